@@ -1,0 +1,136 @@
+"""Moving-average filter of the compensated force (paper, Sec. IV).
+
+The filter runs *after* compensation: filtering raw readings would smear the
+gravity term that the compensation removes pose by pose (paper §IV).
+
+A plain running sum is cheap but not safe over a session: it drifts like √n,
+and one inf/NaN sample poisons it forever while one 1e17 spike leaves a
+permanent offset (docs/science.md §7).  Here non-finite samples are rejected
+before they enter the window, and the running sum is replaced by an exactly
+rounded ``math.fsum`` of the window every ``window`` samples, so the error
+never accumulates beyond one window's worth of roundings and any residue of a
+spike is flushed within ``2·window`` samples of its arrival.
+"""
+
+from __future__ import annotations
+
+import math
+
+from pipeline.frames import Vec3
+
+__all__ = ["MovingAverage", "MovingAverage3", "group_delay_s"]
+
+_FSUM = math.fsum
+
+
+def _check_window(window: object) -> int:
+    if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= 1_000_000:
+        raise ValueError(f"window = {window!r}: must be a whole number of samples from 1 to 1000000")
+    return window
+
+
+def group_delay_s(window: int, rate_hz: float = 1000.0) -> float:
+    """Group delay of a ``window``-sample moving average, ``(N - 1) / 2`` samples, in s."""
+    return (_check_window(window) - 1) / 2.0 / rate_hz
+
+
+class MovingAverage3:
+    """Moving average of 3-vectors (a force), exact over arbitrarily long runs.
+
+    Parameters
+    ----------
+    window
+        Number of samples averaged (1 = pass-through).  At 1 kHz the group
+        delay is ``(window - 1) / 2`` ms.
+
+    Notes
+    -----
+    Until ``window`` samples have arrived the output is the mean of those seen.
+    A sample with any non-finite component is rejected (counted in
+    :attr:`rejected`) and the previous mean is returned unchanged.
+    """
+
+    __slots__ = ("window", "rejected", "_bx", "_by", "_bz", "_sx", "_sy", "_sz", "_i", "_n", "_mean")
+
+    def __init__(self, window: int) -> None:
+        self.window = _check_window(window)
+        self.rejected = 0
+        self.reset()
+
+    def reset(self) -> None:
+        """Empty the window (the next output is the next sample)."""
+        w = self.window
+        self._bx = [0.0] * w
+        self._by = [0.0] * w
+        self._bz = [0.0] * w
+        self._sx = self._sy = self._sz = 0.0
+        self._i = 0
+        self._n = 0
+        self._mean: Vec3 = (0.0, 0.0, 0.0)
+
+    @property
+    def count(self) -> int:
+        """Samples currently in the window (≤ ``window``)."""
+        return self._n
+
+    def update(self, x: float, y: float, z: float) -> Vec3:
+        """Add one sample and return the mean of the last ``window`` accepted samples."""
+        if (x - x) + (y - y) + (z - z) != 0.0:  # NaN or ±inf in any component
+            self.rejected += 1
+            return self._mean
+        i = self._i
+        bx, by, bz = self._bx, self._by, self._bz
+        self._sx += x - bx[i]
+        self._sy += y - by[i]
+        self._sz += z - bz[i]
+        bx[i] = x
+        by[i] = y
+        bz[i] = z
+        i += 1
+        n = self._n
+        if n < self.window:
+            n += 1
+            self._n = n
+        if i == self.window:
+            i = 0
+            # Re-sum exactly once per window: bounds rounding drift and flushes
+            # the residue a huge spike leaves behind when it is evicted.
+            self._sx = _FSUM(bx)
+            self._sy = _FSUM(by)
+            self._sz = _FSUM(bz)
+        self._i = i
+        m = (self._sx / n, self._sy / n, self._sz / n)
+        self._mean = m
+        return m
+
+
+class MovingAverage:
+    """Moving average of a scalar signal; same guarantees as :class:`MovingAverage3`.
+
+    >>> ma = MovingAverage(2)
+    >>> ma.update(1.0), ma.update(3.0), ma.update(5.0)
+    (1.0, 2.0, 4.0)
+    """
+
+    __slots__ = ("_core",)
+
+    def __init__(self, window: int) -> None:
+        self._core = MovingAverage3(window)
+
+    @property
+    def window(self) -> int:
+        """Number of samples averaged."""
+        return self._core.window
+
+    @property
+    def rejected(self) -> int:
+        """Non-finite samples refused so far."""
+        return self._core.rejected
+
+    def reset(self) -> None:
+        """Empty the window."""
+        self._core.reset()
+
+    def update(self, sample: float) -> float:
+        """Add one sample and return the current mean."""
+        return self._core.update(float(sample), 0.0, 0.0)[0]

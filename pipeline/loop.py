@@ -1,0 +1,469 @@
+"""The 1 kHz haptic loop: one thread that owns the devices, paced by absolute deadlines.
+
+Each tick:
+
+1. advance the rig (simulated physics; a no-op on hardware) and apply queued commands;
+2. read the newest F/T sample, robot pose (held between its 125 Hz updates) and stylus state;
+3. watchdog: stale sensor (> 5 ms) or pose (> 50 ms), non-finite values, a bad
+   sensor status, saturation, a haptic-device error → latch a fault;
+4. run Algorithm 1 (:class:`pipeline.framework.HapticFramework`); the safety
+   stage ramps the output to zero within 50 ms while a fault is latched or
+   feedback is off;
+5. command the haptic device and append one record with every stage to the ring buffer.
+
+The loop does only I/O and arithmetic: no logging, no allocation beyond a
+few tuples, no locks.  Commands arrive through a deque (thread-safe append /
+popleft) and are applied at the start of the next tick.  Faults are latched
+until :class:`ResetFaults` clears them -- and a reset only clears conditions
+that have gone away.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import NamedTuple, Protocol
+
+from pipeline.clock import Clock, set_timer_slack_ns
+from pipeline.devices import Fault, ForceSensor, HapticDevice, Robot
+from pipeline.frames import Vec3
+from pipeline.framework import STEP_FIELDS, HapticFramework
+
+__all__ = [
+    "AllowBiasRefinement",
+    "Command",
+    "HapticLoop",
+    "LoopEvent",
+    "LoopStats",
+    "Mark",
+    "OperatorStop",
+    "RECORD_FIELDS",
+    "ResetFaults",
+    "Rig",
+    "SetCalibration",
+    "SetHaptics",
+    "WatchdogConfig",
+]
+
+#: Columns of one loop record (all float64 in the ring buffer).
+RECORD_FIELDS: tuple[str, ...] = (
+    "t_s", "tick",
+    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+    *STEP_FIELDS,
+    "sensor_age_s", "pose_age_s", "faults", "haptic_on", "gain",
+    "trial_index", "phase",
+    "tip_x_m", "tip_y_m", "tip_z_m",
+    "stylus_x_m", "stylus_y_m", "stylus_z_m",
+    "true_fx", "true_fy", "true_fz",
+    "period_s",
+)
+_NAN3 = (math.nan, math.nan, math.nan)
+
+
+class Rig(Protocol):
+    """The devices the loop owns, and a hook to advance simulated physics."""
+
+    sensor: ForceSensor
+    robot: Robot
+    haptic: HapticDevice
+
+    def advance(self, now_ns: int) -> None:
+        """Bring the rig to time ``now_ns`` (simulated rig: step the physics)."""
+        ...
+
+    def true_contact_force(self) -> Vec3 | None:
+        """Ground-truth tip contact force in the base frame, N (simulation only; None on hardware)."""
+        ...
+
+    def close(self) -> None:
+        """Release every device."""
+        ...
+
+
+# -- commands ---------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class SetHaptics:
+    """Turn haptic feedback on or off (off ramps the rendered force to zero)."""
+
+    on: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Mark:
+    """Stamp ``trial_index`` and ``phase`` (an int code owned by the protocol) into the records."""
+
+    trial_index: int
+    phase: int
+
+
+@dataclass(frozen=True, slots=True)
+class ResetFaults:
+    """Clear latched faults whose condition has gone away, and re-arm the haptic device."""
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorStop:
+    """Latch an operator stop: the force ramps to zero until reset."""
+
+
+@dataclass(frozen=True, slots=True)
+class AllowBiasRefinement:
+    """Allow (between trials, tool in free space) or forbid online bias refinement."""
+
+    allowed: bool
+
+
+@dataclass(frozen=True, slots=True)
+class SetCalibration:
+    """Install a new payload calibration (a :class:`pipeline.compensation.PayloadCalibration`)."""
+
+    calibration: object
+
+
+Command = SetHaptics | Mark | ResetFaults | OperatorStop | AllowBiasRefinement | SetCalibration
+
+
+class LoopEvent(NamedTuple):
+    """Something the experimenter must see: ``kind`` is ``"fault"`` or ``"faults_reset"``."""
+
+    t_ns: int
+    kind: str
+    faults: int
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
+class WatchdogConfig:
+    """Age and range limits of the watchdog (science.md §5)."""
+
+    sensor_max_age_s: float = 0.005
+    pose_max_age_s: float = 0.050
+    saturation_fraction: float = 0.8
+
+    def __post_init__(self) -> None:
+        for name in ("sensor_max_age_s", "pose_max_age_s", "saturation_fraction"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"watchdog.{name} = {v!r}: must be a finite number > 0")
+        if self.saturation_fraction > 1:
+            raise ValueError(f"watchdog.saturation_fraction = {self.saturation_fraction!r}: must be ≤ 1")
+
+
+class LoopStats:
+    """Tick-period statistics over arbitrarily long runs (1 µs histogram up to 50 ms)."""
+
+    _BINS = 50_000
+
+    def __init__(self, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all periods."""
+        self._hist = [0] * (self._BINS + 1)
+        self.count = 0
+        self.max_ns = 0
+        self.over_2ms = 0
+        self.missed_slots = 0
+
+    def add(self, period_ns: int) -> None:
+        """Record one tick period."""
+        us = period_ns // 1000
+        self._hist[us if 0 <= us < self._BINS else self._BINS] += 1
+        self.count += 1
+        if period_ns > self.max_ns:
+            self.max_ns = period_ns
+        if period_ns > 2_000_000:
+            self.over_2ms += 1
+
+    def _quantile_us(self, q: float, hist: list[int]) -> float:
+        n = sum(hist)
+        if n == 0:
+            return math.nan
+        target = q * n
+        acc = 0
+        for i, c in enumerate(hist):
+            acc += c
+            if acc >= target:
+                return float(i)
+        return float(len(hist) - 1)
+
+    def summary(self) -> dict[str, float]:
+        """p50/p99/max of the period and p99 of |period − nominal|, µs; counts."""
+        nominal_us = self.period_ns // 1000
+        dev = [0] * (self._BINS + 1)
+        for i, c in enumerate(self._hist):
+            if c:
+                dev[abs(i - nominal_us)] += c
+        return {
+            "ticks": float(self.count),
+            "period_p50_us": self._quantile_us(0.5, self._hist),
+            "period_p99_us": self._quantile_us(0.99, self._hist),
+            "period_max_us": self.max_ns / 1000.0,
+            "abs_dev_p99_us": self._quantile_us(0.99, dev),
+            "periods_over_2ms": float(self.over_2ms),
+            "missed_slots": float(self.missed_slots),
+        }
+
+
+class HapticLoop:
+    """Runs the rig and Algorithm 1 at a fixed rate and records every tick.
+
+    Parameters
+    ----------
+    rig
+        Devices (real or simulated).
+    framework
+        The force path (calibration, filter, rotations, scaling, safety).
+    clock
+        Time source; :class:`pipeline.clock.VirtualClock` for deterministic runs.
+    ring
+        Where each tick's record goes (anything with ``write(values)``), or None.
+    period_ns
+        Tick period (1 ms).
+    watchdog
+        Age/range limits.
+    on_event
+        Called (from the loop thread) for faults and resets; keep it cheap.
+    """
+
+    def __init__(
+        self,
+        rig: Rig,
+        framework: HapticFramework,
+        clock: Clock,
+        ring: object | None = None,
+        *,
+        period_ns: int = 1_000_000,
+        watchdog: WatchdogConfig | None = None,
+        on_event: Callable[[LoopEvent], None] | None = None,
+    ) -> None:
+        self.rig = rig
+        self.framework = framework
+        self.clock = clock
+        self.ring = ring
+        self.period_ns = int(period_ns)
+        self.watchdog = watchdog or WatchdogConfig()
+        self.on_event = on_event
+        self.events: deque[LoopEvent] = deque(maxlen=1000)
+        self.stats = LoopStats(self.period_ns)
+        self._inbox: deque[Command] = deque()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.tick_count = 0
+        self.haptic_on = False
+        self.trial_index = -1
+        self.phase = 0
+        self.faults = 0  # latched
+        self.active_faults = 0  # this tick's conditions
+        self.refine_bias = False
+        self._last_ns: int | None = None
+        self._pose_t_ns: int | None = None
+        self._sensor_age_ns = int(self.watchdog.sensor_max_age_s * 1e9)
+        self._pose_age_ns = int(self.watchdog.pose_max_age_s * 1e9)
+        rng = rig.sensor.range_n
+        frac = self.watchdog.saturation_fraction
+        self._sat = tuple(frac * r for r in rng)
+        self._last_record: tuple[float, ...] | None = None
+
+    # -- control (any thread) ----------------------------------------------------------------
+    def submit(self, command: Command) -> None:
+        """Queue a command; applied at the start of the next tick."""
+        self._inbox.append(command)
+
+    @property
+    def last_record(self) -> dict[str, float] | None:
+        """The newest record as a dict (for tests and status displays)."""
+        r = self._last_record
+        return None if r is None else dict(zip(RECORD_FIELDS, r))
+
+    # -- one tick -----------------------------------------------------------------------------
+    def tick(self) -> None:
+        """Run one cycle at the clock's current time."""
+        now = self.clock.now_ns()
+        last = self._last_ns
+        if last is None:
+            period = self.period_ns
+        else:
+            period = now - last
+            self.stats.add(period)
+        self._last_ns = now
+        dt_s = period * 1e-9
+        rig = self.rig
+        rig.advance(now)
+        inbox = self._inbox
+        while inbox:
+            self._apply(inbox.popleft(), now)
+
+        w = rig.sensor.read_wrench()
+        pose = rig.robot.read_pose()
+        hs = rig.haptic.read_state()
+        fw = self.framework
+
+        # -- watchdog --
+        cond = 0
+        _, fx, fy, fz, tx, ty, tz = w[:7]
+        sensor_age = now - w.t_ns
+        if sensor_age > self._sensor_age_ns:
+            cond |= Fault.SENSOR_STALE
+        if w.status:
+            cond |= Fault.SENSOR_STATUS
+        if (fx - fx) + (fy - fy) + (fz - fz) + (tx - tx) + (ty - ty) + (tz - tz) != 0.0:
+            cond |= Fault.NON_FINITE
+        else:
+            s = self._sat
+            if (
+                abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
+                or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]
+            ):
+                cond |= Fault.SENSOR_SATURATION
+        pose_age = now - pose.t_ns
+        if pose_age > self._pose_age_ns:
+            cond |= Fault.POSE_STALE
+        if pose.t_ns != self._pose_t_ns:
+            rot = pose.rot_base_tip
+            if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
+                self._pose_t_ns = pose.t_ns
+                fw.set_pose(rot)
+            else:
+                cond |= Fault.NON_FINITE
+        if hs.error_code:
+            cond |= Fault.HAPTIC_DEVICE
+        self.active_faults = cond
+        latched = self.faults
+        new = cond & ~latched
+        if new:
+            latched |= new
+            self.faults = latched
+            self._emit(LoopEvent(now, "fault", latched, Fault(new).describe()))
+
+        if self.refine_bias and not latched:
+            fw.refine_bias(fx, fy, fz, tx, ty, tz)
+
+        out = fw.step(fx, fy, fz, tx, ty, tz, self.haptic_on and not latched, dt_s)
+        rig.haptic.command_force(out[21], out[22], out[23])
+
+        truth = rig.true_contact_force() or _NAN3
+        pos = pose.position_m
+        sp = hs.position_m
+        rec = (
+            now * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
+            *out,
+            sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
+            fw.safety.gain, float(self.trial_index), float(self.phase),
+            pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],
+            dt_s,
+        )
+        self._last_record = rec
+        if self.ring is not None:
+            self.ring.write(rec)  # type: ignore[attr-defined]
+        self.tick_count += 1
+
+    def _apply(self, cmd: Command, now: int) -> None:
+        if isinstance(cmd, Mark):
+            self.trial_index = cmd.trial_index
+            self.phase = cmd.phase
+        elif isinstance(cmd, SetHaptics):
+            self.haptic_on = bool(cmd.on)
+        elif isinstance(cmd, ResetFaults):
+            before = self.faults
+            # Only conditions that are gone can be cleared; the operator
+            # stop and device errors are cleared by the reset itself.
+            persisting = self.active_faults & ~(Fault.OPERATOR_STOP | Fault.HAPTIC_DEVICE)
+            if before & Fault.HAPTIC_DEVICE:
+                if not self.rig.haptic.rearm():
+                    persisting |= Fault.HAPTIC_DEVICE
+            self.faults = persisting
+            if before and not persisting:
+                self.framework.reset()
+            self._emit(LoopEvent(now, "faults_reset", persisting, Fault(before).describe()))
+        elif isinstance(cmd, OperatorStop):
+            self.faults |= Fault.OPERATOR_STOP
+            self._emit(LoopEvent(now, "fault", self.faults, "OPERATOR_STOP"))
+        elif isinstance(cmd, AllowBiasRefinement):
+            self.refine_bias = bool(cmd.allowed)
+        elif isinstance(cmd, SetCalibration):
+            self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
+        else:  # pragma: no cover - typed callers cannot get here
+            raise TypeError(f"unknown loop command {cmd!r}")
+
+    def _emit(self, ev: LoopEvent) -> None:
+        self.events.append(ev)
+        if self.on_event is not None:
+            try:
+                self.on_event(ev)
+            except Exception:  # an observer must never stop the loop (bluesky Dispatcher)
+                pass
+
+    # -- running ------------------------------------------------------------------------------
+    def run_ticks(self, n: int) -> None:
+        """Run ``n`` ticks paced on the clock (instant on a virtual clock)."""
+        clock = self.clock
+        deadline = clock.now_ns()
+        period = self.period_ns
+        for _ in range(n):
+            self.tick()
+            deadline += period
+            clock.sleep_until(deadline)
+
+    def run(self, stop: threading.Event | None = None, max_ticks: int | None = None) -> None:
+        """Tick at the loop rate until ``stop`` is set (or ``max_ticks`` ticks), then ramp down.
+
+        Deadlines are absolute (``t0 + k·period``), so lateness never
+        accumulates; after a stall longer than one period the missed slots
+        are counted and skipped rather than replayed in a burst.
+        """
+        stop = stop or self._stop
+        clock = self.clock
+        period = self.period_ns
+        deadline = clock.now_ns()
+        n = 0
+        try:
+            while not stop.is_set() and (max_ticks is None or n < max_ticks):
+                self.tick()
+                n += 1
+                deadline += period
+                behind = clock.now_ns() - deadline
+                if behind > period:
+                    skipped = behind // period
+                    self.stats.missed_slots += skipped
+                    deadline += skipped * period
+                clock.sleep_until(deadline)
+        finally:
+            self.ramp_down()
+
+    def ramp_down(self, max_ticks: int = 200) -> None:
+        """Bring the rendered force to zero through the safety ramp, then command zero."""
+        self.haptic_on = False
+        clock = self.clock
+        deadline = clock.now_ns()
+        for _ in range(max_ticks):
+            if self.framework.safety.gain == 0.0:
+                break
+            deadline += self.period_ns
+            clock.sleep_until(deadline)
+            self.tick()
+        self.rig.haptic.command_force(0.0, 0.0, 0.0)
+
+    def start(self) -> None:
+        """Run the loop in its own thread (real-time use)."""
+        if self._thread is not None:
+            raise RuntimeError("loop already started")
+        self._stop.clear()
+
+        def _target() -> None:
+            set_timer_slack_ns(1)
+            self.run(self._stop)
+
+        self._thread = threading.Thread(target=_target, name="haptic-loop", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Stop the thread (it ramps the force to zero first) and wait for it."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout_s)
+            self._thread = None

@@ -1,0 +1,208 @@
+"""A preallocated ring buffer of loop records that other processes read without blocking the writer.
+
+One writer (the 1 kHz loop) appends fixed-size records of float64 fields;
+any number of readers, in this or another process, copy what is new.  No
+lock is shared: the writer stores the record first and only then publishes
+it by bumping the 64-bit write counter; a reader copies a range and then
+re-reads the counter to discard any rows the writer overwrote meanwhile
+(they are reported as lost, never returned torn).
+
+Layout of the shared block (little-endian)::
+
+    0   8s  magic b"HSRING01"
+    8   u32 number of fields      12  u32 reserved
+    16  u64 capacity (records)    24  u64 write counter (records ever written)
+    32  4064 bytes: field names, comma-separated, NUL-padded
+    4096 ... capacity × n_fields float64
+
+The names travel with the data, so a reader that attaches by name knows the
+columns.  The GUI runs in its own process because a same-process Qt paint
+holds the GIL for milliseconds and breaks the 1 kHz loop (science.md §7).
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Sequence
+import mmap
+import os
+from multiprocessing import shared_memory
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["RingBuffer", "RingReadResult"]
+
+_MAGIC = b"HSRING01"
+_HEADER = 4096
+_NAMES_OFF = 32
+_COUNT = struct.Struct("<Q")
+
+
+class RingReadResult:
+    """Rows copied out of the ring: ``rows`` (structured array), next ``cursor``, and ``lost`` rows."""
+
+    __slots__ = ("rows", "cursor", "lost")
+
+    def __init__(self, rows: npt.NDArray[np.void], cursor: int, lost: int) -> None:
+        self.rows = rows
+        self.cursor = cursor
+        self.lost = lost
+
+
+class RingBuffer:
+    """Shared-memory (or private) ring of float64 records.
+
+    Use :meth:`create` in the writing process and :meth:`attach` in readers.
+    """
+
+    def __init__(
+        self,
+        buf: memoryview,
+        shm: shared_memory.SharedMemory | None,
+        owner: bool,
+    ) -> None:
+        if bytes(buf[:8]) != _MAGIC:
+            raise ValueError("not a haptic-study ring buffer (bad magic)")
+        n_fields, _ = struct.unpack_from("<II", buf, 8)
+        capacity, _ = struct.unpack_from("<QQ", buf, 16)
+        names = bytes(buf[_NAMES_OFF:_HEADER]).rstrip(b"\0").decode("ascii").split(",")
+        if len(names) != n_fields:
+            raise ValueError("corrupt ring header: field count does not match the names")
+        self._buf = buf
+        self._shm = shm
+        self._mmap: mmap.mmap | None = None
+        self._owner = owner
+        self.fields: tuple[str, ...] = tuple(names)
+        self.capacity: int = int(capacity)
+        self._row_bytes = 8 * n_fields
+        self._pack_row = struct.Struct(f"<{n_fields}d").pack_into
+        self._pack_count = _COUNT.pack_into
+        self._count = _COUNT.unpack_from(buf, 24)[0]
+        self.dtype = np.dtype([(n, "<f8") for n in names])
+        self._rows = np.ndarray((self.capacity,), dtype=self.dtype, buffer=buf, offset=_HEADER)
+
+    # -- construction -------------------------------------------------------------------------
+    @classmethod
+    def create(cls, fields: Sequence[str], capacity: int, *, shared: bool = True) -> RingBuffer:
+        """Allocate a ring for ``capacity`` records of ``fields`` (all float64).
+
+        ``shared=False`` keeps it in private memory (headless runs and tests
+        that need no second process).
+        """
+        if capacity < 2:
+            raise ValueError(f"capacity = {capacity}: must be at least 2 records")
+        names = ",".join(fields).encode("ascii")
+        if len(names) > _HEADER - _NAMES_OFF or not fields or any("," in f for f in fields):
+            raise ValueError("field names must be non-empty, comma-free and fit in 4064 bytes")
+        size = _HEADER + 8 * len(fields) * capacity
+        shm: shared_memory.SharedMemory | None
+        if shared:
+            shm = shared_memory.SharedMemory(create=True, size=size)
+            buf = shm.buf
+        else:
+            shm = None
+            buf = memoryview(bytearray(size))
+        buf[: len(_MAGIC)] = _MAGIC
+        struct.pack_into("<IIQQ", buf, 8, len(fields), 0, capacity, 0)
+        buf[_NAMES_OFF : _NAMES_OFF + len(names)] = names
+        return cls(buf, shm, owner=True)
+
+    @classmethod
+    def attach(cls, name: str) -> RingBuffer:
+        """Attach to a ring created by another process (read side)."""
+        path = os.path.join("/dev/shm", name.lstrip("/"))
+        if not os.path.exists(path):
+            raise FileNotFoundError(f"no ring buffer named {name!r} (is the engine running?)")
+        # Map the segment directly rather than through SharedMemory: on
+        # Python < 3.13 an attached SharedMemory is registered with the
+        # resource tracker, which unlinks the writer's segment when the
+        # reader exits.
+        fd = os.open(path, os.O_RDWR)
+        try:
+            mm = mmap.mmap(fd, 0)
+        finally:
+            os.close(fd)
+        ring = cls(memoryview(mm), None, owner=False)
+        ring._mmap = mm
+        return ring
+
+    @property
+    def name(self) -> str | None:
+        """Shared-memory name for :meth:`attach` (None for a private ring)."""
+        return self._shm.name if self._shm is not None and self._owner else None
+
+    # -- writer ---------------------------------------------------------------------------------
+    def write(self, values: Sequence[float]) -> None:
+        """Append one record (exactly ``len(fields)`` numbers). Never blocks."""
+        c = self._count
+        self._pack_row(self._buf, _HEADER + (c % self.capacity) * self._row_bytes, *values)
+        c += 1
+        self._count = c
+        # publish after the row is complete
+        self._pack_count(self._buf, 24, c)
+
+    # -- readers --------------------------------------------------------------------------------
+    @property
+    def write_count(self) -> int:
+        """Records written since creation."""
+        return _COUNT.unpack_from(self._buf, 24)[0]
+
+    def read_since(self, cursor: int) -> RingReadResult:
+        """Copy every record written at or after ``cursor`` that is still in the ring.
+
+        Returns the rows, the cursor to pass next time, and how many records
+        since ``cursor`` were overwritten before they could be read.
+        """
+        c1 = self.write_count
+        start = max(cursor, c1 - self.capacity)
+        rows = self._copy(start, c1)
+        c2 = self.write_count
+        valid = max(start, c2 - self.capacity)  # rows below this may have been overwritten mid-copy
+        if valid > start:
+            rows = rows[valid - start :]
+        return RingReadResult(rows, c1, max(0, min(valid, c1) - cursor))
+
+    def latest(self, n: int) -> npt.NDArray[np.void]:
+        """Copy of the newest ``n`` records (fewer if fewer exist)."""
+        c = self.write_count
+        return self.read_since(max(0, c - n)).rows
+
+    def _copy(self, start: int, stop: int) -> npt.NDArray[np.void]:
+        n = stop - start  # ≤ capacity by construction
+        if n <= 0:
+            return np.empty(0, dtype=self.dtype)
+        cap = self.capacity
+        i = start % cap
+        if i + n <= cap:
+            return self._rows[i : i + n].copy()
+        return np.concatenate((self._rows[i:], self._rows[: n - (cap - i)]))
+
+    def column(self, rows: npt.NDArray[np.void], name: str) -> npt.NDArray[np.float64]:
+        """One field of copied rows as a float array."""
+        return np.asarray(rows[name], dtype=np.float64)
+
+    # -- lifetime -------------------------------------------------------------------------------
+    def close(self) -> None:
+        """Detach; the creator also frees the shared segment."""
+        self._rows = None  # type: ignore[assignment]  # drop the numpy view before closing the buffer
+        buf, self._buf = self._buf, None  # type: ignore[assignment]
+        if self._mmap is not None:
+            buf.release()
+            self._mmap.close()
+            self._mmap = None
+        elif self._shm is not None:
+            del buf
+            self._shm.close()
+            if self._owner:
+                try:
+                    self._shm.unlink()
+                except FileNotFoundError:
+                    pass
+            self._shm = None
+
+    def __enter__(self) -> RingBuffer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
