@@ -35,6 +35,7 @@ from pipeline.framework import STEP_FIELDS, HapticFramework
 __all__ = [
     "AllowBiasRefinement",
     "Command",
+    "ControllerDetached",
     "HapticLoop",
     "LoopEvent",
     "LoopStats",
@@ -110,6 +111,11 @@ class OperatorStop:
 
 
 @dataclass(frozen=True, slots=True)
+class ControllerDetached:
+    """The controlling process went away: latch ``ENGINE_DETACHED`` (the engine then stops)."""
+
+
+@dataclass(frozen=True, slots=True)
 class AllowBiasRefinement:
     """Allow (between trials, tool in free space) or forbid online bias refinement."""
 
@@ -123,7 +129,7 @@ class SetCalibration:
     calibration: object
 
 
-Command = SetHaptics | Mark | ResetFaults | OperatorStop | AllowBiasRefinement | SetCalibration
+Command = SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
 
 
 class LoopEvent(NamedTuple):
@@ -383,6 +389,9 @@ class HapticLoop:
         elif isinstance(cmd, OperatorStop):
             self.faults |= Fault.OPERATOR_STOP
             self._emit(LoopEvent(now, "fault", self.faults, "OPERATOR_STOP"))
+        elif isinstance(cmd, ControllerDetached):
+            self.faults |= Fault.ENGINE_DETACHED
+            self._emit(LoopEvent(now, "fault", self.faults, "ENGINE_DETACHED"))
         elif isinstance(cmd, AllowBiasRefinement):
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):

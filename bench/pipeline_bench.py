@@ -1,0 +1,285 @@
+"""``haptic-study bench pipeline``: the cost of Algorithm 1, the 1 kHz loop's timing, the filter trade.
+
+Three measurements in one run, on the same recorded samples:
+
+1. **Per-tick pipeline cost.** Our :class:`pipeline.framework.HapticFramework`
+   against a straightforward NumPy transcription of Algorithm 1 (one array per
+   step, ``@``, ``np.linalg.norm``, a deque for the moving average), both fed
+   the same raw wrenches and poses recorded from the simulated rig.  The
+   outputs are cross-checked against each other.
+2. **Loop timing.** The real 1 kHz loop in its own engine process (as the
+   app runs it), paced on the monotonic clock for ``--loop-seconds``.
+3. **Filter trade.** Moving-average window vs output noise RMS, group delay
+   and step settling time: how users choose the window (speed vs accuracy).
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import statistics
+import sys
+import time
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from pipeline.clock import VirtualClock
+from pipeline.engine import EngineConfig, EngineProcess, build_sim_engine
+from pipeline.filters import MovingAverage3
+from pipeline.framework import FrameworkConfig, HapticFramework
+
+__all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
+
+
+def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
+    """Run the simulated rig (scripted presses, virtual clock) and record ``n`` ticks of raw input."""
+    eng = build_sim_engine(EngineConfig(clock="virtual", sim=_sim_cfg(seed)))
+    loop = eng.loop
+    raws: list[tuple[float, ...]] = []
+    rots: list[tuple[float, ...]] = []
+    true_f: list[float] = []
+    for _ in range(n):
+        loop.run_ticks(1)
+        w = eng.rig.sensor.read_wrench()
+        raws.append(tuple(w[1:7]))
+        rots.append(eng.rig.robot.read_pose().rot_base_tip)
+        true_f.append(eng.rig.true_contact_force()[2])
+    return {"raw": raws, "rot": rots, "true_force_n": true_f, "calibration": eng.calibration, "engine": eng}
+
+
+def _sim_cfg(seed: int) -> Any:
+    from pipeline.sim.rig import SimRigConfig
+
+    return SimRigConfig(seed=seed)
+
+
+def naive_numpy_pipeline(cal: Any, cfg: FrameworkConfig) -> Callable[[tuple[float, ...], tuple[float, ...]], np.ndarray]:
+    """A line-by-line NumPy transcription of Algorithm 1 with compensation and safety, as a first draft would be."""
+    A = np.array(cal.gravity_matrix).reshape(3, 3)
+    fb = np.array(cal.force_bias_n)
+    rts = np.array(cfg.rot_tip_sensor).reshape(3, 3)
+    rhb = np.array(cfg.rot_haptic_base).reshape(3, 3)
+    g_base = np.array([0.0, 0.0, -9.80665])
+    buf: deque[np.ndarray] = deque(maxlen=cfg.filter_window)
+    state = {"prev": np.zeros(3), "gain": 0.0}
+    limit = min(cfg.f_max_n, 3.3)
+    slew = cfg.safety.slew_n_per_s * 0.001
+
+    def step(raw: tuple[float, ...], rot: tuple[float, ...]) -> np.ndarray:
+        f_meas = np.array(raw[:3])
+        rbt = np.array(rot).reshape(3, 3)
+        rot_sensor_base = (rbt @ rts).T
+        g_s = rot_sensor_base @ g_base
+        f_ext = f_meas - A @ g_s - fb
+        buf.append(f_ext)
+        f_filt = np.mean(np.array(buf), axis=0)
+        f_tip = rts @ f_filt
+        f_base = rbt @ f_tip
+        f_h = rhb @ f_base
+        n = np.linalg.norm(f_h)
+        f_scaled = f_h / n * np.tanh(n / cfg.f_scale_n) * cfg.f_max_n if n > 0 else np.zeros(3)
+        if not np.all(np.isfinite(f_scaled)):
+            f_scaled = np.zeros(3)
+        m = np.linalg.norm(f_scaled)
+        if m > limit:
+            f_scaled = f_scaled / m * limit
+        d = f_scaled - state["prev"]
+        dn = np.linalg.norm(d)
+        if dn > slew:
+            d = d / dn * slew
+        out = state["prev"] + d
+        state["prev"] = out
+        state["gain"] = min(1.0, state["gain"] + 0.001 / cfg.safety.ramp_in_s)
+        return out * state["gain"]
+
+    return step
+
+
+def _time_batches(fn: Callable[[int, int], None], n: int, batch: int) -> list[float]:
+    """Per-call µs for consecutive batches of ``batch`` calls."""
+    out = []
+    for start in range(0, n - batch + 1, batch):
+        t0 = time.perf_counter_ns()
+        fn(start, start + batch)
+        out.append((time.perf_counter_ns() - t0) / batch / 1000.0)
+    return out
+
+
+def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int = 1000) -> dict[str, Any]:
+    """Median per-tick cost of ours vs the NumPy transcription on the same samples, and their agreement."""
+    raws, rots = data["raw"], data["rot"]
+    n = len(raws)
+    cal = data["calibration"]
+
+    def make_ours(pose_every_tick: bool) -> tuple[HapticFramework, Callable[[int, int], None], list[tuple[float, ...]]]:
+        fw = HapticFramework(cfg, cal)
+        outs: list[tuple[float, ...]] = []
+        step = fw.step
+        set_pose = fw.set_pose
+        rec = outs.append
+
+        def run(a: int, b: int) -> None:
+            last = None
+            for i in range(a, b):
+                r = rots[i]
+                if pose_every_tick or r is not last:
+                    set_pose(r)
+                    last = r
+                w = raws[i]
+                rec(step(w[0], w[1], w[2], w[3], w[4], w[5], True, 0.001))
+
+        return fw, run, outs
+
+    _, ours_run, ours_out = make_ours(False)
+    ours = _time_batches(ours_run, n, batch)
+    _, every_run, _ = make_ours(True)
+    every = _time_batches(every_run, n, batch)
+
+    naive_step = naive_numpy_pipeline(cal, cfg)
+    naive_out: list[np.ndarray] = []
+
+    def naive_run(a: int, b: int) -> None:
+        for i in range(a, b):
+            naive_out.append(naive_step(raws[i], rots[i]))
+
+    m = min(n, 20 * batch)  # the slow one on a subset is enough for a median
+    naive = _time_batches(naive_run, m, batch)
+    diff = max(
+        abs(ours_out[i][21 + k] - float(naive_out[i][k])) for i in range(len(naive_out)) for k in range(3)
+    )
+    ours_med = statistics.median(ours)
+    naive_med = statistics.median(naive)
+    return {
+        "ours_us_per_tick": round(ours_med, 3),
+        "ours_pose_every_tick_us": round(statistics.median(every), 3),
+        "naive_numpy_us_per_tick": round(naive_med, 3),
+        "speedup": round(naive_med / ours_med, 1),
+        "ours_vs_naive_max_abs_diff_n": diff,
+        "ticks_timed": n,
+    }
+
+
+def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5, 10, 20, 50, 100)) -> list[dict[str, float]]:
+    """Window length vs output noise RMS, group delay and 2 % step settling time.
+
+    Noise is the compensated force magnitude error while the simulated tool
+    rests out of contact (the same recorded samples as the cost benchmark);
+    group delay is the lag of the response to a 1 N/s ramp; settling is the
+    time a 1 N step takes to stay within 2 %.
+    """
+    eng = data["engine"]
+    fw0 = HapticFramework(FrameworkConfig(filter_window=1), data["calibration"])
+    rest: list[tuple[float, float, float]] = []
+    last = None
+    for raw, rot, tf in zip(data["raw"], data["rot"], data["true_force_n"]):
+        if rot is not last:
+            fw0.set_pose(rot)
+            last = rot
+        out = fw0.step(*raw, False, 0.001)
+        if tf == 0.0:
+            rest.append((out[0], out[1], out[2]))
+    del eng
+    mean = [statistics.fmean(c) for c in zip(*rest)]
+    rows = []
+    for w in windows:
+        ma = MovingAverage3(w)
+        sq = []
+        for i, (x, y, z) in enumerate(rest):
+            mx, my, mz = ma.update(x - mean[0], y - mean[1], z - mean[2])
+            if i >= w:
+                sq.append(mx * mx + my * my + mz * mz)
+        noise = math.sqrt(statistics.fmean(sq)) if sq else math.nan
+        ma = MovingAverage3(w)
+        lag = 0.0
+        for k in range(1000):
+            x = k * 0.001
+            y = ma.update(x, 0.0, 0.0)[0]
+            lag = (x - y) / 0.001  # samples behind the ramp
+        ma = MovingAverage3(w)
+        for _ in range(w):
+            ma.update(0.0, 0.0, 0.0)
+        settle: int | None = None
+        for k in range(2 * w + 10):  # k = samples since the 1 N step
+            y = ma.update(1.0, 0.0, 0.0)[0]
+            if abs(y - 1.0) <= 0.02:
+                settle = k if settle is None else settle
+            else:
+                settle = None
+        rows.append(
+            {
+                "window": float(w),
+                "noise_rms_n": round(noise, 5),
+                "group_delay_ms": round(lag, 3),
+                "settling_ms": float(settle) if settle is not None else math.nan,
+            }
+        )
+    return rows
+
+
+def measure_loop(seconds: float) -> dict[str, float]:
+    """Run the real 1 kHz loop in its engine process for ``seconds`` and return its period statistics."""
+    proc = EngineProcess(EngineConfig(clock="real", driver="scripted"), max_ticks=int(seconds * 1000))
+    proc.start()
+    try:
+        proc.wait(timeout_s=seconds * 3 + 30)
+    finally:
+        proc.stop()
+    if proc.final_stats is None:
+        raise RuntimeError("the engine did not report loop statistics")
+    return proc.final_stats
+
+
+def run_pipeline_bench(loop_seconds: float = 30.0, ticks: int = 20_000, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """All three measurements; returns the JSON-ready result."""
+    say = progress or (lambda s: None)
+    say("recording samples from the simulated rig")
+    data = record_samples(ticks)
+    say("timing the pipeline (ours vs NumPy transcription)")
+    cost = measure_pipeline_cost(data, FrameworkConfig())
+    say("filter trade table")
+    trade = filter_trade_table(data)
+    say(f"running the 1 kHz loop for {loop_seconds:g} s in its engine process")
+    stats = measure_loop(loop_seconds) if loop_seconds > 0 else {}
+    result: dict[str, Any] = dict(cost)
+    result.update(
+        {
+            "loop_seconds": loop_seconds,
+            "loop_period_p50_us": stats.get("period_p50_us", math.nan),
+            "loop_period_p99_us": stats.get("period_p99_us", math.nan),
+            "loop_abs_dev_p99_us": stats.get("abs_dev_p99_us", math.nan),
+            "loop_period_max_us": stats.get("period_max_us", math.nan),
+            "loop_periods_over_2ms": stats.get("periods_over_2ms", math.nan),
+            "loop_missed_slots": stats.get("missed_slots", math.nan),
+            "loop_ticks": stats.get("ticks", math.nan),
+            "filter_trade": trade,
+            "python": sys.version.split()[0],
+            "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
+        }
+    )
+    return result
+
+
+def format_pipeline_bench(r: dict[str, Any]) -> str:
+    """Human-readable report of :func:`run_pipeline_bench`."""
+    lines = [
+        "Per-tick pipeline (compensation + filter + 3 rotations + scaling + safety), median µs:",
+        f"  ours                      {r['ours_us_per_tick']:8.3f}   (pose change every tick: {r['ours_pose_every_tick_us']:.3f})",
+        f"  NumPy transcription       {r['naive_numpy_us_per_tick']:8.3f}",
+        f"  speed-up                  {r['speedup']:8.1f}x   (outputs agree to {r['ours_vs_naive_max_abs_diff_n']:.2e} N)",
+        "",
+        f"1 kHz loop in its engine process, {r['loop_seconds']:g} s of real time:",
+        f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
+        f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
+        f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",
+        "",
+        "Moving-average window: speed against accuracy",
+        "  window  noise RMS (N)  group delay (ms)  2% settling (ms)",
+    ]
+    for row in r["filter_trade"]:
+        lines.append(
+            f"  {row['window']:6.0f}  {row['noise_rms_n']:13.5f}  {row['group_delay_ms']:16.1f}  {row['settling_ms']:16.0f}"
+        )
+    return "\n".join(lines)

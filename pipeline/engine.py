@@ -1,0 +1,269 @@
+"""Building the rig + loop, and running them in an engine process of their own.
+
+Why a process: on a 2-core machine a Qt window painting pyqtgraph curves in
+the same process as the 1 kHz loop holds the GIL for milliseconds per curve
+and drops the loop to ~640 Hz; with the GUI in another process the loop keeps
+p99 ≈ 1.04 ms (science.md §7).  So the app starts an :class:`EngineProcess`
+that owns the devices and the loop; other processes talk to it through a
+command pipe, an event queue and the shared-memory :class:`pipeline.ring.RingBuffer`.
+
+If the controlling process goes away (closed or crashed GUI), the engine
+notices the broken pipe, latches ``ENGINE_DETACHED``, ramps the force to zero
+and exits cleanly.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from pipeline.clock import Clock, MonotonicClock, VirtualClock
+from pipeline.compensation import NO_PAYLOAD, PayloadCalibration
+from pipeline.framework import FrameworkConfig, HapticFramework
+from pipeline.loop import RECORD_FIELDS, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
+from pipeline.ring import RingBuffer
+from pipeline.sim.hand import ScriptedPresses
+from pipeline.sim.rig import SimRig, SimRigConfig
+
+__all__ = ["EngineConfig", "EngineProcess", "SimEngine", "build_sim_engine"]
+
+
+@dataclass(frozen=True, slots=True)
+class EngineConfig:
+    """What the engine builds.
+
+    Attributes
+    ----------
+    sim
+        Simulated-rig parameters (the only rig until real backends are configured).
+    framework
+        Algorithm 1 parameters.
+    watchdog
+        Fault limits.
+    clock
+        ``"real"`` (paced at 1 kHz) or ``"virtual"`` (as fast as the CPU allows).
+    calibrate
+        Run the automatic gravity/bias calibration before the loop starts.
+    driver
+        Who holds the stylus: ``"scripted"`` (repeated presses) or ``"hold"``.
+    haptics_on
+        Feedback state at start.
+    ring_seconds
+        Ring buffer length in seconds of records.
+    """
+
+    sim: SimRigConfig = field(default_factory=SimRigConfig)
+    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
+    clock: str = "real"
+    calibrate: bool = True
+    driver: str = "scripted"
+    haptics_on: bool = True
+    ring_seconds: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.clock not in ("real", "virtual"):
+            raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
+        if self.driver not in ("scripted", "hold"):
+            raise ValueError(f"driver = {self.driver!r}: allowed values are 'scripted' and 'hold'")
+        if not 1.0 <= self.ring_seconds <= 3600.0:
+            raise ValueError(f"ring_seconds = {self.ring_seconds!r}: must be between 1 and 3600")
+
+
+@dataclass
+class SimEngine:
+    """The assembled simulated rig, force path and loop (in-process)."""
+
+    rig: SimRig
+    framework: HapticFramework
+    loop: HapticLoop
+    clock: Clock
+    calibration: PayloadCalibration
+    ring: RingBuffer | None
+
+
+def build_sim_engine(
+    config: EngineConfig,
+    *,
+    shared_ring: bool = False,
+    clock: Clock | None = None,
+    progress: Any = None,
+) -> SimEngine:
+    """Assemble rig → calibration → framework → loop for the simulated rig.
+
+    Parameters
+    ----------
+    config
+        What to build.
+    shared_ring
+        Put the ring buffer in shared memory (another process will read it).
+    clock
+        Override the clock (default from ``config.clock``).
+    progress
+        Optional ``progress(done, total)`` for the calibration.
+    """
+    from pipeline.sim.calibration import auto_calibrate
+
+    clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
+    rig = SimRig(config.sim)
+    calibration = NO_PAYLOAD
+    if config.calibrate:
+        # The simulated calibration runs on its own virtual clock starting now:
+        # it is instant even when the loop will be paced in real time.
+        cal_clock = clk if isinstance(clk, VirtualClock) else VirtualClock(clk.now_ns())
+        calibration, _ = auto_calibrate(rig, cal_clock, progress=progress)
+    if config.driver == "scripted":
+        rig.set_driver(ScriptedPresses())
+    framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n)
+    ring = RingBuffer.create(RECORD_FIELDS, int(config.ring_seconds * 1000), shared=shared_ring)
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
+    loop.submit(SetHaptics(config.haptics_on))
+    return SimEngine(rig, framework, loop, clk, calibration, ring)
+
+
+# -- the engine process -----------------------------------------------------------------------
+def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | None) -> None:
+    """Entry point of the engine process."""
+    eng = build_sim_engine(config, shared_ring=True)
+    loop = eng.loop
+    loop.on_event = lambda ev: events.put(("loop_event", tuple(ev)))
+    stop = threading.Event()
+
+    def _receive() -> None:
+        # Blocking receive in its own thread: the loop only drains a deque.
+        while True:
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError):
+                # controller gone: make the device safe and exit
+                loop.submit(ControllerDetached())
+                stop.set()
+                return
+            if msg == "stop":
+                stop.set()
+                return
+            loop.submit(msg)
+
+    threading.Thread(target=_receive, name="engine-commands", daemon=True).start()
+    assert eng.ring is not None
+    events.put(("ready", eng.ring.name, eng.calibration.to_dict()))
+    try:
+        loop.run(stop, max_ticks=max_ticks)
+    finally:
+        events.put(("stopped", loop.stats.summary(), loop.tick_count, int(loop.faults)))
+        eng.rig.close()
+        time.sleep(0.2)  # let the reader copy the last records before the segment goes
+        eng.ring.close()
+
+
+class EngineProcess:
+    """Start and talk to the engine process.
+
+    Parameters
+    ----------
+    config
+        What the engine builds.
+    max_ticks
+        Stop by itself after this many ticks (benchmarks and tests).
+    """
+
+    def __init__(self, config: EngineConfig, max_ticks: int | None = None) -> None:
+        self.config = config
+        self._ctx = mp.get_context("spawn")  # no fork of a process that may hold Qt or threads
+        self._conn, child_conn = self._ctx.Pipe()
+        self._events = self._ctx.Queue()
+        self._proc = self._ctx.Process(
+            target=_engine_main, args=(config, child_conn, self._events, max_ticks), name="haptic-engine", daemon=True
+        )
+        self._child_conn = child_conn
+        self.ring: RingBuffer | None = None
+        self.calibration: dict[str, Any] | None = None
+        self.final_stats: dict[str, float] | None = None
+        self.final_ticks: int | None = None
+        self.final_faults: int | None = None
+        self.loop_events: list[LoopEvent] = []
+
+    def start(self, timeout_s: float = 30.0) -> None:
+        """Spawn the engine and wait until its ring buffer is ready."""
+        self._proc.start()
+        self._child_conn.close()
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                msg = self._events.get(timeout=max(0.01, deadline - time.monotonic()))
+            except queue.Empty:
+                self.kill()
+                raise RuntimeError(f"engine did not become ready within {timeout_s:g} s") from None
+            if msg[0] == "ready":
+                self.ring = RingBuffer.attach(msg[1])
+                self.calibration = msg[2]
+                return
+            self._handle(msg)
+
+    def send(self, command: Command) -> None:
+        """Send a loop command."""
+        self._conn.send(command)
+
+    def poll_events(self) -> list[tuple[Any, ...]]:
+        """Drain pending engine messages (loop events are also kept in :attr:`loop_events`)."""
+        out = []
+        while True:
+            try:
+                msg = self._events.get_nowait()
+            except queue.Empty:
+                return out
+            self._handle(msg)
+            out.append(msg)
+
+    def _handle(self, msg: tuple[Any, ...]) -> None:
+        if msg[0] == "loop_event":
+            self.loop_events.append(LoopEvent(*msg[1]))
+        elif msg[0] == "stopped":
+            self.final_stats, self.final_ticks, self.final_faults = msg[1], msg[2], msg[3]
+
+    def wait(self, timeout_s: float | None = None) -> None:
+        """Wait for the engine to exit by itself (after ``max_ticks``)."""
+        end = None if timeout_s is None else time.monotonic() + timeout_s
+        while self.final_stats is None:
+            remaining = None if end is None else max(0.0, end - time.monotonic())
+            try:
+                self._handle(self._events.get(timeout=remaining))
+            except queue.Empty:
+                break
+        self._proc.join(timeout_s)
+
+    def stop(self, timeout_s: float = 5.0) -> None:
+        """Ask the engine to ramp down and exit; wait for it."""
+        if self._proc.is_alive():
+            try:
+                self._conn.send("stop")
+            except (OSError, BrokenPipeError):
+                pass
+            self.wait(timeout_s)
+        self.close()
+
+    def kill(self) -> None:
+        """Terminate without ceremony (tests of the detach path use closing the pipe instead)."""
+        if self._proc.is_alive():
+            self._proc.kill()
+        self._proc.join(2.0)
+        self.close()
+
+    def detach(self) -> None:
+        """Close our end of the command pipe, as a crashed GUI would."""
+        self._conn.close()
+
+    @property
+    def alive(self) -> bool:
+        """True while the engine process runs."""
+        return self._proc.is_alive()
+
+    def close(self) -> None:
+        """Release the ring and queues."""
+        if self.ring is not None:
+            self.ring.close()
+            self.ring = None

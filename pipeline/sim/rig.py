@@ -1,0 +1,145 @@
+"""The simulated rig: hand → Touch → UR3 → tissue → wrist sensor, stepped by the loop.
+
+Only what the force-regulation scene needs (science.md §2, §3, §5): a 1-D
+Hunt–Crossley tissue under a horizontal surface, an arm that follows the
+stylus through a 125 Hz controller with a tracking lag, a sensor that sees
+the tool's weight at the current orientation plus the contact force, and a
+Touch with real limits.  Everything derives from one seed, so a run is
+reproducible bit for bit on the virtual clock.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
+from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
+from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
+from pipeline.sim.sensor import SensorParams, SimForceSensor
+from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
+from pipeline.sim.touch import SimTouch, TouchSpec
+
+__all__ = ["SimRig", "SimRigConfig"]
+
+#: A long tick (a stalled loop) is simulated as at most this much time.
+_MAX_DT_S = 0.01
+
+
+@dataclass(frozen=True, slots=True)
+class SimRigConfig:
+    """Everything that defines a simulated rig.
+
+    Attributes
+    ----------
+    seed
+        Seed of every random process (noise, drift, packet loss).
+    surface_z_m
+        Height of the tissue surface in the base frame.
+    tip_home_m
+        Tool-tip start position (base frame); the default is 15 mm above the surface.
+    motion_scale
+        Robot displacement per stylus displacement.
+    rot_tip_sensor
+        The sensor mounting the application is told about (nominal).
+    mount_error_deg
+        The true mounting differs from the nominal by this rotation about an
+        oblique axis -- the unmodelled error the affine calibration absorbs.
+    rot_haptic_base
+        Touch frame vs robot base.
+    """
+
+    seed: int = 0
+    surface_z_m: float = 0.10
+    tip_home_m: Vec3 = (0.30, 0.0, 0.115)
+    motion_scale: float = 1.0
+    rot_tip_sensor: Mat3 = DEFAULT_ROT_TIP_SENSOR
+    mount_error_deg: float = 0.5
+    rot_haptic_base: Mat3 = DEFAULT_ROT_HAPTIC_BASE
+    tissue: TissueParams = field(default_factory=TissueParams)
+    sensor: SensorParams = field(default_factory=SensorParams)
+    robot: RobotParams = field(default_factory=RobotParams)
+    touch: TouchSpec = field(default_factory=TouchSpec)
+    arm: ArmParams = field(default_factory=ArmParams)
+
+
+class SimRig:
+    """Implements the loop's ``Rig`` interface with simulated devices."""
+
+    def __init__(self, config: SimRigConfig | None = None, driver: StylusDriver | None = None) -> None:
+        cfg = config or SimRigConfig()
+        self.config = cfg
+        seeds = np.random.SeedSequence(cfg.seed).generate_state(4)
+        self.sensor = SimForceSensor(cfg.sensor, seed=int(seeds[0]))
+        self.robot = SimRobot(cfg.tip_home_m, TOOL_DOWN, cfg.robot)
+        self.haptic = SimTouch(cfg.touch)
+        self.tissue = HuntCrossleyTissue(cfg.tissue)
+        self.arm = CompliantArm(cfg.arm)
+        self.driver: StylusDriver = driver or HoldStill()
+        self._rot_base_haptic = transpose(cfg.rot_haptic_base)
+        err = axis_angle((1.0, 1.0, 0.3), cfg.mount_error_deg * np.pi / 180.0) if cfg.mount_error_deg else IDENTITY
+        #: The true sensor mounting (nominal × error) the physics uses.
+        self.true_rot_tip_sensor: Mat3 = mat_mul(cfg.rot_tip_sensor, err)
+        self._orient: Mat3 | None = None
+        self._rot_sensor_base: Mat3 = IDENTITY
+        self._last_ns: int | None = None
+        self.sim_time_s = 0.0
+        self._truth: Vec3 = (0.0, 0.0, 0.0)
+        self.last_observation = HandObservation(0.0, 0.0, 0.0, 0.0, cfg.tip_home_m[2] - cfg.surface_z_m)
+
+    # -- Rig interface ------------------------------------------------------------------------
+    def advance(self, now_ns: int) -> None:
+        """Step the physics to ``now_ns``: Touch output, hand, robot, tissue, then the sensor."""
+        last = self._last_ns
+        dt = 0.0 if last is None else (now_ns - last) * 1e-9
+        if dt < 0.0:
+            dt = 0.0
+        elif dt > _MAX_DT_S:
+            dt = _MAX_DT_S
+        self._last_ns = now_ns
+        self.sim_time_s += dt
+        cfg = self.config
+        touch = self.haptic
+        touch.advance(now_ns, dt)
+        felt = touch.applied_force_n[1]
+
+        robot = self.robot
+        tip_z = robot.position_m[2]
+        depth = cfg.surface_z_m - tip_z
+        obs = HandObservation(self.sim_time_s, self.arm.y_m, felt, depth if depth > 0 else 0.0, -depth if depth < 0 else 0.0)
+        self.last_observation = obs
+        y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
+        touch.stylus_m = (0.0, y, 0.0)
+        d = mat_vec(self._rot_base_haptic, (0.0, y * cfg.motion_scale, 0.0))
+        home = cfg.tip_home_m
+        robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
+        robot.advance(now_ns, dt)
+
+        depth = cfg.surface_z_m - robot.position_m[2]
+        f = self.tissue.step(depth, dt) if dt > 0 else self.tissue.force_n
+        self._truth = (0.0, 0.0, f)
+        if robot.orientation is not self._orient:
+            self._orient = robot.orientation
+            self._rot_sensor_base = transpose(mat_mul(robot.orientation, self.true_rot_tip_sensor))
+        self.sensor.sample(now_ns, self._rot_sensor_base, self._truth, dt)
+
+    def true_contact_force(self) -> Vec3:
+        """Contact force on the tool tip in the base frame, N (ground truth)."""
+        return self._truth
+
+    def close(self) -> None:
+        """Zero the Touch."""
+        self.haptic.close()
+
+    # -- scenario control ---------------------------------------------------------------------
+    def set_driver(self, driver: StylusDriver) -> None:
+        """Hand the stylus to another driver (scripted, simulated participant, mouse)."""
+        self.driver = driver
+
+    @property
+    def indentation_m(self) -> float:
+        """Current true tissue indentation, m."""
+        d = self.config.surface_z_m - self.robot.position_m[2]
+        return d if d > 0 else 0.0

@@ -1,0 +1,97 @@
+"""Simulated UR3 (CB3) following the haptic stylus in position mode (science.md §3 item 4).
+
+The controller runs at 125 Hz: every 8 ms it samples the commanded TCP
+position (a zero-order hold) and publishes the actual pose, which is what
+RTDE would return until the next cycle.  The tool itself tracks the held
+target with a first-order lag (τ ≈ 20–50 ms), integrated exactly at the
+loop rate -- the "lagging robot" of the simulated rig, nothing more.
+Orientation changes (calibration poses) are applied at the next controller
+cycle.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pipeline.devices import PoseSample
+from pipeline.frames import Mat3, Vec3
+
+__all__ = ["RobotParams", "SimRobot", "TOOL_DOWN"]
+
+#: Tool pointing straight down: tip z axis along base −z (rotation π about base x).
+TOOL_DOWN: Mat3 = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
+
+
+@dataclass(frozen=True, slots=True)
+class RobotParams:
+    """Timing of the simulated arm: controller rate (125 Hz CB3 / 500 Hz e-Series) and tracking lag."""
+
+    controller_rate_hz: float = 125.0
+    tracking_lag_s: float = 0.03
+
+    def __post_init__(self) -> None:
+        for name in ("controller_rate_hz", "tracking_lag_s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"robot.{name} = {v!r}: must be a finite number > 0")
+
+
+class SimRobot:
+    """A ``Robot`` with a settable target; the rig advances it each tick.
+
+    ``frozen = True`` stops pose publication (a dead RTDE link) for watchdog tests.
+    """
+
+    def __init__(self, home_m: Vec3, orientation: Mat3 = TOOL_DOWN, params: RobotParams | None = None) -> None:
+        self.params = params or RobotParams()
+        self._cycle_ns = int(round(1e9 / self.params.controller_rate_hz))
+        self.position_m: list[float] = list(home_m)
+        self.orientation: Mat3 = orientation
+        self._target: Vec3 = tuple(home_m)  # type: ignore[assignment]
+        self._held_target: Vec3 = self._target
+        self._pending_orientation: Mat3 = orientation
+        self._next_cycle_ns: int | None = None
+        self._pose = PoseSample(0, tuple(home_m), orientation, 0.0)  # type: ignore[arg-type]
+        self.frozen = False
+
+    def command(self, target_m: Vec3) -> None:
+        """Set the TCP position the teleoperation program asks for (base frame, m)."""
+        self._target = target_m
+
+    def set_orientation(self, rot_base_tip: Mat3) -> None:
+        """Re-orient the tool (taken at the next controller cycle)."""
+        self._pending_orientation = rot_base_tip
+
+    def advance(self, now_ns: int, dt_s: float) -> None:
+        """Run the controller cycle if due and integrate the tracking lag over ``dt_s``."""
+        if self._next_cycle_ns is None:
+            self._next_cycle_ns = now_ns
+        if now_ns >= self._next_cycle_ns:
+            self._held_target = self._target
+            self.orientation = self._pending_orientation
+            if not self.frozen:
+                self._pose = PoseSample(
+                    now_ns, (self.position_m[0], self.position_m[1], self.position_m[2]),
+                    self.orientation, now_ns * 1e-9,
+                )
+            while self._next_cycle_ns <= now_ns:
+                self._next_cycle_ns += self._cycle_ns
+        if dt_s > 0:
+            a = 1.0 - math.exp(-dt_s / self.params.tracking_lag_s)
+            p, t = self.position_m, self._held_target
+            p[0] += (t[0] - p[0]) * a
+            p[1] += (t[1] - p[1]) * a
+            p[2] += (t[2] - p[2]) * a
+
+    def teleport(self, position_m: Vec3) -> None:
+        """Place the tool at ``position_m`` at rest (set-up and calibration, not teleoperation)."""
+        self.position_m = list(position_m)
+        self._target = self._held_target = tuple(position_m)  # type: ignore[assignment]
+
+    def read_pose(self) -> PoseSample:
+        """The pose published at the last controller cycle."""
+        return self._pose
+
+    def close(self) -> None:
+        """Nothing to release."""

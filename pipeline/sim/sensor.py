@@ -1,0 +1,188 @@
+"""Simulated ATI Gamma SI-130-10 on a Net F/T box (science.md §1.5, §2).
+
+It reports, in its own frame S, what the real one would: the tool's weight at
+the current orientation, the contact force transmitted from the tip (with its
+lever-arm torque), a bias that drifts (warm-up exponential + random walk),
+white noise, quantisation to counts, saturation at the calibrated ranges and,
+optionally, lost UDP packets.  Records carry the RDT fields (``rdt_sequence``,
+``ft_sequence``, ``status``) so the same health checks run on the simulation
+and on hardware.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from statistics import NormalDist
+
+from pipeline.devices import WrenchSample
+from pipeline.frames import Mat3, Vec3, cross, mat_vec
+
+__all__ = ["GAMMA_RANGE", "SATURATION_STATUS", "SensorParams", "SimForceSensor"]
+
+#: SI-130-10 full scale: Fx, Fy ±130 N; Fz ±400 N; Tx, Ty, Tz ±10 N·m.
+GAMMA_RANGE: tuple[float, float, float, float, float, float] = (130.0, 130.0, 400.0, 10.0, 10.0, 10.0)
+#: Status word the simulated box reports while a gauge is saturated (non-zero = serious).
+SATURATION_STATUS = 0x80020000
+_G = 9.80665
+
+
+@dataclass(frozen=True, slots=True)
+class SensorParams:
+    """Physical truth of the simulated sensor and payload (what calibration must recover).
+
+    Attributes
+    ----------
+    mass_kg, com_m
+        Instrument mass distal to the sensor and its centre of mass in S.
+    tip_in_sensor_m
+        Position of the instrument tip in S (lever arm of the contact force).
+    bias_force_n, bias_torque_nm
+        Initial offsets.
+    drift_force_n, drift_tau_s
+        Warm-up drift amplitude per force axis and its time constant (torque
+        drift is scaled by 0.01 m).
+    random_walk_n_per_sqrt_s
+        Random-walk intensity of the bias, N/√s (0.02 N/√min ≈ 2.6e-3 N/√s).
+    noise_force_n, noise_torque_nm
+        White-noise standard deviation per channel.
+    counts_per_force, counts_per_torque
+        Quantisation (Net F/T cpf/cpt).
+    packet_loss
+        Probability a 1 kHz sample is lost (the previous one stays newest).
+    """
+
+    mass_kg: float = 0.65
+    com_m: Vec3 = (0.003, -0.002, 0.110)
+    tip_in_sensor_m: Vec3 = (0.0, 0.0, 0.35)
+    bias_force_n: Vec3 = (0.8, -0.5, 1.2)
+    bias_torque_nm: Vec3 = (0.03, -0.02, 0.01)
+    drift_force_n: Vec3 = (0.12, -0.08, 0.15)
+    drift_tau_s: float = 900.0
+    random_walk_n_per_sqrt_s: float = 2.6e-3
+    noise_force_n: Vec3 = (0.02, 0.02, 0.035)
+    noise_torque_nm: Vec3 = (0.0008, 0.0008, 0.0008)
+    counts_per_force: float = 1_000_000.0
+    counts_per_torque: float = 1_000_000.0
+    range_n: tuple[float, float, float, float, float, float] = GAMMA_RANGE
+    packet_loss: float = 0.0
+
+
+class SimForceSensor:
+    """A ``ForceSensor`` whose readings come from the simulated world.
+
+    The rig calls :meth:`sample` once per tick with the true sensor
+    orientation and the contact force; the loop reads the newest record with
+    :meth:`read_wrench`.  ``stalled``, ``status_override`` and
+    ``inject_nan`` are fault-injection switches for watchdog tests.
+    """
+
+    _BLOCK = 1024
+
+    def __init__(self, params: SensorParams | None = None, seed: int = 0) -> None:
+        self.params = params or SensorParams()
+        self._rng = np.random.default_rng(seed)
+        self._noise: list[list[float]] = []
+        self._ni = self._BLOCK
+        self._rw = [0.0] * 6
+        self._rdt = 0
+        self._ft = 0
+        self._t0_ns: int | None = None
+        self._latest = WrenchSample(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)
+        self.stalled = False
+        self.status_override = 0
+        self.inject_nan = False
+        self.lost_packets = 0
+        self._loss_threshold = _normal_quantile(self.params.packet_loss)
+
+    @property
+    def range_n(self) -> tuple[float, float, float, float, float, float]:
+        """Full-scale range per channel."""
+        return self.params.range_n
+
+    def _next_noise(self) -> list[float]:
+        if self._ni >= self._BLOCK:
+            p = self.params
+            sig = np.array([*p.noise_force_n, *p.noise_torque_nm, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
+            self._noise = (self._rng.standard_normal((self._BLOCK, 13)) * sig).tolist()
+            self._ni = 0
+        row = self._noise[self._ni]
+        self._ni += 1
+        return row
+
+    def bias_at(self, t_s: float) -> tuple[float, ...]:
+        """Deterministic part of the bias at ``t_s`` (without the random walk), N and N·m."""
+        p = self.params
+        w = 1.0 - math.exp(-t_s / p.drift_tau_s)
+        bf = tuple(b + d * w for b, d in zip(p.bias_force_n, p.drift_force_n))
+        bt = tuple(b + 0.01 * d * w for b, d in zip(p.bias_torque_nm, p.drift_force_n))
+        return bf + bt
+
+    def current_bias(self, t_s: float) -> tuple[float, ...]:
+        """Full bias at ``t_s`` including the random walk so far (ground truth for tests)."""
+        b = self.bias_at(t_s)
+        return tuple(b[i] + self._rw[i] for i in range(6))
+
+    def sample(self, t_ns: int, rot_sensor_base: Mat3, contact_force_base: Vec3, dt_s: float) -> None:
+        """Produce this tick's record from the true orientation and contact force."""
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        p = self.params
+        nz = self._next_noise()
+        if p.random_walk_n_per_sqrt_s > 0 and dt_s > 0:
+            s = p.random_walk_n_per_sqrt_s * math.sqrt(dt_s)
+            rw = self._rw
+            for i in range(3):
+                rw[i] += s * nz[6 + i]
+                rw[3 + i] += 0.01 * s * nz[9 + i]
+        if self.stalled:
+            return
+        if nz[12] < self._loss_threshold:
+            self.lost_packets += 1
+            self._rdt += 1  # the box sent it; the network ate it
+            return
+        g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * p.mass_kg))
+        t_g = cross(p.com_m, g_s)
+        f_c = mat_vec(rot_sensor_base, contact_force_base)
+        t_c = cross(p.tip_in_sensor_m, f_c)
+        b = self.current_bias((t_ns - self._t0_ns) * 1e-9)
+        vals = [
+            g_s[0] + f_c[0] + b[0] + nz[0],
+            g_s[1] + f_c[1] + b[1] + nz[1],
+            g_s[2] + f_c[2] + b[2] + nz[2],
+            t_g[0] + t_c[0] + b[3] + nz[3],
+            t_g[1] + t_c[1] + b[4] + nz[4],
+            t_g[2] + t_c[2] + b[5] + nz[5],
+        ]
+        status = self.status_override
+        rng = p.range_n
+        for i in range(6):
+            cpu = p.counts_per_force if i < 3 else p.counts_per_torque
+            v = vals[i]
+            if v > rng[i]:
+                v, status = rng[i], status | SATURATION_STATUS
+            elif v < -rng[i]:
+                v, status = -rng[i], status | SATURATION_STATUS
+            vals[i] = round(v * cpu) / cpu  # integer counts on the wire
+        if self.inject_nan:
+            vals[0] = math.nan
+        self._rdt += 1
+        self._ft += 1
+        self._latest = WrenchSample(
+            t_ns, vals[0], vals[1], vals[2], vals[3], vals[4], vals[5], status, self._rdt, self._ft
+        )
+
+    def read_wrench(self) -> WrenchSample:
+        """Newest record (never blocks)."""
+        return self._latest
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+def _normal_quantile(p: float) -> float:
+    """Φ⁻¹(p): lose a packet when a standard-normal draw falls below it (probability p)."""
+    return NormalDist().inv_cdf(p) if 0.0 < p < 1.0 else (-math.inf if p <= 0 else math.inf)
+

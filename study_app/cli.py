@@ -1,0 +1,126 @@
+"""The ``haptic-study`` command line.
+
+Subcommands import their machinery lazily, so ``haptic-study --help`` and the
+headless commands never load Qt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+
+__all__ = ["main"]
+
+
+class CliError(Exception):
+    """A user-facing error: printed as one line, exit status 2."""
+
+
+def _positive_float(name: str):  # type: ignore[no-untyped-def]
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a number") from None
+        if not (v > 0 and v < float("inf")):
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a finite number > 0")
+        return v
+
+    return parse
+
+
+def _nonneg_int(name: str):  # type: ignore[no-untyped-def]
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a whole number") from None
+        if v < 0:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be ≥ 0")
+        return v
+
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of every subcommand."""
+    p = argparse.ArgumentParser(
+        prog="haptic-study",
+        description="Force-feedback training study: haptic pipeline, simulated rig, protocol, analysis, GUI.",
+    )
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    s = sub.add_parser("sim", help="run the simulated rig with scripted presses and summarise what the pipeline saw")
+    s.add_argument("--seconds", type=_positive_float("--seconds"), default=60.0, help="simulated time (default 60)")
+    s.add_argument("--seed", type=_nonneg_int("--seed"), default=0, help="seed of every random process (default 0)")
+    s.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                   help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
+    s.add_argument("--haptics", choices=("on", "off"), default="on", help="haptic feedback (default on)")
+    s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+
+    b = sub.add_parser("bench", help="benchmarks (see README for recorded figures)")
+    bsub = b.add_subparsers(dest="bench", metavar="BENCH")
+    bsub.required = True
+    bp = bsub.add_parser("pipeline", help="per-tick cost vs NumPy, 1 kHz loop timing, filter trade table")
+    bp.add_argument("--json", action="store_true", help="print one JSON object")
+    bp.add_argument("--loop-seconds", type=float, default=30.0, help="real time to run the loop (default 30; 0 skips)")
+    bp.add_argument("--ticks", type=_nonneg_int("--ticks"), default=20_000, help="samples for the cost benchmark")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``haptic-study`` console script."""
+    args = build_parser().parse_args(argv)
+    try:
+        if args.command == "sim":
+            return _cmd_sim(args)
+        if args.command == "bench" and args.bench == "pipeline":
+            return _cmd_bench_pipeline(args)
+    except CliError as exc:
+        print(f"haptic-study: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("haptic-study: interrupted", file=sys.stderr)
+        return 130
+    return 1  # pragma: no cover - argparse enforces a known command
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    from study_app.progress import ProgressBar
+    from study_app.sim_summary import run_scripted_sim
+
+    bar = None if args.json else ProgressBar(args.seconds, "simulating", "s")
+    summary = run_scripted_sim(
+        seconds=args.seconds, seed=args.seed, clock=args.clock, haptics_on=args.haptics == "on",
+        progress=None if bar is None else bar.update,
+    )
+    if bar is not None:
+        bar.close()
+    if args.json:
+        print(json.dumps(summary, indent=None))
+    else:
+        from study_app.sim_summary import format_summary
+
+        print(format_summary(summary))
+    return 0
+
+
+def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
+    from bench.pipeline_bench import format_pipeline_bench, run_pipeline_bench
+
+    def say(msg: str) -> None:
+        print(f"bench: {msg} ...", file=sys.stderr, flush=True)
+
+    result = run_pipeline_bench(loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_pipeline_bench(result))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
