@@ -347,7 +347,8 @@ class PayloadCalibration:
 
         The residual fields still describe the original offline fit.
         """
-        return replace(self, force_bias_n=tuple(force_bias_n), torque_bias_nm=tuple(torque_bias_nm))  # type: ignore[arg-type]
+        fb, tb = tuple(force_bias_n), tuple(torque_bias_nm)
+        return replace(self, force_bias_n=fb, torque_bias_nm=tb)  # type: ignore[arg-type]
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dictionary (lists and finite floats), inverse of :meth:`from_dict`."""
@@ -521,15 +522,19 @@ def _pair_words(a: _FloatArray, b: _FloatArray) -> tuple[str, str]:
 
 
 def _undetermined(s: _FloatArray, vt: _FloatArray, rtol: float) -> str:
-    """Name the parameter combinations in the numerical null space."""
-    groups = []
-    for j in range(len(s)):
-        if s[j] > rtol * s[0]:
-            continue
-        v = vt[j]
-        names = [_PARAM_NAMES[k] for k in np.argsort(-np.abs(v)) if abs(v[k]) >= 0.25]
-        groups.append(" with ".join(names))
-    return "; ".join(dict.fromkeys(groups))
+    """Name the parameters with a component in the numerical null space.
+
+    A multi-dimensional null space has no preferred basis, so rather than
+    its (arbitrary) singular vectors, report each parameter whose unit vector
+    projects onto it noticeably: those cannot be told apart from others.
+    """
+    null = vt[s <= rtol * s[0]]
+    weight = np.sum(null * null, axis=0)
+    return ", ".join(_PARAM_NAMES[k] for k in range(len(_PARAM_NAMES)) if weight[k] >= 0.1)
+
+
+def _all_poses(n: int) -> str:
+    return "the only pose has" if n == 1 else "both poses have" if n == 2 else f"all {n} poses have"
 
 
 def _coverage_advice(units: _FloatArray) -> tuple[str, str]:
@@ -543,13 +548,19 @@ def _coverage_advice(units: _FloatArray) -> tuple[str, str]:
     lies along each principal direction.
     """
     n = units.shape[0]
-    _, s, vt = np.linalg.svd(units, full_matrices=False)
+    _, s, vt = np.linalg.svd(units, full_matrices=True)  # vt is 3x3 even for N < 3
     rms = np.zeros(3)
     rms[: s.size] = s / math.sqrt(n)
     weak = [j for j in (1, 2) if rms[j] < _COVER_RMS]
+    if not weak:
+        # well spread yet rank-deficient: only reachable with a very loose rank_rtol
+        return (
+            f"the gravity directions of the {n} poses do not separate all parameters",
+            "add poses tilted 45–60° from the current ones in several directions (see recommended_pose_set)",
+        )
     if len(weak) == 1:
         normal = vt[2]
-        a, b = vt[0], vt[1]
+        a, b = _complement(normal)
         ia, ib = _axis_index(a), _axis_index(b)
         plane = (
             "the sensor {}–{} plane".format(*sorted((_AXES[ia], _AXES[ib])))
@@ -558,7 +569,7 @@ def _coverage_advice(units: _FloatArray) -> tuple[str, str]:
         )
         tilt_axes, _ = _pair_words(a, b)
         situation = (
-            f"the {n} poses have gravity in only 2 distinct directions, both in {plane}, "
+            f"the {n} poses have gravity in only 2 distinct directions, spanning {plane}, "
             f"so nothing excites the payload along {_name_dir(normal, signed=False)}"
         )
         advice = (
@@ -576,7 +587,7 @@ def _coverage_advice(units: _FloatArray) -> tuple[str, str]:
     if i is not None:
         axis = f"sensor {'±' if both else ('+' if d[i] > 0 else '-')}{_AXES[i]} axis"
     else:
-        axis = f"{'±' if both else '+'}{_name_dir(d)}"
+        axis = "sensor direction {}({:.2f}, {:.2f}, {:.2f})".format("±" if both else "", *d)
     tool = ""
     if i == 2:
         # tool-down (rot_base_sensor = diag(1, -1, -1)) puts gravity along +z_S
@@ -585,7 +596,7 @@ def _coverage_advice(units: _FloatArray) -> tuple[str, str]:
         tool = " (tool horizontal)"
     w1, w2 = _complement(d)
     tilt_axes, components = _pair_words(w1, w2)
-    situation = f"all {n} poses have gravity along the {axis}{tool}"
+    situation = f"{_all_poses(n)} gravity along the {axis}{tool}"
     advice = (
         f"add poses that tilt the tool at least 45° about the {tilt_axes} so gravity has a "
         f"component along {components} (e.g. 4 poses tilted ±60°, two about each axis)"
@@ -606,7 +617,7 @@ def _affine_advice(units: _FloatArray, n: int) -> tuple[str, str]:
         w1, w2 = _complement(normal)
         tilt_axes, _ = _pair_words(w1, w2)
         situation = (
-            f"the gravity directions of all {n} poses lie on one great circle, perpendicular to {name} "
+            f"the gravity directions of the {n} poses lie on one great circle, perpendicular to {name} "
             f"(the poses differ only by rotations about the {name} axis)"
         )
         advice = (
@@ -614,10 +625,19 @@ def _affine_advice(units: _FloatArray, n: int) -> tuple[str, str]:
             f"(whichever is not along gravity), so gravity has a component along {name}"
         )
     else:
-        half = math.degrees(math.acos(min(1.0, h)))
         name = _name_dir(normal)
+        tilts = np.degrees(np.arccos(np.clip(units @ normal, -1.0, 1.0)))
+        if np.ptp(tilts) >= 2.0:
+            # a shallow cap: curved, but too little to tell from a plane
+            situation = (
+                f"the gravity directions of the {n} poses all stay within {tilts.max():.0f}° of {name}, "
+                "too close to one plane to separate the mount rotation from the bias"
+            )
+            advice = f"add poses tilted 45–60° from {name} in several directions (see recommended_pose_set)"
+            return situation, advice
+        half = math.degrees(math.acos(min(1.0, h)))
         situation = (
-            f"the gravity directions of all {n} poses lie on one cone of half-angle {half:.0f}° around {name} "
+            f"the gravity directions of the {n} poses lie on one cone of half-angle {half:.0f}° around {name} "
             f"(same tilt, different yaw)"
         )
         advice = (
@@ -713,12 +733,13 @@ def identify_payload(
     rank, cond_h = _rank_cond(s_h, rank_rtol)
     if n < 3 or rank < 10:
         situation, advice = _coverage_advice(units)
-        head = f"{n} poses are too few (at least 3 are needed); " if n < 3 else ""
+        head = f"{n} pose{'s are' if n > 1 else ' is'} too few (at least 3 are needed); " if n < 3 else ""
         missing = _undetermined(s_h, vt_h, rank_rtol)
         raise DegeneratePoseSetError(
             f"{head}the calibration poses do not determine the payload: the rigid regressor has rank {rank} "
-            f"of 10 (condition number {cond_h:.3g}, columns scaled to unit norm), so "
-            f"{missing or 'some parameters'} cannot be separated. Cause: {situation}. To fix: {advice}.",
+            f"of 10 (condition number {cond_h:.3g}, columns scaled to unit norm); "
+            f"these parameters are not determined: {missing or 'some combination'}. "
+            f"Cause: {situation}. To fix: {advice}.",
             rank=rank,
             condition_number=cond_h,
             advice=advice,
@@ -730,13 +751,19 @@ def identify_payload(
     rank_g, cond_g = _rank_cond(s_g, rank_rtol)
     affine_ok = n >= 6 and rank_g == 4
     if model == "affine" and not affine_ok:
-        if rank_g < 4:
+        if n < 6:
+            why = (
+                "its 12 force parameters need at least 6 poses (4 whose gravity directions are not "
+                f"coplanar, plus redundancy), got {n}"
+            )
+            situation = "any 3 gravity directions lie in one plane" if n == 3 else f"only {n} poses were given"
+            advice = (
+                f"add at least {6 - n} more poses at new tilts, out of the plane of the current ones "
+                "(see recommended_pose_set)"
+            )
+        else:
             situation, advice = _affine_advice(units, n)
             why = f"its force regressor [g_Sᵀ 1] has rank {rank_g} of 4 (condition number {cond_g:.3g})"
-        else:
-            situation = f"only {n} poses were given"
-            advice = f"add at least {6 - n} more poses at new tilts (see recommended_pose_set)"
-            why = f"its 12 force parameters need at least 6 poses for any redundancy, got {n}"
         raise DegeneratePoseSetError(
             "the affine model (a free 3x3 gravity matrix absorbing the sensor-mount rotation) cannot be "
             f"identified: {why}. Cause: {situation}. To fix: {advice}, or pass model='rigid' "
@@ -945,7 +972,8 @@ class RlsBias:
 
     def reset(self, force_bias_n: Sequence[float], torque_bias_nm: Sequence[float]) -> None:
         """Restart from new offsets (e.g. after a re-bias at rest) with ``P = p0``."""
-        self._theta = [*_finite_tuple(force_bias_n, 3, "force_bias_n"), *_finite_tuple(torque_bias_nm, 3, "torque_bias_nm")]
+        fb = _finite_tuple(force_bias_n, 3, "force_bias_n")
+        self._theta = [*fb, *_finite_tuple(torque_bias_nm, 3, "torque_bias_nm")]
         self._p = self._p0
         self.updates = 0
         self.rejected = 0

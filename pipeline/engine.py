@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.clock import Clock, MonotonicClock, VirtualClock
-from pipeline.compensation import NO_PAYLOAD, PayloadCalibration
+from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import RECORD_FIELDS, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
+from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
 from pipeline.ring import RingBuffer
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRig, SimRigConfig
@@ -52,6 +52,10 @@ class EngineConfig:
         Who holds the stylus: ``"scripted"`` (repeated presses) or ``"hold"``.
     haptics_on
         Feedback state at start.
+    refine_bias
+        Online bias refinement (RLS, science.md §1.4) allowed from the start.
+        The study runner allows it only between trials; the estimator's own
+        contact gate refuses samples with more than 0.15 N of innovation.
     ring_seconds
         Ring buffer length in seconds of records.
     """
@@ -63,6 +67,7 @@ class EngineConfig:
     calibrate: bool = True
     driver: str = "scripted"
     haptics_on: bool = True
+    refine_bias: bool = True
     ring_seconds: float = 30.0
 
     def __post_init__(self) -> None:
@@ -118,10 +123,12 @@ def build_sim_engine(
         calibration, _ = auto_calibrate(rig, cal_clock, progress=progress)
     if config.driver == "scripted":
         rig.set_driver(ScriptedPresses())
-    framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n)
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
+    framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
     ring = RingBuffer.create(RECORD_FIELDS, int(config.ring_seconds * 1000), shared=shared_ring)
     loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
     loop.submit(SetHaptics(config.haptics_on))
+    loop.submit(AllowBiasRefinement(config.refine_bias))
     return SimEngine(rig, framework, loop, clk, calibration, ring)
 
 

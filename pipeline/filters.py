@@ -50,7 +50,7 @@ class MovingAverage3:
     :attr:`rejected`) and the previous mean is returned unchanged.
     """
 
-    __slots__ = ("window", "rejected", "_bx", "_by", "_bz", "_sx", "_sy", "_sz", "_i", "_n", "_mean")
+    __slots__ = ("window", "rejected", "_bx", "_by", "_bz", "_sx", "_sy", "_sz", "_i", "_n")
 
     def __init__(self, window: int) -> None:
         self.window = _check_window(window)
@@ -66,7 +66,6 @@ class MovingAverage3:
         self._sx = self._sy = self._sz = 0.0
         self._i = 0
         self._n = 0
-        self._mean: Vec3 = (0.0, 0.0, 0.0)
 
     @property
     def count(self) -> int:
@@ -77,7 +76,7 @@ class MovingAverage3:
         """Add one sample and return the mean of the last ``window`` accepted samples."""
         if (x - x) + (y - y) + (z - z) != 0.0:  # NaN or ±inf in any component
             self.rejected += 1
-            return self._mean
+            return self.mean
         i = self._i
         bx, by, bz = self._bx, self._by, self._bz
         self._sx += x - bx[i]
@@ -99,9 +98,15 @@ class MovingAverage3:
             self._sy = _FSUM(by)
             self._sz = _FSUM(bz)
         self._i = i
-        m = (self._sx / n, self._sy / n, self._sz / n)
-        self._mean = m
-        return m
+        return (self._sx / n, self._sy / n, self._sz / n)
+
+    @property
+    def mean(self) -> Vec3:
+        """Current output (zeros before the first accepted sample)."""
+        n = self._n
+        if n == 0:
+            return (0.0, 0.0, 0.0)
+        return (self._sx / n, self._sy / n, self._sz / n)
 
 
 class MovingAverage:

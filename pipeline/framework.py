@@ -24,12 +24,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.filters import MovingAverage3
 from pipeline.frames import IDENTITY, Mat3, check_rotation, mat_mul, transpose
 from pipeline.safety import SafetyConfig, SafetyGovernor
-from pipeline.scaling import scale_components
+from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
+
+_HYPOT = math.hypot
+_TANH = math.tanh
+_FSUM = math.fsum
 
 __all__ = ["FrameworkConfig", "HapticFramework", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE", "DEFAULT_ROT_TIP_SENSOR"]
 
@@ -93,7 +98,6 @@ STEP_FIELDS: tuple[str, ...] = (
     "haptic_fx", "haptic_fy", "haptic_fz",
     "scaled_fx", "scaled_fy", "scaled_fz",
     "render_fx", "render_fy", "render_fz",
-    "force_n",
 )
 
 
@@ -114,8 +118,8 @@ class HapticFramework:
     """
 
     __slots__ = (
-        "config", "calibration", "filter", "safety", "rls",
-        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_rot_base_tip",
+        "config", "_cal", "_bias", "_payload", "filter", "safety", "rls",
+        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_rot_base_tip", "_window",
     )
 
     def __init__(
@@ -126,10 +130,15 @@ class HapticFramework:
         rls: RlsBias | None = None,
     ) -> None:
         self.config = config
-        self.calibration = calibration
+        self._cal = calibration
+        self._bias: tuple[float, ...] = (*calibration.force_bias_n, *calibration.torque_bias_nm)
+        self._payload: tuple[float, ...] = (0.0,) * 6
         self.filter = MovingAverage3(config.filter_window)
+        self._window = config.filter_window
         self.safety = SafetyGovernor(config.safety, device_peak_n)
         self.rls = rls
+        if rls is not None:
+            rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
         self._fmax = float(config.f_max_n)
         self._fscale = float(config.f_scale_n)
         self._rts = config.rot_tip_sensor
@@ -142,16 +151,32 @@ class HapticFramework:
     def set_pose(self, rot_base_tip: Mat3) -> None:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
 
-        Recomputes the gravity + bias wrench the sensor reads in this pose.
+        Recomputes the payload weight the sensor reads in this pose.
         """
         self._rot_base_tip = rot_base_tip
         self._rbt = rot_base_tip
-        rot_sensor_base = transpose(mat_mul(rot_base_tip, self._rts))
-        self._off = self.calibration.gravity_wrench(rot_sensor_base)
+        self._payload = self._cal.payload_wrench(transpose(mat_mul(rot_base_tip, self._rts)))
+        self._update_offsets()
+
+    def _update_offsets(self) -> None:
+        p, b = self._payload, self._bias
+        self._off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
+
+    @property
+    def calibration(self) -> PayloadCalibration:
+        """The payload model in use, with the current (possibly refined) bias."""
+        b = self._bias
+        cal = self._cal
+        if (b[0], b[1], b[2]) == tuple(cal.force_bias_n) and (b[3], b[4], b[5]) == tuple(cal.torque_bias_nm):
+            return cal
+        return cal.with_bias(b[:3], b[3:])
 
     def set_calibration(self, calibration: PayloadCalibration) -> None:
-        """Replace the payload/bias model (takes effect at once)."""
-        self.calibration = calibration
+        """Replace the payload/bias model (takes effect at once; restarts bias refinement from it)."""
+        self._cal = calibration
+        self._bias = (*calibration.force_bias_n, *calibration.torque_bias_nm)
+        if self.rls is not None:
+            self.rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
         self.set_pose(self._rot_base_tip)
 
     def refine_bias(self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
@@ -164,18 +189,11 @@ class HapticFramework:
         rls = self.rls
         if rls is None:
             return False
-        g = self.calibration.gravity_wrench(transpose(mat_mul(self._rot_base_tip, self._rts)))
-        b = self.calibration
-        # measured minus gravity only (the calibration's own bias added back)
-        fb, tb = b.force_bias_n, b.torque_bias_nm
-        z = (
-            fx - g[0] + fb[0], fy - g[1] + fb[1], fz - g[2] + fb[2],
-            tx - g[3] + tb[0], ty - g[4] + tb[1], tz - g[5] + tb[2],
-        )
-        if not rls.update(z, True):
+        p = self._payload
+        if not rls.update((fx - p[0], fy - p[1], fz - p[2], tx - p[3], ty - p[4], tz - p[5]), True):
             return False
-        self.calibration = b.with_bias(rls.force_bias_n, rls.torque_bias_nm)
-        self.set_pose(self._rot_base_tip)
+        self._bias = (*rls.force_bias_n, *rls.torque_bias_nm)
+        self._update_offsets()
         return True
 
     def reset(self) -> None:
@@ -184,7 +202,8 @@ class HapticFramework:
         self.safety.force_zero()
 
     def step(
-        self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float, enabled: bool, dt_s: float
+        self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float, enabled: bool, dt_s: float,
+        *, _hypot: Any = _HYPOT, _tanh: Any = _TANH, _fsum: Any = _FSUM, _lo: float = _SERIES_T, _hi: float = _SATURATED_T,
     ) -> tuple[float, ...]:
         """Run Algorithm 1 on one raw wrench (sensor frame, N and N·m).
 
@@ -203,31 +222,80 @@ class HapticFramework:
         tuple of float
             The stages in :data:`STEP_FIELDS` order: compensated wrench
             (6), filtered force, tip, base and haptic frame force, scaled and
-            rendered force (3 each), and ``force_n`` = |filtered force|, the
-            magnitude the study task judges.
+            rendered force (3 each).
         """
-        o = self._off
-        cx = fx - o[0]
-        cy = fy - o[1]
-        cz = fz - o[2]
-        mx, my, mz = self.filter.update(cx, cy, cz)
-        r = self._rts
-        ax = r[0] * mx + r[1] * my + r[2] * mz
-        ay = r[3] * mx + r[4] * my + r[5] * mz
-        az = r[6] * mx + r[7] * my + r[8] * mz
-        r = self._rbt
-        bx = r[0] * ax + r[1] * ay + r[2] * az
-        by = r[3] * ax + r[4] * ay + r[5] * az
-        bz = r[6] * ax + r[7] * ay + r[8] * az
-        r = self._rhb
-        hx = r[0] * bx + r[1] * by + r[2] * bz
-        hy = r[3] * bx + r[4] * by + r[5] * bz
-        hz = r[6] * bx + r[7] * by + r[8] * bz
-        sx, sy, sz = scale_components(hx, hy, hz, self._fmax, self._fscale)
-        ox, oy, oz = self.safety.step(sx, sy, sz, enabled, dt_s)
+        o0, o1, o2, o3, o4, o5 = self._off
+        cx = fx - o0
+        cy = fy - o1
+        cz = fz - o2
+        # -- moving average: the steady-state path of MovingAverage3.update,
+        # written out (same arithmetic, same state); the first W samples, the
+        # once-per-window exact re-sum and rejected samples go through the method.
+        f = self.filter
+        w = self._window
+        if f._n == w and (cx - cx) + (cy - cy) + (cz - cz) == 0.0:
+            i = f._i
+            bx, by, bz = f._bx, f._by, f._bz
+            sx = f._sx + (cx - bx[i])
+            sy = f._sy + (cy - by[i])
+            sz = f._sz + (cz - bz[i])
+            bx[i] = cx
+            by[i] = cy
+            bz[i] = cz
+            i += 1
+            if i == w:
+                i = 0
+                sx = _fsum(bx)
+                sy = _fsum(by)
+                sz = _fsum(bz)
+            f._i = i
+            f._sx = sx
+            f._sy = sy
+            f._sz = sz
+            mx = sx / w
+            my = sy / w
+            mz = sz / w
+        else:
+            mx, my, mz = f.update(cx, cy, cz)
+        # -- eqs. (TCP), (Base), (Haptic): frames.mat_vec three times, in place
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rts
+        ax = r0 * mx + r1 * my + r2 * mz
+        ay = r3 * mx + r4 * my + r5 * mz
+        az = r6 * mx + r7 * my + r8 * mz
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rbt
+        bx_ = r0 * ax + r1 * ay + r2 * az
+        by_ = r3 * ax + r4 * ay + r5 * az
+        bz_ = r6 * ax + r7 * ay + r8 * az
+        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rhb
+        hx = r0 * bx_ + r1 * by_ + r2 * bz_
+        hy = r3 * bx_ + r4 * by_ + r5 * bz_
+        hz = r6 * bx_ + r7 * by_ + r8 * bz_
+        # -- eq. (H_scaled): scaling.scale_components' general branch in place;
+        # zero, tiny, huge, saturated and non-finite inputs take the function.
+        fmag = _hypot(hx, hy, hz)
+        t = fmag / self._fscale
+        if _lo <= t <= _hi:
+            k = self._fmax * _tanh(t) / fmag
+            qx, qy, qz = hx * k, hy * k, hz * k
+        else:
+            qx, qy, qz = scale_components(hx, hy, hz, self._fmax, self._fscale)
+        # -- safety: SafetyGovernor.step's steady state (enabled, fully ramped
+        # in, in range, slew not limiting) in place; everything else the method.
+        g = self.safety
+        if enabled and g.gain == 1.0 and 0.0 < dt_s <= g._max_dt:
+            px, py, pz = g._sx, g._sy, g._sz
+            dx, dy, dz = qx - px, qy - py, qz - pz
+            step = g._slew * dt_s
+            if qx * qx + qy * qy + qz * qz <= g._lim2 and dx * dx + dy * dy + dz * dz <= step * step:
+                g._sx = ox = px + dx
+                g._sy = oy = py + dy
+                g._sz = oz = pz + dz
+            else:
+                ox, oy, oz = g.step(qx, qy, qz, enabled, dt_s)
+        else:
+            ox, oy, oz = g.step(qx, qy, qz, enabled, dt_s)
         return (
-            cx, cy, cz, tx - o[3], ty - o[4], tz - o[5],
-            mx, my, mz, ax, ay, az, bx, by, bz, hx, hy, hz,
-            sx, sy, sz, ox, oy, oz,
-            math.hypot(mx, my, mz),
+            cx, cy, cz, tx - o3, ty - o4, tz - o5,
+            mx, my, mz, ax, ay, az, bx_, by_, bz_, hx, hy, hz,
+            qx, qy, qz, ox, oy, oz,
         )

@@ -54,6 +54,7 @@ RECORD_FIELDS: tuple[str, ...] = (
     "t_s", "tick",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
     *STEP_FIELDS,
+    "force_n",
     "sensor_age_s", "pose_age_s", "faults", "haptic_on", "gain",
     "trial_index", "phase",
     "tip_x_m", "tip_y_m", "tip_z_m",
@@ -62,6 +63,7 @@ RECORD_FIELDS: tuple[str, ...] = (
     "period_s",
 )
 _NAN3 = (math.nan, math.nan, math.nan)
+_HYPOT = math.hypot
 
 
 class Rig(Protocol):
@@ -357,7 +359,7 @@ class HapticLoop:
         sp = hs.position_m
         rec = (
             now * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
-            *out,
+            *out, _HYPOT(out[6], out[7], out[8]),
             sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
             pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],

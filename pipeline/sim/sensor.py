@@ -45,7 +45,8 @@ class SensorParams:
         Warm-up drift amplitude per force axis and its time constant (torque
         drift is scaled by 0.01 m).
     random_walk_n_per_sqrt_s
-        Random-walk intensity of the bias, N/√s (0.02 N/√min ≈ 2.6e-3 N/√s).
+        Random-walk intensity of the bias, N/√s (0.01 N/√min ≈ 1.3e-3 N/√s,
+        the low end of science.md §1.5).
     noise_force_n, noise_torque_nm
         White-noise standard deviation per channel.
     counts_per_force, counts_per_torque
@@ -61,7 +62,7 @@ class SensorParams:
     bias_torque_nm: Vec3 = (0.03, -0.02, 0.01)
     drift_force_n: Vec3 = (0.12, -0.08, 0.15)
     drift_tau_s: float = 900.0
-    random_walk_n_per_sqrt_s: float = 2.6e-3
+    random_walk_n_per_sqrt_s: float = 1.3e-3
     noise_force_n: Vec3 = (0.02, 0.02, 0.035)
     noise_torque_nm: Vec3 = (0.0008, 0.0008, 0.0008)
     counts_per_force: float = 1_000_000.0
