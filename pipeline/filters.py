@@ -18,9 +18,24 @@ import math
 
 from pipeline.frames import Vec3
 
-__all__ = ["MovingAverage", "MovingAverage3", "group_delay_s"]
+__all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s"]
 
 _FSUM = math.fsum
+
+
+def exact_sum(values: list[float]) -> float:
+    """Correctly rounded sum (``math.fsum``); ±inf when the true sum overflows.
+
+    ``fsum`` raises on intermediate overflow; a window of finite samples near
+    DBL_MAX may legitimately sum beyond it, and the filter must not raise at
+    1 kHz.  The plain sum then gives the overflowed ±inf (or NaN for mixed
+    signs); the next re-sum repairs the running sum once the window is finite
+    again.
+    """
+    try:
+        return _FSUM(values)
+    except OverflowError:
+        return sum(values)
 
 
 def _check_window(window: object) -> int:
@@ -94,9 +109,9 @@ class MovingAverage3:
             i = 0
             # Re-sum exactly once per window: bounds rounding drift and flushes
             # the residue a huge spike leaves behind when it is evicted.
-            self._sx = _FSUM(bx)
-            self._sy = _FSUM(by)
-            self._sz = _FSUM(bz)
+            self._sx = exact_sum(bx)
+            self._sy = exact_sum(by)
+            self._sz = exact_sum(bz)
         self._i = i
         return (self._sx / n, self._sy / n, self._sz / n)
 

@@ -27,14 +27,14 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
-from pipeline.filters import MovingAverage3
+from pipeline.filters import MovingAverage3, exact_sum
 from pipeline.frames import IDENTITY, Mat3, check_rotation, mat_mul, transpose
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 
 _HYPOT = math.hypot
 _TANH = math.tanh
-_FSUM = math.fsum
+_FSUM = exact_sum
 
 __all__ = ["FrameworkConfig", "HapticFramework", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE", "DEFAULT_ROT_TIP_SENSOR"]
 

@@ -1,20 +1,32 @@
 #!/usr/bin/env bash
 # Set up haptic-study on a fresh Debian 12 / Ubuntu machine: the system libraries
 # Qt needs (docs: hardware.md §2.3), a virtual environment in .venv and the
-# package with its test extra.  Safe to run again: it only installs what is missing.
+# package with its test extra.  Safe to run again: it installs only what is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+
+# Prefer the distribution's interpreter: Debian builds CPython with PGO + LTO,
+# which runs the 1 kHz loop's pure-Python hot path ~20 % faster than a plain
+# source build (pyenv's default).  Fall back to whatever python3 is on PATH.
+PY=python3
+if [ -x /usr/bin/python3 ] && /usr/bin/python3 -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+    PY=/usr/bin/python3
+fi
+if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+    echo "setup: haptic-study needs Python >= 3.11 ($PY is $("$PY" -V 2>&1))" >&2
+    exit 1
+fi
 
 QT_LIBS="libglib2.0-0 libgl1 libegl1 libxkbcommon0 libfontconfig1 libdbus-1-3"
 missing=""
 if command -v dpkg-query >/dev/null 2>&1; then
-    for pkg in $QT_LIBS python3-venv; do
+    for pkg in $QT_LIBS; do
         dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing="$missing $pkg"
     done
-fi
-# python3-venv is only needed when the interpreter cannot make a venv by itself.
-if python3 -c "import ensurepip, venv" >/dev/null 2>&1; then
-    missing=$(echo "$missing" | sed 's/python3-venv//')
+    # Debian splits venv/ensurepip out of python3
+    if ! "$PY" -c "import ensurepip, venv" >/dev/null 2>&1; then
+        missing="$missing python3-venv"
+    fi
 fi
 missing=$(echo "$missing" | xargs)
 if [ -n "$missing" ]; then
@@ -22,17 +34,24 @@ if [ -n "$missing" ]; then
     SUDO=""
     [ "$(id -u)" -ne 0 ] && SUDO="sudo"
     $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing >/dev/null
 fi
 
-if [ ! -x .venv/bin/python ]; then
-    echo "setup: creating .venv"
-    python3 -m venv .venv
+want="$("$PY" -c 'import sys; print(sys.executable, sys.version.split()[0])')"
+stamp=.venv/.haptic-study-python
+if [ -d .venv ] && [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+    echo "setup: .venv was made by another interpreter; recreating it"
+    rm -rf .venv
 fi
-stamp=.venv/.haptic-study-installed
-if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+if [ ! -x .venv/bin/python ]; then
+    echo "setup: creating .venv with $want"
+    "$PY" -m venv .venv
+    echo "$want" > "$stamp"
+fi
+installed=.venv/.haptic-study-installed
+if [ ! -f "$installed" ] || [ pyproject.toml -nt "$installed" ]; then
     echo "setup: installing haptic-study and its dependencies into .venv"
     .venv/bin/python -m pip install -q --upgrade pip >/dev/null
     .venv/bin/python -m pip install -q -e ".[test]"
-    touch "$stamp"
+    touch "$installed"
 fi

@@ -142,7 +142,8 @@ class SimForceSensor:
             return
         if nz[12] < self._loss_threshold:
             self.lost_packets += 1
-            self._rdt += 1  # the box sent it; the network ate it
+            self._rdt += 1  # the box sampled and sent it; the network ate it
+            self._ft += 1
             return
         g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * p.mass_kg))
         t_g = cross(p.com_m, g_s)

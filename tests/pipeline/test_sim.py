@@ -1,0 +1,216 @@
+"""The simulated rig's physical models and the end-to-end run on the virtual clock."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.clock import VirtualClock
+from pipeline.compensation import recommended_pose_set
+from pipeline.engine import EngineConfig, build_sim_engine
+from pipeline.frames import IDENTITY, mat_mul, transpose
+from pipeline.sim.calibration import auto_calibrate
+from pipeline.sim.rig import SimRig, SimRigConfig
+from pipeline.sim.robot import TOOL_DOWN, SimRobot
+from pipeline.sim.sensor import GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
+from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
+from pipeline.sim.touch import HD_WARM_MOTORS, SimTouch, TouchSpec
+
+QUIET = SensorParams(
+    noise_force_n=(0.0, 0.0, 0.0), noise_torque_nm=(0.0, 0.0, 0.0), random_walk_n_per_sqrt_s=0.0,
+    drift_force_n=(0.0, 0.0, 0.0),
+)
+
+
+# -- tissue ---------------------------------------------------------------------------------------
+def test_hunt_crossley_task_forces_and_continuity() -> None:
+    p = TissueParams()
+    # science.md §3: 0.6 N at ~1.4 mm and 1.2 N at ~2.3 mm
+    assert p.static_force(0.0014) == pytest.approx(0.576, abs=0.01)
+    assert p.static_force(0.0023) == pytest.approx(1.213, abs=0.01)
+    assert p.depth_for_force(0.6) == pytest.approx(0.00144, abs=2e-5)
+    t = HuntCrossleyTissue(p)
+    assert t.step(-0.001, 0.001) == 0.0
+    # first contact: continuous (no damping jump at δ = 0)
+    assert t.step(1e-7, 0.001) < 1e-5
+    # retracting fast never pulls (F ≥ 0)
+    t.step(0.002, 0.001)
+    assert t.step(0.0001, 0.0001) == 0.0  # 19 m/s retraction: 1 + αδ̇ < 0
+
+
+def test_hunt_crossley_damping_and_relaxation() -> None:
+    t = HuntCrossleyTissue(TissueParams(damping_s_per_m=0.5))
+    t.step(0.002, 0.001)
+    f = t.step(0.00201, 0.001)  # 10 mm/s
+    elastic = 1.1e4 * 0.00201**1.5
+    assert f == pytest.approx(elastic * (1 + 0.5 * 0.01), rel=1e-12)
+    r = HuntCrossleyTissue(TissueParams(relax_stiffness_n_per_m=200.0, relax_time_s=1.0, damping_s_per_m=0.0))
+    r.step(0.0, 0.001)
+    peak = r.step(0.002, 0.001)
+    for _ in range(20000):  # 20 τ
+        held = r.step(0.002, 0.001)
+    assert peak > held and held == pytest.approx(1.1e4 * 0.002**1.5, rel=1e-6)  # relaxes to the elastic part
+    with pytest.raises(ValueError, match="tissue.exponent"):
+        TissueParams(exponent=0.0)
+
+
+# -- robot ----------------------------------------------------------------------------------------
+def test_robot_publishes_at_125_hz_and_lags() -> None:
+    r = SimRobot((0.0, 0.0, 0.1))
+    r.command((0.0, 0.0, 0.09))
+    stamps = []
+    for k in range(40):
+        r.advance(k * 1_000_000, 0.001)
+        stamps.append(r.read_pose().t_ns)
+    assert sorted(set(stamps)) == [0, 8_000_000, 16_000_000, 24_000_000, 32_000_000]
+    # first-order lag τ = 30 ms: after 40 ms of tracking ≈ 1 − e^{−40/30} of the 10 mm step
+    moved = 0.1 - r.position_m[2]
+    assert moved == pytest.approx(0.01 * (1 - math.exp(-0.040 / 0.03)), rel=1e-9)
+    r.frozen = True
+    r.advance(48_000_000, 0.001)
+    assert r.read_pose().t_ns == 32_000_000
+
+
+# -- sensor ---------------------------------------------------------------------------------------
+def test_sensor_reports_weight_contact_and_bias_in_its_frame() -> None:
+    s = SimForceSensor(QUIET)
+    rsb = transpose(TOOL_DOWN)  # sensor axes = tool axes, tool pointing down
+    s.sample(0, rsb, (0.0, 0.0, 1.0), 0.001)  # 1 N upward contact
+    w = s.read_wrench()
+    m, g = QUIET.mass_kg, 9.80665
+    # tool down: base −z (gravity) is sensor +z; the upward contact is sensor −z
+    assert w.fz == pytest.approx(m * g - 1.0 + QUIET.bias_force_n[2], abs=1e-6)
+    assert w.fx == pytest.approx(QUIET.bias_force_n[0], abs=1e-6)
+    # lever arm: contact at the tip (0, 0, 0.35) along z produces no torque; weight at c does
+    c = QUIET.com_m
+    assert w.tx == pytest.approx(c[1] * m * g + QUIET.bias_torque_nm[0], abs=1e-6)
+    # quantised to counts (cpf = 1e6)
+    assert w.fz * 1e6 == pytest.approx(round(w.fz * 1e6), abs=1e-6)
+    assert (w.status, w.rdt_sequence, w.ft_sequence) == (0, 1, 1)
+
+
+def test_sensor_saturation_sets_status_and_clips() -> None:
+    s = SimForceSensor(QUIET)
+    s.sample(0, IDENTITY, (500.0, 0.0, 0.0), 0.001)
+    w = s.read_wrench()
+    assert w.fx == GAMMA_RANGE[0] and w.status == SATURATION_STATUS
+
+
+def test_sensor_packet_loss_and_stall_keep_the_old_sample() -> None:
+    s = SimForceSensor(SensorParams(packet_loss=0.3), seed=3)
+    stamps = []
+    for k in range(2000):
+        s.sample(k * 1_000_000, IDENTITY, (0.0, 0.0, 0.0), 0.001)
+        stamps.append(s.read_wrench().t_ns)
+    fresh = sum(1 for k, t in enumerate(stamps) if t == k * 1_000_000)
+    assert 1250 < fresh < 1550  # ≈ 70 % delivered
+    assert s.lost_packets == 2000 - fresh
+    last = s.read_wrench()  # the box numbered every packet, lost or not
+    assert last.rdt_sequence == last.ft_sequence == last.t_ns // 1_000_000 + 1
+    s.stalled = True
+    before = s.read_wrench()
+    s.sample(5_000_000_000, IDENTITY, (0.0, 0.0, 0.0), 0.001)
+    assert s.read_wrench() == before
+
+
+# -- Touch ----------------------------------------------------------------------------------------
+def test_touch_clamps_heats_and_needs_rearm_after_cooling() -> None:
+    t = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0))
+    t.command_force(10.0, 0.0, 0.0)
+    t.advance(0, 0.001)
+    assert t.applied_force_n == pytest.approx((3.3, 0.0, 0.0))
+    k = 1
+    while not t.error_code:
+        t.advance(k * 1_000_000, 0.001)
+        k += 1
+    # heat rate (3.3² − 0.88²) N² per s → budget 1 N²s after ≈ 99 ms
+    assert k == pytest.approx(1.0 / (3.3**2 - 0.88**2) / 0.001 + 1, abs=2)
+    assert t.error_code == HD_WARM_MOTORS and t.applied_force_n == (0.0, 0.0, 0.0)
+    assert not t.rearm()  # still hot
+    t.command_force(0.0, 0.0, 0.0)
+    for j in range(2000):
+        t.advance((k + j) * 1_000_000, 0.001)
+    assert t.rearm() and t.error_code == 0
+    t.command_force(math.nan, 0.0, 0.0)
+    t.advance(10**10, 0.001)
+    assert t.applied_force_n == (0.0, 0.0, 0.0)
+
+
+# -- calibration on the simulated rig ------------------------------------------------------------------
+def test_sim_calibration_recovers_payload_and_rest_residual_is_small() -> None:
+    """24-pose set on the noisy, drifting sensor: m, c, biases within noise; compensated force at rest ≤ 0.02 N RMS."""
+    rig = SimRig(SimRigConfig(seed=4))
+    clock = VirtualClock()
+    cal, poses = auto_calibrate(rig, clock, recommended_pose_set(24))
+    p = rig.config.sensor
+    assert len(poses) == 24 and cal.model == "affine"
+    assert cal.mass_kg == pytest.approx(p.mass_kg, abs=2e-3)
+    assert cal.com_m == pytest.approx(p.com_m, abs=1e-3)
+    true_bias = rig.sensor.current_bias(rig.sim_time_s)
+    # bias within noise + the random walk during the 12 s of calibration
+    assert cal.force_bias_n == pytest.approx(true_bias[:3], abs=0.02)
+    assert cal.torque_bias_nm == pytest.approx(true_bias[3:], abs=2e-3)
+    assert cal.mount_angle_deg == pytest.approx(0.5, abs=0.2)
+    assert cal.condition_number < 50
+
+    # at rest, tool down, the compensated force is noise only
+    errs = []
+    for k in range(2000):
+        clock.advance(1_000_000)
+        rig.advance(clock.now_ns())
+        w = rig.sensor.read_wrench()
+        rsb = transpose(mat_mul(rig.robot.read_pose().rot_base_tip, rig.config.rot_tip_sensor))
+        comp = cal.compensate(w[1:7], rsb)
+        errs.append(comp[:3])
+    e = np.array(errs)
+    # systematic part (what a filter cannot remove)
+    assert np.linalg.norm(e.mean(axis=0)) < 0.02
+    # the task's signal: magnitude of the 10-sample moving average
+    kernel = np.ones(10) / 10
+    filt = np.stack([np.convolve(e[:, i], kernel, mode="valid") for i in range(3)], axis=1)
+    assert math.sqrt(np.mean(np.sum(filt**2, axis=1))) <= 0.02
+
+
+# -- end to end -----------------------------------------------------------------------------------
+def _run(seed: int, ticks: int, haptics: bool = True) -> np.ndarray:
+    eng = build_sim_engine(EngineConfig(sim=SimRigConfig(seed=seed), clock="virtual", haptics_on=haptics))
+    eng.loop.run_ticks(ticks)
+    assert eng.ring is not None
+    rows = eng.ring.latest(ticks)
+    eng.ring.close()
+    return rows
+
+
+def test_end_to_end_run_is_deterministic_and_tracks_the_true_force() -> None:
+    rows = _run(seed=1, ticks=9000)
+    again = _run(seed=1, ticks=9000)
+    assert rows.tobytes() == again.tobytes()
+    other = _run(seed=2, ticks=2000)
+    assert other.tobytes() != rows[:2000].tobytes()
+
+    true_f = np.abs(rows["true_fz"])
+    assert true_f.max() > 1.0  # the scripted presses reach FIRM-like forces
+    contact = true_f > 0.05
+    err = rows["force_n"][contact] - true_f[contact]
+    # filter delay (4.5 ms) and noise only
+    assert math.sqrt(np.mean(err**2)) < 0.05
+    render = np.sqrt(rows["render_fx"] ** 2 + rows["render_fy"] ** 2 + rows["render_fz"] ** 2)
+    assert render.max() <= 3.0
+    # rendered ≈ 3·tanh(F/7) of the filtered force once ramped in and steady
+    steady = contact & (rows["gain"] == 1.0)
+    expect = 3.0 * np.tanh(rows["force_n"][steady] / 7.0)
+    assert np.max(np.abs(render[steady] - expect)) < 0.02
+    # rendered force pushes the hand up (+y of the Touch) while pressing
+    assert np.all(rows["render_fy"][steady] > 0)
+    assert rows["faults"].max() == 0
+    assert np.all(np.diff(rows["t_s"]) == pytest.approx(0.001, abs=1e-12))
+
+
+def test_haptics_off_renders_nothing_and_presses_deeper() -> None:
+    on = _run(seed=5, ticks=6000, haptics=True)
+    off = _run(seed=5, ticks=6000, haptics=False)
+    assert np.all(off["render_fx"] == 0) and np.all(off["render_fy"] == 0) and np.all(off["render_fz"] == 0)
+    # Wagner–Howe: without the push-back the same hand motion indents further
+    assert np.abs(off["true_fz"]).max() > np.abs(on["true_fz"]).max()
