@@ -28,7 +28,7 @@ from typing import Any
 
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.filters import MovingAverage3, exact_sum
-from pipeline.frames import IDENTITY, Mat3, check_rotation, mat_mul, transpose
+from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation, mat_mul, transpose
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 
@@ -89,9 +89,10 @@ class FrameworkConfig:
             )
 
 
-#: Names of the values :meth:`HapticFramework.step` returns, in order.
+#: Names of the values :meth:`HapticFramework.step` returns, in order
+#: (indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14, scaled 15–17, render 18–20).
 STEP_FIELDS: tuple[str, ...] = (
-    "comp_fx", "comp_fy", "comp_fz", "comp_tx", "comp_ty", "comp_tz",
+    "comp_fx", "comp_fy", "comp_fz",
     "filt_fx", "filt_fy", "filt_fz",
     "tip_fx", "tip_fy", "tip_fz",
     "base_fx", "base_fy", "base_fz",
@@ -119,7 +120,7 @@ class HapticFramework:
 
     __slots__ = (
         "config", "_cal", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_rot_base_tip", "_window",
+        "_off", "_foff", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_rot_base_tip", "_window",
     )
 
     def __init__(
@@ -161,6 +162,12 @@ class HapticFramework:
     def _update_offsets(self) -> None:
         p, b = self._payload, self._bias
         self._off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
+        self._foff = self._off[:3]
+
+    def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
+        """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
+        o = self._off
+        return (tx - o[3], ty - o[4], tz - o[5])
 
     @property
     def calibration(self) -> PayloadCalibration:
@@ -202,15 +209,19 @@ class HapticFramework:
         self.safety.force_zero()
 
     def step(
-        self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float, enabled: bool, dt_s: float,
+        self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float,
         *, _hypot: Any = _HYPOT, _tanh: Any = _TANH, _fsum: Any = _FSUM, _lo: float = _SERIES_T, _hi: float = _SATURATED_T,
     ) -> tuple[float, ...]:
-        """Run Algorithm 1 on one raw wrench (sensor frame, N and N·m).
+        """Run Algorithm 1 on one raw force sample (sensor frame, N).
+
+        Only forces are fed back (paper §IV), so the torques of the sample do
+        not enter the per-tick path; :meth:`compensated_torque` gives them
+        compensated when a display needs them.
 
         Parameters
         ----------
-        fx, fy, fz, tx, ty, tz
-            Raw F/T sample.
+        fx, fy, fz
+            Raw F/T sample, force part.
         enabled
             Haptic feedback on and no fault latched; otherwise the rendered
             force ramps to zero (the rest of the path still runs, for the record).
@@ -220,11 +231,11 @@ class HapticFramework:
         Returns
         -------
         tuple of float
-            The stages in :data:`STEP_FIELDS` order: compensated wrench
-            (6), filtered force, tip, base and haptic frame force, scaled and
+            The stages in :data:`STEP_FIELDS` order: compensated force,
+            filtered force, tip, base and haptic frame force, scaled and
             rendered force (3 each).
         """
-        o0, o1, o2, o3, o4, o5 = self._off
+        o0, o1, o2 = self._foff
         cx = fx - o0
         cy = fy - o1
         cz = fz - o2
@@ -232,13 +243,13 @@ class HapticFramework:
         # written out (same arithmetic, same state); the first W samples, the
         # once-per-window exact re-sum and rejected samples go through the method.
         f = self.filter
+        sx, sy, sz, i, n = f._st
         w = self._window
-        if f._n == w and (cx - cx) + (cy - cy) + (cz - cz) == 0.0:
-            i = f._i
-            bx, by, bz = f._bx, f._by, f._bz
-            sx = f._sx + (cx - bx[i])
-            sy = f._sy + (cy - by[i])
-            sz = f._sz + (cz - bz[i])
+        if n == w and (cx - cx) + (cy - cy) + (cz - cz) == 0.0:
+            bx, by, bz = f._buf
+            sx += cx - bx[i]
+            sy += cy - by[i]
+            sz += cz - bz[i]
             bx[i] = cx
             by[i] = cy
             bz[i] = cz
@@ -248,13 +259,10 @@ class HapticFramework:
                 sx = _fsum(bx)
                 sy = _fsum(by)
                 sz = _fsum(bz)
-            f._i = i
-            f._sx = sx
-            f._sy = sy
-            f._sz = sz
-            mx = sx / w
-            my = sy / w
-            mz = sz / w
+            f._st = (sx, sy, sz, i, n)
+            mx = sx / n
+            my = sy / n
+            mz = sz / n
         else:
             mx, my, mz = f.update(cx, cy, cz)
         # -- eqs. (TCP), (Base), (Haptic): frames.mat_vec three times, in place
@@ -295,7 +303,7 @@ class HapticFramework:
         else:
             ox, oy, oz = g.step(qx, qy, qz, enabled, dt_s)
         return (
-            cx, cy, cz, tx - o3, ty - o4, tz - o5,
+            cx, cy, cz,
             mx, my, mz, ax, ay, az, bx_, by_, bz_, hx, hy, hz,
             qx, qy, qz, ox, oy, oz,
         )

@@ -351,15 +351,15 @@ class HapticLoop:
         if self.refine_bias and not latched:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
 
-        out = fw.step(fx, fy, fz, tx, ty, tz, self.haptic_on and not latched, dt_s)
-        rig.haptic.command_force(out[21], out[22], out[23])
+        out = fw.step(fx, fy, fz, self.haptic_on and not latched, dt_s)
+        rig.haptic.command_force(out[18], out[19], out[20])
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m
         sp = hs.position_m
         rec = (
             now * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
-            *out, _HYPOT(out[6], out[7], out[8]),
+            *out, _HYPOT(out[3], out[4], out[5]),
             sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
             pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],

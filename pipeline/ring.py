@@ -93,8 +93,14 @@ class RingBuffer:
         if capacity < 2:
             raise ValueError(f"capacity = {capacity}: must be at least 2 records")
         names = ",".join(fields).encode("ascii")
-        if len(names) > _HEADER - _NAMES_OFF or not fields or any("," in f for f in fields):
-            raise ValueError("field names must be non-empty, comma-free and fit in 4064 bytes")
+        if (
+            len(names) > _HEADER - _NAMES_OFF
+            or not fields
+            or any(not f or "," in f for f in fields)
+            or len(set(fields)) != len(fields)
+        ):
+            # checked before the segment exists: a failure here must not leak one
+            raise ValueError("field names must be non-empty, unique, comma-free and fit in 4064 bytes")
         size = _HEADER + 8 * len(fields) * capacity
         shm: shared_memory.SharedMemory | None
         if shared:

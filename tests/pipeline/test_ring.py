@@ -1,0 +1,309 @@
+"""Tests of the shared-memory ring buffer: cursor semantics, wrap-around, cross-process attach, lifetime."""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue
+
+import numpy as np
+import pytest
+
+from pipeline.ring import RingBuffer
+
+FIELDS = ("t_s", "a", "b")
+TIMEOUT_S = 30.0
+
+
+def _row(k: int) -> tuple[float, float, float]:
+    return (float(k), 10.0 * k, -0.5 * k)
+
+
+def _rows_as_tuples(rows: np.ndarray) -> list[tuple[float, ...]]:
+    return [tuple(float(v) for v in r) for r in rows]
+
+
+def _shm_path(name: str) -> str:
+    return os.path.join("/dev/shm", name.lstrip("/"))
+
+
+# -- a reader in another process (top level: picklable for the spawn context) ---------------------
+def _read_ring_in_child(name: str, out: mp.Queue, close: bool) -> None:
+    ring = RingBuffer.attach(name)
+    res = ring.read_since(0)
+    out.put((ring.fields, ring.capacity, ring.write_count, res.cursor, res.lost, res.rows.tobytes()))
+    if close:
+        ring.close()
+    # else: exit with the segment still mapped, as a crashed GUI would
+
+
+def _run_reader(name: str, close: bool) -> tuple:
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    p = ctx.Process(target=_read_ring_in_child, args=(name, q, close), daemon=True)
+    p.start()
+    try:
+        msg = q.get(timeout=TIMEOUT_S)
+        p.join(TIMEOUT_S)
+        assert not p.is_alive()
+        assert p.exitcode == 0
+        return msg
+    finally:
+        if p.is_alive():
+            p.kill()
+            p.join(5.0)
+
+
+@pytest.fixture
+def created_segments(monkeypatch):
+    """Names of the shared-memory segments this test creates (other processes may use /dev/shm too)."""
+    from multiprocessing import shared_memory
+
+    made: list[str] = []
+    real = shared_memory.SharedMemory
+
+    class Recording(real):  # type: ignore[misc, valid-type]
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            if kwargs.get("create"):
+                made.append(self.name)
+
+    monkeypatch.setattr(shared_memory, "SharedMemory", Recording)
+    return made
+
+
+@pytest.fixture
+def shared_ring():
+    ring = RingBuffer.create(FIELDS, 5, shared=True)
+    try:
+        yield ring
+    finally:
+        if ring._buf is not None:  # not closed by the test
+            ring.close()
+
+
+# -- single process -------------------------------------------------------------------------------
+@pytest.mark.parametrize("shared", [True, False])
+def test_write_and_read_since_with_wraparound(shared):
+    with RingBuffer.create(FIELDS, 5, shared=shared) as ring:
+        assert ring.capacity == 5
+        assert ring.write_count == 0
+        empty = ring.read_since(0)
+        assert len(empty.rows) == 0 and empty.cursor == 0 and empty.lost == 0
+
+        for k in range(3):
+            ring.write(_row(k))
+        r = ring.read_since(0)
+        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(3)]
+        assert r.cursor == 3 and r.lost == 0
+
+        for k in range(3, 12):
+            ring.write(_row(k))
+        assert ring.write_count == 12
+
+        # From the last cursor (3): records 3..6 were overwritten, 7..11 remain.
+        r2 = ring.read_since(r.cursor)
+        assert _rows_as_tuples(r2.rows) == [_row(k) for k in range(7, 12)]
+        assert r2.cursor == 12 and r2.lost == 4
+
+        # From scratch: 7 lost.
+        r0 = ring.read_since(0)
+        assert _rows_as_tuples(r0.rows) == [_row(k) for k in range(7, 12)]
+        assert r0.cursor == 12 and r0.lost == 7
+
+        # A cursor inside the window: nothing lost; the copy wraps (12 % 5 = 2).
+        r9 = ring.read_since(9)
+        assert _rows_as_tuples(r9.rows) == [_row(9), _row(10), _row(11)]
+        assert r9.cursor == 12 and r9.lost == 0
+
+        # Up to date: nothing new.
+        r12 = ring.read_since(12)
+        assert len(r12.rows) == 0 and r12.cursor == 12 and r12.lost == 0
+
+        # One more write is seen from the returned cursor.
+        ring.write(_row(12))
+        r13 = ring.read_since(r12.cursor)
+        assert _rows_as_tuples(r13.rows) == [_row(12)]
+        assert r13.cursor == 13 and r13.lost == 0
+
+
+def test_latest():
+    with RingBuffer.create(FIELDS, 5, shared=False) as ring:
+        assert len(ring.latest(3)) == 0
+        ring.write(_row(0))
+        ring.write(_row(1))
+        assert _rows_as_tuples(ring.latest(3)) == [_row(0), _row(1)]
+        for k in range(2, 12):
+            ring.write(_row(k))
+        assert _rows_as_tuples(ring.latest(1)) == [_row(11)]
+        assert _rows_as_tuples(ring.latest(3)) == [_row(9), _row(10), _row(11)]
+        # more than the capacity: the whole ring
+        assert _rows_as_tuples(ring.latest(100)) == [_row(k) for k in range(7, 12)]
+        assert len(ring.latest(0)) == 0
+
+
+def test_field_names_round_trip_and_columns():
+    fields = ("t_s", "raw_fx", "render_fy", "x" * 40)
+    with RingBuffer.create(fields, 4, shared=True) as ring:
+        assert ring.fields == fields
+        assert ring.dtype.names == fields
+        ring.write((1.0, 2.0, 3.0, 4.0))
+        reader = RingBuffer.attach(ring.name)
+        try:
+            assert reader.fields == fields
+            assert reader.capacity == 4
+            assert reader.name is None  # only the creator names (and frees) the segment
+            rows = reader.latest(1)
+            assert rows.dtype.names == fields
+            np.testing.assert_array_equal(reader.column(rows, "render_fy"), [3.0])
+            assert reader.column(rows, "render_fy").dtype == np.float64
+        finally:
+            reader.close()
+
+
+def test_rows_are_copies_not_views():
+    with RingBuffer.create(FIELDS, 3, shared=False) as ring:
+        ring.write(_row(1))
+        rows = ring.latest(1)
+        for k in range(2, 8):
+            ring.write(_row(k))
+        assert _rows_as_tuples(rows) == [_row(1)]
+
+
+def test_nan_and_inf_are_stored_verbatim():
+    with RingBuffer.create(FIELDS, 3, shared=False) as ring:
+        ring.write((float("nan"), float("inf"), -0.0))
+        r = ring.latest(1)[0]
+        assert np.isnan(r["t_s"]) and r["a"] == np.inf
+        assert np.signbit(r["b"])
+
+
+def test_private_ring_has_no_name_and_no_segment(created_segments):
+    ring = RingBuffer.create(FIELDS, 4, shared=False)
+    try:
+        assert ring.name is None
+        assert created_segments == []
+        for k in range(6):
+            ring.write(_row(k))
+        r = ring.read_since(0)
+        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(2, 6)]
+        assert r.lost == 2 and r.cursor == 6
+    finally:
+        ring.close()
+
+
+def test_write_with_wrong_number_of_values_raises():
+    with RingBuffer.create(FIELDS, 3, shared=False) as ring:
+        with pytest.raises(Exception):
+            ring.write((1.0, 2.0))
+        assert ring.write_count == 0
+
+
+# -- construction errors --------------------------------------------------------------------------
+@pytest.mark.parametrize("capacity", [1, 0, -3])
+def test_capacity_below_two_raises(capacity):
+    with pytest.raises(ValueError, match="capacity"):
+        RingBuffer.create(FIELDS, capacity)
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        ("a,b", "c"),  # a comma would split into two columns
+        (),  # no fields
+        ("a", ""),  # empty name
+        ("a", "b", "a"),  # duplicate name
+        tuple(f"field_{i:04d}" for i in range(400)),  # 4399 bytes of names > 4064
+    ],
+    ids=["comma", "empty-list", "empty-name", "duplicate", "too-long"],
+)
+def test_bad_field_names_raise_without_leaking_a_segment(fields, created_segments):
+    with pytest.raises(ValueError):
+        RingBuffer.create(fields, 4, shared=True)
+    assert [n for n in created_segments if os.path.exists(_shm_path(n))] == []
+
+
+def test_attach_unknown_name_raises():
+    with pytest.raises(FileNotFoundError):
+        RingBuffer.attach("nope")
+
+
+def test_attach_rejects_a_segment_that_is_not_a_ring():
+    from multiprocessing import shared_memory
+
+    shm = shared_memory.SharedMemory(create=True, size=8192)
+    try:
+        with pytest.raises(ValueError, match="magic"):
+            RingBuffer.attach(shm.name)
+    finally:
+        shm.close()
+        shm.unlink()
+
+
+# -- lifetime ---------------------------------------------------------------------------------------
+def test_close_of_the_creator_removes_the_segment(created_segments):
+    ring = RingBuffer.create(FIELDS, 4, shared=True)
+    name = ring.name
+    assert name is not None
+    assert created_segments == [name]
+    assert os.path.exists(_shm_path(name))
+    ring.close()
+    assert not os.path.exists(_shm_path(name))
+    with pytest.raises(FileNotFoundError):
+        RingBuffer.attach(name)
+
+
+def test_same_process_reader_close_keeps_the_segment(shared_ring):
+    name = shared_ring.name
+    shared_ring.write(_row(0))
+    reader = RingBuffer.attach(name)
+    assert _rows_as_tuples(reader.latest(1)) == [_row(0)]
+    reader.close()
+    assert os.path.exists(_shm_path(name))
+    shared_ring.write(_row(1))
+    assert _rows_as_tuples(shared_ring.latest(2)) == [_row(0), _row(1)]
+
+
+def test_reader_sees_writes_made_after_it_attached(shared_ring):
+    reader = RingBuffer.attach(shared_ring.name)
+    try:
+        r = reader.read_since(0)
+        assert len(r.rows) == 0 and r.cursor == 0
+        for k in range(7):
+            shared_ring.write(_row(k))
+        r = reader.read_since(r.cursor)
+        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(2, 7)]
+        assert r.cursor == 7 and r.lost == 2
+    finally:
+        reader.close()
+
+
+# -- another process --------------------------------------------------------------------------------
+@pytest.mark.parametrize("reader_closes", [True, False], ids=["reader-closes", "reader-just-exits"])
+def test_second_process_attaches_by_name_and_its_exit_keeps_the_segment(shared_ring, reader_closes):
+    name = shared_ring.name
+    for k in range(8):  # wraps: capacity 5
+        shared_ring.write(_row(k))
+
+    fields, capacity, count, cursor, lost, raw = _run_reader(name, reader_closes)
+
+    assert fields == FIELDS
+    assert capacity == 5
+    assert count == 8 and cursor == 8 and lost == 3
+    child_rows = np.frombuffer(raw, dtype=shared_ring.dtype)
+    assert _rows_as_tuples(child_rows) == [_row(k) for k in range(3, 8)]
+    assert child_rows.tobytes() == shared_ring.latest(5).tobytes()
+
+    # The reader's exit must not have unlinked the writer's segment.
+    assert os.path.exists(_shm_path(name))
+    shared_ring.write(_row(8))
+    assert _rows_as_tuples(shared_ring.latest(2)) == [_row(7), _row(8)]
+    # ... and a new reader can still attach by name.
+    again = RingBuffer.attach(name)
+    try:
+        assert _rows_as_tuples(again.latest(1)) == [_row(8)]
+    finally:
+        again.close()
+
+    shared_ring.close()
+    assert not os.path.exists(_shm_path(name))
