@@ -111,6 +111,8 @@ class MovingAverage3:
             sy = exact_sum(by)
             sz = exact_sum(bz)
         self._st = (sx, sy, sz, i, n)
+        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
+            return self._mean_without_overflow()
         return (sx / n, sy / n, sz / n)
 
     @property
@@ -119,7 +121,19 @@ class MovingAverage3:
         sx, sy, sz, _, n = self._st
         if n == 0:
             return (0.0, 0.0, 0.0)
+        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
+            return self._mean_without_overflow()
         return (sx / n, sy / n, sz / n)
+
+    def _mean_without_overflow(self) -> Vec3:
+        """Mean of a window of finite samples whose sum exceeds DBL_MAX: sum the samples divided by n."""
+        n = self._st[4]
+        bx, by, bz = self._buf
+        return (
+            _FSUM([v / n for v in bx]),
+            _FSUM([v / n for v in by]),
+            _FSUM([v / n for v in bz]),
+        )
 
 
 class MovingAverage:

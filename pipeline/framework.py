@@ -263,6 +263,8 @@ class HapticFramework:
             mx = sx / n
             my = sy / n
             mz = sz / n
+            if (mx - mx) + (my - my) + (mz - mz) != 0.0:  # the window's sum overflowed
+                mx, my, mz = f.mean
         else:
             mx, my, mz = f.update(cx, cy, cz)
         # -- eqs. (TCP), (Base), (Haptic): frames.mat_vec three times, in place

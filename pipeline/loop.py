@@ -51,7 +51,7 @@ __all__ = [
 
 #: Columns of one loop record (all float64 in the ring buffer).
 RECORD_FIELDS: tuple[str, ...] = (
-    "t_s", "tick",
+    "t_ns", "t_s", "tick",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
     *STEP_FIELDS,
     "force_n",
@@ -269,6 +269,9 @@ class HapticLoop:
         self.active_faults = 0  # this tick's conditions
         self.refine_bias = False
         self._last_ns: int | None = None
+        #: Clock reading of the first tick; records carry time since then
+        #: (``t_ns`` exact in float64 for 104 days, ``t_s`` in seconds).
+        self.t0_ns = 0
         self._pose_t_ns: int | None = None
         self._sensor_age_ns = int(self.watchdog.sensor_max_age_s * 1e9)
         self._pose_age_ns = int(self.watchdog.pose_max_age_s * 1e9)
@@ -294,6 +297,7 @@ class HapticLoop:
         now = self.clock.now_ns()
         last = self._last_ns
         if last is None:
+            self.t0_ns = now
             period = self.period_ns
         else:
             period = now - last
@@ -357,8 +361,9 @@ class HapticLoop:
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m
         sp = hs.position_m
+        t_rel = now - self.t0_ns
         rec = (
-            now * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
+            float(t_rel), t_rel * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
             *out, _HYPOT(out[3], out[4], out[5]),
             sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
@@ -447,16 +452,26 @@ class HapticLoop:
             self.ramp_down()
 
     def ramp_down(self, max_ticks: int = 200) -> None:
-        """Bring the rendered force to zero through the safety ramp, then command zero."""
-        self.haptic_on = False
+        """Bring the rendered force to zero through the safety ramp, then command zero.
+
+        Commands still queued (e.g. a ``ControllerDetached`` submitted together
+        with the stop) are applied first, so their faults and events are not
+        lost; a queued ``SetHaptics(True)`` cannot undo the ramp-down.
+        """
         clock = self.clock
-        deadline = clock.now_ns()
+        inbox = self._inbox
+        while inbox:
+            self._apply(inbox.popleft(), clock.now_ns())
+        self.haptic_on = False
+        # ramp ticks continue the period grid: the next slot after the last tick, not one later
+        last = self._last_ns
+        deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)
         for _ in range(max_ticks):
             if self.framework.safety.gain == 0.0:
                 break
-            deadline += self.period_ns
             clock.sleep_until(deadline)
             self.tick()
+            deadline += self.period_ns
         self.rig.haptic.command_force(0.0, 0.0, 0.0)
 
     def start(self) -> None:

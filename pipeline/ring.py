@@ -171,8 +171,11 @@ class RingBuffer:
 
     def latest(self, n: int) -> npt.NDArray[np.void]:
         """Copy of the newest ``n`` records (fewer if fewer exist)."""
+        if n <= 0:
+            return np.empty(0, dtype=self.dtype)
         c = self.write_count
-        return self.read_since(max(0, c - n)).rows
+        # the writer may append between the two counter reads: keep only the newest n
+        return self.read_since(max(0, c - n)).rows[-n:]
 
     def _copy(self, start: int, stop: int) -> npt.NDArray[np.void]:
         n = stop - start  # ≤ capacity by construction

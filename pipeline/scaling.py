@@ -75,10 +75,7 @@ def scale_force(f: Sequence[float], f_max_n: float = 3.0, f_scale_n: float = 7.0
     ``math.hypot`` keeps the norm exact over the whole double range; inputs
     whose norm overflows are rescaled by a power of two first.
     """
-    if not (f_max_n > 0.0 and f_scale_n > 0.0 and f_max_n < math.inf and f_scale_n < math.inf):
-        raise ValueError(
-            f"f_max_n = {f_max_n!r} and f_scale_n = {f_scale_n!r}: both must be finite and > 0"
-        )
+    check_limits(f_max_n, f_scale_n)
     try:
         fx, fy, fz = f
     except (TypeError, ValueError):
@@ -89,6 +86,20 @@ def scale_force(f: Sequence[float], f_max_n: float = 3.0, f_scale_n: float = 7.0
             return _saturate_huge(fx, fy, fz, f_max_n)
         fx, fy, fz = conv
     return scale_components(fx, fy, fz, f_max_n, f_scale_n)
+
+
+#: Accepted range of f_max and f_scale, N.  Beyond it the law is meaningless for
+#: a haptic device and the bounds on rounding no longer hold (e.g. f_max below
+#: the smallest normal double).
+LIMIT_RANGE_N = (1e-6, 1e6)
+
+
+def check_limits(f_max_n: float, f_scale_n: float) -> None:
+    """Raise ValueError unless both parameters are real numbers in :data:`LIMIT_RANGE_N`."""
+    lo, hi = LIMIT_RANGE_N
+    for name, v in (("f_max_n", f_max_n), ("f_scale_n", f_scale_n)):
+        if isinstance(v, bool) or not isinstance(v, Real) or not (lo <= v <= hi):
+            raise ValueError(f"{name} = {v!r}: must be a number of newtons from {lo:g} to {hi:g}")
 
 
 def scale_components(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n: float) -> Vec3:
@@ -123,15 +134,26 @@ def scale_components(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n:
 
 
 def _to_floats(fx: object, fy: object, fz: object) -> tuple[float, float, float] | None:
-    """Convert real numbers to floats; None if one is finite but beyond the double range."""
+    """Convert real numbers to floats.
+
+    Returns None if a component is finite but beyond the double range (and
+    none is NaN or infinite); a NaN or infinite component wins and yields
+    floats that :func:`scale_components` turns into zero.
+    """
     out = []
+    overflow = False
     for c in (fx, fy, fz):
-        if not isinstance(c, Real):
-            raise TypeError(f"force component {c!r} is not a real number")
+        if isinstance(c, bool) or not isinstance(c, Real):
+            raise ValueError(f"force component {c!r} is not a real number; expected three numbers (fx, fy, fz)")
         try:
             out.append(float(c))
         except OverflowError:
-            return None
+            overflow = True
+            out.append(0.0)
+    if any(v - v != 0.0 for v in out):
+        return (math.nan, math.nan, math.nan)
+    if overflow:
+        return None
     return out[0], out[1], out[2]
 
 

@@ -61,6 +61,16 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--haptics", choices=("on", "off"), default="on", help="haptic feedback (default on)")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
+    r = sub.add_parser("run", help="run a complete simulated study into a study database (headless)")
+    r.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="number of simulated participants (default 10)")
+    r.add_argument("--seed", type=_nonneg_int("--seed"), default=0, help="study seed: schedules, rigs and participants (default 0)")
+    r.add_argument("--db", required=True, help="study database (SQLite); created if missing")
+    r.add_argument("--protocol", default=None, help="protocol file (default: the paper's study, protocol/default.toml)")
+    r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                   help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
+    r.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
+                   help="continue this participant's interrupted experiment session at its first unfinished trial")
+
     b = sub.add_parser("bench", help="benchmarks (see README for recorded figures)")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
@@ -77,6 +87,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "sim":
             return _cmd_sim(args)
+        if args.command == "run":
+            return _cmd_run(args)
         if args.command == "bench" and args.bench == "pipeline":
             return _cmd_bench_pipeline(args)
     except CliError as exc:
@@ -105,6 +117,46 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         from study_app.sim_summary import format_summary
 
         print(format_summary(summary))
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from protocol.config import ProtocolError, load_protocol
+    from protocol.storage import StorageError
+    from protocol.study import resume_session, run_study
+    from study_app.progress import ProgressBar
+    from study_app.study_summary import format_study_summary
+
+    try:
+        if args.resume is None:
+            protocol = load_protocol(args.protocol)
+            if args.participants < 1:
+                raise CliError(f"--participants = {args.participants}: must be ≥ 1")
+        bar: ProgressBar | None = None
+
+        def show(p):  # type: ignore[no-untyped-def]
+            nonlocal bar
+            if bar is None:
+                bar = ProgressBar(p.study_trials_total, "study", "trials")
+            bar.label = f"{p.code} {p.kind:<10} trial {p.trials_done:>2}/{p.trials_total:<2}"
+            bar.update(p.study_trials_done)
+
+        import time as _time
+
+        t0 = _time.perf_counter()
+        if args.resume is not None:
+            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show)
+        else:
+            progress = run_study(
+                args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
+                on_progress=show,
+            )
+        wall = _time.perf_counter() - t0
+        if bar is not None:
+            bar.close()
+    except (ProtocolError, StorageError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    print(format_study_summary(args.db, progress.sessions, wall))
     return 0
 
 

@@ -97,6 +97,12 @@ class SimForceSensor:
         self.inject_nan = False
         self.lost_packets = 0
         self._loss_threshold = _normal_quantile(self.params.packet_loss)
+        p = self.params
+        self._bias0 = (*p.bias_force_n, *p.bias_torque_nm)
+        self._drift = (*p.drift_force_n, *(0.01 * d for d in p.drift_force_n))
+        self._rw_scale = p.random_walk_n_per_sqrt_s
+        self._grav_rot: Mat3 | None = None
+        self._grav: tuple[float, ...] = (0.0,) * 6
 
     @property
     def range_n(self) -> tuple[float, float, float, float, float, float]:
@@ -114,12 +120,13 @@ class SimForceSensor:
         return row
 
     def bias_at(self, t_s: float) -> tuple[float, ...]:
-        """Deterministic part of the bias at ``t_s`` (without the random walk), N and N·m."""
-        p = self.params
-        w = 1.0 - math.exp(-t_s / p.drift_tau_s)
-        bf = tuple(b + d * w for b, d in zip(p.bias_force_n, p.drift_force_n))
-        bt = tuple(b + 0.01 * d * w for b, d in zip(p.bias_torque_nm, p.drift_force_n))
-        return bf + bt
+        """Deterministic part of the bias at ``t_s`` (without the random walk), N and N·m.
+
+        ``b(t) = b0 + b_w (1 − e^{−t/τ_w})``; the torque drift is the force
+        drift scaled by 0.01 m (science.md §1.5).
+        """
+        w = 1.0 - math.exp(-t_s / self.params.drift_tau_s)
+        return tuple(b + d * w for b, d in zip(self._bias0, self._drift))
 
     def current_bias(self, t_s: float) -> tuple[float, ...]:
         """Full bias at ``t_s`` including the random walk so far (ground truth for tests)."""
@@ -132,12 +139,16 @@ class SimForceSensor:
             self._t0_ns = t_ns
         p = self.params
         nz = self._next_noise()
-        if p.random_walk_n_per_sqrt_s > 0 and dt_s > 0:
-            s = p.random_walk_n_per_sqrt_s * math.sqrt(dt_s)
-            rw = self._rw
-            for i in range(3):
-                rw[i] += s * nz[6 + i]
-                rw[3 + i] += 0.01 * s * nz[9 + i]
+        rw = self._rw
+        if dt_s > 0.0 and self._rw_scale > 0.0:
+            s = self._rw_scale * math.sqrt(dt_s)
+            st = 0.01 * s
+            rw[0] += s * nz[6]
+            rw[1] += s * nz[7]
+            rw[2] += s * nz[8]
+            rw[3] += st * nz[9]
+            rw[4] += st * nz[10]
+            rw[5] += st * nz[11]
         if self.stalled:
             return
         if nz[12] < self._loss_threshold:
@@ -145,29 +156,36 @@ class SimForceSensor:
             self._rdt += 1  # the box sampled and sent it; the network ate it
             self._ft += 1
             return
-        g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * p.mass_kg))
-        t_g = cross(p.com_m, g_s)
+        if rot_sensor_base is not self._grav_rot:
+            # the payload's weight only changes with the orientation
+            g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * p.mass_kg))
+            self._grav = (*g_s, *cross(p.com_m, g_s))
+            self._grav_rot = rot_sensor_base
+        g = self._grav
         f_c = mat_vec(rot_sensor_base, contact_force_base)
-        t_c = cross(p.tip_in_sensor_m, f_c)
-        b = self.current_bias((t_ns - self._t0_ns) * 1e-9)
+        lx, ly, lz = p.tip_in_sensor_m
+        w = 1.0 - math.exp((self._t0_ns - t_ns) * 1e-9 / p.drift_tau_s)
+        b0, d = self._bias0, self._drift
         vals = [
-            g_s[0] + f_c[0] + b[0] + nz[0],
-            g_s[1] + f_c[1] + b[1] + nz[1],
-            g_s[2] + f_c[2] + b[2] + nz[2],
-            t_g[0] + t_c[0] + b[3] + nz[3],
-            t_g[1] + t_c[1] + b[4] + nz[4],
-            t_g[2] + t_c[2] + b[5] + nz[5],
+            g[0] + f_c[0] + (b0[0] + d[0] * w + rw[0]) + nz[0],
+            g[1] + f_c[1] + (b0[1] + d[1] * w + rw[1]) + nz[1],
+            g[2] + f_c[2] + (b0[2] + d[2] * w + rw[2]) + nz[2],
+            g[3] + (ly * f_c[2] - lz * f_c[1]) + (b0[3] + d[3] * w + rw[3]) + nz[3],
+            g[4] + (lz * f_c[0] - lx * f_c[2]) + (b0[4] + d[4] * w + rw[4]) + nz[4],
+            g[5] + (lx * f_c[1] - ly * f_c[0]) + (b0[5] + d[5] * w + rw[5]) + nz[5],
         ]
         status = self.status_override
         rng = p.range_n
+        cpf, cpt = p.counts_per_force, p.counts_per_torque
         for i in range(6):
-            cpu = p.counts_per_force if i < 3 else p.counts_per_torque
             v = vals[i]
-            if v > rng[i]:
-                v, status = rng[i], status | SATURATION_STATUS
-            elif v < -rng[i]:
-                v, status = -rng[i], status | SATURATION_STATUS
-            vals[i] = round(v * cpu) / cpu  # integer counts on the wire
+            r = rng[i]
+            if v > r:
+                v, status = r, status | SATURATION_STATUS
+            elif v < -r:
+                v, status = -r, status | SATURATION_STATUS
+            c = cpf if i < 3 else cpt
+            vals[i] = round(v * c) / c  # integer counts on the wire
         if self.inject_nan:
             vals[0] = math.nan
         self._rdt += 1

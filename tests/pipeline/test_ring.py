@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
-import queue
 
 import numpy as np
 import pytest
@@ -140,6 +139,32 @@ def test_latest():
         # more than the capacity: the whole ring
         assert _rows_as_tuples(ring.latest(100)) == [_row(k) for k in range(7, 12)]
         assert len(ring.latest(0)) == 0
+
+
+class _RacingRing(RingBuffer):
+    """A ring whose writer appends one record right after a reader's first look at the counter."""
+
+    race_row: tuple[float, ...] | None = None
+
+    @property
+    def write_count(self) -> int:
+        c = super().write_count
+        row, self.race_row = self.race_row, None
+        if row is not None:
+            self.write(row)  # the 1 kHz writer in the other process got in between
+        return c
+
+
+def test_latest_returns_at_most_n_rows_when_the_writer_races():
+    ring = _RacingRing.create(FIELDS, 8, shared=False)
+    for k in range(3):
+        ring.write(_row(k))
+    ring.race_row = _row(3)
+    assert _rows_as_tuples(ring.latest(1)) == [_row(3)]  # the newest, and only one
+    ring.race_row = _row(4)
+    assert _rows_as_tuples(ring.latest(2)) == [_row(3), _row(4)]
+    ring.race_row = _row(5)
+    assert len(ring.latest(0)) == 0
 
 
 def test_field_names_round_trip_and_columns():

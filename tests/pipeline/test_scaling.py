@@ -94,13 +94,13 @@ def reference(f, f_max=F_MAX, f_scale=F_SCALE):
         return [c * k for c in d], mag
 
 
-def rel_close(x: float, ref: Decimal, n_eps: float) -> bool:
-    """``|x - ref| <= n_eps * EPS * |ref| + TINY`` (the TINY term covers subnormal rounding)."""
+def rel_close(x: float, ref: Decimal, n_eps: float, n_tiny: int = 1) -> bool:
+    """``|x - ref| <= n_eps * EPS * |ref| + n_tiny * TINY`` (TINY covers subnormal rounding)."""
     with localcontext() as ctx:
         ctx.prec = 60
         ctx.Emin = -999999
         ctx.Emax = 999999
-        return abs(Decimal(x) - ref) <= Decimal(n_eps * EPS) * abs(ref) + Decimal(TINY)
+        return abs(Decimal(x) - ref) <= Decimal(n_eps * EPS) * abs(ref) + n_tiny * Decimal(TINY)
 
 
 def assert_bounded(out, f_max=F_MAX):
@@ -233,7 +233,8 @@ def test_components_match_high_precision_reference(f):
     comps, mag = reference(f)
     for o, r in zip(out, comps):
         assert rel_close(o, r, 4.0), (f, out, [str(c) for c in comps])
-    assert rel_close(math.hypot(*out), mag, 4.0), (f, out, str(mag))
+    # hypot of subnormal components also carries their three absolute roundings
+    assert rel_close(math.hypot(*out), mag, 4.0, n_tiny=4), (f, out, str(mag))
 
 
 @given(st.floats(1e-4, 17.0))
@@ -399,7 +400,9 @@ def test_numpy_and_sequence_inputs_agree():
 def test_other_plausible_parameters_keep_the_guarantees(f_max, f_scale, f):
     out = scale_force(f, f_max, f_scale)
     assert_bounded(out, f_max)
-    if all(math.isfinite(c) for c in f) and math.hypot(*f) < math.inf and any(f):
+    # accuracy "for normal ranges": above ~1e300, f_max/|f| can be subnormal for small
+    # f_max and the kernel's factor loses bits (bounded, but not ulp-exact)
+    if all(math.isfinite(c) for c in f) and math.hypot(*f) <= 1e300 and any(f):
         comps, mag = reference(f, f_max, f_scale)
         for o, r in zip(out, comps):
             assert rel_close(o, r, 4.0), (f, f_max, f_scale, out)

@@ -70,7 +70,7 @@ def ticks(eng: SimEngine, n: int) -> list[dict[str, float]]:
         loop.run_ticks(1)
         rec = loop.last_record
         assert rec is not None
-        rec["t_ns"] = t_ns
+        rec["clock_ns"] = t_ns
         rec["cmd"] = eng.rig.haptic._cmd
         out.append(rec)
     return out
@@ -120,7 +120,7 @@ def check_ramp_to_zero(recs: list[dict[str, float]], fault_i: int, g0: float = 1
     zero_i = first(recs[fault_i:], is_zero) + fault_i
     assert zero_i - fault_i == math.ceil(g0 * RAMP_TICKS - 1e-9) - 1
     assert zero_i - fault_i + 1 <= MAX_ZERO_TICKS
-    t_zero_ms = (recs[zero_i]["t_ns"] - recs[fault_i]["t_ns"]) / 1e6
+    t_zero_ms = (recs[zero_i]["clock_ns"] - recs[fault_i]["clock_ns"]) / 1e6
     assert t_zero_ms <= 50.0
     # ramp: the gain drops by dt/fault_ramp_s per tick from the fault tick on
     for k in range(fault_i, zero_i):
@@ -153,12 +153,12 @@ def test_sensor_stall_latches_when_sample_age_exceeds_5ms_and_ramps_to_zero(eng)
     # age 5 ms is still fine, 6 ms (the 6th stalled tick) is a fault
     assert fault_i == 5
     assert ages_ns[fault_i - 1] == 5_000_000 and ages_ns[fault_i] == 6_000_000
-    assert recs[fault_i]["t_ns"] == last_sample_ns + 6_000_000
+    assert recs[fault_i]["clock_ns"] == last_sample_ns + 6_000_000
     assert all(r["gain"] == 1.0 for r in recs[:fault_i])
     assert all(r["faults"] == float(Fault.SENSOR_STALE) for r in recs[fault_i:])
 
     (ev,) = fault_events(eng)
-    assert ev.t_ns == recs[fault_i]["t_ns"]
+    assert ev.t_ns == recs[fault_i]["clock_ns"]
     assert ev.faults == Fault.SENSOR_STALE
     assert ev.detail == "SENSOR_STALE"
 
@@ -181,7 +181,7 @@ def test_nan_burst_latches_non_finite_never_reaches_device_and_does_not_poison_t
     assert burst[0]["faults"] == float(Fault.NON_FINITE)
     (ev,) = fault_events(eng)
     assert ev.faults == Fault.NON_FINITE and ev.detail == "NON_FINITE"
-    assert ev.t_ns == burst[0]["t_ns"]
+    assert ev.t_ns == burst[0]["clock_ns"]
 
     # nothing non-finite ever goes to the device, and the filter rejected the bad samples
     stage_cols = STEP_FIELDS[STEP_FIELDS.index("filt_fx") :]  # filt_* ... render_*: downstream of the filter
@@ -212,7 +212,7 @@ def test_nan_burst_latches_non_finite_never_reaches_device_and_does_not_poison_t
     assert all(r["faults"] == 0.0 for r in back)
     reset_ev = eng.loop.events[-1]
     assert reset_ev.kind == "faults_reset" and reset_ev.faults == 0 and reset_ev.detail == "NON_FINITE"
-    assert reset_ev.t_ns == back[0]["t_ns"]
+    assert reset_ev.t_ns == back[0]["clock_ns"]
 
     gains = [r["gain"] for r in back]
     # ramp in at dt/ramp_in_s per tick from the reset tick on; exactly 1 after ramp_in_s
@@ -238,7 +238,7 @@ def test_stale_pose_latches_when_pose_age_exceeds_50ms():
     e.rig.robot.frozen = True
     recs = ticks(e, 150)
     fault_i = first(recs, lambda r: r["faults"] != 0.0)
-    assert recs[fault_i]["t_ns"] == pose_t_ns + 51_000_000
+    assert recs[fault_i]["clock_ns"] == pose_t_ns + 51_000_000
     assert round(recs[fault_i]["pose_age_s"] * 1e9) == 51_000_000
     assert round(recs[fault_i - 1]["pose_age_s"] * 1e9) == 50_000_000
     assert recs[fault_i - 1]["faults"] == 0.0 and recs[fault_i - 1]["gain"] == 1.0
@@ -306,7 +306,7 @@ def test_operator_stop_latches_and_ramps_to_zero_until_reset(eng):
     assert all(r["faults"] == float(Fault.OPERATOR_STOP) for r in recs)
     (ev,) = fault_events(eng)
     assert ev.faults == Fault.OPERATOR_STOP and ev.detail == "OPERATOR_STOP"
-    assert ev.t_ns == recs[0]["t_ns"]
+    assert ev.t_ns == recs[0]["clock_ns"]
     check_ramp_to_zero(recs, 0)
     assert eng.loop.active_faults == 0  # not a sensed condition: only the reset clears it
 

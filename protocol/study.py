@@ -1,0 +1,320 @@
+"""Headless studies on the simulated rig: participants, sessions, resume.
+
+``haptic-study run`` calls :func:`run_study`: for each participant it builds
+the simulated rig (calibrating its payload), hands the stylus to a
+:class:`protocol.participant.SimulatedParticipant`, stores a training session
+(tagged ``kind = 'training'``, which analysis excludes) and the experiment
+session, each with its whole schedule committed before the first trial, and
+runs them on the virtual clock (as fast as the CPU allows) or in real time.
+:func:`resume_session` continues an interrupted experiment session at its
+first unfinished trial: the interrupted trial is stored as aborted, with the
+reason, and re-run per the abort policy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib.metadata import PackageNotFoundError, version
+from typing import Any
+
+import numpy as np
+
+from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.sim.rig import SimRigConfig
+from protocol.config import ProtocolConfig, protocol_from_dict
+from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.participant import SimulatedParticipant
+from protocol.session import SessionRunner, first_unfinished, has_samples
+from protocol.storage import Recorder, StorageError, StudyDatabase, trial_id_of, validate_code
+
+__all__ = ["StudyProgress", "participant_code", "resume_session", "run_study", "software_version"]
+
+#: Records per step of the headless driver (the runner reads the ring this often).
+BLOCK_TICKS = 50
+#: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks.
+KILL_ENV = "HAPTIC_STUDY_SIGKILL_AFTER_TICKS"
+
+
+def software_version() -> str:
+    """Installed version of haptic-study."""
+    try:
+        return version("haptic-study")
+    except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
+        return "0+unknown"
+
+
+def participant_code(number: int) -> str:
+    """Pseudonymous code of the n-th simulated participant (P01, P02, …)."""
+    return f"P{number:02d}"
+
+
+def _seeds(study_seed: int, number: int) -> tuple[int, int]:
+    """(rig seed, participant seed) for a participant: independent streams from one study seed."""
+    s = np.random.SeedSequence([study_seed, number]).generate_state(2)
+    return int(s[0]), int(s[1])
+
+
+@dataclass
+class StudyProgress:
+    """What a progress display needs (updated as the study runs)."""
+
+    participants_total: int = 0
+    participant: int = 0
+    code: str = ""
+    kind: str = ""
+    trials_done: int = 0  # in the current session
+    trials_total: int = 0  # in the current session
+    study_trials_done: int = 0
+    study_trials_total: int = 0
+    study_time_s: float = 0.0
+    planned_s: float = 0.0
+    sessions: list[int] = field(default_factory=list)
+
+
+def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
+    """Free practice: each mode in turn, each target once, with the live force aid."""
+    out = []
+    for m in protocol.modes:
+        for t in protocol.targets:
+            out.append(TrialSpec(len(out), t.label, t.force_n, m))
+    return out
+
+
+def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
+    """Upper bound of simulated time (every trial to its cap, plus pauses) for the progress bar."""
+    tr = protocol.trial
+    per = protocol.trials_per_participant * (tr.max_trial_s + tr.pause_s)
+    if protocol.training.enabled:
+        per += len(training_schedule(protocol)) * (protocol.training.seconds_per_target_per_mode + tr.pause_s)
+    return per * participants
+
+
+def _engine(rig_seed: int, clock: str) -> SimEngine:
+    return build_sim_engine(
+        EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
+                     ring_seconds=30.0)
+    )
+
+
+def _drive(
+    eng: SimEngine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    tick_budget: list[int],
+) -> None:
+    """Alternate loop ticks and runner blocks until the session ends."""
+    ring = eng.ring
+    assert ring is not None
+    loop = eng.loop
+    cursor = ring.write_count
+    t_last_report = 0.0
+    kill_after = int(os.environ.get(KILL_ENV, "0") or 0)
+    base_done = progress.study_trials_done
+    if clock == "real":
+        loop.start()
+    try:
+        while not runner.done:
+            if clock == "virtual":
+                loop.run_ticks(BLOCK_TICKS)
+            else:
+                time.sleep(0.02)
+            res = ring.read_since(cursor)
+            cursor = res.cursor
+            if res.lost:
+                raise RuntimeError(f"the session runner fell {res.lost} records behind the loop")
+            n = len(res.rows)
+            runner.process(res.rows)
+            progress.study_time_s += n * 1e-3
+            tick_budget[0] += n
+            if kill_after and tick_budget[0] >= kill_after:
+                os.kill(os.getpid(), signal.SIGKILL)
+            now = time.monotonic()
+            done = runner.state.completed + runner.state.aborted
+            if on_progress is not None and (now - t_last_report > 0.1 or runner.done):
+                t_last_report = now
+                progress.trials_done = done
+                progress.trials_total = runner.state.trials_total
+                progress.study_trials_done = base_done + done
+                on_progress(progress)
+        progress.study_trials_done = base_done + runner.state.completed + runner.state.aborted
+    finally:
+        if clock == "real":
+            loop.stop()
+        else:
+            loop.ramp_down()
+        eng.rig.close()
+
+
+def _config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+    fw = eng.framework.config
+    return {
+        "rig": "sim",
+        "clock": clock,
+        "rig_seed": rig_seed,
+        "participant_seed": participant_seed,
+        "sim": _plain(dataclasses.asdict(eng.rig.config)),
+        "framework": _plain(dataclasses.asdict(fw)),
+        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+    }
+
+
+def _plain(d: Any) -> Any:
+    if isinstance(d, dict):
+        return {k: _plain(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_plain(v) for v in d]
+    return d
+
+
+def _run_session(
+    db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, study_seed: int, clock: str,
+    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
+) -> int:
+    rig_seed, p_seed = _seeds(study_seed, number)
+    eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
+    participant = SimulatedParticipant(seed=p_seed)
+    eng.rig.set_driver(participant)
+    if kind == "experiment":
+        schedule = build_schedule(protocol, study_seed, number)
+        run_protocol = protocol
+    else:
+        schedule = training_schedule(protocol)
+        run_protocol = dataclasses.replace(
+            protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
+        )
+    session_id = db.create_session(
+        code=code, kind=kind, seed=study_seed, participant_number=number, protocol_json=run_protocol.to_json(),
+        schedule_json=schedule_to_json(schedule), software_version=software_version(), rig="sim",
+        config=_config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
+    )
+    progress.sessions.append(session_id)
+    recorder = Recorder(db, threaded=(clock == "real"))
+    runner = SessionRunner(
+        protocol=run_protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=eng.loop.submit,
+        participant=participant, participant_time=lambda: eng.rig.sim_time_s, seed=study_seed,
+    )
+    runner.live_force_aid = kind == "training" and protocol.training.live_force_aid
+    recorder.event(session_id, 0.0, "session_start", f"{kind} session for {code}, seed {study_seed}")
+    progress.kind = kind
+    try:
+        _drive(eng, runner, clock, progress, on_progress, tick_budget)
+    finally:
+        recorder.close()
+    return session_id
+
+
+def run_study(
+    db_path: str,
+    *,
+    participants: int,
+    seed: int,
+    protocol: ProtocolConfig,
+    clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None,
+) -> StudyProgress:
+    """Run a complete simulated study into the database at ``db_path``.
+
+    Raises
+    ------
+    StorageError
+        Before anything is stored, if the database cannot be used or one of
+        the participant codes already has sessions in it.
+    """
+    if participants < 1:
+        raise ValueError(f"participants = {participants}: must be ≥ 1")
+    db = StudyDatabase(db_path)
+    try:
+        for n in range(1, participants + 1):
+            code = participant_code(n)
+            if db.sessions_of(code):
+                raise StorageError(
+                    f"{db_path} already holds sessions for participant {code}; nothing was changed "
+                    f"(use a new database, or --resume {code} to continue an interrupted session)"
+                )
+        progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
+        per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
+        progress.study_trials_total = per * participants
+        ticks = [0]
+        for n in range(1, participants + 1):
+            code = participant_code(n)
+            progress.participant, progress.code = n, code
+            if protocol.training.enabled:
+                _run_session(db, code=code, number=n, kind="training", protocol=protocol, study_seed=seed, clock=clock,
+                             progress=progress, on_progress=on_progress, tick_budget=ticks)
+            _run_session(db, code=code, number=n, kind="experiment", protocol=protocol, study_seed=seed, clock=clock,
+                         progress=progress, on_progress=on_progress, tick_budget=ticks)
+        return progress
+    finally:
+        db.close()
+
+
+def resume_session(
+    db_path: str,
+    code: str,
+    *,
+    clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None,
+) -> StudyProgress:
+    """Continue the interrupted experiment session of participant ``code``.
+
+    The stored schedule is used; trials already stored are kept; a trial that
+    was interrupted mid-way (samples but no summary) is stored as aborted with
+    the reason and re-run per the abort policy; no trial is duplicated or skipped.
+    """
+    validate_code(code)
+    db = StudyDatabase(db_path)
+    try:
+        open_ = [s for s in db.sessions_of(code, "experiment") if s.status == "running"]
+        if not open_:
+            known = db.participant_id(code, create=False)
+            what = "no such participant" if known is None else "no interrupted experiment session"
+            raise StorageError(f"cannot resume {code} in {db_path}: {what}")
+        info = open_[-1]
+        protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
+        schedule = schedule_from_json(info.schedule_json)
+        rows = db.trial_rows(info.session_id)
+        pos = first_unfinished(schedule, rows)
+        offset = db.last_session_time_s(info.session_id) + 1.0
+        if pos < len(schedule) and has_samples(db, info.session_id, schedule[pos].index):
+            spec = schedule[pos]
+            reason = "interrupted: the previous run ended during this trial"
+            schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
+                                       np.random.default_rng([info.seed, info.session_id, 7]))
+            with db.transaction():
+                db.insert_trial({
+                    "trial_id": trial_id_of(info.session_id, spec.index), "session_id": info.session_id,
+                    "trial_index": spec.index, "target_label": spec.target_label,
+                    "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode, "outcome": "aborted",
+                    "started_at_s": offset, "ended_at_s": offset, "abort_reason": reason, "repeat_of": spec.repeat_of,
+                })
+                db.update_schedule(info.session_id, schedule_to_json(schedule))
+                db.insert_event(info.session_id, offset, "resume", f"trial {spec.index} aborted ({reason}) and re-queued")
+            pos += 1
+        else:
+            db.insert_event(info.session_id, offset, "resume", f"continuing at trial position {pos}")
+        rig_seed, p_seed = _seeds(info.seed, info.participant_number)
+        # A fresh rig (re-calibrated) and the same participant (same seed, same parameters).
+        eng = _engine(rig_seed + 2, clock)
+        participant = SimulatedParticipant(seed=p_seed)
+        eng.rig.set_driver(participant)
+        recorder = Recorder(db, threaded=(clock == "real"))
+        runner = SessionRunner(
+            protocol=protocol, schedule=schedule, session_id=info.session_id, recorder=recorder, submit=eng.loop.submit,
+            start_position=pos, session_clock_offset_s=offset + 0.001, participant=participant,
+            participant_time=lambda: eng.rig.sim_time_s, seed=info.seed,
+        )
+        progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind="experiment",
+                                 planned_s=(len(schedule) - pos) * (protocol.trial.max_trial_s + protocol.trial.pause_s),
+                                 study_trials_total=len(schedule) - pos)
+        progress.sessions.append(info.session_id)
+        try:
+            _drive(eng, runner, clock, progress, on_progress, [0])
+        finally:
+            recorder.close()
+        return progress
+    finally:
+        db.close()

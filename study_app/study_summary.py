@@ -1,0 +1,70 @@
+"""The one-screen summary printed after ``haptic-study run``."""
+
+from __future__ import annotations
+
+import math
+import sqlite3
+from collections import defaultdict
+from statistics import fmean
+
+__all__ = ["format_study_summary"]
+
+#: The paper's results (Sec. V-B), for the comparison column.
+PAPER = {"success": (0.27, 0.54), "rmse_n": (1.35, 0.86), "max_ae_n": (2.12, 1.46)}
+
+
+def _mean(xs: list[float]) -> float:
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    return fmean(xs) if xs else math.nan
+
+
+def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
+    """Per-mode means across participants (per participant × mode first, science.md §6)."""
+    conn = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
+    try:
+        q = ",".join("?" * len(session_ids)) or "NULL"
+        rows = conn.execute(
+            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind "
+            f"FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
+            f"WHERE t.session_id IN ({q})", session_ids,
+        ).fetchall()
+        n_samples = conn.execute(
+            f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({q})", session_ids
+        ).fetchone()[0]
+    finally:
+        conn.close()
+    exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
+    aborted = sum(1 for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    training = sum(1 for r in rows if r[7] == "training")
+    per: dict[tuple[str, str], list[tuple]] = defaultdict(list)
+    for r in exp:
+        per[(r[0], r[1])].append(r)
+    codes = sorted({r[0] for r in exp})
+    lines = [
+        f"Study database {db_path}: {len(codes)} participants, {len(exp)} experiment trials "
+        f"({aborted} aborted and re-run, {training} training trials excluded), {n_samples:,} samples",
+        "",
+        f"{'per participant, then averaged':<32}{'haptics OFF':>12}{'haptics ON':>12}{'change':>9}   paper OFF → ON",
+    ]
+
+    def metric(mode: str, fn) -> float:  # type: ignore[no-untyped-def]
+        return _mean([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
+
+    defs = [
+        ("success rate", "success", lambda ts: sum(t[3] == "success" for t in ts) / len(ts)),
+        ("TCT, successful trials (s)", None, lambda ts: _mean([t[4] for t in ts if t[3] == "success"])),
+        ("RMSE (N)", "rmse_n", lambda ts: _mean([t[5] for t in ts])),
+        ("Max AE (N)", "max_ae_n", lambda ts: _mean([t[6] for t in ts])),
+    ]
+    for name, key, fn in defs:
+        off, on = metric("off", fn), metric("on", fn)
+        change = (on - off) / off * 100 if off and math.isfinite(off) and math.isfinite(on) else math.nan
+        paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
+        lines.append(f"  {name:<30}{off:>12.3f}{on:>12.3f}{change:>8.0f}%   {paper}")
+    for label in sorted({r[2] for r in exp}):
+        off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
+        on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
+        lines.append(f"  {'success, ' + label:<30}{off:>12.3f}{on:>12.3f}")
+    lines.append("")
+    lines.append(f"Wall time {wall_s:.1f} s. Every trial, sample and event is in the database (tables trials, samples, events).")
+    return "\n".join(lines)

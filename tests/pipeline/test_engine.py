@@ -1,0 +1,138 @@
+"""The engine process: spawn, run a fixed number of ticks, stop on request, and stop by itself when detached.
+
+The engine runs the loop on the virtual clock (as fast as the CPU allows), so
+these tests wait only for process start-up and exit, with bounded timeouts.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from pipeline.devices import Fault
+from pipeline.engine import EngineConfig, EngineProcess
+from pipeline.loop import RECORD_FIELDS, SetHaptics
+from pipeline.safety import SafetyConfig
+
+START_TIMEOUT_S = 30.0
+EXIT_TIMEOUT_S = 15.0
+PERIOD_NS = 1_000_000
+RAMP_TICKS = round(SafetyConfig().fault_ramp_s / (PERIOD_NS * 1e-9))  # 40
+
+
+@pytest.fixture
+def engines() -> Iterator[Callable[..., EngineProcess]]:
+    """Make engine processes that are always cleaned up (killed if still running)."""
+    made: list[EngineProcess] = []
+
+    def make(config: EngineConfig, max_ticks: int | None = None) -> EngineProcess:
+        p = EngineProcess(config, max_ticks=max_ticks)
+        made.append(p)
+        return p
+
+    yield make
+    for p in made:
+        p.kill()
+        assert not p.alive
+
+
+def wait_for(pred: Callable[[], bool], timeout_s: float = 10.0) -> None:
+    """Poll a condition on the shared ring (no sleeping: the engine fills it at CPU speed)."""
+    end = time.monotonic() + timeout_s
+    while not pred():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached within the timeout")
+
+
+def latest(proc: EngineProcess) -> np.void:
+    rows = proc.ring.latest(1)
+    assert len(rows) == 1
+    return rows[0]
+
+
+def test_engine_runs_max_ticks_and_the_parent_reads_every_record(engines):
+    proc = engines(EngineConfig(clock="virtual", driver="scripted"), max_ticks=3000)
+    proc.start(timeout_s=START_TIMEOUT_S)
+    assert proc.ring is not None
+    assert proc.ring.fields == RECORD_FIELDS
+    assert proc.calibration is not None and "force_bias_n" in str(proc.calibration)
+
+    proc.wait(timeout_s=EXIT_TIMEOUT_S)
+    assert not proc.alive
+    assert proc.final_stats is not None
+    # 3000 ticks of the run, then the ramp-down from full feedback (gain 1 → 0)
+    assert proc.final_ticks == 3000 + RAMP_TICKS
+    assert proc.final_stats["ticks"] == proc.final_ticks - 1  # periods between ticks
+    assert proc.final_stats["period_p50_us"] == 1000.0
+    assert proc.final_stats["period_p99_us"] == 1000.0
+    assert proc.final_stats["period_max_us"] == 1000.0
+    assert proc.final_stats["periods_over_2ms"] == 0.0
+    assert proc.final_stats["missed_slots"] == 0.0
+    assert proc.final_faults == 0
+
+    ring = proc.ring
+    assert ring.write_count == proc.final_ticks
+    res = ring.read_since(0)
+    assert res.lost == 0 and res.cursor == proc.final_ticks
+    rows = res.rows
+    assert rows.dtype.names == RECORD_FIELDS
+    np.testing.assert_array_equal(rows["tick"], np.arange(proc.final_ticks, dtype=float))
+    t_ns = np.round(rows["t_s"] * 1e9).astype(np.int64)
+    assert np.all(np.diff(t_ns) == PERIOD_NS)  # t_s increases by exactly 1 ms
+    assert np.all(rows["haptic_on"][:3000] == 1.0) and np.all(rows["haptic_on"][3000:] == 0.0)
+    assert rows["gain"][2999] == 1.0 and rows["gain"][-1] == 0.0
+    assert rows["render_fx"][-1] == 0.0 and rows["render_fy"][-1] == 0.0 and rows["render_fz"][-1] == 0.0
+    assert np.all(rows["faults"] == 0.0)
+    assert np.all(np.isfinite(rows["render_fy"]))
+
+
+def test_engine_stops_on_request(engines):
+    proc = engines(EngineConfig(clock="virtual"))
+    proc.start(timeout_s=START_TIMEOUT_S)
+    ring = proc.ring
+    wait_for(lambda: ring.write_count >= 1000)
+    assert latest(proc)["haptic_on"] == 1.0
+
+    proc.send(SetHaptics(False))
+    wait_for(lambda: latest(proc)["haptic_on"] == 0.0 and latest(proc)["gain"] == 0.0)
+    seen = ring.write_count
+    proc.stop(timeout_s=EXIT_TIMEOUT_S)
+
+    assert not proc.alive
+    assert proc.ring is None  # released by stop()
+    assert proc.final_stats is not None
+    assert proc.final_ticks >= seen
+    assert proc.final_stats["ticks"] == proc.final_ticks - 1
+    assert proc.final_stats["period_max_us"] == 1000.0
+    assert proc.final_faults == 0
+    assert proc.loop_events == []
+
+
+@pytest.mark.parametrize("haptics_on", [True, False], ids=["feedback-on", "feedback-off"])
+def test_engine_detached_latches_ramps_down_and_exits_by_itself(engines, haptics_on):
+    proc = engines(EngineConfig(clock="virtual", haptics_on=haptics_on))
+    proc.start(timeout_s=START_TIMEOUT_S)
+    ring = proc.ring
+    # running, and (with feedback on) fully faded in
+    wait_for(lambda: ring.write_count >= 1000 and latest(proc)["gain"] == (1.0 if haptics_on else 0.0))
+
+    proc.detach()  # as a crashed GUI would: the command pipe breaks
+    proc.wait(timeout_s=EXIT_TIMEOUT_S)
+
+    assert not proc.alive
+    assert proc.final_stats is not None, "the engine must exit cleanly, reporting its stats"
+    assert proc.final_faults is not None and proc.final_faults & Fault.ENGINE_DETACHED
+    detached = [e for e in proc.loop_events if e.kind == "fault" and e.detail == "ENGINE_DETACHED"]
+    assert len(detached) == 1
+    assert detached[0].faults & Fault.ENGINE_DETACHED
+
+    last = latest(proc)
+    assert ring.write_count == proc.final_ticks
+    assert last["gain"] == 0.0
+    assert last["render_fx"] == 0.0 and last["render_fy"] == 0.0 and last["render_fz"] == 0.0
+    if haptics_on:  # the ramp-down ticks record the latched fault
+        assert int(last["faults"]) & Fault.ENGINE_DETACHED
+        assert last["haptic_on"] == 0.0

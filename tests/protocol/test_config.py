@@ -1,0 +1,256 @@
+"""Tests of the protocol file: the paper's defaults, every field's validation, the dict round trip."""
+
+from __future__ import annotations
+
+from importlib import resources
+from pathlib import Path
+
+import pytest
+
+from protocol.config import (
+    ProtocolConfig,
+    ProtocolError,
+    Target,
+    TrainingConfig,
+    TrialTiming,
+    default_protocol,
+    load_protocol,
+    protocol_from_dict,
+)
+
+DEFAULT_TEXT = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
+
+
+def _write_variant(tmp_path: Path, old: str, new: str, name: str = "study.toml") -> Path:
+    """The default protocol file with exactly one occurrence of ``old`` replaced by ``new``."""
+    assert DEFAULT_TEXT.count(old) == 1, f"{old!r} must occur exactly once in default.toml"
+    p = tmp_path / name
+    p.write_text(DEFAULT_TEXT.replace(old, new), encoding="utf-8")
+    return p
+
+
+def _error_of(path: Path) -> str:
+    with pytest.raises(ProtocolError) as info:
+        load_protocol(path)
+    msg = str(info.value)
+    assert "\n" not in msg, f"message must be a single line: {msg!r}"
+    assert path.name in msg
+    return msg
+
+
+# -- the paper's protocol -------------------------------------------------------------------------
+def test_default_protocol_has_the_papers_values():
+    p = default_protocol()
+    assert p.targets == (Target("GENTLE", 0.6), Target("FIRM", 1.2))
+    assert p.modes == ("on", "off")
+    assert p.trials_per_cell == 5
+    assert p.trials_per_participant == 20
+    assert p.ordering == "random"
+    assert p.abort_policy == "append"
+    assert p.trial == TrialTiming(tolerance_fraction=0.10, hold_s=1.0, max_trial_s=12.0, pause_s=2.0, cue_s=1.0)
+    assert p.training == TrainingConfig(enabled=True, seconds_per_target_per_mode=20.0, live_force_aid=True)
+    assert p.version == 1
+    assert p.name == "Shaker & Erden force regulation"
+
+
+def test_default_protocol_fields_have_exact_types():
+    p = default_protocol()
+    assert type(p.trials_per_cell) is int
+    assert all(type(t.force_n) is float for t in p.targets)
+    assert type(p.trial.hold_s) is float and type(p.trial.max_trial_s) is float
+    assert type(p.training.enabled) is bool
+
+
+def test_target_lookup_by_label():
+    p = default_protocol()
+    assert p.target("FIRM") == Target("FIRM", 1.2)
+    with pytest.raises(KeyError):
+        p.target("gentle")
+
+
+def test_loading_a_copy_of_the_default_file_gives_the_default(tmp_path):
+    path = tmp_path / "copy.toml"
+    path.write_text(DEFAULT_TEXT, encoding="utf-8")
+    assert load_protocol(path) == default_protocol()
+    assert load_protocol(str(path)) == default_protocol()
+
+
+def test_omitted_optional_tables_take_the_papers_defaults(tmp_path):
+    path = tmp_path / "minimal.toml"
+    path.write_text('[[targets]]\nlabel = "GENTLE"\nforce_n = 0.6\n', encoding="utf-8")
+    p = load_protocol(path)
+    assert p.name == "unnamed protocol"
+    assert p.targets == (Target("GENTLE", 0.6),)
+    assert p.modes == ("on", "off")
+    assert p.trials_per_cell == 5
+    assert p.trials_per_participant == 10
+    assert (p.ordering, p.abort_policy) == ("random", "append")
+    assert p.trial == TrialTiming()
+    assert p.training == TrainingConfig()
+
+
+# -- validation: one bad field per file -----------------------------------------------------------
+# (id, text in default.toml, replacement, the message after "<file>: ")
+BAD_FIELDS = [
+    ("negative hold", "hold_s = 1.0 ", "hold_s = -1.0 ",
+     "trial.hold_s = -1.0: must be a number > 0 and ≤ 60"),
+    ("zero hold", "hold_s = 1.0 ", "hold_s = 0.0 ",
+     "trial.hold_s = 0.0: must be a number > 0 and ≤ 60"),
+    ("hold equal to the cap", "hold_s = 1.0 ", "hold_s = 12.0 ",
+     "trial.hold_s = 12.0: must be shorter than trial.max_trial_s = 12"),
+    ("hold longer than the cap", "max_trial_s = 12.0 ", "max_trial_s = 0.5 ",
+     "trial.hold_s = 1.0: must be shorter than trial.max_trial_s = 0.5"),
+    ("tolerance 0.7", "tolerance_fraction = 0.10 ", "tolerance_fraction = 0.7 ",
+     "trial.tolerance_fraction = 0.7: must be a number > 0 and ≤ 0.5"),
+    ("tolerance as text", "tolerance_fraction = 0.10 ", 'tolerance_fraction = "10%" ',
+     "trial.tolerance_fraction = '10%': must be a number > 0 and ≤ 0.5"),
+    ("negative pause", "pause_s = 2.0 ", "pause_s = -2.0 ",
+     "trial.pause_s = -2.0: must be a number ≥ 0 and ≤ 600"),
+    ("infinite cap", "max_trial_s = 12.0 ", "max_trial_s = inf ",
+     "trial.max_trial_s = inf: must be a number > 0 and ≤ 600"),
+    ("unknown ordering", 'ordering = "random"', 'ordering = "latin_square"',
+     "design.ordering = 'latin_square': allowed values: random, blocked_by_mode, counterbalanced"),
+    ("unknown abort policy", 'abort_policy = "append"', 'abort_policy = "drop"',
+     "design.abort_policy = 'drop': allowed values: append, reinsert"),
+    ("duplicate labels", 'label = "FIRM"', 'label = "GENTLE"',
+     "targets = ['GENTLE', 'GENTLE']: labels must be unique"),
+    ("lower-case label", 'label = "GENTLE"', 'label = "gentle"',
+     "targets[0].label = 'gentle': must be an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)"),
+    ("label with a trailing newline", 'label = "FIRM"', 'label = "FIRM\\n"',
+     "targets[1].label = 'FIRM\\n': must be an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)"),
+    ("label of 17 characters", 'label = "FIRM"', 'label = "ABCDEFGHIJKLMNOPQ"',
+     "targets[1].label = 'ABCDEFGHIJKLMNOPQ': must be an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)"),
+    ("zero force", "force_n = 1.2", "force_n = 0.0",
+     "targets[1].force_n = 0.0: must be a number > 0 and ≤ 20"),
+    ("modes on twice", 'modes = ["on", "off"]', 'modes = ["on", "on"]',
+     "design.modes = ['on', 'on']: must be a non-empty list of distinct values from 'on', 'off'"),
+    ("unknown mode", 'modes = ["on", "off"]', 'modes = ["on", "vibro"]',
+     "design.modes = ['on', 'vibro']: must be a non-empty list of distinct values from 'on', 'off'"),
+    ("no modes", 'modes = ["on", "off"]', "modes = []",
+     "design.modes = []: must be a non-empty list of distinct values from 'on', 'off'"),
+    ("trials_per_cell 0", "trials_per_cell = 5 ", "trials_per_cell = 0 ",
+     "design.trials_per_cell = 0: must be a whole number from 1 to 100"),
+    ("trials_per_cell 2.5", "trials_per_cell = 5 ", "trials_per_cell = 2.5 ",
+     "design.trials_per_cell = 2.5: must be a whole number from 1 to 100"),
+    ("trials_per_cell true", "trials_per_cell = 5 ", "trials_per_cell = true ",
+     "design.trials_per_cell = True: must be a whole number from 1 to 100"),
+    ("unknown top-level key", 'name = "Shaker & Erden force regulation"',
+     'name = "Shaker & Erden force regulation"\ncolour = "red"',
+     "colour = 'red': unknown field; allowed: design, name, targets, training, trial, version"),
+    ("typo inside [trial]", "hold_s = 1.0 ", "hold_sec = 1.0 ",
+     "trial.hold_sec = 1.0: unknown field; allowed: cue_s, hold_s, max_trial_s, pause_s, tolerance_fraction"),
+    ("typo inside [design]", "trials_per_cell = 5 ", "trials_per_cel = 5 ",
+     "design.trials_per_cel = 5: unknown field; "
+     "allowed: abort_policy, modes, ordering, trials_per_cell"),
+    ("unknown key in a target", 'label = "FIRM"', 'label = "FIRM"\nforce = 1.2',
+     "targets[1].force = 1.2: unknown field; allowed: force_n, label"),
+    ("training enabled as text", "enabled = true", 'enabled = "yes"',
+     "training.enabled = 'yes': must be true or false"),
+    ("version 2", "version = 1", "version = 2",
+     "version = 2: this software reads protocol version 1"),
+    ("empty name", 'name = "Shaker & Erden force regulation"', 'name = "  "',
+     "name = '  ': must be a non-empty string"),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "expected"), [b[1:] for b in BAD_FIELDS], ids=[b[0] for b in BAD_FIELDS])
+def test_bad_field_is_refused_naming_file_field_value_and_what_is_allowed(tmp_path, old, new, expected):
+    path = _write_variant(tmp_path, old, new)
+    assert _error_of(path) == f"{path}: {expected}"
+
+
+def test_non_toml_text_is_refused(tmp_path):
+    path = tmp_path / "notes.toml"
+    path.write_text("this is not toml\n", encoding="utf-8")
+    assert _error_of(path) == (
+        f"{path}: not valid TOML (Expected '=' after a key in a key/value pair (at line 1, column 6))"
+    )
+
+
+def test_missing_file_is_refused(tmp_path):
+    path = tmp_path / "absent.toml"
+    assert _error_of(path) == f"{path}: no such protocol file"
+    assert not path.exists()
+
+
+def test_a_folder_instead_of_a_file_is_refused(tmp_path):
+    path = tmp_path / "folder.toml"
+    path.mkdir()
+    assert _error_of(path).startswith(f"{path}: cannot read the protocol file (")
+
+
+def test_non_utf8_file_is_refused(tmp_path):
+    path = tmp_path / "latin1.toml"
+    path.write_bytes('name = "Studie für Kraft"\n'.encode("latin-1"))
+    assert _error_of(path).startswith(f"{path}: cannot read the protocol file (")
+
+
+def test_no_targets_is_refused(tmp_path):
+    path = tmp_path / "empty.toml"
+    path.write_text('name = "x"\n', encoding="utf-8")
+    assert _error_of(path) == f"{path}: targets = None: must be a list of 1 to 8 [[targets]] tables"
+
+
+def test_trial_as_a_value_instead_of_a_table_is_refused():
+    d = default_protocol().to_dict()
+    d["trial"] = 3
+    with pytest.raises(ProtocolError) as info:
+        protocol_from_dict(d, "inline")
+    assert str(info.value) == "inline: trial = 3: must be a table"
+
+
+@pytest.mark.parametrize("per_cell", [1, 100])
+def test_trials_per_cell_bounds_are_inclusive(tmp_path, per_cell):
+    path = _write_variant(tmp_path, "trials_per_cell = 5 ", f"trials_per_cell = {per_cell} ")
+    assert load_protocol(path).trials_per_cell == per_cell
+
+
+def test_tolerance_half_is_allowed_and_pause_zero_is_allowed(tmp_path):
+    text = DEFAULT_TEXT.replace("tolerance_fraction = 0.10 ", "tolerance_fraction = 0.5 ").replace(
+        "pause_s = 2.0 ", "pause_s = 0 "
+    )
+    path = tmp_path / "edges.toml"
+    path.write_text(text, encoding="utf-8")
+    p = load_protocol(path)
+    assert (p.trial.tolerance_fraction, p.trial.pause_s) == (0.5, 0.0)
+    assert type(p.trial.pause_s) is float
+
+
+# -- round trip -----------------------------------------------------------------------------------
+def test_to_dict_round_trips_the_default():
+    p = default_protocol()
+    assert protocol_from_dict(p.to_dict()) == p
+
+
+def test_to_dict_round_trips_a_non_default_protocol():
+    p = ProtocolConfig(
+        name="pilot",
+        targets=(Target("LIGHT", 0.3), Target("MEDIUM", 0.9), Target("HARD_2", 2.5)),
+        modes=("off",),
+        trials_per_cell=3,
+        ordering="counterbalanced",
+        abort_policy="reinsert",
+        trial=TrialTiming(tolerance_fraction=0.2, hold_s=0.5, max_trial_s=8.0, pause_s=0.0, cue_s=0.0),
+        training=TrainingConfig(enabled=False, seconds_per_target_per_mode=5.0, live_force_aid=False),
+    )
+    d = p.to_dict()
+    assert d == {
+        "name": "pilot",
+        "version": 1,
+        "targets": [
+            {"label": "LIGHT", "force_n": 0.3},
+            {"label": "MEDIUM", "force_n": 0.9},
+            {"label": "HARD_2", "force_n": 2.5},
+        ],
+        "design": {"modes": ["off"], "trials_per_cell": 3, "ordering": "counterbalanced", "abort_policy": "reinsert"},
+        "trial": {"tolerance_fraction": 0.2, "hold_s": 0.5, "max_trial_s": 8.0, "pause_s": 0.0, "cue_s": 0.0},
+        "training": {"enabled": False, "seconds_per_target_per_mode": 5.0, "live_force_aid": False},
+    }
+    assert protocol_from_dict(d) == p
+    assert p.trials_per_participant == 9
+
+
+def test_to_json_is_canonical():
+    p = default_protocol()
+    assert p.to_json() == protocol_from_dict(p.to_dict()).to_json()
+    assert p.to_json().startswith('{"design": {"abort_policy": "append", "modes": ["on", "off"]')
