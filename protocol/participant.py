@@ -165,9 +165,13 @@ class SimulatedParticipant:
     ) -> None:
         if not (math.isfinite(motion_scale) and motion_scale > 0):
             raise ValueError(f"motion_scale = {motion_scale!r}: must be a finite number > 0")
-        self.seed = seed
-        self._rng = np.random.default_rng(seed)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed = {seed!r}: must be a whole number ≥ 0")
+        self.seed = int(seed)
+        self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(0,)))
         self.params = params if params is not None else ParticipantParams.draw(self._rng)
+        self._n_trials = 0
+        self._n_practice = 0
         tp = tissue or TissueParams()
         self._k = tp.stiffness_n_per_m_pow
         self._n = tp.exponent
@@ -236,23 +240,23 @@ class SimulatedParticipant:
         after this call (the tick at which the loop applies the trial's mark),
         so a runner whose ``t_s`` is on another time base cannot desynchronise it.
         """
-        self._stage_trial(target_force_n, haptic_on, t_s, gauge=False)
+        self._stage_trial(target_force_n, haptic_on, t_s, gauge=False, practice=False)
 
     def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
         """A training trial: like :meth:`begin_trial`; with a live force gauge the visual
         percept is the displayed force with small noise instead of an indentation judged
         through the stiffness belief."""
-        self._stage_trial(target_force_n, haptic_on, t_s, gauge=bool(live_force_n_visible))
+        self._stage_trial(target_force_n, haptic_on, t_s, gauge=bool(live_force_n_visible), practice=True)
 
     def end_trial(self, t_s: float) -> None:
         """Retract to the start pose (y_c = 0) with a 0.4 s minimum-jerk move, then idle."""
         self._pending = ("end", float(t_s))
 
-    def _stage_trial(self, target_force_n: float, haptic_on: bool, t_s: float, gauge: bool) -> None:
+    def _stage_trial(self, target_force_n: float, haptic_on: bool, t_s: float, gauge: bool, practice: bool) -> None:
         f = float(target_force_n)
         if not (math.isfinite(f) and f > 0):
             raise ValueError(f"target_force_n = {target_force_n!r}: must be a finite force > 0")
-        self._pending = ("begin", f, bool(haptic_on), float(t_s), gauge)
+        self._pending = ("begin", f, bool(haptic_on), float(t_s), gauge, practice)
 
     @property
     def in_trial(self) -> bool:
@@ -342,9 +346,19 @@ class SimulatedParticipant:
             self._stage = _IDLE
             self._next = math.inf
             return
-        _, force, haptic, _t_s, gauge = cmd
+        _, force, haptic, _t_s, gauge, practice = cmd
         p = self.params
-        rng = self._rng
+        # every trial has its own random stream (common random numbers: trial k's beliefs and
+        # noise do not depend on what happened in earlier trials)
+        if practice:
+            self._n_practice += 1
+            key: tuple[int, ...] = (2, self._n_practice)
+        else:
+            self._n_trials += 1
+            key = (1, self._n_trials)
+        rng = self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
+        self._z = []
+        self._zi = 0
         self._cue_t = t
         self._haptic = haptic
         self._gauge = gauge

@@ -165,7 +165,7 @@ class SessionRunner:
     def session_time_s(self, t_ns: int) -> float:
         """Session-clock time of a loop timestamp."""
         t0 = self._t0_ns if self._t0_ns is not None else t_ns
-        return self._offset_s + (t_ns - t0) * 1e-9
+        return self._offset_s + (t_ns - t0) / 1e9
 
     def _event(self, t_ns: int, kind: str, detail: str = "") -> None:
         self.recorder.event(self.session_id, self.session_time_s(t_ns), kind, detail)
@@ -221,7 +221,7 @@ class SessionRunner:
             return
         sel = rows[mask]
         n = len(sel)
-        cols = [np.full(n, float(trial_id_of(self.session_id, spec.index))), (t_ns[mask] - cue) * 1e-9]
+        cols = [np.full(n, float(trial_id_of(self.session_id, spec.index))), (t_ns[mask] - cue) / 1e9]
         cols.extend(np.asarray(sel[c], dtype=np.float64) for c in _SAMPLE_SRC)
         self.recorder.samples(np.column_stack(cols).tolist())
 

@@ -266,6 +266,8 @@ def resume_session(
     the reason and re-run per the abort policy; no trial is duplicated or skipped.
     """
     validate_code(code)
+    if not os.path.exists(db_path):
+        raise StorageError(f"cannot resume {code}: no database at {db_path}")
     db = StudyDatabase(db_path)
     try:
         open_ = [s for s in db.sessions_of(code, "experiment") if s.status == "running"]

@@ -175,17 +175,21 @@ class SimForceSensor:
             g[5] + (lx * f_c[1] - ly * f_c[0]) + (b0[5] + d[5] * w + rw[5]) + nz[5],
         ]
         status = self.status_override
-        rng = p.range_n
+        r = p.range_n
+        v0, v1, v2, v3, v4, v5 = vals
+        if not (
+            -r[0] <= v0 <= r[0] and -r[1] <= v1 <= r[1] and -r[2] <= v2 <= r[2]
+            and -r[3] <= v3 <= r[3] and -r[4] <= v4 <= r[4] and -r[5] <= v5 <= r[5]
+        ):
+            # saturated gauges read full scale and the box flags it
+            status |= SATURATION_STATUS
+            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip(vals, r))
         cpf, cpt = p.counts_per_force, p.counts_per_torque
-        for i in range(6):
-            v = vals[i]
-            r = rng[i]
-            if v > r:
-                v, status = r, status | SATURATION_STATUS
-            elif v < -r:
-                v, status = -r, status | SATURATION_STATUS
-            c = cpf if i < 3 else cpt
-            vals[i] = round(v * c) / c  # integer counts on the wire
+        # integer counts on the wire
+        vals = [
+            round(v0 * cpf) / cpf, round(v1 * cpf) / cpf, round(v2 * cpf) / cpf,
+            round(v3 * cpt) / cpt, round(v4 * cpt) / cpt, round(v5 * cpt) / cpt,
+        ]
         if self.inject_nan:
             vals[0] = math.nan
         self._rdt += 1

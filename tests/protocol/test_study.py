@@ -1,0 +1,164 @@
+"""Headless studies end to end: a short study on the virtual clock, crash (SIGKILL) and resume, bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from protocol.config import default_protocol
+from protocol.design import build_schedule, schedule_from_json
+from protocol.storage import StorageError, StudyDatabase
+from protocol.study import KILL_ENV, resume_session, run_study
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def short_protocol(trials_per_cell: int = 1, training: bool = False):  # type: ignore[no-untyped-def]
+    """The paper's protocol with fewer trials (4 per participant) and an optional short training block."""
+    p = default_protocol()
+    return dataclasses.replace(
+        p,
+        trials_per_cell=trials_per_cell,
+        training=dataclasses.replace(p.training, enabled=training, seconds_per_target_per_mode=3.0),
+    )
+
+
+def rows(db: Path, sql: str, *args: object) -> list[tuple]:
+    c = sqlite3.connect(db)
+    try:
+        return c.execute(sql, args).fetchall()
+    finally:
+        c.close()
+
+
+def test_short_study_end_to_end(tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    proto = short_protocol(training=True)
+    progress = run_study(str(db), participants=2, seed=11, protocol=proto)
+    sessions = rows(db, "SELECT session_id, kind, status, schedule_json, participant_number FROM sessions ORDER BY session_id")
+    assert [(s[1], s[2]) for s in sessions] == [("training", "completed"), ("experiment", "completed")] * 2
+    assert progress.sessions == [s[0] for s in sessions]
+    for sid, kind, _, sched_json, number in sessions:
+        schedule = schedule_from_json(sched_json)
+        if kind == "experiment":
+            assert schedule == build_schedule(proto, 11, number)  # the stored schedule is the one run
+        trials = rows(db, "SELECT trial_index, target_label, haptic_mode, outcome, tct_s, n_samples, trial_id "
+                          "FROM trials WHERE session_id = ? ORDER BY trial_index", sid)
+        assert [(t[0], t[1], t[2]) for t in trials] == [(s.index, s.target_label, s.haptic_mode) for s in schedule]
+        for t in trials:
+            assert t[3] in ("success", "timeout")
+            assert (t[4] is not None) == (t[3] == "success")
+            n = rows(db, "SELECT COUNT(*), MIN(t_s), MAX(t_s) FROM samples WHERE trial_id = ?", t[6])[0]
+            assert n[0] == t[5]  # every sample of the trial window is stored, once
+            assert n[1] == 0.0
+            if t[3] == "success":
+                assert n[2] == pytest.approx(t[4], abs=1e-9)  # TCT = the last sample of the window
+            else:
+                assert n[2] == pytest.approx(12.0 if kind == "experiment" else 3.0, abs=1e-9)
+    # provenance stored before trial 1
+    cfg = json.loads(rows(db, "SELECT config_json FROM sessions LIMIT 1")[0][0])
+    assert cfg["rig"] == "sim" and cfg["framework"]["f_max_n"] == 3.0
+    assert rows(db, "SELECT COUNT(*) FROM events WHERE kind = 'cue'")[0][0] == 2 * (4 + 4)
+    # nothing is overwritten: running the same codes again is refused, the data untouched
+    before = rows(db, "SELECT COUNT(*) FROM samples")[0][0]
+    with pytest.raises(StorageError, match="already holds sessions for participant P01"):
+        run_study(str(db), participants=1, seed=11, protocol=proto)
+    assert rows(db, "SELECT COUNT(*) FROM samples")[0][0] == before
+
+
+def test_same_seed_same_study(tmp_path: Path) -> None:
+    proto = short_protocol()
+    a, b = tmp_path / "a.db", tmp_path / "b.db"
+    run_study(str(a), participants=1, seed=5, protocol=proto)
+    run_study(str(b), participants=1, seed=5, protocol=proto)
+    q = "SELECT trial_index, outcome, tct_s, rmse_n, max_ae_n FROM trials ORDER BY trial_id"
+    assert rows(a, q) == rows(b, q)
+    assert rows(a, "SELECT SUM(force_n), COUNT(*) FROM samples") == rows(b, "SELECT SUM(force_n), COUNT(*) FROM samples")
+
+
+def _run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True, timeout=timeout,
+        env={**os.environ, **(env or {})}, cwd=ROOT,
+    )
+
+
+@pytest.mark.parametrize("kill_after_ticks", [9_000, 21_500])
+def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_after_ticks: int) -> None:
+    """SIGKILL mid-study (a real kill -9 of the process), then --resume: every finished trial intact, none twice."""
+    db = tmp_path / "crash.db"
+    proto = tmp_path / "short.toml"
+    proto.write_text(
+        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 2")
+        .replace("enabled = true", "enabled = false")
+    )
+    killed = _run_cli(["run", "--participants", "1", "--seed", "3", "--db", str(db), "--protocol", str(proto)],
+                      env={KILL_ENV: str(kill_after_ticks)})
+    assert killed.returncode == -9  # SIGKILL
+    before = rows(db, "SELECT trial_index, outcome, tct_s, rmse_n, n_samples FROM trials ORDER BY trial_index")
+    sid = rows(db, "SELECT session_id FROM sessions WHERE kind = 'experiment'")[0][0]
+    assert rows(db, "SELECT status FROM sessions WHERE session_id = ?", sid)[0][0] == "running"
+    # every finished trial has all its samples committed (the trial row commits them)
+    for idx, _, _, _, n in before:
+        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", sid * 1_000_000 + idx)[0][0] == n
+    schedule = schedule_from_json(rows(db, "SELECT schedule_json FROM sessions WHERE session_id = ?", sid)[0][0])
+    interrupted = schedule[len(before)]
+    partial = rows(db, "SELECT COUNT(*), MAX(t_s) FROM samples WHERE trial_id = ?", sid * 1_000_000 + interrupted.index)[0]
+
+    resumed = _run_cli(["run", "--db", str(db), "--resume", "P01"])
+    assert resumed.returncode == 0, resumed.stderr
+    after = rows(db, "SELECT trial_index, outcome, tct_s, rmse_n, n_samples, abort_reason, repeat_of, target_label, "
+                     "haptic_mode FROM trials WHERE session_id = ? ORDER BY trial_index", sid)
+    assert [a[:5] for a in after[: len(before)]] == before  # finished trials untouched
+    final_schedule = schedule_from_json(rows(db, "SELECT schedule_json FROM sessions WHERE session_id = ?", sid)[0][0])
+    assert [a[0] for a in after] == [s.index for s in final_schedule]  # nothing skipped or duplicated
+    if partial[0]:
+        # killed mid-trial: that trial is stored as aborted with the reason, and re-run at the end
+        ab = after[len(before)]
+        assert ab[1] == "aborted" and "interrupted" in ab[5]
+        assert after[-1][6] == interrupted.index
+        assert (after[-1][7], after[-1][8]) == (interrupted.target_label, interrupted.haptic_mode)
+    completed = [a for a in after if a[1] != "aborted"]
+    cells = sorted((a[7], a[8]) for a in completed)
+    assert cells == sorted((s.target_label, s.haptic_mode) for s in build_schedule(
+        dataclasses.replace(short_protocol(2)), 3, 1))  # balanced: every cell its full count
+    assert rows(db, "SELECT status FROM sessions WHERE session_id = ?", sid)[0][0] == "completed"
+    # a second resume has nothing to continue
+    again = _run_cli(["run", "--db", str(db), "--resume", "P01"])
+    assert again.returncode == 2 and "no interrupted experiment session" in again.stderr
+
+
+def test_bad_input_is_refused_before_anything_is_stored(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text((ROOT / "protocol" / "default.toml").read_text().replace("hold_s = 1.0", "hold_s = -1.0"))
+    db = tmp_path / "x.db"
+    r = _run_cli(["run", "--participants", "1", "--db", str(db), "--protocol", str(bad)], timeout=60)
+    assert r.returncode == 2 and "trial.hold_s = -1.0" in r.stderr and "Traceback" not in r.stderr
+    assert not db.exists()
+    r = _run_cli(["run", "--participants", "1", "--db", str(tmp_path / "nowhere" / "x.db")], timeout=60)
+    assert r.returncode == 2 and "does not exist" in r.stderr
+    r = _run_cli(["run", "--db", str(db), "--resume", "bad code!"], timeout=60)
+    assert r.returncode == 2 and "participant code = 'bad code!'" in r.stderr
+    newer = tmp_path / "newer.db"
+    StudyDatabase(newer).close()
+    c = sqlite3.connect(newer)
+    c.execute("PRAGMA user_version = 9")
+    c.close()
+    r = _run_cli(["run", "--participants", "1", "--db", str(newer)], timeout=60)
+    assert r.returncode == 2 and "newer than this software supports" in r.stderr
+    r = _run_cli(["run", "--db", str(newer.with_name("missing.db")), "--resume", "P01"], timeout=60)
+    assert r.returncode == 2
+
+
+def test_resume_for_unknown_code(tmp_path: Path) -> None:
+    db = tmp_path / "s.db"
+    StudyDatabase(db).close()
+    with pytest.raises(StorageError, match="no such participant"):
+        resume_session(str(db), "P07")
