@@ -78,6 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--json", action="store_true", help="print one JSON object")
     bp.add_argument("--loop-seconds", type=float, default=30.0, help="real time to run the loop (default 30; 0 skips)")
     bp.add_argument("--ticks", type=_nonneg_int("--ticks"), default=20_000, help="samples for the cost benchmark")
+    bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
+    bs.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="participants (default 10)")
+    bs.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
 
@@ -91,6 +94,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_run(args)
         if args.command == "bench" and args.bench == "pipeline":
             return _cmd_bench_pipeline(args)
+        if args.command == "bench" and args.bench == "study":
+            from bench.study_bench import format_study_bench, run_study_bench
+
+            if args.participants < 1:
+                raise CliError(f"--participants = {args.participants}: must be ≥ 1")
+            print("bench: running the simulated study ...", file=sys.stderr, flush=True)
+            result = run_study_bench(args.participants)
+            print(json.dumps(result) if args.json else format_study_bench(result))
+            return 0
     except CliError as exc:
         print(f"haptic-study: error: {exc}", file=sys.stderr)
         return 2
