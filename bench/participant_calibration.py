@@ -35,7 +35,10 @@ from protocol.design import build_schedule
 from protocol.participant import ParticipantParams, SimulatedParticipant
 from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
-__all__ = ["PAPER", "TrialRow", "run_participant", "run_study", "summarise_study", "main"]
+__all__ = [
+    "PAPER", "TrialRow", "driver_cost_us", "format_table", "main", "participant_seeds", "run_participant", "run_study",
+    "summarise_study",
+]
 
 #: The paper's results (§V-B): OFF, ON.  TCT is only given as a change (−16 %).
 PAPER: dict[str, tuple[float | None, float | None]] = {
@@ -224,6 +227,49 @@ def format_table(summaries: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _constants() -> dict[str, float]:
+    """The participant model's fixed constants (its defaults; the drawn ones are in PARAM_RANGES)."""
+    import dataclasses
+
+    return {f.name: f.default for f in dataclasses.fields(ParticipantParams) if f.default is not dataclasses.MISSING}
+
+
+def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
+    """Mean cost of :meth:`SimulatedParticipant.equilibrium_y` per call, µs (best of ``repeats``).
+
+    Observations of one FIRM trial with feedback are recorded from a simple closed loop
+    (tip lag 30 ms, Hunt–Crossley tissue, scaled felt force) and replayed to a fresh
+    participant with the same seed, so the replay takes the same decisions.
+    """
+    from pipeline.scaling import scale_magnitude
+    from pipeline.sim.hand import HandObservation
+
+    def fresh() -> SimulatedParticipant:
+        q = SimulatedParticipant(seed=1)
+        q.begin_trial(1.2, True, 0.0)
+        return q
+
+    p = fresh()
+    obs = []
+    tip = 0.0
+    n = int(seconds * 1000)
+    for i in range(n):
+        depth = -0.015 - tip
+        ind = depth if depth > 0 else 0.0
+        felt = scale_magnitude(1.1e4 * ind**1.5)
+        o = HandObservation(i * 1e-3, tip, felt, ind, -depth if depth < 0 else 0.0)
+        obs.append(o)
+        tip += (p.equilibrium_y(o) + felt / 500.0 - tip) * (1.0 - math.exp(-1e-3 / 0.03))
+    best = math.inf
+    for _ in range(repeats):
+        f = fresh().equilibrium_y
+        t0 = time.perf_counter()
+        for o in obs:
+            f(o)
+        best = min(best, time.perf_counter() - t0)
+    return best / n * 1e6
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -248,10 +294,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n== mean ± SD [min–max] over {len(summaries)} studies "
           f"({time.perf_counter() - t_total:.0f} s wall, jobs={args.jobs}) ==")
     print(format_table(summaries))
-    print("\nparameter ranges: see protocol.participant.PARAM_RANGES; fixed constants:")
-    d = ParticipantParams.draw(np.random.default_rng(0)).to_dict()
-    print({k: v for k, v in d.items() if k not in ("tau_visual_s",) and k in {f for f in ParticipantParams.__dataclass_fields__}
-           and ParticipantParams.__dataclass_fields__[k].default is not __import__("dataclasses").MISSING})
+    print("\nfixed model constants:", _constants())
+    print(f"equilibrium_y cost: {driver_cost_us():.2f} µs per call (replayed observations, this machine, now)")
     return 0
 
 
