@@ -34,7 +34,7 @@ from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 
 _HYPOT = math.hypot
 _TANH = math.tanh
-_FSUM = exact_sum
+_FSUM = math.fsum
 
 __all__ = ["FrameworkConfig", "HapticFramework", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE", "DEFAULT_ROT_TIP_SENSOR"]
 
@@ -256,9 +256,12 @@ class HapticFramework:
             i += 1
             if i == w:
                 i = 0
-                sx = _fsum(bx)
-                sy = _fsum(by)
-                sz = _fsum(bz)
+                try:
+                    sx = _fsum(bx)
+                    sy = _fsum(by)
+                    sz = _fsum(bz)
+                except OverflowError:  # filters.exact_sum's fallback, for sums beyond DBL_MAX
+                    sx, sy, sz = exact_sum(bx), exact_sum(by), exact_sum(bz)
             f._st = (sx, sy, sz, i, n)
             mx = sx / n
             my = sy / n
