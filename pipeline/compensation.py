@@ -307,11 +307,10 @@ class PayloadCalibration:
         tuple of 6 float
             Force (N) and torque (N·m) in the sensor frame.
         """
-        fg = mat_vec(self.gravity_matrix, mat_vec(rot_sensor_base, self.gravity_base))
-        t = cross(self.com_m, fg)
+        w = self.payload_wrench(rot_sensor_base)
         fb = self.force_bias_n
         tb = self.torque_bias_nm
-        return (fg[0] + fb[0], fg[1] + fb[1], fg[2] + fb[2], t[0] + tb[0], t[1] + tb[1], t[2] + tb[2])
+        return (w[0] + fb[0], w[1] + fb[1], w[2] + fb[2], w[3] + tb[0], w[4] + tb[1], w[5] + tb[2])
 
     def compensate(self, wrench: Sequence[float], rot_sensor_base: Mat3) -> Wrench:
         """External (contact) wrench: measurement minus gravity and bias.

@@ -166,24 +166,21 @@ class SimForceSensor:
         lx, ly, lz = p.tip_in_sensor_m
         w = 1.0 - math.exp((self._t0_ns - t_ns) * 1e-9 / p.drift_tau_s)
         b0, d = self._bias0, self._drift
-        vals = [
-            g[0] + f_c[0] + (b0[0] + d[0] * w + rw[0]) + nz[0],
-            g[1] + f_c[1] + (b0[1] + d[1] * w + rw[1]) + nz[1],
-            g[2] + f_c[2] + (b0[2] + d[2] * w + rw[2]) + nz[2],
-            g[3] + (ly * f_c[2] - lz * f_c[1]) + (b0[3] + d[3] * w + rw[3]) + nz[3],
-            g[4] + (lz * f_c[0] - lx * f_c[2]) + (b0[4] + d[4] * w + rw[4]) + nz[4],
-            g[5] + (lx * f_c[1] - ly * f_c[0]) + (b0[5] + d[5] * w + rw[5]) + nz[5],
-        ]
+        v0 = g[0] + f_c[0] + (b0[0] + d[0] * w + rw[0]) + nz[0]
+        v1 = g[1] + f_c[1] + (b0[1] + d[1] * w + rw[1]) + nz[1]
+        v2 = g[2] + f_c[2] + (b0[2] + d[2] * w + rw[2]) + nz[2]
+        v3 = g[3] + (ly * f_c[2] - lz * f_c[1]) + (b0[3] + d[3] * w + rw[3]) + nz[3]
+        v4 = g[4] + (lz * f_c[0] - lx * f_c[2]) + (b0[4] + d[4] * w + rw[4]) + nz[4]
+        v5 = g[5] + (lx * f_c[1] - ly * f_c[0]) + (b0[5] + d[5] * w + rw[5]) + nz[5]
         status = self.status_override
         r = p.range_n
-        v0, v1, v2, v3, v4, v5 = vals
         if not (
             -r[0] <= v0 <= r[0] and -r[1] <= v1 <= r[1] and -r[2] <= v2 <= r[2]
             and -r[3] <= v3 <= r[3] and -r[4] <= v4 <= r[4] and -r[5] <= v5 <= r[5]
         ):
             # saturated gauges read full scale and the box flags it
             status |= SATURATION_STATUS
-            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip(vals, r))
+            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip((v0, v1, v2, v3, v4, v5), r))
         cpf, cpt = p.counts_per_force, p.counts_per_torque
         # integer counts on the wire
         vals = [
