@@ -120,7 +120,7 @@ class HapticFramework:
 
     __slots__ = (
         "config", "_cal", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_foff", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_rot_base_tip", "_window",
+        "_off", "_foff", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_window",
     )
 
     def __init__(
@@ -144,7 +144,6 @@ class HapticFramework:
         self._fscale = float(config.f_scale_n)
         self._rts = config.rot_tip_sensor
         self._rhb = config.rot_haptic_base
-        self._rot_base_tip: Mat3 = IDENTITY
         self._rbt: Mat3 = IDENTITY
         self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6  # type: ignore[assignment]
         self.set_pose(IDENTITY)
@@ -154,7 +153,6 @@ class HapticFramework:
 
         Recomputes the payload weight the sensor reads in this pose.
         """
-        self._rot_base_tip = rot_base_tip
         self._rbt = rot_base_tip
         self._payload = self._cal.payload_wrench(transpose(mat_mul(rot_base_tip, self._rts)))
         self._update_offsets()
@@ -184,7 +182,7 @@ class HapticFramework:
         self._bias = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         if self.rls is not None:
             self.rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
-        self.set_pose(self._rot_base_tip)
+        self.set_pose(self._rbt)
 
     def refine_bias(self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
         """Feed one out-of-contact raw wrench to the online bias estimator, if any.

@@ -24,6 +24,7 @@ from pipeline.safety import SafetyConfig
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRigConfig
 from pipeline.sim.touch import TouchSpec
+from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9
@@ -33,18 +34,6 @@ RAMP_IN_TICKS = round(SAFETY.ramp_in_s / DT_S)  # 500: gain 0 → exactly 1
 RENDER = ("render_fx", "render_fy", "render_fz")
 
 
-class PressAndHold:
-    """Keep still for ``delay_s`` after the first observation, then hold the equilibrium at ``y_m``."""
-
-    def __init__(self, y_m: float = -0.018, delay_s: float = 0.05) -> None:
-        self.y_m = y_m
-        self.delay_s = delay_s
-        self._t0: float | None = None
-
-    def equilibrium_y(self, obs) -> float:
-        if self._t0 is None:
-            self._t0 = obs.t_s
-        return self.y_m if obs.t_s - self._t0 >= self.delay_s else 0.0
 
 
 def press_engine(**config) -> SimEngine:

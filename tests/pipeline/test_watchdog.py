@@ -24,6 +24,7 @@ from pipeline.loop import OperatorStop, ResetFaults
 from pipeline.safety import SafetyConfig
 from pipeline.sim.rig import SimRigConfig
 from pipeline.sim.touch import HD_WARM_MOTORS, TouchSpec
+from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9
@@ -36,22 +37,6 @@ MAX_ZERO_TICKS = 50  # science.md §5: zero within 50 ms
 RENDER = ("render_fx", "render_fy", "render_fz")
 
 
-class PressAndHold:
-    """Keep still for ``delay_s`` after the first observation, then hold the equilibrium at ``y_m``.
-
-    The tip starts 15 mm above the tissue: -18 mm presses ~2 mm in (about 1 N
-    of tissue force, 0.45 N rendered).
-    """
-
-    def __init__(self, y_m: float = -0.018, delay_s: float = 0.05) -> None:
-        self.y_m = y_m
-        self.delay_s = delay_s
-        self._t0: float | None = None
-
-    def equilibrium_y(self, obs) -> float:
-        if self._t0 is None:
-            self._t0 = obs.t_s
-        return self.y_m if obs.t_s - self._t0 >= self.delay_s else 0.0
 
 
 def make_engine(sim: SimRigConfig | None = None, y_m: float = -0.018) -> SimEngine:
