@@ -41,6 +41,7 @@ __all__ = [
     "HoldDetector",
     "TrialMetrics",
     "band_halfwidth_n",
+    "hold_completion_index",
     "in_band",
     "trial_metrics",
 ]
@@ -97,6 +98,47 @@ class HoldDetector:
         else:
             self.hold_start_ns = None
         return False
+
+
+def hold_completion_index(
+    t_ns: npt.NDArray[np.int64],
+    force_n: npt.NDArray[np.float64],
+    target_force_n: float,
+    tolerance_fraction: float,
+    hold_ns: int,
+) -> int | None:
+    """Index of the sample that completes the hold, or None: :class:`HoldDetector` over a whole trace.
+
+    The same criterion as the streaming detector (a test proves them equal on
+    random traces), vectorised for offline analysis of millions of samples:
+    every in-band sample knows the start of its in-band run, and the hold
+    completes at the first in-band sample whose run began ``hold_ns`` or more
+    before it.
+
+    Parameters
+    ----------
+    t_ns
+        Sample times, integer ns, non-decreasing.
+    force_n
+        Task force at those times, N (NaN is out of band).
+    target_force_n, tolerance_fraction, hold_ns
+        The band and the required hold.
+
+    Returns
+    -------
+    int or None
+    """
+    n = len(t_ns)
+    if n == 0:
+        return None
+    inb = np.abs(force_n - target_force_n) <= band_halfwidth_n(target_force_n, tolerance_fraction)
+    starts = inb.copy()
+    starts[1:] &= ~inb[:-1]
+    # index of the latest run start at or before each sample (-1 before the first run)
+    run_start = np.maximum.accumulate(np.where(starts, np.arange(n), -1))
+    ok = inb & (t_ns - t_ns[np.maximum(run_start, 0)] >= hold_ns)
+    hit = int(np.argmax(ok))
+    return hit if ok[hit] else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,16 +204,13 @@ def trial_metrics(
     cap_ns = int(round(max_trial_s * 1e9))
     keep = (t >= 0) & (t <= cap_ns)
     t, f = t[keep], f[keep]
-    det = HoldDetector(target_force_n, tolerance_fraction, int(round(hold_s * 1e9)))
-    end = len(t)
-    for i, (ti, fi) in enumerate(zip(t.tolist(), f.tolist())):
-        if det.feed(ti, fi):
-            end = i + 1
-            break
-    success = det.completed_ns is not None
+    done = hold_completion_index(t, f, target_force_n, tolerance_fraction, int(round(hold_s * 1e9)))
+    success = done is not None
+    end = done + 1 if done is not None else len(t)
+    completed_ns = int(t[done]) if done is not None else None
     t, f = t[:end], f[:end]
     # ns / 1e9 (not ns * 1e-9) is the double nearest the exact time: 2009 ms → 2.009, not 2.0090000000000003
-    end_s = det.completed_ns / 1e9 if success else max_trial_s  # type: ignore[operator]
+    end_s = completed_ns / 1e9 if completed_ns is not None else max_trial_s
     contact = np.flatnonzero(f > CONTACT_THRESHOLD_N)
     first_contact_s = float(t[contact[0]] / 1e9) if len(contact) else None
     err_f = f if window == "cue" else (f[contact[0] :] if len(contact) else f[:0])

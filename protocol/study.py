@@ -20,7 +20,6 @@ import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from importlib.metadata import PackageNotFoundError, version
 from typing import Any
 
 import numpy as np
@@ -32,6 +31,7 @@ from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule
 from protocol.participant import SimulatedParticipant
 from protocol.session import SessionRunner, first_unfinished, has_samples
 from protocol.storage import Recorder, StorageError, StudyDatabase, trial_id_of, validate_code
+from protocol.version import software_version
 
 __all__ = ["StudyProgress", "participant_code", "resume_session", "run_study", "software_version"]
 
@@ -39,14 +39,6 @@ __all__ = ["StudyProgress", "participant_code", "resume_session", "run_study", "
 BLOCK_TICKS = 50
 #: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks.
 KILL_ENV = "HAPTIC_STUDY_SIGKILL_AFTER_TICKS"
-
-
-def software_version() -> str:
-    """Installed version of haptic-study."""
-    try:
-        return version("haptic-study")
-    except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
-        return "0+unknown"
 
 
 def participant_code(number: int) -> str:

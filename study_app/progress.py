@@ -20,9 +20,13 @@ class ProgressBar:
         Unit shown after the counts.
     stream
         Where to draw (stderr, so stdout stays clean for ``--json``).
+    decimals
+        Decimals of the counts (0 for things counted, like trials or samples).
     """
 
-    def __init__(self, total: float, label: str = "", unit: str = "", stream: TextIO | None = None) -> None:
+    def __init__(self, total: float, label: str = "", unit: str = "", stream: TextIO | None = None,
+                 decimals: int = 1) -> None:
+        self.decimals = decimals
         self.total = float(total) if total > 0 else 1.0
         self.label = label
         self.unit = unit
@@ -49,7 +53,7 @@ class ProgressBar:
         bar = "#" * fill + " " * (width - fill)
         unit = f" {self.unit}" if self.unit else ""
         elapsed = now - self._start
-        text = f"{self.label} [{bar}] {pct:3d}% {done:,.1f}/{self.total:,.1f}{unit}  ({elapsed:.1f} s)"
+        text = f"{self.label} [{bar}] {pct:3d}% {done:,.{self.decimals}f}/{self.total:,.{self.decimals}f}{unit}  ({elapsed:.1f} s)"
         if self._tty:
             self.stream.write("\r" + text)
         else:

@@ -9,6 +9,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from protocol.metrics import (
     BAND_SLACK,
@@ -16,6 +18,7 @@ from protocol.metrics import (
     HoldDetector,
     TrialMetrics,
     band_halfwidth_n,
+    hold_completion_index,
     in_band,
     trial_metrics,
 )
@@ -217,6 +220,24 @@ def test_trial_metrics_and_hold_detector_agree_on_random_traces():
         m = trial_metrics(t, f, 0.6)
         assert m.success is (done is not None)
         assert m.tct_s == (None if done is None else done / 1e9)
+
+
+_LEVELS = st.sampled_from([0.0, 0.54, 0.5399999999, 0.6, 0.66, 0.6600000001, 0.7, math.nan, math.inf])
+
+
+@given(
+    steps_ms=st.lists(st.integers(min_value=0, max_value=400), min_size=0, max_size=60),
+    forces=st.lists(_LEVELS, min_size=60, max_size=60),
+    hold_ms=st.integers(min_value=0, max_value=1500),
+)
+def test_vectorised_hold_equals_the_streaming_detector(steps_ms, forces, hold_ms):
+    # irregular (and repeated) timestamps, band edges, NaN and inf: the offline
+    # form must pick exactly the sample the live detector picks
+    t = np.cumsum(np.asarray(steps_ms, dtype=np.int64) * MS)
+    f = np.asarray(forces[: len(t)], dtype=np.float64)
+    det = HoldDetector(0.6, 0.10, hold_ms * MS)
+    expected = next((i for i, (ti, fi) in enumerate(zip(t.tolist(), f.tolist())) if det.feed(ti, fi)), None)
+    assert hold_completion_index(t, f, 0.6, 0.10, hold_ms * MS) == expected
 
 
 # -- timeout and window ---------------------------------------------------------------------------
