@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 
@@ -71,6 +72,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
                    help="continue this participant's interrupted experiment session at its first unfinished trial")
 
+    from study_app.report_cmds import add_report_parsers
+
+    add_report_parsers(sub)
+
     b = sub.add_parser("bench", help="benchmarks (see README for recorded figures)")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
@@ -81,6 +86,11 @@ def build_parser() -> argparse.ArgumentParser:
     bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
     bs.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
+    br = bsub.add_parser("report", help="report wall time on a 10-participant study; statistics for 10 000 participants")
+    br.add_argument("--db", default=None, help="study database to report on (default: simulate a 10-participant study first)")
+    br.add_argument("--stats-participants", type=_nonneg_int("--stats-participants"), default=10_000,
+                    help="participants of the synthetic trial table (default 10000)")
+    br.add_argument("--json", action="store_true", help="print one JSON object")
     return p
 
 
@@ -92,8 +102,23 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_sim(args)
         if args.command == "run":
             return _cmd_run(args)
+        if args.command in ("report", "plot-trial"):
+            from study_app.report_cmds import cmd_plot_trial, cmd_report
+
+            return cmd_report(args) if args.command == "report" else cmd_plot_trial(args)
         if args.command == "bench" and args.bench == "pipeline":
             return _cmd_bench_pipeline(args)
+        if args.command == "bench" and args.bench == "report":
+            from bench.analysis_bench import format_report_bench, run_report_bench
+
+            if args.db is not None and not os.path.isfile(args.db):
+                raise CliError(f"--db = {args.db!r}: no such file")
+            if args.stats_participants < 2:
+                raise CliError(f"--stats-participants = {args.stats_participants}: must be ≥ 2")
+            print("bench: timing the report ...", file=sys.stderr, flush=True)
+            result = run_report_bench(args.db, stats_participants=args.stats_participants)
+            print(json.dumps(result) if args.json else format_report_bench(result))
+            return 0
         if args.command == "bench" and args.bench == "study":
             from bench.study_bench import format_study_bench, run_study_bench
 
@@ -149,7 +174,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         def show(p):  # type: ignore[no-untyped-def]
             nonlocal bar
             if bar is None:
-                bar = ProgressBar(p.study_trials_total, "study", "trials")
+                bar = ProgressBar(p.study_trials_total, "study", "trials", decimals=0)
             bar.label = f"{p.code} {p.kind:<10} trial {p.trials_done:>2}/{p.trials_total:<2}"
             bar.update(p.study_trials_done)
 

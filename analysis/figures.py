@@ -1,0 +1,320 @@
+"""The paper's figures, drawn with matplotlib's object API (no pyplot state, no display).
+
+* :func:`mode_bars` -- a metric per target and overall, haptics OFF vs ON,
+  mean with SD bars across participants, each participant a dot, and the
+  test's significance mark (the paper's Figs. 8 and 9);
+* :func:`paired_lines` -- every participant's OFF → ON change per metric;
+* :func:`speed_accuracy_scatter` -- TCT against RMSE per trial, by mode;
+* :func:`pipeline_trace` -- one trial's force magnitude raw (red),
+  compensated (blue) and rendered (green), contact shaded (the paper's Fig. 6).
+
+Every function returns a :class:`matplotlib.figure.Figure`; :func:`save`
+writes it as PNG and SVG.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from analysis.aggregate import METRIC_LABELS
+from analysis.stats import WilcoxonResult
+from protocol.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
+
+__all__ = [
+    "MODE_COLORS",
+    "mode_bars",
+    "paired_lines",
+    "peak_downsample",
+    "pipeline_trace",
+    "render",
+    "save",
+    "significance_mark",
+    "speed_accuracy_scatter",
+    "trial_trace",
+]
+
+#: Okabe–Ito colours, distinguishable with every common colour-vision deficiency.
+MODE_COLORS = {"off": "#E69F00", "on": "#0072B2"}
+_MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
+_DPI = 150
+
+
+def significance_mark(result: WilcoxonResult | None, *, adjusted: bool = True, p_holm: float | None = None) -> str:
+    """``***`` p < 0.001, ``**`` p < 0.01, ``*`` p < 0.05, ``n.s.``, or ``n/c`` when not computable.
+
+    Parameters
+    ----------
+    result
+        The test.
+    adjusted
+        Use ``p_holm`` (when given) instead of the raw p-value.
+    p_holm
+        The Holm-adjusted p-value of this result.
+    """
+    if result is None or not result.computable:
+        return "n/c"
+    p = p_holm if (adjusted and p_holm is not None) else result.p_value
+    if not math.isfinite(p):
+        return "n/c"
+    return "***" if p < 0.001 else "**" if p < 0.01 else "*" if p < 0.05 else "n.s."
+
+
+def _style(ax) -> None:  # type: ignore[no-untyped-def]
+    ax.spines["top"].set_visible(False)
+    ax.spines["right"].set_visible(False)
+    ax.grid(axis="y", color="#dddddd", linewidth=0.6)
+    ax.set_axisbelow(True)
+
+
+def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]
+    width = 0.36
+    top = 0.0
+    for gi, (label, frame, mark) in enumerate(groups):
+        heights = {}
+        for k, mode in enumerate(("off", "on")):
+            vals = frame.loc[frame["haptic_mode"] == mode, metric].to_numpy(dtype=float)
+            vals = vals[np.isfinite(vals)]
+            x = gi + (k - 0.5) * width
+            mean = float(vals.mean()) if len(vals) else math.nan
+            sd = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
+            ax.bar(x, mean if math.isfinite(mean) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
+                   label=_MODE_NAMES[mode] if gi == 0 else None, zorder=2)
+            if len(vals):
+                ax.errorbar(x, mean, yerr=sd, color="#333333", capsize=4, linewidth=1.1, zorder=3)
+                ax.scatter(x + rng.uniform(-0.08, 0.08, len(vals)), vals, s=9, color="#222222", alpha=0.55,
+                           zorder=4, linewidths=0)
+                heights[mode] = max(mean + sd, float(vals.max()))
+            else:
+                ax.text(x, 0, "no data", ha="center", va="bottom", fontsize=7, rotation=90)
+        if heights:
+            h = max(heights.values())
+            y = h * 1.06 if h > 0 else 0.05
+            ax.plot([gi - width / 2, gi - width / 2, gi + width / 2, gi + width / 2],
+                    [y * 0.98, y, y, y * 0.98], color="#333333", linewidth=0.9)
+            ax.text(gi, y, mark, ha="center", va="bottom", fontsize=9)
+            top = max(top, y * 1.15)
+    ax.set_xticks(range(len(groups)), [g[0] for g in groups])
+    ax.set_ylabel(METRIC_LABELS.get(metric, metric))
+    if top > 0:
+        ax.set_ylim(0, top)
+    _style(ax)
+
+
+def mode_bars(
+    metrics: Sequence[str],
+    overall: pd.DataFrame,
+    by_target: pd.DataFrame,
+    marks: Mapping[tuple[str, str], str],
+    *,
+    target_order: Sequence[str] | None = None,
+    title: str = "",
+) -> Figure:
+    """Bar panels, one per metric: each target and overall, OFF vs ON.
+
+    Parameters
+    ----------
+    metrics
+        Columns of the per-participant tables to draw, one panel each.
+    overall, by_target
+        :func:`analysis.aggregate.per_participant` without and with the target split.
+    marks
+        Significance mark per ``(metric, group)`` where group is a target
+        label or ``"overall"`` (see :func:`significance_mark`).
+    target_order
+        Target labels left to right (default: by increasing target force when
+        ``target_force_n`` is known, else alphabetical).
+    title
+        Figure title.
+    """
+    targets = list(target_order) if target_order else sorted(by_target["target_label"].unique())
+    fig = Figure(figsize=(4.2 * len(metrics), 3.6), dpi=_DPI)
+    # fixed margins: constrained layout costs more than drawing the figure twice over
+    fig.subplots_adjust(left=0.14 / len(metrics), right=0.98, bottom=0.1, top=0.86 if title else 0.95,
+                        wspace=0.28)
+    axes = fig.subplots(1, len(metrics), squeeze=False)[0]
+    rng = np.random.default_rng(0)  # jitter of the dots, fixed so figures are reproducible
+    for ax, metric in zip(axes, metrics):
+        groups = [(t, by_target[by_target["target_label"] == t], marks.get((metric, t), "")) for t in targets]
+        groups.append(("overall", overall, marks.get((metric, "overall"), "")))
+        _bars_panel(ax, groups, metric, rng)
+    axes[0].legend(frameon=False, fontsize=8, loc="upper left")
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def paired_lines(per_part: pd.DataFrame, metrics: Sequence[str], marks: Mapping[str, str]) -> Figure:
+    """Each participant's value with haptics OFF and ON, joined, per metric; the median in black."""
+    fig = Figure(figsize=(2.8 * len(metrics), 3.4), dpi=_DPI)
+    fig.subplots_adjust(left=0.06, right=0.98, bottom=0.1, top=0.9, wspace=0.38)
+    axes = fig.subplots(1, len(metrics), squeeze=False)[0]
+    for ax, metric in zip(axes, metrics):
+        wide = per_part.pivot(index="participant_code", columns="haptic_mode", values=metric)
+        for mode in ("off", "on"):
+            if mode not in wide.columns:
+                wide[mode] = np.nan
+        for _, row in wide.iterrows():
+            ax.plot([0, 1], [row["off"], row["on"]], color="#7f7f7f", alpha=0.6, linewidth=0.9, marker="o", markersize=3)
+        med = [float(np.nanmedian(wide[m])) if wide[m].notna().any() else math.nan for m in ("off", "on")]
+        ax.plot([0, 1], med, color="black", linewidth=2.2, marker="s", markersize=5, label="median")
+        ax.set_xticks([0, 1], ["OFF", "ON"])
+        ax.set_xlim(-0.3, 1.3)
+        ax.set_title(f"{METRIC_LABELS.get(metric, metric)}  {marks.get(metric, '')}", fontsize=9)
+        _style(ax)
+    axes[0].legend(frameon=False, fontsize=8)
+    return fig
+
+
+def speed_accuracy_scatter(trials: pd.DataFrame, tct_column: str, rho_by_mode: Mapping[str, str]) -> Figure:
+    """TCT against RMSE, one dot per trial, coloured by haptic mode.
+
+    Parameters
+    ----------
+    trials
+        The analysed trials.
+    tct_column
+        ``tct_s`` (successful trials) or ``tct_censored_s``.
+    rho_by_mode
+        Legend text per mode, e.g. ``"ρ = −0.31, p = 0.002"``.
+    """
+    fig = Figure(figsize=(5.2, 4.0), dpi=_DPI)
+    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.12, top=0.96)
+    ax = fig.subplots()
+    for mode in ("off", "on"):
+        sel = trials[trials["haptic_mode"] == mode]
+        ax.scatter(sel[tct_column], sel["rmse_n"], s=14, alpha=0.65, color=MODE_COLORS[mode], linewidths=0,
+                   label=f"{_MODE_NAMES[mode]}: {rho_by_mode.get(mode, '')}")
+    ax.set_xlabel("TCT (s)" if tct_column == "tct_s" else "TCT, failures at the cap (s)")
+    ax.set_ylabel("RMSE (N)")
+    ax.legend(frameon=False, fontsize=8)
+    _style(ax)
+    return fig
+
+
+def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None, tolerance_fraction: float = 0.10,
+                   title: str = "") -> Figure:
+    """One trial's force magnitude through the pipeline (the paper's Fig. 6).
+
+    Raw sensor force (red, the payload's weight included), compensated
+    contact force (blue) and the force rendered on the haptic device (green);
+    intervals in contact (task force above
+    :data:`protocol.metrics.CONTACT_THRESHOLD_N`) are shaded, and the target
+    band when a target is given.
+
+    Parameters
+    ----------
+    samples
+        :func:`analysis.load.read_trial_samples` output.
+    target_force_n, tolerance_fraction
+        The trial's band, drawn when ``target_force_n`` is given.
+    title
+        Axes title.
+    """
+    t = samples["t_s"].to_numpy(dtype=float)
+
+    def mag(prefix: str) -> np.ndarray:
+        c = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
+        return np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
+
+    fig = Figure(figsize=(7.5, 3.8), dpi=_DPI)
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.13, top=0.84)
+    ax = fig.subplots()
+    contact = samples["force_n"].to_numpy(dtype=float) > CONTACT_THRESHOLD_N
+    if contact.any():
+        edges = np.flatnonzero(np.diff(np.concatenate(([0], contact.astype(np.int8), [0]))))
+        for a, b in zip(edges[::2], edges[1::2]):
+            ax.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.35, linewidth=0,
+                       label="contact" if a == edges[0] else None)
+    if target_force_n is not None:
+        half = band_halfwidth_n(target_force_n, tolerance_fraction)
+        ax.axhspan(target_force_n - half, target_force_n + half, color="#0072B2", alpha=0.25, linewidth=0,
+                   label=f"target band {target_force_n:g} N ± {tolerance_fraction:.0%}")
+    for prefix, color, label in (("raw", "#d62728", "raw"), ("comp", "#1f77b4", "compensated"),
+                                 ("render", "#2ca02c", "rendered")):
+        ax.plot(*peak_downsample(t, mag(prefix)), color=color, linewidth=0.9, label=label)
+    ax.set_xlabel("time since cue (s)")
+    ax.set_ylabel("force magnitude (N)")
+    if title:
+        fig.suptitle(title, fontsize=9, x=0.09, ha="left")
+    ax.legend(frameon=False, fontsize=7, ncols=5, loc="lower left", bbox_to_anchor=(0.0, 1.0))
+    _style(ax)
+    return fig
+
+
+def peak_downsample(t: np.ndarray, y: np.ndarray, buckets: int = 1200) -> tuple[np.ndarray, np.ndarray]:
+    """Keep each bucket's minimum and maximum, in time order, so no peak is lost on screen.
+
+    A 12 s trial has 12 001 samples for a plot about 1000 pixels wide; drawing
+    every one costs time and file size (SVG) and shows nothing more.  Each of
+    ``buckets`` equal runs of samples keeps its lowest and highest sample (NaN
+    samples are skipped within a bucket).
+
+    Parameters
+    ----------
+    t, y
+        Samples; returned unchanged when there are at most ``2·buckets``.
+    buckets
+        Number of buckets.
+
+    Returns
+    -------
+    t, y
+        The kept samples.
+    """
+    n = len(y)
+    if n <= 2 * buckets:
+        return t, y
+    edges = np.linspace(0, n, buckets + 1).astype(np.int64)
+    keep = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        seg = y[a:b]
+        if not np.isfinite(seg).any():
+            keep.append(a)
+            continue
+        i, j = a + int(np.nanargmin(seg)), a + int(np.nanargmax(seg))
+        keep.extend((i, j) if i <= j else (j, i))
+    idx = np.asarray(keep, dtype=np.int64)
+    return t[idx], y[idx]
+
+
+def render(builder: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str | Path, name: str) -> bytes:
+    """Build a figure with this module's function ``builder`` and :func:`save` it (a picklable task for a worker)."""
+    if builder not in _BUILDERS:
+        raise ValueError(f"builder = {builder!r}: allowed values are {', '.join(sorted(_BUILDERS))}")
+    return save(_BUILDERS[builder](*args, **kwargs), folder, name)
+
+
+def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any) -> Figure:
+    """:func:`pipeline_trace` of a stored trial, read from its database."""
+    from analysis.load import read_trial_samples
+
+    return pipeline_trace(read_trial_samples(database, session_id, trial_index), **kwargs)
+
+
+def save(fig: Figure, folder: str | Path, name: str) -> bytes:
+    """Write ``folder/name.png`` and ``folder/name.svg``; return the PNG bytes (for embedding)."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=_DPI)
+    png = buf.getvalue()
+    (folder / f"{name}.png").write_bytes(png)
+    fig.savefig(folder / f"{name}.svg", format="svg", metadata={"Date": None})  # no date: reproducible files
+    return png
+
+
+_BUILDERS = {
+    "mode_bars": mode_bars,
+    "paired_lines": paired_lines,
+    "speed_accuracy_scatter": speed_accuracy_scatter,
+    "pipeline_trace": pipeline_trace,
+    "trial_trace": trial_trace,
+}

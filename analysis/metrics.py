@@ -1,0 +1,231 @@
+"""Per-trial metrics recomputed from the stored samples.
+
+The definition is :func:`protocol.metrics.trial_metrics`, the very function
+the live trial machine used; analysis adds only the choices the paper leaves
+open (:class:`MetricOptions`) and a check that the recomputed numbers equal
+the ones stored during the session.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from analysis.load import Progress, StudyData, connect_readonly, read_task_force
+from analysis.parallel import default_workers, run_tasks
+from protocol.metrics import trial_metrics
+
+__all__ = ["ERROR_WINDOWS", "TCT_POLICIES", "MetricOptions", "TrialTable", "compute_trials"]
+
+#: RMSE / Max AE windows: from the cue (default) or from first contact.
+ERROR_WINDOWS = ("cue", "first_contact")
+#: How a failed trial enters TCT: left out (default) or censored at the trial cap.
+TCT_POLICIES = ("successful", "censored")
+
+#: Relative agreement required between recomputed and stored RMSE / Max AE (summation order only).
+_AGREE_REL = 1e-9
+
+
+@dataclass(frozen=True, slots=True)
+class MetricOptions:
+    """The analysis choices the paper leaves open.
+
+    Attributes
+    ----------
+    error_window
+        ``"cue"`` (default): RMSE and Max AE over the whole trial window, from
+        the cue to the trial end, approach included (what the participant was
+        asked to do from the cue on); ``"first_contact"``: from the first
+        sample above :data:`protocol.metrics.CONTACT_THRESHOLD_N`.
+    tct_policy
+        ``"successful"`` (default): TCT is averaged over successful trials
+        only, and is undefined for a participant with no success in a mode;
+        ``"censored"``: a failed trial counts as the trial cap (12 s), so
+        every trial contributes and slow failures are not rewarded.
+    """
+
+    error_window: str = "cue"
+    tct_policy: str = "successful"
+
+    def __post_init__(self) -> None:
+        if self.error_window not in ERROR_WINDOWS:
+            raise ValueError(f"error_window = {self.error_window!r}: allowed values are {', '.join(ERROR_WINDOWS)}")
+        if self.tct_policy not in TCT_POLICIES:
+            raise ValueError(f"tct_policy = {self.tct_policy!r}: allowed values are {', '.join(TCT_POLICIES)}")
+
+
+@dataclass(frozen=True, slots=True)
+class TrialTable:
+    """The analysed trials and how they were obtained.
+
+    Attributes
+    ----------
+    trials
+        One row per analysed trial: ``participant_code, session_id,
+        trial_index, target_label, target_force_n, haptic_mode, outcome,
+        success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n,
+        first_contact_s, tct_censored_s, database``.  ``tct_s`` is NaN unless
+        the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
+    n_from_samples
+        Trials whose metrics were recomputed from samples.
+    n_stored_only
+        Trials without samples, whose stored metrics were used.
+    n_disagree
+        Trials whose recomputed outcome, TCT, RMSE or Max AE (cue window)
+        differ from the stored ones (should be 0; a non-zero count is reported).
+    """
+
+    trials: pd.DataFrame
+    n_from_samples: int
+    n_stored_only: int
+    n_disagree: int
+
+
+def _close(a: float, b: float) -> bool:
+    if math.isnan(a) and math.isnan(b):
+        return True
+    return abs(a - b) <= _AGREE_REL * max(abs(a), abs(b), 1e-12)
+
+
+#: Per analysed trial: (row, has samples, success, tct, rmse, max_ae, time in band, peak, first contact, agrees)
+_Row = tuple[int, bool, bool, float, float, float, float, float, float, bool]
+
+
+def _nan(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _chunk(database: str, specs: list[tuple[int, int, float, float, float, float, str, float, float, float]],
+           window: str) -> list[_Row]:
+    """Recompute the metrics of some trials of one database (runs in a worker process)."""
+    out: list[_Row] = []
+    conn = connect_readonly(database)
+    try:
+        for row, tid, target, tol, hold, cap, outcome, s_tct, s_rmse, s_max in specs:
+            t_ns, force = read_task_force(conn, tid)
+            if len(t_ns) == 0:
+                out.append((row, False, outcome == "success", *(math.nan,) * 6, True))
+                continue
+            kw = dict(tolerance_fraction=tol, hold_s=hold, max_trial_s=cap)
+            m = trial_metrics(t_ns, force, target, window=window, **kw)
+            live = m if window == "cue" else trial_metrics(t_ns, force, target, **kw)
+            agrees = (
+                live.success == (outcome == "success")
+                and _close(_nan(live.tct_s), s_tct)
+                and _close(live.rmse_n, s_rmse)
+                and _close(live.max_ae_n, s_max)
+            )
+            out.append((row, True, m.success, _nan(m.tct_s), m.rmse_n, m.max_ae_n, m.time_in_band_s,
+                        m.peak_force_n, _nan(m.first_contact_s), agrees))
+    finally:
+        conn.close()
+    return out
+
+
+def compute_trials(
+    study: StudyData,
+    options: MetricOptions = MetricOptions(),
+    *,
+    progress: Progress | None = None,
+    workers: int | None = None,
+) -> TrialTable:
+    """Recompute every analysed trial's metrics from its samples.
+
+    Parameters
+    ----------
+    study
+        From :func:`analysis.load.load_study`.
+    options
+        Window and TCT choices.
+    progress
+        ``progress(samples read, samples expected)``.
+    workers
+        Processes reading samples (default: :func:`analysis.parallel.default_workers`; 1 = in this process).
+
+    Returns
+    -------
+    TrialTable
+    """
+    inc = study.included.reset_index(drop=True)
+    n = len(inc)
+    nums = {c: inc[c].to_numpy(dtype=float) for c in
+            ("target_force_n", "tolerance_fraction", "hold_s", "max_trial_s", "stored_tct_s", "stored_rmse_n",
+             "stored_max_ae_n", "n_samples")}
+    specs = [
+        (i, int(tid), nums["target_force_n"][i], nums["tolerance_fraction"][i], nums["hold_s"][i],
+         nums["max_trial_s"][i], str(outcome), nums["stored_tct_s"][i], nums["stored_rmse_n"][i],
+         nums["stored_max_ae_n"][i])
+        for i, (tid, outcome) in enumerate(zip(inc["trial_id"], inc["outcome"]))
+    ]
+    workers = default_workers() if workers is None else max(1, int(workers))
+    # chunks of about an equal number of samples, several per worker so the work evens out
+    weights = np.nan_to_num(nums["n_samples"], nan=1.0) + 1.0
+    per_chunk = max(1.0, float(weights.sum()) / (4 * workers)) if workers > 1 else float("inf")
+    tasks: list[tuple[str, list, str]] = []
+    chunk_weight: list[float] = []
+    for db in dict.fromkeys(inc["database"]):
+        rows = np.flatnonzero((inc["database"] == db).to_numpy())
+        cur: list = []
+        w = 0.0
+        for i in rows:
+            cur.append(specs[i])
+            w += weights[i]
+            if w >= per_chunk:
+                tasks.append((str(db), cur, options.error_window))
+                chunk_weight.append(w)
+                cur, w = [], 0.0
+        if cur:
+            tasks.append((str(db), cur, options.error_window))
+            chunk_weight.append(w)
+    total = float(weights.sum())
+    done = [0.0]
+
+    def tick(i: int, _: object) -> None:
+        done[0] += chunk_weight[i]
+        if progress is not None:
+            progress(min(done[0], total), total)
+
+    if progress is not None:
+        progress(0.0, total)
+    results = run_tasks(_chunk, tasks, workers=workers, on_done=tick)
+    cols = np.full((n, 6), np.nan)
+    success = (inc["outcome"] == "success").to_numpy().copy()
+    from_samples = np.zeros(n, dtype=bool)
+    disagree = 0
+    for chunk in results:
+        for row, has, ok, *vals, agrees in chunk:
+            if has:
+                from_samples[row] = True
+                success[row] = ok
+                cols[row] = vals
+                disagree += not agrees
+    # trials without samples keep the metrics stored live (cue window only)
+    missing = ~from_samples
+    for k, name in enumerate(("tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")):
+        if options.error_window == "cue" or name not in ("rmse_n", "max_ae_n"):
+            cols[missing, k] = inc.loc[missing, f"stored_{name}"].to_numpy(dtype=float)
+    cap = nums["max_trial_s"]
+    out = pd.DataFrame(
+        {
+            "participant_code": inc["participant_code"],
+            "session_id": inc["session_id"].astype(np.int64),
+            "trial_index": inc["trial_index"].astype(np.int64),
+            "target_label": inc["target_label"],
+            "target_force_n": nums["target_force_n"],
+            "haptic_mode": inc["haptic_mode"],
+            "outcome": np.where(success, "success", "timeout"),
+            "success": success,
+            "tct_s": cols[:, 0],
+            "rmse_n": cols[:, 1],
+            "max_ae_n": cols[:, 2],
+            "time_in_band_s": cols[:, 3],
+            "peak_force_n": cols[:, 4],
+            "first_contact_s": cols[:, 5],
+            "tct_censored_s": np.where(success, cols[:, 0], cap),
+            "database": inc["database"],
+        }
+    )
+    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree)

@@ -1,0 +1,82 @@
+"""Spreading independent analysis work over the machine's cores.
+
+Reading samples (SQLite row decoding) and drawing figures (matplotlib) are
+CPU-bound Python; threads would share one core through the GIL, so the work
+goes to worker processes.  Forking is cheap (the workers inherit the imported
+modules) but unsafe once other threads exist, so a process that has threads
+spawns its workers instead.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import Any, TypeVar
+
+__all__ = ["default_workers", "run_tasks"]
+
+T = TypeVar("T")
+
+
+def default_workers() -> int:
+    """Worker processes to use: the usable cores, at most 4."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(4, cores))
+
+
+def run_tasks(
+    fn: Callable[..., T],
+    tasks: Sequence[tuple[Any, ...]],
+    *,
+    workers: int,
+    on_done: Callable[[int, T], None] | None = None,
+) -> list[T]:
+    """``[fn(*t) for t in tasks]``, over ``workers`` processes when more than one.
+
+    Parameters
+    ----------
+    fn
+        A module-level function (it is pickled by name).
+    tasks
+        Argument tuples.
+    workers
+        Processes; 1 runs everything in this process, in order.
+    on_done
+        Called in this process as ``on_done(task index, result)`` when each task finishes.
+
+    Returns
+    -------
+    list
+        Results in task order.  The first exception raised by a task is re-raised.
+    """
+    if workers <= 1 or len(tasks) <= 1:
+        out = []
+        for i, t in enumerate(tasks):
+            r = fn(*t)
+            if on_done is not None:
+                on_done(i, r)
+            out.append(r)
+        return out
+    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    results: list[Any] = [None] * len(tasks)
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+        pending: dict[Future[T], int] = {pool.submit(fn, *t): i for i, t in enumerate(tasks)}
+        try:
+            while pending:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    i = pending.pop(f)
+                    results[i] = f.result()
+                    if on_done is not None:
+                        on_done(i, results[i])
+        except BaseException:
+            for f in pending:
+                f.cancel()
+            raise
+    return results
