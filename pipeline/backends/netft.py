@@ -349,6 +349,7 @@ class NetFTForceSensor:
         self._latest = WrenchSample(self.clock.now_ns() - 10**12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)
         self._fresh = threading.Condition()
         self._stop = threading.Event()
+        self._collect: list[WrenchSample] | None = None
         self._start_cmd = CMD_START_BUFFERED if buffered else CMD_START_REALTIME
         try:
             addr = socket.getaddrinfo(host, self.port, socket.AF_INET, socket.SOCK_DGRAM)[0][4]
@@ -402,6 +403,15 @@ class NetFTForceSensor:
     def set_hardware_bias(self) -> None:
         """Ask the box to tare (``SET_SOFTWARE_BIAS``): only at a known no-load pose."""
         self._send(CMD_SET_SOFTWARE_BIAS, 1)
+
+    def collect(self, n: int, timeout_s: float) -> list[WrenchSample]:
+        """The next ``n`` fresh samples (fewer if ``timeout_s`` passes first); for probes, not the loop."""
+        samples: list[WrenchSample] = []
+        with self._fresh:
+            self._collect = samples
+            self._fresh.wait_for(lambda: len(samples) >= n, timeout_s)
+            self._collect = None
+        return samples[:n]
 
     def wait_for_records(self, n: int, timeout_s: float) -> bool:
         """Block until ``stats.records >= n`` (any record, fresh or not) or the timeout; True if reached."""
@@ -465,3 +475,6 @@ class NetFTForceSensor:
             t_ns, rec[3] / cpf * uf, rec[4] / cpf * uf, rec[5] / cpf * uf,
             rec[6] / cpt * ut, rec[7] / cpt * ut, rec[8] / cpt * ut, status, rec[0], rec[1],
         )
+        sink = self._collect
+        if sink is not None and kind == RdtSequencer.FRESH:
+            sink.append(self._latest)
