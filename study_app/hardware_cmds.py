@@ -101,8 +101,13 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
         got = s.collect(100, 2.0)
         w = s.read_wrench()
         rate = f"{len(got)} fresh samples" if len(got) < 100 else "streaming"
-        return (f"{hw.sensor.host}: {rate}, F = ({w.fx:+.3f}, {w.fy:+.3f}, {w.fz:+.3f}) N, status 0x{w.status:08x}, "
+        text = (f"{hw.sensor.host}: {rate}, F = ({w.fx:+.3f}, {w.fy:+.3f}, {w.fz:+.3f}) N, status 0x{w.status:08x}, "
                 f"lost {s.stats.lost}, cpf {s.calibration.counts_per_force:g} from {s.calibration.source}")
+        rdt = s.calibration.rdt_rate_hz
+        if 0 < rdt < 1000:
+            # the watchdog calls a sample older than 5 ms stale: the box must stream at ≥ 1 kHz
+            text += f"; WARNING: RDT rate {rdt:g} Hz < 1000 Hz, set it on the box's web page"
+        return text
 
     def describe_robot(r: Any) -> str:
         from pipeline.backends.ur import ur3_tcp_pose
