@@ -29,7 +29,7 @@ from pipeline.ring import RingBuffer
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRig, SimRigConfig
 
-__all__ = ["EngineConfig", "EngineProcess", "SimEngine", "build_sim_engine"]
+__all__ = ["EngineConfig", "EngineProcess", "HardwareEngine", "SimEngine", "build_hardware_engine", "build_sim_engine"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -130,6 +130,50 @@ def build_sim_engine(
     loop.submit(SetHaptics(config.haptics_on))
     loop.submit(AllowBiasRefinement(config.refine_bias))
     return SimEngine(rig, framework, loop, clk, calibration, ring)
+
+
+@dataclass
+class HardwareEngine:
+    """The real rig, force path and loop (in-process); ``rig`` is a :class:`pipeline.hardware.RealRig`."""
+
+    rig: Any
+    framework: HapticFramework
+    loop: HapticLoop
+    clock: Clock
+    calibration: PayloadCalibration
+    ring: RingBuffer | None
+
+
+def build_hardware_engine(
+    hardware: Any,
+    *,
+    watchdog: WatchdogConfig | None = None,
+    clock: Clock | None = None,
+    shared_ring: bool = False,
+    ring_seconds: float = 30.0,
+) -> HardwareEngine:
+    """Open the real rig of a :class:`pipeline.hardware.HardwareConfig` and assemble framework and loop.
+
+    The payload calibration comes from the file the hardware config names
+    (``[calibration] file``, written by ``PayloadCalibration.to_dict``); without
+    one, compensation is off and only the online bias refinement runs.
+    Feedback starts off: the experimenter turns it on.
+    """
+    import json
+
+    from pipeline.hardware import build_real_rig
+
+    clk: Clock = clock or MonotonicClock()
+    calibration = NO_PAYLOAD
+    if hardware.calibration_file is not None:
+        with open(hardware.calibration_file, encoding="utf-8") as fh:
+            calibration = PayloadCalibration.from_dict(json.load(fh))
+    rig = build_real_rig(hardware, clk)
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
+    framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
+    ring = RingBuffer.create(RECORD_FIELDS, int(ring_seconds * 1000), shared=shared_ring)
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
+    return HardwareEngine(rig, framework, loop, clk, calibration, ring)
 
 
 # -- the engine process -----------------------------------------------------------------------

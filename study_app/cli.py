@@ -91,7 +91,33 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--stats-participants", type=_nonneg_int("--stats-participants"), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
+
+    pr = sub.add_parser("probe", help="read a real device once and report (no loop)")
+    prsub = pr.add_subparsers(dest="probe", metavar="DEVICE")
+    prsub.required = True
+    pn = prsub.add_parser("netft", help="ATI Net F/T: mean wrench (N, N·m), packet rate, lost/reordered/faulted counts")
+    pn.add_argument("--host", required=True, help="the Net F/T box's IP address")
+    pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
+    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
+    pn.add_argument("--samples", type=_nonneg_int("--samples"), default=1000, help="samples to average (default 1000)")
+    pn.add_argument("--json", action="store_true", help="print one JSON object")
+
+    ch = sub.add_parser("check-hardware", help="connect to every device in the hardware file and print its state")
+    ch.add_argument("--hardware", default="hardware.toml", help="hardware file (default ./hardware.toml; see hardware.example.toml)")
     return p
+
+
+def _port_number(name: str):  # type: ignore[no-untyped-def]
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a whole number") from None
+        if not 1 <= v <= 65535:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a port number from 1 to 65535")
+        return v
+
+    return parse
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -128,6 +154,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             result = run_study_bench(args.participants)
             print(json.dumps(result) if args.json else format_study_bench(result))
             return 0
+        if args.command in ("probe", "check-hardware"):
+            return _cmd_hardware(args)
     except CliError as exc:
         print(f"haptic-study: error: {exc}", file=sys.stderr)
         return 2
@@ -195,6 +223,23 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     print(format_study_summary(args.db, progress.sessions, wall))
     return 0
+
+
+def _cmd_hardware(args: argparse.Namespace) -> int:
+    from study_app.hardware_cmds import HardwareCmdError, check_hardware, format_check, format_probe, probe_netft
+
+    try:
+        if args.command == "probe":
+            if args.samples < 1:
+                raise CliError(f"--samples = {args.samples}: must be ≥ 1")
+            result = probe_netft(args.host, args.port, args.http_port, args.samples)
+            print(json.dumps(result) if args.json else format_probe(result))
+            return 0
+        rows, ok = check_hardware(args.hardware)
+    except HardwareCmdError as exc:
+        raise CliError(str(exc)) from None
+    print(format_check(rows))
+    return 0 if ok else 1
 
 
 def _cmd_bench_pipeline(args: argparse.Namespace) -> int:

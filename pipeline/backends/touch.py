@@ -1,0 +1,301 @@
+"""3D Systems Touch through OpenHaptics (HDAPI) via the optional ``pyOpenHaptics`` package.
+
+``pip install 'haptic-study[touch]'`` plus the OpenHaptics SDK and Touch
+driver from 3D Systems; ``pyOpenHaptics`` loads ``libHD.so`` at import time,
+so it is imported only when a Touch is actually opened, and a machine without
+OpenHaptics gets one clear error naming what to install (docs/hardware.md §3d).
+
+The servo callback runs ~1 kHz in OpenHaptics' scheduler thread and does only
+copies: it reads the stylus transform and buttons, checks ``hdGetError``, and
+writes the latest commanded force (already clamped to the device's reported
+peak by :meth:`TouchHapticDevice.command_force`).  Unlike pyOpenHaptics'
+``hd_callback`` decorator -- which returns ``HD_CALLBACK_DONE`` on the first
+error and so stops the servo loop for good -- our callback keeps running
+after an HD error (exceeded force, warm motors) with the output disabled:
+the error is reported through :class:`HapticState.error_code` (the loop's
+``HAPTIC_DEVICE`` fault) and only :meth:`rearm` -- the experimenter's reset --
+enables output again.
+
+The thin :class:`HDApi` adapter is the seam to the C library: tests drive the
+backend through a fake implementing it (no libHD on CI machines).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from pipeline.clock import Clock, MonotonicClock
+from pipeline.devices import DeviceError, HapticState
+from pipeline.frames import Vec3
+
+__all__ = [
+    "HDApi",
+    "HD_DEVICE_FAULT",
+    "HD_EXCEEDED_MAX_FORCE",
+    "HD_FORCE_OUTPUT",
+    "HD_MAX_FORCE_CLAMPING",
+    "HD_NOMINAL_MAX_CONTINUOUS_FORCE",
+    "HD_NOMINAL_MAX_FORCE",
+    "HD_WARM_MOTORS",
+    "PyOpenHapticsApi",
+    "TOUCH_INSTALL_HINT",
+    "TouchHapticDevice",
+    "load_pyopenhaptics",
+]
+
+# HDAPI enums (pyOpenHaptics hd_define.py)
+HD_FORCE_OUTPUT = 0x4000
+HD_MAX_FORCE_CLAMPING = 0x4001
+HD_NOMINAL_MAX_FORCE = 0x2603
+HD_NOMINAL_MAX_CONTINUOUS_FORCE = 0x2604
+HD_WARM_MOTORS = 0x0200
+HD_EXCEEDED_MAX_FORCE = 0x0201
+HD_DEVICE_FAULT = 0x0300
+HD_CALLBACK_DONE = 0
+HD_CALLBACK_CONTINUE = 1
+
+TOUCH_INSTALL_HINT = (
+    "the 3D Systems Touch needs OpenHaptics: install the OpenHaptics SDK (3.4+) and the Touch device driver "
+    "from 3D Systems (libHD.so must be on the library path), then pip install 'haptic-study[touch]' "
+    "(pyOpenHaptics); or choose the simulated Touch"
+)
+
+
+class HDApi(Protocol):
+    """The HDAPI calls the backend uses (a handle-less subset; one device)."""
+
+    def init_device(self, name: str) -> None:
+        """``hdInitDevice``; raises :class:`DeviceError` on failure."""
+        ...
+
+    def error_code(self) -> int:
+        """``hdGetError().errorCode`` (0 = none); pops the error."""
+        ...
+
+    def get_double(self, code: int) -> float:
+        """``hdGetDoublev`` of a scalar."""
+        ...
+
+    def enable(self, code: int) -> None:
+        """``hdEnable``."""
+        ...
+
+    def schedule(self, callback: Callable[[], None]) -> None:
+        """``hdScheduleAsynchronous`` of a callback run every servo tick between begin/end frame."""
+        ...
+
+    def start_scheduler(self) -> None:
+        """``hdStartScheduler``."""
+        ...
+
+    def stop_scheduler(self) -> None:
+        """``hdStopScheduler``."""
+        ...
+
+    def close_device(self) -> None:
+        """``hdDisableDevice``."""
+        ...
+
+    def position_mm(self) -> Vec3:
+        """Stylus position from ``HD_CURRENT_TRANSFORM``, mm, device frame."""
+        ...
+
+    def buttons(self) -> int:
+        """``HD_CURRENT_BUTTONS`` bitmask."""
+        ...
+
+    def set_force(self, fx: float, fy: float, fz: float) -> None:
+        """``hdSetDoublev(HD_CURRENT_FORCE)``, N, device frame."""
+        ...
+
+
+def load_pyopenhaptics() -> Any:
+    """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot."""
+    try:
+        import pyOpenHaptics.hd as hd  # noqa: F401 - loads libHD.so
+        import pyOpenHaptics.hd_callback as hd_callback
+        import pyOpenHaptics.hd_define as hd_define
+    except ImportError as exc:
+        raise DeviceError(f"{TOUCH_INSTALL_HINT} (pyOpenHaptics is not installed: {exc})") from None
+    except OSError as exc:
+        raise DeviceError(f"{TOUCH_INSTALL_HINT} (OpenHaptics library not found: {exc})") from None
+    return hd, hd_callback, hd_define
+
+
+class PyOpenHapticsApi:
+    """:class:`HDApi` over pyOpenHaptics 1.0.1 (ctypes around libHD)."""
+
+    def __init__(self) -> None:
+        self._hd, self._cb, self._def = load_pyopenhaptics()
+        self._handle: int | None = None
+        self._cfunc: Any = None  # keep the ctypes callback alive while scheduled
+
+    def init_device(self, name: str) -> None:
+        """Open the device; pyOpenHaptics prints and returns None on failure, so check both."""
+        import ctypes
+
+        lib = self._cb._lib_hd
+        lib.hdInitDevice.argtypes = [ctypes.c_char_p]
+        lib.hdInitDevice.restype = self._def.HHD
+        handle = lib.hdInitDevice(name.encode())
+        code = self.error_code()
+        if code or handle == self._def.HD_BAD_HANDLE:
+            raise DeviceError(
+                f"OpenHaptics could not open the haptic device {name!r} (HD error 0x{code:04x}); "
+                "check the USB cable and the device name, and run Touch_Setup/Touch_Diagnostic"
+            )
+        self._handle = handle
+
+    def error_code(self) -> int:
+        return int(self._hd._get_error().errorCode)
+
+    def get_double(self, code: int) -> float:
+        import ctypes
+
+        return float(self._hd._get_doublev(code, ctypes.c_double).value)
+
+    def enable(self, code: int) -> None:
+        lib = self._cb._lib_hd
+        lib.hdEnable.argtypes = [self._def.HDenum]
+        lib.hdEnable.restype = None
+        lib.hdEnable(code)
+
+    def schedule(self, callback: Callable[[], None]) -> None:
+        import ctypes
+
+        hd = self._hd
+
+        def _tick(_user: Any) -> int:
+            dev = hd.get_current_device()
+            hd.begin_frame(dev)
+            callback()
+            hd.end_frame(dev)
+            return HD_CALLBACK_CONTINUE  # never DONE: an error must not end the servo loop for good
+
+        self._cfunc = ctypes.CFUNCTYPE(self._def.HDCallbackCode, ctypes.POINTER(ctypes.c_void_p))(_tick)
+        self._cb.hdAsyncSheduler(self._cfunc)
+
+    def start_scheduler(self) -> None:
+        self._hd.start_scheduler()
+
+    def stop_scheduler(self) -> None:
+        self._hd.stop_scheduler()
+
+    def close_device(self) -> None:
+        if self._handle is not None:
+            self._hd.close_device(self._handle)
+            self._handle = None
+
+    def position_mm(self) -> Vec3:
+        t = self._hd.get_transform()  # column-major 4x4: translation in the last column
+        return (float(t[3][0]), float(t[3][1]), float(t[3][2]))
+
+    def buttons(self) -> int:
+        return int(self._hd.get_buttons())
+
+    def set_force(self, fx: float, fy: float, fz: float) -> None:
+        self._hd.set_force([fx, fy, fz])
+
+
+class TouchHapticDevice:
+    """A :class:`pipeline.devices.HapticDevice` for the 3D Systems Touch.
+
+    Parameters
+    ----------
+    device_name
+        OpenHaptics device name (Touch_Setup), ``"Default Device"`` by default.
+    api
+        The HDAPI adapter (default: :class:`PyOpenHapticsApi`, imported lazily).
+    clock
+        The loop's clock, for the stylus-state timestamps.
+    """
+
+    def __init__(self, device_name: str = "Default Device", *, api: HDApi | None = None, clock: Clock | None = None) -> None:
+        self.device_name = device_name
+        self.clock: Clock = clock or MonotonicClock()
+        self.api: HDApi = api if api is not None else PyOpenHapticsApi()
+        self.api.init_device(device_name)
+        peak = self.api.get_double(HD_NOMINAL_MAX_FORCE)
+        cont = self.api.get_double(HD_NOMINAL_MAX_CONTINUOUS_FORCE)
+        if not (math.isfinite(peak) and peak > 0 and math.isfinite(cont) and cont > 0):
+            self.api.close_device()
+            raise DeviceError(f"{device_name!r} reports nominal max force {peak!r} N / continuous {cont!r} N; expected numbers > 0")
+        self._peak = peak
+        self._cont = cont
+        self._cmd: Vec3 = (0.0, 0.0, 0.0)
+        self._armed = True
+        self._error = 0
+        self.errors: list[int] = []  # every HD error seen, for the experimenter's log
+        self.ticks = 0
+        self._state = HapticState(self.clock.now_ns(), (0.0, 0.0, 0.0), 0, 0)
+        self._lock = threading.Lock()  # only rearm/servo hand-over; the servo never waits on the loop
+        self.api.enable(HD_FORCE_OUTPUT)
+        self.api.enable(HD_MAX_FORCE_CLAMPING)  # the device's own clamp as a second line of defence
+        self.api.schedule(self._servo)
+        self.api.start_scheduler()
+
+    # -- servo thread -------------------------------------------------------------------------
+    def _servo(self) -> None:
+        api = self.api
+        x, y, z = api.position_mm()
+        buttons = api.buttons()
+        err = api.error_code()
+        if err:
+            self._error = err
+            self._armed = False
+            self.errors.append(err)
+        if self._armed:
+            fx, fy, fz = self._cmd
+        else:
+            fx = fy = fz = 0.0
+        api.set_force(fx, fy, fz)
+        self.ticks += 1
+        self._state = HapticState(self.clock.now_ns(), (x * 1e-3, y * 1e-3, z * 1e-3), buttons, self._error)
+
+    # -- HapticDevice -------------------------------------------------------------------------
+    @property
+    def peak_force_n(self) -> float:
+        """Peak force the device reports (``HD_NOMINAL_MAX_FORCE``), N."""
+        return self._peak
+
+    @property
+    def continuous_force_n(self) -> float:
+        """Continuous force the device reports (``HD_NOMINAL_MAX_CONTINUOUS_FORCE``), N."""
+        return self._cont
+
+    def command_force(self, fx: float, fy: float, fz: float) -> None:
+        """Latest force to render, N, device frame; clamped to the peak, non-finite → zero."""
+        m = math.hypot(fx, fy, fz)
+        if not math.isfinite(m):
+            self._cmd = (0.0, 0.0, 0.0)
+        elif m > self._peak:
+            k = self._peak / m
+            self._cmd = (fx * k, fy * k, fz * k)
+        else:
+            self._cmd = (fx, fy, fz)
+
+    def read_state(self) -> HapticState:
+        """Newest stylus state from the servo callback (position in m)."""
+        return self._state
+
+    def rearm(self) -> bool:
+        """Re-enable output after an HD error (the experimenter's reset); the command restarts from zero."""
+        with self._lock:
+            self._cmd = (0.0, 0.0, 0.0)
+            self._error = 0
+            self._armed = True
+            st = self._state
+            self._state = HapticState(st.t_ns, st.position_m, st.buttons, 0)
+        return True
+
+    def close(self) -> None:
+        """Zero the force, stop the servo loop and release the device."""
+        self._cmd = (0.0, 0.0, 0.0)
+        self._armed = False
+        try:
+            self.api.stop_scheduler()
+        finally:
+            self.api.close_device()

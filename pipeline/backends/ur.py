@@ -1,0 +1,299 @@
+"""UR3 (CB3) pose over RTDE via ``ur_rtde``'s ``RTDEReceiveInterface`` -- read only.
+
+The robot stays under its own teleoperation program; this backend only
+listens (docs/hardware.md §3b).  A monitor thread polls ur_rtde's cached state
+at twice the controller rate, and publishes a new :class:`PoseSample` whenever
+the controller timestamp advances -- the TCP position (m, base frame) and the
+rotation vector turned into ``rot_base_tip``.  When the controller falls
+silent the sample simply stops being refreshed, so the loop's watchdog latches
+``POSE_STALE`` after 50 ms; when the link is lost the thread reconnects with
+exponential backoff.
+
+Why every connection attempt is preceded by a plain TCP probe: ur_rtde holds
+the GIL while it connects, so dialling a dead address from ur_rtde would
+freeze every Python thread, the 1 kHz loop included, until the TCP timeout.
+The probe (``socket.create_connection`` with a timeout releases the GIL) makes
+sure the controller answers before ur_rtde is asked to.  Reconnects also wait
+at least ``min_backoff_s`` (200 ms) after the loss, by which time the watchdog
+has already ramped the rendered force to zero.
+
+Also here: the UR3 CB3 forward kinematics from the DH table (§3c), for tests,
+the simulated rig and as a cross-check of the reported TCP pose.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import threading
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from pipeline.clock import Clock, MonotonicClock
+from pipeline.devices import DeviceError, PoseSample
+from pipeline.frames import IDENTITY, Mat3, Vec3, mat_mul, mat_vec, rotvec_to_matrix
+
+__all__ = [
+    "RTDE_PORT",
+    "UR3_DH",
+    "UrRtdeRobot",
+    "probe_tcp",
+    "ur3_flange_pose",
+    "ur3_tcp_pose",
+]
+
+RTDE_PORT = 30004
+#: UR3 (CB3) standard DH parameters (a [m], d [m], alpha [rad]) per joint, urcontrol.conf values.
+UR3_DH: tuple[tuple[float, float, float], ...] = (
+    (0.0, 0.1519, math.pi / 2),
+    (-0.24365, 0.0, 0.0),
+    (-0.21325, 0.0, 0.0),
+    (0.0, 0.11235, math.pi / 2),
+    (0.0, 0.08535, -math.pi / 2),
+    (0.0, 0.0819, 0.0),
+)
+
+
+def ur3_flange_pose(q_rad: Sequence[float]) -> tuple[Vec3, Mat3]:
+    """Flange position (m) and ``rot_base_flange`` of a UR3 CB3 at joint angles ``q_rad``.
+
+    Standard DH: ``T = Π Rz(θᵢ) Tz(dᵢ) Tx(aᵢ) Rx(αᵢ)`` with :data:`UR3_DH`.
+    Real robots carry per-robot calibration, so prefer the controller's TCP
+    pose for the loop; this is for simulation and cross-checks.
+    """
+    if len(q_rad) != 6:
+        raise ValueError(f"q_rad = {list(q_rad)!r}: a UR3 has 6 joints")
+    rot: Mat3 = IDENTITY
+    p = (0.0, 0.0, 0.0)
+    for (a, d, alpha), th in zip(UR3_DH, q_rad):
+        ct, st = math.cos(th), math.sin(th)
+        ca, sa = math.cos(alpha), math.sin(alpha)
+        # rotation and translation of one DH link
+        r_i: Mat3 = (ct, -st * ca, st * sa, st, ct * ca, -ct * sa, 0.0, sa, ca)
+        t_i = (a * ct, a * st, d)
+        dp = mat_vec(rot, t_i)
+        p = (p[0] + dp[0], p[1] + dp[1], p[2] + dp[2])
+        rot = mat_mul(rot, r_i)
+    return p, rot
+
+
+def ur3_tcp_pose(
+    q_rad: Sequence[float], tcp_offset_m: Vec3 = (0.0, 0.0, 0.0), tcp_rotvec: Vec3 = (0.0, 0.0, 0.0)
+) -> tuple[Vec3, Mat3]:
+    """TCP position (m) and ``rot_base_tip`` for a TCP at ``tcp_offset_m`` / ``tcp_rotvec`` in the flange frame."""
+    p, rot = ur3_flange_pose(q_rad)
+    off = mat_vec(rot, tcp_offset_m)
+    return (p[0] + off[0], p[1] + off[1], p[2] + off[2]), mat_mul(rot, rotvec_to_matrix(*tcp_rotvec))
+
+
+def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
+    """None if ``host:port`` accepts a TCP connection within ``timeout_s``, else the reason."""
+    try:
+        with socket.create_connection((host, port), timeout=timeout_s):
+            return None
+    except socket.timeout:
+        return f"no answer within {timeout_s:g} s"
+    except (OSError, UnicodeError) as exc:
+        return exc.strerror or str(exc)
+
+
+def _default_factory(host: str, frequency_hz: float) -> Any:
+    try:
+        import rtde_receive  # lazily: the simulated rig must not need ur_rtde
+    except ImportError as exc:  # pragma: no cover - ur-rtde is a base dependency
+        raise DeviceError(f"the UR backend needs the ur-rtde package ({exc}); pip install ur-rtde") from None
+    return rtde_receive.RTDEReceiveInterface(host, frequency_hz)
+
+
+class UrRtdeRobot:
+    """A :class:`pipeline.devices.Robot` reading a UR controller's TCP pose over RTDE.
+
+    Parameters
+    ----------
+    host
+        Controller IP address.
+    frequency_hz
+        RTDE output rate: 125 on a CB3, 500 on an e-Series; -1 lets ur_rtde pick.
+    clock
+        The loop's clock, for the host-side sample timestamps.
+    connect_timeout_s
+        Bound of the TCP probe and of the wait for the first pose.
+    stale_after_s
+        The controller timestamp not advancing this long marks the link stale
+        (the loop's own 50 ms limit latches the fault; this drives reconnects).
+    reconnect_after_s
+        Stale this long (or disconnected) → reconnect.
+    min_backoff_s, max_backoff_s
+        Reconnect backoff, doubling from min to max.
+    receive_factory
+        ``factory(host, frequency_hz)`` returning an object with the
+        ``RTDEReceiveInterface`` methods (default: ur_rtde's).
+    port
+        Port of the TCP probe (ur_rtde itself always uses 30004).
+    """
+
+    def __init__(
+        self,
+        host: str,
+        *,
+        frequency_hz: float = 125.0,
+        clock: Clock | None = None,
+        connect_timeout_s: float = 2.0,
+        stale_after_s: float = 0.05,
+        reconnect_after_s: float = 0.5,
+        min_backoff_s: float = 0.2,
+        max_backoff_s: float = 5.0,
+        receive_factory: Callable[[str, float], Any] | None = None,
+        port: int = RTDE_PORT,
+    ) -> None:
+        if not (frequency_hz == -1 or (math.isfinite(frequency_hz) and 0 < frequency_hz <= 500)):
+            raise ValueError(f"frequency_hz = {frequency_hz!r}: must be -1 (automatic) or in (0, 500]")
+        self.host = host
+        self.port = port
+        self.frequency_hz = float(frequency_hz)
+        self.clock: Clock = clock or MonotonicClock()
+        self.connect_timeout_s = connect_timeout_s
+        self.stale_after_s = stale_after_s
+        self.reconnect_after_s = reconnect_after_s
+        self.min_backoff_s = min_backoff_s
+        self.max_backoff_s = max_backoff_s
+        self._factory = receive_factory or _default_factory
+        self._pose = PoseSample(self.clock.now_ns() - 10**12, (math.nan, math.nan, math.nan), IDENTITY, 0.0)
+        self.q_rad: tuple[float, ...] = (math.nan,) * 6
+        self.state = "connecting"
+        self.last_error = ""
+        self.reconnects = 0
+        self.samples = 0
+        self._stop = threading.Event()
+        self._new = threading.Condition()
+        self._rtde = self._connect()
+        self._thread = threading.Thread(target=self._monitor, name="ur-rtde-monitor", daemon=True)
+        self._thread.start()
+        if not self.wait_for_samples(1, connect_timeout_s):
+            self.close()
+            raise DeviceError(
+                f"the UR controller at {host} accepted RTDE but sent no robot state within {connect_timeout_s:g} s; "
+                "is the robot powered on and the controller booted?"
+            )
+
+    # -- Robot --------------------------------------------------------------------------------
+    def read_pose(self) -> PoseSample:
+        """The newest TCP pose (never blocks)."""
+        return self._pose
+
+    def close(self) -> None:
+        """Stop the monitor and disconnect."""
+        self._stop.set()
+        t = getattr(self, "_thread", None)
+        if t is not None and t.is_alive() and threading.current_thread() is not t:
+            t.join(2.0)
+        rtde, self._rtde = self._rtde, None
+        if rtde is not None:
+            try:
+                rtde.disconnect()
+            except Exception:  # noqa: BLE001 - the link may already be gone
+                pass
+        self.state = "closed"
+
+    # -- extras -------------------------------------------------------------------------------
+    def wait_for_samples(self, n: int, timeout_s: float) -> bool:
+        """Block until ``n`` poses have been published (or the timeout); True if reached."""
+        with self._new:
+            return self._new.wait_for(lambda: self.samples >= n, timeout_s)
+
+    def wait_for_state(self, state: str, timeout_s: float) -> bool:
+        """Block until :attr:`state` equals ``state`` (or the timeout); True if reached."""
+        with self._new:
+            return self._new.wait_for(lambda: self.state == state, timeout_s)
+
+    # -- internals ----------------------------------------------------------------------------
+    def _connect(self) -> Any:
+        why = probe_tcp(self.host, self.port, self.connect_timeout_s)
+        if why is not None:
+            raise DeviceError(
+                f"cannot reach the UR controller at {self.host}:{self.port} ({why}); "
+                "check the IP address, the cable and that the robot is powered on"
+            )
+        try:
+            return self._factory(self.host, self.frequency_hz)
+        except RuntimeError as exc:
+            raise DeviceError(f"ur_rtde could not connect to the UR controller at {self.host}: {exc}") from None
+
+    def _set_state(self, state: str, error: str = "") -> None:
+        with self._new:
+            self.state = state
+            if error:
+                self.last_error = error
+            self._new.notify_all()
+
+    def _monitor(self) -> None:
+        rate = self.frequency_hz if self.frequency_hz > 0 else 500.0
+        poll_s = 0.5 / rate  # twice the controller rate: a new state is seen within half a cycle
+        clock = self.clock
+        last_ts: float | None = None
+        last_change_ns = clock.now_ns()
+        stale_ns = int(self.stale_after_s * 1e9)
+        reconnect_ns = int(self.reconnect_after_s * 1e9)
+        self._set_state("connected")
+        while not self._stop.wait(poll_s):
+            rtde = self._rtde
+            now = clock.now_ns()
+            try:
+                connected = rtde is not None and rtde.isConnected()
+                ts = rtde.getTimestamp() if connected else None
+            except Exception as exc:  # noqa: BLE001 - any failure of the link is a lost link
+                connected, ts = False, None
+                self.last_error = str(exc)
+            if connected and ts is not None and ts != last_ts:
+                last_ts = ts
+                last_change_ns = now
+                self._publish(rtde, ts, now)
+                if self.state != "connected":
+                    self._set_state("connected")
+                continue
+            if connected and now - last_change_ns <= stale_ns:
+                continue
+            if connected and self.state == "connected":
+                self._set_state("stale", f"controller time stuck at {last_ts} s for > {self.stale_after_s:g} s")
+            if not connected or now - last_change_ns > reconnect_ns:
+                if not connected:
+                    self._set_state("disconnected", self.last_error or "RTDE connection lost")
+                if self._reconnect():
+                    last_change_ns = clock.now_ns()
+
+    def _publish(self, rtde: Any, ts: float, now_ns: int) -> None:
+        pose = rtde.getActualTCPPose()
+        q = rtde.getActualQ()
+        if len(pose) != 6:
+            return
+        try:
+            rot = rotvec_to_matrix(pose[3], pose[4], pose[5])
+        except (ValueError, OverflowError):
+            rot = (math.nan,) * 9  # type: ignore[assignment]
+        self.q_rad = tuple(q) if len(q) == 6 else (math.nan,) * 6
+        sample = PoseSample(now_ns, (pose[0], pose[1], pose[2]), rot, float(ts))
+        with self._new:
+            self._pose = sample
+            self.samples += 1
+            self._new.notify_all()
+
+    def _reconnect(self) -> bool:
+        """Reconnect with exponential backoff until it works or :meth:`close`; True on success."""
+        backoff = self.min_backoff_s
+        while not self._stop.wait(backoff):
+            self._set_state("reconnecting")
+            why = probe_tcp(self.host, self.port, min(self.connect_timeout_s, backoff))
+            if why is None:
+                try:
+                    rtde = self._rtde
+                    if rtde is not None:
+                        rtde.reconnect()
+                    else:
+                        self._rtde = self._factory(self.host, self.frequency_hz)
+                    self.reconnects += 1
+                    return True
+                except Exception as exc:  # noqa: BLE001 - keep trying; the state says why
+                    why = str(exc)
+            self.last_error = f"reconnect to {self.host}: {why}"
+            backoff = min(self.max_backoff_s, backoff * 2.0)
+        return False

@@ -1,0 +1,362 @@
+"""The real rig's configuration: ``hardware.toml`` loaded, validated, and turned into a rig.
+
+:func:`load_hardware` checks every field and raises one :class:`HardwareError`
+naming the field, the offending value and what is allowed (the style of
+``protocol/config.py``); nothing is opened with a bad file.  The documented
+example is ``hardware.example.toml`` at the repository root.
+
+:func:`build_real_rig` opens the devices (Net F/T, UR over RTDE, Touch,
+optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.loop.Rig`.
+If one device fails, the ones already opened are closed again and the error
+names the device.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from pipeline.clock import Clock, MonotonicClock
+from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
+from pipeline.frames import Mat3, Vec3, check_rotation
+
+__all__ = [
+    "HardwareConfig",
+    "HardwareError",
+    "HapticSettings",
+    "JawSettings",
+    "RealRig",
+    "RobotSettings",
+    "SensorSettings",
+    "build_real_rig",
+    "hardware_from_dict",
+    "load_hardware",
+]
+
+ROBOT_MODES = ("observe", "teleop")
+
+
+class HardwareError(ValueError):
+    """A hardware file or value is invalid; the message names field, value and what is allowed."""
+
+
+@dataclass(frozen=True, slots=True)
+class SensorSettings:
+    """ATI Net F/T box."""
+
+    host: str
+    port: int = 49152
+    http_port: int = 80
+    counts_per_force: float | None = None
+    counts_per_torque: float | None = None
+    force_unit: str = "N"
+    torque_unit: str = "Nm"
+    buffered: bool = False
+    connect_timeout_s: float = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class RobotSettings:
+    """UR controller over RTDE."""
+
+    host: str
+    frequency_hz: float = 125.0
+    mode: str = "observe"
+    tcp_offset_m: Vec3 = (0.0, 0.0, 0.0)
+    connect_timeout_s: float = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class HapticSettings:
+    """3D Systems Touch."""
+
+    device_name: str = "Default Device"
+
+
+@dataclass(frozen=True, slots=True)
+class JawSettings:
+    """Jaw actuator Arduino."""
+
+    port: str
+    baud: int = 115200
+    ready_timeout_s: float = 3.0
+
+
+@dataclass(frozen=True, slots=True)
+class HardwareConfig:
+    """A validated hardware file."""
+
+    sensor: SensorSettings
+    robot: RobotSettings
+    haptic: HapticSettings
+    jaw: JawSettings | None
+    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    calibration_file: str | None = None
+    source: str = "hardware"
+
+
+# -- validation helpers ---------------------------------------------------------------------
+def _fail(src: str, fld: str, value: Any, allowed: str) -> HardwareError:
+    return HardwareError(f"{src}: {fld} = {value!r}: {allowed}")
+
+
+def _table(src: str, fld: str, v: Any, allowed: set[str]) -> dict[str, Any]:
+    if not isinstance(v, dict):
+        raise _fail(src, fld, v, "must be a table")
+    extra = sorted(set(v) - allowed)
+    if extra:
+        key = extra[0]
+        raise _fail(src, f"{fld}.{key}" if fld else key, v[key], f"unknown field; allowed: {', '.join(sorted(allowed))}")
+    return v
+
+
+def _number(src: str, fld: str, v: Any, lo: float, hi: float) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo < v <= hi:
+        raise _fail(src, fld, v, f"must be a number > {lo:g} and ≤ {hi:g}")
+    return float(v)
+
+
+def _port(src: str, fld: str, v: Any) -> int:
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 65535:
+        raise _fail(src, fld, v, "must be a whole port number from 1 to 65535")
+    return v
+
+
+def _text(src: str, fld: str, v: Any) -> str:
+    if not isinstance(v, str) or not v.strip() or any(c.isspace() for c in v.strip()):
+        raise _fail(src, fld, v, "must be a non-empty string without spaces (an IP address, host name or device path)")
+    return v.strip()
+
+
+def _rotation(src: str, fld: str, v: Any) -> Mat3:
+    try:
+        return check_rotation(v, fld)
+    except ValueError as exc:
+        raise HardwareError(f"{src}: {exc}") from None
+
+
+def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
+    """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`."""
+    src = source
+    top = _table(src, "", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration"})
+    if top.get("version", 1) != 1:
+        raise _fail(src, "version", top.get("version"), "this software reads hardware file version 1")
+    for required in ("sensor", "robot", "haptic"):
+        if required not in top:
+            raise _fail(src, required, None, f"the [{required}] table is required")
+
+    s = _table(src, "sensor", top["sensor"], {
+        "host", "port", "http_port", "counts_per_force", "counts_per_torque", "force_unit", "torque_unit",
+        "buffered", "connect_timeout_s",
+    })
+    if "host" not in s:
+        raise _fail(src, "sensor.host", None, "required: the Net F/T box's IP address")
+    cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
+    if (cpf is None) != (cpt is None):
+        missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
+        raise _fail(src, missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
+    from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
+
+    fu, tu = s.get("force_unit", "N"), s.get("torque_unit", "Nm")
+    for fld, unit, check in (("sensor.force_unit", fu, force_unit_to_n), ("sensor.torque_unit", tu, torque_unit_to_nm)):
+        try:
+            if not isinstance(unit, str):
+                raise NetFTError("must be a string")
+            check(unit)
+        except NetFTError as exc:
+            raise _fail(src, fld, unit, str(exc).split("; ")[-1]) from None
+    buffered = s.get("buffered", False)
+    if not isinstance(buffered, bool):
+        raise _fail(src, "sensor.buffered", buffered, "must be true or false")
+    sensor = SensorSettings(
+        host=_text(src, "sensor.host", s["host"]),
+        port=_port(src, "sensor.port", s.get("port", 49152)),
+        http_port=_port(src, "sensor.http_port", s.get("http_port", 80)),
+        counts_per_force=None if cpf is None else _number(src, "sensor.counts_per_force", cpf, 0.0, 1e12),
+        counts_per_torque=None if cpt is None else _number(src, "sensor.counts_per_torque", cpt, 0.0, 1e12),
+        force_unit=fu, torque_unit=tu, buffered=buffered,
+        connect_timeout_s=_number(src, "sensor.connect_timeout_s", s.get("connect_timeout_s", 2.0), 0.0, 60.0),
+    )
+
+    r = _table(src, "robot", top["robot"], {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
+    if "host" not in r:
+        raise _fail(src, "robot.host", None, "required: the UR controller's IP address")
+    freq = r.get("frequency_hz", 125.0)
+    if freq != -1:
+        freq = _number(src, "robot.frequency_hz", freq, 0.0, 500.0)
+    mode = r.get("mode", "observe")
+    if mode not in ROBOT_MODES:
+        raise _fail(src, "robot.mode", mode, f"allowed values: {', '.join(ROBOT_MODES)}")
+    if mode == "teleop":
+        raise _fail(src, "robot.mode", mode, "teleoperation by this app is not available in this version; use 'observe' "
+                    "(the robot runs its own teleoperation program)")
+    off = r.get("tcp_offset_m", [0.0, 0.0, 0.0])
+    if (
+        not isinstance(off, list) or len(off) != 3
+        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or abs(x) > 1.0 for x in off)
+    ):
+        raise _fail(src, "robot.tcp_offset_m", off, "must be 3 numbers in metres, each within ±1 m")
+    robot = RobotSettings(
+        host=_text(src, "robot.host", r["host"]), frequency_hz=float(freq), mode=mode,
+        tcp_offset_m=(float(off[0]), float(off[1]), float(off[2])),
+        connect_timeout_s=_number(src, "robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), 0.0, 60.0),
+    )
+
+    h = _table(src, "haptic", top["haptic"], {"device_name"})
+    name = h.get("device_name", "Default Device")
+    if not isinstance(name, str) or not name.strip():
+        raise _fail(src, "haptic.device_name", name, "must be a non-empty string (the OpenHaptics device name)")
+    haptic = HapticSettings(name.strip())
+
+    jaw = None
+    if "jaw" in top:
+        j = _table(src, "jaw", top["jaw"], {"port", "baud", "ready_timeout_s"})
+        if "port" not in j:
+            raise _fail(src, "jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
+        baud = j.get("baud", 115200)
+        if baud not in (9600, 19200, 38400, 57600, 115200):
+            raise _fail(src, "jaw.baud", baud, "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)")
+        jaw = JawSettings(
+            _text(src, "jaw.port", j["port"]), baud,
+            _number(src, "jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), 0.0, 60.0),
+        )
+
+    fr = _table(src, "frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
+    rot_ts = _rotation(src, "frames.rot_tip_sensor", fr.get("rot_tip_sensor", DEFAULT_ROT_TIP_SENSOR))
+    rot_hb = _rotation(src, "frames.rot_haptic_base", fr.get("rot_haptic_base", DEFAULT_ROT_HAPTIC_BASE))
+    fw = _table(src, "framework", top.get("framework", {}), {"f_max_n", "f_scale_n", "filter_window"})
+    window = fw.get("filter_window", 10)
+    if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= 1000:
+        raise _fail(src, "framework.filter_window", window, "must be a whole number of samples from 1 to 1000")
+    f_max = _number(src, "framework.f_max_n", fw.get("f_max_n", 3.0), 0.0, 20.0)
+    framework = FrameworkConfig(
+        f_max_n=f_max, f_scale_n=_number(src, "framework.f_scale_n", fw.get("f_scale_n", 7.0), 0.0, 1000.0),
+        filter_window=window, rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
+    )
+    cal = _table(src, "calibration", top.get("calibration", {}), {"file"})
+    cal_file = cal.get("file")
+    if cal_file is not None and (not isinstance(cal_file, str) or not cal_file.strip()):
+        raise _fail(src, "calibration.file", cal_file, "must be the path of a payload calibration JSON file")
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source)
+
+
+def load_hardware(path: str | Path) -> HardwareConfig:
+    """Load and validate a hardware file."""
+    p = Path(path)
+    src = str(p)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise HardwareError(f"{src}: no such hardware file (copy hardware.example.toml and edit it)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise HardwareError(f"{src}: cannot read the hardware file ({exc})") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise HardwareError(f"{src}: not valid TOML ({exc})") from None
+    hw = hardware_from_dict(data, src)
+    if hw.calibration_file is not None and not Path(hw.calibration_file).is_absolute():
+        # a relative calibration path is relative to the hardware file, not to the working directory
+        hw = replace(hw, calibration_file=str(p.parent / hw.calibration_file))
+    return hw
+
+
+# -- the real rig ----------------------------------------------------------------------------
+class RealRig:
+    """The devices of the real rig, satisfying :class:`pipeline.loop.Rig`."""
+
+    def __init__(self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None) -> None:
+        self.sensor = sensor
+        self.robot = robot
+        self.haptic = haptic
+        self.jaw = jaw
+
+    def advance(self, now_ns: int) -> None:
+        """Nothing to step: the devices run on their own."""
+
+    def true_contact_force(self) -> None:
+        """No ground truth on hardware."""
+        return None
+
+    def close(self) -> None:
+        """Zero and release every device (the Touch first); a failing close does not skip the others."""
+        errors = []
+        for dev in (self.haptic, self.robot, self.sensor, self.jaw):
+            if dev is None:
+                continue
+            try:
+                dev.close()
+            except Exception as exc:  # noqa: BLE001 - close everything, report after
+                errors.append(f"{type(dev).__name__}: {exc}")
+        if errors:
+            raise DeviceError("closing the rig: " + "; ".join(errors))
+
+
+def open_sensor(cfg: SensorSettings, clock: Clock) -> ForceSensor:
+    """Open the Net F/T box described by ``cfg``."""
+    from pipeline.backends.netft import NetFTCalibration, NetFTForceSensor
+
+    cal = None
+    if cfg.counts_per_force is not None and cfg.counts_per_torque is not None:
+        cal = NetFTCalibration(cfg.counts_per_force, cfg.counts_per_torque, cfg.force_unit, cfg.torque_unit)
+    return NetFTForceSensor(
+        cfg.host, port=cfg.port, http_port=cfg.http_port, calibration=cal, clock=clock,
+        connect_timeout_s=cfg.connect_timeout_s, buffered=cfg.buffered,
+    )
+
+
+def open_robot(cfg: RobotSettings, clock: Clock) -> Robot:
+    """Connect to the UR controller described by ``cfg`` (read only)."""
+    from pipeline.backends.ur import UrRtdeRobot
+
+    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s)
+
+
+def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
+    """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
+    from pipeline.backends.touch import TouchHapticDevice
+
+    return TouchHapticDevice(cfg.device_name, clock=clock)
+
+
+def open_jaw(cfg: JawSettings) -> JawActuator:
+    """Open the jaw actuator's serial port and wait for READY."""
+    from pipeline.backends.jaw import SerialJawActuator
+
+    return SerialJawActuator(cfg.port, baud=cfg.baud, ready_timeout_s=cfg.ready_timeout_s)
+
+
+def build_real_rig(config: HardwareConfig, clock: Clock | None = None, *, with_jaw: bool = True) -> RealRig:
+    """Open every configured device into a :class:`RealRig`.
+
+    Raises
+    ------
+    DeviceError
+        Naming the device that failed; the devices opened before it are closed again.
+    """
+    clk = clock or MonotonicClock()
+    opened: list[Any] = []
+    steps: list[tuple[str, Any]] = [
+        ("force sensor", lambda: open_sensor(config.sensor, clk)),
+        ("robot", lambda: open_robot(config.robot, clk)),
+        ("haptic device", lambda: open_haptic(config.haptic, clk)),
+    ]
+    if with_jaw and config.jaw is not None:
+        jaw_cfg = config.jaw
+        steps.append(("jaw actuator", lambda: open_jaw(jaw_cfg)))
+    for what, opener in steps:
+        try:
+            opened.append(opener())
+        except DeviceError as exc:
+            for dev in reversed(opened):
+                try:
+                    dev.close()
+                except Exception:  # noqa: BLE001 - already failing; the first error is the one to show
+                    pass
+            raise DeviceError(f"{what}: {exc}") from None
+    jaw = opened[3] if len(opened) > 3 else None
+    return RealRig(opened[0], opened[1], opened[2], jaw)
