@@ -87,7 +87,8 @@ class PlotModel:
         self.lost += res.lost
         rows = res.rows
         self.new_rows = rows
-        if len(rows) == 0:
+        n_new = len(rows)
+        if n_new == 0:
             return 0
         rows = rows[-self.capacity:]
         self.last_row = rows[-1]
@@ -105,7 +106,7 @@ class PlotModel:
         self.t = t[keep]
         for k, v in new.items():
             self.data[k] = np.concatenate((self.data[k], np.asarray(v, dtype=np.float64)))[keep]
-        return len(rows)
+        return n_new
 
     @property
     def latest_t_s(self) -> float:
