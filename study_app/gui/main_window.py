@@ -131,8 +131,11 @@ class ExperimenterWindow(QMainWindow):
         self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
         self.setup_panel.resume_button.clicked.connect(self.resume_selected)
         self.setup_panel.db.editingFinished.connect(self.model.list_sessions)
-        QShortcut(QKeySequence(Qt.Key.Key_Space), self, activated=self.start_session)
-        QShortcut(QKeySequence(Qt.Key.Key_Escape), self, activated=self.abort_trial)
+        # application-wide: the experimenter may have the rig view or the participant screen focused
+        for key, slot in ((Qt.Key.Key_Space, self.start_session), (Qt.Key.Key_Escape, self.abort_trial)):
+            sc = QShortcut(QKeySequence(key), self)
+            sc.setContext(Qt.ShortcutContext.ApplicationShortcut)
+            sc.activated.connect(slot)
         self.model.actions_changed.connect(self._on_actions_changed)
         self.model.session.changed.connect(self._on_session_changed)
         self.model.error.connect(self._on_error)
