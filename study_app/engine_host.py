@@ -241,6 +241,7 @@ class _PeriodStats:
             "abs_dev_p50_us": self._quantile(dev, 0.5),
             "abs_dev_p99_us": self._quantile(dev, 0.99),
             "periods_over_2ms": float(h[2001:].sum()),
+            "period_max_us": float(np.flatnonzero(h)[-1]) if self.count else math.nan,
             "fraction_over_2ms": float(h[2001:].sum()) / self.count if self.count else math.nan,
             "rate_hz": self.count / self.span_s if self.span_s > 0 else math.nan,
         }
@@ -395,6 +396,7 @@ class StudyEngine:
             missed_slots=int(self.loop.stats.missed_slots), ticks=int(s["ticks"]), faults=int(self.loop.faults),
             haptic_on=bool(self.loop.haptic_on), driver=self.driver.mode,
             session_running=runner is not None and not runner.done, paused=bool(runner is not None and runner.paused),
+            abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
         )
 
     def _on_loop_event(self, ev: LoopEvent) -> None:

@@ -258,6 +258,8 @@ class Health:
     driver: str
     session_running: bool
     paused: bool
+    abs_dev_p50_us: float = float("nan")
+    period_max_us: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True)
