@@ -292,6 +292,7 @@ class StudyEngine:
         self._ticks_run = 0
         self._running = False
         self._last_t_ns = 0
+        self._stats_from_tick = 0
         self.closed = False
 
     # -- lifetime -------------------------------------------------------------------------------
@@ -375,7 +376,12 @@ class StudyEngine:
         rows = res.rows
         if len(rows) == 0:
             return
-        self.stats.add(rows["period_s"])
+        if self._stats_from_tick:
+            # the first tick after a calibration carries the calibration's gap: not a loop overrun
+            keep = rows["tick"] >= self._stats_from_tick
+            self.stats.add(rows["period_s"][keep])
+        else:
+            self.stats.add(rows["period_s"])
         self._last_t_ns = int(rows["t_ns"][-1])
         runner = self.runner
         if runner is None:
@@ -605,6 +611,7 @@ class StudyEngine:
                 self.loop.submit(SetCalibration(cal))
         finally:
             self.stats.reset()
+            self._stats_from_tick = self.loop.tick_count + 1
             self._reanchor()
             if real:
                 self.loop.start()

@@ -86,7 +86,11 @@ def test_calibration_accepts_a_good_set_and_installs_it(engine, tmp_path, short_
     assert done.accepted and done.reason == "" and done.n_poses == 6
     assert done.condition_number < 100 and done.rms_force_residual_n < 0.01
     assert e.calibration.to_dict() == done.calibration
-    e.step()
+    for _ in range(4):
+        e.step()
+    h = e.health()
+    # the loop paused for the calibration: that gap is not reported as an overrun
+    assert h.ticks == 199 and h.periods_over_2ms == 0 and h.period_max_us == 1000.0
     db = str(tmp_path / "s.db")
     e.handle(m.StartSession(db, "P02", "training", short_protocol, 0, 2))
     (cal_json,), = db_rows(db, "SELECT calibration_json FROM sessions")
