@@ -30,10 +30,13 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.participant import SimulatedParticipant
 from protocol.session import SessionRunner, first_unfinished, has_samples
-from protocol.storage import Recorder, StorageError, StudyDatabase, trial_id_of, validate_code
+from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, trial_id_of, validate_code
 from protocol.version import software_version
 
-__all__ = ["StudyProgress", "participant_code", "resume_session", "run_study", "software_version"]
+__all__ = [
+    "StudyProgress", "config_record", "participant_code", "participant_seeds", "prepare_resume", "resume_session", "run_study",
+    "software_version", "training_schedule",
+]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
 BLOCK_TICKS = 50
@@ -46,7 +49,7 @@ def participant_code(number: int) -> str:
     return f"P{number:02d}"
 
 
-def _seeds(study_seed: int, number: int) -> tuple[int, int]:
+def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
     """(rig seed, participant seed) for a participant: independent streams from one study seed."""
     s = np.random.SeedSequence([study_seed, number]).generate_state(2)
     return int(s[0]), int(s[1])
@@ -141,7 +144,8 @@ def _drive(
         eng.rig.close()
 
 
-def _config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+def config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
     fw = eng.framework.config
     return {
         "rig": "sim",
@@ -166,7 +170,7 @@ def _run_session(
     db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, study_seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
 ) -> int:
-    rig_seed, p_seed = _seeds(study_seed, number)
+    rig_seed, p_seed = participant_seeds(study_seed, number)
     eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
     participant = SimulatedParticipant(seed=p_seed)
     eng.rig.set_driver(participant)
@@ -181,7 +185,7 @@ def _run_session(
     session_id = db.create_session(
         code=code, kind=kind, seed=study_seed, participant_number=number, protocol_json=run_protocol.to_json(),
         schedule_json=schedule_to_json(schedule), software_version=software_version(), rig="sim",
-        config=_config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
+        config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
     )
     progress.sessions.append(session_id)
     recorder = Recorder(db, threaded=(clock == "real"))
@@ -268,29 +272,8 @@ def resume_session(
             what = "no such participant" if known is None else "no interrupted experiment session"
             raise StorageError(f"cannot resume {code} in {db_path}: {what}")
         info = open_[-1]
-        protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
-        schedule = schedule_from_json(info.schedule_json)
-        rows = db.trial_rows(info.session_id)
-        pos = first_unfinished(schedule, rows)
-        offset = db.last_session_time_s(info.session_id) + 1.0
-        if pos < len(schedule) and has_samples(db, info.session_id, schedule[pos].index):
-            spec = schedule[pos]
-            reason = "interrupted: the previous run ended during this trial"
-            schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
-                                       np.random.default_rng([info.seed, info.session_id, 7]))
-            with db.transaction():
-                db.insert_trial({
-                    "trial_id": trial_id_of(info.session_id, spec.index), "session_id": info.session_id,
-                    "trial_index": spec.index, "target_label": spec.target_label,
-                    "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode, "outcome": "aborted",
-                    "started_at_s": offset, "ended_at_s": offset, "abort_reason": reason, "repeat_of": spec.repeat_of,
-                })
-                db.update_schedule(info.session_id, schedule_to_json(schedule))
-                db.insert_event(info.session_id, offset, "resume", f"trial {spec.index} aborted ({reason}) and re-queued")
-            pos += 1
-        else:
-            db.insert_event(info.session_id, offset, "resume", f"continuing at trial position {pos}")
-        rig_seed, p_seed = _seeds(info.seed, info.participant_number)
+        protocol, schedule, pos, offset = prepare_resume(db, info)
+        rig_seed, p_seed = participant_seeds(info.seed, info.participant_number)
         # A fresh rig (re-calibrated) and the same participant (same seed, same parameters).
         eng = _engine(rig_seed + 2, clock)
         participant = SimulatedParticipant(seed=p_seed)
@@ -312,3 +295,36 @@ def resume_session(
         return progress
     finally:
         db.close()
+
+
+def prepare_resume(db: StudyDatabase, info: SessionInfo) -> tuple[ProtocolConfig, list[TrialSpec], int, float]:
+    """Get an interrupted session ready to continue: (protocol, schedule, start position, clock offset s).
+
+    A trial that was interrupted mid-way (samples but no summary) is stored as
+    aborted with the reason and re-queued per the abort policy, in one
+    transaction; otherwise a ``resume`` event records where the session continues.
+    Used by :func:`resume_session` and by the GUI's study engine.
+    """
+    protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
+    schedule = schedule_from_json(info.schedule_json)
+    rows = db.trial_rows(info.session_id)
+    pos = first_unfinished(schedule, rows)
+    offset = db.last_session_time_s(info.session_id) + 1.0
+    if pos < len(schedule) and has_samples(db, info.session_id, schedule[pos].index):
+        spec = schedule[pos]
+        reason = "interrupted: the previous run ended during this trial"
+        schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
+                                   np.random.default_rng([info.seed, info.session_id, 7]))
+        with db.transaction():
+            db.insert_trial({
+                "trial_id": trial_id_of(info.session_id, spec.index), "session_id": info.session_id,
+                "trial_index": spec.index, "target_label": spec.target_label,
+                "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode, "outcome": "aborted",
+                "started_at_s": offset, "ended_at_s": offset, "abort_reason": reason, "repeat_of": spec.repeat_of,
+            })
+            db.update_schedule(info.session_id, schedule_to_json(schedule))
+            db.insert_event(info.session_id, offset, "resume", f"trial {spec.index} aborted ({reason}) and re-queued")
+        pos += 1
+    else:
+        db.insert_event(info.session_id, offset, "resume", f"continuing at trial position {pos}")
+    return protocol, schedule, pos, offset

@@ -104,6 +104,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     ch = sub.add_parser("check-hardware", help="connect to every device in the hardware file and print its state")
     ch.add_argument("--hardware", default="hardware.toml", help="hardware file (default ./hardware.toml; see hardware.example.toml)")
+
+    bg = bsub.add_parser("gui", help="1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time")
+    bg.add_argument("--json", action="store_true", help="print one JSON object")
+    bg.add_argument("--seconds", type=_positive_float("--seconds"), default=20.0,
+                    help="real time per loop measurement (default 20)")
+
+    g = sub.add_parser("gui", help="the experimenter's window (simulated rig by default)")
+    g.add_argument("--db", default=None, help="study database (SQLite); default: the last one used")
+    g.add_argument("--rig", choices=("sim", "real"), default="sim", help="simulated rig (default) or the real hardware")
+    g.add_argument("--hardware", default=None, metavar="FILE", help="hardware.toml for --rig real")
+    g.add_argument("--screenshot", default=None, metavar="DIR",
+                   help="drive a short simulated session offscreen and save PNGs of every main view into DIR")
     return p
 
 
@@ -144,6 +156,15 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("bench: timing the report ...", file=sys.stderr, flush=True)
             result = run_report_bench(args.db, stats_participants=args.stats_participants)
             print(json.dumps(result) if args.json else format_report_bench(result))
+            return 0
+        if args.command == "gui":
+            return _cmd_gui(args)
+        if args.command == "bench" and args.bench == "gui":
+            from bench.gui_bench import format_gui_bench, run_gui_bench
+
+            print("bench: measuring the loop without and with the GUI ...", file=sys.stderr, flush=True)
+            result = run_gui_bench(seconds=args.seconds)
+            print(json.dumps(result) if args.json else format_gui_bench(result))
             return 0
         if args.command == "bench" and args.bench == "study":
             from bench.study_bench import format_study_bench, run_study_bench
@@ -240,6 +261,34 @@ def _cmd_hardware(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     print(format_check(rows))
     return 0 if ok else 1
+
+
+def _cmd_gui(args: argparse.Namespace) -> int:
+    import os
+
+    from study_app.engine_host import REAL_RIG_UNAVAILABLE, HostConfig, real_rig_builder
+
+    if args.rig == "real":
+        if real_rig_builder() is None:
+            raise CliError(REAL_RIG_UNAVAILABLE)
+        if args.hardware is None:
+            raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab)")
+    if args.hardware is not None and not os.path.isfile(args.hardware):
+        raise CliError(f"--hardware = {args.hardware!r}: no such file")
+    if args.screenshot is not None and args.rig != "sim":
+        raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
+    # Qt is imported here only: the other subcommands never load it
+    from study_app.gui.app import run_gui
+
+    if args.screenshot is not None:
+        # a rehearsal on the virtual clock at 4x real time: a few trials in seconds
+        host = HostConfig(rig="sim", clock="virtual", speed=4.0)
+    else:
+        host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real")
+    try:
+        return run_gui(host, db_path=args.db, screenshot_dir=args.screenshot)
+    except RuntimeError as exc:
+        raise CliError(str(exc)) from None
 
 
 def _cmd_bench_pipeline(args: argparse.Namespace) -> int:

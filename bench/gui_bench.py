@@ -1,0 +1,169 @@
+"""``haptic-study bench gui``: does the GUI disturb the 1 kHz loop, and does the GUI itself ever stall?
+
+One run, real clock, the loop in its study-engine process as the app runs it:
+
+1. **Without the GUI**: the engine process alone (this process only reads its
+   events, no Qt loaded yet), loop timing over ``seconds``.
+2. **With the GUI**: the experimenter window opens (start-up timed to a usable
+   window and to a connected engine), runs the recommended calibration, then
+   an experiment session driven by the simulated participant while the window
+   plots at 30 Hz and the participant screen and rig view are shown; loop
+   timing over ``seconds`` of that session.
+
+Loop timing is the engine's own: the ``period_s`` of every loop record,
+|period − 1 ms| quantiles and the share of periods over 2 ms.  GUI stalls are
+measured by a 5 ms timer in the GUI's event loop: the longest gap beyond its
+interval, per phase (connect, calibration, session).  The window is rendered
+offscreen when no display is available (the same painting work, no compositor).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import tempfile
+import time
+from typing import Any
+
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import HostConfig
+
+__all__ = ["format_gui_bench", "run_gui_bench"]
+
+_STALL_TIMER_MS = 5
+
+
+def _loop_figures(h: m.Health) -> dict[str, float]:
+    return {
+        "ticks": h.ticks,
+        "abs_dev_p50_us": h.abs_dev_p50_us,
+        "abs_dev_p99_us": h.abs_dev_p99_us,
+        "period_max_us": h.period_max_us,
+        "periods_over_2ms": h.periods_over_2ms,
+        "fraction_over_2ms": h.periods_over_2ms / h.ticks if h.ticks else float("nan"),
+    }
+
+
+def _measure_without_gui(seconds: float) -> dict[str, float]:
+    client = EngineClient(HostConfig(clock="real"))
+    client.start()
+    try:
+        end = time.monotonic() + 60.0
+        while not isinstance(client.get(0.1), m.EngineReady):
+            if time.monotonic() > end or not client.alive:
+                raise RuntimeError("the study engine did not start")
+        client.send(m.ResetStats())
+        time.sleep(0.05)
+        t_end = time.monotonic() + seconds
+        last: m.Health | None = None
+        while time.monotonic() < t_end or last is None:
+            ev = client.get(0.2)
+            if isinstance(ev, m.Health):
+                last = ev
+        return _loop_figures(last)
+    finally:
+        client.shutdown()
+
+
+def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
+    """Measure; returns plain data (see :func:`format_gui_bench`)."""
+    without = _measure_without_gui(seconds)
+
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    t0 = time.perf_counter()
+    from PySide6.QtCore import QSettings
+    from PySide6.QtWidgets import QApplication
+
+    from study_app.gui.main_window import ExperimenterWindow
+    from study_app.gui.timers import tracked_timer
+
+    app = QApplication.instance() or QApplication(["haptic-study-bench"])
+    tmp = tempfile.TemporaryDirectory(prefix="haptic-study-bench-")
+    settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
+    win = ExperimenterWindow(HostConfig(clock="real"), settings, os.path.join(tmp.name, "bench.db"))
+    win.confirm = lambda title, text: True
+    win.show()
+    app.processEvents()
+    t_usable = time.perf_counter() - t0
+
+    phase = ["connect"]
+    stalls: dict[str, float] = {"connect": 0.0, "calibration": 0.0, "session": 0.0}
+    last_tick = [time.perf_counter()]
+
+    def on_tick() -> None:
+        now = time.perf_counter()
+        gap_ms = (now - last_tick[0]) * 1e3 - _STALL_TIMER_MS
+        last_tick[0] = now
+        stalls[phase[0]] = max(stalls[phase[0]], gap_ms)
+
+    stall_timer = tracked_timer(win, _STALL_TIMER_MS, on_tick, name="bench-stall")
+    stall_timer.start()
+    health: list[m.Health] = []
+    win.bridge.event_received.connect(lambda ev: isinstance(ev, m.Health) and health.append(ev))
+
+    def run_until(pred, timeout_s: float) -> None:  # type: ignore[no-untyped-def]
+        end = time.monotonic() + timeout_s
+        while not pred():
+            app.processEvents()
+            time.sleep(0.001)
+            if time.monotonic() > end:
+                raise RuntimeError("bench gui: a step did not complete in time")
+
+    try:
+        run_until(lambda: win.model.session.state == "ready", 60.0)
+        t_ready = time.perf_counter() - t0
+        last_tick[0] = time.perf_counter()
+        phase[0] = "calibration"
+        win.calibration_wizard.show()
+        win.calibration_wizard.run_button.click()
+        run_until(lambda: win.model.calibration.state in ("accepted", "refused"), 120.0)
+        win.calibration_wizard.hide()
+        phase[0] = "session"
+        last_tick[0] = time.perf_counter()
+        win.participant_window.show()
+        win.rig_window.show()
+        win.model.setup.update(code="BENCH01")
+        win.start_button.click()
+        run_until(lambda: win.model.session.trial is not None, 30.0)
+        win.bridge.send(m.ResetStats())
+        t_end = time.monotonic() + seconds
+        run_until(lambda: time.monotonic() >= t_end, seconds + 30.0)
+        n = len(health)
+        run_until(lambda: len(health) > n + 1, 10.0)  # a Health event entirely after the window
+        with_gui = _loop_figures(health[-1])
+        trials = win.trial_table.rowCount()
+    finally:
+        stall_timer.stop()
+        win.close()
+        tmp.cleanup()
+    return {
+        "seconds": seconds,
+        "without_gui": without,
+        "with_gui": with_gui,
+        "gui_stall_ms": {k: round(v, 1) for k, v in stalls.items()},
+        "startup_s": {"window_usable": round(t_usable, 2), "engine_ready": round(t_ready, 2)},
+        "trials_during_measurement": trials,
+        "qt_platform": app.platformName(),
+        "host": f"{platform.python_implementation()} {platform.python_version()}, {os.cpu_count()} CPUs",
+    }
+
+
+def format_gui_bench(r: dict[str, Any]) -> str:
+    """Human-readable summary."""
+    def loop(d: dict[str, float]) -> str:
+        return (f"p50 / p99 |period − 1 ms| {d['abs_dev_p50_us']:.0f} / {d['abs_dev_p99_us']:.0f} µs, "
+                f"periods > 2 ms {d['periods_over_2ms']} of {d['ticks']} ({100 * d['fraction_over_2ms']:.3f} %), "
+                f"max period {d['period_max_us'] / 1000:.1f} ms")
+
+    s = r["gui_stall_ms"]
+    return (
+        f"1 kHz loop in the study-engine process, real clock, {r['seconds']:g} s each ({r['host']}):\n"
+        f"  without GUI          {loop(r['without_gui'])}\n"
+        f"  with GUI, 30 Hz plot {loop(r['with_gui'])}\n"
+        f"GUI event-loop stalls (longest gap beyond a {_STALL_TIMER_MS} ms timer, Qt platform {r['qt_platform']}):\n"
+        f"  connect {s['connect']:.1f} ms · calibration {s['calibration']:.1f} ms · session {s['session']:.1f} ms\n"
+        f"start-up: usable window {r['startup_s']['window_usable']:.2f} s, engine connected "
+        f"{r['startup_s']['engine_ready']:.2f} s"
+    )

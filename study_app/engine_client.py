@@ -1,0 +1,103 @@
+"""The GUI side of the study engine process: spawn it, send commands, receive events (no Qt).
+
+:class:`EngineClient` is deliberately small and blocking-free on the send side
+(a pipe write of a few hundred bytes); receiving is a blocking ``get`` meant
+for a monitor thread (:class:`study_app.gui.bridge.QtEngineBridge`) that turns
+events into Qt signals -- pymeasure's worker → queue → Qt bridge.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import queue
+from typing import Any
+
+from pipeline.ring import RingBuffer
+from study_app import messages as m
+from study_app.engine_host import HostConfig, host_main
+
+__all__ = ["EngineClient"]
+
+
+class EngineClient:
+    """Start and talk to the study engine process.
+
+    Parameters
+    ----------
+    config
+        What the engine builds.
+    """
+
+    def __init__(self, config: HostConfig) -> None:
+        self.config = config
+        self._ctx = mp.get_context("spawn")  # never fork a process that holds Qt and threads
+        self._conn, self._child_conn = self._ctx.Pipe()
+        self._events: Any = self._ctx.Queue()
+        self._proc = self._ctx.Process(
+            target=host_main, args=(config, self._child_conn, self._events), name="study-engine", daemon=True
+        )
+        self.ring: RingBuffer | None = None
+        self.started = False
+
+    def start(self) -> None:
+        """Spawn the engine (returns at once; :class:`EngineReady` arrives as an event)."""
+        self._proc.start()
+        self._child_conn.close()
+        self.started = True
+
+    def send(self, cmd: object) -> bool:
+        """Send a command; False if the engine is gone."""
+        try:
+            self._conn.send(cmd)
+            return True
+        except (OSError, BrokenPipeError, ValueError):
+            return False
+
+    def get(self, timeout_s: float) -> object | None:
+        """The next event, or None after ``timeout_s``.  Attaches the ring on :class:`EngineReady`."""
+        try:
+            ev = self._events.get(timeout=timeout_s)
+        except (queue.Empty, EOFError, OSError):
+            return None
+        if isinstance(ev, m.EngineReady) and ev.ring_name and self.ring is None:
+            self.ring = RingBuffer.attach(ev.ring_name)
+        return ev
+
+    @property
+    def alive(self) -> bool:
+        """True while the engine process runs."""
+        return self.started and self._proc.is_alive()
+
+    def join(self, timeout_s: float) -> bool:
+        """Wait for the engine to exit; True if it did."""
+        if not self.started:
+            return True
+        self._proc.join(timeout_s)
+        return not self._proc.is_alive()
+
+    def shutdown(self, timeout_s: float = 10.0) -> None:
+        """Ask the engine to finish the current trial's records, ramp down and exit; kill it if it does not."""
+        if self.alive:
+            self.send(m.Shutdown())
+            # drain events meanwhile: a full queue would block the engine's exit
+            end = timeout_s
+            while self._proc.is_alive() and end > 0:
+                self.get(0.05)
+                end -= 0.05
+        self.kill()
+
+    def detach(self) -> None:
+        """Close our end of the command pipe, as a crashed GUI would."""
+        self._conn.close()
+
+    def kill(self) -> None:
+        """Terminate the engine if still running and release local resources."""
+        if self.started and self._proc.is_alive():
+            self._proc.kill()
+        if self.started:
+            self._proc.join(5.0)
+        if self.ring is not None:
+            self.ring.close()
+            self.ring = None
+        self._events.close()
+        self._events.join_thread()

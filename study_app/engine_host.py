@@ -1,0 +1,703 @@
+"""The study engine: rig + 1 kHz loop + session runner + recorder, in a process of its own (no Qt).
+
+Why a separate process: a Qt window painting curves in the loop's process
+holds the GIL for milliseconds per curve and breaks the 1 kHz loop
+(science.md §7).  The GUI therefore only talks to this process:
+
+* commands (:mod:`study_app.messages`) arrive over a pipe and are applied by
+  one driver thread, so session state has a single owner;
+* events are published on a queue (trial started/ended with metrics, phases,
+  faults, health, calibration results);
+* samples go through the shared-memory :class:`pipeline.ring.RingBuffer` the
+  loop writes and the GUI pulls from at ~30 Hz.
+
+If the pipe breaks (the GUI closed or crashed) the engine latches
+``ENGINE_DETACHED`` (the force ramps to zero), aborts the running trial so its
+row is stored with the reason (the session stays resumable), commits, and exits.
+
+:class:`StudyEngine` is usable in-process on a virtual clock (tests);
+:func:`host_main` is the process entry point, started by
+:class:`study_app.engine_client.EngineClient`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import queue
+import sys
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.clock import MonotonicClock, VirtualClock
+from pipeline.compensation import DegeneratePoseSetError, PayloadCalibration, recommended_pose_set
+from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.frames import Mat3, axis_angle, mat_mul
+from pipeline.loop import ControllerDetached, LoopEvent, SetCalibration
+from pipeline.loop import OperatorStop as LoopOperatorStop
+from pipeline.loop import ResetFaults as LoopResetFaults
+from pipeline.sim.hand import HandObservation
+from pipeline.sim.rig import SimRigConfig
+from protocol.config import ProtocolError, load_protocol
+from protocol.design import build_schedule, schedule_to_json
+from protocol.participant import SimulatedParticipant
+from protocol.session import SessionRunner
+from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
+from protocol.study import config_record, participant_seeds, prepare_resume, software_version, training_schedule
+from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
+from study_app import messages as m
+
+__all__ = [
+    "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "REAL_RIG_UNAVAILABLE",
+    "StudyEngine", "SwitchableDriver", "host_main", "pose_set", "real_rig_builder",
+]
+
+#: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
+CALIBRATION_MAX_CONDITION = 1000.0
+#: ... or whose fit leaves more than this RMS force residual (a pose in contact, a loose tool).
+CALIBRATION_MAX_RMS_FORCE_N = 0.05
+#: The one line shown when ``--rig real`` is asked for before the hardware backends exist.
+REAL_RIG_UNAVAILABLE = (
+    "real rig: hardware backends are not configured — pass --hardware FILE; see docs/hardware-setup.md"
+)
+#: Lowest / highest equilibrium a person may command with the mouse, m along the Touch's +y.
+MANUAL_Y_RANGE_M = (-0.030, 0.005)
+
+
+def real_rig_builder() -> Callable[..., Any] | None:
+    """The real-rig factory of the hardware backends, or None until they are installed.
+
+    Wiring the real rig in is this import (issue 6 adds ``pipeline.backends``).
+    """
+    try:
+        from pipeline.backends import build_real_rig  # type: ignore[import-not-found]
+    except ImportError:
+        return None
+    return build_real_rig  # type: ignore[no-any-return]
+
+
+def pose_set(name: str) -> list[Mat3]:
+    """Sensor orientations ``rot_base_sensor`` of a named calibration pose set.
+
+    ``recommended``: 24 well-spread tilts (science.md §1.2); ``quick``: 6;
+    ``tool-down only``: 6 yaws about the vertical with the tool pointing down,
+    which leave gravity fixed in the sensor frame -- a degenerate set the
+    wizard must refuse (kept so an experimenter can see what a refusal says).
+    """
+    if name == "recommended":
+        return recommended_pose_set(24)
+    if name == "quick":
+        return recommended_pose_set(6)
+    if name == "tool-down only":
+        down = recommended_pose_set(24)[0]
+        return [mat_mul(axis_angle((0.0, 0.0, 1.0), k * 0.5), down) for k in range(6)]
+    raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.POSE_SETS)}")
+
+
+@dataclass(frozen=True, slots=True)
+class HostConfig:
+    """What the study engine builds.
+
+    Attributes
+    ----------
+    rig
+        ``"sim"`` or ``"real"``.
+    hardware_path
+        hardware.toml for the real rig.
+    clock
+        ``"real"`` (1 kHz on the monotonic clock, loop in its own thread) or
+        ``"virtual"`` (rehearsals, screenshots, tests).
+    speed
+        Virtual clock only: simulated seconds per wall second (0 = as fast as the CPU allows).
+    rig_seed
+        Seed of the simulated rig.
+    block_ticks
+        Virtual clock: ticks per driver step.
+    health_period_s
+        Wall time between :class:`study_app.messages.Health` events.
+    """
+
+    rig: str = "sim"
+    hardware_path: str | None = None
+    clock: str = "real"
+    speed: float = 1.0
+    rig_seed: int = 0
+    block_ticks: int = 50
+    health_period_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.rig not in ("sim", "real"):
+            raise ValueError(f"rig = {self.rig!r}: allowed values are 'sim' and 'real'")
+        if self.clock not in ("real", "virtual"):
+            raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
+        if not (math.isfinite(self.speed) and self.speed >= 0):
+            raise ValueError(f"speed = {self.speed!r}: must be a finite number ≥ 0")
+        if self.block_ticks < 1:
+            raise ValueError(f"block_ticks = {self.block_ticks!r}: must be ≥ 1")
+
+
+class SwitchableDriver:
+    """The simulated stylus's driver: the simulated participant (autopilot) or a person (manual).
+
+    It is also the session runner's participant: trial notifications always
+    reach the simulated participant, and the participant always sees the
+    observations, so switching back to autopilot mid-session is seamless.
+    """
+
+    def __init__(self) -> None:
+        self.mode = "autopilot"
+        self.participant: SimulatedParticipant | None = None
+        self.manual_y_m = 0.0
+
+    def set_mode(self, mode: str) -> None:
+        """Switch who drives (one of :data:`study_app.messages.DRIVER_MODES`)."""
+        if mode not in m.DRIVER_MODES:
+            raise ValueError(f"driver = {mode!r}: allowed values are {', '.join(m.DRIVER_MODES)}")
+        self.mode = mode
+
+    def set_manual_y(self, y_m: float) -> None:
+        """The person's equilibrium point, clamped to the safe stylus range."""
+        if not math.isfinite(y_m):
+            raise ValueError(f"manual target = {y_m!r}: must be a finite number of metres")
+        lo, hi = MANUAL_Y_RANGE_M
+        self.manual_y_m = min(hi, max(lo, float(y_m)))
+
+    def equilibrium_y(self, obs: HandObservation) -> float:
+        """Equilibrium of the arm this tick."""
+        p = self.participant
+        y = p.equilibrium_y(obs) if p is not None else 0.0
+        return self.manual_y_m if self.mode == "manual" else y
+
+    def begin_trial(self, target_force_n: float, haptic_on: bool, t_s: float) -> None:
+        """Forward the cue to the simulated participant."""
+        if self.participant is not None:
+            self.participant.begin_trial(target_force_n, haptic_on, t_s)
+
+    def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
+        """Forward a training trial to the simulated participant."""
+        if self.participant is not None:
+            self.participant.practice(target_force_n, haptic_on, t_s, live_force_n_visible)
+
+    def end_trial(self, t_s: float) -> None:
+        """Forward the end of a trial."""
+        if self.participant is not None:
+            self.participant.end_trial(t_s)
+
+
+class _PeriodStats:
+    """Histogram of tick periods (1 µs bins) read from the ring's ``period_s`` column -- cheap, numpy only.
+
+    The loop's own :class:`pipeline.loop.LoopStats` summary walks 50 000 bins in
+    Python; doing that twice a second in the loop's process would steal the
+    GIL from the loop thread for milliseconds.
+    """
+
+    BINS = 50_001
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.hist = np.zeros(self.BINS, dtype=np.int64)
+        self._pending: list[np.ndarray] = []
+        self.count = 0
+        self.span_s = 0.0  # on the loop's own clock (virtual or real)
+
+    def add(self, period_s: np.ndarray) -> None:
+        # binned lazily (at summary time): one 50 000-bin pass per summary, not per block
+        if len(period_s):
+            self._pending.append(np.asarray(period_s, dtype=np.float64).copy())
+            self.count += len(period_s)
+            self.span_s += float(np.sum(period_s))
+
+    def _fold(self) -> None:
+        if self._pending:
+            us = np.clip(np.round(np.concatenate(self._pending) * 1e6), 0, self.BINS - 1).astype(np.int64)
+            self._pending = []
+            self.hist += np.bincount(us, minlength=self.BINS)
+
+    def _quantile(self, hist: np.ndarray, q: float) -> float:
+        n = int(hist.sum())
+        if n == 0:
+            return math.nan
+        return float(np.searchsorted(np.cumsum(hist), q * n))
+
+    def summary(self, nominal_us: int = 1000) -> dict[str, float]:
+        self._fold()
+        h = self.hist
+        idx = np.arange(self.BINS)
+        dev = np.bincount(np.abs(idx - nominal_us), weights=h, minlength=self.BINS)
+        return {
+            "ticks": float(self.count),
+            "period_p50_us": self._quantile(h, 0.5),
+            "period_p99_us": self._quantile(h, 0.99),
+            "abs_dev_p50_us": self._quantile(dev, 0.5),
+            "abs_dev_p99_us": self._quantile(dev, 0.99),
+            "periods_over_2ms": float(h[2001:].sum()),
+            "period_max_us": float(np.flatnonzero(h)[-1]) if self.count else math.nan,
+            "fraction_over_2ms": float(h[2001:].sum()) / self.count if self.count else math.nan,
+            "rate_hz": self.count / self.span_s if self.span_s > 0 else math.nan,
+        }
+
+
+class StudyEngine:
+    """Owns the rig, the loop, the session runner and the recorder; applies commands; publishes events.
+
+    Parameters
+    ----------
+    config
+        What to build.
+    publish
+        Called with each event (thread-safe: the loop thread reports faults through it).
+    shared_ring
+        Put the sample ring in shared memory (the engine process) or private memory (in-process tests).
+    """
+
+    def __init__(self, config: HostConfig, publish: Callable[[object], None], *, shared_ring: bool = True) -> None:
+        self.config = config
+        self.publish = publish
+        if config.rig == "real":
+            builder = real_rig_builder()
+            if builder is None:
+                raise RuntimeError(REAL_RIG_UNAVAILABLE)
+            raise RuntimeError("real rig: the study engine does not drive the hardware backends yet")  # pragma: no cover
+        self.eng: SimEngine = build_sim_engine(
+            EngineConfig(sim=SimRigConfig(seed=config.rig_seed), clock=config.clock, calibrate=True, driver="hold",
+                         haptics_on=False, refine_bias=True, ring_seconds=30.0),
+            shared_ring=shared_ring,
+        )
+        self.calibration: PayloadCalibration = self.eng.calibration
+        self.driver = SwitchableDriver()
+        self.eng.rig.set_driver(self.driver)
+        assert self.eng.ring is not None
+        self.ring = self.eng.ring
+        self.cursor = self.ring.write_count
+        self.loop = self.eng.loop
+        self.loop.on_event = self._on_loop_event
+        self.stats = _PeriodStats()
+        self.runner: SessionRunner | None = None
+        self.recorder: Recorder | None = None
+        self.db: StudyDatabase | None = None
+        self.session_code = ""
+        self._last_health = 0.0
+        self._anchor_wall = time.monotonic()
+        self._anchor_ticks = 0
+        self._ticks_run = 0
+        self._running = False
+        self._last_t_ns = 0
+        self._stats_from_tick = 0
+        self.closed = False
+
+    # -- lifetime -------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start the loop (its own thread on the real clock) and announce the engine."""
+        if self.config.clock == "real":
+            self.loop.start()
+        self._running = True
+        rc = self.eng.rig.config
+        self.publish(m.EngineReady(
+            ring_name=self.ring.name or "", rig=self.config.rig, clock=self.config.clock,
+            calibration=self.calibration.to_dict(), surface_z_m=rc.surface_z_m,
+            tip_home_m=tuple(rc.tip_home_m), driver=self.driver.mode,  # type: ignore[arg-type]
+        ))
+
+    def close(self, reason: str, *, detached: bool = False) -> None:
+        """Leave the current session resumable with complete records, ramp the force to zero, stop."""
+        if self.closed:
+            return
+        if detached:
+            self.loop.submit(ControllerDetached())  # latches: the force ramps to zero at once
+        runner = self.runner
+        if runner is not None and not runner.done:
+            if runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE):
+                runner.abort_trial(reason)
+                self._step_until(lambda: runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE))
+            t_s = runner.session_time_s(self._last_t_ns)
+            assert self.recorder is not None
+            self.recorder.event(runner.session_id, t_s, "detached" if detached else "closed", reason)
+            self._end_session("interrupted", reason)
+        if self.config.clock == "real":
+            self.loop.stop(timeout_s=5.0)
+        else:
+            self.loop.ramp_down()
+        self._drain_ring()
+        self.eng.rig.close()
+        self.closed = True
+        self.publish(m.EngineStopped(reason, self.stats.summary()))
+
+    def release_ring(self) -> None:
+        """Free the shared ring (after the GUI had a chance to copy the last records)."""
+        self.ring.close()
+
+    def _step_until(self, done: Callable[[], bool], timeout_s: float = 2.0) -> None:
+        end = time.monotonic() + timeout_s
+        while not done() and time.monotonic() < end:
+            self.step(throttle=False)
+            if self.config.clock == "real":
+                time.sleep(0.002)
+
+    # -- the driver thread's work ---------------------------------------------------------------------
+    def step(self, *, throttle: bool = True) -> None:
+        """Advance: run a block of ticks (virtual clock), feed new records to the runner, publish health."""
+        if self.config.clock == "virtual":
+            n = self.config.block_ticks
+            self.loop.run_ticks(n)
+            self._ticks_run += n
+            if throttle and self.config.speed > 0:
+                self._throttle()
+        self._drain_ring()
+        now = time.monotonic()
+        if now - self._last_health >= self.config.health_period_s:
+            self._last_health = now
+            self.publish(self.health())
+
+    def _throttle(self) -> None:
+        # keep simulated time at `speed` × wall time; after a stall, re-anchor instead of bursting
+        ahead = self._anchor_wall + (self._ticks_run - self._anchor_ticks) * 1e-3 / self.config.speed - time.monotonic()
+        if ahead > 0:
+            time.sleep(ahead)
+        elif ahead < -0.2:
+            self._reanchor()
+
+    def _reanchor(self) -> None:
+        self._anchor_wall = time.monotonic()
+        self._anchor_ticks = self._ticks_run
+
+    def _drain_ring(self) -> None:
+        res = self.ring.read_since(self.cursor)
+        self.cursor = res.cursor
+        rows = res.rows
+        if len(rows) == 0:
+            return
+        if self._stats_from_tick:
+            # the first tick after a calibration carries the calibration's gap: not a loop overrun
+            keep = rows["tick"] >= self._stats_from_tick
+            self.stats.add(rows["period_s"][keep])
+        else:
+            self.stats.add(rows["period_s"])
+        self._last_t_ns = int(rows["t_ns"][-1])
+        runner = self.runner
+        if runner is None:
+            return
+        if res.lost:
+            runner.abort_session(f"the session runner fell {res.lost} records behind the loop")
+        runner.process(rows)
+        if runner.done:
+            self._end_session(runner.status, "")
+
+    def health(self) -> m.Health:
+        """The engine's state and loop timing since the last stats reset."""
+        s = self.stats.summary()
+        runner = self.runner
+        return m.Health(
+            loop_rate_hz=s["rate_hz"], period_p50_us=s["period_p50_us"], period_p99_us=s["period_p99_us"],
+            abs_dev_p99_us=s["abs_dev_p99_us"], periods_over_2ms=int(s["periods_over_2ms"]),
+            missed_slots=int(self.loop.stats.missed_slots), ticks=int(s["ticks"]), faults=int(self.loop.faults),
+            haptic_on=bool(self.loop.haptic_on), driver=self.driver.mode,
+            session_running=runner is not None and not runner.done, paused=bool(runner is not None and runner.paused),
+            abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
+        )
+
+    def _on_loop_event(self, ev: LoopEvent) -> None:
+        # called from the loop thread: only hand the event on
+        self.publish(m.EngineFault((ev.t_ns - self.loop.t0_ns) * 1e-9, ev.kind, int(ev.faults), ev.detail))
+
+    # -- commands -------------------------------------------------------------------------------------
+    def handle(self, cmd: object) -> None:
+        """Apply one command; anything that cannot be done is answered with :class:`CommandRefused`."""
+        name = type(cmd).__name__
+        try:
+            self._handle(cmd)
+        except (StorageError, ProtocolError, ValueError, RuntimeError) as exc:
+            self.publish(m.CommandRefused(name, str(exc)))
+
+    def _handle(self, cmd: object) -> None:
+        runner = self.runner
+        if isinstance(cmd, m.StartSession):
+            self._start_session(cmd)
+        elif isinstance(cmd, m.ResumeSession):
+            self._resume_session(cmd)
+        elif isinstance(cmd, m.ListSessions):
+            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path)))
+        elif isinstance(cmd, (m.Pause, m.Resume, m.AbortTrial, m.AbortSession)):
+            if runner is None or runner.done:
+                raise RuntimeError("no session is running")
+            if isinstance(cmd, m.Pause):
+                runner.pause()
+            elif isinstance(cmd, m.Resume):
+                runner.resume()
+            elif isinstance(cmd, m.AbortTrial):
+                if runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+                    raise RuntimeError("no trial is running (between trials or paused)")
+                runner.abort_trial(cmd.reason)
+            else:
+                runner.abort_session(cmd.reason)
+        elif isinstance(cmd, m.ResetFaults):
+            self.loop.submit(LoopResetFaults())
+        elif isinstance(cmd, m.OperatorStop):
+            self.loop.submit(LoopOperatorStop())
+        elif isinstance(cmd, m.Calibrate):
+            self._calibrate(cmd.pose_set)
+        elif isinstance(cmd, m.SetDriver):
+            self.driver.set_mode(cmd.mode)
+            self.publish(self.health())
+        elif isinstance(cmd, m.ManualTarget):
+            self.driver.set_manual_y(cmd.y_m)
+        elif isinstance(cmd, m.ResetStats):
+            self.stats.reset()
+        else:
+            raise ValueError(f"unknown command {cmd!r}")
+
+    def _require_idle(self, what: str) -> None:
+        if self.runner is not None and not self.runner.done:
+            raise RuntimeError(f"{what}: a session is running (end or abort it first)")
+
+    def _open_db(self, path: str) -> StudyDatabase:
+        if not path:
+            raise StorageError("study database: no file given")
+        return StudyDatabase(path)
+
+    def _start_session(self, cmd: m.StartSession) -> None:
+        self._require_idle("start")
+        validate_code(cmd.code)
+        if cmd.kind not in ("training", "experiment"):
+            raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
+        if cmd.seed < 0 or cmd.participant_number < 1:
+            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
+        protocol = load_protocol(cmd.protocol_path or None)
+        if cmd.kind == "experiment":
+            schedule = build_schedule(protocol, cmd.seed, cmd.participant_number)
+            run_protocol = protocol
+        else:
+            schedule = training_schedule(protocol)
+            run_protocol = dataclasses.replace(
+                protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
+            )
+        _, p_seed = participant_seeds(cmd.seed, cmd.participant_number)
+        db = self._open_db(cmd.db_path)
+        try:
+            session_id = db.create_session(
+                code=cmd.code, kind=cmd.kind, seed=cmd.seed, participant_number=cmd.participant_number,
+                protocol_json=run_protocol.to_json(), schedule_json=schedule_to_json(schedule),
+                software_version=software_version(), rig=self.config.rig,
+                config={**config_record(self.eng, self.config.clock, self.config.rig_seed, p_seed), "app": "gui"},
+                calibration=self.calibration.to_dict(),
+            )
+        except BaseException:
+            db.close()
+            raise
+        live_aid = cmd.kind == "training" and protocol.training.live_force_aid
+        self._run(db, session_id, cmd.code, cmd.kind, run_protocol, schedule, 0, 0.0, p_seed, cmd.seed, live_aid,
+                  f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)")
+
+    def _resume_session(self, cmd: m.ResumeSession) -> None:
+        self._require_idle("resume")
+        db = self._open_db(cmd.db_path)
+        try:
+            info = next((s for s in db.open_sessions() if s.session_id == cmd.session_id), None)
+            if info is None:
+                raise StorageError(f"session {cmd.session_id} in {cmd.db_path} is not an interrupted session")
+            protocol, schedule, pos, offset = prepare_resume(db, info)
+            # the calibration this run uses is stored with the session's events
+            db.insert_event(info.session_id, offset, "calibration", json.dumps(self.calibration.to_dict()))
+        except BaseException:
+            db.close()
+            raise
+        _, p_seed = participant_seeds(info.seed, info.participant_number)
+        live_aid = info.kind == "training" and protocol.training.live_force_aid
+        self._run(db, info.session_id, info.code, info.kind, protocol, schedule, pos, offset + 0.001, p_seed, info.seed,
+                  live_aid, None)
+
+    def _run(self, db: StudyDatabase, session_id: int, code: str, kind: str, protocol: Any, schedule: list[Any],
+             pos: int, offset_s: float, p_seed: int, seed: int, live_aid: bool, start_note: str | None) -> None:
+        self.driver.participant = SimulatedParticipant(seed=p_seed)
+        recorder = Recorder(db, threaded=True)
+        rig = self.eng.rig
+        runner = SessionRunner(
+            protocol=protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=self.loop.submit,
+            start_position=pos, session_clock_offset_s=offset_s, participant=self.driver,
+            participant_time=lambda: rig.sim_time_s, seed=seed,
+        )
+        runner.live_force_aid = live_aid
+        runner.listeners.append(self._on_runner_event)
+        if start_note is not None:
+            recorder.event(session_id, 0.0, "session_start", start_note)
+        self.db, self.recorder, self.runner, self.session_code = db, recorder, runner, code
+        tr = protocol.trial
+        self.publish(m.SessionStarted(
+            session_id=session_id, code=code, kind=kind, trials_total=len(schedule), start_position=pos,
+            tolerance_fraction=tr.tolerance_fraction, max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s,
+            live_force_aid=live_aid, schedule=[dataclasses.asdict(s) for s in schedule],
+        ))
+
+    def _on_runner_event(self, ev: object) -> None:
+        runner = self.runner
+        if runner is None:
+            return
+        if isinstance(ev, PhaseChanged):
+            t_s = ev.t_ns * 1e-9
+            if ev.new is TrialPhase.ACTIVE and runner.machine.spec is not None:
+                spec = runner.machine.spec
+                self.publish(m.TrialStarted(
+                    t_s, spec.index, runner.state.trial_position, runner.state.trials_total, spec.target_label,
+                    spec.target_force_n, spec.haptic_mode,
+                ))
+            self.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
+        elif isinstance(ev, TrialFinished):
+            met, spec = ev.metrics, ev.spec
+            self.publish(m.TrialEnded(ev.end_ns * 1e-9, {
+                "trial_index": spec.index, "target_label": spec.target_label, "target_force_n": spec.target_force_n,
+                "haptic_mode": spec.haptic_mode, "outcome": ev.outcome,
+                "tct_s": met.tct_s if ev.outcome == "success" else None, "rmse_n": met.rmse_n,
+                "max_ae_n": met.max_ae_n, "abort_reason": ev.reason or None, "repeat_of": spec.repeat_of,
+                "trials_total": runner.state.trials_total,
+            }))
+
+    def _end_session(self, status: str, reason: str) -> None:
+        runner, recorder, db = self.runner, self.recorder, self.db
+        assert runner is not None and recorder is not None and db is not None
+        self.runner = self.recorder = self.db = None
+        self.driver.participant = None
+        error = ""
+        try:
+            recorder.close()
+        except StorageError as exc:
+            error = str(exc)
+        finally:
+            db.close()
+        st = runner.state
+        self.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted, st.successes))
+
+    # -- calibration ----------------------------------------------------------------------------------
+    def _calibrate(self, name: str) -> None:
+        from pipeline.sim.calibration import auto_calibrate
+
+        self._require_idle("calibrate")
+        rots = pose_set(name)
+        real = self.config.clock == "real"
+        if real:
+            self.loop.stop(timeout_s=5.0)  # ramps the force to zero first
+            clock: Any = MonotonicClock()
+        else:
+            self.loop.ramp_down()
+            clock = self.loop.clock
+        self._drain_ring()
+        total = len(rots)
+        result: m.CalibrationDone
+        try:
+            cal, poses = auto_calibrate(
+                self.eng.rig, clock, rots,
+                progress=lambda done, n: self.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
+            )
+        except DegeneratePoseSetError as exc:
+            result = m.CalibrationDone(False, str(exc), name, total, float(exc.condition_number or math.inf),
+                                       math.nan, math.nan, [], None)
+        else:
+            reason = calibration_verdict(cal)
+            result = m.CalibrationDone(
+                reason == "", reason, name, len(poses), cal.condition_number, cal.rms_force_residual_n,
+                cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
+                cal.to_dict(),
+            )
+            if reason == "":
+                self.calibration = cal
+                self.loop.submit(SetCalibration(cal))
+        finally:
+            self.stats.reset()
+            self._stats_from_tick = self.loop.tick_count + 1
+            self._reanchor()
+            if real:
+                self.loop.start()
+        self.publish(result)
+
+
+def calibration_verdict(cal: PayloadCalibration) -> str:
+    """Empty if the calibration is acceptable, else the reason it is refused."""
+    if cal.condition_number > CALIBRATION_MAX_CONDITION:
+        return (f"condition number {cal.condition_number:.3g} is above {CALIBRATION_MAX_CONDITION:g}: the poses do not "
+                "vary the tool's orientation enough; use the recommended set")
+    if cal.rms_force_residual_n > CALIBRATION_MAX_RMS_FORCE_N:
+        return (f"RMS force residual {cal.rms_force_residual_n:.3g} N is above {CALIBRATION_MAX_RMS_FORCE_N:g} N: "
+                "a pose was in contact or the tool moved; check the tool hangs free and repeat")
+    return ""
+
+
+def list_resumable(db_path: str) -> list[dict[str, Any]]:
+    """Interrupted sessions of a database (none if the file does not exist yet)."""
+    if not db_path or not os.path.exists(db_path):
+        return []
+    db = StudyDatabase(db_path, readonly=True)
+    try:
+        out = []
+        for s in db.open_sessions():
+            out.append({
+                "session_id": s.session_id, "code": s.code, "kind": s.kind, "started_at": s.started_at,
+                "trials_done": len(db.trial_rows(s.session_id)), "trials_total": len(json.loads(s.schedule_json)),
+            })
+        return out
+    finally:
+        db.close()
+
+
+# -- the process --------------------------------------------------------------------------------
+class _Detached:
+    """Internal marker: the command pipe broke."""
+
+
+def host_main(config: HostConfig, conn: Any, events: Any) -> None:
+    """Entry point of the study engine process."""
+    # A pure-Python driver thread must not hold the GIL for the default 5 ms
+    # while the 1 kHz loop thread waits for it.
+    sys.setswitchinterval(0.0002)
+    publish = events.put
+    try:
+        engine = StudyEngine(config, publish)
+    except Exception as exc:  # noqa: BLE001 - reported to the GUI as one line
+        publish(m.CommandRefused("connect", str(exc)))
+        publish(m.EngineStopped(str(exc), {}))
+        return
+    cmds: queue.SimpleQueue[object] = queue.SimpleQueue()
+
+    def receive() -> None:
+        while True:
+            try:
+                msg = conn.recv()
+            except (EOFError, OSError):
+                cmds.put(_Detached())
+                return
+            cmds.put(msg)
+            if isinstance(msg, m.Shutdown):
+                return
+
+    threading.Thread(target=receive, name="engine-commands", daemon=True).start()
+    engine.start()
+    wait_s = 0.01 if config.clock == "real" else 0.0
+    detached = False
+    try:
+        while True:
+            try:
+                cmd = cmds.get(timeout=wait_s) if wait_s else cmds.get_nowait()
+            except queue.Empty:
+                cmd = None
+            if isinstance(cmd, _Detached):
+                detached = True
+                break
+            if isinstance(cmd, m.Shutdown):
+                break
+            if cmd is not None:
+                engine.handle(cmd)
+            engine.step()
+    finally:
+        reason = "the experimenter GUI went away (closed or crashed)" if detached else "the experimenter GUI closed"
+        engine.close(reason, detached=detached)
+        if detached:
+            events.cancel_join_thread()  # nobody reads the queue any more: do not block the exit on it
+        time.sleep(0.2)  # let a reader copy the last records before the segment goes
+        engine.release_ring()

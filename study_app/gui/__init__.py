@@ -1,0 +1,1 @@
+"""Qt windows of the experimenter app: layout and wiring only (behaviour is in :mod:`study_app.models`)."""

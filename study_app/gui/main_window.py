@@ -1,0 +1,275 @@
+"""The experimenter's window: layout and wiring of :class:`study_app.models.app.AppModel`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from PySide6.QtCore import QSettings, Qt, Slot
+from PySide6.QtGui import QAction, QKeySequence, QShortcut
+from PySide6.QtWidgets import (
+    QGroupBox, QHBoxLayout, QLabel, QMainWindow, QMessageBox, QPushButton, QSplitter, QTabWidget, QVBoxLayout, QWidget,
+)
+
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import HostConfig
+from study_app.gui.bridge import QtEngineBridge
+from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.participant_window import ParticipantWindow
+from study_app.gui.rig_view import RigWindow
+from study_app.gui.timers import tracked_timer
+from study_app.gui.widgets import QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.models.app import AppModel
+
+__all__ = ["ExperimenterWindow"]
+
+#: Plot refresh (pyqtgraph's pull-on-a-timer idiom), ms.
+PLOT_INTERVAL_MS = 33
+
+
+def _ask(parent: QWidget, title: str, text: str) -> bool:
+    return QMessageBox.question(parent, title, text) == QMessageBox.StandardButton.Yes
+
+
+class ExperimenterWindow(QMainWindow):
+    """Session setup and control, live plots, trial table, progress, device health.
+
+    Parameters
+    ----------
+    host
+        What the study engine builds (it is spawned in its own process).
+    settings
+        Where last-used settings live (QSettings).
+    db_path
+        Study database to preselect (else the last used one).
+    """
+
+    def __init__(self, host: HostConfig, settings: QSettings | None = None, db_path: str | None = None) -> None:
+        super().__init__()
+        self.setWindowTitle("haptic-study — experimenter")
+        self.settings = settings if settings is not None else QSettings("haptic-study", "gui")
+        #: Asked before destructive actions; tests replace it.
+        self.confirm: Callable[[str, str], bool] = lambda title, text: _ask(self, title, text)
+        self.bridge = QtEngineBridge(EngineClient(host), self)
+        self.model = AppModel(self.bridge.send)
+        self._restore_settings(db_path)
+        self._shut_down = False
+
+        self.setup_panel = QtSetupPanel(self.model.setup)
+        self.start_button = QPushButton("Start  [Space]")
+        self.pause_button = QPushButton("Pause")
+        self.resume_button = QPushButton("Resume")
+        self.abort_trial_button = QPushButton("Abort trial  [Esc]")
+        self.abort_session_button = QPushButton("Abort session")
+        self.calibrate_button = QPushButton("Calibration…")
+        self.participant_button = QPushButton("Participant screen")
+        self.rig_button = QPushButton("Simulated rig view")
+        self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
+        controls = QGroupBox("Control")
+        grid = QVBoxLayout(controls)
+        grid.addWidget(self.start_button)
+        pr = QHBoxLayout()
+        pr.addWidget(self.pause_button)
+        pr.addWidget(self.resume_button)
+        grid.addLayout(pr)
+        ab = QHBoxLayout()
+        ab.addWidget(self.abort_trial_button)
+        ab.addWidget(self.abort_session_button)
+        grid.addLayout(ab)
+        grid.addWidget(self.calibrate_button)
+        wr = QHBoxLayout()
+        wr.addWidget(self.participant_button)
+        wr.addWidget(self.rig_button)
+        grid.addLayout(wr)
+        left = QWidget()
+        ll = QVBoxLayout(left)
+        ll.addWidget(self.setup_panel)
+        ll.addWidget(controls)
+        ll.addStretch(1)
+        left.setMinimumWidth(340)
+        left.setMaximumWidth(460)
+
+        self.progress = QtProgress(self.model.session)
+        self.plots = QtForcePlots(self.model.plots, self.model.session)
+        self.trial_table = QtTrialTable(self.model.session.table)
+        self.health_panel = QtHealthPanel(self.model.health)
+        self.tabs = QTabWidget()
+        self.tabs.addTab(self.trial_table, "Trials")
+        self.tabs.addTab(self.health_panel, "Devices && health")
+        right = QSplitter(Qt.Orientation.Vertical)
+        top = QWidget()
+        tl = QVBoxLayout(top)
+        tl.setContentsMargins(0, 0, 0, 0)
+        tl.addWidget(self.progress)
+        tl.addWidget(self.plots, 1)
+        right.addWidget(top)
+        right.addWidget(self.tabs)
+        right.setSizes([560, 300])
+        split = QSplitter(Qt.Orientation.Horizontal)
+        split.addWidget(left)
+        split.addWidget(right)
+        split.setStretchFactor(1, 1)
+        self.setCentralWidget(split)
+        self.status = QLabel()
+        self.statusBar().addWidget(self.status, 1)
+
+        self.participant_window = ParticipantWindow(self.model.participant)
+        self.rig_window = RigWindow(self.model.rig, self.model.set_driver)
+        self.calibration_wizard = CalibrationWizard(self.model.calibration, self.model.calibrate)
+        self._build_menu()
+
+        # wiring
+        self.start_button.clicked.connect(self.start_session)
+        self.pause_button.clicked.connect(self.model.pause)
+        self.resume_button.clicked.connect(self.model.resume)
+        self.abort_trial_button.clicked.connect(self.abort_trial)
+        self.abort_session_button.clicked.connect(self.abort_session)
+        self.calibrate_button.clicked.connect(lambda: _show(self.calibration_wizard))
+        self.participant_button.clicked.connect(lambda: _show(self.participant_window))
+        self.rig_button.clicked.connect(lambda: _show(self.rig_window))
+        self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
+        self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
+        self.setup_panel.resume_button.clicked.connect(self.resume_selected)
+        self.setup_panel.db.editingFinished.connect(self.model.list_sessions)
+        # application-wide: the experimenter may have the rig view or the participant screen focused
+        for key, slot in ((Qt.Key.Key_Space, self.start_session), (Qt.Key.Key_Escape, self.abort_trial)):
+            sc = QShortcut(QKeySequence(key), self)
+            sc.setContext(Qt.ShortcutContext.ApplicationShortcut)
+            sc.activated.connect(slot)
+        self.model.actions_changed.connect(self._on_actions_changed)
+        self.model.session.changed.connect(self._on_session_changed)
+        self.model.error.connect(self._on_error)
+        self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
+        self.plot_timer = tracked_timer(self, PLOT_INTERVAL_MS, self._on_plot_timer, name="plot-refresh")
+        self._on_actions_changed()
+        self._on_session_changed()
+        self.resize(1400, 900)
+        self.bridge.start()
+        self.plot_timer.start()
+
+    # -- menus ---------------------------------------------------------------------------------------
+    def _build_menu(self) -> None:
+        view = self.menuBar().addMenu("&View")
+        for text, key, window in (
+            ("Participant screen", "Ctrl+P", self.participant_window),
+            ("Simulated rig", "Ctrl+R", self.rig_window),
+            ("Calibration wizard", "Ctrl+K", self.calibration_wizard),
+        ):
+            act = QAction(text, self)
+            act.setShortcut(QKeySequence(key))
+            act.triggered.connect(lambda _=False, w=window: _show(w))
+            view.addAction(act)
+
+    # -- engine events (GUI thread, queued from the monitor thread) -------------------------------------
+    @Slot(object)
+    def _on_engine_event(self, ev: object) -> None:
+        if isinstance(ev, m.EngineReady) and self.bridge.client.ring is not None:
+            self.model.attach_ring(self.bridge.client.ring)
+            self.model.list_sessions()
+        self.model.apply(ev)
+
+    def _on_plot_timer(self) -> None:
+        self.model.tick()
+        self.plots.refresh()
+
+    # -- actions -----------------------------------------------------------------------------------------
+    def start_session(self) -> None:
+        """Space: start a session from the setup form (or resume a paused one)."""
+        if self.model.can("resume") and self.model.session.state == "paused":
+            self.model.resume()
+            return
+        if self.model.session.running:
+            return
+        self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
+        if self.model.start():
+            self._save_settings()
+
+    def abort_trial(self) -> None:
+        """Esc: abort the running trial after confirmation."""
+        if self.model.can("abort_trial") and self.confirm(
+            "Abort trial", "Abort the running trial? It is stored as aborted and run again later."
+        ):
+            self.model.abort_trial()
+
+    def abort_session(self) -> None:
+        """Abort the session after confirmation."""
+        if self.model.can("abort_session") and self.confirm(
+            "Abort session", "Abort the whole session? The running trial is stored as aborted and the session ends."
+        ):
+            self.model.abort_session()
+
+    def resume_selected(self) -> None:
+        """Continue the interrupted session selected in the list."""
+        sid = self.setup_panel.selected_session()
+        if sid is not None and self.model.can("resume_session"):
+            self.model.resume_session(sid)
+
+    # -- views of state ------------------------------------------------------------------------------------
+    def _on_actions_changed(self) -> None:
+        can = self.model.can
+        self.start_button.setEnabled(can("start"))
+        self.pause_button.setEnabled(can("pause"))
+        self.resume_button.setEnabled(can("resume"))
+        self.abort_trial_button.setEnabled(can("abort_trial"))
+        self.abort_session_button.setEnabled(can("abort_session"))
+        self.setup_panel.resume_button.setEnabled(can("resume_session"))
+        self.setup_panel.setEnabled(not self.model.session.running)
+
+    def _on_session_changed(self) -> None:
+        self.status.setText(self.model.session.message)
+
+    def _on_error(self, title: str, text: str) -> None:
+        self.status.setText(f"{title}: {text}")
+        self.statusBar().setStyleSheet("color: #c81e1e;")
+
+    # -- settings and closing --------------------------------------------------------------------------------
+    def _restore_settings(self, db_path: str | None) -> None:
+        s = self.settings
+        self.model.setup.update(
+            db_path=db_path or str(s.value("setup/db_path", "") or ""),
+            kind=str(s.value("setup/kind", "experiment") or "experiment"),
+            protocol_path=str(s.value("setup/protocol_path", "") or ""),
+            seed=int(s.value("setup/seed", 0) or 0),
+        )
+        geom = s.value("window/geometry")
+        if geom is not None:
+            self.restoreGeometry(geom)
+
+    def _save_settings(self) -> None:
+        v = self.model.setup.values
+        s = self.settings
+        s.setValue("setup/db_path", v.db_path)
+        s.setValue("setup/kind", v.kind)
+        s.setValue("setup/protocol_path", v.protocol_path)
+        s.setValue("setup/seed", v.seed)
+        s.setValue("window/geometry", self.saveGeometry())
+        s.sync()
+
+    def shutdown(self) -> None:
+        """Stop refreshing, let the engine close the session's records and exit, close every window."""
+        if self._shut_down:
+            return
+        self._shut_down = True
+        self.plot_timer.stop()
+        self.model.plots.detach()
+        self.bridge.shutdown()
+        for w in (self.participant_window, self.rig_window, self.calibration_wizard):
+            w.close()
+            w.deleteLater()
+
+    def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        if self.model.session.running and not self.confirm(
+            "Quit", "A session is running. Quit anyway? The running trial is stored as aborted and the session "
+                    "can be resumed later."
+        ):
+            event.ignore()
+            return
+        self._save_settings()
+        self.shutdown()
+        event.accept()
+
+
+def _show(w: QWidget) -> None:
+    w.show()
+    w.raise_()
+    w.activateWindow()

@@ -1,0 +1,90 @@
+"""The participant's screen (a second monitor): target word, rest screen, and in training a force gauge."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import QRectF, Qt
+from PySide6.QtGui import QColor, QFont, QKeySequence, QPainter, QPen, QShortcut
+from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+
+from study_app.models.participant import ParticipantScreen, ParticipantScreenModel
+
+__all__ = ["ForceGauge", "ParticipantWindow"]
+
+
+class ForceGauge(QWidget):
+    """A horizontal bar 0–3 N with the target band; only ever shown in training sessions."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setMinimumHeight(90)
+        self.force_n = 0.0
+        self.band: tuple[float, float] | None = None
+        self.max_n = 3.0
+
+    def set_state(self, force_n: float, band: tuple[float, float] | None, max_n: float) -> None:
+        self.force_n, self.band, self.max_n = force_n, band, max_n
+        self.update()
+
+    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        w, h = self.width(), self.height()
+        x0, x1, y0, bar_h = 40.0, w - 40.0, 20.0, h - 50.0
+        scale = (x1 - x0) / self.max_n
+        p.fillRect(QRectF(x0, y0, x1 - x0, bar_h), QColor(45, 45, 52))
+        if self.band is not None:
+            lo, hi = self.band
+            p.fillRect(QRectF(x0 + lo * scale, y0, (hi - lo) * scale, bar_h), QColor(60, 170, 90))
+        f = min(max(self.force_n, 0.0), self.max_n)
+        inside = self.band is not None and self.band[0] <= self.force_n <= self.band[1]
+        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4), QColor(250, 250, 250) if inside else QColor(240, 180, 40))
+        p.setPen(QPen(QColor(200, 200, 200), 1))
+        p.setFont(QFont("Sans", 11))
+        for k in range(int(self.max_n) + 1):
+            x = x0 + k * scale
+            p.drawLine(int(x), int(y0 + bar_h), int(x), int(y0 + bar_h + 6))
+            p.drawText(int(x - 15), int(y0 + bar_h + 8), 30, 20, Qt.AlignmentFlag.AlignHCenter, f"{k} N")
+        p.end()
+
+
+class ParticipantWindow(QWidget):
+    """Layout of the participant screen; F11 or double-click toggles full screen."""
+
+    def __init__(self, model: ParticipantScreenModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent, Qt.WindowType.Window)
+        self.model = model
+        self.setWindowTitle("Participant")
+        self.setStyleSheet("background-color: #16161a; color: #f2f2f2;")
+        self.headline = QLabel()
+        self.headline.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.headline.setStyleSheet("font-size: 96px; font-weight: 700; letter-spacing: 6px;")
+        self.subline = QLabel()
+        self.subline.setAlignment(Qt.AlignmentFlag.AlignCenter)
+        self.subline.setStyleSheet("font-size: 22px; color: #b8b8c0;")
+        self.gauge = ForceGauge()
+        lay = QVBoxLayout(self)
+        lay.addStretch(2)
+        lay.addWidget(self.headline)
+        lay.addWidget(self.subline)
+        lay.addStretch(1)
+        lay.addWidget(self.gauge)
+        lay.addStretch(1)
+        QShortcut(QKeySequence(Qt.Key.Key_F11), self, activated=self.toggle_fullscreen)
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def toggle_fullscreen(self) -> None:
+        """Full screen on the participant's monitor, or back."""
+        self.showNormal() if self.isFullScreen() else self.showFullScreen()
+
+    def mouseDoubleClickEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        self.toggle_fullscreen()
+
+    def _on_changed(self) -> None:
+        s: ParticipantScreen = self.model.screen
+        self.headline.setText(s.headline)
+        self.subline.setText(s.subline)
+        show = s.show_gauge and s.gauge_force_n is not None and self.model.gauge_allowed
+        self.gauge.setVisible(show)
+        if show:
+            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]

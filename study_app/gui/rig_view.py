@@ -1,0 +1,146 @@
+"""The simulated rig's 2-D side view, and the choice of who drives the stylus."""
+
+from __future__ import annotations
+
+import time
+
+from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
+from PySide6.QtWidgets import QButtonGroup, QHBoxLayout, QLabel, QRadioButton, QVBoxLayout, QWidget
+
+from study_app.models.rig import RigViewModel
+
+__all__ = ["RigCanvas", "RigWindow"]
+
+#: Shown span: x ±30 mm, z from −12 mm (tissue) to +24 mm (above the surface).
+_X_MM = 30.0
+_Z_LO, _Z_HI = -12.0, 24.0
+#: Shortest interval between manual targets sent to the engine (the loop needs no more).
+_SEND_INTERVAL_S = 0.02
+
+
+class RigCanvas(QWidget):
+    """Paints tissue and instrument; in manual mode the mouse sets where the tip should go."""
+
+    def __init__(self, model: RigViewModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model = model
+        self.setMinimumSize(480, 320)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self._last_send = 0.0
+        model.changed.connect(self.update)
+
+    # -- geometry --------------------------------------------------------------------------------
+    def _scale(self) -> float:
+        return min(self.width() / (2 * _X_MM), self.height() / (_Z_HI - _Z_LO))
+
+    def to_px(self, x_mm: float, z_mm: float) -> QPointF:
+        s = self._scale()
+        return QPointF(self.width() / 2 + x_mm * s, self.height() - (z_mm - _Z_LO) * s)
+
+    def to_z_mm(self, y_px: float) -> float:
+        return _Z_LO + (self.height() - y_px) / self._scale()
+
+    # -- painting --------------------------------------------------------------------------------
+    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        m = self.model
+        p = QPainter(self)
+        p.setRenderHint(QPainter.RenderHint.Antialiasing)
+        p.fillRect(self.rect(), QColor(238, 242, 247))
+        x, z = m.surface_profile(_X_MM + 5)
+        poly = QPolygonF([self.to_px(float(a), float(b)) for a, b in zip(x, z)])
+        poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
+        poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
+        top = self.to_px(0, 0).y()
+        grad = QLinearGradient(0, top, 0, self.height())
+        grad.setColorAt(0.0, QColor(214, 120, 120))
+        grad.setColorAt(1.0, QColor(150, 60, 70))
+        p.setBrush(QBrush(grad))
+        p.setPen(QPen(QColor(120, 40, 50), 2))
+        p.drawPolygon(poly)
+        # the instrument: a shaft down to the tip, jaws closed
+        tip = self.to_px(0.0, max(m.tip_z_mm, -m.indentation_mm))
+        s = self._scale()
+        shaft = QPainterPath()
+        shaft.addRoundedRect(QRectF(tip.x() - 2.5 * s, tip.y() - 60 * s, 5 * s, 57 * s), 2, 2)
+        p.setBrush(QColor(150, 155, 165))
+        p.setPen(QPen(QColor(70, 70, 80), 1.5))
+        p.drawPath(shaft)
+        jaw = QPolygonF([QPointF(tip.x() - 2.5 * s, tip.y() - 4 * s), QPointF(tip.x() + 2.5 * s, tip.y() - 4 * s), tip])
+        p.setBrush(QColor(90, 95, 105))
+        p.drawPolygon(jaw)
+        if m.driver == "manual":
+            target_z = m.manual_y_m * 1e3 + (m.home_z_m - m.surface_z_m) * 1e3
+            ty = self.to_px(0, target_z).y()
+            p.setPen(QPen(QColor(30, 90, 220), 1.5, Qt.PenStyle.DashLine))
+            p.drawLine(QPointF(tip.x() - 12 * s, ty), QPointF(tip.x() + 12 * s, ty))
+        p.setPen(QColor(40, 40, 50))
+        p.setFont(QFont("Sans", 10))
+        text = (f"tip {m.tip_z_mm:+5.1f} mm · indentation {m.indentation_mm:4.2f} mm · "
+                f"contact force {m.contact_force_n:4.2f} N (ground truth)")
+        p.drawText(QRectF(8, 6, self.width() - 16, 20), Qt.AlignmentFlag.AlignLeft, text)
+        if m.driver == "manual":
+            p.drawText(QRectF(8, 24, self.width() - 16, 20), Qt.AlignmentFlag.AlignLeft,
+                       "manual: drag vertically to move the tip · ↑/↓ 0.5 mm steps · Home: lift off")
+        p.end()
+
+    # -- manual driving --------------------------------------------------------------------------
+    def _target_from_mouse(self, y_px: float, force: bool = False) -> None:
+        if self.model.driver != "manual":
+            return
+        now = time.monotonic()
+        if not force and now - self._last_send < _SEND_INTERVAL_S:
+            return
+        self._last_send = now
+        self.model.set_manual_target(self.model.target_for_tip_mm(self.to_z_mm(y_px)))
+        self.update()
+
+    def mousePressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        self._target_from_mouse(event.position().y(), force=True)
+
+    def mouseMoveEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        if event.buttons() & Qt.MouseButton.LeftButton:
+            self._target_from_mouse(event.position().y())
+
+    def keyPressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        if self.model.driver == "manual" and event.key() in (Qt.Key.Key_Up, Qt.Key.Key_Down, Qt.Key.Key_Home):
+            if event.key() == Qt.Key.Key_Home:
+                self.model.set_manual_target(0.0)
+            else:
+                self.model.step_manual(1 if event.key() == Qt.Key.Key_Up else -1)
+            self.update()
+            return
+        super().keyPressEvent(event)
+
+
+class RigWindow(QWidget):
+    """Side view plus the driver choice."""
+
+    def __init__(self, model: RigViewModel, on_driver, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(parent, Qt.WindowType.Window)
+        self.setWindowTitle("Simulated rig — side view")
+        self.model = model
+        self.canvas = RigCanvas(model)
+        self.autopilot = QRadioButton("Simulated participant (autopilot)")
+        self.manual = QRadioButton("Me — mouse / keyboard")
+        self.group = QButtonGroup(self)
+        self.group.addButton(self.autopilot)
+        self.group.addButton(self.manual)
+        self.autopilot.setChecked(model.driver == "autopilot")
+        self.manual.setChecked(model.driver == "manual")
+        self.autopilot.toggled.connect(lambda on: on and on_driver("autopilot"))
+        self.manual.toggled.connect(lambda on: on and on_driver("manual"))
+        row = QHBoxLayout()
+        row.addWidget(QLabel("Stylus driven by:"))
+        row.addWidget(self.autopilot)
+        row.addWidget(self.manual)
+        row.addStretch(1)
+        lay = QVBoxLayout(self)
+        lay.addLayout(row)
+        lay.addWidget(self.canvas, 1)
+        model.changed.connect(self._on_changed)
+
+    def _on_changed(self) -> None:
+        want = self.model.driver == "manual"
+        if self.manual.isChecked() != want:
+            (self.manual if want else self.autopilot).setChecked(True)

@@ -1,0 +1,270 @@
+"""Commands to and events from the study engine process (small typed records, no strings as topics).
+
+The GUI sends a command over the engine's pipe; the engine publishes events
+on its queue.  Both sides import this module, so every message is a frozen
+dataclass that pickles across the process boundary.  Times called ``t_s``
+are sample times of the loop records (the ``t_s`` column of the ring), so a
+display can relate an event to the plotted samples whatever the clock speed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
+    "EngineFault", "EngineReady", "EngineStopped", "Health", "ListSessions", "ManualTarget", "OperatorStop",
+    "Pause", "PhaseEntered", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
+    "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
+    "DRIVER_MODES", "POSE_SETS",
+]
+
+#: Who holds the simulated stylus.
+DRIVER_MODES = ("autopilot", "manual")
+#: Calibration pose sets offered by the wizard (see :func:`study_app.engine_host.pose_set`).
+POSE_SETS = ("recommended", "quick", "tool-down only")
+
+
+# -- commands (GUI → engine) --------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class StartSession:
+    """Create a session in the database (schedule and calibration stored first) and run it."""
+
+    db_path: str
+    code: str
+    kind: str  # "training" | "experiment"
+    protocol_path: str | None
+    seed: int
+    participant_number: int
+
+
+@dataclass(frozen=True, slots=True)
+class ResumeSession:
+    """Continue an interrupted session at its first unfinished trial."""
+
+    db_path: str
+    session_id: int
+
+
+@dataclass(frozen=True, slots=True)
+class ListSessions:
+    """List the interrupted (resumable) sessions of a database."""
+
+    db_path: str
+
+
+@dataclass(frozen=True, slots=True)
+class Pause:
+    """Hold before the next trial."""
+
+
+@dataclass(frozen=True, slots=True)
+class Resume:
+    """Continue after a pause."""
+
+
+@dataclass(frozen=True, slots=True)
+class AbortTrial:
+    """Abort the running trial (stored as aborted, re-queued)."""
+
+    reason: str = "aborted by the experimenter"
+
+
+@dataclass(frozen=True, slots=True)
+class AbortSession:
+    """Abort the running trial and end the session."""
+
+    reason: str = "aborted by the experimenter"
+
+
+@dataclass(frozen=True, slots=True)
+class ResetFaults:
+    """Clear latched faults whose condition has gone away."""
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorStop:
+    """Latch an operator stop (force ramps to zero until reset)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Calibrate:
+    """Run the gravity/bias identification with one of :data:`POSE_SETS`."""
+
+    pose_set: str = "recommended"
+
+
+@dataclass(frozen=True, slots=True)
+class SetDriver:
+    """Hand the simulated stylus to the simulated participant or to a person."""
+
+    mode: str
+
+
+@dataclass(frozen=True, slots=True)
+class ManualTarget:
+    """Where a person wants the stylus: the arm's equilibrium, m along the Touch's +y (pressing < 0)."""
+
+    y_m: float
+
+
+@dataclass(frozen=True, slots=True)
+class ResetStats:
+    """Restart the loop-timing statistics (benchmarks)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Shutdown:
+    """Finish the current trial's records, ramp the force to zero and exit."""
+
+
+# -- events (engine → GUI) ----------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class EngineReady:
+    """The rig is connected, the loop runs; ``ring_name`` is the shared sample ring."""
+
+    ring_name: str
+    rig: str
+    clock: str
+    calibration: dict[str, Any]
+    surface_z_m: float
+    tip_home_m: tuple[float, float, float]
+    driver: str
+
+
+@dataclass(frozen=True, slots=True)
+class CommandRefused:
+    """A command could not be carried out; ``message`` names what and why."""
+
+    command: str
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class SessionsListed:
+    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_done, trials_total."""
+
+    db_path: str
+    sessions: list[dict[str, Any]]
+
+
+@dataclass(frozen=True, slots=True)
+class SessionStarted:
+    """A session is stored and running."""
+
+    session_id: int
+    code: str
+    kind: str
+    trials_total: int
+    start_position: int
+    tolerance_fraction: float
+    max_trial_s: float
+    pause_s: float
+    cue_s: float
+    live_force_aid: bool
+    schedule: list[dict[str, Any]] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class TrialStarted:
+    """The cue of a trial (the participant screen shows its word)."""
+
+    t_s: float
+    trial_index: int
+    position: int  # 1-based position in the schedule
+    trials_total: int
+    target_label: str
+    target_force_n: float
+    haptic_mode: str
+
+
+@dataclass(frozen=True, slots=True)
+class PhaseEntered:
+    """The trial machine entered ``phase`` (idle, cued, active, pause) at sample time ``t_s``."""
+
+    t_s: float
+    trial_index: int
+    phase: str
+
+
+@dataclass(frozen=True, slots=True)
+class TrialEnded:
+    """A trial's summary row was stored (``row`` has the ``trials`` table's columns)."""
+
+    t_s: float
+    row: dict[str, Any]
+
+
+@dataclass(frozen=True, slots=True)
+class SessionEnded:
+    """The session ended (``status``: completed or aborted; or ``interrupted`` when left resumable)."""
+
+    session_id: int
+    status: str
+    reason: str
+    completed: int
+    aborted: int
+    successes: int
+
+
+@dataclass(frozen=True, slots=True)
+class CalibrationProgress:
+    """Pose ``done`` of ``total`` measured."""
+
+    done: int
+    total: int
+    label: str
+
+
+@dataclass(frozen=True, slots=True)
+class CalibrationDone:
+    """Result of a calibration run: installed if ``accepted``, else ``reason`` says why not."""
+
+    accepted: bool
+    reason: str
+    pose_set: str
+    n_poses: int
+    condition_number: float
+    rms_force_residual_n: float
+    rms_torque_residual_nm: float
+    residuals: list[tuple[str, float, float]]
+    calibration: dict[str, Any] | None
+
+
+@dataclass(frozen=True, slots=True)
+class EngineFault:
+    """The loop latched (``kind='fault'``) or cleared (``'faults_reset'``) faults."""
+
+    t_s: float
+    kind: str
+    faults: int
+    detail: str
+
+
+@dataclass(frozen=True, slots=True)
+class Health:
+    """Loop timing since the last stats reset (µs) and the engine's state, published about twice a second."""
+
+    loop_rate_hz: float
+    period_p50_us: float
+    period_p99_us: float
+    abs_dev_p99_us: float
+    periods_over_2ms: int
+    missed_slots: int
+    ticks: int
+    faults: int
+    haptic_on: bool
+    driver: str
+    session_running: bool
+    paused: bool
+    abs_dev_p50_us: float = float("nan")
+    period_max_us: float = float("nan")
+
+
+@dataclass(frozen=True, slots=True)
+class EngineStopped:
+    """The engine has ramped the force to zero and is exiting."""
+
+    reason: str
+    stats: dict[str, float]

@@ -1,0 +1,96 @@
+"""The calibration wizard's state: pose set, progress, and the verdict with its reason."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from study_app import messages as m
+from study_app.models import Emitter
+
+__all__ = ["CalibrationModel"]
+
+_DESCRIPTIONS = {
+    "recommended": "24 poses tilted up to 60° in every direction (science.md §1.2) — use this one.",
+    "quick": "6 well-spread poses: a quick check, less averaging of noise.",
+    "tool-down only": "6 poses that only turn the tool about the vertical: gravity never changes in the sensor "
+                      "frame, so the payload cannot be identified. The wizard refuses it and says why.",
+}
+
+
+@dataclass
+class CalibrationModel:
+    """``state`` ∈ {idle, running, accepted, refused}; the active calibration comes from the engine."""
+
+    pose_set: str = "recommended"
+    state: str = "idle"
+    done: int = 0
+    total: int = 0
+    result: m.CalibrationDone | None = None
+    active: dict[str, object] | None = None
+    changed: Emitter = field(default_factory=Emitter)
+
+    @staticmethod
+    def describe(pose_set: str) -> str:
+        """What a pose set is for."""
+        return _DESCRIPTIONS[pose_set]
+
+    def set_pose_set(self, name: str) -> None:
+        """Choose one of :data:`study_app.messages.POSE_SETS`."""
+        if name not in m.POSE_SETS:
+            raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.POSE_SETS)}")
+        self.pose_set = name
+        self.changed.emit()
+
+    def command(self) -> m.Calibrate:
+        """Start a run (the engine answers with progress and a result)."""
+        self.state, self.done, self.total, self.result = "running", 0, 0, None
+        self.changed.emit()
+        return m.Calibrate(self.pose_set)
+
+    def apply(self, ev: object) -> None:
+        """Update from engine events."""
+        if isinstance(ev, m.EngineReady):
+            self.active = ev.calibration
+        elif isinstance(ev, m.CalibrationProgress):
+            self.state, self.done, self.total = "running", ev.done, ev.total
+        elif isinstance(ev, m.CalibrationDone):
+            self.result = ev
+            self.state = "accepted" if ev.accepted else "refused"
+            if ev.accepted:
+                self.active = ev.calibration
+        elif isinstance(ev, m.CommandRefused) and ev.command == "Calibrate":
+            self.state = "refused"
+            self.result = m.CalibrationDone(False, ev.message, self.pose_set, 0, math.nan, math.nan, math.nan, [], None)
+        else:
+            return
+        self.changed.emit()
+
+    def verdict(self) -> str:
+        """One line: accepted (stored with the next session) or refused with the reason."""
+        r = self.result
+        if self.state == "running":
+            return f"measuring pose {self.done} of {self.total or '…'} — keep the tool clear of the tissue"
+        if r is None:
+            return "Run the pose set to identify the tool's weight, centre of mass and the sensor bias."
+        if r.accepted:
+            return "Accepted: installed in the force path and stored with the next session."
+        return f"Refused — the previous calibration stays in use. Reason: {r.reason}"
+
+    def summary(self) -> list[tuple[str, str]]:
+        """Figures of the last result (label, value)."""
+        r = self.result
+        if r is None:
+            return []
+        out = [("Poses", str(r.n_poses)), ("Condition number", _fmt(r.condition_number, "{:.3g}"))]
+        out.append(("RMS force residual", _fmt(r.rms_force_residual_n, "{:.4f} N")))
+        out.append(("RMS torque residual", _fmt(r.rms_torque_residual_nm, "{:.5f} N·m")))
+        cal = r.calibration
+        if cal is not None:
+            out.append(("Payload mass", f"{float(cal['mass_kg']):.4f} kg"))  # type: ignore[arg-type]
+            out.append(("Model", str(cal["model"])))
+        return out
+
+
+def _fmt(v: float, f: str) -> str:
+    return "–" if not math.isfinite(v) else f.format(v)

@@ -1,0 +1,120 @@
+"""Live plot data pulled from the sample ring: a 10 s window, peak-downsampled for drawing.
+
+The GUI pulls at ~30 Hz (pyqtgraph's idiom: producers never push); each pull
+copies only the records written since the last one.  Curves as in the paper's
+Fig. 6: force magnitude raw (red), compensated (blue) and rendered (green);
+a second plot shows the compensated components.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["PlotModel", "peak_downsample"]
+
+_F = npt.NDArray[np.float64]
+
+
+def peak_downsample(t: _F, y: _F, bins: int) -> tuple[_F, _F]:
+    """Keep each bin's minimum and maximum (in time order), so spikes survive downsampling.
+
+    Returns at most ``2 * bins`` points; input shorter than that is returned as is.
+    """
+    n = len(y)
+    if n <= 2 * bins or bins < 1:
+        return t, y
+    per = n // bins
+    m = per * bins
+    ys = y[n - m:].reshape(bins, per)
+    ts = t[n - m:].reshape(bins, per)
+    i_min = np.argmin(ys, axis=1)
+    i_max = np.argmax(ys, axis=1)
+    first = np.minimum(i_min, i_max)
+    second = np.maximum(i_min, i_max)
+    rows = np.arange(bins)
+    t_out = np.empty(2 * bins)
+    y_out = np.empty(2 * bins)
+    t_out[0::2], t_out[1::2] = ts[rows, first], ts[rows, second]
+    y_out[0::2], y_out[1::2] = ys[rows, first], ys[rows, second]
+    return t_out, y_out
+
+
+class PlotModel:
+    """Rolling window of the ring's newest records.
+
+    Parameters
+    ----------
+    window_s
+        Seconds of sample time shown.
+    rate_hz
+        Nominal record rate (sizes the buffer).
+    bins
+        Peak-downsampling bins per curve (~ the plot's width in pixels).
+    """
+
+    SERIES = ("raw_n", "comp_n", "render_n", "comp_fx", "comp_fy", "comp_fz", "force_n")
+
+    def __init__(self, window_s: float = 10.0, rate_hz: float = 1000.0, bins: int = 600) -> None:
+        self.window_s = window_s
+        self.bins = bins
+        self.capacity = int(window_s * rate_hz)
+        self.t = np.empty(0)
+        self.data: dict[str, _F] = {k: np.empty(0) for k in self.SERIES}
+        self.ring: object | None = None
+        self.cursor = 0
+        self.last_row: np.void | None = None
+        self.new_rows: np.ndarray = np.empty(0)
+        self.lost = 0
+
+    def attach(self, ring: object) -> None:
+        """Read from this ring (anything with ``read_since`` / ``write_count``), starting with its last window."""
+        self.ring = ring
+        self.cursor = max(0, ring.write_count - self.capacity)  # type: ignore[attr-defined]
+
+    def detach(self) -> None:
+        """Stop reading (the engine is going away)."""
+        self.ring = None
+
+    def pull(self) -> int:
+        """Copy what is new; returns the number of new records."""
+        ring = self.ring
+        if ring is None:
+            self.new_rows = np.empty(0)
+            return 0
+        res = ring.read_since(self.cursor)  # type: ignore[attr-defined]
+        self.cursor = res.cursor
+        self.lost += res.lost
+        rows = res.rows
+        self.new_rows = rows
+        n_new = len(rows)
+        if n_new == 0:
+            return 0
+        rows = rows[-self.capacity:]
+        self.last_row = rows[-1]
+        new = {
+            "raw_n": np.hypot(np.hypot(rows["raw_fx"], rows["raw_fy"]), rows["raw_fz"]),
+            "comp_n": np.hypot(np.hypot(rows["filt_fx"], rows["filt_fy"]), rows["filt_fz"]),
+            "render_n": np.hypot(np.hypot(rows["render_fx"], rows["render_fy"]), rows["render_fz"]),
+            "comp_fx": rows["filt_fx"], "comp_fy": rows["filt_fy"], "comp_fz": rows["filt_fz"],
+            "force_n": rows["force_n"],
+        }
+        t_new = np.asarray(rows["t_s"], dtype=np.float64)
+        t = np.concatenate((self.t, t_new))
+        keep = t >= t[-1] - self.window_s
+        keep[: max(0, len(t) - self.capacity)] = False
+        self.t = t[keep]
+        for k, v in new.items():
+            self.data[k] = np.concatenate((self.data[k], np.asarray(v, dtype=np.float64)))[keep]
+        return n_new
+
+    @property
+    def latest_t_s(self) -> float:
+        """Sample time of the newest record (0 before any)."""
+        return float(self.t[-1]) if len(self.t) else 0.0
+
+    def curve(self, name: str) -> tuple[_F, _F]:
+        """(time relative to the newest sample, values), peak-downsampled."""
+        if len(self.t) == 0:
+            return np.empty(0), np.empty(0)
+        return peak_downsample(self.t - self.t[-1], self.data[name], self.bins)

@@ -1,0 +1,169 @@
+"""The running session as the experimenter sees it: state, progress and the trial table."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from study_app import messages as m
+from study_app.models import Emitter
+
+__all__ = ["SessionModel", "TrialTable", "TRIAL_COLUMNS"]
+
+#: Columns of the live trial table.
+TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)")
+
+
+def _num(v: Any, fmt: str = "{:.2f}") -> str:
+    return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+@dataclass
+class TrialTable:
+    """Finished trials, filled live from :class:`study_app.messages.TrialEnded` rows."""
+
+    rows: list[dict[str, Any]] = field(default_factory=list)
+    row_added: Emitter = field(default_factory=Emitter)
+    cleared: Emitter = field(default_factory=Emitter)
+
+    def add(self, row: dict[str, Any]) -> None:
+        """Append a finished trial."""
+        self.rows.append(dict(row))
+        self.row_added.emit(len(self.rows) - 1)
+
+    def clear(self) -> None:
+        """Forget all rows (a new session)."""
+        self.rows.clear()
+        self.cleared.emit()
+
+    @staticmethod
+    def cells(row: dict[str, Any]) -> tuple[str, ...]:
+        """The displayed text of a row, in :data:`TRIAL_COLUMNS` order."""
+        outcome = str(row["outcome"])
+        if row.get("abort_reason"):
+            outcome += f" ({row['abort_reason']})"
+        return (
+            str(int(row["trial_index"]) + 1),
+            f"{row['target_label']} {row['target_force_n']:g} N",
+            "haptics ON" if row["haptic_mode"] == "on" else "haptics OFF",
+            outcome,
+            _num(row.get("tct_s")),
+            _num(row.get("rmse_n"), "{:.3f}"),
+            _num(row.get("max_ae_n"), "{:.3f}"),
+        )
+
+
+@dataclass
+class SessionModel:
+    """Session state from engine events, and the progress line from the newest sample time.
+
+    ``state`` ∈ {connecting, ready, running, paused, ended, stopped, failed}.
+    """
+
+    state: str = "connecting"
+    message: str = "starting the engine …"
+    session: m.SessionStarted | None = None
+    trial: m.TrialStarted | None = None
+    phase: str = "idle"
+    pause_until_s: float | None = None
+    paused_requested: bool = False
+    completed: int = 0
+    aborted: int = 0
+    latest_t_s: float = 0.0
+    table: TrialTable = field(default_factory=TrialTable)
+    changed: Emitter = field(default_factory=Emitter)
+
+    # -- events -------------------------------------------------------------------------------------
+    def apply(self, ev: object) -> None:
+        """Update from one engine event."""
+        if isinstance(ev, m.EngineReady):
+            self.state, self.message = "ready", f"engine ready ({ev.rig} rig, {ev.clock} clock)"
+        elif isinstance(ev, m.SessionStarted):
+            self.session, self.trial, self.phase = ev, None, "idle"
+            self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}"
+            self.completed = self.aborted = 0
+            self.paused_requested = False
+            self.pause_until_s = None
+            self.table.clear()
+        elif isinstance(ev, m.TrialStarted):
+            self.trial, self.phase, self.pause_until_s = ev, "active", None
+            self.latest_t_s = max(self.latest_t_s, ev.t_s)
+        elif isinstance(ev, m.PhaseEntered):
+            self.phase = ev.phase
+            if ev.phase == "pause" and self.session is not None:
+                self.pause_until_s = ev.t_s + self.session.pause_s
+        elif isinstance(ev, m.TrialEnded):
+            self.table.add(ev.row)
+            if ev.row["outcome"] == "aborted":
+                self.aborted += 1
+            else:
+                self.completed += 1
+            if self.session is not None:
+                total = int(ev.row.get("trials_total", self.session.trials_total))
+                self.session = _with_total(self.session, total)
+        elif isinstance(ev, m.SessionEnded):
+            self.state = "ended"
+            self.message = f"session {ev.session_id} {ev.status}" + (f": {ev.reason}" if ev.reason else "")
+            self.trial, self.phase = None, "idle"
+        elif isinstance(ev, m.Health):
+            if self.state in ("running", "paused") and ev.session_running:
+                self.state = "paused" if ev.paused else "running"
+        elif isinstance(ev, m.EngineStopped):
+            self.state, self.message = "stopped", f"engine stopped: {ev.reason}"
+        elif isinstance(ev, m.CommandRefused) and ev.command == "connect":
+            self.state, self.message = "failed", ev.message
+        else:
+            return
+        self.changed.emit()
+
+    def set_time(self, t_s: float) -> None:
+        """The newest sample time from the ring (drives the countdowns)."""
+        if t_s != self.latest_t_s:
+            self.latest_t_s = t_s
+            self.changed.emit()
+
+    # -- what the progress line shows --------------------------------------------------------------------
+    @property
+    def running(self) -> bool:
+        """A session is running (possibly paused)."""
+        return self.state in ("running", "paused")
+
+    def progress_text(self) -> str:
+        """``trial k of N · time left`` or the pause countdown, or the state."""
+        s = self.session
+        if s is None or not self.running:
+            return self.message
+        done = self.completed + self.aborted
+        if self.phase in ("active", "cued") and self.trial is not None:
+            left = max(0.0, s.max_trial_s - (self.latest_t_s - self.trial.t_s))
+            return (f"trial {self.trial.position} of {s.trials_total} · {self.trial.target_label} · "
+                    f"haptics {self.trial.haptic_mode.upper()} · {left:4.1f} s left")
+        if self.state == "paused":
+            return f"paused after {done} of {s.trials_total} trials"
+        if self.phase == "pause" and self.pause_until_s is not None:
+            left = max(0.0, self.pause_until_s - self.latest_t_s)
+            return f"{done} of {s.trials_total} trials done · next trial in {left:3.1f} s"
+        return f"{done} of {s.trials_total} trials done"
+
+    def fraction_done(self) -> float:
+        """Share of the schedule finished (0–1)."""
+        s = self.session
+        if s is None or s.trials_total == 0:
+            return 0.0
+        return min(1.0, (self.completed + self.aborted) / s.trials_total)
+
+    def band(self) -> tuple[float, float] | None:
+        """The current target band (N) while a trial is active, else None."""
+        if self.trial is None or self.session is None or self.phase != "active":
+            return None
+        f, tol = self.trial.target_force_n, self.session.tolerance_fraction
+        return (f * (1 - tol), f * (1 + tol))
+
+
+def _with_total(s: m.SessionStarted, total: int) -> m.SessionStarted:
+    if total == s.trials_total:
+        return s
+    from dataclasses import replace
+
+    return replace(s, trials_total=total)

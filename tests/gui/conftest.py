@@ -1,0 +1,65 @@
+"""GUI tests run offscreen; every test must leave no thread, tracked QTimer or child process behind."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")  # before anything imports Qt
+
+import multiprocessing
+import threading
+import time
+
+import pytest
+
+SHORT_PROTOCOL = """
+name = "short GUI test protocol"
+[[targets]]
+label = "GENTLE"
+force_n = 0.6
+[design]
+modes = ["on", "off"]
+trials_per_cell = 1
+[trial]
+hold_s = 0.3
+max_trial_s = 2.5
+pause_s = 0.3
+cue_s = 0.3
+[training]
+enabled = true
+seconds_per_target_per_mode = 2.0
+live_force_aid = true
+"""
+
+
+@pytest.fixture
+def short_protocol(tmp_path):
+    """A 2-trial protocol with short hold, cap and pause."""
+    p = tmp_path / "short.toml"
+    p.write_text(SHORT_PROTOCOL, encoding="utf-8")
+    return str(p)
+
+
+@pytest.fixture(autouse=True)
+def no_leaks():
+    """Fail a test that leaves a thread, a running tracked QTimer or a child process behind."""
+    before = set(threading.enumerate())
+    yield
+    # give just-finished threads a moment to be reaped (bounded; nothing waits on the engine here)
+    end = time.monotonic() + 5.0
+    while True:
+        threads = [t for t in threading.enumerate() if t not in before and t.is_alive()]
+        children = multiprocessing.active_children()
+        timers: list[str] = []
+        try:
+            from study_app.gui.timers import active_timers
+
+            timers = active_timers()
+        except ImportError:  # a model-only test never loaded Qt
+            pass
+        if not (threads or children or timers) or time.monotonic() > end:
+            break
+        time.sleep(0.02)
+    assert not threads, f"threads left running: {[t.name for t in threads]}"
+    assert not children, f"child processes left running: {children}"
+    assert not timers, f"QTimers left running: {timers}"

@@ -1,0 +1,196 @@
+"""The study engine: in-process on the virtual clock, and as a process whose controller goes away."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+
+import pytest
+
+from pipeline.devices import Fault
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import HostConfig, StudyEngine
+
+
+@pytest.fixture
+def engine():
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e.start()
+    yield e, events
+    if not e.closed:
+        e.close("test over")
+    e.release_ring()
+
+
+def run_until(e: StudyEngine, pred, max_steps: int = 20_000) -> None:
+    for _ in range(max_steps):
+        if pred():
+            return
+        e.step()
+    raise AssertionError("condition not reached")
+
+
+def of(events, kind):
+    return [ev for ev in events if isinstance(ev, kind)]
+
+
+def db_rows(path, sql, *args):
+    c = sqlite3.connect(path)
+    try:
+        return c.execute(sql, args).fetchall()
+    finally:
+        c.close()
+
+
+def test_a_whole_session_is_stored_with_its_calibration(engine, tmp_path, short_protocol):
+    e, events = engine
+    db = str(tmp_path / "s.db")
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+    assert of(events, m.CommandRefused) == []
+    run_until(e, lambda: e.runner is None)
+    started = of(events, m.TrialStarted)
+    ended = of(events, m.TrialEnded)
+    assert [t.position for t in started] == [1, 2]
+    assert sorted(t.haptic_mode for t in started) == ["off", "on"]
+    assert [t.row["trial_index"] for t in ended] == [0, 1]
+    fin = of(events, m.SessionEnded)
+    assert len(fin) == 1 and fin[0].status == "completed" and fin[0].completed == 2 and fin[0].aborted == 0
+    stored = db_rows(db, "SELECT trial_index, outcome, rmse_n FROM trials ORDER BY trial_index")
+    assert [(r[0], r[1]) for r in stored] == [(0, ended[0].row["outcome"]), (1, ended[1].row["outcome"])]
+    assert [r[2] for r in stored] == pytest.approx([t.row["rmse_n"] for t in ended])
+    (status, cal_json, cfg_json), = db_rows(db, "SELECT status, calibration_json, config_json FROM sessions")
+    assert status == "completed"
+    assert json.loads(cal_json) == e.calibration.to_dict()
+    assert json.loads(cfg_json)["app"] == "gui"
+    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 2000
+
+
+def test_calibration_refuses_a_degenerate_set_and_keeps_the_previous(engine):
+    e, events = engine
+    before = e.calibration
+    e.handle(m.Calibrate("tool-down only"))
+    done = of(events, m.CalibrationDone)[-1]
+    assert not done.accepted and done.calibration is None
+    assert "rank 6 of 10" in done.reason and done.condition_number > 1e12
+    assert e.calibration is before
+    assert [p.done for p in of(events, m.CalibrationProgress)] == [1, 2, 3, 4, 5, 6]
+
+
+def test_calibration_accepts_a_good_set_and_installs_it(engine, tmp_path, short_protocol):
+    e, events = engine
+    e.handle(m.Calibrate("quick"))
+    done = of(events, m.CalibrationDone)[-1]
+    assert done.accepted and done.reason == "" and done.n_poses == 6
+    assert done.condition_number < 100 and done.rms_force_residual_n < 0.01
+    assert e.calibration.to_dict() == done.calibration
+    for _ in range(4):
+        e.step()
+    h = e.health()
+    # the loop paused for the calibration: that gap is not reported as an overrun
+    assert h.ticks == 199 and h.periods_over_2ms == 0 and h.period_max_us == 1000.0
+    db = str(tmp_path / "s.db")
+    e.handle(m.StartSession(db, "P02", "training", short_protocol, 0, 2))
+    (cal_json,), = db_rows(db, "SELECT calibration_json FROM sessions")
+    assert json.loads(cal_json) == done.calibration
+
+
+def test_commands_without_a_session_are_refused_with_a_reason(engine, tmp_path):
+    e, events = engine
+    e.handle(m.Pause())
+    e.handle(m.StartSession(str(tmp_path / "s.db"), "bad code", "experiment", None, 0, 1))
+    e.handle(m.StartSession(str(tmp_path / "nowhere" / "s.db"), "P01", "experiment", None, 0, 1))
+    refused = of(events, m.CommandRefused)
+    assert [r.command for r in refused] == ["Pause", "StartSession", "StartSession"]
+    assert refused[0].message == "no session is running"
+    assert refused[1].message.startswith("participant code = 'bad code'")
+    assert "does not exist" in refused[2].message
+    assert not (tmp_path / "s.db").exists()
+
+
+def test_abort_trial_requeues_and_close_leaves_the_session_resumable(engine, tmp_path, short_protocol):
+    e, events = engine
+    db = str(tmp_path / "s.db")
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 0, 1))
+    run_until(e, lambda: len(of(events, m.TrialStarted)) == 1)
+    e.handle(m.AbortTrial("participant sneezed"))
+    run_until(e, lambda: len(of(events, m.TrialStarted)) == 2)
+    assert of(events, m.TrialEnded)[0].row["outcome"] == "aborted"
+    assert of(events, m.TrialStarted)[1].trials_total == 3  # re-queued at the end
+    run_until(e, lambda: e.runner.machine.elapsed_ns > 200_000_000)
+    e.close("the experimenter GUI went away", detached=True)
+    assert e.loop.faults & Fault.ENGINE_DETACHED
+    assert e.loop.framework.safety.gain == 0.0
+    assert of(events, m.SessionEnded)[-1].status == "interrupted"
+    assert isinstance(events[-1], m.EngineStopped)
+    rows = db_rows(db, "SELECT trial_index, outcome, abort_reason FROM trials ORDER BY trial_index")
+    assert rows == [(0, "aborted", "participant sneezed"), (1, "aborted", "the experimenter GUI went away")]
+    assert db_rows(db, "SELECT status FROM sessions") == [("running",)]
+    assert db_rows(db, "SELECT kind, detail FROM events WHERE kind = 'detached'") == [
+        ("detached", "the experimenter GUI went away")]
+
+
+def test_resume_continues_an_interrupted_session(tmp_path, short_protocol):
+    db = str(tmp_path / "s.db")
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e.start()
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 0, 1))
+    run_until(e, lambda: len(of(events, m.TrialStarted)) == 1 and e.runner.machine.elapsed_ns > 100_000_000)
+    e.close("closed")
+    e.release_ring()
+    events.clear()
+    e2 = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e2.start()
+    try:
+        e2.handle(m.ListSessions(db))
+        (listed,) = of(events, m.SessionsListed)
+        assert [(s["session_id"], s["trials_done"], s["trials_total"]) for s in listed.sessions] == [(1, 1, 3)]
+        e2.handle(m.ResumeSession(db, 1))
+        assert of(events, m.SessionStarted)[0].start_position == 1
+        run_until(e2, lambda: e2.runner is None)
+    finally:
+        e2.close("test over")
+        e2.release_ring()
+    assert of(events, m.SessionEnded)[0].status == "completed"
+    rows = db_rows(db, "SELECT trial_index, outcome FROM trials ORDER BY trial_index")
+    assert [r[0] for r in rows] == [0, 1, 2] and rows[0][1] == "aborted" and rows[2][1] != "aborted"
+    assert db_rows(db, "SELECT COUNT(*) FROM events WHERE kind = 'calibration'") == [(1,)]
+
+
+def test_engine_process_exits_cleanly_when_the_gui_goes_away(tmp_path, short_protocol):
+    """Close the command pipe mid-trial, as a crashed GUI would: force to zero, trial stored, exit."""
+    db = str(tmp_path / "s.db")
+    client = EngineClient(HostConfig(clock="virtual", speed=2.0))
+    client.start()
+    try:
+        seen: list[object] = []
+
+        def wait(pred, timeout_s: float = 30.0):
+            end = time.monotonic() + timeout_s
+            while not pred():
+                ev = client.get(0.05)
+                if ev is not None:
+                    seen.append(ev)
+                assert time.monotonic() < end, f"timed out; events: {[type(x).__name__ for x in seen]}"
+
+        wait(lambda: any(isinstance(x, m.EngineReady) for x in seen))
+        client.send(m.StartSession(db, "P01", "experiment", short_protocol, 0, 1))
+        wait(lambda: any(isinstance(x, m.TrialStarted) for x in seen))
+        ring = client.ring
+        t_start = next(x for x in seen if isinstance(x, m.TrialStarted)).t_s
+        wait(lambda: ring.latest(1)["t_s"][0] > t_start + 0.3)
+        client.detach()
+        wait(lambda: any(isinstance(x, m.EngineStopped) for x in seen))
+        assert client.join(15.0)
+        last = ring.latest(1)[0]
+        assert last["faults"] == float(Fault.ENGINE_DETACHED) and last["gain"] == 0.0
+        assert last["render_fx"] == last["render_fy"] == last["render_fz"] == 0.0
+    finally:
+        client.kill()
+    assert db_rows(db, "SELECT trial_index, outcome, abort_reason FROM trials") == [
+        (0, "aborted", "the experimenter GUI went away (closed or crashed)")]
+    assert db_rows(db, "SELECT status FROM sessions") == [("running",)]
+    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 250

@@ -1,0 +1,233 @@
+"""Qt-free models of the GUI: exact behaviour without any window."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from pipeline.loop import RECORD_FIELDS
+from pipeline.ring import RingBuffer
+from study_app import messages as m
+from study_app.models.app import AppModel
+from study_app.models.calibration import CalibrationModel
+from study_app.models.health import HealthModel
+from study_app.models.participant import ParticipantScreenModel
+from study_app.models.plots import PlotModel, peak_downsample
+from study_app.models.rig import RigViewModel
+from study_app.models.session import SessionModel, TrialTable
+from study_app.models.setup import SetupModel
+
+
+def started(kind: str = "experiment", aid: bool = False, total: int = 2) -> m.SessionStarted:
+    return m.SessionStarted(session_id=3, code="P01", kind=kind, trials_total=total, start_position=0,
+                            tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
+
+
+def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2, mode: str = "on") -> m.TrialStarted:
+    return m.TrialStarted(t_s, position - 1, position, 2, label, force, mode)
+
+
+def fill_ring(ring: RingBuffer, n: int, start: int = 0, **cols: float) -> None:
+    for k in range(start, start + n):
+        rec = dict.fromkeys(RECORD_FIELDS, 0.0)
+        rec.update(t_ns=k * 1e6, t_s=k * 1e-3, tick=float(k), period_s=1e-3, tip_z_m=0.1, **cols)
+        ring.write([rec[f] for f in RECORD_FIELDS])
+
+
+# -- setup -----------------------------------------------------------------------------------------
+def test_setup_validation_names_field_value_and_rule(tmp_path):
+    s = SetupModel()
+    s.update(db_path=str(tmp_path / "study.db"), code="P 01")
+    assert set(s.errors) == {"code"}
+    assert s.errors["code"] == "participant code = 'P 01': must be 1–32 characters from A–Z, a–z, 0–9, '_' and '-'"
+    s.update(code="P01", db_path=str(tmp_path / "missing" / "x.db"))
+    assert set(s.errors) == {"db_path"} and "does not exist" in s.errors["db_path"]
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "x"\n[[targets]]\nlabel = "gentle"\nforce_n = 0.6\n', encoding="utf-8")
+    s.update(db_path=str(tmp_path / "study.db"), protocol_path=str(bad))
+    assert set(s.errors) == {"protocol_path"}
+    assert "targets[0].label = 'gentle'" in s.errors["protocol_path"]
+    s.update(protocol_path="")
+    assert s.valid
+    cmd = s.start_command()
+    assert cmd == m.StartSession(str(tmp_path / "study.db"), "P01", "experiment", None, 0, 1)
+
+
+def test_setup_refuses_to_build_a_command_when_invalid():
+    s = SetupModel()
+    with pytest.raises(ValueError, match="study database: choose a file"):
+        s.start_command()
+
+
+# -- trial table and progress ----------------------------------------------------------------------
+def test_trial_table_cells():
+    row = {"trial_index": 4, "target_label": "GENTLE", "target_force_n": 0.6, "haptic_mode": "off", "outcome": "success",
+           "tct_s": 3.456, "rmse_n": 0.12345, "max_ae_n": 0.5, "abort_reason": None}
+    assert TrialTable.cells(row) == ("5", "GENTLE 0.6 N", "haptics OFF", "success", "3.46", "0.123", "0.500")
+    row.update(outcome="aborted", tct_s=None, rmse_n=float("nan"), abort_reason="operator")
+    assert TrialTable.cells(row)[3:] == ("aborted (operator)", "–", "–", "0.500")
+
+
+def test_session_progress_follows_events_and_sample_time():
+    s = SessionModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    assert s.state == "ready" and not s.running
+    s.apply(started())
+    assert s.running and s.progress_text() == "0 of 2 trials done"
+    s.apply(trial(t_s=5.0))
+    s.set_time(7.5)
+    assert s.progress_text() == "trial 1 of 2 · FIRM · haptics ON ·  9.5 s left"
+    assert s.band() == pytest.approx((1.08, 1.32))
+    s.apply(m.TrialEnded(9.0, {"trial_index": 0, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on",
+                               "outcome": "success", "tct_s": 4.0, "rmse_n": 0.1, "max_ae_n": 0.2, "trials_total": 2}))
+    s.apply(m.PhaseEntered(9.0, 0, "pause"))
+    s.set_time(9.5)
+    assert s.progress_text() == "1 of 2 trials done · next trial in 1.5 s"
+    assert s.band() is None and s.fraction_done() == 0.5
+    s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
+    assert s.state == "ended" and s.progress_text() == "session 3 completed"
+
+
+# -- plots -----------------------------------------------------------------------------------------
+def test_peak_downsample_keeps_extremes_in_time_order():
+    t = np.arange(12.0)
+    y = np.array([0, 5, 1, 1, -3, 2, 0, 0, 0, 9, 0, -1], dtype=float)
+    td, yd = peak_downsample(t, y, 3)
+    assert td.tolist() == [0, 1, 4, 5, 9, 11]
+    assert yd.tolist() == [0, 5, -3, 2, 9, -1]
+    assert peak_downsample(t, y, 6)[1] is y  # short input unchanged
+
+
+def test_plot_model_keeps_a_window_and_computes_magnitudes():
+    ring = RingBuffer.create(RECORD_FIELDS, 5000, shared=False)
+    try:
+        p = PlotModel(window_s=1.0, bins=100)
+        p.attach(ring)
+        fill_ring(ring, 1500, raw_fx=3.0, raw_fz=4.0, filt_fx=0.6, filt_fy=0.8, render_fz=-2.0, force_n=1.0)
+        assert p.pull() == 1500
+        assert len(p.t) == 1000 and p.t[0] == pytest.approx(0.5) and p.latest_t_s == pytest.approx(1.499)
+        assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"], 1.0) and np.all(p.data["render_n"] == 2.0)
+        t, y = p.curve("raw_n")
+        # constant data: each bin keeps its first sample twice
+        assert len(t) == 200 and t[0] == pytest.approx(-0.999) and t[-1] == pytest.approx(-0.009)
+        assert p.pull() == 0
+        fill_ring(ring, 10, start=1500)
+        assert p.pull() == 10 and len(p.t) == 1000 and p.data["raw_n"][-1] == 0.0
+    finally:
+        ring.close()
+
+
+# -- participant screen ----------------------------------------------------------------------------
+def test_participant_screen_experiment_cue_blank_rest_end():
+    p = ParticipantScreenModel()
+    p.apply(started("experiment"))
+    p.apply(trial(t_s=2.0, label="GENTLE", force=0.6))
+    p.update(2.5, 0.7)
+    assert (p.screen.headline, p.screen.show_gauge, p.screen.gauge_force_n) == ("GENTLE", False, None)
+    p.update(3.0, 0.7)  # cue_s = 1 s: the word is gone
+    assert p.screen.headline == "" and not p.screen.show_gauge
+    p.apply(m.PhaseEntered(6.0, 0, "pause"))
+    assert p.screen.headline == "Rest"
+    p.apply(m.SessionEnded(3, "completed", "", 2, 0, 0))
+    assert p.screen.headline == "Thank you"
+
+
+def test_participant_screen_training_shows_gauge_and_band():
+    p = ParticipantScreenModel()
+    p.apply(started("training", aid=True))
+    p.apply(trial(t_s=1.0))
+    p.update(4.0, 0.9)
+    s = p.screen
+    assert s.headline == "FIRM" and s.show_gauge and s.gauge_force_n == 0.9
+    assert s.band_n == pytest.approx((1.08, 1.32))
+
+
+_EVENTS = st.one_of(
+    st.builds(lambda t, pos: trial(t_s=t, position=pos), st.floats(0, 100), st.integers(1, 2)),
+    st.builds(lambda t, ph: m.PhaseEntered(t, 0, ph), st.floats(0, 100), st.sampled_from(["active", "pause", "idle", "cued"])),
+    st.builds(lambda t, f: ("sample", t, f), st.floats(0, 100), st.floats(0, 3.0)),
+)
+
+
+@given(aid=st.booleans(), events=st.lists(_EVENTS, max_size=40))
+def test_participant_screen_never_carries_force_in_an_experiment(aid, events):
+    p = ParticipantScreenModel()
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, live_force_aid=aid))
+    for ev in events:
+        if isinstance(ev, tuple):
+            p.update(ev[1], ev[2])
+        else:
+            p.apply(ev)
+        s = p.screen
+        assert not s.show_gauge and s.gauge_force_n is None and s.band_n is None
+        assert p.force_n == 0.0
+
+
+# -- calibration, rig, health ------------------------------------------------------------------------
+def test_calibration_model_verdicts():
+    c = CalibrationModel()
+    with pytest.raises(ValueError, match="pose set = 'all'"):
+        c.set_pose_set("all")
+    assert c.command() == m.Calibrate("recommended") and c.state == "running"
+    c.apply(m.CalibrationProgress(3, 24, "P03"))
+    assert c.verdict() == "measuring pose 3 of 24 — keep the tool clear of the tissue"
+    c.apply(m.CalibrationDone(False, "rank 6 of 10", "tool-down only", 6, 3e17, math.nan, math.nan, [], None))
+    assert c.state == "refused"
+    assert c.verdict() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10"
+    assert c.summary()[:2] == [("Poses", "6"), ("Condition number", "3e+17")]
+
+
+def test_rig_model_geometry_and_manual_target():
+    r = RigViewModel()
+    r.apply(m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot"))
+    r.update(0.098, 0.9)
+    assert r.tip_z_mm == pytest.approx(-2.0) and r.indentation_mm == pytest.approx(2.0)
+    x, z = r.surface_profile(30.0, 61)
+    assert z[30] == pytest.approx(-2.0) and z[0] > -1e-3 and np.all(z <= 0)
+    assert r.target_for_tip_mm(15.0) == pytest.approx(0.0)
+    assert r.target_for_tip_mm(-3.0) == pytest.approx(-0.018)
+    sent = []
+    r.target_changed.connect(sent.append)
+    r.set_manual_target(-0.1)
+    r.step_manual(+2)
+    assert sent == [-0.030, pytest.approx(-0.029)]
+
+
+def test_health_rates_from_records():
+    h = HealthModel()
+    h.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    n = 1001
+    rows = np.zeros(n, dtype=[(f, "<f8") for f in RECORD_FIELDS])
+    rows["t_s"] = np.arange(n) * 1e-3
+    rows["raw_fx"] = np.arange(n)  # a new sample every tick
+    rows["pose_age_s"] = (np.arange(n) % 8) * 1e-3  # a new pose every 8 ms
+    h.update_from_rows(rows)
+    assert [(d.name, d.state, round(d.rate_hz)) for d in h.devices] == [
+        ("F/T sensor", "ok", 1000), ("Robot (pose)", "ok", 125), ("Haptic device", "ok", 1000)]
+    h.apply(m.EngineFault(1.0, "fault", 2, "POSE_STALE"))
+    assert h.devices[1].state == "FAULT: POSE_STALE" and h.devices[0].state == "ok"
+    assert h.faults_text() == "POSE_STALE" and h.fault_log == ["t =    1.000 s  fault: POSE_STALE"]
+
+
+def test_app_model_actions_follow_state(tmp_path):
+    sent: list[object] = []
+    a = AppModel(lambda c: sent.append(c) or True)
+    assert not a.can("start") and not a.can("calibrate")
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
+    assert a.can("start") and a.can("calibrate") and not a.can("abort_trial")
+    assert a.start() and sent[-1] == a.setup.start_command()
+    a.apply(started())
+    assert not a.can("start") and a.can("abort_session") and not a.can("abort_trial")
+    a.apply(trial())
+    assert a.can("abort_trial")
+    a.abort_trial()
+    assert sent[-1] == m.AbortTrial()
+    errors = []
+    a.error.connect(lambda t, msg: errors.append((t, msg)))
+    a.apply(m.CommandRefused("Pause", "no session is running"))
+    assert errors == [("Pause refused", "no session is running")]

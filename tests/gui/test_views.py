@@ -1,0 +1,148 @@
+"""Models drive views: change the model, assert the widget (no engine)."""
+
+from __future__ import annotations
+
+import math
+
+from PySide6.QtCore import QPoint, Qt
+
+from study_app import messages as m
+from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.participant_window import ParticipantWindow
+from study_app.gui.rig_view import RigWindow
+from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.models.calibration import CalibrationModel
+from study_app.models.health import HealthModel
+from study_app.models.participant import ParticipantScreenModel
+from study_app.models.rig import RigViewModel
+from study_app.models.session import SessionModel, TrialTable
+from study_app.models.setup import SetupModel
+
+READY = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
+
+
+def test_trial_table_view_fills_from_the_model(qtbot):
+    table = TrialTable()
+    view = QtTrialTable(table)
+    qtbot.addWidget(view)
+    table.add({"trial_index": 0, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on",
+               "outcome": "success", "tct_s": 2.5, "rmse_n": 0.2, "max_ae_n": 0.4})
+    assert view.rowCount() == 1
+    assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200", "0.400"]
+    table.clear()
+    assert view.rowCount() == 0
+
+
+def test_progress_view_follows_the_session(qtbot):
+    s = SessionModel()
+    view = QtProgress(s)
+    qtbot.addWidget(view)
+    s.apply(READY)
+    s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.TrialStarted(1.0, 0, 1, 20, "GENTLE", 0.6, "off"))
+    s.set_time(4.0)
+    assert view.label.text() == "trial 1 of 20 · GENTLE · haptics OFF ·  9.0 s left"
+
+
+def test_health_panel_shows_faults_and_enables_reset(qtbot):
+    h = HealthModel()
+    view = QtHealthPanel(h)
+    qtbot.addWidget(view)
+    h.apply(READY)
+    assert view.faults.text() == "Faults: none" and not view.reset_button.isEnabled()
+    h.apply(m.EngineFault(2.0, "fault", int(64), "OPERATOR_STOP"))
+    assert view.faults.text() == "Faults: OPERATOR_STOP" and view.reset_button.isEnabled()
+    h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False))
+    assert view.loop.text() == "loop   1000 Hz · p99 |period − 1 ms| 12 µs · overruns 1 (> 2 ms), 0 missed slots"
+    assert not view.reset_button.isEnabled()
+
+
+def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
+    s = SetupModel()
+    view = QtSetupPanel(s)
+    qtbot.addWidget(view)
+    s.update(db_path=str(tmp_path / "s.db"))
+    qtbot.keyClicks(view.code, "P 1")
+    assert s.values.code == "P 1"
+    assert view.errors.text().startswith("participant code = 'P 1'")
+    view.code.clear()
+    qtbot.keyClicks(view.code, "P01")
+    assert view.errors.text() == "" and s.valid
+    s.set_resumable([{"session_id": 4, "code": "P02", "kind": "experiment", "started_at": "2026-01-02T10:11:12",
+                      "trials_done": 7, "trials_total": 20}])
+    assert view.resumable.count() == 1
+    assert view.resumable.item(0).text() == "session 4: P02 experiment, 7/20 trials stored, started 2026-01-02 10:11"
+    view.resumable.setCurrentRow(0)
+    assert view.selected_session() == 4
+
+
+def test_participant_window_experiment_word_then_blank_never_a_gauge(qtbot):
+    p = ParticipantScreenModel()
+    view = ParticipantWindow(p)
+    qtbot.addWidget(view)
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, True))
+    p.apply(m.TrialStarted(1.0, 0, 1, 2, "FIRM", 1.2, "on"))
+    p.update(1.2, 1.1)
+    assert view.headline.text() == "FIRM" and view.gauge.isHidden()
+    p.update(2.5, 1.1)
+    assert view.headline.text() == "" and view.gauge.isHidden()
+    p.apply(m.PhaseEntered(5.0, 0, "pause"))
+    assert view.headline.text() == "Rest"
+
+
+def test_participant_window_training_gauge(qtbot):
+    p = ParticipantScreenModel()
+    view = ParticipantWindow(p)
+    qtbot.addWidget(view)
+    p.apply(m.SessionStarted(1, "P01", "training", 4, 0, 0.1, 20.0, 2.0, 1.0, True))
+    p.apply(m.TrialStarted(1.0, 0, 1, 4, "GENTLE", 0.6, "off"))
+    p.update(3.0, 0.55)
+    assert not view.gauge.isHidden()
+    assert view.gauge.force_n == 0.55 and view.gauge.band[0] == 0.54 and math.isclose(view.gauge.band[1], 0.66)
+
+
+def test_calibration_wizard_shows_refusal_and_figures(qtbot):
+    c = CalibrationModel()
+    runs = []
+    view = CalibrationWizard(c, lambda: runs.append(1))
+    qtbot.addWidget(view)
+    view.pose_set.setCurrentText("quick")
+    assert c.pose_set == "quick"
+    qtbot.mouseClick(view.run_button, Qt.MouseButton.LeftButton)
+    assert runs == [1]
+    c.command()
+    assert not view.run_button.isEnabled()
+    c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [], None))
+    assert view.verdict.text() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10: add tilted poses"
+    assert view.run_button.isEnabled() and view.residuals.rowCount() == 0
+    c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003, [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],
+                              {"mass_kg": 0.65, "model": "affine"}))
+    assert view.verdict.text().startswith("Accepted")
+    assert view.residuals.rowCount() == 2 and view.residuals.item(1, 1).text() == "0.0020"
+    assert view.figures.rowCount() == 6
+
+
+def test_rig_view_manual_driving_with_mouse_and_keys(qtbot):
+    r = RigViewModel()
+    r.apply(READY)
+    drivers, targets = [], []
+    r.target_changed.connect(targets.append)
+    view = RigWindow(r, drivers.append)
+    qtbot.addWidget(view)
+    view.resize(600, 400)
+    view.show()
+    qtbot.waitExposed(view)
+    qtbot.mouseClick(view.canvas, Qt.MouseButton.LeftButton, pos=QPoint(300, 200))
+    assert targets == []  # autopilot: the mouse does nothing
+    view.manual.setChecked(True)
+    assert drivers == ["manual"]
+    r.driver = "manual"
+    canvas = view.canvas
+    y_px = int(canvas.to_px(0.0, -2.0).y())
+    qtbot.mouseClick(canvas, Qt.MouseButton.LeftButton, pos=QPoint(canvas.width() // 2, y_px))
+    assert len(targets) == 1 and abs(targets[0] - r.target_for_tip_mm(-2.0)) < 2e-4
+    canvas.setFocus()
+    qtbot.keyClick(canvas, Qt.Key.Key_Up)
+    assert abs(targets[-1] - (targets[0] + 0.0005)) < 1e-12
+    qtbot.keyClick(canvas, Qt.Key.Key_Home)
+    assert targets[-1] == 0.0
