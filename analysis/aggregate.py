@@ -141,8 +141,10 @@ def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions(
         sel = trials if mode == "all" else trials[trials["haptic_mode"] == mode]
         x = sel[tct_col].to_numpy(dtype=float)
         y = sel["rmse_n"].to_numpy(dtype=float)
-        c = correlation(x, y, method="spearman")
+        # trials without a TCT (failures, under "successful") are not pairs: leave them out before testing
         keep = np.isfinite(x) & np.isfinite(y)
+        x, y = x[keep], y[keep]
+        c = correlation(x, y, method="spearman")
         rows.append(
             {
                 "haptic_mode": mode,
@@ -154,8 +156,8 @@ def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions(
                 "method": c.method,
                 "computable": c.computable,
                 "note": c.note,
-                "median_tct_s": float(np.median(x[keep])) if keep.any() else np.nan,
-                "median_rmse_n": float(np.median(y[keep])) if keep.any() else np.nan,
+                "median_tct_s": float(np.median(x)) if len(x) else np.nan,
+                "median_rmse_n": float(np.median(y)) if len(y) else np.nan,
             }
         )
     return pd.DataFrame(rows)

@@ -103,6 +103,8 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             top = max(top, y * 1.15)
     ax.set_xticks(range(len(groups)), [g[0] for g in groups])
     ax.set_ylabel(METRIC_LABELS.get(metric, metric))
+    if metric == "success_rate":
+        top = 1.15  # a rate: room for the marks above 1, nothing more
     if top > 0:
         ax.set_ylim(0, top)
     _style(ax)
@@ -137,7 +139,7 @@ def mode_bars(
     targets = list(target_order) if target_order else sorted(by_target["target_label"].unique())
     fig = Figure(figsize=(4.2 * len(metrics), 3.6), dpi=_DPI)
     # fixed margins: constrained layout costs more than drawing the figure twice over
-    fig.subplots_adjust(left=0.14 / len(metrics), right=0.98, bottom=0.1, top=0.86 if title else 0.95,
+    fig.subplots_adjust(left=0.14 / len(metrics), right=0.98, bottom=0.1, top=0.82 if title else 0.9,
                         wspace=0.28)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     rng = np.random.default_rng(0)  # jitter of the dots, fixed so figures are reproducible
@@ -145,7 +147,7 @@ def mode_bars(
         groups = [(t, by_target[by_target["target_label"] == t], marks.get((metric, t), "")) for t in targets]
         groups.append(("overall", overall, marks.get((metric, "overall"), "")))
         _bars_panel(ax, groups, metric, rng)
-    axes[0].legend(frameon=False, fontsize=8, loc="upper left")
+    axes[0].legend(frameon=False, fontsize=8, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.01))
     if title:
         fig.suptitle(title)
     return fig
@@ -186,7 +188,7 @@ def speed_accuracy_scatter(trials: pd.DataFrame, tct_column: str, rho_by_mode: M
         Legend text per mode, e.g. ``"ρ = −0.31, p = 0.002"``.
     """
     fig = Figure(figsize=(5.2, 4.0), dpi=_DPI)
-    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.12, top=0.96)
+    fig.subplots_adjust(left=0.13, right=0.97, bottom=0.12, top=0.86)
     ax = fig.subplots()
     for mode in ("off", "on"):
         sel = trials[trials["haptic_mode"] == mode]
@@ -194,7 +196,7 @@ def speed_accuracy_scatter(trials: pd.DataFrame, tct_column: str, rho_by_mode: M
                    label=f"{_MODE_NAMES[mode]}: {rho_by_mode.get(mode, '')}")
     ax.set_xlabel("TCT (s)" if tct_column == "tct_s" else "TCT, failures at the cap (s)")
     ax.set_ylabel("RMSE (N)")
-    ax.legend(frameon=False, fontsize=8)
+    ax.legend(frameon=False, fontsize=8, loc="lower left", bbox_to_anchor=(0.0, 1.0))
     _style(ax)
     return fig
 

@@ -98,7 +98,34 @@ def _html_table(frame: pd.DataFrame, columns: Sequence[str] | None = None, *, no
         cls = ' class="nc"' if not_computable and not bool(row.get("computable", True)) else ""
         cells = "".join(f"<td>{_fmt(row[c])}</td>" for c in cols)
         body.append(f"<tr{cls}>{cells}</tr>")
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
+
+
+def _stats_html(frame: pd.DataFrame, columns: Sequence[str], lead: Sequence[str] = ()) -> str:
+    """A test table for the page: HL estimate and interval in one column, notes as numbered footnotes."""
+    shown = frame.copy()
+    shown["hl"] = [
+        f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
+        for e, lo, hi in zip(shown["hl_estimate"], shown["hl_ci_low"], shown["hl_ci_high"])
+    ]
+    notes: list[str] = []
+    labels = []
+    for _, row in shown.iterrows():
+        label = str(row["metric"])
+        if isinstance(row.get("note"), str) and row["note"]:
+            notes.append(row["note"])
+            label += f" <sup>{len(notes)}</sup>"
+        labels.append(label)
+    cols = list(lead) + list(columns)
+    head = "".join(f"<th>{html.escape('HL median difference [CI]' if c == 'hl' else c)}</th>" for c in cols)
+    body = []
+    for label, (_, row) in zip(labels, shown.iterrows()):
+        cls = ' class="nc"' if not bool(row["computable"]) else ""
+        cells = "".join(f"<td>{label if c == 'metric' else (row[c] if c == 'hl' else _fmt(row[c]))}</td>" for c in cols)
+        body.append(f"<tr{cls}>{cells}</tr>")
+    foot = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+    return (f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
+            + (f'<ol class="notes">{foot}</ol>' if foot else ""))
 
 
 def _img(png: bytes, alt: str) -> str:
@@ -183,11 +210,11 @@ _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
 h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.8em}
 .meta{color:#666;font-size:.9em}table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.85em}
-th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right;white-space:nowrap}th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}
 tr.nc td{color:#999;font-style:italic}img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .key{display:grid;grid-template-columns:repeat(auto-fit,minmax(180px,1fr));gap:.6em;margin:1em 0}
 .key div{background:#f7f9fc;border:1px solid #e3e8f0;border-radius:6px;padding:.6em .8em}
-.key b{display:block;font-size:1.3em}.warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
+.key b{display:block;font-size:1.3em}.scroll{overflow-x:auto}.notes{font-size:.85em;color:#555}.warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
 """
 
 
@@ -320,15 +347,15 @@ def build_report(
         sess.to_csv(tmp / "sessions.csv", index=False)
 
         # -- the page ----------------------------------------------------------------------
-        med = overall.groupby("haptic_mode")[list(PRIMARY_METRICS)].median()
+        by_metric = stats_out.set_index("metric")
         key = "".join(
-            f"<div>{html.escape(METRIC_LABELS[m])}<b>{_fmt(med.at['off', m]) if 'off' in med.index else '–'} → "
-            f"{_fmt(med.at['on', m]) if 'on' in med.index else '–'}</b>median OFF → ON, {marks_overall.get(m, '')}</div>"
+            f"<div>{html.escape(METRIC_LABELS[m])}<b>{_fmt(by_metric.at[m, 'median_off'])} → "
+            f"{_fmt(by_metric.at[m, 'median_on'])}</b>median OFF → ON (n = {_fmt(by_metric.at[m, 'n'])}), "
+            f"{marks_overall.get(m, '')}</div>"
             for m in PRIMARY_METRICS
         )
-        stat_cols = ["metric", "n", "n_zero", "n_ties", "median_off", "median_on", "statistic", "method",
-                     "p_value", "p_holm", "rank_biserial", "r", "hl_estimate", "hl_ci_low", "hl_ci_high", "note"]
-        stat_cols = [c for c in stat_cols if c in stats_out.columns]
+        stat_cols = ["metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
+                     "p_value", "p_holm", "rank_biserial", "r"]
         warn = ""
         if table.n_disagree:
             warn = (f'<p class="warn">{table.n_disagree} trials disagree between the metrics stored live and those '
@@ -348,10 +375,9 @@ def build_report(
 <div class="key">{key}</div>
 <h2>Haptics ON vs OFF</h2>
 <p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); Holm-adjusted across the four measures.</p>
-{_html_table(stats_out, stat_cols, not_computable=True)}
+{_stats_html(stats_out, stat_cols)}
 <h3>Within each target</h3>
-{_html_table(pd.concat([stats_by_target[["target_label"]], tgt_out.drop(columns="target_label")], axis=1),
-             ["target_label"] + stat_cols, not_computable=True)}
+{_stats_html(tgt_out, stat_cols, lead=["target_label"])}
 <h2>Success rate</h2>{_img(pngs["success_rate"], "success rate per target and overall")}
 <h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}
 <h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}
