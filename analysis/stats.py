@@ -594,7 +594,8 @@ def paired_wilcoxon(
     n_pairs = a_off.size
     if n_pairs == 0:
         return _not_computable(base, joined("no complete pairs: nothing to test"))
-    d = a_on - a_off
+    with np.errstate(over="ignore"):  # an overflow is reported below, in words
+        d = a_on - a_off
     if decimals is not None:
         d = np.round(d, decimals)
     if not np.isfinite(d).all():  # finite inputs whose difference overflows
@@ -681,7 +682,7 @@ def paired_wilcoxon(
     denom = w_plus + w_minus
     notes: list[str] = []
     if n_used < 6 and used != "approx":
-        notes.append(f"only {n_used} ranked pairs: the smallest attainable two-sided p is {2.0 / 2**n_used:g}")
+        notes.append(f"only {n_used} ranked pairs: a two-sided p cannot be below {2.0 / 2**n_used:g}")
     if np.ptp(d) == 0:
         notes.append(f"all differences are equal (d = {d[0]:g}): the Hodges–Lehmann interval has zero width")
     if n_pairs > 1 and level < confidence:
