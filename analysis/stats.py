@@ -298,76 +298,111 @@ def _tail_p(weights: np.ndarray, total: float, obs_lo: int, obs_hi: int, alterna
 # ------------------------------------------------------------------------------------------------
 # Hodges–Lehmann via exact selection over Walsh averages
 # ------------------------------------------------------------------------------------------------
-def _walsh(ds: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    # Halving before adding cannot overflow; it is monotone in ds[j], which the selection needs.
-    return 0.5 * ds[i] + 0.5 * ds[j]
+_EPS = float(np.finfo(np.float64).eps)
+_TINY = float(np.finfo(np.float64).smallest_subnormal)
 
 
-def _row_bounds(ds: np.ndarray, v: float, lo: np.ndarray, hi: np.ndarray, strict: bool) -> np.ndarray:
+def _row_bounds(half: np.ndarray, v: float, lo: np.ndarray, hi: np.ndarray, strict: bool) -> np.ndarray:
     """Per row i, the first column j in [lo_i, hi_i] whose Walsh average is ≥ v (strict) or > v.
 
-    Row i holds w(i, j), j = i … n−1, non-decreasing in j; a vectorized binary search.
+    Row i holds w(i, j) = half[i] + half[j], j = i … n−1, non-decreasing in j
+    (``half`` = 0.5·sorted d). ``searchsorted`` of v − half[i] ± δ brackets the
+    boundary (δ, a few ulps, covers the rounding of the subtraction and of the
+    sum), then a binary search on the exact float sums, vectorized over the
+    rows whose bracket is not yet a single point, makes it exact.
     """
     a = lo.copy()
     b = hi.copy()
-    rows = np.arange(ds.size)
-    last = ds.size - 1
-    while True:
-        act = a < b
-        if not act.any():
-            return a
-        mid = (a + b) // 2
-        w = _walsh(ds, rows, np.minimum(mid, last))
+    rows = np.nonzero(a < b)[0]  # rows without candidates keep a = lo = hi
+    hr = half[rows]
+    with np.errstate(over="ignore", invalid="ignore"):
+        t = v - hr
+        c = 8.0 * _EPS
+        delta = c * abs(v) + c * np.abs(hr) + c * np.abs(t) + 8.0 * _TINY
+        t_lo, t_hi = t - delta, t + delta
+    # where v − half overflows (|d| near the float maximum) the bracket is the whole candidate range
+    sure = np.isfinite(t_lo) & np.isfinite(t_hi)
+    a[rows] = np.where(sure, np.clip(np.searchsorted(half, t_lo, side="left"), lo[rows], hi[rows]), lo[rows])
+    b[rows] = np.where(sure, np.clip(np.searchsorted(half, t_hi, side="right"), lo[rows], hi[rows]), hi[rows])
+    last = half.size - 1
+    act = rows[a[rows] < b[rows]]
+    while act.size:
+        aa, bb = a[act], b[act]
+        mid = (aa + bb) // 2
+        w = half[act] + half[np.minimum(mid, last)]
         below = (w < v) if strict else (w <= v)
-        go_right = act & below
-        go_left = act & ~below
-        a = np.where(go_right, mid + 1, a)
-        b = np.where(go_left, mid, b)
+        a[act] = np.where(below, mid + 1, aa)
+        b[act] = np.where(below, bb, mid)
+        act = act[a[act] < b[act]]
+    return a
 
 
-def _walsh_select(ds: np.ndarray, k: int, *, enumerate_at: int | None = None, seed: int = 0x5EED) -> float:
+def _walsh_select(
+    ds: np.ndarray, k: int, *, enumerate_at: int | None = None, sample: int = 16384, seed: int = 0x5EED
+) -> float:
     """The k-th smallest (1-based) Walsh average ``0.5·ds[i] + 0.5·ds[j]``, i ≤ j, of sorted ``ds``.
 
-    Quickselect on the implicit sorted rows: pick a random pivot among the
-    still-active Walsh averages, count those below it with a vectorized binary
-    search per row (O(n log n)), keep the side holding rank k. Once at most
-    ``enumerate_at`` candidates remain they are materialized and partitioned.
-    The result is exactly the brute-force order statistic (same float formula).
+    Selection on the implicit matrix whose rows are sorted (Floyd–Rivest style):
+    draw ``sample`` of the still-active Walsh averages, take the two sample
+    quantiles that bracket rank k with high probability as pivots, and count
+    the averages below each pivot exactly with a vectorized binary search per
+    row (O(n log n)); each count narrows the per-row active column ranges to
+    the side holding rank k, whether or not the bracket guess was right. Once
+    at most ``enumerate_at`` candidates remain they are materialized and
+    partitioned. The result is exactly the brute-force order statistic (same
+    float formula). Halving before adding cannot overflow and is monotone.
     """
     n = ds.size
     m_total = n * (n + 1) // 2
     if not 1 <= k <= m_total:
         raise ValueError(f"k = {k} outside 1 … {m_total}")
     if enumerate_at is None:
-        enumerate_at = max(4 * n, 4096)
+        enumerate_at = max(4 * n, 8192)
+    half = 0.5 * ds
     rows = np.arange(n)
-    lo = rows.copy()  # row i: columns [lo_i, hi_i) are still candidates
-    hi = np.full(n, n, dtype=np.int64)
+    lo = rows.copy()  # row i: columns [lo_i, hi_i) are the candidates; those before lo_i rank below
+    hi = np.full(n, n, dtype=rows.dtype)
     rng = np.random.default_rng(seed)
     while True:
         sizes = hi - lo
         total = int(sizes.sum())
-        before = int((lo - rows).sum())  # averages known to rank below every candidate
+        before = int((lo - rows).sum())
+        kk = k - before  # rank of the answer among the candidates, 1-based
         if total <= enumerate_at:
             starts = np.cumsum(sizes) - sizes
             r_idx = np.repeat(rows, sizes)
             c_idx = np.repeat(lo, sizes) + (np.arange(total) - np.repeat(starts, sizes))
-            vals = _walsh(ds, r_idx, c_idx)
-            kk = k - before - 1
-            return float(np.partition(vals, kk)[kk])
-        pick = int(rng.integers(total))
+            return float(np.partition(half[r_idx] + half[c_idx], kk - 1)[kk - 1])
         ends = np.cumsum(sizes)
-        row = int(np.searchsorted(ends, pick, side="right"))
-        col = int(lo[row] + pick - (ends[row] - sizes[row]))
-        v = float(_walsh(ds, np.array([row]), np.array([col]))[0])
-        lt = _row_bounds(ds, v, lo, hi, strict=True)
-        if int((lt - rows).sum()) >= k:
-            hi = lt
-            continue
-        le = _row_bounds(ds, v, lt, hi, strict=False)
-        if int((le - rows).sum()) >= k:
-            return v
-        lo = le
+        picks = rng.integers(total, size=sample)
+        prow = np.searchsorted(ends, picks, side="right")
+        pcol = lo[prow] + picks - (ends[prow] - sizes[prow])
+        vals = np.sort(half[prow] + half[pcol])
+        q = kk / total
+        spread = 3.0 * math.sqrt(sample * q * (1.0 - q)) + 2.0
+        pivots = (vals[max(0, math.floor(q * sample - spread))],
+                  vals[min(sample - 1, math.ceil(q * sample + spread))])
+        for v in pivots:
+            lt = _row_bounds(half, v, lo, hi, strict=True)
+            if int((lt - rows).sum()) >= k:
+                hi = lt
+                break  # the answer is below v, so below the second pivot too
+            le = _row_bounds(half, v, lt, hi, strict=False)
+            if int((le - rows).sum()) >= k:
+                return float(v)
+            lo = le
+
+
+def _walsh_next(ds: np.ndarray, k: int, v: float) -> float:
+    """The (k+1)-th smallest Walsh average given that the k-th is ``v`` (one counting pass)."""
+    half = 0.5 * ds
+    n = ds.size
+    rows = np.arange(n)
+    le = _row_bounds(half, v, rows, np.full(n, n, dtype=rows.dtype), strict=False)
+    if int((le - rows).sum()) >= k + 1:
+        return v
+    has = le < n
+    return float(np.min(half[rows[has]] + half[le[has]]))
 
 
 def _hl_rank(n: int, confidence: float) -> tuple[int, float]:
@@ -448,7 +483,8 @@ def hodges_lehmann(d: npt.ArrayLike, confidence: float = 0.95) -> tuple[float, f
     if m % 2:
         est = _walsh_select(ds, (m + 1) // 2)
     else:
-        est = 0.5 * _walsh_select(ds, m // 2) + 0.5 * _walsh_select(ds, m // 2 + 1)
+        below = _walsh_select(ds, m // 2)
+        est = 0.5 * below + 0.5 * _walsh_next(ds, m // 2, below)
     if n == 1:
         return est, math.nan, math.nan, math.nan
     k, level = _hl_rank(n, confidence)

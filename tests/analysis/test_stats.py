@@ -370,6 +370,15 @@ def test_null_counts_equal_enumeration(n):
     assert np.array_equal(signed_rank_null_counts(n), _enumerated_counts(n))
 
 
+@given(st.lists(st.floats(-1.7976931348623157e308, 1.7976931348623157e308, allow_nan=False, allow_infinity=False)
+                | st.sampled_from([0.0, 5e-324, -5e-324, 1e308, -1e308]), min_size=1, max_size=30))
+def test_walsh_selection_exact_at_float_extremes(values):
+    d = np.sort(np.array(values, dtype=np.float64))
+    walsh = _brute_walsh(d)
+    for k in sorted({1, walsh.size, (walsh.size + 1) // 2}):
+        assert _walsh_select(d, k, enumerate_at=1) == walsh[k - 1]
+
+
 @given(st.lists(st.one_of(halves, st.floats(-50, 50, allow_nan=False)), min_size=2, max_size=60))
 def test_hodges_lehmann_equals_brute_force(values):
     n = len(values)
