@@ -374,14 +374,15 @@ def _walsh_select(
             c_idx = np.repeat(lo, sizes) + (np.arange(total) - np.repeat(starts, sizes))
             return float(np.partition(half[r_idx] + half[c_idx], kk - 1)[kk - 1])
         ends = np.cumsum(sizes)
-        picks = rng.integers(total, size=sample)
+        s_size = min(sample, max(64, total))  # a sample larger than the candidates buys nothing
+        picks = rng.integers(total, size=s_size)
         prow = np.searchsorted(ends, picks, side="right")
         pcol = lo[prow] + picks - (ends[prow] - sizes[prow])
         vals = np.sort(half[prow] + half[pcol])
         q = kk / total
-        spread = 3.0 * math.sqrt(sample * q * (1.0 - q)) + 2.0
-        pivots = (vals[max(0, math.floor(q * sample - spread))],
-                  vals[min(sample - 1, math.ceil(q * sample + spread))])
+        spread = 3.0 * math.sqrt(s_size * q * (1.0 - q)) + 2.0
+        pivots = (vals[max(0, math.floor(q * s_size - spread))],
+                  vals[min(s_size - 1, math.ceil(q * s_size + spread))])
         for v in pivots:
             lt = _row_bounds(half, v, lo, hi, strict=True)
             if int((lt - rows).sum()) >= k:

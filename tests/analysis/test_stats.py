@@ -162,6 +162,7 @@ def test_explicit_exact_and_approx_equal_scipy(data, zero_method, correction):
             assert res.p_value == ref.pvalue, (method, alternative)
 
 
+@settings(max_examples=100)
 @given(pairs(min_n=3, max_n=60), st.sampled_from(["wilcox", "pratt", "zsplit"]))
 def test_z_equals_scipy_asymptotic_zstatistic(data, zero_method):
     off, on = data
