@@ -91,6 +91,8 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--stats-participants", type=_nonneg_int("--stats-participants"), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
+    bst = bsub.add_parser("stats", help="analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm")
+    bst.add_argument("--json", action="store_true", help="print one JSON object")
 
     pr = sub.add_parser("probe", help="read a real device once and report (no loop)")
     prsub = pr.add_subparsers(dest="probe", metavar="DEVICE")
@@ -165,6 +167,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("bench: measuring the loop without and with the GUI ...", file=sys.stderr, flush=True)
             result = run_gui_bench(seconds=args.seconds)
             print(json.dumps(result) if args.json else format_gui_bench(result))
+            return 0
+        if args.command == "bench" and args.bench == "stats":
+            from bench.stats_bench import format_stats_bench, run_stats_bench
+
+            result = run_stats_bench()
+            print(json.dumps(result) if args.json else format_stats_bench(result))
             return 0
         if args.command == "bench" and args.bench == "study":
             from bench.study_bench import format_study_bench, run_study_bench

@@ -22,7 +22,7 @@ def study(tmp_path_factory):
         trials = [success_trial("GENTLE", "on", on_ms[0]), success_trial("FIRM", "on", on_ms[1])]
         trials += [success_trial("GENTLE", "off", m) for m in off_ms]
         trials += [timeout_trial("FIRM", "off", 2.0) for _ in range(off_timeouts)]
-        return SessionDef(code, trials)
+        return SessionDef(code, trials, max_trial_s=4.0)  # 4 s cap: fewer samples to write
 
     sessions = [p("P01", (200, 400), [1000], 1), p("P02", (0, 100), [300], 1), p("P03", (500, 500), [], 2),
                 p("P04", (100, 700), [200, 600], 0), p("P05", (300, 0), [900], 1), p("P06", (600, 200), [100], 1)]
@@ -43,8 +43,8 @@ def test_per_participant_means_by_hand(study):
 
 def test_censored_tct_counts_failures_at_the_cap(study):
     pp = per_participant(study, MetricOptions(tct_policy="censored")).set_index(["participant_code", "haptic_mode"])
-    assert pp.at[("P01", "off"), "tct_s"] == pytest.approx((2.0 + 12.0) / 2, rel=1e-15)
-    assert pp.at[("P03", "off"), "tct_s"] == 12.0 and pp.at[("P03", "off"), "n_tct"] == 2
+    assert pp.at[("P01", "off"), "tct_s"] == pytest.approx((2.0 + 4.0) / 2, rel=1e-15)
+    assert pp.at[("P03", "off"), "tct_s"] == 4.0 and pp.at[("P03", "off"), "n_tct"] == 2
 
 
 def test_by_target_split(study):
@@ -82,7 +82,8 @@ def test_a_single_participant_gives_not_computable_rows(tmp_path):
 def test_all_equal_differences_do_not_crash(tmp_path):
     # every participant improves success by exactly 0.5: all differences tie
     sessions = [SessionDef(f"P{i:02d}", [success_trial("GENTLE", "on", 0), success_trial("GENTLE", "on", 0),
-                                         success_trial("GENTLE", "off", 0), timeout_trial("GENTLE", "off", 2.0)])
+                                         success_trial("GENTLE", "off", 0), timeout_trial("GENTLE", "off", 2.0)],
+                           max_trial_s=4.0)
                 for i in range(1, 8)]
     trials = compute_trials(load_study([build(tmp_path / "eq.db", sessions)]), workers=1).trials
     _, frame = mode_tests(per_participant(trials))

@@ -78,7 +78,8 @@ def test_a_trial_without_samples_keeps_its_stored_metrics(tmp_path):
 
 def test_worker_processes_give_the_same_table(tmp_path):
     sessions = [SessionDef(f"P{i:02d}", [success_trial("GENTLE", "on", 100 * i), timeout_trial("FIRM", "off", 2.0),
-                                        success_trial("FIRM", "on", 50 * i), timeout_trial("GENTLE", "off", 0.3)])
+                                        success_trial("FIRM", "on", 50 * i), timeout_trial("GENTLE", "off", 0.3)],
+                           max_trial_s=4.0)
                 for i in range(1, 6)]
     db = build(tmp_path / "w.db", sessions)
     study = load_study([db])
