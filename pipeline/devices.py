@@ -26,6 +26,7 @@ __all__ = [
     "JawActuator",
     "PoseSample",
     "Robot",
+    "TcpServo",
     "WrenchSample",
 ]
 
@@ -164,4 +165,31 @@ class JawActuator(Protocol):
 
     def close(self) -> None:
         """Release the device."""
+        ...
+
+
+@runtime_checkable
+class TcpServo(Protocol):
+    """Streams TCP targets to the arm (app-side teleoperation only, ``robot.mode = "teleop"``).
+
+    The real adapter wraps ``RTDEControlInterface.servoL``/``servoStop`` and
+    does its I/O in its own thread; the simulated arm takes the targets into
+    its 125 Hz controller.  Both calls return at once.
+    """
+
+    def servo_tcp(self, position_m: Vec3, rot_base_tip: Mat3) -> None:
+        """Servo toward this TCP pose (base frame, m) from now on."""
+        ...
+
+    def stop_servo(self) -> None:
+        """Stop servoing and hold the arm where it is (idempotent)."""
+        ...
+
+    @property
+    def servo_error(self) -> str:
+        """Why servoing failed ("" while healthy); teleoperation stops on a non-empty error."""
+        ...
+
+    def close(self) -> None:
+        """Stop and release the connection."""
         ...

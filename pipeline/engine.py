@@ -29,7 +29,19 @@ from pipeline.ring import RingBuffer
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRig, SimRigConfig
 
-__all__ = ["EngineConfig", "EngineProcess", "HardwareEngine", "SimEngine", "build_hardware_engine", "build_sim_engine"]
+__all__ = [
+    "EngineConfig",
+    "EngineProcess",
+    "EngineStartError",
+    "HardwareEngine",
+    "SimEngine",
+    "build_hardware_engine",
+    "build_sim_engine",
+]
+
+
+class EngineStartError(RuntimeError):
+    """The engine process could not start (a device failed to open, or it did not become ready in time)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -58,6 +70,12 @@ class EngineConfig:
         contact gate refuses samples with more than 0.15 N of innovation.
     ring_seconds
         Ring buffer length in seconds of records.
+    hardware_file
+        A ``hardware.toml``: the engine opens the real rig it describes
+        (:func:`build_hardware_engine`) instead of the simulated one; ``sim``,
+        ``framework``, ``calibrate`` and ``driver`` are then unused (the file
+        holds the framework parameters and the calibration), and feedback
+        starts off whatever ``haptics_on`` says -- the experimenter turns it on.
     """
 
     sim: SimRigConfig = field(default_factory=SimRigConfig)
@@ -69,6 +87,7 @@ class EngineConfig:
     haptics_on: bool = True
     refine_bias: bool = True
     ring_seconds: float = 30.0
+    hardware_file: str | None = None
 
     def __post_init__(self) -> None:
         if self.clock not in ("real", "virtual"):
@@ -151,13 +170,15 @@ def build_hardware_engine(
     clock: Clock | None = None,
     shared_ring: bool = False,
     ring_seconds: float = 30.0,
+    on_open: Any = None,
 ) -> HardwareEngine:
     """Open the real rig of a :class:`pipeline.hardware.HardwareConfig` and assemble framework and loop.
 
     The payload calibration comes from the file the hardware config names
     (``[calibration] file``, written by ``PayloadCalibration.to_dict``); without
     one, compensation is off and only the online bias refinement runs.
-    Feedback starts off: the experimenter turns it on.
+    Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
+    called before each device is opened (see :func:`pipeline.hardware.build_real_rig`).
     """
     import json
 
@@ -168,7 +189,7 @@ def build_hardware_engine(
     if hardware.calibration_file is not None:
         with open(hardware.calibration_file, encoding="utf-8") as fh:
             calibration = PayloadCalibration.from_dict(json.load(fh))
-    rig = build_real_rig(hardware, clk)
+    rig = build_real_rig(hardware, clk, on_open=on_open)
     rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
     framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
     ring = RingBuffer.create(RECORD_FIELDS, int(ring_seconds * 1000), shared=shared_ring)
@@ -177,9 +198,31 @@ def build_hardware_engine(
 
 
 # -- the engine process -----------------------------------------------------------------------
+def _build_for_process(config: EngineConfig, events: Any) -> SimEngine | HardwareEngine | None:
+    """Build the engine the config asks for; on failure report one ``("error", message)`` and return None."""
+    if config.hardware_file is None:
+        return build_sim_engine(config, shared_ring=True)
+    from pipeline.devices import DeviceError
+    from pipeline.hardware import HardwareError, load_hardware
+
+    try:
+        hw = load_hardware(config.hardware_file)
+        return build_hardware_engine(
+            hw, watchdog=config.watchdog, shared_ring=True, ring_seconds=config.ring_seconds,
+            on_open=lambda what: events.put(("opening", what)),
+        )
+    except (HardwareError, DeviceError) as exc:
+        events.put(("error", str(exc)))
+    except (OSError, ValueError, KeyError) as exc:  # the calibration file named by the hardware file
+        events.put(("error", f"{config.hardware_file}: calibration file: {exc}"))
+    return None
+
+
 def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | None) -> None:
     """Entry point of the engine process."""
-    eng = build_sim_engine(config, shared_ring=True)
+    eng = _build_for_process(config, events)
+    if eng is None:
+        return
     loop = eng.loop
     loop.on_event = lambda ev: events.put(("loop_event", tuple(ev)))
     stop = threading.Event()
@@ -206,7 +249,10 @@ def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | 
         loop.run(stop, max_ticks=max_ticks)
     finally:
         events.put(("stopped", loop.stats.summary(), loop.tick_count, int(loop.faults)))
-        eng.rig.close()
+        try:
+            eng.rig.close()
+        except Exception as exc:  # noqa: BLE001 - a device failing to close must not keep the ring alive
+            events.put(("close_error", str(exc)))
         time.sleep(0.2)  # let the reader copy the last records before the segment goes
         eng.ring.close()
 
@@ -237,18 +283,46 @@ class EngineProcess:
         self.final_ticks: int | None = None
         self.final_faults: int | None = None
         self.loop_events: list[LoopEvent] = []
+        #: The device the engine was opening last (hardware engines), for the start-up error.
+        self.opening: str | None = None
 
     def start(self, timeout_s: float = 30.0) -> None:
-        """Spawn the engine and wait until its ring buffer is ready."""
+        """Spawn the engine and wait until its ring buffer is ready.
+
+        Raises
+        ------
+        EngineStartError
+            A device failed to open (the message is the device's error, naming
+            it), or the engine was not ready within ``timeout_s`` (the message
+            names the device it was still opening); the process is ended.
+        """
         self._proc.start()
         self._child_conn.close()
         deadline = time.monotonic() + timeout_s
         while True:
+            remaining = deadline - time.monotonic()
             try:
-                msg = self._events.get(timeout=max(0.01, deadline - time.monotonic()))
+                msg = self._events.get(timeout=max(0.01, min(0.25, remaining)))
             except queue.Empty:
+                if remaining > 0.25 and self._proc.is_alive():
+                    continue
+                if remaining > 0.25:  # died: take its last word if it is still in flight, else say so now
+                    try:
+                        msg = self._events.get(timeout=0.5)
+                    except queue.Empty:
+                        code = self._proc.exitcode
+                        self.kill()
+                        raise EngineStartError(f"engine process exited during start-up (exit code {code})") from None
+                else:
+                    self.kill()
+                    where = f" (still opening the {self.opening})" if self.opening else ""
+                    raise EngineStartError(f"engine did not become ready within {timeout_s:g} s{where}") from None
+            if msg[0] == "opening":
+                self.opening = msg[1]
+                continue
+            if msg[0] == "error":
                 self.kill()
-                raise RuntimeError(f"engine did not become ready within {timeout_s:g} s") from None
+                raise EngineStartError(f"engine could not start: {msg[1]}")
             if msg[0] == "ready":
                 self.ring = RingBuffer.attach(msg[1])
                 self.calibration = msg[2]

@@ -17,6 +17,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 from pipeline.clock import Clock, MonotonicClock
@@ -32,6 +33,7 @@ __all__ = [
     "RealRig",
     "RobotSettings",
     "SensorSettings",
+    "TeleopSettings",
     "build_real_rig",
     "hardware_from_dict",
     "load_hardware",
@@ -71,6 +73,24 @@ class RobotSettings:
 
 
 @dataclass(frozen=True, slots=True)
+class TeleopSettings:
+    """App-side teleoperation (``robot.mode = "teleop"``); see :class:`pipeline.teleop.TeleopConfig`."""
+
+    workspace_min_m: Vec3
+    workspace_max_m: Vec3
+    max_speed_m_s: float = 0.1
+    motion_scale: float = 1.0
+    deadman_button: int = 1
+    clutch_button: int = 2
+    stylus_max_age_s: float = 0.02
+    pose_max_age_s: float = 0.05
+    max_tracking_error_m: float = 0.05
+    lookahead_s: float = 0.1
+    gain: float = 300.0
+    control_timeout_s: float = 5.0
+
+
+@dataclass(frozen=True, slots=True)
 class HapticSettings:
     """3D Systems Touch."""
 
@@ -97,6 +117,7 @@ class HardwareConfig:
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
     calibration_file: str | None = None
     source: str = "hardware"
+    teleop: TeleopSettings | None = None
 
 
 # -- validation helpers ---------------------------------------------------------------------
@@ -142,7 +163,7 @@ def _rotation(src: str, fld: str, v: Any) -> Mat3:
 def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`."""
     src = source
-    top = _table(src, "", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration"})
+    top = _table(src, "", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
     if top.get("version", 1) != 1:
         raise _fail(src, "version", top.get("version"), "this software reads hardware file version 1")
     for required in ("sensor", "robot", "haptic"):
@@ -191,9 +212,9 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     mode = r.get("mode", "observe")
     if mode not in ROBOT_MODES:
         raise _fail(src, "robot.mode", mode, f"allowed values: {', '.join(ROBOT_MODES)}")
-    if mode == "teleop":
-        raise _fail(src, "robot.mode", mode, "teleoperation by this app is not available in this version; use 'observe' "
-                    "(the robot runs its own teleoperation program)")
+    if mode == "teleop" and "teleop" not in top:
+        raise _fail(src, "teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
+                    "and workspace_max_m (see hardware.example.toml)")
     off = r.get("tcp_offset_m", [0.0, 0.0, 0.0])
     if (
         not isinstance(off, list) or len(off) != 3
@@ -241,7 +262,58 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     cal_file = cal.get("file")
     if cal_file is not None and (not isinstance(cal_file, str) or not cal_file.strip()):
         raise _fail(src, "calibration.file", cal_file, "must be the path of a payload calibration JSON file")
-    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source)
+    teleop = _teleop(src, top["teleop"]) if "teleop" in top else None
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop)
+
+
+def _vec3_m(src: str, fld: str, v: Any, limit_m: float) -> Vec3:
+    if (
+        not isinstance(v, list) or len(v) != 3
+        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or abs(x) > limit_m for x in v)
+    ):
+        raise _fail(src, fld, v, f"must be 3 numbers in metres (x, y, z in the robot base frame), each within ±{limit_m:g} m")
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+def _teleop(src: str, v: Any) -> TeleopSettings:
+    t = _table(src, "teleop", v, {
+        "workspace_min_m", "workspace_max_m", "max_speed_m_s", "motion_scale", "deadman_button", "clutch_button",
+        "stylus_max_age_s", "pose_max_age_s", "max_tracking_error_m", "lookahead_s", "gain", "control_timeout_s",
+    })
+    for req in ("workspace_min_m", "workspace_max_m"):
+        if req not in t:
+            raise _fail(src, f"teleop.{req}", None, "required: the corner of the box (m, robot base frame) the TCP must stay in")
+    lo = _vec3_m(src, "teleop.workspace_min_m", t["workspace_min_m"], 1.0)
+    hi = _vec3_m(src, "teleop.workspace_max_m", t["workspace_max_m"], 1.0)
+    for i, axis in enumerate("xyz"):
+        if not lo[i] < hi[i]:
+            raise _fail(src, "teleop.workspace_max_m", t["workspace_max_m"],
+                        f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
+    buttons = {}
+    for fld, default in (("deadman_button", 1), ("clutch_button", 2)):
+        b = t.get(fld, default)
+        if isinstance(b, bool) or b not in (1, 2):
+            raise _fail(src, f"teleop.{fld}", b, "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
+        buttons[fld] = b
+    if buttons["deadman_button"] == buttons["clutch_button"]:
+        raise _fail(src, "teleop.clutch_button", buttons["clutch_button"], "must differ from teleop.deadman_button")
+    gain = t.get("gain", 300.0)
+    if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 100 <= gain <= 2000:
+        raise _fail(src, "teleop.gain", gain, "must be a number from 100 to 2000 (servoL's proportional gain)")
+    look = t.get("lookahead_s", 0.1)
+    if isinstance(look, bool) or not isinstance(look, (int, float)) or not 0.03 <= look <= 0.2:
+        raise _fail(src, "teleop.lookahead_s", look, "must be a number from 0.03 to 0.2 s (servoL's look-ahead time)")
+    return TeleopSettings(
+        workspace_min_m=lo, workspace_max_m=hi,
+        max_speed_m_s=_number(src, "teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), 0.0, 0.25),
+        motion_scale=_number(src, "teleop.motion_scale", t.get("motion_scale", 1.0), 0.0, 10.0),
+        deadman_button=buttons["deadman_button"], clutch_button=buttons["clutch_button"],
+        stylus_max_age_s=_number(src, "teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), 0.0, 1.0),
+        pose_max_age_s=_number(src, "teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), 0.0, 1.0),
+        max_tracking_error_m=_number(src, "teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), 0.0, 0.2),
+        lookahead_s=float(look), gain=float(gain),
+        control_timeout_s=_number(src, "teleop.control_timeout_s", t.get("control_timeout_s", 5.0), 0.0, 60.0),
+    )
 
 
 def load_hardware(path: str | Path) -> HardwareConfig:
@@ -269,14 +341,20 @@ def load_hardware(path: str | Path) -> HardwareConfig:
 class RealRig:
     """The devices of the real rig, satisfying :class:`pipeline.loop.Rig`."""
 
-    def __init__(self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None) -> None:
+    def __init__(
+        self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None, teleop: Any = None
+    ) -> None:
         self.sensor = sensor
         self.robot = robot
         self.haptic = haptic
         self.jaw = jaw
+        #: A :class:`pipeline.teleop.TeleopDriver` when the app owns the robot (``robot.mode = "teleop"``).
+        self.teleop = teleop
 
     def advance(self, now_ns: int) -> None:
-        """Nothing to step: the devices run on their own."""
+        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends)."""
+        if self.teleop is not None:
+            self.teleop.update(now_ns)
 
     def true_contact_force(self) -> None:
         """No ground truth on hardware."""
@@ -285,7 +363,8 @@ class RealRig:
     def close(self) -> None:
         """Zero and release every device (the Touch first); a failing close does not skip the others."""
         errors = []
-        for dev in (self.haptic, self.robot, self.sensor, self.jaw):
+        # teleoperation first: the robot stops before anything else goes away
+        for dev in (self.teleop, self.haptic, self.robot, self.sensor, self.jaw):
             if dev is None:
                 continue
             try:
@@ -316,6 +395,32 @@ def open_robot(cfg: RobotSettings, clock: Clock) -> Robot:
     return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s)
 
 
+def open_servo(robot: RobotSettings, teleop: TeleopSettings, clock: Clock) -> Any:
+    """Take control of the UR for teleoperation (uploads ur_rtde's control script)."""
+    from pipeline.backends.ur_control import UrRtdeServo
+
+    return UrRtdeServo(
+        robot.host, frequency_hz=robot.frequency_hz, clock=clock, connect_timeout_s=robot.connect_timeout_s,
+        control_timeout_s=teleop.control_timeout_s, lookahead_s=teleop.lookahead_s, gain=teleop.gain,
+    )
+
+
+def teleop_config(config: HardwareConfig) -> Any:
+    """The :class:`pipeline.teleop.TeleopConfig` of a teleop-mode hardware file."""
+    from pipeline.teleop import TeleopConfig
+
+    t = config.teleop
+    if t is None:
+        raise HardwareError(f"{config.source}: teleop = None: robot.mode = 'teleop' needs a [teleop] table")
+    freq = config.robot.frequency_hz
+    return TeleopConfig(
+        workspace_min_m=t.workspace_min_m, workspace_max_m=t.workspace_max_m, max_speed_m_s=t.max_speed_m_s,
+        motion_scale=t.motion_scale, period_s=1.0 / freq if freq > 0 else 0.008,
+        rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button, clutch_button=t.clutch_button,
+        stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s, max_tracking_error_m=t.max_tracking_error_m,
+    )
+
+
 def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
     """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
     from pipeline.backends.touch import TouchHapticDevice
@@ -330,8 +435,30 @@ def open_jaw(cfg: JawSettings) -> JawActuator:
     return SerialJawActuator(cfg.port, baud=cfg.baud, ready_timeout_s=cfg.ready_timeout_s)
 
 
-def build_real_rig(config: HardwareConfig, clock: Clock | None = None, *, with_jaw: bool = True) -> RealRig:
+def build_real_rig(
+    config: HardwareConfig,
+    clock: Clock | None = None,
+    *,
+    with_jaw: bool = True,
+    on_open: Callable[[str], None] | None = None,
+) -> RealRig:
     """Open every configured device into a :class:`RealRig`.
+
+    With ``robot.mode = "teleop"`` the UR's control interface is opened too
+    (last, once everything else answered) and a
+    :class:`pipeline.teleop.TeleopDriver` is attached to the rig.
+
+    Parameters
+    ----------
+    config
+        The validated hardware file.
+    clock
+        The loop's clock.
+    with_jaw
+        Open the jaw actuator if one is configured.
+    on_open
+        Called with the device's name ("force sensor", "robot", ...) before each is opened
+        (the engine process reports it, so a hang names the device).
 
     Raises
     ------
@@ -348,7 +475,15 @@ def build_real_rig(config: HardwareConfig, clock: Clock | None = None, *, with_j
     if with_jaw and config.jaw is not None:
         jaw_cfg = config.jaw
         steps.append(("jaw actuator", lambda: open_jaw(jaw_cfg)))
+    teleop = config.robot.mode == "teleop"
+    if teleop:
+        tcfg = teleop_config(config)
+        t_settings = config.teleop
+        assert t_settings is not None
+        steps.append(("robot control (teleoperation)", lambda: open_servo(config.robot, t_settings, clk)))
     for what, opener in steps:
+        if on_open is not None:
+            on_open(what)
         try:
             opened.append(opener())
         except DeviceError as exc:
@@ -358,5 +493,11 @@ def build_real_rig(config: HardwareConfig, clock: Clock | None = None, *, with_j
                 except Exception:  # noqa: BLE001 - already failing; the first error is the one to show
                     pass
             raise DeviceError(f"{what}: {exc}") from None
+    servo = opened.pop() if teleop else None
     jaw = opened[3] if len(opened) > 3 else None
-    return RealRig(opened[0], opened[1], opened[2], jaw)
+    driver = None
+    if servo is not None:
+        from pipeline.teleop import TeleopController, TeleopDriver
+
+        driver = TeleopDriver(TeleopController(tcfg), opened[2], opened[1], servo)
+    return RealRig(opened[0], opened[1], opened[2], jaw, driver)

@@ -11,6 +11,7 @@ reproducible bit for bit on the virtual clock.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -88,6 +89,8 @@ class SimRig:
         self.sim_time_s = 0.0
         self._truth: Vec3 = (0.0, 0.0, 0.0)
         self.last_observation = HandObservation(0.0, 0.0, 0.0, 0.0, cfg.tip_home_m[2] - cfg.surface_z_m)
+        #: App-side teleoperation (a :class:`pipeline.teleop.TeleopDriver`); None: the robot follows the stylus directly.
+        self.teleop: Any = None
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
@@ -112,9 +115,13 @@ class SimRig:
         self.last_observation = obs
         y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
         touch.stylus_m = (0.0, y, 0.0)
-        d = mat_vec(self._rot_base_haptic, (0.0, y * cfg.motion_scale, 0.0))
-        home = cfg.tip_home_m
-        robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
+        if self.teleop is None:
+            d = mat_vec(self._rot_base_haptic, (0.0, y * cfg.motion_scale, 0.0))
+            home = cfg.tip_home_m
+            robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
+        else:
+            # the app owns the robot: targets come from the teleoperation controller through servo_tcp
+            self.teleop.update(now_ns)
         robot.advance(now_ns, dt)
 
         depth = cfg.surface_z_m - robot.position_m[2]
@@ -134,6 +141,10 @@ class SimRig:
         self.haptic.close()
 
     # -- scenario control ---------------------------------------------------------------------
+    def attach_teleop(self, driver: Any) -> None:
+        """Let a :class:`pipeline.teleop.TeleopDriver` (servoing :attr:`robot`) move the arm; None detaches."""
+        self.teleop = driver
+
     def set_driver(self, driver: StylusDriver) -> None:
         """Hand the stylus to another driver (scripted, simulated participant, mouse)."""
         self.driver = driver

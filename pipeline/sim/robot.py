@@ -7,6 +7,11 @@ target with a first-order lag (τ ≈ 20–50 ms), integrated exactly at the
 loop rate -- the "lagging robot" of the simulated rig, nothing more.
 Orientation changes (calibration poses) are applied at the next controller
 cycle.
+
+It is also the simulated twin of the teleoperation servo adapter
+(:class:`pipeline.devices.TcpServo`): ``servo_tcp`` sets the target like
+``servoL``, and ``stop_servo`` -- like ``servoStop`` -- makes the controller
+hold the tool where it is at its next cycle.
 """
 
 from __future__ import annotations
@@ -54,10 +59,38 @@ class SimRobot:
         self._next_cycle_ns: int | None = None
         self._pose = PoseSample(0, tuple(home_m), orientation, 0.0)  # type: ignore[arg-type]
         self.frozen = False
+        self._stop_requested = False
+        #: True between a ``servo_tcp`` and the controller cycle that carries out a ``stop_servo``.
+        self.servoing = False
+        self.servo_commands = 0
+        self.servo_stops = 0
+        #: Set to make the adapter report an error (a protective stop), for tests.
+        self.fail_servo = ""
 
     def command(self, target_m: Vec3) -> None:
         """Set the TCP position the teleoperation program asks for (base frame, m)."""
         self._target = target_m
+
+    # -- TcpServo -----------------------------------------------------------------------------
+    def servo_tcp(self, position_m: Vec3, rot_base_tip: Mat3) -> None:
+        """Servo toward ``position_m`` (base frame, m) at ``rot_base_tip`` from the next controller cycle."""
+        self._stop_requested = False
+        self.servoing = True
+        self.servo_commands += 1
+        self._target = position_m
+        if rot_base_tip != self._pending_orientation:
+            self._pending_orientation = rot_base_tip
+
+    def stop_servo(self) -> None:
+        """Hold the tool where it is at the next controller cycle (idempotent)."""
+        if self.servoing and not self._stop_requested:
+            self._stop_requested = True
+            self.servo_stops += 1
+
+    @property
+    def servo_error(self) -> str:
+        """"" unless a test injected a failure through :attr:`fail_servo`."""
+        return self.fail_servo
 
     def set_orientation(self, rot_base_tip: Mat3) -> None:
         """Re-orient the tool (taken at the next controller cycle)."""
@@ -68,6 +101,11 @@ class SimRobot:
         if self._next_cycle_ns is None:
             self._next_cycle_ns = now_ns
         if now_ns >= self._next_cycle_ns:
+            if self._stop_requested:
+                # servoStop: the controller holds the tool where it is now
+                self._target = (self.position_m[0], self.position_m[1], self.position_m[2])
+                self._stop_requested = False
+                self.servoing = False
             self._held_target = self._target
             self.orientation = self._pending_orientation
             if not self.frozen:
@@ -94,4 +132,4 @@ class SimRobot:
         return self._pose
 
     def close(self) -> None:
-        """Nothing to release."""
+        """Nothing to release (also the :class:`TcpServo` close)."""

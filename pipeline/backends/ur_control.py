@@ -1,0 +1,234 @@
+"""UR TCP servoing over ``ur_rtde``'s ``RTDEControlInterface`` -- app-side teleoperation only.
+
+Used only with ``robot.mode = "teleop"`` (pipeline/teleop.py): the control
+interface uploads a URScript and takes control of the robot, so in the
+default ``"observe"`` mode it is never constructed (docs/hardware.md §1.2).
+
+The loop thread must never block on the network, so :class:`UrRtdeServo`
+only drops the newest target (or a stop request) into a slot and wakes its
+own worker thread, which calls ``servoL(pose, 0, 0, period, lookahead, gain)``
+or ``servoStop(a)``.  The worker is a second deadman: if no new target arrives
+for ``target_timeout_s`` while servoing (the loop stalled or died), it stops
+the robot by itself and reports it through :attr:`UrRtdeServo.servo_error`,
+which makes the teleoperation controller latch a fault.
+
+Construction is bounded: a plain TCP probe of the RTDE port first (``ur_rtde``
+holds the GIL while it connects, see pipeline/backends/ur.py), then the
+constructor runs in a thread and is abandoned with a clear error after
+``control_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from pipeline.backends.ur import RTDE_PORT, probe_tcp
+from pipeline.clock import Clock, MonotonicClock
+from pipeline.devices import DeviceError
+from pipeline.frames import Mat3, Vec3, matrix_to_rotvec
+
+__all__ = ["UrRtdeServo"]
+
+
+def _default_factory(host: str, frequency_hz: float) -> Any:
+    try:
+        import rtde_control  # lazily: only teleop mode takes control of the robot
+    except ImportError as exc:  # pragma: no cover - ur-rtde is a base dependency
+        raise DeviceError(f"teleoperation needs the ur-rtde package ({exc}); pip install ur-rtde") from None
+    return rtde_control.RTDEControlInterface(host, frequency_hz)
+
+
+class UrRtdeServo:
+    """A :class:`pipeline.devices.TcpServo` streaming ``servoL`` targets to a UR controller.
+
+    Parameters
+    ----------
+    host
+        Controller IP address.
+    frequency_hz
+        RTDE rate (125 on a CB3, 500 on an e-Series; -1 lets ur_rtde pick, the period is then taken as 8 ms).
+    clock
+        Clock for the target ages (the loop's clock).
+    connect_timeout_s
+        Bound of the TCP probe.
+    control_timeout_s
+        Bound of ``RTDEControlInterface`` construction (it uploads and starts a script).
+    lookahead_s, gain
+        ``servoL`` look-ahead time (0.03–0.2 s) and proportional gain (100–2000).
+    target_timeout_s
+        No new target for this long while servoing → ``servoStop`` and an error.
+    stop_deceleration_m_s2
+        ``servoStop`` deceleration of the tool.
+    control_factory
+        ``factory(host, frequency_hz)`` returning an object with the
+        ``RTDEControlInterface`` methods used here (default: ur_rtde's).
+    port
+        Port of the TCP probe (ur_rtde always uses 30004).
+    """
+
+    def __init__(
+        self,
+        host: str,
+        *,
+        frequency_hz: float = 125.0,
+        clock: Clock | None = None,
+        connect_timeout_s: float = 2.0,
+        control_timeout_s: float = 5.0,
+        lookahead_s: float = 0.1,
+        gain: float = 300.0,
+        target_timeout_s: float = 0.05,
+        stop_deceleration_m_s2: float = 10.0,
+        control_factory: Callable[[str, float], Any] | None = None,
+        port: int = RTDE_PORT,
+    ) -> None:
+        if not (frequency_hz == -1 or (math.isfinite(frequency_hz) and 0 < frequency_hz <= 500)):
+            raise ValueError(f"frequency_hz = {frequency_hz!r}: must be -1 (automatic) or in (0, 500]")
+        if not 0.03 <= lookahead_s <= 0.2:
+            raise ValueError(f"lookahead_s = {lookahead_s!r}: servoL allows 0.03 to 0.2 s")
+        if not 100 <= gain <= 2000:
+            raise ValueError(f"gain = {gain!r}: servoL allows 100 to 2000")
+        self.host = host
+        self.period_s = 1.0 / frequency_hz if frequency_hz > 0 else 0.008
+        self.clock: Clock = clock or MonotonicClock()
+        self.lookahead_s = lookahead_s
+        self.gain = gain
+        self.target_timeout_s = target_timeout_s
+        self.stop_deceleration_m_s2 = stop_deceleration_m_s2
+        self._cond = threading.Condition()
+        self._target: tuple[float, ...] | None = None
+        self._target_ns = 0
+        self._target_seq = 0
+        self._stop_requested = False
+        self._closing = False
+        self._error = ""
+        self.servoing = False
+        self.servo_commands = 0
+        self.servo_stops = 0
+        why = probe_tcp(host, port, connect_timeout_s)
+        if why is not None:
+            raise DeviceError(
+                f"cannot reach the UR controller at {host}:{port} for teleoperation ({why}); "
+                "check the IP address, the cable and that the robot is powered on"
+            )
+        self._ctrl = self._construct(control_factory or _default_factory, host, frequency_hz, control_timeout_s)
+        self._thread = threading.Thread(target=self._work, name="ur-servo", daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _construct(factory: Callable[[str, float], Any], host: str, frequency_hz: float, timeout_s: float) -> Any:
+        box: dict[str, Any] = {}
+        done = threading.Event()
+
+        def _run() -> None:
+            try:
+                box["ctrl"] = factory(host, frequency_hz)
+            except Exception as exc:  # noqa: BLE001 - reported to the caller below
+                box["error"] = exc
+            done.set()
+
+        threading.Thread(target=_run, name="ur-control-connect", daemon=True).start()
+        if not done.wait(timeout_s):
+            raise DeviceError(
+                f"the UR controller at {host} did not start the ur_rtde control script within {timeout_s:g} s; "
+                "is the robot in remote control mode, powered on and brakes released?"
+            )
+        if "error" in box:
+            raise DeviceError(f"ur_rtde could not take control of the UR controller at {host}: {box['error']}")
+        return box["ctrl"]
+
+    # -- TcpServo -----------------------------------------------------------------------------
+    def servo_tcp(self, position_m: Vec3, rot_base_tip: Mat3) -> None:
+        """Hand the newest target to the worker (returns at once)."""
+        rx, ry, rz = matrix_to_rotvec(rot_base_tip)
+        with self._cond:
+            self._target = (position_m[0], position_m[1], position_m[2], rx, ry, rz)
+            self._target_ns = self.clock.now_ns()
+            self._target_seq += 1
+            self._stop_requested = False
+            self._cond.notify_all()
+
+    def stop_servo(self) -> None:
+        """Ask the worker to ``servoStop`` (idempotent; returns at once)."""
+        with self._cond:
+            if not (self.servoing or self._error or self._target is not None):
+                return  # nothing moving: do not wake the worker on every idle call
+            if not self._stop_requested:
+                self._stop_requested = True
+                self._target = None
+                self._cond.notify_all()
+
+    @property
+    def servo_error(self) -> str:
+        """The last servo failure ("" while healthy); cleared by a successful ``servoStop``."""
+        return self._error
+
+    def close(self) -> None:
+        """Stop the robot, end the control script and disconnect."""
+        with self._cond:
+            self._closing = True
+            self._cond.notify_all()
+        t = getattr(self, "_thread", None)
+        if t is not None and t.is_alive() and threading.current_thread() is not t:
+            t.join(2.0)
+        ctrl, self._ctrl = self._ctrl, None
+        if ctrl is None:
+            return
+        for call in (lambda: ctrl.servoStop(self.stop_deceleration_m_s2), ctrl.stopScript, ctrl.disconnect):
+            try:
+                call()
+            except Exception:  # noqa: BLE001 - the link may already be gone; keep releasing
+                pass
+
+    # -- worker -------------------------------------------------------------------------------
+    def _work(self) -> None:
+        sent_seq = 0
+        timeout_ns = int(self.target_timeout_s * 1e9)
+        while True:
+            with self._cond:
+                self._cond.wait_for(
+                    lambda: self._closing or self._stop_requested or self._target_seq != sent_seq,
+                    timeout=self.period_s,
+                )
+                if self._closing:
+                    return
+                stop = self._stop_requested
+                target, seq, target_ns = self._target, self._target_seq, self._target_ns
+            ctrl = self._ctrl
+            now = self.clock.now_ns()
+            try:
+                if stop:
+                    if self.servoing or self._error:
+                        self._do_stop(ctrl)
+                        with self._cond:
+                            if self._stop_requested and self._target_seq == seq:
+                                self._stop_requested = False
+                    else:
+                        with self._cond:
+                            self._stop_requested = False
+                elif target is not None and seq != sent_seq and not self._error:
+                    sent_seq = seq
+                    if now - target_ns > timeout_ns:
+                        continue  # picked up too late: the check below stops the robot if nothing newer comes
+                    ok = ctrl.servoL(list(target), 0.0, 0.0, self.period_s, self.lookahead_s, self.gain)
+                    self.servo_commands += 1
+                    if ok is False:
+                        self._error = "servoL refused the target (protective stop, or the control script is not running)"
+                        self._do_stop(ctrl)
+                    else:
+                        self.servoing = True
+                elif self.servoing and now - target_ns > timeout_ns:
+                    self._do_stop(ctrl)
+                    self._error = f"no teleoperation target for {(now - target_ns) * 1e-6:.0f} ms: stopped the robot"
+            except Exception as exc:  # noqa: BLE001 - a lost link or a controller error: stop and report
+                self._error = f"RTDE control: {exc}"
+                self.servoing = False
+
+    def _do_stop(self, ctrl: Any) -> None:
+        ok = ctrl.servoStop(self.stop_deceleration_m_s2)
+        self.servo_stops += 1
+        self.servoing = False
+        if ok is not False:
+            self._error = ""  # a stop the controller accepted clears a previous failure
