@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.clock import Clock, MonotonicClock, VirtualClock
+from pipeline.clock import Clock, MonotonicClock, VirtualClock, prepare_realtime_thread
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.framework import FrameworkConfig, HapticFramework
 from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
@@ -244,7 +244,8 @@ def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | 
 
     threading.Thread(target=_receive, name="engine-commands", daemon=True).start()
     assert eng.ring is not None
-    events.put(("ready", eng.ring.name, eng.calibration.to_dict()))
+    scheduling = prepare_realtime_thread() if config.clock == "real" else "virtual clock"
+    events.put(("ready", eng.ring.name, eng.calibration.to_dict(), scheduling))
     try:
         loop.run(stop, max_ticks=max_ticks)
     finally:
@@ -280,6 +281,8 @@ class EngineProcess:
         self.ring: RingBuffer | None = None
         self.calibration: dict[str, Any] | None = None
         self.final_stats: dict[str, float] | None = None
+        #: How the loop thread is scheduled, e.g. ``"SCHED_FIFO/20"`` (known once started).
+        self.scheduling = ""
         self.final_ticks: int | None = None
         self.final_faults: int | None = None
         self.loop_events: list[LoopEvent] = []
@@ -326,6 +329,7 @@ class EngineProcess:
             if msg[0] == "ready":
                 self.ring = RingBuffer.attach(msg[1])
                 self.calibration = msg[2]
+                self.scheduling = msg[3]
                 return
             self._handle(msg)
 

@@ -27,7 +27,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
-from pipeline.clock import Clock, set_timer_slack_ns
+from pipeline.clock import Clock, prepare_realtime_thread
 from pipeline.devices import Fault, ForceSensor, HapticDevice, Robot
 from pipeline.frames import Vec3
 from pipeline.framework import STEP_FIELDS, HapticFramework
@@ -261,6 +261,8 @@ class HapticLoop:
         self._inbox: deque[Command] = deque()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        #: How the loop thread is scheduled once :meth:`start` ran (``"SCHED_FIFO/20"`` or why not).
+        self.scheduling = "not started"
         self.tick_count = 0
         self.haptic_on = False
         self.trial_index = -1
@@ -481,7 +483,7 @@ class HapticLoop:
         self._stop.clear()
 
         def _target() -> None:
-            set_timer_slack_ns(1)
+            self.scheduling = prepare_realtime_thread()
             self.run(self._stop)
 
         self._thread = threading.Thread(target=_target, name="haptic-loop", daemon=True)
