@@ -169,8 +169,8 @@ class ExperimenterWindow(QMainWindow):
         self.model.apply(ev)
 
     def _on_plot_timer(self) -> None:
-        self.model.tick()
-        self.plots.refresh()
+        if self.model.tick():  # nothing new (engine paused or gone): nothing to redraw
+            self.plots.refresh()
 
     # -- actions -----------------------------------------------------------------------------------------
     def start_session(self) -> None:

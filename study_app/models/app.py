@@ -70,11 +70,11 @@ class AppModel:
         """Start pulling samples from the engine's ring."""
         self.plots.attach(ring)
 
-    def tick(self) -> None:
-        """Pull new samples (call at ~30 Hz) and update every sample-driven model."""
+    def tick(self) -> int:
+        """Pull new samples (call at ~30 Hz) and update every sample-driven model; returns the number pulled."""
         n = self.plots.pull()
         if n == 0 or self.plots.last_row is None:
-            return
+            return 0
         last = self.plots.last_row
         t = float(last["t_s"])
         self.session.set_time(t)
@@ -86,6 +86,7 @@ class AppModel:
         if self._rate_span >= _RATE_WINDOW_S:
             self.health.update_from_rows(np.concatenate(self._rate_rows))
             self._rate_rows, self._rate_span = [], 0.0
+        return n
 
     # -- what may be done now -------------------------------------------------------------------------
     @property
