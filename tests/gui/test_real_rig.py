@@ -212,3 +212,35 @@ def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(ri
         assert not any(isinstance(ev, m.EngineReady) for ev in got)
     finally:
         client.kill()
+
+
+def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_path):
+    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is fed in."""
+    from PySide6.QtCore import QSettings
+
+    from study_app.gui.main_window import ExperimenterWindow
+
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    w = ExperimenterWindow(HostConfig(rig="real", hardware_path=str(tmp_path / "none.toml")), settings, None)
+    qtbot.addWidget(w)
+    qtbot.waitUntil(lambda: w.model.session.state == "stopped", timeout=20_000)  # refused, then the engine exits
+    assert w.model.session.message == (f"engine stopped: real rig: {tmp_path / 'none.toml'}: no such hardware file "
+                                       "(copy hardware.example.toml and edit it)")
+    w._on_engine_event(m.EngineReady("", "real", "real", {}, math.nan, (math.nan,) * 3, "participant"))
+    assert not w.rig_button.isEnabled() and not w.view_actions["Simulated rig"].isEnabled()
+    assert w.rig_button.toolTip().startswith("real rig: a person holds the stylus")
+    wiz = w.calibration_wizard
+    panel = wiz.real_panel
+    assert panel is not None and not panel.isHidden() and wiz.sim_controls.isHidden()
+    panel.pose_set.setCurrentText("quick")
+    panel.start_button.click()
+    assert panel.instruction.text().startswith("Pose P01 (1 of 6): move the TCP to rotation vector (")
+    assert panel.record_button.isEnabled() and not panel.identify_button.isEnabled()
+    assert panel.identify_button.toolTip() == "record at least 6 poses first (0 so far)"
+    cal = w.model.real_calibration
+    for step in list(cal.steps):
+        w._on_engine_event(m.PoseRecorded(step.label, 1000, (0.0, 0.0, 2.0, 0.0, 0.0, 0.0),
+                                          step.target_rot_base_sensor, (0.3, -0.1, 0.2), 20.0, 0.001))
+    assert panel.poses.rowCount() == 6 and panel.poses.item(0, 1).text() == "20.0"
+    assert panel.poses.item(5, 2).text() == "2.000" and panel.identify_button.isEnabled()
+    assert panel.message.text().startswith("P06 is 20° from its target — kept")
