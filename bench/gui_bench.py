@@ -32,6 +32,8 @@ from study_app.engine_host import HostConfig
 __all__ = ["format_gui_bench", "run_gui_bench"]
 
 _STALL_TIMER_MS = 5
+#: Stalls at least this long are attributed to a callback (sampled stacks of the GUI thread).
+_STALL_THRESHOLD_MS = 30.0
 
 
 def _loop_figures(h: m.Health) -> dict[str, float]:
@@ -77,7 +79,7 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
     from PySide6.QtWidgets import QApplication
 
     from study_app.gui.main_window import ExperimenterWindow
-    from study_app.gui.timers import tracked_timer
+    from study_app.gui.stall import StallDetector
 
     app = QApplication.instance() or QApplication(["haptic-study-bench"])
     tmp = tempfile.TemporaryDirectory(prefix="haptic-study-bench-")
@@ -88,18 +90,8 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
     app.processEvents()
     t_usable = time.perf_counter() - t0
 
-    phase = ["connect"]
-    stalls: dict[str, float] = {"connect": 0.0, "calibration": 0.0, "session": 0.0}
-    last_tick = [time.perf_counter()]
-
-    def on_tick() -> None:
-        now = time.perf_counter()
-        gap_ms = (now - last_tick[0]) * 1e3 - _STALL_TIMER_MS
-        last_tick[0] = now
-        stalls[phase[0]] = max(stalls[phase[0]], gap_ms)
-
-    stall_timer = tracked_timer(win, _STALL_TIMER_MS, on_tick, name="bench-stall")
-    stall_timer.start()
+    detector = StallDetector(win, _STALL_TIMER_MS, threshold_ms=_STALL_THRESHOLD_MS)
+    detector.start("connect")
     health: list[m.Health] = []
     win.bridge.event_received.connect(lambda ev: isinstance(ev, m.Health) and health.append(ev))
 
@@ -114,14 +106,12 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
     try:
         run_until(lambda: win.model.session.state == "ready", 60.0)
         t_ready = time.perf_counter() - t0
-        last_tick[0] = time.perf_counter()
-        phase[0] = "calibration"
+        detector.set_phase("calibration")
         win.calibration_wizard.show()
         win.calibration_wizard.run_button.click()
         run_until(lambda: win.model.calibration.state in ("accepted", "refused"), 120.0)
         win.calibration_wizard.hide()
-        phase[0] = "session"
-        last_tick[0] = time.perf_counter()
+        detector.set_phase("session")
         win.participant_window.show()
         win.rig_window.show()
         win.model.setup.update(code="BENCH01")
@@ -135,14 +125,24 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
         with_gui = _loop_figures(health[-1])
         trials = win.trial_table.rowCount()
     finally:
-        stall_timer.stop()
+        detector.stop()
         win.close()
         tmp.cleanup()
     return {
         "seconds": seconds,
         "without_gui": without,
         "with_gui": with_gui,
-        "gui_stall_ms": {k: round(v, 1) for k, v in stalls.items()},
+        "gui_stall_ms": {k: round(v, 1) for k, v in detector.recorder.worst_ms.items()},
+        "gui_worst_stall": {
+            ph: (None if (w := detector.recorder.worst(ph)) is None else {"ms": w.gap_ms, "callback": w.culprit})
+            for ph in ("connect", "calibration", "session")
+        },
+        "gui_stalls_over_threshold": len(detector.recorder.stalls),
+        "gui_longest_stalls": [
+            {"phase": st.phase, "ms": st.gap_ms, "callback": st.culprit}
+            for st in sorted(detector.recorder.stalls, key=lambda st: -st.gap_ms)[:8]
+        ],
+        "load_average": [round(x, 2) for x in os.getloadavg()],
         "startup_s": {"window_usable": round(t_usable, 2), "engine_ready": round(t_ready, 2)},
         "trials_during_measurement": trials,
         "qt_platform": app.platformName(),
@@ -164,6 +164,12 @@ def format_gui_bench(r: dict[str, Any]) -> str:
         f"  with GUI, 30 Hz plot {loop(r['with_gui'])}\n"
         f"GUI event-loop stalls (longest gap beyond a {_STALL_TIMER_MS} ms timer, Qt platform {r['qt_platform']}):\n"
         f"  connect {s['connect']:.1f} ms · calibration {s['calibration']:.1f} ms · session {s['session']:.1f} ms\n"
+        + "".join(
+            f"  worst in {ph}: {w['ms']:.1f} ms in {w['callback']}\n"
+            for ph, w in r["gui_worst_stall"].items() if w is not None
+        )
+        + f"  {r['gui_stalls_over_threshold']} stalls ≥ {_STALL_THRESHOLD_MS:g} ms in all; load average "
+        f"{' '.join(f'{x:.2f}' for x in r['load_average'])} (1/5/15 min, at the end)\n"
         f"start-up: usable window {r['startup_s']['window_usable']:.2f} s, engine connected "
         f"{r['startup_s']['engine_ready']:.2f} s"
     )

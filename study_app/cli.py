@@ -274,15 +274,20 @@ def _cmd_hardware(args: argparse.Namespace) -> int:
 def _cmd_gui(args: argparse.Namespace) -> int:
     import os
 
-    from study_app.engine_host import REAL_RIG_UNAVAILABLE, HostConfig, real_rig_builder
+    from study_app.engine_host import HostConfig
 
-    if args.rig == "real":
-        if real_rig_builder() is None:
-            raise CliError(REAL_RIG_UNAVAILABLE)
-        if args.hardware is None:
-            raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab)")
+    if args.rig == "real" and args.hardware is None:
+        raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
     if args.hardware is not None and not os.path.isfile(args.hardware):
         raise CliError(f"--hardware = {args.hardware!r}: no such file")
+    if args.rig == "real":
+        # validated here, before any window opens: a bad field is one line and exit 2
+        from pipeline.hardware import HardwareError, load_hardware
+
+        try:
+            load_hardware(args.hardware)
+        except HardwareError as exc:
+            raise CliError(str(exc)) from None
     if args.screenshot is not None and args.rig != "sim":
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
     # Qt is imported here only: the other subcommands never load it

@@ -37,9 +37,13 @@ from typing import Any
 import numpy as np
 
 from pipeline.clock import MonotonicClock, VirtualClock
-from pipeline.compensation import DegeneratePoseSetError, PayloadCalibration, recommended_pose_set
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.compensation import (
+    CalibrationPose, DegeneratePoseSetError, PayloadCalibration, identify_payload, recommended_pose_set,
+)
+from pipeline.devices import DeviceError
+from pipeline.engine import EngineConfig, HardwareEngine, SimEngine, build_hardware_engine, build_sim_engine
 from pipeline.frames import Mat3, axis_angle, mat_mul
+from pipeline.hardware import HardwareConfig, HardwareError, load_hardware
 from pipeline.loop import ControllerDetached, LoopEvent, SetCalibration
 from pipeline.loop import OperatorStop as LoopOperatorStop
 from pipeline.loop import ResetFaults as LoopResetFaults
@@ -55,32 +59,113 @@ from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
 
 __all__ = [
-    "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "REAL_RIG_UNAVAILABLE",
-    "StudyEngine", "SwitchableDriver", "host_main", "pose_set", "real_rig_builder",
+    "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
+    "build_real_engine", "host_main", "pose_set", "real_config_record", "rotation_angle_deg",
 ]
 
 #: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
 CALIBRATION_MAX_CONDITION = 1000.0
 #: ... or whose fit leaves more than this RMS force residual (a pose in contact, a loose tool).
 CALIBRATION_MAX_RMS_FORCE_N = 0.05
-#: The one line shown when ``--rig real`` is asked for before the hardware backends exist.
-REAL_RIG_UNAVAILABLE = (
-    "real rig: hardware backends are not configured — pass --hardware FILE; see docs/hardware-setup.md"
-)
 #: Lowest / highest equilibrium a person may command with the mouse, m along the Touch's +y.
 MANUAL_Y_RANGE_M = (-0.030, 0.005)
+#: A calibration pose is refused if the TCP turned more than this, or moved more than the next, while averaging.
+POSE_STILL_DEG = 0.5
+POSE_STILL_M = 0.002
+#: ... or if a force sample older than this was averaged (the sensor stalled).
+POSE_MAX_SENSOR_AGE_S = 0.05
+_RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
 
 
-def real_rig_builder() -> Callable[..., Any] | None:
-    """The real-rig factory of the hardware backends, or None until they are installed.
+def rotation_angle_deg(a: Mat3, b: Mat3) -> float:
+    """The angle of the rotation taking orientation ``a`` to ``b``, degrees (0–180)."""
+    ra, rb = np.asarray(a, dtype=float).reshape(3, 3), np.asarray(b, dtype=float).reshape(3, 3)
+    c = (float(np.trace(ra.T @ rb)) - 1.0) / 2.0
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
 
-    Wiring the real rig in is this import (issue 6 adds ``pipeline.backends``).
-    """
+
+def _import_factory(spec: str) -> Callable[..., Any]:
+    import importlib
+
+    module, _, attr = spec.partition(":")
     try:
-        from pipeline.backends import build_real_rig  # type: ignore[import-not-found]
-    except ImportError:
-        return None
-    return build_real_rig  # type: ignore[no-any-return]
+        return getattr(importlib.import_module(module), attr)  # type: ignore[no-any-return]
+    except (ImportError, AttributeError) as exc:
+        raise RuntimeError(f"haptic_factory = {spec!r}: cannot be imported ({exc})") from None
+
+
+def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[HardwareEngine, HardwareConfig, str]:
+    """Load the hardware file, open the devices and assemble the loop (:func:`pipeline.engine.build_hardware_engine`).
+
+    Returns the engine, the validated hardware config and the file's text (stored with each session).
+
+    Raises
+    ------
+    RuntimeError
+        One line: the file is missing or invalid (naming the field), or a device cannot be opened (naming it).
+    """
+    if not config.hardware_path:
+        raise RuntimeError("real rig: no hardware file given; pass --hardware FILE (see hardware.example.toml)")
+    try:
+        hw = load_hardware(config.hardware_path)
+        with open(config.hardware_path, encoding="utf-8") as fh:
+            text = fh.read()
+    except HardwareError as exc:
+        raise RuntimeError(f"real rig: {exc}") from None
+    import pipeline.hardware as hardware_module
+
+    # The rig-construction seam: build_real_rig opens the Touch through pipeline.hardware.open_haptic.
+    # Tests (no Touch on CI) swap in a device that speaks the HDAPI through the real Touch backend.
+    original = hardware_module.open_haptic
+    if config.haptic_factory is not None:
+        hardware_module.open_haptic = _import_factory(config.haptic_factory)  # type: ignore[assignment]
+    try:
+        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0)
+    except DeviceError as exc:
+        raise RuntimeError(f"real rig: {exc}") from None
+    except (OSError, ValueError, KeyError) as exc:
+        if hw.calibration_file is None:
+            raise
+        raise RuntimeError(f"real rig: {hw.source}: calibration.file = {hw.calibration_file!r}: cannot be read as a "
+                           f"payload calibration ({exc})") from None
+    finally:
+        hardware_module.open_haptic = original
+    return eng, hw, text
+
+
+def real_config_record(hw: HardwareConfig, hardware_text: str, eng: HardwareEngine) -> dict[str, Any]:
+    """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
+    return {
+        "rig": "real",
+        "clock": "real",
+        "participant": "person",
+        "hardware_file": hw.source,
+        "hardware_toml": hardware_text,
+        "hardware": _plain(dataclasses.asdict(hw)),
+        "framework": _plain(dataclasses.asdict(eng.framework.config)),
+        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+    }
+
+
+def _plain(d: Any) -> Any:
+    if isinstance(d, dict):
+        return {k: _plain(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_plain(v) for v in d]
+    return d
+
+
+@dataclass
+class _Recording:
+    """A calibration pose being averaged from the ring (driver thread)."""
+
+    label: str
+    need: int
+    start_ns: int  # loop time (the ring's t_ns)
+    pose0: Any
+    target: Mat3 | None
+    chunks: list[np.ndarray]
+    got: int = 0
 
 
 def pose_set(name: str) -> list[Mat3]:
@@ -111,6 +196,9 @@ class HostConfig:
         ``"sim"`` or ``"real"``.
     hardware_path
         hardware.toml for the real rig.
+    haptic_factory
+        Real rig, tests only: ``"module:function"`` opening the haptic device instead of the Touch
+        (called as ``open_haptic(HapticSettings, clock)``; no Touch on CI machines).
     clock
         ``"real"`` (1 kHz on the monotonic clock, loop in its own thread) or
         ``"virtual"`` (rehearsals, screenshots, tests).
@@ -127,6 +215,7 @@ class HostConfig:
     rig: str = "sim"
     hardware_path: str | None = None
     clock: str = "real"
+    haptic_factory: str | None = None
     speed: float = 1.0
     rig_seed: int = 0
     block_ticks: int = 50
@@ -137,6 +226,10 @@ class HostConfig:
             raise ValueError(f"rig = {self.rig!r}: allowed values are 'sim' and 'real'")
         if self.clock not in ("real", "virtual"):
             raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
+        if self.rig == "real" and self.clock != "real":
+            raise ValueError(f"clock = {self.clock!r}: the real rig runs on the real clock only")
+        if self.haptic_factory is not None and ":" not in self.haptic_factory:
+            raise ValueError(f"haptic_factory = {self.haptic_factory!r}: must be 'module:function'")
         if not (math.isfinite(self.speed) and self.speed >= 0):
             raise ValueError(f"speed = {self.speed!r}: must be a finite number ≥ 0")
         if self.block_ticks < 1:
@@ -263,19 +356,22 @@ class StudyEngine:
     def __init__(self, config: HostConfig, publish: Callable[[object], None], *, shared_ring: bool = True) -> None:
         self.config = config
         self.publish = publish
-        if config.rig == "real":
-            builder = real_rig_builder()
-            if builder is None:
-                raise RuntimeError(REAL_RIG_UNAVAILABLE)
-            raise RuntimeError("real rig: the study engine does not drive the hardware backends yet")  # pragma: no cover
-        self.eng: SimEngine = build_sim_engine(
-            EngineConfig(sim=SimRigConfig(seed=config.rig_seed), clock=config.clock, calibrate=True, driver="hold",
-                         haptics_on=False, refine_bias=True, ring_seconds=30.0),
-            shared_ring=shared_ring,
-        )
-        self.calibration: PayloadCalibration = self.eng.calibration
+        self.real = config.rig == "real"
         self.driver = SwitchableDriver()
-        self.eng.rig.set_driver(self.driver)
+        self.hardware: HardwareConfig | None = None
+        self.hardware_text = ""
+        self.eng: SimEngine | HardwareEngine
+        if self.real:
+            self.eng, self.hardware, self.hardware_text = build_real_engine(config, shared_ring=shared_ring)
+        else:
+            self.eng = build_sim_engine(
+                EngineConfig(sim=SimRigConfig(seed=config.rig_seed), clock=config.clock, calibrate=True, driver="hold",
+                             haptics_on=False, refine_bias=True, ring_seconds=30.0),
+                shared_ring=shared_ring,
+            )
+            self.eng.rig.set_driver(self.driver)
+        self.calibration: PayloadCalibration = self.eng.calibration
+        self._recording: _Recording | None = None
         assert self.eng.ring is not None
         self.ring = self.eng.ring
         self.cursor = self.ring.write_count
@@ -301,12 +397,35 @@ class StudyEngine:
         if self.config.clock == "real":
             self.loop.start()
         self._running = True
-        rc = self.eng.rig.config
+        if isinstance(self.eng, SimEngine):
+            rc = self.eng.rig.config
+            surface_z_m, tip_home_m, rot_tip_sensor = rc.surface_z_m, tuple(rc.tip_home_m), rc.rot_tip_sensor
+        else:
+            surface_z_m, tip_home_m = math.nan, (math.nan, math.nan, math.nan)
+            rot_tip_sensor = self.eng.framework.config.rot_tip_sensor
         self.publish(m.EngineReady(
             ring_name=self.ring.name or "", rig=self.config.rig, clock=self.config.clock,
-            calibration=self.calibration.to_dict(), surface_z_m=rc.surface_z_m,
-            tip_home_m=tuple(rc.tip_home_m), driver=self.driver.mode,  # type: ignore[arg-type]
+            calibration=self.calibration.to_dict(), surface_z_m=surface_z_m,
+            tip_home_m=tip_home_m, driver=self.driver_name,  # type: ignore[arg-type]
+            rot_tip_sensor=tuple(float(x) for x in rot_tip_sensor),
+            devices=self._device_summary(),
         ))
+
+    @property
+    def driver_name(self) -> str:
+        """Who drives the stylus: the simulated-rig driver mode, or a person on the real rig."""
+        return m.REAL_DRIVER if self.real else self.driver.mode
+
+    def _device_summary(self) -> list[str]:
+        hw = self.hardware
+        if hw is None:
+            return ["simulated rig (F/T sensor, UR3, Touch twins)"]
+        out = [f"F/T sensor: Net F/T at {hw.sensor.host}:{hw.sensor.port}",
+               f"robot: UR over RTDE at {hw.robot.host} ({hw.robot.mode})",
+               f"haptic device: {hw.haptic.device_name}"]
+        if hw.jaw is not None:
+            out.append(f"jaw actuator: {hw.jaw.port}")
+        return out
 
     def close(self, reason: str, *, detached: bool = False) -> None:
         """Leave the current session resumable with complete records, ramp the force to zero, stop."""
@@ -328,7 +447,10 @@ class StudyEngine:
         else:
             self.loop.ramp_down()
         self._drain_ring()
-        self.eng.rig.close()
+        try:
+            self.eng.rig.close()
+        except DeviceError as exc:  # the force is already zero; say what did not close cleanly
+            reason = f"{reason}; {exc}"
         self.closed = True
         self.publish(m.EngineStopped(reason, self.stats.summary()))
 
@@ -383,6 +505,8 @@ class StudyEngine:
         else:
             self.stats.add(rows["period_s"])
         self._last_t_ns = int(rows["t_ns"][-1])
+        if self._recording is not None:
+            self._feed_recording(rows)
         runner = self.runner
         if runner is None:
             return
@@ -400,7 +524,7 @@ class StudyEngine:
             loop_rate_hz=s["rate_hz"], period_p50_us=s["period_p50_us"], period_p99_us=s["period_p99_us"],
             abs_dev_p99_us=s["abs_dev_p99_us"], periods_over_2ms=int(s["periods_over_2ms"]),
             missed_slots=int(self.loop.stats.missed_slots), ticks=int(s["ticks"]), faults=int(self.loop.faults),
-            haptic_on=bool(self.loop.haptic_on), driver=self.driver.mode,
+            haptic_on=bool(self.loop.haptic_on), driver=self.driver_name,
             session_running=runner is not None and not runner.done, paused=bool(runner is not None and runner.paused),
             abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
         )
@@ -444,12 +568,23 @@ class StudyEngine:
         elif isinstance(cmd, m.OperatorStop):
             self.loop.submit(LoopOperatorStop())
         elif isinstance(cmd, m.Calibrate):
+            if self.real:
+                raise RuntimeError("real rig: the poses are recorded one at a time in the calibration wizard "
+                                   "(move the robot, then Record pose)")
             self._calibrate(cmd.pose_set)
-        elif isinstance(cmd, m.SetDriver):
-            self.driver.set_mode(cmd.mode)
-            self.publish(self.health())
-        elif isinstance(cmd, m.ManualTarget):
-            self.driver.set_manual_y(cmd.y_m)
+        elif isinstance(cmd, m.RecordPose):
+            self._record_pose(cmd)
+        elif isinstance(cmd, m.IdentifyPoses):
+            self._identify(cmd)
+        elif isinstance(cmd, (m.SetDriver, m.ManualTarget)):
+            if self.real:
+                raise RuntimeError("real rig: a person holds the stylus; the simulated participant and manual "
+                                   "driving exist on the simulated rig only")
+            if isinstance(cmd, m.SetDriver):
+                self.driver.set_mode(cmd.mode)
+                self.publish(self.health())
+            else:
+                self.driver.set_manual_y(cmd.y_m)
         elif isinstance(cmd, m.ResetStats):
             self.stats.reset()
         else:
@@ -487,7 +622,7 @@ class StudyEngine:
                 code=cmd.code, kind=cmd.kind, seed=cmd.seed, participant_number=cmd.participant_number,
                 protocol_json=run_protocol.to_json(), schedule_json=schedule_to_json(schedule),
                 software_version=software_version(), rig=self.config.rig,
-                config={**config_record(self.eng, self.config.clock, self.config.rig_seed, p_seed), "app": "gui"},
+                config={**self._config_record(p_seed), "app": "gui"},
                 calibration=self.calibration.to_dict(),
             )
         except BaseException:
@@ -496,6 +631,12 @@ class StudyEngine:
         live_aid = cmd.kind == "training" and protocol.training.live_force_aid
         self._run(db, session_id, cmd.code, cmd.kind, run_protocol, schedule, 0, 0.0, p_seed, cmd.seed, live_aid,
                   f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)")
+
+    def _config_record(self, participant_seed: int) -> dict[str, Any]:
+        if isinstance(self.eng, SimEngine):
+            return config_record(self.eng, self.config.clock, self.config.rig_seed, participant_seed)
+        assert self.hardware is not None
+        return real_config_record(self.hardware, self.hardware_text, self.eng)
 
     def _resume_session(self, cmd: m.ResumeSession) -> None:
         self._require_idle("resume")
@@ -517,13 +658,18 @@ class StudyEngine:
 
     def _run(self, db: StudyDatabase, session_id: int, code: str, kind: str, protocol: Any, schedule: list[Any],
              pos: int, offset_s: float, p_seed: int, seed: int, live_aid: bool, start_note: str | None) -> None:
-        self.driver.participant = SimulatedParticipant(seed=p_seed)
         recorder = Recorder(db, threaded=True)
-        rig = self.eng.rig
+        if isinstance(self.eng, SimEngine):
+            self.driver.participant = SimulatedParticipant(seed=p_seed)
+            sim_rig = self.eng.rig
+            participant: SwitchableDriver | None = self.driver
+            participant_time: Callable[[], float] | None = lambda: sim_rig.sim_time_s
+        else:  # a person holds the Touch: nothing to notify, nothing simulated
+            participant, participant_time = None, None
         runner = SessionRunner(
             protocol=protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=self.loop.submit,
-            start_position=pos, session_clock_offset_s=offset_s, participant=self.driver,
-            participant_time=lambda: rig.sim_time_s, seed=seed,
+            start_position=pos, session_clock_offset_s=offset_s, participant=participant,
+            participant_time=participant_time, seed=seed,
         )
         runner.live_force_aid = live_aid
         runner.listeners.append(self._on_runner_event)
@@ -575,7 +721,97 @@ class StudyEngine:
         st = runner.state
         self.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted, st.successes))
 
-    # -- calibration ----------------------------------------------------------------------------------
+    # -- calibration on the real rig: pose by pose -----------------------------------------------------
+    def _record_pose(self, cmd: m.RecordPose) -> None:
+        if not isinstance(self.eng, HardwareEngine):
+            raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
+        self._require_idle("record pose")
+        if self._recording is not None:
+            raise RuntimeError(f"record pose: pose {self._recording.label} is still being recorded")
+        if not cmd.label.strip():
+            raise ValueError("pose label = '': must name the pose")
+        if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 10.0):
+            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.1 to 10 s")
+        target = None
+        if cmd.target_rot_base_sensor is not None:
+            target = check_target(cmd.target_rot_base_sensor)
+        now = self.eng.clock.now_ns()
+        pose0 = self.eng.rig.robot.read_pose()
+        if not all(math.isfinite(x) for x in pose0.position_m):
+            raise RuntimeError("robot: no TCP pose received yet; check the RTDE connection (Devices tab)")
+        age_s = (now - pose0.t_ns) * 1e-9
+        if age_s > 0.5:
+            raise RuntimeError(f"robot: the newest TCP pose is {age_s:.1f} s old; check the RTDE connection")
+        # average only records written after this command: everything up to now is drained first
+        self._drain_ring()
+        start = self._last_t_ns + 1 if self.loop.tick_count else 0
+        self._recording = _Recording(cmd.label, int(round(cmd.seconds * 1000)), start, pose0, target, [])
+
+    def _feed_recording(self, rows: np.ndarray) -> None:
+        rec = self._recording
+        assert rec is not None
+        sel = rows[rows["t_ns"] >= rec.start_ns]
+        if len(sel):
+            if float(np.max(sel["sensor_age_s"])) > POSE_MAX_SENSOR_AGE_S:
+                self._recording = None
+                self.publish(m.CommandRefused("RecordPose", f"pose {rec.label}: the force sensor stalled while "
+                                              "recording (check the Devices tab) — record it again"))
+                return
+            rec.chunks.append(np.stack([sel[c] for c in _RAW_WRENCH], axis=1))
+            rec.got += len(sel)
+        if rec.got < rec.need:
+            return
+        self._recording = None
+        assert isinstance(self.eng, HardwareEngine)
+        w = np.concatenate(rec.chunks)[: rec.need]
+        pose1 = self.eng.rig.robot.read_pose()
+        turned = rotation_angle_deg(rec.pose0.rot_base_tip, pose1.rot_base_tip)
+        moved = math.dist(rec.pose0.position_m, pose1.position_m)
+        if not np.isfinite(w).all():
+            reason = "the force sensor gave non-finite readings"
+        elif not (turned <= POSE_STILL_DEG and moved <= POSE_STILL_M):
+            reason = (f"the robot moved while recording ({turned:.2f}°, {moved * 1e3:.1f} mm; allowed "
+                      f"{POSE_STILL_DEG:g}° and {POSE_STILL_M * 1e3:g} mm) — let it stand still and record again")
+        else:
+            reason = ""
+        if reason:
+            self.publish(m.CommandRefused("RecordPose", f"pose {rec.label}: {reason}"))
+            return
+        rot_base_sensor = mat_mul(pose1.rot_base_tip, self.eng.framework.config.rot_tip_sensor)
+        mean = w.mean(axis=0)
+        self.publish(m.PoseRecorded(
+            label=rec.label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]
+            rot_base_sensor=tuple(float(x) for x in rot_base_sensor),
+            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]
+            off_target_deg=rotation_angle_deg(rec.target, rot_base_sensor) if rec.target is not None else math.nan,
+            force_std_n=float(np.std(np.linalg.norm(w[:, :3], axis=1))),
+        ))
+
+    def _identify(self, cmd: m.IdentifyPoses) -> None:
+        if not self.real:
+            raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
+        self._require_idle("calibrate")
+        poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
+        self.publish(self._identified(poses, cmd.pose_set))
+
+    def _identified(self, poses: list[CalibrationPose], name: str) -> m.CalibrationDone:
+        """Identify, judge, and install an accepted calibration in the running loop."""
+        try:
+            cal = identify_payload(poses)
+        except DegeneratePoseSetError as exc:
+            return m.CalibrationDone(False, str(exc), name, len(poses), float(exc.condition_number or math.inf),
+                                     math.nan, math.nan, [], None)
+        reason = calibration_verdict(cal)
+        if reason == "":
+            self.calibration = cal
+            self.loop.submit(SetCalibration(cal))
+        return m.CalibrationDone(
+            reason == "", reason, name, len(poses), cal.condition_number, cal.rms_force_residual_n,
+            cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
+            cal.to_dict(),
+        )
+
+    # -- calibration on the simulated rig: automatic ----------------------------------------------------
     def _calibrate(self, name: str) -> None:
         from pipeline.sim.calibration import auto_calibrate
 
@@ -592,6 +828,7 @@ class StudyEngine:
         total = len(rots)
         result: m.CalibrationDone
         try:
+            assert isinstance(self.eng, SimEngine)
             cal, poses = auto_calibrate(
                 self.eng.rig, clock, rots,
                 progress=lambda done, n: self.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
@@ -616,6 +853,13 @@ class StudyEngine:
             if real:
                 self.loop.start()
         self.publish(result)
+
+
+def check_target(rows: Any) -> Mat3:
+    """A requested pose's ``rot_base_sensor`` (validated)."""
+    from pipeline.frames import check_rotation
+
+    return check_rotation(rows, "target_rot_base_sensor")
 
 
 def calibration_verdict(cal: PayloadCalibration) -> str:

@@ -15,13 +15,15 @@ from typing import Any
 __all__ = [
     "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
     "EngineFault", "EngineReady", "EngineStopped", "Health", "ListSessions", "ManualTarget", "OperatorStop",
-    "Pause", "PhaseEntered", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
+    "IdentifyPoses", "Pause", "PhaseEntered", "PoseRecorded", "RecordPose", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
     "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
     "DRIVER_MODES", "POSE_SETS",
 ]
 
 #: Who holds the simulated stylus.
 DRIVER_MODES = ("autopilot", "manual")
+#: The driver reported by the real rig: a person holds the Touch; nothing can be switched.
+REAL_DRIVER = "participant"
 #: Calibration pose sets offered by the wizard (see :func:`study_app.engine_host.pose_set`).
 POSE_SETS = ("recommended", "quick", "tool-down only")
 
@@ -96,6 +98,28 @@ class Calibrate:
 
 
 @dataclass(frozen=True, slots=True)
+class RecordPose:
+    """Real rig: average ``seconds`` of raw wrench at the robot's current pose and read its TCP orientation.
+
+    The engine answers with :class:`PoseRecorded` (or :class:`CommandRefused` naming why,
+    e.g. the robot moved while recording).  ``target_rot_base_sensor`` is the pose the wizard
+    asked for; the recorded orientation is the one the robot reports.
+    """
+
+    label: str
+    seconds: float = 1.0
+    target_rot_base_sensor: tuple[float, ...] | None = None  # 9 numbers, row-major
+
+
+@dataclass(frozen=True, slots=True)
+class IdentifyPoses:
+    """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if accepted."""
+
+    poses: tuple[tuple[str, tuple[float, ...], tuple[float, ...]], ...]
+    pose_set: str = "recommended"
+
+
+@dataclass(frozen=True, slots=True)
 class SetDriver:
     """Hand the simulated stylus to the simulated participant or to a person."""
 
@@ -131,6 +155,8 @@ class EngineReady:
     surface_z_m: float
     tip_home_m: tuple[float, float, float]
     driver: str
+    rot_tip_sensor: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
+    devices: list[str] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,6 +256,24 @@ class CalibrationDone:
     rms_torque_residual_nm: float
     residuals: list[tuple[str, float, float]]
     calibration: dict[str, Any] | None
+
+
+@dataclass(frozen=True, slots=True)
+class PoseRecorded:
+    """One calibration pose measured on the real rig.
+
+    ``rot_base_sensor`` is the reported TCP orientation times the configured sensor mount;
+    ``off_target_deg`` the angle between it and the requested pose (NaN if none was given);
+    ``force_std_n`` the standard deviation of the force magnitude while averaging.
+    """
+
+    label: str
+    samples: int
+    wrench: tuple[float, float, float, float, float, float]
+    rot_base_sensor: tuple[float, ...]  # 9 numbers, row-major
+    tcp_position_m: tuple[float, float, float]
+    off_target_deg: float
+    force_std_n: float
 
 
 @dataclass(frozen=True, slots=True)

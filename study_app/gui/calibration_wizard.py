@@ -10,14 +10,91 @@ from PySide6.QtWidgets import (
 
 from study_app import messages as m
 from study_app.models.calibration import CalibrationModel
+from study_app.models.real_calibration import REAL_POSE_SETS, RealCalibrationModel
 
-__all__ = ["CalibrationWizard"]
+__all__ = ["CalibrationWizard", "RealPosePanel"]
+
+
+class RealPosePanel(QWidget):
+    """Real rig: one target pose at a time, Record pose, the recorded poses, Identify (layout of :class:`RealCalibrationModel`)."""
+
+    COLUMNS = ("Pose", "Off target (°)", "|F| (N)", "Force noise (N)")
+
+    def __init__(self, model: RealCalibrationModel, on_record, on_identify, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(parent)
+        self.model = model
+        self.pose_set = QComboBox()
+        self.pose_set.addItems(list(REAL_POSE_SETS))
+        self.start_button = QPushButton("Start pose set")
+        self.instruction = QLabel()
+        self.instruction.setWordWrap(True)
+        self.instruction.setStyleSheet("font-size: 14px; font-weight: 600;")
+        self.message = QLabel()
+        self.message.setWordWrap(True)
+        self.message.setStyleSheet("color: #a05a00;")
+        self.record_button = QPushButton("Record pose")
+        self.skip_button = QPushButton("Skip pose")
+        self.previous_button = QPushButton("Previous pose")
+        self.identify_button = QPushButton("Identify")
+        self.poses = QTableWidget(0, len(self.COLUMNS))
+        self.poses.setHorizontalHeaderLabels(list(self.COLUMNS))
+        self.poses.verticalHeader().setVisible(False)
+        self.poses.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.poses.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        self.poses.setMaximumHeight(160)
+        top = QHBoxLayout()
+        top.addWidget(QLabel("Pose set"))
+        top.addWidget(self.pose_set, 1)
+        top.addWidget(self.start_button)
+        buttons = QHBoxLayout()
+        for b in (self.previous_button, self.skip_button, self.record_button, self.identify_button):
+            buttons.addWidget(b)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addLayout(top)
+        lay.addWidget(self.instruction)
+        lay.addWidget(self.message)
+        lay.addLayout(buttons)
+        lay.addWidget(self.poses)
+        self.start_button.clicked.connect(lambda: model.begin(self.pose_set.currentText()))
+        self.record_button.clicked.connect(on_record)
+        self.identify_button.clicked.connect(on_identify)
+        self.skip_button.clicked.connect(model.skip)
+        self.previous_button.clicked.connect(lambda: model.go_to(max(0, model.index - 1)))
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        mdl = self.model
+        self.instruction.setText(mdl.instruction())
+        self.message.setText(mdl.message if mdl.state != "refused" else "")
+        walking = mdl.state == "at_pose"
+        self.record_button.setEnabled(mdl.can_record())
+        self.skip_button.setEnabled(walking)
+        self.previous_button.setEnabled(walking and mdl.index > 0)
+        self.start_button.setEnabled(mdl.state not in ("recording", "identifying"))
+        why = mdl.identify_refusal() if mdl.steps else "start the pose set first"
+        self.identify_button.setEnabled(not why)
+        self.identify_button.setToolTip(why)
+        rec = mdl.recorded
+        self.poses.setRowCount(len(rec))
+        for i, step in enumerate(rec):
+            r = step.recorded
+            assert r is not None
+            f_n = (r.wrench[0] ** 2 + r.wrench[1] ** 2 + r.wrench[2] ** 2) ** 0.5
+            for j, text in enumerate((step.label, f"{r.off_target_deg:.1f}", f"{f_n:.3f}", f"{r.force_std_n:.4f}")):
+                item = self.poses.item(i, j)
+                if item is None:
+                    item = QTableWidgetItem()
+                    self.poses.setItem(i, j, item)
+                item.setText(text)
 
 
 class CalibrationWizard(QWidget):
     """Layout and wiring of :class:`CalibrationModel`."""
 
-    def __init__(self, model: CalibrationModel, on_run, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,  # type: ignore[no-untyped-def]
+                 parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Gravity and bias calibration")
         self.model = model
@@ -43,13 +120,20 @@ class CalibrationWizard(QWidget):
         self.residuals.verticalHeader().setVisible(False)
         self.residuals.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.residuals.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        row = QHBoxLayout()
+        self.intro = intro
+        self.sim_controls = QWidget()
+        row = QHBoxLayout(self.sim_controls)
+        row.setContentsMargins(0, 0, 0, 0)
         row.addWidget(QLabel("Pose set"))
         row.addWidget(self.pose_set, 1)
         row.addWidget(self.run_button)
+        self.real_panel = real_panel
         lay = QVBoxLayout(self)
         lay.addWidget(intro)
-        lay.addLayout(row)
+        lay.addWidget(self.sim_controls)
+        if real_panel is not None:
+            lay.addWidget(real_panel)
+            real_panel.setVisible(False)
         lay.addWidget(self.description)
         lay.addWidget(self.progress)
         lay.addWidget(self.verdict)
@@ -59,6 +143,21 @@ class CalibrationWizard(QWidget):
         self.run_button.clicked.connect(on_run)
         model.changed.connect(self._on_changed)
         self._on_changed()
+
+    def set_real(self, real: bool) -> None:
+        """Show the pose-by-pose panel (real rig) or the automatic run (simulated rig)."""
+        self.sim_controls.setVisible(not real)
+        self.description.setVisible(not real)
+        self.progress.setVisible(not real)
+        if self.real_panel is not None:
+            self.real_panel.setVisible(real)
+        if real:
+            self.intro.setText(
+                "The wrist sensor reads the instrument's weight and its own offsets as well as the contact force. "
+                "Move the robot to each pose shown (teach pendant or its teleoperation), with the tool hanging free, "
+                "and press Record pose: the engine averages the wrench and reads the TCP orientation. Identify fits "
+                "the payload and bias and refuses a badly spread or noisy set."
+            )
 
     def _on_changed(self) -> None:
         mdl = self.model

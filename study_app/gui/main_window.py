@@ -14,7 +14,7 @@ from study_app import messages as m
 from study_app.engine_client import EngineClient
 from study_app.engine_host import HostConfig
 from study_app.gui.bridge import QtEngineBridge
-from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
@@ -115,7 +115,10 @@ class ExperimenterWindow(QMainWindow):
 
         self.participant_window = ParticipantWindow(self.model.participant)
         self.rig_window = RigWindow(self.model.rig, self.model.set_driver)
-        self.calibration_wizard = CalibrationWizard(self.model.calibration, self.model.calibrate)
+        self.calibration_wizard = CalibrationWizard(
+            self.model.calibration, self.model.calibrate,
+            RealPosePanel(self.model.real_calibration, self.model.record_pose, self.model.identify),
+        )
         self._build_menu()
 
         # wiring
@@ -150,6 +153,8 @@ class ExperimenterWindow(QMainWindow):
     # -- menus ---------------------------------------------------------------------------------------
     def _build_menu(self) -> None:
         view = self.menuBar().addMenu("&View")
+        view.setToolTipsVisible(True)
+        self.view_actions: dict[str, QAction] = {}
         for text, key, window in (
             ("Participant screen", "Ctrl+P", self.participant_window),
             ("Simulated rig", "Ctrl+R", self.rig_window),
@@ -159,6 +164,7 @@ class ExperimenterWindow(QMainWindow):
             act.setShortcut(QKeySequence(key))
             act.triggered.connect(lambda _=False, w=window: _show(w))
             view.addAction(act)
+            self.view_actions[text] = act
 
     # -- engine events (GUI thread, queued from the monitor thread) -------------------------------------
     @Slot(object)
@@ -167,10 +173,24 @@ class ExperimenterWindow(QMainWindow):
             self.model.attach_ring(self.bridge.client.ring)
             self.model.list_sessions()
         self.model.apply(ev)
+        if isinstance(ev, m.EngineReady):
+            self._on_rig_known(ev.rig)
+
+    def _on_rig_known(self, rig: str) -> None:
+        """On the real rig a person holds the stylus: no simulated rig view, no autopilot, pose-by-pose calibration."""
+        real = rig == "real"
+        self.calibration_wizard.set_real(real)
+        why = ("real rig: a person holds the stylus — the simulated rig view and the simulated participant "
+               "(autopilot) exist on the simulated rig only")
+        for w in (self.rig_button, self.view_actions["Simulated rig"]):
+            w.setEnabled(not real)
+            w.setToolTip(why if real else "")
+        if real:
+            self.rig_window.hide()
 
     def _on_plot_timer(self) -> None:
-        self.model.tick()
-        self.plots.refresh()
+        if self.model.tick():  # nothing new (engine paused or gone): nothing to redraw
+            self.plots.refresh()
 
     # -- actions -----------------------------------------------------------------------------------------
     def start_session(self) -> None:

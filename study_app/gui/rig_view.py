@@ -47,8 +47,12 @@ class RigCanvas(QWidget):
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         p.fillRect(self.rect(), QColor(238, 242, 247))
-        x, z = m.surface_profile(_X_MM + 5)
-        poly = QPolygonF([self.to_px(float(a), float(b)) for a, b in zip(x, z)])
+        x, z = m.surface_profile(_X_MM + 5, n=61)
+        # one vectorised transform, not 61 Python calls of to_px (this paints at 30 Hz)
+        s = self._scale()
+        px = self.width() / 2 + x * s
+        py = self.height() - (z - _Z_LO) * s
+        poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist())])
         poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
         poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
         top = self.to_px(0, 0).y()
@@ -60,7 +64,6 @@ class RigCanvas(QWidget):
         p.drawPolygon(poly)
         # the instrument: a shaft down to the tip, jaws closed
         tip = self.to_px(0.0, max(m.tip_z_mm, -m.indentation_mm))
-        s = self._scale()
         shaft = QPainterPath()
         shaft.addRoundedRect(QRectF(tip.x() - 2.5 * s, tip.y() - 60 * s, 5 * s, 57 * s), 2, 2)
         p.setBrush(QColor(150, 155, 165))

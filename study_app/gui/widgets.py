@@ -18,10 +18,14 @@ from study_app.models.setup import KINDS, SetupModel
 
 __all__ = ["QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
-RAW_PEN = pg.mkPen((220, 40, 40), width=1.5)
-COMP_PEN = pg.mkPen((30, 90, 220), width=1.5)
-RENDER_PEN = pg.mkPen((20, 160, 60), width=1.5)
-AXIS_PENS = (pg.mkPen((200, 60, 60), width=1.2), pg.mkPen((40, 150, 60), width=1.2), pg.mkPen((40, 80, 200), width=1.2))
+# Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
+RAW_PEN = pg.mkPen((220, 40, 40), width=1)
+COMP_PEN = pg.mkPen((30, 90, 220), width=1)
+RENDER_PEN = pg.mkPen((20, 160, 60), width=1)
+AXIS_PENS = (pg.mkPen((200, 60, 60), width=1), pg.mkPen((40, 150, 60), width=1), pg.mkPen((40, 80, 200), width=1))
+#: Series on each plot, and whether its axis starts at zero (magnitudes).
+MAG_SERIES = ("raw_n", "comp_n", "render_n")
+COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
 
 
@@ -108,17 +112,32 @@ class QtForcePlots(pg.GraphicsLayoutWidget):
         self.comp.setXLink(self.mag)
         for name, pen, label in zip(("comp_fx", "comp_fy", "comp_fz"), AXIS_PENS, ("x", "y", "z")):
             self.curves[name] = self.comp.plot(pen=pen, name=label)
+        # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
+        # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y range comes from the
+        # model instead, snapped so it changes only when the data crosses a step.
+        self._y: dict[str, tuple[float, float]] = {}
         for p in (self.mag, self.comp):
-            p.showGrid(x=True, y=True, alpha=0.2)
             p.setXRange(-plots.window_s, 0.0, padding=0)
-            p.setMouseEnabled(x=False, y=True)
+            p.setMouseEnabled(x=False, y=False)
+            p.enableAutoRange(x=False, y=False)
             p.setClipToView(True)
+        self._set_y_ranges()
+
+    def _set_y_ranges(self) -> None:
+        band = self.session.band() or ()
+        for key, plot, names, zero, extra in (("mag", self.mag, MAG_SERIES, True, band),
+                                              ("comp", self.comp, COMP_SERIES, False, ())):
+            r = self.plots.y_range(names, floor_zero=zero, include=extra)
+            if self._y.get(key) != r:
+                self._y[key] = r
+                plot.setYRange(*r, padding=0)
 
     def refresh(self) -> None:
         """Redraw from the model (the window's 30 Hz timer calls this after a pull)."""
         for name, curve in self.curves.items():
             t, y = self.plots.curve(name)
             curve.setData(t, y, skipFiniteCheck=True)
+        self._set_y_ranges()
         band = self.session.band()
         self.band.setVisible(band is not None)
         if band is not None:

@@ -12,6 +12,7 @@ from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
+from study_app.models.real_calibration import RealCalibrationModel
 from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel
 from study_app.models.setup import SetupModel
@@ -41,6 +42,9 @@ class AppModel:
         self.health = HealthModel()
         self.participant = ParticipantScreenModel()
         self.calibration = CalibrationModel()
+        self.real_calibration = RealCalibrationModel()
+        #: "sim" or "real", from EngineReady ("" before the engine is connected).
+        self.rig_kind = ""
         self.rig = RigViewModel()
         self.rig.target_changed.connect(lambda y: self.send(m.ManualTarget(y)))
         #: A command was refused or failed: (title, message).
@@ -55,7 +59,9 @@ class AppModel:
     # -- engine → models ------------------------------------------------------------------------
     def apply(self, ev: object) -> None:
         """Route one engine event."""
-        for part in (self.session, self.health, self.participant, self.calibration, self.rig):
+        if isinstance(ev, m.EngineReady):
+            self.rig_kind = ev.rig
+        for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig):
             part.apply(ev)
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
@@ -70,11 +76,11 @@ class AppModel:
         """Start pulling samples from the engine's ring."""
         self.plots.attach(ring)
 
-    def tick(self) -> None:
-        """Pull new samples (call at ~30 Hz) and update every sample-driven model."""
+    def tick(self) -> int:
+        """Pull new samples (call at ~30 Hz) and update every sample-driven model; returns the number pulled."""
         n = self.plots.pull()
         if n == 0 or self.plots.last_row is None:
-            return
+            return 0
         last = self.plots.last_row
         t = float(last["t_s"])
         self.session.set_time(t)
@@ -86,6 +92,7 @@ class AppModel:
         if self._rate_span >= _RATE_WINDOW_S:
             self.health.update_from_rows(np.concatenate(self._rate_rows))
             self._rate_rows, self._rate_span = [], 0.0
+        return n
 
     # -- what may be done now -------------------------------------------------------------------------
     @property
@@ -102,6 +109,12 @@ class AppModel:
             return self.ready and not s.running
         if action == "calibrate":
             return self.ready and not s.running and self.calibration.state != "running"
+        if action == "record_pose":
+            return self.ready and not s.running and self.rig_kind == "real" and self.real_calibration.can_record()
+        if action == "identify":
+            return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
+        if action == "sim_rig_view":
+            return self.rig_kind == "sim"
         if action == "pause":
             return s.state == "running"
         if action == "resume":
@@ -155,6 +168,21 @@ class AppModel:
     def calibrate(self) -> None:
         """Run the chosen pose set."""
         self._send(self.calibration.command())
+
+    def record_pose(self) -> None:
+        """Real rig: measure the shown pose (the engine averages the wrench; nothing blocks here)."""
+        if self.can("record_pose"):
+            self._send(self.real_calibration.record_command())
+
+    def identify(self) -> None:
+        """Real rig: identify from the recorded poses, or say why not."""
+        why = self.real_calibration.identify_refusal()
+        if why:
+            self.error.emit("cannot identify", why)
+            return
+        self.calibration.state, self.calibration.result = "running", None
+        self.calibration.changed.emit()
+        self._send(self.real_calibration.identify_command())
 
     def set_driver(self, mode: str) -> None:
         """Autopilot (simulated participant) or manual (mouse/keyboard)."""

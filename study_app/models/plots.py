@@ -8,10 +8,12 @@ a second plot shows the compensated components.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["PlotModel", "peak_downsample"]
+__all__ = ["PlotModel", "nice_range", "peak_downsample"]
 
 _F = npt.NDArray[np.float64]
 
@@ -40,6 +42,25 @@ def peak_downsample(t: _F, y: _F, bins: int) -> tuple[_F, _F]:
     return t_out, y_out
 
 
+def nice_range(lo: float, hi: float, step: float = 0.5, min_span: float = 1.0, floor_zero: bool = False) -> tuple[float, float]:
+    """An axis range covering ``[lo, hi]`` with 5 % headroom, snapped outwards to multiples of ``step``.
+
+    Snapping is what keeps the axes still: the range changes only when the data
+    crosses a step, so pyqtgraph re-renders its axis ticks (the costliest part
+    of a frame) a few times per trial instead of 30 times a second.
+    """
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return (0.0, min_span) if floor_zero else (-min_span / 2, min_span / 2)
+    pad = 0.05 * max(hi - lo, 0.0)
+    a = 0.0 if floor_zero and lo >= 0 else math.floor((lo - pad) / step) * step
+    b = math.ceil((hi + pad) / step) * step
+    if b - a < min_span:
+        b = a + min_span if floor_zero else b
+        if b - a < min_span:
+            a = b - min_span
+    return (float(a), float(b))
+
+
 class PlotModel:
     """Rolling window of the ring's newest records.
 
@@ -66,6 +87,8 @@ class PlotModel:
         self.last_row: np.void | None = None
         self.new_rows: np.ndarray = np.empty(0)
         self.lost = 0
+        #: Records passed over unread because the GUI was more than a window behind.
+        self.skipped = 0
 
     def attach(self, ring: object) -> None:
         """Read from this ring (anything with ``read_since`` / ``write_count``), starting with its last window."""
@@ -82,6 +105,12 @@ class PlotModel:
         if ring is None:
             self.new_rows = np.empty(0)
             return 0
+        # Far behind (a stall, a suspended laptop)?  Only the last window can be shown: skip the rest
+        # unread, so one pull never copies or converts more than `capacity` records.
+        oldest_needed = ring.write_count - self.capacity  # type: ignore[attr-defined]
+        if self.cursor < oldest_needed:
+            self.skipped += oldest_needed - self.cursor
+            self.cursor = oldest_needed
         res = ring.read_since(self.cursor)  # type: ignore[attr-defined]
         self.cursor = res.cursor
         self.lost += res.lost
@@ -112,6 +141,18 @@ class PlotModel:
     def latest_t_s(self) -> float:
         """Sample time of the newest record (0 before any)."""
         return float(self.t[-1]) if len(self.t) else 0.0
+
+    def y_range(self, names: tuple[str, ...], floor_zero: bool = False, include: tuple[float, ...] = ()) -> tuple[float, float]:
+        """Axis range for these series over the window and the values ``include`` (see :func:`nice_range`)."""
+        lo, hi = min(include, default=math.inf), max(include, default=-math.inf)
+        for k in names:
+            v = self.data[k]
+            v = v[np.isfinite(v)]
+            if len(v):
+                lo, hi = min(lo, float(v.min())), max(hi, float(v.max()))
+        if lo > hi:
+            return nice_range(math.nan, math.nan, floor_zero=floor_zero)
+        return nice_range(lo, hi, floor_zero=floor_zero)
 
     def curve(self, name: str) -> tuple[_F, _F]:
         """(time relative to the newest sample, values), peak-downsampled."""

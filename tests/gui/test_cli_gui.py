@@ -11,11 +11,15 @@ from study_app.cli import main
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_real_rig_without_backends_is_one_clear_line(capsys):
-    assert main(["gui", "--rig", "real", "--hardware", "hw.toml"]) == 2
+def test_real_rig_with_an_invalid_hardware_file_is_one_clear_line(capsys, tmp_path):
+    p = tmp_path / "hw.toml"
+    p.write_text('[sensor]\nhost = "10.0.0.1"\nport = 0\n[robot]\nhost = "10.0.0.2"\n[haptic]\n', encoding="utf-8")
+    assert main(["gui", "--rig", "real", "--hardware", str(p)]) == 2
     err = capsys.readouterr().err
-    assert err == ("haptic-study: error: real rig: hardware backends are not configured — pass --hardware FILE; "
-                   "see docs/hardware-setup.md\n")
+    assert err == f"haptic-study: error: {p}: sensor.port = 0: must be a whole port number from 1 to 65535\n"
+    assert main(["gui", "--rig", "real"]) == 2
+    assert capsys.readouterr().err == ("haptic-study: error: --rig real needs --hardware FILE (the hardware.toml of "
+                                       "the lab; see hardware.example.toml)\n")
 
 
 def test_missing_hardware_file_is_refused(capsys, tmp_path):

@@ -108,7 +108,7 @@ def test_plot_model_keeps_a_window_and_computes_magnitudes():
         p = PlotModel(window_s=1.0, bins=100)
         p.attach(ring)
         fill_ring(ring, 1500, raw_fx=3.0, raw_fz=4.0, filt_fx=0.6, filt_fy=0.8, render_fz=-2.0, force_n=1.0)
-        assert p.pull() == 1500
+        assert p.pull() == 1000 and p.skipped == 500  # only the window is read
         assert len(p.t) == 1000 and p.t[0] == pytest.approx(0.5) and p.latest_t_s == pytest.approx(1.499)
         assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"], 1.0) and np.all(p.data["render_n"] == 2.0)
         t, y = p.curve("raw_n")

@@ -1,0 +1,246 @@
+"""The study engine on the real rig, against the loopback fakes: Net F/T (UDP + HTTP), a UR controller's RTDE
+server (a subprocess), and a Touch whose HDAPI is faked under the real Touch backend (no OpenHaptics here;
+injected at the rig-construction seam, ``HostConfig.haptic_factory``).
+
+Hardware runs on the wall clock, so these tests wait for conditions with timeouts, as the backend tests do.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sqlite3
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
+
+from fake_netft import FakeNetFT  # noqa: E402
+from fake_rtde import FakeRtde  # noqa: E402
+
+from pipeline.frames import matrix_to_rotvec  # noqa: E402
+from study_app import messages as m  # noqa: E402
+from study_app.engine_client import EngineClient  # noqa: E402
+from study_app.engine_host import HostConfig, StudyEngine  # noqa: E402
+from study_app.models.real_calibration import RealCalibrationModel  # noqa: E402
+
+FAKE_TOUCH = "fake_touch:open_fake_touch"
+G = 9.80665
+#: The payload the fakes present: mass, centre of mass in the sensor frame, force and torque bias.
+MASS_KG, COM_M = 0.25, np.array([0.0, 0.01, 0.05])
+F_BIAS_N, T_BIAS_NM = np.array([0.3, -0.2, 0.5]), np.array([0.01, 0.02, -0.01])
+CPF = 1_000_000  # the fake box's counts per N and per N·m
+
+
+def hardware_file(tmp_path: Path, netft: FakeNetFT, rtde_host: str, extra: str = "") -> Path:
+    p = tmp_path / "hardware.toml"
+    p.write_text(
+        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
+        f'[robot]\nhost = "{rtde_host}"\nconnect_timeout_s = 1.0\n[haptic]\ndevice_name = "Fake Touch"\n'
+        f"[framework]\nf_max_n = 2.5\nf_scale_n = 6.0\nfilter_window = 8\n{extra}",
+        encoding="utf-8",
+    )
+    return p
+
+
+def payload_counts(rot_base_sensor: tuple[float, ...]) -> tuple[int, ...]:
+    """What the sensor reads at this orientation (gravity on the payload plus bias), in counts."""
+    g_s = np.asarray(rot_base_sensor).reshape(3, 3).T @ np.array([0.0, 0.0, -G])
+    f = MASS_KG * g_s + F_BIAS_N
+    t = np.cross(COM_M, MASS_KG * g_s) + T_BIAS_NM
+    return tuple(int(round(x * CPF)) for x in (*f, *t))
+
+
+def wait_for(e: StudyEngine, pred, timeout_s: float = 5.0) -> None:
+    end = time.monotonic() + timeout_s
+    while not pred():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached")
+        e.step()
+        time.sleep(0.002)
+
+
+@pytest.fixture
+def rig(tmp_path):
+    with FakeNetFT(rate_hz=1000, initial_records=0) as netft, FakeRtde() as rtde:
+        yield netft, rtde, hardware_file(tmp_path, netft, rtde.host)
+
+
+def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol):
+    netft, rtde, hw_path = rig
+    events: list[object] = []
+    e = StudyEngine(HostConfig(rig="real", hardware_path=str(hw_path), haptic_factory=FAKE_TOUCH), events.append,
+                    shared_ring=False)
+    try:
+        e.start()
+        ready = events[0]
+        assert isinstance(ready, m.EngineReady) and ready.rig == "real" and ready.driver == "participant"
+        assert math.isnan(ready.surface_z_m)
+        assert ready.devices == [f"F/T sensor: Net F/T at 127.0.0.1:{netft.udp_port}",
+                                 f"robot: UR over RTDE at {rtde.host} (observe)", "haptic device: Fake Touch"]
+        # no simulated participant, no automatic calibration on hardware
+        for cmd in (m.SetDriver("manual"), m.Calibrate("recommended")):
+            e.handle(cmd)
+        refused = [ev.message for ev in events if isinstance(ev, m.CommandRefused)]
+        assert refused == [
+            "real rig: a person holds the stylus; the simulated participant and manual driving exist on the "
+            "simulated rig only",
+            "real rig: the poses are recorded one at a time in the calibration wizard (move the robot, then Record pose)",
+        ]
+
+        wiz = RealCalibrationModel(seconds=0.2)
+        wiz.apply(ready)
+        wiz.begin("quick")
+        assert wiz.identify_refusal() == "record at least 6 poses first (0 so far)"
+        while wiz.current is not None and wiz.current.recorded is None:
+            step = wiz.current
+            # the experimenter moves the robot to the target (here: the fake controller reports it) ...
+            rv = matrix_to_rotvec(step.target_rot_base_sensor)  # rot_tip_sensor is the identity
+            rtde.send(f"pose 0.3 -0.1 0.2 {rv[0]} {rv[1]} {rv[2]}")
+            netft.counts = payload_counts(step.target_rot_base_sensor)
+            target = np.asarray(step.target_rot_base_sensor).reshape(3, 3)
+            wait_for(e, lambda: np.allclose(np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target,
+                                            atol=1e-9))
+            wait_for(e, lambda: (r := e.loop.last_record) is not None
+                     and abs(r["raw_fx"] - netft.counts[0] / CPF) < 1e-9)
+            # ... and presses Record pose: the engine averages 0.2 s of wrench off the GUI thread
+            n_before = len(events)
+            e.handle(wiz.record_command())
+            assert wiz.state == "recording"
+            wait_for(e, lambda: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused)) for ev in events[n_before:]))
+            for ev in events[n_before:]:
+                wiz.apply(ev)
+            rec = step.recorded
+            assert rec is not None and rec.samples == 200 and rec.off_target_deg < 1e-3 and rec.force_std_n < 1e-9
+            assert np.allclose(rec.wrench, np.asarray(netft.counts) / CPF, atol=1e-9)
+            if len(wiz.recorded) == len(wiz.steps):
+                break
+        assert wiz.progress() == (6, 6) and wiz.message == "every pose is recorded: Identify"
+
+        n_before = len(events)
+        e.handle(wiz.identify_command())
+        done = [ev for ev in events[n_before:] if isinstance(ev, m.CalibrationDone)]
+        assert len(done) == 1 and done[0].accepted and done[0].n_poses == 6 and done[0].rms_force_residual_n < 1e-5
+        wiz.apply(done[0])
+        assert wiz.state == "accepted"
+        assert e.calibration.mass_kg == pytest.approx(MASS_KG, abs=1e-5)
+
+        # a session: no simulated participant; the hardware-agnostic config record and the calibration are stored
+        db = str(tmp_path / "real.db")
+        e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+        wait_for(e, lambda: any(isinstance(ev, m.TrialStarted) for ev in events))
+        e.handle(m.AbortSession("rehearsal over"))
+        wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
+        ended = [ev for ev in events if isinstance(ev, m.SessionEnded)][0]
+        assert ended.status == "aborted" and ended.aborted == 1
+    finally:
+        e.close("test over")
+        e.release_ring()
+    con = sqlite3.connect(db)
+    try:
+        rig_kind, config_json, cal_json = con.execute("SELECT rig, config_json, calibration_json FROM sessions").fetchone()
+    finally:
+        con.close()
+    config, cal = json.loads(config_json), json.loads(cal_json)
+    assert rig_kind == "real" and config["rig"] == "real" and config["participant"] == "person"
+    assert config["hardware_toml"] == hw_path.read_text(encoding="utf-8")
+    assert config["hardware"]["sensor"]["port"] == netft.udp_port and config["hardware"]["robot"]["host"] == rtde.host
+    assert config["framework"]["f_max_n"] == 2.5 and config["framework"]["filter_window"] == 8
+    assert config["framework"]["rot_tip_sensor"] == [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    assert "sim" not in config and "rig_seed" not in config
+    assert cal["mass_kg"] == pytest.approx(MASS_KG, abs=1e-5)
+
+
+def test_a_pose_recorded_while_the_robot_moves_is_refused(rig):
+    netft, rtde, hw_path = rig
+    events: list[object] = []
+    e = StudyEngine(HostConfig(rig="real", hardware_path=str(hw_path), haptic_factory=FAKE_TOUCH), events.append,
+                    shared_ring=False)
+    try:
+        e.start()
+        wait_for(e, lambda: math.isfinite(e.eng.rig.robot.read_pose().position_m[0]))
+        e.handle(m.RecordPose("P01", 0.3))
+        rtde.send("pose 0.3 -0.1 0.25 0 0 0")  # 50 mm up during the recording
+        end = time.monotonic() + 5.0  # the engine's driver is not stepped until the robot reports the move
+        while e.eng.rig.robot.read_pose().position_m[2] != 0.25 and time.monotonic() < end:
+            time.sleep(0.002)
+        wait_for(e, lambda: any(isinstance(ev, (m.CommandRefused, m.PoseRecorded)) for ev in events))
+        (ev,) = [ev for ev in events if isinstance(ev, m.CommandRefused)]
+        assert ev.command == "RecordPose" and ev.message.startswith("pose P01: the robot moved while recording (")
+        assert not any(isinstance(ev, m.PoseRecorded) for ev in events)
+    finally:
+        e.close("test over")
+        e.release_ring()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ("[robot.bogus]\n", "real rig: {path}: robot.bogus = {{}}: unknown field"),
+        ("", "real rig: {path}: no such hardware file"),
+    ],
+)
+def test_a_bad_hardware_file_is_one_line(tmp_path, extra, message):
+    p = tmp_path / "hardware.toml"
+    if extra:
+        p.write_text('[sensor]\nhost = "127.0.0.1"\n[robot]\nhost = "127.0.0.1"\n[haptic]\n' + extra, encoding="utf-8")
+    with pytest.raises(RuntimeError) as info:
+        StudyEngine(HostConfig(rig="real", hardware_path=str(p)), lambda ev: None, shared_ring=False)
+    assert message.format(path=p) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(rig):
+    """No Touch on this machine: the engine process reports the haptic device in one line and exits (no hang)."""
+    netft, rtde, hw_path = rig
+    client = EngineClient(HostConfig(rig="real", hardware_path=str(hw_path)))
+    client.start()
+    try:
+        got: list[object] = []
+        end = time.monotonic() + 20.0
+        while not any(isinstance(ev, m.EngineStopped) for ev in got) and time.monotonic() < end:
+            ev = client.get(0.1)
+            if ev is not None:
+                got.append(ev)
+        assert client.join(5.0)
+        refused = [ev for ev in got if isinstance(ev, m.CommandRefused)]
+        assert len(refused) == 1 and refused[0].command == "connect"
+        assert refused[0].message.startswith("real rig: haptic device: the 3D Systems Touch needs OpenHaptics")
+        assert not any(isinstance(ev, m.EngineReady) for ev in got)
+    finally:
+        client.kill()
+
+
+def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_path):
+    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is fed in."""
+    from PySide6.QtCore import QSettings
+
+    from study_app.gui.main_window import ExperimenterWindow
+
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    w = ExperimenterWindow(HostConfig(rig="real", hardware_path=str(tmp_path / "none.toml")), settings, None)
+    qtbot.addWidget(w)
+    qtbot.waitUntil(lambda: w.model.session.state == "stopped", timeout=20_000)  # refused, then the engine exits
+    assert w.model.session.message == (f"engine stopped: real rig: {tmp_path / 'none.toml'}: no such hardware file "
+                                       "(copy hardware.example.toml and edit it)")
+    w._on_engine_event(m.EngineReady("", "real", "real", {}, math.nan, (math.nan,) * 3, "participant"))
+    assert not w.rig_button.isEnabled() and not w.view_actions["Simulated rig"].isEnabled()
+    assert w.rig_button.toolTip().startswith("real rig: a person holds the stylus")
+    wiz = w.calibration_wizard
+    panel = wiz.real_panel
+    assert panel is not None and not panel.isHidden() and wiz.sim_controls.isHidden()
+    panel.pose_set.setCurrentText("quick")
+    panel.start_button.click()
+    assert panel.instruction.text().startswith("Pose P01 (1 of 6): move the TCP to rotation vector (")
+    assert panel.record_button.isEnabled() and not panel.identify_button.isEnabled()
+    assert panel.identify_button.toolTip() == "record at least 6 poses first (0 so far)"
+    cal = w.model.real_calibration
+    for step in list(cal.steps):
+        w._on_engine_event(m.PoseRecorded(step.label, 1000, (0.0, 0.0, 2.0, 0.0, 0.0, 0.0),
+                                          step.target_rot_base_sensor, (0.3, -0.1, 0.2), 20.0, 0.001))
+    assert panel.poses.rowCount() == 6 and panel.poses.item(0, 1).text() == "20.0"
+    assert panel.poses.item(5, 2).text() == "2.000" and panel.identify_button.isEnabled()
+    assert panel.message.text().startswith("P06 is 20° from its target — kept")
