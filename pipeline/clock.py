@@ -107,6 +107,8 @@ def set_timer_slack_ns(slack_ns: int = 1) -> bool:
         return False
 
 
+#: Set to ``0`` to keep the loop thread at normal priority.
+REALTIME_ENV = "HAPTIC_STUDY_REALTIME"
 #: SCHED_FIFO priority of the loop thread: above every normal thread, far below the kernel's own (50+).
 REALTIME_PRIORITY = 20
 
@@ -130,6 +132,8 @@ def prepare_realtime_thread(priority: int = REALTIME_PRIORITY) -> str:
         ``"SCHED_FIFO/<priority>"`` or ``"normal (…why…)"``.
     """
     set_timer_slack_ns(1)
+    if os.environ.get(REALTIME_ENV, "1") == "0":
+        return f"normal ({REALTIME_ENV}=0)"
     if not hasattr(os, "sched_setscheduler"):
         return "normal (no real-time scheduling on this platform)"
     try:
