@@ -360,6 +360,19 @@ class RealRig:
         """No ground truth on hardware."""
         return None
 
+    def on_faults(self, faults: int) -> None:
+        """The loop's latched faults changed: with teleoperation, any fault stops the robot (``pipeline.loop.Rig``).
+
+        In ``"observe"`` mode the robot runs its own program and is not ours to stop.
+        """
+        if self.teleop is not None:
+            self.teleop.on_faults(faults)
+
+    def stop_motion(self, reason: str) -> None:
+        """The loop is stopping: with teleoperation, stop the robot."""
+        if self.teleop is not None:
+            self.teleop.stop_motion(reason)
+
     def close(self) -> None:
         """Zero and release every device (the Touch first); a failing close does not skip the others."""
         errors = []
@@ -395,13 +408,20 @@ def open_robot(cfg: RobotSettings, clock: Clock) -> Robot:
     return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s)
 
 
-def open_servo(robot: RobotSettings, teleop: TeleopSettings, clock: Clock) -> Any:
-    """Take control of the UR for teleoperation (uploads ur_rtde's control script)."""
+def open_servo(
+    robot: RobotSettings, teleop: TeleopSettings, clock: Clock, control_factory: Callable[[str, float], Any] | None = None
+) -> Any:
+    """Take control of the UR for teleoperation (uploads ur_rtde's control script).
+
+    ``control_factory`` replaces ur_rtde's ``RTDEControlInterface`` (see
+    :class:`pipeline.backends.ur_control.UrRtdeServo`); None uses ur_rtde.
+    """
     from pipeline.backends.ur_control import UrRtdeServo
 
     return UrRtdeServo(
         robot.host, frequency_hz=robot.frequency_hz, clock=clock, connect_timeout_s=robot.connect_timeout_s,
         control_timeout_s=teleop.control_timeout_s, lookahead_s=teleop.lookahead_s, gain=teleop.gain,
+        control_factory=control_factory,
     )
 
 
@@ -441,6 +461,7 @@ def build_real_rig(
     *,
     with_jaw: bool = True,
     on_open: Callable[[str], None] | None = None,
+    control_factory: Callable[[str, float], Any] | None = None,
 ) -> RealRig:
     """Open every configured device into a :class:`RealRig`.
 
@@ -459,6 +480,9 @@ def build_real_rig(
     on_open
         Called with the device's name ("force sensor", "robot", ...) before each is opened
         (the engine process reports it, so a hang names the device).
+    control_factory
+        Teleop mode only: replaces ur_rtde's ``RTDEControlInterface``
+        constructor (``factory(host, frequency_hz)``); None uses ur_rtde.
 
     Raises
     ------
@@ -480,7 +504,7 @@ def build_real_rig(
         tcfg = teleop_config(config)
         t_settings = config.teleop
         assert t_settings is not None
-        steps.append(("robot control (teleoperation)", lambda: open_servo(config.robot, t_settings, clk)))
+        steps.append(("robot control (teleoperation)", lambda: open_servo(config.robot, t_settings, clk, control_factory)))
     for what, opener in steps:
         if on_open is not None:
             on_open(what)

@@ -15,7 +15,8 @@ The loop does only I/O and arithmetic: no logging, no allocation beyond a
 few tuples, no locks.  Commands arrive through a deque (thread-safe append /
 popleft) and are applied at the start of the next tick.  Faults are latched
 until :class:`ResetFaults` clears them -- and a reset only clears conditions
-that have gone away.
+that have gone away.  Whenever the latched set changes the rig's optional
+``on_faults`` hook is called (a teleoperated robot stops; see :class:`Rig`).
 """
 
 from __future__ import annotations
@@ -67,7 +68,20 @@ _HYPOT = math.hypot
 
 
 class Rig(Protocol):
-    """The devices the loop owns, and a hook to advance simulated physics."""
+    """The devices the loop owns, and a hook to advance simulated physics.
+
+    A rig that moves a robot itself (app-side teleoperation) also offers two
+    optional hooks, looked up once when the loop is built:
+
+    * ``on_faults(faults: Fault) -> None`` -- called whenever the loop's
+      latched fault set changes (a new fault, an operator stop, a reset),
+      from the loop thread, before the event is emitted.  Any fault must stop
+      the robot at once and keep it stopped while the set is non-empty.
+    * ``stop_motion(reason: str) -> None`` -- called when the loop stops
+      (:meth:`HapticLoop.ramp_down`): stop the robot, nobody will drive it.
+
+    Neither runs in the fault-free steady state, so the tick costs nothing extra.
+    """
 
     sensor: ForceSensor
     robot: Robot
@@ -281,6 +295,9 @@ class HapticLoop:
         frac = self.watchdog.saturation_fraction
         self._sat = tuple(frac * r for r in rng)
         self._last_record: tuple[float, ...] | None = None
+        # optional rig hooks (see Rig); resolved once so the tick pays nothing for them
+        self._rig_on_faults: Callable[[Fault], None] | None = getattr(rig, "on_faults", None)
+        self._rig_stop_motion: Callable[[str], None] | None = getattr(rig, "stop_motion", None)
 
     # -- control (any thread) ----------------------------------------------------------------
     def submit(self, command: Command) -> None:
@@ -352,6 +369,7 @@ class HapticLoop:
         if new:
             latched |= new
             self.faults = latched
+            self._faults_changed(now)
             self._emit(LoopEvent(now, "fault", latched, Fault(new).describe()))
 
         if self.refine_bias and not latched:
@@ -394,12 +412,14 @@ class HapticLoop:
             self.faults = persisting
             if before and not persisting:
                 self.framework.reset()
+            if persisting != before:
+                self._faults_changed(now)
             self._emit(LoopEvent(now, "faults_reset", persisting, Fault(before).describe()))
         elif isinstance(cmd, OperatorStop):
-            self.faults |= Fault.OPERATOR_STOP
+            self._latch(Fault.OPERATOR_STOP, now)
             self._emit(LoopEvent(now, "fault", self.faults, "OPERATOR_STOP"))
         elif isinstance(cmd, ControllerDetached):
-            self.faults |= Fault.ENGINE_DETACHED
+            self._latch(Fault.ENGINE_DETACHED, now)
             self._emit(LoopEvent(now, "fault", self.faults, "ENGINE_DETACHED"))
         elif isinstance(cmd, AllowBiasRefinement):
             self.refine_bias = bool(cmd.allowed)
@@ -407,6 +427,21 @@ class HapticLoop:
             self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
         else:  # pragma: no cover - typed callers cannot get here
             raise TypeError(f"unknown loop command {cmd!r}")
+
+    def _latch(self, fault: Fault, now: int) -> None:
+        if not self.faults & fault:
+            self.faults |= fault
+            self._faults_changed(now)
+
+    def _faults_changed(self, now: int) -> None:
+        """Tell the rig the latched set changed (it stops a teleoperated robot); only on a change."""
+        hook = self._rig_on_faults
+        if hook is None:
+            return
+        try:
+            hook(Fault(self.faults))
+        except Exception as exc:  # noqa: BLE001 - the loop must keep ramping the force down; report it
+            self._emit(LoopEvent(now, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
 
     def _emit(self, ev: LoopEvent) -> None:
         self.events.append(ev)
@@ -458,13 +493,20 @@ class HapticLoop:
 
         Commands still queued (e.g. a ``ControllerDetached`` submitted together
         with the stop) are applied first, so their faults and events are not
-        lost; a queued ``SetHaptics(True)`` cannot undo the ramp-down.
+        lost; a queued ``SetHaptics(True)`` cannot undo the ramp-down.  A rig
+        with a ``stop_motion`` hook is told to stop its robot before the ramp.
         """
         clock = self.clock
         inbox = self._inbox
         while inbox:
             self._apply(inbox.popleft(), clock.now_ns())
         self.haptic_on = False
+        if self._rig_stop_motion is not None:
+            # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
+            try:
+                self._rig_stop_motion("haptic loop stopped")
+            except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
+                self._emit(LoopEvent(clock.now_ns(), "fault", self.faults, f"the rig could not stop the robot: {exc!r}"))
         # ramp ticks continue the period grid: the next slot after the last tick, not one later
         last = self._last_ns
         deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)

@@ -45,6 +45,13 @@ last target than ``max_tracking_error_m`` (collision, protective stop), an
 error reported by the servo adapter, or engaging with the TCP outside the
 workspace.
 
+The haptic loop's faults stop the robot too: the loop tells the rig when its
+latched fault set changes (:meth:`TeleopDriver.on_faults`) and when it stops
+(:meth:`TeleopDriver.stop_motion`).  A latched loop fault (operator stop,
+watchdog, engine detached, ...) stops the robot at once and keeps the
+controller in FAULT while it stays latched; after the experimenter resets it,
+the operator must still release and press the deadman to move again.
+
 Safety checks run on every call (the loop calls at 1 kHz); new targets are
 computed once per control period (8 ms on a CB3).
 """
@@ -56,7 +63,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import NamedTuple
 
-from pipeline.devices import HapticDevice, HapticState, PoseSample, Robot, TcpServo
+from pipeline.devices import Fault, HapticDevice, HapticState, PoseSample, Robot, TcpServo
 from pipeline.frames import Mat3, Vec3, check_rotation, mat_vec, transpose
 
 __all__ = [
@@ -229,8 +236,10 @@ class TeleopController:
         self._stop_ns = self._now_ns
         return Stop(reason)
 
-    def _data_problem(self, now_ns: int, stylus: HapticState, pose: PoseSample, servo_error: str) -> str:
+    def _data_problem(self, now_ns: int, stylus: HapticState, pose: PoseSample, servo_error: str, inhibit: str) -> str:
         cfg = self.config
+        if inhibit:
+            return inhibit
         if servo_error:
             return f"robot servo: {servo_error}"
         p = stylus.position_m
@@ -288,7 +297,27 @@ class TeleopController:
         return tuple(min(max(last[i] + step[i], lo[i]), hi[i]) for i in range(3))  # type: ignore[return-value]
 
     # -- the step -----------------------------------------------------------------------------
-    def step(self, now_ns: int, stylus: HapticState, pose: PoseSample, servo_error: str = "") -> TeleopCommand | None:
+    def halt(self, reason: str) -> Stop:
+        """Stop from outside the state machine (a loop fault, the loop stopping).
+
+        Latches FAULT like any other stop: the robot moves again only after the
+        deadman has been released (with healthy data) and pressed again.
+
+        Parameters
+        ----------
+        reason
+            Why, for the experimenter's log (becomes :attr:`stop_reason`).
+
+        Returns
+        -------
+        Stop
+            The stop to send to the robot.
+        """
+        return self._stop(TeleopState.FAULT, reason)
+
+    def step(
+        self, now_ns: int, stylus: HapticState, pose: PoseSample, servo_error: str = "", inhibit: str = ""
+    ) -> TeleopCommand | None:
         """Advance the state machine and say what to send to the robot.
 
         Parameters
@@ -301,6 +330,10 @@ class TeleopController:
             Newest robot TCP pose (base frame).
         servo_error
             Error reported by the servo adapter ("" when healthy).
+        inhibit
+            Why the robot must not move ("" when nothing forbids it): a fault
+            latched by the haptic loop.  Treated like a data problem: it stops
+            the robot, and while it lasts the FAULT cannot be cleared.
 
         Returns
         -------
@@ -314,7 +347,7 @@ class TeleopController:
         clutch = bool(stylus.buttons & cfg.clutch_button)
         try:
             if not deadman:
-                if self.state is TeleopState.FAULT and self._data_problem(now_ns, stylus, pose, servo_error):
+                if self.state is TeleopState.FAULT and self._data_problem(now_ns, stylus, pose, servo_error, inhibit):
                     return Stop(self.stop_reason)  # stays latched until the data are healthy again
                 if self.state in (TeleopState.ENGAGED, TeleopState.CLUTCHED):
                     return self._stop(TeleopState.IDLE, "deadman released")
@@ -323,7 +356,7 @@ class TeleopController:
                 return Stop(self.stop_reason or "deadman released")
             if self.state is TeleopState.FAULT:
                 return Stop(self.stop_reason)
-            problem = self._data_problem(now_ns, stylus, pose, servo_error)
+            problem = self._data_problem(now_ns, stylus, pose, servo_error, inhibit)
             if problem:
                 return self._stop(TeleopState.FAULT, problem)
             p = stylus.position_m
@@ -364,7 +397,9 @@ class TeleopDriver:
 
     Called from the haptic loop's thread through the rig's ``advance`` (so it
     runs at 1 kHz on the loop's clock); it does no I/O itself -- the servo
-    adapter hands targets to its own thread.
+    adapter hands targets to its own thread.  The loop's fault hooks
+    (:meth:`on_faults`, :meth:`stop_motion`) reach it through the rig, on the
+    same thread.
 
     Parameters
     ----------
@@ -380,10 +415,14 @@ class TeleopDriver:
         self.robot = robot
         self.servo = servo
         self.last_command: TeleopCommand | None = None
+        #: Why the haptic loop forbids motion ("" while no loop fault is latched).
+        self.inhibit = ""
 
     def update(self, now_ns: int) -> TeleopCommand | None:
         """One call of the controller; returns what was sent (None: nothing)."""
-        cmd = self.controller.step(now_ns, self.haptic.read_state(), self.robot.read_pose(), self.servo.servo_error)
+        cmd = self.controller.step(
+            now_ns, self.haptic.read_state(), self.robot.read_pose(), self.servo.servo_error, self.inhibit
+        )
         if cmd is None:
             return None
         if isinstance(cmd, Stop):
@@ -392,6 +431,33 @@ class TeleopDriver:
             self.servo.servo_tcp(cmd.position_m, cmd.rot_base_tip)
         self.last_command = cmd
         return cmd
+
+    def on_faults(self, faults: int) -> None:
+        """The haptic loop's latched fault set changed (called by the loop through the rig).
+
+        Any latched fault stops the robot in this very call and forbids motion
+        until the set is empty again; an empty set lifts that, but the
+        controller stays in FAULT until the deadman is released and pressed.
+
+        Parameters
+        ----------
+        faults
+            The loop's latched :class:`pipeline.devices.Fault` flags (0: none).
+        """
+        if faults:
+            self.inhibit = f"haptic loop fault {Fault(faults).describe()}"
+            self._halt(self.inhibit)
+        else:
+            self.inhibit = ""
+
+    def stop_motion(self, reason: str) -> None:
+        """Stop the robot now (the loop is stopping); re-engaging needs the deadman released and pressed."""
+        self._halt(reason)
+
+    def _halt(self, reason: str) -> None:
+        cmd = self.controller.halt(reason)
+        self.servo.stop_servo()
+        self.last_command = cmd
 
     def close(self) -> None:
         """Stop the robot and release the servo adapter."""

@@ -10,7 +10,10 @@ own worker thread, which calls ``servoL(pose, 0, 0, period, lookahead, gain)``
 or ``servoStop(a)``.  The worker is a second deadman: if no new target arrives
 for ``target_timeout_s`` while servoing (the loop stalled or died), it stops
 the robot by itself and reports it through :attr:`UrRtdeServo.servo_error`,
-which makes the teleoperation controller latch a fault.
+which makes the teleoperation controller latch a fault.  An error stays
+latched (new targets are ignored) until a stop requested through
+:meth:`UrRtdeServo.stop_servo` -- which the controller sends on every call
+while it is faulted -- has been accepted by the controller.
 
 Construction is bounded: a plain TCP probe of the RTDE port first (``ur_rtde``
 holds the GIL while it connects, see pipeline/backends/ur.py), then the
@@ -216,19 +219,27 @@ class UrRtdeServo:
                     self.servo_commands += 1
                     if ok is False:
                         self._error = "servoL refused the target (protective stop, or the control script is not running)"
-                        self._do_stop(ctrl)
+                        self._do_stop(ctrl, clears_error=False)
                     else:
                         self.servoing = True
                 elif self.servoing and now - target_ns > timeout_ns:
-                    self._do_stop(ctrl)
                     self._error = f"no teleoperation target for {(now - target_ns) * 1e-6:.0f} ms: stopped the robot"
+                    self._do_stop(ctrl, clears_error=False)
             except Exception as exc:  # noqa: BLE001 - a lost link or a controller error: stop and report
                 self._error = f"RTDE control: {exc}"
                 self.servoing = False
 
-    def _do_stop(self, ctrl: Any) -> None:
+    def _do_stop(self, ctrl: Any, clears_error: bool = True) -> None:
+        """``servoStop``; only a requested stop (``clears_error``) the UR accepted clears the error.
+
+        The worker's own stops (after a failure) keep the error latched, so the
+        teleoperation controller sees it and latches a fault.
+        """
         ok = ctrl.servoStop(self.stop_deceleration_m_s2)
         self.servo_stops += 1
         self.servoing = False
-        if ok is not False:
-            self._error = ""  # a stop the controller accepted clears a previous failure
+        if ok is False:
+            if "servoStop refused" not in self._error:
+                self._error = (self._error + "; " if self._error else "") + "servoStop refused"
+        elif clears_error:
+            self._error = ""

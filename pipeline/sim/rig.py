@@ -136,8 +136,20 @@ class SimRig:
         """Contact force on the tool tip in the base frame, N (ground truth)."""
         return self._truth
 
+    def on_faults(self, faults: int) -> None:
+        """The loop's latched faults changed: an attached teleoperation driver stops the arm (see ``pipeline.loop.Rig``)."""
+        if self.teleop is not None:
+            self.teleop.on_faults(faults)
+
+    def stop_motion(self, reason: str) -> None:
+        """The loop is stopping: an attached teleoperation driver stops the arm."""
+        if self.teleop is not None:
+            self.teleop.stop_motion(reason)
+
     def close(self) -> None:
-        """Zero the Touch."""
+        """Stop a teleoperated arm, zero the Touch."""
+        if self.teleop is not None:
+            self.teleop.close()
         self.haptic.close()
 
     # -- scenario control ---------------------------------------------------------------------
