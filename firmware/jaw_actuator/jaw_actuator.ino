@@ -26,6 +26,10 @@ const uint8_t SERVO_PIN = 9;
 const uint8_t BTN_OPEN_PIN = 2;
 const uint8_t BTN_CLOSE_PIN = 3;
 
+// The PQ12-R's pulse range: 1.0 ms fully retracted .. 2.0 ms fully extended.
+const int PULSE_MIN_US = 1000;
+const int PULSE_MAX_US = 2000;
+
 // Firmware position limits (pulse width, us): the jaw mechanism's closed and open ends.
 const int CLOSED_US = 1100;
 const int OPEN_US = 1900;
@@ -40,6 +44,11 @@ const uint8_t LINE_MAX = 32;
 const int LO_US = CLOSED_US < OPEN_US ? CLOSED_US : OPEN_US;
 const int HI_US = CLOSED_US < OPEN_US ? OPEN_US : CLOSED_US;
 const int OPEN_DIR = OPEN_US > CLOSED_US ? 1 : -1;
+
+// Servo clamps to the attach() range without telling us, so limits outside it would make the
+// reported position lie about the pulse actually sent.
+static_assert(PULSE_MIN_US <= LO_US && HI_US <= PULSE_MAX_US, "CLOSED_US/OPEN_US outside the PQ12-R pulse range");
+static_assert(LO_US <= START_US && START_US <= HI_US, "START_US outside the firmware limits");
 
 Servo jaw;
 int pos_us = START_US;
@@ -86,10 +95,12 @@ void buttonMoved(bool clipped) {
   Serial.println(clipped ? " LIMIT" : "");
 }
 
-// Parse a signed decimal integer; false if the text is not one.
+// Parse a signed decimal integer ([+-]?digits); false if the text is not one.
 bool parseInt(const char *s, long *out) {
   char *end;
-  if (*s == '\0') return false;
+  // strtol alone would also accept leading whitespace ("SET  5"); the protocol does not.
+  const char *digits = (*s == '+' || *s == '-') ? s + 1 : s;
+  if (!isdigit((unsigned char)*digits)) return false;
   long v = strtol(s, &end, 10);
   if (*end != '\0') return false;
   *out = v;
@@ -173,8 +184,10 @@ void updateButton(Button &b, unsigned long now, bool other_pressed) {
 void setup() {
   pinMode(BTN_OPEN_PIN, INPUT_PULLUP);
   pinMode(BTN_CLOSE_PIN, INPUT_PULLUP);
-  jaw.attach(SERVO_PIN, 1000, 2000);
+  // Set the pulse width before attach() starts pulsing: otherwise the first pulses could carry
+  // Servo's default 1500 us and jerk the jaw half open at power-up.
   moveTo(START_US);
+  jaw.attach(SERVO_PIN, PULSE_MIN_US, PULSE_MAX_US);
   Serial.begin(115200);
   Serial.print("READY ");
   Serial.print(PROTOCOL_VERSION);
