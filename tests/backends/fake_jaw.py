@@ -32,6 +32,10 @@ def ino_constants(path: Path = INO) -> dict[str, int]:
 
 C = ino_constants()
 
+#: String literals of the sketch that are the protocol on the wire (replies and the commands it matches).
+PROTOCOL_LITERALS = ("READY ", "PONG", "OK", "LIMIT", "POS ", " LIMIT", "ERR bad number", "ERR unknown command ",
+                     "ERR line too long", "SET ", "STEP ", "OPEN", "CLOSE", "GET", "PING")
+
 
 class _Button:
     def __init__(self, direction: int) -> None:
