@@ -996,10 +996,16 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
         gc.disable()
     engine.start()
     detached = False
+    # real clock: the driver's regular work runs every ~10 ms just after a loop tick (StudyEngine.quiet_wait_s);
+    # a command is applied when it arrives, the work it causes waits for the next quiet moment
+    step_at_ns = time.perf_counter_ns()
     try:
         while True:
             try:
-                cmd = cmds.get(timeout=engine.quiet_wait_s(0.01)) if real else cmds.get_nowait()
+                if real:
+                    cmd = cmds.get(timeout=max(0.0, (step_at_ns - time.perf_counter_ns()) * 1e-9))
+                else:
+                    cmd = cmds.get_nowait()
             except queue.Empty:
                 cmd = None
             if isinstance(cmd, _Detached):
@@ -1009,9 +1015,12 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
                 break
             if cmd is not None:
                 engine.handle(cmd)
-            engine.step()
-            if real:
+            if not real:
+                engine.step()
+            elif time.perf_counter_ns() >= step_at_ns:
+                engine.step()
                 collect_garbage()
+                step_at_ns = time.perf_counter_ns() + int(engine.quiet_wait_s(0.01) * 1e9)
     finally:
         reason = "the experimenter GUI went away (closed or crashed)" if detached else "the experimenter GUI closed"
         engine.close(reason, detached=detached)

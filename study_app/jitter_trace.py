@@ -302,14 +302,19 @@ class LateTickTracer:
             others_cpu[t.name] = others_cpu.get(t.name, 0.0) + (b[0] - a[0]) / 1000.0
             others_wait[t.name] = others_wait.get(t.name, 0.0) + (b[1] - a[1]) / 1000.0
             names[t.name] = t
-        gc_ns = sum(min(e, t1) - max(s, t0) for s, e, _, _ in self._gc_log if e > t0 and s < t1)
+        gc_ns = gc_loop_ns = 0
+        for s, e, tid, _ in self._gc_log:
+            if e > t0 and s < t1:
+                gc_ns += min(e, t1) - max(s, t0)
+                if tid == self._loop_tid:
+                    gc_loop_ns += min(e, t1) - max(s, t0)
         busiest = max(others_cpu, key=others_cpu.__getitem__, default="")
         waitiest = max(others_wait, key=others_wait.__getitem__, default="")
         # what explains most of the excess
         scores = {
             "gc": gc_ns,
             "cpu-busy": loop_wait,
-            "loop-work": loop_run - self._run_norm,
+            "loop-work": loop_run - self._run_norm - gc_loop_ns,  # a pass in the loop thread counts as "gc"
             f"gil:{busiest}": min(blocked, others_cpu.get(busiest, 0.0) * 1000.0) if busiest else 0,
             f"gil-holder-preempted:{waitiest}": min(blocked, others_wait.get(waitiest, 0.0) * 1000.0) if waitiest else 0,
         }
