@@ -76,7 +76,7 @@ POSE_STILL_DEG = 0.5
 POSE_STILL_M = 0.002
 #: ... or if a force sample older than this was averaged (the sensor stalled).
 POSE_MAX_SENSOR_AGE_S = 0.05
-#: The driver thread wakes this long after the start of a loop tick (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
+#: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
 QUIET_OFFSET_NS = 150_000
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
 
@@ -497,7 +497,7 @@ class StudyEngine:
             self.publish(self.health())
 
     def quiet_wait_s(self, interval_s: float) -> float:
-        """How long the driver thread should wait so it wakes ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
+        """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
 
         Real clock only.  The driver's work (runner, recorder hand-off, events)
         takes the GIL; if it asks for it while the loop thread spins to its

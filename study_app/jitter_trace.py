@@ -155,23 +155,30 @@ class LateTickTracer:
         self.gc_passes: dict[str, tuple[int, float]] = {}
 
     def summary(self, top: int = 6) -> dict[str, Any]:
-        """Counts of late periods by cause and the most frequent culprit code locations."""
+        """Counts of late periods by cause and the most frequent culprit code locations.
+
+        Called from another thread while the loop thread counts: every container is first copied
+        in one C-level call (atomic under the GIL), never iterated in Python while it may change.
+        """
+        causes, over = Counter(dict(self.causes)), Counter(dict(self.causes_over_2ms))
+        culprits = Counter(dict(self.culprits))
+        late, gc_passes = list(self.late), dict(self.gc_passes)
         return {
             "late_threshold_us": self.late_ns / 1000.0,
             "ticks": self.periods,
-            "late_ticks": sum(self.causes.values()),
-            "causes": dict(self.causes.most_common()),
-            "over_2ms": sum(self.causes_over_2ms.values()),
-            "causes_over_2ms": dict(self.causes_over_2ms.most_common()),
-            "culprits": dict(self.culprits.most_common(top)),
-            "gc_passes": {k: {"count": n, "longest_us": round(w)} for k, (n, w) in sorted(self.gc_passes.items())},
+            "late_ticks": sum(causes.values()),
+            "causes": dict(causes.most_common()),
+            "over_2ms": sum(over.values()),
+            "causes_over_2ms": dict(over.most_common()),
+            "culprits": dict(culprits.most_common(top)),
+            "gc_passes": {k: {"count": n, "longest_us": round(w)} for k, (n, w) in sorted(gc_passes.items())},
             "worst": [
                 {"period_us": round(p.period_us), "late_us": round(p.late_us), "cause": p.cause, "where": p.where,
                  "gc_us": round(p.gc_us), "loop_blocked_us": round(p.loop_blocked_us),
                  "loop_wait_us": round(p.loop_wait_us),
                  "others_cpu_us": {k: round(v) for k, v in p.others_cpu_us.items() if v >= 50},
                  "others_wait_us": {k: round(v) for k, v in p.others_wait_us.items() if v >= 50}}
-                for p in sorted(self.late, key=lambda p: -p.period_us)[:top]
+                for p in sorted(late, key=lambda p: -p.period_us)[:top]
             ],
         }
 
