@@ -960,6 +960,10 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     # A pure-Python driver thread must not hold the GIL for the default 5 ms
     # while the 1 kHz loop thread waits for it.
     sys.setswitchinterval(0.0002)
+    if config.clock == "real":
+        # every thread started from here on (device receivers of the real rig, command receiver, recorder,
+        # event feeder, loop) inherits this: none can hold the GIL while preempted by another process
+        prepare_helper_thread()
     publish = events.put
     try:
         engine = StudyEngine(config, publish)
@@ -967,9 +971,6 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
         publish(m.CommandRefused("connect", str(exc)))
         publish(m.EngineStopped(str(exc), {}))
         return
-    if config.clock == "real":
-        # every thread started from here on (command receiver, recorder, event feeder, loop) inherits this
-        prepare_helper_thread()
     cmds: queue.SimpleQueue[object] = queue.SimpleQueue()
 
     def receive() -> None:
