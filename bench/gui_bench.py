@@ -11,7 +11,14 @@ One run, real clock, the loop in its study-engine process as the app runs it:
    timing over ``seconds`` of that session.
 
 Loop timing is the engine's own: the ``period_s`` of every loop record,
-|period − 1 ms| quantiles and the share of periods over 2 ms.  GUI stalls are
+|period − 1 ms| quantiles and the share of periods over 2 ms.  With
+``explain=True`` (``--explain``) the engine also names the cause of every tick
+starting over 100 µs late (:mod:`study_app.jitter_trace`: another thread of the
+engine holding the GIL, a garbage-collector pass, the loop's own work, or the
+machine -- nothing in the process); the tracing costs the loop ~25 µs per tick,
+so it is off by default.  The share of CPU time the hypervisor stole during
+each measurement is reported either way (a shared VM's noise the process cannot
+cause or cure).  GUI stalls are
 measured by a 5 ms timer in the GUI's event loop: the longest gap beyond its
 interval, per phase (connect, calibration, session).  The window is rendered
 offscreen when no display is available (the same painting work, no compositor).
@@ -36,19 +43,40 @@ _STALL_TIMER_MS = 5
 _STALL_THRESHOLD_MS = 30.0
 
 
-def _loop_figures(h: m.Health) -> dict[str, float]:
-    return {
+def _cpu_times() -> list[int] | None:
+    """The machine's aggregate CPU times (``/proc/stat``), or None off Linux."""
+    try:
+        with open("/proc/stat", encoding="ascii") as fh:
+            return [int(x) for x in fh.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def _steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
+    if before is None or after is None:
+        return None
+    total = sum(after) - sum(before)
+    return round(100.0 * (after[7] - before[7]) / total, 1) if total > 0 else None
+
+
+def _loop_figures(h: m.Health, cpu_before: list[int] | None = None) -> dict[str, Any]:
+    out: dict[str, Any] = {
         "ticks": h.ticks,
         "abs_dev_p50_us": h.abs_dev_p50_us,
         "abs_dev_p99_us": h.abs_dev_p99_us,
         "period_max_us": h.period_max_us,
         "periods_over_2ms": h.periods_over_2ms,
         "fraction_over_2ms": h.periods_over_2ms / h.ticks if h.ticks else float("nan"),
+        "steal_percent": _steal_percent(cpu_before, _cpu_times()),
+        "load_average": [round(x, 2) for x in os.getloadavg()],
     }
+    if h.late_periods is not None:
+        out["late_ticks"] = h.late_periods
+    return out
 
 
-def _measure_without_gui(seconds: float) -> dict[str, float]:
-    client = EngineClient(HostConfig(clock="real"))
+def _measure_without_gui(seconds: float, explain: bool) -> dict[str, Any]:
+    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
     client.start()
     try:
         end = time.monotonic() + 60.0
@@ -57,20 +85,21 @@ def _measure_without_gui(seconds: float) -> dict[str, float]:
                 raise RuntimeError("the study engine did not start")
         client.send(m.ResetStats())
         time.sleep(0.05)
+        cpu0 = _cpu_times()
         t_end = time.monotonic() + seconds
         last: m.Health | None = None
         while time.monotonic() < t_end or last is None:
             ev = client.get(0.2)
             if isinstance(ev, m.Health):
                 last = ev
-        return _loop_figures(last)
+        return _loop_figures(last, cpu0)
     finally:
         client.shutdown()
 
 
-def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
-    """Measure; returns plain data (see :func:`format_gui_bench`)."""
-    without = _measure_without_gui(seconds)
+def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, Any]:
+    """Measure; returns plain data (see :func:`format_gui_bench`); ``explain`` traces late ticks' causes."""
+    without = _measure_without_gui(seconds, explain)
 
     if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
@@ -84,7 +113,7 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
     app = QApplication.instance() or QApplication(["haptic-study-bench"])
     tmp = tempfile.TemporaryDirectory(prefix="haptic-study-bench-")
     settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
-    win = ExperimenterWindow(HostConfig(clock="real"), settings, os.path.join(tmp.name, "bench.db"))
+    win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings, os.path.join(tmp.name, "bench.db"))
     win.confirm = lambda title, text: True
     win.show()
     app.processEvents()
@@ -118,11 +147,12 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
         win.start_button.click()
         run_until(lambda: win.model.session.trial is not None, 30.0)
         win.bridge.send(m.ResetStats())
+        cpu0 = _cpu_times()
         t_end = time.monotonic() + seconds
         run_until(lambda: time.monotonic() >= t_end, seconds + 30.0)
         n = len(health)
         run_until(lambda: len(health) > n + 1, 10.0)  # a Health event entirely after the window
-        with_gui = _loop_figures(health[-1])
+        with_gui = _loop_figures(health[-1], cpu0)
         trials = win.trial_table.rowCount()
     finally:
         detector.stop()
@@ -152,10 +182,20 @@ def run_gui_bench(seconds: float = 20.0) -> dict[str, Any]:
 
 def format_gui_bench(r: dict[str, Any]) -> str:
     """Human-readable summary."""
-    def loop(d: dict[str, float]) -> str:
-        return (f"p50 / p99 |period − 1 ms| {d['abs_dev_p50_us']:.0f} / {d['abs_dev_p99_us']:.0f} µs, "
+    def loop(d: dict[str, Any]) -> str:
+        steal = "" if d.get("steal_percent") is None else f", CPU stolen by the hypervisor {d['steal_percent']:.1f} %"
+        load = "" if "load_average" not in d else f", load {d['load_average'][0]:.2f}"
+        text = (f"p50 / p99 |period − 1 ms| {d['abs_dev_p50_us']:.0f} / {d['abs_dev_p99_us']:.0f} µs, "
                 f"periods > 2 ms {d['periods_over_2ms']} of {d['ticks']} ({100 * d['fraction_over_2ms']:.3f} %), "
-                f"max period {d['period_max_us'] / 1000:.1f} ms")
+                f"max period {d['period_max_us'] / 1000:.1f} ms{load}{steal}")
+        late = d.get("late_ticks")
+        if late:
+            causes = ", ".join(f"{k} {v}" for k, v in late["causes"].items()) or "none"
+            text += (f"\n      ticks > {late['late_threshold_us']:.0f} µs late: {late['late_ticks']} ({causes}); "
+                     f"periods > 2 ms by cause: "
+                     + (", ".join(f"{k} {v}" for k, v in late["causes_over_2ms"].items()) or "none"))
+            text += "".join(f"\n        {n} × {where}" for where, n in list(late["culprits"].items())[:3])
+        return text
 
     s = r["gui_stall_ms"]
     return (

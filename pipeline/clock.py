@@ -15,7 +15,9 @@ import sys
 import time
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Clock", "MonotonicClock", "VirtualClock", "prepare_realtime_thread", "set_timer_slack_ns"]
+__all__ = [
+    "Clock", "MonotonicClock", "VirtualClock", "prepare_helper_thread", "prepare_realtime_thread", "set_timer_slack_ns",
+]
 
 
 @runtime_checkable
@@ -111,6 +113,8 @@ def set_timer_slack_ns(slack_ns: int = 1) -> bool:
 REALTIME_ENV = "HAPTIC_STUDY_REALTIME"
 #: SCHED_FIFO priority of the loop thread: above every normal thread, far below the kernel's own (50+).
 REALTIME_PRIORITY = 20
+#: SCHED_FIFO priority of the other threads of the loop's process (:func:`prepare_helper_thread`): below the loop.
+HELPER_PRIORITY = 10
 
 
 def prepare_realtime_thread(priority: int = REALTIME_PRIORITY) -> str:
@@ -132,6 +136,38 @@ def prepare_realtime_thread(priority: int = REALTIME_PRIORITY) -> str:
         ``"SCHED_FIFO/<priority>"`` or ``"normal (…why…)"``.
     """
     set_timer_slack_ns(1)
+    if os.environ.get(REALTIME_ENV, "1") == "0":
+        return f"normal ({REALTIME_ENV}=0)"
+    if not hasattr(os, "sched_setscheduler"):
+        return "normal (no real-time scheduling on this platform)"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError) as exc:
+        return f"normal ({exc.strerror or exc})"
+    return f"SCHED_FIFO/{priority}"
+
+
+def prepare_helper_thread(priority: int = HELPER_PRIORITY) -> str:
+    """Put a thread that shares the loop's process (and so its GIL) on ``SCHED_FIFO`` below the loop.
+
+    Why: the loop thread cannot run Python without the GIL.  If another
+    thread of its process holds the GIL and the kernel preempts that thread
+    for an ordinary process (a busy machine), the real-time loop waits for a
+    normal-priority thread to be scheduled again -- milliseconds: a priority
+    inversion through the GIL.  At ``SCHED_FIFO`` just below the loop the
+    holder keeps its CPU until it releases the GIL.  Threads created
+    afterwards by this thread inherit the policy, so calling it first in a
+    process's main thread covers the threads it starts (the loop thread then
+    raises itself to :data:`REALTIME_PRIORITY`).  These threads block on
+    queues, pipes and timeouts most of the time; the kernel still caps
+    real-time threads at 95 % of a CPU.  Honours ``HAPTIC_STUDY_REALTIME=0``
+    like :func:`prepare_realtime_thread`.
+
+    Returns
+    -------
+    str
+        ``"SCHED_FIFO/<priority>"`` or ``"normal (…why…)"``.
+    """
     if os.environ.get(REALTIME_ENV, "1") == "0":
         return f"normal ({REALTIME_ENV}=0)"
     if not hasattr(os, "sched_setscheduler"):

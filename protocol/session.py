@@ -223,7 +223,9 @@ class SessionRunner:
         n = len(sel)
         cols = [np.full(n, float(trial_id_of(self.session_id, spec.index))), (t_ns[mask] - cue) / 1e9]
         cols.extend(np.asarray(sel[c], dtype=np.float64) for c in _SAMPLE_SRC)
-        self.recorder.samples(np.column_stack(cols).tolist())
+        # one float64 array, not a list of row lists: no garbage-collector-tracked objects per sample
+        # (a live session's collector passes would otherwise scan ~1000 such lists, GIL held, loop waiting)
+        self.recorder.samples(np.column_stack(cols))
 
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):

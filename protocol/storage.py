@@ -22,7 +22,10 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "CODE_PATTERN",
@@ -248,9 +251,9 @@ class StudyDatabase:
             raise StorageError(f"session {session_id} is not running; its end is already recorded")
 
     # -- trials, samples, events --------------------------------------------------------------------
-    def insert_samples(self, rows: Sequence[Sequence[float]]) -> None:
-        """Append sample rows (columns :data:`SAMPLE_COLUMNS`)."""
-        if rows:
+    def insert_samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
+        """Append sample rows (columns :data:`SAMPLE_COLUMNS`): a sequence of rows or a 2-D float array."""
+        if len(rows):
             self.conn.executemany(_INSERT_SAMPLES, rows)
 
     def insert_trial(self, row: dict[str, Any]) -> None:
@@ -342,8 +345,8 @@ class Recorder:
             self._thread.start()
 
     # producers ----------------------------------------------------------------------------------
-    def samples(self, rows: Sequence[Sequence[float]]) -> None:
-        """Queue sample rows."""
+    def samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
+        """Queue sample rows (a sequence of rows or a 2-D float array, not modified afterwards)."""
         self._put(("samples", rows))
 
     def trial(self, row: dict[str, Any]) -> None:

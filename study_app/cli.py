@@ -111,6 +111,8 @@ def build_parser() -> argparse.ArgumentParser:
     bg.add_argument("--json", action="store_true", help="print one JSON object")
     bg.add_argument("--seconds", type=_positive_float("--seconds"), default=20.0,
                     help="real time per loop measurement (default 20)")
+    bg.add_argument("--explain", action="store_true",
+                    help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
 
     g = sub.add_parser("gui", help="the experimenter's window (simulated rig by default)")
     g.add_argument("--db", default=None, help="study database (SQLite); default: the last one used")
@@ -165,7 +167,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             from bench.gui_bench import format_gui_bench, run_gui_bench
 
             print("bench: measuring the loop without and with the GUI ...", file=sys.stderr, flush=True)
-            result = run_gui_bench(seconds=args.seconds)
+            result = run_gui_bench(seconds=args.seconds, explain=args.explain)
             print(json.dumps(result) if args.json else format_gui_bench(result))
             return 0
         if args.command == "bench" and args.bench == "stats":

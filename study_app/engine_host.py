@@ -23,6 +23,7 @@ row is stored with the reason (the session stays resumable), commits, and exits.
 from __future__ import annotations
 
 import dataclasses
+import gc
 import json
 import math
 import os
@@ -36,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.clock import MonotonicClock, VirtualClock
+from pipeline.clock import MonotonicClock, VirtualClock, prepare_helper_thread
 from pipeline.compensation import (
     CalibrationPose, DegeneratePoseSetError, PayloadCalibration, identify_payload, recommended_pose_set,
 )
@@ -57,10 +58,11 @@ from protocol.storage import Recorder, StorageError, StudyDatabase, validate_cod
 from protocol.study import config_record, participant_seeds, prepare_resume, software_version, training_schedule
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
+from study_app.jitter_trace import LateTickTracer
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
-    "build_real_engine", "host_main", "pose_set", "real_config_record", "rotation_angle_deg",
+    "build_real_engine", "collect_garbage", "host_main", "pose_set", "real_config_record", "rotation_angle_deg",
 ]
 
 #: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
@@ -74,6 +76,8 @@ POSE_STILL_DEG = 0.5
 POSE_STILL_M = 0.002
 #: ... or if a force sample older than this was averaged (the sensor stalled).
 POSE_MAX_SENSOR_AGE_S = 0.05
+#: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
+QUIET_OFFSET_NS = 150_000
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
 
 
@@ -210,6 +214,9 @@ class HostConfig:
         Virtual clock: ticks per driver step.
     health_period_s
         Wall time between :class:`study_app.messages.Health` events.
+    trace_jitter
+        Real clock only: explain every loop period over 1.5 ms (:mod:`study_app.jitter_trace`),
+        reported in :attr:`study_app.messages.Health.late_periods` (diagnosis and benchmarks).
     """
 
     rig: str = "sim"
@@ -220,6 +227,7 @@ class HostConfig:
     rig_seed: int = 0
     block_ticks: int = 50
     health_period_s: float = 0.5
+    trace_jitter: bool = False
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -377,6 +385,10 @@ class StudyEngine:
         self.cursor = self.ring.write_count
         self.loop = self.eng.loop
         self.loop.on_event = self._on_loop_event
+        self.tracer: LateTickTracer | None = None
+        if config.trace_jitter and config.clock == "real":
+            self.tracer = LateTickTracer(MonotonicClock())
+            self.loop.clock = self.tracer
         self.stats = _PeriodStats()
         self.runner: SessionRunner | None = None
         self.recorder: Recorder | None = None
@@ -446,6 +458,8 @@ class StudyEngine:
             self.loop.stop(timeout_s=5.0)
         else:
             self.loop.ramp_down()
+        if self.tracer is not None:
+            self.tracer.close()
         self._drain_ring()
         try:
             self.eng.rig.close()
@@ -478,7 +492,29 @@ class StudyEngine:
         now = time.monotonic()
         if now - self._last_health >= self.config.health_period_s:
             self._last_health = now
+            if self.tracer is not None:
+                self.tracer.refresh()
             self.publish(self.health())
+
+    def quiet_wait_s(self, interval_s: float) -> float:
+        """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
+
+        Real clock only.  The driver's work (runner, recorder hand-off, events)
+        takes the GIL; if it asks for it while the loop thread spins to its
+        deadline or runs a tick, the interpreter forces the loop out after a
+        switch interval and the tick starts late.  Waking just after a tick
+        leaves the driver (and the recorder it feeds) most of the loop's
+        ~0.8 ms sleep to finish in.  The tick grid is read from the newest
+        record the driver has seen (its start on the loop's clock).
+        """
+        if not self.loop.tick_count:
+            return interval_s
+        now = time.perf_counter_ns()
+        period = self.loop.period_ns
+        last_tick = self.loop.t0_ns + self._last_t_ns
+        target = now + int(interval_s * 1e9)
+        target -= (target - last_tick - QUIET_OFFSET_NS) % period
+        return max(0.0, (target - now) * 1e-9)
 
     def _throttle(self) -> None:
         # keep simulated time at `speed` × wall time; after a stall, re-anchor instead of bursting
@@ -527,6 +563,7 @@ class StudyEngine:
             haptic_on=bool(self.loop.haptic_on), driver=self.driver_name,
             session_running=runner is not None and not runner.done, paused=bool(runner is not None and runner.paused),
             abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
+            late_periods=None if self.tracer is None else self.tracer.summary(),
         )
 
     def _on_loop_event(self, ev: LoopEvent) -> None:
@@ -587,6 +624,8 @@ class StudyEngine:
                 self.driver.set_manual_y(cmd.y_m)
         elif isinstance(cmd, m.ResetStats):
             self.stats.reset()
+            if self.tracer is not None:
+                self.tracer.reset()
         else:
             raise ValueError(f"unknown command {cmd!r}")
 
@@ -676,6 +715,8 @@ class StudyEngine:
         if start_note is not None:
             recorder.event(session_id, 0.0, "session_start", start_note)
         self.db, self.recorder, self.runner, self.session_code = db, recorder, runner, code
+        if self.config.clock == "real":
+            gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
         tr = protocol.trial
         self.publish(m.SessionStarted(
             session_id=session_id, code=code, kind=kind, trials_total=len(schedule), start_position=pos,
@@ -851,6 +892,8 @@ class StudyEngine:
             self._stats_from_tick = self.loop.tick_count + 1
             self._reanchor()
             if real:
+                if self.tracer is not None:
+                    self.tracer.restart()
                 self.loop.start()
         self.publish(result)
 
@@ -891,6 +934,23 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
 
 
 # -- the process --------------------------------------------------------------------------------
+def collect_garbage() -> int | None:
+    """Run the collector pass the interpreter would have started by itself by now, if any; return its generation.
+
+    The engine process disables automatic collection (see :func:`host_main`)
+    and calls this from the driver thread right after a loop tick.  Same
+    thresholds as the automatic collector (:func:`gc.get_threshold`), without
+    its heuristic of postponing full passes.
+    """
+    t0, t1, t2 = gc.get_threshold()
+    c0, c1, c2 = gc.get_count()
+    if c0 < t0:
+        return None
+    gen = 2 if (c1 >= t1 and c2 >= t2) else 1 if c1 >= t1 else 0
+    gc.collect(gen)
+    return gen
+
+
 class _Detached:
     """Internal marker: the command pipe broke."""
 
@@ -900,6 +960,10 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     # A pure-Python driver thread must not hold the GIL for the default 5 ms
     # while the 1 kHz loop thread waits for it.
     sys.setswitchinterval(0.0002)
+    if config.clock == "real":
+        # every thread started from here on (device receivers of the real rig, command receiver, recorder,
+        # event feeder, loop) inherits this: none can hold the GIL while preempted by another process
+        prepare_helper_thread()
     publish = events.put
     try:
         engine = StudyEngine(config, publish)
@@ -921,13 +985,28 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
                 return
 
     threading.Thread(target=receive, name="engine-commands", daemon=True).start()
+    real = config.clock == "real"
+    if real:
+        # What exists now lives as long as the engine: keep it out of every garbage-collector pass
+        # (a full pass over it holds the GIL for ~10 ms, the loop thread included).
+        gc.collect()
+        gc.freeze()
+        # ... and let the collector run only here, in the driver's quiet window after a tick: a pass holds
+        # the GIL throughout, and automatic passes would otherwise start in whatever thread allocates --
+        # often the loop thread itself, mid-tick
+        gc.disable()
     engine.start()
-    wait_s = 0.01 if config.clock == "real" else 0.0
     detached = False
+    # real clock: the driver's regular work runs every ~10 ms just after a loop tick (StudyEngine.quiet_wait_s);
+    # a command is applied when it arrives, the work it causes waits for the next quiet moment
+    step_at_ns = time.perf_counter_ns()
     try:
         while True:
             try:
-                cmd = cmds.get(timeout=wait_s) if wait_s else cmds.get_nowait()
+                if real:
+                    cmd = cmds.get(timeout=max(0.0, (step_at_ns - time.perf_counter_ns()) * 1e-9))
+                else:
+                    cmd = cmds.get_nowait()
             except queue.Empty:
                 cmd = None
             if isinstance(cmd, _Detached):
@@ -937,7 +1016,12 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
                 break
             if cmd is not None:
                 engine.handle(cmd)
-            engine.step()
+            if not real:
+                engine.step()
+            elif time.perf_counter_ns() >= step_at_ns:
+                engine.step()
+                collect_garbage()
+                step_at_ns = time.perf_counter_ns() + int(engine.quiet_wait_s(0.01) * 1e9)
     finally:
         reason = "the experimenter GUI went away (closed or crashed)" if detached else "the experimenter GUI closed"
         engine.close(reason, detached=detached)

@@ -304,6 +304,8 @@ class Health:
     paused: bool
     abs_dev_p50_us: float = float("nan")
     period_max_us: float = float("nan")
+    #: Late periods explained by cause (:meth:`study_app.jitter_trace.LateTickTracer.summary`), when tracing.
+    late_periods: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -528,3 +528,18 @@ def test_threaded_writer_error_reaches_the_producer(db, db_path):
     with pytest.raises(StorageError, match="the recorder failed"):
         rec.close()
     assert _count(db_path, "trials") == 0
+
+
+def test_samples_given_as_one_float_array_are_stored_like_rows(db):
+    # the live session runner hands the recorder one 2-D array per block (no per-row lists to collect)
+    import numpy as np
+
+    sid = db.create_session(**_session_args())
+    rows = [_sample_row(trial_id_of(sid, 0), k) for k in range(20)]
+    with db.transaction():
+        db.insert_samples(np.array(rows[:10], dtype=np.float64))
+        db.insert_samples(rows[10:])
+        db.insert_samples(np.empty((0, len(SAMPLE_COLUMNS))))
+    got = db.conn.execute(f"SELECT {', '.join(SAMPLE_COLUMNS)} FROM samples ORDER BY rowid").fetchall()
+    assert got == rows
+    assert {type(v) for r in got for v in r} == {int, float}  # trial_id stays an integer key
