@@ -35,6 +35,7 @@ from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 _HYPOT = math.hypot
 _TANH = math.tanh
 _FSUM = math.fsum
+_INF = math.inf
 
 __all__ = ["FrameworkConfig", "HapticFramework", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE", "DEFAULT_ROT_TIP_SENSOR"]
 
@@ -120,7 +121,7 @@ class HapticFramework:
 
     __slots__ = (
         "config", "_cal", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_foff", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_window",
+        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_ft_safe",
     )
 
     def __init__(
@@ -135,13 +136,13 @@ class HapticFramework:
         self._bias: tuple[float, ...] = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         self._payload: tuple[float, ...] = (0.0,) * 6
         self.filter = MovingAverage3(config.filter_window)
-        self._window = config.filter_window
         self.safety = SafetyGovernor(config.safety, device_peak_n)
         self.rls = rls
         if rls is not None:
             rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
         self._fmax = float(config.f_max_n)
         self._fscale = float(config.f_scale_n)
+        self._ft_safe = _clamp_free_bound(self.safety)
         self._rts = config.rot_tip_sensor
         self._rhb = config.rot_haptic_base
         self._rbt: Mat3 = IDENTITY
@@ -159,8 +160,19 @@ class HapticFramework:
 
     def _update_offsets(self) -> None:
         p, b = self._payload, self._bias
-        self._off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
-        self._foff = self._off[:3]
+        self._off = off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
+        # Everything the per-tick path reads and never writes, in one tuple
+        # (one attribute load and one unpack per tick instead of ~20 loads).
+        # Rebuilt whenever one of its parts changes: here, which set_pose and
+        # every bias change go through.  The filter rings are cleared in place
+        # by MovingAverage3.reset, so holding them is safe.
+        g = self.safety
+        f = self.filter
+        self._hot = (
+            off[0], off[1], off[2], f, f.window, float(f.window), *f._buf,
+            *self._rts, *self._rbt, *self._rhb,
+            self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe,
+        )
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -206,10 +218,7 @@ class HapticFramework:
         self.filter.reset()
         self.safety.force_zero()
 
-    def step(
-        self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float,
-        *, _hypot: Any = _HYPOT, _tanh: Any = _TANH, _fsum: Any = _FSUM, _lo: float = _SERIES_T, _hi: float = _SATURATED_T,
-    ) -> tuple[float, ...]:
+    def step(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:
         """Run Algorithm 1 on one raw force sample (sensor frame, N).
 
         Only forces are fed back (paper §IV), so the torques of the sample do
@@ -233,71 +242,96 @@ class HapticFramework:
             filtered force, tip, base and haptic frame force, scaled and
             rendered force (3 each).
         """
-        o0, o1, o2 = self._foff
+        (
+            o0, o1, o2, f, w, wf, bx, by, bz,
+            a0, a1, a2, a3, a4, a5, a6, a7, a8,
+            b0, b1, b2, b3, b4, b5, b6, b7, b8,
+            c0, c1, c2, c3, c4, c5, c6, c7, c8,
+            fscale, fmax, g, max_dt, slew, ft_safe,
+        ) = self._hot
         cx = fx - o0
         cy = fy - o1
         cz = fz - o2
         # -- moving average: the steady-state path of MovingAverage3.update,
-        # written out (same arithmetic, same state); the first W samples, the
-        # once-per-window exact re-sum and rejected samples go through the method.
-        f = self.filter
+        # written out (same arithmetic, same state).  The running sums are
+        # formed first and one finiteness test of their total stands for both
+        # of update's tests: a finite total means a finite sample and no
+        # overflow.  A non-finite total (a rejected sample, an overflowing
+        # window, or merely a total beyond DBL_MAX) leaves the state untouched
+        # and takes the method, which redoes this tick exactly; so do the
+        # first W samples.
         sx, sy, sz, i, n = f._st
-        w = self._window
-        if n == w and (cx - cx) + (cy - cy) + (cz - cz) == 0.0:
-            bx, by, bz = f._buf
+        if n == w:
             sx += cx - bx[i]
             sy += cy - by[i]
             sz += cz - bz[i]
-            bx[i] = cx
-            by[i] = cy
-            bz[i] = cz
-            i += 1
-            if i == w:
-                i = 0
-                try:
-                    sx = _fsum(bx)
-                    sy = _fsum(by)
-                    sz = _fsum(bz)
-                except OverflowError:  # filters.exact_sum's fallback, for sums beyond DBL_MAX
-                    sx, sy, sz = exact_sum(bx), exact_sum(by), exact_sum(bz)
-            f._st = (sx, sy, sz, i, n)
-            mx = sx / n
-            my = sy / n
-            mz = sz / n
-            if (mx - mx) + (my - my) + (mz - mz) != 0.0:  # the window's sum overflowed
-                mx, my, mz = f.mean
+            m = sx + sy + sz
+            if m - m == 0.0:
+                bx[i] = cx
+                by[i] = cy
+                bz[i] = cz
+                i += 1
+                if i < w:
+                    f._st = (sx, sy, sz, i, n)
+                    mx = sx / wf  # n == w: a float divisor gives the same quotient, faster
+                    my = sy / wf
+                    mz = sz / wf
+                else:  # once per window: the exact re-sum
+                    try:
+                        sx = _FSUM(bx)
+                        sy = _FSUM(by)
+                        sz = _FSUM(bz)
+                    except OverflowError:  # filters.exact_sum's fallback, for sums beyond DBL_MAX
+                        sx, sy, sz = exact_sum(bx), exact_sum(by), exact_sum(bz)
+                    f._st = (sx, sy, sz, 0, n)
+                    m = sx + sy + sz
+                    if m - m == 0.0:
+                        mx = sx / wf
+                        my = sy / wf
+                        mz = sz / wf
+                    else:  # the exact re-sum overflowed
+                        mx, my, mz = f.mean
+            else:
+                mx, my, mz = f.update(cx, cy, cz)
         else:
             mx, my, mz = f.update(cx, cy, cz)
         # -- eqs. (TCP), (Base), (Haptic): frames.mat_vec three times, in place
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rts
-        ax = r0 * mx + r1 * my + r2 * mz
-        ay = r3 * mx + r4 * my + r5 * mz
-        az = r6 * mx + r7 * my + r8 * mz
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rbt
-        bx_ = r0 * ax + r1 * ay + r2 * az
-        by_ = r3 * ax + r4 * ay + r5 * az
-        bz_ = r6 * ax + r7 * ay + r8 * az
-        r0, r1, r2, r3, r4, r5, r6, r7, r8 = self._rhb
-        hx = r0 * bx_ + r1 * by_ + r2 * bz_
-        hy = r3 * bx_ + r4 * by_ + r5 * bz_
-        hz = r6 * bx_ + r7 * by_ + r8 * bz_
+        ax = a0 * mx + a1 * my + a2 * mz
+        ay = a3 * mx + a4 * my + a5 * mz
+        az = a6 * mx + a7 * my + a8 * mz
+        bx_ = b0 * ax + b1 * ay + b2 * az
+        by_ = b3 * ax + b4 * ay + b5 * az
+        bz_ = b6 * ax + b7 * ay + b8 * az
+        hx = c0 * bx_ + c1 * by_ + c2 * bz_
+        hy = c3 * bx_ + c4 * by_ + c5 * bz_
+        hz = c6 * bx_ + c7 * by_ + c8 * bz_
         # -- eq. (H_scaled): scaling.scale_components' general branch in place;
         # zero, tiny, huge, saturated and non-finite inputs take the function.
-        fmag = _hypot(hx, hy, hz)
-        t = fmag / self._fscale
-        if _lo <= t <= _hi:
-            k = self._fmax * _tanh(t) / fmag
-            qx, qy, qz = hx * k, hy * k, hz * k
+        fmag = _HYPOT(hx, hy, hz)
+        t = fmag / fscale
+        if t >= _SERIES_T and t <= _SATURATED_T:
+            ft = fmax * _TANH(t)
+            k = ft / fmag
+            qx = hx * k
+            qy = hy * k
+            qz = hz * k
         else:
-            qx, qy, qz = scale_components(hx, hy, hz, self._fmax, self._fscale)
+            qx, qy, qz = scale_components(hx, hy, hz, fmax, fscale)
+            # SafetyGovernor.step's clamp test, done here (q is finite)
+            ft = 0.0 if qx * qx + qy * qy + qz * qz <= g._lim2 else _INF
         # -- safety: SafetyGovernor.step's steady state (enabled, fully ramped
-        # in, in range, slew not limiting) in place; everything else the method.
-        g = self.safety
-        if enabled and g.gain == 1.0 and 0.0 < dt_s <= g._max_dt:
-            px, py, pz = g._sx, g._sy, g._sz
-            dx, dy, dz = qx - px, qy - py, qz - pz
-            step = g._slew * dt_s
-            if qx * qx + qy * qy + qz * qz <= g._lim2 and dx * dx + dy * dy + dz * dz <= step * step:
+        # in, in range, clamp and slew not limiting) in place; everything else
+        # the method.  ft ≤ ft_safe proves the clamp inactive (see
+        # _clamp_free_bound), so the fused path need not form |q|².
+        if enabled and ft <= ft_safe and g.gain == 1.0 and dt_s > 0.0 and dt_s <= max_dt:
+            px = g._sx
+            py = g._sy
+            pz = g._sz
+            dx = qx - px
+            dy = qy - py
+            dz = qz - pz
+            step = slew * dt_s
+            if dx * dx + dy * dy + dz * dz <= step * step:
                 g._sx = ox = px + dx
                 g._sy = oy = py + dy
                 g._sz = oz = pz + dz
@@ -310,3 +344,18 @@ class HapticFramework:
             mx, my, mz, ax, ay, az, bx_, by_, bz_, hx, hy, hz,
             qx, qy, qz, ox, oy, oz,
         )
+
+
+def _clamp_free_bound(g: SafetyGovernor) -> float:
+    """Largest ``f_max·tanh(t)`` for which SafetyGovernor.step surely does not clamp.
+
+    The fused scaling forms ``k = ft/|h|`` and ``q = h·k`` with
+    ``ft = f_max·tanh(|h|/f_scale)``; each of the roundings in ``hypot``,
+    ``k``, ``q_i``, the squares and their sum is below 2⁻⁵² relatively, so the
+    computed ``|q|²`` is below ``ft²·(1 + 12·2⁻⁵²)`` (plus subnormal residues far
+    below any limit).  With ``ft`` a relative 1e-9 under the clamp radius that
+    is below ``_lim2`` whatever the roundings, so the clamp test ``|q|² > _lim2``
+    is certainly false and need not be evaluated.  Forces within 1e-9 of the
+    radius (|h| ≳ 10·f_scale at the paper's limits) take the full method.
+    """
+    return g._lim_inner * (1.0 - 1e-9)

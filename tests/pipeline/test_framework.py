@@ -70,17 +70,30 @@ extreme = st.one_of(
         min_size=1, max_size=60,
     ),
     rv=st.tuples(*[st.floats(-3.0, 3.0)] * 3),
+    mount=st.one_of(st.none(), st.tuples(*[st.floats(-0.3, 0.3)] * 3)),
+    peak=st.sampled_from([3.3, 2.0, 0.5]),
+    reset_at=st.integers(0, 60),
 )
-def test_fused_step_equals_composed_stages(window, samples, rv) -> None:
-    """Every output of every tick is identical to the stage modules composed (including extremes)."""
-    cfg = FrameworkConfig(filter_window=window, safety=SafetyConfig(ramp_in_s=0.01))
+def test_fused_step_equals_composed_stages(window, samples, rv, mount, peak, reset_at) -> None:
+    """Every output of every tick is identical to the stage modules composed (including extremes).
+
+    A device peak below f_max makes the safety clamp act inside the fused
+    path's normal range; a tilted sensor mount exercises all three rotations;
+    a reset midway checks the fused path follows the emptied filter.
+    """
+    rts = FrameworkConfig().rot_tip_sensor if mount is None else rotvec_to_matrix(*mount)
+    cfg = FrameworkConfig(filter_window=window, rot_tip_sensor=rts, safety=SafetyConfig(ramp_in_s=0.01))
     cal = _calibration()
-    fw = HapticFramework(cfg, cal, device_peak_n=3.3)
-    ref = Reference(cfg, cal, 3.3)
+    fw = HapticFramework(cfg, cal, device_peak_n=peak)
+    ref = Reference(cfg, cal, peak)
     rbt = rotvec_to_matrix(*rv)
     fw.set_pose(rbt)
     ref.set_pose(rbt)
-    for w, enabled, dt in samples:
+    for k, (w, enabled, dt) in enumerate(samples):
+        if k == reset_at:
+            fw.reset()
+            ref.ma.reset()
+            ref.safety.force_zero()
         got = fw.step(w[0], w[1], w[2], enabled, dt)
         assert fw.compensated_torque(*w[3:]) == tuple(ref.cal.compensate(w, transpose(mat_mul(rbt, cfg.rot_tip_sensor)))[3:]) or any(
             math.isnan(v) for v in w[3:]
@@ -90,6 +103,32 @@ def test_fused_step_equals_composed_stages(window, samples, rv) -> None:
         # identical arithmetic order (f − (A g + b)) makes it exact too
         assert len(got) == len(STEP_FIELDS)
         assert all(_same(g, x) for g, x in zip(got, want)), (w, enabled, dt, got, want)
+
+
+@pytest.mark.parametrize("peak", [3.3, 2.0, 0.5])
+def test_fused_step_equals_composed_stages_at_the_clamp(peak) -> None:
+    """Sustained forces that ramp the output up to the clamp and hold it there, bit for bit.
+
+    Random samples rarely hold a force long enough for the slew-limited output
+    to reach the clamp radius, which is where the fused path's clamp-free
+    bound decides; this sweeps the force magnitude slowly across it.
+    """
+    cfg = FrameworkConfig(safety=SafetyConfig(ramp_in_s=0.01))
+    cal = _calibration()
+    fw = HapticFramework(cfg, cal, device_peak_n=peak)
+    ref = Reference(cfg, cal, peak)
+    rbt = rotvec_to_matrix(0.3, -0.2, 0.1)
+    fw.set_pose(rbt)
+    ref.set_pose(rbt)
+    rendered = []
+    for k in range(3000):
+        fz = 0.05 * k if k < 1500 else 0.05 * (3000 - k)  # 0 → 75 N → 0 N, slowly
+        w = (0.3, -0.2, fz, 0.0, 0.0, 0.0)
+        got = fw.step(w[0], w[1], w[2], True, 0.001)
+        assert got == ref.step(w, True, 0.001), k
+        rendered.append(math.hypot(*got[18:21]))
+    assert max(rendered) <= fw.safety.limit_n
+    assert max(rendered) > fw.safety.limit_n * (1 - 1e-9)  # the clamp was reached
 
 
 def test_steady_state_matches_paper_mapping() -> None:
