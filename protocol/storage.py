@@ -22,10 +22,9 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-if TYPE_CHECKING:
-    import numpy as np
+import numpy as np
 
 __all__ = [
     "CODE_PATTERN",
@@ -254,7 +253,9 @@ class StudyDatabase:
     def insert_samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
         """Append sample rows (columns :data:`SAMPLE_COLUMNS`): a sequence of rows or a 2-D float array."""
         if len(rows):
-            self.conn.executemany(_INSERT_SAMPLES, rows)
+            # sqlite3 binds an array's rows element by element through NumPy scalars, ~4x slower
+            # than plain floats; tolist() converts the whole block in C first
+            self.conn.executemany(_INSERT_SAMPLES, rows.tolist() if isinstance(rows, np.ndarray) else rows)
 
     def insert_trial(self, row: dict[str, Any]) -> None:
         """Insert one trial summary (atomic: its own statement in the current transaction)."""
