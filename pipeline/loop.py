@@ -367,7 +367,8 @@ class HapticLoop:
         latched = self.faults
         new = cond & ~latched
         if new:
-            latched |= new
+            # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
+            latched = int(latched | new)
             self.faults = latched
             self._faults_changed(now)
             self._emit(LoopEvent(now, "fault", latched, Fault(new).describe()))
@@ -409,7 +410,7 @@ class HapticLoop:
             if before & Fault.HAPTIC_DEVICE:
                 if not self.rig.haptic.rearm():
                     persisting |= Fault.HAPTIC_DEVICE
-            self.faults = persisting
+            self.faults = int(persisting)
             if before and not persisting:
                 self.framework.reset()
             if persisting != before:
@@ -430,7 +431,7 @@ class HapticLoop:
 
     def _latch(self, fault: Fault, now: int) -> None:
         if not self.faults & fault:
-            self.faults |= fault
+            self.faults = int(self.faults | fault)
             self._faults_changed(now)
 
     def _faults_changed(self, now: int) -> None:
