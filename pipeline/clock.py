@@ -136,15 +136,7 @@ def prepare_realtime_thread(priority: int = REALTIME_PRIORITY) -> str:
         ``"SCHED_FIFO/<priority>"`` or ``"normal (…why…)"``.
     """
     set_timer_slack_ns(1)
-    if os.environ.get(REALTIME_ENV, "1") == "0":
-        return f"normal ({REALTIME_ENV}=0)"
-    if not hasattr(os, "sched_setscheduler"):
-        return "normal (no real-time scheduling on this platform)"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError) as exc:
-        return f"normal ({exc.strerror or exc})"
-    return f"SCHED_FIFO/{priority}"
+    return _set_fifo(priority)
 
 
 def prepare_helper_thread(priority: int = HELPER_PRIORITY) -> str:
@@ -168,6 +160,11 @@ def prepare_helper_thread(priority: int = HELPER_PRIORITY) -> str:
     str
         ``"SCHED_FIFO/<priority>"`` or ``"normal (…why…)"``.
     """
+    return _set_fifo(priority)
+
+
+def _set_fifo(priority: int) -> str:
+    """``SCHED_FIFO`` at ``priority`` for the calling thread, unless disabled or not permitted; what it got."""
     if os.environ.get(REALTIME_ENV, "1") == "0":
         return f"normal ({REALTIME_ENV}=0)"
     if not hasattr(os, "sched_setscheduler"):
