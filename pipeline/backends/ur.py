@@ -37,6 +37,7 @@ __all__ = [
     "RTDE_PORT",
     "UR3_DH",
     "UrRtdeRobot",
+    "check_rtde_frequency",
     "probe_tcp",
     "ur3_flange_pose",
     "ur3_tcp_pose",
@@ -84,6 +85,12 @@ def ur3_tcp_pose(
     p, rot = ur3_flange_pose(q_rad)
     off = mat_vec(rot, tcp_offset_m)
     return (p[0] + off[0], p[1] + off[1], p[2] + off[2]), mat_mul(rot, rotvec_to_matrix(*tcp_rotvec))
+
+
+def check_rtde_frequency(frequency_hz: float) -> None:
+    """Refuse an RTDE rate ur_rtde cannot use: -1 (the controller's own) or (0, 500] Hz (125 on a CB3)."""
+    if not (frequency_hz == -1 or (math.isfinite(frequency_hz) and 0 < frequency_hz <= 500)):
+        raise ValueError(f"frequency_hz = {frequency_hz!r}: must be -1 (automatic) or in (0, 500]")
 
 
 def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
@@ -146,8 +153,7 @@ class UrRtdeRobot:
         receive_factory: Callable[[str, float], Any] | None = None,
         port: int = RTDE_PORT,
     ) -> None:
-        if not (frequency_hz == -1 or (math.isfinite(frequency_hz) and 0 < frequency_hz <= 500)):
-            raise ValueError(f"frequency_hz = {frequency_hz!r}: must be -1 (automatic) or in (0, 500]")
+        check_rtde_frequency(frequency_hz)
         self.host = host
         self.port = port
         self.frequency_hz = float(frequency_hz)

@@ -23,12 +23,11 @@ constructor runs in a thread and is abandoned with a clear error after
 
 from __future__ import annotations
 
-import math
 import threading
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.backends.ur import RTDE_PORT, probe_tcp
+from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, probe_tcp
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError
 from pipeline.frames import Mat3, Vec3, matrix_to_rotvec
@@ -87,8 +86,7 @@ class UrRtdeServo:
         control_factory: Callable[[str, float], Any] | None = None,
         port: int = RTDE_PORT,
     ) -> None:
-        if not (frequency_hz == -1 or (math.isfinite(frequency_hz) and 0 < frequency_hz <= 500)):
-            raise ValueError(f"frequency_hz = {frequency_hz!r}: must be -1 (automatic) or in (0, 500]")
+        check_rtde_frequency(frequency_hz)
         if not 0.03 <= lookahead_s <= 0.2:
             raise ValueError(f"lookahead_s = {lookahead_s!r}: servoL allows 0.03 to 0.2 s")
         if not 100 <= gain <= 2000:
