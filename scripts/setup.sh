@@ -18,6 +18,9 @@ if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; th
 fi
 
 QT_LIBS="libglib2.0-0 libgl1 libegl1 libxkbcommon0 libfontconfig1 libdbus-1-3"
+# Qt's xcb platform plugin (a real window on an X11 desktop) needs these too since Qt 6.5 (docs/hardware.md §2.3)
+QT_LIBS="$QT_LIBS libxkbcommon-x11-0 libxcb-cursor0 libxcb-icccm4 libxcb-image0 libxcb-keysyms1 libxcb-render-util0"
+QT_LIBS="$QT_LIBS libxcb-render0 libxcb-shape0 libxcb-xkb1 libxcb-util1"
 missing=""
 if command -v dpkg-query >/dev/null 2>&1; then
     for pkg in $QT_LIBS; do

@@ -292,6 +292,12 @@ def _cmd_gui(args: argparse.Namespace) -> int:
             raise CliError(str(exc)) from None
     if args.screenshot is not None and args.rig != "sim":
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
+    if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")):
+        # without this Qt aborts the process with a core dump and a page of plugin names
+        raise CliError(
+            "no display to open the window on (DISPLAY and WAYLAND_DISPLAY are unset): run it on the lab PC's "
+            "desktop, or pass --screenshot DIR to drive it offscreen"
+        )
     # Qt is imported here only: the other subcommands never load it
     from study_app.gui.app import run_gui
 

@@ -33,3 +33,14 @@ def test_refusing_real_rig_does_not_load_qt():
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert out.stdout.strip() == "2 False False"
+
+
+def test_no_display_is_one_clear_line_not_a_qt_abort():
+    # Qt itself would abort the process (SIGABRT) listing its platform plugins
+    code = ("import sys; from study_app.cli import main; rc = main(['gui']); "
+            "print(rc, 'PySide6' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert out.stdout.strip() == "2 False"
+    assert out.stderr == ("haptic-study: error: no display to open the window on (DISPLAY and WAYLAND_DISPLAY are "
+                          "unset): run it on the lab PC's desktop, or pass --screenshot DIR to drive it offscreen\n")
