@@ -9,13 +9,13 @@ import time
 from typing import Any
 
 from protocol.config import load_protocol
-from protocol.study import run_study
+from protocol.study import default_jobs, run_study
 
 __all__ = ["run_study_bench", "format_study_bench"]
 
 
 def run_study_bench(participants: int = 10, seed: int = 0, protocol_path: str | None = None) -> dict[str, Any]:
-    """Run the study into a temporary database and measure it."""
+    """Run the study into a temporary database and measure it (participants in parallel, as ``run`` does by default)."""
     protocol = load_protocol(protocol_path)
     with tempfile.TemporaryDirectory() as tmp:
         db = os.path.join(tmp, "bench.db")
@@ -32,6 +32,7 @@ def run_study_bench(participants: int = 10, seed: int = 0, protocol_path: str | 
     ticks = progress.study_time_s * 1000.0
     return {
         "participants": participants,
+        "jobs": default_jobs(participants),
         "wall_s": round(wall, 2),
         "study_time_min": round(progress.study_time_s / 60.0, 2),
         "speed_x_real_time": round(progress.study_time_s / wall, 1),
@@ -45,7 +46,8 @@ def run_study_bench(participants: int = 10, seed: int = 0, protocol_path: str | 
 def format_study_bench(r: dict[str, Any]) -> str:
     """Human-readable summary."""
     return (
-        f"{r['participants']} simulated participants (training + experiment), virtual clock:\n"
+        f"{r['participants']} simulated participants (training + experiment), virtual clock, "
+        f"{r['jobs']} worker process{'es' if r['jobs'] != 1 else ''}:\n"
         f"  wall time             {r['wall_s']:.1f} s\n"
         f"  study time            {r['study_time_min']:.1f} min ({r['speed_x_real_time']:.0f}x real time)\n"
         f"  cost per 1 kHz tick   {r['us_per_tick']:.1f} µs (rig + pipeline + participant + runner + storage)\n"

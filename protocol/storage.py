@@ -101,16 +101,33 @@ class StudyDatabase:
         Database file; created (with the schema) if it does not exist.
     readonly
         Open for reading only (analysis); never creates or migrates.
+    busy_timeout_s
+        How long a statement waits for another connection's write lock before
+        failing with "database is locked".  Several writers share one database
+        when a study runs participants in parallel processes
+        (:func:`protocol.study.run_study` with ``jobs > 1``); each holds the
+        lock only for one short commit, but a commit that also checkpoints a
+        large WAL on a slow disk can take seconds, so writers wait up to 30 s
+        (sqlite3's default, 5 s, could turn a slow disk into a failed study).
     """
 
-    def __init__(self, path: str | os.PathLike[str], *, readonly: bool = False) -> None:
+    #: Writers' default busy timeout (see ``busy_timeout_s``).
+    WRITER_BUSY_TIMEOUT_S = 30.0
+
+    def __init__(
+        self, path: str | os.PathLike[str], *, readonly: bool = False, busy_timeout_s: float | None = None,
+    ) -> None:
         self.path = Path(path)
         self._check_path(readonly)
         try:
             if readonly:
-                self.conn = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False)
+                self.conn = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False,
+                                            timeout=5.0 if busy_timeout_s is None else busy_timeout_s)
             else:
-                self.conn = sqlite3.connect(str(self.path), check_same_thread=False, isolation_level=None)
+                self.conn = sqlite3.connect(
+                    str(self.path), check_same_thread=False, isolation_level=None,
+                    timeout=self.WRITER_BUSY_TIMEOUT_S if busy_timeout_s is None else busy_timeout_s,
+                )
         except sqlite3.Error as exc:
             raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
         try:
@@ -282,9 +299,14 @@ class StudyDatabase:
 
     # -- transactions -------------------------------------------------------------------------------
     def begin(self) -> None:
-        """Start a transaction if none is open."""
+        """Start a write transaction if none is open.
+
+        IMMEDIATE takes the write lock at once: a deferred transaction that
+        read before writing fails with SQLITE_BUSY, without waiting, if another
+        connection committed in between (parallel participants share the file).
+        """
         if not self.conn.in_transaction:
-            self.conn.execute("BEGIN")
+            self.conn.execute("BEGIN IMMEDIATE")
 
     def commit(self) -> None:
         """Commit the open transaction, if any."""
@@ -302,7 +324,7 @@ class _Tx:
 
     def __enter__(self) -> None:
         self.db.commit()
-        self.db.conn.execute("BEGIN")
+        self.db.conn.execute("BEGIN IMMEDIATE")  # see StudyDatabase.begin
 
     def __exit__(self, exc_type: object, *_: object) -> None:
         if exc_type is None:
@@ -328,13 +350,22 @@ class Recorder:
         Longest time a queued sample may stay uncommitted (wall clock).
     clock
         Wall-clock source for the commit deadline (injectable for tests).
+    short_transactions
+        Keep queued writes in memory and execute them in one short
+        transaction at each commit, instead of holding a transaction (and the
+        database's write lock) open between commits.  For several writer
+        processes on one database (parallel participants): a recorder holding
+        the lock for ~100 ms at a time would starve the others.  The commit
+        rules, and so the crash guarantees, are the same.
     """
 
     def __init__(
         self, db: StudyDatabase, *, threaded: bool = True, max_latency_s: float = 0.1,
-        clock: Callable[[], float] = time.monotonic,
+        clock: Callable[[], float] = time.monotonic, short_transactions: bool = False,
     ) -> None:
         self.db = db
+        self.short_transactions = short_transactions
+        self._held: list[tuple[str, Any]] = []
         self.max_latency_s = max_latency_s
         self._clock = clock
         self._first_pending: float | None = None
@@ -373,11 +404,19 @@ class Recorder:
 
     # writer -------------------------------------------------------------------------------------
     def _handle(self, item: tuple[str, Any]) -> None:
+        if self._first_pending is None:
+            self._first_pending = self._clock()
+        if self.short_transactions:
+            self._held.append(item)
+            if item[0] in ("trial", "call"):
+                self._commit()
+            return
+        self._apply(item)
+
+    def _apply(self, item: tuple[str, Any]) -> None:
         kind, payload = item
         db = self.db
         db.begin()
-        if self._first_pending is None:
-            self._first_pending = self._clock()
         if kind == "samples":
             db.insert_samples(payload)
         elif kind == "event":
@@ -390,6 +429,15 @@ class Recorder:
             self._commit()
 
     def _commit(self) -> None:
+        if self._held:
+            held, self._held = self._held, []
+            try:
+                for item in held:
+                    self._apply(item)  # a trial or call item commits everything before it, itself included
+            except BaseException:
+                if self.db.conn.in_transaction:
+                    self.db.conn.execute("ROLLBACK")
+                raise
         self.db.commit()
         self._first_pending = None
 

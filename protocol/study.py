@@ -13,10 +13,16 @@ reason, and re-run per the abort policy.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import dataclasses
 import json
+import multiprocessing as mp
 import os
+import queue
 import signal
+import sys
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -34,14 +40,17 @@ from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase,
 from protocol.version import software_version
 
 __all__ = [
-    "StudyProgress", "config_record", "participant_code", "participant_seeds", "prepare_resume", "resume_session", "run_study",
+    "StudyProgress", "StudyWorkerError", "config_record", "default_jobs", "participant_code", "participant_seeds", "prepare_resume", "resume_session", "run_study",
     "software_version", "training_schedule",
 ]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
 BLOCK_TICKS = 50
-#: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks.
+#: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks
+#: (in a parallel study: the study's main process, after this many ticks of one worker).
 KILL_ENV = "HAPTIC_STUDY_SIGKILL_AFTER_TICKS"
+#: Set in a parallel study's worker: the process the fault injection kills (the study's main process).
+_kill_target_pid: int | None = None
 
 
 def participant_code(number: int) -> str:
@@ -126,7 +135,9 @@ def _drive(
             progress.study_time_s += n * 1e-3
             tick_budget[0] += n
             if kill_after and tick_budget[0] >= kill_after:
-                os.kill(os.getpid(), signal.SIGKILL)
+                # in a parallel study's worker: kill the study's main process, as `kill -9` of
+                # `haptic-study run` would (the workers then die with it, by PR_SET_PDEATHSIG)
+                os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
             now = time.monotonic()
             done = runner.state.completed + runner.state.aborted
             if on_progress is not None and (now - t_last_report > 0.1 or runner.done):
@@ -169,6 +180,7 @@ def _plain(d: Any) -> Any:
 def _run_session(
     db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, study_seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
+    short_transactions: bool = False,
 ) -> int:
     rig_seed, p_seed = participant_seeds(study_seed, number)
     eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
@@ -188,7 +200,7 @@ def _run_session(
         config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
     )
     progress.sessions.append(session_id)
-    recorder = Recorder(db, threaded=(clock == "real"))
+    recorder = Recorder(db, threaded=(clock == "real"), short_transactions=short_transactions)
     runner = SessionRunner(
         protocol=run_protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=eng.loop.submit,
         participant=participant, participant_time=lambda: eng.rig.sim_time_s, seed=study_seed,
@@ -203,6 +215,19 @@ def _run_session(
     return session_id
 
 
+class StudyWorkerError(RuntimeError):
+    """A participant's worker process failed in a parallel study; the message says which and what to resume."""
+
+
+def default_jobs(participants: int) -> int:
+    """Worker processes for a study: the usable cores, at most one per participant."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, participants))
+
+
 def run_study(
     db_path: str,
     *,
@@ -211,17 +236,52 @@ def run_study(
     protocol: ProtocolConfig,
     clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None,
+    jobs: int | None = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
+
+    Parameters
+    ----------
+    db_path
+        Study database (created if missing).
+    participants
+        Simulated participants P01 … PNN; each runs a training session (if the
+        protocol has one) and then the experiment session.
+    seed
+        Study seed: schedules, rigs and participants derive from it and the
+        participant number only, so the results do not depend on ``jobs``.
+    protocol
+        The study protocol.
+    clock
+        ``"virtual"`` (as fast as the CPU allows) or ``"real"``.
+    on_progress
+        Called (in this process) with the aggregated progress, ~10 times a second.
+    jobs
+        Participants run at once, each in its own worker process (its own
+        database connection and recorder, all writing into the same WAL
+        database).  None: the usable cores, at most ``participants``; 1: one
+        after the other in this process.
+
+    Returns
+    -------
+    StudyProgress
+        The final progress; ``sessions`` lists the session ids in participant
+        order (training before experiment), whatever order they were allocated in.
 
     Raises
     ------
     StorageError
         Before anything is stored, if the database cannot be used or one of
         the participant codes already has sessions in it.
+    StudyWorkerError
+        If a participant's worker fails: the other workers are stopped (their
+        sessions stay ``running``, resumable with ``--resume CODE``).
     """
     if participants < 1:
         raise ValueError(f"participants = {participants}: must be ≥ 1")
+    if jobs is not None and jobs < 1:
+        raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
+    n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
     db = StudyDatabase(db_path)
     try:
         for n in range(1, participants + 1):
@@ -234,6 +294,10 @@ def run_study(
         progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
         progress.study_trials_total = per * participants
+        if n_jobs > 1:
+            db.close()  # the workers open their own connections; none is carried across fork
+            return _run_parallel(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                                 on_progress=on_progress, jobs=n_jobs, progress=progress)
         ticks = [0]
         for n in range(1, participants + 1):
             code = participant_code(n)
@@ -244,6 +308,153 @@ def run_study(
             _run_session(db, code=code, number=n, kind="experiment", protocol=protocol, study_seed=seed, clock=clock,
                          progress=progress, on_progress=on_progress, tick_budget=ticks)
         return progress
+    finally:
+        db.close()
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Linux: have the kernel SIGKILL this process when its parent dies, so no orphan keeps writing."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+            PR_SET_PDEATHSIG = 1
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no libc
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request took effect
+        os._exit(1)
+
+
+def _participant_worker(
+    db_path: str, number: int, seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int, messages: Any,
+) -> None:
+    """One participant (training, then experiment) in a worker process; reports through ``messages``.
+
+    Messages: ``("progress", number, kind, trials_done, trials_total, participant_trials_done, study_time_s)``,
+    ``("done", number, session ids, participant_trials_done, study_time_s)``, ``("error", number, message)``.
+    """
+    global _kill_target_pid
+    _die_with_parent(parent_pid)
+    _kill_target_pid = parent_pid
+    code = participant_code(number)
+    progress = StudyProgress(participants_total=1, participant=number, code=code)
+
+    def report(p: StudyProgress) -> None:
+        messages.put(("progress", number, p.kind, p.trials_done, p.trials_total, p.study_trials_done, p.study_time_s))
+
+    try:
+        db = StudyDatabase(db_path)
+        try:
+            ticks = [0]
+            kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
+            for kind in kinds:
+                _run_session(db, code=code, number=number, kind=kind, protocol=protocol, study_seed=seed, clock=clock,
+                             progress=progress, on_progress=report, tick_budget=ticks, short_transactions=True)
+        finally:
+            db.close()
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which stops the study
+        messages.put(("error", number, f"{type(exc).__name__}: {exc}"))
+        messages.close()
+        messages.join_thread()
+        os._exit(1)
+    messages.put(("done", number, list(progress.sessions), progress.study_trials_done, progress.study_time_s))
+    messages.close()
+    messages.join_thread()
+
+
+def _run_parallel(
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress,
+) -> StudyProgress:
+    """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
+    # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
+    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    messages = ctx.Queue()
+    waiting = list(range(1, participants + 1))
+    running: dict[int, Any] = {}
+    done_trials: dict[int, int] = {}
+    time_s: dict[int, float] = {}
+    sessions: dict[int, list[int]] = {}
+    failure: tuple[int, str] | None = None
+    t_last_report = 0.0
+
+    def handle(msg: tuple[Any, ...]) -> tuple[int, str] | None:
+        what, n = msg[0], msg[1]
+        if what == "progress":
+            _, _, kind, trials_done, trials_total, p_done, p_time = msg
+            done_trials[n], time_s[n] = p_done, p_time
+            progress.participant, progress.code, progress.kind = n, participant_code(n), kind
+            progress.trials_done, progress.trials_total = trials_done, trials_total
+        elif what == "done":
+            sessions[n], done_trials[n], time_s[n] = msg[2], msg[3], msg[4]
+            running.pop(n).join()
+        else:
+            return (n, msg[2])
+        return None
+
+    try:
+        while failure is None and (waiting or running):
+            while waiting and len(running) < jobs:
+                n = waiting.pop(0)
+                p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
+                                args=(db_path, n, seed, protocol, clock, os.getpid(), messages), daemon=True)
+                p.start()
+                running[n] = p
+            try:
+                msg = messages.get(timeout=0.1)
+            except queue.Empty:
+                msg = None
+            if msg is not None:
+                failure = handle(msg)
+            else:
+                for n, p in list(running.items()):
+                    if p.exitcode is None or n in sessions:
+                        continue
+                    # ended: read what it wrote before it ended (its last words may still be in the pipe)
+                    try:
+                        while failure is None and n not in sessions:
+                            failure = handle(messages.get(timeout=1.0))
+                    except queue.Empty:
+                        pass
+                    if failure is None and n not in sessions:  # died without a word (killed, crashed)
+                        failure = (n, f"its worker process ended with exit code {p.exitcode}")
+                    if failure is not None:
+                        break
+            progress.study_trials_done = sum(done_trials.values())
+            progress.study_time_s = sum(time_s.values())
+            now = time.monotonic()
+            if on_progress is not None and msg is not None and (now - t_last_report > 0.1 or not (waiting or running)):
+                t_last_report = now
+                on_progress(progress)
+    finally:
+        for p in running.values():
+            if p.is_alive():
+                p.kill()  # its sessions stay 'running' (resumable); committed data is intact
+        for p in running.values():
+            p.join()
+        messages.close()
+    if failure is not None:
+        n, why = failure
+        open_codes = _open_codes(db_path, participants)
+        resume = f"; resume with --resume CODE: {', '.join(open_codes)}" if open_codes else ""
+        raise StudyWorkerError(
+            f"participant {participant_code(n)} failed ({why}); the other participants were stopped, "
+            f"their committed data is kept{resume}"
+        )
+    progress.sessions = [sid for n in range(1, participants + 1) for sid in sessions[n]]
+    progress.study_trials_done = sum(done_trials.values())
+    return progress
+
+
+def _open_codes(db_path: str, participants: int) -> list[str]:
+    """Codes of this study's participants with an interrupted experiment session."""
+    try:
+        db = StudyDatabase(db_path)
+    except StorageError:
+        return []
+    try:
+        codes = {participant_code(n) for n in range(1, participants + 1)}
+        return sorted({s.code for s in db.open_sessions() if s.kind == "experiment" and s.code in codes})
     finally:
         db.close()
 

@@ -69,6 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--protocol", default=None, help="protocol file (default: the paper's study, protocol/default.toml)")
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
+    r.add_argument("--jobs", type=_nonneg_int("--jobs"), default=None,
+                   help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
     r.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
                    help="continue this participant's interrupted experiment session at its first unfinished trial")
 
@@ -219,7 +221,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from protocol.config import ProtocolError, load_protocol
     from protocol.storage import StorageError
-    from protocol.study import resume_session, run_study
+    from protocol.study import StudyWorkerError, resume_session, run_study
     from study_app.progress import ProgressBar
     from study_app.study_summary import format_study_summary
 
@@ -228,6 +230,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
             protocol = load_protocol(args.protocol)
             if args.participants < 1:
                 raise CliError(f"--participants = {args.participants}: must be ≥ 1")
+            if args.jobs is not None and args.jobs < 1:
+                raise CliError(f"--jobs = {args.jobs}: must be ≥ 1 (omit it to use the usable cores)")
         bar: ProgressBar | None = None
 
         def show(p):  # type: ignore[no-untyped-def]
@@ -245,12 +249,12 @@ def _cmd_run(args: argparse.Namespace) -> int:
         else:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
-                on_progress=show,
+                on_progress=show, jobs=args.jobs,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
             bar.close()
-    except (ProtocolError, StorageError, ValueError) as exc:
+    except (ProtocolError, StorageError, StudyWorkerError, ValueError) as exc:
         raise CliError(str(exc)) from None
     print(format_study_summary(args.db, progress.sessions, wall))
     return 0

@@ -42,7 +42,9 @@ def test_short_study_end_to_end(tmp_path: Path) -> None:
     db = tmp_path / "study.db"
     proto = short_protocol(training=True)
     progress = run_study(str(db), participants=2, seed=11, protocol=proto)
-    sessions = rows(db, "SELECT session_id, kind, status, schedule_json, participant_number FROM sessions ORDER BY session_id")
+    # participants run in parallel worker processes (the default jobs): session ids are allocated in any order
+    sessions = rows(db, "SELECT session_id, kind, status, schedule_json, participant_number FROM sessions "
+                        "ORDER BY participant_number, session_id")
     assert [(s[1], s[2]) for s in sessions] == [("training", "completed"), ("experiment", "completed")] * 2
     assert progress.sessions == [s[0] for s in sessions]
     for sid, kind, _, sched_json, number in sessions:
@@ -162,3 +164,107 @@ def test_resume_for_unknown_code(tmp_path: Path) -> None:
     StudyDatabase(db).close()
     with pytest.raises(StorageError, match="no such participant"):
         resume_session(str(db), "P07")
+
+
+def test_parallel_study_matches_sequential(tmp_path: Path) -> None:
+    """jobs=2 (one worker process per participant, one shared database) stores exactly what jobs=1 stores."""
+    proto = short_protocol(training=True)
+    proto = dataclasses.replace(proto, trial=dataclasses.replace(proto.trial, max_trial_s=4.0))  # keep it fast
+    seq, par = tmp_path / "seq.db", tmp_path / "par.db"
+    seen: list[tuple[int, int, int]] = []
+    p1 = run_study(str(seq), participants=2, seed=21, protocol=proto, jobs=1)
+    p2 = run_study(str(par), participants=2, seed=21, protocol=proto, jobs=2,
+                   on_progress=lambda p: seen.append((p.participant, p.study_trials_done, p.study_trials_total)))
+    trials = ("SELECT p.code, s.kind, t.trial_index, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, t.n_samples, "
+              "(SELECT COUNT(*) FROM samples x WHERE x.trial_id = t.trial_id) "
+              "FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
+              "ORDER BY p.code, s.kind, t.trial_index")
+    a, b = rows(seq, trials), rows(par, trials)
+    assert len(a) == 2 * (4 + 4)
+    assert a == b
+    sched = "SELECT p.code, s.kind, s.schedule_json, s.status FROM sessions s JOIN participants p USING (participant_id) ORDER BY p.code, s.kind"
+    assert rows(seq, sched) == rows(par, sched)
+    forces = "SELECT p.code, s.kind, SUM(x.force_n), SUM(x.render_fz) FROM samples x JOIN trials t USING (trial_id) " \
+             "JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) GROUP BY p.code, s.kind"
+    assert rows(seq, forces) == rows(par, forces)
+    # the summary: the same sessions, in participant order (training before experiment), whatever their ids
+    def described(db: Path, sessions: list[int]) -> list[tuple]:
+        return [rows(db, "SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
+                         "WHERE s.session_id = ?", sid)[0] for sid in sessions]
+    assert described(seq, p1.sessions) == described(par, p2.sessions) == [
+        ("P01", "training"), ("P01", "experiment"), ("P02", "training"), ("P02", "experiment")]
+    assert p2.study_trials_done == p1.study_trials_done == p2.study_trials_total == 16
+    assert p2.study_time_s == pytest.approx(p1.study_time_s, abs=1e-6)
+    # progress came from the workers, summed over them, and never went backwards
+    assert seen and seen[-1][1:] == (16, 16) and {s[0] for s in seen} == {1, 2}
+    assert [s[1] for s in seen] == sorted(s[1] for s in seen)
+
+
+def _processes_mentioning(text: str) -> list[int]:
+    out = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if text.encode() in (d / "cmdline").read_bytes():
+                    out.append(int(d.name))
+            except OSError:
+                pass
+    return out
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_PDEATHSIG is Linux's")
+def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path) -> None:
+    """kill -9 of a parallel `run`: the workers die with it, finished trials are intact, each participant resumes."""
+    db = tmp_path / "crash-par.db"
+    proto = tmp_path / "short.toml"
+    proto.write_text(
+        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
+        .replace("enabled = true", "enabled = false")
+    )
+    killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db), "--protocol", str(proto)],
+                      env={KILL_ENV: "9000"})
+    assert killed.returncode == -9
+    # the workers got SIGKILL from the kernel when the main process died (reaped by init: poll, don't sleep blindly)
+    import time
+
+    deadline = time.monotonic() + 10.0
+    while _processes_mentioning(str(db)) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _processes_mentioning(str(db)) == []
+    sessions = rows(db, "SELECT session_id, status FROM sessions WHERE kind = 'experiment' ORDER BY session_id")
+    assert len(sessions) == 2 and all(s[1] == "running" for s in sessions)
+    for sid, _ in sessions:
+        for idx, n in rows(db, "SELECT trial_index, n_samples FROM trials WHERE session_id = ?", sid):
+            assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", sid * 1_000_000 + idx)[0][0] == n
+    for code in ("P01", "P02"):
+        r = _run_cli(["run", "--db", str(db), "--resume", code])
+        assert r.returncode == 0, r.stderr
+    assert rows(db, "SELECT status FROM sessions ORDER BY session_id") == [("completed",), ("completed",)]
+    for sid, _ in sessions:
+        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? AND outcome != 'aborted'", sid)
+        assert len(done) == 4 and len(set(done)) == 4  # every cell once: nothing skipped or duplicated
+
+
+def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) -> None:
+    """An exception in the parent (here from the progress display) kills the workers; their sessions stay resumable."""
+    import multiprocessing
+
+    db = tmp_path / "stop.db"
+
+    class Stop(Exception):
+        pass
+
+    def fail_once_started(p) -> None:  # type: ignore[no-untyped-def]
+        if p.study_trials_done >= 1:
+            raise Stop
+
+    with pytest.raises(Stop):
+        run_study(str(db), participants=2, seed=4, protocol=short_protocol(), jobs=2, on_progress=fail_once_started)
+    assert multiprocessing.active_children() == []  # killed and reaped, none left writing
+    before = rows(db, "SELECT trial_id, outcome, n_samples FROM trials ORDER BY trial_id")
+    assert rows(db, "SELECT status FROM sessions") == [("running",), ("running",)]
+    for t_id, _, n in before:
+        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", t_id)[0][0] == n
+    resume_session(str(db), "P02")
+    assert sorted(rows(db, "SELECT p.code, s.status FROM sessions s JOIN participants p USING (participant_id)")) == [
+        ("P01", "running"), ("P02", "completed")]
