@@ -50,7 +50,7 @@ def format_study_bench(r: dict[str, Any]) -> str:
         f"{r['jobs']} worker process{'es' if r['jobs'] != 1 else ''}:\n"
         f"  wall time             {r['wall_s']:.1f} s\n"
         f"  study time            {r['study_time_min']:.1f} min ({r['speed_x_real_time']:.0f}x real time)\n"
-        f"  cost per 1 kHz tick   {r['us_per_tick']:.1f} µs (rig + pipeline + participant + runner + storage)\n"
+        f"  wall time per tick    {r['us_per_tick']:.1f} µs (all workers together; rig + pipeline + participant + runner + storage)\n"
         f"  stored                {r['experiment_trials']} experiment trials, {r['samples_stored']:,} samples, "
         f"{r['database_mb']:.0f} MB"
     )
