@@ -245,6 +245,35 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
         assert len(done) == 4 and len(set(done)) == 4  # every cell once: nothing skipped or duplicated
 
 
+def test_a_crashed_worker_stops_the_study_with_one_clear_error(tmp_path: Path) -> None:
+    """A worker that dies without a word (here SIGKILLed) is named; the others are stopped; data stays resumable."""
+    import multiprocessing
+    import signal
+
+    from protocol.study import StudyWorkerError
+
+    db = tmp_path / "crash.db"
+
+    def kill_p02_once_started(p) -> None:  # type: ignore[no-untyped-def]
+        if p.study_trials_done >= 1:
+            for child in multiprocessing.active_children():
+                if child.name == "study-P02" and child.is_alive():
+                    os.kill(child.pid, signal.SIGKILL)
+
+    with pytest.raises(StudyWorkerError) as err:
+        run_study(str(db), participants=2, seed=4, protocol=short_protocol(), jobs=2,
+                  on_progress=kill_p02_once_started)
+    msg = str(err.value)
+    assert msg.startswith("participant P02 failed (its worker process ended with exit code -9); "
+                          "the other participants were stopped, their committed data is kept")
+    assert multiprocessing.active_children() == []
+    for t_id, n in rows(db, "SELECT trial_id, n_samples FROM trials"):
+        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", t_id)[0][0] == n
+    resume_session(str(db), "P02")
+    assert ("P02", "completed") in rows(
+        db, "SELECT p.code, s.status FROM sessions s JOIN participants p USING (participant_id) WHERE s.kind = 'experiment'")
+
+
 def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) -> None:
     """An exception in the parent (here from the progress display) kills the workers; their sessions stay resumable."""
     import multiprocessing
