@@ -25,6 +25,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.aggregate import METRIC_LABELS
+from analysis.load import read_trial_samples
 from analysis.stats import WilcoxonResult
 from protocol.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
 
@@ -296,8 +297,6 @@ def render(builder: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: 
 
 def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any) -> Figure:
     """:func:`pipeline_trace` of a stored trial, read from its database."""
-    from analysis.load import read_trial_samples
-
     return pipeline_trace(read_trial_samples(database, session_id, trial_index), **kwargs)
 
 

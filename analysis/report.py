@@ -90,14 +90,13 @@ def _fmt(v: object, digits: int = 3) -> str:
     return html.escape(str(v))
 
 
-def _html_table(frame: pd.DataFrame, columns: Sequence[str] | None = None, *, not_computable: bool = False) -> str:
+def _html_table(frame: pd.DataFrame, columns: Sequence[str] | None = None) -> str:
     cols = list(columns) if columns else list(frame.columns)
     head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
     body = []
     for _, row in frame.iterrows():
-        cls = ' class="nc"' if not_computable and not bool(row.get("computable", True)) else ""
         cells = "".join(f"<td>{_fmt(row[c])}</td>" for c in cols)
-        body.append(f"<tr{cls}>{cells}</tr>")
+        body.append(f"<tr>{cells}</tr>")
     return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
 
 

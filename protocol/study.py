@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import EngineConfig, HardwareEngine, SimEngine, build_sim_engine
+from pipeline.hardware import HardwareConfig
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
@@ -40,7 +41,7 @@ from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase,
 from protocol.version import software_version
 
 __all__ = [
-    "StudyProgress", "StudyWorkerError", "config_record", "default_jobs", "participant_code", "participant_seeds", "prepare_resume", "resume_session", "run_study",
+    "StudyProgress", "StudyWorkerError", "config_record", "default_jobs", "participant_code", "participant_seeds", "prepare_resume", "real_config_record", "resume_session", "run_study",
     "software_version", "training_schedule",
 ]
 
@@ -165,6 +166,20 @@ def config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: i
         "participant_seed": participant_seed,
         "sim": _plain(dataclasses.asdict(eng.rig.config)),
         "framework": _plain(dataclasses.asdict(fw)),
+        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+    }
+
+
+def real_config_record(hw: HardwareConfig, hardware_text: str, eng: HardwareEngine) -> dict[str, Any]:
+    """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
+    return {
+        "rig": "real",
+        "clock": "real",
+        "participant": "person",
+        "hardware_file": hw.source,
+        "hardware_toml": hardware_text,
+        "hardware": _plain(dataclasses.asdict(hw)),
+        "framework": _plain(dataclasses.asdict(eng.framework.config)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
 

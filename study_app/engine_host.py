@@ -55,14 +55,16 @@ from protocol.design import build_schedule, schedule_to_json
 from protocol.participant import SimulatedParticipant
 from protocol.session import SessionRunner
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
-from protocol.study import config_record, participant_seeds, prepare_resume, software_version, training_schedule
+from protocol.study import (
+    config_record, participant_seeds, prepare_resume, real_config_record, software_version, training_schedule,
+)
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
 from study_app.jitter_trace import LateTickTracer
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
-    "build_real_engine", "collect_garbage", "host_main", "pose_set", "real_config_record", "rotation_angle_deg",
+    "build_real_engine", "collect_garbage", "host_main", "pose_set", "rotation_angle_deg",
 ]
 
 #: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
@@ -135,28 +137,6 @@ def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[Hardwar
     finally:
         hardware_module.open_haptic = original
     return eng, hw, text
-
-
-def real_config_record(hw: HardwareConfig, hardware_text: str, eng: HardwareEngine) -> dict[str, Any]:
-    """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
-    return {
-        "rig": "real",
-        "clock": "real",
-        "participant": "person",
-        "hardware_file": hw.source,
-        "hardware_toml": hardware_text,
-        "hardware": _plain(dataclasses.asdict(hw)),
-        "framework": _plain(dataclasses.asdict(eng.framework.config)),
-        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
-    }
-
-
-def _plain(d: Any) -> Any:
-    if isinstance(d, dict):
-        return {k: _plain(v) for k, v in d.items()}
-    if isinstance(d, (list, tuple)):
-        return [_plain(v) for v in d]
-    return d
 
 
 @dataclass
