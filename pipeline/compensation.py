@@ -20,7 +20,9 @@ sensor frame for the current nominal pose (m/s²), the model is
 
 Offline identification (:func:`identify_payload`) uses NumPy.  The real-time
 side (:meth:`PayloadCalibration.gravity_wrench`,
-:meth:`PayloadCalibration.compensate`, :class:`RlsBias`) is plain float
+:meth:`PayloadCalibration.compensate`, :class:`MountedPayload`, the same
+model evaluated at the robot's tip orientation for one sensor mount, which the
+loop uses at every pose update, and :class:`RlsBias`) is plain float
 arithmetic on tuples: it runs in the 1 kHz loop, where a NumPy call costs more
 than the whole computation.
 
@@ -59,6 +61,7 @@ __all__ = [
     "RANK_RTOL",
     "CalibrationPose",
     "DegeneratePoseSetError",
+    "MountedPayload",
     "PayloadCalibration",
     "PoseResidual",
     "RlsBias",
@@ -339,6 +342,10 @@ class PayloadCalibration:
             wrench[5] - g[5],
         )
 
+    def for_mount(self, rot_tip_sensor: Mat3) -> MountedPayload:
+        """This model evaluated from the robot's tip orientation, for a sensor mounted at ``rot_tip_sensor``."""
+        return MountedPayload(self, rot_tip_sensor)
+
     # -- storage and construction -------------------------------------------
 
     def with_bias(self, force_bias_n: Sequence[float], torque_bias_nm: Sequence[float]) -> PayloadCalibration:
@@ -433,6 +440,84 @@ class PayloadCalibration:
 
 #: Compensation that changes nothing (no calibration yet).
 NO_PAYLOAD: PayloadCalibration = PayloadCalibration.identity()
+
+
+class MountedPayload:
+    """The payload model of a calibration as a function of the tip orientation ᴮ_T R.
+
+    The same equations as :meth:`PayloadCalibration.payload_wrench` and
+    :meth:`PayloadCalibration.compensate`, factored for the loop, which
+    re-evaluates the weight at every robot update (125 Hz) and knows the
+    robot's ``rot_base_tip``, not ``rot_sensor_base``.  With
+    ``g_S = ᵀ_S Rᵀ · ᴮ_T Rᵀ · g_B``:
+
+    ``A·g_S = K · (ᴮ_T Rᵀ g_B)`` with ``K = A · ᵀ_S Rᵀ`` formed once here.
+
+    With gravity along base z (``g_B = (0, 0, g_z)``, the default)
+    ``ᴮ_T Rᵀ g_B`` is ``g_z`` times the last row of ``ᴮ_T R``, and ``g_z`` is
+    folded into ``K``: 9 products per pose instead of the 45 of composing
+    ``ᴮ_S R`` first.  The association differs, so the result agrees with
+    :meth:`PayloadCalibration.payload_wrench` to rounding, not bit for bit
+    (both are within a few ulps of ``|A|·|g|`` of the exact value).
+
+    Parameters
+    ----------
+    calibration
+        The payload model.
+    rot_tip_sensor
+        Sensor mount ᵀ_S R, row-major.
+    """
+
+    __slots__ = ("_k", "_com", "_gravity_base", "_along_z", "_bias")
+
+    def __init__(self, calibration: PayloadCalibration, rot_tip_sensor: Mat3) -> None:
+        k = mat_mul(calibration.gravity_matrix, transpose(rot_tip_sensor))
+        gx, gy, gz = calibration.gravity_base
+        self._along_z = gx == 0.0 and gy == 0.0
+        self._k: Mat3 = tuple(v * gz for v in k) if self._along_z else k  # type: ignore[assignment]
+        self._gravity_base = calibration.gravity_base
+        self._com = calibration.com_m
+        self._bias: Wrench = (*calibration.force_bias_n, *calibration.torque_bias_nm)  # type: ignore[assignment]
+
+    def payload_wrench(self, rot_base_tip: Mat3) -> Wrench:
+        """Weight of the payload as the sensor reads it at tip orientation ``rot_base_tip``, without the bias.
+
+        Returns
+        -------
+        tuple of 6 float
+            ``(A·g_S, c × A·g_S)``: force (N) and torque (N·m) in the sensor frame.
+        """
+        k0, k1, k2, k3, k4, k5, k6, k7, k8 = self._k
+        r = rot_base_tip
+        if self._along_z:
+            x, y, z = r[6], r[7], r[8]
+        else:  # ᴮ_T Rᵀ g_B in full
+            gx, gy, gz = self._gravity_base
+            x = r[0] * gx + r[3] * gy + r[6] * gz
+            y = r[1] * gx + r[4] * gy + r[7] * gz
+            z = r[2] * gx + r[5] * gy + r[8] * gz
+        fx = k0 * x + k1 * y + k2 * z
+        fy = k3 * x + k4 * y + k5 * z
+        fz = k6 * x + k7 * y + k8 * z
+        cx, cy, cz = self._com
+        return (fx, fy, fz, cy * fz - cz * fy, cz * fx - cx * fz, cx * fy - cy * fx)
+
+    def compensate(self, wrench: Sequence[float], rot_base_tip: Mat3) -> Wrench:
+        """External wrench at tip orientation ``rot_base_tip``: ``f − (A·g_S + f_b)``, ``τ − (c × A·g_S + τ_b)``.
+
+        The calibration's own bias; the loop refines it online and keeps its
+        own offsets (:class:`pipeline.framework.HapticFramework`).
+        """
+        p = self.payload_wrench(rot_base_tip)
+        b = self._bias
+        return (
+            wrench[0] - (p[0] + b[0]),
+            wrench[1] - (p[1] + b[1]),
+            wrench[2] - (p[2] + b[2]),
+            wrench[3] - (p[3] + b[3]),
+            wrench[4] - (p[4] + b[4]),
+            wrench[5] - (p[5] + b[5]),
+        )
 
 
 # ---------------------------------------------------------------------------

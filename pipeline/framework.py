@@ -28,7 +28,7 @@ from typing import Any
 
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.filters import MovingAverage3, exact_sum
-from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation, mat_mul, transpose
+from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 
@@ -120,8 +120,8 @@ class HapticFramework:
     """
 
     __slots__ = (
-        "config", "_cal", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_ft_safe",
+        "config", "_cal", "_mounted", "_bias", "_payload", "filter", "safety", "rls",
+        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_hot_head", "_hot_tail", "_ft_safe",
     )
 
     def __init__(
@@ -133,6 +133,7 @@ class HapticFramework:
     ) -> None:
         self.config = config
         self._cal = calibration
+        self._mounted = calibration.for_mount(config.rot_tip_sensor)
         self._bias: tuple[float, ...] = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         self._payload: tuple[float, ...] = (0.0,) * 6
         self.filter = MovingAverage3(config.filter_window)
@@ -147,15 +148,23 @@ class HapticFramework:
         self._rhb = config.rot_haptic_base
         self._rbt: Mat3 = IDENTITY
         self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6  # type: ignore[assignment]
+        # the parts of the per-tick tuple that no pose or bias change touches
+        # (the filter rings are cleared in place by MovingAverage3.reset, so
+        # holding them is safe)
+        g = self.safety
+        f = self.filter
+        self._hot_head: tuple[Any, ...] = (f, f.window, float(f.window), *f._buf, *self._rts)
+        self._hot_tail: tuple[Any, ...] = (*self._rhb, self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe)
         self.set_pose(IDENTITY)
 
     def set_pose(self, rot_base_tip: Mat3) -> None:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
 
-        Recomputes the payload weight the sensor reads in this pose.
+        Recomputes the payload weight the sensor reads in this pose
+        (:meth:`pipeline.compensation.MountedPayload.payload_wrench`).
         """
         self._rbt = rot_base_tip
-        self._payload = self._cal.payload_wrench(transpose(mat_mul(rot_base_tip, self._rts)))
+        self._payload = self._mounted.payload_wrench(rot_base_tip)
         self._update_offsets()
 
     def _update_offsets(self) -> None:
@@ -164,15 +173,8 @@ class HapticFramework:
         # Everything the per-tick path reads and never writes, in one tuple
         # (one attribute load and one unpack per tick instead of ~20 loads).
         # Rebuilt whenever one of its parts changes: here, which set_pose and
-        # every bias change go through.  The filter rings are cleared in place
-        # by MovingAverage3.reset, so holding them is safe.
-        g = self.safety
-        f = self.filter
-        self._hot = (
-            off[0], off[1], off[2], f, f.window, float(f.window), *f._buf,
-            *self._rts, *self._rbt, *self._rhb,
-            self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe,
-        )
+        # every bias change go through.
+        self._hot = (off[0], off[1], off[2], *self._hot_head, *self._rbt, *self._hot_tail)
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -191,6 +193,7 @@ class HapticFramework:
     def set_calibration(self, calibration: PayloadCalibration) -> None:
         """Replace the payload/bias model (takes effect at once; restarts bias refinement from it)."""
         self._cal = calibration
+        self._mounted = calibration.for_mount(self._rts)
         self._bias = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         if self.rls is not None:
             self.rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)

@@ -421,6 +421,76 @@ def test_gravity_wrench_and_compensate_match_numpy_reference(
     )
 
 
+@settings(max_examples=150, deadline=None)
+@given(
+    rv=rotvecs,
+    mount=rotvecs,
+    a=st.lists(st.floats(-2.0, 2.0), min_size=9, max_size=9),
+    com=st.tuples(*[st.floats(-0.3, 0.3)] * 3),
+    fb=st.tuples(*[st.floats(-5.0, 5.0)] * 3),
+    tb=st.tuples(*[st.floats(-0.5, 0.5)] * 3),
+    gravity=st.one_of(
+        st.just(GRAVITY_BASE),
+        st.tuples(*[st.floats(-10.0, 10.0)] * 3).filter(lambda g: math.hypot(*g) > 0.1),
+    ),
+    meas=st.tuples(*[st.floats(-50.0, 50.0)] * 6),
+)
+def test_mounted_payload_is_the_same_model_from_the_tip_orientation(
+    rv: tuple[float, float, float],
+    mount: tuple[float, float, float],
+    a: list[float],
+    com: tuple[float, float, float],
+    fb: tuple[float, float, float],
+    tb: tuple[float, float, float],
+    gravity: tuple[float, float, float],
+    meas: tuple[float, ...],
+) -> None:
+    """``for_mount(ᵀ_S R).payload_wrench(ᴮ_T R)`` equals ``payload_wrench(ᴮ_S Rᵀ)`` to rounding.
+
+    Both are evaluated against an exact (rational) reference, for gravity along
+    base z (the folded 9-product path) and for any other gravity vector; the
+    bound is a few ulps of the largest term, ``|A|·|g|·(1 + |c|)``.
+    """
+    from fractions import Fraction as Q
+
+    cal = PayloadCalibration(
+        mass_kg=1.0, com_m=com, force_bias_n=fb, torque_bias_nm=tb,
+        gravity_matrix=tuple(a),  # type: ignore[arg-type]
+        model="affine", rank=10, condition_number=1.0, residuals=(),
+        rms_force_residual_n=0.0, rms_torque_residual_nm=0.0, mount_angle_deg=0.0,
+        gravity_base=gravity,
+    )
+    rts = frames.rotvec_to_matrix(*mount)
+    rbt = frames.rotvec_to_matrix(*rv)
+    mounted = cal.for_mount(rts)
+    got = mounted.payload_wrench(rbt)
+    assert all(type(v) is float for v in got)
+
+    def mm(x: list[Q], y: list[Q]) -> list[Q]:
+        return [sum(x[3 * i + k] * y[3 * k + j] for k in range(3)) for i in range(3) for j in range(3)]
+
+    rbs = mm([Q(v) for v in rbt], [Q(v) for v in rts])
+    g_s = [sum(rbs[3 * k + i] * Q(gravity[k]) for k in range(3)) for i in range(3)]  # ᴮ_S Rᵀ g_B
+    aq = [Q(v) for v in a]
+    fg = [sum(aq[3 * i + k] * g_s[k] for k in range(3)) for i in range(3)]
+    c = [Q(v) for v in com]
+    exact = [*fg, c[1] * fg[2] - c[2] * fg[1], c[2] * fg[0] - c[0] * fg[2], c[0] * fg[1] - c[1] * fg[0]]
+    scale = max(abs(v) for v in a) * math.hypot(*gravity) * (1.0 + max(abs(v) for v in com))
+    tol = 64 * 2.0**-52 * scale
+    assert max(abs(float(Q(x) - e)) for x, e in zip(got, exact)) <= tol
+    old = cal.payload_wrench(frames.transpose(frames.mat_mul(rbt, rts)))
+    assert max(abs(float(Q(x) - e)) for x, e in zip(old, exact)) <= tol
+    bias = (*fb, *tb)
+    assert mounted.compensate(meas, rbt) == tuple(meas[i] - (got[i] + bias[i]) for i in range(6))
+
+
+def test_mounted_payload_of_no_payload_is_zero() -> None:
+    r = frames.rotvec_to_matrix(0.3, -1.1, 2.0)
+    w = (1.25, -0.5, 3.0, 0.01, -0.02, 0.003)
+    assert NO_PAYLOAD.for_mount(frames.IDENTITY).payload_wrench(r) == (0.0,) * 6
+    assert NO_PAYLOAD.for_mount(r).compensate(w, r) == w
+
+
 def test_no_payload_is_a_no_op() -> None:
     w = (1.25, -0.5, 3.0, 0.01, -0.02, 0.003)
     r = frames.rotvec_to_matrix(0.3, -1.1, 2.0)

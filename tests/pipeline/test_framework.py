@@ -32,6 +32,7 @@ class Reference:
 
     def __init__(self, cfg: FrameworkConfig, cal: PayloadCalibration, peak: float) -> None:
         self.cfg, self.cal = cfg, cal
+        self.mounted = cal.for_mount(cfg.rot_tip_sensor)
         self.ma = MovingAverage3(cfg.filter_window)
         self.safety = SafetyGovernor(cfg.safety, peak)
         self.rbt = transpose(transpose(cfg.rot_tip_sensor))  # placeholder, set by set_pose
@@ -40,8 +41,7 @@ class Reference:
         self.rbt = rbt
 
     def step(self, w: tuple[float, ...], enabled: bool, dt: float) -> tuple[float, ...]:
-        rot_sensor_base = transpose(mat_mul(self.rbt, self.cfg.rot_tip_sensor))
-        comp = self.cal.compensate(w, rot_sensor_base)
+        comp = self.mounted.compensate(w, self.rbt)
         m = self.ma.update(comp[0], comp[1], comp[2])
         tip = mat_vec(self.cfg.rot_tip_sensor, m)
         base = mat_vec(self.rbt, tip)
@@ -95,7 +95,7 @@ def test_fused_step_equals_composed_stages(window, samples, rv, mount, peak, res
             ref.ma.reset()
             ref.safety.force_zero()
         got = fw.step(w[0], w[1], w[2], enabled, dt)
-        assert fw.compensated_torque(*w[3:]) == tuple(ref.cal.compensate(w, transpose(mat_mul(rbt, cfg.rot_tip_sensor)))[3:]) or any(
+        assert fw.compensated_torque(*w[3:]) == tuple(ref.mounted.compensate(w, rbt)[3:]) or any(
             math.isnan(v) for v in w[3:]
         )
         want = ref.step(w, enabled, dt)
