@@ -463,12 +463,29 @@ class HapticLoop:
             deadline += period
             clock.sleep_until(deadline)
 
-    def run(self, stop: threading.Event | None = None, max_ticks: int | None = None) -> None:
+    def run(
+        self,
+        stop: threading.Event | None = None,
+        max_ticks: int | None = None,
+        between_ticks: Callable[[], object] | None = None,
+    ) -> None:
         """Tick at the loop rate until ``stop`` is set (or ``max_ticks`` ticks), then ramp down.
 
         Deadlines are absolute (``t0 + k·period``), so lateness never
         accumulates; after a stall longer than one period the missed slots
         are counted and skipped rather than replayed in a burst.
+
+        Parameters
+        ----------
+        stop
+            Set to stop (default: the loop's own, see :meth:`stop`).
+        max_ticks
+            Stop after this many ticks.
+        between_ticks
+            Called right after each tick, when the rest of the period is
+            free: housekeeping that must not land mid-tick, such as
+            :func:`pipeline.clock.collect_garbage`.  Must be short (well under
+            a period); its exceptions propagate.
         """
         stop = stop or self._stop
         clock = self.clock
@@ -479,6 +496,8 @@ class HapticLoop:
             while not stop.is_set() and (max_ticks is None or n < max_ticks):
                 self.tick()
                 n += 1
+                if between_ticks is not None:
+                    between_ticks()
                 deadline += period
                 behind = clock.now_ns() - deadline
                 if behind > period:

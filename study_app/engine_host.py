@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.clock import MonotonicClock, VirtualClock, prepare_helper_thread
+from pipeline.clock import MonotonicClock, VirtualClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
 from pipeline.compensation import (
     CalibrationPose, DegeneratePoseSetError, PayloadCalibration, identify_payload, recommended_pose_set,
 )
@@ -45,6 +45,7 @@ from pipeline.devices import DeviceError
 from pipeline.engine import EngineConfig, HardwareEngine, SimEngine, build_hardware_engine, build_sim_engine
 from pipeline.frames import Mat3, axis_angle, mat_mul
 from pipeline.hardware import HardwareConfig, HardwareError, load_hardware
+from pipeline.jitter_trace import LateTickTracer
 from pipeline.loop import ControllerDetached, LoopEvent, SetCalibration
 from pipeline.loop import OperatorStop as LoopOperatorStop
 from pipeline.loop import ResetFaults as LoopResetFaults
@@ -60,11 +61,10 @@ from protocol.study import (
 )
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
-from study_app.jitter_trace import LateTickTracer
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
-    "build_real_engine", "collect_garbage", "host_main", "pose_set", "rotation_angle_deg",
+    "build_real_engine", "host_main", "pose_set", "rotation_angle_deg",
 ]
 
 #: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
@@ -195,7 +195,7 @@ class HostConfig:
     health_period_s
         Wall time between :class:`study_app.messages.Health` events.
     trace_jitter
-        Real clock only: explain every loop period over 1.5 ms (:mod:`study_app.jitter_trace`),
+        Real clock only: explain every loop period over 1.5 ms (:mod:`pipeline.jitter_trace`),
         reported in :attr:`study_app.messages.Health.late_periods` (diagnosis and benchmarks).
     """
 
@@ -914,23 +914,6 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
 
 
 # -- the process --------------------------------------------------------------------------------
-def collect_garbage() -> int | None:
-    """Run the collector pass the interpreter would have started by itself by now, if any; return its generation.
-
-    The engine process disables automatic collection (see :func:`host_main`)
-    and calls this from the driver thread right after a loop tick.  Same
-    thresholds as the automatic collector (:func:`gc.get_threshold`), without
-    its heuristic of postponing full passes.
-    """
-    t0, t1, t2 = gc.get_threshold()
-    c0, c1, c2 = gc.get_count()
-    if c0 < t0:
-        return None
-    gen = 2 if (c1 >= t1 and c2 >= t2) else 1 if c1 >= t1 else 0
-    gc.collect(gen)
-    return gen
-
-
 class _Detached:
     """Internal marker: the command pipe broke."""
 
@@ -967,14 +950,8 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     threading.Thread(target=receive, name="engine-commands", daemon=True).start()
     real = config.clock == "real"
     if real:
-        # What exists now lives as long as the engine: keep it out of every garbage-collector pass
-        # (a full pass over it holds the GIL for ~10 ms, the loop thread included).
-        gc.collect()
-        gc.freeze()
-        # ... and let the collector run only here, in the driver's quiet window after a tick: a pass holds
-        # the GIL throughout, and automatic passes would otherwise start in whatever thread allocates --
-        # often the loop thread itself, mid-tick
-        gc.disable()
+        # freeze what exists now and let the collector run only in the driver's quiet window after a tick
+        manual_garbage_collection()
     engine.start()
     detached = False
     # real clock: the driver's regular work runs every ~10 ms just after a loop tick (StudyEngine.quiet_wait_s);

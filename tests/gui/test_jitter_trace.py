@@ -10,9 +10,10 @@ import time
 
 import pytest
 
+from pipeline.clock import collect_garbage
+from pipeline.jitter_trace import LateTickTracer, _Task
 from study_app import messages as m
-from study_app.engine_host import QUIET_OFFSET_NS, HostConfig, StudyEngine, collect_garbage
-from study_app.jitter_trace import LateTickTracer, _Task
+from study_app.engine_host import QUIET_OFFSET_NS, HostConfig, StudyEngine
 
 
 @pytest.fixture

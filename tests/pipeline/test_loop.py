@@ -182,6 +182,31 @@ def test_run_stops_on_the_stop_event():
     assert loop.faults == Fault.OPERATOR_STOP
 
 
+def test_between_ticks_runs_after_every_tick_before_the_sleep_and_not_during_the_ramp_down():
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="scripted", calibrate=False))
+    loop, clock = eng.loop, eng.clock
+    seen: list[tuple[int, int]] = []
+    loop.run(max_ticks=50, between_ticks=lambda: seen.append((loop.tick_count, clock.now_ns())))
+    t0 = seen[0][1]
+    # after tick k (count k), still at that tick's time: the rest of the period is the hook's
+    assert seen == [(k + 1, t0 + k * PERIOD_NS) for k in range(50)]
+    assert loop.tick_count > 50  # the ramp-down ticks ran without it
+
+
+def test_a_failing_between_ticks_hook_still_ramps_the_force_down():
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="scripted", calibrate=False))
+    loop = eng.loop
+
+    def boom() -> None:
+        if loop.tick_count == 600:
+            raise RuntimeError("housekeeping failed")
+
+    with pytest.raises(RuntimeError, match="housekeeping failed"):
+        loop.run(max_ticks=1000, between_ticks=boom)
+    assert loop.framework.safety.gain == 0.0
+    assert eng.rig.haptic._cmd == (0.0, 0.0, 0.0)
+
+
 def test_a_stall_counts_missed_slots_and_keeps_the_deadline_grid():
     eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", calibrate=False, haptics_on=False))
     loop, clock = eng.loop, eng.clock
