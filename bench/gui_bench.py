@@ -13,7 +13,7 @@ One run, real clock, the loop in its study-engine process as the app runs it:
 Loop timing is the engine's own: the ``period_s`` of every loop record,
 |period − 1 ms| quantiles and the share of periods over 2 ms.  With
 ``explain=True`` (``--explain``) the engine also names the cause of every tick
-starting over 100 µs late (:mod:`study_app.jitter_trace`: another thread of the
+starting over 100 µs late (:mod:`pipeline.jitter_trace`: another thread of the
 engine holding the GIL, a garbage-collector pass, the loop's own work, or the
 machine -- nothing in the process); the tracing costs the loop ~25 µs per tick,
 so it is off by default.  The share of CPU time the hypervisor stole during
@@ -32,6 +32,7 @@ import tempfile
 import time
 from typing import Any
 
+from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
 from study_app import messages as m
 from study_app.engine_client import EngineClient
 from study_app.engine_host import HostConfig
@@ -43,22 +44,6 @@ _STALL_TIMER_MS = 5
 _STALL_THRESHOLD_MS = 30.0
 
 
-def _cpu_times() -> list[int] | None:
-    """The machine's aggregate CPU times (``/proc/stat``), or None off Linux."""
-    try:
-        with open("/proc/stat", encoding="ascii") as fh:
-            return [int(x) for x in fh.readline().split()[1:9]]
-    except (OSError, ValueError):
-        return None
-
-
-def _steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
-    if before is None or after is None:
-        return None
-    total = sum(after) - sum(before)
-    return round(100.0 * (after[7] - before[7]) / total, 1) if total > 0 else None
-
-
 def _loop_figures(h: m.Health, cpu_before: list[int] | None = None) -> dict[str, Any]:
     out: dict[str, Any] = {
         "ticks": h.ticks,
@@ -67,8 +52,8 @@ def _loop_figures(h: m.Health, cpu_before: list[int] | None = None) -> dict[str,
         "period_max_us": h.period_max_us,
         "periods_over_2ms": h.periods_over_2ms,
         "fraction_over_2ms": h.periods_over_2ms / h.ticks if h.ticks else float("nan"),
-        "steal_percent": _steal_percent(cpu_before, _cpu_times()),
-        "load_average": [round(x, 2) for x in os.getloadavg()],
+        "steal_percent": steal_percent(cpu_before, cpu_times()),
+        "load_average": load_average(),
     }
     if h.late_periods is not None:
         out["late_ticks"] = h.late_periods
@@ -85,7 +70,7 @@ def _measure_without_gui(seconds: float, explain: bool) -> dict[str, Any]:
                 raise RuntimeError("the study engine did not start")
         client.send(m.ResetStats())
         time.sleep(0.05)
-        cpu0 = _cpu_times()
+        cpu0 = cpu_times()
         t_end = time.monotonic() + seconds
         last: m.Health | None = None
         while time.monotonic() < t_end or last is None:
@@ -147,7 +132,7 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
         win.start_button.click()
         run_until(lambda: win.model.session.trial is not None, 30.0)
         win.bridge.send(m.ResetStats())
-        cpu0 = _cpu_times()
+        cpu0 = cpu_times()
         t_end = time.monotonic() + seconds
         run_until(lambda: time.monotonic() >= t_end, seconds + 30.0)
         n = len(health)
@@ -172,7 +157,7 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
             {"phase": st.phase, "ms": st.gap_ms, "callback": st.culprit}
             for st in sorted(detector.recorder.stalls, key=lambda st: -st.gap_ms)[:8]
         ],
-        "load_average": [round(x, 2) for x in os.getloadavg()],
+        "load_average": load_average(),
         "startup_s": {"window_usable": round(t_usable, 2), "engine_ready": round(t_ready, 2)},
         "trials_during_measurement": trials,
         "qt_platform": app.platformName(),
@@ -190,11 +175,7 @@ def format_gui_bench(r: dict[str, Any]) -> str:
                 f"max period {d['period_max_us'] / 1000:.1f} ms{load}{steal}")
         late = d.get("late_ticks")
         if late:
-            causes = ", ".join(f"{k} {v}" for k, v in late["causes"].items()) or "none"
-            text += (f"\n      ticks > {late['late_threshold_us']:.0f} µs late: {late['late_ticks']} ({causes}); "
-                     f"periods > 2 ms by cause: "
-                     + (", ".join(f"{k} {v}" for k, v in late["causes_over_2ms"].items()) or "none"))
-            text += "".join(f"\n        {n} × {where}" for where, n in list(late["culprits"].items())[:3])
+            text += "\n" + format_late_ticks(late)
         return text
 
     s = r["gui_stall_ms"]

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
 from pipeline.clock import VirtualClock
 from pipeline.engine import EngineConfig, EngineProcess, build_sim_engine
 from pipeline.filters import MovingAverage3
@@ -41,14 +42,20 @@ def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
     loop = eng.loop
     raws: list[tuple[float, ...]] = []
     rots: list[tuple[float, ...]] = []
+    pose_t_ns: list[int] = []
     true_f: list[float] = []
     for _ in range(n):
         loop.run_ticks(1)
         w = eng.rig.sensor.read_wrench()
         raws.append(tuple(w[1:7]))
-        rots.append(eng.rig.robot.read_pose().rot_base_tip)
+        pose = eng.rig.robot.read_pose()
+        rots.append(pose.rot_base_tip)
+        pose_t_ns.append(pose.t_ns)
         true_f.append(eng.rig.true_contact_force()[2])
-    return {"raw": raws, "rot": rots, "true_force_n": true_f, "calibration": eng.calibration, "engine": eng}
+    return {
+        "raw": raws, "rot": rots, "pose_t_ns": pose_t_ns, "true_force_n": true_f,
+        "calibration": eng.calibration, "engine": eng,
+    }
 
 
 def _sim_cfg(seed: int) -> Any:
@@ -100,15 +107,15 @@ def naive_numpy_pipeline(cal: Any, cfg: FrameworkConfig) -> Callable[[tuple[floa
 
 
 def _time_batches(fn: Callable[[int, int], None], n: int, batch: int) -> list[float]:
-    """Per-call µs for consecutive batches of ``batch`` calls.
+    """Per-call µs for consecutive batches of ``batch`` calls, after one untimed warm-up batch.
 
     The cyclic garbage collector is paused while a batch runs, as :mod:`timeit`
-    does: the benchmark keeps every output to compare them, and collecting
-    those thousands of kept tuples is a cost of the benchmark, not of a tick
-    (the loop writes each record into the ring and keeps nothing).
+    does and as the engine process runs its loop (automatic collection off,
+    collections in the quiet part of a tick).
     """
     out = []
     enabled = gc.isenabled()
+    fn(0, batch)  # warm-up: caches, specialised bytecode, the allocator's free lists
     try:
         for start in range(0, n - batch + 1, batch):
             gc.disable()
@@ -125,63 +132,80 @@ def _time_batches(fn: Callable[[int, int], None], n: int, batch: int) -> list[fl
 
 
 def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int = 1000) -> dict[str, Any]:
-    """Median per-tick cost of ours vs the NumPy transcription on the same samples, and their agreement."""
-    raws, rots = data["raw"], data["rot"]
+    """Median per-tick cost of ours vs the NumPy transcription on the same samples, and their agreement.
+
+    Ours is driven as :class:`pipeline.loop.HapticLoop` drives it: ``set_pose``
+    whenever the robot reports a new pose (its timestamp changes, 125 Hz on a
+    CB3, every 8th tick), ``step`` on every sample.  Each timed run keeps only
+    the latest output, as the loop does (it writes each record into the ring
+    and keeps nothing); keeping 20 000 records would time the memory they
+    take.  Every run is preceded by one untimed warm-up batch, and the outputs
+    are compared with the transcription's in a separate, untimed pass.
+    """
+    raws, rots, pose_t = data["raw"], data["rot"], data["pose_t_ns"]
     n = len(raws)
     cal = data["calibration"]
 
-    def make_ours(pose_every_tick: bool) -> tuple[HapticFramework, Callable[[int, int], None], list[tuple[float, ...]]]:
+    def make_ours(pose_every_tick: bool) -> Callable[[int, int], None]:
         fw = HapticFramework(cfg, cal)
-        outs: list[tuple[float, ...]] = []
         step = fw.step
         set_pose = fw.set_pose
-        rec = outs.append
 
         def run(a: int, b: int) -> None:
-            last = None
+            last_t = -1
             for i in range(a, b):
-                r = rots[i]
-                if pose_every_tick or r is not last:
-                    set_pose(r)
-                    last = r
+                t = pose_t[i]
+                if pose_every_tick or t != last_t:
+                    set_pose(rots[i])
+                    last_t = t
                 w = raws[i]
-                rec(step(w[0], w[1], w[2], True, 0.001))
+                out = step(w[0], w[1], w[2], True, 0.001)
+            del out
 
-        return fw, run, outs
+        return run
 
-    _, ours_run, ours_out = make_ours(False)
-    ours = _time_batches(ours_run, n, batch)
-    _, every_run, _ = make_ours(True)
-    every = _time_batches(every_run, n, batch)
+    ours = _time_batches(make_ours(False), n, batch)
+    every = _time_batches(make_ours(True), n, batch)
 
     naive_step = naive_numpy_pipeline(cal, cfg)
-    naive_out: list[np.ndarray] = []
 
     def naive_run(a: int, b: int) -> None:
         for i in range(a, b):
-            naive_out.append(naive_step(raws[i], rots[i]))
+            out = naive_step(raws[i], rots[i])
+        del out
 
     m = min(n, 20 * batch)  # the slow one on a subset is enough for a median
     naive = _time_batches(naive_run, m, batch)
 
-    # The timing harness itself (indexing the recorded samples, unpacking,
-    # appending a result) is measured alone and subtracted from both.
-    sink: list[object] = []
-
+    # The timing harness itself (indexing the recorded samples, the pose
+    # timestamp test, unpacking the sample) is measured alone and subtracted
+    # from both.
     def harness_run(a: int, b: int) -> None:
-        last = None
-        put = sink.append
+        last_t = -1
         for i in range(a, b):
-            r = rots[i]
-            if r is not last:
-                last = r
+            t = pose_t[i]
+            if t != last_t:
+                last_t = t
             w = raws[i]
-            put((w[0], w[1], w[2], True, 0.001))
+            out = (w[0], w[1], w[2], True, 0.001)
+        del out
 
     harness = statistics.median(_time_batches(harness_run, n, batch))
-    diff = max(
-        abs(ours_out[i][18 + k] - float(naive_out[i][k])) for i in range(len(naive_out)) for k in range(3)
-    )
+
+    # agreement, untimed, on fresh state: the rendered force of every tick
+    fw = HapticFramework(cfg, cal)
+    check = naive_numpy_pipeline(cal, cfg)
+    diff = 0.0
+    last_t = -1
+    for i in range(m):
+        if pose_t[i] != last_t:
+            fw.set_pose(rots[i])
+            last_t = pose_t[i]
+        w = raws[i]
+        got = fw.step(w[0], w[1], w[2], True, 0.001)
+        want = check(raws[i], rots[i])
+        diff = max(diff, *(abs(got[18 + k] - float(want[k])) for k in range(3)))
+    pose_updates = sum(1 for i in range(1, n) if pose_t[i] != pose_t[i - 1])
     ours_med = statistics.median(ours) - harness
     naive_med = statistics.median(naive) - harness
     return {
@@ -192,6 +216,7 @@ def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int
         "speedup": round(naive_med / ours_med, 1),
         "ours_vs_naive_max_abs_diff_n": diff,
         "ticks_timed": n,
+        "pose_updates_per_tick": round(pose_updates / max(1, n - 1), 4),
     }
 
 
@@ -252,21 +277,42 @@ def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5
     return rows
 
 
-def measure_loop(seconds: float) -> dict[str, Any]:
-    """Run the real 1 kHz loop in its engine process for ``seconds`` and return its period statistics."""
-    proc = EngineProcess(EngineConfig(clock="real", driver="scripted"), max_ticks=int(seconds * 1000))
+def measure_loop(seconds: float, explain: bool = False) -> dict[str, Any]:
+    """Run the real 1 kHz loop in its engine process for ``seconds`` and return its period statistics.
+
+    With ``explain`` the engine traces every late tick's cause
+    (:class:`pipeline.jitter_trace.LateTickTracer`, ~30 µs per tick, which
+    shows in the p99).  The
+    share of CPU time the hypervisor stole and the load average are reported
+    either way.
+    """
+    proc = EngineProcess(
+        EngineConfig(clock="real", driver="scripted", trace_jitter=explain), max_ticks=int(seconds * 1000)
+    )
     proc.start()
+    cpu0 = cpu_times()
     try:
         proc.wait(timeout_s=seconds * 3 + 30)
     finally:
         proc.stop()
     if proc.final_stats is None:
         raise RuntimeError("the engine did not report loop statistics")
-    return {**proc.final_stats, "scheduling": proc.scheduling}
+    out = {
+        **proc.final_stats, "scheduling": proc.scheduling,
+        "steal_percent": steal_percent(cpu0, cpu_times()), "load_average": load_average(),
+    }
+    if proc.late_periods is not None:
+        out["late_ticks"] = proc.late_periods
+    return out
 
 
-def run_pipeline_bench(loop_seconds: float = 30.0, ticks: int = 20_000, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
-    """All three measurements; returns the JSON-ready result."""
+def run_pipeline_bench(
+    loop_seconds: float = 30.0,
+    ticks: int = 20_000,
+    progress: Callable[[str], None] | None = None,
+    explain: bool = False,
+) -> dict[str, Any]:
+    """All three measurements; returns the JSON-ready result (``explain``: see :func:`measure_loop`)."""
     say = progress or (lambda s: None)
     say("recording samples from the simulated rig")
     data = record_samples(ticks)
@@ -275,7 +321,7 @@ def run_pipeline_bench(loop_seconds: float = 30.0, ticks: int = 20_000, progress
     say("filter trade table")
     trade = filter_trade_table(data)
     say(f"running the 1 kHz loop for {loop_seconds:g} s in its engine process")
-    stats = measure_loop(loop_seconds) if loop_seconds > 0 else {}
+    stats = measure_loop(loop_seconds, explain) if loop_seconds > 0 else {}
     result: dict[str, Any] = dict(cost)
     result.update(
         {
@@ -288,12 +334,28 @@ def run_pipeline_bench(loop_seconds: float = 30.0, ticks: int = 20_000, progress
             "loop_missed_slots": stats.get("missed_slots", math.nan),
             "loop_ticks": stats.get("ticks", math.nan),
             "loop_scheduling": stats.get("scheduling", ""),
+            "loop_steal_percent": stats.get("steal_percent"),
+            "loop_load_average": stats.get("load_average"),
+            "loop_late_ticks": stats.get("late_ticks"),
             "filter_trade": trade,
             "python": sys.version.split()[0],
             "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
         }
     )
     return result
+
+
+def _machine_lines(r: dict[str, Any]) -> list[str]:
+    lines = []
+    if r.get("loop_load_average") is not None:
+        steal = r.get("loop_steal_percent")
+        lines.append(
+            f"  machine                   load {r['loop_load_average'][0]:.2f}"
+            + ("" if steal is None else f", CPU stolen by the hypervisor {steal:.1f} %")
+        )
+    if r.get("loop_late_ticks"):
+        lines.append(format_late_ticks(r["loop_late_ticks"], indent="  "))
+    return lines
 
 
 def format_pipeline_bench(r: dict[str, Any]) -> str:
@@ -309,6 +371,7 @@ def format_pipeline_bench(r: dict[str, Any]) -> str:
         f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
         f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
         f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",
+        *_machine_lines(r),
         "",
         "Moving-average window: speed against accuracy",
         "  window  noise RMS (N)  group delay (ms)  2% settling (ms)",

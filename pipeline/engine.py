@@ -21,9 +21,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.clock import Clock, MonotonicClock, VirtualClock, prepare_realtime_thread
+from pipeline.clock import (
+    Clock, MonotonicClock, VirtualClock, collect_garbage, manual_garbage_collection, prepare_realtime_thread,
+)
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.framework import FrameworkConfig, HapticFramework
+from pipeline.jitter_trace import LateTickTracer
 from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
 from pipeline.ring import RingBuffer
 from pipeline.sim.hand import ScriptedPresses
@@ -76,6 +79,11 @@ class EngineConfig:
         ``framework``, ``calibrate`` and ``driver`` are then unused (the file
         holds the framework parameters and the calibration), and feedback
         starts off whatever ``haptics_on`` says -- the experimenter turns it on.
+    trace_jitter
+        Real clock only: explain every late loop period
+        (:class:`pipeline.jitter_trace.LateTickTracer`, ~30 µs per tick);
+        the explanation comes with the final statistics
+        (:attr:`EngineProcess.late_periods`).
     """
 
     sim: SimRigConfig = field(default_factory=SimRigConfig)
@@ -88,6 +96,7 @@ class EngineConfig:
     refine_bias: bool = True
     ring_seconds: float = 30.0
     hardware_file: str | None = None
+    trace_jitter: bool = False
 
     def __post_init__(self) -> None:
         if self.clock not in ("real", "virtual"):
@@ -244,12 +253,27 @@ def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | 
 
     threading.Thread(target=_receive, name="engine-commands", daemon=True).start()
     assert eng.ring is not None
-    scheduling = prepare_realtime_thread() if config.clock == "real" else "virtual clock"
+    real = config.clock == "real"
+    scheduling = prepare_realtime_thread() if real else "virtual clock"
+    tracer = None
+    if real and config.trace_jitter:
+        tracer = LateTickTracer(MonotonicClock())
+        loop.clock = tracer
     events.put(("ready", eng.ring.name, eng.calibration.to_dict(), scheduling))
+    if tracer is not None:
+        tracer.refresh()  # the threads: this one (the loop), the command receiver, the event queue's feeder
+    if real:
+        # a full collector pass over this process holds the GIL for 6–10 ms: freeze what exists, and let
+        # the collector run only right after a tick, never started mid-tick by an allocation
+        manual_garbage_collection()
     try:
-        loop.run(stop, max_ticks=max_ticks)
+        loop.run(stop, max_ticks=max_ticks, between_ticks=collect_garbage if real else None)
     finally:
-        events.put(("stopped", loop.stats.summary(), loop.tick_count, int(loop.faults)))
+        late = None
+        if tracer is not None:
+            late = tracer.summary()
+            tracer.close()
+        events.put(("stopped", loop.stats.summary(), loop.tick_count, int(loop.faults), late))
         try:
             eng.rig.close()
         except Exception as exc:  # noqa: BLE001 - a device failing to close must not keep the ring alive
@@ -285,6 +309,8 @@ class EngineProcess:
         self.scheduling = ""
         self.final_ticks: int | None = None
         self.final_faults: int | None = None
+        #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), with ``trace_jitter``.
+        self.late_periods: dict[str, Any] | None = None
         self.loop_events: list[LoopEvent] = []
         #: The device the engine was opening last (hardware engines), for the start-up error.
         self.opening: str | None = None
@@ -352,7 +378,7 @@ class EngineProcess:
         if msg[0] == "loop_event":
             self.loop_events.append(LoopEvent(*msg[1]))
         elif msg[0] == "stopped":
-            self.final_stats, self.final_ticks, self.final_faults = msg[1], msg[2], msg[3]
+            self.final_stats, self.final_ticks, self.final_faults, self.late_periods = msg[1], msg[2], msg[3], msg[4]
 
     def wait(self, timeout_s: float | None = None) -> None:
         """Wait for the engine to exit by itself (after ``max_ticks``)."""

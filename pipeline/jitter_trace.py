@@ -1,7 +1,8 @@
-"""Why was a loop tick late?  A tracing clock for the study-engine process (debug and benchmarks only).
+"""Why was a loop tick late?  A tracing clock for an engine process (debug and benchmarks only).
 
 The 1 kHz loop shares its process -- and the GIL -- with the engine's other
-threads (driver / session runner, recorder, command receiver, event feeder).
+threads (the command receiver; in the study engine also the driver / session
+runner, recorder and event feeder).
 :class:`LateTickTracer` wraps the loop's :class:`pipeline.clock.MonotonicClock`
 (the loop's only contact with time, so :mod:`pipeline.loop` is untouched) and,
 at the start of every tick, snapshots from the loop thread:

@@ -32,6 +32,16 @@ def _positive_float(name: str):  # type: ignore[no-untyped-def]
     return parse
 
 
+def _loop_seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--loop-seconds = {text!r}: expected a number") from None
+    if not 0 <= v <= 3600:
+        raise argparse.ArgumentTypeError(f"--loop-seconds = {text!r}: must be from 0 (skip the loop) to 3600")
+    return v
+
+
 def _nonneg_int(name: str):  # type: ignore[no-untyped-def]
     def parse(text: str) -> int:
         try:
@@ -83,7 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
     bsub.required = True
     bp = bsub.add_parser("pipeline", help="per-tick cost vs NumPy, 1 kHz loop timing, filter trade table")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
-    bp.add_argument("--loop-seconds", type=float, default=30.0, help="real time to run the loop (default 30; 0 skips)")
+    bp.add_argument("--loop-seconds", type=_loop_seconds, default=30.0,
+                    help="real time to run the loop (default 30; 0 skips)")
+    bp.add_argument("--explain", action="store_true",
+                    help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
     bp.add_argument("--ticks", type=_nonneg_int("--ticks"), default=20_000, help="samples for the cost benchmark")
     bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
     bs.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="participants (default 10)")
@@ -322,7 +335,9 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
     def say(msg: str) -> None:
         print(f"bench: {msg} ...", file=sys.stderr, flush=True)
 
-    result = run_pipeline_bench(loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say)
+    result = run_pipeline_bench(
+        loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say, explain=args.explain
+    )
     if args.json:
         print(json.dumps(result))
     else:

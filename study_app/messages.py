@@ -304,7 +304,7 @@ class Health:
     paused: bool
     abs_dev_p50_us: float = float("nan")
     period_max_us: float = float("nan")
-    #: Late periods explained by cause (:meth:`study_app.jitter_trace.LateTickTracer.summary`), when tracing.
+    #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), when tracing.
     late_periods: dict[str, Any] | None = None
 
 

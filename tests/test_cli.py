@@ -38,6 +38,8 @@ def test_sim_text_summary_and_progress(capsys: pytest.CaptureFixture[str]) -> No
         (["sim", "--seed", "-3"], "--seed = '-3': must be ≥ 0"),
         (["sim", "--clock", "wall"], "invalid choice: 'wall'"),
         (["bench", "nothing"], "invalid choice: 'nothing'"),
+        (["bench", "pipeline", "--loop-seconds", "-1"], "--loop-seconds = '-1': must be from 0 (skip the loop) to 3600"),
+        (["bench", "pipeline", "--loop-seconds", "nan"], "--loop-seconds = 'nan': must be from 0 (skip the loop) to 3600"),
     ],
 )
 def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:

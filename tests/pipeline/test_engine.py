@@ -136,3 +136,30 @@ def test_engine_detached_latches_ramps_down_and_exits_by_itself(engines, haptics
     if haptics_on:  # the ramp-down ticks record the latched fault
         assert int(last["faults"]) & Fault.ENGINE_DETACHED
         assert last["haptic_on"] == 0.0
+
+
+def test_real_clock_engine_explains_late_ticks_when_asked(engines):
+    """The one real-clock engine test: 100 ticks (0.1 s) paced on the monotonic clock with the tracer on.
+
+    Timing itself is not asserted (that is ``haptic-study bench pipeline``);
+    the run must report its periods and the tracer's accounting of them.
+    """
+    proc = engines(EngineConfig(clock="real", driver="hold", trace_jitter=True), max_ticks=100)
+    proc.start(timeout_s=START_TIMEOUT_S)
+    proc.wait(timeout_s=EXIT_TIMEOUT_S)
+    assert proc.final_stats is not None and proc.final_ticks is not None
+    assert proc.final_stats["ticks"] == proc.final_ticks - 1
+    late = proc.late_periods
+    assert late is not None
+    assert set(late) >= {"late_threshold_us", "ticks", "late_ticks", "causes", "over_2ms", "causes_over_2ms"}
+    assert late["late_threshold_us"] == 100.0
+    assert late["over_2ms"] <= proc.final_stats["periods_over_2ms"]
+    assert sum(late["causes"].values()) == late["late_ticks"]
+
+
+def test_engine_without_tracing_reports_no_explanation(engines):
+    proc = engines(EngineConfig(clock="virtual", trace_jitter=True), max_ticks=10)
+    proc.start(timeout_s=START_TIMEOUT_S)
+    proc.wait(timeout_s=EXIT_TIMEOUT_S)
+    assert proc.final_stats is not None
+    assert proc.late_periods is None  # the tracer explains real-clock runs only

@@ -1,0 +1,46 @@
+"""What the machine did during a timing benchmark: CPU stolen by the hypervisor, load, late-tick causes.
+
+Shared by the loop-timing benchmarks (``bench pipeline``, ``bench gui``): a
+loop's period statistics mean little without knowing whether the machine was
+quiet, and on a shared virtual machine the hypervisor takes the CPU away in
+bursts that no process can cause or cure.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+__all__ = ["cpu_times", "format_late_ticks", "load_average", "steal_percent"]
+
+
+def cpu_times() -> list[int] | None:
+    """The machine's aggregate CPU times (first line of ``/proc/stat``: user … steal), or None off Linux."""
+    try:
+        with open("/proc/stat", encoding="ascii") as fh:
+            return [int(x) for x in fh.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
+def steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
+    """Share of all CPU time between two :func:`cpu_times` readings that the hypervisor stole, %."""
+    if before is None or after is None:
+        return None
+    total = sum(after) - sum(before)
+    return round(100.0 * (after[7] - before[7]) / total, 1) if total > 0 else None
+
+
+def load_average() -> list[float]:
+    """The 1, 5 and 15 minute load averages, rounded to 0.01."""
+    return [round(x, 2) for x in os.getloadavg()]
+
+
+def format_late_ticks(late: dict[str, Any], indent: str = "      ") -> str:
+    """One or more lines from a :meth:`pipeline.jitter_trace.LateTickTracer.summary`: late ticks by cause."""
+    causes = ", ".join(f"{k} {v}" for k, v in late["causes"].items()) or "none"
+    text = (f"{indent}ticks > {late['late_threshold_us']:.0f} µs late: {late['late_ticks']} ({causes}); "
+            "periods > 2 ms by cause: "
+            + (", ".join(f"{k} {v}" for k, v in late["causes_over_2ms"].items()) or "none"))
+    text += "".join(f"\n{indent}  {n} × {where}" for where, n in list(late["culprits"].items())[:3])
+    return text

@@ -1,0 +1,45 @@
+"""``haptic-study bench pipeline`` measures what it says (no timing is asserted: the figures are the bench's)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from bench.pipeline_bench import format_pipeline_bench, measure_pipeline_cost, record_samples, run_pipeline_bench
+from pipeline.framework import FrameworkConfig
+
+
+@pytest.fixture(scope="module")
+def samples() -> dict:
+    return record_samples(2000)
+
+
+def test_recorded_poses_update_at_the_robots_125_hz(samples) -> None:
+    t = samples["pose_t_ns"]
+    changes = [i for i in range(1, len(t)) if t[i] != t[i - 1]]
+    assert {b - a for a, b in zip(changes, changes[1:])} == {8}  # every 8th 1 ms tick
+
+
+def test_cost_drives_the_framework_as_the_loop_does_and_agrees_with_numpy(samples) -> None:
+    r = measure_pipeline_cost(samples, FrameworkConfig(), batch=500)
+    assert r["ticks_timed"] == 2000
+    assert abs(r["pose_updates_per_tick"] - 0.125) <= 0.001  # 1 in 8, give or take the ends
+    assert r["ours_vs_naive_max_abs_diff_n"] <= 1e-12
+    for key in ("ours_us_per_tick", "ours_pose_every_tick_us", "naive_numpy_us_per_tick", "harness_overhead_us"):
+        assert math.isfinite(r[key]) and r[key] > 0, key
+    assert r["speedup"] == round(r["naive_numpy_us_per_tick"] / r["ours_us_per_tick"], 1)
+
+
+def test_the_whole_bench_without_the_loop_has_the_issues_fields() -> None:
+    r = run_pipeline_bench(loop_seconds=0, ticks=2000)
+    for key in ("ours_us_per_tick", "naive_numpy_us_per_tick", "speedup", "loop_period_p50_us",
+                "loop_period_p99_us", "loop_periods_over_2ms", "filter_trade"):
+        assert key in r, key
+    assert math.isnan(r["loop_period_p50_us"])  # the loop was skipped
+    assert [row["window"] for row in r["filter_trade"]] == [1, 2, 5, 10, 20, 50, 100]
+    assert [row["group_delay_ms"] for row in r["filter_trade"]] == [(w - 1) / 2 for w in (1, 2, 5, 10, 20, 50, 100)]
+    noise = [row["noise_rms_n"] for row in r["filter_trade"]]
+    assert noise == sorted(noise, reverse=True)  # a longer window is quieter ...
+    text = format_pipeline_bench(r)
+    assert "NumPy transcription" in text and "Moving-average window" in text
