@@ -8,10 +8,14 @@ bursts that no process can cause or cure.
 
 from __future__ import annotations
 
+import multiprocessing as mp
 import os
 from typing import Any
 
-__all__ = ["cpu_times", "format_late_ticks", "load_average", "steal_percent"]
+from pipeline.clock import MonotonicClock, prepare_realtime_thread
+from pipeline.loop import LoopStats
+
+__all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
 
 
 def cpu_times() -> list[int] | None:
@@ -44,3 +48,39 @@ def format_late_ticks(late: dict[str, Any], indent: str = "      ") -> str:
             + (", ".join(f"{k} {v}" for k, v in late["causes_over_2ms"].items()) or "none"))
     text += "".join(f"\n{indent}  {n} × {where}" for where, n in list(late["culprits"].items())[:3])
     return text
+
+
+def _bare_loop(seconds: float, out: Any) -> None:
+    scheduling = prepare_realtime_thread()
+    clock = MonotonicClock()
+    stats = LoopStats(1_000_000)
+    t = deadline = clock.now_ns()
+    for _ in range(int(seconds * 1000)):
+        deadline += 1_000_000
+        clock.sleep_until(deadline)
+        now = clock.now_ns()
+        stats.add(now - t)
+        t = now
+    out.put({**stats.summary(), "scheduling": scheduling})
+
+
+def bare_loop_stats(seconds: float) -> dict[str, Any]:
+    """The machine's own floor: a loop with nothing in its tick, paced and scheduled as the haptic loop is.
+
+    Same clock (:class:`pipeline.clock.MonotonicClock`: sleep, then spin),
+    same thread preparation (``SCHED_FIFO``, 1 ns timer slack) and the same
+    statistics (:class:`pipeline.loop.LoopStats`), in a process of its own.
+    Periods over 2 ms here are the machine's (a late timer, the hypervisor),
+    since there is nothing else to be late for.
+    """
+    ctx = mp.get_context("spawn")
+    q = ctx.Queue()
+    proc = ctx.Process(target=_bare_loop, args=(seconds, q), name="bare-loop", daemon=True)
+    proc.start()
+    try:
+        result: dict[str, Any] = q.get(timeout=seconds * 3 + 30)
+    finally:
+        proc.join(5.0)
+        if proc.is_alive():
+            proc.kill()
+    return result

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
+from bench.machine import bare_loop_stats, cpu_times, format_late_ticks, load_average, steal_percent
 from pipeline.clock import VirtualClock
 from pipeline.engine import EngineConfig, EngineProcess, build_sim_engine
 from pipeline.filters import MovingAverage3
@@ -311,8 +311,14 @@ def run_pipeline_bench(
     ticks: int = 20_000,
     progress: Callable[[str], None] | None = None,
     explain: bool = False,
+    reference: bool = False,
 ) -> dict[str, Any]:
-    """All three measurements; returns the JSON-ready result (``explain``: see :func:`measure_loop`)."""
+    """All three measurements; returns the JSON-ready result.
+
+    ``explain``: see :func:`measure_loop`.  ``reference``: afterwards, run a
+    loop with nothing in its tick for as long (:func:`bench.machine.bare_loop_stats`),
+    the machine's own floor for the loop figures.
+    """
     say = progress or (lambda s: None)
     say("recording samples from the simulated rig")
     data = record_samples(ticks)
@@ -322,6 +328,10 @@ def run_pipeline_bench(
     trade = filter_trade_table(data)
     say(f"running the 1 kHz loop for {loop_seconds:g} s in its engine process")
     stats = measure_loop(loop_seconds, explain) if loop_seconds > 0 else {}
+    bare: dict[str, Any] | None = None
+    if reference and loop_seconds > 0:
+        say(f"running an empty reference loop for {loop_seconds:g} s: the machine's own floor")
+        bare = bare_loop_stats(loop_seconds)
     result: dict[str, Any] = dict(cost)
     result.update(
         {
@@ -337,6 +347,7 @@ def run_pipeline_bench(
             "loop_steal_percent": stats.get("steal_percent"),
             "loop_load_average": stats.get("load_average"),
             "loop_late_ticks": stats.get("late_ticks"),
+            "bare_loop": bare,
             "filter_trade": trade,
             "python": sys.version.split()[0],
             "machine": f"{platform.machine()} {platform.processor() or ''}".strip(),
@@ -355,6 +366,12 @@ def _machine_lines(r: dict[str, Any]) -> list[str]:
         )
     if r.get("loop_late_ticks"):
         lines.append(format_late_ticks(r["loop_late_ticks"], indent="  "))
+    b = r.get("bare_loop")
+    if b:
+        lines.append(
+            f"  empty reference loop, the next {r['loop_seconds']:g} s: p99 |period - 1 ms| {b['abs_dev_p99_us']:.0f} µs, "
+            f"max {b['period_max_us']:.0f} µs, periods over 2 ms {b['periods_over_2ms']:.0f}"
+        )
     return lines
 
 

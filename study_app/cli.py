@@ -97,6 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="real time to run the loop (default 30; 0 skips)")
     bp.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
+    bp.add_argument("--reference", action="store_true",
+                    help="then run an empty loop as long: the machine's own floor for the loop figures")
     bp.add_argument("--ticks", type=_nonneg_int("--ticks"), default=20_000, help="samples for the cost benchmark")
     bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
     bs.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="participants (default 10)")
@@ -336,7 +338,8 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
         print(f"bench: {msg} ...", file=sys.stderr, flush=True)
 
     result = run_pipeline_bench(
-        loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say, explain=args.explain
+        loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say, explain=args.explain,
+        reference=args.reference,
     )
     if args.json:
         print(json.dumps(result))

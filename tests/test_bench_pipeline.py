@@ -43,3 +43,12 @@ def test_the_whole_bench_without_the_loop_has_the_issues_fields() -> None:
     assert noise == sorted(noise, reverse=True)  # a longer window is quieter ...
     text = format_pipeline_bench(r)
     assert "NumPy transcription" in text and "Moving-average window" in text
+
+
+def test_the_empty_reference_loop_reports_the_loops_statistics() -> None:
+    from bench.machine import bare_loop_stats
+
+    r = bare_loop_stats(0.05)  # 50 periods of real time: what is reported, not how fast
+    assert r["ticks"] == 50.0
+    assert set(r) >= {"period_p50_us", "period_p99_us", "period_max_us", "abs_dev_p99_us", "periods_over_2ms"}
+    assert r["scheduling"].startswith(("SCHED_FIFO/", "normal ("))
