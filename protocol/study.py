@@ -6,9 +6,12 @@ the simulated rig (calibrating its payload), hands the stylus to a
 (tagged ``kind = 'training'``, which analysis excludes) and the experiment
 session, each with its whole schedule committed before the first trial, and
 runs them on the virtual clock (as fast as the CPU allows) or in real time.
-:func:`resume_session` continues an interrupted experiment session at its
-first unfinished trial: the interrupted trial is stored as aborted, with the
-reason, and re-run per the abort policy.
+:func:`resume_session` continues a participant's interrupted session (training
+or experiment) at its first unfinished trial: the interrupted trial is stored
+as aborted, with the reason, and re-run per the abort policy.
+``run_study(..., continue_study=True)`` (``haptic-study run --continue``)
+completes a study that stopped part-way: it resumes every interrupted session,
+runs what each participant has not started, and leaves finished sessions alone.
 """
 
 from __future__ import annotations
@@ -206,9 +209,7 @@ def _run_session(
         run_protocol = protocol
     else:
         schedule = training_schedule(protocol)
-        run_protocol = dataclasses.replace(
-            protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
-        )
+        run_protocol = _training_protocol(protocol)
     session_id = db.create_session(
         code=code, kind=kind, seed=study_seed, participant_number=number, protocol_json=run_protocol.to_json(),
         schedule_json=schedule_to_json(schedule), software_version=software_version(), rig="sim",
@@ -228,6 +229,123 @@ def _run_session(
     finally:
         recorder.close()
     return session_id
+
+
+def _training_protocol(protocol: ProtocolConfig) -> ProtocolConfig:
+    """The protocol a training session runs (and stores): trials last the training's time per target and mode."""
+    return dataclasses.replace(
+        protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
+    )
+
+
+def _resume_run(
+    db: StudyDatabase, info: SessionInfo, *, clock: str, progress: StudyProgress,
+    on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int], short_transactions: bool = False,
+) -> int:
+    """Continue one interrupted session (either kind) to its end with a fresh rig and the same participant."""
+    protocol, schedule, pos, offset = prepare_resume(db, info)
+    rig_seed, p_seed = participant_seeds(info.seed, info.participant_number)
+    # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
+    eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
+    participant = SimulatedParticipant(seed=p_seed)
+    eng.rig.set_driver(participant)
+    recorder = Recorder(db, threaded=(clock == "real"), short_transactions=short_transactions)
+    runner = SessionRunner(
+        protocol=protocol, schedule=schedule, session_id=info.session_id, recorder=recorder, submit=eng.loop.submit,
+        start_position=pos, session_clock_offset_s=offset + 0.001, participant=participant,
+        participant_time=lambda: eng.rig.sim_time_s, seed=info.seed,
+    )
+    runner.live_force_aid = info.kind == "training" and protocol.training.live_force_aid
+    progress.kind = info.kind
+    progress.sessions.append(info.session_id)
+    try:
+        _drive(eng, runner, clock, progress, on_progress, tick_budget)
+    finally:
+        recorder.close()
+    return info.session_id
+
+
+def _remaining_trials(db: StudyDatabase, info: SessionInfo) -> int:
+    """Trials a resume of this session will run.
+
+    An interrupted trial is stored as aborted by :func:`prepare_resume`, not
+    run, and its re-run takes its place in the count.
+    """
+    schedule = schedule_from_json(info.schedule_json)
+    return len(schedule) - first_unfinished(schedule, db.trial_rows(info.session_id))
+
+
+#: One step of a participant's part of a study: ("new", kind) or ("resume", session id).
+Step = tuple[str, Any]
+
+
+def _plan_continue(
+    db: StudyDatabase, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
+) -> tuple[dict[int, list[Step]], int, list[int]]:
+    """What is left of a study: steps per participant, trials they run, and the finished sessions kept.
+
+    Raises :class:`StorageError`, before anything is written, when the stored
+    sessions were made with another seed or protocol: continuing them with
+    this one would mix two designs in one study.
+    """
+    kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
+    wanted = {"training": json.loads(_training_protocol(protocol).to_json()), "experiment": json.loads(protocol.to_json())}
+    plan: dict[int, list[Step]] = {}
+    kept: list[int] = []
+    trials = 0
+    for n in range(1, participants + 1):
+        code = participant_code(n)
+        stored = db.sessions_of(code)
+        for info in stored:
+            if info.seed != seed:
+                raise StorageError(
+                    f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
+                    f"--seed {info.seed}, not {seed}; nothing was changed (give the seed the study was started with)"
+                )
+            if info.kind in wanted and json.loads(info.protocol_json) != wanted[info.kind]:
+                raise StorageError(
+                    f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
+                    f"another protocol; nothing was changed (give the --protocol the study was started with)"
+                )
+        steps: list[Step] = []
+        for kind in kinds:
+            of_kind = [s for s in stored if s.kind == kind]
+            if any(s.status != "running" for s in of_kind):  # completed, or ended by the experimenter
+                kept.extend(s.session_id for s in of_kind if s.status != "running")
+                continue
+            if of_kind:
+                info = of_kind[-1]
+                steps.append(("resume", info.session_id))
+                trials += _remaining_trials(db, info)
+            else:
+                steps.append(("new", kind))
+                trials += protocol.trials_per_participant if kind == "experiment" else len(training_schedule(protocol))
+        if steps:
+            plan[n] = steps
+    return plan, trials, kept
+
+
+def _run_steps(
+    db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
+    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
+    short_transactions: bool = False,
+) -> None:
+    """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
+    code = participant_code(number)
+    for what, arg in steps:
+        if what == "new":
+            _run_session(db, code=code, number=number, kind=arg, protocol=protocol, study_seed=seed, clock=clock,
+                         progress=progress, on_progress=on_progress, tick_budget=tick_budget,
+                         short_transactions=short_transactions)
+        else:
+            info = next(s for s in db.sessions_of(code) if s.session_id == arg)
+            _resume_run(db, info, clock=clock, progress=progress, on_progress=on_progress, tick_budget=tick_budget,
+                        short_transactions=short_transactions)
+
+
+def _all_steps(protocol: ProtocolConfig) -> list[Step]:
+    """A participant's whole part of a study: training (if the protocol has one), then the experiment."""
+    return [("new", "training"), ("new", "experiment")] if protocol.training.enabled else [("new", "experiment")]
 
 
 class StudyWorkerError(RuntimeError):
@@ -252,6 +370,7 @@ def run_study(
     clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None,
     jobs: int | None = None,
+    continue_study: bool = False,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -276,52 +395,66 @@ def run_study(
         database connection and recorder, all writing into the same WAL
         database).  None: the usable cores, at most ``participants``; 1: one
         after the other in this process.
+    continue_study
+        Complete a study that stopped part-way (a crash, a failed worker, an
+        interrupted run) in the same database: every interrupted session is
+        resumed (:func:`resume_session`), what a participant has not started
+        is run, and finished sessions (completed, or ended by the
+        experimenter) are left alone.  ``seed`` and ``protocol`` must be those
+        the study was started with.
 
     Returns
     -------
     StudyProgress
         The final progress; ``sessions`` lists the session ids in participant
-        order (training before experiment), whatever order they were allocated in.
+        order (training before experiment), whatever order they were allocated
+        in; when continuing, the sessions kept from before come first.
 
     Raises
     ------
     StorageError
         Before anything is stored, if the database cannot be used or one of
-        the participant codes already has sessions in it.
+        the participant codes already has sessions in it (without
+        ``continue_study``), or, when continuing, the stored sessions were run
+        with another seed or protocol.
     StudyWorkerError
         If a participant's worker fails: the other workers are stopped (their
-        sessions stay ``running``, resumable with ``--resume CODE``).
+        sessions stay ``running``); ``continue_study`` completes the study.
     """
     if participants < 1:
         raise ValueError(f"participants = {participants}: must be ≥ 1")
     if jobs is not None and jobs < 1:
         raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
     n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
+    if continue_study and not os.path.exists(db_path):
+        raise StorageError(f"cannot continue a study: no database at {db_path}")
     db = StudyDatabase(db_path)
     try:
-        for n in range(1, participants + 1):
-            code = participant_code(n)
-            if db.sessions_of(code):
-                raise StorageError(
-                    f"{db_path} already holds sessions for participant {code}; nothing was changed "
-                    f"(use a new database, or --resume {code} to continue an interrupted session)"
-                )
         progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
-        per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
-        progress.study_trials_total = per * participants
-        if n_jobs > 1:
+        if continue_study:
+            plan, progress.study_trials_total, kept = _plan_continue(db, db_path, participants, seed, protocol)
+            progress.sessions.extend(kept)
+        else:
+            for n in range(1, participants + 1):
+                code = participant_code(n)
+                if db.sessions_of(code):
+                    raise StorageError(
+                        f"{db_path} already holds sessions for participant {code}; nothing was changed "
+                        f"(use a new database, or the same command with --continue to complete the study)"
+                    )
+            plan = {n: _all_steps(protocol) for n in range(1, participants + 1)}
+            per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
+            progress.study_trials_total = per * participants
+        jobs_used = min(n_jobs, len(plan))
+        if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
-            return _run_parallel(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
-                                 on_progress=on_progress, jobs=n_jobs, progress=progress)
+            return _run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
+                                 on_progress=on_progress, jobs=jobs_used, progress=progress)
         ticks = [0]
-        for n in range(1, participants + 1):
-            code = participant_code(n)
-            progress.participant, progress.code = n, code
-            if protocol.training.enabled:
-                _run_session(db, code=code, number=n, kind="training", protocol=protocol, study_seed=seed, clock=clock,
-                             progress=progress, on_progress=on_progress, tick_budget=ticks)
-            _run_session(db, code=code, number=n, kind="experiment", protocol=protocol, study_seed=seed, clock=clock,
-                         progress=progress, on_progress=on_progress, tick_budget=ticks)
+        for n, steps in plan.items():
+            progress.participant, progress.code = n, participant_code(n)
+            _run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
+                       on_progress=on_progress, tick_budget=ticks)
         return progress
     finally:
         db.close()
@@ -341,9 +474,12 @@ def _die_with_parent(parent_pid: int) -> None:
 
 
 def _participant_worker(
-    db_path: str, number: int, seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int, messages: Any,
+    db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
+    messages: Any,
 ) -> None:
-    """One participant (training, then experiment) in a worker process; reports through ``messages``.
+    """One participant's steps (training, then experiment; or what is left of them) in a worker process.
+
+    Reports through ``messages``.
 
     Messages: ``("progress", number, kind, trials_done, trials_total, participant_trials_done, study_time_s)``,
     ``("done", number, session ids, participant_trials_done, study_time_s)``, ``("error", number, message)``.
@@ -360,11 +496,8 @@ def _participant_worker(
     try:
         db = StudyDatabase(db_path)
         try:
-            ticks = [0]
-            kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
-            for kind in kinds:
-                _run_session(db, code=code, number=number, kind=kind, protocol=protocol, study_seed=seed, clock=clock,
-                             progress=progress, on_progress=report, tick_budget=ticks, short_transactions=True)
+            _run_steps(db, number, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
+                       on_progress=report, tick_budget=[0], short_transactions=True)
         finally:
             db.close()
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which stops the study
@@ -378,14 +511,14 @@ def _participant_worker(
 
 
 def _run_parallel(
-    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
+    db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress,
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
     ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
     messages = ctx.Queue()
-    waiting = list(range(1, participants + 1))
+    waiting = list(plan)
     running: dict[int, Any] = {}
     done_trials: dict[int, int] = {}
     time_s: dict[int, float] = {}
@@ -412,7 +545,7 @@ def _run_parallel(
             while waiting and len(running) < jobs:
                 n = waiting.pop(0)
                 p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
-                                args=(db_path, n, seed, protocol, clock, os.getpid(), messages), daemon=True)
+                                args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages), daemon=True)
                 p.start()
                 running[n] = p
             try:
@@ -450,28 +583,13 @@ def _run_parallel(
         messages.close()
     if failure is not None:
         n, why = failure
-        open_codes = _open_codes(db_path, participants)
-        resume = f"; resume with --resume CODE: {', '.join(open_codes)}" if open_codes else ""
         raise StudyWorkerError(
             f"participant {participant_code(n)} failed ({why}); the other participants were stopped, "
-            f"their committed data is kept{resume}"
+            f"their committed data is kept; complete the study with the same command and --continue"
         )
-    progress.sessions = [sid for n in range(1, participants + 1) for sid in sessions[n]]
+    progress.sessions = progress.sessions + [sid for n in plan for sid in sessions[n]]
     progress.study_trials_done = sum(done_trials.values())
     return progress
-
-
-def _open_codes(db_path: str, participants: int) -> list[str]:
-    """Codes of this study's participants with an interrupted experiment session."""
-    try:
-        db = StudyDatabase(db_path)
-    except StorageError:
-        return []
-    try:
-        codes = {participant_code(n) for n in range(1, participants + 1)}
-        return sorted({s.code for s in db.open_sessions() if s.kind == "experiment" and s.code in codes})
-    finally:
-        db.close()
 
 
 def resume_session(
@@ -481,43 +599,32 @@ def resume_session(
     clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None,
 ) -> StudyProgress:
-    """Continue the interrupted experiment session of participant ``code``.
+    """Continue the interrupted session of participant ``code`` (training or experiment).
 
     The stored schedule is used; trials already stored are kept; a trial that
     was interrupted mid-way (samples but no summary) is stored as aborted with
-    the reason and re-run per the abort policy; no trial is duplicated or skipped.
+    the reason and re-run per the abort policy; no trial is duplicated or
+    skipped.  Only that session is continued: a participant interrupted in
+    training still has the experiment to run (``run_study(...,
+    continue_study=True)``, ``haptic-study run --continue``).
     """
     validate_code(code)
     if not os.path.exists(db_path):
         raise StorageError(f"cannot resume {code}: no database at {db_path}")
     db = StudyDatabase(db_path)
     try:
-        open_ = [s for s in db.sessions_of(code, "experiment") if s.status == "running"]
+        open_ = [s for s in db.sessions_of(code) if s.status == "running"]
         if not open_:
             known = db.participant_id(code, create=False)
-            what = "no such participant" if known is None else "no interrupted experiment session"
+            what = "no such participant" if known is None else "no interrupted session"
             raise StorageError(f"cannot resume {code} in {db_path}: {what}")
         info = open_[-1]
-        protocol, schedule, pos, offset = prepare_resume(db, info)
-        rig_seed, p_seed = participant_seeds(info.seed, info.participant_number)
-        # A fresh rig (re-calibrated) and the same participant (same seed, same parameters).
-        eng = _engine(rig_seed + 2, clock)
-        participant = SimulatedParticipant(seed=p_seed)
-        eng.rig.set_driver(participant)
-        recorder = Recorder(db, threaded=(clock == "real"))
-        runner = SessionRunner(
-            protocol=protocol, schedule=schedule, session_id=info.session_id, recorder=recorder, submit=eng.loop.submit,
-            start_position=pos, session_clock_offset_s=offset + 0.001, participant=participant,
-            participant_time=lambda: eng.rig.sim_time_s, seed=info.seed,
-        )
-        progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind="experiment",
-                                 planned_s=(len(schedule) - pos) * (protocol.trial.max_trial_s + protocol.trial.pause_s),
-                                 study_trials_total=len(schedule) - pos)
-        progress.sessions.append(info.session_id)
-        try:
-            _drive(eng, runner, clock, progress, on_progress, [0])
-        finally:
-            recorder.close()
+        remaining = _remaining_trials(db, info)
+        progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind=info.kind,
+                                 study_trials_total=remaining)
+        protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
+        progress.planned_s = remaining * (protocol.trial.max_trial_s + protocol.trial.pause_s)
+        _resume_run(db, info, clock=clock, progress=progress, on_progress=on_progress, tick_budget=[0])
         return progress
     finally:
         db.close()

@@ -81,8 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     r.add_argument("--jobs", type=_nonneg_int("--jobs"), default=None,
                    help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
-    r.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
-                   help="continue this participant's interrupted experiment session at its first unfinished trial")
+    after = r.add_mutually_exclusive_group()
+    after.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
+                       help="continue this participant's interrupted session (training or experiment) "
+                            "at its first unfinished trial")
+    after.add_argument("--continue", dest="continue_study", action="store_true",
+                       help="complete a study that stopped part-way in --db: resume interrupted sessions, run what "
+                            "was not started (give the --participants, --seed and --protocol it was started with)")
 
     from study_app.report_cmds import add_report_parsers
 
@@ -264,13 +269,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
         else:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
-                on_progress=show, jobs=args.jobs,
+                on_progress=show, jobs=args.jobs, continue_study=args.continue_study,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
             bar.close()
     except (ProtocolError, StorageError, StudyWorkerError, ValueError) as exc:
         raise CliError(str(exc)) from None
+    if args.continue_study and progress.study_trials_total == 0:
+        print(f"haptic-study: nothing to continue in {args.db}: every session of participants "
+              f"1–{args.participants} has ended", file=sys.stderr)
     print(format_study_summary(args.db, progress.sessions, wall))
     return 0
 

@@ -134,7 +134,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
     assert rows(db, "SELECT status FROM sessions WHERE session_id = ?", sid)[0][0] == "completed"
     # a second resume has nothing to continue
     again = _run_cli(["run", "--db", str(db), "--resume", "P01"])
-    assert again.returncode == 2 and "no interrupted experiment session" in again.stderr
+    assert again.returncode == 2 and "no interrupted session" in again.stderr
 
 
 def test_bad_input_is_refused_before_anything_is_stored(tmp_path: Path) -> None:
@@ -269,9 +269,14 @@ def test_a_crashed_worker_stops_the_study_with_one_clear_error(tmp_path: Path) -
     assert multiprocessing.active_children() == []
     for t_id, n in rows(db, "SELECT trial_id, n_samples FROM trials"):
         assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", t_id)[0][0] == n
-    resume_session(str(db), "P02")
-    assert ("P02", "completed") in rows(
-        db, "SELECT p.code, s.status FROM sessions s JOIN participants p USING (participant_id) WHERE s.kind = 'experiment'")
+    assert msg.endswith("complete the study with the same command and --continue")
+    before = rows(db, "SELECT trial_id, outcome, tct_s, n_samples FROM trials ORDER BY trial_id")
+    progress = run_study(str(db), participants=2, seed=4, protocol=short_protocol(), jobs=2, continue_study=True)
+    assert rows(db, "SELECT p.code, s.kind, s.status FROM sessions s JOIN participants p USING (participant_id) "
+                    "ORDER BY p.code") == [("P01", "experiment", "completed"), ("P02", "experiment", "completed")]
+    after = rows(db, "SELECT trial_id, outcome, tct_s, n_samples FROM trials ORDER BY trial_id")
+    assert set(before) <= set(after)  # what was stored stays as it was
+    assert sorted(progress.sessions) == [s[0] for s in rows(db, "SELECT session_id FROM sessions ORDER BY session_id")]
 
 
 def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) -> None:
@@ -297,3 +302,108 @@ def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) 
     resume_session(str(db), "P02")
     assert sorted(rows(db, "SELECT p.code, s.status FROM sessions s JOIN participants p USING (participant_id)")) == [
         ("P01", "running"), ("P02", "completed")]
+
+
+def _short_training_toml(tmp_path: Path) -> Path:
+    proto = tmp_path / "short-training.toml"
+    proto.write_text(
+        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
+        .replace("seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 4.0")
+    )
+    return proto
+
+
+def _participant_sessions(db: Path) -> list[tuple]:
+    return rows(db, "SELECT p.code, s.kind, s.status FROM sessions s JOIN participants p USING (participant_id) "
+                    "ORDER BY p.code, s.kind DESC")
+
+
+def test_continue_completes_a_study_killed_during_training(tmp_path: Path) -> None:
+    """kill -9 during P01's training: `--continue` resumes that training, then runs everything not started."""
+    db = tmp_path / "crash-training.db"
+    proto = _short_training_toml(tmp_path)
+    args = ["run", "--participants", "2", "--jobs", "1", "--seed", "8", "--db", str(db), "--protocol", str(proto)]
+    killed = _run_cli(args, env={KILL_ENV: "5000"})  # 5 s into P01's training (4 trials of at most 4 s + pauses)
+    assert killed.returncode == -9
+    assert _participant_sessions(db) == [("P01", "training", "running")]
+    training_sid = rows(db, "SELECT session_id FROM sessions")[0][0]
+    before = rows(db, "SELECT trial_index, outcome, tct_s, n_samples FROM trials ORDER BY trial_index")
+
+    # the same command again is refused, naming the way out, and changes nothing
+    again = _run_cli(args)
+    assert again.returncode == 2 and "--continue" in again.stderr and "Traceback" not in again.stderr
+    assert rows(db, "SELECT trial_index, outcome, tct_s, n_samples FROM trials ORDER BY trial_index") == before
+
+    done = _run_cli([*args, "--continue"])
+    assert done.returncode == 0, done.stderr
+    assert _participant_sessions(db) == [
+        ("P01", "training", "completed"), ("P01", "experiment", "completed"),
+        ("P02", "training", "completed"), ("P02", "experiment", "completed"),
+    ]
+    training = rows(db, "SELECT trial_index, outcome, tct_s, n_samples, target_label, haptic_mode FROM trials "
+                        "WHERE session_id = ? ORDER BY trial_index", training_sid)
+    assert [t[:4] for t in training[: len(before)]] == before  # the practice already done is kept as it was
+    practised = sorted((t[4], t[5]) for t in training if t[1] != "aborted")
+    assert practised == sorted((t, m) for m in ("on", "off") for t in ("GENTLE", "FIRM"))  # each once, none lost
+    assert rows(db, "SELECT COUNT(*) FROM events WHERE session_id = ? AND kind = 'resume'", training_sid) == [(1,)]
+    assert "participants" in done.stdout  # the study summary
+
+    # nothing is left: continuing again runs nothing and says so
+    idle = _run_cli([*args, "--continue"])
+    assert idle.returncode == 0, idle.stderr
+    assert "nothing to continue" in idle.stderr
+    assert rows(db, "SELECT COUNT(*) FROM sessions") == [(4,)]
+
+
+def test_continue_refuses_another_seed_or_protocol_and_changes_nothing(tmp_path: Path) -> None:
+    db = tmp_path / "s.db"
+    proto = short_protocol()
+    run_study(str(db), participants=1, seed=2, protocol=proto, jobs=1)
+    before = rows(db, "SELECT COUNT(*), SUM(n_samples) FROM trials")
+    with pytest.raises(StorageError, match=r"P01's experiment session \d+ in .* was run with --seed 2, not 3"):
+        run_study(str(db), participants=2, seed=3, protocol=proto, continue_study=True)
+    other = dataclasses.replace(proto, trials_per_cell=2)
+    with pytest.raises(StorageError, match="was run with another protocol"):
+        run_study(str(db), participants=2, seed=2, protocol=other, continue_study=True)
+    assert rows(db, "SELECT COUNT(*), SUM(n_samples) FROM trials") == before
+    assert rows(db, "SELECT COUNT(*) FROM sessions") == [(1,)]
+    with pytest.raises(StorageError, match="no database at"):
+        run_study(str(tmp_path / "missing.db"), participants=1, seed=2, protocol=proto, continue_study=True)
+    assert not (tmp_path / "missing.db").exists()
+
+
+def test_continue_adds_participants_and_keeps_finished_and_aborted_sessions(tmp_path: Path) -> None:
+    """A finished study continued with more participants runs only the new ones; an ended session is not re-run."""
+    db = tmp_path / "grow.db"
+    proto = short_protocol()
+    run_study(str(db), participants=1, seed=6, protocol=proto, jobs=1)
+    c = sqlite3.connect(db)
+    c.execute("UPDATE sessions SET status = 'aborted'")  # as if the experimenter had ended it
+    c.commit()
+    c.close()
+    first = rows(db, "SELECT trial_id, outcome, tct_s FROM trials ORDER BY trial_id")
+    progress = run_study(str(db), participants=3, seed=6, protocol=proto, jobs=2, continue_study=True)
+    assert _participant_sessions(db) == [
+        ("P01", "experiment", "aborted"), ("P02", "experiment", "completed"), ("P03", "experiment", "completed")]
+    assert rows(db, "SELECT trial_id, outcome, tct_s FROM trials WHERE session_id = 1 ORDER BY trial_id") == first
+    assert progress.study_trials_total == progress.study_trials_done == 2 * proto.trials_per_participant
+    # the new participants are exactly who they would have been in one uninterrupted study
+    fresh = tmp_path / "fresh.db"
+    run_study(str(fresh), participants=3, seed=6, protocol=proto, jobs=1)
+    q = ("SELECT p.code, t.trial_index, t.outcome, t.tct_s, t.rmse_n FROM trials t JOIN sessions s USING (session_id) "
+         "JOIN participants p USING (participant_id) WHERE p.code != 'P01' ORDER BY p.code, t.trial_index")
+    assert rows(db, q) == rows(fresh, q)
+
+
+def test_resume_continues_an_interrupted_training_session(tmp_path: Path) -> None:
+    """resume_session takes the participant's open session whatever its kind: here, practice."""
+    db = tmp_path / "t.db"
+    proto = _short_training_toml(tmp_path)
+    killed = _run_cli(["run", "--participants", "1", "--seed", "1", "--db", str(db), "--protocol", str(proto)],
+                      env={KILL_ENV: "3000"})
+    assert killed.returncode == -9
+    progress = resume_session(str(db), "P01")
+    assert progress.kind == "training" and progress.study_trials_done == progress.study_trials_total > 0
+    assert _participant_sessions(db) == [("P01", "training", "completed")]
+    with pytest.raises(StorageError, match="no interrupted session"):
+        resume_session(str(db), "P01")
