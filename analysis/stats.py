@@ -430,6 +430,18 @@ def _hl_rank(n: int, confidence: float) -> tuple[int, float]:
     return k, 1.0 - 2.0 * float(special.ndtr((k - 0.5 - mean) / sd))
 
 
+def _midpoint(a: float, b: float) -> float:
+    """(a + b)/2 rounded once, as the median of an even count is (and NumPy's); never overflows.
+
+    ``0.5·a + 0.5·b`` would round twice when the halves are subnormal.  The
+    sum is exact whenever its half is subnormal, and halving a normal number
+    is exact, so ``(a + b)·0.5`` rounds once; only a sum beyond DBL_MAX takes
+    the halves, which are then exact.
+    """
+    s = a + b
+    return s * 0.5 if math.isfinite(s) else 0.5 * a + 0.5 * b
+
+
 def hodges_lehmann(d: npt.ArrayLike, confidence: float = 0.95) -> tuple[float, float, float, float]:
     """Hodges–Lehmann shift estimate of paired differences and its signed-rank confidence interval.
 
@@ -485,7 +497,7 @@ def hodges_lehmann(d: npt.ArrayLike, confidence: float = 0.95) -> tuple[float, f
         est = _walsh_select(ds, (m + 1) // 2)
     else:
         below = _walsh_select(ds, m // 2)
-        est = 0.5 * below + 0.5 * _walsh_next(ds, m // 2, below)
+        est = _midpoint(below, _walsh_next(ds, m // 2, below))
     if n == 1:
         return est, math.nan, math.nan, math.nan
     k, level = _hl_rank(n, confidence)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
@@ -380,6 +380,7 @@ def test_walsh_selection_exact_at_float_extremes(values):
         assert _walsh_select(d, k, enumerate_at=1) == walsh[k - 1]
 
 
+@example([0.0, 0.0, 0.0, 0.0, -0.5, -0.5, -2.225073858507203e-309])  # subnormal middle pair: one rounding
 @given(st.lists(st.one_of(halves, st.floats(-50, 50, allow_nan=False)), min_size=2, max_size=60))
 def test_hodges_lehmann_equals_brute_force(values):
     n = len(values)
@@ -539,3 +540,13 @@ def test_methods_text_states_the_choices():
     assert "\n" not in text
     with pytest.raises(ValueError, match="zero_method = 'x'"):
         methods_text("x")
+
+
+@given(st.floats(allow_nan=False, allow_infinity=False), st.floats(allow_nan=False, allow_infinity=False))
+def test_midpoint_is_the_correctly_rounded_mean_of_any_two_doubles(a, b):
+    from fractions import Fraction
+
+    from analysis.stats import _midpoint
+
+    got = _midpoint(a, b)
+    assert got == float((Fraction(a) + Fraction(b)) / 2)  # float(Fraction) rounds to nearest, ties to even
