@@ -48,7 +48,6 @@ from pipeline.frames import (
     as_mat3,
     axis_angle,
     check_rotation,
-    cross,
     mat_mul,
     mat_vec,
     matrix_to_rotvec,
@@ -290,9 +289,8 @@ class PayloadCalibration:
         tuple of 6 float
             Force (N) and torque (N·m) in the sensor frame.
         """
-        fg = mat_vec(self.gravity_matrix, mat_vec(rot_sensor_base, self.gravity_base))
-        t = cross(self.com_m, fg)
-        return (fg[0], fg[1], fg[2], t[0], t[1], t[2])
+        # one evaluation of the model: the loop's, with the sensor frame as the "tip" (ᴮ_S R = rot_sensor_baseᵀ)
+        return MountedPayload(self, IDENTITY).payload_wrench(transpose(rot_sensor_base))
 
     def gravity_wrench(self, rot_sensor_base: Mat3) -> Wrench:
         """Non-contact wrench the sensor reads in a pose: payload weight plus bias.
@@ -456,9 +454,9 @@ class MountedPayload:
     With gravity along base z (``g_B = (0, 0, g_z)``, the default)
     ``ᴮ_T Rᵀ g_B`` is ``g_z`` times the last row of ``ᴮ_T R``, and ``g_z`` is
     folded into ``K``: 9 products per pose instead of the 45 of composing
-    ``ᴮ_S R`` first.  The association differs, so the result agrees with
-    :meth:`PayloadCalibration.payload_wrench` to rounding, not bit for bit
-    (both are within a few ulps of ``|A|·|g|`` of the exact value).
+    ``ᴮ_S R`` first.  :meth:`PayloadCalibration.payload_wrench` is this with
+    the identity mount; for another mount the association differs, so the two
+    agree to rounding (within a few ulps of ``|A|·|g|`` of the exact value).
 
     Parameters
     ----------
