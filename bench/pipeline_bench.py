@@ -336,13 +336,13 @@ def run_pipeline_bench(
     result.update(
         {
             "loop_seconds": loop_seconds,
-            "loop_period_p50_us": stats.get("period_p50_us", math.nan),
-            "loop_period_p99_us": stats.get("period_p99_us", math.nan),
-            "loop_abs_dev_p99_us": stats.get("abs_dev_p99_us", math.nan),
-            "loop_period_max_us": stats.get("period_max_us", math.nan),
-            "loop_periods_over_2ms": stats.get("periods_over_2ms", math.nan),
-            "loop_missed_slots": stats.get("missed_slots", math.nan),
-            "loop_ticks": stats.get("ticks", math.nan),
+            "loop_period_p50_us": stats.get("period_p50_us"),
+            "loop_period_p99_us": stats.get("period_p99_us"),
+            "loop_abs_dev_p99_us": stats.get("abs_dev_p99_us"),
+            "loop_period_max_us": stats.get("period_max_us"),
+            "loop_periods_over_2ms": stats.get("periods_over_2ms"),
+            "loop_missed_slots": stats.get("missed_slots"),
+            "loop_ticks": stats.get("ticks"),
             "loop_scheduling": stats.get("scheduling", ""),
             "loop_steal_percent": stats.get("steal_percent"),
             "loop_load_average": stats.get("load_average"),
@@ -354,6 +354,18 @@ def run_pipeline_bench(
         }
     )
     return result
+
+
+def _loop_lines(r: dict[str, Any]) -> list[str]:
+    if r["loop_ticks"] is None:
+        return ["1 kHz loop: not run (--loop-seconds 0)"]
+    return [
+        f"1 kHz loop in its engine process, {r['loop_seconds']:g} s of real time ({r.get('loop_scheduling') or 'normal'}):",
+        f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
+        f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
+        f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",
+        *_machine_lines(r),
+    ]
 
 
 def _machine_lines(r: dict[str, Any]) -> list[str]:
@@ -384,11 +396,7 @@ def format_pipeline_bench(r: dict[str, Any]) -> str:
         f"  speed-up                  {r['speedup']:8.1f}x   (outputs agree to {r['ours_vs_naive_max_abs_diff_n']:.2e} N)",
         f"  (timing-harness overhead of {r['harness_overhead_us']:.3f} µs per tick subtracted from both)",
         "",
-        f"1 kHz loop in its engine process, {r['loop_seconds']:g} s of real time ({r.get('loop_scheduling') or 'normal'}):",
-        f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
-        f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
-        f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",
-        *_machine_lines(r),
+        *_loop_lines(r),
         "",
         "Moving-average window: speed against accuracy",
         "  window  noise RMS (N)  group delay (ms)  2% settling (ms)",

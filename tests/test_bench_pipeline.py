@@ -39,13 +39,14 @@ def test_the_whole_bench_without_the_loop_has_the_issues_fields() -> None:
     for key in ("ours_us_per_tick", "naive_numpy_us_per_tick", "speedup", "loop_period_p50_us",
                 "loop_period_p99_us", "loop_periods_over_2ms", "filter_trade"):
         assert key in r, key
-    assert math.isnan(r["loop_period_p50_us"])  # the loop was skipped
+    assert r["loop_period_p50_us"] is None and r["bare_loop"] is None  # the loop was skipped: null in the JSON
     assert [row["window"] for row in r["filter_trade"]] == [1, 2, 5, 10, 20, 50, 100]
     assert [row["group_delay_ms"] for row in r["filter_trade"]] == [(w - 1) / 2 for w in (1, 2, 5, 10, 20, 50, 100)]
     noise = [row["noise_rms_n"] for row in r["filter_trade"]]
     assert noise == sorted(noise, reverse=True)  # a longer window is quieter ...
     text = format_pipeline_bench(r)
     assert "NumPy transcription" in text and "Moving-average window" in text
+    assert "1 kHz loop: not run (--loop-seconds 0)" in text
 
 
 def test_the_empty_reference_loop_reports_the_loops_statistics() -> None:
