@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from pipeline.clock import prepare_realtime_thread
 from pipeline.devices import Fault
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.sim.rig import SimRigConfig
@@ -43,21 +45,44 @@ def run_scripted_sim(
     parts: dict[str, list[np.ndarray]] = {c: [] for c in cols}
     cursor = 0
     lost = 0
-    done = 0
+
+    def read() -> None:
+        nonlocal cursor, lost
+        res = ring.read_since(cursor)
+        cursor, lost = res.cursor, lost + res.lost
+        for c in cols:
+            parts[c].append(np.asarray(res.rows[c]))
+        if progress is not None:
+            progress(min(cursor, total) / 1000.0)
+
     try:
-        while done < total:
-            n = min(chunk, total - done)
-            if clock == "virtual":
+        if clock == "virtual":
+            done = 0
+            while done < total:
+                n = min(chunk, total - done)
                 loop.run_ticks(n)
-            else:
-                loop.run(max_ticks=n)
-            done += n
-            res = ring.read_since(cursor)
-            cursor, lost = res.cursor, lost + res.lost
-            for c in cols:
-                parts[c].append(np.asarray(res.rows[c]))
-            if progress is not None:
-                progress(done / 1000.0)
+                done += n
+                read()
+        else:
+            # one uninterrupted run on its own real-time thread (a run ramps the force down when it
+            # ends, so it must not be cut into chunks); this thread reads the ring as a GUI would
+            failed: list[BaseException] = []
+
+            def run() -> None:
+                prepare_realtime_thread()
+                try:
+                    loop.run(max_ticks=total)
+                except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+                    failed.append(exc)
+
+            worker = threading.Thread(target=run, name="haptic-loop", daemon=True)
+            worker.start()
+            while worker.is_alive():
+                worker.join(0.1)
+                read()
+            read()
+            if failed:
+                raise failed[0]
     finally:
         loop.ramp_down()
         eng.rig.close()
