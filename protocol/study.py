@@ -313,6 +313,8 @@ def _plan_continue(
             if any(s.status != "running" for s in of_kind):  # completed, or ended by the experimenter
                 kept.extend(s.session_id for s in of_kind if s.status != "running")
                 continue
+            if kind == "training" and not of_kind and any(s.kind == "experiment" for s in stored):
+                continue  # practice comes before the experiment or not at all
             if of_kind:
                 info = of_kind[-1]
                 steps.append(("resume", info.session_id))
