@@ -53,6 +53,8 @@ BLOCK_TICKS = 50
 #: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks
 #: (in a parallel study: the study's main process, after this many ticks of one worker).
 KILL_ENV = "HAPTIC_STUDY_SIGKILL_AFTER_TICKS"
+#: Fault injection for the error-path test: raise an exception in the session driver after this many loop ticks.
+RAISE_ENV = "HAPTIC_STUDY_RAISE_AFTER_TICKS"
 #: Set in a parallel study's worker: the process the fault injection kills (the study's main process).
 _kill_target_pid: int | None = None
 
@@ -121,6 +123,7 @@ def _drive(
     cursor = ring.write_count
     t_last_report = 0.0
     kill_after = int(os.environ.get(KILL_ENV, "0") or 0)
+    raise_after = int(os.environ.get(RAISE_ENV, "0") or 0)
     base_done = progress.study_trials_done
     if clock == "real":
         loop.start()
@@ -142,6 +145,8 @@ def _drive(
                 # in a parallel study's worker: kill the study's main process, as `kill -9` of
                 # `haptic-study run` would (the workers then die with it, by PR_SET_PDEATHSIG)
                 os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
+            if raise_after and tick_budget[0] >= raise_after:
+                raise RuntimeError(f"fault injected by {RAISE_ENV} after {tick_budget[0]} ticks")
             now = time.monotonic()
             done = runner.state.completed + runner.state.aborted
             if on_progress is not None and (now - t_last_report > 0.1 or runner.done):

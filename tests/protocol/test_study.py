@@ -15,7 +15,7 @@ import pytest
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
-from protocol.study import KILL_ENV, resume_session, run_study
+from protocol.study import KILL_ENV, RAISE_ENV, resume_session, run_study
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -407,3 +407,30 @@ def test_resume_continues_an_interrupted_training_session(tmp_path: Path) -> Non
     assert _participant_sessions(db) == [("P01", "training", "completed")]
     with pytest.raises(StorageError, match="no interrupted session"):
         resume_session(str(db), "P01")
+
+
+def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_completes_it(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A Python exception inside a participant's worker (injected) is reported by name; the study then completes."""
+    import multiprocessing
+
+    from protocol.study import StudyWorkerError
+
+    db = tmp_path / "raise.db"
+    monkeypatch.setenv(RAISE_ENV, "3000")  # both workers raise 3 s into their participant
+    with pytest.raises(StudyWorkerError) as err:
+        run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2)
+    msg = str(err.value)
+    assert msg.startswith(("participant P01 failed (RuntimeError: fault injected by HAPTIC_STUDY_RAISE_AFTER_TICKS "
+                           "after 3000 ticks)", "participant P02 failed (RuntimeError: fault injected by "
+                           "HAPTIC_STUDY_RAISE_AFTER_TICKS after 3000 ticks)")), msg
+    assert msg.endswith("complete the study with the same command and --continue")
+    assert multiprocessing.active_children() == []
+    assert rows(db, "SELECT status FROM sessions") == [("running",), ("running",)]
+    monkeypatch.delenv(RAISE_ENV)
+    run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2, continue_study=True)
+    assert rows(db, "SELECT status FROM sessions") == [("completed",), ("completed",)]
+    for sid in (1, 2):
+        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? AND outcome != 'aborted'", sid)
+        assert len(done) == 4 and len(set(done)) == 4  # every cell once
