@@ -139,16 +139,22 @@ def build_sim_engine(
     progress
         Optional ``progress(done, total)`` for the calibration.
     """
-    from pipeline.sim.calibration import auto_calibrate
+    from pipeline.compensation import recommended_pose_set
+    from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
 
     clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
     rig = SimRig(config.sim)
     calibration = NO_PAYLOAD
     if config.calibrate:
-        # The simulated calibration runs on its own virtual clock starting now:
-        # it is instant even when the loop will be paced in real time.
-        cal_clock = clk if isinstance(clk, VirtualClock) else VirtualClock(clk.now_ns())
-        calibration, _ = auto_calibrate(rig, cal_clock, progress=progress)
+        poses = recommended_pose_set(24)
+        cal_clock = clk
+        if not isinstance(clk, VirtualClock):
+            # Instant even when the loop is paced in real time: on a virtual clock placed so that it
+            # ends now.  The rig's clocked state (the robot's next controller cycle, sample times) then
+            # carries on with the real clock; a clock starting now would leave the rig 12 s in the
+            # future, and the robot would hold the last calibration pose until real time caught up.
+            cal_clock = VirtualClock(clk.now_ns() - calibration_duration_ns(len(poses)))
+        calibration, _ = auto_calibrate(rig, cal_clock, poses, progress=progress)
     if config.driver == "scripted":
         rig.set_driver(ScriptedPresses())
     rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)

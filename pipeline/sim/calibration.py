@@ -17,7 +17,16 @@ from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN
 
-__all__ = ["auto_calibrate", "collect_pose"]
+__all__ = ["auto_calibrate", "calibration_duration_ns", "collect_pose"]
+
+
+def _settle_ticks(settle_s: float) -> int:
+    return max(1, int(settle_s * 1000))
+
+
+def calibration_duration_ns(n_poses: int, *, samples_per_pose: int = 200, settle_s: float = 0.3) -> int:
+    """Rig time :func:`auto_calibrate` takes for ``n_poses`` poses: settle, then average, at 1 kHz, ns."""
+    return n_poses * (_settle_ticks(settle_s) + samples_per_pose) * 1_000_000
 
 
 def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "", period_ns: int = 1_000_000) -> CalibrationPose:
@@ -74,7 +83,7 @@ def auto_calibrate(
     # The hand returns the stylus to its start pose: the tip hangs at the
     # start gap above the tissue, out of contact, while the tool re-orients.
     rig.set_driver(HoldStill(0.0))
-    settle_ticks = max(1, int(settle_s * 1000))
+    settle_ticks = _settle_ticks(settle_s)
     poses: list[CalibrationPose] = []
     try:
         for k, rot_base_sensor in enumerate(rots):
