@@ -33,8 +33,9 @@ explains most of the delay:
 
 Each late period also records where the culprit thread was (its innermost
 frames from ``sys._current_frames()``) so the offending code can be found.
-Cost: ≈ 2–5 µs per thread per tick in the loop thread; enable it only to
-diagnose (``HostConfig.trace_jitter``) or in ``haptic-study bench gui``.
+Cost: ≈ 25–35 µs per tick in the loop thread (it shows in the p99); enable
+it only to diagnose (``HostConfig.trace_jitter``, ``EngineConfig.trace_jitter``)
+or in ``haptic-study bench gui|pipeline --explain``.
 """
 
 from __future__ import annotations
