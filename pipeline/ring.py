@@ -5,7 +5,10 @@ any number of readers, in this or another process, copy what is new.  No
 lock is shared: the writer stores the record first and only then publishes
 it by bumping the 64-bit write counter; a reader copies a range and then
 re-reads the counter to discard any rows the writer overwrote meanwhile
-(they are reported as lost, never returned torn).
+(they are reported as lost, never returned torn).  The slot the writer fills
+next -- the oldest record's -- is never read: the writer may be half-way
+through it before the counter says so, so a ring of ``capacity`` slots
+serves the newest ``capacity - 1`` records.
 
 Layout of the shared block (little-endian)::
 
@@ -158,24 +161,39 @@ class RingBuffer:
         """Copy every record written at or after ``cursor`` that is still in the ring.
 
         Returns the rows, the cursor to pass next time, and how many records
-        since ``cursor`` were overwritten before they could be read.
+        since ``cursor`` were overwritten before they could be read.  A record
+        is returned only if the writer cannot have touched its slot during the
+        copy (see the module docstring), so no row is ever torn.
         """
         c1 = self.write_count
-        start = max(cursor, c1 - self.capacity)
+        start = max(cursor, self._oldest_readable(c1))
         rows = self._copy(start, c1)
         c2 = self.write_count
-        valid = max(start, c2 - self.capacity)  # rows below this may have been overwritten mid-copy
+        valid = max(start, self._oldest_readable(c2))  # rows below this may have been overwritten mid-copy
         if valid > start:
-            rows = rows[valid - start :]
+            rows = rows[min(valid, c1) - start :]
         return RingReadResult(rows, c1, max(0, min(valid, c1) - cursor))
 
     def latest(self, n: int) -> npt.NDArray[np.void]:
-        """Copy of the newest ``n`` records (fewer if fewer exist)."""
+        """Copy of the newest ``n`` records (all of them if fewer exist, at most ``capacity - 1``).
+
+        However the reader is scheduled, the result holds exactly
+        ``min(n, written, capacity - 1)`` rows for some moment during the
+        call: a copy the writer lapped is taken again.
+        """
         if n <= 0:
             return np.empty(0, dtype=self.dtype)
-        c = self.write_count
-        # the writer may append between the two counter reads: keep only the newest n
-        return self.read_since(max(0, c - n)).rows[-n:]
+        while True:
+            c1 = self.write_count
+            start = max(0, c1 - n, self._oldest_readable(c1))
+            rows = self._copy(start, c1)
+            if self._oldest_readable(self.write_count) <= start:
+                return rows
+            # the writer lapped the copy (the reader was descheduled for a whole ring): copy again
+
+    def _oldest_readable(self, count: int) -> int:
+        """First record a reader may copy while ``count`` records are published (the next slot is the writer's)."""
+        return max(0, count - self.capacity + 1)
 
     def _copy(self, start: int, stop: int) -> npt.NDArray[np.void]:
         n = stop - start  # ≤ capacity by construction

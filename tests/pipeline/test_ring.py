@@ -100,15 +100,16 @@ def test_write_and_read_since_with_wraparound(shared):
             ring.write(_row(k))
         assert ring.write_count == 12
 
-        # From the last cursor (3): records 3..6 were overwritten, 7..11 remain.
+        # From the last cursor (3): records 3..6 were overwritten, and 7's slot is the one the
+        # writer fills next (never read: it may be half-written); 8..11 remain.
         r2 = ring.read_since(r.cursor)
-        assert _rows_as_tuples(r2.rows) == [_row(k) for k in range(7, 12)]
-        assert r2.cursor == 12 and r2.lost == 4
+        assert _rows_as_tuples(r2.rows) == [_row(k) for k in range(8, 12)]
+        assert r2.cursor == 12 and r2.lost == 5
 
-        # From scratch: 7 lost.
+        # From scratch: 8 lost.
         r0 = ring.read_since(0)
-        assert _rows_as_tuples(r0.rows) == [_row(k) for k in range(7, 12)]
-        assert r0.cursor == 12 and r0.lost == 7
+        assert _rows_as_tuples(r0.rows) == [_row(k) for k in range(8, 12)]
+        assert r0.cursor == 12 and r0.lost == 8
 
         # A cursor inside the window: nothing lost; the copy wraps (12 % 5 = 2).
         r9 = ring.read_since(9)
@@ -136,8 +137,8 @@ def test_latest():
             ring.write(_row(k))
         assert _rows_as_tuples(ring.latest(1)) == [_row(11)]
         assert _rows_as_tuples(ring.latest(3)) == [_row(9), _row(10), _row(11)]
-        # more than the capacity: the whole ring
-        assert _rows_as_tuples(ring.latest(100)) == [_row(k) for k in range(7, 12)]
+        # more than the capacity: the whole ring but the slot the writer fills next
+        assert _rows_as_tuples(ring.latest(100)) == [_row(k) for k in range(8, 12)]
         assert len(ring.latest(0)) == 0
 
 
@@ -160,11 +161,94 @@ def test_latest_returns_at_most_n_rows_when_the_writer_races():
     for k in range(3):
         ring.write(_row(k))
     ring.race_row = _row(3)
-    assert _rows_as_tuples(ring.latest(1)) == [_row(3)]  # the newest, and only one
+    assert _rows_as_tuples(ring.latest(1)) == [_row(2)]  # the newest when the call began, and only one
     ring.race_row = _row(4)
-    assert _rows_as_tuples(ring.latest(2)) == [_row(3), _row(4)]
+    assert _rows_as_tuples(ring.latest(2)) == [_row(2), _row(3)]
     ring.race_row = _row(5)
     assert len(ring.latest(0)) == 0
+
+
+class _LappingRing(RingBuffer):
+    """A ring whose writer goes round the whole ring once between a reader's two looks at the counter.
+
+    ``laps_at`` lists which counter reads (1-based) the writer runs a lap right after: the reader
+    was descheduled there for a whole ring.
+    """
+
+    laps_at: tuple[int, ...] = ()
+    reads = 0
+    next_k = 0
+
+    @property
+    def write_count(self) -> int:
+        c = super().write_count
+        self.reads += 1
+        if self.reads in self.laps_at:
+            for _ in range(self.capacity):
+                self.write(_row(self.next_k))
+                self.next_k += 1
+        return c
+
+
+@pytest.mark.parametrize("laps_at", [(1,), (2,), (1, 2), (2, 4), (1, 2, 3, 4)])
+def test_latest_returns_n_rows_however_the_reader_is_scheduled(laps_at):
+    ring = _LappingRing.create(FIELDS, 6, shared=False)
+    for k in range(20):
+        ring.write(_row(k))
+    ring.next_k = 20
+    ring.laps_at = laps_at
+    rows = _rows_as_tuples(ring.latest(3))
+    # three consecutive records, untorn, and as new as they were at some moment of the call
+    assert len(rows) == 3
+    first = int(rows[0][0])
+    assert rows == [_row(k) for k in range(first, first + 3)]
+    assert first >= 17
+    # fewer written than asked: all of them
+    small = _LappingRing.create(FIELDS, 6, shared=False)
+    small.write(_row(0))
+    small.next_k, small.laps_at = 1, laps_at
+    got = _rows_as_tuples(small.latest(3))
+    assert len(got) in (1, 3) and got == [_row(k) for k in range(int(got[0][0]), int(got[0][0]) + len(got))]
+
+
+class _HalfWritingRing(RingBuffer):
+    """A ring whose writer is half-way through its next record while a reader copies.
+
+    Right after the reader's first look at the counter the writer stores the first field of the
+    next record in that record's slot -- the oldest record's -- and has not published it yet.
+    """
+
+    armed = False
+
+    @property
+    def write_count(self) -> int:
+        c = super().write_count
+        if self.armed:
+            self.armed = False
+            slot = self._rows[c % self.capacity]
+            slot[FIELDS[0]] = -1.0  # a torn row: first field new, the rest old
+        return c
+
+
+@pytest.mark.parametrize("cursor", [0, 6, 7])
+def test_read_since_never_returns_the_slot_the_writer_is_filling(cursor):
+    ring = _HalfWritingRing.create(FIELDS, 5, shared=False)
+    for k in range(12):
+        ring.write(_row(k))
+    ring.armed = True
+    res = ring.read_since(cursor)
+    rows = _rows_as_tuples(res.rows)
+    assert all(r == _row(int(r[0])) for r in rows), rows  # no torn row
+    assert rows == [_row(k) for k in range(max(cursor, 8), 12)]
+    assert res.lost == max(0, 8 - cursor) and res.cursor == 12
+
+
+def test_latest_never_returns_the_slot_the_writer_is_filling():
+    ring = _HalfWritingRing.create(FIELDS, 5, shared=False)
+    for k in range(12):
+        ring.write(_row(k))
+    ring.armed = True
+    assert _rows_as_tuples(ring.latest(10)) == [_row(k) for k in range(8, 12)]
 
 
 def test_field_names_round_trip_and_columns():
@@ -211,8 +295,8 @@ def test_private_ring_has_no_name_and_no_segment(created_segments):
         for k in range(6):
             ring.write(_row(k))
         r = ring.read_since(0)
-        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(2, 6)]
-        assert r.lost == 2 and r.cursor == 6
+        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(3, 6)]  # 2's slot is the writer's next
+        assert r.lost == 3 and r.cursor == 6
     finally:
         ring.close()
 
@@ -297,8 +381,8 @@ def test_reader_sees_writes_made_after_it_attached(shared_ring):
         for k in range(7):
             shared_ring.write(_row(k))
         r = reader.read_since(r.cursor)
-        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(2, 7)]
-        assert r.cursor == 7 and r.lost == 2
+        assert _rows_as_tuples(r.rows) == [_row(k) for k in range(3, 7)]  # 2's slot is the writer's next
+        assert r.cursor == 7 and r.lost == 3
     finally:
         reader.close()
 
@@ -314,9 +398,9 @@ def test_second_process_attaches_by_name_and_its_exit_keeps_the_segment(shared_r
 
     assert fields == FIELDS
     assert capacity == 5
-    assert count == 8 and cursor == 8 and lost == 3
+    assert count == 8 and cursor == 8 and lost == 4
     child_rows = np.frombuffer(raw, dtype=shared_ring.dtype)
-    assert _rows_as_tuples(child_rows) == [_row(k) for k in range(3, 8)]
+    assert _rows_as_tuples(child_rows) == [_row(k) for k in range(4, 8)]  # 3's slot is the writer's next
     assert child_rows.tobytes() == shared_ring.latest(5).tobytes()
 
     # The reader's exit must not have unlinked the writer's segment.
