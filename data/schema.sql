@@ -1,7 +1,11 @@
--- haptic-study database schema, version 1 (PRAGMA user_version = 1).
+-- haptic-study database schema, version 2 (PRAGMA user_version = 2).
 -- The application applies this file to an empty database; a database whose
--- user_version is newer than the software's is refused.  Rows are insert-only
--- except that a session's end columns are filled once.
+-- user_version is newer than the software's is refused; a version-1 database
+-- is read as it is, and upgraded in place (after a backup copy is written
+-- beside it) only by a command that writes to it (protocol/storage.py).
+-- Rows are insert-only except that a session's end columns are filled once,
+-- a session's schedule is rewritten when an aborted trial is re-queued, and
+-- the leases table holds who writes to what right now.
 --
 -- Conventions: snake_case, units in column names; times on the session clock are
 -- seconds since the session started (*_at_s); wall-clock stamps are ISO 8601 UTC
@@ -52,6 +56,17 @@ CREATE TABLE IF NOT EXISTS trials (
     n_samples       INTEGER,
     abort_reason    TEXT,
     repeat_of       INTEGER,                    -- trial_index of the aborted trial this one re-runs
+    -- version 2: why an aborted trial was aborted, and how the 1 kHz loop ran during the trial
+    abort_cause     TEXT CHECK (abort_cause IS NULL OR abort_cause IN
+                                ('experimenter', 'fault', 'feedback', 'gap', 'interrupted')),
+    period_p50_ms     REAL,                     -- loop tick period over the trial's samples
+    period_p99_ms     REAL,
+    period_max_ms     REAL,
+    periods_over_2ms  INTEGER,                  -- count of ticks whose period exceeded 2 ms
+    sensor_age_max_ms REAL,                     -- oldest F/T sample the loop used (watchdog limit 5 ms)
+    pose_age_max_ms   REAL,                     -- oldest robot pose the loop used (watchdog limit 50 ms)
+    latency_p50_ms    REAL,                     -- F/T sample arrival -> force command sent
+    latency_max_ms    REAL,
     UNIQUE (session_id, trial_index),
     CHECK (tct_s IS NULL OR outcome = 'success')
 );
@@ -65,7 +80,8 @@ CREATE TABLE IF NOT EXISTS samples (
     comp_fx   REAL, comp_fy REAL, comp_fz REAL,
     render_fx REAL, render_fy REAL, render_fz REAL   -- what was sent to the haptic device
 );
-CREATE INDEX IF NOT EXISTS samples_by_trial ON samples (trial_id, t_s);
+-- unique: one trial never holds two samples of one time (a second writer would be refused here too)
+CREATE UNIQUE INDEX IF NOT EXISTS samples_by_trial ON samples (trial_id, t_s);
 
 CREATE TABLE IF NOT EXISTS events (
     session_id INTEGER NOT NULL REFERENCES sessions(session_id),
@@ -74,3 +90,18 @@ CREATE TABLE IF NOT EXISTS events (
     detail     TEXT
 );
 CREATE INDEX IF NOT EXISTS events_by_session ON events (session_id, t_s);
+
+-- version 2: one writer per session.  A row says which process writes to a
+-- scope ('study': a headless `run` over the whole database; 'session N': one
+-- session).  A lease whose process is gone (same host: the pid no longer runs
+-- the process that took it; another host: no heartbeat for 30 s) is taken over.
+CREATE TABLE IF NOT EXISTS leases (
+    scope         TEXT PRIMARY KEY,
+    owner         TEXT NOT NULL,                -- random token of the command holding it
+    pid           INTEGER NOT NULL,
+    host          TEXT NOT NULL,
+    process_start TEXT NOT NULL,                -- boot id and start time of pid (tells a reused pid apart)
+    command       TEXT NOT NULL,                -- what holds it, for a refusal message
+    acquired_at   TEXT NOT NULL,
+    heartbeat_at  TEXT NOT NULL
+);

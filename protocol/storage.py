@@ -7,6 +7,22 @@ every 100 ms, each trial summary atomically when the trial ends, and nothing is
 ever overwritten: a participant code with an experiment session already
 stored is refused unless the caller resumes it.  WAL mode lets analysis read
 while a session writes.
+
+What protects the record:
+
+* **one writer per session** -- a writer takes a lease (:meth:`StudyDatabase.acquire_lease`,
+  the ``leases`` table) on the session, or on the whole study for a headless
+  ``run``; a second process is refused with a message naming the holder, and a
+  lease left by a killed process is taken over only once that process is gone;
+* **no writing into a damaged file** -- ``PRAGMA quick_check`` runs before a
+  writer touches the file (and when analysis asks for it); a damaged file is
+  refused and left byte-identical;
+* **archives stay readable** -- readers open read-only, and a database in a
+  folder they cannot write opens immutable (:func:`connect_readonly`);
+* **older files** -- a version-1 database is read as it is; a writer upgrades
+  it in place only after writing a backup copy beside it;
+* **privacy** -- new databases (and so their ``-wal``/``-shm`` files, which
+  SQLite creates with the database's permissions) are readable by their owner only.
 """
 
 from __future__ import annotations
@@ -16,7 +32,10 @@ import json
 import os
 import queue
 import re
+import secrets
+import socket
 import sqlite3
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
@@ -27,18 +46,42 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "ABORT_CAUSES",
     "CODE_PATTERN",
+    "LeaseHeld",
     "SCHEMA_VERSION",
     "SessionInfo",
     "StorageError",
     "StudyDatabase",
     "Recorder",
+    "connect_readonly",
+    "new_owner_token",
     "schema_path",
+    "session_scope",
     "trial_id_of",
     "validate_code",
 ]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Why an aborted trial was aborted (``trials.abort_cause``, schema version 2).
+ABORT_CAUSES = ("experimenter", "fault", "feedback", "gap", "interrupted")
+#: Per-trial loop health columns (schema version 2), in table order.
+HEALTH_COLUMNS = (
+    "period_p50_ms", "period_p99_ms", "period_max_ms", "periods_over_2ms",
+    "sensor_age_max_ms", "pose_age_max_ms", "latency_p50_ms", "latency_max_ms",
+)
+#: What upgrades a version-1 database to version 2 (the same tables as a new one; tested).
+_UPGRADE_1_TO_2 = (
+    "ALTER TABLE trials ADD COLUMN abort_cause TEXT CHECK (abort_cause IS NULL OR abort_cause IN "
+    "('experimenter', 'fault', 'feedback', 'gap', 'interrupted'))",
+    *(f"ALTER TABLE trials ADD COLUMN {c} {'INTEGER' if c == 'periods_over_2ms' else 'REAL'}" for c in HEALTH_COLUMNS),
+    "CREATE TABLE leases (scope TEXT PRIMARY KEY, owner TEXT NOT NULL, pid INTEGER NOT NULL, host TEXT NOT NULL, "
+    "process_start TEXT NOT NULL, command TEXT NOT NULL, acquired_at TEXT NOT NULL, heartbeat_at TEXT NOT NULL)",
+)
+#: A lease held from another host is stale after this long without a heartbeat.
+LEASE_STALE_S = 30.0
+#: Writers refresh their leases' heartbeat this often (with a commit).
+LEASE_HEARTBEAT_S = 5.0
 CODE_PATTERN = re.compile(r"^[A-Za-z0-9_-]{1,32}\Z")  # \Z, not $: "$" also matches before a final newline
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
@@ -51,6 +94,116 @@ _INSERT_SAMPLES = f"INSERT INTO samples ({', '.join(SAMPLE_COLUMNS)}) VALUES ({'
 
 class StorageError(Exception):
     """The database cannot be used as asked; the message says why and what to do."""
+
+
+class LeaseHeld(StorageError):
+    """Another live process writes to the study or session; the message names it."""
+
+
+def session_scope(session_id: int) -> str:
+    """The lease scope of one session."""
+    return f"session {int(session_id)}"
+
+
+def new_owner_token() -> str:
+    """A fresh lease owner token (one per writing command; a study's workers share their command's)."""
+    return secrets.token_hex(8)
+
+
+def _boot_id() -> str:
+    try:
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
+            return fh.read().strip()
+    except OSError:
+        return ""
+
+
+def process_identity(pid: int) -> str:
+    """Boot id and start time of a process: equal for the same process, different for a reused pid.
+
+    Empty where ``/proc`` cannot tell (not Linux); the caller then falls back on heartbeats.
+    """
+    try:
+        with open(f"/proc/{int(pid)}/stat", encoding="ascii", errors="replace") as fh:
+            stat = fh.read()
+    except OSError:
+        return ""
+    # the command name (field 2) may hold spaces and parentheses: count fields after the last ')'
+    fields = stat[stat.rindex(")") + 2 :].split()
+    return f"{_boot_id()}:{fields[19]}"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, owned by someone else
+        return True
+    except (OverflowError, ValueError):
+        return False
+    return True
+
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _check_sqlite_header(p: Path) -> None:
+    """Refuse a non-empty file that is not SQLite at all (before SQLite touches it)."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(len(_SQLITE_MAGIC))
+    except OSError as exc:
+        raise StorageError(f"{p}: cannot read the database ({exc.strerror})") from None
+    if head and head != _SQLITE_MAGIC:
+        raise StorageError(f"{p}: not a haptic-study database (not an SQLite file)")
+
+
+def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) -> sqlite3.Connection:
+    """A read-only connection that never creates, migrates or locks the database for writing.
+
+    An archived database -- a read-only file in a folder this user cannot
+    write -- cannot be opened read-only in WAL mode (SQLite needs to create the
+    ``-shm`` index beside it); it is opened *immutable* instead, which is
+    exact as long as nobody writes to it, and nobody can.
+
+    Raises
+    ------
+    StorageError
+        No such file, or it cannot be opened.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise StorageError(f"{p}: no such database")
+    if p.is_dir():
+        raise StorageError(f"{p}: is a directory, not a database file")
+    uri = p.resolve().as_uri()
+    try:
+        conn = sqlite3.connect(f"{uri}?mode=ro", uri=True, check_same_thread=False, timeout=timeout_s)
+        try:
+            conn.execute("PRAGMA user_version").fetchone()
+            return conn
+        except sqlite3.OperationalError:
+            conn.close()
+            folder = p.resolve().parent
+            wal = p.with_name(p.name + "-wal")
+            if os.access(folder, os.W_OK) or (wal.exists() and wal.stat().st_size > 0):
+                raise
+        except sqlite3.DatabaseError:
+            conn.close()
+            raise
+        # an archive (nobody can write here): immutable needs no -shm and takes no lock
+        conn = sqlite3.connect(f"{uri}?immutable=1", uri=True, check_same_thread=False, timeout=timeout_s)
+        try:
+            conn.execute("PRAGMA user_version").fetchone()
+        except sqlite3.DatabaseError:
+            conn.close()
+            raise
+        return conn
+    except sqlite3.OperationalError as exc:
+        raise StorageError(f"{p}: cannot open the database ({exc})") from None
+    except sqlite3.DatabaseError as exc:
+        raise StorageError(f"{p}: not a haptic-study database ({exc})") from None
 
 
 def schema_path() -> Path:
@@ -68,6 +221,13 @@ def validate_code(code: str) -> str:
     if not isinstance(code, str) or not CODE_PATTERN.match(code):
         raise StorageError(f"participant code = {code!r}: must be 1–32 characters from A–Z, a–z, 0–9, '_' and '-'")
     return code
+
+
+def _command_line() -> str:
+    """This process's command, shortened (``haptic-study run --resume P01 ...``)."""
+    args = [os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else "python", *sys.argv[1:]]
+    text = " ".join(args)
+    return text if len(text) <= 120 else text[:117] + "..."
 
 
 def _now_iso() -> str:
@@ -98,9 +258,9 @@ class StudyDatabase:
     Parameters
     ----------
     path
-        Database file; created (with the schema) if it does not exist.
+        Database file; created (with the schema, readable by its owner only) if it does not exist.
     readonly
-        Open for reading only (analysis); never creates or migrates.
+        Open for reading only (analysis); never creates, upgrades or locks for writing.
     busy_timeout_s
         How long a statement waits for another connection's write lock before
         failing with "database is locked".  Several writers share one database
@@ -109,6 +269,21 @@ class StudyDatabase:
         lock only for one short commit, but a commit that also checkpoints a
         large WAL on a slow disk can take seconds, so writers wait up to 30 s
         (sqlite3's default, 5 s, could turn a slow disk into a failed study).
+    check
+        Run ``PRAGMA quick_check`` before anything else (default: for writers;
+        readers ask for it where a whole study is read).  A damaged file is
+        refused with one line and left byte-identical.
+    upgrade
+        A writer that opens a version-1 database upgrades it to the current
+        schema after writing a backup copy beside it (``<name>.v1-backup-<time><suffix>``);
+        False refuses instead.  Readers never upgrade.
+
+    Attributes
+    ----------
+    upgraded_from
+        The schema version the file had before this writer upgraded it (None if it did not).
+    backup_path
+        The backup written before the upgrade.
     """
 
     #: Writers' default busy timeout (see ``busy_timeout_s``).
@@ -116,22 +291,29 @@ class StudyDatabase:
 
     def __init__(
         self, path: str | os.PathLike[str], *, readonly: bool = False, busy_timeout_s: float | None = None,
+        check: bool | None = None, upgrade: bool = True,
     ) -> None:
         self.path = Path(path)
-        self._check_path(readonly)
-        try:
-            if readonly:
-                self.conn = sqlite3.connect(f"file:{self.path}?mode=ro", uri=True, check_same_thread=False,
-                                            timeout=5.0 if busy_timeout_s is None else busy_timeout_s)
-            else:
+        self.readonly = readonly
+        self.upgraded_from: int | None = None
+        self.backup_path: Path | None = None
+        self._last_heartbeat = 0.0
+        self._owners: set[str] = set()
+        created = self._check_path(readonly)
+        if readonly:
+            self.conn = connect_readonly(self.path, timeout_s=5.0 if busy_timeout_s is None else busy_timeout_s)
+        else:
+            try:
                 self.conn = sqlite3.connect(
                     str(self.path), check_same_thread=False, isolation_level=None,
                     timeout=self.WRITER_BUSY_TIMEOUT_S if busy_timeout_s is None else busy_timeout_s,
                 )
-        except sqlite3.Error as exc:
-            raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
+            except sqlite3.Error as exc:
+                raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
         try:
-            self._prepare(readonly)
+            if (not readonly if check is None else check) and not created:
+                self._quick_check()
+            self._prepare(readonly, upgrade)
         except sqlite3.DatabaseError as exc:
             self.conn.close()
             raise StorageError(f"{self.path}: not a haptic-study database ({exc})") from None
@@ -140,24 +322,53 @@ class StudyDatabase:
             raise
 
     # -- opening ------------------------------------------------------------------------------------
-    def _check_path(self, readonly: bool) -> None:
+    def _check_path(self, readonly: bool) -> bool:
+        """Refuse what cannot be opened as asked; create a new file owner-only.  True if it was created."""
         p = self.path
         if p.exists() and p.is_dir():
             raise StorageError(f"{p}: is a directory, not a database file")
         if readonly:
             if not p.exists():
                 raise StorageError(f"{p}: no such database")
-            return
+            _check_sqlite_header(p)
+            return False
         parent = p.parent if str(p.parent) else Path(".")
         if not parent.exists():
             raise StorageError(f"{p}: the folder {parent} does not exist")
         if p.exists():
+            _check_sqlite_header(p)
             if not os.access(p, os.W_OK):
-                raise StorageError(f"{p}: the database is not writable")
-        elif not os.access(parent, os.W_OK):
+                raise StorageError(f"{p}: the database is not writable (open it read-only, e.g. with report)")
+            if not os.access(parent, os.W_OK):
+                raise StorageError(f"{p}: the folder {parent} is not writable (SQLite writes its journal beside the database)")
+            return False
+        if not os.access(parent, os.W_OK):
             raise StorageError(f"{p}: cannot create the database here (folder {parent} is not writable)")
+        try:
+            # owner-only from the first byte: SQLite gives the -wal and -shm files the database's permissions
+            os.close(os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:  # another process created it meanwhile: open it as it is
+            return False
+        except OSError as exc:
+            raise StorageError(f"{p}: cannot create the database ({exc.strerror})") from None
+        return True
 
-    def _prepare(self, readonly: bool) -> None:
+    def _quick_check(self) -> None:
+        try:
+            rows = self.conn.execute("PRAGMA quick_check(5)").fetchall()
+        except sqlite3.DatabaseError as exc:
+            raise StorageError(f"{self.path}: the database is damaged ({exc}); nothing was written to it "
+                               "(restore it from a backup)") from None
+        problems = [str(r[0]) for r in rows if r[0] != "ok"]
+        if problems:
+            raise StorageError(f"{self.path}: the database is damaged (integrity check: {problems[0]}); "
+                               "nothing was written to it (restore it from a backup)")
+
+    def quick_check(self) -> None:
+        """``PRAGMA quick_check``; raises :class:`StorageError` with the first problem found."""
+        self._quick_check()
+
+    def _prepare(self, readonly: bool, upgrade: bool) -> None:
         c = self.conn
         version = c.execute("PRAGMA user_version").fetchone()[0]
         tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
@@ -173,15 +384,74 @@ class StudyDatabase:
                 raise StorageError(f"{self.path}: empty database (no study data)")
             script = schema_path().read_text(encoding="utf-8")
             c.execute("PRAGMA journal_mode = WAL")
-            c.executescript("BEGIN;\n" + script + f"\nPRAGMA user_version = {SCHEMA_VERSION};\nCOMMIT;")
+            c.executescript("BEGIN IMMEDIATE;\n" + script + f"\nPRAGMA user_version = {SCHEMA_VERSION};\nCOMMIT;")
         elif not {"participants", "sessions", "trials", "samples", "events"} <= tables:
             raise StorageError(f"{self.path}: not a haptic-study database (tables missing)")
+        elif version < SCHEMA_VERSION and not readonly:
+            if not upgrade:
+                raise StorageError(f"{self.path}: database schema version {version} must be upgraded to "
+                                   f"{SCHEMA_VERSION} before it is written to; nothing was changed")
+            self._upgrade(version)
         if not readonly:
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.
             c.execute("PRAGMA synchronous = NORMAL")
             c.execute("PRAGMA foreign_keys = ON")
+
+    @property
+    def schema_version(self) -> int:
+        """The file's ``PRAGMA user_version``."""
+        return int(self.conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def _backup_to(self, target: Path) -> None:
+        """A consistent copy of the whole database in ``target`` (SQLite's online backup)."""
+        dst = sqlite3.connect(str(target))
+        try:
+            self.conn.backup(dst)
+        finally:
+            dst.close()
+
+    def _upgrade(self, version: int) -> None:
+        """Write a backup copy beside the file, then upgrade the schema in one transaction."""
+        assert version == 1, version
+        stamp = _dt.datetime.now().strftime("%Y%m%dT%H%M%S")
+        backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}{self.path.suffix or '.db'}")
+        n = 1
+        while backup.exists():
+            n += 1
+            backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}-{n}{self.path.suffix or '.db'}")
+        try:
+            os.close(os.open(backup, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+            self._backup_to(backup)
+        except (OSError, sqlite3.Error) as exc:
+            try:
+                backup.unlink()
+            except OSError:
+                pass
+            raise StorageError(f"{self.path}: schema version {version} must be upgraded to {SCHEMA_VERSION}, and the "
+                               f"backup copy {backup.name} could not be written ({exc}); nothing was changed") from None
+        c = self.conn
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            if c.execute("PRAGMA user_version").fetchone()[0] == version:  # not upgraded by another writer meanwhile
+                for stmt in _UPGRADE_1_TO_2:
+                    c.execute(stmt)
+                try:
+                    # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps its index
+                    c.execute("SAVEPOINT unique_samples")
+                    c.execute("DROP INDEX IF EXISTS samples_by_trial")
+                    c.execute("CREATE UNIQUE INDEX samples_by_trial ON samples (trial_id, t_s)")
+                    c.execute("RELEASE unique_samples")
+                except sqlite3.IntegrityError:
+                    c.execute("ROLLBACK TO unique_samples")
+                    c.execute("RELEASE unique_samples")
+                c.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            c.execute("COMMIT")
+        except BaseException:
+            c.execute("ROLLBACK")
+            raise
+        self.upgraded_from, self.backup_path = version, backup
 
     def close(self) -> None:
         """Close the connection."""
@@ -224,23 +494,32 @@ class StudyDatabase:
     def create_session(
         self, *, code: str, kind: str, seed: int, participant_number: int, protocol_json: str, schedule_json: str,
         software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
+        lease_owner: str | None = None, command: str = "", study_owner: str | None = None,
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
+
+        With ``lease_owner`` the session's lease is taken in the same
+        transaction (see :meth:`acquire_lease`), so no other process can write
+        to it from its first moment.
 
         Raises
         ------
         StorageError
             If the participant already has a session of this kind (nothing is overwritten).
+        LeaseHeld
+            If another live process runs the whole study (a headless ``run``).
         """
-        existing = [s for s in self.sessions_of(code, kind)]
-        if existing:
-            s = existing[-1]
-            hint = "resume it with --resume " + code if s.status == "running" else "use a new participant code"
-            raise StorageError(
-                f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
-                f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
-            )
         with self.transaction():
+            existing = self.sessions_of(code, kind)
+            if existing:
+                s = existing[-1]
+                hint = "resume it with --resume " + code if s.status == "running" else "use a new participant code"
+                raise StorageError(
+                    f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
+                    f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
+                )
+            if lease_owner is not None:
+                self._refuse_if_study_held(study_owner or lease_owner)
             pid = self.participant_id(code, create=True)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
@@ -251,7 +530,118 @@ class StudyDatabase:
                     rig, json.dumps(config, sort_keys=True), None if calibration is None else json.dumps(calibration),
                 ),
             )
-        return int(cur.lastrowid)  # type: ignore[arg-type]
+            session_id = int(cur.lastrowid)  # type: ignore[arg-type]
+            if lease_owner is not None:
+                self._write_lease(session_scope(session_id), lease_owner, command)
+        return session_id
+
+    # -- leases: one writer per session -------------------------------------------------------------
+    def acquire_lease(self, scope: str, owner: str, *, command: str = "", study_owner: str | None = None) -> str:
+        """Take the lease on ``scope`` (``"study"`` or :func:`session_scope`) for this process.
+
+        Parameters
+        ----------
+        scope
+            What to own.
+        owner
+            The caller's token (:func:`new_owner_token`).  A lease already held
+            under this token by a live process of this command is shared, not refused.
+        command
+            What the caller is, for other processes' refusal messages.
+        study_owner
+            The token of the study lease the caller works under (a parallel
+            ``run``'s workers), if any: a study lease under it is not a conflict.
+
+        Returns
+        -------
+        str
+            "" or, when a lease left by a process that is gone was taken over, a
+            sentence saying so (worth storing as an event).
+
+        Raises
+        ------
+        LeaseHeld
+            Another live process holds the scope (or, for a session, the whole
+            study; for the study, any session); the message names it.
+        """
+        with self.transaction():
+            note = ""
+            if scope == "study":
+                for row in self._leases():
+                    if row["owner"] != owner and self._alive(row):
+                        what = "the study in" if row["scope"] == "study" else f"{row['scope']} of"
+                        raise LeaseHeld(self._held_message(row, what))
+            else:
+                self._refuse_if_study_held(study_owner or owner)
+            row = self._lease(scope)
+            if row is not None and row["owner"] != owner:
+                if self._alive(row):
+                    raise LeaseHeld(self._held_message(row, f"{scope} of"))
+                note = (f"took over the lease on {scope} left by process {row['pid']} on {row['host']} "
+                        f"({row['command'] or 'unknown command'}), which is no longer running")
+            self._write_lease(scope, owner, command)
+        return note
+
+    def release_lease(self, scope: str, owner: str) -> None:
+        """Give a lease back (only the owner's own; a lease taken over meanwhile is left alone)."""
+        with self.transaction():
+            self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ? AND pid = ?", (scope, owner, os.getpid()))
+
+    def heartbeat(self, *, force: bool = False) -> None:
+        """Refresh this process's leases (at most every ``LEASE_HEARTBEAT_S``) in the open transaction, if any."""
+        now = time.monotonic()
+        if not self._owners or (not force and now - self._last_heartbeat < LEASE_HEARTBEAT_S):
+            return
+        self._last_heartbeat = now
+        self.conn.execute("UPDATE leases SET heartbeat_at = ? WHERE pid = ? AND host = ?",
+                          (_now_iso(), os.getpid(), socket.gethostname()))
+
+    def lease_holders(self) -> list[dict[str, Any]]:
+        """Every stored lease with ``alive`` (for displays and tests)."""
+        return [{**row, "alive": self._alive(row)} for row in self._leases()]
+
+    def _leases(self) -> list[dict[str, Any]]:
+        cur = self.conn.execute("SELECT scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at FROM leases")
+        names = [d[0] for d in cur.description]
+        return [dict(zip(names, r)) for r in cur]
+
+    def _lease(self, scope: str) -> dict[str, Any] | None:
+        return next((r for r in self._leases() if r["scope"] == scope), None)
+
+    def _refuse_if_study_held(self, my_study_owner: str) -> None:
+        row = self._lease("study")
+        if row is not None and row["owner"] != my_study_owner and self._alive(row):
+            raise LeaseHeld(self._held_message(row, "the study in"))
+
+    def _write_lease(self, scope: str, owner: str, command: str) -> None:
+        now = _now_iso()
+        pid = os.getpid()
+        self.conn.execute(
+            "INSERT OR REPLACE INTO leases (scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at) "
+            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            (scope, owner, pid, socket.gethostname(), process_identity(pid), command or _command_line(), now, now),
+        )
+        self._owners.add(owner)
+
+    @staticmethod
+    def _alive(row: dict[str, Any]) -> bool:
+        """Is the lease's process still running? Same host: the pid runs the very process; else a fresh heartbeat."""
+        if row["host"] == socket.gethostname():
+            if not _pid_alive(row["pid"]):
+                return False
+            ident = process_identity(row["pid"])
+            return not (ident and row["process_start"] and ident != row["process_start"])
+        try:
+            beat = _dt.datetime.fromisoformat(row["heartbeat_at"])
+        except (TypeError, ValueError):
+            return False
+        return (_dt.datetime.now(_dt.timezone.utc) - beat).total_seconds() < LEASE_STALE_S
+
+    def _held_message(self, row: dict[str, Any], what: str) -> str:
+        where = "" if row["host"] == socket.gethostname() else f" on {row['host']}"
+        return (f"{self.path}: {what} this database is being written by process {row['pid']}{where} "
+                f"({row['command']}, since {str(row['acquired_at'])[:19].replace('T', ' ')} UTC); nothing was changed "
+                "(wait for it to finish, or stop it)")
 
     def update_schedule(self, session_id: int, schedule_json: str) -> None:
         """Store the schedule after an aborted trial was re-queued (the only schedule change)."""
@@ -438,6 +828,8 @@ class Recorder:
                 if self.db.conn.in_transaction:
                     self.db.conn.execute("ROLLBACK")
                 raise
+        if self.db.conn.in_transaction:
+            self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()
         self._first_pending = None
 

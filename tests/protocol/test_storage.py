@@ -36,13 +36,15 @@ COLUMNS = {
     "trials": [
         "trial_id", "session_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome",
         "started_at_s", "ended_at_s", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n", "n_samples",
-        "abort_reason", "repeat_of",
+        "abort_reason", "repeat_of", "abort_cause", "period_p50_ms", "period_p99_ms", "period_max_ms",
+        "periods_over_2ms", "sensor_age_max_ms", "pose_age_max_ms", "latency_p50_ms", "latency_max_ms",
     ],
     "samples": [
         "trial_id", "t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
         "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz",
     ],
     "events": ["session_id", "t_s", "kind", "detail"],
+    "leases": ["scope", "owner", "pid", "host", "process_start", "command", "acquired_at", "heartbeat_at"],
 }
 
 
@@ -76,6 +78,9 @@ def _trial_row(session_id: int, index: int, outcome: str = "success", tct_s: flo
         "target_label": "GENTLE", "target_force_n": 0.6, "haptic_mode": "on", "outcome": outcome,
         "started_at_s": 10.25, "ended_at_s": 11.75, "tct_s": tct_s, "rmse_n": 0.125, "max_ae_n": 0.5,
         "time_in_band_s": 1.001, "peak_force_n": 0.66, "n_samples": 1501, "abort_reason": None, "repeat_of": None,
+        "abort_cause": None, "period_p50_ms": 1.0, "period_p99_ms": 1.004, "period_max_ms": 1.25,
+        "periods_over_2ms": 0, "sensor_age_max_ms": 1.0, "pose_age_max_ms": 8.0, "latency_p50_ms": 0.5,
+        "latency_max_ms": 1.125,
     }
 
 
@@ -106,7 +111,7 @@ def test_new_database_gets_the_schema(db, db_path):
         for table, columns in COLUMNS.items():
             assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 1
+        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
         indexes = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")}
         assert indexes == {"samples_by_trial", "events_by_session"}
     finally:
@@ -122,7 +127,7 @@ def test_reopening_keeps_the_data(db_path):
     again = StudyDatabase(db_path)
     try:
         assert [s.session_id for s in again.sessions_of("P01")] == [sid]
-        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 1
+        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 2
     finally:
         again.close()
     ro = StudyDatabase(db_path, readonly=True)
@@ -144,7 +149,7 @@ def test_an_empty_file_becomes_a_database(db_path):
 # -- refusals -------------------------------------------------------------------------------------
 def test_newer_schema_is_refused(db_path):
     with sqlite3.connect(db_path) as c:
-        c.execute("PRAGMA user_version = 2")
+        c.execute("PRAGMA user_version = 3")
         c.execute("CREATE TABLE participants (participant_id INTEGER PRIMARY KEY)")
     c.close()
     before = db_path.read_bytes()
@@ -152,7 +157,7 @@ def test_newer_schema_is_refused(db_path):
         StudyDatabase(db_path)
     msg = str(info.value)
     assert str(db_path) in msg
-    assert "version 2 is newer than this software supports (1)" in msg
+    assert "version 3 is newer than this software supports (2)" in msg
     assert db_path.read_bytes() == before
 
 
@@ -346,7 +351,8 @@ def test_round_trip_of_a_session(db, db_path):
     trials = [
         _trial_row(sid, 0),
         _trial_row(sid, 1, outcome="timeout", tct_s=None),
-        {**_trial_row(sid, 2, outcome="aborted", tct_s=None), "abort_reason": "probe slipped"},
+        {**_trial_row(sid, 2, outcome="aborted", tct_s=None), "abort_reason": "probe slipped",
+         "abort_cause": "experimenter"},
         {**_trial_row(sid, 3), "repeat_of": 2},
     ]
     events = [(sid, 0.5, "cue", "trial 0: GENTLE 0.6 N, haptics on"), (sid, 1.25, "phase", "trial 0: cued -> active")]
