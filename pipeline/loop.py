@@ -9,7 +9,8 @@ Each tick:
 4. run Algorithm 1 (:class:`pipeline.framework.HapticFramework`); the safety
    stage ramps the output to zero within 50 ms while a fault is latched or
    feedback is off;
-5. command the haptic device and append one record with every stage to the ring buffer.
+5. command the haptic device and append one record with every stage to the ring buffer
+   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over).
 
 The loop does only I/O and arithmetic: no logging, no allocation beyond a
 few tuples, no locks.  Commands arrive through a deque (thread-safe append /
@@ -17,6 +18,8 @@ popleft) and are applied at the start of the next tick.  Faults are latched
 until :class:`ResetFaults` clears them -- and a reset only clears conditions
 that have gone away.  Whenever the latched set changes the rig's optional
 ``on_faults`` hook is called (a teleoperated robot stops; see :class:`Rig`).
+Every latch (with the value that tripped it), every condition that goes away
+while latched, and every reset is a :class:`LoopEvent` for the record.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
 from pipeline.clock import Clock, prepare_realtime_thread
-from pipeline.devices import Fault, ForceSensor, HapticDevice, Robot
+from pipeline.devices import Fault, ForceSensor, HapticDevice, HapticState, PoseSample, Robot, WrenchSample
 from pipeline.frames import Vec3
 from pipeline.framework import STEP_FIELDS, HapticFramework
 
@@ -61,7 +64,7 @@ RECORD_FIELDS: tuple[str, ...] = (
     "tip_x_m", "tip_y_m", "tip_z_m",
     "stylus_x_m", "stylus_y_m", "stylus_z_m",
     "true_fx", "true_fy", "true_fz",
-    "period_s",
+    "period_s", "latency_s",
 )
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
@@ -149,7 +152,15 @@ Command = SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | 
 
 
 class LoopEvent(NamedTuple):
-    """Something the experimenter must see: ``kind`` is ``"fault"`` or ``"faults_reset"``."""
+    """Something the experimenter must see, and the study record must keep.
+
+    ``kind`` is ``"fault"`` (a fault latched; ``detail`` names it and the value
+    that tripped it), ``"fault_cleared"`` (a latched fault's condition went
+    away; it stays latched until a reset) or ``"faults_reset"`` (a reset:
+    ``faults`` is what is still latched after it, ``detail`` what was latched
+    before).  ``t_ns`` is on the records' time axis (``t_ns`` of the tick's
+    record: ns since the loop's first tick).
+    """
 
     t_ns: int
     kind: str
@@ -283,6 +294,7 @@ class HapticLoop:
         self.phase = 0
         self.faults = 0  # latched
         self.active_faults = 0  # this tick's conditions
+        self._gone_reported = 0  # latched faults whose condition was reported gone
         self.refine_bias = False
         self._last_ns: int | None = None
         #: Clock reading of the first tick; records carry time since then
@@ -363,6 +375,7 @@ class HapticLoop:
                 cond |= Fault.NON_FINITE
         if hs.error_code:
             cond |= Fault.HAPTIC_DEVICE
+        prev = self.active_faults
         self.active_faults = cond
         latched = self.faults
         new = cond & ~latched
@@ -370,14 +383,24 @@ class HapticLoop:
             # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
             latched = int(latched | new)
             self.faults = latched
+            self._gone_reported &= ~new
             self._faults_changed(now)
-            self._emit(LoopEvent(now, "fault", latched, Fault(new).describe()))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", latched,
+                                 self._fault_detail(new, w, pose, hs, sensor_age, pose_age)))
+        if cond != prev:
+            gone = latched & prev & ~cond & ~self._gone_reported
+            if gone:
+                self._gone_reported |= gone
+                self._emit(LoopEvent(now - self.t0_ns, "fault_cleared", latched,
+                                     f"{Fault(gone).describe()}: the condition is gone (latched until a reset)"))
 
         if self.refine_bias and not latched:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
 
         out = fw.step(fx, fy, fz, self.haptic_on and not latched, dt_s)
         rig.haptic.command_force(out[18], out[19], out[20])
+        # what the participant waits for: from the sample's arrival to the command's hand-over
+        latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m
@@ -389,12 +412,45 @@ class HapticLoop:
             sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
             pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],
-            dt_s,
+            dt_s, latency_s,
         )
         self._last_record = rec
         if self.ring is not None:
             self.ring.write(rec)  # type: ignore[attr-defined]
         self.tick_count += 1
+
+    def _fault_detail(
+        self, new: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age_ns: int, pose_age_ns: int,
+    ) -> str:
+        """What latched and the value that tripped it, e.g. ``SENSOR_STALE: newest F/T sample 7.0 ms old (limit 5 ms)``.
+
+        Only on the fault path: a tick without a new fault never builds it.
+        """
+        wd = self.watchdog
+        parts = []
+        if new & Fault.SENSOR_STALE:
+            parts.append(f"SENSOR_STALE: newest F/T sample {sensor_age_ns * 1e-6:.1f} ms old "
+                         f"(limit {wd.sensor_max_age_s * 1e3:g} ms)")
+        if new & Fault.SENSOR_STATUS:
+            parts.append(f"SENSOR_STATUS: status word 0x{int(w.status):08X}")
+        if new & Fault.NON_FINITE:
+            names = ("fx", "fy", "fz", "tx", "ty", "tz")
+            bad = [f"{n} = {v!r}" for n, v in zip(names, w[1:7]) if not math.isfinite(v)]
+            bad += [f"pose {v!r}" for v in (*pose.position_m, *pose.rot_base_tip) if not math.isfinite(v)][:1]
+            parts.append(f"NON_FINITE: {', '.join(bad) or 'a non-finite reading'}")
+        if new & Fault.SENSOR_SATURATION:
+            names = ("fx", "fy", "fz", "tx", "ty", "tz")
+            units = ("N", "N", "N", "N·m", "N·m", "N·m")
+            over = [(n, v, r, u) for n, v, r, u in zip(names, w[1:7], self._sat, units) if abs(v) > r]
+            n, v, r, u = over[0] if over else ("a channel", math.nan, math.nan, "")
+            parts.append(f"SENSOR_SATURATION: {n} = {v:.2f} {u} beyond {wd.saturation_fraction:.0%} of its range "
+                         f"(±{r:.3g} {u})")
+        if new & Fault.POSE_STALE:
+            parts.append(f"POSE_STALE: newest robot pose {pose_age_ns * 1e-6:.1f} ms old "
+                         f"(limit {wd.pose_max_age_s * 1e3:g} ms)")
+        if new & Fault.HAPTIC_DEVICE:
+            parts.append(f"HAPTIC_DEVICE: device error 0x{int(hs.error_code):04X}")
+        return "; ".join(parts) or Fault(new).describe()
 
     def _apply(self, cmd: Command, now: int) -> None:
         if isinstance(cmd, Mark):
@@ -411,17 +467,19 @@ class HapticLoop:
                 if not self.rig.haptic.rearm():
                     persisting |= Fault.HAPTIC_DEVICE
             self.faults = int(persisting)
+            self._gone_reported &= persisting
             if before and not persisting:
                 self.framework.reset()
             if persisting != before:
                 self._faults_changed(now)
-            self._emit(LoopEvent(now, "faults_reset", persisting, Fault(before).describe()))
+            self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
         elif isinstance(cmd, OperatorStop):
             self._latch(Fault.OPERATOR_STOP, now)
-            self._emit(LoopEvent(now, "fault", self.faults, "OPERATOR_STOP"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, "OPERATOR_STOP: the experimenter stopped the force"))
         elif isinstance(cmd, ControllerDetached):
             self._latch(Fault.ENGINE_DETACHED, now)
-            self._emit(LoopEvent(now, "fault", self.faults, "ENGINE_DETACHED"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
+                                 "ENGINE_DETACHED: the controlling process went away"))
         elif isinstance(cmd, AllowBiasRefinement):
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
@@ -442,7 +500,7 @@ class HapticLoop:
         try:
             hook(Fault(self.faults))
         except Exception as exc:  # noqa: BLE001 - the loop must keep ramping the force down; report it
-            self._emit(LoopEvent(now, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
 
     def _emit(self, ev: LoopEvent) -> None:
         self.events.append(ev)
@@ -526,7 +584,8 @@ class HapticLoop:
             try:
                 self._rig_stop_motion("haptic loop stopped")
             except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
-                self._emit(LoopEvent(clock.now_ns(), "fault", self.faults, f"the rig could not stop the robot: {exc!r}"))
+                self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
+                                     f"the rig could not stop the robot: {exc!r}"))
         # ramp ticks continue the period grid: the next slot after the last tick, not one later
         last = self._last_ns
         deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)

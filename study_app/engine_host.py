@@ -548,7 +548,7 @@ class StudyEngine:
 
     def _on_loop_event(self, ev: LoopEvent) -> None:
         # called from the loop thread: only hand the event on
-        self.publish(m.EngineFault((ev.t_ns - self.loop.t0_ns) * 1e-9, ev.kind, int(ev.faults), ev.detail))
+        self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail))
 
     # -- commands -------------------------------------------------------------------------------------
     def handle(self, cmd: object) -> None:

@@ -125,7 +125,7 @@ def test_engine_detached_latches_ramps_down_and_exits_by_itself(engines, haptics
     assert not proc.alive
     assert proc.final_stats is not None, "the engine must exit cleanly, reporting its stats"
     assert proc.final_faults is not None and proc.final_faults & Fault.ENGINE_DETACHED
-    detached = [e for e in proc.loop_events if e.kind == "fault" and e.detail == "ENGINE_DETACHED"]
+    detached = [e for e in proc.loop_events if e.kind == "fault" and e.detail.startswith("ENGINE_DETACHED: ")]
     assert len(detached) == 1
     assert detached[0].faults & Fault.ENGINE_DETACHED
 

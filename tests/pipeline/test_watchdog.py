@@ -14,6 +14,7 @@ through the simulation's fault switches and checks, tick by tick:
 from __future__ import annotations
 
 import math
+import re
 
 import pytest
 
@@ -143,9 +144,9 @@ def test_sensor_stall_latches_when_sample_age_exceeds_5ms_and_ramps_to_zero(eng)
     assert all(r["faults"] == float(Fault.SENSOR_STALE) for r in recs[fault_i:])
 
     (ev,) = fault_events(eng)
-    assert ev.t_ns == recs[fault_i]["clock_ns"]
+    assert ev.t_ns == recs[fault_i]["t_ns"]  # on the records' time axis
     assert ev.faults == Fault.SENSOR_STALE
-    assert ev.detail == "SENSOR_STALE"
+    assert ev.detail == "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"
 
     check_ramp_to_zero(recs, fault_i)
     assert eng.loop.faults == Fault.SENSOR_STALE
@@ -165,8 +166,8 @@ def test_nan_burst_latches_non_finite_never_reaches_device_and_does_not_poison_t
     assert all(math.isfinite(r["raw_fx"]) for r in after)
     assert burst[0]["faults"] == float(Fault.NON_FINITE)
     (ev,) = fault_events(eng)
-    assert ev.faults == Fault.NON_FINITE and ev.detail == "NON_FINITE"
-    assert ev.t_ns == burst[0]["clock_ns"]
+    assert ev.faults == Fault.NON_FINITE and ev.detail == "NON_FINITE: fx = nan"
+    assert ev.t_ns == burst[0]["t_ns"]
 
     # nothing non-finite ever goes to the device, and the filter rejected the bad samples
     stage_cols = STEP_FIELDS[STEP_FIELDS.index("filt_fx") :]  # filt_* ... render_*: downstream of the filter
@@ -197,7 +198,7 @@ def test_nan_burst_latches_non_finite_never_reaches_device_and_does_not_poison_t
     assert all(r["faults"] == 0.0 for r in back)
     reset_ev = eng.loop.events[-1]
     assert reset_ev.kind == "faults_reset" and reset_ev.faults == 0 and reset_ev.detail == "NON_FINITE"
-    assert reset_ev.t_ns == back[0]["clock_ns"]
+    assert reset_ev.t_ns == back[0]["t_ns"]
 
     gains = [r["gain"] for r in back]
     # ramp in at dt/ramp_in_s per tick from the reset tick on; exactly 1 after ramp_in_s
@@ -229,7 +230,7 @@ def test_stale_pose_latches_when_pose_age_exceeds_50ms():
     assert recs[fault_i - 1]["faults"] == 0.0 and recs[fault_i - 1]["gain"] == 1.0
     assert all(r["faults"] == float(Fault.POSE_STALE) for r in recs[fault_i:])
     (ev,) = fault_events(e)
-    assert ev.faults == Fault.POSE_STALE and ev.detail == "POSE_STALE"
+    assert ev.faults == Fault.POSE_STALE and ev.detail == "POSE_STALE: newest robot pose 51.0 ms old (limit 50 ms)"
     check_ramp_to_zero(recs, fault_i)
 
 
@@ -242,7 +243,7 @@ def test_bad_sensor_status_latches_sensor_status(eng, status):
     assert recs[0]["faults"] == float(Fault.SENSOR_STATUS)
     assert all(r["faults"] == float(Fault.SENSOR_STATUS) for r in recs)
     (ev,) = fault_events(eng)
-    assert ev.faults == Fault.SENSOR_STATUS and ev.detail == "SENSOR_STATUS"
+    assert ev.faults == Fault.SENSOR_STATUS and ev.detail == f"SENSOR_STATUS: status word 0x{status:08X}"
     check_ramp_to_zero(recs, 0)
 
 
@@ -290,8 +291,8 @@ def test_operator_stop_latches_and_ramps_to_zero_until_reset(eng):
     assert recs[0]["faults"] == float(Fault.OPERATOR_STOP)
     assert all(r["faults"] == float(Fault.OPERATOR_STOP) for r in recs)
     (ev,) = fault_events(eng)
-    assert ev.faults == Fault.OPERATOR_STOP and ev.detail == "OPERATOR_STOP"
-    assert ev.t_ns == recs[0]["clock_ns"]
+    assert ev.faults == Fault.OPERATOR_STOP and ev.detail == "OPERATOR_STOP: the experimenter stopped the force"
+    assert ev.t_ns == recs[0]["t_ns"]
     check_ramp_to_zero(recs, 0)
     assert eng.loop.active_faults == 0  # not a sensed condition: only the reset clears it
 
@@ -335,7 +336,7 @@ def test_warm_motors_latch_haptic_device_and_reset_waits_for_cooling():
     assert recs[fault_i]["faults"] == float(Fault.HAPTIC_DEVICE)
     assert touch.error_code == HD_WARM_MOTORS
     (ev,) = fault_events(e)
-    assert ev.faults == Fault.HAPTIC_DEVICE and ev.detail == "HAPTIC_DEVICE"
+    assert ev.faults == Fault.HAPTIC_DEVICE and ev.detail == "HAPTIC_DEVICE: device error 0x0200"
 
     # an immediate reset: the motors are still warm, the device refuses to re-arm
     e.loop.submit(ResetFaults())
@@ -365,3 +366,37 @@ def test_warm_motors_latch_haptic_device_and_reset_waits_for_cooling():
     ev = e.loop.events[-1]
     assert ev.kind == "faults_reset" and ev.faults == 0 and ev.detail == "HAPTIC_DEVICE"
     assert recs[-1]["gain"] == pytest.approx(1 / RAMP_IN_TICKS, abs=1e-12)
+
+
+# -- the record: a condition that goes away while latched is said once -------------------------------
+def test_a_condition_that_goes_away_while_latched_is_reported_once_per_latch(eng):
+    eng.rig.sensor.status_override = 0x1
+    ticks(eng, 3)
+    eng.rig.sensor.status_override = 0
+    recs = ticks(eng, 5)
+    eng.rig.sensor.status_override = 0x1  # back while still latched: not a new fault, nothing new to say
+    ticks(eng, 3)
+    eng.rig.sensor.status_override = 0
+    ticks(eng, 3)
+    kinds = [(e.kind, e.detail) for e in eng.loop.events]
+    assert kinds == [
+        ("fault", "SENSOR_STATUS: status word 0x00000001"),
+        ("fault_cleared", "SENSOR_STATUS: the condition is gone (latched until a reset)"),
+    ]
+    cleared = eng.loop.events[1]
+    assert cleared.t_ns == recs[0]["t_ns"] and cleared.faults == Fault.SENSOR_STATUS
+    eng.loop.submit(ResetFaults())
+    ticks(eng, 2)
+    eng.rig.sensor.status_override = 0x1  # a new latch after the reset: reported again, and its end too
+    ticks(eng, 2)
+    eng.rig.sensor.status_override = 0
+    ticks(eng, 2)
+    assert [e.kind for e in eng.loop.events][2:] == ["faults_reset", "fault", "fault_cleared"]
+
+
+def test_saturation_names_the_channel_and_its_value():
+    e = make_engine()
+    e.loop._sat = (100.0, 100.0, 4.0, 100.0, 100.0, 100.0)  # as if fz's range were 5 N: the tool's weight saturates it
+    ticks(e, 5)
+    (ev,) = fault_events(e)
+    assert re.fullmatch(r"SENSOR_SATURATION: fz = -?\d+\.\d\d N beyond 80% of its range \(±4 N\)", ev.detail), ev.detail
