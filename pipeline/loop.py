@@ -10,7 +10,9 @@ Each tick:
    stage ramps the output to zero within 50 ms while a fault is latched or
    feedback is off;
 5. command the haptic device and append one record with every stage to the ring buffer
-   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over).
+   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over --
+   the sample's age at the tick on the loop clock plus the real time from reading it to the command, so a
+   virtual-clock run still measures the software's own processing time).
 
 The loop does only I/O and arithmetic: no logging, no allocation beyond a
 few tuples, no locks.  Commands arrive through a deque (thread-safe append /
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -68,6 +71,7 @@ RECORD_FIELDS: tuple[str, ...] = (
 )
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
+_perf_ns = time.perf_counter_ns
 
 
 class Rig(Protocol):
@@ -341,6 +345,7 @@ class HapticLoop:
         while inbox:
             self._apply(inbox.popleft(), now)
 
+        t_read = _perf_ns()
         w = rig.sensor.read_wrench()
         pose = rig.robot.read_pose()
         hs = rig.haptic.read_state()
@@ -399,8 +404,9 @@ class HapticLoop:
 
         out = fw.step(fx, fy, fz, self.haptic_on and not latched, dt_s)
         rig.haptic.command_force(out[18], out[19], out[20])
-        # what the participant waits for: from the sample's arrival to the command's hand-over
-        latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
+        # from the sample's arrival to the command's hand-over: its age at the tick (loop clock) plus the
+        # real time the tick took from reading it to commanding (real even on a virtual clock)
+        latency_s = (sensor_age + _perf_ns() - t_read) * 1e-9
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m

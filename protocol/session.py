@@ -13,30 +13,55 @@ requests (:meth:`pause`, :meth:`resume`, :meth:`abort_trial`,
 :meth:`abort_session`) may come from any thread; they take effect at the next
 ``process`` call, at that block's sample time.
 
-Abort policy: an aborted trial is stored with outcome ``aborted`` and its
-reason, and re-run later -- appended at the end of the schedule
-(``append``, the default) or re-inserted at a random later position
-(``reinsert``) -- so every target × mode cell still gets its full count of
-completed trials.  Aborting the session aborts the current trial without
-re-queueing it and ends the session with status ``aborted``.
+Abort policy: an aborted trial is stored with outcome ``aborted``, its
+reason and its cause (``trials.abort_cause``), and re-run later -- appended at
+the end of the schedule (``append``, the default) or re-inserted at a random
+later position (``reinsert``) -- so every target × mode cell still gets its
+full count of completed trials.  Aborting the session aborts the current
+trial without re-queueing it and ends the session with status ``aborted``.
+
+**A trial counts only if it ran under its designed condition.**  The runner
+checks every record of the running trial and aborts the trial (cause in
+brackets) at the first one where
+
+* the loop's watchdog has a fault latched (``fault``);
+* feedback was not what the design says: the loop's haptics flag differs from
+  the trial's mode, the feedback gain is below 1 in a haptics-ON trial after
+  its ramp-in, or above 0 in a haptics-OFF trial (``feedback``);
+* records are missing: two consecutive records further apart than the
+  watchdog's sensor-age limit, or records the runner could not read (``gap``).
+
+Every loop event (a fault latched with the value that tripped it, a
+condition gone, a reset) is stored as an event.  No trial is cued while a
+fault is latched; once it is cleared the protocol's pause runs again before
+the next cue.  In a headless session (``auto_reset_faults``) the runner
+itself resets a fault in the pause once its condition is gone; if one is
+still latched ``fault_timeout_s`` (10 s) later the session stops as
+*interrupted* (resumable later) with a one-line :attr:`SessionRunner.stop_reason`.
+
+Each trial row also carries the loop's health over the trial's records
+(:data:`protocol.storage.HEALTH_COLUMNS`): tick period p50/p99/max, ticks over
+2 ms, the oldest F/T sample and robot pose used, and the latency from a
+sample's arrival to the force command it produced (p50/max).
 """
 
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 
-from pipeline.loop import AllowBiasRefinement, Command, Mark, SetHaptics
+from pipeline.devices import Fault
+from pipeline.loop import AllowBiasRefinement, Command, LoopEvent, Mark, ResetFaults, SetHaptics
 from protocol.config import ProtocolConfig
 from protocol.design import TrialSpec, requeue_aborted, schedule_to_json
 from protocol.storage import Recorder, StudyDatabase, trial_id_of
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
-__all__ = ["SessionRunner", "SessionState", "TrialParticipant"]
+__all__ = ["DeliveryLimits", "SessionRunner", "SessionState", "TrialParticipant", "trial_health"]
 
 
 class TrialParticipant(Protocol):
@@ -49,6 +74,30 @@ class TrialParticipant(Protocol):
     def end_trial(self, t_s: float) -> None:
         """The trial ended; rest until the next cue."""
         ...
+
+
+@dataclass(frozen=True, slots=True)
+class DeliveryLimits:
+    """What the loop must deliver for a trial to count (taken from the loop's own configuration).
+
+    Attributes
+    ----------
+    feedback_ramp_in_s
+        The safety stage's ramp-in after feedback is switched on (its gain is 1 after it).
+    feedback_ramp_out_s
+        The ramp-down after feedback is switched off (its gain is 0 after it).
+    max_gap_s
+        Longest allowed time between two consecutive records of a trial (the
+        watchdog's sensor-age limit: a longer gap is a stretch in which the
+        force was not rendered from fresh data).
+    grace_s
+        Allowance on the ramps for a late tick.
+    """
+
+    feedback_ramp_in_s: float = 0.5
+    feedback_ramp_out_s: float = 0.04
+    max_gap_s: float = 0.005
+    grace_s: float = 0.01
 
 
 @dataclass
@@ -66,12 +115,50 @@ class SessionState:
     status: str = "running"
     current: TrialSpec | None = None
     trial_elapsed_s: float = 0.0
+    #: Why the next cue is held back ("" = not held): a latched fault, the pause after one.
+    waiting: str = ""
 
 
 _SAMPLE_SRC = (
     "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
     "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz",
 )
+#: Record columns the loop-health summary of a trial reads.
+_HEALTH_SRC = ("period_s", "sensor_age_s", "pose_age_s", "latency_s")
+#: Headless: a latched fault is reset at most this often while its condition may still be there.
+RESET_RETRY_S = 0.5
+#: Headless: a fault still latched this long after the runner started waiting stops the session (interrupted).
+FAULT_TIMEOUT_S = 10.0
+
+
+def trial_health(period_s: np.ndarray, sensor_age_s: np.ndarray, pose_age_s: np.ndarray,
+                 latency_s: np.ndarray) -> dict[str, float | int | None]:
+    """The loop's health over a trial's records (the ``trials`` columns :data:`protocol.storage.HEALTH_COLUMNS`).
+
+    Parameters
+    ----------
+    period_s, sensor_age_s, pose_age_s, latency_s
+        The records' columns of the same names, s.
+
+    Returns
+    -------
+    dict
+        Times in ms; ``periods_over_2ms`` a count.  All None for a trial without records.
+    """
+    if len(period_s) == 0:
+        return dict.fromkeys(("period_p50_ms", "period_p99_ms", "period_max_ms", "periods_over_2ms",
+                              "sensor_age_max_ms", "pose_age_max_ms", "latency_p50_ms", "latency_max_ms"))
+    p50, p99 = np.quantile(period_s, (0.5, 0.99))
+    return {
+        "period_p50_ms": float(p50) * 1e3,
+        "period_p99_ms": float(p99) * 1e3,
+        "period_max_ms": float(np.max(period_s)) * 1e3,
+        "periods_over_2ms": int(np.count_nonzero(period_s > 0.002)),
+        "sensor_age_max_ms": float(np.max(sensor_age_s)) * 1e3,
+        "pose_age_max_ms": float(np.max(pose_age_s)) * 1e3,
+        "latency_p50_ms": float(np.quantile(latency_s, 0.5)) * 1e3,
+        "latency_max_ms": float(np.max(latency_s)) * 1e3,
+    }
 
 
 class SessionRunner:
@@ -99,6 +186,15 @@ class SessionRunner:
         The participant's clock (the rig's simulated time), for its notifications.
     seed
         Seeds the ``reinsert`` abort policy.
+    limits
+        What the loop must deliver for a trial to count (see the module docstring).
+    initial_pause_s
+        Hold the first cue this long (a resumed session begins with the protocol's pause).
+    auto_reset_faults
+        Headless sessions: reset a latched fault in the pause once its
+        condition is gone, and stop the session as interrupted if one is still
+        latched ``FAULT_TIMEOUT_S`` later.  A person's session leaves the
+        reset to the experimenter.
     """
 
     def __init__(
@@ -114,6 +210,9 @@ class SessionRunner:
         participant: TrialParticipant | None = None,
         participant_time: Callable[[], float] | None = None,
         seed: int = 0,
+        limits: DeliveryLimits | None = None,
+        initial_pause_s: float = 0.0,
+        auto_reset_faults: bool = False,
     ) -> None:
         self.protocol = protocol
         self.schedule = list(schedule)
@@ -131,13 +230,27 @@ class SessionRunner:
         self._t0_ns: int | None = None
         self._last_t_ns = 0
         self._lock = threading.Lock()
-        self._requests: list[tuple[str, str]] = []
+        self._requests: list[tuple[str, str, str]] = []
         self.paused = False
         self.done = False
         self.status = "running"
         self.state = SessionState(trials_total=len(self.schedule))
         self.finished: list[TrialFinished] = []
         self.listeners: list[Callable[[object], None]] = []
+        self.limits = limits or DeliveryLimits()
+        self.auto_reset_faults = auto_reset_faults
+        #: Why the session stopped early as interrupted (headless fault timeout), else "".
+        self.stop_reason = ""
+        self._initial_pause_ns = int(round(initial_pause_s * 1e9))
+        self._ready_ns: int | None = None  # no cue before this loop time
+        self._faults = 0  # latched, as the newest record says
+        self._fault_detail = ""  # the newest fault event's detail
+        self._waiting_since_ns: int | None = None
+        self._next_reset_ns = 0
+        self._last_marked_ns: int | None = None  # the running trial's newest record
+        self._health: list[np.ndarray] = []
+        self._abort_cause: dict[int, str] = {}  # trial index -> cause of its abort
+        self._pending_gap = ""  # records lost before the next block
         self._enter_pause_commands()
 
     # -- experimenter requests (any thread) ----------------------------------------------------
@@ -149,17 +262,25 @@ class SessionRunner:
         """Continue after :meth:`pause`."""
         self._request("resume")
 
-    def abort_trial(self, reason: str = "aborted by the experimenter") -> None:
-        """Abort the running trial; it is re-queued per the protocol's abort policy."""
-        self._request("abort_trial", reason)
+    def abort_trial(self, reason: str = "aborted by the experimenter", cause: str = "experimenter") -> None:
+        """Abort the running trial; it is re-queued per the protocol's abort policy.
+
+        ``cause`` goes to ``trials.abort_cause`` (``experimenter``, or ``interrupted``
+        when the controlling program is going away).
+        """
+        self._request("abort_trial", reason, cause)
+
+    def records_lost(self, count: int) -> None:
+        """The caller could not read ``count`` records (the ring lapped it): the running trial has a gap."""
+        self._pending_gap = f"{count} loop records were lost before they could be stored"
 
     def abort_session(self, reason: str = "aborted by the experimenter") -> None:
         """Abort the running trial (not re-queued) and end the session."""
         self._request("abort_session", reason)
 
-    def _request(self, kind: str, detail: str = "") -> None:
+    def _request(self, kind: str, detail: str = "", cause: str = "experimenter") -> None:
         with self._lock:
-            self._requests.append((kind, detail))
+            self._requests.append((kind, detail, cause))
 
     # -- helpers ------------------------------------------------------------------------------------
     def session_time_s(self, t_ns: int) -> float:
@@ -184,28 +305,138 @@ class SessionRunner:
                 pass
 
     # -- the work ----------------------------------------------------------------------------------
-    def process(self, rows: np.ndarray) -> None:
-        """Consume a block of loop records (a structured array with the ring's columns)."""
+    def process(self, rows: np.ndarray, loop_events: Sequence[LoopEvent] = ()) -> None:
+        """Consume a block of loop records (a structured array with the ring's columns).
+
+        ``loop_events`` are the loop's events since the previous call (times on
+        the records' axis); they are stored, and a fault's detail names the
+        cause of the trial it aborts.
+        """
+        for ev in loop_events:
+            self._store_loop_event(ev)
         if self.done or len(rows) == 0:
             return
         t_ns_all = rows["t_ns"].astype(np.int64)
         if self._t0_ns is None:
             self._t0_ns = int(t_ns_all[0])
+            self._ready_ns = self._t0_ns + self._initial_pause_ns
+            first_faults = int(rows["faults"][0])
+            if first_faults and not loop_events:
+                self._event(self._t0_ns, "fault", f"{Fault(first_faults).describe()}: latched before the session started")
         self._handle_requests(int(t_ns_all[0]))
         if self.done:
             return
+        if self._pending_gap:
+            gap, self._pending_gap = self._pending_gap, ""
+            self._abort_running(int(t_ns_all[0]), f"gap: {gap}", "gap")
+        while len(rows) and not self.done:
+            cut = self._deviation(rows)
+            if cut is None:
+                self._process_part(rows)
+                break
+            i, cause, reason = cut
+            self._process_part(rows[:i])
+            m = self.machine
+            if not self.done and m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) and m.spec is not None \
+                    and int(rows["trial_index"][i]) == m.spec.index:
+                self._abort_running(int(rows["t_ns"][i]), reason, cause)
+            rows = rows[i:]
+
+    def _process_part(self, rows: np.ndarray) -> None:
+        """The trial machine, the samples and the next cue over records that need no abort."""
+        if len(rows) == 0:
+            return
         m = self.machine
         spec = m.spec
+        running = m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
+        t_ns_all = rows["t_ns"].astype(np.int64)
         events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].astype(np.int64).tolist()))
-        if spec is not None:
+        if spec is not None and running:
+            # only a running trial's records are its samples (records after an abort still carry its mark)
             self._store_samples(rows, t_ns_all, spec, events)
         for ev in events:
             self._on_event(ev)
-        self._last_t_ns = int(t_ns_all[-1])
+        t_last = self._last_t_ns = int(t_ns_all[-1])
+        self._faults = int(rows["faults"][-1])
         if m.phase is TrialPhase.ACTIVE:
             self.state.trial_elapsed_s = m.elapsed_ns * 1e-9
+        if self.done or m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE):
+            return
+        if self._faults:
+            self._wait_for_reset(t_last)
+        elif self._waiting_since_ns is not None:
+            # the fault is cleared: the protocol's pause runs again before the next cue
+            self._waiting_since_ns = None
+            pause_s = self.protocol.trial.pause_s
+            self._ready_ns = max(self._ready_ns or 0, t_last + int(round(pause_s * 1e9)))
+            self.state.waiting = ""
+            self._event(t_last, "waiting", f"faults cleared; the next cue follows a {pause_s:g} s pause")
         if m.phase is TrialPhase.IDLE and not self.done:
-            self._start_next(self._last_t_ns)
+            self._start_next(t_last)
+
+    def _deviation(self, rows: np.ndarray) -> tuple[int, str, str] | None:
+        """The first record at which the running trial left its designed condition: (index, cause, reason)."""
+        m = self.machine
+        spec = m.spec
+        if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE) or spec is None:
+            return None
+        marked = np.flatnonzero(rows["trial_index"] == spec.index)
+        if len(marked) == 0:
+            return None
+        t = rows["t_ns"][marked].astype(np.int64)
+        cue = m.cue_ns if m.cue_ns is not None else int(t[0])
+        lim = self.limits
+        found: list[tuple[int, int, str, str]] = []  # (record index, priority, cause, reason)
+        faults = rows["faults"][marked]
+        bad = np.flatnonzero(faults != 0)
+        if len(bad):
+            k = int(bad[0])
+            what = self._fault_detail or Fault(int(faults[k])).describe()
+            found.append((int(marked[k]), 0, "fault", f"fault: {what}"))
+        prev = np.concatenate(([self._last_marked_ns if self._last_marked_ns is not None else t[0]], t[:-1]))
+        gaps = np.flatnonzero((t - prev) > int(round(lim.max_gap_s * 1e9)))
+        if len(gaps):
+            k = int(gaps[0])
+            found.append((int(marked[k]), 1, "gap",
+                          f"gap: no loop record for {(t[k] - prev[k]) * 1e-6:.1f} ms (limit {lim.max_gap_s * 1e3:g} ms)"))
+        on = spec.haptic_mode == "on"
+        flag = rows["haptic_on"][marked]
+        wrong = np.flatnonzero(flag != (1.0 if on else 0.0))
+        if len(wrong):
+            k = int(wrong[0])
+            found.append((int(marked[k]), 2, "feedback",
+                          f"feedback: haptics were {'off' if on else 'on'} in a haptics-{spec.haptic_mode.upper()} trial"))
+        gain = rows["gain"][marked]
+        rel = t - cue
+        if on:
+            low = np.flatnonzero((gain < 1.0) & (rel > int(round((lim.feedback_ramp_in_s + lim.grace_s) * 1e9))))
+            if len(low):
+                k = int(low[0])
+                found.append((int(marked[k]), 2, "feedback",
+                              f"feedback: gain {gain[k]:.3f} below 1 after the {lim.feedback_ramp_in_s:g} s ramp-in "
+                              "of a haptics-ON trial"))
+        else:
+            high = np.flatnonzero((gain > 0.0) & (rel > int(round((lim.feedback_ramp_out_s + lim.grace_s) * 1e9))))
+            if len(high):
+                k = int(high[0])
+                found.append((int(marked[k]), 2, "feedback",
+                              f"feedback: gain {gain[k]:.3f} above 0 in a haptics-OFF trial"))
+        if not found:
+            self._last_marked_ns = int(t[-1])
+            return None
+        i, _, cause, reason = min(found)
+        return i, cause, reason
+
+    def _store_loop_event(self, ev: LoopEvent) -> None:
+        if ev.kind == "fault":
+            self._fault_detail = ev.detail
+            detail = ev.detail
+        elif ev.kind == "faults_reset":
+            detail = (f"cleared {ev.detail}" if not ev.faults
+                      else f"{Fault(int(ev.faults)).describe()} still latched (its condition persists)")
+        else:
+            detail = ev.detail
+        self._event(int(ev.t_ns), ev.kind, detail)
 
     def _store_samples(self, rows: np.ndarray, t_ns: np.ndarray, spec: TrialSpec, events: list[Any]) -> None:
         cue = self.machine.cue_ns
@@ -226,6 +457,7 @@ class SessionRunner:
         # one float64 array, not a list of row lists: no garbage-collector-tracked objects per sample
         # (a live session's collector passes would otherwise scan ~1000 such lists, GIL held, loop waiting)
         self.recorder.samples(np.column_stack(cols))
+        self._health.append(np.column_stack([np.asarray(sel[c], dtype=np.float64) for c in _HEALTH_SRC]))
 
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):
@@ -237,6 +469,9 @@ class SessionRunner:
 
     def _finish_trial(self, ev: TrialFinished) -> None:
         spec, met = ev.spec, ev.metrics
+        block = np.concatenate(self._health) if self._health else np.empty((0, len(_HEALTH_SRC)))
+        self._health = []
+        self._last_marked_ns = None
         self.recorder.trial(
             {
                 "trial_id": trial_id_of(self.session_id, spec.index),
@@ -256,6 +491,8 @@ class SessionRunner:
                 "n_samples": met.n_samples,
                 "abort_reason": ev.reason or None,
                 "repeat_of": spec.repeat_of,
+                "abort_cause": self._abort_cause.pop(spec.index, "experimenter") if ev.outcome == "aborted" else None,
+                **trial_health(*block.T),
             }
         )
         self.finished.append(ev)
@@ -271,8 +508,12 @@ class SessionRunner:
         self.position = spec.index + 1
 
     def _start_next(self, t_ns: int) -> None:
-        if self.paused:
+        if self.paused or self._faults:
             return
+        if self._ready_ns is not None and t_ns < self._ready_ns:
+            self.state.waiting = "pause"
+            return
+        self.state.waiting = ""
         if self.position >= len(self.schedule):
             self._end("completed", "all trials done", t_ns)
             return
@@ -293,11 +534,52 @@ class SessionRunner:
             else:
                 p.begin_trial(spec.target_force_n, spec.haptic_mode == "on", self.participant_time())
 
+    def _wait_for_reset(self, t_ns: int) -> None:
+        """A fault is latched outside a trial: hold the next cue; headless, reset it once it can be."""
+        what = Fault(self._faults).describe()
+        if self._waiting_since_ns is None:
+            self._waiting_since_ns = t_ns
+            self._next_reset_ns = t_ns
+            how = "the runner resets it once its condition is gone" if self.auto_reset_faults else \
+                "the experimenter resets it"
+            self._event(t_ns, "waiting", f"{what} latched: no cue until it is reset ({how})")
+        self.state.waiting = f"fault latched ({what}): reset to continue"
+        if not self.auto_reset_faults:
+            return
+        if t_ns - self._waiting_since_ns > int(FAULT_TIMEOUT_S * 1e9):
+            self.stop_reason = (f"{what} was still latched {FAULT_TIMEOUT_S:g} s after the runner began waiting for "
+                                "it to clear; the session is interrupted and can be resumed")
+            self._event(t_ns, "session_interrupted", self.stop_reason)
+            self._enter_pause_commands()
+            self.done = self.state.done = True
+            self.status = self.state.status = "interrupted"
+            self._emit(("session_end", "interrupted", self.stop_reason))
+            return
+        if t_ns >= self._next_reset_ns:
+            self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
+            self.submit(ResetFaults())
+
+    def _abort_running(self, t_ns: int, reason: str, cause: str, requeue: bool = True) -> None:
+        """Abort the trial that is cued or running (if any), storing its cause; re-queue it per the policy."""
+        m = self.machine
+        if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+            return
+        spec = m.spec
+        assert spec is not None
+        self._abort_cause[spec.index] = cause
+        for ev in m.abort(t_ns, reason):
+            self._on_event(ev)
+        if requeue:
+            self.schedule = requeue_aborted(self.schedule, spec, spec.index + 1, self.protocol.abort_policy, self._rng)
+            sj = schedule_to_json(self.schedule)
+            sid = self.session_id
+            self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
+            self.state.trials_total = len(self.schedule)
+
     def _handle_requests(self, t_ns: int) -> None:
         with self._lock:
             reqs, self._requests = self._requests, []
-        m = self.machine
-        for kind, detail in reqs:
+        for kind, detail, cause in reqs:
             if kind == "pause":
                 self.paused = self.state.paused = True
                 self._event(t_ns, "experimenter", "pause")
@@ -306,20 +588,7 @@ class SessionRunner:
                 self._event(t_ns, "experimenter", "resume")
             elif kind in ("abort_trial", "abort_session"):
                 self._event(t_ns, "experimenter", f"{kind}: {detail}")
-                if m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE):
-                    spec = m.spec
-                    assert spec is not None
-                    evs = m.abort(t_ns, detail)
-                    for ev in evs:
-                        self._on_event(ev)
-                    if kind == "abort_trial":
-                        self.schedule = requeue_aborted(
-                            self.schedule, spec, spec.index + 1, self.protocol.abort_policy, self._rng
-                        )
-                        sj = schedule_to_json(self.schedule)
-                        sid = self.session_id
-                        self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
-                        self.state.trials_total = len(self.schedule)
+                self._abort_running(t_ns, detail, cause, requeue=kind == "abort_trial")
                 if kind == "abort_session":
                     self._end("aborted", detail, t_ns)
                     return

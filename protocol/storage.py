@@ -118,22 +118,31 @@ def _boot_id() -> str:
         return ""
 
 
+def _proc_stat(pid: int) -> list[str] | None:
+    """The fields of ``/proc/<pid>/stat`` after the command name (field 3 first), or None."""
+    try:
+        with open(f"/proc/{int(pid)}/stat", encoding="ascii", errors="replace") as fh:
+            stat = fh.read()
+    except (OSError, ValueError, OverflowError):
+        return None
+    # the command name (field 2) may hold spaces and parentheses: count fields after the last ')'
+    return stat[stat.rindex(")") + 2 :].split()
+
+
 def process_identity(pid: int) -> str:
     """Boot id and start time of a process: equal for the same process, different for a reused pid.
 
     Empty where ``/proc`` cannot tell (not Linux); the caller then falls back on heartbeats.
     """
-    try:
-        with open(f"/proc/{int(pid)}/stat", encoding="ascii", errors="replace") as fh:
-            stat = fh.read()
-    except OSError:
-        return ""
-    # the command name (field 2) may hold spaces and parentheses: count fields after the last ')'
-    fields = stat[stat.rindex(")") + 2 :].split()
-    return f"{_boot_id()}:{fields[19]}"
+    fields = _proc_stat(pid)
+    return "" if fields is None else f"{_boot_id()}:{fields[19]}"
 
 
 def _pid_alive(pid: int) -> bool:
+    fields = _proc_stat(pid)
+    if fields is not None:
+        # a zombie (killed, not yet reaped -- an orphan whose reaper is slow) writes nothing any more
+        return fields[0] not in ("Z", "X")
     try:
         os.kill(int(pid), 0)
     except ProcessLookupError:

@@ -12,6 +12,14 @@ as aborted, with the reason, and re-run per the abort policy.
 ``run_study(..., continue_study=True)`` (``haptic-study run --continue``)
 completes a study that stopped part-way: it resumes every interrupted session,
 runs what each participant has not started, and leaves finished sessions alone.
+
+Sessions are opened and closed through :mod:`protocol.session_setup`, as the
+GUI's engine does.  A ``run`` owns the whole database while it works (the
+``study`` lease): a second ``run`` on it is refused before it writes, and its
+parallel workers hold their sessions' leases under it.  Planned faults
+(:mod:`protocol.rehearsal`, ``--inject-fault``) are fired on the simulated rig
+at their trial's time; a latched fault is reset by the runner in the pause,
+and a fault that does not clear stops the study with :class:`SessionInterrupted`.
 """
 
 from __future__ import annotations
@@ -27,47 +35,44 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from pipeline.engine import EngineConfig, HardwareEngine, SimEngine, build_sim_engine
 from pipeline.hardware import HardwareConfig
+from pipeline.loop import LoopEvent
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, protocol_from_dict
-from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.design import schedule_from_json
 from protocol.participant import SimulatedParticipant
-from protocol.session import SessionRunner, first_unfinished, has_samples
-from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, trial_id_of, validate_code
+from protocol.rehearsal import FaultPlan, RehearsalTrigger
+from protocol.session import SessionRunner, first_unfinished
+from protocol.session_setup import (
+    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
+    start_runner, training_protocol, training_schedule,
+)
+from protocol.storage import SessionInfo, StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.version import software_version
 
 __all__ = [
-    "StudyProgress", "StudyWorkerError", "config_record", "default_jobs", "participant_code", "participant_seeds", "prepare_resume", "real_config_record", "resume_session", "run_study",
-    "software_version", "training_schedule",
+    "SessionInterrupted", "StudyProgress", "StudyWorkerError", "config_record", "default_jobs", "participant_code",
+    "participant_seeds", "real_config_record", "resume_session", "run_study", "software_version", "training_schedule",
 ]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
 BLOCK_TICKS = 50
-#: Fault injection for the crash-safety test: SIGKILL this process after this many loop ticks
-#: (in a parallel study: the study's main process, after this many ticks of one worker).
-KILL_ENV = "HAPTIC_STUDY_SIGKILL_AFTER_TICKS"
-#: Fault injection for the error-path test: raise an exception in the session driver after this many loop ticks.
-RAISE_ENV = "HAPTIC_STUDY_RAISE_AFTER_TICKS"
-#: Set in a parallel study's worker: the process the fault injection kills (the study's main process).
+#: Set in a parallel study's worker: the process a planned ``kill`` ends (the study's main process).
 _kill_target_pid: int | None = None
+
+
+class SessionInterrupted(RuntimeError):
+    """A session stopped early and stays resumable (a fault that did not clear); the message says why."""
 
 
 def participant_code(number: int) -> str:
     """Pseudonymous code of the n-th simulated participant (P01, P02, …)."""
     return f"P{number:02d}"
-
-
-def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
-    """(rig seed, participant seed) for a participant: independent streams from one study seed."""
-    s = np.random.SeedSequence([study_seed, number]).generate_state(2)
-    return int(s[0]), int(s[1])
 
 
 @dataclass
@@ -85,15 +90,10 @@ class StudyProgress:
     study_time_s: float = 0.0
     planned_s: float = 0.0
     sessions: list[int] = field(default_factory=list)
-
-
-def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
-    """Free practice: each mode in turn, each target once, with the live force aid."""
-    out = []
-    for m in protocol.modes:
-        for t in protocol.targets:
-            out.append(TrialSpec(len(out), t.label, t.force_n, m))
-    return out
+    #: What each planned fault did (``--inject-fault``), one line each.
+    rehearsals: list[str] = field(default_factory=list)
+    #: What the user should know that is not an error (a database upgraded, a lease taken over), one line each.
+    notes: list[str] = field(default_factory=list)
 
 
 def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
@@ -114,17 +114,19 @@ def _engine(rig_seed: int, clock: str) -> SimEngine:
 
 def _drive(
     eng: SimEngine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
-    tick_budget: list[int],
+    trigger: RehearsalTrigger | None = None,
 ) -> None:
     """Alternate loop ticks and runner blocks until the session ends."""
     ring = eng.ring
     assert ring is not None
     loop = eng.loop
+    events: list[LoopEvent] = []
+    loop.on_event = events.append  # list.append is atomic: safe from the real-clock loop thread
     cursor = ring.write_count
     t_last_report = 0.0
-    kill_after = int(os.environ.get(KILL_ENV, "0") or 0)
-    raise_after = int(os.environ.get(RAISE_ENV, "0") or 0)
     base_done = progress.study_trials_done
+    if trigger is not None:
+        runner.listeners.append(trigger.on_runner_event)
     if clock == "real":
         loop.start()
     try:
@@ -136,17 +138,15 @@ def _drive(
             res = ring.read_since(cursor)
             cursor = res.cursor
             if res.lost:
-                raise RuntimeError(f"the session runner fell {res.lost} records behind the loop")
+                runner.records_lost(res.lost)
+            # events after the rows: every event of a tick whose record was read is in
+            n_ev = len(events)
+            batch, events[:n_ev] = events[:n_ev], []
             n = len(res.rows)
-            runner.process(res.rows)
+            runner.process(res.rows, batch)
+            if trigger is not None and n:
+                trigger.poll(int(res.rows["t_ns"][-1]))
             progress.study_time_s += n * 1e-3
-            tick_budget[0] += n
-            if kill_after and tick_budget[0] >= kill_after:
-                # in a parallel study's worker: kill the study's main process, as `kill -9` of
-                # `haptic-study run` would (the workers then die with it, by PR_SET_PDEATHSIG)
-                os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
-            if raise_after and tick_budget[0] >= raise_after:
-                raise RuntimeError(f"fault injected by {RAISE_ENV} after {tick_budget[0]} ticks")
             now = time.monotonic()
             done = runner.state.completed + runner.state.aborted
             if on_progress is not None and (now - t_last_report > 0.1 or runner.done):
@@ -162,6 +162,8 @@ def _drive(
         else:
             loop.ramp_down()
         eng.rig.close()
+        if trigger is not None:
+            progress.rehearsals.extend(trigger.report)
 
 
 def config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
@@ -201,80 +203,73 @@ def _plain(d: Any) -> Any:
 
 
 def _run_session(
-    db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, study_seed: int, clock: str,
-    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
-    short_transactions: bool = False,
+    db: StudyDatabase, *, code: str, number: int, kind: str | None, protocol: ProtocolConfig, study_seed: int,
+    clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
+    faults: Sequence[FaultPlan] = (),
 ) -> int:
+    """Run one session to its end on a fresh simulated rig: a new one of ``kind``, or the interrupted ``resume_id``."""
     rig_seed, p_seed = participant_seeds(study_seed, number)
-    eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
-    participant = SimulatedParticipant(seed=p_seed)
-    eng.rig.set_driver(participant)
-    if kind == "experiment":
-        schedule = build_schedule(protocol, study_seed, number)
-        run_protocol = protocol
+    if resume_id is None:
+        assert kind is not None
+        # training and experiment each get their own rig: the same seed gives the same study whatever ran before
+        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
+        opened = open_new_session(
+            db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
+            config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
+            lease_owner=lease_owner, study_owner=study_owner,
+        )
     else:
-        schedule = training_schedule(protocol)
-        run_protocol = _training_protocol(protocol)
-    session_id = db.create_session(
-        code=code, kind=kind, seed=study_seed, participant_number=number, protocol_json=run_protocol.to_json(),
-        schedule_json=schedule_to_json(schedule), software_version=software_version(), rig="sim",
-        config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
-    )
-    progress.sessions.append(session_id)
-    recorder = Recorder(db, threaded=(clock == "real"), short_transactions=short_transactions)
-    runner = SessionRunner(
-        protocol=run_protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=eng.loop.submit,
-        participant=participant, participant_time=lambda: eng.rig.sim_time_s, seed=study_seed,
-    )
-    runner.live_force_aid = kind == "training" and protocol.training.live_force_aid
-    recorder.event(session_id, 0.0, "session_start", f"{kind} session for {code}, seed {study_seed}")
-    progress.kind = kind
-    try:
-        _drive(eng, runner, clock, progress, on_progress, tick_budget)
-    finally:
-        recorder.close()
-    return session_id
-
-
-def _training_protocol(protocol: ProtocolConfig) -> ProtocolConfig:
-    """The protocol a training session runs (and stores): trials last the training's time per target and mode."""
-    return dataclasses.replace(
-        protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
-    )
-
-
-def _resume_run(
-    db: StudyDatabase, info: SessionInfo, *, clock: str, progress: StudyProgress,
-    on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int], short_transactions: bool = False,
-) -> int:
-    """Continue one interrupted session (either kind) to its end with a fresh rig and the same participant."""
-    protocol, schedule, pos, offset = prepare_resume(db, info)
-    rig_seed, p_seed = participant_seeds(info.seed, info.participant_number)
-    # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
-    eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
-    participant = SimulatedParticipant(seed=p_seed)
+        info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
+        # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
+        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
+        opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
+                                      calibration=eng.calibration.to_dict())
+    participant = SimulatedParticipant(seed=opened.participant_seed)
     eng.rig.set_driver(participant)
-    recorder = Recorder(db, threaded=(clock == "real"), short_transactions=short_transactions)
-    runner = SessionRunner(
-        protocol=protocol, schedule=schedule, session_id=info.session_id, recorder=recorder, submit=eng.loop.submit,
-        start_position=pos, session_clock_offset_s=offset + 0.001, participant=participant,
-        participant_time=lambda: eng.rig.sim_time_s, seed=info.seed,
+    progress.sessions.append(opened.session_id)
+    progress.kind = opened.kind
+    recorder, runner = start_runner(
+        db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
+        limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
+        short_transactions=short_transactions,
     )
-    runner.live_force_aid = info.kind == "training" and protocol.training.live_force_aid
-    progress.kind = info.kind
-    progress.sessions.append(info.session_id)
+    trigger = _trigger(faults, opened, eng)
     try:
-        _drive(eng, runner, clock, progress, on_progress, tick_budget)
+        _drive(eng, runner, clock, progress, on_progress, trigger)
     finally:
-        recorder.close()
-    return info.session_id
+        finish_session(db, recorder, opened)
+    if runner.stop_reason:
+        raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
+    return opened.session_id
+
+
+def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: SimEngine) -> RehearsalTrigger | None:
+    """The rehearsal trigger of a session run, if faults are planned for it."""
+    if not faults:
+        return None
+    loop, rig = eng.loop, eng.rig
+
+    def inject(kind: str, at_ns: int) -> None:
+        rig.inject_fault(kind, loop.t0_ns + at_ns)  # the records' axis -> the rig's clock
+
+    def kill() -> None:
+        # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
+        # (the workers then die with it, by PR_SET_PDEATHSIG)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
+
+    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill)
+    return trig if trig.plans else None
 
 
 def _remaining_trials(db: StudyDatabase, info: SessionInfo) -> int:
     """Trials a resume of this session will run.
 
-    An interrupted trial is stored as aborted by :func:`prepare_resume`, not
-    run, and its re-run takes its place in the count.
+    An interrupted trial is stored as aborted by
+    :func:`protocol.session_setup.open_resumed_session`, not run, and its
+    re-run takes its place in the count.
     """
     schedule = schedule_from_json(info.schedule_json)
     return len(schedule) - first_unfinished(schedule, db.trial_rows(info.session_id))
@@ -294,7 +289,7 @@ def _plan_continue(
     this one would mix two designs in one study.
     """
     kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
-    wanted = {"training": json.loads(_training_protocol(protocol).to_json()), "experiment": json.loads(protocol.to_json())}
+    wanted = {"training": json.loads(training_protocol(protocol).to_json()), "experiment": json.loads(protocol.to_json())}
     plan: dict[int, list[Step]] = {}
     kept: list[int] = []
     trials = 0
@@ -334,20 +329,16 @@ def _plan_continue(
 
 def _run_steps(
     db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
-    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, tick_budget: list[int],
-    short_transactions: bool = False,
+    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
+    faults: Sequence[FaultPlan] = (), short_transactions: bool = False,
 ) -> None:
     """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
     code = participant_code(number)
     for what, arg in steps:
-        if what == "new":
-            _run_session(db, code=code, number=number, kind=arg, protocol=protocol, study_seed=seed, clock=clock,
-                         progress=progress, on_progress=on_progress, tick_budget=tick_budget,
-                         short_transactions=short_transactions)
-        else:
-            info = next(s for s in db.sessions_of(code) if s.session_id == arg)
-            _resume_run(db, info, clock=clock, progress=progress, on_progress=on_progress, tick_budget=tick_budget,
-                        short_transactions=short_transactions)
+        _run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
+                     study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
+                     short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
+                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults)
 
 
 def _all_steps(protocol: ProtocolConfig) -> list[Step]:
@@ -378,6 +369,7 @@ def run_study(
     on_progress: Callable[[StudyProgress], None] | None = None,
     jobs: int | None = None,
     continue_study: bool = False,
+    faults: Sequence[FaultPlan] = (),
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -409,6 +401,8 @@ def run_study(
         is run, and finished sessions (completed, or ended by the
         experimenter) are left alone.  ``seed`` and ``protocol`` must be those
         the study was started with.
+    faults
+        Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
 
     Returns
     -------
@@ -420,24 +414,32 @@ def run_study(
     Raises
     ------
     StorageError
-        Before anything is stored, if the database cannot be used or one of
+        Before anything is stored, if the database cannot be used, another
+        process writes to it (:class:`protocol.storage.LeaseHeld`), or one of
         the participant codes already has sessions in it (without
         ``continue_study``), or, when continuing, the stored sessions were run
         with another seed or protocol.
     StudyWorkerError
         If a participant's worker fails: the other workers are stopped (their
         sessions stay ``running``); ``continue_study`` completes the study.
+    SessionInterrupted
+        A fault did not clear (one participant at a time; in parallel it is a
+        :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
     if participants < 1:
         raise ValueError(f"participants = {participants}: must be ≥ 1")
     if jobs is not None and jobs < 1:
         raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
+    check_fault_plans(faults, protocol, [participant_code(n) for n in range(1, participants + 1)])
     n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
-    db = StudyDatabase(db_path)
+    owner = new_owner_token()
+    db: StudyDatabase | None = StudyDatabase(db_path)
     try:
+        taken = db.acquire_lease("study", owner)  # before anything else is written: a second `run` stops here
         progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
+        progress.notes.extend(_open_notes(db, taken))
         if continue_study:
             plan, progress.study_trials_total, kept = _plan_continue(db, db_path, participants, seed, protocol)
             progress.sessions.extend(kept)
@@ -455,16 +457,64 @@ def run_study(
         jobs_used = min(n_jobs, len(plan))
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
+            db = None
             return _run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
-                                 on_progress=on_progress, jobs=jobs_used, progress=progress)
-        ticks = [0]
+                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
+                                 faults=faults)
         for n, steps in plan.items():
             progress.participant, progress.code = n, participant_code(n)
             _run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                       on_progress=on_progress, tick_budget=ticks)
+                       on_progress=on_progress, study_owner=owner, faults=faults)
         return progress
     finally:
-        db.close()
+        _release_study(db, db_path, owner)
+
+
+def _open_notes(db: StudyDatabase, taken_over: str) -> list[str]:
+    """What opening the database did that the user should hear of."""
+    notes = []
+    if db.upgraded_from is not None:
+        notes.append(f"{db.path}: upgraded from schema version {db.upgraded_from} to {db.schema_version}; "
+                     f"the file as it was is kept in {db.backup_path}")
+    if taken_over:
+        notes.append(f"{db.path}: {taken_over}")
+    return notes
+
+
+def _release_study(db: StudyDatabase | None, db_path: str, owner: str) -> None:
+    """Give the study lease back (reopening the database if the workers had it) and close."""
+    try:
+        if db is None:
+            db = StudyDatabase(db_path, check=False)
+        db.release_lease("study", owner)
+    except StorageError:
+        pass  # the lease is taken over once this process is gone
+    finally:
+        if db is not None:
+            db.close()
+
+
+def check_fault_plans(faults: Sequence[FaultPlan], protocol: ProtocolConfig, codes: Sequence[str]) -> None:
+    """Refuse a planned fault for a participant who is not run, or a trial the session does not have.
+
+    Raises
+    ------
+    ValueError
+        One line naming the plan and what is allowed.
+    """
+    for f in faults:
+        if f.code not in codes:
+            shown = ", ".join(codes[:3]) + (f", … {codes[-1]}" if len(codes) > 3 else "")
+            raise ValueError(f"--inject-fault = {f}: participant {f.code} is not run by this command ({shown})")
+        n = protocol.trials_per_participant if f.session == "experiment" else len(training_schedule(protocol))
+        if f.trial > n:
+            raise ValueError(f"--inject-fault = {f}: trial {f.trial} is beyond the {n} trials of the "
+                             f"{f.session} session")
+        cap = (protocol.trial.max_trial_s if f.session == "experiment"
+               else protocol.training.seconds_per_target_per_mode)
+        if f.seconds > cap:
+            raise ValueError(f"--inject-fault = {f}: {f.seconds:g} s is after the trial's end at the latest "
+                             f"({cap:g} s after its cue)")
 
 
 def _die_with_parent(parent_pid: int) -> None:
@@ -482,14 +532,15 @@ def _die_with_parent(parent_pid: int) -> None:
 
 def _participant_worker(
     db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
-    messages: Any,
+    messages: Any, study_owner: str, faults: Sequence[FaultPlan],
 ) -> None:
     """One participant's steps (training, then experiment; or what is left of them) in a worker process.
 
     Reports through ``messages``.
 
     Messages: ``("progress", number, kind, trials_done, trials_total, participant_trials_done, study_time_s)``,
-    ``("done", number, session ids, participant_trials_done, study_time_s)``, ``("error", number, message)``.
+    ``("done", number, session ids, participant_trials_done, study_time_s, rehearsal reports)``,
+    ``("error", number, message)``.
     """
     global _kill_target_pid
     _die_with_parent(parent_pid)
@@ -501,25 +552,29 @@ def _participant_worker(
         messages.put(("progress", number, p.kind, p.trials_done, p.trials_total, p.study_trials_done, p.study_time_s))
 
     try:
-        db = StudyDatabase(db_path)
+        # the study's main process checked the file a moment ago: no second quick_check per worker
+        db = StudyDatabase(db_path, check=False)
         try:
             _run_steps(db, number, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                       on_progress=report, tick_budget=[0], short_transactions=True)
+                       on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True)
         finally:
             db.close()
     except BaseException as exc:  # noqa: BLE001 - reported to the parent, which stops the study
-        messages.put(("error", number, f"{type(exc).__name__}: {exc}"))
+        why = str(exc) if isinstance(exc, (SessionInterrupted, StorageError)) else f"{type(exc).__name__}: {exc}"
+        messages.put(("error", number, why))
         messages.close()
         messages.join_thread()
         os._exit(1)
-    messages.put(("done", number, list(progress.sessions), progress.study_trials_done, progress.study_time_s))
+    messages.put(("done", number, list(progress.sessions), progress.study_trials_done, progress.study_time_s,
+                  list(progress.rehearsals)))
     messages.close()
     messages.join_thread()
 
 
 def _run_parallel(
     db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
-    on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress, study_owner: str,
+    faults: Sequence[FaultPlan],
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
@@ -542,6 +597,7 @@ def _run_parallel(
             progress.trials_done, progress.trials_total = trials_done, trials_total
         elif what == "done":
             sessions[n], done_trials[n], time_s[n] = msg[2], msg[3], msg[4]
+            progress.rehearsals.extend(msg[5])
             running.pop(n).join()
         else:
             return (n, msg[2])
@@ -552,7 +608,8 @@ def _run_parallel(
             while waiting and len(running) < jobs:
                 n = waiting.pop(0)
                 p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
-                                args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages), daemon=True)
+                                args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages, study_owner,
+                                      faults), daemon=True)
                 p.start()
                 running[n] = p
             try:
@@ -605,15 +662,25 @@ def resume_session(
     *,
     clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None,
+    faults: Sequence[FaultPlan] = (),
 ) -> StudyProgress:
     """Continue the interrupted session of participant ``code`` (training or experiment).
 
-    The stored schedule is used; trials already stored are kept; a trial that
-    was interrupted mid-way (samples but no summary) is stored as aborted with
-    the reason and re-run per the abort policy; no trial is duplicated or
-    skipped.  Only that session is continued: a participant interrupted in
-    training still has the experiment to run (``run_study(...,
-    continue_study=True)``, ``haptic-study run --continue``).
+    The stored schedule is used; trials already stored are kept; the trial that
+    was running when the previous run ended is stored as aborted (cause
+    ``interrupted``) with its real cue time and samples and re-run per the
+    abort policy; no trial is duplicated or skipped
+    (:func:`protocol.session_setup.open_resumed_session`).  Only that session is
+    continued: a participant interrupted in training still has the experiment
+    to run (``run_study(..., continue_study=True)``, ``haptic-study run --continue``).
+
+    Raises
+    ------
+    StorageError
+        No such participant or interrupted session; or another process writes
+        to the session or runs the study (:class:`protocol.storage.LeaseHeld`): nothing is changed.
+    SessionInterrupted
+        A fault did not clear; the session stays resumable.
     """
     validate_code(code)
     if not os.path.exists(db_path):
@@ -629,42 +696,12 @@ def resume_session(
         remaining = _remaining_trials(db, info)
         progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind=info.kind,
                                  study_trials_total=remaining)
+        progress.notes.extend(_open_notes(db, ""))
         protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
         progress.planned_s = remaining * (protocol.trial.max_trial_s + protocol.trial.pause_s)
-        _resume_run(db, info, clock=clock, progress=progress, on_progress=on_progress, tick_budget=[0])
+        _run_session(db, code=code, number=info.participant_number, kind=None, protocol=protocol,
+                     study_seed=info.seed, clock=clock, progress=progress, on_progress=on_progress,
+                     resume_id=info.session_id, lease_owner=new_owner_token(), faults=faults)
         return progress
     finally:
         db.close()
-
-
-def prepare_resume(db: StudyDatabase, info: SessionInfo) -> tuple[ProtocolConfig, list[TrialSpec], int, float]:
-    """Get an interrupted session ready to continue: (protocol, schedule, start position, clock offset s).
-
-    A trial that was interrupted mid-way (samples but no summary) is stored as
-    aborted with the reason and re-queued per the abort policy, in one
-    transaction; otherwise a ``resume`` event records where the session continues.
-    Used by :func:`resume_session` and by the GUI's study engine.
-    """
-    protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
-    schedule = schedule_from_json(info.schedule_json)
-    rows = db.trial_rows(info.session_id)
-    pos = first_unfinished(schedule, rows)
-    offset = db.last_session_time_s(info.session_id) + 1.0
-    if pos < len(schedule) and has_samples(db, info.session_id, schedule[pos].index):
-        spec = schedule[pos]
-        reason = "interrupted: the previous run ended during this trial"
-        schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
-                                   np.random.default_rng([info.seed, info.session_id, 7]))
-        with db.transaction():
-            db.insert_trial({
-                "trial_id": trial_id_of(info.session_id, spec.index), "session_id": info.session_id,
-                "trial_index": spec.index, "target_label": spec.target_label,
-                "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode, "outcome": "aborted",
-                "started_at_s": offset, "ended_at_s": offset, "abort_reason": reason, "repeat_of": spec.repeat_of,
-            })
-            db.update_schedule(info.session_id, schedule_to_json(schedule))
-            db.insert_event(info.session_id, offset, "resume", f"trial {spec.index} aborted ({reason}) and re-queued")
-        pos += 1
-    else:
-        db.insert_event(info.session_id, offset, "resume", f"continuing at trial position {pos}")
-    return protocol, schedule, pos, offset

@@ -55,6 +55,15 @@ def _nonneg_int(name: str):  # type: ignore[no-untyped-def]
     return parse
 
 
+def _fault_plan(text: str):  # type: ignore[no-untyped-def]
+    from protocol.rehearsal import parse_fault_plan
+
+    try:
+        return parse_fault_plan(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     p = argparse.ArgumentParser(
@@ -88,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     after.add_argument("--continue", dest="continue_study", action="store_true",
                        help="complete a study that stopped part-way in --db: resume interrupted sessions, run what "
                             "was not started (give the --participants, --seed and --protocol it was started with)")
+    r.add_argument("--inject-fault", dest="inject_fault", action="append", default=[], type=_fault_plan,
+                   metavar="KIND@CODE:TRIAL[+SECONDS]",
+                   help="rehearse a fault on the simulated rig, SECONDS (default 3) after the cue of participant "
+                        "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
+                        "device-error, kill (ends this command as kill -9 would); repeatable")
 
     from study_app.report_cmds import add_report_parsers
 
@@ -241,10 +255,15 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from protocol.config import ProtocolError, load_protocol
     from protocol.storage import StorageError
-    from protocol.study import StudyWorkerError, resume_session, run_study
+    from protocol.study import SessionInterrupted, StudyWorkerError, resume_session, run_study
     from study_app.progress import ProgressBar
     from study_app.study_summary import format_study_summary
 
+    if args.resume is not None:
+        for f in args.inject_fault:
+            if f.code != args.resume:
+                raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    bar: ProgressBar | None = None
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
@@ -252,7 +271,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
                 raise CliError(f"--participants = {args.participants}: must be ≥ 1")
             if args.jobs is not None and args.jobs < 1:
                 raise CliError(f"--jobs = {args.jobs}: must be ≥ 1 (omit it to use the usable cores)")
-        bar: ProgressBar | None = None
 
         def show(p):  # type: ignore[no-untyped-def]
             nonlocal bar
@@ -265,21 +283,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
         t0 = _time.perf_counter()
         if args.resume is not None:
-            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show)
+            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
+                                      faults=args.inject_fault)
         else:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
-                on_progress=show, jobs=args.jobs, continue_study=args.continue_study,
+                on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
             bar.close()
+    except SessionInterrupted as exc:
+        if bar is not None:
+            bar.close()
+        print(f"haptic-study: interrupted: {exc}; complete it with the same command and --continue "
+              "(or --resume CODE)", file=sys.stderr)
+        return 1
     except (ProtocolError, StorageError, StudyWorkerError, ValueError) as exc:
+        if bar is not None:
+            bar.close()
         raise CliError(str(exc)) from None
+    for note in progress.notes:
+        print(f"haptic-study: {note}", file=sys.stderr)
     if args.continue_study and progress.study_trials_total == 0:
         print(f"haptic-study: nothing to continue in {args.db}: every session of participants "
               f"1–{args.participants} has ended", file=sys.stderr)
     print(format_study_summary(args.db, progress.sessions, wall))
+    for line in progress.rehearsals:
+        print(f"Fault rehearsal {line}")
     return 0
 
 

@@ -22,12 +22,14 @@ row is stored with the reason (the session stays resumable), commits, and exits.
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import gc
 import json
 import math
 import os
 import queue
+import signal
 import sys
 import threading
 import time
@@ -52,13 +54,14 @@ from pipeline.loop import ResetFaults as LoopResetFaults
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolError, load_protocol
-from protocol.design import build_schedule, schedule_to_json
 from protocol.participant import SimulatedParticipant
+from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
-from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
-from protocol.study import (
-    config_record, participant_seeds, prepare_resume, real_config_record, software_version, training_schedule,
+from protocol.session_setup import (
+    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, start_runner,
 )
+from protocol.storage import Recorder, StorageError, StudyDatabase, new_owner_token, validate_code
+from protocol.study import config_record, real_config_record
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
 
@@ -373,6 +376,12 @@ class StudyEngine:
         self.runner: SessionRunner | None = None
         self.recorder: Recorder | None = None
         self.db: StudyDatabase | None = None
+        self.opened: OpenedSession | None = None
+        self.trigger: RehearsalTrigger | None = None
+        # loop events for the runner: appended on the loop thread, taken by the driver thread (deque ops are atomic)
+        self._loop_events: collections.deque[LoopEvent] = collections.deque()
+        #: This engine's lease token (one per engine process).
+        self.lease_owner = new_owner_token()
         self.session_code = ""
         self._last_health = 0.0
         self._anchor_wall = time.monotonic()
@@ -428,7 +437,7 @@ class StudyEngine:
         runner = self.runner
         if runner is not None and not runner.done:
             if runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE):
-                runner.abort_trial(reason)
+                runner.abort_trial(reason, cause="interrupted")
                 self._step_until(lambda: runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE))
             t_s = runner.session_time_s(self._last_t_ns)
             assert self.recorder is not None
@@ -524,13 +533,17 @@ class StudyEngine:
         if self._recording is not None:
             self._feed_recording(rows)
         runner = self.runner
+        # the loop's events after its records: every event of a tick whose record was read is in
+        events = [self._loop_events.popleft() for _ in range(len(self._loop_events))]
         if runner is None:
             return
         if res.lost:
-            runner.abort_session(f"the session runner fell {res.lost} records behind the loop")
-        runner.process(rows)
+            runner.records_lost(res.lost)
+        runner.process(rows, events)
+        if self.trigger is not None:
+            self.trigger.poll(self._last_t_ns)
         if runner.done:
-            self._end_session(runner.status, "")
+            self._end_session(runner.status, runner.stop_reason)
 
     def health(self) -> m.Health:
         """The engine's state and loop timing since the last stats reset."""
@@ -544,10 +557,12 @@ class StudyEngine:
             session_running=runner is not None and not runner.done, paused=bool(runner is not None and runner.paused),
             abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
             late_periods=None if self.tracer is None else self.tracer.summary(),
+            waiting=runner.state.waiting if runner is not None and not runner.done else "",
         )
 
     def _on_loop_event(self, ev: LoopEvent) -> None:
-        # called from the loop thread: only hand the event on
+        # called from the loop thread: only hand the event on (to the GUI, and to the runner for the record)
+        self._loop_events.append(ev)
         self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail))
 
     # -- commands -------------------------------------------------------------------------------------
@@ -582,6 +597,8 @@ class StudyEngine:
                 runner.abort_session(cmd.reason)
         elif isinstance(cmd, m.ResetFaults):
             self.loop.submit(LoopResetFaults())
+        elif isinstance(cmd, m.InjectFault):
+            self._inject_fault(cmd)
         elif isinstance(cmd, m.OperatorStop):
             self.loop.submit(LoopOperatorStop())
         elif isinstance(cmd, m.Calibrate):
@@ -626,30 +643,21 @@ class StudyEngine:
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
-        if cmd.kind == "experiment":
-            schedule = build_schedule(protocol, cmd.seed, cmd.participant_number)
-            run_protocol = protocol
-        else:
-            schedule = training_schedule(protocol)
-            run_protocol = dataclasses.replace(
-                protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
-            )
-        _, p_seed = participant_seeds(cmd.seed, cmd.participant_number)
         db = self._open_db(cmd.db_path)
         try:
-            session_id = db.create_session(
-                code=cmd.code, kind=cmd.kind, seed=cmd.seed, participant_number=cmd.participant_number,
-                protocol_json=run_protocol.to_json(), schedule_json=schedule_to_json(schedule),
-                software_version=software_version(), rig=self.config.rig,
-                config={**self._config_record(p_seed), "app": "gui"},
-                calibration=self.calibration.to_dict(),
+            from protocol.session_setup import participant_seeds
+
+            opened = open_new_session(
+                db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
+                rig=self.config.rig,
+                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui"},
+                calibration=self.calibration.to_dict(), lease_owner=self.lease_owner,
+                note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
             )
         except BaseException:
             db.close()
             raise
-        live_aid = cmd.kind == "training" and protocol.training.live_force_aid
-        self._run(db, session_id, cmd.code, cmd.kind, run_protocol, schedule, 0, 0.0, p_seed, cmd.seed, live_aid,
-                  f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)")
+        self._run(db, opened)
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if isinstance(self.eng, SimEngine):
@@ -661,48 +669,79 @@ class StudyEngine:
         self._require_idle("resume")
         db = self._open_db(cmd.db_path)
         try:
-            info = next((s for s in db.open_sessions() if s.session_id == cmd.session_id), None)
-            if info is None:
-                raise StorageError(f"session {cmd.session_id} in {cmd.db_path} is not an interrupted session")
-            protocol, schedule, pos, offset = prepare_resume(db, info)
-            # the calibration this run uses is stored with the session's events
-            db.insert_event(info.session_id, offset, "calibration", json.dumps(self.calibration.to_dict()))
+            opened = open_resumed_session(db, cmd.session_id, lease_owner=self.lease_owner,
+                                          calibration=self.calibration.to_dict())
         except BaseException:
             db.close()
             raise
-        _, p_seed = participant_seeds(info.seed, info.participant_number)
-        live_aid = info.kind == "training" and protocol.training.live_force_aid
-        self._run(db, info.session_id, info.code, info.kind, protocol, schedule, pos, offset + 0.001, p_seed, info.seed,
-                  live_aid, None)
+        self._run(db, opened)
 
-    def _run(self, db: StudyDatabase, session_id: int, code: str, kind: str, protocol: Any, schedule: list[Any],
-             pos: int, offset_s: float, p_seed: int, seed: int, live_aid: bool, start_note: str | None) -> None:
-        recorder = Recorder(db, threaded=True)
+    def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
         if isinstance(self.eng, SimEngine):
-            self.driver.participant = SimulatedParticipant(seed=p_seed)
+            self.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
             sim_rig = self.eng.rig
             participant: SwitchableDriver | None = self.driver
             participant_time: Callable[[], float] | None = lambda: sim_rig.sim_time_s
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
-        runner = SessionRunner(
-            protocol=protocol, schedule=schedule, session_id=session_id, recorder=recorder, submit=self.loop.submit,
-            start_position=pos, session_clock_offset_s=offset_s, participant=participant,
-            participant_time=participant_time, seed=seed,
+        recorder, runner = start_runner(
+            db, opened, submit=self.loop.submit, participant=participant, participant_time=participant_time,
+            limits=delivery_limits(self.loop), auto_reset_faults=False, threaded=True,
         )
-        runner.live_force_aid = live_aid
         runner.listeners.append(self._on_runner_event)
-        if start_note is not None:
-            recorder.event(session_id, 0.0, "session_start", start_note)
-        self.db, self.recorder, self.runner, self.session_code = db, recorder, runner, code
+        self.trigger = None
+        self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
         if self.config.clock == "real":
             gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
-        tr = protocol.trial
+        tr = opened.protocol.trial
         self.publish(m.SessionStarted(
-            session_id=session_id, code=code, kind=kind, trials_total=len(schedule), start_position=pos,
-            tolerance_fraction=tr.tolerance_fraction, max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s,
-            live_force_aid=live_aid, schedule=[dataclasses.asdict(s) for s in schedule],
+            session_id=opened.session_id, code=opened.code, kind=opened.kind, trials_total=len(opened.schedule),
+            start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
+            max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
+            schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
         ))
+
+    # -- fault rehearsal (simulated rig) -------------------------------------------------------------
+    def _inject_fault(self, cmd: m.InjectFault) -> None:
+        if not isinstance(self.eng, SimEngine):
+            raise RuntimeError("fault rehearsal: refused on the real rig (a person's hand is on it); "
+                               "rehearse on the simulated rig")
+        if cmd.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind = {cmd.kind!r}: allowed values are {', '.join(FAULT_KINDS)}")
+        if not (math.isfinite(cmd.seconds) and 0 <= cmd.seconds <= 600):
+            raise ValueError(f"fault seconds = {cmd.seconds!r}: must be a number from 0 to 600")
+        if cmd.trial is None:
+            if cmd.kind == "kill":
+                os.kill(os.getpid(), signal.SIGKILL)  # as a crash would: the GUI sees the engine die
+            rig, loop = self.eng.rig, self.loop
+            rig.inject_fault(cmd.kind, loop.clock.now_ns())
+            self.publish(m.FaultInjected(cmd.kind, "now"))
+            return
+        runner, opened = self.runner, self.opened
+        if runner is None or runner.done or opened is None:
+            raise RuntimeError("fault rehearsal at a trial: start or resume a session first (or inject it now)")
+        if cmd.trial < 1 or cmd.trial > len(runner.schedule):
+            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {len(runner.schedule)}")
+        if cmd.trial <= runner.state.trial_position:
+            raise ValueError(f"fault trial = {cmd.trial}: trial {runner.state.trial_position} is already under way; "
+                             "choose a later one")
+        plan = FaultPlan(cmd.kind, opened.code, cmd.trial, cmd.seconds, opened.kind)
+        eng = self.eng
+
+        def inject(kind: str, at_ns: int) -> None:
+            eng.rig.inject_fault(kind, eng.loop.t0_ns + at_ns)
+
+        def kill() -> None:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+        trig = RehearsalTrigger.for_session([plan], opened.code, opened.kind, runner.state.trial_position,
+                                            inject, kill)
+        if self.trigger is not None:  # keep what was planned before
+            trig._pending.extend(self.trigger._pending)
+        else:
+            runner.listeners.append(lambda ev: self.trigger.on_runner_event(ev) if self.trigger else None)
+        self.trigger = trig
+        self.publish(m.FaultInjected(cmd.kind, f"trial {cmd.trial} + {cmd.seconds:g} s"))
 
     def _on_runner_event(self, ev: object) -> None:
         runner = self.runner
@@ -728,13 +767,14 @@ class StudyEngine:
             }))
 
     def _end_session(self, status: str, reason: str) -> None:
-        runner, recorder, db = self.runner, self.recorder, self.db
-        assert runner is not None and recorder is not None and db is not None
-        self.runner = self.recorder = self.db = None
+        runner, recorder, db, opened = self.runner, self.recorder, self.db, self.opened
+        assert runner is not None and recorder is not None and db is not None and opened is not None
+        self.runner = self.recorder = self.db = self.opened = None
+        self.trigger = None
         self.driver.participant = None
         error = ""
         try:
-            recorder.close()
+            finish_session(db, recorder, opened)
         except StorageError as exc:
             error = str(exc)
         finally:

@@ -14,7 +14,8 @@ from typing import Any
 
 __all__ = [
     "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
-    "EngineFault", "EngineReady", "EngineStopped", "Health", "ListSessions", "ManualTarget", "OperatorStop",
+    "EngineFault", "EngineReady", "EngineStopped", "FaultInjected", "Health", "InjectFault", "ListSessions", "ManualTarget",
+    "OperatorStop",
     "IdentifyPoses", "Pause", "PhaseEntered", "PoseRecorded", "RecordPose", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
     "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
     "DRIVER_MODES", "POSE_SETS",
@@ -88,6 +89,20 @@ class ResetFaults:
 @dataclass(frozen=True, slots=True)
 class OperatorStop:
     """Latch an operator stop (force ramps to zero until reset)."""
+
+
+@dataclass(frozen=True, slots=True)
+class InjectFault:
+    """Simulated rig only: rehearse a fault (:mod:`pipeline.sim.faults`, :mod:`protocol.rehearsal`).
+
+    ``trial`` None: now; else ``seconds`` after the cue of the running
+    session's ``trial``-th trial (1-based, the order the participant meets them).
+    ``kill`` ends the engine process itself, as a crash would.
+    """
+
+    kind: str
+    trial: int | None = None
+    seconds: float = 0.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -278,12 +293,20 @@ class PoseRecorded:
 
 @dataclass(frozen=True, slots=True)
 class EngineFault:
-    """The loop latched (``kind='fault'``) or cleared (``'faults_reset'``) faults."""
+    """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset (``'faults_reset'``)."""
 
     t_s: float
     kind: str
     faults: int
     detail: str
+
+
+@dataclass(frozen=True, slots=True)
+class FaultInjected:
+    """A rehearsed fault was planned (``when`` says for when) or fired (``when`` = "now" or the trial it hit)."""
+
+    kind: str
+    when: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -306,6 +329,8 @@ class Health:
     period_max_us: float = float("nan")
     #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), when tracing.
     late_periods: dict[str, Any] | None = None
+    #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after it.
+    waiting: str = ""
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,6 +17,7 @@ import numpy as np
 
 from pipeline.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
+from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
 from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
 from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
@@ -91,6 +92,8 @@ class SimRig:
         self.last_observation = HandObservation(0.0, 0.0, 0.0, 0.0, cfg.tip_home_m[2] - cfg.surface_z_m)
         #: App-side teleoperation (a :class:`pipeline.teleop.TeleopDriver`); None: the robot follows the stylus directly.
         self.teleop: Any = None
+        #: Fault rehearsal: faults scheduled on the rig's clock (:meth:`inject_fault`).
+        self.faults = FaultInjector()
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
@@ -103,6 +106,8 @@ class SimRig:
             dt = _MAX_DT_S
         self._last_ns = now_ns
         self.sim_time_s += dt
+        if self.faults.busy:
+            self.faults.apply(self, now_ns)
         cfg = self.config
         touch = self.haptic
         touch.advance(now_ns, dt)
@@ -156,6 +161,14 @@ class SimRig:
     def attach_teleop(self, driver: Any) -> None:
         """Let a :class:`pipeline.teleop.TeleopDriver` (servoing :attr:`robot`) move the arm; None detaches."""
         self.teleop = driver
+
+    def inject_fault(self, kind: str, at_ns: int, duration_s: float | None = None) -> None:
+        """Rehearse a fault (:mod:`pipeline.sim.faults`): ``kind`` from loop-clock time ``at_ns``.
+
+        ``duration_s`` defaults to the kind's own (:data:`pipeline.sim.faults.DEFAULT_DURATION_S`).
+        """
+        duration = DEFAULT_DURATION_S.get(kind, 0.0) if duration_s is None else duration_s
+        self.faults.schedule(SimFault(kind, int(at_ns), duration))
 
     def set_driver(self, driver: StylusDriver) -> None:
         """Hand the stylus to another driver (scripted, simulated participant, mouse)."""

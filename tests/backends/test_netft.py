@@ -218,7 +218,8 @@ def test_status_word_and_stalled_ft_sequence_reach_the_watchdog() -> None:
                 loop.run_ticks(1)
             assert s.stats.stalled == 7 and s.read_wrench().t_ns == t_fresh
             assert loop.faults == Fault.SENSOR_STALE
-            assert [e.detail for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS", "SENSOR_STALE"]
+            assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS", "SENSOR_STALE"]
+            assert [e.detail for e in loop.events if e.kind == "fault"][0] == "SENSOR_STATUS: status word 0x80000001"
         finally:
             s.close()
 

@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 from fake_netft import FakeNetFT  # noqa: E402
 from fake_rtde import FakeRtde  # noqa: E402
 
+from pipeline.devices import Fault  # noqa: E402
 from pipeline.frames import matrix_to_rotvec  # noqa: E402
 from study_app import messages as m  # noqa: E402
 from study_app.engine_client import EngineClient  # noqa: E402
@@ -131,7 +132,15 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
 
         # a session: no simulated participant; the hardware-agnostic config record and the calibration are stored
         db = str(tmp_path / "real.db")
+        # no trial is cued while a fault is latched (here the operator's stop; the sensor's first packets may
+        # also have come after the loop started, a stale start latched until the reset)
+        e.handle(m.OperatorStop())
+        wait_for(e, lambda: e.loop.faults & Fault.OPERATOR_STOP)
         e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+        wait_for(e, lambda: "OPERATOR_STOP" in e.health().waiting)
+        assert e.health().waiting.startswith("fault latched (")
+        assert not any(isinstance(ev, m.TrialStarted) for ev in events)
+        e.handle(m.ResetFaults())
         wait_for(e, lambda: any(isinstance(ev, m.TrialStarted) for ev in events))
         e.handle(m.AbortSession("rehearsal over"))
         wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))

@@ -15,7 +15,7 @@ import pytest
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
-from protocol.study import KILL_ENV, RAISE_ENV, resume_session, run_study
+from protocol.study import resume_session, run_study
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -92,8 +92,21 @@ def _run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float 
     )
 
 
-@pytest.mark.parametrize("kill_after_ticks", [9_000, 21_500])
-def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_after_ticks: int) -> None:
+def _run_killed_in_training(db: Path, proto: Path, participants: int, seed: int, trial: int, seconds: float) -> int:
+    """A study killed (SIGKILL) ``seconds`` into P01's ``trial``-th practice trial; the command line plans only
+    experiment trials, so this runs the library in a subprocess of its own.  Returns the exit status."""
+    code = (
+        "from protocol.config import load_protocol\n"
+        "from protocol.rehearsal import FaultPlan\n"
+        "from protocol.study import run_study\n"
+        f"run_study({str(db)!r}, participants={participants}, seed={seed}, protocol=load_protocol({str(proto)!r}), "
+        f"jobs=1, faults=[FaultPlan('kill', 'P01', {trial}, {seconds}, 'training')])\n"
+    )
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT).returncode
+
+
+@pytest.mark.parametrize("kill_at", ["kill@P01:1+9", "kill@P01:3+4"])
+def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_at: str) -> None:
     """SIGKILL mid-study (a real kill -9 of the process), then --resume: every finished trial intact, none twice."""
     db = tmp_path / "crash.db"
     proto = tmp_path / "short.toml"
@@ -101,8 +114,8 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
         (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 2")
         .replace("enabled = true", "enabled = false")
     )
-    killed = _run_cli(["run", "--participants", "1", "--seed", "3", "--db", str(db), "--protocol", str(proto)],
-                      env={KILL_ENV: str(kill_after_ticks)})
+    killed = _run_cli(["run", "--participants", "1", "--seed", "3", "--db", str(db), "--protocol", str(proto),
+                       "--inject-fault", kill_at])
     assert killed.returncode == -9  # SIGKILL
     before = rows(db, "SELECT trial_index, outcome, tct_s, rmse_n, n_samples FROM trials ORDER BY trial_index")
     sid = rows(db, "SELECT session_id FROM sessions WHERE kind = 'experiment'")[0][0]
@@ -122,9 +135,15 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
     final_schedule = schedule_from_json(rows(db, "SELECT schedule_json FROM sessions WHERE session_id = ?", sid)[0][0])
     assert [a[0] for a in after] == [s.index for s in final_schedule]  # nothing skipped or duplicated
     if partial[0]:
-        # killed mid-trial: that trial is stored as aborted with the reason, and re-run at the end
+        # killed mid-trial: that trial is stored as aborted with the reason, its real cue and its samples,
+        # and re-run at the end
         ab = after[len(before)]
-        assert ab[1] == "aborted" and "interrupted" in ab[5]
+        assert ab[1] == "aborted" and "interrupted" in ab[5] and ab[4] == partial[0]
+        (cue,) = rows(db, "SELECT t_s FROM events WHERE session_id = ? AND kind = 'phase' AND detail = ?",
+                      sid, f"trial {interrupted.index}: cued -> active")
+        started, ended, cause = rows(db, "SELECT started_at_s, ended_at_s, abort_cause FROM trials WHERE trial_id = ?",
+                                     sid * 1_000_000 + interrupted.index)[0]
+        assert started == cue[0] and ended == pytest.approx(cue[0] + partial[1], abs=1e-9) and cause == "interrupted"
         assert after[-1][6] == interrupted.index
         assert (after[-1][7], after[-1][8]) == (interrupted.target_label, interrupted.haptic_mode)
     completed = [a for a in after if a[1] != "aborted"]
@@ -221,8 +240,8 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
         (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
         .replace("enabled = true", "enabled = false")
     )
-    killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db), "--protocol", str(proto)],
-                      env={KILL_ENV: "9000"})
+    killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db), "--protocol", str(proto),
+                       "--inject-fault", "kill@P02:1+9"])
     assert killed.returncode == -9
     # the workers got SIGKILL from the kernel when the main process died (reaped by init: poll, don't sleep blindly)
     import time
@@ -323,8 +342,7 @@ def test_continue_completes_a_study_killed_during_training(tmp_path: Path) -> No
     db = tmp_path / "crash-training.db"
     proto = _short_training_toml(tmp_path)
     args = ["run", "--participants", "2", "--jobs", "1", "--seed", "8", "--db", str(db), "--protocol", str(proto)]
-    killed = _run_cli(args, env={KILL_ENV: "5000"})  # 5 s into P01's training (4 trials of at most 4 s + pauses)
-    assert killed.returncode == -9
+    assert _run_killed_in_training(db, proto, 2, 8, 2, 1.0) == -9  # 1 s into P01's 2nd practice trial
     assert _participant_sessions(db) == [("P01", "training", "running")]
     training_sid = rows(db, "SELECT session_id FROM sessions")[0][0]
     before = rows(db, "SELECT trial_index, outcome, tct_s, n_samples FROM trials ORDER BY trial_index")
@@ -399,9 +417,7 @@ def test_resume_continues_an_interrupted_training_session(tmp_path: Path) -> Non
     """resume_session takes the participant's open session whatever its kind: here, practice."""
     db = tmp_path / "t.db"
     proto = _short_training_toml(tmp_path)
-    killed = _run_cli(["run", "--participants", "1", "--seed", "1", "--db", str(db), "--protocol", str(proto)],
-                      env={KILL_ENV: "3000"})
-    assert killed.returncode == -9
+    assert _run_killed_in_training(db, proto, 1, 1, 1, 3.0) == -9
     progress = resume_session(str(db), "P01")
     assert progress.kind == "training" and progress.study_trials_done == progress.study_trials_total > 0
     assert _participant_sessions(db) == [("P01", "training", "completed")]
@@ -417,18 +433,30 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
 
     from protocol.study import StudyWorkerError
 
+    import protocol.session
+    import protocol.study
+
     db = tmp_path / "raise.db"
-    monkeypatch.setenv(RAISE_ENV, "3000")  # both workers raise 3 s into their participant
+    real_process = protocol.session.SessionRunner.process
+
+    def process_then_fail(self, rows, loop_events=()):  # type: ignore[no-untyped-def]
+        real_process(self, rows, loop_events)
+        if self._last_t_ns > 3_000_000_000:
+            raise RuntimeError("injected by the test 3 s into the participant")
+
+    # the workers are forked, so they run the patched runner (spawned ones would import it afresh)
+    fork = multiprocessing.get_context("fork")
+    monkeypatch.setattr(protocol.study.mp, "get_context", lambda method=None: fork)
+    monkeypatch.setattr(protocol.session.SessionRunner, "process", process_then_fail)
     with pytest.raises(StudyWorkerError) as err:
         run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2)
     msg = str(err.value)
-    assert msg.startswith(("participant P01 failed (RuntimeError: fault injected by HAPTIC_STUDY_RAISE_AFTER_TICKS "
-                           "after 3000 ticks)", "participant P02 failed (RuntimeError: fault injected by "
-                           "HAPTIC_STUDY_RAISE_AFTER_TICKS after 3000 ticks)")), msg
+    assert msg.startswith(("participant P01 failed (RuntimeError: injected by the test 3 s into the participant)",
+                           "participant P02 failed (RuntimeError: injected by the test 3 s into the participant)")), msg
     assert msg.endswith("complete the study with the same command and --continue")
     assert multiprocessing.active_children() == []
     assert rows(db, "SELECT status FROM sessions") == [("running",), ("running",)]
-    monkeypatch.delenv(RAISE_ENV)
+    monkeypatch.setattr(protocol.session.SessionRunner, "process", real_process)
     run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2, continue_study=True)
     assert rows(db, "SELECT status FROM sessions") == [("completed",), ("completed",)]
     for sid in (1, 2):

@@ -1,0 +1,344 @@
+"""Opening a session: the one way in for the headless study runner and the GUI's study engine.
+
+Starting or resuming a session is always the same sequence, whoever drives it:
+
+1. **own it** -- take the session's lease (:meth:`protocol.storage.StudyDatabase.acquire_lease`)
+   so no other process can write to it; a new session takes it in the very
+   transaction that creates it;
+2. **store it** -- a new session is stored with its whole schedule and
+   provenance before its first trial; a resumed one first closes the books on
+   the trial the previous run left half-done (:func:`open_resumed_session`);
+3. **run it** -- a :class:`protocol.storage.Recorder` and a :class:`protocol.session.SessionRunner`
+   over the loop (:func:`start_runner`);
+4. **give it back** -- :func:`finish_session` commits what is pending and releases the lease.
+
+**A resume keeps the true timeline.**  The trial that was running when the
+previous run ended keeps its real cue time and the samples it had (stored
+as ``aborted``, cause ``interrupted``, with its metrics over those samples)
+and is re-run per the abort policy; the session clock continues from the
+last stored moment (event, trial end or sample), and the resumed session
+begins with the protocol's pause before its next cue.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pipeline.loop import Command, HapticLoop
+from protocol.config import ProtocolConfig, protocol_from_dict
+from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.metrics import trial_metrics
+from protocol.session import DeliveryLimits, SessionRunner, TrialParticipant, first_unfinished
+from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope, trial_id_of
+from protocol.version import software_version
+
+__all__ = [
+    "OpenedSession",
+    "delivery_limits",
+    "finish_session",
+    "open_new_session",
+    "open_resumed_session",
+    "participant_seeds",
+    "start_runner",
+    "training_protocol",
+    "training_schedule",
+]
+
+#: Session time between the last stored moment of an interrupted run and the resumed run's first record.
+RESUME_STEP_S = 0.001
+
+
+def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
+    """(rig seed, participant seed) for a participant: independent streams from one study seed."""
+    s = np.random.SeedSequence([study_seed, number]).generate_state(2)
+    return int(s[0]), int(s[1])
+
+
+def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
+    """Free practice: each mode in turn, each target once, with the live force aid."""
+    out = []
+    for m in protocol.modes:
+        for t in protocol.targets:
+            out.append(TrialSpec(len(out), t.label, t.force_n, m))
+    return out
+
+
+def training_protocol(protocol: ProtocolConfig) -> ProtocolConfig:
+    """The protocol a training session runs (and stores): trials last the training's time per target and mode."""
+    return dataclasses.replace(
+        protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
+    )
+
+
+@dataclass(frozen=True)
+class OpenedSession:
+    """A session this process owns and may run: what the runner and the displays need.
+
+    Attributes
+    ----------
+    session_id, code, kind, seed, participant_number
+        The stored session.
+    protocol
+        The protocol the session runs (a training session's own, see :func:`training_protocol`).
+    schedule
+        The whole trial order, as stored.
+    start_position
+        First schedule position to run.
+    clock_offset_s
+        Session-clock time of the runner's first record.
+    initial_pause_s
+        Hold before the first cue (a resumed session begins with the protocol's pause).
+    live_force_aid
+        Training with the participant's live force gauge.
+    lease_owner
+        The lease token this process holds the session under.
+    resumed
+        Continues an interrupted session.
+    notes
+        What happened on the way in that the caller may want to show (a lease taken over, an interrupted trial).
+    """
+
+    session_id: int
+    code: str
+    kind: str
+    seed: int
+    participant_number: int
+    protocol: ProtocolConfig
+    schedule: list[TrialSpec]
+    start_position: int
+    clock_offset_s: float
+    initial_pause_s: float
+    live_force_aid: bool
+    lease_owner: str
+    resumed: bool
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def participant_seed(self) -> int:
+        """Seed of the simulated participant of this session's participant number."""
+        return participant_seeds(self.seed, self.participant_number)[1]
+
+
+def open_new_session(
+    db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, seed: int, rig: str,
+    config: dict[str, Any], calibration: dict[str, Any] | None, lease_owner: str, study_owner: str | None = None,
+    note: str = "",
+) -> OpenedSession:
+    """Store a new session (whole schedule, provenance) and take its lease, before its first trial.
+
+    Parameters
+    ----------
+    db
+        The study database (open for writing).
+    code, number
+        Participant code and number (the number drives counterbalancing).
+    kind
+        ``"training"`` or ``"experiment"``.
+    protocol
+        The study protocol (a training session runs :func:`training_protocol` of it).
+    seed
+        Study seed (schedules).
+    rig, config, calibration
+        Provenance stored with the session.
+    lease_owner, study_owner
+        This command's lease token, and the study lease it works under (a parallel ``run``'s workers).
+    note
+        Detail of the ``session_start`` event.
+
+    Raises
+    ------
+    StorageError
+        The participant already has a session of this kind, or another process runs the study.
+    """
+    if kind == "experiment":
+        schedule = build_schedule(protocol, seed, number)
+        run_protocol = protocol
+    elif kind == "training":
+        schedule = training_schedule(protocol)
+        run_protocol = training_protocol(protocol)
+    else:
+        raise ValueError(f"session kind = {kind!r}: allowed values are 'training' and 'experiment'")
+    session_id = db.create_session(
+        code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
+        schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
+        calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
+    )
+    db.insert_event(session_id, 0.0, "session_start", note or f"{kind} session for {code}, seed {seed}")
+    return OpenedSession(
+        session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
+        schedule=schedule, start_position=0, clock_offset_s=0.0, initial_pause_s=0.0,
+        live_force_aid=kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner, resumed=False,
+    )
+
+
+def open_resumed_session(
+    db: StudyDatabase, session_id: int, *, lease_owner: str, study_owner: str | None = None,
+    calibration: dict[str, Any] | None = None,
+) -> OpenedSession:
+    """Take an interrupted session over and get it ready to continue (see the module docstring).
+
+    Parameters
+    ----------
+    db
+        The study database (open for writing).
+    session_id
+        An interrupted session (status ``running``).
+    lease_owner, study_owner
+        As in :func:`open_new_session`.
+    calibration
+        The payload calibration this run uses: stored as an event (the session's own row keeps the first one).
+
+    Raises
+    ------
+    StorageError
+        No such interrupted session.
+    LeaseHeld
+        Another live process writes to it (nothing was changed).
+    """
+    takeover = db.acquire_lease(session_scope(session_id), lease_owner, study_owner=study_owner)
+    # read it only now that it is ours: another process may have finished it meanwhile
+    info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
+    if info is None:
+        db.release_lease(session_scope(session_id), lease_owner)
+        raise StorageError(f"session {session_id} in {db.path} is not an interrupted session")
+    protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {session_id} protocol")
+    schedule = schedule_from_json(info.schedule_json)
+    notes = [takeover] if takeover else []
+    with db.transaction():
+        if takeover:
+            db.insert_event(session_id, db.last_session_time_s(session_id), "lease", takeover)
+        pos = first_unfinished(schedule, db.trial_rows(session_id))
+        last_s = db.last_session_time_s(session_id)
+        interrupted = _interrupted_trial(db, info, protocol, schedule, pos)
+        if interrupted is not None:
+            row, end_s = interrupted
+            spec = schedule[pos]
+            db.insert_trial(row)
+            schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
+                                       np.random.default_rng([info.seed, session_id, 7]))
+            db.update_schedule(session_id, schedule_to_json(schedule))
+            last_s = max(last_s, end_s)
+            what = (f"trial {spec.index} (cue at {row['started_at_s']:.3f} s, {row['n_samples']} samples) was stored "
+                    "as aborted (interrupted) and re-queued")
+            notes.append(what)
+            pos += 1
+        else:
+            what = f"continuing at trial position {pos}"
+        offset_s = last_s + RESUME_STEP_S
+        db.insert_event(session_id, offset_s, "resume", what)
+        if calibration is not None:
+            db.insert_event(session_id, offset_s, "calibration", json.dumps(calibration))
+    return OpenedSession(
+        session_id=session_id, code=info.code, kind=info.kind, seed=info.seed,
+        participant_number=info.participant_number, protocol=protocol, schedule=schedule, start_position=pos,
+        clock_offset_s=offset_s, initial_pause_s=protocol.trial.pause_s,
+        live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
+        resumed=True, notes=notes,
+    )
+
+
+def _interrupted_trial(
+    db: StudyDatabase, info: SessionInfo, protocol: ProtocolConfig, schedule: list[TrialSpec], pos: int,
+) -> tuple[dict[str, Any], float] | None:
+    """The trial row of a trial that was cued but never finished (and its end on the session clock), or None."""
+    if pos >= len(schedule):
+        return None
+    spec = schedule[pos]
+    sid = info.session_id
+    cue_s = _cue_time_s(db, sid, spec.index)
+    if cue_s is None:
+        return None  # never cued: it simply runs now
+    samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
+                              (trial_id_of(sid, spec.index),)).fetchall()
+    t_s = np.array([r[0] for r in samples], dtype=np.float64)
+    force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
+    tr = protocol.trial
+    # t_s was stored as ns / 1e9: rounding recovers the integer ns exactly
+    met = trial_metrics(np.rint(t_s * 1e9).astype(np.int64), force, spec.target_force_n,
+                        tolerance_fraction=tr.tolerance_fraction, hold_s=tr.hold_s, max_trial_s=tr.max_trial_s)
+    end_s = cue_s + (float(t_s[-1]) if len(t_s) else 0.0)
+    row = {
+        "trial_id": trial_id_of(sid, spec.index), "session_id": sid, "trial_index": spec.index,
+        "target_label": spec.target_label, "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode,
+        "outcome": "aborted", "started_at_s": cue_s, "ended_at_s": end_s, "tct_s": None,
+        "rmse_n": met.rmse_n, "max_ae_n": met.max_ae_n, "time_in_band_s": met.time_in_band_s,
+        "peak_force_n": met.peak_force_n, "n_samples": len(t_s),
+        "abort_reason": "interrupted: the previous run ended during this trial", "repeat_of": spec.repeat_of,
+        "abort_cause": "interrupted",
+    }
+    return row, end_s
+
+
+def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float | None:
+    """When a trial's time origin was (its first record under the trial's condition), from the stored events.
+
+    The phase change to ``active`` carries it exactly; the ``cue`` event (one
+    tick earlier at most) stands in when the run ended before that was stored.
+    """
+    rows = db.conn.execute(
+        "SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail = ?) OR "
+        "(kind = 'cue' AND detail LIKE ?)) ORDER BY t_s DESC",
+        (session_id, f"trial {trial_index}: cued -> active", f"trial {trial_index}: %"),
+    ).fetchall()
+    by_kind = {k: t for k, t in rows}
+    t = by_kind.get("phase", by_kind.get("cue"))
+    return None if t is None else float(t)
+
+
+def delivery_limits(loop: HapticLoop) -> DeliveryLimits:
+    """What a trial on this loop must get: its safety stage's ramps and its watchdog's sensor-age limit."""
+    safety = loop.framework.config.safety
+    return DeliveryLimits(feedback_ramp_in_s=safety.ramp_in_s, feedback_ramp_out_s=safety.fault_ramp_s,
+                          max_gap_s=loop.watchdog.sensor_max_age_s)
+
+
+def start_runner(
+    db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
+    participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
+    auto_reset_faults: bool, threaded: bool, short_transactions: bool = False,
+) -> tuple[Recorder, SessionRunner]:
+    """The writer and the runner of an opened session.
+
+    Parameters
+    ----------
+    db
+        The database the session was opened in (the recorder becomes its writer).
+    opened
+        From :func:`open_new_session` or :func:`open_resumed_session`.
+    submit
+        Sends commands to the haptic loop.
+    participant, participant_time
+        A simulated participant to notify and its clock (None for a person).
+    limits
+        What the loop must deliver for a trial to count.
+    auto_reset_faults
+        Headless: the runner resets faults itself (see :class:`protocol.session.SessionRunner`).
+    threaded, short_transactions
+        Recorder options (a thread for live sessions; short transactions for parallel writers).
+    """
+    recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions)
+    runner = SessionRunner(
+        protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
+        submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,
+        participant=participant, participant_time=participant_time, seed=opened.seed, limits=limits,
+        initial_pause_s=opened.initial_pause_s, auto_reset_faults=auto_reset_faults,
+    )
+    runner.live_force_aid = opened.live_force_aid
+    return recorder, runner
+
+
+def finish_session(db: StudyDatabase, recorder: Recorder, opened: OpenedSession) -> None:
+    """Commit what the recorder holds, then give the session's lease back (also after a recorder error)."""
+    try:
+        recorder.close()
+    finally:
+        try:
+            db.release_lease(session_scope(opened.session_id), opened.lease_owner)
+        except Exception:  # noqa: BLE001 - a lease left behind is taken over once this process is gone
+            pass
