@@ -105,7 +105,7 @@ BAD_FIELDS = [
     ("tolerance as text", "tolerance_fraction = 0.10 ", 'tolerance_fraction = "10%" ',
      "trial.tolerance_fraction = '10%': must be a number > 0 and ≤ 0.5"),
     ("negative pause", "pause_s = 2.0 ", "pause_s = -2.0 ",
-     "trial.pause_s = -2.0: must be a number ≥ 0 and ≤ 600"),
+     "trial.pause_s = -2.0: must be a number from 0 to 600"),
     ("infinite cap", "max_trial_s = 12.0 ", "max_trial_s = inf ",
      "trial.max_trial_s = inf: must be a number > 0 and ≤ 600"),
     ("unknown ordering", 'ordering = "random"', 'ordering = "latin_square"',
