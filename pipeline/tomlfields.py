@@ -19,6 +19,7 @@ use it too.
 from __future__ import annotations
 
 import ipaddress
+import json
 import math
 import re
 import reprlib
@@ -44,6 +45,7 @@ _REPR.maxlevel = 3
 
 # RFC 1123 §2.1: labels of letters, digits and hyphens, 1–63 characters, not starting or ending with a hyphen.
 _LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9-]{0,61}[A-Za-z0-9])?\Z")
+_BARE_KEY = re.compile(r"[A-Za-z0-9_-]+\Z")
 
 
 def show(value: Any) -> str:
@@ -124,7 +126,9 @@ class Fields:
         extra = sorted(set(v) - allowed_keys)
         if extra:
             key = extra[0]
-            raise self.fail(f"{field}.{key}" if field else key, v[key],
+            # a key that is not a TOML bare key is shown quoted, as TOML writes it (escapes keep the line one line)
+            name = key if _BARE_KEY.match(key) else json.dumps(key)
+            raise self.fail(f"{field}.{name}" if field else name, v[key],
                             f"unknown field; allowed: {', '.join(sorted(allowed_keys))}")
         return v
 

@@ -20,6 +20,8 @@ from pipeline.tomlfields import Fields
 
 __all__ = [
     "ABORT_POLICIES",
+    "MAX_TRIAL_S",
+    "MODES",
     "ORDERINGS",
     "ProtocolConfig",
     "ProtocolError",
