@@ -13,7 +13,6 @@ names the device.
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from collections.abc import Callable
@@ -24,7 +23,7 @@ from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
 from pipeline.frames import Vec3
 from pipeline.sim.touch import TouchSpec
-from pipeline.tomlfields import Fields
+from pipeline.tomlfields import Fields, read_toml
 
 __all__ = [
     "HardwareConfig",
@@ -270,16 +269,7 @@ def load_hardware(path: str | Path) -> HardwareConfig:
     """Load and validate a hardware file."""
     p = Path(path)
     src = str(p)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise HardwareError(f"{src}: no such hardware file (copy hardware.example.toml and edit it)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HardwareError(f"{src}: cannot read the hardware file ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except ValueError as exc:  # TOMLDecodeError, and an integer too long for Python to read
-        raise HardwareError(f"{src}: not valid TOML ({exc})") from None
+    data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
     hw = hardware_from_dict(data, src)
     if hw.calibration_file is not None and not Path(hw.calibration_file).is_absolute():
         # a relative calibration path is relative to the hardware file, not to the working directory

@@ -23,12 +23,14 @@ import json
 import math
 import re
 import reprlib
+import tomllib
 from collections.abc import Callable, Sequence
+from pathlib import Path
 from typing import Any, TypeVar
 
 from pipeline.frames import Mat3, Vec3, check_rotation
 
-__all__ = ["Fields", "SQLITE_INTEGER_MAX", "SQLITE_INTEGER_MIN", "host_problem", "show"]
+__all__ = ["Fields", "SQLITE_INTEGER_MAX", "SQLITE_INTEGER_MIN", "host_problem", "parse_toml", "read_toml", "show"]
 
 #: The range of SQLite's INTEGER (signed 64-bit): a larger Python int cannot be stored.
 SQLITE_INTEGER_MIN = -(2**63)
@@ -54,6 +56,25 @@ def show(value: Any) -> str:
         return _REPR.repr(value)
     except ValueError:  # int longer than sys.get_int_max_str_digits()
         return f"<a {type(value).__name__} too long to print>"
+
+
+def parse_toml(text: str, source: str, error: type[ValueError]) -> dict[str, Any]:
+    """Parse TOML text; a syntax error is one line ``<source>: not valid TOML (…)`` raised as ``error``."""
+    try:
+        return tomllib.loads(text)
+    except ValueError as exc:  # TOMLDecodeError, and an integer too long for Python to read
+        raise error(f"{source}: not valid TOML ({exc})") from None
+
+
+def read_toml(path: Path, error: type[ValueError], what: str, missing_hint: str = "") -> dict[str, Any]:
+    """Read and parse the TOML file ``path`` (a ``what``, e.g. "protocol file"); failures raise ``error``."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(f"{path}: no such {what}{missing_hint}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path}: cannot read the {what} ({exc})") from None
+    return parse_toml(text, str(path), error)
 
 
 def _is_real(v: Any) -> bool:

@@ -10,13 +10,12 @@ from __future__ import annotations
 
 import json
 import re
-import tomllib
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from pipeline.tomlfields import Fields
+from pipeline.tomlfields import Fields, parse_toml, read_toml
 
 __all__ = [
     "ABORT_POLICIES",
@@ -195,21 +194,12 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
 def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
     """Load and validate a protocol file (default: the paper's study, ``protocol/default.toml``)."""
     if path is None:
-        text = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
         source = "protocol/default.toml"
+        data = parse_toml(resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8"), source,
+                          ProtocolError)
     else:
-        p = Path(path)
-        source = str(p)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ProtocolError(f"{source}: no such protocol file") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProtocolError(f"{source}: cannot read the protocol file ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except ValueError as exc:  # TOMLDecodeError, and an integer too long for Python to read
-        raise ProtocolError(f"{source}: not valid TOML ({exc})") from None
+        source = str(Path(path))
+        data = read_toml(Path(path), ProtocolError, "protocol file")
     return protocol_from_dict(data, source)
 
 
