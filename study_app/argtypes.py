@@ -15,10 +15,10 @@ from typing import NoReturn
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
-__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "host_name", "real_number", "whole_number"]
+__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "host_name", "one_line", "real_number", "whole_number"]
 
 
-def _printable(text: str) -> str:
+def one_line(text: str) -> str:
     """``text`` with line breaks and other control characters escaped: an error stays on one line."""
     return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
 
@@ -36,7 +36,7 @@ class OneLineParser(argparse.ArgumentParser):
             message = own.group(2)
         else:
             message += f" (see '{self.prog} --help')"
-        self.exit(2, f"{self.prog}: error: {_printable(message)}\n")
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
 
 
 def whole_number(name: str, lo: int, hi: int, note: str = "") -> Callable[[str], int]:

@@ -12,7 +12,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, OneLineParser, host_name, real_number, whole_number
+from study_app.argtypes import SQLITE_INTEGER_MAX, OneLineParser, host_name, one_line, real_number, whole_number
 
 __all__ = ["main"]
 
@@ -180,7 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command in ("probe", "check-hardware"):
             return _cmd_hardware(args)
     except CliError as exc:
-        print(f"haptic-study: error: {exc}", file=sys.stderr)
+        print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
         return 2
     except KeyboardInterrupt:
         print("haptic-study: interrupted", file=sys.stderr)
@@ -321,4 +321,8 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # ``python -m study_app.cli``: run the imported module's main, not this __main__ copy of it -- the subcommand
+    # modules raise study_app.cli.CliError, which __main__.CliError would not catch (a traceback instead of one line)
+    from study_app.cli import main as _main
+
+    sys.exit(_main())

@@ -39,6 +39,7 @@ def test_sim_text_summary_and_progress(capsys: pytest.CaptureFixture[str]) -> No
         (["sim", "--clock", "wall"], "invalid choice: 'wall'"),
         (["bench", "nothing"], "invalid choice: 'nothing'"),
         (["bench", "pipeline", "--loop-seconds", "-1"], "--loop-seconds = '-1': must be a number from 0 to 3600 (0 skips the loop)"),
+        (["report", "--db", "/nonexistent/study.db", "--out", "/nonexistent/out"], "the folder /nonexistent does not exist"),
         (["bench", "pipeline", "--loop-seconds", "nan"], "--loop-seconds = 'nan': must be a number from 0 to 3600 (0 skips the loop)"),
     ],
 )
@@ -49,3 +50,4 @@ def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:
     assert proc.returncode == 2
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr
+    assert len(proc.stderr.splitlines()) == 1, proc.stderr
