@@ -30,10 +30,9 @@ from typing import Any, TypeVar
 
 from pipeline.frames import Mat3, Vec3, check_rotation
 
-__all__ = ["Fields", "SQLITE_INTEGER_MAX", "SQLITE_INTEGER_MIN", "host_problem", "parse_toml", "read_toml", "show"]
+__all__ = ["Fields", "SQLITE_INTEGER_MAX", "host_problem", "parse_toml", "read_toml", "show"]
 
-#: The range of SQLite's INTEGER (signed 64-bit): a larger Python int cannot be stored.
-SQLITE_INTEGER_MIN = -(2**63)
+#: The largest SQLite INTEGER (signed 64-bit): a larger Python int cannot be stored.
 SQLITE_INTEGER_MAX = 2**63 - 1
 
 T = TypeVar("T")
