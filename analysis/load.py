@@ -23,6 +23,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from protocol.storage import StorageError, StudyDatabase, trial_id_of
+from protocol.storage import connect_readonly as _connect_readonly
 
 __all__ = [
     "AnalysisError",
@@ -78,7 +79,8 @@ class StudyData:
 
 def _open(path: str) -> StudyDatabase:
     try:
-        return StudyDatabase(path, readonly=True)
+        # read-only (an archive in a read-only folder opens immutable), and checked: a damaged file is one line
+        return StudyDatabase(path, readonly=True, check=True)
     except StorageError as exc:
         raise AnalysisError(str(exc)) from None
 
@@ -229,8 +231,14 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArra
 
 
 def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
-    """A read-only connection (never creates, migrates or locks the study database for writing)."""
-    return sqlite3.connect(f"file:{database}?mode=ro", uri=True)
+    """A read-only connection (never creates, migrates or locks the study database for writing).
+
+    See :func:`protocol.storage.connect_readonly` (archives in read-only folders open immutable).
+    """
+    try:
+        return _connect_readonly(database)
+    except StorageError as exc:
+        raise AnalysisError(str(exc)) from None
 
 
 _SAMPLE_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",

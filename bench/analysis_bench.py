@@ -15,7 +15,6 @@ Two figures the analysis issue asks for:
 from __future__ import annotations
 
 import os
-import sqlite3
 import subprocess
 import sys
 import tempfile
@@ -26,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.parallel import default_workers
+from protocol.storage import connect_readonly
 
 __all__ = ["format_report_bench", "run_report_bench", "synthetic_trials"]
 
@@ -121,7 +121,7 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
         if db is None:
             db = os.path.join(tmp, "study.db")
             made_s = _make_study(db, participants)
-        c = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
+        c = connect_readonly(db)
         try:
             samples = c.execute(
                 "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "

@@ -13,8 +13,6 @@ names the device.
 
 from __future__ import annotations
 
-import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from collections.abc import Callable
@@ -23,7 +21,9 @@ from typing import Any
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
-from pipeline.frames import Mat3, Vec3, check_rotation
+from pipeline.frames import Vec3
+from pipeline.sim.touch import TouchSpec
+from pipeline.tomlfields import Fields, read_toml
 
 __all__ = [
     "HardwareConfig",
@@ -120,66 +120,36 @@ class HardwareConfig:
     teleop: TeleopSettings | None = None
 
 
-# -- validation helpers ---------------------------------------------------------------------
-def _fail(src: str, fld: str, value: Any, allowed: str) -> HardwareError:
-    return HardwareError(f"{src}: {fld} = {value!r}: {allowed}")
-
-
-def _table(src: str, fld: str, v: Any, allowed: set[str]) -> dict[str, Any]:
-    if not isinstance(v, dict):
-        raise _fail(src, fld, v, "must be a table")
-    extra = sorted(set(v) - allowed)
-    if extra:
-        key = extra[0]
-        raise _fail(src, f"{fld}.{key}" if fld else key, v[key], f"unknown field; allowed: {', '.join(sorted(allowed))}")
-    return v
-
-
-def _number(src: str, fld: str, v: Any, lo: float, hi: float) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo < v <= hi:
-        raise _fail(src, fld, v, f"must be a number > {lo:g} and ≤ {hi:g}")
-    return float(v)
-
-
-def _port(src: str, fld: str, v: Any) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 65535:
-        raise _fail(src, fld, v, "must be a whole port number from 1 to 65535")
-    return v
-
-
-def _text(src: str, fld: str, v: Any) -> str:
-    if not isinstance(v, str) or not v.strip() or any(c.isspace() for c in v.strip()):
-        raise _fail(src, fld, v, "must be a non-empty string without spaces (an IP address, host name or device path)")
-    return v.strip()
-
-
-def _rotation(src: str, fld: str, v: Any) -> Mat3:
-    try:
-        return check_rotation(v, fld)
-    except ValueError as exc:
-        raise HardwareError(f"{src}: {exc}") from None
+# -- validation ------------------------------------------------------------------------------
+_PORT = "a whole port number"
+_DEVICE_PATH = "a non-empty string without spaces (a serial device path such as /dev/ttyACM0 or COM3)"
 
 
 def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
-    """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`."""
-    src = source
-    top = _table(src, "", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
-    if top.get("version", 1) != 1:
-        raise _fail(src, "version", top.get("version"), "this software reads hardware file version 1")
+    """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`.
+
+    Raises
+    ------
+    HardwareError
+        One line naming ``source``, the field, the value and what is allowed.
+    """
+    f = Fields(source, HardwareError)
+    top = f.table("", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
+    f.choice("version", top.get("version", 1), (1,), "this software reads hardware file version 1")
     for required in ("sensor", "robot", "haptic"):
         if required not in top:
-            raise _fail(src, required, None, f"the [{required}] table is required")
+            raise f.fail(required, None, f"the [{required}] table is required")
 
-    s = _table(src, "sensor", top["sensor"], {
+    s = f.table("sensor", top["sensor"], {
         "host", "port", "http_port", "counts_per_force", "counts_per_torque", "force_unit", "torque_unit",
         "buffered", "connect_timeout_s",
     })
     if "host" not in s:
-        raise _fail(src, "sensor.host", None, "required: the Net F/T box's IP address")
+        raise f.fail("sensor.host", None, "required: the Net F/T box's IP address")
     cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
     if (cpf is None) != (cpt is None):
         missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
-        raise _fail(src, missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
+        raise f.fail(missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
     from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
 
     fu, tu = s.get("force_unit", "N"), s.get("torque_unit", "Nm")
@@ -189,130 +159,109 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
                 raise NetFTError("must be a string")
             check(unit)
         except NetFTError as exc:
-            raise _fail(src, fld, unit, str(exc).split("; ")[-1]) from None
-    buffered = s.get("buffered", False)
-    if not isinstance(buffered, bool):
-        raise _fail(src, "sensor.buffered", buffered, "must be true or false")
+            raise f.fail(fld, unit, str(exc).split("; ")[-1]) from None
     sensor = SensorSettings(
-        host=_text(src, "sensor.host", s["host"]),
-        port=_port(src, "sensor.port", s.get("port", 49152)),
-        http_port=_port(src, "sensor.http_port", s.get("http_port", 80)),
-        counts_per_force=None if cpf is None else _number(src, "sensor.counts_per_force", cpf, 0.0, 1e12),
-        counts_per_torque=None if cpt is None else _number(src, "sensor.counts_per_torque", cpt, 0.0, 1e12),
-        force_unit=fu, torque_unit=tu, buffered=buffered,
-        connect_timeout_s=_number(src, "sensor.connect_timeout_s", s.get("connect_timeout_s", 2.0), 0.0, 60.0),
+        # the Net F/T backend opens an AF_INET socket and builds an http:// URL from the host: IPv4 only
+        host=f.host("sensor.host", s["host"], ipv6=False),
+        port=f.integer("sensor.port", s.get("port", 49152), lo=1, hi=65535, what=_PORT),
+        http_port=f.integer("sensor.http_port", s.get("http_port", 80), lo=1, hi=65535, what=_PORT),
+        counts_per_force=None if cpf is None else f.number("sensor.counts_per_force", cpf, lo=0.0, hi=1e12),
+        counts_per_torque=None if cpt is None else f.number("sensor.counts_per_torque", cpt, lo=0.0, hi=1e12),
+        force_unit=fu, torque_unit=tu, buffered=f.boolean("sensor.buffered", s.get("buffered", False)),
+        connect_timeout_s=f.number("sensor.connect_timeout_s", s.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    r = _table(src, "robot", top["robot"], {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
+    r = f.table("robot", top["robot"], {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
     if "host" not in r:
-        raise _fail(src, "robot.host", None, "required: the UR controller's IP address")
+        raise f.fail("robot.host", None, "required: the UR controller's IP address")
     freq = r.get("frequency_hz", 125.0)
-    if freq != -1:
-        freq = _number(src, "robot.frequency_hz", freq, 0.0, 500.0)
-    mode = r.get("mode", "observe")
-    if mode not in ROBOT_MODES:
-        raise _fail(src, "robot.mode", mode, f"allowed values: {', '.join(ROBOT_MODES)}")
+    if not (type(freq) is int and freq == -1):
+        freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
+    mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
     if mode == "teleop" and "teleop" not in top:
-        raise _fail(src, "teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
-                    "and workspace_max_m (see hardware.example.toml)")
-    off = r.get("tcp_offset_m", [0.0, 0.0, 0.0])
-    if (
-        not isinstance(off, list) or len(off) != 3
-        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or abs(x) > 1.0 for x in off)
-    ):
-        raise _fail(src, "robot.tcp_offset_m", off, "must be 3 numbers in metres, each within ±1 m")
+        raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
+                     "and workspace_max_m (see hardware.example.toml)")
     robot = RobotSettings(
-        host=_text(src, "robot.host", r["host"]), frequency_hz=float(freq), mode=mode,
-        tcp_offset_m=(float(off[0]), float(off[1]), float(off[2])),
-        connect_timeout_s=_number(src, "robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), 0.0, 60.0),
+        host=f.host("robot.host", r["host"]), frequency_hz=float(freq), mode=mode,
+        tcp_offset_m=f.vec3("robot.tcp_offset_m", r.get("tcp_offset_m", [0.0, 0.0, 0.0]), limit=1.0,
+                            what="must be 3 numbers in metres, each within ±1 m"),
+        connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    h = _table(src, "haptic", top["haptic"], {"device_name"})
-    name = h.get("device_name", "Default Device")
-    if not isinstance(name, str) or not name.strip():
-        raise _fail(src, "haptic.device_name", name, "must be a non-empty string (the OpenHaptics device name)")
-    haptic = HapticSettings(name.strip())
+    h = f.table("haptic", top["haptic"], {"device_name"})
+    haptic = HapticSettings(f.string("haptic.device_name", h.get("device_name", "Default Device"),
+                                     what="a non-empty string (the OpenHaptics device name)"))
 
     jaw = None
     if "jaw" in top:
-        j = _table(src, "jaw", top["jaw"], {"port", "baud", "ready_timeout_s"})
+        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s"})
         if "port" not in j:
-            raise _fail(src, "jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
-        baud = j.get("baud", 115200)
-        if baud not in (9600, 19200, 38400, 57600, 115200):
-            raise _fail(src, "jaw.baud", baud, "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)")
+            raise f.fail("jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
         jaw = JawSettings(
-            _text(src, "jaw.port", j["port"]), baud,
-            _number(src, "jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), 0.0, 60.0),
+            f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
+            f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
+                     "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
+            f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
         )
 
-    fr = _table(src, "frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
-    rot_ts = _rotation(src, "frames.rot_tip_sensor", fr.get("rot_tip_sensor", DEFAULT_ROT_TIP_SENSOR))
-    rot_hb = _rotation(src, "frames.rot_haptic_base", fr.get("rot_haptic_base", DEFAULT_ROT_HAPTIC_BASE))
-    fw = _table(src, "framework", top.get("framework", {}), {"f_max_n", "f_scale_n", "filter_window"})
-    window = fw.get("filter_window", 10)
-    if isinstance(window, bool) or not isinstance(window, int) or not 1 <= window <= 1000:
-        raise _fail(src, "framework.filter_window", window, "must be a whole number of samples from 1 to 1000")
-    f_max = _number(src, "framework.f_max_n", fw.get("f_max_n", 3.0), 0.0, 20.0)
+    fr = f.table("frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
+    rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else DEFAULT_ROT_TIP_SENSOR
+    rot_hb = (f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr
+              else DEFAULT_ROT_HAPTIC_BASE)
+    fw = f.table("framework", top.get("framework", {}), {"f_max_n", "f_scale_n", "filter_window"})
+    # the safety clamp is min(f_max, the device's reported peak): an f_max above the Touch's peak would be a
+    # setting the device silently ignores (and the paper's scaling law would no longer hold)
+    peak_n = TouchSpec().peak_force_n
     framework = FrameworkConfig(
-        f_max_n=f_max, f_scale_n=_number(src, "framework.f_scale_n", fw.get("f_scale_n", 7.0), 0.0, 1000.0),
-        filter_window=window, rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
+        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=0.0, hi=peak_n,
+                         note="(N; the 3D Systems Touch's peak force)"),
+        f_scale_n=f.number("framework.f_scale_n", fw.get("f_scale_n", 7.0), lo=0.0, hi=1000.0),
+        filter_window=f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,
+                                what="a whole number of samples"),
+        rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
     )
-    cal = _table(src, "calibration", top.get("calibration", {}), {"file"})
+    cal = f.table("calibration", top.get("calibration", {}), {"file"})
     cal_file = cal.get("file")
-    if cal_file is not None and (not isinstance(cal_file, str) or not cal_file.strip()):
-        raise _fail(src, "calibration.file", cal_file, "must be the path of a payload calibration JSON file")
-    teleop = _teleop(src, top["teleop"]) if "teleop" in top else None
+    if cal_file is not None:
+        cal_file = f.string("calibration.file", cal_file, what="the path of a payload calibration JSON file")
+    teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
     return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop)
 
 
-def _vec3_m(src: str, fld: str, v: Any, limit_m: float) -> Vec3:
-    if (
-        not isinstance(v, list) or len(v) != 3
-        or any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) or abs(x) > limit_m for x in v)
-    ):
-        raise _fail(src, fld, v, f"must be 3 numbers in metres (x, y, z in the robot base frame), each within ±{limit_m:g} m")
-    return (float(v[0]), float(v[1]), float(v[2]))
-
-
-def _teleop(src: str, v: Any) -> TeleopSettings:
-    t = _table(src, "teleop", v, {
+def _teleop(f: Fields, v: Any) -> TeleopSettings:
+    t = f.table("teleop", v, {
         "workspace_min_m", "workspace_max_m", "max_speed_m_s", "motion_scale", "deadman_button", "clutch_button",
         "stylus_max_age_s", "pose_max_age_s", "max_tracking_error_m", "lookahead_s", "gain", "control_timeout_s",
     })
     for req in ("workspace_min_m", "workspace_max_m"):
         if req not in t:
-            raise _fail(src, f"teleop.{req}", None, "required: the corner of the box (m, robot base frame) the TCP must stay in")
-    lo = _vec3_m(src, "teleop.workspace_min_m", t["workspace_min_m"], 1.0)
-    hi = _vec3_m(src, "teleop.workspace_max_m", t["workspace_max_m"], 1.0)
+            raise f.fail(f"teleop.{req}", None, "required: the corner of the box (m, robot base frame) the TCP must stay in")
+    box = "must be 3 numbers in metres (x, y, z in the robot base frame), each within ±1 m"
+    lo = f.vec3("teleop.workspace_min_m", t["workspace_min_m"], limit=1.0, what=box)
+    hi = f.vec3("teleop.workspace_max_m", t["workspace_max_m"], limit=1.0, what=box)
     for i, axis in enumerate("xyz"):
         if not lo[i] < hi[i]:
-            raise _fail(src, "teleop.workspace_max_m", t["workspace_max_m"],
-                        f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
+            raise f.fail("teleop.workspace_max_m", t["workspace_max_m"],
+                         f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
     buttons = {}
     for fld, default in (("deadman_button", 1), ("clutch_button", 2)):
-        b = t.get(fld, default)
-        if isinstance(b, bool) or b not in (1, 2):
-            raise _fail(src, f"teleop.{fld}", b, "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
-        buttons[fld] = b
+        buttons[fld] = f.choice(f"teleop.{fld}", t.get(fld, default), (1, 2),
+                                "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
     if buttons["deadman_button"] == buttons["clutch_button"]:
-        raise _fail(src, "teleop.clutch_button", buttons["clutch_button"], "must differ from teleop.deadman_button")
-    gain = t.get("gain", 300.0)
-    if isinstance(gain, bool) or not isinstance(gain, (int, float)) or not 100 <= gain <= 2000:
-        raise _fail(src, "teleop.gain", gain, "must be a number from 100 to 2000 (servoL's proportional gain)")
-    look = t.get("lookahead_s", 0.1)
-    if isinstance(look, bool) or not isinstance(look, (int, float)) or not 0.03 <= look <= 0.2:
-        raise _fail(src, "teleop.lookahead_s", look, "must be a number from 0.03 to 0.2 s (servoL's look-ahead time)")
+        raise f.fail("teleop.clutch_button", buttons["clutch_button"], "must differ from teleop.deadman_button")
     return TeleopSettings(
         workspace_min_m=lo, workspace_max_m=hi,
-        max_speed_m_s=_number(src, "teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), 0.0, 0.25),
-        motion_scale=_number(src, "teleop.motion_scale", t.get("motion_scale", 1.0), 0.0, 10.0),
+        max_speed_m_s=f.number("teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), lo=0.0, hi=0.25),
+        motion_scale=f.number("teleop.motion_scale", t.get("motion_scale", 1.0), lo=0.0, hi=10.0),
         deadman_button=buttons["deadman_button"], clutch_button=buttons["clutch_button"],
-        stylus_max_age_s=_number(src, "teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), 0.0, 1.0),
-        pose_max_age_s=_number(src, "teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), 0.0, 1.0),
-        max_tracking_error_m=_number(src, "teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), 0.0, 0.2),
-        lookahead_s=float(look), gain=float(gain),
-        control_timeout_s=_number(src, "teleop.control_timeout_s", t.get("control_timeout_s", 5.0), 0.0, 60.0),
+        stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
+        pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
+        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0, hi=0.2),
+        lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.1), lo=0.03, hi=0.2, lo_open=False,
+                             note="s (servoL's look-ahead time)"),
+        gain=f.number("teleop.gain", t.get("gain", 300.0), lo=100.0, hi=2000.0, lo_open=False,
+                      note="(servoL's proportional gain)"),
+        control_timeout_s=f.number("teleop.control_timeout_s", t.get("control_timeout_s", 5.0), lo=0.0, hi=60.0),
     )
 
 
@@ -320,16 +269,7 @@ def load_hardware(path: str | Path) -> HardwareConfig:
     """Load and validate a hardware file."""
     p = Path(path)
     src = str(p)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise HardwareError(f"{src}: no such hardware file (copy hardware.example.toml and edit it)") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise HardwareError(f"{src}: cannot read the hardware file ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise HardwareError(f"{src}: not valid TOML ({exc})") from None
+    data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
     hw = hardware_from_dict(data, src)
     if hw.calibration_file is not None and not Path(hw.calibration_file).is_absolute():
         # a relative calibration path is relative to the hardware file, not to the working directory

@@ -9,16 +9,18 @@ offending value and what is allowed -- nothing starts with a bad file.
 from __future__ import annotations
 
 import json
-import math
 import re
-import tomllib
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from pipeline.tomlfields import Fields, parse_toml, read_toml
+
 __all__ = [
     "ABORT_POLICIES",
+    "MAX_TRIAL_S",
+    "MODES",
     "ORDERINGS",
     "ProtocolConfig",
     "ProtocolError",
@@ -33,6 +35,8 @@ __all__ = [
 ORDERINGS = ("random", "blocked_by_mode", "counterbalanced")
 ABORT_POLICIES = ("append", "reinsert")
 MODES = ("on", "off")
+#: Longest trial cap (s): ``trial.max_trial_s``, and each training trial's length.
+MAX_TRIAL_S = 600.0
 _LABEL = re.compile(r"^[A-Z][A-Z0-9_]{0,15}\Z")  # \Z, not $: "$" also matches before a final newline
 
 
@@ -115,99 +119,74 @@ class ProtocolConfig:
         return json.dumps(self.to_dict(), sort_keys=True)
 
 
-def _fail(source: str, field: str, value: Any, allowed: str) -> ProtocolError:
-    return ProtocolError(f"{source}: {field} = {value!r}: {allowed}")
-
-
-def _number(src: str, field: str, v: Any, *, lo: float, hi: float, lo_open: bool = True) -> float:
-    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-    ok = ok and (v > lo if lo_open else v >= lo) and v <= hi
-    if not ok:
-        rng = f"{'>' if lo_open else '≥'} {lo:g} and ≤ {hi:g}"
-        raise _fail(src, field, v, f"must be a number {rng}")
-    return float(v)
-
-
-def _table(src: str, field: str, v: Any, allowed_keys: set[str]) -> dict[str, Any]:
-    if not isinstance(v, dict):
-        raise _fail(src, field, v, "must be a table")
-    extra = set(v) - allowed_keys
-    if extra:
-        key = sorted(extra)[0]
-        raise _fail(src, f"{field}.{key}" if field else key, v[key], f"unknown field; allowed: {', '.join(sorted(allowed_keys))}")
-    return v
-
-
 def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
-    """Validate plain data (a parsed TOML file) into a :class:`ProtocolConfig`."""
-    top = _table(source, "", d, {"name", "version", "targets", "design", "trial", "training"})
-    name = top.get("name", "unnamed protocol")
-    if not isinstance(name, str) or not name.strip():
-        raise _fail(source, "name", name, "must be a non-empty string")
-    version = top.get("version", 1)
-    if version != 1:
-        raise _fail(source, "version", version, "this software reads protocol version 1")
+    """Validate plain data (a parsed TOML file) into a :class:`ProtocolConfig`.
 
-    raw_targets = top.get("targets")
-    if not isinstance(raw_targets, list) or not 1 <= len(raw_targets) <= 8:
-        raise _fail(source, "targets", raw_targets, "must be a list of 1 to 8 [[targets]] tables")
-    targets = []
-    for i, t in enumerate(raw_targets):
-        f = f"targets[{i}]"
-        t = _table(source, f, t, {"label", "force_n"})
-        label = t.get("label")
-        if not isinstance(label, str) or not _LABEL.match(label):
-            raise _fail(source, f"{f}.label", label, "must be an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)")
-        force = _number(source, f"{f}.force_n", t.get("force_n"), lo=0.0, hi=20.0)
-        targets.append(Target(label, force))
+    Besides every field, what is derived from them is checked: the training
+    session runs (and stores, and on resume re-reads) the protocol with
+    ``trial.max_trial_s = training.seconds_per_target_per_mode``, so that
+    value must be a valid trial cap too.
+
+    Raises
+    ------
+    ProtocolError
+        One line naming ``source``, the field, the value and what is allowed.
+    """
+    f = Fields(source, ProtocolError)
+    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training"})
+    name = f.string("name", top.get("name", "unnamed protocol"))
+    f.choice("version", top.get("version", 1), (1,), "this software reads protocol version 1")
+
+    def target(field: str, t: Any) -> Target:
+        t = f.table(field, t, {"label", "force_n"})
+        label = f.string(f"{field}.label", t.get("label"), pattern=_LABEL,
+                         what="an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)")
+        return Target(label, f.number(f"{field}.force_n", t.get("force_n"), lo=0.0, hi=20.0))
+
+    targets = f.list_of("targets", top.get("targets"), target, min_len=1, max_len=8,
+                        what="a list of 1 to 8 [[targets]] tables")
     labels = [t.label for t in targets]
     if len(set(labels)) != len(labels):
-        raise _fail(source, "targets", labels, "labels must be unique")
+        raise f.fail("targets", labels, "labels must be unique")
 
-    design = _table(source, "design", top.get("design", {}), {"modes", "trials_per_cell", "ordering", "abort_policy"})
+    design = f.table("design", top.get("design", {}), {"modes", "trials_per_cell", "ordering", "abort_policy"})
     modes = design.get("modes", list(MODES))
     if (
-        not isinstance(modes, list) or not modes or len(set(modes)) != len(modes)
-        or any(m not in MODES for m in modes)
+        not isinstance(modes, list) or not modes
+        or any(not isinstance(m, str) or m not in MODES for m in modes) or len(set(modes)) != len(modes)
     ):
-        raise _fail(source, "design.modes", modes, "must be a non-empty list of distinct values from 'on', 'off'")
-    per_cell = design.get("trials_per_cell", 5)
-    if isinstance(per_cell, bool) or not isinstance(per_cell, int) or not 1 <= per_cell <= 100:
-        raise _fail(source, "design.trials_per_cell", per_cell, "must be a whole number from 1 to 100")
-    ordering = design.get("ordering", "random")
-    if ordering not in ORDERINGS:
-        raise _fail(source, "design.ordering", ordering, f"allowed values: {', '.join(ORDERINGS)}")
-    policy = design.get("abort_policy", "append")
-    if policy not in ABORT_POLICIES:
-        raise _fail(source, "design.abort_policy", policy, f"allowed values: {', '.join(ABORT_POLICIES)}")
+        raise f.fail("design.modes", modes, "must be a non-empty list of distinct values from 'on', 'off'")
+    per_cell = f.integer("design.trials_per_cell", design.get("trials_per_cell", 5), lo=1, hi=100)
+    ordering = f.choice("design.ordering", design.get("ordering", "random"), ORDERINGS)
+    policy = f.choice("design.abort_policy", design.get("abort_policy", "append"), ABORT_POLICIES)
 
-    tr = _table(source, "trial", top.get("trial", {}), {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
+    tr = f.table("trial", top.get("trial", {}), {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
     timing = TrialTiming(
-        tolerance_fraction=_number(source, "trial.tolerance_fraction", tr.get("tolerance_fraction", 0.10), lo=0.0, hi=0.5),
-        hold_s=_number(source, "trial.hold_s", tr.get("hold_s", 1.0), lo=0.0, hi=60.0),
-        max_trial_s=_number(source, "trial.max_trial_s", tr.get("max_trial_s", 12.0), lo=0.0, hi=600.0),
-        pause_s=_number(source, "trial.pause_s", tr.get("pause_s", 2.0), lo=0.0, hi=600.0, lo_open=False),
-        cue_s=_number(source, "trial.cue_s", tr.get("cue_s", 1.0), lo=0.0, hi=60.0, lo_open=False),
+        tolerance_fraction=f.number("trial.tolerance_fraction", tr.get("tolerance_fraction", 0.10), lo=0.0, hi=0.5),
+        hold_s=f.number("trial.hold_s", tr.get("hold_s", 1.0), lo=0.0, hi=60.0),
+        max_trial_s=f.number("trial.max_trial_s", tr.get("max_trial_s", 12.0), lo=0.0, hi=MAX_TRIAL_S),
+        pause_s=f.number("trial.pause_s", tr.get("pause_s", 2.0), lo=0.0, hi=600.0, lo_open=False),
+        cue_s=f.number("trial.cue_s", tr.get("cue_s", 1.0), lo=0.0, hi=60.0, lo_open=False),
     )
     if timing.hold_s >= timing.max_trial_s:
-        raise _fail(source, "trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
+        raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
 
-    trn = _table(source, "training", top.get("training", {}), {"enabled", "seconds_per_target_per_mode", "live_force_aid"})
-    enabled = trn.get("enabled", True)
-    if not isinstance(enabled, bool):
-        raise _fail(source, "training.enabled", enabled, "must be true or false")
-    aid = trn.get("live_force_aid", True)
-    if not isinstance(aid, bool):
-        raise _fail(source, "training.live_force_aid", aid, "must be true or false")
+    trn = f.table("training", top.get("training", {}), {"enabled", "seconds_per_target_per_mode", "live_force_aid"})
     training = TrainingConfig(
-        enabled=enabled,
-        seconds_per_target_per_mode=_number(
-            source, "training.seconds_per_target_per_mode", trn.get("seconds_per_target_per_mode", 20.0), lo=0.0, hi=3600.0
+        enabled=f.boolean("training.enabled", trn.get("enabled", True)),
+        seconds_per_target_per_mode=f.number(
+            "training.seconds_per_target_per_mode", trn.get("seconds_per_target_per_mode", 20.0), lo=0.0, hi=MAX_TRIAL_S
         ),
-        live_force_aid=aid,
+        live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
     )
+    # The training session runs, stores and on resume re-reads this protocol with its trials capped at
+    # seconds_per_target_per_mode (protocol.study): a cap no hold fits in would never be resumable.
+    if not timing.hold_s < training.seconds_per_target_per_mode:
+        raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
+                     f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "
+                     f"and must leave time to complete a hold)")
     return ProtocolConfig(
-        name=name.strip(), targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
+        name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1,
     )
 
@@ -215,21 +194,12 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
 def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
     """Load and validate a protocol file (default: the paper's study, ``protocol/default.toml``)."""
     if path is None:
-        text = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
         source = "protocol/default.toml"
+        data = parse_toml(resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8"), source,
+                          ProtocolError)
     else:
-        p = Path(path)
-        source = str(p)
-        try:
-            text = p.read_text(encoding="utf-8")
-        except FileNotFoundError:
-            raise ProtocolError(f"{source}: no such protocol file") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise ProtocolError(f"{source}: cannot read the protocol file ({exc})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise ProtocolError(f"{source}: not valid TOML ({exc})") from None
+        source = str(Path(path))
+        data = read_toml(Path(path), ProtocolError, "protocol file")
     return protocol_from_dict(data, source)
 
 

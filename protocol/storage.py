@@ -48,6 +48,7 @@ import numpy as np
 __all__ = [
     "ABORT_CAUSES",
     "CODE_PATTERN",
+    "EmptyDatabase",
     "LeaseHeld",
     "SCHEMA_VERSION",
     "SessionInfo",
@@ -98,6 +99,10 @@ class StorageError(Exception):
 
 class LeaseHeld(StorageError):
     """Another live process writes to the study or session; the message names it."""
+
+
+class EmptyDatabase(StorageError):
+    """Opened for reading, the file holds no study yet (an empty or brand-new SQLite file)."""
 
 
 def session_scope(session_id: int) -> str:
@@ -390,7 +395,7 @@ class StudyDatabase:
             if tables:
                 raise StorageError(f"{self.path}: not a haptic-study database (it has other tables: {', '.join(sorted(tables))})")
             if readonly:
-                raise StorageError(f"{self.path}: empty database (no study data)")
+                raise EmptyDatabase(f"{self.path}: empty database (no study data)")
             script = schema_path().read_text(encoding="utf-8")
             c.execute("PRAGMA journal_mode = WAL")
             c.executescript("BEGIN IMMEDIATE;\n" + script + f"\nPRAGMA user_version = {SCHEMA_VERSION};\nCOMMIT;")

@@ -52,7 +52,7 @@ from protocol.session_setup import (
     OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
     start_runner, training_protocol, training_schedule,
 )
-from protocol.storage import SessionInfo, StorageError, StudyDatabase, new_owner_token, validate_code
+from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.version import software_version
 
 __all__ = [
@@ -434,26 +434,18 @@ def run_study(
     n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
+    # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
+    _plan_study(_peek(db_path), db_path, participants, seed, protocol, continue_study)
     owner = new_owner_token()
-    db: StudyDatabase | None = StudyDatabase(db_path)
+    # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
+    db: StudyDatabase | None = StudyDatabase(db_path, check=False)
     try:
-        taken = db.acquire_lease("study", owner)  # before anything else is written: a second `run` stops here
+        taken = db.acquire_lease("study", owner)  # a second `run` stops here
         progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
         progress.notes.extend(_open_notes(db, taken))
-        if continue_study:
-            plan, progress.study_trials_total, kept = _plan_continue(db, db_path, participants, seed, protocol)
-            progress.sessions.extend(kept)
-        else:
-            for n in range(1, participants + 1):
-                code = participant_code(n)
-                if db.sessions_of(code):
-                    raise StorageError(
-                        f"{db_path} already holds sessions for participant {code}; nothing was changed "
-                        f"(use a new database, or the same command with --continue to complete the study)"
-                    )
-            plan = {n: _all_steps(protocol) for n in range(1, participants + 1)}
-            per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
-            progress.study_trials_total = per * participants
+        # again under the lease: what another process did in between counts
+        plan, progress.study_trials_total, kept = _plan_study(db, db_path, participants, seed, protocol, continue_study)
+        progress.sessions.extend(kept)
         jobs_used = min(n_jobs, len(plan))
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
@@ -468,6 +460,61 @@ def run_study(
         return progress
     finally:
         _release_study(db, db_path, owner)
+
+
+def _interrupted_session_of(db: StudyDatabase | None, db_path: str, code: str) -> SessionInfo:
+    """The participant's interrupted session (the newest), or a :class:`StorageError` saying why there is none.
+
+    A read-only ``db`` is closed afterwards.
+    """
+    try:
+        open_ = [] if db is None else [s for s in db.sessions_of(code) if s.status == "running"]
+        if not open_:
+            known = None if db is None else db.participant_id(code, create=False)
+            what = "no such participant" if known is None else "no interrupted session"
+            raise StorageError(f"cannot resume {code} in {db_path}: {what}")
+        return open_[-1]
+    finally:
+        if db is not None and db.readonly:
+            db.close()
+
+
+def _peek(db_path: str) -> StudyDatabase | None:
+    """The study database opened read-only and checked, or None if there is no study in it yet."""
+    if not os.path.exists(db_path) or (os.path.isfile(db_path) and os.path.getsize(db_path) == 0):
+        return None
+    try:
+        return StudyDatabase(db_path, readonly=True, check=True)
+    except EmptyDatabase:
+        return None
+
+
+def _plan_study(
+    db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig, continue_study: bool,
+) -> tuple[dict[int, list[Step]], int, list[int]]:
+    """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
+
+    ``db`` None: a new database.  A read-only ``db`` is closed afterwards.
+    """
+    try:
+        if continue_study:
+            if db is None:
+                raise StorageError(f"cannot continue a study: no study in {db_path}")
+            return _plan_continue(db, db_path, participants, seed, protocol)
+        if db is not None:
+            for n in range(1, participants + 1):
+                code = participant_code(n)
+                if db.sessions_of(code):
+                    raise StorageError(
+                        f"{db_path} already holds sessions for participant {code}; nothing was changed "
+                        f"(use a new database, or the same command with --continue to complete the study)"
+                    )
+        plan = {n: _all_steps(protocol) for n in range(1, participants + 1)}
+        per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
+        return plan, per * participants, []
+    finally:
+        if db is not None and db.readonly:
+            db.close()
 
 
 def _open_notes(db: StudyDatabase, taken_over: str) -> list[str]:
@@ -685,14 +732,11 @@ def resume_session(
     validate_code(code)
     if not os.path.exists(db_path):
         raise StorageError(f"cannot resume {code}: no database at {db_path}")
-    db = StudyDatabase(db_path)
+    # refusals are decided on a read-only look first: a refused command leaves the file byte-identical
+    _interrupted_session_of(_peek(db_path), db_path, code)
+    db = StudyDatabase(db_path, check=False)
     try:
-        open_ = [s for s in db.sessions_of(code) if s.status == "running"]
-        if not open_:
-            known = db.participant_id(code, create=False)
-            what = "no such participant" if known is None else "no interrupted session"
-            raise StorageError(f"cannot resume {code} in {db_path}: {what}")
-        info = open_[-1]
+        info = _interrupted_session_of(db, db_path, code)
         remaining = _remaining_trials(db, info)
         progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind=info.kind,
                                  study_trials_total=remaining)

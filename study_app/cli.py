@@ -12,6 +12,8 @@ import os
 import sys
 from collections.abc import Sequence
 
+from study_app.argtypes import SQLITE_INTEGER_MAX, OneLineParser, host_name, one_line, real_number, whole_number
+
 __all__ = ["main"]
 
 
@@ -19,40 +21,25 @@ class CliError(Exception):
     """A user-facing error: printed as one line, exit status 2."""
 
 
-def _positive_float(name: str):  # type: ignore[no-untyped-def]
-    def parse(text: str) -> float:
-        try:
-            v = float(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a number") from None
-        if not (v > 0 and v < float("inf")):
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a finite number > 0")
-        return v
-
-    return parse
+# Every number an option takes is bounded here, at parse time (study_app.argtypes): a bad value is one line
+# naming the option, the value and what is allowed, before any file or database is touched.
+#: Seeds are stored in the study database: at most SQLite's largest INTEGER.
+_SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")
 
 
-def _loop_seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--loop-seconds = {text!r}: expected a number") from None
-    if not 0 <= v <= 3600:
-        raise argparse.ArgumentTypeError(f"--loop-seconds = {text!r}: must be from 0 (skip the loop) to 3600")
-    return v
+def _positive_float(name: str, hi: float = 86_400.0):  # type: ignore[no-untyped-def]
+    """A finite number of seconds > 0 and ≤ ``hi`` (default one day)."""
+    return real_number(name, 0.0, hi, lo_open=True)
 
 
-def _nonneg_int(name: str):  # type: ignore[no-untyped-def]
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a whole number") from None
-        if v < 0:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be ≥ 0")
-        return v
+def _nonneg_int(name: str, hi: int = SQLITE_INTEGER_MAX):  # type: ignore[no-untyped-def]
+    """A whole number from 0 to ``hi`` (default: the largest integer the study database stores)."""
+    return whole_number(name, 0, hi)
 
-    return parse
+
+def _port_number(name: str):  # type: ignore[no-untyped-def]
+    """A TCP/UDP port."""
+    return whole_number(name, 1, 65535)
 
 
 def _fault_plan(text: str):  # type: ignore[no-untyped-def]
@@ -66,7 +53,7 @@ def _fault_plan(text: str):  # type: ignore[no-untyped-def]
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="haptic-study",
         description="Force-feedback training study: haptic pipeline, simulated rig, protocol, analysis, GUI.",
     )
@@ -75,20 +62,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("sim", help="run the simulated rig with scripted presses and summarise what the pipeline saw")
     s.add_argument("--seconds", type=_positive_float("--seconds"), default=60.0, help="simulated time (default 60)")
-    s.add_argument("--seed", type=_nonneg_int("--seed"), default=0, help="seed of every random process (default 0)")
+    s.add_argument("--seed", type=_SEED, default=0, help="seed of every random process (default 0)")
     s.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     s.add_argument("--haptics", choices=("on", "off"), default="on", help="haptic feedback (default on)")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
     r = sub.add_parser("run", help="run a complete simulated study into a study database (headless)")
-    r.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="number of simulated participants (default 10)")
-    r.add_argument("--seed", type=_nonneg_int("--seed"), default=0, help="study seed: schedules, rigs and participants (default 0)")
+    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10, help="number of simulated participants (default 10)")
+    r.add_argument("--seed", type=_SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
     r.add_argument("--db", required=True, help="study database (SQLite); created if missing")
     r.add_argument("--protocol", default=None, help="protocol file (default: the paper's study, protocol/default.toml)")
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
-    r.add_argument("--jobs", type=_nonneg_int("--jobs"), default=None,
+    r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
                    help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
     after = r.add_mutually_exclusive_group()
     after.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
@@ -112,19 +99,19 @@ def build_parser() -> argparse.ArgumentParser:
     bsub.required = True
     bp = bsub.add_parser("pipeline", help="per-tick cost vs NumPy, 1 kHz loop timing, filter trade table")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
-    bp.add_argument("--loop-seconds", type=_loop_seconds, default=30.0,
+    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"), default=30.0,
                     help="real time to run the loop (default 30; 0 skips)")
     bp.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
-    bp.add_argument("--ticks", type=_nonneg_int("--ticks"), default=20_000, help="samples for the cost benchmark")
+    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
     bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
-    bs.add_argument("--participants", type=_nonneg_int("--participants"), default=10, help="participants (default 10)")
+    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
     br = bsub.add_parser("report", help="report wall time on a 10-participant study; statistics for 10 000 participants")
     br.add_argument("--db", default=None, help="study database to report on (default: simulate a 10-participant study first)")
-    br.add_argument("--stats-participants", type=_nonneg_int("--stats-participants"), default=10_000,
+    br.add_argument("--stats-participants", type=whole_number("--stats-participants", 2, 1_000_000), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
     bst = bsub.add_parser("stats", help="analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm")
@@ -134,10 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
     prsub = pr.add_subparsers(dest="probe", metavar="DEVICE")
     prsub.required = True
     pn = prsub.add_parser("netft", help="ATI Net F/T: mean wrench (N, N·m), packet rate, lost/reordered/faulted counts")
-    pn.add_argument("--host", required=True, help="the Net F/T box's IP address")
+    pn.add_argument("--host", required=True, type=host_name("--host", ipv6=False), help="the Net F/T box's IP address")
     pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
     pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
-    pn.add_argument("--samples", type=_nonneg_int("--samples"), default=1000, help="samples to average (default 1000)")
+    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000, help="samples to average (default 1000)")
     pn.add_argument("--json", action="store_true", help="print one JSON object")
 
     ch = sub.add_parser("check-hardware", help="connect to every device in the hardware file and print its state")
@@ -145,7 +132,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     bg = bsub.add_parser("gui", help="1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time")
     bg.add_argument("--json", action="store_true", help="print one JSON object")
-    bg.add_argument("--seconds", type=_positive_float("--seconds"), default=20.0,
+    bg.add_argument("--seconds", type=_positive_float("--seconds", 3600.0), default=20.0,
                     help="real time per loop measurement (default 20)")
     bg.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
@@ -157,19 +144,6 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--screenshot", default=None, metavar="DIR",
                    help="drive a short simulated session offscreen and save PNGs of every main view into DIR")
     return p
-
-
-def _port_number(name: str):  # type: ignore[no-untyped-def]
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: expected a whole number") from None
-        if not 1 <= v <= 65535:
-            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a port number from 1 to 65535")
-        return v
-
-    return parse
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -191,8 +165,6 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             if args.db is not None and not os.path.isfile(args.db):
                 raise CliError(f"--db = {args.db!r}: no such file")
-            if args.stats_participants < 2:
-                raise CliError(f"--stats-participants = {args.stats_participants}: must be ≥ 2")
             print("bench: timing the report ...", file=sys.stderr, flush=True)
             result = run_report_bench(args.db, stats_participants=args.stats_participants)
             print(json.dumps(result) if args.json else format_report_bench(result))
@@ -215,8 +187,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "bench" and args.bench == "study":
             from bench.study_bench import format_study_bench, run_study_bench
 
-            if args.participants < 1:
-                raise CliError(f"--participants = {args.participants}: must be ≥ 1")
             print("bench: running the simulated study ...", file=sys.stderr, flush=True)
             result = run_study_bench(args.participants)
             print(json.dumps(result) if args.json else format_study_bench(result))
@@ -224,7 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command in ("probe", "check-hardware"):
             return _cmd_hardware(args)
     except CliError as exc:
-        print(f"haptic-study: error: {exc}", file=sys.stderr)
+        print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
         return 2
     except KeyboardInterrupt:
         print("haptic-study: interrupted", file=sys.stderr)
@@ -267,10 +237,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
-            if args.participants < 1:
-                raise CliError(f"--participants = {args.participants}: must be ≥ 1")
-            if args.jobs is not None and args.jobs < 1:
-                raise CliError(f"--jobs = {args.jobs}: must be ≥ 1 (omit it to use the usable cores)")
 
         def show(p):  # type: ignore[no-untyped-def]
             nonlocal bar
@@ -319,8 +285,6 @@ def _cmd_hardware(args: argparse.Namespace) -> int:
 
     try:
         if args.command == "probe":
-            if args.samples < 1:
-                raise CliError(f"--samples = {args.samples}: must be ≥ 1")
             result = probe_netft(args.host, args.port, args.http_port, args.samples)
             print(json.dumps(result) if args.json else format_probe(result))
             return 0
@@ -377,7 +341,7 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
         print(f"bench: {msg} ...", file=sys.stderr, flush=True)
 
     result = run_pipeline_bench(
-        loop_seconds=args.loop_seconds, ticks=max(2000, args.ticks), progress=say, explain=args.explain,
+        loop_seconds=args.loop_seconds, ticks=args.ticks, progress=say, explain=args.explain,
         reference=args.reference,
     )
     if args.json:
@@ -388,4 +352,8 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # ``python -m study_app.cli``: run the imported module's main, not this __main__ copy of it -- the subcommand
+    # modules raise study_app.cli.CliError, which __main__.CliError would not catch (a traceback instead of one line)
+    from study_app.cli import main as _main
+
+    sys.exit(_main())

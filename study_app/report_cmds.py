@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+from study_app.argtypes import SQLITE_INTEGER_MAX, whole_number
+
 __all__ = ["add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
 
@@ -39,8 +41,9 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
 
     p = sub.add_parser("plot-trial", help="one trial's force through the pipeline: raw, compensated, rendered (paper Fig. 6)")
     p.add_argument("--db", required=True, metavar="PATH", help="study database")
-    p.add_argument("--session", type=int, required=True, help="session_id")
-    p.add_argument("--trial", type=int, required=True, help="trial_index within the session")
+    p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, help="session_id")
+    p.add_argument("--trial", type=whole_number("--trial", 0, SQLITE_INTEGER_MAX), required=True,
+                   help="trial_index within the session")
     p.add_argument("--out", required=True, metavar="FILE", help="image file: .png or .svg")
 
 

@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import math
-import sqlite3
 from collections import defaultdict
 from statistics import fmean
+
+from protocol.storage import connect_readonly
 
 __all__ = ["format_study_summary"]
 
@@ -20,7 +21,7 @@ def _mean(xs: list[float]) -> float:
 
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
     """Per-mode means across participants (per participant × mode first, science.md §6)."""
-    conn = sqlite3.connect(f"file:{db_path}?mode=ro", uri=True)
+    conn = connect_readonly(db_path)
     try:
         q = ",".join("?" * len(session_ids)) or "NULL"
         rows = conn.execute(

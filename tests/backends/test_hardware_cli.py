@@ -46,8 +46,8 @@ def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
     ("args", "message"),
     [
         (["probe", "netft", "--host", "127.0.0.1", "--http-port", "1"], "cannot read the Net F/T calibration from http://127.0.0.1:1/netftapi2.xml"),
-        (["probe", "netft", "--host", "127.0.0.1", "--port", "0"], "--port = '0': must be a port number from 1 to 65535"),
-        (["probe", "netft", "--host", "127.0.0.1", "--samples", "0"], "--samples = 0: must be ≥ 1"),
+        (["probe", "netft", "--host", "127.0.0.1", "--port", "0"], "--port = '0': must be a whole number from 1 to 65535"),
+        (["probe", "netft", "--host", "127.0.0.1", "--samples", "0"], "--samples = '0': must be a whole number from 1 to 1000000"),
         (["check-hardware", "--hardware", "/nonexistent/hw.toml"], "/nonexistent/hw.toml: no such hardware file"),
     ],
 )

@@ -7,6 +7,7 @@ import tomllib
 from pathlib import Path
 
 import pytest
+from hypothesis import given, settings
 
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
@@ -20,7 +21,10 @@ from pipeline.compensation import NO_PAYLOAD
 from pipeline.devices import DeviceError, HapticState
 from pipeline.engine import build_hardware_engine
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
-from pipeline.hardware import HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
+from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
+from pipeline.sim.touch import TouchSpec
+from pipeline.tomlfields import host_problem
+from tomlvalues import TOML_VALUES, replaced
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "hardware.example.toml"
@@ -51,7 +55,7 @@ def test_minimal_file_takes_defaults() -> None:
         ({"sensor": {"host": "10.0.0.1", "port": 70000}}, "sensor.port = 70000: must be a whole port number from 1 to 65535"),
         ({"sensor": {"host": "10.0.0.1", "counts_per_force": 1e6}}, "sensor.counts_per_torque = None: give counts_per_force and counts_per_torque together"),
         ({"sensor": {"host": "10.0.0.1", "force_unit": "stone"}}, "sensor.force_unit = 'stone': allowed: N, lbf"),
-        ({"sensor": {"host": "10 0 0 1"}}, "sensor.host = '10 0 0 1': must be a non-empty string without spaces"),
+        ({"sensor": {"host": "10 0 0 1"}}, "sensor.host = '10 0 0 1': must be an IPv4 address (e.g. 192.168.1.1) or a host name"),
         ({"sensor": {"hots": "10.0.0.1"}}, "sensor.hots = '10.0.0.1': unknown field; allowed: buffered, connect_timeout_s"),
         ({"sensor": {}}, "sensor.host = None: required: the Net F/T box's IP address"),
         ({"robot": {"host": "10.0.0.2", "mode": "drive"}}, "robot.mode = 'drive': allowed values: observe, teleop"),
@@ -72,10 +76,42 @@ def test_minimal_file_takes_defaults() -> None:
         ({"jaw": {}}, "jaw.port = None: required: the Arduino's serial port"),
         ({"frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, "frames.rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, -1]] is a reflection"),
         ({"frames": {"rot_haptic_base": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]] is not a rotation"),
-        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number > 0 and ≤ 20"),
+        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
         ({"framework": {"filter_window": 0}}, "framework.filter_window = 0: must be a whole number of samples from 1 to 1000"),
         ({"version": 2}, "version = 2: this software reads hardware file version 1"),
         ({"haptic": None}, "haptic = None: must be a table"),
+        # types: in Python True is an int (True == 1) and 1.0 == 1, so both are refused explicitly
+        ({"version": True}, "version = True: this software reads hardware file version 1"),
+        ({"sensor": {"host": "10.0.0.1", "port": True}}, "sensor.port = True: must be a whole port number from 1 to 65535"),
+        ({"sensor": {"host": "10.0.0.1", "http_port": 80.0}}, "sensor.http_port = 80.0: must be a whole port number from 1 to 65535"),
+        ({"sensor": {"host": "10.0.0.1", "buffered": 1}}, "sensor.buffered = 1: must be true or false"),
+        ({"jaw": {"port": "/dev/ttyACM0", "baud": 115200.0}}, "jaw.baud = 115200.0: allowed values: 9600"),
+        ({"jaw": {"port": "/dev/tty ACM0"}}, "jaw.port = '/dev/tty ACM0': must be a non-empty string without spaces"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "deadman_button": True}},
+         "teleop.deadman_button = True: allowed values: 1 (the Touch's front"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, True], "workspace_max_m": [0.4, 0.2, 0.3]}},
+         "teleop.workspace_min_m = [0.1, -0.2, True]: must be 3 numbers in metres"),
+        ({"framework": {"filter_window": True}}, "framework.filter_window = True: must be a whole number of samples from 1 to 1000"),
+        ({"robot": {"host": "10.0.0.2", "frequency_hz": "125"}}, "robot.frequency_hz = '125': must be a number > 0 and ≤ 500 (Hz), or -1 to let ur_rtde choose"),
+        # hosts: an IP address or an RFC 1123 host name; the Net F/T speaks IPv4 only
+        ({"robot": {"host": "robot one"}}, "robot.host = 'robot one': must be an IP address (e.g. 192.168.1.1 or fe80::1) or a host name"),
+        ({"robot": {"host": "10.0.0.256"}}, "robot.host = '10.0.0.256': must be an IP address"),
+        ({"robot": {"host": 10}}, "robot.host = 10: must be an IP address"),
+        ({"sensor": {"host": "fe80::1"}}, "sensor.host = 'fe80::1': must be an IPv4 address (e.g. 192.168.1.1) or a host name "
+                                          "(letters, digits, '-', separated by '.'); this device speaks IPv4 only"),
+        # rotations: 3 rows of 3 real numbers
+        ({"frames": {"rot_tip_sensor": [["1", "0", "0"], ["0", "1", "0"], ["0", "0", "1"]]}},
+         "frames.rot_tip_sensor = [['1', '0', '0'], ['0', '1', '0'], ['0', '0', '1']]: must be a rotation matrix: 3 rows of 3 numbers"),
+        ({"frames": {"rot_tip_sensor": [[True, False, False], [False, True, False], [False, False, True]]}},
+         "frames.rot_tip_sensor = [[True, False, False], [False, True, False], [False, False, True]]: must be a rotation matrix"),
+        ({"frames": {"rot_tip_sensor": "identity"}}, "frames.rot_tip_sensor = 'identity': must be a rotation matrix"),
+        ({"frames": {"rot_tip_sensor": [1, 0, 0, 0, 1, 0, 0, 0, 1]}}, "frames.rot_tip_sensor = [1, 0, 0, 0, 1, 0, 0, 0, 1]: must be a rotation matrix: 3 rows"),
+        ({"frames": {"rot_tip_sensor": [[10**400, 0, 0], [0, 1, 0], [0, 0, 1]]}},
+         "frames.rot_tip_sensor = [[100000000000000000...0000000000000000000, 0, 0], [0, 1, 0], [0, 0, 1]]: is not a rotation: every entry of a rotation matrix lies within ±1"),
+        ({"frames": {"rot_haptic_base": [[1, 0, 0], [0, float("nan"), 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0, 0], [0, nan, 0], [0, 0, 1]]: must be a rotation matrix"),
+        # f_max: never above the Touch's peak force
+        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number > 0 and ≤ 3.3"),
     ],
 )
 def test_bad_fields_name_field_value_and_what_is_allowed(patch: dict, message: str) -> None:
@@ -171,3 +207,75 @@ def test_a_failing_device_closes_the_ones_already_open(tmp_path: Path) -> None:
         # the sensor was opened and closed again: it sent START and then STOP
         assert [r[1] for r in netft.requests] == [2, 0]
         assert rtde.wait_for("DISCONNECTED")
+
+
+def test_f_max_may_equal_the_touchs_peak_force() -> None:
+    d = base()
+    d["framework"] = {"f_max_n": TouchSpec().peak_force_n}
+    assert hardware_from_dict(d).framework.f_max_n == TouchSpec().peak_force_n
+
+
+def test_an_integer_too_long_for_python_is_refused_as_toml(tmp_path: Path) -> None:
+    p = tmp_path / "long.toml"
+    p.write_text(EXAMPLE.read_text(encoding="utf-8").replace("port = 49152", "port = " + "9" * 5000), encoding="utf-8")
+    with pytest.raises(HardwareError, match=r"long.toml: not valid TOML \(Exceeds the limit \(4300 digits\)"):
+        load_hardware(p)
+
+
+@pytest.mark.parametrize(
+    "host", ["192.168.1.1", "10.0.0.2", "localhost", "ur3.lab", "ur3-left.lab.example.org", "ur3.lab.", "3com.com",
+             "a" * 63 + ".lab", "::1", "fe80::1", "fe80::1%eth0", "2001:db8::7"],
+)
+def test_hosts_that_are_ip_addresses_or_host_names_are_accepted(host: str) -> None:
+    assert host_problem(host) is None
+    assert (host_problem(host, ipv6=False) is None) == (":" not in host)
+
+
+@pytest.mark.parametrize(
+    "host", ["", " ", "10.0.0.1 ", "10 0 0 1", "10.0.0.256", "10.0.0", "999.1.1.1", "-ur3.lab", "ur3-.lab", "ur3..lab",
+             "ur3_lab", "a" * 64 + ".lab", "a." * 127 + "b", "[::1]", "http://10.0.0.1", "10.0.0.1:30004", "ü.lab",
+             "fe80::1::2", None, 10, True, ["10.0.0.1"]],
+)
+def test_hosts_that_are_neither_are_refused(host: object) -> None:
+    assert host_problem(host) is not None and host_problem(host, ipv6=False) is not None
+
+
+# -- any value of any type in any field -----------------------------------------------------------
+_TELEOP = {"workspace_min_m": [0.2, -0.1, 0.05], "workspace_max_m": [0.4, 0.1, 0.25], "max_speed_m_s": 0.1,
+           "motion_scale": 0.5, "deadman_button": 1, "clutch_button": 2, "stylus_max_age_s": 0.02,
+           "pose_max_age_s": 0.05, "max_tracking_error_m": 0.05, "lookahead_s": 0.1, "gain": 300,
+           "control_timeout_s": 5.0}
+_FULL = {**tomllib.loads(EXAMPLE.read_text(encoding="utf-8")), "calibration": {"file": "payload.json"}, "teleop": _TELEOP}
+_FULL["robot"] = {**_FULL["robot"], "mode": "teleop"}
+_FULL["sensor"] = {**_FULL["sensor"], "counts_per_force": 1e6, "counts_per_torque": 1e6, "force_unit": "N",
+                   "torque_unit": "Nm"}
+FIELDS = [(k,) for k in _FULL] + [(k, f) for k, v in _FULL.items() if isinstance(v, dict) for f in v] + [
+    ("frames", "rot_tip_sensor", 1), ("frames", "rot_tip_sensor", 1, 1), ("teleop", "workspace_min_m", 2),
+]
+
+
+def _assert_well_typed(hw: HardwareConfig) -> None:
+    for settings_ in (hw.sensor, hw.robot, hw.jaw, hw.teleop, hw.framework):
+        for name in type(settings_).__dataclass_fields__:
+            v = getattr(settings_, name)
+            default = type(settings_).__dataclass_fields__[name].type
+            assert not (isinstance(v, bool) and "bool" not in str(default)), (name, v)
+            if isinstance(v, tuple):
+                assert all(type(x) is float for x in v), (name, v)
+    assert type(hw.sensor.port) is int and type(hw.jaw.baud) is int and type(hw.framework.filter_window) is int  # type: ignore[union-attr]
+    assert 0 < hw.framework.f_max_n <= TouchSpec().peak_force_n
+    assert host_problem(hw.sensor.host, ipv6=False) is None and host_problem(hw.robot.host) is None
+
+
+@pytest.mark.parametrize("path", FIELDS, ids=[".".join(map(str, f)) for f in FIELDS])
+@settings(max_examples=40)
+@given(value=TOML_VALUES)
+def test_any_toml_value_in_any_field_is_a_one_line_error_or_a_well_typed_config(path: tuple, value: object) -> None:
+    assert hardware_from_dict(_FULL).teleop is not None  # the file under test is valid before the change
+    try:
+        hw = hardware_from_dict(replaced(_FULL, path, value), "any.toml")
+    except HardwareError as exc:  # never another exception
+        msg = str(exc)
+        assert msg.startswith("any.toml: ") and "\n" not in msg and str(path[0]) in msg
+        return
+    _assert_well_typed(hw)

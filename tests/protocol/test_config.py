@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import json
 from importlib import resources
 from pathlib import Path
 
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 from protocol.config import (
+    ABORT_POLICIES,
+    MODES,
+    ORDERINGS,
     ProtocolConfig,
     ProtocolError,
     Target,
@@ -17,6 +23,8 @@ from protocol.config import (
     load_protocol,
     protocol_from_dict,
 )
+from protocol.session_setup import training_protocol as _training_protocol
+from tomlvalues import TOML_VALUES, replaced
 
 DEFAULT_TEXT = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
 
@@ -105,7 +113,7 @@ BAD_FIELDS = [
     ("tolerance as text", "tolerance_fraction = 0.10 ", 'tolerance_fraction = "10%" ',
      "trial.tolerance_fraction = '10%': must be a number > 0 and ≤ 0.5"),
     ("negative pause", "pause_s = 2.0 ", "pause_s = -2.0 ",
-     "trial.pause_s = -2.0: must be a number ≥ 0 and ≤ 600"),
+     "trial.pause_s = -2.0: must be a number from 0 to 600"),
     ("infinite cap", "max_trial_s = 12.0 ", "max_trial_s = inf ",
      "trial.max_trial_s = inf: must be a number > 0 and ≤ 600"),
     ("unknown ordering", 'ordering = "random"', 'ordering = "latin_square"',
@@ -150,6 +158,42 @@ BAD_FIELDS = [
      "version = 2: this software reads protocol version 1"),
     ("empty name", 'name = "Shaker & Erden force regulation"', 'name = "  "',
      "name = '  ': must be a non-empty string"),
+    # types: in Python True is an int (True == 1) and 1.0 == 1, so both must be refused explicitly
+    ("version true", "version = 1", "version = true",
+     "version = True: this software reads protocol version 1"),
+    ("version 1.0", "version = 1", "version = 1.0",
+     "version = 1.0: this software reads protocol version 1"),
+    ("name as a number", 'name = "Shaker & Erden force regulation"', "name = 3",
+     "name = 3: must be a non-empty string"),
+    ("label as a number", 'label = "FIRM"', "label = 7",
+     "targets[1].label = 7: must be an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)"),
+    ("force as a boolean", "force_n = 1.2", "force_n = true",
+     "targets[1].force_n = True: must be a number > 0 and ≤ 20"),
+    ("force a 30-digit integer", "force_n = 1.2", "force_n = 123456789012345678901234567890",
+     "targets[1].force_n = 123456789012345678901234567890: must be a number > 0 and ≤ 20"),
+    ("hold as a date", "hold_s = 1.0 ", "hold_s = 1979-05-27 ",
+     "trial.hold_s = datetime.date(1979, 5, 27): must be a number > 0 and ≤ 60"),
+    ("modes nested in a list", 'modes = ["on", "off"]', 'modes = [["on"]]',
+     "design.modes = [['on']]: must be a non-empty list of distinct values from 'on', 'off'"),
+    ("a mode as a number", 'modes = ["on", "off"]', 'modes = ["on", 1]',
+     "design.modes = ['on', 1]: must be a non-empty list of distinct values from 'on', 'off'"),
+    ("modes as a string", 'modes = ["on", "off"]', 'modes = "on"',
+     "design.modes = 'on': must be a non-empty list of distinct values from 'on', 'off'"),
+    ("ordering in a list", 'ordering = "random"', 'ordering = ["random"]',
+     "design.ordering = ['random']: allowed values: random, blocked_by_mode, counterbalanced"),
+    ("trials_per_cell beyond 64 bits", "trials_per_cell = 5 ", "trials_per_cell = 99999999999999999999 ",
+     "design.trials_per_cell = 99999999999999999999: must be a whole number from 1 to 100"),
+    ("live aid as 1", "live_force_aid = true", "live_force_aid = 1",
+     "training.live_force_aid = 1: must be true or false"),
+    # the training session runs trials capped at seconds_per_target_per_mode: it must be a valid cap
+    ("training trials shorter than the hold", "seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 0.5",
+     "training.seconds_per_target_per_mode = 0.5: must be longer than trial.hold_s = 1 "
+     "(each training trial lasts this long and must leave time to complete a hold)"),
+    ("training trials as long as the hold", "seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 1",
+     "training.seconds_per_target_per_mode = 1.0: must be longer than trial.hold_s = 1 "
+     "(each training trial lasts this long and must leave time to complete a hold)"),
+    ("training trials over 600 s", "seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 601",
+     "training.seconds_per_target_per_mode = 601: must be a number > 0 and ≤ 600"),
 ]
 
 
@@ -165,6 +209,12 @@ def test_non_toml_text_is_refused(tmp_path):
     assert _error_of(path) == (
         f"{path}: not valid TOML (Expected '=' after a key in a key/value pair (at line 1, column 6))"
     )
+
+
+def test_an_integer_too_long_for_python_is_refused_as_toml(tmp_path):
+    path = tmp_path / "long.toml"
+    path.write_text(DEFAULT_TEXT.replace("trials_per_cell = 5 ", "trials_per_cell = " + "9" * 5000 + " "), encoding="utf-8")
+    assert _error_of(path).startswith(f"{path}: not valid TOML (Exceeds the limit (4300 digits) for integer string")
 
 
 def test_missing_file_is_refused(tmp_path):
@@ -254,3 +304,55 @@ def test_to_json_is_canonical():
     p = default_protocol()
     assert p.to_json() == protocol_from_dict(p.to_dict()).to_json()
     assert p.to_json().startswith('{"design": {"abort_policy": "append", "modes": ["on", "off"]')
+
+
+# -- any value of any type in any field -----------------------------------------------------------
+_DEFAULT_DICT = default_protocol().to_dict()
+FIELDS: list[tuple[str | int, ...]] = [
+    ("name",), ("version",), ("targets",), ("targets", 0), ("targets", 0, "label"), ("targets", 0, "force_n"),
+    ("design",), ("design", "modes"), ("design", "modes", 0),
+    *(("design", k) for k in ("trials_per_cell", "ordering", "abort_policy")),
+    ("trial",), *(("trial", k) for k in _DEFAULT_DICT["trial"]),
+    ("training",), *(("training", k) for k in _DEFAULT_DICT["training"]),
+]
+
+
+def _assert_well_typed(p: ProtocolConfig) -> None:
+    assert type(p.name) is str and p.name and type(p.version) is int
+    assert all(type(t.label) is str and type(t.force_n) is float for t in p.targets)
+    assert type(p.modes) is tuple and all(m in MODES for m in p.modes)
+    assert type(p.trials_per_cell) is int and p.ordering in ORDERINGS and p.abort_policy in ABORT_POLICIES
+    assert all(type(getattr(p.trial, k)) is float for k in _DEFAULT_DICT["trial"])
+    assert type(p.training.enabled) is bool and type(p.training.live_force_aid) is bool
+    assert type(p.training.seconds_per_target_per_mode) is float
+
+
+@pytest.mark.parametrize("path", FIELDS, ids=[".".join(map(str, f)) for f in FIELDS])
+@settings(max_examples=80)
+@given(value=TOML_VALUES)
+def test_any_toml_value_in_any_field_is_a_one_line_error_or_a_well_typed_protocol(path, value):
+    d = replaced(_DEFAULT_DICT, path, value)
+    try:
+        p = protocol_from_dict(d, "any.toml")
+    except ProtocolError as exc:  # never another exception
+        msg = str(exc)
+        assert msg.startswith("any.toml: ") and "\n" not in msg and str(path[0]) in msg
+        return
+    _assert_well_typed(p)
+    assert protocol_from_dict(json.loads(p.to_json())) == p  # what a session stores reads back
+
+
+@given(
+    hold_s=st.floats(0.0, 61.0), max_trial_s=st.floats(0.0, 601.0), seconds=st.floats(0.0, 601.0),
+    enabled=st.booleans(),
+)
+def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resumable(hold_s, max_trial_s, seconds, enabled):
+    """The protocol a training session runs and stores (protocol.study) reads back: a resume can always load it."""
+    d = replaced(replaced(_DEFAULT_DICT, ("trial", "hold_s"), hold_s), ("trial", "max_trial_s"), max_trial_s)
+    d = replaced(replaced(d, ("training", "seconds_per_target_per_mode"), seconds), ("training", "enabled"), enabled)
+    try:
+        p = protocol_from_dict(d)
+    except ProtocolError:
+        assume(False)
+    training = _training_protocol(p)
+    assert protocol_from_dict(json.loads(training.to_json()), "stored training protocol") == training
