@@ -28,6 +28,7 @@ from matplotlib.figure import Figure
 from analysis.aggregate import METRIC_LABELS, mean_sd
 from analysis.load import read_trial_samples
 from analysis.stats import WilcoxonResult
+from protocol.display import task_axis_top_n
 from protocol.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
 
 __all__ = [
@@ -39,7 +40,6 @@ __all__ = [
     "render",
     "save",
     "save_one",
-    "trace_ylim_n",
     "significance_mark",
     "speed_accuracy_scatter",
     "trial_trace",
@@ -213,23 +213,6 @@ def speed_accuracy_scatter(trials: pd.DataFrame, tct_column: str, rho_by_mode: M
     return fig
 
 
-def trace_ylim_n(target_force_n: float | None, peak_n: float) -> tuple[float, float]:
-    """Upper limit of the task-force axis, and the largest force it shows, N.
-
-    The axis is set by the target, not the data, so the band is always a
-    readable share of the plot (about a tenth of its height for ±10 %): 2.5·F*,
-    stretched to show a peak up to 4·F*.  A larger peak is drawn clipped and
-    stated in words.  Without a target the axis follows the data.
-    """
-    if target_force_n is None or not (target_force_n > 0):
-        top = peak_n * 1.1 if math.isfinite(peak_n) and peak_n > 0 else 1.0
-        return top, top
-    top = 2.5 * target_force_n
-    if math.isfinite(peak_n) and peak_n * 1.05 > top:
-        top = min(peak_n * 1.05, 4.0 * target_force_n)
-    return top, top
-
-
 def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None, tolerance_fraction: float = 0.10,
                    title: str = "") -> Figure:
     """One trial's force through the pipeline (the paper's Fig. 6), drawn for judging the task.
@@ -237,7 +220,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     Top panel: the task force (magnitude of the compensated, filtered contact
     force -- the value the trial was judged on, blue), the force rendered on
     the haptic device (green) and the target band; its axis is set by the
-    target (:func:`trace_ylim_n`).  Bottom panel, on its own axis: the raw
+    target (:func:`protocol.display.task_axis_top_n`).  Bottom panel, on its own axis: the raw
     sensor force (red), dominated by the tool's weight.  Intervals in contact
     (task force above :data:`protocol.metrics.CONTACT_THRESHOLD_N`) are shaded
     in both.  Legends sit above the data.
@@ -279,7 +262,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     ax.plot(*peak_downsample(t, mag("render")), color="#2ca02c", linewidth=0.9, label="rendered on the haptic device")
     finite = task[np.isfinite(task)]
     peak = float(finite.max()) if len(finite) else math.nan
-    top, _ = trace_ylim_n(target_force_n, peak)
+    top = task_axis_top_n(target_force_n, peak)
     ax.set_ylim(0.0, top)
     if math.isfinite(peak) and peak > top:
         ax.text(0.99, 0.97, f"peak {peak:.2f} N: above the axis", transform=ax.transAxes, ha="right", va="top",

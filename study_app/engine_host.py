@@ -61,6 +61,7 @@ from protocol.study import (
 )
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
+from study_app.session_list import list_sessions
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
@@ -81,6 +82,9 @@ POSE_MAX_SENSOR_AGE_S = 0.05
 #: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
 QUIET_OFFSET_NS = 150_000
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
+#: A stored trial as the GUI's trial table receives it (the keys of a TrialEnded row).
+_TRIAL_ROW_KEYS = ("trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "tct_s", "rmse_n",
+                   "max_ae_n", "abort_reason", "repeat_of")
 
 
 def rotation_angle_deg(a: Mat3, b: Mat3) -> float:
@@ -566,7 +570,7 @@ class StudyEngine:
         elif isinstance(cmd, m.ResumeSession):
             self._resume_session(cmd)
         elif isinstance(cmd, m.ListSessions):
-            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path)))
+            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path)))
         elif isinstance(cmd, (m.Pause, m.Resume, m.AbortTrial, m.AbortSession)):
             if runner is None or runner.done:
                 raise RuntimeError("no session is running")
@@ -575,10 +579,17 @@ class StudyEngine:
             elif isinstance(cmd, m.Resume):
                 runner.resume()
             elif isinstance(cmd, m.AbortTrial):
-                if runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+                running = runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
+                spec = runner.machine.spec
+                if cmd.trial_index is not None and not (running and spec is not None and spec.index == cmd.trial_index):
+                    # confirmed for a trial that has ended since: never abort the next one instead
+                    raise RuntimeError(f"trial {cmd.trial_index + 1} had already ended: nothing was aborted")
+                if not running:
                     raise RuntimeError("no trial is running (between trials or paused)")
                 runner.abort_trial(cmd.reason)
             else:
+                if cmd.session_id is not None and cmd.session_id != runner.session_id:
+                    raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
                 runner.abort_session(cmd.reason)
         elif isinstance(cmd, m.ResetFaults):
             self.loop.submit(LoopResetFaults())
@@ -649,7 +660,7 @@ class StudyEngine:
             raise
         live_aid = cmd.kind == "training" and protocol.training.live_force_aid
         self._run(db, session_id, cmd.code, cmd.kind, run_protocol, schedule, 0, 0.0, p_seed, cmd.seed, live_aid,
-                  f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)")
+                  f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)", number=cmd.participant_number)
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if isinstance(self.eng, SimEngine):
@@ -667,16 +678,18 @@ class StudyEngine:
             protocol, schedule, pos, offset = prepare_resume(db, info)
             # the calibration this run uses is stored with the session's events
             db.insert_event(info.session_id, offset, "calibration", json.dumps(self.calibration.to_dict()))
+            stored = [{k: r[k] for k in _TRIAL_ROW_KEYS} for r in db.trial_rows(info.session_id)]
         except BaseException:
             db.close()
             raise
         _, p_seed = participant_seeds(info.seed, info.participant_number)
         live_aid = info.kind == "training" and protocol.training.live_force_aid
         self._run(db, info.session_id, info.code, info.kind, protocol, schedule, pos, offset + 0.001, p_seed, info.seed,
-                  live_aid, None)
+                  live_aid, None, number=info.participant_number, stored=stored)
 
     def _run(self, db: StudyDatabase, session_id: int, code: str, kind: str, protocol: Any, schedule: list[Any],
-             pos: int, offset_s: float, p_seed: int, seed: int, live_aid: bool, start_note: str | None) -> None:
+             pos: int, offset_s: float, p_seed: int, seed: int, live_aid: bool, start_note: str | None, *,
+             number: int = 0, stored: list[dict[str, Any]] | None = None) -> None:
         recorder = Recorder(db, threaded=True)
         if isinstance(self.eng, SimEngine):
             self.driver.participant = SimulatedParticipant(seed=p_seed)
@@ -702,6 +715,7 @@ class StudyEngine:
             session_id=session_id, code=code, kind=kind, trials_total=len(schedule), start_position=pos,
             tolerance_fraction=tr.tolerance_fraction, max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s,
             live_force_aid=live_aid, schedule=[dataclasses.asdict(s) for s in schedule],
+            participant_number=number, stored_trials=stored or [],
         ))
 
     def _on_runner_event(self, ev: object) -> None:

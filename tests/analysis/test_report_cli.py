@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import re
 from pathlib import Path
 
@@ -213,12 +214,15 @@ def test_plot_trial(dbs, tmp_path, capsys):
 
 
 def test_the_trace_axis_is_set_by_the_target_not_by_the_data():
-    from analysis.figures import trace_ylim_n
+    from protocol.display import task_axis_top_n
 
-    assert trace_ylim_n(0.6, 0.7) == pytest.approx((1.5, 1.5))       # band 0.54-0.66 N: a tenth of the axis
-    assert trace_ylim_n(0.6, 2.0)[0] == pytest.approx(2.1)          # a peak up to 4 F* stretches it
-    assert trace_ylim_n(0.6, 18.0)[0] == pytest.approx(2.4)         # beyond, clipped (and said in the figure)
-    assert trace_ylim_n(None, 7.6)[0] == pytest.approx(8.36)
+    assert task_axis_top_n(0.6, 0.7) == pytest.approx(1.5)       # band 0.54-0.66 N: 8 % of the axis
+    assert task_axis_top_n(0.6, 2.0) == pytest.approx(2.1)       # a peak up to 4 F* stretches it
+    assert task_axis_top_n(0.6, 2.0, snap_fraction=0.5) == pytest.approx(2.1)  # 3.5 F*: on a step already
+    assert task_axis_top_n(0.6, 1.7, snap_fraction=0.5) == pytest.approx(1.8)
+    assert task_axis_top_n(0.6, 18.0) == pytest.approx(2.4)      # beyond, clipped (and said in the figure)
+    assert task_axis_top_n(None, 7.6) == pytest.approx(8.36)
+    assert task_axis_top_n(0.6, math.nan) == pytest.approx(1.5)
 
 
 def test_sessions_lists_every_session_with_its_trials(dbs, capsys):

@@ -53,7 +53,13 @@ def test_health_panel_shows_faults_and_enables_reset(qtbot):
     h.apply(m.EngineFault(2.0, "fault", int(64), "OPERATOR_STOP"))
     assert view.faults.text() == "Faults: OPERATOR_STOP" and view.reset_button.isEnabled()
     h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False))
-    assert view.loop.text() == "loop   1000 Hz · p99 |period − 1 ms| 12 µs · overruns 1 (> 2 ms), 0 missed slots"
+    text = view.loop.text()
+    assert '<span style="color:#147f28">p99 |period − 1 ms| 12 µs</span>' in text  # within its limit: green
+    assert '<span style="color:#8a5a00">periods over 2 ms: 1 of 5,000 (0.02 %)</span>' in text  # above: amber
+    assert "limits: rate 1000 ± 5 Hz; p99 ≤ 100 µs" in text
+    assert view.log_label.text().startswith("Fault log") and view.force.isHidden()
+    h.update_force(18.0, in_trial=False)
+    assert not view.force.isHidden() and "18.0 N on the tissue while no trial is running" in view.force.text()
     assert not view.reset_button.isEnabled()
 
 
@@ -62,9 +68,13 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view = QtSetupPanel(s)
     qtbot.addWidget(view)
     s.update(db_path=str(tmp_path / "s.db"))
-    qtbot.keyClicks(view.code, "P 1")
-    assert s.values.code == "P 1"
-    assert view.errors.text().startswith("participant code = 'P 1'")
+    assert view.hint.text().startswith("Enter the participant's code") and view.errors.isHidden()
+    started = []
+    view.start_requested.connect(lambda: started.append(1))
+    qtbot.keyClicks(view.code, "P 1")  # Space in the code field is Start, never a character of the code
+    assert s.values.code == "P1" and started == [1]
+    view.code.setText("P-1!")
+    assert view.errors.text().startswith("participant code = 'P-1!'")
     view.code.clear()
     qtbot.keyClicks(view.code, "P01")
     assert view.errors.text() == "" and s.valid
