@@ -125,6 +125,8 @@ class ExperimenterWindow(QMainWindow):
         right.addWidget(top)
         right.addWidget(self.tabs)
         right.setSizes([520, 220])
+        right.setStretchFactor(0, 3)  # a taller window gives the plots the room
+        right.setStretchFactor(1, 1)
         split = QSplitter(Qt.Orientation.Horizontal)
         split.addWidget(left)
         split.addWidget(right)

@@ -203,6 +203,7 @@ class QtForcePlots(QWidget):
         self.lower.setMaximumHeight(10_000 if names else 0)
         self.lower.setLabel("left", "raw |F| (N)" if names == ("raw_n",) else "F (N)")
         self.task.setLabel("bottom", "" if names else "time (s)")
+        self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
         self._y.pop("lower", None)
         self.refresh()
 
@@ -263,7 +264,9 @@ class QtHealthPanel(QWidget):
         self.devices.verticalHeader().setVisible(False)
         self.devices.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.devices.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        self.devices.setMaximumHeight(120)
+        # all three devices, without a scroll bar
+        self.devices.verticalHeader().setDefaultSectionSize(22)
+        self.devices.setFixedHeight(3 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
         self.reset_button = QPushButton("Reset faults")
         self.loop = QLabel()

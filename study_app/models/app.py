@@ -95,6 +95,8 @@ class AppModel:
             moot = ev.command in ("AbortTrial", "AbortSession") and "had already ended" in ev.message
             self.notify("info" if moot else "error", ev.message if moot else f"{_COMMAND_NAMES.get(ev.command, ev.command)} "
                         f"refused: {ev.message}", ev.command)
+        elif isinstance(ev, m.TrialEnded) and self.notice is not None and self.notice.level == "info":
+            self.clear_notice()  # news about an earlier trial: stale once the next one has ended
         elif isinstance(ev, m.SessionStarted):
             self.clear_notice()
             self.setup.session_began(ev.code, ev.kind, ev.participant_number or self.setup.values.participant_number,
