@@ -10,6 +10,7 @@ from __future__ import annotations
 import sqlite3
 
 import pytest
+from conftest import SHORT_PROTOCOL
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtWidgets import QApplication, QMessageBox
 
@@ -18,20 +19,10 @@ from study_app.gui.main_window import ExperimenterWindow
 
 TIMEOUT_MS = 30_000
 
-PROTOCOL = """
-name = "user test protocol"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 2
-[trial]
-hold_s = 0.3
-max_trial_s = 6.0
-pause_s = 0.3
-cue_s = 0.3
-"""
+# the short GUI protocol with two trials per cell and a 6 s cap (time to answer a question within a trial)
+PROTOCOL = SHORT_PROTOCOL.replace("trials_per_cell = 1", "trials_per_cell = 2").replace("max_trial_s = 2.5",
+                                                                                        "max_trial_s = 6.0")
+assert "trials_per_cell = 2" in PROTOCOL and "max_trial_s = 6.0" in PROTOCOL
 
 
 @pytest.fixture
