@@ -19,6 +19,7 @@ from analysis.stats import WilcoxonResult, correlation, paired_wilcoxon, results
 __all__ = [
     "METRIC_LABELS",
     "PRIMARY_METRICS",
+    "mean_sd",
     "mode_tests",
     "per_participant",
     "speed_accuracy",
@@ -79,6 +80,18 @@ def per_participant(
         }
     )
     return out.reset_index()
+
+
+def mean_sd(values: np.ndarray | pd.Series) -> tuple[float, float, int]:
+    """Mean, SD (n − 1) and n of the finite values: what the report's bars and headline figures show.
+
+    The SD is 0 for one value and both are NaN for none.
+    """
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return np.nan, np.nan, 0
+    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v)
 
 
 def _paired(per_part: pd.DataFrame, metric: str) -> tuple[np.ndarray, np.ndarray]:

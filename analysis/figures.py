@@ -5,11 +5,12 @@
   test's significance mark (the paper's Figs. 8 and 9);
 * :func:`paired_lines` -- every participant's OFF → ON change per metric;
 * :func:`speed_accuracy_scatter` -- TCT against RMSE per trial, by mode;
-* :func:`pipeline_trace` -- one trial's force magnitude raw (red),
-  compensated (blue) and rendered (green), contact shaded (the paper's Fig. 6).
+* :func:`pipeline_trace` -- one trial's task force (blue) against its target
+  band with the rendered force (green), and the raw sensor force (red) on an
+  axis of its own, contact shaded (the paper's Fig. 6).
 
 Every function returns a :class:`matplotlib.figure.Figure`; :func:`save`
-writes it as PNG and SVG.
+writes it as a 300 dpi PNG, a PDF and an SVG with real (selectable) text.
 """
 
 from __future__ import annotations
@@ -24,9 +25,10 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from analysis.aggregate import METRIC_LABELS
+from analysis.aggregate import METRIC_LABELS, mean_sd
 from analysis.load import read_trial_samples
 from analysis.stats import WilcoxonResult
+from protocol.display import task_axis_top_n
 from protocol.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
 
 __all__ = [
@@ -37,6 +39,7 @@ __all__ = [
     "pipeline_trace",
     "render",
     "save",
+    "save_one",
     "significance_mark",
     "speed_accuracy_scatter",
     "trial_trace",
@@ -45,7 +48,12 @@ __all__ = [
 #: Okabe–Ito colours, distinguishable with every common colour-vision deficiency.
 MODE_COLORS = {"off": "#E69F00", "on": "#0072B2"}
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
-_DPI = 150
+#: Print resolution of the PNGs.
+_DPI = 300
+#: Text stays text in SVG and PDF (selectable, searchable, editable in a journal's tools).
+_VECTOR_RC = {"svg.fonttype": "none", "pdf.fonttype": 42}
+#: No dates in vector files: the same data give the same files.
+_NO_DATE: dict[str, dict[str, None]] = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
 
 
 def significance_mark(result: WilcoxonResult | None, *, adjusted: bool = True, p_holm: float | None = None) -> str:
@@ -84,8 +92,8 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             vals = frame.loc[frame["haptic_mode"] == mode, metric].to_numpy(dtype=float)
             vals = vals[np.isfinite(vals)]
             x = gi + (k - 0.5) * width
-            mean = float(vals.mean()) if len(vals) else math.nan
-            sd = float(vals.std(ddof=1)) if len(vals) > 1 else 0.0
+            mean, sd, _ = mean_sd(vals)
+            sd = sd if math.isfinite(sd) else 0.0
             ax.bar(x, mean if math.isfinite(mean) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
                    label=_MODE_NAMES[mode] if gi == 0 else None, zorder=2)
             if len(vals):
@@ -140,7 +148,7 @@ def mode_bars(
     targets = list(target_order) if target_order else sorted(by_target["target_label"].unique())
     fig = Figure(figsize=(4.2 * len(metrics), 3.6), dpi=_DPI)
     # fixed margins: constrained layout costs more than drawing the figure twice over
-    fig.subplots_adjust(left=0.14 / len(metrics), right=0.98, bottom=0.1, top=0.82 if title else 0.9,
+    fig.subplots_adjust(left=0.14 / len(metrics), right=0.98, bottom=0.1, top=0.78 if title else 0.84,
                         wspace=0.28)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     rng = np.random.default_rng(0)  # jitter of the dots, fixed so figures are reproducible
@@ -148,7 +156,10 @@ def mode_bars(
         groups = [(t, by_target[by_target["target_label"] == t], marks.get((metric, t), "")) for t in targets]
         groups.append(("overall", overall, marks.get((metric, "overall"), "")))
         _bars_panel(ax, groups, metric, rng)
-    axes[0].legend(frameon=False, fontsize=8, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.01))
+    # the legend says what the bars are: a figure is also read apart from the report
+    axes[0].legend(frameon=False, fontsize=8, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.01),
+                   title="bars: mean ± SD across participants; dots: participants", title_fontsize=7,
+                   alignment="left")
     if title:
         fig.suptitle(title)
     return fig
@@ -204,13 +215,15 @@ def speed_accuracy_scatter(trials: pd.DataFrame, tct_column: str, rho_by_mode: M
 
 def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None, tolerance_fraction: float = 0.10,
                    title: str = "") -> Figure:
-    """One trial's force magnitude through the pipeline (the paper's Fig. 6).
+    """One trial's force through the pipeline (the paper's Fig. 6), drawn for judging the task.
 
-    Raw sensor force (red, the payload's weight included), compensated
-    contact force (blue) and the force rendered on the haptic device (green);
-    intervals in contact (task force above
-    :data:`protocol.metrics.CONTACT_THRESHOLD_N`) are shaded, and the target
-    band when a target is given.
+    Top panel: the task force (magnitude of the compensated, filtered contact
+    force -- the value the trial was judged on, blue), the force rendered on
+    the haptic device (green) and the target band; its axis is set by the
+    target (:func:`protocol.display.task_axis_top_n`).  Bottom panel, on its own axis: the raw
+    sensor force (red), dominated by the tool's weight.  Intervals in contact
+    (task force above :data:`protocol.metrics.CONTACT_THRESHOLD_N`) are shaded
+    in both.  Legends sit above the data.
 
     Parameters
     ----------
@@ -219,7 +232,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     target_force_n, tolerance_fraction
         The trial's band, drawn when ``target_force_n`` is given.
     title
-        Axes title.
+        Figure title.
     """
     t = samples["t_s"].to_numpy(dtype=float)
 
@@ -227,28 +240,43 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
         c = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
         return np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
 
-    fig = Figure(figsize=(7.5, 3.8), dpi=_DPI)
-    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.13, top=0.84)
-    ax = fig.subplots()
-    contact = samples["force_n"].to_numpy(dtype=float) > CONTACT_THRESHOLD_N
+    task = samples["force_n"].to_numpy(dtype=float)
+    fig = Figure(figsize=(7.5, 4.8), dpi=_DPI)
+    fig.subplots_adjust(left=0.09, right=0.98, bottom=0.1, top=0.83 if title else 0.87, hspace=0.42)
+    ax, ax_raw = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    contact = task > CONTACT_THRESHOLD_N
     if contact.any():
         edges = np.flatnonzero(np.diff(np.concatenate(([0], contact.astype(np.int8), [0]))))
         for a, b in zip(edges[::2], edges[1::2]):
-            ax.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.35, linewidth=0,
-                       label="contact" if a == edges[0] else None)
+            for axis in (ax, ax_raw):
+                axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
+                             label="in contact" if (a == edges[0] and axis is ax) else None)
     if target_force_n is not None:
         half = band_halfwidth_n(target_force_n, tolerance_fraction)
-        ax.axhspan(target_force_n - half, target_force_n + half, color="#0072B2", alpha=0.25, linewidth=0,
+        lo, hi = target_force_n - half, target_force_n + half
+        ax.axhspan(lo, hi, color="#0072B2", alpha=0.18, linewidth=0,
                    label=f"target band {target_force_n:g} N ± {tolerance_fraction:.0%}")
-    for prefix, color, label in (("raw", "#d62728", "raw"), ("comp", "#1f77b4", "compensated"),
-                                 ("render", "#2ca02c", "rendered")):
-        ax.plot(*peak_downsample(t, mag(prefix)), color=color, linewidth=0.9, label=label)
-    ax.set_xlabel("time since cue (s)")
-    ax.set_ylabel("force magnitude (N)")
+        for edge in (lo, hi):
+            ax.axhline(edge, color="#0072B2", linewidth=0.7, linestyle="--")
+    ax.plot(*peak_downsample(t, task), color="#1f4e9c", linewidth=1.0, label="task force |F| (compensated, filtered)")
+    ax.plot(*peak_downsample(t, mag("render")), color="#2ca02c", linewidth=0.9, label="rendered on the haptic device")
+    finite = task[np.isfinite(task)]
+    peak = float(finite.max()) if len(finite) else math.nan
+    top = task_axis_top_n(target_force_n, peak)
+    ax.set_ylim(0.0, top)
+    if math.isfinite(peak) and peak > top:
+        ax.text(0.99, 0.97, f"peak {peak:.2f} N: above the axis", transform=ax.transAxes, ha="right", va="top",
+                fontsize=7, color="#b00020")
+    ax.set_ylabel("force (N)")
+    ax_raw.plot(*peak_downsample(t, mag("raw")), color="#d62728", linewidth=0.9)
+    ax_raw.set_ylabel("raw |F| (N)")
+    ax_raw.set_title("raw sensor force, tool weight included (own axis)", fontsize=7, loc="left", pad=2)
+    ax_raw.set_xlabel("time since cue (s)")
     if title:
         fig.suptitle(title, fontsize=9, x=0.09, ha="left")
-    ax.legend(frameon=False, fontsize=7, ncols=5, loc="lower left", bbox_to_anchor=(0.0, 1.0))
+    ax.legend(frameon=False, fontsize=7, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.0))
     _style(ax)
+    _style(ax_raw)
     return fig
 
 
@@ -301,15 +329,27 @@ def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any)
 
 
 def save(fig: Figure, folder: str | Path, name: str) -> bytes:
-    """Write ``folder/name.png`` and ``folder/name.svg``; return the PNG bytes (for embedding)."""
+    """Write ``folder/name.png`` (300 dpi), ``.pdf`` and ``.svg``; return the PNG bytes (for embedding)."""
+    import matplotlib
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=_DPI)
+    with matplotlib.rc_context(_VECTOR_RC):
+        fig.savefig(buf, format="png", dpi=_DPI)
+        for suffix in ("svg", "pdf"):
+            fig.savefig(folder / f"{name}.{suffix}", format=suffix, metadata=_NO_DATE[suffix])
     png = buf.getvalue()
     (folder / f"{name}.png").write_bytes(png)
-    fig.savefig(folder / f"{name}.svg", format="svg", metadata={"Date": None})  # no date: reproducible files
     return png
+
+
+def save_one(fig: Figure, path: str | Path) -> None:
+    """Write one figure file; its format from the suffix (.png at 300 dpi, .pdf, .svg with real text)."""
+    import matplotlib
+
+    with matplotlib.rc_context(_VECTOR_RC):
+        fig.savefig(path, dpi=_DPI, metadata=_NO_DATE.get(Path(path).suffix.lower().lstrip(".")))
 
 
 _BUILDERS = {

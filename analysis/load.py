@@ -51,7 +51,7 @@ class StudyData:
     ----------
     trials
         One row per stored trial.  Columns: ``database``, ``participant_code``,
-        ``session_id``, ``session_kind``, ``session_status``, ``trial_id``,
+        ``participant_number``, ``session_id``, ``session_kind``, ``session_status``, ``trial_id``,
         ``trial_index``, ``target_label``, ``target_force_n``, ``haptic_mode``,
         ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live
         (``stored_tct_s``, ``stored_rmse_n``, ``stored_max_ae_n``,
@@ -61,7 +61,7 @@ class StudyData:
         ``"training session"`` or ``"aborted trial"``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
-        ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
+        ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
         ``end_reason``, ``software_version``, ``rig``, ``protocol_name``.
     databases
         The database paths, in the order given.
@@ -111,7 +111,8 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     try:
         sessions = _query(
             db,
-            "SELECT s.session_id, p.code AS participant_code, s.kind, s.status, s.seed, s.started_at, "
+            "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
+            "s.started_at, "
             "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json "
             "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
         )
@@ -182,7 +183,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
                 "whether they are one person (analyse the databases separately or re-code one)"
             )
     trials = pd.concat(all_trials, ignore_index=True)
-    meta = sessions[["database", "session_id", "participant_code", "kind", "status",
+    meta = sessions[["database", "session_id", "participant_code", "participant_number", "kind", "status",
                      "tolerance_fraction", "hold_s", "max_trial_s"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
     )
@@ -192,8 +193,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
         np.where(trials["outcome"] == "aborted", "aborted trial", ""),
     )
     trials["excluded"] = excluded
-    order = ["database", "participant_code", "session_id", "session_kind", "session_status", "trial_id",
-             "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
+    order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
+             "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
              "stored_peak_force_n", "n_samples", "abort_reason", "tolerance_fraction", "hold_s",
              "max_trial_s", "excluded"]

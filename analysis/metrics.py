@@ -64,9 +64,9 @@ class TrialTable:
     Attributes
     ----------
     trials
-        One row per analysed trial: ``participant_code, session_id,
-        trial_index, target_label, target_force_n, haptic_mode, outcome,
-        success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n,
+        One row per analysed trial: ``participant_code, participant_number,
+        session_id, trial_index, started_at_s`` (the cue, session clock),
+        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n,
         first_contact_s, tct_censored_s, database``.  ``tct_s`` is NaN unless
         the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
     n_from_samples
@@ -211,8 +211,10 @@ def compute_trials(
     out = pd.DataFrame(
         {
             "participant_code": inc["participant_code"],
+            "participant_number": inc["participant_number"].astype(np.int64),
             "session_id": inc["session_id"].astype(np.int64),
             "trial_index": inc["trial_index"].astype(np.int64),
+            "started_at_s": inc["started_at_s"].to_numpy(dtype=float),
             "target_label": inc["target_label"],
             "target_force_n": nums["target_force_n"],
             "haptic_mode": inc["haptic_mode"],

@@ -7,12 +7,14 @@ ON vs OFF, draws the paper's figures and writes::
     DIR/report.html            figures embedded, tables, methods paragraph
     DIR/trials.csv             one row per analysed trial
     DIR/participants.csv       per participant × haptic mode
+    DIR/participants_wide.csv  one row per participant: OFF and ON columns per measure (JASP, SPSS)
     DIR/participants_by_target.csv
     DIR/stats.csv              one row per metric (paired Wilcoxon ON vs OFF, Holm across metrics)
     DIR/stats_by_target.csv    the same within each target
     DIR/speed_accuracy.csv     TCT–RMSE rank correlation per mode
     DIR/sessions.csv           every session read, with what was excluded
-    DIR/figures/*.png, *.svg
+    DIR/codebook.csv           every column of every CSV: meaning, unit, type
+    DIR/figures/*.png, *.pdf, *.svg
 
 The report is built in a temporary folder beside ``DIR`` and moved into place
 at the end, so a failed run never leaves half a report or touches an old one.
@@ -34,8 +36,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis import figures
-from analysis.aggregate import METRIC_LABELS, PRIMARY_METRICS, mode_tests, per_participant, speed_accuracy
+from analysis import codebook, figures
+from analysis.aggregate import PRIMARY_METRICS, mean_sd, mode_tests, per_participant, speed_accuracy
 from analysis.load import AnalysisError, Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.parallel import default_workers, run_tasks
@@ -45,12 +47,17 @@ from protocol.version import software_version
 
 __all__ = ["ReportSummary", "TRIALS_CSV_COLUMNS", "STATS_CSV_COLUMNS", "build_report"]
 
-#: trials.csv: the columns every consumer may rely on, in this order (more follow).
-TRIALS_CSV_COLUMNS = ("participant_code", "session_id", "trial_index", "target_label", "target_force_n",
-                      "haptic_mode", "outcome", "success", "tct_s", "rmse_n", "max_ae_n")
+#: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
+#: number, participant code, session and trial.  Names and rounding: :mod:`analysis.codebook`.
+TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
+                      "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
+                      "cue_at_s")
 #: stats.csv: the columns every consumer may rely on, in this order (more follow).
 STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
                      "zero_method", "rank_biserial", "p_holm")
+#: The Wilcoxon table on the page (``hl`` is the Hodges–Lehmann estimate with its interval).
+_STAT_HTML_COLUMNS = ("metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
+                      "p_value", "p_holm", "rank_biserial", "r")
 
 
 @dataclass(frozen=True, slots=True)
@@ -66,6 +73,11 @@ class ReportSummary:
     files: list[str] = field(default_factory=list)
 
 
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"
+
+
 def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
     out = frame.copy()
     out.insert(1, "n", out["n_used"])
@@ -73,8 +85,62 @@ def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
     return out[list(STATS_CSV_COLUMNS) + rest]
 
 
+def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
+                   stats: pd.DataFrame, stats_by_target: pd.DataFrame, sa: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted."""
+    numbers = dict(zip(trials["participant_code"], trials["participant_number"]))
+    order = sorted(numbers, key=lambda code: (numbers[code], code))
+    rank = {code: i for i, code in enumerate(order)}
+
+    def by_participant(frame: pd.DataFrame, *keys: str) -> pd.DataFrame:
+        out = frame.copy()
+        if "participant_number" not in out.columns:
+            out.insert(1, "participant_number", out["participant_code"].map(numbers).astype(np.int64))
+        out["_rank"] = out["participant_code"].map(rank)
+        return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
+
+    t = by_participant(trials, "session_id", "trial_index")
+    t["database"] = t["database"].map(os.path.basename)
+    t = codebook.export(t, "trials.csv")
+    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    per = codebook.export(by_participant(overall, "haptic_mode"), "participants.csv")
+    per_t = codebook.export(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
+                     values=list(codebook.WIDE_MEASURES))
+    wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
+    for c in wide_cols:
+        if c.startswith("n_"):
+            wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    st = codebook.export(_stats_table(stats), "stats.csv")
+    st_t = codebook.export(_stats_table(stats_by_target.drop(columns="target_label")), "stats_by_target.csv")
+    st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
+    sess = study.sessions.copy()
+    sess["database"] = sess["database"].map(os.path.basename)
+    return {
+        "trials.csv": t,
+        "participants.csv": per,
+        "participants_wide.csv": codebook.export(wide, "participants_wide.csv"),
+        "participants_by_target.csv": per_t,
+        "stats.csv": st,
+        "stats_by_target.csv": st_t,
+        "speed_accuracy.csv": codebook.export(sa, "speed_accuracy.csv"),
+        "sessions.csv": codebook.export(sess, "sessions.csv"),
+    }
+
+
+def _write_tables(folder: Path, tables: dict[str, pd.DataFrame]) -> None:
+    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included)."""
+    for name, frame in tables.items():
+        frame.to_csv(folder / name, index=False)
+    columns = {name: list(frame.columns) for name, frame in tables.items()}
+    columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
+    codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
+
+
 def _fmt(v: object, digits: int = 3) -> str:
-    if v is None:
+    if v is None or v is pd.NA:
         return ""
     if isinstance(v, (bool, np.bool_)):
         return "yes" if v else "no"
@@ -90,41 +156,55 @@ def _fmt(v: object, digits: int = 3) -> str:
     return html.escape(str(v))
 
 
-def _html_table(frame: pd.DataFrame, columns: Sequence[str] | None = None) -> str:
+def _th(file: str, column: str) -> str:
+    """A table heading: the codebook's short label, its description on hover."""
+    entry = codebook.lookup(file, column)
+    tip = f' title="{html.escape(entry.description)}"' if entry is not None else ""
+    return f"<th{tip}>{html.escape(codebook.label(file, column))}</th>"
+
+
+def _html_table(frame: pd.DataFrame, file: str, columns: Sequence[str] | None = None,
+                cell: dict[str, object] | None = None) -> str:
+    """A table of an exported CSV's rows, with readable headings; ``cell`` formats some columns specially."""
     cols = list(columns) if columns else list(frame.columns)
-    head = "".join(f"<th>{html.escape(c)}</th>" for c in cols)
+    special = cell or {}
+    head = "".join(_th(file, c) for c in cols)
     body = []
     for _, row in frame.iterrows():
-        cells = "".join(f"<td>{_fmt(row[c])}</td>" for c in cols)
+        cells = "".join(f"<td>{special[c](row[c]) if c in special else _fmt(row[c])}</td>" for c in cols)  # type: ignore[operator]
         body.append(f"<tr>{cells}</tr>")
     return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
 
 
-def _stats_html(frame: pd.DataFrame, columns: Sequence[str], lead: Sequence[str] = ()) -> str:
-    """A test table for the page: HL estimate and interval in one column, notes as numbered footnotes."""
-    shown = frame.copy()
-    shown["hl"] = [
-        f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        for e, lo, hi in zip(shown["hl_estimate"], shown["hl_ci_low"], shown["hl_ci_high"])
-    ]
-    notes: list[str] = []
-    labels = []
-    for _, row in shown.iterrows():
-        label = str(row["metric"])
-        if isinstance(row.get("note"), str) and row["note"]:
-            notes.append(row["note"])
-            label += f" <sup>{len(notes)}</sup>"
-        labels.append(label)
-    cols = list(lead) + list(columns)
-    head = "".join(f"<th>{html.escape('HL median difference [CI]' if c == 'hl' else c)}</th>" for c in cols)
+def _measure_label(metric: str) -> str:
+    """``rmse_N`` → ``RMSE (N)``: the heading the participants table gives the measure."""
+    return codebook.label("participants.csv", metric)
+
+
+def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str:
+    """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered."""
+    notes: dict[str, int] = {}
+    cols = list(lead) + list(_STAT_HTML_COLUMNS)
+    head = "".join(
+        "<th title=\"Hodges–Lehmann estimate of the shift ON − OFF with its confidence interval\">HL shift ON − OFF "
+        "[CI]</th>" if c == "hl" else _th(file, c) for c in cols
+    )
     body = []
-    for label, (_, row) in zip(labels, shown.iterrows()):
+    for _, row in frame.iterrows():
+        label = html.escape(_measure_label(str(row["metric"])))
+        note = row.get("note")
+        if isinstance(note, str) and note:
+            k = notes.setdefault(note, len(notes) + 1)
+            label += f" <sup>{k}</sup>"
+        e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
+        hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
+        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl if c == 'hl' else _fmt(row[c])}</td>"
+                        for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
-        cells = "".join(f"<td>{label if c == 'metric' else (row[c] if c == 'hl' else _fmt(row[c]))}</td>" for c in cols)
         body.append(f"<tr{cls}>{cells}</tr>")
     foot = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
-    return (f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
-            + (f'<ol class="notes">{foot}</ol>' if foot else ""))
+    return (f'<div class="scroll"><table class="stats"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody>'
+            f'</table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
 
 
 def _img(png: bytes, alt: str) -> str:
@@ -174,16 +254,18 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     exp = sessions[sessions["kind"] == "experiment"]
     versions = ", ".join(sorted(set(sessions["software_version"])))
     dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
-    check = (f"All {table.n_from_samples} analysed trials were recomputed from their stored 1 kHz samples"
+    check = (f"All {plural(table.n_from_samples, 'analysed trial')} were recomputed from their stored 1 kHz samples"
              + (f" and agree with the values stored live" if table.n_disagree == 0 else
                 f"; {table.n_disagree} disagree with the values stored live (the recomputed values are used)")
-             + (f"; {table.n_stored_only} trials without samples use their stored values" if table.n_stored_only else "")
+             + (f"; {plural(table.n_stored_only, 'trial')} without samples use their stored values"
+                if table.n_stored_only else "")
              + ".")
     return (
-        f"<p><b>Data.</b> {n_participants} participants, {len(exp)} experiment sessions "
-        f"({n_incomplete} not completed) from {len(study.databases)} database(s) ({dbs}), "
-        f"{len(trials)} analysed trials. Excluded: {excluded['training_sessions']} training sessions "
-        f"({excluded['training_trials']} trials) and {excluded['aborted_trials']} aborted trials "
+        f"<p><b>Data.</b> {plural(n_participants, 'participant')}, {plural(len(exp), 'experiment session')} "
+        f"({n_incomplete} not completed) from {plural(len(study.databases), 'database')} ({dbs}), "
+        f"{plural(len(trials), 'analysed trial')}. {_origin(study)[1]} Excluded: "
+        f"{plural(excluded['training_sessions'], 'training session')} "
+        f"({plural(excluded['training_trials'], 'trial')}) and {plural(excluded['aborted_trials'], 'aborted trial')} "
         f"(each re-run later in its session). Recorded with haptic-study {html.escape(versions)}; "
         f"analysed with haptic-study {html.escape(software_version())}. {check}</p>"
         f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
@@ -195,10 +277,14 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"is the largest task force in the window. These are the definitions of protocol.metrics, the same code "
         f"that judged the trials live.</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
-        f"RMSE, Max AE, time in band and peak force are means over trials; TCT is {tct}. Bars show the mean across "
-        f"participants with ±1 SD (n − 1); dots are participants.</p>"
+        f"RMSE, Max AE, time in band and peak force are means over trials; TCT is {tct}. Across participants, the "
+        f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
+        f"and the dots are participants; the test tables give medians, the summary the Wilcoxon test is about. "
+        f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
+        f"every CSV file is described, with its unit, in codebook.csv.</p>"
         f"<p><b>Tests.</b> {html.escape(methods_text(zero_method, confidence))} Holm's step-down correction is "
-        f"applied across the {len(PRIMARY_METRICS)} outcome measures ({', '.join(PRIMARY_METRICS)}), and separately "
+        f"applied across the {len(PRIMARY_METRICS)} outcome measures "
+        f"({', '.join(codebook.exported_name(m) for m in PRIMARY_METRICS)}), and separately "
         f"within each target; significance marks in the figures use the Holm-adjusted p-values "
         f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). The speed–accuracy trade is the "
         f"Spearman rank correlation of TCT with RMSE over trials, per mode.</p>"
@@ -209,11 +295,129 @@ _CSS = """
 body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
 h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.8em}
 .meta{color:#666;font-size:.9em}table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.85em}
-th,td{border:1px solid #ddd;padding:3px 7px;text-align:right;white-space:nowrap}th{background:#f4f4f4}td:first-child,th:first-child{text-align:left}
-tr.nc td{color:#999;font-style:italic}img{max-width:100%;height:auto;display:block;margin:.5em 0}
-.key{display:grid;grid-template-columns:repeat(auto-fit,minmax(180px,1fr));gap:.6em;margin:1em 0}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}th{background:#f4f4f4;vertical-align:bottom}
+td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}tr.nc td{color:#999;font-style:italic}
+img{max-width:100%;height:auto;display:block;margin:.5em 0}
+.key{display:grid;grid-template-columns:repeat(auto-fit,minmax(200px,1fr));gap:.6em;margin:1em 0}
 .key div{background:#f7f9fc;border:1px solid #e3e8f0;border-radius:6px;padding:.6em .8em}
-.key b{display:block;font-size:1.3em}.scroll{overflow-x:auto}.notes{font-size:.85em;color:#555}.warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
+.key b{display:block;font-size:1.25em}.key small{color:#555}.scroll{overflow-x:auto}.notes{font-size:.85em;color:#555}
+.warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
+.origin{padding:.5em .8em;border-radius:6px;font-weight:600}.origin.sim{background:#eef3ff;border:1px solid #9db4e8}
+.origin.real{background:#eefaf0;border:1px solid #9ed3a8}.origin.mixed{background:#fff4e5;border:1px solid #f0c36d}
+.caption{font-size:.85em;color:#555;margin:.2em 0 .8em}
+@page{size:A4;margin:12mm}
+@media print{
+ body{max-width:none;margin:0;padding:0;font-size:9.5pt;line-height:1.3}
+ .scroll{overflow:visible}
+ table{font-size:7pt;margin:.3em 0 .8em;page-break-inside:auto}
+ th,td{padding:1px 3px}th{white-space:normal}td{white-space:nowrap}td.wrap{white-space:normal}
+ tr,img,.key div{page-break-inside:avoid}
+ h2,h3{page-break-after:avoid}
+ .key{grid-template-columns:repeat(4,1fr)}
+ img{max-width:100%;max-height:120mm;width:auto}
+ a{color:inherit;text-decoration:none}
+}
+"""
+
+
+def _origin(study: StudyData) -> tuple[str, str]:
+    """(CSS class, sentence) saying whether the analysed data come from the simulated rig or the real one."""
+    exp = study.sessions[study.sessions["kind"] == "experiment"]
+    rigs = exp["rig"].value_counts()
+    n_sim, n_real = int(rigs.get("sim", 0)), int(rigs.get("real", 0))
+    if n_real == 0:
+        return "sim", ("Simulated data: every experiment session was recorded on the simulated rig (rig = sim) with "
+                       "simulated participants. These numbers describe the simulation, not people.")
+    if n_sim == 0:
+        return "real", "Recorded on the real rig (rig = real) with real participants."
+    return "mixed", (f"Mixed data: {plural(n_sim, 'experiment session')} on the simulated rig (rig = sim) and "
+                     f"{n_real} on the real rig (rig = real); see the sessions table.")
+
+
+def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> str:
+    """One card per measure: mean ± SD across participants OFF → ON, and the Holm-adjusted test."""
+    by_metric = stats.set_index("metric")
+    cards = []
+    for m in PRIMARY_METRICS:
+        name = codebook.exported_name(m)
+        parts, ns = [], []
+        for mode in ("off", "on"):
+            mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
+            parts.append(f"{_fmt(mean)} ± {_fmt(sd)}")
+            ns.append(n)
+        who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
+        p_holm = by_metric.at[name, "p_holm"]
+        test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
+                else "Wilcoxon test not computable")
+        cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
+                     f"<small>OFF → ON, mean ± SD across {who}; {html.escape(test)}</small></div>")
+    return f'<div class="key">{"".join(cards)}</div>'
+
+
+def _when(v: object) -> str:
+    """An ISO 8601 time as ``YYYY-MM-DD HH:MM`` (UTC), for the page."""
+    return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
+
+
+def _page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
+          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
+          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]]) -> str:
+    """report.html: self-contained (figures embedded), readable on screen and on paper."""
+    stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
+    warn = ""
+    if table.n_disagree:
+        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
+                "those recomputed from samples; see the methods.</p>")
+    nc = stats[~stats["computable"].astype(bool)]
+    if len(nc):
+        warn += ('<p class="warn">Not computable: '
+                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
+                             for r in nc.itertuples()) + "</p>")
+    origin_class, origin_text = _origin(study)
+    now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    n_trials = len(tables["trials.csv"])
+    per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
+                "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
+    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
+                 "started_at", "ended_at", "software_version"]
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
+<h1>Haptic feedback study: report</h1>
+<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
+{html.escape(software_version())} · error window: {options.error_window} · TCT: {options.tct_policy}</p>
+<p class="origin {origin_class}">{html.escape(origin_text)}</p>
+{warn}
+{_headline(per, stats, marks_overall)}
+<h2>Haptics ON vs OFF</h2>
+<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the four
+measures. Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
+{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
+{_stats_html(stats, "stats.csv")}
+<h3>Within each target</h3>
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"])}
+<figure><h2>Success rate</h2>
+<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after Holm's correction
+(n.s. not significant, n/c not computable).</p>
+{_img(pngs["success_rate"], "success rate per target and overall")}</figure>
+<figure><h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}</figure>
+<figure><h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}</figure>
+<figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
+<p class="caption">Grey lines: participants; black: the median across participants.</p></figure>
+{_html_table(per, "participants.csv", per_cols)}
+<h2>Speed against accuracy</h2>
+<p>Spearman rank correlation of TCT with RMSE over trials, per mode. A negative ρ means faster trials were less
+accurate: participants traded accuracy for speed. A positive ρ means slow trials were also the inaccurate ones: no trade.</p>
+{_html_table(sa, "speed_accuracy.csv")}
+{_img(pngs["speed_accuracy"], "TCT against RMSE")}
+<h2>Force through the pipeline</h2>
+<p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
+band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
+{"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+<h2>Methods</h2>
+{_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
+<h2>Sessions</h2>
+{_html_table(sess, "sessions.csv", sess_cols, cell={"started_at": _when, "ended_at": _when})}
+</body></html>
 """
 
 
@@ -316,8 +520,9 @@ def build_report(
         ]
         titles = []
         for ex in _example_trials(trials):
-            name = f"pipeline_{ex['participant_code']}_s{int(ex['session_id'])}_t{int(ex['trial_index'])}"
-            title = (f"{ex['participant_code']}, trial {int(ex['trial_index'])}: {ex['target_label']} "
+            number = int(ex["trial_index"]) + 1  # trials are numbered from 1 for people (see analysis.codebook)
+            name = f"pipeline_{ex['participant_code']}_s{int(ex['session_id'])}_trial{number}"
+            title = (f"{ex['participant_code']}, session {int(ex['session_id'])}, trial {number}: {ex['target_label']} "
                      f"{ex['target_force_n']:g} N, haptics {str(ex['haptic_mode']).upper()}, {ex['outcome']}")
             tol = float(study.included.loc[(study.included["database"] == ex["database"]) &
                                            (study.included["session_id"] == ex["session_id"]), "tolerance_fraction"].iloc[0])
@@ -330,72 +535,13 @@ def build_report(
         pngs = {key: png for (_, _, _, _, key), png in zip(tasks, drawn)}
         examples = [(title, pngs[name]) for name, title in titles]
 
-        trials_csv = trials[list(TRIALS_CSV_COLUMNS) + [c for c in trials.columns if c not in TRIALS_CSV_COLUMNS]].copy()
-        trials_csv["database"] = trials_csv["database"].map(os.path.basename)
-        trials_csv.to_csv(tmp / "trials.csv", index=False)
-        overall.to_csv(tmp / "participants.csv", index=False)
-        by_target.to_csv(tmp / "participants_by_target.csv", index=False)
-        stats_out = _stats_table(stats)
-        stats_out.to_csv(tmp / "stats.csv", index=False)
-        tgt_out = _stats_table(stats_by_target.drop(columns="target_label"))
-        tgt_out.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
-        tgt_out.to_csv(tmp / "stats_by_target.csv", index=False)
-        sa.to_csv(tmp / "speed_accuracy.csv", index=False)
-        sess = study.sessions.copy()
-        sess["database"] = sess["database"].map(os.path.basename)
-        sess.to_csv(tmp / "sessions.csv", index=False)
-
-        # -- the page ----------------------------------------------------------------------
-        by_metric = stats_out.set_index("metric")
-        key = "".join(
-            f"<div>{html.escape(METRIC_LABELS[m])}<b>{_fmt(by_metric.at[m, 'median_off'])} → "
-            f"{_fmt(by_metric.at[m, 'median_on'])}</b>median OFF → ON (n = {_fmt(by_metric.at[m, 'n'])}), "
-            f"{marks_overall.get(m, '')}</div>"
-            for m in PRIMARY_METRICS
+        tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
+        _write_tables(tmp, tables)
+        page = _page(
+            study=study, table=table, options=options, zero_method=zero_method, confidence=confidence,
+            excluded=excluded, n_participants=n_participants, n_incomplete=n_incomplete, tables=tables,
+            marks_overall=marks_overall, pngs=pngs, examples=examples,
         )
-        stat_cols = ["metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
-                     "p_value", "p_holm", "rank_biserial", "r"]
-        warn = ""
-        if table.n_disagree:
-            warn = (f'<p class="warn">{table.n_disagree} trials disagree between the metrics stored live and those '
-                    "recomputed from samples; see the methods.</p>")
-        nc = stats_out[~stats_out["computable"]] if "computable" in stats_out.columns else stats_out.iloc[:0]
-        if len(nc):
-            warn += ('<p class="warn">Not computable: '
-                     + "; ".join(f"{html.escape(str(r.metric))}: {html.escape(str(r.note))}" for r in nc.itertuples())
-                     + "</p>")
-        now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-        page = f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
-<h1>Haptic feedback study: report</h1>
-<p class="meta">{n_participants} participants · {len(trials)} trials · generated {now} by haptic-study {html.escape(software_version())}
-· error window: {options.error_window} · TCT: {options.tct_policy}</p>
-{warn}
-<div class="key">{key}</div>
-<h2>Haptics ON vs OFF</h2>
-<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); Holm-adjusted across the four measures.</p>
-{_stats_html(stats_out, stat_cols)}
-<h3>Within each target</h3>
-{_stats_html(tgt_out, stat_cols, lead=["target_label"])}
-<h2>Success rate</h2>{_img(pngs["success_rate"], "success rate per target and overall")}
-<h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}
-<h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}
-<h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
-{_html_table(overall)}
-<h2>Speed against accuracy</h2>
-<p>Spearman rank correlation of TCT with RMSE over trials, per mode. A negative ρ means faster trials were less
-accurate: participants traded accuracy for speed. A positive ρ means slow trials were also the inaccurate ones: no trade.</p>
-{_html_table(sa)}
-{_img(pngs["speed_accuracy"], "TCT against RMSE")}
-<h2>Force through the pipeline</h2>
-{"".join(f"<h3>{html.escape(t)}</h3>{_img(p, t)}" for t, p in examples)}
-<h2>Methods</h2>
-{_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
-<h2>Sessions</h2>
-{_html_table(sess[["database", "session_id", "participant_code", "kind", "status", "seed", "started_at", "ended_at",
-                   "software_version", "rig"]])}
-</body></html>
-"""
         (tmp / "report.html").write_text(page, encoding="utf-8")
         files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
         if out.exists():
@@ -405,4 +551,4 @@ accurate: participants traded accuracy for speed. A positive ρ means slow trial
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return ReportSummary(out, n_participants, len(trials), int(study.included["n_samples"].fillna(0).sum()),
-                         excluded, stats_out, files)
+                         excluded, tables["stats.csv"], files)

@@ -230,7 +230,7 @@ class SessionRunner:
         self._t0_ns: int | None = None
         self._last_t_ns = 0
         self._lock = threading.Lock()
-        self._requests: list[tuple[str, str, str]] = []
+        self._requests: list[tuple[str, str, str, int | None]] = []
         self.paused = False
         self.done = False
         self.status = "running"
@@ -262,13 +262,17 @@ class SessionRunner:
         """Continue after :meth:`pause`."""
         self._request("resume")
 
-    def abort_trial(self, reason: str = "aborted by the experimenter", cause: str = "experimenter") -> None:
+    def abort_trial(self, reason: str = "aborted by the experimenter", cause: str = "experimenter",
+                    trial_index: int | None = None) -> None:
         """Abort the running trial; it is re-queued per the protocol's abort policy.
 
         ``cause`` goes to ``trials.abort_cause`` (``experimenter``, or ``interrupted``
-        when the controlling program is going away).
+        when the controlling program is going away).  With ``trial_index`` the
+        request applies to that trial only: if it has ended by the time the
+        request is applied, nothing is aborted (a confirmation answered late
+        never aborts the next trial).
         """
-        self._request("abort_trial", reason, cause)
+        self._request("abort_trial", reason, cause, trial_index)
 
     def records_lost(self, count: int) -> None:
         """The caller could not read ``count`` records (the ring lapped it): the running trial has a gap."""
@@ -278,9 +282,9 @@ class SessionRunner:
         """Abort the running trial (not re-queued) and end the session."""
         self._request("abort_session", reason)
 
-    def _request(self, kind: str, detail: str = "", cause: str = "experimenter") -> None:
+    def _request(self, kind: str, detail: str = "", cause: str = "experimenter", trial_index: int | None = None) -> None:
         with self._lock:
-            self._requests.append((kind, detail, cause))
+            self._requests.append((kind, detail, cause, trial_index))
 
     # -- helpers ------------------------------------------------------------------------------------
     def session_time_s(self, t_ns: int) -> float:
@@ -579,7 +583,7 @@ class SessionRunner:
     def _handle_requests(self, t_ns: int) -> None:
         with self._lock:
             reqs, self._requests = self._requests, []
-        for kind, detail, cause in reqs:
+        for kind, detail, cause, trial_index in reqs:
             if kind == "pause":
                 self.paused = self.state.paused = True
                 self._event(t_ns, "experimenter", "pause")
@@ -587,6 +591,11 @@ class SessionRunner:
                 self.paused = self.state.paused = False
                 self._event(t_ns, "experimenter", "resume")
             elif kind in ("abort_trial", "abort_session"):
+                spec = self.machine.spec
+                running = self.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
+                if trial_index is not None and not (running and spec is not None and spec.index == trial_index):
+                    self._event(t_ns, "experimenter", f"{kind} for trial {trial_index} ignored: it had ended")
+                    continue
                 self._event(t_ns, "experimenter", f"{kind}: {detail}")
                 self._abort_running(t_ns, detail, cause, requeue=kind == "abort_trial")
                 if kind == "abort_session":

@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 from study_app.argtypes import SQLITE_INTEGER_MAX, OneLineParser, host_name, one_line, real_number, whole_number
 
-__all__ = ["main"]
+__all__ = ["add_command", "main", "version_text"]
 
 
 class CliError(Exception):
@@ -51,16 +51,68 @@ def _fault_plan(text: str):  # type: ignore[no-untyped-def]
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,  # type: ignore[type-arg]
+                description: str = "") -> argparse.ArgumentParser:
+    """A subcommand whose ``--help`` starts with what it does and ends with an example."""
+    import shutil
+    import textwrap
+
+    width = max(40, min(100, shutil.get_terminal_size().columns - 2))
+    return sub.add_parser(
+        name, help=help, description=textwrap.fill((description or help[:1].upper() + help[1:]) + ".", width),
+        epilog="example:\n  " + "\n  ".join(example.splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+class _VersionAction(argparse.Action):
+    """``--version``: the installed version, and the commit when run from a git checkout (computed when asked)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, **_: object) -> None:
+        super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
+                         help="print the version (and the git commit of a checkout) and exit")
+
+    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[no-untyped-def]
+        print(f"haptic-study {version_text()}")
+        parser.exit()
+
+
+def version_text() -> str:
+    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout."""
+    import subprocess
+    from pathlib import Path
+
+    from protocol.version import software_version
+
+    text = software_version()
+    root = Path(__file__).resolve().parent.parent
+    if not (root / ".git").exists():  # an installed copy, not a checkout
+        return text
+    try:
+        def git(*args: str) -> str:
+            return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=5,
+                                  check=True).stdout.strip()
+
+        commit = git("rev-parse", "--short=8", "HEAD")
+        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
+    except (OSError, subprocess.SubprocessError):
+        return text
+    return f"{text} (commit {commit}{', with uncommitted changes' if dirty else ''})"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every subcommand."""
     p = OneLineParser(
         prog="haptic-study",
         description="Force-feedback training study: haptic pipeline, simulated rig, protocol, analysis, GUI.",
+        epilog="'haptic-study COMMAND --help' describes a command, with an example.",
     )
+    p.add_argument("--version", action=_VersionAction)
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    s = sub.add_parser("sim", help="run the simulated rig with scripted presses and summarise what the pipeline saw")
+    s = add_command(sub, "sim", "run the simulated rig with scripted presses and summarise what the pipeline saw",
+                    "haptic-study sim --seconds 30 --seed 1")
     s.add_argument("--seconds", type=_positive_float("--seconds"), default=60.0, help="simulated time (default 60)")
     s.add_argument("--seed", type=_SEED, default=0, help="seed of every random process (default 0)")
     s.add_argument("--clock", choices=("virtual", "real"), default="virtual",
@@ -68,17 +120,22 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--haptics", choices=("on", "off"), default="on", help="haptic feedback (default on)")
     s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
-    r = sub.add_parser("run", help="run a complete simulated study into a study database (headless)")
+    r = add_command(sub, "run", "run a complete simulated study into a study database (headless)",
+                    "haptic-study run --participants 10 --seed 0 --db study.db\n"
+                    "haptic-study run --participants 10 --seed 0 --db study.db --continue   # after an interruption",
+                    "Run a complete simulated study (training and experiment sessions of simulated participants on "
+                    "the simulated rig) into a study database, headless, and print a summary")
     r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10, help="number of simulated participants (default 10)")
     r.add_argument("--seed", type=_SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
-    r.add_argument("--db", required=True, help="study database (SQLite); created if missing")
-    r.add_argument("--protocol", default=None, help="protocol file (default: the paper's study, protocol/default.toml)")
+    r.add_argument("--db", required=True, metavar="PATH", help="study database (SQLite); created if missing")
+    r.add_argument("--protocol", default=None, metavar="FILE",
+                   help="protocol file (default: the paper's study, protocol/default.toml)")
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
                    help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
     after = r.add_mutually_exclusive_group()
-    after.add_argument("--resume", metavar="PARTICIPANT_CODE", default=None,
+    after.add_argument("--resume", metavar="CODE", default=None,
                        help="continue this participant's interrupted session (training or experiment) "
                             "at its first unfinished trial")
     after.add_argument("--continue", dest="continue_study", action="store_true",
@@ -94,10 +151,17 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_report_parsers(sub)
 
-    b = sub.add_parser("bench", help="benchmarks (see README for recorded figures)")
+    ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
+                     "haptic-study sessions --db study.db")
+    ss.add_argument("--db", required=True, metavar="PATH", help="study database")
+    ss.add_argument("--json", action="store_true", help="print one JSON array")
+
+    b = add_command(sub, "bench", "benchmarks (see README for recorded figures)",
+                    "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
-    bp = bsub.add_parser("pipeline", help="per-tick cost vs NumPy, 1 kHz loop timing, filter trade table")
+    bp = add_command(bsub, "pipeline", "per-tick cost vs NumPy, 1 kHz loop timing, filter trade table",
+                     "haptic-study bench pipeline --loop-seconds 15 --explain")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
     bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"), default=30.0,
                     help="real time to run the loop (default 30; 0 skips)")
@@ -106,39 +170,53 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
     bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
-    bs = bsub.add_parser("study", help="wall time of a complete simulated study on the virtual clock")
+    bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock",
+                     "haptic-study bench study --participants 4")
     bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
-    br = bsub.add_parser("report", help="report wall time on a 10-participant study; statistics for 10 000 participants")
-    br.add_argument("--db", default=None, help="study database to report on (default: simulate a 10-participant study first)")
+    br = add_command(bsub, "report", "report wall time on a 10-participant study; statistics for 10 000 participants",
+                     "haptic-study bench report --db study.db")
+    br.add_argument("--db", default=None, metavar="PATH",
+                    help="study database to report on (default: simulate a 10-participant study first)")
     br.add_argument("--stats-participants", type=whole_number("--stats-participants", 2, 1_000_000), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
-    bst = bsub.add_parser("stats", help="analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm")
+    bst = add_command(bsub, "stats", "analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm",
+                      "haptic-study bench stats --json")
     bst.add_argument("--json", action="store_true", help="print one JSON object")
 
-    pr = sub.add_parser("probe", help="read a real device once and report (no loop)")
+    pr = add_command(sub, "probe", "read a real device once and report (no loop)",
+                     "haptic-study probe netft --host 192.168.1.1 --samples 1000")
     prsub = pr.add_subparsers(dest="probe", metavar="DEVICE")
     prsub.required = True
-    pn = prsub.add_parser("netft", help="ATI Net F/T: mean wrench (N, N·m), packet rate, lost/reordered/faulted counts")
+    pn = add_command(prsub, "netft", "ATI Net F/T: mean wrench (N, N·m), packet rate, lost/reordered/faulted counts",
+                     "haptic-study probe netft --host 192.168.1.1 --samples 1000")
     pn.add_argument("--host", required=True, type=host_name("--host", ipv6=False), help="the Net F/T box's IP address")
     pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
     pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
     pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000, help="samples to average (default 1000)")
     pn.add_argument("--json", action="store_true", help="print one JSON object")
 
-    ch = sub.add_parser("check-hardware", help="connect to every device in the hardware file and print its state")
-    ch.add_argument("--hardware", default="hardware.toml", help="hardware file (default ./hardware.toml; see hardware.example.toml)")
+    ch = add_command(sub, "check-hardware", "connect to every device in the hardware file and print its state",
+                     "haptic-study check-hardware --hardware hardware.toml")
+    ch.add_argument("--hardware", default="hardware.toml", metavar="FILE",
+                    help="hardware file (default ./hardware.toml; see hardware.example.toml)")
 
-    bg = bsub.add_parser("gui", help="1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time")
+    bg = add_command(bsub, "gui", "1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time",
+                     "haptic-study bench gui --seconds 20")
     bg.add_argument("--json", action="store_true", help="print one JSON object")
     bg.add_argument("--seconds", type=_positive_float("--seconds", 3600.0), default=20.0,
                     help="real time per loop measurement (default 20)")
     bg.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
 
-    g = sub.add_parser("gui", help="the experimenter's window (simulated rig by default)")
-    g.add_argument("--db", default=None, help="study database (SQLite); default: the last one used")
+    g = add_command(sub, "gui", "the experimenter's window (simulated rig by default)",
+                    "haptic-study gui --db study.db\n"
+                    "haptic-study gui --rig real --hardware hardware.toml --db study.db\n"
+                    "haptic-study gui --screenshot docs/screenshots   # regenerate the guide's screenshots",
+                    "Open the experimenter's window: session setup, live force, trial table, device health, the "
+                    "participant screen and the calibration wizard (simulated rig by default; see docs/gui.md)")
+    g.add_argument("--db", default=None, metavar="PATH", help="study database (SQLite); default: the last one used")
     g.add_argument("--rig", choices=("sim", "real"), default="sim", help="simulated rig (default) or the real hardware")
     g.add_argument("--hardware", default=None, metavar="FILE", help="hardware.toml for --rig real")
     g.add_argument("--screenshot", default=None, metavar="DIR",
@@ -154,6 +232,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _cmd_sim(args)
         if args.command == "run":
             return _cmd_run(args)
+        if args.command == "sessions":
+            return _cmd_sessions(args)
         if args.command in ("report", "plot-trial"):
             from study_app.report_cmds import cmd_plot_trial, cmd_report
 
@@ -277,6 +357,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(format_study_summary(args.db, progress.sessions, wall))
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
+    return 0
+
+
+def _cmd_sessions(args: argparse.Namespace) -> int:
+    from protocol.storage import StorageError
+    from study_app.session_list import format_sessions, list_sessions
+
+    if not os.path.isfile(args.db):
+        raise CliError(f"--db = {args.db!r}: no such file")
+    try:
+        sessions = list_sessions(args.db)
+    except StorageError as exc:
+        raise CliError(str(exc)) from None
+    print(json.dumps(sessions) if args.json else format_sessions(args.db, sessions))
     return 0
 
 

@@ -58,12 +58,14 @@ from protocol.participant import SimulatedParticipant
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
-    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, start_runner,
+    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
+    start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.study import config_record, real_config_record
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
+from study_app.session_list import list_sessions
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
@@ -84,6 +86,9 @@ POSE_MAX_SENSOR_AGE_S = 0.05
 #: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
 QUIET_OFFSET_NS = 150_000
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
+#: A stored trial as the GUI's trial table receives it (the keys of a TrialEnded row).
+_TRIAL_ROW_KEYS = ("trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "tct_s", "rmse_n",
+                   "max_ae_n", "abort_reason", "repeat_of")
 
 
 def rotation_angle_deg(a: Mat3, b: Mat3) -> float:
@@ -581,7 +586,7 @@ class StudyEngine:
         elif isinstance(cmd, m.ResumeSession):
             self._resume_session(cmd)
         elif isinstance(cmd, m.ListSessions):
-            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path)))
+            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path)))
         elif isinstance(cmd, (m.Pause, m.Resume, m.AbortTrial, m.AbortSession)):
             if runner is None or runner.done:
                 raise RuntimeError("no session is running")
@@ -590,10 +595,17 @@ class StudyEngine:
             elif isinstance(cmd, m.Resume):
                 runner.resume()
             elif isinstance(cmd, m.AbortTrial):
-                if runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+                running = runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
+                spec = runner.machine.spec
+                if cmd.trial_index is not None and not (running and spec is not None and spec.index == cmd.trial_index):
+                    # confirmed for a trial that has ended since: never abort the next one instead
+                    raise RuntimeError(f"trial {cmd.trial_index + 1} had already ended: nothing was aborted")
+                if not running:
                     raise RuntimeError("no trial is running (between trials or paused)")
-                runner.abort_trial(cmd.reason)
+                runner.abort_trial(cmd.reason, trial_index=cmd.trial_index)
             else:
+                if cmd.session_id is not None and cmd.session_id != runner.session_id:
+                    raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
                 runner.abort_session(cmd.reason)
         elif isinstance(cmd, m.ResetFaults):
             self.loop.submit(LoopResetFaults())
@@ -645,8 +657,6 @@ class StudyEngine:
         protocol = load_protocol(cmd.protocol_path or None)
         db = self._open_db(cmd.db_path)
         try:
-            from protocol.session_setup import participant_seeds
-
             opened = open_new_session(
                 db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
                 rig=self.config.rig,
@@ -684,6 +694,8 @@ class StudyEngine:
             participant_time: Callable[[], float] | None = lambda: sim_rig.sim_time_s
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
+        # a resumed session's table and progress start from what is stored (read before the recorder writes)
+        stored = [{k: r[k] for k in _TRIAL_ROW_KEYS} for r in db.trial_rows(opened.session_id)] if opened.resumed else []
         recorder, runner = start_runner(
             db, opened, submit=self.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.loop), auto_reset_faults=False, threaded=True,
@@ -699,6 +711,7 @@ class StudyEngine:
             start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
+            participant_number=opened.participant_number, stored_trials=stored,
         ))
 
     # -- fault rehearsal (simulated rig) -------------------------------------------------------------

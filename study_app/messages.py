@@ -69,16 +69,22 @@ class Resume:
 
 @dataclass(frozen=True, slots=True)
 class AbortTrial:
-    """Abort the running trial (stored as aborted, re-queued)."""
+    """Abort the running trial (stored as aborted, re-queued).
+
+    ``trial_index`` binds the command to the trial the experimenter confirmed: the engine refuses it
+    when that trial is no longer running (a late "Yes" never aborts the next trial).
+    """
 
     reason: str = "aborted by the experimenter"
+    trial_index: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class AbortSession:
-    """Abort the running trial and end the session."""
+    """Abort the running trial and end the session (refused if ``session_id`` is given and is not the running one)."""
 
     reason: str = "aborted by the experimenter"
+    session_id: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -184,10 +190,15 @@ class CommandRefused:
 
 @dataclass(frozen=True, slots=True)
 class SessionsListed:
-    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_done, trials_total."""
+    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_done, trials_total.
+
+    ``known``: every session of the database (:func:`study_app.session_list.list_sessions`), for the setup
+    form's checks (a code or participant number already used).
+    """
 
     db_path: str
     sessions: list[dict[str, Any]]
+    known: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -205,6 +216,9 @@ class SessionStarted:
     cue_s: float
     live_force_aid: bool
     schedule: list[dict[str, Any]] = field(default_factory=list)
+    participant_number: int = 0
+    #: A resumed session's trials stored before (rows as in :class:`TrialEnded`), in index order.
+    stored_trials: list[dict[str, Any]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)

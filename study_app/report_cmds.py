@@ -22,9 +22,16 @@ def _confidence(text: str) -> float:
 
 def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``report`` and ``plot-trial``."""
-    r = sub.add_parser(
-        "report",
-        help="analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
+    from study_app.cli import add_command
+
+    r = add_command(
+        sub, "report",
+        "analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
+        "haptic-study report --db study.db --out report\n"
+        "haptic-study report --db day1.db --db day2.db --out report --force   # two databases, one study",
+        "Analyse one study (one or more databases): recompute every trial from its samples, test haptics ON "
+        "against OFF per participant (paired Wilcoxon), draw the paper's figures, and write report.html, tidy "
+        "CSV tables (trials, participants long and wide, tests) and codebook.csv describing every column",
     )
     r.add_argument("--db", action="append", required=True, metavar="PATH",
                    help="study database; repeat to merge several into one study")
@@ -39,12 +46,19 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--confidence", type=_confidence, default=0.95,
                    help="confidence level of the Hodges–Lehmann interval (default 0.95)")
 
-    p = sub.add_parser("plot-trial", help="one trial's force through the pipeline: raw, compensated, rendered (paper Fig. 6)")
+    p = add_command(
+        sub, "plot-trial", "one trial's force through the pipeline: task force against its band, rendered, raw",
+        "haptic-study sessions --db study.db            # find the session\n"
+        "haptic-study plot-trial --db study.db --session 4 --trial 7 --out trial7.pdf",
+        "Draw one stored trial (the paper's Fig. 6): the task force the trial was judged on against its target "
+        "band, the force rendered on the haptic device, and the raw sensor force on an axis of its own",
+    )
     p.add_argument("--db", required=True, metavar="PATH", help="study database")
-    p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, help="session_id")
-    p.add_argument("--trial", type=whole_number("--trial", 0, SQLITE_INTEGER_MAX), required=True,
-                   help="trial_index within the session")
-    p.add_argument("--out", required=True, metavar="FILE", help="image file: .png or .svg")
+    p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
+                   help="session id (haptic-study sessions --db PATH lists them)")
+    p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"), required=True, metavar="N",
+                   help="trial number within the session, from 1, as the GUI and trials.csv number them")
+    p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
 
 
 def cmd_report(args: argparse.Namespace) -> int:
@@ -78,37 +92,57 @@ def cmd_report(args: argparse.Namespace) -> int:
           f"{summary.n_samples:,} samples (excluded: {ex['training_trials']} training trials, "
           f"{ex['aborted_trials']} aborted trials)")
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
+    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")
     print(summary.stats[cols].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
     print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
     return 0
 
 
+def _trial_numbers(numbers: list[int]) -> str:
+    """``1–20`` or ``1–5, 7, 9–12``: stored trial numbers, compactly."""
+    runs: list[list[int]] = []
+    for n in sorted(numbers):
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(f"{a}" if a == b else f"{a}–{b}" for a, b in runs)
+
+
 def cmd_plot_trial(args: argparse.Namespace) -> int:
-    """Run ``haptic-study plot-trial``."""
+    """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
     from pathlib import Path
 
-    from analysis.figures import pipeline_trace
+    from analysis.figures import pipeline_trace, save_one
     from analysis.load import AnalysisError, load_study, read_trial_samples
     from study_app.cli import CliError
 
     out = Path(args.out)
-    if out.suffix.lower() not in (".png", ".svg"):
-        raise CliError(f"--out = {args.out!r}: the file name must end in .png or .svg")
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
     if not out.resolve().parent.is_dir():
         raise CliError(f"--out = {args.out!r}: the folder {out.resolve().parent} does not exist")
     try:
         study = load_study([args.db])
-        rows = study.trials[(study.trials["session_id"] == args.session) & (study.trials["trial_index"] == args.trial)]
+        trials = study.trials
+        in_session = trials[trials["session_id"] == args.session]
+        if in_session.empty:
+            ids = ", ".join(str(int(i)) for i in sorted(trials["session_id"].unique()))
+            raise CliError(f"--session {args.session}: no such session with trials in {args.db}; sessions with "
+                           f"trials: {ids} (haptic-study sessions --db {args.db} lists them)")
+        rows = in_session[in_session["trial_index"] == args.trial - 1]
         if rows.empty:
-            raise CliError(f"--session {args.session} --trial {args.trial}: no such trial in {args.db}")
+            numbers = [int(i) + 1 for i in in_session["trial_index"]]
+            raise CliError(f"--trial {args.trial}: no such trial in session {args.session}; its stored trials are "
+                           f"{_trial_numbers(numbers)}")
         row = rows.iloc[0]
-        samples = read_trial_samples(args.db, args.session, args.trial)
+        samples = read_trial_samples(args.db, args.session, args.trial - 1)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
     title = (f"{row['participant_code']}, session {args.session}, trial {args.trial}: {row['target_label']} "
              f"{row['target_force_n']:g} N, haptics {str(row['haptic_mode']).upper()}, {row['outcome']}")
     fig = pipeline_trace(samples, target_force_n=float(row["target_force_n"]),
                          tolerance_fraction=float(row["tolerance_fraction"]), title=title)
-    fig.savefig(out, dpi=150)
-    print(f"wrote {out}", file=sys.stderr)
+    save_one(fig, out)
+    print(f"wrote {out}")
     return 0

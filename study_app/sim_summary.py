@@ -150,7 +150,8 @@ def format_summary(s: dict[str, Any]) -> str:
         f"Calibration ({c['model']} model, 24 poses): m = {c['mass_kg']:.4f} kg, c = ({com}) mm, "
         f"cond {c['condition_number']:.1f}, residual {1000 * c['rms_force_residual_n']:.1f} mN RMS, "
         f"mount {c['mount_angle_deg']:.2f}°",
-        f"Contacts: {s['contacts']} presses, peak tissue force {s['peak_true_force_n']:.3f} N",
+        f"Contacts: {s['contacts']} press{'' if s['contacts'] == 1 else 'es'}, peak tissue force "
+        f"{s['peak_true_force_n']:.3f} N",
         f"Compensated + filtered force vs true contact force: RMS error {s['contact_rms_error_n']:.4f} N in contact, "
         f"{s['rest_rms_force_n']:.4f} N at rest; worst peak error {s['peak_error_n']:.3f} N",
         f"Rendered force: max {s['max_render_n']:.3f} N (f_max 3 N, Touch peak 3.3 N)",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from statistics import fmean
+from statistics import fmean, stdev
 
 from protocol.storage import connect_readonly
 
@@ -19,8 +19,19 @@ def _mean(xs: list[float]) -> float:
     return fmean(xs) if xs else math.nan
 
 
+def _mean_sd(xs: list[float]) -> tuple[float, float]:
+    xs = [x for x in xs if x is not None and math.isfinite(x)]
+    if not xs:
+        return math.nan, math.nan
+    return fmean(xs), stdev(xs) if len(xs) > 1 else 0.0
+
+
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
-    """Per-mode means across participants (per participant × mode first, science.md §6)."""
+    """Per-mode mean ± SD across participants, each participant's trials averaged first (as ``report`` does)."""
     conn = connect_readonly(db_path)
     try:
         q = ",".join("?" * len(session_ids)) or "NULL"
@@ -42,14 +53,18 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         per[(r[0], r[1])].append(r)
     codes = sorted({r[0] for r in exp})
     lines = [
-        f"Study database {db_path}: {len(codes)} participants, {len(exp)} experiment trials "
-        f"({aborted} aborted and re-run, {training} training trials excluded), {n_samples:,} samples",
+        f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
+        f"({aborted} aborted and re-run, {_plural(training, 'training trial')} excluded), {n_samples:,} samples",
         "",
-        f"{'per participant, then averaged':<32}{'haptics OFF':>12}{'haptics ON':>12}{'change':>9}   paper OFF → ON",
+        "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
+        f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
 
-    def metric(mode: str, fn) -> float:  # type: ignore[no-untyped-def]
-        return _mean([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
+    def metric(mode: str, fn) -> tuple[float, float]:  # type: ignore[no-untyped-def]
+        return _mean_sd([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
+
+    def cell(v: tuple[float, float]) -> str:
+        return f"{v[0]:.3f} ± {v[1]:.3f}"
 
     defs = [
         ("success rate", "success", lambda ts: sum(t[3] == "success" for t in ts) / len(ts)),
@@ -59,13 +74,13 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     ]
     for name, key, fn in defs:
         off, on = metric("off", fn), metric("on", fn)
-        change = (on - off) / off * 100 if off and math.isfinite(off) and math.isfinite(on) else math.nan
+        change = (on[0] - off[0]) / off[0] * 100 if off[0] and math.isfinite(off[0]) and math.isfinite(on[0]) else math.nan
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
-        lines.append(f"  {name:<30}{off:>12.3f}{on:>12.3f}{change:>8.0f}%   {paper}")
+        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change:>8.0f}%   {paper}")
     for label in sorted({r[2] for r in exp}):
         off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
         on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
-        lines.append(f"  {'success, ' + label:<30}{off:>12.3f}{on:>12.3f}")
+        lines.append(f"  {'success, ' + label:<30}{cell(off):>16}{cell(on):>16}")
     lines.append("")
     lines.append(f"Wall time {wall_s:.1f} s. Every trial, sample and event is in the database (tables trials, samples, events).")
     return "\n".join(lines)

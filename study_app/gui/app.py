@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-from PySide6.QtCore import QSettings
+from PySide6.QtCore import QSettings, QtMsgType, qInstallMessageHandler
 from PySide6.QtWidgets import QApplication, QWidget
 
 from study_app.engine_host import HostConfig
@@ -22,6 +23,7 @@ def run_gui(host: HostConfig, *, db_path: str | None = None, screenshot_dir: str
     """Open the experimenter window (or run the screenshot tour) and return the exit status."""
     if screenshot_dir is not None:
         os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+        qInstallMessageHandler(_quiet_offscreen)
     app = QApplication.instance() or QApplication(["haptic-study"])
     app.setApplicationName("haptic-study")
     tmp: tempfile.TemporaryDirectory[str] | None = None
@@ -44,9 +46,21 @@ def run_gui(host: HostConfig, *, db_path: str | None = None, screenshot_dir: str
             win.close()
         if tmp is not None:
             tmp.cleanup()
-    if screenshot_dir is not None and tour.error:
-        raise RuntimeError(tour.error)
+    if screenshot_dir is not None:
+        qInstallMessageHandler(None)
+        if tour.error:
+            raise RuntimeError(tour.error)
+        for path in tour.saved:
+            print(f"wrote {path}")
     return int(status)
+
+
+def _quiet_offscreen(mode: QtMsgType, context: object, message: str) -> None:
+    """Qt messages of a scripted run: drop what the offscreen platform says it cannot do (raise a window,
+    pass size hints to a window manager it does not have), pass on everything else."""
+    if "This plugin does not support" in message:
+        return
+    print(f"Qt: {message}", file=sys.stderr)
 
 
 class ScreenshotTour:
@@ -102,6 +116,7 @@ class ScreenshotTour:
     def _script(self) -> Iterator[Callable[[], bool]]:
         w = self.win
         model = w.model
+        w.resize(1280, 728)  # what the window gets on a 1366×768 laptop (the offscreen screen is smaller)
         yield lambda: model.session.state == "ready"
         # calibration wizard: the recommended set, accepted
         w.calibration_wizard.resize(720, 640)

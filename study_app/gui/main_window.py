@@ -4,31 +4,35 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from PySide6.QtCore import QSettings, Qt, Slot
-from PySide6.QtGui import QAction, QKeySequence, QShortcut
+from PySide6.QtCore import QSettings, QSize, Qt, Slot
+from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QGroupBox, QHBoxLayout, QLabel, QMainWindow, QMessageBox, QPushButton, QSplitter, QTabWidget, QVBoxLayout, QWidget,
+    QGroupBox, QHBoxLayout, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
+    QVBoxLayout, QWidget,
 )
 
 from study_app import messages as m
 from study_app.engine_client import EngineClient
 from study_app.engine_host import HostConfig
 from study_app.gui.bridge import QtEngineBridge
+from study_app.gui import placement
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
+from study_app.gui.confirm import Confirmation
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
-from study_app.gui.widgets import QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.widgets import LEVEL_COLOURS, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.app import AppModel
 
 __all__ = ["ExperimenterWindow"]
 
 #: Plot refresh (pyqtgraph's pull-on-a-timer idiom), ms.
 PLOT_INTERVAL_MS = 33
-
-
-def _ask(parent: QWidget, title: str, text: str) -> bool:
-    return QMessageBox.question(parent, title, text) == QMessageBox.StandardButton.Yes
+#: Preferred sizes, shrunk to fit the screen (the experimenter's window fits a 1366×768 laptop).
+MAIN_SIZE = QSize(1280, 800)
+PARTICIPANT_SIZE = QSize(900, 560)
+RIG_SIZE = QSize(760, 480)
+WIZARD_SIZE = QSize(720, 640)
 
 
 class ExperimenterWindow(QMainWindow):
@@ -48,8 +52,11 @@ class ExperimenterWindow(QMainWindow):
         super().__init__()
         self.setWindowTitle("haptic-study — experimenter")
         self.settings = settings if settings is not None else QSettings("haptic-study", "gui")
-        #: Asked before destructive actions; tests replace it.
-        self.confirm: Callable[[str, str], bool] = lambda title, text: _ask(self, title, text)
+        #: None: destructive actions ask in a dialog bound to what it asks about (default No).  Scripted runs
+        #: (the screenshot tour, benchmarks, tests) set a function that answers at once instead.
+        self.confirm: Callable[[str, str], bool] | None = None
+        self.questions: dict[str, Confirmation] = {}
+        self._quit_confirmed = False
         self.bridge = QtEngineBridge(EngineClient(host), self)
         self.model = AppModel(self.bridge.send)
         self._restore_settings(db_path)
@@ -68,6 +75,19 @@ class ExperimenterWindow(QMainWindow):
         controls = QGroupBox("Control")
         grid = QVBoxLayout(controls)
         grid.addWidget(self.start_button)
+        # refusals and questions that became moot show here, under Start, where the experimenter looks
+        self.notice = QLabel()
+        self.notice.setWordWrap(True)
+        self.notice_close = QToolButton()
+        self.notice_close.setText("×")
+        self.notice_close.setToolTip("Dismiss")
+        self.notice_row = QWidget()
+        nr = QHBoxLayout(self.notice_row)
+        nr.setContentsMargins(0, 0, 0, 0)
+        nr.addWidget(self.notice, 1)
+        nr.addWidget(self.notice_close, 0, Qt.AlignmentFlag.AlignTop)
+        self.notice_row.hide()
+        grid.addWidget(self.notice_row)
         pr = QHBoxLayout()
         pr.addWidget(self.pause_button)
         pr.addWidget(self.resume_button)
@@ -89,7 +109,7 @@ class ExperimenterWindow(QMainWindow):
         left.setMinimumWidth(340)
         left.setMaximumWidth(460)
 
-        self.progress = QtProgress(self.model.session)
+        self.progress = QtProgress(self.model.session, self.model.health)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
         self.health_panel = QtHealthPanel(self.model.health)
@@ -104,7 +124,9 @@ class ExperimenterWindow(QMainWindow):
         tl.addWidget(self.plots, 1)
         right.addWidget(top)
         right.addWidget(self.tabs)
-        right.setSizes([560, 300])
+        right.setSizes([520, 220])
+        right.setStretchFactor(0, 3)  # a taller window gives the plots the room
+        right.setStretchFactor(1, 1)
         split = QSplitter(Qt.Orientation.Horizontal)
         split.addWidget(left)
         split.addWidget(right)
@@ -112,6 +134,7 @@ class ExperimenterWindow(QMainWindow):
         self.setCentralWidget(split)
         self.status = QLabel()
         self.statusBar().addWidget(self.status, 1)
+        self.setMinimumSize(self.minimumSizeHint().boundedTo(QSize(1000, 640)))
 
         self.participant_window = ParticipantWindow(self.model.participant)
         self.rig_window = RigWindow(self.model.rig, self.model.set_driver)
@@ -127,9 +150,11 @@ class ExperimenterWindow(QMainWindow):
         self.resume_button.clicked.connect(self.model.resume)
         self.abort_trial_button.clicked.connect(self.abort_trial)
         self.abort_session_button.clicked.connect(self.abort_session)
-        self.calibrate_button.clicked.connect(lambda: _show(self.calibration_wizard))
-        self.participant_button.clicked.connect(lambda: _show(self.participant_window))
-        self.rig_button.clicked.connect(lambda: _show(self.rig_window))
+        self.calibrate_button.clicked.connect(lambda: self.open_window(self.calibration_wizard))
+        self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
+        self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
+        self.notice_close.clicked.connect(self.model.clear_notice)
+        self.setup_panel.start_requested.connect(self.start_session)
         self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
         self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
         self.setup_panel.resume_button.clicked.connect(self.resume_selected)
@@ -141,12 +166,13 @@ class ExperimenterWindow(QMainWindow):
             sc.activated.connect(slot)
         self.model.actions_changed.connect(self._on_actions_changed)
         self.model.session.changed.connect(self._on_session_changed)
-        self.model.error.connect(self._on_error)
+        self.model.notice_changed.connect(self._on_notice)
         self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
         self.plot_timer = tracked_timer(self, PLOT_INTERVAL_MS, self._on_plot_timer, name="plot-refresh")
         self._on_actions_changed()
         self._on_session_changed()
-        self.resize(1400, 900)
+        if not placement.restore(self, self.settings, "experimenter"):
+            placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
         self.bridge.start()
         self.plot_timer.start()
 
@@ -162,7 +188,7 @@ class ExperimenterWindow(QMainWindow):
         ):
             act = QAction(text, self)
             act.setShortcut(QKeySequence(key))
-            act.triggered.connect(lambda _=False, w=window: _show(w))
+            act.triggered.connect(lambda _=False, w=window: self.open_window(w))
             view.addAction(act)
             self.view_actions[text] = act
 
@@ -173,6 +199,8 @@ class ExperimenterWindow(QMainWindow):
             self.model.attach_ring(self.bridge.client.ring)
             self.model.list_sessions()
         self.model.apply(ev)
+        for q in list(self.questions.values()):
+            q.event(ev)
         if isinstance(ev, m.EngineReady):
             self._on_rig_known(ev.rig)
 
@@ -192,31 +220,85 @@ class ExperimenterWindow(QMainWindow):
         if self.model.tick():  # nothing new (engine paused or gone): nothing to redraw
             self.plots.refresh()
 
+    # -- questions -----------------------------------------------------------------------------------------
+    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], None], *,
+            moot_when: Callable[[object], bool] | None = None, moot_text: str = "") -> None:
+        """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event."""
+        if self.confirm is not None:
+            if self.confirm(title, text):
+                on_yes()
+            return
+        old = self.questions.pop(key, None)
+        if old is not None:
+            old.dismiss()
+            old.box.deleteLater()
+        say = (lambda: self.model.notify("info", moot_text)) if moot_text else None
+        q = Confirmation(self, title, text, on_yes, moot_when=moot_when, on_moot=say)
+        self.questions[key] = q
+        q.show()
+
     # -- actions -----------------------------------------------------------------------------------------
     def start_session(self) -> None:
-        """Space: start a session from the setup form (or resume a paused one)."""
+        """Space: start a session from the setup form (or resume a paused one); asks first on a warning."""
         if self.model.can("resume") and self.model.session.state == "paused":
             self.model.resume()
             return
         if self.model.session.running:
             return
         self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
+        warnings = self.model.setup.warnings
+        if warnings and self.model.can("start"):
+            self.ask("start", "Start anyway?", "\n\n".join(warnings.values()) + "\n\nStart the session anyway?",
+                     self._start, moot_when=lambda ev: isinstance(ev, (m.SessionStarted, m.EngineStopped)))
+        else:
+            self._start()
+
+    def _start(self) -> None:
         if self.model.start():
             self._save_settings()
 
     def abort_trial(self) -> None:
-        """Esc: abort the running trial after confirmation."""
-        if self.model.can("abort_trial") and self.confirm(
-            "Abort trial", "Abort the running trial? It is stored as aborted and run again later."
-        ):
-            self.model.abort_trial()
+        """Esc: abort the running trial after confirmation -- that trial only, however late the answer."""
+        tr = self.model.session.trial
+        if not self.model.can("abort_trial") or tr is None:
+            return
+        k = tr.trial_index
+
+        def moot(ev: object) -> bool:
+            return ((isinstance(ev, m.TrialEnded) and ev.row["trial_index"] == k)
+                    or (isinstance(ev, m.TrialStarted) and ev.trial_index != k)
+                    or isinstance(ev, (m.SessionEnded, m.EngineStopped)))
+
+        self.ask("abort_trial", "Abort trial",
+                 f"Abort trial {k + 1} ({tr.target_label}, haptics {tr.haptic_mode.upper()})? It is stored as aborted "
+                 "and run again later.\n\nIf the trial ends before you answer, this question closes and nothing is "
+                 "aborted.", lambda: self.model.abort_trial(k), moot_when=moot,
+                 moot_text=f"Trial {k + 1} ended before you answered: nothing was aborted.")
 
     def abort_session(self) -> None:
-        """Abort the session after confirmation."""
-        if self.model.can("abort_session") and self.confirm(
-            "Abort session", "Abort the whole session? The running trial is stored as aborted and the session ends."
-        ):
-            self.model.abort_session()
+        """Abort the session after confirmation (that session only)."""
+        s = self.model.session.session
+        if not self.model.can("abort_session") or s is None:
+            return
+        sid = s.session_id
+        self.ask("abort_session", "Abort session",
+                 f"Abort session {sid} ({s.code}, {s.kind})? The running trial is stored as aborted and the session "
+                 "ends; it cannot be resumed.", lambda: self.model.abort_session(sid),
+                 moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)),
+                 moot_text=f"Session {sid} ended before you answered: nothing was aborted.")
+
+    def open_window(self, w: QWidget) -> None:
+        """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
+        if not w.property("placed"):
+            w.setProperty("placed", True)
+            key, size = {id(self.participant_window): ("participant", PARTICIPANT_SIZE),
+                         id(self.rig_window): ("rig", RIG_SIZE)}.get(id(w), ("calibration", WIZARD_SIZE))
+            if not placement.restore(w, self.settings, key):
+                other = placement.other_screen(self) if w is self.participant_window else None
+                placement.place(w, size, other or self.screen())
+                if other is not None:  # the participant's own monitor: the whole of it
+                    w.showFullScreen()
+        _show(w)
 
     def resume_selected(self) -> None:
         """Continue the interrupted session selected in the list."""
@@ -229,6 +311,10 @@ class ExperimenterWindow(QMainWindow):
         can = self.model.can
         self.start_button.setEnabled(can("start"))
         self.pause_button.setEnabled(can("pause"))
+        pending = self.model.session.running and self.model.session.paused_requested
+        self.pause_button.setText("Pause requested…" if pending and self.model.session.state == "running" else "Pause")
+        self.pause_button.setToolTip("The session pauses when the running trial ends; Resume cancels" if pending
+                                     else "Hold before the next trial (the running trial finishes first)")
         self.resume_button.setEnabled(can("resume"))
         self.abort_trial_button.setEnabled(can("abort_trial"))
         self.abort_session_button.setEnabled(can("abort_session"))
@@ -238,9 +324,14 @@ class ExperimenterWindow(QMainWindow):
     def _on_session_changed(self) -> None:
         self.status.setText(self.model.session.message)
 
-    def _on_error(self, title: str, text: str) -> None:
-        self.status.setText(f"{title}: {text}")
-        self.statusBar().setStyleSheet("color: #c81e1e;")
+    def _on_notice(self) -> None:
+        n = self.model.notice
+        self.notice_row.setVisible(n is not None)
+        if n is not None:
+            fg, bg = LEVEL_COLOURS.get(n.level, LEVEL_COLOURS["info"])
+            self.notice.setText(n.text)
+            self.notice_row.setStyleSheet(f"background: {bg}; color: {fg};")
+            self.notice.setStyleSheet(f"color: {fg}; font-weight: 600; padding: 4px;")
 
     # -- settings and closing --------------------------------------------------------------------------------
     def _restore_settings(self, db_path: str | None) -> None:
@@ -251,9 +342,6 @@ class ExperimenterWindow(QMainWindow):
             protocol_path=str(s.value("setup/protocol_path", "") or ""),
             seed=int(s.value("setup/seed", 0) or 0),
         )
-        geom = s.value("window/geometry")
-        if geom is not None:
-            self.restoreGeometry(geom)
 
     def _save_settings(self) -> None:
         v = self.model.setup.values
@@ -262,7 +350,11 @@ class ExperimenterWindow(QMainWindow):
         s.setValue("setup/kind", v.kind)
         s.setValue("setup/protocol_path", v.protocol_path)
         s.setValue("setup/seed", v.seed)
-        s.setValue("window/geometry", self.saveGeometry())
+        placement.save(self, s, "experimenter")
+        for key, w in (("participant", self.participant_window), ("rig", self.rig_window),
+                       ("calibration", self.calibration_wizard)):
+            if w.property("placed"):
+                placement.save(w, s, key)
         s.sync()
 
     def shutdown(self) -> None:
@@ -278,15 +370,28 @@ class ExperimenterWindow(QMainWindow):
             w.deleteLater()
 
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
-        if self.model.session.running and not self.confirm(
-            "Quit", "A session is running. Quit anyway? The running trial is stored as aborted and the session "
-                    "can be resumed later."
-        ):
-            event.ignore()
-            return
+        if self.model.session.running and not self._quit_confirmed:
+            title = "Quit"
+            text = ("A session is running. Quit anyway? The running trial is stored as aborted and the session can "
+                    "be resumed later.")
+            if self.confirm is not None:  # a scripted run answers at once
+                if not self.confirm(title, text):
+                    event.ignore()
+                    return
+            else:
+                event.ignore()
+                self.ask("quit", title, text, self._quit,
+                         moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)))
+                return
+        for q in self.questions.values():
+            q.dismiss()
         self._save_settings()
         self.shutdown()
         event.accept()
+
+    def _quit(self) -> None:
+        self._quit_confirmed = True
+        self.close()
 
 
 def _show(w: QWidget) -> None:

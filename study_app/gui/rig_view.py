@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtCore import QPointF, QRectF, QSignalBlocker, Qt
 from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import QButtonGroup, QHBoxLayout, QLabel, QRadioButton, QVBoxLayout, QWidget
 
@@ -131,8 +131,12 @@ class RigWindow(QWidget):
         self.group.addButton(self.manual)
         self.autopilot.setChecked(model.driver == "autopilot")
         self.manual.setChecked(model.driver == "manual")
+        # ↑/↓ move the stylus, not the choice: the radio buttons never take the keyboard focus
+        for b in (self.autopilot, self.manual):
+            b.setFocusPolicy(Qt.FocusPolicy.NoFocus)
         self.autopilot.toggled.connect(lambda on: on and on_driver("autopilot"))
         self.manual.toggled.connect(lambda on: on and on_driver("manual"))
+        self.manual.toggled.connect(lambda on: on and self.canvas.setFocus())
         row = QHBoxLayout()
         row.addWidget(QLabel("Stylus driven by:"))
         row.addWidget(self.autopilot)
@@ -143,7 +147,14 @@ class RigWindow(QWidget):
         lay.addWidget(self.canvas, 1)
         model.changed.connect(self._on_changed)
 
+    def showEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        super().showEvent(event)
+        self.canvas.setFocus()
+
     def _on_changed(self) -> None:
         want = self.model.driver == "manual"
         if self.manual.isChecked() != want:
-            (self.manual if want else self.autopilot).setChecked(True)
+            # showing the engine's state is not a choice: sending it back would undo the experimenter's
+            # own switch whenever a health report from before it arrives
+            with QSignalBlocker(self.autopilot), QSignalBlocker(self.manual):
+                (self.manual if want else self.autopilot).setChecked(True)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
     QAbstractItemView, QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit,
@@ -12,7 +13,7 @@ from PySide6.QtWidgets import (
 )
 
 from study_app.models.health import HealthModel
-from study_app.models.plots import PlotModel
+from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
 
@@ -20,11 +21,8 @@ __all__ = ["QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTri
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_PEN = pg.mkPen((220, 40, 40), width=1)
-COMP_PEN = pg.mkPen((30, 90, 220), width=1)
 RENDER_PEN = pg.mkPen((20, 160, 60), width=1)
 AXIS_PENS = (pg.mkPen((200, 60, 60), width=1), pg.mkPen((40, 150, 60), width=1), pg.mkPen((40, 80, 200), width=1))
-#: Series on each plot, and whether its axis starts at zero (magnitudes).
-MAG_SERIES = ("raw_n", "comp_n", "render_n")
 COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
 
@@ -59,93 +57,202 @@ class QtTrialTable(QTableWidget):
         self.scrollToBottom()
 
 
-class QtProgress(QWidget):
-    """Progress line and bar of the running session."""
+#: Colours of the levels of health figures and notices (text, background).
+LEVEL_COLOURS = {
+    "ok": ("#147f28", "#eaf7ec"), "info": ("#1d4f91", "#eaf1fb"), "warn": ("#8a5a00", "#fff4e0"),
+    "warning": ("#8a5a00", "#fff4e0"), "bad": ("#b3141b", "#fdecec"), "error": ("#b3141b", "#fdecec"),
+    "unknown": ("#555555", "#f2f2f2"),
+}
 
-    def __init__(self, session: SessionModel, parent: QWidget | None = None) -> None:
+
+class QtProgress(QWidget):
+    """Progress line and bar of the running session, and a warning line when the force on the tissue is too high."""
+
+    def __init__(self, session: SessionModel, health: HealthModel | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.session = session
+        self.health = health
         self.label = QLabel()
         self.label.setStyleSheet("font-size: 15px; font-weight: 600;")
         self.bar = QProgressBar()
         self.bar.setRange(0, 1000)
         self.bar.setTextVisible(False)
         self.bar.setMaximumHeight(10)
+        self.warning = QLabel()
+        self.warning.setWordWrap(True)
+        fg, bg = LEVEL_COLOURS["bad"]
+        self.warning.setStyleSheet(f"color: {fg}; background: {bg}; font-weight: 600; padding: 3px 6px;")
+        self.warning.hide()
         lay = QVBoxLayout(self)
         lay.setContentsMargins(4, 2, 4, 2)
         lay.addWidget(self.label)
         lay.addWidget(self.bar)
+        lay.addWidget(self.warning)
         session.changed.connect(self._on_changed)
+        if health is not None:
+            health.changed.connect(self._on_health)
         self._on_changed()
 
     def _on_changed(self) -> None:
         self.label.setText(self.session.progress_text())
         self.bar.setValue(int(1000 * self.session.fraction_done()))
 
+    def _on_health(self) -> None:
+        text = self.health.force_warning() if self.health is not None else ""
+        if text != self.warning.text():
+            self.warning.setText(text)
+            self.warning.setVisible(bool(text))
 
-class QtForcePlots(pg.GraphicsLayoutWidget):
-    """Fig. 6-style force magnitudes and the compensated components, redrawn from :class:`PlotModel`."""
+
+#: The task panel's curve; the lower panel's choices (series, pens).
+TASK_PEN = pg.mkPen((31, 78, 156), width=1)
+LOWER_CHOICES = {
+    "raw sensor |F| (tool weight included)": (("raw_n",), (RAW_PEN,)),
+    "compensated x, y, z (sensor frame)": (COMP_SERIES, AXIS_PENS),
+    "none": ((), ()),
+}
+BAND_BRUSH = pg.mkBrush(0, 114, 178, 60)
+BAND_PEN = pg.mkPen((0, 114, 178), width=1, style=Qt.PenStyle.DashLine)
+
+
+def _swatch(colour: str, text: str, *, block: bool = False) -> str:
+    mark = (f'<span style="background:{colour}">&nbsp;&nbsp;&nbsp;&nbsp;</span>' if block
+            else f'<span style="color:{colour}; font-weight:900">━━</span>')
+    return f"{mark}&nbsp;{text}"
+
+
+class QtForcePlots(QWidget):
+    """The live force view, built for the task: is the force in the band?
+
+    Top: the task force (|compensated, filtered|, what the trial is judged on) and the force rendered on
+    the haptic device, with the target band drawn, on an axis set by the target
+    (:meth:`study_app.models.plots.PlotModel.task_axis`); a force above the axis is named.  Below, on its
+    own axis, the raw sensor force (tool weight included), the compensated components, or nothing.  The
+    legend sits above the plots, never over the data.
+    """
 
     def __init__(self, plots: PlotModel, session: SessionModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setBackground("w")
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         self.plots, self.session = plots, session
-        self.mag = self.addPlot(row=0, col=0)
-        self.mag.setTitle("Force magnitude", size="10pt")
-        self.mag.setLabel("left", "|F| (N)")
-        self.mag.addLegend(offset=(-10, 10))
-        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=pg.mkBrush(255, 190, 0, 70),
-                                        pen=pg.mkPen(None))
+        self.legend = QLabel("  ".join((
+            _swatch("#1f4e9c", "task force |F| (compensated, filtered)"),
+            _swatch("#14a03c", "rendered on the haptic device"),
+            _swatch("rgba(0,114,178,0.35)", "target band", block=True),
+        )))
+        self.lower_choice = QComboBox()
+        self.lower_choice.addItems(list(LOWER_CHOICES))
+        self.lower_choice.setToolTip("What the lower plot shows, on an axis of its own")
+        head = QHBoxLayout()
+        head.setContentsMargins(4, 0, 4, 0)
+        head.addWidget(self.legend, 1)
+        head.addWidget(QLabel("Lower plot:"))
+        head.addWidget(self.lower_choice)
+        self.view = pg.GraphicsLayoutWidget()
+        self.view.setBackground("w")
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
+        lay.addLayout(head)
+        lay.addWidget(self.view, 1)
+
+        self.task = self.view.addPlot(row=0, col=0)
+        self.task.setLabel("left", "force (N)")
+        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=BAND_BRUSH, pen=BAND_PEN)
         self.band.setZValue(-10)
         self.band.setVisible(False)
-        self.mag.addItem(self.band)
-        self.curves = {
-            "raw_n": self.mag.plot(pen=RAW_PEN, name="raw (sensor)"),
-            "comp_n": self.mag.plot(pen=COMP_PEN, name="compensated"),
-            "render_n": self.mag.plot(pen=RENDER_PEN, name="rendered (haptic)"),
-        }
-        self.comp = self.addPlot(row=1, col=0)
-        self.comp.setTitle("Compensated force, sensor frame", size="10pt")
-        self.comp.setLabel("left", "F (N)")
-        self.comp.setLabel("bottom", "time (s)")
-        self.comp.addLegend(offset=(-10, 10))
-        self.comp.setXLink(self.mag)
-        for name, pen, label in zip(("comp_fx", "comp_fy", "comp_fz"), AXIS_PENS, ("x", "y", "z")):
-            self.curves[name] = self.comp.plot(pen=pen, name=label)
+        self.task.addItem(self.band)
+        self.band_label = pg.TextItem(color=(0, 84, 140), anchor=(1, 1))
+        self.clip_label = pg.TextItem(color=(179, 20, 27), anchor=(1, 0))
+        for item in (self.band_label, self.clip_label):
+            item.setVisible(False)
+            self.task.addItem(item, ignoreBounds=True)
+        self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
+        self.lower = self.view.addPlot(row=1, col=0)
+        self.lower.setLabel("bottom", "time (s)")
+        self.lower.setXLink(self.task)
+        self.view.ci.layout.setRowStretchFactor(0, 3)
+        self.view.ci.layout.setRowStretchFactor(1, 1)
+        self.lower_curves: dict[str, pg.PlotDataItem] = {}
         # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
-        # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y range comes from the
-        # model instead, snapped so it changes only when the data crosses a step.
-        self._y: dict[str, tuple[float, float]] = {}
-        for p in (self.mag, self.comp):
+        # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
+        # models instead and change only in steps.  No SI prefix: "(x0.001)" on a force axis misleads.
+        for p in (self.task, self.lower):
             p.setXRange(-plots.window_s, 0.0, padding=0)
             p.setMouseEnabled(x=False, y=False)
             p.enableAutoRange(x=False, y=False)
             p.setClipToView(True)
-        self._set_y_ranges()
+            p.getAxis("left").enableAutoSIPrefix(False)
+            p.getAxis("left").setWidth(48)
+        self._y: dict[str, tuple[float, float]] = {}
+        self._band: tuple[float, float] | None = None
+        self.lower_choice.currentTextChanged.connect(self._set_lower)
+        self._set_lower(self.lower_choice.currentText())
+
+    @property
+    def lower_series(self) -> tuple[str, ...]:
+        """The series the lower plot shows."""
+        return LOWER_CHOICES[self.lower_choice.currentText()][0]
+
+    def _set_lower(self, choice: str) -> None:
+        for c in self.lower_curves.values():
+            self.lower.removeItem(c)
+        names, pens = LOWER_CHOICES[choice]
+        self.lower_curves = {n: self.lower.plot(pen=pen) for n, pen in zip(names, pens)}
+        self.lower.setVisible(bool(names))
+        self.lower.setMaximumHeight(10_000 if names else 0)
+        self.lower.setLabel("left", "raw |F| (N)" if names == ("raw_n",) else "F (N)")
+        self.task.setLabel("bottom", "" if names else "time (s)")
+        self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
+        self._y.pop("lower", None)
+        self.refresh()
+
+    def _target_n(self) -> float:
+        band = self.session.band_for_axis()
+        # before the first trial: the scale of the paper's FIRM target
+        return 1.2 if band is None else (band[0] + band[1]) / 2
 
     def _set_y_ranges(self) -> None:
-        band = self.session.band() or ()
-        for key, plot, names, zero, extra in (("mag", self.mag, MAG_SERIES, True, band),
-                                              ("comp", self.comp, COMP_SERIES, False, ())):
-            r = self.plots.y_range(names, floor_zero=zero, include=extra)
-            if self._y.get(key) != r:
-                self._y[key] = r
-                plot.setYRange(*r, padding=0)
+        r = self.plots.task_axis(self._target_n())
+        if self._y.get("task") != r:
+            self._y["task"] = r
+            self.task.setYRange(*r, padding=0)
+        names = self.lower_series
+        if names:
+            r = self.plots.y_range(names, floor_zero=names == ("raw_n",))
+            if self._y.get("lower") != r:
+                self._y["lower"] = r
+                self.lower.setYRange(*r, padding=0)
+        top = self._y["task"][1]
+        peak = self.plots.peak(TASK_SERIES)
+        over = bool(np.isfinite(peak) and peak > top)
+        if over:
+            self.clip_label.setText(f"peak {peak:.1f} N: above the axis")
+            self.clip_label.setPos(0.0, top)
+        if over != self.clip_label.isVisible():
+            self.clip_label.setVisible(over)
 
     def refresh(self) -> None:
         """Redraw from the model (the window's 30 Hz timer calls this after a pull)."""
         for name, curve in self.curves.items():
-            t, y = self.plots.curve(name)
-            curve.setData(t, y, skipFiniteCheck=True)
+            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
+        for name, curve in self.lower_curves.items():
+            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
         self._set_y_ranges()
         band = self.session.band()
-        self.band.setVisible(band is not None)
-        if band is not None:
-            self.band.setRegion(band)
+        if band != self._band:
+            self._band = band
+            self.band.setVisible(band is not None)
+            self.band_label.setVisible(band is not None)
+            tr, s = self.session.trial, self.session.session
+            if band is not None and tr is not None and s is not None:
+                self.band.setRegion(band)
+                self.band_label.setText(f"{tr.target_label} {tr.target_force_n:g} N ± {s.tolerance_fraction:.0%}")
+                self.band_label.setPos(0.0, band[1])
 
 
 class QtHealthPanel(QWidget):
-    """Devices (state, rate, sample age), faults with a Reset button, loop timing."""
+    """Devices (state, rate, sample age), faults with a Reset button, loop timing judged against its limits."""
 
     COLUMNS = ("Device", "State", "Rate (Hz)", "Sample age (ms)")
 
@@ -157,13 +264,22 @@ class QtHealthPanel(QWidget):
         self.devices.verticalHeader().setVisible(False)
         self.devices.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.devices.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        self.devices.setMaximumHeight(120)
+        # all three devices, without a scroll bar
+        self.devices.verticalHeader().setDefaultSectionSize(22)
+        self.devices.setFixedHeight(3 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
         self.reset_button = QPushButton("Reset faults")
         self.loop = QLabel()
+        self.loop.setTextFormat(Qt.TextFormat.RichText)
+        self.loop.setWordWrap(True)
+        self.force = QLabel()
+        self.force.setWordWrap(True)
+        self.force.hide()
+        self.log_label = QLabel("Fault log (newest last; a fault latches until Reset faults):")
         self.log = QPlainTextEdit()
         self.log.setReadOnly(True)
         self.log.setMaximumHeight(80)
+        self.log.setPlaceholderText("no fault since the engine started")
         row = QHBoxLayout()
         row.addWidget(self.faults, 1)
         row.addWidget(self.reset_button)
@@ -172,9 +288,20 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.devices)
         lay.addLayout(row)
         lay.addWidget(self.loop)
+        lay.addWidget(self.force)
+        lay.addWidget(self.log_label)
         lay.addWidget(self.log)
         health.changed.connect(self._on_changed)
         self._on_changed()
+
+    def loop_html(self) -> str:
+        """The loop's figures, each coloured against its limit, and what the colours mean."""
+        figures = self.health.loop_figures()
+        if not figures:
+            return "loop: –"
+        line = " · ".join(f'<span style="color:{LEVEL_COLOURS[f.level][0]}">{f.text}</span>' for f in figures)
+        limits = "; ".join(f"{f.name} {f.limit}" for f in figures)
+        return f"{line}<br><small>green: within the limit, amber: above it, red: far above (limits: {limits})</small>"
 
     def _on_changed(self) -> None:
         h = self.health
@@ -193,14 +320,27 @@ class QtHealthPanel(QWidget):
         self.faults.setText(f"Faults: {text}")
         self.faults.setStyleSheet("color: #c81e1e; font-weight: 600;" if h.faults else "color: #147f28;")
         self.reset_button.setEnabled(bool(h.faults))
-        self.loop.setText(h.loop_text())
+        loop = self.loop_html()
+        if self.loop.text() != loop:
+            self.loop.setText(loop)
+        warning = h.force_warning()
+        if warning != self.force.text():
+            self.force.setText(warning)
+            self.force.setStyleSheet(f"color: {LEVEL_COLOURS['bad'][0]}; font-weight: 600;")
+            self.force.setVisible(bool(warning))
         log = "\n".join(h.fault_log)
         if log != self.log.toPlainText():
             self.log.setPlainText(log)
 
 
 class QtSetupPanel(QGroupBox):
-    """Session setup form and the list of interrupted sessions to resume."""
+    """Session setup form and the list of interrupted sessions to resume.
+
+    Space in the code, number, kind or seed field starts (``start_requested``), as everywhere else in the
+    window: a code has no spaces, so a Space typed there can only mean Start.
+    """
+
+    start_requested = Signal()
 
     def __init__(self, setup: SetupModel, parent: QWidget | None = None) -> None:
         super().__init__("Session", parent)
@@ -224,7 +364,13 @@ class QtSetupPanel(QGroupBox):
         self.seed.setValue(v.seed)
         self.errors = QLabel()
         self.errors.setWordWrap(True)
-        self.errors.setStyleSheet("color: #c81e1e;")
+        self.errors.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]};")
+        self.warnings = QLabel()
+        self.warnings.setWordWrap(True)
+        self.warnings.setStyleSheet(f"color: {LEVEL_COLOURS['warning'][0]};")
+        self.hint = QLabel()
+        self.hint.setWordWrap(True)
+        self.hint.setStyleSheet("color: #555555;")
         form = QFormLayout()
         form.addRow("Database", _row(self.db, self.db_browse))
         form.addRow("Participant", self.code)
@@ -239,12 +385,18 @@ class QtSetupPanel(QGroupBox):
         lay = QVBoxLayout(self)
         lay.addLayout(form)
         lay.addWidget(self.errors)
+        lay.addWidget(self.warnings)
+        lay.addWidget(self.hint)
         lay.addWidget(QLabel("Interrupted sessions"))
         lay.addWidget(self.resumable)
         lay.addLayout(_row_layout(self.refresh_button, self.resume_button))
         self.db.editingFinished.connect(lambda: setup.update(db_path=self.db.text()))
         self.code.textChanged.connect(lambda t: setup.update(code=t))
-        self.number.valueChanged.connect(lambda n: setup.update(participant_number=int(n)))
+        self.number.valueChanged.connect(lambda n: setup.set_number(int(n)))
+        self.number.setToolTip("Sets the counterbalanced trial order: suggested from the database (the code's own "
+                               "number, or the next free one) until you change it")
+        for w in (self.code, self.number, self.kind, self.seed):
+            w.installEventFilter(self)
         self.kind.currentTextChanged.connect(lambda k: setup.update(kind=k))
         self.protocol.editingFinished.connect(lambda: setup.update(protocol_path=self.protocol.text()))
         self.seed.valueChanged.connect(lambda n: setup.update(seed=int(n)))
@@ -279,6 +431,17 @@ class QtSetupPanel(QGroupBox):
         if self.number.value() != v.participant_number:
             self.number.setValue(v.participant_number)
         self.errors.setText("\n".join(self.setup.errors.values()))
+        self.warnings.setText("\n".join(self.setup.warnings.values()))
+        self.hint.setText(self.setup.hint)
+        for label in (self.errors, self.warnings, self.hint):
+            label.setVisible(bool(label.text()))
+
+    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt's name
+        if (event.type() == QEvent.Type.KeyPress and event.key() == Qt.Key.Key_Space
+                and not event.modifiers() & ~Qt.KeyboardModifier.KeypadModifier):
+            self.start_requested.emit()
+            return True
+        return super().eventFilter(obj, event)
 
     def _on_resumable(self) -> None:
         self.resumable.clear()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -17,10 +18,31 @@ from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel
 from study_app.models.setup import SetupModel
 
-__all__ = ["AppModel"]
+__all__ = ["AppModel", "Notice"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class Notice:
+    """A message for the experimenter where they are looking (under the Start button).
+
+    ``level`` is ``error`` (a command was refused), ``warning`` or ``info``; ``source`` the command it
+    answers (a refusal of StartSession clears when the form changes).
+    """
+
+    level: str
+    text: str
+    source: str = ""
+
+
+#: Commands as the experimenter knows them, for refusal messages.
+_COMMAND_NAMES = {
+    "StartSession": "Start", "ResumeSession": "Resume session", "Pause": "Pause", "Resume": "Resume",
+    "AbortTrial": "Abort trial", "AbortSession": "Abort session", "Calibrate": "Calibration",
+    "ListSessions": "Reading the database", "ResetFaults": "Reset faults", "SetDriver": "Driver",
+}
 
 
 class AppModel:
@@ -47,14 +69,16 @@ class AppModel:
         self.rig_kind = ""
         self.rig = RigViewModel()
         self.rig.target_changed.connect(lambda y: self.send(m.ManualTarget(y)))
-        #: A command was refused or failed: (title, message).
-        self.error = Emitter()
+        #: What the experimenter should read now (a refusal, a question that became moot), or None.
+        self.notice: Notice | None = None
+        self.notice_changed = Emitter()
         #: Action availability changed (buttons enable/disable).
         self.actions_changed = Emitter()
         self._rate_rows: list[np.ndarray] = []
         self._rate_span = 0.0
         self.session.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(lambda: self.actions_changed.emit())
+        self.setup.changed.connect(self._on_setup_changed)
 
     # -- engine → models ------------------------------------------------------------------------
     def apply(self, ev: object) -> None:
@@ -65,12 +89,41 @@ class AppModel:
             part.apply(ev)
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
+            self.setup.set_known(ev.known)
         elif isinstance(ev, m.CommandRefused):
-            self.error.emit(f"{ev.command} refused", ev.message)
-        elif isinstance(ev, m.SessionEnded) and self.setup.values.db_path:
-            self.list_sessions()
+            # a late confirmation the engine refused changed nothing: say so, not as an error
+            moot = ev.command in ("AbortTrial", "AbortSession") and "had already ended" in ev.message
+            self.notify("info" if moot else "error", ev.message if moot else f"{_COMMAND_NAMES.get(ev.command, ev.command)} "
+                        f"refused: {ev.message}", ev.command)
+        elif isinstance(ev, m.TrialEnded) and self.notice is not None and self.notice.level == "info":
+            self.clear_notice()  # news about an earlier trial: stale once the next one has ended
+        elif isinstance(ev, m.SessionStarted):
+            self.clear_notice()
+            self.setup.session_began(ev.code, ev.kind, ev.participant_number or self.setup.values.participant_number,
+                                     ev.session_id)
+        elif isinstance(ev, m.SessionEnded):
+            if self.session.session is not None:
+                self.setup.session_ended(self.session.session.kind, ev.status)
+            if self.setup.values.db_path:
+                self.list_sessions()
         elif isinstance(ev, m.EngineStopped):
             self.plots.detach()
+
+    # -- notices -------------------------------------------------------------------------------------
+    def notify(self, level: str, text: str, source: str = "") -> None:
+        """Show a notice (replacing the previous one)."""
+        self.notice = Notice(level, text, source)
+        self.notice_changed.emit()
+
+    def clear_notice(self) -> None:
+        """The notice was read or its cause resolved."""
+        if self.notice is not None:
+            self.notice = None
+            self.notice_changed.emit()
+
+    def _on_setup_changed(self) -> None:
+        if self.notice is not None and self.notice.source == "StartSession":
+            self.clear_notice()  # the form changed: the refusal was about what it said before
 
     def attach_ring(self, ring: object) -> None:
         """Start pulling samples from the engine's ring."""
@@ -87,6 +140,8 @@ class AppModel:
         self.participant.update(t, float(last["force_n"]))
         self.rig.update(float(last["tip_z_m"]), float(last["true_fz"]))
         rows = self.plots.new_rows
+        in_trial = self.session.phase in ("active", "cued")
+        self.health.update_force(float(np.nanmax(rows["force_n"])) if len(rows) else 0.0, in_trial)
         self._rate_rows.append(rows)
         self._rate_span += float(rows["t_s"][-1] - rows["t_s"][0]) if len(rows) > 1 else 0.0
         if self._rate_span >= _RATE_WINDOW_S:
@@ -116,7 +171,7 @@ class AppModel:
         if action == "sim_rig_view":
             return self.rig_kind == "sim"
         if action == "pause":
-            return s.state == "running"
+            return s.state == "running" and not s.paused_requested
         if action == "resume":
             return s.state == "paused" or (s.running and s.paused_requested)
         if action == "abort_trial":
@@ -126,40 +181,43 @@ class AppModel:
         raise ValueError(f"unknown action {action!r}")
 
     # -- actions -----------------------------------------------------------------------------------------
-    def _send(self, cmd: object) -> bool:
+    def _send(self, cmd: object, *, clear: bool = True) -> bool:
+        if clear:
+            self.clear_notice()  # a new action: the last notice was about an earlier one
         ok = self.send(cmd)
         if not ok:
-            self.error.emit("engine not running", "The study engine is not running; restart the application.")
+            self.notify("error", "The study engine is not running; restart the application.")
         return ok
 
     def start(self) -> bool:
         """Start the session described by the setup form (False if the form is invalid or nothing may start)."""
         if not self.can("start"):
             errors = self.setup.validate()
-            if errors:
-                self.error.emit("cannot start", "\n".join(errors.values()))
+            if errors or self.setup.hint:
+                self.notify("error", "Cannot start: " + " ".join(list(errors.values()) or [self.setup.hint]),
+                            "StartSession")
             return False
         return self._send(self.setup.start_command())
 
     def pause(self) -> None:
-        """Hold before the next trial."""
+        """Hold before the next trial (shown as pending until the running trial ends)."""
         self.session.paused_requested = True
         self._send(m.Pause())
-        self.actions_changed.emit()
+        self.session.changed.emit()
 
     def resume(self) -> None:
-        """Continue after a pause."""
+        """Continue after a pause, or cancel a pending one."""
         self.session.paused_requested = False
         self._send(m.Resume())
-        self.actions_changed.emit()
+        self.session.changed.emit()
 
-    def abort_trial(self) -> None:
-        """Abort the running trial (stored as aborted, re-run later)."""
-        self._send(m.AbortTrial())
+    def abort_trial(self, trial_index: int | None = None) -> None:
+        """Abort the running trial (stored as aborted, re-run later); the engine refuses if ``trial_index`` has ended."""
+        self._send(m.AbortTrial(trial_index=trial_index))
 
-    def abort_session(self) -> None:
-        """Abort the session."""
-        self._send(m.AbortSession())
+    def abort_session(self, session_id: int | None = None) -> None:
+        """Abort the session (refused by the engine if ``session_id`` is no longer the running one)."""
+        self._send(m.AbortSession(session_id=session_id))
 
     def reset_faults(self) -> None:
         """Clear faults whose condition has gone away."""
@@ -178,7 +236,7 @@ class AppModel:
         """Real rig: identify from the recorded poses, or say why not."""
         why = self.real_calibration.identify_refusal()
         if why:
-            self.error.emit("cannot identify", why)
+            self.notify("error", f"Cannot identify: {why}", "IdentifyPoses")
             return
         self.calibration.state, self.calibration.result = "running", None
         self.calibration.changed.emit()
@@ -195,7 +253,7 @@ class AppModel:
         if self.setup.values.db_path.strip():
             import os
 
-            self._send(m.ListSessions(os.path.abspath(self.setup.values.db_path)))
+            self._send(m.ListSessions(os.path.abspath(self.setup.values.db_path)), clear=False)
 
     def resume_session(self, session_id: int) -> None:
         """Continue an interrupted session."""

@@ -11,7 +11,8 @@ from study_app.models import Emitter
 __all__ = ["CalibrationModel"]
 
 _DESCRIPTIONS = {
-    "recommended": "24 poses tilted up to 60° in every direction (science.md §1.2) — use this one.",
+    "recommended": "24 poses tilted up to 60° in every direction, so gravity turns in the sensor frame and the "
+                   "tool's weight, centre of mass and the sensor bias are all determined — use this one.",
     "quick": "6 well-spread poses: a quick check, less averaging of noise.",
     "tool-down only": "6 poses that only turn the tool about the vertical: gravity never changes in the sensor "
                       "frame, so the payload cannot be identified. The wizard refuses it and says why.",

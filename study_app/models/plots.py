@@ -1,9 +1,11 @@
 """Live plot data pulled from the sample ring: a 10 s window, peak-downsampled for drawing.
 
 The GUI pulls at ~30 Hz (pyqtgraph's idiom: producers never push); each pull
-copies only the records written since the last one.  Curves as in the paper's
-Fig. 6: force magnitude raw (red), compensated (blue) and rendered (green);
-a second plot shows the compensated components.
+copies only the records written since the last one.  The experimenter's
+panel shows the task force (the magnitude of the compensated, filtered force
+the trial is judged on) and the rendered force against the target band, on an
+axis set by the target; a second panel, on its own axis, the raw sensor force
+(tool weight included) or the compensated components.
 """
 
 from __future__ import annotations
@@ -13,7 +15,12 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["PlotModel", "nice_range", "peak_downsample"]
+from protocol.display import task_axis_top_n
+
+__all__ = ["PlotModel", "TASK_SERIES", "nice_range", "peak_downsample"]
+
+#: Curves of the task-force panel: the task force the trial is judged on, and the force rendered on the Touch.
+TASK_SERIES = ("force_n", "render_n")
 
 _F = npt.NDArray[np.float64]
 
@@ -153,6 +160,15 @@ class PlotModel:
         if lo > hi:
             return nice_range(math.nan, math.nan, floor_zero=floor_zero)
         return nice_range(lo, hi, floor_zero=floor_zero)
+
+    def peak(self, names: tuple[str, ...]) -> float:
+        """Largest finite value of these series over the window (NaN when there is none)."""
+        peaks = [float(np.max(v[np.isfinite(v)])) for v in (self.data[k] for k in names) if np.isfinite(v).any()]
+        return max(peaks, default=math.nan)
+
+    def task_axis(self, target_force_n: float | None) -> tuple[float, float]:
+        """The task-force axis (0, top): set by the target (:func:`protocol.display.task_axis_top_n`), in steps."""
+        return (0.0, task_axis_top_n(target_force_n, self.peak(TASK_SERIES), snap_fraction=0.5))
 
     def curve(self, name: str) -> tuple[_F, _F]:
         """(time relative to the newest sample, values), peak-downsampled."""

@@ -71,6 +71,8 @@ class SessionModel:
     completed: int = 0
     aborted: int = 0
     latest_t_s: float = 0.0
+    #: The newest trial started, kept after it ends (the live axis keeps its target's scale between trials).
+    last_trial: m.TrialStarted | None = None
     table: TrialTable = field(default_factory=TrialTable)
     changed: Emitter = field(default_factory=Emitter)
 
@@ -81,24 +83,26 @@ class SessionModel:
             self.state, self.message = "ready", f"engine ready ({ev.rig} rig, {ev.clock} clock)"
         elif isinstance(ev, m.SessionStarted):
             self.session, self.trial, self.phase = ev, None, "idle"
-            self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}"
+            resumed = " (resumed)" if ev.stored_trials else ""
+            self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}{resumed}"
             self.completed = self.aborted = 0
             self.paused_requested = False
             self.pause_until_s = None
             self.table.clear()
+            for row in ev.stored_trials:  # a resumed session: its table and progress as they were
+                self._count(row)
         elif isinstance(ev, m.TrialStarted):
             self.trial, self.phase, self.pause_until_s = ev, "active", None
+            self.last_trial = ev
+            if self.session is not None:  # an aborted trial's re-run lengthens the schedule
+                self.session = _with_total(self.session, ev.trials_total)
             self.latest_t_s = max(self.latest_t_s, ev.t_s)
         elif isinstance(ev, m.PhaseEntered):
             self.phase = ev.phase
             if ev.phase == "pause" and self.session is not None:
                 self.pause_until_s = ev.t_s + self.session.pause_s
         elif isinstance(ev, m.TrialEnded):
-            self.table.add(ev.row)
-            if ev.row["outcome"] == "aborted":
-                self.aborted += 1
-            else:
-                self.completed += 1
+            self._count(ev.row)
             if self.session is not None:
                 total = int(ev.row.get("trials_total", self.session.trials_total))
                 self.session = _with_total(self.session, total)
@@ -108,7 +112,10 @@ class SessionModel:
             self.trial, self.phase = None, "idle"
         elif isinstance(ev, m.Health):
             if self.state in ("running", "paused") and ev.session_running:
-                self.state = "paused" if ev.paused else "running"
+                # the engine reports a pause from the moment it is asked for; it holds only once the trial ends
+                holding = ev.paused and self.phase not in ("active", "cued")
+                self.paused_requested = ev.paused and not holding
+                self.state = "paused" if holding else "running"
         elif isinstance(ev, m.EngineStopped):
             self.state, self.message = "stopped", f"engine stopped: {ev.reason}"
         elif isinstance(ev, m.CommandRefused) and ev.command == "connect":
@@ -116,6 +123,13 @@ class SessionModel:
         else:
             return
         self.changed.emit()
+
+    def _count(self, row: dict[str, Any]) -> None:
+        self.table.add(row)
+        if row["outcome"] == "aborted":
+            self.aborted += 1
+        else:
+            self.completed += 1
 
     def set_time(self, t_s: float) -> None:
         """The newest sample time from the ring (drives the countdowns)."""
@@ -135,23 +149,33 @@ class SessionModel:
         if s is None or not self.running:
             return self.message
         done = self.completed + self.aborted
+        if self.state == "paused":
+            return f"paused after {done} of {s.trials_total} trials · Resume (Space) to continue"
+        pending = " · pause requested: pausing after this trial" if self.paused_requested else ""
         if self.phase in ("active", "cued") and self.trial is not None:
             left = max(0.0, s.max_trial_s - (self.latest_t_s - self.trial.t_s))
             return (f"trial {self.trial.position} of {s.trials_total} · {self.trial.target_label} · "
-                    f"haptics {self.trial.haptic_mode.upper()} · {left:4.1f} s left")
-        if self.state == "paused":
-            return f"paused after {done} of {s.trials_total} trials"
+                    f"haptics {self.trial.haptic_mode.upper()} · {left:4.1f} s left{pending}")
         if self.phase == "pause" and self.pause_until_s is not None:
             left = max(0.0, self.pause_until_s - self.latest_t_s)
-            return f"{done} of {s.trials_total} trials done · next trial in {left:3.1f} s"
-        return f"{done} of {s.trials_total} trials done"
+            nxt = "pausing before the next trial" if pending else f"next trial in {left:3.1f} s"
+            return f"{done} of {s.trials_total} trials done · {nxt}"
+        return f"{done} of {s.trials_total} trials done{pending}"
 
     def fraction_done(self) -> float:
-        """Share of the schedule finished (0–1)."""
+        """Share of the schedule finished (0–1); aborted trials count (their re-runs are in the schedule too)."""
         s = self.session
         if s is None or s.trials_total == 0:
             return 0.0
         return min(1.0, (self.completed + self.aborted) / s.trials_total)
+
+    def band_for_axis(self) -> tuple[float, float] | None:
+        """The band of the current trial, or of the last one between trials (the live axis keeps its scale)."""
+        tr = self.last_trial
+        if tr is None or self.session is None:
+            return None
+        f, tol = tr.target_force_n, self.session.tolerance_fraction
+        return (f * (1 - tol), f * (1 + tol))
 
     def band(self) -> tuple[float, float] | None:
         """The current target band (N) while a trial is active, else None."""

@@ -1,14 +1,26 @@
-"""Session setup: what the experimenter enters before a session, validated field by field."""
+"""Session setup: what the experimenter enters before a session, validated field by field.
+
+Besides each field's own rules, the form knows the database's sessions (listed
+by the engine) and checks the entry against them before Start, as the runner
+would after it: a code that already has a session of this kind is an error
+(the database keeps one per participant); a participant number already given
+to someone else is a warning (the same number draws the same counterbalanced
+schedule, which is right only when replacing a participant who dropped out).
+Until the experimenter sets the number, the form suggests one: the code's own
+number if it has sessions (training, then experiment), else the next free one.
+"""
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 from protocol.config import ProtocolError, load_protocol
 from protocol.storage import StorageError, validate_code
 from study_app import messages as m
 from study_app.models import Emitter
+from study_app.session_list import next_participant_number
 
 __all__ = ["SessionSetup", "SetupModel", "KINDS"]
 
@@ -29,21 +41,50 @@ class SessionSetup:
 
 @dataclass
 class SetupModel:
-    """The form's state, its validation errors (field → message), and the resumable sessions of the database."""
+    """The form's state and what is wrong with it.
+
+    ``errors`` (field → message) block Start; ``warnings`` do not, but Start asks first;
+    ``hint`` says what to do next (e.g. enter a code) and blocks Start while the code is empty.
+    """
 
     values: SessionSetup = field(default_factory=SessionSetup)
     errors: dict[str, str] = field(default_factory=dict)
+    warnings: dict[str, str] = field(default_factory=dict)
+    hint: str = ""
     resumable: list[dict[str, object]] = field(default_factory=list)
+    #: Every session of the database (:func:`study_app.session_list.list_sessions`), as the engine listed them.
+    known: list[dict[str, Any]] = field(default_factory=list)
+    #: The number follows the suggestion until the experimenter sets it.
+    number_suggested: bool = True
+    #: The session running now (not a conflict with itself).
+    running_session: int | None = None
     changed: Emitter = field(default_factory=Emitter)
     resumable_changed: Emitter = field(default_factory=Emitter)
 
     def update(self, **kwargs: object) -> None:
-        """Change fields and re-validate."""
+        """Change fields and re-validate (codes are trimmed: a pasted ' P07 ' is P07)."""
+        if isinstance(kwargs.get("code"), str):
+            kwargs["code"] = str(kwargs["code"]).strip()
+        if "participant_number" in kwargs:
+            self.number_suggested = False
         self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]
+        self._suggest_number()
         self.validate()
 
+    def set_number(self, number: int) -> None:
+        """The experimenter set the participant number (it no longer follows the suggestion)."""
+        if number != self.values.participant_number:
+            self.update(participant_number=int(number))
+
+    def _suggest_number(self) -> None:
+        if not self.number_suggested:
+            return
+        mine = [s for s in self.known if s["code"] == self.values.code]
+        n = int(mine[-1]["participant_number"]) if mine else next_participant_number(self.known)
+        self.values = replace(self.values, participant_number=n)
+
     def validate(self) -> dict[str, str]:
-        """Check every field as the engine will; returns (and stores) the errors."""
+        """Check every field as the engine will, and the entry against the database; returns (and stores) the errors."""
         v = self.values
         errors: dict[str, str] = {}
         if not v.db_path.strip():
@@ -57,10 +98,14 @@ class SetupModel:
                 errors["db_path"] = f"study database = {v.db_path!r}: the folder {parent} does not exist"
             elif not os.access(p if os.path.exists(p) else parent, os.W_OK):
                 errors["db_path"] = f"study database = {v.db_path!r}: not writable"
-        try:
-            validate_code(v.code)
-        except StorageError as exc:
-            errors["code"] = str(exc)
+        self.hint = ""
+        if not v.code:
+            self.hint = "Enter the participant's code (pseudonymous, e.g. P07) to start."
+        else:
+            try:
+                validate_code(v.code)
+            except StorageError as exc:
+                errors["code"] = str(exc)
         if v.kind not in KINDS:
             errors["kind"] = f"session kind = {v.kind!r}: allowed values are training, experiment"
         if v.protocol_path.strip():
@@ -72,20 +117,49 @@ class SetupModel:
             errors["seed"] = f"seed = {v.seed!r}: must be a whole number ≥ 0"
         if not (isinstance(v.participant_number, int) and v.participant_number >= 1):
             errors["participant_number"] = f"participant number = {v.participant_number!r}: must be a whole number ≥ 1"
-        self.errors = errors
+        warnings: dict[str, str] = {}
+        if "code" not in errors and v.code:
+            self._check_against_database(errors, warnings)
+        self.errors, self.warnings = errors, warnings
         self.changed.emit()
         return errors
 
+    def _check_against_database(self, errors: dict[str, str], warnings: dict[str, str]) -> None:
+        v = self.values
+        same = [s for s in self.known if s["code"] == v.code and s["kind"] == v.kind
+                and s["session_id"] != self.running_session]
+        if same:
+            s = same[-1]
+            if s["status"] == "running":
+                errors["code"] = (f"{v.code} has an interrupted {v.kind} session (session {s['session_id']}, "
+                                  f"{s['trials_done']} of {s['trials_planned']} trials done): resume it from the "
+                                  "list below")
+            else:
+                errors["code"] = (f"{v.code} already has a {s['status']} {v.kind} session (session "
+                                  f"{s['session_id']}); the database keeps one per participant: enter a new code")
+        others = sorted({s["code"] for s in self.known
+                         if s["participant_number"] == v.participant_number and s["code"] != v.code})
+        if others:
+            free = next_participant_number(self.known)
+            warnings["participant_number"] = (
+                f"number {v.participant_number} is already {', '.join(others)}'s: the same number gives the same "
+                f"trial order (counterbalancing). Use {free} for a new participant; keep {v.participant_number} "
+                "only to replace a participant who dropped out")
+        mine = [s for s in self.known if s["code"] == v.code]
+        if mine and mine[-1]["participant_number"] != v.participant_number:
+            warnings["code"] = (f"{v.code} ran as number {mine[-1]['participant_number']} before (session "
+                                f"{mine[-1]['session_id']}): the number decides the trial order")
+
     @property
     def valid(self) -> bool:
-        """True when every field passed :meth:`validate`."""
-        return not self.errors
+        """True when every field passed :meth:`validate` and a code is entered."""
+        return not self.errors and bool(self.values.code)
 
     def start_command(self) -> m.StartSession:
         """The command that starts this session (validate first)."""
         errors = self.validate()
-        if errors:
-            raise ValueError("; ".join(errors.values()))
+        if errors or not self.values.code:
+            raise ValueError("; ".join(errors.values()) or self.hint)
         v = self.values
         return m.StartSession(os.path.abspath(v.db_path), v.code, v.kind, v.protocol_path.strip() or None, v.seed,
                               v.participant_number)
@@ -94,6 +168,39 @@ class SetupModel:
         """Interrupted sessions listed by the engine."""
         self.resumable = list(sessions)
         self.resumable_changed.emit()
+
+    def set_known(self, sessions: list[dict[str, Any]]) -> None:
+        """Every session of the database (listed by the engine): suggestions and checks follow it."""
+        self.known = list(sessions)
+        self._suggest_number()
+        self.validate()
+
+    def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None) -> None:
+        """A session started or resumed: the form shows whose it is."""
+        self.running_session = session_id
+        self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number)
+        self.number_suggested = False
+        self.validate()
+
+    def session_ended(self, kind: str, status: str) -> None:
+        """The running session ended; if it finished (completed or aborted), set up the next one
+        (:meth:`next_participant`)."""
+        self.running_session = None
+        if status in ("completed", "aborted"):
+            self.next_participant(kind)
+        else:
+            self.validate()
+
+    def next_participant(self, ended_kind: str) -> None:
+        """After training the same participant does the experiment; after an experiment, the next participant
+        (empty code, the next free number suggested)."""
+        if ended_kind == "training":
+            self.values = replace(self.values, kind="experiment")
+        else:
+            self.values = replace(self.values, code="")
+            self.number_suggested = True
+            self._suggest_number()
+        self.validate()
 
     @staticmethod
     def describe_resumable(s: dict[str, object]) -> str:

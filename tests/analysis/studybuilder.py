@@ -67,7 +67,9 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
         pj["trial"]["max_trial_s"] = s.max_trial_s
         sid = db.create_session(
             code=s.code, kind=s.kind, seed=0, participant_number=number, protocol_json=json.dumps(pj),
-            schedule_json="[]", software_version="test", rig="sim", config={}, calibration=None,
+            schedule_json=json.dumps([{"index": i, "target_label": t.label, "target_force_n": TARGETS[t.label],
+                                       "haptic_mode": t.mode, "repeat_of": None} for i, t in enumerate(s.trials)]),
+            software_version="test", rig="sim", config={}, calibration=None,
         )
         cap_ms = int(round(s.max_trial_s * 1000))
         for idx, tdef in enumerate(s.trials):

@@ -88,7 +88,14 @@ def test_whole_session_through_the_gui(window, qtbot, tmp_path, short_protocol):
     qtbot.waitUntil(lambda: w.model.session.state == "ended", timeout=TIMEOUT_MS)
     assert w.trial_table.rowCount() == 3
     assert w.progress.label.text() == "session 1 completed"
-    assert w.start_button.isEnabled()  # ready for the next participant
+    # ready for the next participant: the code cleared, the next number suggested from the database
+    qtbot.waitUntil(lambda: w.setup_panel.number.value() == 2, timeout=TIMEOUT_MS)
+    assert panel.code.text() == "" and not w.start_button.isEnabled()
+    qtbot.keyClicks(panel.code, "P07")  # the same code again: refused before Start, where the form is
+    assert not w.start_button.isEnabled() and "already has a completed experiment session" in panel.errors.text()
+    panel.code.clear()
+    qtbot.keyClicks(panel.code, "P08")
+    assert w.start_button.isEnabled()
 
     stored = rows(db, "SELECT trial_index, outcome, repeat_of FROM trials ORDER BY trial_index")
     assert [r[0] for r in stored] == [0, 1, 2] and stored[0][1] == "aborted" and stored[2][2] == 0

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from pipeline.loop import RECORD_FIELDS
 from pipeline.ring import RingBuffer
 from study_app import messages as m
-from study_app.models.app import AppModel
+from study_app.models.app import AppModel, Notice
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
@@ -57,6 +57,39 @@ def test_setup_validation_names_field_value_and_rule(tmp_path):
     assert cmd == m.StartSession(str(tmp_path / "study.db"), "P01", "experiment", None, 0, 1)
 
 
+def known(code: str, number: int, kind: str = "experiment", status: str = "completed", sid: int = 1) -> dict:
+    return {"session_id": sid, "code": code, "participant_number": number, "kind": kind, "status": status,
+            "trials_done": 20, "trials_planned": 20}
+
+
+def test_setup_suggests_the_next_number_and_checks_the_entry_against_the_database(tmp_path):
+    s = SetupModel()
+    s.update(db_path=str(tmp_path / "study.db"))
+    assert s.hint and not s.valid and not s.errors  # an empty code is a hint, not an error
+    s.set_known([known("P01", 1, "training", sid=1), known("P01", 1, sid=2), known("P02", 2, sid=3)])
+    assert s.values.participant_number == 3  # the next free number
+    s.update(code="  P03 ")
+    assert s.values.code == "P03" and s.valid and s.warnings == {}  # codes are trimmed
+    s.update(code="P01")
+    assert "already has a completed experiment session (session 2)" in s.errors["code"] and not s.valid
+    assert s.values.participant_number == 1  # the code's own number
+    s.update(kind="training")
+    assert "already has a completed training session" in s.errors["code"]
+    s.update(kind="experiment", code="P04")
+    s.set_number(2)  # the experimenter types a number: it stays
+    assert s.valid and "already P02's" in s.warnings["participant_number"] and "Use 3" in s.warnings["participant_number"]
+    s.set_known([known("P01", 1, sid=2), known("P02", 2, sid=3), known("P05", 5, status="running", sid=4)])
+    assert s.values.participant_number == 2
+    s.update(code="P05", participant_number=5)
+    assert "interrupted experiment session (session 4" in s.errors["code"] and "resume it" in s.errors["code"]
+    # after a training session the same participant does the experiment; after an experiment, the next one
+    s.session_began("P06", "training", 6)
+    s.next_participant("training")
+    assert (s.values.code, s.values.kind, s.values.participant_number) == ("P06", "experiment", 6)
+    s.next_participant("experiment")
+    assert s.values.code == "" and s.values.participant_number == 6  # the next free number (P05 has 5)
+
+
 def test_setup_refuses_to_build_a_command_when_invalid():
     s = SetupModel()
     with pytest.raises(ValueError, match="study database: choose a file"):
@@ -90,6 +123,36 @@ def test_session_progress_follows_events_and_sample_time():
     assert s.band() is None and s.fraction_done() == 0.5
     s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
+
+
+def row(i: int, outcome: str = "success") -> dict:
+    return {"trial_index": i, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on", "outcome": outcome,
+            "tct_s": 4.0 if outcome == "success" else None, "rmse_n": 0.1, "max_ae_n": 0.2, "abort_reason": None}
+
+
+def test_a_resumed_session_restores_its_table_and_progress():
+    s = SessionModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    stored = [row(0), row(1, "aborted"), row(2, "timeout")]
+    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, participant_number=4,
+                             stored_trials=stored))
+    assert len(s.table.rows) == 3 and (s.completed, s.aborted) == (2, 1)
+    assert s.progress_text() == "3 of 21 trials done" and s.fraction_done() == pytest.approx(3 / 21)
+    assert s.message.endswith("(resumed)")
+
+
+def test_a_pending_pause_is_shown():
+    s = SessionModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started())
+    s.apply(trial(t_s=5.0))
+    s.set_time(6.0)
+    s.paused_requested = True
+    assert s.progress_text().endswith("pause requested: pausing after this trial")
+    s.apply(m.PhaseEntered(9.0, 0, "pause"))
+    assert s.progress_text().endswith("pausing before the next trial")
+    s.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, True, "autopilot", True, True))
+    assert s.state == "paused" and s.progress_text() == "paused after 0 of 2 trials · Resume (Space) to continue"
 
 
 # -- plots -----------------------------------------------------------------------------------------
@@ -213,6 +276,33 @@ def test_health_rates_from_records():
     assert h.faults_text() == "POSE_STALE" and h.fault_log == ["t =    1.000 s  fault: POSE_STALE"]
 
 
+def test_loop_health_is_judged_against_its_limits():
+    h = HealthModel()
+    assert h.loop_figures() == [] and h.loop_text() == "loop: –"
+    h.apply(m.Health(999.0, 1000.0, 1003.0, 12.0, 0, 0, 120_000, 0, True, "autopilot", True, False))
+    assert [f.level for f in h.loop_figures()] == ["ok", "ok", "ok", "ok"]
+    # the issue's run: 69 periods over 2 ms and 114 missed slots in 2 minutes, p99 0.3 ms
+    h.apply(m.Health(990.0, 1000.0, 1300.0, 300.0, 69, 114, 120_000, 0, True, "autopilot", True, False))
+    figs = {f.name: f for f in h.loop_figures()}
+    assert (figs["rate"].level, figs["p99"].level, figs["over"].level, figs["missed"].level) == (
+        "warn", "warn", "warn", "warn")
+    assert figs["over"].text == "periods over 2 ms: 69 of 120,000 (0.06 %)" and figs["over"].limit == "≤ 0.01 %"
+    h.apply(m.Health(900.0, 1100.0, 3000.0, 2000.0, 5000, 5000, 120_000, 0, True, "autopilot", True, False))
+    assert {f.level for f in h.loop_figures()} == {"bad"}
+
+
+def test_a_large_force_on_the_tissue_is_warned_about():
+    h = HealthModel()
+    seen = []
+    h.changed.connect(lambda: seen.append(h.force_warning()))
+    h.update_force(1.1, in_trial=True)
+    assert h.force_warning() == "" and seen == []
+    h.update_force(18.04, in_trial=False)
+    assert h.force_warning().startswith("18.0 N on the tissue while no trial is running") and len(seen) == 1
+    h.update_force(0.2, in_trial=False)
+    assert h.force_warning() == "" and seen[-1] == ""
+
+
 def test_app_model_actions_follow_state(tmp_path):
     sent: list[object] = []
     a = AppModel(lambda c: sent.append(c) or True)
@@ -225,9 +315,24 @@ def test_app_model_actions_follow_state(tmp_path):
     assert not a.can("start") and a.can("abort_session") and not a.can("abort_trial")
     a.apply(trial())
     assert a.can("abort_trial")
-    a.abort_trial()
-    assert sent[-1] == m.AbortTrial()
-    errors = []
-    a.error.connect(lambda t, msg: errors.append((t, msg)))
+    a.abort_trial(0)
+    assert sent[-1] == m.AbortTrial(trial_index=0)
     a.apply(m.CommandRefused("Pause", "no session is running"))
-    assert errors == [("Pause refused", "no session is running")]
+    assert a.notice == Notice("error", "Pause refused: no session is running", "Pause")
+    a.pause()  # a new action clears the old notice
+    assert a.notice is None and not a.can("pause") and a.can("resume")  # pending: Resume cancels it
+    a.apply(m.CommandRefused("AbortTrial", "trial 1 had already ended: nothing was aborted"))
+    assert a.notice.level == "info"  # a late confirmation that changed nothing is not an error
+
+
+def test_a_refused_start_is_shown_until_the_form_changes(tmp_path):
+    a = AppModel(lambda c: True)
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
+    a.start()
+    a.apply(m.CommandRefused("StartSession", "participant P01 already has an experiment session"))
+    assert a.notice.text.startswith("Start refused: participant P01")
+    a.setup.update(code="P02")
+    assert a.notice is None
+    a.setup.update(code="")
+    assert not a.start() and a.notice.text.startswith("Cannot start: Enter the participant's code")

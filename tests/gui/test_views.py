@@ -4,16 +4,20 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+import pytest
+
 from PySide6.QtCore import QPoint, Qt
 
 from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
-from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.widgets import QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
+from study_app.models.plots import PlotModel
 from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel, TrialTable
 from study_app.models.setup import SetupModel
@@ -53,7 +57,13 @@ def test_health_panel_shows_faults_and_enables_reset(qtbot):
     h.apply(m.EngineFault(2.0, "fault", int(64), "OPERATOR_STOP"))
     assert view.faults.text() == "Faults: OPERATOR_STOP" and view.reset_button.isEnabled()
     h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False))
-    assert view.loop.text() == "loop   1000 Hz · p99 |period − 1 ms| 12 µs · overruns 1 (> 2 ms), 0 missed slots"
+    text = view.loop.text()
+    assert '<span style="color:#147f28">p99 |period − 1 ms| 12 µs</span>' in text  # within its limit: green
+    assert '<span style="color:#8a5a00">periods over 2 ms: 1 of 5,000 (0.02 %)</span>' in text  # above: amber
+    assert "limits: rate 1000 ± 5 Hz; p99 ≤ 100 µs" in text
+    assert view.log_label.text().startswith("Fault log") and view.force.isHidden()
+    h.update_force(18.0, in_trial=False)
+    assert not view.force.isHidden() and "18.0 N on the tissue while no trial is running" in view.force.text()
     assert not view.reset_button.isEnabled()
 
 
@@ -62,9 +72,13 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view = QtSetupPanel(s)
     qtbot.addWidget(view)
     s.update(db_path=str(tmp_path / "s.db"))
-    qtbot.keyClicks(view.code, "P 1")
-    assert s.values.code == "P 1"
-    assert view.errors.text().startswith("participant code = 'P 1'")
+    assert view.hint.text().startswith("Enter the participant's code") and view.errors.isHidden()
+    started = []
+    view.start_requested.connect(lambda: started.append(1))
+    qtbot.keyClicks(view.code, "P 1")  # Space in the code field is Start, never a character of the code
+    assert s.values.code == "P1" and started == [1]
+    view.code.setText("P-1!")
+    assert view.errors.text().startswith("participant code = 'P-1!'")
     view.code.clear()
     qtbot.keyClicks(view.code, "P01")
     assert view.errors.text() == "" and s.valid
@@ -146,3 +160,38 @@ def test_rig_view_manual_driving_with_mouse_and_keys(qtbot):
     assert abs(targets[-1] - (targets[0] + 0.0005)) < 1e-12
     qtbot.keyClick(canvas, Qt.Key.Key_Home)
     assert targets[-1] == 0.0
+    # ↑/↓ move the stylus, never the choice of driver: the radio buttons take no keyboard focus
+    assert view.manual.focusPolicy() == Qt.FocusPolicy.NoFocus == view.autopilot.focusPolicy()
+    qtbot.mouseClick(view.manual, Qt.MouseButton.LeftButton)
+    assert view.focusWidget() is not view.manual
+    # the engine's report of the driver is shown, never sent back as a choice
+    r.driver = "autopilot"
+    r.changed.emit()
+    assert view.autopilot.isChecked() and drivers == ["manual"]
+
+
+def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
+    s = SessionModel()
+    plots = PlotModel(window_s=10.0)
+    view = QtForcePlots(plots, s)
+    qtbot.addWidget(view)
+    s.apply(READY)
+    s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.TrialStarted(1.0, 0, 1, 2, "GENTLE", 0.6, "off"))
+    plots.t = np.linspace(0, 5, 500)
+    for k in plots.data:
+        plots.data[k] = np.zeros(500)
+    plots.data["raw_n"][:] = 7.6  # the tool's weight: on the lower plot's own axis, never the task axis
+    plots.data["force_n"][:] = 0.6
+    view.refresh()
+    assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
+    assert view.band.getRegion() == pytest.approx((0.54, 0.66))
+    assert view.band_label.textItem.toPlainText() == "GENTLE 0.6 N ± 10%" and not view.clip_label.isVisible()
+    assert view.lower.viewRange()[1][1] >= 7.6
+    plots.data["force_n"][-1] = 18.0
+    view.refresh()
+    assert view.task.viewRange()[1] == pytest.approx([0.0, 2.4]) and view.clip_label.isVisible()
+    assert "peak 18.0 N: above the axis" in view.clip_label.textItem.toPlainText()
+    assert not view.task.getAxis("left").autoSIPrefix  # "(x0.001)" never appears on a force axis
+    view.lower_choice.setCurrentText("none")
+    assert not view.lower.isVisible() and view.task.getAxis("bottom").style["showValues"]

@@ -1,0 +1,313 @@
+"""What every column of every CSV the report writes means: the codebook, one table in code.
+
+Each :class:`Column` names a column as it appears in the CSV files, what it
+means, its unit, its type and how far it is rounded.  :func:`export` turns an
+analysis table into the file's form (the exported names, rounded values) and
+:func:`codebook_frame` lists, for every file written, each column with its
+entry -- that list is ``codebook.csv``.  A column without an entry is written
+with an empty description, which the test of the report refuses; to add a
+column, add one line to :data:`COLUMNS`.
+
+Conventions of the exported files
+---------------------------------
+* Units are the last part of a name: ``_s`` seconds, ``_N`` newtons (a capital
+  N, the SI symbol, so it cannot be read as a count); counts start with ``n_``
+  (or are called ``n``).  Inside the analysis code and the database the
+  newton suffix is ``_n``; only the exported files spell it ``_N``.
+* Trials are numbered from 1 (``trial_number``), as the experimenter's window
+  shows them; the database's ``trial_index`` is ``trial_number − 1``.
+* Numbers are rounded to what the rig resolves: forces to 0.1 mN, times to the
+  1 ms sample period, p-values to 4 significant digits, other statistics to 4
+  decimals.  Nothing is rounded before the statistics are computed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["COLUMNS", "WIDE_MEASURES", "Column", "codebook_frame", "export", "exported_name", "label", "lookup",
+           "wide_name"]
+
+
+@dataclass(frozen=True, slots=True)
+class Column:
+    """One column of the exported files.
+
+    Attributes
+    ----------
+    name
+        The column's name in the CSV files.
+    description
+        What it holds, in words.
+    unit
+        ``"N"``, ``"s"``, ``"count"``, ``"fraction (0–1)"``, ... or ``""`` for text and codes.
+    type
+        ``"text"``, ``"integer"``, ``"number"`` or ``"boolean"``.
+    label
+        Short heading for tables in ``report.html`` (default: ``name``).
+    files
+        The files in which it has this meaning; empty: every file.
+    source
+        The analysis table's name for it, when the export renames it.
+    decimals, significant
+        Round to this many decimals, or to this many significant digits (numbers only).
+    """
+
+    name: str
+    description: str
+    unit: str = ""
+    type: str = "number"
+    label: str = ""
+    files: tuple[str, ...] = ()
+    source: str = ""
+    decimals: int | None = None
+    significant: int | None = None
+
+
+_STATS = ("stats.csv", "stats_by_target.csv")
+_SA = ("speed_accuracy.csv",)
+_PER = ("participants.csv", "participants_by_target.csv")
+_MU = "unit of the measure (see metric)"
+#: Force: 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
+_F = 4
+#: Time: the 1 ms sample period.
+_T = 3
+
+COLUMNS: tuple[Column, ...] = (
+    # -- who and which trial --------------------------------------------------------------------------
+    Column("participant_code", "pseudonymous participant code, as entered for the session", type="text",
+           label="participant"),
+    Column("participant_number", "the participant's number in the study (sets the counterbalanced schedule)",
+           type="integer", label="number"),
+    Column("session_id", "session in its database (sessions.session_id)", type="integer", label="session"),
+    Column("trial_number", "trial within its session, numbered from 1 as the experimenter's window shows it "
+           "(the database's trials.trial_index is trial_number − 1)", type="integer", label="trial",
+           source="trial_index"),
+    Column("database", "file name of the study database the row comes from", type="text"),
+    Column("target_label", "target force level (GENTLE or FIRM in the paper's protocol)", type="text",
+           label="target"),
+    Column("target_force_N", "target force F*", "N", label="target (N)", source="target_force_n", decimals=_F),
+    Column("haptic_mode", "haptic feedback during the trial: on or off", type="text", label="haptics"),
+    Column("haptic_mode", "haptic feedback of the trials correlated: on, off, or all (both)", type="text",
+           label="haptics", files=_SA),
+    # -- one trial ----------------------------------------------------------------------------------
+    Column("outcome", "success (force held in the band for the hold time) or timeout (trial cap reached)",
+           type="text"),
+    Column("success", "true when outcome is success", type="boolean"),
+    Column("cue_at_s", "time of the trial's cue, seconds since the session started (session clock)", "s",
+           label="cue at (s)", source="started_at_s", decimals=_T),
+    Column("tct_s", "task completion time: cue to the end of the successful hold; empty unless success", "s",
+           label="TCT (s)", decimals=_T),
+    Column("rmse_N", "root-mean-square error of the task force against F* over the error window", "N",
+           label="RMSE (N)", source="rmse_n", decimals=_F),
+    Column("max_ae_N", "largest absolute error of the task force against F* over the error window", "N",
+           label="Max AE (N)", source="max_ae_n", decimals=_F),
+    Column("time_in_band_s", "in-band samples × 1 ms over the trial window", "s", label="time in band (s)",
+           decimals=_T),
+    Column("peak_force_N", "largest task force over the error window", "N", label="peak force (N)",
+           source="peak_force_n", decimals=_F),
+    Column("first_contact_s", "time from the cue to the first sample with task force above the contact "
+           "threshold; empty without contact", "s", label="first contact (s)", decimals=_T),
+    Column("tct_censored_s", "TCT, with a failed trial counted as the trial cap", "s", label="TCT censored (s)",
+           decimals=_T),
+    # -- per participant × mode (× target) ----------------------------------------------------------
+    Column("n_trials", "analysed trials", "count", "integer", label="trials", files=_PER),
+    Column("n_success", "successful trials", "count", "integer", label="successes", files=_PER),
+    Column("success_rate", "successful trials / analysed trials", "fraction (0–1)", label="success rate",
+           decimals=4),
+    Column("tct_s", "mean TCT over the trials in n_tct (successful trials only, or with failures censored at "
+           "the cap: see the report's methods); empty when no trial counts", "s", label="TCT (s)", files=_PER,
+           decimals=_T),
+    Column("n_tct", "trials that entered the TCT mean", "count", "integer", label="TCT trials", files=_PER),
+    Column("rmse_N", "mean RMSE over the trials", "N", label="RMSE (N)", files=_PER, source="rmse_n",
+           decimals=_F),
+    Column("max_ae_N", "mean Max AE over the trials", "N", label="Max AE (N)", files=_PER, source="max_ae_n",
+           decimals=_F),
+    Column("time_in_band_s", "mean time in band over the trials", "s", label="time in band (s)", files=_PER,
+           decimals=_T),
+    Column("peak_force_N", "mean peak force over the trials", "N", label="peak force (N)", files=_PER,
+           source="peak_force_n", decimals=_F),
+    # -- paired Wilcoxon tests, ON vs OFF -------------------------------------------------------------
+    Column("metric", "the measure tested: success_rate, tct_s, rmse_N or max_ae_N (participants.csv columns)",
+           type="text", label="measure"),
+    Column("n", "pairs that entered the ranking (n_used)", "count", "integer", label="n", files=_STATS),
+    Column("median_off", "median over participants of the OFF values (complete pairs)", _MU,
+           label="median OFF", decimals=4),
+    Column("median_on", "median over participants of the ON values (complete pairs)", _MU, label="median ON",
+           decimals=4),
+    Column("statistic", "Wilcoxon signed-rank statistic: the smaller rank sum, min(W+, W−), for a two-sided "
+           "test", "rank sum", label="W", decimals=4),
+    Column("p_value", "p-value of the Wilcoxon signed-rank test (method: see method)", "probability",
+           label="p", files=_STATS, significant=4),
+    Column("method", "how the p-value was computed: exact, permutation or approx (normal approximation); "
+           "empty when not computable", type="text", label="p method", files=_STATS),
+    Column("zero_method", "handling of zero differences: wilcox (dropped), pratt or zsplit", type="text",
+           label="zeros"),
+    Column("rank_biserial", "matched-pairs rank-biserial correlation (W+ − W−)/(W+ + W−); positive: ON > OFF",
+           "−1 to 1", label="rank-biserial", decimals=4),
+    Column("p_holm", "p-value after Holm's step-down correction across the four measures (within the target "
+           "in stats_by_target.csv)", "probability", label="p (Holm)", significant=4),
+    Column("n_pairs", "participants with a value in both modes", "count", "integer", label="pairs"),
+    Column("n_dropped_nan", "participants left out for lacking a value in a mode (e.g. no successful trial for "
+           "TCT)", "count", "integer", label="pairs dropped"),
+    Column("n_used", "pairs that entered the ranking", "count", "integer", label="pairs ranked"),
+    Column("n_zero", "pairs with a zero difference ON − OFF", "count", "integer", label="zero differences"),
+    Column("n_ties", "groups of equal non-zero |ON − OFF| of size > 1", "count", "integer", label="tie groups"),
+    Column("z", "tie-corrected normal statistic of W+ (no continuity correction); positive: ON > OFF",
+           "standard normal", decimals=4),
+    Column("r", "effect size r = z/√n", "−1 to 1", label="r = z/√n", decimals=4),
+    Column("hl_estimate", "Hodges–Lehmann estimate of the shift ON − OFF", _MU, label="HL shift", decimals=4),
+    Column("hl_ci_low", "lower end of the Hodges–Lehmann confidence interval", _MU, label="HL CI low",
+           decimals=4),
+    Column("hl_ci_high", "upper end of the Hodges–Lehmann confidence interval", _MU, label="HL CI high",
+           decimals=4),
+    Column("ci_level", "confidence the Hodges–Lehmann interval achieves", "fraction (0–1)", label="CI level",
+           decimals=4),
+    Column("computable", "false when no test was possible (see note)", type="boolean", files=_STATS),
+    Column("note", "why a test was not computable, or which degenerate case occurred; empty otherwise",
+           type="text", files=_STATS),
+    Column("alternative", "alternative hypothesis: two-sided, greater (ON > OFF) or less", type="text"),
+    Column("w_plus", "rank sum of the pairs with ON > OFF", "rank sum", label="W+", decimals=4),
+    Column("w_minus", "rank sum of the pairs with ON < OFF", "rank sum", label="W−", decimals=4),
+    Column("n_positive", "pairs with ON > OFF", "count", "integer", label="ON > OFF"),
+    Column("n_negative", "pairs with ON < OFF", "count", "integer", label="ON < OFF"),
+    # -- speed against accuracy ---------------------------------------------------------------------
+    Column("n", "trials with both a TCT and an RMSE", "count", "integer", files=_SA),
+    Column("rho", "Spearman rank correlation of TCT with RMSE over trials", "−1 to 1", label="ρ", decimals=4),
+    Column("p_value", "p-value of Spearman's ρ (method: see method)", "probability", label="p", files=_SA,
+           significant=4),
+    Column("ci_low", "lower end of the confidence interval of ρ", "−1 to 1", label="CI low", decimals=4),
+    Column("ci_high", "upper end of the confidence interval of ρ", "−1 to 1", label="CI high", decimals=4),
+    Column("method", "how the p-value of ρ was computed", type="text", label="p method", files=_SA),
+    Column("computable", "false when ρ could not be computed (see note)", type="boolean", files=_SA),
+    Column("note", "why ρ was not computable; empty otherwise", type="text", files=_SA),
+    Column("median_tct_s", "median TCT of the correlated trials", "s", label="median TCT (s)", decimals=_T),
+    Column("median_rmse_N", "median RMSE of the correlated trials", "N", label="median RMSE (N)",
+           source="median_rmse_n", decimals=_F),
+    # -- sessions -----------------------------------------------------------------------------------
+    Column("kind", "training or experiment (training sessions are not analysed)", type="text"),
+    Column("status", "running (interrupted, resumable), completed or aborted", type="text"),
+    Column("seed", "study seed the session's schedule was drawn with", type="integer"),
+    Column("started_at", "when the session started, ISO 8601 UTC", type="text", label="started"),
+    Column("ended_at", "when the session ended, ISO 8601 UTC; empty if interrupted", type="text", label="ended"),
+    Column("end_reason", "why the session ended early; empty otherwise", type="text", label="end reason"),
+    Column("software_version", "haptic-study version that recorded the session", type="text", label="software"),
+    Column("rig", "sim (simulated rig: simulated data) or real (the hardware)", type="text"),
+    Column("protocol_name", "name of the protocol the session ran", type="text", label="protocol"),
+    Column("tolerance_fraction", "half-width of the target band as a fraction of F*", "fraction (0–1)",
+           label="tolerance", decimals=4),
+    Column("hold_s", "time the force must stay in the band for success", "s", label="hold (s)", decimals=_T),
+    Column("max_trial_s", "trial cap: a trial not completed by then is a timeout", "s", label="trial cap (s)",
+           decimals=_T),
+    # -- the codebook itself --------------------------------------------------------------------------
+    Column("file", "CSV file of the report folder", type="text", files=("codebook.csv",)),
+    Column("column", "column of that file", type="text", files=("codebook.csv",)),
+    Column("type", "text, integer, number or boolean (true/false)", type="text", files=("codebook.csv",)),
+    Column("unit", "unit of the column's values; empty for text and codes", type="text", files=("codebook.csv",)),
+    Column("description", "what the column holds", type="text", files=("codebook.csv",)),
+)
+
+#: The long-format measures that participants_wide.csv spreads into an OFF and an ON column.
+WIDE_MEASURES: tuple[str, ...] = ("n_trials", "n_success", "success_rate", "tct_s", "n_tct", "rmse_N", "max_ae_N",
+                                  "time_in_band_s", "peak_force_N")
+_UNITS = ("_s", "_N")
+
+
+def wide_name(name: str, mode: str) -> str:
+    """The participants_wide.csv column of measure ``name`` in haptic mode ``mode``: ``rmse_N`` → ``rmse_off_N``."""
+    for suffix in _UNITS:
+        if name.endswith(suffix):
+            return f"{name[: -len(suffix)]}_{mode}{suffix}"
+    return f"{name}_{mode}"
+
+
+def _wide_columns() -> tuple[Column, ...]:
+    out = [Column(c.name, c.description, c.unit, c.type, c.label, ("participants_wide.csv",), "", c.decimals,
+                  c.significant)
+           for c in COLUMNS if c.name in ("participant_code", "participant_number")]
+    for name in WIDE_MEASURES:
+        base = next(c for c in COLUMNS if c.name == name and (not c.files or "participants.csv" in c.files))
+        for mode in ("off", "on"):
+            out.append(Column(wide_name(name, mode), f"haptics {mode.upper()}: {base.description}", base.unit,
+                              base.type, f"{base.label or name} {mode.upper()}", ("participants_wide.csv",), "",
+                              base.decimals, base.significant))
+    return tuple(out)
+
+
+_ALL = COLUMNS + _wide_columns()
+#: analysis name -> exported name
+_RENAMED: dict[str, str] = {c.source: c.name for c in COLUMNS if c.source}
+
+
+def exported_name(name: str) -> str:
+    """The exported name of an analysis column or measure (``rmse_n`` → ``rmse_N``); others unchanged."""
+    return _RENAMED.get(name, name)
+
+
+def lookup(file: str, column: str) -> Column | None:
+    """The entry describing ``column`` of ``file`` (a file-specific entry first), or None."""
+    general = None
+    for c in _ALL:
+        if c.name == column:
+            if file in c.files:
+                return c
+            if not c.files and general is None:
+                general = c
+    return general
+
+
+def _round(values: pd.Series, c: Column) -> pd.Series:
+    if c.type != "number" or not pd.api.types.is_numeric_dtype(values) or pd.api.types.is_bool_dtype(values):
+        return values
+    x = values.to_numpy(dtype=np.float64)
+    if c.decimals is not None:
+        return pd.Series(np.round(x, c.decimals), index=values.index)
+    if c.significant is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            mag = np.floor(np.log10(np.abs(x)))
+        digits = np.where(np.isfinite(mag), c.significant - 1 - mag, 0).astype(np.int64)
+        out = [v if not math.isfinite(v) or v == 0 else round(v, int(d)) for v, d in zip(x.tolist(), digits.tolist())]
+        return pd.Series(out, index=values.index, dtype=np.float64)
+    return values
+
+
+def export(frame: pd.DataFrame, file: str) -> pd.DataFrame:
+    """``frame`` as ``file`` is written: exported names (also as values of ``metric``) and rounded numbers.
+
+    Trial indices become 1-based trial numbers.
+    """
+    out = frame.rename(columns=_RENAMED)
+    if "trial_index" in frame.columns:
+        out["trial_number"] = frame["trial_index"].astype(np.int64) + 1
+    if "metric" in out.columns:
+        out["metric"] = out["metric"].map(exported_name)
+    for name in out.columns:
+        c = lookup(file, name)
+        if c is not None:
+            out[name] = _round(out[name], c)
+    return out
+
+
+def codebook_frame(files: Mapping[str, Iterable[str]]) -> pd.DataFrame:
+    """``codebook.csv``: one row per (file, column) of the files written, in file and column order.
+
+    A column without an entry in :data:`COLUMNS` gets an empty description (the report's test refuses that).
+    """
+    rows = []
+    for file, columns in files.items():
+        for name in columns:
+            c = lookup(file, name)
+            rows.append({"file": file, "column": name, "type": c.type if c else "",
+                         "unit": c.unit if c else "", "description": c.description if c else ""})
+    return pd.DataFrame(rows, columns=["file", "column", "type", "unit", "description"])
+
+
+def label(file: str, column: str) -> str:
+    """Short table heading of a column (its name if it has none)."""
+    c = lookup(file, column)
+    return (c.label or c.name) if c is not None else column

@@ -1,0 +1,77 @@
+"""Questions bound to what they were asked about (PsychoPy/PyMeasure users expect No to be the safe default).
+
+A :class:`Confirmation` is a non-blocking question whose default (Enter,
+Space, Esc) is **No**, and which closes itself, as No, when what it was asked
+about is over: "Abort trial 7?" goes away when trial 7 ends, so a late Yes can
+never abort trial 9.  The engine refuses a bound command for a trial that is no
+longer running as well (:class:`study_app.messages.AbortTrial`), which covers
+the instant between the trial's end and the window hearing of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QMessageBox, QWidget
+
+__all__ = ["Confirmation"]
+
+
+class Confirmation:
+    """A Yes/No question, default No, that calls ``on_yes`` only if answered Yes while still open.
+
+    Parameters
+    ----------
+    parent
+        The window the question is about (the dialog is window-modal to it and centred on it).
+    title, text
+        The question.
+    on_yes
+        Called once on Yes.
+    moot_when
+        Called with each engine event while the question is open; True closes it as No.
+    on_moot
+        Called when it was closed that way (to say so where the experimenter looks).
+    """
+
+    def __init__(self, parent: QWidget, title: str, text: str, on_yes: Callable[[], None], *,
+                 moot_when: Callable[[object], bool] | None = None, on_moot: Callable[[], None] | None = None) -> None:
+        self.on_yes = on_yes
+        self.moot_when = moot_when
+        self.on_moot = on_moot
+        self.box = QMessageBox(QMessageBox.Icon.Question, title, text,
+                               QMessageBox.StandardButton.Yes | QMessageBox.StandardButton.No, parent)
+        self.box.setDefaultButton(QMessageBox.StandardButton.No)
+        self.box.setEscapeButton(QMessageBox.StandardButton.No)
+        self.box.setWindowModality(Qt.WindowModality.WindowModal)
+        self.box.button(QMessageBox.StandardButton.No).setFocus()
+        self.box.finished.connect(self._on_finished)
+        self.open = False
+
+    def show(self) -> None:
+        """Ask (returns at once; the answer arrives through ``on_yes``)."""
+        self.open = True
+        self.box.open()
+        self.box.button(QMessageBox.StandardButton.No).setFocus()
+
+    def _on_finished(self, result: int) -> None:
+        was_open, self.open = self.open, False
+        if was_open and result == QMessageBox.StandardButton.Yes:
+            self.on_yes()
+
+    def event(self, ev: object) -> None:
+        """An engine event: close the question (as No) if it has become moot."""
+        if self.open and self.moot_when is not None and self.moot_when(ev):
+            self.dismiss()
+            if self.on_moot is not None:
+                self.on_moot()
+
+    def dismiss(self) -> None:
+        """Close as No, and hand the keyboard back to the window (Space and Esc work there again)."""
+        if self.open:
+            self.open = False
+            self.box.done(QMessageBox.StandardButton.No)
+            parent = self.box.parentWidget()
+            if parent is not None:
+                parent.activateWindow()

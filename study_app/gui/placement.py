@@ -1,0 +1,68 @@
+"""Where windows open: their last place if it is still on a screen, else a size that fits, on the right screen.
+
+The experimenter's window must fit a 1366×768 laptop; the participant screen
+belongs on the second monitor when there is one; every window is saved (and
+restored) in the settings by name.
+"""
+
+from __future__ import annotations
+
+from PySide6.QtCore import QByteArray, QRect, QSettings, QSize
+from PySide6.QtGui import QGuiApplication, QScreen
+from PySide6.QtWidgets import QWidget
+
+__all__ = ["fit_size", "other_screen", "place", "restore", "save"]
+
+#: A restored window must show at least this much of itself on some screen, px (else it is placed afresh).
+_MIN_VISIBLE = 120
+
+
+def _screen_of(widget: QWidget | None) -> QScreen:
+    s = widget.screen() if widget is not None else None
+    return s if s is not None else QGuiApplication.primaryScreen()
+
+
+def other_screen(widget: QWidget | None) -> QScreen | None:
+    """A screen other than the one ``widget`` is on (the participant's monitor), or None with one screen."""
+    mine = _screen_of(widget)
+    others = [s for s in QGuiApplication.screens() if s is not mine]
+    return others[0] if others else None
+
+
+def fit_size(preferred: QSize, screen: QScreen, margin: int = 40) -> QSize:
+    """``preferred``, shrunk to fit the screen's available area less a margin."""
+    avail = screen.availableGeometry()
+    return QSize(min(preferred.width(), avail.width() - margin), min(preferred.height(), avail.height() - margin))
+
+
+def place(window: QWidget, preferred: QSize, screen: QScreen) -> None:
+    """Size ``window`` to fit ``screen`` and centre it there."""
+    size = fit_size(preferred.expandedTo(QSize(1, 1)), screen)
+    size = size.expandedTo(window.minimumSizeHint().boundedTo(screen.availableGeometry().size()))
+    avail = screen.availableGeometry()
+    window.resize(size)
+    window.move(avail.x() + (avail.width() - size.width()) // 2, avail.y() + (avail.height() - size.height()) // 2)
+
+
+def _on_a_screen(rect: QRect) -> bool:
+    for s in QGuiApplication.screens():
+        common = rect.intersected(s.availableGeometry())
+        if common.width() >= _MIN_VISIBLE and common.height() >= _MIN_VISIBLE:
+            # the title bar (top edge) must be reachable to move the window
+            return s.availableGeometry().contains(rect.center()) or common.top() == rect.top()
+    return False
+
+
+def restore(window: QWidget, settings: QSettings, key: str) -> bool:
+    """Restore ``window``'s saved geometry if there is one and it is on a screen now; True if restored."""
+    geom = settings.value(f"window/{key}")
+    if not isinstance(geom, (QByteArray, bytes)) or not window.restoreGeometry(geom):
+        return False
+    if not _on_a_screen(window.frameGeometry()):
+        return False
+    return True
+
+
+def save(window: QWidget, settings: QSettings, key: str) -> None:
+    """Remember ``window``'s geometry (position, size, maximised) under ``key``."""
+    settings.setValue(f"window/{key}", window.saveGeometry())

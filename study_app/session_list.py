@@ -1,0 +1,103 @@
+"""The sessions of a study database, as people ask about them (``haptic-study sessions``, the GUI's setup form).
+
+Read-only: the database is opened with ``mode=ro`` and nothing is written.
+Trials are counted for people: ``trials_done`` finished (success or timeout),
+``trials_aborted`` aborted (each re-run later in its session) and
+``trials_planned`` the schedule as drawn, re-runs not counted.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+from protocol.storage import StorageError, StudyDatabase
+
+__all__ = ["format_sessions", "list_sessions", "next_participant_number"]
+
+_SQL = """
+SELECT s.session_id, p.code, s.participant_number, s.kind, s.status, s.rig, s.seed, s.started_at, s.ended_at,
+       s.end_reason, s.schedule_json,
+       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome != 'aborted'),
+       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'aborted'),
+       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'success'),
+       (SELECT MIN(trial_index) FROM trials t WHERE t.session_id = s.session_id),
+       (SELECT MAX(trial_index) FROM trials t WHERE t.session_id = s.session_id)
+FROM sessions s JOIN participants p USING (participant_id)
+ORDER BY s.session_id
+"""
+
+
+def list_sessions(db_path: str | os.PathLike[str]) -> list[dict[str, Any]]:
+    """Every session of a study database, oldest first; empty when the file does not exist yet.
+
+    Returns
+    -------
+    list of dict
+        ``session_id, code, participant_number, kind, status, rig, seed, started_at, ended_at, end_reason,
+        trials_planned, trials_done, trials_aborted, successes`` and ``first_trial``, ``last_trial``: the
+        stored trials' numbers, from 1 (None when none is stored).
+
+    Raises
+    ------
+    StorageError
+        Not a study database (the message says why).
+    """
+    if not os.path.exists(db_path):
+        return []
+    db = StudyDatabase(db_path, readonly=True)
+    try:
+        rows = db.conn.execute(_SQL).fetchall()
+    finally:
+        db.close()
+    out = []
+    for (sid, code, number, kind, status, rig, seed, started, ended, reason, schedule, done, aborted, successes,
+         first, last) in rows:
+        try:
+            planned = sum(1 for t in json.loads(schedule) if t.get("repeat_of") is None)
+        except (ValueError, TypeError, AttributeError):
+            raise StorageError(f"{db_path}: session {sid} has an unreadable schedule") from None
+        out.append({
+            "session_id": int(sid), "code": code, "participant_number": int(number), "kind": kind,
+            "status": status, "rig": rig, "seed": int(seed), "started_at": started, "ended_at": ended,
+            "end_reason": reason or "", "trials_planned": planned, "trials_done": int(done),
+            "trials_aborted": int(aborted), "successes": int(successes),
+            "first_trial": None if first is None else int(first) + 1, "last_trial": None if last is None else int(last) + 1,
+        })
+    return out
+
+
+def next_participant_number(sessions: list[dict[str, Any]]) -> int:
+    """One more than the largest participant number in use (1 for an empty database)."""
+    return max((int(s["participant_number"]) for s in sessions), default=0) + 1
+
+
+def _count(n: int, word: str) -> str:
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
+def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
+    """A table of the sessions for the terminal, with how to plot one of their trials."""
+    if not sessions:
+        return f"{db_path}: no sessions yet"
+    head = ("session", "participant", "number", "kind", "status", "rig", "trials", "aborted", "started (UTC)")
+    rows = [head]
+    for s in sessions:
+        rows.append((
+            str(s["session_id"]), s["code"], str(s["participant_number"]), s["kind"],
+            "interrupted" if s["status"] == "running" else s["status"], s["rig"],
+            f"{s['trials_done']}/{s['trials_planned']}", str(s["trials_aborted"]),
+            str(s["started_at"])[:16].replace("T", " "),
+        ))
+    widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+             for r in rows]
+    n_participants = len({s["code"] for s in sessions})
+    lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")
+    lines.append("")
+    lines.append("trials: finished / planned (aborted trials are re-run and not counted as finished); "
+                 "interrupted sessions can be resumed (haptic-study run --resume CODE, or the GUI)")
+    lines.append("plot a trial: haptic-study plot-trial --db PATH --session SESSION --trial N --out FILE.png "
+                 "(trials are numbered from 1)")
+    return "\n".join(lines)
