@@ -22,8 +22,8 @@ from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
 from pipeline.frames import Vec3
-from pipeline.sim.touch import TouchSpec
 from pipeline.tomlfields import Fields, read_toml
+from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 
 __all__ = [
     "HardwareConfig",
@@ -40,6 +40,8 @@ __all__ = [
 ]
 
 ROBOT_MODES = ("observe", "teleop")
+#: The calibration file when ``[calibration] file`` is not given (next to the hardware file).
+DEFAULT_CALIBRATION_FILE = "calibration.json"
 
 
 class HardwareError(ValueError):
@@ -95,15 +97,19 @@ class HapticSettings:
     """3D Systems Touch."""
 
     device_name: str = "Default Device"
+    #: A command this old renders as zero, in the Touch's own servo thread (the device-side watchdog).
+    command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
 
 
 @dataclass(frozen=True, slots=True)
 class JawSettings:
-    """Jaw actuator Arduino."""
+    """Jaw actuator Arduino, and the Touch's stylus buttons that drive it (when teleoperation does not claim them)."""
 
     port: str
     baud: int = 115200
     ready_timeout_s: float = 3.0
+    close_button: int = 1
+    open_button: int = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,9 +121,12 @@ class HardwareConfig:
     haptic: HapticSettings
     jaw: JawSettings | None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by default.
     calibration_file: str | None = None
     source: str = "hardware"
     teleop: TeleopSettings | None = None
+    #: The instrument mounted now: its record in the calibration file is the one in use.
+    calibration_tool: str = "instrument"
 
 
 # -- validation ------------------------------------------------------------------------------
@@ -188,20 +197,32 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    h = f.table("haptic", top["haptic"], {"device_name"})
-    haptic = HapticSettings(f.string("haptic.device_name", h.get("device_name", "Default Device"),
-                                     what="a non-empty string (the OpenHaptics device name)"))
+    h = f.table("haptic", top["haptic"], {"device_name", "command_timeout_s"})
+    haptic = HapticSettings(
+        f.string("haptic.device_name", h.get("device_name", "Default Device"),
+                 what="a non-empty string (the OpenHaptics device name)"),
+        # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
+        f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S), lo=0.002, hi=0.05,
+                 lo_open=False, note="s (a force command this old renders as zero)"),
+    )
 
     jaw = None
     if "jaw" in top:
-        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s"})
+        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
         if "port" not in j:
             raise f.fail("jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
+        stylus = {}
+        for fld, default in (("close_button", 1), ("open_button", 2)):
+            stylus[fld] = f.choice(f"jaw.{fld}", j.get(fld, default), (1, 2),
+                                   "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
+        if stylus["close_button"] == stylus["open_button"]:
+            raise f.fail("jaw.open_button", stylus["open_button"], "must differ from jaw.close_button")
         jaw = JawSettings(
             f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
             f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
                      "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
             f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
+            stylus["close_button"], stylus["open_button"],
         )
 
     fr = f.table("frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
@@ -220,12 +241,14 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
                                 what="a whole number of samples"),
         rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
     )
-    cal = f.table("calibration", top.get("calibration", {}), {"file"})
+    cal = f.table("calibration", top.get("calibration", {}), {"file", "tool"})
     cal_file = cal.get("file")
     if cal_file is not None:
-        cal_file = f.string("calibration.file", cal_file, what="the path of a payload calibration JSON file")
+        cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
+    tool = f.string("calibration.tool", cal.get("tool", "instrument"),
+                    what="a non-empty name of the mounted instrument (its calibration is kept under it)")
     teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
-    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop)
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
 
 
 def _teleop(f: Fields, v: Any) -> TeleopSettings:
@@ -271,10 +294,9 @@ def load_hardware(path: str | Path) -> HardwareConfig:
     src = str(p)
     data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
     hw = hardware_from_dict(data, src)
-    if hw.calibration_file is not None and not Path(hw.calibration_file).is_absolute():
-        # a relative calibration path is relative to the hardware file, not to the working directory
-        hw = replace(hw, calibration_file=str(p.parent / hw.calibration_file))
-    return hw
+    # a relative calibration path is relative to the hardware file, not to the working directory
+    cal = Path(hw.calibration_file if hw.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
+    return replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
 
 
 # -- the real rig ----------------------------------------------------------------------------
@@ -341,11 +363,18 @@ def open_sensor(cfg: SensorSettings, clock: Clock) -> ForceSensor:
     )
 
 
-def open_robot(cfg: RobotSettings, clock: Clock) -> Robot:
-    """Connect to the UR controller described by ``cfg`` (read only)."""
+def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = None) -> Robot:
+    """Connect to the UR controller described by ``cfg`` (read only).
+
+    With ``tip_in_flange_m`` (a TCP calibration on record) the poses are moved from the pendant's TCP
+    (``robot.tcp_offset_m``) to the calibrated tip.
+    """
     from pipeline.backends.ur import UrRtdeRobot
 
-    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s)
+    corr = (0.0, 0.0, 0.0) if tip_in_flange_m is None else tuple(
+        t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m))
+    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s,
+                       tcp_correction_m=corr)  # type: ignore[arg-type]
 
 
 def open_servo(
@@ -385,7 +414,7 @@ def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
     """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
     from pipeline.backends.touch import TouchHapticDevice
 
-    return TouchHapticDevice(cfg.device_name, clock=clock)
+    return TouchHapticDevice(cfg.device_name, clock=clock, command_timeout_s=cfg.command_timeout_s)
 
 
 def open_jaw(cfg: JawSettings) -> JawActuator:
@@ -402,6 +431,7 @@ def build_real_rig(
     with_jaw: bool = True,
     on_open: Callable[[str], None] | None = None,
     control_factory: Callable[[str, float], Any] | None = None,
+    tip_in_flange_m: Vec3 | None = None,
 ) -> RealRig:
     """Open every configured device into a :class:`RealRig`.
 
@@ -423,6 +453,8 @@ def build_real_rig(
     control_factory
         Teleop mode only: replaces ur_rtde's ``RTDEControlInterface``
         constructor (``factory(host, frequency_hz)``); None uses ur_rtde.
+    tip_in_flange_m
+        The calibrated tip (a TCP calibration on record): the robot's poses are reported there.
 
     Raises
     ------
@@ -433,7 +465,7 @@ def build_real_rig(
     opened: list[Any] = []
     steps: list[tuple[str, Any]] = [
         ("force sensor", lambda: open_sensor(config.sensor, clk)),
-        ("robot", lambda: open_robot(config.robot, clk)),
+        ("robot", lambda: open_robot(config.robot, clk, tip_in_flange_m)),
         ("haptic device", lambda: open_haptic(config.haptic, clk)),
     ]
     if with_jaw and config.jaw is not None:

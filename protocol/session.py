@@ -27,7 +27,9 @@ brackets) at the first one where
 * the loop's watchdog has a fault latched (``fault``);
 * feedback was not what the design says: the loop's haptics flag differs from
   the trial's mode, the feedback gain is below 1 in a haptics-ON trial after
-  its ramp-in, or above 0 in a haptics-OFF trial (``feedback``);
+  its ramp-in, or above 0 in a haptics-OFF trial, or the haptic device's
+  thermal derating cut the rendered force below the designed one in a
+  haptics-ON trial (the record's ``derate`` < 1) (``feedback``);
 * records are missing: two consecutive records further apart than the
   watchdog's sensor-age limit, or records the runner could not read (``gap``).
 
@@ -419,6 +421,13 @@ class SessionRunner:
                 found.append((int(marked[k]), 2, "feedback",
                               f"feedback: gain {gain[k]:.3f} below 1 after the {lim.feedback_ramp_in_s:g} s ramp-in "
                               "of a haptics-ON trial"))
+            derate = rows["derate"][marked]
+            cut = np.flatnonzero(derate < 1.0)
+            if len(cut):
+                k = int(cut[0])
+                found.append((int(marked[k]), 2, "feedback",
+                              f"feedback: the haptic device's thermal derating rendered {derate[k]:.0%} of the "
+                              "designed force in a haptics-ON trial"))
         else:
             high = np.flatnonzero((gain > 0.0) & (rel > int(round((lim.feedback_ramp_out_s + lim.grace_s) * 1e9))))
             if len(high):

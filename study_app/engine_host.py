@@ -52,6 +52,8 @@ from pipeline.loop import ControllerDetached, LoopEvent, SetCalibration
 from pipeline.loop import OperatorStop as LoopOperatorStop
 from pipeline.loop import ResetFaults as LoopResetFaults
 from pipeline.sim.hand import HandObservation
+from pipeline.rig_calibration import CalibrationFileError
+from pipeline.supervisor import LoopSupervisor
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolError, load_protocol
 from protocol.participant import SimulatedParticipant
@@ -135,13 +137,8 @@ def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[Hardwar
         hardware_module.open_haptic = _import_factory(config.haptic_factory)  # type: ignore[assignment]
     try:
         eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0)
-    except DeviceError as exc:
+    except (DeviceError, CalibrationFileError) as exc:
         raise RuntimeError(f"real rig: {exc}") from None
-    except (OSError, ValueError, KeyError) as exc:
-        if hw.calibration_file is None:
-            raise
-        raise RuntimeError(f"real rig: {hw.source}: calibration.file = {hw.calibration_file!r}: cannot be read as a "
-                           f"payload calibration ({exc})") from None
     finally:
         hardware_module.open_haptic = original
     return eng, hw, text
@@ -396,6 +393,10 @@ class StudyEngine:
         self._last_t_ns = 0
         self._stats_from_tick = 0
         self.closed = False
+        #: Watches the loop thread and its tick counter (real clock; the virtual clock runs the loop in step()).
+        self.supervisor = LoopSupervisor(self.loop)
+        #: Why the haptic loop died ("" while it runs): nothing that needs the loop can be done any more.
+        self.loop_dead = ""
 
     # -- lifetime -------------------------------------------------------------------------------
     def start(self) -> None:
@@ -450,7 +451,7 @@ class StudyEngine:
             self._end_session("interrupted", reason)
         if self.config.clock == "real":
             self.loop.stop(timeout_s=5.0)
-        else:
+        elif not self.loop_dead:
             self.loop.ramp_down()
         if self.tracer is not None:
             self.tracer.close()
@@ -476,12 +477,25 @@ class StudyEngine:
     # -- the driver thread's work ---------------------------------------------------------------------
     def step(self, *, throttle: bool = True) -> None:
         """Advance: run a block of ticks (virtual clock), feed new records to the runner, publish health."""
+        if self.loop_dead:
+            return
         if self.config.clock == "virtual":
             n = self.config.block_ticks
-            self.loop.run_ticks(n)
+            try:
+                self.loop.run_ticks(n)
+            except Exception as exc:  # noqa: BLE001 - the loop died in this thread: make safe, report, store
+                self.loop.fail_safe(f"the haptic loop died ({exc!r}); the haptic device's command watchdog dropped "
+                                    "the force to zero", thread_dead=True)
+                self._loop_died(repr(exc))
+                return
             self._ticks_run += n
             if throttle and self.config.speed > 0:
                 self._throttle()
+        elif self.supervisor.check() is not None:
+            if self.supervisor.dead:
+                self._loop_died(self.supervisor.dead)
+                return
+            self._store_loop_events()  # frozen: no records come, but its event must reach the record now
         self._drain_ring()
         now = time.monotonic()
         if now - self._last_health >= self.config.health_period_s:
@@ -489,6 +503,32 @@ class StudyEngine:
             if self.tracer is not None:
                 self.tracer.refresh()
             self.publish(self.health())
+
+    def _store_loop_events(self) -> None:
+        """Hand the pending loop events to the session runner without records (the loop writes none)."""
+        runner = self.runner
+        if runner is not None and self._loop_events:
+            runner.process(np.empty(0), [self._loop_events.popleft() for _ in range(len(self._loop_events))])
+
+    def _loop_died(self, why: str) -> None:
+        """The haptic loop is dead (its fault is latched and reported): store it, leave the session resumable."""
+        self.loop_dead = why
+        self._drain_ring()  # the records it wrote before it died
+        self._store_loop_events()
+        runner = self.runner
+        if runner is not None and not runner.done:
+            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the application and "
+                      "resume it")
+            assert self.recorder is not None
+            self.recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "session_interrupted",
+                                reason)
+            self._end_session("interrupted", reason)
+        self.publish(self.health())
+
+    def _require_loop(self, what: str) -> None:
+        if self.loop_dead:
+            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); close and restart the application "
+                               "(an interrupted session can be resumed)")
 
     def quiet_wait_s(self, interval_s: float) -> float:
         """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
@@ -608,6 +648,7 @@ class StudyEngine:
                     raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
                 runner.abort_session(cmd.reason)
         elif isinstance(cmd, m.ResetFaults):
+            self._require_loop("reset faults")
             self.loop.submit(LoopResetFaults())
         elif isinstance(cmd, m.InjectFault):
             self._inject_fault(cmd)
@@ -639,6 +680,7 @@ class StudyEngine:
             raise ValueError(f"unknown command {cmd!r}")
 
     def _require_idle(self, what: str) -> None:
+        self._require_loop(what)
         if self.runner is not None and not self.runner.done:
             raise RuntimeError(f"{what}: a session is running (end or abort it first)")
 

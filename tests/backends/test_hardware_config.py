@@ -41,7 +41,10 @@ def test_example_file_is_valid_and_documents_the_defaults() -> None:
     assert hw.jaw is not None and hw.jaw.port == "/dev/ttyACM0" and hw.jaw.baud == 115200
     assert hw.framework.f_max_n == 3.0 and hw.framework.f_scale_n == 7.0 and hw.framework.filter_window == 10
     assert hw.framework.rot_haptic_base == DEFAULT_ROT_HAPTIC_BASE
-    assert hw.calibration_file is None
+    # the calibration file is next to the hardware file unless named; the tool and watchdog have defaults
+    assert hw.calibration_file == str(EXAMPLE.parent / "calibration.json") and hw.calibration_tool == "grasper"
+    assert hw.haptic.command_timeout_s == 0.010
+    assert (hw.jaw.close_button, hw.jaw.open_button) == (1, 2)
 
 
 def test_minimal_file_takes_defaults() -> None:
@@ -58,6 +61,13 @@ def test_minimal_file_takes_defaults() -> None:
         ({"sensor": {"host": "10 0 0 1"}}, "sensor.host = '10 0 0 1': must be an IPv4 address (e.g. 192.168.1.1) or a host name"),
         ({"sensor": {"hots": "10.0.0.1"}}, "sensor.hots = '10.0.0.1': unknown field; allowed: buffered, connect_timeout_s"),
         ({"sensor": {}}, "sensor.host = None: required: the Net F/T box's IP address"),
+        ({"haptic": {"command_timeout_s": 0.2}},
+         "haptic.command_timeout_s = 0.2: must be a number from 0.002 to 0.05 s (a force command this old renders as "
+         "zero)"),
+        ({"haptic": {"command_timeout_s": True}}, "haptic.command_timeout_s = True: must be a number"),
+        ({"calibration": {"tool": ""}}, "calibration.tool = '': must be a non-empty name of the mounted instrument"),
+        ({"jaw": {"port": "/dev/ttyACM0", "open_button": 1}}, "jaw.open_button = 1: must differ from jaw.close_button"),
+        ({"jaw": {"port": "/dev/ttyACM0", "close_button": 3}}, "jaw.close_button = 3: allowed values: 1 (the Touch's front"),
         ({"robot": {"host": "10.0.0.2", "mode": "drive"}}, "robot.mode = 'drive': allowed values: observe, teleop"),
         ({"robot": {"host": "10.0.0.2", "mode": "teleop"}}, "teleop = None: robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m"),
         ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0]}}, "teleop.workspace_max_m = None: required: the corner of the box"),
@@ -166,7 +176,7 @@ class _FakeTouch:
     def __init__(self, *a: object, **k: object) -> None:
         self.closed = False
 
-    def command_force(self, fx: float, fy: float, fz: float) -> None:
+    def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
         self.cmd = (fx, fy, fz)
 
     def read_state(self) -> HapticState:

@@ -60,7 +60,8 @@ def wait_for(e: StudyEngine, pred, timeout_s: float = 5.0) -> None:
     end = time.monotonic() + timeout_s
     while not pred():
         if time.monotonic() > end:
-            raise AssertionError("condition not reached")
+            raise AssertionError(f"condition not reached (faults {e.loop.faults}, {list(e.loop.events)[-3:]}, "
+                                 f"waiting {e.health().waiting!r})")
         e.step()
         time.sleep(0.002)
 
