@@ -112,16 +112,16 @@ class AxisCheck:
         """One line for the experimenter."""
         if self.samples == 0:
             return (f"{self.axis}  no push felt: the largest force was {self.peak_n:.2f} N (need {MIN_PUSH_N:g} N); "
-                    f"push the tip gently along base {self.axis}   FAIL")
+                    f"push the tip gently along base {self.axis} · FAIL")
         verdict = "PASS" if self.passed else "FAIL"
         base = f"base force {self.base_angle_deg:5.1f}° from {self.axis}"
         if self.base_angle_deg > MAX_ANGLE_DEG:
-            base += f" (points along {direction_name(self.measured_base)})"
+            base += f", along {direction_name(self.measured_base)}"
         hap = (f"rendered force {self.haptic_angle_deg:5.1f}° from haptic "
                f"{direction_name(self.expected_haptic, haptic=True)}")
         if self.haptic_angle_deg > MAX_ANGLE_DEG:
-            hap += f" (points {direction_name(self.measured_haptic, haptic=True)})"
-        return f"{self.axis}  peak {self.peak_n:.2f} N, {base}, {hap}   {verdict}"
+            hap += f", along {direction_name(self.measured_haptic, haptic=True)}"
+        return f"{self.axis}  peak {self.peak_n:.2f} N · {base} · {hap} · {verdict}"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe record (NaN angles as None)."""

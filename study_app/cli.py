@@ -210,6 +210,10 @@ def build_parser() -> argparse.ArgumentParser:
     bg.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
 
+    from study_app.calibrate_cmds import add_calibrate_command
+
+    add_calibrate_command(sub, add_command, _SEED)
+
     g = add_command(sub, "gui", "the experimenter's window (simulated rig by default)",
                     "haptic-study gui --db study.db\n"
                     "haptic-study gui --rig real --hardware hardware.toml --db study.db\n"
@@ -273,6 +277,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command in ("probe", "check-hardware"):
             return _cmd_hardware(args)
+        if args.command == "calibrate":
+            from study_app.calibrate_cmds import cmd_calibrate
+
+            return cmd_calibrate(args, CliError)
     except CliError as exc:
         print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
         return 2
