@@ -234,7 +234,8 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     # setting the device silently ignores (and the paper's scaling law would no longer hold)
     peak_n = TouchSpec().peak_force_n
     framework = FrameworkConfig(
-        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=0.0, hi=peak_n,
+        # from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there
+        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=1e-6, hi=peak_n, lo_open=False,
                          note="(N; the 3D Systems Touch's peak force)"),
         f_scale_n=f.number("framework.f_scale_n", fw.get("f_scale_n", 7.0), lo=0.0, hi=1000.0),
         filter_window=f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,

@@ -86,7 +86,7 @@ def test_minimal_file_takes_defaults() -> None:
         ({"jaw": {}}, "jaw.port = None: required: the Arduino's serial port"),
         ({"frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, "frames.rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, -1]] is a reflection"),
         ({"frames": {"rot_haptic_base": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]] is not a rotation"),
-        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
         ({"framework": {"filter_window": 0}}, "framework.filter_window = 0: must be a whole number of samples from 1 to 1000"),
         ({"version": 2}, "version = 2: this software reads hardware file version 1"),
         ({"haptic": None}, "haptic = None: must be a table"),
@@ -120,8 +120,8 @@ def test_minimal_file_takes_defaults() -> None:
          "frames.rot_tip_sensor = [[100000000000000000...0000000000000000000, 0, 0], [0, 1, 0], [0, 0, 1]]: is not a rotation: every entry of a rotation matrix lies within ±1"),
         ({"frames": {"rot_haptic_base": [[1, 0, 0], [0, float("nan"), 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0, 0], [0, nan, 0], [0, 0, 1]]: must be a rotation matrix"),
         # f_max: never above the Touch's peak force
-        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
-        ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number > 0 and ≤ 3.3"),
+        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number from 1e-06 to 3.3"),
     ],
 )
 def test_bad_fields_name_field_value_and_what_is_allowed(patch: dict, message: str) -> None:
