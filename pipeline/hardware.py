@@ -313,11 +313,19 @@ class RealRig:
         self.jaw = jaw
         #: A :class:`pipeline.teleop.TeleopDriver` when the app owns the robot (``robot.mode = "teleop"``).
         self.teleop = teleop
+        #: Called with (now_ns, the stylus buttons) every tick: :meth:`pipeline.jaw_control.JawController.buttons`.
+        self.on_buttons: Callable[[int, int], None] | None = None
 
     def advance(self, now_ns: int) -> None:
-        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends)."""
+        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends).
+
+        The stylus buttons go to the jaw's controller (no I/O either: it queues).
+        """
         if self.teleop is not None:
             self.teleop.update(now_ns)
+        hook = self.on_buttons
+        if hook is not None:
+            hook(now_ns, self.haptic.read_state().buttons)
 
     def true_contact_force(self) -> None:
         """No ground truth on hardware."""

@@ -10,6 +10,7 @@ reproducible bit for bit on the virtual clock.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +20,7 @@ from pipeline.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, 
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
 from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
 from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
+from pipeline.sim.jaw import SimJaw
 from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
@@ -115,6 +117,10 @@ class SimRig:
         self.teleop: Any = None
         #: Fault rehearsal: faults scheduled on the rig's clock (:meth:`inject_fault`).
         self.faults = FaultInjector()
+        #: The instrument's jaw (the sketch's limits, no serial port).
+        self.jaw = SimJaw()
+        #: Called with (now_ns, the stylus buttons) every step: :meth:`pipeline.jaw_control.JawController.buttons`.
+        self.on_buttons: Callable[[int, int], None] | None = None
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
@@ -149,6 +155,9 @@ class SimRig:
             # the app owns the robot: targets come from the teleoperation controller through servo_tcp
             self.teleop.update(now_ns)
         robot.advance(now_ns, dt)
+        hook = self.on_buttons
+        if hook is not None:
+            hook(now_ns, touch.buttons)
 
         depth = cfg.surface_z_m - robot.position_m[2]
         f = self.tissue.step(depth, dt) if dt > 0 else self.tissue.force_n

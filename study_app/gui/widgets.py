@@ -264,14 +264,15 @@ class QtHealthPanel(QWidget):
         self.devices.verticalHeader().setVisible(False)
         self.devices.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.devices.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        # all three devices, without a scroll bar
+        # all four devices (the jaw's row when there is one), without a scroll bar
         self.devices.verticalHeader().setDefaultSectionSize(22)
-        self.devices.setFixedHeight(3 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
+        self.devices.setFixedHeight(4 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
         self.reset_button = QPushButton("Reset faults")
         self.loop = QLabel()
         self.loop.setTextFormat(Qt.TextFormat.RichText)
         self.loop.setWordWrap(True)
+        self.thermal = QLabel()
         self.force = QLabel()
         self.force.setWordWrap(True)
         self.force.hide()
@@ -288,6 +289,7 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.devices)
         lay.addLayout(row)
         lay.addWidget(self.loop)
+        lay.addWidget(self.thermal)
         lay.addWidget(self.force)
         lay.addWidget(self.log_label)
         lay.addWidget(self.log)
@@ -307,7 +309,8 @@ class QtHealthPanel(QWidget):
         h = self.health
         self.devices.setRowCount(len(h.devices))
         for i, d in enumerate(h.devices):
-            cells = (d.name, d.state, f"{d.rate_hz:.0f}", f"{d.age_ms:.1f}")
+            cells = (d.name, d.state, "–" if d.rate_hz != d.rate_hz else f"{d.rate_hz:.0f}",
+                     "–" if d.age_ms != d.age_ms else f"{d.age_ms:.1f}")
             for j, text in enumerate(cells):
                 item = self.devices.item(i, j)
                 if item is None:
@@ -315,7 +318,7 @@ class QtHealthPanel(QWidget):
                     self.devices.setItem(i, j, item)
                 item.setText(text)
                 if j == 1:
-                    item.setForeground(QColor(20, 130, 40) if d.state == "ok" else QColor(200, 30, 30))
+                    item.setForeground(QColor(20, 130, 40) if d.state.startswith("ok") else QColor(200, 30, 30))
         text = h.faults_text()
         self.faults.setText(f"Faults: {text}")
         self.faults.setStyleSheet("color: #c81e1e; font-weight: 600;" if h.faults else "color: #147f28;")
@@ -323,6 +326,10 @@ class QtHealthPanel(QWidget):
         loop = self.loop_html()
         if self.loop.text() != loop:
             self.loop.setText(loop)
+        th = h.thermal_figure()
+        self.thermal.setText(th.text if th is not None else "")
+        if th is not None:
+            self.thermal.setStyleSheet(f"color: {LEVEL_COLOURS[th.level][0]};")
         warning = h.force_warning()
         if warning != self.force.text():
             self.force.setText(warning)

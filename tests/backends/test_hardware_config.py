@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 import tomllib
 from pathlib import Path
 
@@ -214,7 +215,11 @@ def test_a_failing_device_closes_the_ones_already_open(tmp_path: Path) -> None:
         hw = load_hardware(write_rig_file(tmp_path, netft, rtde, None))
         with pytest.raises(DeviceError, match=r"^haptic device: .*pip install 'haptic-study\[touch\]'"):
             build_real_rig(hw, VirtualClock())
-        # the sensor was opened and closed again: it sent START and then STOP
+        # the sensor was opened and closed again: it sent START and then STOP (the fake reads UDP in its own
+        # thread: wait, bounded, for the STOP datagram to arrive)
+        deadline = time.monotonic() + 2.0
+        while [r[1] for r in netft.requests] != [2, 0] and time.monotonic() < deadline:
+            time.sleep(0.002)
         assert [r[1] for r in netft.requests] == [2, 0]
         assert rtde.wait_for("DISCONNECTED")
 
