@@ -169,7 +169,7 @@ def _tcp_result(poses: list[Any], name: str, note: str) -> dict[str, Any]:
         return _refused("tcp", name, len(poses), str(exc), note)
     worst = max(tc.residuals, key=lambda r: r[1])
     text = "\n".join([
-        f"TCP pivot calibration ({note}, {tc.n_poses} orientations '{name}'):",
+        f"TCP pivot calibration ({note}, {tc.n_poses} orientations" + (f" '{name}'" if name else "") + "):",
         f"  tip in the flange frame ({_mm(tc.tip_in_flange_m)}) mm",
         f"  pivot (the divot) in the base frame ({_mm(tc.pivot_base_m)}) mm",
         f"  RMS residual {tc.rms_residual_m * 1e3:.3f} mm (worst {worst[0]} {worst[1] * 1e3:.3f} mm); "
@@ -280,6 +280,18 @@ def _still_pose(robot: Any, seconds: float) -> tuple[Any, str]:
     return last._replace(position_m=tuple(float(v) for v in p.mean(axis=0))), ""
 
 
+def _sensor_and_robot(hw: Any, clock: Any) -> tuple[Any, Any]:
+    """Open the Net F/T and the robot (read only); the sensor is closed again if the robot cannot be opened."""
+    from pipeline.hardware import open_robot, open_sensor
+
+    sensor = open_sensor(hw.sensor, clock)
+    try:
+        return sensor, open_robot(hw.robot, clock)
+    except BaseException:
+        sensor.close()
+        raise
+
+
 def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
     from pipeline.frames import mat_vec, matrix_to_rotvec
     from pipeline.hardware import open_robot
@@ -315,7 +327,7 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
                  f"{rv[2]:+.3f}) rad")
     finally:
         robot.close()
-    out = _tcp_result(poses, name if name != "recommended" else "recorded", note)
+    out = _tcp_result(poses, "", note)
     if out["accepted"]:
         t = out["tip_in_flange_m"]
         out["text"] += (f"\n  set the TCP on the pendant to ({_mm(t)}) mm and robot.tcp_offset_m to "
@@ -331,17 +343,11 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
 
     from pipeline.compensation import CalibrationPose, PayloadCalibration, identify_payload
     from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
-    from pipeline.hardware import open_robot, open_sensor
     from study_app.engine_host import pose_set
 
     rots = pose_set(name)
     rts = hw.framework.rot_tip_sensor
-    sensor = open_sensor(hw.sensor, clock)
-    try:
-        robot = open_robot(hw.robot, clock)
-    except BaseException:
-        sensor.close()
-        raise
+    sensor, robot = _sensor_and_robot(hw, clock)
     poses: list[CalibrationPose] = []
     _say(f"Payload/bias calibration of {note}: move the robot to each pose with the tool hanging free, then press "
          "Enter; 's' skips a pose the robot cannot reach, 'c' identifies from the poses so far.")
@@ -387,15 +393,9 @@ def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, n
 
     from pipeline.frame_check import AXES, FrameCheck, check_axis
     from pipeline.framework import HapticFramework
-    from pipeline.hardware import open_robot, open_sensor
 
     fw = HapticFramework(hw.framework, payload)
-    sensor = open_sensor(hw.sensor, clock)
-    try:
-        robot = open_robot(hw.robot, clock)
-    except BaseException:
-        sensor.close()
-        raise
+    sensor, robot = _sensor_and_robot(hw, clock)
     words = {"+x": "+x", "+y": "+y", "+z": "+z (up)"}
     results = []
     _say(f"Frame and sign check of {note}: the tip hangs free. At each prompt press Enter, then within 3 s push the "

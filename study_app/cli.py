@@ -225,6 +225,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--hardware", default=None, metavar="FILE", help="hardware.toml for --rig real")
     g.add_argument("--screenshot", default=None, metavar="DIR",
                    help="drive a short simulated session offscreen and save PNGs of every main view into DIR")
+    g.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
+                   metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
+                                       "telling the pipeline (rehearse the wizard's frame check failing)")
     return p
 
 
@@ -416,6 +419,8 @@ def _cmd_gui(args: argparse.Namespace) -> int:
             raise CliError(str(exc)) from None
     if args.screenshot is not None and args.rig != "sim":
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
+    if args.sim_mount_error_deg and args.rig != "sim":
+        raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
     if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")):
         # without this Qt aborts the process with a core dump and a page of plugin names
         raise CliError(
@@ -429,7 +434,8 @@ def _cmd_gui(args: argparse.Namespace) -> int:
         # a rehearsal on the virtual clock at 4x real time: a few trials in seconds
         host = HostConfig(rig="sim", clock="virtual", speed=4.0)
     else:
-        host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real")
+        host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
+                          sim_mount_error_deg=args.sim_mount_error_deg)
     try:
         return run_gui(host, db_path=args.db, screenshot_dir=args.screenshot)
     except RuntimeError as exc:

@@ -228,6 +228,9 @@ class HostConfig:
     trace_jitter
         Real clock only: explain every loop period over 1.5 ms (:mod:`pipeline.jitter_trace`),
         reported in :attr:`study_app.messages.Health.late_periods` (diagnosis and benchmarks).
+    sim_mount_error_deg
+        Simulated rig: the sensor is mounted turned about its z axis by this much, unknown to the pipeline
+        (``SimRigConfig.sensor_z_mount_deg``): rehearse the frame check failing.
     """
 
     rig: str = "sim"
@@ -239,6 +242,7 @@ class HostConfig:
     block_ticks: int = 50
     health_period_s: float = 0.5
     trace_jitter: bool = False
+    sim_mount_error_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -384,7 +388,8 @@ class StudyEngine:
             self.eng, self.hardware, self.hardware_text = build_real_engine(config, shared_ring=shared_ring)
         else:
             self.eng = build_sim_engine(
-                EngineConfig(sim=SimRigConfig(seed=config.rig_seed), clock=config.clock, calibrate=True, driver="hold",
+                EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
+                             clock=config.clock, calibrate=True, driver="hold",
                              haptics_on=False, refine_bias=True, ring_seconds=30.0),
                 shared_ring=shared_ring,
             )
@@ -1036,14 +1041,18 @@ class StudyEngine:
                 self.loop.submit(SetCalibration(cal))
                 self._record_step("payload", cal)
         finally:
-            self.stats.reset()
-            self._stats_from_tick = self.loop.tick_count + 1
-            self._reanchor()
-            if real:
-                if self.tracer is not None:
-                    self.tracer.restart()
-                self.loop.start()
+            self._after_loop_pause(real)
         self.publish(result)
+
+    def _after_loop_pause(self, restart: bool) -> None:
+        """The loop ran the rig for a calibration step: restart its timing statistics (and its thread)."""
+        self.stats.reset()
+        self._stats_from_tick = self.loop.tick_count + 1
+        self._reanchor()
+        if restart:
+            if self.tracer is not None:
+                self.tracer.restart()
+            self.loop.start()
 
     # -- the commissioning chain: what is on record, and the steps (TCP, payload above, frames) ------------------
     def _tool_record(self) -> ToolCalibration:
@@ -1164,13 +1173,7 @@ class StudyEngine:
             check = push_axes(self.eng.rig, self.loop, self.ring)
         finally:
             self.cursor = self.ring.write_count  # the check's own records are not the loop's timing
-            self.stats.reset()
-            self._stats_from_tick = self.loop.tick_count + 1
-            self._reanchor()
-            if real:
-                if self.tracer is not None:
-                    self.tracer.restart()
-                self.loop.start()
+            self._after_loop_pause(real)
         for a in check.axes:
             self.publish(m.FrameAxisChecked(a.axis, a.passed, a.describe(), a.to_dict()))
         self._frames_done(check)

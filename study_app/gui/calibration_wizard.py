@@ -84,6 +84,7 @@ class TcpPage(QWidget):
         lay.addLayout(row)
         lay.addWidget(self.verdict)
         lay.addWidget(self.orientations, 1)
+        lay.addStretch(1)  # the simulated rig has no table: keep the rest at the top
         self.pose_set.currentTextChanged.connect(lambda t: setattr(model, "pivot_set", t))
         self.run_button.clicked.connect(on_run)
         self.compute_button.clicked.connect(on_compute)

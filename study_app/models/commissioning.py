@@ -15,6 +15,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pipeline.frame_check import AXES
 from pipeline.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG
 from study_app import messages as m
@@ -107,7 +109,7 @@ class CommissioningModel:
             self.status = ev
         elif isinstance(ev, m.PivotRecorded):
             self.pivots.append(ev)
-            self.tcp_state, self.tcp_message = "idle", ""
+            self.tcp_state, self.tcp_message = "idle", self._too_close(ev)
         elif isinstance(ev, m.TcpCalibrationDone):
             self.tcp_result = ev
             self.tcp_state = "accepted" if ev.accepted else "refused"
@@ -126,6 +128,20 @@ class CommissioningModel:
         else:
             return
         self.changed.emit()
+
+    def _too_close(self, ev: m.PivotRecorded) -> str:
+        """A warning when an orientation repeats an earlier one (it adds nothing to the fit)."""
+        r = np.asarray(ev.rot_base_flange).reshape(3, 3)
+        best: tuple[float, str] | None = None
+        for p in self.pivots[:-1]:
+            c = (float(np.trace(np.asarray(p.rot_base_flange).reshape(3, 3).T @ r)) - 1.0) / 2.0
+            ang = math.degrees(math.acos(min(1.0, max(-1.0, c))))
+            if best is None or ang < best[0]:
+                best = (ang, p.label)
+        if best is None or best[0] >= 5.0:
+            return ""
+        return (f"{ev.label} is only {best[0]:.1f}° from {best[1]}: it adds little -- turn the instrument further "
+                f"(at least {MIN_SPREAD_DEG:g}° between orientations, in two directions) and record again")
 
     # -- what the wizard shows -------------------------------------------------------------------------
     def status_lines(self) -> list[tuple[str, bool, str]]:
@@ -164,7 +180,7 @@ class CommissioningModel:
         r = self.tcp_result
         if self.tcp_state == "running":
             return "computing …" if self.real else "turning the instrument about the divot …"
-        if r is None:
+        if r is None or self.tcp_message and self.tcp_state == "idle":
             return self.tcp_message
         if not r.accepted:
             return f"Refused: {r.reason}"

@@ -104,3 +104,20 @@ def test_the_wizard_steps_on_the_simulated_rig(engine) -> None:
     assert refused == ["simulated rig: the orientations run automatically (Run TCP calibration)",
                        "simulated rig: the pushes run automatically (Run frame check)",
                        "pose set = 'sideways': allowed values are recommended, minimal, roll only"]
+
+
+def test_the_gui_s_mount_error_makes_the_wizard_s_frame_check_fail_naming_the_axes() -> None:
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_mount_error_deg=90.0), events.append, shared_ring=False)
+    e.start()
+    try:
+        e.handle(m.CheckFrames())
+    finally:
+        e.close("test over")
+        e.release_ring()
+    (fc,) = [ev for ev in events if isinstance(ev, m.FrameCheckDone)]
+    assert not fc.passed and fc.summary.startswith("Frames and signs: FAIL on +x (")
+    off = [float(s.split("(")[1].split("°")[0]) for s in fc.summary.split(":")[1].split(",")[:2]]
+    assert all(abs(a - 90.0) < 3.0 for a in off), fc.summary
+    status = [ev for ev in events if isinstance(ev, m.CalibrationStatus)][-1]
+    assert [(n, ok) for n, ok, _ in status.steps][2] == ("frames", False)
