@@ -434,7 +434,7 @@ class StudyEngine:
         self._frame_axes: dict[str, AxisCheck] = {}
         self._gate_passed: object | None = None  # a start whose rest check passed: let it through once
         self._starting: object | None = None  # a start waiting for its rest check
-        self._override: tuple[str, str] | None = None  # (what was missing, the experimenter's reason)
+        self._override: tuple[str, str, float] | None = None  # (what was missing, the reason, force at rest N)
         #: The instrument's jaw (the simulated one, or the Arduino of the hardware file); None: there is none.
         self.jaw = self._make_jaw()
 
@@ -816,11 +816,12 @@ class StudyEngine:
         self.trigger = None
         self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
         if self._override is not None:
-            missing, why = self._override
+            missing, why, rest_n = self._override
             self._override = None
             recorder.event(opened.session_id, opened.clock_offset_s, "calibration_override",
                            f"started by the experimenter's override: {missing or 'the calibration chain was on record'}; "
-                           f"the force at rest was not checked. Reason: {why}")
+                           f"the compensated force at rest was {rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). "
+                           f"Reason: {why}")
         if self.config.clock == "real":
             gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
         tr = opened.protocol.trial
@@ -1095,7 +1096,8 @@ class StudyEngine:
         path = eng.calibration_file.path if isinstance(eng, HardwareEngine) and eng.calibration_file is not None else None
         out: dict[str, Any] = {"rig_calibration": {"tool": self.tool_cal.tool, "file": path, **self.tool_cal.to_dict()}}
         if self._override is not None:
-            out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1]}
+            out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1],
+                                           "rest_force_n": self._override[2]}
         return out
 
     def _calibrate_tcp(self, name: str) -> None:
@@ -1246,6 +1248,10 @@ class StudyEngine:
     def _gate(self, cmd: m.StartSession | m.ResumeSession) -> bool:
         """The real rig's calibration gate; True when the start waits for its rest check (it comes back later).
 
+        The chain (TCP, payload, frames) must be on record for the mounted tool -- or the experimenter gives a
+        reason to start without it -- and then, in every case, the compensated force at rest over
+        ``REST_CHECK_S`` must be below ``REST_MAX_FORCE_N``.
+
         Raises :class:`RuntimeError` (one line, naming the missing step) when the start is refused.
         """
         if not self.real:
@@ -1253,12 +1259,12 @@ class StudyEngine:
         if cmd is self._gate_passed:
             self._gate_passed = None
             return False
+        self._override = None  # a start that failed after its check must not lend its override to this one
         missing = self.tool_cal.missing(*self._frames_in_use())
+        # the override waives the steps on record, never the force at rest: without a payload that fits the
+        # mounted tool the tool's own weight would be rendered as feedback
         reason = cmd.override_reason.strip()
-        if reason:
-            self._override = (missing, reason)
-            return False
-        if missing:
+        if missing and not reason:
             raise RuntimeError(f"real rig: {missing}")
         if self._starting is not None:
             raise RuntimeError("start: the force at rest is being measured; wait for it")
@@ -1271,8 +1277,11 @@ class StudyEngine:
                 self.publish(m.CommandRefused(type(cmd).__name__, (
                     f"real rig: the compensated force at rest is {f:.3f} N over {REST_CHECK_S:g} s (limit "
                     f"{REST_MAX_FORCE_N:g} N): the tool touches something, or its payload calibration does not match "
-                    f"the mounted tool {self.tool_cal.tool!r}; keep it clear and still, or calibrate the payload again")))
+                    f"the mounted tool {self.tool_cal.tool!r}; keep it clear and still, or calibrate the payload again"
+                    + ("; an override does not waive this check" if reason else ""))))
                 return
+            if reason:
+                self._override = (missing, reason, f)
             self._gate_passed = cmd
             self.handle(cmd)
 

@@ -180,13 +180,15 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
     assert rc["payload"]["mass_kg"] == pytest.approx(MASS_KG, abs=1e-5) and "tcp" not in rc and "frames" not in rc
     assert config["calibration_override"]["reason"] == "rehearsal of the session flow, nobody holds the stylus"
     assert config["calibration_override"]["missing"].startswith("no TCP calibration on record for tool 'instrument'")
+    assert config["calibration_override"]["rest_force_n"] < 0.1  # the override waived the steps, not the force at rest
     con = sqlite3.connect(db)
     try:
         (detail,) = con.execute("SELECT detail FROM events WHERE kind = 'calibration_override'").fetchone()
     finally:
         con.close()
     assert detail.startswith("started by the experimenter's override: no TCP calibration on record for tool") and \
-        detail.endswith("Reason: rehearsal of the session flow, nobody holds the stylus")
+        "; the compensated force at rest was 0.0" in detail and \
+        detail.endswith("N (limit 0.1 N). Reason: rehearsal of the session flow, nobody holds the stylus")
     # and the wizard's accepted payload is in the calibration file, for the tool, dated
     saved = json.loads((tmp_path / "calibration.json").read_text(encoding="utf-8"))
     assert saved["tools"]["instrument"]["payload"]["mass_kg"] == pytest.approx(MASS_KG, abs=1e-5)

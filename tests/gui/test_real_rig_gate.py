@@ -137,3 +137,29 @@ def test_the_chain_in_order_then_the_gate_measures_the_force_at_rest(engine, tmp
     assert isinstance(started, m.SessionStarted), started
     e.handle(m.AbortSession("gate checked"))
     wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
+
+
+def test_nothing_on_record_is_refused_in_one_line_and_an_override_does_not_waive_the_force_at_rest(
+        engine, tmp_path, short_protocol) -> None:
+    e, events, netft, rtde = engine
+    put(rtde, TOOL_DOWN, PIVOT)
+    netft.counts = counts(TOOL_DOWN)  # the tool hangs free; no payload on record: its weight is not compensated
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
+    db = str(tmp_path / "real.db")
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+    (refused,) = [ev for ev in events[n:] if isinstance(ev, m.CommandRefused)]
+    assert refused.message == ("real rig: no TCP calibration on record for tool 'instrument': run haptic-study "
+                               "calibrate tcp --rig real --hardware FILE (or the calibration wizard's TCP step)")
+    assert "\n" not in refused.message and not Path(db).exists()
+    # the experimenter overrides with a reason: the steps are waived, the force at rest is still measured -- and the
+    # uncompensated weight of the tool (what feedback would push the hand with) refuses the start
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1, override_reason="rehearsal"))
+    assert isinstance(events[n], m.StartChecking)
+    (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    weight = float(np.linalg.norm(np.asarray(counts(TOOL_DOWN)[:3]) / CPF))
+    assert isinstance(refused, m.CommandRefused) and refused.message.startswith(
+        f"real rig: the compensated force at rest is {weight:.3f} N over 2 s (limit 0.1 N)")
+    assert refused.message.endswith("; an override does not waive this check")
+    assert not Path(db).exists()
