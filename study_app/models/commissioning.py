@@ -194,6 +194,9 @@ class CommissioningModel:
 
     def frames_instruction(self) -> str:
         """What to do in the frames step now."""
+        if not self.real and self.frames_state == "running":
+            return ("Checking … the simulated experimenter pushes the free tip along +x, +y and +z in turn (feedback "
+                    "off); the result appears below when the three pushes are done.")
         if not self.real:
             return ("The simulated experimenter pushes the free tip 1 N along each base axis with feedback off; the "
                     "compensated force in the base frame and the force the Touch would render must point the "

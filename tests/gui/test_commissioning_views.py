@@ -89,6 +89,9 @@ def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:
     wiz.tcp_page.run_button.click()
     wiz.frames_page.run_button.click()
     assert sent == [m.CalibrateTcp("minimal"), m.CheckFrames()]
+    # the check is under way (no answer yet): the page says so
+    assert wiz.frames_page.instruction.text().startswith("Checking … the simulated experimenter pushes")
+    assert not wiz.frames_page.run_button.isEnabled()
     assert wiz.tcp_page.orientations.isHidden() and wiz.tcp_page.run_button.text() == "Run TCP calibration"
 
 
