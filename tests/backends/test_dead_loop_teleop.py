@@ -98,7 +98,13 @@ class TeleopBench:
 
     def teleoperating(self) -> None:
         for _ in range(200):
+            seq, sent = self.servo._target_seq, self.control.count("servoL")
             self.ms()
+            if self.servo._target_seq != seq:
+                # the stepped clock waits for the adapter's worker to send it (the worker runs on the wall clock:
+                # stepping on regardless would age the target past the adapter's limit before it is picked up);
+                # the worker sends only the newest target, so one servoL may stand for two targets
+                assert self.control.wait_count("servoL", sent + 1)
         assert self.rig.controller.state is TeleopState.ENGAGED, self.rig.controller.stop_reason
         assert self.control.wait_count("servoL", 5) and self.servo.servoing
 
