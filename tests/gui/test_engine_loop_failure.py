@@ -87,3 +87,70 @@ def test_a_dead_loop_thread_on_the_real_clock_is_found_by_the_supervisor() -> No
         e.close("test over")
         e.release_ring()
         assert time.monotonic() - t0 < 5.0
+
+
+def test_a_frozen_loop_in_a_session_on_the_real_clock_is_latched_and_stored(tmp_path, short_protocol) -> None:
+    """The loop thread hangs in a sensor read mid-session: the supervisor (on a clock the test moves) reports it
+    after 50 ms without a tick, the runner stores it, and the loop latches it when it runs again."""
+    import threading
+
+    from pipeline.clock import VirtualClock
+
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="real"), events.append, shared_ring=False)
+    hang, hanging, thaw = threading.Event(), threading.Event(), threading.Event()
+    read = e.eng.rig.sensor.read_wrench
+
+    def read_or_hang():  # type: ignore[no-untyped-def]
+        if hang.is_set():
+            hang.clear()
+            hanging.set()
+            thaw.wait(10.0)
+        return read()
+
+    e.eng.rig.sensor.read_wrench = read_or_hang  # type: ignore[method-assign]
+    e.start()
+    db = str(tmp_path / "s.db")
+    try:
+        e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+        assert e.runner is not None
+        clock = VirtualClock()
+        e.supervisor.clock = clock  # the supervisor's wall clock, moved by the test
+        ticks = e.loop.tick_count
+        end = time.monotonic() + 5.0
+        while e.loop.tick_count < ticks + 50 and time.monotonic() < end:  # the session runs (bounded wait)
+            e.step(throttle=False)
+            time.sleep(0.002)
+        hang.set()
+        assert hanging.wait(5.0)  # the loop thread is inside the read that hangs
+        e.step(throttle=False)  # the supervisor sees the last tick count
+        frozen_at = e.loop.tick_count
+        clock.advance(50_000_000)
+        e.step(throttle=False)
+        assert not [ev for ev in events if isinstance(ev, m.EngineFault) and "LOOP_STALLED" in ev.detail]
+        clock.advance(1_000_000)
+        e.step(throttle=False)
+        assert e.loop.tick_count == frozen_at  # still hanging
+        (fault,) = [ev for ev in events if isinstance(ev, m.EngineFault) and "LOOP_STALLED" in ev.detail]
+        assert fault.detail.startswith("LOOP_STALLED: no loop tick for 51 ms (limit 50 ms): the haptic loop is frozen")
+        # stored while the loop still hangs (it may never come back): the recorder commits on its own thread
+        end = time.monotonic() + 5.0
+        while not any(d.startswith("LOOP_STALLED") for _, d in stored_events(db)) and time.monotonic() < end:
+            e.step(throttle=False)
+            time.sleep(0.01)
+        assert e.loop.tick_count == frozen_at
+        assert any(k == "fault" and d.startswith("LOOP_STALLED: no loop tick for 51 ms") for k, d in stored_events(db))
+        thaw.set()
+        end = time.monotonic() + 5.0
+        while not e.loop.faults & Fault.LOOP_STALLED and time.monotonic() < end:
+            e.step(throttle=False)
+            time.sleep(0.002)
+        assert e.loop.faults & Fault.LOOP_STALLED  # latched by the loop itself once it ran again
+        assert not e.loop_dead  # frozen, not dead: the session goes on, waiting for a reset
+    finally:
+        thaw.set()
+        e.close("test over")
+        e.release_ring()
+    stored = [d for k, d in stored_events(db) if k == "fault" and d.startswith("LOOP_STALLED")]
+    assert stored[0].startswith("LOOP_STALLED: no loop tick for 51 ms (limit 50 ms): the haptic loop is frozen; the "
+                                "haptic device's command watchdog dropped the force to zero")
