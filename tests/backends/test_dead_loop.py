@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 
 import pytest
 
@@ -85,13 +86,19 @@ class Rig:
 
 
 class Bench:
-    """Loop thread + Touch on FakeHD + supervisor, all on one stepped clock."""
+    """Loop thread + Touch on FakeHD + supervisor, all on one stepped clock.
 
-    def __init__(self) -> None:
+    ``make_rig(clock, touch)`` builds the rig (default :class:`Rig`); ``buttons`` are the stylus buttons held from
+    the first tick on.
+    """
+
+    def __init__(self, make_rig: Callable[[SteppedClock, TouchHapticDevice], Rig] = Rig, buttons: int = 0) -> None:
         self.clock = SteppedClock()
         self.hd = FakeHD()
+        self.hd.button_mask = buttons
         self.touch = TouchHapticDevice(api=self.hd, clock=self.clock)
-        self.rig = Rig(self.clock, self.touch)
+        self.hd.tick()  # a stylus state before the loop's first tick
+        self.rig = make_rig(self.clock, self.touch)
         self.events: list[LoopEvent] = []
         self.loop = HapticLoop(self.rig, HapticFramework(FrameworkConfig()), self.clock)
         self.loop.on_event = self.events.append

@@ -23,23 +23,18 @@ clock stands still meanwhile, so every age it judges is exact.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator
 
 import pytest
 
 from fake_ur_control import FakeControl
 from stepped_clock import SteppedClock
-from test_dead_loop import MS, PushSensor, Rig, stalled
-from test_touch import FakeHD
+from test_dead_loop import MS, Bench, Rig, stalled
 from test_ur_control import QUIET_S, listener  # noqa: F401 - the fixture: a loopback port for the adapter's probe
 
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
 from pipeline.devices import Fault
-from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop, LoopEvent, SetHaptics
-from pipeline.supervisor import LoopSupervisor
 from pipeline.teleop import TeleopConfig, TeleopController, TeleopDriver, TeleopState
 
 DEADMAN = 1
@@ -71,30 +66,17 @@ class TeleopRig(Rig):
         self.teleop.stop_motion(reason)
 
 
-class TeleopBench:
-    def __init__(self, port: int) -> None:
-        self.clock = SteppedClock()
-        self.hd = FakeHD()
-        self.hd.button_mask = DEADMAN
-        self.touch = TouchHapticDevice(api=self.hd, clock=self.clock)
-        self.control = FakeControl()
-        self.servo = UrRtdeServo("127.0.0.1", clock=self.clock, port=port, control_factory=lambda h, f: self.control)
-        self.rig = TeleopRig(self.clock, self.touch, self.servo)
-        self.rig.sensor = PushSensor(self.clock)
-        self.events: list[LoopEvent] = []
-        self.loop = HapticLoop(self.rig, HapticFramework(FrameworkConfig()), self.clock)
-        self.loop.on_event = self.events.append
-        self.supervisor = LoopSupervisor(self.loop, self.clock)
-        self.loop.submit(SetHaptics(True))
-        self.hd.tick()  # a stylus state (deadman held) before the first tick
-        self.loop.start()
-        assert self.clock.wait_for_sleeper()
+class TeleopBench(Bench):
+    """The dead-loop bench with the robot teleoperated through the servo adapter on the same stepped clock."""
 
-    def ms(self, done=None) -> float:  # type: ignore[no-untyped-def]
-        self.clock.step(MS, done)
-        self.hd.tick()
-        self.supervisor.check()
-        return math.hypot(*self.hd.forces[-1])
+    def __init__(self, port: int) -> None:
+        self.control = FakeControl()
+
+        def make_rig(clock: SteppedClock, touch: TouchHapticDevice) -> TeleopRig:
+            self.servo = UrRtdeServo("127.0.0.1", clock=clock, port=port, control_factory=lambda h, f: self.control)
+            return TeleopRig(clock, touch, self.servo)
+
+        super().__init__(make_rig, buttons=DEADMAN)
 
     def teleoperating(self) -> None:
         for _ in range(200):
@@ -115,11 +97,8 @@ class TeleopBench:
         return self.control.names().count("servoStop")
 
     def close(self) -> None:
-        self.rig.sensor.thaw.set()
-        self.clock.release()
-        self.loop.stop(timeout_s=5.0)
+        super().close()
         self.servo.close()
-        self.touch.close()
 
 
 @pytest.fixture
