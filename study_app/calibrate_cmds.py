@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # numpy is imported where it is used: ``haptic-study --help`` must not load it
     import numpy as np
 
-__all__ = ["add_calibrate_command", "cmd_calibrate"]
+__all__ = ["add_calibrate_command", "ask_on_stderr", "cmd_calibrate"]
 
 STEPS = ("tcp", "payload", "frames")
 _PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
@@ -67,7 +67,25 @@ def add_calibrate_command(sub: Any, add_command: Callable[..., argparse.Argument
     c.add_argument("--json", action="store_true", help="print one JSON object")
 
 
-def cmd_calibrate(args: argparse.Namespace, error: type[Exception], ask: Callable[[str], str] = input) -> int:
+def ask_on_stderr(prompt: str) -> str:
+    """The experimenter's answer to ``prompt``: the prompt on stderr, the answer one line of stdin.
+
+    ``input()`` writes its prompt to stdout when stdin is not a terminal, mixing it into the result (and
+    breaking ``--json``); stdout carries only the result.
+
+    Raises
+    ------
+    EOFError
+        stdin ended (the step stops; nothing is saved).
+    """
+    print(prompt, end="", file=sys.stderr, flush=True)
+    line = sys.stdin.readline()
+    if not line:
+        raise EOFError
+    return line.rstrip("\r\n")
+
+
+def cmd_calibrate(args: argparse.Namespace, error: type[Exception], ask: Callable[[str], str] = ask_on_stderr) -> int:
     """Run the step; ``error`` is the CLI's one-line error, ``ask`` reads the experimenter's answers (real rig)."""
     from pipeline.tcp import PIVOT_POSE_SETS
 
@@ -314,7 +332,7 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
                     break
                 _say(f"record at least {MIN_PIVOT_POSES} orientations first ({len(poses)} so far)")
                 continue
-            pose, why = _still_pose(robot, 0.5)
+            pose, why = _still_pose(robot, 0.3)
             if pose is None:
                 _say(f"O{k} not recorded: {why}")
                 continue

@@ -201,3 +201,29 @@ def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_save
         run(["calibrate", "tcp", "--hardware", str(hw), "--rig", "real", "--json"], answers)
     assert "O1 not recorded: the robot moved while recording (" in capsys.readouterr().err
     assert not (tmp_path / "calibration.json").exists()
+
+
+def test_from_a_terminal_the_prompts_go_to_stderr_and_stdout_is_only_the_result(rig, tmp_path, monkeypatch,
+                                                                                  capsys) -> None:
+    netft, rtde, hw = rig
+    rots = iter(pivot_orientations("minimal", TOOL_DOWN))
+
+    class Experimenter(io.StringIO):
+        """stdin: before each Enter the fake robot is where the experimenter turned the instrument."""
+
+        def readline(self, *_: object) -> str:  # type: ignore[override]
+            rot = next(rots, None)
+            if rot is None:
+                return "c\n"
+            r = np.asarray(rot).reshape(3, 3)
+            put_robot(rtde, rot, PIVOT - r @ TIP + r @ np.asarray(PENDANT_TCP))
+            time.sleep(0.05)  # the controller's next few 125 Hz states carry it
+            return "\n"
+
+    monkeypatch.setattr("sys.stdin", Experimenter())
+    assert main(["calibrate", "tcp", "--rig", "real", "--hardware", str(hw), "--json"]) == 0
+    cap = capsys.readouterr()
+    r = json.loads(cap.out)  # nothing but the result
+    assert r["accepted"] and np.allclose(r["tip_in_flange_m"], TIP, atol=1e-5)
+    assert "orientation O1: Enter = record, c = compute (0 recorded), q = quit: " in cap.err
+    assert "O4 recorded: flange at (" in cap.err
