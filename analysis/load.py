@@ -12,6 +12,7 @@ the columns the metrics need.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sqlite3
 from collections.abc import Callable, Sequence
@@ -22,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from protocol.storage import StorageError, StudyDatabase, trial_id_of
+from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
 from protocol.storage import connect_readonly as _connect_readonly
 
 __all__ = [
@@ -56,13 +57,17 @@ class StudyData:
         ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live
         (``stored_tct_s``, ``stored_rmse_n``, ``stored_max_ae_n``,
         ``stored_time_in_band_s``, ``stored_peak_force_n``), ``n_samples``,
-        ``abort_reason``, the session's ``tolerance_fraction``, ``hold_s`` and
+        ``abort_reason``, ``abort_cause`` and the loop-health columns
+        (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
+        databases), the session's ``tolerance_fraction``, ``hold_s`` and
         ``max_trial_s``, and ``excluded`` (``""`` when analysed, else
         ``"training session"`` or ``"aborted trial"``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
-        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``.
+        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
+        ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored).
     databases
         The database paths, in the order given.
     """
@@ -106,6 +111,16 @@ def _protocol_fields(protocol_json: str, where: str) -> dict[str, object]:
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
 
 
+def _watchdog_limits(config_json: object) -> dict[str, float]:
+    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say)."""
+    try:
+        wd = json.loads(str(config_json)).get("watchdog", {})
+        sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
+    except (ValueError, KeyError, TypeError, AttributeError):
+        sensor = pose = math.nan
+    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
+
+
 def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     db = _open(path)
     try:
@@ -113,15 +128,18 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
             db,
             "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
             "s.started_at, "
-            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json "
+            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json, s.config_json "
             "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
         )
+        # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
+        has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
+        v2 = ", ".join(c if c in has else f"NULL AS {c}" for c in ("abort_cause", *HEALTH_COLUMNS))
         trials = _query(
             db,
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
             "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
             "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            "peak_force_n AS stored_peak_force_n, n_samples, abort_reason "
+            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, {v2} "
             "FROM trials ORDER BY session_id, trial_index",
         )
     finally:
@@ -132,7 +150,8 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
         [_protocol_fields(pj, f"{path}: session {sid}") for sid, pj in zip(sessions["session_id"], sessions["protocol_json"])],
         index=sessions.index,
     )
-    sessions = pd.concat([sessions.drop(columns="protocol_json"), proto], axis=1)
+    watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
+    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json"]), proto, watchdog], axis=1)
     sessions.insert(0, "database", path)
     trials.insert(0, "database", path)
     return sessions, trials
@@ -196,8 +215,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
-             "stored_peak_force_n", "n_samples", "abort_reason", "tolerance_fraction", "hold_s",
-             "max_trial_s", "excluded"]
+             "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
+             "tolerance_fraction", "hold_s", "max_trial_s", "excluded"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
     if not (sessions["kind"] == "experiment").any():

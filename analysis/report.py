@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import datetime as dt
 import html
+import json
 import math
 import os
 import shutil
@@ -39,6 +40,7 @@ import pandas as pd
 from analysis import codebook, figures
 from analysis.aggregate import PRIMARY_METRICS, mean_sd, mode_tests, per_participant, speed_accuracy
 from analysis.load import AnalysisError, Progress, StudyData, load_study
+from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts, health_summary, health_table
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.parallel import default_workers, run_tasks
 from analysis.stats import WilcoxonResult, methods_text
@@ -118,6 +120,8 @@ def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame
     st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
     sess = study.sessions.copy()
     sess["database"] = sess["database"].map(os.path.basename)
+    health = health_table(study)
+    health["database"] = health["database"].map(os.path.basename)
     return {
         "trials.csv": t,
         "participants.csv": per,
@@ -127,6 +131,9 @@ def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame
         "stats_by_target.csv": st_t,
         "speed_accuracy.csv": codebook.export(sa, "speed_accuracy.csv"),
         "sessions.csv": codebook.export(sess, "sessions.csv"),
+        "loop_health.csv": codebook.export(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
+        "loop_health_by_participant.csv": codebook.export(by_participant(health_summary(health)),
+                                                          "loop_health_by_participant.csv"),
     }
 
 
@@ -354,6 +361,39 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
     return f'<div class="key">{"".join(cards)}</div>'
 
 
+def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
+    """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
+    counts = abort_counts(study)
+    total = int(counts["n_trials"].sum())
+    rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
+                   for c, n in zip(counts["abort_cause"], counts["n_trials"]))
+    aborted = (f"<p>{plural(total, 'experiment trial')} did not count and {'was' if total == 1 else 'were'} re-run "
+               "under the protocol's abort policy, by cause:</p>"
+               f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
+               f"<tbody>{rows}</tbody></table></div>")
+    health = tables["loop_health.csv"]
+    recorded = health[health["within_bounds"].notna()]
+    bounds = "; ".join(b.describe() for b in LOOP_BOUNDS)
+    if recorded.empty:
+        loop = "<p>No trial carries a loop-health record (databases of schema version 1).</p>"
+    else:
+        outside = recorded[~recorded["within_bounds"].astype(bool)]
+        listed = "".join(
+            f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}: "
+            f"{html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+        more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
+        verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
+                   "bounds.</p>" if outside.empty else
+                   f'<p class="warn">{plural(len(outside), "trial")} of {len(recorded)} left the bounds:</p>'
+                   f"<ul>{listed}{more}</ul>")
+        loop = (_html_table(tables["loop_health_by_participant.csv"], "loop_health_by_participant.csv") + verdict)
+    clock = ("" if not (study.sessions["rig"] == "sim").any() else
+             "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
+             "the latency is the sample's age. A real-clock session measures them in real time.</p>")
+    return (f"<h2>What was delivered</h2>{aborted}<h3>The 1 kHz loop, per trial</h3>"
+            f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
+
+
 def _when(v: object) -> str:
     """An ISO 8601 time as ``YYYY-MM-DD HH:MM`` (UTC), for the page."""
     return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
@@ -413,12 +453,76 @@ accurate: participants traded accuracy for speed. A positive ρ means slow trial
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
 band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
 {"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+{_record_html(study, tables)}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
 <h2>Sessions</h2>
 {_html_table(sess, "sessions.csv", sess_cols, cell={"started_at": _when, "ended_at": _when})}
 </body></html>
 """
+
+
+#: The file report leaves in every folder it writes, listing what it wrote: ``--force`` replaces only such folders.
+REPORT_MARKER = ".haptic-study-report"
+
+
+def _refuse_inputs_inside(out: Path, databases: Sequence[str | os.PathLike[str]]) -> None:
+    """A report folder must never hold one of its own input databases (``--force`` would replace it)."""
+    root = out.resolve()
+    for db in databases:
+        p = Path(db).resolve()
+        if root == p or root in p.parents:
+            raise AnalysisError(f"--out {out}: holds the input database {db}; write the report to another folder "
+                                "(nothing was changed)")
+
+
+def _ours(out: Path) -> set[str] | None:
+    """The files a previous report listed in ``out``'s marker (None: no readable marker)."""
+    try:
+        listed = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return {str(f) for f in listed} if isinstance(listed, list) else None
+
+
+def _ours_to_replace(out: Path) -> None:
+    """Refuse ``--force`` unless ``out`` holds only what a report wrote there (its marker says what)."""
+    listed = _ours(out)
+    if listed is None:
+        raise AnalysisError(f"--out {out}: not a folder report wrote (no {REPORT_MARKER} in it); --force replaces "
+                            "only report folders: choose another folder (nothing was deleted)")
+    foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                     if not p.is_dir() and str(p.relative_to(out)) not in listed | {REPORT_MARKER})
+    if foreign:
+        raise AnalysisError(f"--out {out}: holds {plural(len(foreign), 'file')} report did not write "
+                            f"(e.g. {foreign[0]}); move {'it' if len(foreign) == 1 else 'them'} or choose another "
+                            "folder (nothing was deleted)")
+
+
+def _remove_ours(out: Path) -> None:
+    """Delete what a previous report wrote in ``out`` (checked by :func:`_ours_to_replace`), then the folder."""
+    listed = _ours(out) or set()
+    for name in sorted(listed | {REPORT_MARKER}, reverse=True):
+        try:
+            (out / name).unlink()
+        except FileNotFoundError:
+            pass
+    try:
+        for d in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+            d.rmdir()  # fails, keeping it, if a file appeared meanwhile: nothing unlisted is ever deleted
+        out.rmdir()
+    except OSError:
+        raise AnalysisError(f"--out {out}: other files appeared in it while the report was made; the previous "
+                            "report's files were removed, nothing else was deleted, and the new report was not "
+                            "moved in (run it again)") from None
+
+
+def _apply_umask(folder: Path) -> None:
+    """The temporary folder was made owner-only: give the report the permissions the user's umask asks for."""
+    mask = os.umask(0)
+    os.umask(mask)
+    for p in [folder, *folder.rglob("*")]:
+        p.chmod((0o777 if p.is_dir() else 0o666) & ~mask)
 
 
 def build_report(
@@ -445,7 +549,9 @@ def build_report(
     zero_method, confidence
         Wilcoxon zero handling and the Hodges–Lehmann confidence level.
     force
-        Replace an existing, non-empty ``out_dir``.
+        Replace an existing, non-empty ``out_dir`` -- only one that ``report``
+        itself wrote (its marker file lists what it wrote) and that holds
+        nothing else: no input database, no file of anybody else's.
     progress
         ``progress(samples read, samples expected)``.
     workers
@@ -463,8 +569,11 @@ def build_report(
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise AnalysisError(f"--out {out}: exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not force:
-        raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
+    _refuse_inputs_inside(out, databases)
+    if out.exists() and any(out.iterdir()):
+        if not force:
+            raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
+        _ours_to_replace(out)
     parent = out.resolve().parent
     if not parent.exists():
         raise AnalysisError(f"--out {out}: the folder {parent} does not exist")
@@ -544,8 +653,11 @@ def build_report(
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
         files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
+        (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": f"haptic-study {software_version()}",
+                                                     "files": files}, indent=1), encoding="utf-8")
+        _apply_umask(tmp)
         if out.exists():
-            shutil.rmtree(out)
+            _remove_ours(out)
         os.replace(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

@@ -10,9 +10,8 @@ Each tick:
    stage ramps the output to zero within 50 ms while a fault is latched or
    feedback is off;
 5. command the haptic device and append one record with every stage to the ring buffer
-   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over --
-   the sample's age at the tick on the loop clock plus the real time from reading it to the command, so a
-   virtual-clock run still measures the software's own processing time).
+   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over,
+   on the loop's clock -- on a virtual clock, where computing takes no time, the sample's age).
 
 The loop does only I/O and arithmetic: no logging, no allocation beyond a
 few tuples, no locks.  Commands arrive through a deque (thread-safe append /
@@ -28,7 +27,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -71,7 +69,6 @@ RECORD_FIELDS: tuple[str, ...] = (
 )
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
-_perf_ns = time.perf_counter_ns
 
 
 class Rig(Protocol):
@@ -345,7 +342,6 @@ class HapticLoop:
         while inbox:
             self._apply(inbox.popleft(), now)
 
-        t_read = _perf_ns()
         w = rig.sensor.read_wrench()
         pose = rig.robot.read_pose()
         hs = rig.haptic.read_state()
@@ -404,9 +400,9 @@ class HapticLoop:
 
         out = fw.step(fx, fy, fz, self.haptic_on and not latched, dt_s)
         rig.haptic.command_force(out[18], out[19], out[20])
-        # from the sample's arrival to the command's hand-over: its age at the tick (loop clock) plus the
-        # real time the tick took from reading it to commanding (real even on a virtual clock)
-        latency_s = (sensor_age + _perf_ns() - t_read) * 1e-9
+        # from the sample's arrival to the command's hand-over, on the loop's clock (on a virtual clock
+        # computing takes no time: it is the sample's age)
+        latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m

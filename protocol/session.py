@@ -245,6 +245,7 @@ class SessionRunner:
         self._ready_ns: int | None = None  # no cue before this loop time
         self._faults = 0  # latched, as the newest record says
         self._fault_detail = ""  # the newest fault event's detail
+        self._condition_gone = False  # the loop said a latched fault's condition went away
         self._waiting_since_ns: int | None = None
         self._next_reset_ns = 0
         self._last_marked_ns: int | None = None  # the running trial's newest record
@@ -434,6 +435,10 @@ class SessionRunner:
     def _store_loop_event(self, ev: LoopEvent) -> None:
         if ev.kind == "fault":
             self._fault_detail = ev.detail
+            self._condition_gone = False
+            detail = ev.detail
+        elif ev.kind == "fault_cleared":
+            self._condition_gone = True  # a reset can clear it now
             detail = ev.detail
         elif ev.kind == "faults_reset":
             detail = (f"cleared {ev.detail}" if not ev.faults
@@ -543,7 +548,9 @@ class SessionRunner:
         what = Fault(self._faults).describe()
         if self._waiting_since_ns is None:
             self._waiting_since_ns = t_ns
-            self._next_reset_ns = t_ns
+            # reset at once when the loop said the condition is gone, else try every RESET_RETRY_S (a device
+            # error or an operator stop only clears with a reset)
+            self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             how = "the runner resets it once its condition is gone" if self.auto_reset_faults else \
                 "the experimenter resets it"
             self._event(t_ns, "waiting", f"{what} latched: no cue until it is reset ({how})")
@@ -559,7 +566,8 @@ class SessionRunner:
             self.status = self.state.status = "interrupted"
             self._emit(("session_end", "interrupted", self.stop_reason))
             return
-        if t_ns >= self._next_reset_ns:
+        if self._condition_gone or t_ns >= self._next_reset_ns:
+            self._condition_gone = False
             self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             self.submit(ResetFaults())
 

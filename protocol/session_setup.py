@@ -206,7 +206,10 @@ def open_resumed_session(
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
     if info is None:
         db.release_lease(session_scope(session_id), lease_owner)
-        raise StorageError(f"session {session_id} in {db.path} is not an interrupted session")
+        row = db.conn.execute("SELECT status FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
+        why = ("there is no such session" if row is None else
+               f"it has ended (status {row[0]}), perhaps run to its end by another process meanwhile")
+        raise StorageError(f"session {session_id} in {db.path} cannot be resumed: {why}; nothing was changed")
     protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {session_id} protocol")
     schedule = schedule_from_json(info.schedule_json)
     notes = [takeover] if takeover else []

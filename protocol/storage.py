@@ -49,6 +49,7 @@ __all__ = [
     "ABORT_CAUSES",
     "CODE_PATTERN",
     "EmptyDatabase",
+    "HEALTH_COLUMNS",
     "LeaseHeld",
     "SCHEMA_VERSION",
     "SessionInfo",
@@ -593,6 +594,9 @@ class StudyDatabase:
                     raise LeaseHeld(self._held_message(row, f"{scope} of"))
                 note = (f"took over the lease on {scope} left by process {row['pid']} on {row['host']} "
                         f"({row['command'] or 'unknown command'}), which is no longer running")
+            for other in self._leases():  # leases of processes that are gone protect nothing: clear them
+                if other["scope"] != scope and not self._alive(other):
+                    self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ?", (other["scope"], other["owner"]))
             self._write_lease(scope, owner, command)
         return note
 
