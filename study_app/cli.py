@@ -357,4 +357,8 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    # `python -m study_app.cli` runs this file as __main__, a second copy of the module: the subcommand modules
+    # raise study_app.cli.CliError, which __main__'s except clause would not catch (a traceback, exit 1)
+    from study_app.cli import main as _main
+
+    sys.exit(_main())
