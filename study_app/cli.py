@@ -93,6 +93,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_report_parsers(sub)
 
+    from study_app.power_cmds import add_power_bench_parser, add_power_parser
+
+    add_power_parser(sub)
+
     b = sub.add_parser("bench", help="benchmarks (see README for recorded figures)")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
@@ -113,6 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--stats-participants", type=_nonneg_int("--stats-participants"), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
+    add_power_bench_parser(bsub)
     bst = bsub.add_parser("stats", help="analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm")
     bst.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -170,6 +175,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from study_app.report_cmds import cmd_plot_trial, cmd_report
 
             return cmd_report(args) if args.command == "report" else cmd_plot_trial(args)
+        if args.command == "power" or (args.command == "bench" and args.bench == "power"):
+            from study_app.power_cmds import cmd_bench_power, cmd_power
+
+            return cmd_power(args) if args.command == "power" else cmd_bench_power(args)
         if args.command == "bench" and args.bench == "pipeline":
             return _cmd_bench_pipeline(args)
         if args.command == "bench" and args.bench == "report":
