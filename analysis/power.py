@@ -217,14 +217,20 @@ def load_pool(
     return pool_from_trials(trials, options, source=source)
 
 
-def output_folder(out_dir: str | os.PathLike[str]) -> Path:
-    """The output folder, created if missing (its parent must exist); an existing folder is kept as it is."""
+def output_folder(out_dir: str | os.PathLike[str], *, create: bool = True) -> Path:
+    """Check the output folder and create it if missing (its parent must exist); an existing folder is kept.
+
+    With ``create=False`` only the checks run, so a command can refuse a bad
+    ``--out`` before any work without leaving an empty folder behind.
+    """
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise PowerError(f"--out {out}: exists and is not a folder")
     if not out.exists():
         if not out.resolve().parent.is_dir():
             raise PowerError(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        if not create:
+            return out
         out.mkdir()
     if not os.access(out, os.W_OK):
         raise PowerError(f"--out {out}: cannot write in it")

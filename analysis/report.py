@@ -227,6 +227,7 @@ def build_report(
     force: bool = False,
     progress: Progress | None = None,
     workers: int | None = None,
+    power: bool = False,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -246,6 +247,9 @@ def build_report(
         ``progress(samples read, samples expected)``.
     workers
         Processes for reading samples and drawing figures (default: the usable cores, at most 4; 1 = none).
+    power
+        Add "What n would a study need?": the power of the tests against the number of participants, by
+        resampling this study's participants (:func:`analysis.power.report_section`; writes ``power.csv``).
 
     Returns
     -------
@@ -345,6 +349,14 @@ def build_report(
         sess["database"] = sess["database"].map(os.path.basename)
         sess.to_csv(tmp / "sessions.csv", index=False)
 
+        power_html = ""
+        if power:
+            from analysis.power import report_section
+
+            text, png = report_section(trials, options, zero_method, tmp)
+            power_html = (f"<h2>What n would a study need?</h2><pre>{html.escape(text)}</pre>"
+                          + (_img(png, "power of each test against the number of participants") if png else ""))
+
         # -- the page ----------------------------------------------------------------------
         by_metric = stats_out.set_index("metric")
         key = "".join(
@@ -389,6 +401,7 @@ accurate: participants traded accuracy for speed. A positive ρ means slow trial
 {_img(pngs["speed_accuracy"], "TCT against RMSE")}
 <h2>Force through the pipeline</h2>
 {"".join(f"<h3>{html.escape(t)}</h3>{_img(p, t)}" for t, p in examples)}
+{power_html}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
 <h2>Sessions</h2>

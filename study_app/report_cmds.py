@@ -36,6 +36,9 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                    help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
     r.add_argument("--confidence", type=_confidence, default=0.95,
                    help="confidence level of the Hodges–Lehmann interval (default 0.95)")
+    r.add_argument("--power", action="store_true",
+                   help="add 'what n would a study need': power against the number of participants, resampling "
+                        "this study's participants (as haptic-study power with its defaults)")
 
     p = sub.add_parser("plot-trial", help="one trial's force through the pipeline: raw, compensated, rendered (paper Fig. 6)")
     p.add_argument("--db", required=True, metavar="PATH", help="study database")
@@ -64,6 +67,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         summary = build_report(
             args.db, args.out, options=MetricOptions(args.error_window, args.tct),
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
+            power=args.power,
         )
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
