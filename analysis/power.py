@@ -582,6 +582,11 @@ def _pool_notes(pool: PairedPool, n_values: tuple[int, ...], alpha: float, zero_
             if d.size and np.all(d == 0):
                 notes.append(f"{label}{where}: every participant has ON = OFF, so no resampled study can "
                              "reject: its power is 0 at every n (the pool shows no effect)")
+    if max(n_values) > P:
+        notes.append(
+            f"n up to {max(n_values)} from {P} participants: larger studies repeat pool members, so their power "
+            f"treats the pool as the whole population; its own sampling error (of {P} participants) is not in "
+            "the intervals")
     small = [n for n in n_values if 2.0 / 2**n >= alpha]
     if small:
         notes.append(
@@ -720,6 +725,9 @@ def summary_text(result: PowerResult) -> str:
         f"Test: the report's paired Wilcoxon signed-rank test ON vs OFF per metric, two-sided, significant at "
         f"p < {result.alpha:g}; TCT {tct}; RMSE and Max AE from the "
         f"{'cue' if result.options.error_window == 'cue' else 'first contact'}; zero differences: {result.zero_method}.",
+        f"Intervals ({result.interval_level:.0%}, in power.csv and the figure) are the Monte Carlo error of the "
+        f"resampling only, not the uncertainty of the {result.n_pool} participants' own effects: a plan from a "
+        "small pilot is itself uncertain.",
         f"Participants needed: the smallest n of {', '.join(str(n) for n in result.n_values)} from which on power "
         "stays at or above the target, for the test alone and with Holm across the four metrics (as the report's "
         "significance marks); '> N (x %)': not reached, x = power at the largest n tried.",

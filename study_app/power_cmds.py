@@ -14,12 +14,14 @@ import time
 __all__ = ["add_power_bench_parser", "add_power_parser", "cmd_bench_power", "cmd_power"]
 
 _N_MAX = 10_000
+#: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
+DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
 _POOL_DEFAULT = 100
 
 
 def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``power``."""
-    from analysis.power import DEFAULT_N_VALUES
+    from study_app.report_cmds import add_analysis_options
 
     p = sub.add_parser(
         "power",
@@ -32,19 +34,14 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
                    help="no pilot yet: simulate a pool of participants from the calibrated population (kept in DIR)")
     p.add_argument("--pool", default=None, metavar="N",
                    help=f"participants in the simulated pool (default {_POOL_DEFAULT}; with --simulated)")
-    p.add_argument("--n", default=",".join(str(n) for n in DEFAULT_N_VALUES), metavar="LIST",
-                   help="planned study sizes, comma-separated (default %(default)s)")
+    p.add_argument("--n", default=None, metavar="LIST",
+                   help=f"planned study sizes, comma-separated (default {DEFAULT_N_TEXT})")
     p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
     p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
     p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool)")
-    p.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
-                   help="RMSE / Max AE from the cue (default) or from first contact, as in report")
-    p.add_argument("--tct", choices=("successful", "censored"), default="successful",
-                   help="TCT over successful trials only (default, the paper's) or failures censored at the trial cap")
-    p.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
-                   help="Wilcoxon handling of zero differences, as in report (default wilcox)")
+    add_analysis_options(p)
 
 
 def add_power_bench_parser(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -108,7 +105,7 @@ def cmd_power(args: argparse.Namespace) -> int:
         raise CliError("power needs a source: --db PILOT.db (a pilot study) or --simulated (simulated participants)")
     if args.pool is not None and not args.simulated:
         raise CliError(f"--pool = {args.pool!r}: only with --simulated (a pilot's size is its own)")
-    n_values = _n_values(args.n)
+    n_values = _n_values(DEFAULT_N_TEXT if args.n is None else args.n)
     resamples = _whole("--resamples", args.resamples, 1, 1_000_000)
     alpha = _alpha(args.alpha)
     seed = _whole("--seed", args.seed, 0, 2**32 - 1)

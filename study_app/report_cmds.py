@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["add_report_parsers", "cmd_plot_trial", "cmd_report"]
+__all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
 
 def _confidence(text: str) -> float:
@@ -18,6 +18,16 @@ def _confidence(text: str) -> float:
     return v
 
 
+def add_analysis_options(parser: argparse.ArgumentParser) -> None:
+    """The aggregation and test choices a report is made with (``report`` and ``power`` share them)."""
+    parser.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
+                        help="RMSE / Max AE from the cue (default) or from first contact")
+    parser.add_argument("--tct", choices=("successful", "censored"), default="successful",
+                        help="TCT over successful trials only (default) or failures censored at the trial cap")
+    parser.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
+                        help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
+
+
 def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``report`` and ``plot-trial``."""
     r = sub.add_parser(
@@ -28,12 +38,7 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                    help="study database; repeat to merge several into one study")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, *.csv, figures/)")
     r.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
-    r.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
-                   help="RMSE / Max AE from the cue (default) or from first contact")
-    r.add_argument("--tct", choices=("successful", "censored"), default="successful",
-                   help="TCT over successful trials only (default) or failures censored at the trial cap")
-    r.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
-                   help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
+    add_analysis_options(r)
     r.add_argument("--confidence", type=_confidence, default=0.95,
                    help="confidence level of the Hodges–Lehmann interval (default 0.95)")
     r.add_argument("--power", action="store_true",

@@ -187,3 +187,15 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
     assert "paired_wilcoxon loop" in text and "speed-up" in text
     code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
     assert code == 2  # the reference cannot run more studies than the engine
+
+
+def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import():
+    from analysis.power import DEFAULT_N_VALUES
+    from study_app.power_cmds import DEFAULT_N_TEXT
+
+    assert DEFAULT_N_TEXT == ",".join(str(n) for n in DEFAULT_N_VALUES)
+    proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli import build_parser; build_parser(); "
+                           "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "[]"
+
