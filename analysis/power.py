@@ -556,15 +556,16 @@ def _check_request(n_values: Sequence[int], resamples: int, alpha: float, zero_m
     return tuple(sorted(set(ns)))
 
 
-def _pool_notes(pool: PairedPool, n_values: tuple[int, ...], alpha: float, zero_method: str) -> list[str]:
+def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], n_values: tuple[int, ...],
+                alpha: float) -> list[str]:
     notes = []
     P = pool.n_participants
     for s, scope in enumerate(pool.scopes):
         where = "" if scope == "overall" else f" ({scope})"
         for m, metric in enumerate(pool.metrics):
-            off, on = pool.off[s, m], pool.on[s, m]
+            pm = prepared[s][m]
             label = METRIC_LABELS.get(metric, metric)
-            undefined = int((np.isnan(off) | np.isnan(on)).sum())
+            undefined = int(pm.missing.sum())
             if undefined == P:
                 notes.append(f"{label}{where} is undefined for every participant: no study can test it, "
                              "its power is 0 at every n")
@@ -576,10 +577,7 @@ def _pool_notes(pool: PairedPool, n_values: tuple[int, ...], alpha: float, zero_
                     f"{label} is undefined for {undefined} of {P} participants{why}: resampled studies leave "
                     f"those pairs out, as the report does, so a study of n participants has about "
                     f"{1 - undefined / P:.2f}·n {label.split(' (')[0]} pairs")
-            with np.errstate(invalid="ignore"):
-                d = np.round(on - off, DEFAULT_DECIMALS)
-            d = d[np.isfinite(d)]
-            if d.size and np.all(d == 0):
+            if pm.zero[~pm.missing].all():
                 notes.append(f"{label}{where}: every participant has ON = OFF, so no resampled study can "
                              "reject: its power is 0 at every n (the pool shows no effect)")
     if max(n_values) > P:
@@ -677,7 +675,7 @@ def estimate_power(
                                                                        interval_level)
     frame = frame[list(POWER_CSV_COLUMNS)]
     frame["source"] = pool.source
-    return PowerResult(frame, _pool_notes(pool, ns, float(alpha), zero_method), pool.source, P, R, float(alpha),
+    return PowerResult(frame, _pool_notes(pool, prepared, ns, float(alpha)), pool.source, P, R, float(alpha),
                        int(seed), zero_method, pool.options, ns, float(interval_level))
 
 

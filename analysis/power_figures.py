@@ -80,6 +80,7 @@ def power_curves(result: PowerResult) -> Figure:
     fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=len(handles),
                frameon=False, fontsize=9, title=f"band: {result.interval_level:.0%} Monte Carlo interval of {result.resamples} resampled "
                                                "studies per n", title_fontsize=8)
-    fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests against study size\nresampling {result.source} "
-                 f"({result.n_pool} participants)", fontsize=10.5)
+    size = "" if "participants" in result.source else f" ({result.n_pool} participants)"
+    fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests against study size\nresampling {result.source}{size}",
+                 fontsize=10.5)
     return fig
