@@ -36,6 +36,7 @@ from analysis.power import (
 )
 from analysis.stats import holm, paired_wilcoxon
 from bench.analysis_bench import synthetic_trials
+from bench.machine import cpu_times, load_average, steal_percent
 
 __all__ = ["format_power_bench", "run_power_bench"]
 
@@ -76,10 +77,12 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
     else:
         pool = load_pool([db])
     overall = _overall_only(pool)
+    cpu_before = cpu_times()
     runs_overall = [_cold(lambda: estimate_power(overall, n_values, resamples=resamples, seed=seed))[0]
                     for _ in range(repeats)]
     runs_all = [_cold(lambda: estimate_power(pool, n_values, resamples=resamples, seed=seed))[0]
                 for _ in range(repeats)]
+    stolen = steal_percent(cpu_before, cpu_times())
 
     # the reference: one paired_wilcoxon per study and metric, Holm per study, overall scope
     P = pool.n_participants
@@ -117,6 +120,8 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
         "speedup": round(loop_scaled / overall_s, 1) if overall_s > 0 else None,
         "reference_tests": tests,
         "identical_p_values": identical,
+        "load_average": load_average(),
+        "cpu_stolen_percent": stolen,
     }
 
 
@@ -136,6 +141,9 @@ def format_power_bench(r: dict[str, Any]) -> str:
         f"for {r['reference_resamples']} studies per n",
         f"  speed-up                       {r['speedup']:7.1f}x   (p-values identical in "
         f"{r['identical_p_values']:,} of {r['reference_tests']:,} tests both ran)",
+        f"  machine                        load {r['load_average'][0]:.2f}, CPU stolen by the hypervisor "
+        f"{'n/a' if r['cpu_stolen_percent'] is None else format(r['cpu_stolen_percent'], '.1f') + ' %'} "
+        "(during our runs)",
     ])
 
 
