@@ -354,8 +354,8 @@ def build_report(
             from analysis.power import report_section
 
             text, png = report_section(trials, options, zero_method, tmp)
-            power_html = (f"<h2>What n would a study need?</h2><pre>{html.escape(text)}</pre>"
-                          + (_img(png, "power of each test against the number of participants") if png else ""))
+            power_html = (f'<h2>What n would a study need?</h2><pre style="white-space:pre-wrap">{html.escape(text)}'
+                          "</pre>" + (_img(png, "power of each test against the number of participants") if png else ""))
 
         # -- the page ----------------------------------------------------------------------
         by_metric = stats_out.set_index("metric")
