@@ -77,9 +77,9 @@ def power_curves(result: PowerResult) -> Figure:
     for level in (0.8, 0.9):
         axes[-1].annotate(f"{level:.0%}", xy=(1.0, level), xycoords=("axes fraction", "data"), xytext=(3, 0),
                           textcoords="offset points", va="center", fontsize=8, color="#555555")
+    band = f"band: {result.interval_level:.0%} Monte Carlo interval of {result.resamples} resampled studies per n"
     fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=len(handles),
-               frameon=False, fontsize=9, title=f"band: {result.interval_level:.0%} Monte Carlo interval of {result.resamples} resampled "
-                                               "studies per n", title_fontsize=8)
+               frameon=False, fontsize=9, title=band, title_fontsize=8)
     size = "" if "participants" in result.source else f" ({result.n_pool} participants)"
     fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests against study size\nresampling {result.source}{size}",
                  fontsize=10.5)
