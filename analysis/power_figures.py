@@ -9,10 +9,11 @@ each metric also has its own marker, so the figure reads in grey too.
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 from matplotlib.figure import Figure
-from matplotlib.ticker import PercentFormatter
+from matplotlib.ticker import NullLocator, PercentFormatter
 
 from analysis.figures import _style
 
@@ -50,12 +51,16 @@ def power_curves(result: PowerResult) -> Figure:
         for level, style in ((0.8, (0, (4, 3))), (0.9, (0, (1, 2)))):
             ax.axhline(level, color="#555555", linewidth=0.9, linestyle=style, zorder=1)
         ns = sorted(set(sel["n"]))
+        # a wide range of n (6 … 200) reads on a log axis; the default 6 … 30 on a linear one
+        log = ns[-1] > 6 * ns[0]
+        span = math.log(ns[-1] / ns[0]) if log else float(max(ns[-1] - ns[0], 4))
         # curves that coincide (e.g. several at 100 %) stay visible: each metric is shifted a hair sideways
-        dodge = 0.007 * max(ns[-1] - ns[0], 4)
+        dodge = 0.007 * span
         shown = [m for m in dict.fromkeys(sel["metric"]) if m not in FAMILY_LABELS or m == FAMILY_ALL]
         for k, metric in enumerate(shown):
             m = sel[sel["metric"] == metric].sort_values("n")
-            x = m["n"] + (k - (len(shown) - 1) / 2) * dodge
+            shift = (k - (len(shown) - 1) / 2) * dodge
+            x = m["n"] * math.exp(shift) if log else m["n"] + shift
             family = metric == FAMILY_ALL
             color = "#000000" if family else METRIC_COLORS.get(metric, "#666666")
             col, lo, hi = ("power_holm", "holm_ci_low", "holm_ci_high") if family else ("power", "ci_low", "ci_high")
@@ -67,9 +72,14 @@ def power_curves(result: PowerResult) -> Figure:
         _style(ax)
         ax.set_title("overall" if scope == "overall" else f"within {scope}", fontsize=11)
         ax.set_xlabel("participants in the planned study, n")
-        ax.set_xticks(ns)
-        pad = max(0.5, 0.03 * (ns[-1] - ns[0]))
-        ax.set_xlim(ns[0] - pad, ns[-1] + pad)
+        if log:
+            ax.set_xscale("log")
+            ax.xaxis.set_minor_locator(NullLocator())
+            ax.set_xlim(ns[0] * math.exp(-0.03 * span), ns[-1] * math.exp(0.03 * span))
+        else:
+            pad = max(0.5, 0.03 * span)
+            ax.set_xlim(ns[0] - pad, ns[-1] + pad)
+        ax.set_xticks(ns, _thinned_labels(ns, log))
         ax.set_ylim(-0.02, 1.03)
         ax.yaxis.set_major_formatter(PercentFormatter(1.0, decimals=0))
         ax.grid(axis="x", color="#eeeeee", linewidth=0.6)
@@ -84,3 +94,16 @@ def power_curves(result: PowerResult) -> Figure:
     fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests against study size\nresampling {result.source}{size}",
                  fontsize=10.5)
     return fig
+
+
+def _thinned_labels(ns: list[int], log: bool, min_gap: float = 0.06) -> list[str]:
+    """Tick labels for the n tried, leaving out any closer than ``min_gap`` of the axis to the last one shown."""
+    pos = [math.log(n) if log else float(n) for n in ns]
+    width = (pos[-1] - pos[0]) or 1.0
+    labels, last = [], -math.inf
+    for n, p in zip(ns, pos):
+        show = (p - last) / width >= min_gap or n == ns[-1] and (p - last) / width >= min_gap / 2
+        labels.append(str(n) if show else "")
+        last = p if show else last
+    return labels
+
