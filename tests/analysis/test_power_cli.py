@@ -170,12 +170,16 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert not (tmp_path / "plain" / "power.csv").exists()
 
 
-def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsys):
-    out = tmp_path / "rep3"
-    assert _run(capsys, "report", "--db", pilots[1], "--out", out, "--power")[0] == 0
-    page = (out / "report.html").read_text(encoding="utf-8")
-    assert "Not estimated: this study has 3 participants with both haptic modes: at least 4 are needed" in page
-    assert not (out / "power.csv").exists()
+def test_report_power_of_three_participants_says_why_not(pilots, tmp_path):
+    from analysis.load import load_study
+    from analysis.metrics import MetricOptions, compute_trials
+    from analysis.power import report_section
+
+    trials = compute_trials(load_study([pilots[1]]), workers=1).trials
+    text, png = report_section(trials, MetricOptions(), "wilcox", tmp_path)
+    assert png is None
+    assert text.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 are needed")
+    assert not list(tmp_path.iterdir())
 
 
 def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
