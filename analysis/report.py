@@ -137,11 +137,16 @@ def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame
     }
 
 
-def _write_tables(folder: Path, tables: dict[str, pd.DataFrame]) -> None:
-    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included)."""
+def _write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
+
+    ``written_too``: CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)
     columns = {name: list(frame.columns) for name, frame in tables.items()}
+    for name in written_too:
+        columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
     codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
 
@@ -401,7 +406,8 @@ def _when(v: object) -> str:
 
 def _page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
           excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
-          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]]) -> str:
+          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
+          power_html: str = "") -> str:
     """report.html: self-contained (figures embedded), readable on screen and on paper."""
     stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
     warn = ""
@@ -453,6 +459,7 @@ accurate: participants traded accuracy for speed. A positive ρ means slow trial
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
 band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
 {"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+{power_html}
 {_record_html(study, tables)}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
@@ -535,6 +542,7 @@ def build_report(
     force: bool = False,
     progress: Progress | None = None,
     workers: int | None = None,
+    power: bool = False,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -556,6 +564,9 @@ def build_report(
         ``progress(samples read, samples expected)``.
     workers
         Processes for reading samples and drawing figures (default: the usable cores, at most 4; 1 = none).
+    power
+        Add "What n would a study need?": the power of the tests against the number of participants, by
+        resampling this study's participants (:func:`analysis.power.report_section`; writes ``power.csv``).
 
     Returns
     -------
@@ -644,12 +655,19 @@ def build_report(
         pngs = {key: png for (_, _, _, _, key), png in zip(tasks, drawn)}
         examples = [(title, pngs[name]) for name, title in titles]
 
+        power_html = ""
+        if power:
+            from analysis.power import report_section
+
+            text, png = report_section(trials, options, zero_method, tmp)
+            power_html = (f'<h2>What n would a study need?</h2><pre style="white-space:pre-wrap">{html.escape(text)}'
+                          "</pre>" + (_img(png, "power of each test against the number of participants") if png else ""))
         tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
-        _write_tables(tmp, tables)
+        _write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         page = _page(
             study=study, table=table, options=options, zero_method=zero_method, confidence=confidence,
             excluded=excluded, n_participants=n_participants, n_incomplete=n_incomplete, tables=tables,
-            marks_overall=marks_overall, pngs=pngs, examples=examples,
+            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=power_html,
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
         files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
