@@ -88,7 +88,7 @@ class HealthModel:
             self.faults = ev.faults
         elif isinstance(ev, m.EngineFault):
             self.faults = ev.faults
-            verb = "fault" if ev.kind == "fault" else "reset"
+            verb = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset"}.get(ev.kind, ev.kind)
             self.fault_log.append(f"t = {ev.t_s:8.3f} s  {verb}: {ev.detail}")
             del self.fault_log[:-50]
         elif isinstance(ev, m.EngineStopped):
@@ -129,6 +129,11 @@ class HealthModel:
     def faults_text(self) -> str:
         """Latched faults, or 'none'."""
         return Fault(self.faults).describe()
+
+    def waiting_text(self) -> str:
+        """Why the session's next cue is held back ('' when it is not, or between pauses)."""
+        h = self.loop
+        return "" if h is None or h.waiting in ("", "pause") else h.waiting
 
     def loop_text(self) -> str:
         """Loop rate, p99 |period − 1 ms| and overruns, in one line."""
