@@ -348,6 +348,6 @@ def test_health_says_why_the_next_cue_waits_and_logs_every_fault_event():
                      waiting="fault latched (SENSOR_STALE): reset to continue"))
     assert h.waiting_text() == "fault latched (SENSOR_STALE): reset to continue"
     h.apply(m.EngineFault(3.0, "faults_reset", 0, "SENSOR_STALE"))
-    assert [line.split("  ")[1].split(":")[0] for line in h.fault_log] == ["fault", "gone", "reset"]
+    assert [line.split("s  ", 1)[1].split(":")[0] for line in h.fault_log] == ["fault", "gone", "reset"]
     h.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, False, "autopilot", True, False, waiting="pause"))
     assert h.waiting_text() == ""  # the protocol's own pause is not worth a line
