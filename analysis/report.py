@@ -33,6 +33,7 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -383,9 +384,12 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
         loop = "<p>No trial carries a loop-health record (databases of schema version 1).</p>"
     else:
         outside = recorded[~recorded["within_bounds"].astype(bool)]
+        def counted(r: Any) -> str:
+            return "" if r.outcome != "aborted" else f" (aborted: {r.abort_cause or 'cause not recorded'}; not counted)"
+
         listed = "".join(
-            f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}: "
-            f"{html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+            f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}"
+            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
         more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
         verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
                    "bounds.</p>" if outside.empty else

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from statistics import fmean, stdev
 
 from protocol.storage import connect_readonly
@@ -36,7 +36,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     try:
         q = ",".join("?" * len(session_ids)) or "NULL"
         rows = conn.execute(
-            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind "
+            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind, "
+            f"t.abort_cause "
             f"FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
             f"WHERE t.session_id IN ({q})", session_ids,
         ).fetchall()
@@ -46,7 +47,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     finally:
         conn.close()
     exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
-    aborted = sum(1 for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    causes = Counter(r[8] or "cause not recorded" for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    aborted = sum(causes.values())
+    why = (": " + ", ".join(f"{n} {c}" for c, n in sorted(causes.items()))) if causes else ""
     training = sum(1 for r in rows if r[7] == "training")
     per: dict[tuple[str, str], list[tuple]] = defaultdict(list)
     for r in exp:
@@ -54,7 +57,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     codes = sorted({r[0] for r in exp})
     lines = [
         f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
-        f"({aborted} aborted and re-run, {_plural(training, 'training trial')} excluded), {n_samples:,} samples",
+        f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), {n_samples:,} samples",
         "",
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
