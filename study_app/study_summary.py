@@ -23,7 +23,7 @@ def _mean_sd(xs: list[float]) -> tuple[float, float]:
     xs = [x for x in xs if x is not None and math.isfinite(x)]
     if not xs:
         return math.nan, math.nan
-    return fmean(xs), stdev(xs) if len(xs) > 1 else 0.0
+    return fmean(xs), stdev(xs) if len(xs) > 1 else math.nan  # one participant has no spread
 
 
 def _plural(n: int, word: str) -> str:
@@ -67,7 +67,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         return _mean_sd([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
 
     def cell(v: tuple[float, float]) -> str:
-        return f"{v[0]:.3f} ± {v[1]:.3f}"
+        if not math.isfinite(v[0]):
+            return "–"
+        return f"{v[0]:.3f}" + (f" ± {v[1]:.3f}" if math.isfinite(v[1]) else "")
 
     defs = [
         ("success rate", "success", lambda ts: sum(t[3] == "success" for t in ts) / len(ts)),
@@ -79,7 +81,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         off, on = metric("off", fn), metric("on", fn)
         change = (on[0] - off[0]) / off[0] * 100 if off[0] and math.isfinite(off[0]) and math.isfinite(on[0]) else math.nan
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
-        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change:>8.0f}%   {paper}")
+        change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
+        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change_txt}   {paper}")
     for label in sorted({r[2] for r in exp}):
         off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
         on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
