@@ -24,7 +24,11 @@ import numpy.typing as npt
 import pandas as pd
 
 from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
+from protocol.recording import read_ticks
 from protocol.storage import connect_readonly as _connect_readonly
+
+#: Where a trial's records are in its session's recording (schema version 3).
+RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
 
 __all__ = [
     "AnalysisError",
@@ -33,6 +37,7 @@ __all__ = [
     "connect_readonly",
     "load_study",
     "read_task_force",
+    "recorded_where",
     "read_trial_samples",
 ]
 
@@ -59,7 +64,9 @@ class StudyData:
         ``stored_time_in_band_s``, ``stored_peak_force_n``), ``n_samples``,
         ``abort_reason``, ``abort_cause`` and the loop-health columns
         (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
-        databases), the session's ``tolerance_fraction``, ``hold_s`` and
+        databases), where its records are in the session's recording
+        (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
+        trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
         ``max_trial_s``, and ``excluded`` (``""`` when analysed, else
         ``"training session"`` or ``"aborted trial"``).
     sessions
@@ -133,7 +140,8 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
         )
         # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
         has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
-        v2 = ", ".join(c if c in has else f"NULL AS {c}" for c in ("abort_cause", *HEALTH_COLUMNS))
+        v2 = ", ".join(c if c in has else f"NULL AS {c}"
+                       for c in ("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS))
         trials = _query(
             db,
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
@@ -215,7 +223,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
-             "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
+             "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
              "tolerance_fraction", "hold_s", "max_trial_s", "excluded"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
@@ -226,7 +234,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths))
 
 
-def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
+                    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
     """One trial's task-force samples: times since the cue (int ns) and ``force_n`` (N).
 
     Parameters
@@ -235,6 +244,9 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArra
         An open connection to the study database.
     trial_id
         ``session_id`` · 10⁶ + ``trial_index``.
+    where
+        ``(session_id, segment, first_tick, last_tick)``: the trial's records in its session's
+        recording (schema version 3); None: its rows of the ``samples`` table (versions 1 and 2).
 
     Returns
     -------
@@ -242,12 +254,25 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArra
         In time order; empty when the trial has no samples.  A NULL force
         becomes NaN (out of band, left out of the errors).
     """
+    if where is not None:
+        cols = read_ticks(conn, *where, ("t_ns", "force_n"))
+        t = cols["t_ns"].astype(np.int64)
+        return (t - t[0] if len(t) else t), cols["force_n"].astype(np.float64)  # the first record is the cue
     rows = conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s", (trial_id,)).fetchall()
     if not rows:
         return np.empty(0, np.int64), np.empty(0, np.float64)
     block = np.array(rows, dtype=np.float64)
     # t_s was stored as ns / 1e9; rounding recovers the integer ns exactly (|t| ≪ 2^53 ns)
     return np.rint(block[:, 0] * 1e9).astype(np.int64), np.ascontiguousarray(block[:, 1])
+
+
+def recorded_where(session_id: object, segment: object, first_tick: object, last_tick: object,
+                   ) -> tuple[int, int, int, int] | None:
+    """A trial's place in its session's recording, or None when it has none (a trial of schema version 1 or 2)."""
+    values = (segment, first_tick, last_tick)
+    if any(v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in values):
+        return None
+    return int(session_id), int(segment), int(first_tick), int(last_tick)  # type: ignore[arg-type]
 
 
 def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
@@ -263,6 +288,9 @@ def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
 
 _SAMPLE_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
                    "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz")
+#: What a trial's trace reads of a recorded session (the compensated force is not stored: replay recomputes it).
+_RECORDED_TRACE = ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+                   "render_fx", "render_fy", "render_fz")
 
 
 def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int) -> pd.DataFrame:
@@ -278,7 +306,9 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     Returns
     -------
     pandas.DataFrame
-        Columns ``t_s``, ``force_n``, ``raw_f*``, ``raw_t*``, ``comp_f*``, ``render_f*``.
+        Columns ``t_s`` (since the cue), ``force_n``, ``raw_f*``, ``raw_t*``, ``render_f*``, and
+        ``comp_f*`` for a trial of schema version 1 or 2 (a recorded session's compensated force is
+        recomputed by replay, :func:`pipeline.replay.replay`, not stored).
 
     Raises
     ------
@@ -287,10 +317,20 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     """
     db = _open(str(database))
     try:
-        frame = pd.read_sql_query(
-            f"SELECT {', '.join(_SAMPLE_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY t_s",
-            db.conn, params=(trial_id_of(int(session_id), int(trial_index)),),
-        )
+        frame = pd.DataFrame()
+        if db.schema_version >= 3:
+            row = db.conn.execute("SELECT segment, first_tick, last_tick FROM trials WHERE trial_id = ?",
+                                  (trial_id_of(int(session_id), int(trial_index)),)).fetchone()
+            where = None if row is None else recorded_where(session_id, *row)
+            if where is not None:
+                cols = read_ticks(db.conn, *where, ("t_ns", *_RECORDED_TRACE))
+                t_ns = cols.pop("t_ns")
+                frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
+        if frame.empty:
+            frame = pd.read_sql_query(
+                f"SELECT {', '.join(_SAMPLE_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY t_s",
+                db.conn, params=(trial_id_of(int(session_id), int(trial_index)),),
+            )
     finally:
         db.close()
     if frame.empty:

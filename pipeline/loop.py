@@ -51,6 +51,8 @@ __all__ = [
     "Rig",
     "SetCalibration",
     "SetHaptics",
+    "StartRecording",
+    "StopRecording",
     "WatchdogConfig",
 ]
 
@@ -149,7 +151,28 @@ class SetCalibration:
     calibration: object
 
 
-Command = SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
+@dataclass(frozen=True, slots=True)
+class StartRecording:
+    """Begin a replayable record: snapshot the framework, then log what replay needs (:attr:`HapticLoop.replay_log`).
+
+    The snapshot is taken once every command of the tick has been applied, and
+    logged as ``(tick, "snapshot", {"token": token, "framework": ..., "refine_bias": ...})``;
+    from then on every pose the framework takes (``"pose"``: rotation, position,
+    pose time), every change of the bias-refinement permission (``"refine"``), every
+    framework reset (``"reset"``) and calibration (``"calibration"``) is logged with
+    its tick, in the order the loop applied them (:mod:`pipeline.replay`).
+    """
+
+    token: int
+
+
+@dataclass(frozen=True, slots=True)
+class StopRecording:
+    """Stop logging for replay (the log is left for its reader to drain)."""
+
+
+Command = (SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
+           | StartRecording | StopRecording)
 
 
 class LoopEvent(NamedTuple):
@@ -308,6 +331,10 @@ class HapticLoop:
         frac = self.watchdog.saturation_fraction
         self._sat = tuple(frac * r for r in rng)
         self._last_record: tuple[float, ...] | None = None
+        #: What replay needs beyond the records, while recording (see :class:`StartRecording`); its reader drains it.
+        self.replay_log: deque[tuple[int, str, object]] = deque()
+        self.recording = False
+        self._snapshot_due: int | None = None
         # optional rig hooks (see Rig); resolved once so the tick pays nothing for them
         self._rig_on_faults: Callable[[Fault], None] | None = getattr(rig, "on_faults", None)
         self._rig_stop_motion: Callable[[str], None] | None = getattr(rig, "stop_motion", None)
@@ -341,6 +368,8 @@ class HapticLoop:
         inbox = self._inbox
         while inbox:
             self._apply(inbox.popleft(), now)
+        if self._snapshot_due is not None:
+            self._take_snapshot()
 
         w = rig.sensor.read_wrench()
         pose = rig.robot.read_pose()
@@ -372,6 +401,8 @@ class HapticLoop:
             if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
                 self._pose_t_ns = pose.t_ns
                 fw.set_pose(rot)
+                if self.recording:
+                    self.replay_log.append((self.tick_count, "pose", (rot, pose.position_m, pose.t_ns)))
             else:
                 cond |= Fault.NON_FINITE
         if hs.error_code:
@@ -472,6 +503,8 @@ class HapticLoop:
             self._gone_reported &= persisting
             if before and not persisting:
                 self.framework.reset()
+                if self.recording:
+                    self.replay_log.append((self.tick_count, "reset", None))
             if persisting != before:
                 self._faults_changed(now)
             self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
@@ -483,11 +516,26 @@ class HapticLoop:
             self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
                                  "ENGINE_DETACHED: the controlling process went away"))
         elif isinstance(cmd, AllowBiasRefinement):
+            if self.recording and bool(cmd.allowed) != self.refine_bias:
+                self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
             self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
+            if self.recording:
+                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))  # type: ignore[attr-defined]
+        elif isinstance(cmd, StartRecording):
+            self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
+        elif isinstance(cmd, StopRecording):
+            self.recording = False
         else:  # pragma: no cover - typed callers cannot get here
             raise TypeError(f"unknown loop command {cmd!r}")
+
+    def _take_snapshot(self) -> None:
+        token, self._snapshot_due = self._snapshot_due, None
+        self.recording = True
+        self.replay_log.append((self.tick_count, "snapshot", {
+            "token": token, "framework": self.framework.snapshot(), "refine_bias": self.refine_bias,
+        }))
 
     def _latch(self, fault: Fault, now: int) -> None:
         if not self.faults & fault:

@@ -65,7 +65,7 @@ def test_a_whole_session_is_stored_with_its_calibration(engine, tmp_path, short_
     assert status == "completed"
     assert json.loads(cal_json) == e.calibration.to_dict()
     assert json.loads(cfg_json)["app"] == "gui"
-    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 2000
+    assert db_rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0] > 2000  # the whole session, recorded
 
 
 def test_calibration_refuses_a_degenerate_set_and_keeps_the_previous(engine):
@@ -193,7 +193,7 @@ def test_engine_process_exits_cleanly_when_the_gui_goes_away(tmp_path, short_pro
     assert db_rows(db, "SELECT trial_index, outcome, abort_reason FROM trials") == [
         (0, "aborted", "the experimenter GUI went away (closed or crashed)")]
     assert db_rows(db, "SELECT status FROM sessions") == [("running",)]
-    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 250
+    assert db_rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0] > 250
 
 
 def test_a_rehearsed_fault_is_stored_aborts_the_trial_and_waits_for_the_experimenters_reset(engine, tmp_path,
