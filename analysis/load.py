@@ -38,6 +38,7 @@ __all__ = [
     "load_study",
     "read_task_force",
     "recorded_where",
+    "samples_frame",
     "read_trial_samples",
 ]
 
@@ -336,3 +337,105 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     if frame.empty:
         raise AnalysisError(f"{database}: no samples for session {session_id}, trial {trial_index}")
     return frame
+
+
+#: The columns of :func:`samples_frame`, in order (``comp_f*`` only for sessions recorded before version 3).
+SAMPLES_FRAME_COLUMNS = (
+    "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
+    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
+    "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
+)
+
+
+def samples_frame(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+    """The 1 kHz records of one session (or all) as one table: the study's samples for SQL-free analysis.
+
+    A session recorded by version 3 gives every record from its start to its
+    end (training, pauses, trials, waits, every resumed run); one recorded
+    before gives its trials' samples (what version 2 kept).
+
+    Parameters
+    ----------
+    database
+        The study database (opened read-only).
+    session_id
+        One session, or None for every session.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per record, columns :data:`SAMPLES_FRAME_COLUMNS`: the session and its
+        recording's segment and loop tick, the session-clock time, the trial (numbered from 1;
+        empty between trials) and the time since its cue, the trial phase code, the task force
+        and the raw, rendered and gain values, the feedback switch and latched faults, the stylus
+        position and the sensor and pose ages and the latency (ms).  Sorted by session and time.
+
+    Raises
+    ------
+    AnalysisError
+        Not a study database, or no such session.
+    """
+    db = _open(str(database))
+    try:
+        ids = [int(r[0]) for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+        if session_id is not None:
+            if int(session_id) not in ids:
+                raise AnalysisError(f"{database}: no session {session_id} (sessions: {', '.join(map(str, ids)) or 'none'})")
+            ids = [int(session_id)]
+        parts = [_session_samples(db, sid) for sid in ids]
+    finally:
+        db.close()
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
+    return pd.concat(parts, ignore_index=True)
+
+
+def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
+    from protocol.recording import read_segment, segments_of
+
+    frames = []
+    if db.schema_version >= 3:
+        cues = {int(i): (int(f), float(c)) for i, f, c in db.conn.execute(
+            "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
+            (session_id,))}
+        for seg, _, _ in segments_of(db.conn, session_id):
+            d = read_segment(db.conn, session_id, seg)
+            c = d.columns
+            n = len(c["tick"])
+            time_s = d.session_time_s
+            trial = c["trial_index"].astype(np.int64)
+            since = np.full(n, np.nan)
+            for idx in np.unique(trial[trial >= 0]).tolist():
+                if idx in cues:
+                    sel = trial == idx
+                    cue_tick = cues[idx][0]
+                    cue_rows = np.flatnonzero(c["tick"] == cue_tick)
+                    if len(cue_rows):
+                        since[sel] = (c["t_ns"][sel] - c["t_ns"][cue_rows[0]]) / 1e9
+            frame = pd.DataFrame({
+                "session_id": session_id, "segment": seg, "tick": c["tick"], "session_time_s": time_s,
+                "trial_number": pd.Series(trial + 1, dtype="Int64").mask(trial < 0),
+                "t_since_cue_s": since, "phase": c["phase"],
+                **{k: c[k] for k in ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+                                     "render_fx", "render_fy", "render_fz", "gain")},
+                "haptic_on": c["haptic_on"].astype(bool), "faults": c["faults"],
+                **{k: c[k] for k in ("stylus_x_m", "stylus_y_m", "stylus_z_m")},
+                "sensor_age_ms": c["sensor_age_ns"] / 1e6, "pose_age_ms": c["pose_age_ns"] / 1e6,
+                "latency_ms": c["latency_ns"] / 1e6,
+            })
+            frames.append(frame)
+    old = pd.read_sql_query(
+        "SELECT t.trial_index, t.started_at_s, s.* FROM samples s JOIN trials t USING (trial_id) "
+        "WHERE t.session_id = ? ORDER BY t.trial_index, s.t_s", db.conn, params=(session_id,))
+    if len(old):
+        frames.append(pd.DataFrame({
+            "session_id": session_id, "session_time_s": old["started_at_s"] + old["t_s"],
+            "trial_number": pd.array(old["trial_index"] + 1, dtype="Int64"), "t_since_cue_s": old["t_s"],
+            **{k: old[k] for k in old.columns if k.startswith(("raw_", "comp_", "render_")) or k == "force_n"},
+        }))
+    if not frames:
+        return pd.DataFrame()
+    out = pd.concat(frames, ignore_index=True)
+    cols = [c for c in SAMPLES_FRAME_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
+    return out[cols].sort_values("session_time_s", kind="stable", ignore_index=True)

@@ -101,9 +101,8 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
     fw = HapticFramework.restore(snap["framework"], config)
     refine = bool(snap["refine_bias"])
     n = len(inputs.tick)
-    stages = np.empty((n, len(STEP_FIELDS)), dtype=np.float64)
-    force = np.empty(n, dtype=np.float64)
-    gain = np.empty(n, dtype=np.float64)
+    outs: list[tuple[float, ...]] = []
+    gains: list[float] = []
     by_tick: dict[int, list[tuple[str, object]]] = {}
     for t, kind, payload in inputs.events:
         by_tick.setdefault(int(t), []).append((kind, payload))
@@ -115,6 +114,7 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
     step = fw.step
     refine_bias = fw.refine_bias
     safety = fw.safety
+    keep, keep_gain = outs.append, gains.append
     for k in range(n):
         evs = by_tick.get(ticks[k])
         if evs is not None:
@@ -130,8 +130,9 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
         fx, fy, fz, tx, ty, tz = raw[k]
         if refine and not latched[k]:
             refine_bias(fx, fy, fz, tx, ty, tz)
-        out = step(fx, fy, fz, enabled[k], dts[k])
-        stages[k] = out
-        force[k] = _HYPOT(out[3], out[4], out[5])
-        gain[k] = safety.gain
-    return ReplayOutputs(stages, force, gain)
+        keep(step(fx, fy, fz, enabled[k], dts[k]))
+        keep_gain(safety.gain)
+    stages = np.array(outs, dtype=np.float64).reshape(n, len(STEP_FIELDS))
+    # |filtered|, as the loop forms it: math.hypot per record (numpy's hypot may round differently)
+    force = np.fromiter((_HYPOT(o[3], o[4], o[5]) for o in outs), dtype=np.float64, count=n)
+    return ReplayOutputs(stages, force, np.array(gains, dtype=np.float64))

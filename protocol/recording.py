@@ -42,6 +42,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.replay import ReplayInputs
+
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
     "decode_columns", "encode_block", "join_blocks", "marked_records", "read_segment", "read_ticks",
@@ -329,6 +331,22 @@ class SegmentData:
     def session_time_s(self) -> np.ndarray:
         """Session-clock time of every record, s."""
         return self.started_at_s + (self.columns["t_ns"] - self.t0_ns) / 1e9
+
+    def replay_inputs(self) -> ReplayInputs:
+        """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
+        c = self.columns
+        return ReplayInputs(
+            tick=c["tick"].astype(np.int64), period_ns=c["period_ns"].astype(np.int64),
+            raw_wrench=np.stack([c[f"raw_{k}"] for k in ("fx", "fy", "fz", "tx", "ty", "tz")], axis=1),
+            haptic_on=c["haptic_on"] != 0, faults=c["faults"].astype(np.int64), snapshot=self.snapshot,
+            events=self.log(),
+        )
+
+    @property
+    def continuous(self) -> bool:
+        """True when no record is missing (ticks consecutive): replay is then exact from end to end."""
+        t = self.columns["tick"]
+        return bool(len(t) == 0 or np.all(np.diff(t) == 1))
 
     def log(self) -> list[tuple[int, str, Any]]:
         """The replay log (poses and events merged in tick order, poses last within a tick, as the loop logs them)."""

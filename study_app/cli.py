@@ -147,9 +147,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
                         "device-error, kill (ends this command as kill -9 would); repeatable")
 
+    from study_app.replay_cmds import add_replay_parsers
     from study_app.report_cmds import add_report_parsers
 
     add_report_parsers(sub)
+    add_replay_parsers(sub)
 
     ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
                      "haptic-study sessions --db study.db")
@@ -243,6 +245,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             from study_app.report_cmds import cmd_plot_trial, cmd_report
 
             return cmd_report(args) if args.command == "report" else cmd_plot_trial(args)
+        if args.command in ("replay", "plot-session", "export"):
+            from study_app.replay_cmds import cmd_export, cmd_plot_session, cmd_replay
+
+            return {"replay": cmd_replay, "plot-session": cmd_plot_session, "export": cmd_export}[args.command](args)
         if args.command == "power" or (args.command == "bench" and args.bench == "power"):
             from study_app.power_cmds import cmd_bench_power, cmd_power
 

@@ -44,6 +44,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         n_samples = conn.execute(
             f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({q})", session_ids
         ).fetchone()[0]
+        recorded = (conn.execute(f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({q})",
+                                 session_ids).fetchone()[0]
+                    if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'session_blocks'").fetchone() else 0)
     finally:
         conn.close()
     exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
@@ -57,7 +60,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     codes = sorted({r[0] for r in exp})
     lines = [
         f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
-        f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), {n_samples:,} samples",
+        f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), "
+        + (f"{recorded:,} records (whole sessions at 1 kHz)" if recorded else f"{n_samples:,} samples"),
         "",
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
@@ -88,5 +92,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
         lines.append(f"  {'success, ' + label:<30}{cell(off):>16}{cell(on):>16}")
     lines.append("")
-    lines.append(f"Wall time {wall_s:.1f} s. Every trial, sample and event is in the database (tables trials, samples, events).")
+    where = "recordings, session_blocks" if recorded else "samples"
+    lines.append(f"Wall time {wall_s:.1f} s. Every trial, record and event is in the database (tables trials, {where}, "
+                 "events).")
     return "\n".join(lines)
