@@ -10,6 +10,8 @@ For a notebook::
     results, table = mode_tests(per_part)               # paired Wilcoxon ON vs OFF, Holm across metrics
 
 or the whole report: ``build_report(["study.db"], "out/")`` (``haptic-study report``).
+Every 1 kHz record of a session, as a pandas table: ``samples_frame("study.db", session_id=2)``
+(``haptic-study export samples``).
 
 Names are loaded on first use, so importing one module (e.g. :mod:`analysis.stats`)
 does not pull in matplotlib.
@@ -30,6 +32,7 @@ __all__ = [
     "paired_wilcoxon",
     "per_participant",
     "read_trial_samples",
+    "samples_frame",
     "speed_accuracy",
 ]
 
@@ -37,6 +40,7 @@ _WHERE = {
     "AnalysisError": "analysis.load",
     "load_study": "analysis.load",
     "read_trial_samples": "analysis.load",
+    "samples_frame": "analysis.load",
     "MetricOptions": "analysis.metrics",
     "compute_trials": "analysis.metrics",
     "per_participant": "analysis.aggregate",

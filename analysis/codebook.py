@@ -10,7 +10,7 @@ column, add one line to :data:`COLUMNS`.
 
 Conventions of the exported files
 ---------------------------------
-* Units are the last part of a name: ``_s`` seconds, ``_N`` newtons (a capital
+* Units are the last part of a name: ``_s`` seconds, ``_ms`` milliseconds, ``_N`` newtons (a capital
   N, the SI symbol, so it cannot be read as a count); counts start with ``n_``
   (or are called ``n``).  Inside the analysis code and the database the
   newton suffix is ``_n``; only the exported files spell it ``_N``.
@@ -204,6 +204,67 @@ COLUMNS: tuple[Column, ...] = (
     Column("hold_s", "time the force must stay in the band for success", "s", label="hold (s)", decimals=_T),
     Column("max_trial_s", "trial cap: a trial not completed by then is a timeout", "s", label="trial cap (s)",
            decimals=_T),
+    # -- what was delivered: aborted trials and the loop's health per trial ----------------------------
+    Column("outcome", "success, timeout, or aborted (not counted; see abort_cause)", type="text",
+           files=("loop_health.csv",)),
+    Column("abort_cause", "why an aborted trial did not count: experimenter, fault (a watchdog fault latched), "
+           "feedback (haptics not as designed), gap (loop records missing) or interrupted (the program ended); "
+           "empty for a counted trial or when not recorded (schema version 1)", type="text", label="abort cause"),
+    Column("period_p50_ms", "median haptic-loop tick period over the trial's samples", "ms",
+           label="period p50 (ms)", decimals=3),
+    Column("period_p99_ms", "99th percentile of the tick period (per participant: the largest over the trials)",
+           "ms", label="period p99 (ms)", decimals=3),
+    Column("period_max_ms", "longest tick period", "ms", label="period max (ms)", decimals=3),
+    Column("periods_over_2ms", "ticks whose period exceeded 2 ms", "count", "integer", label="ticks > 2 ms"),
+    Column("sensor_age_max_ms", "age of the oldest F/T sample the loop used (watchdog limit 5 ms)", "ms",
+           label="sensor age max (ms)", decimals=3),
+    Column("pose_age_max_ms", "age of the oldest robot pose the loop used (watchdog limit 50 ms)", "ms",
+           label="pose age max (ms)", decimals=3),
+    Column("latency_p50_ms", "median time from an F/T sample's arrival to the force command it produced "
+           "(per participant: the median over the trials)", "ms", label="latency p50 (ms)", decimals=3),
+    Column("latency_max_ms", "longest time from an F/T sample's arrival to its force command", "ms",
+           label="latency max (ms)", decimals=3),
+    Column("within_bounds", "true when every loop-health value is within the report's bounds; empty when the "
+           "trial has no loop record", type="boolean", label="within bounds"),
+    Column("outside_bounds", "which bounds the trial's loop exceeded, in words; empty when within", type="text",
+           label="outside bounds"),
+    Column("watchdog_sensor_max_age_ms", "the watchdog's F/T sample age limit the session ran with", "ms",
+           label="sensor age limit (ms)", decimals=3),
+    Column("watchdog_pose_max_age_ms", "the watchdog's robot pose age limit the session ran with", "ms",
+           label="pose age limit (ms)", decimals=3),
+    Column("n_trials", "experiment trials with a loop record", "count", "integer", label="trials",
+           files=("loop_health_by_participant.csv",)),
+    Column("n_outside_bounds", "of those, trials outside the bounds", "count", "integer", label="outside bounds"),
+    # -- power.csv (report --power): the power of each test against the number of participants ----------
+    Column("scope", "overall, or the target level the tests were restricted to", type="text", files=("power.csv",)),
+    Column("metric", "the measure tested (participants.csv column), or all_four_holm / any_holm: Holm across the "
+           "four measures rejects all of them / at least one", type="text", files=("power.csv",)),
+    Column("n", "participants in each resampled study", "count", "integer", files=("power.csv",)),
+    Column("resamples", "resampled studies of n participants", "count", "integer", files=("power.csv",)),
+    Column("alpha", "significance level of each test", "probability", files=("power.csv",), decimals=4),
+    Column("rejections", "resampled studies whose test rejected (p < alpha)", "count", "integer", files=("power.csv",)),
+    Column("power", "rejections / resamples: the estimated power", "fraction (0–1)", files=("power.csv",), decimals=4),
+    Column("ci_low", "lower end of the Clopper–Pearson interval of the power (Monte Carlo error only)",
+           "fraction (0–1)", files=("power.csv",), decimals=4),
+    Column("ci_high", "upper end of that interval", "fraction (0–1)", files=("power.csv",), decimals=4),
+    Column("rejections_holm", "rejections after Holm's correction across the four measures", "count", "integer",
+           files=("power.csv",)),
+    Column("power_holm", "power after Holm's correction", "fraction (0–1)", files=("power.csv",), decimals=4),
+    Column("holm_ci_low", "lower end of the interval of power_holm", "fraction (0–1)", files=("power.csv",),
+           decimals=4),
+    Column("holm_ci_high", "upper end of the interval of power_holm", "fraction (0–1)", files=("power.csv",),
+           decimals=4),
+    Column("mean_pairs", "mean number of pairs that entered the test (a participant without a value in a mode "
+           "is left out)", "count", files=("power.csv",), decimals=4),
+    Column("not_computable", "resampled studies where no test was possible", "count", "integer", files=("power.csv",)),
+    Column("exact", "resampled studies tested with the exact null distribution", "count", "integer",
+           files=("power.csv",)),
+    Column("permutation", "resampled studies tested by permutation (ties or zeros)", "count", "integer",
+           files=("power.csv",)),
+    Column("approx", "resampled studies tested with the normal approximation", "count", "integer",
+           files=("power.csv",)),
+    Column("source", "whose participants were resampled: this study, a pilot database, or the simulated pool",
+           type="text", files=("power.csv",)),
     # -- the codebook itself --------------------------------------------------------------------------
     Column("file", "CSV file of the report folder", type="text", files=("codebook.csv",)),
     Column("column", "column of that file", type="text", files=("codebook.csv",)),

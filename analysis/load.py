@@ -12,6 +12,7 @@ the columns the metrics need.
 from __future__ import annotations
 
 import json
+import math
 import os
 import sqlite3
 from collections.abc import Callable, Sequence
@@ -22,8 +23,12 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from protocol.storage import StorageError, StudyDatabase, trial_id_of
+from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
+from protocol.recording import read_ticks
 from protocol.storage import connect_readonly as _connect_readonly
+
+#: Where a trial's records are in its session's recording (schema version 3).
+RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
 
 __all__ = [
     "AnalysisError",
@@ -32,6 +37,8 @@ __all__ = [
     "connect_readonly",
     "load_study",
     "read_task_force",
+    "recorded_where",
+    "samples_frame",
     "read_trial_samples",
 ]
 
@@ -56,13 +63,19 @@ class StudyData:
         ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live
         (``stored_tct_s``, ``stored_rmse_n``, ``stored_max_ae_n``,
         ``stored_time_in_band_s``, ``stored_peak_force_n``), ``n_samples``,
-        ``abort_reason``, the session's ``tolerance_fraction``, ``hold_s`` and
+        ``abort_reason``, ``abort_cause`` and the loop-health columns
+        (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
+        databases), where its records are in the session's recording
+        (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
+        trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
         ``max_trial_s``, and ``excluded`` (``""`` when analysed, else
         ``"training session"`` or ``"aborted trial"``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
-        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``.
+        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
+        ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored).
     databases
         The database paths, in the order given.
     """
@@ -106,6 +119,16 @@ def _protocol_fields(protocol_json: str, where: str) -> dict[str, object]:
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
 
 
+def _watchdog_limits(config_json: object) -> dict[str, float]:
+    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say)."""
+    try:
+        wd = json.loads(str(config_json)).get("watchdog", {})
+        sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
+    except (ValueError, KeyError, TypeError, AttributeError):
+        sensor = pose = math.nan
+    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
+
+
 def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     db = _open(path)
     try:
@@ -113,15 +136,19 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
             db,
             "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
             "s.started_at, "
-            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json "
+            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json, s.config_json "
             "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
         )
+        # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
+        has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
+        v2 = ", ".join(c if c in has else f"NULL AS {c}"
+                       for c in ("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS))
         trials = _query(
             db,
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
             "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
             "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            "peak_force_n AS stored_peak_force_n, n_samples, abort_reason "
+            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, {v2} "
             "FROM trials ORDER BY session_id, trial_index",
         )
     finally:
@@ -132,7 +159,8 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
         [_protocol_fields(pj, f"{path}: session {sid}") for sid, pj in zip(sessions["session_id"], sessions["protocol_json"])],
         index=sessions.index,
     )
-    sessions = pd.concat([sessions.drop(columns="protocol_json"), proto], axis=1)
+    watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
+    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json"]), proto, watchdog], axis=1)
     sessions.insert(0, "database", path)
     trials.insert(0, "database", path)
     return sessions, trials
@@ -196,8 +224,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
-             "stored_peak_force_n", "n_samples", "abort_reason", "tolerance_fraction", "hold_s",
-             "max_trial_s", "excluded"]
+             "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
+             "tolerance_fraction", "hold_s", "max_trial_s", "excluded"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
     if not (sessions["kind"] == "experiment").any():
@@ -207,7 +235,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths))
 
 
-def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
+                    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
     """One trial's task-force samples: times since the cue (int ns) and ``force_n`` (N).
 
     Parameters
@@ -216,6 +245,9 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArra
         An open connection to the study database.
     trial_id
         ``session_id`` · 10⁶ + ``trial_index``.
+    where
+        ``(session_id, segment, first_tick, last_tick)``: the trial's records in its session's
+        recording (schema version 3); None: its rows of the ``samples`` table (versions 1 and 2).
 
     Returns
     -------
@@ -223,12 +255,25 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int) -> tuple[npt.NDArra
         In time order; empty when the trial has no samples.  A NULL force
         becomes NaN (out of band, left out of the errors).
     """
+    if where is not None:
+        cols = read_ticks(conn, *where, ("t_ns", "force_n"))
+        t = cols["t_ns"].astype(np.int64)
+        return (t - t[0] if len(t) else t), cols["force_n"].astype(np.float64)  # the first record is the cue
     rows = conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s", (trial_id,)).fetchall()
     if not rows:
         return np.empty(0, np.int64), np.empty(0, np.float64)
     block = np.array(rows, dtype=np.float64)
     # t_s was stored as ns / 1e9; rounding recovers the integer ns exactly (|t| ≪ 2^53 ns)
     return np.rint(block[:, 0] * 1e9).astype(np.int64), np.ascontiguousarray(block[:, 1])
+
+
+def recorded_where(session_id: object, segment: object, first_tick: object, last_tick: object,
+                   ) -> tuple[int, int, int, int] | None:
+    """A trial's place in its session's recording, or None when it has none (a trial of schema version 1 or 2)."""
+    values = (segment, first_tick, last_tick)
+    if any(v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in values):
+        return None
+    return int(session_id), int(segment), int(first_tick), int(last_tick)  # type: ignore[arg-type]
 
 
 def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
@@ -244,6 +289,9 @@ def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
 
 _SAMPLE_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
                    "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz")
+#: What a trial's trace reads of a recorded session (the compensated force is not stored: replay recomputes it).
+_RECORDED_TRACE = ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+                   "render_fx", "render_fy", "render_fz")
 
 
 def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int) -> pd.DataFrame:
@@ -259,7 +307,9 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     Returns
     -------
     pandas.DataFrame
-        Columns ``t_s``, ``force_n``, ``raw_f*``, ``raw_t*``, ``comp_f*``, ``render_f*``.
+        Columns ``t_s`` (since the cue), ``force_n``, ``raw_f*``, ``raw_t*``, ``render_f*``, and
+        ``comp_f*`` for a trial of schema version 1 or 2 (a recorded session's compensated force is
+        recomputed by replay, :func:`pipeline.replay.replay`, not stored).
 
     Raises
     ------
@@ -268,12 +318,124 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     """
     db = _open(str(database))
     try:
-        frame = pd.read_sql_query(
-            f"SELECT {', '.join(_SAMPLE_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY t_s",
-            db.conn, params=(trial_id_of(int(session_id), int(trial_index)),),
-        )
+        frame = pd.DataFrame()
+        if db.schema_version >= 3:
+            row = db.conn.execute("SELECT segment, first_tick, last_tick FROM trials WHERE trial_id = ?",
+                                  (trial_id_of(int(session_id), int(trial_index)),)).fetchone()
+            where = None if row is None else recorded_where(session_id, *row)
+            if where is not None:
+                cols = read_ticks(db.conn, *where, ("t_ns", *_RECORDED_TRACE))
+                t_ns = cols.pop("t_ns")
+                frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
+        if frame.empty:
+            frame = pd.read_sql_query(
+                f"SELECT {', '.join(_SAMPLE_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY t_s",
+                db.conn, params=(trial_id_of(int(session_id), int(trial_index)),),
+            )
     finally:
         db.close()
     if frame.empty:
         raise AnalysisError(f"{database}: no samples for session {session_id}, trial {trial_index}")
     return frame
+
+
+#: The columns of :func:`samples_frame`, in order (``comp_f*`` only for sessions recorded before version 3).
+SAMPLES_FRAME_COLUMNS = (
+    "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
+    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
+    "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
+)
+
+
+def samples_frame(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+    """The 1 kHz records of one session (or all) as one table: the study's samples for SQL-free analysis.
+
+    A session recorded by version 3 gives every record from its start to its
+    end (training, pauses, trials, waits, every resumed run); one recorded
+    before gives its trials' samples (what version 2 kept).
+
+    Parameters
+    ----------
+    database
+        The study database (opened read-only).
+    session_id
+        One session, or None for every session.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per record, columns :data:`SAMPLES_FRAME_COLUMNS`: the session and its
+        recording's segment and loop tick, the session-clock time, the trial (numbered from 1;
+        empty between trials) and the time since its cue, the trial phase code, the task force
+        and the raw, rendered and gain values, the feedback switch and latched faults, the stylus
+        position and the sensor and pose ages and the latency (ms).  Sorted by session and time.
+
+    Raises
+    ------
+    AnalysisError
+        Not a study database, or no such session.
+    """
+    db = _open(str(database))
+    try:
+        ids = [int(r[0]) for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+        if session_id is not None:
+            if int(session_id) not in ids:
+                raise AnalysisError(f"{database}: no session {session_id} (sessions: {', '.join(map(str, ids)) or 'none'})")
+            ids = [int(session_id)]
+        parts = [_session_samples(db, sid) for sid in ids]
+    finally:
+        db.close()
+    parts = [p for p in parts if len(p)]
+    if not parts:
+        return pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
+    return pd.concat(parts, ignore_index=True)
+
+
+def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
+    from protocol.recording import read_segment, segments_of
+
+    frames = []
+    if db.schema_version >= 3:
+        cues = {int(i): (int(f), float(c)) for i, f, c in db.conn.execute(
+            "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
+            (session_id,))}
+        for seg, _, _ in segments_of(db.conn, session_id):
+            d = read_segment(db.conn, session_id, seg)
+            c = d.columns
+            n = len(c["tick"])
+            time_s = d.session_time_s
+            trial = c["trial_index"].astype(np.int64)
+            since = np.full(n, np.nan)
+            for idx in np.unique(trial[trial >= 0]).tolist():
+                if idx in cues:
+                    sel = trial == idx
+                    cue_tick = cues[idx][0]
+                    cue_rows = np.flatnonzero(c["tick"] == cue_tick)
+                    if len(cue_rows):
+                        since[sel] = (c["t_ns"][sel] - c["t_ns"][cue_rows[0]]) / 1e9
+            frame = pd.DataFrame({
+                "session_id": session_id, "segment": seg, "tick": c["tick"], "session_time_s": time_s,
+                "trial_number": pd.Series(trial + 1, dtype="Int64").mask(trial < 0),
+                "t_since_cue_s": since, "phase": c["phase"],
+                **{k: c[k] for k in ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+                                     "render_fx", "render_fy", "render_fz", "gain")},
+                "haptic_on": c["haptic_on"].astype(bool), "faults": c["faults"],
+                **{k: c[k] for k in ("stylus_x_m", "stylus_y_m", "stylus_z_m")},
+                "sensor_age_ms": c["sensor_age_ns"] / 1e6, "pose_age_ms": c["pose_age_ns"] / 1e6,
+                "latency_ms": c["latency_ns"] / 1e6,
+            })
+            frames.append(frame)
+    old = pd.read_sql_query(
+        "SELECT t.trial_index, t.started_at_s, s.* FROM samples s JOIN trials t USING (trial_id) "
+        "WHERE t.session_id = ? ORDER BY t.trial_index, s.t_s", db.conn, params=(session_id,))
+    if len(old):
+        frames.append(pd.DataFrame({
+            "session_id": session_id, "session_time_s": old["started_at_s"] + old["t_s"],
+            "trial_number": pd.array(old["trial_index"] + 1, dtype="Int64"), "t_since_cue_s": old["t_s"],
+            **{k: old[k] for k in old.columns if k.startswith(("raw_", "comp_", "render_")) or k == "force_n"},
+        }))
+    if not frames:
+        return pd.DataFrame()
+    out = pd.concat(frames, ignore_index=True)
+    cols = [c for c in SAMPLES_FRAME_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
+    return out[cols].sort_values("session_time_s", kind="stable", ignore_index=True)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from analysis.load import Progress, StudyData, connect_readonly, read_task_force
+from analysis.load import Progress, StudyData, connect_readonly, read_task_force, recorded_where
 from analysis.parallel import default_workers, run_tasks
 from protocol.metrics import trial_metrics
 
@@ -98,14 +98,16 @@ def _nan(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
-def _chunk(database: str, specs: list[tuple[int, int, float, float, float, float, str, float, float, float]],
-           window: str) -> list[_Row]:
+_Spec = tuple[int, int, float, float, float, float, str, float, float, float, "tuple[int, int, int, int] | None"]
+
+
+def _chunk(database: str, specs: list[_Spec], window: str) -> list[_Row]:
     """Recompute the metrics of some trials of one database (runs in a worker process)."""
     out: list[_Row] = []
     conn = connect_readonly(database)
     try:
-        for row, tid, target, tol, hold, cap, outcome, s_tct, s_rmse, s_max in specs:
-            t_ns, force = read_task_force(conn, tid)
+        for row, tid, target, tol, hold, cap, outcome, s_tct, s_rmse, s_max, where in specs:
+            t_ns, force = read_task_force(conn, tid, where)
             if len(t_ns) == 0:
                 out.append((row, False, outcome == "success", *(math.nan,) * 6, True))
                 continue
@@ -154,10 +156,11 @@ def compute_trials(
     nums = {c: inc[c].to_numpy(dtype=float) for c in
             ("target_force_n", "tolerance_fraction", "hold_s", "max_trial_s", "stored_tct_s", "stored_rmse_n",
              "stored_max_ae_n", "n_samples")}
+    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"])]
     specs = [
         (i, int(tid), nums["target_force_n"][i], nums["tolerance_fraction"][i], nums["hold_s"][i],
          nums["max_trial_s"][i], str(outcome), nums["stored_tct_s"][i], nums["stored_rmse_n"][i],
-         nums["stored_max_ae_n"][i])
+         nums["stored_max_ae_n"][i], wheres[i])
         for i, (tid, outcome) in enumerate(zip(inc["trial_id"], inc["outcome"]))
     ]
     workers = default_workers() if workers is None else max(1, int(workers))

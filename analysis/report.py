@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import datetime as dt
 import html
+import json
 import math
 import os
 import shutil
@@ -32,6 +33,7 @@ import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -39,6 +41,7 @@ import pandas as pd
 from analysis import codebook, figures
 from analysis.aggregate import PRIMARY_METRICS, mean_sd, mode_tests, per_participant, speed_accuracy
 from analysis.load import AnalysisError, Progress, StudyData, load_study
+from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts, health_summary, health_table
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.parallel import default_workers, run_tasks
 from analysis.stats import WilcoxonResult, methods_text
@@ -118,6 +121,8 @@ def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame
     st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
     sess = study.sessions.copy()
     sess["database"] = sess["database"].map(os.path.basename)
+    health = health_table(study)
+    health["database"] = health["database"].map(os.path.basename)
     return {
         "trials.csv": t,
         "participants.csv": per,
@@ -127,14 +132,22 @@ def _export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame
         "stats_by_target.csv": st_t,
         "speed_accuracy.csv": codebook.export(sa, "speed_accuracy.csv"),
         "sessions.csv": codebook.export(sess, "sessions.csv"),
+        "loop_health.csv": codebook.export(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
+        "loop_health_by_participant.csv": codebook.export(by_participant(health_summary(health)),
+                                                          "loop_health_by_participant.csv"),
     }
 
 
-def _write_tables(folder: Path, tables: dict[str, pd.DataFrame]) -> None:
-    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included)."""
+def _write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
+
+    ``written_too``: CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)
     columns = {name: list(frame.columns) for name, frame in tables.items()}
+    for name in written_too:
+        columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
     codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
 
@@ -354,6 +367,42 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
     return f'<div class="key">{"".join(cards)}</div>'
 
 
+def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
+    """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
+    counts = abort_counts(study)
+    total = int(counts["n_trials"].sum())
+    rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
+                   for c, n in zip(counts["abort_cause"], counts["n_trials"]))
+    aborted = (f"<p>{plural(total, 'experiment trial')} did not count and {'was' if total == 1 else 'were'} re-run "
+               "under the protocol's abort policy, by cause:</p>"
+               f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
+               f"<tbody>{rows}</tbody></table></div>")
+    health = tables["loop_health.csv"]
+    recorded = health[health["within_bounds"].notna()]
+    bounds = "; ".join(b.describe() for b in LOOP_BOUNDS)
+    if recorded.empty:
+        loop = "<p>No trial carries a loop-health record (databases of schema version 1).</p>"
+    else:
+        outside = recorded[~recorded["within_bounds"].astype(bool)]
+        def counted(r: Any) -> str:
+            return "" if r.outcome != "aborted" else f" (aborted: {r.abort_cause or 'cause not recorded'}; not counted)"
+
+        listed = "".join(
+            f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}"
+            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+        more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
+        verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
+                   "bounds.</p>" if outside.empty else
+                   f'<p class="warn">{plural(len(outside), "trial")} of {len(recorded)} left the bounds:</p>'
+                   f"<ul>{listed}{more}</ul>")
+        loop = (_html_table(tables["loop_health_by_participant.csv"], "loop_health_by_participant.csv") + verdict)
+    clock = ("" if not (study.sessions["rig"] == "sim").any() else
+             "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
+             "the latency is the sample's age. A real-clock session measures them in real time.</p>")
+    return (f"<h2>What was delivered</h2>{aborted}<h3>The 1 kHz loop, per trial</h3>"
+            f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
+
+
 def _when(v: object) -> str:
     """An ISO 8601 time as ``YYYY-MM-DD HH:MM`` (UTC), for the page."""
     return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
@@ -361,7 +410,8 @@ def _when(v: object) -> str:
 
 def _page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
           excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
-          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]]) -> str:
+          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
+          power_html: str = "") -> str:
     """report.html: self-contained (figures embedded), readable on screen and on paper."""
     stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
     warn = ""
@@ -413,12 +463,77 @@ accurate: participants traded accuracy for speed. A positive ρ means slow trial
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
 band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
 {"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+{power_html}
+{_record_html(study, tables)}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
 <h2>Sessions</h2>
 {_html_table(sess, "sessions.csv", sess_cols, cell={"started_at": _when, "ended_at": _when})}
 </body></html>
 """
+
+
+#: The file report leaves in every folder it writes, listing what it wrote: ``--force`` replaces only such folders.
+REPORT_MARKER = ".haptic-study-report"
+
+
+def _refuse_inputs_inside(out: Path, databases: Sequence[str | os.PathLike[str]]) -> None:
+    """A report folder must never hold one of its own input databases (``--force`` would replace it)."""
+    root = out.resolve()
+    for db in databases:
+        p = Path(db).resolve()
+        if root == p or root in p.parents:
+            raise AnalysisError(f"--out {out}: holds the input database {db}; write the report to another folder "
+                                "(nothing was changed)")
+
+
+def _ours(out: Path) -> set[str] | None:
+    """The files a previous report listed in ``out``'s marker (None: no readable marker)."""
+    try:
+        listed = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))["files"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    return {str(f) for f in listed} if isinstance(listed, list) else None
+
+
+def _ours_to_replace(out: Path) -> None:
+    """Refuse ``--force`` unless ``out`` holds only what a report wrote there (its marker says what)."""
+    listed = _ours(out)
+    if listed is None:
+        raise AnalysisError(f"--out {out}: not a folder report wrote (no {REPORT_MARKER} in it); --force replaces "
+                            "only report folders: choose another folder (nothing was deleted)")
+    foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
+                     if not p.is_dir() and str(p.relative_to(out)) not in listed | {REPORT_MARKER})
+    if foreign:
+        raise AnalysisError(f"--out {out}: holds {plural(len(foreign), 'file')} report did not write "
+                            f"(e.g. {foreign[0]}); move {'it' if len(foreign) == 1 else 'them'} or choose another "
+                            "folder (nothing was deleted)")
+
+
+def _remove_ours(out: Path) -> None:
+    """Delete what a previous report wrote in ``out`` (checked by :func:`_ours_to_replace`), then the folder."""
+    listed = _ours(out) or set()
+    for name in sorted(listed | {REPORT_MARKER}, reverse=True):
+        try:
+            (out / name).unlink()
+        except FileNotFoundError:
+            pass
+    try:
+        for d in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
+            d.rmdir()  # fails, keeping it, if a file appeared meanwhile: nothing unlisted is ever deleted
+        out.rmdir()
+    except OSError:
+        raise AnalysisError(f"--out {out}: other files appeared in it while the report was made; the previous "
+                            "report's files were removed, nothing else was deleted, and the new report was not "
+                            "moved in (run it again)") from None
+
+
+def _apply_umask(folder: Path) -> None:
+    """The temporary folder was made owner-only: give the report the permissions the user's umask asks for."""
+    mask = os.umask(0)
+    os.umask(mask)
+    for p in [folder, *folder.rglob("*")]:
+        p.chmod((0o777 if p.is_dir() else 0o666) & ~mask)
 
 
 def build_report(
@@ -431,6 +546,7 @@ def build_report(
     force: bool = False,
     progress: Progress | None = None,
     workers: int | None = None,
+    power: bool = False,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -445,11 +561,16 @@ def build_report(
     zero_method, confidence
         Wilcoxon zero handling and the Hodges–Lehmann confidence level.
     force
-        Replace an existing, non-empty ``out_dir``.
+        Replace an existing, non-empty ``out_dir`` -- only one that ``report``
+        itself wrote (its marker file lists what it wrote) and that holds
+        nothing else: no input database, no file of anybody else's.
     progress
         ``progress(samples read, samples expected)``.
     workers
         Processes for reading samples and drawing figures (default: the usable cores, at most 4; 1 = none).
+    power
+        Add "What n would a study need?": the power of the tests against the number of participants, by
+        resampling this study's participants (:func:`analysis.power.report_section`; writes ``power.csv``).
 
     Returns
     -------
@@ -463,8 +584,11 @@ def build_report(
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
         raise AnalysisError(f"--out {out}: exists and is not a folder")
-    if out.exists() and any(out.iterdir()) and not force:
-        raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
+    _refuse_inputs_inside(out, databases)
+    if out.exists() and any(out.iterdir()):
+        if not force:
+            raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
+        _ours_to_replace(out)
     parent = out.resolve().parent
     if not parent.exists():
         raise AnalysisError(f"--out {out}: the folder {parent} does not exist")
@@ -535,17 +659,27 @@ def build_report(
         pngs = {key: png for (_, _, _, _, key), png in zip(tasks, drawn)}
         examples = [(title, pngs[name]) for name, title in titles]
 
+        power_html = ""
+        if power:
+            from analysis.power import report_section
+
+            text, png = report_section(trials, options, zero_method, tmp)
+            power_html = (f'<h2>What n would a study need?</h2><pre style="white-space:pre-wrap">{html.escape(text)}'
+                          "</pre>" + (_img(png, "power of each test against the number of participants") if png else ""))
         tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
-        _write_tables(tmp, tables)
+        _write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         page = _page(
             study=study, table=table, options=options, zero_method=zero_method, confidence=confidence,
             excluded=excluded, n_participants=n_participants, n_incomplete=n_incomplete, tables=tables,
-            marks_overall=marks_overall, pngs=pngs, examples=examples,
+            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=power_html,
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
         files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
+        (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": f"haptic-study {software_version()}",
+                                                     "files": files}, indent=1), encoding="utf-8")
+        _apply_umask(tmp)
         if out.exists():
-            shutil.rmtree(out)
+            _remove_ours(out)
         os.replace(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

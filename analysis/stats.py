@@ -747,7 +747,7 @@ def paired_wilcoxon(
 # ------------------------------------------------------------------------------------------------
 # Multiple comparisons, correlation, tables, methods text
 # ------------------------------------------------------------------------------------------------
-def holm(p_values: npt.ArrayLike) -> np.ndarray:
+def holm(p_values: npt.ArrayLike, *, axis: int | None = None) -> np.ndarray:
     """Holm (1979) step-down adjusted p-values.
 
     Parameters
@@ -755,11 +755,15 @@ def holm(p_values: npt.ArrayLike) -> np.ndarray:
     p_values : array_like
         p-values in [0, 1]; NaN entries (untested metrics) stay NaN and do not
         count towards the family size m.
+    axis : int or None
+        None (default): the whole array is one family.  An axis: every slice
+        along it is a family of its own, all adjusted at once (e.g. the four
+        metrics of each of thousands of resampled studies, ``axis=-1``).
 
     Returns
     -------
     numpy.ndarray
-        Same shape. With the m finite p-values sorted, p₍₁₎ ≤ … ≤ p₍ₘ₎,
+        Same shape. With the m finite p-values of a family sorted, p₍₁₎ ≤ … ≤ p₍ₘ₎,
         ``p̃₍ᵢ₎ = min(1, max_{j ≤ i} (m − j + 1)·p₍ⱼ₎)`` — monotone in p and capped
         at 1, as ``statsmodels.stats.multitest.multipletests(method="holm")``.
 
@@ -770,21 +774,31 @@ def holm(p_values: npt.ArrayLike) -> np.ndarray:
     """
     p = np.asarray(p_values, dtype=np.float64)
     flat = p.ravel()
-    out = np.full(flat.shape, np.nan)
     ok = ~np.isnan(flat)
     bad = ok & ~((flat >= 0.0) & (flat <= 1.0))
     if bad.any():
         i = int(np.nonzero(bad)[0][0])
         raise ValueError(f"p_values[{i}] = {flat[i]}: p-values must lie in [0, 1] (or be NaN)")
-    q = flat[ok]
-    m = q.size
-    if m:
-        order = np.argsort(q, kind="stable")
-        adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(m)) * q[order]))
-        sub = np.empty(m)
-        sub[order] = adj
-        out[ok] = sub
-    return out.reshape(p.shape)
+    if axis is None:
+        return _holm_rows(flat.reshape(1, -1)).reshape(p.shape)
+    moved = np.moveaxis(p, axis, -1)
+    rows = _holm_rows(moved.reshape(-1, moved.shape[-1]))
+    return np.moveaxis(rows.reshape(moved.shape), -1, axis)
+
+
+def _holm_rows(q: np.ndarray) -> np.ndarray:
+    """Holm's adjustment of every row of a 2-D array, each row a family (NaN: not in the family)."""
+    missing = np.isnan(q)
+    m = (~missing).sum(axis=1, keepdims=True)
+    # NaN sorts last, so the first m sorted entries of a row are its family, in ascending order
+    order = np.argsort(np.where(missing, np.inf, q), axis=1, kind="stable")
+    ranked = np.take_along_axis(q, order, axis=1)
+    with np.errstate(invalid="ignore"):
+        adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(q.shape[1])) * ranked, axis=1))
+    out = np.empty_like(q)
+    np.put_along_axis(out, order, adj, axis=1)
+    out[missing] = np.nan
+    return out
 
 
 def correlation(

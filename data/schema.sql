@@ -1,8 +1,11 @@
--- haptic-study database schema, version 2 (PRAGMA user_version = 2).
+-- haptic-study database schema, version 3 (PRAGMA user_version = 3).
 -- The application applies this file to an empty database; a database whose
 -- user_version is newer than the software's is refused; a version-1 database
--- is read as it is, and upgraded in place (after a backup copy is written
--- beside it) only by a command that writes to it (protocol/storage.py).
+-- or version-2 database is read as it is, and upgraded in place (after a
+-- backup copy is written beside it) only by a command that writes to it
+-- (protocol/storage.py).  Version 3 records whole sessions at full rate in
+-- compressed blocks (recordings, session_blocks; protocol/recording.py);
+-- the samples table holds what versions 1 and 2 recorded (trial windows).
 -- Rows are insert-only except that a session's end columns are filled once,
 -- a session's schedule is rewritten when an aborted trial is re-queued, and
 -- the leases table holds who writes to what right now.
@@ -67,6 +70,10 @@ CREATE TABLE IF NOT EXISTS trials (
     pose_age_max_ms   REAL,                     -- oldest robot pose the loop used (watchdog limit 50 ms)
     latency_p50_ms    REAL,                     -- F/T sample arrival -> force command sent
     latency_max_ms    REAL,
+    -- version 3: where the trial's records are in the session's recording (NULL: in samples, or none)
+    segment     INTEGER,                        -- recordings.segment
+    first_tick  INTEGER,                        -- the loop ticks of its first (the cue) and last record
+    last_tick   INTEGER,
     UNIQUE (session_id, trial_index),
     CHECK (tct_s IS NULL OR outcome = 'success')
 );
@@ -104,4 +111,31 @@ CREATE TABLE IF NOT EXISTS leases (
     command       TEXT NOT NULL,                -- what holds it, for a refusal message
     acquired_at   TEXT NOT NULL,
     heartbeat_at  TEXT NOT NULL
+);
+
+-- version 3: whole sessions at full rate.  A run of a session (its first, then one per resume) is a segment,
+-- with the haptic framework's state at its first record (replay starts from it); its records are cut into
+-- blocks of about one second, each column one compressed array (protocol/recording.py).
+CREATE TABLE IF NOT EXISTS recordings (
+    session_id    INTEGER NOT NULL REFERENCES sessions(session_id),
+    segment       INTEGER NOT NULL,
+    started_at_s  REAL NOT NULL,                -- session clock of its first record
+    t0_ns         INTEGER NOT NULL,             -- loop time of that record: session time = started_at_s + (t_ns - t0_ns) / 1e9
+    snapshot_json TEXT NOT NULL,                -- the framework's state before its first record, and the loop's
+    scales_json   TEXT NOT NULL,                -- counts per unit of the raw wrench columns (the codec's hint)
+    PRIMARY KEY (session_id, segment)
+);
+
+CREATE TABLE IF NOT EXISTS session_blocks (
+    session_id  INTEGER NOT NULL,
+    segment     INTEGER NOT NULL,
+    block       INTEGER NOT NULL,               -- 0, 1, ... within the segment
+    first_tick  INTEGER NOT NULL,               -- loop ticks of its first and last record
+    last_tick   INTEGER NOT NULL,
+    n_records   INTEGER NOT NULL,
+    t_first_s   REAL NOT NULL,                  -- session clock of its first and last record
+    t_last_s    REAL NOT NULL,
+    data        BLOB NOT NULL,                  -- the records' columns, the poses and the replay log
+    PRIMARY KEY (session_id, segment, block),
+    FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );

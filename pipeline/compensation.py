@@ -1118,3 +1118,18 @@ class RlsBias:
     def covariance(self) -> float:
         """Current ``P`` (the same for all six channels)."""
         return self._p
+
+    def state(self) -> dict[str, Any]:
+        """Everything that determines the next update, JSON-safe and exact (see :meth:`from_state`)."""
+        return {"forgetting": self._lam, "p0": self._p0, "p_max": self._p_max, "gate2": self._gate2,
+                "theta": list(self._theta), "p": self._p, "updates": self.updates, "rejected": self.rejected}
+
+    @classmethod
+    def from_state(cls, d: Mapping[str, Any]) -> RlsBias:
+        """The estimator exactly as :meth:`state` saw it."""
+        th = [float(v) for v in d["theta"]]
+        rls = cls(th[:3], th[3:], forgetting=float(d["forgetting"]), p0=float(d["p0"]), p_max=float(d["p_max"]))
+        rls._gate2 = float(d["gate2"])
+        rls._p = float(d["p"])
+        rls.updates, rls.rejected = int(d["updates"]), int(d["rejected"])
+        return rls

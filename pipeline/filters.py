@@ -15,6 +15,8 @@ spike is flushed within ``2·window`` samples of its arrival.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
+from typing import Any
 
 from pipeline.frames import Vec3
 
@@ -88,6 +90,21 @@ class MovingAverage3:
     def count(self) -> int:
         """Samples currently in the window (≤ ``window``)."""
         return self._st[4]
+
+    def state(self) -> dict[str, Any]:
+        """The window's contents and running sums, JSON-safe and exact (see :meth:`load_state`)."""
+        return {"window": self.window, "buf": [list(b) for b in self._buf], "st": list(self._st),
+                "rejected": self.rejected}
+
+    def load_state(self, d: Mapping[str, Any]) -> None:
+        """Continue exactly from a :meth:`state` of a filter of the same window (rings refilled in place)."""
+        if int(d["window"]) != self.window:
+            raise ValueError(f"filter state of window {d['window']!r}: this filter's window is {self.window}")
+        for ring, values in zip(self._buf, d["buf"]):
+            ring[:] = [float(v) for v in values]
+        sx, sy, sz, i, n = d["st"]
+        self._st = (float(sx), float(sy), float(sz), int(i), int(n))
+        self.rejected = int(d["rejected"])
 
     def update(self, x: float, y: float, z: float) -> Vec3:
         """Add one sample and return the mean of the last ``window`` accepted samples."""

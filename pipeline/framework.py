@@ -37,7 +37,10 @@ _TANH = math.tanh
 _FSUM = math.fsum
 _INF = math.inf
 
-__all__ = ["FrameworkConfig", "HapticFramework", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE", "DEFAULT_ROT_TIP_SENSOR"]
+__all__ = [
+    "FrameworkConfig", "HapticFramework", "SNAPSHOT_VERSION", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE",
+    "DEFAULT_ROT_TIP_SENSOR", "framework_config_from_dict", "framework_config_to_dict",
+]
 
 #: Touch frame (+x right, +y up, +z toward the user) for an experimenter facing
 #: the robot along base +y: base x → haptic x, base z (up) → haptic y (up),
@@ -122,6 +125,7 @@ class HapticFramework:
     __slots__ = (
         "config", "_cal", "_mounted", "_bias", "_payload", "filter", "safety", "rls",
         "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_hot_head", "_hot_tail", "_ft_safe",
+        "device_peak_n",
     )
 
     def __init__(
@@ -132,6 +136,8 @@ class HapticFramework:
         rls: RlsBias | None = None,
     ) -> None:
         self.config = config
+        #: The haptic device's peak force, N (the safety clamp is the smaller of it and f_max).
+        self.device_peak_n = float(device_peak_n)
         self._cal = calibration
         self._mounted = calibration.for_mount(config.rot_tip_sensor)
         self._bias: tuple[float, ...] = (*calibration.force_bias_n, *calibration.torque_bias_nm)
@@ -236,6 +242,53 @@ class HapticFramework:
         """Empty the filter and drop the output to zero (after a fault reset or re-calibration)."""
         self.filter.reset()
         self.safety.force_zero()
+
+    # -- replay: the whole state, exactly -------------------------------------------------------------
+    def snapshot(self) -> dict[str, Any]:
+        """Everything the next :meth:`step` depends on, JSON-safe and exact (floats round-trip by ``repr``).
+
+        :meth:`restore` builds a framework that continues bit for bit from here:
+        what a recorded session needs to be replayed through this code.
+        """
+        return {
+            "version": SNAPSHOT_VERSION,
+            "config": framework_config_to_dict(self.config),
+            "device_peak_n": self.device_peak_n,
+            "calibration": self._cal.to_dict(),
+            "bias": list(self._bias),
+            "rls": None if self.rls is None else self.rls.state(),
+            "filter": self.filter.state(),
+            "safety": self.safety.state(),
+            "rot_base_tip": list(self._rbt),
+        }
+
+    @classmethod
+    def restore(cls, snap: dict[str, Any], config: FrameworkConfig | None = None) -> HapticFramework:
+        """A framework in the exact state of a :meth:`snapshot`.
+
+        ``config`` replaces the stored configuration (replay "what if" with
+        another filter window, f_scale or f_max): the state that does not fit
+        it -- the filter's window -- then starts empty, as after a reset.
+
+        Raises
+        ------
+        ValueError
+            A snapshot of another version, or one that does not read.
+        """
+        if snap.get("version") != SNAPSHOT_VERSION:
+            raise ValueError(f"framework snapshot version = {snap.get('version')!r}: this code reads {SNAPSHOT_VERSION}")
+        stored = framework_config_from_dict(snap["config"])
+        cfg = stored if config is None else config
+        cal = PayloadCalibration.from_dict(snap["calibration"])
+        rls = None if snap["rls"] is None else RlsBias.from_state(snap["rls"])
+        fw = cls(cfg, cal, device_peak_n=float(snap["device_peak_n"]), rls=None)
+        fw.rls = rls  # not reset: it continues from its own state
+        fw._bias = tuple(float(v) for v in snap["bias"])
+        if cfg.filter_window == stored.filter_window:
+            fw.filter.load_state(snap["filter"])
+        fw.safety.load_state(snap["safety"])
+        fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]
+        return fw
 
     def step(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:
         """Run Algorithm 1 on one raw force sample (sensor frame, N).
@@ -363,6 +416,28 @@ class HapticFramework:
             mx, my, mz, ax, ay, az, bx_, by_, bz_, hx, hy, hz,
             qx, qy, qz, ox, oy, oz,
         )
+
+
+#: Version of :meth:`HapticFramework.snapshot`'s layout.
+SNAPSHOT_VERSION = 1
+
+
+def framework_config_to_dict(config: FrameworkConfig) -> dict[str, Any]:
+    """A configuration as plain JSON data (inverse of :func:`framework_config_from_dict`)."""
+    return {
+        "f_max_n": config.f_max_n, "f_scale_n": config.f_scale_n, "filter_window": config.filter_window,
+        "rot_tip_sensor": list(config.rot_tip_sensor), "rot_haptic_base": list(config.rot_haptic_base),
+        "safety": {f: getattr(config.safety, f) for f in config.safety.__dataclass_fields__},
+    }
+
+
+def framework_config_from_dict(d: dict[str, Any]) -> FrameworkConfig:
+    """The configuration :func:`framework_config_to_dict` wrote (validated like any other)."""
+    return FrameworkConfig(
+        f_max_n=d["f_max_n"], f_scale_n=d["f_scale_n"], filter_window=d["filter_window"],
+        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),  # type: ignore[arg-type]
+        safety=SafetyConfig(**d["safety"]),
+    )
 
 
 def _clamp_free_bound(g: SafetyGovernor) -> float:

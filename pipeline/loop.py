@@ -10,9 +10,8 @@ Each tick:
    stage ramps the output to zero within 50 ms while a fault is latched or
    feedback is off;
 5. command the haptic device and append one record with every stage to the ring buffer
-   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over --
-   the sample's age at the tick on the loop clock plus the real time from reading it to the command, so a
-   virtual-clock run still measures the software's own processing time).
+   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over,
+   on the loop's clock -- on a virtual clock, where computing takes no time, the sample's age).
 
 The loop does only I/O and arithmetic: no logging, no allocation beyond a
 few tuples, no locks.  Commands arrive through a deque (thread-safe append /
@@ -44,7 +43,6 @@ from __future__ import annotations
 
 import math
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -71,6 +69,8 @@ __all__ = [
     "Rig",
     "SetCalibration",
     "SetHaptics",
+    "StartRecording",
+    "StopRecording",
     "WatchdogConfig",
 ]
 
@@ -89,7 +89,6 @@ RECORD_FIELDS: tuple[str, ...] = (
 )
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
-_perf_ns = time.perf_counter_ns
 
 
 class Rig(Protocol):
@@ -180,8 +179,28 @@ class SetCalibration:
     calibration: object
 
 
+@dataclass(frozen=True, slots=True)
+class StartRecording:
+    """Begin a replayable record: snapshot the framework, then log what replay needs (:attr:`HapticLoop.replay_log`).
+
+    The snapshot is taken once every command of the tick has been applied, and
+    logged as ``(tick, "snapshot", {"token": token, "framework": ..., "refine_bias": ...})``;
+    from then on every pose the framework takes (``"pose"``: rotation, position,
+    pose time), every change of the bias-refinement permission (``"refine"``), every
+    framework reset (``"reset"``) and calibration (``"calibration"``) is logged with
+    its tick, in the order the loop applied them (:mod:`pipeline.replay`).
+    """
+
+    token: int
+
+
+@dataclass(frozen=True, slots=True)
+class StopRecording:
+    """Stop logging for replay (the log is left for its reader to drain)."""
+
+
 Command = (SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
-           | LatchFault)
+           | LatchFault | StartRecording | StopRecording)
 
 
 class LoopEvent(NamedTuple):
@@ -347,6 +366,10 @@ class HapticLoop:
         frac = self.watchdog.saturation_fraction
         self._sat = tuple(frac * r for r in rng)
         self._last_record: tuple[float, ...] | None = None
+        #: What replay needs beyond the records, while recording (see :class:`StartRecording`); its reader drains it.
+        self.replay_log: deque[tuple[int, str, object]] = deque()
+        self.recording = False
+        self._snapshot_due: int | None = None
         # optional rig hooks (see Rig); resolved once so the tick pays nothing for them
         self._rig_on_faults: Callable[[Fault], None] | None = getattr(rig, "on_faults", None)
         self._rig_stop_motion: Callable[[str], None] | None = getattr(rig, "stop_motion", None)
@@ -394,8 +417,9 @@ class HapticLoop:
         if period > self.command_timeout_ns and not self._resync:
             self._late_tick(now, period)
         self._resync = False
+        if self._snapshot_due is not None:
+            self._take_snapshot()
 
-        t_read = _perf_ns()
         w = rig.sensor.read_wrench()
         pose = rig.robot.read_pose()
         hs = rig.haptic.read_state()
@@ -426,6 +450,8 @@ class HapticLoop:
             if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
                 self._pose_t_ns = pose.t_ns
                 fw.set_pose(rot)
+                if self.recording:
+                    self.replay_log.append((self.tick_count, "pose", (rot, pose.position_m, pose.t_ns)))
             else:
                 cond |= Fault.NON_FINITE
         if hs.error_code:
@@ -467,9 +493,9 @@ class HapticLoop:
             if want > lim:
                 designed = want if want < fw.safety.static_limit_n else fw.safety.static_limit_n
                 derate = lim / designed
-        # from the sample's arrival to the command's hand-over: its age at the tick (loop clock) plus the
-        # real time the tick took from reading it to commanding (real even on a virtual clock)
-        latency_s = (sensor_age + _perf_ns() - t_read) * 1e-9
+        # from the sample's arrival to the command's hand-over, on the loop's clock (on a virtual clock
+        # computing takes no time: it is the sample's age)
+        latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m
@@ -575,6 +601,8 @@ class HapticLoop:
             self._gone_reported &= persisting
             if before and not persisting:
                 self.framework.reset()
+                if self.recording:
+                    self.replay_log.append((self.tick_count, "reset", None))
             if persisting != before:
                 self._faults_changed(now)
             self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
@@ -589,11 +617,26 @@ class HapticLoop:
             self.framework.safety.force_zero()
             self._latch(Fault(cmd.fault), now)
         elif isinstance(cmd, AllowBiasRefinement):
+            if self.recording and bool(cmd.allowed) != self.refine_bias:
+                self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
             self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
+            if self.recording:
+                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))  # type: ignore[attr-defined]
+        elif isinstance(cmd, StartRecording):
+            self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
+        elif isinstance(cmd, StopRecording):
+            self.recording = False
         else:  # pragma: no cover - typed callers cannot get here
             raise TypeError(f"unknown loop command {cmd!r}")
+
+    def _take_snapshot(self) -> None:
+        token, self._snapshot_due = self._snapshot_due, None
+        self.recording = True
+        self.replay_log.append((self.tick_count, "snapshot", {
+            "token": token, "framework": self.framework.snapshot(), "refine_bias": self.refine_bias,
+        }))
 
     def fail_safe(self, detail: str, *, thread_dead: bool) -> LoopEvent:
         """The loop has stopped ticking: latch ``LOOP_STALLED``, report it, and zero the device from this thread.

@@ -16,6 +16,7 @@ slowed by the slew limit.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from pipeline.frames import Vec3
@@ -174,3 +175,12 @@ class SafetyGovernor:
         """Drop the output to zero at once (device reported an error: it is already off)."""
         self.gain = 0.0
         self._sx = self._sy = self._sz = 0.0
+
+    def state(self) -> dict[str, float]:
+        """The ramp gain and the slew-limited command, exact (see :meth:`load_state`)."""
+        return {"gain": self.gain, "sx": self._sx, "sy": self._sy, "sz": self._sz}
+
+    def load_state(self, d: Mapping[str, float]) -> None:
+        """Continue exactly from a :meth:`state`."""
+        self.gain = float(d["gain"])
+        self._sx, self._sy, self._sz = float(d["sx"]), float(d["sy"]), float(d["sz"])

@@ -45,6 +45,14 @@ Each trial row also carries the loop's health over the trial's records
 (:data:`protocol.storage.HEALTH_COLUMNS`): tick period p50/p99/max, ticks over
 2 ms, the oldest F/T sample and robot pose used, and the latency from a
 sample's arrival to the force command it produced (p50/max).
+
+**The whole session is recorded** (:mod:`protocol.recording`): the runner asks
+the loop for a snapshot of the framework (:class:`pipeline.loop.StartRecording`)
+and, from the tick it was taken on, hands every record and the loop's replay
+log to the recorder -- trials, pauses and waits alike -- so the session can be
+replayed through the pipeline (:mod:`pipeline.replay`).  Records before that
+tick (the loop ran before the session began) are not the session's.  A trial
+row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 """
 
 from __future__ import annotations
@@ -56,10 +64,15 @@ from typing import Any, Protocol
 
 import numpy as np
 
+import secrets
+
 from pipeline.devices import Fault
-from pipeline.loop import AllowBiasRefinement, Command, LoopEvent, Mark, ResetFaults, SetHaptics
+from pipeline.loop import (
+    AllowBiasRefinement, Command, LoopEvent, Mark, ResetFaults, SetHaptics, StartRecording, StopRecording,
+)
 from protocol.config import ProtocolConfig
 from protocol.design import TrialSpec, requeue_aborted, schedule_to_json
+from protocol.recording import rows_to_columns
 from protocol.storage import Recorder, StudyDatabase, trial_id_of
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
@@ -121,10 +134,6 @@ class SessionState:
     waiting: str = ""
 
 
-_SAMPLE_SRC = (
-    "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-    "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz",
-)
 #: Record columns the loop-health summary of a trial reads.
 _HEALTH_SRC = ("period_s", "sensor_age_s", "pose_age_s", "latency_s")
 #: Headless: a latched fault is reset at most this often while its condition may still be there.
@@ -197,6 +206,10 @@ class SessionRunner:
         condition is gone, and stop the session as interrupted if one is still
         latched ``FAULT_TIMEOUT_S`` later.  A person's session leaves the
         reset to the experimenter.
+    segment
+        The recording's segment this run writes (0, then one more per resume).
+    scales
+        Counts per unit of the raw wrench columns (the recording codec's hint; empty: store floats).
     """
 
     def __init__(
@@ -215,6 +228,8 @@ class SessionRunner:
         limits: DeliveryLimits | None = None,
         initial_pause_s: float = 0.0,
         auto_reset_faults: bool = False,
+        segment: int = 0,
+        scales: dict[str, float] | None = None,
     ) -> None:
         self.protocol = protocol
         self.schedule = list(schedule)
@@ -247,13 +262,23 @@ class SessionRunner:
         self._ready_ns: int | None = None  # no cue before this loop time
         self._faults = 0  # latched, as the newest record says
         self._fault_detail = ""  # the newest fault event's detail
+        self._condition_gone = False  # the loop said a latched fault's condition went away
         self._waiting_since_ns: int | None = None
         self._next_reset_ns = 0
         self._last_marked_ns: int | None = None  # the running trial's newest record
         self._health: list[np.ndarray] = []
         self._abort_cause: dict[int, str] = {}  # trial index -> cause of its abort
         self._pending_gap = ""  # records lost before the next block
+        self.segment = segment
+        self._scales = dict(scales or {})
+        self._token = secrets.randbits(31)
+        self._log: list[tuple[int, str, object]] = []  # replay log entries not yet handed on
+        self._start_tick: int | None = None  # the tick the recording (and the session clock) starts at
+        self._snapshot: object = None  # the loop's snapshot payload at that tick
+        self._trial_ticks: tuple[int, int] | None = None  # first and last record of the running trial
         self._enter_pause_commands()
+        # after the pause commands: the snapshot is taken once they are applied, in the same tick
+        self.submit(StartRecording(self._token))
 
     # -- experimenter requests (any thread) ----------------------------------------------------
     def pause(self) -> None:
@@ -311,24 +336,40 @@ class SessionRunner:
                 pass
 
     # -- the work ----------------------------------------------------------------------------------
-    def process(self, rows: np.ndarray, loop_events: Sequence[LoopEvent] = ()) -> None:
+    def process(self, rows: np.ndarray, loop_events: Sequence[LoopEvent] = (),
+                replay_log: Sequence[tuple[int, str, object]] = ()) -> None:
         """Consume a block of loop records (a structured array with the ring's columns).
 
         ``loop_events`` are the loop's events since the previous call (times on
         the records' axis); they are stored, and a fault's detail names the
-        cause of the trial it aborts.
+        cause of the trial it aborts.  ``replay_log`` is what the loop logged
+        for replay since the previous call (:attr:`pipeline.loop.HapticLoop.replay_log`),
+        read after the records.
         """
-        for ev in loop_events:
-            self._store_loop_event(ev)
-        if self.done or len(rows) == 0:
+        if self._start_tick is None:
+            self._log.extend(replay_log)
+            rows = self._from_snapshot(rows)
+            if self._start_tick is None:
+                return  # the loop has not taken the snapshot yet: these records are not the session's
+        else:
+            self._log.extend(replay_log)
+        if self.done or (len(rows) == 0 and self._t0_ns is None):
             return
-        t_ns_all = rows["t_ns"].astype(np.int64)
         if self._t0_ns is None:
-            self._t0_ns = int(t_ns_all[0])
-            self._ready_ns = self._t0_ns + self._initial_pause_ns
+            t0 = self._t0_ns = int(rows["t_ns"][0])
+            self.recorder.segment(self.session_id, self.segment, self._offset_s, t0,
+                                  self._snapshot, self._scales)  # type: ignore[arg-type]
+            self._ready_ns = t0 + self._initial_pause_ns
             first_faults = int(rows["faults"][0])
-            if first_faults and not loop_events:
-                self._event(self._t0_ns, "fault", f"{Fault(first_faults).describe()}: latched before the session started")
+            if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
+                self._event(t0, "fault", f"{Fault(first_faults).describe()}: latched before the session started")
+        for ev in loop_events:
+            if ev.t_ns >= self._t0_ns:  # (the loop's events from before the session are not its own)
+                self._store_loop_event(ev)
+        if len(rows) == 0:
+            return
+        self._record(rows)
+        t_ns_all = rows["t_ns"].astype(np.int64)
         self._handle_requests(int(t_ns_all[0]))
         if self.done:
             return
@@ -348,6 +389,24 @@ class SessionRunner:
                 self._abort_running(int(rows["t_ns"][i]), reason, cause)
             rows = rows[i:]
 
+    def _from_snapshot(self, rows: np.ndarray) -> np.ndarray:
+        """Find this runner's snapshot in the log; the records from its tick on (none before it is found)."""
+        for i, (tick, kind, payload) in enumerate(self._log):
+            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]
+                self._start_tick = int(tick)
+                self._snapshot = payload
+                self._log = self._log[i + 1 :]
+                return rows[rows["tick"] >= tick]
+        self._log = [e for e in self._log if e[1] == "snapshot"]  # (another runner's: kept until ours shows)
+        return rows[:0]
+
+    def _record(self, rows: np.ndarray) -> None:
+        """Hand the records and the log entries of their ticks to the recorder."""
+        last = int(rows["tick"][-1])
+        log = [e for e in self._log if e[0] <= last]
+        self._log = [e for e in self._log if e[0] > last]
+        self.recorder.records(self.session_id, self.segment, rows_to_columns(rows), log)
+
     def _process_part(self, rows: np.ndarray) -> None:
         """The trial machine, the samples and the next cue over records that need no abort."""
         if len(rows) == 0:
@@ -359,7 +418,7 @@ class SessionRunner:
         events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].astype(np.int64).tolist()))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
-            self._store_samples(rows, t_ns_all, spec, events)
+            self._trial_records(rows, t_ns_all, spec, events)
         for ev in events:
             self._on_event(ev)
         t_last = self._last_t_ns = int(t_ns_all[-1])
@@ -443,6 +502,10 @@ class SessionRunner:
     def _store_loop_event(self, ev: LoopEvent) -> None:
         if ev.kind == "fault":
             self._fault_detail = ev.detail
+            self._condition_gone = False
+            detail = ev.detail
+        elif ev.kind == "fault_cleared":
+            self._condition_gone = True  # a reset can clear it now
             detail = ev.detail
         elif ev.kind == "faults_reset":
             detail = (f"cleared {ev.detail}" if not ev.faults
@@ -451,7 +514,8 @@ class SessionRunner:
             detail = ev.detail
         self._event(int(ev.t_ns), ev.kind, detail)
 
-    def _store_samples(self, rows: np.ndarray, t_ns: np.ndarray, spec: TrialSpec, events: list[Any]) -> None:
+    def _trial_records(self, rows: np.ndarray, t_ns: np.ndarray, spec: TrialSpec, events: list[Any]) -> None:
+        """Note which records are the trial's (cue to end) and their loop health."""
         cue = self.machine.cue_ns
         end = next((e.end_ns for e in events if isinstance(e, TrialFinished)), None)
         if cue is None:
@@ -464,12 +528,11 @@ class SessionRunner:
         if not mask.any():
             return
         sel = rows[mask]
-        n = len(sel)
-        cols = [np.full(n, float(trial_id_of(self.session_id, spec.index))), (t_ns[mask] - cue) / 1e9]
-        cols.extend(np.asarray(sel[c], dtype=np.float64) for c in _SAMPLE_SRC)
+        ticks = sel["tick"]
+        first = int(ticks[0]) if self._trial_ticks is None else self._trial_ticks[0]
+        self._trial_ticks = (first, int(ticks[-1]))
         # one float64 array, not a list of row lists: no garbage-collector-tracked objects per sample
         # (a live session's collector passes would otherwise scan ~1000 such lists, GIL held, loop waiting)
-        self.recorder.samples(np.column_stack(cols))
         self._health.append(np.column_stack([np.asarray(sel[c], dtype=np.float64) for c in _HEALTH_SRC]))
 
     def _on_event(self, ev: object) -> None:
@@ -485,6 +548,7 @@ class SessionRunner:
         block = np.concatenate(self._health) if self._health else np.empty((0, len(_HEALTH_SRC)))
         self._health = []
         self._last_marked_ns = None
+        ticks, self._trial_ticks = self._trial_ticks, None
         self.recorder.trial(
             {
                 "trial_id": trial_id_of(self.session_id, spec.index),
@@ -506,6 +570,9 @@ class SessionRunner:
                 "repeat_of": spec.repeat_of,
                 "abort_cause": self._abort_cause.pop(spec.index, "experimenter") if ev.outcome == "aborted" else None,
                 **trial_health(*block.T),
+                "segment": self.segment if ticks is not None else None,
+                "first_tick": ticks[0] if ticks is not None else None,
+                "last_tick": ticks[1] if ticks is not None else None,
             }
         )
         self.finished.append(ev)
@@ -552,7 +619,9 @@ class SessionRunner:
         what = Fault(self._faults).describe()
         if self._waiting_since_ns is None:
             self._waiting_since_ns = t_ns
-            self._next_reset_ns = t_ns
+            # reset at once when the loop said the condition is gone, else try every RESET_RETRY_S (a device
+            # error or an operator stop only clears with a reset)
+            self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             how = "the runner resets it once its condition is gone" if self.auto_reset_faults else \
                 "the experimenter resets it"
             self._event(t_ns, "waiting", f"{what} latched: no cue until it is reset ({how})")
@@ -564,11 +633,13 @@ class SessionRunner:
                                 "it to clear; the session is interrupted and can be resumed")
             self._event(t_ns, "session_interrupted", self.stop_reason)
             self._enter_pause_commands()
+            self.submit(StopRecording())
             self.done = self.state.done = True
             self.status = self.state.status = "interrupted"
             self._emit(("session_end", "interrupted", self.stop_reason))
             return
-        if t_ns >= self._next_reset_ns:
+        if self._condition_gone or t_ns >= self._next_reset_ns:
+            self._condition_gone = False
             self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             self.submit(ResetFaults())
 
@@ -613,6 +684,7 @@ class SessionRunner:
 
     def _end(self, status: str, reason: str, t_ns: int) -> None:
         self._enter_pause_commands()
+        self.submit(StopRecording())
         self._event(t_ns, "session_end", f"{status}: {reason}")
         sid = self.session_id
         self.recorder.call(lambda db: db.end_session(sid, status, reason))
@@ -628,9 +700,3 @@ def first_unfinished(schedule: list[TrialSpec], trial_rows: list[dict[str, Any]]
         if spec.index not in stored:
             return i
     return len(schedule)
-
-
-def has_samples(db: StudyDatabase, session_id: int, trial_index: int) -> bool:
-    """True if samples of this trial were committed (it was interrupted mid-trial)."""
-    r = db.conn.execute("SELECT 1 FROM samples WHERE trial_id = ? LIMIT 1", (trial_id_of(session_id, trial_index),)).fetchone()
-    return r is not None

@@ -34,6 +34,7 @@ from pipeline.loop import Command, HapticLoop
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
+from protocol.recording import marked_records
 from protocol.session import DeliveryLimits, SessionRunner, TrialParticipant, first_unfinished
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope, trial_id_of
 from protocol.version import software_version
@@ -45,6 +46,7 @@ __all__ = [
     "open_new_session",
     "open_resumed_session",
     "participant_seeds",
+    "raw_wrench_scales",
     "start_runner",
     "training_protocol",
     "training_schedule",
@@ -98,6 +100,8 @@ class OpenedSession:
         Training with the participant's live force gauge.
     lease_owner
         The lease token this process holds the session under.
+    segment
+        The recording's segment this run writes (:mod:`protocol.recording`): 0, then one more per resume.
     resumed
         Continues an interrupted session.
     notes
@@ -118,6 +122,7 @@ class OpenedSession:
     lease_owner: str
     resumed: bool
     notes: list[str] = field(default_factory=list)
+    segment: int = 0
 
     @property
     def participant_seed(self) -> int:
@@ -206,7 +211,10 @@ def open_resumed_session(
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
     if info is None:
         db.release_lease(session_scope(session_id), lease_owner)
-        raise StorageError(f"session {session_id} in {db.path} is not an interrupted session")
+        row = db.conn.execute("SELECT status FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
+        why = ("there is no such session" if row is None else
+               f"it has ended (status {row[0]}), perhaps run to its end by another process meanwhile")
+        raise StorageError(f"session {session_id} in {db.path} cannot be resumed: {why}; nothing was changed")
     protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {session_id} protocol")
     schedule = schedule_from_json(info.schedule_json)
     notes = [takeover] if takeover else []
@@ -214,7 +222,8 @@ def open_resumed_session(
         if takeover:
             db.insert_event(session_id, db.last_session_time_s(session_id), "lease", takeover)
         pos = first_unfinished(schedule, db.trial_rows(session_id))
-        last_s = db.last_session_time_s(session_id)
+        last_s = db.last_session_time_s(session_id)  # events, trial ends and recorded records alike
+        segment = db.next_segment(session_id)
         interrupted = _interrupted_trial(db, info, protocol, schedule, pos)
         if interrupted is not None:
             row, end_s = interrupted
@@ -239,14 +248,18 @@ def open_resumed_session(
         participant_number=info.participant_number, protocol=protocol, schedule=schedule, start_position=pos,
         clock_offset_s=offset_s, initial_pause_s=protocol.trial.pause_s,
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
-        resumed=True, notes=notes,
+        resumed=True, notes=notes, segment=segment,
     )
 
 
 def _interrupted_trial(
     db: StudyDatabase, info: SessionInfo, protocol: ProtocolConfig, schedule: list[TrialSpec], pos: int,
 ) -> tuple[dict[str, Any], float] | None:
-    """The trial row of a trial that was cued but never finished (and its end on the session clock), or None."""
+    """The trial row of a trial that was cued but never finished (and its end on the session clock), or None.
+
+    Its records are those the loop marked with it: in the session's recording
+    (version 3), or its rows of the ``samples`` table (a session begun by version 2).
+    """
     if pos >= len(schedule):
         return None
     spec = schedule[pos]
@@ -254,23 +267,32 @@ def _interrupted_trial(
     cue_s = _cue_time_s(db, sid, spec.index)
     if cue_s is None:
         return None  # never cued: it simply runs now
-    samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
-                              (trial_id_of(sid, spec.index),)).fetchall()
-    t_s = np.array([r[0] for r in samples], dtype=np.float64)
-    force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
+    where: dict[str, Any] = {}
+    marked = marked_records(db.conn, sid, spec.index, ("force_n",))
+    if marked is not None:
+        (segment, started_at_s, t0_ns), cols = marked
+        t_ns = cols["t_ns"] - cols["t_ns"][0]  # from its first marked record: the trial's time origin
+        force = cols["force_n"]
+        cue_s = started_at_s + (int(cols["t_ns"][0]) - t0_ns) / 1e9
+        where = {"segment": segment, "first_tick": int(cols["tick"][0]), "last_tick": int(cols["tick"][-1])}
+    else:
+        samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
+                                  (trial_id_of(sid, spec.index),)).fetchall()
+        # t_s was stored as ns / 1e9: rounding recovers the integer ns exactly
+        t_ns = np.rint(np.array([r[0] for r in samples], dtype=np.float64) * 1e9).astype(np.int64)
+        force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
     tr = protocol.trial
-    # t_s was stored as ns / 1e9: rounding recovers the integer ns exactly
-    met = trial_metrics(np.rint(t_s * 1e9).astype(np.int64), force, spec.target_force_n,
+    met = trial_metrics(t_ns, force, spec.target_force_n,
                         tolerance_fraction=tr.tolerance_fraction, hold_s=tr.hold_s, max_trial_s=tr.max_trial_s)
-    end_s = cue_s + (float(t_s[-1]) if len(t_s) else 0.0)
+    end_s = cue_s + (int(t_ns[-1]) / 1e9 if len(t_ns) else 0.0)
     row = {
         "trial_id": trial_id_of(sid, spec.index), "session_id": sid, "trial_index": spec.index,
         "target_label": spec.target_label, "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode,
         "outcome": "aborted", "started_at_s": cue_s, "ended_at_s": end_s, "tct_s": None,
         "rmse_n": met.rmse_n, "max_ae_n": met.max_ae_n, "time_in_band_s": met.time_in_band_s,
-        "peak_force_n": met.peak_force_n, "n_samples": len(t_s),
+        "peak_force_n": met.peak_force_n, "n_samples": len(t_ns),
         "abort_reason": "interrupted: the previous run ended during this trial", "repeat_of": spec.repeat_of,
-        "abort_cause": "interrupted",
+        "abort_cause": "interrupted", **where,
     }
     return row, end_s
 
@@ -298,10 +320,19 @@ def delivery_limits(loop: HapticLoop) -> DeliveryLimits:
                           max_gap_s=loop.watchdog.sensor_max_age_s)
 
 
+def raw_wrench_scales(sensor: Any) -> dict[str, float]:
+    """Counts per unit of a sensor's raw wrench (its ``counts_per_unit``), for the recording; {} if it has none."""
+    per = getattr(sensor, "counts_per_unit", None)
+    if per is None:
+        return {}
+    force, torque = per
+    return {**{f"raw_f{a}": float(force) for a in "xyz"}, **{f"raw_t{a}": float(torque) for a in "xyz"}}
+
+
 def start_runner(
     db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
-    auto_reset_faults: bool, threaded: bool, short_transactions: bool = False,
+    auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -321,13 +352,16 @@ def start_runner(
         Headless: the runner resets faults itself (see :class:`protocol.session.SessionRunner`).
     threaded, short_transactions
         Recorder options (a thread for live sessions; short transactions for parallel writers).
+    scales
+        Counts per unit of the raw wrench (:func:`raw_wrench_scales`), so the recording keeps counts.
     """
     recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions)
     runner = SessionRunner(
         protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
         submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,
         participant=participant, participant_time=participant_time, seed=opened.seed, limits=limits,
-        initial_pause_s=opened.initial_pause_s, auto_reset_faults=auto_reset_faults,
+        initial_pause_s=opened.initial_pause_s, auto_reset_faults=auto_reset_faults, segment=opened.segment,
+        scales=scales,
     )
     runner.live_force_aid = opened.live_force_aid
     return recorder, runner

@@ -45,10 +45,13 @@ from typing import Any
 
 import numpy as np
 
+from protocol.recording import BlockBuilder
+
 __all__ = [
     "ABORT_CAUSES",
     "CODE_PATTERN",
     "EmptyDatabase",
+    "HEALTH_COLUMNS",
     "LeaseHeld",
     "SCHEMA_VERSION",
     "SessionInfo",
@@ -63,7 +66,7 @@ __all__ = [
     "validate_code",
 ]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: Why an aborted trial was aborted (``trials.abort_cause``, schema version 2).
 ABORT_CAUSES = ("experimenter", "fault", "feedback", "gap", "interrupted")
 #: Per-trial loop health columns (schema version 2), in table order.
@@ -78,6 +81,19 @@ _UPGRADE_1_TO_2 = (
     *(f"ALTER TABLE trials ADD COLUMN {c} {'INTEGER' if c == 'periods_over_2ms' else 'REAL'}" for c in HEALTH_COLUMNS),
     "CREATE TABLE leases (scope TEXT PRIMARY KEY, owner TEXT NOT NULL, pid INTEGER NOT NULL, host TEXT NOT NULL, "
     "process_start TEXT NOT NULL, command TEXT NOT NULL, acquired_at TEXT NOT NULL, heartbeat_at TEXT NOT NULL)",
+)
+#: What upgrades a version-2 database to version 3: whole sessions recorded in blocks.
+_UPGRADE_2_TO_3 = (
+    "ALTER TABLE trials ADD COLUMN segment INTEGER",
+    "ALTER TABLE trials ADD COLUMN first_tick INTEGER",
+    "ALTER TABLE trials ADD COLUMN last_tick INTEGER",
+    "CREATE TABLE recordings (session_id INTEGER NOT NULL REFERENCES sessions(session_id), segment INTEGER NOT NULL, "
+    "started_at_s REAL NOT NULL, t0_ns INTEGER NOT NULL, snapshot_json TEXT NOT NULL, scales_json TEXT NOT NULL, "
+    "PRIMARY KEY (session_id, segment))",
+    "CREATE TABLE session_blocks (session_id INTEGER NOT NULL, segment INTEGER NOT NULL, block INTEGER NOT NULL, "
+    "first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, n_records INTEGER NOT NULL, t_first_s REAL NOT NULL, "
+    "t_last_s REAL NOT NULL, data BLOB NOT NULL, PRIMARY KEY (session_id, segment, block), "
+    "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))",
 )
 #: A lease held from another host is stale after this long without a heartbeat.
 LEASE_STALE_S = 30.0
@@ -373,7 +389,7 @@ class StudyDatabase:
         except sqlite3.DatabaseError as exc:
             raise StorageError(f"{self.path}: the database is damaged ({exc}); nothing was written to it "
                                "(restore it from a backup)") from None
-        problems = [str(r[0]) for r in rows if r[0] != "ok"]
+        problems = [" ".join(str(r[0]).split()) for r in rows if r[0] != "ok"]  # SQLite's report spans lines
         if problems:
             raise StorageError(f"{self.path}: the database is damaged (integrity check: {problems[0]}); "
                                "nothing was written to it (restore it from a backup)")
@@ -428,7 +444,7 @@ class StudyDatabase:
 
     def _upgrade(self, version: int) -> None:
         """Write a backup copy beside the file, then upgrade the schema in one transaction."""
-        assert version == 1, version
+        assert version in (1, 2), version
         stamp = _dt.datetime.now().strftime("%Y%m%dT%H%M%S")
         backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}{self.path.suffix or '.db'}")
         n = 1
@@ -449,17 +465,20 @@ class StudyDatabase:
         c.execute("BEGIN IMMEDIATE")
         try:
             if c.execute("PRAGMA user_version").fetchone()[0] == version:  # not upgraded by another writer meanwhile
-                for stmt in _UPGRADE_1_TO_2:
+                if version == 1:
+                    for stmt in _UPGRADE_1_TO_2:
+                        c.execute(stmt)
+                    try:
+                        # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps its index
+                        c.execute("SAVEPOINT unique_samples")
+                        c.execute("DROP INDEX IF EXISTS samples_by_trial")
+                        c.execute("CREATE UNIQUE INDEX samples_by_trial ON samples (trial_id, t_s)")
+                        c.execute("RELEASE unique_samples")
+                    except sqlite3.IntegrityError:
+                        c.execute("ROLLBACK TO unique_samples")
+                        c.execute("RELEASE unique_samples")
+                for stmt in _UPGRADE_2_TO_3:
                     c.execute(stmt)
-                try:
-                    # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps its index
-                    c.execute("SAVEPOINT unique_samples")
-                    c.execute("DROP INDEX IF EXISTS samples_by_trial")
-                    c.execute("CREATE UNIQUE INDEX samples_by_trial ON samples (trial_id, t_s)")
-                    c.execute("RELEASE unique_samples")
-                except sqlite3.IntegrityError:
-                    c.execute("ROLLBACK TO unique_samples")
-                    c.execute("RELEASE unique_samples")
                 c.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             c.execute("COMMIT")
         except BaseException:
@@ -593,6 +612,9 @@ class StudyDatabase:
                     raise LeaseHeld(self._held_message(row, f"{scope} of"))
                 note = (f"took over the lease on {scope} left by process {row['pid']} on {row['host']} "
                         f"({row['command'] or 'unknown command'}), which is no longer running")
+            for other in self._leases():  # leases of processes that are gone protect nothing: clear them
+                if other["scope"] != scope and not self._alive(other):
+                    self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ?", (other["scope"], other["owner"]))
             self._write_lease(scope, owner, command)
         return note
 
@@ -683,6 +705,29 @@ class StudyDatabase:
         cols = ", ".join(row)
         self.conn.execute(f"INSERT INTO trials ({cols}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
 
+    def insert_recording(self, session_id: int, segment: int, started_at_s: float, t0_ns: int,
+                         snapshot: dict[str, Any], scales: dict[str, float]) -> None:
+        """Open a segment of a session's recording (version 3): where it starts, and the framework's state then."""
+        self.conn.execute(
+            "INSERT INTO recordings (session_id, segment, started_at_s, t0_ns, snapshot_json, scales_json) "
+            "VALUES (?, ?, ?, ?, ?, ?)",
+            (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot), json.dumps(scales)),
+        )
+
+    def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
+                    n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
+        """Write a recorded block, or rewrite the segment's open block as it grew (the recorder's own row)."""
+        self.conn.execute(
+            "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
+            "t_first_s, t_last_s, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data),
+        )
+
+    def next_segment(self, session_id: int) -> int:
+        """The number the next run of a session records under (0 for its first)."""
+        r = self.conn.execute("SELECT MAX(segment) FROM recordings WHERE session_id = ?", (session_id,)).fetchone()
+        return 0 if r is None or r[0] is None else int(r[0]) + 1
+
     def insert_event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
         """Record a phase change or an experimenter action."""
         self.conn.execute("INSERT INTO events (session_id, t_s, kind, detail) VALUES (?, ?, ?, ?)", (session_id, t_s, kind, detail))
@@ -694,10 +739,13 @@ class StudyDatabase:
         return [dict(zip(names, r)) for r in cur]
 
     def last_session_time_s(self, session_id: int) -> float:
-        """Latest session-clock time recorded (events and trials), for resuming the clock."""
+        """Latest session-clock time recorded (events, trials, recorded records), for resuming the clock."""
+        blocks = ("UNION ALL SELECT MAX(t_last_s) FROM session_blocks WHERE session_id = ?"
+                  if self.schema_version >= 3 else "")
+        args = (session_id,) * (3 if blocks else 2)
         r = self.conn.execute(
             "SELECT MAX(t) FROM (SELECT MAX(t_s) AS t FROM events WHERE session_id = ? "
-            "UNION ALL SELECT MAX(ended_at_s) FROM trials WHERE session_id = ?)", (session_id, session_id),
+            f"UNION ALL SELECT MAX(ended_at_s) FROM trials WHERE session_id = ? {blocks})", args,
         ).fetchone()
         return float(r[0]) if r and r[0] is not None else 0.0
 
@@ -774,6 +822,8 @@ class Recorder:
         self._clock = clock
         self._first_pending: float | None = None
         self._q: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
+        #: The open block of every segment being recorded: (session, segment) -> (builder, started_at_s, t0_ns).
+        self._blocks: dict[tuple[int, int], tuple[BlockBuilder, float, int]] = {}
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
         if threaded:
@@ -792,6 +842,19 @@ class Recorder:
     def event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
         """Queue an event."""
         self._put(("event", (session_id, t_s, kind, detail)))
+
+    def segment(self, session_id: int, segment: int, started_at_s: float, t0_ns: int, snapshot: dict[str, Any],
+                scales: dict[str, float]) -> None:
+        """Open a segment of the session's recording (committed at once, before any of its blocks)."""
+        self._put(("segment", (session_id, segment, started_at_s, t0_ns, snapshot, scales)))
+
+    def records(self, session_id: int, segment: int, columns: dict[str, np.ndarray],
+                log: Sequence[tuple[int, str, Any]] = ()) -> None:
+        """Queue records of a segment (:func:`protocol.recording.rows_to_columns`) and the replay log of their ticks.
+
+        They are cut into blocks as they fill; the open block is written as it stands at every commit.
+        """
+        self._put(("records", (session_id, segment, columns, list(log))))
 
     def call(self, fn: Callable[[StudyDatabase], Any]) -> None:
         """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
@@ -825,12 +888,31 @@ class Recorder:
             db.insert_samples(payload)
         elif kind == "event":
             db.insert_event(*payload)
+        elif kind == "records":
+            sid, seg, columns, log = payload
+            builder, _, _ = self._blocks[(sid, seg)]
+            builder.add(columns, log)
+            for block in builder.take_full():
+                self._write_block(sid, seg, block)
+        elif kind == "segment":
+            sid, seg, started_at_s, t0_ns, snapshot, scales = payload
+            db.insert_recording(sid, seg, started_at_s, t0_ns, snapshot, scales)
+            self._blocks[(sid, seg)] = (BlockBuilder(scales=scales), started_at_s, t0_ns)
+            self._commit()
         elif kind == "trial":
             db.insert_trial(payload)
             self._commit()
         elif kind == "call":
             payload(db)
             self._commit()
+
+    def _write_block(self, session_id: int, segment: int, block: tuple[int, int, dict[str, np.ndarray], bytes]) -> None:
+        _, started_at_s, t0_ns = self._blocks[(session_id, segment)]
+        number, _, cols, data = block
+        ticks, t_ns = cols["tick"], cols["t_ns"]
+        self.db.write_block(session_id, segment, number, int(ticks[0]), int(ticks[-1]), len(ticks),
+                            started_at_s + (int(t_ns[0]) - t0_ns) / 1e9, started_at_s + (int(t_ns[-1]) - t0_ns) / 1e9,
+                            data)
 
     def _commit(self) -> None:
         if self._held:
@@ -842,6 +924,11 @@ class Recorder:
                 if self.db.conn.in_transaction:
                     self.db.conn.execute("ROLLBACK")
                 raise
+        for (sid, seg), (builder, _, _) in self._blocks.items():
+            open_block = builder.partial()  # the records since the last commit reach the disk with it
+            if open_block is not None:
+                self.db.begin()
+                self._write_block(sid, seg, open_block)
         if self.db.conn.in_transaction:
             self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()

@@ -50,7 +50,7 @@ from protocol.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner, first_unfinished
 from protocol.session_setup import (
     OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    start_runner, training_protocol, training_schedule,
+    raw_wrench_scales, start_runner, training_protocol, training_schedule,
 )
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.version import software_version
@@ -122,6 +122,7 @@ def _drive(
     loop = eng.loop
     events: list[LoopEvent] = []
     loop.on_event = events.append  # list.append is atomic: safe from the real-clock loop thread
+    replay_log = loop.replay_log
     cursor = ring.write_count
     t_last_report = 0.0
     base_done = progress.study_trials_done
@@ -139,11 +140,12 @@ def _drive(
             cursor = res.cursor
             if res.lost:
                 runner.records_lost(res.lost)
-            # events after the rows: every event of a tick whose record was read is in
+            # events and the replay log after the rows: every entry of a tick whose record was read is in
             n_ev = len(events)
             batch, events[:n_ev] = events[:n_ev], []
+            log = [replay_log.popleft() for _ in range(len(replay_log))]
             n = len(res.rows)
-            runner.process(res.rows, batch)
+            runner.process(res.rows, batch, log)
             if trigger is not None and n:
                 trigger.poll(int(res.rows["t_ns"][-1]))
             progress.study_time_s += n * 1e-3
@@ -232,7 +234,7 @@ def _run_session(
     recorder, runner = start_runner(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
-        short_transactions=short_transactions,
+        short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
     )
     trigger = _trigger(faults, opened, eng)
     try:

@@ -147,14 +147,20 @@ def build_parser() -> argparse.ArgumentParser:
                         "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
                         "device-error, kill (ends this command as kill -9 would); repeatable")
 
+    from study_app.replay_cmds import add_replay_parsers
     from study_app.report_cmds import add_report_parsers
 
     add_report_parsers(sub)
+    add_replay_parsers(sub)
 
     ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
                      "haptic-study sessions --db study.db")
     ss.add_argument("--db", required=True, metavar="PATH", help="study database")
     ss.add_argument("--json", action="store_true", help="print one JSON array")
+
+    from study_app.power_cmds import add_power_bench_parser, add_power_parser
+
+    add_power_parser(sub)
 
     b = add_command(sub, "bench", "benchmarks (see README for recorded figures)",
                     "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
@@ -181,6 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
     br.add_argument("--stats-participants", type=whole_number("--stats-participants", 2, 1_000_000), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
     br.add_argument("--json", action="store_true", help="print one JSON object")
+    add_power_bench_parser(bsub)
     bst = add_command(bsub, "stats", "analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm",
                       "haptic-study bench stats --json")
     bst.add_argument("--json", action="store_true", help="print one JSON object")
@@ -245,6 +252,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             from study_app.report_cmds import cmd_plot_trial, cmd_report
 
             return cmd_report(args) if args.command == "report" else cmd_plot_trial(args)
+        if args.command in ("replay", "plot-session", "export"):
+            from study_app.replay_cmds import cmd_export, cmd_plot_session, cmd_replay
+
+            return {"replay": cmd_replay, "plot-session": cmd_plot_session, "export": cmd_export}[args.command](args)
+        if args.command == "power" or (args.command == "bench" and args.bench == "power"):
+            from study_app.power_cmds import cmd_bench_power, cmd_power
+
+            return cmd_power(args) if args.command == "power" else cmd_bench_power(args)
         if args.command == "bench" and args.bench == "pipeline":
             return _cmd_bench_pipeline(args)
         if args.command == "bench" and args.bench == "report":

@@ -64,7 +64,7 @@ from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
     OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    start_runner,
+    raw_wrench_scales, start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.study import config_record, real_config_record
@@ -628,13 +628,15 @@ class StudyEngine:
         if self._windows:
             self._feed_windows(rows)
         runner = self.runner
-        # the loop's events after its records: every event of a tick whose record was read is in
+        # the loop's events and replay log after its records: every entry of a tick whose record was read is in
         events = [self._loop_events.popleft() for _ in range(len(self._loop_events))]
+        log = self.loop.replay_log
+        replay_log = [log.popleft() for _ in range(len(log))]
         if runner is None:
             return
         if res.lost:
             runner.records_lost(res.lost)
-        runner.process(rows, events)
+        runner.process(rows, events, replay_log)
         if self.trigger is not None:
             self.trigger.poll(self._last_t_ns)
         if runner.done:
@@ -811,6 +813,7 @@ class StudyEngine:
         recorder, runner = start_runner(
             db, opened, submit=self.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.loop), auto_reset_faults=False, threaded=True,
+            scales=raw_wrench_scales(self.eng.rig.sensor),
         )
         runner.listeners.append(self._on_runner_event)
         self.trigger = None

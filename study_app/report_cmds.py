@@ -7,7 +7,7 @@ import sys
 
 from study_app.argtypes import SQLITE_INTEGER_MAX, whole_number
 
-__all__ = ["add_report_parsers", "cmd_plot_trial", "cmd_report"]
+__all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
 
 def _confidence(text: str) -> float:
@@ -18,6 +18,16 @@ def _confidence(text: str) -> float:
     if not 0.5 <= v < 1.0:
         raise argparse.ArgumentTypeError(f"--confidence = {text!r}: must be in [0.5, 1), e.g. 0.95")
     return v
+
+
+def add_analysis_options(parser: argparse.ArgumentParser) -> None:
+    """The aggregation and test choices a report is made with (``report`` and ``power`` share them)."""
+    parser.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
+                        help="RMSE / Max AE from the cue (default) or from first contact")
+    parser.add_argument("--tct", choices=("successful", "censored"), default="successful",
+                        help="TCT over successful trials only (default) or failures censored at the trial cap")
+    parser.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
+                        help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
 
 
 def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -37,14 +47,12 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                    help="study database; repeat to merge several into one study")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, *.csv, figures/)")
     r.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
-    r.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
-                   help="RMSE / Max AE from the cue (default) or from first contact")
-    r.add_argument("--tct", choices=("successful", "censored"), default="successful",
-                   help="TCT over successful trials only (default) or failures censored at the trial cap")
-    r.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
-                   help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
+    add_analysis_options(r)
     r.add_argument("--confidence", type=_confidence, default=0.95,
                    help="confidence level of the Hodges–Lehmann interval (default 0.95)")
+    r.add_argument("--power", action="store_true",
+                   help="add 'what n would a study need': power against the number of participants, resampling "
+                        "this study's participants (as haptic-study power with its defaults)")
 
     p = add_command(
         sub, "plot-trial", "one trial's force through the pipeline: task force against its band, rendered, raw",
@@ -81,6 +89,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         summary = build_report(
             args.db, args.out, options=MetricOptions(args.error_window, args.tct),
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
+            power=args.power,
         )
     except AnalysisError as exc:
         raise CliError(str(exc)) from None

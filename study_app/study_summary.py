@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 from statistics import fmean, stdev
 
 from protocol.storage import connect_readonly
@@ -23,7 +23,7 @@ def _mean_sd(xs: list[float]) -> tuple[float, float]:
     xs = [x for x in xs if x is not None and math.isfinite(x)]
     if not xs:
         return math.nan, math.nan
-    return fmean(xs), stdev(xs) if len(xs) > 1 else 0.0
+    return fmean(xs), stdev(xs) if len(xs) > 1 else math.nan  # one participant has no spread
 
 
 def _plural(n: int, word: str) -> str:
@@ -36,17 +36,23 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     try:
         q = ",".join("?" * len(session_ids)) or "NULL"
         rows = conn.execute(
-            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind "
+            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind, "
+            f"t.abort_cause "
             f"FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
             f"WHERE t.session_id IN ({q})", session_ids,
         ).fetchall()
         n_samples = conn.execute(
             f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({q})", session_ids
         ).fetchone()[0]
+        recorded = (conn.execute(f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({q})",
+                                 session_ids).fetchone()[0]
+                    if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'session_blocks'").fetchone() else 0)
     finally:
         conn.close()
     exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
-    aborted = sum(1 for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    causes = Counter(r[8] or "cause not recorded" for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    aborted = sum(causes.values())
+    why = (": " + ", ".join(f"{n} {c}" for c, n in sorted(causes.items()))) if causes else ""
     training = sum(1 for r in rows if r[7] == "training")
     per: dict[tuple[str, str], list[tuple]] = defaultdict(list)
     for r in exp:
@@ -54,7 +60,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     codes = sorted({r[0] for r in exp})
     lines = [
         f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
-        f"({aborted} aborted and re-run, {_plural(training, 'training trial')} excluded), {n_samples:,} samples",
+        f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), "
+        + (f"{recorded:,} records (whole sessions at 1 kHz)" if recorded else f"{n_samples:,} samples"),
         "",
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
@@ -64,7 +71,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         return _mean_sd([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
 
     def cell(v: tuple[float, float]) -> str:
-        return f"{v[0]:.3f} ± {v[1]:.3f}"
+        if not math.isfinite(v[0]):
+            return "–"
+        return f"{v[0]:.3f}" + (f" ± {v[1]:.3f}" if math.isfinite(v[1]) else "")
 
     defs = [
         ("success rate", "success", lambda ts: sum(t[3] == "success" for t in ts) / len(ts)),
@@ -76,11 +85,14 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         off, on = metric("off", fn), metric("on", fn)
         change = (on[0] - off[0]) / off[0] * 100 if off[0] and math.isfinite(off[0]) and math.isfinite(on[0]) else math.nan
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
-        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change:>8.0f}%   {paper}")
+        change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
+        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change_txt}   {paper}")
     for label in sorted({r[2] for r in exp}):
         off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
         on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
         lines.append(f"  {'success, ' + label:<30}{cell(off):>16}{cell(on):>16}")
     lines.append("")
-    lines.append(f"Wall time {wall_s:.1f} s. Every trial, sample and event is in the database (tables trials, samples, events).")
+    where = "recordings, session_blocks" if recorded else "samples"
+    lines.append(f"Wall time {wall_s:.1f} s. Every trial, record and event is in the database (tables trials, {where}, "
+                 "events).")
     return "\n".join(lines)

@@ -344,6 +344,9 @@ class NetFTForceSensor:
         cal = self.calibration
         self._cpf, self._cpt = float(cal.counts_per_force), float(cal.counts_per_torque)
         self._uf, self._ut = force_unit_to_n(cal.force_unit), torque_unit_to_nm(cal.torque_unit)
+        #: Counts per N and per N·m when a reading is exactly ``counts / counts_per_unit`` (the box reports in
+        #: N and N·m), so a recording can keep the counts; None otherwise.
+        self.counts_per_unit = (self._cpf, self._cpt) if self._uf == 1.0 and self._ut == 1.0 else None
         self.stats = NetFTStats()
         self._seq = RdtSequencer(self.stats)
         self._latest = WrenchSample(self.clock.now_ns() - 10**12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)

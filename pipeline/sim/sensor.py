@@ -112,6 +112,11 @@ class SimForceSensor:
         """Full-scale range per channel."""
         return self.params.range_n
 
+    @property
+    def counts_per_unit(self) -> tuple[float, float]:
+        """Counts per N and per N·m: every reading is an integer count divided by these, as on the wire."""
+        return (self.params.counts_per_force, self.params.counts_per_torque)
+
     def _next_noise(self) -> list[float]:
         if self._ni >= self._BLOCK:
             p = self.params

@@ -143,7 +143,7 @@ class ExperimenterWindow(QMainWindow):
         self.setMinimumSize(self.minimumSizeHint().boundedTo(QSize(1000, 640)))
 
         self.participant_window = ParticipantWindow(self.model.participant)
-        self.rig_window = RigWindow(self.model.rig, self.model.set_driver)
+        self.rig_window = RigWindow(self.model.rig, self.model.set_driver, self.model.inject_fault)
         self.calibration_wizard = CalibrationWizard(
             self.model.calibration, self.model.calibrate,
             RealPosePanel(self.model.real_calibration, self.model.record_pose, self.model.identify),

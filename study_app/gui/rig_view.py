@@ -1,4 +1,4 @@
-"""The simulated rig's 2-D side view, and the choice of who drives the stylus."""
+"""The simulated rig's 2-D side view, the choice of who drives the stylus, and fault rehearsal."""
 
 from __future__ import annotations
 
@@ -6,8 +6,12 @@ import time
 
 from PySide6.QtCore import QPointF, QRectF, QSignalBlocker, Qt
 from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
-from PySide6.QtWidgets import QButtonGroup, QHBoxLayout, QLabel, QRadioButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import (
+    QButtonGroup, QComboBox, QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QRadioButton, QSpinBox, QVBoxLayout,
+    QWidget,
+)
 
+from study_app.models.app import REHEARSAL_KINDS
 from study_app.models.rig import RigViewModel
 
 __all__ = ["RigCanvas", "RigWindow"]
@@ -119,7 +123,8 @@ class RigCanvas(QWidget):
 class RigWindow(QWidget):
     """Side view plus the driver choice."""
 
-    def __init__(self, model: RigViewModel, on_driver, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: RigViewModel, on_driver, on_inject=None,  # type: ignore[no-untyped-def]
+                 parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Simulated rig — side view")
         self.model = model
@@ -145,7 +150,41 @@ class RigWindow(QWidget):
         lay = QVBoxLayout(self)
         lay.addLayout(row)
         lay.addWidget(self.canvas, 1)
+        if on_inject is not None:
+            lay.addLayout(self._rehearsal_row(on_inject))
         model.changed.connect(self._on_changed)
+
+    def _rehearsal_row(self, on_inject) -> QHBoxLayout:  # type: ignore[no-untyped-def]
+        """Rehearse a fault: what, and when (now, or seconds after a trial's cue)."""
+        self.fault_kind = QComboBox()
+        for kind, text in REHEARSAL_KINDS.items():
+            self.fault_kind.addItem(text, kind)
+        self.fault_trial = QSpinBox()
+        self.fault_trial.setRange(0, 999)
+        self.fault_trial.setSpecialValueText("now")
+        self.fault_trial.setPrefix("trial ")
+        self.fault_trial.setToolTip("now, or the trial (numbered from 1) whose cue it follows")
+        self.fault_seconds = QDoubleSpinBox()
+        self.fault_seconds.setRange(0.0, 600.0)
+        self.fault_seconds.setDecimals(1)
+        self.fault_seconds.setValue(3.0)
+        self.fault_seconds.setSuffix(" s after its cue")
+        self.fault_trial.valueChanged.connect(lambda v: self.fault_seconds.setEnabled(v > 0))
+        self.fault_seconds.setEnabled(False)
+        self.inject_button = QPushButton("Inject")
+        self.inject_button.setToolTip("rehearse recovery: the watchdog latches, the trial it hits is aborted and "
+                                      "re-run, the next cue waits for Reset")
+        self.inject_button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space in the side view never injects
+        self.inject_button.clicked.connect(lambda: on_inject(
+            self.fault_kind.currentData(), self.fault_trial.value() or None, self.fault_seconds.value()))
+        row = QHBoxLayout()
+        row.addWidget(QLabel("Rehearse a fault:"))
+        row.addWidget(self.fault_kind)
+        row.addWidget(self.fault_trial)
+        row.addWidget(self.fault_seconds)
+        row.addWidget(self.inject_button)
+        row.addStretch(1)
+        return row
 
     def showEvent(self, event) -> None:  # noqa: N802 - Qt's name
         super().showEvent(event)

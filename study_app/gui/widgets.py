@@ -320,7 +320,8 @@ class QtHealthPanel(QWidget):
                 if j == 1:
                     item.setForeground(QColor(20, 130, 40) if d.state.startswith("ok") else QColor(200, 30, 30))
         text = h.faults_text()
-        self.faults.setText(f"Faults: {text}")
+        waiting = h.waiting_text()
+        self.faults.setText(f"Faults: {text}" + (f" — the next cue waits: {waiting}" if waiting else ""))
         self.faults.setStyleSheet("color: #c81e1e; font-weight: 600;" if h.faults else "color: #147f28;")
         self.reset_button.setEnabled(bool(h.faults))
         loop = self.loop_html()

@@ -19,7 +19,14 @@ from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel
 from study_app.models.setup import SetupModel
 
-__all__ = ["AppModel", "Notice"]
+#: The faults an experimenter can rehearse on the simulated rig, as the GUI names them.
+REHEARSAL_KINDS: dict[str, str] = {
+    "sensor-stall": "F/T sensor stalls (20 ms)", "nan-burst": "F/T sensor sends NaN (5 ms)",
+    "bad-status": "F/T sensor reports an error (5 ms)", "stale-pose": "robot pose stops (100 ms)",
+    "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
+}
+
+__all__ = ["AppModel", "Notice", "REHEARSAL_KINDS"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
@@ -116,6 +123,10 @@ class AppModel:
                 self.list_sessions()
         elif isinstance(ev, m.EngineStopped):
             self.plots.detach()
+        elif isinstance(ev, m.FaultInjected):
+            when = "now" if ev.when == "now" else f"at {ev.when} after its cue"
+            self.notify("info", f"Rehearsal: {REHEARSAL_KINDS.get(ev.kind, ev.kind)} {when}. Watch the health panel; "
+                        "the trial it hits is aborted and re-run, and the next cue waits for Reset.", "InjectFault")
 
     # -- notices -------------------------------------------------------------------------------------
     def notify(self, level: str, text: str, source: str = "") -> None:
@@ -263,6 +274,10 @@ class AppModel:
     def reset_faults(self) -> None:
         """Clear faults whose condition has gone away."""
         self._send(m.ResetFaults())
+
+    def inject_fault(self, kind: str, trial: int | None, seconds: float) -> None:
+        """Rehearse a fault on the simulated rig: now (``trial`` None) or ``seconds`` after a trial's cue."""
+        self._send(m.InjectFault(kind, trial, seconds))
 
     def calibrate(self) -> None:
         """Run the chosen pose set."""

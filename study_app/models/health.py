@@ -165,6 +165,11 @@ class HealthModel:
         """Latched faults, or 'none'."""
         return Fault(self.faults).describe()
 
+    def waiting_text(self) -> str:
+        """Why the session's next cue is held back ('' when it is not, or between pauses)."""
+        h = self.loop
+        return "" if h is None or h.waiting in ("", "pause") else h.waiting
+
     def loop_text(self) -> str:
         """Loop rate, p99 |period − 1 ms| and overruns, in one line."""
         figures = self.loop_figures()

@@ -5,7 +5,9 @@ from __future__ import annotations
 import csv
 import json
 import math
+import os
 import re
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -162,16 +164,54 @@ def test_an_existing_output_folder_is_kept_without_force_and_options_change_the_
     assert code == 2
     assert err.count("\n") == 1 and "pass --force" in err
     assert (out / "mine.txt").read_text() == "keep me" and len(list(out.iterdir())) == 1
-    code, stdout, _ = _run(capsys, "report", "--db", str(dbs[0]), "--db", str(dbs[1]), "--out", str(out), "--force",
+    # --force replaces only a folder report wrote: this one is the user's
+    code, _, err = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(out), "--force")
+    assert code == 2 and err.count("\n") == 1 and "not a folder report wrote" in err and "nothing was deleted" in err
+    assert (out / "mine.txt").read_text() == "keep me" and len(list(out.iterdir())) == 1
+    # a report folder is replaced, with other options
+    rep2 = tmp_path / "rep2"
+    code, _, _ = _run(capsys, "report", "--db", str(dbs[0]), "--db", str(dbs[1]), "--out", str(rep2))
+    assert code == 0 and (rep2 / ".haptic-study-report").exists()
+    code, stdout, _ = _run(capsys, "report", "--db", str(dbs[0]), "--db", str(dbs[1]), "--out", str(rep2), "--force",
                            "--tct", "censored", "--error-window", "first_contact")
-    assert code == 0 and not (out / "mine.txt").exists() and (out / "report.html").exists()
+    assert code == 0 and (rep2 / "report.html").exists()
     assert "7 participants, 42 trials" in stdout
-    assert not list(tmp_path.glob(".rep.*"))  # no temporary folder left behind
+    assert not list(tmp_path.glob(".rep*.*"))  # no temporary folder left behind
     # censored TCT can only grow, errors from first contact can only shrink
-    pa, pb = pd.read_csv(report / "participants.csv"), pd.read_csv(out / "participants.csv")
+    pa, pb = pd.read_csv(report / "participants.csv"), pd.read_csv(rep2 / "participants.csv")
     assert (pb["tct_s"] >= pa["tct_s"]).all() and (pb["tct_s"] > pa["tct_s"]).any()
     assert (pb["rmse_N"] <= pa["rmse_N"]).all() and (pb["rmse_N"] < pa["rmse_N"]).any()
-    assert "a failed trial counting as the trial cap (4 s)" in (out / "report.html").read_text()
+    assert "a failed trial counting as the trial cap (4 s)" in (rep2 / "report.html").read_text()
+    # ... but not once someone put a file of their own in it
+    (rep2 / "figures" / "my-annotated.png").write_bytes(b"\x89PNG mine")
+    code, _, err = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(rep2), "--force")
+    assert code == 2 and "holds 1 file report did not write (e.g. figures/my-annotated.png)" in err
+    assert (rep2 / "figures" / "my-annotated.png").read_bytes() == b"\x89PNG mine" and (rep2 / "report.html").exists()
+
+
+def test_force_never_replaces_a_folder_holding_the_database(tmp_path, capsys):
+    """report --db d/study.db --out d --force: refused, nothing deleted (it used to delete d)."""
+    d = tmp_path / "d"
+    d.mkdir()
+    db = d / "study.db"
+    build(db, [SessionDef("P1", [success_trial("GENTLE", "on", 0), success_trial("GENTLE", "off", 1)])])
+    (d / "notes.txt").write_text("lab notes")
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    for out in (d, d / "sub" / ".."):
+        code, _, err = _run(capsys, "report", "--db", str(db), "--out", str(out), "--force")
+        assert code == 2 and err.count("\n") == 1 and "holds the input database" in err
+    assert {p.name: p.read_bytes() for p in d.iterdir() if not p.name.endswith(("-wal", "-shm"))} == before
+
+
+def test_the_report_follows_the_umask(dbs, tmp_path, capsys):
+    old = os.umask(0o027)
+    try:
+        code, _, _ = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(tmp_path / "r"))
+    finally:
+        os.umask(old)
+    assert code == 0
+    assert stat.S_IMODE((tmp_path / "r").stat().st_mode) == 0o750
+    assert stat.S_IMODE((tmp_path / "r" / "report.html").stat().st_mode) == 0o640
 
 
 @pytest.mark.parametrize(

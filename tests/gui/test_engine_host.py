@@ -65,7 +65,7 @@ def test_a_whole_session_is_stored_with_its_calibration(engine, tmp_path, short_
     assert status == "completed"
     assert json.loads(cal_json) == e.calibration.to_dict()
     assert json.loads(cfg_json)["app"] == "gui"
-    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 2000
+    assert db_rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0] > 2000  # the whole session, recorded
 
 
 def test_calibration_refuses_a_degenerate_set_and_keeps_the_previous(engine):
@@ -193,4 +193,42 @@ def test_engine_process_exits_cleanly_when_the_gui_goes_away(tmp_path, short_pro
     assert db_rows(db, "SELECT trial_index, outcome, abort_reason FROM trials") == [
         (0, "aborted", "the experimenter GUI went away (closed or crashed)")]
     assert db_rows(db, "SELECT status FROM sessions") == [("running",)]
-    assert db_rows(db, "SELECT COUNT(*) FROM samples")[0][0] > 250
+    assert db_rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0] > 250
+
+
+def test_a_rehearsed_fault_is_stored_aborts_the_trial_and_waits_for_the_experimenters_reset(engine, tmp_path,
+                                                                                            short_protocol):
+    e, events = engine
+    db = str(tmp_path / "f.db")
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+    e.handle(m.InjectFault("sensor-stall", trial=1, seconds=0.2))
+    assert of(events, m.CommandRefused) == [] and of(events, m.FaultInjected)[-1].when == "trial 1 + 0.2 s"
+    run_until(e, lambda: of(events, m.TrialEnded))
+    ended = of(events, m.TrialEnded)[0].row
+    assert ended["outcome"] == "aborted" and ended["abort_reason"].startswith("fault: SENSOR_STALE")
+    # the GUI saw the fault; no cue follows until the experimenter resets
+    assert any(f.kind == "fault" and f.detail.startswith("SENSOR_STALE") for f in of(events, m.EngineFault))
+    run_until(e, lambda: e.health().waiting.startswith("fault latched (SENSOR_STALE)"))
+    for _ in range(100):
+        e.step()
+    assert len(of(events, m.TrialStarted)) == 1
+    e.handle(m.ResetFaults())
+    run_until(e, lambda: e.runner is None)
+    fin = of(events, m.SessionEnded)[-1]
+    assert fin.status == "completed" and fin.aborted == 1 and fin.completed == 2
+    stored = db_rows(db, "SELECT kind, detail FROM events WHERE kind IN ('fault', 'fault_cleared', 'faults_reset')")
+    assert [k for k, _ in stored] == ["fault", "fault_cleared", "faults_reset"]
+    assert db_rows(db, "SELECT abort_cause FROM trials WHERE outcome = 'aborted'") == [("fault",)]
+    assert db_rows(db, "SELECT repeat_of FROM trials ORDER BY trial_index DESC LIMIT 1") == [(0,)]
+    assert db_rows(db, "SELECT COUNT(*) FROM leases") == [(0,)]
+
+
+def test_fault_rehearsal_now_and_its_refusals(engine, tmp_path, short_protocol):
+    e, events = engine
+    e.handle(m.InjectFault("nan-burst"))
+    run_until(e, lambda: e.loop.faults & Fault.NON_FINITE)
+    e.handle(m.InjectFault("melt-down"))
+    e.handle(m.InjectFault("sensor-stall", trial=2, seconds=1.0))  # no session
+    refused = [r.message for r in of(events, m.CommandRefused)]
+    assert refused[0].startswith("fault kind = 'melt-down': allowed values are sensor-stall, nan-burst")
+    assert refused[1].startswith("fault rehearsal at a trial: start or resume a session first")

@@ -336,3 +336,18 @@ def test_a_refused_start_is_shown_until_the_form_changes(tmp_path):
     assert a.notice is None
     a.setup.update(code="")
     assert not a.start() and a.notice.text.startswith("Cannot start: Enter the participant's code")
+
+
+def test_health_says_why_the_next_cue_waits_and_logs_every_fault_event():
+    from study_app.models.health import HealthModel
+
+    h = HealthModel()
+    h.apply(m.EngineFault(1.5, "fault", 1, "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"))
+    h.apply(m.EngineFault(1.52, "fault_cleared", 1, "SENSOR_STALE: the condition is gone (latched until a reset)"))
+    h.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 1, False, "autopilot", True, False,
+                     waiting="fault latched (SENSOR_STALE): reset to continue"))
+    assert h.waiting_text() == "fault latched (SENSOR_STALE): reset to continue"
+    h.apply(m.EngineFault(3.0, "faults_reset", 0, "SENSOR_STALE"))
+    assert [line.split("s  ", 1)[1].split(":")[0] for line in h.fault_log] == ["fault", "gone", "reset"]
+    h.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, False, "autopilot", True, False, waiting="pause"))
+    assert h.waiting_text() == ""  # the protocol's own pause is not worth a line

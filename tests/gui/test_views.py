@@ -195,3 +195,35 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     assert not view.task.getAxis("left").autoSIPrefix  # "(x0.001)" never appears on a force axis
     view.lower_choice.setCurrentText("none")
     assert not view.lower.isVisible() and view.task.getAxis("bottom").style["showValues"]
+
+
+def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):
+    r = RigViewModel()
+    r.apply(READY)
+    sent: list[tuple] = []
+    view = RigWindow(r, lambda mode: None, lambda *a: sent.append(a))
+    qtbot.addWidget(view)
+    view.show()
+    qtbot.waitExposed(view)
+    assert not view.fault_seconds.isEnabled() and view.fault_trial.text() == "now"
+    view.fault_kind.setCurrentIndex(view.fault_kind.findData("nan-burst"))
+    qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
+    view.fault_trial.setValue(4)
+    assert view.fault_seconds.isEnabled()
+    view.fault_seconds.setValue(2.5)
+    view.fault_kind.setCurrentIndex(view.fault_kind.findData("sensor-stall"))
+    qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
+    assert sent == [("nan-burst", None, 3.0), ("sensor-stall", 4, 2.5)]
+    assert view.inject_button.focusPolicy() == Qt.FocusPolicy.NoFocus
+
+
+def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
+    from study_app.models.app import AppModel
+
+    sent: list[object] = []
+    app = AppModel(send=lambda cmd: sent.append(cmd) or True)
+    app.inject_fault("stale-pose", 3, 1.5)
+    assert sent == [m.InjectFault("stale-pose", 3, 1.5)]
+    app.apply(m.FaultInjected("stale-pose", "trial 3 + 1.5 s"))
+    assert app.notice is not None and app.notice.level == "info"
+    assert app.notice.text.startswith("Rehearsal: robot pose stops (100 ms) at trial 3 + 1.5 s after its cue.")

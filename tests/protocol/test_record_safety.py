@@ -199,7 +199,7 @@ def test_upgrade_can_be_refused_and_then_nothing_changes(tmp_path):
     path = tmp_path / "old.db"
     _v1_database(path)
     before = path.read_bytes()
-    with pytest.raises(StorageError, match="must be upgraded to 2 before it is written to; nothing was changed"):
+    with pytest.raises(StorageError, match="must be upgraded to 3 before it is written to; nothing was changed"):
         StudyDatabase(path, upgrade=False)
     assert path.read_bytes() == before
 

@@ -38,6 +38,7 @@ COLUMNS = {
         "started_at_s", "ended_at_s", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n", "n_samples",
         "abort_reason", "repeat_of", "abort_cause", "period_p50_ms", "period_p99_ms", "period_max_ms",
         "periods_over_2ms", "sensor_age_max_ms", "pose_age_max_ms", "latency_p50_ms", "latency_max_ms",
+        "segment", "first_tick", "last_tick",
     ],
     "samples": [
         "trial_id", "t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
@@ -45,6 +46,9 @@ COLUMNS = {
     ],
     "events": ["session_id", "t_s", "kind", "detail"],
     "leases": ["scope", "owner", "pid", "host", "process_start", "command", "acquired_at", "heartbeat_at"],
+    "recordings": ["session_id", "segment", "started_at_s", "t0_ns", "snapshot_json", "scales_json"],
+    "session_blocks": ["session_id", "segment", "block", "first_tick", "last_tick", "n_records", "t_first_s",
+                       "t_last_s", "data"],
 }
 
 
@@ -80,7 +84,7 @@ def _trial_row(session_id: int, index: int, outcome: str = "success", tct_s: flo
         "time_in_band_s": 1.001, "peak_force_n": 0.66, "n_samples": 1501, "abort_reason": None, "repeat_of": None,
         "abort_cause": None, "period_p50_ms": 1.0, "period_p99_ms": 1.004, "period_max_ms": 1.25,
         "periods_over_2ms": 0, "sensor_age_max_ms": 1.0, "pose_age_max_ms": 8.0, "latency_p50_ms": 0.5,
-        "latency_max_ms": 1.125,
+        "latency_max_ms": 1.125, "segment": None, "first_tick": None, "last_tick": None,
     }
 
 
@@ -111,7 +115,7 @@ def test_new_database_gets_the_schema(db, db_path):
         for table, columns in COLUMNS.items():
             assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 2
+        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
         indexes = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")}
         assert indexes == {"samples_by_trial", "events_by_session"}
     finally:
@@ -127,7 +131,7 @@ def test_reopening_keeps_the_data(db_path):
     again = StudyDatabase(db_path)
     try:
         assert [s.session_id for s in again.sessions_of("P01")] == [sid]
-        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 2
+        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 3
     finally:
         again.close()
     ro = StudyDatabase(db_path, readonly=True)
@@ -149,7 +153,7 @@ def test_an_empty_file_becomes_a_database(db_path):
 # -- refusals -------------------------------------------------------------------------------------
 def test_newer_schema_is_refused(db_path):
     with sqlite3.connect(db_path) as c:
-        c.execute("PRAGMA user_version = 3")
+        c.execute("PRAGMA user_version = 4")
         c.execute("CREATE TABLE participants (participant_id INTEGER PRIMARY KEY)")
     c.close()
     before = db_path.read_bytes()
@@ -157,7 +161,7 @@ def test_newer_schema_is_refused(db_path):
         StudyDatabase(db_path)
     msg = str(info.value)
     assert str(db_path) in msg
-    assert "version 3 is newer than this software supports (2)" in msg
+    assert "version 4 is newer than this software supports (3)" in msg
     assert db_path.read_bytes() == before
 
 

@@ -10,12 +10,14 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
 from protocol.study import resume_session, run_study
+from records import all_records, trial_samples
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -57,22 +59,22 @@ def test_short_study_end_to_end(tmp_path: Path) -> None:
         for t in trials:
             assert t[3] in ("success", "timeout")
             assert (t[4] is not None) == (t[3] == "success")
-            n = rows(db, "SELECT COUNT(*), MIN(t_s), MAX(t_s) FROM samples WHERE trial_id = ?", t[6])[0]
-            assert n[0] == t[5]  # every sample of the trial window is stored, once
-            assert n[1] == 0.0
+            smp = trial_samples(db, t[6])
+            assert len(smp) == t[5]  # every sample of the trial window is stored, once
+            assert smp["t_s"].iloc[0] == 0.0
             if t[3] == "success":
-                assert n[2] == pytest.approx(t[4], abs=1e-9)  # TCT = the last sample of the window
+                assert smp["t_s"].iloc[-1] == pytest.approx(t[4], abs=1e-9)  # TCT = the last sample of the window
             else:
-                assert n[2] == pytest.approx(12.0 if kind == "experiment" else 3.0, abs=1e-9)
+                assert smp["t_s"].iloc[-1] == pytest.approx(12.0 if kind == "experiment" else 3.0, abs=1e-9)
     # provenance stored before trial 1
     cfg = json.loads(rows(db, "SELECT config_json FROM sessions LIMIT 1")[0][0])
     assert cfg["rig"] == "sim" and cfg["framework"]["f_max_n"] == 3.0
     assert rows(db, "SELECT COUNT(*) FROM events WHERE kind = 'cue'")[0][0] == 2 * (4 + 4)
     # nothing is overwritten: running the same codes again is refused, the data untouched
-    before = rows(db, "SELECT COUNT(*) FROM samples")[0][0]
+    before = rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0]
     with pytest.raises(StorageError, match="already holds sessions for participant P01"):
         run_study(str(db), participants=1, seed=11, protocol=proto)
-    assert rows(db, "SELECT COUNT(*) FROM samples")[0][0] == before
+    assert rows(db, "SELECT SUM(n_records) FROM session_blocks")[0][0] == before
 
 
 def test_same_seed_same_study(tmp_path: Path) -> None:
@@ -82,7 +84,8 @@ def test_same_seed_same_study(tmp_path: Path) -> None:
     run_study(str(b), participants=1, seed=5, protocol=proto)
     q = "SELECT trial_index, outcome, tct_s, rmse_n, max_ae_n FROM trials ORDER BY trial_id"
     assert rows(a, q) == rows(b, q)
-    assert rows(a, "SELECT SUM(force_n), COUNT(*) FROM samples") == rows(b, "SELECT SUM(force_n), COUNT(*) FROM samples")
+    assert rows(a, "SELECT data FROM session_blocks ORDER BY session_id, segment, block") == rows(
+        b, "SELECT data FROM session_blocks ORDER BY session_id, segment, block")  # the recordings, byte for byte
 
 
 def _run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -122,10 +125,13 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
     assert rows(db, "SELECT status FROM sessions WHERE session_id = ?", sid)[0][0] == "running"
     # every finished trial has all its samples committed (the trial row commits them)
     for idx, _, _, _, n in before:
-        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", sid * 1_000_000 + idx)[0][0] == n
+        assert len(trial_samples(db, sid * 1_000_000 + idx)) == n
     schedule = schedule_from_json(rows(db, "SELECT schedule_json FROM sessions WHERE session_id = ?", sid)[0][0])
     interrupted = schedule[len(before)]
-    partial = rows(db, "SELECT COUNT(*), MAX(t_s) FROM samples WHERE trial_id = ?", sid * 1_000_000 + interrupted.index)[0]
+    marked = [cols for (s, _), cols in all_records(db).items() if s == sid]
+    in_trial = np.concatenate([c["trial_index"] == interrupted.index for c in marked]) if marked else np.empty(0, bool)
+    t_ns = np.concatenate([c["t_ns"] for c in marked])[in_trial] if marked else np.empty(0)
+    partial = (int(in_trial.sum()), (t_ns[-1] - t_ns[0]) / 1e9 if len(t_ns) else None)
 
     resumed = _run_cli(["run", "--db", str(db), "--resume", "P01"])
     assert resumed.returncode == 0, resumed.stderr
@@ -195,7 +201,7 @@ def test_parallel_study_matches_sequential(tmp_path: Path) -> None:
     p2 = run_study(str(par), participants=2, seed=21, protocol=proto, jobs=2,
                    on_progress=lambda p: seen.append((p.participant, p.study_trials_done, p.study_trials_total)))
     trials = ("SELECT p.code, s.kind, t.trial_index, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, t.n_samples, "
-              "(SELECT COUNT(*) FROM samples x WHERE x.trial_id = t.trial_id) "
+              "t.last_tick - t.first_tick "
               "FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
               "ORDER BY p.code, s.kind, t.trial_index")
     a, b = rows(seq, trials), rows(par, trials)
@@ -203,9 +209,9 @@ def test_parallel_study_matches_sequential(tmp_path: Path) -> None:
     assert a == b
     sched = "SELECT p.code, s.kind, s.schedule_json, s.status FROM sessions s JOIN participants p USING (participant_id) ORDER BY p.code, s.kind"
     assert rows(seq, sched) == rows(par, sched)
-    forces = "SELECT p.code, s.kind, SUM(x.force_n), SUM(x.render_fz) FROM samples x JOIN trials t USING (trial_id) " \
-             "JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) GROUP BY p.code, s.kind"
-    assert rows(seq, forces) == rows(par, forces)
+    blocks = "SELECT p.code, s.kind, b.segment, b.block, b.data FROM session_blocks b JOIN sessions s USING (session_id) " \
+             "JOIN participants p USING (participant_id) ORDER BY p.code, s.kind, b.segment, b.block"
+    assert rows(seq, blocks) == rows(par, blocks)  # the whole recordings, byte for byte
     # the summary: the same sessions, in participant order (training before experiment), whatever their ids
     def described(db: Path, sessions: list[int]) -> list[tuple]:
         return [rows(db, "SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
@@ -254,7 +260,7 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
     assert len(sessions) == 2 and all(s[1] == "running" for s in sessions)
     for sid, _ in sessions:
         for idx, n in rows(db, "SELECT trial_index, n_samples FROM trials WHERE session_id = ?", sid):
-            assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", sid * 1_000_000 + idx)[0][0] == n
+            assert len(trial_samples(db, sid * 1_000_000 + idx)) == n
     for code in ("P01", "P02"):
         r = _run_cli(["run", "--db", str(db), "--resume", code])
         assert r.returncode == 0, r.stderr
@@ -287,7 +293,7 @@ def test_a_crashed_worker_stops_the_study_with_one_clear_error(tmp_path: Path) -
                           "the other participants were stopped, their committed data is kept")
     assert multiprocessing.active_children() == []
     for t_id, n in rows(db, "SELECT trial_id, n_samples FROM trials"):
-        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", t_id)[0][0] == n
+        assert len(trial_samples(db, t_id)) == n
     assert msg.endswith("complete the study with the same command and --continue")
     before = rows(db, "SELECT trial_id, outcome, tct_s, n_samples FROM trials ORDER BY trial_id")
     progress = run_study(str(db), participants=2, seed=4, protocol=short_protocol(), jobs=2, continue_study=True)
@@ -317,7 +323,7 @@ def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) 
     before = rows(db, "SELECT trial_id, outcome, n_samples FROM trials ORDER BY trial_id")
     assert rows(db, "SELECT status FROM sessions") == [("running",), ("running",)]
     for t_id, _, n in before:
-        assert rows(db, "SELECT COUNT(*) FROM samples WHERE trial_id = ?", t_id)[0][0] == n
+        assert len(trial_samples(db, t_id)) == n
     resume_session(str(db), "P02")
     assert sorted(rows(db, "SELECT p.code, s.status FROM sessions s JOIN participants p USING (participant_id)")) == [
         ("P01", "running"), ("P02", "completed")]
@@ -439,8 +445,8 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     db = tmp_path / "raise.db"
     real_process = protocol.session.SessionRunner.process
 
-    def process_then_fail(self, rows, loop_events=()):  # type: ignore[no-untyped-def]
-        real_process(self, rows, loop_events)
+    def process_then_fail(self, rows, *args):  # type: ignore[no-untyped-def]
+        real_process(self, rows, *args)
         if self._last_t_ns > 3_000_000_000:
             raise RuntimeError("injected by the test 3 s into the participant")
 

@@ -1,0 +1,184 @@
+"""The ``power`` subcommand and ``bench power``: planning the next study's sample size.
+
+Option values are parsed here rather than by argparse so that a bad value is
+one line on stderr naming the option, the value and what is allowed (exit 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+
+__all__ = ["add_power_bench_parser", "add_power_parser", "cmd_bench_power", "cmd_power"]
+
+_N_MAX = 10_000
+#: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
+DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
+_POOL_DEFAULT = 100
+
+
+def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``power``."""
+    from study_app.report_cmds import add_analysis_options
+
+    p = sub.add_parser(
+        "power",
+        help="plan the next study: power of the report's tests against the number of participants, "
+             "by resampling a pilot study or simulated participants",
+    )
+    p.add_argument("--db", action="append", metavar="PILOT.db",
+                   help="pilot study database; repeat to merge several (the report's aggregation and tests)")
+    p.add_argument("--simulated", action="store_true",
+                   help="no pilot yet: simulate a pool of participants from the calibrated population (kept in DIR)")
+    p.add_argument("--pool", default=None, metavar="N",
+                   help=f"participants in the simulated pool (default {_POOL_DEFAULT}; with --simulated)")
+    p.add_argument("--n", default=None, metavar="LIST",
+                   help=f"planned study sizes, comma-separated (default {DEFAULT_N_TEXT})")
+    p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
+    p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
+    p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool)")
+    add_analysis_options(p)
+
+
+def add_power_bench_parser(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``bench power``."""
+    b = bsub.add_parser("power", help="power analysis: the vectorised engine against paired_wilcoxon per resample")
+    b.add_argument("--db", default=None, metavar="PATH",
+                   help="pilot study database (default: a synthetic 10-participant pilot)")
+    b.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
+    b.add_argument("--reference-resamples", default="100",
+                   help="resamples per n for the paired_wilcoxon loop, scaled up (default 100)")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+
+
+def _whole(option: str, text: str, low: int, high: int) -> int:
+    from study_app.cli import CliError
+
+    try:
+        v = int(text)
+    except ValueError:
+        v = None
+    if v is None or not low <= v <= high:
+        raise CliError(f"{option} = {text!r}: must be a whole number from {low} to {high}")
+    return v
+
+
+def _n_values(text: str) -> tuple[int, ...]:
+    from study_app.cli import CliError
+
+    out = []
+    for part in text.split(","):
+        try:
+            v = int(part.strip())
+        except ValueError:
+            v = None
+        if v is None or not 2 <= v <= _N_MAX:
+            raise CliError(f"--n = {text!r}: each n must be a whole number from 2 to {_N_MAX}, comma-separated "
+                           "(e.g. 6,8,10,12)")
+        out.append(v)
+    return tuple(out)
+
+
+def _alpha(text: str) -> float:
+    from study_app.cli import CliError
+
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0.0 < v < 1.0:
+        raise CliError(f"--alpha = {text!r}: must be a number with 0 < alpha < 1 (e.g. 0.05)")
+    return v
+
+
+def cmd_power(args: argparse.Namespace) -> int:
+    """Run ``haptic-study power``; errors raise :class:`study_app.cli.CliError`."""
+    from study_app.cli import CliError
+
+    if args.db and args.simulated:
+        raise CliError("--db and --simulated: give one or the other (a pilot study, or simulated participants)")
+    if not args.db and not args.simulated:
+        raise CliError("power needs a source: --db PILOT.db (a pilot study) or --simulated (simulated participants)")
+    if args.pool is not None and not args.simulated:
+        raise CliError(f"--pool = {args.pool!r}: only with --simulated (a pilot's size is its own)")
+    n_values = _n_values(DEFAULT_N_TEXT if args.n is None else args.n)
+    resamples = _whole("--resamples", args.resamples, 1, 1_000_000)
+    alpha = _alpha(args.alpha)
+    seed = _whole("--seed", args.seed, 0, 2**32 - 1)
+    pool_size = _whole("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
+    if args.out is None:
+        raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
+
+    from analysis.load import AnalysisError
+    from analysis.metrics import MetricOptions
+    from analysis.power import (FAMILY_LABELS, estimate_power, load_pool, output_folder, simulated_pool, summary_text,
+                                write_power)
+    from study_app.progress import ProgressBar
+
+    options = MetricOptions(args.error_window, args.tct)
+    bars: list[ProgressBar] = []
+
+    def reading(done: float, total: float) -> None:
+        if not bars or bars[-1].unit != "samples":
+            bars.append(ProgressBar(total, "reading samples", "samples", decimals=0))
+        bars[-1].update(done)
+
+    def simulating(p) -> None:  # type: ignore[no-untyped-def]
+        if not bars:
+            bars.append(ProgressBar(p.study_trials_total, "simulating pool", "trials", decimals=0))
+        bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
+        bars[-1].update(p.study_trials_done)
+
+    try:
+        output_folder(args.out, create=False)
+        if args.simulated:
+            t0 = time.perf_counter()
+            path, reused = simulated_pool(args.out, pool_size, seed, on_progress=simulating)
+            for bar in bars:
+                bar.close()
+            if reused:
+                print(f"power: reusing the simulated pool {path}", file=sys.stderr)
+            else:
+                print(f"power: simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); "
+                      "the next call with the same --pool and --seed reuses it", file=sys.stderr)
+            databases = [str(path)]
+            source = f"a simulated pool of {pool_size} participants (study seed {seed}, {path.name})"
+        else:
+            databases = list(args.db)
+            source = None
+        pool = load_pool(databases, options, source=source, progress=reading)
+        for bar in bars:
+            bar.close()
+        t0 = time.perf_counter()
+        result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
+                                zero_method=args.zero_method)
+        wall = time.perf_counter() - t0
+        files = write_power(result, args.out)
+    except AnalysisError as exc:  # PowerError included
+        raise CliError(str(exc)) from None
+    tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
+    print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
+    print(summary_text(result))
+    print(f"Written in {args.out}/: {', '.join(files)}")
+    return 0
+
+
+def cmd_bench_power(args: argparse.Namespace) -> int:
+    """Run ``haptic-study bench power``."""
+    import os
+
+    from bench.power_bench import format_power_bench, run_power_bench
+    from study_app.cli import CliError
+
+    if args.db is not None and not os.path.isfile(args.db):
+        raise CliError(f"--db = {args.db!r}: no such file")
+    resamples = _whole("--resamples", args.resamples, 1, 1_000_000)
+    reference = _whole("--reference-resamples", args.reference_resamples, 1, resamples)
+    print("bench: timing the power analysis ...", file=sys.stderr, flush=True)
+    result = run_power_bench(args.db, resamples=resamples, reference_resamples=reference)
+    print(json.dumps(result) if args.json else format_power_bench(result))
+    return 0

@@ -1,0 +1,283 @@
+"""``replay``, ``plot-session`` and ``export samples``: a recorded session, after the fact.
+
+``replay`` runs a session's recorded inputs through the pipeline again
+(:mod:`pipeline.replay`): with the recorded settings it must reproduce the
+rendered force bit for bit, and says whether it did; with another filter
+window, f_scale or f_max it says, trial by trial, what the participant would
+have felt instead, and measures the filter's trade on the recording itself.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from study_app.argtypes import SQLITE_INTEGER_MAX, real_number, whole_number
+
+__all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
+
+_FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``replay``, ``plot-session`` and ``export``."""
+    from study_app.cli import add_command
+
+    r = add_command(
+        sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
+        "haptic-study replay --db study.db --session 2\n"
+        "haptic-study replay --db study.db --session 2 --filter-window 20 --out replay-w20",
+        "Run a recorded session's inputs (raw sensor wrench, robot poses, feedback switch, faults) through the "
+        "same pipeline code as the live loop. With the recorded settings it reproduces the rendered force bit for "
+        "bit; with another --filter-window, --f-scale or --f-max it writes, per trial, how the rendered force would "
+        "have differed, and measures the filter window's noise and delay on the recording",
+    )
+    r.add_argument("--db", required=True, metavar="PATH", help="study database")
+    r.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
+                   help="session id (haptic-study sessions --db PATH lists them)")
+    r.add_argument("--filter-window", type=whole_number("--filter-window", 1, 1000), default=None, metavar="N",
+                   help="moving-average window to try, samples")
+    r.add_argument("--f-scale", type=real_number("--f-scale", 0.0, 1000.0, lo_open=True), default=None,
+                   metavar="N", help="tanh scaling f_scale to try, N")
+    r.add_argument("--f-max", type=real_number("--f-max", 0.0, 100.0, lo_open=True), default=None, metavar="N",
+                   help="tanh scaling f_max to try, N (the device's own peak still clamps)")
+    r.add_argument("--out", default=None, metavar="DIR",
+                   help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new folder)")
+
+    p = add_command(
+        sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
+        "haptic-study plot-session --db study.db --session 2 --out session2.pdf",
+        "Draw a whole recorded session: the compensated and rendered force with trials and contact shaded and a "
+        "zero baseline, and the raw sensor force on an axis of its own (decimated for drawing, never for numbers)",
+    )
+    p.add_argument("--db", required=True, metavar="PATH", help="study database")
+    p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
+                   help="session id")
+    p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+
+    e = add_command(
+        sub, "export", "export a study's data in tidy form (samples: every 1 kHz record)",
+        "haptic-study export samples --db study.db --session 2 --format csv --out session2.csv\n"
+        "haptic-study export samples --db study.db --format parquet --out samples.parquet",
+        "Export every recorded 1 kHz record (of one session, or all) as one table, for pandas, R or SQL-free "
+        "tools; the Python function is analysis.samples_frame",
+    )
+    esub = e.add_subparsers(dest="export", metavar="WHAT")
+    esub.required = True
+    es = esub.add_parser("samples", help="every recorded record: session time, trial, forces, stylus, ages")
+    es.add_argument("--db", required=True, metavar="PATH", help="study database")
+    es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
+                    help="one session (default: all)")
+    es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
+    es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist)")
+
+
+# -- shared -------------------------------------------------------------------------------------------------
+def _cli_error(msg: str) -> Exception:
+    from study_app.cli import CliError
+
+    return CliError(msg)
+
+
+def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
+    """(open read-only database, its recorded segments, the session's trials frame), or a one-line error."""
+    from protocol.recording import read_segment, segments_of
+    from protocol.storage import StorageError, StudyDatabase
+
+    try:
+        db = StudyDatabase(db_path, readonly=True, check=True)
+    except StorageError as exc:
+        raise _cli_error(str(exc)) from None
+    row = db.conn.execute("SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
+                          "WHERE s.session_id = ?", (session_id,)).fetchone()
+    if row is None:
+        ids = [r[0] for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+        db.close()
+        raise _cli_error(f"--session {session_id}: no such session in {db_path} (sessions: "
+                         f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
+    segs = segments_of(db.conn, session_id) if db.schema_version >= 3 else []
+    if not segs:
+        db.close()
+        raise _cli_error(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
+                         "which kept its trials' samples only); replay and plot-session need a recorded session")
+    segments = [read_segment(db.conn, session_id, s[0]) for s in segs]
+    import pandas as pd
+
+    trials = pd.read_sql_query(
+        "SELECT trial_index, target_label, haptic_mode, outcome, segment, first_tick, last_tick, started_at_s, "
+        "ended_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL ORDER BY trial_index",
+        db.conn, params=(session_id,))
+    db.close()
+    trials.insert(0, "code", row[0])
+    trials.insert(1, "session_kind", row[1])
+    return row, segments, trials
+
+
+def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
+    return np.sqrt(cols[f"{prefix}_fx"] ** 2 + cols[f"{prefix}_fy"] ** 2 + cols[f"{prefix}_fz"] ** 2)
+
+
+def _new_folder(path: str) -> Path:
+    out = Path(path)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise _cli_error(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
+    if not out.resolve().parent.exists():
+        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+    out.mkdir(exist_ok=True)
+    return out
+
+
+# -- replay ---------------------------------------------------------------------------------------------------
+def cmd_replay(args: argparse.Namespace) -> int:
+    """``haptic-study replay``."""
+    from analysis.replay_compare import filter_trade, trial_differences
+    from pipeline.framework import framework_config_from_dict
+    from pipeline.replay import replay
+
+    (code, kind), segments, trials = _session(args.db, args.session)
+    n = sum(len(s.columns["tick"]) for s in segments)
+    t0 = time.perf_counter()
+    outputs = [replay(s.replay_inputs()) for s in segments]
+    wall = time.perf_counter() - t0
+    exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
+             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
+    gaps = [s.segment for s in segments if not s.continuous]
+    print(f"Session {args.session} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
+          f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
+    verdict = ("bit-identical to the recording" if all(exact) else
+               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
+    print(f"  recorded settings: rendered force and task force {verdict}")
+    if gaps:
+        print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
+    # the filter's trade on this recording: the compensated force replay recomputed, at rest and in contact
+    comp = np.concatenate([o.stages[:, :3] for o in outputs])
+    phase = np.concatenate([s.columns["phase"] for s in segments])
+    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
+    mag = np.linalg.norm(comp, axis=1)
+    from protocol.metrics import CONTACT_THRESHOLD_N
+    from protocol.trial import PHASE_CODES, TrialPhase
+
+    rest = (phase == PHASE_CODES[TrialPhase.PAUSE]) & (mag < 2 * CONTACT_THRESHOLD_N)
+    contact = in_trial & (mag > 2 * CONTACT_THRESHOLD_N)
+    trade = filter_trade(comp, rest, contact)
+    recorded_w = segments[0].snapshot["framework"]["config"]["filter_window"]
+    print(f"  the moving-average window on this recording ({int(rest.sum()):,} records at rest, "
+          f"{int(contact.sum()):,} in contact; recorded with {recorded_w}):")
+    print("    window  noise at rest (N RMS)  delay in contact (ms)  theory (ms)")
+    for r in trade.itertuples():
+        print(f"    {r.window:6d}  {r.noise_rms_N:21.5f}  {r.delay_ms + 0.0:21.1f}  {r.group_delay_ms:11.1f}")
+    changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
+                                 ("f_max_n", args.f_max)) if v is not None}
+    out = _new_folder(args.out) if args.out else None
+    if out is not None:
+        trade.round(6).to_csv(out / "filter_trade.csv", index=False)
+    if not changes:
+        if out is not None:
+            print(f"Files in {out}/: filter_trade.csv")
+        return 0 if all(exact) else 1
+    what = ", ".join(f"{k} = {v:g}" for k, v in changes.items())
+    other = []
+    for s in segments:
+        cfg = framework_config_from_dict(s.snapshot["framework"]["config"])
+        try:
+            cfg = dataclasses.replace(cfg, **changes)
+        except ValueError as exc:
+            raise _cli_error(str(exc)) from None
+        other.append(replay(s.replay_inputs(), cfg))
+    recorded = np.concatenate([_magnitude(s.columns, "render") for s in segments])
+    replayed = np.concatenate([np.linalg.norm(o.stages[:, 18:21], axis=1) for o in other])
+    run = 2**40  # ticks restart with each run of the session: make them unique across runs
+    ticks = np.concatenate([s.columns["tick"] + s.segment * run for s in segments])
+    trials = trials.assign(first_tick=trials["first_tick"] + trials["segment"] * run,
+                           last_tick=trials["last_tick"] + trials["segment"] * run)
+    diffs = trial_differences(trials, recorded, replayed, ticks)
+    print(f"  with {what}: the rendered force, trial by trial (against the recording):")
+    print("    trial  mode  outcome   RMS diff (N)  peak diff (N)  delay (ms)")
+    for r in diffs.itertuples():
+        print(f"    {r.trial_index + 1:5d}  {r.haptic_mode:>4}  {r.outcome:<8}  {r.rms_difference_N:12.4f}  "
+              f"{r.peak_difference_N:13.4f}  {r.delay_ms:10.1f}")
+    if out is not None:
+        table = diffs.drop(columns=["first_tick", "last_tick"]).assign(trial_number=diffs["trial_index"] + 1)
+        table.drop(columns="trial_index").round(6).to_csv(out / "replay_trials.csv", index=False)
+        from analysis.figures import save
+        from analysis.session_figures import replay_figure
+
+        t_s = np.concatenate([s.session_time_s for s in segments])
+        worst = None
+        if len(diffs) and diffs["rms_difference_N"].notna().any():
+            w = diffs.loc[diffs["rms_difference_N"].idxmax()]
+            worst = (float(w["started_at_s"]), float(w["ended_at_s"]),
+                     f"trial {int(w['trial_index']) + 1} ({w['haptic_mode']}, {w['outcome']}): the largest difference")
+        save(replay_figure(t_s, recorded, replayed, what, worst), out, "replay")
+        print(f"Files in {out}/: replay_trials.csv, filter_trade.csv, replay.png, replay.pdf, replay.svg")
+    return 0 if all(exact) else 1
+
+
+# -- plot-session ---------------------------------------------------------------------------------------------
+def cmd_plot_session(args: argparse.Namespace) -> int:
+    """``haptic-study plot-session``."""
+    from analysis.figures import save_one
+    from analysis.session_figures import session_trace
+
+    out = Path(args.out)
+    if out.suffix.lower() not in _FIGURE_SUFFIXES:
+        raise _cli_error(f"--out {out}: must end in .png, .pdf or .svg")
+    if not out.resolve().parent.exists():
+        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+    (code, kind), segments, trials = _session(args.db, args.session)
+    comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
+    t_s = np.concatenate([s.session_time_s for s in segments])
+    raw = np.concatenate([_magnitude(s.columns, "raw") for s in segments])
+    rendered = np.concatenate([_magnitude(s.columns, "render") for s in segments])
+    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
+    starts = [(float(r.started_at_s), f"{r.trial_index + 1} {r.target_label} {r.haptic_mode.upper()}")
+              for r in trials.itertuples()]
+    title = (f"{code}, {kind} session {args.session}: {len(trials)} trials, {t_s[-1] - t_s[0]:.0f} s "
+             "(trial number, target, haptics)") if len(t_s) else f"{code}, session {args.session}: no records"
+    save_one(session_trace(t_s, raw, comp, rendered, in_trial, title, starts), out)
+    print(f"Wrote {out}")
+    return 0
+
+
+# -- export ---------------------------------------------------------------------------------------------------
+def cmd_export(args: argparse.Namespace) -> int:
+    """``haptic-study export samples``."""
+    from analysis.load import AnalysisError, samples_frame
+
+    out = Path(args.out)
+    if out.exists():
+        raise _cli_error(f"--out {out}: exists; export writes a new file only (nothing was written)")
+    if not out.resolve().parent.exists():
+        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+    if args.format == "parquet":
+        try:
+            import pyarrow  # noqa: F401
+        except ImportError:
+            raise _cli_error("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
+    print("export: reading the records ...", file=sys.stderr, flush=True)
+    try:
+        frame = samples_frame(args.db, args.session)
+    except AnalysisError as exc:
+        raise _cli_error(str(exc)) from None
+    tmp = out.with_name(f".{out.name}.partial")
+    try:
+        if args.format == "csv":
+            frame.to_csv(tmp, index=False)  # floats written as repr: they read back exactly
+        else:
+            frame.to_parquet(tmp, index=False)
+        os.replace(tmp, out)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    sessions = frame["session_id"].nunique() if len(frame) else 0
+    print(f"Wrote {out}: {len(frame):,} records of {sessions} session{'s' if sessions != 1 else ''}, "
+          f"{len(frame.columns)} columns ({', '.join(frame.columns[:6])}, …)")
+    return 0

@@ -1,0 +1,210 @@
+"""``haptic-study power``, ``report --power`` and ``bench power`` as a researcher runs them."""
+
+from __future__ import annotations
+
+import sqlite3
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+from studybuilder import SessionDef, build, success_trial, timeout_trial
+
+from analysis.power import POWER_CSV_COLUMNS
+from study_app.cli import main
+
+
+def _participant(code: str, i: int) -> SessionDef:
+    trials = [success_trial("GENTLE", "on", 100 * i), success_trial("FIRM", "on", 150 * i),
+              timeout_trial("GENTLE", "on", 0.2 + 0.05 * i), success_trial("FIRM", "off", 400 + 90 * i),
+              timeout_trial("GENTLE", "off", 1.0 + 0.1 * i), timeout_trial("FIRM", "off", 2.0)]
+    if i % 3 == 0:  # no success with haptics OFF: TCT undefined for this participant
+        trials[3] = timeout_trial("FIRM", "off", 2.5)
+    return SessionDef(code, trials, max_trial_s=4.0)
+
+
+@pytest.fixture(scope="module")
+def pilots(tmp_path_factory):
+    d = tmp_path_factory.mktemp("pilots")
+    six = build(d / "pilot.db", [_participant(f"A{i}", i) for i in range(1, 7)])
+    three = build(d / "tiny.db", [_participant(f"B{i}", i) for i in range(1, 4)])
+    return six, three
+
+
+def _run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, capsys):
+    out = tmp_path / "plan"
+    out.mkdir()
+    (out / "notes.md").write_text("mine")  # someone else's file in the folder: left alone
+    code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400",
+                                "--n", "6,10,16")
+    assert code == 0, stderr
+    assert "Source: the pilot study pilot.db; 6 participants with both haptic modes" in stdout
+    assert "TCT (s) is undefined for 2 of 6 participants (no successful trial in a mode)" in stdout
+    assert "resampled Wilcoxon tests (and Holm) in" in stderr
+    for name in ("power.csv", "power.txt", "power.png", "power.pdf", "power.svg"):
+        assert (out / name).stat().st_size > 500, name
+    assert (out / "notes.md").read_text() == "mine"
+    frame = pd.read_csv(out / "power.csv")
+    assert list(frame.columns[: len(POWER_CSV_COLUMNS)]) == list(POWER_CSV_COLUMNS)
+    assert sorted(set(frame["n"])) == [6, 10, 16] and set(frame["resamples"]) == {400}
+    assert set(frame["scope"]) == {"overall", "GENTLE", "FIRM"}
+    assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
+    # a second run replaces its own files and gives the same numbers for the same seed
+    assert _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")[0] == 0
+    pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), frame)
+    assert not list(out.glob(".*.tmp"))
+
+
+def test_power_refuses_a_pilot_of_three_in_one_line(pilots, tmp_path, capsys):
+    code, _, stderr = _run(capsys, "power", "--db", pilots[1], "--out", tmp_path / "o")
+    assert code == 2
+    lines = [ln for ln in stderr.splitlines() if ln.startswith("haptic-study:")]
+    assert lines == ["haptic-study: error: the pilot study tiny.db has 3 participants with both haptic modes: at "
+                     "least 4 are needed to resample planned studies from (with fewer, every resampled study "
+                     "repeats the same few people)"]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--n", "0"], "--n = '0': each n must be a whole number from 2 to 10000, comma-separated (e.g. 6,8,10,12)"),
+        (["--n", "abc"], "--n = 'abc': each n must be a whole number from 2 to 10000"),
+        (["--n", "6,,8"], "--n = '6,,8': each n must be a whole number"),
+        (["--resamples", "-1"], "--resamples = '-1': must be a whole number from 1 to 1000000"),
+        (["--resamples", "1.5"], "--resamples = '1.5': must be a whole number from 1 to 1000000"),
+        (["--alpha", "2"], "--alpha = '2': must be a number with 0 < alpha < 1 (e.g. 0.05)"),
+        (["--alpha", "nan"], "--alpha = 'nan': must be a number with 0 < alpha < 1"),
+        (["--seed", "-3"], "--seed = '-3': must be a whole number from 0 to 4294967295"),
+        (["--pool", "50"], "--pool = '50': only with --simulated"),
+    ],
+)
+def test_bad_values_are_one_line_naming_the_option(pilots, tmp_path, capsys, args, message):
+    code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", tmp_path / "o", *args)
+    assert code == 2 and stdout == ""
+    assert stderr == f"haptic-study: error: {message}\n" if message.endswith(")") else message in stderr
+    assert len(stderr.splitlines()) == 1
+    assert not (tmp_path / "o").exists()  # nothing written, nothing simulated
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--out", "o"], "power needs a source: --db PILOT.db (a pilot study) or --simulated (simulated participants)"),
+        (["--db", "x.db", "--simulated", "--out", "o"], "--db and --simulated: give one or the other"),
+        (["--simulated", "--pool", "3", "--out", "o"], "--pool = '3': must be a whole number from 4 to 10000"),
+        (["--simulated"], "--out: give the output folder (DIR)"),
+        (["--db", "missing.db", "--out", "o"], "missing.db: no such database"),
+    ],
+)
+def test_bad_sources_are_one_line(tmp_path, capsys, monkeypatch, args, message):
+    monkeypatch.chdir(tmp_path)
+    code, _, stderr = _run(capsys, "power", *args)
+    assert code == 2
+    assert message in stderr and len(stderr.splitlines()) == 1
+    assert not list(tmp_path.iterdir())
+
+
+def test_bad_value_in_a_fresh_process_has_no_traceback(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "study_app.cli", "power", "--simulated", "--n", "0", "--out",
+                           str(tmp_path / "o")], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.splitlines() == ["haptic-study: error: --n = '0': each n must be a whole number from 2 to "
+                                        "10000, comma-separated (e.g. 6,8,10,12)"]
+
+
+@pytest.mark.slow
+def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypatch):
+    import dataclasses
+
+    import protocol.config
+
+    # the paper's protocol with one trial per cell and no training: the same runner, a sixth of the simulation
+    paper = protocol.config.default_protocol()
+    short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False))
+    monkeypatch.setattr(protocol.config, "default_protocol", lambda: short)
+    out = tmp_path / "plan"
+    argv = ("power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200", "--n", "6,10", "--out", out)
+    code, stdout, stderr = _run(capsys, *argv)
+    assert code == 0, stderr
+    pool = out / "pool-4-seed7.db"
+    assert pool.is_file()
+    assert f"simulated pool written to {pool}" in stderr and "simulating pool" in stderr  # the progress bar
+    assert "Source: a simulated pool of 4 participants (study seed 7, pool-4-seed7.db); 4 participants" in stdout
+    first = pd.read_csv(out / "power.csv")
+
+    def sessions() -> list[tuple]:
+        c = sqlite3.connect(f"file:{pool}?mode=ro", uri=True)
+        try:
+            return c.execute("SELECT session_id, kind, status FROM sessions ORDER BY session_id").fetchall()
+        finally:
+            c.close()
+
+    before = sessions()
+    assert [s[1:] for s in before].count(("experiment", "completed")) == 4
+    code, stdout2, stderr2 = _run(capsys, *argv)
+    assert code == 0
+    assert f"reusing the simulated pool {pool}" in stderr2 and "simulating pool" not in stderr2
+    assert sessions() == before
+    pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), first)
+    assert stdout2 == stdout
+
+
+def test_report_power_adds_the_section(pilots, tmp_path, capsys):
+    out = tmp_path / "rep"
+    code, stdout, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
+    assert code == 0, stderr
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "<h2>What n would a study need?</h2>" in page
+    assert "Source: this study; 6 participants with both haptic modes" in page
+    assert (out / "power.csv").is_file() and (out / "figures" / "power.png").stat().st_size > 1000
+    assert page.index("What n would a study need?") < page.index("<h2>Methods</h2>")
+    # power.csv is described in the codebook like every other CSV of the report
+    book = pd.read_csv(out / "codebook.csv", keep_default_na=False)
+    described = book[book["file"] == "power.csv"]
+    assert list(described["column"]) == list(pd.read_csv(out / "power.csv", nrows=0).columns)
+    assert (described["description"] != "").all()
+    # without --power the report is as before
+    code, _, _ = _run(capsys, "report", "--db", pilots[0], "--out", tmp_path / "plain")
+    assert "What n would" not in (tmp_path / "plain" / "report.html").read_text(encoding="utf-8")
+    assert not (tmp_path / "plain" / "power.csv").exists()
+
+
+def test_report_power_of_three_participants_says_why_not(pilots, tmp_path):
+    from analysis.load import load_study
+    from analysis.metrics import MetricOptions, compute_trials
+    from analysis.power import report_section
+
+    trials = compute_trials(load_study([pilots[1]]), workers=1).trials
+    text, png = report_section(trials, MetricOptions(), "wilcox", tmp_path)
+    assert png is None
+    assert text.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 are needed")
+    assert not list(tmp_path.iterdir())
+
+
+def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
+    from bench.power_bench import format_power_bench, run_power_bench
+
+    r = run_power_bench(resamples=60, reference_resamples=6, n_values=(6, 12, 30), repeats=1)
+    assert r["identical_p_values"] == r["reference_tests"] == 6 * 3 * 4
+    text = format_power_bench(r)
+    assert "paired_wilcoxon loop" in text and "speed-up" in text
+    code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
+    assert code == 2  # the reference cannot run more studies than the engine
+
+
+def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import():
+    from analysis.power import DEFAULT_N_VALUES
+    from study_app.power_cmds import DEFAULT_N_TEXT
+
+    assert DEFAULT_N_TEXT == ",".join(str(n) for n in DEFAULT_N_VALUES)
+    proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli import build_parser; build_parser(); "
+                           "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.stdout.strip() == "[]"
+
