@@ -63,13 +63,15 @@ class Column:
     ``codec``: ``"int"`` (differences of int64), ``"small"`` (int32, plain), ``"float"`` (float64,
     byte-shuffled), ``"smooth"`` (float64, differences of the bit patterns), ``"counts"`` (raw
     sensor values: integer counts when exact, else ``"float"``).  ``scale_ns`` turns a
-    seconds column of the loop record into integer ns.
+    seconds column of the loop record into integer ns.  ``missing``: the value of every
+    record in a block written before the column was added (None: every block has it).
     """
 
     name: str
     source: str
     codec: str
     scale_ns: bool = False
+    missing: float | None = None
 
 
 #: What a block keeps of each record, in order.
@@ -92,7 +94,12 @@ COLUMNS: tuple[Column, ...] = (
     Column("force_n", "force_n", "float"),
     Column("stylus_x_m", "stylus_x_m", "smooth"), Column("stylus_y_m", "stylus_y_m", "smooth"),
     Column("stylus_z_m", "stylus_z_m", "smooth"),
+    # the fraction of the designed force the haptic device's thermal derating let through (1: not cut);
+    # recordings from before derating have none, and nothing was cut then
+    Column("derate", "derate", "float", missing=1.0),
 )
+#: Columns a block may lack (written before they were added), with the value each of its records had.
+_MISSING = {c.name: c.missing for c in COLUMNS if c.missing is not None}
 #: The pose log's columns (one row per pose the framework took, at the robot's 125 Hz).
 POSE_COLUMNS: tuple[Column, ...] = (
     Column("tick", "", "int"), Column("pose_t_ns", "", "int"),
@@ -219,6 +226,7 @@ def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarr
             size = entry["bytes"]
             target[entry["name"]] = _decode(entry, blob[pos : pos + size], count)
             pos += size
+    _fill_missing(out[0], _MISSING.keys(), header["n"])
     events = [(int(t), str(k), p) for t, k, p in header["events"]]
     return out[0], out[1], events
 
@@ -349,7 +357,12 @@ class SegmentData:
         return bool(len(t) == 0 or np.all(np.diff(t) == 1))
 
     def log(self) -> list[tuple[int, str, Any]]:
-        """The replay log (poses and events merged in tick order, poses last within a tick, as the loop logs them)."""
+        """The replay log: poses and events merged in tick order, poses last within a tick.
+
+        The loop logs a tick's commands and drops to zero before its pose, and its device limit after
+        it; a pose and a device limit commute (:meth:`pipeline.framework.HapticFramework.set_pose` and
+        ``set_device_limit`` change disjoint state), so this order replays as the loop ran.
+        """
         merged = [(t, 0, i, k, p) for i, (t, k, p) in enumerate(self.events)]
         p = self.poses
         for i in range(len(p["tick"])):
@@ -377,6 +390,13 @@ def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str
 
 
 # -- reading ------------------------------------------------------------------------------------------
+def _fill_missing(columns: dict[str, np.ndarray], names: Iterable[str], n: int) -> None:
+    """Columns a block written before they were added lacks: every record's value then (:attr:`Column.missing`)."""
+    for name in names:
+        if name not in columns:
+            columns[name] = np.full(n, _MISSING[name], dtype=np.float64)
+
+
 def decode_columns(blob: bytes, names: Iterable[str]) -> dict[str, np.ndarray]:
     """Only some columns of a block (the others are skipped, not decompressed)."""
     if blob[:4] != _MAGIC:
@@ -391,6 +411,7 @@ def decode_columns(blob: bytes, names: Iterable[str]) -> dict[str, np.ndarray]:
         if entry["name"] in wanted:
             out[entry["name"]] = _decode(entry, blob[pos : pos + size], header["n"])
         pos += size
+    _fill_missing(out, wanted & _MISSING.keys(), header["n"])
     missing = wanted - out.keys()
     if missing:
         raise ValueError(f"the block has no column {sorted(missing)[0]!r}")
