@@ -57,6 +57,7 @@ row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -484,8 +485,10 @@ class SessionRunner:
             cut = np.flatnonzero(derate < 1.0)
             if len(cut):
                 k = int(cut[0])
+                # rounded down: a cut to 99.996 % must not read "100 %"
+                pct = math.floor(float(derate[k]) * 1e4) / 1e2
                 found.append((int(marked[k]), 2, "feedback",
-                              f"feedback: the haptic device's thermal derating rendered {derate[k]:.0%} of the "
+                              f"feedback: the haptic device's thermal derating rendered {pct:.2f} % of the "
                               "designed force in a haptics-ON trial"))
         else:
             high = np.flatnonzero((gain > 0.0) & (rel > int(round((lim.feedback_ramp_out_s + lim.grace_s) * 1e9))))
