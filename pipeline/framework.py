@@ -259,6 +259,9 @@ class HapticFramework:
             "rls": None if self.rls is None else self.rls.state(),
             "filter": self.filter.state(),
             "safety": self.safety.state(),
+            # the haptic device's derated force limit as the loop last passed it on (None: none given or not
+            # finite); the raw value, so a replay with another f_max clamps as that f_max would have
+            "device_limit_n": lim if math.isfinite(lim := self.safety.device_limit_n) else None,
             "rot_base_tip": list(self._rbt),
         }
 
@@ -286,6 +289,9 @@ class HapticFramework:
         fw._bias = tuple(float(v) for v in snap["bias"])
         if cfg.filter_window == stored.filter_window:
             fw.filter.load_state(snap["filter"])
+        device_limit = snap.get("device_limit_n")  # (absent in snapshots from before thermal derating)
+        if device_limit is not None:
+            fw.set_device_limit(float(device_limit))  # before the safety state: the state was clamped by it already
         fw.safety.load_state(snap["safety"])
         fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]
         return fw

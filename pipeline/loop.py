@@ -187,8 +187,12 @@ class StartRecording:
     logged as ``(tick, "snapshot", {"token": token, "framework": ..., "refine_bias": ...})``;
     from then on every pose the framework takes (``"pose"``: rotation, position,
     pose time), every change of the bias-refinement permission (``"refine"``), every
-    framework reset (``"reset"``) and calibration (``"calibration"``) is logged with
-    its tick, in the order the loop applied them (:mod:`pipeline.replay`).
+    framework reset (``"reset"``) and calibration (``"calibration"``), every change
+    of the haptic device's force limit passed on to the safety stage
+    (``"device_limit"``: the device's limit, N; thermal derating) and every time
+    the output is dropped to zero outside the framework's step (``"zero"``: why --
+    ``"late_tick"``, ``"latch_fault"`` or ``"fail_safe"``) is logged with its
+    tick, in the order the loop applied them (:mod:`pipeline.replay`).
     """
 
     token: int
@@ -517,6 +521,8 @@ class HapticLoop:
     def _late_tick(self, now: int, period: int) -> None:
         """This tick came after the device's command watchdog dropped the force: restart from zero; latch a stall."""
         self.framework.safety.force_zero()  # the device renders zero now: ramp in from there, never jump back
+        if self.recording:
+            self.replay_log.append((self.tick_count, "zero", "late_tick"))
         ms, t = period * 1e-6, now - self.t0_ns
         if period > self._stall_ns:
             if not self.faults & Fault.LOOP_STALLED:
@@ -536,6 +542,8 @@ class HapticLoop:
         lim = float(hs[4])
         self._device_limit_n = lim
         safety = self.framework.set_device_limit(lim)
+        if self.recording:
+            self.replay_log.append((self.tick_count, "device_limit", lim))
         self._derate_check = safety.limit_n < safety.static_limit_n
         frac = float(hs[5])
         t = now - self.t0_ns
@@ -615,6 +623,8 @@ class HapticLoop:
                                  "ENGINE_DETACHED: the controlling process went away"))
         elif isinstance(cmd, LatchFault):
             self.framework.safety.force_zero()
+            if self.recording:
+                self.replay_log.append((self.tick_count, "zero", "latch_fault"))
             self._latch(Fault(cmd.fault), now)
         elif isinstance(cmd, AllowBiasRefinement):
             if self.recording and bool(cmd.allowed) != self.refine_bias:
@@ -656,6 +666,8 @@ class HapticLoop:
             self.faults = int(self.faults | Fault.LOOP_STALLED)
             self.haptic_on = False
             self.framework.safety.force_zero()
+            if self.recording:  # before the next tick, should the loop ever tick again
+                self.replay_log.append((self.tick_count, "zero", "fail_safe"))
             if new:
                 self._faults_changed(t + self.t0_ns)
         else:

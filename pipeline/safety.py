@@ -78,7 +78,7 @@ class SafetyGovernor:
         ``min(config.f_max_n, device_peak_n)``.
     """
 
-    __slots__ = ("config", "limit_n", "static_limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
+    __slots__ = ("config", "limit_n", "static_limit_n", "device_limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
 
     def __init__(self, config: SafetyConfig, device_peak_n: float) -> None:
         if not (isinstance(device_peak_n, (int, float)) and 1e-6 <= device_peak_n <= 1e3):
@@ -88,6 +88,8 @@ class SafetyGovernor:
         self.static_limit_n = min(config.f_max_n, float(device_peak_n))
         #: The clamp now: :attr:`static_limit_n`, or the device's derated limit when that is lower.
         self.limit_n = self.static_limit_n
+        #: The device's force limit as last given to :meth:`set_device_limit` (inf: none given), N.
+        self.device_limit_n = math.inf
         self._set_clamp(self.limit_n)
         self._up = 1.0 / config.ramp_in_s
         self._down = 1.0 / config.fault_ramp_s
@@ -108,6 +110,7 @@ class SafetyGovernor:
         A non-finite or non-positive limit leaves the static clamp (a device that does not say); the
         slew-limited state is clamped at once, so the next output is already within the new limit.
         """
+        self.device_limit_n = float(device_limit_n)
         lim = self.static_limit_n
         if math.isfinite(device_limit_n) and 0.0 < device_limit_n < lim:
             lim = float(device_limit_n)
