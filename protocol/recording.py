@@ -45,7 +45,7 @@ import numpy.typing as npt
 from pipeline.replay import ReplayInputs
 
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
     "decode_columns", "encode_block", "join_blocks", "marked_records", "read_segment", "read_ticks",
     "rows_to_columns", "segments_of",
 ]
@@ -106,6 +106,9 @@ POSE_COLUMNS: tuple[Column, ...] = (
     *(Column(f"r{i}", "", "smooth") for i in range(9)),
     Column("x_m", "", "smooth"), Column("y_m", "", "smooth"), Column("z_m", "", "smooth"),
 )
+#: The device-limit log's columns (one row per change of the haptic device's force limit: while it derates,
+#: every tick), kept like the poses rather than as events (a few bytes a change instead of ~40).
+LIMIT_COLUMNS: tuple[Column, ...] = (Column("tick", "", "int"), Column("limit_n", "", "smooth"))
 _INT_CODECS = ("int", "small")
 
 
@@ -191,12 +194,24 @@ def encode_block(
     """A block: the records' columns (:data:`COLUMNS`), the poses taken meanwhile, the other log entries.
 
     ``scales``: counts per unit of the raw wrench columns (``raw_fx`` … ``raw_tz``), when known.
+    The log's ``"device_limit"`` entries are kept as columns (:data:`LIMIT_COLUMNS`, only in a block
+    that has any); :func:`decode_block` returns them among the events again.
     """
     n = len(columns["tick"])
     m = len(poses["tick"]) if poses else 0
+    limits = [e for e in events if e[1] == "device_limit"]
+    if limits:
+        events = [e for e in events if e[1] != "device_limit"]
     header: dict[str, Any] = {"n": n, "m": m, "columns": [], "poses": [], "events": [list(e) for e in events]}
+    sections = [(COLUMNS, columns, "columns", n), (POSE_COLUMNS, poses, "poses", m)]
+    if limits:
+        header["k"] = len(limits)
+        header["limits"] = []
+        sections.append((LIMIT_COLUMNS, {"tick": np.array([e[0] for e in limits], dtype=np.int64),
+                                         "limit_n": np.array([e[2] for e in limits], dtype=np.float64)},
+                         "limits", len(limits)))
     parts: list[bytes] = []
-    for specs, data, key, count in ((COLUMNS, columns, "columns", n), (POSE_COLUMNS, poses, "poses", m)):
+    for specs, data, key, count in sections:
         for c in specs:
             values = np.asarray(data[c.name]) if count else np.empty(0)
             entry, payload = _encode(values, c.codec, (scales or {}).get(c.name))
@@ -220,14 +235,19 @@ def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarr
     (hlen,) = struct.unpack_from("<I", blob, 4)
     header = json.loads(blob[8 : 8 + hlen])
     pos = 8 + hlen
-    out: list[dict[str, np.ndarray]] = [{}, {}]
-    for key, count, target in (("columns", header["n"], out[0]), ("poses", header["m"], out[1])):
-        for entry in header[key]:
+    out: list[dict[str, np.ndarray]] = [{}, {}, {}]
+    for key, count, target in (("columns", header["n"], out[0]), ("poses", header["m"], out[1]),
+                               ("limits", header.get("k", 0), out[2])):
+        for entry in header.get(key, ()):
             size = entry["bytes"]
             target[entry["name"]] = _decode(entry, blob[pos : pos + size], count)
             pos += size
     _fill_missing(out[0], _MISSING.keys(), header["n"])
     events = [(int(t), str(k), p) for t, k, p in header["events"]]
+    if out[2]:
+        # back among the events, after a tick's others (a stable sort; the device limit commutes with them)
+        events += [(t, "device_limit", v) for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist())]
+        events.sort(key=lambda e: e[0])
     return out[0], out[1], events
 
 

@@ -58,3 +58,18 @@ def test_a_block_written_before_the_derate_column_reads_as_not_cut(monkeypatch: 
     win = read_ticks(c, 1, 0, 2, 5, ["derate", "gain"])
     np.testing.assert_array_equal(win["tick"], [2, 3, 4, 5])
     np.testing.assert_array_equal(win["derate"], np.ones(4))
+
+
+def test_device_limit_entries_are_kept_as_columns_and_read_back_among_the_events() -> None:
+    n = 1000
+    limits = 3.3 - np.cumsum(np.full(n, 2.4e-4))  # a Touch derating: a new limit every tick
+    events: list[tuple[int, str, object]] = [(0, "refine", False), (0, "device_limit", 3.3), (5, "reset", None)]
+    events += [(k, "device_limit", float(v)) for k, v in enumerate(limits.tolist()) if k > 0]
+    events.insert(4, (2, "zero", "late_tick"))  # (tick 2: before that tick's device limit, as the loop logs them)
+    blob = encode_block(block_columns(n), no_poses(), events)
+    _, _, back = decode_block(blob)
+    assert back == sorted(events, key=lambda e: e[0])  # every value exact, the others first within a tick
+    assert [e for e in back if e[0] == 2] == [(2, "zero", "late_tick"), (2, "device_limit", float(limits[2]))]
+    plain = encode_block(block_columns(n), no_poses(), [e for e in events if e[1] != "device_limit"])
+    assert len(blob) - len(plain) < 8 * n  # not ~40 bytes of JSON a tick
+    assert b'"limits"' not in plain  # a block without any is written as before
