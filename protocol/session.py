@@ -44,7 +44,9 @@ still latched ``fault_timeout_s`` (10 s) later the session stops as
 Each trial row also carries the loop's health over the trial's records
 (:data:`protocol.storage.HEALTH_COLUMNS`): tick period p50/p99/max, ticks over
 2 ms, the oldest F/T sample and robot pose used, and the latency from a
-sample's arrival to the force command it produced (p50/max).
+sample's arrival to the force command it produced (p50/max).  An aborted
+trial's records end with the one that aborted it (a stalled tick's period, a
+stale sample's age are in its health).
 
 **The whole session is recorded** (:mod:`protocol.recording`): the runner asks
 the loop for a snapshot of the framework (:class:`pipeline.loop.StartRecording`)
@@ -387,6 +389,9 @@ class SessionRunner:
             m = self.machine
             if not self.done and m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) and m.spec is not None \
                     and int(rows["trial_index"][i]) == m.spec.index:
+                # the record that left the condition ends the trial and is its last: its loop health (a stalled
+                # tick's period, a stale sample's age) belongs to the trial it aborted
+                self._trial_records(rows[i : i + 1], rows["t_ns"][i : i + 1].astype(np.int64), m.spec, [])
                 self._abort_running(int(rows["t_ns"][i]), reason, cause)
             rows = rows[i:]
 

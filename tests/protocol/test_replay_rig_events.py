@@ -26,6 +26,8 @@ import numpy as np
 import pytest
 
 import protocol.study
+from analysis.load import load_study
+from analysis.loop_health import abort_counts, health_table
 from pipeline.engine import SimEngine
 from pipeline.replay import ReplayInputs, replay
 from pipeline.sim.rig import SimRigConfig
@@ -172,4 +174,13 @@ def test_a_session_with_late_ticks_and_latched_loop_faults_replays_bit_for_bit(
     assert aborted[0] == ("gap", "gap: no loop record for 21.0 ms (limit 5 ms)")
     assert [c for c, _ in aborted[1:]] == ["fault"] * 3
     assert all(r.startswith("fault: LOOP_STALLED") for _, r in aborted[1:])
+    # the report: aborted trials by cause, and the late and stalled ticks in the loop health of the trials they ended
+    study = load_study([str(db)])
+    counts = dict(zip(*abort_counts(study).to_dict("list").values()))
+    assert (counts["fault"], counts["gap"], sum(counts.values())) == (3, 1, 4)
+    health = health_table(study).set_index("trial_index")
+    assert health.loc[0, "period_max_ms"] == pytest.approx(21.0) and health.loc[0, "within_bounds"] == False  # noqa: E712
+    stall = next(i for i, (c, r) in enumerate(rows(db, "SELECT abort_cause, abort_reason FROM trials ORDER BY "
+                                                      "trial_index")) if r and "61.0 ms" in r)
+    assert health.loc[stall, "period_max_ms"] == pytest.approx(61.0) and "longest tick period 61 > 2" in health.loc[stall, "outside_bounds"]
     assert rows(db, "SELECT status FROM sessions") == [("completed",)]
