@@ -44,7 +44,7 @@ def _level(value: float, limits: tuple[float, float]) -> str:
     return "ok" if value <= limits[0] else "warn" if value <= limits[1] else "bad"
 
 #: How the fault log names each kind of loop event.
-_VERBS = {"fault": "fault", "fault_cleared": "condition gone", "faults_reset": "reset", "derating": "derating",
+_VERBS = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset", "derating": "derating",
           "derating_ended": "derating ended", "output_restarted": "output restarted"}
 
 #: Fault bits that belong to each device row.
