@@ -81,6 +81,8 @@ class HealthModel:
     #: Largest task force in the newest records, N, and whether a trial was running then.
     force_n: float = 0.0
     in_trial: bool = False
+    #: The real rig has no payload calibration on record: the task force carries the tool's own weight.
+    uncompensated: bool = False
     #: The jaw (None: the rig has none, or it has not reported yet).
     jaw: m.JawState | None = None
     changed: Emitter = field(default_factory=Emitter)
@@ -99,6 +101,8 @@ class HealthModel:
             del self.fault_log[:-50]
         elif isinstance(ev, m.JawState):
             self.jaw = ev
+        elif isinstance(ev, m.CalibrationStatus):
+            self.uncompensated = ev.rig == "real" and not any(done for name, done, _ in ev.steps if name == "payload")
         elif isinstance(ev, m.EngineStopped):
             self.connected = False
         else:
@@ -209,6 +213,9 @@ class HealthModel:
         """A warning when the task force is above :data:`HIGH_FORCE_N`, else ''."""
         if self.force_n <= HIGH_FORCE_N:
             return ""
+        if self.uncompensated:  # not a force on the tissue: the tool's weight, nothing subtracts it
+            return (f"{self.force_n:.1f} N task force (warning above {HIGH_FORCE_N:g} N): no payload calibration "
+                    "on record, so the tool's own weight counts as force; run the calibration wizard's payload step")
         where = "" if self.in_trial else " while no trial is running"
         return (f"{self.force_n:.1f} N on the tissue{where} (warning above {HIGH_FORCE_N:g} N): "
                 "lift the instrument")
