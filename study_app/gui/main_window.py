@@ -21,7 +21,9 @@ from study_app.gui.confirm import Confirmation
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
-from study_app.gui.widgets import LEVEL_COLOURS, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.widgets import (
+    LEVEL_COLOURS, ElidedLabel, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+)
 from study_app.models.app import AppModel
 
 __all__ = ["ExperimenterWindow"]
@@ -204,16 +206,21 @@ class ExperimenterWindow(QMainWindow):
             row.addWidget(b)
             self.jaw_buttons[action] = b
         self.jaw_label = QLabel()
-        self.jaw_label.setWordWrap(True)
+        self.jaw_label.setWordWrap(True)  # (a fault's text may take two lines)
+        # the last command on one line: the left column has no height to spare on a 768-px screen
+        self.jaw_last = ElidedLabel()
         lay.addLayout(row)
         lay.addWidget(self.jaw_label)
+        lay.addWidget(self.jaw_last)
         box.hide()
         return box
 
     def _on_jaw_changed(self) -> None:
         jaw = self.model.jaw
         self.jaw_box.setVisible(jaw.available)
-        self.jaw_label.setText(jaw.text() + (f"\nlast: {jaw.log[-1]}" if jaw.log else ""))
+        self.jaw_label.setText(jaw.text())
+        self.jaw_last.set_full_text(f"last: {jaw.log[-1]}" if jaw.log else "")
+        self.jaw_last.setVisible(bool(jaw.log))
         fault = jaw.state is not None and bool(jaw.state.fault)
         self.jaw_label.setStyleSheet("color: #c81e1e; font-weight: 600;" if fault else "color: #333;")
 
