@@ -149,7 +149,7 @@ class FramesPage(QWidget):
         for b in self.axis_buttons.values():
             b.setVisible(mdl.real)
             b.setEnabled(not busy)
-        text = "\n".join(mdl.frames_view())
+        text = "\n".join(mdl.frames_display())
         if text != self.result.toPlainText():
             self.result.setPlainText(text)
         colour = _VERDICT_COLOURS.get(mdl.frames_state, "#333")

@@ -215,6 +215,27 @@ class CommissioningModel:
             lines.append(self.frames_summary)
         return lines
 
+    def frames_display(self) -> list[str]:
+        """:meth:`frames_view` for a window ~90 characters wide: each axis's verdict first, its parts below it.
+
+        ``+x  peak 1.02 N · base force 0.7° from +x · rendered force … · PASS`` (one terminal line) becomes
+        ``+x  PASS · peak 1.02 N`` with the base and the rendered force indented beneath, so no verdict is
+        wrapped onto a line of its own.
+        """
+        out: list[str] = []
+        for a in AXES:
+            line = self.frames_lines.get(a)
+            if line is None:
+                continue
+            parts = line.split(" · ")
+            verdict = parts.pop() if len(parts) > 1 and parts[-1] in ("PASS", "FAIL") else ""
+            head = parts[0][len(a):].strip() if parts[0].startswith(a) else parts[0]
+            out.append(f"{a}  " + " · ".join(p for p in (verdict, head) if p))
+            out += [" " * (len(a) + 2) + p for p in parts[1:]]
+        if self.frames_summary:
+            out.append(self.frames_summary)
+        return out
+
 
 @dataclass
 class JawModel:

@@ -73,8 +73,14 @@ def test_the_real_frames_step_records_one_axis_at_a_time(qtbot) -> None:
     assert page.instruction.text().startswith("Recording 3 s: push the tip gently (about 1 N) along base +z (up)")
     chain.apply(m.FrameAxisChecked("+z", False, "+z  peak 1.02 N · base force  89.4° from +z · FAIL", {}))
     chain.apply(m.FrameCheckDone(False, "Frames and signs: FAIL on +z (89.4° off): ...", []))
-    assert page.result.toPlainText().splitlines() == ["+z  peak 1.02 N · base force  89.4° from +z · FAIL",
+    assert page.result.toPlainText().splitlines() == ["+z  FAIL · peak 1.02 N", "    base force  89.4° from +z",
                                                       "Frames and signs: FAIL on +z (89.4° off): ..."]
+    # the window is narrower than a terminal: every axis's verdict comes first, its parts beneath it
+    chain.apply(m.FrameAxisChecked("+x", True, "+x  peak 1.03 N · base force   0.2° from +x · rendered force   0.2° "
+                                   "from haptic +x (right) · PASS", {}))
+    assert page.result.toPlainText().splitlines()[:3] == [
+        "+x  PASS · peak 1.03 N", "    base force   0.2° from +x", "    rendered force   0.2° from haptic +x (right)"]
+    assert chain.frames_view()[0].endswith("· PASS")  # (what the terminal prints is unchanged)
 
 
 def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:
