@@ -938,7 +938,7 @@ class Recorder:
                             started_at_s + (int(t_ns[0]) - t0_ns) / 1e9, started_at_s + (int(t_ns[-1]) - t0_ns) / 1e9,
                             data)
 
-    def _commit(self) -> None:
+    def _commit(self, final: bool = False) -> None:
         if self._held:
             held, self._held = self._held, []
             try:
@@ -949,7 +949,8 @@ class Recorder:
                     self.db.conn.execute("ROLLBACK")
                 raise
         for (sid, seg), (builder, _, _) in self._blocks.items():
-            open_block = builder.partial()  # the records since the last commit reach the disk with it
+            # the records since the last commit reach the disk with it; at the end, the open block whole
+            open_block = builder.final() if final else builder.partial()
             if open_block is not None:
                 self.db.begin()
                 self._write_block(sid, seg, open_block)
@@ -977,7 +978,7 @@ class Recorder:
                     break
                 self._handle(item)
                 self._maybe_commit()
-            self._commit()
+            self._commit(final=True)
         except BaseException as exc:  # noqa: BLE001 - reported to the producer on its next call
             self.error = exc
             try:
@@ -1008,6 +1009,6 @@ class Recorder:
             self._thread.join()
             self._thread = None
         else:
-            self._commit()
+            self._commit(final=True)
         if self.error is not None:
             raise StorageError(f"the recorder failed: {self.error}")
