@@ -20,6 +20,7 @@ from collections.abc import Sequence
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+from scipy.signal import correlate
 
 __all__ = ["DEFAULT_WINDOWS", "best_lag_ms", "filter_trade", "moving_average", "trial_differences"]
 
@@ -54,13 +55,22 @@ def best_lag_ms(reference: npt.NDArray[np.float64], delayed: npt.NDArray[np.floa
     core = ref[max_lag : n - max_lag]
     a = core - core.mean()
     na = float(np.sqrt(np.dot(a, a)))
+    m = len(a)
     lags = np.arange(-max_lag, max_lag + 1)
-    r = np.empty(len(lags))
-    for j, k in enumerate(lags.tolist()):
-        b = dly[max_lag + k : n - max_lag + k]
-        b = b - b.mean()
-        nb = float(np.sqrt(np.dot(b, b)))
-        r[j] = float(np.dot(a, b)) / (na * nb) if na > 0 and nb > 0 else -1.0
+    # every shift at once: sum(a * (b - mean b)) = sum(a * b) since a sums to zero, so the numerators are one
+    # correlation (FFT); each shifted window's spread comes from running sums (of the signal less its own mean,
+    # so the sums do not cancel digits)
+    d = dly - dly.mean()
+    num = correlate(d, a, mode="valid", method="auto")  # num[j] = sum a[i] * d[j + i], j = k + max_lag
+    c1 = np.concatenate(([0.0], np.cumsum(d)))
+    c2 = np.concatenate(([0.0], np.cumsum(d * d)))
+    shifts = len(lags)
+    s1 = c1[m : m + shifts] - c1[:shifts]
+    s2 = c2[m : m + shifts] - c2[:shifts]
+    var = np.maximum(s2 - s1 * s1 / m, 0.0)
+    nb = np.sqrt(var)
+    ok = (nb > 1e-12 * max(1.0, float(np.sqrt(np.max(s2))))) & (na > 0)
+    r = np.where(ok, num / np.where(ok, na * nb, 1.0), -1.0)
     i = int(np.argmax(r))
     if r[i] < 0.5:
         return math.nan
@@ -132,7 +142,8 @@ def filter_trade(
     Returns
     -------
     pandas.DataFrame
-        ``window``, ``noise_rms_N`` (RMS of the filtered force about its mean at rest), ``delay_ms``
+        ``window``, ``noise_rms_N`` (RMS of the filtered force about the mean of each period at rest, from a
+        window after its start), ``delay_ms``
         (lag of the filtered force magnitude behind the unfiltered one in contact; (window − 1)/2 in theory),
         ``group_delay_ms`` (that theory), ``n_rest``, ``n_contact``.
     """
@@ -141,8 +152,15 @@ def filter_trade(
     out = []
     for w in windows:
         f = np.stack([moving_average(xyz[:, k], w) for k in range(3)], axis=1)
-        at_rest = f[rest]
-        noise = float(np.sqrt(np.mean(np.sum((at_rest - at_rest.mean(axis=0)) ** 2, axis=1)))) if len(at_rest) else math.nan
+        # the spread about each rest period's own mean, once the window holds rest samples only: neither the
+        # bias drifting between pauses nor the filter settling after a contact is noise
+        sq, count = 0.0, 0
+        for lo, hi in _runs(rest):
+            part = f[lo + w : hi]
+            if len(part) > 1:
+                sq += float(np.sum((part - part.mean(axis=0)) ** 2))
+                count += len(part)
+        noise = math.sqrt(sq / count) if count else math.nan
         mag = np.linalg.norm(f, axis=1)
         delays = []
         for lo, hi in _runs(contact):

@@ -487,32 +487,43 @@ def _refuse_inputs_inside(out: Path, databases: Sequence[str | os.PathLike[str]]
                                 "(nothing was changed)")
 
 
-def _ours(out: Path) -> set[str] | None:
-    """The files a previous report listed in ``out``'s marker (None: no readable marker)."""
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _ours(out: Path) -> dict[str, str] | None:
+    """The files a previous report listed in ``out``'s marker, with their hashes (None: no readable marker)."""
     try:
         listed = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))["files"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    return {str(f) for f in listed} if isinstance(listed, list) else None
+    return {str(f): str(h) for f, h in listed.items()} if isinstance(listed, dict) else None
 
 
 def _ours_to_replace(out: Path) -> None:
-    """Refuse ``--force`` unless ``out`` holds only what a report wrote there (its marker says what)."""
+    """Refuse ``--force`` unless ``out`` holds only what a report wrote there, as it wrote it (its marker says)."""
     listed = _ours(out)
     if listed is None:
         raise AnalysisError(f"--out {out}: not a folder report wrote (no {REPORT_MARKER} in it); --force replaces "
                             "only report folders: choose another folder (nothing was deleted)")
     foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                     if not p.is_dir() and str(p.relative_to(out)) not in listed | {REPORT_MARKER})
+                     if not p.is_dir() and str(p.relative_to(out)) not in listed.keys() | {REPORT_MARKER})
     if foreign:
         raise AnalysisError(f"--out {out}: holds {plural(len(foreign), 'file')} report did not write "
                             f"(e.g. {foreign[0]}); move {'it' if len(foreign) == 1 else 'them'} or choose another "
                             "folder (nothing was deleted)")
+    edited = sorted(f for f, h in listed.items() if (out / f).is_file() and _sha256(out / f) != h)
+    if edited:
+        raise AnalysisError(f"--out {out}: {plural(len(edited), 'file')} report wrote {'was' if len(edited) == 1 else 'were'} "
+                            f"changed since (e.g. {edited[0]}); keep your edits elsewhere or choose another folder "
+                            "(nothing was deleted)")
 
 
 def _remove_ours(out: Path) -> None:
     """Delete what a previous report wrote in ``out`` (checked by :func:`_ours_to_replace`), then the folder."""
-    listed = _ours(out) or set()
+    listed = set(_ours(out) or {})
     for name in sorted(listed | {REPORT_MARKER}, reverse=True):
         try:
             (out / name).unlink()
@@ -622,7 +633,10 @@ def build_report(
     n_incomplete = int((exp["status"] != "completed").sum())
     n_participants = int(trials["participant_code"].nunique())
 
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
+    except OSError as exc:
+        raise AnalysisError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from None
     try:
         fig_dir = tmp / "figures"
         marks_overall = _marks(results, stats)
@@ -675,8 +689,10 @@ def build_report(
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
         files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
-        (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": f"haptic-study {software_version()}",
-                                                     "files": files}, indent=1), encoding="utf-8")
+        (tmp / REPORT_MARKER).write_text(json.dumps({
+            "written_by": f"haptic-study {software_version()}",
+            "files": {f: _sha256(tmp / f) for f in files},  # a file changed since is someone's work: kept
+        }, indent=1), encoding="utf-8")
         _apply_umask(tmp)
         if out.exists():
             _remove_ours(out)

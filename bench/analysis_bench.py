@@ -19,6 +19,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -101,24 +102,61 @@ def _make_study(db: str, participants: int) -> float:
     return time.perf_counter() - t0
 
 
+def _read_all_samples(db: str) -> tuple[float, int]:
+    """Read every analysed trial's task force as the report does, in this process: (seconds, samples)."""
+    from analysis.load import load_study, read_task_force, recorded_where
+
+    inc = load_study([db]).included
+    t0 = time.perf_counter()
+    conn = connect_readonly(db)
+    n = 0
+    try:
+        for tid, sid, seg, first, last in zip(inc["trial_id"], inc["session_id"], inc["segment"], inc["first_tick"],
+                                              inc["last_tick"]):
+            n += len(read_task_force(conn, int(tid), recorded_where(sid, seg, first, last))[0])
+    finally:
+        conn.close()
+    return time.perf_counter() - t0, n
+
+
+def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
+    walls = []
+    for k in range(repeats):
+        out = os.path.join(tmp, f"report-{tag}{k}")
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", db, "--out", out],
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        walls.append(time.perf_counter() - t0)
+    return walls
+
+
 def run_report_bench(db: str | None = None, participants: int = 10, stats_participants: int = 10_000,
-                     repeats: int = 3) -> dict[str, Any]:
+                     repeats: int = 3, log: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Time the report CLI on a study database (simulated first when none is given) and the statistics at scale.
+
+    Side by side in the same run: the same study in the row format of versions 1 and 2
+    (:func:`bench.row_format.row_format_copy`), read by the same code.
 
     Parameters
     ----------
     db
-        An existing study database, or None to run a simulated study of ``participants`` first.
+        An existing recorded study database, or None to run a simulated study of ``participants`` first.
     participants
         Size of that simulated study.
     stats_participants
         Participants of the synthetic trial table for the statistics figure.
     repeats
-        Report runs; the median is the figure (the first run also warms the page cache).
+        Runs of each timing; the median is the figure (the first run also warms the page cache).
+    log
+        Called with a line before each long step.
     """
+    from bench.row_format import row_format_copy
+
+    say = log or (lambda _: None)
     with tempfile.TemporaryDirectory() as tmp:
         made_s = None
         if db is None:
+            say(f"simulating a {participants}-participant study ...")
             db = os.path.join(tmp, "study.db")
             made_s = _make_study(db, participants)
         c = connect_readonly(db)
@@ -127,19 +165,30 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
                 "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "
                 "JOIN sessions s USING (session_id) WHERE s.kind = 'experiment' AND t.outcome != 'aborted'"
             ).fetchone()
+            recorded = c.execute("PRAGMA user_version").fetchone()[0] >= 3 and \
+                c.execute("SELECT COUNT(*) FROM recordings").fetchone()[0] > 0
         finally:
             c.close()
-        walls = []
-        for k in range(repeats):
-            out = os.path.join(tmp, f"report{k}")
-            t0 = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", db, "--out", out],
-                           check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            walls.append(time.perf_counter() - t0)
+        rows_db = None
+        if recorded:
+            say("writing the same study in the row format of versions 1 and 2 (replaying every session) ...")
+            rows_db = row_format_copy(db, os.path.join(tmp, "rows.db"))
+        say("timing the sample reading and the report ...")
+        formats = {"recording": db, **({"rows": rows_db.path} if rows_db is not None else {})}
+        reading = {k: [_read_all_samples(p)[0] for _ in range(repeats)] for k, p in formats.items()}
+        walls = {k: _report_walls(p, tmp, k, repeats) for k, p in formats.items()}
+        sizes = {k: sum(os.path.getsize(f) for f in (p, p + "-wal") if os.path.exists(f)) for k, p in formats.items()}
+    say("timing the statistics at scale ...")
     stats = _stats_at_scale(stats_participants)
+    med = {k: round(float(np.median(v)), 3) for k, v in walls.items()}
+    read = {k: round(float(np.median(v)), 3) for k, v in reading.items()}
     return {
-        "report_wall_s": round(float(np.median(walls)), 2),
-        "report_runs_s": [round(w, 2) for w in walls],
+        "report_wall_s": med["recording"],
+        "report_runs_s": [round(w, 2) for w in walls["recording"]],
+        "formats": {k: {"report_wall_s": med[k], "read_samples_s": read[k], "database_mb": round(sizes[k] / 1e6, 1)}
+                    for k in formats},
+        "report_speedup": round(med["rows"] / med["recording"], 2) if "rows" in med else None,
+        "read_speedup": round(read["rows"] / read["recording"], 2) if "rows" in read else None,
         "participants": int(samples[2]),
         "trials": int(samples[1]),
         "samples": int(samples[0]),
@@ -156,13 +205,27 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
 def format_report_bench(r: dict[str, Any]) -> str:
     """Human-readable summary."""
     made = "" if r["study_simulated_in_s"] is None else f" (simulated first, in {r['study_simulated_in_s']:.0f} s)"
-    return (
-        f"haptic-study report, fresh process, {r['workers']} worker processes{made}:\n"
-        f"  study                 {r['participants']} participants, {r['trials']} trials, {r['samples']:,} samples\n"
+    lines = [
+        f"haptic-study report, fresh process, {r['workers']} worker processes{made}:",
+        f"  study                 {r['participants']} participants, {r['trials']} trials, {r['samples']:,} samples",
         f"  wall time             {r['report_wall_s']:.2f} s median of {len(r['report_runs_s'])} "
-        f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})\n"
-        f"trial-level statistics, {r['stats_participants']:,} simulated participants ({r['stats_trials']:,} trials):\n"
+        f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})",
+    ]
+    f = r["formats"]
+    if "rows" in f:
+        names = {"recording": "whole sessions, blocks (v3)", "rows": "trial windows, rows (v1/v2)"}
+        lines += [
+            "the same study in both formats, same code, same run (medians):",
+            f"  {'format':30s} {'database':>10s} {'read every trial':>17s} {'report':>8s}",
+            *(f"  {names[k]:30s} {v['database_mb']:8.1f} MB {v['read_samples_s']:15.2f} s {v['report_wall_s']:6.2f} s"
+              for k, v in f.items()),
+            f"  the recording reads the samples {r['read_speedup']:.1f}x faster; the whole report runs "
+            f"{r['report_speedup']:.1f}x faster (figures and statistics cost the same in both)",
+        ]
+    lines += [
+        f"trial-level statistics, {r['stats_participants']:,} simulated participants ({r['stats_trials']:,} trials):",
         f"  wall time             {r['stats_wall_s']:.2f} s (aggregation, 12 Wilcoxon tests with Hodges–Lehmann CIs, "
-        f"Holm, speed–accuracy)\n"
-        f"  methods chosen        " + ", ".join(f"{k}: {v}" for k, v in r["stats_methods"].items())
-    )
+        f"Holm, speed–accuracy)",
+        "  methods chosen        " + ", ".join(f"{k}: {v}" for k, v in r["stats_methods"].items()),
+    ]
+    return "\n".join(lines)

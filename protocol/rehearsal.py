@@ -9,9 +9,9 @@ command with SIGKILL, as a crash or ``kill -9`` would.  The GUI's simulated
 rig offers the same.  A real rig refuses them: a person's hand is on it.
 
 :class:`RehearsalTrigger` watches a session runner's events and fires each
-planned fault when its trial's cue has passed by ``SECONDS``; it reports what
-happened (:attr:`RehearsalTrigger.report`), including a fault that landed in
-a pause because its trial had already ended.
+planned fault when its trial's cue has passed by ``SECONDS``; a fault whose
+trial ends before that is withdrawn (it would hit the next trial instead).
+:attr:`RehearsalTrigger.report` says what happened to each.
 """
 
 from __future__ import annotations
@@ -99,8 +99,6 @@ class _Pending:
     plan: FaultPlan
     at_ns: int | None = None  # loop time (the records' axis) once the trial's cue is known
     trial_index: int | None = None
-    trial_ended_ns: int | None = None
-    trial_outcome: str = ""
 
 
 @dataclass
@@ -115,11 +113,14 @@ class RehearsalTrigger:
         ``inject(kind, at_ns)`` schedules a device fault at loop time ``at_ns`` (the records' axis).
     kill
         Ends the process (SIGKILL of the command), called from :meth:`poll`.
+    cancel
+        ``cancel(kind, at_ns)`` withdraws a scheduled device fault (its trial ended before it).
     """
 
     plans: Sequence[FaultPlan]
     inject: Callable[[str, int], None]
     kill: Callable[[], None]
+    cancel: Callable[[str, int], object] = lambda kind, at_ns: None
     report: list[str] = field(default_factory=list)
     _pending: list[_Pending] = field(default_factory=list)
     _position: int = 0  # trials cued so far in this run of the session
@@ -131,10 +132,11 @@ class RehearsalTrigger:
     def for_session(
         cls, plans: Sequence[FaultPlan], code: str, kind: str, start_position: int,
         inject: Callable[[str, int], None], kill: Callable[[], None],
+        cancel: Callable[[str, int], object] = lambda kind, at_ns: None,
     ) -> RehearsalTrigger:
         """The trigger of one session: the plans for its participant and kind, counting trials from ``start_position``."""
         mine = [p for p in plans if p.code == code and p.session == kind]
-        trig = cls(mine, inject, kill)
+        trig = cls(mine, inject, kill, cancel)
         trig._position = start_position
         return trig
 
@@ -149,9 +151,15 @@ class RehearsalTrigger:
                     if p.plan.kind != "kill":
                         self.inject(p.plan.kind, p.at_ns)
         elif isinstance(ev, TrialFinished):
-            for p in self._pending:
-                if p.trial_index == ev.spec.index and p.trial_ended_ns is None:
-                    p.trial_ended_ns, p.trial_outcome = ev.end_ns, ev.outcome
+            for p in list(self._pending):
+                if p.trial_index == ev.spec.index and p.at_ns is not None and p.at_ns > ev.end_ns:
+                    # the trial ended first: the fault would hit the pause or the next trial, not this one
+                    self._pending.remove(p)
+                    if p.plan.kind != "kill":
+                        self.cancel(p.plan.kind, p.at_ns)
+                    after = (ev.end_ns - (p.at_ns - round(p.plan.seconds * 1e9))) * 1e-9
+                    self.report.append(f"{p.plan}: not injected: trial {p.plan.trial} ended ({ev.outcome}) "
+                                       f"{after:.1f} s after its cue, before +{p.plan.seconds:g} s")
 
     def poll(self, t_ns: int) -> None:
         """Called with the newest record's time: reports injected faults; kills when a ``kill`` is due."""
@@ -159,10 +167,7 @@ class RehearsalTrigger:
             if p.at_ns is None or t_ns < p.at_ns:
                 continue
             self._pending.remove(p)
-            ended = p.trial_ended_ns is not None and p.trial_ended_ns < p.at_ns
-            where = (f"in the pause: trial {p.plan.trial} had already ended ({p.trial_outcome})" if ended
-                     else f"during trial {p.plan.trial}")
-            self.report.append(f"{p.plan}: injected {where}")
+            self.report.append(f"{p.plan}: injected during trial {p.plan.trial}")
             if p.plan.kind == "kill":
                 self.kill()
 

@@ -79,7 +79,7 @@ from protocol.recording import rows_to_columns
 from protocol.storage import Recorder, StudyDatabase, trial_id_of
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
-__all__ = ["DeliveryLimits", "SessionRunner", "SessionState", "TrialParticipant", "trial_health"]
+__all__ = ["DeliveryLimits", "SessionRunner", "SessionState", "TrialParticipant", "trial_health", "trial_words"]
 
 
 class TrialParticipant(Protocol):
@@ -143,6 +143,17 @@ _HEALTH_SRC = ("period_s", "sensor_age_s", "pose_age_s", "latency_s")
 RESET_RETRY_S = 0.5
 #: Headless: a fault still latched this long after the runner started waiting stops the session (interrupted).
 FAULT_TIMEOUT_S = 10.0
+#: Trials in a row the loop failed to deliver (fault, feedback, gap) before the runner stops cueing: a machine or
+#: rig that cannot hold the designed condition would otherwise re-run trials without end.
+MAX_FAILED_IN_A_ROW = 3
+
+
+def trial_words(trial_index: int) -> str:
+    """How events name a trial: numbered from 1 for people, with the database's index to join on.
+
+    ``trial_words(3)`` is ``"trial 4 (index 3)"``; a pause (index −1) is ``"the pause"``.
+    """
+    return "the pause" if trial_index < 0 else f"trial {trial_index + 1} (index {trial_index})"
 
 
 def trial_health(period_s: np.ndarray, sensor_age_s: np.ndarray, pose_age_s: np.ndarray,
@@ -279,6 +290,8 @@ class SessionRunner:
         self._start_tick: int | None = None  # the tick the recording (and the session clock) starts at
         self._snapshot: object = None  # the loop's snapshot payload at that tick
         self._trial_ticks: tuple[int, int] | None = None  # first and last record of the running trial
+        self._failed_in_a_row = 0  # trials the loop did not deliver as designed, since the last that it did
+        self.last_abort_cause: str | None = None
         self._enter_pause_commands()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick
         self.submit(StartRecording(self._token))
@@ -389,9 +402,8 @@ class SessionRunner:
             m = self.machine
             if not self.done and m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) and m.spec is not None \
                     and int(rows["trial_index"][i]) == m.spec.index:
-                # the record that left the condition ends the trial and is its last: its loop health (a stalled
-                # tick's period, a stale sample's age) belongs to the trial it aborted
-                self._trial_records(rows[i : i + 1], rows["t_ns"][i : i + 1].astype(np.int64), m.spec, [])
+                # the record that tripped the abort is the trial's last: its window and health show the cause
+                self._note_trial_records(rows[i : i + 1])
                 self._abort_running(int(rows["t_ns"][i]), reason, cause)
             rows = rows[i:]
 
@@ -535,7 +547,10 @@ class SessionRunner:
             mask &= t_ns <= end
         if not mask.any():
             return
-        sel = rows[mask]
+        self._note_trial_records(rows[mask])
+
+    def _note_trial_records(self, sel: np.ndarray) -> None:
+        """These records are the running trial's: extend its window, keep their loop health."""
         ticks = sel["tick"]
         first = int(ticks[0]) if self._trial_ticks is None else self._trial_ticks[0]
         self._trial_ticks = (first, int(ticks[-1]))
@@ -546,7 +561,7 @@ class SessionRunner:
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):
             self.state.phase = str(ev.new)
-            self._event(ev.t_ns, "phase", f"trial {ev.trial_index}: {ev.old} -> {ev.new}")
+            self._event(ev.t_ns, "phase", f"{trial_words(ev.trial_index)}: {ev.old} -> {ev.new}")
         elif isinstance(ev, TrialFinished):
             self._finish_trial(ev)
         self._emit(ev)
@@ -557,6 +572,10 @@ class SessionRunner:
         self._health = []
         self._last_marked_ns = None
         ticks, self._trial_ticks = self._trial_ticks, None
+        cause = self._abort_cause.pop(spec.index, "experimenter") if ev.outcome == "aborted" else None
+        #: The cause of the last aborted trial (``trials.abort_cause``), for listeners.
+        self.last_abort_cause = cause
+        self._failed_in_a_row = self._failed_in_a_row + 1 if cause in ("fault", "feedback", "gap") else 0
         self.recorder.trial(
             {
                 "trial_id": trial_id_of(self.session_id, spec.index),
@@ -576,7 +595,7 @@ class SessionRunner:
                 "n_samples": met.n_samples,
                 "abort_reason": ev.reason or None,
                 "repeat_of": spec.repeat_of,
-                "abort_cause": self._abort_cause.pop(spec.index, "experimenter") if ev.outcome == "aborted" else None,
+                "abort_cause": cause,
                 **trial_health(*block.T),
                 "segment": self.segment if ticks is not None else None,
                 "first_tick": ticks[0] if ticks is not None else None,
@@ -598,6 +617,9 @@ class SessionRunner:
     def _start_next(self, t_ns: int) -> None:
         if self.paused or self._faults:
             return
+        if self._failed_in_a_row >= MAX_FAILED_IN_A_ROW:
+            self._too_many_failed(t_ns)
+            return
         if self._ready_ns is not None and t_ns < self._ready_ns:
             self.state.waiting = "pause"
             return
@@ -611,7 +633,8 @@ class SessionRunner:
         self.state.trial_position = self.position + 1
         self.state.trials_total = len(self.schedule)
         self.state.phase = "cued"
-        self._event(t_ns, "cue", f"trial {spec.index}: {spec.target_label} {spec.target_force_n:g} N, haptics {spec.haptic_mode}")
+        self._event(t_ns, "cue", f"{trial_words(spec.index)}: {spec.target_label} {spec.target_force_n:g} N, "
+                                 f"haptics {spec.haptic_mode}")
         self.submit(AllowBiasRefinement(False))
         self.submit(SetHaptics(spec.haptic_mode == "on"))
         self.submit(Mark(spec.index, PHASE_CODES[TrialPhase.ACTIVE]))
@@ -621,6 +644,30 @@ class SessionRunner:
                 p.practice(spec.target_force_n, spec.haptic_mode == "on", self.participant_time(), True)
             else:
                 p.begin_trial(spec.target_force_n, spec.haptic_mode == "on", self.participant_time())
+
+    def _too_many_failed(self, t_ns: int) -> None:
+        """The loop failed several trials in a row: stop cueing (headless: interrupt; a person's session: pause)."""
+        last = self.finished[-1]
+        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: {last.reason}); "
+               "the rig or the machine cannot hold the designed condition")
+        self._failed_in_a_row = 0
+        if self.auto_reset_faults:
+            self._interrupt(t_ns, f"{why}: the session is interrupted and can be resumed")
+            return
+        self.paused = self.state.paused = True
+        self.state.waiting = f"{why}: paused — check the machine's load and the devices, then Resume"
+        self._event(t_ns, "waiting", self.state.waiting)
+        self._emit(("paused", self.state.waiting))
+
+    def _interrupt(self, t_ns: int, reason: str) -> None:
+        """Stop the session here, resumable later: the reason is stored as an event and is :attr:`stop_reason`."""
+        self.stop_reason = reason
+        self._event(t_ns, "session_interrupted", reason)
+        self._enter_pause_commands()
+        self.submit(StopRecording())
+        self.done = self.state.done = True
+        self.status = self.state.status = "interrupted"
+        self._emit(("session_end", "interrupted", reason))
 
     def _wait_for_reset(self, t_ns: int) -> None:
         """A fault is latched outside a trial: hold the next cue; headless, reset it once it can be."""
@@ -637,14 +684,8 @@ class SessionRunner:
         if not self.auto_reset_faults:
             return
         if t_ns - self._waiting_since_ns > int(FAULT_TIMEOUT_S * 1e9):
-            self.stop_reason = (f"{what} was still latched {FAULT_TIMEOUT_S:g} s after the runner began waiting for "
-                                "it to clear; the session is interrupted and can be resumed")
-            self._event(t_ns, "session_interrupted", self.stop_reason)
-            self._enter_pause_commands()
-            self.submit(StopRecording())
-            self.done = self.state.done = True
-            self.status = self.state.status = "interrupted"
-            self._emit(("session_end", "interrupted", self.stop_reason))
+            self._interrupt(t_ns, f"{what} was still latched {FAULT_TIMEOUT_S:g} s after the runner began waiting "
+                                  "for it to clear; the session is interrupted and can be resumed")
             return
         if self._condition_gone or t_ns >= self._next_reset_ns:
             self._condition_gone = False
@@ -682,7 +723,7 @@ class SessionRunner:
                 spec = self.machine.spec
                 running = self.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
                 if trial_index is not None and not (running and spec is not None and spec.index == trial_index):
-                    self._event(t_ns, "experimenter", f"{kind} for trial {trial_index} ignored: it had ended")
+                    self._event(t_ns, "experimenter", f"{kind} for {trial_words(trial_index)} ignored: it had ended")
                     continue
                 self._event(t_ns, "experimenter", f"{kind}: {detail}")
                 self._abort_running(t_ns, detail, cause, requeue=kind == "abort_trial")

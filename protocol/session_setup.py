@@ -35,7 +35,7 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
 from protocol.recording import marked_records
-from protocol.session import DeliveryLimits, SessionRunner, TrialParticipant, first_unfinished
+from protocol.session import DeliveryLimits, SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope, trial_id_of
 from protocol.version import software_version
 
@@ -233,8 +233,8 @@ def open_resumed_session(
                                        np.random.default_rng([info.seed, session_id, 7]))
             db.update_schedule(session_id, schedule_to_json(schedule))
             last_s = max(last_s, end_s)
-            what = (f"trial {spec.index} (cue at {row['started_at_s']:.3f} s, {row['n_samples']} samples) was stored "
-                    "as aborted (interrupted) and re-queued")
+            what = (f"{trial_words(spec.index)} (cue at {row['started_at_s']:.3f} s, {row['n_samples']} samples) was "
+                    "stored as aborted (interrupted) and re-queued")
             notes.append(what)
             pos += 1
         else:
@@ -303,10 +303,11 @@ def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float |
     The phase change to ``active`` carries it exactly; the ``cue`` event (one
     tick earlier at most) stands in when the run ended before that was stored.
     """
+    name, old = trial_words(trial_index), f"trial {trial_index}"  # (versions 1 and 2 named trials by index)
     rows = db.conn.execute(
-        "SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail = ?) OR "
-        "(kind = 'cue' AND detail LIKE ?)) ORDER BY t_s DESC",
-        (session_id, f"trial {trial_index}: cued -> active", f"trial {trial_index}: %"),
+        "SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail IN (?, ?)) OR "
+        "(kind = 'cue' AND (detail LIKE ? OR detail LIKE ?))) ORDER BY t_s DESC",
+        (session_id, f"{name}: cued -> active", f"{old}: cued -> active", f"{name}: %", f"{old}: %"),
     ).fetchall()
     by_kind = {k: t for k, t in rows}
     t = by_kind.get("phase", by_kind.get("cue"))

@@ -217,8 +217,13 @@ def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) ->
             conn.close()
             folder = p.resolve().parent
             wal = p.with_name(p.name + "-wal")
-            if os.access(folder, os.W_OK) or (wal.exists() and wal.stat().st_size > 0):
+            if os.access(folder, os.W_OK):
                 raise
+            if wal.exists() and wal.stat().st_size > 0:
+                raise StorageError(
+                    f"{p}: cannot be read where it is: its last changes are still in {wal.name}, which SQLite can "
+                    f"read only with a writable folder and {folder} is read-only; copy the database and its "
+                    f"{wal.name} into a writable folder and read the copy") from None
         except sqlite3.DatabaseError:
             conn.close()
             raise
@@ -415,6 +420,7 @@ class StudyDatabase:
             script = schema_path().read_text(encoding="utf-8")
             c.execute("PRAGMA journal_mode = WAL")
             c.executescript("BEGIN IMMEDIATE;\n" + script + f"\nPRAGMA user_version = {SCHEMA_VERSION};\nCOMMIT;")
+            self._owner_only()
         elif not {"participants", "sessions", "trials", "samples", "events"} <= tables:
             raise StorageError(f"{self.path}: not a haptic-study database (tables missing)")
         elif version < SCHEMA_VERSION and not readonly:
@@ -428,6 +434,14 @@ class StudyDatabase:
             # crash (SIGKILL); only a power cut can lose the last commits.
             c.execute("PRAGMA synchronous = NORMAL")
             c.execute("PRAGMA foreign_keys = ON")
+
+    def _owner_only(self) -> None:
+        """A study was just created in this file (new, or empty before): readable by its owner only."""
+        try:
+            if self.path.stat().st_uid == os.getuid():
+                os.chmod(self.path, 0o600)
+        except OSError:  # (not ours to change: leave it)
+            pass
 
     @property
     def schema_version(self) -> int:
@@ -635,6 +649,16 @@ class StudyDatabase:
     def lease_holders(self) -> list[dict[str, Any]]:
         """Every stored lease with ``alive`` (for displays and tests)."""
         return [{**row, "alive": self._alive(row)} for row in self._leases()]
+
+    def sessions_being_written(self) -> dict[int, str]:
+        """Sessions a live process writes to right now: session id -> "process N (command)" ({} before version 2)."""
+        if self.schema_version < 2:
+            return {}
+        out = {}
+        for row in self.lease_holders():
+            if row["alive"] and str(row["scope"]).startswith("session "):
+                out[int(str(row["scope"]).split()[1])] = f"process {row['pid']} ({row['command']})"
+        return out
 
     def _leases(self) -> list[dict[str, Any]]:
         cur = self.conn.execute("SELECT scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at FROM leases")
@@ -914,7 +938,7 @@ class Recorder:
                             started_at_s + (int(t_ns[0]) - t0_ns) / 1e9, started_at_s + (int(t_ns[-1]) - t0_ns) / 1e9,
                             data)
 
-    def _commit(self) -> None:
+    def _commit(self, final: bool = False) -> None:
         if self._held:
             held, self._held = self._held, []
             try:
@@ -925,7 +949,8 @@ class Recorder:
                     self.db.conn.execute("ROLLBACK")
                 raise
         for (sid, seg), (builder, _, _) in self._blocks.items():
-            open_block = builder.partial()  # the records since the last commit reach the disk with it
+            # the records since the last commit reach the disk with it; at the end, the open block whole
+            open_block = builder.final() if final else builder.partial()
             if open_block is not None:
                 self.db.begin()
                 self._write_block(sid, seg, open_block)
@@ -953,7 +978,7 @@ class Recorder:
                     break
                 self._handle(item)
                 self._maybe_commit()
-            self._commit()
+            self._commit(final=True)
         except BaseException as exc:  # noqa: BLE001 - reported to the producer on its next call
             self.error = exc
             try:
@@ -984,6 +1009,6 @@ class Recorder:
             self._thread.join()
             self._thread = None
         else:
-            self._commit()
+            self._commit(final=True)
         if self.error is not None:
             raise StorageError(f"the recorder failed: {self.error}")

@@ -126,6 +126,7 @@ def _drive(
     cursor = ring.write_count
     t_last_report = 0.0
     base_done = progress.study_trials_done
+    planned = runner.state.trials_total  # re-runs of aborted trials add to the study's trials as they are queued
     if trigger is not None:
         runner.listeners.append(trigger.on_runner_event)
     if clock == "real":
@@ -155,6 +156,8 @@ def _drive(
                 t_last_report = now
                 progress.trials_done = done
                 progress.trials_total = runner.state.trials_total
+                progress.study_trials_total += runner.state.trials_total - planned
+                planned = runner.state.trials_total
                 progress.study_trials_done = base_done + done
                 on_progress(progress)
         progress.study_trials_done = base_done + runner.state.completed + runner.state.aborted
@@ -262,7 +265,10 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: SimEngine)
         sys.stderr.flush()
         os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
 
-    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill)
+    def cancel(kind: str, at_ns: int) -> None:
+        rig.cancel_fault(kind, loop.t0_ns + at_ns)
+
+    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel)
     return trig if trig.plans else None
 
 
@@ -437,7 +443,11 @@ def run_study(
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    _plan_study(_peek(db_path), db_path, participants, seed, protocol, continue_study)
+    first_plan, first_total, first_kept = _plan_study(_peek(db_path), db_path, participants, seed, protocol,
+                                                      continue_study)
+    if continue_study and not first_plan:  # nothing left to run: nothing to write either
+        done = StudyProgress(participants_total=participants, sessions=list(first_kept))
+        return done
     owner = new_owner_token()
     # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
     db: StudyDatabase | None = StudyDatabase(db_path, check=False)

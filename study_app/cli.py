@@ -176,11 +176,13 @@ def build_parser() -> argparse.ArgumentParser:
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
     bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
-    bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock",
+    bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock, and its storage as "
+                     "blocks and as rows",
                      "haptic-study bench study --participants 4")
     bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
-    br = add_command(bsub, "report", "report wall time on a 10-participant study; statistics for 10 000 participants",
+    br = add_command(bsub, "report", "report wall time on a 10-participant study, recorded and in the row format "
+                     "of versions 1-2; statistics for 10 000 participants",
                      "haptic-study bench report --db study.db")
     br.add_argument("--db", default=None, metavar="PATH",
                     help="study database to report on (default: simulate a 10-participant study first)")
@@ -267,8 +269,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             if args.db is not None and not os.path.isfile(args.db):
                 raise CliError(f"--db = {args.db!r}: no such file")
-            print("bench: timing the report ...", file=sys.stderr, flush=True)
-            result = run_report_bench(args.db, stats_participants=args.stats_participants)
+            result = run_report_bench(args.db, stats_participants=args.stats_participants,
+                                      log=lambda line: print(f"bench: {line}", file=sys.stderr, flush=True))
             print(json.dumps(result) if args.json else format_report_bench(result))
             return 0
         if args.command == "gui":
@@ -289,8 +291,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "bench" and args.bench == "study":
             from bench.study_bench import format_study_bench, run_study_bench
 
-            print("bench: running the simulated study ...", file=sys.stderr, flush=True)
-            result = run_study_bench(args.participants)
+            result = run_study_bench(args.participants,
+                                     log=lambda line: print(f"bench: {line}", file=sys.stderr, flush=True))
             print(json.dumps(result) if args.json else format_study_bench(result))
             return 0
         if args.command in ("probe", "check-hardware"):
@@ -305,6 +307,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("haptic-study: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:
+        # the reader went away (``| head``): not an error of ours; point stdout at nothing so that the
+        # interpreter's final flush does not raise again
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
     return 1  # pragma: no cover - argparse enforces a known command
 
 

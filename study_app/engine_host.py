@@ -661,7 +661,11 @@ class StudyEngine:
     def _on_loop_event(self, ev: LoopEvent) -> None:
         # called from the loop thread: only hand the event on (to the GUI, and to the runner for the record)
         self._loop_events.append(ev)
-        self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail))
+        runner = self.runner
+        session_t = math.nan
+        if runner is not None and not runner.done and runner._t0_ns is not None:
+            session_t = runner.session_time_s(ev.t_ns)  # what the events table will say
+        self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail, session_t))
 
     # -- commands -------------------------------------------------------------------------------------
     def handle(self, cmd: object) -> None:
@@ -679,7 +683,8 @@ class StudyEngine:
         elif isinstance(cmd, m.ResumeSession):
             self._resume_session(cmd)
         elif isinstance(cmd, m.ListSessions):
-            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path)))
+            self.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path),
+                                          list_sessions(cmd.db_path, check=False)))
         elif isinstance(cmd, (m.Pause, m.Resume, m.AbortTrial, m.AbortSession)):
             if runner is None or runner.done:
                 raise RuntimeError("no session is running")
@@ -869,8 +874,11 @@ class StudyEngine:
         def kill() -> None:
             os.kill(os.getpid(), signal.SIGKILL)
 
+        def cancel(kind: str, at_ns: int) -> None:
+            eng.rig.cancel_fault(kind, eng.loop.t0_ns + at_ns)
+
         trig = RehearsalTrigger.for_session([plan], opened.code, opened.kind, runner.state.trial_position,
-                                            inject, kill)
+                                            inject, kill, cancel)
         if self.trigger is not None:  # keep what was planned before
             trig._pending.extend(self.trigger._pending)
         else:
@@ -893,6 +901,10 @@ class StudyEngine:
             self.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
         elif isinstance(ev, TrialFinished):
             met, spec = ev.metrics, ev.spec
+            cause = runner.last_abort_cause if ev.outcome == "aborted" else None
+            if cause in ("gap", "feedback"):  # not a watchdog fault, so the loop said nothing: say it here
+                self.publish(m.EngineFault(ev.end_ns * 1e-9, cause, int(self.loop.faults), ev.reason,
+                                           runner.session_time_s(ev.end_ns)))
             self.publish(m.TrialEnded(ev.end_ns * 1e-9, {
                 "trial_index": spec.index, "target_label": spec.target_label, "target_force_n": spec.target_force_n,
                 "haptic_mode": spec.haptic_mode, "outcome": ev.outcome,
@@ -1361,7 +1373,10 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
     db = StudyDatabase(db_path, readonly=True)
     try:
         out = []
+        busy = db.sessions_being_written()
         for s in db.open_sessions():
+            if s.session_id in busy:
+                continue  # another process runs it right now: not interrupted
             out.append({
                 "session_id": s.session_id, "code": s.code, "kind": s.kind, "started_at": s.started_at,
                 "trials_done": len(db.trial_rows(s.session_id)), "trials_total": len(json.loads(s.schedule_json)),

@@ -448,6 +448,8 @@ class EngineFault:
     kind: str
     faults: int
     detail: str
+    #: The same moment on the running session's clock (as the database stores it), NaN when no session runs.
+    session_t_s: float = float("nan")
 
 
 @dataclass(frozen=True, slots=True)

@@ -72,12 +72,22 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     )
     esub = e.add_subparsers(dest="export", metavar="WHAT")
     esub.required = True
-    es = esub.add_parser("samples", help="every recorded record: session time, trial, forces, stylus, ages")
+    es = add_command(
+        esub, "samples", "every recorded record: session time, trial, forces, stylus, ages",
+        "haptic-study export samples --db study.db --session 2 --out session2.csv\n"
+        "haptic-study export samples --db study.db --format parquet --out samples.parquet\n"
+        "haptic-study export samples --db study.db --session 2 --out - | head",
+        "Every 1 kHz record of the recorded sessions (one session, or all) as one table, a row per record: the "
+        "session time, trial and phase, the raw sensor wrench, the task force (the "
+        "filtered compensated force the metrics use), the rendered force and gain, the stylus position, the sample "
+        "and pose ages, the latency and the fault flags (analysis.samples_frame returns the same as a "
+        "DataFrame)",
+    )
     es.add_argument("--db", required=True, metavar="PATH", help="study database")
     es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
-    es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist)")
+    es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
 
 
 # -- shared -------------------------------------------------------------------------------------------------
@@ -125,13 +135,15 @@ def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
     return np.sqrt(cols[f"{prefix}_fx"] ** 2 + cols[f"{prefix}_fy"] ** 2 + cols[f"{prefix}_fz"] ** 2)
 
 
-def _new_folder(path: str) -> Path:
+def _new_folder(path: str, *, create: bool = True) -> Path:
+    """``--out DIR``: a new or empty folder (checked before the work, created after it)."""
     out = Path(path)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise _cli_error(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
     if not out.resolve().parent.exists():
         raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
-    out.mkdir(exist_ok=True)
+    if create:
+        out.mkdir(exist_ok=True)
     return out
 
 
@@ -142,6 +154,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from pipeline.framework import framework_config_from_dict
     from pipeline.replay import replay
 
+    if args.out:
+        _new_folder(args.out, create=False)  # refused before the work, not after it
     (code, kind), segments, trials = _session(args.db, args.session)
     n = sum(len(s.columns["tick"]) for s in segments)
     t0 = time.perf_counter()
@@ -252,10 +266,13 @@ def cmd_export(args: argparse.Namespace) -> int:
     """``haptic-study export samples``."""
     from analysis.load import AnalysisError, samples_frame
 
+    to_stdout = args.out == "-"
+    if to_stdout and args.format != "csv":
+        raise _cli_error("--out -: standard output takes --format csv only; give a file for parquet")
     out = Path(args.out)
-    if out.exists():
+    if not to_stdout and out.exists():
         raise _cli_error(f"--out {out}: exists; export writes a new file only (nothing was written)")
-    if not out.resolve().parent.exists():
+    if not to_stdout and not out.resolve().parent.exists():
         raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
     if args.format == "parquet":
         try:
@@ -267,6 +284,9 @@ def cmd_export(args: argparse.Namespace) -> int:
         frame = samples_frame(args.db, args.session)
     except AnalysisError as exc:
         raise _cli_error(str(exc)) from None
+    if to_stdout:
+        frame.to_csv(sys.stdout, index=False)
+        return 0
     tmp = out.with_name(f".{out.name}.partial")
     try:
         if args.format == "csv":

@@ -29,26 +29,31 @@ ORDER BY s.session_id
 """
 
 
-def list_sessions(db_path: str | os.PathLike[str]) -> list[dict[str, Any]]:
+def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> list[dict[str, Any]]:
     """Every session of a study database, oldest first; empty when the file does not exist yet.
 
     Returns
     -------
     list of dict
         ``session_id, code, participant_number, kind, status, rig, seed, started_at, ended_at, end_reason,
-        trials_planned, trials_done, trials_aborted, successes`` and ``first_trial``, ``last_trial``: the
-        stored trials' numbers, from 1 (None when none is stored).
+        trials_planned, trials_done, trials_aborted, successes``, ``first_trial``, ``last_trial``: the
+        stored trials' numbers, from 1 (None when none is stored), and ``writer``: the live process running
+        a session right now ("" when none: a ``running`` session without one was interrupted).
+
+    ``check``: run the integrity check first (the command line does; the GUI's engine, listing between
+    sessions, checks when it opens the database to write).
 
     Raises
     ------
     StorageError
-        Not a study database (the message says why).
+        Not a study database, or a damaged one (the message says why).
     """
     if not os.path.exists(db_path):
         return []
-    db = StudyDatabase(db_path, readonly=True)
+    db = StudyDatabase(db_path, readonly=True, check=check)
     try:
         rows = db.conn.execute(_SQL).fetchall()
+        writers = db.sessions_being_written()
     finally:
         db.close()
     out = []
@@ -64,6 +69,7 @@ def list_sessions(db_path: str | os.PathLike[str]) -> list[dict[str, Any]]:
             "end_reason": reason or "", "trials_planned": planned, "trials_done": int(done),
             "trials_aborted": int(aborted), "successes": int(successes),
             "first_trial": None if first is None else int(first) + 1, "last_trial": None if last is None else int(last) + 1,
+            "writer": writers.get(int(sid), "") if status == "running" else "",
         })
     return out
 
@@ -77,6 +83,12 @@ def _count(n: int, word: str) -> str:
     return f"{n} {word}" + ("" if n == 1 else "s")
 
 
+def _status(s: dict[str, Any]) -> str:
+    if s["status"] != "running":
+        return str(s["status"])
+    return f"in progress ({s['writer'].split(' (')[0]})" if s.get("writer") else "interrupted"
+
+
 def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     """A table of the sessions for the terminal, with how to plot one of their trials."""
     if not sessions:
@@ -86,7 +98,7 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     for s in sessions:
         rows.append((
             str(s["session_id"]), s["code"], str(s["participant_number"]), s["kind"],
-            "interrupted" if s["status"] == "running" else s["status"], s["rig"],
+            _status(s), s["rig"],
             f"{s['trials_done']}/{s['trials_planned']}", str(s["trials_aborted"]),
             str(s["started_at"])[:16].replace("T", " "),
         ))
@@ -96,8 +108,9 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     n_participants = len({s["code"] for s in sessions})
     lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")
     lines.append("")
-    lines.append("trials: finished / planned (aborted trials are re-run and not counted as finished); "
-                 "interrupted sessions can be resumed (haptic-study run --resume CODE, or the GUI)")
+    lines.append("trials: finished / planned (aborted trials are re-run and not counted as finished)")
+    if any(_status(s) == "interrupted" for s in sessions):
+        lines.append("an interrupted session can be resumed: haptic-study run --resume CODE, or the GUI")
     lines.append("plot a trial: haptic-study plot-trial --db PATH --session SESSION --trial N --out FILE.png "
                  "(trials are numbered from 1)")
     return "\n".join(lines)

@@ -73,6 +73,14 @@ class FaultInjector:
         self._scheduled.append(fault)
         self._scheduled.sort(key=lambda f: f.at_ns)
 
+    def cancel(self, kind: str, at_ns: int) -> bool:
+        """Withdraw a scheduled fault that has not started; True if there was one."""
+        for f in self._scheduled:
+            if f.kind == kind and f.at_ns == at_ns:
+                self._scheduled.remove(f)
+                return True
+        return False
+
     def apply(self, rig: Any, now_ns: int) -> None:
         """Switch on what is due and off what has ended (the rig's devices' own fault switches)."""
         while self._scheduled and self._scheduled[0].at_ns <= now_ns:

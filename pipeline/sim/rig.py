@@ -201,6 +201,10 @@ class SimRig:
         duration = DEFAULT_DURATION_S.get(kind, 0.0) if duration_s is None else duration_s
         self.faults.schedule(SimFault(kind, int(at_ns), duration))
 
+    def cancel_fault(self, kind: str, at_ns: int) -> bool:
+        """Withdraw a rehearsed fault that has not started (its trial ended first); True if there was one."""
+        return self.faults.cancel(kind, int(at_ns))
+
     def set_driver(self, driver: StylusDriver) -> None:
         """Hand the stylus to another driver (scripted, simulated participant, mouse)."""
         self.driver = driver

@@ -97,7 +97,9 @@ class HealthModel:
         elif isinstance(ev, m.EngineFault):
             self.faults = ev.faults
             verb = _VERBS.get(ev.kind, ev.kind)
-            self.fault_log.append(f"t = {ev.t_s:8.3f} s  {verb}: {ev.detail}")
+            # the session's clock when a session runs: the time the database stores the event at
+            when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
+            self.fault_log.append(f"{when}  {verb}: {ev.detail}")
             del self.fault_log[:-50]
         elif isinstance(ev, m.JawState):
             self.jaw = ev

@@ -187,6 +187,13 @@ def test_an_existing_output_folder_is_kept_without_force_and_options_change_the_
     code, _, err = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(rep2), "--force")
     assert code == 2 and "holds 1 file report did not write (e.g. figures/my-annotated.png)" in err
     assert (rep2 / "figures" / "my-annotated.png").read_bytes() == b"\x89PNG mine" and (rep2 / "report.html").exists()
+    # ... nor once someone edited a file report wrote
+    (rep2 / "figures" / "my-annotated.png").unlink()
+    with (rep2 / "report.html").open("a") as f:
+        f.write("<!-- my notes -->")
+    code, _, err = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(rep2), "--force")
+    assert code == 2 and err.count("\n") == 1 and "1 file report wrote was changed since (e.g. report.html)" in err
+    assert (rep2 / "report.html").read_text().endswith("<!-- my notes -->")
 
 
 def test_force_never_replaces_a_folder_holding_the_database(tmp_path, capsys):

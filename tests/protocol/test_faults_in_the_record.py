@@ -83,6 +83,9 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     assert counts["fault"] == 1 and sum(counts.values()) == 1
     health = health_table(study)
     assert health[list(HEALTH_COLUMNS)].notna().all().all()
+    if kind == "sensor-stall":  # the record that tripped the abort is the trial's: its health shows the stall
+        (age,), = rows(db, "SELECT sensor_age_max_ms FROM trials WHERE trial_index = 1")
+        assert age > 5.0
 
 
 def test_a_run_without_faults_stores_none_and_its_health(tmp_path: Path) -> None:
@@ -150,3 +153,33 @@ def test_fault_plans_for_participants_or_trials_not_run_are_refused(tmp_path: Pa
         with pytest.raises(ValueError, match=re.escape(says)):
             run_study(str(db), participants=2, seed=3, protocol=short_protocol(), faults=[plan])
     assert not db.exists()
+
+
+def test_a_fault_planned_after_its_trial_ends_is_withdrawn_and_said_so(tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    proto = short_protocol()
+    # 5 s after the cue: this trial succeeded after 3.2 s; the fault would otherwise land on the
+    # pause or the next trial
+    progress = run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1,
+                         faults=[FaultPlan("sensor-stall", "P01", 4, 5.0)])
+    (note,) = progress.rehearsals
+    assert note == "sensor-stall@P01:4+5: not injected: trial 4 ended (success) 3.2 s after its cue, before +5 s"
+    assert rows(db, "SELECT COUNT(*) FROM events WHERE kind IN ('fault', 'faults_reset')") == [(0,)]
+    assert rows(db, "SELECT COUNT(*) FROM trials WHERE outcome = 'aborted'") == [(0,)]
+
+
+def test_trials_failing_again_and_again_stop_the_session_resumable(tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    proto = short_protocol()
+    plans = [FaultPlan("nan-burst", "P01", n, 0.5) for n in (1, 2, 3)]
+    with pytest.raises(SessionInterrupted) as info:
+        run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1, faults=plans)
+    msg = str(info.value)
+    assert "3 trials in a row were not delivered as designed" in msg and "\n" not in msg
+    assert rows(db, "SELECT abort_cause, COUNT(*) FROM trials GROUP BY abort_cause") == [("fault", 3)]
+    assert rows(db, "SELECT status FROM sessions") == [("running",)]
+    progress = resume_session(str(db), "P01")
+    assert progress.study_trials_done == progress.study_trials_total
+    done = rows(db, "SELECT COUNT(*) FROM trials WHERE outcome != 'aborted'")[0][0]
+    assert done == proto.trials_per_participant
+    assert_true_timeline(db, proto.trial.pause_s)

@@ -86,20 +86,32 @@ def _has_sessions(db: Path) -> bool:
 
 
 def test_a_second_run_is_refused_while_a_study_runs_and_names_it(tmp_path: Path) -> None:
-    db, proto = tmp_path / "busy.db", short_toml(tmp_path)
-    first = subprocess.Popen(cli("run", "--participants", "2", "--jobs", "1", "--seed", "5", "--db", str(db),
-                                 "--protocol", str(proto), "--clock", "real"),
+    db, proto = tmp_path / "busy.db", tmp_path / "long.toml"
+    # one long session on the virtual clock: 120 trials, some 15 minutes of study time, tens of seconds of work
+    # whatever the machine's load (the real clock would be at the mercy of it: a loaded machine misses ticks,
+    # and the runner stops a session whose trials fail again and again)
+    proto.write_text(short_toml(tmp_path).read_text().replace("trials_per_cell = 1", "trials_per_cell = 15"))
+    first = subprocess.Popen(cli("run", "--participants", "1", "--jobs", "1", "--seed", "5", "--db", str(db),
+                                 "--protocol", str(proto)),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and not _has_sessions(db):
-            time.sleep(0.1)  # wait for the first run to be under way (it runs in real time: minutes)
+            time.sleep(0.1)  # wait for the first run to be under way
         assert _has_sessions(db)
-        for args in (("run", "--participants", "2", "--seed", "5", "--continue"), ("run", "--resume", "P01")):
+        for args in (("run", "--participants", "1", "--seed", "5", "--continue"), ("run", "--resume", "P01")):
             second = run(*args, "--db", str(db), "--protocol", str(proto))
             err = second.stderr.strip()
             assert second.returncode == 2 and "\n" not in err, err
             assert f"this database is being written by process {first.pid}" in err, err
+        # the session it runs is listed as in progress, by whom, not as interrupted; it cannot be resumed
+        listing = run("sessions", "--db", str(db))
+        assert listing.returncode == 0 and f"in progress (process {first.pid})" in listing.stdout, listing.stdout
+        assert "interrupted" not in listing.stdout
+        from study_app.engine_host import list_resumable
+
+        assert list_resumable(str(db)) == []
+        assert first.poll() is None  # (all of this while the first run still wrote)
     finally:
         first.kill()
         first.wait(30)

@@ -53,8 +53,8 @@ def test_a_block_written_before_the_derate_column_reads_as_not_cut(monkeypatch: 
         decode_columns(blob, ["nonesuch"])
     # through the database, as analysis reads a trial's window
     c = sqlite3.connect(":memory:")
-    c.execute("CREATE TABLE session_blocks (session_id, segment, block, first_tick, last_tick, data)")
-    c.execute("INSERT INTO session_blocks VALUES (1, 0, 0, 0, ?, ?)", (n - 1, blob))
+    c.execute("CREATE TABLE session_blocks (session_id, segment, block, first_tick, last_tick, n_records, data)")
+    c.execute("INSERT INTO session_blocks VALUES (1, 0, 0, 0, ?, ?, ?)", (n - 1, n, blob))
     win = read_ticks(c, 1, 0, 2, 5, ["derate", "gain"])
     np.testing.assert_array_equal(win["tick"], [2, 3, 4, 5])
     np.testing.assert_array_equal(win["derate"], np.ones(4))
@@ -73,3 +73,28 @@ def test_device_limit_entries_are_kept_as_columns_and_read_back_among_the_events
     plain = encode_block(block_columns(n), no_poses(), [e for e in events if e[1] != "device_limit"])
     assert len(blob) - len(plain) < 8 * n  # not ~40 bytes of JSON a tick
     assert b'"limits"' not in plain  # a block without any is written as before
+
+
+def test_an_open_block_written_in_chunks_before_the_derate_column_reads_as_not_cut(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    n = 30
+    cols = block_columns(n)
+    with monkeypatch.context() as m:
+        m.setattr(recording, "COLUMNS", tuple(c for c in COLUMNS if c.name != "derate"))
+        b = recording.BlockBuilder()
+        old = {k: v for k, v in cols.items() if k != "derate"}
+        b.add({k: v[:10] for k, v in old.items()}, [(4, "refine", True)])
+        b.partial()
+        b.add({k: v[10:] for k, v in old.items()}, [(12, "device_limit", 3.1)])
+        blob = b.partial()[3]  # (what a session killed mid-block leaves: its chunks)
+    back, _, events = decode_block(blob)
+    np.testing.assert_array_equal(back["derate"], np.ones(n))
+    np.testing.assert_array_equal(back["gain"].view(np.int64), cols["gain"].view(np.int64))
+    assert events == [(4, "refine", True), (12, "device_limit", 3.1)]
+    np.testing.assert_array_equal(decode_columns(blob, ["derate"])["derate"], np.ones(n))
+    # and one this code writes keeps the values
+    b = recording.BlockBuilder()
+    cols["derate"][5] = 0.75
+    b.add(cols)
+    back, _, _ = decode_block(b.partial()[3])
+    assert back["derate"][5] == 0.75

@@ -146,7 +146,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
         ab = after[len(before)]
         assert ab[1] == "aborted" and "interrupted" in ab[5] and ab[4] == partial[0]
         (cue,) = rows(db, "SELECT t_s FROM events WHERE session_id = ? AND kind = 'phase' AND detail = ?",
-                      sid, f"trial {interrupted.index}: cued -> active")
+                      sid, f"trial {interrupted.index + 1} (index {interrupted.index}): cued -> active")
         started, ended, cause = rows(db, "SELECT started_at_s, ended_at_s, abort_cause FROM trials WHERE trial_id = ?",
                                      sid * 1_000_000 + interrupted.index)[0]
         assert started == cue[0] and ended == pytest.approx(cue[0] + partial[1], abs=1e-9) and cause == "interrupted"

@@ -1,0 +1,181 @@
+"""``replay``, ``plot-session`` and ``export samples`` on a recorded study, as a researcher runs them.
+
+The study is simulated once: one participant's training and experiment sessions, then a second participant
+whose experiment session is interrupted by a fault that does not clear and resumed (a session recorded in
+two runs).  A row-format copy (what versions 1 and 2 kept) checks that older databases stay readable.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import pipeline.sim.faults
+from analysis.load import SAMPLES_FRAME_COLUMNS, samples_frame
+from bench.row_format import row_format_copy
+from protocol.config import default_protocol
+from protocol.rehearsal import FaultPlan
+from protocol.study import SessionInterrupted, resume_session, run_study
+from study_app.cli import main
+
+
+def _protocol():  # type: ignore[no-untyped-def]
+    p = default_protocol()
+    return dataclasses.replace(p, trials_per_cell=1,
+                               training=dataclasses.replace(p.training, seconds_per_target_per_mode=4.0))
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory) -> Path:
+    db = tmp_path_factory.mktemp("replay") / "study.db"
+    proto = _protocol()
+    run_study(str(db), participants=1, seed=4, protocol=proto, jobs=1)
+    mp = pytest.MonkeyPatch()
+    mp.setitem(pipeline.sim.faults.DEFAULT_DURATION_S, "sensor-stall", 30.0)  # still latched 10 s on: interrupted
+    try:
+        with pytest.raises(SessionInterrupted):
+            run_study(str(db), participants=2, seed=4, protocol=proto, jobs=1, continue_study=True,
+                      faults=[FaultPlan("sensor-stall", "P02", 2, 1.0)])
+    finally:
+        mp.undo()
+    resume_session(str(db), "P02")
+    return db
+
+
+def sessions(db: Path) -> dict[str, int]:
+    c = sqlite3.connect(db)
+    try:
+        return {f"{code}/{kind}": sid for sid, code, kind in c.execute(
+            "SELECT s.session_id, p.code, s.kind FROM sessions s JOIN participants p USING (participant_id)")}
+    finally:
+        c.close()
+
+
+def _run(capsys, *argv: str) -> tuple[int, str, str]:
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_a_session_replays_bit_for_bit_and_measures_the_filter_on_itself(study, capsys) -> None:
+    sid = sessions(study)["P01/experiment"]
+    code, out, err = _run(capsys, "replay", "--db", str(study), "--session", str(sid))
+    assert code == 0, err
+    assert "1 recorded run," in out and "bit-identical to the recording" in out
+    table = out[out.index("window  noise"):].splitlines()[1:]
+    windows = [int(line.split()[0]) for line in table if line.strip()]
+    assert len(windows) >= 4 and 10 in windows  # the paper's window among those measured
+    noise = [float(line.split()[1]) for line in table if line.strip()]
+    assert noise == sorted(noise, reverse=True)  # a longer window averages more noise away
+
+
+def test_a_resumed_session_replays_run_by_run_bit_for_bit(study, capsys) -> None:
+    sid = sessions(study)["P02/experiment"]
+    code, out, err = _run(capsys, "replay", "--db", str(study), "--session", str(sid))
+    assert code == 0, err
+    assert "2 recorded runs," in out and "bit-identical to the recording" in out
+
+
+def test_training_replays_too(study, capsys) -> None:
+    code, out, _ = _run(capsys, "replay", "--db", str(study), "--session", str(sessions(study)["P01/training"]))
+    assert code == 0 and "bit-identical" in out
+
+
+def test_other_settings_say_what_would_have_been_felt(study, tmp_path, capsys) -> None:
+    sid = sessions(study)["P01/experiment"]
+    out_dir = tmp_path / "w20"
+    code, out, err = _run(capsys, "replay", "--db", str(study), "--session", str(sid), "--filter-window", "20",
+                          "--f-scale", "5", "--out", str(out_dir))
+    assert code == 0, err
+    assert "with filter_window = 20, f_scale_n = 5" in out
+    assert sorted(p.name for p in out_dir.iterdir()) == ["filter_trade.csv", "replay.pdf", "replay.png",
+                                                         "replay.svg", "replay_trials.csv"]
+    trials = pd.read_csv(out_dir / "replay_trials.csv")
+    assert len(trials) == 4 and trials["trial_number"].tolist() == [1, 2, 3, 4]
+    on, off = trials[trials["haptic_mode"] == "on"], trials[trials["haptic_mode"] == "off"]
+    assert (on["rms_difference_N"] > 0).all() and (on["peak_difference_N"] >= on["rms_difference_N"]).all()
+    assert (off["rms_difference_N"] == 0).all()  # no feedback either way
+    assert (on["delay_ms"] > 0).all()  # twice the window: the rendered force comes later
+
+
+def test_replay_refuses_bad_input_in_one_line(study, tmp_path, capsys) -> None:
+    for argv, message in [
+        (["--session", "99"], "--session 99: no such session"),
+        (["--session", "1", "--out", str(study)], "exists and is not an empty folder"),
+        (["--session", "1"], "no such database"),
+    ]:
+        db = str(tmp_path / "none.db") if message == "no such database" else str(study)
+        code, _, err = _run(capsys, "replay", "--db", db, *argv)
+        assert code == 2 and err.count("\n") == 1 and message in err, err
+    for argv, message in [(["--filter-window", "0"], "--filter-window"), (["--f-max", "nan"], "--f-max")]:
+        with pytest.raises(SystemExit) as exit_:
+            main(["replay", "--db", str(study), "--session", "1", *argv])
+        err = capsys.readouterr().err
+        assert exit_.value.code == 2 and message in err.splitlines()[-1] and "Traceback" not in err
+
+
+def test_plot_session_draws_a_whole_session(study, tmp_path, capsys) -> None:
+    sid = sessions(study)["P02/experiment"]
+    for suffix in (".png", ".pdf", ".svg"):
+        out = tmp_path / f"s{suffix}"
+        code, _, err = _run(capsys, "plot-session", "--db", str(study), "--session", str(sid), "--out", str(out))
+        assert code == 0, err
+        assert out.stat().st_size > 10_000
+    assert (tmp_path / "s.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    code, _, err = _run(capsys, "plot-session", "--db", str(study), "--session", str(sid), "--out",
+                        str(tmp_path / "s.jpg"))
+    assert code == 2 and "must end in .png, .pdf or .svg" in err
+
+
+def test_export_gives_every_record_as_a_table(study, tmp_path, capsys) -> None:
+    c = sqlite3.connect(study)
+    (n_records,) = c.execute("SELECT SUM(n_records) FROM session_blocks").fetchone()
+    c.close()
+    frame = samples_frame(study)
+    assert list(frame.columns) == list(SAMPLES_FRAME_COLUMNS) and len(frame) == n_records
+    # csv and parquet hold the same numbers, exactly
+    code, out, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "all.csv"))
+    assert code == 0 and f"{n_records:,} records" in out, err
+    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--format", "parquet",
+                        "--out", str(tmp_path / "all.parquet"))
+    assert code == 0, err
+    from_csv = pd.read_csv(tmp_path / "all.csv")
+    from_parquet = pd.read_parquet(tmp_path / "all.parquet")
+    for col in ("session_time_s", "force_n", "raw_fx", "render_fz", "stylus_y_m"):
+        assert np.array_equal(from_csv[col].to_numpy(), from_parquet[col].to_numpy(), equal_nan=True), col
+    # one session, to standard output
+    sid = sessions(study)["P01/experiment"]
+    code, out, _ = _run(capsys, "export", "samples", "--db", str(study), "--session", str(sid), "--out", "-")
+    assert code == 0 and out.splitlines()[0].startswith("session_id,segment,tick,session_time_s")
+    assert len(out.splitlines()) - 1 == int((frame["session_id"] == sid).sum())
+    # an existing file is never overwritten
+    before = (tmp_path / "all.csv").read_bytes()
+    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "all.csv"))
+    assert code == 2 and "exists" in err and (tmp_path / "all.csv").read_bytes() == before
+
+
+def test_a_row_format_database_reads_as_before_and_says_it_cannot_replay(study, tmp_path, capsys) -> None:
+    rows = tmp_path / "rows.db"
+    copy = row_format_copy(str(study), str(rows), workers=1)
+    assert copy.samples > 0
+    c = sqlite3.connect(rows)
+    assert c.execute("PRAGMA user_version").fetchone() == (2,) and \
+        c.execute("SELECT COUNT(*) FROM samples").fetchone() == (copy.samples,)
+    c.close()
+    frame = samples_frame(rows)
+    assert len(frame) == copy.samples  # the trial windows version 2 kept
+    sid = sessions(study)["P01/experiment"]
+    code, _, err = _run(capsys, "replay", "--db", str(rows), "--session", str(sid))
+    assert code == 2 and "was not recorded whole" in err and err.count("\n") == 1
+    # the same trials, the same numbers
+    code_a, out_a, _ = _run(capsys, "report", "--db", str(study), "--out", str(tmp_path / "ra"))
+    code_b, out_b, _ = _run(capsys, "report", "--db", str(rows), "--out", str(tmp_path / "rb"))
+    assert code_a == code_b == 0
+    a = pd.read_csv(tmp_path / "ra" / "trials.csv")
+    b = pd.read_csv(tmp_path / "rb" / "trials.csv")
+    pd.testing.assert_frame_equal(a.drop(columns="database"), b.drop(columns="database"))

@@ -1,0 +1,174 @@
+"""The whole-session recording: a lossless codec for any value, blocks built as records arrive, written by the
+recorder within its deadline, read back by tick windows."""
+
+from __future__ import annotations
+
+import sqlite3
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
+
+from protocol import recording
+from protocol.recording import (
+    BLOCK_RECORDS, COLUMNS, POSE_COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, read_segment,
+    read_ticks,
+)
+from protocol.storage import Recorder, StudyDatabase
+from test_storage import FakeClock, _session_args
+
+#: Every kind of float64 the loop could hand over, the awkward ones often.
+ANY_FLOAT = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True),
+    st.sampled_from([0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 5e-324, -5e-324, 2.2250738585072014e-308,
+                     1.7976931348623157e308, 1e-320, 0.1, 1 / 3]),
+)
+COUNTS_PER_UNIT = 1_000_000.0  # the Net F/T's counts per N
+
+
+def bits(a: np.ndarray) -> np.ndarray:
+    """Values compared bit for bit (NaN payloads, the sign of zero)."""
+    a = np.ascontiguousarray(a)
+    return a.view(np.int64) if a.dtype == np.float64 else a.astype(np.int64)
+
+
+@st.composite
+def blocks(draw: st.DrawFn) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list]:
+    n = draw(st.integers(0, 40))
+    m = draw(st.integers(0, 6))
+    cols: dict[str, np.ndarray] = {}
+    for c in COLUMNS:
+        if c.codec in ("int", "small"):
+            lo, hi = (-(2**63), 2**63 - 1) if c.codec == "int" else (-(2**40), 2**40)
+            cols[c.name] = draw(hnp.arrays(np.int64, n, elements=st.integers(lo, hi)))
+        elif c.codec == "counts" and draw(st.booleans()):
+            # what the sensor sends (integer counts over counts per unit), now and then something else
+            counts = draw(hnp.arrays(np.int64, n, elements=st.integers(-(2**40), 2**40)))
+            values = counts / COUNTS_PER_UNIT
+            if n and draw(st.booleans()):
+                values[draw(st.integers(0, n - 1))] = draw(ANY_FLOAT)
+            cols[c.name] = values
+        else:
+            cols[c.name] = draw(hnp.arrays(np.float64, n, elements=ANY_FLOAT))
+    poses = {c.name: (draw(hnp.arrays(np.int64, m, elements=st.integers(-(2**62), 2**62))) if c.codec == "int"
+                      else draw(hnp.arrays(np.float64, m, elements=ANY_FLOAT))) for c in POSE_COLUMNS}
+    events = [(draw(st.integers(0, 10**9)), "reset", None) for _ in range(draw(st.integers(0, 2)))]
+    return cols, poses, events
+
+
+@settings(max_examples=150, deadline=None)
+@given(blocks())
+def test_any_block_decodes_to_the_same_bits(block) -> None:
+    cols, poses, events = block
+    blob = encode_block(cols, poses, events, {f"raw_{k}": COUNTS_PER_UNIT for k in ("fx", "fy", "fz", "tx", "ty", "tz")})
+    back, back_poses, back_events = decode_block(blob)
+    for name, values in cols.items():
+        assert np.array_equal(bits(back[name]), bits(values)), name
+    for name, values in poses.items():
+        assert np.array_equal(bits(back_poses[name]), bits(values)), name
+    assert back_events == events
+    # reading some columns only gives the same values
+    part = decode_columns(blob, ["t_ns", "force_n", "raw_fx"])
+    assert all(np.array_equal(bits(part[k]), bits(cols[k])) for k in part)
+    # so does an open block's cheap chunk, alone or after another
+    chunk = recording._encode_fast(cols, poses, events)
+    for blob in (chunk, recording._CHUNKED + b"".join(len(c).to_bytes(4, "little") + c for c in (chunk, chunk))):
+        back, back_poses, back_events = decode_block(blob)
+        k = 2 if blob[:4] == recording._CHUNKED else 1
+        for name, values in cols.items():
+            assert np.array_equal(bits(back[name]), bits(np.tile(values, k))), name
+        for name, values in poses.items():
+            assert np.array_equal(bits(back_poses[name]), bits(np.tile(values, k))), name
+        assert back_events == events * k
+        assert np.array_equal(bits(decode_columns(blob, ["force_n"])["force_n"]), bits(np.tile(cols["force_n"], k)))
+
+
+def test_exact_counts_are_kept_as_counts_and_are_smaller() -> None:
+    rng = np.random.default_rng(0)
+    n = BLOCK_RECORDS
+    counts = rng.integers(-20_000_000, 20_000_000, n)
+
+    def block(raw: np.ndarray) -> bytes:
+        cols = {c.name: np.zeros(n, dtype=np.int64 if c.codec in ("int", "small") else np.float64) for c in COLUMNS}
+        cols["tick"] = np.arange(n)
+        cols["raw_fx"] = raw
+        poses = {c.name: np.empty(0) for c in POSE_COLUMNS}
+        return encode_block(cols, poses, [], {"raw_fx": COUNTS_PER_UNIT})
+
+    exact = block(counts / COUNTS_PER_UNIT)
+    nudged = counts / COUNTS_PER_UNIT
+    nudged[::7] = np.nextafter(nudged[::7], np.inf)  # not counts any more: stored as float64, still exactly
+    kept = block(nudged)
+    assert len(exact) < len(kept)
+    assert np.array_equal(decode_block(kept)[0]["raw_fx"], nudged)
+    assert np.array_equal(decode_block(exact)[0]["raw_fx"], counts / COUNTS_PER_UNIT)
+
+
+def records(first_tick: int, n: int) -> dict[str, np.ndarray]:
+    """Loop records as the runner hands them over (rows_to_columns' output), values from the tick."""
+    tick = np.arange(first_tick, first_tick + n, dtype=np.int64)
+    cols: dict[str, np.ndarray] = {}
+    for c in COLUMNS:
+        cols[c.name] = tick.copy() if c.codec in ("int", "small") else np.sin(tick * 0.001) + tick * 1e-6
+    cols["t_ns"] = tick * 1_000_000
+    return cols
+
+
+@pytest.mark.parametrize("chunk", [1, 37, 999, 1000, 1001, 2500])
+def test_the_builder_cuts_full_blocks_and_keeps_the_rest_open(chunk: int) -> None:
+    builder = BlockBuilder()
+    written: dict[int, bytes] = {}
+    full: set[int] = set()
+    total = 3210
+    for start in range(0, total, chunk):
+        n = min(chunk, total - start)
+        builder.add(records(start, n), [(start, "pose", ((1.0,) * 9, (0.1, 0.2, 0.3), start * 1000))])
+        for number, before, cols, blob in builder.take_full():
+            # a full block is written once (over its partial writes)
+            assert number not in full and before == number * BLOCK_RECORDS and len(cols["tick"]) == BLOCK_RECORDS
+            written[number] = blob
+            full.add(number)
+        part = builder.partial()
+        if part is not None:
+            assert part[0] not in full
+            written[part[0]] = part[3]  # rewritten as it grows, as the recorder does at each commit
+    assert builder.partial() is None  # nothing new since
+    assert sorted(written) == [0, 1, 2, 3]
+    cols = [decode_block(written[k]) for k in sorted(written)]
+    ticks = np.concatenate([c[0]["tick"] for c in cols])
+    assert np.array_equal(ticks, np.arange(total))
+    pose_ticks = np.concatenate([c[1]["tick"] for c in cols])
+    assert np.array_equal(pose_ticks, np.arange(0, total, chunk))  # each pose in the block of its tick
+
+
+def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_only_the_uncommitted(
+        tmp_path: Path) -> None:
+    path = tmp_path / "rec.db"
+    db = StudyDatabase(path)
+    sid = db.create_session(**_session_args())
+    clock = FakeClock()
+    rec = Recorder(db, threaded=False, clock=clock)
+    rec.segment(sid, 0, 0.0, 0, {"framework": {}}, {})
+    # one record per millisecond, handed over in chunks of 10 ms, as the runner does
+    for k in range(0, 1540, 10):
+        clock.now = k / 1000
+        rec.records(sid, 0, records(k, 10))
+    # a crash now (no close, no flush): another connection sees what the commits wrote
+    other = sqlite3.connect(path)
+    try:
+        seg = read_segment(other, sid, 0)
+        stored = len(seg.columns["tick"])
+        assert 1540 - 100 - 10 <= stored < 1540  # at most 100 ms (one commit deadline) of records lost
+        assert np.array_equal(seg.columns["tick"], np.arange(stored))  # and what is there is whole and in order
+        n_blocks = other.execute("SELECT COUNT(*), MAX(n_records) FROM session_blocks").fetchone()
+        assert n_blocks == (2, BLOCK_RECORDS)
+        window = read_ticks(other, sid, 0, 990, 1010, ["t_ns", "force_n"])  # across the blocks' seam
+        assert np.array_equal(window["tick"], np.arange(990, 1011))
+        assert np.array_equal(window["t_ns"], np.arange(990, 1011) * 1_000_000)
+    finally:
+        other.close()
+    rec.close()
+    db.close()
