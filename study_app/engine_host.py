@@ -170,8 +170,8 @@ class _Recording:
 class _Window:
     """Records of the ring collected for a calibration step or the session gate (driver thread).
 
-    ``done(columns)`` gets each column in ``cols`` over exactly ``need`` records, or is not called
-    if ``refuse`` names why the recording was abandoned (published as a refusal of ``command``).
+    ``done(columns)`` gets each column in ``cols`` over exactly ``need`` records; if the recording is
+    abandoned instead (the sensor stalled: published as a refusal of ``command``), ``abandoned()`` is called.
     """
 
     command: str
@@ -181,6 +181,7 @@ class _Window:
     done: Callable[[dict[str, np.ndarray]], None]
     chunks: list[np.ndarray]
     got: int = 0
+    abandoned: Callable[[], None] | None = None
 
 
 def pose_set(name: str) -> list[Mat3]:
@@ -1232,13 +1233,13 @@ class StudyEngine:
                           ("base_fx", "base_fy", "base_fz", "scaled_fx", "scaled_fy", "scaled_fz"), done)
 
     def _open_window(self, command: str, seconds: float, cols: tuple[str, ...],
-                     done: Callable[[dict[str, np.ndarray]], None]) -> None:
+                     done: Callable[[dict[str, np.ndarray]], None], abandoned: Callable[[], None] | None = None) -> None:
         """Collect ``seconds`` of records written after now, then call ``done`` (see :class:`_Window`)."""
         if any(w.command == command for w in self._windows):
             raise RuntimeError(f"{command}: a recording is already running")
         self._drain_ring()
         start = self._last_t_ns + 1 if self.loop.tick_count else 0
-        self._windows.append(_Window(command, int(round(seconds * 1000)), start, cols, done, []))
+        self._windows.append(_Window(command, int(round(seconds * 1000)), start, cols, done, [], abandoned=abandoned))
 
     def _feed_windows(self, rows: np.ndarray) -> None:
         for w in list(self._windows):
@@ -1246,8 +1247,12 @@ class StudyEngine:
             if len(sel):
                 if float(np.max(sel["sensor_age_s"])) > POSE_MAX_SENSOR_AGE_S:
                     self._windows.remove(w)
-                    self.publish(m.CommandRefused(w.command, "the force sensor stalled while recording (check the "
-                                                  "Devices tab) — record again"))
+                    again = ("measuring the force at rest (check the Devices tab) — press Start again"
+                             if w.command in ("StartSession", "ResumeSession")
+                             else "recording (check the Devices tab) — record again")
+                    self.publish(m.CommandRefused(w.command, f"the force sensor stalled while {again}"))
+                    if w.abandoned is not None:
+                        w.abandoned()
                     continue
                 w.chunks.append(np.stack([sel[c] for c in w.cols], axis=1))
                 w.got += len(sel)
@@ -1300,8 +1305,11 @@ class StudyEngine:
             self._gate_passed = cmd
             self.handle(cmd)
 
+        def abandoned() -> None:
+            self._starting = None  # the measurement was abandoned: Start may be pressed again
+
         try:
-            self._open_window(type(cmd).__name__, REST_CHECK_S, ("comp_fx", "comp_fy", "comp_fz"), done)
+            self._open_window(type(cmd).__name__, REST_CHECK_S, ("comp_fx", "comp_fy", "comp_fz"), done, abandoned)
         except RuntimeError:
             self._starting = None
             raise

@@ -79,7 +79,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
                     shared_ring=False)
     try:
         e.start()
-        ready = events[0]
+        ready = next(ev for ev in events if isinstance(ev, m.EngineReady))  # (a busy machine: a fault may come first)
         assert isinstance(ready, m.EngineReady) and ready.rig == "real" and ready.driver == "participant"
         assert math.isnan(ready.surface_z_m)
         assert ready.devices == [f"F/T sensor: Net F/T at 127.0.0.1:{netft.udp_port}",
@@ -147,9 +147,22 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         status = [ev for ev in events if isinstance(ev, m.CalibrationStatus)][-1]
         assert [(n, ok) for n, ok, _ in status.steps] == [("TCP", False), ("payload", True), ("frames", False)]
         # the experimenter overrides, with a reason: the session starts and the reason is stored with it
-        e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1,
-                                override_reason="rehearsal of the session flow, nobody holds the stylus"))
-        wait_for(e, lambda: "OPERATOR_STOP" in e.health().waiting)
+        start = m.StartSession(db, "R01", "experiment", short_protocol, 1, 1,
+                               override_reason="rehearsal of the session flow, nobody holds the stylus")
+        e.handle(start)
+        stalled: list[object] = []
+
+        def waiting_for_reset() -> bool:
+            # on a busy machine the fake sensor's thread may stall during the 2 s rest check: the start is refused
+            # in one line and the experimenter presses Start again
+            refused = [ev for ev in events if isinstance(ev, m.CommandRefused) and ev.command == "StartSession"
+                       and ev.message.startswith("the force sensor stalled while measuring the force at rest")]
+            if len(refused) > len(stalled):
+                stalled.append(refused[-1])
+                e.handle(start)
+            return "OPERATOR_STOP" in e.health().waiting
+
+        wait_for(e, waiting_for_reset, timeout_s=30.0)
         assert e.health().waiting.startswith("fault latched (")
         assert not any(isinstance(ev, m.TrialStarted) for ev in events)
         e.handle(m.ResetFaults())

@@ -163,3 +163,27 @@ def test_nothing_on_record_is_refused_in_one_line_and_an_override_does_not_waive
         f"real rig: the compensated force at rest is {weight:.3f} N over 2 s (limit 0.1 N)")
     assert refused.message.endswith("; an override does not waive this check")
     assert not Path(db).exists()
+
+
+def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_again(engine, tmp_path,
+                                                                                        short_protocol) -> None:
+    e, events, netft, rtde = engine
+    put(rtde, TOOL_DOWN, PIVOT)
+    netft.counts = counts(TOOL_DOWN)
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
+    start = m.StartSession(str(tmp_path / "real.db"), "R01", "experiment", short_protocol, 1, 1,
+                           override_reason="rehearsal")
+    n = len(events)
+    e.handle(start)
+    assert isinstance(events[n], m.StartChecking)
+    netft.streaming.clear()  # the box stops streaming during the 2 s measurement
+    try:
+        (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    finally:
+        netft.streaming.set()
+    assert refused.message == ("the force sensor stalled while measuring the force at rest (check the Devices tab) "
+                               "— press Start again")
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and r["sensor_age_s"] < 0.002)
+    n = len(events)
+    e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
+    assert isinstance(events[n], m.StartChecking), events[n:]
