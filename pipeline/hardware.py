@@ -211,18 +211,13 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
         if "port" not in j:
             raise f.fail("jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
-        stylus = {}
-        for fld, default in (("close_button", 1), ("open_button", 2)):
-            stylus[fld] = f.choice(f"jaw.{fld}", j.get(fld, default), (1, 2),
-                                   "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
-        if stylus["close_button"] == stylus["open_button"]:
-            raise f.fail("jaw.open_button", stylus["open_button"], "must differ from jaw.close_button")
+        close_button, open_button = _two_buttons(f, "jaw", j, "close_button", "open_button")
         jaw = JawSettings(
             f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
             f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
                      "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
             f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
-            stylus["close_button"], stylus["open_button"],
+            close_button, open_button,
         )
 
     fr = f.table("frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
@@ -252,6 +247,16 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
 
 
+def _two_buttons(f: Fields, table: str, t: dict[str, Any], first: str, second: str) -> tuple[int, int]:
+    """Two of the Touch's stylus buttons, ``first`` (default 1) and ``second`` (default 2), which must differ."""
+    a, b = (f.choice(f"{table}.{fld}", t.get(fld, default), (1, 2),
+                     "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
+            for fld, default in ((first, 1), (second, 2)))
+    if a == b:
+        raise f.fail(f"{table}.{second}", b, f"must differ from {table}.{first}")
+    return a, b
+
+
 def _teleop(f: Fields, v: Any) -> TeleopSettings:
     t = f.table("teleop", v, {
         "workspace_min_m", "workspace_max_m", "max_speed_m_s", "motion_scale", "deadman_button", "clutch_button",
@@ -267,17 +272,12 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
         if not lo[i] < hi[i]:
             raise f.fail("teleop.workspace_max_m", t["workspace_max_m"],
                          f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
-    buttons = {}
-    for fld, default in (("deadman_button", 1), ("clutch_button", 2)):
-        buttons[fld] = f.choice(f"teleop.{fld}", t.get(fld, default), (1, 2),
-                                "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
-    if buttons["deadman_button"] == buttons["clutch_button"]:
-        raise f.fail("teleop.clutch_button", buttons["clutch_button"], "must differ from teleop.deadman_button")
+    deadman, clutch = _two_buttons(f, "teleop", t, "deadman_button", "clutch_button")
     return TeleopSettings(
         workspace_min_m=lo, workspace_max_m=hi,
         max_speed_m_s=f.number("teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), lo=0.0, hi=0.25),
         motion_scale=f.number("teleop.motion_scale", t.get("motion_scale", 1.0), lo=0.0, hi=10.0),
-        deadman_button=buttons["deadman_button"], clutch_button=buttons["clutch_button"],
+        deadman_button=deadman, clutch_button=clutch,
         stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
         pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
         max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0, hi=0.2),

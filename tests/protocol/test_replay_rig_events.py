@@ -32,18 +32,14 @@ from pipeline.engine import SimEngine
 from pipeline.replay import ReplayInputs, replay
 from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import TouchSpec
-from protocol.config import default_protocol
 from protocol.recording import SegmentData, read_segment, segments_of
 from protocol.study import run_study
+from test_faults_in_the_record import rows, short_protocol
+from test_recording import bits
 
 MS = 1_000_000
 #: A Touch whose motors warm within a trial at the study's forces (continuous rating 0.3 N, budget 1 N²·s).
 HOT_TOUCH = TouchSpec(continuous_force_n=0.3, thermal_budget_n2s=1.0)
-
-
-def short_protocol():  # type: ignore[no-untyped-def]
-    p = default_protocol()
-    return dataclasses.replace(p, trials_per_cell=1, training=dataclasses.replace(p.training, enabled=False))
 
 
 def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSpec | None,
@@ -69,10 +65,6 @@ def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSp
         c.close()
 
 
-def bits(a: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
-
-
 def assert_bit_identical(seg: SegmentData, inputs: ReplayInputs | None = None) -> None:
     out = replay(inputs or seg.replay_inputs())
     for axis in ("fx", "fy", "fz"):
@@ -84,14 +76,6 @@ def assert_bit_identical(seg: SegmentData, inputs: ReplayInputs | None = None) -
 def without(seg: SegmentData, kind: str) -> ReplayInputs:
     """The segment's replay inputs with the log entries of one kind left out."""
     return dataclasses.replace(seg.replay_inputs(), events=[e for e in seg.log() if e[1] != kind])
-
-
-def rows(db: Path, sql: str) -> list[tuple]:
-    c = sqlite3.connect(db)
-    try:
-        return c.execute(sql).fetchall()
-    finally:
-        c.close()
 
 
 def test_a_session_with_thermal_derating_replays_bit_for_bit(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
