@@ -158,6 +158,32 @@ def test_resume_continues_an_interrupted_session(tmp_path, short_protocol):
     rows = db_rows(db, "SELECT trial_index, outcome FROM trials ORDER BY trial_index")
     assert [r[0] for r in rows] == [0, 1, 2] and rows[0][1] == "aborted" and rows[2][1] != "aborted"
     assert db_rows(db, "SELECT COUNT(*) FROM events WHERE kind = 'calibration'") == [(1,)]
+    _assert_replays_bit_for_bit(db, 1, runs=2)
+
+
+def _assert_replays_bit_for_bit(db: str, session_id: int, runs: int) -> None:
+    """Each recorded run of the session, through the pipeline again, renders exactly what the GUI's engine did."""
+    import numpy as np
+
+    from pipeline.replay import replay
+    from protocol.recording import read_segment, segments_of
+    from protocol.storage import connect_readonly
+
+    c = connect_readonly(db)
+    try:
+        segments = [read_segment(c, session_id, seg) for seg, _, _ in segments_of(c, session_id)]
+    finally:
+        c.close()
+    assert len(segments) == runs
+    peak_n = 0.0
+    for s in segments:
+        out = replay(s.replay_inputs())
+        for axis in ("fx", "fy", "fz"):
+            assert np.array_equal(out.column(f"render_{axis}"), s.columns[f"render_{axis}"])
+        assert np.array_equal(out.force_n, s.columns["force_n"])
+        peak_n = max(peak_n, float(np.hypot(np.hypot(s.columns["render_fx"], s.columns["render_fy"]),
+                                            s.columns["render_fz"]).max()))
+    assert peak_n > 0.05  # feedback was rendered: the comparison means something
 
 
 def test_engine_process_exits_cleanly_when_the_gui_goes_away(tmp_path, short_protocol):
