@@ -207,9 +207,10 @@ COLUMNS: tuple[Column, ...] = (
     # -- what was delivered: aborted trials and the loop's health per trial ----------------------------
     Column("outcome", "success, timeout, or aborted (not counted; see abort_cause)", type="text",
            files=("loop_health.csv",)),
-    Column("abort_cause", "why an aborted trial did not count: experimenter, fault (a watchdog fault latched), "
-           "feedback (haptics not as designed), gap (loop records missing) or interrupted (the program ended); "
-           "empty for a counted trial or when not recorded (schema version 1)", type="text", label="abort cause"),
+    Column("abort_cause", "why an aborted trial did not count: experimenter, fault (a watchdog fault latched, "
+           "LOOP_STALLED included), feedback (haptics not as designed, thermal derating included), gap (loop "
+           "records missing) or interrupted (the program ended); empty for a counted trial or when not recorded "
+           "(schema version 1)", type="text", label="abort cause"),
     Column("period_p50_ms", "median haptic-loop tick period over the trial's samples", "ms",
            label="period p50 (ms)", decimals=3),
     Column("period_p99_ms", "99th percentile of the tick period (per participant: the largest over the trials)",

@@ -343,7 +343,7 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
 SAMPLES_FRAME_COLUMNS = (
     "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
-    "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
+    "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
 )
 
 
@@ -367,7 +367,8 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
         One row per record, columns :data:`SAMPLES_FRAME_COLUMNS`: the session and its
         recording's segment and loop tick, the session-clock time, the trial (numbered from 1;
         empty between trials) and the time since its cue, the trial phase code, the task force
-        and the raw, rendered and gain values, the feedback switch and latched faults, the stylus
+        and the raw, rendered and gain values, the fraction of the designed force the haptic
+        device's thermal derating let through (1: not cut), the feedback switch and latched faults, the stylus
         position and the sensor and pose ages and the latency (ms).  Sorted by session and time.
 
     Raises
@@ -418,7 +419,7 @@ def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
                 "trial_number": pd.Series(trial + 1, dtype="Int64").mask(trial < 0),
                 "t_since_cue_s": since, "phase": c["phase"],
                 **{k: c[k] for k in ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-                                     "render_fx", "render_fy", "render_fz", "gain")},
+                                     "render_fx", "render_fy", "render_fz", "gain", "derate")},
                 "haptic_on": c["haptic_on"].astype(bool), "faults": c["faults"],
                 **{k: c[k] for k in ("stylus_x_m", "stylus_y_m", "stylus_z_m")},
                 "sensor_age_ms": c["sensor_age_ns"] / 1e6, "pose_age_ms": c["pose_age_ns"] / 1e6,

@@ -49,8 +49,8 @@ LOOP_BOUNDS: tuple[LoopBound, ...] = (
 #: How each abort cause reads in the report.
 ABORT_CAUSE_TEXT: dict[str, str] = {
     "experimenter": "aborted by the experimenter",
-    "fault": "a fault latched (sensor, pose, device)",
-    "feedback": "feedback not as designed",
+    "fault": "a fault latched (sensor, pose, haptic device, or the loop itself stalled)",
+    "feedback": "feedback not as designed (switch, gain, or the device's thermal derating)",
     "gap": "loop records missing",
     "interrupted": "the program ended during the trial",
     "": "cause not recorded (schema version 1)",

@@ -12,6 +12,7 @@ Timestamps ``t_ns`` are on the loop's clock (:mod:`pipeline.clock`).
 
 from __future__ import annotations
 
+import math
 from enum import IntFlag
 from typing import NamedTuple, Protocol, runtime_checkable
 
@@ -43,6 +44,7 @@ class Fault(IntFlag):
     HAPTIC_DEVICE = 32  # the haptic device reported an error (e.g. warm motors)
     OPERATOR_STOP = 64  # the experimenter pressed stop
     ENGINE_DETACHED = 128  # the controlling process went away
+    LOOP_STALLED = 256  # the loop thread died or ticked too late (the device's command watchdog zeroed it)
 
     def describe(self) -> str:
         """Human-readable list of the set flags, e.g. ``"SENSOR_STALE|NON_FINITE"``."""
@@ -85,12 +87,19 @@ class PoseSample(NamedTuple):
 
 
 class HapticState(NamedTuple):
-    """Haptic stylus state: position in the device frame (m), buttons bitmask, error code (0 = ok)."""
+    """Haptic stylus state: position in the device frame (m), buttons bitmask, error code (0 = ok).
+
+    ``force_limit_n`` is the force the device may render now (its peak, lowered by thermal derating;
+    infinite if the device does not say) and ``heat_fraction`` its motor heat as a fraction of the
+    thermal budget (:mod:`pipeline.touch_output`).
+    """
 
     t_ns: int
     position_m: Vec3
     buttons: int = 0
     error_code: int = 0
+    force_limit_n: float = math.inf
+    heat_fraction: float = 0.0
 
 
 @runtime_checkable
@@ -138,8 +147,17 @@ class HapticDevice(Protocol):
         """Force the device sustains indefinitely without overheating, N."""
         ...
 
-    def command_force(self, fx: float, fy: float, fz: float) -> None:
-        """Set the force to render from now on, N, device frame."""
+    def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
+        """Set the force to render, N, device frame.
+
+        Rendered only while fresh: a command as old as the device's command
+        timeout (:data:`pipeline.touch_output.DEFAULT_COMMAND_TIMEOUT_S`, 10 ms)
+        renders as zero, in the device's own servo thread, so a loop that dies
+        or freezes cannot leave a force on the hand.  ``t_ns`` is when the
+        command was computed, on the device's clock (the loop's: the loop passes
+        its tick time, so a tick that froze half-way cannot revive an old force);
+        None: now.
+        """
         ...
 
     def read_state(self) -> HapticState:

@@ -168,7 +168,11 @@ def build_sim_engine(
 
 @dataclass
 class HardwareEngine:
-    """The real rig, force path and loop (in-process); ``rig`` is a :class:`pipeline.hardware.RealRig`."""
+    """The real rig, force path and loop (in-process); ``rig`` is a :class:`pipeline.hardware.RealRig`.
+
+    ``calibration_file`` is the rig's calibration file (:mod:`pipeline.rig_calibration`) and
+    ``tool`` the mounted instrument whose record is in use.
+    """
 
     rig: Any
     framework: HapticFramework
@@ -176,6 +180,8 @@ class HardwareEngine:
     clock: Clock
     calibration: PayloadCalibration
     ring: RingBuffer | None
+    calibration_file: Any = None
+    tool: str = "instrument"
 
 
 def build_hardware_engine(
@@ -189,27 +195,35 @@ def build_hardware_engine(
 ) -> HardwareEngine:
     """Open the real rig of a :class:`pipeline.hardware.HardwareConfig` and assemble framework and loop.
 
-    The payload calibration comes from the file the hardware config names
-    (``[calibration] file``, written by ``PayloadCalibration.to_dict``); without
-    one, compensation is off and only the online bias refinement runs.
+    What is on record for the mounted tool (``[calibration] tool``) in the calibration file
+    (:class:`pipeline.rig_calibration.RigCalibrationFile`) is put to use: its payload calibration
+    compensates, and online bias refinement runs on top of it; its TCP calibration moves the robot's
+    poses to the calibrated tip.  Without a payload on record there is no compensation and no bias
+    refinement -- an "online bias only" start cannot work (its contact gate sees the tool's weight as
+    contact), and a session on the real rig is refused until the payload step is done.
     Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
     called before each device is opened (see :func:`pipeline.hardware.build_real_rig`).
-    """
-    import json
 
+    Raises
+    ------
+    pipeline.rig_calibration.CalibrationFileError
+        The calibration file cannot be read (before any device is opened).
+    """
     from pipeline.hardware import build_real_rig
+    from pipeline.rig_calibration import RigCalibrationFile
 
     clk: Clock = clock or MonotonicClock()
-    calibration = NO_PAYLOAD
-    if hardware.calibration_file is not None:
-        with open(hardware.calibration_file, encoding="utf-8") as fh:
-            calibration = PayloadCalibration.from_dict(json.load(fh))
-    rig = build_real_rig(hardware, clk, on_open=on_open)
-    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
+    cal_file = RigCalibrationFile.load(hardware.calibration_file) if hardware.calibration_file else None
+    record = cal_file.tool(hardware.calibration_tool) if cal_file is not None else None
+    payload = record.payload if record is not None else None
+    tip = record.tcp.tip_in_flange_m if record is not None and record.tcp is not None else None
+    rig = build_real_rig(hardware, clk, on_open=on_open, tip_in_flange_m=tip)
+    calibration = payload if payload is not None else NO_PAYLOAD
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm) if payload is not None else None
     framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
     ring = RingBuffer.create(RECORD_FIELDS, int(ring_seconds * 1000), shared=shared_ring)
     loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
-    return HardwareEngine(rig, framework, loop, clk, calibration, ring)
+    return HardwareEngine(rig, framework, loop, clk, calibration, ring, cal_file, hardware.calibration_tool)
 
 
 # -- the engine process -----------------------------------------------------------------------
@@ -228,8 +242,8 @@ def _build_for_process(config: EngineConfig, events: Any) -> SimEngine | Hardwar
         )
     except (HardwareError, DeviceError) as exc:
         events.put(("error", str(exc)))
-    except (OSError, ValueError, KeyError) as exc:  # the calibration file named by the hardware file
-        events.put(("error", f"{config.hardware_file}: calibration file: {exc}"))
+    except ValueError as exc:  # the calibration file (CalibrationFileError names it)
+        events.put(("error", str(exc)))
     return None
 
 

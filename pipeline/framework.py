@@ -160,8 +160,12 @@ class HapticFramework:
         g = self.safety
         f = self.filter
         self._hot_head: tuple[Any, ...] = (f, f.window, float(f.window), *f._buf, *self._rts)
-        self._hot_tail: tuple[Any, ...] = (*self._rhb, self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe)
+        self._hot_tail: tuple[Any, ...] = self._tail()
         self.set_pose(IDENTITY)
+
+    def _tail(self) -> tuple[Any, ...]:
+        g = self.safety
+        return (*self._rhb, self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe)
 
     def set_pose(self, rot_base_tip: Mat3) -> None:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
@@ -205,6 +209,18 @@ class HapticFramework:
             self.rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
         self.set_pose(self._rbt)
 
+    def set_device_limit(self, device_limit_n: float) -> SafetyGovernor:
+        """Clamp to the haptic device's current (derated) force limit as well (:meth:`SafetyGovernor.set_device_limit`).
+
+        Rebuilds the per-tick tuple (its clamp-free bound depends on the limit); returns the safety stage.
+        """
+        g = self.safety
+        g.set_device_limit(device_limit_n)
+        self._ft_safe = _clamp_free_bound(g)
+        self._hot_tail = self._tail()
+        self._update_offsets()
+        return g
+
     def refine_bias(self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
         """Feed one out-of-contact raw wrench to the online bias estimator, if any.
 
@@ -243,6 +259,9 @@ class HapticFramework:
             "rls": None if self.rls is None else self.rls.state(),
             "filter": self.filter.state(),
             "safety": self.safety.state(),
+            # the haptic device's derated force limit as the loop last passed it on (None: none given or not
+            # finite); the raw value, so a replay with another f_max clamps as that f_max would have
+            "device_limit_n": lim if math.isfinite(lim := self.safety.device_limit_n) else None,
             "rot_base_tip": list(self._rbt),
         }
 
@@ -270,6 +289,9 @@ class HapticFramework:
         fw._bias = tuple(float(v) for v in snap["bias"])
         if cfg.filter_window == stored.filter_window:
             fw.filter.load_state(snap["filter"])
+        device_limit = snap.get("device_limit_n")  # (absent in snapshots from before thermal derating)
+        if device_limit is not None:
+            fw.set_device_limit(float(device_limit))  # before the safety state: the state was clamped by it already
         fw.safety.load_state(snap["safety"])
         fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]
         return fw

@@ -22,8 +22,8 @@ from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
 from pipeline.frames import Vec3
-from pipeline.sim.touch import TouchSpec
 from pipeline.tomlfields import Fields, read_toml
+from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 
 __all__ = [
     "HardwareConfig",
@@ -40,6 +40,8 @@ __all__ = [
 ]
 
 ROBOT_MODES = ("observe", "teleop")
+#: The calibration file when ``[calibration] file`` is not given (next to the hardware file).
+DEFAULT_CALIBRATION_FILE = "calibration.json"
 
 
 class HardwareError(ValueError):
@@ -95,15 +97,19 @@ class HapticSettings:
     """3D Systems Touch."""
 
     device_name: str = "Default Device"
+    #: A command this old renders as zero, in the Touch's own servo thread (the device-side watchdog).
+    command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
 
 
 @dataclass(frozen=True, slots=True)
 class JawSettings:
-    """Jaw actuator Arduino."""
+    """Jaw actuator Arduino, and the Touch's stylus buttons that drive it (when teleoperation does not claim them)."""
 
     port: str
     baud: int = 115200
     ready_timeout_s: float = 3.0
+    close_button: int = 1
+    open_button: int = 2
 
 
 @dataclass(frozen=True, slots=True)
@@ -115,9 +121,12 @@ class HardwareConfig:
     haptic: HapticSettings
     jaw: JawSettings | None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by default.
     calibration_file: str | None = None
     source: str = "hardware"
     teleop: TeleopSettings | None = None
+    #: The instrument mounted now: its record in the calibration file is the one in use.
+    calibration_tool: str = "instrument"
 
 
 # -- validation ------------------------------------------------------------------------------
@@ -188,20 +197,27 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    h = f.table("haptic", top["haptic"], {"device_name"})
-    haptic = HapticSettings(f.string("haptic.device_name", h.get("device_name", "Default Device"),
-                                     what="a non-empty string (the OpenHaptics device name)"))
+    h = f.table("haptic", top["haptic"], {"device_name", "command_timeout_s"})
+    haptic = HapticSettings(
+        f.string("haptic.device_name", h.get("device_name", "Default Device"),
+                 what="a non-empty string (the OpenHaptics device name)"),
+        # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
+        f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S), lo=0.002, hi=0.05,
+                 lo_open=False, note="s (a force command this old renders as zero)"),
+    )
 
     jaw = None
     if "jaw" in top:
-        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s"})
+        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
         if "port" not in j:
             raise f.fail("jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
+        close_button, open_button = _two_buttons(f, "jaw", j, "close_button", "open_button")
         jaw = JawSettings(
             f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
             f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
                      "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
             f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
+            close_button, open_button,
         )
 
     fr = f.table("frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
@@ -213,19 +229,32 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     # setting the device silently ignores (and the paper's scaling law would no longer hold)
     peak_n = TouchSpec().peak_force_n
     framework = FrameworkConfig(
-        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=0.0, hi=peak_n,
+        # from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there
+        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=1e-6, hi=peak_n, lo_open=False,
                          note="(N; the 3D Systems Touch's peak force)"),
         f_scale_n=f.number("framework.f_scale_n", fw.get("f_scale_n", 7.0), lo=0.0, hi=1000.0),
         filter_window=f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,
                                 what="a whole number of samples"),
         rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
     )
-    cal = f.table("calibration", top.get("calibration", {}), {"file"})
+    cal = f.table("calibration", top.get("calibration", {}), {"file", "tool"})
     cal_file = cal.get("file")
     if cal_file is not None:
-        cal_file = f.string("calibration.file", cal_file, what="the path of a payload calibration JSON file")
+        cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
+    tool = f.string("calibration.tool", cal.get("tool", "instrument"),
+                    what="a non-empty name of the mounted instrument (its calibration is kept under it)")
     teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
-    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop)
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
+
+
+def _two_buttons(f: Fields, table: str, t: dict[str, Any], first: str, second: str) -> tuple[int, int]:
+    """Two of the Touch's stylus buttons, ``first`` (default 1) and ``second`` (default 2), which must differ."""
+    a, b = (f.choice(f"{table}.{fld}", t.get(fld, default), (1, 2),
+                     "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
+            for fld, default in ((first, 1), (second, 2)))
+    if a == b:
+        raise f.fail(f"{table}.{second}", b, f"must differ from {table}.{first}")
+    return a, b
 
 
 def _teleop(f: Fields, v: Any) -> TeleopSettings:
@@ -243,17 +272,12 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
         if not lo[i] < hi[i]:
             raise f.fail("teleop.workspace_max_m", t["workspace_max_m"],
                          f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
-    buttons = {}
-    for fld, default in (("deadman_button", 1), ("clutch_button", 2)):
-        buttons[fld] = f.choice(f"teleop.{fld}", t.get(fld, default), (1, 2),
-                                "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
-    if buttons["deadman_button"] == buttons["clutch_button"]:
-        raise f.fail("teleop.clutch_button", buttons["clutch_button"], "must differ from teleop.deadman_button")
+    deadman, clutch = _two_buttons(f, "teleop", t, "deadman_button", "clutch_button")
     return TeleopSettings(
         workspace_min_m=lo, workspace_max_m=hi,
         max_speed_m_s=f.number("teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), lo=0.0, hi=0.25),
         motion_scale=f.number("teleop.motion_scale", t.get("motion_scale", 1.0), lo=0.0, hi=10.0),
-        deadman_button=buttons["deadman_button"], clutch_button=buttons["clutch_button"],
+        deadman_button=deadman, clutch_button=clutch,
         stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
         pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
         max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0, hi=0.2),
@@ -271,10 +295,9 @@ def load_hardware(path: str | Path) -> HardwareConfig:
     src = str(p)
     data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
     hw = hardware_from_dict(data, src)
-    if hw.calibration_file is not None and not Path(hw.calibration_file).is_absolute():
-        # a relative calibration path is relative to the hardware file, not to the working directory
-        hw = replace(hw, calibration_file=str(p.parent / hw.calibration_file))
-    return hw
+    # a relative calibration path is relative to the hardware file, not to the working directory
+    cal = Path(hw.calibration_file if hw.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
+    return replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
 
 
 # -- the real rig ----------------------------------------------------------------------------
@@ -290,11 +313,19 @@ class RealRig:
         self.jaw = jaw
         #: A :class:`pipeline.teleop.TeleopDriver` when the app owns the robot (``robot.mode = "teleop"``).
         self.teleop = teleop
+        #: Called with (now_ns, the stylus buttons) every tick: :meth:`pipeline.jaw_control.JawController.buttons`.
+        self.on_buttons: Callable[[int, int], None] | None = None
 
     def advance(self, now_ns: int) -> None:
-        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends)."""
+        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends).
+
+        The stylus buttons go to the jaw's controller (no I/O either: it queues).
+        """
         if self.teleop is not None:
             self.teleop.update(now_ns)
+        hook = self.on_buttons
+        if hook is not None:
+            hook(now_ns, self.haptic.read_state().buttons)
 
     def true_contact_force(self) -> None:
         """No ground truth on hardware."""
@@ -341,11 +372,18 @@ def open_sensor(cfg: SensorSettings, clock: Clock) -> ForceSensor:
     )
 
 
-def open_robot(cfg: RobotSettings, clock: Clock) -> Robot:
-    """Connect to the UR controller described by ``cfg`` (read only)."""
+def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = None) -> Robot:
+    """Connect to the UR controller described by ``cfg`` (read only).
+
+    With ``tip_in_flange_m`` (a TCP calibration on record) the poses are moved from the pendant's TCP
+    (``robot.tcp_offset_m``) to the calibrated tip.
+    """
     from pipeline.backends.ur import UrRtdeRobot
 
-    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s)
+    corr = (0.0, 0.0, 0.0) if tip_in_flange_m is None else tuple(
+        t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m))
+    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s,
+                       tcp_correction_m=corr)  # type: ignore[arg-type]
 
 
 def open_servo(
@@ -385,7 +423,7 @@ def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
     """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
     from pipeline.backends.touch import TouchHapticDevice
 
-    return TouchHapticDevice(cfg.device_name, clock=clock)
+    return TouchHapticDevice(cfg.device_name, clock=clock, command_timeout_s=cfg.command_timeout_s)
 
 
 def open_jaw(cfg: JawSettings) -> JawActuator:
@@ -402,6 +440,7 @@ def build_real_rig(
     with_jaw: bool = True,
     on_open: Callable[[str], None] | None = None,
     control_factory: Callable[[str, float], Any] | None = None,
+    tip_in_flange_m: Vec3 | None = None,
 ) -> RealRig:
     """Open every configured device into a :class:`RealRig`.
 
@@ -423,6 +462,8 @@ def build_real_rig(
     control_factory
         Teleop mode only: replaces ur_rtde's ``RTDEControlInterface``
         constructor (``factory(host, frequency_hz)``); None uses ur_rtde.
+    tip_in_flange_m
+        The calibrated tip (a TCP calibration on record): the robot's poses are reported there.
 
     Raises
     ------
@@ -433,7 +474,7 @@ def build_real_rig(
     opened: list[Any] = []
     steps: list[tuple[str, Any]] = [
         ("force sensor", lambda: open_sensor(config.sensor, clk)),
-        ("robot", lambda: open_robot(config.robot, clk)),
+        ("robot", lambda: open_robot(config.robot, clk, tip_in_flange_m)),
         ("haptic device", lambda: open_haptic(config.haptic, clk)),
     ]
     if with_jaw and config.jaw is not None:

@@ -21,6 +21,22 @@ that have gone away.  Whenever the latched set changes the rig's optional
 ``on_faults`` hook is called (a teleoperated robot stops; see :class:`Rig`).
 Every latch (with the value that tripped it), every condition that goes away
 while latched, and every reset is a :class:`LoopEvent` for the record.
+
+**When the loop itself fails.**  The haptic device renders a command only
+while it is fresh (its own watchdog, :mod:`pipeline.touch_output`): a loop
+that dies or freezes leaves no force on the hand.  A tick that comes later
+than the device's command timeout restarts the output from zero (no kick
+back to the old force); one later than ``WatchdogConfig.loop_stall_s`` (50 ms)
+latches ``LOOP_STALLED``.  The zero command at the end of :meth:`HapticLoop.ramp_down`
+is issued whatever went wrong before it, and a loop thread that dies keeps
+its exception in :attr:`HapticLoop.crash` for whoever watches it
+(:class:`pipeline.supervisor.LoopSupervisor`).
+
+**Thermal derating.**  The device reports the force it may render now
+(``HapticState.force_limit_n``, lowered as its motors warm); the loop clamps
+the safety stage to it and records, per tick, the fraction of the designed
+(scaled) force it could render (``derate``, 1 when not limited), which the
+session runner checks.  Derating starting and ending are events.
 """
 
 from __future__ import annotations
@@ -36,6 +52,7 @@ from pipeline.clock import Clock, prepare_realtime_thread
 from pipeline.devices import Fault, ForceSensor, HapticDevice, HapticState, PoseSample, Robot, WrenchSample
 from pipeline.frames import Vec3
 from pipeline.framework import STEP_FIELDS, HapticFramework
+from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S
 
 __all__ = [
     "AllowBiasRefinement",
@@ -47,6 +64,7 @@ __all__ = [
     "Mark",
     "OperatorStop",
     "RECORD_FIELDS",
+    "LatchFault",
     "ResetFaults",
     "Rig",
     "SetCalibration",
@@ -67,7 +85,7 @@ RECORD_FIELDS: tuple[str, ...] = (
     "tip_x_m", "tip_y_m", "tip_z_m",
     "stylus_x_m", "stylus_y_m", "stylus_z_m",
     "true_fx", "true_fy", "true_fz",
-    "period_s", "latency_s",
+    "period_s", "latency_s", "derate",
 )
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
@@ -138,6 +156,16 @@ class ControllerDetached:
 
 
 @dataclass(frozen=True, slots=True)
+class LatchFault:
+    """Latch ``fault`` from outside the loop (its supervisor saw it stall); the event was already reported.
+
+    The output restarts from zero: the device's command watchdog has dropped it.
+    """
+
+    fault: int
+
+
+@dataclass(frozen=True, slots=True)
 class AllowBiasRefinement:
     """Allow (between trials, tool in free space) or forbid online bias refinement."""
 
@@ -159,8 +187,12 @@ class StartRecording:
     logged as ``(tick, "snapshot", {"token": token, "framework": ..., "refine_bias": ...})``;
     from then on every pose the framework takes (``"pose"``: rotation, position,
     pose time), every change of the bias-refinement permission (``"refine"``), every
-    framework reset (``"reset"``) and calibration (``"calibration"``) is logged with
-    its tick, in the order the loop applied them (:mod:`pipeline.replay`).
+    framework reset (``"reset"``) and calibration (``"calibration"``), every change
+    of the haptic device's force limit passed on to the safety stage
+    (``"device_limit"``: the device's limit, N; thermal derating) and every time
+    the output is dropped to zero outside the framework's step (``"zero"``: why --
+    ``"late_tick"``, ``"latch_fault"`` or ``"fail_safe"``) is logged with its
+    tick, in the order the loop applied them (:mod:`pipeline.replay`).
     """
 
     token: int
@@ -172,7 +204,7 @@ class StopRecording:
 
 
 Command = (SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
-           | StartRecording | StopRecording)
+           | LatchFault | StartRecording | StopRecording)
 
 
 class LoopEvent(NamedTuple):
@@ -180,9 +212,13 @@ class LoopEvent(NamedTuple):
 
     ``kind`` is ``"fault"`` (a fault latched; ``detail`` names it and the value
     that tripped it), ``"fault_cleared"`` (a latched fault's condition went
-    away; it stays latched until a reset) or ``"faults_reset"`` (a reset:
+    away; it stays latched until a reset), ``"faults_reset"`` (a reset:
     ``faults`` is what is still latched after it, ``detail`` what was latched
-    before).  ``t_ns`` is on the records' time axis (``t_ns`` of the tick's
+    before), ``"derating"`` / ``"derating_ended"`` (the haptic device's motors
+    got warm and it lowered its force limit / it cooled and renders its full
+    peak again) or ``"output_restarted"`` (a tick came later than the
+    device's command watchdog: the device had dropped the force, and the
+    output ramps in again from zero).  ``t_ns`` is on the records' time axis (``t_ns`` of the tick's
     record: ns since the loop's first tick).
     """
 
@@ -199,9 +235,12 @@ class WatchdogConfig:
     sensor_max_age_s: float = 0.005
     pose_max_age_s: float = 0.050
     saturation_fraction: float = 0.8
+    #: No tick for longer than this latches ``LOOP_STALLED`` (the loop's own check on its next tick, and
+    #: :class:`pipeline.supervisor.LoopSupervisor` while it lasts).
+    loop_stall_s: float = 0.050
 
     def __post_init__(self) -> None:
-        for name in ("sensor_max_age_s", "pose_max_age_s", "saturation_fraction"):
+        for name in ("sensor_max_age_s", "pose_max_age_s", "saturation_fraction", "loop_stall_s"):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ValueError(f"watchdog.{name} = {v!r}: must be a finite number > 0")
@@ -338,6 +377,17 @@ class HapticLoop:
         # optional rig hooks (see Rig); resolved once so the tick pays nothing for them
         self._rig_on_faults: Callable[[Fault], None] | None = getattr(rig, "on_faults", None)
         self._rig_stop_motion: Callable[[str], None] | None = getattr(rig, "stop_motion", None)
+        #: The loop thread's exception if it died (``repr``), else "".
+        self.crash = ""
+        self._stall_ns = int(self.watchdog.loop_stall_s * 1e9)
+        timeout_s = getattr(rig.haptic, "command_timeout_s", None)
+        #: The device drops a command older than this (its own watchdog); a later tick restarts from zero.
+        self.command_timeout_ns = int((timeout_s if timeout_s is not None else DEFAULT_COMMAND_TIMEOUT_S) * 1e9)
+        self._resync = True  # the next tick's period is not a stall (first tick, or after a ramp-down)
+        self._peak_n = float(rig.haptic.peak_force_n)
+        self._device_limit_n = math.inf  # the device's derated force limit as last seen
+        self._derating = False
+        self._derate_check = False  # the thermal limit is below the safety stage's own: measure what it cuts
 
     # -- control (any thread) ----------------------------------------------------------------
     def submit(self, command: Command) -> None:
@@ -368,6 +418,9 @@ class HapticLoop:
         inbox = self._inbox
         while inbox:
             self._apply(inbox.popleft(), now)
+        if period > self.command_timeout_ns and not self._resync:
+            self._late_tick(now, period)
+        self._resync = False
         if self._snapshot_due is not None:
             self._take_snapshot()
 
@@ -407,6 +460,8 @@ class HapticLoop:
                 cond |= Fault.NON_FINITE
         if hs.error_code:
             cond |= Fault.HAPTIC_DEVICE
+        if hs[4] != self._device_limit_n:  # force_limit_n: the device derates (rare; a compare per tick otherwise)
+            self._device_limit(now, hs)
         prev = self.active_faults
         self.active_faults = cond
         latched = self.faults
@@ -429,8 +484,19 @@ class HapticLoop:
         if self.refine_bias and not latched:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
 
-        out = fw.step(fx, fy, fz, self.haptic_on and not latched, dt_s)
-        rig.haptic.command_force(out[18], out[19], out[20])
+        enabled = self.haptic_on and not latched
+        out = fw.step(fx, fy, fz, enabled, dt_s)
+        # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
+        rig.haptic.command_force(out[18], out[19], out[20], now)
+        derate = 1.0
+        if self._derate_check and enabled:
+            # the fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
+            # through; only while the thermal limit is below the safety stage's own
+            want = _HYPOT(out[15], out[16], out[17])
+            lim = fw.safety.limit_n
+            if want > lim:
+                designed = want if want < fw.safety.static_limit_n else fw.safety.static_limit_n
+                derate = lim / designed
         # from the sample's arrival to the command's hand-over, on the loop's clock (on a virtual clock
         # computing takes no time: it is the sample's age)
         latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
@@ -445,12 +511,52 @@ class HapticLoop:
             sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
             pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],
-            dt_s, latency_s,
+            dt_s, latency_s, derate,
         )
         self._last_record = rec
         if self.ring is not None:
             self.ring.write(rec)  # type: ignore[attr-defined]
         self.tick_count += 1
+
+    def _late_tick(self, now: int, period: int) -> None:
+        """This tick came after the device's command watchdog dropped the force: restart from zero; latch a stall."""
+        self.framework.safety.force_zero()  # the device renders zero now: ramp in from there, never jump back
+        if self.recording:
+            self.replay_log.append((self.tick_count, "zero", "late_tick"))
+        ms, t = period * 1e-6, now - self.t0_ns
+        if period > self._stall_ns:
+            if not self.faults & Fault.LOOP_STALLED:
+                self._latch(Fault.LOOP_STALLED, now)
+                self._emit(LoopEvent(t, "fault", self.faults,
+                                     f"LOOP_STALLED: no loop tick for {ms:.1f} ms (limit "
+                                     f"{self.watchdog.loop_stall_s * 1e3:g} ms); the haptic device's command watchdog "
+                                     f"had dropped the force to zero after {self.command_timeout_ns * 1e-6:g} ms"))
+        else:
+            self._emit(LoopEvent(t, "output_restarted", self.faults,
+                                 f"no loop tick for {ms:.1f} ms: the haptic device's command watchdog "
+                                 f"({self.command_timeout_ns * 1e-6:g} ms) had dropped the force to zero; "
+                                 "feedback ramps in again from zero"))
+
+    def _device_limit(self, now: int, hs: HapticState) -> None:
+        """The device changed the force it may render (thermal derating): clamp to it; report derating."""
+        lim = float(hs[4])
+        self._device_limit_n = lim
+        safety = self.framework.set_device_limit(lim)
+        if self.recording:
+            self.replay_log.append((self.tick_count, "device_limit", lim))
+        self._derate_check = safety.limit_n < safety.static_limit_n
+        frac = float(hs[5])
+        t = now - self.t0_ns
+        if not self._derating and lim < self._peak_n:
+            self._derating = True
+            self._emit(LoopEvent(t, "derating", self.faults,
+                                 f"haptic device motors warm ({frac:.0%} of the thermal budget): force limited to "
+                                 f"{lim:.2f} N, falling toward the continuous rating as they heat"))
+        elif self._derating and lim >= self._peak_n:
+            self._derating = False
+            self._emit(LoopEvent(t, "derating_ended", self.faults,
+                                 f"haptic device motors cooled ({frac:.0%} of the thermal budget): full "
+                                 f"{lim:.2f} N again"))
 
     def _fault_detail(
         self, new: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age_ns: int, pose_age_ns: int,
@@ -515,6 +621,11 @@ class HapticLoop:
             self._latch(Fault.ENGINE_DETACHED, now)
             self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
                                  "ENGINE_DETACHED: the controlling process went away"))
+        elif isinstance(cmd, LatchFault):
+            self.framework.safety.force_zero()
+            if self.recording:
+                self.replay_log.append((self.tick_count, "zero", "latch_fault"))
+            self._latch(Fault(cmd.fault), now)
         elif isinstance(cmd, AllowBiasRefinement):
             if self.recording and bool(cmd.allowed) != self.refine_bias:
                 self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
@@ -536,6 +647,39 @@ class HapticLoop:
         self.replay_log.append((self.tick_count, "snapshot", {
             "token": token, "framework": self.framework.snapshot(), "refine_bias": self.refine_bias,
         }))
+
+    def fail_safe(self, detail: str, *, thread_dead: bool) -> LoopEvent:
+        """The loop has stopped ticking: latch ``LOOP_STALLED``, report it, and zero the device from this thread.
+
+        Called by whoever watches the loop (:class:`pipeline.supervisor.LoopSupervisor`), not by the loop.
+        The event goes through the same path as the loop's own (:attr:`on_event`), on the records' time
+        axis just after the last tick.  With ``thread_dead`` (nothing else touches the loop any more) the
+        fault is latched here and the rig told (a teleoperated robot stops now, before its own 50 ms
+        watchdog); a loop that is only frozen latches it itself, through a :class:`LatchFault` command,
+        when it ticks again.  The device's own watchdog has zeroed its output already; the zero command
+        here is a second line.
+        """
+        last = self._last_ns
+        t = 0 if last is None else last - self.t0_ns + self.period_ns
+        if thread_dead:
+            new = not self.faults & Fault.LOOP_STALLED
+            self.faults = int(self.faults | Fault.LOOP_STALLED)
+            self.haptic_on = False
+            self.framework.safety.force_zero()
+            if self.recording:  # before the next tick, should the loop ever tick again
+                self.replay_log.append((self.tick_count, "zero", "fail_safe"))
+            if new:
+                self._faults_changed(t + self.t0_ns)
+        else:
+            self.submit(LatchFault(Fault.LOOP_STALLED))
+        ev = LoopEvent(t, "fault", int(self.faults | Fault.LOOP_STALLED), f"LOOP_STALLED: {detail}")
+        self._emit(ev)
+        try:
+            self.rig.haptic.command_force(0.0, 0.0, 0.0)
+        except Exception as exc:  # noqa: BLE001 - the device's own watchdog zeroes it anyway; say so
+            self._emit(LoopEvent(t, "fault", ev.faults, f"the haptic device refused the zero command ({exc!r}); "
+                                 "its command watchdog drops the force"))
+        return ev
 
     def _latch(self, fault: Fault, now: int) -> None:
         if not self.faults & fault:
@@ -625,27 +769,32 @@ class HapticLoop:
         with a ``stop_motion`` hook is told to stop its robot before the ramp.
         """
         clock = self.clock
-        inbox = self._inbox
-        while inbox:
-            self._apply(inbox.popleft(), clock.now_ns())
-        self.haptic_on = False
-        if self._rig_stop_motion is not None:
-            # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
-            try:
-                self._rig_stop_motion("haptic loop stopped")
-            except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
-                self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
-                                     f"the rig could not stop the robot: {exc!r}"))
-        # ramp ticks continue the period grid: the next slot after the last tick, not one later
-        last = self._last_ns
-        deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)
-        for _ in range(max_ticks):
-            if self.framework.safety.gain == 0.0:
-                break
-            clock.sleep_until(deadline)
-            self.tick()
-            deadline += self.period_ns
-        self.rig.haptic.command_force(0.0, 0.0, 0.0)
+        try:
+            inbox = self._inbox
+            while inbox:
+                self._apply(inbox.popleft(), clock.now_ns())
+            self.haptic_on = False
+            if self._rig_stop_motion is not None:
+                # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
+                try:
+                    self._rig_stop_motion("haptic loop stopped")
+                except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
+                    self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
+                                         f"the rig could not stop the robot: {exc!r}"))
+            # ramp ticks continue the period grid: the next slot after the last tick, not one later
+            last = self._last_ns
+            deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)
+            for _ in range(max_ticks):
+                if self.framework.safety.gain == 0.0:
+                    break
+                clock.sleep_until(deadline)
+                self.tick()
+                deadline += self.period_ns
+        finally:
+            # whatever failed above (a tick raising, a device gone), the last command is zero -- and should even
+            # this fail, the device's command watchdog drops the force within its timeout
+            self._resync = True
+            self.rig.haptic.command_force(0.0, 0.0, 0.0)
 
     def start(self) -> None:
         """Run the loop in its own thread (real-time use)."""
@@ -655,10 +804,22 @@ class HapticLoop:
 
         def _target() -> None:
             self.scheduling = prepare_realtime_thread()
-            self.run(self._stop)
+            try:
+                self.run(self._stop)
+            except BaseException as exc:  # noqa: BLE001 - kept for the supervisor, which reports and stores it
+                first = exc.__context__  # the exception the ramp-down was handling when this one struck
+                why = repr(exc)
+                self.crash = why + (f" while handling {first!r}" if first is not None and repr(first) != why else "")
 
+        self.crash = ""
         self._thread = threading.Thread(target=_target, name="haptic-loop", daemon=True)
         self._thread.start()
+
+    @property
+    def thread_alive(self) -> bool | None:
+        """Whether the loop thread runs: None if it was never started (or was stopped)."""
+        t = self._thread
+        return None if t is None else t.is_alive()
 
     def stop(self, timeout_s: float = 2.0) -> None:
         """Stop the thread (it ramps the force to zero first) and wait for it."""

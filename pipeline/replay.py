@@ -4,9 +4,14 @@ The loop records, at 1 kHz, what it fed the framework (the raw F/T wrench, the
 tick period, whether feedback was on and which faults were latched) and logs
 everything else that changed the framework's state (:class:`pipeline.loop.StartRecording`):
 the snapshot it started from, every pose it took, every change of the
-bias-refinement permission, every reset and calibration.  :func:`replay`
-applies them in the loop's own order -- commands, then the pose, then bias
-refinement, then :meth:`pipeline.framework.HapticFramework.step` -- so with the
+bias-refinement permission, every reset and calibration, and what the rig
+did to the safety stage outside the step: every change of the haptic
+device's (thermally derated) force limit and every drop of the output to
+zero (a tick later than the device's command watchdog, a fault latched from
+outside the loop, the fail-safe of a dead loop).  :func:`replay` applies them
+in the loop's own order -- commands and drops to zero, then the pose and the
+device limit, then bias refinement, then
+:meth:`pipeline.framework.HapticFramework.step` -- so with the
 recorded configuration it reproduces the rendered force bit for bit, and with
 another (a longer filter window, another f_scale or f_max) it answers what the
 participant would have felt.  It is the live code path, not a model of it.
@@ -127,6 +132,10 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
                     fw.reset()
                 elif kind == "calibration":
                     fw.set_calibration(PayloadCalibration.from_dict(payload))  # type: ignore[arg-type]
+                elif kind == "device_limit":
+                    fw.set_device_limit(float(payload))  # type: ignore[arg-type]
+                elif kind == "zero":
+                    safety.force_zero()
         fx, fy, fz, tx, ty, tz = raw[k]
         if refine and not latched[k]:
             refine_bias(fx, fy, fz, tx, ty, tz)

@@ -78,15 +78,19 @@ class SafetyGovernor:
         ``min(config.f_max_n, device_peak_n)``.
     """
 
-    __slots__ = ("config", "limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
+    __slots__ = ("config", "limit_n", "static_limit_n", "device_limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
 
     def __init__(self, config: SafetyConfig, device_peak_n: float) -> None:
         if not (isinstance(device_peak_n, (int, float)) and 1e-6 <= device_peak_n <= 1e3):
             raise ValueError(f"device_peak_n = {device_peak_n!r}: must be a number from 1e-06 to 1000 N")
         self.config = config
-        self.limit_n = min(config.f_max_n, float(device_peak_n))
-        self._lim_inner = self.limit_n * (1.0 - 1e-12)
-        self._lim2 = self._lim_inner * self._lim_inner
+        #: ``min(f_max, device peak)``: the clamp when the device is not derating.
+        self.static_limit_n = min(config.f_max_n, float(device_peak_n))
+        #: The clamp now: :attr:`static_limit_n`, or the device's derated limit when that is lower.
+        self.limit_n = self.static_limit_n
+        #: The device's force limit as last given to :meth:`set_device_limit` (inf: none given), N.
+        self.device_limit_n = math.inf
+        self._set_clamp(self.limit_n)
         self._up = 1.0 / config.ramp_in_s
         self._down = 1.0 / config.fault_ramp_s
         self._slew = config.slew_n_per_s
@@ -94,6 +98,27 @@ class SafetyGovernor:
         self._sx = self._sy = self._sz = 0.0
         #: Current ramp factor in [0, 1] (0 = output off).
         self.gain = 0.0
+
+    def _set_clamp(self, limit_n: float) -> None:
+        self.limit_n = limit_n
+        self._lim_inner = limit_n * (1.0 - 1e-12)
+        self._lim2 = self._lim_inner * self._lim_inner
+
+    def set_device_limit(self, device_limit_n: float) -> None:
+        """The device's current force limit (its thermal derating), N: the clamp becomes the lower of it and the static one.
+
+        A non-finite or non-positive limit leaves the static clamp (a device that does not say); the
+        slew-limited state is clamped at once, so the next output is already within the new limit.
+        """
+        self.device_limit_n = float(device_limit_n)
+        lim = self.static_limit_n
+        if math.isfinite(device_limit_n) and 0.0 < device_limit_n < lim:
+            lim = float(device_limit_n)
+        self._set_clamp(lim)
+        sx, sy, sz = self._sx, self._sy, self._sz
+        if sx * sx + sy * sy + sz * sz > self._lim2:
+            k = self._lim_inner / _HYPOT(sx, sy, sz)
+            self._sx, self._sy, self._sz = sx * k, sy * k, sz * k
 
     def step(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> Vec3:
         """Return the force to send to the device this tick.

@@ -45,7 +45,7 @@ import numpy.typing as npt
 from pipeline.replay import ReplayInputs
 
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
     "decode_columns", "encode_block", "join_blocks", "marked_records", "read_segment", "read_ticks",
     "rows_to_columns", "segments_of",
 ]
@@ -66,16 +66,19 @@ class Column:
     ``codec``: ``"int"`` (differences of int64), ``"small"`` (int32, plain), ``"float"`` (float64,
     byte-shuffled), ``"smooth"`` (float64, differences of the bit patterns), ``"counts"`` (raw
     sensor values: integer counts when exact, else ``"float"``).  ``scale_ns`` turns a
-    seconds column of the loop record into integer ns.
+    seconds column of the loop record into integer ns.  ``missing``: the value of every
+    record in a block written before the column was added (None: every block has it).
     """
 
     name: str
     source: str
     codec: str
     scale_ns: bool = False
+    missing: float | None = None
 
 
-#: What a block keeps of each record, in order.
+#: What a block keeps of each record, in order.  A column added later goes at the end, with its ``missing`` value:
+#: a block or chunk written before it then reads as the columns before it plus that value.
 COLUMNS: tuple[Column, ...] = (
     Column("tick", "tick", "int"),
     Column("t_ns", "t_ns", "int"),
@@ -95,13 +98,21 @@ COLUMNS: tuple[Column, ...] = (
     Column("force_n", "force_n", "float"),
     Column("stylus_x_m", "stylus_x_m", "smooth"), Column("stylus_y_m", "stylus_y_m", "smooth"),
     Column("stylus_z_m", "stylus_z_m", "smooth"),
+    # the fraction of the designed force the haptic device's thermal derating let through (1: not cut);
+    # recordings from before derating have none, and nothing was cut then
+    Column("derate", "derate", "float", missing=1.0),
 )
+#: Columns a block may lack (written before they were added), with the value each of its records had.
+_MISSING = {c.name: c.missing for c in COLUMNS if c.missing is not None}
 #: The pose log's columns (one row per pose the framework took, at the robot's 125 Hz).
 POSE_COLUMNS: tuple[Column, ...] = (
     Column("tick", "", "int"), Column("pose_t_ns", "", "int"),
     *(Column(f"r{i}", "", "smooth") for i in range(9)),
     Column("x_m", "", "smooth"), Column("y_m", "", "smooth"), Column("z_m", "", "smooth"),
 )
+#: The device-limit log's columns (one row per change of the haptic device's force limit: while it derates,
+#: every tick), kept like the poses rather than as events (a few bytes a change instead of ~40).
+LIMIT_COLUMNS: tuple[Column, ...] = (Column("tick", "", "int"), Column("limit_n", "", "smooth"))
 _INT_CODECS = ("int", "small")
 
 
@@ -187,12 +198,24 @@ def encode_block(
     """A block: the records' columns (:data:`COLUMNS`), the poses taken meanwhile, the other log entries.
 
     ``scales``: counts per unit of the raw wrench columns (``raw_fx`` … ``raw_tz``), when known.
+    The log's ``"device_limit"`` entries are kept as columns (:data:`LIMIT_COLUMNS`, only in a block
+    that has any); :func:`decode_block` returns them among the events again.
     """
     n = len(columns["tick"])
     m = len(poses["tick"]) if poses else 0
+    limits = [e for e in events if e[1] == "device_limit"]
+    if limits:
+        events = [e for e in events if e[1] != "device_limit"]
     header: dict[str, Any] = {"n": n, "m": m, "columns": [], "poses": [], "events": [list(e) for e in events]}
+    sections = [(COLUMNS, columns, "columns", n), (POSE_COLUMNS, poses, "poses", m)]
+    if limits:
+        header["k"] = len(limits)
+        header["limits"] = []
+        sections.append((LIMIT_COLUMNS, {"tick": np.array([e[0] for e in limits], dtype=np.int64),
+                                         "limit_n": np.array([e[2] for e in limits], dtype=np.float64)},
+                         "limits", len(limits)))
     parts: list[bytes] = []
-    for specs, data, key, count in ((COLUMNS, columns, "columns", n), (POSE_COLUMNS, poses, "poses", m)):
+    for specs, data, key, count in sections:
         for c in specs:
             values = np.asarray(data[c.name]) if count else np.empty(0)
             entry, payload = _encode(values, c.codec, (scales or {}).get(c.name))
@@ -220,13 +243,19 @@ def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarr
     (hlen,) = struct.unpack_from("<I", blob, 4)
     header = json.loads(blob[8 : 8 + hlen])
     pos = 8 + hlen
-    out: list[dict[str, np.ndarray]] = [{}, {}]
-    for key, count, target in (("columns", header["n"], out[0]), ("poses", header["m"], out[1])):
-        for entry in header[key]:
+    out: list[dict[str, np.ndarray]] = [{}, {}, {}]
+    for key, count, target in (("columns", header["n"], out[0]), ("poses", header["m"], out[1]),
+                               ("limits", header.get("k", 0), out[2])):
+        for entry in header.get(key, ()):
             size = entry["bytes"]
             target[entry["name"]] = _decode(entry, blob[pos : pos + size], count)
             pos += size
+    _fill_missing(out[0], _MISSING.keys(), header["n"])
     events = [(int(t), str(k), p) for t, k, p in header["events"]]
+    if out[2]:
+        # back among the events, after a tick's others (a stable sort; the device limit commutes with them)
+        events += [(t, "device_limit", v) for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist())]
+        events.sort(key=lambda e: e[0])
     return out[0], out[1], events
 
 
@@ -268,9 +297,11 @@ def _decode_fast(blob: bytes, names: Iterable[str] | None,
     header = json.loads(blob[8 : 8 + hlen])
     raw = zlib.decompress(blob[8 + hlen :])
     n, m, dtypes = header["n"], header["m"], header["dtypes"]
-    split = n * 8 * len(COLUMNS)
-    cols = dict(zip((c.name for c in COLUMNS), _unstack8(raw[:split], dtypes[: len(COLUMNS)], n)))
-    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[len(COLUMNS) :], m)))
+    k = len(dtypes) - len(POSE_COLUMNS)  # the columns of the code that wrote it: a prefix of ours (appended since)
+    split = n * 8 * k
+    cols = dict(zip((c.name for c in COLUMNS[:k]), _unstack8(raw[:split], dtypes[:k], n)))
+    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[k:], m)))
+    _fill_missing(cols, _MISSING.keys(), n)
     if names is not None:
         cols = {k: v for k, v in cols.items() if k in set(names)}
     return cols, poses, [(int(t), str(k), p) for t, k, p in header["events"]]
@@ -443,7 +474,12 @@ class SegmentData:
         return bool(len(t) == 0 or np.all(np.diff(t) == 1))
 
     def log(self) -> list[tuple[int, str, Any]]:
-        """The replay log (poses and events merged in tick order, poses last within a tick, as the loop logs them)."""
+        """The replay log: poses and events merged in tick order, poses last within a tick.
+
+        The loop logs a tick's commands and drops to zero before its pose, and its device limit after
+        it; a pose and a device limit commute (:meth:`pipeline.framework.HapticFramework.set_pose` and
+        ``set_device_limit`` change disjoint state), so this order replays as the loop ran.
+        """
         merged = [(t, 0, i, k, p) for i, (t, k, p) in enumerate(self.events)]
         p = self.poses
         for i in range(len(p["tick"])):
@@ -471,6 +507,13 @@ def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str
 
 
 # -- reading ------------------------------------------------------------------------------------------
+def _fill_missing(columns: dict[str, np.ndarray], names: Iterable[str], n: int) -> None:
+    """Columns a block written before they were added lacks: every record's value then (:attr:`Column.missing`)."""
+    for name in names:
+        if name not in columns:
+            columns[name] = np.full(n, _MISSING[name], dtype=np.float64)
+
+
 def decode_columns(blob: bytes, names: Iterable[str]) -> dict[str, np.ndarray]:
     """Only some columns of a block (the others are skipped, not decompressed)."""
     names = list(names)
@@ -494,6 +537,7 @@ def decode_columns(blob: bytes, names: Iterable[str]) -> dict[str, np.ndarray]:
         if entry["name"] in wanted:
             out[entry["name"]] = _decode(entry, blob[pos : pos + size], header["n"])
         pos += size
+    _fill_missing(out, wanted & _MISSING.keys(), header["n"])
     missing = wanted - out.keys()
     if missing:
         raise ValueError(f"the block has no column {sorted(missing)[0]!r}")

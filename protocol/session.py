@@ -27,7 +27,9 @@ brackets) at the first one where
 * the loop's watchdog has a fault latched (``fault``);
 * feedback was not what the design says: the loop's haptics flag differs from
   the trial's mode, the feedback gain is below 1 in a haptics-ON trial after
-  its ramp-in, or above 0 in a haptics-OFF trial (``feedback``);
+  its ramp-in, or above 0 in a haptics-OFF trial, or the haptic device's
+  thermal derating cut the rendered force below the designed one in a
+  haptics-ON trial (the record's ``derate`` < 1) (``feedback``);
 * records are missing: two consecutive records further apart than the
   watchdog's sensor-age limit, or records the runner could not read (``gap``).
 
@@ -42,7 +44,9 @@ still latched ``fault_timeout_s`` (10 s) later the session stops as
 Each trial row also carries the loop's health over the trial's records
 (:data:`protocol.storage.HEALTH_COLUMNS`): tick period p50/p99/max, ticks over
 2 ms, the oldest F/T sample and robot pose used, and the latency from a
-sample's arrival to the force command it produced (p50/max).
+sample's arrival to the force command it produced (p50/max).  An aborted
+trial's records end with the one that aborted it (a stalled tick's period, a
+stale sample's age are in its health).
 
 **The whole session is recorded** (:mod:`protocol.recording`): the runner asks
 the loop for a snapshot of the framework (:class:`pipeline.loop.StartRecording`)
@@ -55,6 +59,7 @@ row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -493,6 +498,15 @@ class SessionRunner:
                 found.append((int(marked[k]), 2, "feedback",
                               f"feedback: gain {gain[k]:.3f} below 1 after the {lim.feedback_ramp_in_s:g} s ramp-in "
                               "of a haptics-ON trial"))
+            derate = rows["derate"][marked]
+            cut = np.flatnonzero(derate < 1.0)
+            if len(cut):
+                k = int(cut[0])
+                # rounded down: a cut to 99.996 % must not read "100 %"
+                pct = math.floor(float(derate[k]) * 1e4) / 1e2
+                found.append((int(marked[k]), 2, "feedback",
+                              f"feedback: the haptic device's thermal derating rendered {pct:.2f} % of the "
+                              "designed force in a haptics-ON trial"))
         else:
             high = np.flatnonzero((gain > 0.0) & (rel > int(round((lim.feedback_ramp_out_s + lim.grace_s) * 1e9))))
             if len(high):

@@ -219,6 +219,10 @@ def build_parser() -> argparse.ArgumentParser:
     bg.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
 
+    from study_app.calibrate_cmds import add_calibrate_command
+
+    add_calibrate_command(sub, add_command, _SEED)
+
     g = add_command(sub, "gui", "the experimenter's window (simulated rig by default)",
                     "haptic-study gui --db study.db\n"
                     "haptic-study gui --rig real --hardware hardware.toml --db study.db\n"
@@ -230,6 +234,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--hardware", default=None, metavar="FILE", help="hardware.toml for --rig real")
     g.add_argument("--screenshot", default=None, metavar="DIR",
                    help="drive a short simulated session offscreen and save PNGs of every main view into DIR")
+    g.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
+                   metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
+                                       "telling the pipeline (rehearse the wizard's frame check failing)")
     return p
 
 
@@ -290,6 +297,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command in ("probe", "check-hardware"):
             return _cmd_hardware(args)
+        if args.command == "calibrate":
+            from study_app.calibrate_cmds import cmd_calibrate
+
+            return cmd_calibrate(args, CliError)
     except CliError as exc:
         print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
         return 2
@@ -430,6 +441,8 @@ def _cmd_gui(args: argparse.Namespace) -> int:
             raise CliError(str(exc)) from None
     if args.screenshot is not None and args.rig != "sim":
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
+    if args.sim_mount_error_deg and args.rig != "sim":
+        raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
     if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")):
         # without this Qt aborts the process with a core dump and a page of plugin names
         raise CliError(
@@ -443,7 +456,8 @@ def _cmd_gui(args: argparse.Namespace) -> int:
         # a rehearsal on the virtual clock at 4x real time: a few trials in seconds
         host = HostConfig(rig="sim", clock="virtual", speed=4.0)
     else:
-        host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real")
+        host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
+                          sim_mount_error_deg=args.sim_mount_error_deg)
     try:
         return run_gui(host, db_path=args.db, screenshot_dir=args.screenshot)
     except RuntimeError as exc:

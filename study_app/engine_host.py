@@ -52,6 +52,11 @@ from pipeline.loop import ControllerDetached, LoopEvent, SetCalibration
 from pipeline.loop import OperatorStop as LoopOperatorStop
 from pipeline.loop import ResetFaults as LoopResetFaults
 from pipeline.sim.hand import HandObservation
+from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
+from pipeline.jaw_control import JawController
+from pipeline.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
+from pipeline.supervisor import LoopSupervisor
+from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolError, load_protocol
 from protocol.participant import SimulatedParticipant
@@ -83,6 +88,12 @@ POSE_STILL_DEG = 0.5
 POSE_STILL_M = 0.002
 #: ... or if a force sample older than this was averaged (the sensor stalled).
 POSE_MAX_SENSOR_AGE_S = 0.05
+#: Real rig: a session starts only if the compensated force at rest, averaged over this long, is below the next.
+REST_CHECK_S = 2.0
+REST_MAX_FORCE_N = 0.1
+#: Real rig, TCP pivot step: a recorded orientation is refused if the TCP moved more than this while averaging.
+PIVOT_STILL_M = 0.0002
+PIVOT_STILL_DEG = 0.2
 #: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
 QUIET_OFFSET_NS = 150_000
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
@@ -135,13 +146,8 @@ def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[Hardwar
         hardware_module.open_haptic = _import_factory(config.haptic_factory)  # type: ignore[assignment]
     try:
         eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0)
-    except DeviceError as exc:
+    except (DeviceError, CalibrationFileError) as exc:
         raise RuntimeError(f"real rig: {exc}") from None
-    except (OSError, ValueError, KeyError) as exc:
-        if hw.calibration_file is None:
-            raise
-        raise RuntimeError(f"real rig: {hw.source}: calibration.file = {hw.calibration_file!r}: cannot be read as a "
-                           f"payload calibration ({exc})") from None
     finally:
         hardware_module.open_haptic = original
     return eng, hw, text
@@ -158,6 +164,24 @@ class _Recording:
     target: Mat3 | None
     chunks: list[np.ndarray]
     got: int = 0
+
+
+@dataclass
+class _Window:
+    """Records of the ring collected for a calibration step or the session gate (driver thread).
+
+    ``done(columns)`` gets each column in ``cols`` over exactly ``need`` records; if the recording is
+    abandoned instead (the sensor stalled: published as a refusal of ``command``), ``abandoned()`` is called.
+    """
+
+    command: str
+    need: int
+    start_ns: int
+    cols: tuple[str, ...]
+    done: Callable[[dict[str, np.ndarray]], None]
+    chunks: list[np.ndarray]
+    got: int = 0
+    abandoned: Callable[[], None] | None = None
 
 
 def pose_set(name: str) -> list[Mat3]:
@@ -205,6 +229,9 @@ class HostConfig:
     trace_jitter
         Real clock only: explain every loop period over 1.5 ms (:mod:`pipeline.jitter_trace`),
         reported in :attr:`study_app.messages.Health.late_periods` (diagnosis and benchmarks).
+    sim_mount_error_deg
+        Simulated rig: the sensor is mounted turned about its z axis by this much, unknown to the pipeline
+        (``SimRigConfig.sensor_z_mount_deg``): rehearse the frame check failing.
     """
 
     rig: str = "sim"
@@ -216,6 +243,7 @@ class HostConfig:
     block_ticks: int = 50
     health_period_s: float = 0.5
     trace_jitter: bool = False
+    sim_mount_error_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -361,7 +389,8 @@ class StudyEngine:
             self.eng, self.hardware, self.hardware_text = build_real_engine(config, shared_ring=shared_ring)
         else:
             self.eng = build_sim_engine(
-                EngineConfig(sim=SimRigConfig(seed=config.rig_seed), clock=config.clock, calibrate=True, driver="hold",
+                EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
+                             clock=config.clock, calibrate=True, driver="hold",
                              haptics_on=False, refine_bias=True, ring_seconds=30.0),
                 shared_ring=shared_ring,
             )
@@ -396,6 +425,19 @@ class StudyEngine:
         self._last_t_ns = 0
         self._stats_from_tick = 0
         self.closed = False
+        #: Watches the loop thread and its tick counter (real clock; the virtual clock runs the loop in step()).
+        self.supervisor = LoopSupervisor(self.loop)
+        #: Why the haptic loop died ("" while it runs): nothing that needs the loop can be done any more.
+        self.loop_dead = ""
+        #: What is on record for the mounted tool (real rig: from the calibration file; simulated: this run's).
+        self.tool_cal = self._tool_record()
+        self._windows: list[_Window] = []
+        self._frame_axes: dict[str, AxisCheck] = {}
+        self._gate_passed: object | None = None  # a start whose rest check passed: let it through once
+        self._starting: object | None = None  # a start waiting for its rest check
+        self._override: tuple[str, str, float] | None = None  # (what was missing, the reason, force at rest N)
+        #: The instrument's jaw (the simulated one, or the Arduino of the hardware file); None: there is none.
+        self.jaw = self._make_jaw()
 
     # -- lifetime -------------------------------------------------------------------------------
     def start(self) -> None:
@@ -416,6 +458,10 @@ class StudyEngine:
             rot_tip_sensor=tuple(float(x) for x in rot_tip_sensor),
             devices=self._device_summary(),
         ))
+        self._publish_calibration_status()
+        if self.jaw is not None:
+            self.jaw.start()
+            self._publish_jaw("")
 
     @property
     def driver_name(self) -> str:
@@ -450,10 +496,12 @@ class StudyEngine:
             self._end_session("interrupted", reason)
         if self.config.clock == "real":
             self.loop.stop(timeout_s=5.0)
-        else:
+        elif not self.loop_dead:
             self.loop.ramp_down()
         if self.tracer is not None:
             self.tracer.close()
+        if self.jaw is not None:
+            self.jaw.close()
         self._drain_ring()
         try:
             self.eng.rig.close()
@@ -476,19 +524,60 @@ class StudyEngine:
     # -- the driver thread's work ---------------------------------------------------------------------
     def step(self, *, throttle: bool = True) -> None:
         """Advance: run a block of ticks (virtual clock), feed new records to the runner, publish health."""
+        if self.loop_dead:
+            return
         if self.config.clock == "virtual":
             n = self.config.block_ticks
-            self.loop.run_ticks(n)
+            try:
+                self.loop.run_ticks(n)
+            except Exception as exc:  # noqa: BLE001 - the loop died in this thread: make safe, report, store
+                self.loop.fail_safe(f"the haptic loop died ({exc!r}); the haptic device's command watchdog dropped "
+                                    "the force to zero", thread_dead=True)
+                self._loop_died(repr(exc))
+                return
             self._ticks_run += n
             if throttle and self.config.speed > 0:
                 self._throttle()
+        elif self.supervisor.check() is not None:
+            if self.supervisor.dead:
+                self._loop_died(self.supervisor.dead)
+                return
+            self._store_loop_events()  # frozen: no records come, but its event must reach the record now
         self._drain_ring()
+        if self.jaw is not None and self.jaw.events:
+            self._drain_jaw()
         now = time.monotonic()
         if now - self._last_health >= self.config.health_period_s:
             self._last_health = now
             if self.tracer is not None:
                 self.tracer.refresh()
             self.publish(self.health())
+
+    def _store_loop_events(self) -> None:
+        """Hand the pending loop events to the session runner without records (the loop writes none)."""
+        runner = self.runner
+        if runner is not None and self._loop_events:
+            runner.process(np.empty(0), [self._loop_events.popleft() for _ in range(len(self._loop_events))])
+
+    def _loop_died(self, why: str) -> None:
+        """The haptic loop is dead (its fault is latched and reported): store it, leave the session resumable."""
+        self.loop_dead = why
+        self._drain_ring()  # the records it wrote before it died
+        self._store_loop_events()
+        runner = self.runner
+        if runner is not None and not runner.done:
+            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the application and "
+                      "resume it")
+            assert self.recorder is not None
+            self.recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "session_interrupted",
+                                reason)
+            self._end_session("interrupted", reason)
+        self.publish(self.health())
+
+    def _require_loop(self, what: str) -> None:
+        if self.loop_dead:
+            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); close and restart the application "
+                               "(an interrupted session can be resumed)")
 
     def quiet_wait_s(self, interval_s: float) -> float:
         """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
@@ -537,6 +626,8 @@ class StudyEngine:
         self._last_t_ns = int(rows["t_ns"][-1])
         if self._recording is not None:
             self._feed_recording(rows)
+        if self._windows:
+            self._feed_windows(rows)
         runner = self.runner
         # the loop's events and replay log after its records: every entry of a tick whose record was read is in
         events = [self._loop_events.popleft() for _ in range(len(self._loop_events))]
@@ -565,6 +656,7 @@ class StudyEngine:
             abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
             late_periods=None if self.tracer is None else self.tracer.summary(),
             waiting=runner.state.waiting if runner is not None and not runner.done else "",
+            **self._health_extra(),
         )
 
     def _on_loop_event(self, ev: LoopEvent) -> None:
@@ -615,6 +707,7 @@ class StudyEngine:
                     raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
                 runner.abort_session(cmd.reason)
         elif isinstance(cmd, m.ResetFaults):
+            self._require_loop("reset faults")
             self.loop.submit(LoopResetFaults())
         elif isinstance(cmd, m.InjectFault):
             self._inject_fault(cmd)
@@ -629,6 +722,20 @@ class StudyEngine:
             self._record_pose(cmd)
         elif isinstance(cmd, m.IdentifyPoses):
             self._identify(cmd)
+        elif isinstance(cmd, m.CalibrateTcp):
+            self._calibrate_tcp(cmd.pose_set)
+        elif isinstance(cmd, m.RecordPivot):
+            self._record_pivot(cmd)
+        elif isinstance(cmd, m.IdentifyTcp):
+            self._identify_tcp(cmd)
+        elif isinstance(cmd, m.CheckFrames):
+            self._check_frames()
+        elif isinstance(cmd, m.RecordFrameAxis):
+            self._record_frame_axis(cmd)
+        elif isinstance(cmd, m.JawCommand):
+            if self.jaw is None:
+                raise RuntimeError("jaw: no jaw actuator on this rig (add a [jaw] table to the hardware file)")
+            self.jaw.submit(cmd.action)
         elif isinstance(cmd, (m.SetDriver, m.ManualTarget)):
             if self.real:
                 raise RuntimeError("real rig: a person holds the stylus; the simulated participant and manual "
@@ -646,6 +753,7 @@ class StudyEngine:
             raise ValueError(f"unknown command {cmd!r}")
 
     def _require_idle(self, what: str) -> None:
+        self._require_loop(what)
         if self.runner is not None and not self.runner.done:
             raise RuntimeError(f"{what}: a session is running (end or abort it first)")
 
@@ -662,12 +770,15 @@ class StudyEngine:
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
+        if self._gate(cmd):
+            return
         db = self._open_db(cmd.db_path)
         try:
             opened = open_new_session(
                 db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
                 rig=self.config.rig,
-                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui"},
+                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui",
+                        **self._calibration_provenance()},
                 calibration=self.calibration.to_dict(), lease_owner=self.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
             )
@@ -684,6 +795,8 @@ class StudyEngine:
 
     def _resume_session(self, cmd: m.ResumeSession) -> None:
         self._require_idle("resume")
+        if self._gate(cmd):
+            return
         db = self._open_db(cmd.db_path)
         try:
             opened = open_resumed_session(db, cmd.session_id, lease_owner=self.lease_owner,
@@ -711,6 +824,13 @@ class StudyEngine:
         runner.listeners.append(self._on_runner_event)
         self.trigger = None
         self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
+        if self._override is not None:
+            missing, why, rest_n = self._override
+            self._override = None
+            recorder.event(opened.session_id, opened.clock_offset_s, "calibration_override",
+                           f"started by the experimenter's override: {missing or 'the calibration chain was on record'}; "
+                           f"the compensated force at rest was {rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). "
+                           f"Reason: {why}")
         if self.config.clock == "real":
             gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
         tr = opened.protocol.trial
@@ -894,6 +1014,7 @@ class StudyEngine:
         if reason == "":
             self.calibration = cal
             self.loop.submit(SetCalibration(cal))
+            self._record_step("payload", cal)
         return m.CalibrationDone(
             reason == "", reason, name, len(poses), cal.condition_number, cal.rms_force_residual_n,
             cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
@@ -935,15 +1056,304 @@ class StudyEngine:
             if reason == "":
                 self.calibration = cal
                 self.loop.submit(SetCalibration(cal))
+                self._record_step("payload", cal)
         finally:
-            self.stats.reset()
-            self._stats_from_tick = self.loop.tick_count + 1
-            self._reanchor()
-            if real:
-                if self.tracer is not None:
-                    self.tracer.restart()
-                self.loop.start()
+            self._after_loop_pause(real)
         self.publish(result)
+
+    def _after_loop_pause(self, restart: bool) -> None:
+        """The loop ran the rig for a calibration step: restart its timing statistics (and its thread)."""
+        self.stats.reset()
+        self._stats_from_tick = self.loop.tick_count + 1
+        self._reanchor()
+        if restart:
+            if self.tracer is not None:
+                self.tracer.restart()
+            self.loop.start()
+
+    # -- the commissioning chain: what is on record, and the steps (TCP, payload above, frames) ------------------
+    def _tool_record(self) -> ToolCalibration:
+        eng = self.eng
+        if isinstance(eng, HardwareEngine):
+            return eng.calibration_file.tool(eng.tool) if eng.calibration_file is not None else ToolCalibration(eng.tool)
+        # the simulated rig calibrated its payload as it was built; TCP and frames are this run's, never saved
+        return ToolCalibration("simulated instrument", payload=eng.calibration, payload_date=now_iso())
+
+    def _frames_in_use(self) -> tuple[Mat3, Mat3]:
+        fw = self.eng.framework.config
+        return fw.rot_tip_sensor, fw.rot_haptic_base
+
+    def _publish_calibration_status(self) -> None:
+        eng = self.eng
+        path = eng.calibration_file.path if isinstance(eng, HardwareEngine) and eng.calibration_file is not None else ""
+        self.publish(m.CalibrationStatus(self.config.rig, self.tool_cal.tool, path, self.tool_cal.status(),
+                                         self.tool_cal.missing(*self._frames_in_use())))
+
+    def _record_step(self, step: str, result: Any) -> None:
+        """Put an accepted result on record (real rig: saved in the calibration file) and publish the status."""
+        eng = self.eng
+        if isinstance(eng, HardwareEngine) and eng.calibration_file is not None:
+            try:
+                self.tool_cal = eng.calibration_file.record(eng.tool, step, result)
+            except CalibrationFileError as exc:
+                self.tool_cal = self.tool_cal.with_step(step, result)
+                self.publish(m.CommandRefused("calibration file", f"{exc}: the result is in use but not saved"))
+            if step == "tcp" and self.hardware is not None:
+                # the robot's poses move to the new tip at once (the pendant's TCP stays what the file says)
+                off = self.hardware.robot.tcp_offset_m
+                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off))
+        else:
+            self.tool_cal = self.tool_cal.with_step(step, result)
+        self._publish_calibration_status()
+
+    def _calibration_provenance(self) -> dict[str, Any]:
+        """What a session stores about the calibration chain (``config_json``): tool, file, every step on record."""
+        eng = self.eng
+        path = eng.calibration_file.path if isinstance(eng, HardwareEngine) and eng.calibration_file is not None else None
+        out: dict[str, Any] = {"rig_calibration": {"tool": self.tool_cal.tool, "file": path, **self.tool_cal.to_dict()}}
+        if self._override is not None:
+            out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1],
+                                           "rest_force_n": self._override[2]}
+        return out
+
+    def _calibrate_tcp(self, name: str) -> None:
+        from pipeline.sim.commissioning import pivot_poses
+        from pipeline.sim.robot import TOOL_DOWN
+
+        if not isinstance(self.eng, SimEngine):
+            raise RuntimeError("real rig: rest the tip in the divot, turn the instrument and record each orientation "
+                               "(Record orientation), then Compute")
+        self._require_idle("TCP calibration")
+        if name not in m.PIVOT_SETS:
+            raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.PIVOT_SETS)}")
+        rig = self.eng.rig
+        self._tcp_identified(pivot_poses(rig, pivot_orientations(name, TOOL_DOWN)), name, rig.config.tip_in_flange_m)
+
+    def _tcp_identified(self, poses: list[PivotPose], name: str, truth: Any = None) -> None:
+        try:
+            tc = identify_tip(poses)
+        except ValueError as exc:
+            self.publish(m.TcpCalibrationDone(False, str(exc), name, len(poses), None))
+            return
+        err = math.dist(tc.tip_in_flange_m, truth) * 1e3 if truth is not None else math.nan
+        self._record_step("tcp", tc)
+        self.publish(m.TcpCalibrationDone(True, "", name, tc.n_poses, tc.to_dict(), err))
+
+    def _record_pivot(self, cmd: m.RecordPivot) -> None:
+        if not isinstance(self.eng, HardwareEngine):
+            raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
+        self._require_idle("record orientation")
+        if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 5.0):
+            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.1 to 5 s")
+        robot = self.eng.rig.robot
+        pose0 = robot.read_pose()
+        if not all(math.isfinite(x) for x in pose0.position_m):
+            raise RuntimeError("robot: no TCP pose received yet; check the RTDE connection (Devices tab)")
+        label = cmd.label
+
+        def done(cols: dict[str, np.ndarray]) -> None:
+            p = np.stack([cols["tip_x_m"], cols["tip_y_m"], cols["tip_z_m"]], axis=1)
+            pose1 = robot.read_pose()
+            moved = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
+            turned = rotation_angle_deg(pose0.rot_base_tip, pose1.rot_base_tip)
+            if not (moved <= PIVOT_STILL_M and turned <= PIVOT_STILL_DEG):
+                self.publish(m.CommandRefused("RecordPivot", (
+                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; allowed "
+                    f"{PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
+                return
+            rot = pose1.rot_base_tip
+            tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
+                self.hardware.robot.tcp_offset_m if self.hardware is not None else (0.0, 0.0, 0.0))
+            off = np.asarray(rot).reshape(3, 3) @ np.asarray(tip)
+            flange = tuple(float(v) for v in p.mean(axis=0) - off)
+            self.publish(m.PivotRecorded(label, tuple(float(x) for x in rot), flange, moved * 1e3))  # type: ignore[arg-type]
+
+        self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
+
+    def _identify_tcp(self, cmd: m.IdentifyTcp) -> None:
+        if not isinstance(self.eng, HardwareEngine):
+            raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
+        self._require_idle("TCP calibration")
+        self._tcp_identified([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded")
+
+    def _check_frames(self) -> None:
+        from pipeline.sim.commissioning import push_axes
+
+        if not isinstance(self.eng, SimEngine):
+            raise RuntimeError("real rig: push the free tip along each axis in turn (Record +x, +y, +z)")
+        self._require_idle("frame check")
+        real = self.config.clock == "real"
+        if real:
+            self.loop.stop(timeout_s=5.0)  # the check runs the loop itself, paced on the same clock
+        self._drain_ring()
+        try:
+            assert self.ring is not None
+            check = push_axes(self.eng.rig, self.loop, self.ring)
+        finally:
+            self.cursor = self.ring.write_count  # the check's own records are not the loop's timing
+            self._after_loop_pause(real)
+        for a in check.axes:
+            self.publish(m.FrameAxisChecked(a.axis, a.passed, a.describe(), a.to_dict()))
+        self._frames_done(check)
+
+    def _frames_done(self, check: FrameCheck) -> None:
+        self._record_step("frames", check)
+        summary = check.summary()
+        mount = self.calibration.mount_angle_deg
+        if not check.passed and mount > 5.0:
+            summary += f" (the payload calibration finds the sensor {mount:.1f}° from its configured mount)"
+        self.publish(m.FrameCheckDone(check.passed, summary, [a.describe() for a in check.axes]))
+
+    def _record_frame_axis(self, cmd: m.RecordFrameAxis) -> None:
+        if not isinstance(self.eng, HardwareEngine):
+            raise RuntimeError("simulated rig: the pushes run automatically (Run frame check)")
+        self._require_idle("frame check")
+        if cmd.axis not in AXES:
+            raise ValueError(f"axis = {cmd.axis!r}: allowed values are {', '.join(AXES)}")
+        if not (math.isfinite(cmd.seconds) and 0.5 <= cmd.seconds <= 10.0):
+            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.5 to 10 s")
+        if self.tool_cal.payload is None:
+            raise RuntimeError("frame check: no payload calibration on record for tool "
+                               f"{self.tool_cal.tool!r}; the chain runs in order: calibrate the payload first")
+        axis = cmd.axis
+        rhb = self._frames_in_use()[1]
+
+        def done(cols: dict[str, np.ndarray]) -> None:
+            base = np.stack([cols["base_fx"], cols["base_fy"], cols["base_fz"]], axis=1)
+            scaled = np.stack([cols["scaled_fx"], cols["scaled_fy"], cols["scaled_fz"]], axis=1)
+            res = check_axis(axis, base, scaled, rhb)
+            self._frame_axes[axis] = res
+            self.publish(m.FrameAxisChecked(axis, res.passed, res.describe(), res.to_dict()))
+            if all(a in self._frame_axes for a in AXES):
+                check = FrameCheck(tuple(self._frame_axes[a] for a in AXES), *self._frames_in_use())
+                self._frame_axes = {}
+                self._frames_done(check)
+
+        self._open_window("RecordFrameAxis", cmd.seconds,
+                          ("base_fx", "base_fy", "base_fz", "scaled_fx", "scaled_fy", "scaled_fz"), done)
+
+    def _open_window(self, command: str, seconds: float, cols: tuple[str, ...],
+                     done: Callable[[dict[str, np.ndarray]], None], abandoned: Callable[[], None] | None = None) -> None:
+        """Collect ``seconds`` of records written after now, then call ``done`` (see :class:`_Window`)."""
+        if any(w.command == command for w in self._windows):
+            raise RuntimeError(f"{command}: a recording is already running")
+        self._drain_ring()
+        start = self._last_t_ns + 1 if self.loop.tick_count else 0
+        self._windows.append(_Window(command, int(round(seconds * 1000)), start, cols, done, [], abandoned=abandoned))
+
+    def _feed_windows(self, rows: np.ndarray) -> None:
+        for w in list(self._windows):
+            sel = rows[rows["t_ns"] >= w.start_ns]
+            if len(sel):
+                if float(np.max(sel["sensor_age_s"])) > POSE_MAX_SENSOR_AGE_S:
+                    self._windows.remove(w)
+                    again = ("measuring the force at rest (check the Devices tab) — press Start again"
+                             if w.command in ("StartSession", "ResumeSession")
+                             else "recording (check the Devices tab) — record again")
+                    self.publish(m.CommandRefused(w.command, f"the force sensor stalled while {again}"))
+                    if w.abandoned is not None:
+                        w.abandoned()
+                    continue
+                w.chunks.append(np.stack([sel[c] for c in w.cols], axis=1))
+                w.got += len(sel)
+            if w.got >= w.need:
+                self._windows.remove(w)
+                data = np.concatenate(w.chunks)[: w.need]
+                try:
+                    w.done({c: data[:, i] for i, c in enumerate(w.cols)})
+                except (ValueError, RuntimeError) as exc:
+                    self.publish(m.CommandRefused(w.command, str(exc)))
+
+    # -- the session gate (real rig) -----------------------------------------------------------------
+    def _gate(self, cmd: m.StartSession | m.ResumeSession) -> bool:
+        """The real rig's calibration gate; True when the start waits for its rest check (it comes back later).
+
+        The chain (TCP, payload, frames) must be on record for the mounted tool -- or the experimenter gives a
+        reason to start without it -- and then, in every case, the compensated force at rest over
+        ``REST_CHECK_S`` must be below ``REST_MAX_FORCE_N``.
+
+        Raises :class:`RuntimeError` (one line, naming the missing step) when the start is refused.
+        """
+        if not self.real:
+            return False
+        if cmd is self._gate_passed:
+            self._gate_passed = None
+            return False
+        self._override = None  # a start that failed after its check must not lend its override to this one
+        missing = self.tool_cal.missing(*self._frames_in_use())
+        # the override waives the steps on record, never the force at rest: without a payload that fits the
+        # mounted tool the tool's own weight would be rendered as feedback
+        reason = cmd.override_reason.strip()
+        if missing and not reason:
+            raise RuntimeError(f"real rig: {missing}")
+        if self._starting is not None:
+            raise RuntimeError("start: the force at rest is being measured; wait for it")
+        self._starting = cmd
+
+        def done(cols: dict[str, np.ndarray]) -> None:
+            self._starting = None
+            f = float(math.hypot(*(float(np.mean(cols[c])) for c in ("comp_fx", "comp_fy", "comp_fz"))))
+            if not f < REST_MAX_FORCE_N:
+                self.publish(m.CommandRefused(type(cmd).__name__, (
+                    f"real rig: the compensated force at rest is {f:.3f} N over {REST_CHECK_S:g} s (limit "
+                    f"{REST_MAX_FORCE_N:g} N): the tool touches something, or its payload calibration does not match "
+                    f"the mounted tool {self.tool_cal.tool!r}; keep it clear and still, or calibrate the payload again"
+                    + ("; an override does not waive this check" if reason else ""))))
+                return
+            if reason:
+                self._override = (missing, reason, f)
+            self._gate_passed = cmd
+            self.handle(cmd)
+
+        def abandoned() -> None:
+            self._starting = None  # the measurement was abandoned: Start may be pressed again
+
+        try:
+            self._open_window(type(cmd).__name__, REST_CHECK_S, ("comp_fx", "comp_fy", "comp_fz"), done, abandoned)
+        except RuntimeError:
+            self._starting = None
+            raise
+        self.publish(m.StartChecking(REST_CHECK_S, f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
+                                     f"the compensated force at rest for {REST_CHECK_S:g} s — keep the instrument "
+                                     "still and clear of everything"))
+        return True
+
+    # -- health extras, the jaw ------------------------------------------------------------------------
+    def _health_extra(self) -> dict[str, Any]:
+        st = self.eng.rig.haptic.read_state()
+        return {"haptic_heat_fraction": float(st.heat_fraction), "haptic_force_limit_n": float(st.force_limit_n),
+                "loop_dead": self.loop_dead}
+
+    def _make_jaw(self) -> JawController | None:
+        rig = self.eng.rig
+        jaw = getattr(rig, "jaw", None)
+        if jaw is None:
+            return None
+        if self.hardware is not None and self.hardware.jaw is not None:
+            j = self.hardware.jaw
+            ctl = JawController(jaw, close_button=j.close_button, open_button=j.open_button,
+                                stylus=self.hardware.robot.mode != "teleop")  # teleoperation claims both buttons
+        else:
+            ctl = JawController(jaw)
+        rig.on_buttons = ctl.buttons
+        return ctl
+
+    def _publish_jaw(self, last: str) -> None:
+        assert self.jaw is not None
+        s = self.jaw.jaw.status
+        self.publish(m.JawState(float(s.fraction_open), int(s.pos_us), bool(s.at_limit), str(s.fault), last))
+
+    def _drain_jaw(self) -> None:
+        """Every jaw command carried out: to the display, and into the running session's events."""
+        assert self.jaw is not None
+        runner, recorder = self.runner, self.recorder
+        while self.jaw.events:
+            ev = self.jaw.events.popleft()
+            text = f"{ev.source}: {ev.detail}"
+            if runner is not None and recorder is not None and not runner.done:
+                recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "jaw", text)
+            self.publish(m.JawState(ev.fraction_open, ev.pulse_us, ev.at_limit, ev.fault, text))
+
 
 
 def check_target(rows: Any) -> Mat3:

@@ -19,6 +19,9 @@ __all__ = [
     "IdentifyPoses", "Pause", "PhaseEntered", "PoseRecorded", "RecordPose", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
     "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
     "DRIVER_MODES", "POSE_SETS",
+    "CalibrateTcp", "CalibrationStatus", "CheckFrames", "FrameAxisChecked", "FrameCheckDone", "IdentifyTcp",
+    "JawCommand", "JawState", "PivotRecorded", "RecordFrameAxis", "RecordPivot", "StartChecking", "TcpCalibrationDone",
+    "JAW_ACTIONS", "PIVOT_SETS",
 ]
 
 #: Who holds the simulated stylus.
@@ -27,12 +30,21 @@ DRIVER_MODES = ("autopilot", "manual")
 REAL_DRIVER = "participant"
 #: Calibration pose sets offered by the wizard (see :func:`study_app.engine_host.pose_set`).
 POSE_SETS = ("recommended", "quick", "tool-down only")
+#: TCP pivot orientation sets the wizard offers on the simulated rig (:func:`pipeline.tcp.pivot_orientations`).
+PIVOT_SETS = ("recommended", "minimal", "roll only")
+#: What the jaw controls ask for: fully open, fully closed, one step toward open / toward closed.
+JAW_ACTIONS = ("open", "close", "step_open", "step_close")
 
 
 # -- commands (GUI → engine) --------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class StartSession:
-    """Create a session in the database (schedule and calibration stored first) and run it."""
+    """Create a session in the database (schedule and calibration stored first) and run it.
+
+    On the real rig a session starts only with the calibration chain on record for the mounted tool and
+    the compensated force at rest below 0.1 N; ``override_reason`` (non-empty) starts it anyway, and the
+    reason is stored with the session.
+    """
 
     db_path: str
     code: str
@@ -40,14 +52,16 @@ class StartSession:
     protocol_path: str | None
     seed: int
     participant_number: int
+    override_reason: str = ""
 
 
 @dataclass(frozen=True, slots=True)
 class ResumeSession:
-    """Continue an interrupted session at its first unfinished trial."""
+    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as StartSession)."""
 
     db_path: str
     session_id: int
+    override_reason: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,6 +152,48 @@ class IdentifyPoses:
 
     poses: tuple[tuple[str, tuple[float, ...], tuple[float, ...]], ...]
     pose_set: str = "recommended"
+
+
+@dataclass(frozen=True, slots=True)
+class CalibrateTcp:
+    """Simulated rig: run the TCP pivot calibration with one of :data:`PIVOT_SETS` (the simulated robot turns)."""
+
+    pose_set: str = "recommended"
+
+
+@dataclass(frozen=True, slots=True)
+class RecordPivot:
+    """Real rig: the tip rests in the divot; average the TCP pose for ``seconds`` (answered by :class:`PivotRecorded`)."""
+
+    label: str
+    seconds: float = 0.5
+
+
+@dataclass(frozen=True, slots=True)
+class IdentifyTcp:
+    """Real rig: pivot calibration from recorded flange poses (label, rot_base_flange as 9 numbers, position m)."""
+
+    poses: tuple[tuple[str, tuple[float, ...], tuple[float, float, float]], ...]
+
+
+@dataclass(frozen=True, slots=True)
+class CheckFrames:
+    """Simulated rig: the frame and sign check (the simulated experimenter pushes the free tip along each axis)."""
+
+
+@dataclass(frozen=True, slots=True)
+class RecordFrameAxis:
+    """Real rig: record ``seconds`` while the experimenter pushes the free tip along base ``axis`` (+x, +y, +z)."""
+
+    axis: str
+    seconds: float = 3.0
+
+
+@dataclass(frozen=True, slots=True)
+class JawCommand:
+    """Move the instrument's jaw: one of :data:`JAW_ACTIONS` (stored as an event of the running session)."""
+
+    action: str
 
 
 @dataclass(frozen=True, slots=True)
@@ -306,6 +362,85 @@ class PoseRecorded:
 
 
 @dataclass(frozen=True, slots=True)
+class PivotRecorded:
+    """Real rig: one orientation of the TCP pivot calibration, as the flange pose (base frame)."""
+
+    label: str
+    rot_base_flange: tuple[float, ...]  # 9 numbers, row-major
+    flange_position_m: tuple[float, float, float]
+    moved_mm: float
+
+
+@dataclass(frozen=True, slots=True)
+class TcpCalibrationDone:
+    """Result of a TCP pivot calibration: saved and in use if ``accepted``, else ``reason`` says which orientations to add.
+
+    ``result`` is :meth:`pipeline.tcp.TipCalibration.to_dict`; ``error_mm`` the distance from the simulated
+    rig's true tip (NaN on the real rig).
+    """
+
+    accepted: bool
+    reason: str
+    pose_set: str
+    n_poses: int
+    result: dict[str, Any] | None
+    error_mm: float = float("nan")
+
+
+@dataclass(frozen=True, slots=True)
+class FrameAxisChecked:
+    """One axis of the frame and sign check (:meth:`pipeline.frame_check.AxisCheck.to_dict`, and its line of text)."""
+
+    axis: str
+    passed: bool
+    line: str
+    result: dict[str, Any]
+
+
+@dataclass(frozen=True, slots=True)
+class FrameCheckDone:
+    """Every axis checked: the verdict (one line), each axis' line; on record for the tool either way."""
+
+    passed: bool
+    summary: str
+    lines: list[str]
+
+
+@dataclass(frozen=True, slots=True)
+class CalibrationStatus:
+    """What is on record for the mounted tool: per step (name, done, one line), and what the session gate would say.
+
+    ``missing`` is "" when a session may start (real rig), else the one line of the first step to do;
+    ``file`` the calibration file ("" on the simulated rig, where nothing is saved).
+    """
+
+    rig: str
+    tool: str
+    file: str
+    steps: list[tuple[str, bool, str]]
+    missing: str
+
+
+@dataclass(frozen=True, slots=True)
+class StartChecking:
+    """Real rig: Start was accepted by the calibration gate; the force at rest is measured for ``seconds`` first."""
+
+    seconds: float
+    message: str
+
+
+@dataclass(frozen=True, slots=True)
+class JawState:
+    """The jaw: position (fraction open, pulse width), whether at a limit, its fault ("" when healthy), the last command."""
+
+    fraction_open: float
+    pulse_us: int
+    at_limit: bool
+    fault: str
+    last: str
+
+
+@dataclass(frozen=True, slots=True)
 class EngineFault:
     """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset (``'faults_reset'``)."""
 
@@ -347,6 +482,11 @@ class Health:
     late_periods: dict[str, Any] | None = None
     #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after it.
     waiting: str = ""
+    #: The haptic device's motor heat as a fraction of its thermal budget, and the force it may render now (derated), N.
+    haptic_heat_fraction: float = 0.0
+    haptic_force_limit_n: float = float("nan")
+    #: Why the haptic loop is dead ("" while it runs).
+    loop_dead: str = ""
 
 
 @dataclass(frozen=True, slots=True)

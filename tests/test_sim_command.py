@@ -33,7 +33,14 @@ def test_real_clock_run_keeps_feedback_on_for_the_whole_run(records: dict[str, A
     s = sim_summary.run_scripted_sim(seconds=1.5, clock="real")
     gain, t = records["gain"], records["t_s"]
     assert s["loop"]["ticks"] == len(gain) - 1
-    assert np.all(gain[500:1500] == 1.0)  # ramped in by 0.5 s, on until the end of the run
+    # ramped in by 0.5 s, on until the end of the run.  On a loaded machine a tick can come later than the
+    # Touch's command timeout: the device has dropped the force and the output restarts from zero at that tick.
+    # Anything else -- a gradual fall, as a ramp-down at a chunk boundary -- is a failure.
+    late = np.diff(t, prepend=t[0]) >= 0.010
+    falls = np.flatnonzero(np.diff(gain[:1500]) < 0) + 1
+    assert all(late[k] and gain[k] == 0.0 for k in falls), [(int(k), float(t[k] - t[k - 1])) for k in falls]
+    if not late[:1500].any():
+        assert np.all(gain[500:1500] == 1.0)
     assert np.all(gain[1500:] < 1.0) and gain[-1] == 0.0  # then the run's own ramp-down, to zero
     assert np.all(np.diff(t) > 0)  # every record once, in order
 

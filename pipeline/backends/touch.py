@@ -5,10 +5,14 @@ driver from 3D Systems; ``pyOpenHaptics`` loads ``libHD.so`` at import time,
 so it is imported only when a Touch is actually opened, and a machine without
 OpenHaptics gets one clear error naming what to install (docs/hardware.md §3d).
 
-The servo callback runs ~1 kHz in OpenHaptics' scheduler thread and does only
-copies: it reads the stylus transform and buttons, checks ``hdGetError``, and
-writes the latest commanded force (already clamped to the device's reported
-peak by :meth:`TouchHapticDevice.command_force`).  Unlike pyOpenHaptics'
+The servo callback runs ~1 kHz in OpenHaptics' scheduler thread: it reads the
+stylus transform and buttons, checks ``hdGetError``, and writes what
+:class:`pipeline.touch_output.TouchOutput` renders from the latest command --
+zero once the command is ``command_timeout_s`` old (10 ms: the loop
+thread died or froze), clamped to the device's reported peak and derated by
+the motor-heat model of its reported continuous rating (the same model as the
+simulated Touch).  A few float operations per tick, no allocation beyond a
+tuple.  Unlike pyOpenHaptics'
 ``hd_callback`` decorator -- which returns ``HD_CALLBACK_DONE`` on the first
 error and so stops the servo loop for good -- our callback keeps running
 after an HD error (exceeded force, warm motors) with the output disabled:
@@ -30,6 +34,9 @@ from typing import Any, Protocol
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, HapticState
 from pipeline.frames import Vec3
+from pipeline.touch_output import (
+    DEFAULT_COMMAND_TIMEOUT_S, DEFAULT_THERMAL_BUDGET_N2S, HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS, TouchOutput, TouchSpec,
+)
 
 __all__ = [
     "HDApi",
@@ -51,8 +58,6 @@ HD_FORCE_OUTPUT = 0x4000
 HD_MAX_FORCE_CLAMPING = 0x4001
 HD_NOMINAL_MAX_FORCE = 0x2603
 HD_NOMINAL_MAX_CONTINUOUS_FORCE = 0x2604
-HD_WARM_MOTORS = 0x0200
-HD_EXCEEDED_MAX_FORCE = 0x0201
 HD_DEVICE_FAULT = 0x0300
 HD_CALLBACK_DONE = 0
 HD_CALLBACK_CONTINUE = 1
@@ -210,27 +215,42 @@ class TouchHapticDevice:
     api
         The HDAPI adapter (default: :class:`PyOpenHapticsApi`, imported lazily).
     clock
-        The loop's clock, for the stylus-state timestamps.
+        The loop's clock: stylus-state timestamps, and the command ages the servo judges freshness by.
+    command_timeout_s
+        A command this old renders as zero (the device-side watchdog), s.
+    thermal_budget_n2s
+        Heat budget of the motor-heat model, N²·s (peak and continuous rating are the device's own).
     """
 
-    def __init__(self, device_name: str = "Default Device", *, api: HDApi | None = None, clock: Clock | None = None) -> None:
+    def __init__(
+        self,
+        device_name: str = "Default Device",
+        *,
+        api: HDApi | None = None,
+        clock: Clock | None = None,
+        command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S,
+        thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S,
+    ) -> None:
         self.device_name = device_name
         self.clock: Clock = clock or MonotonicClock()
         self.api: HDApi = api if api is not None else PyOpenHapticsApi()
         self.api.init_device(device_name)
         peak = self.api.get_double(HD_NOMINAL_MAX_FORCE)
         cont = self.api.get_double(HD_NOMINAL_MAX_CONTINUOUS_FORCE)
-        if not (math.isfinite(peak) and peak > 0 and math.isfinite(cont) and cont > 0):
+        if not (math.isfinite(peak) and peak > 0 and math.isfinite(cont) and 0 < cont <= peak):
             self.api.close_device()
-            raise DeviceError(f"{device_name!r} reports nominal max force {peak!r} N / continuous {cont!r} N; expected numbers > 0")
+            raise DeviceError(f"{device_name!r} reports nominal max force {peak!r} N / continuous {cont!r} N; expected "
+                              "numbers > 0, the continuous one at most the peak")
         self._peak = peak
         self._cont = cont
-        self._cmd: Vec3 = (0.0, 0.0, 0.0)
+        #: What the servo renders from the latest command (watchdog, clamp, derating, heat).
+        self.output = TouchOutput(TouchSpec(peak, cont, thermal_budget_n2s), command_timeout_s)
         self._armed = True
         self._error = 0
         self.errors: list[int] = []  # every HD error seen, for the experimenter's log
         self.ticks = 0
-        self._state = HapticState(self.clock.now_ns(), (0.0, 0.0, 0.0), 0, 0)
+        self._last_servo_ns: int | None = None
+        self._state = HapticState(self.clock.now_ns(), (0.0, 0.0, 0.0), 0, 0, peak, 0.0)
         self._lock = threading.Lock()  # only rearm/servo hand-over; the servo never waits on the loop
         self.api.enable(HD_FORCE_OUTPUT)
         self.api.enable(HD_MAX_FORCE_CLAMPING)  # the device's own clamp as a second line of defence
@@ -247,13 +267,19 @@ class TouchHapticDevice:
             self._error = err
             self._armed = False
             self.errors.append(err)
-        if self._armed:
-            fx, fy, fz = self._cmd
-        else:
-            fx = fy = fz = 0.0
+        now = self.clock.now_ns()
+        last = self._last_servo_ns
+        self._last_servo_ns = now
+        out = self.output
+        fx, fy, fz = out.render(now, 0.0 if last is None else (now - last) * 1e-9, self._armed)
+        if out.warm and self._armed:  # our own heat model passed the budget: as the device's HD_WARM_MOTORS
+            self._error = HD_WARM_MOTORS
+            self._armed = False
+            self.errors.append(HD_WARM_MOTORS)
         api.set_force(fx, fy, fz)
         self.ticks += 1
-        self._state = HapticState(self.clock.now_ns(), (x * 1e-3, y * 1e-3, z * 1e-3), buttons, self._error)
+        self._state = HapticState(now, (x * 1e-3, y * 1e-3, z * 1e-3), buttons, self._error, out.limit_n,
+                                  out.heat.fraction)
 
     # -- HapticDevice -------------------------------------------------------------------------
     @property
@@ -262,38 +288,43 @@ class TouchHapticDevice:
         return self._peak
 
     @property
+    def command_timeout_s(self) -> float:
+        """A command this old renders as zero (the device-side watchdog), s."""
+        return self.output.command_timeout_s
+
+    @property
     def continuous_force_n(self) -> float:
         """Continuous force the device reports (``HD_NOMINAL_MAX_CONTINUOUS_FORCE``), N."""
         return self._cont
 
-    def command_force(self, fx: float, fy: float, fz: float) -> None:
-        """Latest force to render, N, device frame; clamped to the peak, non-finite → zero."""
-        m = math.hypot(fx, fy, fz)
-        if not math.isfinite(m):
-            self._cmd = (0.0, 0.0, 0.0)
-        elif m > self._peak:
-            k = self._peak / m
-            self._cmd = (fx * k, fy * k, fz * k)
-        else:
-            self._cmd = (fx, fy, fz)
+    def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
+        """Latest force to render, N, device frame, computed at ``t_ns`` on the loop's clock (default now).
+
+        Rendered while fresh; clamped; non-finite → zero (:class:`pipeline.touch_output.TouchOutput`).
+        """
+        self.output.command(fx, fy, fz, self.clock.now_ns() if t_ns is None else t_ns)
 
     def read_state(self) -> HapticState:
         """Newest stylus state from the servo callback (position in m)."""
         return self._state
 
     def rearm(self) -> bool:
-        """Re-enable output after an HD error (the experimenter's reset); the command restarts from zero."""
+        """Re-enable output after an HD error (the experimenter's reset); the command restarts from zero.
+
+        After ``HD_WARM_MOTORS`` from the heat model, only once the motors have cooled to half the budget.
+        """
         with self._lock:
-            self._cmd = (0.0, 0.0, 0.0)
+            if not self.output.rearm():
+                return False
             self._error = 0
             self._armed = True
             st = self._state
-            self._state = HapticState(st.t_ns, st.position_m, st.buttons, 0)
+            self._state = st._replace(error_code=0)
         return True
 
     def close(self) -> None:
         """Zero the force, stop the servo loop and release the device."""
-        self._cmd = (0.0, 0.0, 0.0)
+        self.output.clear()
         self._armed = False
         try:
             self.api.stop_scheduler()

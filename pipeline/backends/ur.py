@@ -137,6 +137,9 @@ class UrRtdeRobot:
         ``RTDEReceiveInterface`` methods (default: ur_rtde's).
     port
         Port of the TCP probe (ur_rtde itself always uses 30004).
+    tcp_correction_m
+        Added to the reported TCP, in the TCP's own (flange-aligned) frame, m: the calibrated tip minus the
+        TCP set on the pendant (:mod:`pipeline.tcp`), so the poses the app uses are at the instrument tip.
     """
 
     def __init__(
@@ -152,9 +155,11 @@ class UrRtdeRobot:
         max_backoff_s: float = 5.0,
         receive_factory: Callable[[str, float], Any] | None = None,
         port: int = RTDE_PORT,
+        tcp_correction_m: Vec3 = (0.0, 0.0, 0.0),
     ) -> None:
         check_rtde_frequency(frequency_hz)
         self.host = host
+        self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]
         self.port = port
         self.frequency_hz = float(frequency_hz)
         self.clock: Clock = clock or MonotonicClock()
@@ -277,7 +282,13 @@ class UrRtdeRobot:
         except (ValueError, OverflowError):
             rot = (math.nan,) * 9  # type: ignore[assignment]
         self.q_rad = tuple(q) if len(q) == 6 else (math.nan,) * 6
-        sample = PoseSample(now_ns, (pose[0], pose[1], pose[2]), rot, float(ts))
+        x, y, z = pose[0], pose[1], pose[2]
+        cx, cy, cz = self.tcp_correction_m
+        if cx or cy or cz:  # the calibrated tip, not the pendant's TCP
+            x += rot[0] * cx + rot[1] * cy + rot[2] * cz
+            y += rot[3] * cx + rot[4] * cy + rot[5] * cz
+            z += rot[6] * cx + rot[7] * cy + rot[8] * cz
+        sample = PoseSample(now_ns, (x, y, z), rot, float(ts))
         with self._new:
             self._pose = sample
             self.samples += 1

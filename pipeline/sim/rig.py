@@ -10,6 +10,7 @@ reproducible bit for bit on the virtual clock.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,6 +20,7 @@ from pipeline.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, 
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
 from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
 from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
+from pipeline.sim.jaw import SimJaw
 from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
@@ -49,8 +51,21 @@ class SimRigConfig:
     mount_error_deg
         The true mounting differs from the nominal by this rotation about an
         oblique axis -- the unmodelled error the affine calibration absorbs.
+    sensor_z_mount_deg
+        A lab's mounting mistake: the sensor is turned about its own z axis by
+        this much, and nobody told the pipeline (``--sim-mount-error-deg``).
+        The payload calibration absorbs it for the weight; the frame and sign
+        check must catch it for the contact force.
     rot_haptic_base
         Touch frame vs robot base.
+    tip_in_flange_m
+        Where the instrument tip really is in the flange frame (what the TCP
+        calibration must recover; the CAD nominal would be (0, 0, 0.40) m).
+    pivot_m
+        The divot of the TCP calibration, base frame (within reach, clear of the tissue).
+    pivot_noise_m
+        Per-axis standard deviation of the robot's reported flange position and
+        of the tip's seat in the divot, m (UR3 repeatability ±0.1 mm).
     """
 
     seed: int = 0
@@ -59,7 +74,11 @@ class SimRigConfig:
     motion_scale: float = 1.0
     rot_tip_sensor: Mat3 = DEFAULT_ROT_TIP_SENSOR
     mount_error_deg: float = 0.5
+    sensor_z_mount_deg: float = 0.0
     rot_haptic_base: Mat3 = DEFAULT_ROT_HAPTIC_BASE
+    tip_in_flange_m: Vec3 = (0.0011, -0.0007, 0.4023)
+    pivot_m: Vec3 = (0.35, 0.12, 0.14)
+    pivot_noise_m: float = 3e-5
     tissue: TissueParams = field(default_factory=TissueParams)
     sensor: SensorParams = field(default_factory=SensorParams)
     robot: RobotParams = field(default_factory=RobotParams)
@@ -82,8 +101,12 @@ class SimRig:
         self.driver: StylusDriver = driver or HoldStill()
         self._rot_base_haptic = transpose(cfg.rot_haptic_base)
         err = axis_angle((1.0, 1.0, 0.3), cfg.mount_error_deg * np.pi / 180.0) if cfg.mount_error_deg else IDENTITY
+        if cfg.sensor_z_mount_deg:
+            err = mat_mul(err, axis_angle((0.0, 0.0, 1.0), cfg.sensor_z_mount_deg * np.pi / 180.0))
         #: The true sensor mounting (nominal × error) the physics uses.
         self.true_rot_tip_sensor: Mat3 = mat_mul(cfg.rot_tip_sensor, err)
+        #: A force someone applies to the tip by hand, base frame, N (the frame and sign check's pushes).
+        self.push_base_n: Vec3 = (0.0, 0.0, 0.0)
         self._orient: Mat3 | None = None
         self._rot_sensor_base: Mat3 = IDENTITY
         self._last_ns: int | None = None
@@ -94,6 +117,10 @@ class SimRig:
         self.teleop: Any = None
         #: Fault rehearsal: faults scheduled on the rig's clock (:meth:`inject_fault`).
         self.faults = FaultInjector()
+        #: The instrument's jaw (the sketch's limits, no serial port).
+        self.jaw = SimJaw()
+        #: Called with (now_ns, the stylus buttons) every step: :meth:`pipeline.jaw_control.JawController.buttons`.
+        self.on_buttons: Callable[[int, int], None] | None = None
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
@@ -128,10 +155,14 @@ class SimRig:
             # the app owns the robot: targets come from the teleoperation controller through servo_tcp
             self.teleop.update(now_ns)
         robot.advance(now_ns, dt)
+        hook = self.on_buttons
+        if hook is not None:
+            hook(now_ns, touch.buttons)
 
         depth = cfg.surface_z_m - robot.position_m[2]
         f = self.tissue.step(depth, dt) if dt > 0 else self.tissue.force_n
-        self._truth = (0.0, 0.0, f)
+        px, py, pz = self.push_base_n
+        self._truth = (px, py, f + pz)
         if robot.orientation is not self._orient:
             self._orient = robot.orientation
             self._rot_sensor_base = transpose(mat_mul(robot.orientation, self.true_rot_tip_sensor))

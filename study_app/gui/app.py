@@ -118,13 +118,17 @@ class ScreenshotTour:
         model = w.model
         w.resize(1280, 728)  # what the window gets on a 1366×768 laptop (the offscreen screen is smaller)
         yield lambda: model.session.state == "ready"
-        # calibration wizard: the recommended set, accepted
-        w.calibration_wizard.resize(720, 640)
-        w.calibration_wizard.show()
+        # calibration wizard: the chain in order -- TCP, then the payload's recommended set, accepted
+        wiz = w.calibration_wizard
+        wiz.resize(720, 640)
+        wiz.show()
+        wiz.tcp_page.run_button.click()
+        yield lambda: model.commissioning.tcp_state == "accepted"
+        wiz.steps.setCurrentWidget(wiz.payload_page)
         model.calibration.set_pose_set("recommended")
-        w.calibration_wizard.run_button.click()
+        wiz.run_button.click()
         yield lambda: model.calibration.state == "accepted"
-        self._save(w.calibration_wizard, "calibration-wizard")
+        self._save(wiz, "calibration-wizard")
         w.calibration_wizard.hide()
         # an experiment session, driven by the simulated participant
         code = f"DEMO{int(time.time()) % 100000:05d}"

@@ -1,18 +1,159 @@
-"""The calibration wizard: choose a pose set, run it, see condition number and residuals, accept or refuse."""
+"""The calibration wizard: the commissioning chain in order -- TCP, payload/bias, frames and signs -- and what is on record.
+
+Layout and wiring only: the TCP and frame steps and the status are :class:`study_app.models.commissioning.CommissioningModel`,
+the payload step :class:`study_app.models.calibration.CalibrationModel` (and, on the real rig,
+:class:`study_app.models.real_calibration.RealCalibrationModel`).
+"""
 
 from __future__ import annotations
 
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
-    QAbstractItemView, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel, QProgressBar, QPushButton,
-    QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel, QPlainTextEdit, QProgressBar,
+    QPushButton, QTabWidget, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
 from study_app import messages as m
 from study_app.models.calibration import CalibrationModel
+from study_app.models.commissioning import AXIS_WORDS, CommissioningModel
 from study_app.models.real_calibration import REAL_POSE_SETS, RealCalibrationModel
 
-__all__ = ["CalibrationWizard", "RealPosePanel"]
+__all__ = ["CalibrationWizard", "ChainStatus", "FramesPage", "RealPosePanel", "TcpPage"]
+
+_VERDICT_COLOURS = {"accepted": "#147f28", "passed": "#147f28", "refused": "#c81e1e", "failed": "#c81e1e"}
+
+
+class ChainStatus(QWidget):
+    """What is on record for the mounted tool, step by step, and whether a session may start."""
+
+    def __init__(self, model: CommissioningModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model = model
+        self.steps = QLabel()
+        self.steps.setTextFormat(Qt.TextFormat.RichText)
+        self.gate = QLabel()
+        self.gate.setWordWrap(True)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.addWidget(self.steps)
+        lay.addWidget(self.gate)
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        mdl = self.model
+        st = mdl.status
+        head = f"<b>On record for {st.tool!r}</b>" if st is not None else "<b>On record</b>: –"
+        rows = [f'<span style="color:{"#147f28" if ok else "#c81e1e"}">{"✔" if ok else "✘"} {n}</span>: {text}'
+                for n, ok, text in mdl.status_lines()]
+        self.steps.setText(head + ("<br>" + "<br>".join(rows) if rows else ""))
+        self.gate.setText(mdl.gate_text())
+        blocked = st is not None and st.rig == "real" and bool(st.missing)
+        self.gate.setStyleSheet("color: #c81e1e; font-weight: 600;" if blocked else "color: #555;")
+
+
+class TcpPage(QWidget):
+    """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real one)."""
+
+    def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(parent)
+        self.model = model
+        self.instruction = QLabel()
+        self.instruction.setWordWrap(True)
+        self.pose_set = QComboBox()
+        self.pose_set.addItems(list(m.PIVOT_SETS))
+        self.run_button = QPushButton()
+        self.compute_button = QPushButton("Compute")
+        self.clear_button = QPushButton("Start again")
+        self.verdict = QLabel()
+        self.verdict.setWordWrap(True)
+        self.orientations = QTableWidget(0, 3)
+        self.orientations.setHorizontalHeaderLabels(["Orientation", "Flange position (mm)", "Moved while recording (mm)"])
+        self.orientations.verticalHeader().setVisible(False)
+        self.orientations.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.orientations.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        row = QHBoxLayout()
+        self.pose_label = QLabel("Orientations")
+        row.addWidget(self.pose_label)
+        row.addWidget(self.pose_set, 1)
+        row.addWidget(self.run_button)
+        row.addWidget(self.compute_button)
+        row.addWidget(self.clear_button)
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.instruction)
+        lay.addLayout(row)
+        lay.addWidget(self.verdict)
+        lay.addWidget(self.orientations, 1)
+        lay.addStretch(1)  # the simulated rig has no table: keep the rest at the top
+        self.pose_set.currentTextChanged.connect(lambda t: setattr(model, "pivot_set", t))
+        self.run_button.clicked.connect(on_run)
+        self.compute_button.clicked.connect(on_compute)
+        self.clear_button.clicked.connect(model.clear_pivots)
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        mdl = self.model
+        real = mdl.real
+        self.instruction.setText(mdl.tcp_instruction())
+        for w in (self.pose_set, self.pose_label):
+            w.setVisible(not real)
+        for w in (self.compute_button, self.clear_button, self.orientations):
+            w.setVisible(real)
+        self.run_button.setText("Record orientation" if real else "Run TCP calibration")
+        self.run_button.setEnabled(mdl.tcp_state not in ("running", "recording"))
+        why = mdl.compute_refusal()
+        self.compute_button.setEnabled(not why)
+        self.compute_button.setToolTip(why)
+        self.verdict.setText(mdl.tcp_verdict())
+        self.verdict.setStyleSheet(f"color: {_VERDICT_COLOURS.get(mdl.tcp_state, '#333')}; font-weight: 600;")
+        self.orientations.setRowCount(len(mdl.pivots))
+        for i, p in enumerate(mdl.pivots):
+            pos = ", ".join(f"{1e3 * v:+.1f}" for v in p.flange_position_m)
+            for j, text in enumerate((p.label, pos, f"{p.moved_mm:.3f}")):
+                self.orientations.setItem(i, j, QTableWidgetItem(text))
+
+
+class FramesPage(QWidget):
+    """Step 3: the frame and sign check (automatic on the simulated rig, one push per axis on the real one)."""
+
+    def __init__(self, model: CommissioningModel, on_check, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(parent)
+        self.model = model
+        self.instruction = QLabel()
+        self.instruction.setWordWrap(True)
+        self.run_button = QPushButton("Run frame check")
+        self.axis_buttons = {a: QPushButton(f"Record push along {AXIS_WORDS[a]}") for a in AXIS_WORDS}
+        self.result = QPlainTextEdit()
+        self.result.setReadOnly(True)
+        self.result.setPlaceholderText("no check yet")
+        row = QHBoxLayout()
+        row.addWidget(self.run_button)
+        for a, b in self.axis_buttons.items():
+            row.addWidget(b)
+            b.clicked.connect(lambda _=False, a=a: on_check(a))
+        lay = QVBoxLayout(self)
+        lay.addWidget(self.instruction)
+        lay.addLayout(row)
+        lay.addWidget(self.result, 1)
+        self.run_button.clicked.connect(lambda: on_check(""))
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        mdl = self.model
+        busy = mdl.frames_state in ("running", "recording")
+        self.instruction.setText(mdl.frames_instruction())
+        self.run_button.setVisible(not mdl.real)
+        self.run_button.setEnabled(not busy)
+        for b in self.axis_buttons.values():
+            b.setVisible(mdl.real)
+            b.setEnabled(not busy)
+        text = "\n".join(mdl.frames_display())
+        if text != self.result.toPlainText():
+            self.result.setPlainText(text)
+        colour = _VERDICT_COLOURS.get(mdl.frames_state, "#333")
+        self.result.setStyleSheet(f"color: {colour}; font-family: monospace;")
 
 
 class RealPosePanel(QWidget):
@@ -94,9 +235,10 @@ class CalibrationWizard(QWidget):
     """Layout and wiring of :class:`CalibrationModel`."""
 
     def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,  # type: ignore[no-untyped-def]
-                 parent: QWidget | None = None) -> None:
+                 parent: QWidget | None = None, chain: CommissioningModel | None = None, on_tcp=None,
+                 on_compute_tcp=None, on_frames=None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
-        self.setWindowTitle("Gravity and bias calibration")
+        self.setWindowTitle("Calibration — TCP, payload, frames")
         self.model = model
         intro = QLabel(
             "The wrist sensor reads the instrument's weight and its own offsets as well as the contact force. "
@@ -128,7 +270,8 @@ class CalibrationWizard(QWidget):
         row.addWidget(self.pose_set, 1)
         row.addWidget(self.run_button)
         self.real_panel = real_panel
-        lay = QVBoxLayout(self)
+        self.payload_page = QWidget()
+        lay = QVBoxLayout(self.payload_page)
         lay.addWidget(intro)
         lay.addWidget(self.sim_controls)
         if real_panel is not None:
@@ -139,6 +282,18 @@ class CalibrationWizard(QWidget):
         lay.addWidget(self.verdict)
         lay.addLayout(self.figures)
         lay.addWidget(self.residuals, 1)
+        # the chain in order: TCP, payload, frames; what is on record above the steps
+        chain = chain if chain is not None else CommissioningModel()
+        self.chain_status = ChainStatus(chain)
+        self.tcp_page = TcpPage(chain, on_tcp or (lambda: None), on_compute_tcp or (lambda: None))
+        self.frames_page = FramesPage(chain, on_frames or (lambda axis: None))
+        self.steps = QTabWidget()
+        self.steps.addTab(self.tcp_page, "1 · TCP")
+        self.steps.addTab(self.payload_page, "2 · Payload && bias")
+        self.steps.addTab(self.frames_page, "3 · Frames && signs")
+        outer = QVBoxLayout(self)
+        outer.addWidget(self.chain_status)
+        outer.addWidget(self.steps, 1)
         self.pose_set.currentTextChanged.connect(model.set_pose_set)
         self.run_button.clicked.connect(on_run)
         model.changed.connect(self._on_changed)

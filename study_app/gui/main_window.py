@@ -7,7 +7,7 @@ from collections.abc import Callable
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QGroupBox, QHBoxLayout, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
+    QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
     QVBoxLayout, QWidget,
 )
 
@@ -21,7 +21,9 @@ from study_app.gui.confirm import Confirmation
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
-from study_app.gui.widgets import LEVEL_COLOURS, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.widgets import (
+    LEVEL_COLOURS, ElidedLabel, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+)
 from study_app.models.app import AppModel
 
 __all__ = ["ExperimenterWindow"]
@@ -97,14 +99,20 @@ class ExperimenterWindow(QMainWindow):
         ab.addWidget(self.abort_session_button)
         grid.addLayout(ab)
         grid.addWidget(self.calibrate_button)
+        # real rig: start although the calibration chain is incomplete -- only with a reason, which is stored
+        self.override_button = QPushButton("Start without calibration…")
+        self.override_button.hide()
+        grid.addWidget(self.override_button)
         wr = QHBoxLayout()
         wr.addWidget(self.participant_button)
         wr.addWidget(self.rig_button)
         grid.addLayout(wr)
+        self.jaw_box = self._build_jaw_box()
         left = QWidget()
         ll = QVBoxLayout(left)
         ll.addWidget(self.setup_panel)
         ll.addWidget(controls)
+        ll.addWidget(self.jaw_box)
         ll.addStretch(1)
         left.setMinimumWidth(340)
         left.setMaximumWidth(460)
@@ -141,6 +149,8 @@ class ExperimenterWindow(QMainWindow):
         self.calibration_wizard = CalibrationWizard(
             self.model.calibration, self.model.calibrate,
             RealPosePanel(self.model.real_calibration, self.model.record_pose, self.model.identify),
+            chain=self.model.commissioning, on_tcp=self.model.run_tcp, on_compute_tcp=self.model.compute_tcp,
+            on_frames=self.model.check_frames,
         )
         self._build_menu()
 
@@ -154,6 +164,9 @@ class ExperimenterWindow(QMainWindow):
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
         self.notice_close.clicked.connect(self.model.clear_notice)
+        self.override_button.clicked.connect(self.start_with_override)
+        self.model.commissioning.changed.connect(self._on_actions_changed)
+        self.model.jaw.changed.connect(self._on_jaw_changed)
         self.setup_panel.start_requested.connect(self.start_session)
         self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
         self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
@@ -175,6 +188,57 @@ class ExperimenterWindow(QMainWindow):
             placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
         self.bridge.start()
         self.plot_timer.start()
+
+    # -- the jaw -------------------------------------------------------------------------------------
+    def _build_jaw_box(self) -> QGroupBox:
+        """Jaw controls (open, close, step) and its position; hidden until the engine reports a jaw."""
+        box = QGroupBox("Jaw")
+        lay = QVBoxLayout(box)
+        row = QHBoxLayout()
+        self.jaw_buttons: dict[str, QPushButton] = {}
+        for action, text, tip in (("close", "Close", "close fully (the firmware's closed limit)"),
+                                  ("step_close", "Step −", "one step (1 mm of rod travel) toward closed"),
+                                  ("step_open", "Step +", "one step (1 mm of rod travel) toward open"),
+                                  ("open", "Open", "open fully (the firmware's open limit)")):
+            b = QPushButton(text)
+            b.setToolTip(tip)
+            b.clicked.connect(lambda _=False, a=action: self.model.jaw_action(a))
+            row.addWidget(b)
+            self.jaw_buttons[action] = b
+        self.jaw_label = QLabel()
+        self.jaw_label.setWordWrap(True)  # (a fault's text may take two lines)
+        # the last command on one line: the left column has no height to spare on a 768-px screen
+        self.jaw_last = ElidedLabel()
+        lay.addLayout(row)
+        lay.addWidget(self.jaw_label)
+        lay.addWidget(self.jaw_last)
+        box.hide()
+        return box
+
+    def _on_jaw_changed(self) -> None:
+        jaw = self.model.jaw
+        self.jaw_box.setVisible(jaw.available)
+        self.jaw_label.setText(jaw.text())
+        self.jaw_last.set_full_text(f"last: {jaw.log[-1]}" if jaw.log else "")
+        self.jaw_last.setVisible(bool(jaw.log))
+        fault = jaw.state is not None and bool(jaw.state.fault)
+        self.jaw_label.setStyleSheet("color: #c81e1e; font-weight: 600;" if fault else "color: #333;")
+
+    def start_with_override(self) -> None:
+        """Real rig, calibration incomplete: ask for a reason, then start anyway (the reason is stored)."""
+        missing = self.model.calibration_missing()
+        if not missing or not self.model.can("start"):
+            return
+        self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
+        prompt = (f"{missing}.\n\nStart anyway? The session stores this override and your reason "
+                  "(the force at rest is still measured for 2 s and must be below 0.1 N).\n\nReason:")
+        if self.confirm is not None:  # a scripted run answers at once
+            reason = "scripted override" if self.confirm("Start without calibration", prompt) else ""
+        else:
+            reason, ok = QInputDialog.getText(self, "Start without calibration", prompt)
+            reason = reason if ok else ""
+        if reason.strip() and self.model.start(override_reason=reason):
+            self._save_settings()
 
     # -- menus ---------------------------------------------------------------------------------------
     def _build_menu(self) -> None:
@@ -320,6 +384,10 @@ class ExperimenterWindow(QMainWindow):
         self.abort_session_button.setEnabled(can("abort_session"))
         self.setup_panel.resume_button.setEnabled(can("resume_session"))
         self.setup_panel.setEnabled(not self.model.session.running)
+        missing = self.model.calibration_missing()
+        self.override_button.setVisible(bool(missing))
+        self.override_button.setEnabled(bool(missing) and can("start"))
+        self.override_button.setToolTip(missing)
 
     def _on_session_changed(self) -> None:
         self.status.setText(self.model.session.message)

@@ -81,14 +81,18 @@ class RigCanvas(QWidget):
             ty = self.to_px(0, target_z).y()
             p.setPen(QPen(QColor(30, 90, 220), 1.5, Qt.PenStyle.DashLine))
             p.drawLine(QPointF(tip.x() - 12 * s, ty), QPointF(tip.x() + 12 * s, ty))
-        p.setPen(QColor(40, 40, 50))
         p.setFont(QFont("Sans", 10))
-        text = (f"tip {m.tip_z_mm:+5.1f} mm · indentation {m.indentation_mm:4.2f} mm · "
-                f"contact force {m.contact_force_n:4.2f} N (ground truth)")
-        p.drawText(QRectF(8, 6, self.width() - 16, 20), Qt.AlignmentFlag.AlignLeft, text)
+        lines = [f"tip {m.tip_z_mm:+5.1f} mm · indentation {m.indentation_mm:4.2f} mm · "
+                 f"contact force {m.contact_force_n:4.2f} N (ground truth)"]
         if m.driver == "manual":
-            p.drawText(QRectF(8, 24, self.width() - 16, 20), Qt.AlignmentFlag.AlignLeft,
-                       "manual: drag vertically to move the tip · ↑/↓ 0.5 mm steps · Home: lift off")
+            lines.append("manual: drag vertically to move the tip · ↑/↓ 0.5 mm steps · Home: lift off")
+        for k, text in enumerate(lines):
+            box = QRectF(8, 6 + 18 * k, self.width() - 16, 20)
+            # on a pale backing: the shaft passes under the readout
+            back = p.boundingRect(box, Qt.AlignmentFlag.AlignLeft, text).adjusted(-3, 0, 3, 0)
+            p.fillRect(back, QColor(238, 242, 247, 225))
+            p.setPen(QColor(40, 40, 50))
+            p.drawText(box, Qt.AlignmentFlag.AlignLeft, text)
         p.end()
 
     # -- manual driving --------------------------------------------------------------------------

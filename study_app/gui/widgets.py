@@ -8,8 +8,8 @@ from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
     QAbstractItemView, QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit,
-    QListWidget, QListWidgetItem, QPlainTextEdit, QProgressBar, QPushButton, QSpinBox, QTableWidget, QTableWidgetItem,
-    QVBoxLayout, QWidget,
+    QListWidget, QListWidgetItem, QPlainTextEdit, QProgressBar, QPushButton, QSizePolicy, QSpinBox, QTableWidget,
+    QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
 from study_app.models.health import HealthModel
@@ -17,7 +17,7 @@ from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
 
-__all__ = ["QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
+__all__ = ["ElidedLabel", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_PEN = pg.mkPen((220, 40, 40), width=1)
@@ -25,6 +25,32 @@ RENDER_PEN = pg.mkPen((20, 160, 60), width=1)
 AXIS_PENS = (pg.mkPen((200, 60, 60), width=1), pg.mkPen((40, 150, 60), width=1), pg.mkPen((40, 80, 200), width=1))
 COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
+
+
+class ElidedLabel(QLabel):
+    """One line of text that never wraps or widens its column: what does not fit ends in '…', all of it in the tooltip."""
+
+    def __init__(self, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self._full = ""
+        self.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+
+    def full_text(self) -> str:
+        """The text as set (the label may show it shortened)."""
+        return self._full
+
+    def set_full_text(self, text: str) -> None:
+        """Show ``text``, shortened to the label's width if it must be."""
+        self._full = text
+        self.setToolTip(text)
+        self._elide()
+
+    def resizeEvent(self, event):  # noqa: N802 - Qt's name
+        super().resizeEvent(event)
+        self._elide()
+
+    def _elide(self) -> None:
+        self.setText(self.fontMetrics().elidedText(self._full, Qt.TextElideMode.ElideRight, max(0, self.width())))
 
 
 class QtTrialTable(QTableWidget):
@@ -264,14 +290,15 @@ class QtHealthPanel(QWidget):
         self.devices.verticalHeader().setVisible(False)
         self.devices.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.devices.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
-        # all three devices, without a scroll bar
+        # all four devices (the jaw's row when there is one), without a scroll bar
         self.devices.verticalHeader().setDefaultSectionSize(22)
-        self.devices.setFixedHeight(3 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
+        self.devices.setFixedHeight(4 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
         self.reset_button = QPushButton("Reset faults")
         self.loop = QLabel()
         self.loop.setTextFormat(Qt.TextFormat.RichText)
         self.loop.setWordWrap(True)
+        self.thermal = QLabel()
         self.force = QLabel()
         self.force.setWordWrap(True)
         self.force.hide()
@@ -288,6 +315,7 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.devices)
         lay.addLayout(row)
         lay.addWidget(self.loop)
+        lay.addWidget(self.thermal)
         lay.addWidget(self.force)
         lay.addWidget(self.log_label)
         lay.addWidget(self.log)
@@ -307,7 +335,8 @@ class QtHealthPanel(QWidget):
         h = self.health
         self.devices.setRowCount(len(h.devices))
         for i, d in enumerate(h.devices):
-            cells = (d.name, d.state, f"{d.rate_hz:.0f}", f"{d.age_ms:.1f}")
+            cells = (d.name, d.state, "–" if d.rate_hz != d.rate_hz else f"{d.rate_hz:.0f}",
+                     "–" if d.age_ms != d.age_ms else f"{d.age_ms:.1f}")
             for j, text in enumerate(cells):
                 item = self.devices.item(i, j)
                 if item is None:
@@ -315,7 +344,7 @@ class QtHealthPanel(QWidget):
                     self.devices.setItem(i, j, item)
                 item.setText(text)
                 if j == 1:
-                    item.setForeground(QColor(20, 130, 40) if d.state == "ok" else QColor(200, 30, 30))
+                    item.setForeground(QColor(20, 130, 40) if d.state.startswith("ok") else QColor(200, 30, 30))
         text = h.faults_text()
         waiting = h.waiting_text()
         self.faults.setText(f"Faults: {text}" + (f" — the next cue waits: {waiting}" if waiting else ""))
@@ -324,6 +353,10 @@ class QtHealthPanel(QWidget):
         loop = self.loop_html()
         if self.loop.text() != loop:
             self.loop.setText(loop)
+        th = h.thermal_figure()
+        self.thermal.setText(th.text if th is not None else "")
+        if th is not None:
+            self.thermal.setStyleSheet(f"color: {LEVEL_COLOURS[th.level][0]};")
         warning = h.force_warning()
         if warning != self.force.text():
             self.force.setText(warning)

@@ -10,6 +10,7 @@ import numpy as np
 from study_app import messages as m
 from study_app.models import Emitter
 from study_app.models.calibration import CalibrationModel
+from study_app.models.commissioning import CommissioningModel, JawModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
@@ -49,6 +50,8 @@ _COMMAND_NAMES = {
     "StartSession": "Start", "ResumeSession": "Resume session", "Pause": "Pause", "Resume": "Resume",
     "AbortTrial": "Abort trial", "AbortSession": "Abort session", "Calibrate": "Calibration",
     "ListSessions": "Reading the database", "ResetFaults": "Reset faults", "SetDriver": "Driver",
+    "CalibrateTcp": "TCP calibration", "RecordPivot": "Record orientation", "IdentifyTcp": "TCP calibration",
+    "CheckFrames": "Frame check", "RecordFrameAxis": "Frame check", "JawCommand": "Jaw",
 }
 
 
@@ -72,6 +75,8 @@ class AppModel:
         self.participant = ParticipantScreenModel()
         self.calibration = CalibrationModel()
         self.real_calibration = RealCalibrationModel()
+        self.commissioning = CommissioningModel()
+        self.jaw = JawModel()
         #: "sim" or "real", from EngineReady ("" before the engine is connected).
         self.rig_kind = ""
         self.rig = RigViewModel()
@@ -92,8 +97,11 @@ class AppModel:
         """Route one engine event."""
         if isinstance(ev, m.EngineReady):
             self.rig_kind = ev.rig
-        for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig):
+        for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
+                     self.commissioning, self.jaw):
             part.apply(ev)
+        if isinstance(ev, m.StartChecking):
+            self.notify("info", ev.message, "StartSession")
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
             self.setup.set_known(ev.known)
@@ -200,15 +208,48 @@ class AppModel:
             self.notify("error", "The study engine is not running; restart the application.")
         return ok
 
-    def start(self) -> bool:
-        """Start the session described by the setup form (False if the form is invalid or nothing may start)."""
+    def start(self, override_reason: str = "") -> bool:
+        """Start the session described by the setup form (False if the form is invalid or nothing may start).
+
+        ``override_reason``: start on the real rig although the calibration chain is not complete (stored).
+        """
         if not self.can("start"):
             errors = self.setup.validate()
             if errors or self.setup.hint:
                 self.notify("error", "Cannot start: " + " ".join(list(errors.values()) or [self.setup.hint]),
                             "StartSession")
             return False
-        return self._send(self.setup.start_command())
+        cmd = self.setup.start_command()
+        if override_reason.strip():
+            import dataclasses
+
+            cmd = dataclasses.replace(cmd, override_reason=override_reason.strip())
+        return self._send(cmd)
+
+    def calibration_missing(self) -> str:
+        """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated rig)."""
+        st = self.commissioning.status
+        return st.missing if st is not None and st.rig == "real" else ""
+
+    def run_tcp(self) -> None:
+        """TCP step: run the pose set (simulated rig) or record the orientation the instrument is in (real rig)."""
+        self._send(self.commissioning.tcp_command())
+
+    def compute_tcp(self) -> None:
+        """Real rig: the pivot calibration from the recorded orientations, or say why not."""
+        why = self.commissioning.compute_refusal()
+        if why:
+            self.notify("error", f"Cannot compute the TCP: {why}", "IdentifyTcp")
+            return
+        self._send(self.commissioning.compute_command())
+
+    def check_frames(self, axis: str = "") -> None:
+        """Frames step: the whole check (simulated rig) or one axis' push (real rig)."""
+        self._send(self.commissioning.frames_command(axis))
+
+    def jaw_action(self, action: str) -> None:
+        """A jaw control: open, close, step_open, step_close."""
+        self._send(self.jaw.command(action))
 
     def pause(self) -> None:
         """Hold before the next trial (shown as pending until the running trial ends)."""

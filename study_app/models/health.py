@@ -43,11 +43,15 @@ def _level(value: float, limits: tuple[float, float]) -> str:
         return "unknown"
     return "ok" if value <= limits[0] else "warn" if value <= limits[1] else "bad"
 
+#: How the fault log names each kind of loop event.
+_VERBS = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset", "derating": "derating",
+          "derating_ended": "derating ended", "output_restarted": "output restarted"}
+
 #: Fault bits that belong to each device row.
 _DEVICE_FAULTS = {
     "F/T sensor": Fault.SENSOR_STALE | Fault.SENSOR_STATUS | Fault.SENSOR_SATURATION | Fault.NON_FINITE,
     "Robot (pose)": Fault.POSE_STALE,
-    "Haptic device": Fault.HAPTIC_DEVICE,
+    "Haptic device": Fault.HAPTIC_DEVICE | Fault.LOOP_STALLED,
 }
 
 
@@ -77,6 +81,10 @@ class HealthModel:
     #: Largest task force in the newest records, N, and whether a trial was running then.
     force_n: float = 0.0
     in_trial: bool = False
+    #: The real rig has no payload calibration on record: the task force carries the tool's own weight.
+    uncompensated: bool = False
+    #: The jaw (None: the rig has none, or it has not reported yet).
+    jaw: m.JawState | None = None
     changed: Emitter = field(default_factory=Emitter)
 
     def apply(self, ev: object) -> None:
@@ -88,11 +96,15 @@ class HealthModel:
             self.faults = ev.faults
         elif isinstance(ev, m.EngineFault):
             self.faults = ev.faults
-            verb = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset"}.get(ev.kind, ev.kind)
+            verb = _VERBS.get(ev.kind, ev.kind)
             # the session's clock when a session runs: the time the database stores the event at
             when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
             self.fault_log.append(f"{when}  {verb}: {ev.detail}")
             del self.fault_log[:-50]
+        elif isinstance(ev, m.JawState):
+            self.jaw = ev
+        elif isinstance(ev, m.CalibrationStatus):
+            self.uncompensated = ev.rig == "real" and not any(done for name, done, _ in ev.steps if name == "payload")
         elif isinstance(ev, m.EngineStopped):
             self.connected = False
         else:
@@ -123,10 +135,37 @@ class HealthModel:
     def _refresh_states(self) -> None:
         out = []
         for d in self.devices:
+            if d.name == "Jaw actuator":
+                continue
             bits = Fault(self.faults & _DEVICE_FAULTS.get(d.name, 0))
             state = "disconnected" if not self.connected else ("FAULT: " + bits.describe() if bits else "ok")
+            if state == "ok" and d.name == "Haptic device" and self.derating():
+                state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]
             out.append(DeviceStatus(d.name, state, d.rate_hz, d.age_ms))
+        j = self.jaw
+        if j is not None:
+            state = "disconnected" if not self.connected else (
+                f"FAULT: {j.fault}" if j.fault else f"ok, {j.fraction_open:.0%} open ({j.pulse_us} µs)"
+                + (" at the limit" if j.at_limit else ""))
+            out.append(DeviceStatus("Jaw actuator", state, math.nan, math.nan))
         self.devices = out
+
+    def derating(self) -> bool:
+        """The haptic device lowered its force limit (its motors are warm)."""
+        h = self.loop
+        return h is not None and math.isfinite(h.haptic_force_limit_n) and h.haptic_heat_fraction > 0.5
+
+    def thermal_figure(self) -> LoopFigure | None:
+        """The Touch's motor heat against its budget (None before the first Health event)."""
+        h = self.loop
+        if h is None:
+            return None
+        frac = h.haptic_heat_fraction
+        text = f"Touch motors {frac:.0%} of the thermal budget"
+        if self.derating():
+            text += f", derating: force limited to {h.haptic_force_limit_n:.2f} N"
+        level = "ok" if frac <= 0.5 else "warn" if frac <= 0.9 else "bad"
+        return LoopFigure("thermal", text, level, "derating above 50 %")
 
     def faults_text(self) -> str:
         """Latched faults, or 'none'."""
@@ -176,6 +215,9 @@ class HealthModel:
         """A warning when the task force is above :data:`HIGH_FORCE_N`, else ''."""
         if self.force_n <= HIGH_FORCE_N:
             return ""
+        if self.uncompensated:  # not a force on the tissue: the tool's weight, nothing subtracts it
+            return (f"{self.force_n:.1f} N task force (warning above {HIGH_FORCE_N:g} N): no payload calibration "
+                    "on record, so the tool's own weight counts as force; run the calibration wizard's payload step")
         where = "" if self.in_trial else " while no trial is running"
         return (f"{self.force_n:.1f} N on the tissue{where} (warning above {HIGH_FORCE_N:g} N): "
                 "lift the instrument")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 import tomllib
 from pathlib import Path
 
@@ -41,7 +42,10 @@ def test_example_file_is_valid_and_documents_the_defaults() -> None:
     assert hw.jaw is not None and hw.jaw.port == "/dev/ttyACM0" and hw.jaw.baud == 115200
     assert hw.framework.f_max_n == 3.0 and hw.framework.f_scale_n == 7.0 and hw.framework.filter_window == 10
     assert hw.framework.rot_haptic_base == DEFAULT_ROT_HAPTIC_BASE
-    assert hw.calibration_file is None
+    # the calibration file is next to the hardware file unless named; the tool and watchdog have defaults
+    assert hw.calibration_file == str(EXAMPLE.parent / "calibration.json") and hw.calibration_tool == "grasper"
+    assert hw.haptic.command_timeout_s == 0.010
+    assert (hw.jaw.close_button, hw.jaw.open_button) == (1, 2)
 
 
 def test_minimal_file_takes_defaults() -> None:
@@ -58,6 +62,13 @@ def test_minimal_file_takes_defaults() -> None:
         ({"sensor": {"host": "10 0 0 1"}}, "sensor.host = '10 0 0 1': must be an IPv4 address (e.g. 192.168.1.1) or a host name"),
         ({"sensor": {"hots": "10.0.0.1"}}, "sensor.hots = '10.0.0.1': unknown field; allowed: buffered, connect_timeout_s"),
         ({"sensor": {}}, "sensor.host = None: required: the Net F/T box's IP address"),
+        ({"haptic": {"command_timeout_s": 0.2}},
+         "haptic.command_timeout_s = 0.2: must be a number from 0.002 to 0.05 s (a force command this old renders as "
+         "zero)"),
+        ({"haptic": {"command_timeout_s": True}}, "haptic.command_timeout_s = True: must be a number"),
+        ({"calibration": {"tool": ""}}, "calibration.tool = '': must be a non-empty name of the mounted instrument"),
+        ({"jaw": {"port": "/dev/ttyACM0", "open_button": 1}}, "jaw.open_button = 1: must differ from jaw.close_button"),
+        ({"jaw": {"port": "/dev/ttyACM0", "close_button": 3}}, "jaw.close_button = 3: allowed values: 1 (the Touch's front"),
         ({"robot": {"host": "10.0.0.2", "mode": "drive"}}, "robot.mode = 'drive': allowed values: observe, teleop"),
         ({"robot": {"host": "10.0.0.2", "mode": "teleop"}}, "teleop = None: robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m"),
         ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0]}}, "teleop.workspace_max_m = None: required: the corner of the box"),
@@ -76,7 +87,7 @@ def test_minimal_file_takes_defaults() -> None:
         ({"jaw": {}}, "jaw.port = None: required: the Arduino's serial port"),
         ({"frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, "frames.rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, -1]] is a reflection"),
         ({"frames": {"rot_haptic_base": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]] is not a rotation"),
-        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
         ({"framework": {"filter_window": 0}}, "framework.filter_window = 0: must be a whole number of samples from 1 to 1000"),
         ({"version": 2}, "version = 2: this software reads hardware file version 1"),
         ({"haptic": None}, "haptic = None: must be a table"),
@@ -110,8 +121,8 @@ def test_minimal_file_takes_defaults() -> None:
          "frames.rot_tip_sensor = [[100000000000000000...0000000000000000000, 0, 0], [0, 1, 0], [0, 0, 1]]: is not a rotation: every entry of a rotation matrix lies within ±1"),
         ({"frames": {"rot_haptic_base": [[1, 0, 0], [0, float("nan"), 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0, 0], [0, nan, 0], [0, 0, 1]]: must be a rotation matrix"),
         # f_max: never above the Touch's peak force
-        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number > 0 and ≤ 3.3 (N; the 3D Systems Touch's peak force)"),
-        ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number > 0 and ≤ 3.3"),
+        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number from 1e-06 to 3.3"),
     ],
 )
 def test_bad_fields_name_field_value_and_what_is_allowed(patch: dict, message: str) -> None:
@@ -166,7 +177,7 @@ class _FakeTouch:
     def __init__(self, *a: object, **k: object) -> None:
         self.closed = False
 
-    def command_force(self, fx: float, fy: float, fz: float) -> None:
+    def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
         self.cmd = (fx, fy, fz)
 
     def read_state(self) -> HapticState:
@@ -204,7 +215,11 @@ def test_a_failing_device_closes_the_ones_already_open(tmp_path: Path) -> None:
         hw = load_hardware(write_rig_file(tmp_path, netft, rtde, None))
         with pytest.raises(DeviceError, match=r"^haptic device: .*pip install 'haptic-study\[touch\]'"):
             build_real_rig(hw, VirtualClock())
-        # the sensor was opened and closed again: it sent START and then STOP
+        # the sensor was opened and closed again: it sent START and then STOP (the fake reads UDP in its own
+        # thread: wait, bounded, for the STOP datagram to arrive)
+        deadline = time.monotonic() + 2.0
+        while [r[1] for r in netft.requests] != [2, 0] and time.monotonic() < deadline:
+            time.sleep(0.002)
         assert [r[1] for r in netft.requests] == [2, 0]
         assert rtde.wait_for("DISCONNECTED")
 

@@ -203,3 +203,42 @@ def test_missing_openhaptics_names_what_to_install(monkeypatch: pytest.MonkeyPat
     except (ImportError, OSError):
         with pytest.raises(DeviceError, match=r"pip install 'haptic-study\[touch\]'"):
             TouchHapticDevice()
+
+
+def test_a_command_that_stops_coming_renders_zero_once_it_is_10_ms_old() -> None:
+    hd = FakeHD()
+    clock = VirtualClock()
+    t = TouchHapticDevice(api=hd, clock=clock)
+    assert t.command_timeout_s == 0.010
+    t.command_force(0.0, 0.83, 0.0)  # the stuck force
+    out = []
+    for _ in range(15):  # nobody commands any more; the servo runs on at 1 kHz
+        clock.advance(1_000_000)
+        hd.tick()
+        out.append(hd.forces[-1])
+    assert out[:9] == [(0.0, 0.83, 0.0)] * 9  # 1..9 ms old
+    assert out[9:] == [(0.0, 0.0, 0.0)] * 6  # exactly zero from 10 ms on
+    assert t.output.stale_ticks == 6
+    t.command_force(0.0, 0.5, 0.0)  # a fresh command renders again
+    hd.tick()
+    assert hd.forces[-1] == (0.0, 0.5, 0.0)
+    # a command computed at an earlier tick (a tick that froze half-way) is stale on arrival
+    t.command_force(0.0, 0.5, 0.0, clock.now_ns() - 20_000_000)
+    hd.tick()
+    assert hd.forces[-1] == (0.0, 0.0, 0.0)
+
+
+def test_the_real_touch_derates_with_the_same_heat_model_and_reports_its_limit() -> None:
+    hd = FakeHD()
+    clock = VirtualClock()
+    t = TouchHapticDevice(api=hd, clock=clock, thermal_budget_n2s=1.0)
+    hd.tick()
+    for _ in range(3000):  # the loop commands 3 N every millisecond for 3 s
+        limit = t.read_state().force_limit_n
+        clock.advance(1_000_000)
+        t.command_force(3.0, 0.0, 0.0)
+        hd.tick()
+        assert hd.forces[-1][0] <= limit * (1 + 1e-12)
+    st = t.read_state()
+    assert st.error_code == 0 and st.heat_fraction > 0.95 and 0.88 < st.force_limit_n < 1.0
+    assert hd.forces[-1][0] == pytest.approx(st.force_limit_n, rel=1e-3)

@@ -77,4 +77,4 @@ def open_fake_touch(settings: HapticSettings, clock: Clock) -> TouchHapticDevice
     """``pipeline.hardware.open_haptic``'s signature, on :class:`ThreadedHD`."""
     api = ThreadedHD()
     OPENED.append(api)
-    return TouchHapticDevice(settings.device_name, api=api, clock=clock)
+    return TouchHapticDevice(settings.device_name, api=api, clock=clock, command_timeout_s=settings.command_timeout_s)

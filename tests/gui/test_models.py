@@ -303,6 +303,20 @@ def test_a_large_force_on_the_tissue_is_warned_about():
     assert h.force_warning() == "" and seen[-1] == ""
 
 
+def test_without_a_payload_on_record_the_real_rig_warns_of_the_tools_weight_not_of_tissue():
+    h = HealthModel()
+    steps = [("TCP", False, "not on record"), ("payload", False, "not on record"), ("frames", False, "not on record")]
+    h.apply(m.CalibrationStatus("real", "grasper", "/lab/calibration.json", steps, "real rig: no TCP ..."))
+    h.update_force(6.4, in_trial=False)
+    assert h.force_warning() == ("6.4 N task force (warning above 5 N): no payload calibration on record, so the "
+                                 "tool's own weight counts as force; run the calibration wizard's payload step")
+    steps[1] = ("payload", True, "0.650 kg, RMS residual 2.9 mN")
+    h.apply(m.CalibrationStatus("real", "grasper", "/lab/calibration.json", steps, ""))
+    assert h.force_warning().startswith("6.4 N on the tissue while no trial is running")
+    h.apply(m.CalibrationStatus("sim", "simulated instrument", "", [("payload", False, "not on record")], ""))
+    assert h.force_warning().startswith("6.4 N on the tissue")  # the simulated rig compensates from its own model
+
+
 def test_app_model_actions_follow_state(tmp_path):
     sent: list[object] = []
     a = AppModel(lambda c: sent.append(c) or True)

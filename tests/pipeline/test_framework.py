@@ -193,3 +193,32 @@ def test_config_validation_names_the_field() -> None:
         FrameworkConfig(f_max_n=math.nan)
     # the safety clamp follows f_max
     assert FrameworkConfig(f_max_n=2.0).safety.f_max_n == 2.0
+
+
+def _pushing(fw: HapticFramework, ticks: int) -> list[tuple[float, ...]]:
+    """Steps with a force that grows past the clamp (the slew state ends at the limit)."""
+    return [fw.step(0.8 + 0.004 * k, -0.5 + 0.01 * k, 1.2 + 0.02 * k, True, 0.001) for k in range(ticks)]
+
+
+def test_a_snapshot_carries_the_device_limit_and_restores_bit_for_bit() -> None:
+    fw = HapticFramework(FrameworkConfig(), _calibration(), device_peak_n=3.3)
+    _pushing(fw, 600)
+    fw.set_device_limit(1.7)  # the Touch derates mid-contact
+    _pushing(fw, 50)
+    snap = fw.snapshot()
+    assert snap["device_limit_n"] == 1.7
+    twin = HapticFramework.restore(snap)
+    assert twin.safety.limit_n == fw.safety.limit_n == 1.7
+    ours, theirs = _pushing(fw, 300), _pushing(twin, 300)
+    assert math.hypot(*ours[-1][18:21]) == pytest.approx(1.7)  # the limit is what clamps
+    for a, b in zip(ours, theirs):
+        assert all(_same(x, y) for x, y in zip(a, b))
+    # replay with another f_max: the device's own limit still clamps (the raw limit is kept, not the clamp)
+    higher = HapticFramework.restore(snap, FrameworkConfig(f_max_n=3.2))
+    assert higher.safety.static_limit_n == 3.2 and higher.safety.limit_n == fw.safety.limit_n
+    # a device that does not derate (no limit given, or cooled to its peak) and a snapshot from before derating
+    fw2 = HapticFramework(FrameworkConfig(), _calibration(), device_peak_n=3.3)
+    assert fw2.snapshot()["device_limit_n"] is None
+    old = dict(snap)
+    del old["device_limit_n"]
+    assert HapticFramework.restore(old).safety.limit_n == fw.safety.static_limit_n

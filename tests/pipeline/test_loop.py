@@ -49,7 +49,7 @@ def ticks(eng: SimEngine, n: int) -> list[dict[str, float]]:
         eng.loop.run_ticks(1)
         rec = eng.loop.last_record
         rec["clock_ns"] = t_ns
-        rec["cmd"] = eng.rig.haptic._cmd
+        rec["cmd"] = eng.rig.haptic.output.commanded
         out.append(rec)
     return out
 
@@ -155,7 +155,7 @@ def test_run_on_virtual_clock_has_exact_1ms_period_including_the_ramp_down():
     assert rows["gain"][999] == 1.0
     assert np.all(rows["haptic_on"][1000:] == 0.0)
     assert rows["gain"][-1] == 0.0 and np.all(rows["gain"][1000:-1] > 0.0)
-    assert eng.rig.haptic._cmd == (0.0, 0.0, 0.0)
+    assert eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
 
     s = loop.stats.summary()
     assert s["ticks"] == loop.tick_count - 1  # periods between ticks
@@ -204,7 +204,7 @@ def test_a_failing_between_ticks_hook_still_ramps_the_force_down():
     with pytest.raises(RuntimeError, match="housekeeping failed"):
         loop.run(max_ticks=1000, between_ticks=boom)
     assert loop.framework.safety.gain == 0.0
-    assert eng.rig.haptic._cmd == (0.0, 0.0, 0.0)
+    assert eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
 
 
 def test_a_stall_counts_missed_slots_and_keeps_the_deadline_grid():
@@ -291,14 +291,14 @@ def test_haptics_off_ramps_rendered_force_to_exactly_zero_while_the_pipeline_run
 def test_ramp_down_ends_with_the_device_commanded_to_zero(steady):
     eng = steady
     loop = eng.loop
-    assert eng.rig.haptic._cmd != (0.0, 0.0, 0.0)
+    assert eng.rig.haptic.output.commanded != (0.0, 0.0, 0.0)
     n0 = loop.tick_count
     c = eng.ring.write_count
     loop.ramp_down()
     assert loop.tick_count - n0 == RAMP_TICKS
     assert loop.haptic_on is False
     assert eng.framework.safety.gain == 0.0
-    assert eng.rig.haptic._cmd == (0.0, 0.0, 0.0)
+    assert eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
     rows = eng.ring.read_since(c - 1).rows  # the last tick before the ramp-down, then the ramp
     assert len(rows) == RAMP_TICKS + 1
     assert rows["render_fx"][-1] == 0.0 and rows["render_fy"][-1] == 0.0 and rows["render_fz"][-1] == 0.0
@@ -340,7 +340,7 @@ def test_ramp_down_is_not_undone_by_a_queued_set_haptics_on(steady):
     assert loop.haptic_on is False
     assert eng.framework.safety.gain == 0.0
     assert loop.tick_count - n0 == RAMP_TICKS
-    assert eng.rig.haptic._cmd == (0.0, 0.0, 0.0)
+    assert eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
 
 
 # -- determinism ----------------------------------------------------------------------------------------

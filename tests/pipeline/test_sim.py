@@ -116,26 +116,61 @@ def test_sensor_packet_loss_and_stall_keep_the_old_sample() -> None:
 
 
 # -- Touch ----------------------------------------------------------------------------------------
-def test_touch_clamps_heats_and_needs_rearm_after_cooling() -> None:
-    t = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0))
-    t.command_force(10.0, 0.0, 0.0)
+def test_touch_clamps_to_its_peak_and_renders_only_fresh_commands() -> None:
+    t = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.88))
     t.advance(0, 0.001)
+    t.command_force(10.0, 0.0, 0.0)  # commanded at t = 0 ms
+    t.advance(1_000_000, 0.001)
     assert t.applied_force_n == pytest.approx((3.3, 0.0, 0.0))
-    k = 1
-    while not t.error_code:
+    # nobody commands any more: rendered while younger than 10 ms, exactly zero once 10 ms old
+    t.advance(9_999_999, 0.001)
+    assert t.applied_force_n == pytest.approx((3.3, 0.0, 0.0))
+    t.advance(10_000_000, 1e-9)
+    assert t.applied_force_n == (0.0, 0.0, 0.0) and t.output.stale
+    t.command_force(math.nan, 0.0, 0.0)
+    t.advance(10_500_000, 0.0005)
+    assert t.applied_force_n == (0.0, 0.0, 0.0)
+
+
+def test_touch_derates_toward_its_continuous_rating_and_stays_under_budget() -> None:
+    spec = TouchSpec(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0)
+    t = SimTouch(spec)
+    limits, heat = [], []
+    for k in range(3000):  # the loop commands 10 N every tick for 3 s
+        limit = t.read_state().force_limit_n  # the limit in force when this tick renders
         t.advance(k * 1_000_000, 0.001)
-        k += 1
-    # heat rate (3.3² − 0.88²) N² per s → budget 1 N²s after ≈ 99 ms
-    assert k == pytest.approx(1.0 / (3.3**2 - 0.88**2) / 0.001 + 1, abs=2)
+        t.command_force(10.0, 0.0, 0.0)
+        limits.append(t.read_state().force_limit_n)
+        heat.append(t.heat_n2s)
+        assert math.hypot(*t.applied_force_n) <= limit * (1 + 1e-12)
+    assert t.error_code == 0  # derating kept it under the budget: no WARM_MOTORS
+    assert max(heat) < spec.thermal_budget_n2s
+    # full peak until half the budget, then falling monotonically toward the continuous rating
+    half = next(i for i, h in enumerate(heat) if h > 0.5)
+    assert all(x == 3.3 for x in limits[:half])
+    assert all(b <= a for a, b in zip(limits[half:], limits[half + 1:]))
+    assert 0.88 < limits[-1] < 1.0 and t.read_state().heat_fraction > 0.95
+    # resting cools it: the full peak comes back
+    for k in range(3000, 6000):
+        t.advance(k * 1_000_000, 0.001)
+        t.command_force(0.0, 0.0, 0.0)
+    assert t.read_state().force_limit_n == 3.3
+
+
+def test_touch_past_its_budget_raises_warm_motors_until_cooled_and_rearmed() -> None:
+    t = SimTouch(TouchSpec(thermal_budget_n2s=1.0))
+    t.advance(0, 0.001)
+    t.command_force(1.0, 0.0, 0.0)
+    t.output.heat.heat_n2s = 1.01  # past the budget (e.g. after a servo stall): the backstop
+    t.advance(1_000_000, 0.001)
     assert t.error_code == HD_WARM_MOTORS and t.applied_force_n == (0.0, 0.0, 0.0)
     assert not t.rearm()  # still hot
-    t.command_force(0.0, 0.0, 0.0)
-    for j in range(2000):
-        t.advance((k + j) * 1_000_000, 0.001)
+    k = 2
+    while t.heat_n2s > 0.5:
+        t.command_force(0.0, 0.0, 0.0)
+        t.advance(k * 1_000_000, 0.001)
+        k += 1
     assert t.rearm() and t.error_code == 0
-    t.command_force(math.nan, 0.0, 0.0)
-    t.advance(10**10, 0.001)
-    assert t.applied_force_n == (0.0, 0.0, 0.0)
 
 
 # -- calibration on the simulated rig ------------------------------------------------------------------

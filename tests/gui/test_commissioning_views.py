@@ -1,0 +1,138 @@
+"""The wizard's chain (status, TCP, frames), the jaw controls and the health panel's thermal and jaw rows: models
+drive views, events drive models (no engine)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.frames import axis_angle, mat_mul
+from pipeline.loop import RECORD_FIELDS
+from pipeline.sim.robot import TOOL_DOWN
+from study_app import messages as m
+from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.widgets import QtHealthPanel
+from study_app.models.app import AppModel
+from study_app.models.calibration import CalibrationModel
+from study_app.models.commissioning import CommissioningModel, JawModel
+from study_app.models.health import HealthModel
+
+REAL = m.EngineReady("", "real", "real", {}, math.nan, (math.nan,) * 3, "participant")
+SIM = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
+MISSING = ("no TCP calibration on record for tool 'grasper': run haptic-study calibrate tcp --rig real --hardware "
+           "FILE (or the calibration wizard's TCP step)")
+STATUS = m.CalibrationStatus("real", "grasper", "/lab/calibration.json",
+                             [("TCP", False, "not on record"), ("payload", True, "0.650 kg (2026-01-01 10:00:00 UTC)"),
+                              ("frames", False, "not on record")], MISSING)
+
+
+def test_the_real_tcp_step_records_orientations_warns_on_a_repeat_and_computes(qtbot) -> None:
+    chain = CommissioningModel()
+    sent: list[object] = []
+    wiz = CalibrationWizard(CalibrationModel(), lambda: None, chain=chain,
+                            on_tcp=lambda: sent.append(chain.tcp_command()),
+                            on_compute_tcp=lambda: sent.append(chain.compute_command()))
+    qtbot.addWidget(wiz)
+    for ev in (REAL, STATUS):
+        chain.apply(ev)
+    assert wiz.chain_status.gate.text() == f"A session cannot start yet: {MISSING}."
+    page = wiz.tcp_page
+    assert page.run_button.text() == "Record orientation" and not page.compute_button.isEnabled()
+    assert page.compute_button.toolTip() == "record at least 4 orientations first (0 so far)"
+    page.run_button.click()
+    assert sent == [m.RecordPivot("O1")] and not page.run_button.isEnabled()
+    chain.apply(m.PivotRecorded("O1", TOOL_DOWN, (0.3, -0.1, 0.2), 0.01))
+    chain.apply(m.PivotRecorded("O2", mat_mul(axis_angle((1.0, 0.0, 0.0), math.radians(1.0)), TOOL_DOWN),
+                                (0.3, -0.1, 0.2), 0.01))
+    assert page.orientations.rowCount() == 2 and page.orientations.item(1, 1).text() == "+300.0, -100.0, +200.0"
+    assert page.verdict.text().startswith("O2 is only 1.0° from O1: it adds little")
+    for k, deg in ((3, 30.0), (4, -30.0)):
+        chain.apply(m.PivotRecorded(f"O{k}", mat_mul(axis_angle((0.0, 1.0, 0.0), math.radians(deg)), TOOL_DOWN),
+                                    (0.3, -0.1, 0.2), 0.01))
+    assert page.compute_button.isEnabled()
+    page.compute_button.click()
+    assert isinstance(sent[-1], m.IdentifyTcp) and [p[0] for p in sent[-1].poses] == ["O1", "O2", "O3", "O4"]
+    chain.apply(m.TcpCalibrationDone(True, "", "recorded", 4, {"tip_in_flange_m": [0.001, -0.001, 0.25],
+                                                               "rms_residual_m": 4e-5}))
+    assert page.verdict.text() == ("Accepted: tip (+1.00, -1.00, +250.00) mm in the flange frame, RMS residual 0.040 "
+                                   "mm over 4 orientations — saved for the tool.")
+
+
+def test_the_real_frames_step_records_one_axis_at_a_time(qtbot) -> None:
+    chain = CommissioningModel()
+    sent: list[object] = []
+    wiz = CalibrationWizard(CalibrationModel(), lambda: None, chain=chain,
+                            on_frames=lambda axis: sent.append(chain.frames_command(axis)))
+    qtbot.addWidget(wiz)
+    chain.apply(REAL)
+    page = wiz.frames_page
+    assert page.run_button.isHidden() and not page.axis_buttons["+z"].isHidden()
+    page.axis_buttons["+z"].click()
+    assert sent == [m.RecordFrameAxis("+z")]
+    assert page.instruction.text().startswith("Recording 3 s: push the tip gently (about 1 N) along base +z (up)")
+    chain.apply(m.FrameAxisChecked("+z", False, "+z  peak 1.02 N · base force  89.4° from +z · FAIL", {}))
+    chain.apply(m.FrameCheckDone(False, "Frames and signs: FAIL on +z (89.4° off): ...", []))
+    assert page.result.toPlainText().splitlines() == ["+z  FAIL · peak 1.02 N", "    base force  89.4° from +z",
+                                                      "Frames and signs: FAIL on +z (89.4° off): ..."]
+    # the window is narrower than a terminal: every axis's verdict comes first, its parts beneath it
+    chain.apply(m.FrameAxisChecked("+x", True, "+x  peak 1.03 N · base force   0.2° from +x · rendered force   0.2° "
+                                   "from haptic +x (right) · PASS", {}))
+    assert page.result.toPlainText().splitlines()[:3] == [
+        "+x  PASS · peak 1.03 N", "    base force   0.2° from +x", "    rendered force   0.2° from haptic +x (right)"]
+    assert chain.frames_view()[0].endswith("· PASS")  # (what the terminal prints is unchanged)
+
+
+def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:
+    chain = CommissioningModel()
+    sent: list[object] = []
+    wiz = CalibrationWizard(CalibrationModel(), lambda: None, chain=chain,
+                            on_tcp=lambda: sent.append(chain.tcp_command()),
+                            on_frames=lambda axis: sent.append(chain.frames_command(axis)))
+    qtbot.addWidget(wiz)
+    chain.apply(SIM)
+    wiz.tcp_page.pose_set.setCurrentText("minimal")
+    wiz.tcp_page.run_button.click()
+    wiz.frames_page.run_button.click()
+    assert sent == [m.CalibrateTcp("minimal"), m.CheckFrames()]
+    # the check is under way (no answer yet): the page says so
+    assert wiz.frames_page.instruction.text().startswith("Checking … the simulated experimenter pushes")
+    assert not wiz.frames_page.run_button.isEnabled()
+    assert wiz.tcp_page.orientations.isHidden() and wiz.tcp_page.run_button.text() == "Run TCP calibration"
+
+
+def test_the_app_offers_an_override_only_on_an_incomplete_real_rig_and_sends_the_reason() -> None:
+    sent: list[object] = []
+    app = AppModel(lambda cmd: sent.append(cmd) or True)
+    app.apply(REAL)
+    assert app.calibration_missing() == ""
+    app.apply(STATUS)
+    assert app.calibration_missing() == MISSING
+    app.setup.update(db_path="/tmp/x.db", code="R01")
+    app.session.state = "ready"
+    assert app.start(override_reason="  rehearsal  ")
+    assert isinstance(sent[-1], m.StartSession) and sent[-1].override_reason == "rehearsal"
+
+
+def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
+    h = HealthModel()
+    panel = QtHealthPanel(h)
+    qtbot.addWidget(panel)
+    h.apply(SIM)
+    h.apply(m.JawState(0.4, 1420, False, "", "experimenter: step 50 µs toward open → 1420 µs (40% open)"))
+    h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
+                     haptic_heat_fraction=0.62, haptic_force_limit_n=2.52))
+    rows = np.zeros(300, dtype=[(f, "<f8") for f in RECORD_FIELDS])
+    rows["t_s"] = np.arange(300) * 1e-3
+    h.update_from_rows(rows)
+    names = [panel.devices.item(i, 0).text() for i in range(panel.devices.rowCount())]
+    states = [panel.devices.item(i, 1).text() for i in range(panel.devices.rowCount())]
+    assert names[-1] == "Jaw actuator" and states[-1] == "ok, 40% open (1420 µs)"
+    assert states[names.index("Haptic device")] == "ok, derating: at most 2.52 N"
+    assert panel.thermal.text() == "Touch motors 62% of the thermal budget, derating: force limited to 2.52 N"
+    h.apply(m.JawState(0.4, 1420, False, "serial port /dev/ttyACM0 lost: [Errno 5]", "experimenter: open fully: refused"))
+    assert panel.devices.item(3, 1).text() == "FAULT: serial port /dev/ttyACM0 lost: [Errno 5]"
+    jaw = JawModel()
+    jaw.apply(m.JawState(1.0, 1900, False, "", "stylus: open fully → 1900 µs (100% open)"))
+    assert jaw.text() == "100% open (1900 µs)" and jaw.log == ["stylus: open fully → 1900 µs (100% open)"]
+    assert JawModel.command("step_open") == m.JawCommand("step_open")

@@ -1,0 +1,189 @@
+"""The real rig's commissioning chain through the study engine, and the session gate, on the loopback fakes.
+
+TCP (orientations recorded about a divot, then Compute), payload (poses identified), frames (a push along
+each axis): each is saved for the mounted tool; only then does Start measure the force at rest for 2 s and
+open the session -- or refuse it, in one line, when the tool touches something or its payload is wrong.
+Hardware runs on the wall clock: the engine is stepped while waiting for conditions (bounded).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
+
+from fake_netft import FakeNetFT  # noqa: E402
+from fake_rtde import FakeRtde  # noqa: E402
+from test_real_rig import CPF, FAKE_TOUCH, G, hardware_file, wait_for  # noqa: E402
+
+from pipeline.frames import matrix_to_rotvec  # noqa: E402
+from pipeline.sim.robot import TOOL_DOWN  # noqa: E402
+from pipeline.tcp import pivot_orientations  # noqa: E402
+from study_app import messages as m  # noqa: E402
+from study_app.engine_host import HostConfig, StudyEngine, pose_set  # noqa: E402
+
+TIP = np.array([0.0015, -0.0010, 0.2212])  # the tool's true tip in the flange frame (the pendant's TCP is zero)
+PIVOT = np.array([0.30, -0.10, 0.15])
+MASS, COM = 0.3, np.array([0.0, 0.0, 0.06])
+BIAS = np.array([0.4, -0.3, 0.2])
+
+
+def counts(rot: tuple[float, ...], extra_base_n: np.ndarray | None = None) -> tuple[int, ...]:
+    r = np.asarray(rot).reshape(3, 3)
+    g_s = r.T @ np.array([0.0, 0.0, -G])
+    f = MASS * g_s + BIAS + (r.T @ extra_base_n if extra_base_n is not None else 0.0)
+    return tuple(int(round(v * CPF)) for v in (*f, *np.cross(COM, MASS * g_s)))
+
+
+def put(rtde: FakeRtde, rot: tuple[float, ...], p: np.ndarray) -> None:
+    rv = matrix_to_rotvec(rot)
+    rtde.send(f"pose {p[0]} {p[1]} {p[2]} {rv[0]} {rv[1]} {rv[2]}")
+
+
+def at(e: StudyEngine, rot: tuple[float, ...], p: np.ndarray) -> None:
+    target = np.asarray(rot).reshape(3, 3)
+    wait_for(e, lambda: np.allclose(np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target,
+                                    atol=1e-9))
+
+
+def answered(e: StudyEngine, events: list, kinds: tuple, n_before: int, timeout_s: float = 8.0) -> list:
+    wait_for(e, lambda: any(isinstance(ev, kinds) for ev in events[n_before:]), timeout_s)
+    return [ev for ev in events[n_before:] if isinstance(ev, kinds)]
+
+
+@pytest.fixture
+def engine(tmp_path):  # type: ignore[no-untyped-def]
+    with FakeNetFT(rate_hz=1000, initial_records=0) as netft, FakeRtde() as rtde:
+        events: list[object] = []
+        e = StudyEngine(HostConfig(rig="real", hardware_path=str(hardware_file(tmp_path, netft, rtde.host)),
+                                   haptic_factory=FAKE_TOUCH), events.append, shared_ring=False)
+        e.start()
+        try:
+            yield e, events, netft, rtde
+        finally:
+            e.close("test over")
+            e.release_ring()
+
+
+def test_the_chain_in_order_then_the_gate_measures_the_force_at_rest(engine, tmp_path, short_protocol) -> None:
+    e, events, netft, rtde = engine
+    # -- TCP: four orientations about the divot; the pendant's TCP is the flange (tcp_offset_m defaults to 0)
+    poses = []
+    for k, rot in enumerate(pivot_orientations("minimal", TOOL_DOWN)):
+        r = np.asarray(rot).reshape(3, 3)
+        put(rtde, rot, PIVOT - r @ TIP)
+        netft.counts = counts(rot)
+        at(e, rot, PIVOT - r @ TIP)
+        n = len(events)
+        e.handle(m.RecordPivot(f"O{k + 1}", 0.2))
+        (rec,) = answered(e, events, (m.PivotRecorded, m.CommandRefused), n)
+        assert isinstance(rec, m.PivotRecorded), rec
+        poses.append((rec.label, rec.rot_base_flange, rec.flange_position_m))
+    n = len(events)
+    e.handle(m.IdentifyTcp(tuple(poses)))
+    (done,) = [ev for ev in events[n:] if isinstance(ev, m.TcpCalibrationDone)]
+    assert done.accepted and np.allclose(done.result["tip_in_flange_m"], TIP, atol=1e-5)  # type: ignore[index]
+    # the robot's poses are now reported at the tip: resting in the divot, the tip is at the pivot
+    wait_for(e, lambda: np.allclose(e.eng.rig.robot.read_pose().position_m, PIVOT, atol=1e-5))
+
+    # -- payload: six well-spread poses (what Record pose would have measured there)
+    rots = pose_set("quick")
+    n = len(events)
+    e.handle(m.IdentifyPoses(tuple((f"P{k + 1:02d}", rot, tuple(c / CPF for c in counts(rot)))  # type: ignore[misc]
+                                   for k, rot in enumerate(rots)), "quick"))
+    (cal,) = [ev for ev in events[n:] if isinstance(ev, m.CalibrationDone)]
+    assert cal.accepted and cal.calibration["mass_kg"] == pytest.approx(MASS, abs=1e-5)  # type: ignore[index]
+
+    # -- frames: tool down, the experimenter pushes 1 N along each base axis
+    put(rtde, TOOL_DOWN, PIVOT)
+    at(e, TOOL_DOWN, PIVOT)
+    for axis, push in (("+x", (1.0, 0, 0)), ("+y", (0, 1.0, 0)), ("+z", (0, 0, 1.0))):
+        netft.counts = counts(TOOL_DOWN, np.asarray(push))
+        wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fx"] - netft.counts[0] / CPF) < 1e-9)
+        n = len(events)
+        e.handle(m.RecordFrameAxis(axis, 0.6))
+        (res,) = answered(e, events, (m.FrameAxisChecked, m.CommandRefused), n)
+        assert isinstance(res, m.FrameAxisChecked) and res.passed, res
+    (fc,) = [ev for ev in events if isinstance(ev, m.FrameCheckDone)]
+    assert fc.passed and fc.summary == "Frames and signs: PASS (3 of 3 axes)"
+    status = [ev for ev in events if isinstance(ev, m.CalibrationStatus)][-1]
+    assert status.missing == "" and all(ok for _, ok, _ in status.steps)
+    saved = json.loads((tmp_path / "calibration.json").read_text(encoding="utf-8"))["tools"]["instrument"]
+    assert sorted(saved) == ["frames", "payload", "tcp"] and saved["frames"]["passed"]
+
+    # -- the gate: something leans on the tool (0.3 N): refused after the 2 s measurement, one line
+    db = str(tmp_path / "real.db")
+    netft.counts = counts(TOOL_DOWN, np.array([0.0, 0.3, 0.0]))
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fy"] - netft.counts[1] / CPF) < 1e-9)
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+    assert isinstance(events[n], m.StartChecking) and events[n].seconds == 2.0
+    (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    assert isinstance(refused, m.CommandRefused) and refused.message.startswith(
+        "real rig: the compensated force at rest is 0.30") and "(limit 0.1 N)" in refused.message
+    assert not Path(db).exists()
+
+    # -- the tool hangs free: the session starts
+    netft.counts = counts(TOOL_DOWN)
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fy"] - netft.counts[1] / CPF) < 1e-9)
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+    (started,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    assert isinstance(started, m.SessionStarted), started
+    e.handle(m.AbortSession("gate checked"))
+    wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
+
+
+def test_nothing_on_record_is_refused_in_one_line_and_an_override_does_not_waive_the_force_at_rest(
+        engine, tmp_path, short_protocol) -> None:
+    e, events, netft, rtde = engine
+    put(rtde, TOOL_DOWN, PIVOT)
+    netft.counts = counts(TOOL_DOWN)  # the tool hangs free; no payload on record: its weight is not compensated
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
+    db = str(tmp_path / "real.db")
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
+    (refused,) = [ev for ev in events[n:] if isinstance(ev, m.CommandRefused)]
+    assert refused.message == ("real rig: no TCP calibration on record for tool 'instrument': run haptic-study "
+                               "calibrate tcp --rig real --hardware FILE (or the calibration wizard's TCP step)")
+    assert "\n" not in refused.message and not Path(db).exists()
+    # the experimenter overrides with a reason: the steps are waived, the force at rest is still measured -- and the
+    # uncompensated weight of the tool (what feedback would push the hand with) refuses the start
+    n = len(events)
+    e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1, override_reason="rehearsal"))
+    assert isinstance(events[n], m.StartChecking)
+    (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    weight = float(np.linalg.norm(np.asarray(counts(TOOL_DOWN)[:3]) / CPF))
+    assert isinstance(refused, m.CommandRefused) and refused.message.startswith(
+        f"real rig: the compensated force at rest is {weight:.3f} N over 2 s (limit 0.1 N)")
+    assert refused.message.endswith("; an override does not waive this check")
+    assert not Path(db).exists()
+
+
+def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_again(engine, tmp_path,
+                                                                                        short_protocol) -> None:
+    e, events, netft, rtde = engine
+    put(rtde, TOOL_DOWN, PIVOT)
+    netft.counts = counts(TOOL_DOWN)
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
+    start = m.StartSession(str(tmp_path / "real.db"), "R01", "experiment", short_protocol, 1, 1,
+                           override_reason="rehearsal")
+    n = len(events)
+    e.handle(start)
+    assert isinstance(events[n], m.StartChecking)
+    netft.streaming.clear()  # the box stops streaming during the 2 s measurement
+    try:
+        (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    finally:
+        netft.streaming.set()
+    assert refused.message == ("the force sensor stalled while measuring the force at rest (check the Devices tab) "
+                               "— press Start again")
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and r["sensor_age_s"] < 0.002)
+    n = len(events)
+    e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
+    assert isinstance(events[n], m.StartChecking), events[n:]
