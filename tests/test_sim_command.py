@@ -35,10 +35,13 @@ def test_real_clock_run_keeps_feedback_on_for_the_whole_run(records: dict[str, A
     assert s["loop"]["ticks"] == len(gain) - 1
     # ramped in by 0.5 s, on until the end of the run.  On a loaded machine a tick can come later than the
     # Touch's command timeout: the device has dropped the force and the output restarts from zero at that tick.
+    # On that tick the gain is one ramp-in step from zero: a late tick counts as at most 5 ms of the 0.5 s ramp
+    # (tests/pipeline/test_loop_stall.py pins this on the virtual clock), so at most 0.01.
     # Anything else -- a gradual fall, as a ramp-down at a chunk boundary -- is a failure.
     late = np.diff(t, prepend=t[0]) >= 0.010
     falls = np.flatnonzero(np.diff(gain[:1500]) < 0) + 1
-    assert all(late[k] and gain[k] == 0.0 for k in falls), [(int(k), float(t[k] - t[k - 1])) for k in falls]
+    assert all(late[k] and gain[k] <= 0.005 / 0.5 for k in falls), [
+        (int(k), float(t[k] - t[k - 1]), float(gain[k])) for k in falls]
     if not late[:1500].any():
         assert np.all(gain[500:1500] == 1.0)
     assert np.all(gain[1500:] < 1.0) and gain[-1] == 0.0  # then the run's own ramp-down, to zero
