@@ -29,7 +29,7 @@ import numpy.typing as npt
 from pipeline.compensation import PayloadCalibration
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
 
-__all__ = ["ReplayInputs", "ReplayOutputs", "replay"]
+__all__ = ["REPLAY_LOG_KINDS", "ReplayInputs", "ReplayOutputs", "replay"]
 
 _HYPOT = math.hypot
 
@@ -87,6 +87,10 @@ class ReplayOutputs:
         return self.stages[:, STEP_FIELDS.index(name)]
 
 
+#: The log entries :func:`replay` applies, as the loop writes them (``pipeline.loop``); any other is refused.
+REPLAY_LOG_KINDS: tuple[str, ...] = ("pose", "refine", "reset", "calibration", "device_limit", "zero")
+
+
 def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> ReplayOutputs:
     """Run the recorded inputs through a framework restored from the snapshot.
 
@@ -101,6 +105,11 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
     Returns
     -------
     ReplayOutputs
+
+    Raises
+    ------
+    ValueError
+        The log holds an entry this version does not know (not in :data:`REPLAY_LOG_KINDS`).
     """
     snap = inputs.snapshot
     fw = HapticFramework.restore(snap["framework"], config)
@@ -110,6 +119,10 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
     gains: list[float] = []
     by_tick: dict[int, list[tuple[str, object]]] = {}
     for t, kind, payload in inputs.events:
+        if kind not in REPLAY_LOG_KINDS:
+            # a kind this version does not apply would make the replay silently differ from what was rendered
+            raise ValueError(f"recording log entry {kind!r} at tick {int(t)}: this version of replay applies only "
+                             f"{', '.join(REPLAY_LOG_KINDS)} (was the session recorded by a newer haptic-study?)")
         by_tick.setdefault(int(t), []).append((kind, payload))
     ticks = inputs.tick.tolist()
     dts = (inputs.period_ns.astype(np.int64) * 1e-9).tolist()  # as the loop computes dt: int ns × 1e-9

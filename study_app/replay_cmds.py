@@ -159,7 +159,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     (code, kind), segments, trials = _session(args.db, args.session)
     n = sum(len(s.columns["tick"]) for s in segments)
     t0 = time.perf_counter()
-    outputs = [replay(s.replay_inputs()) for s in segments]
+    try:
+        outputs = [replay(s.replay_inputs()) for s in segments]
+    except ValueError as exc:  # a log entry this version cannot apply
+        raise _cli_error(f"--session {args.session}: {exc}") from None
     wall = time.perf_counter() - t0
     exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
              and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]

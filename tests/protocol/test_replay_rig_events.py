@@ -98,6 +98,11 @@ def test_a_session_with_thermal_derating_replays_bit_for_bit(tmp_path: Path, mon
 def test_a_cold_session_records_no_cut(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     _, (seg,) = run_recorded(tmp_path, monkeypatch, None)
     assert np.all(seg.columns["derate"] == 1.0)
+    # a log entry this version cannot apply (a newer recorder's) is refused, never skipped into a silent difference
+    inputs = seg.replay_inputs()
+    newer = dataclasses.replace(inputs, events=[*inputs.events, (int(seg.columns["tick"][5]), "haptic_gain_2", 0.5)])
+    with pytest.raises(ValueError, match=r"'haptic_gain_2' at tick \d+: this version of replay applies only pose, "):
+        replay(newer)
     assert [p for _, k, p in seg.log() if k == "device_limit"] == [TouchSpec().peak_force_n]  # once, at the start
     assert_bit_identical(seg)
 
