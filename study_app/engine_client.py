@@ -64,6 +64,11 @@ class EngineClient:
         return ev
 
     @property
+    def pid(self) -> int | None:
+        """The engine process's id (None before it is started)."""
+        return self._proc.pid
+
+    @property
     def alive(self) -> bool:
         """True while the engine process runs."""
         return self.started and self._proc.is_alive()

@@ -566,8 +566,8 @@ class StudyEngine:
         self._store_loop_events()
         runner = self.runner
         if runner is not None and not runner.done:
-            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the application and "
-                      "resume it")
+            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the engine (Restart engine "
+                      "in the window) and resume it")
             assert self.recorder is not None
             self.recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "session_interrupted",
                                 reason)
@@ -576,8 +576,8 @@ class StudyEngine:
 
     def _require_loop(self, what: str) -> None:
         if self.loop_dead:
-            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); close and restart the application "
-                               "(an interrupted session can be resumed)")
+            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); restart the engine (Restart engine "
+                               "in the window; an interrupted session can be resumed)")
 
     def quiet_wait_s(self, interval_s: float) -> float:
         """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.

@@ -61,6 +61,7 @@ class ExperimenterWindow(QMainWindow):
         self._quit_confirmed = False
         self.bridge = QtEngineBridge(EngineClient(host), self)
         self.model = AppModel(self.bridge.send)
+        self.model.restarter = self.bridge.restart
         self._restore_settings(db_path)
         self._shut_down = False
 
@@ -76,6 +77,21 @@ class ExperimenterWindow(QMainWindow):
         self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
         controls = QGroupBox("Control")
         grid = QVBoxLayout(controls)
+        # a dead engine or haptic loop: what happened and the way out, above everything else
+        self.engine_label = QLabel()
+        self.engine_label.setWordWrap(True)
+        self.restart_button = QPushButton("Restart engine")
+        self.restart_button.setStyleSheet("font-weight: 700; padding: 6px;")
+        self.engine_row = QWidget()
+        er = QVBoxLayout(self.engine_row)
+        er.setContentsMargins(4, 4, 4, 4)
+        er.addWidget(self.engine_label)
+        er.addWidget(self.restart_button)
+        fg, bg = LEVEL_COLOURS["error"]
+        self.engine_row.setStyleSheet(f"background: {bg};")
+        self.engine_label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.engine_row.hide()
+        grid.addWidget(self.engine_row)
         grid.addWidget(self.start_button)
         # refusals and questions that became moot show here, under Start, where the experimenter looks
         self.notice = QLabel()
@@ -164,6 +180,8 @@ class ExperimenterWindow(QMainWindow):
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
         self.notice_close.clicked.connect(self.model.clear_notice)
+        self.restart_button.clicked.connect(self.model.restart_engine)
+        self.model.engine_changed.connect(self._on_engine_changed)
         self.override_button.clicked.connect(self.start_with_override)
         self.model.commissioning.changed.connect(self._on_actions_changed)
         self.model.jaw.changed.connect(self._on_jaw_changed)
@@ -388,6 +406,12 @@ class ExperimenterWindow(QMainWindow):
         self.override_button.setVisible(bool(missing))
         self.override_button.setEnabled(bool(missing) and can("start"))
         self.override_button.setToolTip(missing)
+
+    def _on_engine_changed(self) -> None:
+        trouble = self.model.engine_trouble
+        self.engine_label.setText(trouble)
+        self.engine_row.setVisible(bool(trouble))
+        self.restart_button.setEnabled(self.model.can("restart_engine"))
 
     def _on_session_changed(self) -> None:
         self.status.setText(self.model.session.message)

@@ -483,6 +483,8 @@ class QtSetupPanel(QGroupBox):
             item = QListWidgetItem(SetupModel.describe_resumable(s))
             item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]
             self.resumable.addItem(item)
+            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]
+                self.resumable.setCurrentItem(item)
 
     def selected_session(self) -> int | None:
         """The session id selected in the resume list."""

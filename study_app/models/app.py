@@ -86,6 +86,14 @@ class AppModel:
         self.notice_changed = Emitter()
         #: Action availability changed (buttons enable/disable).
         self.actions_changed = Emitter()
+        #: Why the engine must be restarted ("" while it is fine): it exited, or its haptic loop died.
+        self.engine_trouble = ""
+        self.engine_changed = Emitter()
+        #: Replaces the engine by a new one (the window's bridge); None: nothing can restart it.
+        self.restarter: Callable[[], None] | None = None
+        self._restarting = False
+        #: The session the failure interrupted (selected for resume after the restart).
+        self._interrupted: int | None = None
         self._rate_rows: list[np.ndarray] = []
         self._rate_span = 0.0
         self.session.changed.connect(lambda: self.actions_changed.emit())
@@ -97,6 +105,8 @@ class AppModel:
         """Route one engine event."""
         if isinstance(ev, m.EngineReady):
             self.rig_kind = ev.rig
+            self._restarting = False
+        self._watch_engine(ev)
         for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
                      self.commissioning, self.jaw):
             part.apply(ev)
@@ -127,6 +137,51 @@ class AppModel:
             when = "now" if ev.when == "now" else f"at {ev.when} after its cue"
             self.notify("info", f"Rehearsal: {REHEARSAL_KINDS.get(ev.kind, ev.kind)} {when}. Watch the health panel; "
                         "the trial it hits is aborted and re-run, and the next cue waits for Reset.", "InjectFault")
+
+    # -- a dead engine or loop, and the restart ---------------------------------------------------------
+    def _watch_engine(self, ev: object) -> None:
+        """Notice an engine that exited or whose haptic loop died (before the parts forget the session)."""
+        s = self.session
+        if isinstance(ev, m.SessionEnded) and ev.status == "interrupted":
+            self._interrupted = ev.session_id
+        trouble = ""
+        if isinstance(ev, m.EngineStopped) and not self._restarting:
+            reason = ev.reason.rstrip(".")
+            trouble = (reason[:1].upper() + reason[1:] if "study engine" in reason
+                       else f"The study engine stopped: {reason}") + " (without it the haptic device renders no force)."
+            if s.running and s.session is not None:
+                self._interrupted = s.session.session_id
+        elif isinstance(ev, m.Health) and ev.loop_dead:
+            trouble = (f"The haptic loop died ({ev.loop_dead}); the haptic device's command watchdog dropped the "
+                       "force to zero, and the engine accepts no session until it is restarted.")
+        if trouble and not self.engine_trouble:
+            sid = self._interrupted
+            then = (f" Session {sid} was interrupted: its stored trials are kept, and after the restart it is "
+                    "selected under Interrupted sessions — press Resume selected." if sid is not None else "")
+            self.engine_trouble = f"{trouble}{then} Press Restart engine to start a new one."
+            self.engine_changed.emit()
+            self.actions_changed.emit()
+
+    def restart_engine(self) -> bool:
+        """Replace a dead engine by a new one: plots, session and health start afresh; the interrupted session
+        will be selected for resume.  False if nothing can restart it."""
+        if self.restarter is None:
+            return False
+        self._restarting = True
+        self.plots.reset()
+        self._rate_rows, self._rate_span = [], 0.0
+        self.session.reset("restarting the study engine …")
+        self.health.engine_restarted()
+        self.setup.preferred_resume = self._interrupted
+        self.setup.running_session = None
+        self._interrupted = None
+        self.rig_kind = ""
+        self.engine_trouble = ""
+        self.clear_notice()
+        self.engine_changed.emit()
+        self.actions_changed.emit()
+        self.restarter()
+        return True
 
     # -- notices -------------------------------------------------------------------------------------
     def notify(self, level: str, text: str, source: str = "") -> None:
@@ -171,8 +226,8 @@ class AppModel:
     # -- what may be done now -------------------------------------------------------------------------
     @property
     def ready(self) -> bool:
-        """The engine is connected and idle or running."""
-        return self.session.state in ("ready", "running", "paused", "ended")
+        """The engine is connected and idle or running (and neither it nor its haptic loop has died)."""
+        return self.session.state in ("ready", "running", "paused", "ended") and not self.engine_trouble
 
     def can(self, action: str) -> bool:
         """Whether an action is available: start, pause, resume, abort_trial, abort_session, calibrate, resume_session."""
@@ -187,6 +242,8 @@ class AppModel:
             return self.ready and not s.running and self.rig_kind == "real" and self.real_calibration.can_record()
         if action == "identify":
             return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
+        if action == "restart_engine":
+            return bool(self.engine_trouble) and self.restarter is not None
         if action == "sim_rig_view":
             return self.rig_kind == "sim"
         if action == "pause":
@@ -205,7 +262,7 @@ class AppModel:
             self.clear_notice()  # a new action: the last notice was about an earlier one
         ok = self.send(cmd)
         if not ok:
-            self.notify("error", "The study engine is not running; restart the application.")
+            self.notify("error", "The study engine is not running: press Restart engine.")
         return ok
 
     def start(self, override_reason: str = "") -> bool:

@@ -112,6 +112,12 @@ class HealthModel:
         self._refresh_states()
         self.changed.emit()
 
+    def engine_restarted(self) -> None:
+        """A new engine replaces the old one: its figures and faults are gone (the log keeps what happened)."""
+        self.connected, self.loop, self.faults, self.devices = False, None, 0, []
+        self.fault_log.append("engine restarted")
+        self.changed.emit()
+
     def update_from_rows(self, rows: np.ndarray) -> None:
         """Measure device rates and ages over a block of records (≥ ~0.2 s gives stable rates)."""
         if len(rows) < 2:

@@ -124,6 +124,16 @@ class SessionModel:
             return
         self.changed.emit()
 
+    def reset(self, message: str) -> None:
+        """A new engine is starting: no session, no trial, an empty table (the old engine's clock is gone)."""
+        self.state, self.message = "connecting", message
+        self.session = self.trial = self.last_trial = None
+        self.phase, self.pause_until_s, self.paused_requested = "idle", None, False
+        self.completed = self.aborted = 0
+        self.latest_t_s = 0.0
+        self.table.clear()
+        self.changed.emit()
+
     def _count(self, row: dict[str, Any]) -> None:
         self.table.add(row)
         if row["outcome"] == "aborted":

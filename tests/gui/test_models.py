@@ -365,3 +365,32 @@ def test_health_says_why_the_next_cue_waits_and_logs_every_fault_event():
     assert [line.split("s  ", 1)[1].split(":")[0] for line in h.fault_log] == ["fault", "gone", "reset"]
     h.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, False, "autopilot", True, False, waiting="pause"))
     assert h.waiting_text() == ""  # the protocol's own pause is not worth a line
+
+
+def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
+    restarts: list[int] = []
+    ready = m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot")
+    a = AppModel(lambda c: True)
+    a.apply(ready)
+    a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
+    a.apply(started())
+    a.apply(trial())
+    assert not a.can("restart_engine")  # nothing to restart while it runs
+    a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
+    assert a.engine_trouble.startswith("The study engine exited unexpectedly")
+    assert "Session 3 was interrupted" in a.engine_trouble
+    assert not a.can("restart_engine")  # no restarter: no button that does nothing
+    a.restarter = lambda: restarts.append(1)
+    assert a.can("restart_engine") and not a.can("start") and not a.can("resume_session")
+    a.plots.t = np.arange(3.0)
+    assert a.restart_engine() and restarts == [1]
+    assert a.engine_trouble == "" and len(a.plots.t) == 0 and a.session.state == "connecting"
+    assert a.session.trial is None and a.session.last_trial is None and not a.session.table.rows
+    a.apply(ready)
+    a.apply(m.SessionsListed(str(tmp_path / "s.db"), [{"session_id": 2}, {"session_id": 3}]))
+    assert a.setup.default_resume() == 3  # the interrupted one, not the first listed
+    # a loop that died in a live engine: the same way out
+    a.apply(m.SessionEnded(4, "interrupted", "the haptic loop died (x)", 0, 0, 0))
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False, loop_dead="OSError('x')"))
+    assert a.engine_trouble.startswith("The haptic loop died (OSError('x'))") and "Session 4" in a.engine_trouble
+    assert a.can("restart_engine") and not a.can("start")
