@@ -148,7 +148,7 @@ class ScreenshotTour:
         w.tabs.setCurrentWidget(w.health_panel)
         w.health_panel.resize(900, 360)
         self._save(w.health_panel, "health-panel")
-        w.tabs.setCurrentWidget(w.trial_table)
+        w.tabs.setCurrentWidget(w.trials_tab)
         yield lambda: model.session.phase == "pause"
         self._save(w.participant_window, "participant-rest")
         w.abort_session_button.click()

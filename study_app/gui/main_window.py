@@ -22,7 +22,7 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import (
-    LEVEL_COLOURS, ElidedLabel, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+    LEVEL_COLOURS, ElidedLabel, QtCueWait, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
 )
 from study_app.models.app import AppModel
 
@@ -136,9 +136,16 @@ class ExperimenterWindow(QMainWindow):
         self.progress = QtProgress(self.model.session, self.model.health)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
+        self.cue_wait = QtCueWait(self.model)
+        self.trials_tab = QWidget()
+        tt = QVBoxLayout(self.trials_tab)
+        tt.setContentsMargins(0, 0, 0, 0)
+        tt.setSpacing(2)
+        tt.addWidget(self.cue_wait)
+        tt.addWidget(self.trial_table, 1)
         self.health_panel = QtHealthPanel(self.model.health)
         self.tabs = QTabWidget()
-        self.tabs.addTab(self.trial_table, "Trials")
+        self.tabs.addTab(self.trials_tab, "Trials")
         self.tabs.addTab(self.health_panel, "Devices && health")
         right = QSplitter(Qt.Orientation.Vertical)
         top = QWidget()

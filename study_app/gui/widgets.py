@@ -17,7 +17,7 @@ from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
 
-__all__ = ["ElidedLabel", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
+__all__ = ["ElidedLabel", "QtCueWait", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_PEN = pg.mkPen((220, 40, 40), width=1)
@@ -81,6 +81,52 @@ class QtTrialTable(QTableWidget):
                 item.setBackground(colour)
             self.setItem(i, j, item)
         self.scrollToBottom()
+
+
+class QtCueWait(QWidget):
+    """Above the trial table: why the next cue waits, for how long, and the button that ends the wait."""
+
+    def __init__(self, model, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(parent)
+        from study_app.models.app import CUE_ACTIONS
+
+        self.model, self._actions = model, CUE_ACTIONS
+        self.label = QLabel()
+        self.label.setWordWrap(True)
+        self.help = QLabel()
+        self.help.setWordWrap(True)
+        self.button = QPushButton()
+        self.button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space stays Start / Resume
+        self.button.clicked.connect(model.end_cue_wait)
+        text = QVBoxLayout()
+        text.setContentsMargins(0, 0, 0, 0)
+        text.setSpacing(0)
+        text.addWidget(self.label)
+        text.addWidget(self.help)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(6, 3, 6, 3)
+        lay.addLayout(text, 1)
+        lay.addWidget(self.button, 0, Qt.AlignmentFlag.AlignTop)
+        model.cue_wait_changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        w = self.model.cue_wait
+        self.setVisible(w is not None)
+        if w is None:
+            return
+        fg, bg = LEVEL_COLOURS.get(w.level, LEVEL_COLOURS["info"])
+        self.setAutoFillBackground(True)
+        pal = self.palette()
+        pal.setColor(self.backgroundRole(), QColor(bg))
+        self.setPalette(pal)
+        self.label.setText(w.text())
+        self.label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.help.setStyleSheet(f"color: {fg};")
+        self.help.setText(w.help)
+        self.help.setVisible(bool(w.help))
+        self.button.setText(self._actions.get(w.action, ""))
+        self.button.setVisible(bool(w.action))
 
 
 #: Colours of the levels of health figures and notices (text, background).

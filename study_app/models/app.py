@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +27,7 @@ REHEARSAL_KINDS: dict[str, str] = {
     "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
 }
 
-__all__ = ["AppModel", "Notice", "REHEARSAL_KINDS"]
+__all__ = ["AppModel", "CueWait", "Notice", "REHEARSAL_KINDS"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
@@ -43,6 +44,36 @@ class Notice:
     level: str
     text: str
     source: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class CueWait:
+    """Why the next cue of the running session has not come, for how long, and what ends the wait.
+
+    ``level`` is ``info`` (it ends by itself: the protocol's pause), ``warning`` (the experimenter ends it:
+    a pause) or ``error`` (something must be put right: a latched fault, a dead engine).  ``left_s`` is the time
+    until the cue when it is known, ``waited_s`` how long it has waited so far (sample time).  ``action`` names
+    what ends it (``reset_faults``, ``resume``, ``restart_engine`` or ""), ``help`` what to do if that does not.
+    """
+
+    level: str
+    reason: str
+    left_s: float | None = None
+    waited_s: float = 0.0
+    action: str = ""
+    help: str = ""
+
+    def text(self) -> str:
+        """One line: ``Next cue waits: <reason> · 1.2 s left`` (or ``· waiting 14 s``)."""
+        when = (f" · {self.left_s:.1f} s left" if self.left_s is not None
+                else f" · waiting {self.waited_s:.0f} s" if self.waited_s >= 1.0 else "")
+        return f"Next cue waits: {self.reason}{when}"
+
+
+#: A wait with nothing named to end it, after this long (s), says where to look.
+CUE_STUCK_S = 5.0
+#: What ends each wait, as the button reads.
+CUE_ACTIONS = {"reset_faults": "Reset faults", "resume": "Resume", "restart_engine": "Restart engine"}
 
 
 #: Commands as the experimenter knows them, for refusal messages.
@@ -96,6 +127,11 @@ class AppModel:
         self._interrupted: int | None = None
         self._rate_rows: list[np.ndarray] = []
         self._rate_span = 0.0
+        #: Why the next cue waits (None: a trial runs, or no session does); see :class:`CueWait`.
+        self.cue_wait: CueWait | None = None
+        self.cue_wait_changed = Emitter()
+        self._wait_key = ""
+        self._wait_since_s = 0.0
         self.session.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(self._on_setup_changed)
@@ -137,6 +173,72 @@ class AppModel:
             when = "now" if ev.when == "now" else f"at {ev.when} after its cue"
             self.notify("info", f"Rehearsal: {REHEARSAL_KINDS.get(ev.kind, ev.kind)} {when}. Watch the health panel; "
                         "the trial it hits is aborted and re-run, and the next cue waits for Reset.", "InjectFault")
+        self._refresh_cue_wait()
+
+    # -- why the next cue waits ----------------------------------------------------------------------
+    def _cue_wait_now(self) -> tuple[str, CueWait | None]:
+        """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
+        s = self.session
+        if self.engine_trouble:
+            if s.session is None and self._interrupted is None:
+                return "", None
+            return "engine", CueWait("error", "the study engine is not running", action="restart_engine",
+                                     help="Restart engine (under Start), then Resume selected.")
+        if not s.running or s.session is None or s.phase in ("active", "cued"):
+            return "", None
+        h = self.health.loop
+        waiting = h.waiting if h is not None and h.session_running else ""
+        if s.state == "paused":
+            if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
+                return "paused-runner", CueWait("error", waiting, action="resume",
+                                                help="Resume (Space) once the cause is dealt with.")
+            return "paused", CueWait("warning", "the session is paused", action="resume",
+                                     help="Resume (Space) to continue with the next trial.")
+        if waiting.startswith("fault latched"):
+            return "fault", CueWait(
+                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+                help="No trial is cued while a fault is latched. Reset faults; if the fault latches again, its cause "
+                     "is still there — the fault log under Devices & health names it (a stalled sensor, a device "
+                     "error, the stylus pressed at the start): put it right, then reset.")
+        if s.phase == "pause" and s.pause_until_s is not None:
+            left = round(max(0.0, s.pause_until_s - s.latest_t_s), 1)
+            return "pause", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause between trials", left_s=left)
+        if waiting == "pause":
+            return "pause-again", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause before the next cue "
+                                          "(after the session began or a fault was cleared)")
+        return "due", CueWait("info", "the next cue is due")
+
+    def _refresh_cue_wait(self) -> None:
+        key, wait = self._cue_wait_now()
+        if key != self._wait_key:
+            s = self.session
+            since = s.latest_t_s
+            if key == "pause" and s.pause_until_s is not None and s.session is not None:
+                since = s.pause_until_s - s.session.pause_s  # the pause began when the trial ended
+            self._wait_key, self._wait_since_s = key, since
+        if wait is not None:
+            waited = max(0.0, self.session.latest_t_s - self._wait_since_s)
+            help_ = wait.help
+            # a wait that should end by itself but has not: say where to look, and the way out
+            expected = self.session.session.pause_s if key in ("pause", "pause-again") and self.session.session else 0.0
+            if not wait.action and waited >= expected + CUE_STUCK_S:
+                help_ = (f"No cue for {waited:.0f} s and nothing to reset: look under Devices & health (the loop's "
+                         "figures, the fault log). If it stays stuck, Quit: the running trial is stored as aborted and "
+                         "the session can be resumed after a restart.")
+            wait = dataclasses.replace(wait, waited_s=round(waited, 1), help=help_)
+        if wait != self.cue_wait:
+            self.cue_wait = wait
+            self.cue_wait_changed.emit()
+
+    def end_cue_wait(self) -> None:
+        """Do what ends the current wait (the banner's button)."""
+        action = self.cue_wait.action if self.cue_wait is not None else ""
+        if action == "reset_faults":
+            self.reset_faults()
+        elif action == "resume":
+            self.resume()
+        elif action == "restart_engine":
+            self.restart_engine()
 
     # -- a dead engine or loop, and the restart ---------------------------------------------------------
     def _watch_engine(self, ev: object) -> None:
@@ -181,6 +283,7 @@ class AppModel:
         self.engine_changed.emit()
         self.actions_changed.emit()
         self.restarter()
+        self._refresh_cue_wait()
         return True
 
     # -- notices -------------------------------------------------------------------------------------
@@ -211,6 +314,7 @@ class AppModel:
         last = self.plots.last_row
         t = float(last["t_s"])
         self.session.set_time(t)
+        self._refresh_cue_wait()
         self.participant.update(t, float(last["force_n"]))
         self.rig.update(float(last["tip_z_m"]), float(last["true_fz"]))
         rows = self.plots.new_rows

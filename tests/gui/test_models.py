@@ -394,3 +394,36 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False, loop_dead="OSError('x')"))
     assert a.engine_trouble.startswith("The haptic loop died (OSError('x'))") and "Session 4" in a.engine_trouble
     assert a.can("restart_engine") and not a.can("start")
+
+
+def test_cue_wait_names_the_wait_its_length_and_what_ends_it():
+    a = AppModel(lambda c: True)
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    assert a.cue_wait is None
+    a.apply(started())
+    a.apply(trial(t_s=1.0))
+    assert a.cue_wait is None  # a trial runs
+    a.apply(m.PhaseEntered(4.0, 0, "pause"))
+    a.session.set_time(4.5)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting="pause"))
+    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 1.5 s left"
+    assert a.cue_wait.action == "" and a.cue_wait.level == "info"
+    # the pause is over and no cue comes, nothing latched: after a while, where to look and the way out
+    a.session.set_time(11.5)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
+    a.session.set_time(17.0)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
+    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 0.0 s left"
+    assert a.cue_wait.help.startswith("No cue for 13 s and nothing to reset: look under Devices & health")
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
+                     waiting="fault latched (SENSOR_STALE): reset to continue"))
+    a.session.set_time(20.0)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
+                     waiting="fault latched (SENSOR_STALE): reset to continue"))
+    w = a.cue_wait
+    assert (w.level, w.action, w.text()) == ("error", "reset_faults",
+                                             "Next cue waits: fault latched (SENSOR_STALE) · waiting 3 s")
+    sent: list[object] = []
+    a.send = lambda c: sent.append(c) or True
+    a.end_cue_wait()
+    assert sent == [m.ResetFaults()]
