@@ -7,7 +7,7 @@ from collections.abc import Callable
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
+    QApplication, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
     QVBoxLayout, QWidget,
 )
 
@@ -322,9 +322,19 @@ class ExperimenterWindow(QMainWindow):
             old.dismiss()
             old.box.deleteLater()
         say = (lambda: self.model.notify("info", moot_text)) if moot_text else None
-        q = Confirmation(self, title, text, on_yes, moot_when=moot_when, on_moot=say)
+        q = Confirmation(self.question_parent(), title, text, on_yes, moot_when=moot_when, on_moot=say)
         self.questions[key] = q
         q.show()
+
+    def question_parent(self) -> QWidget:
+        """The window a question opens over: the one the experimenter is looking at (Esc pressed in the rig
+        view asks over the rig view, which so stays in front), never the participant's own monitor."""
+        active = QApplication.activeWindow()
+        if active in (self.rig_window, self.calibration_wizard):
+            return active
+        if active is self.participant_window and active.screen() is self.screen():
+            return active  # one monitor: the experimenter sees the participant view too
+        return self
 
     # -- actions -----------------------------------------------------------------------------------------
     def start_session(self) -> None:
