@@ -861,11 +861,14 @@ class StudyEngine:
         runner, opened = self.runner, self.opened
         if runner is None or runner.done or opened is None:
             raise RuntimeError("fault rehearsal at a trial: start or resume a session first (or inject it now)")
-        if cmd.trial < 1 or cmd.trial > len(runner.schedule):
-            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {len(runner.schedule)}")
-        if cmd.trial <= runner.state.trial_position:
-            raise ValueError(f"fault trial = {cmd.trial}: trial {runner.state.trial_position} is already under way; "
-                             "choose a later one")
+        n, begun = len(runner.schedule), runner.state.trial_position
+        later = (f"the trials still to come are {begun + 1} to {n}" if begun + 1 < n
+                 else f"the one still to come is trial {n}" if begun + 1 == n
+                 else f"every trial of this session has begun (all {n}); inject it now instead")
+        if cmd.trial < 1 or cmd.trial > n:
+            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {n}; {later}")
+        if cmd.trial <= begun:
+            raise ValueError(f"fault trial = {cmd.trial}: trial {cmd.trial} has already begun; {later}")
         plan = FaultPlan(cmd.kind, opened.code, cmd.trial, cmd.seconds, opened.kind)
         eng = self.eng
 

@@ -432,6 +432,8 @@ class ExperimenterWindow(QMainWindow):
 
     def _on_session_changed(self) -> None:
         self.status.setText(self.model.session.message)
+        if hasattr(self.rig_window, "fault_trial"):
+            self.rig_window.set_trials(self.model.rehearsal_trials())
 
     def _on_notice(self) -> None:
         n = self.model.notice

@@ -83,6 +83,7 @@ _COMMAND_NAMES = {
     "ListSessions": "Reading the database", "ResetFaults": "Reset faults", "SetDriver": "Driver",
     "CalibrateTcp": "TCP calibration", "RecordPivot": "Record orientation", "IdentifyTcp": "TCP calibration",
     "CheckFrames": "Frame check", "RecordFrameAxis": "Frame check", "JawCommand": "Jaw",
+    "InjectFault": "Fault rehearsal",
 }
 
 
@@ -436,8 +437,41 @@ class AppModel:
         """Clear faults whose condition has gone away."""
         self._send(m.ResetFaults())
 
+    def rehearsal_trials(self) -> range:
+        """The trials a fault can still be planned for: the running session's trials not yet begun, numbered
+        from 1 in the order the participant meets them (empty when no session runs)."""
+        s = self.session
+        if not s.running or s.session is None:
+            return range(0)
+        begun = s.trial.position if s.phase in ("active", "cued") and s.trial is not None else s.completed + s.aborted
+        return range(begun + 1, s.session.trials_total + 1)
+
+    def rehearsal_refusal(self, trial: int | None) -> str:
+        """Why a fault cannot be rehearsed now or at ``trial`` ("" when it can)."""
+        if self.rig_kind == "real":
+            return "fault rehearsal is for the simulated rig only (a person's hand is on the real one)"
+        if trial is None:
+            return ""
+        if not self.session.running or self.session.session is None:
+            return f"a fault at trial {trial} needs a running session: start or resume one, or inject it now"
+        future = self.rehearsal_trials()
+        if trial in future:
+            return ""
+        total = self.session.session.trials_total
+        if not future:
+            return f"trial {trial}: every trial of this session has begun (all {total}); inject it now instead"
+        later = (f"the trials still to come are {future[0]} to {total}" if len(future) > 1
+                 else f"the one still to come is trial {total}")
+        if trial > total:
+            return f"trial {trial}: the session has {total} trials; {later}"
+        return f"trial {trial} has already begun; {later}"
+
     def inject_fault(self, kind: str, trial: int | None, seconds: float) -> None:
         """Rehearse a fault on the simulated rig: now (``trial`` None) or ``seconds`` after a trial's cue."""
+        why = self.rehearsal_refusal(trial)
+        if why:
+            self.notify("error", f"Fault rehearsal refused: {why}.", "InjectFault")
+            return
         self._send(m.InjectFault(kind, trial, seconds))
 
     def calibrate(self) -> None:

@@ -205,16 +205,24 @@ def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):
     qtbot.addWidget(view)
     view.show()
     qtbot.waitExposed(view)
-    assert not view.fault_seconds.isEnabled() and view.fault_trial.text() == "now"
+    assert not view.fault_seconds.isEnabled() and view.fault_trial.currentText() == "now"
+    assert view.fault_trial.count() == 1  # no session: now, or nothing
     view.fault_kind.setCurrentIndex(view.fault_kind.findData("nan-burst"))
     qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
-    view.fault_trial.setValue(4)
+    view.set_trials(range(3, 9))  # trials 1 and 2 have begun, of 8
+    assert [view.fault_trial.itemText(i) for i in range(view.fault_trial.count())] == \
+        ["now"] + [f"trial {k}" for k in range(3, 9)]
+    view.fault_trial.setCurrentIndex(view.fault_trial.findData(4))
     assert view.fault_seconds.isEnabled()
     view.fault_seconds.setValue(2.5)
     view.fault_kind.setCurrentIndex(view.fault_kind.findData("sensor-stall"))
     qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
     assert sent == [("nan-burst", None, 3.0), ("sensor-stall", 4, 2.5)]
     assert view.inject_button.focusPolicy() == Qt.FocusPolicy.NoFocus
+    view.set_trials(range(5, 9))  # trial 4 began before Inject: the next one still to come, not "now"
+    assert view.fault_trial.currentData() == 5 and view.fault_seconds.isEnabled()
+    view.set_trials(range(0))
+    assert view.fault_trial.currentText() == "now" and not view.fault_seconds.isEnabled()
 
 
 def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
@@ -222,6 +230,20 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
 
     sent: list[object] = []
     app = AppModel(send=lambda cmd: sent.append(cmd) or True)
+    app.apply(READY)
+    app.inject_fault("stale-pose", 3, 1.5)  # no session: refused here, saying why
+    assert not sent and app.notice.text == ("Fault rehearsal refused: a fault at trial 3 needs a running session: "
+                                            "start or resume one, or inject it now.")
+    app.apply(m.SessionStarted(session_id=3, code="P01", kind="experiment", trials_total=8, start_position=0,
+                               tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=False))
+    app.apply(m.TrialStarted(1.0, 0, 1, 8, "FIRM", 1.2, "on"))
+    assert app.rehearsal_trials() == range(2, 9)
+    app.apply(m.TrialStarted(9.0, 1, 2, 8, "FIRM", 1.2, "on"))
+    app.inject_fault("stale-pose", 2, 1.5)
+    assert not sent and app.notice.text == ("Fault rehearsal refused: trial 2 has already begun; the trials still to "
+                                            "come are 3 to 8.")
+    app.inject_fault("stale-pose", 9, 1.5)
+    assert app.notice.text.endswith("trial 9: the session has 8 trials; the trials still to come are 3 to 8.")
     app.inject_fault("stale-pose", 3, 1.5)
     assert sent == [m.InjectFault("stale-pose", 3, 1.5)]
     app.apply(m.FaultInjected("stale-pose", "trial 3 + 1.5 s"))
