@@ -178,8 +178,9 @@ class RigWindow(QWidget):
             lambda _i: self.fault_seconds.setEnabled(self.fault_trial.currentData() is not None))
         self.fault_seconds.setEnabled(False)
         self.inject_button = QPushButton("Inject")
-        self.inject_button.setToolTip("rehearse recovery: the watchdog latches, the trial it hits is aborted and "
-                                      "re-run, the next cue waits for Reset")
+        self.inject_button.setToolTip("a real fault of the simulated rig, stored with the running session like any "
+                                      "fault: it latches, a trial it hits is stored as aborted and run again, and "
+                                      "the next cue waits for Reset faults")
         self.inject_button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space in the side view never injects
         self.inject_button.clicked.connect(lambda: on_inject(
             self.fault_kind.currentData(), self.fault_trial.currentData(), self.fault_seconds.value()))

@@ -316,10 +316,9 @@ class QtForcePlots(QWidget):
             self._band = band
             self.band.setVisible(band is not None)
             self.band_label.setVisible(band is not None)
-            tr, s = self.session.trial, self.session.session
-            if band is not None and tr is not None and s is not None:
+            if band is not None:
                 self.band.setRegion(band)
-                self.band_label.setText(f"{tr.target_label} {tr.target_force_n:g} N ± {s.tolerance_fraction:.0%}")
+                self.band_label.setText(self.session.band_label())
                 self.band_label.setPos(0.0, band[1])
 
 

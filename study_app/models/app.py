@@ -130,6 +130,7 @@ class AppModel:
         self._rate_span = 0.0
         #: Why the next cue waits (None: a trial runs, or no session does); see :class:`CueWait`.
         self.cue_wait: CueWait | None = None
+        self._planned: tuple[int, float] | None = None  # the last fault rehearsal planned at a trial
         self.cue_wait_changed = Emitter()
         self._wait_key = ""
         self._wait_since_s = 0.0
@@ -171,9 +172,7 @@ class AppModel:
         elif isinstance(ev, m.EngineStopped):
             self.plots.detach()
         elif isinstance(ev, m.FaultInjected):
-            when = "now" if ev.when == "now" else f"at {ev.when} after its cue"
-            self.notify("info", f"Rehearsal: {REHEARSAL_KINDS.get(ev.kind, ev.kind)} {when}. Watch the health panel; "
-                        "the trial it hits is aborted and re-run, and the next cue waits for Reset.", "InjectFault")
+            self.notify("info", self.rehearsal_notice(ev), "InjectFault")
         self._refresh_cue_wait()
 
     # -- why the next cue waits ----------------------------------------------------------------------
@@ -466,12 +465,37 @@ class AppModel:
             return f"trial {trial}: the session has {total} trials; {later}"
         return f"trial {trial} has already begun; {later}"
 
+    def rehearsal_notice(self, ev: m.FaultInjected) -> str:
+        """What a rehearsed fault does, as the engine runs it (:mod:`protocol.rehearsal`, the session runner)."""
+        what = REHEARSAL_KINDS.get(ev.kind, ev.kind)
+        planned = self._planned if ev.when != "now" else None
+        when = (f"{planned[1]:g} s after the cue of trial {planned[0]}" if planned is not None
+                else ev.when if ev.when != "now" else "now")
+        running = self.session.running
+        if ev.kind == "kill":
+            return (f"Rehearsal: {what}, {when}. The engine process is killed as a crash would kill it: "
+                    + ("the session is left interrupted — its stored trials are kept, the trial under way is not "
+                       "stored and runs again on resume. " if running else "")
+                    + "The window then offers Restart engine" + (", then Resume selected." if running else "."))
+        if planned is not None:
+            k = planned[0]
+            return (f"Rehearsal planned: {what}, {when} (if trial {k} ends sooner, nothing is injected). It is a real "
+                    f"fault of the simulated rig in this session, stored with it like any fault — nothing in the "
+                    f"record marks it as rehearsed: trial {k} is stored as aborted (cause: fault), does not count, "
+                    "and is run again later. The fault latches: the next cue waits for Reset faults.")
+        stored = ("It is stored with the running session like any fault — nothing in the record marks it as "
+                  "rehearsed; a trial it hits is stored as aborted (cause: fault), does not count, and is run again "
+                  "later. " if running else "No session is running: nothing is stored. ")
+        return (f"Rehearsal: {what}, now: a real fault of the simulated rig. {stored}The fault latches"
+                + (": the next cue waits for Reset faults." if running else " until Reset faults."))
+
     def inject_fault(self, kind: str, trial: int | None, seconds: float) -> None:
         """Rehearse a fault on the simulated rig: now (``trial`` None) or ``seconds`` after a trial's cue."""
         why = self.rehearsal_refusal(trial)
         if why:
             self.notify("error", f"Fault rehearsal refused: {why}.", "InjectFault")
             return
+        self._planned = None if trial is None else (trial, seconds)
         self._send(m.InjectFault(kind, trial, seconds))
 
     def calibrate(self) -> None:

@@ -186,7 +186,8 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     view.refresh()
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
     assert view.band.getRegion() == pytest.approx((0.54, 0.66))
-    assert view.band_label.textItem.toPlainText() == "GENTLE 0.6 N ± 10%" and not view.clip_label.isVisible()
+    assert view.band_label.textItem.toPlainText() == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
+    assert not view.clip_label.isVisible()
     assert view.lower.viewRange()[1][1] >= 7.6
     plots.data["force_n"][-1] = 18.0
     view.refresh()
@@ -248,4 +249,14 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     assert sent == [m.InjectFault("stale-pose", 3, 1.5)]
     app.apply(m.FaultInjected("stale-pose", "trial 3 + 1.5 s"))
     assert app.notice is not None and app.notice.level == "info"
-    assert app.notice.text.startswith("Rehearsal: robot pose stops (100 ms) at trial 3 + 1.5 s after its cue.")
+    assert app.notice.text == (
+        "Rehearsal planned: robot pose stops (100 ms), 1.5 s after the cue of trial 3 (if trial 3 ends sooner, nothing "
+        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault — "
+        "nothing in the record marks it as rehearsed: trial 3 is stored as aborted (cause: fault), does not count, "
+        "and is run again later. The fault latches: the next cue waits for Reset faults.")
+    app.apply(m.FaultInjected("nan-burst", "now"))
+    assert "Rehearsal: F/T sensor sends NaN (5 ms), now: a real fault of the simulated rig. It is stored with the " \
+        "running session" in app.notice.text
+    app.apply(m.SessionEnded(3, "aborted", "", 0, 1, 0))
+    app.apply(m.FaultInjected("nan-burst", "now"))
+    assert app.notice.text.endswith("No session is running: nothing is stored. The fault latches until Reset faults.")
