@@ -459,6 +459,11 @@ class QtSetupPanel(QGroupBox):
         form.addRow("Seed", self.seed)
         self.resumable = QListWidget()
         self.resumable.setMaximumHeight(90)
+        # a row longer than the column wraps (all of it in the tooltip too); nothing hides to the right
+        self.resumable.setWordWrap(True)
+        self.resumable.setTextElideMode(Qt.TextElideMode.ElideNone)
+        self.resumable.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.resumable.setResizeMode(QListWidget.ResizeMode.Adjust)
         self.refresh_button = QPushButton("Refresh")
         self.resume_button = QPushButton("Resume selected")
         lay = QVBoxLayout(self)
@@ -525,7 +530,9 @@ class QtSetupPanel(QGroupBox):
     def _on_resumable(self) -> None:
         self.resumable.clear()
         for s in self.setup.resumable:
-            item = QListWidgetItem(SetupModel.describe_resumable(s))
+            text = SetupModel.describe_resumable(s)
+            item = QListWidgetItem(text)
+            item.setToolTip(text)
             item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]
             self.resumable.addItem(item)
             if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]

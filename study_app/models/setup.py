@@ -216,5 +216,5 @@ class SetupModel:
     @staticmethod
     def describe_resumable(s: dict[str, object]) -> str:
         """One line for the resume list."""
-        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {s['trials_done']}/{s['trials_total']} trials "
-                f"stored, started {str(s['started_at'])[:16].replace('T', ' ')}")
+        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {s['trials_done']} of {s['trials_total']} "
+                f"trials stored, started {str(s['started_at'])[:16].replace('T', ' ')}")

@@ -82,12 +82,22 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view.code.clear()
     qtbot.keyClicks(view.code, "P01")
     assert view.errors.text() == "" and s.valid
+    view.resize(340, 700)  # the left column's narrowest
+    view.show()
+    qtbot.waitExposed(view)
     s.set_resumable([{"session_id": 4, "code": "P02", "kind": "experiment", "started_at": "2026-01-02T10:11:12",
-                      "trials_done": 7, "trials_total": 20}])
-    assert view.resumable.count() == 1
-    assert view.resumable.item(0).text() == "session 4: P02 experiment, 7/20 trials stored, started 2026-01-02 10:11"
-    view.resumable.setCurrentRow(0)
-    assert view.selected_session() == 4
+                      "trials_done": 7, "trials_total": 20},
+                     {"session_id": 9, "code": "PARTICIPANT-0042-LONG", "kind": "training",
+                      "started_at": "2026-01-03T09:00:00", "trials_done": 0, "trials_total": 12}])
+    assert view.resumable.count() == 2
+    full = "session 4: P02 experiment, 7 of 20 trials stored, started 2026-01-02 10:11"
+    assert view.resumable.item(0).toolTip() == full and view.resumable.item(0).text() == full
+    assert view.selected_session() == 4  # the first row is selected: Resume selected works at once
+    # long rows wrap within the list: nothing runs out of sight to the right
+    width = view.resumable.viewport().width()
+    for i in range(view.resumable.count()):
+        assert view.resumable.visualItemRect(view.resumable.item(i)).right() <= width
+    assert view.resumable.horizontalScrollBar().maximum() == 0
 
 
 def test_participant_window_experiment_word_then_blank_never_a_gauge(qtbot):
