@@ -427,3 +427,21 @@ def test_cue_wait_names_the_wait_its_length_and_what_ends_it():
     a.send = lambda c: sent.append(c) or True
     a.end_cue_wait()
     assert sent == [m.ResetFaults()]
+
+
+def test_a_run_of_the_same_event_is_one_log_line_counted():
+    """The view coalesces repeated events (the engine stores each one; test_engine_host checks the record)."""
+    h = HealthModel()
+    h.apply(m.EngineFault(1.0, "fault", 1, "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"))
+    for k in range(30):
+        h.apply(m.EngineFault(2.0 + k, "output_restarted", 0, f"no loop tick for {11 + k / 10:.1f} ms: the haptic "
+                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in again "
+                              "from zero", session_t_s=1.0 + k))
+    h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
+    h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
+    assert len(h.fault_log) == 4
+    assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
+                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to zero; "
+                              "feedback ramps in again from zero")
+    assert h.fault_log[2].endswith("reset: SENSOR_STALE")
+    assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
