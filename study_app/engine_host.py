@@ -1323,9 +1323,11 @@ class StudyEngine:
 
     # -- health extras, the jaw ------------------------------------------------------------------------
     def _health_extra(self) -> dict[str, Any]:
-        st = self.eng.rig.haptic.read_state()
+        haptic = self.eng.rig.haptic
+        st = haptic.read_state()
         return {"haptic_heat_fraction": float(st.heat_fraction), "haptic_force_limit_n": float(st.force_limit_n),
-                "loop_dead": self.loop_dead}
+                "haptic_peak_force_n": float(haptic.peak_force_n),
+                "haptic_continuous_force_n": float(haptic.continuous_force_n), "loop_dead": self.loop_dead}
 
     def _make_jaw(self) -> JawController | None:
         rig = self.eng.rig

@@ -194,9 +194,13 @@ class HealthModel:
         self.devices = out
 
     def derating(self) -> bool:
-        """The haptic device lowered its force limit (its motors are warm)."""
+        """The haptic device lowered its force limit below its peak (its motors are warm)."""
         h = self.loop
-        return h is not None and math.isfinite(h.haptic_force_limit_n) and h.haptic_heat_fraction > 0.5
+        if h is None or not math.isfinite(h.haptic_force_limit_n):
+            return False
+        if math.isfinite(h.haptic_peak_force_n):
+            return h.haptic_force_limit_n < h.haptic_peak_force_n
+        return h.haptic_heat_fraction > 0.5  # an engine that does not say its peak: the default onset
 
     def thermal_figure(self) -> LoopFigure | None:
         """The Touch's motor heat against its budget (None before the first Health event)."""
@@ -204,10 +208,15 @@ class HealthModel:
         if h is None:
             return None
         frac = h.haptic_heat_fraction
-        text = f"Touch motors {frac:.0%} of the thermal budget"
-        if self.derating():
-            text += f", derating: force limited to {h.haptic_force_limit_n:.2f} N"
-        level = "ok" if frac <= 0.5 else "warn" if frac <= 0.9 else "bad"
+        text = f"Touch motors at {100 * frac:.0f} % of their heat budget"
+        derating = self.derating()
+        if derating:
+            peak, cont = h.haptic_peak_force_n, h.haptic_continuous_force_n
+            text += f": derating — it may render at most {h.haptic_force_limit_n:.2f} N now"
+            if math.isfinite(peak) and math.isfinite(cont):
+                text += (f" (its {peak:g} N peak, lowered toward its {cont:g} N continuous rating as the motors "
+                         "heat; back to the peak when they cool)")
+        level = "bad" if frac > 0.9 else "warn" if derating or frac > 0.5 else "ok"
         return LoopFigure("thermal", text, level, "derating above 50 %")
 
     def faults_text(self) -> str:

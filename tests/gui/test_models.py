@@ -238,6 +238,14 @@ def test_calibration_model_verdicts():
     assert c.command() == m.Calibrate("recommended") and c.state == "running"
     c.apply(m.CalibrationProgress(3, 24, "P03"))
     assert c.verdict() == "measuring pose 3 of 24 — keep the tool clear of the tissue"
+    # the simulated rig has no hardware: its text says so, and that there is nothing to hold
+    c.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    assert c.intro().startswith("Simulated rig — no hardware is attached. The simulated wrist sensor")
+    assert "wrist sensor reads" not in c.intro() and "(nothing to move or hold)" in c.intro()
+    c.apply(m.CalibrationProgress(4, 24, "P04"))
+    assert c.verdict() == "measuring pose 4 of 24 — the simulated robot moves by itself"
+    c.rig = "real"
+    assert c.intro().startswith("The wrist sensor reads the instrument's weight")
     c.apply(m.CalibrationDone(False, "rank 6 of 10", "tool-down only", 6, 3e17, math.nan, math.nan, [], None))
     assert c.state == "refused"
     assert c.verdict() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10"
