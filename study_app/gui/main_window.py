@@ -427,6 +427,8 @@ class ExperimenterWindow(QMainWindow):
     def _on_engine_changed(self) -> None:
         trouble = self.model.engine_trouble
         self.engine_label.setText(trouble)
+        self.engine_label.setToolTip(self.model.engine_trouble_detail)
+        self.restart_button.setToolTip(self.model.engine_trouble_detail)
         self.engine_row.setVisible(bool(trouble))
         self.restart_button.setEnabled(self.model.can("restart_engine"))
 

@@ -120,6 +120,8 @@ class AppModel:
         self.actions_changed = Emitter()
         #: Why the engine must be restarted ("" while it is fine): it exited, or its haptic loop died.
         self.engine_trouble = ""
+        #: The whole story of :attr:`engine_trouble`: the reason as the engine gave it, and what Restart does.
+        self.engine_trouble_detail = ""
         self.engine_changed = Emitter()
         #: Replaces the engine by a new one (the window's bridge); None: nothing can restart it.
         self.restarter: Callable[[], None] | None = None
@@ -182,8 +184,8 @@ class AppModel:
         if self.engine_trouble:
             if s.session is None and self._interrupted is None:
                 return "", None
-            return "engine", CueWait("error", "the study engine is not running", action="restart_engine",
-                                     help="Restart engine (under Start), then Resume selected.")
+            return "engine", CueWait("error", "no trial runs until the study engine is restarted",
+                                     action="restart_engine", help="Restart engine, then Resume selected.")
         if not s.running or s.session is None or s.phase in ("active", "cued"):
             return "", None
         h = self.health.loop
@@ -246,21 +248,26 @@ class AppModel:
         s = self.session
         if isinstance(ev, m.SessionEnded) and ev.status == "interrupted":
             self._interrupted = ev.session_id
-        trouble = ""
+        trouble = detail = ""
         if isinstance(ev, m.EngineStopped) and not self._restarting:
             reason = ev.reason.rstrip(".")
-            trouble = (reason[:1].upper() + reason[1:] if "study engine" in reason
-                       else f"The study engine stopped: {reason}") + " (without it the haptic device renders no force)."
+            trouble = "The study engine exited unexpectedly." if "unexpectedly" in reason else \
+                "The study engine stopped."
+            detail = (reason[:1].upper() + reason[1:] + ". Without the engine the haptic device renders no force.")
             if s.running and s.session is not None:
                 self._interrupted = s.session.session_id
         elif isinstance(ev, m.Health) and ev.loop_dead:
-            trouble = (f"The haptic loop died ({ev.loop_dead}); the haptic device's command watchdog dropped the "
-                       "force to zero, and the engine accepts no session until it is restarted.")
+            trouble = "The haptic loop died; the force is at zero."
+            detail = (f"The haptic loop died ({ev.loop_dead}); the haptic device's command watchdog dropped the "
+                      "force to zero, and the engine accepts no session until it is restarted.")
         if trouble and not self.engine_trouble:
             sid = self._interrupted
-            then = (f" Session {sid} was interrupted: its stored trials are kept, and after the restart it is "
-                    "selected under Interrupted sessions — press Resume selected." if sid is not None else "")
-            self.engine_trouble = f"{trouble}{then} Press Restart engine to start a new one."
+            # short: it sits in the left column of a 768-px screen; the rest is in the detail (tooltip)
+            self.engine_trouble = trouble + (f" Session {sid} was interrupted; its stored trials are kept."
+                                             if sid is not None else "")
+            self.engine_trouble_detail = detail + (
+                f" After Restart engine, session {sid} is selected under Interrupted sessions: press Resume selected."
+                if sid is not None else " Press Restart engine to start a new one.")
             self.engine_changed.emit()
             self.actions_changed.emit()
 
@@ -278,7 +285,7 @@ class AppModel:
         self.setup.running_session = None
         self._interrupted = None
         self.rig_kind = ""
-        self.engine_trouble = ""
+        self.engine_trouble = self.engine_trouble_detail = ""
         self.clear_notice()
         self.engine_changed.emit()
         self.actions_changed.emit()

@@ -66,8 +66,10 @@ def test_an_engine_killed_in_a_session_is_restarted_and_its_session_resumed(qtbo
     os.kill(w.bridge.client.pid, signal.SIGKILL)  # as a crash would
     qtbot.waitUntil(lambda: w.engine_row.isVisible(), timeout=TIMEOUT_MS)
     text = w.engine_label.text()
-    assert "study engine" in text and "exited unexpectedly" in text and "Restart engine" in text
-    assert f"Session {sid} was interrupted" in text  # what happened to the session, in the same place
+    # what happened to the engine and to the session, in the same place; the rest in the tooltip
+    assert text == f"The study engine exited unexpectedly. Session {sid} was interrupted; its stored trials are kept."
+    assert w.restart_button.toolTip().endswith(f"After Restart engine, session {sid} is selected under Interrupted "
+                                               "sessions: press Resume selected.")
     assert not w.start_button.isEnabled() and not w.abort_trial_button.isEnabled()
     restart_and_find(qtbot, w, sid)
 
@@ -82,7 +84,8 @@ def test_a_dead_haptic_loop_in_a_live_engine_leads_to_the_same_restart(qtbot, wi
                                       "interrupted", 0, 0, 0))
     w._on_engine_event(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False,
                                 loop_dead=why))
-    assert w.engine_row.isVisible() and "haptic loop" in w.engine_label.text() and why in w.engine_label.text()
+    assert w.engine_row.isVisible() and w.engine_label.text().startswith("The haptic loop died; the force is at zero.")
+    assert why in w.engine_label.toolTip()
     assert w.bridge.client.alive and w.bridge.client.pid == alive_pid
     assert not w.start_button.isEnabled()
     restart_and_find(qtbot, w, sid)

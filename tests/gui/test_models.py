@@ -385,8 +385,8 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     a.apply(trial())
     assert not a.can("restart_engine")  # nothing to restart while it runs
     a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
-    assert a.engine_trouble.startswith("The study engine exited unexpectedly")
-    assert "Session 3 was interrupted" in a.engine_trouble
+    assert a.engine_trouble == "The study engine exited unexpectedly. Session 3 was interrupted; its stored trials are kept."
+    assert a.engine_trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
     assert not a.can("restart_engine")  # no restarter: no button that does nothing
     a.restarter = lambda: restarts.append(1)
     assert a.can("restart_engine") and not a.can("start") and not a.can("resume_session")
@@ -400,7 +400,9 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     # a loop that died in a live engine: the same way out
     a.apply(m.SessionEnded(4, "interrupted", "the haptic loop died (x)", 0, 0, 0))
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False, loop_dead="OSError('x')"))
-    assert a.engine_trouble.startswith("The haptic loop died (OSError('x'))") and "Session 4" in a.engine_trouble
+    assert a.engine_trouble == "The haptic loop died; the force is at zero. Session 4 was interrupted; its stored " \
+        "trials are kept."
+    assert a.engine_trouble_detail.startswith("The haptic loop died (OSError('x')); the haptic device's command")
     assert a.can("restart_engine") and not a.can("start")
 
 
