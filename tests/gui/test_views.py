@@ -270,3 +270,22 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     app.apply(m.SessionEnded(3, "aborted", "", 0, 1, 0))
     app.apply(m.FaultInjected("nan-burst", "now"))
     assert app.notice.text.endswith("No session is running: nothing is stored. The fault latches until Reset faults.")
+
+
+def test_a_placed_window_fits_with_its_title_bar(qtbot):
+    """``move`` places the frame and ``resize`` sizes the contents: centring the contents put the bottom of the
+    experimenter's window 5 px below a 1366×768 screen under a window manager (Xvfb + openbox)."""
+    from PySide6.QtCore import QSize
+    from PySide6.QtGui import QGuiApplication
+    from PySide6.QtWidgets import QWidget
+
+    from study_app.gui import placement
+
+    w = QWidget()
+    qtbot.addWidget(w)
+    screen = QGuiApplication.primaryScreen()
+    avail = screen.availableGeometry()
+    placement.place(w, QSize(5000, 5000), screen)  # larger than any screen: shrunk to fit
+    extra = placement.FRAME_ALLOWANCE
+    assert w.y() >= avail.y() and w.y() + extra.height() + w.height() <= avail.y() + avail.height()
+    assert w.x() >= avail.x() and w.x() + extra.width() + w.width() <= avail.x() + avail.width()
