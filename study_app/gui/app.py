@@ -151,6 +151,8 @@ class ScreenshotTour:
         w.tabs.setCurrentWidget(w.trials_tab)
         yield lambda: model.session.phase == "pause"
         self._save(w.participant_window, "participant-rest")
+        yield lambda: model.cue_wait is not None and model.cue_wait.left_s is not None and model.cue_wait.left_s < 1.6
+        self._save(w.tabs, "trials-cue-wait")
         w.abort_session_button.click()
         yield lambda: model.session.state == "ended"
         # a training session: the participant screen shows the live force gauge
