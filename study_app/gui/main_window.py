@@ -187,7 +187,7 @@ class ExperimenterWindow(QMainWindow):
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
         self.notice_close.clicked.connect(self.model.clear_notice)
-        self.restart_button.clicked.connect(self.model.restart_engine)
+        self.restart_button.clicked.connect(self.restart_engine)
         self.model.engine_changed.connect(self._on_engine_changed)
         self.override_button.clicked.connect(self.start_with_override)
         self.model.commissioning.changed.connect(self._on_actions_changed)
@@ -386,6 +386,21 @@ class ExperimenterWindow(QMainWindow):
                  moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)),
                  moot_text=f"Session {sid} ended before you answered: nothing was aborted.")
 
+    def restart_engine(self) -> None:
+        """Restart engine: at once if it is dead; asks first if it still runs a session (a stalled loop)."""
+        s = self.model.session.session
+        if not self.model.can("restart_engine"):
+            return
+        if self.model.session.running and s is not None:
+            sid = s.session_id
+            self.ask("restart", "Restart engine",
+                     f"Restart the study engine? Session {sid} stops here: the running trial is stored as aborted if "
+                     "the engine can still store it, and the session can be resumed after the restart.",
+                     self.model.restart_engine,
+                     moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)))
+        else:
+            self.model.restart_engine()
+
     def open_window(self, w: QWidget) -> None:
         """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
         if not w.property("placed"):
@@ -425,10 +440,10 @@ class ExperimenterWindow(QMainWindow):
         self.override_button.setToolTip(missing)
 
     def _on_engine_changed(self) -> None:
-        trouble = self.model.engine_trouble
+        trouble, detail = self.model.engine_notice()
         self.engine_label.setText(trouble)
-        self.engine_label.setToolTip(self.model.engine_trouble_detail)
-        self.restart_button.setToolTip(self.model.engine_trouble_detail)
+        self.engine_label.setToolTip(detail)
+        self.restart_button.setToolTip(detail)
         self.engine_row.setVisible(bool(trouble))
         self.restart_button.setEnabled(self.model.can("restart_engine"))
 

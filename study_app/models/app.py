@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.devices import Fault
 from study_app import messages as m
 from study_app.models import Emitter
 from study_app.models.calibration import CalibrationModel
@@ -146,6 +147,7 @@ class AppModel:
         if isinstance(ev, m.EngineReady):
             self.rig_kind = ev.rig
             self._restarting = False
+        was_stalled = self.loop_stalled
         self._watch_engine(ev)
         for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
                      self.commissioning, self.jaw):
@@ -175,6 +177,9 @@ class AppModel:
             self.plots.detach()
         elif isinstance(ev, m.FaultInjected):
             self.notify("info", self.rehearsal_notice(ev), "InjectFault")
+        if self.loop_stalled != was_stalled:
+            self.engine_changed.emit()
+            self.actions_changed.emit()
         self._refresh_cue_wait()
 
     # -- why the next cue waits ----------------------------------------------------------------------
@@ -196,6 +201,11 @@ class AppModel:
                                                 help="Resume (Space) once the cause is dealt with.")
             return "paused", CueWait("warning", "the session is paused", action="resume",
                                      help="Resume (Space) to continue with the next trial.")
+        if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
+            return "fault", CueWait(
+                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+                help="The haptic loop stalled. Reset faults if it runs again; if the fault stays, the loop is frozen "
+                     "and no reset reaches it: Restart engine (under Start), then Resume selected.")
         if waiting.startswith("fault latched"):
             return "fault", CueWait(
                 "error", waiting.replace(": reset to continue", ""), action="reset_faults",
@@ -271,11 +281,34 @@ class AppModel:
             self.engine_changed.emit()
             self.actions_changed.emit()
 
+    @property
+    def loop_stalled(self) -> bool:
+        """The engine runs but its haptic loop latched ``LOOP_STALLED`` (a tick over 50 ms late, or frozen)."""
+        return (bool(self.health.faults & Fault.LOOP_STALLED) and not self.engine_trouble
+                and self.session.state not in ("connecting", "stopped", "failed"))
+
+    def engine_notice(self) -> tuple[str, str]:
+        """(short line, the whole story) of a dead engine or haptic loop, or a stalled loop; ("", "") when fine."""
+        if self.engine_trouble:
+            return self.engine_trouble, self.engine_trouble_detail
+        if self.loop_stalled:
+            s = self.session.session if self.session.running else None
+            return ("The haptic loop stalled; the force is at zero. Reset faults if it runs again, else Restart "
+                    "engine.",
+                    "LOOP_STALLED is latched: a loop tick came over 50 ms late, or the loop is frozen (the fault log "
+                    "says which). If it runs again, Reset faults clears it. If it stays frozen, Reset faults cannot "
+                    "reach it: Restart engine"
+                    + (f" — session {s.session_id} is then interrupted, its stored trials kept, and selected for "
+                       "resume." if s is not None else "."))
+        return "", ""
+
     def restart_engine(self) -> bool:
         """Replace a dead engine by a new one: plots, session and health start afresh; the interrupted session
         will be selected for resume.  False if nothing can restart it."""
         if self.restarter is None:
             return False
+        if self.session.running and self.session.session is not None:
+            self._interrupted = self.session.session.session_id  # a live engine closes it as interrupted
         self._restarting = True
         self.plots.reset()
         self._rate_rows, self._rate_span = [], 0.0
@@ -354,7 +387,7 @@ class AppModel:
         if action == "identify":
             return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
         if action == "restart_engine":
-            return bool(self.engine_trouble) and self.restarter is not None
+            return (bool(self.engine_trouble) or self.loop_stalled) and self.restarter is not None
         if action == "sim_rig_view":
             return self.rig_kind == "sim"
         if action == "pause":

@@ -90,3 +90,26 @@ def test_a_dead_haptic_loop_in_a_live_engine_leads_to_the_same_restart(qtbot, wi
     assert not w.start_button.isEnabled()
     restart_and_find(qtbot, w, sid)
     assert not math.isnan(w.model.session.latest_t_s)
+
+
+def test_a_stalled_loop_offers_reset_and_a_restart_that_asks_first(qtbot, window) -> None:
+    from pipeline.devices import Fault
+    from PySide6.QtWidgets import QMessageBox
+
+    w = window
+    sid = start_session(qtbot, w, "P03")
+    # what a live engine whose loop froze reports (test_engine_loop_failure checks that the engine reports it)
+    stalled = m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, int(Fault.LOOP_STALLED), False, "manual", True, False)
+    w.bridge.generation += 1  # nothing more from this engine reaches the window: its next Health would clear it
+    w._on_engine_event(stalled)
+    assert w.engine_row.isVisible() and w.engine_label.text().startswith("The haptic loop stalled")
+    assert "Reset faults" in w.engine_label.text() and w.restart_button.isEnabled()
+    assert w.start_button.isEnabled() is False  # a session runs
+    qtbot.mouseClick(w.restart_button, Qt.MouseButton.LeftButton)
+    q = w.questions["restart"]
+    assert q.open and q.box.defaultButton() is q.box.button(QMessageBox.StandardButton.No)
+    assert f"Session {sid} stops here" in q.box.text()
+    q.box.button(QMessageBox.StandardButton.Yes).click()
+    qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
+    assert not w.engine_row.isVisible()
+    qtbot.waitUntil(lambda: w.setup_panel.selected_session() == sid, timeout=TIMEOUT_MS)
