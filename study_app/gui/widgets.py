@@ -12,6 +12,7 @@ from PySide6.QtWidgets import (
     QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
+from study_app.models.app import CUE_ACTIONS, AppModel
 from study_app.models.health import HealthModel
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
@@ -86,10 +87,8 @@ class QtTrialTable(QTableWidget):
 class QtCueWait(QWidget):
     """Above the trial table: why the next cue waits, for how long, and the button that ends the wait."""
 
-    def __init__(self, model, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: AppModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        from study_app.models.app import CUE_ACTIONS
-
         self.model, self._actions = model, CUE_ACTIONS
         self.label = QLabel()
         self.label.setWordWrap(True)
