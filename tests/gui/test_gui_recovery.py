@@ -63,6 +63,8 @@ def test_an_engine_killed_in_a_session_is_restarted_and_its_session_resumed(qtbo
     w = window
     sid = start_session(qtbot, w, "P01")
     assert not w.engine_row.isVisible()
+    ring = os.path.join("/dev/shm", w.bridge.client.ring_name.lstrip("/"))
+    assert os.path.exists(ring)
     os.kill(w.bridge.client.pid, signal.SIGKILL)  # as a crash would
     qtbot.waitUntil(lambda: w.engine_row.isVisible(), timeout=TIMEOUT_MS)
     text = w.engine_label.text()
@@ -72,6 +74,7 @@ def test_an_engine_killed_in_a_session_is_restarted_and_its_session_resumed(qtbo
                                                "sessions: press Resume selected.")
     assert not w.start_button.isEnabled() and not w.abort_trial_button.isEnabled()
     restart_and_find(qtbot, w, sid)
+    assert not os.path.exists(ring)  # the dead engine's shared ring is freed, not left until the GUI exits
 
 
 def test_a_dead_haptic_loop_in_a_live_engine_leads_to_the_same_restart(qtbot, window) -> None:
