@@ -549,14 +549,18 @@ class HapticLoop:
         t = now - self.t0_ns
         if not self._derating and lim < self._peak_n:
             self._derating = True
+            # at the onset the limit is still a hair below the peak ("3.30 N" of 3.3 N): say what begins
+            cont = float(getattr(self.rig.haptic, "continuous_force_n", math.nan))
+            toward = f"its {cont:g} N continuous rating" if math.isfinite(cont) else "its continuous rating"
             self._emit(LoopEvent(t, "derating", self.faults,
-                                 f"haptic device motors warm ({frac:.0%} of the thermal budget): force limited to "
-                                 f"{lim:.2f} N, falling toward the continuous rating as they heat"))
+                                 f"haptic device motors warm ({100 * frac:.0f} % of the thermal budget): derating "
+                                 f"begins — the most it may render falls from its {self._peak_n:g} N peak toward "
+                                 f"{toward} as they heat further, and rises again as they cool"))
         elif self._derating and lim >= self._peak_n:
             self._derating = False
             self._emit(LoopEvent(t, "derating_ended", self.faults,
-                                 f"haptic device motors cooled ({frac:.0%} of the thermal budget): full "
-                                 f"{lim:.2f} N again"))
+                                 f"haptic device motors cooled ({100 * frac:.0f} % of the thermal budget): derating "
+                                 f"over, its full {lim:g} N peak again"))
 
     def _fault_detail(
         self, new: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age_ns: int, pose_age_ns: int,

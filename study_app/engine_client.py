@@ -9,6 +9,7 @@ events into Qt signals -- pymeasure's worker → queue → Qt bridge.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 import queue
 from typing import Any
 
@@ -37,6 +38,8 @@ class EngineClient:
             target=host_main, args=(config, self._child_conn, self._events), name="study-engine", daemon=True
         )
         self.ring: RingBuffer | None = None
+        #: The shared segment of the engine's ring ("" before EngineReady).
+        self.ring_name = ""
         self.started = False
 
     def start(self) -> None:
@@ -61,7 +64,13 @@ class EngineClient:
             return None
         if isinstance(ev, m.EngineReady) and ev.ring_name and self.ring is None:
             self.ring = RingBuffer.attach(ev.ring_name)
+            self.ring_name = ev.ring_name
         return ev
+
+    @property
+    def pid(self) -> int | None:
+        """The engine process's id (None before it is started)."""
+        return self._proc.pid
 
     @property
     def alive(self) -> bool:
@@ -99,5 +108,29 @@ class EngineClient:
         if self.ring is not None:
             self.ring.close()
             self.ring = None
+        if self.started and not self._proc.is_alive():
+            _free_orphaned_ring(self.ring_name)
         self._events.close()
         self._events.join_thread()
+
+
+def _free_orphaned_ring(name: str) -> None:
+    """Unlink the ring segment of an engine that died without freeing it (killed, crashed).
+
+    An engine that exits normally unlinks its own segment.  One killed by a signal
+    leaves it in /dev/shm until the GUI exits (when the shared resource tracker frees
+    it with a warning); a restart frees it at once and tells the tracker so.
+    """
+    path = os.path.join("/dev/shm", name.lstrip("/")) if name else ""
+    if not path or not os.path.exists(path):
+        return
+    try:
+        os.unlink(path)
+    except OSError:
+        return
+    try:
+        from multiprocessing import resource_tracker
+
+        resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
+    except Exception:  # noqa: BLE001 - the tracker is only told to keep quiet; the segment is gone already
+        pass

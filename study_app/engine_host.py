@@ -566,8 +566,8 @@ class StudyEngine:
         self._store_loop_events()
         runner = self.runner
         if runner is not None and not runner.done:
-            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the application and "
-                      "resume it")
+            reason = (f"the haptic loop died ({why}); the session is interrupted: restart the engine (Restart engine "
+                      "in the window) and resume it")
             assert self.recorder is not None
             self.recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "session_interrupted",
                                 reason)
@@ -576,8 +576,8 @@ class StudyEngine:
 
     def _require_loop(self, what: str) -> None:
         if self.loop_dead:
-            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); close and restart the application "
-                               "(an interrupted session can be resumed)")
+            raise RuntimeError(f"{what}: the haptic loop died ({self.loop_dead}); restart the engine (Restart engine "
+                               "in the window; an interrupted session can be resumed)")
 
     def quiet_wait_s(self, interval_s: float) -> float:
         """Seconds to wait to wake ``QUIET_OFFSET_NS`` after a loop tick, about ``interval_s`` from now.
@@ -861,11 +861,14 @@ class StudyEngine:
         runner, opened = self.runner, self.opened
         if runner is None or runner.done or opened is None:
             raise RuntimeError("fault rehearsal at a trial: start or resume a session first (or inject it now)")
-        if cmd.trial < 1 or cmd.trial > len(runner.schedule):
-            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {len(runner.schedule)}")
-        if cmd.trial <= runner.state.trial_position:
-            raise ValueError(f"fault trial = {cmd.trial}: trial {runner.state.trial_position} is already under way; "
-                             "choose a later one")
+        n, begun = len(runner.schedule), runner.state.trial_position
+        later = (f"the trials still to come are {begun + 1} to {n}" if begun + 1 < n
+                 else f"the one still to come is trial {n}" if begun + 1 == n
+                 else f"every trial of this session has begun (all {n}); inject it now instead")
+        if cmd.trial < 1 or cmd.trial > n:
+            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {n}; {later}")
+        if cmd.trial <= begun:
+            raise ValueError(f"fault trial = {cmd.trial}: trial {cmd.trial} has already begun; {later}")
         plan = FaultPlan(cmd.kind, opened.code, cmd.trial, cmd.seconds, opened.kind)
         eng = self.eng
 
@@ -1320,9 +1323,11 @@ class StudyEngine:
 
     # -- health extras, the jaw ------------------------------------------------------------------------
     def _health_extra(self) -> dict[str, Any]:
-        st = self.eng.rig.haptic.read_state()
+        haptic = self.eng.rig.haptic
+        st = haptic.read_state()
         return {"haptic_heat_fraction": float(st.heat_fraction), "haptic_force_limit_n": float(st.force_limit_n),
-                "loop_dead": self.loop_dead}
+                "haptic_peak_force_n": float(haptic.peak_force_n),
+                "haptic_continuous_force_n": float(haptic.continuous_force_n), "loop_dead": self.loop_dead}
 
     def _make_jaw(self) -> JawController | None:
         rig = self.eng.rig

@@ -485,6 +485,9 @@ class Health:
     #: The haptic device's motor heat as a fraction of its thermal budget, and the force it may render now (derated), N.
     haptic_heat_fraction: float = 0.0
     haptic_force_limit_n: float = float("nan")
+    #: The haptic device's peak and continuous ratings, N (derating lowers the limit from the first toward the second).
+    haptic_peak_force_n: float = float("nan")
+    haptic_continuous_force_n: float = float("nan")
     #: Why the haptic loop is dead ("" while it runs).
     loop_dead: str = ""
 

@@ -148,9 +148,11 @@ class ScreenshotTour:
         w.tabs.setCurrentWidget(w.health_panel)
         w.health_panel.resize(900, 360)
         self._save(w.health_panel, "health-panel")
-        w.tabs.setCurrentWidget(w.trial_table)
+        w.tabs.setCurrentWidget(w.trials_tab)
         yield lambda: model.session.phase == "pause"
         self._save(w.participant_window, "participant-rest")
+        yield lambda: model.cue_wait is not None and model.cue_wait.left_s is not None and model.cue_wait.left_s < 1.6
+        self._save(w.tabs, "trials-cue-wait")
         w.abort_session_button.click()
         yield lambda: model.session.state == "ended"
         # a training session: the participant screen shows the live force gauge
@@ -159,5 +161,11 @@ class ScreenshotTour:
         yield lambda: (model.session.phase == "active" and model.participant.screen.show_gauge
                        and model.participant.force_n > 0.3)
         self._save(w.participant_window, "participant-training")
-        w.abort_session_button.click()
-        yield lambda: model.session.state == "ended"
+        # the engine crashes (the rehearsal's kill): the window says so and offers the restart
+        w.participant_window.hide()
+        w.rig_window.hide()
+        model.inject_fault("kill", None, 0.0)
+        yield lambda: w.engine_row.isVisible()
+        self._save(w, "engine-restart")
+        w.restart_button.click()
+        yield lambda: model.session.state == "ready" and w.setup_panel.selected_session() is not None

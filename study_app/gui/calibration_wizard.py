@@ -240,11 +240,7 @@ class CalibrationWizard(QWidget):
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Calibration — TCP, payload, frames")
         self.model = model
-        intro = QLabel(
-            "The wrist sensor reads the instrument's weight and its own offsets as well as the contact force. "
-            "The rig holds the tool clear of the tissue in a set of orientations; a least-squares fit identifies "
-            "the payload and the bias. On the simulated rig the poses run automatically."
-        )
+        intro = QLabel(model.intro())
         intro.setWordWrap(True)
         self.pose_set = QComboBox()
         self.pose_set.addItems(list(m.POSE_SETS))
@@ -306,19 +302,14 @@ class CalibrationWizard(QWidget):
         self.progress.setVisible(not real)
         if self.real_panel is not None:
             self.real_panel.setVisible(real)
-        if real:
-            self.intro.setText(
-                "The wrist sensor reads the instrument's weight and its own offsets as well as the contact force. "
-                "Move the robot to each pose shown (teach pendant or its teleoperation), with the tool hanging free, "
-                "and press Record pose: the engine averages the wrench and reads the TCP orientation. Identify fits "
-                "the payload and bias and refuses a badly spread or noisy set."
-            )
+        self.intro.setText(self.model.intro())
 
     def _on_changed(self) -> None:
         mdl = self.model
         if self.pose_set.currentText() != mdl.pose_set:
             self.pose_set.setCurrentText(mdl.pose_set)
         self.description.setText(CalibrationModel.describe(mdl.pose_set))
+        self.intro.setText(mdl.intro())
         self.run_button.setEnabled(mdl.state != "running")
         self.progress.setRange(0, max(1, mdl.total))
         self.progress.setValue(mdl.done if mdl.state == "running" else (mdl.total if mdl.result else 0))

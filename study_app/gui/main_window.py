@@ -7,7 +7,7 @@ from collections.abc import Callable
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
+    QApplication, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
     QVBoxLayout, QWidget,
 )
 
@@ -22,7 +22,7 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import (
-    LEVEL_COLOURS, ElidedLabel, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+    LEVEL_COLOURS, ElidedLabel, QtCueWait, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
 )
 from study_app.models.app import AppModel
 
@@ -61,6 +61,7 @@ class ExperimenterWindow(QMainWindow):
         self._quit_confirmed = False
         self.bridge = QtEngineBridge(EngineClient(host), self)
         self.model = AppModel(self.bridge.send)
+        self.model.restarter = self.bridge.restart
         self._restore_settings(db_path)
         self._shut_down = False
 
@@ -76,6 +77,21 @@ class ExperimenterWindow(QMainWindow):
         self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
         controls = QGroupBox("Control")
         grid = QVBoxLayout(controls)
+        # a dead engine or haptic loop: what happened and the way out, above everything else
+        self.engine_label = QLabel()
+        self.engine_label.setWordWrap(True)
+        self.restart_button = QPushButton("Restart engine")
+        self.restart_button.setStyleSheet("font-weight: 700; padding: 6px;")
+        self.engine_row = QWidget()
+        er = QVBoxLayout(self.engine_row)
+        er.setContentsMargins(4, 4, 4, 4)
+        er.addWidget(self.engine_label)
+        er.addWidget(self.restart_button)
+        fg, bg = LEVEL_COLOURS["error"]
+        self.engine_row.setStyleSheet(f"background: {bg};")
+        self.engine_label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.engine_row.hide()
+        grid.addWidget(self.engine_row)
         grid.addWidget(self.start_button)
         # refusals and questions that became moot show here, under Start, where the experimenter looks
         self.notice = QLabel()
@@ -120,9 +136,16 @@ class ExperimenterWindow(QMainWindow):
         self.progress = QtProgress(self.model.session, self.model.health)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
+        self.cue_wait = QtCueWait(self.model)
+        self.trials_tab = QWidget()
+        tt = QVBoxLayout(self.trials_tab)
+        tt.setContentsMargins(0, 0, 0, 0)
+        tt.setSpacing(2)
+        tt.addWidget(self.cue_wait)
+        tt.addWidget(self.trial_table, 1)
         self.health_panel = QtHealthPanel(self.model.health)
         self.tabs = QTabWidget()
-        self.tabs.addTab(self.trial_table, "Trials")
+        self.tabs.addTab(self.trials_tab, "Trials")
         self.tabs.addTab(self.health_panel, "Devices && health")
         right = QSplitter(Qt.Orientation.Vertical)
         top = QWidget()
@@ -164,6 +187,8 @@ class ExperimenterWindow(QMainWindow):
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
         self.notice_close.clicked.connect(self.model.clear_notice)
+        self.restart_button.clicked.connect(self.restart_engine)
+        self.model.engine_changed.connect(self._on_engine_changed)
         self.override_button.clicked.connect(self.start_with_override)
         self.model.commissioning.changed.connect(self._on_actions_changed)
         self.model.jaw.changed.connect(self._on_jaw_changed)
@@ -297,9 +322,19 @@ class ExperimenterWindow(QMainWindow):
             old.dismiss()
             old.box.deleteLater()
         say = (lambda: self.model.notify("info", moot_text)) if moot_text else None
-        q = Confirmation(self, title, text, on_yes, moot_when=moot_when, on_moot=say)
+        q = Confirmation(self.question_parent(), title, text, on_yes, moot_when=moot_when, on_moot=say)
         self.questions[key] = q
         q.show()
+
+    def question_parent(self) -> QWidget:
+        """The window a question opens over: the one the experimenter is looking at (Esc pressed in the rig
+        view asks over the rig view, which so stays in front), never the participant's own monitor."""
+        active = QApplication.activeWindow()
+        if active in (self.rig_window, self.calibration_wizard):
+            return active
+        if active is self.participant_window and active.screen() is self.screen():
+            return active  # one monitor: the experimenter sees the participant view too
+        return self
 
     # -- actions -----------------------------------------------------------------------------------------
     def start_session(self) -> None:
@@ -351,6 +386,21 @@ class ExperimenterWindow(QMainWindow):
                  moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)),
                  moot_text=f"Session {sid} ended before you answered: nothing was aborted.")
 
+    def restart_engine(self) -> None:
+        """Restart engine: at once if it is dead; asks first if it still runs a session (a stalled loop)."""
+        s = self.model.session.session
+        if not self.model.can("restart_engine"):
+            return
+        if self.model.session.running and s is not None:
+            sid = s.session_id
+            self.ask("restart", "Restart engine",
+                     f"Restart the study engine? Session {sid} stops here: the running trial is stored as aborted if "
+                     "the engine can still store it, and the session can be resumed after the restart.",
+                     self.model.restart_engine,
+                     moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)))
+        else:
+            self.model.restart_engine()
+
     def open_window(self, w: QWidget) -> None:
         """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
         if not w.property("placed"):
@@ -389,8 +439,18 @@ class ExperimenterWindow(QMainWindow):
         self.override_button.setEnabled(bool(missing) and can("start"))
         self.override_button.setToolTip(missing)
 
+    def _on_engine_changed(self) -> None:
+        trouble, detail = self.model.engine_notice()
+        self.engine_label.setText(trouble)
+        self.engine_label.setToolTip(detail)
+        self.restart_button.setToolTip(detail)
+        self.engine_row.setVisible(bool(trouble))
+        self.restart_button.setEnabled(self.model.can("restart_engine"))
+
     def _on_session_changed(self) -> None:
         self.status.setText(self.model.session.message)
+        if hasattr(self.rig_window, "fault_trial"):
+            self.rig_window.set_trials(self.model.rehearsal_trials())
 
     def _on_notice(self) -> None:
         n = self.model.notice

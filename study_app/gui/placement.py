@@ -35,13 +35,32 @@ def fit_size(preferred: QSize, screen: QScreen, margin: int = 40) -> QSize:
     return QSize(min(preferred.width(), avail.width() - margin), min(preferred.height(), avail.height() - margin))
 
 
+#: The window manager's title bar and borders before a window is first shown (then measured), px.
+FRAME_ALLOWANCE = QSize(8, 34)
+
+
+def frame_extra(window: QWidget) -> QSize:
+    """How much larger the frame (title bar, borders) is than the window's contents: measured once shown."""
+    if window.isVisible():
+        f, g = window.frameGeometry(), window.geometry()
+        if f.height() > g.height() or f.width() > g.width():
+            return QSize(f.width() - g.width(), f.height() - g.height())
+    return FRAME_ALLOWANCE
+
+
 def place(window: QWidget, preferred: QSize, screen: QScreen) -> None:
-    """Size ``window`` to fit ``screen`` and centre it there."""
-    size = fit_size(preferred.expandedTo(QSize(1, 1)), screen)
-    size = size.expandedTo(window.minimumSizeHint().boundedTo(screen.availableGeometry().size()))
+    """Size ``window`` to fit ``screen`` and centre it there -- its frame, title bar included, not just its contents
+    (``move`` places the frame, ``resize`` sizes the contents: a 728-px window centred by its contents on a
+    768-px screen put the bottom of a 753-px frame 5 px below the screen)."""
     avail = screen.availableGeometry()
+    extra = frame_extra(window)
+    size = fit_size(preferred.expandedTo(QSize(1, 1)), screen)
+    size = size.boundedTo(QSize(avail.width() - extra.width(), avail.height() - extra.height()))
+    size = size.expandedTo(window.minimumSizeHint().boundedTo(avail.size() - extra))
     window.resize(size)
-    window.move(avail.x() + (avail.width() - size.width()) // 2, avail.y() + (avail.height() - size.height()) // 2)
+    x = avail.x() + max(0, (avail.width() - size.width() - extra.width()) // 2)
+    y = avail.y() + max(0, (avail.height() - size.height() - extra.height()) // 2)
+    window.move(x, y)
 
 
 def _on_a_screen(rect: QRect) -> bool:

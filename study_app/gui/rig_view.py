@@ -7,7 +7,7 @@ import time
 from PySide6.QtCore import QPointF, QRectF, QSignalBlocker, Qt
 from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import (
-    QButtonGroup, QComboBox, QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QRadioButton, QSpinBox, QVBoxLayout,
+    QButtonGroup, QComboBox, QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QRadioButton, QVBoxLayout,
     QWidget,
 )
 
@@ -163,24 +163,27 @@ class RigWindow(QWidget):
         self.fault_kind = QComboBox()
         for kind, text in REHEARSAL_KINDS.items():
             self.fault_kind.addItem(text, kind)
-        self.fault_trial = QSpinBox()
-        self.fault_trial.setRange(0, 999)
-        self.fault_trial.setSpecialValueText("now")
-        self.fault_trial.setPrefix("trial ")
-        self.fault_trial.setToolTip("now, or the trial (numbered from 1) whose cue it follows")
+        # "now", or one of the running session's trials still to come (numbered from 1, as everywhere)
+        self.fault_trial = QComboBox()
+        self.fault_trial.addItem("now", None)
+        self.fault_trial.setToolTip("now, or a trial of the running session not yet begun (numbered from 1), "
+                                    "whose cue the fault follows")
+        self.fault_trial.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToContents)
         self.fault_seconds = QDoubleSpinBox()
         self.fault_seconds.setRange(0.0, 600.0)
         self.fault_seconds.setDecimals(1)
         self.fault_seconds.setValue(3.0)
         self.fault_seconds.setSuffix(" s after its cue")
-        self.fault_trial.valueChanged.connect(lambda v: self.fault_seconds.setEnabled(v > 0))
+        self.fault_trial.currentIndexChanged.connect(
+            lambda _i: self.fault_seconds.setEnabled(self.fault_trial.currentData() is not None))
         self.fault_seconds.setEnabled(False)
         self.inject_button = QPushButton("Inject")
-        self.inject_button.setToolTip("rehearse recovery: the watchdog latches, the trial it hits is aborted and "
-                                      "re-run, the next cue waits for Reset")
+        self.inject_button.setToolTip("a real fault of the simulated rig, stored with the running session like any "
+                                      "fault: it latches, a trial it hits is stored as aborted and run again, and "
+                                      "the next cue waits for Reset faults")
         self.inject_button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space in the side view never injects
         self.inject_button.clicked.connect(lambda: on_inject(
-            self.fault_kind.currentData(), self.fault_trial.value() or None, self.fault_seconds.value()))
+            self.fault_kind.currentData(), self.fault_trial.currentData(), self.fault_seconds.value()))
         row = QHBoxLayout()
         row.addWidget(QLabel("Rehearse a fault:"))
         row.addWidget(self.fault_kind)
@@ -189,6 +192,25 @@ class RigWindow(QWidget):
         row.addWidget(self.inject_button)
         row.addStretch(1)
         return row
+
+    def set_trials(self, trials: range) -> None:
+        """Offer these trials (the session's trials not yet begun).  A chosen trial that has begun gives way to
+        the next one still to come, never silently to "now"."""
+        have = [self.fault_trial.itemData(i) for i in range(1, self.fault_trial.count())]
+        if have == list(trials):
+            return
+        chosen = self.fault_trial.currentData()
+        with QSignalBlocker(self.fault_trial):
+            while self.fault_trial.count() > 1:
+                self.fault_trial.removeItem(1)
+            for k in trials:
+                self.fault_trial.addItem(f"trial {k}", k)
+            if chosen is None or not len(trials):
+                index = 0
+            else:
+                index = 1 + next((i for i, k in enumerate(trials) if k >= chosen), len(trials) - 1)
+            self.fault_trial.setCurrentIndex(index)
+        self.fault_seconds.setEnabled(self.fault_trial.currentData() is not None)
 
     def showEvent(self, event) -> None:  # noqa: N802 - Qt's name
         super().showEvent(event)

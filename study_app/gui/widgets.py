@@ -12,12 +12,13 @@ from PySide6.QtWidgets import (
     QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
+from study_app.models.app import CUE_ACTIONS, AppModel
 from study_app.models.health import HealthModel
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
 
-__all__ = ["ElidedLabel", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
+__all__ = ["ElidedLabel", "QtCueWait", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_PEN = pg.mkPen((220, 40, 40), width=1)
@@ -81,6 +82,50 @@ class QtTrialTable(QTableWidget):
                 item.setBackground(colour)
             self.setItem(i, j, item)
         self.scrollToBottom()
+
+
+class QtCueWait(QWidget):
+    """Above the trial table: why the next cue waits, for how long, and the button that ends the wait."""
+
+    def __init__(self, model: AppModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model, self._actions = model, CUE_ACTIONS
+        self.label = QLabel()
+        self.label.setWordWrap(True)
+        self.help = QLabel()
+        self.help.setWordWrap(True)
+        self.button = QPushButton()
+        self.button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space stays Start / Resume
+        self.button.clicked.connect(model.end_cue_wait)
+        text = QVBoxLayout()
+        text.setContentsMargins(0, 0, 0, 0)
+        text.setSpacing(0)
+        text.addWidget(self.label)
+        text.addWidget(self.help)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(6, 3, 6, 3)
+        lay.addLayout(text, 1)
+        lay.addWidget(self.button, 0, Qt.AlignmentFlag.AlignTop)
+        model.cue_wait_changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        w = self.model.cue_wait
+        self.setVisible(w is not None)
+        if w is None:
+            return
+        fg, bg = LEVEL_COLOURS.get(w.level, LEVEL_COLOURS["info"])
+        self.setAutoFillBackground(True)
+        pal = self.palette()
+        pal.setColor(self.backgroundRole(), QColor(bg))
+        self.setPalette(pal)
+        self.label.setText(w.text())
+        self.label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.help.setStyleSheet(f"color: {fg};")
+        self.help.setText(w.help)
+        self.help.setVisible(bool(w.help))
+        self.button.setText(self._actions.get(w.action, ""))
+        self.button.setVisible(bool(w.action))
 
 
 #: Colours of the levels of health figures and notices (text, background).
@@ -270,10 +315,9 @@ class QtForcePlots(QWidget):
             self._band = band
             self.band.setVisible(band is not None)
             self.band_label.setVisible(band is not None)
-            tr, s = self.session.trial, self.session.session
-            if band is not None and tr is not None and s is not None:
+            if band is not None:
                 self.band.setRegion(band)
-                self.band_label.setText(f"{tr.target_label} {tr.target_force_n:g} N ± {s.tolerance_fraction:.0%}")
+                self.band_label.setText(self.session.band_label())
                 self.band_label.setPos(0.0, band[1])
 
 
@@ -414,6 +458,11 @@ class QtSetupPanel(QGroupBox):
         form.addRow("Seed", self.seed)
         self.resumable = QListWidget()
         self.resumable.setMaximumHeight(90)
+        # a row longer than the column wraps (all of it in the tooltip too); nothing hides to the right
+        self.resumable.setWordWrap(True)
+        self.resumable.setTextElideMode(Qt.TextElideMode.ElideNone)
+        self.resumable.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        self.resumable.setResizeMode(QListWidget.ResizeMode.Adjust)
         self.refresh_button = QPushButton("Refresh")
         self.resume_button = QPushButton("Resume selected")
         lay = QVBoxLayout(self)
@@ -480,9 +529,13 @@ class QtSetupPanel(QGroupBox):
     def _on_resumable(self) -> None:
         self.resumable.clear()
         for s in self.setup.resumable:
-            item = QListWidgetItem(SetupModel.describe_resumable(s))
+            text = SetupModel.describe_resumable(s)
+            item = QListWidgetItem(text)
+            item.setToolTip(text)
             item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]
             self.resumable.addItem(item)
+            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]
+                self.resumable.setCurrentItem(item)
 
     def selected_session(self) -> int | None:
         """The session id selected in the resume list."""

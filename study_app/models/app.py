@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.devices import Fault
 from study_app import messages as m
 from study_app.models import Emitter
 from study_app.models.calibration import CalibrationModel
@@ -26,7 +28,7 @@ REHEARSAL_KINDS: dict[str, str] = {
     "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
 }
 
-__all__ = ["AppModel", "Notice", "REHEARSAL_KINDS"]
+__all__ = ["AppModel", "CueWait", "Notice", "REHEARSAL_KINDS"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
@@ -45,6 +47,36 @@ class Notice:
     source: str = ""
 
 
+@dataclass(frozen=True, slots=True)
+class CueWait:
+    """Why the next cue of the running session has not come, for how long, and what ends the wait.
+
+    ``level`` is ``info`` (it ends by itself: the protocol's pause), ``warning`` (the experimenter ends it:
+    a pause) or ``error`` (something must be put right: a latched fault, a dead engine).  ``left_s`` is the time
+    until the cue when it is known, ``waited_s`` how long it has waited so far (sample time).  ``action`` names
+    what ends it (``reset_faults``, ``resume``, ``restart_engine`` or ""), ``help`` what to do if that does not.
+    """
+
+    level: str
+    reason: str
+    left_s: float | None = None
+    waited_s: float = 0.0
+    action: str = ""
+    help: str = ""
+
+    def text(self) -> str:
+        """One line: ``Next cue waits: <reason> · 1.2 s left`` (or ``· waiting 14 s``)."""
+        when = (f" · {self.left_s:.1f} s left" if self.left_s is not None
+                else f" · waiting {self.waited_s:.0f} s" if self.waited_s >= 1.0 else "")
+        return f"Next cue waits: {self.reason}{when}"
+
+
+#: A wait with nothing named to end it, after this long (s), says where to look.
+CUE_STUCK_S = 5.0
+#: What ends each wait, as the button reads.
+CUE_ACTIONS = {"reset_faults": "Reset faults", "resume": "Resume", "restart_engine": "Restart engine"}
+
+
 #: Commands as the experimenter knows them, for refusal messages.
 _COMMAND_NAMES = {
     "StartSession": "Start", "ResumeSession": "Resume session", "Pause": "Pause", "Resume": "Resume",
@@ -52,6 +84,7 @@ _COMMAND_NAMES = {
     "ListSessions": "Reading the database", "ResetFaults": "Reset faults", "SetDriver": "Driver",
     "CalibrateTcp": "TCP calibration", "RecordPivot": "Record orientation", "IdentifyTcp": "TCP calibration",
     "CheckFrames": "Frame check", "RecordFrameAxis": "Frame check", "JawCommand": "Jaw",
+    "InjectFault": "Fault rehearsal",
 }
 
 
@@ -86,8 +119,24 @@ class AppModel:
         self.notice_changed = Emitter()
         #: Action availability changed (buttons enable/disable).
         self.actions_changed = Emitter()
+        #: Why the engine must be restarted ("" while it is fine): it exited, or its haptic loop died.
+        self.engine_trouble = ""
+        #: The whole story of :attr:`engine_trouble`: the reason as the engine gave it, and what Restart does.
+        self.engine_trouble_detail = ""
+        self.engine_changed = Emitter()
+        #: Replaces the engine by a new one (the window's bridge); None: nothing can restart it.
+        self.restarter: Callable[[], None] | None = None
+        self._restarting = False
+        #: The session the failure interrupted (selected for resume after the restart).
+        self._interrupted: int | None = None
         self._rate_rows: list[np.ndarray] = []
         self._rate_span = 0.0
+        #: Why the next cue waits (None: a trial runs, or no session does); see :class:`CueWait`.
+        self.cue_wait: CueWait | None = None
+        self._planned: tuple[int, float] | None = None  # the last fault rehearsal planned at a trial
+        self.cue_wait_changed = Emitter()
+        self._wait_key = ""
+        self._wait_since_s = 0.0
         self.session.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(self._on_setup_changed)
@@ -97,6 +146,9 @@ class AppModel:
         """Route one engine event."""
         if isinstance(ev, m.EngineReady):
             self.rig_kind = ev.rig
+            self._restarting = False
+        was_stalled = self.loop_stalled
+        self._watch_engine(ev)
         for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
                      self.commissioning, self.jaw):
             part.apply(ev)
@@ -124,9 +176,155 @@ class AppModel:
         elif isinstance(ev, m.EngineStopped):
             self.plots.detach()
         elif isinstance(ev, m.FaultInjected):
-            when = "now" if ev.when == "now" else f"at {ev.when} after its cue"
-            self.notify("info", f"Rehearsal: {REHEARSAL_KINDS.get(ev.kind, ev.kind)} {when}. Watch the health panel; "
-                        "the trial it hits is aborted and re-run, and the next cue waits for Reset.", "InjectFault")
+            self.notify("info", self.rehearsal_notice(ev), "InjectFault")
+        if self.loop_stalled != was_stalled:
+            self.engine_changed.emit()
+            self.actions_changed.emit()
+        self._refresh_cue_wait()
+
+    # -- why the next cue waits ----------------------------------------------------------------------
+    def _cue_wait_now(self) -> tuple[str, CueWait | None]:
+        """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
+        s = self.session
+        if self.engine_trouble:
+            if s.session is None and self._interrupted is None:
+                return "", None
+            return "engine", CueWait("error", "no trial runs until the study engine is restarted",
+                                     action="restart_engine", help="Restart engine, then Resume selected.")
+        if not s.running or s.session is None or s.phase in ("active", "cued"):
+            return "", None
+        h = self.health.loop
+        waiting = h.waiting if h is not None and h.session_running else ""
+        if s.state == "paused":
+            if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
+                return "paused-runner", CueWait("error", waiting, action="resume",
+                                                help="Resume (Space) once the cause is dealt with.")
+            return "paused", CueWait("warning", "the session is paused", action="resume",
+                                     help="Resume (Space) to continue with the next trial.")
+        if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
+            return "fault", CueWait(
+                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+                help="The haptic loop stalled. Reset faults if it runs again; if the fault stays, the loop is frozen "
+                     "and no reset reaches it: Restart engine (under Start), then Resume selected.")
+        if waiting.startswith("fault latched"):
+            return "fault", CueWait(
+                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+                help="No trial is cued while a fault is latched. Reset faults; if the fault latches again, its cause "
+                     "is still there — the fault log under Devices & health names it (a stalled sensor, a device "
+                     "error, the stylus pressed at the start): put it right, then reset.")
+        if s.phase == "pause" and s.pause_until_s is not None:
+            left = round(max(0.0, s.pause_until_s - s.latest_t_s), 1)
+            return "pause", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause between trials", left_s=left)
+        if waiting == "pause":
+            return "pause-again", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause before the next cue "
+                                          "(after the session began or a fault was cleared)")
+        return "due", CueWait("info", "the next cue is due")
+
+    def _refresh_cue_wait(self) -> None:
+        key, wait = self._cue_wait_now()
+        if key != self._wait_key:
+            s = self.session
+            since = s.latest_t_s
+            if key == "pause" and s.pause_until_s is not None and s.session is not None:
+                since = s.pause_until_s - s.session.pause_s  # the pause began when the trial ended
+            self._wait_key, self._wait_since_s = key, since
+        if wait is not None:
+            waited = max(0.0, self.session.latest_t_s - self._wait_since_s)
+            help_ = wait.help
+            # a wait that should end by itself but has not: say where to look, and the way out
+            expected = self.session.session.pause_s if key in ("pause", "pause-again") and self.session.session else 0.0
+            if not wait.action and waited >= expected + CUE_STUCK_S:
+                help_ = (f"No cue for {waited:.0f} s and nothing to reset: look under Devices & health (the loop's "
+                         "figures, the fault log). If it stays stuck, Quit: the running trial is stored as aborted and "
+                         "the session can be resumed after a restart.")
+            wait = dataclasses.replace(wait, waited_s=round(waited, 1), help=help_)
+        if wait != self.cue_wait:
+            self.cue_wait = wait
+            self.cue_wait_changed.emit()
+
+    def end_cue_wait(self) -> None:
+        """Do what ends the current wait (the banner's button)."""
+        action = self.cue_wait.action if self.cue_wait is not None else ""
+        if action == "reset_faults":
+            self.reset_faults()
+        elif action == "resume":
+            self.resume()
+        elif action == "restart_engine":
+            self.restart_engine()
+
+    # -- a dead engine or loop, and the restart ---------------------------------------------------------
+    def _watch_engine(self, ev: object) -> None:
+        """Notice an engine that exited or whose haptic loop died (before the parts forget the session)."""
+        s = self.session
+        if isinstance(ev, m.SessionEnded) and ev.status == "interrupted":
+            self._interrupted = ev.session_id
+        trouble = detail = ""
+        if isinstance(ev, m.EngineStopped) and not self._restarting:
+            reason = ev.reason.rstrip(".")
+            trouble = "The study engine exited unexpectedly." if "unexpectedly" in reason else \
+                "The study engine stopped."
+            detail = (reason[:1].upper() + reason[1:] + ". Without the engine the haptic device renders no force.")
+            if s.running and s.session is not None:
+                self._interrupted = s.session.session_id
+        elif isinstance(ev, m.Health) and ev.loop_dead:
+            trouble = "The haptic loop died; the force is at zero."
+            detail = (f"The haptic loop died ({ev.loop_dead}); the haptic device's command watchdog dropped the "
+                      "force to zero, and the engine accepts no session until it is restarted.")
+        if trouble and not self.engine_trouble:
+            sid = self._interrupted
+            # short: it sits in the left column of a 768-px screen; the rest is in the detail (tooltip)
+            self.engine_trouble = trouble + (f" Session {sid} was interrupted; its stored trials are kept."
+                                             if sid is not None else "")
+            self.engine_trouble_detail = detail + (
+                f" After Restart engine, session {sid} is selected under Interrupted sessions: press Resume selected."
+                if sid is not None else " Press Restart engine to start a new one.")
+            self.engine_changed.emit()
+            self.actions_changed.emit()
+
+    @property
+    def loop_stalled(self) -> bool:
+        """The engine runs but its haptic loop latched ``LOOP_STALLED`` (a tick over 50 ms late, or frozen)."""
+        return (bool(self.health.faults & Fault.LOOP_STALLED) and not self.engine_trouble
+                and self.session.state not in ("connecting", "stopped", "failed"))
+
+    def engine_notice(self) -> tuple[str, str]:
+        """(short line, the whole story) of a dead engine or haptic loop, or a stalled loop; ("", "") when fine."""
+        if self.engine_trouble:
+            return self.engine_trouble, self.engine_trouble_detail
+        if self.loop_stalled:
+            s = self.session.session if self.session.running else None
+            return ("The haptic loop stalled; the force is at zero. Reset faults if it runs again, else Restart "
+                    "engine.",
+                    "LOOP_STALLED is latched: a loop tick came over 50 ms late, or the loop is frozen (the fault log "
+                    "says which). If it runs again, Reset faults clears it. If it stays frozen, Reset faults cannot "
+                    "reach it: Restart engine"
+                    + (f" — session {s.session_id} is then interrupted, its stored trials kept, and selected for "
+                       "resume." if s is not None else "."))
+        return "", ""
+
+    def restart_engine(self) -> bool:
+        """Replace a dead engine by a new one: plots, session and health start afresh; the interrupted session
+        will be selected for resume.  False if nothing can restart it."""
+        if self.restarter is None:
+            return False
+        if self.session.running and self.session.session is not None:
+            self._interrupted = self.session.session.session_id  # a live engine closes it as interrupted
+        self._restarting = True
+        self.plots.reset()
+        self._rate_rows, self._rate_span = [], 0.0
+        self.session.reset("restarting the study engine …")
+        self.health.engine_restarted()
+        self.setup.preferred_resume = self._interrupted
+        self.setup.running_session = None
+        self._interrupted = None
+        self.rig_kind = ""
+        self.engine_trouble = self.engine_trouble_detail = ""
+        self.clear_notice()
+        self.engine_changed.emit()
+        self.actions_changed.emit()
+        self.restarter()
+        self._refresh_cue_wait()
+        return True
 
     # -- notices -------------------------------------------------------------------------------------
     def notify(self, level: str, text: str, source: str = "") -> None:
@@ -156,6 +354,7 @@ class AppModel:
         last = self.plots.last_row
         t = float(last["t_s"])
         self.session.set_time(t)
+        self._refresh_cue_wait()
         self.participant.update(t, float(last["force_n"]))
         self.rig.update(float(last["tip_z_m"]), float(last["true_fz"]))
         rows = self.plots.new_rows
@@ -171,8 +370,8 @@ class AppModel:
     # -- what may be done now -------------------------------------------------------------------------
     @property
     def ready(self) -> bool:
-        """The engine is connected and idle or running."""
-        return self.session.state in ("ready", "running", "paused", "ended")
+        """The engine is connected and idle or running (and neither it nor its haptic loop has died)."""
+        return self.session.state in ("ready", "running", "paused", "ended") and not self.engine_trouble
 
     def can(self, action: str) -> bool:
         """Whether an action is available: start, pause, resume, abort_trial, abort_session, calibrate, resume_session."""
@@ -187,6 +386,8 @@ class AppModel:
             return self.ready and not s.running and self.rig_kind == "real" and self.real_calibration.can_record()
         if action == "identify":
             return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
+        if action == "restart_engine":
+            return (bool(self.engine_trouble) or self.loop_stalled) and self.restarter is not None
         if action == "sim_rig_view":
             return self.rig_kind == "sim"
         if action == "pause":
@@ -205,7 +406,7 @@ class AppModel:
             self.clear_notice()  # a new action: the last notice was about an earlier one
         ok = self.send(cmd)
         if not ok:
-            self.notify("error", "The study engine is not running; restart the application.")
+            self.notify("error", "The study engine is not running: press Restart engine.")
         return ok
 
     def start(self, override_reason: str = "") -> bool:
@@ -275,8 +476,66 @@ class AppModel:
         """Clear faults whose condition has gone away."""
         self._send(m.ResetFaults())
 
+    def rehearsal_trials(self) -> range:
+        """The trials a fault can still be planned for: the running session's trials not yet begun, numbered
+        from 1 in the order the participant meets them (empty when no session runs)."""
+        s = self.session
+        if not s.running or s.session is None:
+            return range(0)
+        begun = s.trial.position if s.phase in ("active", "cued") and s.trial is not None else s.completed + s.aborted
+        return range(begun + 1, s.session.trials_total + 1)
+
+    def rehearsal_refusal(self, trial: int | None) -> str:
+        """Why a fault cannot be rehearsed now or at ``trial`` ("" when it can)."""
+        if self.rig_kind == "real":
+            return "fault rehearsal is for the simulated rig only (a person's hand is on the real one)"
+        if trial is None:
+            return ""
+        if not self.session.running or self.session.session is None:
+            return f"a fault at trial {trial} needs a running session: start or resume one, or inject it now"
+        future = self.rehearsal_trials()
+        if trial in future:
+            return ""
+        total = self.session.session.trials_total
+        if not future:
+            return f"trial {trial}: every trial of this session has begun (all {total}); inject it now instead"
+        later = (f"the trials still to come are {future[0]} to {total}" if len(future) > 1
+                 else f"the one still to come is trial {total}")
+        if trial > total:
+            return f"trial {trial}: the session has {total} trials; {later}"
+        return f"trial {trial} has already begun; {later}"
+
+    def rehearsal_notice(self, ev: m.FaultInjected) -> str:
+        """What a rehearsed fault does, as the engine runs it (:mod:`protocol.rehearsal`, the session runner)."""
+        what = REHEARSAL_KINDS.get(ev.kind, ev.kind)
+        planned = self._planned if ev.when != "now" else None
+        when = (f"{planned[1]:g} s after the cue of trial {planned[0]}" if planned is not None
+                else ev.when if ev.when != "now" else "now")
+        running = self.session.running
+        if ev.kind == "kill":
+            return (f"Rehearsal: {what}, {when}. The engine process is killed as a crash would kill it: "
+                    + ("the session is left interrupted — its stored trials are kept, the trial under way is not "
+                       "stored and runs again on resume. " if running else "")
+                    + "The window then offers Restart engine" + (", then Resume selected." if running else "."))
+        if planned is not None:
+            k = planned[0]
+            return (f"Rehearsal planned: {what}, {when} (if trial {k} ends sooner, nothing is injected). It is a real "
+                    f"fault of the simulated rig in this session, stored with it like any fault — nothing in the "
+                    f"record marks it as rehearsed: trial {k} is stored as aborted (cause: fault), does not count, "
+                    "and is run again later. The fault latches: the next cue waits for Reset faults.")
+        stored = ("It is stored with the running session like any fault — nothing in the record marks it as "
+                  "rehearsed; a trial it hits is stored as aborted (cause: fault), does not count, and is run again "
+                  "later. " if running else "No session is running: nothing is stored. ")
+        return (f"Rehearsal: {what}, now: a real fault of the simulated rig. {stored}The fault latches"
+                + (": the next cue waits for Reset faults." if running else " until Reset faults."))
+
     def inject_fault(self, kind: str, trial: int | None, seconds: float) -> None:
         """Rehearse a fault on the simulated rig: now (``trial`` None) or ``seconds`` after a trial's cue."""
+        why = self.rehearsal_refusal(trial)
+        if why:
+            self.notify("error", f"Fault rehearsal refused: {why}.", "InjectFault")
+            return
+        self._planned = None if trial is None else (trial, seconds)
         self._send(m.InjectFault(kind, trial, seconds))
 
     def calibrate(self) -> None:

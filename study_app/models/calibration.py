@@ -29,6 +29,8 @@ class CalibrationModel:
     total: int = 0
     result: m.CalibrationDone | None = None
     active: dict[str, object] | None = None
+    #: "sim" or "real" (from EngineReady; "" before): what the step's text speaks of.
+    rig: str = ""
     changed: Emitter = field(default_factory=Emitter)
 
     @staticmethod
@@ -52,7 +54,7 @@ class CalibrationModel:
     def apply(self, ev: object) -> None:
         """Update from engine events."""
         if isinstance(ev, m.EngineReady):
-            self.active = ev.calibration
+            self.active, self.rig = ev.calibration, ev.rig
         elif isinstance(ev, m.CalibrationProgress):
             self.state, self.done, self.total = "running", ev.done, ev.total
         elif isinstance(ev, m.CalibrationDone):
@@ -67,10 +69,27 @@ class CalibrationModel:
             return
         self.changed.emit()
 
+    def intro(self) -> str:
+        """What the payload step does, on the rig there is (the simulated one has no hardware to speak of)."""
+        if self.rig == "real":
+            return ("The wrist sensor reads the instrument's weight and its own offsets as well as the contact force. "
+                    "Move the robot to each pose shown (teach pendant or its teleoperation), with the tool hanging "
+                    "free, and press Record pose: the engine averages the wrench and reads the TCP orientation. "
+                    "Identify fits the payload and bias and refuses a badly spread or noisy set.")
+        if not self.rig:
+            return "Waiting for the study engine …"
+        return ("Simulated rig — no hardware is attached. The simulated wrist sensor reports the simulated "
+                "instrument's weight and a sensor bias on top of the contact force, as a real one does. Run "
+                "calibration: the simulated robot holds the tool clear of the tissue in each pose of the set by itself "
+                "(nothing to move or hold), and the same least-squares fit as on the real rig identifies the payload "
+                "and the bias, accepted or refused by the same rules.")
+
     def verdict(self) -> str:
         """One line: accepted (stored with the next session) or refused with the reason."""
         r = self.result
         if self.state == "running":
+            if self.rig == "sim":
+                return f"measuring pose {self.done} of {self.total or '…'} — the simulated robot moves by itself"
             return f"measuring pose {self.done} of {self.total or '…'} — keep the tool clear of the tissue"
         if r is None:
             return "Run the pose set to identify the tool's weight, centre of mass and the sensor bias."

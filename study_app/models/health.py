@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +49,19 @@ def _level(value: float, limits: tuple[float, float]) -> str:
 _VERBS = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset", "derating": "derating",
           "derating_ended": "derating ended", "output_restarted": "output restarted"}
 
+#: Numbers in an event's detail (a run of "no loop tick for 11.2 ms", "… 12.9 ms" is one kind of event).
+_NUMBER = re.compile(r"\d+(?:\.\d+)?")
+
+
+def _run_line(run: list[Any]) -> str:
+    """A run of events as one log line: the first, and for more than one, ×N and the newest's time and detail."""
+    _key, first, last, n, detail = run
+    verb = _key[0]
+    if n == 1:
+        return f"{first}  {verb}: {detail}"
+    return f"{first}  {verb} ×{n} (the last at {' '.join(last.split())}): {detail}"
+
+
 #: Fault bits that belong to each device row.
 _DEVICE_FAULTS = {
     "F/T sensor": Fault.SENSOR_STALE | Fault.SENSOR_STATUS | Fault.SENSOR_SATURATION | Fault.NON_FINITE,
@@ -86,6 +101,8 @@ class HealthModel:
     #: The jaw (None: the rig has none, or it has not reported yet).
     jaw: m.JawState | None = None
     changed: Emitter = field(default_factory=Emitter)
+    #: The runs behind :attr:`fault_log`: [key, first when, last when, count, newest detail].
+    _log_runs: list[list[Any]] = field(default_factory=list, repr=False)
 
     def apply(self, ev: object) -> None:
         """Update from an engine event."""
@@ -96,11 +113,7 @@ class HealthModel:
             self.faults = ev.faults
         elif isinstance(ev, m.EngineFault):
             self.faults = ev.faults
-            verb = _VERBS.get(ev.kind, ev.kind)
-            # the session's clock when a session runs: the time the database stores the event at
-            when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
-            self.fault_log.append(f"{when}  {verb}: {ev.detail}")
-            del self.fault_log[:-50]
+            self._log_event(ev)
         elif isinstance(ev, m.JawState):
             self.jaw = ev
         elif isinstance(ev, m.CalibrationStatus):
@@ -110,6 +123,36 @@ class HealthModel:
         else:
             return
         self._refresh_states()
+        self.changed.emit()
+
+    def _log_event(self, ev: m.EngineFault) -> None:
+        """One line per event; a run of the same event (numbers aside) is one line counted ``×N``.
+
+        Only the view coalesces: the engine stores every event in the database.
+        """
+        verb = _VERBS.get(ev.kind, ev.kind)
+        # the session's clock when a session runs: the time the database stores the event at
+        when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
+        key = (verb, _NUMBER.sub("#", ev.detail))
+        last = self._log_runs[-1] if self._log_runs else None
+        if last is not None and last[0] == key:
+            last[2] = when
+            last[3] += 1
+            last[4] = ev.detail
+            self.fault_log[-1] = _run_line(last)
+            return
+        self._log_runs.append([key, when, when, 1, ev.detail])
+        self.fault_log.append(_run_line(self._log_runs[-1]))
+        del self.fault_log[:-50]
+        del self._log_runs[:-50]
+
+    def engine_restarted(self) -> None:
+        """A new engine replaces the old one: its figures and faults are gone (the log keeps what happened)."""
+        self.connected, self.loop, self.faults, self.devices = False, None, 0, []
+        self.fault_log.append("engine restarted")
+        self._log_runs.append([("restart", ""), "", "", 1, ""])
+        del self.fault_log[:-50]
+        del self._log_runs[:-50]
         self.changed.emit()
 
     def update_from_rows(self, rows: np.ndarray) -> None:
@@ -151,9 +194,13 @@ class HealthModel:
         self.devices = out
 
     def derating(self) -> bool:
-        """The haptic device lowered its force limit (its motors are warm)."""
+        """The haptic device lowered its force limit below its peak (its motors are warm)."""
         h = self.loop
-        return h is not None and math.isfinite(h.haptic_force_limit_n) and h.haptic_heat_fraction > 0.5
+        if h is None or not math.isfinite(h.haptic_force_limit_n):
+            return False
+        if math.isfinite(h.haptic_peak_force_n):
+            return h.haptic_force_limit_n < h.haptic_peak_force_n
+        return h.haptic_heat_fraction > 0.5  # an engine that does not say its peak: the default onset
 
     def thermal_figure(self) -> LoopFigure | None:
         """The Touch's motor heat against its budget (None before the first Health event)."""
@@ -161,10 +208,15 @@ class HealthModel:
         if h is None:
             return None
         frac = h.haptic_heat_fraction
-        text = f"Touch motors {frac:.0%} of the thermal budget"
-        if self.derating():
-            text += f", derating: force limited to {h.haptic_force_limit_n:.2f} N"
-        level = "ok" if frac <= 0.5 else "warn" if frac <= 0.9 else "bad"
+        text = f"Touch motors at {100 * frac:.0f} % of their heat budget"
+        derating = self.derating()
+        if derating:
+            peak, cont = h.haptic_peak_force_n, h.haptic_continuous_force_n
+            text += f": derating — it may render at most {h.haptic_force_limit_n:.2f} N now"
+            if math.isfinite(peak) and math.isfinite(cont):
+                text += (f" (its {peak:g} N peak, lowered toward its {cont:g} N continuous rating as the motors "
+                         "heat; back to the peak when they cool)")
+        level = "bad" if frac > 0.9 else "warn" if derating or frac > 0.5 else "ok"
         return LoopFigure("thermal", text, level, "derating above 50 %")
 
     def faults_text(self) -> str:

@@ -106,6 +106,15 @@ class PlotModel:
         """Stop reading (the engine is going away)."""
         self.ring = None
 
+    def reset(self) -> None:
+        """Forget every sample (a new engine: its clock starts again at zero)."""
+        self.detach()
+        self.t = np.empty(0)
+        self.data = {k: np.empty(0) for k in self.SERIES}
+        self.cursor = 0
+        self.last_row = None
+        self.new_rows = np.empty(0)
+
     def pull(self) -> int:
         """Copy what is new; returns the number of new records."""
         ring = self.ring

@@ -124,6 +124,16 @@ class SessionModel:
             return
         self.changed.emit()
 
+    def reset(self, message: str) -> None:
+        """A new engine is starting: no session, no trial, an empty table (the old engine's clock is gone)."""
+        self.state, self.message = "connecting", message
+        self.session = self.trial = self.last_trial = None
+        self.phase, self.pause_until_s, self.paused_requested = "idle", None, False
+        self.completed = self.aborted = 0
+        self.latest_t_s = 0.0
+        self.table.clear()
+        self.changed.emit()
+
     def _count(self, row: dict[str, Any]) -> None:
         self.table.add(row)
         if row["outcome"] == "aborted":
@@ -176,6 +186,15 @@ class SessionModel:
             return None
         f, tol = tr.target_force_n, self.session.tolerance_fraction
         return (f * (1 - tol), f * (1 + tol))
+
+    def band_label(self) -> str:
+        """The live plot's label of the band: ``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)`` ("" without a band)."""
+        band = self.band()
+        if band is None or self.trial is None or self.session is None:
+            return ""
+        tol_pct = round(100 * self.session.tolerance_fraction, 1)
+        return (f"{self.trial.target_label}: target {self.trial.target_force_n:g} N ± {tol_pct:g} % "
+                f"({band[0]:.3g}–{band[1]:.3g} N)")
 
     def band(self) -> tuple[float, float] | None:
         """The current target band (N) while a trial is active, else None."""

@@ -58,6 +58,8 @@ class SetupModel:
     number_suggested: bool = True
     #: The session running now (not a conflict with itself).
     running_session: int | None = None
+    #: The session to select in the resume list when it is listed (the one an engine failure interrupted).
+    preferred_resume: int | None = None
     changed: Emitter = field(default_factory=Emitter)
     resumable_changed: Emitter = field(default_factory=Emitter)
 
@@ -169,6 +171,13 @@ class SetupModel:
         self.resumable = list(sessions)
         self.resumable_changed.emit()
 
+    def default_resume(self) -> int | None:
+        """The session the resume list selects: the one an engine failure interrupted, else the first listed."""
+        ids = [int(s["session_id"]) for s in self.resumable]  # type: ignore[call-overload]
+        if self.preferred_resume in ids:
+            return self.preferred_resume
+        return ids[0] if ids else None
+
     def set_known(self, sessions: list[dict[str, Any]]) -> None:
         """Every session of the database (listed by the engine): suggestions and checks follow it."""
         self.known = list(sessions)
@@ -178,6 +187,8 @@ class SetupModel:
     def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None) -> None:
         """A session started or resumed: the form shows whose it is."""
         self.running_session = session_id
+        if session_id == self.preferred_resume:
+            self.preferred_resume = None
         self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number)
         self.number_suggested = False
         self.validate()
@@ -205,5 +216,5 @@ class SetupModel:
     @staticmethod
     def describe_resumable(s: dict[str, object]) -> str:
         """One line for the resume list."""
-        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {s['trials_done']}/{s['trials_total']} trials "
-                f"stored, started {str(s['started_at'])[:16].replace('T', ' ')}")
+        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {s['trials_done']} of {s['trials_total']} "
+                f"trials stored, started {str(s['started_at'])[:16].replace('T', ' ')}")

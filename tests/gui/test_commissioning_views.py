@@ -121,7 +121,8 @@ def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
     h.apply(SIM)
     h.apply(m.JawState(0.4, 1420, False, "", "experimenter: step 50 µs toward open → 1420 µs (40% open)"))
     h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
-                     haptic_heat_fraction=0.62, haptic_force_limit_n=2.52))
+                     haptic_heat_fraction=0.62, haptic_force_limit_n=2.52, haptic_peak_force_n=3.3,
+                     haptic_continuous_force_n=0.88))
     rows = np.zeros(300, dtype=[(f, "<f8") for f in RECORD_FIELDS])
     rows["t_s"] = np.arange(300) * 1e-3
     h.update_from_rows(rows)
@@ -129,7 +130,17 @@ def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
     states = [panel.devices.item(i, 1).text() for i in range(panel.devices.rowCount())]
     assert names[-1] == "Jaw actuator" and states[-1] == "ok, 40% open (1420 µs)"
     assert states[names.index("Haptic device")] == "ok, derating: at most 2.52 N"
-    assert panel.thermal.text() == "Touch motors 62% of the thermal budget, derating: force limited to 2.52 N"
+    assert panel.thermal.text() == ("Touch motors at 62 % of their heat budget: derating — it may render at most "
+                                    "2.52 N now (its 3.3 N peak, lowered toward its 0.88 N continuous rating as the "
+                                    "motors heat; back to the peak when they cool)")
+    # below the onset: no derating, whatever the fraction says about a near-peak limit
+    h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
+                     haptic_heat_fraction=0.45, haptic_force_limit_n=3.3, haptic_peak_force_n=3.3,
+                     haptic_continuous_force_n=0.88))
+    assert panel.thermal.text() == "Touch motors at 45 % of their heat budget" and not h.derating()
+    h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
+                     haptic_heat_fraction=0.62, haptic_force_limit_n=2.52, haptic_peak_force_n=3.3,
+                     haptic_continuous_force_n=0.88))
     h.apply(m.JawState(0.4, 1420, False, "serial port /dev/ttyACM0 lost: [Errno 5]", "experimenter: open fully: refused"))
     assert panel.devices.item(3, 1).text() == "FAULT: serial port /dev/ttyACM0 lost: [Errno 5]"
     jaw = JawModel()

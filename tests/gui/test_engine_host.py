@@ -258,3 +258,12 @@ def test_fault_rehearsal_now_and_its_refusals(engine, tmp_path, short_protocol):
     refused = [r.message for r in of(events, m.CommandRefused)]
     assert refused[0].startswith("fault kind = 'melt-down': allowed values are sensor-stall, nan-burst")
     assert refused[1].startswith("fault rehearsal at a trial: start or resume a session first")
+    # a trial that has begun: the refusal says so and names the trials still to come
+    e.handle(m.ResetFaults())  # the NaN burst's fault
+    e.handle(m.StartSession(str(tmp_path / "r.db"), "P01", "experiment", short_protocol, 3, 1))
+    run_until(e, lambda: of(events, m.TrialStarted))
+    e.handle(m.InjectFault("sensor-stall", trial=1, seconds=1.0))
+    e.handle(m.InjectFault("sensor-stall", trial=3, seconds=1.0))
+    refused = [r.message for r in of(events, m.CommandRefused)]
+    assert refused[-2:] == ["fault trial = 1: trial 1 has already begun; the one still to come is trial 2",
+                            "fault trial = 3: the session has trials 1 to 2; the one still to come is trial 2"]

@@ -238,6 +238,14 @@ def test_calibration_model_verdicts():
     assert c.command() == m.Calibrate("recommended") and c.state == "running"
     c.apply(m.CalibrationProgress(3, 24, "P03"))
     assert c.verdict() == "measuring pose 3 of 24 — keep the tool clear of the tissue"
+    # the simulated rig has no hardware: its text says so, and that there is nothing to hold
+    c.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    assert c.intro().startswith("Simulated rig — no hardware is attached. The simulated wrist sensor")
+    assert "wrist sensor reads" not in c.intro() and "(nothing to move or hold)" in c.intro()
+    c.apply(m.CalibrationProgress(4, 24, "P04"))
+    assert c.verdict() == "measuring pose 4 of 24 — the simulated robot moves by itself"
+    c.rig = "real"
+    assert c.intro().startswith("The wrist sensor reads the instrument's weight")
     c.apply(m.CalibrationDone(False, "rank 6 of 10", "tool-down only", 6, 3e17, math.nan, math.nan, [], None))
     assert c.state == "refused"
     assert c.verdict() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10"
@@ -365,3 +373,85 @@ def test_health_says_why_the_next_cue_waits_and_logs_every_fault_event():
     assert [line.split("s  ", 1)[1].split(":")[0] for line in h.fault_log] == ["fault", "gone", "reset"]
     h.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, False, "autopilot", True, False, waiting="pause"))
     assert h.waiting_text() == ""  # the protocol's own pause is not worth a line
+
+
+def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
+    restarts: list[int] = []
+    ready = m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot")
+    a = AppModel(lambda c: True)
+    a.apply(ready)
+    a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
+    a.apply(started())
+    a.apply(trial())
+    assert not a.can("restart_engine")  # nothing to restart while it runs
+    a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
+    assert a.engine_trouble == "The study engine exited unexpectedly. Session 3 was interrupted; its stored trials are kept."
+    assert a.engine_trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
+    assert not a.can("restart_engine")  # no restarter: no button that does nothing
+    a.restarter = lambda: restarts.append(1)
+    assert a.can("restart_engine") and not a.can("start") and not a.can("resume_session")
+    a.plots.t = np.arange(3.0)
+    assert a.restart_engine() and restarts == [1]
+    assert a.engine_trouble == "" and len(a.plots.t) == 0 and a.session.state == "connecting"
+    assert a.session.trial is None and a.session.last_trial is None and not a.session.table.rows
+    a.apply(ready)
+    a.apply(m.SessionsListed(str(tmp_path / "s.db"), [{"session_id": 2}, {"session_id": 3}]))
+    assert a.setup.default_resume() == 3  # the interrupted one, not the first listed
+    # a loop that died in a live engine: the same way out
+    a.apply(m.SessionEnded(4, "interrupted", "the haptic loop died (x)", 0, 0, 0))
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False, loop_dead="OSError('x')"))
+    assert a.engine_trouble == "The haptic loop died; the force is at zero. Session 4 was interrupted; its stored " \
+        "trials are kept."
+    assert a.engine_trouble_detail.startswith("The haptic loop died (OSError('x')); the haptic device's command")
+    assert a.can("restart_engine") and not a.can("start")
+
+
+def test_cue_wait_names_the_wait_its_length_and_what_ends_it():
+    a = AppModel(lambda c: True)
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    assert a.cue_wait is None
+    a.apply(started())
+    a.apply(trial(t_s=1.0))
+    assert a.cue_wait is None  # a trial runs
+    a.apply(m.PhaseEntered(4.0, 0, "pause"))
+    a.session.set_time(4.5)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting="pause"))
+    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 1.5 s left"
+    assert a.cue_wait.action == "" and a.cue_wait.level == "info"
+    # the pause is over and no cue comes, nothing latched: after a while, where to look and the way out
+    a.session.set_time(11.5)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
+    a.session.set_time(17.0)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
+    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 0.0 s left"
+    assert a.cue_wait.help.startswith("No cue for 13 s and nothing to reset: look under Devices & health")
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
+                     waiting="fault latched (SENSOR_STALE): reset to continue"))
+    a.session.set_time(20.0)
+    a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
+                     waiting="fault latched (SENSOR_STALE): reset to continue"))
+    w = a.cue_wait
+    assert (w.level, w.action, w.text()) == ("error", "reset_faults",
+                                             "Next cue waits: fault latched (SENSOR_STALE) · waiting 3 s")
+    sent: list[object] = []
+    a.send = lambda c: sent.append(c) or True
+    a.end_cue_wait()
+    assert sent == [m.ResetFaults()]
+
+
+def test_a_run_of_the_same_event_is_one_log_line_counted():
+    """The view coalesces repeated events (the engine stores each one; test_engine_host checks the record)."""
+    h = HealthModel()
+    h.apply(m.EngineFault(1.0, "fault", 1, "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"))
+    for k in range(30):
+        h.apply(m.EngineFault(2.0 + k, "output_restarted", 0, f"no loop tick for {11 + k / 10:.1f} ms: the haptic "
+                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in again "
+                              "from zero", session_t_s=1.0 + k))
+    h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
+    h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
+    assert len(h.fault_log) == 4
+    assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
+                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to zero; "
+                              "feedback ramps in again from zero")
+    assert h.fault_log[2].endswith("reset: SENSOR_STALE")
+    assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"

@@ -82,12 +82,22 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view.code.clear()
     qtbot.keyClicks(view.code, "P01")
     assert view.errors.text() == "" and s.valid
+    view.resize(340, 700)  # the left column's narrowest
+    view.show()
+    qtbot.waitExposed(view)
     s.set_resumable([{"session_id": 4, "code": "P02", "kind": "experiment", "started_at": "2026-01-02T10:11:12",
-                      "trials_done": 7, "trials_total": 20}])
-    assert view.resumable.count() == 1
-    assert view.resumable.item(0).text() == "session 4: P02 experiment, 7/20 trials stored, started 2026-01-02 10:11"
-    view.resumable.setCurrentRow(0)
-    assert view.selected_session() == 4
+                      "trials_done": 7, "trials_total": 20},
+                     {"session_id": 9, "code": "PARTICIPANT-0042-LONG", "kind": "training",
+                      "started_at": "2026-01-03T09:00:00", "trials_done": 0, "trials_total": 12}])
+    assert view.resumable.count() == 2
+    full = "session 4: P02 experiment, 7 of 20 trials stored, started 2026-01-02 10:11"
+    assert view.resumable.item(0).toolTip() == full and view.resumable.item(0).text() == full
+    assert view.selected_session() == 4  # the first row is selected: Resume selected works at once
+    # long rows wrap within the list: nothing runs out of sight to the right
+    width = view.resumable.viewport().width()
+    for i in range(view.resumable.count()):
+        assert view.resumable.visualItemRect(view.resumable.item(i)).right() <= width
+    assert view.resumable.horizontalScrollBar().maximum() == 0
 
 
 def test_participant_window_experiment_word_then_blank_never_a_gauge(qtbot):
@@ -186,7 +196,8 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     view.refresh()
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
     assert view.band.getRegion() == pytest.approx((0.54, 0.66))
-    assert view.band_label.textItem.toPlainText() == "GENTLE 0.6 N ± 10%" and not view.clip_label.isVisible()
+    assert view.band_label.textItem.toPlainText() == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
+    assert not view.clip_label.isVisible()
     assert view.lower.viewRange()[1][1] >= 7.6
     plots.data["force_n"][-1] = 18.0
     view.refresh()
@@ -205,16 +216,24 @@ def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):
     qtbot.addWidget(view)
     view.show()
     qtbot.waitExposed(view)
-    assert not view.fault_seconds.isEnabled() and view.fault_trial.text() == "now"
+    assert not view.fault_seconds.isEnabled() and view.fault_trial.currentText() == "now"
+    assert view.fault_trial.count() == 1  # no session: now, or nothing
     view.fault_kind.setCurrentIndex(view.fault_kind.findData("nan-burst"))
     qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
-    view.fault_trial.setValue(4)
+    view.set_trials(range(3, 9))  # trials 1 and 2 have begun, of 8
+    assert [view.fault_trial.itemText(i) for i in range(view.fault_trial.count())] == \
+        ["now"] + [f"trial {k}" for k in range(3, 9)]
+    view.fault_trial.setCurrentIndex(view.fault_trial.findData(4))
     assert view.fault_seconds.isEnabled()
     view.fault_seconds.setValue(2.5)
     view.fault_kind.setCurrentIndex(view.fault_kind.findData("sensor-stall"))
     qtbot.mouseClick(view.inject_button, Qt.MouseButton.LeftButton)
     assert sent == [("nan-burst", None, 3.0), ("sensor-stall", 4, 2.5)]
     assert view.inject_button.focusPolicy() == Qt.FocusPolicy.NoFocus
+    view.set_trials(range(5, 9))  # trial 4 began before Inject: the next one still to come, not "now"
+    assert view.fault_trial.currentData() == 5 and view.fault_seconds.isEnabled()
+    view.set_trials(range(0))
+    assert view.fault_trial.currentText() == "now" and not view.fault_seconds.isEnabled()
 
 
 def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
@@ -222,8 +241,51 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
 
     sent: list[object] = []
     app = AppModel(send=lambda cmd: sent.append(cmd) or True)
+    app.apply(READY)
+    app.inject_fault("stale-pose", 3, 1.5)  # no session: refused here, saying why
+    assert not sent and app.notice.text == ("Fault rehearsal refused: a fault at trial 3 needs a running session: "
+                                            "start or resume one, or inject it now.")
+    app.apply(m.SessionStarted(session_id=3, code="P01", kind="experiment", trials_total=8, start_position=0,
+                               tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=False))
+    app.apply(m.TrialStarted(1.0, 0, 1, 8, "FIRM", 1.2, "on"))
+    assert app.rehearsal_trials() == range(2, 9)
+    app.apply(m.TrialStarted(9.0, 1, 2, 8, "FIRM", 1.2, "on"))
+    app.inject_fault("stale-pose", 2, 1.5)
+    assert not sent and app.notice.text == ("Fault rehearsal refused: trial 2 has already begun; the trials still to "
+                                            "come are 3 to 8.")
+    app.inject_fault("stale-pose", 9, 1.5)
+    assert app.notice.text.endswith("trial 9: the session has 8 trials; the trials still to come are 3 to 8.")
     app.inject_fault("stale-pose", 3, 1.5)
     assert sent == [m.InjectFault("stale-pose", 3, 1.5)]
     app.apply(m.FaultInjected("stale-pose", "trial 3 + 1.5 s"))
     assert app.notice is not None and app.notice.level == "info"
-    assert app.notice.text.startswith("Rehearsal: robot pose stops (100 ms) at trial 3 + 1.5 s after its cue.")
+    assert app.notice.text == (
+        "Rehearsal planned: robot pose stops (100 ms), 1.5 s after the cue of trial 3 (if trial 3 ends sooner, nothing "
+        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault — "
+        "nothing in the record marks it as rehearsed: trial 3 is stored as aborted (cause: fault), does not count, "
+        "and is run again later. The fault latches: the next cue waits for Reset faults.")
+    app.apply(m.FaultInjected("nan-burst", "now"))
+    assert "Rehearsal: F/T sensor sends NaN (5 ms), now: a real fault of the simulated rig. It is stored with the " \
+        "running session" in app.notice.text
+    app.apply(m.SessionEnded(3, "aborted", "", 0, 1, 0))
+    app.apply(m.FaultInjected("nan-burst", "now"))
+    assert app.notice.text.endswith("No session is running: nothing is stored. The fault latches until Reset faults.")
+
+
+def test_a_placed_window_fits_with_its_title_bar(qtbot):
+    """``move`` places the frame and ``resize`` sizes the contents: centring the contents put the bottom of the
+    experimenter's window 5 px below a 1366×768 screen under a window manager (Xvfb + openbox)."""
+    from PySide6.QtCore import QSize
+    from PySide6.QtGui import QGuiApplication
+    from PySide6.QtWidgets import QWidget
+
+    from study_app.gui import placement
+
+    w = QWidget()
+    qtbot.addWidget(w)
+    screen = QGuiApplication.primaryScreen()
+    avail = screen.availableGeometry()
+    placement.place(w, QSize(5000, 5000), screen)  # larger than any screen: shrunk to fit
+    extra = placement.FRAME_ALLOWANCE
+    assert w.y() >= avail.y() and w.y() + extra.height() + w.height() <= avail.y() + avail.height()
+    assert w.x() >= avail.x() and w.x() + extra.width() + w.width() <= avail.x() + avail.width()

@@ -1,0 +1,71 @@
+"""Between trials the Trials tab says why the next cue waits, for how long, and offers what ends the wait.
+
+The real window and engine (virtual clock at 4x); nobody presses the stylus, so each trial runs to its cap.
+"""
+
+from __future__ import annotations
+
+import pytest
+from conftest import SHORT_PROTOCOL
+from PySide6.QtCore import QSettings, Qt
+
+from study_app.engine_host import HostConfig
+from study_app.gui.main_window import ExperimenterWindow
+
+TIMEOUT_MS = 30_000
+# four trials, a 3 s pause between them (0.75 s of real time): long enough to be seen
+PROTOCOL = SHORT_PROTOCOL.replace("trials_per_cell = 1", "trials_per_cell = 2").replace("pause_s = 0.3", "pause_s = 3.0")
+
+
+@pytest.fixture
+def window(qtbot, tmp_path):
+    proto = tmp_path / "p.toml"
+    proto.write_text(PROTOCOL, encoding="utf-8")
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    settings.setValue("setup/protocol_path", str(proto))
+    w = ExperimenterWindow(HostConfig(clock="virtual", speed=4.0), settings, str(tmp_path / "study.db"))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    w.show()
+    qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
+    w.model.set_driver("manual")
+    return w
+
+
+def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, window) -> None:
+    w = window
+    banner = w.cue_wait
+    assert banner.isHidden()  # no session: nothing waits
+    w.model.setup.update(code="P01", kind="experiment")
+    qtbot.mouseClick(w.start_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
+    assert banner.isHidden()  # a trial runs: its cue has come
+
+    # the protocol's pause: why, and the seconds left; nothing to press
+    qtbot.waitUntil(lambda: w.model.session.phase == "pause" and w.model.cue_wait is not None
+                    and w.model.cue_wait.left_s is not None and w.model.cue_wait.left_s < 2.9, timeout=TIMEOUT_MS)
+    text = banner.label.text()
+    assert text.startswith("Next cue waits: the protocol's 3 s pause between trials · ") and text.endswith(" s left")
+    assert not banner.isHidden() and banner.button.isHidden()
+
+    # a fault that only a reset clears, during trial 2: the next cue waits for Reset faults, and the banner has it
+    qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
+    w.model.inject_fault("device-error", None, 0.0)
+    qtbot.waitUntil(lambda: w.model.cue_wait is not None and w.model.cue_wait.action == "reset_faults",
+                    timeout=TIMEOUT_MS)
+    assert banner.label.text().startswith("Next cue waits: fault latched (HAPTIC_DEVICE")
+    assert banner.button.text() == "Reset faults" and banner.button.isVisible()
+    assert "fault log under Devices & health" in banner.help.text()
+    qtbot.waitUntil(lambda: "waiting" in banner.label.text(), timeout=TIMEOUT_MS)  # and for how long
+    done = w.model.session.completed + w.model.session.aborted
+    qtbot.mouseClick(banner.button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)  # the cue came
+    assert w.model.session.completed + w.model.session.aborted == done
+
+    # a pause the experimenter asked for: said so, with Resume
+    qtbot.mouseClick(w.pause_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.state == "paused" and w.model.cue_wait is not None
+                    and w.model.cue_wait.action == "resume", timeout=TIMEOUT_MS)
+    assert banner.label.text().startswith("Next cue waits: the session is paused")
+    assert banner.button.text() == "Resume"
+    qtbot.mouseClick(banner.button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
