@@ -61,7 +61,7 @@ def best_lag_ms(reference: npt.NDArray[np.float64], delayed: npt.NDArray[np.floa
     # correlation (FFT); each shifted window's spread comes from running sums (of the signal less its own mean,
     # so the sums do not cancel digits)
     d = dly - dly.mean()
-    num = correlate(d, a, mode="valid", method="auto")  # num[j] = sum a[i] * d[j + i], j = k + max_lag
+    num = correlate(d, a, mode="valid", method="fft")  # num[j] = sum a[i] * d[j + i], j = k + max_lag
     c1 = np.concatenate(([0.0], np.cumsum(d)))
     c2 = np.concatenate(([0.0], np.cumsum(d * d)))
     shifts = len(lags)
