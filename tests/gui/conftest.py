@@ -40,6 +40,26 @@ def short_protocol(tmp_path):
     return str(p)
 
 
+def open_ready_window(qtbot, tmp_path, protocol: str, speed: float, timeout_ms: int = 30_000):
+    """The experimenter window on a simulated engine (virtual clock at ``speed``), ``protocol`` chosen, ready,
+    the simulated hand on manual; closing it answers every question Yes."""
+    from PySide6.QtCore import QSettings
+
+    from study_app.engine_host import HostConfig
+    from study_app.gui.main_window import ExperimenterWindow
+
+    proto = tmp_path / "p.toml"
+    proto.write_text(protocol, encoding="utf-8")
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    settings.setValue("setup/protocol_path", str(proto))
+    w = ExperimenterWindow(HostConfig(clock="virtual", speed=speed), settings, str(tmp_path / "study.db"))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    w.show()
+    qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=timeout_ms)
+    w.model.set_driver("manual")
+    return w
+
+
 @pytest.fixture(autouse=True)
 def no_leaks():
     """Fail a test that leaves a thread, a running tracked QTimer or a child process behind."""

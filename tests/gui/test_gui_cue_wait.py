@@ -6,11 +6,8 @@ The real window and engine (virtual clock at 4x); nobody presses the stylus, so 
 from __future__ import annotations
 
 import pytest
-from conftest import SHORT_PROTOCOL
-from PySide6.QtCore import QSettings, Qt
-
-from study_app.engine_host import HostConfig
-from study_app.gui.main_window import ExperimenterWindow
+from conftest import SHORT_PROTOCOL, open_ready_window
+from PySide6.QtCore import Qt
 
 TIMEOUT_MS = 30_000
 # four trials, a 3 s pause between them (0.75 s of real time): long enough to be seen
@@ -19,16 +16,7 @@ PROTOCOL = SHORT_PROTOCOL.replace("trials_per_cell = 1", "trials_per_cell = 2").
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    proto = tmp_path / "p.toml"
-    proto.write_text(PROTOCOL, encoding="utf-8")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    settings.setValue("setup/protocol_path", str(proto))
-    w = ExperimenterWindow(HostConfig(clock="virtual", speed=4.0), settings, str(tmp_path / "study.db"))
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
-    w.show()
-    qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
-    w.model.set_driver("manual")
-    return w
+    return open_ready_window(qtbot, tmp_path, PROTOCOL, speed=4.0, timeout_ms=TIMEOUT_MS)
 
 
 def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, window) -> None:

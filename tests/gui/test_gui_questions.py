@@ -8,12 +8,9 @@ window was raised over the rig view while the question was open.)
 from __future__ import annotations
 
 import pytest
-from conftest import SHORT_PROTOCOL
-from PySide6.QtCore import QSettings, Qt
+from conftest import SHORT_PROTOCOL, open_ready_window
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QApplication, QMessageBox
-
-from study_app.engine_host import HostConfig
-from study_app.gui.main_window import ExperimenterWindow
 
 TIMEOUT_MS = 30_000
 PROTOCOL = SHORT_PROTOCOL.replace("max_trial_s = 2.5", "max_trial_s = 60.0")
@@ -21,16 +18,7 @@ PROTOCOL = SHORT_PROTOCOL.replace("max_trial_s = 2.5", "max_trial_s = 60.0")
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    proto = tmp_path / "p.toml"
-    proto.write_text(PROTOCOL, encoding="utf-8")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    settings.setValue("setup/protocol_path", str(proto))
-    w = ExperimenterWindow(HostConfig(clock="virtual", speed=1.0), settings, str(tmp_path / "study.db"))
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
-    w.show()
-    qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
-    w.model.set_driver("manual")
-    return w
+    return open_ready_window(qtbot, tmp_path, PROTOCOL, speed=1.0, timeout_ms=TIMEOUT_MS)
 
 
 @pytest.mark.parametrize("which", ["rig_window", "participant_window"])
