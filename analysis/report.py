@@ -17,7 +17,9 @@ ON vs OFF, draws the paper's figures and writes::
     DIR/figures/*.png, *.pdf, *.svg
 
 The report is built in a temporary folder beside ``DIR`` and moved into place
-at the end, so a failed run never leaves half a report or touches an old one.
+at the end, so a failed run never leaves half a report or touches an old one;
+``--force`` replaces only a report's own, unedited files (the folder policy
+of :mod:`analysis.outdir`, shared with ``power``).
 """
 
 from __future__ import annotations
@@ -25,11 +27,8 @@ from __future__ import annotations
 import base64
 import datetime as dt
 import html
-import json
 import math
 import os
-import shutil
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +42,7 @@ from analysis.aggregate import PRIMARY_METRICS, mean_sd, mode_tests, per_partici
 from analysis.load import AnalysisError, Progress, StudyData, load_study
 from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts, health_summary, health_table
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
+from analysis.outdir import check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.stats import WilcoxonResult, methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
@@ -473,78 +473,8 @@ band; bottom, on an axis of its own: the raw sensor force, the tool's weight inc
 """
 
 
-#: The file report leaves in every folder it writes, listing what it wrote: ``--force`` replaces only such folders.
+#: The file report leaves in every folder it writes, listing what it wrote with its SHA-256 (:mod:`analysis.outdir`).
 REPORT_MARKER = ".haptic-study-report"
-
-
-def _refuse_inputs_inside(out: Path, databases: Sequence[str | os.PathLike[str]]) -> None:
-    """A report folder must never hold one of its own input databases (``--force`` would replace it)."""
-    root = out.resolve()
-    for db in databases:
-        p = Path(db).resolve()
-        if root == p or root in p.parents:
-            raise AnalysisError(f"--out {out}: holds the input database {db}; write the report to another folder "
-                                "(nothing was changed)")
-
-
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def _ours(out: Path) -> dict[str, str] | None:
-    """The files a previous report listed in ``out``'s marker, with their hashes (None: no readable marker)."""
-    try:
-        listed = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))["files"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-    return {str(f): str(h) for f, h in listed.items()} if isinstance(listed, dict) else None
-
-
-def _ours_to_replace(out: Path) -> None:
-    """Refuse ``--force`` unless ``out`` holds only what a report wrote there, as it wrote it (its marker says)."""
-    listed = _ours(out)
-    if listed is None:
-        raise AnalysisError(f"--out {out}: not a folder report wrote (no {REPORT_MARKER} in it); --force replaces "
-                            "only report folders: choose another folder (nothing was deleted)")
-    foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                     if not p.is_dir() and str(p.relative_to(out)) not in listed.keys() | {REPORT_MARKER})
-    if foreign:
-        raise AnalysisError(f"--out {out}: holds {plural(len(foreign), 'file')} report did not write "
-                            f"(e.g. {foreign[0]}); move {'it' if len(foreign) == 1 else 'them'} or choose another "
-                            "folder (nothing was deleted)")
-    edited = sorted(f for f, h in listed.items() if (out / f).is_file() and _sha256(out / f) != h)
-    if edited:
-        raise AnalysisError(f"--out {out}: {plural(len(edited), 'file')} report wrote {'was' if len(edited) == 1 else 'were'} "
-                            f"changed since (e.g. {edited[0]}); keep your edits elsewhere or choose another folder "
-                            "(nothing was deleted)")
-
-
-def _remove_ours(out: Path) -> None:
-    """Delete what a previous report wrote in ``out`` (checked by :func:`_ours_to_replace`), then the folder."""
-    listed = set(_ours(out) or {})
-    for name in sorted(listed | {REPORT_MARKER}, reverse=True):
-        try:
-            (out / name).unlink()
-        except FileNotFoundError:
-            pass
-    try:
-        for d in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
-            d.rmdir()  # fails, keeping it, if a file appeared meanwhile: nothing unlisted is ever deleted
-        out.rmdir()
-    except OSError:
-        raise AnalysisError(f"--out {out}: other files appeared in it while the report was made; the previous "
-                            "report's files were removed, nothing else was deleted, and the new report was not "
-                            "moved in (run it again)") from None
-
-
-def _apply_umask(folder: Path) -> None:
-    """The temporary folder was made owner-only: give the report the permissions the user's umask asks for."""
-    mask = os.umask(0)
-    os.umask(mask)
-    for p in [folder, *folder.rglob("*")]:
-        p.chmod((0o777 if p.is_dir() else 0o666) & ~mask)
 
 
 def build_report(
@@ -572,9 +502,10 @@ def build_report(
     zero_method, confidence
         Wilcoxon zero handling and the Hodges–Lehmann confidence level.
     force
-        Replace an existing, non-empty ``out_dir`` -- only one that ``report``
-        itself wrote (its marker file lists what it wrote) and that holds
-        nothing else: no input database, no file of anybody else's.
+        Replace an existing, non-empty ``out_dir`` -- only the files ``report``
+        itself wrote there, unedited (its marker lists each with its SHA-256),
+        and only when it holds nothing else: no input database, no file of
+        anybody else's (:mod:`analysis.outdir`).
     progress
         ``progress(samples read, samples expected)``.
     workers
@@ -592,19 +523,7 @@ def build_report(
     AnalysisError
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise AnalysisError(f"--out {out}: exists and is not a folder")
-    _refuse_inputs_inside(out, databases)
-    if out.exists() and any(out.iterdir()):
-        if not force:
-            raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
-        _ours_to_replace(out)
-    parent = out.resolve().parent
-    if not parent.exists():
-        raise AnalysisError(f"--out {out}: the folder {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise AnalysisError(f"--out {out}: cannot write in {parent}")
+    out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
 
     study = load_study(databases)
     table = compute_trials(study, options, progress=progress, workers=workers)
@@ -633,11 +552,9 @@ def build_report(
     n_incomplete = int((exp["status"] != "completed").sum())
     n_participants = int(trials["participant_code"].nunique())
 
-    try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
-    except OSError as exc:
-        raise AnalysisError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from None
-    try:
+    made: dict[str, pd.DataFrame] = {}
+
+    def fill(tmp: Path) -> None:
         fig_dir = tmp / "figures"
         marks_overall = _marks(results, stats)
         marks: dict[tuple[str, str], str] = {(m, "overall"): s for m, s in marks_overall.items()}
@@ -688,17 +605,8 @@ def build_report(
             marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=power_html,
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
-        files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
-        (tmp / REPORT_MARKER).write_text(json.dumps({
-            "written_by": f"haptic-study {software_version()}",
-            "files": {f: _sha256(tmp / f) for f in files},  # a file changed since is someone's work: kept
-        }, indent=1), encoding="utf-8")
-        _apply_umask(tmp)
-        if out.exists():
-            _remove_ours(out)
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        made["stats.csv"] = tables["stats.csv"]
+
+    files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, n_participants, len(trials), int(study.included["n_samples"].fillna(0).sum()),
-                         excluded, tables["stats.csv"], files)
+                         excluded, made["stats.csv"], files)
