@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import sqlite3
 import subprocess
 import sys
@@ -39,8 +40,6 @@ def _run(capsys, *argv):
 
 def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, capsys):
     out = tmp_path / "plan"
-    out.mkdir()
-    (out / "notes.md").write_text("mine")  # someone else's file in the folder: left alone
     code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400",
                                 "--n", "6,10,16")
     assert code == 0, stderr
@@ -49,16 +48,69 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert "resampled Wilcoxon tests (and Holm) in" in stderr
     for name in ("power.csv", "power.txt", "power.png", "power.pdf", "power.svg"):
         assert (out / name).stat().st_size > 500, name
-    assert (out / "notes.md").read_text() == "mine"
+    assert "Power at each n (overall; the two-sided rejection rate in brackets):" in stdout
     frame = pd.read_csv(out / "power.csv")
     assert list(frame.columns[: len(POWER_CSV_COLUMNS)]) == list(POWER_CSV_COLUMNS)
     assert sorted(set(frame["n"])) == [6, 10, 16] and set(frame["resamples"]) == {400}
     assert set(frame["scope"]) == {"overall", "GENTLE", "FIRM"}
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
-    # a second run replaces its own files and gives the same numbers for the same seed
-    assert _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")[0] == 0
+    marker = json.loads((out / ".haptic-study-power").read_text())
+    assert sorted(marker["files"]) == ["power.csv", "power.pdf", "power.png", "power.svg", "power.txt"]
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")
+    # a second run needs --force; it replaces its own files and gives the same numbers for the same seed
+    code, _, stderr = _run(capsys, *argv)
+    assert code == 2 and "the folder exists and is not empty" in stderr and "pass --force" in stderr
+    assert _run(capsys, *argv, "--force")[0] == 0
     pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), frame)
-    assert not list(out.glob(".*.tmp"))
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+def test_power_force_replaces_only_its_own_unedited_files(pilots, tmp_path, capsys):
+    out = tmp_path / "plan"
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "50", "--n", "6")
+    assert _run(capsys, *argv)[0] == 0
+    (out / "notes.md").write_text("mine")  # someone else's file: a refusal naming it, nothing touched
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, stdout, stderr = _run(capsys, *argv, "--force")
+    assert code == 2 and stdout == ""
+    assert stderr == (f"haptic-study: error: --out {out}: holds notes.md, which power did not write; move it or "
+                      "choose another folder (nothing was deleted)\n")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    (out / "notes.md").unlink()
+    with (out / "power.txt").open("a") as f:  # an edited output: the same
+        f.write("my reading of it\n")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, _, stderr = _run(capsys, *argv, "--force")
+    assert code == 2 and stderr.count("\n") == 1 and "power.txt was changed since power wrote it" in stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_power_refuses_a_pilot_inside_the_output_folder(pilots, tmp_path, capsys):
+    out = tmp_path / "plan"
+    out.mkdir()
+    db = out / "pilot.db"
+    db.write_bytes(pilots[0].read_bytes())
+    code, _, stderr = _run(capsys, "power", "--db", db, "--out", out, "--force", "--resamples", "50")
+    assert code == 2 and stderr.count("\n") == 1 and f"--out {out}: holds the input database {db}" in stderr
+    assert [p.name for p in out.iterdir()] == ["pilot.db"]
+
+
+def test_power_crashing_while_writing_leaves_the_old_output(pilots, tmp_path, capsys, monkeypatch):
+    import analysis.power_figures
+
+    out = tmp_path / "plan"
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "50", "--n", "6")
+    assert _run(capsys, *argv)[0] == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def broken(result):
+        raise RuntimeError("the figure crashed")
+
+    monkeypatch.setattr(analysis.power_figures, "power_curves", broken)
+    with pytest.raises(RuntimeError, match="the figure crashed"):
+        main([str(a) for a in (*argv[:-2], "--n", "8", "--force")])
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_power_refuses_a_pilot_of_three_in_one_line(pilots, tmp_path, capsys):
@@ -147,12 +199,23 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
     before = sessions()
     assert [s[1:] for s in before].count(("experiment", "completed")) == 4
-    code, stdout2, stderr2 = _run(capsys, *argv)
+    pool_bytes = pool.read_bytes()
+    assert "pool-4-seed7.db" not in json.loads((out / ".haptic-study-power").read_text())["files"]
+    code, stdout2, stderr2 = _run(capsys, *argv, "--force")  # --force replaces the outputs, never the pool
     assert code == 0
-    assert f"reusing the simulated pool {pool}" in stderr2 and "simulating pool" not in stderr2
-    assert sessions() == before
+    assert f"reusing the simulated pool {pool} (SHA-256 checked)" in stderr2 and "simulating pool" not in stderr2
+    assert sessions() == before and pool.read_bytes() == pool_bytes
     pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), first)
     assert stdout2 == stdout
+    # a fresh folder holding only the pool (and its record) needs no --force
+    only_pool = tmp_path / "only-pool"
+    only_pool.mkdir()
+    for p in out.glob("pool-*"):
+        (only_pool / p.name).write_bytes(p.read_bytes())
+    code, stdout3, stderr3 = _run(capsys, "power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200",
+                                  "--n", "6,10", "--out", only_pool)
+    assert code == 0 and "reusing the simulated pool" in stderr3
+    assert stdout3.split("\nWritten in")[0] == stdout.split("\nWritten in")[0]
 
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
