@@ -86,9 +86,11 @@ __all__ = [
     "PairedPool",
     "PowerError",
     "PowerResult",
+    "ReportPower",
     "estimate_power",
     "load_pool",
     "monte_carlo_interval",
+    "plan_table",
     "pool_from_trials",
     "report_section",
     "resample_indices",
@@ -528,6 +530,7 @@ def _check_request(n_values: Sequence[int], resamples: int, alpha: float, zero_m
 def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], direction: np.ndarray,
                 n_values: tuple[int, ...], alpha: float) -> list[str]:
     notes = []
+    one_sign: list[str] = []  # one note for all of them: it can hold for most measures of a small pilot
     P = pool.n_participants
     for s, scope in enumerate(pool.scopes):
         where = "" if scope == "overall" else f" ({scope})"
@@ -557,10 +560,13 @@ def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], directi
             used = ~pm.missing & ~pm.zero
             if used.any() and (pm.positive[used].all() or not pm.positive[used].any()):
                 sign = "ON > OFF" if pm.positive[used].all() else "ON < OFF"
-                zeros = " (or ON = OFF)" if pm.zero[~pm.missing].any() else ""
-                notes.append(f"{label}{where}: every participant of the pool has {sign}{zeros}, so every resampled "
-                             "study has the same sign too and its power comes out high; a real study will meet "
-                             "participants the other way round, so this overstates the power")
+                one_sign.append(f"{label}{where} {sign}{' or =' if pm.zero[~pm.missing].any() else ''}")
+    if one_sign:
+        notes.append(
+            f"every participant of the pool has the same sign of ON − OFF (zeros aside) for {'; '.join(one_sign)}: "
+            "every resampled study then has that sign too, so the power of "
+            f"{'this test' if len(one_sign) == 1 else 'these tests'} comes out high; a real study will also meet "
+            "participants the other way round, so it overstates the power (more so the smaller the pool)")
     if max(n_values) > P:
         notes.append(
             f"n up to {max(n_values)} from {P} participants: larger studies repeat pool members, so their power "
@@ -788,8 +794,52 @@ def write_power(result: PowerResult, folder: str | os.PathLike[str]) -> list[str
     return names
 
 
+@dataclass(frozen=True, slots=True)
+class ReportPower:
+    """The "what n would a study need?" section of ``report --power``.
+
+    Attributes
+    ----------
+    result
+        The estimate (None when it could not be made).
+    notice
+        Why it could not be made, in words ("" when it was).
+    png
+        The power-curve figure (None when not made).
+    """
+
+    result: PowerResult | None
+    notice: str
+    png: bytes | None
+
+
+def plan_table(result: PowerResult) -> pd.DataFrame:
+    """The plan as a table, one row per scope × metric (family rows included), for the report's page.
+
+    Columns: ``scope``, ``metric``, ``direction``, ``n80``, ``n90``,
+    ``n80_holm``, ``n90_holm`` (text: ``"12"``, ``"> 30 (64%)"`` when not
+    reached, ``""`` where it does not apply) and ``power_n{n}`` per n tried
+    (directional power, a fraction; NaN where it does not apply).
+    """
+    f = result.frame
+    rows = []
+    for scope in dict.fromkeys(f["scope"]):
+        for metric in dict.fromkeys(f[f["scope"] == scope]["metric"]):
+            family = metric in FAMILY_LABELS
+            sel = f[(f["scope"] == scope) & (f["metric"] == metric)].set_index("n")
+            row: dict[str, object] = {"scope": scope, "metric": metric, "direction": str(sel["direction"].iloc[0])}
+            for target in (0.8, 0.9):
+                key = f"n{round(target * 100)}"
+                row[key] = "" if family else _reach(f, scope, metric, target, False).removeprefix("n = ")
+                row[f"{key}_holm"] = _reach(f, scope, metric, target, True).removeprefix("n = ")
+            for n in result.n_values:
+                row[f"power_n{n}"] = float(sel.at[n, "power_holm" if family else "power"])
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: str,
-                   out_dir: str | os.PathLike[str]) -> tuple[str, bytes | None]:
+                   out_dir: str | os.PathLike[str]) -> ReportPower:
     """``report --power``: what n a study would need, resampling the reported study's own participants.
 
     Writes ``power.csv`` and ``figures/power.png`` / ``.svg`` into ``out_dir``
@@ -798,10 +848,10 @@ def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: st
 
     Returns
     -------
-    text, png
-        :func:`summary_text`, and the figure's PNG; when the study cannot be
-        resampled (fewer than :data:`MIN_PILOT` participants), the reason in
-        words and None.
+    ReportPower
+        The estimate and the figure; when the study cannot be resampled
+        (fewer than :data:`MIN_PILOT` participants with both modes, ...), no
+        estimate and the reason in words, for the page to show.
     """
     from analysis.figures import save
     from analysis.power_figures import power_curves
@@ -810,8 +860,7 @@ def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: st
     try:
         result = estimate_power(pool, zero_method=zero_method)
     except PowerError as exc:
-        return f"Not estimated: {exc}.", None
+        return ReportPower(None, f"Not estimated: {exc}.", None)
     out = Path(out_dir)
     result.frame.to_csv(out / "power.csv", index=False)
-    return summary_text(result), save(power_curves(result), out / "figures", "power")
-
+    return ReportPower(result, "", save(power_curves(result), out / "figures", "power"))

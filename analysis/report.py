@@ -220,6 +220,69 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str
             f'</table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
 
 
+#: Headings of the power table's columns (``target`` and ``measure`` are the row labels, as in the test tables).
+_POWER_HEADINGS = {"scope": "target", "metric": "measure", "direction": "pilot shows", "n80": "n for 80 %",
+                   "n80_holm": "n for 80 % (Holm)", "n90": "n for 90 %", "n90_holm": "n for 90 % (Holm)"}
+_DIRECTION_TEXT = {"on_higher": "ON > OFF", "on_lower": "ON < OFF", "none": "no effect", "": ""}
+
+
+def _power_html(section: Any) -> str:
+    """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
+
+    ``section`` is an :class:`analysis.power.ReportPower`.  The table is built
+    from the structured result (:func:`analysis.power.plan_table`); columns
+    with no value in any row are left out.  In print, its rows never split,
+    its head repeats on every page and the heading stays with it (``_CSS``).
+    """
+    from analysis.power import FAMILY_LABELS, _label, plan_table
+
+    head = "<h2>What n would a study need?</h2>"
+    if section.result is None:
+        return (f'<section class="power"><div class="power-head">{head}<p class="warn">'
+                f'{html.escape(section.notice)}</p></div></section>')
+    r = section.result
+    table = plan_table(r)
+    cells: dict[str, list[str]] = {}
+    for col in table.columns:
+        if col == "scope":
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+        elif col == "metric":
+            cells[col] = [html.escape(_label(str(v))) for v in table[col]]
+        elif col == "direction":
+            cells[col] = [_DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
+        elif col.startswith("power_n"):
+            cells[col] = ["" if not np.isfinite(v) else f"{v:.0%}" for v in table[col]]
+        else:
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+    shown = [c for c in table.columns if any(cells[c])]  # a column empty in every row is left out
+    heads = "".join(f"<th>{html.escape(_POWER_HEADINGS.get(c, 'n = ' + c.removeprefix('power_n')))}</th>"
+                    for c in shown)
+    body = []
+    for i, metric in enumerate(table["metric"]):
+        cls = ' class="family"' if metric in FAMILY_LABELS else ""
+        tds = "".join(f'<td class="m">{cells[c][i]}</td>' if c in ("scope", "metric") else f"<td>{cells[c][i]}</td>"
+                      for c in shown)
+        body.append(f"<tr{cls}>{tds}</tr>")
+    tct = "over successful trials" if r.options.tct_policy == "successful" else "failures counted at the trial cap"
+    lead = (f"<p>Resampling this study's {plural(r.n_pool, 'participant')} with both haptic modes with replacement "
+            f"({r.resamples} studies per n, seed {r.seed}): the power of each ON-vs-OFF Wilcoxon test (p &lt; "
+            f"{r.alpha:g}; TCT {tct}) to detect the effect <b>in the direction this study shows</b>"
+            f"{' (pilot shows)' if 'direction' in shown else ''}. "
+            "n for 80 %: the smallest n tried from which on power stays at or above 80 %; '&gt; N (x %)': not "
+            "reached by the largest n tried. Holm: with Holm's correction across the four measures, as the "
+            "significance marks above. power.csv has every number, with the two-sided rejection rate "
+            "(power_two_sided) and the Monte Carlo intervals.</p>")
+    caption = (f"<caption>Participants needed, and power at each n ({r.interval_level:.0%} Monte Carlo intervals "
+               "in power.csv)</caption>")
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in r.notes)
+    return (f'<section class="power"><div class="power-head">{head}{lead}</div>'
+            f'<div class="scroll"><table class="stats power">{caption}<thead><tr>{heads}</tr></thead>'
+            f'<tbody>{"".join(body)}</tbody></table></div>'
+            + (f'<ul class="notes">{notes}</ul>' if notes else "")
+            + (f"<figure>{_img(section.png, 'power of each test against the number of participants')}</figure>"
+               if section.png else "") + "</section>")
+
+
 def _img(png: bytes, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
 
@@ -318,14 +381,21 @@ img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .origin{padding:.5em .8em;border-radius:6px;font-weight:600}.origin.sim{background:#eef3ff;border:1px solid #9db4e8}
 .origin.real{background:#eefaf0;border:1px solid #9ed3a8}.origin.mixed{background:#fff4e5;border:1px solid #f0c36d}
 .caption{font-size:.85em;color:#555;margin:.2em 0 .8em}
+table.power caption{caption-side:top;text-align:left;font-size:1.05em;color:#555;padding:0 0 .3em}
+table.power th{white-space:nowrap}table.power tr.family td{background:#fafafa}
 @page{size:A4;margin:12mm}
 @media print{
  body{max-width:none;margin:0;padding:0;font-size:9.5pt;line-height:1.3}
  .scroll{overflow:visible}
  table{font-size:7pt;margin:.3em 0 .8em;page-break-inside:auto}
  th,td{padding:1px 3px}th{white-space:normal}td{white-space:nowrap}td.wrap{white-space:normal}
- tr,img,.key div{page-break-inside:avoid}
- h2,h3{page-break-after:avoid}
+ tr,img,.key div{page-break-inside:avoid;break-inside:avoid}
+ thead{display:table-header-group}
+ h2,h3{page-break-after:avoid;break-after:avoid}
+ .power-head{break-inside:avoid;page-break-inside:avoid;break-after:avoid;page-break-after:avoid}
+ .power-head+.scroll table{break-before:avoid;page-break-before:avoid}
+ table.power caption,table.power thead{break-after:avoid;page-break-after:avoid}
+ table.power tbody tr:nth-child(-n+3){break-before:avoid;page-break-before:avoid}
  .key{grid-template-columns:repeat(4,1fr)}
  img{max-width:100%;max-height:120mm;width:auto}
  a{color:inherit;text-decoration:none}
@@ -594,9 +664,7 @@ def build_report(
         if power:
             from analysis.power import report_section
 
-            text, png = report_section(trials, options, zero_method, tmp)
-            power_html = (f'<h2>What n would a study need?</h2><pre style="white-space:pre-wrap">{html.escape(text)}'
-                          "</pre>" + (_img(png, "power of each test against the number of participants") if png else ""))
+            power_html = _power_html(report_section(trials, options, zero_method, tmp))
         tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
         _write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         page = _page(

@@ -324,8 +324,8 @@ def test_a_pool_of_one_sign_is_said_to_overstate_power():
     pool = pool_from_trials(trials)
     d = pool.on[0, 2] - pool.off[0, 2]
     assert (d < 0).all()  # RMSE lower with haptics for every one of these participants
-    assert any(n.startswith("RMSE (N): every participant of the pool has ON < OFF") and "overstates the power" in n
-               for n in result.notes)
+    one_sign = [n for n in result.notes if n.startswith("every participant of the pool has the same sign")]
+    assert len(one_sign) == 1 and "RMSE (N) ON < OFF" in one_sign[0] and "overstates the power" in one_sign[0]
 
 
 def test_a_pilot_of_three_is_refused_in_words():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import html.parser
 import json
 import sqlite3
 import subprocess
@@ -30,6 +31,34 @@ def pilots(tmp_path_factory):
     six = build(d / "pilot.db", [_participant(f"A{i}", i) for i in range(1, 7)])
     three = build(d / "tiny.db", [_participant(f"B{i}", i) for i in range(1, 4)])
     return six, three
+
+
+def _html_table(page: str) -> pd.DataFrame:
+    """The first table of a page: its head and body cells (text only) as a frame."""
+    class Cells(html.parser.HTMLParser):
+        head: list[str] = []
+        rows: list[list[str]] = []
+        cell: list[str] | None = None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+            elif tag in ("td", "th"):
+                self.cell = []
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th") and self.cell is not None:
+                (self.head if tag == "th" else self.rows[-1]).append("".join(self.cell).strip())
+                self.cell = None
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell.append(data)
+
+    p = Cells()
+    p.head, p.rows = [], []
+    p.feed(page[page.index("<table"): page.index("</table>")])
+    return pd.DataFrame([r for r in p.rows if r], columns=p.head)
 
 
 def _run(capsys, *argv):
@@ -224,7 +253,21 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page
-    assert "Source: this study; 6 participants with both haptic modes" in page
+    assert "Resampling this study's 6 participants with both haptic modes" in page
+    # a real table built from the result, not preformatted text
+    assert "<pre" not in page
+    section = page[page.index('<section class="power">'):]
+    section = section[: section.index("</section>")]
+    table = _html_table(section)
+    assert list(table.columns[:7]) == ["target", "measure", "pilot shows", "n for 80 %", "n for 80 % (Holm)",
+                                       "n for 90 %", "n for 90 % (Holm)"]
+    assert list(table.columns[7:]) == [f"n = {n}" for n in (6, 8, 10, 12, 16, 20, 30)]
+    assert len(table) == 3 * 6 and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
+    frame = pd.read_csv(out / "power.csv")
+    rmse = frame[(frame["scope"] == "overall") & (frame["metric"] == "rmse_n")].set_index("n")
+    row = table[(table["target"] == "overall") & (table["measure"] == "RMSE (N)")].iloc[0]
+    assert row["n = 10"] == f"{rmse.at[10, 'power']:.0%}" and row["pilot shows"] == "ON < OFF"
+    assert "undefined for 2 of 6 participants" in section  # the notes, as a list
     assert (out / "power.csv").is_file() and (out / "figures" / "power.png").stat().st_size > 1000
     assert page.index("What n would a study need?") < page.index("<h2>Methods</h2>")
     # power.csv is described in the codebook like every other CSV of the report
@@ -238,16 +281,48 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert not (tmp_path / "plain" / "power.csv").exists()
 
 
-def test_report_power_of_three_participants_says_why_not(pilots, tmp_path):
+def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsys):
     from analysis.load import load_study
     from analysis.metrics import MetricOptions, compute_trials
     from analysis.power import report_section
 
     trials = compute_trials(load_study([pilots[1]]), workers=1).trials
-    text, png = report_section(trials, MetricOptions(), "wilcox", tmp_path)
-    assert png is None
-    assert text.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 are needed")
+    section = report_section(trials, MetricOptions(), "wilcox", tmp_path)
+    assert section.result is None and section.png is None
+    assert section.notice.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 "
+                                     "are needed")
     assert not list(tmp_path.iterdir())
+    # and the report shows it, visibly, where the section would be
+    code, _, stderr = _run(capsys, "report", "--db", pilots[1], "--out", tmp_path / "rep", "--power")
+    assert code == 0, stderr
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    assert ('<h2>What n would a study need?</h2><p class="warn">Not estimated: this study has 3 participants with '
+            "both haptic modes") in page
+    assert not (tmp_path / "rep" / "power.csv").exists()
+
+
+def test_report_power_table_leaves_out_empty_columns(monkeypatch):
+    import analysis.power
+    from analysis.power import ReportPower, estimate_power, plan_table, pool_from_trials
+    from analysis.report import _power_html
+
+    trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
+                                success=True, tct_s=3.0 + p + (m == "on"), rmse_n=1.0 + p * (m == "on"),
+                                max_ae_n=2.0, time_in_band_s=1.0, peak_force_n=1.0, tct_censored_s=3.0)
+                           for p in range(6) for m in ("off", "on")])
+    result = estimate_power(pool_from_trials(trials), (6, 10), resamples=50)
+    full = _power_html(ReportPower(result, "", None))
+    assert "<th>pilot shows</th>" in full and "<th>n for 80 %</th>" in full
+
+    def without_direction(r):
+        t = plan_table(r)
+        t["direction"] = ""
+        return t
+
+    monkeypatch.setattr(analysis.power, "plan_table", without_direction)
+    page = _power_html(ReportPower(result, "", None))
+    assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
+    assert page.count("<td") == full.count("<td") - len(plan_table(result))
 
 
 def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
