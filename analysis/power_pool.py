@@ -50,7 +50,7 @@ from typing import Any
 from analysis.load import AnalysisError
 from analysis.outdir import sha256_file
 
-__all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_parameters",
+__all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",
            "simulated_pool"]
 
 #: Size of a pool database per simulated participant (the paper's protocol, training included), measured:

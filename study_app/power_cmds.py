@@ -27,8 +27,8 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
 
     p = sub.add_parser(
         "power",
-        help="plan the next study: power of the report's tests against the number of participants, "
-             "by resampling a pilot study or simulated participants",
+        help="plan the next study: power of the report's tests to detect the effect in the pilot's direction "
+             "against the number of participants, by resampling a pilot study or simulated participants",
     )
     p.add_argument("--db", action="append", metavar="PILOT.db",
                    help="pilot study database; repeat to merge several (the report's aggregation and tests)")

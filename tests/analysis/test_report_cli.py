@@ -211,6 +211,24 @@ def test_force_never_replaces_a_folder_holding_the_database(tmp_path, capsys):
     assert {p.name: p.read_bytes() for p in d.iterdir() if not p.name.endswith(("-wal", "-shm"))} == before
 
 
+def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, tmp_path, capsys, monkeypatch):
+    import analysis.report
+
+    out = tmp_path / "rep"
+    assert _run(capsys, "report", "--db", str(dbs[0]), "--out", str(out))[0] == 0
+    before = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def crash(folder, tables, written_too=()):
+        (folder / "stats.csv").write_text("half")
+        raise RuntimeError("disk trouble")
+
+    monkeypatch.setattr(analysis.report, "_write_tables", crash)
+    with pytest.raises(RuntimeError, match="disk trouble"):
+        main(["report", "--db", str(dbs[0]), "--out", str(out), "--force"])
+    assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["rep"]  # no temporary folder left beside it
+
+
 def test_the_report_follows_the_umask(dbs, tmp_path, capsys):
     old = os.umask(0o027)
     try:
