@@ -104,7 +104,8 @@ def _thinned_labels(ns: list[int], log: bool, min_gap: float = 0.06) -> list[str
     width = (pos[-1] - pos[0]) or 1.0
     labels, last = [], -math.inf
     for n, p in zip(ns, pos):
-        show = (p - last) / width >= min_gap or n == ns[-1] and (p - last) / width >= min_gap / 2
+        need = min_gap * max(2, len(str(n))) / 2  # three-digit labels need more room than two-digit ones
+        show = (p - last) / width >= need or n == ns[-1] and (p - last) / width >= need / 2
         labels.append(str(n) if show else "")
         last = p if show else last
     return labels
