@@ -240,16 +240,29 @@ COLUMNS: tuple[Column, ...] = (
     Column("scope", "overall, or the target level the tests were restricted to", type="text", files=("power.csv",)),
     Column("metric", "the measure tested (participants.csv column), or all_four_holm / any_holm: Holm across the "
            "four measures rejects all of them / at least one", type="text", files=("power.csv",)),
+    Column("direction", "the direction of effect the resampled pool shows (its signed-rank statistic W+ above or "
+           "below its null mean): on_higher (ON > OFF), on_lower (ON < OFF) or none; a rejection counts towards "
+           "power only in this direction (empty on the family rows)", type="text", files=("power.csv",)),
     Column("n", "participants in each resampled study", "count", "integer", files=("power.csv",)),
     Column("resamples", "resampled studies of n participants", "count", "integer", files=("power.csv",)),
     Column("alpha", "significance level of each test", "probability", files=("power.csv",), decimals=4),
-    Column("rejections", "resampled studies whose test rejected (p < alpha)", "count", "integer", files=("power.csv",)),
-    Column("power", "rejections / resamples: the estimated power", "fraction (0–1)", files=("power.csv",), decimals=4),
+    Column("rejections", "resampled studies whose two-sided test rejected (p < alpha) with the effect in the "
+           "pool's direction", "count", "integer", files=("power.csv",)),
+    Column("power", "rejections / resamples: the estimated power to detect the effect in the pool's direction",
+           "fraction (0–1)", files=("power.csv",), decimals=4),
     Column("ci_low", "lower end of the Clopper–Pearson interval of the power (Monte Carlo error only)",
            "fraction (0–1)", files=("power.csv",), decimals=4),
     Column("ci_high", "upper end of that interval", "fraction (0–1)", files=("power.csv",), decimals=4),
-    Column("rejections_holm", "rejections after Holm's correction across the four measures", "count", "integer",
-           files=("power.csv",)),
+    Column("rejections_two_sided", "resampled studies whose two-sided test rejected, in either direction (empty on "
+           "the family rows)", "count", "integer", files=("power.csv",)),
+    Column("power_two_sided", "rejections_two_sided / resamples: the two-sided rejection rate", "fraction (0–1)",
+           files=("power.csv",), decimals=4),
+    Column("two_sided_ci_low", "lower end of the interval of power_two_sided", "fraction (0–1)",
+           files=("power.csv",), decimals=4),
+    Column("two_sided_ci_high", "upper end of the interval of power_two_sided", "fraction (0–1)",
+           files=("power.csv",), decimals=4),
+    Column("rejections_holm", "directional rejections that survive Holm's correction across the four measures",
+           "count", "integer", files=("power.csv",)),
     Column("power_holm", "power after Holm's correction", "fraction (0–1)", files=("power.csv",), decimals=4),
     Column("holm_ci_low", "lower end of the interval of power_holm", "fraction (0–1)", files=("power.csv",),
            decimals=4),

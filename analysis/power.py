@@ -16,10 +16,20 @@ metrics keep their correlation), and applying the report's test to every
 metric: :func:`analysis.stats.paired_wilcoxon` with its defaults (d = ON − OFF
 rounded to 10 decimals, the chosen zero method, SciPy's automatic choice of
 the exact, permutation or normal method, two-sided), significant when
-p < α.  Power is the fraction of R resampled studies that reject, with a
-Clopper–Pearson interval for the Monte Carlo error; the family-wise figures
-apply Holm's correction across the four metrics within each resampled study,
-as the report does.
+p < α.
+
+**Directional power.**  What a lab asks is the probability of detecting the
+effect *in the direction the pilot shows* (feedback helps), not of a
+significant result either way.  The direction of a study's effect is the side
+of its signed-rank statistic: W⁺ (the rank sum of the ON > OFF pairs) above
+or below its null mean, the side on which the two-sided test rejects.  The
+pool's direction is that of the whole pool; ``power`` is the fraction of R
+resampled studies that reject *and* lie on the pool's side (about α/2 when
+there is no effect), ``power_two_sided`` the fraction that reject either way
+(about α), each with a Clopper–Pearson interval for the Monte Carlo error.
+The family-wise figures apply Holm's correction across the four metrics
+within each resampled study, as the report does, and count a metric only
+when its rejection is directional.
 
 **Speed.**  Calling :func:`~analysis.stats.paired_wilcoxon` R times per n and
 metric costs about a millisecond a call; here the R tests of one metric run
@@ -34,7 +44,9 @@ it on random samples with ties, zeros and missing values).
 (:class:`PowerError`).  A participant whose metric is undefined (TCT without a
 success in a mode) is left out of that metric's test in every resample, as in
 the report, so a study of n has fewer TCT pairs; when every difference is zero
-no resample can reject.  Both are stated in :attr:`PowerResult.notes`.  The
+no resample can reject; when all the pool's differences have one sign (zeros
+aside), every resample has that sign too and the power is overstated.  All
+are stated in :attr:`PowerResult.notes`.  The
 resamples of each n come from ``numpy.random.default_rng([seed, n])``: the
 same seed gives the same numbers, whatever other n are asked for.
 """
@@ -42,9 +54,8 @@ same seed gives the same numbers, whatever other n are asked for.
 from __future__ import annotations
 
 import functools
-import math
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -75,15 +86,15 @@ __all__ = [
     "PairedPool",
     "PowerError",
     "PowerResult",
+    "ReportPower",
     "estimate_power",
     "load_pool",
     "monte_carlo_interval",
-    "output_folder",
+    "plan_table",
     "pool_from_trials",
     "report_section",
     "resample_indices",
     "resampled_p_values",
-    "simulated_pool",
     "smallest_n",
     "summary_text",
     "write_power",
@@ -99,10 +110,13 @@ FAMILY_ANY = "any_holm"
 FAMILY_LABELS = {FAMILY_ALL: "all four (Holm)", FAMILY_ANY: "at least one (Holm)"}
 #: power.csv: its columns, in this order.
 POWER_CSV_COLUMNS = (
-    "scope", "metric", "n", "resamples", "alpha", "rejections", "power", "ci_low", "ci_high",
+    "scope", "metric", "direction", "n", "resamples", "alpha", "rejections", "power", "ci_low", "ci_high",
+    "rejections_two_sided", "power_two_sided", "two_sided_ci_low", "two_sided_ci_high",
     "rejections_holm", "power_holm", "holm_ci_low", "holm_ci_high", "mean_pairs", "not_computable",
     "exact", "permutation", "approx",
 )
+#: ``direction`` of power.csv: the pool's direction of effect per metric (the one a rejection must have).
+DIRECTION_NAMES = {1: "on_higher", -1: "on_lower", 0: "none"}
 #: Method codes of :func:`resampled_p_values` (0: no test possible).
 METHOD_NAMES = ("", "exact", "permutation", "approx")
 _METHOD_CODE = {name: code for code, name in enumerate(METHOD_NAMES)}
@@ -196,6 +210,7 @@ def load_pool(
     source: str | None = None,
     progress: Progress | None = None,
     workers: int | None = None,
+    participants: Sequence[str] | None = None,
 ) -> PairedPool:
     """Read study databases (read-only), recompute every trial as the report does, and build the pool.
 
@@ -209,79 +224,20 @@ def load_pool(
         Description for the outputs (default: the database names).
     progress, workers
         As in :func:`analysis.metrics.compute_trials`.
+    participants
+        Only these participant codes (the first N of a larger simulated pool); default: all.
     """
     study = load_study(databases)
+    if participants is not None:
+        import dataclasses
+
+        keep = set(participants)
+        study = dataclasses.replace(study, trials=study.trials[study.trials["participant_code"].isin(keep)],
+                                    sessions=study.sessions[study.sessions["participant_code"].isin(keep)])
     trials = compute_trials(study, options, progress=progress, workers=workers).trials
     if source is None:
         source = "the pilot study " + ", ".join(os.path.basename(str(d)) for d in databases)
     return pool_from_trials(trials, options, source=source)
-
-
-def output_folder(out_dir: str | os.PathLike[str], *, create: bool = True) -> Path:
-    """Check the output folder and create it if missing (its parent must exist); an existing folder is kept.
-
-    With ``create=False`` only the checks run, so a command can refuse a bad
-    ``--out`` before any work without leaving an empty folder behind.
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise PowerError(f"--out {out}: exists and is not a folder")
-    if not out.exists():
-        if not out.resolve().parent.is_dir():
-            raise PowerError(f"--out {out}: the folder {out.resolve().parent} does not exist")
-        if not create:
-            return out
-        out.mkdir()
-    if not os.access(out, os.W_OK):
-        raise PowerError(f"--out {out}: cannot write in it")
-    return out
-
-
-def simulated_pool(
-    out_dir: str | os.PathLike[str],
-    participants: int,
-    seed: int,
-    *,
-    on_progress: Callable[..., None] | None = None,
-    jobs: int | None = None,
-) -> tuple[Path, bool]:
-    """Simulate a pool of participants from the calibrated population, or reuse the one already simulated.
-
-    The pool is an ordinary study database, ``out_dir/pool-N-seedS.db``, run by
-    the headless study runner (:func:`protocol.study.run_study`, the paper's
-    protocol, participants in parallel on the usable cores).  When it exists it
-    is reused; if its simulation was interrupted, the missing participants are
-    run first (``continue_study``), so the pool is the same as an uninterrupted one.
-
-    Parameters
-    ----------
-    out_dir
-        Folder that keeps the pool (created if missing; its parent must exist).
-    participants, seed
-        Pool size and study seed.
-    on_progress
-        Progress callback of :func:`protocol.study.run_study`.
-    jobs
-        Worker processes (default: the usable cores).
-
-    Returns
-    -------
-    path, reused
-        The database and whether it was complete already (nothing simulated).
-    """
-    from protocol.config import default_protocol
-    from protocol.storage import StorageError
-    from protocol.study import StudyWorkerError, run_study
-
-    out = output_folder(out_dir)
-    path = out / f"pool-{participants}-seed{seed}.db"
-    existed = path.exists()
-    try:
-        progress = run_study(str(path), participants=participants, seed=seed, protocol=default_protocol(),
-                             on_progress=on_progress, jobs=jobs, continue_study=existed)
-    except (StorageError, StudyWorkerError, ValueError) as exc:
-        raise PowerError(str(exc)) from None
-    return path, existed and progress.study_trials_total == 0
 
 
 # ------------------------------------------------------------------------------------------------
@@ -357,8 +313,14 @@ def _permutation_p(key: int, units: np.ndarray) -> np.ndarray:
     return table
 
 
-def _p_values(pm: _PreparedMetric, idx: np.ndarray, zero_method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """p-value (NaN: not computable), method code and complete pairs of every resampled study (rows of idx)."""
+def _p_values(pm: _PreparedMetric, idx: np.ndarray,
+              zero_method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """p-value (NaN: not computable), method code, complete pairs and side of every resampled study (rows of idx).
+
+    The side is the direction of the study's effect as the signed-rank test
+    sees it: +1 when W⁺ (the rank sum of the ON > OFF pairs) lies above its
+    null mean, -1 below, 0 on it -- the side on which the two-sided test rejects.
+    """
     r, n = idx.shape
     pick = pm.by_rank[np.sort(pm.rank[idx], axis=1, kind="stable")]  # members sorted by |d|, missing last
     code = pm.code[pick]
@@ -382,6 +344,8 @@ def _p_values(pm: _PreparedMetric, idx: np.ndarray, zero_method: str) -> tuple[n
         ranked, offset = ~missing, np.zeros((r, 1), dtype=np.int64)
     units = 2 * (start - offset) + size + 1  # doubled mid-ranks: integers
     w2 = np.where(pm.positive[pick], units, 0).sum(axis=1)  # 2·W⁺ without the zero ranks
+    # W⁺ against its null mean, half the non-zero pairs' rank sum: 2·w2 vs Σ units, all integers (zeros cancel)
+    side = np.sign(2 * w2 - np.where(nonzero, units, 0).sum(axis=1)).astype(np.int8)
     count = ranked.sum(axis=1)
     tie_groups = nonzero & (size > 1)
     has_ties = tie_groups.any(axis=1)
@@ -438,12 +402,12 @@ def _p_values(pm: _PreparedMetric, idx: np.ndarray, zero_method: str) -> tuple[n
         se = np.sqrt((se2 - tie_correct / 2.0) / 24.0)
         z = (w_plus2 / 2.0 - mn) / se
         p[sel] = 2.0 * special.ndtr(-np.abs(z))
-    return np.minimum(np.maximum(p, 0.0), 1.0), method, n_pairs
+    return np.minimum(np.maximum(p, 0.0), 1.0), method, n_pairs, side
 
 
 def resampled_p_values(
-    off: npt.ArrayLike, on: npt.ArrayLike, idx: npt.ArrayLike, *, zero_method: str = "wilcox"
-) -> tuple[np.ndarray, np.ndarray]:
+    off: npt.ArrayLike, on: npt.ArrayLike, idx: npt.ArrayLike, *, zero_method: str = "wilcox", sides: bool = False
+) -> tuple[np.ndarray, ...]:
     """p-values of the report's Wilcoxon test on many resampled studies at once.
 
     Row r of ``idx`` is a study made of the pairs ``(off[idx[r]], on[idx[r]])``;
@@ -459,13 +423,17 @@ def resampled_p_values(
         Shape (R, n): the pool members of each of R studies of n participants.
     zero_method : {"wilcox", "pratt", "zsplit"}
         As in :func:`analysis.stats.paired_wilcoxon`.
+    sides : bool
+        Also return each study's side.
 
     Returns
     -------
-    p, method
+    p, method[, side]
         ``p`` (R,): NaN where ``paired_wilcoxon`` reports the test not
         computable (fewer than two complete pairs, all differences zero, an
-        infinite value); ``method`` (R,): index into :data:`METHOD_NAMES`.
+        infinite value); ``method`` (R,): index into :data:`METHOD_NAMES`;
+        ``side`` (R,): +1 when the signed-rank statistic W⁺ lies above its
+        null mean (ON > OFF carries more rank weight), -1 below, 0 on it.
     """
     zm = str(zero_method).lower()
     if zm not in ZERO_METHODS:
@@ -476,8 +444,8 @@ def resampled_p_values(
         raise ValueError(f"idx must be 2-D (resamples × n), got shape {ix.shape}")
     if ix.size and (ix.min() < 0 or ix.max() >= pm.code.size):
         raise ValueError(f"idx holds values outside 0 … {pm.code.size - 1}")
-    p, method, _ = _p_values(pm, ix, zm)
-    return p, method
+    p, method, _, side = _p_values(pm, ix, zm)
+    return (p, method, side) if sides else (p, method)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -510,10 +478,13 @@ class PowerResult:
     frame
         One row per scope × metric × n (columns :data:`POWER_CSV_COLUMNS`, then
         ``source``); ``metric`` is a metric name or :data:`FAMILY_ALL` /
-        :data:`FAMILY_ANY` (their ``power`` is the Holm family-wise figure).
+        :data:`FAMILY_ANY` (their ``power`` is the Holm family-wise figure);
+        ``power`` counts rejections in the pool's ``direction`` only,
+        ``power_two_sided`` every rejection (empty on the family rows).
     notes
         Plain-words notes on the pool (undefined values, zero differences,
-        the smallest attainable p at small n).
+        a pool whose differences all have one sign, the smallest attainable p
+        at small n).
     source, n_pool, resamples, alpha, seed, zero_method, options, n_values, interval_level
         What was resampled and how.
     """
@@ -556,9 +527,10 @@ def _check_request(n_values: Sequence[int], resamples: int, alpha: float, zero_m
     return tuple(sorted(set(ns)))
 
 
-def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], n_values: tuple[int, ...],
-                alpha: float) -> list[str]:
+def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], direction: np.ndarray,
+                n_values: tuple[int, ...], alpha: float) -> list[str]:
     notes = []
+    one_sign: list[str] = []  # one note for all of them: it can hold for most measures of a small pilot
     P = pool.n_participants
     for s, scope in enumerate(pool.scopes):
         where = "" if scope == "overall" else f" ({scope})"
@@ -580,6 +552,21 @@ def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], n_value
             if pm.zero[~pm.missing].all():
                 notes.append(f"{label}{where}: every participant has ON = OFF, so no resampled study can "
                              "reject: its power is 0 at every n (the pool shows no effect)")
+                continue
+            if direction[s, m] == 0:
+                notes.append(f"{label}{where}: the pool's signed-rank statistic lies exactly on its null mean, so "
+                             "the pool shows no direction of effect; its (directional) power is 0 at every n "
+                             "(power_two_sided in power.csv still counts every rejection)")
+            used = ~pm.missing & ~pm.zero
+            if used.any() and (pm.positive[used].all() or not pm.positive[used].any()):
+                sign = "ON > OFF" if pm.positive[used].all() else "ON < OFF"
+                one_sign.append(f"{label}{where} {sign}{' or =' if pm.zero[~pm.missing].any() else ''}")
+    if one_sign:
+        notes.append(
+            f"every participant of the pool has the same sign of ON − OFF (zeros aside) for {'; '.join(one_sign)}: "
+            "every resampled study then has that sign too, so the power of "
+            f"{'this test' if len(one_sign) == 1 else 'these tests'} comes out high; a real study will also meet "
+            "participants the other way round, so it overstates the power (more so the smaller the pool)")
     if max(n_values) > P:
         notes.append(
             f"n up to {max(n_values)} from {P} participants: larger studies repeat pool members, so their power "
@@ -641,42 +628,53 @@ def estimate_power(
     R = int(resamples)
     prepared = [[_prepare(pool.off[s, m], pool.on[s, m]) for m in range(len(pool.metrics))]
                 for s in range(len(pool.scopes))]
+    # the pool's own direction of effect, per scope and metric: the side its own test statistic lies on
+    whole = np.arange(P)[None, :]
+    direction = np.array([[int(_p_values(pm, whole, zero_method)[3][0]) for pm in row] for row in prepared])
     rows: list[dict[str, object]] = []
     for n in ns:
         idx = resample_indices(seed, n, R, P)
         for s, scope in enumerate(pool.scopes):
             pvals = np.empty((R, len(pool.metrics)))
+            agree = np.empty((R, len(pool.metrics)), dtype=bool)
             per_metric = []
             for m in range(len(pool.metrics)):
-                p, method, n_pairs = _p_values(prepared[s][m], idx, zero_method)
+                p, method, n_pairs, side = _p_values(prepared[s][m], idx, zero_method)
                 pvals[:, m] = p
+                agree[:, m] = (side == direction[s, m]) & (direction[s, m] != 0)
                 per_metric.append((method, n_pairs))
             with np.errstate(invalid="ignore"):
-                reject = pvals < alpha
-                reject_holm = holm(pvals, axis=1) < alpha
+                reject_two = pvals < alpha
+                reject_holm = (holm(pvals, axis=1) < alpha) & agree
+            reject = reject_two & agree
             for m, metric in enumerate(pool.metrics):
                 method, n_pairs = per_metric[m]
                 counts = np.bincount(method, minlength=len(METHOD_NAMES))
-                rows.append(dict(scope=scope, metric=metric, n=n, rejections=int(reject[:, m].sum()),
+                rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[s, m])], n=n,
+                                 rejections=int(reject[:, m].sum()), rejections_two_sided=int(reject_two[:, m].sum()),
                                  rejections_holm=int(reject_holm[:, m].sum()), mean_pairs=float(n_pairs.mean()),
                                  not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
                                  approx=int(counts[3])))
             for fam, hits in ((FAMILY_ALL, reject_holm.all(axis=1)), (FAMILY_ANY, reject_holm.any(axis=1))):
                 k = int(hits.sum())
-                rows.append(dict(scope=scope, metric=fam, n=n, rejections=k, rejections_holm=k, mean_pairs=np.nan,
+                rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
+                                 rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
                                  not_computable=0, exact=0, permutation=0, approx=0))
     frame = pd.DataFrame(rows)
     frame["resamples"] = R
     frame["alpha"] = float(alpha)
-    frame["power"] = frame["rejections"] / R
-    frame["power_holm"] = frame["rejections_holm"] / R
-    frame["ci_low"], frame["ci_high"] = monte_carlo_interval(frame["rejections"].to_numpy(), R, interval_level)
-    frame["holm_ci_low"], frame["holm_ci_high"] = monte_carlo_interval(frame["rejections_holm"].to_numpy(), R,
-                                                                       interval_level)
+    frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
+    for prefix, col in (("", "rejections"), ("two_sided_", "rejections_two_sided"), ("holm_", "rejections_holm")):
+        k = frame[col].to_numpy(dtype=float, na_value=np.nan)
+        power_col = {"": "power", "two_sided_": "power_two_sided", "holm_": "power_holm"}[prefix]
+        frame[power_col] = k / R
+        lo, hi = monte_carlo_interval(np.nan_to_num(k), R, interval_level)
+        frame[f"{prefix}ci_low"] = np.where(np.isnan(k), np.nan, lo)
+        frame[f"{prefix}ci_high"] = np.where(np.isnan(k), np.nan, hi)
     frame = frame[list(POWER_CSV_COLUMNS)]
     frame["source"] = pool.source
-    return PowerResult(frame, _pool_notes(pool, prepared, ns, float(alpha)), pool.source, P, R, float(alpha),
-                       int(seed), zero_method, pool.options, ns, float(interval_level))
+    return PowerResult(frame, _pool_notes(pool, prepared, direction, ns, float(alpha)), pool.source, P, R,
+                       float(alpha), int(seed), zero_method, pool.options, ns, float(interval_level))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -723,6 +721,9 @@ def summary_text(result: PowerResult) -> str:
         f"Test: the report's paired Wilcoxon signed-rank test ON vs OFF per metric, two-sided, significant at "
         f"p < {result.alpha:g}; TCT {tct}; RMSE and Max AE from the "
         f"{'cue' if result.options.error_window == 'cue' else 'first contact'}; zero differences: {result.zero_method}.",
+        "Power: the probability that a study detects the effect in the direction this pool shows (a rejection "
+        "counts only when the resampled study's effect lies on the pool's side); the two-sided rejection rate, "
+        "which also counts significant effects the other way, is power_two_sided.",
         f"Intervals ({result.interval_level:.0%}, in power.csv and the figure) are the Monte Carlo error of the "
         f"resampling only, not the uncertainty of the {result.n_pool} participants' own effects: a plan from a "
         "small pilot is itself uncertain.",
@@ -743,6 +744,17 @@ def summary_text(result: PowerResult) -> str:
                 cells.append(_reach(f, scope, metric, target, True))
             name = _label(metric) if scope == "overall" else f"  {_label(metric)}"
             lines.append(f"  {name:<21s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
+    lines.append("Power at each n (overall; the two-sided rejection rate in brackets):")
+    ns = list(result.n_values)
+    lines.append(f"  {'':<21s}{'pool shows':<12s}" + "".join(f"{'n = ' + str(n):<14s}" for n in ns).rstrip())
+    overall = f[f["scope"] == "overall"]
+    for metric in dict.fromkeys(overall["metric"]):
+        if metric in FAMILY_LABELS:
+            continue
+        sel = overall[overall["metric"] == metric].set_index("n")
+        direction = {"on_higher": "ON > OFF", "on_lower": "ON < OFF"}.get(str(sel["direction"].iloc[0]), "no effect")
+        cells = [f"{sel.at[n, 'power']:.0%} ({sel.at[n, 'power_two_sided']:.0%})" for n in ns]
+        lines.append(f"  {_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     last = max(result.n_values)
     under = [_label(m) for m in dict.fromkeys(f["metric"])
              if m not in FAMILY_LABELS and smallest_n(f, "overall", m, 0.8) is None]
@@ -756,22 +768,12 @@ def summary_text(result: PowerResult) -> str:
     return "\n".join(lines)
 
 
-def _replace(path: Path, write: Callable[[Path], None]) -> None:
-    """Write a file via a temporary sibling and an atomic rename: a failure never leaves half a file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+def write_power(result: PowerResult, folder: str | os.PathLike[str]) -> list[str]:
+    """Write ``power.csv``, ``power.txt`` (:func:`summary_text`) and ``power.png/.pdf/.svg`` into ``folder``.
 
-
-def write_power(result: PowerResult, out_dir: str | os.PathLike[str]) -> list[str]:
-    """Write ``power.csv``, ``power.txt`` (:func:`summary_text`) and ``power.png/.pdf/.svg`` into ``out_dir``.
-
-    Only these files are written (each replaced atomically); anything else in
-    the folder, such as a simulated pool, is left alone.
+    ``haptic-study power`` gives it the temporary folder of
+    :func:`analysis.outdir.write_output_folder`, which moves the files into
+    ``--out`` under the output-folder policy (marker, ``--force``, the pool kept).
 
     Returns
     -------
@@ -780,20 +782,64 @@ def write_power(result: PowerResult, out_dir: str | os.PathLike[str]) -> list[st
     """
     from analysis.power_figures import power_curves
 
-    out = output_folder(out_dir)
-    _replace(out / "power.csv", lambda p: result.frame.to_csv(p, index=False))
-    _replace(out / "power.txt", lambda p: p.write_text(summary_text(result) + "\n", encoding="utf-8"))
+    out = Path(folder)
+    result.frame.to_csv(out / "power.csv", index=False)
+    (out / "power.txt").write_text(summary_text(result) + "\n", encoding="utf-8")
     fig = power_curves(result)
     names = ["power.csv", "power.txt"]
     for ext in ("png", "pdf", "svg"):
         meta = {"Date": None} if ext == "svg" else {"CreationDate": None} if ext == "pdf" else {}
-        _replace(out / f"power.{ext}", lambda p, e=ext, md=meta: fig.savefig(p, format=e, dpi=150, metadata=md))
+        fig.savefig(out / f"power.{ext}", format=ext, dpi=150, metadata=meta)
         names.append(f"power.{ext}")
     return names
 
 
+@dataclass(frozen=True, slots=True)
+class ReportPower:
+    """The "what n would a study need?" section of ``report --power``.
+
+    Attributes
+    ----------
+    result
+        The estimate (None when it could not be made).
+    notice
+        Why it could not be made, in words ("" when it was).
+    png
+        The power-curve figure (None when not made).
+    """
+
+    result: PowerResult | None
+    notice: str
+    png: bytes | None
+
+
+def plan_table(result: PowerResult) -> pd.DataFrame:
+    """The plan as a table, one row per scope × metric (family rows included), for the report's page.
+
+    Columns: ``scope``, ``metric``, ``direction``, ``n80``, ``n90``,
+    ``n80_holm``, ``n90_holm`` (text: ``"12"``, ``"> 30 (64%)"`` when not
+    reached, ``""`` where it does not apply) and ``power_n{n}`` per n tried
+    (directional power, a fraction; NaN where it does not apply).
+    """
+    f = result.frame
+    rows = []
+    for scope in dict.fromkeys(f["scope"]):
+        for metric in dict.fromkeys(f[f["scope"] == scope]["metric"]):
+            family = metric in FAMILY_LABELS
+            sel = f[(f["scope"] == scope) & (f["metric"] == metric)].set_index("n")
+            row: dict[str, object] = {"scope": scope, "metric": metric, "direction": str(sel["direction"].iloc[0])}
+            for target in (0.8, 0.9):
+                key = f"n{round(target * 100)}"
+                row[key] = "" if family else _reach(f, scope, metric, target, False).removeprefix("n = ")
+                row[f"{key}_holm"] = _reach(f, scope, metric, target, True).removeprefix("n = ")
+            for n in result.n_values:
+                row[f"power_n{n}"] = float(sel.at[n, "power_holm" if family else "power"])
+            rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: str,
-                   out_dir: str | os.PathLike[str]) -> tuple[str, bytes | None]:
+                   out_dir: str | os.PathLike[str]) -> ReportPower:
     """``report --power``: what n a study would need, resampling the reported study's own participants.
 
     Writes ``power.csv`` and ``figures/power.png`` / ``.svg`` into ``out_dir``
@@ -802,10 +848,10 @@ def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: st
 
     Returns
     -------
-    text, png
-        :func:`summary_text`, and the figure's PNG; when the study cannot be
-        resampled (fewer than :data:`MIN_PILOT` participants), the reason in
-        words and None.
+    ReportPower
+        The estimate and the figure; when the study cannot be resampled
+        (fewer than :data:`MIN_PILOT` participants with both modes, ...), no
+        estimate and the reason in words, for the page to show.
     """
     from analysis.figures import save
     from analysis.power_figures import power_curves
@@ -814,8 +860,7 @@ def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: st
     try:
         result = estimate_power(pool, zero_method=zero_method)
     except PowerError as exc:
-        return f"Not estimated: {exc}.", None
+        return ReportPower(None, f"Not estimated: {exc}.", None)
     out = Path(out_dir)
     result.frame.to_csv(out / "power.csv", index=False)
-    return summary_text(result), save(power_curves(result), out / "figures", "power")
-
+    return ReportPower(result, "", save(power_curves(result), out / "figures", "power"))

@@ -2,7 +2,8 @@
 
 One panel per scope (overall, then each target); one line per metric with its
 Monte Carlo interval as a band, the Holm family-wise power of all four
-metrics as a dashed black line, and the 80 % and 90 % targets.  Colours are
+metrics as a dashed black line, and the 80 % and 90 % targets.  Power is
+directional (:mod:`analysis.power`): a rejection in the pool's direction.  Colours are
 Okabe–Ito, distinguishable with every common colour-vision deficiency, and
 each metric also has its own marker, so the figure reads in grey too.
 """
@@ -83,7 +84,7 @@ def power_curves(result: PowerResult) -> Figure:
         ax.set_ylim(-0.02, 1.03)
         ax.yaxis.set_major_formatter(PercentFormatter(1.0, decimals=0))
         ax.grid(axis="x", color="#eeeeee", linewidth=0.6)
-    axes[0].set_ylabel(f"power (p < {result.alpha:g})")
+    axes[0].set_ylabel(f"power (p < {result.alpha:g}, in the pool's direction)")
     for level in (0.8, 0.9):
         axes[-1].annotate(f"{level:.0%}", xy=(1.0, level), xycoords=("axes fraction", "data"), xytext=(3, 0),
                           textcoords="offset points", va="center", fontsize=8, color="#555555")
@@ -91,7 +92,8 @@ def power_curves(result: PowerResult) -> Figure:
     fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=len(handles),
                frameon=False, fontsize=9, title=band, title_fontsize=8)
     size = "" if "participants" in result.source else f" ({result.n_pool} participants)"
-    fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests against study size\nresampling {result.source}{size}",
+    fig.suptitle(f"Power of the ON-vs-OFF Wilcoxon tests to detect the effect in the pool's direction, against "
+                 f"study size\nresampling {result.source}{size}",
                  fontsize=10.5)
     return fig
 
@@ -102,7 +104,8 @@ def _thinned_labels(ns: list[int], log: bool, min_gap: float = 0.06) -> list[str
     width = (pos[-1] - pos[0]) or 1.0
     labels, last = [], -math.inf
     for n, p in zip(ns, pos):
-        show = (p - last) / width >= min_gap or n == ns[-1] and (p - last) / width >= min_gap / 2
+        need = min_gap * max(2, len(str(n))) / 2  # three-digit labels need more room than two-digit ones
+        show = (p - last) / width >= need or n == ns[-1] and (p - last) / width >= need / 2
         labels.append(str(n) if show else "")
         last = p if show else last
     return labels

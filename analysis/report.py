@@ -17,7 +17,9 @@ ON vs OFF, draws the paper's figures and writes::
     DIR/figures/*.png, *.pdf, *.svg
 
 The report is built in a temporary folder beside ``DIR`` and moved into place
-at the end, so a failed run never leaves half a report or touches an old one.
+at the end, so a failed run never leaves half a report or touches an old one;
+``--force`` replaces only a report's own, unedited files (the folder policy
+of :mod:`analysis.outdir`, shared with ``power``).
 """
 
 from __future__ import annotations
@@ -25,11 +27,8 @@ from __future__ import annotations
 import base64
 import datetime as dt
 import html
-import json
 import math
 import os
-import shutil
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,6 +42,7 @@ from analysis.aggregate import PRIMARY_METRICS, mean_sd, mode_tests, per_partici
 from analysis.load import AnalysisError, Progress, StudyData, load_study
 from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts, health_summary, health_table
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
+from analysis.outdir import check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.stats import WilcoxonResult, methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
@@ -220,6 +220,69 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str
             f'</table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
 
 
+#: Headings of the power table's columns (``target`` and ``measure`` are the row labels, as in the test tables).
+_POWER_HEADINGS = {"scope": "target", "metric": "measure", "direction": "pilot shows", "n80": "n for 80 %",
+                   "n80_holm": "n for 80 % (Holm)", "n90": "n for 90 %", "n90_holm": "n for 90 % (Holm)"}
+_DIRECTION_TEXT = {"on_higher": "ON > OFF", "on_lower": "ON < OFF", "none": "no effect", "": ""}
+
+
+def _power_html(section: Any) -> str:
+    """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
+
+    ``section`` is an :class:`analysis.power.ReportPower`.  The table is built
+    from the structured result (:func:`analysis.power.plan_table`); columns
+    with no value in any row are left out.  In print, its rows never split,
+    its head repeats on every page and the heading stays with it (``_CSS``).
+    """
+    from analysis.power import FAMILY_LABELS, _label, plan_table
+
+    head = "<h2>What n would a study need?</h2>"
+    if section.result is None:
+        return (f'<section class="power"><div class="power-head">{head}<p class="warn">'
+                f'{html.escape(section.notice)}</p></div></section>')
+    r = section.result
+    table = plan_table(r)
+    cells: dict[str, list[str]] = {}
+    for col in table.columns:
+        if col == "scope":
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+        elif col == "metric":
+            cells[col] = [html.escape(_label(str(v))) for v in table[col]]
+        elif col == "direction":
+            cells[col] = [_DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
+        elif col.startswith("power_n"):
+            cells[col] = ["" if not np.isfinite(v) else f"{v:.0%}" for v in table[col]]
+        else:
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+    shown = [c for c in table.columns if any(cells[c])]  # a column empty in every row is left out
+    heads = "".join(f"<th>{html.escape(_POWER_HEADINGS.get(c, 'n = ' + c.removeprefix('power_n')))}</th>"
+                    for c in shown)
+    body = []
+    for i, metric in enumerate(table["metric"]):
+        cls = ' class="family"' if metric in FAMILY_LABELS else ""
+        tds = "".join(f'<td class="m">{cells[c][i]}</td>' if c in ("scope", "metric") else f"<td>{cells[c][i]}</td>"
+                      for c in shown)
+        body.append(f"<tr{cls}>{tds}</tr>")
+    tct = "over successful trials" if r.options.tct_policy == "successful" else "failures counted at the trial cap"
+    lead = (f"<p>Resampling this study's {plural(r.n_pool, 'participant')} with both haptic modes with replacement "
+            f"({r.resamples} studies per n, seed {r.seed}): the power of each ON-vs-OFF Wilcoxon test (p &lt; "
+            f"{r.alpha:g}; TCT {tct}) to detect the effect <b>in the direction this study shows</b>"
+            f"{' (pilot shows)' if 'direction' in shown else ''}. "
+            "n for 80 %: the smallest n tried from which on power stays at or above 80 %; '&gt; N (x %)': not "
+            "reached by the largest n tried. Holm: with Holm's correction across the four measures, as the "
+            "significance marks above. power.csv has every number, with the two-sided rejection rate "
+            "(power_two_sided) and the Monte Carlo intervals.</p>")
+    caption = (f"<caption>Participants needed, and power at each n ({r.interval_level:.0%} Monte Carlo intervals "
+               "in power.csv)</caption>")
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in r.notes)
+    return (f'<section class="power"><div class="power-head">{head}{lead}</div>'
+            f'<div class="scroll"><table class="stats power">{caption}<thead><tr>{heads}</tr></thead>'
+            f'<tbody>{"".join(body)}</tbody></table></div>'
+            + (f'<ul class="notes">{notes}</ul>' if notes else "")
+            + (f"<figure>{_img(section.png, 'power of each test against the number of participants')}</figure>"
+               if section.png else "") + "</section>")
+
+
 def _img(png: bytes, alt: str) -> str:
     return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
 
@@ -318,14 +381,21 @@ img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .origin{padding:.5em .8em;border-radius:6px;font-weight:600}.origin.sim{background:#eef3ff;border:1px solid #9db4e8}
 .origin.real{background:#eefaf0;border:1px solid #9ed3a8}.origin.mixed{background:#fff4e5;border:1px solid #f0c36d}
 .caption{font-size:.85em;color:#555;margin:.2em 0 .8em}
+table.power caption{caption-side:top;text-align:left;font-size:1.05em;color:#555;padding:0 0 .3em}
+table.power th{white-space:nowrap}table.power tr.family td{background:#fafafa}
 @page{size:A4;margin:12mm}
 @media print{
  body{max-width:none;margin:0;padding:0;font-size:9.5pt;line-height:1.3}
  .scroll{overflow:visible}
  table{font-size:7pt;margin:.3em 0 .8em;page-break-inside:auto}
  th,td{padding:1px 3px}th{white-space:normal}td{white-space:nowrap}td.wrap{white-space:normal}
- tr,img,.key div{page-break-inside:avoid}
- h2,h3{page-break-after:avoid}
+ tr,img,.key div{page-break-inside:avoid;break-inside:avoid}
+ thead{display:table-header-group}
+ h2,h3{page-break-after:avoid;break-after:avoid}
+ .power-head{break-inside:avoid;page-break-inside:avoid;break-after:avoid;page-break-after:avoid}
+ .power-head+.scroll table{break-before:avoid;page-break-before:avoid}
+ table.power caption,table.power thead{break-after:avoid;page-break-after:avoid}
+ table.power tbody tr:nth-child(-n+3){break-before:avoid;page-break-before:avoid}
  .key{grid-template-columns:repeat(4,1fr)}
  img{max-width:100%;max-height:120mm;width:auto}
  a{color:inherit;text-decoration:none}
@@ -473,78 +543,8 @@ band; bottom, on an axis of its own: the raw sensor force, the tool's weight inc
 """
 
 
-#: The file report leaves in every folder it writes, listing what it wrote: ``--force`` replaces only such folders.
+#: The file report leaves in every folder it writes, listing what it wrote with its SHA-256 (:mod:`analysis.outdir`).
 REPORT_MARKER = ".haptic-study-report"
-
-
-def _refuse_inputs_inside(out: Path, databases: Sequence[str | os.PathLike[str]]) -> None:
-    """A report folder must never hold one of its own input databases (``--force`` would replace it)."""
-    root = out.resolve()
-    for db in databases:
-        p = Path(db).resolve()
-        if root == p or root in p.parents:
-            raise AnalysisError(f"--out {out}: holds the input database {db}; write the report to another folder "
-                                "(nothing was changed)")
-
-
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
-def _ours(out: Path) -> dict[str, str] | None:
-    """The files a previous report listed in ``out``'s marker, with their hashes (None: no readable marker)."""
-    try:
-        listed = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))["files"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-    return {str(f): str(h) for f, h in listed.items()} if isinstance(listed, dict) else None
-
-
-def _ours_to_replace(out: Path) -> None:
-    """Refuse ``--force`` unless ``out`` holds only what a report wrote there, as it wrote it (its marker says)."""
-    listed = _ours(out)
-    if listed is None:
-        raise AnalysisError(f"--out {out}: not a folder report wrote (no {REPORT_MARKER} in it); --force replaces "
-                            "only report folders: choose another folder (nothing was deleted)")
-    foreign = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                     if not p.is_dir() and str(p.relative_to(out)) not in listed.keys() | {REPORT_MARKER})
-    if foreign:
-        raise AnalysisError(f"--out {out}: holds {plural(len(foreign), 'file')} report did not write "
-                            f"(e.g. {foreign[0]}); move {'it' if len(foreign) == 1 else 'them'} or choose another "
-                            "folder (nothing was deleted)")
-    edited = sorted(f for f, h in listed.items() if (out / f).is_file() and _sha256(out / f) != h)
-    if edited:
-        raise AnalysisError(f"--out {out}: {plural(len(edited), 'file')} report wrote {'was' if len(edited) == 1 else 'were'} "
-                            f"changed since (e.g. {edited[0]}); keep your edits elsewhere or choose another folder "
-                            "(nothing was deleted)")
-
-
-def _remove_ours(out: Path) -> None:
-    """Delete what a previous report wrote in ``out`` (checked by :func:`_ours_to_replace`), then the folder."""
-    listed = set(_ours(out) or {})
-    for name in sorted(listed | {REPORT_MARKER}, reverse=True):
-        try:
-            (out / name).unlink()
-        except FileNotFoundError:
-            pass
-    try:
-        for d in sorted((p for p in out.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True):
-            d.rmdir()  # fails, keeping it, if a file appeared meanwhile: nothing unlisted is ever deleted
-        out.rmdir()
-    except OSError:
-        raise AnalysisError(f"--out {out}: other files appeared in it while the report was made; the previous "
-                            "report's files were removed, nothing else was deleted, and the new report was not "
-                            "moved in (run it again)") from None
-
-
-def _apply_umask(folder: Path) -> None:
-    """The temporary folder was made owner-only: give the report the permissions the user's umask asks for."""
-    mask = os.umask(0)
-    os.umask(mask)
-    for p in [folder, *folder.rglob("*")]:
-        p.chmod((0o777 if p.is_dir() else 0o666) & ~mask)
 
 
 def build_report(
@@ -572,9 +572,10 @@ def build_report(
     zero_method, confidence
         Wilcoxon zero handling and the Hodges–Lehmann confidence level.
     force
-        Replace an existing, non-empty ``out_dir`` -- only one that ``report``
-        itself wrote (its marker file lists what it wrote) and that holds
-        nothing else: no input database, no file of anybody else's.
+        Replace an existing, non-empty ``out_dir`` -- only the files ``report``
+        itself wrote there, unedited (its marker lists each with its SHA-256),
+        and only when it holds nothing else: no input database, no file of
+        anybody else's (:mod:`analysis.outdir`).
     progress
         ``progress(samples read, samples expected)``.
     workers
@@ -592,19 +593,7 @@ def build_report(
     AnalysisError
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise AnalysisError(f"--out {out}: exists and is not a folder")
-    _refuse_inputs_inside(out, databases)
-    if out.exists() and any(out.iterdir()):
-        if not force:
-            raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it")
-        _ours_to_replace(out)
-    parent = out.resolve().parent
-    if not parent.exists():
-        raise AnalysisError(f"--out {out}: the folder {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise AnalysisError(f"--out {out}: cannot write in {parent}")
+    out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
 
     study = load_study(databases)
     table = compute_trials(study, options, progress=progress, workers=workers)
@@ -633,11 +622,9 @@ def build_report(
     n_incomplete = int((exp["status"] != "completed").sum())
     n_participants = int(trials["participant_code"].nunique())
 
-    try:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=parent))
-    except OSError as exc:
-        raise AnalysisError(f"--out {out}: cannot write in {parent} ({exc.strerror})") from None
-    try:
+    made: dict[str, pd.DataFrame] = {}
+
+    def fill(tmp: Path) -> None:
         fig_dir = tmp / "figures"
         marks_overall = _marks(results, stats)
         marks: dict[tuple[str, str], str] = {(m, "overall"): s for m, s in marks_overall.items()}
@@ -677,9 +664,7 @@ def build_report(
         if power:
             from analysis.power import report_section
 
-            text, png = report_section(trials, options, zero_method, tmp)
-            power_html = (f'<h2>What n would a study need?</h2><pre style="white-space:pre-wrap">{html.escape(text)}'
-                          "</pre>" + (_img(png, "power of each test against the number of participants") if png else ""))
+            power_html = _power_html(report_section(trials, options, zero_method, tmp))
         tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
         _write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         page = _page(
@@ -688,17 +673,8 @@ def build_report(
             marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=power_html,
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
-        files = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*") if p.is_file())
-        (tmp / REPORT_MARKER).write_text(json.dumps({
-            "written_by": f"haptic-study {software_version()}",
-            "files": {f: _sha256(tmp / f) for f in files},  # a file changed since is someone's work: kept
-        }, indent=1), encoding="utf-8")
-        _apply_umask(tmp)
-        if out.exists():
-            _remove_ours(out)
-        os.replace(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+        made["stats.csv"] = tables["stats.csv"]
+
+    files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, n_participants, len(trials), int(study.included["n_samples"].fillna(0).sum()),
-                         excluded, tables["stats.csv"], files)
+                         excluded, made["stats.csv"], files)

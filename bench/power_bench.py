@@ -3,10 +3,12 @@
 The figure the planning issue asks for: ``--resamples 2000`` over the 7
 default study sizes and the 4 metrics, in one process.  In the same run, the
 same resampled studies are tested by a straightforward loop that calls
-:func:`analysis.stats.paired_wilcoxon` once per study and metric and applies
-:func:`analysis.stats.holm` per study; the loop is timed on the first
-``reference_resamples`` studies of each n and scaled to all of them, and the
-two must give identical p-values on every study both ran.
+:func:`analysis.stats.paired_wilcoxon` once per study and metric (its side,
+for the directional power, from the sign of its rank-biserial correlation,
+(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.holm` per study; the
+loop is timed on the first ``reference_resamples`` studies of each n and
+scaled to all of them, and the two must give identical p-values and sides on
+every study both ran.
 
 The pilot is a synthetic 10-participant trial table
 (:func:`bench.analysis_bench.synthetic_trials`: success rates on a 0.1 grid,
@@ -88,20 +90,25 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
     P = pool.n_participants
     metrics = range(len(pool.metrics))
     loop_s = 0.0
-    tests = identical = 0
+    tests = identical = same_side = 0
     for n in n_values:
         idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
-        engine = np.stack([resampled_p_values(pool.off[0, m], pool.on[0, m], idx)[0] for m in metrics], axis=1)
+        got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
+        engine = np.stack([g[0] for g in got], axis=1)
+        engine_side = np.stack([g[2] for g in got], axis=1)
         t0 = time.perf_counter()
         ref = np.empty_like(engine)
+        ref_side = np.zeros_like(engine_side)
         for r, rows in enumerate(idx):
             for m in metrics:
                 res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
                 ref[r, m] = res.p_value if res.computable else np.nan
+                ref_side[r, m] = np.sign(res.rank_biserial) if res.computable else engine_side[r, m]
             holm(ref[r])
         loop_s += time.perf_counter() - t0
         tests += engine.size
         identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
+        same_side += int((engine_side == ref_side).sum())
     loop_scaled = loop_s * resamples / reference_resamples
     overall_s = float(np.median(runs_overall))
     return {
@@ -120,6 +127,7 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
         "speedup": round(loop_scaled / overall_s, 1) if overall_s > 0 else None,
         "reference_tests": tests,
         "identical_p_values": identical,
+        "identical_sides": same_side,
         "load_average": load_average(),
         "cpu_stolen_percent": stolen,
     }
@@ -140,7 +148,7 @@ def format_power_bench(r: dict[str, Any]) -> str:
         f"  paired_wilcoxon loop, overall  {r['reference_scaled_s']:7.1f} s scaled from {r['reference_loop_s']:.2f} s "
         f"for {r['reference_resamples']} studies per n",
         f"  speed-up                       {r['speedup']:7.1f}x   (p-values identical in "
-        f"{r['identical_p_values']:,} of {r['reference_tests']:,} tests both ran)",
+        f"{r['identical_p_values']:,} of {r['reference_tests']:,} tests both ran, sides in {r['identical_sides']:,})",
         f"  machine                        load {r['load_average'][0]:.2f}, CPU stolen by the hypervisor "
         f"{'n/a' if r['cpu_stolen_percent'] is None else format(r['cpu_stolen_percent'], '.1f') + ' %'} "
         "(during our runs)",

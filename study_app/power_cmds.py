@@ -17,6 +17,8 @@ _N_MAX = 10_000
 #: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
 DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
 _POOL_DEFAULT = 100
+#: The marker of a power output folder (analysis.outdir): the files power wrote there, with their SHA-256.
+POWER_MARKER = ".haptic-study-power"
 
 
 def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -25,13 +27,16 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
 
     p = sub.add_parser(
         "power",
-        help="plan the next study: power of the report's tests against the number of participants, "
-             "by resampling a pilot study or simulated participants",
+        help="plan the next study: power of the report's tests to detect the effect in the pilot's direction "
+             "against the number of participants, by resampling a pilot study or simulated participants",
     )
     p.add_argument("--db", action="append", metavar="PILOT.db",
                    help="pilot study database; repeat to merge several (the report's aggregation and tests)")
     p.add_argument("--simulated", action="store_true",
-                   help="no pilot yet: simulate a pool of participants from the calibrated population (kept in DIR)")
+                   help="no pilot yet: simulate a pool of participants from the calibrated population, kept in DIR "
+                        "as pool-N-seedS.db with a record of how it was made; a later call reuses it (or the first "
+                        "N of a larger pool of the same seed) after checking its SHA-256, and completes an "
+                        "interrupted simulation")
     p.add_argument("--pool", default=None, metavar="N",
                    help=f"participants in the simulated pool (default {_POOL_DEFAULT}; with --simulated)")
     p.add_argument("--n", default=None, metavar="LIST",
@@ -40,7 +45,12 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
     p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
     p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool)")
+                   help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool); it must "
+                        "be new or empty, or hold only a simulated pool, unless --force")
+    p.add_argument("--force", action="store_true",
+                   help="replace the files an earlier power run wrote in DIR, if unedited (the marker "
+                        ".haptic-study-power lists them with their SHA-256); any other file, or an edited one, is "
+                        "a refusal; the simulated pool is never deleted")
     add_analysis_options(p)
 
 
@@ -115,12 +125,15 @@ def cmd_power(args: argparse.Namespace) -> int:
 
     from analysis.load import AnalysisError
     from analysis.metrics import MetricOptions
-    from analysis.power import (FAMILY_LABELS, estimate_power, load_pool, output_folder, simulated_pool, summary_text,
-                                write_power)
+    from analysis.outdir import check_output_folder, write_output_folder
+    from analysis.power import FAMILY_LABELS, estimate_power, load_pool, summary_text, write_power
+    from analysis.power_pool import is_pool_file, simulated_pool
     from study_app.progress import ProgressBar
 
     options = MetricOptions(args.error_window, args.tct)
     bars: list[ProgressBar] = []
+    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
+                  keep=is_pool_file)
 
     def reading(done: float, total: float) -> None:
         if not bars or bars[-1].unit != "samples":
@@ -134,31 +147,37 @@ def cmd_power(args: argparse.Namespace) -> int:
         bars[-1].update(p.study_trials_done)
 
     try:
-        output_folder(args.out, create=False)
+        check_output_folder(args.out, **folder)  # before any work: a refused folder costs nothing
+        participants = None
         if args.simulated:
             t0 = time.perf_counter()
-            path, reused = simulated_pool(args.out, pool_size, seed, on_progress=simulating)
+            pool_db = simulated_pool(args.out, pool_size, seed, on_progress=simulating)
             for bar in bars:
                 bar.close()
-            if reused:
-                print(f"power: reusing the simulated pool {path}", file=sys.stderr)
-            else:
-                print(f"power: simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); "
-                      "the next call with the same --pool and --seed reuses it", file=sys.stderr)
+            path = pool_db.path
+            said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
+                    "reused-larger": f"reusing the first {pool_size} participants of the simulated pool {path} "
+                                     "(SHA-256 checked; participant k is the same in a pool of any size)",
+                    "resumed": f"completed the interrupted simulated pool {path} ({time.perf_counter() - t0:.0f} s)",
+                    "simulated": f"simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); the next "
+                                 "call with the same --pool and --seed reuses it"}
+            print(f"power: {said[pool_db.status]}", file=sys.stderr)
             databases = [str(path)]
-            source = f"a simulated pool of {pool_size} participants (study seed {seed}, {path.name})"
+            participants = pool_db.participants
+            first = f"the first {pool_size} of " if pool_db.status == "reused-larger" else ""
+            source = f"a simulated pool of {pool_size} participants (study seed {seed}, {first}{path.name})"
         else:
             databases = list(args.db)
             source = None
-        pool = load_pool(databases, options, source=source, progress=reading)
+        pool = load_pool(databases, options, source=source, progress=reading, participants=participants)
         for bar in bars:
             bar.close()
         t0 = time.perf_counter()
         result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
                                 zero_method=args.zero_method)
         wall = time.perf_counter() - t0
-        files = write_power(result, args.out)
-    except AnalysisError as exc:  # PowerError included
+        files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
+    except AnalysisError as exc:  # PowerError, PoolError included
         raise CliError(str(exc)) from None
     tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)

@@ -46,7 +46,10 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--db", action="append", required=True, metavar="PATH",
                    help="study database; repeat to merge several into one study")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, *.csv, figures/)")
-    r.add_argument("--force", action="store_true", help="replace DIR if it exists and is not empty")
+    r.add_argument("--force", action="store_true",
+                   help="replace the files an earlier report wrote in DIR, if unedited (the marker "
+                        ".haptic-study-report lists them with their SHA-256); any other file, an edited one or an "
+                        "input database in DIR is a refusal")
     add_analysis_options(r)
     r.add_argument("--confidence", type=_confidence, default=0.95,
                    help="confidence level of the Hodges–Lehmann interval (default 0.95)")

@@ -4,7 +4,8 @@ The vectorised engine must reproduce :func:`analysis.stats.paired_wilcoxon`
 bit for bit on every resampled study (same p-value, same method), ties,
 zeros, missing and infinite values included; then, on populations whose
 power is known by direct simulation, the resampled estimate must agree within
-its Monte Carlo interval, and with no effect the rejection rate must be α.
+its Monte Carlo interval, and with no effect the two-sided rejection rate must
+be α and the directional one (a rejection on the pool's side) α/2.
 """
 
 from __future__ import annotations
@@ -132,11 +133,40 @@ def _pool(off: np.ndarray, on: np.ndarray) -> PairedPool:
                       np.tile(off, (1, 4, 1)), np.tile(on, (1, 4, 1)), "a known population")
 
 
-def _agree(row: pd.Series, direct_rate: float, direct_m: int) -> None:
+def _agree(row: pd.Series, direct_rate: float, direct_m: int, prefix: str = "") -> None:
     """The two Monte Carlo estimates agree: each 95 % interval reaches the other's point estimate's interval."""
     lo, hi = monte_carlo_interval(np.array([round(direct_rate * direct_m)]), direct_m)
-    assert row["ci_low"] <= hi[0] and lo[0] <= row["ci_high"], (row["power"], row["ci_low"], row["ci_high"],
-                                                                direct_rate)
+    low, high = row[f"{prefix}ci_low"], row[f"{prefix}ci_high"]
+    assert low <= hi[0] and lo[0] <= high, (prefix, row["power"], low, high, direct_rate)
+
+
+def _side(d: np.ndarray, zero_method: str = "wilcox") -> np.ndarray:
+    """Direction of each row's effect, from first principles: W⁺ against its null mean over the non-zero pairs.
+
+    Zeros are dropped before ranking ("wilcox") or ranked with the rest ("pratt", "zsplit", whose zero ranks
+    split evenly and so do not move W⁺ against its mean).
+    """
+    out = np.empty(len(d), dtype=int)
+    for i, row in enumerate(d):
+        if zero_method == "wilcox":
+            row = row[row != 0]
+        ranks = sps.rankdata(np.abs(row))
+        out[i] = np.sign(ranks[row > 0].sum() - ranks[row != 0].sum() / 2)
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(pools(), zero_methods, st.integers(0, 2**31 - 1))
+def test_the_side_of_each_resample_is_that_of_its_signed_rank_statistic(pool, zero_method, seed):
+    off, on = pool
+    good = np.isfinite(off) & np.isfinite(on)
+    off, on = off[good], on[good]
+    if off.size == 0:
+        return
+    idx = np.random.default_rng(seed).integers(0, off.size, (20, min(off.size, 9) + 1))
+    _, _, side = resampled_p_values(off, on, idx, zero_method=zero_method, sides=True)
+    d = np.round(on - off, 10)[idx]
+    assert np.array_equal(side, _side(d, zero_method))
 
 
 def test_power_of_a_continuous_population_matches_direct_simulation():
@@ -148,10 +178,12 @@ def test_power_of_a_continuous_population_matches_direct_simulation():
     direct_m = 20_000
     for n in (12, 30):
         d = rng.normal(-0.5, 1.0, (direct_m, n)) * 0.3  # fresh studies from the population itself
-        rate = float((sps.wilcoxon(d, axis=1).pvalue < 0.05).mean())  # exact test: no ties in continuous data
+        reject = sps.wilcoxon(d, axis=1).pvalue < 0.05  # exact test: no ties in continuous data
         row = result.frame[(result.frame["metric"] == "rmse_n") & (result.frame["n"] == n)].iloc[0]
-        _agree(row, rate, direct_m)
-        assert 0.1 < rate < 0.95  # a power that can be told apart from 0 and 1
+        assert row["direction"] == "on_lower"
+        _agree(row, float((reject & (_side(d) < 0)).mean()), direct_m)  # detected, and lower with haptics
+        _agree(row, float(reject.mean()), direct_m, "two_sided_")
+        assert 0.1 < row["power"] < 0.95  # a power that can be told apart from 0 and 1
 
 
 def test_power_of_a_discrete_population_matches_direct_simulation():
@@ -166,14 +198,17 @@ def test_power_of_a_discrete_population_matches_direct_simulation():
     result = estimate_power(_pool(*draw(rng, 20_000)), (10, 16), resamples=4000, seed=5)
     direct_m = 1500
     for n in (10, 16):
-        hits = 0
+        hits = hits_up = 0
         for _ in range(direct_m):
             off, on = draw(rng, n)
             res = paired_wilcoxon(off, on)
-            hits += bool(res.computable and res.p_value < 0.05)
+            significant = bool(res.computable and res.p_value < 0.05)
+            hits += significant
+            hits_up += significant and _side(np.round(on - off, 10)[None, :])[0] > 0
         row = result.frame[(result.frame["metric"] == "success_rate") & (result.frame["n"] == n)].iloc[0]
-        assert row["permutation"] + row["approx"] > 0.9 * row["resamples"]
-        _agree(row, hits / direct_m, direct_m)
+        assert row["permutation"] + row["approx"] > 0.9 * row["resamples"] and row["direction"] == "on_higher"
+        _agree(row, hits_up / direct_m, direct_m)
+        _agree(row, hits / direct_m, direct_m, "two_sided_")
 
 
 def test_no_effect_rejects_at_rate_alpha():
@@ -183,9 +218,12 @@ def test_no_effect_rejects_at_rate_alpha():
     result = estimate_power(_pool(off, on), (6, 20, 30), resamples=4000, seed=1)
     rows = result.frame[result.frame["metric"] == "rmse_n"].set_index("n")
     for n in (20, 30):
-        assert rows.at[n, "ci_low"] <= 0.05 <= rows.at[n, "ci_high"], rows.loc[n, ["power", "ci_low", "ci_high"]]
-    # at n = 6 the exact test can only reach p = 2/64 < 0.05 for all-positive or all-negative studies: 2/64 of them
-    assert rows.at[6, "ci_low"] <= 2 / 64 <= rows.at[6, "ci_high"]
+        assert rows.at[n, "two_sided_ci_low"] <= 0.05 <= rows.at[n, "two_sided_ci_high"], rows.loc[n]
+        assert rows.at[n, "ci_low"] <= 0.025 <= rows.at[n, "ci_high"], rows.loc[n]  # one side of it: α/2
+    # at n = 6 the exact test can only reach p = 2/64 < 0.05 for all-positive or all-negative studies: 2/64 of
+    # them, and half of those lie on the pool's side
+    assert rows.at[6, "two_sided_ci_low"] <= 2 / 64 <= rows.at[6, "two_sided_ci_high"]
+    assert rows.at[6, "ci_low"] <= 1 / 64 <= rows.at[6, "ci_high"]
     fam = result.frame[(result.frame["metric"] == FAMILY_ANY) & (result.frame["n"] == 30)].iloc[0]
     assert fam["power"] <= 0.05 + 0.01  # Holm keeps the family-wise error at α (four identical tests here)
 
@@ -234,6 +272,10 @@ def test_estimate_writes_the_promised_columns_and_is_reproducible():
     assert set(f["metric"]) == {"success_rate", "tct_s", "rmse_n", "max_ae_n", FAMILY_ALL, FAMILY_ANY}
     assert ((f["ci_low"] <= f["power"]) & (f["power"] <= f["ci_high"])).all()
     assert (f["power_holm"] <= f["power"]).all()  # Holm never rejects what the test alone does not
+    tests = f[f["metric"].isin(pool.metrics)]
+    assert (tests["power"] <= tests["power_two_sided"]).all()  # directional: a subset of the rejections
+    assert set(tests["direction"]) <= {"on_higher", "on_lower"} and f[~f["metric"].isin(pool.metrics)][
+        "power_two_sided"].isna().all()
     assert (f[f["metric"] != FAMILY_ANY]["exact"] + f["permutation"] + f["approx"] + f["not_computable"]
             == f["resamples"])[f["metric"].isin(pool.metrics)].all()
 
@@ -258,6 +300,32 @@ def test_all_zero_differences_give_power_zero_with_a_note():
     assert any("RMSE (N): every participant has ON = OFF" in n for n in result.notes)
     assert smallest_n(result.frame, "overall", "rmse_n", 0.8) is None
     assert "> 12 (0%)" in summary_text(result)
+
+
+def test_a_rejection_against_the_pools_direction_is_not_power():
+    """A pool whose effect is weak and mixed: resampled studies sometimes reject the wrong way round."""
+    rng = np.random.default_rng(8)
+    off = rng.normal(0.0, 1.0, 12)
+    on = off + rng.normal(0.15, 1.0, 12)
+    result = estimate_power(_pool(off, on), (6, 10, 16), resamples=3000, seed=2)
+    rows = result.frame[result.frame["metric"] == "rmse_n"]
+    wrong_way = rows["rejections_two_sided"] - rows["rejections"]
+    assert (wrong_way > 0).any() and (wrong_way >= 0).all()
+    # and they are exactly the two-sided rejections whose side is not the pool's
+    pool_side = 1 if rows["direction"].iloc[0] == "on_higher" else -1
+    idx = resample_indices(2, 10, 3000, 12)
+    p, _, side = resampled_p_values(off, on, idx, sides=True)
+    assert int(((p < 0.05) & (side == pool_side)).sum()) == int(rows[rows["n"] == 10]["rejections"].iloc[0])
+
+
+def test_a_pool_of_one_sign_is_said_to_overstate_power():
+    trials = _trials(8)
+    result = estimate_power(pool_from_trials(trials), (6,), resamples=50)
+    pool = pool_from_trials(trials)
+    d = pool.on[0, 2] - pool.off[0, 2]
+    assert (d < 0).all()  # RMSE lower with haptics for every one of these participants
+    one_sign = [n for n in result.notes if n.startswith("every participant of the pool has the same sign")]
+    assert len(one_sign) == 1 and "RMSE (N) ON < OFF" in one_sign[0] and "overstates the power" in one_sign[0]
 
 
 def test_a_pilot_of_three_is_refused_in_words():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import html.parser
+import json
 import sqlite3
 import subprocess
 import sys
@@ -31,6 +33,34 @@ def pilots(tmp_path_factory):
     return six, three
 
 
+def _html_table(page: str) -> pd.DataFrame:
+    """The first table of a page: its head and body cells (text only) as a frame."""
+    class Cells(html.parser.HTMLParser):
+        head: list[str] = []
+        rows: list[list[str]] = []
+        cell: list[str] | None = None
+
+        def handle_starttag(self, tag, attrs):
+            if tag == "tr":
+                self.rows.append([])
+            elif tag in ("td", "th"):
+                self.cell = []
+
+        def handle_endtag(self, tag):
+            if tag in ("td", "th") and self.cell is not None:
+                (self.head if tag == "th" else self.rows[-1]).append("".join(self.cell).strip())
+                self.cell = None
+
+        def handle_data(self, data):
+            if self.cell is not None:
+                self.cell.append(data)
+
+    p = Cells()
+    p.head, p.rows = [], []
+    p.feed(page[page.index("<table"): page.index("</table>")])
+    return pd.DataFrame([r for r in p.rows if r], columns=p.head)
+
+
 def _run(capsys, *argv):
     code = main([str(a) for a in argv])
     out = capsys.readouterr()
@@ -39,8 +69,6 @@ def _run(capsys, *argv):
 
 def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, capsys):
     out = tmp_path / "plan"
-    out.mkdir()
-    (out / "notes.md").write_text("mine")  # someone else's file in the folder: left alone
     code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400",
                                 "--n", "6,10,16")
     assert code == 0, stderr
@@ -49,16 +77,69 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert "resampled Wilcoxon tests (and Holm) in" in stderr
     for name in ("power.csv", "power.txt", "power.png", "power.pdf", "power.svg"):
         assert (out / name).stat().st_size > 500, name
-    assert (out / "notes.md").read_text() == "mine"
+    assert "Power at each n (overall; the two-sided rejection rate in brackets):" in stdout
     frame = pd.read_csv(out / "power.csv")
     assert list(frame.columns[: len(POWER_CSV_COLUMNS)]) == list(POWER_CSV_COLUMNS)
     assert sorted(set(frame["n"])) == [6, 10, 16] and set(frame["resamples"]) == {400}
     assert set(frame["scope"]) == {"overall", "GENTLE", "FIRM"}
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
-    # a second run replaces its own files and gives the same numbers for the same seed
-    assert _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")[0] == 0
+    marker = json.loads((out / ".haptic-study-power").read_text())
+    assert sorted(marker["files"]) == ["power.csv", "power.pdf", "power.png", "power.svg", "power.txt"]
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")
+    # a second run needs --force; it replaces its own files and gives the same numbers for the same seed
+    code, _, stderr = _run(capsys, *argv)
+    assert code == 2 and "the folder exists and is not empty" in stderr and "pass --force" in stderr
+    assert _run(capsys, *argv, "--force")[0] == 0
     pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), frame)
-    assert not list(out.glob(".*.tmp"))
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+def test_power_force_replaces_only_its_own_unedited_files(pilots, tmp_path, capsys):
+    out = tmp_path / "plan"
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "50", "--n", "6")
+    assert _run(capsys, *argv)[0] == 0
+    (out / "notes.md").write_text("mine")  # someone else's file: a refusal naming it, nothing touched
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, stdout, stderr = _run(capsys, *argv, "--force")
+    assert code == 2 and stdout == ""
+    assert stderr == (f"haptic-study: error: --out {out}: holds notes.md, which power did not write; move it or "
+                      "choose another folder (nothing was deleted)\n")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    (out / "notes.md").unlink()
+    with (out / "power.txt").open("a") as f:  # an edited output: the same
+        f.write("my reading of it\n")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    code, _, stderr = _run(capsys, *argv, "--force")
+    assert code == 2 and stderr.count("\n") == 1 and "power.txt was changed since power wrote it" in stderr
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_power_refuses_a_pilot_inside_the_output_folder(pilots, tmp_path, capsys):
+    out = tmp_path / "plan"
+    out.mkdir()
+    db = out / "pilot.db"
+    db.write_bytes(pilots[0].read_bytes())
+    code, _, stderr = _run(capsys, "power", "--db", db, "--out", out, "--force", "--resamples", "50")
+    assert code == 2 and stderr.count("\n") == 1 and f"--out {out}: holds the input database {db}" in stderr
+    assert [p.name for p in out.iterdir()] == ["pilot.db"]
+
+
+def test_power_crashing_while_writing_leaves_the_old_output(pilots, tmp_path, capsys, monkeypatch):
+    import analysis.power_figures
+
+    out = tmp_path / "plan"
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "50", "--n", "6")
+    assert _run(capsys, *argv)[0] == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+
+    def broken(result):
+        raise RuntimeError("the figure crashed")
+
+    monkeypatch.setattr(analysis.power_figures, "power_curves", broken)
+    with pytest.raises(RuntimeError, match="the figure crashed"):
+        main([str(a) for a in (*argv[:-2], "--n", "8", "--force")])
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]
 
 
 def test_power_refuses_a_pilot_of_three_in_one_line(pilots, tmp_path, capsys):
@@ -147,12 +228,23 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
     before = sessions()
     assert [s[1:] for s in before].count(("experiment", "completed")) == 4
-    code, stdout2, stderr2 = _run(capsys, *argv)
+    pool_bytes = pool.read_bytes()
+    assert "pool-4-seed7.db" not in json.loads((out / ".haptic-study-power").read_text())["files"]
+    code, stdout2, stderr2 = _run(capsys, *argv, "--force")  # --force replaces the outputs, never the pool
     assert code == 0
-    assert f"reusing the simulated pool {pool}" in stderr2 and "simulating pool" not in stderr2
-    assert sessions() == before
+    assert f"reusing the simulated pool {pool} (SHA-256 checked)" in stderr2 and "simulating pool" not in stderr2
+    assert sessions() == before and pool.read_bytes() == pool_bytes
     pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), first)
     assert stdout2 == stdout
+    # a fresh folder holding only the pool (and its record) needs no --force
+    only_pool = tmp_path / "only-pool"
+    only_pool.mkdir()
+    for p in out.glob("pool-*"):
+        (only_pool / p.name).write_bytes(p.read_bytes())
+    code, stdout3, stderr3 = _run(capsys, "power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200",
+                                  "--n", "6,10", "--out", only_pool)
+    assert code == 0 and "reusing the simulated pool" in stderr3
+    assert stdout3.split("\nWritten in")[0] == stdout.split("\nWritten in")[0]
 
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
@@ -161,7 +253,21 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page
-    assert "Source: this study; 6 participants with both haptic modes" in page
+    assert "Resampling this study's 6 participants with both haptic modes" in page
+    # a real table built from the result, not preformatted text
+    assert "<pre" not in page
+    section = page[page.index('<section class="power">'):]
+    section = section[: section.index("</section>")]
+    table = _html_table(section)
+    assert list(table.columns[:7]) == ["target", "measure", "pilot shows", "n for 80 %", "n for 80 % (Holm)",
+                                       "n for 90 %", "n for 90 % (Holm)"]
+    assert list(table.columns[7:]) == [f"n = {n}" for n in (6, 8, 10, 12, 16, 20, 30)]
+    assert len(table) == 3 * 6 and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
+    frame = pd.read_csv(out / "power.csv")
+    rmse = frame[(frame["scope"] == "overall") & (frame["metric"] == "rmse_n")].set_index("n")
+    row = table[(table["target"] == "overall") & (table["measure"] == "RMSE (N)")].iloc[0]
+    assert row["n = 10"] == f"{rmse.at[10, 'power']:.0%}" and row["pilot shows"] == "ON < OFF"
+    assert "undefined for 2 of 6 participants" in section  # the notes, as a list
     assert (out / "power.csv").is_file() and (out / "figures" / "power.png").stat().st_size > 1000
     assert page.index("What n would a study need?") < page.index("<h2>Methods</h2>")
     # power.csv is described in the codebook like every other CSV of the report
@@ -175,23 +281,55 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert not (tmp_path / "plain" / "power.csv").exists()
 
 
-def test_report_power_of_three_participants_says_why_not(pilots, tmp_path):
+def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsys):
     from analysis.load import load_study
     from analysis.metrics import MetricOptions, compute_trials
     from analysis.power import report_section
 
     trials = compute_trials(load_study([pilots[1]]), workers=1).trials
-    text, png = report_section(trials, MetricOptions(), "wilcox", tmp_path)
-    assert png is None
-    assert text.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 are needed")
+    section = report_section(trials, MetricOptions(), "wilcox", tmp_path)
+    assert section.result is None and section.png is None
+    assert section.notice.startswith("Not estimated: this study has 3 participants with both haptic modes: at least 4 "
+                                     "are needed")
     assert not list(tmp_path.iterdir())
+    # and the report shows it, visibly, where the section would be
+    code, _, stderr = _run(capsys, "report", "--db", pilots[1], "--out", tmp_path / "rep", "--power")
+    assert code == 0, stderr
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    assert ('<h2>What n would a study need?</h2><p class="warn">Not estimated: this study has 3 participants with '
+            "both haptic modes") in page
+    assert not (tmp_path / "rep" / "power.csv").exists()
+
+
+def test_report_power_table_leaves_out_empty_columns(monkeypatch):
+    import analysis.power
+    from analysis.power import ReportPower, estimate_power, plan_table, pool_from_trials
+    from analysis.report import _power_html
+
+    trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
+                                success=True, tct_s=3.0 + p + (m == "on"), rmse_n=1.0 + p * (m == "on"),
+                                max_ae_n=2.0, time_in_band_s=1.0, peak_force_n=1.0, tct_censored_s=3.0)
+                           for p in range(6) for m in ("off", "on")])
+    result = estimate_power(pool_from_trials(trials), (6, 10), resamples=50)
+    full = _power_html(ReportPower(result, "", None))
+    assert "<th>pilot shows</th>" in full and "<th>n for 80 %</th>" in full
+
+    def without_direction(r):
+        t = plan_table(r)
+        t["direction"] = ""
+        return t
+
+    monkeypatch.setattr(analysis.power, "plan_table", without_direction)
+    page = _power_html(ReportPower(result, "", None))
+    assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
+    assert page.count("<td") == full.count("<td") - len(plan_table(result))
 
 
 def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
     from bench.power_bench import format_power_bench, run_power_bench
 
     r = run_power_bench(resamples=60, reference_resamples=6, n_values=(6, 12, 30), repeats=1)
-    assert r["identical_p_values"] == r["reference_tests"] == 6 * 3 * 4
+    assert r["identical_p_values"] == r["identical_sides"] == r["reference_tests"] == 6 * 3 * 4
     text = format_power_bench(r)
     assert "paired_wilcoxon loop" in text and "speed-up" in text
     code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
