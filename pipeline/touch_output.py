@@ -105,54 +105,65 @@ class TouchSpec:
 class MotorHeat:
     """The Touch's thermal budget: heat, the derated force limit, and whether the budget was passed.
 
+    :attr:`limit_n`, :attr:`fraction` and :attr:`over_budget` are kept up to date whenever the heat changes
+    (they are read every servo and loop tick; the heat changes once per servo tick).
+
     Parameters
     ----------
     spec
         Peak, continuous rating, budget and where derating starts.
     """
 
-    __slots__ = ("spec", "heat_n2s", "_cont2", "_budget", "_from", "_span", "_peak", "_drop")
+    __slots__ = ("spec", "_h", "limit_n", "fraction", "over_budget", "_cont2", "_budget", "_from", "_span",
+                 "_peak", "_drop")
 
     def __init__(self, spec: TouchSpec) -> None:
         self.spec = spec
-        self.heat_n2s = 0.0
         self._cont2 = spec.continuous_force_n ** 2
         self._budget = spec.thermal_budget_n2s
         self._from = spec.derate_from_fraction * spec.thermal_budget_n2s
         self._span = spec.thermal_budget_n2s - self._from
         self._peak = spec.peak_force_n
         self._drop = spec.peak_force_n - spec.continuous_force_n
+        #: The force the device may render now, N: its peak, falling to the continuous rating as it warms.
+        self.limit_n = self._peak
+        #: Heat as a fraction of the budget (0 cold, 1 at the budget).
+        self.fraction = 0.0
+        #: The heat passed the budget (the device must stop: ``HD_WARM_MOTORS``).
+        self.over_budget = False
+        self._h = 0.0
+        self.heat_n2s = 0.0
 
     @property
-    def fraction(self) -> float:
-        """Heat as a fraction of the budget (0 cold, 1 at the budget)."""
-        return self.heat_n2s / self._budget
+    def heat_n2s(self) -> float:
+        """Motor heat above the continuous rating's steady state, N²·s (0 cold)."""
+        return self._h
 
-    @property
-    def limit_n(self) -> float:
-        """The force the device may render now, N: its peak, falling to the continuous rating as it warms."""
-        h = self.heat_n2s
+    @heat_n2s.setter
+    def heat_n2s(self, h: float) -> None:
+        self._h = h
         if h <= self._from:
-            return self._peak
-        if h >= self._budget:
-            return self.spec.continuous_force_n
-        return self._peak - self._drop * (h - self._from) / self._span
-
-    @property
-    def over_budget(self) -> bool:
-        """The heat passed the budget (the device must stop: ``HD_WARM_MOTORS``)."""
-        return self.heat_n2s > self._budget
+            self.limit_n = self._peak
+        elif h >= self._budget:
+            self.limit_n = self.spec.continuous_force_n
+        else:
+            self.limit_n = self._peak - self._drop * (h - self._from) / self._span
+        self.fraction = h / self._budget
+        self.over_budget = h > self._budget
 
     def add(self, force_n: float, dt_s: float) -> None:
         """Account ``dt_s`` of rendering ``force_n`` (a magnitude, N)."""
         if dt_s > _MAX_HEAT_DT_S:
             dt_s = _MAX_HEAT_DT_S
-        h = self.heat_n2s + (force_n * force_n - self._cont2) * dt_s
-        self.heat_n2s = h if h > 0.0 else 0.0
+        h = self._h + (force_n * force_n - self._cont2) * dt_s
+        if h > 0.0:
+            self.heat_n2s = h
+        elif self._h != 0.0:  # cold, and it stays so: nothing to update (the common case at rest)
+            self.heat_n2s = 0.0
 
     def cooled(self) -> bool:
         """Cool enough to re-arm after ``HD_WARM_MOTORS`` (half the budget)."""
-        return self.heat_n2s <= 0.5 * self._budget
+        return self._h <= 0.5 * self._budget
 
 
 class TouchOutput:

@@ -66,6 +66,8 @@ class SimRobot:
         self.servo_stops = 0
         #: Set to make the adapter report an error (a protective stop), for tests.
         self.fail_servo = ""
+        self._lag_dt_s = -1.0  # the dt the lag factor was computed for (the tick period, nearly always the same)
+        self._lag_a = 0.0
 
     def command(self, target_m: Vec3) -> None:
         """Set the TCP position the teleoperation program asks for (base frame, m)."""
@@ -116,7 +118,10 @@ class SimRobot:
             while self._next_cycle_ns <= now_ns:
                 self._next_cycle_ns += self._cycle_ns
         if dt_s > 0:
-            a = 1.0 - math.exp(-dt_s / self.params.tracking_lag_s)
+            if dt_s != self._lag_dt_s:
+                self._lag_dt_s = dt_s
+                self._lag_a = 1.0 - math.exp(-dt_s / self.params.tracking_lag_s)
+            a = self._lag_a
             p, t = self.position_m, self._held_target
             p[0] += (t[0] - p[0]) * a
             p[1] += (t[1] - p[1]) * a

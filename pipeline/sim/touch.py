@@ -85,8 +85,8 @@ class SimTouch:
 
     def read_state(self) -> HapticState:
         """Stylus position (m, device frame), buttons, error code, the derated force limit and the heat fraction."""
-        out = self.output
-        return HapticState(self._t_ns, self.stylus_m, self.buttons, self.error_code, out.limit_n, out.heat.fraction)
+        heat = self.output.heat
+        return HapticState(self._t_ns, self.stylus_m, self.buttons, self.error_code, heat.limit_n, heat.fraction)
 
     def close(self) -> None:
         """Zero the output."""
