@@ -144,8 +144,10 @@ def check_output_folder(
     if not present:
         return out
     if not force:
-        raise AnalysisError(f"--out {out}: the folder exists and is not empty; pass --force to replace it (only "
-                            f"the files {command} wrote there, unedited, e.g. {present[0]}) or choose another folder")
+        more = f" and {len(present) - 1} more" if len(present) > 1 else ""
+        raise AnalysisError(f"--out {out}: the folder exists and holds {present[0]}{more}; choose another folder, or "
+                            f"pass --force to replace a folder {command} wrote before (--force replaces only "
+                            f"{command}'s own unedited files)")
     listed = read_marker(out, marker)
     if listed is None:
         raise AnalysisError(f"--out {out}: not a folder {command} wrote (no readable {marker} in it); --force "

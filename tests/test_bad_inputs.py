@@ -275,7 +275,7 @@ CASES: list[Case] = [
          "notes.db: not a haptic-study database", {"notes.db": _text("minutes of the lab meeting\n" * 200)}),
     Case("database: a folder", (*CONTINUE, "{d}/study.db"), "study.db: is a directory, not a database file", {"study.db": folder, **TINY}),
     Case("database: report into a non-empty folder", ("report", "--db", "{d}/good.db", "--out", "{d}/out"),
-         "out: the folder exists and is not empty; pass --force to replace it", {"good.db": good_db, "out": folder}),
+         "out: the folder exists and holds ", {"good.db": good_db, "out": folder}),
     Case("database: read-only, run --continue", (*CONTINUE, "{d}/good.db"), "good.db: the database is not writable",
          {"good.db": good_db, **TINY}, read_only="good.db"),
     Case("database: damaged, run --continue", (*CONTINUE, "{d}/damaged.db"), "damaged.db: the database is damaged",

@@ -47,8 +47,8 @@ def test_an_existing_non_empty_folder_needs_force(tmp_path):
     out = tmp_path / "o"
     _write(out, {"a.csv": "1"})
     before = _snapshot(out)
-    with pytest.raises(AnalysisError, match=r"the folder exists and is not empty; pass --force to replace it \(only "
-                       r"the files test wrote there, unedited, e.g. a.csv\) or choose another folder"):
+    with pytest.raises(AnalysisError, match=r"the folder exists and holds a.csv; choose another folder, or pass "
+                       r"--force to replace a folder test wrote before \(--force replaces only test's own unedited files\)"):
         _write(out, {"a.csv": "2"})
     assert _snapshot(out) == before
 

@@ -88,7 +88,7 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")
     # a second run needs --force; it replaces its own files and gives the same numbers for the same seed
     code, _, stderr = _run(capsys, *argv)
-    assert code == 2 and "the folder exists and is not empty" in stderr and "pass --force" in stderr
+    assert code == 2 and "the folder exists and holds power.csv and 4 more" in stderr and "pass --force" in stderr
     assert _run(capsys, *argv, "--force")[0] == 0
     pd.testing.assert_frame_equal(pd.read_csv(out / "power.csv"), frame)
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary folder left
