@@ -233,10 +233,13 @@ class QtForcePlots(QWidget):
         self.band.setZValue(-10)
         self.band.setVisible(False)
         self.task.addItem(self.band)
-        self.band_label = pg.TextItem(color=(0, 84, 140), anchor=(1, 1))
-        self.clip_label = pg.TextItem(color=(179, 20, 27), anchor=(1, 0))
+        # on a pale backing, above the traces: a force held just above the band runs through the label
+        backing = pg.mkBrush(255, 255, 255, 215)
+        self.band_label = pg.TextItem(color=(0, 84, 140), anchor=(1, 1), fill=backing)
+        self.clip_label = pg.TextItem(color=(179, 20, 27), anchor=(1, 0), fill=backing)
         for item in (self.band_label, self.clip_label):
             item.setVisible(False)
+            item.setZValue(10)
             self.task.addItem(item, ignoreBounds=True)
         self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
         self.lower = self.view.addPlot(row=1, col=0)

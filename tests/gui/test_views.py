@@ -197,6 +197,9 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
     assert view.band.getRegion() == pytest.approx((0.54, 0.66))
     assert view.band_label.textItem.toPlainText() == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
+    # legible where the force runs through it: on an opaque-enough backing, drawn above the traces
+    assert view.band_label.fill.color().alpha() >= 200
+    assert all(view.band_label.zValue() > c.zValue() for c in view.curves.values())
     assert not view.clip_label.isVisible()
     assert view.lower.viewRange()[1][1] >= 7.6
     plots.data["force_n"][-1] = 18.0
