@@ -79,6 +79,8 @@ from analysis.stats import (
 
 __all__ = [
     "DEFAULT_N_VALUES",
+    "DIRECTION_NAMES",
+    "DIRECTION_TEXT",
     "FAMILY_ALL",
     "FAMILY_ANY",
     "MIN_PILOT",
@@ -117,6 +119,8 @@ POWER_CSV_COLUMNS = (
 )
 #: ``direction`` of power.csv: the pool's direction of effect per metric (the one a rejection must have).
 DIRECTION_NAMES = {1: "on_higher", -1: "on_lower", 0: "none"}
+#: The same directions in words, for people (the text summary and the report's table); family rows have none.
+DIRECTION_TEXT = {"on_higher": "ON > OFF", "on_lower": "ON < OFF", "none": "no effect", "": ""}
 #: Method codes of :func:`resampled_p_values` (0: no test possible).
 METHOD_NAMES = ("", "exact", "permutation", "approx")
 _METHOD_CODE = {name: code for code, name in enumerate(METHOD_NAMES)}
@@ -664,9 +668,10 @@ def estimate_power(
     frame["resamples"] = R
     frame["alpha"] = float(alpha)
     frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
-    for prefix, col in (("", "rejections"), ("two_sided_", "rejections_two_sided"), ("holm_", "rejections_holm")):
+    for prefix, col, power_col in (("", "rejections", "power"),
+                                   ("two_sided_", "rejections_two_sided", "power_two_sided"),
+                                   ("holm_", "rejections_holm", "power_holm")):
         k = frame[col].to_numpy(dtype=float, na_value=np.nan)
-        power_col = {"": "power", "two_sided_": "power_two_sided", "holm_": "power_holm"}[prefix]
         frame[power_col] = k / R
         lo, hi = monte_carlo_interval(np.nan_to_num(k), R, interval_level)
         frame[f"{prefix}ci_low"] = np.where(np.isnan(k), np.nan, lo)
@@ -752,7 +757,7 @@ def summary_text(result: PowerResult) -> str:
         if metric in FAMILY_LABELS:
             continue
         sel = overall[overall["metric"] == metric].set_index("n")
-        direction = {"on_higher": "ON > OFF", "on_lower": "ON < OFF"}.get(str(sel["direction"].iloc[0]), "no effect")
+        direction = DIRECTION_TEXT[str(sel["direction"].iloc[0])]
         cells = [f"{sel.at[n, 'power']:.0%} ({sel.at[n, 'power_two_sided']:.0%})" for n in ns]
         lines.append(f"  {_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     last = max(result.n_values)

@@ -223,7 +223,6 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str
 #: Headings of the power table's columns (``target`` and ``measure`` are the row labels, as in the test tables).
 _POWER_HEADINGS = {"scope": "target", "metric": "measure", "direction": "pilot shows", "n80": "n for 80 %",
                    "n80_holm": "n for 80 % (Holm)", "n90": "n for 90 %", "n90_holm": "n for 90 % (Holm)"}
-_DIRECTION_TEXT = {"on_higher": "ON > OFF", "on_lower": "ON < OFF", "none": "no effect", "": ""}
 
 
 def _power_html(section: Any) -> str:
@@ -234,7 +233,7 @@ def _power_html(section: Any) -> str:
     with no value in any row are left out.  In print, its rows never split,
     its head repeats on every page and the heading stays with it (``_CSS``).
     """
-    from analysis.power import FAMILY_LABELS, _label, plan_table
+    from analysis.power import DIRECTION_TEXT, FAMILY_LABELS, _label, plan_table
 
     head = "<h2>What n would a study need?</h2>"
     if section.result is None:
@@ -249,7 +248,7 @@ def _power_html(section: Any) -> str:
         elif col == "metric":
             cells[col] = [html.escape(_label(str(v))) for v in table[col]]
         elif col == "direction":
-            cells[col] = [_DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
+            cells[col] = [DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
         elif col.startswith("power_n"):
             cells[col] = ["" if not np.isfinite(v) else f"{v:.0%}" for v in table[col]]
         else:
@@ -621,8 +620,7 @@ def build_report(
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     n_incomplete = int((exp["status"] != "completed").sum())
     n_participants = int(trials["participant_code"].nunique())
-
-    made: dict[str, pd.DataFrame] = {}
+    tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
 
     def fill(tmp: Path) -> None:
         fig_dir = tmp / "figures"
@@ -665,7 +663,6 @@ def build_report(
             from analysis.power import report_section
 
             power_html = _power_html(report_section(trials, options, zero_method, tmp))
-        tables = _export_tables(study, trials, overall, by_target, stats, stats_by_target, sa)
         _write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         page = _page(
             study=study, table=table, options=options, zero_method=zero_method, confidence=confidence,
@@ -673,8 +670,7 @@ def build_report(
             marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=power_html,
         )
         (tmp / "report.html").write_text(page, encoding="utf-8")
-        made["stats.csv"] = tables["stats.csv"]
 
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, n_participants, len(trials), int(study.included["n_samples"].fillna(0).sum()),
-                         excluded, made["stats.csv"], files)
+                         excluded, tables["stats.csv"], files)
