@@ -53,6 +53,11 @@ class RingReadResult:
         self.lost = lost
 
 
+def _segment_path(name: str) -> str:
+    """Where a POSIX shared-memory segment of that name lives (Linux)."""
+    return os.path.join("/dev/shm", name.lstrip("/"))
+
+
 class RingBuffer:
     """Shared-memory (or private) ring of float64 records.
 
@@ -120,7 +125,7 @@ class RingBuffer:
     @classmethod
     def attach(cls, name: str) -> RingBuffer:
         """Attach to a ring created by another process (read side)."""
-        path = os.path.join("/dev/shm", name.lstrip("/"))
+        path = _segment_path(name)
         if not os.path.exists(path):
             raise FileNotFoundError(f"no ring buffer named {name!r} (is the engine running?)")
         # Map the segment directly rather than through SharedMemory: on
@@ -135,6 +140,31 @@ class RingBuffer:
         ring = cls(memoryview(mm), None, owner=False)
         ring._mmap = mm
         return ring
+
+    @staticmethod
+    def free_orphaned(name: str) -> bool:
+        """Unlink the segment of a ring whose creator died without freeing it (killed by a signal); True if freed.
+
+        A writer that exits normally unlinks its own segment (:meth:`close`).  One
+        killed leaves it until the resource tracker of the process tree frees it at
+        exit, with a warning; the reader that knows the writer is dead frees it at
+        once and tells the tracker so.  Call it only for a ring whose writer is known
+        to be dead: it removes nothing but the segment of that name.
+        """
+        path = _segment_path(name) if name else ""
+        if not path or not os.path.exists(path):
+            return False
+        try:
+            os.unlink(path)
+        except OSError:
+            return False
+        try:
+            from multiprocessing import resource_tracker
+
+            resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
+        except Exception:  # noqa: BLE001 - the tracker is only told to keep quiet; the segment is gone already
+            pass
+        return True
 
     @property
     def name(self) -> str | None:

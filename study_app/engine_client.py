@@ -9,7 +9,6 @@ events into Qt signals -- pymeasure's worker → queue → Qt bridge.
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import queue
 from typing import Any
 
@@ -109,28 +108,7 @@ class EngineClient:
             self.ring.close()
             self.ring = None
         if self.started and not self._proc.is_alive():
-            _free_orphaned_ring(self.ring_name)
+            RingBuffer.free_orphaned(self.ring_name)  # killed: it could not free its own ring
         self._events.close()
         self._events.join_thread()
 
-
-def _free_orphaned_ring(name: str) -> None:
-    """Unlink the ring segment of an engine that died without freeing it (killed, crashed).
-
-    An engine that exits normally unlinks its own segment.  One killed by a signal
-    leaves it in /dev/shm until the GUI exits (when the shared resource tracker frees
-    it with a warning); a restart frees it at once and tells the tracker so.
-    """
-    path = os.path.join("/dev/shm", name.lstrip("/")) if name else ""
-    if not path or not os.path.exists(path):
-        return
-    try:
-        os.unlink(path)
-    except OSError:
-        return
-    try:
-        from multiprocessing import resource_tracker
-
-        resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
-    except Exception:  # noqa: BLE001 - the tracker is only told to keep quiet; the segment is gone already
-        pass

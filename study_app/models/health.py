@@ -5,7 +5,6 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
 
@@ -53,13 +52,28 @@ _VERBS = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset", "d
 _NUMBER = re.compile(r"\d+(?:\.\d+)?")
 
 
-def _run_line(run: list[Any]) -> str:
-    """A run of events as one log line: the first, and for more than one, ×N and the newest's time and detail."""
-    _key, first, last, n, detail = run
-    verb = _key[0]
-    if n == 1:
-        return f"{first}  {verb}: {detail}"
-    return f"{first}  {verb} ×{n} (the last at {' '.join(last.split())}): {detail}"
+@dataclass(slots=True)
+class _LogRun:
+    """Events of one kind in a row (numbers in their details aside), shown as one line of the fault log."""
+
+    key: tuple[str, str]
+    first: str  # when the first happened ("" for a line that is no event: "engine restarted")
+    last: str
+    detail: str  # the newest one's
+    count: int = 1
+
+    def line(self) -> str:
+        """The first, and for more than one, ×N and the newest's time and detail."""
+        verb = self.key[0]
+        if not self.first:
+            return verb
+        if self.count == 1:
+            return f"{self.first}  {verb}: {self.detail}"
+        return f"{self.first}  {verb} ×{self.count} (the last at {' '.join(self.last.split())}): {self.detail}"
+
+
+#: Lines the fault log keeps.
+_LOG_LINES = 50
 
 
 #: Fault bits that belong to each device row.
@@ -90,7 +104,6 @@ class HealthModel:
 
     connected: bool = False
     faults: int = 0
-    fault_log: list[str] = field(default_factory=list)
     loop: m.Health | None = None
     devices: list[DeviceStatus] = field(default_factory=list)
     #: Largest task force in the newest records, N, and whether a trial was running then.
@@ -101,8 +114,13 @@ class HealthModel:
     #: The jaw (None: the rig has none, or it has not reported yet).
     jaw: m.JawState | None = None
     changed: Emitter = field(default_factory=Emitter)
-    #: The runs behind :attr:`fault_log`: [key, first when, last when, count, newest detail].
-    _log_runs: list[list[Any]] = field(default_factory=list, repr=False)
+    #: The runs behind :attr:`fault_log`, oldest first.
+    _log_runs: list[_LogRun] = field(default_factory=list, repr=False)
+
+    @property
+    def fault_log(self) -> list[str]:
+        """The newest events, one line each; a run of the same event is one line counted ``×N``."""
+        return [run.line() for run in self._log_runs]
 
     def apply(self, ev: object) -> None:
         """Update from an engine event."""
@@ -135,24 +153,17 @@ class HealthModel:
         when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
         key = (verb, _NUMBER.sub("#", ev.detail))
         last = self._log_runs[-1] if self._log_runs else None
-        if last is not None and last[0] == key:
-            last[2] = when
-            last[3] += 1
-            last[4] = ev.detail
-            self.fault_log[-1] = _run_line(last)
+        if last is not None and last.key == key:
+            last.last, last.detail, last.count = when, ev.detail, last.count + 1
             return
-        self._log_runs.append([key, when, when, 1, ev.detail])
-        self.fault_log.append(_run_line(self._log_runs[-1]))
-        del self.fault_log[:-50]
-        del self._log_runs[:-50]
+        self._log_runs.append(_LogRun(key, when, when, ev.detail))
+        del self._log_runs[:-_LOG_LINES]
 
     def engine_restarted(self) -> None:
         """A new engine replaces the old one: its figures and faults are gone (the log keeps what happened)."""
         self.connected, self.loop, self.faults, self.devices = False, None, 0, []
-        self.fault_log.append("engine restarted")
-        self._log_runs.append([("restart", ""), "", "", 1, ""])
-        del self.fault_log[:-50]
-        del self._log_runs[:-50]
+        self._log_runs.append(_LogRun(("engine restarted", ""), "", "", ""))
+        del self._log_runs[:-_LOG_LINES]
         self.changed.emit()
 
     def update_from_rows(self, rows: np.ndarray) -> None:

@@ -455,3 +455,10 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
                               "feedback ramps in again from zero")
     assert h.fault_log[2].endswith("reset: SENSOR_STALE")
     assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
+    # a restart is a line of its own: the same event after it starts a new run; the log keeps the newest 50 lines
+    h.engine_restarted()
+    h.apply(m.EngineFault(1.0, "output_restarted", 0, "no loop tick for 10.7 ms: …", session_t_s=1.0))
+    assert h.fault_log[-2:] == ["engine restarted", "session    1.000 s  output restarted: no loop tick for 10.7 ms: …"]
+    for k in range(60):
+        h.apply(m.EngineFault(2.0 + k, "fault" if k % 2 else "fault_cleared", 1, "SENSOR_STALE"))
+    assert len(h.fault_log) == 50 and h.fault_log[-1].endswith("fault: SENSOR_STALE")

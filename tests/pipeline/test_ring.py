@@ -416,3 +416,26 @@ def test_second_process_attaches_by_name_and_its_exit_keeps_the_segment(shared_r
 
     shared_ring.close()
     assert not os.path.exists(_shm_path(name))
+
+
+def _create_ring_and_die(conn) -> None:  # type: ignore[no-untyped-def]
+    ring = RingBuffer.create(["t"], 4, shared=True)
+    ring.write([1.0])
+    conn.send(ring.name)  # a pipe write: it has left the process before the kill
+    os.kill(os.getpid(), 9)  # as a crash would: the segment is never freed
+
+
+def test_a_killed_writers_ring_is_freed_by_name_and_only_once():
+    ctx = mp.get_context("spawn")
+    here, there = ctx.Pipe()
+    p = ctx.Process(target=_create_ring_and_die, args=(there,), daemon=True)
+    p.start()
+    assert here.poll(30)
+    name = here.recv()
+    p.join(30)
+    assert p.exitcode == -9 and os.path.exists(_shm_path(name))  # left behind by the dead writer
+    reader = RingBuffer.attach(name)
+    assert reader.latest(1)["t"].tolist() == [1.0]
+    reader.close()
+    assert RingBuffer.free_orphaned(name) is True and not os.path.exists(_shm_path(name))
+    assert RingBuffer.free_orphaned(name) is False and RingBuffer.free_orphaned("") is False
