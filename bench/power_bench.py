@@ -90,7 +90,7 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
     P = pool.n_participants
     metrics = range(len(pool.metrics))
     loop_s = 0.0
-    tests = identical = same_side = 0
+    tests = identical = same_side = sided = 0
     for n in n_values:
         idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
         got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
@@ -99,16 +99,19 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
         t0 = time.perf_counter()
         ref = np.empty_like(engine)
         ref_side = np.zeros_like(engine_side)
+        computable = np.zeros(engine.shape, dtype=bool)  # a side is compared only where the test could run
         for r, rows in enumerate(idx):
             for m in metrics:
                 res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
                 ref[r, m] = res.p_value if res.computable else np.nan
-                ref_side[r, m] = np.sign(res.rank_biserial) if res.computable else engine_side[r, m]
+                if res.computable:
+                    ref_side[r, m], computable[r, m] = np.sign(res.rank_biserial), True
             holm(ref[r])
         loop_s += time.perf_counter() - t0
         tests += engine.size
         identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
-        same_side += int((engine_side == ref_side).sum())
+        same_side += int(((engine_side == ref_side) & computable).sum())
+        sided += int(computable.sum())
     loop_scaled = loop_s * resamples / reference_resamples
     overall_s = float(np.median(runs_overall))
     return {
@@ -128,6 +131,7 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
         "reference_tests": tests,
         "identical_p_values": identical,
         "identical_sides": same_side,
+        "sided_tests": sided,
         "load_average": load_average(),
         "cpu_stolen_percent": stolen,
     }
@@ -148,7 +152,8 @@ def format_power_bench(r: dict[str, Any]) -> str:
         f"  paired_wilcoxon loop, overall  {r['reference_scaled_s']:7.1f} s scaled from {r['reference_loop_s']:.2f} s "
         f"for {r['reference_resamples']} studies per n",
         f"  speed-up                       {r['speedup']:7.1f}x   (p-values identical in "
-        f"{r['identical_p_values']:,} of {r['reference_tests']:,} tests both ran, sides in {r['identical_sides']:,})",
+        f"{r['identical_p_values']:,} of {r['reference_tests']:,} tests both ran, sides in {r['identical_sides']:,} of "
+        f"{r['sided_tests']:,} computable)",
         f"  machine                        load {r['load_average'][0]:.2f}, CPU stolen by the hypervisor "
         f"{'n/a' if r['cpu_stolen_percent'] is None else format(r['cpu_stolen_percent'], '.1f') + ' %'} "
         "(during our runs)",

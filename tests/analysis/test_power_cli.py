@@ -329,7 +329,7 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
     from bench.power_bench import format_power_bench, run_power_bench
 
     r = run_power_bench(resamples=60, reference_resamples=6, n_values=(6, 12, 30), repeats=1)
-    assert r["identical_p_values"] == r["identical_sides"] == r["reference_tests"] == 6 * 3 * 4
+    assert r["identical_p_values"] == r["identical_sides"] == r["sided_tests"] == r["reference_tests"] == 6 * 3 * 4
     text = format_power_bench(r)
     assert "paired_wilcoxon loop" in text and "speed-up" in text
     code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
