@@ -1,8 +1,9 @@
 """The simulated pool of ``power --simulated``: simulated once, kept beside the output, reused only when it is sound.
 
 A pool is an ordinary study database, ``DIR/pool-N-seedS.db``, run by the
-headless study runner (:func:`protocol.study.run_study`, the paper's protocol,
-participants in parallel on the usable cores).  Beside it,
+headless study runner (``simulate``, given by the caller: ``haptic-study power``
+passes :func:`study_app.headless.run_study`, the paper's protocol, participants
+in parallel on the usable cores).  Beside it,
 ``pool-N-seedS.db.json`` records what it is: pool size, study seed, the
 protocol's identity (SHA-256 of its JSON), the software that simulated it
 (there is no separate participant-model version: the model is part of the
@@ -206,6 +207,7 @@ def simulated_pool(
     participants: int,
     seed: int,
     *,
+    simulate: Callable[..., Any],
     protocol: Any = None,
     on_progress: Callable[..., None] | None = None,
     jobs: int | None = None,
@@ -218,10 +220,16 @@ def simulated_pool(
         Folder that keeps the pool (created if missing; its parent must exist).
     participants, seed
         Pool size and study seed.
+    simulate
+        The headless study runner, called as ``run_study(db_path, participants=,
+        seed=, protocol=, on_progress=, jobs=, continue_study=)``; it raises
+        :class:`protocol.storage.StorageError`, :class:`RuntimeError` or
+        :class:`ValueError` when the simulation fails (the study floor sits above
+        analysis, so it is passed in, not imported).
     protocol
         The study protocol (default: :func:`protocol.config.default_protocol`, the paper's).
     on_progress
-        Progress callback of :func:`protocol.study.run_study`.
+        Progress callback of ``simulate``.
     jobs
         Worker processes (default: the usable cores).
 
@@ -237,8 +245,8 @@ def simulated_pool(
         simulation; one line, and no pool file is deleted.
     """
     from protocol.config import default_protocol
+    from protocol.session_setup import participant_code
     from protocol.storage import StorageError
-    from protocol.study import StudyWorkerError, participant_code, run_study
 
     if protocol is None:
         protocol = default_protocol()
@@ -273,9 +281,9 @@ def simulated_pool(
     _write_record(db, {**wanted, "complete": False, "resumed_participants": resumed})  # first: an interrupted
     # simulation is known as such
     try:
-        run_study(str(db), participants=participants, seed=seed, protocol=protocol, on_progress=on_progress,
-                  jobs=jobs, continue_study=resuming)
-    except (StorageError, StudyWorkerError, ValueError) as exc:
+        simulate(str(db), participants=participants, seed=seed, protocol=protocol, on_progress=on_progress,
+                 jobs=jobs, continue_study=resuming)
+    except (StorageError, RuntimeError, ValueError) as exc:
         raise PoolError(f"{db}: the simulation failed ({exc}); the next call resumes it") from None
     digest = sha256_file(db)
     _write_record(db, {**wanted, "complete": True, "sha256": digest, "bytes": db.stat().st_size,

@@ -3,7 +3,7 @@
 ``python -m bench.participant_calibration --studies 5``
 
 For every participant of every study this builds the simulated rig on a
-virtual clock, hands the stylus to a :class:`protocol.participant.SimulatedParticipant`
+virtual clock, hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`
 and walks the paper's 20-trial random schedule through the real
 :class:`protocol.trial.TrialMachine` (so success, TCT, RMSE and Max AE come from
 the one definition in :mod:`protocol.metrics`).  Per participant × mode it
@@ -32,7 +32,7 @@ from pipeline.loop import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, default_protocol
 from protocol.design import build_schedule
-from protocol.participant import ParticipantParams, SimulatedParticipant
+from pipeline.sim.participant import ParticipantParams, SimulatedParticipant
 from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = [

@@ -22,7 +22,7 @@ from bench.row_format import row_format_copy
 from protocol.config import load_protocol
 from protocol.recording import read_segment, segments_of
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
-from protocol.study import default_jobs, run_study
+from study_app.headless import default_jobs, run_study
 
 __all__ = ["format_study_bench", "rewrite_recording", "run_study_bench"]
 

@@ -180,7 +180,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
     )
     # The training session runs, stores and on resume re-reads this protocol with its trials capped at
-    # seconds_per_target_per_mode (protocol.study): a cap no hold fits in would never be resumable.
+    # seconds_per_target_per_mode (the headless study runner): a cap no hold fits in would never be resumable.
     if not timing.hold_s < training.seconds_per_target_per_mode:
         raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
                      f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "

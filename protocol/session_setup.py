@@ -56,6 +56,11 @@ __all__ = [
 RESUME_STEP_S = 0.001
 
 
+def participant_code(number: int) -> str:
+    """Pseudonymous code of the n-th simulated participant (P01, P02, …)."""
+    return f"P{number:02d}"
+
+
 def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
     """(rig seed, participant seed) for a participant: independent streams from one study seed."""
     s = np.random.SeedSequence([study_seed, number]).generate_state(2)

@@ -300,7 +300,7 @@ class StudyDatabase:
         How long a statement waits for another connection's write lock before
         failing with "database is locked".  Several writers share one database
         when a study runs participants in parallel processes
-        (:func:`protocol.study.run_study` with ``jobs > 1``); each holds the
+        (:func:`study_app.headless.run_study` with ``jobs > 1``); each holds the
         lock only for one short commit, but a commit that also checkpoints a
         large WAL on a slow disk can take seconds, so writers wait up to 30 s
         (sqlite3's default, 5 s, could turn a slow disk into a failed study).

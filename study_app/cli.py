@@ -338,7 +338,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from protocol.config import ProtocolError, load_protocol
     from protocol.storage import StorageError
-    from protocol.study import SessionInterrupted, StudyWorkerError, resume_session, run_study
+    from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
     from study_app.progress import ProgressBar
     from study_app.study_summary import format_study_summary
 

@@ -59,7 +59,7 @@ from pipeline.supervisor import LoopSupervisor
 from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolError, load_protocol
-from protocol.participant import SimulatedParticipant
+from pipeline.sim.participant import SimulatedParticipant
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
@@ -67,7 +67,7 @@ from protocol.session_setup import (
     raw_wrench_scales, start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, new_owner_token, validate_code
-from protocol.study import config_record, real_config_record
+from study_app.session_config import config_record, real_config_record
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
 from study_app.session_list import list_sessions

@@ -128,6 +128,7 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.outdir import check_output_folder, write_output_folder
     from analysis.power import FAMILY_LABELS, estimate_power, load_pool, summary_text, write_power
     from analysis.power_pool import is_pool_file, simulated_pool
+    from study_app.headless import run_study
     from study_app.progress import ProgressBar
 
     options = MetricOptions(args.error_window, args.tct)
@@ -151,7 +152,7 @@ def cmd_power(args: argparse.Namespace) -> int:
         participants = None
         if args.simulated:
             t0 = time.perf_counter()
-            pool_db = simulated_pool(args.out, pool_size, seed, on_progress=simulating)
+            pool_db = simulated_pool(args.out, pool_size, seed, simulate=run_study, on_progress=simulating)
             for bar in bars:
                 bar.close()
             path = pool_db.path

@@ -8,7 +8,7 @@ with K_a = 500 N/m, B_a = 10 N·s/m, m_a = 0.25 kg.  With feedback on, the
 rendered force physically pushes the hand back (the Wagner–Howe mechanism by
 which force feedback prevents excessive force).  Who chooses the equilibrium
 point ``y_c`` is a :class:`StylusDriver`: a scripted press pattern here, the
-simulated participant of the study (``protocol.participant``), or a person
+simulated participant of the study (``pipeline.sim.participant``), or a person
 with the mouse in the GUI.
 """
 

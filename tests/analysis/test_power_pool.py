@@ -16,6 +16,7 @@ import pytest
 import analysis.power_pool as power_pool
 from analysis.power import load_pool
 from analysis.power_pool import PoolError, is_pool_file, simulated_pool
+from study_app.headless import run_study
 from protocol.config import default_protocol
 
 SEED = 5
@@ -31,8 +32,8 @@ def short():
 def pools(tmp_path_factory, short):
     """A pool of 3 and a pool of 2, same seed, each simulated once (in its own folder)."""
     a, b = tmp_path_factory.mktemp("three"), tmp_path_factory.mktemp("two")
-    three = simulated_pool(a, 3, SEED, protocol=short, jobs=1)
-    two = simulated_pool(b, 2, SEED, protocol=short, jobs=1)
+    three = simulated_pool(a, 3, SEED, simulate=run_study, protocol=short, jobs=1)
+    two = simulated_pool(b, 2, SEED, simulate=run_study, protocol=short, jobs=1)
     return three, two
 
 
@@ -70,7 +71,7 @@ def test_participant_k_is_the_same_whatever_the_study_size(pools):
 def test_a_complete_pool_is_reused_read_only(pools, short):
     three, _ = pools
     before = _bytes(three.path.parent)
-    again = simulated_pool(three.path.parent, 3, SEED, protocol=short, jobs=1)
+    again = simulated_pool(three.path.parent, 3, SEED, simulate=run_study, protocol=short, jobs=1)
     assert again.status == "reused" and again.path == three.path and again.sha256 == three.sha256
     _values(again.path)
     assert _bytes(three.path.parent) == before  # reading it changed nothing, not even a WAL file
@@ -78,7 +79,7 @@ def test_a_complete_pool_is_reused_read_only(pools, short):
 
 def test_a_larger_pool_serves_a_smaller_request_as_its_first_participants(pools, short, monkeypatch):
     three, two = pools
-    served = simulated_pool(three.path.parent, 2, SEED, protocol=short, jobs=1)
+    served = simulated_pool(three.path.parent, 2, SEED, simulate=run_study, protocol=short, jobs=1)
     assert served.status == "reused-larger" and served.path == three.path and served.participants == ("P01", "P02")
     assert not (three.path.parent / "pool-2-seed5.db").exists()  # nothing simulated
     _same(_values(served.path, served.participants), _values(two.path))
@@ -86,7 +87,7 @@ def test_a_larger_pool_serves_a_smaller_request_as_its_first_participants(pools,
     usage = namedtuple("usage", "total used free")
     monkeypatch.setattr(power_pool.shutil, "disk_usage", lambda _: usage(0, 0, 0))
     with pytest.raises(PoolError, match="simulating 2 participants needs about"):
-        simulated_pool(three.path.parent, 2, SEED + 1, protocol=short, jobs=1)
+        simulated_pool(three.path.parent, 2, SEED + 1, simulate=run_study, protocol=short, jobs=1)
 
 
 def test_a_changed_pool_is_refused_not_used(pools, short, tmp_path):
@@ -99,7 +100,7 @@ def test_a_changed_pool_is_refused_not_used(pools, short, tmp_path):
         f.write(b"\0")
     before = _bytes(folder)
     with pytest.raises(PoolError) as err:
-        simulated_pool(folder, 3, SEED, protocol=short, jobs=1)
+        simulated_pool(folder, 3, SEED, simulate=run_study, protocol=short, jobs=1)
     assert str(err.value) == (f"{folder / three.path.name}: its SHA-256 is not the one recorded in "
                               f"{three.path.name}.json when it was simulated (the file changed since); it is not "
                               "used: move it away or choose another --out")
@@ -123,7 +124,7 @@ def test_a_pool_recorded_with_other_parameters_is_refused(pools, short, tmp_path
     record_path.write_text(json.dumps(record))
     before = _bytes(folder)
     with pytest.raises(PoolError, match=message) as err:
-        simulated_pool(folder, 3, SEED, protocol=short, jobs=1)
+        simulated_pool(folder, 3, SEED, simulate=run_study, protocol=short, jobs=1)
     assert "it is not used (nor deleted)" in str(err.value) and "\n" not in str(err.value)
     assert _bytes(folder) == before
 
@@ -132,7 +133,7 @@ def test_a_pool_without_record_is_refused(pools, short, tmp_path):
     three, _ = pools
     (tmp_path / three.path.name).write_bytes(three.path.read_bytes())
     with pytest.raises(PoolError, match="no readable record pool-3-seed5.db.json beside it"):
-        simulated_pool(tmp_path, 3, SEED, protocol=short, jobs=1)
+        simulated_pool(tmp_path, 3, SEED, simulate=run_study, protocol=short, jobs=1)
 
 
 def test_too_little_disk_is_refused_before_anything_is_written(short, tmp_path, monkeypatch):
@@ -140,7 +141,7 @@ def test_too_little_disk_is_refused_before_anything_is_written(short, tmp_path, 
     monkeypatch.setattr(power_pool.shutil, "disk_usage", lambda _: usage(10**9, 10**9, 50 * 10**6))
     out = tmp_path / "plan"
     with pytest.raises(PoolError) as err:
-        simulated_pool(out, 100, SEED, protocol=short, jobs=1)
+        simulated_pool(out, 100, SEED, simulate=run_study, protocol=short, jobs=1)
     need = 100 * power_pool.POOL_MB_PER_PARTICIPANT * 1.25
     assert str(err.value) == (f"--pool: simulating 100 participants needs about {need:,.0f} MB in {tmp_path}, "
                               "50 MB are free there; free space or choose a smaller --pool")
@@ -155,15 +156,15 @@ def test_an_interrupted_simulation_is_completed_not_used_as_it_is(pools, short, 
             raise KeyboardInterrupt  # Ctrl-C while the second participant runs
 
     with pytest.raises(KeyboardInterrupt):
-        simulated_pool(tmp_path, 3, SEED, protocol=short, jobs=1, on_progress=interrupt)
+        simulated_pool(tmp_path, 3, SEED, simulate=run_study, protocol=short, jobs=1, on_progress=interrupt)
     record = json.loads((tmp_path / "pool-3-seed5.db.json").read_text())
     assert record["complete"] is False and "sha256" not in record
     # a request for fewer participants is not served by an unfinished pool
     with pytest.raises(KeyboardInterrupt):
-        simulated_pool(tmp_path, 2, SEED, protocol=short, jobs=1, on_progress=interrupt)
+        simulated_pool(tmp_path, 2, SEED, simulate=run_study, protocol=short, jobs=1, on_progress=interrupt)
     (tmp_path / "pool-2-seed5.db").unlink()
     (tmp_path / "pool-2-seed5.db.json").unlink()
-    resumed = simulated_pool(tmp_path, 3, SEED, protocol=short, jobs=1)
+    resumed = simulated_pool(tmp_path, 3, SEED, simulate=run_study, protocol=short, jobs=1)
     assert resumed.status == "resumed"
     record = json.loads((tmp_path / "pool-3-seed5.db.json").read_text())
     assert record["complete"] is True and record["resumed_participants"] == ["P02"]
@@ -179,7 +180,7 @@ def test_an_interrupted_simulation_is_completed_not_used_as_it_is(pools, short, 
     trials = load_study([str(resumed.path)]).trials
     p02 = trials[trials["participant_code"] == "P02"]
     assert (p02["excluded"] == "").sum() == short.trials_per_participant and (p02["excluded"] == "aborted trial").sum() == 1
-    assert simulated_pool(tmp_path, 3, SEED, protocol=short, jobs=1).status == "reused"
+    assert simulated_pool(tmp_path, 3, SEED, simulate=run_study, protocol=short, jobs=1).status == "reused"
     # the first 2 of this pool are not those of a pool of 2 (P02 was resumed): a pool of 2 is simulated instead
     assert power_pool._larger_pool(tmp_path, 2, SEED, power_pool.pool_parameters(2, SEED, short)) is None
     assert power_pool._larger_pool(tmp_path, 1, SEED, power_pool.pool_parameters(1, SEED, short)) == resumed.path

@@ -347,7 +347,7 @@ def test_any_toml_value_in_any_field_is_a_one_line_error_or_a_well_typed_protoco
     enabled=st.booleans(),
 )
 def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resumable(hold_s, max_trial_s, seconds, enabled):
-    """The protocol a training session runs and stores (protocol.study) reads back: a resume can always load it."""
+    """The protocol a training session runs and stores (the headless study runner) reads back: a resume can always load it."""
     d = replaced(replaced(_DEFAULT_DICT, ("trial", "hold_s"), hold_s), ("trial", "max_trial_s"), max_trial_s)
     d = replaced(replaced(d, ("training", "seconds_per_target_per_mode"), seconds), ("training", "enabled"), enabled)
     try:

@@ -20,7 +20,7 @@ from protocol.config import default_protocol
 from protocol.design import build_schedule
 from protocol.rehearsal import FaultPlan, parse_fault_plan
 from protocol.storage import HEALTH_COLUMNS
-from protocol.study import SessionInterrupted, resume_session, run_study
+from study_app.headless import SessionInterrupted, resume_session, run_study
 
 #: What each rehearsed kind latches, as the loop names it.
 LATCHES = {"sensor-stall": "SENSOR_STALE", "nan-burst": "NON_FINITE", "bad-status": "SENSOR_STATUS",

@@ -143,7 +143,7 @@ def test_kill_during_training_then_continue_keeps_the_true_timeline(tmp_path: Pa
     db, proto = tmp_path / "t.db", short_toml(tmp_path, training=True)
     code = ("from protocol.config import load_protocol\n"
             "from protocol.rehearsal import FaultPlan\n"
-            "from protocol.study import run_study\n"
+            "from study_app.headless import run_study\n"
             f"run_study({str(db)!r}, participants=1, seed=4, protocol=load_protocol({str(proto)!r}), jobs=1, "
             "faults=[FaultPlan('kill', 'P01', 3, 0.5, 'training')])\n")
     assert subprocess.run([sys.executable, "-c", code], cwd=ROOT, timeout=300).returncode == -9

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import protocol.study
+import study_app.headless.session_run as session_run
 from analysis.load import load_study
 from analysis.loop_health import abort_counts, health_table
 from pipeline.engine import SimEngine
@@ -33,7 +33,7 @@ from pipeline.replay import ReplayInputs, replay
 from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import TouchSpec
 from protocol.recording import SegmentData, read_segment, segments_of
-from protocol.study import run_study
+from study_app.headless import run_study
 from test_faults_in_the_record import rows, short_protocol
 from test_recording import bits
 
@@ -46,16 +46,16 @@ def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSp
                  tamper: Callable[[SimEngine], None] | None = None) -> tuple[Path, list[SegmentData]]:
     """One participant's session on a simulated rig built as ``run`` builds it, with this Touch; its recording."""
     if touch is not None:
-        monkeypatch.setattr(protocol.study, "SimRigConfig", lambda seed: SimRigConfig(seed=seed, touch=touch))
+        monkeypatch.setattr(session_run, "SimRigConfig", lambda seed: SimRigConfig(seed=seed, touch=touch))
     if tamper is not None:
-        build = protocol.study._engine
+        build = session_run._engine
 
         def engine(rig_seed: int, clock: str) -> SimEngine:
             eng = build(rig_seed, clock)
             tamper(eng)
             return eng
 
-        monkeypatch.setattr(protocol.study, "_engine", engine)
+        monkeypatch.setattr(session_run, "_engine", engine)
     db = tmp_path / "study.db"
     run_study(str(db), participants=1, seed=3, protocol=short_protocol(), jobs=1)
     c = sqlite3.connect(db)

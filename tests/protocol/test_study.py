@@ -16,7 +16,7 @@ import pytest
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
-from protocol.study import resume_session, run_study
+from study_app.headless import resume_session, run_study
 from records import all_records, trial_samples
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -101,7 +101,7 @@ def _run_killed_in_training(db: Path, proto: Path, participants: int, seed: int,
     code = (
         "from protocol.config import load_protocol\n"
         "from protocol.rehearsal import FaultPlan\n"
-        "from protocol.study import run_study\n"
+        "from study_app.headless import run_study\n"
         f"run_study({str(db)!r}, participants={participants}, seed={seed}, protocol=load_protocol({str(proto)!r}), "
         f"jobs=1, faults=[FaultPlan('kill', 'P01', {trial}, {seconds}, 'training')])\n"
     )
@@ -275,7 +275,7 @@ def test_a_crashed_worker_stops_the_study_with_one_clear_error(tmp_path: Path) -
     import multiprocessing
     import signal
 
-    from protocol.study import StudyWorkerError
+    from study_app.headless import StudyWorkerError
 
     db = tmp_path / "crash.db"
 
@@ -437,10 +437,10 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     """A Python exception inside a participant's worker (injected) is reported by name; the study then completes."""
     import multiprocessing
 
-    from protocol.study import StudyWorkerError
+    from study_app.headless import StudyWorkerError
 
     import protocol.session
-    import protocol.study
+    import study_app.headless.pool as pool
 
     db = tmp_path / "raise.db"
     real_process = protocol.session.SessionRunner.process
@@ -452,7 +452,7 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
 
     # the workers are forked, so they run the patched runner (spawned ones would import it afresh)
     fork = multiprocessing.get_context("fork")
-    monkeypatch.setattr(protocol.study.mp, "get_context", lambda method=None: fork)
+    monkeypatch.setattr(pool.mp, "get_context", lambda method=None: fork)
     monkeypatch.setattr(protocol.session.SessionRunner, "process", process_then_fail)
     with pytest.raises(StudyWorkerError) as err:
         run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2)

@@ -13,7 +13,7 @@ from pipeline.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.rig import SimRigConfig
 from protocol.metrics import trial_metrics
-from protocol.participant import PARAM_RANGES, SAFE_Y_RANGE_M, ParticipantParams, SimulatedParticipant
+from pipeline.sim.participant import PARAM_RANGES, SAFE_Y_RANGE_M, ParticipantParams, SimulatedParticipant
 
 K_TISSUE = 1.1e4
 GAP_M = 0.015

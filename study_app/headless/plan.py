@@ -1,0 +1,185 @@
+"""What a ``run`` will do before it writes: steps per participant, trials, sessions kept; refusals.
+
+Every refusal is decided here on a read-only look at the database first, so a
+refused command leaves the file byte-identical.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from typing import Any
+
+from protocol.config import ProtocolConfig
+from protocol.design import schedule_from_json
+from protocol.rehearsal import FaultPlan
+from protocol.session import first_unfinished
+from protocol.session_setup import participant_code, training_protocol, training_schedule
+from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
+
+__all__ = [
+    "Step", "all_steps", "check_fault_plans", "interrupted_session_of", "open_notes", "peek", "plan_study",
+    "remaining_trials",
+]
+
+
+def remaining_trials(db: StudyDatabase, info: SessionInfo) -> int:
+    """Trials a resume of this session will run.
+
+    An interrupted trial is stored as aborted by
+    :func:`protocol.session_setup.open_resumed_session`, not run, and its
+    re-run takes its place in the count.
+    """
+    schedule = schedule_from_json(info.schedule_json)
+    return len(schedule) - first_unfinished(schedule, db.trial_rows(info.session_id))
+
+
+
+#: One step of a participant's part of a study: ("new", kind) or ("resume", session id).
+Step = tuple[str, Any]
+
+
+def _plan_continue(
+    db: StudyDatabase, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
+) -> tuple[dict[int, list[Step]], int, list[int]]:
+    """What is left of a study: steps per participant, trials they run, and the finished sessions kept.
+
+    Raises :class:`StorageError`, before anything is written, when the stored
+    sessions were made with another seed or protocol: continuing them with
+    this one would mix two designs in one study.
+    """
+    kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
+    wanted = {"training": json.loads(training_protocol(protocol).to_json()), "experiment": json.loads(protocol.to_json())}
+    plan: dict[int, list[Step]] = {}
+    kept: list[int] = []
+    trials = 0
+    for n in range(1, participants + 1):
+        code = participant_code(n)
+        stored = db.sessions_of(code)
+        for info in stored:
+            if info.seed != seed:
+                raise StorageError(
+                    f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
+                    f"--seed {info.seed}, not {seed}; nothing was changed (give the seed the study was started with)"
+                )
+            if info.kind in wanted and json.loads(info.protocol_json) != wanted[info.kind]:
+                raise StorageError(
+                    f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
+                    f"another protocol; nothing was changed (give the --protocol the study was started with)"
+                )
+        steps: list[Step] = []
+        for kind in kinds:
+            of_kind = [s for s in stored if s.kind == kind]
+            if any(s.status != "running" for s in of_kind):  # completed, or ended by the experimenter
+                kept.extend(s.session_id for s in of_kind if s.status != "running")
+                continue
+            if kind == "training" and not of_kind and any(s.kind == "experiment" for s in stored):
+                continue  # practice comes before the experiment or not at all
+            if of_kind:
+                info = of_kind[-1]
+                steps.append(("resume", info.session_id))
+                trials += remaining_trials(db, info)
+            else:
+                steps.append(("new", kind))
+                trials += protocol.trials_per_participant if kind == "experiment" else len(training_schedule(protocol))
+        if steps:
+            plan[n] = steps
+    return plan, trials, kept
+
+
+
+def all_steps(protocol: ProtocolConfig) -> list[Step]:
+    """A participant's whole part of a study: training (if the protocol has one), then the experiment."""
+    return [("new", "training"), ("new", "experiment")] if protocol.training.enabled else [("new", "experiment")]
+
+
+
+def interrupted_session_of(db: StudyDatabase | None, db_path: str, code: str) -> SessionInfo:
+    """The participant's interrupted session (the newest), or a :class:`StorageError` saying why there is none.
+
+    A read-only ``db`` is closed afterwards.
+    """
+    try:
+        open_ = [] if db is None else [s for s in db.sessions_of(code) if s.status == "running"]
+        if not open_:
+            known = None if db is None else db.participant_id(code, create=False)
+            what = "no such participant" if known is None else "no interrupted session"
+            raise StorageError(f"cannot resume {code} in {db_path}: {what}")
+        return open_[-1]
+    finally:
+        if db is not None and db.readonly:
+            db.close()
+
+
+def peek(db_path: str) -> StudyDatabase | None:
+    """The study database opened read-only and checked, or None if there is no study in it yet."""
+    if not os.path.exists(db_path) or (os.path.isfile(db_path) and os.path.getsize(db_path) == 0):
+        return None
+    try:
+        return StudyDatabase(db_path, readonly=True, check=True)
+    except EmptyDatabase:
+        return None
+
+
+def plan_study(
+    db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig, continue_study: bool,
+) -> tuple[dict[int, list[Step]], int, list[int]]:
+    """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
+
+    ``db`` None: a new database.  A read-only ``db`` is closed afterwards.
+    """
+    try:
+        if continue_study:
+            if db is None:
+                raise StorageError(f"cannot continue a study: no study in {db_path}")
+            return _plan_continue(db, db_path, participants, seed, protocol)
+        if db is not None:
+            for n in range(1, participants + 1):
+                code = participant_code(n)
+                if db.sessions_of(code):
+                    raise StorageError(
+                        f"{db_path} already holds sessions for participant {code}; nothing was changed "
+                        f"(use a new database, or the same command with --continue to complete the study)"
+                    )
+        plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
+        per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
+        return plan, per * participants, []
+    finally:
+        if db is not None and db.readonly:
+            db.close()
+
+
+def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:
+    """What opening the database did that the user should hear of."""
+    notes = []
+    if db.upgraded_from is not None:
+        notes.append(f"{db.path}: upgraded from schema version {db.upgraded_from} to {db.schema_version}; "
+                     f"the file as it was is kept in {db.backup_path}")
+    if taken_over:
+        notes.append(f"{db.path}: {taken_over}")
+    return notes
+
+
+
+def check_fault_plans(faults: Sequence[FaultPlan], protocol: ProtocolConfig, codes: Sequence[str]) -> None:
+    """Refuse a planned fault for a participant who is not run, or a trial the session does not have.
+
+    Raises
+    ------
+    ValueError
+        One line naming the plan and what is allowed.
+    """
+    for f in faults:
+        if f.code not in codes:
+            shown = ", ".join(codes[:3]) + (f", … {codes[-1]}" if len(codes) > 3 else "")
+            raise ValueError(f"--inject-fault = {f}: participant {f.code} is not run by this command ({shown})")
+        n = protocol.trials_per_participant if f.session == "experiment" else len(training_schedule(protocol))
+        if f.trial > n:
+            raise ValueError(f"--inject-fault = {f}: trial {f.trial} is beyond the {n} trials of the "
+                             f"{f.session} session")
+        cap = (protocol.trial.max_trial_s if f.session == "experiment"
+               else protocol.training.seconds_per_target_per_mode)
+        if f.seconds > cap:
+            raise ValueError(f"--inject-fault = {f}: {f.seconds:g} s is after the trial's end at the latest "
+                             f"({cap:g} s after its cue)")

@@ -1,0 +1,181 @@
+"""A study's participants over worker processes, one participant per process.
+
+Each worker opens its own database connection and recorder (all write into
+the same WAL database) and dies with the study's main process
+(``PR_SET_PDEATHSIG``), so no orphan keeps writing.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import multiprocessing as mp
+import os
+import queue
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from protocol.config import ProtocolConfig
+from protocol.rehearsal import FaultPlan
+from protocol.storage import StorageError, StudyDatabase
+from protocol.session_setup import participant_code
+from study_app.headless.plan import Step
+from study_app.headless.session_run import SessionInterrupted, StudyProgress, run_steps, set_kill_target
+
+__all__ = ["StudyWorkerError", "default_jobs", "run_parallel"]
+
+
+class StudyWorkerError(RuntimeError):
+    """A participant's worker process failed in a parallel study; the message says which and what to resume."""
+
+
+def default_jobs(participants: int) -> int:
+    """Worker processes for a study: the usable cores, at most one per participant."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, participants))
+
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    """Linux: have the kernel SIGKILL this process when its parent dies, so no orphan keeps writing."""
+    if sys.platform.startswith("linux"):
+        try:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+            PR_SET_PDEATHSIG = 1
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        except (OSError, AttributeError):  # pragma: no cover - no libc
+            pass
+    if os.getppid() != parent_pid:  # the parent died before the request took effect
+        os._exit(1)
+
+
+def _participant_worker(
+    db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
+    messages: Any, study_owner: str, faults: Sequence[FaultPlan],
+) -> None:
+    """One participant's steps (training, then experiment; or what is left of them) in a worker process.
+
+    Reports through ``messages``.
+
+    Messages: ``("progress", number, kind, trials_done, trials_total, participant_trials_done, study_time_s)``,
+    ``("done", number, session ids, participant_trials_done, study_time_s, rehearsal reports)``,
+    ``("error", number, message)``.
+    """
+    _die_with_parent(parent_pid)
+    set_kill_target(parent_pid)
+    code = participant_code(number)
+    progress = StudyProgress(participants_total=1, participant=number, code=code)
+
+    def report(p: StudyProgress) -> None:
+        messages.put(("progress", number, p.kind, p.trials_done, p.trials_total, p.study_trials_done, p.study_time_s))
+
+    try:
+        # the study's main process checked the file a moment ago: no second quick_check per worker
+        db = StudyDatabase(db_path, check=False)
+        try:
+            run_steps(db, number, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
+                       on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True)
+        finally:
+            db.close()
+    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which stops the study
+        why = str(exc) if isinstance(exc, (SessionInterrupted, StorageError)) else f"{type(exc).__name__}: {exc}"
+        messages.put(("error", number, why))
+        messages.close()
+        messages.join_thread()
+        os._exit(1)
+    messages.put(("done", number, list(progress.sessions), progress.study_trials_done, progress.study_time_s,
+                  list(progress.rehearsals)))
+    messages.close()
+    messages.join_thread()
+
+
+def run_parallel(
+    db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress, study_owner: str,
+    faults: Sequence[FaultPlan],
+) -> StudyProgress:
+    """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
+    # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
+    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    messages = ctx.Queue()
+    waiting = list(plan)
+    running: dict[int, Any] = {}
+    done_trials: dict[int, int] = {}
+    time_s: dict[int, float] = {}
+    sessions: dict[int, list[int]] = {}
+    failure: tuple[int, str] | None = None
+    t_last_report = 0.0
+
+    def handle(msg: tuple[Any, ...]) -> tuple[int, str] | None:
+        what, n = msg[0], msg[1]
+        if what == "progress":
+            _, _, kind, trials_done, trials_total, p_done, p_time = msg
+            done_trials[n], time_s[n] = p_done, p_time
+            progress.participant, progress.code, progress.kind = n, participant_code(n), kind
+            progress.trials_done, progress.trials_total = trials_done, trials_total
+        elif what == "done":
+            sessions[n], done_trials[n], time_s[n] = msg[2], msg[3], msg[4]
+            progress.rehearsals.extend(msg[5])
+            running.pop(n).join()
+        else:
+            return (n, msg[2])
+        return None
+
+    try:
+        while failure is None and (waiting or running):
+            while waiting and len(running) < jobs:
+                n = waiting.pop(0)
+                p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
+                                args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages, study_owner,
+                                      faults), daemon=True)
+                p.start()
+                running[n] = p
+            try:
+                msg = messages.get(timeout=0.1)
+            except queue.Empty:
+                msg = None
+            if msg is not None:
+                failure = handle(msg)
+            else:
+                for n, p in list(running.items()):
+                    if p.exitcode is None or n in sessions:
+                        continue
+                    # ended: read what it wrote before it ended (its last words may still be in the pipe)
+                    try:
+                        while failure is None and n not in sessions:
+                            failure = handle(messages.get(timeout=1.0))
+                    except queue.Empty:
+                        pass
+                    if failure is None and n not in sessions:  # died without a word (killed, crashed)
+                        failure = (n, f"its worker process ended with exit code {p.exitcode}")
+                    if failure is not None:
+                        break
+            progress.study_trials_done = sum(done_trials.values())
+            progress.study_time_s = sum(time_s.values())
+            now = time.monotonic()
+            if on_progress is not None and msg is not None and (now - t_last_report > 0.1 or not (waiting or running)):
+                t_last_report = now
+                on_progress(progress)
+    finally:
+        for p in running.values():
+            if p.is_alive():
+                p.kill()  # its sessions stay 'running' (resumable); committed data is intact
+        for p in running.values():
+            p.join()
+        messages.close()
+    if failure is not None:
+        n, why = failure
+        raise StudyWorkerError(
+            f"participant {participant_code(n)} failed ({why}); the other participants were stopped, "
+            f"their committed data is kept; complete the study with the same command and --continue"
+        )
+    progress.sessions = progress.sessions + [sid for n in plan for sid in sessions[n]]
+    progress.study_trials_done = sum(done_trials.values())
+    return progress

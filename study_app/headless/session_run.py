@@ -1,0 +1,229 @@
+"""One session of a headless study on the simulated rig, driven on the virtual or the real clock.
+
+:func:`run_session` builds a fresh simulated rig (calibrating its payload),
+hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`,
+opens the session through :mod:`protocol.session_setup` (as the GUI's engine
+does) and alternates loop ticks and runner blocks until the session ends.
+Planned faults (:mod:`protocol.rehearsal`) are fired on the rig at their
+trial's time.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.loop import LoopEvent
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.rig import SimRigConfig
+from protocol.config import ProtocolConfig
+from protocol.rehearsal import FaultPlan, RehearsalTrigger
+from protocol.session import SessionRunner
+from protocol.session_setup import (
+    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
+    raw_wrench_scales, start_runner, training_schedule,
+)
+from protocol.storage import StudyDatabase, new_owner_token
+from protocol.session_setup import participant_code
+from study_app.headless.plan import Step
+from study_app.session_config import config_record
+
+__all__ = [
+    "BLOCK_TICKS", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
+    "run_steps", "set_kill_target",
+]
+
+#: Records per step of the headless driver (the runner reads the ring this often).
+BLOCK_TICKS = 50
+#: Set in a parallel study's worker (:func:`set_kill_target`): the process a planned ``kill`` ends.
+_kill_target_pid: int | None = None
+
+
+def set_kill_target(pid: int) -> None:
+    """In a parallel study's worker: a planned ``kill`` ends ``pid`` (the study's main process), as ``kill -9`` would."""
+    global _kill_target_pid
+    _kill_target_pid = pid
+
+
+class SessionInterrupted(RuntimeError):
+    """A session stopped early and stays resumable (a fault that did not clear); the message says why."""
+
+
+@dataclass
+class StudyProgress:
+    """What a progress display needs (updated as the study runs)."""
+
+    participants_total: int = 0
+    participant: int = 0
+    code: str = ""
+    kind: str = ""
+    trials_done: int = 0  # in the current session
+    trials_total: int = 0  # in the current session
+    study_trials_done: int = 0
+    study_trials_total: int = 0
+    study_time_s: float = 0.0
+    planned_s: float = 0.0
+    sessions: list[int] = field(default_factory=list)
+    #: What each planned fault did (``--inject-fault``), one line each.
+    rehearsals: list[str] = field(default_factory=list)
+    #: What the user should know that is not an error (a database upgraded, a lease taken over), one line each.
+    notes: list[str] = field(default_factory=list)
+
+
+def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
+    """Upper bound of simulated time (every trial to its cap, plus pauses) for the progress bar."""
+    tr = protocol.trial
+    per = protocol.trials_per_participant * (tr.max_trial_s + tr.pause_s)
+    if protocol.training.enabled:
+        per += len(training_schedule(protocol)) * (protocol.training.seconds_per_target_per_mode + tr.pause_s)
+    return per * participants
+
+
+def _engine(rig_seed: int, clock: str) -> SimEngine:
+    return build_sim_engine(
+        EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
+                     ring_seconds=30.0)
+    )
+
+
+def _drive(
+    eng: SimEngine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    trigger: RehearsalTrigger | None = None,
+) -> None:
+    """Alternate loop ticks and runner blocks until the session ends."""
+    ring = eng.ring
+    assert ring is not None
+    loop = eng.loop
+    events: list[LoopEvent] = []
+    loop.on_event = events.append  # list.append is atomic: safe from the real-clock loop thread
+    replay_log = loop.replay_log
+    cursor = ring.write_count
+    t_last_report = 0.0
+    base_done = progress.study_trials_done
+    planned = runner.state.trials_total  # re-runs of aborted trials add to the study's trials as they are queued
+    if trigger is not None:
+        runner.listeners.append(trigger.on_runner_event)
+    if clock == "real":
+        loop.start()
+    try:
+        while not runner.done:
+            if clock == "virtual":
+                loop.run_ticks(BLOCK_TICKS)
+            else:
+                time.sleep(0.02)
+            res = ring.read_since(cursor)
+            cursor = res.cursor
+            if res.lost:
+                runner.records_lost(res.lost)
+            # events and the replay log after the rows: every entry of a tick whose record was read is in
+            n_ev = len(events)
+            batch, events[:n_ev] = events[:n_ev], []
+            log = [replay_log.popleft() for _ in range(len(replay_log))]
+            n = len(res.rows)
+            runner.process(res.rows, batch, log)
+            if trigger is not None and n:
+                trigger.poll(int(res.rows["t_ns"][-1]))
+            progress.study_time_s += n * 1e-3
+            now = time.monotonic()
+            done = runner.state.completed + runner.state.aborted
+            if on_progress is not None and (now - t_last_report > 0.1 or runner.done):
+                t_last_report = now
+                progress.trials_done = done
+                progress.trials_total = runner.state.trials_total
+                progress.study_trials_total += runner.state.trials_total - planned
+                planned = runner.state.trials_total
+                progress.study_trials_done = base_done + done
+                on_progress(progress)
+        progress.study_trials_done = base_done + runner.state.completed + runner.state.aborted
+    finally:
+        if clock == "real":
+            loop.stop()
+        else:
+            loop.ramp_down()
+        eng.rig.close()
+        if trigger is not None:
+            progress.rehearsals.extend(trigger.report)
+
+
+def run_session(
+    db: StudyDatabase, *, code: str, number: int, kind: str | None, protocol: ProtocolConfig, study_seed: int,
+    clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
+    faults: Sequence[FaultPlan] = (),
+) -> int:
+    """Run one session to its end on a fresh simulated rig: a new one of ``kind``, or the interrupted ``resume_id``."""
+    rig_seed, p_seed = participant_seeds(study_seed, number)
+    if resume_id is None:
+        assert kind is not None
+        # training and experiment each get their own rig: the same seed gives the same study whatever ran before
+        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
+        opened = open_new_session(
+            db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
+            config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
+            lease_owner=lease_owner, study_owner=study_owner,
+        )
+    else:
+        info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
+        # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
+        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
+        opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
+                                      calibration=eng.calibration.to_dict())
+    participant = SimulatedParticipant(seed=opened.participant_seed)
+    eng.rig.set_driver(participant)
+    progress.sessions.append(opened.session_id)
+    progress.kind = opened.kind
+    recorder, runner = start_runner(
+        db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
+        limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
+        short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
+    )
+    trigger = _trigger(faults, opened, eng)
+    try:
+        _drive(eng, runner, clock, progress, on_progress, trigger)
+    finally:
+        finish_session(db, recorder, opened)
+    if runner.stop_reason:
+        raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
+    return opened.session_id
+
+
+def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: SimEngine) -> RehearsalTrigger | None:
+    """The rehearsal trigger of a session run, if faults are planned for it."""
+    if not faults:
+        return None
+    loop, rig = eng.loop, eng.rig
+
+    def inject(kind: str, at_ns: int) -> None:
+        rig.inject_fault(kind, loop.t0_ns + at_ns)  # the records' axis -> the rig's clock
+
+    def kill() -> None:
+        # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
+        # (the workers then die with it, by PR_SET_PDEATHSIG)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
+
+    def cancel(kind: str, at_ns: int) -> None:
+        rig.cancel_fault(kind, loop.t0_ns + at_ns)
+
+    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel)
+    return trig if trig.plans else None
+
+
+def run_steps(
+    db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
+    progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
+    faults: Sequence[FaultPlan] = (), short_transactions: bool = False,
+) -> None:
+    """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
+    code = participant_code(number)
+    for what, arg in steps:
+        run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
+                     study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
+                     short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
+                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults)

@@ -1,0 +1,209 @@
+"""Headless studies on the simulated rig: participants, sessions, resume (``haptic-study run``).
+
+``haptic-study run`` calls :func:`run_study`: for each participant it builds
+the simulated rig (calibrating its payload), hands the stylus to a
+:class:`pipeline.sim.participant.SimulatedParticipant`, stores a training session
+(tagged ``kind = 'training'``, which analysis excludes) and the experiment
+session, each with its whole schedule committed before the first trial, and
+runs them on the virtual clock (as fast as the CPU allows) or in real time.
+:func:`resume_session` continues a participant's interrupted session (training
+or experiment) at its first unfinished trial: the interrupted trial is stored
+as aborted, with the reason, and re-run per the abort policy.
+``run_study(..., continue_study=True)`` (``haptic-study run --continue``)
+completes a study that stopped part-way: it resumes every interrupted session,
+runs what each participant has not started, and leaves finished sessions alone.
+
+Sessions are opened and closed through :mod:`protocol.session_setup`, as the
+GUI's engine does.  A ``run`` owns the whole database while it works (the
+``study`` lease): a second ``run`` on it is refused before it writes, and its
+parallel workers hold their sessions' leases under it.  Planned faults
+(:mod:`protocol.rehearsal`, ``--inject-fault``) are fired on the simulated rig
+at their trial's time; a latched fault is reset by the runner in the pause,
+and a fault that does not clear stops the study with :class:`SessionInterrupted`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+
+from protocol.config import ProtocolConfig, protocol_from_dict
+from protocol.rehearsal import FaultPlan
+from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
+from protocol.session_setup import participant_code
+from study_app.headless.plan import Step, check_fault_plans, interrupted_session_of, open_notes, peek, plan_study, remaining_trials
+from study_app.headless.pool import default_jobs, run_parallel
+from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
+
+__all__ = ["resume_session", "run_study"]
+
+
+def run_study(
+    db_path: str,
+    *,
+    participants: int,
+    seed: int,
+    protocol: ProtocolConfig,
+    clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None,
+    jobs: int | None = None,
+    continue_study: bool = False,
+    faults: Sequence[FaultPlan] = (),
+) -> StudyProgress:
+    """Run a complete simulated study into the database at ``db_path``.
+
+    Parameters
+    ----------
+    db_path
+        Study database (created if missing).
+    participants
+        Simulated participants P01 … PNN; each runs a training session (if the
+        protocol has one) and then the experiment session.
+    seed
+        Study seed: schedules, rigs and participants derive from it and the
+        participant number only, so the results do not depend on ``jobs``.
+    protocol
+        The study protocol.
+    clock
+        ``"virtual"`` (as fast as the CPU allows) or ``"real"``.
+    on_progress
+        Called (in this process) with the aggregated progress, ~10 times a second.
+    jobs
+        Participants run at once, each in its own worker process (its own
+        database connection and recorder, all writing into the same WAL
+        database).  None: the usable cores, at most ``participants``; 1: one
+        after the other in this process.
+    continue_study
+        Complete a study that stopped part-way (a crash, a failed worker, an
+        interrupted run) in the same database: every interrupted session is
+        resumed (:func:`resume_session`), what a participant has not started
+        is run, and finished sessions (completed, or ended by the
+        experimenter) are left alone.  ``seed`` and ``protocol`` must be those
+        the study was started with.
+    faults
+        Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
+
+    Returns
+    -------
+    StudyProgress
+        The final progress; ``sessions`` lists the session ids in participant
+        order (training before experiment), whatever order they were allocated
+        in; when continuing, the sessions kept from before come first.
+
+    Raises
+    ------
+    StorageError
+        Before anything is stored, if the database cannot be used, another
+        process writes to it (:class:`protocol.storage.LeaseHeld`), or one of
+        the participant codes already has sessions in it (without
+        ``continue_study``), or, when continuing, the stored sessions were run
+        with another seed or protocol.
+    StudyWorkerError
+        If a participant's worker fails: the other workers are stopped (their
+        sessions stay ``running``); ``continue_study`` completes the study.
+    SessionInterrupted
+        A fault did not clear (one participant at a time; in parallel it is a
+        :class:`StudyWorkerError`); ``continue_study`` completes the study.
+    """
+    if participants < 1:
+        raise ValueError(f"participants = {participants}: must be ≥ 1")
+    if jobs is not None and jobs < 1:
+        raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
+    check_fault_plans(faults, protocol, [participant_code(n) for n in range(1, participants + 1)])
+    n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
+    if continue_study and not os.path.exists(db_path):
+        raise StorageError(f"cannot continue a study: no database at {db_path}")
+    # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
+    first_plan, first_total, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol,
+                                                      continue_study)
+    if continue_study and not first_plan:  # nothing left to run: nothing to write either
+        done = StudyProgress(participants_total=participants, sessions=list(first_kept))
+        return done
+    owner = new_owner_token()
+    # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
+    db: StudyDatabase | None = StudyDatabase(db_path, check=False)
+    try:
+        taken = db.acquire_lease("study", owner)  # a second `run` stops here
+        progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
+        progress.notes.extend(open_notes(db, taken))
+        # again under the lease: what another process did in between counts
+        plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study)
+        progress.sessions.extend(kept)
+        jobs_used = min(n_jobs, len(plan))
+        if jobs_used > 1:
+            db.close()  # the workers open their own connections; none is carried across fork
+            db = None
+            return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
+                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
+                                 faults=faults)
+        for n, steps in plan.items():
+            progress.participant, progress.code = n, participant_code(n)
+            run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
+                       on_progress=on_progress, study_owner=owner, faults=faults)
+        return progress
+    finally:
+        _release_study(db, db_path, owner)
+
+
+
+def _release_study(db: StudyDatabase | None, db_path: str, owner: str) -> None:
+    """Give the study lease back (reopening the database if the workers had it) and close."""
+    try:
+        if db is None:
+            db = StudyDatabase(db_path, check=False)
+        db.release_lease("study", owner)
+    except StorageError:
+        pass  # the lease is taken over once this process is gone
+    finally:
+        if db is not None:
+            db.close()
+
+
+
+def resume_session(
+    db_path: str,
+    code: str,
+    *,
+    clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None,
+    faults: Sequence[FaultPlan] = (),
+) -> StudyProgress:
+    """Continue the interrupted session of participant ``code`` (training or experiment).
+
+    The stored schedule is used; trials already stored are kept; the trial that
+    was running when the previous run ended is stored as aborted (cause
+    ``interrupted``) with its real cue time and samples and re-run per the
+    abort policy; no trial is duplicated or skipped
+    (:func:`protocol.session_setup.open_resumed_session`).  Only that session is
+    continued: a participant interrupted in training still has the experiment
+    to run (``run_study(..., continue_study=True)``, ``haptic-study run --continue``).
+
+    Raises
+    ------
+    StorageError
+        No such participant or interrupted session; or another process writes
+        to the session or runs the study (:class:`protocol.storage.LeaseHeld`): nothing is changed.
+    SessionInterrupted
+        A fault did not clear; the session stays resumable.
+    """
+    validate_code(code)
+    if not os.path.exists(db_path):
+        raise StorageError(f"cannot resume {code}: no database at {db_path}")
+    # refusals are decided on a read-only look first: a refused command leaves the file byte-identical
+    interrupted_session_of(peek(db_path), db_path, code)
+    db = StudyDatabase(db_path, check=False)
+    try:
+        info = interrupted_session_of(db, db_path, code)
+        remaining = remaining_trials(db, info)
+        progress = StudyProgress(participants_total=1, participant=info.participant_number, code=code, kind=info.kind,
+                                 study_trials_total=remaining)
+        progress.notes.extend(open_notes(db, ""))
+        protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {info.session_id} protocol")
+        progress.planned_s = remaining * (protocol.trial.max_trial_s + protocol.trial.pause_s)
+        run_session(db, code=code, number=info.participant_number, kind=None, protocol=protocol,
+                     study_seed=info.seed, clock=clock, progress=progress, on_progress=on_progress,
+                     resume_id=info.session_id, lease_owner=new_owner_token(), faults=faults)
+        return progress
+    finally:
+        db.close()
