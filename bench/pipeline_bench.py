@@ -7,8 +7,8 @@ Three measurements in one run, on the same recorded samples:
    step, ``@``, ``np.linalg.norm``, a deque for the moving average), both fed
    the same raw wrenches and poses recorded from the simulated rig.  The
    outputs are cross-checked against each other.
-2. **Loop timing.** The real 1 kHz loop in its own engine process (as the
-   app runs it), paced on the monotonic clock for ``--loop-seconds``.
+2. **Loop timing.** The real 1 kHz loop in the study-engine process (as the
+   app runs it, without a GUI), paced on the monotonic clock for ``--loop-seconds``.
 3. **Filter trade.** Moving-average window vs output noise RMS, group delay
    and step settling time: how users choose the window (speed vs accuracy).
 """
@@ -29,9 +29,12 @@ import numpy as np
 
 from bench.machine import bare_loop_stats, cpu_times, format_late_ticks, load_average, steal_percent
 from pipeline.clock import VirtualClock
-from pipeline.engine import EngineConfig, EngineProcess, build_sim_engine
+from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import HostConfig
 
 __all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
 
@@ -278,31 +281,42 @@ def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5
 
 
 def measure_loop(seconds: float, explain: bool = False) -> dict[str, Any]:
-    """Run the real 1 kHz loop in its engine process for ``seconds`` and return its period statistics.
+    """Run the real 1 kHz loop in the study-engine process for ``seconds`` and return its period statistics.
 
-    With ``explain`` the engine traces every late tick's cause
+    The engine is the app's own (:class:`study_app.engine_client.EngineClient`:
+    the simulated rig, the loop in its thread, the engine's driver draining the
+    ring beside it), without a GUI (``bench gui`` adds one).  With ``explain``
+    the engine traces every late tick's cause
     (:class:`pipeline.jitter_trace.LateTickTracer`, ~30 µs per tick, which
-    shows in the p99).  The
-    share of CPU time the hypervisor stole and the load average are reported
-    either way.
+    shows in the p99).  The share of CPU time the hypervisor stole and the
+    load average are reported either way.
     """
-    proc = EngineProcess(
-        EngineConfig(clock="real", driver="scripted", trace_jitter=explain), max_ticks=int(seconds * 1000)
-    )
-    proc.start()
-    cpu0 = cpu_times()
+    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
     try:
-        proc.wait(timeout_s=seconds * 3 + 30)
+        client.wait_ready(60.0)
+        client.send(m.ResetStats())
+        first: m.Health | None = None
+        while first is None:  # the loop's missed slots count from start-up: take the difference
+            ev = client.get(1.0)
+            first = ev if isinstance(ev, m.Health) else None
+        cpu0 = cpu_times()
+        t_end = time.monotonic() + seconds
+        last: m.Health | None = None
+        while time.monotonic() < t_end or last is None:
+            ev = client.get(0.2)
+            if isinstance(ev, m.Health) and time.monotonic() >= t_end:
+                last = ev
+        steal = steal_percent(cpu0, cpu_times())
     finally:
-        proc.stop()
-    if proc.final_stats is None:
-        raise RuntimeError("the engine did not report loop statistics")
-    out = {
-        **proc.final_stats, "scheduling": proc.scheduling,
-        "steal_percent": steal_percent(cpu0, cpu_times()), "load_average": load_average(),
+        client.shutdown()
+    out: dict[str, Any] = {
+        "ticks": last.ticks, "period_p50_us": last.period_p50_us, "period_p99_us": last.period_p99_us,
+        "abs_dev_p99_us": last.abs_dev_p99_us, "period_max_us": last.period_max_us,
+        "periods_over_2ms": last.periods_over_2ms, "missed_slots": last.missed_slots - first.missed_slots,
+        "scheduling": last.scheduling, "steal_percent": steal, "load_average": load_average(),
     }
-    if proc.late_periods is not None:
-        out["late_ticks"] = proc.late_periods
+    if last.late_periods is not None:
+        out["late_ticks"] = last.late_periods
     return out
 
 
@@ -326,7 +340,7 @@ def run_pipeline_bench(
     cost = measure_pipeline_cost(data, FrameworkConfig())
     say("filter trade table")
     trade = filter_trade_table(data)
-    say(f"running the 1 kHz loop for {loop_seconds:g} s in its engine process")
+    say(f"running the 1 kHz loop for {loop_seconds:g} s in the study-engine process")
     stats = measure_loop(loop_seconds, explain) if loop_seconds > 0 else {}
     bare: dict[str, Any] | None = None
     if reference and loop_seconds > 0:
@@ -360,7 +374,7 @@ def _loop_lines(r: dict[str, Any]) -> list[str]:
     if r["loop_ticks"] is None:
         return ["1 kHz loop: not run (--loop-seconds 0)"]
     return [
-        f"1 kHz loop in its engine process, {r['loop_seconds']:g} s of real time ({r.get('loop_scheduling') or 'normal'}):",
+        f"1 kHz loop in the study-engine process, {r['loop_seconds']:g} s of real time ({r.get('loop_scheduling') or 'normal'}):",
         f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
         f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
         f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",

@@ -1,50 +1,31 @@
-"""Building the rig + loop, and running them in an engine process of their own.
+"""Assembling an engine: the rig (simulated or real), Algorithm 1 and the 1 kHz loop, in this process.
 
-Why a process: on a 2-core machine a Qt window painting pyqtgraph curves in
-the same process as the 1 kHz loop holds the GIL for milliseconds per curve
-and drops the loop to ~640 Hz; with the GUI in another process the loop keeps
-p99 ≈ 1.04 ms (science.md §7).  So the app starts an :class:`EngineProcess`
-that owns the devices and the loop; other processes talk to it through a
-command pipe, an event queue and the shared-memory :class:`pipeline.ring.RingBuffer`.
+:func:`build_sim_engine` builds the simulated rig (and calibrates its payload);
+:func:`build_hardware_engine` opens the real rig a hardware file describes and
+puts the calibration on record for its tool to use.  Both return one
+:class:`Engine`.  Running an engine in a process of its own, talking to it and
+supervising it is the top floor's job (``study_app.engine_host``, the GUI's
+study engine; ``study_app.headless``, the headless study runner).
 
-If the controlling process goes away (closed or crashed GUI), the engine
-notices the broken pipe, latches ``ENGINE_DETACHED``, ramps the force to zero
-and exits cleanly.
+The simulators are imported only when a simulated rig is built: a real rig's
+process never loads them.
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import queue
-import threading
-import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from pipeline.clock import (
-    Clock, MonotonicClock, VirtualClock, collect_garbage, manual_garbage_collection, prepare_realtime_thread,
-)
+from pipeline.clock import Clock, MonotonicClock, VirtualClock
 from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.jitter_trace import LateTickTracer
-from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, HapticLoop, LoopEvent, SetHaptics, WatchdogConfig
+from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, HapticLoop, SetHaptics, WatchdogConfig
 from pipeline.ring import RingBuffer
-from pipeline.sim.hand import ScriptedPresses
-from pipeline.sim.rig import SimRig, SimRigConfig
 
-__all__ = [
-    "EngineConfig",
-    "EngineProcess",
-    "EngineStartError",
-    "HardwareEngine",
-    "SimEngine",
-    "build_hardware_engine",
-    "build_sim_engine",
-]
+if TYPE_CHECKING:
+    from pipeline.sim.rig import SimRigConfig
 
-
-class EngineStartError(RuntimeError):
-    """The engine process could not start (a device failed to open, or it did not become ready in time)."""
+__all__ = ["Engine", "EngineConfig", "build_hardware_engine", "build_sim_engine"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,7 +35,7 @@ class EngineConfig:
     Attributes
     ----------
     sim
-        Simulated-rig parameters (the only rig until real backends are configured).
+        Simulated-rig parameters (:class:`pipeline.sim.rig.SimRigConfig`; None: its defaults).
     framework
         Algorithm 1 parameters.
     watchdog
@@ -73,20 +54,9 @@ class EngineConfig:
         contact gate refuses samples with more than 0.15 N of innovation.
     ring_seconds
         Ring buffer length in seconds of records.
-    hardware_file
-        A ``hardware.toml``: the engine opens the real rig it describes
-        (:func:`build_hardware_engine`) instead of the simulated one; ``sim``,
-        ``framework``, ``calibrate`` and ``driver`` are then unused (the file
-        holds the framework parameters and the calibration), and feedback
-        starts off whatever ``haptics_on`` says -- the experimenter turns it on.
-    trace_jitter
-        Real clock only: explain every late loop period
-        (:class:`pipeline.jitter_trace.LateTickTracer`, ~30 µs per tick);
-        the explanation comes with the final statistics
-        (:attr:`EngineProcess.late_periods`).
     """
 
-    sim: SimRigConfig = field(default_factory=SimRigConfig)
+    sim: SimRigConfig | None = None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
     watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
     clock: str = "real"
@@ -95,8 +65,6 @@ class EngineConfig:
     haptics_on: bool = True
     refine_bias: bool = True
     ring_seconds: float = 30.0
-    hardware_file: str | None = None
-    trace_jitter: bool = False
 
     def __post_init__(self) -> None:
         if self.clock not in ("real", "virtual"):
@@ -108,15 +76,30 @@ class EngineConfig:
 
 
 @dataclass
-class SimEngine:
-    """The assembled simulated rig, force path and loop (in-process)."""
+class Engine:
+    """An assembled rig, force path and loop (in-process), simulated or real.
 
-    rig: SimRig
+    Attributes
+    ----------
+    rig
+        :class:`pipeline.sim.rig.SimRig` or :class:`pipeline.hardware.RealRig`.
+    simulated
+        True for the simulated rig (its configuration is ``rig.config``).
+    calibration_file
+        Real rig: its calibration file (:mod:`pipeline.rig_calibration`), if the hardware file names one.
+    tool
+        Real rig: the mounted instrument whose record in the calibration file is in use.
+    """
+
+    rig: Any
     framework: HapticFramework
     loop: HapticLoop
     clock: Clock
     calibration: PayloadCalibration
     ring: RingBuffer | None
+    simulated: bool
+    calibration_file: Any = None
+    tool: str = "instrument"
 
 
 def build_sim_engine(
@@ -125,7 +108,7 @@ def build_sim_engine(
     shared_ring: bool = False,
     clock: Clock | None = None,
     progress: Any = None,
-) -> SimEngine:
+) -> Engine:
     """Assemble rig → calibration → framework → loop for the simulated rig.
 
     Parameters
@@ -141,9 +124,11 @@ def build_sim_engine(
     """
     from pipeline.compensation import recommended_pose_set
     from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
+    from pipeline.sim.hand import ScriptedPresses
+    from pipeline.sim.rig import SimRig, SimRigConfig
 
     clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
-    rig = SimRig(config.sim)
+    rig = SimRig(config.sim if config.sim is not None else SimRigConfig())
     calibration = NO_PAYLOAD
     if config.calibrate:
         poses = recommended_pose_set(24)
@@ -163,25 +148,7 @@ def build_sim_engine(
     loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
     loop.submit(SetHaptics(config.haptics_on))
     loop.submit(AllowBiasRefinement(config.refine_bias))
-    return SimEngine(rig, framework, loop, clk, calibration, ring)
-
-
-@dataclass
-class HardwareEngine:
-    """The real rig, force path and loop (in-process); ``rig`` is a :class:`pipeline.hardware.RealRig`.
-
-    ``calibration_file`` is the rig's calibration file (:mod:`pipeline.rig_calibration`) and
-    ``tool`` the mounted instrument whose record is in use.
-    """
-
-    rig: Any
-    framework: HapticFramework
-    loop: HapticLoop
-    clock: Clock
-    calibration: PayloadCalibration
-    ring: RingBuffer | None
-    calibration_file: Any = None
-    tool: str = "instrument"
+    return Engine(rig, framework, loop, clk, calibration, ring, simulated=True)
 
 
 def build_hardware_engine(
@@ -192,7 +159,7 @@ def build_hardware_engine(
     shared_ring: bool = False,
     ring_seconds: float = 30.0,
     on_open: Any = None,
-) -> HardwareEngine:
+) -> Engine:
     """Open the real rig of a :class:`pipeline.hardware.HardwareConfig` and assemble framework and loop.
 
     What is on record for the mounted tool (``[calibration] tool``) in the calibration file
@@ -223,222 +190,5 @@ def build_hardware_engine(
     framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
     ring = RingBuffer.create(RECORD_FIELDS, int(ring_seconds * 1000), shared=shared_ring)
     loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
-    return HardwareEngine(rig, framework, loop, clk, calibration, ring, cal_file, hardware.calibration_tool)
-
-
-# -- the engine process -----------------------------------------------------------------------
-def _build_for_process(config: EngineConfig, events: Any) -> SimEngine | HardwareEngine | None:
-    """Build the engine the config asks for; on failure report one ``("error", message)`` and return None."""
-    if config.hardware_file is None:
-        return build_sim_engine(config, shared_ring=True)
-    from pipeline.devices import DeviceError
-    from pipeline.hardware import HardwareError, load_hardware
-
-    try:
-        hw = load_hardware(config.hardware_file)
-        return build_hardware_engine(
-            hw, watchdog=config.watchdog, shared_ring=True, ring_seconds=config.ring_seconds,
-            on_open=lambda what: events.put(("opening", what)),
-        )
-    except (HardwareError, DeviceError) as exc:
-        events.put(("error", str(exc)))
-    except ValueError as exc:  # the calibration file (CalibrationFileError names it)
-        events.put(("error", str(exc)))
-    return None
-
-
-def _engine_main(config: EngineConfig, conn: Any, events: Any, max_ticks: int | None) -> None:
-    """Entry point of the engine process."""
-    eng = _build_for_process(config, events)
-    if eng is None:
-        return
-    loop = eng.loop
-    loop.on_event = lambda ev: events.put(("loop_event", tuple(ev)))
-    stop = threading.Event()
-
-    def _receive() -> None:
-        # Blocking receive in its own thread: the loop only drains a deque.
-        while True:
-            try:
-                msg = conn.recv()
-            except (EOFError, OSError):
-                # controller gone: make the device safe and exit
-                loop.submit(ControllerDetached())
-                stop.set()
-                return
-            if msg == "stop":
-                stop.set()
-                return
-            loop.submit(msg)
-
-    threading.Thread(target=_receive, name="engine-commands", daemon=True).start()
-    assert eng.ring is not None
-    real = config.clock == "real"
-    scheduling = prepare_realtime_thread() if real else "virtual clock"
-    tracer = None
-    if real and config.trace_jitter:
-        tracer = LateTickTracer(MonotonicClock())
-        loop.clock = tracer
-    events.put(("ready", eng.ring.name, eng.calibration.to_dict(), scheduling))
-    if tracer is not None:
-        tracer.refresh()  # the threads: this one (the loop), the command receiver, the event queue's feeder
-    if real:
-        # a full collector pass over this process holds the GIL for 6–10 ms: freeze what exists, and let
-        # the collector run only right after a tick, never started mid-tick by an allocation
-        manual_garbage_collection()
-    try:
-        loop.run(stop, max_ticks=max_ticks, between_ticks=collect_garbage if real else None)
-    finally:
-        late = None
-        if tracer is not None:
-            late = tracer.summary()
-            tracer.close()
-        events.put(("stopped", loop.stats.summary(), loop.tick_count, int(loop.faults), late))
-        try:
-            eng.rig.close()
-        except Exception as exc:  # noqa: BLE001 - a device failing to close must not keep the ring alive
-            events.put(("close_error", str(exc)))
-        time.sleep(0.2)  # let the reader copy the last records before the segment goes
-        eng.ring.close()
-
-
-class EngineProcess:
-    """Start and talk to the engine process.
-
-    Parameters
-    ----------
-    config
-        What the engine builds.
-    max_ticks
-        Stop by itself after this many ticks (benchmarks and tests).
-    """
-
-    def __init__(self, config: EngineConfig, max_ticks: int | None = None) -> None:
-        self.config = config
-        self._ctx = mp.get_context("spawn")  # no fork of a process that may hold Qt or threads
-        self._conn, child_conn = self._ctx.Pipe()
-        self._events = self._ctx.Queue()
-        self._proc = self._ctx.Process(
-            target=_engine_main, args=(config, child_conn, self._events, max_ticks), name="haptic-engine", daemon=True
-        )
-        self._child_conn = child_conn
-        self.ring: RingBuffer | None = None
-        self.calibration: dict[str, Any] | None = None
-        self.final_stats: dict[str, float] | None = None
-        #: How the loop thread is scheduled, e.g. ``"SCHED_FIFO/20"`` (known once started).
-        self.scheduling = ""
-        self.final_ticks: int | None = None
-        self.final_faults: int | None = None
-        #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), with ``trace_jitter``.
-        self.late_periods: dict[str, Any] | None = None
-        self.loop_events: list[LoopEvent] = []
-        #: The device the engine was opening last (hardware engines), for the start-up error.
-        self.opening: str | None = None
-
-    def start(self, timeout_s: float = 30.0) -> None:
-        """Spawn the engine and wait until its ring buffer is ready.
-
-        Raises
-        ------
-        EngineStartError
-            A device failed to open (the message is the device's error, naming
-            it), or the engine was not ready within ``timeout_s`` (the message
-            names the device it was still opening); the process is ended.
-        """
-        self._proc.start()
-        self._child_conn.close()
-        deadline = time.monotonic() + timeout_s
-        while True:
-            remaining = deadline - time.monotonic()
-            try:
-                msg = self._events.get(timeout=max(0.01, min(0.25, remaining)))
-            except queue.Empty:
-                if remaining > 0.25 and self._proc.is_alive():
-                    continue
-                if remaining > 0.25:  # died: take its last word if it is still in flight, else say so now
-                    try:
-                        msg = self._events.get(timeout=0.5)
-                    except queue.Empty:
-                        code = self._proc.exitcode
-                        self.kill()
-                        raise EngineStartError(f"engine process exited during start-up (exit code {code})") from None
-                else:
-                    self.kill()
-                    where = f" (still opening the {self.opening})" if self.opening else ""
-                    raise EngineStartError(f"engine did not become ready within {timeout_s:g} s{where}") from None
-            if msg[0] == "opening":
-                self.opening = msg[1]
-                continue
-            if msg[0] == "error":
-                self.kill()
-                raise EngineStartError(f"engine could not start: {msg[1]}")
-            if msg[0] == "ready":
-                self.ring = RingBuffer.attach(msg[1])
-                self.calibration = msg[2]
-                self.scheduling = msg[3]
-                return
-            self._handle(msg)
-
-    def send(self, command: Command) -> None:
-        """Send a loop command."""
-        self._conn.send(command)
-
-    def poll_events(self) -> list[tuple[Any, ...]]:
-        """Drain pending engine messages (loop events are also kept in :attr:`loop_events`)."""
-        out = []
-        while True:
-            try:
-                msg = self._events.get_nowait()
-            except queue.Empty:
-                return out
-            self._handle(msg)
-            out.append(msg)
-
-    def _handle(self, msg: tuple[Any, ...]) -> None:
-        if msg[0] == "loop_event":
-            self.loop_events.append(LoopEvent(*msg[1]))
-        elif msg[0] == "stopped":
-            self.final_stats, self.final_ticks, self.final_faults, self.late_periods = msg[1], msg[2], msg[3], msg[4]
-
-    def wait(self, timeout_s: float | None = None) -> None:
-        """Wait for the engine to exit by itself (after ``max_ticks``)."""
-        end = None if timeout_s is None else time.monotonic() + timeout_s
-        while self.final_stats is None:
-            remaining = None if end is None else max(0.0, end - time.monotonic())
-            try:
-                self._handle(self._events.get(timeout=remaining))
-            except queue.Empty:
-                break
-        self._proc.join(timeout_s)
-
-    def stop(self, timeout_s: float = 5.0) -> None:
-        """Ask the engine to ramp down and exit; wait for it."""
-        if self._proc.is_alive():
-            try:
-                self._conn.send("stop")
-            except (OSError, BrokenPipeError):
-                pass
-            self.wait(timeout_s)
-        self.close()
-
-    def kill(self) -> None:
-        """Terminate without ceremony (tests of the detach path use closing the pipe instead)."""
-        if self._proc.is_alive():
-            self._proc.kill()
-        self._proc.join(2.0)
-        self.close()
-
-    def detach(self) -> None:
-        """Close our end of the command pipe, as a crashed GUI would."""
-        self._conn.close()
-
-    @property
-    def alive(self) -> bool:
-        """True while the engine process runs."""
-        return self._proc.is_alive()
-
-    def close(self) -> None:
-        """Release the ring and queues."""
-        if self.ring is not None:
-            self.ring.close()
-            self.ring = None
+    return Engine(rig, framework, loop, clk, calibration, ring, simulated=False, calibration_file=cal_file,
+                  tool=hardware.calibration_tool)

@@ -10,13 +10,18 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue
+import time
 from typing import Any
 
 from pipeline.ring import RingBuffer
 from study_app import messages as m
 from study_app.engine_host import HostConfig, host_main
 
-__all__ = ["EngineClient"]
+__all__ = ["EngineClient", "EngineStartError"]
+
+
+class EngineStartError(RuntimeError):
+    """The engine could not start (a device failed to open, or it did not become ready in time); one line."""
 
 
 class EngineClient:
@@ -40,6 +45,10 @@ class EngineClient:
         #: The shared segment of the engine's ring ("" before EngineReady).
         self.ring_name = ""
         self.started = False
+        #: The device the engine was opening last (real rig; "" before the first :class:`EngineOpening`).
+        self.opening = ""
+        #: The engine's last words (:class:`EngineStopped`), once it has stopped.
+        self.stopped: m.EngineStopped | None = None
 
     def start(self) -> None:
         """Spawn the engine (returns at once; :class:`EngineReady` arrives as an event)."""
@@ -64,7 +73,42 @@ class EngineClient:
         if isinstance(ev, m.EngineReady) and ev.ring_name and self.ring is None:
             self.ring = RingBuffer.attach(ev.ring_name)
             self.ring_name = ev.ring_name
+        elif isinstance(ev, m.EngineOpening):
+            self.opening = ev.device
+        elif isinstance(ev, m.EngineStopped):
+            self.stopped = ev
         return ev
+
+    def wait_ready(self, timeout_s: float) -> tuple[m.EngineReady, list[object]]:
+        """Start the engine if needed and wait for :class:`EngineReady` (benchmarks, tests, scripts).
+
+        Returns the ready event and the events that came before it.
+
+        Raises
+        ------
+        EngineStartError
+            The engine stopped before it was ready (the message is its reason), or
+            ``timeout_s`` passed (naming the device it was still opening); the
+            engine is then killed.
+        """
+        if not self.started:
+            self.start()
+        before: list[object] = []
+        end = time.monotonic() + timeout_s
+        while True:
+            left = end - time.monotonic()
+            ev = self.get(min(0.1, max(0.0, left))) if left > 0 else None
+            if isinstance(ev, m.EngineReady):
+                return ev, before
+            if ev is not None:
+                before.append(ev)
+            if self.stopped is not None:
+                self.kill()
+                raise EngineStartError(f"engine could not start: {self.stopped.reason}")
+            if left <= 0:
+                self.kill()
+                still = f" (still opening the {self.opening})" if self.opening else ""
+                raise EngineStartError(f"engine did not become ready within {timeout_s:g} s{still}")
 
     @property
     def pid(self) -> int | None:

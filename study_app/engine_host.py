@@ -44,7 +44,7 @@ from pipeline.compensation import (
     CalibrationPose, DegeneratePoseSetError, PayloadCalibration, identify_payload, recommended_pose_set,
 )
 from pipeline.devices import DeviceError
-from pipeline.engine import EngineConfig, HardwareEngine, SimEngine, build_hardware_engine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.frames import Mat3, axis_angle, mat_mul
 from pipeline.hardware import HardwareConfig, HardwareError, load_hardware
 from pipeline.jitter_trace import LateTickTracer
@@ -119,10 +119,13 @@ def _import_factory(spec: str) -> Callable[..., Any]:
         raise RuntimeError(f"haptic_factory = {spec!r}: cannot be imported ({exc})") from None
 
 
-def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[HardwareEngine, HardwareConfig, str]:
+def build_real_engine(
+    config: HostConfig, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
+) -> tuple[Engine, HardwareConfig, str]:
     """Load the hardware file, open the devices and assemble the loop (:func:`pipeline.engine.build_hardware_engine`).
 
     Returns the engine, the validated hardware config and the file's text (stored with each session).
+    ``on_open(device)`` is called before each device is opened.
 
     Raises
     ------
@@ -145,7 +148,7 @@ def build_real_engine(config: HostConfig, *, shared_ring: bool) -> tuple[Hardwar
     if config.haptic_factory is not None:
         hardware_module.open_haptic = _import_factory(config.haptic_factory)  # type: ignore[assignment]
     try:
-        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0)
+        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open)
     except (DeviceError, CalibrationFileError) as exc:
         raise RuntimeError(f"real rig: {exc}") from None
     finally:
@@ -384,9 +387,10 @@ class StudyEngine:
         self.driver = SwitchableDriver()
         self.hardware: HardwareConfig | None = None
         self.hardware_text = ""
-        self.eng: SimEngine | HardwareEngine
+        self.eng: Engine
         if self.real:
-            self.eng, self.hardware, self.hardware_text = build_real_engine(config, shared_ring=shared_ring)
+            self.eng, self.hardware, self.hardware_text = build_real_engine(
+                config, shared_ring=shared_ring, on_open=lambda device: publish(m.EngineOpening(device)))
         else:
             self.eng = build_sim_engine(
                 EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
@@ -445,7 +449,7 @@ class StudyEngine:
         if self.config.clock == "real":
             self.loop.start()
         self._running = True
-        if isinstance(self.eng, SimEngine):
+        if self.eng.simulated:
             rc = self.eng.rig.config
             surface_z_m, tip_home_m, rot_tip_sensor = rc.surface_z_m, tuple(rc.tip_home_m), rc.rot_tip_sensor
         else:
@@ -656,6 +660,7 @@ class StudyEngine:
             abs_dev_p50_us=s["abs_dev_p50_us"], period_max_us=s["period_max_us"],
             late_periods=None if self.tracer is None else self.tracer.summary(),
             waiting=runner.state.waiting if runner is not None and not runner.done else "",
+            scheduling=self.loop.scheduling if self.config.clock == "real" else "virtual clock",
             **self._health_extra(),
         )
 
@@ -788,7 +793,7 @@ class StudyEngine:
         self._run(db, opened)
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
-        if isinstance(self.eng, SimEngine):
+        if self.eng.simulated:
             return config_record(self.eng, self.config.clock, self.config.rig_seed, participant_seed)
         assert self.hardware is not None
         return real_config_record(self.hardware, self.hardware_text, self.eng)
@@ -807,7 +812,7 @@ class StudyEngine:
         self._run(db, opened)
 
     def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
-        if isinstance(self.eng, SimEngine):
+        if self.eng.simulated:
             self.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
             sim_rig = self.eng.rig
             participant: SwitchableDriver | None = self.driver
@@ -844,7 +849,7 @@ class StudyEngine:
 
     # -- fault rehearsal (simulated rig) -------------------------------------------------------------
     def _inject_fault(self, cmd: m.InjectFault) -> None:
-        if not isinstance(self.eng, SimEngine):
+        if not self.eng.simulated:
             raise RuntimeError("fault rehearsal: refused on the real rig (a person's hand is on it); "
                                "rehearse on the simulated rig")
         if cmd.kind not in FAULT_KINDS:
@@ -935,7 +940,7 @@ class StudyEngine:
 
     # -- calibration on the real rig: pose by pose -----------------------------------------------------
     def _record_pose(self, cmd: m.RecordPose) -> None:
-        if not isinstance(self.eng, HardwareEngine):
+        if self.eng.simulated:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self._require_idle("record pose")
         if self._recording is not None:
@@ -974,7 +979,7 @@ class StudyEngine:
         if rec.got < rec.need:
             return
         self._recording = None
-        assert isinstance(self.eng, HardwareEngine)
+        assert not self.eng.simulated
         w = np.concatenate(rec.chunks)[: rec.need]
         pose1 = self.eng.rig.robot.read_pose()
         turned = rotation_angle_deg(rec.pose0.rot_base_tip, pose1.rot_base_tip)
@@ -1041,7 +1046,7 @@ class StudyEngine:
         total = len(rots)
         result: m.CalibrationDone
         try:
-            assert isinstance(self.eng, SimEngine)
+            assert self.eng.simulated
             cal, poses = auto_calibrate(
                 self.eng.rig, clock, rots,
                 progress=lambda done, n: self.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
@@ -1077,7 +1082,7 @@ class StudyEngine:
     # -- the commissioning chain: what is on record, and the steps (TCP, payload above, frames) ------------------
     def _tool_record(self) -> ToolCalibration:
         eng = self.eng
-        if isinstance(eng, HardwareEngine):
+        if not eng.simulated:
             return eng.calibration_file.tool(eng.tool) if eng.calibration_file is not None else ToolCalibration(eng.tool)
         # the simulated rig calibrated its payload as it was built; TCP and frames are this run's, never saved
         return ToolCalibration("simulated instrument", payload=eng.calibration, payload_date=now_iso())
@@ -1088,14 +1093,14 @@ class StudyEngine:
 
     def _publish_calibration_status(self) -> None:
         eng = self.eng
-        path = eng.calibration_file.path if isinstance(eng, HardwareEngine) and eng.calibration_file is not None else ""
+        path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else ""
         self.publish(m.CalibrationStatus(self.config.rig, self.tool_cal.tool, path, self.tool_cal.status(),
                                          self.tool_cal.missing(*self._frames_in_use())))
 
     def _record_step(self, step: str, result: Any) -> None:
         """Put an accepted result on record (real rig: saved in the calibration file) and publish the status."""
         eng = self.eng
-        if isinstance(eng, HardwareEngine) and eng.calibration_file is not None:
+        if not eng.simulated and eng.calibration_file is not None:
             try:
                 self.tool_cal = eng.calibration_file.record(eng.tool, step, result)
             except CalibrationFileError as exc:
@@ -1112,7 +1117,7 @@ class StudyEngine:
     def _calibration_provenance(self) -> dict[str, Any]:
         """What a session stores about the calibration chain (``config_json``): tool, file, every step on record."""
         eng = self.eng
-        path = eng.calibration_file.path if isinstance(eng, HardwareEngine) and eng.calibration_file is not None else None
+        path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else None
         out: dict[str, Any] = {"rig_calibration": {"tool": self.tool_cal.tool, "file": path, **self.tool_cal.to_dict()}}
         if self._override is not None:
             out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1],
@@ -1123,7 +1128,7 @@ class StudyEngine:
         from pipeline.sim.commissioning import pivot_poses
         from pipeline.sim.robot import TOOL_DOWN
 
-        if not isinstance(self.eng, SimEngine):
+        if not self.eng.simulated:
             raise RuntimeError("real rig: rest the tip in the divot, turn the instrument and record each orientation "
                                "(Record orientation), then Compute")
         self._require_idle("TCP calibration")
@@ -1143,7 +1148,7 @@ class StudyEngine:
         self.publish(m.TcpCalibrationDone(True, "", name, tc.n_poses, tc.to_dict(), err))
 
     def _record_pivot(self, cmd: m.RecordPivot) -> None:
-        if not isinstance(self.eng, HardwareEngine):
+        if self.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self._require_idle("record orientation")
         if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 5.0):
@@ -1174,7 +1179,7 @@ class StudyEngine:
         self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
 
     def _identify_tcp(self, cmd: m.IdentifyTcp) -> None:
-        if not isinstance(self.eng, HardwareEngine):
+        if self.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self._require_idle("TCP calibration")
         self._tcp_identified([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded")
@@ -1182,7 +1187,7 @@ class StudyEngine:
     def _check_frames(self) -> None:
         from pipeline.sim.commissioning import push_axes
 
-        if not isinstance(self.eng, SimEngine):
+        if not self.eng.simulated:
             raise RuntimeError("real rig: push the free tip along each axis in turn (Record +x, +y, +z)")
         self._require_idle("frame check")
         real = self.config.clock == "real"
@@ -1208,7 +1213,7 @@ class StudyEngine:
         self.publish(m.FrameCheckDone(check.passed, summary, [a.describe() for a in check.axes]))
 
     def _record_frame_axis(self, cmd: m.RecordFrameAxis) -> None:
-        if not isinstance(self.eng, HardwareEngine):
+        if self.eng.simulated:
             raise RuntimeError("simulated rig: the pushes run automatically (Run frame check)")
         self._require_idle("frame check")
         if cmd.axis not in AXES:

@@ -14,7 +14,7 @@ from typing import Any
 
 __all__ = [
     "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
-    "EngineFault", "EngineReady", "EngineStopped", "FaultInjected", "Health", "InjectFault", "ListSessions", "ManualTarget",
+    "EngineFault", "EngineOpening", "EngineReady", "EngineStopped", "FaultInjected", "Health", "InjectFault", "ListSessions", "ManualTarget",
     "OperatorStop",
     "IdentifyPoses", "Pause", "PhaseEntered", "PoseRecorded", "RecordPose", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
     "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
@@ -490,6 +490,15 @@ class Health:
     haptic_continuous_force_n: float = float("nan")
     #: Why the haptic loop is dead ("" while it runs).
     loop_dead: str = ""
+    #: How the loop thread is scheduled (:func:`pipeline.clock.prepare_realtime_thread`; "virtual clock" when virtual).
+    scheduling: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class EngineOpening:
+    """Real rig: the engine is opening this device now (a device that hangs is named by the last of these)."""
+
+    device: str
 
 
 @dataclass(frozen=True, slots=True)

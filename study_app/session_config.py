@@ -5,13 +5,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from pipeline.engine import HardwareEngine, SimEngine
+from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
 
 __all__ = ["config_record", "real_config_record"]
 
 
-def config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
     """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
     fw = eng.framework.config
     return {
@@ -25,7 +25,7 @@ def config_record(eng: SimEngine, clock: str, rig_seed: int, participant_seed: i
     }
 
 
-def real_config_record(hw: HardwareConfig, hardware_text: str, eng: HardwareEngine) -> dict[str, Any]:
+def real_config_record(hw: HardwareConfig, hardware_text: str, eng: Engine) -> dict[str, Any]:
     """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
     return {
         "rig": "real",

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.loop import LoopEvent
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
@@ -84,7 +84,7 @@ def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     return per * participants
 
 
-def _engine(rig_seed: int, clock: str) -> SimEngine:
+def _engine(rig_seed: int, clock: str) -> Engine:
     return build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
                      ring_seconds=30.0)
@@ -92,7 +92,7 @@ def _engine(rig_seed: int, clock: str) -> SimEngine:
 
 
 def _drive(
-    eng: SimEngine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
     trigger: RehearsalTrigger | None = None,
 ) -> None:
     """Alternate loop ticks and runner blocks until the session ends."""
@@ -192,7 +192,7 @@ def run_session(
     return opened.session_id
 
 
-def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: SimEngine) -> RehearsalTrigger | None:
+def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) -> RehearsalTrigger | None:
     """The rehearsal trigger of a session run, if faults are planned for it."""
     if not faults:
         return None

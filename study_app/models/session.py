@@ -81,6 +81,8 @@ class SessionModel:
         """Update from one engine event."""
         if isinstance(ev, m.EngineReady):
             self.state, self.message = "ready", f"engine ready ({ev.rig} rig, {ev.clock} clock)"
+        elif isinstance(ev, m.EngineOpening) and self.state == "connecting":
+            self.message = f"starting the engine: opening the {ev.device} …"  # a device that hangs is named
         elif isinstance(ev, m.SessionStarted):
             self.session, self.trial, self.phase = ev, None, "idle"
             resumed = " (resumed)" if ev.stored_trials else ""

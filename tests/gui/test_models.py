@@ -462,3 +462,15 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
     for k in range(60):
         h.apply(m.EngineFault(2.0 + k, "fault" if k % 2 else "fault_cleared", 1, "SENSOR_STALE"))
     assert len(h.fault_log) == 50 and h.fault_log[-1].endswith("fault: SENSOR_STALE")
+
+
+def test_a_starting_engine_names_the_device_it_is_opening():
+    from study_app.models.session import SessionModel
+
+    s = SessionModel()
+    s.apply(m.EngineOpening("force sensor"))
+    assert s.state == "connecting" and s.message == "starting the engine: opening the force sensor …"
+    s.apply(m.EngineReady(ring_name="", rig="real", clock="real", calibration={}, surface_z_m=0.0,
+                          tip_home_m=(0.0, 0.0, 0.0), driver="participant", rot_tip_sensor=(1.0,) * 9, devices=[]))
+    s.apply(m.EngineOpening("robot"))  # late news changes nothing once ready
+    assert s.state == "ready" and s.message == "engine ready (real rig, real clock)"

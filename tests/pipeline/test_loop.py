@@ -10,7 +10,7 @@ import pytest
 
 from pipeline.clock import VirtualClock
 from pipeline.devices import Fault
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.framework import FrameworkConfig
 from pipeline.loop import (
     RECORD_FIELDS,
@@ -36,13 +36,13 @@ RENDER = ("render_fx", "render_fy", "render_fz")
 
 
 
-def press_engine(**config) -> SimEngine:
+def press_engine(**config) -> Engine:
     eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", **config))
     eng.rig.set_driver(PressAndHold())
     return eng
 
 
-def ticks(eng: SimEngine, n: int) -> list[dict[str, float]]:
+def ticks(eng: Engine, n: int) -> list[dict[str, float]]:
     out = []
     for _ in range(n):
         t_ns = eng.clock.now_ns()
@@ -63,7 +63,7 @@ def row_times_ns(rows: np.ndarray) -> np.ndarray:
     return np.round(rows["t_s"] * 1e9).astype(np.int64)
 
 
-def all_rows(eng: SimEngine) -> np.ndarray:
+def all_rows(eng: Engine) -> np.ndarray:
     ring = eng.ring
     assert ring.write_count <= ring.capacity
     r = ring.read_since(0)
@@ -72,7 +72,7 @@ def all_rows(eng: SimEngine) -> np.ndarray:
 
 
 @pytest.fixture
-def steady() -> SimEngine:
+def steady() -> Engine:
     """Pressing ~2 mm into the tissue with feedback fully on (rendered force ≈ 0.45 N)."""
     eng = press_engine()
     recs = ticks(eng, 1500)

@@ -21,14 +21,14 @@ from drivers import PressAndHold
 from test_teleop_faults import Teleop
 
 from pipeline.devices import Fault
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.loop import ResetFaults
 from pipeline.teleop import TeleopState
 
 MS = 1_000_000
 
 
-def pressing() -> SimEngine:
+def pressing() -> Engine:
     eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold"))
     eng.rig.set_driver(PressAndHold(-0.018))
     eng.loop.run_ticks(1500)  # ramped in, pressing steadily
@@ -37,7 +37,7 @@ def pressing() -> SimEngine:
     return eng
 
 
-def render(eng: SimEngine) -> float:
+def render(eng: Engine) -> float:
     r = eng.loop.last_record
     assert r is not None
     return math.hypot(r["render_fx"], r["render_fy"], r["render_fz"])

@@ -21,7 +21,7 @@ import math
 import pytest
 
 from pipeline.devices import Fault
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.loop import ControllerDetached, OperatorStop, ResetFaults
 from pipeline.sim.hand import HandObservation
 from pipeline.teleop import ServoTarget, TeleopConfig, TeleopController, TeleopDriver, TeleopState
@@ -42,7 +42,7 @@ class Teleop:
     """A simulated engine whose arm is driven by a TeleopDriver from the simulated Touch."""
 
     def __init__(self) -> None:
-        self.eng: SimEngine = build_sim_engine(EngineConfig(clock="virtual", calibrate=False, driver="hold"))
+        self.eng: Engine = build_sim_engine(EngineConfig(clock="virtual", calibrate=False, driver="hold"))
         rig = self.eng.rig
         rig.set_driver(Sweep())
         self.robot = rig.robot

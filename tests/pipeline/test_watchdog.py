@@ -19,7 +19,7 @@ import re
 import pytest
 
 from pipeline.devices import Fault
-from pipeline.engine import EngineConfig, SimEngine, build_sim_engine
+from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.framework import STEP_FIELDS
 from pipeline.loop import OperatorStop, ResetFaults
 from pipeline.safety import SafetyConfig
@@ -40,14 +40,14 @@ RENDER = ("render_fx", "render_fy", "render_fz")
 
 
 
-def make_engine(sim: SimRigConfig | None = None, y_m: float = -0.018) -> SimEngine:
+def make_engine(sim: SimRigConfig | None = None, y_m: float = -0.018) -> Engine:
     cfg = EngineConfig(clock="virtual", driver="hold", sim=sim or SimRigConfig())
     eng = build_sim_engine(cfg)
     eng.rig.set_driver(PressAndHold(y_m))
     return eng
 
 
-def ticks(eng: SimEngine, n: int) -> list[dict[str, float]]:
+def ticks(eng: Engine, n: int) -> list[dict[str, float]]:
     """Run ``n`` ticks one by one; each record also gets the tick time (ns) and the device command."""
     loop = eng.loop
     out = []
@@ -78,7 +78,7 @@ def first(recs: list[dict[str, float]], pred) -> int:
     raise AssertionError("condition never met")
 
 
-def settle(eng: SimEngine, n: int = 1500) -> list[dict[str, float]]:
+def settle(eng: Engine, n: int = 1500) -> list[dict[str, float]]:
     """Press and hold until the rendered force is steady; check it is."""
     recs = ticks(eng, n)
     tail = recs[-300:]
@@ -92,7 +92,7 @@ def settle(eng: SimEngine, n: int = 1500) -> list[dict[str, float]]:
 
 
 @pytest.fixture
-def eng() -> SimEngine:
+def eng() -> Engine:
     e = make_engine()
     settle(e)
     return e
@@ -122,7 +122,7 @@ def check_ramp_to_zero(recs: list[dict[str, float]], fault_i: int, g0: float = 1
     return zero_i
 
 
-def fault_events(eng: SimEngine) -> list:
+def fault_events(eng: Engine) -> list:
     return [e for e in eng.loop.events if e.kind == "fault"]
 
 

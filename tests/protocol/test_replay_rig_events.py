@@ -28,7 +28,7 @@ import pytest
 import study_app.headless.session_run as session_run
 from analysis.load import load_study
 from analysis.loop_health import abort_counts, health_table
-from pipeline.engine import SimEngine
+from pipeline.engine import Engine
 from pipeline.replay import ReplayInputs, replay
 from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import TouchSpec
@@ -43,14 +43,14 @@ HOT_TOUCH = TouchSpec(continuous_force_n=0.3, thermal_budget_n2s=1.0)
 
 
 def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSpec | None,
-                 tamper: Callable[[SimEngine], None] | None = None) -> tuple[Path, list[SegmentData]]:
+                 tamper: Callable[[Engine], None] | None = None) -> tuple[Path, list[SegmentData]]:
     """One participant's session on a simulated rig built as ``run`` builds it, with this Touch; its recording."""
     if touch is not None:
         monkeypatch.setattr(session_run, "SimRigConfig", lambda seed: SimRigConfig(seed=seed, touch=touch))
     if tamper is not None:
         build = session_run._engine
 
-        def engine(rig_seed: int, clock: str) -> SimEngine:
+        def engine(rig_seed: int, clock: str) -> Engine:
             eng = build(rig_seed, clock)
             tamper(eng)
             return eng
@@ -107,7 +107,7 @@ def test_a_cold_session_records_no_cut(tmp_path: Path, monkeypatch: pytest.Monke
     assert_bit_identical(seg)
 
 
-def failing_loop(plan: list[tuple[int, str]], done: list[tuple[int, str]]) -> Callable[[SimEngine], None]:
+def failing_loop(plan: list[tuple[int, str]], done: list[tuple[int, str]]) -> Callable[[Engine], None]:
     """Make the engine's loop fail as planned: at the first tick from each planned one at which it renders a force.
 
     ``late``: the next tick comes 20 ms late; ``stall``: 60 ms late; ``frozen``: its supervisor finds it
@@ -115,7 +115,7 @@ def failing_loop(plan: list[tuple[int, str]], done: list[tuple[int, str]]) -> Ca
     and it ticks again anyway (a loop restarted in the same run).
     """
 
-    def tamper(eng: SimEngine) -> None:
+    def tamper(eng: Engine) -> None:
         loop, clock = eng.loop, eng.clock
         pending = list(plan)
 
