@@ -32,7 +32,8 @@ from pipeline.loop import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, default_protocol
 from protocol.design import build_schedule
-from pipeline.sim.participant import ParticipantParams, SimulatedParticipant
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.participant_params import ParticipantParams
 from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = [

@@ -96,6 +96,27 @@ def _participant_worker(
     messages.join_thread()
 
 
+def _ended_workers(
+    running: dict[int, Any], sessions: dict[int, list[int]], messages: Any,
+    handle: Callable[[tuple[Any, ...]], tuple[int, str] | None],
+) -> tuple[int, str] | None:
+    """Workers that have ended: read what each wrote before it ended; one that died without a word is a failure."""
+    for n, p in list(running.items()):
+        if p.exitcode is None or n in sessions:
+            continue
+        failure = None
+        try:  # its last words may still be in the pipe
+            while failure is None and n not in sessions:
+                failure = handle(messages.get(timeout=1.0))
+        except queue.Empty:
+            pass
+        if failure is None and n not in sessions:  # died without a word (killed, crashed)
+            failure = (n, f"its worker process ended with exit code {p.exitcode}")
+        if failure is not None:
+            return failure
+    return None
+
+
 def run_parallel(
     db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress, study_owner: str,
@@ -141,22 +162,7 @@ def run_parallel(
                 msg = messages.get(timeout=0.1)
             except queue.Empty:
                 msg = None
-            if msg is not None:
-                failure = handle(msg)
-            else:
-                for n, p in list(running.items()):
-                    if p.exitcode is None or n in sessions:
-                        continue
-                    # ended: read what it wrote before it ended (its last words may still be in the pipe)
-                    try:
-                        while failure is None and n not in sessions:
-                            failure = handle(messages.get(timeout=1.0))
-                    except queue.Empty:
-                        pass
-                    if failure is None and n not in sessions:  # died without a word (killed, crashed)
-                        failure = (n, f"its worker process ended with exit code {p.exitcode}")
-                    if failure is not None:
-                        break
+            failure = handle(msg) if msg is not None else _ended_workers(running, sessions, messages, handle)
             progress.study_trials_done = sum(done_trials.values())
             progress.study_time_s = sum(time_s.values())
             now = time.monotonic()

@@ -32,7 +32,7 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.rehearsal import FaultPlan
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.session_setup import participant_code
-from study_app.headless.plan import Step, check_fault_plans, interrupted_session_of, open_notes, peek, plan_study, remaining_trials
+from study_app.headless.plan import check_fault_plans, interrupted_session_of, open_notes, peek, plan_study, remaining_trials
 from study_app.headless.pool import default_jobs, run_parallel
 from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
 
@@ -70,10 +70,9 @@ def run_study(
     on_progress
         Called (in this process) with the aggregated progress, ~10 times a second.
     jobs
-        Participants run at once, each in its own worker process (its own
-        database connection and recorder, all writing into the same WAL
-        database).  None: the usable cores, at most ``participants``; 1: one
-        after the other in this process.
+        Participants run at once, each in a worker process with its own connection
+        and recorder (one WAL database).  None: the usable cores, at most
+        ``participants``; 1: one after the other in this process.
     continue_study
         Complete a study that stopped part-way (a crash, a failed worker, an
         interrupted run) in the same database: every interrupted session is
@@ -100,8 +99,8 @@ def run_study(
         ``continue_study``), or, when continuing, the stored sessions were run
         with another seed or protocol.
     StudyWorkerError
-        If a participant's worker fails: the other workers are stopped (their
-        sessions stay ``running``); ``continue_study`` completes the study.
+        A participant's worker failed: the others are stopped (their sessions
+        stay ``running``); ``continue_study`` completes the study.
     SessionInterrupted
         A fault did not clear (one participant at a time; in parallel it is a
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
@@ -115,11 +114,18 @@ def run_study(
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    first_plan, first_total, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol,
-                                                      continue_study)
+    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
-        done = StudyProgress(participants_total=participants, sessions=list(first_kept))
-        return done
+        return StudyProgress(participants_total=participants, sessions=list(first_kept))
+    return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                            on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults)
+
+
+def _run_under_lease(
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
+) -> StudyProgress:
+    """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
     # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
     db: StudyDatabase | None = StudyDatabase(db_path, check=False)
@@ -130,21 +136,20 @@ def run_study(
         # again under the lease: what another process did in between counts
         plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study)
         progress.sessions.extend(kept)
-        jobs_used = min(n_jobs, len(plan))
+        jobs_used = min(jobs, len(plan))
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
             db = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
-                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
-                                 faults=faults)
+                                on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
+                                faults=faults)
         for n, steps in plan.items():
             progress.participant, progress.code = n, participant_code(n)
             run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                       on_progress=on_progress, study_owner=owner, faults=faults)
+                      on_progress=on_progress, study_owner=owner, faults=faults)
         return progress
     finally:
         _release_study(db, db_path, owner)
-
 
 
 def _release_study(db: StudyDatabase | None, db_path: str, owner: str) -> None:
