@@ -5,7 +5,12 @@ any number of readers, in this or another process, copy what is new.  No
 lock is shared: the writer stores the record first and only then publishes
 it by bumping the 64-bit write counter; a reader copies a range and then
 re-reads the counter to discard any rows the writer overwrote meanwhile
-(they are reported as lost, never returned torn).  The slot the writer fills
+(they are reported as lost, never returned torn).  The counter itself is
+one aligned 8-byte word, stored and loaded in one instruction (a numpy
+int64 cell): read byte by byte, as ``struct`` does, a reader in another
+process could see it half-written -- a count from the past -- and return
+old rows again as new.  On x86-64, stores are not reordered with stores nor
+loads with loads, so a counter seen means its rows are complete.  The slot the writer fills
 next -- the oldest record's -- is never read: the writer may be half-way
 through it before the counter says so, so a ring of ``capacity`` slots
 serves the newest ``capacity - 1`` records.
@@ -39,7 +44,6 @@ __all__ = ["RingBuffer", "RingReadResult"]
 _MAGIC = b"HSRING01"
 _HEADER = 4096
 _NAMES_OFF = 32
-_COUNT = struct.Struct("<Q")
 
 
 class RingReadResult:
@@ -85,8 +89,9 @@ class RingBuffer:
         self.capacity: int = int(capacity)
         self._row_bytes = 8 * n_fields
         self._pack_row = struct.Struct(f"<{n_fields}d").pack_into
-        self._pack_count = _COUNT.pack_into
-        self._count = _COUNT.unpack_from(buf, 24)[0]
+        # the write counter as one aligned int64 word (offset 24): stored and loaded whole, never torn
+        self._count_cell = np.ndarray((1,), dtype=np.int64, buffer=buf, offset=24)
+        self._count = int(self._count_cell[0])
         self.dtype = np.dtype([(n, "<f8") for n in names])
         self._rows = np.ndarray((self.capacity,), dtype=self.dtype, buffer=buf, offset=_HEADER)
 
@@ -179,13 +184,13 @@ class RingBuffer:
         c += 1
         self._count = c
         # publish after the row is complete
-        self._pack_count(self._buf, 24, c)
+        self._count_cell[0] = c
 
     # -- readers --------------------------------------------------------------------------------
     @property
     def write_count(self) -> int:
         """Records written since creation."""
-        return _COUNT.unpack_from(self._buf, 24)[0]
+        return int(self._count_cell[0])
 
     def read_since(self, cursor: int) -> RingReadResult:
         """Copy every record written at or after ``cursor`` that is still in the ring.
@@ -242,7 +247,8 @@ class RingBuffer:
     # -- lifetime -------------------------------------------------------------------------------
     def close(self) -> None:
         """Detach; the creator also frees the shared segment."""
-        self._rows = None  # type: ignore[assignment]  # drop the numpy view before closing the buffer
+        self._rows = None  # type: ignore[assignment]  # drop the numpy views before closing the buffer
+        self._count_cell = None  # type: ignore[assignment]
         buf, self._buf = self._buf, None  # type: ignore[assignment]
         if self._mmap is not None:
             buf.release()

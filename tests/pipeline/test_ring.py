@@ -439,3 +439,37 @@ def test_a_killed_writers_ring_is_freed_by_name_and_only_once():
     reader.close()
     assert RingBuffer.free_orphaned(name) is True and not os.path.exists(_shm_path(name))
     assert RingBuffer.free_orphaned(name) is False and RingBuffer.free_orphaned("") is False
+
+
+def _write_counts(name: str, n: int) -> None:
+    """Writer process: ``n`` one-field records as fast as it can."""
+    ring = RingBuffer.attach(name)  # mapped read-write: the stand-in for the engine's loop writing its ring
+    for k in range(n):
+        ring.write((float(k),))
+    ring.close()
+
+
+def test_a_reader_in_another_process_never_sees_the_write_counter_go_back():
+    """The counter is one aligned word: read byte by byte (``struct``), it was seen half-written now and then --
+    a count from the past, and old rows returned again as new (the GUI's plots got a trial's records twice)."""
+    ring = RingBuffer.create(("k",), 4096, shared=True)
+    try:
+        writer = mp.get_context("spawn").Process(target=_write_counts, args=(ring.name, 1_500_000))
+        writer.start()
+        last, cursor, went_back, gaps = 0, 0, [], 0
+        while writer.is_alive() or cursor < 1_500_000:
+            c = ring.write_count
+            if c < last:
+                went_back.append((last, c))
+            last = c
+            res = ring.read_since(cursor)
+            if len(res.rows) and res.rows["k"][0] != cursor + res.lost:
+                gaps += 1
+            cursor = res.cursor
+            if not writer.is_alive() and cursor >= ring.write_count:
+                break
+        writer.join(30)
+        assert writer.exitcode == 0
+        assert went_back == [] and gaps == 0 and ring.write_count == 1_500_000
+    finally:
+        ring.close()
