@@ -15,7 +15,7 @@ from typing import NoReturn
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
-__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "host_name", "one_line", "real_number", "whole_number"]
+__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "add_command", "host_name", "one_line", "real_number", "whole_number"]
 
 
 def one_line(text: str) -> str:
@@ -80,3 +80,17 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
         return text
 
     return parse
+
+
+def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,  # type: ignore[type-arg]
+                description: str = "") -> argparse.ArgumentParser:
+    """A subcommand whose ``--help`` starts with what it does and ends with an example."""
+    import shutil
+    import textwrap
+
+    width = max(40, min(100, shutil.get_terminal_size().columns - 2))
+    return sub.add_parser(
+        name, help=help, description=textwrap.fill((description or help[:1].upper() + help[1:]) + ".", width),
+        epilog="example:\n  " + "\n  ".join(example.splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )

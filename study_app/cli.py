@@ -12,13 +12,11 @@ import os
 import sys
 from collections.abc import Sequence
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, OneLineParser, host_name, one_line, real_number, whole_number
+from study_app.argtypes import (SQLITE_INTEGER_MAX, OneLineParser, add_command, host_name, one_line, real_number,
+                                whole_number)
+from study_app.cli_error import CliError
 
-__all__ = ["add_command", "main", "version_text"]
-
-
-class CliError(Exception):
-    """A user-facing error: printed as one line, exit status 2."""
+__all__ = ["CliError", "add_command", "main", "version_text"]
 
 
 # Every number an option takes is bounded here, at parse time (study_app.argtypes): a bad value is one line
@@ -49,20 +47,6 @@ def _fault_plan(text: str):  # type: ignore[no-untyped-def]
         return parse_fault_plan(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,  # type: ignore[type-arg]
-                description: str = "") -> argparse.ArgumentParser:
-    """A subcommand whose ``--help`` starts with what it does and ends with an example."""
-    import shutil
-    import textwrap
-
-    width = max(40, min(100, shutil.get_terminal_size().columns - 2))
-    return sub.add_parser(
-        name, help=help, description=textwrap.fill((description or help[:1].upper() + help[1:]) + ".", width),
-        epilog="example:\n  " + "\n  ".join(example.splitlines()),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
 
 
 class _VersionAction(argparse.Action):
@@ -300,7 +284,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "calibrate":
             from study_app.calibrate_cmds import cmd_calibrate
 
-            return cmd_calibrate(args, CliError)
+            return cmd_calibrate(args)
     except CliError as exc:
         print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
         return 2
@@ -482,8 +466,6 @@ def _cmd_bench_pipeline(args: argparse.Namespace) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    # ``python -m study_app.cli``: run the imported module's main, not this __main__ copy of it -- the subcommand
-    # modules raise study_app.cli.CliError, which __main__.CliError would not catch (a traceback instead of one line)
-    from study_app.cli import main as _main
-
-    sys.exit(_main())
+    # ``python -m study_app.cli``: CliError lives in study_app.cli_error, so this __main__ copy catches the one
+    # the subcommand modules raise
+    sys.exit(main())

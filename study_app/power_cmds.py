@@ -11,6 +11,8 @@ import json
 import sys
 import time
 
+from study_app.cli_error import CliError
+
 __all__ = ["add_power_bench_parser", "add_power_parser", "cmd_bench_power", "cmd_power"]
 
 _N_MAX = 10_000
@@ -66,8 +68,6 @@ def add_power_bench_parser(bsub: argparse._SubParsersAction) -> None:  # type: i
 
 
 def _whole(option: str, text: str, low: int, high: int) -> int:
-    from study_app.cli import CliError
-
     try:
         v = int(text)
     except ValueError:
@@ -78,8 +78,6 @@ def _whole(option: str, text: str, low: int, high: int) -> int:
 
 
 def _n_values(text: str) -> tuple[int, ...]:
-    from study_app.cli import CliError
-
     out = []
     for part in text.split(","):
         try:
@@ -94,8 +92,6 @@ def _n_values(text: str) -> tuple[int, ...]:
 
 
 def _alpha(text: str) -> float:
-    from study_app.cli import CliError
-
     try:
         v = float(text)
     except ValueError:
@@ -106,9 +102,7 @@ def _alpha(text: str) -> float:
 
 
 def cmd_power(args: argparse.Namespace) -> int:
-    """Run ``haptic-study power``; errors raise :class:`study_app.cli.CliError`."""
-    from study_app.cli import CliError
-
+    """Run ``haptic-study power``; errors raise :class:`study_app.cli_error.CliError`."""
     if args.db and args.simulated:
         raise CliError("--db and --simulated: give one or the other (a pilot study, or simulated participants)")
     if not args.db and not args.simulated:
@@ -192,8 +186,6 @@ def cmd_bench_power(args: argparse.Namespace) -> int:
     import os
 
     from bench.power_bench import format_power_bench, run_power_bench
-    from study_app.cli import CliError
-
     if args.db is not None and not os.path.isfile(args.db):
         raise CliError(f"--db = {args.db!r}: no such file")
     resamples = _whole("--resamples", args.resamples, 1, 1_000_000)

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, real_number, whole_number
+from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, real_number, whole_number
+from study_app.cli_error import CliError
 
 __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
@@ -29,8 +30,6 @@ _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``replay``, ``plot-session`` and ``export``."""
-    from study_app.cli import add_command
-
     r = add_command(
         sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
         "haptic-study replay --db study.db --session 2\n"
@@ -91,12 +90,6 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
 
 
 # -- shared -------------------------------------------------------------------------------------------------
-def _cli_error(msg: str) -> Exception:
-    from study_app.cli import CliError
-
-    return CliError(msg)
-
-
 def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
     """(open read-only database, its recorded segments, the session's trials frame), or a one-line error."""
     from protocol.recording import read_segment, segments_of
@@ -105,18 +98,18 @@ def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
     try:
         db = StudyDatabase(db_path, readonly=True, check=True)
     except StorageError as exc:
-        raise _cli_error(str(exc)) from None
+        raise CliError(str(exc)) from None
     row = db.conn.execute("SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
                           "WHERE s.session_id = ?", (session_id,)).fetchone()
     if row is None:
         ids = [r[0] for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
         db.close()
-        raise _cli_error(f"--session {session_id}: no such session in {db_path} (sessions: "
+        raise CliError(f"--session {session_id}: no such session in {db_path} (sessions: "
                          f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
     segs = segments_of(db.conn, session_id) if db.schema_version >= 3 else []
     if not segs:
         db.close()
-        raise _cli_error(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
+        raise CliError(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
                          "which kept its trials' samples only); replay and plot-session need a recorded session")
     segments = [read_segment(db.conn, session_id, s[0]) for s in segs]
     import pandas as pd
@@ -139,9 +132,9 @@ def _new_folder(path: str, *, create: bool = True) -> Path:
     """``--out DIR``: a new or empty folder (checked before the work, created after it)."""
     out = Path(path)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise _cli_error(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
+        raise CliError(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
     if not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     if create:
         out.mkdir(exist_ok=True)
     return out
@@ -162,7 +155,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     try:
         outputs = [replay(s.replay_inputs()) for s in segments]
     except ValueError as exc:  # a log entry this version cannot apply
-        raise _cli_error(f"--session {args.session}: {exc}") from None
+        raise CliError(f"--session {args.session}: {exc}") from None
     wall = time.perf_counter() - t0
     exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
              and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
@@ -207,7 +200,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         try:
             cfg = dataclasses.replace(cfg, **changes)
         except ValueError as exc:
-            raise _cli_error(str(exc)) from None
+            raise CliError(str(exc)) from None
         other.append(replay(s.replay_inputs(), cfg))
     recorded = np.concatenate([_magnitude(s.columns, "render") for s in segments])
     replayed = np.concatenate([np.linalg.norm(o.stages[:, 18:21], axis=1) for o in other])
@@ -246,9 +239,9 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
-        raise _cli_error(f"--out {out}: must end in .png, .pdf or .svg")
+        raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     if not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     (code, kind), segments, trials = _session(args.db, args.session)
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
@@ -271,22 +264,22 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     to_stdout = args.out == "-"
     if to_stdout and args.format != "csv":
-        raise _cli_error("--out -: standard output takes --format csv only; give a file for parquet")
+        raise CliError("--out -: standard output takes --format csv only; give a file for parquet")
     out = Path(args.out)
     if not to_stdout and out.exists():
-        raise _cli_error(f"--out {out}: exists; export writes a new file only (nothing was written)")
+        raise CliError(f"--out {out}: exists; export writes a new file only (nothing was written)")
     if not to_stdout and not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     if args.format == "parquet":
         try:
             import pyarrow  # noqa: F401
         except ImportError:
-            raise _cli_error("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
+            raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
     print("export: reading the records ...", file=sys.stderr, flush=True)
     try:
         frame = samples_frame(args.db, args.session)
     except AnalysisError as exc:
-        raise _cli_error(str(exc)) from None
+        raise CliError(str(exc)) from None
     if to_stdout:
         frame.to_csv(sys.stdout, index=False)
         return 0

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, whole_number
+from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, whole_number
+from study_app.cli_error import CliError
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
@@ -32,8 +33,6 @@ def add_analysis_options(parser: argparse.ArgumentParser) -> None:
 
 def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``report`` and ``plot-trial``."""
-    from study_app.cli import add_command
-
     r = add_command(
         sub, "report",
         "analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
@@ -73,11 +72,10 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    """Run ``haptic-study report``; errors raise :class:`study_app.cli.CliError`."""
+    """Run ``haptic-study report``; errors raise :class:`study_app.cli_error.CliError`."""
     from analysis.load import AnalysisError
     from analysis.metrics import MetricOptions
     from analysis.report import build_report
-    from study_app.cli import CliError
     from study_app.progress import ProgressBar
 
     bar: ProgressBar | None = None
@@ -127,7 +125,6 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
 
     from analysis.figures import pipeline_trace, save_one
     from analysis.load import AnalysisError, load_study, read_trial_samples
-    from study_app.cli import CliError
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
