@@ -15,7 +15,8 @@ from typing import NoReturn
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
-__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "add_command", "host_name", "one_line", "real_number", "whole_number"]
+__all__ = ["SEED", "OneLineParser", "SQLITE_INTEGER_MAX", "add_command", "host_name", "one_line", "positive_seconds",
+           "real_number", "whole_number"]
 
 
 def one_line(text: str) -> str:
@@ -94,3 +95,12 @@ def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: 
         epilog="example:\n  " + "\n  ".join(example.splitlines()),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+
+
+def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
+    """An argument type: a finite number of seconds > 0 and ≤ ``hi`` (default one day)."""
+    return real_number(name, 0.0, hi, lo_open=True)
+
+
+#: Seeds are stored in the study database: at most SQLite's largest INTEGER.
+SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")

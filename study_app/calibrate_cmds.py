@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from study_app.argtypes import SEED, add_command, real_number
 from study_app.cli_error import CliError
 
 if TYPE_CHECKING:  # numpy is imported where it is used: ``haptic-study --help`` must not load it
@@ -41,10 +42,8 @@ _PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
 _STILL_M, _STILL_DEG = 0.0002, 0.2
 
 
-def add_calibrate_command(sub: Any, add_command: Callable[..., argparse.ArgumentParser], seed_type: Any) -> None:
+def add_calibrate_command(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``calibrate`` to the ``haptic-study`` subcommands."""
-    from study_app.argtypes import real_number
-
     c = add_command(
         sub, "calibrate", "commission the rig: TCP pivot calibration, payload/bias, frame and sign check",
         "haptic-study calibrate tcp --rig sim --json\n"
@@ -62,11 +61,12 @@ def add_calibrate_command(sub: Any, add_command: Callable[..., argparse.Argument
     c.add_argument("--poses", default=None, metavar="SET",
                    help="tcp: recommended (8, default), minimal (4), 'roll only' (refused: shows why); "
                         "payload: recommended (24, default), quick (6), 'tool-down only' (refused)")
-    c.add_argument("--seed", type=seed_type, default=0, help="simulated rig: seed (default 0)")
+    c.add_argument("--seed", type=SEED, default=0, help="simulated rig: seed (default 0)")
     c.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
                    metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
                                        "telling the pipeline (a lab's mounting mistake the frame check must catch)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(handler=cmd_calibrate)
 
 
 def ask_on_stderr(prompt: str) -> str:

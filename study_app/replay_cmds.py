@@ -50,6 +50,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                    help="tanh scaling f_max to try, N (the device's own peak still clamps)")
     r.add_argument("--out", default=None, metavar="DIR",
                    help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new folder)")
+    r.set_defaults(handler=cmd_replay)
 
     p = add_command(
         sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
@@ -61,6 +62,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
                    help="session id")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.set_defaults(handler=cmd_plot_session)
 
     e = add_command(
         sub, "export", "export a study's data in tidy form (samples: every 1 kHz record)",
@@ -87,6 +89,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
     es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
+    es.set_defaults(handler=cmd_export)
 
 
 # -- shared -------------------------------------------------------------------------------------------------

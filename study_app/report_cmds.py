@@ -55,6 +55,7 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--power", action="store_true",
                    help="add 'what n would a study need': power against the number of participants, resampling "
                         "this study's participants (as haptic-study power with its defaults)")
+    r.set_defaults(handler=cmd_report)
 
     p = add_command(
         sub, "plot-trial", "one trial's force through the pipeline: task force against its band, rendered, raw",
@@ -69,6 +70,7 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"), required=True, metavar="N",
                    help="trial number within the session, from 1, as the GUI and trials.csv number them")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.set_defaults(handler=cmd_plot_trial)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
