@@ -146,47 +146,11 @@ def _new_folder(path: str, *, create: bool = True) -> Path:
 # -- replay ---------------------------------------------------------------------------------------------------
 def cmd_replay(args: argparse.Namespace) -> int:
     """``haptic-study replay``."""
-    from analysis.replay_compare import filter_trade, trial_differences
-    from pipeline.framework import framework_config_from_dict
-    from pipeline.replay import replay
-
     if args.out:
         _new_folder(args.out, create=False)  # refused before the work, not after it
     (code, kind), segments, trials = _session(args.db, args.session)
-    n = sum(len(s.columns["tick"]) for s in segments)
-    t0 = time.perf_counter()
-    try:
-        outputs = [replay(s.replay_inputs()) for s in segments]
-    except ValueError as exc:  # a log entry this version cannot apply
-        raise CliError(f"--session {args.session}: {exc}") from None
-    wall = time.perf_counter() - t0
-    exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
-             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
-    gaps = [s.segment for s in segments if not s.continuous]
-    print(f"Session {args.session} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
-          f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
-    verdict = ("bit-identical to the recording" if all(exact) else
-               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
-    print(f"  recorded settings: rendered force and task force {verdict}")
-    if gaps:
-        print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
-    # the filter's trade on this recording: the compensated force replay recomputed, at rest and in contact
-    comp = np.concatenate([o.stages[:, :3] for o in outputs])
-    phase = np.concatenate([s.columns["phase"] for s in segments])
-    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
-    mag = np.linalg.norm(comp, axis=1)
-    from protocol.metrics import CONTACT_THRESHOLD_N
-    from protocol.trial import PHASE_CODES, TrialPhase
-
-    rest = (phase == PHASE_CODES[TrialPhase.PAUSE]) & (mag < 2 * CONTACT_THRESHOLD_N)
-    contact = in_trial & (mag > 2 * CONTACT_THRESHOLD_N)
-    trade = filter_trade(comp, rest, contact)
-    recorded_w = segments[0].snapshot["framework"]["config"]["filter_window"]
-    print(f"  the moving-average window on this recording ({int(rest.sum()):,} records at rest, "
-          f"{int(contact.sum()):,} in contact; recorded with {recorded_w}):")
-    print("    window  noise at rest (N RMS)  delay in contact (ms)  theory (ms)")
-    for r in trade.itertuples():
-        print(f"    {r.window:6d}  {r.noise_rms_N:21.5f}  {r.delay_ms + 0.0:21.1f}  {r.group_delay_ms:11.1f}")
+    outputs, exact = _replay_as_recorded(args.session, code, kind, segments)
+    trade = _filter_trade(outputs, segments)
     changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
                                  ("f_max_n", args.f_max)) if v is not None}
     out = _new_folder(args.out) if args.out else None
@@ -196,6 +160,63 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if out is not None:
             print(f"Files in {out}/: filter_trade.csv")
         return 0 if all(exact) else 1
+    _replay_with_changes(segments, trials, changes, out)
+    return 0 if all(exact) else 1
+
+
+def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[Any]) -> tuple[list[Any], list[bool]]:
+    """Replay every recorded run with its recorded settings and say whether it matched (outputs, exact per run)."""
+    from pipeline.replay import replay
+
+    n = sum(len(s.columns["tick"]) for s in segments)
+    t0 = time.perf_counter()
+    try:
+        outputs = [replay(s.replay_inputs()) for s in segments]
+    except ValueError as exc:  # a log entry this version cannot apply
+        raise CliError(f"--session {session_id}: {exc}") from None
+    wall = time.perf_counter() - t0
+    exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
+             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
+    gaps = [s.segment for s in segments if not s.continuous]
+    print(f"Session {session_id} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
+          f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
+    verdict = ("bit-identical to the recording" if all(exact) else
+               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
+    print(f"  recorded settings: rendered force and task force {verdict}")
+    if gaps:
+        print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
+    return outputs, exact
+
+
+def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
+    """Print (and return) the filter's trade on this recording: noise at rest against delay in contact."""
+    from analysis.replay_compare import filter_trade
+    from protocol.metrics import CONTACT_THRESHOLD_N
+    from protocol.trial import PHASE_CODES, TrialPhase
+
+    # the compensated force replay recomputed, at rest and in contact
+    comp = np.concatenate([o.stages[:, :3] for o in outputs])
+    phase = np.concatenate([s.columns["phase"] for s in segments])
+    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
+    mag = np.linalg.norm(comp, axis=1)
+    rest = (phase == PHASE_CODES[TrialPhase.PAUSE]) & (mag < 2 * CONTACT_THRESHOLD_N)
+    contact = in_trial & (mag > 2 * CONTACT_THRESHOLD_N)
+    trade = filter_trade(comp, rest, contact)
+    recorded_w = segments[0].snapshot["framework"]["config"]["filter_window"]
+    print(f"  the moving-average window on this recording ({int(rest.sum()):,} records at rest, "
+          f"{int(contact.sum()):,} in contact; recorded with {recorded_w}):")
+    print("    window  noise at rest (N RMS)  delay in contact (ms)  theory (ms)")
+    for r in trade.itertuples():
+        print(f"    {r.window:6d}  {r.noise_rms_N:21.5f}  {r.delay_ms + 0.0:21.1f}  {r.group_delay_ms:11.1f}")
+    return trade
+
+
+def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, float], out: Path | None) -> None:
+    """Replay with ``changes`` to the recorded settings; the rendered force's difference, trial by trial."""
+    from analysis.replay_compare import trial_differences
+    from pipeline.framework import framework_config_from_dict
+    from pipeline.replay import replay
+
     what = ", ".join(f"{k} = {v:g}" for k, v in changes.items())
     other = []
     for s in segments:
@@ -231,7 +252,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
                      f"trial {int(w['trial_index']) + 1} ({w['haptic_mode']}, {w['outcome']}): the largest difference")
         save(replay_figure(t_s, recorded, replayed, what, worst), out, "replay")
         print(f"Files in {out}/: replay_trials.csv, filter_trade.csv, replay.png, replay.pdf, replay.svg")
-    return 0 if all(exact) else 1
 
 
 # -- plot-session ---------------------------------------------------------------------------------------------
