@@ -113,8 +113,8 @@ def _add_absent_command(sub: argparse._SubParsersAction, name: str, what: str) -
     """``name`` whose package is not installed: any use of it is one line naming what is missing, exit 2."""
 
     def absent(args: argparse.Namespace) -> int:
-        raise CliError(f"{name}: the {what} are not installed here (no '{name}' in the entry points "
-                       f"'{COMMANDS_GROUP}'; install haptic-study from its source tree: pip install -e .)")
+        raise CliError(f"{name}: the {what} are not part of this install (the '{name}' package and its entry "
+                       f"point in '{COMMANDS_GROUP}'); install haptic-study from its source tree: pip install -e .")
 
     a = sub.add_parser(name, help=f"{what} (not installed)")
     a.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)

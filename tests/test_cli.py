@@ -85,8 +85,9 @@ def test_bench_absent_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pytes
     assert main(argv) == 2
     out = capsys.readouterr()
     assert out.out == ""
-    assert out.err == ("haptic-study: error: bench: the benchmarks are not installed here (no 'bench' in the entry "
-                       "points 'haptic_study.commands'; install haptic-study from its source tree: pip install -e .)\n")
+    assert out.err == ("haptic-study: error: bench: the benchmarks are not part of this install (the 'bench' package "
+                       "and its entry point in 'haptic_study.commands'); install haptic-study from its source tree: "
+                       "pip install -e .\n")
     assert main(["sessions", "--db", "/no/such.db"]) == 2  # the rest of the command line unaffected
 
 
