@@ -18,6 +18,7 @@ __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run",
 
 
 def _fault_plan(text: str):  # type: ignore[no-untyped-def]
+    """An argument type: one ``--inject-fault`` plan (protocol.rehearsal), or the parser's one-line error."""
     from protocol.rehearsal import parse_fault_plan
 
     try:
