@@ -30,6 +30,7 @@ import os
 import platform
 import tempfile
 import time
+from collections.abc import Callable
 from typing import Any
 
 from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
@@ -82,6 +83,32 @@ def _measure_without_gui(seconds: float, explain: bool) -> dict[str, Any]:
         client.shutdown()
 
 
+def _run_until(app: Any, pred: Callable[[], bool], timeout_s: float) -> None:
+    """Run Qt's event loop until ``pred()`` holds, or raise after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while not pred():
+        app.processEvents()
+        time.sleep(0.001)
+        if time.monotonic() > end:
+            raise RuntimeError("bench gui: a step did not complete in time")
+
+
+def _stall_figures(recorder: Any) -> dict[str, Any]:
+    """The GUI event loop's stalls: the worst per phase, the count over the threshold and the longest eight."""
+    return {
+        "gui_stall_ms": {k: round(v, 1) for k, v in recorder.worst_ms.items()},
+        "gui_worst_stall": {
+            ph: (None if (w := recorder.worst(ph)) is None else {"ms": w.gap_ms, "callback": w.culprit})
+            for ph in ("connect", "calibration", "session")
+        },
+        "gui_stalls_over_threshold": len(recorder.stalls),
+        "gui_longest_stalls": [
+            {"phase": st.phase, "ms": st.gap_ms, "callback": st.culprit}
+            for st in sorted(recorder.stalls, key=lambda st: -st.gap_ms)[:8]
+        ],
+    }
+
+
 def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, Any]:
     """Measure; returns plain data (see :func:`format_gui_bench`); ``explain`` traces late ticks' causes."""
     without = _measure_without_gui(seconds, explain)
@@ -109,34 +136,26 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
     health: list[m.Health] = []
     win.bridge.event_received.connect(lambda ev: isinstance(ev, m.Health) and health.append(ev))
 
-    def run_until(pred, timeout_s: float) -> None:  # type: ignore[no-untyped-def]
-        end = time.monotonic() + timeout_s
-        while not pred():
-            app.processEvents()
-            time.sleep(0.001)
-            if time.monotonic() > end:
-                raise RuntimeError("bench gui: a step did not complete in time")
-
     try:
-        run_until(lambda: win.model.session.state == "ready", 60.0)
+        _run_until(app, lambda: win.model.session.state == "ready", 60.0)
         t_ready = time.perf_counter() - t0
         detector.set_phase("calibration")
         win.calibration_wizard.show()
         win.calibration_wizard.run_button.click()
-        run_until(lambda: win.model.calibration.state in ("accepted", "refused"), 120.0)
+        _run_until(app, lambda: win.model.calibration.state in ("accepted", "refused"), 120.0)
         win.calibration_wizard.hide()
         detector.set_phase("session")
         win.participant_window.show()
         win.rig_window.show()
         win.model.setup.update(code="BENCH01")
         win.start_button.click()
-        run_until(lambda: win.model.session.trial is not None, 30.0)
+        _run_until(app, lambda: win.model.session.trial is not None, 30.0)
         win.bridge.send(m.ResetStats())
         cpu0 = cpu_times()
         t_end = time.monotonic() + seconds
-        run_until(lambda: time.monotonic() >= t_end, seconds + 30.0)
+        _run_until(app, lambda: time.monotonic() >= t_end, seconds + 30.0)
         n = len(health)
-        run_until(lambda: len(health) > n + 1, 10.0)  # a Health event entirely after the window
+        _run_until(app, lambda: len(health) > n + 1, 10.0)  # a Health event entirely after the window
         with_gui = _loop_figures(health[-1], cpu0)
         trials = win.trial_table.rowCount()
     finally:
@@ -147,16 +166,7 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
         "seconds": seconds,
         "without_gui": without,
         "with_gui": with_gui,
-        "gui_stall_ms": {k: round(v, 1) for k, v in detector.recorder.worst_ms.items()},
-        "gui_worst_stall": {
-            ph: (None if (w := detector.recorder.worst(ph)) is None else {"ms": w.gap_ms, "callback": w.culprit})
-            for ph in ("connect", "calibration", "session")
-        },
-        "gui_stalls_over_threshold": len(detector.recorder.stalls),
-        "gui_longest_stalls": [
-            {"phase": st.phase, "ms": st.gap_ms, "callback": st.culprit}
-            for st in sorted(detector.recorder.stalls, key=lambda st: -st.gap_ms)[:8]
-        ],
+        **_stall_figures(detector.recorder),
         "load_average": load_average(),
         "startup_s": {"window_usable": round(t_usable, 2), "engine_ready": round(t_ready, 2)},
         "trials_during_measurement": trials,

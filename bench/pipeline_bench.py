@@ -134,6 +134,48 @@ def _time_batches(fn: Callable[[int, int], None], n: int, batch: int) -> list[fl
     return out
 
 
+def _harness_cost(data: dict[str, Any], batch: int) -> float:
+    """Median per-tick cost (µs) of the timing harness alone, subtracted from both pipelines' figures.
+
+    The harness is what both timed runs do besides the pipeline: indexing the
+    recorded samples, the pose timestamp test, unpacking the sample.
+    """
+    raws, pose_t = data["raw"], data["pose_t_ns"]
+
+    def harness_run(a: int, b: int) -> None:
+        last_t = -1
+        for i in range(a, b):
+            t = pose_t[i]
+            if t != last_t:
+                last_t = t
+            w = raws[i]
+            out = (w[0], w[1], w[2], True, 0.001)
+        del out
+
+    return statistics.median(_time_batches(harness_run, len(raws), batch))
+
+
+def _max_abs_diff_to_naive(data: dict[str, Any], cfg: FrameworkConfig, m: int) -> float:
+    """Largest difference (N) of the rendered force, ours against the NumPy transcription, first ``m`` ticks.
+
+    Untimed, on fresh state, driven as the loop drives it (``set_pose`` when the pose's timestamp changes).
+    """
+    raws, rots, pose_t = data["raw"], data["rot"], data["pose_t_ns"]
+    fw = HapticFramework(cfg, data["calibration"])
+    check = naive_numpy_pipeline(data["calibration"], cfg)
+    diff = 0.0
+    last_t = -1
+    for i in range(m):
+        if pose_t[i] != last_t:
+            fw.set_pose(rots[i])
+            last_t = pose_t[i]
+        w = raws[i]
+        got = fw.step(w[0], w[1], w[2], True, 0.001)
+        want = check(raws[i], rots[i])
+        diff = max(diff, *(abs(got[18 + k] - float(want[k])) for k in range(3)))
+    return diff
+
+
 def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int = 1000) -> dict[str, Any]:
     """Median per-tick cost of ours vs the NumPy transcription on the same samples, and their agreement.
 
@@ -180,34 +222,8 @@ def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int
     m = min(n, 20 * batch)  # the slow one on a subset is enough for a median
     naive = _time_batches(naive_run, m, batch)
 
-    # The timing harness itself (indexing the recorded samples, the pose
-    # timestamp test, unpacking the sample) is measured alone and subtracted
-    # from both.
-    def harness_run(a: int, b: int) -> None:
-        last_t = -1
-        for i in range(a, b):
-            t = pose_t[i]
-            if t != last_t:
-                last_t = t
-            w = raws[i]
-            out = (w[0], w[1], w[2], True, 0.001)
-        del out
-
-    harness = statistics.median(_time_batches(harness_run, n, batch))
-
-    # agreement, untimed, on fresh state: the rendered force of every tick
-    fw = HapticFramework(cfg, cal)
-    check = naive_numpy_pipeline(cal, cfg)
-    diff = 0.0
-    last_t = -1
-    for i in range(m):
-        if pose_t[i] != last_t:
-            fw.set_pose(rots[i])
-            last_t = pose_t[i]
-        w = raws[i]
-        got = fw.step(w[0], w[1], w[2], True, 0.001)
-        want = check(raws[i], rots[i])
-        diff = max(diff, *(abs(got[18 + k] - float(want[k])) for k in range(3)))
+    harness = _harness_cost(data, batch)
+    diff = _max_abs_diff_to_naive(data, cfg, m)
     pose_updates = sum(1 for i in range(1, n) if pose_t[i] != pose_t[i - 1])
     ours_med = statistics.median(ours) - harness
     naive_med = statistics.median(naive) - harness

@@ -15,7 +15,8 @@ from typing import NoReturn
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
-__all__ = ["OneLineParser", "SQLITE_INTEGER_MAX", "host_name", "one_line", "real_number", "whole_number"]
+__all__ = ["SEED", "OneLineParser", "SQLITE_INTEGER_MAX", "add_command", "host_name", "one_line", "positive_seconds",
+           "real_number", "whole_number"]
 
 
 def one_line(text: str) -> str:
@@ -80,3 +81,26 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
         return text
 
     return parse
+
+
+def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,  # type: ignore[type-arg]
+                description: str = "") -> argparse.ArgumentParser:
+    """A subcommand whose ``--help`` starts with what it does and ends with an example."""
+    import shutil
+    import textwrap
+
+    width = max(40, min(100, shutil.get_terminal_size().columns - 2))
+    return sub.add_parser(
+        name, help=help, description=textwrap.fill((description or help[:1].upper() + help[1:]) + ".", width),
+        epilog="example:\n  " + "\n  ".join(example.splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
+    """An argument type: a finite number of seconds > 0 and ≤ ``hi`` (default one day)."""
+    return real_number(name, 0.0, hi, lo_open=True)
+
+
+#: Seeds are stored in the study database: at most SQLite's largest INTEGER.
+SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")

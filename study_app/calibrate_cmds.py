@@ -28,6 +28,9 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from study_app.argtypes import SEED, add_command, real_number
+from study_app.cli_error import CliError
+
 if TYPE_CHECKING:  # numpy is imported where it is used: ``haptic-study --help`` must not load it
     import numpy as np
 
@@ -39,10 +42,8 @@ _PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
 _STILL_M, _STILL_DEG = 0.0002, 0.2
 
 
-def add_calibrate_command(sub: Any, add_command: Callable[..., argparse.ArgumentParser], seed_type: Any) -> None:
+def add_calibrate_command(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add ``calibrate`` to the ``haptic-study`` subcommands."""
-    from study_app.argtypes import real_number
-
     c = add_command(
         sub, "calibrate", "commission the rig: TCP pivot calibration, payload/bias, frame and sign check",
         "haptic-study calibrate tcp --rig sim --json\n"
@@ -60,11 +61,12 @@ def add_calibrate_command(sub: Any, add_command: Callable[..., argparse.Argument
     c.add_argument("--poses", default=None, metavar="SET",
                    help="tcp: recommended (8, default), minimal (4), 'roll only' (refused: shows why); "
                         "payload: recommended (24, default), quick (6), 'tool-down only' (refused)")
-    c.add_argument("--seed", type=seed_type, default=0, help="simulated rig: seed (default 0)")
+    c.add_argument("--seed", type=SEED, default=0, help="simulated rig: seed (default 0)")
     c.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
                    metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
                                        "telling the pipeline (a lab's mounting mistake the frame check must catch)")
     c.add_argument("--json", action="store_true", help="print one JSON object")
+    c.set_defaults(handler=cmd_calibrate)
 
 
 def ask_on_stderr(prompt: str) -> str:
@@ -85,24 +87,24 @@ def ask_on_stderr(prompt: str) -> str:
     return line.rstrip("\r\n")
 
 
-def cmd_calibrate(args: argparse.Namespace, error: type[Exception], ask: Callable[[str], str] = ask_on_stderr) -> int:
-    """Run the step; ``error`` is the CLI's one-line error, ``ask`` reads the experimenter's answers (real rig)."""
+def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_stderr) -> int:
+    """Run the step; ``ask`` reads the experimenter's answers (real rig); a refusal raises :class:`CliError`."""
     from pipeline.tcp import PIVOT_POSE_SETS
 
     allowed = PIVOT_POSE_SETS if args.step == "tcp" else _PAYLOAD_SETS
     if args.poses is not None and (args.step == "frames" or args.poses not in allowed):
         if args.step == "frames":
-            raise error(f"--poses = {args.poses!r}: the frames step takes no pose set (it checks +x, +y and +z)")
-        raise error(f"--poses = {args.poses!r}: allowed for {args.step}: {', '.join(repr(a) for a in allowed)}")
+            raise CliError(f"--poses = {args.poses!r}: the frames step takes no pose set (it checks +x, +y and +z)")
+        raise CliError(f"--poses = {args.poses!r}: allowed for {args.step}: {', '.join(repr(a) for a in allowed)}")
     if args.rig == "real":
         if args.sim_mount_error_deg:
-            raise error("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
+            raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
         if args.hardware is None:
-            raise error("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
-        result = _real(args, error, ask)
+            raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
+        result = _real(args, ask)
     else:
         if args.hardware is not None:
-            raise error("--hardware applies to --rig real only")
+            raise CliError("--hardware applies to --rig real only")
         result = _sim(args)
     text = result.pop("text")
     print(json.dumps(result) if args.json else text)
@@ -227,7 +229,7 @@ def _frames_result(check: Any, head: str, mount_deg: float | None) -> dict[str, 
 
 
 # -- the real rig --------------------------------------------------------------------------------------
-def _real(args: argparse.Namespace, error: type[Exception], ask: Callable[[str], str]) -> dict[str, Any]:
+def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]:
     from pipeline.clock import MonotonicClock
     from pipeline.devices import DeviceError
     from pipeline.hardware import HardwareError, load_hardware
@@ -237,14 +239,14 @@ def _real(args: argparse.Namespace, error: type[Exception], ask: Callable[[str],
         hw = load_hardware(args.hardware)
         cal_file = RigCalibrationFile.load(hw.calibration_file or "calibration.json")
     except (HardwareError, CalibrationFileError) as exc:
-        raise error(str(exc)) from None
+        raise CliError(str(exc)) from None
     tool = hw.calibration_tool
     record = cal_file.tool(tool)
     if args.step == "payload" and record.tcp is None:
-        raise error(f"calibrate payload: no TCP calibration on record for tool {tool!r}; the chain runs in order: "
+        raise CliError(f"calibrate payload: no TCP calibration on record for tool {tool!r}; the chain runs in order: "
                     "calibrate tcp first")
     if args.step == "frames" and record.payload is None:
-        raise error(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in order: "
+        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in order: "
                     "calibrate payload first")
     note = f"tool {tool!r}"
     clock = MonotonicClock()
@@ -256,14 +258,14 @@ def _real(args: argparse.Namespace, error: type[Exception], ask: Callable[[str],
         else:
             out = _real_frames(hw, clock, ask, record.payload, note)
     except DeviceError as exc:
-        raise error(str(exc)) from None
+        raise CliError(str(exc)) from None
     except (EOFError, KeyboardInterrupt):
-        raise error(f"calibrate {args.step}: stopped before the end; nothing was saved") from None
+        raise CliError(f"calibrate {args.step}: stopped before the end; nothing was saved") from None
     if out.pop("save", False):
         try:
             cal_file.record(tool, args.step, out.pop("object"))
         except CalibrationFileError as exc:
-            raise error(str(exc)) from None
+            raise CliError(str(exc)) from None
         out["saved_to"] = cal_file.path
         out["text"] += f"\nSaved for tool {tool!r} in {cal_file.path}."
     out.pop("object", None)

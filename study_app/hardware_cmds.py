@@ -6,10 +6,15 @@ and a non-zero exit, never a hang.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
+from collections.abc import Callable
 from typing import Any
+
+from study_app.argtypes import add_command, host_name, whole_number
+from study_app.cli_error import CliError
 
 
 class HardwareCmdError(Exception):
@@ -143,3 +148,48 @@ def format_check(rows: list[tuple[str, bool, str]]) -> str:
 def to_json(obj: Any) -> str:
     """JSON with NaN kept readable."""
     return json.dumps(obj)
+
+
+# -- the command line -------------------------------------------------------------------------------------
+def _port_number(name: str) -> Callable[[str], int]:
+    """An argument type: a TCP/UDP port."""
+    return whole_number(name, 1, 65535)
+
+
+def add_probe_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``probe`` and its devices."""
+    pr = add_command(sub, "probe", "read a real device once and report (no loop)",
+                     "haptic-study probe netft --host 192.168.1.1 --samples 1000")
+    prsub = pr.add_subparsers(dest="probe", metavar="DEVICE")
+    prsub.required = True
+    pn = add_command(prsub, "netft", "ATI Net F/T: mean wrench (N, N·m), packet rate, lost/reordered/faulted counts",
+                     "haptic-study probe netft --host 192.168.1.1 --samples 1000")
+    pn.add_argument("--host", required=True, type=host_name("--host", ipv6=False), help="the Net F/T box's IP address")
+    pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
+    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
+    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000, help="samples to average (default 1000)")
+    pn.add_argument("--json", action="store_true", help="print one JSON object")
+    pn.set_defaults(handler=cmd_hardware)
+
+
+def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Register ``check-hardware``."""
+    ch = add_command(sub, "check-hardware", "connect to every device in the hardware file and print its state",
+                     "haptic-study check-hardware --hardware hardware.toml")
+    ch.add_argument("--hardware", default="hardware.toml", metavar="FILE",
+                    help="hardware file (default ./hardware.toml; see hardware.example.toml)")
+    ch.set_defaults(handler=cmd_hardware)
+
+
+def cmd_hardware(args: argparse.Namespace) -> int:
+    """Run ``haptic-study probe netft`` or ``check-hardware``; errors raise :class:`CliError`."""
+    try:
+        if args.command == "probe":
+            result = probe_netft(args.host, args.port, args.http_port, args.samples)
+            print(json.dumps(result) if args.json else format_probe(result))
+            return 0
+        rows, ok = check_hardware(args.hardware)
+    except HardwareCmdError as exc:
+        raise CliError(str(exc)) from None
+    print(format_check(rows))
+    return 0 if ok else 1

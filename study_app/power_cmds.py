@@ -1,4 +1,4 @@
-"""The ``power`` subcommand and ``bench power``: planning the next study's sample size.
+"""The ``power`` subcommand: planning the next study's sample size.
 
 Option values are parsed here rather than by argparse so that a bad value is
 one line on stderr naming the option, the value and what is allowed (exit 2).
@@ -11,7 +11,9 @@ import json
 import sys
 import time
 
-__all__ = ["add_power_bench_parser", "add_power_parser", "cmd_bench_power", "cmd_power"]
+from study_app.cli_error import CliError
+
+__all__ = ["add_power_parser", "cmd_power", "whole_option"]
 
 _N_MAX = 10_000
 #: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
@@ -52,22 +54,11 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
                         ".haptic-study-power lists them with their SHA-256); any other file, or an edited one, is "
                         "a refusal; the simulated pool is never deleted")
     add_analysis_options(p)
+    p.set_defaults(handler=cmd_power)
 
 
-def add_power_bench_parser(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    """Register ``bench power``."""
-    b = bsub.add_parser("power", help="power analysis: the vectorised engine against paired_wilcoxon per resample")
-    b.add_argument("--db", default=None, metavar="PATH",
-                   help="pilot study database (default: a synthetic 10-participant pilot)")
-    b.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
-    b.add_argument("--reference-resamples", default="100",
-                   help="resamples per n for the paired_wilcoxon loop, scaled up (default 100)")
-    b.add_argument("--json", action="store_true", help="print one JSON object")
-
-
-def _whole(option: str, text: str, low: int, high: int) -> int:
-    from study_app.cli import CliError
-
+def whole_option(option: str, text: str, low: int, high: int) -> int:
+    """``text`` as a whole number from ``low`` to ``high``, or a :class:`CliError` naming ``option``."""
     try:
         v = int(text)
     except ValueError:
@@ -78,8 +69,6 @@ def _whole(option: str, text: str, low: int, high: int) -> int:
 
 
 def _n_values(text: str) -> tuple[int, ...]:
-    from study_app.cli import CliError
-
     out = []
     for part in text.split(","):
         try:
@@ -94,8 +83,6 @@ def _n_values(text: str) -> tuple[int, ...]:
 
 
 def _alpha(text: str) -> float:
-    from study_app.cli import CliError
-
     try:
         v = float(text)
     except ValueError:
@@ -106,9 +93,7 @@ def _alpha(text: str) -> float:
 
 
 def cmd_power(args: argparse.Namespace) -> int:
-    """Run ``haptic-study power``; errors raise :class:`study_app.cli.CliError`."""
-    from study_app.cli import CliError
-
+    """Run ``haptic-study power``; errors raise :class:`study_app.cli_error.CliError`."""
     if args.db and args.simulated:
         raise CliError("--db and --simulated: give one or the other (a pilot study, or simulated participants)")
     if not args.db and not args.simulated:
@@ -116,10 +101,10 @@ def cmd_power(args: argparse.Namespace) -> int:
     if args.pool is not None and not args.simulated:
         raise CliError(f"--pool = {args.pool!r}: only with --simulated (a pilot's size is its own)")
     n_values = _n_values(DEFAULT_N_TEXT if args.n is None else args.n)
-    resamples = _whole("--resamples", args.resamples, 1, 1_000_000)
+    resamples = whole_option("--resamples", args.resamples, 1, 1_000_000)
     alpha = _alpha(args.alpha)
-    seed = _whole("--seed", args.seed, 0, 2**32 - 1)
-    pool_size = _whole("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
+    seed = whole_option("--seed", args.seed, 0, 2**32 - 1)
+    pool_size = whole_option("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
     if args.out is None:
         raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
 
@@ -184,21 +169,4 @@ def cmd_power(args: argparse.Namespace) -> int:
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))
     print(f"Written in {args.out}/: {', '.join(files)}")
-    return 0
-
-
-def cmd_bench_power(args: argparse.Namespace) -> int:
-    """Run ``haptic-study bench power``."""
-    import os
-
-    from bench.power_bench import format_power_bench, run_power_bench
-    from study_app.cli import CliError
-
-    if args.db is not None and not os.path.isfile(args.db):
-        raise CliError(f"--db = {args.db!r}: no such file")
-    resamples = _whole("--resamples", args.resamples, 1, 1_000_000)
-    reference = _whole("--reference-resamples", args.reference_resamples, 1, resamples)
-    print("bench: timing the power analysis ...", file=sys.stderr, flush=True)
-    result = run_power_bench(args.db, resamples=resamples, reference_resamples=reference)
-    print(json.dumps(result) if args.json else format_power_bench(result))
     return 0

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, real_number, whole_number
+from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, real_number, whole_number
+from study_app.cli_error import CliError
 
 __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
@@ -29,8 +30,6 @@ _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``replay``, ``plot-session`` and ``export``."""
-    from study_app.cli import add_command
-
     r = add_command(
         sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
         "haptic-study replay --db study.db --session 2\n"
@@ -51,6 +50,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                    help="tanh scaling f_max to try, N (the device's own peak still clamps)")
     r.add_argument("--out", default=None, metavar="DIR",
                    help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new folder)")
+    r.set_defaults(handler=cmd_replay)
 
     p = add_command(
         sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
@@ -62,6 +62,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
                    help="session id")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.set_defaults(handler=cmd_plot_session)
 
     e = add_command(
         sub, "export", "export a study's data in tidy form (samples: every 1 kHz record)",
@@ -88,15 +89,10 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
     es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
+    es.set_defaults(handler=cmd_export)
 
 
 # -- shared -------------------------------------------------------------------------------------------------
-def _cli_error(msg: str) -> Exception:
-    from study_app.cli import CliError
-
-    return CliError(msg)
-
-
 def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
     """(open read-only database, its recorded segments, the session's trials frame), or a one-line error."""
     from protocol.recording import read_segment, segments_of
@@ -105,18 +101,18 @@ def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
     try:
         db = StudyDatabase(db_path, readonly=True, check=True)
     except StorageError as exc:
-        raise _cli_error(str(exc)) from None
+        raise CliError(str(exc)) from None
     row = db.conn.execute("SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
                           "WHERE s.session_id = ?", (session_id,)).fetchone()
     if row is None:
         ids = [r[0] for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
         db.close()
-        raise _cli_error(f"--session {session_id}: no such session in {db_path} (sessions: "
+        raise CliError(f"--session {session_id}: no such session in {db_path} (sessions: "
                          f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
     segs = segments_of(db.conn, session_id) if db.schema_version >= 3 else []
     if not segs:
         db.close()
-        raise _cli_error(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
+        raise CliError(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
                          "which kept its trials' samples only); replay and plot-session need a recorded session")
     segments = [read_segment(db.conn, session_id, s[0]) for s in segs]
     import pandas as pd
@@ -139,9 +135,9 @@ def _new_folder(path: str, *, create: bool = True) -> Path:
     """``--out DIR``: a new or empty folder (checked before the work, created after it)."""
     out = Path(path)
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise _cli_error(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
+        raise CliError(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
     if not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     if create:
         out.mkdir(exist_ok=True)
     return out
@@ -150,47 +146,11 @@ def _new_folder(path: str, *, create: bool = True) -> Path:
 # -- replay ---------------------------------------------------------------------------------------------------
 def cmd_replay(args: argparse.Namespace) -> int:
     """``haptic-study replay``."""
-    from analysis.replay_compare import filter_trade, trial_differences
-    from pipeline.framework import framework_config_from_dict
-    from pipeline.replay import replay
-
     if args.out:
         _new_folder(args.out, create=False)  # refused before the work, not after it
     (code, kind), segments, trials = _session(args.db, args.session)
-    n = sum(len(s.columns["tick"]) for s in segments)
-    t0 = time.perf_counter()
-    try:
-        outputs = [replay(s.replay_inputs()) for s in segments]
-    except ValueError as exc:  # a log entry this version cannot apply
-        raise _cli_error(f"--session {args.session}: {exc}") from None
-    wall = time.perf_counter() - t0
-    exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
-             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
-    gaps = [s.segment for s in segments if not s.continuous]
-    print(f"Session {args.session} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
-          f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
-    verdict = ("bit-identical to the recording" if all(exact) else
-               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
-    print(f"  recorded settings: rendered force and task force {verdict}")
-    if gaps:
-        print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
-    # the filter's trade on this recording: the compensated force replay recomputed, at rest and in contact
-    comp = np.concatenate([o.stages[:, :3] for o in outputs])
-    phase = np.concatenate([s.columns["phase"] for s in segments])
-    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
-    mag = np.linalg.norm(comp, axis=1)
-    from protocol.metrics import CONTACT_THRESHOLD_N
-    from protocol.trial import PHASE_CODES, TrialPhase
-
-    rest = (phase == PHASE_CODES[TrialPhase.PAUSE]) & (mag < 2 * CONTACT_THRESHOLD_N)
-    contact = in_trial & (mag > 2 * CONTACT_THRESHOLD_N)
-    trade = filter_trade(comp, rest, contact)
-    recorded_w = segments[0].snapshot["framework"]["config"]["filter_window"]
-    print(f"  the moving-average window on this recording ({int(rest.sum()):,} records at rest, "
-          f"{int(contact.sum()):,} in contact; recorded with {recorded_w}):")
-    print("    window  noise at rest (N RMS)  delay in contact (ms)  theory (ms)")
-    for r in trade.itertuples():
-        print(f"    {r.window:6d}  {r.noise_rms_N:21.5f}  {r.delay_ms + 0.0:21.1f}  {r.group_delay_ms:11.1f}")
+    outputs, exact = _replay_as_recorded(args.session, code, kind, segments)
+    trade = _filter_trade(outputs, segments)
     changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
                                  ("f_max_n", args.f_max)) if v is not None}
     out = _new_folder(args.out) if args.out else None
@@ -200,6 +160,63 @@ def cmd_replay(args: argparse.Namespace) -> int:
         if out is not None:
             print(f"Files in {out}/: filter_trade.csv")
         return 0 if all(exact) else 1
+    _replay_with_changes(segments, trials, changes, out)
+    return 0 if all(exact) else 1
+
+
+def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[Any]) -> tuple[list[Any], list[bool]]:
+    """Replay every recorded run with its recorded settings and say whether it matched (outputs, exact per run)."""
+    from pipeline.replay import replay
+
+    n = sum(len(s.columns["tick"]) for s in segments)
+    t0 = time.perf_counter()
+    try:
+        outputs = [replay(s.replay_inputs()) for s in segments]
+    except ValueError as exc:  # a log entry this version cannot apply
+        raise CliError(f"--session {session_id}: {exc}") from None
+    wall = time.perf_counter() - t0
+    exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
+             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
+    gaps = [s.segment for s in segments if not s.continuous]
+    print(f"Session {session_id} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
+          f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
+    verdict = ("bit-identical to the recording" if all(exact) else
+               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
+    print(f"  recorded settings: rendered force and task force {verdict}")
+    if gaps:
+        print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
+    return outputs, exact
+
+
+def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
+    """Print (and return) the filter's trade on this recording: noise at rest against delay in contact."""
+    from analysis.replay_compare import filter_trade
+    from protocol.metrics import CONTACT_THRESHOLD_N
+    from protocol.trial import PHASE_CODES, TrialPhase
+
+    # the compensated force replay recomputed, at rest and in contact
+    comp = np.concatenate([o.stages[:, :3] for o in outputs])
+    phase = np.concatenate([s.columns["phase"] for s in segments])
+    in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
+    mag = np.linalg.norm(comp, axis=1)
+    rest = (phase == PHASE_CODES[TrialPhase.PAUSE]) & (mag < 2 * CONTACT_THRESHOLD_N)
+    contact = in_trial & (mag > 2 * CONTACT_THRESHOLD_N)
+    trade = filter_trade(comp, rest, contact)
+    recorded_w = segments[0].snapshot["framework"]["config"]["filter_window"]
+    print(f"  the moving-average window on this recording ({int(rest.sum()):,} records at rest, "
+          f"{int(contact.sum()):,} in contact; recorded with {recorded_w}):")
+    print("    window  noise at rest (N RMS)  delay in contact (ms)  theory (ms)")
+    for r in trade.itertuples():
+        print(f"    {r.window:6d}  {r.noise_rms_N:21.5f}  {r.delay_ms + 0.0:21.1f}  {r.group_delay_ms:11.1f}")
+    return trade
+
+
+def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, float], out: Path | None) -> None:
+    """Replay with ``changes`` to the recorded settings; the rendered force's difference, trial by trial."""
+    from analysis.replay_compare import trial_differences
+    from pipeline.framework import framework_config_from_dict
+    from pipeline.replay import replay
+
     what = ", ".join(f"{k} = {v:g}" for k, v in changes.items())
     other = []
     for s in segments:
@@ -207,7 +224,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
         try:
             cfg = dataclasses.replace(cfg, **changes)
         except ValueError as exc:
-            raise _cli_error(str(exc)) from None
+            raise CliError(str(exc)) from None
         other.append(replay(s.replay_inputs(), cfg))
     recorded = np.concatenate([_magnitude(s.columns, "render") for s in segments])
     replayed = np.concatenate([np.linalg.norm(o.stages[:, 18:21], axis=1) for o in other])
@@ -235,7 +252,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
                      f"trial {int(w['trial_index']) + 1} ({w['haptic_mode']}, {w['outcome']}): the largest difference")
         save(replay_figure(t_s, recorded, replayed, what, worst), out, "replay")
         print(f"Files in {out}/: replay_trials.csv, filter_trade.csv, replay.png, replay.pdf, replay.svg")
-    return 0 if all(exact) else 1
 
 
 # -- plot-session ---------------------------------------------------------------------------------------------
@@ -246,9 +262,9 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
-        raise _cli_error(f"--out {out}: must end in .png, .pdf or .svg")
+        raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     if not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     (code, kind), segments, trials = _session(args.db, args.session)
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
@@ -271,22 +287,22 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     to_stdout = args.out == "-"
     if to_stdout and args.format != "csv":
-        raise _cli_error("--out -: standard output takes --format csv only; give a file for parquet")
+        raise CliError("--out -: standard output takes --format csv only; give a file for parquet")
     out = Path(args.out)
     if not to_stdout and out.exists():
-        raise _cli_error(f"--out {out}: exists; export writes a new file only (nothing was written)")
+        raise CliError(f"--out {out}: exists; export writes a new file only (nothing was written)")
     if not to_stdout and not out.resolve().parent.exists():
-        raise _cli_error(f"--out {out}: the folder {out.resolve().parent} does not exist")
+        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
     if args.format == "parquet":
         try:
             import pyarrow  # noqa: F401
         except ImportError:
-            raise _cli_error("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
+            raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
     print("export: reading the records ...", file=sys.stderr, flush=True)
     try:
         frame = samples_frame(args.db, args.session)
     except AnalysisError as exc:
-        raise _cli_error(str(exc)) from None
+        raise CliError(str(exc)) from None
     if to_stdout:
         frame.to_csv(sys.stdout, index=False)
         return 0

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, whole_number
+from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, whole_number
+from study_app.cli_error import CliError
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
@@ -32,8 +33,6 @@ def add_analysis_options(parser: argparse.ArgumentParser) -> None:
 
 def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Register ``report`` and ``plot-trial``."""
-    from study_app.cli import add_command
-
     r = add_command(
         sub, "report",
         "analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
@@ -56,6 +55,7 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--power", action="store_true",
                    help="add 'what n would a study need': power against the number of participants, resampling "
                         "this study's participants (as haptic-study power with its defaults)")
+    r.set_defaults(handler=cmd_report)
 
     p = add_command(
         sub, "plot-trial", "one trial's force through the pipeline: task force against its band, rendered, raw",
@@ -70,14 +70,14 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"), required=True, metavar="N",
                    help="trial number within the session, from 1, as the GUI and trials.csv number them")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.set_defaults(handler=cmd_plot_trial)
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    """Run ``haptic-study report``; errors raise :class:`study_app.cli.CliError`."""
+    """Run ``haptic-study report``; errors raise :class:`study_app.cli_error.CliError`."""
     from analysis.load import AnalysisError
     from analysis.metrics import MetricOptions
     from analysis.report import build_report
-    from study_app.cli import CliError
     from study_app.progress import ProgressBar
 
     bar: ProgressBar | None = None
@@ -127,7 +127,6 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
 
     from analysis.figures import pipeline_trace, save_one
     from analysis.load import AnalysisError, load_study, read_trial_samples
-    from study_app.cli import CliError
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -51,3 +52,49 @@ def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:
     assert message in proc.stderr
     assert "Traceback" not in proc.stderr
     assert len(proc.stderr.splitlines()) == 1, proc.stderr
+
+
+# -- commands from outside the product: the benchmarks, found by entry point ----------------------------------
+def test_bench_is_registered_by_entry_point_not_imported() -> None:
+    from importlib.metadata import entry_points
+
+    from study_app.cli import COMMANDS_GROUP, build_parser
+
+    eps = {ep.name: ep.value for ep in entry_points(group=COMMANDS_GROUP)}
+    assert eps.get("bench") == "bench.commands:register"  # pip install -e . (scripts/setup.sh) wrote it
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    bench = next(a for a in sub.choices["bench"]._actions if isinstance(a, argparse._SubParsersAction))
+    assert list(bench.choices) == ["pipeline", "study", "report", "power", "stats", "gui"]
+
+
+def _entry_points_of(monkeypatch: pytest.MonkeyPatch, *values: str) -> None:
+    import importlib.metadata as md
+
+    from study_app.cli import COMMANDS_GROUP
+
+    eps = tuple(md.EntryPoint(name="bench", value=v, group=COMMANDS_GROUP) for v in values)
+    monkeypatch.setattr(md, "entry_points", lambda group: eps if group == COMMANDS_GROUP else ())
+
+
+@pytest.mark.parametrize("values", [(), ("no_such_bench_package.commands:register",)],
+                         ids=["unregistered", "package-left-out"])
+@pytest.mark.parametrize("argv", [["bench"], ["bench", "pipeline", "--ticks", "5"]])
+def test_bench_absent_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+                                  values: tuple[str, ...], argv: list[str]) -> None:
+    _entry_points_of(monkeypatch, *values)
+    assert main(argv) == 2
+    out = capsys.readouterr()
+    assert out.out == ""
+    assert out.err == ("haptic-study: error: bench: the benchmarks are not part of this install (the 'bench' package "
+                       "and its entry point in 'haptic_study.commands'); install haptic-study from its source tree: "
+                       "pip install -e .\n")
+    assert main(["sessions", "--db", "/no/such.db"]) == 2  # the rest of the command line unaffected
+
+
+def test_bench_with_a_missing_dependency_is_not_masked(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    # the registered module exists but imports something absent: a broken install, shown as it is
+    (tmp_path / "broken_bench_commands.py").write_text("import no_such_dependency_of_bench\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    _entry_points_of(monkeypatch, "broken_bench_commands:register")
+    with pytest.raises(ModuleNotFoundError, match="no_such_dependency_of_bench"):
+        main(["bench"])

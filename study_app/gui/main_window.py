@@ -66,6 +66,44 @@ class ExperimenterWindow(QMainWindow):
         self._shut_down = False
 
         self.setup_panel = QtSetupPanel(self.model.setup)
+        left = self._build_left_column()
+        right = self._build_right_column()
+        split = QSplitter(Qt.Orientation.Horizontal)
+        split.addWidget(left)
+        split.addWidget(right)
+        split.setStretchFactor(1, 1)
+        self.setCentralWidget(split)
+        self.status = QLabel()
+        self.statusBar().addWidget(self.status, 1)
+        self.setMinimumSize(self.minimumSizeHint().boundedTo(QSize(1000, 640)))
+
+        self._build_windows()
+        self._wire_signals()
+        self.plot_timer = tracked_timer(self, PLOT_INTERVAL_MS, self._on_plot_timer, name="plot-refresh")
+        self._on_actions_changed()
+        self._on_session_changed()
+        if not placement.restore(self, self.settings, "experimenter"):
+            placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
+        self.bridge.start()
+        self.plot_timer.start()
+
+    # -- building the window (the order of creation is the keyboard focus order) -----------------------
+    def _build_left_column(self) -> QWidget:
+        """Session setup, the controls and the jaw, top to bottom."""
+        controls = self._build_controls()
+        self.jaw_box = self._build_jaw_box()
+        left = QWidget()
+        ll = QVBoxLayout(left)
+        ll.addWidget(self.setup_panel)
+        ll.addWidget(controls)
+        ll.addWidget(self.jaw_box)
+        ll.addStretch(1)
+        left.setMinimumWidth(340)
+        left.setMaximumWidth(460)
+        return left
+
+    def _build_controls(self) -> QGroupBox:
+        """Start, pause/resume, abort, the windows' buttons; the engine's and the notices' rows above them."""
         self.start_button = QPushButton("Start  [Space]")
         self.pause_button = QPushButton("Pause")
         self.resume_button = QPushButton("Resume")
@@ -77,35 +115,9 @@ class ExperimenterWindow(QMainWindow):
         self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
         controls = QGroupBox("Control")
         grid = QVBoxLayout(controls)
-        # a dead engine or haptic loop: what happened and the way out, above everything else
-        self.engine_label = QLabel()
-        self.engine_label.setWordWrap(True)
-        self.restart_button = QPushButton("Restart engine")
-        self.restart_button.setStyleSheet("font-weight: 700; padding: 6px;")
-        self.engine_row = QWidget()
-        er = QVBoxLayout(self.engine_row)
-        er.setContentsMargins(4, 4, 4, 4)
-        er.addWidget(self.engine_label)
-        er.addWidget(self.restart_button)
-        fg, bg = LEVEL_COLOURS["error"]
-        self.engine_row.setStyleSheet(f"background: {bg};")
-        self.engine_label.setStyleSheet(f"color: {fg}; font-weight: 600;")
-        self.engine_row.hide()
-        grid.addWidget(self.engine_row)
+        grid.addWidget(self._build_engine_row())
         grid.addWidget(self.start_button)
-        # refusals and questions that became moot show here, under Start, where the experimenter looks
-        self.notice = QLabel()
-        self.notice.setWordWrap(True)
-        self.notice_close = QToolButton()
-        self.notice_close.setText("×")
-        self.notice_close.setToolTip("Dismiss")
-        self.notice_row = QWidget()
-        nr = QHBoxLayout(self.notice_row)
-        nr.setContentsMargins(0, 0, 0, 0)
-        nr.addWidget(self.notice, 1)
-        nr.addWidget(self.notice_close, 0, Qt.AlignmentFlag.AlignTop)
-        self.notice_row.hide()
-        grid.addWidget(self.notice_row)
+        grid.addWidget(self._build_notice_row())
         pr = QHBoxLayout()
         pr.addWidget(self.pause_button)
         pr.addWidget(self.resume_button)
@@ -123,16 +135,42 @@ class ExperimenterWindow(QMainWindow):
         wr.addWidget(self.participant_button)
         wr.addWidget(self.rig_button)
         grid.addLayout(wr)
-        self.jaw_box = self._build_jaw_box()
-        left = QWidget()
-        ll = QVBoxLayout(left)
-        ll.addWidget(self.setup_panel)
-        ll.addWidget(controls)
-        ll.addWidget(self.jaw_box)
-        ll.addStretch(1)
-        left.setMinimumWidth(340)
-        left.setMaximumWidth(460)
+        return controls
 
+    def _build_engine_row(self) -> QWidget:
+        """A dead engine or haptic loop: what happened and the way out (hidden until then)."""
+        self.engine_label = QLabel()
+        self.engine_label.setWordWrap(True)
+        self.restart_button = QPushButton("Restart engine")
+        self.restart_button.setStyleSheet("font-weight: 700; padding: 6px;")
+        self.engine_row = QWidget()
+        er = QVBoxLayout(self.engine_row)
+        er.setContentsMargins(4, 4, 4, 4)
+        er.addWidget(self.engine_label)
+        er.addWidget(self.restart_button)
+        fg, bg = LEVEL_COLOURS["error"]
+        self.engine_row.setStyleSheet(f"background: {bg};")
+        self.engine_label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.engine_row.hide()
+        return self.engine_row
+
+    def _build_notice_row(self) -> QWidget:
+        """Refusals and questions that became moot, with a dismiss button (hidden until there is one)."""
+        self.notice = QLabel()
+        self.notice.setWordWrap(True)
+        self.notice_close = QToolButton()
+        self.notice_close.setText("×")
+        self.notice_close.setToolTip("Dismiss")
+        self.notice_row = QWidget()
+        nr = QHBoxLayout(self.notice_row)
+        nr.setContentsMargins(0, 0, 0, 0)
+        nr.addWidget(self.notice, 1)
+        nr.addWidget(self.notice_close, 0, Qt.AlignmentFlag.AlignTop)
+        self.notice_row.hide()
+        return self.notice_row
+
+    def _build_right_column(self) -> QSplitter:
+        """Progress and live plots above; the trial table and device health in tabs below."""
         self.progress = QtProgress(self.model.session, self.model.health)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
@@ -158,15 +196,10 @@ class ExperimenterWindow(QMainWindow):
         right.setSizes([520, 220])
         right.setStretchFactor(0, 3)  # a taller window gives the plots the room
         right.setStretchFactor(1, 1)
-        split = QSplitter(Qt.Orientation.Horizontal)
-        split.addWidget(left)
-        split.addWidget(right)
-        split.setStretchFactor(1, 1)
-        self.setCentralWidget(split)
-        self.status = QLabel()
-        self.statusBar().addWidget(self.status, 1)
-        self.setMinimumSize(self.minimumSizeHint().boundedTo(QSize(1000, 640)))
+        return right
 
+    def _build_windows(self) -> None:
+        """The participant screen, the simulated rig view, the calibration wizard and the menu."""
         self.participant_window = ParticipantWindow(self.model.participant)
         self.rig_window = RigWindow(self.model.rig, self.model.set_driver, self.model.inject_fault)
         self.calibration_wizard = CalibrationWizard(
@@ -177,7 +210,8 @@ class ExperimenterWindow(QMainWindow):
         )
         self._build_menu()
 
-        # wiring
+    def _wire_signals(self) -> None:
+        """Buttons, keys and the model's signals to the window's slots."""
         self.start_button.clicked.connect(self.start_session)
         self.pause_button.clicked.connect(self.model.pause)
         self.resume_button.clicked.connect(self.model.resume)
@@ -206,13 +240,6 @@ class ExperimenterWindow(QMainWindow):
         self.model.session.changed.connect(self._on_session_changed)
         self.model.notice_changed.connect(self._on_notice)
         self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
-        self.plot_timer = tracked_timer(self, PLOT_INTERVAL_MS, self._on_plot_timer, name="plot-refresh")
-        self._on_actions_changed()
-        self._on_session_changed()
-        if not placement.restore(self, self.settings, "experimenter"):
-            placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
-        self.bridge.start()
-        self.plot_timer.start()
 
     # -- the jaw -------------------------------------------------------------------------------------
     def _build_jaw_box(self) -> QGroupBox:

@@ -94,7 +94,7 @@ def run(argv: list[str], answers) -> tuple[int, dict]:  # type: ignore[no-untype
     args = build_parser().parse_args(argv)
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
-        code = cmd_calibrate(args, CliError, answers)
+        code = cmd_calibrate(args, answers)
     return code, json.loads(buf.getvalue())
 
 

@@ -1,0 +1,174 @@
+"""``haptic-study bench ...``: the benchmarks' subcommands, added to the product's command line from outside.
+
+The product imports nothing from ``bench``: ``pyproject.toml`` names
+:func:`register` in the entry-point group ``haptic_study.commands``, and
+``study_app.cli`` calls what that group names while it builds its parser.
+The dependency runs one way, bench → product, and an install without
+``bench`` still has a working ``haptic-study`` (``bench`` then says so).
+
+Each benchmark's machinery is imported when it runs: ``haptic-study --help``
+loads none of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+from study_app.argtypes import add_command, positive_seconds, real_number, whole_number
+from study_app.cli_error import CliError
+from study_app.power_cmds import whole_option
+
+__all__ = ["register"]
+
+
+def _say(line: str) -> None:
+    print(f"bench: {line}", file=sys.stderr, flush=True)
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    """Add ``bench`` and its benchmarks to the ``haptic-study`` subcommands (the entry point's target)."""
+    b = add_command(sub, "bench", "benchmarks (see README for recorded figures)",
+                    "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
+    bsub = b.add_subparsers(dest="bench", metavar="BENCH")
+    bsub.required = True
+    for add in (_add_pipeline, _add_study, _add_report, _add_power, _add_stats, _add_gui):
+        add(bsub)
+
+
+# -- bench pipeline --------------------------------------------------------------------------------------
+def _add_pipeline(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    bp = add_command(bsub, "pipeline", "per-tick cost vs NumPy, 1 kHz loop timing, filter trade table",
+                     "haptic-study bench pipeline --loop-seconds 15 --explain")
+    bp.add_argument("--json", action="store_true", help="print one JSON object")
+    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"), default=30.0,
+                    help="real time to run the loop (default 30; 0 skips)")
+    bp.add_argument("--explain", action="store_true",
+                    help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
+    bp.add_argument("--reference", action="store_true",
+                    help="then run an empty loop as long: the machine's own floor for the loop figures")
+    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
+    bp.set_defaults(handler=_cmd_pipeline)
+
+
+def _cmd_pipeline(args: argparse.Namespace) -> int:
+    from bench.pipeline_bench import format_pipeline_bench, run_pipeline_bench
+
+    def say(msg: str) -> None:
+        _say(f"{msg} ...")
+
+    result = run_pipeline_bench(
+        loop_seconds=args.loop_seconds, ticks=args.ticks, progress=say, explain=args.explain,
+        reference=args.reference,
+    )
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_pipeline_bench(result))
+    return 0
+
+
+# -- bench study -----------------------------------------------------------------------------------------
+def _add_study(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock, and its storage as "
+                     "blocks and as rows",
+                     "haptic-study bench study --participants 4")
+    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
+    bs.add_argument("--json", action="store_true", help="print one JSON object")
+    bs.set_defaults(handler=_cmd_study)
+
+
+def _cmd_study(args: argparse.Namespace) -> int:
+    from bench.study_bench import format_study_bench, run_study_bench
+
+    result = run_study_bench(args.participants, log=_say)
+    print(json.dumps(result) if args.json else format_study_bench(result))
+    return 0
+
+
+# -- bench report ----------------------------------------------------------------------------------------
+def _add_report(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    br = add_command(bsub, "report", "report wall time on a 10-participant study, recorded and in the row format "
+                     "of versions 1-2; statistics for 10 000 participants",
+                     "haptic-study bench report --db study.db")
+    br.add_argument("--db", default=None, metavar="PATH",
+                    help="study database to report on (default: simulate a 10-participant study first)")
+    br.add_argument("--stats-participants", type=whole_number("--stats-participants", 2, 1_000_000), default=10_000,
+                    help="participants of the synthetic trial table (default 10000)")
+    br.add_argument("--json", action="store_true", help="print one JSON object")
+    br.set_defaults(handler=_cmd_report)
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from bench.analysis_bench import format_report_bench, run_report_bench
+
+    if args.db is not None and not os.path.isfile(args.db):
+        raise CliError(f"--db = {args.db!r}: no such file")
+    result = run_report_bench(args.db, stats_participants=args.stats_participants, log=_say)
+    print(json.dumps(result) if args.json else format_report_bench(result))
+    return 0
+
+
+# -- bench power -----------------------------------------------------------------------------------------
+def _add_power(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    # option values parsed by the command, as ``haptic-study power`` parses its own (study_app.power_cmds)
+    b = bsub.add_parser("power", help="power analysis: the vectorised engine against paired_wilcoxon per resample")
+    b.add_argument("--db", default=None, metavar="PATH",
+                   help="pilot study database (default: a synthetic 10-participant pilot)")
+    b.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
+    b.add_argument("--reference-resamples", default="100",
+                   help="resamples per n for the paired_wilcoxon loop, scaled up (default 100)")
+    b.add_argument("--json", action="store_true", help="print one JSON object")
+    b.set_defaults(handler=_cmd_power)
+
+
+def _cmd_power(args: argparse.Namespace) -> int:
+    from bench.power_bench import format_power_bench, run_power_bench
+
+    if args.db is not None and not os.path.isfile(args.db):
+        raise CliError(f"--db = {args.db!r}: no such file")
+    resamples = whole_option("--resamples", args.resamples, 1, 1_000_000)
+    reference = whole_option("--reference-resamples", args.reference_resamples, 1, resamples)
+    _say("timing the power analysis ...")
+    result = run_power_bench(args.db, resamples=resamples, reference_resamples=reference)
+    print(json.dumps(result) if args.json else format_power_bench(result))
+    return 0
+
+
+# -- bench stats -----------------------------------------------------------------------------------------
+def _add_stats(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    bst = add_command(bsub, "stats", "analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm",
+                      "haptic-study bench stats --json")
+    bst.add_argument("--json", action="store_true", help="print one JSON object")
+    bst.set_defaults(handler=_cmd_stats)
+
+
+def _cmd_stats(args: argparse.Namespace) -> int:
+    from bench.stats_bench import format_stats_bench, run_stats_bench
+
+    result = run_stats_bench()
+    print(json.dumps(result) if args.json else format_stats_bench(result))
+    return 0
+
+
+# -- bench gui -------------------------------------------------------------------------------------------
+def _add_gui(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    bg = add_command(bsub, "gui", "1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time",
+                     "haptic-study bench gui --seconds 20")
+    bg.add_argument("--json", action="store_true", help="print one JSON object")
+    bg.add_argument("--seconds", type=positive_seconds("--seconds", 3600.0), default=20.0,
+                    help="real time per loop measurement (default 20)")
+    bg.add_argument("--explain", action="store_true",
+                    help="name the cause of every loop tick over 100 µs late (costs the loop ~25 µs per tick)")
+    bg.set_defaults(handler=_cmd_gui)
+
+
+def _cmd_gui(args: argparse.Namespace) -> int:
+    from bench.gui_bench import format_gui_bench, run_gui_bench
+
+    _say("measuring the loop without and with the GUI ...")
+    result = run_gui_bench(seconds=args.seconds, explain=args.explain)
+    print(json.dumps(result) if args.json else format_gui_bench(result))
+    return 0
