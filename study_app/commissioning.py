@@ -1,7 +1,7 @@
 """Commissioning the rig from the study engine: payload, TCP and frame steps, what is on record, and the session gate.
 
 :class:`Commissioning` belongs to a :class:`study_app.engine_host.StudyEngine`
-and runs on its driver thread.  On the simulated rig each step runs
+(it sees it as an :class:`study_app.engine_core.EngineCore`) and runs on its driver thread.  On the simulated rig each step runs
 automatically; on the real rig the experimenter records poses, pivot
 orientations and axis pushes one at a time, each averaged over a window of
 the ring's records (:class:`_Window`).  Accepted results are put on record for
@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -30,9 +30,8 @@ from pipeline.loop import SetCalibration
 from pipeline.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
 from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from study_app import messages as m
+from study_app.engine_core import EngineCore
 
-if TYPE_CHECKING:
-    from study_app.engine_host import StudyEngine
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "REST_CHECK_S", "REST_MAX_FORCE_N", "Commissioning",
@@ -129,7 +128,7 @@ class Commissioning:
         The engine whose rig, loop and ring the steps use.
     """
 
-    def __init__(self, engine: StudyEngine) -> None:
+    def __init__(self, engine: EngineCore) -> None:
         self.engine = engine
         #: What is on record for the mounted tool (real rig: from the calibration file; simulated: this run's).
         self.tool_cal = self._tool_record()
@@ -149,7 +148,7 @@ class Commissioning:
         e = self.engine
         if e.eng.simulated:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
-        e._require_idle("record pose")
+        e.require_idle("record pose")
         busy = next((w for w in self._windows if w.command == "RecordPose"), None)
         if busy is not None:
             raise RuntimeError(f"record pose: pose {busy.label} is still being recorded")
@@ -205,7 +204,7 @@ class Commissioning:
     def identify(self, cmd: m.IdentifyPoses) -> None:
         if not self.engine.real:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
-        self.engine._require_idle("calibrate")
+        self.engine.require_idle("calibrate")
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
         self.engine.publish(self._identified(poses, cmd.pose_set))
 
@@ -230,7 +229,7 @@ class Commissioning:
     def calibrate(self, name: str) -> None:
         from pipeline.sim.calibration import auto_calibrate
 
-        self.engine._require_idle("calibrate")
+        self.engine.require_idle("calibrate")
         rots = pose_set(name)
         real = self.engine.config.clock == "real"
         if real:
@@ -239,7 +238,7 @@ class Commissioning:
         else:
             self.engine.loop.ramp_down()
             clock = self.engine.loop.clock
-        self.engine._drain_ring()
+        self.engine.drain_ring()
         total = len(rots)
         result: m.CalibrationDone
         try:
@@ -263,7 +262,7 @@ class Commissioning:
                 self.engine.loop.submit(SetCalibration(cal))
                 self._record_step("payload", cal)
         finally:
-            self.engine._after_loop_pause(real)
+            self.engine.after_loop_pause(real)
         self.engine.publish(result)
 
     def _tool_record(self) -> ToolCalibration:
@@ -317,7 +316,7 @@ class Commissioning:
         if not self.engine.eng.simulated:
             raise RuntimeError("real rig: rest the tip in the divot, turn the instrument and record each orientation "
                                "(Record orientation), then Compute")
-        self.engine._require_idle("TCP calibration")
+        self.engine.require_idle("TCP calibration")
         if name not in m.PIVOT_SETS:
             raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.PIVOT_SETS)}")
         rig = self.engine.eng.rig
@@ -336,7 +335,7 @@ class Commissioning:
     def record_pivot(self, cmd: m.RecordPivot) -> None:
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
-        self.engine._require_idle("record orientation")
+        self.engine.require_idle("record orientation")
         if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 5.0):
             raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.1 to 5 s")
         robot = self.engine.eng.rig.robot
@@ -367,7 +366,7 @@ class Commissioning:
     def identify_tcp(self, cmd: m.IdentifyTcp) -> None:
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
-        self.engine._require_idle("TCP calibration")
+        self.engine.require_idle("TCP calibration")
         self._tcp_identified([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded")
 
     def check_frames(self) -> None:
@@ -375,17 +374,17 @@ class Commissioning:
 
         if not self.engine.eng.simulated:
             raise RuntimeError("real rig: push the free tip along each axis in turn (Record +x, +y, +z)")
-        self.engine._require_idle("frame check")
+        self.engine.require_idle("frame check")
         real = self.engine.config.clock == "real"
         if real:
             self.engine.loop.stop(timeout_s=5.0)  # the check runs the loop itself, paced on the same clock
-        self.engine._drain_ring()
+        self.engine.drain_ring()
         try:
             assert self.engine.ring is not None
             check = push_axes(self.engine.eng.rig, self.engine.loop, self.engine.ring)
         finally:
             self.engine.cursor = self.engine.ring.write_count  # the check's own records are not the loop's timing
-            self.engine._after_loop_pause(real)
+            self.engine.after_loop_pause(real)
         for a in check.axes:
             self.engine.publish(m.FrameAxisChecked(a.axis, a.passed, a.describe(), a.to_dict()))
         self._frames_done(check)
@@ -401,7 +400,7 @@ class Commissioning:
     def record_frame_axis(self, cmd: m.RecordFrameAxis) -> None:
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the pushes run automatically (Run frame check)")
-        self.engine._require_idle("frame check")
+        self.engine.require_idle("frame check")
         if cmd.axis not in AXES:
             raise ValueError(f"axis = {cmd.axis!r}: allowed values are {', '.join(AXES)}")
         if not (math.isfinite(cmd.seconds) and 0.5 <= cmd.seconds <= 10.0):
@@ -432,8 +431,8 @@ class Commissioning:
         """Collect ``seconds`` of records written after now, then call ``done`` (see :class:`_Window`)."""
         if any(w.command == command for w in self._windows):
             raise RuntimeError(f"{command}: a recording is already running")
-        self.engine._drain_ring()
-        start = self.engine._last_t_ns + 1 if self.engine.loop.tick_count else 0
+        self.engine.drain_ring()
+        start = self.engine.last_t_ns + 1 if self.engine.loop.tick_count else 0
         self._windows.append(_Window(command, int(round(seconds * 1000)), start, cols, done, [], abandoned=abandoned,
                                      label=label, stalled=stalled))
 

@@ -113,7 +113,7 @@ class StudyEngine:
         self._anchor_ticks = 0
         self._ticks_run = 0
         self._running = False
-        self._last_t_ns = 0
+        self.last_t_ns = 0
         self._stats_from_tick = 0
         self.closed = False
         #: Watches the loop thread and its tick counter (real clock; the virtual clock runs the loop in step()).
@@ -121,8 +121,8 @@ class StudyEngine:
         #: Why the haptic loop died ("" while it runs): nothing that needs the loop can be done any more.
         self.loop_dead = ""
         #: The session being run (at most one), and the commissioning chain (calibration steps, the real rig's gate).
-        self.sessions = EngineSessions(self)
         self.commissioning = Commissioning(self)
+        self.sessions = EngineSessions(self, self.commissioning)
         #: The instrument's jaw (the simulated one, or the Arduino of the hardware file); None: there is none.
         self.jaw = self._make_jaw()
         self._commands = self._command_table()
@@ -188,7 +188,7 @@ class StudyEngine:
             if runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE):
                 runner.abort_trial(reason, cause="interrupted")
                 self._step_until(lambda: runner.machine.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE))
-            t_s = runner.session_time_s(self._last_t_ns)
+            t_s = runner.session_time_s(self.last_t_ns)
             assert self.sessions.recorder is not None
             self.sessions.recorder.event(runner.session_id, t_s, "detached" if detached else "closed", reason)
             self.sessions.end("interrupted", reason)
@@ -200,7 +200,7 @@ class StudyEngine:
             self.tracer.close()
         if self.jaw is not None:
             self.jaw.close()
-        self._drain_ring()
+        self.drain_ring()
         try:
             self.eng.rig.close()
         except DeviceError as exc:  # the force is already zero; say what did not close cleanly
@@ -241,7 +241,7 @@ class StudyEngine:
                 self._loop_died(self.supervisor.dead)
                 return
             self._store_loop_events()  # frozen: no records come, but its event must reach the record now
-        self._drain_ring()
+        self.drain_ring()
         if self.jaw is not None and self.jaw.events:
             self._drain_jaw()
         now = time.monotonic()
@@ -260,14 +260,14 @@ class StudyEngine:
     def _loop_died(self, why: str) -> None:
         """The haptic loop is dead (its fault is latched and reported): store it, leave the session resumable."""
         self.loop_dead = why
-        self._drain_ring()  # the records it wrote before it died
+        self.drain_ring()  # the records it wrote before it died
         self._store_loop_events()
         runner = self.sessions.runner
         if runner is not None and not runner.done:
             reason = (f"the haptic loop died ({why}); the session is interrupted: restart the engine (Restart engine "
                       "in the window) and resume it")
             assert self.sessions.recorder is not None
-            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "session_interrupted",
+            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns), "session_interrupted",
                                 reason)
             self.sessions.end("interrupted", reason)
         self.publish(self.health())
@@ -292,7 +292,7 @@ class StudyEngine:
             return interval_s
         now = time.perf_counter_ns()
         period = self.loop.period_ns
-        last_tick = self.loop.t0_ns + self._last_t_ns
+        last_tick = self.loop.t0_ns + self.last_t_ns
         target = now + int(interval_s * 1e9)
         target -= (target - last_tick - QUIET_OFFSET_NS) % period
         return max(0.0, (target - now) * 1e-9)
@@ -309,7 +309,7 @@ class StudyEngine:
         self._anchor_wall = time.monotonic()
         self._anchor_ticks = self._ticks_run
 
-    def _drain_ring(self) -> None:
+    def drain_ring(self) -> None:
         res = self.ring.read_since(self.cursor)
         self.cursor = res.cursor
         rows = res.rows
@@ -321,7 +321,7 @@ class StudyEngine:
             self.stats.add(rows["period_s"][keep])
         else:
             self.stats.add(rows["period_s"])
-        self._last_t_ns = int(rows["t_ns"][-1])
+        self.last_t_ns = int(rows["t_ns"][-1])
         self.commissioning.feed(rows)
         runner = self.sessions.runner
         # the loop's events and replay log after its records: every entry of a tick whose record was read is in
@@ -334,7 +334,7 @@ class StudyEngine:
             runner.records_lost(res.lost)
         runner.process(rows, events, replay_log)
         if self.sessions.trigger is not None:
-            self.sessions.trigger.poll(self._last_t_ns)
+            self.sessions.trigger.poll(self.last_t_ns)
         if runner.done:
             self.sessions.end(runner.status, runner.stop_reason)
 
@@ -444,12 +444,12 @@ class StudyEngine:
             self.tracer.reset()
 
 
-    def _require_idle(self, what: str) -> None:
+    def require_idle(self, what: str) -> None:
         self._require_loop(what)
         if self.sessions.runner is not None and not self.sessions.runner.done:
             raise RuntimeError(f"{what}: a session is running (end or abort it first)")
 
-    def _after_loop_pause(self, restart: bool) -> None:
+    def after_loop_pause(self, restart: bool) -> None:
         """The loop ran the rig for a calibration step: restart its timing statistics (and its thread)."""
         self.stats.reset()
         self._stats_from_tick = self.loop.tick_count + 1
@@ -494,7 +494,7 @@ class StudyEngine:
             ev = self.jaw.events.popleft()
             text = f"{ev.source}: {ev.detail}"
             if runner is not None and recorder is not None and not runner.done:
-                recorder.event(runner.session_id, runner.session_time_s(self._last_t_ns), "jaw", text)
+                recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns), "jaw", text)
             self.publish(m.JawState(ev.fraction_open, ev.pulse_us, ev.at_limit, ev.fault, text))
 
 

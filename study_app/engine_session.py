@@ -16,7 +16,7 @@ import math
 import os
 import signal
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pipeline.sim.participant import SimulatedParticipant
 from protocol.config import load_protocol
@@ -29,12 +29,11 @@ from protocol.session_setup import (
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
 from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
 from study_app import messages as m
-from study_app.commissioning import REST_MAX_FORCE_N
+from study_app.commissioning import REST_MAX_FORCE_N, Commissioning
+from study_app.engine_core import EngineCore
 from study_app.engine_setup import SwitchableDriver
 from study_app.session_config import config_record, real_config_record
 
-if TYPE_CHECKING:
-    from study_app.engine_host import StudyEngine
 
 __all__ = ["EngineSessions", "list_resumable"]
 
@@ -50,10 +49,13 @@ class EngineSessions:
     ----------
     engine
         The engine whose loop the session's runner commands.
+    commissioning
+        The engine's commissioning chain: the real rig's gate before a start, and what it puts on record.
     """
 
-    def __init__(self, engine: StudyEngine) -> None:
+    def __init__(self, engine: EngineCore, commissioning: Commissioning) -> None:
         self.engine = engine
+        self.commissioning = commissioning
         self.runner: SessionRunner | None = None
         self.recorder: Recorder | None = None
         self.db: StudyDatabase | None = None
@@ -67,14 +69,14 @@ class EngineSessions:
         return self.runner is not None and not self.runner.done
 
     def start(self, cmd: m.StartSession) -> None:
-        self.engine._require_idle("start")
+        self.engine.require_idle("start")
         validate_code(cmd.code)
         if cmd.kind not in ("training", "experiment"):
             raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
-        if self.engine.commissioning.gate(cmd):
+        if self.commissioning.gate(cmd):
             return
         db = self._open_db(cmd.db_path)
         try:
@@ -82,7 +84,7 @@ class EngineSessions:
                 db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
                 rig=self.engine.config.rig,
                 config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui",
-                        **self.engine.commissioning.provenance()},
+                        **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
             )
@@ -98,8 +100,8 @@ class EngineSessions:
         return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
 
     def resume(self, cmd: m.ResumeSession) -> None:
-        self.engine._require_idle("resume")
-        if self.engine.commissioning.gate(cmd):
+        self.engine.require_idle("resume")
+        if self.commissioning.gate(cmd):
             return
         db = self._open_db(cmd.db_path)
         try:
@@ -128,7 +130,7 @@ class EngineSessions:
         runner.listeners.append(self._on_runner_event)
         self.trigger = None
         self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
-        override = self.engine.commissioning.take_override()
+        override = self.commissioning.take_override()
         if override is not None:
             missing, why, rest_n = override
             recorder.event(opened.session_id, opened.clock_offset_s, "calibration_override",

@@ -7,7 +7,6 @@ one line on stderr naming the option, the value and what is allowed (exit 2).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, whole_number
 from study_app.cli_error import CliError

@@ -53,7 +53,9 @@ SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
     "pipeline.engine",
-    "study_app.engine_host",
+    "study_app.engine_setup",
+    "study_app.engine_session",
+    "study_app.commissioning",
     "study_app.calibrate_cmds",
     "study_app.sim_summary",
     "study_app.headless",

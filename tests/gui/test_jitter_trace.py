@@ -84,7 +84,7 @@ def test_the_driver_wakes_just_after_a_loop_tick_about_the_interval_from_now():
         assert isinstance(events[0], m.EngineReady) and e.loop.tick_count > 0
         # pretend the newest tick started 12.345678 ms ago on the loop's clock (perf_counter_ns)
         before = time.perf_counter_ns()
-        e.loop.t0_ns, e._last_t_ns = before - 12_345_678 - 7_000_000, 7_000_000
+        e.loop.t0_ns, e.last_t_ns = before - 12_345_678 - 7_000_000, 7_000_000
         wait_s = e.quiet_wait_s(0.01)
         after = time.perf_counter_ns()
         assert 0.009 - 1e-6 <= wait_s <= 0.01 + (after - before) * 1e-9
