@@ -26,9 +26,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
+from pipeline.bias_refinement import RlsBias
 from pipeline.filters import MovingAverage3, exact_sum
 from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
 
@@ -114,7 +115,7 @@ class HapticFramework:
     config
         Algorithm parameters.
     calibration
-        Payload/bias model from :func:`pipeline.compensation.identify_payload`
+        Payload/bias model from :func:`pipeline.payload_identification.identify_payload`
         (default: none, compensation is a no-op).
     device_peak_n
         Peak force of the haptic device, N (safety clamp).
@@ -171,7 +172,7 @@ class HapticFramework:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
 
         Recomputes the payload weight the sensor reads in this pose
-        (:meth:`pipeline.compensation.MountedPayload.payload_wrench`).
+        (:meth:`pipeline.payload_compensator.MountedPayload.payload_wrench`).
         """
         self._rbt = rot_base_tip
         self._payload = self._mounted.payload_wrench(rot_base_tip)

@@ -174,7 +174,7 @@ class AllowBiasRefinement:
 
 @dataclass(frozen=True, slots=True)
 class SetCalibration:
-    """Install a new payload calibration (a :class:`pipeline.compensation.PayloadCalibration`)."""
+    """Install a new payload calibration (a :class:`pipeline.payload_compensator.PayloadCalibration`)."""
 
     calibration: object
 
