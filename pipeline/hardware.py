@@ -6,7 +6,7 @@ naming the field, the offending value and what is allowed (the style of
 example is ``hardware.example.toml`` at the repository root.
 
 :func:`build_real_rig` opens the devices (Net F/T, UR over RTDE, Touch,
-optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.loop.Rig`.
+optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.rig.Rig`.
 If one device fails, the ones already opened are closed again and the error
 names the device.
 """
@@ -302,7 +302,7 @@ def load_hardware(path: str | Path) -> HardwareConfig:
 
 # -- the real rig ----------------------------------------------------------------------------
 class RealRig:
-    """The devices of the real rig, satisfying :class:`pipeline.loop.Rig`."""
+    """The devices of the real rig, satisfying :class:`pipeline.rig.Rig`."""
 
     def __init__(
         self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None, teleop: Any = None
@@ -332,7 +332,7 @@ class RealRig:
         return None
 
     def on_faults(self, faults: int) -> None:
-        """The loop's latched faults changed: with teleoperation, any fault stops the robot (``pipeline.loop.Rig``).
+        """The loop's latched faults changed: with teleoperation, any fault stops the robot (``pipeline.rig.Rig``).
 
         In ``"observe"`` mode the robot runs its own program and is not ours to stop.
         """
