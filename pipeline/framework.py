@@ -323,9 +323,10 @@ class HapticFramework:
         """
         # One function on purpose, though over 80 lines: this is the per-tick hot path.  The same
         # arithmetic as four stage helpers (moving average, the three rotations, scaling, safety)
-        # measured 1.94 µs per tick against 1.53 µs fused (best of 15 runs over 20 000 recorded ticks,
-        # bench.pipeline_bench's harness, 2 shared cores): +0.4 µs, a quarter of the budget.  Only the
-        # once-per-window re-sum, which is not per tick, is out of line (_resum_window).
+        # measured 1.89–2.01 µs per tick against 1.57–1.71 µs fused (medians of 21 runs over 20 000
+        # recorded ticks, thread CPU time, bench.pipeline_bench's harness, four repetitions): about
+        # +0.3 µs, a fifth more per tick.  Only the once-per-window re-sum, which is not per tick, is
+        # out of line (_resum_window).
         (
             o0, o1, o2, f, w, wf, bx, by, bz,
             a0, a1, a2, a3, a4, a5, a6, a7, a8,
