@@ -6,7 +6,7 @@ naming the field, the offending value and what is allowed (the style of
 example is ``hardware.example.toml`` at the repository root.
 
 :func:`build_real_rig` opens the devices (Net F/T, UR over RTDE, Touch,
-optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.loop.Rig`.
+optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.rig.Rig`.
 If one device fails, the ones already opened are closed again and the error
 names the device.
 """
@@ -144,17 +144,31 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     """
     f = Fields(source, HardwareError)
     top = f.table("", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
-    f.choice("version", top.get("version", 1), (1,), "this software reads hardware file version 1")
+    f.version(top, "hardware file")
     for required in ("sensor", "robot", "haptic"):
-        if required not in top:
-            raise f.fail(required, None, f"the [{required}] table is required")
+        f.required(top, "", required, f"the [{required}] table is required")
+    sensor = _sensor(f, top["sensor"])
+    robot = _robot(f, top["robot"], has_teleop="teleop" in top)
+    haptic = _haptic(f, top["haptic"])
+    jaw = _jaw(f, top["jaw"]) if "jaw" in top else None
+    framework = _framework(f, top)
+    cal = f.section(top, "calibration", {"file", "tool"})
+    cal_file = cal.get("file")
+    if cal_file is not None:
+        cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
+    tool = f.string("calibration.tool", cal.get("tool", "instrument"),
+                    what="a non-empty name of the mounted instrument (its calibration is kept under it)")
+    teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
 
-    s = f.table("sensor", top["sensor"], {
+
+def _sensor(f: Fields, v: Any) -> SensorSettings:
+    """``[sensor]``: the Net F/T box."""
+    s = f.table("sensor", v, {
         "host", "port", "http_port", "counts_per_force", "counts_per_torque", "force_unit", "torque_unit",
         "buffered", "connect_timeout_s",
     })
-    if "host" not in s:
-        raise f.fail("sensor.host", None, "required: the Net F/T box's IP address")
+    f.required(s, "sensor", "host", "required: the Net F/T box's IP address")
     cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
     if (cpf is None) != (cpt is None):
         missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
@@ -169,7 +183,7 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
             check(unit)
         except NetFTError as exc:
             raise f.fail(fld, unit, str(exc).split("; ")[-1]) from None
-    sensor = SensorSettings(
+    return SensorSettings(
         # the Net F/T backend opens an AF_INET socket and builds an http:// URL from the host: IPv4 only
         host=f.host("sensor.host", s["host"], ipv6=False),
         port=f.integer("sensor.port", s.get("port", 49152), lo=1, hi=65535, what=_PORT),
@@ -180,25 +194,30 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         connect_timeout_s=f.number("sensor.connect_timeout_s", s.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    r = f.table("robot", top["robot"], {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
-    if "host" not in r:
-        raise f.fail("robot.host", None, "required: the UR controller's IP address")
+
+def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
+    """``[robot]``: the UR controller (``has_teleop``: the file has a ``[teleop]`` table)."""
+    r = f.table("robot", v, {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
+    f.required(r, "robot", "host", "required: the UR controller's IP address")
     freq = r.get("frequency_hz", 125.0)
     if not (type(freq) is int and freq == -1):
         freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
     mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
-    if mode == "teleop" and "teleop" not in top:
+    if mode == "teleop" and not has_teleop:
         raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
                      "and workspace_max_m (see hardware.example.toml)")
-    robot = RobotSettings(
+    return RobotSettings(
         host=f.host("robot.host", r["host"]), frequency_hz=float(freq), mode=mode,
         tcp_offset_m=f.vec3("robot.tcp_offset_m", r.get("tcp_offset_m", [0.0, 0.0, 0.0]), limit=1.0,
                             what="must be 3 numbers in metres, each within ±1 m"),
         connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
     )
 
-    h = f.table("haptic", top["haptic"], {"device_name", "command_timeout_s"})
-    haptic = HapticSettings(
+
+def _haptic(f: Fields, v: Any) -> HapticSettings:
+    """``[haptic]``: the Touch."""
+    h = f.table("haptic", v, {"device_name", "command_timeout_s"})
+    return HapticSettings(
         f.string("haptic.device_name", h.get("device_name", "Default Device"),
                  what="a non-empty string (the OpenHaptics device name)"),
         # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
@@ -206,29 +225,32 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
                  lo_open=False, note="s (a force command this old renders as zero)"),
     )
 
-    jaw = None
-    if "jaw" in top:
-        j = f.table("jaw", top["jaw"], {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
-        if "port" not in j:
-            raise f.fail("jaw.port", None, "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
-        close_button, open_button = _two_buttons(f, "jaw", j, "close_button", "open_button")
-        jaw = JawSettings(
-            f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
-            f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
-                     "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
-            f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
-            close_button, open_button,
-        )
 
-    fr = f.table("frames", top.get("frames", {}), {"rot_tip_sensor", "rot_haptic_base"})
+def _jaw(f: Fields, v: Any) -> JawSettings:
+    """``[jaw]``: the jaw actuator's Arduino and its buttons."""
+    j = f.table("jaw", v, {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
+    f.required(j, "jaw", "port", "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
+    close_button, open_button = _two_buttons(f, "jaw", j, "close_button", "open_button")
+    return JawSettings(
+        f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
+        f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
+                 "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
+        f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
+        close_button, open_button,
+    )
+
+
+def _framework(f: Fields, top: dict[str, Any]) -> FrameworkConfig:
+    """``[frames]`` and ``[framework]``: Algorithm 1's rotations and scaling."""
+    fr = f.section(top, "frames", {"rot_tip_sensor", "rot_haptic_base"})
     rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else DEFAULT_ROT_TIP_SENSOR
     rot_hb = (f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr
               else DEFAULT_ROT_HAPTIC_BASE)
-    fw = f.table("framework", top.get("framework", {}), {"f_max_n", "f_scale_n", "filter_window"})
+    fw = f.section(top, "framework", {"f_max_n", "f_scale_n", "filter_window"})
     # the safety clamp is min(f_max, the device's reported peak): an f_max above the Touch's peak would be a
     # setting the device silently ignores (and the paper's scaling law would no longer hold)
     peak_n = TouchSpec().peak_force_n
-    framework = FrameworkConfig(
+    return FrameworkConfig(
         # from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there
         f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=1e-6, hi=peak_n, lo_open=False,
                          note="(N; the 3D Systems Touch's peak force)"),
@@ -237,14 +259,6 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
                                 what="a whole number of samples"),
         rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
     )
-    cal = f.table("calibration", top.get("calibration", {}), {"file", "tool"})
-    cal_file = cal.get("file")
-    if cal_file is not None:
-        cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
-    tool = f.string("calibration.tool", cal.get("tool", "instrument"),
-                    what="a non-empty name of the mounted instrument (its calibration is kept under it)")
-    teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
-    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
 
 
 def _two_buttons(f: Fields, table: str, t: dict[str, Any], first: str, second: str) -> tuple[int, int]:
@@ -258,13 +272,13 @@ def _two_buttons(f: Fields, table: str, t: dict[str, Any], first: str, second: s
 
 
 def _teleop(f: Fields, v: Any) -> TeleopSettings:
+    """``[teleop]``: app-side teleoperation."""
     t = f.table("teleop", v, {
         "workspace_min_m", "workspace_max_m", "max_speed_m_s", "motion_scale", "deadman_button", "clutch_button",
         "stylus_max_age_s", "pose_max_age_s", "max_tracking_error_m", "lookahead_s", "gain", "control_timeout_s",
     })
     for req in ("workspace_min_m", "workspace_max_m"):
-        if req not in t:
-            raise f.fail(f"teleop.{req}", None, "required: the corner of the box (m, robot base frame) the TCP must stay in")
+        f.required(t, "teleop", req, "required: the corner of the box (m, robot base frame) the TCP must stay in")
     box = "must be 3 numbers in metres (x, y, z in the robot base frame), each within ±1 m"
     lo = f.vec3("teleop.workspace_min_m", t["workspace_min_m"], limit=1.0, what=box)
     hi = f.vec3("teleop.workspace_max_m", t["workspace_max_m"], limit=1.0, what=box)
@@ -302,7 +316,7 @@ def load_hardware(path: str | Path) -> HardwareConfig:
 
 # -- the real rig ----------------------------------------------------------------------------
 class RealRig:
-    """The devices of the real rig, satisfying :class:`pipeline.loop.Rig`."""
+    """The devices of the real rig, satisfying :class:`pipeline.rig.Rig`."""
 
     def __init__(
         self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None, teleop: Any = None
@@ -332,7 +346,7 @@ class RealRig:
         return None
 
     def on_faults(self, faults: int) -> None:
-        """The loop's latched faults changed: with teleoperation, any fault stops the robot (``pipeline.loop.Rig``).
+        """The loop's latched faults changed: with teleoperation, any fault stops the robot (``pipeline.rig.Rig``).
 
         In ``"observe"`` mode the robot runs its own program and is not ours to stop.
         """

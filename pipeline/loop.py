@@ -18,7 +18,7 @@ few tuples, no locks.  Commands arrive through a deque (thread-safe append /
 popleft) and are applied at the start of the next tick.  Faults are latched
 until :class:`ResetFaults` clears them -- and a reset only clears conditions
 that have gone away.  Whenever the latched set changes the rig's optional
-``on_faults`` hook is called (a teleoperated robot stops; see :class:`Rig`).
+``on_faults`` hook is called (a teleoperated robot stops; see :class:`pipeline.rig.Rig`).
 Every latch (with the value that tripped it), every condition that goes away
 while latched, and every reset is a :class:`LoopEvent` for the record.
 
@@ -45,264 +45,33 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import NamedTuple, Protocol
 
 from pipeline.clock import Clock, prepare_realtime_thread
-from pipeline.devices import Fault, ForceSensor, HapticDevice, HapticState, PoseSample, Robot, WrenchSample
-from pipeline.frames import Vec3
-from pipeline.framework import STEP_FIELDS, HapticFramework
+from pipeline.devices import Fault, HapticState, PoseSample, WrenchSample
+from pipeline.framework import HapticFramework
+from pipeline.loop_messages import (
+    RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, LatchFault, LoopEvent, Mark, OperatorStop,
+    ResetFaults, SetCalibration, SetHaptics, StartRecording, StopRecording,
+)
+from pipeline.loop_stats import LoopStats
+from pipeline.rig import Rig
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S
+from pipeline.watchdog import (
+    WatchdogConfig, derating_detail, derating_ended_detail, fault_detail, output_restarted_detail, stall_detail,
+)
 
+# The commands, events, record columns, statistics and watchdog limits are defined in
+# pipeline.loop_messages, pipeline.loop_stats and pipeline.watchdog; they are named here
+# too because the loop's callers import them from this module.  The devices the loop
+# owns are pipeline.rig.Rig.
 __all__ = [
-    "AllowBiasRefinement",
-    "Command",
-    "ControllerDetached",
-    "HapticLoop",
-    "LoopEvent",
-    "LoopStats",
-    "Mark",
-    "OperatorStop",
-    "RECORD_FIELDS",
-    "LatchFault",
-    "ResetFaults",
-    "Rig",
-    "SetCalibration",
-    "SetHaptics",
-    "StartRecording",
-    "StopRecording",
+    "AllowBiasRefinement", "Command", "ControllerDetached", "HapticLoop", "LoopEvent", "LoopStats", "Mark",
+    "OperatorStop", "RECORD_FIELDS", "ResetFaults", "SetCalibration", "SetHaptics", "StartRecording", "StopRecording",
     "WatchdogConfig",
 ]
 
-#: Columns of one loop record (all float64 in the ring buffer).
-RECORD_FIELDS: tuple[str, ...] = (
-    "t_ns", "t_s", "tick",
-    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-    *STEP_FIELDS,
-    "force_n",
-    "sensor_age_s", "pose_age_s", "faults", "haptic_on", "gain",
-    "trial_index", "phase",
-    "tip_x_m", "tip_y_m", "tip_z_m",
-    "stylus_x_m", "stylus_y_m", "stylus_z_m",
-    "true_fx", "true_fy", "true_fz",
-    "period_s", "latency_s", "derate",
-)
 _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
-
-
-class Rig(Protocol):
-    """The devices the loop owns, and a hook to advance simulated physics.
-
-    A rig that moves a robot itself (app-side teleoperation) also offers two
-    optional hooks, looked up once when the loop is built:
-
-    * ``on_faults(faults: Fault) -> None`` -- called whenever the loop's
-      latched fault set changes (a new fault, an operator stop, a reset),
-      from the loop thread, before the event is emitted.  Any fault must stop
-      the robot at once and keep it stopped while the set is non-empty.
-    * ``stop_motion(reason: str) -> None`` -- called when the loop stops
-      (:meth:`HapticLoop.ramp_down`): stop the robot, nobody will drive it.
-
-    Neither runs in the fault-free steady state, so the tick costs nothing extra.
-    """
-
-    sensor: ForceSensor
-    robot: Robot
-    haptic: HapticDevice
-
-    def advance(self, now_ns: int) -> None:
-        """Bring the rig to time ``now_ns`` (simulated rig: step the physics)."""
-        ...
-
-    def true_contact_force(self) -> Vec3 | None:
-        """Ground-truth tip contact force in the base frame, N (simulation only; None on hardware)."""
-        ...
-
-    def close(self) -> None:
-        """Release every device."""
-        ...
-
-
-# -- commands ---------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class SetHaptics:
-    """Turn haptic feedback on or off (off ramps the rendered force to zero)."""
-
-    on: bool
-
-
-@dataclass(frozen=True, slots=True)
-class Mark:
-    """Stamp ``trial_index`` and ``phase`` (an int code owned by the protocol) into the records."""
-
-    trial_index: int
-    phase: int
-
-
-@dataclass(frozen=True, slots=True)
-class ResetFaults:
-    """Clear latched faults whose condition has gone away, and re-arm the haptic device."""
-
-
-@dataclass(frozen=True, slots=True)
-class OperatorStop:
-    """Latch an operator stop: the force ramps to zero until reset."""
-
-
-@dataclass(frozen=True, slots=True)
-class ControllerDetached:
-    """The controlling process went away: latch ``ENGINE_DETACHED`` (the engine then stops)."""
-
-
-@dataclass(frozen=True, slots=True)
-class LatchFault:
-    """Latch ``fault`` from outside the loop (its supervisor saw it stall); the event was already reported.
-
-    The output restarts from zero: the device's command watchdog has dropped it.
-    """
-
-    fault: int
-
-
-@dataclass(frozen=True, slots=True)
-class AllowBiasRefinement:
-    """Allow (between trials, tool in free space) or forbid online bias refinement."""
-
-    allowed: bool
-
-
-@dataclass(frozen=True, slots=True)
-class SetCalibration:
-    """Install a new payload calibration (a :class:`pipeline.compensation.PayloadCalibration`)."""
-
-    calibration: object
-
-
-@dataclass(frozen=True, slots=True)
-class StartRecording:
-    """Begin a replayable record: snapshot the framework, then log what replay needs (:attr:`HapticLoop.replay_log`).
-
-    The snapshot is taken once every command of the tick has been applied, and
-    logged as ``(tick, "snapshot", {"token": token, "framework": ..., "refine_bias": ...})``;
-    from then on every pose the framework takes (``"pose"``: rotation, position,
-    pose time), every change of the bias-refinement permission (``"refine"``), every
-    framework reset (``"reset"``) and calibration (``"calibration"``), every change
-    of the haptic device's force limit passed on to the safety stage
-    (``"device_limit"``: the device's limit, N; thermal derating) and every time
-    the output is dropped to zero outside the framework's step (``"zero"``: why --
-    ``"late_tick"``, ``"latch_fault"`` or ``"fail_safe"``) is logged with its
-    tick, in the order the loop applied them (:mod:`pipeline.replay`).
-    """
-
-    token: int
-
-
-@dataclass(frozen=True, slots=True)
-class StopRecording:
-    """Stop logging for replay (the log is left for its reader to drain)."""
-
-
-Command = (SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
-           | LatchFault | StartRecording | StopRecording)
-
-
-class LoopEvent(NamedTuple):
-    """Something the experimenter must see, and the study record must keep.
-
-    ``kind`` is ``"fault"`` (a fault latched; ``detail`` names it and the value
-    that tripped it), ``"fault_cleared"`` (a latched fault's condition went
-    away; it stays latched until a reset), ``"faults_reset"`` (a reset:
-    ``faults`` is what is still latched after it, ``detail`` what was latched
-    before), ``"derating"`` / ``"derating_ended"`` (the haptic device's motors
-    got warm and it lowered its force limit / it cooled and renders its full
-    peak again) or ``"output_restarted"`` (a tick came later than the
-    device's command watchdog: the device had dropped the force, and the
-    output ramps in again from zero).  ``t_ns`` is on the records' time axis (``t_ns`` of the tick's
-    record: ns since the loop's first tick).
-    """
-
-    t_ns: int
-    kind: str
-    faults: int
-    detail: str
-
-
-@dataclass(frozen=True, slots=True)
-class WatchdogConfig:
-    """Age and range limits of the watchdog (science.md §5)."""
-
-    sensor_max_age_s: float = 0.005
-    pose_max_age_s: float = 0.050
-    saturation_fraction: float = 0.8
-    #: No tick for longer than this latches ``LOOP_STALLED`` (the loop's own check on its next tick, and
-    #: :class:`pipeline.supervisor.LoopSupervisor` while it lasts).
-    loop_stall_s: float = 0.050
-
-    def __post_init__(self) -> None:
-        for name in ("sensor_max_age_s", "pose_max_age_s", "saturation_fraction", "loop_stall_s"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"watchdog.{name} = {v!r}: must be a finite number > 0")
-        if self.saturation_fraction > 1:
-            raise ValueError(f"watchdog.saturation_fraction = {self.saturation_fraction!r}: must be ≤ 1")
-
-
-class LoopStats:
-    """Tick-period statistics over arbitrarily long runs (1 µs histogram up to 50 ms)."""
-
-    _BINS = 50_000
-
-    def __init__(self, period_ns: int) -> None:
-        self.period_ns = period_ns
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget all periods."""
-        self._hist = [0] * (self._BINS + 1)
-        self.count = 0
-        self.max_ns = 0
-        self.over_2ms = 0
-        self.missed_slots = 0
-
-    def add(self, period_ns: int) -> None:
-        """Record one tick period."""
-        us = period_ns // 1000
-        self._hist[us if 0 <= us < self._BINS else self._BINS] += 1
-        self.count += 1
-        if period_ns > self.max_ns:
-            self.max_ns = period_ns
-        if period_ns > 2_000_000:
-            self.over_2ms += 1
-
-    def _quantile_us(self, q: float, hist: list[int]) -> float:
-        n = sum(hist)
-        if n == 0:
-            return math.nan
-        target = q * n
-        acc = 0
-        for i, c in enumerate(hist):
-            acc += c
-            if acc >= target:
-                return float(i)
-        return float(len(hist) - 1)
-
-    def summary(self) -> dict[str, float]:
-        """p50/p99/max of the period and p99 of |period − nominal|, µs; counts."""
-        nominal_us = self.period_ns // 1000
-        dev = [0] * (self._BINS + 1)
-        for i, c in enumerate(self._hist):
-            if c:
-                dev[abs(i - nominal_us)] += c
-        return {
-            "ticks": float(self.count),
-            "period_p50_us": self._quantile_us(0.5, self._hist),
-            "period_p99_us": self._quantile_us(0.99, self._hist),
-            "period_max_us": self.max_ns / 1000.0,
-            "abs_dev_p99_us": self._quantile_us(0.99, dev),
-            "periods_over_2ms": float(self.over_2ms),
-            "missed_slots": float(self.missed_slots),
-        }
 
 
 class HapticLoop:
@@ -415,14 +184,9 @@ class HapticLoop:
         dt_s = period * 1e-9
         rig = self.rig
         rig.advance(now)
-        inbox = self._inbox
-        while inbox:
-            self._apply(inbox.popleft(), now)
-        if period > self.command_timeout_ns and not self._resync:
-            self._late_tick(now, period)
+        if self._inbox or period > self.command_timeout_ns or self._snapshot_due is not None:
+            self._start_of_tick(now, period)
         self._resync = False
-        if self._snapshot_due is not None:
-            self._take_snapshot()
 
         w = rig.sensor.read_wrench()
         pose = rig.robot.read_pose()
@@ -449,37 +213,15 @@ class HapticLoop:
         pose_age = now - pose.t_ns
         if pose_age > self._pose_age_ns:
             cond |= Fault.POSE_STALE
-        if pose.t_ns != self._pose_t_ns:
-            rot = pose.rot_base_tip
-            if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
-                self._pose_t_ns = pose.t_ns
-                fw.set_pose(rot)
-                if self.recording:
-                    self.replay_log.append((self.tick_count, "pose", (rot, pose.position_m, pose.t_ns)))
-            else:
-                cond |= Fault.NON_FINITE
+        if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
+            cond |= self._take_pose(pose)
         if hs.error_code:
             cond |= Fault.HAPTIC_DEVICE
         if hs[4] != self._device_limit_n:  # force_limit_n: the device derates (rare; a compare per tick otherwise)
             self._device_limit(now, hs)
-        prev = self.active_faults
-        self.active_faults = cond
         latched = self.faults
-        new = cond & ~latched
-        if new:
-            # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
-            latched = int(latched | new)
-            self.faults = latched
-            self._gone_reported &= ~new
-            self._faults_changed(now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", latched,
-                                 self._fault_detail(new, w, pose, hs, sensor_age, pose_age)))
-        if cond != prev:
-            gone = latched & prev & ~cond & ~self._gone_reported
-            if gone:
-                self._gone_reported |= gone
-                self._emit(LoopEvent(now - self.t0_ns, "fault_cleared", latched,
-                                     f"{Fault(gone).describe()}: the condition is gone (latched until a reset)"))
+        if cond != self.active_faults or cond & ~latched:  # (fault-free steady state: both false)
+            latched = self._conditions_changed(cond, now, w, pose, hs, sensor_age, pose_age)
 
         if self.refine_bias and not latched:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
@@ -488,17 +230,8 @@ class HapticLoop:
         out = fw.step(fx, fy, fz, enabled, dt_s)
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         rig.haptic.command_force(out[18], out[19], out[20], now)
-        derate = 1.0
-        if self._derate_check and enabled:
-            # the fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
-            # through; only while the thermal limit is below the safety stage's own
-            want = _HYPOT(out[15], out[16], out[17])
-            lim = fw.safety.limit_n
-            if want > lim:
-                designed = want if want < fw.safety.static_limit_n else fw.safety.static_limit_n
-                derate = lim / designed
-        # from the sample's arrival to the command's hand-over, on the loop's clock (on a virtual clock
-        # computing takes no time: it is the sample's age)
+        derate = self._derate(out) if self._derate_check and enabled else 1.0
+        # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
         latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
 
         truth = rig.true_contact_force() or _NAN3
@@ -518,24 +251,85 @@ class HapticLoop:
             self.ring.write(rec)  # type: ignore[attr-defined]
         self.tick_count += 1
 
+    def _start_of_tick(self, now: int, period: int) -> None:
+        """Apply the queued commands, restart the output after a late tick, take a due replay snapshot.
+
+        Rare work, so :meth:`tick` calls this only when one of the three is due (the same three tests it
+        would make itself).
+        """
+        inbox = self._inbox
+        while inbox:
+            self._apply(inbox.popleft(), now)
+        if period > self.command_timeout_ns and not self._resync:
+            self._late_tick(now, period)
+        if self._snapshot_due is not None:
+            self._take_snapshot()
+
+    def _take_pose(self, pose: PoseSample) -> int:
+        """Hand a new robot pose to the framework; a non-finite one is refused: ``Fault.NON_FINITE``, else 0."""
+        rot = pose.rot_base_tip
+        if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
+            self._pose_t_ns = pose.t_ns
+            self.framework.set_pose(rot)
+            if self.recording:
+                self.replay_log.append((self.tick_count, "pose", (rot, pose.position_m, pose.t_ns)))
+            return 0
+        return Fault.NON_FINITE
+
+    def _conditions_changed(
+        self, cond: int, now: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age: int, pose_age: int,
+    ) -> int:
+        """This tick's fault conditions differ from the last tick's: latch the new ones, report the gone ones.
+
+        Returns the latched set.
+        """
+        prev = self.active_faults
+        self.active_faults = cond
+        latched = self.faults
+        new = cond & ~latched
+        if new:
+            # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
+            latched = int(latched | new)
+            self.faults = latched
+            self._gone_reported &= ~new
+            self._faults_changed(now)
+            self._emit(LoopEvent(now - self.t0_ns, "fault", latched,
+                                 fault_detail(new, w, pose, hs, sensor_age, pose_age, self.watchdog, self._sat)))
+        if cond != prev:
+            gone = latched & prev & ~cond & ~self._gone_reported
+            if gone:
+                self._gone_reported |= gone
+                self._emit(LoopEvent(now - self.t0_ns, "fault_cleared", latched,
+                                     f"{Fault(gone).describe()}: the condition is gone (latched until a reset)"))
+        return latched
+
+    def _derate(self, out: tuple[float, ...]) -> float:
+        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets through.
+
+        Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
+        """
+        want = _HYPOT(out[15], out[16], out[17])
+        safety = self.framework.safety
+        lim = safety.limit_n
+        if want > lim:
+            designed = want if want < safety.static_limit_n else safety.static_limit_n
+            return lim / designed
+        return 1.0
+
     def _late_tick(self, now: int, period: int) -> None:
         """This tick came after the device's command watchdog dropped the force: restart from zero; latch a stall."""
         self.framework.safety.force_zero()  # the device renders zero now: ramp in from there, never jump back
         if self.recording:
             self.replay_log.append((self.tick_count, "zero", "late_tick"))
-        ms, t = period * 1e-6, now - self.t0_ns
+        t = now - self.t0_ns
         if period > self._stall_ns:
             if not self.faults & Fault.LOOP_STALLED:
                 self._latch(Fault.LOOP_STALLED, now)
                 self._emit(LoopEvent(t, "fault", self.faults,
-                                     f"LOOP_STALLED: no loop tick for {ms:.1f} ms (limit "
-                                     f"{self.watchdog.loop_stall_s * 1e3:g} ms); the haptic device's command watchdog "
-                                     f"had dropped the force to zero after {self.command_timeout_ns * 1e-6:g} ms"))
+                                     stall_detail(period, self.watchdog, self.command_timeout_ns)))
         else:
             self._emit(LoopEvent(t, "output_restarted", self.faults,
-                                 f"no loop tick for {ms:.1f} ms: the haptic device's command watchdog "
-                                 f"({self.command_timeout_ns * 1e-6:g} ms) had dropped the force to zero; "
-                                 "feedback ramps in again from zero"))
+                                 output_restarted_detail(period, self.command_timeout_ns)))
 
     def _device_limit(self, now: int, hs: HapticState) -> None:
         """The device changed the force it may render (thermal derating): clamp to it; report derating."""
@@ -549,51 +343,11 @@ class HapticLoop:
         t = now - self.t0_ns
         if not self._derating and lim < self._peak_n:
             self._derating = True
-            # at the onset the limit is still a hair below the peak ("3.30 N" of 3.3 N): say what begins
             cont = float(getattr(self.rig.haptic, "continuous_force_n", math.nan))
-            toward = f"its {cont:g} N continuous rating" if math.isfinite(cont) else "its continuous rating"
-            self._emit(LoopEvent(t, "derating", self.faults,
-                                 f"haptic device motors warm ({100 * frac:.0f} % of the thermal budget): derating "
-                                 f"begins — the most it may render falls from its {self._peak_n:g} N peak toward "
-                                 f"{toward} as they heat further, and rises again as they cool"))
+            self._emit(LoopEvent(t, "derating", self.faults, derating_detail(frac, self._peak_n, cont)))
         elif self._derating and lim >= self._peak_n:
             self._derating = False
-            self._emit(LoopEvent(t, "derating_ended", self.faults,
-                                 f"haptic device motors cooled ({100 * frac:.0f} % of the thermal budget): derating "
-                                 f"over, its full {lim:g} N peak again"))
-
-    def _fault_detail(
-        self, new: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age_ns: int, pose_age_ns: int,
-    ) -> str:
-        """What latched and the value that tripped it, e.g. ``SENSOR_STALE: newest F/T sample 7.0 ms old (limit 5 ms)``.
-
-        Only on the fault path: a tick without a new fault never builds it.
-        """
-        wd = self.watchdog
-        parts = []
-        if new & Fault.SENSOR_STALE:
-            parts.append(f"SENSOR_STALE: newest F/T sample {sensor_age_ns * 1e-6:.1f} ms old "
-                         f"(limit {wd.sensor_max_age_s * 1e3:g} ms)")
-        if new & Fault.SENSOR_STATUS:
-            parts.append(f"SENSOR_STATUS: status word 0x{int(w.status):08X}")
-        if new & Fault.NON_FINITE:
-            names = ("fx", "fy", "fz", "tx", "ty", "tz")
-            bad = [f"{n} = {v!r}" for n, v in zip(names, w[1:7]) if not math.isfinite(v)]
-            bad += [f"pose {v!r}" for v in (*pose.position_m, *pose.rot_base_tip) if not math.isfinite(v)][:1]
-            parts.append(f"NON_FINITE: {', '.join(bad) or 'a non-finite reading'}")
-        if new & Fault.SENSOR_SATURATION:
-            names = ("fx", "fy", "fz", "tx", "ty", "tz")
-            units = ("N", "N", "N", "N·m", "N·m", "N·m")
-            over = [(n, v, r, u) for n, v, r, u in zip(names, w[1:7], self._sat, units) if abs(v) > r]
-            n, v, r, u = over[0] if over else ("a channel", math.nan, math.nan, "")
-            parts.append(f"SENSOR_SATURATION: {n} = {v:.2f} {u} beyond {wd.saturation_fraction:.0%} of its range "
-                         f"(±{r:.3g} {u})")
-        if new & Fault.POSE_STALE:
-            parts.append(f"POSE_STALE: newest robot pose {pose_age_ns * 1e-6:.1f} ms old "
-                         f"(limit {wd.pose_max_age_s * 1e3:g} ms)")
-        if new & Fault.HAPTIC_DEVICE:
-            parts.append(f"HAPTIC_DEVICE: device error 0x{int(hs.error_code):04X}")
-        return "; ".join(parts) or Fault(new).describe()
+            self._emit(LoopEvent(t, "derating_ended", self.faults, derating_ended_detail(frac, lim)))
 
     def _apply(self, cmd: Command, now: int) -> None:
         if isinstance(cmd, Mark):

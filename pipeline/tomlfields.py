@@ -152,6 +152,19 @@ class Fields:
                             f"unknown field; allowed: {', '.join(sorted(allowed_keys))}")
         return v
 
+    def section(self, top: dict[str, Any], name: str, allowed_keys: set[str]) -> dict[str, Any]:
+        """The optional top-level table ``[name]`` of ``top`` (empty when absent), keys all in ``allowed_keys``."""
+        return self.table(name, top.get(name, {}), allowed_keys)
+
+    def required(self, t: dict[str, Any], field: str, key: str, allowed: str) -> None:
+        """Refuse a table ``t`` (at ``field``; "" for the top level) without ``key``: ``<field>.<key> = None: <allowed>``."""
+        if key not in t:
+            raise self.fail(f"{field}.{key}" if field else key, None, allowed)
+
+    def version(self, top: dict[str, Any], what: str) -> None:
+        """The file's ``version``: absent or exactly the integer 1 (``this software reads <what> version 1``)."""
+        self.choice("version", top.get("version", 1), (1,), f"this software reads {what} version 1")
+
     def number(self, field: str, v: Any, *, lo: float, hi: float, lo_open: bool = True, note: str = "") -> float:
         """A finite real number in ``(lo, hi]`` (``lo_open``) or ``[lo, hi]``, as a float."""
         ok = _finite(v) and (v > lo if lo_open else v >= lo) and v <= hi

@@ -135,7 +135,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training"})
     name = f.string("name", top.get("name", "unnamed protocol"))
-    f.choice("version", top.get("version", 1), (1,), "this software reads protocol version 1")
+    f.version(top, "protocol")
 
     def target(field: str, t: Any) -> Target:
         t = f.table(field, t, {"label", "force_n"})
@@ -149,7 +149,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     if len(set(labels)) != len(labels):
         raise f.fail("targets", labels, "labels must be unique")
 
-    design = f.table("design", top.get("design", {}), {"modes", "trials_per_cell", "ordering", "abort_policy"})
+    design = f.section(top, "design", {"modes", "trials_per_cell", "ordering", "abort_policy"})
     modes = design.get("modes", list(MODES))
     if (
         not isinstance(modes, list) or not modes
@@ -160,7 +160,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     ordering = f.choice("design.ordering", design.get("ordering", "random"), ORDERINGS)
     policy = f.choice("design.abort_policy", design.get("abort_policy", "append"), ABORT_POLICIES)
 
-    tr = f.table("trial", top.get("trial", {}), {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
+    tr = f.section(top, "trial", {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
     timing = TrialTiming(
         tolerance_fraction=f.number("trial.tolerance_fraction", tr.get("tolerance_fraction", 0.10), lo=0.0, hi=0.5),
         hold_s=f.number("trial.hold_s", tr.get("hold_s", 1.0), lo=0.0, hi=60.0),
@@ -171,7 +171,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     if timing.hold_s >= timing.max_trial_s:
         raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
 
-    trn = f.table("training", top.get("training", {}), {"enabled", "seconds_per_target_per_mode", "live_force_aid"})
+    trn = f.section(top, "training", {"enabled", "seconds_per_target_per_mode", "live_force_aid"})
     training = TrainingConfig(
         enabled=f.boolean("training.enabled", trn.get("enabled", True)),
         seconds_per_target_per_mode=f.number(

@@ -18,11 +18,11 @@ from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur import UrRtdeRobot
 from pipeline.clock import VirtualClock
-from pipeline.compensation import NO_PAYLOAD
 from pipeline.devices import DeviceError, HapticState
 from pipeline.engine import build_hardware_engine
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
+from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.sim.touch import TouchSpec
 from pipeline.tomlfields import host_problem
 from tomlvalues import TOML_VALUES, replaced

@@ -1,4 +1,5 @@
-"""Tests of gravity/bias compensation (pipeline/compensation.py, science.md §1).
+"""Tests of gravity/bias compensation (pipeline/payload_compensator.py, pipeline/payload_identification.py,
+pipeline/bias_refinement.py; science.md §1).
 
 Synthetic data are made here with NumPy/SciPy, independently of the module:
 a 0.65 kg instrument with centre of mass (3, −2, 110) mm, bias
@@ -23,14 +24,11 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from pipeline import frames
-from pipeline.compensation import (
-    GRAVITY_BASE,
-    NO_PAYLOAD,
+from pipeline.bias_refinement import RlsBias
+from pipeline.payload_compensator import GRAVITY_BASE, NO_PAYLOAD, PayloadCalibration, PoseResidual
+from pipeline.payload_identification import (
     CalibrationPose,
     DegeneratePoseSetError,
-    PayloadCalibration,
-    PoseResidual,
-    RlsBias,
     identify_payload,
     recommended_pose_set,
 )

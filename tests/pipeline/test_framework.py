@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.compensation import NO_PAYLOAD, PayloadCalibration
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.filters import MovingAverage3
 from pipeline.frames import axis_angle, mat_mul, mat_vec, rotvec_to_matrix, transpose
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
@@ -162,7 +162,7 @@ def test_disabled_output_ramps_to_zero_but_path_runs() -> None:
 
 
 def test_rls_refinement_tracks_bias_and_updates_offsets() -> None:
-    from pipeline.compensation import RlsBias
+    from pipeline.bias_refinement import RlsBias
 
     cal = _calibration()
     rls = RlsBias(cal.force_bias_n, cal.torque_bias_nm, forgetting=0.99, gate_force_n=0.15)
