@@ -36,7 +36,7 @@ from typing import Any
 from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
 from study_app import messages as m
 from study_app.engine_client import EngineClient
-from study_app.engine_host import HostConfig
+from study_app.engine_setup import HostConfig
 
 __all__ = ["format_gui_bench", "run_gui_bench"]
 

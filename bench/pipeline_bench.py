@@ -34,7 +34,7 @@ from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework
 from study_app import messages as m
 from study_app.engine_client import EngineClient
-from study_app.engine_host import HostConfig
+from study_app.engine_setup import HostConfig
 
 __all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
 

@@ -17,7 +17,8 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from pipeline.clock import Clock, MonotonicClock, VirtualClock
-from pipeline.compensation import NO_PAYLOAD, PayloadCalibration, RlsBias
+from pipeline.bias_refinement import RlsBias
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.framework import FrameworkConfig, HapticFramework
 from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, HapticLoop, SetHaptics, WatchdogConfig
 from pipeline.ring import RingBuffer
@@ -122,7 +123,7 @@ def build_sim_engine(
     progress
         Optional ``progress(done, total)`` for the calibration.
     """
-    from pipeline.compensation import recommended_pose_set
+    from pipeline.payload_identification import recommended_pose_set
     from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
     from pipeline.sim.hand import ScriptedPresses
     from pipeline.sim.rig import SimRig, SimRigConfig

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.compensation import PayloadCalibration
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
 
 __all__ = ["REPLAY_LOG_KINDS", "ReplayInputs", "ReplayOutputs", "replay"]

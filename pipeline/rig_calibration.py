@@ -1,7 +1,7 @@
 """The calibration file: what is on record for each instrument, and whether a session may start.
 
 The commissioning chain runs in order -- **TCP** (:mod:`pipeline.tcp`),
-**payload/bias** (:mod:`pipeline.compensation`), **frames and signs**
+**payload/bias** (:mod:`pipeline.payload_compensator`), **frames and signs**
 (:mod:`pipeline.frame_check`) -- and each accepted result is saved, with its
 date, under the name of the mounted tool in one JSON file (the hardware file's
 ``[calibration] file``, ``calibration.json`` next to it by default)::
@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from pipeline.compensation import PayloadCalibration
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.frame_check import FrameCheck
 from pipeline.frames import Mat3
 from pipeline.tcp import TipCalibration

@@ -3,7 +3,7 @@
 Each step does what the calibration wizard's step does, from a terminal:
 
 * ``tcp`` -- pivot calibration of the tool-centre point (:mod:`pipeline.tcp`);
-* ``payload`` -- gravity/bias identification (:mod:`pipeline.compensation`);
+* ``payload`` -- gravity/bias identification (:mod:`pipeline.payload_identification`);
 * ``frames`` -- the frame and sign check (:mod:`pipeline.frame_check`).
 
 On the simulated rig each step runs by itself (the simulated robot turns,
@@ -143,7 +143,7 @@ def _sim(args: argparse.Namespace) -> dict[str, Any]:
         from pipeline.clock import VirtualClock
         from pipeline.sim.calibration import auto_calibrate
         from pipeline.sim.rig import SimRig
-        from study_app.engine_host import pose_set
+        from study_app.commissioning import pose_set
 
         name = args.poses or "recommended"
         rig = SimRig(sim)
@@ -202,7 +202,7 @@ def _tcp_result(poses: list[Any], name: str, note: str) -> dict[str, Any]:
 
 
 def _payload_result(cal: Any, name: str, note: str) -> dict[str, Any]:
-    from study_app.engine_host import calibration_verdict
+    from study_app.commissioning import calibration_verdict
 
     reason = calibration_verdict(cal)
     text = "\n".join([
@@ -280,7 +280,7 @@ def _still_pose(robot: Any, seconds: float) -> tuple[Any, str]:
     """Average the TCP position over ``seconds``; (pose, "") or (None, why it is refused)."""
     import numpy as np
 
-    from study_app.engine_host import rotation_angle_deg
+    from study_app.commissioning import rotation_angle_deg
 
     first = robot.read_pose()
     pts = []
@@ -361,9 +361,10 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
 def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
     import numpy as np
 
-    from pipeline.compensation import CalibrationPose, PayloadCalibration, identify_payload
+    from pipeline.payload_compensator import PayloadCalibration
+    from pipeline.payload_identification import CalibrationPose, identify_payload
     from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
-    from study_app.engine_host import pose_set
+    from study_app.commissioning import pose_set
 
     rots = pose_set(name)
     rts = hw.framework.rot_tip_sensor

@@ -21,9 +21,8 @@ from typing import Any
 import numpy as np
 
 from pipeline.clock import MonotonicClock
-from pipeline.compensation import (
-    CalibrationPose, DegeneratePoseSetError, PayloadCalibration, identify_payload, recommended_pose_set,
-)
+from pipeline.payload_compensator import PayloadCalibration
+from pipeline.payload_identification import CalibrationPose, DegeneratePoseSetError, identify_payload, recommended_pose_set
 from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
 from pipeline.frames import Mat3, axis_angle, mat_mul
 from pipeline.loop import SetCalibration

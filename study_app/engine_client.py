@@ -15,7 +15,8 @@ from typing import Any
 
 from pipeline.ring import RingBuffer
 from study_app import messages as m
-from study_app.engine_host import HostConfig, host_main
+from study_app.engine_host import host_main
+from study_app.engine_setup import HostConfig
 
 __all__ = ["EngineClient", "EngineStartError"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-from pipeline.compensation import PayloadCalibration
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
 from pipeline.loop import HapticLoop

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
-from pipeline.compensation import PayloadCalibration
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.devices import DeviceError
 from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
@@ -49,18 +49,13 @@ from protocol.session import SessionRunner
 from protocol.storage import Recorder, StorageError, new_owner_token
 from protocol.trial import TrialPhase
 from study_app import messages as m
-from study_app.commissioning import (
-    CALIBRATION_MAX_CONDITION, CALIBRATION_MAX_RMS_FORCE_N, Commissioning, pose_set, rotation_angle_deg,
-)
+from study_app.commissioning import Commissioning
 from study_app.engine_session import EngineSessions, list_resumable
-from study_app.engine_setup import HostConfig, SwitchableDriver, build_engine, build_real_engine
+from study_app.engine_setup import HostConfig, SwitchableDriver, build_engine
 from study_app.period_stats import PeriodStats
 from study_app.session_list import list_sessions
 
-__all__ = [
-    "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "HostConfig", "StudyEngine", "SwitchableDriver",
-    "build_real_engine", "host_main", "list_resumable", "pose_set", "rotation_angle_deg",
-]
+__all__ = ["QUIET_OFFSET_NS", "StudyEngine", "host_main"]
 
 #: The driver thread wakes this long after a loop tick starts (a tick takes ~50 µs): see StudyEngine.quiet_wait_s.
 QUIET_OFFSET_NS = 150_000

@@ -36,7 +36,7 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
 
 def cmd_gui(args: argparse.Namespace) -> int:
     """Run ``haptic-study gui``: checks first (one line, exit 2), then Qt is loaded and the window opens."""
-    from study_app.engine_host import HostConfig
+    from study_app.engine_setup import HostConfig
 
     if args.rig == "real" and args.hardware is None:
         raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")

@@ -28,7 +28,7 @@ __all__ = [
 DRIVER_MODES = ("autopilot", "manual")
 #: The driver reported by the real rig: a person holds the Touch; nothing can be switched.
 REAL_DRIVER = "participant"
-#: Calibration pose sets offered by the wizard (see :func:`study_app.engine_host.pose_set`).
+#: Calibration pose sets offered by the wizard (see :func:`study_app.commissioning.pose_set`).
 POSE_SETS = ("recommended", "quick", "tool-down only")
 #: TCP pivot orientation sets the wizard offers on the simulated rig (:func:`pipeline.tcp.pivot_orientations`).
 PIVOT_SETS = ("recommended", "minimal", "roll only")

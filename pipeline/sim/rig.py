@@ -173,7 +173,7 @@ class SimRig:
         return self._truth
 
     def on_faults(self, faults: int) -> None:
-        """The loop's latched faults changed: an attached teleoperation driver stops the arm (see ``pipeline.loop.Rig``)."""
+        """The loop's latched faults changed: an attached teleoperation driver stops the arm (see ``pipeline.rig.Rig``)."""
         if self.teleop is not None:
             self.teleop.on_faults(faults)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 from PySide6.QtCore import QSettings, QtMsgType, qInstallMessageHandler
 from PySide6.QtWidgets import QApplication, QWidget
 
-from study_app.engine_host import HostConfig
+from study_app.engine_setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
 from study_app.gui.timers import tracked_timer
 

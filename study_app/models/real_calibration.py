@@ -1,7 +1,7 @@
 """The real rig's calibration wizard, step by step (Qt-free).
 
 On hardware nobody can re-orient the tool for us: the wizard shows one target
-pose of :func:`pipeline.compensation.recommended_pose_set` at a time, the
+pose of :func:`pipeline.payload_identification.recommended_pose_set` at a time, the
 experimenter moves the robot there with its own teach pendant or teleoperation,
 and presses *Record pose*; the engine averages the raw wrench for
 ``seconds`` and reads the TCP orientation the robot reports (off the GUI
@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pipeline.compensation import recommended_pose_set
+from pipeline.payload_identification import recommended_pose_set
 from pipeline.frames import IDENTITY, Mat3, mat_mul, matrix_to_rotvec, transpose
 from study_app import messages as m
 from study_app.models import Emitter

@@ -135,7 +135,7 @@ def test_the_real_chain_in_order_saves_each_step_for_the_tool(rig, tmp_path) -> 
     assert rec.tcp is not None and np.allclose(rec.tcp.tip_in_flange_m, TIP, atol=1e-5) and rec.payload is None
 
     # payload: 6 poses, the fake box reads the tool's weight and bias at each
-    from study_app.engine_host import pose_set
+    from study_app.commissioning import pose_set
 
     poses = iter(pose_set("quick"))
 

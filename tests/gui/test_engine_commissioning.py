@@ -11,7 +11,8 @@ import pytest
 from pipeline.sim.touch import SimTouch, TouchSpec
 from protocol.trial import TrialPhase
 from study_app import messages as m
-from study_app.engine_host import HostConfig, StudyEngine
+from study_app.engine_host import StudyEngine
+from study_app.engine_setup import HostConfig
 
 
 @pytest.fixture

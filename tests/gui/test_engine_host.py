@@ -11,7 +11,8 @@ import pytest
 from pipeline.devices import Fault
 from study_app import messages as m
 from study_app.engine_client import EngineClient
-from study_app.engine_host import HostConfig, StudyEngine
+from study_app.engine_host import StudyEngine
+from study_app.engine_setup import HostConfig
 
 
 @pytest.fixture

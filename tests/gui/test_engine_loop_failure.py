@@ -15,7 +15,9 @@ import time
 from pipeline.devices import Fault
 from protocol.trial import TrialPhase
 from study_app import messages as m
-from study_app.engine_host import HostConfig, StudyEngine, list_resumable
+from study_app.engine_host import StudyEngine
+from study_app.engine_session import list_resumable
+from study_app.engine_setup import HostConfig
 
 
 def _fail() -> None:

@@ -15,7 +15,7 @@ import numpy as np
 from pipeline.loop import RECORD_FIELDS
 from study_app import messages as m
 from study_app.engine_client import EngineClient
-from study_app.engine_host import HostConfig
+from study_app.engine_setup import HostConfig
 
 START_TIMEOUT_S = 60.0
 EXIT_TIMEOUT_S = 15.0

@@ -13,7 +13,8 @@ import pytest
 from pipeline.clock import collect_garbage
 from pipeline.jitter_trace import LateTickTracer, _Task
 from study_app import messages as m
-from study_app.engine_host import QUIET_OFFSET_NS, HostConfig, StudyEngine
+from study_app.engine_host import QUIET_OFFSET_NS, StudyEngine
+from study_app.engine_setup import HostConfig
 
 
 @pytest.fixture

@@ -26,7 +26,8 @@ from pipeline.devices import Fault  # noqa: E402
 from pipeline.frames import matrix_to_rotvec  # noqa: E402
 from study_app import messages as m  # noqa: E402
 from study_app.engine_client import EngineClient  # noqa: E402
-from study_app.engine_host import HostConfig, StudyEngine  # noqa: E402
+from study_app.engine_host import StudyEngine  # noqa: E402
+from study_app.engine_setup import HostConfig  # noqa: E402
 from study_app.models.real_calibration import RealCalibrationModel  # noqa: E402
 
 FAKE_TOUCH = "fake_touch:open_fake_touch"

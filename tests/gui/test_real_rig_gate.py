@@ -25,7 +25,9 @@ from pipeline.frames import matrix_to_rotvec  # noqa: E402
 from pipeline.sim.robot import TOOL_DOWN  # noqa: E402
 from pipeline.tcp import pivot_orientations  # noqa: E402
 from study_app import messages as m  # noqa: E402
-from study_app.engine_host import HostConfig, StudyEngine, pose_set  # noqa: E402
+from study_app.commissioning import pose_set  # noqa: E402
+from study_app.engine_host import StudyEngine  # noqa: E402
+from study_app.engine_setup import HostConfig  # noqa: E402
 
 TIP = np.array([0.0015, -0.0010, 0.2212])  # the tool's true tip in the flange frame (the pendant's TCP is zero)
 PIVOT = np.array([0.30, -0.10, 0.15])

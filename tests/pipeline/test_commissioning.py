@@ -16,7 +16,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.compensation import NO_PAYLOAD
+from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frame_check import AXES, FrameCheck, check_axis
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE

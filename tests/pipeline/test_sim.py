@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.clock import VirtualClock
-from pipeline.compensation import recommended_pose_set
+from pipeline.payload_identification import recommended_pose_set
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frames import IDENTITY, mat_mul, transpose
 from pipeline.sim.calibration import auto_calibrate
