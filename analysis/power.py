@@ -68,14 +68,8 @@ from scipy import stats as sps
 from analysis.aggregate import METRIC_LABELS, PRIMARY_METRICS, per_participant
 from analysis.load import AnalysisError, Progress, load_study
 from analysis.metrics import MetricOptions, compute_trials
-from analysis.stats import (
-    DEFAULT_DECIMALS,
-    ZERO_METHODS,
-    _auto_method,
-    _sign_flip_distribution,
-    holm,
-    signed_rank_null_counts,
-)
+from analysis.signed_rank import auto_method, sign_flip_distribution, signed_rank_null_counts
+from analysis.stats import DEFAULT_DECIMALS, ZERO_METHODS, holm
 
 __all__ = [
     "DEFAULT_N_VALUES",
@@ -313,7 +307,7 @@ def _permutation_p(key: int, units: np.ndarray) -> np.ndarray:
     if table is None:
         if len(_PERM_CACHE) >= _PERM_CACHE_MAX:
             _PERM_CACHE.clear()
-        table = _PERM_CACHE[key] = _two_sided_p(*_sign_flip_distribution(units))
+        table = _PERM_CACHE[key] = _two_sided_p(*sign_flip_distribution(units))
     return table
 
 
@@ -360,7 +354,7 @@ def _p_values(pm: _PreparedMetric, idx: np.ndarray,
     # SciPy's automatic choice, asked once per distinct (pairs, any zero, any tie)
     keys = 4 * n_pairs + 2 * (n_zero > 0) + has_ties
     uniq, inverse = np.unique(keys, return_inverse=True)
-    chosen = np.array([_METHOD_CODE[_auto_method(int(k) // 4, int(k) // 2 % 2, int(k) % 2)] for k in uniq],
+    chosen = np.array([_METHOD_CODE[auto_method(int(k) // 4, int(k) // 2 % 2, int(k) % 2)] for k in uniq],
                       dtype=np.int8)
     method = np.where(computable, chosen[inverse.ravel()], 0).astype(np.int8)
 
