@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from analysis.aggregate import PRIMARY_METRICS, per_participant
+from analysis.aggregate import PRIMARY_METRICS, by_mode, per_participant
 from analysis.load import Progress, load_study
 from analysis.metrics import MetricOptions, compute_trials
 
@@ -52,12 +52,6 @@ class PairedPool:
         return len(self.participants)
 
 
-def _wide(per_part: pd.DataFrame, metric: str, codes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    wide = per_part.pivot(index="participant_code", columns="haptic_mode", values=metric).reindex(list(codes))
-    cols = [wide[m].to_numpy(dtype=float) if m in wide.columns else np.full(len(codes), np.nan) for m in ("off", "on")]
-    return cols[0], cols[1]
-
-
 def pool_from_trials(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), *, source: str = "") -> PairedPool:
     """The resampling pool of an analysed trial table.
 
@@ -87,7 +81,8 @@ def pool_from_trials(trials: pd.DataFrame, options: MetricOptions = MetricOption
     for s, scope in enumerate(scopes):
         part = overall if scope == "overall" else by_target[by_target["target_label"] == scope]
         for m, metric in enumerate(metrics):
-            off[s, m], on[s, m] = _wide(part, metric, codes)
+            wide = by_mode(part, metric, codes)
+            off[s, m], on[s, m] = wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
     return PairedPool(codes, scopes, metrics, off, on, source, options)
 
 

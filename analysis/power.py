@@ -199,7 +199,7 @@ def _check_request(n_values: Sequence[int], resamples: int, alpha: float, zero_m
         raise PowerError(f"resamples = {resamples}: must be a whole number from 1 to 1000000")
     if not 0.0 < float(alpha) < 1.0:
         raise PowerError(f"alpha = {alpha}: must be a number with 0 < alpha < 1")
-    if zero_method not in ZERO_METHODS:
+    if zero_method not in ZERO_METHODS:  # exactly these names: estimate_power passes it on as given
         raise PowerError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
     return tuple(sorted(set(ns)))
 

@@ -23,7 +23,7 @@ import numpy.typing as npt
 from scipy import special
 
 from analysis.signed_rank import auto_method, sign_flip_distribution, signed_rank_null_counts
-from analysis.stats import DEFAULT_DECIMALS, ZERO_METHODS
+from analysis.stats import DEFAULT_DECIMALS, check_zero_method
 
 __all__ = ["METHOD_NAMES", "PreparedMetric", "prepare_metric", "resampled_p_values", "study_tests"]
 
@@ -261,9 +261,7 @@ def resampled_p_values(
         ``side`` (R,): +1 when the signed-rank statistic W⁺ lies above its
         null mean (ON > OFF carries more rank weight), -1 below, 0 on it.
     """
-    zm = str(zero_method).lower()
-    if zm not in ZERO_METHODS:
-        raise ValueError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
+    zm = check_zero_method(zero_method)
     pm = prepare_metric(off, on)
     ix = np.asarray(idx, dtype=np.int64)
     if ix.ndim != 2:

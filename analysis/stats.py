@@ -57,6 +57,7 @@ __all__ = [
     "PERMUTATION_AUTO_MAX_N",
     "WilcoxonResult",
     "ZERO_METHODS",
+    "check_zero_method",
     "correlation",
     "hodges_lehmann",
     "holm",
@@ -176,11 +177,17 @@ class WilcoxonResult:
 # ------------------------------------------------------------------------------------------------
 # The signed-rank test, on scipy.stats.wilcoxon
 # ------------------------------------------------------------------------------------------------
-def _check_arguments(zero_method: str, alternative: str, method: str, confidence: float) -> tuple[str, str, str]:
-    """Lower-cased ``zero_method``, ``alternative`` and method (``"asymptotic"`` → ``"approx"``), or ValueError."""
+def check_zero_method(zero_method: str) -> str:
+    """``zero_method`` lower-cased, or ValueError naming the value and what is allowed (:data:`ZERO_METHODS`)."""
     zm = str(zero_method).lower()
     if zm not in ZERO_METHODS:
-        raise ValueError(f"zero_method = {zm!r}: allowed are {', '.join(ZERO_METHODS)}")
+        raise ValueError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
+    return zm
+
+
+def _check_arguments(zero_method: str, alternative: str, method: str, confidence: float) -> tuple[str, str, str]:
+    """Lower-cased ``zero_method``, ``alternative`` and method (``"asymptotic"`` → ``"approx"``), or ValueError."""
+    zm = check_zero_method(zero_method)
     alt = str(alternative).lower()
     if alt not in ALTERNATIVES:
         raise ValueError(f"alternative = {alt!r}: allowed are {', '.join(ALTERNATIVES)}")
@@ -523,9 +530,7 @@ def methods_text(zero_method: str = "wilcox", confidence: float = 0.95) -> str:
     str
         The paragraph (no trailing newline); it names the SciPy version that computed the tests.
     """
-    zm = str(zero_method).lower()
-    if zm not in ZERO_METHODS:
-        raise ValueError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
+    zm = check_zero_method(zero_method)
     zeros = {
         "wilcox": "zero differences were discarded before ranking (Wilcoxon's method), so n can be smaller "
                   "than the number of participants",
