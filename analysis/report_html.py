@@ -349,7 +349,24 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
           excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
           marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
           power_html: str = "") -> str:
-    """report.html: self-contained (figures embedded), readable on screen and on paper."""
+    """report.html: self-contained (figures embedded), readable on screen and on paper.
+
+    Parameters
+    ----------
+    study, table, options, zero_method, confidence
+        The study, its recomputed trials and the analysis choices (for the methods section).
+    excluded, n_participants, n_incomplete
+        What was left out, and how many participants and unfinished sessions there are.
+    tables
+        :func:`analysis.report_tables.export_tables`' result: the page shows the CSVs' rows.
+    marks_overall, pngs, examples, power_html
+        Significance marks, the figures (PNG bytes), the example trials' figures and the power section.
+
+    Returns
+    -------
+    str
+        The HTML document.
+    """
     stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
     warn = ""
     if table.n_disagree:

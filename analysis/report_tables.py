@@ -38,7 +38,20 @@ def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
                    stats: pd.DataFrame, stats_by_target: pd.DataFrame, sa: pd.DataFrame) -> dict[str, pd.DataFrame]:
-    """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted."""
+    """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted.
+
+    Parameters
+    ----------
+    study : StudyData
+        The study read (its sessions and loop records).
+    trials, overall, by_target, stats, stats_by_target, sa : pandas.DataFrame
+        The analysed trials, the per-participant tables, the tests and the speed–accuracy correlations.
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        File name → table, in the order the files are listed.
+    """
     numbers = dict(zip(trials["participant_code"], trials["participant_number"]))
     order = sorted(numbers, key=lambda code: (numbers[code], code))
     rank = {code: i for i, code in enumerate(order)}
@@ -89,7 +102,14 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
 def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
     """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
 
-    ``written_too``: CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Where to write.
+    tables : dict of str to pandas.DataFrame
+        :func:`export_tables`' result.
+    written_too : sequence of str
+        CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
     """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)

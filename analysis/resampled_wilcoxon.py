@@ -75,7 +75,18 @@ class PreparedMetric:
 
 
 def prepare_metric(off: npt.ArrayLike, on: npt.ArrayLike) -> PreparedMetric:
-    """One metric's pool values (one per member, NaN where undefined), coded for :func:`study_tests`."""
+    """One metric's pool, coded for :func:`study_tests`.
+
+    Parameters
+    ----------
+    off, on : array_like
+        One value per pool member, same length; NaN where undefined.
+
+    Returns
+    -------
+    PreparedMetric
+        The members ordered by |d| (rounded as ``paired_wilcoxon`` rounds it), their signs and what is missing.
+    """
     x_off = np.asarray(off, dtype=np.float64)
     x_on = np.asarray(on, dtype=np.float64)
     missing = np.isnan(x_off) | np.isnan(x_on)
@@ -220,6 +231,20 @@ def study_tests(pm: PreparedMetric, idx: np.ndarray,
     The side is the direction of the study's effect as the signed-rank test
     sees it: +1 when W⁺ (the rank sum of the ON > OFF pairs) lies above its
     null mean, -1 below, 0 on it -- the side on which the two-sided test rejects.
+
+    Parameters
+    ----------
+    pm : PreparedMetric
+        The metric's pool (:func:`prepare_metric`).
+    idx : numpy.ndarray
+        Shape (R, n), int: the pool members of each of R studies.
+    zero_method : {"wilcox", "pratt", "zsplit"}
+        As in :func:`analysis.stats.paired_wilcoxon` (lower case).
+
+    Returns
+    -------
+    p, method, n_pairs, side : numpy.ndarray
+        Each of shape (R,); ``method`` indexes :data:`METHOD_NAMES`.
     """
     rows = _rank_rows(pm, idx, zero_method)
     method = _methods(rows, pm, idx)

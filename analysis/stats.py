@@ -178,7 +178,23 @@ class WilcoxonResult:
 # The signed-rank test, on scipy.stats.wilcoxon
 # ------------------------------------------------------------------------------------------------
 def check_zero_method(zero_method: str) -> str:
-    """``zero_method`` lower-cased, or ValueError naming the value and what is allowed (:data:`ZERO_METHODS`)."""
+    """The zero method, lower-cased, checked against :data:`ZERO_METHODS`.
+
+    Parameters
+    ----------
+    zero_method : str
+        ``"wilcox"``, ``"pratt"`` or ``"zsplit"``, in any case.
+
+    Returns
+    -------
+    str
+        The name in lower case.
+
+    Raises
+    ------
+    ValueError
+        Naming the value given and what is allowed.
+    """
     zm = str(zero_method).lower()
     if zm not in ZERO_METHODS:
         raise ValueError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
