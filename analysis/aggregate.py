@@ -19,6 +19,7 @@ from analysis.stats import WilcoxonResult, correlation, paired_wilcoxon, results
 __all__ = [
     "METRIC_LABELS",
     "PRIMARY_METRICS",
+    "by_mode",
     "mean_sd",
     "mode_tests",
     "per_participant",
@@ -94,11 +95,33 @@ def mean_sd(values: np.ndarray | pd.Series) -> tuple[float, float, int]:
     return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v)
 
 
-def _paired(per_part: pd.DataFrame, metric: str) -> tuple[np.ndarray, np.ndarray]:
+def by_mode(per_part: pd.DataFrame, metric: str, codes: Sequence[str] | None = None) -> pd.DataFrame:
+    """One metric of :func:`per_participant` side by side: a row per participant, columns ``off`` and ``on``.
+
+    Parameters
+    ----------
+    per_part
+        :func:`per_participant`'s table (one scope: overall or one target).
+    metric
+        The column to spread.
+    codes
+        Participant codes giving the rows and their order; default: every participant, sorted.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Indexed by ``participant_code``; NaN where a participant lacks the mode (or the value).
+    """
     wide = per_part.pivot(index="participant_code", columns="haptic_mode", values=metric)
     for mode in ("off", "on"):
         if mode not in wide.columns:
             wide[mode] = np.nan
+    wide = wide[["off", "on"]]
+    return wide if codes is None else wide.reindex(list(codes))
+
+
+def _paired(per_part: pd.DataFrame, metric: str) -> tuple[np.ndarray, np.ndarray]:
+    wide = by_mode(per_part, metric)
     return wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
 
 

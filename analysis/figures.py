@@ -25,7 +25,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from analysis.aggregate import METRIC_LABELS, mean_sd
+from analysis.aggregate import METRIC_LABELS, by_mode, mean_sd
 from analysis.load import read_trial_samples
 from analysis.stats import WilcoxonResult
 from protocol.display import task_axis_top_n
@@ -171,10 +171,7 @@ def paired_lines(per_part: pd.DataFrame, metrics: Sequence[str], marks: Mapping[
     fig.subplots_adjust(left=0.06, right=0.98, bottom=0.1, top=0.9, wspace=0.38)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     for ax, metric in zip(axes, metrics):
-        wide = per_part.pivot(index="participant_code", columns="haptic_mode", values=metric)
-        for mode in ("off", "on"):
-            if mode not in wide.columns:
-                wide[mode] = np.nan
+        wide = by_mode(per_part, metric)
         for _, row in wide.iterrows():
             ax.plot([0, 1], [row["off"], row["on"]], color="#7f7f7f", alpha=0.6, linewidth=0.9, marker="o", markersize=3)
         med = [float(np.nanmedian(wide[m])) if wide[m].notna().any() else math.nan for m in ("off", "on")]

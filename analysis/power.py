@@ -31,14 +31,10 @@ The family-wise figures apply Holm's correction across the four metrics
 within each resampled study, as the report does, and count a metric only
 when its rejection is directional.
 
-**Speed.**  Calling :func:`~analysis.stats.paired_wilcoxon` R times per n and
-metric costs about a millisecond a call; here the R tests of one metric run
-at once.  The tie groups of every resample come from one sort of the whole
-R × n block of codes; the exact null distribution of each n and the sign-flip
-distribution of each tie structure are computed once and cached; the normal
-approximation is vectorised.  The p-values are bit-for-bit those of
-:func:`~analysis.stats.paired_wilcoxon` (tests/analysis/test_power.py proves
-it on random samples with ties, zeros and missing values).
+**Speed.**  The R tests of one metric run at once
+(:mod:`analysis.resampled_wilcoxon`), bit for bit those of
+:func:`~analysis.stats.paired_wilcoxon`; the pool is built in
+:mod:`analysis.paired_pool`.
 
 **Edges.**  A pilot with fewer than :data:`MIN_PILOT` participants is refused
 (:class:`PowerError`).  A participant whose metric is undefined (TCT without a
@@ -53,7 +49,6 @@ same seed gives the same numbers, whatever other n are asked for.
 
 from __future__ import annotations
 
-import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -62,20 +57,22 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
-from scipy import special
 from scipy import stats as sps
 
-from analysis.aggregate import METRIC_LABELS, PRIMARY_METRICS, per_participant
-from analysis.load import AnalysisError, Progress, load_study
-from analysis.metrics import MetricOptions, compute_trials
-from analysis.stats import (
-    DEFAULT_DECIMALS,
-    ZERO_METHODS,
-    _auto_method,
-    _sign_flip_distribution,
-    holm,
-    signed_rank_null_counts,
+from analysis.aggregate import METRIC_LABELS
+from analysis.load import AnalysisError
+from analysis.metrics import MetricOptions
+from analysis.paired_pool import PairedPool, load_pool, pool_from_trials
+from analysis.resampled_wilcoxon import (  # _PERM_CACHE and _exact_p: the caches bench power clears
+    _PERM_CACHE,
+    METHOD_NAMES,
+    PreparedMetric,
+    _exact_p,
+    prepare_metric,
+    resampled_p_values,
+    study_tests,
 )
+from analysis.stats import ZERO_METHODS, holm
 
 __all__ = [
     "DEFAULT_N_VALUES",
@@ -83,6 +80,7 @@ __all__ = [
     "DIRECTION_TEXT",
     "FAMILY_ALL",
     "FAMILY_ANY",
+    "METHOD_NAMES",
     "MIN_PILOT",
     "POWER_CSV_COLUMNS",
     "PairedPool",
@@ -121,335 +119,10 @@ POWER_CSV_COLUMNS = (
 DIRECTION_NAMES = {1: "on_higher", -1: "on_lower", 0: "none"}
 #: The same directions in words, for people (the text summary and the report's table); family rows have none.
 DIRECTION_TEXT = {"on_higher": "ON > OFF", "on_lower": "ON < OFF", "none": "no effect", "": ""}
-#: Method codes of :func:`resampled_p_values` (0: no test possible).
-METHOD_NAMES = ("", "exact", "permutation", "approx")
-_METHOD_CODE = {name: code for code, name in enumerate(METHOD_NAMES)}
 
 
 class PowerError(AnalysisError):
     """The data cannot be resampled or the request is malformed; the message says which and why."""
-
-
-# ------------------------------------------------------------------------------------------------
-# The pool: per-participant OFF/ON values, aggregated as the report aggregates them
-# ------------------------------------------------------------------------------------------------
-@dataclass(frozen=True, slots=True)
-class PairedPool:
-    """Per-participant OFF and ON values to resample from.
-
-    Attributes
-    ----------
-    participants
-        Participant codes, in the order of the last axis of ``off`` and ``on``.
-    scopes
-        ``"overall"``, then the target labels in order of target force.
-    metrics
-        The metrics (the Holm family): :data:`analysis.aggregate.PRIMARY_METRICS`.
-    off, on
-        Shape (scopes, metrics, participants); NaN where a value is undefined
-        (TCT with no successful trial in that mode) or a participant lacks a mode.
-    source
-        Where the values come from, in words (for the outputs).
-    options
-        The aggregation choices (error window, TCT policy).
-    """
-
-    participants: tuple[str, ...]
-    scopes: tuple[str, ...]
-    metrics: tuple[str, ...]
-    off: npt.NDArray[np.float64]
-    on: npt.NDArray[np.float64]
-    source: str
-    options: MetricOptions = MetricOptions()
-
-    @property
-    def n_participants(self) -> int:
-        """Participants in the pool."""
-        return len(self.participants)
-
-
-def _wide(per_part: pd.DataFrame, metric: str, codes: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
-    wide = per_part.pivot(index="participant_code", columns="haptic_mode", values=metric).reindex(list(codes))
-    cols = [wide[m].to_numpy(dtype=float) if m in wide.columns else np.full(len(codes), np.nan) for m in ("off", "on")]
-    return cols[0], cols[1]
-
-
-def pool_from_trials(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), *, source: str = "") -> PairedPool:
-    """The resampling pool of an analysed trial table.
-
-    Parameters
-    ----------
-    trials
-        :attr:`analysis.metrics.TrialTable.trials` (or a table with its columns).
-    options
-        Error window and TCT policy, as in the report.
-    source
-        Where the trials come from, in words.
-
-    Returns
-    -------
-    PairedPool
-        Only participants with trials in both haptic modes are kept.
-    """
-    overall = per_participant(trials, options)
-    modes = overall.groupby("participant_code")["haptic_mode"].nunique()
-    codes = tuple(sorted(str(c) for c in modes[modes == 2].index))
-    by_target = per_participant(trials, options, by_target=True)
-    order = trials.drop_duplicates("target_label").sort_values("target_force_n")["target_label"].tolist()
-    scopes = ("overall", *[str(t) for t in order])
-    metrics = tuple(PRIMARY_METRICS)
-    off = np.full((len(scopes), len(metrics), len(codes)), np.nan)
-    on = off.copy()
-    for s, scope in enumerate(scopes):
-        part = overall if scope == "overall" else by_target[by_target["target_label"] == scope]
-        for m, metric in enumerate(metrics):
-            off[s, m], on[s, m] = _wide(part, metric, codes)
-    return PairedPool(codes, scopes, metrics, off, on, source, options)
-
-
-def load_pool(
-    databases: Sequence[str | os.PathLike[str]],
-    options: MetricOptions = MetricOptions(),
-    *,
-    source: str | None = None,
-    progress: Progress | None = None,
-    workers: int | None = None,
-    participants: Sequence[str] | None = None,
-) -> PairedPool:
-    """Read study databases (read-only), recompute every trial as the report does, and build the pool.
-
-    Parameters
-    ----------
-    databases
-        Pilot study databases; they merge into one study, as in the report.
-    options
-        Error window and TCT policy.
-    source
-        Description for the outputs (default: the database names).
-    progress, workers
-        As in :func:`analysis.metrics.compute_trials`.
-    participants
-        Only these participant codes (the first N of a larger simulated pool); default: all.
-    """
-    study = load_study(databases)
-    if participants is not None:
-        import dataclasses
-
-        keep = set(participants)
-        study = dataclasses.replace(study, trials=study.trials[study.trials["participant_code"].isin(keep)],
-                                    sessions=study.sessions[study.sessions["participant_code"].isin(keep)])
-    trials = compute_trials(study, options, progress=progress, workers=workers).trials
-    if source is None:
-        source = "the pilot study " + ", ".join(os.path.basename(str(d)) for d in databases)
-    return pool_from_trials(trials, options, source=source)
-
-
-# ------------------------------------------------------------------------------------------------
-# The report's Wilcoxon test, vectorised across resamples
-# ------------------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=None)
-def _exact_p(n: int) -> np.ndarray:
-    """Two-sided exact p-value of every W⁺ = 0 … n(n+1)/2 for n untied, non-zero differences."""
-    return _two_sided_p(signed_rank_null_counts(n), float(2**n))
-
-
-def _two_sided_p(weights: np.ndarray, total: float) -> np.ndarray:
-    """``analysis.stats._tail_p(weights, total, s, s, "two-sided")`` for every s at once (same float operations)."""
-    cdf = np.cumsum(weights)
-    p_less = cdf / total
-    p_greater = (cdf[-1] - cdf + weights) / total  # integer counts of S ≥ s, exact as in _tail_p
-    p = np.minimum(2.0 * np.minimum(p_less, p_greater), 1.0)
-    p.flags.writeable = False
-    return p
-
-
-_PERM_CACHE: dict[int, np.ndarray] = {}
-_PERM_CACHE_MAX = 200_000
-
-
-@dataclass(frozen=True, slots=True)
-class _PreparedMetric:
-    """One metric's pool, coded for resampling.
-
-    ``rank`` orders the pool by |d| (ties in pool order), complete pairs
-    first and pairs with a missing value last; ``by_rank`` is its inverse, so
-    sorting a resample's ranks sorts its members by |d|.
-    """
-
-    rank: np.ndarray      # pool member → position in the |d| order
-    by_rank: np.ndarray   # position → pool member
-    code: np.ndarray      # pool member → index of its |d| among the distinct values; missing pairs after all
-    positive: np.ndarray
-    zero: np.ndarray
-    missing: np.ndarray   # NaN on a side: the pair is dropped and counted
-    bad: np.ndarray       # infinite value or overflowing difference: the whole test is not computable
-    any_bad: bool
-
-
-def _prepare(off: npt.ArrayLike, on: npt.ArrayLike) -> _PreparedMetric:
-    x_off = np.asarray(off, dtype=np.float64)
-    x_on = np.asarray(on, dtype=np.float64)
-    missing = np.isnan(x_off) | np.isnan(x_on)
-    with np.errstate(over="ignore", invalid="ignore"):
-        d = np.round(x_on - x_off, DEFAULT_DECIMALS)  # elementwise, as paired_wilcoxon computes it
-    bad = np.isinf(x_off) | np.isinf(x_on) | (~missing & ~np.isfinite(d))
-    unusable = missing | bad
-    absd = np.abs(d[~unusable])
-    values = np.unique(absd)
-    code = np.full(d.size, values.size, dtype=np.int64)
-    code[~unusable] = np.searchsorted(values, absd)
-    by_rank = np.argsort(code, kind="stable")
-    rank = np.empty_like(by_rank)
-    rank[by_rank] = np.arange(by_rank.size)
-    # small ranks sort by radix (kind="stable" on ≤ 16-bit integers), the bulk of the cost otherwise
-    rank = rank.astype(np.int16 if by_rank.size <= np.iinfo(np.int16).max else np.int64)
-    return _PreparedMetric(rank, by_rank, code, ~unusable & (d > 0), ~unusable & (d == 0), unusable, bad,
-                           bool(bad.any()))
-
-
-def _permutation_p(key: int, units: np.ndarray) -> np.ndarray:
-    """Two-sided p of every doubled W⁺ under the sign-flip distribution of these doubled mid-ranks (cached by key)."""
-    table = _PERM_CACHE.get(key)
-    if table is None:
-        if len(_PERM_CACHE) >= _PERM_CACHE_MAX:
-            _PERM_CACHE.clear()
-        table = _PERM_CACHE[key] = _two_sided_p(*_sign_flip_distribution(units))
-    return table
-
-
-def _p_values(pm: _PreparedMetric, idx: np.ndarray,
-              zero_method: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """p-value (NaN: not computable), method code, complete pairs and side of every resampled study (rows of idx).
-
-    The side is the direction of the study's effect as the signed-rank test
-    sees it: +1 when W⁺ (the rank sum of the ON > OFF pairs) lies above its
-    null mean, -1 below, 0 on it -- the side on which the two-sided test rejects.
-    """
-    r, n = idx.shape
-    pick = pm.by_rank[np.sort(pm.rank[idx], axis=1, kind="stable")]  # members sorted by |d|, missing last
-    code = pm.code[pick]
-    # tie groups of the sorted rows: where each group starts and how long it is
-    pos = np.broadcast_to(np.arange(n), (r, n))
-    new = np.ones((r, n), dtype=bool)
-    new[:, 1:] = code[:, 1:] != code[:, :-1]
-    start = np.maximum.accumulate(np.where(new, pos, 0), axis=1)
-    last = np.ones((r, n), dtype=bool)
-    last[:, :-1] = new[:, 1:]
-    end = np.minimum.accumulate(np.where(last, pos, n)[:, ::-1], axis=1)[:, ::-1]
-    size = end - start + 1
-    missing = pm.missing[pick]
-    zero = pm.zero[pick]
-    nonzero = ~missing & ~zero
-    n_pairs = n - missing.sum(axis=1)
-    n_zero = zero.sum(axis=1)
-    if zero_method == "wilcox":
-        ranked, offset = nonzero, n_zero[:, None]  # zeros (sorted first) are dropped before ranking
-    else:
-        ranked, offset = ~missing, np.zeros((r, 1), dtype=np.int64)
-    units = 2 * (start - offset) + size + 1  # doubled mid-ranks: integers
-    w2 = np.where(pm.positive[pick], units, 0).sum(axis=1)  # 2·W⁺ without the zero ranks
-    # W⁺ against its null mean, half the non-zero pairs' rank sum: 2·w2 vs Σ units, all integers (zeros cancel)
-    side = np.sign(2 * w2 - np.where(nonzero, units, 0).sum(axis=1)).astype(np.int8)
-    count = ranked.sum(axis=1)
-    tie_groups = nonzero & (size > 1)
-    has_ties = tie_groups.any(axis=1)
-    computable = (n_pairs >= 2) & (n_zero < n_pairs)
-    if pm.any_bad:
-        computable &= ~pm.bad[idx].any(axis=1)
-
-    # SciPy's automatic choice, asked once per distinct (pairs, any zero, any tie)
-    keys = 4 * n_pairs + 2 * (n_zero > 0) + has_ties
-    uniq, inverse = np.unique(keys, return_inverse=True)
-    chosen = np.array([_METHOD_CODE[_auto_method(int(k) // 4, int(k) // 2 % 2, int(k) % 2)] for k in uniq],
-                      dtype=np.int8)
-    method = np.where(computable, chosen[inverse.ravel()], 0).astype(np.int8)
-
-    p = np.full(r, np.nan)
-    sel = np.nonzero(method == _METHOD_CODE["exact"])[0]
-    for nn in np.unique(count[sel]):
-        at = sel[count[sel] == nn]
-        p[at] = _exact_p(int(nn))[w2[at] // 2]
-    sel = np.nonzero(method == _METHOD_CODE["permutation"])[0]
-    if sel.size:
-        # The sign-flip distribution depends on the doubled mid-ranks of the non-zero pairs only: their
-        # number, where tie groups begin among them (≤ 13 bits) and the ranks zeros take below them.
-        nz = nonzero[sel]
-        begins = nz & new[sel]
-        bit = np.left_shift(np.int64(1), np.clip(pos[sel] - n_zero[sel][:, None], 0, 62))
-        shape = np.where(begins, bit, 0).sum(axis=1)
-        below = n_zero[sel] if zero_method != "wilcox" else np.zeros(sel.size, dtype=np.int64)
-        key = (shape * 64 + below) * 64 + count[sel] - (n_zero[sel] if zero_method != "wilcox" else 0)
-        kinds, first, which = np.unique(key, return_index=True, return_inverse=True)
-        tables = []
-        for kk, i in zip(kinds.tolist(), first.tolist()):
-            t = _PERM_CACHE.get(kk)
-            tables.append(t if t is not None else _permutation_p(kk, units[sel[i]][nz[i]]))
-        stacked = np.full((len(tables), max(t.size for t in tables)), np.nan)
-        for k, t in enumerate(tables):
-            stacked[k, : t.size] = t
-        p[sel] = stacked[which.ravel(), w2[sel]]
-    sel = np.nonzero(method == _METHOD_CODE["approx"])[0]
-    if sel.size:
-        # SciPy's normal approximation with tie and zero corrections, in paired_wilcoxon's order of operations
-        cnt = count[sel].astype(np.float64)
-        nzf = n_zero[sel].astype(np.float64)
-        w_plus2 = w2[sel].astype(np.float64)
-        if zero_method == "zsplit":
-            w_plus2 += n_zero[sel] * (n_zero[sel] + 1) // 2  # half the zero ranks go to W⁺
-        tie_set = tie_groups[sel] if zero_method != "zsplit" else (ranked & (size > 1))[sel]
-        tie_correct = np.where(tie_set, size[sel] ** 2 - 1, 0).sum(axis=1).astype(np.float64)  # Σ (t³ − t)
-        mn = cnt * (cnt + 1.0) * 0.25
-        se2 = cnt * (cnt + 1.0) * (2.0 * cnt + 1.0)
-        if zero_method == "pratt":
-            mn -= nzf * (nzf + 1.0) * 0.25
-            se2 -= nzf * (nzf + 1.0) * (2.0 * nzf + 1.0)
-        se = np.sqrt((se2 - tie_correct / 2.0) / 24.0)
-        z = (w_plus2 / 2.0 - mn) / se
-        p[sel] = 2.0 * special.ndtr(-np.abs(z))
-    return np.minimum(np.maximum(p, 0.0), 1.0), method, n_pairs, side
-
-
-def resampled_p_values(
-    off: npt.ArrayLike, on: npt.ArrayLike, idx: npt.ArrayLike, *, zero_method: str = "wilcox", sides: bool = False
-) -> tuple[np.ndarray, ...]:
-    """p-values of the report's Wilcoxon test on many resampled studies at once.
-
-    Row r of ``idx`` is a study made of the pairs ``(off[idx[r]], on[idx[r]])``;
-    its p-value is exactly ``paired_wilcoxon(off[idx[r]], on[idx[r]],
-    zero_method=zero_method).p_value`` (two-sided, ``method="auto"``,
-    differences rounded to :data:`analysis.stats.DEFAULT_DECIMALS` decimals).
-
-    Parameters
-    ----------
-    off, on : array_like
-        One value per pool member, same length; NaN where undefined.
-    idx : array_like of int
-        Shape (R, n): the pool members of each of R studies of n participants.
-    zero_method : {"wilcox", "pratt", "zsplit"}
-        As in :func:`analysis.stats.paired_wilcoxon`.
-    sides : bool
-        Also return each study's side.
-
-    Returns
-    -------
-    p, method[, side]
-        ``p`` (R,): NaN where ``paired_wilcoxon`` reports the test not
-        computable (fewer than two complete pairs, all differences zero, an
-        infinite value); ``method`` (R,): index into :data:`METHOD_NAMES`;
-        ``side`` (R,): +1 when the signed-rank statistic W⁺ lies above its
-        null mean (ON > OFF carries more rank weight), -1 below, 0 on it.
-    """
-    zm = str(zero_method).lower()
-    if zm not in ZERO_METHODS:
-        raise ValueError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
-    pm = _prepare(off, on)
-    ix = np.asarray(idx, dtype=np.int64)
-    if ix.ndim != 2:
-        raise ValueError(f"idx must be 2-D (resamples × n), got shape {ix.shape}")
-    if ix.size and (ix.min() < 0 or ix.max() >= pm.code.size):
-        raise ValueError(f"idx holds values outside 0 … {pm.code.size - 1}")
-    p, method, _, side = _p_values(pm, ix, zm)
-    return (p, method, side) if sides else (p, method)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -526,12 +199,12 @@ def _check_request(n_values: Sequence[int], resamples: int, alpha: float, zero_m
         raise PowerError(f"resamples = {resamples}: must be a whole number from 1 to 1000000")
     if not 0.0 < float(alpha) < 1.0:
         raise PowerError(f"alpha = {alpha}: must be a number with 0 < alpha < 1")
-    if zero_method not in ZERO_METHODS:
+    if zero_method not in ZERO_METHODS:  # exactly these names: estimate_power passes it on as given
         raise PowerError(f"zero_method = {zero_method!r}: allowed are {', '.join(ZERO_METHODS)}")
     return tuple(sorted(set(ns)))
 
 
-def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], direction: np.ndarray,
+def _pool_notes(pool: PairedPool, prepared: list[list[PreparedMetric]], direction: np.ndarray,
                 n_values: tuple[int, ...], alpha: float) -> list[str]:
     notes = []
     one_sign: list[str] = []  # one note for all of them: it can hold for most measures of a small pilot
@@ -584,6 +257,56 @@ def _pool_notes(pool: PairedPool, prepared: list[list[_PreparedMetric]], directi
     return notes
 
 
+def _scope_rows(metrics: Sequence[str], prepared: list[PreparedMetric], direction: np.ndarray, idx: np.ndarray,
+                zero_method: str, alpha: float, scope: str, n: int) -> list[dict[str, object]]:
+    """power.csv's rejection counts for one scope and study size: one row per metric, then the family rows."""
+    R = idx.shape[0]
+    pvals = np.empty((R, len(metrics)))
+    agree = np.empty((R, len(metrics)), dtype=bool)
+    per_metric = []
+    for m in range(len(metrics)):
+        p, method, n_pairs, side = study_tests(prepared[m], idx, zero_method)
+        pvals[:, m] = p
+        agree[:, m] = (side == direction[m]) & (direction[m] != 0)
+        per_metric.append((method, n_pairs))
+    with np.errstate(invalid="ignore"):
+        reject_two = pvals < alpha
+        reject_holm = (holm(pvals, axis=1) < alpha) & agree
+    reject = reject_two & agree
+    rows: list[dict[str, object]] = []
+    for m, metric in enumerate(metrics):
+        method, n_pairs = per_metric[m]
+        counts = np.bincount(method, minlength=len(METHOD_NAMES))
+        rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[m])], n=n,
+                         rejections=int(reject[:, m].sum()), rejections_two_sided=int(reject_two[:, m].sum()),
+                         rejections_holm=int(reject_holm[:, m].sum()), mean_pairs=float(n_pairs.mean()),
+                         not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
+                         approx=int(counts[3])))
+    for fam, hits in ((FAMILY_ALL, reject_holm.all(axis=1)), (FAMILY_ANY, reject_holm.any(axis=1))):
+        k = int(hits.sum())
+        rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
+                         rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
+                         not_computable=0, exact=0, permutation=0, approx=0))
+    return rows
+
+
+def _power_frame(rows: list[dict[str, object]], R: int, alpha: float, interval_level: float) -> pd.DataFrame:
+    """power.csv from the rejection counts: the power figures with their Monte Carlo intervals, in column order."""
+    frame = pd.DataFrame(rows)
+    frame["resamples"] = R
+    frame["alpha"] = alpha
+    frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
+    for prefix, col, power_col in (("", "rejections", "power"),
+                                   ("two_sided_", "rejections_two_sided", "power_two_sided"),
+                                   ("holm_", "rejections_holm", "power_holm")):
+        k = frame[col].to_numpy(dtype=float, na_value=np.nan)
+        frame[power_col] = k / R
+        lo, hi = monte_carlo_interval(np.nan_to_num(k), R, interval_level)
+        frame[f"{prefix}ci_low"] = np.where(np.isnan(k), np.nan, lo)
+        frame[f"{prefix}ci_high"] = np.where(np.isnan(k), np.nan, hi)
+    return frame[list(POWER_CSV_COLUMNS)]
+
+
 def estimate_power(
     pool: PairedPool,
     n_values: Sequence[int] = DEFAULT_N_VALUES,
@@ -630,53 +353,17 @@ def estimate_power(
             f"least {MIN_PILOT} are needed to resample planned studies from (with fewer, every resampled study "
             "repeats the same few people)")
     R = int(resamples)
-    prepared = [[_prepare(pool.off[s, m], pool.on[s, m]) for m in range(len(pool.metrics))]
+    prepared = [[prepare_metric(pool.off[s, m], pool.on[s, m]) for m in range(len(pool.metrics))]
                 for s in range(len(pool.scopes))]
     # the pool's own direction of effect, per scope and metric: the side its own test statistic lies on
     whole = np.arange(P)[None, :]
-    direction = np.array([[int(_p_values(pm, whole, zero_method)[3][0]) for pm in row] for row in prepared])
+    direction = np.array([[int(study_tests(pm, whole, zero_method)[3][0]) for pm in row] for row in prepared])
     rows: list[dict[str, object]] = []
     for n in ns:
         idx = resample_indices(seed, n, R, P)
         for s, scope in enumerate(pool.scopes):
-            pvals = np.empty((R, len(pool.metrics)))
-            agree = np.empty((R, len(pool.metrics)), dtype=bool)
-            per_metric = []
-            for m in range(len(pool.metrics)):
-                p, method, n_pairs, side = _p_values(prepared[s][m], idx, zero_method)
-                pvals[:, m] = p
-                agree[:, m] = (side == direction[s, m]) & (direction[s, m] != 0)
-                per_metric.append((method, n_pairs))
-            with np.errstate(invalid="ignore"):
-                reject_two = pvals < alpha
-                reject_holm = (holm(pvals, axis=1) < alpha) & agree
-            reject = reject_two & agree
-            for m, metric in enumerate(pool.metrics):
-                method, n_pairs = per_metric[m]
-                counts = np.bincount(method, minlength=len(METHOD_NAMES))
-                rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[s, m])], n=n,
-                                 rejections=int(reject[:, m].sum()), rejections_two_sided=int(reject_two[:, m].sum()),
-                                 rejections_holm=int(reject_holm[:, m].sum()), mean_pairs=float(n_pairs.mean()),
-                                 not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
-                                 approx=int(counts[3])))
-            for fam, hits in ((FAMILY_ALL, reject_holm.all(axis=1)), (FAMILY_ANY, reject_holm.any(axis=1))):
-                k = int(hits.sum())
-                rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
-                                 rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
-                                 not_computable=0, exact=0, permutation=0, approx=0))
-    frame = pd.DataFrame(rows)
-    frame["resamples"] = R
-    frame["alpha"] = float(alpha)
-    frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
-    for prefix, col, power_col in (("", "rejections", "power"),
-                                   ("two_sided_", "rejections_two_sided", "power_two_sided"),
-                                   ("holm_", "rejections_holm", "power_holm")):
-        k = frame[col].to_numpy(dtype=float, na_value=np.nan)
-        frame[power_col] = k / R
-        lo, hi = monte_carlo_interval(np.nan_to_num(k), R, interval_level)
-        frame[f"{prefix}ci_low"] = np.where(np.isnan(k), np.nan, lo)
-        frame[f"{prefix}ci_high"] = np.where(np.isnan(k), np.nan, hi)
-    frame = frame[list(POWER_CSV_COLUMNS)]
+            rows.extend(_scope_rows(pool.metrics, prepared[s], direction[s], idx, zero_method, alpha, scope, n))
+    frame = _power_frame(rows, R, float(alpha), interval_level)
     frame["source"] = pool.source
     return PowerResult(frame, _pool_notes(pool, prepared, direction, ns, float(alpha)), pool.source, P, R,
                        float(alpha), int(seed), zero_method, pool.options, ns, float(interval_level))

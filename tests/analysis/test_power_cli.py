@@ -304,7 +304,7 @@ def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsy
 def test_report_power_table_leaves_out_empty_columns(monkeypatch):
     import analysis.power
     from analysis.power import ReportPower, estimate_power, plan_table, pool_from_trials
-    from analysis.report import _power_html
+    from analysis.report_html import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
                                 success=True, tct_s=3.0 + p + (m == "on"), rmse_n=1.0 + p * (m == "on"),

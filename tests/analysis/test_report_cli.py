@@ -212,7 +212,7 @@ def test_force_never_replaces_a_folder_holding_the_database(tmp_path, capsys):
 
 
 def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, tmp_path, capsys, monkeypatch):
-    import analysis.report
+    import analysis.report_tables
 
     out = tmp_path / "rep"
     assert _run(capsys, "report", "--db", str(dbs[0]), "--out", str(out))[0] == 0
@@ -222,7 +222,7 @@ def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, tmp_pat
         (folder / "stats.csv").write_text("half")
         raise RuntimeError("disk trouble")
 
-    monkeypatch.setattr(analysis.report, "_write_tables", crash)
+    monkeypatch.setattr(analysis.report_tables, "write_tables", crash)
     with pytest.raises(RuntimeError, match="disk trouble"):
         main(["report", "--db", str(dbs[0]), "--out", str(out), "--force"])
     assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before

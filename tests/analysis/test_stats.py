@@ -15,11 +15,11 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
+from analysis.hodges_lehmann import _midpoint, _walsh_select
 from analysis.stats import (
     RESULT_COLUMNS,
     CorrelationResult,
     WilcoxonResult,
-    _walsh_select,
     correlation,
     hodges_lehmann,
     holm,
@@ -546,7 +546,24 @@ def test_methods_text_states_the_choices():
 def test_midpoint_is_the_correctly_rounded_mean_of_any_two_doubles(a, b):
     from fractions import Fraction
 
-    from analysis.stats import _midpoint
-
     got = _midpoint(a, b)
     assert got == float((Fraction(a) + Fraction(b)) / 2)  # float(Fraction) rounds to nearest, ties to even
+
+
+def test_scipy_pin_is_the_range_whose_auto_rule_was_read():
+    import re
+    import tomllib
+    from pathlib import Path
+
+    import scipy
+
+    from analysis.signed_rank import SCIPY_AUTO_RANGE
+
+    deps = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["dependencies"]
+    (spec,) = [d for d in deps if d.startswith("scipy")]
+    lo, hi = SCIPY_AUTO_RANGE
+    major, minor = (int(x) for x in hi.split("."))
+    assert spec == f"scipy>={lo},<{major}.{minor + 1}"
+    installed = tuple(int(x) for x in re.findall(r"\d+", scipy.__version__)[:2])
+    assert tuple(int(x) for x in lo.split(".")) <= installed <= (major, minor)
+    assert f"SciPy {scipy.__version__}" in methods_text()

@@ -1,0 +1,427 @@
+"""The report's page: report.html, self-contained (figures embedded), readable on screen and on paper.
+
+:func:`page` renders the computed study and the exported tables
+(:mod:`analysis.report_tables`); it computes nothing of its own.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as dt
+import html
+import math
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from analysis import codebook
+from analysis.aggregate import PRIMARY_METRICS, mean_sd
+from analysis.load import StudyData
+from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
+from analysis.metrics import MetricOptions, TrialTable
+from analysis.stats import methods_text
+from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
+from protocol.version import software_version
+
+__all__ = ["page", "plural", "power_html"]
+
+#: The Wilcoxon table on the page (``hl`` is the Hodges–Lehmann estimate with its interval).
+_STAT_HTML_COLUMNS = ("metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
+                      "p_value", "p_holm", "rank_biserial", "r")
+
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"
+
+
+def _fmt(v: object, digits: int = 3) -> str:
+    if v is None or v is pd.NA:
+        return ""
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (float, np.floating)):
+        f = float(v)
+        if math.isnan(f):
+            return "–"
+        if f != 0 and (abs(f) < 1e-3 or abs(f) >= 1e5):
+            return f"{f:.{digits}g}"
+        return f"{f:.{digits}f}"
+    return html.escape(str(v))
+
+
+def _th(file: str, column: str) -> str:
+    """A table heading: the codebook's short label, its description on hover."""
+    entry = codebook.lookup(file, column)
+    tip = f' title="{html.escape(entry.description)}"' if entry is not None else ""
+    return f"<th{tip}>{html.escape(codebook.label(file, column))}</th>"
+
+
+def _html_table(frame: pd.DataFrame, file: str, columns: Sequence[str] | None = None,
+                cell: dict[str, object] | None = None) -> str:
+    """A table of an exported CSV's rows, with readable headings; ``cell`` formats some columns specially."""
+    cols = list(columns) if columns else list(frame.columns)
+    special = cell or {}
+    head = "".join(_th(file, c) for c in cols)
+    body = []
+    for _, row in frame.iterrows():
+        cells = "".join(f"<td>{special[c](row[c]) if c in special else _fmt(row[c])}</td>" for c in cols)  # type: ignore[operator]
+        body.append(f"<tr>{cells}</tr>")
+    return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
+
+
+def _measure_label(metric: str) -> str:
+    """``rmse_N`` → ``RMSE (N)``: the heading the participants table gives the measure."""
+    return codebook.label("participants.csv", metric)
+
+
+def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str:
+    """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered."""
+    notes: dict[str, int] = {}
+    cols = list(lead) + list(_STAT_HTML_COLUMNS)
+    head = "".join(
+        "<th title=\"Hodges–Lehmann estimate of the shift ON − OFF with its confidence interval\">HL shift ON − OFF "
+        "[CI]</th>" if c == "hl" else _th(file, c) for c in cols
+    )
+    body = []
+    for _, row in frame.iterrows():
+        label = html.escape(_measure_label(str(row["metric"])))
+        note = row.get("note")
+        if isinstance(note, str) and note:
+            k = notes.setdefault(note, len(notes) + 1)
+            label += f" <sup>{k}</sup>"
+        e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
+        hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
+        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl if c == 'hl' else _fmt(row[c])}</td>"
+                        for c in cols)
+        cls = ' class="nc"' if not bool(row["computable"]) else ""
+        body.append(f"<tr{cls}>{cells}</tr>")
+    foot = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
+    return (f'<div class="scroll"><table class="stats"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody>'
+            f'</table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
+
+
+#: Headings of the power table's columns (``target`` and ``measure`` are the row labels, as in the test tables).
+_POWER_HEADINGS = {"scope": "target", "metric": "measure", "direction": "pilot shows", "n80": "n for 80 %",
+                   "n80_holm": "n for 80 % (Holm)", "n90": "n for 90 %", "n90_holm": "n for 90 % (Holm)"}
+
+
+def power_html(section: Any) -> str:
+    """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
+
+    ``section`` is an :class:`analysis.power.ReportPower`.  The table is built
+    from the structured result (:func:`analysis.power.plan_table`); columns
+    with no value in any row are left out.  In print, its rows never split,
+    its head repeats on every page and the heading stays with it (``_CSS``).
+    """
+    from analysis.power import DIRECTION_TEXT, FAMILY_LABELS, _label, plan_table
+
+    head = "<h2>What n would a study need?</h2>"
+    if section.result is None:
+        return (f'<section class="power"><div class="power-head">{head}<p class="warn">'
+                f'{html.escape(section.notice)}</p></div></section>')
+    r = section.result
+    table = plan_table(r)
+    cells: dict[str, list[str]] = {}
+    for col in table.columns:
+        if col == "scope":
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+        elif col == "metric":
+            cells[col] = [html.escape(_label(str(v))) for v in table[col]]
+        elif col == "direction":
+            cells[col] = [DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
+        elif col.startswith("power_n"):
+            cells[col] = ["" if not np.isfinite(v) else f"{v:.0%}" for v in table[col]]
+        else:
+            cells[col] = [html.escape(str(v)) for v in table[col]]
+    shown = [c for c in table.columns if any(cells[c])]  # a column empty in every row is left out
+    heads = "".join(f"<th>{html.escape(_POWER_HEADINGS.get(c, 'n = ' + c.removeprefix('power_n')))}</th>"
+                    for c in shown)
+    body = []
+    for i, metric in enumerate(table["metric"]):
+        cls = ' class="family"' if metric in FAMILY_LABELS else ""
+        tds = "".join(f'<td class="m">{cells[c][i]}</td>' if c in ("scope", "metric") else f"<td>{cells[c][i]}</td>"
+                      for c in shown)
+        body.append(f"<tr{cls}>{tds}</tr>")
+    tct = "over successful trials" if r.options.tct_policy == "successful" else "failures counted at the trial cap"
+    lead = (f"<p>Resampling this study's {plural(r.n_pool, 'participant')} with both haptic modes with replacement "
+            f"({r.resamples} studies per n, seed {r.seed}): the power of each ON-vs-OFF Wilcoxon test (p &lt; "
+            f"{r.alpha:g}; TCT {tct}) to detect the effect <b>in the direction this study shows</b>"
+            f"{' (pilot shows)' if 'direction' in shown else ''}. "
+            "n for 80 %: the smallest n tried from which on power stays at or above 80 %; '&gt; N (x %)': not "
+            "reached by the largest n tried. Holm: with Holm's correction across the four measures, as the "
+            "significance marks above. power.csv has every number, with the two-sided rejection rate "
+            "(power_two_sided) and the Monte Carlo intervals.</p>")
+    caption = (f"<caption>Participants needed, and power at each n ({r.interval_level:.0%} Monte Carlo intervals "
+               "in power.csv)</caption>")
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in r.notes)
+    return (f'<section class="power"><div class="power-head">{head}{lead}</div>'
+            f'<div class="scroll"><table class="stats power">{caption}<thead><tr>{heads}</tr></thead>'
+            f'<tbody>{"".join(body)}</tbody></table></div>'
+            + (f'<ul class="notes">{notes}</ul>' if notes else "")
+            + (f"<figure>{_img(section.png, 'power of each test against the number of participants')}</figure>"
+               if section.png else "") + "</section>")
+
+
+def _img(png: bytes, alt: str) -> str:
+    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+
+
+def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
+             excluded: dict[str, int], n_participants: int, n_incomplete: int) -> str:
+    trials = study.included
+    tol = sorted(set(trials["tolerance_fraction"]))
+    hold = sorted(set(trials["hold_s"]))
+    cap = sorted(set(trials["max_trial_s"]))
+    targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
+    target_txt = ", ".join(f"{lab} {f:g} N" for lab, f in zip(targets["target_label"], targets["target_force_n"]))
+
+    def one(vals: list[float], unit: str) -> str:
+        return " / ".join(f"{v:g}{unit}" for v in vals)
+
+    window = ("from the cue to the trial end, the approach before contact included"
+              if options.error_window == "cue" else
+              f"from first contact (the first sample with task force above {CONTACT_THRESHOLD_N:g} N) to the trial end; "
+              "a trial without contact has no RMSE or Max AE")
+    tct = ("averaged over successful trials only, so it is undefined for a participant with no success in a mode "
+           "(that participant's pair is left out of the TCT test and counted)"
+           if options.tct_policy == "successful" else
+           f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
+    sessions = study.sessions
+    exp = sessions[sessions["kind"] == "experiment"]
+    versions = ", ".join(sorted(set(sessions["software_version"])))
+    dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
+    check = (f"All {plural(table.n_from_samples, 'analysed trial')} were recomputed from their stored 1 kHz samples"
+             + (f" and agree with the values stored live" if table.n_disagree == 0 else
+                f"; {table.n_disagree} disagree with the values stored live (the recomputed values are used)")
+             + (f"; {plural(table.n_stored_only, 'trial')} without samples use their stored values"
+                if table.n_stored_only else "")
+             + ".")
+    return (
+        f"<p><b>Data.</b> {plural(n_participants, 'participant')}, {plural(len(exp), 'experiment session')} "
+        f"({n_incomplete} not completed) from {plural(len(study.databases), 'database')} ({dbs}), "
+        f"{plural(len(trials), 'analysed trial')}. {_origin(study)[1]} Excluded: "
+        f"{plural(excluded['training_sessions'], 'training session')} "
+        f"({plural(excluded['training_trials'], 'trial')}) and {plural(excluded['aborted_trials'], 'aborted trial')} "
+        f"(each re-run later in its session). Recorded with haptic-study {html.escape(versions)}; "
+        f"analysed with haptic-study {html.escape(software_version())}. {check}</p>"
+        f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
+        f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
+        f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
+        f"when the force stays in the band continuously for {one(hold, ' s')} (leaving the band restarts the hold) "
+        f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. RMSE and Max AE "
+        f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
+        f"is the largest task force in the window. These are the definitions of protocol.metrics, the same code "
+        f"that judged the trials live.</p>"
+        f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
+        f"RMSE, Max AE, time in band and peak force are means over trials; TCT is {tct}. Across participants, the "
+        f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
+        f"and the dots are participants; the test tables give medians, the summary the Wilcoxon test is about. "
+        f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
+        f"every CSV file is described, with its unit, in codebook.csv.</p>"
+        f"<p><b>Tests.</b> {html.escape(methods_text(zero_method, confidence))} Holm's step-down correction is "
+        f"applied across the {len(PRIMARY_METRICS)} outcome measures "
+        f"({', '.join(codebook.exported_name(m) for m in PRIMARY_METRICS)}), and separately "
+        f"within each target; significance marks in the figures use the Holm-adjusted p-values "
+        f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). The speed–accuracy trade is the "
+        f"Spearman rank correlation of TCT with RMSE over trials, per mode.</p>"
+    )
+
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.8em}
+.meta{color:#666;font-size:.9em}table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.85em}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}th{background:#f4f4f4;vertical-align:bottom}
+td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}tr.nc td{color:#999;font-style:italic}
+img{max-width:100%;height:auto;display:block;margin:.5em 0}
+.key{display:grid;grid-template-columns:repeat(auto-fit,minmax(200px,1fr));gap:.6em;margin:1em 0}
+.key div{background:#f7f9fc;border:1px solid #e3e8f0;border-radius:6px;padding:.6em .8em}
+.key b{display:block;font-size:1.25em}.key small{color:#555}.scroll{overflow-x:auto}.notes{font-size:.85em;color:#555}
+.warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
+.origin{padding:.5em .8em;border-radius:6px;font-weight:600}.origin.sim{background:#eef3ff;border:1px solid #9db4e8}
+.origin.real{background:#eefaf0;border:1px solid #9ed3a8}.origin.mixed{background:#fff4e5;border:1px solid #f0c36d}
+.caption{font-size:.85em;color:#555;margin:.2em 0 .8em}
+table.power caption{caption-side:top;text-align:left;font-size:1.05em;color:#555;padding:0 0 .3em}
+table.power th{white-space:nowrap}table.power tr.family td{background:#fafafa}
+@page{size:A4;margin:12mm}
+@media print{
+ body{max-width:none;margin:0;padding:0;font-size:9.5pt;line-height:1.3}
+ .scroll{overflow:visible}
+ table{font-size:7pt;margin:.3em 0 .8em;page-break-inside:auto}
+ th,td{padding:1px 3px}th{white-space:normal}td{white-space:nowrap}td.wrap{white-space:normal}
+ tr,img,.key div{page-break-inside:avoid;break-inside:avoid}
+ thead{display:table-header-group}
+ h2,h3{page-break-after:avoid;break-after:avoid}
+ .power-head{break-inside:avoid;page-break-inside:avoid;break-after:avoid;page-break-after:avoid}
+ .power-head+.scroll table{break-before:avoid;page-break-before:avoid}
+ table.power caption,table.power thead{break-after:avoid;page-break-after:avoid}
+ table.power tbody tr:nth-child(-n+3){break-before:avoid;page-break-before:avoid}
+ .key{grid-template-columns:repeat(4,1fr)}
+ img{max-width:100%;max-height:120mm;width:auto}
+ a{color:inherit;text-decoration:none}
+}
+"""
+
+
+def _origin(study: StudyData) -> tuple[str, str]:
+    """(CSS class, sentence) saying whether the analysed data come from the simulated rig or the real one."""
+    exp = study.sessions[study.sessions["kind"] == "experiment"]
+    rigs = exp["rig"].value_counts()
+    n_sim, n_real = int(rigs.get("sim", 0)), int(rigs.get("real", 0))
+    if n_real == 0:
+        return "sim", ("Simulated data: every experiment session was recorded on the simulated rig (rig = sim) with "
+                       "simulated participants. These numbers describe the simulation, not people.")
+    if n_sim == 0:
+        return "real", "Recorded on the real rig (rig = real) with real participants."
+    return "mixed", (f"Mixed data: {plural(n_sim, 'experiment session')} on the simulated rig (rig = sim) and "
+                     f"{n_real} on the real rig (rig = real); see the sessions table.")
+
+
+def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> str:
+    """One card per measure: mean ± SD across participants OFF → ON, and the Holm-adjusted test."""
+    by_metric = stats.set_index("metric")
+    cards = []
+    for m in PRIMARY_METRICS:
+        name = codebook.exported_name(m)
+        parts, ns = [], []
+        for mode in ("off", "on"):
+            mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
+            parts.append(f"{_fmt(mean)} ± {_fmt(sd)}")
+            ns.append(n)
+        who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
+        p_holm = by_metric.at[name, "p_holm"]
+        test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
+                else "Wilcoxon test not computable")
+        cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
+                     f"<small>OFF → ON, mean ± SD across {who}; {html.escape(test)}</small></div>")
+    return f'<div class="key">{"".join(cards)}</div>'
+
+
+def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
+    """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
+    counts = abort_counts(study)
+    total = int(counts["n_trials"].sum())
+    rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
+                   for c, n in zip(counts["abort_cause"], counts["n_trials"]))
+    aborted = (f"<p>{plural(total, 'experiment trial')} did not count and {'was' if total == 1 else 'were'} re-run "
+               "under the protocol's abort policy, by cause:</p>"
+               f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
+               f"<tbody>{rows}</tbody></table></div>")
+    health = tables["loop_health.csv"]
+    recorded = health[health["within_bounds"].notna()]
+    bounds = "; ".join(b.describe() for b in LOOP_BOUNDS)
+    if recorded.empty:
+        loop = "<p>No trial carries a loop-health record (databases of schema version 1).</p>"
+    else:
+        outside = recorded[~recorded["within_bounds"].astype(bool)]
+        def counted(r: Any) -> str:
+            return "" if r.outcome != "aborted" else f" (aborted: {r.abort_cause or 'cause not recorded'}; not counted)"
+
+        listed = "".join(
+            f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}"
+            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+        more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
+        verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
+                   "bounds.</p>" if outside.empty else
+                   f'<p class="warn">{plural(len(outside), "trial")} of {len(recorded)} left the bounds:</p>'
+                   f"<ul>{listed}{more}</ul>")
+        loop = (_html_table(tables["loop_health_by_participant.csv"], "loop_health_by_participant.csv") + verdict)
+    clock = ("" if not (study.sessions["rig"] == "sim").any() else
+             "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
+             "the latency is the sample's age. A real-clock session measures them in real time.</p>")
+    return (f"<h2>What was delivered</h2>{aborted}<h3>The 1 kHz loop, per trial</h3>"
+            f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
+
+
+def _when(v: object) -> str:
+    """An ISO 8601 time as ``YYYY-MM-DD HH:MM`` (UTC), for the page."""
+    return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
+
+
+def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
+          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
+          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
+          power_html: str = "") -> str:
+    """report.html: self-contained (figures embedded), readable on screen and on paper.
+
+    Parameters
+    ----------
+    study, table, options, zero_method, confidence
+        The study, its recomputed trials and the analysis choices (for the methods section).
+    excluded, n_participants, n_incomplete
+        What was left out, and how many participants and unfinished sessions there are.
+    tables
+        :func:`analysis.report_tables.export_tables`' result: the page shows the CSVs' rows.
+    marks_overall, pngs, examples, power_html
+        Significance marks, the figures (PNG bytes), the example trials' figures and the power section.
+
+    Returns
+    -------
+    str
+        The HTML document.
+    """
+    stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
+    warn = ""
+    if table.n_disagree:
+        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
+                "those recomputed from samples; see the methods.</p>")
+    nc = stats[~stats["computable"].astype(bool)]
+    if len(nc):
+        warn += ('<p class="warn">Not computable: '
+                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
+                             for r in nc.itertuples()) + "</p>")
+    origin_class, origin_text = _origin(study)
+    now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    n_trials = len(tables["trials.csv"])
+    per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
+                "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
+    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
+                 "started_at", "ended_at", "software_version"]
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
+<h1>Haptic feedback study: report</h1>
+<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
+{html.escape(software_version())} · error window: {options.error_window} · TCT: {options.tct_policy}</p>
+<p class="origin {origin_class}">{html.escape(origin_text)}</p>
+{warn}
+{_headline(per, stats, marks_overall)}
+<h2>Haptics ON vs OFF</h2>
+<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the four
+measures. Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
+{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
+{_stats_html(stats, "stats.csv")}
+<h3>Within each target</h3>
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"])}
+<figure><h2>Success rate</h2>
+<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after Holm's correction
+(n.s. not significant, n/c not computable).</p>
+{_img(pngs["success_rate"], "success rate per target and overall")}</figure>
+<figure><h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}</figure>
+<figure><h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}</figure>
+<figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
+<p class="caption">Grey lines: participants; black: the median across participants.</p></figure>
+{_html_table(per, "participants.csv", per_cols)}
+<h2>Speed against accuracy</h2>
+<p>Spearman rank correlation of TCT with RMSE over trials, per mode. A negative ρ means faster trials were less
+accurate: participants traded accuracy for speed. A positive ρ means slow trials were also the inaccurate ones: no trade.</p>
+{_html_table(sa, "speed_accuracy.csv")}
+{_img(pngs["speed_accuracy"], "TCT against RMSE")}
+<h2>Force through the pipeline</h2>
+<p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
+band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
+{"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+{power_html}
+{_record_html(study, tables)}
+<h2>Methods</h2>
+{_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
+<h2>Sessions</h2>
+{_html_table(sess, "sessions.csv", sess_cols, cell={"started_at": _when, "ended_at": _when})}
+</body></html>
+"""

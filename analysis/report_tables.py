@@ -1,0 +1,121 @@
+"""The report's CSV tables: exported names and rounding (:mod:`analysis.codebook`), sorted, and the codebook.
+
+:func:`export_tables` turns the computed frames into every CSV as written;
+:func:`write_tables` writes them and ``codebook.csv``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis import codebook
+from analysis.load import StudyData
+from analysis.loop_health import health_summary, health_table
+
+__all__ = ["STATS_CSV_COLUMNS", "TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
+
+#: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
+#: number, participant code, session and trial.  Names and rounding: :mod:`analysis.codebook`.
+TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
+                      "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
+                      "cue_at_s")
+#: stats.csv: the columns every consumer may rely on, in this order (more follow).
+STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
+                     "zero_method", "rank_biserial", "p_holm")
+
+
+def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
+    out = frame.copy()
+    out.insert(1, "n", out["n_used"])
+    rest = [c for c in out.columns if c not in STATS_CSV_COLUMNS]
+    return out[list(STATS_CSV_COLUMNS) + rest]
+
+
+def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
+                   stats: pd.DataFrame, stats_by_target: pd.DataFrame, sa: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted.
+
+    Parameters
+    ----------
+    study : StudyData
+        The study read (its sessions and loop records).
+    trials, overall, by_target, stats, stats_by_target, sa : pandas.DataFrame
+        The analysed trials, the per-participant tables, the tests and the speed–accuracy correlations.
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        File name → table, in the order the files are listed.
+    """
+    numbers = dict(zip(trials["participant_code"], trials["participant_number"]))
+    order = sorted(numbers, key=lambda code: (numbers[code], code))
+    rank = {code: i for i, code in enumerate(order)}
+
+    def by_participant(frame: pd.DataFrame, *keys: str) -> pd.DataFrame:
+        out = frame.copy()
+        if "participant_number" not in out.columns:
+            out.insert(1, "participant_number", out["participant_code"].map(numbers).astype(np.int64))
+        out["_rank"] = out["participant_code"].map(rank)
+        return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
+
+    t = by_participant(trials, "session_id", "trial_index")
+    t["database"] = t["database"].map(os.path.basename)
+    t = codebook.export(t, "trials.csv")
+    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    per = codebook.export(by_participant(overall, "haptic_mode"), "participants.csv")
+    per_t = codebook.export(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
+                     values=list(codebook.WIDE_MEASURES))
+    wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
+    for c in wide_cols:
+        if c.startswith("n_"):
+            wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    st = codebook.export(_stats_table(stats), "stats.csv")
+    st_t = codebook.export(_stats_table(stats_by_target.drop(columns="target_label")), "stats_by_target.csv")
+    st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
+    sess = study.sessions.copy()
+    sess["database"] = sess["database"].map(os.path.basename)
+    health = health_table(study)
+    health["database"] = health["database"].map(os.path.basename)
+    return {
+        "trials.csv": t,
+        "participants.csv": per,
+        "participants_wide.csv": codebook.export(wide, "participants_wide.csv"),
+        "participants_by_target.csv": per_t,
+        "stats.csv": st,
+        "stats_by_target.csv": st_t,
+        "speed_accuracy.csv": codebook.export(sa, "speed_accuracy.csv"),
+        "sessions.csv": codebook.export(sess, "sessions.csv"),
+        "loop_health.csv": codebook.export(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
+        "loop_health_by_participant.csv": codebook.export(by_participant(health_summary(health)),
+                                                          "loop_health_by_participant.csv"),
+    }
+
+
+def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Where to write.
+    tables : dict of str to pandas.DataFrame
+        :func:`export_tables`' result.
+    written_too : sequence of str
+        CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    """
+    for name, frame in tables.items():
+        frame.to_csv(folder / name, index=False)
+    columns = {name: list(frame.columns) for name, frame in tables.items()}
+    for name in written_too:
+        columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
+    columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
+    codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
+
