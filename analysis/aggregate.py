@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics import MetricOptions
-from analysis.stats import WilcoxonResult, correlation, paired_wilcoxon, results_frame
+from analysis.correlation import correlation
+from analysis.stats import WilcoxonResult, paired_wilcoxon, results_frame
 
 __all__ = [
     "METRIC_LABELS",

@@ -49,10 +49,8 @@ same seed gives the same numbers, whatever other n are asked for.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import numpy.typing as npt
@@ -62,16 +60,8 @@ from scipy import stats as sps
 from analysis.aggregate import METRIC_LABELS
 from analysis.load import AnalysisError
 from analysis.metrics import MetricOptions
-from analysis.paired_pool import PairedPool, load_pool, pool_from_trials
-from analysis.resampled_wilcoxon import (  # _PERM_CACHE and _exact_p: the caches bench power clears
-    _PERM_CACHE,
-    METHOD_NAMES,
-    PreparedMetric,
-    _exact_p,
-    prepare_metric,
-    resampled_p_values,
-    study_tests,
-)
+from analysis.paired_pool import PairedPool
+from analysis.resampled_wilcoxon import METHOD_NAMES, PreparedMetric, prepare_metric, study_tests
 from analysis.stats import ZERO_METHODS, holm
 
 __all__ = [
@@ -80,24 +70,16 @@ __all__ = [
     "DIRECTION_TEXT",
     "FAMILY_ALL",
     "FAMILY_ANY",
-    "METHOD_NAMES",
     "MIN_PILOT",
     "POWER_CSV_COLUMNS",
-    "PairedPool",
     "PowerError",
     "PowerResult",
-    "ReportPower",
     "estimate_power",
-    "load_pool",
     "monte_carlo_interval",
     "plan_table",
-    "pool_from_trials",
-    "report_section",
     "resample_indices",
-    "resampled_p_values",
     "smallest_n",
     "summary_text",
-    "write_power",
 ]
 
 #: Planned study sizes tried by default.
@@ -391,7 +373,7 @@ def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *, h
     return best
 
 
-def _label(metric: str) -> str:
+def metric_label(metric: str) -> str:
     return FAMILY_LABELS.get(metric, METRIC_LABELS.get(metric, metric))
 
 
@@ -434,7 +416,7 @@ def summary_text(result: PowerResult) -> str:
             for target in (0.8, 0.9):
                 cells.append("" if family else _reach(f, scope, metric, target, False))
                 cells.append(_reach(f, scope, metric, target, True))
-            name = _label(metric) if scope == "overall" else f"  {_label(metric)}"
+            name = metric_label(metric) if scope == "overall" else f"  {metric_label(metric)}"
             lines.append(f"  {name:<21s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     lines.append("Power at each n (overall; the two-sided rejection rate in brackets):")
     ns = list(result.n_values)
@@ -446,9 +428,9 @@ def summary_text(result: PowerResult) -> str:
         sel = overall[overall["metric"] == metric].set_index("n")
         direction = DIRECTION_TEXT[str(sel["direction"].iloc[0])]
         cells = [f"{sel.at[n, 'power']:.0%} ({sel.at[n, 'power_two_sided']:.0%})" for n in ns]
-        lines.append(f"  {_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
+        lines.append(f"  {metric_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     last = max(result.n_values)
-    under = [_label(m) for m in dict.fromkeys(f["metric"])
+    under = [metric_label(m) for m in dict.fromkeys(f["metric"])
              if m not in FAMILY_LABELS and smallest_n(f, "overall", m, 0.8) is None]
     if under:
         lines.append(f"Under-powered: {', '.join(under)} do{'es' if len(under) == 1 else ''} not reach 80 % power "
@@ -458,51 +440,6 @@ def summary_text(result: PowerResult) -> str:
         lines.append("Notes:")
         lines.extend(f"  - {n}" for n in result.notes)
     return "\n".join(lines)
-
-
-def write_power(result: PowerResult, folder: str | os.PathLike[str]) -> list[str]:
-    """Write ``power.csv``, ``power.txt`` (:func:`summary_text`) and ``power.png/.pdf/.svg`` into ``folder``.
-
-    ``haptic-study power`` gives it the temporary folder of
-    :func:`analysis.outdir.write_output_folder`, which moves the files into
-    ``--out`` under the output-folder policy (marker, ``--force``, the pool kept).
-
-    Returns
-    -------
-    list of str
-        The file names written.
-    """
-    from analysis.power_figures import power_curves
-
-    out = Path(folder)
-    result.frame.to_csv(out / "power.csv", index=False)
-    (out / "power.txt").write_text(summary_text(result) + "\n", encoding="utf-8")
-    fig = power_curves(result)
-    names = ["power.csv", "power.txt"]
-    for ext in ("png", "pdf", "svg"):
-        meta = {"Date": None} if ext == "svg" else {"CreationDate": None} if ext == "pdf" else {}
-        fig.savefig(out / f"power.{ext}", format=ext, dpi=150, metadata=meta)
-        names.append(f"power.{ext}")
-    return names
-
-
-@dataclass(frozen=True, slots=True)
-class ReportPower:
-    """The "what n would a study need?" section of ``report --power``.
-
-    Attributes
-    ----------
-    result
-        The estimate (None when it could not be made).
-    notice
-        Why it could not be made, in words ("" when it was).
-    png
-        The power-curve figure (None when not made).
-    """
-
-    result: PowerResult | None
-    notice: str
-    png: bytes | None
 
 
 def plan_table(result: PowerResult) -> pd.DataFrame:
@@ -528,31 +465,3 @@ def plan_table(result: PowerResult) -> pd.DataFrame:
                 row[f"power_n{n}"] = float(sel.at[n, "power_holm" if family else "power"])
             rows.append(row)
     return pd.DataFrame(rows)
-
-
-def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: str,
-                   out_dir: str | os.PathLike[str]) -> ReportPower:
-    """``report --power``: what n a study would need, resampling the reported study's own participants.
-
-    Writes ``power.csv`` and ``figures/power.png`` / ``.svg`` into ``out_dir``
-    with the defaults of ``haptic-study power`` (n = 6 … 30, 2000 resamples,
-    α = 0.05, seed 0).
-
-    Returns
-    -------
-    ReportPower
-        The estimate and the figure; when the study cannot be resampled
-        (fewer than :data:`MIN_PILOT` participants with both modes, ...), no
-        estimate and the reason in words, for the page to show.
-    """
-    from analysis.figures import save
-    from analysis.power_figures import power_curves
-
-    pool = pool_from_trials(trials, options, source="this study")
-    try:
-        result = estimate_power(pool, zero_method=zero_method)
-    except PowerError as exc:
-        return ReportPower(None, f"Not estimated: {exc}.", None)
-    out = Path(out_dir)
-    result.frame.to_csv(out / "power.csv", index=False)
-    return ReportPower(result, "", save(power_curves(result), out / "figures", "power"))

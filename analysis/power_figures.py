@@ -11,15 +11,13 @@ each metric also has its own marker, so the figure reads in grey too.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 from matplotlib.figure import Figure
 from matplotlib.ticker import NullLocator, PercentFormatter
 
 from analysis.figures import _style
+from analysis.power import FAMILY_ALL, FAMILY_LABELS, PowerResult, metric_label
 
-if TYPE_CHECKING:
-    from analysis.power import PowerResult
 
 __all__ = ["METRIC_COLORS", "power_curves"]
 
@@ -40,8 +38,6 @@ def power_curves(result: PowerResult) -> Figure:
     -------
     matplotlib.figure.Figure
     """
-    from analysis.power import FAMILY_ALL, FAMILY_LABELS, _label
-
     f = result.frame
     scopes = list(dict.fromkeys(f["scope"]))
     fig = Figure(figsize=(4.2 * len(scopes) + 0.6, 4.6), layout="constrained")
@@ -68,8 +64,8 @@ def power_curves(result: PowerResult) -> Figure:
             ax.fill_between(x, m[lo], m[hi], color=color, alpha=0.15, linewidth=0, zorder=2)
             (line,) = ax.plot(x, m[col], color=color, linewidth=2.0 if family else 1.6,
                               linestyle="--" if family else "-", marker=None if family else _MARKERS.get(metric, "o"),
-                              markersize=4.5, zorder=3, label=_label(metric))
-            handles.setdefault(_label(metric), line)
+                              markersize=4.5, zorder=3, label=metric_label(metric))
+            handles.setdefault(metric_label(metric), line)
         _style(ax)
         ax.set_title("overall" if scope == "overall" else f"within {scope}", fontsize=11)
         ax.set_xlabel("participants in the planned study, n")

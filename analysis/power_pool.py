@@ -202,6 +202,31 @@ def _larger_pool(folder: Path, participants: int, seed: int, wanted: dict[str, A
     return min(found)[1] if found else None
 
 
+def _reusable(
+    out: Path, db: Path, record: dict[str, Any] | None, wanted: dict[str, Any], participants: int, seed: int,
+    codes: tuple[str, ...],
+) -> SimulatedPool | None:
+    """A sound complete pool to reuse (this one, or a larger one of the same parameters), or None to simulate.
+
+    Raises :class:`PoolError` for a pool file without a record, or recorded with other parameters.
+    """
+    if db.exists() and record is None:
+        raise PoolError(f"{db}: no readable record {_record_path(db).name} beside it, so nothing says how it was "
+                        "made; it is not used (nor deleted): move it away or choose another --out")
+    if record is not None:
+        bad = _mismatch(record, wanted)
+        if bad is not None:
+            raise PoolError(f"{db}: recorded with {bad}; it is not used (nor deleted): move it away or choose "
+                            "another --out")
+        if record.get("complete") is True:
+            return SimulatedPool(db, codes, "reused", _verified(db, record))
+    elif out.is_dir():
+        larger = _larger_pool(out, participants, seed, wanted)
+        if larger is not None:
+            return SimulatedPool(larger, codes, "reused-larger", _verified(larger, _read_record(larger) or {}))
+    return None
+
+
 def simulated_pool(
     out_dir: str | os.PathLike[str],
     participants: int,
@@ -255,20 +280,9 @@ def simulated_pool(
     codes = tuple(participant_code(k) for k in range(1, participants + 1))
     db = out / pool_name(participants, seed)
     record = _read_record(db) if db.exists() else None
-    if db.exists() and record is None:
-        raise PoolError(f"{db}: no readable record {_record_path(db).name} beside it, so nothing says how it was "
-                        "made; it is not used (nor deleted): move it away or choose another --out")
-    if record is not None:
-        bad = _mismatch(record, wanted)
-        if bad is not None:
-            raise PoolError(f"{db}: recorded with {bad}; it is not used (nor deleted): move it away or choose "
-                            "another --out")
-        if record.get("complete") is True:
-            return SimulatedPool(db, codes, "reused", _verified(db, record))
-    elif out.is_dir():
-        larger = _larger_pool(out, participants, seed, wanted)
-        if larger is not None:
-            return SimulatedPool(larger, codes, "reused-larger", _verified(larger, _read_record(larger) or {}))
+    reused = _reusable(out, db, record, wanted, participants, seed, codes)
+    if reused is not None:
+        return reused
 
     if not out.exists() and not out.resolve().parent.is_dir():
         raise PoolError(f"--out {out}: the folder {out.resolve().parent} does not exist")

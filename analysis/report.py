@@ -38,10 +38,12 @@ from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.outdir import check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, power_html
-from analysis.report_tables import STATS_CSV_COLUMNS, TRIALS_CSV_COLUMNS
 from analysis.stats import WilcoxonResult
 
-__all__ = ["ReportSummary", "TRIALS_CSV_COLUMNS", "STATS_CSV_COLUMNS", "build_report"]
+__all__ = [
+    "ReportSummary",
+    "build_report",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,7 +231,7 @@ def build_report(
         pngs, examples = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
         section = ""
         if power:
-            from analysis.power import report_section
+            from analysis.power_outputs import report_section
 
             section = power_html(report_section(a.trials, options, zero_method, tmp))
         report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])

@@ -120,7 +120,7 @@ def power_html(section: Any) -> str:
     with no value in any row are left out.  In print, its rows never split,
     its head repeats on every page and the heading stays with it (``_CSS``).
     """
-    from analysis.power import DIRECTION_TEXT, FAMILY_LABELS, _label, plan_table
+    from analysis.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label, plan_table
 
     head = "<h2>What n would a study need?</h2>"
     if section.result is None:
@@ -133,7 +133,7 @@ def power_html(section: Any) -> str:
         if col == "scope":
             cells[col] = [html.escape(str(v)) for v in table[col]]
         elif col == "metric":
-            cells[col] = [html.escape(_label(str(v))) for v in table[col]]
+            cells[col] = [html.escape(metric_label(str(v))) for v in table[col]]
         elif col == "direction":
             cells[col] = [DIRECTION_TEXT.get(str(v), str(v)) for v in table[col]]
         elif col.startswith("power_n"):
@@ -198,7 +198,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     versions = ", ".join(sorted(set(sessions["software_version"])))
     dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
     check = (f"All {plural(table.n_from_samples, 'analysed trial')} were recomputed from their stored 1 kHz samples"
-             + (f" and agree with the values stored live" if table.n_disagree == 0 else
+             + (" and agree with the values stored live" if table.n_disagree == 0 else
                 f"; {table.n_disagree} disagree with the values stored live (the recomputed values are used)")
              + (f"; {plural(table.n_stored_only, 'trial')} without samples use their stored values"
                 if table.n_stored_only else "")

@@ -36,35 +36,26 @@ import pandas as pd
 import scipy
 from scipy import stats as sps
 
-from analysis.correlation import CorrelationResult, correlation
 from analysis.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
 from analysis.signed_rank import (
     EXACT_MAX_N,
     PERMUTATION_AUTO_MAX_N,
     SCIPY_AUTO_RANGE,
     auto_method,
-    signed_rank_null_counts,
 )
 
 __all__ = [
     "ALTERNATIVES",
-    "CorrelationResult",
     "DEFAULT_DECIMALS",
-    "EXACT_MAX_N",
     "EXPLICIT_EXACT_MAX_N",
-    "HL_EXACT_MAX_N",
     "METHODS",
-    "PERMUTATION_AUTO_MAX_N",
     "WilcoxonResult",
     "ZERO_METHODS",
     "check_zero_method",
-    "correlation",
-    "hodges_lehmann",
     "holm",
     "methods_text",
     "paired_wilcoxon",
     "results_frame",
-    "signed_rank_null_counts",
 ]
 
 ZERO_METHODS = ("wilcox", "pratt", "zsplit")

@@ -28,7 +28,6 @@ from typing import Any
 import numpy as np
 
 from bench.machine import bare_loop_stats, cpu_times, format_late_ticks, load_average, steal_percent
-from pipeline.clock import VirtualClock
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework

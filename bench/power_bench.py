@@ -25,17 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from analysis.power import (
-    _PERM_CACHE,
-    DEFAULT_N_VALUES,
-    PairedPool,
-    _exact_p,
-    estimate_power,
-    load_pool,
-    pool_from_trials,
-    resample_indices,
-    resampled_p_values,
-)
+from analysis.paired_pool import PairedPool, load_pool, pool_from_trials
+from analysis.power import DEFAULT_N_VALUES, estimate_power, resample_indices
+from analysis.resampled_wilcoxon import _PERM_CACHE, _exact_p, resampled_p_values
 from analysis.stats import holm, paired_wilcoxon
 from bench.analysis_bench import synthetic_trials
 from bench.machine import cpu_times, load_average, steal_percent

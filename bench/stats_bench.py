@@ -18,7 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from analysis.stats import correlation, hodges_lehmann, holm, paired_wilcoxon
+from analysis.correlation import correlation
+from analysis.hodges_lehmann import hodges_lehmann
+from analysis.stats import holm, paired_wilcoxon
 
 __all__ = ["run_stats_bench", "format_stats_bench"]
 

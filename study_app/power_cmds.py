@@ -110,7 +110,9 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.load import AnalysisError
     from analysis.metrics import MetricOptions
     from analysis.outdir import check_output_folder, write_output_folder
-    from analysis.power import FAMILY_LABELS, estimate_power, load_pool, summary_text, write_power
+    from analysis.paired_pool import load_pool
+    from analysis.power import FAMILY_LABELS, estimate_power, summary_text
+    from analysis.power_outputs import write_power
     from analysis.power_pool import is_pool_file, simulated_pool
     from study_app.headless import run_study
     from study_app.progress import ProgressBar

@@ -237,16 +237,8 @@ def test_the_graph_sees_lazy_and_relative_imports(graph: list[Import]) -> None:
     assert len({i.source for i in graph}) > 100  # every module of the five packages, not a few
 
 
-#: Circles found when the contract was written, in a floor being restructured by another hand (issue 14): each
-#: must still be there (else delete it here), and no other may appear.
-KNOWN_CYCLES = ("analysis.power <-> analysis.power_figures",)
-
-
 def test_no_import_cycles(graph: list[Import]) -> None:
-    cycles = import_cycles(graph)
-    assert [c for c in cycles if not c.startswith(tuple(f"circle {k}: " for k in KNOWN_CYCLES))] == []
-    assert [k for k in KNOWN_CYCLES if not any(c.startswith(f"circle {k}: ") for c in cycles)] == [], \
-        "a known circle is gone: delete it from KNOWN_CYCLES"
+    assert import_cycles(graph) == []
 
 
 @pytest.mark.parametrize("where", sorted(FORBIDDEN))

@@ -20,21 +20,19 @@ from hypothesis import strategies as st
 from scipy import stats as sps
 
 from analysis.metrics import MetricOptions
+from analysis.paired_pool import PairedPool, pool_from_trials
 from analysis.power import (
     FAMILY_ALL,
     FAMILY_ANY,
-    METHOD_NAMES,
     POWER_CSV_COLUMNS,
-    PairedPool,
     PowerError,
     estimate_power,
     monte_carlo_interval,
-    pool_from_trials,
     resample_indices,
-    resampled_p_values,
     smallest_n,
     summary_text,
 )
+from analysis.resampled_wilcoxon import METHOD_NAMES, resampled_p_values
 from analysis.stats import holm, paired_wilcoxon
 
 zero_methods = st.sampled_from(["wilcox", "pratt", "zsplit"])

@@ -284,7 +284,7 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
 def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsys):
     from analysis.load import load_study
     from analysis.metrics import MetricOptions, compute_trials
-    from analysis.power import report_section
+    from analysis.power_outputs import report_section
 
     trials = compute_trials(load_study([pilots[1]]), workers=1).trials
     section = report_section(trials, MetricOptions(), "wilcox", tmp_path)
@@ -303,7 +303,9 @@ def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsy
 
 def test_report_power_table_leaves_out_empty_columns(monkeypatch):
     import analysis.power
-    from analysis.power import ReportPower, estimate_power, plan_table, pool_from_trials
+    from analysis.paired_pool import pool_from_trials
+    from analysis.power import estimate_power, plan_table
+    from analysis.power_outputs import ReportPower
     from analysis.report_html import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,

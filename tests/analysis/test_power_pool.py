@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import analysis.power_pool as power_pool
-from analysis.power import load_pool
+from analysis.paired_pool import load_pool
 from analysis.power_pool import PoolError, is_pool_file, simulated_pool
 from study_app.headless import run_study
 from protocol.config import default_protocol

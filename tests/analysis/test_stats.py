@@ -16,18 +16,10 @@ from hypothesis import strategies as st
 from scipy import stats as sps
 
 from analysis.hodges_lehmann import _midpoint, _walsh_select
-from analysis.stats import (
-    RESULT_COLUMNS,
-    CorrelationResult,
-    WilcoxonResult,
-    correlation,
-    hodges_lehmann,
-    holm,
-    methods_text,
-    paired_wilcoxon,
-    results_frame,
-    signed_rank_null_counts,
-)
+from analysis.correlation import CorrelationResult, correlation
+from analysis.hodges_lehmann import hodges_lehmann
+from analysis.signed_rank import signed_rank_null_counts
+from analysis.stats import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
 
 _SCIPY_METHOD = {"exact": "exact", "approx": "asymptotic"}
 TEST_FIELDS = ("statistic", "p_value", "z", "rank_biserial", "r")
