@@ -13,7 +13,7 @@ import os
 from typing import Any
 
 from pipeline.clock import MonotonicClock, prepare_realtime_thread
-from pipeline.loop import LoopStats
+from pipeline.loop_stats import LoopStats
 
 __all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
 

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.loop import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, default_protocol
 from protocol.design import build_schedule

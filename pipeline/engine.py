@@ -20,7 +20,9 @@ from pipeline.clock import Clock, MonotonicClock, VirtualClock
 from pipeline.bias_refinement import RlsBias
 from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import RECORD_FIELDS, AllowBiasRefinement, HapticLoop, SetHaptics, WatchdogConfig
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import RECORD_FIELDS, AllowBiasRefinement, SetHaptics
+from pipeline.watchdog import WatchdogConfig
 from pipeline.ring import RingBuffer
 
 if TYPE_CHECKING:

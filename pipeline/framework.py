@@ -158,7 +158,6 @@ class HapticFramework:
         # the parts of the per-tick tuple that no pose or bias change touches
         # (the filter rings are cleared in place by MovingAverage3.reset, so
         # holding them is safe)
-        g = self.safety
         f = self.filter
         self._hot_head: tuple[Any, ...] = (f, f.window, float(f.window), *f._buf, *self._rts)
         self._hot_tail: tuple[Any, ...] = self._tail()

@@ -65,9 +65,7 @@ from pipeline.watchdog import (
 # too because the loop's callers import them from this module.  The devices the loop
 # owns are pipeline.rig.Rig.
 __all__ = [
-    "AllowBiasRefinement", "Command", "ControllerDetached", "HapticLoop", "LoopEvent", "LoopStats", "Mark",
-    "OperatorStop", "RECORD_FIELDS", "ResetFaults", "SetCalibration", "SetHaptics", "StartRecording", "StopRecording",
-    "WatchdogConfig",
+    "HapticLoop",
 ]
 
 _NAN3 = (math.nan, math.nan, math.nan)

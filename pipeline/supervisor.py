@@ -17,7 +17,8 @@ servo adapter stops the arm when no target has come for 50 ms
 from __future__ import annotations
 
 from pipeline.clock import Clock, MonotonicClock
-from pipeline.loop import HapticLoop, LoopEvent
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import LoopEvent
 
 __all__ = ["LoopSupervisor"]
 

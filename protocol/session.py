@@ -70,8 +70,15 @@ import numpy as np
 import secrets
 
 from pipeline.devices import Fault
-from pipeline.loop import (
-    AllowBiasRefinement, Command, LoopEvent, Mark, ResetFaults, SetHaptics, StartRecording, StopRecording,
+from pipeline.loop_messages import (
+    AllowBiasRefinement,
+    Command,
+    LoopEvent,
+    Mark,
+    ResetFaults,
+    SetHaptics,
+    StartRecording,
+    StopRecording,
 )
 from protocol.config import ProtocolConfig
 from protocol.design import TrialSpec, requeue_aborted, schedule_to_json

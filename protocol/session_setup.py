@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.loop import Command, HapticLoop
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import Command
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics

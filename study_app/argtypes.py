@@ -15,8 +15,16 @@ from typing import NoReturn
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
-__all__ = ["SEED", "OneLineParser", "SQLITE_INTEGER_MAX", "add_command", "host_name", "one_line", "positive_seconds",
-           "real_number", "whole_number"]
+__all__ = [
+    "SEED",
+    "OneLineParser",
+    "add_command",
+    "host_name",
+    "one_line",
+    "positive_seconds",
+    "real_number",
+    "whole_number",
+]
 
 
 def one_line(text: str) -> str:

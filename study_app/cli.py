@@ -16,7 +16,7 @@ import os
 import sys
 from collections.abc import Sequence
 
-from study_app.argtypes import OneLineParser, add_command, one_line
+from study_app.argtypes import OneLineParser, one_line
 from study_app.calibrate_cmds import add_calibrate_command
 from study_app.cli_error import CliError
 from study_app.gui_cmds import add_gui_parser
@@ -26,7 +26,12 @@ from study_app.replay_cmds import add_replay_parsers
 from study_app.report_cmds import add_report_parsers
 from study_app.run_cmds import add_run_parser, add_sessions_parser, add_sim_parser
 
-__all__ = ["COMMANDS_GROUP", "CliError", "add_command", "build_parser", "main", "version_text"]
+__all__ = [
+    "COMMANDS_GROUP",
+    "build_parser",
+    "main",
+    "version_text",
+]
 
 #: The entry-point group through which an installed package adds subcommands: each entry point names a
 #: function ``register(sub)`` that adds its parsers to the ``haptic-study`` subparsers, every leaf with a

@@ -25,7 +25,7 @@ from pipeline.payload_compensator import PayloadCalibration
 from pipeline.payload_identification import CalibrationPose, DegeneratePoseSetError, identify_payload, recommended_pose_set
 from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
 from pipeline.frames import Mat3, axis_angle, mat_mul
-from pipeline.loop import SetCalibration
+from pipeline.loop_messages import SetCalibration
 from pipeline.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
 from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from study_app import messages as m

@@ -40,9 +40,9 @@ from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
 from pipeline.jaw_control import JawController
 from pipeline.jitter_trace import LateTickTracer
-from pipeline.loop import ControllerDetached, LoopEvent
-from pipeline.loop import OperatorStop as LoopOperatorStop
-from pipeline.loop import ResetFaults as LoopResetFaults
+from pipeline.loop_messages import ControllerDetached, LoopEvent
+from pipeline.loop_messages import OperatorStop as LoopOperatorStop
+from pipeline.loop_messages import ResetFaults as LoopResetFaults
 from pipeline.supervisor import LoopSupervisor
 from protocol.config import ProtocolError
 from protocol.session import SessionRunner

@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, real_number, whole_number
+from pipeline.tomlfields import SQLITE_INTEGER_MAX
+from study_app.argtypes import add_command, real_number, whole_number
 from study_app.cli_error import CliError
 
 __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]

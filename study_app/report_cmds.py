@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from study_app.argtypes import SQLITE_INTEGER_MAX, add_command, whole_number
+from pipeline.tomlfields import SQLITE_INTEGER_MAX
+from study_app.argtypes import add_command, whole_number
 from study_app.cli_error import CliError
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]

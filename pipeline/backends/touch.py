@@ -35,18 +35,16 @@ from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, HapticState
 from pipeline.frames import Vec3
 from pipeline.touch_output import (
-    DEFAULT_COMMAND_TIMEOUT_S, DEFAULT_THERMAL_BUDGET_N2S, HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS, TouchOutput, TouchSpec,
+    DEFAULT_COMMAND_TIMEOUT_S, DEFAULT_THERMAL_BUDGET_N2S, HD_WARM_MOTORS, TouchOutput, TouchSpec,
 )
 
 __all__ = [
     "HDApi",
     "HD_DEVICE_FAULT",
-    "HD_EXCEEDED_MAX_FORCE",
     "HD_FORCE_OUTPUT",
     "HD_MAX_FORCE_CLAMPING",
     "HD_NOMINAL_MAX_CONTINUOUS_FORCE",
     "HD_NOMINAL_MAX_FORCE",
-    "HD_WARM_MOTORS",
     "PyOpenHapticsApi",
     "TOUCH_INSTALL_HINT",
     "TouchHapticDevice",

@@ -22,7 +22,8 @@ import numpy as np
 
 from pipeline.frame_check import AXES, FrameCheck, axis_vector, check_axis
 from pipeline.frames import Mat3, mat_vec
-from pipeline.loop import AllowBiasRefinement, HapticLoop, SetHaptics
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import AllowBiasRefinement, SetHaptics
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.tcp import PivotPose

@@ -24,7 +24,8 @@ from pipeline.sim.jaw import SimJaw
 from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
-from pipeline.sim.touch import SimTouch, TouchSpec
+from pipeline.sim.touch import SimTouch
+from pipeline.touch_output import TouchSpec
 
 __all__ = ["SimRig", "SimRigConfig"]
 

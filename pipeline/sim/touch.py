@@ -18,9 +18,11 @@ from __future__ import annotations
 
 from pipeline.devices import HapticState
 from pipeline.frames import Vec3
-from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS, TouchOutput, TouchSpec
+from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, TouchOutput, TouchSpec
 
-__all__ = ["HD_EXCEEDED_MAX_FORCE", "HD_WARM_MOTORS", "SimTouch", "TouchSpec"]
+__all__ = [
+    "SimTouch",
+]
 
 
 class SimTouch:

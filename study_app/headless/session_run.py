@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop import LoopEvent
+from pipeline.loop_messages import LoopEvent
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig

@@ -31,7 +31,8 @@ from pipeline.rig_calibration import RigCalibrationFile
 from pipeline.sim.robot import TOOL_DOWN
 from pipeline.tcp import pivot_orientations
 from study_app.calibrate_cmds import cmd_calibrate
-from study_app.cli import CliError, build_parser, main
+from study_app.cli import build_parser, main
+from study_app.cli_error import CliError
 
 G = 9.80665
 TIP = np.array([0.0012, -0.0009, 0.2513])  # the fake tool's true tip in the flange frame

@@ -26,7 +26,8 @@ from test_touch import FakeHD
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.devices import Fault, WrenchSample
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop, LoopEvent, SetHaptics
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import LoopEvent, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import GAMMA_RANGE
 from pipeline.supervisor import LoopSupervisor

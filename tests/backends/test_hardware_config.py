@@ -23,7 +23,7 @@ from pipeline.engine import build_hardware_engine
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
 from pipeline.payload_compensator import NO_PAYLOAD
-from pipeline.sim.touch import TouchSpec
+from pipeline.touch_output import TouchSpec
 from pipeline.tomlfields import host_problem
 from tomlvalues import TOML_VALUES, replaced
 

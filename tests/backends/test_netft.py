@@ -20,7 +20,8 @@ from pipeline.backends.netft import (
 from pipeline.clock import VirtualClock
 from pipeline.devices import Fault, ForceSensor
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop, ResetFaults
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import ResetFaults
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.touch import SimTouch
 

@@ -13,19 +13,19 @@ import math
 import pytest
 
 from pipeline.backends.touch import (
-    HD_EXCEEDED_MAX_FORCE,
     HD_FORCE_OUTPUT,
     HD_MAX_FORCE_CLAMPING,
     HD_NOMINAL_MAX_CONTINUOUS_FORCE,
     HD_NOMINAL_MAX_FORCE,
-    HD_WARM_MOTORS,
     TouchHapticDevice,
     load_pyopenhaptics,
 )
+from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 from pipeline.clock import VirtualClock
 from pipeline.devices import DeviceError, Fault, HapticDevice
 from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop, ResetFaults, SetHaptics
+from pipeline.loop import HapticLoop
+from pipeline.loop_messages import ResetFaults, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import SimForceSensor
 

@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from pipeline.frames import axis_angle, mat_mul
-from pipeline.loop import RECORD_FIELDS
+from pipeline.loop_messages import RECORD_FIELDS
 from pipeline.sim.robot import TOOL_DOWN
 from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard

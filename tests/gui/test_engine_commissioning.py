@@ -8,7 +8,8 @@ import time
 
 import pytest
 
-from pipeline.sim.touch import SimTouch, TouchSpec
+from pipeline.sim.touch import SimTouch
+from pipeline.touch_output import TouchSpec
 from protocol.trial import TrialPhase
 from study_app import messages as m
 from study_app.engine_host import StudyEngine

@@ -12,7 +12,7 @@ import time
 
 import numpy as np
 
-from pipeline.loop import RECORD_FIELDS
+from pipeline.loop_messages import RECORD_FIELDS
 from study_app import messages as m
 from study_app.engine_client import EngineClient
 from study_app.engine_setup import HostConfig

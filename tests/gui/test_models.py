@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.loop import RECORD_FIELDS
+from pipeline.loop_messages import RECORD_FIELDS
 from pipeline.ring import RingBuffer
 from study_app import messages as m
 from study_app.models.app import AppModel, Notice

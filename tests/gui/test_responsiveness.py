@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.loop import RECORD_FIELDS
+from pipeline.loop_messages import RECORD_FIELDS
 from pipeline.ring import RingBuffer
 from study_app.gui.stall import Stall, StallRecorder, culprit
 from study_app.gui.widgets import QtTrialTable

@@ -12,18 +12,12 @@ from pipeline.clock import VirtualClock
 from pipeline.devices import Fault
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.framework import FrameworkConfig
-from pipeline.loop import (
-    RECORD_FIELDS,
-    ControllerDetached,
-    LoopStats,
-    Mark,
-    OperatorStop,
-    SetHaptics,
-)
+from pipeline.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
+from pipeline.loop_stats import LoopStats
 from pipeline.safety import SafetyConfig
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRigConfig
-from pipeline.sim.touch import TouchSpec
+from pipeline.touch_output import TouchSpec
 from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000

@@ -22,7 +22,7 @@ from test_teleop_faults import Teleop
 
 from pipeline.devices import Fault
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop import ResetFaults
+from pipeline.loop_messages import ResetFaults
 from pipeline.teleop import TeleopState
 
 MS = 1_000_000

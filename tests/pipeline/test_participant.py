@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.loop import Mark, SetHaptics
+from pipeline.loop_messages import Mark, SetHaptics
 from pipeline.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.rig import SimRigConfig

@@ -16,7 +16,8 @@ from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
-from pipeline.sim.touch import HD_WARM_MOTORS, SimTouch, TouchSpec
+from pipeline.sim.touch import SimTouch
+from pipeline.touch_output import HD_WARM_MOTORS, TouchSpec
 
 QUIET = SensorParams(
     noise_force_n=(0.0, 0.0, 0.0), noise_torque_nm=(0.0, 0.0, 0.0), random_walk_n_per_sqrt_s=0.0,

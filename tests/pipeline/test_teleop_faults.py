@@ -22,7 +22,7 @@ import pytest
 
 from pipeline.devices import Fault
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop import ControllerDetached, OperatorStop, ResetFaults
+from pipeline.loop_messages import ControllerDetached, OperatorStop, ResetFaults
 from pipeline.sim.hand import HandObservation
 from pipeline.teleop import ServoTarget, TeleopConfig, TeleopController, TeleopDriver, TeleopState
 

@@ -21,10 +21,10 @@ import pytest
 from pipeline.devices import Fault
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.framework import STEP_FIELDS
-from pipeline.loop import OperatorStop, ResetFaults
+from pipeline.loop_messages import OperatorStop, ResetFaults
 from pipeline.safety import SafetyConfig
 from pipeline.sim.rig import SimRigConfig
-from pipeline.sim.touch import HD_WARM_MOTORS, TouchSpec
+from pipeline.touch_output import HD_WARM_MOTORS, TouchSpec
 from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000
