@@ -234,8 +234,8 @@ class SessionRunner:
         """Continue after :meth:`pause`."""
         self._request("resume")
 
-    def abort_trial(self, reason: str = "aborted by the experimenter", cause: str = AbortCause.EXPERIMENTER,
-                    trial_index: int | None = None) -> None:
+    def abort_trial(self, reason: str = "aborted by the experimenter",
+                    cause: AbortCause | str = AbortCause.EXPERIMENTER, trial_index: int | None = None) -> None:
         """Abort the running trial; it is re-queued per the protocol's abort policy.
 
         ``cause`` goes to ``trials.abort_cause`` (``experimenter``, or ``interrupted``
@@ -525,7 +525,7 @@ class SessionRunner:
             self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             self.submit(ResetFaults())
 
-    def _abort_running(self, t_ns: int, reason: str, cause: str, requeue: bool = True) -> None:
+    def _abort_running(self, t_ns: int, reason: str, cause: AbortCause | str, requeue: bool = True) -> None:
         """Abort the trial that is cued or running (if any), storing its cause; re-queue it per the policy."""
         m = self.machine
         if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
