@@ -23,8 +23,9 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
 from protocol.recording import read_ticks
+from protocol.records import Outcome, TrialRecord
+from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
 from protocol.storage import connect_readonly as _connect_readonly
 
 #: Where a trial's records are in its session's recording (schema version 3).
@@ -38,6 +39,7 @@ __all__ = [
     "load_study",
     "read_task_force",
     "recorded_where",
+    "stored_records",
     "samples_frame",
     "read_trial_samples",
 ]
@@ -218,7 +220,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     trials = trials.merge(meta, on=["database", "session_id"], how="left", validate="many_to_one")
     excluded = np.where(
         trials["session_kind"] != "experiment", "training session",
-        np.where(trials["outcome"] == "aborted", "aborted trial", ""),
+        np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial", ""),
     )
     trials["excluded"] = excluded
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
@@ -265,6 +267,29 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, i
     block = np.array(rows, dtype=np.float64)
     # t_s was stored as ns / 1e9; rounding recovers the integer ns exactly (|t| ≪ 2^53 ns)
     return np.rint(block[:, 0] * 1e9).astype(np.int64), np.ascontiguousarray(block[:, 1])
+
+
+#: Integer columns of a trials frame that read as floats once one of them is empty.
+_INT_COLUMNS = ("n_samples", "periods_over_2ms", *RECORD_COLUMNS)
+
+
+def _empty(v: object) -> bool:
+    return v is None or v is pd.NA or (isinstance(v, float) and math.isnan(v))
+
+
+def stored_records(trials: pd.DataFrame) -> list[TrialRecord]:
+    """The rows of a trials frame (:attr:`StudyData.trials` or a part of it) as the records stored live.
+
+    The ``stored_*`` metric columns are the records' metrics; an empty value is None.
+    """
+    out = []
+    for row in trials.rename(columns=lambda c: c.removeprefix("stored_")).to_dict("records"):
+        clean = {k: None if _empty(v) else v for k, v in row.items()}
+        for k in _INT_COLUMNS:
+            if clean.get(k) is not None:
+                clean[k] = int(clean[k])
+        out.append(TrialRecord.from_row(clean))
+    return out
 
 
 def recorded_where(session_id: object, segment: object, first_tick: object, last_tick: object,

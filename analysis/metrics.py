@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from analysis.load import Progress, StudyData, connect_readonly, read_task_force, recorded_where
+from analysis.load import Progress, StudyData, connect_readonly, read_task_force, recorded_where, stored_records
 from analysis.parallel import default_workers, run_tasks
-from protocol.metrics import trial_metrics
+from protocol.metrics import TrialMetrics, trial_metrics
+from protocol.records import Outcome, TrialRecord
 
 __all__ = ["ERROR_WINDOWS", "TCT_POLICIES", "MetricOptions", "TrialTable", "compute_trials"]
 
@@ -90,41 +91,134 @@ def _close(a: float, b: float) -> bool:
     return abs(a - b) <= _AGREE_REL * max(abs(a), abs(b), 1e-12)
 
 
-#: Per analysed trial: (row, has samples, success, tct, rmse, max_ae, time in band, peak, first contact, agrees)
-_Row = tuple[int, bool, bool, float, float, float, float, float, float, bool]
+@dataclass(frozen=True, slots=True)
+class _Check:
+    """One analysed trial to recompute: its stored record, its protocol's criterion and where its samples are."""
+
+    row: int
+    stored: TrialRecord
+    tolerance_fraction: float
+    hold_s: float
+    max_trial_s: float
+    where: tuple[int, int, int, int] | None
+
+
+@dataclass(frozen=True, slots=True)
+class _Recomputed:
+    """A trial's metrics recomputed in ``window`` (None: it has no samples) and whether the live ones agree."""
+
+    row: int
+    metrics: TrialMetrics | None
+    agrees: bool
 
 
 def _nan(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
-_Spec = tuple[int, int, float, float, float, float, str, float, float, float, "tuple[int, int, int, int] | None"]
+def _agrees(live: TrialMetrics, stored: TrialRecord) -> bool:
+    """The metrics recomputed over the cue window are the ones stored during the session."""
+    return (live.success == stored.success and _close(_nan(live.tct_s), _nan(stored.tct_s))
+            and _close(live.rmse_n, _nan(stored.rmse_n)) and _close(live.max_ae_n, _nan(stored.max_ae_n)))
 
 
-def _chunk(database: str, specs: list[_Spec], window: str) -> list[_Row]:
+def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed]:
     """Recompute the metrics of some trials of one database (runs in a worker process)."""
-    out: list[_Row] = []
+    out: list[_Recomputed] = []
     conn = connect_readonly(database)
     try:
-        for row, tid, target, tol, hold, cap, outcome, s_tct, s_rmse, s_max, where in specs:
-            t_ns, force = read_task_force(conn, tid, where)
+        for c in checks:
+            t_ns, force = read_task_force(conn, c.stored.trial_id, c.where)
             if len(t_ns) == 0:
-                out.append((row, False, outcome == "success", *(math.nan,) * 6, True))
+                out.append(_Recomputed(c.row, None, True))
                 continue
-            kw = dict(tolerance_fraction=tol, hold_s=hold, max_trial_s=cap)
-            m = trial_metrics(t_ns, force, target, window=window, **kw)
-            live = m if window == "cue" else trial_metrics(t_ns, force, target, **kw)
-            agrees = (
-                live.success == (outcome == "success")
-                and _close(_nan(live.tct_s), s_tct)
-                and _close(live.rmse_n, s_rmse)
-                and _close(live.max_ae_n, s_max)
-            )
-            out.append((row, True, m.success, _nan(m.tct_s), m.rmse_n, m.max_ae_n, m.time_in_band_s,
-                        m.peak_force_n, _nan(m.first_contact_s), agrees))
+            kw = dict(tolerance_fraction=c.tolerance_fraction, hold_s=c.hold_s, max_trial_s=c.max_trial_s)
+            m = trial_metrics(t_ns, force, c.stored.target_force_n, window=window, **kw)
+            live = m if window == "cue" else trial_metrics(t_ns, force, c.stored.target_force_n, **kw)
+            out.append(_Recomputed(c.row, m, _agrees(live, c.stored)))
     finally:
         conn.close()
     return out
+
+
+def _checks(inc: pd.DataFrame) -> list[_Check]:
+    """What each analysed trial's worker needs, in row order."""
+    crit = {c: inc[c].to_numpy(dtype=float) for c in ("tolerance_fraction", "hold_s", "max_trial_s")}
+    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"])]
+    return [_Check(i, rec, crit["tolerance_fraction"][i], crit["hold_s"][i], crit["max_trial_s"][i], wheres[i])
+            for i, rec in enumerate(stored_records(inc))]
+
+
+def _tasks(inc: pd.DataFrame, checks: list[_Check], workers: int, window: str,
+           ) -> tuple[list[tuple[str, list[_Check], str]], list[float], float]:
+    """The checks cut into chunks of about an equal number of samples, several per worker so the work evens out.
+
+    Returns the tasks (one database each), each chunk's weight and the total weight (samples read, roughly).
+    """
+    weights = np.nan_to_num(inc["n_samples"].to_numpy(dtype=float), nan=1.0) + 1.0
+    per_chunk = max(1.0, float(weights.sum()) / (4 * workers)) if workers > 1 else float("inf")
+    tasks: list[tuple[str, list[_Check], str]] = []
+    chunk_weight: list[float] = []
+    for db in dict.fromkeys(inc["database"]):
+        cur: list[_Check] = []
+        w = 0.0
+        for i in np.flatnonzero((inc["database"] == db).to_numpy()):
+            cur.append(checks[i])
+            w += weights[i]
+            if w >= per_chunk:
+                tasks.append((str(db), cur, window))
+                chunk_weight.append(w)
+                cur, w = [], 0.0
+        if cur:
+            tasks.append((str(db), cur, window))
+            chunk_weight.append(w)
+    return tasks, chunk_weight, float(weights.sum())
+
+
+def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricOptions) -> TrialTable:
+    """The analysed trials: recomputed metrics where there were samples, the stored ones elsewhere."""
+    n = len(inc)
+    cols = np.full((n, 6), np.nan)
+    success = (inc["outcome"] == Outcome.SUCCESS).to_numpy().copy()
+    from_samples = np.zeros(n, dtype=bool)
+    disagree = 0
+    for chunk in results:
+        for r in chunk:
+            if r.metrics is not None:
+                m = r.metrics
+                from_samples[r.row] = True
+                success[r.row] = m.success
+                cols[r.row] = (_nan(m.tct_s), m.rmse_n, m.max_ae_n, m.time_in_band_s, m.peak_force_n,
+                               _nan(m.first_contact_s))
+                disagree += not r.agrees
+    # trials without samples keep the metrics stored live (cue window only)
+    missing = ~from_samples
+    for k, name in enumerate(("tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")):
+        if options.error_window == "cue" or name not in ("rmse_n", "max_ae_n"):
+            cols[missing, k] = inc.loc[missing, f"stored_{name}"].to_numpy(dtype=float)
+    out = pd.DataFrame(
+        {
+            "participant_code": inc["participant_code"],
+            "participant_number": inc["participant_number"].astype(np.int64),
+            "session_id": inc["session_id"].astype(np.int64),
+            "trial_index": inc["trial_index"].astype(np.int64),
+            "started_at_s": inc["started_at_s"].to_numpy(dtype=float),
+            "target_label": inc["target_label"],
+            "target_force_n": inc["target_force_n"].to_numpy(dtype=float),
+            "haptic_mode": inc["haptic_mode"],
+            "outcome": np.where(success, Outcome.SUCCESS.value, Outcome.TIMEOUT.value),
+            "success": success,
+            "tct_s": cols[:, 0],
+            "rmse_n": cols[:, 1],
+            "max_ae_n": cols[:, 2],
+            "time_in_band_s": cols[:, 3],
+            "peak_force_n": cols[:, 4],
+            "first_contact_s": cols[:, 5],
+            "tct_censored_s": np.where(success, cols[:, 0], inc["max_trial_s"].to_numpy(dtype=float)),
+            "database": inc["database"],
+        }
+    )
+    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree)
 
 
 def compute_trials(
@@ -152,38 +246,8 @@ def compute_trials(
     TrialTable
     """
     inc = study.included.reset_index(drop=True)
-    n = len(inc)
-    nums = {c: inc[c].to_numpy(dtype=float) for c in
-            ("target_force_n", "tolerance_fraction", "hold_s", "max_trial_s", "stored_tct_s", "stored_rmse_n",
-             "stored_max_ae_n", "n_samples")}
-    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"])]
-    specs = [
-        (i, int(tid), nums["target_force_n"][i], nums["tolerance_fraction"][i], nums["hold_s"][i],
-         nums["max_trial_s"][i], str(outcome), nums["stored_tct_s"][i], nums["stored_rmse_n"][i],
-         nums["stored_max_ae_n"][i], wheres[i])
-        for i, (tid, outcome) in enumerate(zip(inc["trial_id"], inc["outcome"]))
-    ]
     workers = default_workers() if workers is None else max(1, int(workers))
-    # chunks of about an equal number of samples, several per worker so the work evens out
-    weights = np.nan_to_num(nums["n_samples"], nan=1.0) + 1.0
-    per_chunk = max(1.0, float(weights.sum()) / (4 * workers)) if workers > 1 else float("inf")
-    tasks: list[tuple[str, list, str]] = []
-    chunk_weight: list[float] = []
-    for db in dict.fromkeys(inc["database"]):
-        rows = np.flatnonzero((inc["database"] == db).to_numpy())
-        cur: list = []
-        w = 0.0
-        for i in rows:
-            cur.append(specs[i])
-            w += weights[i]
-            if w >= per_chunk:
-                tasks.append((str(db), cur, options.error_window))
-                chunk_weight.append(w)
-                cur, w = [], 0.0
-        if cur:
-            tasks.append((str(db), cur, options.error_window))
-            chunk_weight.append(w)
-    total = float(weights.sum())
+    tasks, chunk_weight, total = _tasks(inc, _checks(inc), workers, options.error_window)
     done = [0.0]
 
     def tick(i: int, _: object) -> None:
@@ -193,44 +257,4 @@ def compute_trials(
 
     if progress is not None:
         progress(0.0, total)
-    results = run_tasks(_chunk, tasks, workers=workers, on_done=tick)
-    cols = np.full((n, 6), np.nan)
-    success = (inc["outcome"] == "success").to_numpy().copy()
-    from_samples = np.zeros(n, dtype=bool)
-    disagree = 0
-    for chunk in results:
-        for row, has, ok, *vals, agrees in chunk:
-            if has:
-                from_samples[row] = True
-                success[row] = ok
-                cols[row] = vals
-                disagree += not agrees
-    # trials without samples keep the metrics stored live (cue window only)
-    missing = ~from_samples
-    for k, name in enumerate(("tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")):
-        if options.error_window == "cue" or name not in ("rmse_n", "max_ae_n"):
-            cols[missing, k] = inc.loc[missing, f"stored_{name}"].to_numpy(dtype=float)
-    cap = nums["max_trial_s"]
-    out = pd.DataFrame(
-        {
-            "participant_code": inc["participant_code"],
-            "participant_number": inc["participant_number"].astype(np.int64),
-            "session_id": inc["session_id"].astype(np.int64),
-            "trial_index": inc["trial_index"].astype(np.int64),
-            "started_at_s": inc["started_at_s"].to_numpy(dtype=float),
-            "target_label": inc["target_label"],
-            "target_force_n": nums["target_force_n"],
-            "haptic_mode": inc["haptic_mode"],
-            "outcome": np.where(success, "success", "timeout"),
-            "success": success,
-            "tct_s": cols[:, 0],
-            "rmse_n": cols[:, 1],
-            "max_ae_n": cols[:, 2],
-            "time_in_band_s": cols[:, 3],
-            "peak_force_n": cols[:, 4],
-            "first_contact_s": cols[:, 5],
-            "tct_censored_s": np.where(success, cols[:, 0], cap),
-            "database": inc["database"],
-        }
-    )
-    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree)
+    return _table(inc, run_tasks(_chunk, tasks, workers=workers, on_done=tick), options)

@@ -47,8 +47,12 @@ class TrialSpec:
     index: int
     target_label: str
     target_force_n: float
-    haptic_mode: str
+    haptic_mode: HapticMode
     repeat_of: int | None = None  # index of the aborted trial this one re-runs
+
+    def __post_init__(self) -> None:
+        # a mode read from a protocol file or a stored schedule ("on"/"off") becomes the enum (the same TEXT)
+        object.__setattr__(self, "haptic_mode", HapticMode(self.haptic_mode))
 
 
 def _cells(p: ProtocolConfig, modes: tuple[str, ...]) -> list[tuple[str, float, str]]:

@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 from typing import Final
 
 from protocol.storage import CODE_PATTERN
-from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
+from protocol.records import TrialRecord
+from protocol.trial import PhaseChanged, TrialPhase
 
 __all__ = ["FAULT_KINDS", "FaultPlan", "RehearsalTrigger", "parse_fault_plan"]
 
@@ -150,9 +151,9 @@ class RehearsalTrigger:
                     p.trial_index = ev.trial_index
                     if p.plan.kind != "kill":
                         self.inject(p.plan.kind, p.at_ns)
-        elif isinstance(ev, TrialFinished):
+        elif isinstance(ev, TrialRecord):
             for p in list(self._pending):
-                if p.trial_index == ev.spec.index and p.at_ns is not None and p.at_ns > ev.end_ns:
+                if p.trial_index == ev.trial_index and p.at_ns is not None and p.at_ns > ev.end_ns:
                     # the trial ended first: the fault would hit the pause or the next trial, not this one
                     self._pending.remove(p)
                     if p.plan.kind != "kill":

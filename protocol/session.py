@@ -20,18 +20,8 @@ later position (``reinsert``) -- so every target × mode cell still gets its
 full count of completed trials.  Aborting the session aborts the current
 trial without re-queueing it and ends the session with status ``aborted``.
 
-**A trial counts only if it ran under its designed condition.**  The runner
-checks every record of the running trial and aborts the trial (cause in
-brackets) at the first one where
-
-* the loop's watchdog has a fault latched (``fault``);
-* feedback was not what the design says: the loop's haptics flag differs from
-  the trial's mode, the feedback gain is below 1 in a haptics-ON trial after
-  its ramp-in, or above 0 in a haptics-OFF trial, or the haptic device's
-  thermal derating cut the rendered force below the designed one in a
-  haptics-ON trial (the record's ``derate`` < 1) (``feedback``);
-* records are missing: two consecutive records further apart than the
-  watchdog's sensor-age limit, or records the runner could not read (``gap``).
+**A trial counts only if it ran under its designed condition**: the runner aborts it at the
+first record where the loop did not deliver it as designed (:mod:`protocol.delivery`).
 
 Every loop event (a fault latched with the value that tripped it, a
 condition gone, a reset) is stored as an event.  No trial is cued while a
@@ -41,12 +31,8 @@ itself resets a fault in the pause once its condition is gone; if one is
 still latched ``fault_timeout_s`` (10 s) later the session stops as
 *interrupted* (resumable later) with a one-line :attr:`SessionRunner.stop_reason`.
 
-Each trial row also carries the loop's health over the trial's records
-(:data:`protocol.storage.HEALTH_COLUMNS`): tick period p50/p99/max, ticks over
-2 ms, the oldest F/T sample and robot pose used, and the latency from a
-sample's arrival to the force command it produced (p50/max).  An aborted
-trial's records end with the one that aborted it (a stalled tick's period, a
-stale sample's age are in its health).
+A finished trial is one :class:`protocol.records.TrialRecord`: stored by the recorder and handed
+to the runner's listeners as it is.
 
 **The whole session is recorded** (:mod:`protocol.recording`): the runner asks
 the loop for a snapshot of the framework (:class:`pipeline.loop.StartRecording`)
@@ -59,15 +45,13 @@ row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 
 from __future__ import annotations
 
-import math
+import secrets
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
-
-import secrets
 
 from pipeline.devices import Fault
 from pipeline.loop_messages import (
@@ -80,13 +64,16 @@ from pipeline.loop_messages import (
     StartRecording,
     StopRecording,
 )
+from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig
-from protocol.design import TrialSpec, requeue_aborted, schedule_to_json
+from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
+from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.recording import rows_to_columns
-from protocol.storage import Recorder, StudyDatabase, trial_id_of
+from protocol.records import AbortCause, Outcome, TrialRecord
+from protocol.storage import Recorder
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
-__all__ = ["DeliveryLimits", "SessionRunner", "SessionState", "TrialParticipant", "trial_health", "trial_words"]
+__all__ = ["SessionRunner", "SessionState", "TrialParticipant", "first_unfinished", "trial_words"]
 
 
 class TrialParticipant(Protocol):
@@ -99,30 +86,6 @@ class TrialParticipant(Protocol):
     def end_trial(self, t_s: float) -> None:
         """The trial ended; rest until the next cue."""
         ...
-
-
-@dataclass(frozen=True, slots=True)
-class DeliveryLimits:
-    """What the loop must deliver for a trial to count (taken from the loop's own configuration).
-
-    Attributes
-    ----------
-    feedback_ramp_in_s
-        The safety stage's ramp-in after feedback is switched on (its gain is 1 after it).
-    feedback_ramp_out_s
-        The ramp-down after feedback is switched off (its gain is 0 after it).
-    max_gap_s
-        Longest allowed time between two consecutive records of a trial (the
-        watchdog's sensor-age limit: a longer gap is a stretch in which the
-        force was not rendered from fresh data).
-    grace_s
-        Allowance on the ramps for a late tick.
-    """
-
-    feedback_ramp_in_s: float = 0.5
-    feedback_ramp_out_s: float = 0.04
-    max_gap_s: float = 0.005
-    grace_s: float = 0.01
 
 
 @dataclass
@@ -144,8 +107,6 @@ class SessionState:
     waiting: str = ""
 
 
-#: Record columns the loop-health summary of a trial reads.
-_HEALTH_SRC = ("period_s", "sensor_age_s", "pose_age_s", "latency_s")
 #: Headless: a latched fault is reset at most this often while its condition may still be there.
 RESET_RETRY_S = 0.5
 #: Headless: a fault still latched this long after the runner started waiting stops the session (interrupted).
@@ -161,36 +122,6 @@ def trial_words(trial_index: int) -> str:
     ``trial_words(3)`` is ``"trial 4 (index 3)"``; a pause (index −1) is ``"the pause"``.
     """
     return "the pause" if trial_index < 0 else f"trial {trial_index + 1} (index {trial_index})"
-
-
-def trial_health(period_s: np.ndarray, sensor_age_s: np.ndarray, pose_age_s: np.ndarray,
-                 latency_s: np.ndarray) -> dict[str, float | int | None]:
-    """The loop's health over a trial's records (the ``trials`` columns :data:`protocol.storage.HEALTH_COLUMNS`).
-
-    Parameters
-    ----------
-    period_s, sensor_age_s, pose_age_s, latency_s
-        The records' columns of the same names, s.
-
-    Returns
-    -------
-    dict
-        Times in ms; ``periods_over_2ms`` a count.  All None for a trial without records.
-    """
-    if len(period_s) == 0:
-        return dict.fromkeys(("period_p50_ms", "period_p99_ms", "period_max_ms", "periods_over_2ms",
-                              "sensor_age_max_ms", "pose_age_max_ms", "latency_p50_ms", "latency_max_ms"))
-    p50, p99 = np.quantile(period_s, (0.5, 0.99))
-    return {
-        "period_p50_ms": float(p50) * 1e3,
-        "period_p99_ms": float(p99) * 1e3,
-        "period_max_ms": float(np.max(period_s)) * 1e3,
-        "periods_over_2ms": int(np.count_nonzero(period_s > 0.002)),
-        "sensor_age_max_ms": float(np.max(sensor_age_s)) * 1e3,
-        "pose_age_max_ms": float(np.max(pose_age_s)) * 1e3,
-        "latency_p50_ms": float(np.quantile(latency_s, 0.5)) * 1e3,
-        "latency_max_ms": float(np.max(latency_s)) * 1e3,
-    }
 
 
 class SessionRunner:
@@ -265,7 +196,8 @@ class SessionRunner:
         self.machine = TrialMachine(protocol.trial)
         self._rng = np.random.default_rng([seed, session_id, 7])
         self._offset_s = session_clock_offset_s
-        self._t0_ns: int | None = None
+        #: Session time of loop timestamps, from this run's first record on (None before it).
+        self.clock: SessionClock | None = None
         self._last_t_ns = 0
         self._lock = threading.Lock()
         self._requests: list[tuple[str, str, str, int | None]] = []
@@ -273,7 +205,7 @@ class SessionRunner:
         self.done = False
         self.status = "running"
         self.state = SessionState(trials_total=len(self.schedule))
-        self.finished: list[TrialFinished] = []
+        self.finished: list[TrialRecord] = []
         self.listeners: list[Callable[[object], None]] = []
         self.limits = limits or DeliveryLimits()
         self.auto_reset_faults = auto_reset_faults
@@ -286,9 +218,8 @@ class SessionRunner:
         self._condition_gone = False  # the loop said a latched fault's condition went away
         self._waiting_since_ns: int | None = None
         self._next_reset_ns = 0
-        self._last_marked_ns: int | None = None  # the running trial's newest record
-        self._health: list[np.ndarray] = []
-        self._abort_cause: dict[int, str] = {}  # trial index -> cause of its abort
+        self._window = TrialWindow()  # the running trial's records
+        self._abort_cause: dict[int, AbortCause] = {}  # trial index -> cause of its abort
         self._pending_gap = ""  # records lost before the next block
         self.segment = segment
         self._scales = dict(scales or {})
@@ -296,9 +227,7 @@ class SessionRunner:
         self._log: list[tuple[int, str, object]] = []  # replay log entries not yet handed on
         self._start_tick: int | None = None  # the tick the recording (and the session clock) starts at
         self._snapshot: object = None  # the loop's snapshot payload at that tick
-        self._trial_ticks: tuple[int, int] | None = None  # first and last record of the running trial
         self._failed_in_a_row = 0  # trials the loop did not deliver as designed, since the last that it did
-        self.last_abort_cause: str | None = None
         self._enter_pause_commands()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick
         self.submit(StartRecording(self._token))
@@ -312,8 +241,8 @@ class SessionRunner:
         """Continue after :meth:`pause`."""
         self._request("resume")
 
-    def abort_trial(self, reason: str = "aborted by the experimenter", cause: str = "experimenter",
-                    trial_index: int | None = None) -> None:
+    def abort_trial(self, reason: str = "aborted by the experimenter",
+                    cause: AbortCause | str = AbortCause.EXPERIMENTER, trial_index: int | None = None) -> None:
         """Abort the running trial; it is re-queued per the protocol's abort policy.
 
         ``cause`` goes to ``trials.abort_cause`` (``experimenter``, or ``interrupted``
@@ -339,8 +268,8 @@ class SessionRunner:
     # -- helpers ------------------------------------------------------------------------------------
     def session_time_s(self, t_ns: int) -> float:
         """Session-clock time of a loop timestamp."""
-        t0 = self._t0_ns if self._t0_ns is not None else t_ns
-        return self._offset_s + (t_ns - t0) / 1e9
+        clock = self.clock if self.clock is not None else SessionClock(self._offset_s, t_ns)
+        return clock.seconds(t_ns)
 
     def _event(self, t_ns: int, kind: str, detail: str = "") -> None:
         self.recorder.event(self.session_id, self.session_time_s(t_ns), kind, detail)
@@ -376,18 +305,20 @@ class SessionRunner:
                 return  # the loop has not taken the snapshot yet: these records are not the session's
         else:
             self._log.extend(replay_log)
-        if self.done or (len(rows) == 0 and self._t0_ns is None):
+        if self.done or (len(rows) == 0 and self.clock is None):
             return
-        if self._t0_ns is None:
-            t0 = self._t0_ns = int(rows["t_ns"][0])
+        if self.clock is None:
+            t0 = int(rows["t_ns"][0])
+            self.clock = SessionClock(self._offset_s, t0)
             self.recorder.segment(self.session_id, self.segment, self._offset_s, t0,
                                   self._snapshot, self._scales)  # type: ignore[arg-type]
             self._ready_ns = t0 + self._initial_pause_ns
             first_faults = int(rows["faults"][0])
             if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
                 self._event(t0, "fault", f"{Fault(first_faults).describe()}: latched before the session started")
+        t0 = self.clock.t0_ns
         for ev in loop_events:
-            if ev.t_ns >= self._t0_ns:  # (the loop's events from before the session are not its own)
+            if ev.t_ns >= t0:  # (the loop's events from before the session are not its own)
                 self._store_loop_event(ev)
         if len(rows) == 0:
             return
@@ -398,20 +329,20 @@ class SessionRunner:
             return
         if self._pending_gap:
             gap, self._pending_gap = self._pending_gap, ""
-            self._abort_running(int(t_ns_all[0]), f"gap: {gap}", "gap")
+            self._abort_running(int(t_ns_all[0]), f"gap: {gap}", AbortCause.GAP)
         while len(rows) and not self.done:
             cut = self._deviation(rows)
             if cut is None:
                 self._process_part(rows)
                 break
-            i, cause, reason = cut
+            i = cut.index
             self._process_part(rows[:i])
             m = self.machine
             if not self.done and m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) and m.spec is not None \
                     and int(rows["trial_index"][i]) == m.spec.index:
                 # the record that tripped the abort is the trial's last: its window and health show the cause
-                self._note_trial_records(rows[i : i + 1])
-                self._abort_running(int(rows["t_ns"][i]), reason, cause)
+                self._window.note(rows[i : i + 1])
+                self._abort_running(int(rows["t_ns"][i]), cut.reason, cut.cause)
             rows = rows[i:]
 
     def _from_snapshot(self, rows: np.ndarray) -> np.ndarray:
@@ -443,7 +374,8 @@ class SessionRunner:
         events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].astype(np.int64).tolist()))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
-            self._trial_records(rows, t_ns_all, spec, events)
+            ended = next((e for e in events if isinstance(e, TrialFinished)), None)
+            self._window.note_trial(rows, t_ns_all, spec.index, m.cue_ns, ended)
         for ev in events:
             self._on_event(ev)
         t_last = self._last_t_ns = int(t_ns_all[-1])
@@ -464,67 +396,12 @@ class SessionRunner:
         if m.phase is TrialPhase.IDLE and not self.done:
             self._start_next(t_last)
 
-    def _deviation(self, rows: np.ndarray) -> tuple[int, str, str] | None:
-        """The first record at which the running trial left its designed condition: (index, cause, reason)."""
+    def _deviation(self, rows: np.ndarray) -> Deviation | None:
+        """The first record at which the running trial left its designed condition (None: no trial, or none)."""
         m = self.machine
-        spec = m.spec
-        if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE) or spec is None:
+        if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE) or m.spec is None:
             return None
-        marked = np.flatnonzero(rows["trial_index"] == spec.index)
-        if len(marked) == 0:
-            return None
-        t = rows["t_ns"][marked].astype(np.int64)
-        cue = m.cue_ns if m.cue_ns is not None else int(t[0])
-        lim = self.limits
-        found: list[tuple[int, int, str, str]] = []  # (record index, priority, cause, reason)
-        faults = rows["faults"][marked]
-        bad = np.flatnonzero(faults != 0)
-        if len(bad):
-            k = int(bad[0])
-            what = self._fault_detail or Fault(int(faults[k])).describe()
-            found.append((int(marked[k]), 0, "fault", f"fault: {what}"))
-        prev = np.concatenate(([self._last_marked_ns if self._last_marked_ns is not None else t[0]], t[:-1]))
-        gaps = np.flatnonzero((t - prev) > int(round(lim.max_gap_s * 1e9)))
-        if len(gaps):
-            k = int(gaps[0])
-            found.append((int(marked[k]), 1, "gap",
-                          f"gap: no loop record for {(t[k] - prev[k]) * 1e-6:.1f} ms (limit {lim.max_gap_s * 1e3:g} ms)"))
-        on = spec.haptic_mode == "on"
-        flag = rows["haptic_on"][marked]
-        wrong = np.flatnonzero(flag != (1.0 if on else 0.0))
-        if len(wrong):
-            k = int(wrong[0])
-            found.append((int(marked[k]), 2, "feedback",
-                          f"feedback: haptics were {'off' if on else 'on'} in a haptics-{spec.haptic_mode.upper()} trial"))
-        gain = rows["gain"][marked]
-        rel = t - cue
-        if on:
-            low = np.flatnonzero((gain < 1.0) & (rel > int(round((lim.feedback_ramp_in_s + lim.grace_s) * 1e9))))
-            if len(low):
-                k = int(low[0])
-                found.append((int(marked[k]), 2, "feedback",
-                              f"feedback: gain {gain[k]:.3f} below 1 after the {lim.feedback_ramp_in_s:g} s ramp-in "
-                              "of a haptics-ON trial"))
-            derate = rows["derate"][marked]
-            cut = np.flatnonzero(derate < 1.0)
-            if len(cut):
-                k = int(cut[0])
-                # rounded down: a cut to 99.996 % must not read "100 %"
-                pct = math.floor(float(derate[k]) * 1e4) / 1e2
-                found.append((int(marked[k]), 2, "feedback",
-                              f"feedback: the haptic device's thermal derating rendered {pct:.2f} % of the "
-                              "designed force in a haptics-ON trial"))
-        else:
-            high = np.flatnonzero((gain > 0.0) & (rel > int(round((lim.feedback_ramp_out_s + lim.grace_s) * 1e9))))
-            if len(high):
-                k = int(high[0])
-                found.append((int(marked[k]), 2, "feedback",
-                              f"feedback: gain {gain[k]:.3f} above 0 in a haptics-OFF trial"))
-        if not found:
-            self._last_marked_ns = int(t[-1])
-            return None
-        i, _, cause, reason = min(found)
-        return i, cause, reason
+        return self._window.deviation(rows, m.spec, m.cue_ns, self.limits, self._fault_detail)
 
     def _store_loop_event(self, ev: LoopEvent) -> None:
         if ev.kind == "fault":
@@ -541,85 +418,40 @@ class SessionRunner:
             detail = ev.detail
         self._event(int(ev.t_ns), ev.kind, detail)
 
-    def _trial_records(self, rows: np.ndarray, t_ns: np.ndarray, spec: TrialSpec, events: list[Any]) -> None:
-        """Note which records are the trial's (cue to end) and their loop health."""
-        cue = self.machine.cue_ns
-        end = next((e.end_ns for e in events if isinstance(e, TrialFinished)), None)
-        if cue is None:
-            if end is None:
-                return
-            cue = next(e.cue_ns for e in events if isinstance(e, TrialFinished))
-        mask = (rows["trial_index"] == spec.index) & (t_ns >= cue)
-        if end is not None:
-            mask &= t_ns <= end
-        if not mask.any():
-            return
-        self._note_trial_records(rows[mask])
-
-    def _note_trial_records(self, sel: np.ndarray) -> None:
-        """These records are the running trial's: extend its window, keep their loop health."""
-        ticks = sel["tick"]
-        first = int(ticks[0]) if self._trial_ticks is None else self._trial_ticks[0]
-        self._trial_ticks = (first, int(ticks[-1]))
-        # one float64 array, not a list of row lists: no garbage-collector-tracked objects per sample
-        # (a live session's collector passes would otherwise scan ~1000 such lists, GIL held, loop waiting)
-        self._health.append(np.column_stack([np.asarray(sel[c], dtype=np.float64) for c in _HEALTH_SRC]))
-
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):
             self.state.phase = str(ev.new)
             self._event(ev.t_ns, "phase", f"{trial_words(ev.trial_index)}: {ev.old} -> {ev.new}")
+            self._emit(ev)
         elif isinstance(ev, TrialFinished):
-            self._finish_trial(ev)
-        self._emit(ev)
+            self._emit(self._finish_trial(ev))
 
-    def _finish_trial(self, ev: TrialFinished) -> None:
-        spec, met = ev.spec, ev.metrics
-        block = np.concatenate(self._health) if self._health else np.empty((0, len(_HEALTH_SRC)))
-        self._health = []
-        self._last_marked_ns = None
-        ticks, self._trial_ticks = self._trial_ticks, None
-        cause = self._abort_cause.pop(spec.index, "experimenter") if ev.outcome == "aborted" else None
-        #: The cause of the last aborted trial (``trials.abort_cause``), for listeners.
-        self.last_abort_cause = cause
-        self._failed_in_a_row = self._failed_in_a_row + 1 if cause in ("fault", "feedback", "gap") else 0
-        self.recorder.trial(
-            {
-                "trial_id": trial_id_of(self.session_id, spec.index),
-                "session_id": self.session_id,
-                "trial_index": spec.index,
-                "target_label": spec.target_label,
-                "target_force_n": spec.target_force_n,
-                "haptic_mode": spec.haptic_mode,
-                "outcome": ev.outcome,
-                "started_at_s": self.session_time_s(ev.cue_ns),
-                "ended_at_s": self.session_time_s(ev.end_ns),
-                "tct_s": met.tct_s if ev.outcome == "success" else None,
-                "rmse_n": met.rmse_n,
-                "max_ae_n": met.max_ae_n,
-                "time_in_band_s": met.time_in_band_s,
-                "peak_force_n": met.peak_force_n,
-                "n_samples": met.n_samples,
-                "abort_reason": ev.reason or None,
-                "repeat_of": spec.repeat_of,
-                "abort_cause": cause,
-                **trial_health(*block.T),
-                "segment": self.segment if ticks is not None else None,
-                "first_tick": ticks[0] if ticks is not None else None,
-                "last_tick": ticks[1] if ticks is not None else None,
-            }
+    def _finish_trial(self, ev: TrialFinished) -> TrialRecord:
+        """Store the trial that ended and count it; its record (what the listeners get)."""
+        spec = ev.spec
+        ticks, health = self._window.take()
+        aborted = ev.outcome is Outcome.ABORTED
+        cause = self._abort_cause.pop(spec.index, AbortCause.EXPERIMENTER) if aborted else None
+        self._failed_in_a_row = self._failed_in_a_row + 1 if cause is not None and cause.undelivered else 0
+        assert self.clock is not None  # a trial ends only on a record
+        record = TrialRecord.finished(
+            session_id=self.session_id, spec=spec, outcome=ev.outcome, clock=self.clock, cue_ns=ev.cue_ns,
+            end_ns=ev.end_ns, metrics=ev.metrics, reason=ev.reason, cause=cause, health=health,
+            segment=self.segment, ticks=ticks,
         )
-        self.finished.append(ev)
+        self.recorder.trial(record)
+        self.finished.append(record)
         st = self.state
-        if ev.outcome == "aborted":
+        if aborted:
             st.aborted += 1
         else:
             st.completed += 1
-            st.successes += ev.outcome == "success"
+            st.successes += record.success
         self._enter_pause_commands()
         if self.participant is not None:
             self.participant.end_trial(self.participant_time())
         self.position = spec.index + 1
+        return record
 
     def _start_next(self, t_ns: int) -> None:
         if self.paused or self._faults:
@@ -643,19 +475,20 @@ class SessionRunner:
         self._event(t_ns, "cue", f"{trial_words(spec.index)}: {spec.target_label} {spec.target_force_n:g} N, "
                                  f"haptics {spec.haptic_mode}")
         self.submit(AllowBiasRefinement(False))
-        self.submit(SetHaptics(spec.haptic_mode == "on"))
+        on = spec.haptic_mode is HapticMode.ON
+        self.submit(SetHaptics(on))
         self.submit(Mark(spec.index, PHASE_CODES[TrialPhase.ACTIVE]))
         p = self.participant
         if p is not None:
             if self.live_force_aid and hasattr(p, "practice"):
-                p.practice(spec.target_force_n, spec.haptic_mode == "on", self.participant_time(), True)
+                p.practice(spec.target_force_n, on, self.participant_time(), True)
             else:
-                p.begin_trial(spec.target_force_n, spec.haptic_mode == "on", self.participant_time())
+                p.begin_trial(spec.target_force_n, on, self.participant_time())
 
     def _too_many_failed(self, t_ns: int) -> None:
         """The loop failed several trials in a row: stop cueing (headless: interrupt; a person's session: pause)."""
         last = self.finished[-1]
-        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: {last.reason}); "
+        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: {last.abort_reason}); "
                "the rig or the machine cannot hold the designed condition")
         self._failed_in_a_row = 0
         if self.auto_reset_faults:
@@ -699,14 +532,14 @@ class SessionRunner:
             self._next_reset_ns = t_ns + int(RESET_RETRY_S * 1e9)
             self.submit(ResetFaults())
 
-    def _abort_running(self, t_ns: int, reason: str, cause: str, requeue: bool = True) -> None:
+    def _abort_running(self, t_ns: int, reason: str, cause: AbortCause | str, requeue: bool = True) -> None:
         """Abort the trial that is cued or running (if any), storing its cause; re-queue it per the policy."""
         m = self.machine
         if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
             return
         spec = m.spec
         assert spec is not None
-        self._abort_cause[spec.index] = cause
+        self._abort_cause[spec.index] = AbortCause(cause)
         for ev in m.abort(t_ns, reason):
             self._on_event(ev)
         if requeue:

@@ -32,12 +32,15 @@ import numpy as np
 
 from pipeline.loop import HapticLoop
 from pipeline.loop_messages import Command
+from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig, protocol_from_dict
+from protocol.delivery import DeliveryLimits
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
 from protocol.recording import marked_records
-from protocol.session import DeliveryLimits, SessionRunner, TrialParticipant, first_unfinished, trial_words
-from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope, trial_id_of
+from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
+from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
+from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
 from protocol.version import software_version
 
 __all__ = [
@@ -232,14 +235,14 @@ def open_resumed_session(
         segment = db.next_segment(session_id)
         interrupted = _interrupted_trial(db, info, protocol, schedule, pos)
         if interrupted is not None:
-            row, end_s = interrupted
+            record = interrupted
             spec = schedule[pos]
-            db.insert_trial(row)
+            db.insert_trial(record.to_row())
             schedule = requeue_aborted(schedule, spec, spec.index + 1, protocol.abort_policy,
                                        np.random.default_rng([info.seed, session_id, 7]))
             db.update_schedule(session_id, schedule_to_json(schedule))
-            last_s = max(last_s, end_s)
-            what = (f"{trial_words(spec.index)} (cue at {row['started_at_s']:.3f} s, {row['n_samples']} samples) was "
+            last_s = max(last_s, record.ended_at_s)
+            what = (f"{trial_words(spec.index)} (cue at {record.started_at_s:.3f} s, {record.n_samples} samples) was "
                     "stored as aborted (interrupted) and re-queued")
             notes.append(what)
             pos += 1
@@ -260,8 +263,8 @@ def open_resumed_session(
 
 def _interrupted_trial(
     db: StudyDatabase, info: SessionInfo, protocol: ProtocolConfig, schedule: list[TrialSpec], pos: int,
-) -> tuple[dict[str, Any], float] | None:
-    """The trial row of a trial that was cued but never finished (and its end on the session clock), or None.
+) -> TrialRecord | None:
+    """The record of a trial that was cued but never finished, or None.
 
     Its records are those the loop marked with it: in the session's recording
     (version 3), or its rows of the ``samples`` table (a session begun by version 2).
@@ -273,34 +276,31 @@ def _interrupted_trial(
     cue_s = _cue_time_s(db, sid, spec.index)
     if cue_s is None:
         return None  # never cued: it simply runs now
-    where: dict[str, Any] = {}
+    segment, ticks, origin_ns = None, None, 0
     marked = marked_records(db.conn, sid, spec.index, ("force_n",))
     if marked is not None:
         (segment, started_at_s, t0_ns), cols = marked
-        t_ns = cols["t_ns"] - cols["t_ns"][0]  # from its first marked record: the trial's time origin
+        t_ns = cols["t_ns"].astype(np.int64)  # loop clock; the first marked record is the trial's time origin
         force = cols["force_n"]
-        cue_s = started_at_s + (int(cols["t_ns"][0]) - t0_ns) / 1e9
-        where = {"segment": segment, "first_tick": int(cols["tick"][0]), "last_tick": int(cols["tick"][-1])}
+        origin_ns = int(t_ns[0])
+        cue_s = SessionClock(started_at_s, t0_ns).seconds(origin_ns)
+        ticks = (int(cols["tick"][0]), int(cols["tick"][-1]))
     else:
         samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
                                   (trial_id_of(sid, spec.index),)).fetchall()
-        # t_s was stored as ns / 1e9: rounding recovers the integer ns exactly
+        # t_s was stored as ns / 1e9 since the cue: rounding recovers the integer ns exactly
         t_ns = np.rint(np.array([r[0] for r in samples], dtype=np.float64) * 1e9).astype(np.int64)
         force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
     tr = protocol.trial
-    met = trial_metrics(t_ns, force, spec.target_force_n,
+    met = trial_metrics(t_ns - origin_ns, force, spec.target_force_n,
                         tolerance_fraction=tr.tolerance_fraction, hold_s=tr.hold_s, max_trial_s=tr.max_trial_s)
-    end_s = cue_s + (int(t_ns[-1]) / 1e9 if len(t_ns) else 0.0)
-    row = {
-        "trial_id": trial_id_of(sid, spec.index), "session_id": sid, "trial_index": spec.index,
-        "target_label": spec.target_label, "target_force_n": spec.target_force_n, "haptic_mode": spec.haptic_mode,
-        "outcome": "aborted", "started_at_s": cue_s, "ended_at_s": end_s, "tct_s": None,
-        "rmse_n": met.rmse_n, "max_ae_n": met.max_ae_n, "time_in_band_s": met.time_in_band_s,
-        "peak_force_n": met.peak_force_n, "n_samples": len(t_ns),
-        "abort_reason": "interrupted: the previous run ended during this trial", "repeat_of": spec.repeat_of,
-        "abort_cause": "interrupted", **where,
-    }
-    return row, end_s
+    record = TrialRecord.finished(
+        session_id=sid, spec=spec, outcome=Outcome.ABORTED, clock=SessionClock(cue_s, origin_ns),
+        cue_ns=origin_ns, end_ns=int(t_ns[-1]) if len(t_ns) else origin_ns, metrics=met,
+        reason="interrupted: the previous run ended during this trial", cause=AbortCause.INTERRUPTED,
+        segment=segment, ticks=ticks,
+    )
+    return dataclasses.replace(record, n_samples=len(t_ns))  # every record it had, not only those up to the cap
 
 
 def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float | None:

@@ -26,6 +26,7 @@ from typing import Final
 from protocol.config import TrialTiming
 from protocol.design import TrialSpec
 from protocol.metrics import HoldDetector, TrialMetrics, trial_metrics
+from protocol.records import Outcome
 
 __all__ = ["PhaseChanged", "TrialFinished", "TrialMachine", "TrialPhase", "TRANSITIONS", "TrialMachineError"]
 
@@ -68,10 +69,10 @@ class PhaseChanged:
 
 @dataclass(frozen=True, slots=True)
 class TrialFinished:
-    """A trial ended: ``outcome`` ∈ {success, timeout, aborted}; times in ns on the loop clock."""
+    """A trial ended (the trial machine's event); times in ns on the loop clock."""
 
     spec: TrialSpec
-    outcome: str
+    outcome: Outcome
     cue_ns: int
     end_ns: int
     metrics: TrialMetrics
@@ -146,7 +147,7 @@ class TrialMachine:
             if phase is TrialPhase.ACTIVE:
                 rel = t_ns - self.cue_ns  # type: ignore[operator]
                 if rel > self._cap_ns:
-                    events.extend(self._finish("timeout", self.cue_ns + self._cap_ns))  # type: ignore[operator]
+                    events.extend(self._finish(Outcome.TIMEOUT, self.cue_ns + self._cap_ns))  # type: ignore[operator]
                     # this sample already belongs to the pause
                     if t_ns >= self.pause_until_ns:  # type: ignore[operator]
                         events.append(self._go(TrialPhase.IDLE, t_ns))
@@ -155,9 +156,9 @@ class TrialMachine:
                 self._t.append(rel)
                 self._f.append(force)
                 if self._hold.feed(rel, force):  # type: ignore[union-attr]
-                    events.extend(self._finish("success", t_ns))
+                    events.extend(self._finish(Outcome.SUCCESS, t_ns))
                 elif rel == self._cap_ns:
-                    events.extend(self._finish("timeout", t_ns))
+                    events.extend(self._finish(Outcome.TIMEOUT, t_ns))
         return events
 
     def abort(self, t_ns: int, reason: str) -> list[PhaseChanged | TrialFinished]:
@@ -166,9 +167,9 @@ class TrialMachine:
             raise TrialMachineError(f"no trial to abort in phase {self.phase}")
         if self.cue_ns is None:
             self.cue_ns = t_ns
-        return self._finish("aborted", t_ns, reason)
+        return self._finish(Outcome.ABORTED, t_ns, reason)
 
-    def _finish(self, outcome: str, end_ns: int, reason: str = "") -> list[PhaseChanged | TrialFinished]:
+    def _finish(self, outcome: Outcome, end_ns: int, reason: str = "") -> list[PhaseChanged | TrialFinished]:
         spec = self.spec
         assert spec is not None and self.cue_ns is not None
         m = trial_metrics(
@@ -176,7 +177,7 @@ class TrialMachine:
             tolerance_fraction=self.timing.tolerance_fraction, hold_s=self.timing.hold_s,
             max_trial_s=self.timing.max_trial_s, sample_period_s=self.sample_period_s,
         )
-        if outcome != "aborted" and m.success != (outcome == "success"):  # pragma: no cover - one definition
+        if outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS):  # pragma: no cover - one definition
             raise TrialMachineError("live hold decision disagrees with trial_metrics")
         done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason)
         self.pause_until_ns = end_ns + self._pause_ns

@@ -355,7 +355,7 @@ class StudyEngine:
         self._loop_events.append(ev)
         runner = self.sessions.runner
         session_t = math.nan
-        if runner is not None and not runner.done and runner._t0_ns is not None:
+        if runner is not None and not runner.done and runner.clock is not None:
             session_t = runner.session_time_s(ev.t_ns)  # what the events table will say
         self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail, session_t))
 

@@ -27,7 +27,8 @@ from protocol.session_setup import (
     raw_wrench_scales, start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
-from protocol.trial import PhaseChanged, TrialFinished, TrialPhase
+from protocol.records import AbortCause, TrialRecord
+from protocol.trial import PhaseChanged, TrialPhase
 from study_app import messages as m
 from study_app.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine_core import EngineCore
@@ -37,9 +38,6 @@ from study_app.session_config import config_record, real_config_record
 
 __all__ = ["EngineSessions", "list_resumable"]
 
-#: A stored trial as the GUI's trial table receives it (the keys of a TrialEnded row).
-_TRIAL_ROW_KEYS = ("trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "tct_s", "rmse_n",
-                   "max_ae_n", "abort_reason", "repeat_of")
 
 
 class EngineSessions:
@@ -121,7 +119,7 @@ class EngineSessions:
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)
-        stored = [{k: r[k] for k in _TRIAL_ROW_KEYS} for r in db.trial_rows(opened.session_id)] if opened.resumed else []
+        stored = [TrialRecord.from_row(r) for r in db.trial_rows(opened.session_id)] if opened.resumed else []
         recorder, runner = start_runner(
             db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
@@ -208,19 +206,12 @@ class EngineSessions:
                     spec.target_force_n, spec.haptic_mode,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
-        elif isinstance(ev, TrialFinished):
-            met, spec = ev.metrics, ev.spec
-            cause = runner.last_abort_cause if ev.outcome == "aborted" else None
-            if cause in ("gap", "feedback"):  # not a watchdog fault, so the loop said nothing: say it here
-                self.engine.publish(m.EngineFault(ev.end_ns * 1e-9, cause, int(self.engine.loop.faults), ev.reason,
-                                           runner.session_time_s(ev.end_ns)))
-            self.engine.publish(m.TrialEnded(ev.end_ns * 1e-9, {
-                "trial_index": spec.index, "target_label": spec.target_label, "target_force_n": spec.target_force_n,
-                "haptic_mode": spec.haptic_mode, "outcome": ev.outcome,
-                "tct_s": met.tct_s if ev.outcome == "success" else None, "rmse_n": met.rmse_n,
-                "max_ae_n": met.max_ae_n, "abort_reason": ev.reason or None, "repeat_of": spec.repeat_of,
-                "trials_total": runner.state.trials_total,
-            }))
+        elif isinstance(ev, TrialRecord):
+            cause = ev.abort_cause
+            if cause in (AbortCause.GAP, AbortCause.FEEDBACK):  # not a watchdog fault, so the loop said nothing
+                self.engine.publish(m.EngineFault(ev.end_ns * 1e-9, cause.value, int(self.engine.loop.faults),
+                                                  ev.abort_reason or "", ev.ended_at_s))
+            self.engine.publish(m.TrialEnded(ev.end_ns * 1e-9, ev, runner.state.trials_total))
 
     def end(self, status: str, reason: str) -> None:
         runner, recorder, db, opened = self.runner, self.recorder, self.db, self.opened

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.records import TrialRecord
+
 __all__ = [
     "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
     "EngineFault", "EngineOpening", "EngineReady", "EngineStopped", "FaultInjected", "Health", "InjectFault", "ListSessions", "ManualTarget",
@@ -273,8 +275,8 @@ class SessionStarted:
     live_force_aid: bool
     schedule: list[dict[str, Any]] = field(default_factory=list)
     participant_number: int = 0
-    #: A resumed session's trials stored before (rows as in :class:`TrialEnded`), in index order.
-    stored_trials: list[dict[str, Any]] = field(default_factory=list)
+    #: A resumed session's trials stored before, in index order.
+    stored_trials: list[TrialRecord] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -301,10 +303,11 @@ class PhaseEntered:
 
 @dataclass(frozen=True, slots=True)
 class TrialEnded:
-    """A trial's summary row was stored (``row`` has the ``trials`` table's columns)."""
+    """A trial ended and its record was stored; ``trials_total`` is the schedule's length now (re-runs included)."""
 
     t_s: float
-    row: dict[str, Any]
+    record: TrialRecord
+    trials_total: int
 
 
 @dataclass(frozen=True, slots=True)

@@ -391,7 +391,7 @@ class ExperimenterWindow(QMainWindow):
         k = tr.trial_index
 
         def moot(ev: object) -> bool:
-            return ((isinstance(ev, m.TrialEnded) and ev.row["trial_index"] == k)
+            return ((isinstance(ev, m.TrialEnded) and ev.record.trial_index == k)
                     or (isinstance(ev, m.TrialStarted) and ev.trial_index != k)
                     or isinstance(ev, (m.SessionEnded, m.EngineStopped)))
 

@@ -73,7 +73,7 @@ class QtTrialTable(QTableWidget):
     def _on_row_added(self, i: int) -> None:
         row = self.table.rows[i]
         self.insertRow(i)
-        colour = _OUTCOME_COLOURS.get(str(row["outcome"]))
+        colour = _OUTCOME_COLOURS.get(str(row.outcome))
         for j, text in enumerate(TrialTable.cells(row)):
             item = QTableWidgetItem(text)
             if j != 3:

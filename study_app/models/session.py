@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.records import HapticMode, Outcome, TrialRecord
 from study_app import messages as m
 from study_app.models import Emitter
 
@@ -21,15 +22,15 @@ def _num(v: Any, fmt: str = "{:.2f}") -> str:
 
 @dataclass
 class TrialTable:
-    """Finished trials, filled live from :class:`study_app.messages.TrialEnded` rows."""
+    """Finished trials, filled live from :class:`study_app.messages.TrialEnded` records."""
 
-    rows: list[dict[str, Any]] = field(default_factory=list)
+    rows: list[TrialRecord] = field(default_factory=list)
     row_added: Emitter = field(default_factory=Emitter)
     cleared: Emitter = field(default_factory=Emitter)
 
-    def add(self, row: dict[str, Any]) -> None:
+    def add(self, row: TrialRecord) -> None:
         """Append a finished trial."""
-        self.rows.append(dict(row))
+        self.rows.append(row)
         self.row_added.emit(len(self.rows) - 1)
 
     def clear(self) -> None:
@@ -38,19 +39,19 @@ class TrialTable:
         self.cleared.emit()
 
     @staticmethod
-    def cells(row: dict[str, Any]) -> tuple[str, ...]:
+    def cells(row: TrialRecord) -> tuple[str, ...]:
         """The displayed text of a row, in :data:`TRIAL_COLUMNS` order."""
-        outcome = str(row["outcome"])
-        if row.get("abort_reason"):
-            outcome += f" ({row['abort_reason']})"
+        outcome = str(row.outcome)
+        if row.abort_reason:
+            outcome += f" ({row.abort_reason})"
         return (
-            str(int(row["trial_index"]) + 1),
-            f"{row['target_label']} {row['target_force_n']:g} N",
-            "haptics ON" if row["haptic_mode"] == "on" else "haptics OFF",
+            str(row.trial_index + 1),
+            f"{row.target_label} {row.target_force_n:g} N",
+            "haptics ON" if row.haptic_mode is HapticMode.ON else "haptics OFF",
             outcome,
-            _num(row.get("tct_s")),
-            _num(row.get("rmse_n"), "{:.3f}"),
-            _num(row.get("max_ae_n"), "{:.3f}"),
+            _num(row.tct_s),
+            _num(row.rmse_n, "{:.3f}"),
+            _num(row.max_ae_n, "{:.3f}"),
         )
 
 
@@ -104,10 +105,9 @@ class SessionModel:
             if ev.phase == "pause" and self.session is not None:
                 self.pause_until_s = ev.t_s + self.session.pause_s
         elif isinstance(ev, m.TrialEnded):
-            self._count(ev.row)
+            self._count(ev.record)
             if self.session is not None:
-                total = int(ev.row.get("trials_total", self.session.trials_total))
-                self.session = _with_total(self.session, total)
+                self.session = _with_total(self.session, ev.trials_total)
         elif isinstance(ev, m.SessionEnded):
             self.state = "ended"
             self.message = f"session {ev.session_id} {ev.status}" + (f": {ev.reason}" if ev.reason else "")
@@ -136,9 +136,9 @@ class SessionModel:
         self.table.clear()
         self.changed.emit()
 
-    def _count(self, row: dict[str, Any]) -> None:
+    def _count(self, row: TrialRecord) -> None:
         self.table.add(row)
-        if row["outcome"] == "aborted":
+        if row.outcome is Outcome.ABORTED:
             self.aborted += 1
         else:
             self.completed += 1

@@ -56,12 +56,12 @@ def test_a_whole_session_is_stored_with_its_calibration(engine, tmp_path, short_
     ended = of(events, m.TrialEnded)
     assert [t.position for t in started] == [1, 2]
     assert sorted(t.haptic_mode for t in started) == ["off", "on"]
-    assert [t.row["trial_index"] for t in ended] == [0, 1]
+    assert [t.record.trial_index for t in ended] == [0, 1]
     fin = of(events, m.SessionEnded)
     assert len(fin) == 1 and fin[0].status == "completed" and fin[0].completed == 2 and fin[0].aborted == 0
     stored = db_rows(db, "SELECT trial_index, outcome, rmse_n FROM trials ORDER BY trial_index")
-    assert [(r[0], r[1]) for r in stored] == [(0, ended[0].row["outcome"]), (1, ended[1].row["outcome"])]
-    assert [r[2] for r in stored] == pytest.approx([t.row["rmse_n"] for t in ended])
+    assert [(r[0], r[1]) for r in stored] == [(0, ended[0].record.outcome), (1, ended[1].record.outcome)]
+    assert [r[2] for r in stored] == pytest.approx([t.record.rmse_n for t in ended])
     (status, cal_json, cfg_json), = db_rows(db, "SELECT status, calibration_json, config_json FROM sessions")
     assert status == "completed"
     assert json.loads(cal_json) == e.calibration.to_dict()
@@ -118,7 +118,7 @@ def test_abort_trial_requeues_and_close_leaves_the_session_resumable(engine, tmp
     run_until(e, lambda: len(of(events, m.TrialStarted)) == 1)
     e.handle(m.AbortTrial("participant sneezed"))
     run_until(e, lambda: len(of(events, m.TrialStarted)) == 2)
-    assert of(events, m.TrialEnded)[0].row["outcome"] == "aborted"
+    assert of(events, m.TrialEnded)[0].record.outcome == "aborted"
     assert of(events, m.TrialStarted)[1].trials_total == 3  # re-queued at the end
     run_until(e, lambda: e.runner.machine.elapsed_ns > 200_000_000)
     e.close("the experimenter GUI went away", detached=True)
@@ -231,8 +231,8 @@ def test_a_rehearsed_fault_is_stored_aborts_the_trial_and_waits_for_the_experime
     e.handle(m.InjectFault("sensor-stall", trial=1, seconds=0.2))
     assert of(events, m.CommandRefused) == [] and of(events, m.FaultInjected)[-1].when == "trial 1 + 0.2 s"
     run_until(e, lambda: of(events, m.TrialEnded))
-    ended = of(events, m.TrialEnded)[0].row
-    assert ended["outcome"] == "aborted" and ended["abort_reason"].startswith("fault: SENSOR_STALE")
+    ended = of(events, m.TrialEnded)[0].record
+    assert ended.outcome == "aborted" and ended.abort_reason.startswith("fault: SENSOR_STALE")
     # the GUI saw the fault; no cue follows until the experimenter resets
     assert any(f.kind == "fault" and f.detail.startswith("SENSOR_STALE") for f in of(events, m.EngineFault))
     run_until(e, lambda: e.health().waiting.startswith("fault latched (SENSOR_STALE)"))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,8 @@ from hypothesis import strategies as st
 
 from pipeline.loop_messages import RECORD_FIELDS
 from pipeline.ring import RingBuffer
+from protocol.records import TrialRecord
+from gui_trials import trial_record
 from study_app import messages as m
 from study_app.models.app import AppModel, Notice
 from study_app.models.calibration import CalibrationModel
@@ -98,10 +101,10 @@ def test_setup_refuses_to_build_a_command_when_invalid():
 
 # -- trial table and progress ----------------------------------------------------------------------
 def test_trial_table_cells():
-    row = {"trial_index": 4, "target_label": "GENTLE", "target_force_n": 0.6, "haptic_mode": "off", "outcome": "success",
-           "tct_s": 3.456, "rmse_n": 0.12345, "max_ae_n": 0.5, "abort_reason": None}
+    row = trial_record(trial_index=4, target_label="GENTLE", target_force_n=0.6, haptic_mode="off", outcome="success",
+                       tct_s=3.456, rmse_n=0.12345, max_ae_n=0.5, abort_reason=None)
     assert TrialTable.cells(row) == ("5", "GENTLE 0.6 N", "haptics OFF", "success", "3.46", "0.123", "0.500")
-    row.update(outcome="aborted", tct_s=None, rmse_n=float("nan"), abort_reason="operator")
+    row = dataclasses.replace(row, outcome="aborted", tct_s=None, rmse_n=float("nan"), abort_reason="operator")
     assert TrialTable.cells(row)[3:] == ("aborted (operator)", "–", "–", "0.500")
 
 
@@ -115,8 +118,8 @@ def test_session_progress_follows_events_and_sample_time():
     s.set_time(7.5)
     assert s.progress_text() == "trial 1 of 2 · FIRM · haptics ON ·  9.5 s left"
     assert s.band() == pytest.approx((1.08, 1.32))
-    s.apply(m.TrialEnded(9.0, {"trial_index": 0, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on",
-                               "outcome": "success", "tct_s": 4.0, "rmse_n": 0.1, "max_ae_n": 0.2, "trials_total": 2}))
+    s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
+                                           outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2), 2))
     s.apply(m.PhaseEntered(9.0, 0, "pause"))
     s.set_time(9.5)
     assert s.progress_text() == "1 of 2 trials done · next trial in 1.5 s"
@@ -125,9 +128,9 @@ def test_session_progress_follows_events_and_sample_time():
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
 
 
-def row(i: int, outcome: str = "success") -> dict:
-    return {"trial_index": i, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on", "outcome": outcome,
-            "tct_s": 4.0 if outcome == "success" else None, "rmse_n": 0.1, "max_ae_n": 0.2, "abort_reason": None}
+def row(i: int, outcome: str = "success") -> TrialRecord:
+    return trial_record(trial_index=i, target_label="FIRM", target_force_n=1.2, haptic_mode="on", outcome=outcome,
+                        tct_s=4.0 if outcome == "success" else None, rmse_n=0.1, max_ae_n=0.2, abort_reason=None)
 
 
 def test_a_resumed_session_restores_its_table_and_progress():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from pipeline.loop_messages import RECORD_FIELDS
@@ -10,6 +12,8 @@ from study_app.gui.stall import Stall, StallRecorder, culprit
 from study_app.gui.widgets import QtTrialTable
 from study_app.models.plots import PlotModel, nice_range
 from study_app.models.session import TrialTable
+
+from gui_trials import trial_record
 
 _T = RECORD_FIELDS.index("t_s")
 _RAW_FZ = RECORD_FIELDS.index("raw_fz")
@@ -59,12 +63,12 @@ def test_trial_table_appends_without_rebuilding(qtbot):
     table = TrialTable()
     view = QtTrialTable(table)
     qtbot.addWidget(view)
-    row = {"trial_index": 0, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on", "outcome": "success",
-           "tct_s": 2.5, "rmse_n": 0.2, "max_ae_n": 0.4}
+    row = trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on", outcome="success",
+                       tct_s=2.5, rmse_n=0.2, max_ae_n=0.4)
     table.add(row)
     first = [view.item(0, j) for j in range(7)]
     for k in range(1, 5):
-        table.add({**row, "trial_index": k})
+        table.add(dataclasses.replace(row, trial_index=k))
     assert view.rowCount() == 5
     assert all(view.item(0, j) is first[j] for j in range(7))  # existing cells untouched
     assert [view.item(4, 0).text(), view.item(0, 0).text()] == ["5", "1"]

@@ -20,6 +20,8 @@ from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
 from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel, TrialTable
+
+from gui_trials import trial_record
 from study_app.models.setup import SetupModel
 
 READY = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
@@ -29,8 +31,8 @@ def test_trial_table_view_fills_from_the_model(qtbot):
     table = TrialTable()
     view = QtTrialTable(table)
     qtbot.addWidget(view)
-    table.add({"trial_index": 0, "target_label": "FIRM", "target_force_n": 1.2, "haptic_mode": "on",
-               "outcome": "success", "tct_s": 2.5, "rmse_n": 0.2, "max_ae_n": 0.4})
+    table.add(trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
+                           outcome="success", tct_s=2.5, rmse_n=0.2, max_ae_n=0.4))
     assert view.rowCount() == 1
     assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200", "0.400"]
     table.clear()

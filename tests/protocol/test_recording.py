@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from protocol import recording
+from protocol.recording import codec as recording
 from protocol.recording import (
     BLOCK_RECORDS, COLUMNS, POSE_COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, read_segment,
     read_ticks,

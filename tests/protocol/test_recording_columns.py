@@ -7,7 +7,7 @@ import sqlite3
 import numpy as np
 import pytest
 
-import protocol.recording as recording
+import protocol.recording.codec as recording
 from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, read_ticks
 
 

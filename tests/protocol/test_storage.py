@@ -16,6 +16,7 @@ import pytest
 
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_to_json
+from protocol.records import TrialRecord
 from protocol.storage import (
     SAMPLE_COLUMNS,
     SCHEMA_VERSION,
@@ -463,7 +464,7 @@ def test_inline_trial_summary_commits_at_once_with_the_samples_before_it(db, db_
     rec.event(sid, 11.75, "phase", "trial 0: active -> pause")
     assert (_count(db_path, "samples"), _count(db_path, "trials")) == (0, 0)
     clock.now = 0.01  # well before the deadline
-    rec.trial(_trial_row(sid, 0))
+    rec.trial(TrialRecord.from_row(_trial_row(sid, 0)))
     assert (_count(db_path, "samples"), _count(db_path, "trials"), _count(db_path, "events")) == (25, 1, 1)
     rec.close()
 
@@ -498,7 +499,7 @@ def test_threaded_flush_makes_everything_visible(db, db_path):
         for b in range(5):
             rec.samples([_sample_row(trial_id_of(sid, 0), 10 * b + k) for k in range(10)])
         rec.event(sid, 0.5, "phase", "trial 0: cued -> active")
-        rec.trial(_trial_row(sid, 0))
+        rec.trial(TrialRecord.from_row(_trial_row(sid, 0)))
         rec.samples([_sample_row(trial_id_of(sid, 1), 0)])
         rec.flush()
         assert (_count(db_path, "samples"), _count(db_path, "events"), _count(db_path, "trials")) == (51, 1, 1)
@@ -530,7 +531,8 @@ def test_threaded_close_commits_pending_work_and_stops_the_thread(db, db_path):
 def test_threaded_writer_error_reaches_the_producer(db, db_path):
     sid = db.create_session(**_session_args())
     rec = Recorder(db, clock=FakeClock())
-    rec.trial(_trial_row(sid, 0, outcome="timeout", tct_s=5.0))  # violates the CHECK in the writer
+    # a timeout with a TCT: the record allows it, the CHECK in the writer does not
+    rec.trial(TrialRecord.from_row(_trial_row(sid, 0, outcome="timeout", tct_s=5.0)))
     with pytest.raises(StorageError, match="the recorder stopped"):
         rec.flush()
     with pytest.raises(StorageError, match="the recorder stopped after an error: CHECK constraint failed"):

@@ -1,33 +1,8 @@
-"""The whole session at full rate, compactly, in the study database: per-column blocks of about one second.
-
-Every 1 kHz record of a session -- training, pauses, trials, waits, every
-resumed run -- is kept with what replay needs (:mod:`pipeline.replay`): the
-loop's inputs (the raw F/T wrench, the tick period and the sensor's age, the
-robot pose at its own 125 Hz), its outputs (the rendered force, the feedback
-gain, the latched faults), the stylus position, the trial and phase marks,
-and the task force the metrics are computed from.  What replay recomputes (the
-compensated, filtered and rotated stages) is not stored.
-
-**Storage.**  A run of a session (its first run, then one per resume) is a
-*segment*: a ``recordings`` row holds the framework's snapshot at its first
-record and the segment's place on the session clock.  Its records are cut
-into blocks of :data:`BLOCK_RECORDS` (one ``session_blocks`` row each); a block
-stores every column as one compressed array, losslessly:
-
-* integers (times, counts, marks) as differences, byte-shuffled, deflated;
-* raw wrench values as the sensor's integer counts when they are exactly
-  ``counts / counts_per_unit`` (the Net F/T and its twin send counts),
-  otherwise as float64;
-* other floats byte-shuffled (smooth ones as differences of their bit patterns).
+"""The recording's codec: what a block keeps of each record, and how, losslessly; the open block as it grows.
 
 Every decoding is checked bit for bit before a block is written, so a value
 the codec cannot keep exactly is stored as plain float64 instead: nothing is
-ever rounded.  About 40 bytes a record, where a ``samples`` row took ~150.
-
-**Crash safety.**  The writer (:class:`protocol.storage.Recorder`) appends records
-to the open block and, at each commit (at least every 100 ms), writes the
-block as it stands; a full block is written once and the next one opened.  A
-``kill -9`` loses at most the records since the last commit, as before.
+ever rounded.
 """
 
 from __future__ import annotations
@@ -42,12 +17,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.replay import ReplayInputs
-
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
-    "decode_columns", "encode_block", "join_blocks", "marked_records", "read_segment", "read_ticks",
-    "rows_to_columns", "segments_of",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "decode_block",
+    "decode_columns", "encode_block", "join_blocks", "rows_to_columns",
 ]
 
 #: Records per block (one second at 1 kHz).
@@ -436,60 +408,6 @@ def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...
     return out
 
 
-@dataclass
-class SegmentData:
-    """One segment read back: its columns over all its blocks, its poses and log, its snapshot and clock.
-
-    ``session_time_s(t_ns)`` = ``started_at_s + (t_ns - t0_ns) / 1e9``.
-    """
-
-    session_id: int
-    segment: int
-    started_at_s: float
-    t0_ns: int
-    snapshot: dict[str, Any]
-    columns: dict[str, np.ndarray]
-    poses: dict[str, np.ndarray]
-    events: list[tuple[int, str, Any]]
-
-    @property
-    def session_time_s(self) -> np.ndarray:
-        """Session-clock time of every record, s."""
-        return self.started_at_s + (self.columns["t_ns"] - self.t0_ns) / 1e9
-
-    def replay_inputs(self) -> ReplayInputs:
-        """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
-        c = self.columns
-        return ReplayInputs(
-            tick=c["tick"].astype(np.int64), period_ns=c["period_ns"].astype(np.int64),
-            raw_wrench=np.stack([c[f"raw_{k}"] for k in ("fx", "fy", "fz", "tx", "ty", "tz")], axis=1),
-            haptic_on=c["haptic_on"] != 0, faults=c["faults"].astype(np.int64), snapshot=self.snapshot,
-            events=self.log(),
-        )
-
-    @property
-    def continuous(self) -> bool:
-        """True when no record is missing (ticks consecutive): replay is then exact from end to end."""
-        t = self.columns["tick"]
-        return bool(len(t) == 0 or np.all(np.diff(t) == 1))
-
-    def log(self) -> list[tuple[int, str, Any]]:
-        """The replay log: poses and events merged in tick order, poses last within a tick.
-
-        The loop logs a tick's commands and drops to zero before its pose, and its device limit after
-        it; a pose and a device limit commute (:meth:`pipeline.framework.HapticFramework.set_pose` and
-        ``set_device_limit`` change disjoint state), so this order replays as the loop ran.
-        """
-        merged = [(t, 0, i, k, p) for i, (t, k, p) in enumerate(self.events)]
-        p = self.poses
-        for i in range(len(p["tick"])):
-            rot = tuple(float(p[f"r{j}"][i]) for j in range(9))
-            pos = (float(p["x_m"][i]), float(p["y_m"][i]), float(p["z_m"][i]))
-            merged.append((int(p["tick"][i]), 1, i, "pose", (rot, pos, int(p["pose_t_ns"][i]))))
-        merged.sort(key=lambda e: (e[0], e[1], e[2]))
-        return [(t, k, pl) for t, _, _, k, pl in merged]
-
-
 def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
     """Decode and concatenate a segment's blocks, in order."""
     cols: list[dict[str, np.ndarray]] = []
@@ -542,65 +460,3 @@ def decode_columns(blob: bytes, names: Iterable[str]) -> dict[str, np.ndarray]:
     if missing:
         raise ValueError(f"the block has no column {sorted(missing)[0]!r}")
     return out
-
-
-def segments_of(conn: Any, session_id: int) -> list[tuple[int, float, int]]:
-    """A session's recorded segments: (segment, started_at_s, t0_ns), in order (none for a version-2 session)."""
-    return [(int(a), float(b), int(c)) for a, b, c in conn.execute(
-        "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment", (session_id,))]
-
-
-def read_segment(conn: Any, session_id: int, segment: int) -> SegmentData:
-    """One segment in full: every column, the poses, the log and the snapshot."""
-    row = conn.execute("SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
-                       (session_id, segment)).fetchone()
-    if row is None:
-        raise KeyError(f"session {session_id} has no recorded segment {segment}")
-    blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
-                                        "ORDER BY block", (session_id, segment))]
-    cols, poses, events = join_blocks(blobs)
-    return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events)
-
-
-def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
-               names: Iterable[str]) -> dict[str, np.ndarray]:
-    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window)."""
-    names = list(dict.fromkeys(["tick", *names]))
-    parts: list[dict[str, np.ndarray]] = []
-    for b_first, b_last, n, blob in conn.execute(
-            "SELECT first_tick, last_tick, n_records, data FROM session_blocks WHERE session_id = ? AND segment = ? "
-            "AND last_tick >= ? AND first_tick <= ? ORDER BY block", (session_id, segment, first_tick, last_tick)):
-        if b_last - b_first + 1 == n:
-            # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
-            cols = decode_columns(blob, names[1:])
-            lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
-            part = {k: v[lo:hi] for k, v in cols.items()}
-            part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
-        else:
-            cols = decode_columns(blob, names)
-            keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
-            part = {k: v[keep] for k, v in cols.items()}
-        parts.append(part)
-    if not parts:
-        return {n: np.empty(0) for n in names}
-    return {n: np.concatenate([p[n] for p in parts]) for n in names}
-
-
-def marked_records(conn: Any, session_id: int, trial_index: int,
-                   names: Iterable[str]) -> tuple[tuple[int, float, int], dict[str, np.ndarray]] | None:
-    """The records the loop marked with a trial, in the last segment that has any (an interrupted trial's).
-
-    Returns ((segment, started_at_s, t0_ns), columns), or None when no record carries the mark.
-    """
-    names = list(dict.fromkeys(["tick", "t_ns", "trial_index", *names]))
-    for seg in reversed(segments_of(conn, session_id)):
-        blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
-                                            "ORDER BY block", (session_id, seg[0]))]
-        parts = [decode_columns(b, names) for b in blobs]
-        if not parts:
-            continue
-        cols = {n: np.concatenate([p[n] for p in parts]) for n in names}
-        mark = cols["trial_index"] == trial_index
-        if mark.any():
-            return seg, {n: v[mark] for n, v in cols.items()}
-    return None

@@ -1,0 +1,137 @@
+"""Reading the recording back: a whole segment (for replay and the samples table), or a trial's window of it."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from pipeline.replay import ReplayInputs
+from protocol.clock import SessionClock
+from protocol.recording.codec import decode_columns, join_blocks
+
+__all__ = ["SegmentData", "marked_records", "read_segment", "read_ticks", "segments_of"]
+
+
+@dataclass
+class SegmentData:
+    """One segment read back: its columns over all its blocks, its poses and log, its snapshot and clock.
+
+    Session time of its records: :attr:`clock` (``started_at_s`` at loop time ``t0_ns``).
+    """
+
+    session_id: int
+    segment: int
+    started_at_s: float
+    t0_ns: int
+    snapshot: dict[str, Any]
+    columns: dict[str, np.ndarray]
+    poses: dict[str, np.ndarray]
+    events: list[tuple[int, str, Any]]
+
+    @property
+    def clock(self) -> SessionClock:
+        """The segment's place on the session clock."""
+        return SessionClock(self.started_at_s, self.t0_ns)
+
+    @property
+    def session_time_s(self) -> np.ndarray:
+        """Session-clock time of every record, s."""
+        return self.clock.seconds_of(self.columns["t_ns"])
+
+    def replay_inputs(self) -> ReplayInputs:
+        """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
+        c = self.columns
+        return ReplayInputs(
+            tick=c["tick"].astype(np.int64), period_ns=c["period_ns"].astype(np.int64),
+            raw_wrench=np.stack([c[f"raw_{k}"] for k in ("fx", "fy", "fz", "tx", "ty", "tz")], axis=1),
+            haptic_on=c["haptic_on"] != 0, faults=c["faults"].astype(np.int64), snapshot=self.snapshot,
+            events=self.log(),
+        )
+
+    @property
+    def continuous(self) -> bool:
+        """True when no record is missing (ticks consecutive): replay is then exact from end to end."""
+        t = self.columns["tick"]
+        return bool(len(t) == 0 or np.all(np.diff(t) == 1))
+
+    def log(self) -> list[tuple[int, str, Any]]:
+        """The replay log: poses and events merged in tick order, poses last within a tick.
+
+        The loop logs a tick's commands and drops to zero before its pose, and its device limit after
+        it; a pose and a device limit commute (:meth:`pipeline.framework.HapticFramework.set_pose` and
+        ``set_device_limit`` change disjoint state), so this order replays as the loop ran.
+        """
+        merged = [(t, 0, i, k, p) for i, (t, k, p) in enumerate(self.events)]
+        p = self.poses
+        for i in range(len(p["tick"])):
+            rot = tuple(float(p[f"r{j}"][i]) for j in range(9))
+            pos = (float(p["x_m"][i]), float(p["y_m"][i]), float(p["z_m"][i]))
+            merged.append((int(p["tick"][i]), 1, i, "pose", (rot, pos, int(p["pose_t_ns"][i]))))
+        merged.sort(key=lambda e: (e[0], e[1], e[2]))
+        return [(t, k, pl) for t, _, _, k, pl in merged]
+
+
+def segments_of(conn: Any, session_id: int) -> list[tuple[int, float, int]]:
+    """A session's recorded segments: (segment, started_at_s, t0_ns), in order (none for a version-2 session)."""
+    return [(int(a), float(b), int(c)) for a, b, c in conn.execute(
+        "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment", (session_id,))]
+
+
+def read_segment(conn: Any, session_id: int, segment: int) -> SegmentData:
+    """One segment in full: every column, the poses, the log and the snapshot."""
+    row = conn.execute("SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
+                       (session_id, segment)).fetchone()
+    if row is None:
+        raise KeyError(f"session {session_id} has no recorded segment {segment}")
+    blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
+                                        "ORDER BY block", (session_id, segment))]
+    cols, poses, events = join_blocks(blobs)
+    return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events)
+
+
+def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
+               names: Iterable[str]) -> dict[str, np.ndarray]:
+    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window)."""
+    names = list(dict.fromkeys(["tick", *names]))
+    parts: list[dict[str, np.ndarray]] = []
+    for b_first, b_last, n, blob in conn.execute(
+            "SELECT first_tick, last_tick, n_records, data FROM session_blocks WHERE session_id = ? AND segment = ? "
+            "AND last_tick >= ? AND first_tick <= ? ORDER BY block", (session_id, segment, first_tick, last_tick)):
+        if b_last - b_first + 1 == n:
+            # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
+            cols = decode_columns(blob, names[1:])
+            lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
+            part = {k: v[lo:hi] for k, v in cols.items()}
+            part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
+        else:
+            cols = decode_columns(blob, names)
+            keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
+            part = {k: v[keep] for k, v in cols.items()}
+        parts.append(part)
+    if not parts:
+        return {n: np.empty(0) for n in names}
+    return {n: np.concatenate([p[n] for p in parts]) for n in names}
+
+
+def marked_records(conn: Any, session_id: int, trial_index: int,
+                   names: Iterable[str]) -> tuple[tuple[int, float, int], dict[str, np.ndarray]] | None:
+    """The records the loop marked with a trial, in the last segment that has any (an interrupted trial's).
+
+    Returns ((segment, started_at_s, t0_ns), columns), or None when no record carries the mark.
+    """
+    names = list(dict.fromkeys(["tick", "t_ns", "trial_index", *names]))
+    for seg in reversed(segments_of(conn, session_id)):
+        blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
+                                            "ORDER BY block", (session_id, seg[0]))]
+        parts = [decode_columns(b, names) for b in blobs]
+        if not parts:
+            continue
+        cols = {n: np.concatenate([p[n] for p in parts]) for n in names}
+        mark = cols["trial_index"] == trial_index
+        if mark.any():
+            return seg, {n: v[mark] for n, v in cols.items()}
+    return None

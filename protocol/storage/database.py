@@ -1,0 +1,311 @@
+"""The single writer of a study database: participants, sessions, trials, events and recorded blocks.
+
+One writer owns the connection (:class:`StudyDatabase`); in a live session it
+runs in a :class:`protocol.storage.Recorder` thread.  Nothing is ever
+overwritten: a participant code with an experiment session already stored is
+refused unless the caller resumes it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import sqlite3
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from protocol.storage.common import StorageError, now_iso
+from protocol.storage.leases import LeaseHolder, session_scope
+from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
+
+__all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
+
+CODE_PATTERN = re.compile(r"^[A-Za-z0-9_-]{1,32}\Z")  # \Z, not $: "$" also matches before a final newline
+_INSERT_SAMPLES = f"INSERT INTO samples ({', '.join(SAMPLE_COLUMNS)}) VALUES ({', '.join('?' * len(SAMPLE_COLUMNS))})"
+
+
+def validate_code(code: str) -> str:
+    """Check a participant code: 1–32 of ``A–Z a–z 0–9 _ -`` (pseudonymous, no personal data)."""
+    if not isinstance(code, str) or not CODE_PATTERN.match(code):
+        raise StorageError(f"participant code = {code!r}: must be 1–32 characters from A–Z, a–z, 0–9, '_' and '-'")
+    return code
+
+
+@dataclass(frozen=True, slots=True)
+class SessionInfo:
+    """A stored session (what a resume needs)."""
+
+    session_id: int
+    participant_id: int
+    code: str
+    kind: str
+    seed: int
+    participant_number: int
+    protocol_json: str
+    schedule_json: str
+    status: str
+    started_at: str
+    calibration_json: str | None
+    config_json: str
+
+
+class StudyDatabase(SchemaFile, LeaseHolder):
+    """The single writer of a study database.
+
+    Parameters
+    ----------
+    path
+        Database file; created (with the schema, readable by its owner only) if it does not exist.
+    readonly
+        Open for reading only (analysis); never creates, upgrades or locks for writing.
+    busy_timeout_s
+        How long a statement waits for another connection's write lock before
+        failing with "database is locked".  Several writers share one database
+        when a study runs participants in parallel processes
+        (:func:`study_app.headless.run_study` with ``jobs > 1``); each holds the
+        lock only for one short commit, but a commit that also checkpoints a
+        large WAL on a slow disk can take seconds, so writers wait up to 30 s
+        (sqlite3's default, 5 s, could turn a slow disk into a failed study).
+    check
+        Run ``PRAGMA quick_check`` before anything else (default: for writers;
+        readers ask for it where a whole study is read).  A damaged file is
+        refused with one line and left byte-identical.
+    upgrade
+        A writer that opens a version-1 database upgrades it to the current
+        schema after writing a backup copy beside it (``<name>.v1-backup-<time><suffix>``);
+        False refuses instead.  Readers never upgrade.
+
+    Attributes
+    ----------
+    upgraded_from
+        The schema version the file had before this writer upgraded it (None if it did not).
+    backup_path
+        The backup written before the upgrade.
+    """
+
+    #: Writers' default busy timeout (see ``busy_timeout_s``).
+    WRITER_BUSY_TIMEOUT_S = 30.0
+
+    def __init__(
+        self, path: str | os.PathLike[str], *, readonly: bool = False, busy_timeout_s: float | None = None,
+        check: bool | None = None, upgrade: bool = True,
+    ) -> None:
+        self.path = Path(path)
+        self.readonly = readonly
+        self.upgraded_from: int | None = None
+        self.backup_path: Path | None = None
+        self._last_heartbeat = 0.0
+        self._owners: set[str] = set()
+        created = self._check_path(readonly)
+        if readonly:
+            self.conn = connect_readonly(self.path, timeout_s=5.0 if busy_timeout_s is None else busy_timeout_s)
+        else:
+            try:
+                self.conn = sqlite3.connect(
+                    str(self.path), check_same_thread=False, isolation_level=None,
+                    timeout=self.WRITER_BUSY_TIMEOUT_S if busy_timeout_s is None else busy_timeout_s,
+                )
+            except sqlite3.Error as exc:
+                raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
+        try:
+            if (not readonly if check is None else check) and not created:
+                self._quick_check()
+            self._prepare(readonly, upgrade)
+        except sqlite3.DatabaseError as exc:
+            self.conn.close()
+            raise StorageError(f"{self.path}: not a haptic-study database ({exc})") from None
+        except StorageError:
+            self.conn.close()
+            raise
+
+    def close(self) -> None:
+        """Close the connection."""
+        self.conn.close()
+
+    # -- participants and sessions ------------------------------------------------------------------
+    def participant_id(self, code: str, *, create: bool) -> int | None:
+        """The id of a participant code, optionally creating it."""
+        validate_code(code)
+        row = self.conn.execute("SELECT participant_id FROM participants WHERE code = ?", (code,)).fetchone()
+        if row is not None:
+            return int(row[0])
+        if not create:
+            return None
+        cur = self.conn.execute("INSERT INTO participants (code, created_at) VALUES (?, ?)", (code, now_iso()))
+        return int(cur.lastrowid)  # type: ignore[arg-type]
+
+    def sessions_of(self, code: str, kind: str | None = None) -> list[SessionInfo]:
+        """Stored sessions of a participant, oldest first."""
+        sql = (
+            "SELECT s.session_id, s.participant_id, p.code, s.kind, s.seed, s.participant_number, s.protocol_json, "
+            "s.schedule_json, s.status, s.started_at, s.calibration_json, s.config_json "
+            "FROM sessions s JOIN participants p USING (participant_id) WHERE p.code = ?"
+        )
+        args: list[Any] = [code]
+        if kind is not None:
+            sql += " AND s.kind = ?"
+            args.append(kind)
+        return [SessionInfo(*r) for r in self.conn.execute(sql + " ORDER BY s.session_id", args)]
+
+    def open_sessions(self) -> list[SessionInfo]:
+        """Sessions that never ended (interrupted): candidates for resume."""
+        sql = (
+            "SELECT s.session_id, s.participant_id, p.code, s.kind, s.seed, s.participant_number, s.protocol_json, "
+            "s.schedule_json, s.status, s.started_at, s.calibration_json, s.config_json "
+            "FROM sessions s JOIN participants p USING (participant_id) WHERE s.status = 'running' ORDER BY s.session_id"
+        )
+        return [SessionInfo(*r) for r in self.conn.execute(sql)]
+
+    def create_session(
+        self, *, code: str, kind: str, seed: int, participant_number: int, protocol_json: str, schedule_json: str,
+        software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
+        lease_owner: str | None = None, command: str = "", study_owner: str | None = None,
+    ) -> int:
+        """Insert a session with its whole schedule and provenance, committed before trial 1.
+
+        With ``lease_owner`` the session's lease is taken in the same
+        transaction (see :meth:`acquire_lease`), so no other process can write
+        to it from its first moment.
+
+        Raises
+        ------
+        StorageError
+            If the participant already has a session of this kind (nothing is overwritten).
+        LeaseHeld
+            If another live process runs the whole study (a headless ``run``).
+        """
+        with self.transaction():
+            existing = self.sessions_of(code, kind)
+            if existing:
+                s = existing[-1]
+                hint = "resume it with --resume " + code if s.status == "running" else "use a new participant code"
+                raise StorageError(
+                    f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
+                    f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
+                )
+            if lease_owner is not None:
+                self._refuse_if_study_held(study_owner or lease_owner)
+            pid = self.participant_id(code, create=True)
+            cur = self.conn.execute(
+                "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
+                "status, started_at, software_version, rig, config_json, calibration_json) "
+                "VALUES (?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?)",
+                (
+                    pid, kind, seed, participant_number, protocol_json, schedule_json, now_iso(), software_version,
+                    rig, json.dumps(config, sort_keys=True), None if calibration is None else json.dumps(calibration),
+                ),
+            )
+            session_id = int(cur.lastrowid)  # type: ignore[arg-type]
+            if lease_owner is not None:
+                self._write_lease(session_scope(session_id), lease_owner, command)
+        return session_id
+
+    def update_schedule(self, session_id: int, schedule_json: str) -> None:
+        """Store the schedule after an aborted trial was re-queued (the only schedule change)."""
+        self.conn.execute("UPDATE sessions SET schedule_json = ? WHERE session_id = ?", (schedule_json, session_id))
+
+    def end_session(self, session_id: int, status: str, reason: str = "") -> None:
+        """Fill the end columns, once."""
+        cur = self.conn.execute(
+            "UPDATE sessions SET status = ?, ended_at = ?, end_reason = ? WHERE session_id = ? AND status = 'running'",
+            (status, now_iso(), reason, session_id),
+        )
+        if cur.rowcount != 1:
+            raise StorageError(f"session {session_id} is not running; its end is already recorded")
+
+    # -- trials, samples, events --------------------------------------------------------------------
+    def insert_samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
+        """Append sample rows (columns :data:`SAMPLE_COLUMNS`): a sequence of rows or a 2-D float array."""
+        if len(rows):
+            # sqlite3 binds an array's rows element by element through NumPy scalars, ~4x slower
+            # than plain floats; tolist() converts the whole block in C first
+            self.conn.executemany(_INSERT_SAMPLES, rows.tolist() if isinstance(rows, np.ndarray) else rows)
+
+    def insert_trial(self, row: Mapping[str, Any]) -> None:
+        """Insert one ``trials`` row (:meth:`protocol.records.TrialRecord.to_row`; atomic: its own statement)."""
+        cols = ", ".join(row)
+        self.conn.execute(f"INSERT INTO trials ({cols}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
+
+    def insert_recording(self, session_id: int, segment: int, started_at_s: float, t0_ns: int,
+                         snapshot: dict[str, Any], scales: dict[str, float]) -> None:
+        """Open a segment of a session's recording (version 3): where it starts, and the framework's state then."""
+        self.conn.execute(
+            "INSERT INTO recordings (session_id, segment, started_at_s, t0_ns, snapshot_json, scales_json) "
+            "VALUES (?, ?, ?, ?, ?, ?)",
+            (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot), json.dumps(scales)),
+        )
+
+    def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
+                    n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
+        """Write a recorded block, or rewrite the segment's open block as it grew (the recorder's own row)."""
+        self.conn.execute(
+            "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
+            "t_first_s, t_last_s, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data),
+        )
+
+    def next_segment(self, session_id: int) -> int:
+        """The number the next run of a session records under (0 for its first)."""
+        r = self.conn.execute("SELECT MAX(segment) FROM recordings WHERE session_id = ?", (session_id,)).fetchone()
+        return 0 if r is None or r[0] is None else int(r[0]) + 1
+
+    def insert_event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
+        """Record a phase change or an experimenter action."""
+        self.conn.execute("INSERT INTO events (session_id, t_s, kind, detail) VALUES (?, ?, ?, ?)", (session_id, t_s, kind, detail))
+
+    def trial_rows(self, session_id: int) -> list[dict[str, Any]]:
+        """The trials of a session as dicts, in index order."""
+        cur = self.conn.execute("SELECT * FROM trials WHERE session_id = ? ORDER BY trial_index", (session_id,))
+        names = [d[0] for d in cur.description]
+        return [dict(zip(names, r)) for r in cur]
+
+    def last_session_time_s(self, session_id: int) -> float:
+        """Latest session-clock time recorded (events, trials, recorded records), for resuming the clock."""
+        blocks = ("UNION ALL SELECT MAX(t_last_s) FROM session_blocks WHERE session_id = ?"
+                  if self.schema_version >= 3 else "")
+        args = (session_id,) * (3 if blocks else 2)
+        r = self.conn.execute(
+            "SELECT MAX(t) FROM (SELECT MAX(t_s) AS t FROM events WHERE session_id = ? "
+            f"UNION ALL SELECT MAX(ended_at_s) FROM trials WHERE session_id = ? {blocks})", args,
+        ).fetchone()
+        return float(r[0]) if r and r[0] is not None else 0.0
+
+    # -- transactions -------------------------------------------------------------------------------
+    def begin(self) -> None:
+        """Start a write transaction if none is open.
+
+        IMMEDIATE takes the write lock at once: a deferred transaction that
+        read before writing fails with SQLITE_BUSY, without waiting, if another
+        connection committed in between (parallel participants share the file).
+        """
+        if not self.conn.in_transaction:
+            self.conn.execute("BEGIN IMMEDIATE")
+
+    def commit(self) -> None:
+        """Commit the open transaction, if any."""
+        if self.conn.in_transaction:
+            self.conn.execute("COMMIT")
+
+    def transaction(self) -> _Tx:
+        """Context manager: commit on success, roll back on error."""
+        return _Tx(self)
+
+
+class _Tx:
+    def __init__(self, db: StudyDatabase) -> None:
+        self.db = db
+
+    def __enter__(self) -> None:
+        self.db.commit()
+        self.db.conn.execute("BEGIN IMMEDIATE")  # see StudyDatabase.begin
+
+    def __exit__(self, exc_type: object, *_: object) -> None:
+        if exc_type is None:
+            self.db.conn.execute("COMMIT")
+        else:
+            self.db.conn.execute("ROLLBACK")

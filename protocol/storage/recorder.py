@@ -1,0 +1,229 @@
+"""The recorder: a queue-fed writer with a commit deadline, so neither the loop nor the GUI waits on the disk.
+
+Sample batches are committed at least every 100 ms, each trial record
+atomically when the trial ends.
+"""
+
+from __future__ import annotations
+
+import queue
+import sqlite3
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+
+from protocol.clock import SessionClock
+from protocol.recording import BlockBuilder
+from protocol.records import TrialRecord
+from protocol.storage.common import StorageError
+from protocol.storage.database import StudyDatabase
+
+__all__ = ["Recorder"]
+
+
+class Recorder:
+    """Queue-fed writer with a commit deadline: samples reach the disk within ``max_latency_s``.
+
+    ``threaded=True`` runs the writer in its own thread (live sessions: the
+    producers never wait on the disk); ``threaded=False`` executes each call
+    inline (headless runs on the virtual clock, where nothing else is
+    waiting) with the same commit rules.  Trial summaries are committed at
+    once, together with every sample before them, in one transaction.
+
+    Parameters
+    ----------
+    db
+        The database (the recorder becomes its only writer).
+    max_latency_s
+        Longest time a queued sample may stay uncommitted (wall clock).
+    clock
+        Wall-clock source for the commit deadline (injectable for tests).
+    short_transactions
+        Keep queued writes in memory and execute them in one short
+        transaction at each commit, instead of holding a transaction (and the
+        database's write lock) open between commits.  For several writer
+        processes on one database (parallel participants): a recorder holding
+        the lock for ~100 ms at a time would starve the others.  The commit
+        rules, and so the crash guarantees, are the same.
+    """
+
+    def __init__(
+        self, db: StudyDatabase, *, threaded: bool = True, max_latency_s: float = 0.1,
+        clock: Callable[[], float] = time.monotonic, short_transactions: bool = False,
+    ) -> None:
+        self.db = db
+        self.short_transactions = short_transactions
+        self._held: list[tuple[str, Any]] = []
+        self.max_latency_s = max_latency_s
+        self._clock = clock
+        self._first_pending: float | None = None
+        self._q: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
+        #: The open block of every segment being recorded, and the segment's clock: (session, segment) -> both.
+        self._blocks: dict[tuple[int, int], tuple[BlockBuilder, SessionClock]] = {}
+        self._thread: threading.Thread | None = None
+        self.error: BaseException | None = None
+        if threaded:
+            self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
+            self._thread.start()
+
+    # producers ----------------------------------------------------------------------------------
+    def samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
+        """Queue sample rows (a sequence of rows or a 2-D float array, not modified afterwards)."""
+        self._put(("samples", rows))
+
+    def trial(self, record: TrialRecord) -> None:
+        """Queue a finished trial's record (committed at once with the samples before it)."""
+        self._put(("trial", record))
+
+    def event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
+        """Queue an event."""
+        self._put(("event", (session_id, t_s, kind, detail)))
+
+    def segment(self, session_id: int, segment: int, started_at_s: float, t0_ns: int, snapshot: dict[str, Any],
+                scales: dict[str, float]) -> None:
+        """Open a segment of the session's recording (committed at once, before any of its blocks)."""
+        self._put(("segment", (session_id, segment, started_at_s, t0_ns, snapshot, scales)))
+
+    def records(self, session_id: int, segment: int, columns: dict[str, np.ndarray],
+                log: Sequence[tuple[int, str, Any]] = ()) -> None:
+        """Queue records of a segment (:func:`protocol.recording.rows_to_columns`) and the replay log of their ticks.
+
+        They are cut into blocks as they fill; the open block is written as it stands at every commit.
+        """
+        self._put(("records", (session_id, segment, columns, list(log))))
+
+    def call(self, fn: Callable[[StudyDatabase], Any]) -> None:
+        """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
+        self._put(("call", fn))
+
+    def _put(self, item: tuple[str, Any]) -> None:
+        if self.error is not None:
+            raise StorageError(f"the recorder stopped after an error: {self.error}")
+        if self._thread is None:
+            self._handle(item)
+            self._maybe_commit()
+        else:
+            self._q.put(item)
+
+    # writer -------------------------------------------------------------------------------------
+    def _handle(self, item: tuple[str, Any]) -> None:
+        if self._first_pending is None:
+            self._first_pending = self._clock()
+        if self.short_transactions:
+            self._held.append(item)
+            if item[0] in ("trial", "call"):
+                self._commit()
+            return
+        self._apply(item)
+
+    def _apply(self, item: tuple[str, Any]) -> None:
+        kind, payload = item
+        db = self.db
+        db.begin()
+        if kind == "samples":
+            db.insert_samples(payload)
+        elif kind == "event":
+            db.insert_event(*payload)
+        elif kind == "records":
+            sid, seg, columns, log = payload
+            builder, _ = self._blocks[(sid, seg)]
+            builder.add(columns, log)
+            for block in builder.take_full():
+                self._write_block(sid, seg, block)
+        elif kind == "segment":
+            sid, seg, started_at_s, t0_ns, snapshot, scales = payload
+            db.insert_recording(sid, seg, started_at_s, t0_ns, snapshot, scales)
+            self._blocks[(sid, seg)] = (BlockBuilder(scales=scales), SessionClock(started_at_s, t0_ns))
+            self._commit()
+        elif kind == "trial":
+            db.insert_trial(payload.to_row())
+            self._commit()
+        elif kind == "call":
+            payload(db)
+            self._commit()
+
+    def _write_block(self, session_id: int, segment: int, block: tuple[int, int, dict[str, np.ndarray], bytes]) -> None:
+        _, clock = self._blocks[(session_id, segment)]
+        number, _, cols, data = block
+        ticks, t_ns = cols["tick"], cols["t_ns"]
+        self.db.write_block(session_id, segment, number, int(ticks[0]), int(ticks[-1]), len(ticks),
+                            clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1])), data)
+
+    def _commit(self, final: bool = False) -> None:
+        if self._held:
+            held, self._held = self._held, []
+            try:
+                for item in held:
+                    self._apply(item)  # a trial or call item commits everything before it, itself included
+            except BaseException:
+                if self.db.conn.in_transaction:
+                    self.db.conn.execute("ROLLBACK")
+                raise
+        for (sid, seg), (builder, _) in self._blocks.items():
+            # the records since the last commit reach the disk with it; at the end, the open block whole
+            open_block = builder.final() if final else builder.partial()
+            if open_block is not None:
+                self.db.begin()
+                self._write_block(sid, seg, open_block)
+        if self.db.conn.in_transaction:
+            self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
+        self.db.commit()
+        self._first_pending = None
+
+    def _maybe_commit(self) -> None:
+        if self._first_pending is not None and self._clock() - self._first_pending >= self.max_latency_s:
+            self._commit()
+
+    def _run(self) -> None:
+        try:
+            while True:
+                timeout = None
+                if self._first_pending is not None:
+                    timeout = max(0.0, self.max_latency_s - (self._clock() - self._first_pending))
+                try:
+                    item = self._q.get(timeout=timeout)
+                except queue.Empty:
+                    self._commit()
+                    continue
+                if item is None:
+                    break
+                self._handle(item)
+                self._maybe_commit()
+            self._commit(final=True)
+        except BaseException as exc:  # noqa: BLE001 - reported to the producer on its next call
+            self.error = exc
+            try:
+                self.db.conn.execute("ROLLBACK") if self.db.conn.in_transaction else None
+            except sqlite3.Error:
+                pass
+
+    def flush(self) -> None:
+        """Commit everything queued so far (blocks until the writer has)."""
+        if self._thread is None:
+            self._commit()
+            return
+        done = threading.Event()
+
+        def committed(db: StudyDatabase) -> None:
+            db.commit()  # before waking the caller, who may read what it wrote from another connection
+            done.set()
+
+        self.call(committed)
+        while not done.wait(0.05):
+            if self.error is not None or not self._thread.is_alive():
+                raise StorageError(f"the recorder stopped: {self.error}")
+
+    def close(self) -> None:
+        """Commit what is pending and stop the writer thread."""
+        if self._thread is not None:
+            self._q.put(None)
+            self._thread.join()
+            self._thread = None
+        else:
+            self._commit(final=True)
+        if self.error is not None:
+            raise StorageError(f"the recorder failed: {self.error}")
+

@@ -1,0 +1,285 @@
+"""The file and its schema: opening it safely, checking it, creating it, upgrading it.
+
+* **no writing into a damaged file** -- ``PRAGMA quick_check`` runs before a
+  writer touches the file (and when analysis asks for it); a damaged file is
+  refused and left byte-identical;
+* **archives stay readable** -- readers open read-only, and a database in a
+  folder they cannot write opens immutable (:func:`connect_readonly`);
+* **older files** -- a version-1 database is read as it is; a writer upgrades
+  it in place only after writing a backup copy beside it;
+* **privacy** -- new databases (and so their ``-wal``/``-shm`` files, which
+  SQLite creates with the database's permissions) are readable by their owner only.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import sqlite3
+from dataclasses import fields
+from pathlib import Path
+
+from protocol.records import AbortCause, LoopHealth
+from protocol.storage.common import EmptyDatabase, StorageError
+
+__all__ = ["ABORT_CAUSES", "HEALTH_COLUMNS", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SchemaFile", "connect_readonly",
+           "schema_path"]
+
+SCHEMA_VERSION = 3
+#: Why an aborted trial was aborted (``trials.abort_cause``, schema version 2).
+ABORT_CAUSES = tuple(c.value for c in AbortCause)
+#: Per-trial loop health columns (schema version 2), in table order (the fields of the record's health).
+HEALTH_COLUMNS = tuple(f.name for f in fields(LoopHealth))
+#: What upgrades a version-1 database to version 2 (the same tables as a new one; tested).
+_UPGRADE_1_TO_2 = (
+    "ALTER TABLE trials ADD COLUMN abort_cause TEXT CHECK (abort_cause IS NULL OR abort_cause IN "
+    "('experimenter', 'fault', 'feedback', 'gap', 'interrupted'))",
+    *(f"ALTER TABLE trials ADD COLUMN {c} {'INTEGER' if c == 'periods_over_2ms' else 'REAL'}" for c in HEALTH_COLUMNS),
+    "CREATE TABLE leases (scope TEXT PRIMARY KEY, owner TEXT NOT NULL, pid INTEGER NOT NULL, host TEXT NOT NULL, "
+    "process_start TEXT NOT NULL, command TEXT NOT NULL, acquired_at TEXT NOT NULL, heartbeat_at TEXT NOT NULL)",
+)
+#: What upgrades a version-2 database to version 3: whole sessions recorded in blocks.
+_UPGRADE_2_TO_3 = (
+    "ALTER TABLE trials ADD COLUMN segment INTEGER",
+    "ALTER TABLE trials ADD COLUMN first_tick INTEGER",
+    "ALTER TABLE trials ADD COLUMN last_tick INTEGER",
+    "CREATE TABLE recordings (session_id INTEGER NOT NULL REFERENCES sessions(session_id), segment INTEGER NOT NULL, "
+    "started_at_s REAL NOT NULL, t0_ns INTEGER NOT NULL, snapshot_json TEXT NOT NULL, scales_json TEXT NOT NULL, "
+    "PRIMARY KEY (session_id, segment))",
+    "CREATE TABLE session_blocks (session_id INTEGER NOT NULL, segment INTEGER NOT NULL, block INTEGER NOT NULL, "
+    "first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, n_records INTEGER NOT NULL, t_first_s REAL NOT NULL, "
+    "t_last_s REAL NOT NULL, data BLOB NOT NULL, PRIMARY KEY (session_id, segment, block), "
+    "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))",
+)
+SAMPLE_COLUMNS = (
+    "trial_id", "t_s", "force_n",
+    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+    "comp_fx", "comp_fy", "comp_fz",
+    "render_fx", "render_fy", "render_fz",
+)
+
+
+def schema_path() -> Path:
+    """Location of ``data/schema.sql`` in the source tree."""
+    return Path(__file__).resolve().parents[2] / "data" / "schema.sql"
+
+
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _check_sqlite_header(p: Path) -> None:
+    """Refuse a non-empty file that is not SQLite at all (before SQLite touches it)."""
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(len(_SQLITE_MAGIC))
+    except OSError as exc:
+        raise StorageError(f"{p}: cannot read the database ({exc.strerror})") from None
+    if head and head != _SQLITE_MAGIC:
+        raise StorageError(f"{p}: not a haptic-study database (not an SQLite file)")
+
+
+def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) -> sqlite3.Connection:
+    """A read-only connection that never creates, migrates or locks the database for writing.
+
+    An archived database -- a read-only file in a folder this user cannot
+    write -- cannot be opened read-only in WAL mode (SQLite needs to create the
+    ``-shm`` index beside it); it is opened *immutable* instead, which is
+    exact as long as nobody writes to it, and nobody can.
+
+    Raises
+    ------
+    StorageError
+        No such file, or it cannot be opened.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise StorageError(f"{p}: no such database")
+    if p.is_dir():
+        raise StorageError(f"{p}: is a directory, not a database file")
+    uri = p.resolve().as_uri()
+    try:
+        conn = sqlite3.connect(f"{uri}?mode=ro", uri=True, check_same_thread=False, timeout=timeout_s)
+        try:
+            conn.execute("PRAGMA user_version").fetchone()
+            return conn
+        except sqlite3.OperationalError:
+            conn.close()
+            folder = p.resolve().parent
+            wal = p.with_name(p.name + "-wal")
+            if os.access(folder, os.W_OK):
+                raise
+            if wal.exists() and wal.stat().st_size > 0:
+                raise StorageError(
+                    f"{p}: cannot be read where it is: its last changes are still in {wal.name}, which SQLite can "
+                    f"read only with a writable folder and {folder} is read-only; copy the database and its "
+                    f"{wal.name} into a writable folder and read the copy") from None
+        except sqlite3.DatabaseError:
+            conn.close()
+            raise
+        # an archive (nobody can write here): immutable needs no -shm and takes no lock
+        conn = sqlite3.connect(f"{uri}?immutable=1", uri=True, check_same_thread=False, timeout=timeout_s)
+        try:
+            conn.execute("PRAGMA user_version").fetchone()
+        except sqlite3.DatabaseError:
+            conn.close()
+            raise
+        return conn
+    except sqlite3.OperationalError as exc:
+        raise StorageError(f"{p}: cannot open the database ({exc})") from None
+    except sqlite3.DatabaseError as exc:
+        raise StorageError(f"{p}: not a haptic-study database ({exc})") from None
+
+
+class SchemaFile:
+    """The opening half of :class:`protocol.storage.StudyDatabase`: the file, its checks, its schema and upgrades.
+
+    Uses the database's ``path`` and ``conn``; sets ``upgraded_from`` and ``backup_path``.
+    """
+
+    path: Path
+    conn: sqlite3.Connection
+    upgraded_from: int | None
+    backup_path: Path | None
+
+    def _check_path(self, readonly: bool) -> bool:
+        """Refuse what cannot be opened as asked; create a new file owner-only.  True if it was created."""
+        p = self.path
+        if p.exists() and p.is_dir():
+            raise StorageError(f"{p}: is a directory, not a database file")
+        if readonly:
+            if not p.exists():
+                raise StorageError(f"{p}: no such database")
+            _check_sqlite_header(p)
+            return False
+        parent = p.parent if str(p.parent) else Path(".")
+        if not parent.exists():
+            raise StorageError(f"{p}: the folder {parent} does not exist")
+        if p.exists():
+            _check_sqlite_header(p)
+            if not os.access(p, os.W_OK):
+                raise StorageError(f"{p}: the database is not writable (open it read-only, e.g. with report)")
+            if not os.access(parent, os.W_OK):
+                raise StorageError(f"{p}: the folder {parent} is not writable (SQLite writes its journal beside the database)")
+            return False
+        if not os.access(parent, os.W_OK):
+            raise StorageError(f"{p}: cannot create the database here (folder {parent} is not writable)")
+        try:
+            # owner-only from the first byte: SQLite gives the -wal and -shm files the database's permissions
+            os.close(os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        except FileExistsError:  # another process created it meanwhile: open it as it is
+            return False
+        except OSError as exc:
+            raise StorageError(f"{p}: cannot create the database ({exc.strerror})") from None
+        return True
+
+    def _quick_check(self) -> None:
+        try:
+            rows = self.conn.execute("PRAGMA quick_check(5)").fetchall()
+        except sqlite3.DatabaseError as exc:
+            raise StorageError(f"{self.path}: the database is damaged ({exc}); nothing was written to it "
+                               "(restore it from a backup)") from None
+        problems = [" ".join(str(r[0]).split()) for r in rows if r[0] != "ok"]  # SQLite's report spans lines
+        if problems:
+            raise StorageError(f"{self.path}: the database is damaged (integrity check: {problems[0]}); "
+                               "nothing was written to it (restore it from a backup)")
+
+    def quick_check(self) -> None:
+        """``PRAGMA quick_check``; raises :class:`StorageError` with the first problem found."""
+        self._quick_check()
+
+    def _prepare(self, readonly: bool, upgrade: bool) -> None:
+        c = self.conn
+        version = c.execute("PRAGMA user_version").fetchone()[0]
+        tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        if version > SCHEMA_VERSION:
+            raise StorageError(
+                f"{self.path}: database schema version {version} is newer than this software supports "
+                f"({SCHEMA_VERSION}); update haptic-study to open it"
+            )
+        if version == 0:
+            if tables:
+                raise StorageError(f"{self.path}: not a haptic-study database (it has other tables: {', '.join(sorted(tables))})")
+            if readonly:
+                raise EmptyDatabase(f"{self.path}: empty database (no study data)")
+            script = schema_path().read_text(encoding="utf-8")
+            c.execute("PRAGMA journal_mode = WAL")
+            c.executescript("BEGIN IMMEDIATE;\n" + script + f"\nPRAGMA user_version = {SCHEMA_VERSION};\nCOMMIT;")
+            self._owner_only()
+        elif not {"participants", "sessions", "trials", "samples", "events"} <= tables:
+            raise StorageError(f"{self.path}: not a haptic-study database (tables missing)")
+        elif version < SCHEMA_VERSION and not readonly:
+            if not upgrade:
+                raise StorageError(f"{self.path}: database schema version {version} must be upgraded to "
+                                   f"{SCHEMA_VERSION} before it is written to; nothing was changed")
+            self._upgrade(version)
+        if not readonly:
+            c.execute("PRAGMA journal_mode = WAL")
+            # NORMAL in WAL mode: a committed transaction survives a process
+            # crash (SIGKILL); only a power cut can lose the last commits.
+            c.execute("PRAGMA synchronous = NORMAL")
+            c.execute("PRAGMA foreign_keys = ON")
+
+    def _owner_only(self) -> None:
+        """A study was just created in this file (new, or empty before): readable by its owner only."""
+        try:
+            if self.path.stat().st_uid == os.getuid():
+                os.chmod(self.path, 0o600)
+        except OSError:  # (not ours to change: leave it)
+            pass
+
+    @property
+    def schema_version(self) -> int:
+        """The file's ``PRAGMA user_version``."""
+        return int(self.conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def _backup_to(self, target: Path) -> None:
+        """A consistent copy of the whole database in ``target`` (SQLite's online backup)."""
+        dst = sqlite3.connect(str(target))
+        try:
+            self.conn.backup(dst)
+        finally:
+            dst.close()
+
+    def _upgrade(self, version: int) -> None:
+        """Write a backup copy beside the file, then upgrade the schema in one transaction."""
+        assert version in (1, 2), version
+        stamp = _dt.datetime.now().strftime("%Y%m%dT%H%M%S")
+        backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}{self.path.suffix or '.db'}")
+        n = 1
+        while backup.exists():
+            n += 1
+            backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}-{n}{self.path.suffix or '.db'}")
+        try:
+            os.close(os.open(backup, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+            self._backup_to(backup)
+        except (OSError, sqlite3.Error) as exc:
+            try:
+                backup.unlink()
+            except OSError:
+                pass
+            raise StorageError(f"{self.path}: schema version {version} must be upgraded to {SCHEMA_VERSION}, and the "
+                               f"backup copy {backup.name} could not be written ({exc}); nothing was changed") from None
+        c = self.conn
+        c.execute("BEGIN IMMEDIATE")
+        try:
+            if c.execute("PRAGMA user_version").fetchone()[0] == version:  # not upgraded by another writer meanwhile
+                if version == 1:
+                    for stmt in _UPGRADE_1_TO_2:
+                        c.execute(stmt)
+                    try:
+                        # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps its index
+                        c.execute("SAVEPOINT unique_samples")
+                        c.execute("DROP INDEX IF EXISTS samples_by_trial")
+                        c.execute("CREATE UNIQUE INDEX samples_by_trial ON samples (trial_id, t_s)")
+                        c.execute("RELEASE unique_samples")
+                    except sqlite3.IntegrityError:
+                        c.execute("ROLLBACK TO unique_samples")
+                        c.execute("RELEASE unique_samples")
+                for stmt in _UPGRADE_2_TO_3:
+                    c.execute(stmt)
+                c.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+            c.execute("COMMIT")
+        except BaseException:
+            c.execute("ROLLBACK")
+            raise
+        self.upgraded_from, self.backup_path = version, backup
