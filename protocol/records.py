@@ -27,7 +27,14 @@ from protocol.clock import SessionClock
 from protocol.design import HapticMode, TrialSpec
 from protocol.metrics import TrialMetrics
 
-__all__ = ["AbortCause", "HapticMode", "LoopHealth", "Outcome", "TrialRecord", "trial_health", "trial_id_of"]
+__all__ = [
+    "AbortCause",
+    "LoopHealth",
+    "Outcome",
+    "TrialRecord",
+    "trial_health",
+    "trial_id_of",
+]
 
 
 class Outcome(StrEnum):

@@ -6,7 +6,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from protocol.records import HapticMode, Outcome, TrialRecord
+from protocol.design import HapticMode
+from protocol.records import Outcome, TrialRecord
 from study_app import messages as m
 from study_app.models import Emitter
 
