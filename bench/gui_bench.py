@@ -10,7 +10,7 @@ One run, real clock, the loop in its study-engine process as the app runs it:
    plots at 30 Hz and the participant screen and rig view are shown; loop
    timing over ``seconds`` of that session.
 
-Loop timing is the engine's own: the ``period_s`` of every loop record,
+Loop timing is the engine's own: the ``period_ns`` of every loop record,
 |period − 1 ms| quantiles and the share of periods over 2 ms.  With
 ``explain=True`` (``--explain``) the engine also names the cause of every tick
 starting over 100 µs late (:mod:`pipeline.jitter_trace`: another thread of the

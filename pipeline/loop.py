@@ -10,7 +10,7 @@ Each tick:
    stage ramps the output to zero within 50 ms while a fault is latched or
    feedback is off;
 5. command the haptic device and append one record with every stage to the ring buffer
-   (with ``latency_s``: from the F/T sample's arrival to the moment the force command was handed over,
+   (with ``latency_ns``: from the F/T sample's arrival to the moment the force command was handed over,
    on the loop's clock -- on a virtual clock, where computing takes no time, the sample's age).
 
 The loop does only I/O and arithmetic: no logging, no allocation beyond a
@@ -230,7 +230,7 @@ class HapticLoop:
         rig.haptic.command_force(out[18], out[19], out[20], now)
         derate = self._derate(out) if self._derate_check and enabled else 1.0
         # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
-        latency_s = (self.clock.now_ns() - w.t_ns) * 1e-9
+        latency_ns = self.clock.now_ns() - w.t_ns
 
         truth = rig.true_contact_force() or _NAN3
         pos = pose.position_m
@@ -239,10 +239,10 @@ class HapticLoop:
         rec = (
             float(t_rel), t_rel * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
             *out, _HYPOT(out[3], out[4], out[5]),
-            sensor_age * 1e-9, pose_age * 1e-9, float(latched), 1.0 if self.haptic_on else 0.0,
+            float(sensor_age), float(pose_age), float(latched), 1.0 if self.haptic_on else 0.0,
             fw.safety.gain, float(self.trial_index), float(self.phase),
             pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],
-            dt_s, latency_s, derate,
+            float(period), float(latency_ns), derate,
         )
         self._last_record = rec
         if self.ring is not None:

@@ -30,18 +30,19 @@ __all__ = [
     "StopRecording",
 ]
 
-#: Columns of one loop record (all float64 in the ring buffer).
+#: Columns of one loop record (all float64 in the ring buffer; ``*_ns`` columns hold integer nanoseconds on the
+#: loop clock, exact in a float64 up to 104 days; seconds are made from them only where they are shown or stored).
 RECORD_FIELDS: tuple[str, ...] = (
     "t_ns", "t_s", "tick",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
     *STEP_FIELDS,
     "force_n",
-    "sensor_age_s", "pose_age_s", "faults", "haptic_on", "gain",
+    "sensor_age_ns", "pose_age_ns", "faults", "haptic_on", "gain",
     "trial_index", "phase",
     "tip_x_m", "tip_y_m", "tip_z_m",
     "stylus_x_m", "stylus_y_m", "stylus_z_m",
     "true_fx", "true_fy", "true_fz",
-    "period_s", "latency_s", "derate",
+    "period_ns", "latency_ns", "derate",
 )
 
 

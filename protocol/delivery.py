@@ -37,7 +37,7 @@ from protocol.trial import TrialFinished
 __all__ = ["DeliveryLimits", "Deviation", "TrialWindow"]
 
 #: Record columns the loop-health summary of a trial reads.
-_HEALTH_SRC = ("period_s", "sensor_age_s", "pose_age_s", "latency_s")
+_HEALTH_SRC = ("period_ns", "sensor_age_ns", "pose_age_ns", "latency_ns")
 
 
 def _ns(seconds: float) -> int:
@@ -171,7 +171,7 @@ class TrialWindow:
         block = np.concatenate(self._health) if self._health else np.empty((0, len(_HEALTH_SRC)))
         ticks = self.ticks
         self.ticks, self.last_ns, self._health = None, None, []
-        return ticks, trial_health(*block.T)
+        return ticks, trial_health(*(block.T * 1e-9))  # seconds at the edge: the stored health columns are ms
 
     def deviation(self, rows: np.ndarray, spec: TrialSpec, cue_ns: int | None, limits: DeliveryLimits,
                   fault_detail: str) -> Deviation | None:

@@ -440,7 +440,7 @@ class Commissioning:
         for w in list(self._windows):
             sel = rows[rows["t_ns"] >= w.start_ns]
             if len(sel):
-                if float(np.max(sel["sensor_age_s"])) > POSE_MAX_SENSOR_AGE_S:
+                if float(np.max(sel["sensor_age_ns"])) * 1e-9 > POSE_MAX_SENSOR_AGE_S:
                     self._windows.remove(w)
                     again = ("measuring the force at rest (check the Devices tab) — press Start again"
                              if w.command in ("StartSession", "ResumeSession")

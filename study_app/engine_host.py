@@ -313,9 +313,9 @@ class StudyEngine:
         if self._stats_from_tick:
             # the first tick after a calibration carries the calibration's gap: not a loop overrun
             keep = rows["tick"] >= self._stats_from_tick
-            self.stats.add(rows["period_s"][keep])
+            self.stats.add(rows["period_ns"][keep] * 1e-9)
         else:
-            self.stats.add(rows["period_s"])
+            self.stats.add(rows["period_ns"] * 1e-9)
         self.last_t_ns = int(rows["t_ns"][-1])
         self.commissioning.feed(rows)
         runner = self.sessions.runner

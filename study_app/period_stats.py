@@ -1,4 +1,4 @@
-"""Loop timing of the study engine, from the ring's ``period_s`` column (numpy only, cheap)."""
+"""Loop timing of the study engine, from the ring's ``period_ns`` column (numpy only, cheap)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ __all__ = ["PeriodStats"]
 
 
 class PeriodStats:
-    """Histogram of tick periods (1 µs bins) read from the ring's ``period_s`` column -- cheap, numpy only.
+    """Histogram of tick periods (1 µs bins), in seconds, from the ring's ``period_ns`` column -- cheap, numpy only.
 
     The loop's own :class:`pipeline.loop.LoopStats` summary walks 50 000 bins in
     Python; doing that twice a second in the loop's process would steal the

@@ -37,15 +37,13 @@ class Column:
 
     ``codec``: ``"int"`` (differences of int64), ``"small"`` (int32, plain), ``"float"`` (float64,
     byte-shuffled), ``"smooth"`` (float64, differences of the bit patterns), ``"counts"`` (raw
-    sensor values: integer counts when exact, else ``"float"``).  ``scale_ns`` turns a
-    seconds column of the loop record into integer ns.  ``missing``: the value of every
+    sensor values: integer counts when exact, else ``"float"``).  ``missing``: the value of every
     record in a block written before the column was added (None: every block has it).
     """
 
     name: str
     source: str
     codec: str
-    scale_ns: bool = False
     missing: float | None = None
 
 
@@ -54,12 +52,12 @@ class Column:
 COLUMNS: tuple[Column, ...] = (
     Column("tick", "tick", "int"),
     Column("t_ns", "t_ns", "int"),
-    Column("period_ns", "period_s", "int", scale_ns=True),
+    Column("period_ns", "period_ns", "int"),
     Column("raw_fx", "raw_fx", "counts"), Column("raw_fy", "raw_fy", "counts"), Column("raw_fz", "raw_fz", "counts"),
     Column("raw_tx", "raw_tx", "counts"), Column("raw_ty", "raw_ty", "counts"), Column("raw_tz", "raw_tz", "counts"),
-    Column("sensor_age_ns", "sensor_age_s", "int", scale_ns=True),
-    Column("pose_age_ns", "pose_age_s", "int", scale_ns=True),
-    Column("latency_ns", "latency_s", "int", scale_ns=True),
+    Column("sensor_age_ns", "sensor_age_ns", "int"),
+    Column("pose_age_ns", "pose_age_ns", "int"),
+    Column("latency_ns", "latency_ns", "int"),
     Column("faults", "faults", "small"),
     Column("haptic_on", "haptic_on", "small"),
     Column("trial_index", "trial_index", "small"),
@@ -93,9 +91,7 @@ def rows_to_columns(rows: np.ndarray) -> dict[str, npt.NDArray[Any]]:
     out: dict[str, npt.NDArray[Any]] = {}
     for c in COLUMNS:
         v = np.asarray(rows[c.source], dtype=np.float64)
-        if c.scale_ns:
-            out[c.name] = np.rint(v * 1e9).astype(np.int64)  # the loop's int ns × 1e-9, back to the int exactly
-        elif c.codec in _INT_CODECS:
+        if c.codec in _INT_CODECS:
             out[c.name] = v.astype(np.int64)
         else:
             out[c.name] = v

@@ -175,12 +175,12 @@ class HealthModel:
             return
         raw = np.stack([rows["raw_fx"], rows["raw_fy"], rows["raw_fz"]], axis=1)
         sensor_new = int(np.count_nonzero(np.any(np.diff(raw, axis=0) != 0, axis=1)))
-        pose_new = int(np.count_nonzero(np.diff(rows["pose_age_s"]) < 0))
+        pose_new = int(np.count_nonzero(np.diff(rows["pose_age_ns"]) < 0))
         last = rows[-1]
         ticks = len(rows) - 1
         self.devices = [
-            DeviceStatus("F/T sensor", "", sensor_new / span, float(last["sensor_age_s"]) * 1e3),
-            DeviceStatus("Robot (pose)", "", pose_new / span, float(last["pose_age_s"]) * 1e3),
+            DeviceStatus("F/T sensor", "", sensor_new / span, float(last["sensor_age_ns"]) * 1e-6),
+            DeviceStatus("Robot (pose)", "", pose_new / span, float(last["pose_age_ns"]) * 1e-6),
             DeviceStatus("Haptic device", "", ticks / span, 0.0),
         ]
         self._refresh_states()

@@ -37,7 +37,7 @@ def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float
 def fill_ring(ring: RingBuffer, n: int, start: int = 0, **cols: float) -> None:
     for k in range(start, start + n):
         rec = dict.fromkeys(RECORD_FIELDS, 0.0)
-        rec.update(t_ns=k * 1e6, t_s=k * 1e-3, tick=float(k), period_s=1e-3, tip_z_m=0.1, **cols)
+        rec.update(t_ns=k * 1e6, t_s=k * 1e-3, tick=float(k), period_ns=1e6, tip_z_m=0.1, **cols)
         ring.write([rec[f] for f in RECORD_FIELDS])
 
 
@@ -278,7 +278,7 @@ def test_health_rates_from_records():
     rows = np.zeros(n, dtype=[(f, "<f8") for f in RECORD_FIELDS])
     rows["t_s"] = np.arange(n) * 1e-3
     rows["raw_fx"] = np.arange(n)  # a new sample every tick
-    rows["pose_age_s"] = (np.arange(n) % 8) * 1e-3  # a new pose every 8 ms
+    rows["pose_age_ns"] = (np.arange(n) % 8) * 1e6  # a new pose every 8 ms
     h.update_from_rows(rows)
     assert [(d.name, d.state, round(d.rate_hz)) for d in h.devices] == [
         ("F/T sensor", "ok", 1000), ("Robot (pose)", "ok", 125), ("Haptic device", "ok", 1000)]

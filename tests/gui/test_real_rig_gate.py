@@ -185,7 +185,7 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
         netft.streaming.set()
     assert refused.message == ("the force sensor stalled while measuring the force at rest (check the Devices tab) "
                                "— press Start again")
-    wait_for(e, lambda: (r := e.loop.last_record) is not None and r["sensor_age_s"] < 0.002)
+    wait_for(e, lambda: (r := e.loop.last_record) is not None and r["sensor_age_ns"] < 2_000_000)
     n = len(events)
     e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
     assert isinstance(events[n], m.StartChecking), events[n:]

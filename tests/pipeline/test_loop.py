@@ -145,7 +145,7 @@ def test_run_on_virtual_clock_has_exact_1ms_period_including_the_ramp_down():
     np.testing.assert_array_equal(rows["tick"], np.arange(loop.tick_count, dtype=float))
     times = row_times_ns(rows)
     np.testing.assert_array_equal(times - times[0], PERIOD_NS * np.arange(loop.tick_count))
-    np.testing.assert_array_equal(rows["period_s"], np.full(loop.tick_count, DT_S))
+    np.testing.assert_array_equal(rows["period_ns"], np.full(loop.tick_count, float(PERIOD_NS)))
     assert rows["gain"][999] == 1.0
     assert np.all(rows["haptic_on"][1000:] == 0.0)
     assert rows["gain"][-1] == 0.0 and np.all(rows["gain"][1000:-1] > 0.0)
@@ -227,7 +227,7 @@ def test_a_stall_counts_missed_slots_and_keeps_the_deadline_grid():
     assert s["period_max_us"] == 3500.0
     assert s["ticks"] == 199.0
     # the late tick's own period is what the record says
-    assert all_rows(eng)["period_s"][101] == pytest.approx(0.0035, abs=1e-15)
+    assert all_rows(eng)["period_ns"][101] == 3_500_000
 
 
 # -- commands ------------------------------------------------------------------------------------------
@@ -298,7 +298,7 @@ def test_ramp_down_ends_with_the_device_commanded_to_zero(steady):
     assert rows["render_fx"][-1] == 0.0 and rows["render_fy"][-1] == 0.0 and rows["render_fz"][-1] == 0.0
     # the ramp ticks keep the 1 ms grid: the first one at the next slot, not one slot later
     assert np.all(np.diff(row_times_ns(rows)) == PERIOD_NS)
-    np.testing.assert_array_equal(rows["period_s"][1:], np.full(RAMP_TICKS, DT_S))
+    np.testing.assert_array_equal(rows["period_ns"][1:], np.full(RAMP_TICKS, float(PERIOD_NS)))
     # the device actually renders nothing from its next servo step on
     eng.rig.advance(eng.clock.now_ns())
     assert eng.rig.haptic.applied_force_n == (0.0, 0.0, 0.0)
@@ -353,7 +353,7 @@ def test_same_seed_gives_identical_records_and_another_seed_differs():
     assert a.dtype.names == RECORD_FIELDS
     # on the virtual clock computing takes no time: the latency is the sample's age
     for rows in (a, b, c):
-        np.testing.assert_array_equal(rows["latency_s"], rows["sensor_age_s"])
+        np.testing.assert_array_equal(rows["latency_ns"], rows["sensor_age_ns"])
     assert a.tobytes() == b.tobytes()  # bit for bit, NaN-aware
     assert a.tobytes() != c.tobytes()
     # the difference is in the measurements, not in the bookkeeping

@@ -87,10 +87,12 @@ def _has_sessions(db: Path) -> bool:
 
 def test_a_second_run_is_refused_while_a_study_runs_and_names_it(tmp_path: Path) -> None:
     db, proto = tmp_path / "busy.db", tmp_path / "long.toml"
-    # one long session on the virtual clock: 120 trials, some 15 minutes of study time, tens of seconds of work
-    # whatever the machine's load (the real clock would be at the mercy of it: a loaded machine misses ticks,
-    # and the runner stops a session whose trials fail again and again)
-    proto.write_text(short_toml(tmp_path).read_text().replace("trials_per_cell = 1", "trials_per_cell = 15"))
+    # one long session on the virtual clock: 400 trials (the most cells a protocol allows), about an hour of study
+    # time, minutes of work even on a quiet fast machine -- 120 trials once ended before the second command had
+    # started -- and the first run is killed at the end anyway (the real clock would be at the mercy of the
+    # machine's load: a loaded machine misses ticks, and the runner stops a session whose trials fail again and
+    # again)
+    proto.write_text(short_toml(tmp_path).read_text().replace("trials_per_cell = 1", "trials_per_cell = 100"))
     first = subprocess.Popen(cli("run", "--participants", "1", "--jobs", "1", "--seed", "5", "--db", str(db),
                                  "--protocol", str(proto)),
                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
