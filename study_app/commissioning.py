@@ -205,14 +205,15 @@ class Commissioning:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self.engine.require_idle("calibrate")
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
-        self.engine.publish(self._identified(poses, cmd.pose_set))
+        self.engine.publish(self._judged(cmd.pose_set, len(poses), lambda: (identify_payload(poses), len(poses))))
 
-    def _identified(self, poses: list[CalibrationPose], name: str) -> m.CalibrationDone:
-        """Identify, judge, and install an accepted calibration in the running loop."""
+    def _judged(self, name: str, n_poses: int,
+                identify: Callable[[], tuple[PayloadCalibration, int]]) -> m.CalibrationDone:
+        """Identify (``identify`` gives the calibration and how many poses it used), judge, install an accepted one."""
         try:
-            cal = identify_payload(poses)
+            cal, n_used = identify()
         except DegeneratePoseSetError as exc:
-            return m.CalibrationDone(False, str(exc), name, len(poses), float(exc.condition_number or math.inf),
+            return m.CalibrationDone(False, str(exc), name, n_poses, float(exc.condition_number or math.inf),
                                      math.nan, math.nan, [], None)
         reason = calibration_verdict(cal)
         if reason == "":
@@ -220,12 +221,13 @@ class Commissioning:
             self.engine.loop.submit(SetCalibration(cal))
             self._record_step("payload", cal)
         return m.CalibrationDone(
-            reason == "", reason, name, len(poses), cal.condition_number, cal.rms_force_residual_n,
+            reason == "", reason, name, n_used, cal.condition_number, cal.rms_force_residual_n,
             cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
             cal.to_dict(),
         )
 
     def calibrate(self, name: str) -> None:
+        """Simulated rig: run the pose set automatically (the loop paused), identify, judge, install."""
         from pipeline.sim.calibration import auto_calibrate
 
         self.engine.require_idle("calibrate")
@@ -238,28 +240,17 @@ class Commissioning:
             self.engine.loop.ramp_down()
             clock = self.engine.loop.clock
         self.engine.drain_ring()
-        total = len(rots)
-        result: m.CalibrationDone
-        try:
+
+        def run_poses() -> tuple[PayloadCalibration, int]:
             assert self.engine.eng.simulated
-            cal, poses = auto_calibrate(
+            cal, used = auto_calibrate(
                 self.engine.eng.rig, clock, rots,
                 progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
             )
-        except DegeneratePoseSetError as exc:
-            result = m.CalibrationDone(False, str(exc), name, total, float(exc.condition_number or math.inf),
-                                       math.nan, math.nan, [], None)
-        else:
-            reason = calibration_verdict(cal)
-            result = m.CalibrationDone(
-                reason == "", reason, name, len(poses), cal.condition_number, cal.rms_force_residual_n,
-                cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
-                cal.to_dict(),
-            )
-            if reason == "":
-                self.engine.calibration = cal
-                self.engine.loop.submit(SetCalibration(cal))
-                self._record_step("payload", cal)
+            return cal, len(used)
+
+        try:
+            result = self._judged(name, len(rots), run_poses)
         finally:
             self.engine.after_loop_pause(real)
         self.engine.publish(result)
