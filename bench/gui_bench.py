@@ -33,9 +33,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from bench.machine import cpu_times, format_late_ticks, load_average, steal_percent
+from bench.machine import cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
 from study_app import messages as m
-from study_app.engine_client import EngineClient
 from study_app.engine_setup import HostConfig
 
 __all__ = ["format_gui_bench", "run_gui_bench"]
@@ -62,25 +61,8 @@ def _loop_figures(h: m.Health, cpu_before: list[int] | None = None) -> dict[str,
 
 
 def _measure_without_gui(seconds: float, explain: bool) -> dict[str, Any]:
-    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
-    client.start()
-    try:
-        end = time.monotonic() + 60.0
-        while not isinstance(client.get(0.1), m.EngineReady):
-            if time.monotonic() > end or not client.alive:
-                raise RuntimeError("the study engine did not start")
-        client.send(m.ResetStats())
-        time.sleep(0.05)
-        cpu0 = cpu_times()
-        t_end = time.monotonic() + seconds
-        last: m.Health | None = None
-        while time.monotonic() < t_end or last is None:
-            ev = client.get(0.2)
-            if isinstance(ev, m.Health):
-                last = ev
-        return _loop_figures(last, cpu0)
-    finally:
-        client.shutdown()
+    _, last, cpu0 = engine_loop_health(seconds, explain)
+    return _loop_figures(last, cpu0)
 
 
 def _run_until(app: Any, pred: Callable[[], bool], timeout_s: float) -> None:

@@ -10,10 +10,14 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import time
 from typing import Any
 
 from pipeline.clock import MonotonicClock, prepare_realtime_thread
 from pipeline.loop_stats import LoopStats
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_setup import HostConfig
 
 __all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
 
@@ -84,3 +88,30 @@ def bare_loop_stats(seconds: float) -> dict[str, Any]:
         if proc.is_alive():
             proc.kill()
     return result
+
+
+def engine_loop_health(seconds: float, explain: bool) -> tuple[m.Health, m.Health, list[int] | None]:
+    """Run the study engine (simulated rig, real clock, no GUI) for ``seconds`` after a timing reset.
+
+    Returns the first :class:`study_app.messages.Health` after the reset, the first one published after
+    ``seconds`` (its timing covers the whole window), and the CPU times at the window's start
+    (:func:`cpu_times`).  ``explain``: trace every late tick's cause (``HostConfig.trace_jitter``).
+    """
+    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
+    try:
+        client.wait_ready(60.0)
+        client.send(m.ResetStats())
+        first: m.Health | None = None
+        while first is None:  # the loop's missed slots count from start-up: the caller takes the difference
+            ev = client.get(1.0)
+            first = ev if isinstance(ev, m.Health) else None
+        cpu0 = cpu_times()
+        t_end = time.monotonic() + seconds
+        last: m.Health | None = None
+        while last is None:
+            ev = client.get(0.2)
+            if isinstance(ev, m.Health) and time.monotonic() >= t_end:
+                last = ev
+        return first, last, cpu0
+    finally:
+        client.shutdown()

@@ -27,13 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from bench.machine import bare_loop_stats, cpu_times, format_late_ticks, load_average, steal_percent
+from bench.machine import bare_loop_stats, cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_setup import HostConfig
 
 __all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
 
@@ -306,24 +303,8 @@ def measure_loop(seconds: float, explain: bool = False) -> dict[str, Any]:
     shows in the p99).  The share of CPU time the hypervisor stole and the
     load average are reported either way.
     """
-    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
-    try:
-        client.wait_ready(60.0)
-        client.send(m.ResetStats())
-        first: m.Health | None = None
-        while first is None:  # the loop's missed slots count from start-up: take the difference
-            ev = client.get(1.0)
-            first = ev if isinstance(ev, m.Health) else None
-        cpu0 = cpu_times()
-        t_end = time.monotonic() + seconds
-        last: m.Health | None = None
-        while time.monotonic() < t_end or last is None:
-            ev = client.get(0.2)
-            if isinstance(ev, m.Health) and time.monotonic() >= t_end:
-                last = ev
-        steal = steal_percent(cpu0, cpu_times())
-    finally:
-        client.shutdown()
+    first, last, cpu0 = engine_loop_health(seconds, explain)
+    steal = steal_percent(cpu0, cpu_times())
     out: dict[str, Any] = {
         "ticks": last.ticks, "period_p50_us": last.period_p50_us, "period_p99_us": last.period_p99_us,
         "abs_dev_p99_us": last.abs_dev_p99_us, "period_max_us": last.period_max_us,

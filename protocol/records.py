@@ -93,7 +93,8 @@ def trial_health(period_s: npt.NDArray[np.float64], sensor_age_s: npt.NDArray[np
     Parameters
     ----------
     period_s, sensor_age_s, pose_age_s, latency_s
-        The loop records' columns of the same names, s (as the loop's ring hands them over).
+        The loop records' ``period_ns``, ``sensor_age_ns``, ``pose_age_ns`` and ``latency_ns`` × 1e-9, s
+        (the product the loop itself formed before its records carried ns, so the stored ms are the same).
 
     Returns
     -------

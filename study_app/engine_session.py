@@ -18,7 +18,6 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.sim.participant import SimulatedParticipant
 from protocol.config import load_protocol
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
@@ -112,6 +111,8 @@ class EngineSessions:
 
     def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
         if self.engine.eng.simulated:
+            from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
+
             self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
             sim_rig = self.engine.eng.rig
             participant: SwitchableDriver | None = self.engine.driver

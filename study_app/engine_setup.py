@@ -10,15 +10,17 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pipeline.devices import DeviceError
 from pipeline.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.hardware import HardwareConfig, HardwareError, load_hardware
 from pipeline.rig_calibration import CalibrationFileError
-from pipeline.sim.hand import HandObservation
-from pipeline.sim.participant import SimulatedParticipant
 from study_app import messages as m
+
+if TYPE_CHECKING:  # the simulated rig's types: a real rig's engine process never loads the simulators
+    from pipeline.sim.hand import HandObservation
+    from pipeline.sim.participant import SimulatedParticipant
 
 __all__ = ["MANUAL_Y_RANGE_M", "HostConfig", "SwitchableDriver", "build_engine", "build_real_engine"]
 

@@ -21,6 +21,8 @@ from __future__ import annotations
 import ast
 import functools
 import shutil
+import subprocess
+import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -327,3 +329,12 @@ def test_an_upward_import_is_reported(tmp_path: Path, floor: str, above: str) ->
 def test_the_simulators_imported_outside_the_wiring_is_reported(tmp_path: Path) -> None:
     graph = _tree_with(tmp_path, {"study_app/gui/_bad.py": "from pipeline.sim import rig\n"})
     assert sim_importers(graph) == ["study_app.gui._bad imports pipeline.sim.rig (line 1)"]
+
+
+def test_the_real_rigs_engine_loads_no_simulator() -> None:
+    # what a real rig's engine process imports before it builds anything: the simulators stay unloaded
+    code = ("import sys, study_app.engine_host, study_app.engine_client, pipeline.hardware; "
+            "print(sorted(m for m in sys.modules if m == 'pipeline.sim' or m.startswith('pipeline.sim.')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"

@@ -15,6 +15,7 @@ import socket
 import sqlite3
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, ContextManager
 
@@ -96,9 +97,7 @@ class LeaseHolder:
     conn: sqlite3.Connection
     _owners: set[str]
     _last_heartbeat: float
-
-    def transaction(self) -> ContextManager[None]:  # pragma: no cover - provided by StudyDatabase
-        raise NotImplementedError
+    transaction: Callable[[], ContextManager[None]]  # StudyDatabase's
 
     def acquire_lease(self, scope: str, owner: str, *, command: str = "", study_owner: str | None = None) -> str:
         """Take the lease on ``scope`` (``"study"`` or :func:`session_scope`) for this process.
