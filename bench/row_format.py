@@ -90,7 +90,7 @@ def trial_window_rows(database: str, session_id: int) -> list[tuple[int, npt.NDA
 
 def row_format_copy(source: str, target: str, *, workers: int | None = None,
                     progress: Callable[[int, int], None] | None = None) -> RowCopy:
-    """Write ``target``: ``source`` (schema version 3) as version 2 kept it, trial windows in ``samples`` rows.
+    """Write ``target``: ``source`` (schema version 3 or 4) as version 2 kept it, trial windows in ``samples`` rows.
 
     Parameters
     ----------
@@ -142,6 +142,8 @@ def row_format_copy(source: str, target: str, *, workers: int | None = None,
         # what version 2 did not have: the recording and where each trial is in it
         dst.execute("DROP TABLE session_blocks")
         dst.execute("DROP TABLE recordings")
+        for col in ("software_commit", "software_dirty"):  # (version 4: which code ran the session)
+            dst.execute(f"ALTER TABLE sessions DROP COLUMN {col}")
         for col in ("segment", "first_tick", "last_tick"):
             dst.execute(f"ALTER TABLE trials DROP COLUMN {col}")
         dst.execute("PRAGMA user_version = 2")

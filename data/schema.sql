@@ -1,7 +1,7 @@
--- haptic-study database schema, version 3 (PRAGMA user_version = 3).
+-- haptic-study database schema, version 4 (PRAGMA user_version = 4).
 -- The application applies this file to an empty database; a database whose
--- user_version is newer than the software's is refused; a version-1 database
--- or version-2 database is read as it is, and upgraded in place (after a
+-- user_version is newer than the software's is refused; a version-1, -2 or -3
+-- database is read as it is, and upgraded in place (after a
 -- backup copy is written beside it) only by a command that writes to it
 -- (protocol/storage.py).  Version 3 records whole sessions at full rate in
 -- compressed blocks (recordings, session_blocks; protocol/recording.py);
@@ -23,6 +23,8 @@ CREATE TABLE IF NOT EXISTS participants (
     created_at     TEXT NOT NULL
 );
 
+-- version 4: which code ran each session: software_commit, the git commit of the checkout, and software_dirty, 1 if
+-- it had uncommitted changes (both NULL where not known, e.g. installed from a wheel without a commit).
 CREATE TABLE IF NOT EXISTS sessions (
     session_id         INTEGER PRIMARY KEY,
     participant_id     INTEGER NOT NULL REFERENCES participants(participant_id),
@@ -38,7 +40,9 @@ CREATE TABLE IF NOT EXISTS sessions (
     software_version   TEXT NOT NULL,
     rig                TEXT NOT NULL,           -- 'sim' or 'real'
     config_json        TEXT NOT NULL,           -- hardware / simulation and pipeline configuration
-    calibration_json   TEXT                     -- payload/bias calibration used
+    calibration_json   TEXT,                    -- payload/bias calibration used
+    software_commit    TEXT,                    -- version 4, see above
+    software_dirty     INTEGER CHECK (software_dirty IS NULL OR software_dirty IN (0, 1))
 );
 
 CREATE TABLE IF NOT EXISTS trials (
@@ -136,6 +140,7 @@ CREATE TABLE IF NOT EXISTS session_blocks (
     t_first_s   REAL NOT NULL,                  -- session clock of its first and last record
     t_last_s    REAL NOT NULL,
     data        BLOB NOT NULL,                  -- the records' columns, the poses and the replay log
+    crc32       INTEGER,                        -- version 4: zlib.crc32 of data (NULL: written before version 4)
     PRIMARY KEY (session_id, segment, block),
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );

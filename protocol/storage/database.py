@@ -12,6 +12,7 @@ import json
 import os
 import re
 import sqlite3
+import zlib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -242,11 +243,12 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
                     n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
-        """Write a recorded block, or rewrite the segment's open block as it grew (the recorder's own row)."""
+        """Write a recorded block with its checksum, or rewrite the segment's open block as it grew (the recorder's own row)."""
         self.conn.execute(
             "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
-            "t_first_s, t_last_s, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data),
+            "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data,
+             zlib.crc32(data)),
         )
 
     def next_segment(self, session_id: int) -> int:

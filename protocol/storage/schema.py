@@ -25,7 +25,7 @@ from protocol.storage.common import EmptyDatabase, StorageError
 __all__ = ["ABORT_CAUSES", "HEALTH_COLUMNS", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SchemaFile", "connect_readonly",
            "schema_path"]
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: Why an aborted trial was aborted (``trials.abort_cause``, schema version 2).
 ABORT_CAUSES = tuple(c.value for c in AbortCause)
 #: Per-trial loop health columns (schema version 2), in table order (the fields of the record's health).
@@ -50,6 +50,14 @@ _UPGRADE_2_TO_3 = (
     "first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, n_records INTEGER NOT NULL, t_first_s REAL NOT NULL, "
     "t_last_s REAL NOT NULL, data BLOB NOT NULL, PRIMARY KEY (session_id, segment, block), "
     "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))",
+)
+#: What upgrades a version-3 database to version 4: a checksum per recorded block (NULL in blocks written before it,
+#: which cannot be verified), and which code ran each session (the commit, and whether the checkout had uncommitted
+#: changes; NULL where it is not known, e.g. an install from a wheel).
+_UPGRADE_3_TO_4 = (
+    "ALTER TABLE session_blocks ADD COLUMN crc32 INTEGER",
+    "ALTER TABLE sessions ADD COLUMN software_commit TEXT",
+    "ALTER TABLE sessions ADD COLUMN software_dirty INTEGER CHECK (software_dirty IS NULL OR software_dirty IN (0, 1))",
 )
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
@@ -242,7 +250,7 @@ class SchemaFile:
 
     def _upgrade(self, version: int) -> None:
         """Write a backup copy beside the file, then upgrade the schema in one transaction."""
-        assert version in (1, 2), version
+        assert version in (1, 2, 3), version
         stamp = _dt.datetime.now().strftime("%Y%m%dT%H%M%S")
         backup = self.path.with_name(f"{self.path.stem}.v{version}-backup-{stamp}{self.path.suffix or '.db'}")
         n = 1
@@ -275,7 +283,10 @@ class SchemaFile:
                     except sqlite3.IntegrityError:
                         c.execute("ROLLBACK TO unique_samples")
                         c.execute("RELEASE unique_samples")
-                for stmt in _UPGRADE_2_TO_3:
+                if version <= 2:
+                    for stmt in _UPGRADE_2_TO_3:
+                        c.execute(stmt)
+                for stmt in _UPGRADE_3_TO_4:
                     c.execute(stmt)
                 c.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
             c.execute("COMMIT")

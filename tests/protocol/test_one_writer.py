@@ -183,6 +183,8 @@ def _as_version_1(db: Path) -> None:
     c.execute("DROP TABLE session_blocks")
     c.execute("DROP TABLE recordings")
     c.execute("DROP TABLE leases")
+    for col in ("software_commit", "software_dirty"):
+        c.execute(f"ALTER TABLE sessions DROP COLUMN {col}")
     c.execute("DROP INDEX samples_by_trial")
     c.execute("CREATE INDEX samples_by_trial ON samples (trial_id, t_s)")
     c.execute("ALTER TABLE trials DROP COLUMN abort_cause")

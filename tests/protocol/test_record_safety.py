@@ -12,6 +12,7 @@ import os
 import socket
 import sqlite3
 import stat
+import zlib
 from pathlib import Path
 
 import pytest
@@ -31,6 +32,7 @@ from protocol.storage import (
 )
 
 V1_SCHEMA = Path(__file__).parent / "data" / "schema_v1.sql"
+V3_SCHEMA = Path(__file__).parent / "data" / "schema_v3.sql"
 
 
 def _session_args(code: str = "P01", kind: str = "experiment") -> dict:
@@ -195,11 +197,35 @@ def test_a_v1_database_with_duplicate_samples_is_upgraded_keeping_its_index(tmp_
     d.close()
 
 
+def test_a_v3_database_is_upgraded_to_checksummed_blocks_and_keeps_its_old_blocks_unverifiable(tmp_path):
+    path = tmp_path / "v3.db"
+    c = sqlite3.connect(path)
+    c.executescript(V3_SCHEMA.read_text() + "\nPRAGMA user_version = 3;")
+    c.execute("INSERT INTO participants VALUES (1, 'P01', '2026-01-01T00:00:00Z')")
+    c.execute("INSERT INTO sessions (session_id, participant_id, kind, seed, participant_number, protocol_json, "
+              "schedule_json, status, started_at, software_version, rig, config_json) VALUES "
+              "(1, 1, 'experiment', 0, 1, '{}', '[]', 'running', 'x', '0.1.0', 'sim', '{}')")
+    c.execute("INSERT INTO recordings VALUES (1, 0, 0.0, 0, '{}', '{}')")
+    c.execute("INSERT INTO session_blocks VALUES (1, 0, 0, 0, 9, 10, 0.0, 0.009, x'0102')")
+    c.commit()
+    c.close()
+    d = StudyDatabase(path)
+    assert d.upgraded_from == 3 and d.schema_version == SCHEMA_VERSION == 4
+    assert d.backup_path is not None and d.backup_path.name.startswith("v3.v3-backup-")
+    # the block written before version 4 carries no checksum (NULL: not verifiable), a new one does
+    d.write_block(1, 0, 1, 10, 19, 10, 0.01, 0.019, b"\x03\x04")
+    d.commit()
+    rows = d.conn.execute("SELECT block, crc32 FROM session_blocks ORDER BY block").fetchall()
+    assert rows == [(0, None), (1, zlib.crc32(b"\x03\x04"))]
+    assert d.conn.execute("SELECT software_commit, software_dirty FROM sessions").fetchone() == (None, None)
+    d.close()
+
+
 def test_upgrade_can_be_refused_and_then_nothing_changes(tmp_path):
     path = tmp_path / "old.db"
     _v1_database(path)
     before = path.read_bytes()
-    with pytest.raises(StorageError, match="must be upgraded to 3 before it is written to; nothing was changed"):
+    with pytest.raises(StorageError, match="must be upgraded to 4 before it is written to; nothing was changed"):
         StudyDatabase(path, upgrade=False)
     assert path.read_bytes() == before
 

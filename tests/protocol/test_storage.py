@@ -33,6 +33,7 @@ COLUMNS = {
     "sessions": [
         "session_id", "participant_id", "kind", "seed", "participant_number", "protocol_json", "schedule_json",
         "status", "started_at", "ended_at", "end_reason", "software_version", "rig", "config_json", "calibration_json",
+        "software_commit", "software_dirty",
     ],
     "trials": [
         "trial_id", "session_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome",
@@ -49,7 +50,7 @@ COLUMNS = {
     "leases": ["scope", "owner", "pid", "host", "process_start", "command", "acquired_at", "heartbeat_at"],
     "recordings": ["session_id", "segment", "started_at_s", "t0_ns", "snapshot_json", "scales_json"],
     "session_blocks": ["session_id", "segment", "block", "first_tick", "last_tick", "n_records", "t_first_s",
-                       "t_last_s", "data"],
+                       "t_last_s", "data", "crc32"],
 }
 
 
@@ -116,7 +117,7 @@ def test_new_database_gets_the_schema(db, db_path):
         for table, columns in COLUMNS.items():
             assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+        assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
         indexes = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")}
         assert indexes == {"samples_by_trial", "events_by_session"}
     finally:
@@ -132,7 +133,7 @@ def test_reopening_keeps_the_data(db_path):
     again = StudyDatabase(db_path)
     try:
         assert [s.session_id for s in again.sessions_of("P01")] == [sid]
-        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 3
+        assert again.conn.execute("PRAGMA user_version").fetchone()[0] == 4
     finally:
         again.close()
     ro = StudyDatabase(db_path, readonly=True)
@@ -154,7 +155,7 @@ def test_an_empty_file_becomes_a_database(db_path):
 # -- refusals -------------------------------------------------------------------------------------
 def test_newer_schema_is_refused(db_path):
     with sqlite3.connect(db_path) as c:
-        c.execute("PRAGMA user_version = 4")
+        c.execute("PRAGMA user_version = 5")
         c.execute("CREATE TABLE participants (participant_id INTEGER PRIMARY KEY)")
     c.close()
     before = db_path.read_bytes()
@@ -162,7 +163,7 @@ def test_newer_schema_is_refused(db_path):
         StudyDatabase(db_path)
     msg = str(info.value)
     assert str(db_path) in msg
-    assert "version 4 is newer than this software supports (3)" in msg
+    assert "version 5 is newer than this software supports (4)" in msg
     assert db_path.read_bytes() == before
 
 

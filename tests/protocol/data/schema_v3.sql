@@ -1,0 +1,141 @@
+-- haptic-study database schema, version 3 (PRAGMA user_version = 3).
+-- The application applies this file to an empty database; a database whose
+-- user_version is newer than the software's is refused; a version-1 database
+-- or version-2 database is read as it is, and upgraded in place (after a
+-- backup copy is written beside it) only by a command that writes to it
+-- (protocol/storage.py).  Version 3 records whole sessions at full rate in
+-- compressed blocks (recordings, session_blocks; protocol/recording.py);
+-- the samples table holds what versions 1 and 2 recorded (trial windows).
+-- Rows are insert-only except that a session's end columns are filled once,
+-- a session's schedule is rewritten when an aborted trial is re-queued, and
+-- the leases table holds who writes to what right now.
+--
+-- Conventions: snake_case, units in column names; times on the session clock are
+-- seconds since the session started (*_at_s); wall-clock stamps are ISO 8601 UTC
+-- text (*_at).  A trial's samples are keyed by trial_id = session_id * 1000000
+-- + trial_index, allocated when the trial starts, so samples can be committed
+-- (every ≤ 100 ms) before the trial's summary row exists (committed atomically
+-- when the trial ends).
+
+CREATE TABLE IF NOT EXISTS participants (
+    participant_id INTEGER PRIMARY KEY,
+    code           TEXT NOT NULL UNIQUE,        -- pseudonymous code only, no personal data
+    created_at     TEXT NOT NULL
+);
+
+CREATE TABLE IF NOT EXISTS sessions (
+    session_id         INTEGER PRIMARY KEY,
+    participant_id     INTEGER NOT NULL REFERENCES participants(participant_id),
+    kind               TEXT NOT NULL CHECK (kind IN ('training', 'experiment')),
+    seed               INTEGER NOT NULL,
+    participant_number INTEGER NOT NULL,        -- position in the study (counterbalancing)
+    protocol_json      TEXT NOT NULL,           -- the validated protocol, as run
+    schedule_json      TEXT NOT NULL,           -- the whole trial order, stored before trial 1
+    status             TEXT NOT NULL CHECK (status IN ('running', 'completed', 'aborted')),
+    started_at         TEXT NOT NULL,
+    ended_at           TEXT,
+    end_reason         TEXT,
+    software_version   TEXT NOT NULL,
+    rig                TEXT NOT NULL,           -- 'sim' or 'real'
+    config_json        TEXT NOT NULL,           -- hardware / simulation and pipeline configuration
+    calibration_json   TEXT                     -- payload/bias calibration used
+);
+
+CREATE TABLE IF NOT EXISTS trials (
+    trial_id        INTEGER PRIMARY KEY,        -- session_id * 1000000 + trial_index
+    session_id      INTEGER NOT NULL REFERENCES sessions(session_id),
+    trial_index     INTEGER NOT NULL,
+    target_label    TEXT NOT NULL,              -- 'GENTLE' / 'FIRM' in the paper's protocol
+    target_force_n  REAL NOT NULL,
+    haptic_mode     TEXT NOT NULL CHECK (haptic_mode IN ('on', 'off')),
+    outcome         TEXT NOT NULL CHECK (outcome IN ('success', 'timeout', 'aborted')),
+    started_at_s    REAL NOT NULL,              -- cue, session clock
+    ended_at_s      REAL NOT NULL,              -- trial end, session clock
+    tct_s           REAL,                       -- NULL unless success
+    rmse_n          REAL,
+    max_ae_n        REAL,
+    time_in_band_s  REAL,
+    peak_force_n    REAL,
+    n_samples       INTEGER,
+    abort_reason    TEXT,
+    repeat_of       INTEGER,                    -- trial_index of the aborted trial this one re-runs
+    -- version 2: why an aborted trial was aborted, and how the 1 kHz loop ran during the trial
+    abort_cause     TEXT CHECK (abort_cause IS NULL OR abort_cause IN
+                                ('experimenter', 'fault', 'feedback', 'gap', 'interrupted')),
+    period_p50_ms     REAL,                     -- loop tick period over the trial's samples
+    period_p99_ms     REAL,
+    period_max_ms     REAL,
+    periods_over_2ms  INTEGER,                  -- count of ticks whose period exceeded 2 ms
+    sensor_age_max_ms REAL,                     -- oldest F/T sample the loop used (watchdog limit 5 ms)
+    pose_age_max_ms   REAL,                     -- oldest robot pose the loop used (watchdog limit 50 ms)
+    latency_p50_ms    REAL,                     -- F/T sample arrival -> force command sent
+    latency_max_ms    REAL,
+    -- version 3: where the trial's records are in the session's recording (NULL: in samples, or none)
+    segment     INTEGER,                        -- recordings.segment
+    first_tick  INTEGER,                        -- the loop ticks of its first (the cue) and last record
+    last_tick   INTEGER,
+    UNIQUE (session_id, trial_index),
+    CHECK (tct_s IS NULL OR outcome = 'success')
+);
+
+CREATE TABLE IF NOT EXISTS samples (
+    trial_id  INTEGER NOT NULL,                 -- see trials.trial_id
+    t_s       REAL NOT NULL,                    -- since the trial's cue
+    force_n   REAL,                             -- the task force: |filtered compensated force|
+    raw_fx    REAL, raw_fy REAL, raw_fz REAL,
+    raw_tx    REAL, raw_ty REAL, raw_tz REAL,
+    comp_fx   REAL, comp_fy REAL, comp_fz REAL,
+    render_fx REAL, render_fy REAL, render_fz REAL   -- what was sent to the haptic device
+);
+-- unique: one trial never holds two samples of one time (a second writer would be refused here too)
+CREATE UNIQUE INDEX IF NOT EXISTS samples_by_trial ON samples (trial_id, t_s);
+
+CREATE TABLE IF NOT EXISTS events (
+    session_id INTEGER NOT NULL REFERENCES sessions(session_id),
+    t_s        REAL NOT NULL,                   -- session clock
+    kind       TEXT NOT NULL,
+    detail     TEXT
+);
+CREATE INDEX IF NOT EXISTS events_by_session ON events (session_id, t_s);
+
+-- version 2: one writer per session.  A row says which process writes to a
+-- scope ('study': a headless `run` over the whole database; 'session N': one
+-- session).  A lease whose process is gone (same host: the pid no longer runs
+-- the process that took it; another host: no heartbeat for 30 s) is taken over.
+CREATE TABLE IF NOT EXISTS leases (
+    scope         TEXT PRIMARY KEY,
+    owner         TEXT NOT NULL,                -- random token of the command holding it
+    pid           INTEGER NOT NULL,
+    host          TEXT NOT NULL,
+    process_start TEXT NOT NULL,                -- boot id and start time of pid (tells a reused pid apart)
+    command       TEXT NOT NULL,                -- what holds it, for a refusal message
+    acquired_at   TEXT NOT NULL,
+    heartbeat_at  TEXT NOT NULL
+);
+
+-- version 3: whole sessions at full rate.  A run of a session (its first, then one per resume) is a segment,
+-- with the haptic framework's state at its first record (replay starts from it); its records are cut into
+-- blocks of about one second, each column one compressed array (protocol/recording.py).
+CREATE TABLE IF NOT EXISTS recordings (
+    session_id    INTEGER NOT NULL REFERENCES sessions(session_id),
+    segment       INTEGER NOT NULL,
+    started_at_s  REAL NOT NULL,                -- session clock of its first record
+    t0_ns         INTEGER NOT NULL,             -- loop time of that record: session time = started_at_s + (t_ns - t0_ns) / 1e9
+    snapshot_json TEXT NOT NULL,                -- the framework's state before its first record, and the loop's
+    scales_json   TEXT NOT NULL,                -- counts per unit of the raw wrench columns (the codec's hint)
+    PRIMARY KEY (session_id, segment)
+);
+
+CREATE TABLE IF NOT EXISTS session_blocks (
+    session_id  INTEGER NOT NULL,
+    segment     INTEGER NOT NULL,
+    block       INTEGER NOT NULL,               -- 0, 1, ... within the segment
+    first_tick  INTEGER NOT NULL,               -- loop ticks of its first and last record
+    last_tick   INTEGER NOT NULL,
+    n_records   INTEGER NOT NULL,
+    t_first_s   REAL NOT NULL,                  -- session clock of its first and last record
+    t_last_s    REAL NOT NULL,
+    data        BLOB NOT NULL,                  -- the records' columns, the poses and the replay log
+    PRIMARY KEY (session_id, segment, block),
+    FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
+);
