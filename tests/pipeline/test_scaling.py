@@ -297,8 +297,8 @@ def test_series_matches_gain_near_zero_through_scale_magnitude(f):
         (2.0, "0.835", 3),
         (3.0, "1.21", 3),
         (5.0, "1.84", 3),
-        # science.md §0 prints 0.129 and 0.232 for these two: rounding slips in the
-        # table (3·tanh(0.3/7) = 0.128493, 3·tanh(0.54/7) = 0.230971).
+        # the reference this table was first taken from printed 0.129 and 0.232 for these two:
+        # rounding slips (3·tanh(0.3/7) = 0.128493, 3·tanh(0.54/7) = 0.230971).
         (0.30, "0.128", 3),
         (0.54, "0.231", 3),
     ],
