@@ -1,4 +1,4 @@
-"""Import contracts: the folder layout is the architecture (docs/house-style.md §3.1).
+"""Import contracts: the folder layout is the architecture (docs/architecture.md, "Five floors").
 
 The project is a house of floors, ``study_app`` → ``bench`` → ``analysis`` → ``protocol`` → ``pipeline``, but
 ``bench`` stands beside the product rather than inside it: the benchmarks import the product, the product never
