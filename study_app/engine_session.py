@@ -147,7 +147,7 @@ class EngineSessions:
             start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
-            participant_number=opened.participant_number, stored_trials=stored,
+            participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
         ))
 
     def inject_fault(self, cmd: m.InjectFault) -> None:

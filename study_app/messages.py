@@ -283,6 +283,8 @@ class SessionStarted:
     participant_number: int = 0
     #: A resumed session's trials stored before, in index order.
     stored_trials: list[TrialRecord] = field(default_factory=list)
+    #: The session's (so the study's) seed.
+    seed: int = 0
 
 
 @dataclass(frozen=True, slots=True)

@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
-from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
+from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QApplication, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
-    QVBoxLayout, QWidget,
+    QApplication, QFrame, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QScrollArea, QSplitter,
+    QTabWidget, QToolButton, QVBoxLayout, QWidget,
 )
 
 from study_app import messages as m
@@ -104,8 +104,17 @@ class ExperimenterWindow(QMainWindow):
         ll.addStretch(1)
         left.setMinimumWidth(340)
         left.setMaximumWidth(460)
-        self.left_column = left
-        return left
+        # a column taller than the screen scrolls; nothing in it is squashed or cut
+        scroll = QScrollArea()
+        scroll.setWidget(left)
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        bar = scroll.verticalScrollBar().sizeHint().width()
+        scroll.setMinimumWidth(340 + bar)
+        scroll.setMaximumWidth(460 + bar)
+        self.left_column = scroll
+        return scroll
 
     def _build_controls(self) -> QGroupBox:
         """Start, pause/resume, abort, the windows' buttons; the engine's and the notices' rows above them."""
@@ -188,6 +197,7 @@ class ExperimenterWindow(QMainWindow):
         self.trials_tab = QWidget()
         self.trials_count = ElidedLabel()  # the session's count, as the progress line above reads it
         self.trials_count.setContentsMargins(6, 2, 6, 0)
+        self.trials_count.hide()
         tt = QVBoxLayout(self.trials_tab)
         tt.setContentsMargins(0, 0, 0, 0)
         tt.setSpacing(2)

@@ -68,7 +68,7 @@ class ParticipantWindow(QWidget):
         self.setMinimumSize(320, 240)
         self.headline = QLabel()
         self.headline.setAlignment(Qt.AlignmentFlag.AlignCenter)
-        self.headline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
+        self.headline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self.subline = QLabel()
         self.subline.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.subline.setWordWrap(True)

@@ -423,7 +423,8 @@ class QtSetupPanel(QGroupBox):
         lay.addWidget(self.errors)
         lay.addWidget(self.warnings)
         lay.addWidget(self.hint)
-        lay.addWidget(QLabel("Interrupted sessions"))
+        self.resumable_label = QLabel()
+        lay.addWidget(self.resumable_label)
         lay.addWidget(self.resumable)
         lay.addLayout(_row_layout(self.refresh_button, self.resume_button))
         self.db.editingFinished.connect(lambda: setup.update(db_path=self.db.text()))
@@ -444,6 +445,7 @@ class QtSetupPanel(QGroupBox):
         setup.changed.connect(self._on_changed)
         setup.resumable_changed.connect(self._on_resumable)
         self._on_changed()
+        self._on_resumable()
 
     def _browse_db(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(), "SQLite (*.db *.sqlite);;All files (*)",
@@ -471,7 +473,8 @@ class QtSetupPanel(QGroupBox):
             self.number.setValue(v.participant_number)
         self.errors.setText("\n".join(self.setup.errors.values()))
         self.warnings.setText("\n".join(self.setup.warnings.values()))
-        self.hint.setText(self.setup.hint or ("" if self.setup.errors else self.setup.next_step()))
+        idle = self.setup.running_session is None
+        self.hint.setText(self.setup.hint or ("" if self.setup.errors or not idle else self.setup.next_step()))
         for label in (self.errors, self.warnings, self.hint):
             label.setVisible(bool(label.text()))
         self._show_seed()
@@ -497,6 +500,11 @@ class QtSetupPanel(QGroupBox):
         return super().eventFilter(obj, event)
 
     def _on_resumable(self) -> None:
+        # an empty list takes one line, not the list's height: the column must fit a 768-px screen
+        n = len(self.setup.resumable)
+        self.resumable_label.setText("Interrupted sessions" if n else "Interrupted sessions: none")
+        self.resumable.setVisible(bool(n))
+        self.resume_button.setToolTip("" if n else "no interrupted session in this database")
         self.resumable.clear()
         for s in self.setup.resumable:
             text = self.setup.describe_resumable(s)

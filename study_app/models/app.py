@@ -144,12 +144,11 @@ class AppModel:
         elif isinstance(ev, m.SessionStarted):
             self.clear_notice()
             if ev.kind == "experiment" and self._training_override:
-                self.notify("warning", f"{ev.code}'s experiment started without a completed training session: "
-                            "your reason is stored with the session as a deviation (listed in the report).",
-                            "TrainingOverride")
+                self.notify("warning", f"{ev.code}: started without training, stored as a deviation with your "
+                            "reason.", "TrainingOverride")
             self._training_override = ""
             self.setup.session_began(ev.code, ev.kind, ev.participant_number or self.setup.values.participant_number,
-                                     ev.session_id)
+                                     ev.session_id, seed=ev.seed)
         elif isinstance(ev, m.SessionEnded):
             self.clear_notice(CALIBRATION_COMMANDS)  # "not during a session": its cause has gone
             if self.session.session is not None:

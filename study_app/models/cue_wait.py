@@ -45,7 +45,7 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
     """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
     s = session
     if engine_trouble:
-        if s.session is None and interrupted is None:
+        if interrupted is None and not s.running:  # no session was cut short: there is no cue to wait for
             return "", None
         return "engine", CueWait("error", "no trial runs until the study engine is restarted",
                                  action="restart_engine", help="Restart engine, then Resume selected.")

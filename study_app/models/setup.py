@@ -197,7 +197,7 @@ class SetupModel:
                 errors["code"] = (f"{v.code} already has {article(str(s['status']))} {s['status']} {v.kind} session "
                                   f"(session {s['session_id']}); the database keeps one per participant: enter a new "
                                   "code")
-        elif v.kind == "experiment" and self.protocol is not None:
+        elif v.kind == "experiment" and self.protocol is not None and self.running_session is None:
             why = training_refusal(self._stored(), v.code, self.protocol)
             if why:
                 errors["training"] = f"{why}. {TRAINING_OVERRIDE_HINT}."
@@ -276,11 +276,17 @@ class SetupModel:
         self._suggest_kind()
         self.validate()
 
-    def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None) -> None:
-        """A session started or resumed: the form shows whose it is."""
+    def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None,
+                      seed: int | None = None) -> None:
+        """A session started or resumed: the form shows whose it is (and knows it is stored: the study's seed
+        is fixed from now on, before the database is listed again)."""
         self.running_session = session_id
         if session_id == self.preferred_resume:
             self.preferred_resume = None
+        if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):
+            self.known.append({"session_id": session_id, "code": code, "participant_number": participant_number,
+                               "kind": kind, "status": "running", "seed": seed, "trials_planned": 0,
+                               "trials_done": 0, "trials_aborted": 0})
         self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number)
         self.number_suggested = False
         self.validate()
@@ -288,6 +294,9 @@ class SetupModel:
     def session_ended(self, kind: str, status: str) -> None:
         """The running session ended; if it finished (completed or aborted), set up the next one
         (:meth:`next_participant`)."""
+        for s in self.known:  # as stored now, before the database is listed again
+            if s["session_id"] == self.running_session:
+                s["status"] = status
         self.running_session = None
         if status in ("completed", "aborted"):
             self.next_participant(kind)
