@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
@@ -223,7 +224,9 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_windows(self) -> None:
         """The participant screen, the simulated rig view, the calibration wizard and the menu."""
-        self.participant_window = ParticipantWindow(self.model.participant)
+        # a window of its own, kept above this one (its transient parent): on one monitor it stays in view
+        # beside the controls when the experimenter clicks here
+        self.participant_window = ParticipantWindow(self.model.participant, self)
         self.rig_window = RigWindow(self.model.rig, self.model.set_driver, self.model.inject_fault)
         self.calibration_wizard = CalibrationWizard(
             self.model.calibration, self.model.calibrate,
@@ -494,6 +497,11 @@ class ExperimenterWindow(QMainWindow):
         self.untrained_button.setToolTip("Asks for the reason; it is stored with the session as a deviation from "
                                          "the protocol, and the report lists it")
         self.calibration_wizard.set_blocked(self.model.calibration_refusal())
+        db = self.model.setup.values.db_path
+        title = f"{os.path.basename(db)} — haptic-study experimenter" if db else "haptic-study — experimenter"
+        if title != self.windowTitle():
+            self.setWindowTitle(title)
+            self.setWindowFilePath(os.path.abspath(db) if db else "")
         if hasattr(self, "menus"):
             self.menus.refresh()
         self.pause_button.setEnabled(can("pause"))

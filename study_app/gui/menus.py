@@ -110,11 +110,15 @@ class WindowMenus:
     def choose_database(self) -> None:
         """File → Open study database…: pick a file (a new name creates the database at the first Start)."""
         current = self.win.setup_panel.db.text()
-        path, _ = QFileDialog.getSaveFileName(
-            self.win, "Open study database", current or os.getcwd(), "Study databases (*.db *.sqlite);;All files (*)",
-            options=QFileDialog.Option.DontConfirmOverwrite)
-        if path:
-            self.open_database(path)
+        # a save-style dialog, so a new name can be typed (the database is made at the first Start), labelled Open
+        dlg = QFileDialog(self.win, "Open study database", current or os.getcwd(),
+                          "Study databases (*.db *.sqlite);;All files (*)")
+        dlg.setAcceptMode(QFileDialog.AcceptMode.AcceptSave)
+        dlg.setOption(QFileDialog.Option.DontConfirmOverwrite)
+        dlg.setLabelText(QFileDialog.DialogLabel.Accept, "Open")
+        dlg.setDefaultSuffix("db")
+        if dlg.exec() and dlg.selectedFiles():
+            self.open_database(dlg.selectedFiles()[0])
 
     def open_database(self, path: str) -> None:
         """Use the study database at ``path`` (refused while a session runs, with why)."""

@@ -56,7 +56,8 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
     if s.state == "paused":
         if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
             return "paused-runner", CueWait("error", waiting, action="resume",
-                                            help="Resume (Space) once the cause is dealt with.")
+                                            help="Resume (Space) once the cause is dealt with; Devices & health "
+                                                 "says whether this computer is too busy for the loop.")
         return "paused", CueWait("warning", "the session is paused", action="resume",
                                  help="Resume (Space) to continue with the next trial.")
     if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:

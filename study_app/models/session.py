@@ -122,6 +122,8 @@ class SessionModel:
     phase: str = "idle"
     pause_until_s: float | None = None
     paused_requested: bool = False
+    #: Why the session runner paused the session itself ("" when it did not): trials it could not deliver.
+    paused_by_runner: str = ""
     completed: int = 0
     aborted: int = 0
     reruns_run: int = 0
@@ -179,6 +181,7 @@ class SessionModel:
                 holding = ev.paused and self.phase not in ("active", "cued")
                 self.paused_requested = ev.paused and not holding
                 self.state = "paused" if holding else "running"
+                self.paused_by_runner = ev.waiting if holding and ev.waiting not in ("", "pause") else ""
         elif isinstance(ev, m.EngineStopped):
             self.state, self.message = "stopped", f"engine stopped: {ev.reason}"
         elif isinstance(ev, m.CommandRefused) and ev.command == "connect":
@@ -205,7 +208,7 @@ class SessionModel:
         else:
             self.completed += 1
         self.reruns_run += row.repeat_of is not None
-        if row.end_ns > row.cue_ns:
+        if row.end_ns > row.cue_ns and row.outcome is not Outcome.ABORTED:  # an aborted one was cut short
             self._durations_s.append((row.end_ns - row.cue_ns) * 1e-9)
 
     @property
@@ -231,6 +234,8 @@ class SessionModel:
         if s is None or not self.running:
             return self.message
         if self.state == "paused":
+            if self.paused_by_runner:  # not the experimenter's pause: say so, and where the reason is
+                return "Paused by the session: trials were not delivered as designed (see below) · Resume (Space)"
             return "Paused · Resume (Space) to continue"
         pending = " · pause requested: pausing after this trial" if self.paused_requested else ""
         tr = self.trial
@@ -259,9 +264,10 @@ class SessionModel:
     def time_left_s(self) -> tuple[float, bool] | None:
         """(estimated seconds until the last designed trial is done, whether it is an upper bound), or None.
 
-        Every designed trial not yet done takes one more attempt (a re-run to come is one of them): the
-        attempts' mean length so far plus the protocol's pause, or the trial cap before any attempt ended
-        (then it is an upper bound).  The running trial counts what it has left of that.
+        Every designed trial not yet done takes one more attempt (a re-run to come is one of them): the mean
+        length of the trials that ended so far (a success or a timeout: an aborted one was cut short) plus the
+        protocol's pause, or the trial cap before any ended (then it is an upper bound).  The running trial
+        counts what it has left of that.
         """
         s = self.session
         if s is None:
