@@ -224,9 +224,7 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_windows(self) -> None:
         """The participant screen, the simulated rig view, the calibration wizard and the menu."""
-        # a window of its own, kept above this one (its transient parent): on one monitor it stays in view
-        # beside the controls when the experimenter clicks here
-        self.participant_window = ParticipantWindow(self.model.participant, self)
+        self.participant_window = ParticipantWindow(self.model.participant)
         self.rig_window = RigWindow(self.model.rig, self.model.set_driver, self.model.inject_fault)
         self.calibration_wizard = CalibrationWizard(
             self.model.calibration, self.model.calibrate,
@@ -478,7 +476,23 @@ class ExperimenterWindow(QMainWindow):
                     placement.place_beside(w, self, self.left_column, PARTICIPANT_BESIDE_SIZE)
                 else:
                     placement.place(w, size, self.screen())
+        if w is self.participant_window:
+            self._keep_participant_in_view(w)
         _show(w)
+
+    def _keep_participant_in_view(self, w: QWidget) -> None:
+        """Sharing this window's monitor, the participant screen is a utility window of this one (X11 and the
+        window managers keep such a window above its transient parent), so it stays in view beside the controls
+        when the experimenter clicks here; on a monitor of its own it is an ordinary window."""
+        shared = placement.other_screen(self) is None or w.screen() is self.screen()
+        if w.windowType() != (Qt.WindowType.Tool if shared else Qt.WindowType.Window):
+            geometry = w.saveGeometry()
+            w.setWindowFlags(Qt.WindowType.Tool if shared else Qt.WindowType.Window)  # (this hides it)
+            w.restoreGeometry(geometry)
+        w.winId()
+        handle = w.windowHandle()
+        if handle is not None:
+            handle.setTransientParent(self.windowHandle() if shared else None)
 
     def resume_selected(self) -> None:
         """Continue the interrupted session selected in the list."""

@@ -45,7 +45,8 @@ class ElidedLabel(QLabel):
         self._elide()
 
     def _elide(self) -> None:
-        self.setText(self.fontMetrics().elidedText(self._full, Qt.TextElideMode.ElideRight, max(0, self.width())))
+        one_line = " ".join(self._full.split())  # a message with line breaks (an engine's traceback) is one line here
+        self.setText(self.fontMetrics().elidedText(one_line, Qt.TextElideMode.ElideRight, max(0, self.width())))
 
 
 class FollowNewest:

@@ -143,6 +143,8 @@ class AppModel:
             self.clear_notice()  # news about an earlier trial: stale once the next one has ended
         elif isinstance(ev, m.SessionStarted):
             self.clear_notice()
+            if any(s["session_id"] == ev.session_id for s in self.setup.resumable):  # it runs now: not to resume
+                self.setup.set_resumable([s for s in self.setup.resumable if s["session_id"] != ev.session_id])
             if ev.kind == "experiment" and self._training_override:
                 self.notify("warning", f"{ev.code}: started without training, stored as a deviation with your "
                             "reason.", "TrainingOverride")

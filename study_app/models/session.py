@@ -29,7 +29,8 @@ class TrialCount:
     ``designed`` trials are the design's (20 in the paper's protocol); each is ``done`` once, when it or a
     re-run of it ends as a success or a timeout, so ``done`` never passes ``designed`` and the count never
     grows as re-runs are added.  ``aborted`` attempts are counted apart; each queues one re-run, so the
-    re-runs still to come are the aborted attempts less the re-runs already run (``reruns_run``).
+    re-runs left (the one running included) are the aborted attempts less the re-runs already run
+    (``reruns_run``).
     """
 
     designed: int
@@ -45,7 +46,7 @@ class TrialCount:
 
     @property
     def reruns_to_come(self) -> int:
-        """Re-runs queued and not run yet."""
+        """Re-runs queued and not ended yet (the one running, if one runs, included)."""
         return max(0, self.aborted - self.reruns_run)
 
     @property
@@ -54,13 +55,13 @@ class TrialCount:
         return min(1.0, self.done / self.designed) if self.designed > 0 else 0.0
 
     def text(self) -> str:
-        """``7 of 20 trials done · 2 aborted · 1 re-run to come`` (the last two only when not zero)."""
+        """``7 of 20 trials done · 2 aborted · 1 re-run left`` (the last two only when not zero)."""
         parts = [f"{self.done} of {self.designed} trials done"]
         if self.aborted:
             parts.append(f"{self.aborted} aborted")
         n = self.reruns_to_come
         if n:
-            parts.append(f"{n} re-run{'s' if n > 1 else ''} to come")
+            parts.append(f"{n} re-run{'s' if n > 1 else ''} left")
         return " · ".join(parts)
 
 
@@ -251,7 +252,7 @@ class SessionModel:
         return ("Session started: the first trial is due" if first else "The next trial is due") + pending
 
     def count_text(self) -> str:
-        """The progress count and the time left: ``7 of 20 trials done · 2 aborted · 1 re-run to come · about
+        """The progress count and the time left: ``7 of 20 trials done · 2 aborted · 1 re-run left · about
         4 min left`` ("" without a session)."""
         if self.session is None:
             return ""
@@ -264,7 +265,7 @@ class SessionModel:
     def time_left_s(self) -> tuple[float, bool] | None:
         """(estimated seconds until the last designed trial is done, whether it is an upper bound), or None.
 
-        Every designed trial not yet done takes one more attempt (a re-run to come is one of them): the mean
+        Every designed trial not yet done takes one more attempt (a re-run left is one of them): the mean
         length of the trials that ended so far (a success or a timeout: an aborted one was cut short) plus the
         protocol's pause, or the trial cap before any ended (then it is an upper bound).  The running trial
         counts what it has left of that.

@@ -78,7 +78,7 @@ def test_training_rule_seed_rule_and_one_count_through_a_rerun_quit_and_resume(q
     answer_input("pilot participant, trained on the rig yesterday")
     qtbot.mouseClick(w.untrained_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: w.model.session.running, timeout=TIMEOUT_MS)
-    assert w.notice.text().startswith("P01's experiment started without a completed training session")
+    assert w.notice.text() == "P01: started without training, stored as a deviation with your reason."
     (kind, detail), = rows(db, "SELECT kind, detail FROM events WHERE kind = 'deviation'")
     assert detail.startswith("training skipped: P01's experiment started without a completed training session")
     assert detail.endswith("Reason given: pilot participant, trained on the rig yesterday")
@@ -96,7 +96,7 @@ def test_training_rule_seed_rule_and_one_count_through_a_rerun_quit_and_resume(q
     qtbot.waitUntil(lambda: w.trial_table.rowCount() == 2, timeout=TIMEOUT_MS)  # trial 2 ended too
     seen = panels(w)
     assert len(set(seen.values())) == 1, seen
-    assert seen["progress"].startswith("1 of 2 trials done · 1 aborted · 1 re-run to come · about ")
+    assert seen["progress"].startswith("1 of 2 trials done · 1 aborted · 1 re-run left · about ")
     assert w.progress.bar.value() == 500
     # the re-run: its row says which trial it repeats; quitting mid-trial stores it aborted
     qtbot.waitUntil(lambda: w.model.session.trial is not None and w.model.session.trial.repeat_of == 0
@@ -112,7 +112,7 @@ def test_training_rule_seed_rule_and_one_count_through_a_rerun_quit_and_resume(q
     w2 = open_ready_window(qtbot, tmp_path, PROTOCOL, speed=4.0)
     qtbot.waitUntil(lambda: w2.setup_panel.resumable.count() == 1, timeout=TIMEOUT_MS)
     listed = w2.setup_panel.resumable.item(0).text()
-    count = "1 of 2 trials done · 2 aborted · 1 re-run to come"
+    count = "1 of 2 trials done · 2 aborted · 1 re-run left"
     assert listed.startswith(f"session 1: P01 experiment, {count}, started ")
 
     # a second participant with another seed: the form takes the study's seed; another one is refused everywhere

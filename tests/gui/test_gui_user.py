@@ -101,7 +101,7 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     assert w.progress.label.full_text().endswith("pause requested: pausing after this trial")
     qtbot.waitUntil(lambda: w.model.session.state == "paused", timeout=TIMEOUT_MS)
     assert w.progress.label.full_text() == "Paused · Resume (Space) to continue"
-    count = "2 of 4 trials done · 1 aborted · 1 re-run to come"  # the re-run is no fifth designed trial
+    count = "2 of 4 trials done · 1 aborted · 1 re-run left"  # the re-run is no fifth designed trial
     assert w.progress.count.full_text().startswith(count)
     fraction = w.progress.bar.value()
     assert fraction == 500  # 2 of the 4 designed trials

@@ -149,7 +149,7 @@ def test_a_resumed_session_restores_its_table_and_progress():
     s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, schedule=schedule,
                              participant_number=4, stored_trials=stored))
     assert len(s.table.rows) == 3 and (s.completed, s.aborted) == (2, 1)
-    assert s.count.text() == "2 of 20 trials done · 1 aborted · 1 re-run to come"
+    assert s.count.text() == "2 of 20 trials done · 1 aborted · 1 re-run left"
     assert s.fraction_done() == pytest.approx(2 / 20)
     assert s.message.endswith("(resumed)")
 

@@ -96,8 +96,8 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
                       "started_at": "2026-01-03T09:00:00", "trials_planned": 12, "trials_done": 0,
                       "trials_total": 12}])
     assert view.resumable.count() == 2
-    # counted as the running session's progress line counts (designed trials, aborted attempts, re-runs to come)
-    full = "session 4: P02 experiment, 7 of 20 trials done · 2 aborted · 1 re-run to come, started 2026-01-02 10:11"
+    # counted as the running session's progress line counts (designed trials, aborted attempts, re-runs left)
+    full = "session 4: P02 experiment, 7 of 20 trials done · 2 aborted · 1 re-run left, started 2026-01-02 10:11"
     assert view.resumable.item(0).toolTip() == full and view.resumable.item(0).text() == full
     assert view.selected_session() == 4  # the first row is selected: Resume selected works at once
     # long rows wrap within the list: nothing runs out of sight to the right
