@@ -85,23 +85,23 @@ class QtForcePlots(QWidget):
         lay.addLayout(head)
         lay.addWidget(self.view, 1)
 
-        self.task = self.view.addPlot(row=0, col=0)
+        self.task: pg.PlotItem = self.view.addPlot(row=0, col=0)
         self.task.setLabel("left", "force (N)")
         self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=BAND_BRUSH, pen=BAND_PEN)
         self.band.setZValue(-10)
         self.band.setVisible(False)
         self.task.addItem(self.band)
         self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
-        self.lower = self.view.addPlot(row=1, col=0)
-        self.lower.setLabel("bottom", "time (s)")
-        self.lower.setXLink(self.task)
+        self.lower_plot: pg.PlotItem = self.view.addPlot(row=1, col=0)  # (not "lower": QWidget.lower() exists)
+        self.lower_plot.setLabel("bottom", "time (s)")
+        self.lower_plot.setXLink(self.task)
         self.view.ci.layout.setRowStretchFactor(0, 3)
         self.view.ci.layout.setRowStretchFactor(1, 1)
         self.lower_curves: dict[str, pg.PlotDataItem] = {}
         # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
         # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
         # models instead and change only in steps.  No SI prefix: "(x0.001)" on a force axis misleads.
-        for p in (self.task, self.lower):
+        for p in (self.task, self.lower_plot):
             p.setXRange(-plots.window_s, 0.0, padding=0)
             p.setMouseEnabled(x=False, y=False)
             p.enableAutoRange(x=False, y=False)
@@ -129,14 +129,14 @@ class QtForcePlots(QWidget):
 
     def _set_lower(self, choice: str) -> None:
         for c in self.lower_curves.values():
-            self.lower.removeItem(c)
+            self.lower_plot.removeItem(c)
         names, pens, legend, axis = LOWER_CHOICES[choice]
-        self.lower_curves = {n: self.lower.plot(pen=pen) for n, pen in zip(names, pens)}
-        self.lower.setVisible(bool(names))
-        self.lower.setMaximumHeight(10_000 if names else 0)
-        self.lower.setLabel("left", axis)
+        self.lower_curves = {n: self.lower_plot.plot(pen=pen) for n, pen in zip(names, pens)}
+        self.lower_plot.setVisible(bool(names))
+        self.lower_plot.setMaximumHeight(10_000 if names else 0)
+        self.lower_plot.setLabel("left", axis)
         # the legend in the title line, outside the data: every curve by its colour
-        self.lower.setTitle("&nbsp;&nbsp;".join(_swatch(c, w) for c, w in legend) or _BLANK, justify="left",
+        self.lower_plot.setTitle("&nbsp;&nbsp;".join(_swatch(c, w) for c, w in legend) or _BLANK, justify="left",
                             size="9pt")
         self.task.setLabel("bottom", "" if names else "time (s)")
         self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
@@ -159,7 +159,7 @@ class QtForcePlots(QWidget):
             r = self.plots.y_range(names, floor_zero=names == ("raw_n",))
             if self._y.get("lower") != r:
                 self._y["lower"] = r
-                self.lower.setYRange(*r, padding=0)
+                self.lower_plot.setYRange(*r, padding=0)
         top = self._y["task"][1]
         peak = self.plots.peak(TASK_SERIES)
         return f"peak {peak:.1f} N: above the axis" if bool(np.isfinite(peak) and peak > top) else ""

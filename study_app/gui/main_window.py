@@ -20,6 +20,7 @@ from study_app.gui import placement
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
 from study_app.gui.confirm import Confirmation
 from study_app.gui.force_plots import QtForcePlots
+from study_app.gui.jaw_box import QtJawBox
 from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
@@ -96,7 +97,7 @@ class ExperimenterWindow(QMainWindow):
     def _build_left_column(self) -> QWidget:
         """Session setup, the controls and the jaw, top to bottom."""
         controls = self._build_controls()
-        self.jaw_box = self._build_jaw_box()
+        self.jaw_box = QtJawBox(self.model.jaw, self.model.jaw_action)
         left = QWidget()
         ll = QVBoxLayout(left)
         ll.addWidget(self.setup_panel)
@@ -253,7 +254,6 @@ class ExperimenterWindow(QMainWindow):
         self.untrained_button.clicked.connect(self.start_without_training)
         self.health_panel.health.changed.connect(self._on_health_changed)
         self.model.commissioning.changed.connect(self._on_actions_changed)
-        self.model.jaw.changed.connect(self._on_jaw_changed)
         self.setup_panel.start_requested.connect(self.start_session)
         self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
         self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
@@ -268,41 +268,6 @@ class ExperimenterWindow(QMainWindow):
         self.model.session.changed.connect(self._on_session_changed)
         self.model.notice_changed.connect(self._on_notice)
         self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
-
-    # -- the jaw -------------------------------------------------------------------------------------
-    def _build_jaw_box(self) -> QGroupBox:
-        """Jaw controls (open, close, step) and its position; hidden until the engine reports a jaw."""
-        box = QGroupBox("Jaw")
-        lay = QVBoxLayout(box)
-        row = QHBoxLayout()
-        self.jaw_buttons: dict[str, QPushButton] = {}
-        for action, text, tip in (("close", "Close", "close fully (the firmware's closed limit)"),
-                                  ("step_close", "Step −", "one step (1 mm of rod travel) toward closed"),
-                                  ("step_open", "Step +", "one step (1 mm of rod travel) toward open"),
-                                  ("open", "Open", "open fully (the firmware's open limit)")):
-            b = QPushButton(text)
-            b.setToolTip(tip)
-            b.clicked.connect(lambda _=False, a=action: self.model.jaw_action(a))
-            row.addWidget(b)
-            self.jaw_buttons[action] = b
-        self.jaw_label = QLabel()
-        self.jaw_label.setWordWrap(True)  # (a fault's text may take two lines)
-        # the last command on one line: the left column has no height to spare on a 768-px screen
-        self.jaw_last = ElidedLabel()
-        lay.addLayout(row)
-        lay.addWidget(self.jaw_label)
-        lay.addWidget(self.jaw_last)
-        box.hide()
-        return box
-
-    def _on_jaw_changed(self) -> None:
-        jaw = self.model.jaw
-        self.jaw_box.setVisible(jaw.available)
-        self.jaw_label.setText(jaw.text())
-        self.jaw_last.set_full_text(f"last: {jaw.log[-1]}" if jaw.log else "")
-        self.jaw_last.setVisible(bool(jaw.log))
-        fault = jaw.state is not None and bool(jaw.state.fault)
-        self.jaw_label.setStyleSheet("color: #c81e1e; font-weight: 600;" if fault else "color: #333;")
 
     def start_with_override(self) -> None:
         """Real rig, calibration incomplete: ask for a reason, then start anyway (the reason is stored)."""
@@ -477,22 +442,8 @@ class ExperimenterWindow(QMainWindow):
                 else:
                     placement.place(w, size, self.screen())
         if w is self.participant_window:
-            self._keep_participant_in_view(w)
+            placement.keep_above(w, self)
         _show(w)
-
-    def _keep_participant_in_view(self, w: QWidget) -> None:
-        """Sharing this window's monitor, the participant screen is a utility window of this one (X11 and the
-        window managers keep such a window above its transient parent), so it stays in view beside the controls
-        when the experimenter clicks here; on a monitor of its own it is an ordinary window."""
-        shared = placement.other_screen(self) is None or w.screen() is self.screen()
-        if w.windowType() != (Qt.WindowType.Tool if shared else Qt.WindowType.Window):
-            geometry = w.saveGeometry()
-            w.setWindowFlags(Qt.WindowType.Tool if shared else Qt.WindowType.Window)  # (this hides it)
-            w.restoreGeometry(geometry)
-        w.winId()
-        handle = w.windowHandle()
-        if handle is not None:
-            handle.setTransientParent(self.windowHandle() if shared else None)
 
     def resume_selected(self) -> None:
         """Continue the interrupted session selected in the list."""

@@ -8,7 +8,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QFileDialog, QMenu, QMessageBox
+from PySide6.QtWidgets import QFileDialog, QMenu, QMessageBox, QWidget
 
 if TYPE_CHECKING:
     from study_app.gui.main_window import ExperimenterWindow
@@ -74,9 +74,12 @@ class WindowMenus:
         for text, key, window in (("&Participant screen", "Ctrl+P", win.participant_window),
                                   ("&Simulated rig", "Ctrl+R", win.rig_window),
                                   ("&Calibration wizard", "Ctrl+K", win.calibration_wizard)):
-            self.windows[text.replace("&", "")] = self._add(self.view, text, lambda w=window: win.open_window(w), key)
+            self.windows[text.replace("&", "")] = self._add(self.view, text, self._opener(window), key)
         self.about = self._add(self.help, "&About haptic-study", self.show_about)
         self.refresh_recent()
+
+    def _opener(self, window: QWidget) -> Callable[[], None]:
+        return lambda: self.win.open_window(window)
 
     def _add(self, menu: QMenu, text: str, slot: Callable[[], object],
              key: QKeySequence.StandardKey | str | None = None) -> QAction:
@@ -91,7 +94,7 @@ class WindowMenus:
     def recent_paths(self) -> list[str]:
         """The study databases opened before, newest first (QSettings)."""
         value = self.win.settings.value("recent/databases", [])
-        paths = [value] if isinstance(value, str) else list(value or [])
+        paths = [value] if isinstance(value, str) else list(value) if isinstance(value, (list, tuple)) else []
         return [str(p) for p in paths if p]
 
     def refresh_recent(self) -> None:

@@ -7,11 +7,11 @@ restored) in the settings by name.
 
 from __future__ import annotations
 
-from PySide6.QtCore import QByteArray, QRect, QSettings, QSize
+from PySide6.QtCore import QByteArray, QRect, QSettings, QSize, Qt
 from PySide6.QtGui import QGuiApplication, QScreen
 from PySide6.QtWidgets import QWidget
 
-__all__ = ["beside", "fit_size", "other_screen", "place", "place_beside", "restore", "save"]
+__all__ = ["beside", "fit_size", "keep_above", "other_screen", "place", "place_beside", "restore", "save"]
 
 #: A restored window must show at least this much of itself on some screen, px (else it is placed afresh).
 _MIN_VISIBLE = 120
@@ -99,6 +99,22 @@ def place_beside(window: QWidget, main: QWidget, keep_clear: QWidget, preferred:
     frame = beside(screen.availableGeometry(), main.frameGeometry(), clear, preferred, extra)
     window.resize(frame.width() - extra.width(), frame.height() - extra.height())
     window.move(frame.topLeft())
+
+
+def keep_above(window: QWidget, main: QWidget) -> None:
+    """On ``main``'s monitor, make ``window`` a utility window of ``main`` (X11 and the window managers keep such a
+    window above its transient parent), so it stays in view beside ``main``'s controls when the experimenter
+    clicks in ``main``; on a monitor of its own it is an ordinary window."""
+    shared = other_screen(main) is None or window.screen() is main.screen()
+    wanted = Qt.WindowType.Tool if shared else Qt.WindowType.Window
+    if window.windowType() != wanted:
+        geometry = window.saveGeometry()
+        window.setWindowFlags(wanted)  # (this hides it)
+        window.restoreGeometry(geometry)
+    window.winId()
+    handle = window.windowHandle()
+    if handle is not None:
+        handle.setTransientParent(main.windowHandle() if shared else None)  # type: ignore[arg-type]  # None: none
 
 
 def _on_a_screen(rect: QRect) -> bool:

@@ -24,6 +24,7 @@ from PySide6.QtGui import QColor, QPainter, QPixmap
 from PySide6.QtWidgets import QApplication, QMenu, QMessageBox, QWidget
 
 from protocol.clock import SessionClock
+from protocol.design import HapticMode
 from protocol.records import AbortCause, Outcome, TrialRecord
 from study_app import messages as m
 from study_app.gui.timers import tracked_timer
@@ -151,7 +152,8 @@ class ScreenshotTour:
         yield lambda: model.session.running
         w.open_window(w.participant_window)
         yield lambda: model.session.trial is not None and model.session.trial.position >= 2
-        yield lambda: model.session.phase == "active" and model.session.latest_t_s - model.session.trial.t_s < 0.6
+        yield lambda: (model.session.phase == "active" and model.session.trial is not None
+                       and model.session.latest_t_s - model.session.trial.t_s < 0.6)
         self._save_screen([w, w.participant_window], "participant-beside")
         self._save(w.participant_window, "participant-experiment")
 
@@ -166,7 +168,8 @@ class ScreenshotTour:
         w.tabs.setCurrentWidget(w.health_panel)
         self._save(w.tabs, "health-panel")
         w.tabs.setCurrentWidget(w.trials_tab)
-        model.abort_trial(model.session.trial.trial_index)  # the window's confirm answers Yes at once
+        trial = model.session.trial
+        model.abort_trial(None if trial is None else trial.trial_index)  # (the tour's confirm answers Yes)
         yield lambda: model.session.aborted >= 1 and model.session.completed >= 3
         yield lambda: model.session.phase == "active"
         self._save(w, "progress-rerun")
@@ -217,7 +220,7 @@ class ScreenshotTour:
             reason = f"gap: no loop record for {gap_ms:.1f} ms (limit 5 ms)"
             model.health.apply(m.EngineFault(k * 15.0, "gap", 0, reason, k * 15.0))
             record = TrialRecord(session_id=99, trial_index=k - 1, target_label="FIRM", target_force_n=1.2,
-                                 haptic_mode="on", outcome=Outcome.ABORTED, clock=SessionClock(0.0, 0), cue_ns=0,
+                                 haptic_mode=HapticMode.ON, outcome=Outcome.ABORTED, clock=SessionClock(0.0, 0), cue_ns=0,
                                  end_ns=int(3e9), abort_reason=reason, abort_cause=AbortCause.GAP)
             model.health.apply(m.TrialEnded(k * 15.0, record, 23))
         w.tabs.setCurrentWidget(w.health_panel)

@@ -217,8 +217,12 @@ class SetupModel:
     def count_of(self, s: dict[str, Any]) -> TrialCount:
         """The progress of a listed session, counted as the running one is (:class:`TrialCount`)."""
         listed = next((r for r in self.resumable if r["session_id"] == s["session_id"]), s)
-        return TrialCount(int(listed.get("trials_planned", 0)), int(listed.get("trials_done", 0)),  # type: ignore[call-overload]
-                          int(listed.get("trials_aborted", 0)), int(listed.get("reruns_run", 0)))  # type: ignore[call-overload]
+
+        def n(key: str) -> int:
+            v = listed.get(key, 0)
+            return int(v) if isinstance(v, (int, float, str)) else 0
+
+        return TrialCount(n("trials_planned"), n("trials_done"), n("trials_aborted"), n("reruns_run"))
 
     @property
     def valid(self) -> bool:

@@ -209,7 +209,7 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
         view.task.titleLabel.sceneBoundingRect())
     in_data = [i for i in view.task.vb.addedItems if i.isVisible()]
     assert set(map(type, in_data)) <= {type(view.band), type(view.curves["force_n"])}  # curves and the band only
-    assert view.lower.viewRange()[1][1] >= 7.6
+    assert view.lower_plot.viewRange()[1][1] >= 7.6
     assert view.lower_legend() == ["raw sensor |F| (the tool's weight included)"]
     plots.data["force_n"][-1] = 18.0
     view.refresh()
@@ -221,14 +221,14 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     view.show()
     qtbot.waitExposed(view)
     view.refresh()  # (the window's 30 Hz timer)
-    for p in (view.task, view.lower):
+    for p in (view.task, view.lower_plot):
         assert p.viewRange()[0] == pytest.approx([-10.0, 0.0], abs=0.02)
     # a legend on every plot with more than one line: the compensated x, y, z
     view.lower_choice.setCurrentText("compensated x, y, z (sensor frame)")
     assert len(view.lower_curves) == 3 and view.lower_legend() == ["compensated Fx", "Fy", "Fz (sensor frame)"]
-    assert all(w in view.lower.titleLabel.text for w in ("Fx", "Fy", "Fz"))
+    assert all(w in view.lower_plot.titleLabel.text for w in ("Fx", "Fy", "Fz"))
     view.lower_choice.setCurrentText("none")
-    assert not view.lower.isVisible() and view.task.getAxis("bottom").style["showValues"]
+    assert not view.lower_plot.isVisible() and view.task.getAxis("bottom").style["showValues"]
 
 
 def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):

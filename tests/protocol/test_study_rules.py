@@ -87,7 +87,7 @@ def test_where_sessions_are_stored_the_rules_refuse_or_store_the_deviation(tmp_p
             _open(db, "P01", "experiment", 2)
         assert stored_sessions(db) == []  # refused before anything was stored
         sid = _open(db, "P01", "experiment", 2, override="trained on the rig in the pilot")
-        (kind, detail), = db.conn.execute("SELECT kind, detail FROM events WHERE session_id = ? AND kind = ?",
+        (_, detail), = db.conn.execute("SELECT kind, detail FROM events WHERE session_id = ? AND kind = ?",
                                           (sid, DEVIATION_EVENT)).fetchall()
         assert detail.startswith("training skipped: P01's experiment started without") and "pilot" in detail
         with pytest.raises(StudyRuleError, match="this study's seed is 2"):
