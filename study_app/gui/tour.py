@@ -166,7 +166,8 @@ class ScreenshotTour:
         self._save(w.rig_window, "sim-rig-view")
         w.rig_window.hide()
         w.tabs.setCurrentWidget(w.health_panel)
-        self._save(w.tabs, "health-panel")
+        w.health_panel.resize(900, 420)  # all of it (in the window, a short tab scrolls)
+        self._save(w.health_panel, "health-panel")
         w.tabs.setCurrentWidget(w.trials_tab)
         trial = model.session.trial
         model.abort_trial(None if trial is None else trial.trial_index)  # (the tour's confirm answers Yes)
