@@ -5,13 +5,10 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import Any
 
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QFileDialog, QMenu, QMessageBox, QWidget
-
-if TYPE_CHECKING:
-    from study_app.gui.main_window import ExperimenterWindow
 
 __all__ = ["MAX_RECENT", "PAPER", "WindowMenus", "about_text", "remember_recent"]
 
@@ -30,7 +27,7 @@ def remember_recent(recent: list[str], path: str) -> list[str]:
 
 def about_text() -> str:
     """Help → About: what this is, its version and commit, the paper it implements."""
-    from study_app.cli import version_text
+    from study_app.version_info import version_text
 
     return (f"<b>haptic-study</b> {version_text()}<br><br>"
             "Runs a force-feedback training study end to end: the haptic feedback framework at 1 kHz, the "
@@ -47,7 +44,7 @@ class WindowMenus:
     actions without binding them a second time.
     """
 
-    def __init__(self, win: ExperimenterWindow) -> None:
+    def __init__(self, win: Any) -> None:  # the ExperimenterWindow (which imports this module: no circle)
         self.win = win
         bar = win.menuBar()
         self.file = bar.addMenu("&File")

@@ -156,7 +156,7 @@ def test_one_count_never_grows_with_re_runs():
 
 
 def test_help_about_names_the_version_the_commit_and_the_paper():
-    from study_app.cli import version_text
+    from study_app.version_info import version_text
     from study_app.gui.menus import about_text
 
     text = about_text()
