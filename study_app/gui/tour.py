@@ -65,11 +65,10 @@ class ScreenshotTour:
 
     def _step(self) -> None:
         try:
-            if self._wait is not None:
-                if not self._wait():
-                    if time.monotonic() > self._deadline:
-                        raise TimeoutError("screenshot tour: a step did not complete within its timeout")
-                    return
+            if self._wait is not None and not self._wait():
+                if time.monotonic() > self._deadline:
+                    raise TimeoutError("screenshot tour: a step did not complete within its timeout")
+                return
             self._wait = next(self._steps)
             self._deadline = time.monotonic() + 60.0
         except StopIteration:

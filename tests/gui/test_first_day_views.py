@@ -156,8 +156,8 @@ def test_one_count_never_grows_with_re_runs():
 
 
 def test_help_about_names_the_version_the_commit_and_the_paper():
-    from study_app.version_info import version_text
     from study_app.gui.menus import about_text
+    from study_app.version_info import version_text
 
     text = about_text()
     assert version_text() in text and "Shaker and M. S. Erden" in text and "Robotic Surgery Training" in text
