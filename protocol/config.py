@@ -70,6 +70,13 @@ class TrainingConfig:
     enabled: bool = True
     seconds_per_target_per_mode: float = 20.0
     live_force_aid: bool = True
+    #: An experiment session needs a completed training session of the same participant
+    #: (:mod:`protocol.study_rules`).  In a file it defaults to ``enabled``; without training it is False.
+    required: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.enabled and self.required:  # nothing to require (e.g. dataclasses.replace(t, enabled=False))
+            object.__setattr__(self, "required", False)
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,13 +178,14 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     if timing.hold_s >= timing.max_trial_s:
         raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
 
-    trn = f.section(top, "training", {"enabled", "seconds_per_target_per_mode", "live_force_aid"})
+    trn = f.section(top, "training", {"enabled", "seconds_per_target_per_mode", "live_force_aid", "required"})
     training = TrainingConfig(
         enabled=f.boolean("training.enabled", trn.get("enabled", True)),
         seconds_per_target_per_mode=f.number(
             "training.seconds_per_target_per_mode", trn.get("seconds_per_target_per_mode", 20.0), lo=0.0, hi=MAX_TRIAL_S
         ),
         live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
+        required=_training_required(f, trn),
     )
     # The training session runs, stores and on resume re-reads this protocol with its trials capped at
     # seconds_per_target_per_mode (the headless study runner): a cap no hold fits in would never be resumable.
@@ -189,6 +197,16 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1,
     )
+
+
+def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
+    """``training.required``: defaults to ``training.enabled``; required without a training block is refused."""
+    enabled = bool(trn.get("enabled", True))
+    required = f.boolean("training.required", trn.get("required", enabled))
+    if required and not enabled:
+        raise f.fail("training.required", required, "must be false when training.enabled = false (an experiment "
+                     "cannot require a training session the protocol does not have)")
+    return required
 
 
 def load_protocol(path: str | Path | None = None) -> ProtocolConfig:

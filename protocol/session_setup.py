@@ -41,6 +41,7 @@ from protocol.recording import marked_records
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
+from protocol.study_rules import DEVIATION_EVENT, check_new_session, stored_sessions
 from protocol.version import software_version
 
 __all__ = [
@@ -142,7 +143,7 @@ class OpenedSession:
 def open_new_session(
     db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, seed: int, rig: str,
     config: dict[str, Any], calibration: dict[str, Any] | None, lease_owner: str, study_owner: str | None = None,
-    note: str = "",
+    note: str = "", training_override: str = "",
 ) -> OpenedSession:
     """Store a new session (whole schedule, provenance) and take its lease, before its first trial.
 
@@ -164,11 +165,17 @@ def open_new_session(
         This command's lease token, and the study lease it works under (a parallel ``run``'s workers).
     note
         Detail of the ``session_start`` event.
+    training_override
+        The experimenter's reason for an experiment without the completed training session the protocol
+        requires: the session starts, and a ``deviation`` event stores the reason (:mod:`protocol.study_rules`).
 
     Raises
     ------
     StorageError
         The participant already has a session of this kind, or another process runs the study.
+    StudyRuleError
+        The study's rules refuse it (:mod:`protocol.study_rules`): another seed than the study's, or an
+        experiment without a completed training session and no ``training_override``.
     """
     if kind == "experiment":
         schedule = build_schedule(protocol, seed, number)
@@ -178,12 +185,18 @@ def open_new_session(
         run_protocol = training_protocol(protocol)
     else:
         raise ValueError(f"session kind = {kind!r}: allowed values are 'training' and 'experiment'")
+    deviation = ""
+    if not db.sessions_of(code, kind):  # (a second session of a kind is create_session's refusal)
+        deviation = check_new_session(stored_sessions(db), code=code, kind=kind, seed=seed, protocol=protocol,
+                                      training_override=training_override)
     session_id = db.create_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
         schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
         calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
     )
     db.insert_event(session_id, 0.0, "session_start", note or f"{kind} session for {code}, seed {seed}")
+    if deviation:
+        db.insert_event(session_id, 0.0, DEVIATION_EVENT, deviation)
     return OpenedSession(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
         schedule=schedule, start_position=0, clock_offset_s=0.0, initial_pause_s=0.0,

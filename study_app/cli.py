@@ -25,6 +25,7 @@ from study_app.power_cmds import add_power_parser
 from study_app.replay_cmds import add_replay_parsers
 from study_app.report_cmds import add_report_parsers
 from study_app.run_cmds import add_run_parser, add_sessions_parser, add_sim_parser
+from study_app.version_info import version_text
 
 __all__ = [
     "COMMANDS_GROUP",
@@ -51,29 +52,6 @@ class _VersionAction(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[no-untyped-def]
         print(f"haptic-study {version_text()}")
         parser.exit()
-
-
-def version_text() -> str:
-    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout."""
-    import subprocess
-    from pathlib import Path
-
-    from protocol.version import software_version
-
-    text = software_version()
-    root = Path(__file__).resolve().parent.parent
-    if not (root / ".git").exists():  # an installed copy, not a checkout
-        return text
-    try:
-        def git(*args: str) -> str:
-            return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=5,
-                                  check=True).stdout.strip()
-
-        commit = git("rev-parse", "--short=8", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
-    except (OSError, subprocess.SubprocessError):
-        return text
-    return f"{text} (commit {commit}{', with uncommitted changes' if dirty else ''})"
 
 
 def build_parser() -> argparse.ArgumentParser:

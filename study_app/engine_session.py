@@ -18,7 +18,7 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
-from protocol.config import load_protocol
+from protocol.config import ProtocolConfig, load_protocol
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
@@ -26,6 +26,7 @@ from protocol.session_setup import (
     raw_wrench_scales, start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
+from protocol.study_rules import check_new_session, stored_sessions
 from protocol.records import AbortCause, TrialRecord
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app import messages as m
@@ -73,6 +74,7 @@ class EngineSessions:
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
+        _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -84,6 +86,7 @@ class EngineSessions:
                         **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
+                training_override=cmd.training_override,
             )
         except BaseException:
             db.close()
@@ -144,7 +147,7 @@ class EngineSessions:
             start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
-            participant_number=opened.participant_number, stored_trials=stored,
+            participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
         ))
 
     def inject_fault(self, cmd: m.InjectFault) -> None:
@@ -204,7 +207,7 @@ class EngineSessions:
                 spec = runner.machine.spec
                 self.engine.publish(m.TrialStarted(
                     t_s, spec.index, runner.state.trial_position, runner.state.trials_total, spec.target_label,
-                    spec.target_force_n, spec.haptic_mode,
+                    spec.target_force_n, spec.haptic_mode, spec.repeat_of,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
         elif isinstance(ev, TrialRecord):
@@ -236,6 +239,20 @@ class EngineSessions:
         return StudyDatabase(path)
 
 
+def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig) -> None:
+    """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
+    where the session is stored, by :func:`protocol.session_setup.open_new_session`)."""
+    if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
+        return
+    db = StudyDatabase(cmd.db_path, readonly=True)
+    try:
+        if not db.sessions_of(cmd.code, cmd.kind):
+            check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
+                              training_override=cmd.training_override)
+    finally:
+        db.close()
+
+
 def list_resumable(db_path: str) -> list[dict[str, Any]]:
     """Interrupted sessions of a database (none if the file does not exist yet)."""
     if not db_path or not os.path.exists(db_path):
@@ -247,9 +264,16 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
         for s in db.open_sessions():
             if s.session_id in busy:
                 continue  # another process runs it right now: not interrupted
+            schedule = json.loads(s.schedule_json)
+            rows = db.trial_rows(s.session_id)
+            outcomes = [r["outcome"] for r in rows]
+            aborted = sum(o == "aborted" for o in outcomes)
             out.append({
                 "session_id": s.session_id, "code": s.code, "kind": s.kind, "started_at": s.started_at,
-                "trials_done": len(db.trial_rows(s.session_id)), "trials_total": len(json.loads(s.schedule_json)),
+                # counted as everywhere (study_app.models.session.TrialCount): designed trials done, aborted attempts
+                "trials_planned": sum(1 for t in schedule if t.get("repeat_of") is None),
+                "trials_done": len(outcomes) - aborted, "trials_aborted": aborted, "trials_total": len(schedule),
+                "reruns_run": sum(r["repeat_of"] is not None for r in rows),
             })
         return out
     finally:

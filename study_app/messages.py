@@ -45,7 +45,10 @@ class StartSession:
 
     On the real rig a session starts only with the calibration chain on record for the mounted tool and
     the compensated force at rest below 0.1 N; ``override_reason`` (non-empty) starts it anyway, and the
-    reason is stored with the session.
+    reason is stored with the session.  The study's rules (:mod:`protocol.study_rules`: one seed per
+    study, training before the experiment) are the engine's to enforce; ``training_override`` (non-empty)
+    starts an experiment without the completed training the protocol requires, and is stored as a
+    ``deviation`` event.
     """
 
     db_path: str
@@ -55,6 +58,7 @@ class StartSession:
     seed: int
     participant_number: int
     override_reason: str = ""
+    training_override: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -248,7 +252,9 @@ class CommandRefused:
 
 @dataclass(frozen=True, slots=True)
 class SessionsListed:
-    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_done, trials_total.
+    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_planned (the
+    designed trials), trials_done (designed trials done), trials_aborted (aborted attempts) and trials_total
+    (the schedule with its re-runs).
 
     ``known``: every session of the database (:func:`study_app.session_list.list_sessions`), for the setup
     form's checks (a code or participant number already used).
@@ -277,6 +283,8 @@ class SessionStarted:
     participant_number: int = 0
     #: A resumed session's trials stored before, in index order.
     stored_trials: list[TrialRecord] = field(default_factory=list)
+    #: The session's (so the study's) seed.
+    seed: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -290,6 +298,8 @@ class TrialStarted:
     target_label: str
     target_force_n: float
     haptic_mode: str
+    #: The trial this one re-runs (an aborted one), or None for a trial of the design.
+    repeat_of: int | None = None
 
 
 @dataclass(frozen=True, slots=True)

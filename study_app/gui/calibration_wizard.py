@@ -7,7 +7,7 @@ the payload step :class:`study_app.models.calibration.CalibrationModel` (and, on
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QAbstractItemView, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel, QPlainTextEdit, QProgressBar,
     QPushButton, QTabWidget, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
@@ -232,7 +232,13 @@ class RealPosePanel(QWidget):
 
 
 class CalibrationWizard(QWidget):
-    """Layout and wiring of :class:`CalibrationModel`."""
+    """Layout and wiring of :class:`CalibrationModel`.
+
+    ``hidden`` is emitted when the window closes (its notices in the main window go with it);
+    :meth:`set_blocked` disables every step while a calibration may not run (a session runs), saying why.
+    """
+
+    hidden = Signal()
 
     def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,  # type: ignore[no-untyped-def]
                  parent: QWidget | None = None, chain: CommissioningModel | None = None, on_tcp=None,
@@ -287,13 +293,37 @@ class CalibrationWizard(QWidget):
         self.steps.addTab(self.tcp_page, "1 · TCP")
         self.steps.addTab(self.payload_page, "2 · Payload && bias")
         self.steps.addTab(self.frames_page, "3 · Frames && signs")
+        self.blocked = QLabel()
+        self.blocked.setWordWrap(True)
+        self.blocked.setStyleSheet("color: #8a5a00; background: #fff4e0; font-weight: 600; padding: 4px;")
+        self.blocked.hide()
         outer = QVBoxLayout(self)
         outer.addWidget(self.chain_status)
+        outer.addWidget(self.blocked)
         outer.addWidget(self.steps, 1)
         self.pose_set.currentTextChanged.connect(model.set_pose_set)
         self.run_button.clicked.connect(on_run)
         model.changed.connect(self._on_changed)
         self._on_changed()
+
+    def set_blocked(self, why: str) -> None:
+        """Disable the steps' actions while no calibration may run (``why``; "" enables them), saying why."""
+        pages = [self.tcp_page, self.frames_page, self.sim_controls]
+        if self.real_panel is not None:
+            pages.append(self.real_panel)
+        text = f"Calibration is not available now: {why}." if why else ""
+        for page in pages:
+            page.setEnabled(not why)
+            page.setToolTip(text)
+        for button in (self.tcp_page.run_button, self.frames_page.run_button, self.run_button):
+            button.setToolTip(text)
+        if text != self.blocked.text():
+            self.blocked.setText(text)
+            self.blocked.setVisible(bool(text))
+
+    def hideEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        super().hideEvent(event)
+        self.hidden.emit()
 
     def set_real(self, real: bool) -> None:
         """Show the pose-by-pose panel (real rig) or the automatic run (simulated rig)."""

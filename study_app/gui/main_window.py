@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable
 
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
-from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
+from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QApplication, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QSplitter, QTabWidget, QToolButton,
-    QVBoxLayout, QWidget,
+    QApplication, QFrame, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QScrollArea, QSplitter,
+    QTabWidget, QToolButton, QVBoxLayout, QWidget,
 )
 
 from study_app import messages as m
@@ -18,13 +19,16 @@ from study_app.gui.bridge import QtEngineBridge
 from study_app.gui import placement
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
 from study_app.gui.confirm import Confirmation
+from study_app.gui.force_plots import QtForcePlots
+from study_app.gui.jaw_box import QtJawBox
+from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import (
-    LEVEL_COLOURS, ElidedLabel, QtCueWait, QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+    LEVEL_COLOURS, ElidedLabel, QtCueWait, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
 )
-from study_app.models.app import AppModel
+from study_app.models.app import CALIBRATION_COMMANDS, AppModel
 
 __all__ = ["ExperimenterWindow"]
 
@@ -33,6 +37,8 @@ PLOT_INTERVAL_MS = 33
 #: Preferred sizes, shrunk to fit the screen (the experimenter's window fits a 1366×768 laptop).
 MAIN_SIZE = QSize(1280, 800)
 PARTICIPANT_SIZE = QSize(900, 560)
+#: The participant screen beside this window on a one-monitor machine (a rehearsal): small enough to leave room.
+PARTICIPANT_BESIDE_SIZE = QSize(640, 400)
 RIG_SIZE = QSize(760, 480)
 WIZARD_SIZE = QSize(720, 640)
 
@@ -73,7 +79,7 @@ class ExperimenterWindow(QMainWindow):
         split.addWidget(right)
         split.setStretchFactor(1, 1)
         self.setCentralWidget(split)
-        self.status = QLabel()
+        self.status = ElidedLabel()
         self.statusBar().addWidget(self.status, 1)
         self.setMinimumSize(self.minimumSizeHint().boundedTo(QSize(1000, 640)))
 
@@ -91,7 +97,7 @@ class ExperimenterWindow(QMainWindow):
     def _build_left_column(self) -> QWidget:
         """Session setup, the controls and the jaw, top to bottom."""
         controls = self._build_controls()
-        self.jaw_box = self._build_jaw_box()
+        self.jaw_box = QtJawBox(self.model.jaw, self.model.jaw_action)
         left = QWidget()
         ll = QVBoxLayout(left)
         ll.addWidget(self.setup_panel)
@@ -100,7 +106,17 @@ class ExperimenterWindow(QMainWindow):
         ll.addStretch(1)
         left.setMinimumWidth(340)
         left.setMaximumWidth(460)
-        return left
+        # a column taller than the screen scrolls; nothing in it is squashed or cut
+        scroll = QScrollArea()
+        scroll.setWidget(left)
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        bar = scroll.verticalScrollBar().sizeHint().width()
+        scroll.setMinimumWidth(340 + bar)
+        scroll.setMaximumWidth(460 + bar)
+        self.left_column = scroll
+        return scroll
 
     def _build_controls(self) -> QGroupBox:
         """Start, pause/resume, abort, the windows' buttons; the engine's and the notices' rows above them."""
@@ -113,10 +129,14 @@ class ExperimenterWindow(QMainWindow):
         self.participant_button = QPushButton("Participant screen")
         self.rig_button = QPushButton("Simulated rig view")
         self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
+        # an experiment the form refuses for want of training: only with a typed reason, stored as a deviation
+        self.untrained_button = QPushButton("Start without training…")
+        self.untrained_button.hide()
         controls = QGroupBox("Control")
         grid = QVBoxLayout(controls)
         grid.addWidget(self._build_engine_row())
         grid.addWidget(self.start_button)
+        grid.addWidget(self.untrained_button)
         grid.addWidget(self._build_notice_row())
         pr = QHBoxLayout()
         pr.addWidget(self.pause_button)
@@ -158,6 +178,7 @@ class ExperimenterWindow(QMainWindow):
         """Refusals and questions that became moot, with a dismiss button (hidden until there is one)."""
         self.notice = QLabel()
         self.notice.setWordWrap(True)
+        self.notice.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.notice_close = QToolButton()
         self.notice_close.setText("×")
         self.notice_close.setToolTip("Dismiss")
@@ -176,9 +197,13 @@ class ExperimenterWindow(QMainWindow):
         self.trial_table = QtTrialTable(self.model.session.table)
         self.cue_wait = QtCueWait(self.model)
         self.trials_tab = QWidget()
+        self.trials_count = ElidedLabel()  # the session's count, as the progress line above reads it
+        self.trials_count.setContentsMargins(6, 2, 6, 0)
+        self.trials_count.hide()
         tt = QVBoxLayout(self.trials_tab)
         tt.setContentsMargins(0, 0, 0, 0)
         tt.setSpacing(2)
+        tt.addWidget(self.trials_count)
         tt.addWidget(self.cue_wait)
         tt.addWidget(self.trial_table, 1)
         self.health_panel = QtHealthPanel(self.model.health)
@@ -208,7 +233,9 @@ class ExperimenterWindow(QMainWindow):
             chain=self.model.commissioning, on_tcp=self.model.run_tcp, on_compute_tcp=self.model.compute_tcp,
             on_frames=self.model.check_frames,
         )
-        self._build_menu()
+        self.calibration_wizard.hidden.connect(lambda: self.model.clear_notice(CALIBRATION_COMMANDS))
+        self.menus = WindowMenus(self)
+        self.view_actions = self.menus.windows
 
     def _wire_signals(self) -> None:
         """Buttons, keys and the model's signals to the window's slots."""
@@ -224,8 +251,9 @@ class ExperimenterWindow(QMainWindow):
         self.restart_button.clicked.connect(self.restart_engine)
         self.model.engine_changed.connect(self._on_engine_changed)
         self.override_button.clicked.connect(self.start_with_override)
+        self.untrained_button.clicked.connect(self.start_without_training)
+        self.health_panel.health.changed.connect(self._on_health_changed)
         self.model.commissioning.changed.connect(self._on_actions_changed)
-        self.model.jaw.changed.connect(self._on_jaw_changed)
         self.setup_panel.start_requested.connect(self.start_session)
         self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
         self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
@@ -240,41 +268,6 @@ class ExperimenterWindow(QMainWindow):
         self.model.session.changed.connect(self._on_session_changed)
         self.model.notice_changed.connect(self._on_notice)
         self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
-
-    # -- the jaw -------------------------------------------------------------------------------------
-    def _build_jaw_box(self) -> QGroupBox:
-        """Jaw controls (open, close, step) and its position; hidden until the engine reports a jaw."""
-        box = QGroupBox("Jaw")
-        lay = QVBoxLayout(box)
-        row = QHBoxLayout()
-        self.jaw_buttons: dict[str, QPushButton] = {}
-        for action, text, tip in (("close", "Close", "close fully (the firmware's closed limit)"),
-                                  ("step_close", "Step −", "one step (1 mm of rod travel) toward closed"),
-                                  ("step_open", "Step +", "one step (1 mm of rod travel) toward open"),
-                                  ("open", "Open", "open fully (the firmware's open limit)")):
-            b = QPushButton(text)
-            b.setToolTip(tip)
-            b.clicked.connect(lambda _=False, a=action: self.model.jaw_action(a))
-            row.addWidget(b)
-            self.jaw_buttons[action] = b
-        self.jaw_label = QLabel()
-        self.jaw_label.setWordWrap(True)  # (a fault's text may take two lines)
-        # the last command on one line: the left column has no height to spare on a 768-px screen
-        self.jaw_last = ElidedLabel()
-        lay.addLayout(row)
-        lay.addWidget(self.jaw_label)
-        lay.addWidget(self.jaw_last)
-        box.hide()
-        return box
-
-    def _on_jaw_changed(self) -> None:
-        jaw = self.model.jaw
-        self.jaw_box.setVisible(jaw.available)
-        self.jaw_label.setText(jaw.text())
-        self.jaw_last.set_full_text(f"last: {jaw.log[-1]}" if jaw.log else "")
-        self.jaw_last.setVisible(bool(jaw.log))
-        fault = jaw.state is not None and bool(jaw.state.fault)
-        self.jaw_label.setStyleSheet("color: #c81e1e; font-weight: 600;" if fault else "color: #333;")
 
     def start_with_override(self) -> None:
         """Real rig, calibration incomplete: ask for a reason, then start anyway (the reason is stored)."""
@@ -291,22 +284,6 @@ class ExperimenterWindow(QMainWindow):
             reason = reason if ok else ""
         if reason.strip() and self.model.start(override_reason=reason):
             self._save_settings()
-
-    # -- menus ---------------------------------------------------------------------------------------
-    def _build_menu(self) -> None:
-        view = self.menuBar().addMenu("&View")
-        view.setToolTipsVisible(True)
-        self.view_actions: dict[str, QAction] = {}
-        for text, key, window in (
-            ("Participant screen", "Ctrl+P", self.participant_window),
-            ("Simulated rig", "Ctrl+R", self.rig_window),
-            ("Calibration wizard", "Ctrl+K", self.calibration_wizard),
-        ):
-            act = QAction(text, self)
-            act.setShortcut(QKeySequence(key))
-            act.triggered.connect(lambda _=False, w=window: self.open_window(w))
-            view.addAction(act)
-            self.view_actions[text] = act
 
     # -- engine events (GUI thread, queued from the monitor thread) -------------------------------------
     @Slot(object)
@@ -364,6 +341,27 @@ class ExperimenterWindow(QMainWindow):
         return self
 
     # -- actions -----------------------------------------------------------------------------------------
+    def start_without_training(self) -> None:
+        """An experiment for a participant without the completed training the protocol requires: only with a
+        typed reason, which the engine stores as a ``deviation`` event (listed in the report)."""
+        missing = self.model.setup.training_missing
+        if not missing or not self.model.can("start_without_training"):
+            return
+        code = self.model.setup.values.code
+        prompt = (f"{missing.split('. ')[0]}.\n\nStart {code}'s experiment anyway? The session is stored with "
+                  "this deviation from the protocol and your reason; the study report lists it.\n\nReason:")
+        if self.confirm is not None:  # a scripted run answers at once
+            reason = "scripted override" if self.confirm("Start without training", prompt) else ""
+        else:
+            reason, ok = QInputDialog.getText(self, "Start without training", prompt)
+            reason = reason if ok else ""
+        if not reason.strip():
+            self.model.notify("info", "Nothing was started: a start without training needs a reason.",
+                              "StartSession")
+            return
+        if self.model.start(training_override=reason):
+            self._save_settings()
+
     def start_session(self) -> None:
         """Space: start a session from the setup form (or resume a paused one); asks first on a warning."""
         if self.model.can("resume") and self.model.session.state == "paused":
@@ -436,9 +434,15 @@ class ExperimenterWindow(QMainWindow):
                          id(self.rig_window): ("rig", RIG_SIZE)}.get(id(w), ("calibration", WIZARD_SIZE))
             if not placement.restore(w, self.settings, key):
                 other = placement.other_screen(self) if w is self.participant_window else None
-                placement.place(w, size, other or self.screen())
                 if other is not None:  # the participant's own monitor: the whole of it
+                    placement.place(w, size, other)
                     w.showFullScreen()
+                elif w is self.participant_window:  # one monitor: beside this window, never over its controls
+                    placement.place_beside(w, self, self.left_column, PARTICIPANT_BESIDE_SIZE)
+                else:
+                    placement.place(w, size, self.screen())
+        if w is self.participant_window:
+            placement.keep_above(w, self)
         _show(w)
 
     def resume_selected(self) -> None:
@@ -451,6 +455,20 @@ class ExperimenterWindow(QMainWindow):
     def _on_actions_changed(self) -> None:
         can = self.model.can
         self.start_button.setEnabled(can("start"))
+        self.start_button.setToolTip("" if can("start") else f"Start is not available: {self.model.start_refusal()}")
+        untrained = bool(self.model.setup.training_missing)
+        self.untrained_button.setVisible(untrained)
+        self.untrained_button.setEnabled(can("start_without_training"))
+        self.untrained_button.setToolTip("Asks for the reason; it is stored with the session as a deviation from "
+                                         "the protocol, and the report lists it")
+        self.calibration_wizard.set_blocked(self.model.calibration_refusal())
+        db = self.model.setup.values.db_path
+        title = f"{os.path.basename(db)} — haptic-study experimenter" if db else "haptic-study — experimenter"
+        if title != self.windowTitle():
+            self.setWindowTitle(title)
+            self.setWindowFilePath(os.path.abspath(db) if db else "")
+        if hasattr(self, "menus"):
+            self.menus.refresh()
         self.pause_button.setEnabled(can("pause"))
         pending = self.model.session.running and self.model.session.paused_requested
         self.pause_button.setText("Pause requested…" if pending and self.model.session.state == "running" else "Pause")
@@ -475,9 +493,23 @@ class ExperimenterWindow(QMainWindow):
         self.restart_button.setEnabled(self.model.can("restart_engine"))
 
     def _on_session_changed(self) -> None:
-        self.status.setText(self.model.session.message)
+        s = self.model.session
+        count = s.count_text() if s.running else ""
+        self.status.set_full_text(s.message + (f" — {count}" if count else ""))
+        if count != self.trials_count.full_text():
+            self.trials_count.set_full_text(count)
+            self.trials_count.setVisible(bool(count))
         if hasattr(self.rig_window, "fault_trial"):
             self.rig_window.set_trials(self.model.rehearsal_trials())
+
+    def _on_health_changed(self) -> None:
+        """The health tab's title says when something there needs the experimenter (a fault, a busy machine)."""
+        i = self.tabs.indexOf(self.health_panel)
+        text = "Devices && health" + ("  ⚠" if self.health_panel.attention() else "")
+        if self.tabs.tabText(i) != text:
+            self.tabs.setTabText(i, text)
+        if hasattr(self, "menus"):
+            self.menus.refresh()
 
     def _on_notice(self) -> None:
         n = self.model.notice
@@ -493,7 +525,6 @@ class ExperimenterWindow(QMainWindow):
         s = self.settings
         self.model.setup.update(
             db_path=db_path or str(s.value("setup/db_path", "") or ""),
-            kind=str(s.value("setup/kind", "experiment") or "experiment"),
             protocol_path=str(s.value("setup/protocol_path", "") or ""),
             seed=int(s.value("setup/seed", 0) or 0),
         )
@@ -502,9 +533,11 @@ class ExperimenterWindow(QMainWindow):
         v = self.model.setup.values
         s = self.settings
         s.setValue("setup/db_path", v.db_path)
-        s.setValue("setup/kind", v.kind)
         s.setValue("setup/protocol_path", v.protocol_path)
         s.setValue("setup/seed", v.seed)
+        if v.db_path:
+            s.setValue("recent/databases", remember_recent(self.menus.recent_paths(), v.db_path))
+            self.menus.refresh_recent()
         placement.save(self, s, "experimenter")
         for key, w in (("participant", self.participant_window), ("rig", self.rig_window),
                        ("calibration", self.calibration_wizard)):

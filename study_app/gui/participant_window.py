@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from PySide6.QtCore import QRectF, Qt
-from PySide6.QtGui import QColor, QFont, QKeySequence, QPainter, QPen, QShortcut
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
+from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from study_app.models.participant import ParticipantScreen, ParticipantScreenModel
 
@@ -47,20 +47,35 @@ class ForceGauge(QWidget):
         p.end()
 
 
+#: The cue word's largest size, px (a full HD monitor); it shrinks with the window, never the other way round.
+HEADLINE_MAX_PX = 96
+#: Words the headline shows at most: the cue is sized so the longest of these fits (the targets' labels added).
+_HEADLINE_WORDS = ("Thank you", "GENTLE", "FIRM", "Rest")
+
+
 class ParticipantWindow(QWidget):
-    """Layout of the participant screen; F11 or double-click toggles full screen."""
+    """Layout of the participant screen; F11 or double-click toggles full screen.
+
+    The window keeps the size the experimenter gives it: its text never asks for more room (the labels
+    ignore their text's width), and the cue word is scaled to the window instead.
+    """
 
     def __init__(self, model: ParticipantScreenModel, parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.model = model
         self.setWindowTitle("Participant")
         self.setStyleSheet("background-color: #16161a; color: #f2f2f2;")
+        self.setMinimumSize(320, 240)
         self.headline = QLabel()
         self.headline.setAlignment(Qt.AlignmentFlag.AlignCenter)
-        self.headline.setStyleSheet("font-size: 96px; font-weight: 700; letter-spacing: 6px;")
+        self.headline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self.subline = QLabel()
         self.subline.setAlignment(Qt.AlignmentFlag.AlignCenter)
-        self.subline.setStyleSheet("font-size: 22px; color: #b8b8c0;")
+        self.subline.setWordWrap(True)
+        self.subline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self._words: tuple[str, ...] = _HEADLINE_WORDS
+        self.headline_px = HEADLINE_MAX_PX
+        self._scale_text()
         self.gauge = ForceGauge()
         lay = QVBoxLayout(self)
         lay.addStretch(2)
@@ -73,6 +88,29 @@ class ParticipantWindow(QWidget):
         model.changed.connect(self._on_changed)
         self._on_changed()
 
+    def headline_size_px(self, width: int, height: int) -> int:
+        """The cue word's size for a window of this size: the longest word fits 85 % of the width, and the word
+        a third of the height (at most :data:`HEADLINE_MAX_PX`, at least 16 px)."""
+        font = QFont(self.font())
+        font.setPixelSize(100)
+        font.setBold(True)
+        font.setLetterSpacing(QFont.SpacingType.AbsoluteSpacing, 6.0)
+        metrics = QFontMetricsF(font)
+        widest = max(metrics.horizontalAdvance(w) for w in self._words)
+        px = min(100.0 * 0.85 * width / max(widest, 1.0), height / 3.0, float(HEADLINE_MAX_PX))
+        return max(16, int(px))
+
+    def _scale_text(self) -> None:
+        px = self.headline_size_px(self.width(), self.height())
+        self.headline_px = px
+        self.headline.setStyleSheet(f"font-size: {px}px; font-weight: 700; letter-spacing: 6px;")
+        sub = max(12, min(22, px // 4))
+        self.subline.setStyleSheet(f"font-size: {sub}px; color: #b8b8c0;")
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+        super().resizeEvent(event)
+        self._scale_text()
+
     def toggle_fullscreen(self) -> None:
         """Full screen on the participant's monitor, or back."""
         self.showNormal() if self.isFullScreen() else self.showFullScreen()
@@ -82,6 +120,9 @@ class ParticipantWindow(QWidget):
 
     def _on_changed(self) -> None:
         s: ParticipantScreen = self.model.screen
+        if s.headline and s.headline not in self._words:  # a protocol's own target word: sized to fit as well
+            self._words = (*self._words, s.headline)
+            self._scale_text()
         self.headline.setText(s.headline)
         self.subline.setText(s.subline)
         show = s.show_gauge and s.gauge_force_n is not None and self.model.gauge_allowed

@@ -7,11 +7,11 @@ restored) in the settings by name.
 
 from __future__ import annotations
 
-from PySide6.QtCore import QByteArray, QRect, QSettings, QSize
+from PySide6.QtCore import QByteArray, QRect, QSettings, QSize, Qt
 from PySide6.QtGui import QGuiApplication, QScreen
 from PySide6.QtWidgets import QWidget
 
-__all__ = ["fit_size", "other_screen", "place", "restore", "save"]
+__all__ = ["beside", "fit_size", "keep_above", "other_screen", "place", "place_beside", "restore", "save"]
 
 #: A restored window must show at least this much of itself on some screen, px (else it is placed afresh).
 _MIN_VISIBLE = 120
@@ -61,6 +61,60 @@ def place(window: QWidget, preferred: QSize, screen: QScreen) -> None:
     x = avail.x() + max(0, (avail.width() - size.width() - extra.width()) // 2)
     y = avail.y() + max(0, (avail.height() - size.height() - extra.height()) // 2)
     window.move(x, y)
+
+
+#: Smallest window placed beside another, px (contents): smaller than this, it goes over the other's right part.
+BESIDE_MIN = QSize(480, 320)
+
+
+def beside(avail: QRect, main: QRect, keep_clear: QRect, preferred: QSize, extra: QSize) -> QRect:
+    """Where a second window opens on the experimenter's only screen (its frame, title bar included).
+
+    Beside ``main`` (the experimenter window's frame) where the screen has room for at least
+    :data:`BESIDE_MIN` -- the wider side; else in the screen's bottom-right corner, over the main window's
+    right part (its plots and tables) but clear of ``keep_clear`` (its controls: the setup form and the
+    buttons), at most ``preferred`` in size.  ``extra`` is the frame's size beyond the contents.
+    """
+    want = QSize(preferred.width() + extra.width(), preferred.height() + extra.height())
+    right = avail.right() - main.right()
+    left = main.left() - avail.left()
+    min_w = BESIDE_MIN.width() + extra.width()
+    height = min(want.height(), avail.height())
+    if max(right, left) >= min_w:
+        width = min(want.width(), max(right, left))
+        x = main.right() + 1 if right >= left else main.left() - width
+        return QRect(x, avail.top(), width, height)
+    x0 = max(avail.left(), keep_clear.right() + 9)  # a gap, so the controls' edge stays visible
+    # never over the controls, even on a screen too small for BESIDE_MIN (then it is as wide as there is room)
+    width = min(want.width(), avail.right() + 1 - x0)
+    height = min(height, max(BESIDE_MIN.height() + extra.height(), avail.height() * 2 // 3))
+    return QRect(avail.right() + 1 - width, avail.bottom() + 1 - height, width, height)
+
+
+def place_beside(window: QWidget, main: QWidget, keep_clear: QWidget, preferred: QSize) -> None:
+    """Open ``window`` beside ``main`` on ``main``'s screen, clear of ``keep_clear`` (see :func:`beside`)."""
+    screen = _screen_of(main)
+    extra = frame_extra(window)
+    clear = QRect(keep_clear.mapToGlobal(keep_clear.rect().topLeft()), keep_clear.size())
+    frame = beside(screen.availableGeometry(), main.frameGeometry(), clear, preferred, extra)
+    window.resize(frame.width() - extra.width(), frame.height() - extra.height())
+    window.move(frame.topLeft())
+
+
+def keep_above(window: QWidget, main: QWidget) -> None:
+    """On ``main``'s monitor, make ``window`` a utility window of ``main`` (X11 and the window managers keep such a
+    window above its transient parent), so it stays in view beside ``main``'s controls when the experimenter
+    clicks in ``main``; on a monitor of its own it is an ordinary window."""
+    shared = other_screen(main) is None or window.screen() is main.screen()
+    wanted = Qt.WindowType.Tool if shared else Qt.WindowType.Window
+    if window.windowType() != wanted:
+        geometry = window.saveGeometry()
+        window.setWindowFlags(wanted)  # (this hides it)
+        window.restoreGeometry(geometry)
+    window.winId()
+    handle = window.windowHandle()
+    if handle is not None:
+        handle.setTransientParent(main.windowHandle() if shared else None)  # type: ignore[arg-type]  # None: none
 
 
 def _on_a_screen(rect: QRect) -> bool:

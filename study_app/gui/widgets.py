@@ -2,29 +2,23 @@
 
 from __future__ import annotations
 
-import numpy as np
-import pyqtgraph as pg
+from collections.abc import Callable
+
 from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
-    QAbstractItemView, QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit,
+    QAbstractItemView, QAbstractScrollArea, QFrame, QScrollArea, QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit,
     QListWidget, QListWidgetItem, QPlainTextEdit, QProgressBar, QPushButton, QSizePolicy, QSpinBox, QTableWidget,
     QTableWidgetItem, QVBoxLayout, QWidget,
 )
 
 from study_app.models.app import CUE_ACTIONS, AppModel
 from study_app.models.health import HealthModel
-from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
 
-__all__ = ["ElidedLabel", "QtCueWait", "QtForcePlots", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
+__all__ = ["ElidedLabel", "FollowNewest", "QtCueWait", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
-# Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
-RAW_PEN = pg.mkPen((220, 40, 40), width=1)
-RENDER_PEN = pg.mkPen((20, 160, 60), width=1)
-AXIS_PENS = (pg.mkPen((200, 60, 60), width=1), pg.mkPen((40, 150, 60), width=1), pg.mkPen((40, 80, 200), width=1))
-COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
 
 
@@ -51,11 +45,60 @@ class ElidedLabel(QLabel):
         self._elide()
 
     def _elide(self) -> None:
-        self.setText(self.fontMetrics().elidedText(self._full, Qt.TextElideMode.ElideRight, max(0, self.width())))
+        one_line = " ".join(self._full.split())  # a message with line breaks (an engine's traceback) is one line here
+        self.setText(self.fontMetrics().elidedText(one_line, Qt.TextElideMode.ElideRight, max(0, self.width())))
+
+
+class FollowNewest:
+    """Keep a scroll area's newest (last) row in view -- unless the user scrolled away from it.
+
+    The view follows while its scroll bar is at the end; when rows are added or the view shrinks (a banner
+    appears above it), it scrolls to the end again.  Scrolled up by the user, it stays where it was, until
+    the user scrolls back to the end.
+    """
+
+    def __init__(self, area: QAbstractScrollArea) -> None:
+        self.bar = area.verticalScrollBar()
+        self.following = True
+        self._moving = False
+        self.bar.valueChanged.connect(self._on_value)
+        self.bar.rangeChanged.connect(self._on_range)
+
+    def _on_value(self, value: int) -> None:
+        if not self._moving:
+            self.following = value >= self.bar.maximum()
+
+    def _on_range(self, _lo: int, hi: int) -> None:
+        if self.following:
+            self.to_end()
+
+    def to_end(self) -> None:
+        """Show the newest row (when following)."""
+        if self.following:
+            self._moving = True
+            try:
+                self.bar.setValue(self.bar.maximum())
+            finally:
+                self._moving = False
+
+    def keep(self, change: Callable[[], None]) -> None:
+        """Apply a change that resets the view (``setPlainText`` scrolls to the top): the newest row stays in view
+        if it was, else the user's place is kept."""
+        was, value = self.following, self.bar.value()
+        self._moving = True
+        try:
+            change()
+        finally:
+            self._moving = False
+        self.following = was
+        if was:
+            self.to_end()
+        else:
+            self.bar.setValue(min(value, self.bar.maximum()))
 
 
 class QtTrialTable(QTableWidget):
-    """The trial table, filled as :class:`TrialTable` rows arrive."""
+    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view (:class:`FollowNewest`)."""
 
     def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
         super().__init__(0, len(TRIAL_COLUMNS), parent)
@@ -64,11 +107,17 @@ class QtTrialTable(QTableWidget):
         self.verticalHeader().setVisible(False)
         self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.setTextElideMode(Qt.TextElideMode.ElideRight)
         header = self.horizontalHeader()
         header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         header.setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
+        self.follow = FollowNewest(self)
         table.row_added.connect(self._on_row_added)
-        table.cleared.connect(lambda: self.setRowCount(0))
+        table.cleared.connect(self._on_cleared)
+
+    def _on_cleared(self) -> None:
+        self.setRowCount(0)
+        self.follow.following = True
 
     def _on_row_added(self, i: int) -> None:
         row = self.table.rows[i]
@@ -76,12 +125,13 @@ class QtTrialTable(QTableWidget):
         colour = _OUTCOME_COLOURS.get(str(row.outcome))
         for j, text in enumerate(TrialTable.cells(row)):
             item = QTableWidgetItem(text)
+            item.setToolTip(text)  # an abort's reason may be longer than its column
             if j != 3:
                 item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
             if colour is not None:
                 item.setBackground(colour)
             self.setItem(i, j, item)
-        self.scrollToBottom()
+        self.follow.to_end()
 
 
 class QtCueWait(QWidget):
@@ -137,14 +187,17 @@ LEVEL_COLOURS = {
 
 
 class QtProgress(QWidget):
-    """Progress line and bar of the running session, and a warning line when the force on the tissue is too high."""
+    """What happens now (the trial and its time left, the pause), the session's count and time left with a bar
+    of the designed trials done, and a warning line when the force on the tissue is too high."""
 
     def __init__(self, session: SessionModel, health: HealthModel | None = None, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.session = session
         self.health = health
-        self.label = QLabel()
+        self.label = ElidedLabel()
         self.label.setStyleSheet("font-size: 15px; font-weight: 600;")
+        self.count = ElidedLabel()
+        self.count.setStyleSheet("font-size: 13px;")
         self.bar = QProgressBar()
         self.bar.setRange(0, 1000)
         self.bar.setTextVisible(False)
@@ -156,7 +209,9 @@ class QtProgress(QWidget):
         self.warning.hide()
         lay = QVBoxLayout(self)
         lay.setContentsMargins(4, 2, 4, 2)
+        lay.setSpacing(1)
         lay.addWidget(self.label)
+        lay.addWidget(self.count)
         lay.addWidget(self.bar)
         lay.addWidget(self.warning)
         session.changed.connect(self._on_changed)
@@ -165,7 +220,11 @@ class QtProgress(QWidget):
         self._on_changed()
 
     def _on_changed(self) -> None:
-        self.label.setText(self.session.progress_text())
+        self.label.set_full_text(self.session.progress_text())
+        count = self.session.count_text() if self.session.running else ""
+        if count != self.count.full_text():
+            self.count.set_full_text(count)
+            self.count.setVisible(bool(count))
         self.bar.setValue(int(1000 * self.session.fraction_done()))
 
     def _on_health(self) -> None:
@@ -175,159 +234,12 @@ class QtProgress(QWidget):
             self.warning.setVisible(bool(text))
 
 
-#: The task panel's curve; the lower panel's choices (series, pens).
-TASK_PEN = pg.mkPen((31, 78, 156), width=1)
-LOWER_CHOICES = {
-    "raw sensor |F| (tool weight included)": (("raw_n",), (RAW_PEN,)),
-    "compensated x, y, z (sensor frame)": (COMP_SERIES, AXIS_PENS),
-    "none": ((), ()),
-}
-BAND_BRUSH = pg.mkBrush(0, 114, 178, 60)
-BAND_PEN = pg.mkPen((0, 114, 178), width=1, style=Qt.PenStyle.DashLine)
-
-
-def _swatch(colour: str, text: str, *, block: bool = False) -> str:
-    mark = (f'<span style="background:{colour}">&nbsp;&nbsp;&nbsp;&nbsp;</span>' if block
-            else f'<span style="color:{colour}; font-weight:900">━━</span>')
-    return f"{mark}&nbsp;{text}"
-
-
-class QtForcePlots(QWidget):
-    """The live force view, built for the task: is the force in the band?
-
-    Top: the task force (|compensated, filtered|, what the trial is judged on) and the force rendered on
-    the haptic device, with the target band drawn, on an axis set by the target
-    (:meth:`study_app.models.plots.PlotModel.task_axis`); a force above the axis is named.  Below, on its
-    own axis, the raw sensor force (tool weight included), the compensated components, or nothing.  The
-    legend sits above the plots, never over the data.
-    """
-
-    def __init__(self, plots: PlotModel, session: SessionModel, parent: QWidget | None = None) -> None:
-        super().__init__(parent)
-        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
-        self.plots, self.session = plots, session
-        self.legend = QLabel("  ".join((
-            _swatch("#1f4e9c", "task force |F| (compensated, filtered)"),
-            _swatch("#14a03c", "rendered on the haptic device"),
-            _swatch("rgba(0,114,178,0.35)", "target band", block=True),
-        )))
-        self.lower_choice = QComboBox()
-        self.lower_choice.addItems(list(LOWER_CHOICES))
-        self.lower_choice.setToolTip("What the lower plot shows, on an axis of its own")
-        head = QHBoxLayout()
-        head.setContentsMargins(4, 0, 4, 0)
-        head.addWidget(self.legend, 1)
-        head.addWidget(QLabel("Lower plot:"))
-        head.addWidget(self.lower_choice)
-        self.view = pg.GraphicsLayoutWidget()
-        self.view.setBackground("w")
-        lay = QVBoxLayout(self)
-        lay.setContentsMargins(0, 0, 0, 0)
-        lay.setSpacing(2)
-        lay.addLayout(head)
-        lay.addWidget(self.view, 1)
-
-        self.task = self.view.addPlot(row=0, col=0)
-        self.task.setLabel("left", "force (N)")
-        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=BAND_BRUSH, pen=BAND_PEN)
-        self.band.setZValue(-10)
-        self.band.setVisible(False)
-        self.task.addItem(self.band)
-        # on a pale backing, above the traces: a force held just above the band runs through the label
-        backing = pg.mkBrush(255, 255, 255, 215)
-        self.band_label = pg.TextItem(color=(0, 84, 140), anchor=(1, 1), fill=backing)
-        self.clip_label = pg.TextItem(color=(179, 20, 27), anchor=(1, 0), fill=backing)
-        for item in (self.band_label, self.clip_label):
-            item.setVisible(False)
-            item.setZValue(10)
-            self.task.addItem(item, ignoreBounds=True)
-        self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
-        self.lower = self.view.addPlot(row=1, col=0)
-        self.lower.setLabel("bottom", "time (s)")
-        self.lower.setXLink(self.task)
-        self.view.ci.layout.setRowStretchFactor(0, 3)
-        self.view.ci.layout.setRowStretchFactor(1, 1)
-        self.lower_curves: dict[str, pg.PlotDataItem] = {}
-        # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
-        # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
-        # models instead and change only in steps.  No SI prefix: "(x0.001)" on a force axis misleads.
-        for p in (self.task, self.lower):
-            p.setXRange(-plots.window_s, 0.0, padding=0)
-            p.setMouseEnabled(x=False, y=False)
-            p.enableAutoRange(x=False, y=False)
-            p.setClipToView(True)
-            p.getAxis("left").enableAutoSIPrefix(False)
-            p.getAxis("left").setWidth(48)
-        self._y: dict[str, tuple[float, float]] = {}
-        self._band: tuple[float, float] | None = None
-        self.lower_choice.currentTextChanged.connect(self._set_lower)
-        self._set_lower(self.lower_choice.currentText())
-
-    @property
-    def lower_series(self) -> tuple[str, ...]:
-        """The series the lower plot shows."""
-        return LOWER_CHOICES[self.lower_choice.currentText()][0]
-
-    def _set_lower(self, choice: str) -> None:
-        for c in self.lower_curves.values():
-            self.lower.removeItem(c)
-        names, pens = LOWER_CHOICES[choice]
-        self.lower_curves = {n: self.lower.plot(pen=pen) for n, pen in zip(names, pens)}
-        self.lower.setVisible(bool(names))
-        self.lower.setMaximumHeight(10_000 if names else 0)
-        self.lower.setLabel("left", "raw |F| (N)" if names == ("raw_n",) else "F (N)")
-        self.task.setLabel("bottom", "" if names else "time (s)")
-        self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
-        self._y.pop("lower", None)
-        self.refresh()
-
-    def _target_n(self) -> float:
-        band = self.session.band_for_axis()
-        # before the first trial: the scale of the paper's FIRM target
-        return 1.2 if band is None else (band[0] + band[1]) / 2
-
-    def _set_y_ranges(self) -> None:
-        r = self.plots.task_axis(self._target_n())
-        if self._y.get("task") != r:
-            self._y["task"] = r
-            self.task.setYRange(*r, padding=0)
-        names = self.lower_series
-        if names:
-            r = self.plots.y_range(names, floor_zero=names == ("raw_n",))
-            if self._y.get("lower") != r:
-                self._y["lower"] = r
-                self.lower.setYRange(*r, padding=0)
-        top = self._y["task"][1]
-        peak = self.plots.peak(TASK_SERIES)
-        over = bool(np.isfinite(peak) and peak > top)
-        if over:
-            self.clip_label.setText(f"peak {peak:.1f} N: above the axis")
-            self.clip_label.setPos(0.0, top)
-        if over != self.clip_label.isVisible():
-            self.clip_label.setVisible(over)
-
-    def refresh(self) -> None:
-        """Redraw from the model (the window's 30 Hz timer calls this after a pull)."""
-        for name, curve in self.curves.items():
-            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
-        for name, curve in self.lower_curves.items():
-            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
-        self._set_y_ranges()
-        band = self.session.band()
-        if band != self._band:
-            self._band = band
-            self.band.setVisible(band is not None)
-            self.band_label.setVisible(band is not None)
-            if band is not None:
-                self.band.setRegion(band)
-                self.band_label.setText(self.session.band_label())
-                self.band_label.setPos(0.0, band[1])
-
-
 class QtHealthPanel(QWidget):
-    """Devices (state, rate, sample age), faults with a Reset button, loop timing judged against its limits."""
+    """Devices (state, rate, sample age), faults with a Reset button, why the next cue waits, the machine's health
+    in words, loop timing judged against its limits, and the fault log (newest last, kept in view)."""
 
     COLUMNS = ("Device", "State", "Rate (Hz)", "Sample age (ms)")
+    LOG_LABEL = "Fault log, oldest first and newest last (a fault latches until Reset faults):"
 
     def __init__(self, health: HealthModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -342,30 +254,53 @@ class QtHealthPanel(QWidget):
         self.devices.setFixedHeight(4 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
         self.reset_button = QPushButton("Reset faults")
+        self.waiting = QLabel()
+        self.waiting.setWordWrap(True)
+        self.waiting.hide()
+        self.machine = QLabel()
+        self.machine.setWordWrap(True)
+        fg, bg = LEVEL_COLOURS["warning"]
+        self.machine.setStyleSheet(f"color: {fg}; background: {bg}; padding: 4px;")
+        self.machine.hide()
         self.loop = QLabel()
         self.loop.setTextFormat(Qt.TextFormat.RichText)
         self.loop.setWordWrap(True)
         self.thermal = QLabel()
+        self.thermal.setWordWrap(True)
         self.force = QLabel()
         self.force.setWordWrap(True)
         self.force.hide()
-        self.log_label = QLabel("Fault log (newest last; a fault latches until Reset faults):")
+        self.log_label = QLabel(self.LOG_LABEL)
         self.log = QPlainTextEdit()
         self.log.setReadOnly(True)
-        self.log.setMaximumHeight(80)
+        self.log.setMinimumHeight(60)
+        self.log.setLineWrapMode(QPlainTextEdit.LineWrapMode.WidgetWidth)
         self.log.setPlaceholderText("no fault since the engine started")
+        self.log_follow = FollowNewest(self.log)
         row = QHBoxLayout()
         row.addWidget(self.faults, 1)
-        row.addWidget(self.reset_button)
-        lay = QVBoxLayout(self)
+        row.addWidget(self.reset_button, 0, Qt.AlignmentFlag.AlignTop)
+        body = QWidget()
+        lay = QVBoxLayout(body)
         lay.setContentsMargins(4, 4, 4, 4)
+        lay.addWidget(self.machine)
         lay.addWidget(self.devices)
         lay.addLayout(row)
+        lay.addWidget(self.waiting)
         lay.addWidget(self.loop)
         lay.addWidget(self.thermal)
         lay.addWidget(self.force)
         lay.addWidget(self.log_label)
-        lay.addWidget(self.log)
+        lay.addWidget(self.log, 1)
+        # a short tab (a 768-px screen) scrolls; nothing is squashed or cut
+        scroll = QScrollArea()
+        scroll.setWidgetResizable(True)
+        scroll.setFrameShape(QFrame.Shape.NoFrame)
+        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+        scroll.setWidget(body)
+        outer = QVBoxLayout(self)
+        outer.setContentsMargins(0, 0, 0, 0)
+        outer.addWidget(scroll)
         health.changed.connect(self._on_changed)
         self._on_changed()
 
@@ -377,6 +312,11 @@ class QtHealthPanel(QWidget):
         line = " · ".join(f'<span style="color:{LEVEL_COLOURS[f.level][0]}">{f.text}</span>' for f in figures)
         limits = "; ".join(f"{f.name} {f.limit}" for f in figures)
         return f"{line}<br><small>green: within the limit, amber: above it, red: far above (limits: {limits})</small>"
+
+    def attention(self) -> bool:
+        """Something here needs the experimenter: a latched fault, a held cue or a busy machine (the tab says so)."""
+        h = self.health
+        return bool(h.faults or h.waiting_text() or h.busy_trials)
 
     def _on_changed(self) -> None:
         h = self.health
@@ -390,13 +330,24 @@ class QtHealthPanel(QWidget):
                     item = QTableWidgetItem()
                     self.devices.setItem(i, j, item)
                 item.setText(text)
+                item.setToolTip(text)
                 if j == 1:
-                    item.setForeground(QColor(20, 130, 40) if d.state.startswith("ok") else QColor(200, 30, 30))
-        text = h.faults_text()
-        waiting = h.waiting_text()
-        self.faults.setText(f"Faults: {text}" + (f" — the next cue waits: {waiting}" if waiting else ""))
-        self.faults.setStyleSheet("color: #c81e1e; font-weight: 600;" if h.faults else "color: #147f28;")
+                    level = "ok" if d.state.startswith("ok") else "error"
+                    item.setForeground(QColor(LEVEL_COLOURS[level][0]))
+        self.faults.setText(f"Faults: {h.faults_text()}")
+        # one colour per state, as the Trials tab's banner shows it: a latched fault or a held cue is an error
+        level = "error" if h.faults else "ok"
+        self.faults.setStyleSheet(f"color: {LEVEL_COLOURS[level][0]}; font-weight: 600;")
         self.reset_button.setEnabled(bool(h.faults))
+        self.reset_button.setToolTip("" if h.faults else "No fault is latched")
+        waiting = h.waiting_text()
+        self.waiting.setText(f"The next cue waits: {waiting}" if waiting else "")
+        self.waiting.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]}; font-weight: 600;")
+        self.waiting.setVisible(bool(waiting))
+        machine = h.machine_notice()
+        if machine != self.machine.text():
+            self.machine.setText(machine)
+            self.machine.setVisible(bool(machine))
         loop = self.loop_html()
         if self.loop.text() != loop:
             self.loop.setText(loop)
@@ -411,7 +362,7 @@ class QtHealthPanel(QWidget):
             self.force.setVisible(bool(warning))
         log = "\n".join(h.fault_log)
         if log != self.log.toPlainText():
-            self.log.setPlainText(log)
+            self.log_follow.keep(lambda: self.log.setPlainText(log))
 
 
 class QtSetupPanel(QGroupBox):
@@ -473,7 +424,8 @@ class QtSetupPanel(QGroupBox):
         lay.addWidget(self.errors)
         lay.addWidget(self.warnings)
         lay.addWidget(self.hint)
-        lay.addWidget(QLabel("Interrupted sessions"))
+        self.resumable_label = QLabel()
+        lay.addWidget(self.resumable_label)
         lay.addWidget(self.resumable)
         lay.addLayout(_row_layout(self.refresh_button, self.resume_button))
         self.db.editingFinished.connect(lambda: setup.update(db_path=self.db.text()))
@@ -483,7 +435,10 @@ class QtSetupPanel(QGroupBox):
                                "number, or the next free one) until you change it")
         for w in (self.code, self.number, self.kind, self.seed):
             w.installEventFilter(self)
-        self.kind.currentTextChanged.connect(lambda k: setup.update(kind=k))
+        # the experimenter's choice only (textActivated): the form's own proposal of the next step is set from the model
+        self.kind.textActivated.connect(lambda k: setup.update(kind=k))
+        self.kind.setToolTip("Training (practice with the live force gauge) or the experiment. The form proposes "
+                             "the participant's next step — training, then the experiment — until you choose")
         self.protocol.editingFinished.connect(lambda: setup.update(protocol_path=self.protocol.text()))
         self.seed.valueChanged.connect(lambda n: setup.update(seed=int(n)))
         self.db_browse.clicked.connect(self._browse_db)
@@ -491,6 +446,7 @@ class QtSetupPanel(QGroupBox):
         setup.changed.connect(self._on_changed)
         setup.resumable_changed.connect(self._on_resumable)
         self._on_changed()
+        self._on_resumable()
 
     def _browse_db(self) -> None:
         path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(), "SQLite (*.db *.sqlite);;All files (*)",
@@ -518,9 +474,24 @@ class QtSetupPanel(QGroupBox):
             self.number.setValue(v.participant_number)
         self.errors.setText("\n".join(self.setup.errors.values()))
         self.warnings.setText("\n".join(self.setup.warnings.values()))
-        self.hint.setText(self.setup.hint)
+        idle = self.setup.running_session is None
+        self.hint.setText(self.setup.hint or ("" if self.setup.errors or not idle else self.setup.next_step()))
         for label in (self.errors, self.warnings, self.hint):
             label.setVisible(bool(label.text()))
+        self._show_seed()
+
+    def _show_seed(self) -> None:
+        """The study's seed: read-only once the database has a session, with a tooltip saying why."""
+        first = self.setup.seed_fixed_by
+        fixed = first is not None and "seed" not in self.setup.errors
+        self.seed.setReadOnly(fixed)
+        self.seed.setButtonSymbols(QSpinBox.ButtonSymbols.NoButtons if fixed else QSpinBox.ButtonSymbols.UpDownArrows)
+        self.seed.setToolTip(
+            f"The study's seed, {first.seed}: fixed by the database's first session (session {first.session_id}, "
+            f"{first.code}). Every session of a study uses one seed, so its schedules can be reproduced; a new "
+            "study needs a new database." if first is not None else
+            "The study's seed (schedules, simulated rigs and participants derive from it): fixed when this database "
+            "gets its first session, read-only after that")
 
     def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt's name
         if (event.type() == QEvent.Type.KeyPress and event.key() == Qt.Key.Key_Space
@@ -530,9 +501,14 @@ class QtSetupPanel(QGroupBox):
         return super().eventFilter(obj, event)
 
     def _on_resumable(self) -> None:
+        # an empty list takes one line, not the list's height: the column must fit a 768-px screen
+        n = len(self.setup.resumable)
+        self.resumable_label.setText("Interrupted sessions" if n else "Interrupted sessions: none")
+        self.resumable.setVisible(bool(n))
+        self.resume_button.setToolTip("" if n else "no interrupted session in this database")
         self.resumable.clear()
         for s in self.setup.resumable:
-            text = SetupModel.describe_resumable(s)
+            text = self.setup.describe_resumable(s)
             item = QListWidgetItem(text)
             item.setToolTip(text)
             item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]

@@ -11,12 +11,13 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
-from protocol.config import ProtocolConfig
+from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import schedule_from_json
 from protocol.rehearsal import FaultPlan
 from protocol.session import first_unfinished
 from protocol.session_setup import participant_code, training_protocol, training_schedule
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
+from protocol.study_rules import StudyRuleError, seed_refusal, stored_sessions, training_refusal
 
 __all__ = [
     "Step", "all_steps", "check_fault_plans", "interrupted_session_of", "open_notes", "peek", "plan_study",
@@ -63,7 +64,7 @@ def _plan_continue(
                     f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
                     f"--seed {info.seed}, not {seed}; nothing was changed (give the seed the study was started with)"
                 )
-            if info.kind in wanted and json.loads(info.protocol_json) != wanted[info.kind]:
+            if info.kind in wanted and _same_protocol(info.protocol_json) != wanted[info.kind]:
                 raise StorageError(
                     f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
                     f"another protocol; nothing was changed (give the --protocol the study was started with)"
@@ -85,7 +86,27 @@ def _plan_continue(
                 trials += protocol.trials_per_participant if kind == "experiment" else len(training_schedule(protocol))
         if steps:
             plan[n] = steps
+        _check_training(db, db_path, code, steps, protocol)
     return plan, trials, kept
+
+
+def _same_protocol(stored_json: str) -> Any:
+    """A stored protocol as this version writes it (fields added since, such as ``training.required``, filled in
+    with the defaults the stored one meant), for comparing with the one given."""
+    try:
+        return json.loads(protocol_from_dict(json.loads(stored_json), "stored protocol").to_json())
+    except ValueError:
+        return json.loads(stored_json)
+
+
+def _check_training(db: StudyDatabase, db_path: str, code: str, steps: list[Step], protocol: ProtocolConfig) -> None:
+    """Refuse, before anything is written, a new experiment session the training rule would refuse
+    (:mod:`protocol.study_rules`): one whose training is neither completed nor run by this command."""
+    if ("new", "experiment") not in steps or steps.index(("new", "experiment")) > 0:
+        return  # no new experiment, or its training runs (or resumes) first in this command
+    why = training_refusal(stored_sessions(db), code, protocol)
+    if why:
+        raise StudyRuleError(f"cannot continue: {why}; nothing was changed ({db_path})")
 
 
 
@@ -133,7 +154,9 @@ def plan_study(
         if continue_study:
             if db is None:
                 raise StorageError(f"cannot continue a study: no study in {db_path}")
-            return _plan_continue(db, db_path, participants, seed, protocol)
+            planned = _plan_continue(db, db_path, participants, seed, protocol)
+            _check_seed(db, db_path, seed)
+            return planned
         if db is not None:
             for n in range(1, participants + 1):
                 code = participant_code(n)
@@ -142,12 +165,20 @@ def plan_study(
                         f"{db_path} already holds sessions for participant {code}; nothing was changed "
                         f"(use a new database, or the same command with --continue to complete the study)"
                     )
+            _check_seed(db, db_path, seed)
         plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
         return plan, per * participants, []
     finally:
         if db is not None and db.readonly:
             db.close()
+
+
+def _check_seed(db: StudyDatabase, db_path: str, seed: int) -> None:
+    """One seed per study (:mod:`protocol.study_rules`), whoever ran its sessions (this command, the GUI)."""
+    why = seed_refusal(stored_sessions(db), seed)
+    if why:
+        raise StudyRuleError(f"{db_path}: {why}; nothing was changed")
 
 
 def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:

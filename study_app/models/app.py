@@ -13,6 +13,7 @@ from study_app import messages as m
 from study_app.models import Emitter
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel
+from study_app.models.cue_wait import CUE_ACTIONS, CUE_STUCK_S, CueWait, cue_wait_now
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
@@ -28,7 +29,7 @@ REHEARSAL_KINDS: dict[str, str] = {
     "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
 }
 
-__all__ = ["AppModel", "CueWait", "Notice", "REHEARSAL_KINDS"]
+__all__ = ["AppModel", "CUE_ACTIONS", "CueWait", "Notice", "REHEARSAL_KINDS"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
@@ -47,35 +48,9 @@ class Notice:
     source: str = ""
 
 
-@dataclass(frozen=True, slots=True)
-class CueWait:
-    """Why the next cue of the running session has not come, for how long, and what ends the wait.
-
-    ``level`` is ``info`` (it ends by itself: the protocol's pause), ``warning`` (the experimenter ends it:
-    a pause) or ``error`` (something must be put right: a latched fault, a dead engine).  ``left_s`` is the time
-    until the cue when it is known, ``waited_s`` how long it has waited so far (sample time).  ``action`` names
-    what ends it (``reset_faults``, ``resume``, ``restart_engine`` or ""), ``help`` what to do if that does not.
-    """
-
-    level: str
-    reason: str
-    left_s: float | None = None
-    waited_s: float = 0.0
-    action: str = ""
-    help: str = ""
-
-    def text(self) -> str:
-        """One line: ``Next cue waits: <reason> · 1.2 s left`` (or ``· waiting 14 s``)."""
-        when = (f" · {self.left_s:.1f} s left" if self.left_s is not None
-                else f" · waiting {self.waited_s:.0f} s" if self.waited_s >= 1.0 else "")
-        return f"Next cue waits: {self.reason}{when}"
-
-
-#: A wait with nothing named to end it, after this long (s), says where to look.
-CUE_STUCK_S = 5.0
-#: What ends each wait, as the button reads.
-CUE_ACTIONS = {"reset_faults": "Reset faults", "resume": "Resume", "restart_engine": "Restart engine"}
-
+#: The commands of the calibration window: their notices go when it closes, or when a session starts or ends.
+CALIBRATION_COMMANDS = ("Calibrate", "CalibrateTcp", "RecordPivot", "IdentifyTcp", "CheckFrames", "RecordFrameAxis",
+                        "RecordPose", "IdentifyPoses")
 
 #: Commands as the experimenter knows them, for refusal messages.
 _COMMAND_NAMES = {
@@ -84,7 +59,7 @@ _COMMAND_NAMES = {
     "ListSessions": "Reading the database", "ResetFaults": "Reset faults", "SetDriver": "Driver",
     "CalibrateTcp": "TCP calibration", "RecordPivot": "Record orientation", "IdentifyTcp": "TCP calibration",
     "CheckFrames": "Frame check", "RecordFrameAxis": "Frame check", "JawCommand": "Jaw",
-    "InjectFault": "Fault rehearsal",
+    "InjectFault": "Fault rehearsal", "RecordPose": "Record pose", "IdentifyPoses": "Identify",
 }
 
 
@@ -137,6 +112,8 @@ class AppModel:
         self.cue_wait_changed = Emitter()
         self._wait_key = ""
         self._wait_since_s = 0.0
+        #: The reason of a start without training, until the session it was given for has started.
+        self._training_override = ""
         self.session.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(lambda: self.actions_changed.emit())
         self.setup.changed.connect(self._on_setup_changed)
@@ -166,9 +143,16 @@ class AppModel:
             self.clear_notice()  # news about an earlier trial: stale once the next one has ended
         elif isinstance(ev, m.SessionStarted):
             self.clear_notice()
+            if any(s["session_id"] == ev.session_id for s in self.setup.resumable):  # it runs now: not to resume
+                self.setup.set_resumable([s for s in self.setup.resumable if s["session_id"] != ev.session_id])
+            if ev.kind == "experiment" and self._training_override:
+                self.notify("warning", f"{ev.code}: started without training, stored as a deviation with your "
+                            "reason.", "TrainingOverride")
+            self._training_override = ""
             self.setup.session_began(ev.code, ev.kind, ev.participant_number or self.setup.values.participant_number,
-                                     ev.session_id)
+                                     ev.session_id, seed=ev.seed)
         elif isinstance(ev, m.SessionEnded):
+            self.clear_notice(CALIBRATION_COMMANDS)  # "not during a session": its cause has gone
             if self.session.session is not None:
                 self.setup.session_ended(self.session.session.kind, ev.status)
             if self.setup.values.db_path:
@@ -184,41 +168,8 @@ class AppModel:
 
     # -- why the next cue waits ----------------------------------------------------------------------
     def _cue_wait_now(self) -> tuple[str, CueWait | None]:
-        """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
-        s = self.session
-        if self.engine_trouble:
-            if s.session is None and self._interrupted is None:
-                return "", None
-            return "engine", CueWait("error", "no trial runs until the study engine is restarted",
-                                     action="restart_engine", help="Restart engine, then Resume selected.")
-        if not s.running or s.session is None or s.phase in ("active", "cued"):
-            return "", None
-        h = self.health.loop
-        waiting = h.waiting if h is not None and h.session_running else ""
-        if s.state == "paused":
-            if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
-                return "paused-runner", CueWait("error", waiting, action="resume",
-                                                help="Resume (Space) once the cause is dealt with.")
-            return "paused", CueWait("warning", "the session is paused", action="resume",
-                                     help="Resume (Space) to continue with the next trial.")
-        if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
-            return "fault", CueWait(
-                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
-                help="The haptic loop stalled. Reset faults if it runs again; if the fault stays, the loop is frozen "
-                     "and no reset reaches it: Restart engine (under Start), then Resume selected.")
-        if waiting.startswith("fault latched"):
-            return "fault", CueWait(
-                "error", waiting.replace(": reset to continue", ""), action="reset_faults",
-                help="No trial is cued while a fault is latched. Reset faults; if the fault latches again, its cause "
-                     "is still there — the fault log under Devices & health names it (a stalled sensor, a device "
-                     "error, the stylus pressed at the start): put it right, then reset.")
-        if s.phase == "pause" and s.pause_until_s is not None:
-            left = round(max(0.0, s.pause_until_s - s.latest_t_s), 1)
-            return "pause", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause between trials", left_s=left)
-        if waiting == "pause":
-            return "pause-again", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause before the next cue "
-                                          "(after the session began or a fault was cleared)")
-        return "due", CueWait("info", "the next cue is due")
+        """(kind of wait, the wait without its duration): see :func:`study_app.models.cue_wait.cue_wait_now`."""
+        return cue_wait_now(self.session, self.health, self.engine_trouble, self._interrupted)
 
     def _refresh_cue_wait(self) -> None:
         key, wait = self._cue_wait_now()
@@ -332,9 +283,9 @@ class AppModel:
         self.notice = Notice(level, text, source)
         self.notice_changed.emit()
 
-    def clear_notice(self) -> None:
-        """The notice was read or its cause resolved."""
-        if self.notice is not None:
+    def clear_notice(self, sources: tuple[str, ...] | None = None) -> None:
+        """The notice was read or its cause resolved (``sources``: only a notice answering one of these commands)."""
+        if self.notice is not None and (sources is None or self.notice.source in sources):
             self.notice = None
             self.notice_changed.emit()
 
@@ -378,6 +329,8 @@ class AppModel:
         s = self.session
         if action == "start":
             return self.ready and not s.running and self.setup.valid
+        if action == "start_without_training":
+            return self.ready and not s.running and bool(self.setup.training_missing)
         if action == "resume_session":
             return self.ready and not s.running
         if action == "calibrate":
@@ -409,23 +362,45 @@ class AppModel:
             self.notify("error", "The study engine is not running: press Restart engine.")
         return ok
 
-    def start(self, override_reason: str = "") -> bool:
+    def start(self, override_reason: str = "", training_override: str = "") -> bool:
         """Start the session described by the setup form (False if the form is invalid or nothing may start).
 
         ``override_reason``: start on the real rig although the calibration chain is not complete (stored).
+        ``training_override``: start an experiment without the completed training the protocol requires; the
+        engine stores the reason as a ``deviation`` event (:mod:`protocol.study_rules`).
         """
-        if not self.can("start"):
+        skip_training = bool(training_override.strip()) and self.can("start_without_training")
+        if not (self.can("start") or skip_training):
             errors = self.setup.validate()
             if errors or self.setup.hint:
                 self.notify("error", "Cannot start: " + " ".join(list(errors.values()) or [self.setup.hint]),
                             "StartSession")
             return False
-        cmd = self.setup.start_command()
+        cmd = self.setup.start_command(training_override if skip_training else "")
         if override_reason.strip():
-            import dataclasses
-
             cmd = dataclasses.replace(cmd, override_reason=override_reason.strip())
+        self._training_override = cmd.training_override
         return self._send(cmd)
+
+    def start_refusal(self) -> str:
+        """Why Start is not available now, in words ("" when it is): for the button's and the menu's tooltip."""
+        s = self.session
+        if self.engine_trouble:
+            return "the study engine must be restarted first (Restart engine)"
+        if s.running:
+            return "a session is running"
+        if not self.ready:
+            return "the study engine is not ready yet"
+        if self.setup.hint:
+            return self.setup.hint
+        return " ".join(self.setup.errors.values())
+
+    def calibration_refusal(self) -> str:
+        """Why the calibration steps may not run now ("" when they may)."""
+        if self.session.running:
+            return ("not during a session: a calibration step moves the robot and replaces what the force path "
+                    "uses; finish or end the session first")
+        return ""
 
     def calibration_missing(self) -> str:
         """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated rig)."""

@@ -9,10 +9,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.devices import Fault
+from protocol.records import AbortCause, TrialRecord
 from study_app import messages as m
 from study_app.models import Emitter
 
-__all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFigure"]
+__all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFigure", "lost_to_the_machine"]
 
 #: Task force above which the window warns: well above every target of the paper's protocol (≤ 1.2 N) and above
 #: what the Touch can render (3.3 N peak), so no trial needs it; it only presses the tissue (and the hand) harder.
@@ -43,6 +44,18 @@ def _level(value: float, limits: tuple[float, float]) -> str:
     if not math.isfinite(value):
         return "unknown"
     return "ok" if value <= limits[0] else "warn" if value <= limits[1] else "bad"
+
+def lost_to_the_machine(record: TrialRecord) -> bool:
+    """A trial aborted because the 1 kHz loop fell behind: records missing for longer than the watchdog allows
+    (``gap``), or the loop stalled (``LOOP_STALLED``) -- what a computer too busy for the loop causes."""
+    cause, reason = record.abort_cause, record.abort_reason or ""
+    return cause is AbortCause.GAP or (cause is AbortCause.FAULT and "LOOP_STALLED" in reason)
+
+
+#: What helps a computer too busy for the loop (the health panel's notice, docs/gui.md "Machine health").
+BUSY_HELP = ("What helps: close other programs (web browsers, video calls, software updates, other studies), keep a "
+             "laptop on mains power, and use this computer for nothing else during a session.")
+
 
 #: How the fault log names each kind of loop event.
 _VERBS = {"fault": "fault", "fault_cleared": "gone", "faults_reset": "reset", "derating": "derating",
@@ -114,6 +127,8 @@ class HealthModel:
     #: The jaw (None: the rig has none, or it has not reported yet).
     jaw: m.JawState | None = None
     changed: Emitter = field(default_factory=Emitter)
+    #: Trials of the running session lost to the machine (:func:`lost_to_the_machine`), and their numbers.
+    busy_trials: list[int] = field(default_factory=list)
     #: The runs behind :attr:`fault_log`, oldest first.
     _log_runs: list[_LogRun] = field(default_factory=list, repr=False)
 
@@ -138,10 +153,36 @@ class HealthModel:
             self.uncompensated = ev.rig == "real" and not any(done for name, done, _ in ev.steps if name == "payload")
         elif isinstance(ev, m.EngineStopped):
             self.connected = False
+        elif isinstance(ev, m.SessionStarted):
+            self.busy_trials = [r.trial_index + 1 for r in ev.stored_trials if lost_to_the_machine(r)]
+        elif isinstance(ev, m.TrialEnded):
+            if not lost_to_the_machine(ev.record):
+                return
+            self.busy_trials.append(ev.record.trial_index + 1)
         else:
             return
         self._refresh_states()
         self.changed.emit()
+
+    def machine_notice(self) -> str:
+        """When the loop falling behind cost trials: that the computer is too busy, how many trials it cost, what
+        helps, and whether the loop got the real-time priority it asked for ("" while no trial was lost so)."""
+        n = len(self.busy_trials)
+        if not n:
+            return ""
+        which = ", ".join(str(k) for k in self.busy_trials[-5:]) + (" …" if n > 5 else "")
+        text = (f"This computer is too busy for the 1 kHz haptic loop: {n} trial{'s' if n > 1 else ''} of this "
+                f"session (trial{'s' if n > 1 else ''} {which}) {'were' if n > 1 else 'was'} aborted because the "
+                "loop fell behind; each is run again, so the session takes longer. " + BUSY_HELP)
+        sched = self.loop.scheduling if self.loop is not None else ""
+        if sched.startswith("SCHED_FIFO"):
+            text += f" The loop asked for real-time priority and got it ({sched})."
+        elif sched.startswith("normal"):
+            why = sched[len("normal"):].strip(" ()")
+            text += (f" The loop asked for real-time priority and did not get it ({why}): it runs at normal priority, "
+                     "so any busy program can delay it; allow real-time scheduling for this user (docs/gui.md, "
+                     "Machine health).")
+        return text
 
     def _log_event(self, ev: m.EngineFault) -> None:
         """One line per event; a run of the same event (numbers aside) is one line counted ``×N``.
@@ -162,6 +203,7 @@ class HealthModel:
     def engine_restarted(self) -> None:
         """A new engine replaces the old one: its figures and faults are gone (the log keeps what happened)."""
         self.connected, self.loop, self.faults, self.devices = False, None, 0, []
+        self.busy_trials = []
         self._log_runs.append(_LogRun(("engine restarted", ""), "", "", ""))
         del self._log_runs[:-_LOG_LINES]
         self.changed.emit()

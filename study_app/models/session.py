@@ -11,7 +11,7 @@ from protocol.records import Outcome, TrialRecord
 from study_app import messages as m
 from study_app.models import Emitter
 
-__all__ = ["SessionModel", "TrialTable", "TRIAL_COLUMNS"]
+__all__ = ["SessionModel", "TrialCount", "TrialTable", "TRIAL_COLUMNS", "time_left_text"]
 
 #: Columns of the live trial table.
 TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)")
@@ -19,6 +19,59 @@ TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max A
 
 def _num(v: Any, fmt: str = "{:.2f}") -> str:
     return "–" if v is None or (isinstance(v, float) and not math.isfinite(v)) else fmt.format(v)
+
+
+@dataclass(frozen=True, slots=True)
+class TrialCount:
+    """A session's progress, counted one way in every panel (the progress line, the status bar, the Trials tab,
+    the list of interrupted sessions, the setup form).
+
+    ``designed`` trials are the design's (20 in the paper's protocol); each is ``done`` once, when it or a
+    re-run of it ends as a success or a timeout, so ``done`` never passes ``designed`` and the count never
+    grows as re-runs are added.  ``aborted`` attempts are counted apart; each queues one re-run, so the
+    re-runs left (the one running included) are the aborted attempts less the re-runs already run
+    (``reruns_run``).
+    """
+
+    designed: int
+    done: int = 0
+    aborted: int = 0
+    reruns_run: int = 0
+
+    @classmethod
+    def of(cls, designed: int, records: list[TrialRecord]) -> TrialCount:
+        """From the trial records stored so far."""
+        aborted = sum(r.outcome is Outcome.ABORTED for r in records)
+        return cls(designed, len(records) - aborted, aborted, sum(r.repeat_of is not None for r in records))
+
+    @property
+    def reruns_to_come(self) -> int:
+        """Re-runs queued and not ended yet (the one running, if one runs, included)."""
+        return max(0, self.aborted - self.reruns_run)
+
+    @property
+    def fraction(self) -> float:
+        """Share of the designed trials done (0–1)."""
+        return min(1.0, self.done / self.designed) if self.designed > 0 else 0.0
+
+    def text(self) -> str:
+        """``7 of 20 trials done · 2 aborted · 1 re-run left`` (the last two only when not zero)."""
+        parts = [f"{self.done} of {self.designed} trials done"]
+        if self.aborted:
+            parts.append(f"{self.aborted} aborted")
+        n = self.reruns_to_come
+        if n:
+            parts.append(f"{n} re-run{'s' if n > 1 else ''} left")
+        return " · ".join(parts)
+
+
+def time_left_text(seconds: float, *, bound: bool = False) -> str:
+    """An estimate of the time left, rounded as people say it: ``about 40 s left``, ``about 4 min left``
+    (``at most …`` when ``bound``: no trial has ended yet, so every trial is counted at its cap)."""
+    word = "at most" if bound else "about"
+    if seconds < 60.0:
+        return f"{word} {max(10, 10 * math.ceil(seconds / 10.0)):.0f} s left"
+    return f"{word} {math.ceil(seconds / 60.0) if bound else max(1, round(seconds / 60.0)):d} min left"
 
 
 @dataclass
@@ -46,7 +99,7 @@ class TrialTable:
         if row.abort_reason:
             outcome += f" ({row.abort_reason})"
         return (
-            str(row.trial_index + 1),
+            str(row.trial_index + 1) + ("" if row.repeat_of is None else f" (re-run of {row.repeat_of + 1})"),
             f"{row.target_label} {row.target_force_n:g} N",
             "haptics ON" if row.haptic_mode is HapticMode.ON else "haptics OFF",
             outcome,
@@ -70,8 +123,15 @@ class SessionModel:
     phase: str = "idle"
     pause_until_s: float | None = None
     paused_requested: bool = False
+    #: Why the session runner paused the session itself ("" when it did not): trials it could not deliver.
+    paused_by_runner: str = ""
     completed: int = 0
     aborted: int = 0
+    reruns_run: int = 0
+    #: Trials of the design (re-runs not counted): the "of N" of every count.
+    designed: int = 0
+    #: Length of each attempt so far (cue to end, s): the time-left estimate.
+    _durations_s: list[float] = field(default_factory=list)
     latest_t_s: float = 0.0
     #: The newest trial started, kept after it ends (the live axis keeps its target's scale between trials).
     last_trial: m.TrialStarted | None = None
@@ -89,7 +149,10 @@ class SessionModel:
             self.session, self.trial, self.phase = ev, None, "idle"
             resumed = " (resumed)" if ev.stored_trials else ""
             self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}{resumed}"
-            self.completed = self.aborted = 0
+            self.completed = self.aborted = self.reruns_run = 0
+            self._durations_s = []
+            designed = [t for t in ev.schedule if t.get("repeat_of") is None]
+            self.designed = len(designed) if ev.schedule else ev.trials_total
             self.paused_requested = False
             self.pause_until_s = None
             self.table.clear()
@@ -119,6 +182,7 @@ class SessionModel:
                 holding = ev.paused and self.phase not in ("active", "cued")
                 self.paused_requested = ev.paused and not holding
                 self.state = "paused" if holding else "running"
+                self.paused_by_runner = ev.waiting if holding and ev.waiting not in ("", "pause") else ""
         elif isinstance(ev, m.EngineStopped):
             self.state, self.message = "stopped", f"engine stopped: {ev.reason}"
         elif isinstance(ev, m.CommandRefused) and ev.command == "connect":
@@ -132,7 +196,8 @@ class SessionModel:
         self.state, self.message = "connecting", message
         self.session = self.trial = self.last_trial = None
         self.phase, self.pause_until_s, self.paused_requested = "idle", None, False
-        self.completed = self.aborted = 0
+        self.completed = self.aborted = self.reruns_run = self.designed = 0
+        self._durations_s = []
         self.latest_t_s = 0.0
         self.table.clear()
         self.changed.emit()
@@ -143,6 +208,14 @@ class SessionModel:
             self.aborted += 1
         else:
             self.completed += 1
+        self.reruns_run += row.repeat_of is not None
+        if row.end_ns > row.cue_ns and row.outcome is not Outcome.ABORTED:  # an aborted one was cut short
+            self._durations_s.append((row.end_ns - row.cue_ns) * 1e-9)
+
+    @property
+    def count(self) -> TrialCount:
+        """The session's progress, as every panel shows it."""
+        return TrialCount(self.designed, self.completed, self.aborted, self.reruns_run)
 
     def set_time(self, t_s: float) -> None:
         """The newest sample time from the ring (drives the countdowns)."""
@@ -157,30 +230,61 @@ class SessionModel:
         return self.state in ("running", "paused")
 
     def progress_text(self) -> str:
-        """``trial k of N · time left`` or the pause countdown, or the state."""
+        """What is happening now: the running trial and its time left, the pause's countdown, or the state."""
         s = self.session
         if s is None or not self.running:
             return self.message
-        done = self.completed + self.aborted
         if self.state == "paused":
-            return f"paused after {done} of {s.trials_total} trials · Resume (Space) to continue"
+            if self.paused_by_runner:  # not the experimenter's pause: say so, and where the reason is
+                return "Paused by the session: trials were not delivered as designed (see below) · Resume (Space)"
+            return "Paused · Resume (Space) to continue"
         pending = " · pause requested: pausing after this trial" if self.paused_requested else ""
-        if self.phase in ("active", "cued") and self.trial is not None:
-            left = max(0.0, s.max_trial_s - (self.latest_t_s - self.trial.t_s))
-            return (f"trial {self.trial.position} of {s.trials_total} · {self.trial.target_label} · "
-                    f"haptics {self.trial.haptic_mode.upper()} · {left:4.1f} s left{pending}")
+        tr = self.trial
+        if self.phase in ("active", "cued") and tr is not None:
+            left = max(0.0, s.max_trial_s - (self.latest_t_s - tr.t_s))
+            again = "" if tr.repeat_of is None else f" (re-run of trial {tr.repeat_of + 1})"
+            return (f"Trial {tr.trial_index + 1}{again} · {tr.target_label} · haptics {tr.haptic_mode.upper()} · "
+                    f"{left:4.1f} s left{pending}")
         if self.phase == "pause" and self.pause_until_s is not None:
             left = max(0.0, self.pause_until_s - self.latest_t_s)
-            nxt = "pausing before the next trial" if pending else f"next trial in {left:3.1f} s"
-            return f"{done} of {s.trials_total} trials done · {nxt}"
-        return f"{done} of {s.trials_total} trials done{pending}"
+            return "Pausing before the next trial" if pending else f"Next trial in {left:3.1f} s"
+        first = tr is None and not self.table.rows
+        return ("Session started: the first trial is due" if first else "The next trial is due") + pending
+
+    def count_text(self) -> str:
+        """The progress count and the time left: ``7 of 20 trials done · 2 aborted · 1 re-run left · about
+        4 min left`` ("" without a session)."""
+        if self.session is None:
+            return ""
+        c = self.count
+        left = self.time_left_s()
+        if c.done >= c.designed or left is None:
+            return c.text()
+        return f"{c.text()} · {time_left_text(left[0], bound=left[1])}"
+
+    def time_left_s(self) -> tuple[float, bool] | None:
+        """(estimated seconds until the last designed trial is done, whether it is an upper bound), or None.
+
+        Every designed trial not yet done takes one more attempt (a re-run left is one of them): the mean
+        length of the trials that ended so far (a success or a timeout: an aborted one was cut short) plus the
+        protocol's pause, or the trial cap before any ended (then it is an upper bound).  The running trial
+        counts what it has left of that.
+        """
+        s = self.session
+        if s is None:
+            return None
+        c = self.count
+        remaining = max(0, c.designed - c.done)
+        bound = not self._durations_s
+        per = s.max_trial_s if bound else min(s.max_trial_s, sum(self._durations_s) / len(self._durations_s))
+        total = remaining * (per + s.pause_s)
+        if self.phase in ("active", "cued") and self.trial is not None and remaining:
+            total -= min(per, max(0.0, self.latest_t_s - self.trial.t_s))
+        return max(0.0, total), bound
 
     def fraction_done(self) -> float:
-        """Share of the schedule finished (0–1); aborted trials count (their re-runs are in the schedule too)."""
-        s = self.session
-        if s is None or s.trials_total == 0:
-            return 0.0
-        return min(1.0, (self.completed + self.aborted) / s.trials_total)
+        """Share of the designed trials done (0–1): it never moves back when a re-run is added."""
+        return self.count.fraction if self.session is not None else 0.0
 
     def band_for_axis(self) -> tuple[float, float] | None:
         """The band of the current trial, or of the last one between trials (the live axis keeps its scale)."""

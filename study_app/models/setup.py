@@ -8,6 +8,14 @@ to someone else is a warning (the same number draws the same counterbalanced
 schedule, which is right only when replacing a participant who dropped out).
 Until the experimenter sets the number, the form suggests one: the code's own
 number if it has sessions (training, then experiment), else the next free one.
+
+The study's rules (:mod:`protocol.study_rules`, the functions the engine applies
+when it stores a session) are checked here too, so the form says why before
+Start: a database's seed is fixed by its first session (the form takes it and
+the view shows it read-only); an experiment without the completed training the
+protocol requires is an error that only an override with a typed reason passes.
+Until the experimenter picks the kind, the form proposes the participant's next
+step: training, then the experiment.
 """
 
 from __future__ import annotations
@@ -16,15 +24,24 @@ import os
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from protocol.config import ProtocolError, load_protocol
+from protocol.config import ProtocolConfig, ProtocolError, load_protocol
 from protocol.storage import StorageError, validate_code
+from protocol.study_rules import StoredSession, next_kind, requires_training, seed_refusal, study_seed, training_refusal
 from study_app import messages as m
 from study_app.models import Emitter
+from study_app.models.session import TrialCount
 from study_app.session_list import next_participant_number
 
-__all__ = ["SessionSetup", "SetupModel", "KINDS"]
+__all__ = ["SessionSetup", "SetupModel", "KINDS", "article", "TRAINING_OVERRIDE_HINT"]
 
 KINDS = ("training", "experiment")
+#: What the form adds to a training refusal: the way past it, and what it costs.
+TRAINING_OVERRIDE_HINT = "Run the training first, or Start without training… with a reason (stored as a deviation)"
+
+
+def article(word: str) -> str:
+    """``a`` or ``an`` before ``word`` (an aborted, a completed)."""
+    return "an" if word[:1].lower() in "aeiou" else "a"
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,6 +73,13 @@ class SetupModel:
     known: list[dict[str, Any]] = field(default_factory=list)
     #: The number follows the suggestion until the experimenter sets it.
     number_suggested: bool = True
+    #: The kind follows the participant's next step (training, then experiment) until the experimenter picks one.
+    kind_suggested: bool = True
+    #: The session that fixed the database's seed (None: no session yet, the seed may still be chosen).
+    seed_fixed_by: StoredSession | None = None
+    #: The protocol as loaded from the form's file (None while it does not load).
+    protocol: ProtocolConfig | None = None
+    _protocol_key: tuple[str, float] | None = None
     #: The session running now (not a conflict with itself).
     running_session: int | None = None
     #: The session to select in the resume list when it is listed (the one an engine failure interrupted).
@@ -69,8 +93,11 @@ class SetupModel:
             kwargs["code"] = str(kwargs["code"]).strip()
         if "participant_number" in kwargs:
             self.number_suggested = False
+        if "kind" in kwargs:
+            self.kind_suggested = False
         self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]
         self._suggest_number()
+        self._suggest_kind()
         self.validate()
 
     def set_number(self, number: int) -> None:
@@ -84,6 +111,32 @@ class SetupModel:
         mine = [s for s in self.known if s["code"] == self.values.code]
         n = int(mine[-1]["participant_number"]) if mine else next_participant_number(self.known)
         self.values = replace(self.values, participant_number=n)
+
+    def _suggest_kind(self) -> None:
+        protocol = self._load_protocol() if self.kind_suggested else None
+        if protocol is None:
+            return
+        kind = next_kind(self._stored(), self.values.code, protocol)
+        if kind != self.values.kind:
+            self.values = replace(self.values, kind=kind)
+
+    def _stored(self) -> list[StoredSession]:
+        return [StoredSession.of(s) for s in self.known]
+
+    def _load_protocol(self) -> ProtocolConfig | None:
+        """The form's protocol (loaded again only when its file or its time stamp changes); None if it does not load."""
+        path = self.values.protocol_path.strip()
+        try:
+            key = (path, os.path.getmtime(path) if path else 0.0)
+        except OSError:
+            key = (path, -1.0)
+        if key != self._protocol_key:
+            self._protocol_key = key
+            try:
+                self.protocol = load_protocol(path or None)
+            except ProtocolError:
+                self.protocol = None
+        return self.protocol
 
     def validate(self) -> dict[str, str]:
         """Check every field as the engine will, and the entry against the database; returns (and stores) the errors."""
@@ -115,11 +168,16 @@ class SetupModel:
                 load_protocol(v.protocol_path)
             except ProtocolError as exc:
                 errors["protocol_path"] = str(exc)
+        self._load_protocol()
         if not (isinstance(v.seed, int) and v.seed >= 0):
             errors["seed"] = f"seed = {v.seed!r}: must be a whole number ≥ 0"
         if not (isinstance(v.participant_number, int) and v.participant_number >= 1):
             errors["participant_number"] = f"participant number = {v.participant_number!r}: must be a whole number ≥ 1"
         warnings: dict[str, str] = {}
+        self.seed_fixed_by = study_seed(self._stored())
+        why = seed_refusal(self._stored(), v.seed) if "seed" not in errors else ""
+        if why:
+            errors["seed"] = why
         if "code" not in errors and v.code:
             self._check_against_database(errors, warnings)
         self.errors, self.warnings = errors, warnings
@@ -134,11 +192,15 @@ class SetupModel:
             s = same[-1]
             if s["status"] == "running":
                 errors["code"] = (f"{v.code} has an interrupted {v.kind} session (session {s['session_id']}, "
-                                  f"{s['trials_done']} of {s['trials_planned']} trials done): resume it from the "
-                                  "list below")
+                                  f"{self.count_of(s).text()}): resume it from the list below")
             else:
-                errors["code"] = (f"{v.code} already has a {s['status']} {v.kind} session (session "
-                                  f"{s['session_id']}); the database keeps one per participant: enter a new code")
+                errors["code"] = (f"{v.code} already has {article(str(s['status']))} {s['status']} {v.kind} session "
+                                  f"(session {s['session_id']}); the database keeps one per participant: enter a new "
+                                  "code")
+        elif v.kind == "experiment" and self.protocol is not None and self.running_session is None:
+            why = training_refusal(self._stored(), v.code, self.protocol)
+            if why:
+                errors["training"] = f"{why}. {TRAINING_OVERRIDE_HINT}."
         others = sorted({s["code"] for s in self.known
                          if s["participant_number"] == v.participant_number and s["code"] != v.code})
         if others:
@@ -152,19 +214,48 @@ class SetupModel:
             warnings["code"] = (f"{v.code} ran as number {mine[-1]['participant_number']} before (session "
                                 f"{mine[-1]['session_id']}): the number decides the trial order")
 
+    def count_of(self, s: dict[str, Any]) -> TrialCount:
+        """The progress of a listed session, counted as the running one is (:class:`TrialCount`)."""
+        listed = next((r for r in self.resumable if r["session_id"] == s["session_id"]), s)
+
+        def n(key: str) -> int:
+            v = listed.get(key, 0)
+            return int(v) if isinstance(v, (int, float, str)) else 0
+
+        return TrialCount(n("trials_planned"), n("trials_done"), n("trials_aborted"), n("reruns_run"))
+
     @property
     def valid(self) -> bool:
         """True when every field passed :meth:`validate` and a code is entered."""
         return not self.errors and bool(self.values.code)
 
-    def start_command(self) -> m.StartSession:
-        """The command that starts this session (validate first)."""
-        errors = self.validate()
+    @property
+    def training_missing(self) -> str:
+        """Why the experiment would be refused for want of training, when that is the form's only error ("" else):
+        the case an override with a reason may pass."""
+        return self.errors["training"] if set(self.errors) == {"training"} and self.values.code else ""
+
+    def next_step(self) -> str:
+        """What the participant does next, in words ("" without a code or a protocol)."""
+        v, p = self.values, self.protocol
+        if not v.code or p is None or not p.training.enabled:
+            return ""
+        proposed = next_kind(self._stored(), v.code, p)
+        rule = "required before the experiment" if requires_training(p) else "the protocol's practice block"
+        if proposed == "training":
+            return f"Next for {v.code}: training ({rule}), then the experiment."
+        return f"Next for {v.code}: the experiment."
+
+    def start_command(self, training_override: str = "") -> m.StartSession:
+        """The command that starts this session (validate first); ``training_override`` passes a missing training."""
+        errors = dict(self.validate())
+        if training_override.strip() and self.training_missing:
+            errors.pop("training")
         if errors or not self.values.code:
             raise ValueError("; ".join(errors.values()) or self.hint)
         v = self.values
         return m.StartSession(os.path.abspath(v.db_path), v.code, v.kind, v.protocol_path.strip() or None, v.seed,
-                              v.participant_number)
+                              v.participant_number, training_override=training_override.strip())
 
     def set_resumable(self, sessions: list[dict[str, object]]) -> None:
         """Interrupted sessions listed by the engine."""
@@ -179,16 +270,27 @@ class SetupModel:
         return ids[0] if ids else None
 
     def set_known(self, sessions: list[dict[str, Any]]) -> None:
-        """Every session of the database (listed by the engine): suggestions and checks follow it."""
+        """Every session of the database (listed by the engine): suggestions and checks follow it; a database
+        with sessions has its seed, and the form takes it (the view shows it read-only)."""
         self.known = list(sessions)
+        first = study_seed(self._stored())
+        if first is not None and self.values.seed != first.seed:
+            self.values = replace(self.values, seed=first.seed)
         self._suggest_number()
+        self._suggest_kind()
         self.validate()
 
-    def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None) -> None:
-        """A session started or resumed: the form shows whose it is."""
+    def session_began(self, code: str, kind: str, participant_number: int, session_id: int | None = None,
+                      seed: int | None = None) -> None:
+        """A session started or resumed: the form shows whose it is (and knows it is stored: the study's seed
+        is fixed from now on, before the database is listed again)."""
         self.running_session = session_id
         if session_id == self.preferred_resume:
             self.preferred_resume = None
+        if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):
+            self.known.append({"session_id": session_id, "code": code, "participant_number": participant_number,
+                               "kind": kind, "status": "running", "seed": seed, "trials_planned": 0,
+                               "trials_done": 0, "trials_aborted": 0})
         self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number)
         self.number_suggested = False
         self.validate()
@@ -196,6 +298,9 @@ class SetupModel:
     def session_ended(self, kind: str, status: str) -> None:
         """The running session ended; if it finished (completed or aborted), set up the next one
         (:meth:`next_participant`)."""
+        for s in self.known:  # as stored now, before the database is listed again
+            if s["session_id"] == self.running_session:
+                s["status"] = status
         self.running_session = None
         if status in ("completed", "aborted"):
             self.next_participant(kind)
@@ -210,11 +315,12 @@ class SetupModel:
         else:
             self.values = replace(self.values, code="")
             self.number_suggested = True
+            self.kind_suggested = True
             self._suggest_number()
+            self._suggest_kind()
         self.validate()
 
-    @staticmethod
-    def describe_resumable(s: dict[str, object]) -> str:
-        """One line for the resume list."""
-        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {s['trials_done']} of {s['trials_total']} "
-                f"trials stored, started {str(s['started_at'])[:16].replace('T', ' ')}")
+    def describe_resumable(self, s: dict[str, object]) -> str:
+        """One line for the resume list, its progress counted as the running session's is."""
+        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {self.count_of(s).text()}, started "
+                f"{str(s['started_at'])[:16].replace('T', ' ')}")

@@ -29,6 +29,8 @@ cue_s = 0.3
 enabled = true
 seconds_per_target_per_mode = 2.0
 live_force_aid = true
+# these tests start experiments directly; the training rule has tests of its own (test_gui_study_rules.py)
+required = false
 """
 
 

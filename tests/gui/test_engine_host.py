@@ -148,7 +148,9 @@ def test_resume_continues_an_interrupted_session(tmp_path, short_protocol):
     try:
         e2.handle(m.ListSessions(db))
         (listed,) = of(events, m.SessionsListed)
-        assert [(s["session_id"], s["trials_done"], s["trials_total"]) for s in listed.sessions] == [(1, 1, 3)]
+        # counted as the GUI counts: designed trials done, aborted attempts (each queues a re-run), the schedule
+        assert [(s["session_id"], s["trials_done"], s["trials_aborted"], s["trials_planned"], s["trials_total"])
+                for s in listed.sessions] == [(1, 0, 1, 2, 3)]
         e2.handle(m.ResumeSession(db, 1))
         assert of(events, m.SessionStarted)[0].start_position == 1
         run_until(e2, lambda: e2.runner is None)

@@ -67,6 +67,8 @@ def test_whole_session_through_the_gui(window, qtbot, tmp_path, short_protocol):
     qtbot.keyClicks(panel.code, "P07")
     panel.protocol.setText(short_protocol)
     panel.protocol.editingFinished.emit()
+    assert panel.kind.currentText() == "training"  # the proposed next step of a new participant
+    w.model.setup.update(kind="experiment")  # (this protocol does not require it: its tests are elsewhere)
     assert w.start_button.isEnabled()
     qtbot.mouseClick(w.participant_button, Qt.MouseButton.LeftButton)
 

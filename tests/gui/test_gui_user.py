@@ -62,6 +62,8 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     assert w.width() <= 1366 and w.height() <= 768 or w.screen().availableGeometry().height() > 768
     assert panel.number.value() == 1 and panel.hint.text().startswith("Enter the participant's code")
 
+    # the experiment (the protocol does not require training: that rule is test_gui_study_rules.py's)
+    w.model.setup.update(kind="experiment")
     # the code, then Space in the code field: Start (a code has no spaces)
     panel.code.setFocus()
     qtbot.keyClicks(panel.code, " P11")
@@ -96,11 +98,13 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     qtbot.waitUntil(active_trial(w, 2), timeout=TIMEOUT_MS)
     qtbot.mouseClick(w.pause_button, Qt.MouseButton.LeftButton)
     assert w.pause_button.text() == "Pause requested…" and not w.pause_button.isEnabled()
-    assert w.progress.label.text().endswith("pause requested: pausing after this trial")
+    assert w.progress.label.full_text().endswith("pause requested: pausing after this trial")
     qtbot.waitUntil(lambda: w.model.session.state == "paused", timeout=TIMEOUT_MS)
-    assert w.progress.label.text().startswith("paused after 3 of 5 trials")
+    assert w.progress.label.full_text() == "Paused · Resume (Space) to continue"
+    count = "2 of 4 trials done · 1 aborted · 1 re-run left"  # the re-run is no fifth designed trial
+    assert w.progress.count.full_text().startswith(count)
     fraction = w.progress.bar.value()
-    assert fraction == 600  # 3 of 5 (4 planned + the aborted one's re-run)
+    assert fraction == 500  # 2 of the 4 designed trials
 
     # quitting asks, and Enter means No
     w.close()
@@ -123,14 +127,17 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     qtbot.waitUntil(lambda: w2.model.session.running, timeout=TIMEOUT_MS)
     assert w2.trial_table.rowCount() == 3
     assert [w2.trial_table.item(i, 3).text()[:7] for i in range(3)] == ["timeout", "aborted", "timeout"]
-    assert w2.progress.bar.value() == fraction  # 3 of 5, not 0 of 2
-    assert w2.progress.label.text().startswith(("3 of 5 trials done", "trial 4 of 5 "))
+    assert w2.progress.bar.value() == fraction  # 2 of 4, not 0 of 2
+    assert w2.progress.count.full_text().startswith(count)
     assert (w2.setup_panel.code.text(), w2.setup_panel.number.value()) == ("P11", 1)
     assert w2.setup_panel.errors.isHidden()
-    # the participant screen opens at a usable size on the screen
+    # the participant screen opens at a usable size on the screen, beside the controls, never over them
     w2.open_window(w2.participant_window)
-    assert w2.participant_window.width() >= 600 and w2.participant_window.height() >= 400
-    assert w2.screen().availableGeometry().contains(w2.participant_window.frameGeometry().center())
+    pw = w2.participant_window
+    assert pw.width() >= 320 and pw.height() >= 240  # (an 800×600 screen here; on 1366×768: test_views)
+    assert w2.screen().availableGeometry().contains(pw.frameGeometry())
+    controls = w2.left_column
+    assert pw.frameGeometry().left() > controls.mapToGlobal(controls.rect().topRight()).x()
 
     c = sqlite3.connect(db)
     try:

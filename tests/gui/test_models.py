@@ -57,12 +57,14 @@ def test_setup_validation_names_field_value_and_rule(tmp_path):
     s.update(protocol_path="")
     assert s.valid
     cmd = s.start_command()
-    assert cmd == m.StartSession(str(tmp_path / "study.db"), "P01", "experiment", None, 0, 1)
+    # a new participant: the form proposes the next step, training (the paper's protocol has a training block)
+    assert cmd == m.StartSession(str(tmp_path / "study.db"), "P01", "training", None, 0, 1)
 
 
-def known(code: str, number: int, kind: str = "experiment", status: str = "completed", sid: int = 1) -> dict:
+def known(code: str, number: int, kind: str = "experiment", status: str = "completed", sid: int = 1,
+          seed: int = 0) -> dict:
     return {"session_id": sid, "code": code, "participant_number": number, "kind": kind, "status": status,
-            "trials_done": 20, "trials_planned": 20}
+            "trials_done": 20, "trials_planned": 20, "seed": seed}
 
 
 def test_setup_suggests_the_next_number_and_checks_the_entry_against_the_database(tmp_path):
@@ -80,7 +82,10 @@ def test_setup_suggests_the_next_number_and_checks_the_entry_against_the_databas
     assert "already has a completed training session" in s.errors["code"]
     s.update(kind="experiment", code="P04")
     s.set_number(2)  # the experimenter types a number: it stays
-    assert s.valid and "already P02's" in s.warnings["participant_number"] and "Use 3" in s.warnings["participant_number"]
+    assert "already P02's" in s.warnings["participant_number"] and "Use 3" in s.warnings["participant_number"]
+    # P04 has no training: the experiment is refused with the reason (only an override with a reason passes)
+    assert set(s.errors) == {"training"} and s.training_missing.startswith("P04 has no training session")
+    assert "Start without training…" in s.errors["training"] and not s.valid
     s.set_known([known("P01", 1, sid=2), known("P02", 2, sid=3), known("P05", 5, status="running", sid=4)])
     assert s.values.participant_number == 2
     s.update(code="P05", participant_number=5)
@@ -113,16 +118,19 @@ def test_session_progress_follows_events_and_sample_time():
     s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     assert s.state == "ready" and not s.running
     s.apply(started())
-    assert s.running and s.progress_text() == "0 of 2 trials done"
+    assert s.running and s.progress_text() == "Session started: the first trial is due"
+    assert s.count_text() == "0 of 2 trials done · at most 30 s left"  # 2 × (12 s cap + 2 s pause), rounded up
     s.apply(trial(t_s=5.0))
     s.set_time(7.5)
-    assert s.progress_text() == "trial 1 of 2 · FIRM · haptics ON ·  9.5 s left"
+    assert s.progress_text() == "Trial 1 · FIRM · haptics ON ·  9.5 s left"
     assert s.band() == pytest.approx((1.08, 1.32))
     s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
-                                           outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2), 2))
+                                           outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2,
+                                           cue_ns=5_000_000_000, end_ns=9_000_000_000), 2))
     s.apply(m.PhaseEntered(9.0, 0, "pause"))
     s.set_time(9.5)
-    assert s.progress_text() == "1 of 2 trials done · next trial in 1.5 s"
+    assert s.progress_text() == "Next trial in 1.5 s"
+    assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: 4 + 2 s pause
     assert s.band() is None and s.fraction_done() == 0.5
     s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
@@ -137,10 +145,12 @@ def test_a_resumed_session_restores_its_table_and_progress():
     s = SessionModel()
     s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     stored = [row(0), row(1, "aborted"), row(2, "timeout")]
-    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, participant_number=4,
-                             stored_trials=stored))
+    schedule = [{"index": i, "repeat_of": None} for i in range(20)] + [{"index": 20, "repeat_of": 1}]
+    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, schedule=schedule,
+                             participant_number=4, stored_trials=stored))
     assert len(s.table.rows) == 3 and (s.completed, s.aborted) == (2, 1)
-    assert s.progress_text() == "3 of 21 trials done" and s.fraction_done() == pytest.approx(3 / 21)
+    assert s.count.text() == "2 of 20 trials done · 1 aborted · 1 re-run left"
+    assert s.fraction_done() == pytest.approx(2 / 20)
     assert s.message.endswith("(resumed)")
 
 
@@ -153,9 +163,9 @@ def test_a_pending_pause_is_shown():
     s.paused_requested = True
     assert s.progress_text().endswith("pause requested: pausing after this trial")
     s.apply(m.PhaseEntered(9.0, 0, "pause"))
-    assert s.progress_text().endswith("pausing before the next trial")
+    assert s.progress_text() == "Pausing before the next trial"
     s.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, True, "autopilot", True, True))
-    assert s.state == "paused" and s.progress_text() == "paused after 0 of 2 trials · Resume (Space) to continue"
+    assert s.state == "paused" and s.progress_text() == "Paused · Resume (Space) to continue"
 
 
 # -- plots -----------------------------------------------------------------------------------------

@@ -13,7 +13,8 @@ from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
-from study_app.gui.widgets import QtForcePlots, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.force_plots import QtForcePlots
+from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
@@ -47,7 +48,8 @@ def test_progress_view_follows_the_session(qtbot):
     s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 20, "GENTLE", 0.6, "off"))
     s.set_time(4.0)
-    assert view.label.text() == "trial 1 of 20 · GENTLE · haptics OFF ·  9.0 s left"
+    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF ·  9.0 s left"
+    assert view.count.full_text() == "0 of 20 trials done · at most 5 min left"
 
 
 def test_health_panel_shows_faults_and_enables_reset(qtbot):
@@ -88,11 +90,14 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view.show()
     qtbot.waitExposed(view)
     s.set_resumable([{"session_id": 4, "code": "P02", "kind": "experiment", "started_at": "2026-01-02T10:11:12",
-                      "trials_done": 7, "trials_total": 20},
+                      "trials_planned": 20, "trials_done": 7, "trials_aborted": 2, "reruns_run": 1,
+                      "trials_total": 22},
                      {"session_id": 9, "code": "PARTICIPANT-0042-LONG", "kind": "training",
-                      "started_at": "2026-01-03T09:00:00", "trials_done": 0, "trials_total": 12}])
+                      "started_at": "2026-01-03T09:00:00", "trials_planned": 12, "trials_done": 0,
+                      "trials_total": 12}])
     assert view.resumable.count() == 2
-    full = "session 4: P02 experiment, 7 of 20 trials stored, started 2026-01-02 10:11"
+    # counted as the running session's progress line counts (designed trials, aborted attempts, re-runs left)
+    full = "session 4: P02 experiment, 7 of 20 trials done · 2 aborted · 1 re-run left, started 2026-01-02 10:11"
     assert view.resumable.item(0).toolTip() == full and view.resumable.item(0).text() == full
     assert view.selected_session() == 4  # the first row is selected: Resume selected works at once
     # long rows wrap within the list: nothing runs out of sight to the right
@@ -198,19 +203,32 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     view.refresh()
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
     assert view.band.getRegion() == pytest.approx((0.54, 0.66))
-    assert view.band_label.textItem.toPlainText() == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
-    # legible where the force runs through it: on an opaque-enough backing, drawn above the traces
-    assert view.band_label.fill.color().alpha() >= 200
-    assert all(view.band_label.zValue() > c.zValue() for c in view.curves.values())
-    assert not view.clip_label.isVisible()
-    assert view.lower.viewRange()[1][1] >= 7.6
+    # the band's words in the title line, outside the data area: nothing is drawn over the trace
+    assert view.title_text == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
+    assert view.task.titleLabel.isVisible() and not view.task.vb.sceneBoundingRect().intersects(
+        view.task.titleLabel.sceneBoundingRect())
+    in_data = [i for i in view.task.vb.addedItems if i.isVisible()]
+    assert set(map(type, in_data)) <= {type(view.band), type(view.curves["force_n"])}  # curves and the band only
+    assert view.lower_plot.viewRange()[1][1] >= 7.6
+    assert view.lower_legend() == ["raw sensor |F| (the tool's weight included)"]
     plots.data["force_n"][-1] = 18.0
     view.refresh()
-    assert view.task.viewRange()[1] == pytest.approx([0.0, 2.4]) and view.clip_label.isVisible()
-    assert "peak 18.0 N: above the axis" in view.clip_label.textItem.toPlainText()
+    assert view.task.viewRange()[1] == pytest.approx([0.0, 2.4])
+    assert view.title_text.endswith("peak 18.0 N: above the axis")
     assert not view.task.getAxis("left").autoSIPrefix  # "(x0.001)" never appears on a force axis
+    # the newest 2 s are in the data area, up to its right edge, on both plots
+    view.resize(900, 500)
+    view.show()
+    qtbot.waitExposed(view)
+    view.refresh()  # (the window's 30 Hz timer)
+    for p in (view.task, view.lower_plot):
+        assert p.viewRange()[0] == pytest.approx([-10.0, 0.0], abs=0.02)
+    # a legend on every plot with more than one line: the compensated x, y, z
+    view.lower_choice.setCurrentText("compensated x, y, z (sensor frame)")
+    assert len(view.lower_curves) == 3 and view.lower_legend() == ["compensated Fx", "Fy", "Fz (sensor frame)"]
+    assert all(w in view.lower_plot.titleLabel.text for w in ("Fx", "Fy", "Fz"))
     view.lower_choice.setCurrentText("none")
-    assert not view.lower.isVisible() and view.task.getAxis("bottom").style["showValues"]
+    assert not view.lower_plot.isVisible() and view.task.getAxis("bottom").style["showValues"]
 
 
 def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):

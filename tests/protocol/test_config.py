@@ -294,7 +294,7 @@ def test_to_dict_round_trips_a_non_default_protocol():
         ],
         "design": {"modes": ["off"], "trials_per_cell": 3, "ordering": "counterbalanced", "abort_policy": "reinsert"},
         "trial": {"tolerance_fraction": 0.2, "hold_s": 0.5, "max_trial_s": 8.0, "pause_s": 0.0, "cue_s": 0.0},
-        "training": {"enabled": False, "seconds_per_target_per_mode": 5.0, "live_force_aid": False},
+        "training": {"enabled": False, "seconds_per_target_per_mode": 5.0, "live_force_aid": False, "required": False},
     }
     assert protocol_from_dict(d) == p
     assert p.trials_per_participant == 9

@@ -1,0 +1,153 @@
+"""The rules of a study that span its sessions: one seed per study, training before the experiment.
+
+One definition, used by everyone who opens a session:
+
+* :func:`protocol.session_setup.open_new_session` enforces them when a session is stored (the GUI's study
+  engine and the headless runner of ``haptic-study run`` both open sessions through it);
+* ``haptic-study run`` checks them on a read-only look before it writes (:mod:`study_app.headless.plan`);
+* the GUI's setup form checks the same functions against the sessions the engine listed, so it can say why
+  before Start, propose the next step and show the seed read-only.
+
+**One seed per study.**  A study database's seed is the seed of its first session; every later session
+must use it (the schedules, the simulated rigs and participants derive from it), so a study stays
+reproducible.  A different seed is refused with one line naming the stored one.
+
+**Training before the experiment.**  When the protocol says so (``[training] required``, which applies
+while ``[training] enabled``), an experiment session needs a *completed* training session of the same
+participant.  An experimenter may start one anyway only with a typed reason (:func:`check_new_session`'s
+``training_override``); the reason is stored as a :data:`DEVIATION_EVENT` event of that session, whose
+detail begins with :data:`TRAINING_SKIPPED`, so the report can list it among the study's deviations.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from protocol.config import ProtocolConfig
+from protocol.storage import StorageError, StudyDatabase
+
+__all__ = [
+    "DEVIATION_EVENT", "TRAINING_SKIPPED", "StoredSession", "StudyRuleError", "check_new_session", "next_kind",
+    "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
+]
+
+#: The ``events.kind`` of a deviation from the designed study an experimenter chose (and gave a reason for).
+DEVIATION_EVENT = "deviation"
+#: How the detail of the deviation "experiment without a completed training session" begins.
+TRAINING_SKIPPED = "training skipped"
+
+
+class StudyRuleError(StorageError):
+    """A session the study's rules refuse (another seed; an experiment without training); one line, nothing stored."""
+
+
+@dataclass(frozen=True, slots=True)
+class StoredSession:
+    """What the rules need of a stored session."""
+
+    session_id: int
+    code: str
+    kind: str
+    status: str
+    seed: int
+
+    @classmethod
+    def of(cls, d: dict[str, Any]) -> StoredSession:
+        """From a dict with these keys (:func:`study_app.session_list.list_sessions`' rows)."""
+        return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]))
+
+
+def stored_sessions(db: StudyDatabase) -> list[StoredSession]:
+    """Every session of the database, oldest first."""
+    rows = db.conn.execute(
+        "SELECT s.session_id, p.code, s.kind, s.status, s.seed FROM sessions s JOIN participants p "
+        "USING (participant_id) ORDER BY s.session_id").fetchall()
+    return [StoredSession(int(r[0]), str(r[1]), str(r[2]), str(r[3]), int(r[4])) for r in rows]
+
+
+def study_seed(sessions: Iterable[StoredSession]) -> StoredSession | None:
+    """The session that fixed the study's seed (the first stored), or None for an empty study."""
+    return min(sessions, key=lambda s: s.session_id, default=None)
+
+
+def seed_refusal(sessions: Iterable[StoredSession], seed: int) -> str:
+    """Why ``seed`` may not start a session of this study ("" when it may)."""
+    first = study_seed(sessions)
+    if first is None or first.seed == seed:
+        return ""
+    return (f"seed = {seed}: this study's seed is {first.seed}, fixed by its first session (session "
+            f"{first.session_id}, {first.code}); every session of a study uses it, so its schedules can be "
+            f"reproduced: use seed {first.seed}, or a new database for a new study")
+
+
+def requires_training(protocol: ProtocolConfig) -> bool:
+    """Whether the protocol requires a completed training session before an experiment session."""
+    return protocol.training.enabled and protocol.training.required
+
+
+def training_state(sessions: Iterable[StoredSession], code: str) -> tuple[str, StoredSession | None]:
+    """A participant's training: ``completed``, ``interrupted`` (resumable), ``ended`` (ended early) or ``none``,
+    with the session that says so."""
+    mine = [s for s in sessions if s.code == code and s.kind == "training"]
+    for state, match in (("completed", "completed"), ("interrupted", "running")):
+        found = [s for s in mine if s.status == match]
+        if found:
+            return state, found[-1]
+    return ("ended", mine[-1]) if mine else ("none", None)
+
+
+def training_refusal(sessions: Sequence[StoredSession], code: str, protocol: ProtocolConfig) -> str:
+    """Why an experiment session of ``code`` may not start for want of training ("" when it may)."""
+    if not requires_training(protocol):
+        return ""
+    state, s = training_state(sessions, code)
+    if state == "completed":
+        return ""
+    rule = "the protocol requires a completed one before the experiment (training.required)"
+    if state == "interrupted" and s is not None:
+        return f"{code}'s training (session {s.session_id}) was interrupted; {rule}: resume it first"
+    if state == "ended" and s is not None:
+        return f"{code}'s training (session {s.session_id}) ended {s.status}, not completed; {rule}"
+    return f"{code} has no training session; {rule}"
+
+
+def next_kind(sessions: Sequence[StoredSession], code: str, protocol: ProtocolConfig) -> str:
+    """The session a participant does next: ``training`` (when the protocol has one and it is not done),
+    then ``experiment``."""
+    if not protocol.training.enabled:
+        return "experiment"
+    state, _ = training_state(sessions, code)
+    began = any(s.code == code and s.kind == "experiment" for s in sessions)
+    return "training" if state == "interrupted" or (state == "none" and not began) else "experiment"
+
+
+def check_new_session(
+    sessions: Sequence[StoredSession], *, code: str, kind: str, seed: int, protocol: ProtocolConfig,
+    training_override: str = "",
+) -> str:
+    """Apply the study's rules to a session about to be stored.
+
+    Returns the detail of the deviation event to store with it ("" when there is none): an experiment
+    without a completed training session, started with the experimenter's ``training_override`` reason.
+
+    Raises
+    ------
+    StudyRuleError
+        Another seed than the study's; an experiment without a completed training session and no reason
+        given.  One line; nothing is stored.
+    """
+    why = seed_refusal(sessions, seed)
+    if why:
+        raise StudyRuleError(why)
+    if kind != "experiment":
+        return ""
+    why = training_refusal(sessions, code, protocol)
+    if not why:
+        return ""
+    reason = " ".join(training_override.split())
+    if not reason:
+        raise StudyRuleError(why)
+    return f"{TRAINING_SKIPPED}: {code}'s experiment started without a completed training session ({why}). " \
+           f"Reason given: {reason}"

@@ -1,0 +1,197 @@
+"""The live force view: is the force in the band?  Nothing is ever drawn over the data.
+
+Every label and legend sits outside the plots' data areas: the legend of the
+upper plot above it, the target band's words and a force above the axis in
+the upper plot's title line, the lower plot's legend (each of its curves, by
+colour) in its own title line.  The data areas hold only the curves and the
+band, so the newest seconds at the right edge are never hidden.
+"""
+
+from __future__ import annotations
+
+import html
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+
+from study_app.models.plots import TASK_SERIES, PlotModel
+from study_app.models.session import SessionModel
+
+__all__ = ["LOWER_CHOICES", "QtForcePlots"]
+
+# Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
+RAW_COLOUR, RENDER_COLOUR, TASK_COLOUR = "#dc2828", "#14a03c", "#1f4e9c"
+AXIS_COLOURS = ("#c83c3c", "#28963c", "#2850c8")
+RAW_PEN = pg.mkPen(RAW_COLOUR, width=1)
+RENDER_PEN = pg.mkPen(RENDER_COLOUR, width=1)
+TASK_PEN = pg.mkPen(TASK_COLOUR, width=1)
+AXIS_PENS = tuple(pg.mkPen(c, width=1) for c in AXIS_COLOURS)
+COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
+#: The lower panel's choices: (series, pens, legend entries (colour, words), axis label).
+LOWER_CHOICES: dict[str, tuple[tuple[str, ...], tuple[object, ...], tuple[tuple[str, str], ...], str]] = {
+    "raw sensor |F| (tool weight included)": (
+        ("raw_n",), (RAW_PEN,), ((RAW_COLOUR, "raw sensor |F| (the tool's weight included)"),), "raw |F| (N)"),
+    "compensated x, y, z (sensor frame)": (
+        COMP_SERIES, AXIS_PENS, tuple(zip(AXIS_COLOURS, ("compensated Fx", "Fy", "Fz (sensor frame)"))), "F (N)"),
+    "none": ((), (), (), ""),
+}
+BAND_RGB = (0, 114, 178)
+BAND_BRUSH = pg.mkBrush(*BAND_RGB, 60)
+BAND_PEN = pg.mkPen(BAND_RGB, width=1, style=Qt.PenStyle.DashLine)
+#: A title line that says nothing still takes its height, so the plots never jump as it fills and empties.
+_BLANK = "&nbsp;"
+
+
+def _swatch(colour: str, text: str, *, block: bool = False) -> str:
+    mark = (f'<span style="background:{colour}">&nbsp;&nbsp;&nbsp;&nbsp;</span>' if block
+            else f'<span style="color:{colour}; font-weight:900">━━</span>')
+    return f"{mark}&nbsp;{html.escape(text)}"
+
+
+class QtForcePlots(QWidget):
+    """The live force view, built for the task: is the force in the band?
+
+    Top: the task force (|compensated, filtered|, what the trial is judged on) and the force rendered on
+    the haptic device, with the target band drawn, on an axis set by the target
+    (:meth:`study_app.models.plots.PlotModel.task_axis`); the band's words and a force above the axis are
+    named in the plot's title line.  Below, on its own axis, the raw sensor force (tool weight included),
+    the compensated components (with their legend in the title line), or nothing.
+    """
+
+    def __init__(self, plots: PlotModel, session: SessionModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
+        self.plots, self.session = plots, session
+        self.legend = QLabel("  ".join((
+            _swatch(TASK_COLOUR, "task force |F| (compensated, filtered)"),
+            _swatch(RENDER_COLOUR, "rendered on the haptic device"),
+            _swatch("rgba(0,114,178,0.35)", "target band", block=True),
+        )))
+        self.lower_choice = QComboBox()
+        self.lower_choice.addItems(list(LOWER_CHOICES))
+        self.lower_choice.setToolTip("What the lower plot shows, on an axis of its own")
+        head = QHBoxLayout()
+        head.setContentsMargins(4, 0, 4, 0)
+        head.addWidget(self.legend, 1)
+        head.addWidget(QLabel("Lower plot:"))
+        head.addWidget(self.lower_choice)
+        self.view = pg.GraphicsLayoutWidget()
+        self.view.setBackground("w")
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
+        lay.addLayout(head)
+        lay.addWidget(self.view, 1)
+
+        self.task: pg.PlotItem = self.view.addPlot(row=0, col=0)
+        self.task.setLabel("left", "force (N)")
+        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=BAND_BRUSH, pen=BAND_PEN)
+        self.band.setZValue(-10)
+        self.band.setVisible(False)
+        self.task.addItem(self.band)
+        self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
+        self.lower_plot: pg.PlotItem = self.view.addPlot(row=1, col=0)  # (not "lower": QWidget.lower() exists)
+        self.lower_plot.setLabel("bottom", "time (s)")
+        self.lower_plot.setXLink(self.task)
+        self.view.ci.layout.setRowStretchFactor(0, 3)
+        self.view.ci.layout.setRowStretchFactor(1, 1)
+        self.lower_curves: dict[str, pg.PlotDataItem] = {}
+        # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
+        # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
+        # models instead and change only in steps.  No SI prefix: "(x0.001)" on a force axis misleads.
+        for p in (self.task, self.lower_plot):
+            p.setXRange(-plots.window_s, 0.0, padding=0)
+            p.setMouseEnabled(x=False, y=False)
+            p.enableAutoRange(x=False, y=False)
+            p.setClipToView(True)
+            p.hideButtons()  # pyqtgraph's "A" button sits in the data area's corner
+            p.getAxis("left").enableAutoSIPrefix(False)
+            p.getAxis("left").setWidth(48)
+        self._y: dict[str, tuple[float, float]] = {}
+        self._band: tuple[float, float] | None = None
+        #: The upper plot's title line as shown (the band's words; a force above the axis).
+        self.title_text = ""
+        self._title_html = ""
+        self.task.setTitle(_BLANK, justify="left", size="9pt")
+        self.lower_choice.currentTextChanged.connect(self._set_lower)
+        self._set_lower(self.lower_choice.currentText())
+
+    @property
+    def lower_series(self) -> tuple[str, ...]:
+        """The series the lower plot shows."""
+        return LOWER_CHOICES[self.lower_choice.currentText()][0]
+
+    def lower_legend(self) -> list[str]:
+        """The lower plot's legend entries, in the order of its curves (empty when it shows nothing)."""
+        return [words for _, words in LOWER_CHOICES[self.lower_choice.currentText()][2]]
+
+    def _set_lower(self, choice: str) -> None:
+        for c in self.lower_curves.values():
+            self.lower_plot.removeItem(c)
+        names, pens, legend, axis = LOWER_CHOICES[choice]
+        self.lower_curves = {n: self.lower_plot.plot(pen=pen) for n, pen in zip(names, pens)}
+        self.lower_plot.setVisible(bool(names))
+        self.lower_plot.setMaximumHeight(10_000 if names else 0)
+        self.lower_plot.setLabel("left", axis)
+        # the legend in the title line, outside the data: every curve by its colour
+        self.lower_plot.setTitle("&nbsp;&nbsp;".join(_swatch(c, w) for c, w in legend) or _BLANK, justify="left",
+                            size="9pt")
+        self.task.setLabel("bottom", "" if names else "time (s)")
+        self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
+        self._y.pop("lower", None)
+        self.refresh()
+
+    def _target_n(self) -> float:
+        band = self.session.band_for_axis()
+        # before the first trial: the scale of the paper's FIRM target
+        return 1.2 if band is None else (band[0] + band[1]) / 2
+
+    def _set_y_ranges(self) -> str:
+        """Set the axes; returns the words for a force above the upper axis ("" when there is none)."""
+        r = self.plots.task_axis(self._target_n())
+        if self._y.get("task") != r:
+            self._y["task"] = r
+            self.task.setYRange(*r, padding=0)
+        names = self.lower_series
+        if names:
+            r = self.plots.y_range(names, floor_zero=names == ("raw_n",))
+            if self._y.get("lower") != r:
+                self._y["lower"] = r
+                self.lower_plot.setYRange(*r, padding=0)
+        top = self._y["task"][1]
+        peak = self.plots.peak(TASK_SERIES)
+        return f"peak {peak:.1f} N: above the axis" if bool(np.isfinite(peak) and peak > top) else ""
+
+    def refresh(self) -> None:
+        """Redraw from the model (the window's 30 Hz timer calls this after a pull)."""
+        for name, curve in self.curves.items():
+            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
+        for name, curve in self.lower_curves.items():
+            curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
+        x0 = self.task.viewRange()[0][0]
+        if abs(x0 + self.plots.window_s) > 1e-6:  # the x link re-scales the range while the layout settles
+            self.task.setXRange(-self.plots.window_s, 0.0, padding=0)
+        over = self._set_y_ranges()
+        band = self.session.band()
+        if band != self._band:
+            self._band = band
+            self.band.setVisible(band is not None)
+            if band is not None:
+                self.band.setRegion(band)
+        self._set_title(self.session.band_label() if band is not None else "", over)
+
+    def _set_title(self, band_words: str, over: str) -> None:
+        """The upper plot's title line: the band in its colour, a force above the axis in red (set on change only:
+        a new title re-lays the plot out)."""
+        parts = []
+        if band_words:
+            parts.append(f'<span style="color:#00548c">{html.escape(band_words)}</span>')
+        if over:
+            parts.append(f'<span style="color:#b3141b; font-weight:600">{html.escape(over)}</span>')
+        markup = " &nbsp;·&nbsp; ".join(parts) or _BLANK
+        if markup != self._title_html:
+            self._title_html = markup
+            self.title_text = " · ".join(p for p in (band_words, over) if p)
+            self.task.setTitle(markup, justify="left", size="9pt")

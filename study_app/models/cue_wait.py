@@ -1,0 +1,80 @@
+"""Why the next cue of the running session waits, for how long, and what ends the wait (the Trials tab's banner)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from study_app.models.health import HealthModel
+from study_app.models.session import SessionModel
+
+__all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "cue_wait_now"]
+
+
+@dataclass(frozen=True, slots=True)
+class CueWait:
+    """Why the next cue of the running session has not come, for how long, and what ends the wait.
+
+    ``level`` is ``info`` (it ends by itself: the protocol's pause), ``warning`` (the experimenter ends it:
+    a pause) or ``error`` (something must be put right: a latched fault, a dead engine).  ``left_s`` is the time
+    until the cue when it is known, ``waited_s`` how long it has waited so far (sample time).  ``action`` names
+    what ends it (``reset_faults``, ``resume``, ``restart_engine`` or ""), ``help`` what to do if that does not.
+    """
+
+    level: str
+    reason: str
+    left_s: float | None = None
+    waited_s: float = 0.0
+    action: str = ""
+    help: str = ""
+
+    def text(self) -> str:
+        """One line: ``Next cue waits: <reason> · 1.2 s left`` (or ``· waiting 14 s``)."""
+        when = (f" · {self.left_s:.1f} s left" if self.left_s is not None
+                else f" · waiting {self.waited_s:.0f} s" if self.waited_s >= 1.0 else "")
+        return f"Next cue waits: {self.reason}{when}"
+
+
+#: A wait with nothing named to end it, after this long (s), says where to look.
+CUE_STUCK_S = 5.0
+#: What ends each wait, as the button reads.
+CUE_ACTIONS = {"reset_faults": "Reset faults", "resume": "Resume", "restart_engine": "Restart engine"}
+
+
+def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str,
+                 interrupted: int | None) -> tuple[str, CueWait | None]:
+    """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
+    s = session
+    if engine_trouble:
+        if interrupted is None and not s.running:  # no session was cut short: there is no cue to wait for
+            return "", None
+        return "engine", CueWait("error", "no trial runs until the study engine is restarted",
+                                 action="restart_engine", help="Restart engine, then Resume selected.")
+    if not s.running or s.session is None or s.phase in ("active", "cued"):
+        return "", None
+    h = health.loop
+    waiting = h.waiting if h is not None and h.session_running else ""
+    if s.state == "paused":
+        if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
+            return "paused-runner", CueWait("error", waiting, action="resume",
+                                            help="Resume (Space) once the cause is dealt with; Devices & health "
+                                                 "says whether this computer is too busy for the loop.")
+        return "paused", CueWait("warning", "the session is paused", action="resume",
+                                 help="Resume (Space) to continue with the next trial.")
+    if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
+        return "fault", CueWait(
+            "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+            help="The haptic loop stalled. Reset faults if it runs again; if the fault stays, the loop is frozen "
+                 "and no reset reaches it: Restart engine (under Start), then Resume selected.")
+    if waiting.startswith("fault latched"):
+        return "fault", CueWait(
+            "error", waiting.replace(": reset to continue", ""), action="reset_faults",
+            help="No trial is cued while a fault is latched. Reset faults; if the fault latches again, its cause "
+                 "is still there — the fault log under Devices & health names it (a stalled sensor, a device "
+                 "error, the stylus pressed at the start): put it right, then reset.")
+    if s.phase == "pause" and s.pause_until_s is not None:
+        left = round(max(0.0, s.pause_until_s - s.latest_t_s), 1)
+        return "pause", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause between trials", left_s=left)
+    if waiting == "pause":
+        return "pause-again", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause before the next cue "
+                                      "(after the session began or a fault was cleared)")
+    return "due", CueWait("info", "the next cue is due")

@@ -1,0 +1,163 @@
+"""What a first-day assistant meets, view by view (no engine): the newest row kept in view, the participant screen
+beside the controls and keeping its size, the busy machine in words, notices that go with their cause."""
+
+from __future__ import annotations
+
+import pytest
+from gui_trials import trial_record
+from PySide6.QtCore import QRect, QSize
+from PySide6.QtWidgets import QApplication
+
+from protocol.records import AbortCause
+from study_app import messages as m
+from study_app.gui.participant_window import HEADLINE_MAX_PX, ParticipantWindow
+from study_app.gui.placement import BESIDE_MIN, beside
+from study_app.gui.widgets import QtHealthPanel, QtTrialTable
+from study_app.models.app import AppModel
+from study_app.models.health import HealthModel
+from study_app.models.participant import ParticipantScreenModel
+from study_app.models.session import TrialCount, TrialTable, time_left_text
+from study_app.models.setup import SetupModel
+
+FRAME = QSize(8, 34)  # a window manager's borders and title bar
+
+
+def test_the_participant_screen_goes_beside_the_window_never_over_its_controls():
+    laptop = QRect(0, 0, 1366, 768)
+    main = QRect(40, 5, 1288, 762)  # the experimenter's window, its frame
+    controls = QRect(44, 60, 360, 650)  # the setup form and the buttons
+    r = beside(laptop, main, controls, QSize(640, 400), FRAME)
+    assert laptop.contains(r) and r.left() > controls.right()  # over the plots' corner, clear of the controls
+    assert (r.width(), r.height()) == (648, 434) and r.bottomRight() == laptop.bottomRight()
+    wide = QRect(0, 0, 1920, 1080)
+    r = beside(wide, QRect(0, 0, 1288, 762), controls, QSize(640, 400), FRAME)
+    assert r.left() == 1288 and r.right() < 1920  # room beside it: beside it
+    tiny = QRect(0, 0, 800, 600)
+    r = beside(tiny, QRect(0, 0, 800, 600), QRect(0, 40, 350, 500), QSize(640, 400), FRAME)
+    assert r.left() > 350 and tiny.contains(r) and r.width() < BESIDE_MIN.width()  # narrow rather than over them
+
+
+def test_the_participant_screen_keeps_the_size_given_and_scales_the_cue(qtbot):
+    p = ParticipantScreenModel()
+    w = ParticipantWindow(p)
+    qtbot.addWidget(w)
+    w.resize(400, 260)
+    w.show()
+    qtbot.waitExposed(w)
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    p.apply(m.TrialStarted(1.0, 0, 1, 2, "VERYLONGTARGET", 0.6, "off"))  # a protocol's own, long target word
+    p.update(1.2, 0.0)
+    p.apply(m.SessionEnded(1, "completed", "", 2, 0, 0))
+    QApplication.processEvents()
+    assert (w.width(), w.height()) == (400, 260)  # it never grows to fit its text
+    small = w.headline_px
+    assert 16 <= small < HEADLINE_MAX_PX and w.headline.text() == "Thank you"
+    w.resize(1200, 700)
+    qtbot.waitUntil(lambda: w.headline_px > small)
+
+
+def test_the_trial_table_keeps_the_newest_row_in_view_unless_scrolled_away(qtbot):
+    table = TrialTable()
+    view = QtTrialTable(table)
+    qtbot.addWidget(view)
+    view.resize(600, 150)
+    view.show()
+    qtbot.waitExposed(view)
+    bar = view.verticalScrollBar()
+    for i in range(12):
+        table.add(trial_record(trial_index=i))
+    qtbot.waitUntil(lambda: bar.maximum() > 0)  # (the range follows the layout)
+    assert bar.value() == bar.maximum()
+    view.resize(600, 100)  # a banner appears above the table: the newest row stays in view
+    qtbot.waitUntil(lambda: bar.value() == bar.maximum())
+    bar.setValue(0)  # the assistant scrolls up to read an older row: it stays there
+    table.add(trial_record(trial_index=12, repeat_of=3, outcome="aborted", abort_reason="operator",
+                           abort_cause=AbortCause.EXPERIMENTER))
+    QApplication.processEvents()
+    assert bar.value() == 0
+    assert view.item(12, 0).text() == "13 (re-run of 4)"
+    bar.setValue(bar.maximum())  # back to the end: it follows again
+    table.add(trial_record(trial_index=13))
+    qtbot.waitUntil(lambda: bar.value() == bar.maximum() and view.rowViewportPosition(13) < view.viewport().height())
+
+
+def test_the_fault_log_reads_oldest_first_and_keeps_the_newest_in_view(qtbot):
+    h = HealthModel()
+    view = QtHealthPanel(h)
+    qtbot.addWidget(view)
+    view.resize(700, 420)
+    view.show()
+    qtbot.waitExposed(view)
+    assert "oldest first and newest last" in view.log_label.text()
+    for k in range(30):
+        h.apply(m.EngineFault(float(k), "fault" if k % 2 else "fault_cleared", 1, f"SENSOR_STALE event {'ab'[k % 2]}",
+                              float(k)))
+    bar = view.log.verticalScrollBar()
+    assert bar.maximum() > 0 and bar.value() == bar.maximum()
+    assert view.log.toPlainText().splitlines()[-1].startswith("session   29.000 s")
+    h.apply(m.EngineFault(30.0, "faults_reset", 0, "", 30.0))  # Reset faults: the view stays at the newest line
+    assert bar.value() == bar.maximum()
+
+
+def test_a_computer_too_busy_for_the_loop_is_said_in_words():
+    h = HealthModel()
+    h.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
+    assert h.machine_notice() == ""
+    h.apply(m.Health(990.0, 1000.0, 2000.0, 900.0, 30, 5, 20_000, 0, True, "autopilot", True, False,
+                     scheduling="normal (Operation not permitted)"))
+    gap = trial_record(trial_index=6, outcome="aborted", abort_reason="gap: no loop record for 14.5 ms (limit 5 ms)",
+                       abort_cause=AbortCause.GAP)
+    h.apply(m.TrialEnded(3.0, gap, 21))
+    h.apply(m.TrialEnded(4.0, trial_record(trial_index=7, outcome="aborted", abort_reason="operator",
+                                           abort_cause=AbortCause.EXPERIMENTER), 22))
+    text = h.machine_notice()
+    assert text.startswith("This computer is too busy for the 1 kHz haptic loop: 1 trial of this session (trial 7) "
+                           "was aborted because the loop fell behind")
+    assert "What helps: close other programs" in text
+    assert "did not get it (Operation not permitted)" in text and "allow real-time scheduling" in text
+    h.apply(m.Health(990.0, 1000.0, 2000.0, 900.0, 30, 5, 20_000, 0, True, "autopilot", True, False,
+                     scheduling="SCHED_FIFO/20"))
+    assert h.machine_notice().endswith("The loop asked for real-time priority and got it (SCHED_FIFO/20).")
+
+
+def test_notices_go_with_their_cause_and_the_form_speaks_plainly(tmp_path):
+    app = AppModel()
+    app.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    app.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    assert app.calibration_refusal().startswith("not during a session")
+    app.apply(m.CommandRefused("CalibrateTcp", "a session is running"))
+    assert app.notice is not None and app.notice.text == "TCP calibration refused: a session is running"
+    app.apply(m.SessionEnded(1, "completed", "", 2, 0, 0))
+    assert app.notice is None and app.calibration_refusal() == ""  # the cause has gone: so has the notice
+    app.apply(m.CommandRefused("CheckFrames", "no payload"))
+    app.clear_notice(("Calibrate",))
+    assert app.notice is not None  # another command's notice stays
+    s = SetupModel()
+    s.update(db_path=str(tmp_path / "s.db"))
+    s.set_known([{"session_id": 3, "code": "P01", "participant_number": 1, "kind": "experiment", "status": "aborted",
+                  "seed": 0, "trials_done": 2, "trials_planned": 20}])
+    s.update(code="P01", kind="experiment")
+    assert "P01 already has an aborted experiment session (session 3)" in s.errors["code"]
+
+
+@pytest.mark.parametrize(("seconds", "bound", "text"), [
+    (4.0, False, "about 10 s left"), (41.0, False, "about 50 s left"), (90.0, False, "about 2 min left"),
+    (280.0, True, "at most 5 min left"), (0.0, False, "about 10 s left"),
+])
+def test_time_left_is_said_as_people_say_it(seconds, bound, text):
+    assert time_left_text(seconds, bound=bound) == text
+
+
+def test_one_count_never_grows_with_re_runs():
+    assert TrialCount(20).text() == "0 of 20 trials done"
+    c = TrialCount(20, done=7, aborted=2, reruns_run=1)
+    assert c.text() == "7 of 20 trials done · 2 aborted · 1 re-run left" and c.fraction == 0.35
+    assert TrialCount(20, 20, 3, 3).text() == "20 of 20 trials done · 3 aborted"
+
+
+def test_help_about_names_the_version_the_commit_and_the_paper():
+    from study_app.gui.menus import about_text
+    from study_app.version_info import version_text
+
+    text = about_text()
+    assert version_text() in text and "Shaker and M. S. Erden" in text and "Robotic Surgery Training" in text
