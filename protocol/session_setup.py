@@ -182,8 +182,8 @@ def open_new_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
         schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
         calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
+        start_event=note or f"{kind} session for {code}, seed {seed}",  # in the same transaction
     )
-    db.insert_event(session_id, 0.0, "session_start", note or f"{kind} session for {code}, seed {seed}")
     return OpenedSession(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
         schedule=schedule, start_position=0, clock_offset_s=0.0, initial_pause_s=0.0,
@@ -340,6 +340,7 @@ def start_runner(
     db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
+    commit_clock: Callable[[], float] | None = None,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -361,8 +362,12 @@ def start_runner(
         Recorder options (a thread for live sessions; short transactions for parallel writers).
     scales
         Counts per unit of the raw wrench (:func:`raw_wrench_scales`), so the recording keeps counts.
+    commit_clock
+        The recorder's commit-deadline clock, s (None: the wall clock).  A run on the virtual clock passes the
+        loop's time, so it commits every 100 ms of records as a live session does, and a crash loses as much.
     """
-    recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions)
+    recorder = (Recorder(db, threaded=threaded, short_transactions=short_transactions) if commit_clock is None else
+                Recorder(db, threaded=threaded, short_transactions=short_transactions, clock=commit_clock))
     runner = SessionRunner(
         protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
         submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from protocol.storage import crashpoint
 from protocol.storage.common import StorageError, now_iso
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
@@ -102,6 +103,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self.backup_path: Path | None = None
         self._last_heartbeat = 0.0
         self._owners: set[str] = set()
+        crash = None if readonly else crashpoint.planned()  # a planned crash (tests): nothing unless HAPTIC_STUDY_CRASH_AT
         created = self._check_path(readonly)
         if readonly:
             self.conn = connect_readonly(self.path, timeout_s=5.0 if busy_timeout_s is None else busy_timeout_s)
@@ -113,6 +115,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 )
             except sqlite3.Error as exc:
                 raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
+            crashpoint.install(self.conn, crash)
         try:
             if (not readonly if check is None else check) and not created:
                 self._quick_check()
@@ -165,13 +168,14 @@ class StudyDatabase(SchemaFile, LeaseHolder):
     def create_session(
         self, *, code: str, kind: str, seed: int, participant_number: int, protocol_json: str, schedule_json: str,
         software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
-        lease_owner: str | None = None, command: str = "", study_owner: str | None = None,
+        lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
 
         With ``lease_owner`` the session's lease is taken in the same
         transaction (see :meth:`acquire_lease`), so no other process can write
-        to it from its first moment.
+        to it from its first moment; with ``start_event`` its ``session_start``
+        event (at session time 0) is stored in it too.
 
         Raises
         ------
@@ -204,6 +208,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             session_id = int(cur.lastrowid)  # type: ignore[arg-type]
             if lease_owner is not None:
                 self._write_lease(session_scope(session_id), lease_owner, command)
+            if start_event:
+                self.insert_event(session_id, 0.0, "session_start", start_event)
         return session_id
 
     def update_schedule(self, session_id: int, schedule_json: str) -> None:

@@ -130,9 +130,8 @@ def plan_study(
     ``db`` None: a new database.  A read-only ``db`` is closed afterwards.
     """
     try:
-        if continue_study:
-            if db is None:
-                raise StorageError(f"cannot continue a study: no study in {db_path}")
+        # an empty file (a run killed before it stored a session) holds nothing to continue: all of it is still to run
+        if continue_study and db is not None:
             return _plan_continue(db, db_path, participants, seed, protocol)
         if db is not None:
             for n in range(1, participants + 1):

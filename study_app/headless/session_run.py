@@ -181,6 +181,9 @@ def run_session(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
         short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
+        # on the virtual clock the commit deadline runs on the records' own time: a commit every 100 ms of them,
+        # as live, so a crash (a planned kill) loses what it would lose live, and the commits fall deterministically
+        commit_clock=(lambda: eng.loop.clock.now_ns() * 1e-9) if clock == "virtual" else None,
     )
     trigger = _trigger(faults, opened, eng)
     try:
