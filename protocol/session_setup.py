@@ -37,7 +37,7 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.delivery import DeliveryLimits
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
-from protocol.recording import marked_records
+from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
@@ -51,6 +51,7 @@ __all__ = [
     "open_resumed_session",
     "participant_seeds",
     "raw_wrench_scales",
+    "refuse_damaged_recording",
     "start_runner",
     "training_protocol",
     "training_schedule",
@@ -211,10 +212,12 @@ def open_resumed_session(
     Raises
     ------
     StorageError
-        No such interrupted session.
+        No such interrupted session, or its recording is damaged (:func:`refuse_damaged_recording`;
+        nothing was changed).
     LeaseHeld
         Another live process writes to it (nothing was changed).
     """
+    refuse_damaged_recording(db, session_id)
     takeover = db.acquire_lease(session_scope(session_id), lease_owner, study_owner=study_owner)
     # read it only now that it is ours: another process may have finished it meanwhile
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
@@ -259,6 +262,26 @@ def open_resumed_session(
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
         resumed=True, notes=notes, segment=segment,
     )
+
+
+def refuse_damaged_recording(db: StudyDatabase, session_id: int) -> None:
+    """Refuse to append to a session whose recording is damaged (read only: nothing is written).
+
+    A resumed run would add a segment to a session whose earlier records fail their checksum or do not
+    decode: the session would look whole while part of it cannot be analysed or replayed.
+
+    Raises
+    ------
+    StorageError
+        One line naming the damage and what to do.
+    """
+    damage = recording_damage(db.conn, session_id, columns=None)
+    if damage:
+        more = f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})" if len(damage) > 1 else ""
+        raise StorageError(
+            f"session {session_id} in {db.path} cannot be resumed: its recording is damaged: {damage[0].describe()}"
+            f"{more}; a resumed run would append to a session part of which cannot be read; nothing was changed "
+            f"(haptic-study check --db {db.path} lists the damage; restore the file from a backup to resume)")
 
 
 def _interrupted_trial(

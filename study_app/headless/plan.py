@@ -15,7 +15,7 @@ from protocol.config import ProtocolConfig
 from protocol.design import schedule_from_json
 from protocol.rehearsal import FaultPlan
 from protocol.session import first_unfinished
-from protocol.session_setup import participant_code, training_protocol, training_schedule
+from protocol.session_setup import participant_code, refuse_damaged_recording, training_protocol, training_schedule
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
 
 __all__ = [
@@ -78,6 +78,7 @@ def _plan_continue(
                 continue  # practice comes before the experiment or not at all
             if of_kind:
                 info = of_kind[-1]
+                refuse_damaged_recording(db, info.session_id)  # before anything is written (cannot continue it)
                 steps.append(("resume", info.session_id))
                 trials += remaining_trials(db, info)
             else:
@@ -106,6 +107,8 @@ def interrupted_session_of(db: StudyDatabase | None, db_path: str, code: str) ->
             known = None if db is None else db.participant_id(code, create=False)
             what = "no such participant" if known is None else "no interrupted session"
             raise StorageError(f"cannot resume {code} in {db_path}: {what}")
+        assert db is not None
+        refuse_damaged_recording(db, open_[-1].session_id)
         return open_[-1]
     finally:
         if db is not None and db.readonly:
