@@ -40,8 +40,8 @@ def format_audit(a: object) -> str:
     from protocol.audit import Audit
 
     assert isinstance(a, Audit)
-    lines = [f"{a.path}: schema version {a.schema_version}, {_count(a.sessions, 'session')} "
-             f"({a.experiment_sessions} experiment), {_count(a.trials, 'trial')}"]
+    lines = [(f"{a.path}: schema version {a.schema_version}, {_count(a.sessions, 'session')} "
+              f"({a.experiment_sessions} experiment), {_count(a.trials, 'trial')}")]
     lines.append("  SQLite integrity check: " + ("ok" if a.integrity == ["ok"] else "; ".join(a.integrity)))
     if a.schema_version >= 3 and a.integrity == ["ok"]:
         lines.append(f"  recorded blocks: {a.blocks_verified:,} verified by their checksum, "

@@ -27,8 +27,15 @@ import numpy as np
 
 from protocol.recording.codec import decode_block, decode_columns
 
-__all__ = ["BlockDamage", "BlockRow", "RecordingDamaged", "block_rows", "block_problem", "describe_damage",
-           "recording_damage"]
+__all__ = [
+    "BlockDamage",
+    "BlockRow",
+    "RecordingDamaged",
+    "block_problem",
+    "block_rows",
+    "describe_damage",
+    "recording_damage",
+]
 
 
 @dataclass(frozen=True, slots=True)

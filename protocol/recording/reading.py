@@ -17,7 +17,14 @@ import numpy as np
 from pipeline.replay import ReplayInputs
 from protocol.clock import SessionClock
 from protocol.recording.codec import decode_block, decode_columns, join_decoded
-from protocol.recording.integrity import BlockDamage, BlockRow, RecordingDamaged, block_problem, block_rows, describe_damage
+from protocol.recording.integrity import (
+    BlockDamage,
+    BlockRow,
+    RecordingDamaged,
+    block_problem,
+    block_rows,
+    describe_damage,
+)
 
 __all__ = ["RecordingDamaged", "SegmentData", "marked_records", "read_segment", "read_ticks", "segments_of"]
 

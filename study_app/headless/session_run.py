@@ -17,8 +17,11 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.loop_messages import LoopEvent
+from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig
@@ -125,7 +128,16 @@ def _drive(
             batch, events[:n_ev] = events[:n_ev], []
             log = [replay_log.popleft() for _ in range(len(replay_log))]
             n = len(res.rows)
-            runner.process(res.rows, batch, log)
+            due = trigger.due_ns() if trigger is not None else None
+            if trigger is not None and due is not None and n and int(res.rows["t_ns"][-1]) >= due:
+                # a planned kill: the runner gets the records up to its moment, then the process dies there
+                k = int(np.searchsorted(res.rows["t_ns"], due, side="right"))
+                runner.process(res.rows[:k], batch, log)
+                if k:
+                    trigger.poll(int(res.rows["t_ns"][k - 1]))
+                runner.process(res.rows[k:])
+            else:
+                runner.process(res.rows, batch, log)
             if trigger is not None and n:
                 trigger.poll(int(res.rows["t_ns"][-1]))
             progress.study_time_s += n * 1e-3
@@ -214,7 +226,13 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
     def cancel(kind: str, at_ns: int) -> None:
         rig.cancel_fault(kind, loop.t0_ns + at_ns)
 
-    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel)
+    wd = loop.watchdog
+
+    def latch_s(kind: str) -> float:
+        return latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s)
+
+    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel,
+                                        max_trial_s=opened.protocol.trial.max_trial_s, latch_s=latch_s)
     return trig if trig.plans else None
 
 

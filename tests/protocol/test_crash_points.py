@@ -20,14 +20,13 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import sqlite3
+import tomllib
 from collections import Counter
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
 import pytest
-
-import tomllib
 
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import build_schedule, schedule_from_json
@@ -137,7 +136,7 @@ def _unchanged(before: dict[str, list[tuple[Any, ...]]], after: dict[str, list[t
     for table in ("trials", "events", "recordings", "blocks"):
         missing = set(before[table]) - set(after[table])
         if missing:
-            out.append(f"{table}: {len(missing)} row(s) seen at the crash changed or gone, e.g. {sorted(missing)[0][:4]}")
+            out.append(f"{table}: {len(missing)} row(s) seen at the crash changed or gone, e.g. {min(missing)[:4]}")
     for (sid, _, _, sched), (sid2, _, _, sched2) in zip(before["sessions"], after["sessions"]):
         old, new = schedule_from_json(sched), schedule_from_json(sched2)
         if sid != sid2 or new[: len(old)] != old:

@@ -33,7 +33,12 @@ import pytest
 
 from analysis.load import load_study
 from protocol.config import protocol_from_dict
-from protocol.recording import RecordingDamaged, read_segment, read_ticks, recording_damage
+from protocol.recording import (
+    RecordingDamaged,
+    read_segment,
+    read_ticks,
+    recording_damage,
+)
 from protocol.session_setup import open_resumed_session
 from protocol.storage import StorageError, StudyDatabase
 from study_app.headless import run_study
@@ -62,7 +67,7 @@ DAMAGED_BLOCK = 2  # 2.0–2.999 s: trial 2 (and the pause before it)
 
 def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
-    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=300, cwd=cwd, env=env)
+    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=300, cwd=cwd, env=env)
 
 
 @pytest.fixture(scope="module")
@@ -230,8 +235,8 @@ def test_one_flipped_bit_passes_sqlites_check_and_is_found_by_check(study: Path,
     found = json.loads(r.stdout)
     assert found["integrity"] == ["ok"]
     assert [d["line"] for d in found["damage"]] == [
-        "session 3, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes changed since they "
-        "were written); touches trial 2"]
+        ("session 3, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes changed since they "
+         "were written); touches trial 2")]
     assert found["trials_not_in_recording"] and "trial 2 of session 3" in found["trials_not_in_recording"][0]
     clean = _cli(["check", "--db", str(study)], tmp_path)
     assert clean.returncode == 0 and "No problem found." in clean.stdout, clean.stdout + clean.stderr
