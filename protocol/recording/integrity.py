@@ -18,6 +18,7 @@ refuses to append to a damaged session).
 
 from __future__ import annotations
 
+import math
 import zlib
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
@@ -97,18 +98,20 @@ class RecordingDamaged(ValueError):
         super().__init__("; ".join(f"recording damaged: {d.describe()}" for d in self.damage))
 
 
-def _has_crc(conn: Any) -> bool:
-    return "crc32" in {d[0] for d in conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
-
-
 def block_rows(conn: Any, where: str = "", args: Sequence[Any] = ()) -> Iterable[BlockRow]:
-    """``session_blocks`` rows (``where``: an SQL condition on its columns), by session, segment and block."""
-    crc = "crc32" if _has_crc(conn) else "NULL"  # a version-3 file read as it is has no checksums
-    sql = ("SELECT session_id, segment, block, first_tick, last_tick, n_records, t_first_s, t_last_s, data, "
-           f"{crc} FROM session_blocks {'WHERE ' + where if where else ''} ORDER BY session_id, segment, block")
+    """``session_blocks`` rows (``where``: an SQL condition on its columns), by session, segment and block.
+
+    A version-3 file read as it is has no ``crc32`` (its blocks read as not verifiable); a column a table
+    lacks reads as NULL (NaN times).
+    """
+    have = {d[0] for d in conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
+    cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
+    sql = (f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM session_blocks "
+           f"{'WHERE ' + where if where else ''} ORDER BY session_id, segment, block")
     for r in conn.execute(sql, tuple(args)):
-        yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]), float(r[6]), float(r[7]),
-                       bytes(r[8]), None if r[9] is None else int(r[9]))
+        yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
+                       math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
+                       bytes(r[6]), None if r[9] is None else int(r[9]))
 
 
 def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: bool = False) -> str:

@@ -71,8 +71,7 @@ class Recorder:
         self._blocks: dict[tuple[int, int], tuple[BlockBuilder, SessionClock]] = {}
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
-        self._group: list[tuple[str, Any]] | None = None  # items queued inside atomic(), not yet handed on
-        self._depth = 0
+        self._local = threading.local()  # per producer thread: the items queued inside atomic(), not yet handed on
         if threaded:
             self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
             self._thread.start()
@@ -111,27 +110,31 @@ class Recorder:
     def atomic(self) -> Iterator[None]:
         """Everything queued inside the block is one transaction: applied and committed together, or not at all.
 
-        Nestable (the outermost block commits).  For one producer thread: the
-        items are handed to the writer as one when the block ends, so neither the
-        commit deadline nor a crash can fall between them.
+        Nestable (the outermost block commits).  The items the calling thread
+        queues are handed to the writer as one when the block ends, so neither
+        the commit deadline nor a crash can fall between them (other threads'
+        items go on as usual).
         """
-        if self._depth == 0:
-            self._group = []
-        self._depth += 1
+        local = self._local
+        if getattr(local, "group", None) is not None:
+            yield  # inside another block: its end commits
+            return
+        local.group = []
         try:
             yield
-        finally:
-            self._depth -= 1
-            if self._depth == 0:
-                group, self._group = self._group, None
-                if group:
-                    self._put(("group", group))
+        except BaseException:
+            local.group = None  # a state change that failed half-way is not stored at all
+            raise
+        group, local.group = local.group, None
+        if group:
+            self._put(("group", group))
 
     def _put(self, item: tuple[str, Any]) -> None:
         if self.error is not None:
             raise StorageError(f"the recorder stopped after an error: {self.error}")
-        if self._group is not None and item[0] != "group":
-            self._group.append(item)
+        group = getattr(self._local, "group", None)
+        if group is not None and item[0] != "group":
+            group.append(item)
             return
         if self._thread is None:
             self._handle(item)

@@ -35,6 +35,7 @@ from protocol.storage import crashpoint
 from protocol.storage.crashpoint import CRASH_ENV
 from protocol.storage.database import StudyDatabase
 from study_app.headless import run_study
+from test_storage import FakeClock, _session_args
 
 #: Two designed trials (one per mode), no training; short trials and pauses keep the commits few.
 PROTOCOL = """name = "crash points"
@@ -199,10 +200,10 @@ def test_a_crash_at_any_commit_or_inside_the_abort_transaction_loses_and_duplica
         reference: tuple[int, list[int]], tmp_path: Path) -> None:
     commits, inserts = reference
     assert 10 < commits < 200, commits  # a commit every 100 ms of records (and the session's own)
-    # every commit in turn, and one past the last (the run completes), and every statement around the aborted
-    # trial's row: the statements of its transaction
+    # every commit in turn, and one past the last (the run completes); and inside the aborted trial's transaction:
+    # before its row, before the schedule with its re-run, before the open block's write (then its COMMIT)
     cases = [(f"commit:{n}", n <= commits) for n in range(1, commits + 2)]
-    cases += [(f"statement:{n}", True) for n in range(inserts[0] - 2, inserts[0] + 5)]
+    cases += [(f"statement:{n}", True) for n in (inserts[0], inserts[0] + 2, inserts[0] + 3)]
     ctx = mp.get_context("forkserver")
     ctx.set_forkserver_preload(["study_app.headless", "protocol.config", "protocol.rehearsal", __name__])
     with ThreadPoolExecutor(max_workers=2) as pool:
@@ -218,3 +219,45 @@ def test_the_crash_point_is_refused_when_misspelt(tmp_path: Path, monkeypatch: p
     with pytest.raises(StorageError, match="expected commit:N or statement:N"):
         StudyDatabase(tmp_path / "x.db")
     assert list(tmp_path.iterdir()) == []  # refused before the file was made
+
+
+def test_what_is_queued_in_one_atomic_block_is_one_commit_whatever_the_deadline(tmp_path: Path) -> None:
+    from protocol.clock import SessionClock
+    from protocol.records import TrialRecord
+    from protocol.storage import Recorder
+
+    path = tmp_path / "s.db"
+    db = StudyDatabase(path)
+    sid = db.create_session(**_session_args())
+    clock = FakeClock()
+    rec = Recorder(db, threaded=False, clock=clock)
+    trial = TrialRecord(session_id=sid, trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="off",
+                        outcome="aborted", clock=SessionClock(0.0, 0), cue_ns=0, end_ns=5)
+
+    def seen() -> tuple[int, str]:
+        c = sqlite3.connect(path)
+        try:
+            n = c.execute("SELECT COUNT(*) FROM trials").fetchone()[0]
+            return n, c.execute("SELECT schedule_json FROM sessions").fetchone()[0]
+        finally:
+            c.close()
+
+    before = seen()
+    with pytest.raises(RuntimeError):
+        with rec.atomic():
+            rec.trial(trial)
+            raise RuntimeError("the runner failed half-way")
+    clock.now = 1.0
+    rec.event(sid, 0.1, "x")  # past the deadline: commits what is pending
+    assert seen() == before  # the half-done state change was not stored
+    with rec.atomic():
+        rec.trial(trial)
+        clock.now = 5.0  # the deadline passes in the middle ...
+        rec.event(sid, 0.2, "y")
+        assert seen() == before  # ... and nothing is committed before the block ends
+        with rec.atomic():  # nested: the outer block commits
+            rec.call(lambda d: d.update_schedule(sid, "[]"))
+        assert seen() == before
+    assert seen() == (1, "[]")
+    rec.close()
+    db.close()

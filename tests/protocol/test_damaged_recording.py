@@ -170,8 +170,9 @@ COMMANDS = [  # (args, exit status, what the line says, file written)
      "cannot be resumed: its recording is damaged", ""),
     (("run", "--db", "study.db", "--resume", "P03"), 2, "cannot be resumed: its recording is damaged", ""),
 ]
-CASES = [Case(k, *c) for k in ("bit-flip", "undecodable-pre-v4") for c in COMMANDS]
-CASES += [Case(k, *c) for k in ("checksum-changed",) for c in COMMANDS[:4]]
+CASES = [Case("bit-flip", *c) for c in COMMANDS]
+CASES += [Case("undecodable-pre-v4", *COMMANDS[i]) for i in (0, 1, 3, 5)]
+CASES += [Case("checksum-changed", *COMMANDS[i]) for i in (0, 3)]
 CASES += [Case("row-disagrees", *COMMANDS[0])]
 
 
@@ -325,6 +326,23 @@ def test_the_engines_resume_refuses_a_damaged_session_and_changes_nothing(study:
     finally:
         w.close()
     assert content() == before  # not even the lease was taken
+    # and the engine the GUI drives answers its Resume with that line
+    from study_app import messages as m
+    from study_app.engine_host import StudyEngine
+    from study_app.engine_setup import HostConfig
+
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e.start()
+    try:
+        e.handle(m.ResumeSession(str(db), DAMAGED_SESSION))
+    finally:
+        e.close("test over")
+        e.release_ring()
+    (refused,) = [ev for ev in events if isinstance(ev, m.CommandRefused)]
+    assert "cannot be resumed: its recording is damaged: session 3" in refused.message and "\n" not in refused.message
+    assert not [ev for ev in events if isinstance(ev, m.SessionStarted)]
+    assert content() == before
 
 
 def test_checksums_are_the_blocks_own(study: Path) -> None:
