@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from test_storage import FakeClock, _session_args
 
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import build_schedule, schedule_from_json
@@ -35,7 +36,6 @@ from protocol.storage import crashpoint
 from protocol.storage.crashpoint import CRASH_ENV
 from protocol.storage.database import StudyDatabase
 from study_app.headless import run_study
-from test_storage import FakeClock, _session_args
 
 #: Two designed trials (one per mode), no training; short trials and pauses keep the commits few.
 PROTOCOL = """name = "crash points"
@@ -243,10 +243,9 @@ def test_what_is_queued_in_one_atomic_block_is_one_commit_whatever_the_deadline(
             c.close()
 
     before = seen()
-    with pytest.raises(RuntimeError):
-        with rec.atomic():
-            rec.trial(trial)
-            raise RuntimeError("the runner failed half-way")
+    with pytest.raises(RuntimeError), rec.atomic():
+        rec.trial(trial)
+        raise RuntimeError("the runner failed half-way")
     clock.now = 1.0
     rec.event(sid, 0.1, "x")  # past the deadline: commits what is pending
     assert seen() == before  # the half-done state change was not stored
