@@ -35,11 +35,26 @@ time range, trials -- never a decoding traceback (:mod:`protocol.recording.integ
 """
 
 from protocol.recording.codec import (
-    BLOCK_RECORDS, COLUMNS, LIMIT_COLUMNS, POSE_COLUMNS, BlockBuilder, Column, decode_block, decode_columns,
-    encode_block, join_blocks, rows_to_columns,
+    BLOCK_RECORDS,
+    COLUMNS,
+    LIMIT_COLUMNS,
+    POSE_COLUMNS,
+    BlockBuilder,
+    Column,
+    decode_block,
+    decode_columns,
+    encode_block,
+    join_blocks,
+    rows_to_columns,
 )
 from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
-from protocol.recording.reading import SegmentData, marked_records, read_segment, read_ticks, segments_of
+from protocol.recording.reading import (
+    SegmentData,
+    marked_records,
+    read_segment,
+    read_ticks,
+    segments_of,
+)
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Column",

@@ -20,13 +20,13 @@ from __future__ import annotations
 
 import math
 import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from protocol.recording.codec import decode_block, decode_columns
+from protocol.recording.codec import COLUMNS, decode_block, decode_columns
 
 __all__ = [
     "BlockDamage",
@@ -130,19 +130,39 @@ def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: b
         return "checksum mismatch (the block's bytes changed since they were written)"
     if not whole and (row.crc32 is not None or columns == ()):
         return ""
+    names = [c.name for c in COLUMNS] if whole or columns is None else list(dict.fromkeys(["tick", *columns]))
     try:
-        if whole or columns is None:
-            cols = decode_block(row.data)[0]
-        else:
-            cols = decode_columns(row.data, list(dict.fromkeys(["tick", *columns])))
+        cols = decode_block(row.data)[0] if whole or columns is None else decode_columns(row.data, names)
     except Exception as exc:  # noqa: BLE001 - any failure to decode is damage: zlib, struct, json, numpy alike
-        return f"cannot be decoded ({type(exc).__name__}: {' '.join(str(exc).split())[:80]})"
+        return decode_failure(exc)
+    why = columns_problem(cols, names)
+    if why:
+        return why
     ticks = np.asarray(cols["tick"])
     if whole and (len(ticks) != row.n_records or (len(ticks) and (int(ticks[0]) != row.first_tick
                                                                  or int(ticks[-1]) != row.last_tick))):
         return (f"its records (ticks {int(ticks[0]) if len(ticks) else '-'}–{int(ticks[-1]) if len(ticks) else '-'}, "
                 f"{len(ticks)} records) disagree with its row (ticks {row.first_tick}–{row.last_tick}, "
                 f"{row.n_records} records)")
+    return ""
+
+
+def decode_failure(exc: BaseException) -> str:
+    """What a failure to decode a block says (one line)."""
+    return f"cannot be decoded ({type(exc).__name__}: {' '.join(str(exc).split())[:80]})"
+
+
+def columns_problem(cols: Mapping[str, np.ndarray], names: Iterable[str]) -> str:
+    """What is wrong with a block's decoded columns ("" if nothing): one missing, or lengths that differ.
+
+    A block without a checksum whose header was changed can still decode, to the wrong columns.
+    """
+    names = list(names)
+    missing = [n for n in names if n not in cols]
+    if missing:
+        return f"decodes without its column {missing[0]!r} (its header changed)"
+    if len({len(cols[n]) for n in names}) > 1:
+        return "decodes to columns of different lengths (its header changed)"
     return ""
 
 

@@ -16,13 +16,15 @@ import numpy as np
 
 from pipeline.replay import ReplayInputs
 from protocol.clock import SessionClock
-from protocol.recording.codec import decode_block, decode_columns, join_decoded
+from protocol.recording.codec import COLUMNS, decode_block, decode_columns, join_decoded
 from protocol.recording.integrity import (
     BlockDamage,
     BlockRow,
     RecordingDamaged,
     block_problem,
     block_rows,
+    columns_problem,
+    decode_failure,
     describe_damage,
 )
 
@@ -102,14 +104,18 @@ def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: lis
     damaged blocks raise :class:`RecordingDamaged`, or with ``skip_damaged`` are left out and returned."""
     good: list[Any] = []
     bad: list[tuple[BlockRow, str]] = []
+    want = [c.name for c in COLUMNS] if names is None else names
     for r in rows:
         why = block_problem(r)
         if not why:
             try:
-                good.append(decode_block(r.data) if names is None else decode_columns(r.data, names))
-                continue
+                decoded = decode_block(r.data) if names is None else decode_columns(r.data, names)
+                why = columns_problem(decoded[0] if names is None else decoded, want)
             except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
-                why = f"cannot be decoded ({type(exc).__name__}: {' '.join(str(exc).split())[:80]})"
+                why = decode_failure(exc)
+            if not why:
+                good.append(decoded)
+                continue
         bad.append((r, why))
     damage = describe_damage(conn, bad)
     if damage and not skip_damaged:
@@ -151,32 +157,41 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
     bad: list[tuple[BlockRow, str]] = []
     for r in block_rows(conn, "session_id = ? AND segment = ? AND last_tick >= ? AND first_tick <= ?",
                         (session_id, segment, first_tick, last_tick)):
-        b_first, b_last, n, blob = r.first_tick, r.last_tick, r.n_records, r.data
         why = block_problem(r)
-        try:
-            if why:
-                pass
-            elif b_last - b_first + 1 == n:
-                # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
-                cols = decode_columns(blob, names[1:])
-                lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
-                part = {k: v[lo:hi] for k, v in cols.items()}
-                part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
-            else:
-                cols = decode_columns(blob, names)
-                keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
-                part = {k: v[keep] for k, v in cols.items()}
-        except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
-            why = f"cannot be decoded ({type(exc).__name__}: {' '.join(str(exc).split())[:80]})"
+        if not why:
+            try:
+                part, why = _window_part(r, names, first_tick, last_tick)
+            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+                why = decode_failure(exc)
         if why:
             bad.append((r, why))
-            continue
-        parts.append(part)
+        else:
+            parts.append(part)
     if bad:
         raise RecordingDamaged(describe_damage(conn, bad))
     if not parts:
         return {n: np.empty(0) for n in names}
     return {n: np.concatenate([p[n] for p in parts]) for n in names}
+
+
+def _window_part(r: BlockRow, names: list[str], first_tick: int, last_tick: int,
+                 ) -> tuple[dict[str, np.ndarray], str]:
+    """The records ``first_tick`` … ``last_tick`` of one block (``names``, ``"tick"`` first), and what is wrong ("")."""
+    b_first, b_last, n = r.first_tick, r.last_tick, r.n_records
+    if b_last - b_first + 1 == n:
+        # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
+        cols = decode_columns(r.data, names[1:])
+        why = columns_problem(cols, names[1:])
+        if not why and len(cols[names[1]]) != n:
+            why = f"decodes to {len(cols[names[1]])} records where its row says {n}"
+        lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
+        part = {k: v[lo:hi] for k, v in cols.items()}
+        part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
+        return part, why
+    cols = decode_columns(r.data, names)
+    why = columns_problem(cols, names)
+    keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
+    return ({k: v[keep] for k, v in cols.items()} if not why else {}), why
 
 
 def marked_records(conn: Any, session_id: int, trial_index: int,

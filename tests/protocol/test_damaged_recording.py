@@ -2,8 +2,8 @@
 
 A study of three participants (P03's session interrupted by a kill) is damaged
 in ways a lab meets -- one bit flipped in a block on the disk (SQLite's own
-check passes it), a block from before checksums that no longer decodes, a
-changed checksum, a block row disagreeing with its records -- and every command
+check passes it), a block from before checksums that no longer decodes or whose
+header changed, a changed checksum, a block row disagreeing with its records -- and every command
 that reads the recording is run on it through the real command line: ``check``
 names the damage (exit 1), ``report`` analyses the rest, ``export``,
 ``plot-session`` give a partial result stated as such (exit 1), ``replay`` and
@@ -126,6 +126,14 @@ def undecodable_without_checksum(db: Path) -> None:
          blob[:40] + bytes(b ^ 0x5A for b in blob[40:]), DAMAGED_SESSION, DAMAGED_BLOCK)
 
 
+def header_changed_without_checksum(db: Path) -> None:
+    """A block from before checksums whose header lost a column's name: it decodes, to the wrong columns."""
+    blob = _blob(db, DAMAGED_SESSION, DAMAGED_BLOCK)
+    assert blob.count(b'"raw_fx"') == 1
+    _sql(db, "UPDATE session_blocks SET crc32 = NULL, data = ? WHERE session_id = ? AND segment = 0 AND block = ?",
+         blob.replace(b'"raw_fx"', b'"raw_fz"'), DAMAGED_SESSION, DAMAGED_BLOCK)
+
+
 def checksum_changed(db: Path) -> None:
     """The block intact, its checksum changed: which of the two is wrong cannot be told, so the block is damaged."""
     _sql(db, "UPDATE session_blocks SET crc32 = crc32 + 1 WHERE session_id = ? AND segment = 0 AND block = ?",
@@ -140,7 +148,7 @@ def row_disagrees(db: Path) -> None:
 
 DAMAGE: dict[str, Callable[[Path], None]] = {
     "bit-flip": flip_a_bit, "undecodable-pre-v4": undecodable_without_checksum, "checksum-changed": checksum_changed,
-    "row-disagrees": row_disagrees,
+    "header-changed-pre-v4": header_changed_without_checksum, "row-disagrees": row_disagrees,
 }
 
 
@@ -173,6 +181,7 @@ COMMANDS = [  # (args, exit status, what the line says, file written)
 CASES = [Case("bit-flip", *c) for c in COMMANDS]
 CASES += [Case("undecodable-pre-v4", *COMMANDS[i]) for i in (0, 1, 3, 5)]
 CASES += [Case("checksum-changed", *COMMANDS[i]) for i in (0, 3)]
+CASES += [Case("header-changed-pre-v4", *COMMANDS[i]) for i in (1, 2)]
 CASES += [Case("row-disagrees", *COMMANDS[0])]
 
 
