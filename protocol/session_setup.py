@@ -363,7 +363,7 @@ def start_runner(
     db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
-    commit_clock: Callable[[], float] | None = None,
+    commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -385,12 +385,13 @@ def start_runner(
         Recorder options (a thread for live sessions; short transactions for parallel writers).
     scales
         Counts per unit of the raw wrench (:func:`raw_wrench_scales`), so the recording keeps counts.
-    commit_clock
-        The recorder's commit-deadline clock, s (None: the wall clock).  A run on the virtual clock passes the
-        loop's time, so it commits every 100 ms of records as a live session does, and a crash loses as much.
+    commit_clock, commit_interval_s
+        The recorder's commit deadline: its clock, s (None: the wall clock), and the longest time a record waits
+        for its commit (100 ms).  A run on the virtual clock passes the loop's time, so its commits fall on the
+        same records every time (see :mod:`study_app.headless.session_run`).
     """
-    recorder = (Recorder(db, threaded=threaded, short_transactions=short_transactions) if commit_clock is None else
-                Recorder(db, threaded=threaded, short_transactions=short_transactions, clock=commit_clock))
+    recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
+                        **({} if commit_clock is None else {"clock": commit_clock}))
     runner = SessionRunner(
         protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
         submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,

@@ -245,6 +245,8 @@ class Recorder:
 
     def flush(self) -> None:
         """Commit everything queued so far (blocks until the writer has)."""
+        if getattr(self._local, "group", None) is not None:
+            raise RuntimeError("Recorder.flush() inside atomic(): the block's items are not queued before it ends")
         if self._thread is None:
             self._commit()
             return

@@ -15,6 +15,7 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -37,12 +38,16 @@ from study_app.headless.plan import Step
 from study_app.session_config import config_record
 
 __all__ = [
-    "BLOCK_TICKS", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
+    "BLOCK_TICKS", "VIRTUAL_COMMIT_S", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
     "run_steps", "set_kill_target",
 ]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
 BLOCK_TICKS = 50
+#: On the virtual clock, records wait at most this long (of their own time) for their commit, s: about the live
+#: 100 ms of wall clock at the virtual clock's speed (each commit rewrites the open block: every 100 ms of
+#: records would double what storing costs).  A session rehearsing a ``kill`` commits every 100 ms, as live.
+VIRTUAL_COMMIT_S = 2.0
 #: Set in a parallel study's worker (:func:`set_kill_target`): the process a planned ``kill`` ends.
 _kill_target_pid: int | None = None
 
@@ -193,9 +198,7 @@ def run_session(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
         short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
-        # on the virtual clock the commit deadline runs on the records' own time: a commit every 100 ms of them,
-        # as live, so a crash (a planned kill) loses what it would lose live, and the commits fall deterministically
-        commit_clock=(lambda: eng.loop.clock.now_ns() * 1e-9) if clock == "virtual" else None,
+        **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng)
     try:
@@ -205,6 +208,22 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
+
+
+def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:
+    """The recorder's commit deadline for a session run (:func:`protocol.session_setup.start_runner`'s arguments).
+
+    On the virtual clock it runs on the records' own time, so the commits fall on the same records every
+    time (a crash at the N-th commit is one state: ``tests/protocol/test_crash_points.py``): every
+    :data:`VIRTUAL_COMMIT_S` of records -- about what the wall clock's 100 ms are at the virtual clock's
+    speed, so a run costs what it did -- and every 100 ms of them, as live, in a session where a ``kill`` is
+    rehearsed, so the rehearsal loses what a live crash would.  On the real clock: the wall clock, 100 ms.
+    """
+    if clock != "virtual":
+        return {}
+    kill = any(f.kind == "kill" and f.code == opened.code and f.session == opened.kind for f in faults)
+    return {"commit_clock": lambda: eng.loop.clock.now_ns() * 1e-9,
+            "commit_interval_s": 0.1 if kill else VIRTUAL_COMMIT_S}
 
 
 def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) -> RehearsalTrigger | None:
