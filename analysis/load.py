@@ -23,7 +23,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
-from protocol.recording import read_ticks
+from protocol.recording import RecordingDamaged, read_ticks, recording_damage
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
 from protocol.storage import connect_readonly as _connect_readonly
@@ -70,8 +70,9 @@ class StudyData:
         databases), where its records are in the session's recording
         (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
         trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
-        ``max_trial_s``, and ``excluded`` (``""`` when analysed, else
-        ``"training session"`` or ``"aborted trial"``).
+        ``max_trial_s``, ``excluded`` (``""`` when analysed, else
+        ``"training session"``, ``"aborted trial"`` or ``"recording damaged"``) and ``damage`` (for a trial
+        whose records touch a damaged block of the recording: the line of :attr:`damage` naming it, else ``""``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
@@ -80,11 +81,17 @@ class StudyData:
         ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored).
     databases
         The database paths, in the order given.
+    damage
+        One line per run of damaged recorded blocks (a checksum that does not match, a block that does not
+        decode): the database, session, session-time range and the trials it touches.  Those trials are
+        excluded (``"recording damaged"``): their metrics' window is not whole, so they are not analysed
+        from what is left; every other trial is.
     """
 
     trials: pd.DataFrame
     sessions: pd.DataFrame
     databases: tuple[str, ...]
+    damage: tuple[str, ...] = ()
 
     @property
     def included(self) -> pd.DataFrame:
@@ -131,7 +138,31 @@ def _watchdog_limits(config_json: object) -> dict[str, float]:
     return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+#: What analysis decodes of a recorded block (a block written before version 4 has no checksum: these are tried).
+_ANALYSED_COLUMNS = ("t_ns", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
+                     "render_fx", "render_fy", "render_fz")
+
+
+def _mark_damage(db: StudyDatabase, path: str, trials: pd.DataFrame) -> list[str]:
+    """Verify the recording's blocks; name each trial touching a damaged one in ``trials["damage"]``; the lines."""
+    trials["damage"] = ""
+    if db.schema_version < 3:
+        return []
+    try:
+        damage = recording_damage(db.conn, columns=_ANALYSED_COLUMNS)
+    except sqlite3.DatabaseError as exc:
+        raise AnalysisError(f"{path}: cannot read the recording ({exc})") from None
+    lines = []
+    for d in damage:
+        line = f"{path}: {d.describe()}"
+        lines.append(line)
+        hit = ((trials["session_id"] == d.session_id) & (trials["segment"] == d.segment)
+               & (trials["first_tick"] <= d.last_tick) & (trials["last_tick"] >= d.first_tick))
+        trials.loc[hit & (trials["damage"] == ""), "damage"] = line
+    return lines
+
+
+def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
     db = _open(path)
     try:
         sessions = _query(
@@ -153,6 +184,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
             f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, {v2} "
             "FROM trials ORDER BY session_id, trial_index",
         )
+        damage = _mark_damage(db, path, trials)
     finally:
         db.close()
     if sessions.empty:
@@ -165,7 +197,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
     sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json"]), proto, watchdog], axis=1)
     sessions.insert(0, "database", path)
     trials.insert(0, "database", path)
-    return sessions, trials
+    return sessions, trials, damage
 
 
 def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
@@ -191,7 +223,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     if not paths:
         raise AnalysisError("--db: give at least one study database")
     seen: dict[tuple[int, int], str] = {}
-    all_sessions, all_trials = [], []
+    all_sessions, all_trials, damage = [], [], []
     for raw in paths:
         path = str(raw)
         if not Path(path).exists():
@@ -201,9 +233,10 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
         if key in seen:
             raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
         seen[key] = path
-        s, t = _read_one(path)
+        s, t, d = _read_one(path)
         all_sessions.append(s)
         all_trials.append(t)
+        damage.extend(d)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():
@@ -220,21 +253,22 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     trials = trials.merge(meta, on=["database", "session_id"], how="left", validate="many_to_one")
     excluded = np.where(
         trials["session_kind"] != "experiment", "training session",
-        np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial", ""),
+        np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial",
+                 np.where(trials["damage"] != "", "recording damaged", "")),
     )
     trials["excluded"] = excluded
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
              "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
-             "tolerance_fraction", "hold_s", "max_trial_s", "excluded"]
+             "tolerance_fraction", "hold_s", "max_trial_s", "excluded", "damage"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
     if not (sessions["kind"] == "experiment").any():
         raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
     if (trials["excluded"] == "").sum() == 0:
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
-    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths))
+    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage))
 
 
 def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
@@ -349,7 +383,10 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
                                   (trial_id_of(int(session_id), int(trial_index)),)).fetchone()
             where = None if row is None else recorded_where(session_id, *row)
             if where is not None:
-                cols = read_ticks(db.conn, *where, ("t_ns", *_RECORDED_TRACE))
+                try:
+                    cols = read_ticks(db.conn, *where, ("t_ns", *_RECORDED_TRACE))
+                except RecordingDamaged as exc:
+                    raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: {exc}") from None
                 t_ns = cols.pop("t_ns")
                 frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
         if frame.empty:
@@ -394,7 +431,9 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
         empty between trials) and the time since its cue, the trial phase code, the task force
         and the raw, rendered and gain values, the fraction of the designed force the haptic
         device's thermal derating let through (1: not cut), the feedback switch and latched faults, the stylus
-        position and the sensor and pose ages and the latency (ms).  Sorted by session and time.
+        position and the sensor and pose ages and the latency (ms).  Sorted by session and time.  Records in
+        damaged blocks of the recording are left out: ``frame.attrs["damage"]`` then lists them, one line each
+        (session, time range, trials), and the table is partial.
 
     Raises
     ------
@@ -408,16 +447,18 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
             if int(session_id) not in ids:
                 raise AnalysisError(f"{database}: no session {session_id} (sessions: {', '.join(map(str, ids)) or 'none'})")
             ids = [int(session_id)]
-        parts = [_session_samples(db, sid) for sid in ids]
+        damage: list[str] = []
+        parts = [_session_samples(db, sid, damage) for sid in ids]
     finally:
         db.close()
     parts = [p for p in parts if len(p)]
-    if not parts:
-        return pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
-    return pd.concat(parts, ignore_index=True)
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
+    out.attrs["damage"] = [f"{database}: {line}" for line in damage]
+    return out
 
 
-def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
+def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> pd.DataFrame:
+    """A session's records (see :func:`samples_frame`); damaged blocks are left out and described in ``damage``."""
     from protocol.recording import read_segment, segments_of
 
     frames = []
@@ -426,7 +467,8 @@ def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
             "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
             (session_id,))}
         for seg, _, _ in segments_of(db.conn, session_id):
-            d = read_segment(db.conn, session_id, seg)
+            d = read_segment(db.conn, session_id, seg, skip_damaged=True)
+            damage.extend(x.describe() for x in d.damage)
             c = d.columns
             n = len(c["tick"])
             time_s = d.session_time_s

@@ -376,8 +376,9 @@ class SessionRunner:
             # only a running trial's records are its samples (records after an abort still carry its mark)
             ended = next((e for e in events if isinstance(e, TrialFinished)), None)
             self._window.note_trial(rows, t_ns_all, spec.index, m.cue_ns, ended)
-        for ev in events:
-            self._on_event(ev)
+        with self.recorder.atomic():  # a trial's end is one state change: its row and its end's events commit together
+            for ev in events:
+                self._on_event(ev)
         t_last = self._last_t_ns = int(t_ns_all[-1])
         self._faults = int(rows["faults"][-1])
         if m.phase is TrialPhase.ACTIVE:
@@ -540,18 +541,25 @@ class SessionRunner:
         spec = m.spec
         assert spec is not None
         self._abort_cause[spec.index] = AbortCause(cause)
-        for ev in m.abort(t_ns, reason):
-            self._on_event(ev)
-        if requeue:
-            self.schedule = requeue_aborted(self.schedule, spec, spec.index + 1, self.protocol.abort_policy, self._rng)
-            sj = schedule_to_json(self.schedule)
-            sid = self.session_id
-            self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
-            self.state.trials_total = len(self.schedule)
+        # one transaction: the row, its end's events and the schedule with its re-run (else a crash between them
+        # could leave an aborted trial never re-run, its cell one short)
+        with self.recorder.atomic():
+            for ev in m.abort(t_ns, reason):
+                self._on_event(ev)
+            if requeue:
+                policy, sid = self.protocol.abort_policy, self.session_id
+                self.schedule = requeue_aborted(self.schedule, spec, spec.index + 1, policy, self._rng)
+                sj = schedule_to_json(self.schedule)
+                self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
+                self.state.trials_total = len(self.schedule)
 
     def _handle_requests(self, t_ns: int) -> None:
         with self._lock:
             reqs, self._requests = self._requests, []
+        with self.recorder.atomic():  # a request and what it changes (an abort, a session's end) are one commit
+            self._apply_requests(reqs, t_ns)
+
+    def _apply_requests(self, reqs: list[tuple[str, str, str, int | None]], t_ns: int) -> None:
         for kind, detail, cause, trial_index in reqs:
             if kind == "pause":
                 self.paused = self.state.paused = True
@@ -574,9 +582,10 @@ class SessionRunner:
     def _end(self, status: str, reason: str, t_ns: int) -> None:
         self._enter_pause_commands()
         self.submit(StopRecording())
-        self._event(t_ns, "session_end", f"{status}: {reason}")
         sid = self.session_id
-        self.recorder.call(lambda db: db.end_session(sid, status, reason))
+        with self.recorder.atomic():
+            self._event(t_ns, "session_end", f"{status}: {reason}")
+            self.recorder.call(lambda db: db.end_session(sid, status, reason))
         self.done = self.state.done = True
         self.status = self.state.status = status
         self._emit(("session_end", status, reason))

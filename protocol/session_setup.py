@@ -37,7 +37,7 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.delivery import DeliveryLimits
 from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
-from protocol.recording import marked_records
+from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
@@ -52,6 +52,7 @@ __all__ = [
     "open_resumed_session",
     "participant_seeds",
     "raw_wrench_scales",
+    "refuse_damaged_recording",
     "start_runner",
     "training_protocol",
     "training_schedule",
@@ -185,18 +186,21 @@ def open_new_session(
         run_protocol = training_protocol(protocol)
     else:
         raise ValueError(f"session kind = {kind!r}: allowed values are 'training' and 'experiment'")
-    deviation = ""
-    if not db.sessions_of(code, kind):  # (a second session of a kind is create_session's refusal)
-        deviation = check_new_session(stored_sessions(db), code=code, kind=kind, seed=seed, protocol=protocol,
+
+    def rules(locked: StudyDatabase) -> list[tuple[str, str]]:
+        # runs inside create_session's transaction, after its refusal of a second session of a kind:
+        # what it read cannot change before the session is stored
+        deviation = check_new_session(stored_sessions(locked), code=code, kind=kind, seed=seed, protocol=protocol,
                                       training_override=training_override)
+        return [(DEVIATION_EVENT, deviation)] if deviation else []
+
     session_id = db.create_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
         schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
         calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
+        start_event=note or f"{kind} session for {code}, seed {seed}",  # in the same transaction
+        rules=rules,
     )
-    db.insert_event(session_id, 0.0, "session_start", note or f"{kind} session for {code}, seed {seed}")
-    if deviation:
-        db.insert_event(session_id, 0.0, DEVIATION_EVENT, deviation)
     return OpenedSession(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
         schedule=schedule, start_position=0, clock_offset_s=0.0, initial_pause_s=0.0,
@@ -224,10 +228,12 @@ def open_resumed_session(
     Raises
     ------
     StorageError
-        No such interrupted session.
+        No such interrupted session, or its recording is damaged (:func:`refuse_damaged_recording`;
+        nothing was changed).
     LeaseHeld
         Another live process writes to it (nothing was changed).
     """
+    refuse_damaged_recording(db, session_id)
     takeover = db.acquire_lease(session_scope(session_id), lease_owner, study_owner=study_owner)
     # read it only now that it is ours: another process may have finished it meanwhile
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
@@ -272,6 +278,26 @@ def open_resumed_session(
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
         resumed=True, notes=notes, segment=segment,
     )
+
+
+def refuse_damaged_recording(db: StudyDatabase, session_id: int) -> None:
+    """Refuse to append to a session whose recording is damaged (read only: nothing is written).
+
+    A resumed run would add a segment to a session whose earlier records fail their checksum or do not
+    decode: the session would look whole while part of it cannot be analysed or replayed.
+
+    Raises
+    ------
+    StorageError
+        One line naming the damage and what to do.
+    """
+    damage = recording_damage(db.conn, session_id, columns=None)
+    if damage:
+        more = f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})" if len(damage) > 1 else ""
+        raise StorageError(
+            f"session {session_id} in {db.path} cannot be resumed: its recording is damaged: {damage[0].describe()}"
+            f"{more}; a resumed run would append to a session part of which cannot be read; nothing was changed "
+            f"(haptic-study check --db {db.path} lists the damage; restore the file from a backup to resume)")
 
 
 def _interrupted_trial(
@@ -353,6 +379,7 @@ def start_runner(
     db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
+    commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -374,8 +401,13 @@ def start_runner(
         Recorder options (a thread for live sessions; short transactions for parallel writers).
     scales
         Counts per unit of the raw wrench (:func:`raw_wrench_scales`), so the recording keeps counts.
+    commit_clock, commit_interval_s
+        The recorder's commit deadline: its clock, s (None: the wall clock), and the longest time a record waits
+        for its commit (100 ms).  A run on the virtual clock passes the loop's time, so its commits fall on the
+        same records every time (see :mod:`study_app.headless.session_run`).
     """
-    recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions)
+    recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
+                        **({} if commit_clock is None else {"clock": commit_clock}))
     runner = SessionRunner(
         protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
         submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,

@@ -18,6 +18,7 @@ from collections.abc import Sequence
 
 from study_app.argtypes import OneLineParser, one_line
 from study_app.calibrate_cmds import add_calibrate_command
+from study_app.check_cmds import add_check_parser
 from study_app.cli_error import CliError
 from study_app.gui_cmds import add_gui_parser
 from study_app.hardware_cmds import add_check_hardware_parser, add_probe_parser
@@ -65,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for add in (add_sim_parser, add_run_parser, add_report_parsers, add_replay_parsers, add_sessions_parser,
-                add_power_parser, _add_installed_commands, add_probe_parser, add_check_hardware_parser,
+                add_check_parser, add_power_parser, _add_installed_commands, add_probe_parser, add_check_hardware_parser,
                 add_calibrate_command, add_gui_parser):
         add(sub)
     return p

@@ -188,8 +188,13 @@ class EngineSessions:
         def cancel(kind: str, at_ns: int) -> None:
             eng.rig.cancel_fault(kind, eng.loop.t0_ns + at_ns)
 
-        trig = RehearsalTrigger.for_session([plan], opened.code, opened.kind, runner.state.trial_position,
-                                            inject, kill, cancel)
+        from pipeline.sim.faults import latch_delay_s  # the simulated rig only
+
+        wd = eng.loop.watchdog
+        trig = RehearsalTrigger.for_session(
+            [plan], opened.code, opened.kind, runner.state.trial_position, inject, kill, cancel,
+            max_trial_s=opened.protocol.trial.max_trial_s,  # moved to land in its trial, or withdrawn, and said so
+            latch_s=lambda kind: latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s))
         if self.trigger is not None:  # keep what was planned before
             trig._pending.extend(self.trigger._pending)
         else:

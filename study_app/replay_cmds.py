@@ -93,9 +93,13 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
 
 
 # -- shared -------------------------------------------------------------------------------------------------
-def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
-    """(open read-only database, its recorded segments, the session's trials frame), or a one-line error."""
-    from protocol.recording import read_segment, segments_of
+def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any, list[Any], Any]:
+    """(open read-only database, its recorded segments, the session's trials frame), or a one-line error.
+
+    A damaged recording is that one-line error, or with ``partial`` its damaged blocks are left out and
+    named on standard error (a partial result, stated as such).
+    """
+    from protocol.recording import RecordingDamaged, read_segment, segments_of
     from protocol.storage import StorageError, StudyDatabase
 
     try:
@@ -114,7 +118,14 @@ def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
         db.close()
         raise CliError(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
                          "which kept its trials' samples only); replay and plot-session need a recorded session")
-    segments = [read_segment(db.conn, session_id, s[0]) for s in segs]
+    try:
+        segments = [read_segment(db.conn, session_id, s[0], skip_damaged=partial) for s in segs]
+    except RecordingDamaged as exc:
+        db.close()
+        raise CliError(f"--session {session_id} in {db_path}: {exc} (haptic-study check --db {db_path} lists "
+                       "every damaged block)") from None
+    for d in (d for seg in segments for d in seg.damage):
+        print(f"haptic-study: recording damaged: {d.describe()}: left out, the result is partial", file=sys.stderr)
     import pandas as pd
 
     trials = pd.read_sql_query(
@@ -265,7 +276,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
         raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     if not out.resolve().parent.exists():
         raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
-    (code, kind), segments, trials = _session(args.db, args.session)
+    (code, kind), segments, trials = _session(args.db, args.session, partial=True)
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
     raw = np.concatenate([_magnitude(s.columns, "raw") for s in segments])
@@ -275,9 +286,13 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
               for r in trials.itertuples()]
     title = (f"{code}, {kind} session {args.session}: {len(trials)} trials, {t_s[-1] - t_s[0]:.0f} s "
              "(trial number, target, haptics)") if len(t_s) else f"{code}, session {args.session}: no records"
+    gone = [f"{d.t_first_s:.3f}–{d.t_last_s:.3f} s" for s in segments for d in s.damage]
+    if gone:
+        title += f"; PARTIAL: recording damaged at {', '.join(gone)}, left out"
     save_one(session_trace(t_s, raw, comp, rendered, in_trial, title, starts), out)
-    print(f"Wrote {out}")
-    return 0
+    damaged = any(s.damage for s in segments)
+    print(f"Wrote {out}{' (partial: the damaged records are left out)' if damaged else ''}")
+    return 1 if damaged else 0
 
 
 # -- export ---------------------------------------------------------------------------------------------------
@@ -305,7 +320,9 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
     if to_stdout:
         frame.to_csv(sys.stdout, index=False)
-        return 0
+        for line in frame.attrs.get("damage", []):
+            print(f"haptic-study: recording damaged: {line}: left out, the output is partial", file=sys.stderr)
+        return 1 if frame.attrs.get("damage") else 0
     tmp = out.with_name(f".{out.name}.partial")
     try:
         if args.format == "csv":
@@ -317,6 +334,10 @@ def cmd_export(args: argparse.Namespace) -> int:
         if tmp.exists():
             tmp.unlink()
     sessions = frame["session_id"].nunique() if len(frame) else 0
+    damage = frame.attrs.get("damage", [])
+    for line in damage:
+        print(f"haptic-study: recording damaged: {line}: left out of {out}", file=sys.stderr)
     print(f"Wrote {out}: {len(frame):,} records of {sessions} session{'s' if sessions != 1 else ''}, "
-          f"{len(frame.columns)} columns ({', '.join(frame.columns[:6])}, …)")
-    return 0
+          f"{len(frame.columns)} columns ({', '.join(frame.columns[:6])}, …)"
+          f"{'; partial: damaged records left out' if damage else ''}")
+    return 1 if damage else 0

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Final
 
-__all__ = ["BAD_STATUS_WORD", "DEVICE_FAULT_KINDS", "DEFAULT_DURATION_S", "FaultInjector", "SimFault"]
+__all__ = ["BAD_STATUS_WORD", "DEVICE_FAULT_KINDS", "DEFAULT_DURATION_S", "FaultInjector", "SimFault", "latch_delay_s"]
 
 #: The simulated rig's fault kinds (the names used on the command line).
 DEVICE_FAULT_KINDS: Final = ("sensor-stall", "nan-burst", "bad-status", "stale-pose", "device-error")
@@ -33,6 +33,21 @@ DEFAULT_DURATION_S: Final[dict[str, float]] = {
 BAD_STATUS_WORD: Final = 0x80020000
 #: OpenHaptics' ``HD_DEVICE_FAULT`` (hdDefines.h), as the real backend reports it.
 HD_DEVICE_FAULT: Final = 0x0300
+
+
+def latch_delay_s(kind: str, sensor_max_age_s: float, pose_max_age_s: float, tick_s: float = 0.001) -> float:
+    """The longest time from a fault's start to the watchdog's latch, s (0 for ``kill``, which needs no watchdog).
+
+    A stalled sensor is seen once its newest sample is older than ``sensor_max_age_s``, a frozen robot
+    once its pose is older than ``pose_max_age_s``; the others at the next sample or status read.  One
+    tick more for where in a tick the fault begins, one for the loop to act on it.
+    """
+    if kind == "kill":
+        return 0.0
+    if kind not in DEVICE_FAULT_KINDS:
+        raise ValueError(f"fault kind = {kind!r}: allowed values are {', '.join(DEVICE_FAULT_KINDS)} and kill")
+    age = {"sensor-stall": sensor_max_age_s, "stale-pose": pose_max_age_s}.get(kind, 0.0)
+    return age + 2 * tick_s
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,11 +88,20 @@ class FaultInjector:
         self._scheduled.append(fault)
         self._scheduled.sort(key=lambda f: f.at_ns)
 
-    def cancel(self, kind: str, at_ns: int) -> bool:
-        """Withdraw a scheduled fault that has not started; True if there was one."""
+    def cancel(self, kind: str, at_ns: int, rig: Any = None) -> bool:
+        """Withdraw a scheduled fault that has not started, or (given the ``rig``) end one that has; True if there was one.
+
+        Ending a fault early switches its device back at once: the fault of a trial that ended before
+        the watchdog latched it does not go on into the pause or the next trial.
+        """
         for f in self._scheduled:
             if f.kind == kind and f.at_ns == at_ns:
                 self._scheduled.remove(f)
+                return True
+        for entry in self._active:
+            if rig is not None and entry[0].kind == kind and entry[0].at_ns == at_ns:
+                self._active.remove(entry)
+                _switch(rig, kind, False)
                 return True
         return False
 

@@ -203,8 +203,8 @@ class SimRig:
         self.faults.schedule(SimFault(kind, int(at_ns), duration))
 
     def cancel_fault(self, kind: str, at_ns: int) -> bool:
-        """Withdraw a rehearsed fault that has not started (its trial ended first); True if there was one."""
-        return self.faults.cancel(kind, int(at_ns))
+        """Withdraw a rehearsed fault (its trial ended first), or end it if it has begun; True if there was one."""
+        return self.faults.cancel(kind, int(at_ns), self)
 
     def set_driver(self, driver: StylusDriver) -> None:
         """Hand the stylus to another driver (scripted, simulated participant, mouse)."""

@@ -28,16 +28,36 @@ ever rounded.  About 40 bytes a record, where a ``samples`` row took ~150.
 to the open block and, at each commit (at least every 100 ms), writes the
 block as it stands; a full block is written once and the next one opened.  A
 ``kill -9`` loses at most the records since the last commit, as before.
+
+**Integrity.**  Each block carries the CRC-32 of its bytes (schema version 4);
+every reader verifies it, and a damaged block is named in one line -- session,
+time range, trials -- never a decoding traceback (:mod:`protocol.recording.integrity`).
 """
 
 from protocol.recording.codec import (
-    BLOCK_RECORDS, COLUMNS, LIMIT_COLUMNS, POSE_COLUMNS, BlockBuilder, Column, decode_block, decode_columns,
-    encode_block, join_blocks, rows_to_columns,
+    BLOCK_RECORDS,
+    COLUMNS,
+    LIMIT_COLUMNS,
+    POSE_COLUMNS,
+    BlockBuilder,
+    Column,
+    decode_block,
+    decode_columns,
+    encode_block,
+    join_blocks,
+    rows_to_columns,
 )
-from protocol.recording.reading import SegmentData, marked_records, read_segment, read_ticks, segments_of
+from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
+from protocol.recording.reading import (
+    SegmentData,
+    marked_records,
+    read_segment,
+    read_ticks,
+    segments_of,
+)
 
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "SegmentData", "decode_block",
-    "decode_columns", "encode_block", "join_blocks", "marked_records", "read_segment", "read_ticks",
-    "rows_to_columns", "segments_of",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Column",
+    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks",
+    "marked_records", "read_segment", "read_ticks", "recording_damage", "rows_to_columns", "segments_of",
 ]

@@ -19,7 +19,7 @@ import numpy.typing as npt
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "decode_block",
-    "decode_columns", "encode_block", "join_blocks", "rows_to_columns",
+    "decode_columns", "encode_block", "join_blocks", "join_decoded", "rows_to_columns",
 ]
 
 #: Records per block (one second at 1 kHz).
@@ -406,11 +406,16 @@ def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...
 
 def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
     """Decode and concatenate a segment's blocks, in order."""
+    return join_decoded(decode_block(blob) for blob in blobs)
+
+
+def join_decoded(decoded: Iterable[tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]],
+                 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
+    """Concatenate decoded blocks (:func:`decode_block`'s output), in order."""
     cols: list[dict[str, np.ndarray]] = []
     poses: list[dict[str, np.ndarray]] = []
     events: list[tuple[int, str, Any]] = []
-    for blob in blobs:
-        c, p, e = decode_block(blob)
+    for c, p, e in decoded:
         cols.append(c)
         poses.append(p)
         events.extend(e)

@@ -1,19 +1,34 @@
-"""Reading the recording back: a whole segment (for replay and the samples table), or a trial's window of it."""
+"""Reading the recording back: a whole segment (for replay and the samples table), or a trial's window of it.
+
+Every block read is verified first (:mod:`protocol.recording.integrity`): a
+damaged one raises :class:`RecordingDamaged` naming it in one line, or, where
+the caller asks for what is intact (``skip_damaged``), is left out and listed.
+"""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from pipeline.replay import ReplayInputs
 from protocol.clock import SessionClock
-from protocol.recording.codec import decode_columns, join_blocks
+from protocol.recording.codec import COLUMNS, decode_block, decode_columns, join_decoded
+from protocol.recording.integrity import (
+    BlockDamage,
+    BlockRow,
+    RecordingDamaged,
+    block_problem,
+    block_rows,
+    columns_problem,
+    decode_failure,
+    describe_damage,
+)
 
-__all__ = ["SegmentData", "marked_records", "read_segment", "read_ticks", "segments_of"]
+__all__ = ["RecordingDamaged", "SegmentData", "marked_records", "read_segment", "read_ticks", "segments_of"]
 
 
 @dataclass
@@ -31,6 +46,8 @@ class SegmentData:
     columns: dict[str, np.ndarray]
     poses: dict[str, np.ndarray]
     events: list[tuple[int, str, Any]]
+    #: Damaged blocks left out (``read_segment(..., skip_damaged=True)``): its records are those around them.
+    damage: list[BlockDamage] = field(default_factory=list)
 
     @property
     def clock(self) -> SessionClock:
@@ -81,40 +98,100 @@ def segments_of(conn: Any, session_id: int) -> list[tuple[int, float, int]]:
         "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment", (session_id,))]
 
 
-def read_segment(conn: Any, session_id: int, segment: int) -> SegmentData:
-    """One segment in full: every column, the poses, the log and the snapshot."""
+def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: list[str] | None = None,
+             ) -> tuple[list[Any], list[BlockDamage]]:
+    """Each block decoded (:func:`decode_block`; with ``names`` only those columns), its checksum verified first;
+    damaged blocks raise :class:`RecordingDamaged`, or with ``skip_damaged`` are left out and returned."""
+    good: list[Any] = []
+    bad: list[tuple[BlockRow, str]] = []
+    want = [c.name for c in COLUMNS] if names is None else names
+    for r in rows:
+        why = block_problem(r)
+        if not why:
+            try:
+                decoded = decode_block(r.data) if names is None else decode_columns(r.data, names)
+                why = columns_problem(decoded[0] if names is None else decoded, want)
+            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+                why = decode_failure(exc)
+            if not why:
+                good.append(decoded)
+                continue
+        bad.append((r, why))
+    damage = describe_damage(conn, bad)
+    if damage and not skip_damaged:
+        raise RecordingDamaged(damage)
+    return good, damage
+
+
+def read_segment(conn: Any, session_id: int, segment: int, *, skip_damaged: bool = False) -> SegmentData:
+    """One segment in full: every column, the poses, the log and the snapshot.
+
+    Raises
+    ------
+    RecordingDamaged
+        A block of it is damaged (one line naming where); with ``skip_damaged`` the damaged blocks are left
+        out instead and listed in :attr:`SegmentData.damage`.
+    """
     row = conn.execute("SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
                        (session_id, segment)).fetchone()
     if row is None:
         raise KeyError(f"session {session_id} has no recorded segment {segment}")
-    blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
-                                        "ORDER BY block", (session_id, segment))]
-    cols, poses, events = join_blocks(blobs)
-    return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events)
+    good, damage = _decoded(conn, block_rows(conn, "session_id = ? AND segment = ?", (session_id, segment)),
+                            skip_damaged)
+    cols, poses, events = join_decoded(good)
+    return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events,
+                       damage)
 
 
 def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
                names: Iterable[str]) -> dict[str, np.ndarray]:
-    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window)."""
+    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window).
+
+    Raises
+    ------
+    RecordingDamaged
+        A block of the window is damaged (one line naming where).
+    """
     names = list(dict.fromkeys(["tick", *names]))
     parts: list[dict[str, np.ndarray]] = []
-    for b_first, b_last, n, blob in conn.execute(
-            "SELECT first_tick, last_tick, n_records, data FROM session_blocks WHERE session_id = ? AND segment = ? "
-            "AND last_tick >= ? AND first_tick <= ? ORDER BY block", (session_id, segment, first_tick, last_tick)):
-        if b_last - b_first + 1 == n:
-            # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
-            cols = decode_columns(blob, names[1:])
-            lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
-            part = {k: v[lo:hi] for k, v in cols.items()}
-            part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
+    bad: list[tuple[BlockRow, str]] = []
+    for r in block_rows(conn, "session_id = ? AND segment = ? AND last_tick >= ? AND first_tick <= ?",
+                        (session_id, segment, first_tick, last_tick)):
+        why = block_problem(r)
+        if not why:
+            try:
+                part, why = _window_part(r, names, first_tick, last_tick)
+            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+                why = decode_failure(exc)
+        if why:
+            bad.append((r, why))
         else:
-            cols = decode_columns(blob, names)
-            keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
-            part = {k: v[keep] for k, v in cols.items()}
-        parts.append(part)
+            parts.append(part)
+    if bad:
+        raise RecordingDamaged(describe_damage(conn, bad))
     if not parts:
         return {n: np.empty(0) for n in names}
     return {n: np.concatenate([p[n] for p in parts]) for n in names}
+
+
+def _window_part(r: BlockRow, names: list[str], first_tick: int, last_tick: int,
+                 ) -> tuple[dict[str, np.ndarray], str]:
+    """The records ``first_tick`` … ``last_tick`` of one block (``names``, ``"tick"`` first), and what is wrong ("")."""
+    b_first, b_last, n = r.first_tick, r.last_tick, r.n_records
+    if b_last - b_first + 1 == n:
+        # no tick missing in this block (the usual case): its ticks need no decoding, the window is a slice
+        cols = decode_columns(r.data, names[1:])
+        why = columns_problem(cols, names[1:])
+        if not why and len(cols[names[1]]) != n:
+            why = f"decodes to {len(cols[names[1]])} records where its row says {n}"
+        lo, hi = max(first_tick - b_first, 0), min(last_tick, b_last) - b_first + 1
+        part = {k: v[lo:hi] for k, v in cols.items()}
+        part["tick"] = np.arange(b_first + lo, b_first + hi, dtype=np.int64)
+        return part, why
+    cols = decode_columns(r.data, names)
+    why = columns_problem(cols, names)
+    keep = (cols["tick"] >= first_tick) & (cols["tick"] <= last_tick)
+    return ({k: v[keep] for k, v in cols.items()} if not why else {}), why
 
 
 def marked_records(conn: Any, session_id: int, trial_index: int,
@@ -122,12 +199,15 @@ def marked_records(conn: Any, session_id: int, trial_index: int,
     """The records the loop marked with a trial, in the last segment that has any (an interrupted trial's).
 
     Returns ((segment, started_at_s, t0_ns), columns), or None when no record carries the mark.
+
+    Raises
+    ------
+    RecordingDamaged
+        A block of a segment it reads is damaged.
     """
     names = list(dict.fromkeys(["tick", "t_ns", "trial_index", *names]))
     for seg in reversed(segments_of(conn, session_id)):
-        blobs = [b for (b,) in conn.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = ? "
-                                            "ORDER BY block", (session_id, seg[0]))]
-        parts = [decode_columns(b, names) for b in blobs]
+        parts, _ = _decoded(conn, block_rows(conn, "session_id = ? AND segment = ?", (session_id, seg[0])), False, names)
         if not parts:
             continue
         cols = {n: np.concatenate([p[n] for p in parts]) for n in names}

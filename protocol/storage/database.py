@@ -13,13 +13,14 @@ import os
 import re
 import sqlite3
 import zlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from protocol.storage import crashpoint
 from protocol.storage.common import StorageError, now_iso
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
@@ -102,6 +103,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self.backup_path: Path | None = None
         self._last_heartbeat = 0.0
         self._owners: set[str] = set()
+        crash = None if readonly else crashpoint.planned()  # a planned crash (tests): nothing unless HAPTIC_STUDY_CRASH_AT
         created = self._check_path(readonly)
         if readonly:
             self.conn = connect_readonly(self.path, timeout_s=5.0 if busy_timeout_s is None else busy_timeout_s)
@@ -113,6 +115,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 )
             except sqlite3.Error as exc:
                 raise StorageError(f"{self.path}: cannot open the database ({exc})") from None
+            crashpoint.install(self.conn, crash)
         try:
             if (not readonly if check is None else check) and not created:
                 self._quick_check()
@@ -165,13 +168,19 @@ class StudyDatabase(SchemaFile, LeaseHolder):
     def create_session(
         self, *, code: str, kind: str, seed: int, participant_number: int, protocol_json: str, schedule_json: str,
         software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
-        lease_owner: str | None = None, command: str = "", study_owner: str | None = None,
+        lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
+        rules: Callable[[StudyDatabase], Sequence[tuple[str, str]]] | None = None,
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
 
         With ``lease_owner`` the session's lease is taken in the same
         transaction (see :meth:`acquire_lease`), so no other process can write
-        to it from its first moment.
+        to it from its first moment; with ``start_event`` its ``session_start``
+        event (at session time 0) is stored in it too.  ``rules`` (the study's
+        rules, :mod:`protocol.study_rules`) is called inside the same
+        transaction, before the insert, so no other writer can change what it
+        checked: it raises to refuse the session, or returns the events
+        ``(kind, detail)`` (a deviation) to store with it at session time 0.
 
         Raises
         ------
@@ -191,6 +200,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 )
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
+            extra_events = rules(self) if rules is not None else ()
             pid = self.participant_id(code, create=True)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
@@ -204,6 +214,10 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             session_id = int(cur.lastrowid)  # type: ignore[arg-type]
             if lease_owner is not None:
                 self._write_lease(session_scope(session_id), lease_owner, command)
+            if start_event:
+                self.insert_event(session_id, 0.0, "session_start", start_event)
+            for event_kind, detail in extra_events:
+                self.insert_event(session_id, 0.0, event_kind, detail)
         return session_id
 
     def update_schedule(self, session_id: int, schedule_json: str) -> None:

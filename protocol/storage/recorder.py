@@ -1,16 +1,20 @@
 """The recorder: a queue-fed writer with a commit deadline, so neither the loop nor the GUI waits on the disk.
 
 Sample batches are committed at least every 100 ms, each trial record
-atomically when the trial ends.
+atomically when the trial ends.  **A state change is one transaction**: what
+a producer queues inside :meth:`Recorder.atomic` -- a trial's row, the schedule
+with its re-run, the events of its end, a session's end -- is applied and
+committed together or not at all, however the commit deadline falls.
 """
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import sqlite3
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +44,9 @@ class Recorder:
     max_latency_s
         Longest time a queued sample may stay uncommitted (wall clock).
     clock
-        Wall-clock source for the commit deadline (injectable for tests).
+        The commit deadline's clock, s: the wall clock for a live session; a
+        run on the virtual clock passes its own time, so it commits every 100 ms
+        of its records as a live session does (and a crash loses as much).
     short_transactions
         Keep queued writes in memory and execute them in one short
         transaction at each commit, instead of holding a transaction (and the
@@ -65,6 +71,7 @@ class Recorder:
         self._blocks: dict[tuple[int, int], tuple[BlockBuilder, SessionClock]] = {}
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
+        self._local = threading.local()  # per producer thread: the items queued inside atomic(), not yet handed on
         if threaded:
             self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
             self._thread.start()
@@ -99,9 +106,36 @@ class Recorder:
         """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
         self._put(("call", fn))
 
+    @contextlib.contextmanager
+    def atomic(self) -> Iterator[None]:
+        """Everything queued inside the block is one transaction: applied and committed together, or not at all.
+
+        Nestable (the outermost block commits).  The items the calling thread
+        queues are handed to the writer as one when the block ends, so neither
+        the commit deadline nor a crash can fall between them (other threads'
+        items go on as usual).
+        """
+        local = self._local
+        if getattr(local, "group", None) is not None:
+            yield  # inside another block: its end commits
+            return
+        local.group = []
+        try:
+            yield
+        except BaseException:
+            local.group = None  # a state change that failed half-way is not stored at all
+            raise
+        group, local.group = local.group, None
+        if group:
+            self._put(("group", group))
+
     def _put(self, item: tuple[str, Any]) -> None:
         if self.error is not None:
             raise StorageError(f"the recorder stopped after an error: {self.error}")
+        group = getattr(self._local, "group", None)
+        if group is not None and item[0] != "group":
+            group.append(item)
+            return
         if self._thread is None:
             self._handle(item)
             self._maybe_commit()
@@ -114,16 +148,22 @@ class Recorder:
             self._first_pending = self._clock()
         if self.short_transactions:
             self._held.append(item)
-            if item[0] in ("trial", "call"):
+            if _commits(item):
                 self._commit()
             return
         self._apply(item)
 
-    def _apply(self, item: tuple[str, Any]) -> None:
+    def _apply(self, item: tuple[str, Any], commit: bool = True) -> None:
+        """Apply one item in the open transaction; a trial, a call, a segment or a group commits (unless ``commit`` is False)."""
         kind, payload = item
         db = self.db
         db.begin()
-        if kind == "samples":
+        if kind == "group":
+            for sub in payload:
+                self._apply(sub, commit=False)
+            if commit and _commits(item):
+                self._commit()
+        elif kind == "samples":
             db.insert_samples(payload)
         elif kind == "event":
             db.insert_event(*payload)
@@ -137,13 +177,16 @@ class Recorder:
             sid, seg, started_at_s, t0_ns, snapshot, scales = payload
             db.insert_recording(sid, seg, started_at_s, t0_ns, snapshot, scales)
             self._blocks[(sid, seg)] = (BlockBuilder(scales=scales), SessionClock(started_at_s, t0_ns))
-            self._commit()
+            if commit:
+                self._commit()
         elif kind == "trial":
             db.insert_trial(payload.to_row())
-            self._commit()
+            if commit:
+                self._commit()
         elif kind == "call":
             payload(db)
-            self._commit()
+            if commit:
+                self._commit()
 
     def _write_block(self, session_id: int, segment: int, block: tuple[int, int, dict[str, np.ndarray], bytes]) -> None:
         _, clock = self._blocks[(session_id, segment)]
@@ -202,6 +245,8 @@ class Recorder:
 
     def flush(self) -> None:
         """Commit everything queued so far (blocks until the writer has)."""
+        if getattr(self._local, "group", None) is not None:
+            raise RuntimeError("Recorder.flush() inside atomic(): the block's items are not queued before it ends")
         if self._thread is None:
             self._commit()
             return
@@ -227,3 +272,11 @@ class Recorder:
         if self.error is not None:
             raise StorageError(f"the recorder failed: {self.error}")
 
+
+def _commits(item: tuple[str, Any]) -> bool:
+    """Whether an item is committed at once: a trial, a call, a segment, or a group holding one (events and records
+    wait for the deadline)."""
+    kind, payload = item
+    if kind == "group":
+        return any(_commits(sub) for sub in payload)
+    return kind in ("trial", "call", "segment")

@@ -86,6 +86,15 @@ def _check_sqlite_header(p: Path) -> None:
         raise StorageError(f"{p}: not a haptic-study database (not an SQLite file)")
 
 
+def _refuse_special(p: Path) -> None:
+    """Refuse a path that is not a regular file, before SQLite opens it (and leaves a ``-journal`` beside it)."""
+    if p.is_dir():
+        raise StorageError(f"{p}: is a directory, not a database file")
+    if p.exists() and not p.is_file():
+        raise StorageError(f"{p}: is not a regular file (a device, a pipe or a socket); give the path of a study "
+                           "database file; nothing was written")
+
+
 def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) -> sqlite3.Connection:
     """A read-only connection that never creates, migrates or locks the database for writing.
 
@@ -102,8 +111,7 @@ def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) ->
     p = Path(path)
     if not p.exists():
         raise StorageError(f"{p}: no such database")
-    if p.is_dir():
-        raise StorageError(f"{p}: is a directory, not a database file")
+    _refuse_special(p)
     uri = p.resolve().as_uri()
     try:
         conn = sqlite3.connect(f"{uri}?mode=ro", uri=True, check_same_thread=False, timeout=timeout_s)
@@ -152,8 +160,7 @@ class SchemaFile:
     def _check_path(self, readonly: bool) -> bool:
         """Refuse what cannot be opened as asked; create a new file owner-only.  True if it was created."""
         p = self.path
-        if p.exists() and p.is_dir():
-            raise StorageError(f"{p}: is a directory, not a database file")
+        _refuse_special(p)
         if readonly:
             if not p.exists():
                 raise StorageError(f"{p}: no such database")

@@ -15,7 +15,7 @@ from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import schedule_from_json
 from protocol.rehearsal import FaultPlan
 from protocol.session import first_unfinished
-from protocol.session_setup import participant_code, training_protocol, training_schedule
+from protocol.session_setup import participant_code, refuse_damaged_recording, training_protocol, training_schedule
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
 from protocol.study_rules import StudyRuleError, seed_refusal, stored_sessions, training_refusal
 
@@ -79,6 +79,7 @@ def _plan_continue(
                 continue  # practice comes before the experiment or not at all
             if of_kind:
                 info = of_kind[-1]
+                refuse_damaged_recording(db, info.session_id)  # before anything is written (cannot continue it)
                 steps.append(("resume", info.session_id))
                 trials += remaining_trials(db, info)
             else:
@@ -127,6 +128,8 @@ def interrupted_session_of(db: StudyDatabase | None, db_path: str, code: str) ->
             known = None if db is None else db.participant_id(code, create=False)
             what = "no such participant" if known is None else "no interrupted session"
             raise StorageError(f"cannot resume {code} in {db_path}: {what}")
+        assert db is not None
+        refuse_damaged_recording(db, open_[-1].session_id)
         return open_[-1]
     finally:
         if db is not None and db.readonly:
@@ -152,11 +155,14 @@ def plan_study(
     """
     try:
         if continue_study:
-            if db is None:
+            if db is None and not os.path.exists(db_path):
                 raise StorageError(f"cannot continue a study: no study in {db_path}")
-            planned = _plan_continue(db, db_path, participants, seed, protocol)
-            _check_seed(db, db_path, seed)
-            return planned
+            # an empty file (a run killed before it stored a session) holds nothing to continue: all of it is
+            # still to run
+            if db is not None:
+                planned = _plan_continue(db, db_path, participants, seed, protocol)
+                _check_seed(db, db_path, seed)
+                return planned
         if db is not None:
             for n in range(1, participants + 1):
                 code = participant_code(n)

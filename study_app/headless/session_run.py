@@ -15,10 +15,14 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
+from typing import Any
 from dataclasses import dataclass, field
+
+import numpy as np
 
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.loop_messages import LoopEvent
+from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig
@@ -34,12 +38,16 @@ from study_app.headless.plan import Step
 from study_app.session_config import config_record
 
 __all__ = [
-    "BLOCK_TICKS", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
+    "BLOCK_TICKS", "VIRTUAL_COMMIT_S", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
     "run_steps", "set_kill_target",
 ]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
 BLOCK_TICKS = 50
+#: On the virtual clock, records wait at most this long (of their own time) for their commit, s: about the live
+#: 100 ms of wall clock at the virtual clock's speed (each commit rewrites the open block: every 100 ms of
+#: records would double what storing costs).  A session rehearsing a ``kill`` commits every 100 ms, as live.
+VIRTUAL_COMMIT_S = 2.0
 #: Set in a parallel study's worker (:func:`set_kill_target`): the process a planned ``kill`` ends.
 _kill_target_pid: int | None = None
 
@@ -125,7 +133,16 @@ def _drive(
             batch, events[:n_ev] = events[:n_ev], []
             log = [replay_log.popleft() for _ in range(len(replay_log))]
             n = len(res.rows)
-            runner.process(res.rows, batch, log)
+            due = trigger.due_ns() if trigger is not None else None
+            if trigger is not None and due is not None and n and int(res.rows["t_ns"][-1]) >= due:
+                # a planned kill: the runner gets the records up to its moment, then the process dies there
+                k = int(np.searchsorted(res.rows["t_ns"], due, side="right"))
+                runner.process(res.rows[:k], batch, log)
+                if k:
+                    trigger.poll(int(res.rows["t_ns"][k - 1]))
+                runner.process(res.rows[k:])
+            else:
+                runner.process(res.rows, batch, log)
             if trigger is not None and n:
                 trigger.poll(int(res.rows["t_ns"][-1]))
             progress.study_time_s += n * 1e-3
@@ -181,6 +198,7 @@ def run_session(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
         short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
+        **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng)
     try:
@@ -190,6 +208,22 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
+
+
+def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:
+    """The recorder's commit deadline for a session run (:func:`protocol.session_setup.start_runner`'s arguments).
+
+    On the virtual clock it runs on the records' own time, so the commits fall on the same records every
+    time (a crash at the N-th commit is one state: ``tests/protocol/test_crash_points.py``): every
+    :data:`VIRTUAL_COMMIT_S` of records -- about what the wall clock's 100 ms are at the virtual clock's
+    speed, so a run costs what it did -- and every 100 ms of them, as live, in a session where a ``kill`` is
+    rehearsed, so the rehearsal loses what a live crash would.  On the real clock: the wall clock, 100 ms.
+    """
+    if clock != "virtual":
+        return {}
+    kill = any(f.kind == "kill" and f.code == opened.code and f.session == opened.kind for f in faults)
+    return {"commit_clock": lambda: eng.loop.clock.now_ns() * 1e-9,
+            "commit_interval_s": 0.1 if kill else VIRTUAL_COMMIT_S}
 
 
 def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) -> RehearsalTrigger | None:
@@ -211,7 +245,13 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
     def cancel(kind: str, at_ns: int) -> None:
         rig.cancel_fault(kind, loop.t0_ns + at_ns)
 
-    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel)
+    wd = loop.watchdog
+
+    def latch_s(kind: str) -> float:
+        return latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s)
+
+    trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel,
+                                        max_trial_s=opened.protocol.trial.max_trial_s, latch_s=latch_s)
     return trig if trig.plans else None
 
 

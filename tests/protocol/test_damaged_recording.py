@@ -1,0 +1,363 @@
+"""A damaged recording: found by every reader, named in one line, never a traceback; the rest analysed.
+
+A study of three participants (P03's session interrupted by a kill) is damaged
+in ways a lab meets -- one bit flipped in a block on the disk (SQLite's own
+check passes it), a block from before checksums that no longer decodes or whose
+header changed, a changed checksum, a block row disagreeing with its records -- and every command
+that reads the recording is run on it through the real command line: ``check``
+names the damage (exit 1), ``report`` analyses the rest, ``export``,
+``plot-session`` give a partial result stated as such (exit 1), ``replay`` and
+``plot-trial`` of a damaged trial refuse in one line (exit 2), and ``run
+--continue`` / ``--resume`` refuse to append to the damaged session (exit 2).
+No case prints a traceback or changes the database; each writes only what it
+was asked to.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import sqlite3
+import subprocess
+import sys
+import tomllib
+import zlib
+from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from analysis.load import load_study
+from protocol.config import protocol_from_dict
+from protocol.recording import (
+    RecordingDamaged,
+    read_segment,
+    read_ticks,
+    recording_damage,
+)
+from protocol.session_setup import open_resumed_session
+from protocol.storage import StorageError, StudyDatabase
+from study_app.headless import run_study
+
+ROOT = Path(__file__).resolve().parents[2]
+_SCRIPT = Path(sys.executable).with_name("haptic-study")
+CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
+PROTOCOL = """name = "damage"
+[[targets]]
+label = "GENTLE"
+force_n = 0.6
+[design]
+modes = ["on", "off"]
+trials_per_cell = 2
+[trial]
+max_trial_s = 1.5
+hold_s = 0.3
+pause_s = 0.3
+[training]
+enabled = false
+"""
+#: P03's session: interrupted during its 3rd trial (resumable), and the one damaged.
+DAMAGED_SESSION = 3
+DAMAGED_BLOCK = 2  # 2.0–2.999 s: trial 2 (and the pause before it)
+
+
+def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
+    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=300, cwd=cwd, env=env)
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """P01 and P02 complete, P03 killed during its 3rd trial; everything in the one file."""
+    d = tmp_path_factory.mktemp("damage")
+    (d / "p.toml").write_text(PROTOCOL, encoding="utf-8")
+    db = d / "study.db"
+    run_study(str(db), participants=2, seed=4, protocol=protocol_from_dict(tomllib.loads(PROTOCOL)), jobs=1)
+    killed = _cli(["run", "--participants", "3", "--seed", "4", "--db", str(db), "--protocol", str(d / "p.toml"),
+                   "--continue", "--inject-fault", "kill@P03:3+0.4"], d)
+    assert killed.returncode == -9, killed.stderr
+    c = sqlite3.connect(db)
+    try:
+        c.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        assert c.execute("SELECT status FROM sessions WHERE session_id = ?", (DAMAGED_SESSION,)).fetchone() == ("running",)
+    finally:
+        c.close()
+    return db
+
+
+# -- the damage -------------------------------------------------------------------------------------------------
+def _blob(db: Path, session: int, block: int) -> bytes:
+    c = sqlite3.connect(db)
+    try:
+        return bytes(c.execute("SELECT data FROM session_blocks WHERE session_id = ? AND segment = 0 AND block = ?",
+                               (session, block)).fetchone()[0])
+    finally:
+        c.close()
+
+
+def flip_a_bit(db: Path, session: int = DAMAGED_SESSION, block: int = DAMAGED_BLOCK) -> None:
+    """One bit of a block flipped in the file itself, as a failing disk or memory would (SQLite does not notice)."""
+    blob = _blob(db, session, block)
+    raw = bytearray(db.read_bytes())
+    at = raw.find(blob[len(blob) // 2 : len(blob) // 2 + 48])
+    assert at > 0 and raw.find(blob[len(blob) // 2 : len(blob) // 2 + 48], at + 1) < 0
+    raw[at + 7] ^= 0x10
+    db.write_bytes(bytes(raw))
+
+
+def _sql(db: Path, sql: str, *args: object) -> None:
+    c = sqlite3.connect(db)
+    try:
+        c.execute(sql, args)
+        c.commit()
+        c.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    finally:
+        c.close()
+
+
+def undecodable_without_checksum(db: Path) -> None:
+    """A block from before checksums (crc32 NULL) whose bytes no longer decode."""
+    blob = _blob(db, DAMAGED_SESSION, DAMAGED_BLOCK)
+    _sql(db, "UPDATE session_blocks SET crc32 = NULL, data = ? WHERE session_id = ? AND segment = 0 AND block = ?",
+         blob[:40] + bytes(b ^ 0x5A for b in blob[40:]), DAMAGED_SESSION, DAMAGED_BLOCK)
+
+
+def header_changed_without_checksum(db: Path) -> None:
+    """A block from before checksums whose header lost a column's name: it decodes, to the wrong columns."""
+    blob = _blob(db, DAMAGED_SESSION, DAMAGED_BLOCK)
+    assert blob.count(b'"raw_fx"') == 1
+    _sql(db, "UPDATE session_blocks SET crc32 = NULL, data = ? WHERE session_id = ? AND segment = 0 AND block = ?",
+         blob.replace(b'"raw_fx"', b'"raw_fz"'), DAMAGED_SESSION, DAMAGED_BLOCK)
+
+
+def checksum_changed(db: Path) -> None:
+    """The block intact, its checksum changed: which of the two is wrong cannot be told, so the block is damaged."""
+    _sql(db, "UPDATE session_blocks SET crc32 = crc32 + 1 WHERE session_id = ? AND segment = 0 AND block = ?",
+         DAMAGED_SESSION, DAMAGED_BLOCK)
+
+
+def row_disagrees(db: Path) -> None:
+    """The block's bytes intact, its row's record count changed: what ``check`` decodes in full finds."""
+    _sql(db, "UPDATE session_blocks SET n_records = n_records - 1 WHERE session_id = ? AND segment = 0 AND block = ?",
+         DAMAGED_SESSION, DAMAGED_BLOCK)
+
+
+DAMAGE: dict[str, Callable[[Path], None]] = {
+    "bit-flip": flip_a_bit, "undecodable-pre-v4": undecodable_without_checksum, "checksum-changed": checksum_changed,
+    "header-changed-pre-v4": header_changed_without_checksum, "row-disagrees": row_disagrees,
+}
+
+
+# -- the cases --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Case:
+    damage: str
+    args: tuple[str, ...]
+    code: int
+    says: str  # in the one line on stderr naming it
+    writes: str = ""  # the file the command was asked to write
+
+    @property
+    def id(self) -> str:
+        return f"{self.damage}:{'-'.join(a for a in self.args[:2] if not a.startswith('--'))}"
+
+
+_S = str(DAMAGED_SESSION)
+COMMANDS = [  # (args, exit status, what the line says, file written)
+    (("check", "--db", "study.db"), 1, "problems found", ""),
+    (("export", "samples", "--db", "study.db", "--out", "x.csv"), 1, "left out of", "x.csv"),
+    (("plot-session", "--db", "study.db", "--session", _S, "--out", "s.png"), 1, "the result is partial", "s.png"),
+    (("replay", "--db", "study.db", "--session", _S), 2, "recording damaged: session 3", ""),
+    (("plot-trial", "--db", "study.db", "--session", _S, "--trial", "2", "--out", "t.png"), 2,
+     "trial 2 of session 3: recording damaged", ""),
+    (("run", "--participants", "3", "--seed", "4", "--db", "study.db", "--protocol", "p.toml", "--continue"), 2,
+     "cannot be resumed: its recording is damaged", ""),
+    (("run", "--db", "study.db", "--resume", "P03"), 2, "cannot be resumed: its recording is damaged", ""),
+]
+CASES = [Case("bit-flip", *c) for c in COMMANDS]
+CASES += [Case("undecodable-pre-v4", *COMMANDS[i]) for i in (0, 1, 3, 5)]
+CASES += [Case("checksum-changed", *COMMANDS[i]) for i in (0, 3)]
+CASES += [Case("header-changed-pre-v4", *COMMANDS[i]) for i in (1, 2)]
+CASES += [Case("row-disagrees", *COMMANDS[0])]
+
+
+@dataclass(frozen=True)
+class Outcome:
+    code: int
+    stdout: str
+    stderr: str
+    before: dict[str, str]
+    after: dict[str, str]
+
+
+def _snapshot(d: Path) -> dict[str, str]:
+    return {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in d.iterdir() if p.is_file()}
+
+
+def _run(case: Case, d: Path, study: Path) -> Outcome:
+    shutil.copy(study, d / "study.db")
+    (d / "p.toml").write_text(PROTOCOL, encoding="utf-8")
+    DAMAGE[case.damage](d / "study.db")
+    before = _snapshot(d)
+    r = _cli(list(case.args), d)
+    return Outcome(r.returncode, r.stdout, r.stderr, before, _snapshot(d))
+
+
+@pytest.fixture(scope="module")
+def outcomes(study: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, Outcome]]:
+    base = tmp_path_factory.mktemp("cases")
+    folders = {c.id: base / f"case{i:02d}" for i, c in enumerate(CASES)}
+    for f in folders.values():
+        f.mkdir()
+    with ThreadPoolExecutor(max_workers=3) as pool:
+        futures = {c.id: pool.submit(_run, c, folders[c.id], study) for c in CASES}
+        yield {k: f.result() for k, f in futures.items()}
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_every_reader_names_the_damage_in_one_line_and_changes_nothing(case: Case, outcomes: dict[str, Outcome]) -> None:
+    out = outcomes[case.id]
+    assert "Traceback" not in out.stdout + out.stderr, out.stderr
+    assert out.code == case.code, (out.code, out.stderr)
+    damage_lines = [ln for ln in out.stderr.splitlines() if case.says in ln]
+    assert len(damage_lines) == 1, out.stderr
+    if case.args[0] != "check":
+        assert "session 3, recorded run 0, 2.000–2.999 s (block 2)" in damage_lines[0]
+        assert "touches trial" in damage_lines[0]
+    assert out.after.get("study.db") == out.before["study.db"]  # nothing stored was touched
+    new = set(out.after) - set(out.before)
+    assert new <= {"study.db-wal", "study.db-shm", *([case.writes] if case.writes else [])}, new
+
+
+def test_one_flipped_bit_passes_sqlites_check_and_is_found_by_check(study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    flip_a_bit(db)
+    c = sqlite3.connect(db)
+    assert c.execute("PRAGMA quick_check").fetchall() == [("ok",)]  # what the product relied on before
+    c.close()
+    r = _cli(["check", "--db", str(db), "--json"], tmp_path)
+    assert r.returncode == 1, r.stderr
+    found = json.loads(r.stdout)
+    assert found["integrity"] == ["ok"]
+    assert [d["line"] for d in found["damage"]] == [
+        ("session 3, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes changed since they "
+         "were written); touches trial 2")]
+    assert found["trials_not_in_recording"] and "trial 2 of session 3" in found["trials_not_in_recording"][0]
+    clean = _cli(["check", "--db", str(study)], tmp_path)
+    assert clean.returncode == 0 and "No problem found." in clean.stdout, clean.stdout + clean.stderr
+    assert "2 of 3 experiment sessions" in clean.stdout  # P03's is interrupted: a note, not a problem
+    assert "P03, running): " in clean.stdout and "designed trials done" in clean.stdout
+
+
+def test_the_report_leaves_out_the_trials_a_damaged_block_touches_and_analyses_the_rest(
+        study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    flip_a_bit(db, session=1, block=3)  # P01's completed session, 3.0–3.999 s
+    c = sqlite3.connect(db)
+    touched = c.execute("SELECT trial_index FROM trials WHERE session_id = 1 AND first_tick <= 3999 "
+                        "AND last_tick >= 3000 AND outcome != 'aborted' ORDER BY trial_index").fetchall()
+    c.close()
+    assert touched
+    data = load_study([db])
+    hit = data.trials[data.trials["excluded"] == "recording damaged"]
+    assert [(int(s), int(i)) for s, i in zip(hit["session_id"], hit["trial_index"])] == [(1, i) for (i,) in touched]
+    assert (hit["damage"] == data.damage[0]).all() and len(data.damage) == 1
+    assert data.damage[0].startswith(f"{db}: session 1, recorded run 0, 3.000–3.999 s (block 3): checksum mismatch")
+    assert f"touches trials {', '.join(str(i + 1) for (i,) in touched)}" in data.damage[0]
+    r = _cli(["report", "--db", str(db), "--out", str(tmp_path / "rep")], tmp_path)
+    assert r.returncode == 0, r.stderr
+    rows = (tmp_path / "rep" / "trials.csv").read_text().splitlines()
+    analysed = {(int(ln.split(",")[2]), int(ln.split(",")[3])) for ln in rows[1:]}  # session, trial number
+    assert not analysed & {(1, i + 1) for (i,) in touched}  # the touched trials are left out ...
+    assert len(analysed) == len(data.included) and {(2, 1), (1, 1)} <= analysed  # ... and only they
+
+
+def test_readers_raise_one_error_naming_the_damage_or_read_around_it(study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    flip_a_bit(db)
+    c = sqlite3.connect(db)
+    try:
+        with pytest.raises(RecordingDamaged, match=r"2\.000–2\.999 s \(block 2\).*touches trial 2"):
+            read_segment(c, DAMAGED_SESSION, 0)
+        with pytest.raises(RecordingDamaged):
+            read_ticks(c, DAMAGED_SESSION, 0, 2500, 2600, ["force_n"])
+        read_ticks(c, DAMAGED_SESSION, 0, 100, 900, ["force_n"])  # a window of intact blocks reads as ever
+        whole = read_segment(c, DAMAGED_SESSION, 0, skip_damaged=True)
+        assert [d.first_block for d in whole.damage] == [DAMAGED_BLOCK]
+        assert not ((whole.columns["tick"] >= 2000) & (whole.columns["tick"] < 3000)).any()
+        assert recording_damage(c, 1) == [] and len(recording_damage(c)) == 1
+    finally:
+        c.close()
+
+
+def test_a_block_from_before_checksums_is_not_verifiable_and_not_damaged_until_it_fails_to_decode(
+        study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    _sql(db, "UPDATE session_blocks SET crc32 = NULL WHERE session_id = 1")
+    c = sqlite3.connect(db)
+    assert recording_damage(c, columns=None) == []
+    c.close()
+    r = _cli(["check", "--db", str(db)], tmp_path)
+    assert r.returncode == 0 and "without one (written before version 4) decoded" in r.stdout, r.stdout
+    assert "cannot be detected" in r.stdout
+    undecodable_without_checksum(db)
+    c = sqlite3.connect(db)
+    (d,) = recording_damage(c, columns=("force_n",))
+    c.close()
+    assert d.why.startswith("cannot be decoded (")
+
+
+def test_the_engines_resume_refuses_a_damaged_session_and_changes_nothing(study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    flip_a_bit(db)
+    def content() -> list[object]:
+        c = sqlite3.connect(db)
+        try:
+            return [c.execute(f"SELECT * FROM {t} ORDER BY 1, 2").fetchall()
+                    for t in ("sessions", "trials", "events", "leases", "recordings", "session_blocks")]
+        finally:
+            c.close()
+
+    before = content()
+    w = StudyDatabase(db)  # as the GUI's engine opens it
+    try:
+        with pytest.raises(StorageError, match="cannot be resumed: its recording is damaged: session 3"):
+            open_resumed_session(w, DAMAGED_SESSION, lease_owner="gui-test")
+    finally:
+        w.close()
+    assert content() == before  # not even the lease was taken
+    # and the engine the GUI drives answers its Resume with that line
+    from study_app import messages as m
+    from study_app.engine_host import StudyEngine
+    from study_app.engine_setup import HostConfig
+
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e.start()
+    try:
+        e.handle(m.ResumeSession(str(db), DAMAGED_SESSION))
+    finally:
+        e.close("test over")
+        e.release_ring()
+    (refused,) = [ev for ev in events if isinstance(ev, m.CommandRefused)]
+    assert "cannot be resumed: its recording is damaged: session 3" in refused.message and "\n" not in refused.message
+    assert not [ev for ev in events if isinstance(ev, m.SessionStarted)]
+    assert content() == before
+
+
+def test_checksums_are_the_blocks_own(study: Path) -> None:
+    c = sqlite3.connect(study)
+    try:
+        rows = c.execute("SELECT data, crc32 FROM session_blocks").fetchall()
+    finally:
+        c.close()
+    assert rows and all(zlib.crc32(d) == crc for d, crc in rows)

@@ -1,0 +1,149 @@
+"""Fault rehearsal does what it says: a planned kill loses what a live crash loses and leaves the cut trial stored
+as interrupted; a fault planned for trial k lands in trial k, or is said to have been moved or withdrawn; and a
+refused database path leaves nothing behind.
+
+Headless on the virtual clock, one participant of a tiny protocol at a time.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from pipeline.sim.faults import FaultInjector, SimFault, latch_delay_s
+from protocol.clock import SessionClock
+from protocol.config import ProtocolConfig, protocol_from_dict
+from protocol.records import TrialRecord
+from protocol.rehearsal import FaultPlan, RehearsalTrigger
+from protocol.trial import PhaseChanged, TrialPhase
+from study_app.headless import run_study
+
+ROOT = Path(__file__).resolve().parents[2]
+_SCRIPT = Path(sys.executable).with_name("haptic-study")
+CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
+
+
+def protocol_text(max_trial_s: float = 2.0, pause_s: float = 0.5) -> str:
+    return f"""name = "rehearsal"
+[[targets]]
+label = "GENTLE"
+force_n = 0.6
+[design]
+modes = ["on", "off"]
+trials_per_cell = 2
+[trial]
+max_trial_s = {max_trial_s}
+hold_s = 0.5
+pause_s = {pause_s}
+[training]
+enabled = false
+"""
+
+
+def protocol(max_trial_s: float = 2.0, pause_s: float = 0.5) -> ProtocolConfig:
+    return protocol_from_dict(tomllib.loads(protocol_text(max_trial_s, pause_s)), "rehearsal protocol")
+
+
+def rows(db: Path, sql: str, *args: object) -> list[tuple]:
+    c = sqlite3.connect(db)
+    try:
+        return c.execute(sql, args).fetchall()
+    finally:
+        c.close()
+
+
+def cli(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
+    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=timeout, cwd=cwd, env=env)
+
+
+@pytest.mark.parametrize("seconds", [0.5, 2.0])
+def test_a_planned_kill_loses_at_most_100_ms_and_its_trial_is_stored_as_interrupted(tmp_path: Path,
+                                                                                     seconds: float) -> None:
+    """2.0: planned at the cap itself, the kill is moved to the trial's last millisecond, so it still cuts the trial."""
+    (tmp_path / "p.toml").write_text(protocol_text(), encoding="utf-8")
+    db = tmp_path / "study.db"
+    killed = cli(["run", "--participants", "1", "--seed", "2", "--db", str(db), "--protocol", "p.toml",
+                  "--inject-fault", f"kill@P01:2+{seconds:g}"], tmp_path)
+    assert killed.returncode == -9, killed.stderr
+    (cue_s,) = rows(db, "SELECT t_s FROM events WHERE kind = 'phase' AND detail = 'trial 2 (index 1): cued -> active'")[0]
+    kill_s = cue_s + min(seconds, 2.0 - 0.001)
+    (last_s,) = rows(db, "SELECT MAX(t_last_s) FROM session_blocks WHERE segment = 0")[0]
+    assert kill_s - 0.100 - 1e-9 <= last_s <= kill_s + 1e-9  # at most one commit interval of records lost
+    assert rows(db, "SELECT trial_index FROM trials") == [(0,)]
+    run_study(str(db), participants=1, seed=2, protocol=protocol(), continue_study=True)
+    ((outcome, cause, started, ended, n),) = rows(
+        db, "SELECT outcome, abort_cause, started_at_s, ended_at_s, n_samples FROM trials WHERE trial_index = 1")
+    assert (outcome, cause, started) == ("aborted", "interrupted", cue_s)
+    assert ended == pytest.approx(last_s, abs=1e-9) and n == round((last_s - cue_s) * 1000) + 1
+    assert rows(db, "SELECT COUNT(*) FROM trials WHERE outcome != 'aborted'") == [(4,)]  # every cell full
+
+
+@pytest.mark.parametrize("kind,pause_s", [("sensor-stall", 0.5), ("sensor-stall", 0.0), ("stale-pose", 0.0)])
+def test_a_fault_planned_at_the_cap_is_moved_into_its_trial_and_said_so(tmp_path: Path, kind: str,
+                                                                         pause_s: float) -> None:
+    """Planned at the trial's cap, the watchdog would latch it after the trial: it is moved so that it latches
+    inside, aborts that trial (not the next) and the report says where it went."""
+    db = tmp_path / "study.db"
+    progress = run_study(str(db), participants=1, seed=1, protocol=protocol(3.0, pause_s), jobs=1,
+                         faults=[FaultPlan(kind, "P01", 1, 3.0)])
+    outcomes = rows(db, "SELECT trial_index, outcome, abort_cause FROM trials ORDER BY trial_index")
+    assert outcomes[0][1:] == ("aborted", "fault")
+    assert all(o[1] != "aborted" for o in outcomes[1:]), outcomes  # the next trial is not hit
+    delay = latch_delay_s(kind, 0.005, 0.050)
+    (note,) = progress.rehearsals
+    assert note == (f"{kind}@P01:1+3: injected during trial 1, moved to +{3.0 - delay - 0.001:.3f} s: a {kind} is "
+                    f"latched up to {delay * 1e3:g} ms after it begins and trial 1 ends 3 s after its cue at the latest")
+
+
+class _Rig:
+    """What the fault switches touch, for the injector alone."""
+
+    class _Sensor:
+        stalled = False
+
+    def __init__(self) -> None:
+        self.sensor = self._Sensor()
+
+
+def test_a_fault_whose_trial_ends_before_the_watchdog_latches_it_is_ended_at_once() -> None:
+    injector, rig = FaultInjector(), _Rig()
+    calls: list[tuple[str, int]] = []
+
+    def cancel(kind: str, at_ns: int) -> bool:
+        calls.append((kind, at_ns))
+        return injector.cancel(kind, at_ns, rig)
+
+    trig = RehearsalTrigger.for_session([FaultPlan("sensor-stall", "P01", 1, 1.0)], "P01", "experiment", 0,
+                                        lambda kind, at: injector.schedule(SimFault(kind, at, 0.02)),
+                                        lambda: pytest.fail("no kill planned"), cancel, max_trial_s=2.0,
+                                        latch_s=lambda kind: 0.007)
+    trig.on_runner_event(PhaseChanged(5_000_000, 0, TrialPhase.CUED, TrialPhase.ACTIVE))
+    injector.apply(rig, 1_006_000_000)  # the stall has begun ...
+    assert rig.sensor.stalled
+    # ... and the trial succeeds 2 ms later, before the watchdog can see it
+    rec = TrialRecord(session_id=1, trial_index=0, target_label="GENTLE", target_force_n=0.6, haptic_mode="on",
+                      outcome="success", clock=SessionClock(0.0, 0), cue_ns=5_000_000, end_ns=1_007_000_000)
+    trig.on_runner_event(rec)
+    assert calls == [("sensor-stall", 1_005_000_000)] and not rig.sensor.stalled and not injector.busy
+    assert trig.report == [("sensor-stall@P01:1+1: begun 1 s into trial 1, which ended (success) 2 ms later, before "
+                            "the watchdog latched it: ended at once, the trial was not aborted")]
+
+
+def test_a_device_path_is_refused_and_nothing_is_left_beside_it(tmp_path: Path) -> None:
+    fifo = tmp_path / "pipe.db"
+    os.mkfifo(fifo)
+    for args in (["run", "--participants", "1", "--db", str(fifo)], ["check", "--db", str(fifo)]):
+        r = cli(args, tmp_path, timeout=60)  # (before: SQLite opened the pipe and waited for a writer)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1 and "is not a regular file" in r.stderr, r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["pipe.db"]
+    if os.access("/dev", os.W_OK):  # root: SQLite could create /dev/null-journal
+        r = cli(["run", "--participants", "1", "--db", "/dev/null"], tmp_path)
+        assert r.returncode == 2 and "is not a regular file" in r.stderr
+        assert not Path("/dev/null-journal").exists()
