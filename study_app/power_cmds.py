@@ -18,6 +18,8 @@ _N_MAX = 10_000
 #: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
 DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
 _POOL_DEFAULT = 100
+#: Resampled participants (studies × n) from which on ``power`` shows a progress bar: ~10 s of work and more.
+_BAR_DRAWS = 5_000_000
 #: The marker of a power output folder (analysis.outdir): the files power wrote there, with their SHA-256.
 POWER_MARKER = ".haptic-study-power"
 
@@ -127,6 +129,13 @@ def cmd_power(args: argparse.Namespace) -> int:
             bars.append(ProgressBar(total, "reading samples", "samples", decimals=0))
         bars[-1].update(done)
 
+    def resampling(done: int, total: int) -> None:
+        if total < _BAR_DRAWS:  # a few seconds: no bar
+            return
+        if not bars or bars[-1].unit != "participants drawn":
+            bars.append(ProgressBar(total, "resampling studies", "participants drawn", decimals=0))
+        bars[-1].update(done)
+
     def simulating(p) -> None:  # type: ignore[no-untyped-def]
         if not bars:
             bars.append(ProgressBar(p.study_trials_total, "simulating pool", "trials", decimals=0))
@@ -161,11 +170,13 @@ def cmd_power(args: argparse.Namespace) -> int:
             bar.close()
         t0 = time.perf_counter()
         result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
-                                zero_method=args.zero_method)
+                                zero_method=args.zero_method, progress=resampling)
+        if bars and bars[-1].unit == "participants drawn":
+            bars[-1].close()
         wall = time.perf_counter() - t0
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
-    except AnalysisError as exc:  # PowerError, PoolError included
-        raise CliError(str(exc)) from None
+    except AnalysisError as exc:  # PowerError, PoolError, OutputError included
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))

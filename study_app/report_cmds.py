@@ -95,7 +95,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             power=args.power,
         )
     except AnalysisError as exc:
-        raise CliError(str(exc)) from None
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     finally:
         if bar is not None:
             bar.close()
@@ -127,13 +127,13 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
 
     from analysis.figures import pipeline_trace, save_one
     from analysis.load import AnalysisError, load_study, read_trial_samples
+    from analysis.outdir import check_output_file, write_output_file
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
-    if not out.resolve().parent.is_dir():
-        raise CliError(f"--out = {args.out!r}: the folder {out.resolve().parent} does not exist")
     try:
+        check_output_file(out, command="plot-trial")  # before the work: an existing file is never replaced
         study = load_study([args.db])
         trials = study.trials
         in_session = trials[trials["session_id"] == args.session]
@@ -154,6 +154,9 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
              f"{row['target_force_n']:g} N, haptics {str(row['haptic_mode']).upper()}, {row['outcome']}")
     fig = pipeline_trace(samples, target_force_n=float(row["target_force_n"]),
                          tolerance_fraction=float(row["tolerance_fraction"]), title=title)
-    save_one(fig, out)
+    try:
+        write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
+    except AnalysisError as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     print(f"wrote {out}")
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sqlite3
 import sys
 
 from study_app.argtypes import SEED, add_command, positive_seconds, whole_number
@@ -149,6 +150,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
         raise CliError(str(exc)) from None
+    except (OSError, sqlite3.Error):  # the machine failed (a full disk): one line from the CLI's error path
+        if bar is not None:
+            bar.close()
+        raise
     for note in progress.notes:
         print(f"haptic-study: {note}", file=sys.stderr)
     if args.continue_study and progress.study_trials_total == 0:
