@@ -70,6 +70,7 @@ from analysis.outfs import (
 )
 
 __all__ = [
+    "REPORT_MARKER",
     "OutputError",
     "check_output_file",
     "check_output_folder",
@@ -80,6 +81,9 @@ __all__ = [
     "write_output_folder",
 ]
 
+#: The marker of ``report``'s output folder (here, so that the command line checks ``--out`` before it imports
+#: the analysis).
+REPORT_MARKER = ".haptic-study-report"
 #: Decides whether a file (its path relative to the folder, with ``/``) belongs to what the command keeps.
 Keep = Callable[[str], bool]
 #: OSErrors of the file system itself: while outputs are written they are the command's failure to write.

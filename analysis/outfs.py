@@ -21,7 +21,7 @@ import stat
 from collections.abc import Iterator
 from pathlib import Path
 
-from analysis.load import AnalysisError
+from analysis.errors import AnalysisError
 from analysis.oserrors import kind_of, os_error_line
 
 __all__ = [

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from analysis.load import AnalysisError
+from analysis.errors import AnalysisError
 from analysis.outdir import ensure_output_folder, sha256_file
 from analysis.outfs import open_folder, os_error_line, write_bytes_at
 

@@ -45,8 +45,6 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
 
 def cmd_gui(args: argparse.Namespace) -> int:
     """Run ``haptic-study gui``: checks first (one line, exit 2), then Qt is loaded and the window opens."""
-    from study_app.engine_setup import HostConfig
-
     if args.rig == "real" and args.hardware is None:
         raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
     if args.hardware is not None and not os.path.isfile(args.hardware):
@@ -74,6 +72,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
     if args.screenshot is not None:
         return _screenshots(args)
     # Qt is imported here only: the other subcommands never load it
+    from study_app.engine_setup import HostConfig
     from study_app.gui.app import run_gui
 
     host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
@@ -88,7 +87,6 @@ def _screenshots(args: argparse.Namespace) -> int:
     """``gui --screenshot DIR``: the tour's PNGs, written under the output policy (:mod:`analysis.outdir`)."""
     from analysis.load import AnalysisError
     from analysis.outdir import check_output_folder, write_output_folder
-    from study_app.engine_setup import HostConfig
 
     folder: dict[str, Any] = {"command": "gui --screenshot", "marker": SCREENSHOT_MARKER, "force": args.force,
                               "option": "--screenshot",
@@ -97,6 +95,7 @@ def _screenshots(args: argparse.Namespace) -> int:
 
     def tour(tmp: Path) -> None:
         nonlocal status
+        from study_app.engine_setup import HostConfig
         from study_app.gui.app import run_gui  # Qt is imported here only
 
         # a rehearsal on the virtual clock at 4x real time: a few trials in seconds

@@ -109,20 +109,27 @@ def cmd_power(args: argparse.Namespace) -> int:
     if args.out is None:
         raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
 
-    from analysis.load import AnalysisError
-    from analysis.metrics import MetricOptions
+    from analysis.errors import AnalysisError
     from analysis.outdir import check_output_folder, write_output_folder
+    from analysis.power_pool import is_pool_file
+
+    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
+                  keep=is_pool_file)
+    try:
+        check_output_folder(args.out, **folder)  # before any work (and before the analysis is imported)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
+
+    from analysis.metrics import MetricOptions
     from analysis.paired_pool import load_pool
     from analysis.power import FAMILY_LABELS, estimate_power, summary_text
     from analysis.power_outputs import write_power
-    from analysis.power_pool import is_pool_file, simulated_pool
+    from analysis.power_pool import simulated_pool
     from study_app.headless import run_study
     from study_app.progress import ProgressBar
 
     options = MetricOptions(args.error_window, args.tct)
     bars: list[ProgressBar] = []
-    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
-                  keep=is_pool_file)
 
     def reading(done: float, total: float) -> None:
         if not bars or bars[-1].unit != "samples":
@@ -143,7 +150,6 @@ def cmd_power(args: argparse.Namespace) -> int:
         bars[-1].update(p.study_trials_done)
 
     try:
-        check_output_folder(args.out, **folder)  # before any work: a refused folder costs nothing
         participants = None
         if args.simulated:
             t0 = time.perf_counter()

@@ -14,13 +14,14 @@ import dataclasses
 import sys
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX
 from study_app.argtypes import add_command, real_number, whole_number
 from study_app.cli_error import CliError
+
+if TYPE_CHECKING:  # numpy is imported where it is used: every haptic-study command imports this module
+    import numpy as np
 
 __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
@@ -127,6 +128,8 @@ def _session(db_path: str, session_id: int) -> tuple[Any, list[Any], Any]:
 
 
 def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
+    import numpy as np
+
     return np.sqrt(cols[f"{prefix}_fx"] ** 2 + cols[f"{prefix}_fy"] ** 2 + cols[f"{prefix}_fz"] ** 2)
 
 
@@ -136,7 +139,7 @@ REPLAY_MARKER = ".haptic-study-replay"
 
 def _output_policy(call: Any) -> Any:
     """Run an output-policy call (analysis.outdir); its refusal or failure is one line (exit 2, or 1 mid-write)."""
-    from analysis.load import AnalysisError
+    from analysis.errors import AnalysisError
 
     try:
         return call()
@@ -171,6 +174,8 @@ def cmd_replay(args: argparse.Namespace) -> int:
 
 def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[Any]) -> tuple[list[Any], list[bool]]:
     """Replay every recorded run with its recorded settings and say whether it matched (outputs, exact per run)."""
+    import numpy as np
+
     from pipeline.replay import replay
 
     n = sum(len(s.columns["tick"]) for s in segments)
@@ -195,6 +200,8 @@ def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[An
 
 def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     """Print (and return) the filter's trade on this recording: noise at rest against delay in contact."""
+    import numpy as np
+
     from analysis.replay_compare import filter_trade
     from protocol.metrics import CONTACT_THRESHOLD_N
     from protocol.trial import PHASE_CODES, TrialPhase
@@ -221,6 +228,8 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, fl
 
     Prints the table and returns ``write(folder)``, which writes it and the figure (for ``--out``).
     """
+    import numpy as np
+
     from analysis.replay_compare import trial_differences
     from pipeline.framework import framework_config_from_dict
     from pipeline.replay import replay
@@ -267,15 +276,19 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, fl
 # -- plot-session ---------------------------------------------------------------------------------------------
 def cmd_plot_session(args: argparse.Namespace) -> int:
     """``haptic-study plot-session``."""
-    from analysis.figures import save_one
+    import numpy as np
+
     from analysis.outdir import check_output_file, write_output_file
-    from analysis.session_figures import session_trace
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
         raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     _output_policy(lambda: check_output_file(out, command="plot-session"))  # before the work
     (code, kind), segments, trials = _session(args.db, args.session)
+    # matplotlib: once the session is known to be there
+    from analysis.figures import save_one
+    from analysis.session_figures import session_trace
+
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
     raw = np.concatenate([_magnitude(s.columns, "raw") for s in segments])
@@ -294,7 +307,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
 # -- export ---------------------------------------------------------------------------------------------------
 def cmd_export(args: argparse.Namespace) -> int:
     """``haptic-study export samples``."""
-    from analysis.load import AnalysisError, samples_frame
+    from analysis.errors import AnalysisError
     from analysis.outdir import check_output_file, write_output_file
 
     to_stdout = args.out == "-"
@@ -308,7 +321,10 @@ def cmd_export(args: argparse.Namespace) -> int:
             import pyarrow  # noqa: F401
         except ImportError:
             raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
-    print("export: reading the records ...", file=sys.stderr, flush=True)
+    if sys.stderr.isatty():  # a person waits: say what takes the time (a log gets only the result, or one error)
+        print("export: reading the records ...", file=sys.stderr, flush=True)
+    from analysis.load import samples_frame
+
     try:
         frame = samples_frame(args.db, args.session)
     except AnalysisError as exc:

@@ -114,6 +114,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         for f in args.inject_fault:
             if f.code != args.resume:
                 raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    _refuse_a_full_disk(args.db)
     bar: ProgressBar | None = None
     try:
         if args.resume is None:
@@ -165,13 +166,32 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Free space below which ``run`` does not start: SQLite's journal and the first recorded blocks need about this.
+_RUN_MIN_FREE_BYTES = 1 << 20
+
+
+def _refuse_a_full_disk(db: str) -> None:
+    """A database on a (nearly) full disk is refused before the study starts (a fuller one mid-run: cli's one line)."""
+    from analysis.outfs import free_bytes, read_only
+
+    folder = os.path.dirname(os.path.abspath(db))
+    if not os.path.isdir(folder) or read_only(folder):
+        return  # the database's own checks say what is wrong with the folder
+    free = free_bytes(folder)
+    if free is not None and free < _RUN_MIN_FREE_BYTES:
+        raise CliError(f"--db {db}: no space left on the device ({free / 1e6:.2f} MB free, a study needs at least "
+                       f"{_RUN_MIN_FREE_BYTES / 1e6:.0f} MB to start); free some space or use a database on another "
+                       "disk (nothing was written)")
+
+
 def cmd_sessions(args: argparse.Namespace) -> int:
     """Run ``haptic-study sessions``; errors raise :class:`CliError`."""
     from protocol.storage import StorageError
     from study_app.session_list import format_sessions, list_sessions
 
     if not os.path.isfile(args.db):
-        raise CliError(f"--db = {args.db!r}: no such file")
+        raise CliError(f"--db = {args.db!r}: " + ("is a folder, not a database file" if os.path.isdir(args.db)
+                                                  else "no such file"))
     try:
         sessions = list_sessions(args.db)
     except StorageError as exc:
