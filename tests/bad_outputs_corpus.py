@@ -8,8 +8,19 @@ writing), every file that was there unchanged (bytes, mode, link target), and no
 
 from __future__ import annotations
 
-from bad_inputs_corpus import (EXAMPLE_HARDWARE, GOOD, TINY_PROTOCOL, Case, Mount, _text, fifo, good_db, link,
-                               marked_folder, user_folder)
+from bad_inputs_corpus import (
+    EXAMPLE_HARDWARE,
+    GOOD,
+    TINY_PROTOCOL,
+    Case,
+    Mount,
+    _text,
+    fifo,
+    good_db,
+    link,
+    marked_folder,
+    user_folder,
+)
 
 REPORT = ".haptic-study-report"
 POWER = ".haptic-study-power"

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import pytest
 from bad_inputs_corpus import CASES as INPUT_CASES
-from bad_inputs_corpus import ROOT, TINY_PROTOCOL, Case, Mount
+from bad_inputs_corpus import ROOT, TINY_PROTOCOL, Case
 from bad_outputs_corpus import CASES as OUTPUT_CASES
 from mounts import can_mount, mount_tmpfs, unmount
 
@@ -211,3 +211,35 @@ def test_bad_input_ends_in_one_line_with_its_status_and_touches_nothing(case: Ca
         assert out.after.get(name) == what, f"{name} was changed or removed"
     new = set(out.after) - set(out.before)
     assert all(n.endswith(SQLITE_COMPANIONS) and n[: n.rindex("-")] in out.before for n in new), sorted(new)
+
+
+@pytest.mark.skipif(bool(_MOUNT), reason=_MOUNT or "mounting works")
+def test_run_on_a_disk_that_fills_ends_in_one_line_and_continue_completes_the_study(tmp_path: Path) -> None:
+    """The disk fills mid-study: one line, exit 1, the database intact; with room again, --continue completes it."""
+    from mounts import tmpfs
+
+    protocol = tmp_path / "tiny.toml"
+    protocol.write_text(TINY_PROTOCOL, encoding="utf-8")
+    with tmpfs(tmp_path / "disk", 1100) as disk:
+        run = [*CLI, "run", "--participants", "8", "--seed", "0", "--jobs", "1", "--protocol", str(protocol),
+               "--db", str(disk / "study.db")]
+        r = subprocess.run(run, capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+        line = r.stderr.splitlines()[-1]
+        assert line == (f"haptic-study: error: --db {disk / 'study.db'}: SQLite says 'database or disk is full': no "
+                        "space left on the device; free some space or write to another disk; then complete the study "
+                        "with the same command and --continue (what was committed is kept)")
+        c = sqlite3.connect(f"file:{disk / 'study.db'}?mode=ro", uri=True)
+        assert c.execute("PRAGMA quick_check").fetchone()[0] == "ok"
+        done = c.execute("SELECT COUNT(*) FROM sessions WHERE status = 'completed'").fetchone()[0]
+        c.close()
+        assert 0 < done < 8  # part of the study was stored, and is intact
+        subprocess.run(["mount", "-o", "remount,size=8m", str(disk)], check=True, capture_output=True)
+        r = subprocess.run([*run, "--continue"], capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert r.returncode == 0, r.stderr
+        c = sqlite3.connect(f"file:{disk / 'study.db'}?mode=ro", uri=True)
+        rows = c.execute("SELECT p.code, s.status, (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id "
+                         "AND t.outcome != 'aborted') FROM sessions s JOIN participants p USING (participant_id) "
+                         "ORDER BY p.code").fetchall()
+        c.close()
+    assert rows == [(f"P{k:02d}", "completed", 1) for k in range(1, 9)]

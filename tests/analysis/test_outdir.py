@@ -1,15 +1,28 @@
-"""The output-folder policy of ``report --out`` and ``power --out`` (analysis.outdir)."""
+"""The one output policy of every command that writes files (analysis.outdir): folders, single files, links,
+permissions, and the file system failing."""
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import json
 import os
+import stat
+from contextlib import contextmanager
 
 import pytest
+from mounts import can_mount, tmpfs
 
 from analysis import outdir
 from analysis.load import AnalysisError
-from analysis.outdir import check_output_folder, sha256_file, write_output_folder
+from analysis.outdir import (
+    check_output_file,
+    check_output_folder,
+    sha256_file,
+    write_output_file,
+    write_output_folder,
+)
+from analysis.outfs import OutputError
 
 MARKER = ".haptic-study-test"
 
@@ -180,14 +193,6 @@ def test_a_file_not_a_folder_and_a_missing_parent_are_refused(tmp_path):
 
 
 # -- the policy of issue 22: links, permissions, single files, the file system failing -----------------------------
-from contextlib import contextmanager  # noqa: E402
-import errno  # noqa: E402
-import hashlib  # noqa: E402
-import stat  # noqa: E402
-
-from analysis.outdir import check_output_file, write_output_file  # noqa: E402
-from analysis.outfs import OutputError  # noqa: E402
-from mounts import can_mount, tmpfs  # noqa: E402
 
 
 @contextmanager
@@ -392,3 +397,26 @@ def test_a_disk_that_fills_while_writing_leaves_the_old_output(tmp_path):
         assert err.value.status == 1
         assert _snapshot(out) == before
         _no_temporaries(out, MARKER)
+
+
+@pytest.mark.parametrize(("code", "says"), [
+    (errno.EIO, "input/output error (a failing disk, a removed drive or a lost network share); check the device, "
+                "then write to another disk"),
+    (errno.EROFS, "the file system is read-only; write to a folder on a writable disk"),
+    (errno.EACCES, "permission denied; choose a folder you may write to"),
+])
+def test_a_failing_disk_while_the_outputs_are_made_durable_is_one_line(tmp_path, monkeypatch, code, says):
+    from analysis import outfs
+
+    def fail(fd):
+        raise OSError(code, os.strerror(code))
+
+    monkeypatch.setattr(outfs.os, "fsync", fail)
+    with pytest.raises(OutputError) as err:
+        write_output_file(tmp_path / "x.csv", _png("data"), command="export")
+    assert err.value.status == 1
+    assert str(err.value) == f"--out {tmp_path / 'x.csv'}: cannot write it: {says} (nothing was written)"
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(OutputError, match=says.split(";")[0].replace("(", r"\(").replace(")", r"\)")):
+        _write(tmp_path / "o", {"a.csv": "1"})
+    assert list(tmp_path.iterdir()) == []
