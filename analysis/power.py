@@ -389,8 +389,11 @@ def estimate_power(
             f"least {MIN_PILOT} are needed to resample planned studies from (with fewer, every resampled study "
             "repeats the same few people)")
     R = int(resamples)
-    from analysis.resources import memory_problem
+    from analysis.resources import available_memory_bytes, memory_problem
 
+    have = available_memory_bytes()
+    if have is not None:  # a chunk takes at most a quarter of what is free (the numbers do not depend on it)
+        chunk_bytes = min(chunk_bytes, max(have // 4, BYTES_PER_ELEMENT * max(ns)))
     need = memory_needed(ns, R, P, chunk_bytes)
     problem = memory_problem(need, f"power: resampling studies of up to {max(ns)} participants",
                              "ask for smaller --n values (memory grows with n; --resamples costs time only)")

@@ -81,11 +81,20 @@ def add_sessions_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
     ss.set_defaults(handler=cmd_sessions)
 
 
+#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a margin.
+_SIM_BYTES_PER_TICK = 160
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run ``haptic-study sim``."""
+    from analysis.resources import memory_problem
     from study_app.progress import ProgressBar
     from study_app.sim_summary import run_scripted_sim
 
+    problem = memory_problem(args.seconds * 1000 * _SIM_BYTES_PER_TICK, f"sim --seconds {args.seconds:g}",
+                             "simulate fewer seconds (the summary keeps every tick)")
+    if problem is not None:
+        raise CliError(problem)
     bar = None if args.json else ProgressBar(args.seconds, "simulating", "s")
     summary = run_scripted_sim(
         seconds=args.seconds, seed=args.seed, clock=args.clock, haptics_on=args.haptics == "on",

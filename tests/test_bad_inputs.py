@@ -45,6 +45,8 @@ _SCRIPT = Path(sys.executable).with_name("haptic-study")
 #: The command as users run it: the installed console script (``python -m study_app.cli`` where there is none).
 CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
 CASES: list[Case] = [*INPUT_CASES, *OUTPUT_CASES]
+#: A case that has not answered by then hung (the slowest take a few seconds on a loaded 2-core machine).
+CASE_TIMEOUT_S = 180
 #: One worker runs the whole corpus (its module fixture runs every case once; split across workers it would run twice).
 pytestmark = pytest.mark.xdist_group("bad-inputs")
 _MOUNT = can_mount()
@@ -136,10 +138,14 @@ def _run_case(case: Case, d: Path, good: Path) -> Outcome:
                if not k.startswith("HAPTIC_STUDY") and k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         args = [a.replace("{d}", str(d)) for a in case.args]
-        proc = subprocess.run(
-            [*CLI, *args], capture_output=True, text=True, timeout=180, cwd=ROOT, env=env,
-            **({"user": user[0], "group": user[1], "extra_groups": []} if user else {}),
-        )
+        try:
+            proc = subprocess.run(
+                [*CLI, *args], capture_output=True, text=True, timeout=CASE_TIMEOUT_S, cwd=ROOT, env=env,
+                **({"user": user[0], "group": user[1], "extra_groups": []} if user else {}),
+            )
+        except subprocess.TimeoutExpired:  # a hang (a FIFO read for ever) fails its own case, not the corpus
+            return Outcome(-9, "", f"Traceback: no answer within {CASE_TIMEOUT_S} s (it hung)", before,
+                           _snapshot(d), str(d))
         return Outcome(proc.returncode, proc.stdout, proc.stderr, before, _snapshot(d), str(d))
     finally:
         for where in mounted:

@@ -391,6 +391,6 @@ def test_a_request_the_machine_cannot_hold_is_refused_in_one_line(monkeypatch):
     pool = pool_from_trials(_trials(8))
     with pytest.raises(PowerError) as err:
         estimate_power(pool, (6, 10_000), resamples=10)
-    assert str(err.value) == ("power: resampling studies of up to 10000 participants needs about 25.2 MiB of memory; this "
+    assert str(err.value) == ("power: resampling studies of up to 10000 participants needs about 17.8 MiB of memory; this "
                               "machine has 8.0 MiB available; ask for smaller --n values (memory grows with n; "
                               "--resamples costs time only)")
