@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 import pandas as pd
 
+from analysis.errors import AnalysisError
 from protocol.recording import RecordingDamaged, read_ticks, recording_damage
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
@@ -46,10 +47,6 @@ __all__ = [
 
 #: ``progress(done, total)`` callback, called while samples are read.
 Progress = Callable[[float, float], None]
-
-
-class AnalysisError(ValueError):
-    """The input cannot be analysed; the message says which file and why."""
 
 
 @dataclass(frozen=True, slots=True)

@@ -49,7 +49,7 @@ same seed gives the same numbers, whatever other n are asked for.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -239,37 +239,79 @@ def _pool_notes(pool: PairedPool, prepared: list[list[PreparedMetric]], directio
     return notes
 
 
-def _scope_rows(metrics: Sequence[str], prepared: list[PreparedMetric], direction: np.ndarray, idx: np.ndarray,
-                zero_method: str, alpha: float, scope: str, n: int) -> list[dict[str, object]]:
-    """power.csv's rejection counts for one scope and study size: one row per metric, then the family rows."""
-    R = idx.shape[0]
-    pvals = np.empty((R, len(metrics)))
-    agree = np.empty((R, len(metrics)), dtype=bool)
-    per_metric = []
-    for m in range(len(metrics)):
-        p, method, n_pairs, side = study_tests(prepared[m], idx, zero_method)
-        pvals[:, m] = p
-        agree[:, m] = (side == direction[m]) & (direction[m] != 0)
-        per_metric.append((method, n_pairs))
-    with np.errstate(invalid="ignore"):
-        reject_two = pvals < alpha
-        reject_holm = (holm(pvals, axis=1) < alpha) & agree
-    reject = reject_two & agree
-    rows: list[dict[str, object]] = []
-    for m, metric in enumerate(metrics):
-        method, n_pairs = per_metric[m]
-        counts = np.bincount(method, minlength=len(METHOD_NAMES))
-        rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[m])], n=n,
-                         rejections=int(reject[:, m].sum()), rejections_two_sided=int(reject_two[:, m].sum()),
-                         rejections_holm=int(reject_holm[:, m].sum()), mean_pairs=float(n_pairs.mean()),
-                         not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
-                         approx=int(counts[3])))
-    for fam, hits in ((FAMILY_ALL, reject_holm.all(axis=1)), (FAMILY_ANY, reject_holm.any(axis=1))):
-        k = int(hits.sum())
-        rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
-                         rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
-                         not_computable=0, exact=0, permutation=0, approx=0))
-    return rows
+@dataclass
+class _Counts:
+    """Rejection counts of one scope and study size, summed over the chunks of resampled studies."""
+
+    metrics: int
+    reject: np.ndarray = field(init=False)
+    two_sided: np.ndarray = field(init=False)
+    holm: np.ndarray = field(init=False)
+    pairs: np.ndarray = field(init=False)
+    methods: np.ndarray = field(init=False)
+    family: np.ndarray = field(init=False)  # all four (Holm), at least one (Holm)
+
+    def __post_init__(self) -> None:
+        m = self.metrics
+        self.reject, self.two_sided, self.holm, self.pairs = (np.zeros(m, dtype=np.int64) for _ in range(4))
+        self.methods = np.zeros((m, len(METHOD_NAMES)), dtype=np.int64)
+        self.family = np.zeros(2, dtype=np.int64)
+
+    def add(self, prepared: list[PreparedMetric], direction: np.ndarray, idx: np.ndarray, zero_method: str,
+            alpha: float) -> None:
+        """Test the studies of ``idx`` (rows) and add their counts."""
+        R = idx.shape[0]
+        pvals = np.empty((R, self.metrics))
+        agree = np.empty((R, self.metrics), dtype=bool)
+        for m in range(self.metrics):
+            p, method, n_pairs, side = study_tests(prepared[m], idx, zero_method)
+            pvals[:, m] = p
+            agree[:, m] = (side == direction[m]) & (direction[m] != 0)
+            self.methods[m] += np.bincount(method, minlength=len(METHOD_NAMES))
+            self.pairs[m] += int(n_pairs.sum())
+        with np.errstate(invalid="ignore"):
+            reject_two = pvals < alpha
+            reject_holm = (holm(pvals, axis=1) < alpha) & agree
+        self.reject += (reject_two & agree).sum(axis=0)
+        self.two_sided += reject_two.sum(axis=0)
+        self.holm += reject_holm.sum(axis=0)
+        self.family += (int(reject_holm.all(axis=1).sum()), int(reject_holm.any(axis=1).sum()))
+
+    def rows(self, metrics: Sequence[str], direction: np.ndarray, scope: str, n: int,
+             R: int) -> list[dict[str, object]]:
+        """power.csv's rejection counts: one row per metric, then the family rows."""
+        rows: list[dict[str, object]] = []
+        for m, metric in enumerate(metrics):
+            counts = self.methods[m]
+            rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[m])], n=n,
+                             rejections=int(self.reject[m]), rejections_two_sided=int(self.two_sided[m]),
+                             rejections_holm=int(self.holm[m]), mean_pairs=float(self.pairs[m]) / R,
+                             not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
+                             approx=int(counts[3])))
+        for fam, k in ((FAMILY_ALL, int(self.family[0])), (FAMILY_ANY, int(self.family[1]))):
+            rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
+                             rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
+                             not_computable=0, exact=0, permutation=0, approx=0))
+        return rows
+
+
+#: Peak bytes per (study × participant) element while one chunk of resampled studies is tested: the index
+#: (8) and the ranking of :func:`analysis.resampled_wilcoxon.study_tests` (measured 62–66), with a margin.
+BYTES_PER_ELEMENT = 96
+#: Resampled studies are tested in chunks of at most this many bytes (so ``--resamples`` costs time, not memory).
+CHUNK_BYTES = 192 << 20
+
+
+def chunk_rows(n: int, budget_bytes: int = CHUNK_BYTES) -> int:
+    """Resampled studies of ``n`` participants tested at once: as many as ``budget_bytes`` holds (at least one)."""
+    return max(1, int(budget_bytes) // (BYTES_PER_ELEMENT * max(1, int(n))))
+
+
+def memory_needed(n_values: Sequence[int], resamples: int, pool_size: int, budget_bytes: int = CHUNK_BYTES) -> int:
+    """Peak bytes :func:`estimate_power` allocates for this request (its largest chunk, and the pool's tables)."""
+    n_max = max(int(n) for n in n_values)
+    rows = min(int(resamples), chunk_rows(n_max, budget_bytes))
+    return rows * n_max * BYTES_PER_ELEMENT + 64 * int(pool_size) + (16 << 20)
 
 
 def _power_frame(rows: list[dict[str, object]], R: int, alpha: float, interval_level: float) -> pd.DataFrame:
@@ -298,8 +340,15 @@ def estimate_power(
     seed: int = 0,
     zero_method: str = "wilcox",
     interval_level: float = 0.95,
+    progress: Callable[[int, int], None] | None = None,
+    chunk_bytes: int = CHUNK_BYTES,
 ) -> PowerResult:
     """Power of the report's ON-vs-OFF tests for studies of each size in ``n_values``.
+
+    The resampled studies are tested in chunks of at most ``chunk_bytes``, so
+    memory does not grow with ``resamples`` and the result is the same, bit
+    for bit, whatever the chunk size (the chunks are drawn from one generator
+    in order).
 
     Parameters
     ----------
@@ -317,6 +366,10 @@ def estimate_power(
         Wilcoxon zero handling, as the report's ``--zero-method``.
     interval_level
         Level of the Clopper–Pearson Monte Carlo intervals.
+    progress
+        ``progress(participants drawn, participants to draw)`` after each chunk.
+    chunk_bytes
+        Memory one chunk of resampled studies may take (the default suits any machine; tests make it small).
 
     Returns
     -------
@@ -325,7 +378,8 @@ def estimate_power(
     Raises
     ------
     PowerError
-        Fewer than :data:`MIN_PILOT` participants in the pool, or a malformed request.
+        Fewer than :data:`MIN_PILOT` participants in the pool, a malformed request, or one whose
+        memory exceeds what the machine has available (:func:`memory_needed`).
     """
     ns = _check_request(n_values, resamples, alpha, zero_method)
     P = pool.n_participants
@@ -335,16 +389,37 @@ def estimate_power(
             f"least {MIN_PILOT} are needed to resample planned studies from (with fewer, every resampled study "
             "repeats the same few people)")
     R = int(resamples)
+    from analysis.resources import available_memory_bytes, memory_problem
+
+    have = available_memory_bytes()
+    if have is not None:  # a chunk takes at most a quarter of what is free (the numbers do not depend on it)
+        chunk_bytes = min(chunk_bytes, max(have // 4, BYTES_PER_ELEMENT * max(ns)))
+    need = memory_needed(ns, R, P, chunk_bytes)
+    problem = memory_problem(need, f"power: resampling studies of up to {max(ns)} participants",
+                             "ask for smaller --n values (memory grows with n; --resamples costs time only)")
+    if problem is not None:
+        raise PowerError(problem)
     prepared = [[prepare_metric(pool.off[s, m], pool.on[s, m]) for m in range(len(pool.metrics))]
                 for s in range(len(pool.scopes))]
     # the pool's own direction of effect, per scope and metric: the side its own test statistic lies on
     whole = np.arange(P)[None, :]
     direction = np.array([[int(study_tests(pm, whole, zero_method)[3][0]) for pm in row] for row in prepared])
     rows: list[dict[str, object]] = []
+    total, done = R * sum(ns), 0
     for n in ns:
-        idx = resample_indices(seed, n, R, P)
+        # the studies of size n, drawn in chunks from one generator: the same draws as one call would make
+        rng = np.random.default_rng([int(seed), int(n)])
+        counts = [_Counts(len(pool.metrics)) for _ in pool.scopes]
+        step = chunk_rows(n, chunk_bytes)
+        for start in range(0, R, step):
+            idx = rng.integers(0, P, size=(min(step, R - start), n))
+            for s in range(len(pool.scopes)):
+                counts[s].add(prepared[s], direction[s], idx, zero_method, float(alpha))
+            done += idx.size
+            if progress is not None:
+                progress(done, total)
         for s, scope in enumerate(pool.scopes):
-            rows.extend(_scope_rows(pool.metrics, prepared[s], direction[s], idx, zero_method, alpha, scope, n))
+            rows.extend(counts[s].rows(pool.metrics, direction[s], scope, n, R))
     frame = _power_frame(rows, R, float(alpha), interval_level)
     frame["source"] = pool.source
     return PowerResult(frame, _pool_notes(pool, prepared, direction, ns, float(alpha)), pool.source, P, R,

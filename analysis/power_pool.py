@@ -48,8 +48,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from analysis.load import AnalysisError
-from analysis.outdir import sha256_file
+from analysis.errors import AnalysisError
+from analysis.outdir import ensure_output_folder, sha256_file
+from analysis.outfs import open_folder, os_error_line, write_bytes_at
 
 __all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",
            "simulated_pool"]
@@ -123,10 +124,16 @@ def _read_record(db: Path) -> dict[str, Any] | None:
 
 
 def _write_record(db: Path, record: dict[str, Any]) -> None:
+    """Write the pool's record beside it atomically (the output policy's write: fsynced, never through a link)."""
     path = _record_path(db)
-    tmp = path.with_name(path.name + ".new")
-    tmp.write_text(json.dumps(record, indent=1, sort_keys=True), encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        fd = open_folder(str(path.parent), follow=True)
+        try:
+            write_bytes_at(fd, path.name, json.dumps(record, indent=1, sort_keys=True).encode("utf-8"))
+        finally:
+            os.close(fd)
+    except OSError as exc:
+        raise PoolError(os_error_line(exc, path, "cannot write the pool's record", written=True)) from None
 
 
 def _mismatch(record: dict[str, Any], wanted: dict[str, Any], *, size: bool = True) -> str | None:
@@ -289,7 +296,7 @@ def simulated_pool(
     resuming = db.exists()
     _check_disk(out if out.exists() else out.resolve().parent,
                 participants - (_simulated_codes(db) if resuming else 0))
-    out.mkdir(exist_ok=True)
+    ensure_output_folder(out)  # owner-only, as the policy makes every output folder
     resumed = sorted(set((record or {}).get("resumed_participants", [])) | set(_cut_participants(db) if resuming
                                                                                else []))
     _write_record(db, {**wanted, "complete": False, "resumed_participants": resumed})  # first: an interrupted

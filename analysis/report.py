@@ -35,7 +35,7 @@ from analysis import figures, report_tables
 from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant, speed_accuracy
 from analysis.load import Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
-from analysis.outdir import check_output_folder, write_output_folder
+from analysis.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, power_html
 from analysis.stats import WilcoxonResult
@@ -172,8 +172,6 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     return pngs, [(title, pngs[name]) for name, title in titles]
 
 
-#: The file report leaves in every folder it writes, listing what it wrote with its SHA-256 (:mod:`analysis.outdir`).
-REPORT_MARKER = ".haptic-study-report"
 
 
 def build_report(

@@ -20,10 +20,11 @@ from typing import Any
 
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR, FrameworkConfig
+from pipeline.framework import FrameworkConfig
 from pipeline.frames import Vec3
 from pipeline.tomlfields import Fields, read_toml
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
+from pipeline.watchdog import WatchdogConfig
 
 __all__ = [
     "HardwareConfig",
@@ -159,6 +160,10 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     tool = f.string("calibration.tool", cal.get("tool", "instrument"),
                     what="a non-empty name of the mounted instrument (its calibration is kept under it)")
     teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
+    if teleop is not None and robot.frequency_hz > 0 and teleop.pose_max_age_s <= 1.0 / robot.frequency_hz:
+        raise f.fail("teleop.pose_max_age_s", teleop.pose_max_age_s,
+                     f"must be longer than the robot's pose period, 1 / robot.frequency_hz = "
+                     f"{1e3 / robot.frequency_hz:g} ms (teleoperation would stop the robot at every pose)")
     return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
 
 
@@ -175,6 +180,10 @@ def _sensor(f: Fields, v: Any) -> SensorSettings:
         raise f.fail(missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
     from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
 
+    if cpf is not None:  # counts per *unit*: a unit taken by default would scale every force by a guess
+        for unit, counts in (("force_unit", "counts_per_force"), ("torque_unit", "counts_per_torque")):
+            f.required(s, "sensor", unit, f"required with sensor.{counts}: the unit the box's counts are per (as its "
+                                          "web page shows it, e.g. N or lbf); a wrong one scales every force")
     fu, tu = s.get("force_unit", "N"), s.get("torque_unit", "Nm")
     for fld, unit, check in (("sensor.force_unit", fu, force_unit_to_n), ("sensor.torque_unit", tu, torque_unit_to_nm)):
         try:
@@ -202,6 +211,13 @@ def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
     freq = r.get("frequency_hz", 125.0)
     if not (type(freq) is int and freq == -1):
         freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
+    pose_limit_s = WatchdogConfig().pose_max_age_s
+    if type(freq) is not int or freq != -1:
+        if 1.0 / freq >= pose_limit_s:
+            raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
+                         f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
+                         f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
+                         f"is {1e3 / freq:g} ms old when the next arrives")
     mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
     if mode == "teleop" and not has_teleop:
         raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
@@ -240,24 +256,46 @@ def _jaw(f: Fields, v: Any) -> JawSettings:
     )
 
 
+#: What the two rotations of ``[frames]`` are, for the message when one is missing (no default: a guess sets a
+#: force's direction).
+_ROTATIONS = {
+    "rot_tip_sensor": "the sensor's mounting on the instrument (e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]] for a sensor "
+                      "coaxial with it)",
+    "rot_haptic_base": "how the experimenter faces the robot (e.g. [[1, 0, 0], [0, 0, 1], [0, -1, 0]] facing it along "
+                       "base +y)",
+}
+
+
 def _framework(f: Fields, top: dict[str, Any]) -> FrameworkConfig:
-    """``[frames]`` and ``[framework]``: Algorithm 1's rotations and scaling."""
+    """``[frames]`` and ``[framework]``: Algorithm 1's rotations and scaling.
+
+    What sets a rendered force's direction (both rotations) or size (f_max,
+    f_scale) has no default on a real rig: a file without it is refused, so no
+    identity or textbook value is ever taken silently.
+    """
     fr = f.section(top, "frames", {"rot_tip_sensor", "rot_haptic_base"})
-    rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else DEFAULT_ROT_TIP_SENSOR
-    rot_hb = (f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr
-              else DEFAULT_ROT_HAPTIC_BASE)
     fw = f.section(top, "framework", {"f_max_n", "f_scale_n", "filter_window"})
     # the safety clamp is min(f_max, the device's reported peak): an f_max above the Touch's peak would be a
     # setting the device silently ignores (and the paper's scaling law would no longer hold)
     peak_n = TouchSpec().peak_force_n
+    # what the file gives is checked first, then what it lacks
+    # (f_max from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there)
+    f_max = (f.number("framework.f_max_n", fw["f_max_n"], lo=1e-6, hi=peak_n, lo_open=False,
+                      note="(N; the 3D Systems Touch's peak force)") if "f_max_n" in fw else None)
+    f_scale = f.number("framework.f_scale_n", fw["f_scale_n"], lo=0.0, hi=1000.0) if "f_scale_n" in fw else None
+    rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else None
+    rot_hb = f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr else None
+    window = f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,
+                       what="a whole number of samples")
+    for key, what in (("f_max_n", "the largest force rendered (the paper's 3.0 N)"),
+                      ("f_scale_n", "the tanh scaling's force scale (the paper's 7.0 N)")):
+        f.required(fw, "framework", key, f"required on a real rig: {what}; it sets the size of every rendered force")
+    for key, what in _ROTATIONS.items():
+        f.required(fr, "frames", key, f"required on a real rig: {what}; it sets the direction of every rendered "
+                                      "force (see hardware.example.toml)")
+    assert f_max is not None and f_scale is not None and rot_ts is not None and rot_hb is not None
     return FrameworkConfig(
-        # from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there
-        f_max_n=f.number("framework.f_max_n", fw.get("f_max_n", 3.0), lo=1e-6, hi=peak_n, lo_open=False,
-                         note="(N; the 3D Systems Touch's peak force)"),
-        f_scale_n=f.number("framework.f_scale_n", fw.get("f_scale_n", 7.0), lo=0.0, hi=1000.0),
-        filter_window=f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,
-                                what="a whole number of samples"),
-        rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
+        f_max_n=f_max, f_scale_n=f_scale, filter_window=window, rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
     )
 
 

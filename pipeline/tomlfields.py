@@ -21,8 +21,10 @@ from __future__ import annotations
 import ipaddress
 import json
 import math
+import os
 import re
 import reprlib
+import stat
 import tomllib
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -66,7 +68,17 @@ def parse_toml(text: str, source: str, error: type[ValueError]) -> dict[str, Any
 
 
 def read_toml(path: Path, error: type[ValueError], what: str, missing_hint: str = "") -> dict[str, Any]:
-    """Read and parse the TOML file ``path`` (a ``what``, e.g. "protocol file"); failures raise ``error``."""
+    """Read and parse the TOML file ``path`` (a ``what``, e.g. "protocol file"); failures raise ``error``.
+
+    A FIFO, socket or device is refused before it is opened (reading a FIFO would wait for a writer for ever).
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        mode = 0
+    if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        kind = "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a socket" if stat.S_ISSOCK(mode) else "a device"
+        raise error(f"{path}: is {kind}, not a {what}; give the path of a regular file")
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:

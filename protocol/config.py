@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from pipeline.safety import SafetyConfig
 from pipeline.tomlfields import Fields, parse_toml, read_toml
 
 __all__ = [
@@ -175,8 +176,6 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         pause_s=f.number("trial.pause_s", tr.get("pause_s", 2.0), lo=0.0, hi=600.0, lo_open=False),
         cue_s=f.number("trial.cue_s", tr.get("cue_s", 1.0), lo=0.0, hi=60.0, lo_open=False),
     )
-    if timing.hold_s >= timing.max_trial_s:
-        raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
 
     trn = f.section(top, "training", {"enabled", "seconds_per_target_per_mode", "live_force_aid", "required"})
     training = TrainingConfig(
@@ -187,12 +186,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
         required=_training_required(f, trn),
     )
-    # The training session runs, stores and on resume re-reads this protocol with its trials capped at
-    # seconds_per_target_per_mode (the headless study runner): a cap no hold fits in would never be resumable.
-    if not timing.hold_s < training.seconds_per_target_per_mode:
-        raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
-                     f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "
-                     f"and must leave time to complete a hold)")
+    _check_together(f, timing, training, tuple(modes))
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1,
@@ -207,6 +201,44 @@ def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
         raise f.fail("training.required", required, "must be false when training.enabled = false (an experiment "
                      "cannot require a training session the protocol does not have)")
     return required
+
+
+def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...]) -> None:
+    """Values valid alone but not together: one line naming both fields.
+
+    * ``trial.hold_s`` < ``trial.max_trial_s``, and with haptics ON in the
+      design the trial must also hold the feedback's ramp-in: an ON trial
+      shorter than ramp-in + hold could only succeed (or be counted) at a gain
+      below 1 -- feedback weaker than designed.
+    * ``trial.pause_s`` ≥ the feedback's ramp-out when haptics ON is in the
+      design: otherwise the next trial is cued while the last one's force is
+      still fading out (an OFF trial would start with feedback).
+    * ``training.seconds_per_target_per_mode``: the training session runs,
+      stores and on resume re-reads this protocol with its trials capped at
+      this value (the headless study runner), so it must fit a hold (and the
+      ramp-in) too.
+
+    The ramps are the safety stage's own (:class:`pipeline.safety.SafetyConfig`, their one definition).
+    """
+    ramps = SafetyConfig()
+    on = "on" in modes
+    if timing.hold_s >= timing.max_trial_s:
+        raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
+    if not timing.hold_s < training.seconds_per_target_per_mode:
+        raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
+                     f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "
+                     f"and must leave time to complete a hold)")
+    for field, cap in (("trial.max_trial_s", timing.max_trial_s),
+                       ("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode)):
+        if on and cap < ramps.ramp_in_s + timing.hold_s:
+            raise f.fail(field, cap, f"must be at least trial.hold_s = {timing.hold_s:g} + the feedback's "
+                         f"{ramps.ramp_in_s:g} s ramp-in (safety.ramp_in_s) = {ramps.ramp_in_s + timing.hold_s:g} s "
+                         "when design.modes has 'on': a shorter haptics-ON trial would be judged at a feedback gain "
+                         "below 1")
+    if on and timing.pause_s < ramps.fault_ramp_s:
+        raise f.fail("trial.pause_s", timing.pause_s,
+                     f"must be at least the feedback's {ramps.fault_ramp_s:g} s ramp-out (safety.fault_ramp_s) when "
+                     "design.modes has 'on': otherwise a trial is cued while the last one's force still fades out")
 
 
 def load_protocol(path: str | Path | None = None) -> ProtocolConfig:

@@ -30,6 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.devices import Fault
+from pipeline.safety import SafetyConfig
+from pipeline.watchdog import WatchdogConfig
 from protocol.design import HapticMode, TrialSpec
 from protocol.records import AbortCause, LoopHealth, trial_health
 from protocol.trial import TrialFinished
@@ -42,6 +44,11 @@ _HEALTH_SRC = ("period_ns", "sensor_age_ns", "pose_age_ns", "latency_ns")
 
 def _ns(seconds: float) -> int:
     return int(round(seconds * 1e9))
+
+
+#: The safety stage's and the watchdog's defaults: the one definition of the ramps and of the sensor-age limit.
+_SAFETY = SafetyConfig()
+_WATCHDOG = WatchdogConfig()
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,9 +69,9 @@ class DeliveryLimits:
         Allowance on the ramps for a late tick.
     """
 
-    feedback_ramp_in_s: float = 0.5
-    feedback_ramp_out_s: float = 0.04
-    max_gap_s: float = 0.005
+    feedback_ramp_in_s: float = _SAFETY.ramp_in_s
+    feedback_ramp_out_s: float = _SAFETY.fault_ramp_s
+    max_gap_s: float = _WATCHDOG.sensor_max_age_s
     grace_s: float = 0.01
 
 

@@ -32,7 +32,7 @@ from study_app.argtypes import SEED, add_command, real_number
 from study_app.cli_error import CliError
 
 if TYPE_CHECKING:  # numpy is imported where it is used: ``haptic-study --help`` must not load it
-    import numpy as np
+    pass
 
 __all__ = ["add_calibrate_command", "ask_on_stderr", "cmd_calibrate"]
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import stat
 import sys
 from collections.abc import Sequence
 
@@ -105,14 +106,72 @@ def _add_absent_command(sub: argparse._SubParsersAction, name: str, what: str) -
     a.set_defaults(handler=absent)
 
 
+#: Options that name an input file, and what it must be: a FIFO, socket or device there is refused up front
+#: (SQLite and the TOML reader would wait on a FIFO for ever).
+_INPUT_FILES = {"db": "database", "protocol": "protocol", "hardware": "hardware"}
+
+
+def _refuse_special_inputs(args: argparse.Namespace) -> None:
+    """An input path that is a FIFO, a socket or a device: one line (a missing one is each command's to say)."""
+    from analysis.oserrors import kind_of
+
+    for option, what in _INPUT_FILES.items():
+        value = getattr(args, option, None)
+        for path in value if isinstance(value, list) else [value]:
+            if not isinstance(path, str):
+                continue
+            try:
+                mode = os.stat(path).st_mode
+            except (OSError, ValueError):
+                continue
+            if stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+                raise CliError(f"--{option} {path}: is {kind_of(mode)}, not a {what} file; give the path of a "
+                               "regular file")
+
+
+def _machine_failure(args: argparse.Namespace, exc: BaseException) -> str | None:
+    """One line for a failure of the machine under a command (a full disk, a failing device, memory), else None.
+
+    The commands handle what they expect; this is the net under all of them.
+    """
+    import errno
+    import sqlite3
+
+    from analysis.oserrors import os_error_line
+
+    db = getattr(args, "db", None)
+    db = db[0] if isinstance(db, list) and len(db) == 1 else db
+    again = (" then complete the study with the same command and --continue (what was committed is kept)"
+             if getattr(args, "command", "") == "run" else " then run it again")
+    if isinstance(exc, MemoryError):
+        return f"{args.command}: out of memory; close other programs or ask for less, then run it again"
+    if isinstance(exc, sqlite3.OperationalError):
+        text = str(exc)
+        known = {"database or disk is full": errno.ENOSPC, "disk I/O error": errno.EIO,
+                 "attempt to write a readonly database": errno.EROFS, "unable to open database file": errno.EACCES}
+        code = next((c for k, c in known.items() if k in text), None)
+        if code is None:
+            return None
+        line = os_error_line(OSError(code, text), f"--db {db}" if isinstance(db, str) else "the database",
+                             f"SQLite says '{text}'", written=True)
+        return f"{line};{again}" if code != errno.EACCES else line
+    if isinstance(exc, OSError):
+        where = exc.filename if exc.filename is not None else (f"--db {db}" if isinstance(db, str) else args.command)
+        return os_error_line(exc, where, "failed", written=True)
+    return None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``haptic-study`` console script."""
+    import sqlite3
+
     args = build_parser().parse_args(argv)
     try:
+        _refuse_special_inputs(args)
         return args.handler(args)  # every leaf parser sets one; argparse enforces a known command
     except CliError as exc:
         print(f"haptic-study: error: {one_line(str(exc))}", file=sys.stderr)  # a path may hold a line break
-        return 2
+        return exc.status
     except KeyboardInterrupt:
         print("haptic-study: interrupted", file=sys.stderr)
         return 130
@@ -121,6 +180,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         # interpreter's final flush does not raise again
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
+    except (OSError, MemoryError, sqlite3.OperationalError) as exc:
+        line = _machine_failure(args, exc)
+        if line is None:
+            raise
+        print(f"haptic-study: error: {one_line(line)}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

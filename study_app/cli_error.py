@@ -11,4 +11,17 @@ __all__ = ["CliError"]
 
 
 class CliError(Exception):
-    """A user-facing error: printed as one line, exit status 2."""
+    """A user-facing error: printed as one line; exit status 2 (a refusal), or ``status`` (1: the system failed).
+
+    Parameters
+    ----------
+    message
+        The line.
+    status
+        The exit status: 2 for bad input or a refusal before any work, 1 when the
+        machine failed the command (a full disk, a failing device, too little memory).
+    """
+
+    def __init__(self, message: str, status: int = 2) -> None:
+        super().__init__(message)
+        self.status = status

@@ -18,6 +18,8 @@ _N_MAX = 10_000
 #: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
 DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
 _POOL_DEFAULT = 100
+#: Resampled participants (studies × n) from which on ``power`` shows a progress bar: ~10 s of work and more.
+_BAR_DRAWS = 5_000_000
 #: The marker of a power output folder (analysis.outdir): the files power wrote there, with their SHA-256.
 POWER_MARKER = ".haptic-study-power"
 
@@ -107,24 +109,38 @@ def cmd_power(args: argparse.Namespace) -> int:
     if args.out is None:
         raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
 
-    from analysis.load import AnalysisError
-    from analysis.metrics import MetricOptions
+    from analysis.errors import AnalysisError
     from analysis.outdir import check_output_folder, write_output_folder
+    from analysis.power_pool import is_pool_file
+
+    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
+                  keep=is_pool_file)
+    try:
+        check_output_folder(args.out, **folder)  # before any work (and before the analysis is imported)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
+
+    from analysis.metrics import MetricOptions
     from analysis.paired_pool import load_pool
     from analysis.power import FAMILY_LABELS, estimate_power, summary_text
     from analysis.power_outputs import write_power
-    from analysis.power_pool import is_pool_file, simulated_pool
+    from analysis.power_pool import simulated_pool
     from study_app.headless import run_study
     from study_app.progress import ProgressBar
 
     options = MetricOptions(args.error_window, args.tct)
     bars: list[ProgressBar] = []
-    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
-                  keep=is_pool_file)
 
     def reading(done: float, total: float) -> None:
         if not bars or bars[-1].unit != "samples":
             bars.append(ProgressBar(total, "reading samples", "samples", decimals=0))
+        bars[-1].update(done)
+
+    def resampling(done: int, total: int) -> None:
+        if total < _BAR_DRAWS:  # a few seconds: no bar
+            return
+        if not bars or bars[-1].unit != "participants drawn":
+            bars.append(ProgressBar(total, "resampling studies", "participants drawn", decimals=0))
         bars[-1].update(done)
 
     def simulating(p) -> None:  # type: ignore[no-untyped-def]
@@ -134,7 +150,6 @@ def cmd_power(args: argparse.Namespace) -> int:
         bars[-1].update(p.study_trials_done)
 
     try:
-        check_output_folder(args.out, **folder)  # before any work: a refused folder costs nothing
         participants = None
         if args.simulated:
             t0 = time.perf_counter()
@@ -161,11 +176,13 @@ def cmd_power(args: argparse.Namespace) -> int:
             bar.close()
         t0 = time.perf_counter()
         result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
-                                zero_method=args.zero_method)
+                                zero_method=args.zero_method, progress=resampling)
+        if bars and bars[-1].unit == "participants drawn":
+            bars[-1].close()
         wall = time.perf_counter() - t0
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
-    except AnalysisError as exc:  # PowerError, PoolError included
-        raise CliError(str(exc)) from None
+    except AnalysisError as exc:  # PowerError, PoolError, OutputError included
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))

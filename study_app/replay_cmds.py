@@ -11,17 +11,17 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
 import sys
 import time
 from pathlib import Path
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from pipeline.tomlfields import SQLITE_INTEGER_MAX
 from study_app.argtypes import add_command, real_number, whole_number
 from study_app.cli_error import CliError
+
+if TYPE_CHECKING:  # numpy is imported where it is used: every haptic-study command imports this module
+    import numpy as np
 
 __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
@@ -139,44 +139,54 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
 
 
 def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
+    import numpy as np
+
     return np.sqrt(cols[f"{prefix}_fx"] ** 2 + cols[f"{prefix}_fy"] ** 2 + cols[f"{prefix}_fz"] ** 2)
 
 
-def _new_folder(path: str, *, create: bool = True) -> Path:
-    """``--out DIR``: a new or empty folder (checked before the work, created after it)."""
-    out = Path(path)
-    if out.exists() and (not out.is_dir() or any(out.iterdir())):
-        raise CliError(f"--out {out}: exists and is not an empty folder; choose a new folder (nothing was written)")
-    if not out.resolve().parent.exists():
-        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
-    if create:
-        out.mkdir(exist_ok=True)
-    return out
+#: The marker of a replay output folder (analysis.outdir): the files replay wrote there, with their SHA-256.
+REPLAY_MARKER = ".haptic-study-replay"
+
+
+def _output_policy(call: Any) -> Any:
+    """Run an output-policy call (analysis.outdir); its refusal or failure is one line (exit 2, or 1 mid-write)."""
+    from analysis.errors import AnalysisError
+
+    try:
+        return call()
+    except AnalysisError as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
 
 
 # -- replay ---------------------------------------------------------------------------------------------------
 def cmd_replay(args: argparse.Namespace) -> int:
     """``haptic-study replay``."""
-    if args.out:
-        _new_folder(args.out, create=False)  # refused before the work, not after it
+    from analysis.outdir import check_output_folder, write_output_folder
+
+    folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db]}
+    if args.out:  # refused before the work, not after it
+        _output_policy(lambda: check_output_folder(args.out, **folder))
     (code, kind), segments, trials = _session(args.db, args.session)
     outputs, exact = _replay_as_recorded(args.session, code, kind, segments)
     trade = _filter_trade(outputs, segments)
     changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
                                  ("f_max_n", args.f_max)) if v is not None}
-    out = _new_folder(args.out) if args.out else None
-    if out is not None:
-        trade.round(6).to_csv(out / "filter_trade.csv", index=False)
-    if not changes:
-        if out is not None:
-            print(f"Files in {out}/: filter_trade.csv")
-        return 0 if all(exact) else 1
-    _replay_with_changes(segments, trials, changes, out)
+    write_changes = _replay_with_changes(segments, trials, changes) if changes else None
+    if args.out:
+        def fill(out: Path) -> None:
+            trade.round(6).to_csv(out / "filter_trade.csv", index=False)
+            if write_changes is not None:
+                write_changes(out)
+
+        files = _output_policy(lambda: write_output_folder(args.out, fill, **folder))
+        print(f"Files in {args.out}/: {', '.join(files)}")
     return 0 if all(exact) else 1
 
 
 def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[Any]) -> tuple[list[Any], list[bool]]:
     """Replay every recorded run with its recorded settings and say whether it matched (outputs, exact per run)."""
+    import numpy as np
+
     from pipeline.replay import replay
 
     n = sum(len(s.columns["tick"]) for s in segments)
@@ -201,6 +211,8 @@ def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[An
 
 def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     """Print (and return) the filter's trade on this recording: noise at rest against delay in contact."""
+    import numpy as np
+
     from analysis.replay_compare import filter_trade
     from protocol.metrics import CONTACT_THRESHOLD_N
     from protocol.trial import PHASE_CODES, TrialPhase
@@ -222,8 +234,13 @@ def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     return trade
 
 
-def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, float], out: Path | None) -> None:
-    """Replay with ``changes`` to the recorded settings; the rendered force's difference, trial by trial."""
+def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, float]) -> Any:
+    """Replay with ``changes`` to the recorded settings; the rendered force's difference, trial by trial.
+
+    Prints the table and returns ``write(folder)``, which writes it and the figure (for ``--out``).
+    """
+    import numpy as np
+
     from analysis.replay_compare import trial_differences
     from pipeline.framework import framework_config_from_dict
     from pipeline.replay import replay
@@ -249,7 +266,8 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, fl
     for r in diffs.itertuples():
         print(f"    {r.trial_index + 1:5d}  {r.haptic_mode:>4}  {r.outcome:<8}  {r.rms_difference_N:12.4f}  "
               f"{r.peak_difference_N:13.4f}  {r.delay_ms:10.1f}")
-    if out is not None:
+
+    def write(out: Path) -> None:
         table = diffs.drop(columns=["first_tick", "last_tick"]).assign(trial_number=diffs["trial_index"] + 1)
         table.drop(columns="trial_index").round(6).to_csv(out / "replay_trials.csv", index=False)
         from analysis.figures import save
@@ -262,21 +280,26 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, fl
             worst = (float(w["started_at_s"]), float(w["ended_at_s"]),
                      f"trial {int(w['trial_index']) + 1} ({w['haptic_mode']}, {w['outcome']}): the largest difference")
         save(replay_figure(t_s, recorded, replayed, what, worst), out, "replay")
-        print(f"Files in {out}/: replay_trials.csv, filter_trade.csv, replay.png, replay.pdf, replay.svg")
+
+    return write
 
 
 # -- plot-session ---------------------------------------------------------------------------------------------
 def cmd_plot_session(args: argparse.Namespace) -> int:
     """``haptic-study plot-session``."""
-    from analysis.figures import save_one
-    from analysis.session_figures import session_trace
+    import numpy as np
+
+    from analysis.outdir import check_output_file, write_output_file
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
         raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
-    if not out.resolve().parent.exists():
-        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
+    _output_policy(lambda: check_output_file(out, command="plot-session"))  # before the work
     (code, kind), segments, trials = _session(args.db, args.session, partial=True)
+    # matplotlib: once the session is known to be there
+    from analysis.figures import save_one
+    from analysis.session_figures import session_trace
+
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
     raw = np.concatenate([_magnitude(s.columns, "raw") for s in segments])
@@ -289,7 +312,8 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     gone = [f"{d.t_first_s:.3f}–{d.t_last_s:.3f} s" for s in segments for d in s.damage]
     if gone:
         title += f"; PARTIAL: recording damaged at {', '.join(gone)}, left out"
-    save_one(session_trace(t_s, raw, comp, rendered, in_trial, title, starts), out)
+    fig = session_trace(t_s, raw, comp, rendered, in_trial, title, starts)
+    _output_policy(lambda: write_output_file(out, lambda path: save_one(fig, path), command="plot-session"))
     damaged = any(s.damage for s in segments)
     print(f"Wrote {out}{' (partial: the damaged records are left out)' if damaged else ''}")
     return 1 if damaged else 0
@@ -298,22 +322,24 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
 # -- export ---------------------------------------------------------------------------------------------------
 def cmd_export(args: argparse.Namespace) -> int:
     """``haptic-study export samples``."""
-    from analysis.load import AnalysisError, samples_frame
+    from analysis.errors import AnalysisError
+    from analysis.outdir import check_output_file, write_output_file
 
     to_stdout = args.out == "-"
     if to_stdout and args.format != "csv":
         raise CliError("--out -: standard output takes --format csv only; give a file for parquet")
     out = Path(args.out)
-    if not to_stdout and out.exists():
-        raise CliError(f"--out {out}: exists; export writes a new file only (nothing was written)")
-    if not to_stdout and not out.resolve().parent.exists():
-        raise CliError(f"--out {out}: the folder {out.resolve().parent} does not exist")
+    if not to_stdout:
+        _output_policy(lambda: check_output_file(out, command="export"))  # before the work
     if args.format == "parquet":
         try:
             import pyarrow  # noqa: F401
         except ImportError:
             raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
-    print("export: reading the records ...", file=sys.stderr, flush=True)
+    if sys.stderr.isatty():  # a person waits: say what takes the time (a log gets only the result, or one error)
+        print("export: reading the records ...", file=sys.stderr, flush=True)
+    from analysis.load import samples_frame
+
     try:
         frame = samples_frame(args.db, args.session)
     except AnalysisError as exc:
@@ -323,16 +349,17 @@ def cmd_export(args: argparse.Namespace) -> int:
         for line in frame.attrs.get("damage", []):
             print(f"haptic-study: recording damaged: {line}: left out, the output is partial", file=sys.stderr)
         return 1 if frame.attrs.get("damage") else 0
-    tmp = out.with_name(f".{out.name}.partial")
-    try:
+
+    def fill(path: Path) -> None:
         if args.format == "csv":
-            frame.to_csv(tmp, index=False)  # floats written as repr: they read back exactly
+            frame.to_csv(path, index=False)  # floats written as repr: they read back exactly
         else:
-            frame.to_parquet(tmp, index=False)
-        os.replace(tmp, out)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+            frame.to_parquet(path, index=False)
+
+    # at least ~6 bytes a value in CSV and ~2 in parquet (measured: 7.1 and 2.6): what surely cannot fit is
+    # refused before writing; a disk that fills anyway is one line too
+    need = int(frame.shape[0] * frame.shape[1] * (6 if args.format == "csv" else 2))
+    _output_policy(lambda: write_output_file(out, fill, command="export", need_bytes=need))
     sessions = frame["session_id"].nunique() if len(frame) else 0
     damage = frame.attrs.get("damage", [])
     for line in damage:

@@ -75,7 +75,13 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Run ``haptic-study report``; errors raise :class:`study_app.cli_error.CliError`."""
-    from analysis.load import AnalysisError
+    from analysis.errors import AnalysisError
+    from analysis.outdir import REPORT_MARKER, check_output_folder
+
+    try:  # before the analysis is imported (seconds): a refused folder is said at once
+        check_output_folder(args.out, command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
     from analysis.metrics import MetricOptions
     from analysis.report import build_report
     from study_app.progress import ProgressBar
@@ -95,7 +101,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             power=args.power,
         )
     except AnalysisError as exc:
-        raise CliError(str(exc)) from None
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     finally:
         if bar is not None:
             bar.close()
@@ -125,15 +131,16 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
     """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
     from pathlib import Path
 
-    from analysis.figures import pipeline_trace, save_one
-    from analysis.load import AnalysisError, load_study, read_trial_samples
+    from analysis.errors import AnalysisError
+    from analysis.outdir import check_output_file, write_output_file
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
-    if not out.resolve().parent.is_dir():
-        raise CliError(f"--out = {args.out!r}: the folder {out.resolve().parent} does not exist")
     try:
+        check_output_file(out, command="plot-trial")  # before the work: an existing file is never replaced
+        from analysis.load import load_study, read_trial_samples
+
         study = load_study([args.db])
         trials = study.trials
         in_session = trials[trials["session_id"] == args.session]
@@ -150,10 +157,15 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
         samples = read_trial_samples(args.db, args.session, args.trial - 1)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
+    from analysis.figures import pipeline_trace, save_one  # matplotlib: once the trial is known to be there
+
     title = (f"{row['participant_code']}, session {args.session}, trial {args.trial}: {row['target_label']} "
              f"{row['target_force_n']:g} N, haptics {str(row['haptic_mode']).upper()}, {row['outcome']}")
     fig = pipeline_trace(samples, target_force_n=float(row["target_force_n"]),
                          tolerance_fraction=float(row["tolerance_fraction"]), title=title)
-    save_one(fig, out)
+    try:
+        write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
+    except AnalysisError as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
     print(f"wrote {out}")
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sqlite3
 import sys
 
 from study_app.argtypes import SEED, add_command, positive_seconds, whole_number
@@ -80,11 +81,20 @@ def add_sessions_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
     ss.set_defaults(handler=cmd_sessions)
 
 
+#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a margin.
+_SIM_BYTES_PER_TICK = 160
+
+
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run ``haptic-study sim``."""
+    from analysis.resources import memory_problem
     from study_app.progress import ProgressBar
     from study_app.sim_summary import run_scripted_sim
 
+    problem = memory_problem(args.seconds * 1000 * _SIM_BYTES_PER_TICK, f"sim --seconds {args.seconds:g}",
+                             "simulate fewer seconds (the summary keeps every tick)")
+    if problem is not None:
+        raise CliError(problem)
     bar = None if args.json else ProgressBar(args.seconds, "simulating", "s")
     summary = run_scripted_sim(
         seconds=args.seconds, seed=args.seed, clock=args.clock, haptics_on=args.haptics == "on",
@@ -113,6 +123,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         for f in args.inject_fault:
             if f.code != args.resume:
                 raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    _refuse_a_full_disk(args.db)
     bar: ProgressBar | None = None
     try:
         if args.resume is None:
@@ -149,6 +160,10 @@ def cmd_run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
         raise CliError(str(exc)) from None
+    except (OSError, sqlite3.Error):  # the machine failed (a full disk): one line from the CLI's error path
+        if bar is not None:
+            bar.close()
+        raise
     for note in progress.notes:
         print(f"haptic-study: {note}", file=sys.stderr)
     if args.continue_study and progress.study_trials_total == 0:
@@ -160,13 +175,32 @@ def cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Free space below which ``run`` does not start: SQLite's journal and the first recorded blocks need about this.
+_RUN_MIN_FREE_BYTES = 1 << 20
+
+
+def _refuse_a_full_disk(db: str) -> None:
+    """A database on a (nearly) full disk is refused before the study starts (a fuller one mid-run: cli's one line)."""
+    from analysis.outfs import free_bytes, read_only
+
+    folder = os.path.dirname(os.path.abspath(db))
+    if not os.path.isdir(folder) or read_only(folder):
+        return  # the database's own checks say what is wrong with the folder
+    free = free_bytes(folder)
+    if free is not None and free < _RUN_MIN_FREE_BYTES:
+        raise CliError(f"--db {db}: no space left on the device ({free / 1e6:.2f} MB free, a study needs at least "
+                       f"{_RUN_MIN_FREE_BYTES / 1e6:.0f} MB to start); free some space or use a database on another "
+                       "disk (nothing was written)")
+
+
 def cmd_sessions(args: argparse.Namespace) -> int:
     """Run ``haptic-study sessions``; errors raise :class:`CliError`."""
     from protocol.storage import StorageError
     from study_app.session_list import format_sessions, list_sessions
 
     if not os.path.isfile(args.db):
-        raise CliError(f"--db = {args.db!r}: no such file")
+        raise CliError(f"--db = {args.db!r}: " + ("is a folder, not a database file" if os.path.isdir(args.db)
+                                                  else "no such file"))
     try:
         sessions = list_sessions(args.db)
     except StorageError as exc:

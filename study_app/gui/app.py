@@ -55,8 +55,6 @@ def run_gui(host: HostConfig, *, db_path: str | None = None, screenshot_dir: str
         qInstallMessageHandler(None)
         if tour.error:
             raise RuntimeError(tour.error)
-        for path in tour.saved:
-            print(f"wrote {path}")
     return int(status)
 
 

@@ -355,3 +355,42 @@ def test_resample_indices_depend_on_seed_and_n_only():
     assert a.shape == (50, 10) and a.min() >= 0 and a.max() < 7
     assert np.array_equal(a, resample_indices(3, 10, 50, 7))
     assert not np.array_equal(a, resample_indices(4, 10, 50, 7))
+
+
+# -- limits that fit the machine (issue 22) -----------------------------------------------------------------------
+def test_chunked_resampling_gives_the_same_numbers_bit_for_bit():
+    pool = pool_from_trials(_trials(8))
+    whole = estimate_power(pool, (6, 11), resamples=333, seed=4)
+    seen = []
+    chunked = estimate_power(pool, (6, 11), resamples=333, seed=4, chunk_bytes=1000,
+                             progress=lambda done, total: seen.append((done, total)))
+    pd.testing.assert_frame_equal(whole.frame, chunked.frame, check_exact=True)
+    assert len(seen) > 20 and seen[-1] == (333 * 17, 333 * 17) and seen == sorted(seen)
+
+
+def test_memory_does_not_grow_with_the_resamples():
+    import tracemalloc
+
+    from analysis.power import memory_needed
+
+    pool = pool_from_trials(_trials(8))
+    tracemalloc.start()
+    try:
+        estimate_power(pool, (200,), resamples=4000, chunk_bytes=4 << 20)  # 800,000 draws; 77 MB at once
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 16 << 20
+    assert memory_needed((200,), 4000, 8, 4 << 20) == memory_needed((200,), 10**6, 8, 4 << 20)
+
+
+def test_a_request_the_machine_cannot_hold_is_refused_in_one_line(monkeypatch):
+    import analysis.resources
+
+    monkeypatch.setattr(analysis.resources, "available_memory_bytes", lambda: 8 << 20)
+    pool = pool_from_trials(_trials(8))
+    with pytest.raises(PowerError) as err:
+        estimate_power(pool, (6, 10_000), resamples=10)
+    assert str(err.value) == ("power: resampling studies of up to 10000 participants needs about 17.8 MiB of memory; this "
+                              "machine has 8.0 MiB available; ask for smaller --n values (memory grows with n; "
+                              "--resamples costs time only)")

@@ -93,8 +93,8 @@ def test_other_settings_say_what_would_have_been_felt(study, tmp_path, capsys) -
                           "--f-scale", "5", "--out", str(out_dir))
     assert code == 0, err
     assert "with filter_window = 20, f_scale_n = 5" in out
-    assert sorted(p.name for p in out_dir.iterdir()) == ["filter_trade.csv", "replay.pdf", "replay.png",
-                                                         "replay.svg", "replay_trials.csv"]
+    assert sorted(p.name for p in out_dir.iterdir()) == [".haptic-study-replay", "filter_trade.csv", "replay.pdf",
+                                                         "replay.png", "replay.svg", "replay_trials.csv"]
     trials = pd.read_csv(out_dir / "replay_trials.csv")
     assert len(trials) == 4 and trials["trial_number"].tolist() == [1, 2, 3, 4]
     on, off = trials[trials["haptic_mode"] == "on"], trials[trials["haptic_mode"] == "off"]
@@ -106,7 +106,7 @@ def test_other_settings_say_what_would_have_been_felt(study, tmp_path, capsys) -
 def test_replay_refuses_bad_input_in_one_line(study, tmp_path, capsys) -> None:
     for argv, message in [
         (["--session", "99"], "--session 99: no such session"),
-        (["--session", "1", "--out", str(study)], "exists and is not an empty folder"),
+        (["--session", "1", "--out", str(study)], "exists and is not a folder (it is a file)"),
         (["--session", "1"], "no such database"),
     ]:
         db = str(tmp_path / "none.db") if message == "no such database" else str(study)

@@ -229,15 +229,20 @@ def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, tmp_pat
     assert [p.name for p in tmp_path.iterdir()] == ["rep"]  # no temporary folder left beside it
 
 
-def test_the_report_follows_the_umask(dbs, tmp_path, capsys):
-    old = os.umask(0o027)
+def test_the_report_is_as_private_as_the_database_and_keeps_a_folder_s_permissions(dbs, tmp_path, capsys):
+    (tmp_path / "kept").mkdir()
+    (tmp_path / "kept").chmod(0o750)
+    old = os.umask(0o000)  # a permissive umask does not make the report world-readable
     try:
-        code, _, _ = _run(capsys, "report", "--db", str(dbs[0]), "--out", str(tmp_path / "r"))
+        assert _run(capsys, "report", "--db", str(dbs[0]), "--out", str(tmp_path / "r"))[0] == 0
+        assert _run(capsys, "report", "--db", str(dbs[0]), "--out", str(tmp_path / "kept"))[0] == 0
     finally:
         os.umask(old)
-    assert code == 0
-    assert stat.S_IMODE((tmp_path / "r").stat().st_mode) == 0o750
-    assert stat.S_IMODE((tmp_path / "r" / "report.html").stat().st_mode) == 0o640
+    assert stat.S_IMODE((tmp_path / "r").stat().st_mode) == 0o700
+    assert stat.S_IMODE((tmp_path / "kept").stat().st_mode) == 0o750  # an existing folder is written into, as it is
+    for out in (tmp_path / "r", tmp_path / "kept"):
+        assert stat.S_IMODE((out / "report.html").stat().st_mode) == 0o600
+        assert stat.S_IMODE((out / "figures").stat().st_mode) == 0o700
 
 
 @pytest.mark.parametrize(
@@ -265,6 +270,10 @@ def test_plot_trial(dbs, tmp_path, capsys):
     code, _, _ = _run(capsys, "plot-trial", "--db", str(dbs[0]), "--session", "1", "--trial", "7",
                       "--out", str(tmp_path / "t.pdf"))
     assert code == 0 and (tmp_path / "t.pdf").read_bytes()[:5] == b"%PDF-"
+    code, _, err = _run(capsys, "plot-trial", "--db", str(dbs[0]), "--session", "1", "--trial", "1",
+                        "--out", str(png))
+    assert code == 2 and "t.png: exists; plot-trial writes a new file only and never replaces one" in err
+    png = tmp_path / "u.png"
     code, _, err = _run(capsys, "plot-trial", "--db", str(dbs[0]), "--session", "1", "--trial", "99",
                         "--out", str(png))
     assert code == 2 and "no such trial in session 1; its stored trials are 1–7" in err

@@ -7,7 +7,7 @@ import sqlite3
 
 import pandas as pd
 import pytest
-from studybuilder import SessionDef, TrialDef, build, rmse_of_success, success_trial, timeout_trial
+from studybuilder import SessionDef, build, rmse_of_success, success_trial, timeout_trial
 
 from analysis.load import AnalysisError, load_study
 from analysis.metrics import MetricOptions, compute_trials

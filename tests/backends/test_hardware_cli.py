@@ -63,7 +63,8 @@ def test_check_hardware_reports_each_device(tmp_path: Path, capsys: pytest.Captu
         p = tmp_path / "hardware.toml"
         p.write_text(
             f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
-            f'[robot]\nhost = "{rtde.host}"\n[haptic]\n[jaw]\nport = "{jaw.path}"\nready_timeout_s = 1.0\n',
+            f'[robot]\nhost = "{rtde.host}"\n[haptic]\n[jaw]\nport = "{jaw.path}"\nready_timeout_s = 1.0\n'
+            '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
             encoding="utf-8",
         )
         rc = main(["check-hardware", "--hardware", str(p)])

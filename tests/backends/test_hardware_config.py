@@ -15,7 +15,6 @@ from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
-from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur import UrRtdeRobot
 from pipeline.clock import VirtualClock
 from pipeline.devices import DeviceError, HapticState
@@ -31,8 +30,13 @@ ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "hardware.example.toml"
 
 
+#: What sets a rendered force's direction and size: a real rig's file must say it (no default is taken).
+FORCE_TOML = ("[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n"
+              "rot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n")
+
+
 def base() -> dict:
-    return {"sensor": {"host": "10.0.0.1"}, "robot": {"host": "10.0.0.2"}, "haptic": {}}
+    return {"sensor": {"host": "10.0.0.1"}, "robot": {"host": "10.0.0.2"}, "haptic": {}, **tomllib.loads(FORCE_TOML)}
 
 
 def test_example_file_is_valid_and_documents_the_defaults() -> None:
@@ -51,6 +55,38 @@ def test_example_file_is_valid_and_documents_the_defaults() -> None:
 def test_minimal_file_takes_defaults() -> None:
     hw = hardware_from_dict(base())
     assert hw.jaw is None and hw.haptic.device_name == "Default Device" and hw.sensor.http_port == 80
+
+
+@pytest.mark.parametrize(("table", "key"), [("frames", "rot_tip_sensor"), ("frames", "rot_haptic_base"),
+                                            ("framework", "f_max_n"), ("framework", "f_scale_n")])
+def test_what_sets_a_force_s_direction_or_size_has_no_default(table: str, key: str) -> None:
+    d = base()
+    del d[table][key]
+    with pytest.raises(HardwareError) as info:
+        hardware_from_dict(d, "lab.toml")
+    what = "direction" if table == "frames" else "size"
+    assert str(info.value).startswith(f"lab.toml: {table}.{key} = None: required on a real rig: ")
+    assert f"it sets the {what} of every rendered force" in str(info.value)
+
+
+@pytest.mark.parametrize(("patch", "message"), [
+    ({"sensor": {"host": "10.0.0.1", "counts_per_force": 1e6, "counts_per_torque": 1e6}},
+     "sensor.force_unit = None: required with sensor.counts_per_force: the unit the box's counts are per"),
+    ({"sensor": {"host": "10.0.0.1", "counts_per_force": 1e6, "counts_per_torque": 1e6, "force_unit": "lbf"}},
+     "sensor.torque_unit = None: required with sensor.counts_per_torque"),
+    ({"robot": {"host": "10.0.0.2", "frequency_hz": 10}},
+     "robot.frequency_hz = 10: must be above 20 Hz: the watchdog faults when the robot pose is older than 50 ms "
+     "(watchdog.pose_max_age_s), and at 10 Hz each pose is 100 ms old when the next arrives"),
+    ({"robot": {"host": "10.0.0.2", "frequency_hz": 25, "mode": "teleop"},
+      "teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "pose_max_age_s": 0.03}},
+     "teleop.pose_max_age_s = 0.03: must be longer than the robot's pose period, 1 / robot.frequency_hz = 40 ms"),
+])
+def test_values_valid_alone_but_not_together_name_both_fields(patch: dict, message: str) -> None:
+    d = base()
+    d.update(patch)
+    with pytest.raises(HardwareError) as info:
+        hardware_from_dict(d, "lab.toml")
+    assert str(info.value).startswith("lab.toml: ") and message in str(info.value)
 
 
 @pytest.mark.parametrize(
@@ -159,7 +195,8 @@ def write_rig_file(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde, jaw: PtyJaw
     ]
     if jaw is not None:
         lines.append(f'[jaw]\nport = "{jaw.path}"\nready_timeout_s = 1.0')
-    lines.append(f"[frames]\nrot_tip_sensor = {d['frames']['rot_tip_sensor']}")
+    lines.append(f"[frames]\nrot_tip_sensor = {d['frames']['rot_tip_sensor']}\n"
+                 f"rot_haptic_base = {d['frames']['rot_haptic_base']}\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0")
     if cal:
         (tmp_path / "payload.json").write_text(json.dumps(NO_PAYLOAD.to_dict()), encoding="utf-8")
         lines.append('[calibration]\nfile = "payload.json"')
@@ -226,7 +263,7 @@ def test_a_failing_device_closes_the_ones_already_open(tmp_path: Path) -> None:
 
 def test_f_max_may_equal_the_touchs_peak_force() -> None:
     d = base()
-    d["framework"] = {"f_max_n": TouchSpec().peak_force_n}
+    d["framework"]["f_max_n"] = TouchSpec().peak_force_n
     assert hardware_from_dict(d).framework.f_max_n == TouchSpec().peak_force_n
 
 

@@ -38,12 +38,16 @@ F_BIAS_N, T_BIAS_NM = np.array([0.3, -0.2, 0.5]), np.array([0.01, 0.02, -0.01])
 CPF = 1_000_000  # the fake box's counts per N and per N·m
 
 
+#: The rotations a real rig's file must give (no default sets a force's direction).
+FRAMES = "rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n"
+
+
 def hardware_file(tmp_path: Path, netft: FakeNetFT, rtde_host: str, extra: str = "") -> Path:
     p = tmp_path / "hardware.toml"
     p.write_text(
         f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
         f'[robot]\nhost = "{rtde_host}"\nconnect_timeout_s = 1.0\n[haptic]\ndevice_name = "Fake Touch"\n'
-        f"[framework]\nf_max_n = 2.5\nf_scale_n = 6.0\nfilter_window = 8\n{extra}",
+        f"[frames]\n{FRAMES}[framework]\nf_max_n = 2.5\nf_scale_n = 6.0\nfilter_window = 8\n{extra}",
         encoding="utf-8",
     )
     return p

@@ -14,7 +14,6 @@ through the simulation's fault switches and checks, tick by tick:
 from __future__ import annotations
 
 import math
-import re
 
 import pytest
 

@@ -108,6 +108,19 @@ BAD_FIELDS = [
      "trial.hold_s = 12.0: must be shorter than trial.max_trial_s = 12"),
     ("hold longer than the cap", "max_trial_s = 12.0 ", "max_trial_s = 0.5 ",
      "trial.hold_s = 1.0: must be shorter than trial.max_trial_s = 0.5"),
+    # values valid alone but not together (issue 22): the ON trial must hold the feedback's ramp-in, the pause its
+    # ramp-out (both the safety stage's, pipeline/safety.py)
+    ("a trial shorter than ramp-in + hold", "max_trial_s = 12.0 ", "max_trial_s = 1.2 ",
+     "trial.max_trial_s = 1.2: must be at least trial.hold_s = 1 + the feedback's 0.5 s ramp-in "
+     "(safety.ramp_in_s) = 1.5 s when design.modes has 'on': a shorter haptics-ON trial would be judged at a "
+     "feedback gain below 1"),
+    ("a training trial shorter than ramp-in + hold", "seconds_per_target_per_mode = 20.0",
+     "seconds_per_target_per_mode = 1.25", "training.seconds_per_target_per_mode = 1.25: must be at least "
+     "trial.hold_s = 1 + the feedback's 0.5 s ramp-in (safety.ramp_in_s) = 1.5 s when design.modes has 'on': a "
+     "shorter haptics-ON trial would be judged at a feedback gain below 1"),
+    ("a pause shorter than the ramp-out", "pause_s = 2.0 ", "pause_s = 0.03 ",
+     "trial.pause_s = 0.03: must be at least the feedback's 0.04 s ramp-out (safety.fault_ramp_s) when design.modes "
+     "has 'on': otherwise a trial is cued while the last one's force still fades out"),
     ("tolerance 0.7", "tolerance_fraction = 0.10 ", "tolerance_fraction = 0.7 ",
      "trial.tolerance_fraction = 0.7: must be a number > 0 and ≤ 0.5"),
     ("tolerance as text", "tolerance_fraction = 0.10 ", 'tolerance_fraction = "10%" ',
@@ -203,6 +216,25 @@ def test_bad_field_is_refused_naming_file_field_value_and_what_is_allowed(tmp_pa
     assert _error_of(path) == f"{path}: {expected}"
 
 
+def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(tmp_path):
+    text = DEFAULT_TEXT.replace("max_trial_s = 12.0 ", "max_trial_s = 0.002 ").replace("hold_s = 1.0 ", "hold_s = 0.001 ")
+    path = tmp_path / "short.toml"
+    path.write_text(text, encoding="utf-8")
+    assert _error_of(path).startswith(f"{path}: trial.max_trial_s = 0.002: must be at least trial.hold_s = 0.001 + "
+                                      "the feedback's 0.5 s ramp-in (safety.ramp_in_s) = 0.501 s")
+    off_only = text.replace('modes = ["on", "off"]', 'modes = ["off"]')
+    path.write_text(off_only, encoding="utf-8")
+    assert load_protocol(path).trial.max_trial_s == 0.002  # no feedback, no ramp: only the hold must fit
+
+
+def test_the_ramps_have_one_definition():
+    from pipeline.safety import SafetyConfig
+    from protocol.delivery import DeliveryLimits
+
+    limits, safety = DeliveryLimits(), SafetyConfig()
+    assert (limits.feedback_ramp_in_s, limits.feedback_ramp_out_s) == (safety.ramp_in_s, safety.fault_ramp_s)
+
+
 def test_non_toml_text_is_refused(tmp_path):
     path = tmp_path / "notes.toml"
     path.write_text("this is not toml\n", encoding="utf-8")
@@ -255,10 +287,10 @@ def test_trials_per_cell_bounds_are_inclusive(tmp_path, per_cell):
     assert load_protocol(path).trials_per_cell == per_cell
 
 
-def test_tolerance_half_is_allowed_and_pause_zero_is_allowed(tmp_path):
+def test_tolerance_half_is_allowed_and_pause_zero_is_allowed_without_feedback(tmp_path):
     text = DEFAULT_TEXT.replace("tolerance_fraction = 0.10 ", "tolerance_fraction = 0.5 ").replace(
         "pause_s = 2.0 ", "pause_s = 0 "
-    )
+    ).replace('modes = ["on", "off"]', 'modes = ["off"]')
     path = tmp_path / "edges.toml"
     path.write_text(text, encoding="utf-8")
     p = load_protocol(path)
