@@ -51,6 +51,7 @@ from typing import Any
 from analysis.errors import AnalysisError
 from analysis.outdir import ensure_output_folder, sha256_file
 from analysis.outfs import open_folder, os_error_line, write_bytes_at
+from protocol.storage import StudyDatabase
 
 __all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",
            "simulated_pool"]
@@ -306,6 +307,11 @@ def simulated_pool(
                  jobs=jobs, continue_study=resuming)
     except (StorageError, RuntimeError, ValueError) as exc:
         raise PoolError(f"{db}: the simulation failed ({exc}); the next call resumes it") from None
+    finished = StudyDatabase(db, check=False)  # just written by the simulation
+    try:
+        finished.seal()  # its readers (every later power request) leave no -wal/-shm beside it
+    finally:
+        finished.close()
     digest = sha256_file(db)
     _write_record(db, {**wanted, "complete": True, "sha256": digest, "bytes": db.stat().st_size,
                        "resumed_participants": resumed})

@@ -52,7 +52,12 @@ _BARE_KEY = re.compile(r"[A-Za-z0-9_-]+\Z")
 
 
 def show(value: Any) -> str:
-    """``repr(value)`` for an error line: shortened, and safe for integers too long to print."""
+    """``repr(value)`` for an error line: shortened, and safe for integers too long to print.
+
+    A boolean is shown as TOML writes it (``true``, ``false``): the user typed it so in the file.
+    """
+    if isinstance(value, bool):
+        return "true" if value else "false"
     try:
         return _REPR.repr(value)
     except ValueError:  # int longer than sys.get_int_max_str_digits()

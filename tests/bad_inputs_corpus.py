@@ -169,7 +169,7 @@ CONTINUE = ("run", "--participants", "2", "--seed", "0", "--protocol", "{d}/tiny
 
 CASES: list[Case] = [
     # -- protocol files -----------------------------------------------------------------------------------------
-    Case("protocol: version = true", RUN_NEW, "p.toml: version = True: this software reads protocol version 1",
+    Case("protocol: version = true", RUN_NEW, "p.toml: version = true: this software reads protocol version 1",
          {"p.toml": protocol("version = 1", "version = true")}),
     Case("protocol: modes nested in a list", RUN_NEW, "p.toml: design.modes = [['on']]: must be a non-empty list",
          {"p.toml": protocol('modes = ["on", "off"]', 'modes = [["on"]]')}),
@@ -202,7 +202,7 @@ CASES: list[Case] = [
          "p\\n.toml: no such protocol file"),
     Case("protocol: a folder", RUN_NEW, "p.toml: cannot read the protocol file", {"p.toml": folder}),
     # -- hardware files -----------------------------------------------------------------------------------------
-    Case("hardware: version = true", CHECK, "hw.toml: version = True: this software reads hardware file version 1",
+    Case("hardware: version = true", CHECK, "hw.toml: version = true: this software reads hardware file version 1",
          {"hw.toml": hardware("version = 1", "version = true")}),
     Case("hardware: rotation of strings", CHECK, "hw.toml: frames.rot_tip_sensor = [['1', '0', '0'], ['0', '1', '0'], ['0', '0', '1']]: must be a rotation matrix",
          {"hw.toml": hardware("rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]",
@@ -219,7 +219,7 @@ CASES: list[Case] = [
          {"hw.toml": hardware('host = "192.168.1.1"', 'host = "192.168.1.300"')}),
     Case("hardware: robot host with a space", CHECK, "hw.toml: robot.host = 'ur3 left': must be an IP address",
          {"hw.toml": hardware('host = "192.168.1.2"', 'host = "ur3 left"')}),
-    Case("hardware: port = true", CHECK, "hw.toml: sensor.port = True: must be a whole port number from 1 to 65535",
+    Case("hardware: port = true", CHECK, "hw.toml: sensor.port = true: must be a whole port number from 1 to 65535",
          {"hw.toml": hardware("port = 49152", "port = true")}),
     Case("hardware: baud as a float", CHECK, "hw.toml: jaw.baud = 115200.0: allowed values: 9600",
          {"hw.toml": hardware("baud = 115200", "baud = 115200.0")}),

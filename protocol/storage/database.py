@@ -131,6 +131,18 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         """Close the connection."""
         self.conn.close()
 
+    def seal(self) -> None:
+        """Make the file whole on its own: the WAL checkpointed into it and WAL mode left.
+
+        For a finished file nobody will write again (a power analysis's simulated pool): a reader of a
+        file in WAL mode makes ``-wal`` and ``-shm`` files beside it, which stay after it closes; in
+        rollback-journal mode a reader leaves nothing.  A writer that opens it later returns it to WAL.
+        """
+        if self.readonly:
+            raise StorageError(f"{self.path}: opened read-only; it cannot be sealed")
+        self.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+        self.conn.execute("PRAGMA journal_mode = DELETE").fetchone()
+
     # -- participants and sessions ------------------------------------------------------------------
     def participant_id(self, code: str, *, create: bool) -> int | None:
         """The id of a participant code, optionally creating it."""

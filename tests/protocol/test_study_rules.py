@@ -38,7 +38,7 @@ def test_the_protocol_field_defaults_to_training_enabled_and_cannot_require_what
     d["training"].update(enabled=True, required=False)
     assert not requires_training(protocol_from_dict(d))  # the paper's study exactly: no practice phase
     d["training"].update(enabled=False, required=True)
-    with pytest.raises(ProtocolError, match=r"^protocol: training.required = True: must be false when "
+    with pytest.raises(ProtocolError, match=r"^protocol: training.required = true: must be false when "
                                             r"training.enabled = false"):
         protocol_from_dict(d)
 
