@@ -45,7 +45,7 @@ _WHERE = {
     "compute_trials": "analysis.metrics",
     "per_participant": "analysis.aggregate",
     "mode_tests": "analysis.aggregate",
-    "speed_accuracy": "analysis.aggregate",
+    "speed_accuracy": "analysis.trade",
     "paired_wilcoxon": "analysis.stats",
     "build_report": "analysis.report",
 }

@@ -16,7 +16,7 @@ import math
 import os
 import sqlite3
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +30,16 @@ from protocol.storage import connect_readonly as _connect_readonly
 
 #: Where a trial's records are in its session's recording (schema version 3).
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
+#: Events the report lists: deviations from the protocol ("deviation": any recorded departure from the
+#: design, e.g. an experiment started without a completed training; "calibration_override": a session started
+#: without a calibration step on record) and which code ran each resumed part of a session ("software").
+DEVIATION_EVENTS = ("deviation", "calibration_override")
+LISTED_EVENTS = (*DEVIATION_EVENTS, "software")
 
 __all__ = [
     "AnalysisError",
+    "DEVIATION_EVENTS",
+    "LISTED_EVENTS",
     "Progress",
     "StudyData",
     "connect_readonly",
@@ -70,21 +77,31 @@ class StudyData:
         databases), where its records are in the session's recording
         (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
         trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
-        ``max_trial_s``, and ``excluded`` (``""`` when analysed, else
-        ``"training session"`` or ``"aborted trial"``).
+        ``max_trial_s``, ``repeat_of`` (the trial index an aborted trial's re-run repeats), and ``excluded``
+        (``""`` when analysed, else ``"training session"``, ``"incomplete session"`` or ``"aborted trial"``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
         ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
         ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
-        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored).
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored), which code
+        ran it (``software_commit``, ``software_dirty``; empty before schema version 4 or when not known),
+        ``n_designed`` (the trials its design has: the schedule less its re-runs), ``first_mode`` (the haptic
+        mode of the schedule's first trial) and ``analysed`` (its trials are analysed: an experiment session,
+        completed, or any with ``include_incomplete``).
     databases
         The database paths, in the order given.
+    events
+        The events the report lists (:data:`LISTED_EVENTS`): ``database, session_id, t_s, kind, detail``.
+    include_incomplete
+        Whether experiment sessions that did not complete are analysed.
     """
 
     trials: pd.DataFrame
     sessions: pd.DataFrame
     databases: tuple[str, ...]
+    events: pd.DataFrame = field(default_factory=pd.DataFrame)
+    include_incomplete: bool = False
 
     @property
     def included(self) -> pd.DataFrame:
@@ -131,15 +148,28 @@ def _watchdog_limits(config_json: object) -> dict[str, float]:
     return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+def _schedule_fields(schedule_json: object) -> dict[str, object]:
+    """The trials a session's design has (its stored schedule less the re-runs) and its first trial's mode."""
+    try:
+        schedule = json.loads(str(schedule_json))
+        designed = [t for t in schedule if t.get("repeat_of") is None]
+        return {"n_designed": len(designed), "first_mode": str(schedule[0]["haptic_mode"]) if schedule else ""}
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError):
+        return {"n_designed": np.nan, "first_mode": ""}
+
+
+def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     db = _open(path)
     try:
+        # schema version 4 records which code ran a session; earlier files do not
+        has_s = {r[1] for r in db.conn.execute("PRAGMA table_info(sessions)")}
+        v4 = ", ".join(f"s.{c}" if c in has_s else f"NULL AS {c}" for c in ("software_commit", "software_dirty"))
         sessions = _query(
             db,
             "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
             "s.started_at, "
-            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json, s.config_json "
-            "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
+            f"s.ended_at, s.end_reason, s.software_version, {v4}, s.rig, s.protocol_json, s.config_json, "
+            "s.schedule_json FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
         )
         # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
         has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
@@ -150,9 +180,12 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
             "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
             "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, {v2} "
+            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, repeat_of, {v2} "
             "FROM trials ORDER BY session_id, trial_index",
         )
+        kinds = ", ".join(f"'{k}'" for k in LISTED_EVENTS)
+        events = _query(db, f"SELECT session_id, t_s, kind, detail FROM events WHERE kind IN ({kinds}) "
+                            "ORDER BY session_id, t_s")
     finally:
         db.close()
     if sessions.empty:
@@ -162,19 +195,26 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame]:
         index=sessions.index,
     )
     watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
-    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json"]), proto, watchdog], axis=1)
-    sessions.insert(0, "database", path)
-    trials.insert(0, "database", path)
-    return sessions, trials
+    design = pd.DataFrame([_schedule_fields(sj) for sj in sessions["schedule_json"]], index=sessions.index)
+    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
+                          design], axis=1)
+    sessions["software_dirty"] = sessions["software_dirty"].astype("boolean")
+    for frame in (sessions, trials, events):
+        frame.insert(0, "database", path)
+    return sessions, trials, events
 
 
-def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
+def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False) -> StudyData:
     """Read and merge study databases.
 
     Parameters
     ----------
     paths
         One or more haptic-study databases.
+    include_incomplete
+        Analyse the finished trials of experiment sessions that did not complete (ended by the experimenter,
+        or interrupted and not resumed).  By default they are left out (``excluded = "incomplete session"``)
+        and the report lists them with the reason.
 
     Returns
     -------
@@ -191,7 +231,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     if not paths:
         raise AnalysisError("--db: give at least one study database")
     seen: dict[tuple[int, int], str] = {}
-    all_sessions, all_trials = [], []
+    all_sessions, all_trials, all_events = [], [], []
     for raw in paths:
         path = str(raw)
         if not Path(path).exists():
@@ -201,9 +241,10 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
         if key in seen:
             raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
         seen[key] = path
-        s, t = _read_one(path)
+        s, t, e = _read_one(path)
         all_sessions.append(s)
         all_trials.append(t)
+        all_events.append(e)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():
@@ -212,29 +253,36 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
                 f"participant code {code!r} appears in {dbs[0]} and {dbs[1]}; the merge refuses to guess "
                 "whether they are one person (analyse the databases separately or re-code one)"
             )
+    experiment = sessions["kind"] == "experiment"
+    sessions["analysed"] = experiment & ((sessions["status"] == "completed") | include_incomplete)
     trials = pd.concat(all_trials, ignore_index=True)
     meta = sessions[["database", "session_id", "participant_code", "participant_number", "kind", "status",
-                     "tolerance_fraction", "hold_s", "max_trial_s"]].rename(
+                     "tolerance_fraction", "hold_s", "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
     )
     trials = trials.merge(meta, on=["database", "session_id"], how="left", validate="many_to_one")
     excluded = np.where(
         trials["session_kind"] != "experiment", "training session",
-        np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial", ""),
+        np.where(~trials["analysed"].astype(bool), "incomplete session",
+                 np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial", "")),
     )
     trials["excluded"] = excluded
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
              "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
-             "tolerance_fraction", "hold_s", "max_trial_s", "excluded"]
+             "tolerance_fraction", "hold_s", "max_trial_s", "repeat_of", "excluded"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
-    if not (sessions["kind"] == "experiment").any():
+    if not experiment.any():
         raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
     if (trials["excluded"] == "").sum() == 0:
+        if (trials["excluded"] == "incomplete session").any():
+            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
+                                "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
-    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths))
+    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths),
+                     events=pd.concat(all_events, ignore_index=True), include_incomplete=include_incomplete)
 
 
 def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
@@ -316,7 +364,7 @@ _SAMPLE_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "ra
                    "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz")
 #: What a trial's trace reads of a recorded session (the compensated force is not stored: replay recomputes it).
 _RECORDED_TRACE = ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-                   "render_fx", "render_fy", "render_fz")
+                   "render_fx", "render_fy", "render_fz", "faults")
 
 
 def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int) -> pd.DataFrame:
@@ -333,6 +381,7 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     -------
     pandas.DataFrame
         Columns ``t_s`` (since the cue), ``force_n``, ``raw_f*``, ``raw_t*``, ``render_f*``, and
+        ``faults`` (the latched watchdog faults, a bitmask) for a recorded trial, or
         ``comp_f*`` for a trial of schema version 1 or 2 (a recorded session's compensated force is
         recomputed by replay, :func:`pipeline.replay.replay`, not stored).
 

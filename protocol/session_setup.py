@@ -41,7 +41,7 @@ from protocol.recording import marked_records
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
-from protocol.version import software_version
+from protocol.version import software_provenance
 
 __all__ = [
     "OpenedSession",
@@ -178,10 +178,12 @@ def open_new_session(
         run_protocol = training_protocol(protocol)
     else:
         raise ValueError(f"session kind = {kind!r}: allowed values are 'training' and 'experiment'")
+    code_ran = software_provenance()  # which code runs the session: version, commit, uncommitted changes
     session_id = db.create_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
-        schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
+        schedule_json=schedule_to_json(schedule), software_version=code_ran.version, rig=rig, config=config,
         calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
+        software_commit=code_ran.commit, software_dirty=code_ran.dirty,
     )
     db.insert_event(session_id, 0.0, "session_start", note or f"{kind} session for {code}, seed {seed}")
     return OpenedSession(
@@ -250,6 +252,8 @@ def open_resumed_session(
             what = f"continuing at trial position {pos}"
         offset_s = last_s + RESUME_STEP_S
         db.insert_event(session_id, offset_s, "resume", what)
+        # which code runs this part of the session (the session row names the code that started it)
+        db.insert_event(session_id, offset_s, "software", json.dumps(dataclasses.asdict(software_provenance())))
         if calibration is not None:
             db.insert_event(session_id, offset_s, "calibration", json.dumps(calibration))
     return OpenedSession(

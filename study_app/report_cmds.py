@@ -55,6 +55,10 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--power", action="store_true",
                    help="add 'what n would a study need': power against the number of participants, resampling "
                         "this study's participants (as haptic-study power with its defaults)")
+    r.add_argument("--include-incomplete", action="store_true",
+                   help="analyse the finished trials of experiment sessions that did not complete (aborted by the "
+                        "experimenter, or interrupted and not resumed); by default they are left out, and listed "
+                        "with the reason either way")
     r.set_defaults(handler=cmd_report)
 
     p = add_command(
@@ -92,7 +96,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         summary = build_report(
             args.db, args.out, options=MetricOptions(args.error_window, args.tct),
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
-            power=args.power,
+            power=args.power, include_incomplete=args.include_incomplete,
         )
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
