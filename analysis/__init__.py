@@ -40,7 +40,7 @@ _WHERE = {
     "AnalysisError": "analysis.load",
     "load_study": "analysis.load",
     "read_trial_samples": "analysis.load",
-    "samples_frame": "analysis.load",
+    "samples_frame": "analysis.samples",
     "MetricOptions": "analysis.metrics",
     "compute_trials": "analysis.metrics",
     "per_participant": "analysis.aggregate",

@@ -50,6 +50,7 @@ __all__ = [
     "save",
     "save_one",
     "significance_mark",
+    "stored_trial_figure",
     "styled",
     "trial_trace",
 ]
@@ -347,22 +348,30 @@ def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> 
 
 
 def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]
-    """An aborted trial: where a watchdog fault latched (from the recorded flags) and where the trial ended."""
-    if "faults" in samples.columns:
+    """An aborted trial: where a watchdog fault latched (from the recorded flags) and where the trial ended, each
+    a red line with its time and cause in a boxed label (on the left of a line in the right half of the axis)."""
+    labels: list[tuple[float, str, str]] = []  # (time, text, line style)
+    if "faults" in samples.columns and len(t):
         faults = samples["faults"].to_numpy()
         latched = np.flatnonzero(faults != 0)
         if len(latched):
             i = int(latched[0])
-            for axis in (ax, ax_raw):
-                axis.axvline(t[i], color="#b00020", linewidth=0.9, linestyle=":", zorder=6)
-            ax.text(t[i], ax.get_ylim()[1] * 0.97, f" {fault_names(int(faults[i]))} latched at {t[i]:.3f} s",
-                    color="#b00020", fontsize=6.5, va="top", ha="left")
+            labels.append((float(t[i]), f"{fault_names(int(faults[i]))} latched at {t[i]:.3f} s", ":"))
     if abort is not None:
         at, cause = abort
+        if labels and abs(labels[0][0] - at) < 0.05:  # the fault that aborted it: one label, not two on one line
+            labels[0] = (at, f"{labels[0][1]}; aborted at {at:.3f} s\n{cause}", "-")
+        else:
+            labels.append((at, f"aborted at {at:.3f} s\n{cause}", "-"))
+    lo, hi = (float(t[0]), float(t[-1])) if len(t) else (0.0, 1.0)
+    top = ax.get_ylim()[1]
+    for k, (at, text, style) in enumerate(labels):
         for axis in (ax, ax_raw):
-            axis.axvline(at, color="#b00020", linewidth=1.2, zorder=6)
-        ax.text(at, ax.get_ylim()[1] * 0.85, f"aborted at {at:.3f} s: {cause} ", color="#b00020", fontsize=6.5,
-                va="top", ha="right", wrap=True)
+            axis.axvline(at, color="#b00020", linewidth=1.2 if style == "-" else 0.9, linestyle=style, zorder=6)
+        right = at > (lo + hi) / 2
+        ax.text(at, top * (0.97 - 0.2 * k), text, color="#b00020", fontsize=6.5, va="top",
+                ha="right" if right else "left", zorder=7, linespacing=1.3,
+                bbox={"facecolor": "white", "edgecolor": "#b00020", "linewidth": 0.6, "pad": 2.0, "alpha": 0.92})
 
 
 def peak_downsample(t: np.ndarray, y: np.ndarray, buckets: int = 1200) -> tuple[np.ndarray, np.ndarray]:
@@ -418,6 +427,31 @@ def render(builder: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: 
 def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any) -> Figure:
     """:func:`pipeline_trace` of a stored trial, read from its database."""
     return pipeline_trace(read_trial_samples(database, session_id, trial_index), **kwargs)
+
+
+def stored_trial_figure(database: str, trial: Mapping[str, Any], samples: pd.DataFrame,
+                        error_window: str = "cue") -> Figure:
+    """``plot-trial``'s figure of one stored trial (a row of :attr:`analysis.load.StudyData.trials`).
+
+    The title names the participant, session, trial, target, mode and outcome; an aborted trial is marked at
+    the moment it ended with its cause (``abort_reason``, e.g. ``fault: SENSOR_STALE: newest F/T sample 6.0 ms
+    old (limit 5 ms)``), and where a watchdog fault latched, from the recorded flags.
+    """
+    number = int(trial["trial_index"]) + 1
+    outcome = str(trial["outcome"])
+    cause = trial.get("abort_cause")
+    what = f"aborted ({cause})" if outcome == "aborted" and isinstance(cause, str) and cause else outcome
+    title = (f"{trial['participant_code']}, session {int(trial['session_id'])}, trial {number}: "
+             f"{trial['target_label']} {float(trial['target_force_n']):g} N, haptics "
+             f"{str(trial['haptic_mode']).upper()}, {what}")
+    abort = None
+    if outcome == "aborted":
+        reason = trial.get("abort_reason")
+        at = float(trial["ended_at_s"]) - float(trial["started_at_s"])
+        abort = (at, str(reason) if isinstance(reason, str) and reason else "cause not recorded")
+    return pipeline_trace(samples, target_force_n=float(trial["target_force_n"]),
+                          tolerance_fraction=float(trial["tolerance_fraction"]), title=title,
+                          error_window=error_window if outcome != "aborted" else None, abort=abort)
 
 
 def save(fig: Figure, folder: str | Path, name: str) -> bytes:

@@ -47,8 +47,8 @@ __all__ = [
     "read_task_force",
     "recorded_where",
     "stored_records",
-    "samples_frame",
     "read_trial_samples",
+    "recorded_samples",
 ]
 
 #: ``progress(done, total)`` callback, called while samples are read.
@@ -413,16 +413,18 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     return frame
 
 
-#: The columns of :func:`samples_frame`, in order (``comp_f*`` only for sessions recorded before version 3).
-SAMPLES_FRAME_COLUMNS = (
+#: The columns of :func:`recorded_samples`, in order (``comp_f*`` only for sessions recorded before version 3).
+RECORDED_COLUMNS = (
     "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
     "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
 )
 
 
-def samples_frame(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
-    """The 1 kHz records of one session (or all) as one table: the study's samples for SQL-free analysis.
+def recorded_samples(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+    """The 1 kHz records of one session (or all) as one table, with the recording's own column names.
+
+    :func:`analysis.samples.samples_frame` labels it for people (``haptic-study export samples``).
 
     A session recorded by version 3 gives every record from its start to its
     end (training, pauses, trials, waits, every resumed run); one recorded
@@ -438,7 +440,7 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
     Returns
     -------
     pandas.DataFrame
-        One row per record, columns :data:`SAMPLES_FRAME_COLUMNS`: the session and its
+        One row per record, columns :data:`RECORDED_COLUMNS`: the session and its
         recording's segment and loop tick, the session-clock time, the trial (numbered from 1;
         empty between trials) and the time since its cue, the trial phase code, the task force
         and the raw, rendered and gain values, the fraction of the designed force the haptic
@@ -462,7 +464,7 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
         db.close()
     parts = [p for p in parts if len(p)]
     if not parts:
-        return pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
+        return pd.DataFrame({c: [] for c in RECORDED_COLUMNS})
     return pd.concat(parts, ignore_index=True)
 
 
@@ -512,5 +514,5 @@ def _session_samples(db: StudyDatabase, session_id: int) -> pd.DataFrame:
     if not frames:
         return pd.DataFrame()
     out = pd.concat(frames, ignore_index=True)
-    cols = [c for c in SAMPLES_FRAME_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
+    cols = [c for c in RECORDED_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
     return out[cols].sort_values("session_time_s", kind="stable", ignore_index=True)

@@ -106,8 +106,11 @@ def _warned(caught: Sequence[warnings.WarningMessage]) -> list[str]:
     return list(dict.fromkeys(str(w.message).splitlines()[0] for w in caught))
 
 
-#: statsmodels' warning that the participant variance went to zero (a fit that is fine, reported as such).
+#: statsmodels' warnings that a variance may be zero (judged here: :data:`_AT_ZERO`).
 _BOUNDARY = "on the boundary of the parameter space"
+_SINGULAR = ("Random effects covariance is singular", "The random effects covariance matrix is singular")
+#: A participant variance below this fraction of the residual variance is zero for the report.
+_AT_ZERO = 1e-6
 #: The optimisers MixedLM tries in turn: Powell's derivative-free method reaches a participant variance of 0
 #: (common with few participants) where the gradient methods stall or fail on a singular matrix; L-BFGS if not.
 MIXED_METHODS = ["powell", "lbfgs"]
@@ -149,15 +152,17 @@ def fit_mixed(model: str, outcome: str, scale: str, y: pd.Series, exog: pd.DataF
     names = list(exog.columns)
     ci = res.conf_int(alpha=1.0 - confidence).loc[names]
     participant_var = float(np.asarray(res.cov_re)[0, 0])
-    notes = [w for w in _warned(caught) if _BOUNDARY not in w]
-    if any(_BOUNDARY in w for w in _warned(caught)):
-        notes.append(f"the participant variance is estimated at {participant_var:.2g}, on the boundary (0): the "
-                     "participants differ no more than their trials do, and the model is ordinary least squares "
-                     "with these fixed effects")
+    at_zero = participant_var <= _AT_ZERO * float(res.scale)
+    # statsmodels warns of "the boundary" below an absolute 0.01 whatever the unit (0.01 N² is a real variance in
+    # N); whether the participant variance is at zero is judged here against the residual variance instead
+    notes = [w for w in _warned(caught) if _BOUNDARY not in w and not (at_zero and w.startswith(_SINGULAR))]
+    converged = bool(res.converged) and not notes
+    if at_zero:
+        notes.append("the participant variance is estimated at zero (participants differ no more than their trials "
+                     "do): the fixed effects are those of ordinary least squares")
     extra = {"participant_var": participant_var, "residual_var": float(res.scale)}
     return ModelFit(model, outcome, scale, method, res.fe_params[names], res.bse_fe[names], res.tvalues[names],
-                    res.pvalues[names], ci[0], ci[1], int(res.nobs), int(groups.nunique()),
-                    bool(res.converged) and len(notes) == (1 if any(_BOUNDARY in w for w in _warned(caught)) else 0),
+                    res.pvalues[names], ci[0], ci[1], int(res.nobs), int(groups.nunique()), converged,
                     "; ".join(notes), extra)
 
 

@@ -159,10 +159,10 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
     elif n_rerun == n_ab:
         aborted = f"{plural(n_ab, 'aborted trial')} (each re-run later in its session)"
     elif n_rerun == 0:
-        aborted = f"{plural(n_ab, 'aborted trial')} (not re-run: the session ended first)"
+        aborted = f"{plural(n_ab, 'aborted trial')} ({'not' if n_ab == 1 else 'none'} re-run in its session)"
     else:
         aborted = (f"{plural(n_ab, 'aborted trial')} ({n_rerun} of them re-run later in their session; the other "
-                   f"{n_ab - n_rerun} not, their session ended first)")
+                   f"{n_ab - n_rerun} not)")
     codes = "; ".join(f"{html.escape(r.code)} ({plural(int(r.n_sessions), 'session')})"
                       for r in within.provenance.itertuples())
     dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
@@ -193,10 +193,10 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     def one(vals: list[float], unit: str) -> str:
         return " / ".join(f"{v:g}{unit}" for v in vals)
 
-    window = ("<b>from the cue</b> to the trial end, the approach before contact included (error window: cue, "
+    window = ("from the cue to the trial end, the approach before contact included (error window: cue, "
               "the default, the paper's \"during the trial\")"
               if options.error_window == "cue" else
-              f"<b>from first contact</b> (the first sample with task force above {CONTACT_THRESHOLD_N:g} N) to the "
+              f"from first contact (the first sample with task force above {CONTACT_THRESHOLD_N:g} N) to the "
               "trial end; a trial without contact has no RMSE or Max AE (error window: first_contact)")
     tct = ("averaged over successful trials only, so it is undefined for a participant with no success in a mode "
            "(that participant's pair is left out of the TCT test and counted)"

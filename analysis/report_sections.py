@@ -68,7 +68,7 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
                     f'<td class="m">{html.escape(labels.get(r.term, r.term))}{warn}</td>'
                     f"<td>{fmt(r.estimate, 4)}</td><td>{_ci(r.ci_low, r.ci_high, 4)}</td><td>{fmt_p(r.p_value)}</td></tr>")
     foot = "".join(f"<li>{k}: {html.escape(n)}</li>" for n, k in marks.items())
-    return (f'<div class="scroll"><table class="stats"><caption>{caption}</caption><thead><tr><th>outcome</th>'
+    return (f'<div class="scroll"><table class="within"><caption>{caption}</caption><thead><tr><th>outcome</th>'
             "<th>term</th><th>estimate</th><th>95 % CI</th><th>p</th></tr></thead>"
             f'<tbody>{"".join(body)}</tbody></table></div>' + (f'<ul class="notes">{foot}</ul>' if foot else ""))
 
@@ -83,7 +83,7 @@ def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOpti
         f"<td>{fmt(r.r_rm)}</td><td>{_ci(r.ci_low, r.ci_high)}</td><td>{int(r.df)}</td><td>{fmt_p(r.p_value)}</td>"
         f"<td>{fmt(r.slope_s_per_n)}</td><td class=\"wrap\">{html.escape(str(r.note))}</td></tr>"
         for r in within.sa.itertuples())
-    sa = (f'<div class="scroll"><table class="stats"><caption>Repeated-measures correlation of TCT with RMSE; RMSE '
+    sa = (f'<div class="scroll"><table class="within"><caption>Repeated-measures correlation of TCT with RMSE; RMSE '
           f"{win}</caption><thead><tr><th>trials of</th><th>trials</th><th>participants</th><th>r_rm</th>"
           "<th>95 % CI</th><th>df</th><th>p</th><th>slope (s/N)</th><th>note</th></tr></thead>"
           f"<tbody>{rows}</tbody></table></div>")
@@ -134,7 +134,7 @@ def sensitivity_html(within: Any, options: MetricOptions) -> str:
             f"taken over. {window_fact(within, options)} The same tests (Holm across the four measures in each "
             "window) and the speed–accuracy correlations, in both windows; conclusions at p &lt; "
             f"{ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [95 % CI].</p>{verdict}"
-            f'<div class="scroll"><table class="stats sens"><caption>Sensitivity to the error window '
+            f'<div class="scroll"><table class="within sens"><caption>Sensitivity to the error window '
             f"(sensitivity.csv)</caption><thead><tr><th>analysis</th><th>measure</th>{head}<th>conclusion</th></tr>"
             f'</thead><tbody>{"".join(body)}</tbody></table></div>')
 
@@ -180,7 +180,7 @@ def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, tar
             + (_model_table(fe, labels, "metric ~ mode × target + trial number + (1 | participant); success: logistic "
                             "GEE, estimates in log-odds") if not too_few else "")
             + f"<figure>{img(png, 'each metric over the trials of the session by mode')}</figure>"
-            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"stats\"><caption>ON − OFF per participant, "
+            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per participant, "
             "ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
             "</caption><thead><tr><th>measure</th><th>ON first</th><th>OFF first</th><th>median ON − OFF, ON first"
             "</th><th>median ON − OFF, OFF first</th><th>U</th><th>p</th><th>note</th></tr></thead>"

@@ -24,7 +24,8 @@ def phase_name(code: int) -> str:
 
 
 def fault_names(bits: int) -> str:
-    """The latched faults of a bitmask joined by ``|`` (``SENSOR_STALE|NON_FINITE``); ``""`` for none.
+    """The latched faults of a bitmask joined by ``|`` (``SENSOR_STALE|NON_FINITE``); ``none`` for 0 (as
+    :meth:`pipeline.devices.Fault.describe`; never empty, so a table reads the same in SQL and pandas).
 
     A bit this version does not know is named by its value (``bit 1024``), never dropped.
     """
@@ -37,4 +38,4 @@ def fault_names(bits: int) -> str:
             names.append(f"bit {1 << k}")
         rest >>= 1
         k += 1
-    return "|".join(names)
+    return "|".join(names) or "none"

@@ -129,7 +129,7 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
     """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
     from pathlib import Path
 
-    from analysis.figures import pipeline_trace, save_one
+    from analysis.figures import save_one, stored_trial_figure
     from analysis.load import AnalysisError, load_study, read_trial_samples
 
     out = Path(args.out)
@@ -154,10 +154,6 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
         samples = read_trial_samples(args.db, args.session, args.trial - 1)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
-    title = (f"{row['participant_code']}, session {args.session}, trial {args.trial}: {row['target_label']} "
-             f"{row['target_force_n']:g} N, haptics {str(row['haptic_mode']).upper()}, {row['outcome']}")
-    fig = pipeline_trace(samples, target_force_n=float(row["target_force_n"]),
-                         tolerance_fraction=float(row["tolerance_fraction"]), title=title)
-    save_one(fig, out)
+    save_one(stored_trial_figure(args.db, row, samples), out)  # an aborted trial: its abort, time and cause marked
     print(f"wrote {out}")
     return 0
