@@ -23,7 +23,7 @@ import io
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, cast
 
 import numpy as np
 import pandas as pd
@@ -63,7 +63,7 @@ _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 #: Widths of a journal's single column and full page, inches (89 and 183 mm).
 COLUMN_IN, PAGE_IN = 3.5, 7.2
 #: Fonts a journal accepts at the printed size: 8 pt text, 7 pt ticks and legends, never below 6 pt.
-STYLE = {"font.family": "DejaVu Sans", "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
+STYLE: dict[str, Any] = {"font.family": "DejaVu Sans", "font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
          "xtick.labelsize": 7, "ytick.labelsize": 7, "legend.fontsize": 7, "legend.title_fontsize": 7,
          "figure.titlesize": 8, "axes.linewidth": 0.6, "xtick.major.width": 0.6, "ytick.major.width": 0.6,
          "lines.linewidth": 1.0}
@@ -76,14 +76,14 @@ def styled(builder: _F) -> _F:
 
     @functools.wraps(builder)
     def build(*args: Any, **kwargs: Any) -> Figure:
-        with matplotlib.rc_context(STYLE):
+        with matplotlib.rc_context(cast(Any, STYLE)):
             return builder(*args, **kwargs)
 
     return build  # type: ignore[return-value]
 #: Print resolution of the PNGs.
 _DPI = 300
 #: Text stays text in SVG and PDF (selectable, searchable, editable in a journal's tools).
-_VECTOR_RC = {"svg.fonttype": "none", "pdf.fonttype": 42}
+_VECTOR_RC: dict[str, Any] = {"svg.fonttype": "none", "pdf.fonttype": 42}
 #: No dates in vector files: the same data give the same files.
 _NO_DATE: dict[str, dict[str, None]] = {"svg": {"Date": None}, "pdf": {"CreationDate": None}}
 
@@ -417,7 +417,7 @@ def render(builder: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: 
     """
     from analysis import model_figures
 
-    builders = {**_BUILDERS, "trade_slopes": model_figures.trade_slopes,
+    builders: dict[str, Callable[..., Figure]] = {**_BUILDERS, "trade_slopes": model_figures.trade_slopes,
                 "learning_curves": model_figures.learning_curves}
     if builder not in builders:
         raise ValueError(f"builder = {builder!r}: allowed values are {', '.join(sorted(builders))}")
@@ -461,7 +461,7 @@ def save(fig: Figure, folder: str | Path, name: str) -> bytes:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
-    with matplotlib.rc_context(_VECTOR_RC):
+    with matplotlib.rc_context(cast(Any, _VECTOR_RC)):
         fig.savefig(buf, format="png", dpi=_DPI)
         for suffix in ("svg", "pdf"):
             fig.savefig(folder / f"{name}.{suffix}", format=suffix, metadata=_NO_DATE[suffix])
@@ -474,11 +474,11 @@ def save_one(fig: Figure, path: str | Path) -> None:
     """Write one figure file; its format from the suffix (.png at 300 dpi, .pdf, .svg with real text)."""
     import matplotlib
 
-    with matplotlib.rc_context(_VECTOR_RC):
+    with matplotlib.rc_context(cast(Any, _VECTOR_RC)):
         fig.savefig(path, dpi=_DPI, metadata=_NO_DATE.get(Path(path).suffix.lower().lstrip(".")))
 
 
-_BUILDERS = {
+_BUILDERS: dict[str, Callable[..., Figure]] = {
     "mode_bars": mode_bars,
     "paired_lines": paired_lines,
     "pipeline_trace": pipeline_trace,

@@ -10,7 +10,8 @@ from __future__ import annotations
 import base64
 import html
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -70,7 +71,7 @@ def th(file: str, column: str) -> str:
 
 
 def html_table(frame: pd.DataFrame, file: str, columns: Sequence[str] | None = None,
-               cell: dict[str, Callable[[object], str]] | None = None, caption: str = "") -> str:
+               cell: Mapping[str, Callable[[Any], str]] | None = None, caption: str = "") -> str:
     """A table of an exported CSV's rows, with readable headings; ``cell`` formats some columns specially."""
     cols = list(columns) if columns else list(frame.columns)
     special = cell or {}

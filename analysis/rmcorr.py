@@ -140,7 +140,7 @@ def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
     sxx, syy, sxy = float(xt @ xt), float(yt @ yt), float(xt @ yt)
     # what centring leaves of a constant by rounding alone: a few ulps of the largest value per observation
     def flat(s: float, v: npt.NDArray[np.float64]) -> bool:
-        return s <= len(v) * (64.0 * np.finfo(np.float64).eps * float(np.abs(v).max())) ** 2
+        return bool(s <= len(v) * (64.0 * np.finfo(np.float64).eps * float(np.abs(v).max())) ** 2)
 
     if flat(sxx, xs):
         return fail("x does not vary within any participant: there is no within-participant slope")

@@ -32,21 +32,21 @@ SAMPLES_COLUMNS: tuple[tuple[str, str, str, str], ...] = (
     ("segment", "integer", "", "run of the session the record belongs to: 0, then one more per resume"),
     ("tick", "integer", "count", "the 1 kHz loop's tick number within its run"),
     ("session_time_s", "number", "s", "time since the session started (session clock)"),
-    ("trial_number", "integer", "", "trial within its session, numbered from 1 as the report and the GUI number "
-     "them; empty between trials"),
+    ("trial_number", "integer", "", ("trial within its session, numbered from 1 as the report and the GUI number "
+     "them; empty between trials")),
     ("t_since_cue_s", "number", "s", "time since the trial's cue; empty between trials"),
     ("phase", "text", "", "the trial machine's phase: idle, cued (cue given, not yet in contact), active, pause"),
     ("phase_code", "integer", "", f"the phase as recorded ({_PHASES})"),
-    ("force_N", "number", "N", "task force: magnitude of the filtered, compensated contact force (what the trial "
-     "was judged on)"),
-    *((f"raw_f{a}_N", "number", "N", f"raw F/T sensor force, {a} axis of the sensor frame (tool weight and bias "
-       "included)") for a in "xyz"),
+    ("force_N", "number", "N", ("task force: magnitude of the filtered, compensated contact force (what the trial "
+     "was judged on)")),
+    *((f"raw_f{a}_N", "number", "N", (f"raw F/T sensor force, {a} axis of the sensor frame (tool weight and bias "
+       "included)")) for a in "xyz"),
     *((f"raw_t{a}_Nm", "number", "N·m", f"raw F/T sensor torque, {a} axis of the sensor frame") for a in "xyz"),
     *((f"render_f{a}_N", "number", "N", f"force commanded to the haptic device, {a} axis of the haptic frame")
       for a in "xyz"),
     ("gain", "number", "fraction (0–1)", "the safety stage's gain on the rendered force (ramps in and out)"),
-    ("derate", "number", "fraction (0–1)", "the fraction of the designed force the haptic device's thermal "
-     "derating let through (1: not cut)"),
+    ("derate", "number", "fraction (0–1)", ("the fraction of the designed force the haptic device's thermal "
+     "derating let through (1: not cut)")),
     ("haptic_on", "boolean", "", "force feedback switched on"),
     ("faults", "integer", "bitmask", f"latched watchdog faults as a bitmask ({_FAULTS}); 0 none"),
     ("fault_names", "text", "", "the latched faults by name, joined by |; none when none is latched"),

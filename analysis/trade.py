@@ -15,6 +15,8 @@ successful trials by default, so only successful trials enter).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pandas as pd
 
@@ -119,7 +121,7 @@ def participant_slopes(trials: pd.DataFrame, options: MetricOptions = MetricOpti
                                        "intercept_s", "rmse_min_n", "rmse_max_n"])
 
 
-def rm_caption(row: object) -> str:
+def rm_caption(row: Any) -> str:
     """``r_rm = −0.31 [−0.55, −0.03], df = 40, p = 0.031`` for a row of :func:`speed_accuracy`."""
     if not bool(row.computable):
         return "r_rm not computable"
