@@ -411,17 +411,10 @@ def peak_downsample(t: np.ndarray, y: np.ndarray, buckets: int = 1200) -> tuple[
 
 
 def render(builder: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str | Path, name: str) -> bytes:
-    """Build a figure with the builder named ``builder`` and :func:`save` it (a picklable task for a worker).
-
-    The builders are this module's and :mod:`analysis.model_figures`' (``trade_slopes``, ``learning_curves``).
-    """
-    from analysis import model_figures
-
-    builders: dict[str, Callable[..., Figure]] = {**_BUILDERS, "trade_slopes": model_figures.trade_slopes,
-                "learning_curves": model_figures.learning_curves}
-    if builder not in builders:
-        raise ValueError(f"builder = {builder!r}: allowed values are {', '.join(sorted(builders))}")
-    return save(builders[builder](*args, **kwargs), folder, name)
+    """Build a figure with this module's function ``builder`` and :func:`save` it (a picklable task for a worker)."""
+    if builder not in _BUILDERS:
+        raise ValueError(f"builder = {builder!r}: allowed values are {', '.join(sorted(_BUILDERS))}")
+    return save(_BUILDERS[builder](*args, **kwargs), folder, name)
 
 
 def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any) -> Figure:

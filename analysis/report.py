@@ -33,13 +33,13 @@ from typing import Any
 
 import pandas as pd
 
-from analysis import figures, report_tables
+from analysis import figures, model_figures, report_tables
 from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant
 from analysis.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.load import Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.models import MIN_PARTICIPANTS, ModelFit
-from analysis.sensitivity import max_ae_at_target, window_sensitivity
+from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
 from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.outdir import check_output_folder, write_output_folder
@@ -114,7 +114,7 @@ class _Within:
     trade_fit: ModelFit | None
     slopes: pd.DataFrame
     sensitivity: pd.DataFrame
-    max_ae_at_target: dict[str, tuple[int, int]]
+    max_ae_approach: tuple[int, int]
     learning: list[ModelFit]
     order: pd.DataFrame
     curve: pd.DataFrame
@@ -173,7 +173,7 @@ def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_o
         trade_fit=None,
         slopes=participant_slopes(trials, options),
         sensitivity=window_sensitivity(table, options, zero_method=zero_method, confidence=confidence),
-        max_ae_at_target=max_ae_at_target(table),
+        max_ae_approach=max_ae_from_approach(table),
         learning=[],
         order=order_check(overall, first_modes(study.sessions)),
         curve=learning_curve(trials, tct_column(options)),
@@ -218,9 +218,12 @@ def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOp
 
 
 def _work(kind: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str, name: str) -> Any:
-    """One task of the report's worker pool: draw a figure (``kind`` is its builder) or fit the models."""
+    """One task of the report's worker pool: draw a figure (``kind`` is its builder, in :mod:`analysis.figures` or
+    :mod:`analysis.model_figures`) or fit the models."""
     if kind == "models":
         return _fit_models(*args)
+    if kind in ("trade_slopes", "learning_curves"):
+        return figures.save(getattr(model_figures, kind)(*args, **kwargs), folder, name)
     return figures.render(kind, args, kwargs, folder, name)
 
 

@@ -141,14 +141,12 @@ def sensitivity_html(within: Any, options: MetricOptions) -> str:
 
 def window_fact(within: Any, options: MetricOptions) -> str:
     """What the window does to Max AE in this study, in numbers."""
-    at = within.max_ae_at_target
-    cue_at, cue_n = at.get("cue", (0, 0))
-    fc_at, fc_n = at.get("first_contact", (0, 0))
-    if not cue_n:
+    approach, n = within.max_ae_approach
+    if not n:
         return ""
-    return (f"From the cue, Max AE equals the target force in {cue_at} of {cue_n} trials "
-            f"({cue_at / cue_n:.0%}): their largest error is the approach from 0 N at the cue, not a peak force "
-            f"excursion; from first contact it does in {fc_at} of {fc_n}.")
+    return (f"From the cue, Max AE is the approach in {approach} of {n} trials ({approach / n:.0%}): the largest "
+            "error comes before first contact (at the cue the force is 0 N, an error of the whole target force), "
+            "not from a peak force excursion; from first contact it never is.")
 
 
 def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, target_order: list[str]) -> str:
@@ -245,7 +243,8 @@ def methods_within(within: Any, options: MetricOptions, confidence: float) -> st
         "participant-centred values, with N − k − 1 degrees of freedom (N trials, k groups), the p-value of the "
         f"common slope's t test and a {confidence:.0%} Fisher-z interval with SE = 1/√(df − 3), as the rmcorr R "
         "package computes them. A linear mixed model TCT ~ RMSE × mode with a random intercept per participant "
-        "(statsmodels MixedLM, REML) gives the slope with haptics OFF and its ON − OFF difference, with Wald "
+        "(statsmodels MixedLM, REML; Powell's method, then L-BFGS) gives the slope with haptics OFF and its ON − OFF "
+        "difference, with Wald "
         "intervals. Each participant's own least-squares line is drawn; no pooled-trial p-value is computed.</p>"
         "<p><b>Error windows.</b> Every analysis uses the window named in the header; the sensitivity table repeats "
         "the ON-vs-OFF tests (Holm within each window) and r_rm with RMSE and Max AE from the cue and from first "

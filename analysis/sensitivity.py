@@ -5,7 +5,7 @@ paper's "during the trial", the default) or from first contact.  From the cue, t
 part of the error, and Max AE is often exactly the target (the error at the cue, before contact) rather than
 a peak excursion.  :func:`window_sensitivity` runs the ON-vs-OFF tests (Holm across the four measures, as
 the report) and the speed–accuracy repeated-measures correlation in each window and flags every conclusion
-that differs; :func:`max_ae_at_target` counts the trials whose Max AE is the approach.
+that differs; :func:`max_ae_from_approach` counts the trials whose Max AE is the approach.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from analysis.aggregate import mode_tests, per_participant
 from analysis.metrics import ERROR_WINDOWS, MetricOptions, TrialTable
 from analysis.trade import speed_accuracy
 
-__all__ = ["ALPHA", "SENSITIVITY_COLUMNS", "max_ae_at_target", "window_sensitivity"]
+__all__ = ["ALPHA", "SENSITIVITY_COLUMNS", "max_ae_from_approach", "window_sensitivity"]
 
 #: The level at which a conclusion is drawn.
 ALPHA = 0.05
@@ -87,16 +87,14 @@ def window_sensitivity(table: TrialTable, options: MetricOptions, *, zero_method
     return out[list(SENSITIVITY_COLUMNS)]
 
 
-def max_ae_at_target(table: TrialTable) -> dict[str, tuple[int, int]]:
-    """Per error window: (trials whose Max AE equals the target force, trials with a Max AE).
+def max_ae_from_approach(table: TrialTable) -> tuple[int, int]:
+    """(trials whose Max AE from the cue comes before first contact, trials with a Max AE from the cue).
 
-    Such a trial's largest error is the approach from 0 N (the error at the cue), not a peak excursion.
+    Such a trial's largest error is the approach (the error at the cue's 0 N is the target force itself), not a
+    peak force excursion: its Max AE from the cue exceeds its Max AE from first contact, or it never touched.
     """
-    target = table.trials["target_force_n"].to_numpy(float)
-    out = {}
-    for window in ERROR_WINDOWS:
-        max_ae = table.in_window(window)["max_ae_n"].to_numpy(float)
-        has = np.isfinite(max_ae)
-        at = has & (np.abs(max_ae - target) <= 1e-9 * np.maximum(target, 1e-12))
-        out[window] = (int(at.sum()), int(has.sum()))
-    return out
+    cue = table.in_window("cue")["max_ae_n"].to_numpy(float)
+    contact = table.in_window("first_contact")["max_ae_n"].to_numpy(float)
+    has = np.isfinite(cue)
+    approach = has & (~np.isfinite(contact) | (cue > contact))
+    return int(approach.sum()), int(has.sum())
