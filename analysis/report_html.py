@@ -63,8 +63,8 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), captio
             label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        special = {"hl": lambda _: hl, "statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
-        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else
+        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
+        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl}</td>" if c == "hl" else
                         f"<td>{special[c](row.get(c)) if c in special else _fmt(row[c])}</td>" for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
         body.append(f"<tr{cls}>{cells}</tr>")
@@ -343,6 +343,20 @@ def _when(v: object) -> str:
     return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
 
 
+def _warnings(study: StudyData, table: TrialTable, stats: pd.DataFrame, within: Any) -> str:
+    """The warnings the page opens with: disagreeing trials, tests not computable, and the record's."""
+    warn = ""
+    if table.n_disagree:
+        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
+                "those recomputed from samples; see the methods.</p>")
+    nc = stats[~stats["computable"].astype(bool)]
+    if len(nc):
+        warn += ('<p class="warn">Not computable: '
+                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
+                             for r in nc.itertuples()) + "</p>")
+    return warn + report_sections.top_warnings(within, study.include_incomplete)
+
+
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
@@ -368,18 +382,9 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
         The HTML document.
     """
     stats, per, sess = (tables[k] for k in ("stats.csv", "participants.csv", "sessions.csv"))
-    warn = ""
-    if table.n_disagree:
-        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
-                "those recomputed from samples; see the methods.</p>")
-    nc = stats[~stats["computable"].astype(bool)]
-    if len(nc):
-        warn += ('<p class="warn">Not computable: '
-                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
-                             for r in nc.itertuples()) + "</p>")
-    warn += report_sections.top_warnings(within, study.include_incomplete)
+    warn = _warnings(study, table, stats, within)
     origin_class, origin_text = _origin(study)
-    now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     n_trials = len(tables["trials.csv"])
     win = report_sections.window_words(options.error_window)
     per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",

@@ -81,6 +81,17 @@ class RmCorrResult:
     note: str
 
 
+def _interval(r: float, df: int, confidence: float) -> tuple[float, float]:
+    """The rmcorr R package's interval of r_rm: Fisher z with SE = 1/√(df − 3); NaN for df ≤ 3."""
+    if df <= 3:
+        return math.nan, math.nan
+    if abs(r) >= 1.0:
+        return r, r
+    zq = float(special.ndtri(0.5 + confidence / 2.0))
+    z, se = math.atanh(r), 1.0 / math.sqrt(df - 3)
+    return math.tanh(z - zq * se), math.tanh(z + zq * se)
+
+
 def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
            confidence: float = 0.95) -> RmCorrResult:
     """The repeated-measures correlation of ``x`` and ``y`` observed repeatedly within participants.
@@ -151,14 +162,8 @@ def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
     ss_res = max(syy - b * sxy, 0.0)
     se_b = math.sqrt(ss_res / df / sxx)
     p = 0.0 if abs(r) == 1.0 else float(2.0 * sps.t.sf(abs(r) * math.sqrt(df / (1.0 - r * r)), df))
-    lo = hi = nan
-    if df > 3 and abs(r) < 1.0:
-        zq = float(special.ndtri(0.5 + confidence / 2.0))
-        z, se = math.atanh(r), 1.0 / math.sqrt(df - 3)
-        lo, hi = math.tanh(z - zq * se), math.tanh(z + zq * se)
-    elif df <= 3:
+    lo, hi = _interval(r, df, confidence)
+    if df <= 3:
         note = "; ".join(part for part in (note, f"df = {df}: no interval (needs df > 3)") if part)
-    else:
-        lo = hi = r
     return RmCorrResult(float(r), df, min(max(float(p), 0.0), 1.0), lo, hi, confidence, b, se_b, n, k, dropped,
                         True, note)

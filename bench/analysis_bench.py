@@ -223,12 +223,16 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
         "stats_wall_s": stats["stats_wall_s"],
         "stats_methods": stats["methods"],
         "stats_r_rm_all": stats["r_rm_all"],
-        "reference": None if ref is None else {
-            "source": reference, "ours_runs_s": [round(w, 2) for w in ref[0]],
-            "reference_runs_s": [round(w, 2) for w in ref[1]], "ours_s": round(float(np.median(ref[0])), 3),
-            "reference_s": round(float(np.median(ref[1])), 3),
-            "ratio": round(float(np.median(ref[0]) / np.median(ref[1])), 2)},
+        "reference": None if ref is None else _reference_result(reference, *ref),
     }
+
+
+def _reference_result(source: str | None, ours: list[float], theirs: list[float]) -> dict[str, Any]:
+    """Our report's and the reference's runs, medians and their ratio."""
+    return {"source": source, "ours_runs_s": [round(w, 2) for w in ours],
+            "reference_runs_s": [round(w, 2) for w in theirs], "ours_s": round(float(np.median(ours)), 3),
+            "reference_s": round(float(np.median(theirs)), 3),
+            "ratio": round(float(np.median(ours) / np.median(theirs)), 2)}
 
 
 def format_report_bench(r: dict[str, Any]) -> str:
@@ -237,8 +241,8 @@ def format_report_bench(r: dict[str, Any]) -> str:
     lines = [
         f"haptic-study report, fresh process, {r['workers']} worker processes{made}:",
         f"  study                 {r['participants']} participants, {r['trials']} trials, {r['samples']:,} samples",
-        f"  wall time             {r['report_wall_s']:.2f} s median of {len(r['report_runs_s'])} "
-        f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})",
+        (f"  wall time             {r['report_wall_s']:.2f} s median of {len(r['report_runs_s'])} "
+         f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})"),
     ]
     f = r["formats"]
     if "rows" in f:
@@ -248,8 +252,8 @@ def format_report_bench(r: dict[str, Any]) -> str:
             f"  {'format':30s} {'database':>10s} {'read every trial':>17s} {'report':>8s}",
             *(f"  {names[k]:30s} {v['database_mb']:8.1f} MB {v['read_samples_s']:15.2f} s {v['report_wall_s']:6.2f} s"
               for k, v in f.items()),
-            f"  the recording reads the samples {r['read_speedup']:.1f}x faster; the whole report runs "
-            f"{r['report_speedup']:.1f}x faster (figures and statistics cost the same in both)",
+            (f"  the recording reads the samples {r['read_speedup']:.1f}x faster; the whole report runs "
+             f"{r['report_speedup']:.1f}x faster (figures and statistics cost the same in both)"),
         ]
     ref = r.get("reference")
     if ref:
@@ -261,8 +265,8 @@ def format_report_bench(r: dict[str, Any]) -> str:
         ]
     lines += [
         f"trial-level statistics, {r['stats_participants']:,} simulated participants ({r['stats_trials']:,} trials):",
-        f"  wall time             {r['stats_wall_s']:.2f} s (aggregation, 12 Wilcoxon tests with Hodges–Lehmann CIs, "
-        f"Holm, speed–accuracy within participants)",
+        (f"  wall time             {r['stats_wall_s']:.2f} s (aggregation, 12 Wilcoxon tests with Hodges–Lehmann CIs, "
+         f"Holm, speed–accuracy within participants)"),
         "  methods chosen        " + ", ".join(f"{k}: {v}" for k, v in r["stats_methods"].items()),
     ]
     return "\n".join(lines)

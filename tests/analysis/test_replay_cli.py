@@ -20,8 +20,8 @@ from analysis.samples import SAMPLES_COLUMNS, samples_frame
 from bench.row_format import row_format_copy
 from protocol.config import default_protocol
 from protocol.rehearsal import FaultPlan
-from study_app.headless import SessionInterrupted, resume_session, run_study
 from study_app.cli import main
+from study_app.headless import SessionInterrupted, resume_session, run_study
 
 
 def _protocol():  # type: ignore[no-untyped-def]
@@ -163,10 +163,12 @@ def test_export_gives_every_record_as_a_table(study, tmp_path, capsys) -> None:
 def test_export_labels_phases_and_faults_and_writes_a_codebook_for_every_column(study, tmp_path, capsys) -> None:
     from protocol.labels import PHASE_NAMES
 
-    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "s.csv"))
+    sid = sessions(study)["P02/experiment"]  # the session with the fault, alone: a lean test
+    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--session", str(sid),
+                        "--out", str(tmp_path / "s.csv"))
     assert code == 0, err
     frame = pd.read_csv(tmp_path / "s.csv")
-    assert set(frame["participant_code"]) == {"P01", "P02"}
+    assert set(frame["participant_code"]) == {"P02"}
     assert (frame["phase"] == frame["phase_code"].map(PHASE_NAMES)).all()
     latched = frame[frame["faults"] != 0]
     assert len(latched) and latched["fault_names"].str.contains("SENSOR_STALE").all()  # P02's stalled sensor
@@ -180,12 +182,11 @@ def test_export_labels_phases_and_faults_and_writes_a_codebook_for_every_column(
         suffix = {"N": "_N", "N·m": "_Nm", "s": "_s", "ms": "_ms", "m": "_m"}.get(unit)
         assert suffix is None or col.endswith(suffix), (col, unit)
     assert units["gain"] == "fraction (0–1)" and units["faults"] == "bitmask"
-    # the codebook is never overwritten either
-    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "t.csv"))
-    assert code == 0
-    (tmp_path / "t.csv").unlink()
+    # the codebook is never overwritten either: refused before anything is read or written
+    (tmp_path / "t.csv.codebook.csv").write_text("my notes\n")
     code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "t.csv"))
     assert code == 2 and "codebook" in err and not (tmp_path / "t.csv").exists()
+    assert (tmp_path / "t.csv.codebook.csv").read_text() == "my notes\n"
 
 
 def test_plot_session_and_plot_trial_mark_the_abort_the_fault_and_the_resume(study, tmp_path, capsys) -> None:
@@ -224,8 +225,8 @@ def test_a_row_format_database_reads_as_before_and_says_it_cannot_replay(study, 
     code, _, err = _run(capsys, "replay", "--db", str(rows), "--session", str(sid))
     assert code == 2 and "was not recorded whole" in err and err.count("\n") == 1
     # the same trials, the same numbers
-    code_a, out_a, _ = _run(capsys, "report", "--db", str(study), "--out", str(tmp_path / "ra"))
-    code_b, out_b, _ = _run(capsys, "report", "--db", str(rows), "--out", str(tmp_path / "rb"))
+    code_a, _, _ = _run(capsys, "report", "--db", str(study), "--out", str(tmp_path / "ra"))
+    code_b, _, _ = _run(capsys, "report", "--db", str(rows), "--out", str(tmp_path / "rb"))
     assert code_a == code_b == 0
     a = pd.read_csv(tmp_path / "ra" / "trials.csv")
     b = pd.read_csv(tmp_path / "rb" / "trials.csv")
