@@ -183,7 +183,8 @@ COLUMNS: tuple[Column, ...] = (
     # -- speed against accuracy, within participants --------------------------------------------------
     Column("n_trials", "trials with both a TCT and an RMSE (participants' only such trial left out: it has no "
            "within-participant information)", "count", "integer", label="trials", files=_SA),
-    Column("n_participants", "participants contributing", "count", "integer", label="participants", files=_SA),
+    Column("n_participants", "participants contributing (at least two such trials in a mode)", "count", "integer",
+           label="participants", files=_SA),
     Column("r_rm", "repeated-measures correlation of TCT with RMSE (Bakdash & Marusich 2017): the common "
            "within-participant association; negative: a participant's faster trials were the less accurate ones "
            "(a trade)", "−1 to 1", label="r_rm", decimals=4),

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 import io
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -341,10 +342,13 @@ def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> 
                 transform=ax.transAxes, fontsize=6.5, color="#444444")
         return
     y = ax.get_ylim()[1] * 0.02
-    ax.annotate("", xy=(t[-1], y), xytext=(start, y), arrowprops=dict(arrowstyle="|-|", color="#444444", lw=0.8,
-                                                                       shrinkA=0, shrinkB=0))
-    ax.text((start + t[-1]) / 2, y * 2.2, f"error window ({what}): RMSE, Max AE", ha="center", va="bottom",
-            fontsize=6.5, color="#444444")
+    ax.annotate("", xy=(t[-1], y), xytext=(start, y), arrowprops={"arrowstyle": "|-|", "color": "#444444",
+                                                                    "lw": 0.8, "shrinkA": 0, "shrinkB": 0})
+    # at the window's end, where the force has settled (at the target, or wherever the trial ended) rather than
+    # rising through the label; a light box keeps it legible over a trace that does pass
+    ax.text(t[-1], y * 2.2, f"error window ({what}): RMSE, Max AE", ha="right", va="bottom", fontsize=6.5,
+            color="#444444", bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.8},
+            zorder=5)
 
 
 def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]
@@ -399,7 +403,7 @@ def peak_downsample(t: np.ndarray, y: np.ndarray, buckets: int = 1200) -> tuple[
         return t, y
     edges = np.linspace(0, n, buckets + 1).astype(np.int64)
     keep = []
-    for a, b in zip(edges[:-1], edges[1:]):
+    for a, b in itertools.pairwise(edges):
         seg = y[a:b]
         if not np.isfinite(seg).any():
             keep.append(a)

@@ -136,6 +136,20 @@ def power_html(section: Any) -> str:
                if section.png else "") + "</section>")
 
 
+def _deviations_methods(within: Any) -> str:
+    """The methods' sentence on recorded deviations from the protocol: none, or each with its participant."""
+    dev = within.deviations
+    if dev.empty:
+        return "No deviation from the protocol was recorded (events of kind deviation or calibration_override)."
+    items = "; ".join(f"{html.escape(str(r.participant_code))}: {html.escape(str(r.detail).rstrip('. '))}"
+                      for r in dev.head(5).itertuples())
+    if len(dev) > 5:
+        items += f"; and {len(dev) - 5} more"
+    return (f"{plural(len(dev), 'deviation')} from the protocol {'was' if len(dev) == 1 else 'were'} recorded "
+            f"(listed under Deviations from the protocol, deviations.csv; the trials they concern are analysed "
+            f"as recorded): {items}.")
+
+
 def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int], n_participants: int,
                   within: Any) -> str:
     """The data paragraph: what was analysed and what was left out, true whether or not incomplete sessions are in."""
@@ -144,7 +158,8 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
     reasons = "; ".join(html.escape(str(r)) for r in inc["reason"])
     are = "is" if len(inc) == 1 else "are"
     if inc.empty:
-        incomplete = "Every experiment session completed."
+        incomplete = ("Every experiment session completed (one that did not would be left out and listed with its "
+                      "reason; report --include-incomplete analyses its finished trials).")
     elif study.include_incomplete:
         incomplete = (f"{plural(len(inc), 'experiment session')} did not complete and {are} analysed with "
                       f"{'its' if len(inc) == 1 else 'their'} finished trials (report --include-incomplete): "
@@ -177,7 +192,8 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
             f"{plural(len(study.databases), 'database')} ({dbs}), {plural(len(study.included), 'analysed trial')}. "
             f"{_origin(study)[1]} {incomplete} Excluded: "
             f"{plural(excluded['training_sessions'], 'training session')} "
-            f"({plural(excluded['training_trials'], 'trial')}) and {aborted}. Recorded with haptic-study {codes}; "
+            f"({plural(excluded['training_trials'], 'trial')}) and {aborted}. {_deviations_methods(within)} "
+            f"Recorded with haptic-study {codes}; "
             f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
 

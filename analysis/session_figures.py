@@ -122,7 +122,9 @@ def session_trace(
     ymax = max(1.0, float(np.nanmax(compensated_n)) * 1.08 if len(t_s) else 1.0)
     top.set_ylim(-0.05 * ymax, ymax)
     for t0, label in trial_starts:
-        top.text(t0, ymax * 0.99, label, fontsize=6, va="top", ha="left", color="#444444", rotation=90)
+        # boxed, above the aborted-trial hatching, so an aborted trial's own label stays legible
+        top.text(t0, ymax * 0.99, label, fontsize=6, va="top", ha="left", color="#444444", rotation=90, zorder=6,
+                 bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.85})
     _mark_events(top, bottom, t_s, marks, faults, ymax)
     top.set_ylabel("force (N)")
     top.set_title(title, loc="left")

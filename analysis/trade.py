@@ -27,6 +27,9 @@ from analysis.rmcorr import rmcorr
 __all__ = ["TRADE_MODEL_TERMS", "participant_slopes", "rm_caption", "speed_accuracy", "tct_column", "trade_model",
            "trade_pairs"]
 
+#: The report's default metric options (TCT over successful trials, error window from the cue).
+_DEFAULT_OPTIONS = MetricOptions()
+
 #: The fixed effects of :func:`trade_model`, in order, and what each means.
 TRADE_MODEL_TERMS = {
     "intercept": "TCT at RMSE = 0 N, haptics OFF (s)",
@@ -47,7 +50,7 @@ def trade_pairs(trials: pd.DataFrame, options: MetricOptions) -> pd.DataFrame:
     return t[np.isfinite(t["tct"]) & np.isfinite(t["rmse"])]
 
 
-def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), *,
+def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = _DEFAULT_OPTIONS, *,
                    confidence: float = 0.95) -> pd.DataFrame:
     """The repeated-measures correlation of TCT with RMSE, per haptic mode and within participant × mode.
 
@@ -75,8 +78,10 @@ def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions(
         sel = pairs if mode == "all" else pairs[pairs["haptic_mode"] == mode]
         who = (sel["participant_code"].astype(str) + "/" + sel["haptic_mode"].astype(str)).to_numpy()
         c = rmcorr(who, sel["rmse"].to_numpy(), sel["tct"].to_numpy(), confidence=confidence)
+        groups, sizes = np.unique(who, return_counts=True)  # a group with one trial contributes nothing
+        contributing = sel["participant_code"][np.isin(who, groups[sizes >= 2])].nunique()
         rows.append({
-            "haptic_mode": mode, "n_trials": c.n_obs, "n_participants": int(sel["participant_code"].nunique()),
+            "haptic_mode": mode, "n_trials": c.n_obs, "n_participants": int(contributing),
             "r_rm": c.r, "df": c.df, "p_value": c.p_value, "ci_low": c.ci_low, "ci_high": c.ci_high,
             "slope_s_per_n": c.slope, "computable": c.computable, "note": c.note,
             "median_tct_s": float(sel["tct"].median()) if len(sel) else np.nan,
@@ -85,7 +90,7 @@ def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions(
     return pd.DataFrame(rows)
 
 
-def trade_model(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), *,
+def trade_model(trials: pd.DataFrame, options: MetricOptions = _DEFAULT_OPTIONS, *,
                 confidence: float = 0.95) -> ModelFit:
     """``TCT ~ RMSE × haptic mode + (1 | participant)``, REML, with the terms of :data:`TRADE_MODEL_TERMS`.
 
@@ -99,7 +104,7 @@ def trade_model(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), 
                      pairs["participant_code"], confidence)
 
 
-def participant_slopes(trials: pd.DataFrame, options: MetricOptions = MetricOptions()) -> pd.DataFrame:
+def participant_slopes(trials: pd.DataFrame, options: MetricOptions = _DEFAULT_OPTIONS) -> pd.DataFrame:
     """Each participant's least-squares line of TCT on RMSE, per haptic mode (at least 2 distinct RMSEs).
 
     Returns

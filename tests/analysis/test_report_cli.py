@@ -155,6 +155,9 @@ def test_html_is_self_contained_and_states_its_methods(report):
     assert "mean ± SD across 7 participants" in page  # every statistic says what it is
     assert "Holm" in page and "Hodges" in page and "from the cue to the trial end" in page
     assert "a.db" in page and "b.db" in page
+    # the incomplete-session rule and the deviations are stated even when there is nothing to say
+    assert "Every experiment session completed (one that did not would be left out and listed" in page
+    assert "No deviation from the protocol was recorded" in page
 
 
 def test_an_existing_output_folder_is_kept_without_force_and_options_change_the_numbers(dbs, report, tmp_path, capsys):

@@ -108,6 +108,10 @@ def test_recorded_deviations_are_listed(reports):
     dev = pd.read_csv(reports["default"] / "deviations.csv")
     assert list(dev[["participant_code", "kind"]].itertuples(index=False, name=None)) == [("P02", "deviation")]
     assert "without a completed training session" in (reports["default"] / "report.html").read_text()
+    for folder in reports.values():  # the methods name it too, with or without the incomplete session
+        assert ("1 deviation from the protocol was recorded (listed under Deviations from the protocol, "
+                "deviations.csv; the trials they concern are analysed as recorded): P02: experiment started "
+                "without a completed training session (override).") in _methods(folder)
 
 
 def test_a_session_run_from_a_checkout_stores_its_commit(tmp_path):

@@ -148,6 +148,17 @@ def test_the_learning_models_equal_statsmodels_called_directly():
     assert fits["success"].std_errors["haptics_on"] == pytest.approx(gee.bse["on"], rel=1e-8)
 
 
+def test_the_trade_counts_only_the_participants_who_contribute():
+    trials = _trials(8)
+    trials = trials.assign(success=True, tct_s=trials["tct_censored_s"])  # every trial has a TCT, but:
+    p00_off = (trials["participant_code"] == "P00") & (trials["haptic_mode"] == "off")
+    first = p00_off.idxmax()
+    trials.loc[p00_off & (trials.index != first), "tct_s"] = math.nan  # P00: one successful OFF trial left
+    rows = speed_accuracy(trials).set_index("haptic_mode")
+    assert rows.at["off", "n_participants"] == 7 and rows.at["on", "n_participants"] == 8
+    assert rows.at["off", "df"] == rows.at["off", "n_trials"] - 7 - 1  # N − k − 1 over the 7 who contribute
+
+
 def test_too_few_participants_is_a_plain_statement_not_a_fit():
     small = _trials(MIN_PARTICIPANTS - 1)
     fit = trade_model(small)
