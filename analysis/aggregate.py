@@ -1,4 +1,4 @@
-"""Per-participant aggregation, the ON-vs-OFF tests and the speed–accuracy trade.
+"""Per-participant aggregation and the ON-vs-OFF tests (the speed–accuracy trade is :mod:`analysis.trade`).
 
 Statistics follow the paper's design: each participant contributes one value
 per haptic mode (the mean of their trials, or their success rate), and the two
@@ -14,7 +14,6 @@ import numpy as np
 import pandas as pd
 
 from analysis.metrics import MetricOptions
-from analysis.correlation import correlation
 from analysis.stats import WilcoxonResult, paired_wilcoxon, results_frame
 
 __all__ = [
@@ -24,7 +23,6 @@ __all__ = [
     "mean_sd",
     "mode_tests",
     "per_participant",
-    "speed_accuracy",
 ]
 
 #: The paper's outcome measures, in report order; Holm's correction runs across them.
@@ -154,47 +152,3 @@ def mode_tests(
         off, on = _paired(per_part, m)
         results.append(paired_wilcoxon(off, on, metric=m, zero_method=zero_method, confidence=confidence))
     return results, results_frame(results)
-
-
-def speed_accuracy(trials: pd.DataFrame, options: MetricOptions = MetricOptions()) -> pd.DataFrame:
-    """How TCT and RMSE trade against each other, trial by trial, per haptic mode.
-
-    A participant who hurries reaches the band sooner but overshoots more; the
-    Spearman rank correlation of TCT with RMSE over the trials of each mode
-    (and over all trials) measures that trade.  TCT follows
-    ``options.tct_policy`` (successful trials only by default).
-
-    Returns
-    -------
-    pandas.DataFrame
-        One row per ``haptic_mode`` (``off``, ``on``, ``all``): ``n``,
-        ``rho``, ``p_value``, ``ci_low``, ``ci_high``, ``method``,
-        ``computable``, ``note``, and the medians ``median_tct_s``,
-        ``median_rmse_n``.
-    """
-    tct_col = "tct_s" if options.tct_policy == "successful" else "tct_censored_s"
-    rows = []
-    for mode in ("off", "on", "all"):
-        sel = trials if mode == "all" else trials[trials["haptic_mode"] == mode]
-        x = sel[tct_col].to_numpy(dtype=float)
-        y = sel["rmse_n"].to_numpy(dtype=float)
-        # trials without a TCT (failures, under "successful") are not pairs: leave them out before testing
-        keep = np.isfinite(x) & np.isfinite(y)
-        x, y = x[keep], y[keep]
-        c = correlation(x, y, method="spearman")
-        rows.append(
-            {
-                "haptic_mode": mode,
-                "n": c.n,
-                "rho": c.r,
-                "p_value": c.p_value,
-                "ci_low": c.ci_low,
-                "ci_high": c.ci_high,
-                "method": c.method,
-                "computable": c.computable,
-                "note": c.note,
-                "median_tct_s": float(np.median(x)) if len(x) else np.nan,
-                "median_rmse_n": float(np.median(y)) if len(y) else np.nan,
-            }
-        )
-    return pd.DataFrame(rows)

@@ -71,6 +71,10 @@ class Column:
 
 _STATS = ("stats.csv", "stats_by_target.csv")
 _SA = ("speed_accuracy.csv",)
+_SLOPES = ("speed_accuracy_slopes.csv",)
+_MODELS = ("speed_accuracy_model.csv", "learning_models.csv")
+_ORDER = ("order_check.csv",)
+_SENS = ("sensitivity.csv",)
 _PER = ("participants.csv", "participants_by_target.csv")
 _MU = "unit of the measure (see metric)"
 #: Force: 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
@@ -93,8 +97,8 @@ COLUMNS: tuple[Column, ...] = (
            label="target"),
     Column("target_force_N", "target force F*", "N", label="target (N)", source="target_force_n", decimals=_F),
     Column("haptic_mode", "haptic feedback during the trial: on or off", type="text", label="haptics"),
-    Column("haptic_mode", "haptic feedback of the trials correlated: on, off, or all (both)", type="text",
-           label="haptics", files=_SA),
+    Column("haptic_mode", "haptic feedback of the trials correlated: on, off, or all (both modes, each "
+           "participant × mode a group of its own)", type="text", label="haptics", files=_SA),
     # -- one trial ----------------------------------------------------------------------------------
     Column("outcome", "success (force held in the band for the hold time) or timeout (trial cap reached)",
            type="text"),
@@ -176,19 +180,112 @@ COLUMNS: tuple[Column, ...] = (
     Column("w_minus", "rank sum of the pairs with ON < OFF", "rank sum", label="W−", decimals=4),
     Column("n_positive", "pairs with ON > OFF", "count", "integer", label="ON > OFF"),
     Column("n_negative", "pairs with ON < OFF", "count", "integer", label="ON < OFF"),
-    # -- speed against accuracy ---------------------------------------------------------------------
-    Column("n", "trials with both a TCT and an RMSE", "count", "integer", files=_SA),
-    Column("rho", "Spearman rank correlation of TCT with RMSE over trials", "−1 to 1", label="ρ", decimals=4),
-    Column("p_value", "p-value of Spearman's ρ (method: see method)", "probability", label="p", files=_SA,
-           significant=4),
-    Column("ci_low", "lower end of the confidence interval of ρ", "−1 to 1", label="CI low", decimals=4),
-    Column("ci_high", "upper end of the confidence interval of ρ", "−1 to 1", label="CI high", decimals=4),
-    Column("method", "how the p-value of ρ was computed", type="text", label="p method", files=_SA),
-    Column("computable", "false when ρ could not be computed (see note)", type="boolean", files=_SA),
-    Column("note", "why ρ was not computable; empty otherwise", type="text", files=_SA),
+    # -- speed against accuracy, within participants --------------------------------------------------
+    Column("n_trials", "trials with both a TCT and an RMSE (participants' only such trial left out: it has no "
+           "within-participant information)", "count", "integer", label="trials", files=_SA),
+    Column("n_participants", "participants contributing (at least two such trials in a mode)", "count", "integer",
+           label="participants", files=_SA),
+    Column("r_rm", "repeated-measures correlation of TCT with RMSE (Bakdash & Marusich 2017): the common "
+           "within-participant association; negative: a participant's faster trials were the less accurate ones "
+           "(a trade)", "−1 to 1", label="r_rm", decimals=4),
+    Column("df", "degrees of freedom of r_rm: trials − participants (− mode cells for 'all') − 1", "count",
+           "integer", files=_SA),
+    Column("p_value", "p-value of r_rm (t test of the common within-participant slope, df as given)",
+           "probability", label="p", files=_SA, significant=4),
+    Column("ci_low", "lower end of the confidence interval of r_rm (Fisher z, SE = 1/√(df − 3), as the rmcorr R "
+           "package)", "−1 to 1", label="CI low", files=_SA, decimals=4),
+    Column("ci_high", "upper end of the confidence interval of r_rm", "−1 to 1", label="CI high", files=_SA,
+           decimals=4),
+    Column("slope_s_per_N", "common within-participant slope of TCT on RMSE", "s per N", label="slope (s/N)",
+           source="slope_s_per_n", decimals=4),
+    Column("computable", "false when r_rm could not be computed (see note)", type="boolean", files=_SA),
+    Column("note", "why r_rm was not computable, or what was left out; empty otherwise", type="text", files=_SA),
     Column("median_tct_s", "median TCT of the correlated trials", "s", label="median TCT (s)", decimals=_T),
     Column("median_rmse_N", "median RMSE of the correlated trials", "N", label="median RMSE (N)",
            source="median_rmse_n", decimals=_F),
+    Column("participant_code", "pseudonymous participant code", type="text", label="participant", files=_SLOPES),
+    Column("n_trials", "the participant's trials in this mode with both a TCT and an RMSE", "count", "integer",
+           label="trials", files=_SLOPES),
+    Column("intercept_s", "TCT at RMSE = 0 of the participant's own least-squares line", "s", label="intercept (s)",
+           decimals=_T),
+    Column("rmse_min_N", "the participant's smallest RMSE in this mode", "N", source="rmse_min_n", decimals=_F),
+    Column("rmse_max_N", "the participant's largest RMSE in this mode", "N", source="rmse_max_n", decimals=_F),
+    # -- trial-level models (speed_accuracy_model.csv, learning_models.csv) ------------------------------
+    Column("model", "speed-accuracy (TCT ~ RMSE × mode + (1 | participant)) or learning (outcome ~ mode × "
+           "target + trial number, participant as the unit)", type="text", files=_MODELS),
+    Column("outcome", "the modelled outcome and its unit", type="text", files=_MODELS),
+    Column("term", "fixed effect: intercept, haptics_on (ON − OFF), target_<label> (that target − the lowest), "
+           "haptics_on_x_target_<label> (interaction), trial_number (per trial), rmse (slope of TCT on RMSE, "
+           "OFF), rmse_x_on (ON − OFF difference of that slope); empty when the model was not fitted",
+           type="text", files=_MODELS),
+    Column("estimate", "the fixed effect's estimate, in the unit given by scale", "see scale", files=_MODELS,
+           decimals=6),
+    Column("std_error", "its standard error (GEE: robust)", "see scale", files=_MODELS, decimals=6),
+    Column("ci_low", "lower end of its Wald confidence interval", "see scale", files=_MODELS, decimals=6),
+    Column("ci_high", "upper end of its Wald confidence interval", "see scale", files=_MODELS, decimals=6),
+    Column("z", "estimate / standard error", "standard normal", files=_MODELS, decimals=4),
+    Column("p_value", "two-sided Wald p-value of the fixed effect", "probability", files=_MODELS, significant=4),
+    Column("scale", "unit of the estimates: s, N, log-odds (success; exp(estimate) is an odds ratio)",
+           type="text", files=_MODELS),
+    Column("n_obs", "trials in the model", "count", "integer", files=_MODELS),
+    Column("n_participants", "participants in the model", "count", "integer", files=_MODELS),
+    Column("method", "how the model was fitted", type="text", files=_MODELS),
+    Column("converged", "false when the fit did not converge or statsmodels warned (see note)", type="boolean",
+           files=_MODELS),
+    Column("note", "why the model was not fitted, or statsmodels' warnings; empty otherwise", type="text",
+           files=_MODELS),
+    # -- order check ---------------------------------------------------------------------------------
+    Column("n_on_first", "participants whose stored schedule begins with a haptics-ON trial", "count", "integer",
+           files=_ORDER),
+    Column("n_off_first", "participants whose stored schedule begins with a haptics-OFF trial", "count",
+           "integer", files=_ORDER),
+    Column("median_diff_on_first", "median ON − OFF difference of the ON-first participants", _MU, decimals=4),
+    Column("median_diff_off_first", "median ON − OFF difference of the OFF-first participants", _MU, decimals=4),
+    Column("u_statistic", "Mann–Whitney U of the ON-first against the OFF-first differences", "rank count",
+           decimals=1),
+    Column("p_value", "two-sided p-value of the Mann–Whitney U test (scipy.stats.mannwhitneyu)", "probability",
+           files=_ORDER, significant=4),
+    Column("computable", "false when the groups are too small to test (see note)", type="boolean", files=_ORDER),
+    Column("note", "why not tested; empty otherwise", type="text", files=_ORDER),
+    # -- error-window sensitivity --------------------------------------------------------------------
+    Column("analysis", "ON vs OFF (the Wilcoxon tests, Holm across the four measures) or speed-accuracy (r_rm)",
+           type="text", files=_SENS),
+    Column("measure", "the measure tested, or r_rm off / on / all", type="text", files=_SENS),
+    Column("error_window", "the error window of this row: cue (from the cue, the approach included) or "
+           "first_contact", type="text", files=_SENS),
+    Column("n", "pairs ranked (ON vs OFF) or trials correlated (r_rm)", "count", "integer", files=_SENS),
+    Column("estimate", "Hodges–Lehmann shift ON − OFF (unit of the measure), or r_rm", "see analysis",
+           files=_SENS, decimals=4),
+    Column("ci_low", "lower end of its confidence interval", "see analysis", files=_SENS, decimals=4),
+    Column("ci_high", "upper end of its confidence interval", "see analysis", files=_SENS, decimals=4),
+    Column("p_value", "p-value (Wilcoxon signed-rank test, or the t test of r_rm)", "probability", files=_SENS,
+           significant=4),
+    Column("p_holm", "Holm-adjusted p across the four measures in this window (ON vs OFF only)", "probability",
+           files=_SENS, significant=4),
+    Column("conclusion", "what the row concludes at p < 0.05 (Holm's p for the tests)", type="text", files=_SENS),
+    Column("differs", "true when this measure's conclusion is not the same in every error window", type="boolean",
+           files=_SENS),
+    Column("error_window", "the error window of RMSE, Max AE and peak force in this file: cue (from the cue, the "
+           "approach from 0 N included: the paper's 'during the trial') or first_contact", type="text"),
+    # -- incomplete sessions, deviations, provenance --------------------------------------------------
+    Column("n_finished", "trials that ended as designed (success or timeout)", "count", "integer",
+           files=("incomplete_sessions.csv",)),
+    Column("n_designed", "trials of the session's design (its schedule less the re-runs of aborted trials)",
+           "count", "integer"),
+    Column("n_aborted", "aborted trials (not counted)", "count", "integer", files=("incomplete_sessions.csv",)),
+    Column("analysed", "true when the session's finished trials are analysed (experiment sessions that "
+           "completed, and with --include-incomplete the others)", type="boolean"),
+    Column("reason", "why the session is incomplete, in words", type="text", files=("incomplete_sessions.csv",)),
+    Column("kind", "the kind of deviation event (deviation, calibration_override)", type="text",
+           files=("deviations.csv",)),
+    Column("t_s", "session clock of the event", "s", files=("deviations.csv",), decimals=_T),
+    Column("detail", "what the event records, as stored", type="text", files=("deviations.csv",)),
+    Column("software_commit", "git commit of the checkout that ran the session; empty when not known (installed "
+           "from a wheel, or recorded before schema version 4)", type="text", label="commit"),
+    Column("software_dirty", "true when that checkout had uncommitted changes to tracked files; empty when not "
+           "known", type="boolean", label="uncommitted changes"),
+    Column("first_mode", "haptic mode of the first trial of the session's stored schedule (the order check's "
+           "grouping)", type="text", label="first mode"),
     # -- sessions -----------------------------------------------------------------------------------
     Column("kind", "training or experiment (training sessions are not analysed)", type="text"),
     Column("status", "running (interrupted, resumable), completed or aborted", type="text"),

@@ -16,7 +16,7 @@ import math
 import os
 import sqlite3
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,12 +28,20 @@ from protocol.recording import RecordingDamaged, read_ticks, recording_damage
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
 from protocol.storage import connect_readonly as _connect_readonly
+from protocol.study_rules import DEVIATION_KINDS
 
 #: Where a trial's records are in its session's recording (schema version 3).
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
+#: Events the report lists: deviations from the protocol ("deviation": any recorded departure from the
+#: design, e.g. an experiment started without a completed training; "calibration_override": a session started
+#: without a calibration step on record) and which code ran each resumed part of a session ("software").
+DEVIATION_EVENTS = DEVIATION_KINDS  # their one definition: protocol.study_rules
+LISTED_EVENTS = (*DEVIATION_EVENTS, "software")
 
 __all__ = [
     "AnalysisError",
+    "DEVIATION_EVENTS",
+    "LISTED_EVENTS",
     "Progress",
     "StudyData",
     "connect_readonly",
@@ -41,8 +49,8 @@ __all__ = [
     "read_task_force",
     "recorded_where",
     "stored_records",
-    "samples_frame",
     "read_trial_samples",
+    "recorded_samples",
 ]
 
 #: ``progress(done, total)`` callback, called while samples are read.
@@ -67,15 +75,20 @@ class StudyData:
         databases), where its records are in the session's recording
         (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
         trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
-        ``max_trial_s``, ``excluded`` (``""`` when analysed, else
-        ``"training session"``, ``"aborted trial"`` or ``"recording damaged"``) and ``damage`` (for a trial
-        whose records touch a damaged block of the recording: the line of :attr:`damage` naming it, else ``""``).
+        ``max_trial_s``, ``repeat_of`` (the trial index an aborted trial's re-run repeats), ``excluded``
+        (``""`` when analysed, else ``"training session"``, ``"incomplete session"``, ``"aborted trial"`` or
+        ``"recording damaged"``) and ``damage`` (for a trial whose records touch a damaged block of the
+        recording: the line of :attr:`damage` naming it, else ``""``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
         ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
         ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
-        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored).
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored), which code
+        ran it (``software_commit``, ``software_dirty``; empty before schema version 4 or when not known),
+        ``n_designed`` (the trials its design has: the schedule less its re-runs), ``first_mode`` (the haptic
+        mode of the schedule's first trial) and ``analysed`` (its trials are analysed: an experiment session,
+        completed, or any with ``include_incomplete``).
     databases
         The database paths, in the order given.
     damage
@@ -83,12 +96,18 @@ class StudyData:
         decode): the database, session, session-time range and the trials it touches.  Those trials are
         excluded (``"recording damaged"``): their metrics' window is not whole, so they are not analysed
         from what is left; every other trial is.
+    events
+        The events the report lists (:data:`LISTED_EVENTS`): ``database, session_id, t_s, kind, detail``.
+    include_incomplete
+        Whether experiment sessions that did not complete are analysed.
     """
 
     trials: pd.DataFrame
     sessions: pd.DataFrame
     databases: tuple[str, ...]
     damage: tuple[str, ...] = ()
+    events: pd.DataFrame = field(default_factory=pd.DataFrame)
+    include_incomplete: bool = False
 
     @property
     def included(self) -> pd.DataFrame:
@@ -159,15 +178,28 @@ def _mark_damage(db: StudyDatabase, path: str, trials: pd.DataFrame) -> list[str
     return lines
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
+def _schedule_fields(schedule_json: object) -> dict[str, object]:
+    """The trials a session's design has (its stored schedule less the re-runs) and its first trial's mode."""
+    try:
+        schedule = json.loads(str(schedule_json))
+        designed = [t for t in schedule if t.get("repeat_of") is None]
+        return {"n_designed": len(designed), "first_mode": str(schedule[0]["haptic_mode"]) if schedule else ""}
+    except (ValueError, KeyError, TypeError, AttributeError, IndexError):
+        return {"n_designed": np.nan, "first_mode": ""}
+
+
+def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
     db = _open(path)
     try:
+        # schema version 4 records which code ran a session; earlier files do not
+        has_s = {r[1] for r in db.conn.execute("PRAGMA table_info(sessions)")}
+        v4 = ", ".join(f"s.{c}" if c in has_s else f"NULL AS {c}" for c in ("software_commit", "software_dirty"))
         sessions = _query(
             db,
             "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
             "s.started_at, "
-            "s.ended_at, s.end_reason, s.software_version, s.rig, s.protocol_json, s.config_json "
-            "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
+            f"s.ended_at, s.end_reason, s.software_version, {v4}, s.rig, s.protocol_json, s.config_json, "
+            "s.schedule_json FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
         )
         # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
         has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
@@ -178,10 +210,13 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
             "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
             "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, {v2} "
+            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, repeat_of, {v2} "
             "FROM trials ORDER BY session_id, trial_index",
         )
         damage = _mark_damage(db, path, trials)
+        kinds = ", ".join(f"'{k}'" for k in LISTED_EVENTS)
+        events = _query(db, f"SELECT session_id, t_s, kind, detail FROM events WHERE kind IN ({kinds}) "
+                            "ORDER BY session_id, t_s")
     finally:
         db.close()
     if sessions.empty:
@@ -191,19 +226,26 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, list[str]]:
         index=sessions.index,
     )
     watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
-    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json"]), proto, watchdog], axis=1)
-    sessions.insert(0, "database", path)
-    trials.insert(0, "database", path)
-    return sessions, trials, damage
+    design = pd.DataFrame([_schedule_fields(sj) for sj in sessions["schedule_json"]], index=sessions.index)
+    sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
+                          design], axis=1)
+    sessions["software_dirty"] = sessions["software_dirty"].astype("boolean")
+    for frame in (sessions, trials, events):
+        frame.insert(0, "database", path)
+    return sessions, trials, events, damage
 
 
-def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
+def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False) -> StudyData:
     """Read and merge study databases.
 
     Parameters
     ----------
     paths
         One or more haptic-study databases.
+    include_incomplete
+        Analyse the finished trials of experiment sessions that did not complete (ended by the experimenter,
+        or interrupted and not resumed).  By default they are left out (``excluded = "incomplete session"``)
+        and the report lists them with the reason.
 
     Returns
     -------
@@ -220,7 +262,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
     if not paths:
         raise AnalysisError("--db: give at least one study database")
     seen: dict[tuple[int, int], str] = {}
-    all_sessions, all_trials, damage = [], [], []
+    all_sessions, all_trials, all_events, damage = [], [], [], []
     for raw in paths:
         path = str(raw)
         if not Path(path).exists():
@@ -230,9 +272,10 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
         if key in seen:
             raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
         seen[key] = path
-        s, t, d = _read_one(path)
+        s, t, e, d = _read_one(path)
         all_sessions.append(s)
         all_trials.append(t)
+        all_events.append(e)
         damage.extend(d)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
@@ -242,30 +285,37 @@ def load_study(paths: Sequence[str | os.PathLike[str]]) -> StudyData:
                 f"participant code {code!r} appears in {dbs[0]} and {dbs[1]}; the merge refuses to guess "
                 "whether they are one person (analyse the databases separately or re-code one)"
             )
+    experiment = sessions["kind"] == "experiment"
+    sessions["analysed"] = experiment & ((sessions["status"] == "completed") | include_incomplete)
     trials = pd.concat(all_trials, ignore_index=True)
     meta = sessions[["database", "session_id", "participant_code", "participant_number", "kind", "status",
-                     "tolerance_fraction", "hold_s", "max_trial_s"]].rename(
+                     "tolerance_fraction", "hold_s", "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
     )
     trials = trials.merge(meta, on=["database", "session_id"], how="left", validate="many_to_one")
     excluded = np.where(
         trials["session_kind"] != "experiment", "training session",
-        np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial",
-                 np.where(trials["damage"] != "", "recording damaged", "")),
+        np.where(~trials["analysed"].astype(bool), "incomplete session",
+                 np.where(trials["outcome"] == Outcome.ABORTED, "aborted trial",
+                          np.where(trials["damage"] != "", "recording damaged", ""))),
     )
     trials["excluded"] = excluded
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
              "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
-             "tolerance_fraction", "hold_s", "max_trial_s", "excluded", "damage"]
+             "tolerance_fraction", "hold_s", "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
-    if not (sessions["kind"] == "experiment").any():
+    if not experiment.any():
         raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
     if (trials["excluded"] == "").sum() == 0:
+        if (trials["excluded"] == "incomplete session").any():
+            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
+                                "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
-    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage))
+    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
+                     events=pd.concat(all_events, ignore_index=True), include_incomplete=include_incomplete)
 
 
 def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
@@ -347,7 +397,7 @@ _SAMPLE_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "ra
                    "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz")
 #: What a trial's trace reads of a recorded session (the compensated force is not stored: replay recomputes it).
 _RECORDED_TRACE = ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-                   "render_fx", "render_fy", "render_fz")
+                   "render_fx", "render_fy", "render_fz", "faults")
 
 
 def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int) -> pd.DataFrame:
@@ -364,6 +414,7 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     -------
     pandas.DataFrame
         Columns ``t_s`` (since the cue), ``force_n``, ``raw_f*``, ``raw_t*``, ``render_f*``, and
+        ``faults`` (the latched watchdog faults, a bitmask) for a recorded trial, or
         ``comp_f*`` for a trial of schema version 1 or 2 (a recorded session's compensated force is
         recomputed by replay, :func:`pipeline.replay.replay`, not stored).
 
@@ -398,16 +449,18 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     return frame
 
 
-#: The columns of :func:`samples_frame`, in order (``comp_f*`` only for sessions recorded before version 3).
-SAMPLES_FRAME_COLUMNS = (
+#: The columns of :func:`recorded_samples`, in order (``comp_f*`` only for sessions recorded before version 3).
+RECORDED_COLUMNS = (
     "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
     "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
 )
 
 
-def samples_frame(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
-    """The 1 kHz records of one session (or all) as one table: the study's samples for SQL-free analysis.
+def recorded_samples(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+    """The 1 kHz records of one session (or all) as one table, with the recording's own column names.
+
+    :func:`analysis.samples.samples_frame` labels it for people (``haptic-study export samples``).
 
     A session recorded by version 3 gives every record from its start to its
     end (training, pauses, trials, waits, every resumed run); one recorded
@@ -423,7 +476,7 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
     Returns
     -------
     pandas.DataFrame
-        One row per record, columns :data:`SAMPLES_FRAME_COLUMNS`: the session and its
+        One row per record, columns :data:`RECORDED_COLUMNS`: the session and its
         recording's segment and loop tick, the session-clock time, the trial (numbered from 1;
         empty between trials) and the time since its cue, the trial phase code, the task force
         and the raw, rendered and gain values, the fraction of the designed force the haptic
@@ -449,7 +502,7 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
     finally:
         db.close()
     parts = [p for p in parts if len(p)]
-    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame({c: [] for c in SAMPLES_FRAME_COLUMNS})
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame({c: [] for c in RECORDED_COLUMNS})
     out.attrs["damage"] = [f"{database}: {line}" for line in damage]
     return out
 
@@ -502,5 +555,5 @@ def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> p
     if not frames:
         return pd.DataFrame()
     out = pd.concat(frames, ignore_index=True)
-    cols = [c for c in SAMPLES_FRAME_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
+    cols = [c for c in RECORDED_COLUMNS if c in out.columns] + [c for c in out.columns if c.startswith("comp_")]
     return out[cols].sort_values("session_time_s", kind="stable", ignore_index=True)

@@ -9,7 +9,7 @@ the ones stored during the session.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
@@ -77,12 +77,30 @@ class TrialTable:
     n_disagree
         Trials whose recomputed outcome, TCT, RMSE or Max AE (cue window)
         differ from the stored ones (should be 0; a non-zero count is reported).
+    by_window
+        The window-dependent metrics (``rmse_n``, ``max_ae_n``, ``peak_force_n``) of every trial in each
+        error window (:data:`ERROR_WINDOWS`), row for row with ``trials``: what the sensitivity analysis
+        compares.  A trial without samples has its stored (cue-window) values in the cue window, NaN in
+        the other.
+    error_window
+        The window of ``trials``' own ``rmse_n``, ``max_ae_n`` and ``peak_force_n``.
     """
 
     trials: pd.DataFrame
     n_from_samples: int
     n_stored_only: int
     n_disagree: int
+    by_window: dict[str, pd.DataFrame] = field(default_factory=dict)
+    error_window: str = "cue"
+
+    def in_window(self, window: str) -> pd.DataFrame:
+        """``trials`` with the window-dependent metrics of ``window`` (one of :data:`ERROR_WINDOWS`)."""
+        if window == self.error_window or window not in self.by_window:
+            return self.trials
+        out = self.trials.copy()
+        for col, values in self.by_window[window].items():
+            out[col] = values.to_numpy()
+        return out
 
 
 def _close(a: float, b: float) -> bool:
@@ -105,11 +123,13 @@ class _Check:
 
 @dataclass(frozen=True, slots=True)
 class _Recomputed:
-    """A trial's metrics recomputed in ``window`` (None: it has no samples) and whether the live ones agree."""
+    """A trial's metrics recomputed in ``window`` (None: it has no samples), in every error window, and whether
+    the live ones agree."""
 
     row: int
     metrics: TrialMetrics | None
     agrees: bool
+    by_window: dict[str, TrialMetrics] | None = None
 
 
 def _nan(v: float | None) -> float:
@@ -133,9 +153,9 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
                 out.append(_Recomputed(c.row, None, True))
                 continue
             kw = dict(tolerance_fraction=c.tolerance_fraction, hold_s=c.hold_s, max_trial_s=c.max_trial_s)
-            m = trial_metrics(t_ns, force, c.stored.target_force_n, window=window, **kw)
-            live = m if window == "cue" else trial_metrics(t_ns, force, c.stored.target_force_n, **kw)
-            out.append(_Recomputed(c.row, m, _agrees(live, c.stored)))
+            # every window, for the report's sensitivity table; the live metrics are the cue window's
+            every = {w: trial_metrics(t_ns, force, c.stored.target_force_n, window=w, **kw) for w in ERROR_WINDOWS}
+            out.append(_Recomputed(c.row, every[window], _agrees(every["cue"], c.stored), every))
     finally:
         conn.close()
     return out
@@ -218,7 +238,25 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "database": inc["database"],
         }
     )
-    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree)
+    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree, _by_window(inc, results),
+                      options.error_window)
+
+
+#: The metrics that depend on the error window.
+WINDOWED = ("rmse_n", "max_ae_n", "peak_force_n")
+
+
+def _by_window(inc: pd.DataFrame, results: list[list[_Recomputed]]) -> dict[str, pd.DataFrame]:
+    """Every trial's window-dependent metrics in each window (stored cue values where there are no samples)."""
+    n = len(inc)
+    out = {w: np.full((n, len(WINDOWED)), np.nan) for w in ERROR_WINDOWS}
+    out["cue"][:] = inc[[f"stored_{m}" for m in WINDOWED]].to_numpy(dtype=float)
+    for chunk in results:
+        for r in chunk:
+            if r.by_window is not None:
+                for w, m in r.by_window.items():
+                    out[w][r.row] = (m.rmse_n, m.max_ae_n, m.peak_force_n)
+    return {w: pd.DataFrame(v, columns=list(WINDOWED), index=inc.index) for w, v in out.items()}
 
 
 def compute_trials(

@@ -85,6 +85,10 @@ def power_curves(result: PowerResult) -> Figure:
         axes[-1].annotate(f"{level:.0%}", xy=(1.0, level), xycoords=("axes fraction", "data"), xytext=(3, 0),
                           textcoords="offset points", va="center", fontsize=8, color="#555555")
     band = f"band: {result.interval_level:.0%} Monte Carlo interval of {result.resamples} resampled studies per n"
+    # the caveat belongs on the figure it qualifies, not only in the text beside it
+    band += (f"\ncaveat: resampling {result.n_pool} participants leaves out their own sampling error; a small pilot "
+             "overstates power" + (", more so where all its participants change the same way"
+                                   if any("overstates the power" in n for n in result.notes) else ""))
     fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=len(handles),
                frameon=False, fontsize=9, title=band, title_fontsize=8)
     size = "" if "participants" in result.source else f" ({result.n_pool} participants)"

@@ -24,20 +24,27 @@ of :mod:`analysis.outdir`, shared with ``power``).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
-from analysis import figures, report_tables
-from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant, speed_accuracy
+from analysis import figures, model_figures, report_tables
+from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.load import Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
+from analysis.models import MIN_PARTICIPANTS, ModelFit
+from analysis.sensitivity import max_ae_from_approach, window_sensitivity
+from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
+from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
-from analysis.report_html import page, power_html
+from analysis.report_html import page, plural, power_html
 from analysis.stats import WilcoxonResult
 
 __all__ = [
@@ -92,16 +99,37 @@ class _Analysis:
     target_order: list[str]
     target_results: dict[str, list[WilcoxonResult]]
     stats_by_target: pd.DataFrame
-    sa: pd.DataFrame
     excluded: dict[str, int]
     n_incomplete: int
     n_participants: int
+    within: _Within
+    confidence: float = 0.95
+
+
+@dataclass(frozen=True, slots=True)
+class _Within:
+    """The within-participant analyses: the trade, the error-window sensitivity, learning and order, the record."""
+
+    sa: pd.DataFrame
+    trade_fit: ModelFit | None
+    slopes: pd.DataFrame
+    sensitivity: pd.DataFrame
+    max_ae_approach: tuple[int, int]
+    learning: list[ModelFit]
+    order: pd.DataFrame
+    curve: pd.DataFrame
+    incomplete: pd.DataFrame
+    deviations: pd.DataFrame
+    provenance: pd.DataFrame
+    provenance_warnings: list[str]
+    reruns: tuple[int, int]
 
 
 def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
-             confidence: float, progress: Progress | None, workers: int | None) -> _Analysis:
+             confidence: float, progress: Progress | None, workers: int | None,
+             include_incomplete: bool = False) -> _Analysis:
     """Read the study, recompute every trial, aggregate per participant and test ON vs OFF (overall, per target)."""
-    study = load_study(databases)
+    study = load_study(databases, include_incomplete=include_incomplete)
     table = compute_trials(study, options, progress=progress, workers=workers)
     trials = table.trials
     overall = per_participant(trials, options)
@@ -119,12 +147,39 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     excluded = {
         "training_sessions": int((study.sessions["kind"] != "experiment").sum()),
         "training_trials": int((all_t["excluded"] == "training session").sum()),
+        "incomplete_sessions": int(((study.sessions["kind"] == "experiment") & ~study.sessions["analysed"]).sum()),
+        "incomplete_trials": int(((all_t["excluded"] == "incomplete session") & (all_t["outcome"] != "aborted")).sum()),
         "aborted_trials": int((all_t["excluded"] == "aborted trial").sum()),
     }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
+    within = _within(study, table, overall, target_order, options, zero_method, confidence)
     return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
-                     pd.concat(per_target, ignore_index=True), speed_accuracy(trials, options), excluded,
-                     int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()))
+                     pd.concat(per_target, ignore_index=True), excluded,
+                     int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
+                     confidence)
+
+
+def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
+            options: MetricOptions, zero_method: str, confidence: float) -> _Within:
+    """The trade, the sensitivity to the error window, learning and order, and the study record's lists.
+
+    The models are not fitted here (``trade_fit`` None, ``learning`` empty): :func:`_draw` fits them in a worker
+    while the figures are drawn (:func:`_fit_models`), each once.
+    """
+    trials = table.trials
+    prov, warn = provenance(study)
+    return _Within(
+        sa=speed_accuracy(trials, options, confidence=confidence),
+        trade_fit=None,
+        slopes=participant_slopes(trials, options),
+        sensitivity=window_sensitivity(table, options, zero_method=zero_method, confidence=confidence),
+        max_ae_approach=max_ae_from_approach(table),
+        learning=[],
+        order=order_check(overall, first_modes(study.sessions)),
+        curve=learning_curve(trials, tct_column(options)),
+        incomplete=incomplete_sessions(study), deviations=deviations(study), provenance=prov,
+        provenance_warnings=warn, reruns=aborted_reruns(study),
+    )
 
 
 def _all_marks(a: _Analysis) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
@@ -138,20 +193,60 @@ def _all_marks(a: _Analysis) -> tuple[dict[str, str], dict[tuple[str, str], str]
     return marks_overall, marks
 
 
+def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
+    """The caveats printed on the figures they qualify."""
+    window = ("from the cue, the approach from 0 N included" if options.error_window == "cue" else
+              "from first contact")
+    no_tct = int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+    tct = ("TCT over successful trials only" + (f"; {plural(no_tct, 'participant')} without a success in a mode "
+                                                 "have no TCT there" if no_tct else "")
+           if options.tct_policy == "successful" else "TCT with failed trials counted at the trial cap")
+    learning = ("Descriptive; the trial-number effects at fixed mode and target are the models' (report table)."
+                if a.n_participants >= MIN_PARTICIPANTS else
+                f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
+                f"(at least {MIN_PARTICIPANTS}).")
+    return {"tct": tct + ".", "errors": f"RMSE and Max AE: error window {window}.",
+            "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
+            "learning": learning}
+
+
+def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOptions,
+                confidence: float) -> tuple[ModelFit, list[ModelFit]]:
+    """Every model of the report, each fitted once: the trade's mixed model and one learning model per outcome."""
+    return (trade_model(trials, options, confidence=confidence),
+            learning_models(trials, target_order, tct_column(options), confidence))
+
+
+def _work(kind: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str, name: str) -> Any:
+    """One task of the report's worker pool: draw a figure (``kind`` is its builder, in :mod:`analysis.figures` or
+    :mod:`analysis.model_figures`) or fit the models."""
+    if kind == "models":
+        return _fit_models(*args)
+    if kind in ("trade_slopes", "learning_curves"):
+        return figures.save(getattr(model_figures, kind)(*args, **kwargs), folder, name)
+    return figures.render(kind, args, kwargs, folder, name)
+
+
 def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], marks: dict[tuple[str, str], str],
-          fig_dir: Path, workers: int | None) -> tuple[dict[str, bytes], list[tuple[str, bytes]]]:
-    """Draw the figures into ``fig_dir`` (in parallel): the PNGs by key, and the example trials with titles."""
+          fig_dir: Path, workers: int | None,
+          ) -> tuple[dict[str, bytes], list[tuple[str, bytes]], tuple[ModelFit, list[ModelFit]]]:
+    """Draw the figures into ``fig_dir`` and fit the models, in parallel: the PNGs by key, the example trials
+    with titles, and the fitted models (the trade's, the learning ones)."""
     overall, by_target, trials = a.overall, a.by_target, a.trials
-    tct_col = "tct_s" if options.tct_policy == "successful" else "tct_censored_s"
-    rho_txt = {r.haptic_mode: (f"ρ = {r.rho:.2f}, p = {r.p_value:.3g}, n = {r.n}" if r.computable else "not computable")
-               for r in a.sa.itertuples()}
+    notes = _notes(a, options)
+    common = {str(r.haptic_mode): (float(r.slope_s_per_n), rm_caption(r)) for r in a.within.sa.itertuples()}
+    tct_label = "TCT (s), successful trials" if options.tct_policy == "successful" else "TCT (s), failures at the cap"
     bars = dict(target_order=a.target_order)
     tasks: list[tuple[str, tuple, dict, str, str]] = [
+        ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
-        ("mode_bars", (["tct_s"], overall, by_target, marks), bars, "tct", "tct"),
-        ("mode_bars", (["rmse_n", "max_ae_n"], overall, by_target, marks), bars, "rmse_max_ae", "errors"),
+        ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),
+        ("mode_bars", (["rmse_n", "max_ae_n"], overall, by_target, marks), {**bars, "note": notes["errors"]},
+         "rmse_max_ae", "errors"),
         ("paired_lines", (overall, PRIMARY_METRICS, marks_overall), {}, "paired", "paired"),
-        ("speed_accuracy_scatter", (trials, tct_col, rho_txt), {}, "speed_accuracy", "speed_accuracy"),
+        ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
+         {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
+        ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
     ]
     titles = []
     included = a.study.included
@@ -163,13 +258,14 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
         tol = float(included.loc[(included["database"] == ex["database"]) &
                                  (included["session_id"] == ex["session_id"]), "tolerance_fraction"].iloc[0])
         tasks.append(("trial_trace", (str(ex["database"]), int(ex["session_id"]), int(ex["trial_index"])),
-                      dict(target_force_n=float(ex["target_force_n"]), tolerance_fraction=tol, title=title),
-                      name, name))
+                      dict(target_force_n=float(ex["target_force_n"]), tolerance_fraction=tol, title=title,
+                           error_window=options.error_window), name, name))
         titles.append((name, title))
-    drawn = run_tasks(figures.render, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],
+    drawn = run_tasks(_work, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],
                       workers=default_workers() if workers is None else workers)
-    pngs = {key: png for (_, _, _, _, key), png in zip(tasks, drawn)}
-    return pngs, [(title, pngs[name]) for name, title in titles]
+    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn)}
+    models = out.pop("models")
+    return out, [(title, out[name]) for name, title in titles], models
 
 
 
@@ -185,6 +281,7 @@ def build_report(
     progress: Progress | None = None,
     workers: int | None = None,
     power: bool = False,
+    include_incomplete: bool = False,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -210,6 +307,9 @@ def build_report(
     power
         Add "What n would a study need?": the power of the tests against the number of participants, by
         resampling this study's participants (:func:`analysis.power.report_section`; writes ``power.csv``).
+    include_incomplete
+        Analyse the finished trials of experiment sessions that did not complete (by default they are left
+        out; either way the report lists them with the reason).
 
     Returns
     -------
@@ -221,12 +321,16 @@ def build_report(
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    a = _analyse(databases, options, zero_method, confidence, progress, workers)
-    tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target, a.sa)
+    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete)
+    results: dict[str, pd.DataFrame] = {}
 
     def fill(tmp: Path) -> None:
         marks_overall, marks = _all_marks(a)
-        pngs, examples = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
+        pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
+        within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
+        tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
+                                             within, options.error_window)
+        results.update(tables)
         section = ""
         if power:
             from analysis.power_outputs import report_section
@@ -236,10 +340,11 @@ def build_report(
         html = page(
             study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
             excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=tables,
-            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section,
+            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
+            target_order=a.target_order,
         )
         (tmp / "report.html").write_text(html, encoding="utf-8")
 
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, a.n_participants, len(a.trials), int(a.study.included["n_samples"].fillna(0).sum()),
-                         a.excluded, tables["stats.csv"], files)
+                         a.excluded, results["stats.csv"], files)

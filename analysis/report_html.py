@@ -6,10 +6,8 @@
 
 from __future__ import annotations
 
-import base64
 import datetime as dt
 import html
-import math
 import os
 from collections.abc import Sequence
 from typing import Any
@@ -17,14 +15,19 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from analysis import codebook
+from analysis import codebook, report_sections
 from analysis.aggregate import PRIMARY_METRICS, mean_sd
+from analysis.html_parts import fmt as _fmt
+from analysis.html_parts import fmt_p, fmt_w, plural
+from analysis.html_parts import html_table as _html_table
+from analysis.html_parts import img as _img
+from analysis.html_parts import th as _th
 from analysis.load import StudyData
 from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
 from analysis.metrics import MetricOptions, TrialTable
 from analysis.stats import methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
-from protocol.version import software_version
+from protocol.version import software_provenance
 
 __all__ = ["page", "plural", "power_html"]
 
@@ -34,55 +37,17 @@ _STAT_HTML_COLUMNS = ("metric", "n", "n_zero", "n_ties", "median_off", "median_o
 
 
 
-def plural(n: int, word: str, many: str | None = None) -> str:
-    """``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
-    return f"{n} {word if n == 1 else (many or word + 's')}"
-
-
-def _fmt(v: object, digits: int = 3) -> str:
-    if v is None or v is pd.NA:
-        return ""
-    if isinstance(v, (bool, np.bool_)):
-        return "yes" if v else "no"
-    if isinstance(v, (int, np.integer)):
-        return str(int(v))
-    if isinstance(v, (float, np.floating)):
-        f = float(v)
-        if math.isnan(f):
-            return "–"
-        if f != 0 and (abs(f) < 1e-3 or abs(f) >= 1e5):
-            return f"{f:.{digits}g}"
-        return f"{f:.{digits}f}"
-    return html.escape(str(v))
-
-
-def _th(file: str, column: str) -> str:
-    """A table heading: the codebook's short label, its description on hover."""
-    entry = codebook.lookup(file, column)
-    tip = f' title="{html.escape(entry.description)}"' if entry is not None else ""
-    return f"<th{tip}>{html.escape(codebook.label(file, column))}</th>"
-
-
-def _html_table(frame: pd.DataFrame, file: str, columns: Sequence[str] | None = None,
-                cell: dict[str, object] | None = None) -> str:
-    """A table of an exported CSV's rows, with readable headings; ``cell`` formats some columns specially."""
-    cols = list(columns) if columns else list(frame.columns)
-    special = cell or {}
-    head = "".join(_th(file, c) for c in cols)
-    body = []
-    for _, row in frame.iterrows():
-        cells = "".join(f"<td>{special[c](row[c]) if c in special else _fmt(row[c])}</td>" for c in cols)  # type: ignore[operator]
-        body.append(f"<tr>{cells}</tr>")
-    return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
-
-
 def _measure_label(metric: str) -> str:
     """``rmse_N`` → ``RMSE (N)``: the heading the participants table gives the measure."""
     return codebook.label("participants.csv", metric)
 
 
-def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str:
-    """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered."""
+def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), caption: str = "") -> str:
+    """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered.
+
+    W is shown with the precision it has (a rank sum: whole or half), p-values to 3 significant digits; each
+    note is the one of its own row (it speaks of that row's pairs).
+    """
     notes: dict[str, int] = {}
     cols = list(lead) + list(_STAT_HTML_COLUMNS)
     head = "".join(
@@ -98,13 +63,15 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = ()) -> str
             label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl if c == 'hl' else _fmt(row[c])}</td>"
-                        for c in cols)
+        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
+        cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl}</td>" if c == "hl" else
+                        f"<td>{special[c](row.get(c)) if c in special else _fmt(row[c])}</td>" for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
         body.append(f"<tr{cls}>{cells}</tr>")
     foot = "".join(f"<li>{html.escape(n)}</li>" for n in notes)
-    return (f'<div class="scroll"><table class="stats"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody>'
-            f'</table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
+    cap = f"<caption>{caption}</caption>" if caption else ""
+    return (f'<div class="scroll"><table class="stats">{cap}<thead><tr>{head}</tr></thead><tbody>{"".join(body)}'
+            f'</tbody></table></div>' + (f'<ol class="notes">{foot}</ol>' if foot else ""))
 
 
 #: Headings of the power table's columns (``target`` and ``measure`` are the row labels, as in the test tables).
@@ -169,12 +136,69 @@ def power_html(section: Any) -> str:
                if section.png else "") + "</section>")
 
 
-def _img(png: bytes, alt: str) -> str:
-    return f'<img alt="{html.escape(alt)}" src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">'
+def _deviations_methods(within: Any) -> str:
+    """The methods' sentence on recorded deviations from the protocol: none, or each with its participant."""
+    dev = within.deviations
+    if dev.empty:
+        return "No deviation from the protocol was recorded (events of kind deviation or calibration_override)."
+    items = "; ".join(f"{html.escape(str(r.participant_code))}: {html.escape(str(r.detail).rstrip('. '))}"
+                      for r in dev.head(5).itertuples())
+    if len(dev) > 5:
+        items += f"; and {len(dev) - 5} more"
+    return (f"{plural(len(dev), 'deviation')} from the protocol {'was' if len(dev) == 1 else 'were'} recorded "
+            f"(listed under Deviations from the protocol, deviations.csv; the trials they concern are analysed "
+            f"as recorded): {items}.")
+
+
+def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int], n_participants: int,
+                  within: Any) -> str:
+    """The data paragraph: what was analysed and what was left out, true whether or not incomplete sessions are in."""
+    exp = study.sessions[study.sessions["kind"] == "experiment"]
+    inc = within.incomplete
+    reasons = "; ".join(html.escape(str(r)) for r in inc["reason"])
+    are = "is" if len(inc) == 1 else "are"
+    if inc.empty:
+        incomplete = ("Every experiment session completed (one that did not would be left out and listed with its "
+                      "reason; report --include-incomplete analyses its finished trials).")
+    elif study.include_incomplete:
+        incomplete = (f"{plural(len(inc), 'experiment session')} did not complete and {are} analysed with "
+                      f"{'its' if len(inc) == 1 else 'their'} finished trials (report --include-incomplete): "
+                      f"{reasons}.")
+    else:
+        incomplete = (f"{plural(len(inc), 'experiment session')} did not complete and {are} left out with "
+                      f"{'its' if len(inc) == 1 else 'their'} {plural(excluded['incomplete_trials'], 'finished trial')} "
+                      f"(the default; report --include-incomplete analyses them): {reasons}.")
+    n_ab, n_rerun = within.reruns
+    if n_ab == 0:
+        aborted = "no aborted trial"
+    elif n_rerun == n_ab:
+        aborted = f"{plural(n_ab, 'aborted trial')} (each re-run later in its session)"
+    elif n_rerun == 0:
+        aborted = f"{plural(n_ab, 'aborted trial')} ({'not' if n_ab == 1 else 'none'} re-run in its session)"
+    else:
+        aborted = (f"{plural(n_ab, 'aborted trial')} ({n_rerun} of them re-run later in their session; the other "
+                   f"{n_ab - n_rerun} not)")
+    codes = "; ".join(f"{html.escape(r.code)} ({plural(int(r.n_sessions), 'session')})"
+                      for r in within.provenance.itertuples())
+    dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
+    check = (f"All {plural(table.n_from_samples, 'analysed trial')} were recomputed from their stored 1 kHz samples"
+             + (" and agree with the values stored live" if table.n_disagree == 0 else
+                f"; {table.n_disagree} disagree with the values stored live (the recomputed values are used)")
+             + (f"; {plural(table.n_stored_only, 'trial')} without samples use their stored values"
+                if table.n_stored_only else "")
+             + ".")
+    return (f"<p><b>Data.</b> {plural(n_participants, 'participant')} in "
+            f"{plural(int(exp['analysed'].sum()), 'analysed experiment session')} of {len(exp)} from "
+            f"{plural(len(study.databases), 'database')} ({dbs}), {plural(len(study.included), 'analysed trial')}. "
+            f"{_origin(study)[1]} {incomplete} Excluded: "
+            f"{plural(excluded['training_sessions'], 'training session')} "
+            f"({plural(excluded['training_trials'], 'trial')}) and {aborted}. {_deviations_methods(within)} "
+            f"Recorded with haptic-study {codes}; "
+            f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
 
 def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
-             excluded: dict[str, int], n_participants: int, n_incomplete: int) -> str:
+             excluded: dict[str, int], n_participants: int, within: Any) -> str:
     trials = study.included
     tol = sorted(set(trials["tolerance_fraction"]))
     hold = sorted(set(trials["hold_s"]))
@@ -185,40 +209,25 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     def one(vals: list[float], unit: str) -> str:
         return " / ".join(f"{v:g}{unit}" for v in vals)
 
-    window = ("from the cue to the trial end, the approach before contact included"
+    window = ("from the cue to the trial end, the approach before contact included (error window: cue, "
+              "the default, the paper's \"during the trial\")"
               if options.error_window == "cue" else
-              f"from first contact (the first sample with task force above {CONTACT_THRESHOLD_N:g} N) to the trial end; "
-              "a trial without contact has no RMSE or Max AE")
+              f"from first contact (the first sample with task force above {CONTACT_THRESHOLD_N:g} N) to the "
+              "trial end; a trial without contact has no RMSE or Max AE (error window: first_contact)")
     tct = ("averaged over successful trials only, so it is undefined for a participant with no success in a mode "
            "(that participant's pair is left out of the TCT test and counted)"
            if options.tct_policy == "successful" else
            f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
-    sessions = study.sessions
-    exp = sessions[sessions["kind"] == "experiment"]
-    versions = ", ".join(sorted(set(sessions["software_version"])))
-    dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
-    check = (f"All {plural(table.n_from_samples, 'analysed trial')} were recomputed from their stored 1 kHz samples"
-             + (" and agree with the values stored live" if table.n_disagree == 0 else
-                f"; {table.n_disagree} disagree with the values stored live (the recomputed values are used)")
-             + (f"; {plural(table.n_stored_only, 'trial')} without samples use their stored values"
-                if table.n_stored_only else "")
-             + ".")
     return (
-        f"<p><b>Data.</b> {plural(n_participants, 'participant')}, {plural(len(exp), 'experiment session')} "
-        f"({n_incomplete} not completed) from {plural(len(study.databases), 'database')} ({dbs}), "
-        f"{plural(len(trials), 'analysed trial')}. {_origin(study)[1]} Excluded: "
-        f"{plural(excluded['training_sessions'], 'training session')} "
-        f"({plural(excluded['training_trials'], 'trial')}) and {plural(excluded['aborted_trials'], 'aborted trial')} "
-        f"(each re-run later in its session). Recorded with haptic-study {html.escape(versions)}; "
-        f"analysed with haptic-study {html.escape(software_version())}. {check}</p>"
-        f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
+        _data_methods(study, table, excluded, n_participants, within)
+        + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
         f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
         f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
         f"when the force stays in the band continuously for {one(hold, ' s')} (leaving the band restarts the hold) "
         f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. RMSE and Max AE "
         f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
         f"is the largest task force in the window. These are the definitions of protocol.metrics, the same code "
-        f"that judged the trials live.</p>"
+        f"that judged the trials live. {report_sections.window_fact(within, options)}</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
         f"RMSE, Max AE, time in band and peak force are means over trials; TCT is {tct}. Across participants, the "
         f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
@@ -229,8 +238,9 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"applied across the {len(PRIMARY_METRICS)} outcome measures "
         f"({', '.join(codebook.exported_name(m) for m in PRIMARY_METRICS)}), and separately "
         f"within each target; significance marks in the figures use the Holm-adjusted p-values "
-        f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). The speed–accuracy trade is the "
-        f"Spearman rank correlation of TCT with RMSE over trials, per mode.</p>"
+        f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). No p-value in this report comes "
+        f"from trials pooled as if independent.</p>"
+        + report_sections.methods_within(within, options, confidence)
     )
 
 
@@ -247,7 +257,9 @@ img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .warn{background:#fff4e5;border:1px solid #f0c36d;padding:.5em .8em;border-radius:6px}
 .origin{padding:.5em .8em;border-radius:6px;font-weight:600}.origin.sim{background:#eef3ff;border:1px solid #9db4e8}
 .origin.real{background:#eefaf0;border:1px solid #9ed3a8}.origin.mixed{background:#fff4e5;border:1px solid #f0c36d}
-.caption{font-size:.85em;color:#555;margin:.2em 0 .8em}
+.caption{font-size:.85em;color:#555;margin:.2em 0 .8em}td.wrap{white-space:normal;text-align:left;min-width:12em}
+table caption{caption-side:top;text-align:left;color:#555;padding:0 0 .2em}
+td.flag{color:#b00020;font-weight:600}tr.differs td{background:#fff4e5}
 table.power caption{caption-side:top;text-align:left;font-size:1.05em;color:#555;padding:0 0 .3em}
 table.power th{white-space:nowrap}table.power tr.family td{background:#fafafa}
 @page{size:A4;margin:12mm}
@@ -304,14 +316,14 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
     return f'<div class="key">{"".join(cards)}</div>'
 
 
-def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
+def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any) -> str:
     """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
     counts = abort_counts(study)
     total = int(counts["n_trials"].sum())
     rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
                    for c, n in zip(counts["abort_cause"], counts["n_trials"]))
-    aborted = (f"<p>{plural(total, 'experiment trial')} did not count and {'was' if total == 1 else 'were'} re-run "
-               "under the protocol's abort policy, by cause:</p>"
+    aborted = (f"<p>{plural(total, 'experiment trial')} did not count (a trial aborted in a session that went on is "
+               "re-run under the protocol's abort policy; see the methods for how many were), by cause:</p>"
                f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
                f"<tbody>{rows}</tbody></table></div>")
     health = tables["loop_health.csv"]
@@ -336,7 +348,9 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame]) -> str:
     clock = ("" if not (study.sessions["rig"] == "sim").any() else
              "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
              "the latency is the sample's age. A real-clock session measures them in real time.</p>")
-    return (f"<h2>What was delivered</h2>{aborted}<h3>The 1 kHz loop, per trial</h3>"
+    return (f"<h2>What was delivered</h2>{report_sections.incomplete_html(within, study.include_incomplete)}"
+            f"{report_sections.deviations_html(within)}<h3>Trials that did not count</h3>{aborted}"
+            f"<h3>The 1 kHz loop, per trial</h3>"
             f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
 
 
@@ -345,10 +359,24 @@ def _when(v: object) -> str:
     return "" if not isinstance(v, str) else html.escape(v[:16].replace("T", " "))
 
 
+def _warnings(study: StudyData, table: TrialTable, stats: pd.DataFrame, within: Any) -> str:
+    """The warnings the page opens with: disagreeing trials, tests not computable, and the record's."""
+    warn = ""
+    if table.n_disagree:
+        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
+                "those recomputed from samples; see the methods.</p>")
+    nc = stats[~stats["computable"].astype(bool)]
+    if len(nc):
+        warn += ('<p class="warn">Not computable: '
+                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
+                             for r in nc.itertuples()) + "</p>")
+    return warn + report_sections.top_warnings(within, study.include_incomplete)
+
+
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
-          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
-          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
-          power_html: str = "") -> str:
+         excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
+         marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
+         power_html: str = "", within: Any = None, target_order: Sequence[str] = ()) -> str:
     """report.html: self-contained (figures embedded), readable on screen and on paper.
 
     Parameters
@@ -361,34 +389,31 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
         :func:`analysis.report_tables.export_tables`' result: the page shows the CSVs' rows.
     marks_overall, pngs, examples, power_html
         Significance marks, the figures (PNG bytes), the example trials' figures and the power section.
+    within, target_order
+        The within-participant analyses (``analysis.report._Within``) and the targets in order.
 
     Returns
     -------
     str
         The HTML document.
     """
-    stats, per, sa, sess = (tables[k] for k in ("stats.csv", "participants.csv", "speed_accuracy.csv", "sessions.csv"))
-    warn = ""
-    if table.n_disagree:
-        warn = (f'<p class="warn">{plural(table.n_disagree, "trial")} disagree between the metrics stored live and '
-                "those recomputed from samples; see the methods.</p>")
-    nc = stats[~stats["computable"].astype(bool)]
-    if len(nc):
-        warn += ('<p class="warn">Not computable: '
-                 + "; ".join(f"{html.escape(_measure_label(str(r.metric)))}: {html.escape(str(r.note))}"
-                             for r in nc.itertuples()) + "</p>")
+    stats, per, sess = (tables[k] for k in ("stats.csv", "participants.csv", "sessions.csv"))
+    warn = _warnings(study, table, stats, within)
     origin_class, origin_text = _origin(study)
-    now = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     n_trials = len(tables["trials.csv"])
+    win = report_sections.window_words(options.error_window)
     per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
                 "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
     sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "software_version"]
+                 "started_at", "ended_at", "software_version", "software_commit", "software_dirty", "analysed"]
+    short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
 <h1>Haptic feedback study: report</h1>
 <p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
-{html.escape(software_version())} · error window: {options.error_window} · TCT: {options.tct_policy}</p>
+{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
+{'· incomplete sessions included' if study.include_incomplete else ''}</p>
 <p class="origin {origin_class}">{html.escape(origin_text)}</p>
 {warn}
 {_headline(per, stats, marks_overall)}
@@ -396,9 +421,11 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
 <p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the four
 measures. Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
 {confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
-{_stats_html(stats, "stats.csv")}
+{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; RMSE and Max AE {win}")}
 <h3>Within each target</h3>
-{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"])}
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
+             caption=f"ON vs OFF within each target; RMSE and Max AE {win}")}
+{report_sections.sensitivity_html(within, options)}
 <figure><h2>Success rate</h2>
 <p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after Holm's correction
 (n.s. not significant, n/c not computable).</p>
@@ -406,22 +433,21 @@ measures. Medians are across participants; the HL shift is the Hodges–Lehmann 
 <figure><h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}</figure>
 <figure><h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}</figure>
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
-<p class="caption">Grey lines: participants; black: the median across participants.</p></figure>
-{_html_table(per, "participants.csv", per_cols)}
-<h2>Speed against accuracy</h2>
-<p>Spearman rank correlation of TCT with RMSE over trials, per mode. A negative ρ means faster trials were less
-accurate: participants traded accuracy for speed. A positive ρ means slow trials were also the inaccurate ones: no trade.</p>
-{_html_table(sa, "speed_accuracy.csv")}
-{_img(pngs["speed_accuracy"], "TCT against RMSE")}
+<p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
+across participants.</p></figure>
+{_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; RMSE and Max AE {win}")}
+{report_sections.trade_html(within, tables, options, pngs["speed_accuracy"])}
 <h2>Force through the pipeline</h2>
-<p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device and the target
-band; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
+<p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device, the target
+band and the error window; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
 {"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
+{report_sections.secondary_html(within, tables, pngs["learning"], list(target_order))}
 {power_html}
-{_record_html(study, tables)}
+{_record_html(study, tables, within)}
 <h2>Methods</h2>
-{_methods(study, table, options, zero_method, confidence, excluded, n_participants, n_incomplete)}
+{_methods(study, table, options, zero_method, confidence, excluded, n_participants, within)}
 <h2>Sessions</h2>
-{_html_table(sess, "sessions.csv", sess_cols, cell={"started_at": _when, "ended_at": _when})}
+{report_sections.provenance_html(within)}
+{_html_table(sess, "sessions.csv", sess_cols, cell=short)}
 </body></html>
 """

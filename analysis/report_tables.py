@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -16,6 +17,7 @@ import pandas as pd
 from analysis import codebook
 from analysis.load import StudyData
 from analysis.loop_health import health_summary, health_table
+from analysis.models import fixed_effects
 
 __all__ = ["STATS_CSV_COLUMNS", "TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
@@ -37,15 +39,21 @@ def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
-                   stats: pd.DataFrame, stats_by_target: pd.DataFrame, sa: pd.DataFrame) -> dict[str, pd.DataFrame]:
+                  stats: pd.DataFrame, stats_by_target: pd.DataFrame, within: Any,
+                  error_window: str) -> dict[str, pd.DataFrame]:
     """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted.
 
     Parameters
     ----------
     study : StudyData
         The study read (its sessions and loop records).
-    trials, overall, by_target, stats, stats_by_target, sa : pandas.DataFrame
-        The analysed trials, the per-participant tables, the tests and the speed–accuracy correlations.
+    trials, overall, by_target, stats, stats_by_target : pandas.DataFrame
+        The analysed trials, the per-participant tables and the tests.
+    within
+        The within-participant analyses (``analysis.report._Within``): the trade, the sensitivity table,
+        learning and order, incomplete sessions, deviations.
+    error_window
+        The error window of every RMSE and Max AE in the files, named in each (column ``error_window``).
 
     Returns
     -------
@@ -84,19 +92,37 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)
     health["database"] = health["database"].map(os.path.basename)
-    return {
+    tables = {
         "trials.csv": t,
         "participants.csv": per,
         "participants_wide.csv": codebook.export(wide, "participants_wide.csv"),
         "participants_by_target.csv": per_t,
         "stats.csv": st,
         "stats_by_target.csv": st_t,
-        "speed_accuracy.csv": codebook.export(sa, "speed_accuracy.csv"),
+        "sensitivity.csv": codebook.export(within.sensitivity.assign(
+            measure=within.sensitivity["measure"].map(codebook.exported_name)), "sensitivity.csv"),
+        "speed_accuracy.csv": codebook.export(within.sa, "speed_accuracy.csv"),
+        "speed_accuracy_model.csv": codebook.export(fixed_effects([within.trade_fit]), "speed_accuracy_model.csv"),
+        "speed_accuracy_slopes.csv": codebook.export(by_participant(within.slopes, "haptic_mode"),
+                                                     "speed_accuracy_slopes.csv"),
+        "learning_models.csv": codebook.export(fixed_effects(within.learning), "learning_models.csv"),
+        "order_check.csv": codebook.export(within.order, "order_check.csv"),
         "sessions.csv": codebook.export(sess, "sessions.csv"),
+        "incomplete_sessions.csv": codebook.export(within.incomplete, "incomplete_sessions.csv"),
+        "deviations.csv": codebook.export(within.deviations, "deviations.csv"),
         "loop_health.csv": codebook.export(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
         "loop_health_by_participant.csv": codebook.export(by_participant(health_summary(health)),
                                                           "loop_health_by_participant.csv"),
     }
+    for name in _WINDOWED_FILES:  # every table with an RMSE or Max AE names the window it was taken over
+        tables[name]["error_window"] = error_window
+    return tables
+
+
+#: The files whose numbers depend on the error window (sensitivity.csv names it per row).
+_WINDOWED_FILES = ("trials.csv", "participants.csv", "participants_wide.csv", "participants_by_target.csv",
+                   "stats.csv", "stats_by_target.csv", "speed_accuracy.csv", "speed_accuracy_model.csv",
+                   "speed_accuracy_slopes.csv", "learning_models.csv", "order_check.csv")
 
 
 def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:

@@ -327,8 +327,10 @@ def _notes(d: np.ndarray, n_used: int, method: str, level: float, confidence: fl
     if np.ptp(d) == 0:
         notes.append(f"all differences are equal (d = {d[0]:g}): the Hodges–Lehmann interval has zero width")
     if d.size > 1 and level < confidence:
-        notes.append(
-            f"n = {d.size} is too small for a {confidence:.0%} interval: [min d, max d] shown at {level:.1%}")
+        zeros = int((d == 0).sum())
+        which = f"{d.size} differences ({zeros} of them zero)" if zeros else f"{d.size} differences"
+        notes.append(f"{which} are too few for a {confidence:.0%} Hodges–Lehmann interval: [min d, max d] shown, "
+                     f"at {level:.1%}")
     return notes
 
 

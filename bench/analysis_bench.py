@@ -75,7 +75,8 @@ def synthetic_trials(participants: int, seed: int = 0) -> pd.DataFrame:
 
 
 def _stats_at_scale(participants: int) -> dict[str, Any]:
-    from analysis.aggregate import mode_tests, per_participant, speed_accuracy
+    from analysis.aggregate import mode_tests, per_participant
+    from analysis.trade import speed_accuracy
 
     trials = synthetic_trials(participants)
     t0 = time.perf_counter()
@@ -91,7 +92,7 @@ def _stats_at_scale(participants: int) -> dict[str, Any]:
         "trials": len(trials),
         "stats_wall_s": round(wall, 3),
         "methods": dict(zip(frame["metric"], frame["method"])),
-        "rho_all": round(float(sa.set_index("haptic_mode").at["all", "rho"]), 4),
+        "r_rm_all": round(float(sa.set_index("haptic_mode").at["all", "r_rm"]), 4),
     }
 
 
@@ -119,19 +120,53 @@ def _read_all_samples(db: str) -> tuple[float, int]:
     return time.perf_counter() - t0, n
 
 
+def _source_env(source: str | None) -> dict[str, str] | None:
+    """The environment that puts the source tree ``source`` first on the import path (None: ours)."""
+    if source is None:
+        return None
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(source),
+                                                         os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
+
+
+def _report_wall(db: str, out: str, source: str | None = None) -> float:
+    """One ``haptic-study report`` in a fresh process: ours, or the source tree ``source``'s (its code first on
+    the import path, this interpreter and its installed libraries).  It runs in the output's folder: ``python -m``
+    puts the working directory before PYTHONPATH, so run from our checkout the "reference" would be our code."""
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", os.path.abspath(db), "--out", out],
+                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_source_env(source),
+                   cwd=os.path.dirname(os.path.abspath(out)))
+    return time.perf_counter() - t0
+
+
+def _imported_from(source: str | None, cwd: str) -> str:
+    """Where a fresh process set up as :func:`_report_wall` sets it up imports ``study_app`` from."""
+    out = subprocess.run([sys.executable, "-c", "import study_app; print(study_app.__file__)"], check=True,
+                         capture_output=True, text=True, env=_source_env(source), cwd=cwd)
+    return out.stdout.strip()
+
+
 def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
-    walls = []
+    return [_report_wall(db, os.path.join(tmp, f"report-{tag}{k}")) for k in range(repeats)]
+
+
+def _reference_walls(db: str, tmp: str, source: str, repeats: int) -> tuple[list[float], list[float]]:
+    """Our report and the reference tree's on the same database, run in turn (ours, theirs, ours, …) so a busy
+    spell of the machine falls on both alike: (ours, theirs)."""
+    where = _imported_from(source, tmp)
+    if not os.path.abspath(where).startswith(os.path.join(os.path.abspath(source), "")):
+        raise RuntimeError(f"--reference {source}: its report would import study_app from {where}, not from the tree "
+                           "(is it a source tree of haptic-study?)")
+    ours, theirs = [], []
     for k in range(repeats):
-        out = os.path.join(tmp, f"report-{tag}{k}")
-        t0 = time.perf_counter()
-        subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", db, "--out", out],
-                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        walls.append(time.perf_counter() - t0)
-    return walls
+        ours.append(_report_wall(db, os.path.join(tmp, f"report-ours{k}")))
+        theirs.append(_report_wall(db, os.path.join(tmp, f"report-ref{k}"), source))
+    return ours, theirs
 
 
 def run_report_bench(db: str | None = None, participants: int = 10, stats_participants: int = 10_000,
-                     repeats: int = 3, log: Callable[[str], None] | None = None) -> dict[str, Any]:
+                     repeats: int = 3, log: Callable[[str], None] | None = None,
+                     reference: str | None = None) -> dict[str, Any]:
     """Time the report CLI on a study database (simulated first when none is given) and the statistics at scale.
 
     Side by side in the same run: the same study in the row format of versions 1 and 2
@@ -149,6 +184,9 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
         Runs of each timing; the median is the figure (the first run also warms the page cache).
     log
         Called with a line before each long step.
+    reference
+        A source tree of another version (e.g. a worktree of main): its ``report`` is timed in turn with ours
+        on the same database, in the same run.
     """
     from bench.row_format import row_format_copy
 
@@ -177,6 +215,10 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
         formats = {"recording": db, **({"rows": rows_db.path} if rows_db is not None else {})}
         reading = {k: [_read_all_samples(p)[0] for _ in range(repeats)] for k, p in formats.items()}
         walls = {k: _report_walls(p, tmp, k, repeats) for k, p in formats.items()}
+        ref = None
+        if reference is not None:
+            say(f"timing our report and {reference}'s in turn ...")
+            ref = _reference_walls(db, tmp, reference, repeats)
         sizes = {k: sum(os.path.getsize(f) for f in (p, p + "-wal") if os.path.exists(f)) for k, p in formats.items()}
     say("timing the statistics at scale ...")
     stats = _stats_at_scale(stats_participants)
@@ -198,8 +240,17 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
         "stats_trials": stats["trials"],
         "stats_wall_s": stats["stats_wall_s"],
         "stats_methods": stats["methods"],
-        "stats_rho_all": stats["rho_all"],
+        "stats_r_rm_all": stats["r_rm_all"],
+        "reference": None if ref is None else _reference_result(reference, *ref),
     }
+
+
+def _reference_result(source: str | None, ours: list[float], theirs: list[float]) -> dict[str, Any]:
+    """Our report's and the reference's runs, medians and their ratio."""
+    return {"source": source, "ours_runs_s": [round(w, 2) for w in ours],
+            "reference_runs_s": [round(w, 2) for w in theirs], "ours_s": round(float(np.median(ours)), 3),
+            "reference_s": round(float(np.median(theirs)), 3),
+            "ratio": round(float(np.median(ours) / np.median(theirs)), 2)}
 
 
 def format_report_bench(r: dict[str, Any]) -> str:
@@ -208,8 +259,8 @@ def format_report_bench(r: dict[str, Any]) -> str:
     lines = [
         f"haptic-study report, fresh process, {r['workers']} worker processes{made}:",
         f"  study                 {r['participants']} participants, {r['trials']} trials, {r['samples']:,} samples",
-        f"  wall time             {r['report_wall_s']:.2f} s median of {len(r['report_runs_s'])} "
-        f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})",
+        (f"  wall time             {r['report_wall_s']:.2f} s median of {len(r['report_runs_s'])} "
+         f"({', '.join(f'{w:.2f}' for w in r['report_runs_s'])})"),
     ]
     f = r["formats"]
     if "rows" in f:
@@ -219,13 +270,21 @@ def format_report_bench(r: dict[str, Any]) -> str:
             f"  {'format':30s} {'database':>10s} {'read every trial':>17s} {'report':>8s}",
             *(f"  {names[k]:30s} {v['database_mb']:8.1f} MB {v['read_samples_s']:15.2f} s {v['report_wall_s']:6.2f} s"
               for k, v in f.items()),
-            f"  the recording reads the samples {r['read_speedup']:.1f}x faster; the whole report runs "
-            f"{r['report_speedup']:.1f}x faster (figures and statistics cost the same in both)",
+            (f"  the recording reads the samples {r['read_speedup']:.1f}x faster; the whole report runs "
+             f"{r['report_speedup']:.1f}x faster (figures and statistics cost the same in both)"),
+        ]
+    ref = r.get("reference")
+    if ref:
+        lines += [
+            f"against the reference {ref['source']}, same database, run in turn (medians):",
+            f"  ours        {ref['ours_s']:6.2f} s ({', '.join(f'{w:.2f}' for w in ref['ours_runs_s'])})",
+            f"  reference   {ref['reference_s']:6.2f} s ({', '.join(f'{w:.2f}' for w in ref['reference_runs_s'])})",
+            f"  ours / reference {ref['ratio']:.2f}",
         ]
     lines += [
         f"trial-level statistics, {r['stats_participants']:,} simulated participants ({r['stats_trials']:,} trials):",
-        f"  wall time             {r['stats_wall_s']:.2f} s (aggregation, 12 Wilcoxon tests with Hodges–Lehmann CIs, "
-        f"Holm, speed–accuracy)",
+        (f"  wall time             {r['stats_wall_s']:.2f} s (aggregation, 12 Wilcoxon tests with Hodges–Lehmann CIs, "
+         f"Holm, speed–accuracy within participants)"),
         "  methods chosen        " + ", ".join(f"{k}: {v}" for k, v in r["stats_methods"].items()),
     ]
     return "\n".join(lines)

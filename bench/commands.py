@@ -97,6 +97,9 @@ def _add_report(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-
                     help="study database to report on (default: simulate a 10-participant study first)")
     br.add_argument("--stats-participants", type=whole_number("--stats-participants", 2, 1_000_000), default=10_000,
                     help="participants of the synthetic trial table (default 10000)")
+    br.add_argument("--reference", default=None, metavar="TREE",
+                    help="a source tree of another version (e.g. a git worktree of main): its report is timed in "
+                         "turn with ours on the same database, in the same run")
     br.add_argument("--json", action="store_true", help="print one JSON object")
     br.set_defaults(handler=_cmd_report)
 
@@ -106,7 +109,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     if args.db is not None and not os.path.isfile(args.db):
         raise CliError(f"--db = {args.db!r}: no such file")
-    result = run_report_bench(args.db, stats_participants=args.stats_participants, log=_say)
+    if args.reference is not None and not os.path.isfile(os.path.join(args.reference, "study_app", "cli.py")):
+        raise CliError(f"--reference = {args.reference!r}: not a haptic-study source tree (no study_app/cli.py)")
+    result = run_report_bench(args.db, stats_participants=args.stats_participants, log=_say,
+                              reference=args.reference)
     print(json.dumps(result) if args.json else format_report_bench(result))
     return 0
 

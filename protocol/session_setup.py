@@ -42,7 +42,7 @@ from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
 from protocol.study_rules import DEVIATION_EVENT, check_new_session, stored_sessions
-from protocol.version import software_version
+from protocol.version import software_provenance
 
 __all__ = [
     "OpenedSession",
@@ -194,12 +194,14 @@ def open_new_session(
                                       training_override=training_override)
         return [(DEVIATION_EVENT, deviation)] if deviation else []
 
+    code_ran = software_provenance()  # which code runs the session: version, commit, uncommitted changes
     session_id = db.create_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
-        schedule_json=schedule_to_json(schedule), software_version=software_version(), rig=rig, config=config,
+        schedule_json=schedule_to_json(schedule), software_version=code_ran.version, rig=rig, config=config,
         calibration=calibration, lease_owner=lease_owner, study_owner=study_owner,
         start_event=note or f"{kind} session for {code}, seed {seed}",  # in the same transaction
         rules=rules,
+        software_commit=code_ran.commit, software_dirty=code_ran.dirty,
     )
     return OpenedSession(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
@@ -269,6 +271,8 @@ def open_resumed_session(
             what = f"continuing at trial position {pos}"
         offset_s = last_s + RESUME_STEP_S
         db.insert_event(session_id, offset_s, "resume", what)
+        # which code runs this part of the session (the session row names the code that started it)
+        db.insert_event(session_id, offset_s, "software", json.dumps(dataclasses.asdict(software_provenance())))
         if calibration is not None:
             db.insert_event(session_id, offset_s, "calibration", json.dumps(calibration))
     return OpenedSession(

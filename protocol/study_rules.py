@@ -29,12 +29,16 @@ from protocol.config import ProtocolConfig
 from protocol.storage import StorageError, StudyDatabase
 
 __all__ = [
-    "DEVIATION_EVENT", "TRAINING_SKIPPED", "StoredSession", "StudyRuleError", "check_new_session", "next_kind",
+    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession", "StudyRuleError", "check_new_session", "next_kind",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
 
 #: The ``events.kind`` of a deviation from the designed study an experimenter chose (and gave a reason for).
 DEVIATION_EVENT = "deviation"
+#: The ``events.kind`` of a real-rig session started by the experimenter's override of the calibration chain.
+CALIBRATION_OVERRIDE_EVENT = "calibration_override"
+#: Every ``events.kind`` that records a deviation from the designed study (the report lists them all).
+DEVIATION_KINDS = (DEVIATION_EVENT, CALIBRATION_OVERRIDE_EVENT)
 #: How the detail of the deviation "experiment without a completed training session" begins.
 TRAINING_SKIPPED = "training skipped"
 

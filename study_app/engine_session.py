@@ -26,7 +26,7 @@ from protocol.session_setup import (
     raw_wrench_scales, start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
-from protocol.study_rules import check_new_session, stored_sessions
+from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
 from protocol.records import AbortCause, TrialRecord
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app import messages as m
@@ -135,7 +135,7 @@ class EngineSessions:
         override = self.commissioning.take_override()
         if override is not None:
             missing, why, rest_n = override
-            recorder.event(opened.session_id, opened.clock_offset_s, "calibration_override",
+            recorder.event(opened.session_id, opened.clock_offset_s, CALIBRATION_OVERRIDE_EVENT,
                            f"started by the experimenter's override: {missing or 'the calibration chain was on record'}; "
                            f"the compensated force at rest was {rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). "
                            f"Reason: {why}")

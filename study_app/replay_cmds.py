@@ -55,8 +55,10 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p = add_command(
         sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
         "haptic-study plot-session --db study.db --session 2 --out session2.pdf",
-        "Draw a whole recorded session: the compensated and rendered force with trials and contact shaded and a "
-        "zero baseline, and the raw sensor force on an axis of its own (decimated for drawing, never for numbers)",
+        "Draw a whole recorded session: the compensated and rendered force with trials, their target bands and "
+        "contact shaded and a zero baseline; aborted trials (with their cause), experimenter pauses, latched "
+        "faults and resumes marked; the raw sensor force on an axis of its own (decimated for drawing, never for "
+        "numbers)",
     )
     p.add_argument("--db", required=True, metavar="PATH", help="study database")
     p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
@@ -79,10 +81,11 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
         "haptic-study export samples --db study.db --format parquet --out samples.parquet\n"
         "haptic-study export samples --db study.db --session 2 --out - | head",
         "Every 1 kHz record of the recorded sessions (one session, or all) as one table, a row per record: the "
-        "session time, trial and phase, the raw sensor wrench, the task force (the "
+        "participant, session time, trial and phase (by name and code), the raw sensor wrench, the task force (the "
         "filtered compensated force the metrics use), the rendered force and gain, the stylus position, the sample "
-        "and pose ages, the latency and the fault flags (analysis.samples_frame returns the same as a "
-        "DataFrame)",
+        "and pose ages, the latency and the faults (bitmask and names); a unit ends every name (_N, _Nm, _s, _ms, "
+        "_m) and FILE.codebook.csv beside the file describes every column (analysis.samples_frame returns the same "
+        "as a DataFrame)",
     )
     es.add_argument("--db", required=True, metavar="PATH", help="study database")
     es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
@@ -129,9 +132,9 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
     import pandas as pd
 
     trials = pd.read_sql_query(
-        "SELECT trial_index, target_label, haptic_mode, outcome, segment, first_tick, last_tick, started_at_s, "
-        "ended_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL ORDER BY trial_index",
-        db.conn, params=(session_id,))
+        "SELECT trial_index, target_label, target_force_n, haptic_mode, outcome, segment, first_tick, last_tick, "
+        "started_at_s, ended_at_s, abort_reason FROM trials WHERE session_id = ? AND first_tick IS NOT NULL "
+        "ORDER BY trial_index", db.conn, params=(session_id,))
     db.close()
     trials.insert(0, "code", row[0])
     trials.insert(1, "session_kind", row[1])
@@ -305,23 +308,67 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     raw = np.concatenate([_magnitude(s.columns, "raw") for s in segments])
     rendered = np.concatenate([_magnitude(s.columns, "render") for s in segments])
     in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
+    faults = np.concatenate([s.columns["faults"] for s in segments]).astype(np.int64)
     starts = [(float(r.started_at_s), f"{r.trial_index + 1} {r.target_label} {r.haptic_mode.upper()}")
               for r in trials.itertuples()]
-    title = (f"{code}, {kind} session {args.session}: {len(trials)} trials, {t_s[-1] - t_s[0]:.0f} s "
-             "(trial number, target, haptics)") if len(t_s) else f"{code}, session {args.session}: no records"
+    n_aborted = int((trials["outcome"] == "aborted").sum())
+    title = (f"{code}, {kind} session {args.session}: {len(trials)} trials ({n_aborted} aborted), "
+             f"{t_s[-1] - t_s[0]:.0f} s (trial number, target, haptics)") if len(t_s) else \
+        f"{code}, session {args.session}: no records"
     gone = [f"{d.t_first_s:.3f}–{d.t_last_s:.3f} s" for s in segments for d in s.damage]
     if gone:
         title += f"; PARTIAL: recording damaged at {', '.join(gone)}, left out"
-    fig = session_trace(t_s, raw, comp, rendered, in_trial, title, starts)
+    marks = _session_marks(args.db, args.session, segments, trials, float(t_s[-1]) if len(t_s) else 0.0)
+    fig = session_trace(t_s, raw, comp, rendered, in_trial, title, starts, marks, faults)
     _output_policy(lambda: write_output_file(out, lambda path: save_one(fig, path), command="plot-session"))
     damaged = any(s.damage for s in segments)
     print(f"Wrote {out}{' (partial: the damaged records are left out)' if damaged else ''}")
     return 1 if damaged else 0
 
 
+def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: Any, t_end: float) -> Any:
+    """What plot-session marks besides the force: target bands, aborted trials, pauses, resumes."""
+    import json
+
+    from analysis.load import connect_readonly
+    from analysis.session_figures import SessionMarks
+    from protocol.metrics import band_halfwidth_n
+
+    conn = connect_readonly(db_path)
+    try:
+        (protocol_json,) = conn.execute("SELECT protocol_json FROM sessions WHERE session_id = ?",
+                                        (session_id,)).fetchone()
+        events = conn.execute("SELECT t_s, detail FROM events WHERE session_id = ? AND kind = 'experimenter' "
+                              "AND detail IN ('pause', 'resume') ORDER BY t_s", (session_id,)).fetchall()
+    finally:
+        conn.close()
+    tol = float(json.loads(protocol_json)["trial"]["tolerance_fraction"])
+    bands = [(float(r.started_at_s), float(r.ended_at_s), r.target_force_n - band_halfwidth_n(r.target_force_n, tol),
+              r.target_force_n + band_halfwidth_n(r.target_force_n, tol)) for r in trials.itertuples()]
+    aborted = [(float(r.started_at_s), float(r.ended_at_s), f"trial {r.trial_index + 1} aborted: {r.abort_reason}")
+               for r in trials.itertuples() if r.outcome == "aborted"]
+    pauses, since = [], None
+    for t, what in events:
+        if what == "pause" and since is None:
+            since = float(t)
+        elif what == "resume" and since is not None:
+            pauses.append((since, float(t)))
+            since = None
+    if since is not None:
+        pauses.append((since, t_end))
+    resumes = [float(s.session_time_s[0]) for s in segments[1:] if len(s.session_time_s)]
+    return SessionMarks(bands=bands, aborted=aborted, pauses=pauses, resumes=resumes)
+
+
 # -- export ---------------------------------------------------------------------------------------------------
+def _codebook_path(out: Path) -> Path:
+    """Where an export's codebook goes: ``samples.csv`` → ``samples.csv.codebook.csv`` (one per file written, so a
+    csv and a parquet export of one name each keep their own)."""
+    return out.with_name(f"{out.name}.codebook.csv")
+
+
 def cmd_export(args: argparse.Namespace) -> int:
-    """``haptic-study export samples``."""
+    """``haptic-study export samples``: the labelled records, and their codebook beside the file."""
     from analysis.errors import AnalysisError
     from analysis.outdir import check_output_file, write_output_file
 
@@ -329,8 +376,10 @@ def cmd_export(args: argparse.Namespace) -> int:
     if to_stdout and args.format != "csv":
         raise CliError("--out -: standard output takes --format csv only; give a file for parquet")
     out = Path(args.out)
+    book = _codebook_path(out)
     if not to_stdout:
         _output_policy(lambda: check_output_file(out, command="export"))  # before the work
+        _output_policy(lambda: check_output_file(book, command="export", option="--out's codebook"))
     if args.format == "parquet":
         try:
             import pyarrow  # noqa: F401
@@ -338,7 +387,7 @@ def cmd_export(args: argparse.Namespace) -> int:
             raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
     if sys.stderr.isatty():  # a person waits: say what takes the time (a log gets only the result, or one error)
         print("export: reading the records ...", file=sys.stderr, flush=True)
-    from analysis.load import samples_frame
+    from analysis.samples import codebook_frame, samples_frame
 
     try:
         frame = samples_frame(args.db, args.session)
@@ -348,6 +397,8 @@ def cmd_export(args: argparse.Namespace) -> int:
         frame.to_csv(sys.stdout, index=False)
         for line in frame.attrs.get("damage", []):
             print(f"haptic-study: recording damaged: {line}: left out, the output is partial", file=sys.stderr)
+        print("export: every column's unit and meaning: export to a file, its codebook is written beside it",
+              file=sys.stderr)
         return 1 if frame.attrs.get("damage") else 0
 
     def fill(path: Path) -> None:
@@ -360,11 +411,18 @@ def cmd_export(args: argparse.Namespace) -> int:
     # refused before writing; a disk that fills anyway is one line too
     need = int(frame.shape[0] * frame.shape[1] * (6 if args.format == "csv" else 2))
     _output_policy(lambda: write_output_file(out, fill, command="export", need_bytes=need))
+    try:  # all or nothing: the data without its codebook is not left behind (the data file is this command's own)
+        _output_policy(lambda: write_output_file(
+            book, lambda p: codebook_frame(out.name, list(frame.columns)).to_csv(p, index=False), command="export",
+            option="--out's codebook"))
+    except BaseException:
+        out.unlink(missing_ok=True)
+        raise
     sessions = frame["session_id"].nunique() if len(frame) else 0
     damage = frame.attrs.get("damage", [])
     for line in damage:
         print(f"haptic-study: recording damaged: {line}: left out of {out}", file=sys.stderr)
     print(f"Wrote {out}: {len(frame):,} records of {sessions} session{'s' if sessions != 1 else ''}, "
-          f"{len(frame.columns)} columns ({', '.join(frame.columns[:6])}, …)"
-          f"{'; partial: damaged records left out' if damage else ''}")
+          f"{len(frame.columns)} columns ({', '.join(frame.columns[:6])}, …); every column's unit and meaning "
+          f"in {book}{'; partial: damaged records left out' if damage else ''}")
     return 1 if damage else 0

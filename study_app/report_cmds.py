@@ -55,6 +55,10 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     r.add_argument("--power", action="store_true",
                    help="add 'what n would a study need': power against the number of participants, resampling "
                         "this study's participants (as haptic-study power with its defaults)")
+    r.add_argument("--include-incomplete", action="store_true",
+                   help="analyse the finished trials of experiment sessions that did not complete (aborted by the "
+                        "experimenter, or interrupted and not resumed); by default they are left out, and listed "
+                        "with the reason either way")
     r.set_defaults(handler=cmd_report)
 
     p = add_command(
@@ -98,7 +102,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         summary = build_report(
             args.db, args.out, options=MetricOptions(args.error_window, args.tct),
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
-            power=args.power,
+            power=args.power, include_incomplete=args.include_incomplete,
         )
     except AnalysisError as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
@@ -157,12 +161,10 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
         samples = read_trial_samples(args.db, args.session, args.trial - 1)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
-    from analysis.figures import pipeline_trace, save_one  # matplotlib: once the trial is known to be there
+    # matplotlib: once the trial is known to be there
+    from analysis.figures import save_one, stored_trial_figure
 
-    title = (f"{row['participant_code']}, session {args.session}, trial {args.trial}: {row['target_label']} "
-             f"{row['target_force_n']:g} N, haptics {str(row['haptic_mode']).upper()}, {row['outcome']}")
-    fig = pipeline_trace(samples, target_force_n=float(row["target_force_n"]),
-                         tolerance_fraction=float(row["tolerance_fraction"]), title=title)
+    fig = stored_trial_figure(args.db, row, samples)  # an aborted trial: its abort, time and cause marked
     try:
         write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
     except AnalysisError as exc:

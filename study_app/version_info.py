@@ -10,23 +10,10 @@ __all__ = ["version_text"]
 
 
 def version_text() -> str:
-    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout."""
-    import subprocess
-    from pathlib import Path
+    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout.
 
-    from protocol.version import software_version
+    The same answer every new session stores (:func:`protocol.version.software_provenance`).
+    """
+    from protocol.version import software_provenance
 
-    text = software_version()
-    root = Path(__file__).resolve().parent.parent
-    if not (root / ".git").exists():  # an installed copy, not a checkout
-        return text
-    try:
-        def git(*args: str) -> str:
-            return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=5,
-                                  check=True).stdout.strip()
-
-        commit = git("rev-parse", "--short=8", "HEAD")
-        dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
-    except (OSError, subprocess.SubprocessError):
-        return text
-    return f"{text} (commit {commit}{', with uncommitted changes' if dirty else ''})"
+    return software_provenance().describe()

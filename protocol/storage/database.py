@@ -182,8 +182,12 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
         lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
         rules: Callable[[StudyDatabase], Sequence[tuple[str, str]]] | None = None,
+        software_commit: str | None = None, software_dirty: bool | None = None,
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
+
+        ``software_commit`` and ``software_dirty`` say which code ran it (the git commit of the checkout and
+        whether it had uncommitted changes; None when not known, e.g. installed from a wheel).
 
         With ``lease_owner`` the session's lease is taken in the same
         transaction (see :meth:`acquire_lease`), so no other process can write
@@ -216,11 +220,12 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             pid = self.participant_id(code, create=True)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
-                "status, started_at, software_version, rig, config_json, calibration_json) "
-                "VALUES (?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?)",
+                "status, started_at, software_version, rig, config_json, calibration_json, software_commit, "
+                "software_dirty) VALUES (?, ?, ?, ?, ?, ?, 'running', ?, ?, ?, ?, ?, ?, ?)",
                 (
                     pid, kind, seed, participant_number, protocol_json, schedule_json, now_iso(), software_version,
                     rig, json.dumps(config, sort_keys=True), None if calibration is None else json.dumps(calibration),
+                    software_commit, None if software_dirty is None else int(bool(software_dirty)),
                 ),
             )
             session_id = int(cur.lastrowid)  # type: ignore[arg-type]

@@ -31,6 +31,7 @@ class TrialDef:
     segments: list[tuple[float, int]]
     outcome_override: str | None = None  # "aborted" to store an aborted trial
     with_samples: bool = True
+    repeat_of: int | None = None  # the trial index of the aborted trial this one re-runs
 
 
 @dataclass
@@ -41,6 +42,11 @@ class SessionDef:
     status: str = "completed"
     max_trial_s: float = 12.0
     extra: dict = field(default_factory=dict)
+    designed: int | None = None  # the schedule's length when the session stopped before its end (default: the trials)
+    end_reason: str = "test"
+    software_commit: str | None = None
+    software_dirty: bool | None = None
+    events: list[tuple[float, str, str]] = field(default_factory=list)  # (t_s, kind, detail)
 
 
 TARGETS = {"GENTLE": 0.6, "FIRM": 1.2}
@@ -65,12 +71,17 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
     for number, s in enumerate(sessions, start=1):
         pj = proto.to_dict()
         pj["trial"]["max_trial_s"] = s.max_trial_s
+        n = s.designed or len(s.trials)
+        planned = [s.trials[i % len(s.trials)] for i in range(n)]
         sid = db.create_session(
             code=s.code, kind=s.kind, seed=0, participant_number=number, protocol_json=json.dumps(pj),
             schedule_json=json.dumps([{"index": i, "target_label": t.label, "target_force_n": TARGETS[t.label],
-                                       "haptic_mode": t.mode, "repeat_of": None} for i, t in enumerate(s.trials)]),
+                                       "haptic_mode": t.mode, "repeat_of": None} for i, t in enumerate(planned)]),
             software_version="test", rig="sim", config={}, calibration=None,
+            software_commit=s.software_commit, software_dirty=s.software_dirty,
         )
+        for t_s, kind, detail in s.events:
+            db.insert_event(sid, t_s, kind, detail)
         cap_ms = int(round(s.max_trial_s * 1000))
         for idx, tdef in enumerate(s.trials):
             target = TARGETS[tdef.label]
@@ -90,10 +101,10 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
                 "started_at_s": 20.0 * idx, "ended_at_s": 20.0 * idx + m.end_s,
                 "tct_s": m.tct_s if outcome == "success" else None, "rmse_n": m.rmse_n, "max_ae_n": m.max_ae_n,
                 "time_in_band_s": m.time_in_band_s, "peak_force_n": m.peak_force_n, "n_samples": m.n_samples,
-                "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": None,
+                "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": tdef.repeat_of,
             })
         if s.status != "running":
-            db.end_session(sid, s.status, "test")
+            db.end_session(sid, s.status, s.end_reason)
     db.close()
     return path
 

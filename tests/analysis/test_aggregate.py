@@ -10,7 +10,8 @@ import pytest
 import scipy.stats
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
-from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant, speed_accuracy
+from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.trade import speed_accuracy
 from analysis.load import load_study
 from analysis.metrics import MetricOptions, compute_trials
 
@@ -95,13 +96,22 @@ def test_all_equal_differences_do_not_crash(tmp_path):
     assert (bool(tct["computable"]), tct["n_zero"]) == (False, 7)
 
 
-def test_speed_accuracy_is_spearman_per_mode(study):
+def test_speed_accuracy_is_the_repeated_measures_correlation_per_mode(study):
+    """Within participants: the correlation of participant-centred TCT and RMSE, df = trials − participants − 1."""
     sa = speed_accuracy(study).set_index("haptic_mode")
     for mode in ("on", "off"):
         sel = study[(study["haptic_mode"] == mode) & study["tct_s"].notna()]
-        ref = scipy.stats.spearmanr(sel["tct_s"], sel["rmse_n"])
-        assert sa.at[mode, "n"] == len(sel)
-        assert sa.at[mode, "rho"] == pytest.approx(float(ref.statistic), rel=1e-12)
-        assert sa.at[mode, "p_value"] == pytest.approx(float(ref.pvalue), rel=1e-9)
-    assert sa.at["all", "n"] == int(study["tct_s"].notna().sum())
+        sel = sel[sel.groupby("participant_code")["tct_s"].transform("size") >= 2]  # a lone trial says nothing
+        x = sel["rmse_n"] - sel.groupby("participant_code")["rmse_n"].transform("mean")
+        y = sel["tct_s"] - sel.groupby("participant_code")["tct_s"].transform("mean")
+        df = len(sel) - sel["participant_code"].nunique() - 1
+        assert (sa.at[mode, "n_trials"], sa.at[mode, "df"]) == (len(sel), df)
+        if df < 1 or not (x != 0).any():
+            assert not sa.at[mode, "computable"]
+            continue
+        r = float((x * y).sum() / math.sqrt((x * x).sum() * (y * y).sum()))
+        assert sa.at[mode, "r_rm"] == pytest.approx(r, rel=1e-12)
+        t = r * math.sqrt(df / (1 - r * r))
+        assert sa.at[mode, "p_value"] == pytest.approx(2 * scipy.stats.t.sf(abs(t), df), rel=1e-9)
+    assert "rho" not in sa.columns  # no correlation over pooled trials, and no p-value of one
     assert isinstance(sa, pd.DataFrame)

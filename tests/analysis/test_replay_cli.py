@@ -16,12 +16,12 @@ import pandas as pd
 import pytest
 
 import pipeline.sim.faults
-from analysis.load import SAMPLES_FRAME_COLUMNS, samples_frame
+from analysis.samples import SAMPLES_COLUMNS, samples_frame
 from bench.row_format import row_format_copy
 from protocol.config import default_protocol
 from protocol.rehearsal import FaultPlan
-from study_app.headless import SessionInterrupted, resume_session, run_study
 from study_app.cli import main
+from study_app.headless import SessionInterrupted, resume_session, run_study
 
 
 def _protocol():  # type: ignore[no-untyped-def]
@@ -137,7 +137,8 @@ def test_export_gives_every_record_as_a_table(study, tmp_path, capsys) -> None:
     (n_records,) = c.execute("SELECT SUM(n_records) FROM session_blocks").fetchone()
     c.close()
     frame = samples_frame(study)
-    assert list(frame.columns) == list(SAMPLES_FRAME_COLUMNS) and len(frame) == n_records
+    assert list(frame.columns) == [c for c, *_ in SAMPLES_COLUMNS if not c.startswith("comp_")]
+    assert len(frame) == n_records
     # csv and parquet hold the same numbers, exactly
     code, out, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "all.csv"))
     assert code == 0 and f"{n_records:,} records" in out, err
@@ -146,17 +147,68 @@ def test_export_gives_every_record_as_a_table(study, tmp_path, capsys) -> None:
     assert code == 0, err
     from_csv = pd.read_csv(tmp_path / "all.csv")
     from_parquet = pd.read_parquet(tmp_path / "all.parquet")
-    for col in ("session_time_s", "force_n", "raw_fx", "render_fz", "stylus_y_m"):
+    for col in ("session_time_s", "force_N", "raw_fx_N", "raw_tz_Nm", "render_fz_N", "stylus_y_m"):
         assert np.array_equal(from_csv[col].to_numpy(), from_parquet[col].to_numpy(), equal_nan=True), col
     # one session, to standard output
     sid = sessions(study)["P01/experiment"]
     code, out, _ = _run(capsys, "export", "samples", "--db", str(study), "--session", str(sid), "--out", "-")
-    assert code == 0 and out.splitlines()[0].startswith("session_id,segment,tick,session_time_s")
+    assert code == 0 and out.splitlines()[0].startswith("participant_code,session_id,segment,tick,session_time_s")
     assert len(out.splitlines()) - 1 == int((frame["session_id"] == sid).sum())
     # an existing file is never overwritten
     before = (tmp_path / "all.csv").read_bytes()
     code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "all.csv"))
     assert code == 2 and "exists" in err and (tmp_path / "all.csv").read_bytes() == before
+
+
+def test_export_labels_phases_and_faults_and_writes_a_codebook_for_every_column(study, tmp_path, capsys) -> None:
+    from protocol.labels import PHASE_NAMES
+
+    sid = sessions(study)["P02/experiment"]  # the session with the fault, alone: a lean test
+    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--session", str(sid),
+                        "--out", str(tmp_path / "s.csv"))
+    assert code == 0, err
+    frame = pd.read_csv(tmp_path / "s.csv")
+    assert set(frame["participant_code"]) == {"P02"}
+    assert (frame["phase"] == frame["phase_code"].map(PHASE_NAMES)).all()
+    latched = frame[frame["faults"] != 0]
+    assert len(latched) and latched["fault_names"].str.contains("SENSOR_STALE").all()  # P02's stalled sensor
+    assert (frame.loc[frame["faults"] == 0, "fault_names"] == "none").all()
+    book = pd.read_csv(tmp_path / "s.csv.codebook.csv")
+    assert list(book["column"]) == list(frame.columns) and (book["file"] == "s.csv").all()
+    assert book["description"].str.len().gt(10).all() and book["type"].isin(["text", "integer", "number", "boolean"]).all()
+    units = dict(zip(book["column"], book["unit"].fillna("")))
+    # a unit ends every physical quantity's name, spelled as the report's CSVs spell them; the rest say theirs
+    for col, unit in units.items():
+        suffix = {"N": "_N", "N·m": "_Nm", "s": "_s", "ms": "_ms", "m": "_m"}.get(unit)
+        assert suffix is None or col.endswith(suffix), (col, unit)
+    assert units["gain"] == "fraction (0–1)" and units["faults"] == "bitmask"
+    # the codebook is never overwritten either: refused before anything is read or written
+    (tmp_path / "t.csv.codebook.csv").write_text("my notes\n")
+    code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--out", str(tmp_path / "t.csv"))
+    assert code == 2 and "codebook" in err and not (tmp_path / "t.csv").exists()
+    assert (tmp_path / "t.csv.codebook.csv").read_text() == "my notes\n"
+
+
+def test_plot_session_and_plot_trial_mark_the_abort_the_fault_and_the_resume(study, tmp_path, capsys) -> None:
+    sid = sessions(study)["P02/experiment"]
+    out = tmp_path / "session.svg"
+    code, _, err = _run(capsys, "plot-session", "--db", str(study), "--session", str(sid), "--out", str(out))
+    assert code == 0, err
+    svg = out.read_text()
+    for text in ("aborted trial (not counted)", "A1", "F1", "SENSOR_STALE latched at", "resumed at",
+                 "target band", "fault latched"):
+        assert text in svg, text
+    c = sqlite3.connect(study)
+    (index, reason) = c.execute("SELECT trial_index, abort_reason FROM trials WHERE session_id = ? AND "
+                                "abort_cause = 'fault'", (sid,)).fetchone()
+    c.close()
+    trial = tmp_path / "trial.svg"
+    code, _, err = _run(capsys, "plot-trial", "--db", str(study), "--session", str(sid), "--trial", str(index + 1),
+                        "--out", str(trial))
+    assert code == 0, err
+    svg = trial.read_text()
+    assert "aborted (fault)" in svg and "SENSOR_STALE latched at" in svg and "aborted at" in svg
+    assert reason.split(":")[1].strip() in svg  # the cause, as stored
 
 
 def test_a_row_format_database_reads_as_before_and_says_it_cannot_replay(study, tmp_path, capsys) -> None:
@@ -173,8 +225,8 @@ def test_a_row_format_database_reads_as_before_and_says_it_cannot_replay(study, 
     code, _, err = _run(capsys, "replay", "--db", str(rows), "--session", str(sid))
     assert code == 2 and "was not recorded whole" in err and err.count("\n") == 1
     # the same trials, the same numbers
-    code_a, out_a, _ = _run(capsys, "report", "--db", str(study), "--out", str(tmp_path / "ra"))
-    code_b, out_b, _ = _run(capsys, "report", "--db", str(rows), "--out", str(tmp_path / "rb"))
+    code_a, _, _ = _run(capsys, "report", "--db", str(study), "--out", str(tmp_path / "ra"))
+    code_b, _, _ = _run(capsys, "report", "--db", str(rows), "--out", str(tmp_path / "rb"))
     assert code_a == code_b == 0
     a = pd.read_csv(tmp_path / "ra" / "trials.csv")
     b = pd.read_csv(tmp_path / "rb" / "trials.csv")

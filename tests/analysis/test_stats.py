@@ -322,7 +322,10 @@ def test_few_pairs_note_and_small_n_interval():
     assert "cannot be below 0.125" in res.note
     # 95 % is out of reach with 4 pairs: widest interval [min d, max d] at 1 − 2/16
     assert (res.hl_ci_low, res.hl_ci_high, res.ci_level) == (1.0, 4.0, 0.875)
-    assert "too small for a 95% interval" in res.note
+    assert "4 differences are too few for a 95% Hodges–Lehmann interval" in res.note
+    # with a zero among them, the note counts the differences the interval is made of, zeros named
+    zero = paired_wilcoxon(np.zeros(4), np.array([0.0, 2.0, 3.0, 4.0]))
+    assert zero.n_used == 3 and "4 differences (1 of them zero) are too few" in zero.note
 
 
 def test_bad_arguments_raise_naming_the_value():
