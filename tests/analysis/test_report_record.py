@@ -127,7 +127,7 @@ def test_a_session_run_from_a_checkout_stores_its_commit(tmp_path):
     dirty = bool(subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
                                 capture_output=True, text=True, check=True).stdout.strip())
     db = StudyDatabase(tmp_path / "s.db")
-    opened = open_new_session(db, code="P01", number=1, kind="experiment", protocol=default_protocol(), seed=0,
+    opened = open_new_session(db, code="P01", number=1, kind="training", protocol=default_protocol(), seed=0,
                               rig="sim", config={}, calibration=None, lease_owner="test")
     row = db.conn.execute("SELECT software_version, software_commit, software_dirty FROM sessions "
                           "WHERE session_id = ?", (opened.session_id,)).fetchone()
