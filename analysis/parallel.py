@@ -5,6 +5,9 @@ CPU-bound Python; threads would share one core through the GIL, so the work
 goes to worker processes.  Forking is cheap (the workers inherit the imported
 modules) but unsafe once other threads exist, so a process that has threads
 spawns its workers instead.
+
+``HAPTIC_STUDY_WORKERS`` sets how many worker processes the analysis may use
+(a shared lab machine; the test suite, which already runs a test per core).
 """
 
 from __future__ import annotations
@@ -16,13 +19,42 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
-__all__ = ["default_workers", "run_tasks"]
+__all__ = ["WORKERS_ENV", "default_workers", "run_tasks", "workers_env_problem"]
 
 T = TypeVar("T")
 
 
+#: The environment variable that sets the analysis's worker processes (unset: the usable cores, at most 4).
+WORKERS_ENV = "HAPTIC_STUDY_WORKERS"
+
+
+def workers_env_problem() -> str | None:
+    """What is wrong with :data:`WORKERS_ENV` in one line, or None when it is unset or a whole number >= 1."""
+    raw = os.environ.get(WORKERS_ENV)
+    if raw is None or raw.strip() == "":
+        return None
+    try:
+        n = int(raw)
+    except ValueError:
+        n = 0
+    return None if n >= 1 else f"{WORKERS_ENV} = {raw!r}: must be a whole number of worker processes, at least 1"
+
+
 def default_workers() -> int:
-    """Worker processes to use: the usable cores, at most 4."""
+    """Worker processes to use: :data:`WORKERS_ENV` when set, else the usable cores, at most 4.
+
+    Raises
+    ------
+    ValueError
+        :data:`WORKERS_ENV` is set to something else than a whole number >= 1
+        (the command line checks it first and says so in one line).
+    """
+    problem = workers_env_problem()
+    if problem is not None:
+        raise ValueError(problem)
+    raw = os.environ.get(WORKERS_ENV, "").strip()
+    if raw:
+        return int(raw)
     try:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:  # pragma: no cover - not Linux

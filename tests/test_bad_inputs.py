@@ -47,8 +47,7 @@ CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app
 CASES: list[Case] = [*INPUT_CASES, *OUTPUT_CASES]
 #: A case that has not answered by then hung (the slowest take a few seconds on a loaded 2-core machine).
 CASE_TIMEOUT_S = 180
-#: One worker runs the whole corpus (its module fixture runs every case once; split across workers it would run twice).
-pytestmark = pytest.mark.xdist_group("bad-inputs")
+#: One worker runs the whole corpus (pytest runs with --dist loadfile: a module in one worker, its fixture once).
 _MOUNT = can_mount()
 
 

@@ -98,3 +98,23 @@ def test_bench_with_a_missing_dependency_is_not_masked(monkeypatch: pytest.Monke
     _entry_points_of(monkeypatch, "broken_bench_commands:register")
     with pytest.raises(ModuleNotFoundError, match="no_such_dependency_of_bench"):
         main(["bench"])
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "two", "1.5"])
+def test_a_bad_worker_count_in_the_environment_is_one_line_and_nothing_runs(
+        value: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path) -> None:  # type: ignore[no-untyped-def]
+    monkeypatch.setenv("HAPTIC_STUDY_WORKERS", value)
+    assert main(["report", "--db", str(tmp_path / "absent.db"), "--out", str(tmp_path / "rep")]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"haptic-study: error: HAPTIC_STUDY_WORKERS = {value!r}: must be a whole number of worker "
+                   "processes, at least 1"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_worker_count_in_the_environment_is_used(monkeypatch: pytest.MonkeyPatch) -> None:
+    from analysis.parallel import default_workers
+
+    monkeypatch.setenv("HAPTIC_STUDY_WORKERS", "3")
+    assert default_workers() == 3
+    monkeypatch.delenv("HAPTIC_STUDY_WORKERS")
+    assert 1 <= default_workers() <= 4

@@ -375,13 +375,21 @@ def test_any_toml_value_in_any_field_is_a_one_line_error_or_a_well_typed_protoco
 
 
 @given(
-    hold_s=st.floats(0.0, 61.0), max_trial_s=st.floats(0.0, 601.0), seconds=st.floats(0.0, 601.0),
+    hold_s=st.floats(0.0, 61.0), trial_beyond_hold_s=st.floats(0.0, 601.0), training_beyond_hold_s=st.floats(0.0, 601.0),
     enabled=st.booleans(),
 )
-def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resumable(hold_s, max_trial_s, seconds, enabled):
-    """The protocol a training session runs and stores (the headless study runner) reads back: a resume can always load it."""
+def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resumable(
+        hold_s, trial_beyond_hold_s, training_beyond_hold_s, enabled):
+    """The protocol a training session runs and stores (the headless study runner) reads back: a resume can always load it.
+
+    The caps are drawn as the hold plus a margin, and training is required exactly when
+    it is enabled: drawn on their own, most protocols would be refused by a cross-field
+    rule and the test would mostly discard.
+    """
+    max_trial_s, seconds = hold_s + trial_beyond_hold_s, hold_s + training_beyond_hold_s
     d = replaced(replaced(_DEFAULT_DICT, ("trial", "hold_s"), hold_s), ("trial", "max_trial_s"), max_trial_s)
     d = replaced(replaced(d, ("training", "seconds_per_target_per_mode"), seconds), ("training", "enabled"), enabled)
+    d = replaced(d, ("training", "required"), enabled)  # required without training is refused on its own
     try:
         p = protocol_from_dict(d)
     except ProtocolError:
