@@ -144,3 +144,18 @@ CREATE TABLE IF NOT EXISTS session_blocks (
     PRIMARY KEY (session_id, segment, block),
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );
+
+-- version 4: a participant who withdrew (haptic-study withdraw).  Every row of theirs was removed and the file
+-- rewritten; this row keeps only the pseudonymous code, when, the reason given and how many rows of each kind were
+-- removed -- no measurement.  A withdrawn code is never given a session again.
+CREATE TABLE IF NOT EXISTS withdrawals (
+    code             TEXT PRIMARY KEY,          -- the participant's pseudonymous code
+    withdrawn_at     TEXT NOT NULL,
+    reason           TEXT NOT NULL,
+    removed_sessions INTEGER NOT NULL,          -- rows removed: sessions, trials, events
+    removed_trials   INTEGER NOT NULL,
+    removed_events   INTEGER NOT NULL,
+    removed_blocks   INTEGER NOT NULL,          -- recorded blocks, and the 1 kHz records they held
+    removed_records  INTEGER NOT NULL,
+    removed_samples  INTEGER NOT NULL           -- samples rows (what versions 1 and 2 recorded)
+);
