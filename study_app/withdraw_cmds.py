@@ -22,13 +22,14 @@ from typing import Any
 from study_app.argtypes import add_command
 from study_app.cli_error import CliError
 
-__all__ = ["add_withdraw_parser", "cmd_withdraw"]
+__all__ = ["add_withdraw_parser", "cmd_withdraw", "participant_code_arg"]
 
 #: The longest reason stored (a sentence or two: the record is not the place for a case history).
 REASON_MAX = 500
 
 
-def _code(text: str) -> str:
+def participant_code_arg(text: str) -> str:
+    """An argument type: a participant code (:func:`protocol.storage.validate_code`)."""
     from protocol.storage import StorageError, validate_code
 
     try:
@@ -60,7 +61,7 @@ def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
         "the counts removed; the report lists it. Refused while a session is being written",
     )
     w.add_argument("--db", required=True, metavar="PATH", help="study database")
-    w.add_argument("--participant", required=True, type=_code, metavar="CODE", help="the participant's code")
+    w.add_argument("--participant", required=True, type=participant_code_arg, metavar="CODE", help="the participant's code")
     w.add_argument("--reason", required=True, type=_reason, metavar="TEXT",
                    help=f"why, in a few words, stored with the record (no personal data; at most {REASON_MAX} "
                         "characters)")
