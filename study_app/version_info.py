@@ -10,7 +10,11 @@ __all__ = ["version_text"]
 
 
 def version_text() -> str:
-    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout."""
+    """``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout; else it says it is not one.
+
+    An install from a wheel (or a source tree without git) has no commit to name:
+    ``0.1.0 (installed package, not a git checkout: /…/site-packages)``.
+    """
     import subprocess
     from pathlib import Path
 
@@ -19,7 +23,7 @@ def version_text() -> str:
     text = software_version()
     root = Path(__file__).resolve().parent.parent
     if not (root / ".git").exists():  # an installed copy, not a checkout
-        return text
+        return f"{text} (installed package, not a git checkout: {root})"
     try:
         def git(*args: str) -> str:
             return subprocess.run(["git", "-C", str(root), *args], capture_output=True, text=True, timeout=5,
