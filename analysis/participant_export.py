@@ -33,7 +33,7 @@ import pandas as pd
 
 from analysis import codebook
 from analysis.errors import AnalysisError
-from analysis.load import StudyData, load_study, samples_frame
+from analysis.load import load_study, samples_frame
 from analysis.metrics import MetricOptions, compute_trials
 from analysis.report_tables import TRIALS_CSV_COLUMNS
 from protocol.storage import StorageError, StudyDatabase
@@ -183,7 +183,7 @@ def _settings(rows: ParticipantRows, database: str) -> dict[str, Any]:
                                for r in mine.to_dict("records")]
         out.append(entry)
     return {"participant": rows.code, "database": os.path.basename(database),
-            "exported_at": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "exported_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "exported_by": f"haptic-study {software_version()}", "files": FILES, "sessions": out}
 
 
@@ -228,7 +228,7 @@ def _analysed(database: str, code: str, options: MetricOptions) -> pd.DataFrame:
 
 
 def participant_export(database: str | os.PathLike[str], code: str,
-                       options: MetricOptions = MetricOptions()) -> ParticipantExport:
+                       options: MetricOptions | None = None) -> ParticipantExport:
     """Read everything stored about participant ``code`` (read-only).
 
     Raises
@@ -263,7 +263,7 @@ def participant_export(database: str | os.PathLike[str], code: str,
         "participant": _frame(rows, "participants"),
         "sessions": _frame(rows, "sessions", tuple(_SESSION_JSON)),
         "stored_trials": _frame(rows, "trials"),
-        "trials": _analysed(path, code, options),
+        "trials": _analysed(path, code, options or MetricOptions()),
         "events": _frame(rows, "events"),
         "samples": samples,
         "poses": poses,

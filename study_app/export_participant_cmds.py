@@ -43,7 +43,11 @@ def cmd_export_participant(args: argparse.Namespace) -> int:
     """Run ``haptic-study export participant``; errors raise :class:`CliError`."""
     from analysis.errors import AnalysisError
     from analysis.outdir import check_output_folder
-    from analysis.participant_export import PARTICIPANT_MARKER, participant_export, write_participant_export
+    from analysis.participant_export import (
+        PARTICIPANT_MARKER,
+        participant_export,
+        write_participant_export,
+    )
 
     def policy(call):  # type: ignore[no-untyped-def]
         try:

@@ -18,19 +18,28 @@ from __future__ import annotations
 
 import os
 import sqlite3
+from contextlib import AbstractContextManager
 from dataclasses import astuple, dataclass, fields
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from protocol.records import trial_id_of
 from protocol.storage.common import StorageError, now_iso
 from protocol.storage.leases import session_scope
 
-if TYPE_CHECKING:
-    from protocol.storage.database import StudyDatabase
-
 __all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "rewrite_file", "withdrawal_of",
            "withdrawals"]
+
+
+class StudyDatabase(Protocol):
+    """What this module uses of :class:`protocol.storage.StudyDatabase` (which imports this module)."""
+
+    path: Path
+    conn: sqlite3.Connection
+
+    def transaction(self) -> AbstractContextManager[None]: ...
+    def sessions_being_written(self) -> dict[int, str]: ...
+    def quick_check(self) -> None: ...
 
 
 @dataclass(frozen=True, slots=True)
