@@ -15,6 +15,7 @@ What it does, in order (:mod:`protocol.storage.withdrawal` holds the storage hal
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -70,8 +71,20 @@ def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
     w.set_defaults(handler=cmd_withdraw)
 
 
+def _log_holds_pages(path: str) -> bool:
+    """The database's write-ahead log is not empty (after a withdrawal: its rewrite was held up by a reader)."""
+    try:
+        return os.path.getsize(f"{path}-wal") > 0
+    except OSError:
+        return False
+
+
 def _look(path: str, code: str) -> Any:
-    """The read-only look that decides every refusal: the participant's :class:`Footprint`."""
+    """The read-only look that decides every refusal: the participant's :class:`Footprint`.
+
+    A participant who already withdrew is refused, unless a program reading the study kept that withdrawal's
+    rewrite of the file from finishing: then their :class:`Withdrawal` is returned, and this command finishes it.
+    """
     from protocol.storage import LeaseHeld, StorageError, StudyDatabase
     from protocol.storage.withdrawal import footprint, withdrawal_of
 
@@ -83,6 +96,8 @@ def _look(path: str, code: str) -> Any:
         raise CliError(str(exc)) from None
     try:
         done = withdrawal_of(db.conn, code)
+        if done is not None and _log_holds_pages(path):
+            return done  # withdrawn, but a reader held the file's rewrite up: this command finishes it
         if done is not None:
             raise CliError(f"--participant {code}: already withdrew from {path} on "
                            f"{done.withdrawn_at[:16].replace('T', ' ')} UTC ({done.counts()} removed then); "
@@ -151,15 +166,51 @@ def _other_copies(db_path: str, code: str) -> list[str]:
     return lines
 
 
+def _reader_line(db_path: str, code: str, removed: bool) -> str:
+    from protocol.storage.withdrawal import CHECKPOINT_WAIT_S
+
+    what = (f"{code}'s rows are removed, but their bytes stay in {db_path} and {db_path}-wal until it closes; "
+            f"once it has, run this command again to finish rewriting the file" if removed else "nothing was changed")
+    return (f"{db_path}: another program is reading the study (a report, an export, a window): withdraw rewrites "
+            f"the whole file and waited {CHECKPOINT_WAIT_S:g} s for it; close it and run withdraw again; {what}")
+
+
+def _erase(db: Any, args: argparse.Namespace, finishing: Any) -> tuple[Any, bool]:
+    """Under the study's lease: the participant's rows removed (unless ``finishing``), the file rewritten."""
+    from protocol.storage import new_owner_token
+    from protocol.storage.withdrawal import (
+        erase_participant,
+        nobody_reading,
+        rewrite_file,
+    )
+
+    owner = new_owner_token()
+    db.acquire_lease("study", owner, command="haptic-study withdraw")  # no participant code in the lease
+    try:
+        if finishing is None:
+            # the lease's row is in the log now, so a reader's older snapshot holds the log up: found before
+            # anything is removed, not after (when it would keep the old pages in the file until it closes)
+            if not nobody_reading(db):
+                raise CliError(_reader_line(args.db, args.participant, removed=False))
+            record = erase_participant(db, args.participant, args.reason)
+        else:
+            record = finishing
+        clean = rewrite_file(db)
+    finally:
+        db.release_lease("study", owner)
+    return record, clean and nobody_reading(db)  # the lease's release out of the log too
+
+
 def cmd_withdraw(args: argparse.Namespace) -> int:
     """Run ``haptic-study withdraw``; errors raise :class:`CliError`."""
-    from protocol.storage import StorageError, StudyDatabase, new_owner_token
-    from protocol.storage.withdrawal import erase_participant, rewrite_file
+    from protocol.storage import StorageError, StudyDatabase
+    from protocol.storage.withdrawal import Footprint
 
     code = args.participant
-    fp = _look(args.db, code)
-    _confirm(args, fp)
-    owner = new_owner_token()
+    found = _look(args.db, code)
+    finishing = None if isinstance(found, Footprint) else found
+    if finishing is None:
+        _confirm(args, found)
     try:
         db = StudyDatabase(args.db)
     except StorageError as exc:
@@ -170,26 +221,22 @@ def cmd_withdraw(args: argparse.Namespace) -> int:
                      f"version {db.upgraded_from}; it holds {code}'s data: delete it once the upgraded file checks "
                      f"clean (haptic-study check --db {args.db})")
     try:
-        db.acquire_lease("study", owner, command="haptic-study withdraw")  # no participant code in the lease
-        try:
-            record = erase_participant(db, code, args.reason)
-        finally:
-            db.release_lease("study", owner)
-        clean = rewrite_file(db)
+        record, clean = _erase(db, args, finishing)
     except StorageError as exc:
         raise CliError(str(exc)) from None
     finally:
         db.close()
-    log = ("its write-ahead log emptied, so none of it can be read back from the database" if clean else
-           "its write-ahead log could not be emptied yet (below)")
-    print(f"Withdrew {code} from {args.db}: removed {record.counts()}; the file was rewritten and {log}.")
+    if not clean:
+        raise CliError(_reader_line(args.db, code, removed=True), 1)
+    if finishing is not None:
+        print(f"{code} had withdrawn ({record.withdrawn_at[:16].replace('T', ' ')} UTC); the rewrite of {args.db} "
+              "that a reader held up is finished: none of their data can be read back from the database.")
+        return 0
+    print(f"Withdrew {code} from {args.db}: removed {record.counts()}; the file was rewritten and its write-ahead "
+          "log emptied, so none of it can be read back from the database.")
     print(f"Kept: the withdrawal record (code {code}, {record.withdrawn_at[:16].replace('T', ' ')} UTC, the reason, "
           "these counts); the report lists it. The other participants keep their numbers and schedules.")
     print("What else may still hold their data:")
     for line in notes + _other_copies(args.db, code):
         print(line)
-    if not clean:
-        raise CliError(f"{args.db}-wal: another program reading the study kept the write-ahead log from being "
-                       f"emptied; it may still hold pages of {code}'s data until every program reading {args.db} "
-                       "has closed it (the database itself is rewritten)", 1)
     return 0

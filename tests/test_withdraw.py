@@ -118,9 +118,18 @@ def report(withdrawn) -> Path:
     return out
 
 
-def _refused(capsys, db: Path, *argv: str, expect: str) -> None:  # type: ignore[no-untyped-def]
-    """The command is refused in one line naming ``expect``, exit 2, and the file is byte-identical."""
-    before = _file_bytes(db)
+def _content(db: Path) -> list[str]:
+    c = sqlite3.connect(db)
+    try:
+        return list(c.iterdump())
+    finally:
+        c.close()
+
+
+def _refused(capsys, db: Path, *argv: str, expect: str, same_bytes: bool = True) -> None:  # type: ignore[no-untyped-def]
+    """The command is refused in one line naming ``expect``, exit 2, and the file is byte-identical (or, where the
+    refusal comes after the study's lease was taken and given back, holds the same rows)."""
+    before = _file_bytes(db) if same_bytes else _content(db)
     try:
         code = main(list(argv))
     except SystemExit as exc:  # argparse's one line
@@ -128,7 +137,7 @@ def _refused(capsys, db: Path, *argv: str, expect: str) -> None:  # type: ignore
     err = capsys.readouterr().err.strip()
     assert code == 2, err
     assert len(err.splitlines()) == 1 and expect in err, err
-    assert _file_bytes(db) == before
+    assert (_file_bytes(db) if same_bytes else _content(db)) == before
 
 
 # -- the withdrawal ---------------------------------------------------------------------------------------------
@@ -310,3 +319,33 @@ def test_a_version_4_file_from_before_withdrawals_gains_the_table(tmp_path) -> N
     StudyDatabase(db).close()  # a writer completes version 4
     assert _rows(db, "SELECT COUNT(*) FROM withdrawals") == [(0,)]
     assert os.path.getsize(db) > 0
+
+
+def test_a_reader_that_holds_up_the_rewrite_is_named_and_a_second_run_finishes_it(study, copy, capsys,
+                                                                                  monkeypatch) -> None:
+    import protocol.storage.withdrawal as w
+
+    monkeypatch.setattr(w, "CHECKPOINT_WAIT_S", 0.2)
+    reader = sqlite3.connect(copy, isolation_level=None)
+    try:
+        reader.execute("BEGIN")
+        reader.execute("SELECT COUNT(*) FROM trials").fetchone()  # a report reading: its snapshot holds the file
+        _refused(capsys, copy, "withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE,
+                 expect="another program is reading the study", same_bytes=False)
+        reader.execute("COMMIT")
+        db = StudyDatabase(copy)  # it starts reading again between the check and the rewrite
+        try:
+            assert w.nobody_reading(db)
+            w.erase_participant(db, GONE, "x")
+            reader.execute("BEGIN")
+            reader.execute("SELECT COUNT(*) FROM trials").fetchone()
+            assert not w.rewrite_file(db)
+        finally:
+            db.close()
+        reader.execute("COMMIT")  # it has finished reading, but keeps the file open
+        assert main(["withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE]) == 0
+        assert "the rewrite of" in capsys.readouterr().out
+        assert Path(f"{copy}-wal").stat().st_size == 0
+        assert [t for t in study["before"]["traces"] if t in _file_bytes(copy)] == []
+    finally:
+        reader.close()

@@ -27,8 +27,8 @@ from protocol.records import trial_id_of
 from protocol.storage.common import StorageError, now_iso
 from protocol.storage.leases import session_scope
 
-__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "rewrite_file", "withdrawal_of",
-           "withdrawals"]
+__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
+           "withdrawal_of", "withdrawals"]
 
 
 class StudyDatabase(Protocol):
@@ -183,10 +183,25 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
     return record
 
 
+#: How long emptying the write-ahead log waits for programs reading the study to finish their read.
+CHECKPOINT_WAIT_S = 5.0
+
+
 def _checkpoint(conn: sqlite3.Connection) -> bool:
     """Copy the whole write-ahead log into the file and empty it; False if a reader kept it from finishing."""
+    conn.execute(f"PRAGMA busy_timeout = {int(CHECKPOINT_WAIT_S * 1000)}")  # a reader's snapshot: wait this long
     busy, _, _ = conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
     return int(busy) == 0
+
+
+def nobody_reading(db: StudyDatabase) -> bool:
+    """Empty the write-ahead log now: True when it could be (no other program holds a read of the study open).
+
+    Run before :func:`erase_participant`, after something was written (the lease), so that a program reading
+    the study (a report, a window) is found before anything is removed rather than after, when it would keep the
+    old pages in the file until it closes.  (With an empty log a reader holds nothing up, and is not seen.)
+    """
+    return _checkpoint(db.conn)
 
 
 def rewrite_file(db: StudyDatabase) -> bool:
