@@ -7,8 +7,10 @@
 -- compressed blocks (recordings, session_blocks; protocol/recording.py);
 -- the samples table holds what versions 1 and 2 recorded (trial windows).
 -- Rows are insert-only except that a session's end columns are filled once,
--- a session's schedule is rewritten when an aborted trial is re-queued, and
--- the leases table holds who writes to what right now.
+-- a session's schedule is rewritten when an aborted trial is re-queued, the
+-- leases table holds who writes to what right now, and a participant who
+-- withdraws has every row of theirs removed (haptic-study withdraw; the
+-- withdrawals table keeps the record of it).
 --
 -- Conventions: snake_case, units in column names; times on the session clock are
 -- seconds since the session started (*_at_s); wall-clock stamps are ISO 8601 UTC
