@@ -146,12 +146,13 @@ def _confirm(args: argparse.Namespace, fp: Any) -> None:
         raise CliError(f"not confirmed (the code typed was not {code}); nothing was changed")
 
 
-def _other_copies(db_path: str, code: str) -> list[str]:
+def _other_copies(db_path: str, code: str, made: Path | None = None) -> list[str]:
     """What else on disk may hold the participant's data: lines for the user (files this command did not make)."""
     p = Path(db_path)
     try:
         backups = sorted(q.name for q in (p.parent if str(p.parent) else Path(".")).iterdir()
-                         if q.name.startswith(f"{p.stem}.v") and "-backup-" in q.name and q.is_file())
+                         if q.name.startswith(f"{p.stem}.v") and "-backup-" in q.name and q.is_file()
+                         and (made is None or q.name != made.name))
     except OSError:
         backups = []
     lines = []
@@ -237,6 +238,6 @@ def cmd_withdraw(args: argparse.Namespace) -> int:
     print(f"Kept: the withdrawal record (code {code}, {record.withdrawn_at[:16].replace('T', ' ')} UTC, the reason, "
           "these counts); the report lists it. The other participants keep their numbers and schedules.")
     print("What else may still hold their data:")
-    for line in notes + _other_copies(args.db, code):
+    for line in notes + _other_copies(args.db, code, db.backup_path):
         print(line)
     return 0
