@@ -46,6 +46,7 @@ from analysis.outdir import REPORT_MARKER, check_output_folder, write_output_fol
 from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, plural, power_html
 from analysis.stats import WilcoxonResult
+from analysis.withdrawals import study_withdrawals, withdrawals_html
 
 __all__ = [
     "ReportSummary",
@@ -331,11 +332,11 @@ def build_report(
         tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
                                              within, options.error_window)
         results.update(tables)
-        section = ""
+        section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
         if power:
             from analysis.power_outputs import report_section
 
-            section = power_html(report_section(a.trials, options, zero_method, tmp))
+            section += power_html(report_section(a.trials, options, zero_method, tmp))
         report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         html = page(
             study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,

@@ -71,10 +71,7 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         out["_rank"] = out["participant_code"].map(rank)
         return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
 
-    t = by_participant(trials, "session_id", "trial_index")
-    t["database"] = t["database"].map(os.path.basename)
-    t = codebook.export(t, "trials.csv")
-    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window)
     per = codebook.export(by_participant(overall, "haptic_mode"), "participants.csv")
     per_t = codebook.export(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
     wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
@@ -119,8 +116,19 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     return tables
 
 
+def trials_csv(trials: pd.DataFrame, error_window: str) -> pd.DataFrame:
+    """The rows of ``trials.csv`` for these trials, in their order: exported names, the database's file name,
+    the columns every consumer relies on first, and the error window their RMSE and Max AE were taken over."""
+    t = trials.copy()
+    t["database"] = t["database"].map(os.path.basename)
+    t = codebook.export(t, "trials.csv")
+    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    t["error_window"] = error_window
+    return t.reset_index(drop=True)
+
+
 #: The files whose numbers depend on the error window (sensitivity.csv names it per row).
-_WINDOWED_FILES = ("trials.csv", "participants.csv", "participants_wide.csv", "participants_by_target.csv",
+_WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by_target.csv",
                    "stats.csv", "stats_by_target.csv", "speed_accuracy.csv", "speed_accuracy_model.csv",
                    "speed_accuracy_slopes.csv", "learning_models.csv", "order_check.csv")
 

@@ -7,8 +7,10 @@
 -- compressed blocks (recordings, session_blocks; protocol/recording.py);
 -- the samples table holds what versions 1 and 2 recorded (trial windows).
 -- Rows are insert-only except that a session's end columns are filled once,
--- a session's schedule is rewritten when an aborted trial is re-queued, and
--- the leases table holds who writes to what right now.
+-- a session's schedule is rewritten when an aborted trial is re-queued, the
+-- leases table holds who writes to what right now, and a participant who
+-- withdraws has every row of theirs removed (haptic-study withdraw; the
+-- withdrawals table keeps the record of it).
 --
 -- Conventions: snake_case, units in column names; times on the session clock are
 -- seconds since the session started (*_at_s); wall-clock stamps are ISO 8601 UTC
@@ -143,4 +145,19 @@ CREATE TABLE IF NOT EXISTS session_blocks (
     crc32       INTEGER,                        -- version 4: zlib.crc32 of data (NULL: written before version 4)
     PRIMARY KEY (session_id, segment, block),
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
+);
+
+-- version 4: a participant who withdrew (haptic-study withdraw).  Every row of theirs was removed and the file
+-- rewritten; this row keeps only the pseudonymous code, when, the reason given and how many rows of each kind were
+-- removed -- no measurement.  A withdrawn code is never given a session again.
+CREATE TABLE IF NOT EXISTS withdrawals (
+    code             TEXT PRIMARY KEY,          -- the participant's pseudonymous code
+    withdrawn_at     TEXT NOT NULL,
+    reason           TEXT NOT NULL,
+    removed_sessions INTEGER NOT NULL,          -- rows removed: sessions, trials, events
+    removed_trials   INTEGER NOT NULL,
+    removed_events   INTEGER NOT NULL,
+    removed_blocks   INTEGER NOT NULL,          -- recorded blocks, and the 1 kHz records they held
+    removed_records  INTEGER NOT NULL,
+    removed_samples  INTEGER NOT NULL           -- samples rows (what versions 1 and 2 recorded)
 );

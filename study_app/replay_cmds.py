@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 from pipeline.tomlfields import SQLITE_INTEGER_MAX
 from study_app.argtypes import add_command, real_number, whole_number
 from study_app.cli_error import CliError
+from study_app.export_participant_cmds import add_export_participant_parser
 
 if TYPE_CHECKING:  # numpy is imported where it is used: every haptic-study command imports this module
     import numpy as np
@@ -67,9 +68,11 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.set_defaults(handler=cmd_plot_session)
 
     e = add_command(
-        sub, "export", "export a study's data in tidy form (samples: every 1 kHz record)",
+        sub, "export", "export a study's data in tidy form (samples: every 1 kHz record; participant: all of one "
+        "participant's)",
         "haptic-study export samples --db study.db --session 2 --format csv --out session2.csv\n"
-        "haptic-study export samples --db study.db --format parquet --out samples.parquet",
+        "haptic-study export samples --db study.db --format parquet --out samples.parquet\n"
+        "haptic-study export participant --db study.db --participant P02 --out P02-data",
         "Export every recorded 1 kHz record (of one session, or all) as one table, for pandas, R or SQL-free "
         "tools; the Python function is analysis.samples_frame",
     )
@@ -93,6 +96,7 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
     es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
     es.set_defaults(handler=cmd_export)
+    add_export_participant_parser(esub)  # everything about one participant (study_app/export_participant_cmds.py)
 
 
 # -- shared -------------------------------------------------------------------------------------------------

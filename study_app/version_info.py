@@ -10,10 +10,18 @@ __all__ = ["version_text"]
 
 
 def version_text() -> str:
-    """``0.1.0``, or ``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout.
+    """``0.1.0 (commit 1a2b3c4d, with uncommitted changes)`` in a git checkout; else it says it is not one.
 
-    The same answer every new session stores (:func:`protocol.version.software_provenance`).
+    The same answer every new session stores (:func:`protocol.version.software_provenance`). An install from a
+    wheel (or a source tree without git) has no commit to name:
+    ``0.1.0 (installed package, not a git checkout: /…/site-packages)``.
     """
+    from pathlib import Path
+
     from protocol.version import software_provenance
 
-    return software_provenance().describe()
+    provenance = software_provenance()
+    root = Path(__file__).resolve().parent.parent
+    if provenance.commit is None and not (root / ".git").exists():
+        return f"{provenance.version} (installed package, not a git checkout: {root})"
+    return provenance.describe()

@@ -24,6 +24,7 @@ from protocol.storage import crashpoint
 from protocol.storage.common import StorageError, now_iso
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
+from protocol.storage.withdrawal import withdrawal_of
 
 __all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
 
@@ -201,11 +202,16 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         Raises
         ------
         StorageError
-            If the participant already has a session of this kind (nothing is overwritten).
+            If the participant already has a session of this kind (nothing is overwritten), or withdrew.
         LeaseHeld
             If another live process runs the whole study (a headless ``run``).
         """
         with self.transaction():
+            gone = withdrawal_of(self.conn, code)
+            if gone is not None:
+                raise StorageError(f"participant {code} withdrew from the study in {self.path} "
+                                   f"({gone.withdrawn_at[:16].replace('T', ' ')} UTC) and their data were erased; "
+                                   "a withdrawn code is not used again (give a new participant code)")
             existing = self.sessions_of(code, kind)
             if existing:
                 s = existing[-1]

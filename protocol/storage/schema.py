@@ -51,6 +51,13 @@ _UPGRADE_2_TO_3 = (
     "t_last_s REAL NOT NULL, data BLOB NOT NULL, PRIMARY KEY (session_id, segment, block), "
     "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))",
 )
+#: Version 4's record of the participants who withdrew (``haptic-study withdraw``; :mod:`protocol.storage.withdrawal`).
+#: Added to version 4 after files of version 4 existed: a writer that opens a version-4 file without it adds it.
+_WITHDRAWALS = (
+    "CREATE TABLE IF NOT EXISTS withdrawals (code TEXT PRIMARY KEY, withdrawn_at TEXT NOT NULL, reason TEXT NOT NULL, "
+    "removed_sessions INTEGER NOT NULL, removed_trials INTEGER NOT NULL, removed_events INTEGER NOT NULL, "
+    "removed_blocks INTEGER NOT NULL, removed_records INTEGER NOT NULL, removed_samples INTEGER NOT NULL)"
+)
 #: What upgrades a version-3 database to version 4: a checksum per recorded block (NULL in blocks written before it,
 #: which cannot be verified), and which code ran each session (the commit, and whether the checkout had uncommitted
 #: changes; NULL where it is not known, e.g. an install from a wheel).
@@ -58,6 +65,7 @@ _UPGRADE_3_TO_4 = (
     "ALTER TABLE session_blocks ADD COLUMN crc32 INTEGER",
     "ALTER TABLE sessions ADD COLUMN software_commit TEXT",
     "ALTER TABLE sessions ADD COLUMN software_dirty INTEGER CHECK (software_dirty IS NULL OR software_dirty IN (0, 1))",
+    _WITHDRAWALS,
 )
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
@@ -68,8 +76,13 @@ SAMPLE_COLUMNS = (
 
 
 def schema_path() -> Path:
-    """Location of ``data/schema.sql`` in the source tree."""
-    return Path(__file__).resolve().parents[2] / "data" / "schema.sql"
+    """Location of the schema: ``data/schema.sql`` of a checkout, shipped in an installed wheel as ``protocol/storage/sql``.
+
+    The installed copy is looked for first, so an install never reads a ``data/`` folder that is not its own.
+    """
+    here = Path(__file__).resolve().parent
+    installed = here / "sql" / "schema.sql"
+    return installed if installed.is_file() else here.parents[1] / "data" / "schema.sql"
 
 
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -227,6 +240,8 @@ class SchemaFile:
                 raise StorageError(f"{self.path}: database schema version {version} must be upgraded to "
                                    f"{SCHEMA_VERSION} before it is written to; nothing was changed")
             self._upgrade(version)
+        elif not readonly and "withdrawals" not in tables:  # a version-4 file from before withdrawals
+            c.execute(_WITHDRAWALS)
         if not readonly:
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process

@@ -17,6 +17,7 @@ from protocol.rehearsal import FaultPlan
 from protocol.session import first_unfinished
 from protocol.session_setup import participant_code, refuse_damaged_recording, training_protocol, training_schedule
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
+from protocol.storage.withdrawal import withdrawals
 from protocol.study_rules import StudyRuleError, seed_refusal, stored_sessions, training_refusal
 
 __all__ = [
@@ -55,8 +56,11 @@ def _plan_continue(
     plan: dict[int, list[Step]] = {}
     kept: list[int] = []
     trials = 0
+    withdrawn = {w.code for w in withdrawals(db.conn)}
     for n in range(1, participants + 1):
         code = participant_code(n)
+        if code in withdrawn:  # erased at their request: their number stays vacant, the others' schedules unchanged
+            continue
         stored = db.sessions_of(code)
         for info in stored:
             if info.seed != seed:
@@ -195,6 +199,10 @@ def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:
                      f"the file as it was is kept in {db.backup_path}")
     if taken_over:
         notes.append(f"{db.path}: {taken_over}")
+    gone = [w.code for w in withdrawals(db.conn)]
+    if gone:
+        notes.append(f"{db.path}: {', '.join(gone)} withdrew (haptic-study withdraw): not run again; the participant numbers "
+                     "stay vacant, so the other participants keep their schedules")
     return notes
 
 

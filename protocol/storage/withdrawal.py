@@ -1,0 +1,227 @@
+"""A participant's withdrawal: every row of theirs removed, the file rewritten, a record of it kept.
+
+An ethics approval lets a participant withdraw and have their data erased.  :func:`erase_participant` removes,
+in one transaction, the participant row and everything that refers to it -- their sessions, trials, events,
+recorded runs and blocks, the samples rows of older versions and the leases of their sessions -- with SQLite's
+``secure_delete`` on, so the freed bytes are overwritten with zeros rather than left in free pages, and stores a
+:class:`Withdrawal` record that keeps only the pseudonymous code, the time, the reason and how many rows of each kind
+were removed (no measurement).  :func:`rewrite_file` then checkpoints the write-ahead log into the file (so the
+zeroed pages land on the file's own blocks), rewrites the whole file (``VACUUM``) and empties the log, so nothing of
+theirs can be read back from the database or its ``-wal`` file.
+
+The caller holds the study's one-writer lease (:meth:`protocol.storage.StudyDatabase.acquire_lease` on
+``"study"``) while it does so: no session is written meanwhile, and none of theirs is running.  A withdrawn code
+is never given a session again (:meth:`protocol.storage.StudyDatabase.create_session` refuses it).
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from contextlib import AbstractContextManager
+from dataclasses import astuple, dataclass, fields
+from pathlib import Path
+from typing import Protocol
+
+from protocol.records import trial_id_of
+from protocol.storage.common import StorageError, now_iso
+from protocol.storage.leases import session_scope
+
+__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
+           "withdrawal_of", "withdrawals"]
+
+
+class StudyDatabase(Protocol):
+    """What this module uses of :class:`protocol.storage.StudyDatabase` (which imports this module)."""
+
+    path: Path
+    conn: sqlite3.Connection
+
+    def transaction(self) -> AbstractContextManager[None]: ...
+    def sessions_being_written(self) -> dict[int, str]: ...
+    def quick_check(self) -> None: ...
+
+
+@dataclass(frozen=True, slots=True)
+class Footprint:
+    """What is stored about one participant: what a withdrawal removes.
+
+    ``sessions`` holds ``(session_id, kind, status)`` per session, oldest first.
+    """
+
+    code: str
+    participant_id: int
+    sessions: tuple[tuple[int, str, str], ...]
+    trials: int
+    events: int
+    segments: int
+    blocks: int
+    records: int
+    samples: int
+
+    def describe(self) -> str:
+        """One sentence naming what is stored (what a withdrawal will remove)."""
+        kinds = ", ".join(f"{k} session {sid} ({'interrupted' if st == 'running' else st})"
+                          for sid, k, st in self.sessions)
+        recorded = (f"{_n(self.segments, 'recorded run')} in {_n(self.blocks, 'block')} "
+                    f"({self.records:,} records at 1 kHz)")
+        older = f", {_n(self.samples, 'samples row')} (an older version's)" if self.samples else ""
+        return (f"participant {self.code}: {_n(len(self.sessions), 'session')}{': ' + kinds if kinds else ''}; "
+                f"{_n(self.trials, 'trial')}, {_n(self.events, 'event')}, {recorded}{older}")
+
+
+@dataclass(frozen=True, slots=True)
+class Withdrawal:
+    """The record a withdrawal leaves (table ``withdrawals``): no measurement, only what the ethics board asks."""
+
+    code: str
+    withdrawn_at: str
+    reason: str
+    removed_sessions: int
+    removed_trials: int
+    removed_events: int
+    removed_blocks: int
+    removed_records: int
+    removed_samples: int
+
+    def counts(self) -> str:
+        """What was removed, in words."""
+        return (f"{_n(self.removed_sessions, 'session')}, {_n(self.removed_trials, 'trial')}, "
+                f"{_n(self.removed_events, 'event')}, {_n(self.removed_blocks, 'recorded block')} "
+                f"({self.removed_records:,} records)"
+                + (f", {_n(self.removed_samples, 'samples row')}" if self.removed_samples else ""))
+
+
+_COLUMNS = ", ".join(f.name for f in fields(Withdrawal))
+
+
+def _n(n: int, word: str) -> str:
+    return f"{n:,} {word}{'' if n == 1 else 's'}"
+
+
+def _has_table(conn: sqlite3.Connection, name: str) -> bool:
+    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone() is not None
+
+
+def withdrawals(conn: sqlite3.Connection) -> list[Withdrawal]:
+    """Every withdrawal recorded in a database, oldest first (none in a file from before withdrawals)."""
+    if not _has_table(conn, "withdrawals"):
+        return []
+    return [Withdrawal(*r) for r in conn.execute(f"SELECT {_COLUMNS} FROM withdrawals ORDER BY withdrawn_at, code")]
+
+
+def withdrawal_of(conn: sqlite3.Connection, code: str) -> Withdrawal | None:
+    """The withdrawal of one participant code, or None."""
+    if not _has_table(conn, "withdrawals"):
+        return None
+    row = conn.execute(f"SELECT {_COLUMNS} FROM withdrawals WHERE code = ?", (code,)).fetchone()
+    return None if row is None else Withdrawal(*row)
+
+
+def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
+    """Everything stored about participant ``code``, counted; None when there is no such participant."""
+    row = conn.execute("SELECT participant_id FROM participants WHERE code = ?", (code,)).fetchone()
+    if row is None:
+        return None
+    pid = int(row[0])
+    sessions = tuple((int(s), str(k), str(st)) for s, k, st in conn.execute(
+        "SELECT session_id, kind, status FROM sessions WHERE participant_id = ? ORDER BY session_id", (pid,)))
+    trials = events = segments = blocks = records = samples = 0
+    recorded = _has_table(conn, "session_blocks")
+    for sid, _, _ in sessions:
+        trials += conn.execute("SELECT COUNT(*) FROM trials WHERE session_id = ?", (sid,)).fetchone()[0]
+        events += conn.execute("SELECT COUNT(*) FROM events WHERE session_id = ?", (sid,)).fetchone()[0]
+        samples += conn.execute("SELECT COUNT(*) FROM samples WHERE trial_id >= ? AND trial_id < ?",
+                                (trial_id_of(sid, 0), trial_id_of(sid + 1, 0))).fetchone()[0]
+        if recorded:
+            segments += conn.execute("SELECT COUNT(*) FROM recordings WHERE session_id = ?", (sid,)).fetchone()[0]
+            b, r = conn.execute("SELECT COUNT(*), COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id = ?",
+                                (sid,)).fetchone()
+            blocks, records = blocks + int(b), records + int(r)
+    return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples))
+
+
+def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
+    """Remove every row of participant ``code`` in one transaction, its bytes overwritten, and record the withdrawal.
+
+    The caller holds the study's lease.  Nothing is removed when anything is refused.
+
+    Raises
+    ------
+    StorageError
+        No such participant, the participant already withdrew, or a live process writes one of their sessions.
+    """
+    c = db.conn
+    c.execute("PRAGMA secure_delete = ON")  # deleted cells and freed pages are overwritten with zeros
+    with db.transaction():
+        done = withdrawal_of(c, code)
+        if done is not None:
+            raise StorageError(f"participant {code} already withdrew from {db.path} ({done.withdrawn_at[:16]} UTC); "
+                               "nothing to remove")
+        fp = footprint(c, code)
+        if fp is None:
+            raise StorageError(f"participant {code}: no such participant in {db.path}; nothing was changed")
+        writing = db.sessions_being_written()
+        for sid, _, _ in fp.sessions:
+            if sid in writing:
+                raise StorageError(f"participant {code}'s session {sid} is running (being written by "
+                                   f"{writing[sid]}); withdraw once it has ended; nothing was changed")
+        for sid, _, _ in fp.sessions:
+            c.execute("DELETE FROM samples WHERE trial_id >= ? AND trial_id < ?",
+                      (trial_id_of(sid, 0), trial_id_of(sid + 1, 0)))
+            c.execute("DELETE FROM session_blocks WHERE session_id = ?", (sid,))
+            c.execute("DELETE FROM recordings WHERE session_id = ?", (sid,))
+            c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))
+            c.execute("DELETE FROM events WHERE session_id = ?", (sid,))
+            c.execute("DELETE FROM leases WHERE scope = ?", (session_scope(sid),))
+            c.execute("DELETE FROM sessions WHERE session_id = ?", (sid,))
+        c.execute("DELETE FROM participants WHERE participant_id = ?", (fp.participant_id,))
+        record = Withdrawal(code, now_iso(), reason, len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records,
+                            fp.samples)
+        c.execute(f"INSERT INTO withdrawals ({_COLUMNS}) VALUES ({', '.join('?' * len(fields(Withdrawal)))})",
+                  astuple(record))
+    return record
+
+
+#: How long emptying the write-ahead log waits for programs reading the study to finish their read.
+CHECKPOINT_WAIT_S = 5.0
+
+
+def _checkpoint(conn: sqlite3.Connection) -> bool:
+    """Copy the whole write-ahead log into the file and empty it; False if a reader kept it from finishing."""
+    conn.execute(f"PRAGMA busy_timeout = {int(CHECKPOINT_WAIT_S * 1000)}")  # a reader's snapshot: wait this long
+    busy, _, _ = conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
+    return int(busy) == 0
+
+
+def nobody_reading(db: StudyDatabase) -> bool:
+    """Empty the write-ahead log now: True when it could be (no other program holds a read of the study open).
+
+    Run before :func:`erase_participant`, after something was written (the lease), so that a program reading
+    the study (a report, a window) is found before anything is removed rather than after, when it would keep the
+    old pages in the file until it closes.  (With an empty log a reader holds nothing up, and is not seen.)
+    """
+    return _checkpoint(db.conn)
+
+
+def rewrite_file(db: StudyDatabase) -> bool:
+    """After :func:`erase_participant`: the zeroed pages written over the file's own, the file rewritten, the log emptied.
+
+    Returns
+    -------
+    bool
+        True when the write-ahead log is empty at the end.  False when another program reading the study kept
+        the log from being emptied (it waited the connection's busy timeout): the log may still hold pages
+        of what was removed until that reader closes.
+    """
+    c = db.conn
+    first = _checkpoint(c)  # the zeroed pages onto the file's blocks, before VACUUM shrinks the file
+    c.execute("VACUUM")  # every page written anew, free pages gone
+    last = _checkpoint(c)
+    db.quick_check()
+    wal = Path(f"{db.path}-wal")
+    try:
+        empty = not wal.exists() or os.path.getsize(wal) == 0
+    except OSError:
+        empty = False
+    return first and last and empty
