@@ -290,8 +290,8 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, i
     """
     if where is not None:
         cols = read_ticks(conn, *where, ("t_ns", "force_n"))
-        t = cols["t_ns"].astype(np.int64)
-        return (t - t[0] if len(t) else t), cols["force_n"].astype(np.float64)  # the first record is the cue
+        t = cols["t_ns"]  # int64, as the tick record has it
+        return (t - t[0] if len(t) else t), cols["force_n"]  # the first record is the cue
     rows = conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s", (trial_id,)).fetchall()
     if not rows:
         return np.empty(0, np.int64), np.empty(0, np.float64)

@@ -63,9 +63,9 @@ class SegmentData:
         """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
         c = self.columns
         return ReplayInputs(
-            tick=c["tick"].astype(np.int64), period_ns=c["period_ns"].astype(np.int64),
+            tick=c["tick"], period_ns=c["period_ns"],  # int64, as the tick record has them
             raw_wrench=np.stack([c[f"raw_{k}"] for k in ("fx", "fy", "fz", "tx", "ty", "tz")], axis=1),
-            haptic_on=c["haptic_on"] != 0, faults=c["faults"].astype(np.int64), snapshot=self.snapshot,
+            haptic_on=c["haptic_on"] != 0, faults=c["faults"], snapshot=self.snapshot,
             events=self.log(),
         )
 
