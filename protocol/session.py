@@ -68,7 +68,6 @@ from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
-from protocol.recording import kept_records
 from protocol.records import AbortCause, Outcome, TrialRecord
 from protocol.storage import Recorder
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
@@ -361,7 +360,7 @@ class SessionRunner:
         last = int(rows["tick"][-1])
         log = [e for e in self._log if e[0] <= last]
         self._log = [e for e in self._log if e[0] > last]
-        self.recorder.records(self.session_id, self.segment, kept_records(rows), log)
+        self.recorder.records(self.session_id, self.segment, rows, log)  # (the recorder keeps the kept fields)
 
     def _process_part(self, rows: np.ndarray) -> None:
         """The trial machine, the samples and the next cue over records that need no abort."""

@@ -96,8 +96,9 @@ class Recorder:
 
     def records(self, session_id: int, segment: int, records: np.ndarray,
                 log: Sequence[tuple[int, str, Any]] = ()) -> None:
-        """Queue records of a segment (their kept part, :func:`protocol.recording.kept_records`) and the replay log
-        of their ticks.
+        """Queue loop records of a segment (rows of :data:`pipeline.tick_record.TICK_DTYPE`, or their kept part,
+        :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
+        after they are queued (the ring's copies do not).
 
         They are cut into blocks as they fill; the open block is written as it stands at every commit.
         """
