@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 
 from bench.row_format import row_format_copy
-from protocol.config import load_protocol
 from pipeline.tick_record import TICK_DTYPE
+from protocol.config import load_protocol
 from protocol.recording import SegmentData, read_segment, segments_of
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
 from study_app.headless import default_jobs, run_study

@@ -26,10 +26,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline import tick_record
 from pipeline.bias_refinement import RlsBias
 from pipeline.filters import MovingAverage3, exact_sum
 from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation
-from pipeline import tick_record
 from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import _SATURATED_T, _SERIES_T, scale_components
