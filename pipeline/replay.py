@@ -86,6 +86,11 @@ class ReplayOutputs:
         """One stage column by its :data:`pipeline.framework.STEP_FIELDS` name."""
         return self.stages[:, STEP_FIELDS.index(name)]
 
+    def force(self, stage: str) -> npt.NDArray[np.float64]:
+        """One stage's force vectors, n × 3 (``stage``: ``"comp"``, ``"filt"``, … ``"render"``)."""
+        i = STEP_FIELDS.index(f"{stage}_fx")
+        return self.stages[:, i : i + 3]
+
 
 #: The log entries :func:`replay` applies, as the loop writes them (``pipeline.loop``); any other is refused.
 REPLAY_LOG_KINDS: tuple[str, ...] = ("pose", "refine", "reset", "calibration", "device_limit", "zero")
