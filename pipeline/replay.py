@@ -86,7 +86,7 @@ class ReplayOutputs:
         """One stage column by its :data:`pipeline.framework.STEP_FIELDS` name."""
         return self.stages[:, STEP_FIELDS.index(name)]
 
-    def force(self, stage: str) -> npt.NDArray[np.float64]:
+    def stage_force(self, stage: str) -> npt.NDArray[np.float64]:
         """One stage's force vectors, n × 3 (``stage``: ``"comp"``, ``"filt"``, … ``"render"``)."""
         i = STEP_FIELDS.index(f"{stage}_fx")
         return self.stages[:, i : i + 3]
