@@ -469,7 +469,7 @@ def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> p
             c = d.columns
             n = len(c["tick"])
             time_s = d.session_time_s
-            trial = c["trial_index"].astype(np.int64)
+            trial = c["trial_index"]  # int64, as the tick record has it
             since = np.full(n, np.nan)
             for idx in np.unique(trial[trial >= 0]).tolist():
                 if idx in cues:

@@ -130,7 +130,7 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
                              f"{', '.join(REPLAY_LOG_KINDS)} (was the session recorded by a newer haptic-study?)")
         by_tick.setdefault(int(t), []).append((kind, payload))
     ticks = inputs.tick.tolist()
-    dts = (inputs.period_ns.astype(np.int64) * 1e-9).tolist()  # as the loop computes dt: int ns × 1e-9
+    dts = (inputs.period_ns * 1e-9).tolist()  # as the loop computes dt: int ns × 1e-9 (int64, the tick record's)
     raw = inputs.raw_wrench.tolist()
     enabled = (inputs.haptic_on & (inputs.faults == 0)).tolist()
     latched = (inputs.faults != 0).tolist()
