@@ -25,8 +25,9 @@ Layout of the shared block (little-endian)::
     4096 ... capacity × n_fields 8-byte values (each record a row of the structured type)
 
 The names and types travel with the data, so a reader that attaches by name
-knows the columns and reads them with their own types.  The GUI runs in its own process because a same-process Qt paint
-holds the GIL for milliseconds and breaks the 1 kHz loop (science.md §7).
+knows the columns and reads them with their own types.  The GUI runs in its
+own process because a same-process Qt paint holds the GIL for milliseconds and
+breaks the 1 kHz loop (science.md §7).
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ class RingBuffer:
         """
         if capacity < 2:
             raise ValueError(f"capacity = {capacity}: must be at least 2 records")
-        names, fields = _header_fields(fields)  # checked before the segment exists: a failure must not leak one
+        header, fields = _header_fields(fields)  # checked before the segment exists: a failure must not leak one
         size = _HEADER + 8 * len(fields) * capacity
         shm: shared_memory.SharedMemory | None
         if shared:
@@ -145,7 +146,7 @@ class RingBuffer:
             buf = memoryview(bytearray(size))
         buf[: len(_MAGIC)] = _MAGIC
         struct.pack_into("<IIQQ", buf, 8, len(fields), 0, capacity, 0)
-        buf[_NAMES_OFF : _NAMES_OFF + len(names)] = names
+        buf[_NAMES_OFF : _NAMES_OFF + len(header)] = header
         return cls(buf, shm, owner=True)
 
     @classmethod
