@@ -430,7 +430,8 @@ class BlockBuilder:
         return block
 
     def partial(self) -> tuple[int, int, np.ndarray, bytes] | None:
-        """The open block as it stands (None when it is empty or already written as it is).
+        """The open block as it stands (None when it is empty or already written as it is); its records are a view,
+        valid until the next :meth:`add` (so are :meth:`final`'s).
 
         Only the records added since the last call are encoded (a cheap chunk, :data:`_FAST`), appended to
         the chunks written before: a commit costs what it adds, not what the block holds.  The full block
