@@ -225,29 +225,24 @@ class HapticLoop:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
 
         enabled = self.haptic_on and not latched
-        # the stages of pipeline.tick_record.STEP_FIELDS, by name
         (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
          haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = fw.step(fx, fy, fz, enabled, dt_s)
+         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.tick_record.STEP_FIELDS, by name
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         rig.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
         # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
         latency_ns = self.clock.now_ns() - w.t_ns
-
         true_fx, true_fy, true_fz = rig.true_contact_force() or _NAN3
         tip_x_m, tip_y_m, tip_z_m = pose.position_m
         stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
         t_ns = now - self.t0_ns
-        # one record, in pipeline.tick_record.TICK_FIELDS' order (the ring refuses a float in an int64 field)
-        rec = (
-            self.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns,
-            latched, 1 if self.haptic_on else 0, self.trial_index, self.phase, fw.safety.gain,
-            render_fx, render_fy, render_fz, _HYPOT(filt_fx, filt_fy, filt_fz),
-            stylus_x_m, stylus_y_m, stylus_z_m, derate,
-            t_ns * 1e-9, comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz,
-            base_fx, base_fy, base_fz, haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz,
-            tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
+        rec = (  # one record, in pipeline.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
+            self.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
+            1 if self.haptic_on else 0, self.trial_index, self.phase, fw.safety.gain, render_fx, render_fy, render_fz,
+            _HYPOT(filt_fx, filt_fy, filt_fz), stylus_x_m, stylus_y_m, stylus_z_m, derate, t_ns * 1e-9, comp_fx,
+            comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx,
+            haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
         )
         self._last_record = rec
         if self.ring is not None:
