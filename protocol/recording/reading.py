@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.replay import ReplayInputs
+from pipeline.tick_record import TICK_DTYPE
 from protocol.clock import SessionClock
 from protocol.recording.codec import COLUMNS, decode_block, decode_columns, join_decoded
 from protocol.recording.integrity import (
@@ -169,8 +170,8 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
             parts.append(part)
     if bad:
         raise RecordingDamaged(describe_damage(conn, bad))
-    if not parts:
-        return {n: np.empty(0) for n in names}
+    if not parts:  # (each empty column with its field's type)
+        return {n: np.empty(0, TICK_DTYPE[n] if n in (TICK_DTYPE.names or ()) else np.float64) for n in names}
     return {n: np.concatenate([p[n] for p in parts]) for n in names}
 
 
