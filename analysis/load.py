@@ -340,8 +340,8 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, i
     """
     if where is not None:
         cols = read_ticks(conn, *where, ("t_ns", "force_n"))
-        t = cols["t_ns"].astype(np.int64)
-        return (t - t[0] if len(t) else t), cols["force_n"].astype(np.float64)  # the first record is the cue
+        t = cols["t_ns"]  # int64, as the tick record has it
+        return (t - t[0] if len(t) else t), cols["force_n"]  # the first record is the cue
     rows = conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s", (trial_id,)).fetchall()
     if not rows:
         return np.empty(0, np.int64), np.empty(0, np.float64)
@@ -522,7 +522,7 @@ def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> p
             c = d.columns
             n = len(c["tick"])
             time_s = d.session_time_s
-            trial = c["trial_index"].astype(np.int64)
+            trial = c["trial_index"]  # int64, as the tick record has it
             since = np.full(n, np.nan)
             for idx in np.unique(trial[trial >= 0]).tolist():
                 if idx in cues:

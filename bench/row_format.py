@@ -70,17 +70,17 @@ def trial_window_rows(database: str, session_id: int) -> list[tuple[int, npt.NDA
             replayed = replay(data.replay_inputs())
             c = data.columns
             render = np.stack([c[f"render_{a}"] for a in ("fx", "fy", "fz")], axis=1)
-            if not np.array_equal(replayed.stages[:, 18:21], render):
+            if not np.array_equal(replayed.stage_force("render"), render):
                 raise ValueError(f"session {session_id}, run {seg}: the replay differs from the recording")
             for trial_id, t_seg, first, last in trials:
                 if t_seg != seg:
                     continue
                 keep = (c["tick"] >= first) & (c["tick"] <= last)
-                t_ns = c["t_ns"][keep].astype(np.int64)
+                t_ns = c["t_ns"][keep]
                 rows = np.column_stack([
                     (t_ns - t_ns[0]) / 1e9, c["force_n"][keep],
                     *(c[f"raw_{a}"][keep] for a in ("fx", "fy", "fz", "tx", "ty", "tz")),
-                    replayed.stages[keep, :3], render[keep],
+                    replayed.stage_force("comp")[keep], render[keep],
                 ])
                 out.append((int(trial_id), rows))
         return out

@@ -9,6 +9,7 @@ records, i.e. every 100 ms at 1 kHz).
 
 from __future__ import annotations
 
+import json
 import os
 import sqlite3
 import tempfile
@@ -19,8 +20,9 @@ from typing import Any
 import numpy as np
 
 from bench.row_format import row_format_copy
+from pipeline.tick_record import TICK_DTYPE
 from protocol.config import load_protocol
-from protocol.recording import read_segment, segments_of
+from protocol.recording import SegmentData, read_segment, segments_of
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
 from study_app.headless import default_jobs, run_study
 
@@ -42,10 +44,15 @@ class _RecordClock:
 def rewrite_recording(source: str, target: str) -> tuple[float, int]:
     """Write every recorded segment of ``source`` again into ``target`` through the recorder, at the live commit rate.
 
+    Each segment's records are handed over as a live session hands them: loop records as the ring holds them
+    (:data:`pipeline.tick_record.TICK_DTYPE`; the fields a recording does not keep are zero here), ``_CHUNK``
+    at a time, each with the log entries of its ticks.
+
     Returns
     -------
     seconds, records
-        Time spent in the recorder (reading the source is not counted) and records written.
+        Time spent handing records over and in the recorder (reading the source and cutting it into
+        hand-overs is not counted) and records written.
     """
     src = connect_readonly(source)
     dst = sqlite3.connect(target)
@@ -60,33 +67,46 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
     finally:
         src.close()
         dst.close()
-    import json
-
     db = StudyDatabase(target)
     clock = _RecordClock()
     rec = Recorder(db, threaded=False, clock=clock)
-    n = 0
-    t0 = time.perf_counter()
+    n, spent = 0, 0.0
     try:
         for s in segments:
+            hand_overs = _hand_overs(s)  # (one segment at a time: a whole study's loop records need GBs)
+            t0 = time.perf_counter()
             rec.segment(s.session_id, s.segment, s.started_at_s, s.t0_ns, s.snapshot,
                         json.loads(scales[(s.session_id, s.segment)]))
-            log = s.log()
-            log_ticks = np.array([e[0] for e in log], dtype=np.int64)
-            cols = s.columns
-            ticks = cols["tick"]
-            for lo in range(0, len(ticks), _CHUNK):
-                hi = min(lo + _CHUNK, len(ticks))
-                a, b = np.searchsorted(log_ticks, [ticks[lo], ticks[hi - 1] + 1])
-                if lo == 0:
-                    a = 0  # entries logged before the first record belong to it
-                clock.now_s = (int(cols["t_ns"][hi - 1]) - s.t0_ns) / 1e9
-                rec.records(s.session_id, s.segment, {k: v[lo:hi] for k, v in cols.items()}, log[a:b])
-                n += hi - lo
+            for rows, log, now_s in hand_overs:
+                clock.now_s = now_s
+                rec.records(s.session_id, s.segment, rows, log)
+                n += len(rows)
+            spent += time.perf_counter() - t0
+        t0 = time.perf_counter()
         rec.close()
+        spent += time.perf_counter() - t0
     finally:
         db.close()
-    return time.perf_counter() - t0, n
+    return spent, n
+
+
+def _hand_overs(s: SegmentData) -> list[tuple[np.ndarray, list[tuple[int, str, Any]], float]]:
+    """A segment cut as a live session hands it to the recorder: (loop records, their log entries, commit clock)."""
+    cols = s.columns
+    rows = np.zeros(len(cols["tick"]), TICK_DTYPE)
+    for name, values in cols.items():
+        rows[name] = values
+    log = s.log()
+    log_ticks = np.array([e[0] for e in log], dtype=np.int64)
+    ticks = cols["tick"]
+    out = []
+    for lo in range(0, len(ticks), _CHUNK):
+        hi = min(lo + _CHUNK, len(ticks))
+        a, b = np.searchsorted(log_ticks, [ticks[lo], ticks[hi - 1] + 1])
+        if lo == 0:
+            a = 0  # entries logged before the first record belong to it
+        out.append((rows[lo:hi], log[a:b], (int(cols["t_ns"][hi - 1]) - s.t0_ns) / 1e9))
+    return out
 
 
 def run_study_bench(participants: int = 10, seed: int = 0, protocol_path: str | None = None,

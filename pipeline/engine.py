@@ -21,9 +21,10 @@ from pipeline.bias_refinement import RlsBias
 from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.framework import FrameworkConfig, HapticFramework
 from pipeline.loop import HapticLoop
-from pipeline.loop_messages import RECORD_FIELDS, AllowBiasRefinement, SetHaptics
+from pipeline.loop_messages import AllowBiasRefinement, SetHaptics
 from pipeline.watchdog import WatchdogConfig
 from pipeline.ring import RingBuffer
+from pipeline.tick_record import TICK_DTYPE
 
 if TYPE_CHECKING:
     from pipeline.sim.rig import SimRigConfig
@@ -147,7 +148,7 @@ def build_sim_engine(
         rig.set_driver(ScriptedPresses())
     rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
     framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
-    ring = RingBuffer.create(RECORD_FIELDS, int(config.ring_seconds * 1000), shared=shared_ring)
+    ring = RingBuffer.create(TICK_DTYPE, int(config.ring_seconds * 1000), shared=shared_ring)
     loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
     loop.submit(SetHaptics(config.haptics_on))
     loop.submit(AllowBiasRefinement(config.refine_bias))
@@ -191,7 +192,7 @@ def build_hardware_engine(
     calibration = payload if payload is not None else NO_PAYLOAD
     rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm) if payload is not None else None
     framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
-    ring = RingBuffer.create(RECORD_FIELDS, int(ring_seconds * 1000), shared=shared_ring)
+    ring = RingBuffer.create(TICK_DTYPE, int(ring_seconds * 1000), shared=shared_ring)
     loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
     return Engine(rig, framework, loop, clk, calibration, ring, simulated=False, calibration_file=cal_file,
                   tool=hardware.calibration_tool)

@@ -26,6 +26,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline import tick_record
 from pipeline.bias_refinement import RlsBias
 from pipeline.filters import MovingAverage3, exact_sum
 from pipeline.frames import IDENTITY, Mat3, Vec3, check_rotation
@@ -94,17 +95,10 @@ class FrameworkConfig:
             )
 
 
-#: Names of the values :meth:`HapticFramework.step` returns, in order
-#: (indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14, scaled 15–17, render 18–20).
-STEP_FIELDS: tuple[str, ...] = (
-    "comp_fx", "comp_fy", "comp_fz",
-    "filt_fx", "filt_fy", "filt_fz",
-    "tip_fx", "tip_fy", "tip_fz",
-    "base_fx", "base_fy", "base_fz",
-    "haptic_fx", "haptic_fy", "haptic_fz",
-    "scaled_fx", "scaled_fy", "scaled_fz",
-    "render_fx", "render_fy", "render_fz",
-)
+#: Names of the values :meth:`HapticFramework.step` returns, in order (defined with the tick's record,
+#: :data:`pipeline.tick_record.STEP_FIELDS`; indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14,
+#: scaled 15–17, render 18–20).
+STEP_FIELDS = tick_record.STEP_FIELDS
 
 
 class HapticFramework:

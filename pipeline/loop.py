@@ -136,7 +136,7 @@ class HapticLoop:
         rng = rig.sensor.range_n
         frac = self.watchdog.saturation_fraction
         self._sat = tuple(frac * r for r in rng)
-        self._last_record: tuple[float, ...] | None = None
+        self._last_record: tuple[float | int, ...] | None = None
         #: What replay needs beyond the records, while recording (see :class:`StartRecording`); its reader drains it.
         self.replay_log: deque[tuple[int, str, object]] = deque()
         self.recording = False
@@ -162,7 +162,7 @@ class HapticLoop:
         self._inbox.append(command)
 
     @property
-    def last_record(self) -> dict[str, float] | None:
+    def last_record(self) -> dict[str, float | int] | None:
         """The newest record as a dict (for tests and status displays)."""
         r = self._last_record
         return None if r is None else dict(zip(RECORD_FIELDS, r))
@@ -215,7 +215,7 @@ class HapticLoop:
             cond |= self._take_pose(pose)
         if hs.error_code:
             cond |= Fault.HAPTIC_DEVICE
-        if hs[4] != self._device_limit_n:  # force_limit_n: the device derates (rare; a compare per tick otherwise)
+        if hs.force_limit_n != self._device_limit_n:  # the device derates (rare; a compare per tick otherwise)
             self._device_limit(now, hs)
         latched = self.faults
         if cond != self.active_faults or cond & ~latched:  # (fault-free steady state: both false)
@@ -225,24 +225,24 @@ class HapticLoop:
             fw.refine_bias(fx, fy, fz, tx, ty, tz)
 
         enabled = self.haptic_on and not latched
-        out = fw.step(fx, fy, fz, enabled, dt_s)
+        (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
+         haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
+         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.tick_record.STEP_FIELDS, by name
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
-        rig.haptic.command_force(out[18], out[19], out[20], now)
-        derate = self._derate(out) if self._derate_check and enabled else 1.0
+        rig.haptic.command_force(render_fx, render_fy, render_fz, now)
+        derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
         # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
         latency_ns = self.clock.now_ns() - w.t_ns
-
-        truth = rig.true_contact_force() or _NAN3
-        pos = pose.position_m
-        sp = hs.position_m
-        t_rel = now - self.t0_ns
-        rec = (
-            float(t_rel), t_rel * 1e-9, float(self.tick_count), fx, fy, fz, tx, ty, tz,
-            *out, _HYPOT(out[3], out[4], out[5]),
-            float(sensor_age), float(pose_age), float(latched), 1.0 if self.haptic_on else 0.0,
-            fw.safety.gain, float(self.trial_index), float(self.phase),
-            pos[0], pos[1], pos[2], sp[0], sp[1], sp[2], truth[0], truth[1], truth[2],
-            float(period), float(latency_ns), derate,
+        true_fx, true_fy, true_fz = rig.true_contact_force() or _NAN3
+        tip_x_m, tip_y_m, tip_z_m = pose.position_m
+        stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
+        t_ns = now - self.t0_ns
+        rec = (  # one record, in pipeline.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
+            self.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
+            1 if self.haptic_on else 0, self.trial_index, self.phase, fw.safety.gain, render_fx, render_fy, render_fz,
+            _HYPOT(filt_fx, filt_fy, filt_fz), stylus_x_m, stylus_y_m, stylus_z_m, derate, t_ns * 1e-9, comp_fx,
+            comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx,
+            haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
         )
         self._last_record = rec
         if self.ring is not None:
@@ -301,12 +301,12 @@ class HapticLoop:
                                      f"{Fault(gone).describe()}: the condition is gone (latched until a reset)"))
         return latched
 
-    def _derate(self, out: tuple[float, ...]) -> float:
+    def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
         """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets through.
 
         Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
         """
-        want = _HYPOT(out[15], out[16], out[17])
+        want = _HYPOT(scaled_fx, scaled_fy, scaled_fz)
         safety = self.framework.safety
         lim = safety.limit_n
         if want > lim:
@@ -331,13 +331,13 @@ class HapticLoop:
 
     def _device_limit(self, now: int, hs: HapticState) -> None:
         """The device changed the force it may render (thermal derating): clamp to it; report derating."""
-        lim = float(hs[4])
+        lim = float(hs.force_limit_n)
         self._device_limit_n = lim
         safety = self.framework.set_device_limit(lim)
         if self.recording:
             self.replay_log.append((self.tick_count, "device_limit", lim))
         self._derate_check = safety.limit_n < safety.static_limit_n
-        frac = float(hs[5])
+        frac = float(hs.heat_fraction)
         t = now - self.t0_ns
         if not self._derating and lim < self._peak_n:
             self._derating = True
@@ -349,8 +349,8 @@ class HapticLoop:
 
     def _apply(self, cmd: Command, now: int) -> None:
         if isinstance(cmd, Mark):
-            self.trial_index = cmd.trial_index
-            self.phase = cmd.phase
+            self.trial_index = int(cmd.trial_index)  # int64 fields of the record
+            self.phase = int(cmd.phase)
         elif isinstance(cmd, SetHaptics):
             self.haptic_on = bool(cmd.on)
         elif isinstance(cmd, ResetFaults):

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from pipeline.framework import STEP_FIELDS
+from pipeline import tick_record
 
 __all__ = [
     "AllowBiasRefinement",
@@ -30,20 +30,8 @@ __all__ = [
     "StopRecording",
 ]
 
-#: Columns of one loop record (all float64 in the ring buffer; ``*_ns`` columns hold integer nanoseconds on the
-#: loop clock, exact in a float64 up to 104 days; seconds are made from them only where they are shown or stored).
-RECORD_FIELDS: tuple[str, ...] = (
-    "t_ns", "t_s", "tick",
-    "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
-    *STEP_FIELDS,
-    "force_n",
-    "sensor_age_ns", "pose_age_ns", "faults", "haptic_on", "gain",
-    "trial_index", "phase",
-    "tip_x_m", "tip_y_m", "tip_z_m",
-    "stylus_x_m", "stylus_y_m", "stylus_z_m",
-    "true_fx", "true_fy", "true_fz",
-    "period_ns", "latency_ns", "derate",
-)
+#: Fields of one loop record, in order (defined with their types in :mod:`pipeline.tick_record`).
+RECORD_FIELDS = tick_record.RECORD_FIELDS
 
 
 @dataclass(frozen=True, slots=True)

@@ -86,6 +86,11 @@ class ReplayOutputs:
         """One stage column by its :data:`pipeline.framework.STEP_FIELDS` name."""
         return self.stages[:, STEP_FIELDS.index(name)]
 
+    def stage_force(self, stage: str) -> npt.NDArray[np.float64]:
+        """One stage's force vectors, n × 3 (``stage``: ``"comp"``, ``"filt"``, … ``"render"``)."""
+        i = STEP_FIELDS.index(f"{stage}_fx")
+        return self.stages[:, i : i + 3]
+
 
 #: The log entries :func:`replay` applies, as the loop writes them (``pipeline.loop``); any other is refused.
 REPLAY_LOG_KINDS: tuple[str, ...] = ("pose", "refine", "reset", "calibration", "device_limit", "zero")
@@ -125,7 +130,7 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
                              f"{', '.join(REPLAY_LOG_KINDS)} (was the session recorded by a newer haptic-study?)")
         by_tick.setdefault(int(t), []).append((kind, payload))
     ticks = inputs.tick.tolist()
-    dts = (inputs.period_ns.astype(np.int64) * 1e-9).tolist()  # as the loop computes dt: int ns × 1e-9
+    dts = (inputs.period_ns * 1e-9).tolist()  # as the loop computes dt: int ns × 1e-9 (int64, the tick record's)
     raw = inputs.raw_wrench.tolist()
     enabled = (inputs.haptic_on & (inputs.faults == 0)).tolist()
     latched = (inputs.faults != 0).tolist()

@@ -1,6 +1,7 @@
 """A preallocated ring buffer of loop records that other processes read without blocking the writer.
 
-One writer (the 1 kHz loop) appends fixed-size records of float64 fields;
+One writer (the 1 kHz loop) appends fixed-size records of 8-byte fields (``int64`` or ``float64``; the
+loop's are :data:`pipeline.tick_record.TICK_DTYPE`);
 any number of readers, in this or another process, copy what is new.  No
 lock is shared: the writer stores the record first and only then publishes
 it by bumping the 64-bit write counter; a reader copies a range and then
@@ -17,15 +18,16 @@ serves the newest ``capacity - 1`` records.
 
 Layout of the shared block (little-endian)::
 
-    0   8s  magic b"HSRING01"
+    0   8s  magic b"HSRING02"
     8   u32 number of fields      12  u32 reserved
     16  u64 capacity (records)    24  u64 write counter (records ever written)
-    32  4064 bytes: field names, comma-separated, NUL-padded
-    4096 ... capacity × n_fields float64
+    32  4064 bytes: the fields as ``name:i8`` or ``name:f8``, comma-separated, NUL-padded
+    4096 ... capacity × n_fields 8-byte values (each record a row of the structured type)
 
-The names travel with the data, so a reader that attaches by name knows the
-columns.  The GUI runs in its own process because a same-process Qt paint
-holds the GIL for milliseconds and breaks the 1 kHz loop (science.md §7).
+The names and types travel with the data, so a reader that attaches by name
+knows the columns and reads them with their own types.  The GUI runs in its
+own process because a same-process Qt paint holds the GIL for milliseconds and
+breaks the 1 kHz loop (science.md §7).
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ import numpy.typing as npt
 
 __all__ = ["RingBuffer", "RingReadResult"]
 
-_MAGIC = b"HSRING01"
+_MAGIC = b"HSRING02"
+_CODES = {"i8": ("<i8", "q"), "f8": ("<f8", "d")}  # a field's type in the header: its NumPy type, its struct code
 _HEADER = 4096
 _NAMES_OFF = 32
 
@@ -57,13 +60,36 @@ class RingReadResult:
         self.lost = lost
 
 
+def _header_fields(fields: Sequence[str] | np.dtype) -> tuple[bytes, tuple[str, ...]]:
+    """The header's field list for a ring of ``fields`` (a structured type, or names: all float64), and the names.
+
+    Raises
+    ------
+    ValueError
+        A type other than packed little-endian int64/float64 fields, or names empty, repeated, holding
+        ``,`` or ``:``, or too long for the header.
+    """
+    if isinstance(fields, np.dtype):
+        names = tuple(fields.names or ())
+        types = [fields.fields[n][0].str for n in names]  # type: ignore[index]
+        if any(t not in ("<i8", "<f8") for t in types) or fields.itemsize != 8 * len(names):
+            raise ValueError("ring fields must be packed int64 or float64 (little-endian)")
+    else:
+        names, types = tuple(fields), ["<f8"] * len(fields)
+    header = ",".join(f"{n}:{t[1:]}" for n, t in zip(names, types)).encode("ascii")
+    if (not names or any(not n or "," in n or ":" in n for n in names) or len(set(names)) != len(names)
+            or len(header) > _HEADER - _NAMES_OFF):
+        raise ValueError("field names must be non-empty, unique, free of ',' and ':' and fit in 4064 bytes")
+    return header, names
+
+
 def _segment_path(name: str) -> str:
     """Where a POSIX shared-memory segment of that name lives (Linux)."""
     return os.path.join("/dev/shm", name.lstrip("/"))
 
 
 class RingBuffer:
-    """Shared-memory (or private) ring of float64 records.
+    """Shared-memory (or private) ring of fixed-layout records (``int64`` and ``float64`` fields).
 
     Use :meth:`create` in the writing process and :meth:`attach` in readers.
     """
@@ -78,9 +104,10 @@ class RingBuffer:
             raise ValueError("not a haptic-study ring buffer (bad magic)")
         n_fields, _ = struct.unpack_from("<II", buf, 8)
         capacity, _ = struct.unpack_from("<QQ", buf, 16)
-        names = bytes(buf[_NAMES_OFF:_HEADER]).rstrip(b"\0").decode("ascii").split(",")
-        if len(names) != n_fields:
-            raise ValueError("corrupt ring header: field count does not match the names")
+        fields = [f.rpartition(":") for f in bytes(buf[_NAMES_OFF:_HEADER]).rstrip(b"\0").decode("ascii").split(",")]
+        if len(fields) != n_fields or any(t not in _CODES for _, _, t in fields):
+            raise ValueError("corrupt ring header: the fields do not match their count or have no known type")
+        names = [n for n, _, _ in fields]
         self._buf = buf
         self._shm = shm
         self._mmap: mmap.mmap | None = None
@@ -88,32 +115,27 @@ class RingBuffer:
         self.fields: tuple[str, ...] = tuple(names)
         self.capacity: int = int(capacity)
         self._row_bytes = 8 * n_fields
-        self._pack_row = struct.Struct(f"<{n_fields}d").pack_into
+        # one struct call packs a record: an int64 field takes an int (a float there raises, never truncates)
+        self._pack_row = struct.Struct("<" + "".join(_CODES[t][1] for _, _, t in fields)).pack_into
         # the write counter as one aligned int64 word (offset 24): stored and loaded whole, never torn
         self._count_cell = np.ndarray((1,), dtype=np.int64, buffer=buf, offset=24)
         self._count = int(self._count_cell[0])
-        self.dtype = np.dtype([(n, "<f8") for n in names])
+        self.dtype = np.dtype([(n, _CODES[t][0]) for n, _, t in fields])
         self._rows = np.ndarray((self.capacity,), dtype=self.dtype, buffer=buf, offset=_HEADER)
 
     # -- construction -------------------------------------------------------------------------
     @classmethod
-    def create(cls, fields: Sequence[str], capacity: int, *, shared: bool = True) -> RingBuffer:
-        """Allocate a ring for ``capacity`` records of ``fields`` (all float64).
+    def create(cls, fields: Sequence[str] | np.dtype, capacity: int, *, shared: bool = True) -> RingBuffer:
+        """Allocate a ring for ``capacity`` records of ``fields``.
 
+        ``fields``: a structured type of ``int64`` and ``float64`` fields (the loop's
+        :data:`pipeline.tick_record.TICK_DTYPE`), or names (all ``float64``).
         ``shared=False`` keeps it in private memory (headless runs and tests
         that need no second process).
         """
         if capacity < 2:
             raise ValueError(f"capacity = {capacity}: must be at least 2 records")
-        names = ",".join(fields).encode("ascii")
-        if (
-            len(names) > _HEADER - _NAMES_OFF
-            or not fields
-            or any(not f or "," in f for f in fields)
-            or len(set(fields)) != len(fields)
-        ):
-            # checked before the segment exists: a failure here must not leak one
-            raise ValueError("field names must be non-empty, unique, comma-free and fit in 4064 bytes")
+        header, fields = _header_fields(fields)  # checked before the segment exists: a failure must not leak one
         size = _HEADER + 8 * len(fields) * capacity
         shm: shared_memory.SharedMemory | None
         if shared:
@@ -124,7 +146,7 @@ class RingBuffer:
             buf = memoryview(bytearray(size))
         buf[: len(_MAGIC)] = _MAGIC
         struct.pack_into("<IIQQ", buf, 8, len(fields), 0, capacity, 0)
-        buf[_NAMES_OFF : _NAMES_OFF + len(names)] = names
+        buf[_NAMES_OFF : _NAMES_OFF + len(header)] = header
         return cls(buf, shm, owner=True)
 
     @classmethod
@@ -178,7 +200,7 @@ class RingBuffer:
 
     # -- writer ---------------------------------------------------------------------------------
     def write(self, values: Sequence[float]) -> None:
-        """Append one record (exactly ``len(fields)`` numbers). Never blocks."""
+        """Append one record (exactly ``len(fields)`` numbers, an int for an ``int64`` field). Never blocks."""
         c = self._count
         self._pack_row(self._buf, _HEADER + (c % self.capacity) * self._row_bytes, *values)
         c += 1

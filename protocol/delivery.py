@@ -111,7 +111,7 @@ def _feedback(rows: np.ndarray, marked: np.ndarray, rel_ns: np.ndarray, spec: Tr
               limits: DeliveryLimits) -> list[_Found]:
     found: list[_Found] = []
     on = spec.haptic_mode is HapticMode.ON
-    wrong = np.flatnonzero(rows["haptic_on"][marked] != (1.0 if on else 0.0))
+    wrong = np.flatnonzero(rows["haptic_on"][marked] != (1 if on else 0))
     if len(wrong):
         found.append((int(marked[int(wrong[0])]), 2, AbortCause.FEEDBACK,
                       f"feedback: haptics were {'off' if on else 'on'} in a haptics-{spec.haptic_mode.upper()} trial"))
@@ -200,7 +200,7 @@ class TrialWindow:
         marked = np.flatnonzero(rows["trial_index"] == spec.index)
         if len(marked) == 0:
             return None
-        t = rows["t_ns"][marked].astype(np.int64)
+        t = rows["t_ns"][marked]
         cue = cue_ns if cue_ns is not None else int(t[0])
         found = (_fault(marked, rows["faults"][marked], fault_detail) + _gap(marked, t, self.last_ns, limits)
                  + _feedback(rows, marked, t - cue, spec, limits))

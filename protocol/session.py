@@ -68,7 +68,6 @@ from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
-from protocol.recording import rows_to_columns
 from protocol.records import AbortCause, Outcome, TrialRecord
 from protocol.storage import Recorder
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
@@ -290,7 +289,7 @@ class SessionRunner:
     # -- the work ----------------------------------------------------------------------------------
     def process(self, rows: np.ndarray, loop_events: Sequence[LoopEvent] = (),
                 replay_log: Sequence[tuple[int, str, object]] = ()) -> None:
-        """Consume a block of loop records (a structured array with the ring's columns).
+        """Consume a block of loop records (rows of :data:`pipeline.tick_record.TICK_DTYPE`, as the ring holds them).
 
         ``loop_events`` are the loop's events since the previous call (times on
         the records' axis); they are stored, and a fault's detail names the
@@ -323,7 +322,7 @@ class SessionRunner:
         if len(rows) == 0:
             return
         self._record(rows)
-        t_ns_all = rows["t_ns"].astype(np.int64)
+        t_ns_all = rows["t_ns"]  # int64 (pipeline.tick_record)
         self._handle_requests(int(t_ns_all[0]))
         if self.done:
             return
@@ -361,7 +360,7 @@ class SessionRunner:
         last = int(rows["tick"][-1])
         log = [e for e in self._log if e[0] <= last]
         self._log = [e for e in self._log if e[0] > last]
-        self.recorder.records(self.session_id, self.segment, rows_to_columns(rows), log)
+        self.recorder.records(self.session_id, self.segment, rows, log)  # (the recorder keeps the kept fields)
 
     def _process_part(self, rows: np.ndarray) -> None:
         """The trial machine, the samples and the next cue over records that need no abort."""
@@ -370,8 +369,8 @@ class SessionRunner:
         m = self.machine
         spec = m.spec
         running = m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
-        t_ns_all = rows["t_ns"].astype(np.int64)
-        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].astype(np.int64).tolist()))
+        t_ns_all = rows["t_ns"]
+        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist()))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
             ended = next((e for e in events if isinstance(e, TrialFinished)), None)

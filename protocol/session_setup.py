@@ -323,7 +323,7 @@ def _interrupted_trial(
     marked = marked_records(db.conn, sid, spec.index, ("force_n",))
     if marked is not None:
         (segment, started_at_s, t0_ns), cols = marked
-        t_ns = cols["t_ns"].astype(np.int64)  # loop clock; the first marked record is the trial's time origin
+        t_ns = cols["t_ns"]  # loop clock, int64; the first marked record is the trial's time origin
         force = cols["force_n"]
         origin_ns = int(t_ns[0])
         cue_s = SessionClock(started_at_s, t0_ns).seconds(origin_ns)

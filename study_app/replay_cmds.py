@@ -225,7 +225,7 @@ def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     from protocol.trial import PHASE_CODES, TrialPhase
 
     # the compensated force replay recomputed, at rest and in contact
-    comp = np.concatenate([o.stages[:, :3] for o in outputs])
+    comp = np.concatenate([o.stage_force("comp") for o in outputs])
     phase = np.concatenate([s.columns["phase"] for s in segments])
     in_trial = np.concatenate([s.columns["trial_index"] for s in segments]) >= 0
     mag = np.linalg.norm(comp, axis=1)
@@ -262,7 +262,7 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, fl
             raise CliError(str(exc)) from None
         other.append(replay(s.replay_inputs(), cfg))
     recorded = np.concatenate([_magnitude(s.columns, "render") for s in segments])
-    replayed = np.concatenate([np.linalg.norm(o.stages[:, 18:21], axis=1) for o in other])
+    replayed = np.concatenate([np.linalg.norm(o.stage_force("render"), axis=1) for o in other])
     run = 2**40  # ticks restart with each run of the session: make them unique across runs
     ticks = np.concatenate([s.columns["tick"] + s.segment * run for s in segments])
     trials = trials.assign(first_tick=trials["first_tick"] + trials["segment"] * run,

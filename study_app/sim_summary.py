@@ -110,7 +110,7 @@ def _summarise(
     # rest: well away from any contact (the filter's memory and the tissue's release)
     far = np.convolve(in_contact.astype(float), np.ones(201), mode="same") == 0
     peaks = [(float(true_f[a:b].max()), float(force[a:b].max())) for a, b in contacts]
-    faults = int(np.bitwise_or.reduce(d["faults"].astype(np.int64))) if len(d["faults"]) else 0
+    faults = int(np.bitwise_or.reduce(d["faults"])) if len(d["faults"]) else 0
     out: dict[str, Any] = {
         "seed": seed,
         "seconds": seconds,

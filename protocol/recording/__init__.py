@@ -45,7 +45,7 @@ from protocol.recording.codec import (
     decode_columns,
     encode_block,
     join_blocks,
-    rows_to_columns,
+    kept_records,
 )
 from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
 from protocol.recording.reading import (
@@ -58,6 +58,6 @@ from protocol.recording.reading import (
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Column",
-    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks",
-    "marked_records", "read_segment", "read_ticks", "recording_damage", "rows_to_columns", "segments_of",
+    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks", "kept_records",
+    "marked_records", "read_segment", "read_ticks", "recording_damage", "segments_of",
 ]

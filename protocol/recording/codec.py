@@ -17,9 +17,11 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
+
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "decode_block",
-    "decode_columns", "encode_block", "join_blocks", "join_decoded", "rows_to_columns",
+    "decode_columns", "encode_block", "join_blocks", "join_decoded", "kept_records",
 ]
 
 #: Records per block (one second at 1 kHz).
@@ -47,31 +49,12 @@ class Column:
     missing: float | None = None
 
 
-#: What a block keeps of each record, in order.  A column added later goes at the end, with its ``missing`` value:
-#: a block or chunk written before it then reads as the columns before it plus that value.
-COLUMNS: tuple[Column, ...] = (
-    Column("tick", "tick", "int"),
-    Column("t_ns", "t_ns", "int"),
-    Column("period_ns", "period_ns", "int"),
-    Column("raw_fx", "raw_fx", "counts"), Column("raw_fy", "raw_fy", "counts"), Column("raw_fz", "raw_fz", "counts"),
-    Column("raw_tx", "raw_tx", "counts"), Column("raw_ty", "raw_ty", "counts"), Column("raw_tz", "raw_tz", "counts"),
-    Column("sensor_age_ns", "sensor_age_ns", "int"),
-    Column("pose_age_ns", "pose_age_ns", "int"),
-    Column("latency_ns", "latency_ns", "int"),
-    Column("faults", "faults", "small"),
-    Column("haptic_on", "haptic_on", "small"),
-    Column("trial_index", "trial_index", "small"),
-    Column("phase", "phase", "small"),
-    Column("gain", "gain", "float"),
-    Column("render_fx", "render_fx", "float"), Column("render_fy", "render_fy", "float"),
-    Column("render_fz", "render_fz", "float"),
-    Column("force_n", "force_n", "float"),
-    Column("stylus_x_m", "stylus_x_m", "smooth"), Column("stylus_y_m", "stylus_y_m", "smooth"),
-    Column("stylus_z_m", "stylus_z_m", "smooth"),
-    # the fraction of the designed force the haptic device's thermal derating let through (1: not cut);
-    # recordings from before derating have none, and nothing was cut then
-    Column("derate", "derate", "float", missing=1.0),
-)
+#: What a block keeps of each record, in order: the kept fields of the tick's record
+#: (:data:`pipeline.tick_record.KEPT_FIELDS`, where a field's codec and ``missing`` value are defined).  A column
+#: added later goes at the end, with its ``missing`` value: a block or chunk written before it then reads as the
+#: columns before it plus that value.
+COLUMNS: tuple[Column, ...] = tuple(Column(f.name, f.name, f.keep or "", f.missing) for f in KEPT_FIELDS)
+_KEPT_COLUMNS = COLUMNS
 #: Columns a block may lack (written before they were added), with the value each of its records had.
 _MISSING = {c.name: c.missing for c in COLUMNS if c.missing is not None}
 #: The pose log's columns (one row per pose the framework took, at the robot's 125 Hz).
@@ -86,16 +69,72 @@ LIMIT_COLUMNS: tuple[Column, ...] = (Column("tick", "", "int"), Column("limit_n"
 _INT_CODECS = ("int", "small")
 
 
-def rows_to_columns(rows: np.ndarray) -> dict[str, npt.NDArray[Any]]:
-    """The recorded columns of a block of loop records (a structured array with the ring's fields)."""
-    out: dict[str, npt.NDArray[Any]] = {}
+def kept_records(records: np.ndarray | Mapping[str, np.ndarray]) -> np.ndarray:
+    """The kept part of loop records: a structured array of :data:`COLUMNS`' fields, each with the record's type.
+
+    ``records``: rows of :data:`pipeline.tick_record.TICK_DTYPE` (the ring's), whose kept fields are one prefix
+    of each row's bytes, taken in one copy; rows of the kept type itself, returned as they are; or anything
+    else with the columns by name (a structured array, a mapping of columns), copied field by field.
+
+    Raises
+    ------
+    ValueError
+        A column of an integer field holds a value that is not an integer.
+    """
+    dtype = _kept_dtype()
+    if isinstance(records, np.ndarray) and records.dtype == dtype:
+        return records
+    if isinstance(records, np.ndarray) and records.dtype == TICK_DTYPE and dtype is KEPT_DTYPE:
+        return _as_records(np.ascontiguousarray(_record_bytes(np.ascontiguousarray(records), dtype)), dtype)
+    n = len(records["tick"])
+    out = np.empty(n, dtype)
     for c in COLUMNS:
-        v = np.asarray(rows[c.source], dtype=np.float64)
-        if c.codec in _INT_CODECS:
-            out[c.name] = v.astype(np.int64)
-        else:
-            out[c.name] = v
+        values = np.asarray(records[c.name])
+        out[c.name] = values
+        if c.codec in _INT_CODECS and values.dtype.kind == "f" and not np.array_equal(out[c.name], values):
+            raise ValueError(f"recorded column {c.name!r}: holds a value that is not an integer")
     return out
+
+
+def _kept_dtype() -> np.dtype:
+    """The structured type of :data:`COLUMNS` (int64 for the integer codecs, else float64)."""
+    if COLUMNS is _KEPT_COLUMNS:
+        return KEPT_DTYPE
+    # (only where a test stands for a writer from before a column was added)
+    return np.dtype([(c.name, "<i8" if c.codec in _INT_CODECS else "<f8") for c in COLUMNS])
+
+
+def _record_bytes(records: np.ndarray | Mapping[str, np.ndarray], dtype: np.dtype) -> npt.NDArray[np.uint8]:
+    """The kept part of records as bytes, one row a record (``dtype.itemsize`` bytes): a view where it can be.
+
+    Loop records (:data:`pipeline.tick_record.TICK_DTYPE`) and kept records lay their kept fields out as
+    ``dtype`` does, so their bytes are viewed, not converted (NumPy's structured copies cost ~2 µs a record);
+    anything else goes through :func:`kept_records`.
+    """
+    if isinstance(records, np.ndarray) and records.flags.c_contiguous:
+        rec = records.dtype
+        if rec is dtype or rec == dtype:
+            return np.ndarray((len(records), dtype.itemsize), np.uint8, records)
+        if dtype is KEPT_DTYPE and (rec is TICK_DTYPE or rec == TICK_DTYPE):
+            return np.ndarray((len(records), rec.itemsize), np.uint8, records)[:, : dtype.itemsize]
+    recs = kept_records(records)
+    return np.ndarray((len(recs), dtype.itemsize), np.uint8, recs)
+
+
+def _as_records(raw: npt.NDArray[np.uint8], dtype: np.dtype) -> np.ndarray:
+    """Contiguous record bytes (one row a record) seen as records of ``dtype``."""
+    return np.ndarray((len(raw),), dtype, raw)
+
+
+def _stack_records(records: np.ndarray) -> bytes:
+    """Kept records byte-shuffled as one array: every column's first bytes, then their second bytes, …
+
+    The bytes :func:`_stack8` makes of the same columns: a record's fields are 8 bytes each, in column order.
+    """
+    n = len(records)
+    if n == 0:
+        return b""
+    return np.ascontiguousarray(_record_bytes(records, records.dtype).T).tobytes()
 
 
 # -- codecs ----------------------------------------------------------------------------------------
@@ -160,10 +199,13 @@ def _decode(entry: Mapping[str, Any], data: bytes, n: int) -> np.ndarray:
 
 
 def encode_block(
-    columns: Mapping[str, np.ndarray], poses: Mapping[str, np.ndarray], events: Sequence[tuple[int, str, Any]],
-    scales: Mapping[str, float] | None = None,
+    columns: np.ndarray | Mapping[str, np.ndarray], poses: Mapping[str, np.ndarray],
+    events: Sequence[tuple[int, str, Any]], scales: Mapping[str, float] | None = None,
 ) -> bytes:
     """A block: the records' columns (:data:`COLUMNS`), the poses taken meanwhile, the other log entries.
+
+    ``columns``: the kept records (:func:`kept_records`; each column is read from them where it lies) or the
+    columns by name.
 
     ``scales``: counts per unit of the raw wrench columns (``raw_fx`` … ``raw_tz``), when known.
     The log's ``"device_limit"`` entries are kept as columns (:data:`LIMIT_COLUMNS`, only in a block
@@ -244,17 +286,18 @@ def _unstack8(raw: bytes, dtypes: Sequence[str], n: int) -> list[np.ndarray]:
     return [np.ascontiguousarray(table[:, j]).view(np.dtype(d)) for j, d in enumerate(dtypes)]
 
 
-def _encode_fast(columns: Mapping[str, np.ndarray], poses: Mapping[str, np.ndarray],
+def _encode_fast(records: np.ndarray | Mapping[str, np.ndarray], poses: Mapping[str, np.ndarray],
                  events: Sequence[tuple[int, str, Any]]) -> bytes:
     """A chunk of an open block: cheap to make (one shuffle, one deflate call at level 1), lossless (the values'
-    own bytes)."""
-    n, m = len(columns["tick"]), len(poses["tick"])
-    cols = [np.asarray(columns[c.name]) for c in COLUMNS]
+    own bytes).  ``records``: the kept records (:func:`kept_records`), shuffled as they lie."""
+    recs = kept_records(records)
+    n, m = len(recs), len(poses["tick"])
     pose = [np.asarray(poses[c.name]) for c in POSE_COLUMNS]
-    if any(a.dtype.itemsize != 8 for a in cols + pose):
+    if any(a.dtype.itemsize != 8 for a in pose):
         raise ValueError("recorded columns are 8-byte values")
-    packed = zlib.compress(_stack8(cols, n) + _stack8(pose, m), _FAST_LEVEL)
-    header = {"n": n, "m": m, "dtypes": [a.dtype.str for a in cols + pose], "events": [list(e) for e in events]}
+    packed = zlib.compress(_stack_records(recs) + _stack8(pose, m), _FAST_LEVEL)
+    dtypes = [recs.dtype.fields[c.name][0].str for c in COLUMNS] + [a.dtype.str for a in pose]  # type: ignore[index]
+    header = {"n": n, "m": m, "dtypes": dtypes, "events": [list(e) for e in events]}
     head = json.dumps(header, separators=(",", ":")).encode()
     return _FAST + struct.pack("<I", len(head)) + head + packed
 
@@ -296,7 +339,10 @@ class BlockBuilder:
 
     scales: Mapping[str, float] = field(default_factory=dict)
     first_block: int = 0
-    _cols: list[dict[str, np.ndarray]] = field(default_factory=list)
+    # the open block's kept records as bytes, one row a record (the first _n rows; room for more after them):
+    # NumPy copies bytes ~5x faster than it assigns structured rows
+    _raw: npt.NDArray[np.uint8] | None = None
+    _dtype: np.dtype | None = None
     _n: int = 0
     _poses: list[tuple[int, tuple[float, ...], tuple[float, ...], int]] = field(default_factory=list)
     _events: list[tuple[int, str, Any]] = field(default_factory=list)
@@ -311,12 +357,21 @@ class BlockBuilder:
     def __post_init__(self) -> None:
         self.block = self.first_block
 
-    def add(self, columns: Mapping[str, np.ndarray], log: Iterable[tuple[int, str, Any]] = ()) -> None:
-        """Append records (the output of :func:`rows_to_columns`) and the log entries of their ticks."""
-        n = len(columns["tick"])
+    def add(self, records: np.ndarray | Mapping[str, np.ndarray], log: Iterable[tuple[int, str, Any]] = ()) -> None:
+        """Append records (loop records or their kept part, :func:`kept_records`) and the log entries of their ticks."""
+        dtype = self._dtype = self._dtype or _kept_dtype()
+        raw = _record_bytes(records, dtype)
+        n = len(raw)
         if n:
-            self._cols.append(dict(columns))
-            self._n += n
+            have = self._n
+            buf = self._raw
+            if buf is None or have + n > len(buf):
+                grown = np.empty((max(2 * (have + n), BLOCK_RECORDS + n), dtype.itemsize), np.uint8)
+                if buf is not None:
+                    grown[:have] = buf[:have]
+                self._raw = buf = grown
+            buf[have : have + n] = raw
+            self._n = have + n
             self.dirty = True
         for tick, kind, payload in log:
             if kind == "pose":
@@ -326,18 +381,21 @@ class BlockBuilder:
                 self._events.append((int(tick), kind, payload))
             self.dirty = True
 
-    def _merged(self) -> dict[str, np.ndarray]:
-        if len(self._cols) != 1:
-            self._cols = [{k: np.concatenate([c[k] for c in self._cols]) for k in self._cols[0]}] if self._cols else []
-        return self._cols[0] if self._cols else {c.name: np.empty(0) for c in COLUMNS}
+    def _merged(self) -> np.ndarray:
+        """The open block's records (a view: valid until the next :meth:`add` or cut)."""
+        if self._raw is None or self._dtype is None:
+            return np.empty(0, _kept_dtype())
+        return _as_records(self._raw[: self._n], self._dtype)
 
-    def _cut(self, n: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
+    def _cut(self, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], list[tuple[int, str, Any]]]:
         """The first ``n`` records with their log entries; keep the rest open."""
-        cols = self._merged()
-        head = {k: v[:n] for k, v in cols.items()}
-        rest = {k: v[n:] for k, v in cols.items()}
-        self._cols = [rest] if len(rest["tick"]) else []
-        self._n -= n
+        raw = self._raw
+        assert raw is not None and self._dtype is not None  # (n ≤ _n records were added)
+        head = _as_records(raw[:n].copy(), self._dtype)
+        rest = self._n - n
+        if rest:
+            raw[:rest] = raw[n : self._n].copy()  # (overlapping: through a copy)
+        self._n = rest
         last_tick = int(head["tick"][-1]) if n else -1
         poses = [p for p in self._poses if p[0] <= last_tick]
         self._poses = [p for p in self._poses if p[0] > last_tick]
@@ -346,8 +404,8 @@ class BlockBuilder:
         self._chunks, self._chunked_n, self._chunked_tick = [], 0, -(2**63)  # the next block starts unwritten
         return head, _pose_columns(poses), events
 
-    def take_full(self) -> list[tuple[int, int, dict[str, np.ndarray], bytes]]:
-        """Complete blocks: (block number, first record, columns, encoded) each."""
+    def take_full(self) -> list[tuple[int, int, np.ndarray, bytes]]:
+        """Complete blocks: (block number, first record, kept records, encoded) each."""
         out = []
         while self._n >= BLOCK_RECORDS:
             cols, poses, events = self._cut(BLOCK_RECORDS)
@@ -356,7 +414,7 @@ class BlockBuilder:
             self.records_before += BLOCK_RECORDS
         return out
 
-    def final(self) -> tuple[int, int, dict[str, np.ndarray], bytes] | None:
+    def final(self) -> tuple[int, int, np.ndarray, bytes] | None:
         """The open block, encoded whole as a full block is, when its segment ends (None when it is empty).
 
         Its chunks (:meth:`partial`) depend on when the commits fell; the final encoding does not, so a
@@ -371,8 +429,9 @@ class BlockBuilder:
         self.dirty = False
         return block
 
-    def partial(self) -> tuple[int, int, dict[str, np.ndarray], bytes] | None:
-        """The open block as it stands (None when it is empty or already written as it is).
+    def partial(self) -> tuple[int, int, np.ndarray, bytes] | None:
+        """The open block as it stands (None when it is empty or already written as it is); its records are a view,
+        valid until the next :meth:`add` (so are :meth:`final`'s).
 
         Only the records added since the last call are encoded (a cheap chunk, :data:`_FAST`), appended to
         the chunks written before: a commit costs what it adds, not what the block holds.  The full block
@@ -384,7 +443,7 @@ class BlockBuilder:
         cols = self._merged()
         if self._n == self._chunked_n:
             return None  # only log entries of later ticks arrived: they go with the records of their ticks
-        new = {k: v[self._chunked_n :] for k, v in cols.items()}
+        new = cols[self._chunked_n :]
         lo, hi = self._chunked_tick, int(new["tick"][-1])
         poses = _pose_columns([p for p in self._poses if lo < p[0] <= hi])
         events = [e for e in self._events if lo < e[0] <= hi]
@@ -395,12 +454,14 @@ class BlockBuilder:
 
 
 def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...], int]]) -> dict[str, np.ndarray]:
-    out: dict[str, np.ndarray] = {"tick": np.array([p[0] for p in poses], dtype=np.int64),
-                                  "pose_t_ns": np.array([p[3] for p in poses], dtype=np.int64)}
+    """The poses as :data:`POSE_COLUMNS` (two arrays, one of ints and one of floats, seen column by column)."""
+    ints = np.array([(p[0], p[3]) for p in poses], dtype=np.int64).reshape(-1, 2)
+    floats = np.array([(*p[1], *p[2]) for p in poses], dtype=np.float64).reshape(-1, 12)
+    out: dict[str, np.ndarray] = {"tick": ints[:, 0], "pose_t_ns": ints[:, 1]}
     for i in range(9):
-        out[f"r{i}"] = np.array([p[1][i] for p in poses], dtype=np.float64)
+        out[f"r{i}"] = floats[:, i]
     for i, axis in enumerate("xyz"):
-        out[f"{axis}_m"] = np.array([p[2][i] for p in poses], dtype=np.float64)
+        out[f"{axis}_m"] = floats[:, 9 + i]
     return out
 
 
@@ -420,7 +481,8 @@ def join_decoded(decoded: Iterable[tuple[dict[str, np.ndarray], dict[str, np.nda
         poses.append(p)
         events.extend(e)
     if not cols:
-        return ({c.name: np.empty(0) for c in COLUMNS}, _pose_columns([]), [])
+        empty = _kept_dtype()
+        return ({c.name: np.empty(0, empty[c.name]) for c in COLUMNS}, _pose_columns([]), [])
     return ({k: np.concatenate([c[k] for c in cols]) for k in cols[0]},
             {k: np.concatenate([p[k] for p in poses]) for k in poses[0]}, events)
 

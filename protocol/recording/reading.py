@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.replay import ReplayInputs
+from pipeline.tick_record import TICK_DTYPE
 from protocol.clock import SessionClock
 from protocol.recording.codec import COLUMNS, decode_block, decode_columns, join_decoded
 from protocol.recording.integrity import (
@@ -63,9 +64,9 @@ class SegmentData:
         """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
         c = self.columns
         return ReplayInputs(
-            tick=c["tick"].astype(np.int64), period_ns=c["period_ns"].astype(np.int64),
+            tick=c["tick"], period_ns=c["period_ns"],  # int64, as the tick record has them
             raw_wrench=np.stack([c[f"raw_{k}"] for k in ("fx", "fy", "fz", "tx", "ty", "tz")], axis=1),
-            haptic_on=c["haptic_on"] != 0, faults=c["faults"].astype(np.int64), snapshot=self.snapshot,
+            haptic_on=c["haptic_on"] != 0, faults=c["faults"], snapshot=self.snapshot,
             events=self.log(),
         )
 
@@ -169,8 +170,8 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
             parts.append(part)
     if bad:
         raise RecordingDamaged(describe_damage(conn, bad))
-    if not parts:
-        return {n: np.empty(0) for n in names}
+    if not parts:  # (each empty column with its field's type)
+        return {n: np.empty(0, TICK_DTYPE[n] if n in (TICK_DTYPE.names or ()) else np.float64) for n in names}
     return {n: np.concatenate([p[n] for p in parts]) for n in names}
 
 

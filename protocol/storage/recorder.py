@@ -94,13 +94,15 @@ class Recorder:
         """Open a segment of the session's recording (committed at once, before any of its blocks)."""
         self._put(("segment", (session_id, segment, started_at_s, t0_ns, snapshot, scales)))
 
-    def records(self, session_id: int, segment: int, columns: dict[str, np.ndarray],
+    def records(self, session_id: int, segment: int, records: np.ndarray,
                 log: Sequence[tuple[int, str, Any]] = ()) -> None:
-        """Queue records of a segment (:func:`protocol.recording.rows_to_columns`) and the replay log of their ticks.
+        """Queue loop records of a segment (rows of :data:`pipeline.tick_record.TICK_DTYPE`, or their kept part,
+        :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
+        after they are queued (the ring's copies do not).
 
         They are cut into blocks as they fill; the open block is written as it stands at every commit.
         """
-        self._put(("records", (session_id, segment, columns, list(log))))
+        self._put(("records", (session_id, segment, records, list(log))))
 
     def call(self, fn: Callable[[StudyDatabase], Any]) -> None:
         """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
@@ -168,9 +170,9 @@ class Recorder:
         elif kind == "event":
             db.insert_event(*payload)
         elif kind == "records":
-            sid, seg, columns, log = payload
+            sid, seg, records, log = payload
             builder, _ = self._blocks[(sid, seg)]
-            builder.add(columns, log)
+            builder.add(records, log)
             for block in builder.take_full():
                 self._write_block(sid, seg, block)
         elif kind == "segment":
@@ -188,10 +190,10 @@ class Recorder:
             if commit:
                 self._commit()
 
-    def _write_block(self, session_id: int, segment: int, block: tuple[int, int, dict[str, np.ndarray], bytes]) -> None:
+    def _write_block(self, session_id: int, segment: int, block: tuple[int, int, np.ndarray, bytes]) -> None:
         _, clock = self._blocks[(session_id, segment)]
-        number, _, cols, data = block
-        ticks, t_ns = cols["tick"], cols["t_ns"]
+        number, _, records, data = block
+        ticks, t_ns = records["tick"], records["t_ns"]
         self.db.write_block(session_id, segment, number, int(ticks[0]), int(ticks[-1]), len(ticks),
                             clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1])), data)
 

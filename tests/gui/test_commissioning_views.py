@@ -8,8 +8,8 @@ import math
 import numpy as np
 
 from pipeline.frames import axis_angle, mat_mul
-from pipeline.loop_messages import RECORD_FIELDS
 from pipeline.sim.robot import TOOL_DOWN
+from pipeline.tick_record import TICK_DTYPE
 from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.widgets import QtHealthPanel
@@ -123,7 +123,7 @@ def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
     h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
                      haptic_heat_fraction=0.62, haptic_force_limit_n=2.52, haptic_peak_force_n=3.3,
                      haptic_continuous_force_n=0.88))
-    rows = np.zeros(300, dtype=[(f, "<f8") for f in RECORD_FIELDS])
+    rows = np.zeros(300, dtype=TICK_DTYPE)
     rows["t_s"] = np.arange(300) * 1e-3
     h.update_from_rows(rows)
     names = [panel.devices.item(i, 0).text() for i in range(panel.devices.rowCount())]

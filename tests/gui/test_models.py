@@ -11,6 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.loop_messages import RECORD_FIELDS
+from pipeline.tick_record import TICK_DTYPE
 from pipeline.ring import RingBuffer
 from protocol.records import TrialRecord
 from gui_trials import trial_record
@@ -36,8 +37,8 @@ def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float
 
 def fill_ring(ring: RingBuffer, n: int, start: int = 0, **cols: float) -> None:
     for k in range(start, start + n):
-        rec = dict.fromkeys(RECORD_FIELDS, 0.0)
-        rec.update(t_ns=k * 1e6, t_s=k * 1e-3, tick=float(k), period_ns=1e6, tip_z_m=0.1, **cols)
+        rec: dict[str, float] = {f: 0 if TICK_DTYPE[f] == np.int64 else 0.0 for f in RECORD_FIELDS}
+        rec.update(t_ns=k * 1_000_000, t_s=k * 1e-3, tick=k, period_ns=1_000_000, tip_z_m=0.1, **cols)
         ring.write([rec[f] for f in RECORD_FIELDS])
 
 
@@ -179,7 +180,7 @@ def test_peak_downsample_keeps_extremes_in_time_order():
 
 
 def test_plot_model_keeps_a_window_and_computes_magnitudes():
-    ring = RingBuffer.create(RECORD_FIELDS, 5000, shared=False)
+    ring = RingBuffer.create(TICK_DTYPE, 5000, shared=False)
     try:
         p = PlotModel(window_s=1.0, bins=100)
         p.attach(ring)
@@ -285,10 +286,10 @@ def test_health_rates_from_records():
     h = HealthModel()
     h.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     n = 1001
-    rows = np.zeros(n, dtype=[(f, "<f8") for f in RECORD_FIELDS])
+    rows = np.zeros(n, dtype=TICK_DTYPE)
     rows["t_s"] = np.arange(n) * 1e-3
     rows["raw_fx"] = np.arange(n)  # a new sample every tick
-    rows["pose_age_ns"] = (np.arange(n) % 8) * 1e6  # a new pose every 8 ms
+    rows["pose_age_ns"] = (np.arange(n) % 8) * 1_000_000  # a new pose every 8 ms
     h.update_from_rows(rows)
     assert [(d.name, d.state, round(d.rate_hz)) for d in h.devices] == [
         ("F/T sensor", "ok", 1000), ("Robot (pose)", "ok", 125), ("Haptic device", "ok", 1000)]

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 
 from pipeline.loop_messages import RECORD_FIELDS
+from pipeline.tick_record import TICK_DTYPE
 from pipeline.ring import RingBuffer
 from study_app.gui.stall import Stall, StallRecorder, culprit
 from study_app.gui.widgets import QtTrialTable
@@ -19,9 +20,13 @@ _T = RECORD_FIELDS.index("t_s")
 _RAW_FZ = RECORD_FIELDS.index("raw_fz")
 
 
+def _zero_row() -> list[float]:
+    return [0 if TICK_DTYPE[f] == np.int64 else 0.0 for f in RECORD_FIELDS]
+
+
 def _ring_with(n: int, capacity: int = 30_000) -> RingBuffer:
-    ring = RingBuffer.create(RECORD_FIELDS, capacity, shared=False)
-    row = [0.0] * len(RECORD_FIELDS)
+    ring = RingBuffer.create(TICK_DTYPE, capacity, shared=False)
+    row = _zero_row()
     for i in range(n):
         row[_T] = i * 1e-3
         row[_RAW_FZ] = 0.5
@@ -39,7 +44,7 @@ def test_a_pull_far_behind_reads_at_most_one_window():
     assert float(plots.new_rows["t_s"][0]) == 15.0 and plots.latest_t_s == 24.999
     assert len(plots.t) == 10_000
     # caught up: the next pull copies only what is new
-    row = [0.0] * len(RECORD_FIELDS)
+    row = _zero_row()
     row[_T] = 25.0
     ring.write(row)
     assert plots.pull() == 1 and plots.skipped == 15_000

@@ -12,10 +12,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
+from pipeline.tick_record import TICK_DTYPE
 from protocol.recording import codec as recording
 from protocol.recording import (
-    BLOCK_RECORDS, COLUMNS, POSE_COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, read_segment,
-    read_ticks,
+    BLOCK_RECORDS, COLUMNS, POSE_COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, kept_records,
+    read_segment, read_ticks,
 )
 from protocol.storage import Recorder, StudyDatabase
 from test_storage import FakeClock, _session_args
@@ -108,7 +109,7 @@ def test_exact_counts_are_kept_as_counts_and_are_smaller() -> None:
 
 
 def records(first_tick: int, n: int) -> dict[str, np.ndarray]:
-    """Loop records as the runner hands them over (rows_to_columns' output), values from the tick."""
+    """The kept columns of loop records, values from the tick."""
     tick = np.arange(first_tick, first_tick + n, dtype=np.int64)
     cols: dict[str, np.ndarray] = {}
     for c in COLUMNS:
@@ -172,3 +173,38 @@ def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_onl
         other.close()
     rec.close()
     db.close()
+
+
+def test_loop_records_are_encoded_from_their_layout_into_the_same_bytes() -> None:
+    """The recorder takes the ring's rows as they lie (their kept prefix): the bytes are those of the columns."""
+    n = 2345
+    cols = records(0, n)
+    rows = np.zeros(n, TICK_DTYPE)
+    for name, values in cols.items():
+        rows[name] = values
+    rows["t_s"], rows["comp_fx"] = np.nan, 7.0  # fields the recording does not keep change nothing
+    kept = kept_records(rows)
+    assert kept.dtype.names == tuple(c.name for c in COLUMNS)
+    assert all(np.array_equal(bits(kept[c.name]), bits(cols[c.name])) for c in COLUMNS)
+    assert kept_records(kept) is kept
+    # an open block's chunk: the records' bytes shuffled as they lie are the columns' bytes shuffled
+    assert recording._stack_records(kept[:100]) == recording._stack8([cols[c.name][:100] for c in COLUMNS], 100)
+    # the builder fed loop records and the builder fed columns write the same blocks, full and open
+    log = [(k, "pose", ((1.0,) * 9, (0.1, 0.2, 0.3), k * 1000)) for k in range(0, n, 8)]
+    by_rows, by_cols = BlockBuilder(), BlockBuilder()
+    for lo in range(0, n, 70):
+        hi = min(lo + 70, n)
+        part = [e for e in log if lo <= e[0] < hi]
+        by_rows.add(rows[lo:hi], part)
+        by_cols.add({k: v[lo:hi] for k, v in cols.items()}, part)
+        assert [b[3] for b in by_rows.take_full()] == [b[3] for b in by_cols.take_full()]
+        a, b = by_rows.partial(), by_cols.partial()
+        assert (a is None and b is None) or (a is not None and b is not None and a[3] == b[3])
+    final_rows, final_cols = by_rows.final(), by_cols.final()
+    assert final_rows is not None and final_cols is not None and final_rows[3] == final_cols[3]
+    # an integer column handed over as floats is refused unless every value is an integer
+    floats = {k: v.astype(np.float64) for k, v in cols.items()}
+    assert kept_records(floats).tobytes() == kept.tobytes()
+    floats["faults"][3] = 0.5
+    with pytest.raises(ValueError, match="'faults'"):
+        kept_records(floats)

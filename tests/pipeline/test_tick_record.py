@@ -1,0 +1,75 @@
+"""The one tick record: its layout, the ring's typed rows, and the loop's records with their integers as ints."""
+
+from __future__ import annotations
+
+import struct
+
+import numpy as np
+import pytest
+
+from pipeline.engine import EngineConfig, build_sim_engine
+from pipeline.framework import STEP_FIELDS
+from pipeline.loop_messages import RECORD_FIELDS, Mark
+from pipeline.ring import RingBuffer
+from pipeline.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE, TICK_FIELDS
+
+#: What is an integer in a record (the rest are measurements: float64).
+INTEGERS = {"tick", "t_ns", "period_ns", "sensor_age_ns", "pose_age_ns", "latency_ns", "faults", "haptic_on",
+            "trial_index", "phase"}
+
+
+def test_the_layout_is_defined_once_and_derived_everywhere() -> None:
+    assert RECORD_FIELDS == TICK_DTYPE.names == tuple(f.name for f in TICK_FIELDS)
+    assert set(STEP_FIELDS) <= set(RECORD_FIELDS) and len(STEP_FIELDS) == 21
+    assert {n for n in RECORD_FIELDS if TICK_DTYPE[n] == np.int64} == INTEGERS
+    assert all(TICK_DTYPE[n] == np.float64 for n in RECORD_FIELDS if n not in INTEGERS)
+    assert TICK_DTYPE.itemsize == 8 * len(RECORD_FIELDS)  # no padding
+    # the kept fields lead the record, so a record's kept part is a prefix of its bytes
+    assert TICK_FIELDS[: len(KEPT_FIELDS)] == KEPT_FIELDS
+    assert KEPT_DTYPE.names == RECORD_FIELDS[: len(KEPT_FIELDS)]
+    assert all(KEPT_DTYPE.fields[n][1] == TICK_DTYPE.fields[n][1] for n in KEPT_DTYPE.names)
+
+
+def test_the_ring_keeps_each_field_with_its_own_type() -> None:
+    ring = RingBuffer.create(TICK_DTYPE, 8, shared=False)
+    big = 2**62 + 1  # not exact in a float64: an int64 field keeps it
+    row = [0.5] * len(RECORD_FIELDS)
+    for i, name in enumerate(RECORD_FIELDS):
+        if name in INTEGERS:
+            row[i] = big if name == "t_ns" else i
+    ring.write(row)
+    got = ring.read_since(0).rows
+    assert got.dtype == TICK_DTYPE and int(got["t_ns"][0]) == big and got["gain"][0] == 0.5
+    # an attached reader (another process's view) reads the same types from the header
+    shared = RingBuffer.create(TICK_DTYPE, 8)
+    try:
+        shared.write(row)
+        reader = RingBuffer.attach(shared.name or "")
+        try:
+            assert reader.dtype == TICK_DTYPE and int(reader.latest(1)["t_ns"][0]) == big
+        finally:
+            reader.close()
+    finally:
+        shared.close()
+    # a float where an integer belongs is refused, never truncated
+    bad = list(row)
+    bad[RECORD_FIELDS.index("faults")] = 1.5
+    with pytest.raises(struct.error):
+        ring.write(bad)
+    with pytest.raises(ValueError, match="int64 or float64"):
+        RingBuffer.create(np.dtype([("a", "<i4"), ("b", "<f8")]), 8, shared=False)
+
+
+def test_the_loop_writes_its_integers_as_ints() -> None:
+    eng = build_sim_engine(EngineConfig(clock="virtual"))
+    eng.loop.submit(Mark(3, 2))
+    eng.loop.run_ticks(50)
+    assert eng.ring is not None and eng.ring.dtype == TICK_DTYPE
+    rows = eng.ring.read_since(0).rows
+    np.testing.assert_array_equal(rows["tick"], np.arange(50))
+    assert rows["trial_index"][-1] == 3 and rows["phase"][-1] == 2
+    np.testing.assert_array_equal(rows["t_ns"], rows["tick"] * 1_000_000)  # virtual clock, 1 ms period
+    np.testing.assert_array_equal(rows["t_s"], rows["t_ns"] * 1e-9)
+    last = eng.loop.last_record
+    assert last is not None and all(type(last[n]) is int for n in INTEGERS)
+    assert np.array([tuple(last[n] for n in RECORD_FIELDS)], TICK_DTYPE).tobytes() == rows[-1:].tobytes()
