@@ -216,13 +216,9 @@ def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | Non
 
 
 def chmod_at(dir_fd: int, rel: str, mode: int, *, sync: bool = False) -> None:
-    *folders, name = rel.split("/")
-    fd = os.dup(dir_fd)
+    """Set the mode of the file ``rel`` below ``dir_fd`` (never through a link), and with ``sync`` make it durable."""
+    fd, name = _walk_to(dir_fd, rel)
     try:
-        for part in folders:
-            nxt = open_folder(part, fd)
-            os.close(fd)
-            fd = nxt
         f = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=fd)
         try:
             os.fchmod(f, mode)
@@ -232,6 +228,7 @@ def chmod_at(dir_fd: int, rel: str, mode: int, *, sync: bool = False) -> None:
             os.close(f)
     finally:
         os.close(fd)
+
 
 def folder_at(dir_fd: int, rel_dir: str, *, make: bool) -> int:
     """Open (and with ``make`` create, owner-only) the folder ``rel_dir`` below ``dir_fd``, never through a link."""
