@@ -560,8 +560,8 @@ class ExperimenterWindow(QMainWindow):
     def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
         if self.model.session.running and not self._quit_confirmed:
             title = "Quit"
-            text = ("A session is running. Quit anyway? The running trial is stored as aborted and the session can "
-                    "be resumed later.")
+            text = ("A session is running. Quit anyway? A trial still running is stored as aborted and the session "
+                    "can be resumed later.")
             if self.confirm is not None:  # a scripted run answers at once
                 if not self.confirm(title, text):
                     event.ignore()

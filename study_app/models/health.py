@@ -170,7 +170,7 @@ class HealthModel:
         n = len(self.busy_trials)
         if not n:
             return ""
-        which = ", ".join(str(k) for k in self.busy_trials[-5:]) + (" …" if n > 5 else "")
+        which = ("…, " if n > 5 else "") + ", ".join(str(k) for k in self.busy_trials[-5:])  # the newest five
         text = (f"This computer is too busy for the 1 kHz haptic loop: {n} trial{'s' if n > 1 else ''} of this "
                 f"session (trial{'s' if n > 1 else ''} {which}) {'were' if n > 1 else 'was'} aborted because the "
                 "loop fell behind; each is run again, so the session takes longer. " + BUSY_HELP)
@@ -192,12 +192,14 @@ class HealthModel:
         verb = _VERBS.get(ev.kind, ev.kind)
         # the session's clock when a session runs: the time the database stores the event at
         when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
-        key = (verb, _NUMBER.sub("#", ev.detail))
+        # an aborted trial's reason names its cause already ("gap: no loop record …"): say it once
+        detail = ev.detail.removeprefix(f"{verb}: ")
+        key = (verb, _NUMBER.sub("#", detail))
         last = self._log_runs[-1] if self._log_runs else None
         if last is not None and last.key == key:
-            last.last, last.detail, last.count = when, ev.detail, last.count + 1
+            last.last, last.detail, last.count = when, detail, last.count + 1
             return
-        self._log_runs.append(_LogRun(key, when, when, ev.detail))
+        self._log_runs.append(_LogRun(key, when, when, detail))
         del self._log_runs[:-_LOG_LINES]
 
     def engine_restarted(self) -> None:

@@ -118,6 +118,18 @@ def test_a_computer_too_busy_for_the_loop_is_said_in_words():
     h.apply(m.Health(990.0, 1000.0, 2000.0, 900.0, 30, 5, 20_000, 0, True, "autopilot", True, False,
                      scheduling="SCHED_FIFO/20"))
     assert h.machine_notice().endswith("The loop asked for real-time priority and got it (SCHED_FIFO/20).")
+    for k in (8, 9, 10, 11, 12, 13, 14):  # eight lost: the newest five are named, the older ones elided before them
+        h.apply(m.TrialEnded(5.0 + k, trial_record(trial_index=k, outcome="aborted", abort_cause=AbortCause.GAP,
+                                                   abort_reason="gap: no loop record for 9.1 ms (limit 5 ms)"), 30))
+    assert "8 trials of this session (trials …, 11, 12, 13, 14, 15) were aborted" in h.machine_notice()
+
+
+def test_the_fault_log_names_an_aborted_trial_s_cause_once():
+    h = HealthModel()
+    h.apply(m.EngineFault(3.0, "gap", 0, "gap: no loop record for 14.5 ms (limit 5 ms)", 3.0))
+    h.apply(m.EngineFault(4.0, "feedback", 0, "feedback: the force was not rendered as designed", 4.0))
+    assert h.fault_log == ["session    3.000 s  gap: no loop record for 14.5 ms (limit 5 ms)",
+                           "session    4.000 s  feedback: the force was not rendered as designed"]
 
 
 def test_notices_go_with_their_cause_and_the_form_speaks_plainly(tmp_path):
