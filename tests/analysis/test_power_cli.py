@@ -207,7 +207,8 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
     # the paper's protocol with one trial per cell and no training: the same runner, a sixth of the simulation
     paper = protocol.config.default_protocol()
-    short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False))
+    short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False),
+                                trial=dataclasses.replace(paper.trial, pause_s=0.1))  # short pauses: fewer ticks
     monkeypatch.setattr(protocol.config, "default_protocol", lambda: short)
     out = tmp_path / "plan"
     argv = ("power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200", "--n", "6,10", "--out", out)

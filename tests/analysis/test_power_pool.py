@@ -25,7 +25,9 @@ SEED = 5
 @pytest.fixture(scope="module")
 def short():
     paper = default_protocol()
-    return dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False))
+    # short pauses too: the 2 s pause between trials only adds ticks to simulate (0.1 s is above the ramp-out)
+    return dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False),
+                               trial=dataclasses.replace(paper.trial, pause_s=0.1))
 
 
 @pytest.fixture(scope="module")

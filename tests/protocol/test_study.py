@@ -23,11 +23,13 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def short_protocol(trials_per_cell: int = 1, training: bool = False):  # type: ignore[no-untyped-def]
-    """The paper's protocol with fewer trials (4 per participant) and an optional short training block."""
+    """The paper's protocol with fewer trials (4 per participant), short pauses (the 2 s pause between trials
+    only adds ticks to simulate; 0.1 s is above the feedback's ramp-out) and an optional short training block."""
     p = default_protocol()
     return dataclasses.replace(
         p,
         trials_per_cell=trials_per_cell,
+        trial=dataclasses.replace(p.trial, pause_s=0.1),
         training=dataclasses.replace(p.training, enabled=training, seconds_per_target_per_mode=3.0),
     )
 
