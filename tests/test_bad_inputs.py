@@ -200,7 +200,8 @@ def test_the_corpus_is_large_and_each_case_distinct() -> None:
 
 @pytest.mark.parametrize(
     "case",
-    [pytest.param(c, id=c.id, marks=[pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else []) for c in CASES],
+    [pytest.param(c, id=c.id, marks=[pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else [])
+     for c in CASES],
 )
 def test_bad_input_ends_in_one_line_with_its_status_and_touches_nothing(case: Case,
                                                                      outcomes: dict[str, Outcome]) -> None:

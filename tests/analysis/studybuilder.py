@@ -82,7 +82,7 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
         )
         for t_s, kind, detail in s.events:
             db.insert_event(sid, t_s, kind, detail)
-        cap_ms = int(round(s.max_trial_s * 1000))
+        cap_ms = round(s.max_trial_s * 1000)
         for idx, tdef in enumerate(s.trials):
             target = TARGETS[tdef.label]
             t_ns, f = trace(tdef.segments, cap_ms)

@@ -7,6 +7,7 @@ import json
 import sqlite3
 import subprocess
 import sys
+from typing import ClassVar
 
 import pandas as pd
 import pytest
@@ -36,8 +37,8 @@ def pilots(tmp_path_factory):
 def _html_table(page: str) -> pd.DataFrame:
     """The first table of a page: its head and body cells (text only) as a frame."""
     class Cells(html.parser.HTMLParser):
-        head: list[str] = []
-        rows: list[list[str]] = []
+        head: ClassVar[list[str]] = []
+        rows: ClassVar[list[list[str]]] = []
         cell: list[str] | None = None
 
         def handle_starttag(self, tag, attrs):
@@ -250,7 +251,7 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     out = tmp_path / "rep"
-    code, stdout, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
+    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page
@@ -335,7 +336,7 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
     assert r["identical_p_values"] == r["identical_sides"] == r["sided_tests"] == r["reference_tests"] == 6 * 3 * 4
     text = format_power_bench(r)
     assert "paired_wilcoxon loop" in text and "speed-up" in text
-    code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
+    code, _, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
     assert code == 2  # the reference cannot run more studies than the engine
 
 
@@ -343,7 +344,7 @@ def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import()
     from analysis.power import DEFAULT_N_VALUES
     from study_app.power_cmds import DEFAULT_N_TEXT
 
-    assert DEFAULT_N_TEXT == ",".join(str(n) for n in DEFAULT_N_VALUES)
+    assert ",".join(str(n) for n in DEFAULT_N_VALUES) == DEFAULT_N_TEXT
     proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli import build_parser; build_parser(); "
                            "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
                           capture_output=True, text=True, timeout=60)

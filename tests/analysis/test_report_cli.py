@@ -80,7 +80,7 @@ def test_report_writes_every_file_with_the_promised_columns(report):
     trials = pd.read_csv(out / "trials.csv")
     assert len(trials) == 42 and "aborted" not in set(trials["outcome"])  # 7 × 6 analysed, aborted left out
     # sorted by participant number, then trial (numbered from 1); the cue time is there
-    keys = list(zip(trials["participant_number"], trials["participant_code"], trials["trial_number"]))
+    keys = list(zip(trials["participant_number"], trials["participant_code"], trials["trial_number"], strict=True))
     assert keys == sorted(keys) and trials["trial_number"].min() == 1 and trials["cue_at_s"].notna().all()
     pp = pd.read_csv(out / "participants.csv")
     assert len(pp) == 14 and set(pp["haptic_mode"]) == {"on", "off"}
@@ -109,8 +109,9 @@ def test_participants_wide_has_one_row_per_participant_with_off_and_on_columns(r
     long = pd.read_csv(report / "participants.csv")
     assert len(wide) == 7 and wide["participant_code"].is_unique
     assert list(wide["participant_number"]) == sorted(wide["participant_number"])
-    for long_name, off, on in (("rmse_N", "rmse_off_N", "rmse_on_N"), ("success_rate", "success_rate_off",
-                                                                       "success_rate_on"), ("tct_s", "tct_off_s", "tct_on_s")):
+    for long_name, off, on in (("rmse_N", "rmse_off_N", "rmse_on_N"),
+                               ("success_rate", "success_rate_off", "success_rate_on"),
+                               ("tct_s", "tct_off_s", "tct_on_s")):
         for mode, col in (("off", off), ("on", on)):
             expect = long[long["haptic_mode"] == mode].set_index("participant_code")[long_name]
             got = wide.set_index("participant_code")[col]

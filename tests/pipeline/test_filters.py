@@ -96,7 +96,7 @@ def test_vector_filter_is_three_independent_scalar_filters(window, xs):
     ma3 = MovingAverage3(window)
     lanes = [MovingAverage(window) for _ in range(3)]
     for i, (x, y, z) in enumerate(xs):
-        assert ma3.update(x, y, z) == tuple(m.update(c) for m, c in zip(lanes, (x, y, z)))
+        assert ma3.update(x, y, z) == tuple(m.update(c) for m, c in zip(lanes, (x, y, z), strict=True))
         assert ma3.count == min(i + 1, window)
 
 
