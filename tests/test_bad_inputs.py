@@ -59,6 +59,7 @@ class Outcome:
     before: dict[str, str]
     after: dict[str, str]
     folder: str  # the case's folder ({d})
+    seconds: float = 0.0  # the command's wall time (on a loaded machine: for finding the slow cases only)
 
 
 def _snapshot(d: Path) -> dict[str, str]:
@@ -137,6 +138,7 @@ def _run_case(case: Case, d: Path, good: Path) -> Outcome:
                if not k.startswith("HAPTIC_STUDY") and k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
         env["PYTHONDONTWRITEBYTECODE"] = "1"
         args = [a.replace("{d}", str(d)) for a in case.args]
+        t0 = time.perf_counter()
         try:
             proc = subprocess.run(
                 [*CLI, *args], capture_output=True, text=True, timeout=CASE_TIMEOUT_S, cwd=ROOT, env=env,
@@ -145,7 +147,8 @@ def _run_case(case: Case, d: Path, good: Path) -> Outcome:
         except subprocess.TimeoutExpired:  # a hang (a FIFO read for ever) fails its own case, not the corpus
             return Outcome(-9, "", f"Traceback: no answer within {CASE_TIMEOUT_S} s (it hung)", before,
                            _snapshot(d), str(d))
-        return Outcome(proc.returncode, proc.stdout, proc.stderr, before, _snapshot(d), str(d))
+        return Outcome(proc.returncode, proc.stdout, proc.stderr, before, _snapshot(d), str(d),
+                       time.perf_counter() - t0)
     finally:
         for where in mounted:
             unmount(where)
@@ -179,7 +182,9 @@ def outcomes() -> Iterator[dict[str, Outcome]]:
         with ThreadPoolExecutor(max_workers=3) as pool:
             futures = {case.id: pool.submit(_run_case, case, dirs[case.id], good) for case in runnable}
             results = {k: f.result() for k, f in futures.items()}
-        print(f"\n{len(runnable)} bad-input cases in {time.perf_counter() - t0:.1f} s")
+        print(f"\n{len(runnable)} bad-input cases in {time.perf_counter() - t0:.1f} s; the slowest:")
+        for case_id, out in sorted(results.items(), key=lambda kv: -kv[1].seconds)[:12]:
+            print(f"  {out.seconds:5.1f} s  {case_id}")
         yield results
     finally:
         for p in base.rglob("*"):  # read-only files and folders left by a case
@@ -195,7 +200,8 @@ def test_the_corpus_is_large_and_each_case_distinct() -> None:
 
 @pytest.mark.parametrize(
     "case",
-    [pytest.param(c, id=c.id, marks=[pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else []) for c in CASES],
+    [pytest.param(c, id=c.id, marks=[pytest.mark.xfail(strict=True, reason=c.xfail)] if c.xfail else [])
+     for c in CASES],
 )
 def test_bad_input_ends_in_one_line_with_its_status_and_touches_nothing(case: Case,
                                                                      outcomes: dict[str, Outcome]) -> None:

@@ -82,27 +82,30 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
         )
         for t_s, kind, detail in s.events:
             db.insert_event(sid, t_s, kind, detail)
-        cap_ms = int(round(s.max_trial_s * 1000))
+        cap_ms = round(s.max_trial_s * 1000)
         for idx, tdef in enumerate(s.trials):
             target = TARGETS[tdef.label]
             t_ns, f = trace(tdef.segments, cap_ms)
             m = trial_metrics(t_ns, f, target, max_trial_s=s.max_trial_s)
             end = m.n_samples
             tid = trial_id_of(sid, idx)
-            if tdef.with_samples:
-                z = np.zeros(end)
-                rows = np.column_stack([np.full(end, float(tid)), t_ns[:end] / 1e9, f[:end],
-                                        z, z, f[:end] + 6.4, z, z, z, z, z, f[:end], z, z, -f[:end] * 0.5])
-                db.insert_samples(rows.tolist())
-            outcome = tdef.outcome_override or ("success" if m.success else "timeout")
-            db.insert_trial({
-                "trial_id": tid, "session_id": sid, "trial_index": idx, "target_label": tdef.label,
-                "target_force_n": target, "haptic_mode": tdef.mode, "outcome": outcome,
-                "started_at_s": 20.0 * idx, "ended_at_s": 20.0 * idx + m.end_s,
-                "tct_s": m.tct_s if outcome == "success" else None, "rmse_n": m.rmse_n, "max_ae_n": m.max_ae_n,
-                "time_in_band_s": m.time_in_band_s, "peak_force_n": m.peak_force_n, "n_samples": m.n_samples,
-                "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": tdef.repeat_of,
-            })
+            # one transaction per trial, as the session runner commits a trial: in autocommit every sample row
+            # would be a transaction of its own (most of the time of building a study)
+            with db.transaction():
+                if tdef.with_samples:
+                    z = np.zeros(end)
+                    rows = np.column_stack([np.full(end, float(tid)), t_ns[:end] / 1e9, f[:end],
+                                            z, z, f[:end] + 6.4, z, z, z, z, z, f[:end], z, z, -f[:end] * 0.5])
+                    db.insert_samples(rows.tolist())
+                outcome = tdef.outcome_override or ("success" if m.success else "timeout")
+                db.insert_trial({
+                    "trial_id": tid, "session_id": sid, "trial_index": idx, "target_label": tdef.label,
+                    "target_force_n": target, "haptic_mode": tdef.mode, "outcome": outcome,
+                    "started_at_s": 20.0 * idx, "ended_at_s": 20.0 * idx + m.end_s,
+                    "tct_s": m.tct_s if outcome == "success" else None, "rmse_n": m.rmse_n, "max_ae_n": m.max_ae_n,
+                    "time_in_band_s": m.time_in_band_s, "peak_force_n": m.peak_force_n, "n_samples": m.n_samples,
+                    "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": tdef.repeat_of,
+                })
         if s.status != "running":
             db.end_session(sid, s.status, s.end_reason)
     db.close()

@@ -233,7 +233,7 @@ def _trials(participants: int, seed: int = 0, success_off: float = 0.3, success_
     for p in range(participants):
         for label, force in (("GENTLE", 0.6), ("FIRM", 1.2)):
             for mode in ("off", "on"):
-                for k in range(5):
+                for _ in range(5):
                     ok = bool(rng.random() < (success_on if mode == "on" else success_off))
                     tct = round(float(rng.uniform(2, 10)), 3) if ok else math.nan
                     rmse = float(rng.lognormal(math.log(0.8 if mode == "off" else 0.55), 0.3))
@@ -291,7 +291,8 @@ def test_undefined_tct_is_left_out_and_said():
 
 def test_all_zero_differences_give_power_zero_with_a_note():
     trials = _trials(6)
-    trials.loc[trials["haptic_mode"] == "on", "rmse_n"] = trials.loc[trials["haptic_mode"] == "off", "rmse_n"].to_numpy()
+    off_rmse = trials.loc[trials["haptic_mode"] == "off", "rmse_n"].to_numpy()
+    trials.loc[trials["haptic_mode"] == "on", "rmse_n"] = off_rmse
     result = estimate_power(pool_from_trials(trials), (6, 12), resamples=200)
     rows = result.frame[(result.frame["metric"] == "rmse_n") & (result.frame["scope"] == "overall")]
     assert (rows["power"] == 0).all() and (rows["not_computable"] == rows["resamples"]).all()
@@ -391,6 +392,7 @@ def test_a_request_the_machine_cannot_hold_is_refused_in_one_line(monkeypatch):
     pool = pool_from_trials(_trials(8))
     with pytest.raises(PowerError) as err:
         estimate_power(pool, (6, 10_000), resamples=10)
-    assert str(err.value) == ("power: resampling studies of up to 10000 participants needs about 17.8 MiB of memory; this "
+    assert str(err.value) == ("power: resampling studies of up to 10000 participants needs about 17.8 MiB of memory; "
+                              "this "
                               "machine has 8.0 MiB available; ask for smaller --n values (memory grows with n; "
                               "--resamples costs time only)")

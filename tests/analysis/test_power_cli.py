@@ -7,6 +7,7 @@ import json
 import sqlite3
 import subprocess
 import sys
+from typing import ClassVar
 
 import pandas as pd
 import pytest
@@ -36,8 +37,8 @@ def pilots(tmp_path_factory):
 def _html_table(page: str) -> pd.DataFrame:
     """The first table of a page: its head and body cells (text only) as a frame."""
     class Cells(html.parser.HTMLParser):
-        head: list[str] = []
-        rows: list[list[str]] = []
+        head: ClassVar[list[str]] = []
+        rows: ClassVar[list[list[str]]] = []
         cell: list[str] | None = None
 
         def handle_starttag(self, tag, attrs):
@@ -207,7 +208,8 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
     # the paper's protocol with one trial per cell and no training: the same runner, a sixth of the simulation
     paper = protocol.config.default_protocol()
-    short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False))
+    short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False),
+                                trial=dataclasses.replace(paper.trial, pause_s=0.1))  # short pauses: fewer ticks
     monkeypatch.setattr(protocol.config, "default_protocol", lambda: short)
     out = tmp_path / "plan"
     argv = ("power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200", "--n", "6,10", "--out", out)
@@ -249,7 +251,7 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     out = tmp_path / "rep"
-    code, stdout, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
+    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page
@@ -334,7 +336,7 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
     assert r["identical_p_values"] == r["identical_sides"] == r["sided_tests"] == r["reference_tests"] == 6 * 3 * 4
     text = format_power_bench(r)
     assert "paired_wilcoxon loop" in text and "speed-up" in text
-    code, stdout, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
+    code, _, _ = _run(capsys, "bench", "power", "--resamples", "50", "--reference-resamples", "60")
     assert code == 2  # the reference cannot run more studies than the engine
 
 
@@ -342,7 +344,7 @@ def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import()
     from analysis.power import DEFAULT_N_VALUES
     from study_app.power_cmds import DEFAULT_N_TEXT
 
-    assert DEFAULT_N_TEXT == ",".join(str(n) for n in DEFAULT_N_VALUES)
+    assert ",".join(str(n) for n in DEFAULT_N_VALUES) == DEFAULT_N_TEXT
     proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli import build_parser; build_parser(); "
                            "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
                           capture_output=True, text=True, timeout=60)

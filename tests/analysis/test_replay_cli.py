@@ -175,8 +175,9 @@ def test_export_labels_phases_and_faults_and_writes_a_codebook_for_every_column(
     assert (frame.loc[frame["faults"] == 0, "fault_names"] == "none").all()
     book = pd.read_csv(tmp_path / "s.csv.codebook.csv")
     assert list(book["column"]) == list(frame.columns) and (book["file"] == "s.csv").all()
-    assert book["description"].str.len().gt(10).all() and book["type"].isin(["text", "integer", "number", "boolean"]).all()
-    units = dict(zip(book["column"], book["unit"].fillna("")))
+    assert book["description"].str.len().gt(10).all()
+    assert book["type"].isin(["text", "integer", "number", "boolean"]).all()
+    units = dict(zip(book["column"], book["unit"].fillna(""), strict=True))
     # a unit ends every physical quantity's name, spelled as the report's CSVs spell them; the rest say theirs
     for col, unit in units.items():
         suffix = {"N": "_N", "N·m": "_Nm", "s": "_s", "ms": "_ms", "m": "_m"}.get(unit)

@@ -31,7 +31,8 @@ def _complete(code: str, i: int, commit: str, dirty: bool) -> SessionDef:
     trials = [success_trial("GENTLE", "on", 100 * i), timeout_trial("GENTLE", "off", 0.2 + 0.05 * i),
               _aborted("FIRM", "on"), success_trial("FIRM", "off", 300 + 80 * i),
               timeout_trial("FIRM", "off", 2.0 + 0.1 * i), success_trial("GENTLE", "off", 500 + 60 * i), rerun]
-    events = [(3.0, "deviation", "experiment started without a completed training session (override)")] if i == 2 else []
+    override = "experiment started without a completed training session (override)"
+    events = [(3.0, "deviation", override)] if i == 2 else []
     return SessionDef(code, trials, max_trial_s=4.0, software_commit=commit, software_dirty=dirty, events=events)
 
 
@@ -42,7 +43,7 @@ def study(tmp_path_factory) -> Path:
                               timeout_trial("FIRM", "on", 0.5), success_trial("GENTLE", "off", 700)],
                       max_trial_s=4.0, status="aborted", end_reason="participant felt unwell", designed=7,
                       software_commit=COMMIT_B, software_dirty=False)
-    return build(tmp_path_factory.mktemp("record") / "record.db", sessions + [half])
+    return build(tmp_path_factory.mktemp("record") / "record.db", [*sessions, half])
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +68,8 @@ def test_an_incomplete_session_is_left_out_by_default_and_listed_with_its_reason
     listed = pd.read_csv(folder / "incomplete_sessions.csv")
     assert len(listed) == 1
     row = listed.iloc[0]
-    assert (row["participant_code"], row["n_finished"], row["n_designed"], bool(row["analysed"])) == ("P07", 3, 7, False)
+    assert (row["participant_code"], row["n_finished"], row["n_designed"], bool(row["analysed"])) == \
+        ("P07", 3, 7, False)
     reason = "P07, session 7: aborted by the experimenter after 3 of 7 trials (participant felt unwell)"
     assert row["reason"] == reason
     page = (folder / "report.html").read_text()

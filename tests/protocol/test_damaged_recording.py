@@ -83,7 +83,8 @@ def study(tmp_path_factory: pytest.TempPathFactory) -> Path:
     c = sqlite3.connect(db)
     try:
         c.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        assert c.execute("SELECT status FROM sessions WHERE session_id = ?", (DAMAGED_SESSION,)).fetchone() == ("running",)
+        status = c.execute("SELECT status FROM sessions WHERE session_id = ?", (DAMAGED_SESSION,)).fetchone()
+        assert status == ("running",)
     finally:
         c.close()
     return db
@@ -219,7 +220,8 @@ def outcomes(study: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_every_reader_names_the_damage_in_one_line_and_changes_nothing(case: Case, outcomes: dict[str, Outcome]) -> None:
+def test_every_reader_names_the_damage_in_one_line_and_changes_nothing(case: Case,
+                                                                        outcomes: dict[str, Outcome]) -> None:
     out = outcomes[case.id]
     assert "Traceback" not in out.stdout + out.stderr, out.stderr
     assert out.code == case.code, (out.code, out.stderr)
@@ -268,7 +270,8 @@ def test_the_report_leaves_out_the_trials_a_damaged_block_touches_and_analyses_t
     assert touched
     data = load_study([db])
     hit = data.trials[data.trials["excluded"] == "recording damaged"]
-    assert [(int(s), int(i)) for s, i in zip(hit["session_id"], hit["trial_index"])] == [(1, i) for (i,) in touched]
+    hit_keys = [(int(s), int(i)) for s, i in zip(hit["session_id"], hit["trial_index"], strict=True)]
+    assert hit_keys == [(1, i) for (i,) in touched]
     assert (hit["damage"] == data.damage[0]).all() and len(data.damage) == 1
     assert data.damage[0].startswith(f"{db}: session 1, recorded run 0, 3.000–3.999 s (block 3): checksum mismatch")
     assert f"touches trials {', '.join(str(i + 1) for (i,) in touched)}" in data.damage[0]

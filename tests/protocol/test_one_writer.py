@@ -11,10 +11,10 @@ import time
 from pathlib import Path
 
 import pytest
-
-from protocol.storage import SCHEMA_VERSION
 from records import assert_records_unique_and_ordered, trial_samples
 from test_faults_in_the_record import assert_true_timeline, rows
+
+from protocol.storage import SCHEMA_VERSION
 
 ROOT = Path(__file__).resolve().parents[2]
 PAUSE_S = 2.0
@@ -161,9 +161,8 @@ def _as_version_1(db: Path) -> None:
     leases or later columns)."""
     import sqlite3
 
-    from protocol.storage import HEALTH_COLUMNS
-
     from protocol.recording import read_ticks
+    from protocol.storage import HEALTH_COLUMNS
 
     c = sqlite3.connect(db)
     # what version 1 stored of each trial: its window's samples, in rows
@@ -177,7 +176,7 @@ def _as_version_1(db: Path) -> None:
         c.executemany(
             "INSERT INTO samples (trial_id, t_s, force_n, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, "
             "render_fx, render_fy, render_fz) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            zip([tid] * len(t_s), t_s.tolist(), *(rec[k].tolist() for k in cols[1:])))
+            zip([tid] * len(t_s), t_s.tolist(), *(rec[k].tolist() for k in cols[1:]), strict=True))
     for col in ("segment", "first_tick", "last_tick"):
         c.execute(f"ALTER TABLE trials DROP COLUMN {col}")
     c.execute("DROP TABLE session_blocks")

@@ -12,22 +12,24 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from records import all_records, trial_samples
 
 from protocol.config import default_protocol
 from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
 from study_app.headless import resume_session, run_study
-from records import all_records, trial_samples
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def short_protocol(trials_per_cell: int = 1, training: bool = False):  # type: ignore[no-untyped-def]
-    """The paper's protocol with fewer trials (4 per participant) and an optional short training block."""
+    """The paper's protocol with fewer trials (4 per participant), short pauses (the 2 s pause between trials
+    only adds ticks to simulate; 0.1 s is above the feedback's ramp-out) and an optional short training block."""
     p = default_protocol()
     return dataclasses.replace(
         p,
         trials_per_cell=trials_per_cell,
+        trial=dataclasses.replace(p.trial, pause_s=0.1),
         training=dataclasses.replace(p.training, enabled=training, seconds_per_target_per_mode=3.0),
     )
 
@@ -88,7 +90,8 @@ def test_same_seed_same_study(tmp_path: Path) -> None:
         b, "SELECT data FROM session_blocks ORDER BY session_id, segment, block")  # the recordings, byte for byte
 
 
-def _run_cli(args: list[str], env: dict[str, str] | None = None, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+def _run_cli(args: list[str], env: dict[str, str] | None = None,
+             timeout: float = 300) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True, timeout=timeout,
         env={**os.environ, **(env or {})}, cwd=ROOT,
@@ -105,7 +108,8 @@ def _run_killed_in_training(db: Path, proto: Path, participants: int, seed: int,
         f"run_study({str(db)!r}, participants={participants}, seed={seed}, protocol=load_protocol({str(proto)!r}), "
         f"jobs=1, faults=[FaultPlan('kill', 'P01', {trial}, {seconds}, 'training')])\n"
     )
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=ROOT).returncode
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                          cwd=ROOT).returncode
 
 
 @pytest.mark.parametrize("kill_at", ["kill@P01:1+9", "kill@P01:3+4"])
@@ -207,10 +211,12 @@ def test_parallel_study_matches_sequential(tmp_path: Path) -> None:
     a, b = rows(seq, trials), rows(par, trials)
     assert len(a) == 2 * (4 + 4)
     assert a == b
-    sched = "SELECT p.code, s.kind, s.schedule_json, s.status FROM sessions s JOIN participants p USING (participant_id) ORDER BY p.code, s.kind"
+    sched = ("SELECT p.code, s.kind, s.schedule_json, s.status FROM sessions s JOIN participants p "
+             "USING (participant_id) ORDER BY p.code, s.kind")
     assert rows(seq, sched) == rows(par, sched)
-    blocks = "SELECT p.code, s.kind, b.segment, b.block, b.data FROM session_blocks b JOIN sessions s USING (session_id) " \
-             "JOIN participants p USING (participant_id) ORDER BY p.code, s.kind, b.segment, b.block"
+    blocks = ("SELECT p.code, s.kind, b.segment, b.block, b.data FROM session_blocks b JOIN sessions s "
+              "USING (session_id) JOIN participants p USING (participant_id) "
+              "ORDER BY p.code, s.kind, b.segment, b.block")
     assert rows(seq, blocks) == rows(par, blocks)  # the whole recordings, byte for byte
     # the summary: the same sessions, in participant order (training before experiment), whatever their ids
     def described(db: Path, sessions: list[int]) -> list[tuple]:
@@ -246,8 +252,8 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
         (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
         .replace("enabled = true", "enabled = false")
     )
-    killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db), "--protocol", str(proto),
-                       "--inject-fault", "kill@P02:1+9"])
+    killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db),
+                       "--protocol", str(proto), "--inject-fault", "kill@P02:1+9"])
     assert killed.returncode == -9
     # the workers got SIGKILL from the kernel when the main process died (reaped by init: poll, don't sleep blindly)
     import time
@@ -266,7 +272,8 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
         assert r.returncode == 0, r.stderr
     assert rows(db, "SELECT status FROM sessions ORDER BY session_id") == [("completed",), ("completed",)]
     for sid, _ in sessions:
-        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? AND outcome != 'aborted'", sid)
+        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? "
+                        "AND outcome != 'aborted'", sid)
         assert len(done) == 4 and len(set(done)) == 4  # every cell once: nothing skipped or duplicated
 
 
@@ -437,10 +444,9 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     """A Python exception inside a participant's worker (injected) is reported by name; the study then completes."""
     import multiprocessing
 
-    from study_app.headless import StudyWorkerError
-
     import protocol.session
     import study_app.headless.pool as pool
+    from study_app.headless import StudyWorkerError
 
     db = tmp_path / "raise.db"
     real_process = protocol.session.SessionRunner.process
@@ -466,5 +472,6 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2, continue_study=True)
     assert rows(db, "SELECT status FROM sessions") == [("completed",), ("completed",)]
     for sid in (1, 2):
-        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? AND outcome != 'aborted'", sid)
+        done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? "
+                        "AND outcome != 'aborted'", sid)
         assert len(done) == 4 and len(set(done)) == 4  # every cell once
