@@ -67,8 +67,7 @@ _RENAME = {"force_n": "force_N", "phase": "phase_code",
 def _codes(database: str | os.PathLike[str]) -> dict[int, str]:
     db = _open(str(database))
     try:
-        return {int(s): str(c) for s, c in db.conn.execute(
-            "SELECT s.session_id, p.code FROM sessions s JOIN participants p USING (participant_id)")}
+        return db.session_codes()
     finally:
         db.close()
 

@@ -40,7 +40,7 @@ from protocol.metrics import trial_metrics
 from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
-from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
+from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
 from protocol.study_rules import DEVIATION_EVENT, check_new_session, stored_sessions
 from protocol.version import software_provenance
 
@@ -241,9 +241,9 @@ def open_resumed_session(
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
     if info is None:
         db.release_lease(session_scope(session_id), lease_owner)
-        row = db.conn.execute("SELECT status FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
-        why = ("there is no such session" if row is None else
-               f"it has ended (status {row[0]}), perhaps run to its end by another process meanwhile")
+        stored = StudyReader.over(db).session(session_id)
+        why = ("there is no such session" if stored is None else
+               f"it has ended (status {stored.status}), perhaps run to its end by another process meanwhile")
         raise StorageError(f"session {session_id} in {db.path} cannot be resumed: {why}; nothing was changed")
     protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {session_id} protocol")
     schedule = schedule_from_json(info.schedule_json)
@@ -329,8 +329,7 @@ def _interrupted_trial(
         cue_s = SessionClock(started_at_s, t0_ns).seconds(origin_ns)
         ticks = (int(cols["tick"][0]), int(cols["tick"][-1]))
     else:
-        samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
-                                  (trial_id_of(sid, spec.index),)).fetchall()
+        samples = StudyReader.over(db).trial_samples(trial_id_of(sid, spec.index), ("t_s", "force_n")).rows
         # t_s was stored as ns / 1e9 since the cue: rounding recovers the integer ns exactly
         t_ns = np.rint(np.array([r[0] for r in samples], dtype=np.float64) * 1e9).astype(np.int64)
         force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
@@ -353,12 +352,7 @@ def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float |
     tick earlier at most) stands in when the run ended before that was stored.
     """
     name, old = trial_words(trial_index), f"trial {trial_index}"  # (versions 1 and 2 named trials by index)
-    rows = db.conn.execute(
-        "SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail IN (?, ?)) OR "
-        "(kind = 'cue' AND (detail LIKE ? OR detail LIKE ?))) ORDER BY t_s DESC",
-        (session_id, f"{name}: cued -> active", f"{old}: cued -> active", f"{name}: %", f"{old}: %"),
-    ).fetchall()
-    by_kind = {k: t for k, t in rows}
+    by_kind = dict(StudyReader.over(db).trial_start_events(session_id, (name, old)))
     t = by_kind.get("phase", by_kind.get("cue"))
     return None if t is None else float(t)
 

@@ -6,7 +6,7 @@ import math
 from collections import Counter, defaultdict
 from statistics import fmean, stdev
 
-from protocol.storage import connect_readonly
+from protocol.storage import StudyReader
 
 __all__ = ["format_study_summary"]
 
@@ -32,23 +32,15 @@ def _plural(n: int, word: str) -> str:
 
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
     """Per-mode mean ± SD across participants, each participant's trials averaged first (as ``report`` does)."""
-    conn = connect_readonly(db_path)
-    try:
-        q = ",".join("?" * len(session_ids)) or "NULL"
-        rows = conn.execute(
-            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind, "
-            f"t.abort_cause "
-            f"FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
-            f"WHERE t.session_id IN ({q})", session_ids,
-        ).fetchall()
-        n_samples = conn.execute(
-            f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({q})", session_ids
-        ).fetchone()[0]
-        recorded = (conn.execute(f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({q})",
-                                 session_ids).fetchone()[0]
-                    if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'session_blocks'").fetchone() else 0)
-    finally:
-        conn.close()
+    with StudyReader(db_path, check=False) as reader:  # the run just wrote it
+        sessions = {s.session_id: s for s in reader.sessions()}
+        records = reader.trial_records(session_ids)
+        n_samples = reader.sample_count(session_ids)
+        recorded = reader.record_count(session_ids)
+    # (code, mode, target, outcome, tct, rmse, max ae, session kind, abort cause)
+    rows = [(sessions[t.session_id].code, t.haptic_mode.value, t.target_label, t.outcome.value, t.tct_s, t.rmse_n,
+             t.max_ae_n, sessions[t.session_id].kind, None if t.abort_cause is None else t.abort_cause.value)
+            for t in records]
     exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
     causes = Counter(r[8] or "cause not recorded" for r in rows if r[7] == "experiment" and r[3] == "aborted")
     aborted = sum(causes.values())
