@@ -18,6 +18,7 @@ import sqlite3
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import SupportsInt
 
 import numpy as np
 import numpy.typing as npt
@@ -39,18 +40,18 @@ DEVIATION_EVENTS = DEVIATION_KINDS  # their one definition: protocol.study_rules
 LISTED_EVENTS = (*DEVIATION_EVENTS, "software")
 
 __all__ = [
-    "AnalysisError",
     "DEVIATION_EVENTS",
     "LISTED_EVENTS",
+    "AnalysisError",
     "Progress",
     "StudyData",
     "connect_readonly",
     "load_study",
     "read_task_force",
-    "recorded_where",
-    "stored_records",
     "read_trial_samples",
     "recorded_samples",
+    "recorded_where",
+    "stored_records",
 ]
 
 #: ``progress(done, total)`` callback, called while samples are read.
@@ -209,7 +210,8 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     if sessions.empty:
         raise AnalysisError(f"{path}: empty study database (no sessions)")
     proto = pd.DataFrame(
-        [_protocol_fields(pj, f"{path}: session {sid}") for sid, pj in zip(sessions["session_id"], sessions["protocol_json"])],
+        [_protocol_fields(pj, f"{path}: session {sid}")
+         for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)],
         index=sessions.index,
     )
     watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
@@ -305,7 +307,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                      events=pd.concat(all_events, ignore_index=True), include_incomplete=include_incomplete)
 
 
-def read_task_force(conn: sqlite3.Connection | StudyReader, trial_id: int, where: tuple[int, int, int, int] | None = None,
+def read_task_force(conn: sqlite3.Connection | StudyReader, trial_id: int,
+                    where: tuple[int, int, int, int] | None = None,
                     ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
     """One trial's task-force samples: times since the cue (int ns) and ``force_n`` (N).
 
@@ -354,19 +357,20 @@ def stored_records(trials: pd.DataFrame) -> list[TrialRecord]:
     for row in trials.rename(columns=lambda c: c.removeprefix("stored_")).to_dict("records"):
         clean = {k: None if _empty(v) else v for k, v in row.items()}
         for k in _INT_COLUMNS:
-            if clean.get(k) is not None:
-                clean[k] = int(clean[k])
+            v = clean.get(k)
+            if v is not None:
+                clean[k] = int(v)
         out.append(TrialRecord.from_row(clean))
     return out
 
 
-def recorded_where(session_id: object, segment: object, first_tick: object, last_tick: object,
-                   ) -> tuple[int, int, int, int] | None:
+def recorded_where(session_id: SupportsInt, segment: SupportsInt | None, first_tick: SupportsInt | None,
+                   last_tick: SupportsInt | None) -> tuple[int, int, int, int] | None:
     """A trial's place in its session's recording, or None when it has none (a trial of schema version 1 or 2)."""
-    values = (segment, first_tick, last_tick)
-    if any(v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in values):
+    if segment is None or first_tick is None or last_tick is None or any(
+            (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in (segment, first_tick, last_tick)):
         return None
-    return int(session_id), int(segment), int(first_tick), int(last_tick)  # type: ignore[arg-type]
+    return int(session_id), int(segment), int(first_tick), int(last_tick)
 
 
 def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
@@ -420,7 +424,8 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
                 try:
                     cols = read_ticks(db, *where, ("t_ns", *_RECORDED_TRACE))
                 except RecordingDamaged as exc:
-                    raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: {exc}") from None
+                    raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: "
+                                        f"{exc}") from None
                 t_ns = cols.pop("t_ns")
                 frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
         if frame.empty:
@@ -436,7 +441,8 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
 RECORDED_COLUMNS = (
     "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
-    "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
+    "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms",
+    "latency_ms",
 )
 
 
@@ -478,7 +484,8 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
         ids = db.session_ids()
         if session_id is not None:
             if int(session_id) not in ids:
-                raise AnalysisError(f"{database}: no session {session_id} (sessions: {', '.join(map(str, ids)) or 'none'})")
+                listed = ", ".join(map(str, ids)) or "none"
+                raise AnalysisError(f"{database}: no session {session_id} (sessions: {listed})")
             ids = [int(session_id)]
         damage: list[str] = []
         parts = [_session_samples(db, sid, damage) for sid in ids]

@@ -22,6 +22,7 @@ begins with the protocol's pause before its next cue.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 from collections.abc import Callable
@@ -35,7 +36,7 @@ from pipeline.loop_messages import Command
 from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.delivery import DeliveryLimits
-from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.design import HapticMode, TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
 from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
@@ -75,10 +76,10 @@ def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
 
 def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
     """Free practice: each mode in turn, each target once, with the live force aid."""
-    out = []
+    out: list[TrialSpec] = []
     for m in protocol.modes:
         for t in protocol.targets:
-            out.append(TrialSpec(len(out), t.label, t.force_n, m))
+            out.append(TrialSpec(len(out), t.label, t.force_n, HapticMode(m)))
     return out
 
 
@@ -297,7 +298,8 @@ def refuse_damaged_recording(db: StudyDatabase, session_id: int) -> None:
     """
     damage = recording_damage(db.conn, session_id, columns=None)
     if damage:
-        more = f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})" if len(damage) > 1 else ""
+        more = (f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})"
+                if len(damage) > 1 else "")
         raise StorageError(
             f"session {session_id} in {db.path} cannot be resumed: its recording is damaged: {damage[0].describe()}"
             f"{more}; a resumed run would append to a session part of which cannot be read; nothing was changed "
@@ -422,7 +424,6 @@ def finish_session(db: StudyDatabase, recorder: Recorder, opened: OpenedSession)
     try:
         recorder.close()
     finally:
-        try:
+        # a lease left behind is taken over once this process is gone
+        with contextlib.suppress(Exception):
             db.release_lease(session_scope(opened.session_id), opened.lease_owner)
-        except Exception:  # noqa: BLE001 - a lease left behind is taken over once this process is gone
-            pass

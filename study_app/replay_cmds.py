@@ -94,7 +94,8 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
-    es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
+    es.add_argument("--out", required=True, metavar="FILE",
+                    help="file to write (must not exist); - writes csv to standard output")
     es.set_defaults(handler=cmd_export)
     add_export_participant_parser(esub)  # everything about one participant (study_app/export_participant_cmds.py)
 
@@ -200,12 +201,13 @@ def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[An
         raise CliError(f"--session {session_id}: {exc}") from None
     wall = time.perf_counter() - t0
     exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
-             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
+             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments, strict=True)]
     gaps = [s.segment for s in segments if not s.continuous]
     print(f"Session {session_id} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
           f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
     verdict = ("bit-identical to the recording" if all(exact) else
-               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
+               f"DIFFERENT from the recording in run(s) "
+               f"{[s.segment for s, ok in zip(segments, exact, strict=True) if not ok]}")
     print(f"  recorded settings: rendered force and task force {verdict}")
     if gaps:
         print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")

@@ -75,13 +75,14 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     ]
     for name, key, fn in defs:
         off, on = metric("off", fn), metric("on", fn)
-        change = (on[0] - off[0]) / off[0] * 100 if off[0] and math.isfinite(off[0]) and math.isfinite(on[0]) else math.nan
+        finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
+        change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
         lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change_txt}   {paper}")
     for label in sorted({r[2] for r in exp}):
-        off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
-        on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
+        off = metric("off", lambda ts, lab=label: _mean([float(t[3] == 'success') for t in ts if t[2] == lab]))
+        on = metric("on", lambda ts, lab=label: _mean([float(t[3] == 'success') for t in ts if t[2] == lab]))
         lines.append(f"  {'success, ' + label:<30}{cell(off):>16}{cell(on):>16}")
     lines.append("")
     where = "recordings, session_blocks" if recorded else "samples"

@@ -79,7 +79,8 @@ class BlockDamage:
     trials: tuple[int, ...] = ()
 
     def describe(self) -> str:
-        """One line: ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches trial 5``."""
+        """One line, e.g. ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches
+        trial 5``."""
         blocks = (f"block {self.first_block}" if self.first_block == self.last_block
                   else f"blocks {self.first_block}–{self.last_block}")
         touches = ("touches no trial" if not self.trials else
@@ -142,7 +143,7 @@ def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: b
     names = [c.name for c in COLUMNS] if whole or columns is None else list(dict.fromkeys(["tick", *columns]))
     try:
         cols = decode_block(row.data)[0] if whole or columns is None else decode_columns(row.data, names)
-    except Exception as exc:  # noqa: BLE001 - any failure to decode is damage: zlib, struct, json, numpy alike
+    except Exception as exc:  # any failure to decode is damage: zlib, struct, json, numpy alike
         return decode_failure(exc)
     why = columns_problem(cols, names)
     if why:

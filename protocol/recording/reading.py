@@ -110,9 +110,9 @@ def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: lis
         why = block_problem(r)
         if not why:
             try:
-                decoded = decode_block(r.data) if names is None else decode_columns(r.data, names)
+                decoded: Any = decode_block(r.data) if names is None else decode_columns(r.data, names)
                 why = columns_problem(decoded[0] if names is None else decoded, want)
-            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+            except Exception as exc:  # any failure to decode is damage (see integrity.block_problem)
                 why = decode_failure(exc)
             if not why:
                 good.append(decoded)
@@ -160,7 +160,7 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
         if not why:
             try:
                 part, why = _window_part(r, names, first_tick, last_tick)
-            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+            except Exception as exc:  # any failure to decode is damage (see integrity.block_problem)
                 why = decode_failure(exc)
         if why:
             bad.append((r, why))

@@ -348,8 +348,9 @@ class StudyReader:
     # -- counts (the run summary) -------------------------------------------------------------------------------
     def sample_count(self, session_ids: Sequence[int]) -> int:
         """How many ``samples`` rows (schema versions 1 and 2) some sessions' trials have."""
-        return int(self.conn.execute(f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({_in(len(session_ids))})",
-                                     [int(s) for s in session_ids]).fetchone()[0])
+        return int(self.conn.execute(
+            f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({_in(len(session_ids))})",
+            [int(s) for s in session_ids]).fetchone()[0])
 
     def record_count(self, session_ids: Sequence[int]) -> int:
         """How many 1 kHz records some sessions' recordings hold (0 without a recording)."""
