@@ -18,6 +18,7 @@ import sqlite3
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import SupportsInt
 
 import numpy as np
 import numpy.typing as npt
@@ -26,7 +27,7 @@ import pandas as pd
 from analysis.errors import AnalysisError
 from protocol.recording import RecordingDamaged, read_ticks, recording_damage
 from protocol.records import Outcome, TrialRecord
-from protocol.storage import HEALTH_COLUMNS, StorageError, StudyDatabase, trial_id_of
+from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader, trial_id_of
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.study_rules import DEVIATION_KINDS
 
@@ -39,18 +40,18 @@ DEVIATION_EVENTS = DEVIATION_KINDS  # their one definition: protocol.study_rules
 LISTED_EVENTS = (*DEVIATION_EVENTS, "software")
 
 __all__ = [
-    "AnalysisError",
     "DEVIATION_EVENTS",
     "LISTED_EVENTS",
+    "AnalysisError",
     "Progress",
     "StudyData",
     "connect_readonly",
     "load_study",
     "read_task_force",
-    "recorded_where",
-    "stored_records",
     "read_trial_samples",
     "recorded_samples",
+    "recorded_where",
+    "stored_records",
 ]
 
 #: ``progress(done, total)`` callback, called while samples are read.
@@ -115,18 +116,25 @@ class StudyData:
         return self.trials[self.trials["excluded"] == ""]
 
 
-def _open(path: str) -> StudyDatabase:
+def _open(path: str) -> StudyReader:
     try:
         # read-only (an archive in a read-only folder opens immutable), and checked: a damaged file is one line
-        return StudyDatabase(path, readonly=True, check=True)
+        return StudyReader(path, check=True)
     except StorageError as exc:
         raise AnalysisError(str(exc)) from None
 
 
-def _query(db: StudyDatabase, sql: str) -> pd.DataFrame:
+def frame_of(rows: Rows) -> pd.DataFrame:
+    """A reader's table as a DataFrame, typed as ``pandas.read_sql_query`` types a query's result."""
+    if not rows.rows:
+        return pd.DataFrame(columns=list(rows.columns))
+    return pd.DataFrame.from_records(rows.rows, columns=list(rows.columns), coerce_float=True)
+
+
+def _query(db: StudyReader, read: Callable[[], Rows]) -> pd.DataFrame:
     try:
-        return pd.read_sql_query(sql, db.conn)
-    except (sqlite3.DatabaseError, pd.errors.DatabaseError) as exc:
+        return frame_of(read())
+    except sqlite3.DatabaseError as exc:
         raise AnalysisError(f"{db.path}: cannot read the study tables ({exc})") from None
 
 
@@ -159,13 +167,13 @@ _ANALYSED_COLUMNS = ("t_ns", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", 
                      "render_fx", "render_fy", "render_fz")
 
 
-def _mark_damage(db: StudyDatabase, path: str, trials: pd.DataFrame) -> list[str]:
+def _mark_damage(db: StudyReader, path: str, trials: pd.DataFrame) -> list[str]:
     """Verify the recording's blocks; name each trial touching a damaged one in ``trials["damage"]``; the lines."""
     trials["damage"] = ""
     if db.schema_version < 3:
         return []
     try:
-        damage = recording_damage(db.conn, columns=_ANALYSED_COLUMNS)
+        damage = recording_damage(db, columns=_ANALYSED_COLUMNS)
     except sqlite3.DatabaseError as exc:
         raise AnalysisError(f"{path}: cannot read the recording ({exc})") from None
     lines = []
@@ -191,38 +199,19 @@ def _schedule_fields(schedule_json: object) -> dict[str, object]:
 def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
     db = _open(path)
     try:
-        # schema version 4 records which code ran a session; earlier files do not
-        has_s = {r[1] for r in db.conn.execute("PRAGMA table_info(sessions)")}
-        v4 = ", ".join(f"s.{c}" if c in has_s else f"NULL AS {c}" for c in ("software_commit", "software_dirty"))
-        sessions = _query(
-            db,
-            "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
-            "s.started_at, "
-            f"s.ended_at, s.end_reason, s.software_version, {v4}, s.rig, s.protocol_json, s.config_json, "
-            "s.schedule_json FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id",
-        )
+        # schema version 4 records which code ran a session; earlier files do not (NULL)
+        sessions = _query(db, db.session_table)
         # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
-        has = {r[1] for r in db.conn.execute("PRAGMA table_info(trials)")}
-        v2 = ", ".join(c if c in has else f"NULL AS {c}"
-                       for c in ("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS))
-        trials = _query(
-            db,
-            "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
-            "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
-            "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, repeat_of, {v2} "
-            "FROM trials ORDER BY session_id, trial_index",
-        )
+        trials = _query(db, lambda: db.trial_table(("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS)))
         damage = _mark_damage(db, path, trials)
-        kinds = ", ".join(f"'{k}'" for k in LISTED_EVENTS)
-        events = _query(db, f"SELECT session_id, t_s, kind, detail FROM events WHERE kind IN ({kinds}) "
-                            "ORDER BY session_id, t_s")
+        events = _query(db, lambda: db.events(LISTED_EVENTS))
     finally:
         db.close()
     if sessions.empty:
         raise AnalysisError(f"{path}: empty study database (no sessions)")
     proto = pd.DataFrame(
-        [_protocol_fields(pj, f"{path}: session {sid}") for sid, pj in zip(sessions["session_id"], sessions["protocol_json"])],
+        [_protocol_fields(pj, f"{path}: session {sid}")
+         for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)],
         index=sessions.index,
     )
     watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
@@ -318,14 +307,15 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                      events=pd.concat(all_events, ignore_index=True), include_incomplete=include_incomplete)
 
 
-def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, int, int, int] | None = None,
+def read_task_force(conn: sqlite3.Connection | StudyReader, trial_id: int,
+                    where: tuple[int, int, int, int] | None = None,
                     ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64]]:
     """One trial's task-force samples: times since the cue (int ns) and ``force_n`` (N).
 
     Parameters
     ----------
     conn
-        An open connection to the study database.
+        A reader of the study database (:class:`protocol.storage.StudyReader`), or an open connection to it.
     trial_id
         ``session_id`` · 10⁶ + ``trial_index``.
     where
@@ -342,7 +332,7 @@ def read_task_force(conn: sqlite3.Connection, trial_id: int, where: tuple[int, i
         cols = read_ticks(conn, *where, ("t_ns", "force_n"))
         t = cols["t_ns"]  # int64, as the tick record has it
         return (t - t[0] if len(t) else t), cols["force_n"]  # the first record is the cue
-    rows = conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s", (trial_id,)).fetchall()
+    rows = StudyReader.over(conn).trial_samples(trial_id, ("t_s", "force_n")).rows
     if not rows:
         return np.empty(0, np.int64), np.empty(0, np.float64)
     block = np.array(rows, dtype=np.float64)
@@ -367,19 +357,20 @@ def stored_records(trials: pd.DataFrame) -> list[TrialRecord]:
     for row in trials.rename(columns=lambda c: c.removeprefix("stored_")).to_dict("records"):
         clean = {k: None if _empty(v) else v for k, v in row.items()}
         for k in _INT_COLUMNS:
-            if clean.get(k) is not None:
-                clean[k] = int(clean[k])
+            v = clean.get(k)
+            if v is not None:
+                clean[k] = int(v)
         out.append(TrialRecord.from_row(clean))
     return out
 
 
-def recorded_where(session_id: object, segment: object, first_tick: object, last_tick: object,
-                   ) -> tuple[int, int, int, int] | None:
+def recorded_where(session_id: SupportsInt, segment: SupportsInt | None, first_tick: SupportsInt | None,
+                   last_tick: SupportsInt | None) -> tuple[int, int, int, int] | None:
     """A trial's place in its session's recording, or None when it has none (a trial of schema version 1 or 2)."""
-    values = (segment, first_tick, last_tick)
-    if any(v is None or (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in values):
+    if segment is None or first_tick is None or last_tick is None or any(
+            (isinstance(v, float) and math.isnan(v)) or v is pd.NA for v in (segment, first_tick, last_tick)):
         return None
-    return int(session_id), int(segment), int(first_tick), int(last_tick)  # type: ignore[arg-type]
+    return int(session_id), int(segment), int(first_tick), int(last_tick)
 
 
 def connect_readonly(database: str | os.PathLike[str]) -> sqlite3.Connection:
@@ -427,21 +418,18 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     try:
         frame = pd.DataFrame()
         if db.schema_version >= 3:
-            row = db.conn.execute("SELECT segment, first_tick, last_tick FROM trials WHERE trial_id = ?",
-                                  (trial_id_of(int(session_id), int(trial_index)),)).fetchone()
+            row = db.trial_window(trial_id_of(int(session_id), int(trial_index)))
             where = None if row is None else recorded_where(session_id, *row)
             if where is not None:
                 try:
-                    cols = read_ticks(db.conn, *where, ("t_ns", *_RECORDED_TRACE))
+                    cols = read_ticks(db, *where, ("t_ns", *_RECORDED_TRACE))
                 except RecordingDamaged as exc:
-                    raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: {exc}") from None
+                    raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: "
+                                        f"{exc}") from None
                 t_ns = cols.pop("t_ns")
                 frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
         if frame.empty:
-            frame = pd.read_sql_query(
-                f"SELECT {', '.join(_SAMPLE_COLUMNS)} FROM samples WHERE trial_id = ? ORDER BY t_s",
-                db.conn, params=(trial_id_of(int(session_id), int(trial_index)),),
-            )
+            frame = frame_of(db.trial_samples(trial_id_of(int(session_id), int(trial_index)), _SAMPLE_COLUMNS))
     finally:
         db.close()
     if frame.empty:
@@ -453,7 +441,8 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
 RECORDED_COLUMNS = (
     "session_id", "segment", "tick", "session_time_s", "trial_number", "t_since_cue_s", "phase", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz", "render_fx", "render_fy", "render_fz", "gain",
-    "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms", "latency_ms",
+    "derate", "haptic_on", "faults", "stylus_x_m", "stylus_y_m", "stylus_z_m", "sensor_age_ms", "pose_age_ms",
+    "latency_ms",
 )
 
 
@@ -492,10 +481,11 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
     """
     db = _open(str(database))
     try:
-        ids = [int(r[0]) for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+        ids = db.session_ids()
         if session_id is not None:
             if int(session_id) not in ids:
-                raise AnalysisError(f"{database}: no session {session_id} (sessions: {', '.join(map(str, ids)) or 'none'})")
+                listed = ", ".join(map(str, ids)) or "none"
+                raise AnalysisError(f"{database}: no session {session_id} (sessions: {listed})")
             ids = [int(session_id)]
         damage: list[str] = []
         parts = [_session_samples(db, sid, damage) for sid in ids]
@@ -507,17 +497,15 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
     return out
 
 
-def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> pd.DataFrame:
+def _session_samples(db: StudyReader, session_id: int, damage: list[str]) -> pd.DataFrame:
     """A session's records (see :func:`samples_frame`); damaged blocks are left out and described in ``damage``."""
     from protocol.recording import read_segment, segments_of
 
     frames = []
     if db.schema_version >= 3:
-        cues = {int(i): (int(f), float(c)) for i, f, c in db.conn.execute(
-            "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
-            (session_id,))}
-        for seg, _, _ in segments_of(db.conn, session_id):
-            d = read_segment(db.conn, session_id, seg, skip_damaged=True)
+        cues = db.trial_cues(session_id)
+        for seg, _, _ in segments_of(db, session_id):
+            d = read_segment(db, session_id, seg, skip_damaged=True)
             damage.extend(x.describe() for x in d.damage)
             c = d.columns
             n = len(c["tick"])
@@ -543,9 +531,7 @@ def _session_samples(db: StudyDatabase, session_id: int, damage: list[str]) -> p
                 "latency_ms": c["latency_ns"] / 1e6,
             })
             frames.append(frame)
-    old = pd.read_sql_query(
-        "SELECT t.trial_index, t.started_at_s, s.* FROM samples s JOIN trials t USING (trial_id) "
-        "WHERE t.session_id = ? ORDER BY t.trial_index, s.t_s", db.conn, params=(session_id,))
+    old = frame_of(db.session_samples(session_id))
     if len(old):
         frames.append(pd.DataFrame({
             "session_id": session_id, "session_time_s": old["started_at_s"] + old["t_s"],

@@ -37,8 +37,8 @@ from analysis.load import load_study
 from analysis.metrics import MetricOptions, compute_trials
 from analysis.report_tables import TRIALS_CSV_COLUMNS, trials_csv
 from analysis.samples import SAMPLES_COLUMNS, samples_frame
-from protocol.storage import StorageError, StudyDatabase
-from protocol.storage.participant_data import ParticipantRows, participant_rows
+from protocol.storage import StorageError, StudyReader
+from protocol.storage.participant_data import ParticipantRows
 
 __all__ = ["FILES", "PARTICIPANT_MARKER", "ParticipantExport", "participant_export", "write_participant_export"]
 
@@ -192,12 +192,12 @@ def _recording_extras(database: str, session_ids: tuple[int, ...]) -> tuple[pd.D
     """(poses, log) of their recorded runs; damaged blocks are left out (samples_frame names them)."""
     from protocol.recording import read_segment, segments_of
 
-    db = StudyDatabase(database, readonly=True)
+    db = StudyReader(database, check=False)
     poses, logs = [], []
     try:
         for sid in session_ids:
-            for seg, _, _ in (segments_of(db.conn, sid) if db.schema_version >= 3 else []):
-                d = read_segment(db.conn, sid, seg, skip_damaged=True)
+            for seg, _, _ in (segments_of(db, sid) if db.schema_version >= 3 else []):
+                d = read_segment(db, sid, seg, skip_damaged=True)
                 p = pd.DataFrame({k: np.asarray(v) for k, v in d.poses.items()})
                 poses.append(p.assign(session_id=sid, segment=seg))
                 logs.append(pd.DataFrame(
@@ -235,17 +235,15 @@ def participant_export(database: str | os.PathLike[str], code: str,
     AnalysisError
         Not a study database, or no such participant (one who withdrew is named as such).
     """
-    from protocol.storage.withdrawal import withdrawal_of
-
     path = str(database)
     try:
-        db = StudyDatabase(path, readonly=True, check=True)
+        db = StudyReader(path, check=True)
     except StorageError as exc:
         raise AnalysisError(str(exc)) from None
     try:
-        rows = participant_rows(db.conn, code)
-        gone = withdrawal_of(db.conn, code) if rows is None else None
-        codes = [r[0] for r in db.conn.execute("SELECT code FROM participants ORDER BY code LIMIT 11")]
+        rows = db.participant_data(code)
+        gone = db.withdrawal(code) if rows is None else None
+        codes = db.participant_codes(limit=11)
     finally:
         db.close()
     if gone is not None:

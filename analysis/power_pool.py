@@ -43,6 +43,7 @@ import json
 import os
 import re
 import shutil
+import sqlite3
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +52,7 @@ from typing import Any
 from analysis.errors import AnalysisError
 from analysis.outdir import ensure_output_folder, sha256_file
 from analysis.outfs import open_folder, os_error_line, write_bytes_at
-from protocol.storage import StudyDatabase
+from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",
            "simulated_pool"]
@@ -156,34 +157,23 @@ def _check_disk(folder: Path, participants_left: int) -> None:
 
 
 def _simulated_codes(db: Path) -> int:
-    """Participants with a finished experiment session in a (partial) pool, read-only."""
-    import sqlite3
-
+    """Participants with a finished experiment session in a (partial) pool, read-only (0 when it cannot be read)."""
     try:
-        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
-        try:
-            return int(con.execute("SELECT COUNT(DISTINCT participant_id) FROM sessions WHERE kind = 'experiment' "
-                                   "AND status = 'completed'").fetchone()[0])
-        finally:
-            con.close()
-    except sqlite3.Error:
+        with StudyReader(db, check=False) as reader:
+            return len({s.participant_id for s in reader.sessions()
+                        if s.kind == "experiment" and s.status == "completed"})
+    except (StorageError, sqlite3.Error):
         return 0
 
 
 def _cut_participants(db: Path) -> list[str]:
     """Participants with a session that did not complete (an interrupted simulation), read-only."""
-    import sqlite3
-
     try:
-        con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
-        try:
-            rows = con.execute("SELECT DISTINCT p.code FROM sessions s JOIN participants p USING (participant_id) "
-                               "WHERE s.status != 'completed'").fetchall()
-        finally:
-            con.close()
-    except sqlite3.Error as exc:
+        with StudyReader(db, check=False) as reader:
+            codes = {s.code for s in reader.sessions() if s.status != "completed"}
+    except (StorageError, sqlite3.Error) as exc:
         raise PoolError(f"{db}: cannot read the interrupted pool ({exc}); it is not used (nor deleted)") from None
-    return sorted(str(r[0]) for r in rows)
+    return sorted(codes)
 
 
 def _verified(db: Path, record: dict[str, Any]) -> str:

@@ -67,8 +67,7 @@ _RENAME = {"force_n": "force_N", "phase": "phase_code",
 def _codes(database: str | os.PathLike[str]) -> dict[int, str]:
     db = _open(str(database))
     try:
-        return {int(s): str(c) for s, c in db.conn.execute(
-            "SELECT s.session_id, p.code FROM sessions s JOIN participants p USING (participant_id)")}
+        return db.session_codes()
     finally:
         db.close()
 
@@ -118,6 +117,7 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
 def codebook_frame(file: str, columns: list[str]) -> pd.DataFrame:
     """The codebook of an export: one row per column of ``file`` (``file, column, type, unit, description``)."""
     entries = {name: (kind, unit, text) for name, kind, unit, text in SAMPLES_COLUMNS}
-    rows = [{"file": file, "column": c, "type": entries.get(c, ("", "", ""))[0], "unit": entries.get(c, ("", "", ""))[1],
+    rows = [{"file": file, "column": c, "type": entries.get(c, ("", "", ""))[0],
+             "unit": entries.get(c, ("", "", ""))[1],
              "description": entries.get(c, ("", "", ""))[2]} for c in columns]
     return pd.DataFrame(rows, columns=["file", "column", "type", "unit", "description"])

@@ -73,9 +73,9 @@ def aborted_reruns(study: StudyData) -> tuple[int, int]:
     if t.empty:
         return 0, 0
     rep = study.trials[study.trials["repeat_of"].notna()]
-    repeats = set(zip(rep["database"], rep["session_id"], rep["repeat_of"].astype(int)))
-    rerun = sum((db, sid, int(idx)) in repeats for db, sid, idx in zip(t["database"], t["session_id"],
-                                                                       t["trial_index"]))
+    repeats = set(zip(rep["database"], rep["session_id"], rep["repeat_of"].astype(int), strict=True))
+    rerun = sum((db, sid, int(idx)) in repeats
+                for db, sid, idx in zip(t["database"], t["session_id"], t["trial_index"], strict=True))
     return len(t), int(rerun)
 
 
@@ -128,7 +128,8 @@ def provenance(study: StudyData) -> tuple[pd.DataFrame, list[str]]:
     """
     s = study.sessions
     code = pd.Series([code_label(v, c, (None if pd.isna(d) else bool(d))) for v, c, d in
-                      zip(s["software_version"], s["software_commit"], s["software_dirty"])], index=s.index)
+                      zip(s["software_version"], s["software_commit"], s["software_dirty"], strict=True)],
+                     index=s.index)
     parts = pd.concat([pd.DataFrame({"database": s["database"], "session_id": s["session_id"], "code": code}),
                        _resumed_code(study)], ignore_index=True).drop_duplicates()
     rows = []

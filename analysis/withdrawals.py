@@ -17,8 +17,7 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 from analysis.load import StudyData
-from protocol.storage import StorageError, connect_readonly
-from protocol.storage.withdrawal import withdrawals
+from protocol.storage import StorageError, StudyReader
 
 __all__ = ["study_withdrawals", "withdrawals_html"]
 
@@ -28,13 +27,11 @@ def study_withdrawals(databases: Sequence[str | os.PathLike[str]]) -> pd.DataFra
     rows = []
     for path in databases:
         try:
-            conn = connect_readonly(path)
+            reader = StudyReader(path, check=False)  # (load_study checked the file)
         except StorageError as exc:
             raise AnalysisError(str(exc)) from None
-        try:
-            rows += [{"database": str(path), **asdict(w)} for w in withdrawals(conn)]
-        finally:
-            conn.close()
+        with reader:
+            rows += [{"database": str(path), **asdict(w)} for w in reader.withdrawals()]
     return pd.DataFrame(rows, columns=["database", "code", "withdrawn_at", "reason", "removed_sessions",
                                        "removed_trials", "removed_events", "removed_blocks", "removed_records",
                                        "removed_samples"])

@@ -38,6 +38,7 @@ from protocol.recording.integrity import (
     block_rows,
     describe_damage,
 )
+from protocol.storage.reader import StudyReader
 
 __all__ = ["Audit", "audit_database"]
 
@@ -94,7 +95,7 @@ class Audit:
 def _integrity(conn: sqlite3.Connection, audit: Audit) -> bool:
     """SQLite's integrity check; False when the file cannot be read at all."""
     try:
-        rows = [" ".join(str(r[0]).split()) for r in conn.execute("PRAGMA integrity_check(20)")]
+        rows = StudyReader.over(conn).integrity_check(20)
     except sqlite3.DatabaseError as exc:
         audit.integrity = [str(exc)]
         audit.problems.append(f"SQLite integrity check: {exc}")
@@ -108,7 +109,7 @@ def _integrity(conn: sqlite3.Connection, audit: Audit) -> bool:
 def _blocks(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int], None] | None) -> dict[
         tuple[int, int], list[tuple[int, int, bool]]]:
     """Verify every block; per (session, segment) the tick ranges of its blocks and whether each is readable."""
-    total = int(conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
+    total = StudyReader.over(conn).block_count()
     runs: dict[tuple[int, int], list[tuple[int, int, bool]]] = {}
     bad: list[tuple[BlockRow, str]] = []
     last: dict[tuple[int, int], int] = {}
@@ -145,9 +146,7 @@ def _readable(runs: list[tuple[int, int, bool]], first: int, last: int) -> bool:
 
 def _trials_against_recording(conn: sqlite3.Connection, audit: Audit,
                               runs: dict[tuple[int, int], list[tuple[int, int, bool]]]) -> None:
-    for sid, idx, seg, first, last in conn.execute(
-            "SELECT session_id, trial_index, segment, first_tick, last_tick FROM trials "
-            "WHERE segment IS NOT NULL AND first_tick IS NOT NULL ORDER BY session_id, trial_index"):
+    for sid, idx, seg, first, last in StudyReader.over(conn).trial_places():
         if _readable(runs.get((sid, seg), []), first, last):
             audit.trials_in_recording += 1
             continue
@@ -159,9 +158,7 @@ def _trials_against_recording(conn: sqlite3.Connection, audit: Audit,
 
 def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
     """Every experiment session's trials against its schedule and its protocol's design."""
-    sessions = conn.execute("SELECT s.session_id, p.code, s.status, s.protocol_json, s.schedule_json FROM sessions s "
-                            "JOIN participants p USING (participant_id) WHERE s.kind = 'experiment' "
-                            "ORDER BY s.session_id").fetchall()
+    sessions = StudyReader.over(conn).experiment_designs()
     audit.experiment_sessions = len(sessions)
     for sid, code, status, protocol_json, schedule_json in sessions:
         where = f"session {sid} ({code}, {status})"
@@ -171,8 +168,7 @@ def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
         except (ProtocolError, ValueError, TypeError, KeyError) as exc:
             audit.problems.append(f"{where}: its protocol or schedule cannot be read ({exc})")
             continue
-        rows = {int(i): (lab, mode, out) for i, lab, mode, out in conn.execute(
-            "SELECT trial_index, target_label, haptic_mode, outcome FROM trials WHERE session_id = ?", (sid,))}
+        rows = {int(i): (lab, mode, out) for i, lab, mode, out in StudyReader.over(conn).trial_cells(sid)}
         found: list[str] = []
         for i, (lab, mode, out) in sorted(rows.items()):
             if i >= len(schedule) or (schedule[i].target_label, str(schedule[i].haptic_mode)) != (lab, mode):
@@ -217,12 +213,12 @@ def audit_database(conn: sqlite3.Connection, path: str,
         ``progress(blocks done, blocks)`` while the blocks are decoded.
     """
     audit = Audit(path=path)
-    audit.schema_version = int(conn.execute("PRAGMA user_version").fetchone()[0])
+    audit.schema_version = StudyReader.over(conn).schema_version
     if not _integrity(conn, audit):
         return audit
     try:
-        audit.sessions = int(conn.execute("SELECT COUNT(*) FROM sessions").fetchone()[0])
-        audit.trials = int(conn.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
+        audit.sessions = StudyReader.over(conn).session_count()
+        audit.trials = StudyReader.over(conn).trial_count()
         if audit.schema_version >= 3:
             runs = _blocks(conn, audit, progress)
             _trials_against_recording(conn, audit, runs)

@@ -22,6 +22,7 @@ begins with the protocol's pause before its next cue.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 from collections.abc import Callable
@@ -35,12 +36,12 @@ from pipeline.loop_messages import Command
 from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.delivery import DeliveryLimits
-from protocol.design import TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.design import HapticMode, TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 from protocol.metrics import trial_metrics
 from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
-from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, session_scope
+from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
 from protocol.study_rules import DEVIATION_EVENT, check_new_session, stored_sessions
 from protocol.version import software_provenance
 
@@ -75,10 +76,10 @@ def participant_seeds(study_seed: int, number: int) -> tuple[int, int]:
 
 def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
     """Free practice: each mode in turn, each target once, with the live force aid."""
-    out = []
+    out: list[TrialSpec] = []
     for m in protocol.modes:
         for t in protocol.targets:
-            out.append(TrialSpec(len(out), t.label, t.force_n, m))
+            out.append(TrialSpec(len(out), t.label, t.force_n, HapticMode(m)))
     return out
 
 
@@ -241,9 +242,9 @@ def open_resumed_session(
     info = next((s for s in db.open_sessions() if s.session_id == session_id), None)
     if info is None:
         db.release_lease(session_scope(session_id), lease_owner)
-        row = db.conn.execute("SELECT status FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
-        why = ("there is no such session" if row is None else
-               f"it has ended (status {row[0]}), perhaps run to its end by another process meanwhile")
+        stored = StudyReader.over(db).session(session_id)
+        why = ("there is no such session" if stored is None else
+               f"it has ended (status {stored.status}), perhaps run to its end by another process meanwhile")
         raise StorageError(f"session {session_id} in {db.path} cannot be resumed: {why}; nothing was changed")
     protocol = protocol_from_dict(json.loads(info.protocol_json), f"session {session_id} protocol")
     schedule = schedule_from_json(info.schedule_json)
@@ -297,7 +298,8 @@ def refuse_damaged_recording(db: StudyDatabase, session_id: int) -> None:
     """
     damage = recording_damage(db.conn, session_id, columns=None)
     if damage:
-        more = f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})" if len(damage) > 1 else ""
+        more = (f" (and {len(damage) - 1} more damaged stretch{'es' if len(damage) > 2 else ''})"
+                if len(damage) > 1 else "")
         raise StorageError(
             f"session {session_id} in {db.path} cannot be resumed: its recording is damaged: {damage[0].describe()}"
             f"{more}; a resumed run would append to a session part of which cannot be read; nothing was changed "
@@ -329,8 +331,7 @@ def _interrupted_trial(
         cue_s = SessionClock(started_at_s, t0_ns).seconds(origin_ns)
         ticks = (int(cols["tick"][0]), int(cols["tick"][-1]))
     else:
-        samples = db.conn.execute("SELECT t_s, force_n FROM samples WHERE trial_id = ? ORDER BY t_s",
-                                  (trial_id_of(sid, spec.index),)).fetchall()
+        samples = StudyReader.over(db).trial_samples(trial_id_of(sid, spec.index), ("t_s", "force_n")).rows
         # t_s was stored as ns / 1e9 since the cue: rounding recovers the integer ns exactly
         t_ns = np.rint(np.array([r[0] for r in samples], dtype=np.float64) * 1e9).astype(np.int64)
         force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
@@ -353,12 +354,7 @@ def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float |
     tick earlier at most) stands in when the run ended before that was stored.
     """
     name, old = trial_words(trial_index), f"trial {trial_index}"  # (versions 1 and 2 named trials by index)
-    rows = db.conn.execute(
-        "SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail IN (?, ?)) OR "
-        "(kind = 'cue' AND (detail LIKE ? OR detail LIKE ?))) ORDER BY t_s DESC",
-        (session_id, f"{name}: cued -> active", f"{old}: cued -> active", f"{name}: %", f"{old}: %"),
-    ).fetchall()
-    by_kind = {k: t for k, t in rows}
+    by_kind = dict(StudyReader.over(db).trial_start_events(session_id, (name, old)))
     t = by_kind.get("phase", by_kind.get("cue"))
     return None if t is None else float(t)
 
@@ -428,7 +424,6 @@ def finish_session(db: StudyDatabase, recorder: Recorder, opened: OpenedSession)
     try:
         recorder.close()
     finally:
-        try:
+        # a lease left behind is taken over once this process is gone
+        with contextlib.suppress(Exception):
             db.release_lease(session_scope(opened.session_id), opened.lease_owner)
-        except Exception:  # noqa: BLE001 - a lease left behind is taken over once this process is gone
-            pass

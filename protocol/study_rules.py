@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from protocol.config import ProtocolConfig
-from protocol.storage import StorageError, StudyDatabase
+from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = [
     "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession", "StudyRuleError", "check_new_session", "next_kind",
@@ -65,10 +65,8 @@ class StoredSession:
 
 def stored_sessions(db: StudyDatabase) -> list[StoredSession]:
     """Every session of the database, oldest first."""
-    rows = db.conn.execute(
-        "SELECT s.session_id, p.code, s.kind, s.status, s.seed FROM sessions s JOIN participants p "
-        "USING (participant_id) ORDER BY s.session_id").fetchall()
-    return [StoredSession(int(r[0]), str(r[1]), str(r[2]), str(r[3]), int(r[4])) for r in rows]
+    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed))
+            for s in StudyReader.over(db).sessions()]
 
 
 def study_seed(sessions: Iterable[StoredSession]) -> StoredSession | None:

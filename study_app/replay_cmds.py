@@ -94,7 +94,8 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
-    es.add_argument("--out", required=True, metavar="FILE", help="file to write (must not exist); - writes csv to standard output")
+    es.add_argument("--out", required=True, metavar="FILE",
+                    help="file to write (must not exist); - writes csv to standard output")
     es.set_defaults(handler=cmd_export)
     add_export_participant_parser(esub)  # everything about one participant (study_app/export_participant_cmds.py)
 
@@ -106,39 +107,35 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
     A damaged recording is that one-line error, or with ``partial`` its damaged blocks are left out and
     named on standard error (a partial result, stated as such).
     """
+    from analysis.load import frame_of
     from protocol.recording import RecordingDamaged, read_segment, segments_of
-    from protocol.storage import StorageError, StudyDatabase
+    from protocol.storage import StorageError, StudyReader
 
     try:
-        db = StudyDatabase(db_path, readonly=True, check=True)
+        db = StudyReader(db_path, check=True)
     except StorageError as exc:
         raise CliError(str(exc)) from None
-    row = db.conn.execute("SELECT p.code, s.kind FROM sessions s JOIN participants p USING (participant_id) "
-                          "WHERE s.session_id = ?", (session_id,)).fetchone()
-    if row is None:
-        ids = [r[0] for r in db.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+    info = db.session(session_id)
+    if info is None:
+        ids = db.session_ids()
         db.close()
         raise CliError(f"--session {session_id}: no such session in {db_path} (sessions: "
                          f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
-    segs = segments_of(db.conn, session_id) if db.schema_version >= 3 else []
+    row = (info.code, info.kind)
+    segs = segments_of(db, session_id) if db.schema_version >= 3 else []
     if not segs:
         db.close()
         raise CliError(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
                          "which kept its trials' samples only); replay and plot-session need a recorded session")
     try:
-        segments = [read_segment(db.conn, session_id, s[0], skip_damaged=partial) for s in segs]
+        segments = [read_segment(db, session_id, s[0], skip_damaged=partial) for s in segs]
     except RecordingDamaged as exc:
         db.close()
         raise CliError(f"--session {session_id} in {db_path}: {exc} (haptic-study check --db {db_path} lists "
                        "every damaged block)") from None
     for d in (d for seg in segments for d in seg.damage):
         print(f"haptic-study: recording damaged: {d.describe()}: left out, the result is partial", file=sys.stderr)
-    import pandas as pd
-
-    trials = pd.read_sql_query(
-        "SELECT trial_index, target_label, target_force_n, haptic_mode, outcome, segment, first_tick, last_tick, "
-        "started_at_s, ended_at_s, abort_reason FROM trials WHERE session_id = ? AND first_tick IS NOT NULL "
-        "ORDER BY trial_index", db.conn, params=(session_id,))
+    trials = frame_of(db.recorded_trial_table(session_id))
     db.close()
     trials.insert(0, "code", row[0])
     trials.insert(1, "session_kind", row[1])
@@ -204,12 +201,13 @@ def _replay_as_recorded(session_id: int, code: str, kind: str, segments: list[An
         raise CliError(f"--session {session_id}: {exc}") from None
     wall = time.perf_counter() - t0
     exact = [all(np.array_equal(o.column(f"render_{a}"), s.columns[f"render_{a}"]) for a in ("fx", "fy", "fz"))
-             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments)]
+             and np.array_equal(o.force_n, s.columns["force_n"]) for o, s in zip(outputs, segments, strict=True)]
     gaps = [s.segment for s in segments if not s.continuous]
     print(f"Session {session_id} ({code}, {kind}): {len(segments)} recorded run{'s' if len(segments) != 1 else ''}, "
           f"{n:,} records ({n / 1000:.1f} s at 1 kHz), replayed in {wall:.1f} s")
     verdict = ("bit-identical to the recording" if all(exact) else
-               f"DIFFERENT from the recording in run(s) {[s.segment for s, ok in zip(segments, exact) if not ok]}")
+               f"DIFFERENT from the recording in run(s) "
+               f"{[s.segment for s, ok in zip(segments, exact, strict=True) if not ok]}")
     print(f"  recorded settings: rendered force and task force {verdict}")
     if gaps:
         print(f"  note: run(s) {gaps} miss records (a gap the loop logged): replay after a gap is approximate")
@@ -334,18 +332,18 @@ def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: A
     """What plot-session marks besides the force: target bands, aborted trials, pauses, resumes."""
     import json
 
-    from analysis.load import connect_readonly
     from analysis.session_figures import SessionMarks
     from protocol.metrics import band_halfwidth_n
+    from protocol.storage import StorageError, StudyReader
 
-    conn = connect_readonly(db_path)
     try:
-        (protocol_json,) = conn.execute("SELECT protocol_json FROM sessions WHERE session_id = ?",
-                                        (session_id,)).fetchone()
-        events = conn.execute("SELECT t_s, detail FROM events WHERE session_id = ? AND kind = 'experimenter' "
-                              "AND detail IN ('pause', 'resume') ORDER BY t_s", (session_id,)).fetchall()
-    finally:
-        conn.close()
+        db = StudyReader(db_path, check=False)  # (checked by _session, which read the segments)
+    except StorageError as exc:
+        raise CliError(str(exc)) from None
+    with db:
+        stored = db.session(session_id)
+        protocol_json = "{}" if stored is None else stored.protocol_json
+        events = db.session_events(session_id, "experimenter", ("pause", "resume"))
     tol = float(json.loads(protocol_json)["trial"]["tolerance_fraction"])
     bands = [(float(r.started_at_s), float(r.ended_at_s), r.target_force_n - band_halfwidth_n(r.target_force_n, tol),
               r.target_force_n + band_halfwidth_n(r.target_force_n, tol)) for r in trials.itertuples()]

@@ -12,22 +12,9 @@ import json
 import os
 from typing import Any
 
-from protocol.storage import StorageError, StudyDatabase
+from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["format_sessions", "list_sessions", "next_participant_number"]
-
-_SQL = """
-SELECT s.session_id, p.code, s.participant_number, s.kind, s.status, s.rig, s.seed, s.started_at, s.ended_at,
-       s.end_reason, s.schedule_json,
-       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome != 'aborted'),
-       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'aborted'),
-       (SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'success'),
-       (SELECT MIN(trial_index) FROM trials t WHERE t.session_id = s.session_id),
-       (SELECT MAX(trial_index) FROM trials t WHERE t.session_id = s.session_id)
-FROM sessions s JOIN participants p USING (participant_id)
-ORDER BY s.session_id
-"""
-
 
 def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> list[dict[str, Any]]:
     """Every session of a study database, oldest first; empty when the file does not exist yet.
@@ -52,7 +39,7 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         return []
     db = StudyDatabase(db_path, readonly=True, check=check)
     try:
-        rows = db.conn.execute(_SQL).fetchall()
+        rows = StudyReader.over(db).session_overview()
         writers = db.sessions_being_written()
     finally:
         db.close()

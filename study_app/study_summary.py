@@ -1,63 +1,83 @@
-"""The one-screen summary printed after ``haptic-study run``."""
+"""The one-screen summary printed after ``haptic-study run``.
+
+Its per-mode mean ± SD across participants is the report's (:func:`analysis.aggregate.per_participant`, then
+:func:`analysis.aggregate.mean_sd` across participants), computed from the metrics each trial stored live.
+"""
 
 from __future__ import annotations
 
 import math
-from collections import Counter, defaultdict
-from statistics import fmean, stdev
+from collections import Counter
 
-from protocol.storage import connect_readonly
+import pandas as pd
+
+from analysis.aggregate import by_mode, mean_sd, per_participant
+from protocol.records import Outcome, TrialRecord
+from protocol.storage import StudyReader
 
 __all__ = ["format_study_summary"]
 
 #: The paper's results (Sec. V-B), for the comparison column.
 PAPER = {"success": (0.27, 0.54), "rmse_n": (1.35, 0.86), "max_ae_n": (2.12, 1.46)}
 
-
-def _mean(xs: list[float]) -> float:
-    xs = [x for x in xs if x is not None and math.isfinite(x)]
-    return fmean(xs) if xs else math.nan
-
-
-def _mean_sd(xs: list[float]) -> tuple[float, float]:
-    xs = [x for x in xs if x is not None and math.isfinite(x)]
-    if not xs:
-        return math.nan, math.nan
-    return fmean(xs), stdev(xs) if len(xs) > 1 else math.nan  # one participant has no spread
+#: The summary's rows: label, the paper's key (None: TCT, quoted as a change), the column of per_participant.
+_ROWS = (
+    ("success rate", "success", "success_rate"),
+    ("TCT, successful trials (s)", None, "tct_s"),
+    ("RMSE (N)", "rmse_n", "rmse_n"),
+    ("Max AE (N)", "max_ae_n", "max_ae_n"),
+)
 
 
 def _plural(n: int, word: str) -> str:
     return f"{n} {word}{'' if n == 1 else 's'}"
 
 
+def _value(v: float | None) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _trials_frame(exp: list[tuple[str, TrialRecord]]) -> pd.DataFrame:
+    """The analysed trials as :func:`analysis.aggregate.per_participant` takes them, with their stored metrics."""
+    ok = [t.outcome is Outcome.SUCCESS for _, t in exp]
+    return pd.DataFrame({
+        "participant_code": [c for c, _ in exp], "haptic_mode": [t.haptic_mode.value for _, t in exp],
+        "target_label": [t.target_label for _, t in exp], "success": ok,
+        "tct_s": [_value(t.tct_s) if s else math.nan for (_, t), s in zip(exp, ok, strict=True)],
+        **{m: [_value(getattr(t, m)) for _, t in exp] for m in ("rmse_n", "max_ae_n", "time_in_band_s",
+                                                                  "peak_force_n")},
+    })
+
+
+def _across(per_part: pd.DataFrame | None, metric: str, mode: str) -> tuple[float, float]:
+    """Mean and SD across participants of their per-mode means (SD NaN for one participant: no spread)."""
+    if per_part is None or per_part.empty:
+        return math.nan, math.nan
+    mean, sd, n = mean_sd(by_mode(per_part, metric)[mode])
+    return mean, sd if n > 1 else math.nan
+
+
+def _cell(v: tuple[float, float]) -> str:
+    if not math.isfinite(v[0]):
+        return "–"
+    return f"{v[0]:.3f}" + (f" ± {v[1]:.3f}" if math.isfinite(v[1]) else "")
+
+
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
     """Per-mode mean ± SD across participants, each participant's trials averaged first (as ``report`` does)."""
-    conn = connect_readonly(db_path)
-    try:
-        q = ",".join("?" * len(session_ids)) or "NULL"
-        rows = conn.execute(
-            f"SELECT p.code, t.haptic_mode, t.target_label, t.outcome, t.tct_s, t.rmse_n, t.max_ae_n, s.kind, "
-            f"t.abort_cause "
-            f"FROM trials t JOIN sessions s USING (session_id) JOIN participants p USING (participant_id) "
-            f"WHERE t.session_id IN ({q})", session_ids,
-        ).fetchall()
-        n_samples = conn.execute(
-            f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({q})", session_ids
-        ).fetchone()[0]
-        recorded = (conn.execute(f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({q})",
-                                 session_ids).fetchone()[0]
-                    if conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'session_blocks'").fetchone() else 0)
-    finally:
-        conn.close()
-    exp = [r for r in rows if r[7] == "experiment" and r[3] != "aborted"]
-    causes = Counter(r[8] or "cause not recorded" for r in rows if r[7] == "experiment" and r[3] == "aborted")
+    with StudyReader(db_path, check=False) as reader:  # the run just wrote it
+        sessions = {s.session_id: s for s in reader.sessions()}
+        records = reader.trial_records(session_ids)
+        n_samples = reader.sample_count(session_ids)
+        recorded = reader.record_count(session_ids)
+    experiment = [t for t in records if sessions[t.session_id].kind == "experiment"]
+    exp = [(sessions[t.session_id].code, t) for t in experiment if t.outcome is not Outcome.ABORTED]
+    causes = Counter("cause not recorded" if t.abort_cause is None else t.abort_cause.value
+                     for t in experiment if t.outcome is Outcome.ABORTED)
     aborted = sum(causes.values())
     why = (": " + ", ".join(f"{n} {c}" for c, n in sorted(causes.items()))) if causes else ""
-    training = sum(1 for r in rows if r[7] == "training")
-    per: dict[tuple[str, str], list[tuple]] = defaultdict(list)
-    for r in exp:
-        per[(r[0], r[1])].append(r)
-    codes = sorted({r[0] for r in exp})
+    training = sum(1 for t in records if sessions[t.session_id].kind == "training")
+    codes = sorted({c for c, _ in exp})
     lines = [
         f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
         f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), "
@@ -66,33 +86,23 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
-
-    def metric(mode: str, fn) -> tuple[float, float]:  # type: ignore[no-untyped-def]
-        return _mean_sd([fn(per[(c, mode)]) for c in codes if per[(c, mode)]])
-
-    def cell(v: tuple[float, float]) -> str:
-        if not math.isfinite(v[0]):
-            return "–"
-        return f"{v[0]:.3f}" + (f" ± {v[1]:.3f}" if math.isfinite(v[1]) else "")
-
-    defs = [
-        ("success rate", "success", lambda ts: sum(t[3] == "success" for t in ts) / len(ts)),
-        ("TCT, successful trials (s)", None, lambda ts: _mean([t[4] for t in ts if t[3] == "success"])),
-        ("RMSE (N)", "rmse_n", lambda ts: _mean([t[5] for t in ts])),
-        ("Max AE (N)", "max_ae_n", lambda ts: _mean([t[6] for t in ts])),
-    ]
-    for name, key, fn in defs:
-        off, on = metric("off", fn), metric("on", fn)
-        change = (on[0] - off[0]) / off[0] * 100 if off[0] and math.isfinite(off[0]) and math.isfinite(on[0]) else math.nan
+    frame = _trials_frame(exp) if exp else None
+    overall = None if frame is None else per_participant(frame)
+    for name, key, metric in _ROWS:
+        off, on = _across(overall, metric, "off"), _across(overall, metric, "on")
+        finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
+        change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
-        lines.append(f"  {name:<30}{cell(off):>16}{cell(on):>16}{change_txt}   {paper}")
-    for label in sorted({r[2] for r in exp}):
-        off = metric("off", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
-        on = metric("on", lambda ts, l=label: _mean([float(t[3] == 'success') for t in ts if t[2] == l]))
-        lines.append(f"  {'success, ' + label:<30}{cell(off):>16}{cell(on):>16}")
+        lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
+    targets = None if frame is None else per_participant(frame, by_target=True)
+    for label in sorted({t.target_label for _, t in exp}):
+        part = None if targets is None else targets[targets["target_label"] == label]
+        off, on = _across(part, "success_rate", "off"), _across(part, "success_rate", "on")
+        lines.append(f"  {'success, ' + label:<30}{_cell(off):>16}{_cell(on):>16}")
     lines.append("")
     where = "recordings, session_blocks" if recorded else "samples"
     lines.append(f"Wall time {wall_s:.1f} s. Every trial, record and event is in the database (tables trials, {where}, "
                  "events).")
     return "\n".join(lines)
+

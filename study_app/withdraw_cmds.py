@@ -85,7 +85,7 @@ def _look(path: str, code: str) -> Any:
     A participant who already withdrew is refused, unless a program reading the study kept that withdrawal's
     rewrite of the file from finishing: then their :class:`Withdrawal` is returned, and this command finishes it.
     """
-    from protocol.storage import LeaseHeld, StorageError, StudyDatabase
+    from protocol.storage import LeaseHeld, StorageError, StudyDatabase, StudyReader
     from protocol.storage.withdrawal import footprint, withdrawal_of
 
     if not Path(path).exists():
@@ -104,7 +104,7 @@ def _look(path: str, code: str) -> Any:
                            "nothing to remove")
         fp = footprint(db.conn, code)
         if fp is None:
-            codes = [r[0] for r in db.conn.execute("SELECT code FROM participants ORDER BY code LIMIT 11")]
+            codes = StudyReader.over(db).participant_codes(limit=11)
             listed = ", ".join(codes[:10]) + (", …" if len(codes) > 10 else "")
             raise CliError(f"--participant {code}: no such participant in {path} (participants: {listed or 'none'})")
         writing = db.sessions_being_written()

@@ -22,11 +22,14 @@ import math
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from protocol.recording.codec import COLUMNS, decode_block, decode_columns
+
+if TYPE_CHECKING:
+    from protocol.storage.reader import StudyReader
 
 __all__ = [
     "BlockDamage",
@@ -35,6 +38,7 @@ __all__ = [
     "block_problem",
     "block_rows",
     "describe_damage",
+    "reader_of",
     "recording_damage",
 ]
 
@@ -75,7 +79,8 @@ class BlockDamage:
     trials: tuple[int, ...] = ()
 
     def describe(self) -> str:
-        """One line: ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches trial 5``."""
+        """One line, e.g. ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches
+        trial 5``."""
         blocks = (f"block {self.first_block}" if self.first_block == self.last_block
                   else f"blocks {self.first_block}–{self.last_block}")
         touches = ("touches no trial" if not self.trials else
@@ -98,17 +103,22 @@ class RecordingDamaged(ValueError):
         super().__init__("; ".join(f"recording damaged: {d.describe()}" for d in self.damage))
 
 
-def block_rows(conn: Any, where: str = "", args: Sequence[Any] = ()) -> Iterable[BlockRow]:
-    """``session_blocks`` rows (``where``: an SQL condition on its columns), by session, segment and block.
+def reader_of(source: Any) -> StudyReader:
+    """A :class:`protocol.storage.StudyReader` over ``source`` (a reader, a ``StudyDatabase`` or a connection)."""
+    from protocol.storage.reader import StudyReader  # (protocol.storage's recorder imports this package)
+
+    return StudyReader.over(source)
+
+
+def block_rows(source: Any, session_id: int | None = None, segment: int | None = None,
+               ticks: tuple[int, int] | None = None) -> Iterable[BlockRow]:
+    """``session_blocks`` rows (of a session, a segment, those overlapping ticks ``(first, last)``), by session,
+    segment and block; ``source`` is a reader, a ``StudyDatabase`` or a connection (:func:`reader_of`).
 
     A version-3 file read as it is has no ``crc32`` (its blocks read as not verifiable); a column a table
     lacks reads as NULL (NaN times).
     """
-    have = {d[0] for d in conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
-    cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
-    sql = (f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM session_blocks "
-           f"{'WHERE ' + where if where else ''} ORDER BY session_id, segment, block")
-    for r in conn.execute(sql, tuple(args)):
+    for r in reader_of(source).blocks(session_id, segment, ticks):
         yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
                        math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
                        bytes(r[6]), None if r[9] is None else int(r[9]))
@@ -133,7 +143,7 @@ def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: b
     names = [c.name for c in COLUMNS] if whole or columns is None else list(dict.fromkeys(["tick", *columns]))
     try:
         cols = decode_block(row.data)[0] if whole or columns is None else decode_columns(row.data, names)
-    except Exception as exc:  # noqa: BLE001 - any failure to decode is damage: zlib, struct, json, numpy alike
+    except Exception as exc:  # any failure to decode is damage: zlib, struct, json, numpy alike
         return decode_failure(exc)
     why = columns_problem(cols, names)
     if why:
@@ -166,13 +176,9 @@ def columns_problem(cols: Mapping[str, np.ndarray], names: Iterable[str]) -> str
     return ""
 
 
-def _trials_touched(conn: Any, session_id: int, segment: int, first_tick: int, last_tick: int) -> tuple[int, ...]:
-    cols = {r[1] for r in conn.execute("PRAGMA table_info(trials)")}
-    if "first_tick" not in cols:
-        return ()
-    return tuple(int(i) + 1 for (i,) in conn.execute(
-        "SELECT trial_index FROM trials WHERE session_id = ? AND segment = ? AND first_tick <= ? AND last_tick >= ? "
-        "ORDER BY trial_index", (session_id, segment, last_tick, first_tick)))
+def _trials_touched(source: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
+                   ) -> tuple[int, ...]:
+    return tuple(i + 1 for i in reader_of(source).trials_touching(session_id, segment, first_tick, last_tick))
 
 
 def describe_damage(conn: Any, bad: Sequence[tuple[BlockRow, str]]) -> list[BlockDamage]:
@@ -197,9 +203,9 @@ def recording_damage(conn: Any, session_id: int | None = None, *, columns: Itera
     ``columns`` say (see :func:`block_problem`), and with ``whole`` every block is decoded in full.
     A database without recordings (version 1 or 2) has none.
     """
-    if conn.execute("SELECT COUNT(*) FROM sqlite_master WHERE name = 'session_blocks'").fetchone()[0] == 0:
+    reader = reader_of(conn)
+    if not reader.has_recordings():
         return []
-    where, args = ("session_id = ?", (session_id,)) if session_id is not None else ("", ())
     cols = None if columns is None else tuple(columns)
-    bad = [(r, why) for r in block_rows(conn, where, args) if (why := block_problem(r, cols, whole=whole))]
-    return describe_damage(conn, bad)
+    bad = [(r, why) for r in block_rows(reader, session_id) if (why := block_problem(r, cols, whole=whole))]
+    return describe_damage(reader, bad)

@@ -27,6 +27,7 @@ from protocol.recording.integrity import (
     columns_problem,
     decode_failure,
     describe_damage,
+    reader_of,
 )
 
 __all__ = ["RecordingDamaged", "SegmentData", "marked_records", "read_segment", "read_ticks", "segments_of"]
@@ -95,8 +96,7 @@ class SegmentData:
 
 def segments_of(conn: Any, session_id: int) -> list[tuple[int, float, int]]:
     """A session's recorded segments: (segment, started_at_s, t0_ns), in order (none for a version-2 session)."""
-    return [(int(a), float(b), int(c)) for a, b, c in conn.execute(
-        "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment", (session_id,))]
+    return reader_of(conn).recordings(session_id)
 
 
 def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: list[str] | None = None,
@@ -110,9 +110,9 @@ def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: lis
         why = block_problem(r)
         if not why:
             try:
-                decoded = decode_block(r.data) if names is None else decode_columns(r.data, names)
+                decoded: Any = decode_block(r.data) if names is None else decode_columns(r.data, names)
                 why = columns_problem(decoded[0] if names is None else decoded, want)
-            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+            except Exception as exc:  # any failure to decode is damage (see integrity.block_problem)
                 why = decode_failure(exc)
             if not why:
                 good.append(decoded)
@@ -133,12 +133,11 @@ def read_segment(conn: Any, session_id: int, segment: int, *, skip_damaged: bool
         A block of it is damaged (one line naming where); with ``skip_damaged`` the damaged blocks are left
         out instead and listed in :attr:`SegmentData.damage`.
     """
-    row = conn.execute("SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
-                       (session_id, segment)).fetchone()
+    reader = reader_of(conn)
+    row = reader.recording(session_id, segment)
     if row is None:
         raise KeyError(f"session {session_id} has no recorded segment {segment}")
-    good, damage = _decoded(conn, block_rows(conn, "session_id = ? AND segment = ?", (session_id, segment)),
-                            skip_damaged)
+    good, damage = _decoded(reader, block_rows(reader, session_id, segment), skip_damaged)
     cols, poses, events = join_decoded(good)
     return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events,
                        damage)
@@ -156,13 +155,12 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
     names = list(dict.fromkeys(["tick", *names]))
     parts: list[dict[str, np.ndarray]] = []
     bad: list[tuple[BlockRow, str]] = []
-    for r in block_rows(conn, "session_id = ? AND segment = ? AND last_tick >= ? AND first_tick <= ?",
-                        (session_id, segment, first_tick, last_tick)):
+    for r in block_rows(conn, session_id, segment, (first_tick, last_tick)):
         why = block_problem(r)
         if not why:
             try:
                 part, why = _window_part(r, names, first_tick, last_tick)
-            except Exception as exc:  # noqa: BLE001 - any failure to decode is damage (see integrity.block_problem)
+            except Exception as exc:  # any failure to decode is damage (see integrity.block_problem)
                 why = decode_failure(exc)
         if why:
             bad.append((r, why))
@@ -207,8 +205,9 @@ def marked_records(conn: Any, session_id: int, trial_index: int,
         A block of a segment it reads is damaged.
     """
     names = list(dict.fromkeys(["tick", "t_ns", "trial_index", *names]))
-    for seg in reversed(segments_of(conn, session_id)):
-        parts, _ = _decoded(conn, block_rows(conn, "session_id = ? AND segment = ?", (session_id, seg[0])), False, names)
+    reader = reader_of(conn)
+    for seg in reversed(segments_of(reader, session_id)):
+        parts, _ = _decoded(reader, block_rows(reader, session_id, seg[0]), False, names)
         if not parts:
             continue
         cols = {n: np.concatenate([p[n] for p in parts]) for n in names}

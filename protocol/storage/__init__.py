@@ -29,14 +29,38 @@ from protocol.records import trial_id_of
 from protocol.storage.common import EmptyDatabase, LeaseHeld, StorageError
 from protocol.storage.database import CODE_PATTERN, SessionInfo, StudyDatabase, validate_code
 from protocol.storage.leases import LEASE_HEARTBEAT_S, LEASE_STALE_S, new_owner_token, process_identity, session_scope
+from protocol.storage.reader import Rows, StudyReader
 from protocol.storage.recorder import Recorder
 from protocol.storage.schema import (
-    ABORT_CAUSES, HEALTH_COLUMNS, SAMPLE_COLUMNS, SCHEMA_VERSION, connect_readonly, schema_path,
+    ABORT_CAUSES,
+    HEALTH_COLUMNS,
+    SAMPLE_COLUMNS,
+    SCHEMA_VERSION,
+    connect_readonly,
+    schema_path,
 )
 
 __all__ = [
-    "ABORT_CAUSES", "CODE_PATTERN", "EmptyDatabase", "HEALTH_COLUMNS", "LEASE_HEARTBEAT_S", "LEASE_STALE_S",
-    "LeaseHeld", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SessionInfo", "StorageError", "StudyDatabase", "Recorder",
-    "connect_readonly", "new_owner_token", "process_identity", "schema_path", "session_scope", "trial_id_of",
+    "ABORT_CAUSES",
+    "CODE_PATTERN",
+    "HEALTH_COLUMNS",
+    "LEASE_HEARTBEAT_S",
+    "LEASE_STALE_S",
+    "SAMPLE_COLUMNS",
+    "SCHEMA_VERSION",
+    "EmptyDatabase",
+    "LeaseHeld",
+    "Recorder",
+    "Rows",
+    "SessionInfo",
+    "StorageError",
+    "StudyDatabase",
+    "StudyReader",
+    "connect_readonly",
+    "new_owner_token",
+    "process_identity",
+    "schema_path",
+    "session_scope",
+    "trial_id_of",
     "validate_code",
 ]

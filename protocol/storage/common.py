@@ -22,4 +22,4 @@ class EmptyDatabase(StorageError):
 
 def now_iso() -> str:
     """Wall-clock time now, UTC, ISO 8601 to the millisecond (the ``*_at`` TEXT columns)."""
-    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="milliseconds")
+    return _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")

@@ -104,7 +104,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self.backup_path: Path | None = None
         self._last_heartbeat = 0.0
         self._owners: set[str] = set()
-        crash = None if readonly else crashpoint.planned()  # a planned crash (tests): nothing unless HAPTIC_STUDY_CRASH_AT
+        # a planned crash (tests): nothing unless HAPTIC_STUDY_CRASH_AT
+        crash = None if readonly else crashpoint.planned()
         created = self._check_path(readonly)
         if readonly:
             self.conn = connect_readonly(self.path, timeout_s=5.0 if busy_timeout_s is None else busy_timeout_s)
@@ -174,7 +175,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         sql = (
             "SELECT s.session_id, s.participant_id, p.code, s.kind, s.seed, s.participant_number, s.protocol_json, "
             "s.schedule_json, s.status, s.started_at, s.calibration_json, s.config_json "
-            "FROM sessions s JOIN participants p USING (participant_id) WHERE s.status = 'running' ORDER BY s.session_id"
+            "FROM sessions s JOIN participants p USING (participant_id) WHERE s.status = 'running' "
+            "ORDER BY s.session_id"
         )
         return [SessionInfo(*r) for r in self.conn.execute(sql)]
 
@@ -280,7 +282,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
                     n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
-        """Write a recorded block with its checksum, or rewrite the segment's open block as it grew (the recorder's own row)."""
+        """Write a recorded block with its checksum, or rewrite the segment's open block as it grew (the recorder's
+        own row)."""
         self.conn.execute(
             "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
             "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
@@ -295,13 +298,14 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def insert_event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
         """Record a phase change or an experimenter action."""
-        self.conn.execute("INSERT INTO events (session_id, t_s, kind, detail) VALUES (?, ?, ?, ?)", (session_id, t_s, kind, detail))
+        self.conn.execute("INSERT INTO events (session_id, t_s, kind, detail) VALUES (?, ?, ?, ?)",
+                          (session_id, t_s, kind, detail))
 
     def trial_rows(self, session_id: int) -> list[dict[str, Any]]:
         """The trials of a session as dicts, in index order."""
         cur = self.conn.execute("SELECT * FROM trials WHERE session_id = ? ORDER BY trial_index", (session_id,))
         names = [d[0] for d in cur.description]
-        return [dict(zip(names, r)) for r in cur]
+        return [dict(zip(names, r, strict=True)) for r in cur]
 
     def last_session_time_s(self, session_id: int) -> float:
         """Latest session-clock time recorded (events, trials, recorded records), for resuming the clock."""

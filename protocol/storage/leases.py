@@ -16,8 +16,9 @@ import sqlite3
 import sys
 import time
 from collections.abc import Callable
+from contextlib import AbstractContextManager
 from pathlib import Path
-from typing import Any, ContextManager
+from typing import Any
 
 from protocol.storage.common import LeaseHeld, now_iso
 
@@ -97,7 +98,11 @@ class LeaseHolder:
     conn: sqlite3.Connection
     _owners: set[str]
     _last_heartbeat: float
-    transaction: Callable[[], ContextManager[None]]  # StudyDatabase's
+    transaction: Callable[[], AbstractContextManager[None]]  # StudyDatabase's
+
+    @property
+    def schema_version(self) -> int:  # StudyDatabase's (protocol.storage.schema.SchemaFile), which comes first
+        raise NotImplementedError
 
     def acquire_lease(self, scope: str, owner: str, *, command: str = "", study_owner: str | None = None) -> str:
         """Take the lease on ``scope`` (``"study"`` or :func:`session_scope`) for this process.
@@ -136,22 +141,24 @@ class LeaseHolder:
                         raise LeaseHeld(self._held_message(row, what))
             else:
                 self._refuse_if_study_held(study_owner or owner)
-            row = self._lease(scope)
-            if row is not None and row["owner"] != owner:
-                if self._alive(row):
-                    raise LeaseHeld(self._held_message(row, f"{scope} of"))
-                note = (f"took over the lease on {scope} left by process {row['pid']} on {row['host']} "
-                        f"({row['command'] or 'unknown command'}), which is no longer running")
+            held = self._lease(scope)
+            if held is not None and held["owner"] != owner:
+                if self._alive(held):
+                    raise LeaseHeld(self._held_message(held, f"{scope} of"))
+                note = (f"took over the lease on {scope} left by process {held['pid']} on {held['host']} "
+                        f"({held['command'] or 'unknown command'}), which is no longer running")
             for other in self._leases():  # leases of processes that are gone protect nothing: clear them
                 if other["scope"] != scope and not self._alive(other):
-                    self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ?", (other["scope"], other["owner"]))
+                    self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ?",
+                                      (other["scope"], other["owner"]))
             self._write_lease(scope, owner, command)
         return note
 
     def release_lease(self, scope: str, owner: str) -> None:
         """Give a lease back (only the owner's own; a lease taken over meanwhile is left alone)."""
         with self.transaction():
-            self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ? AND pid = ?", (scope, owner, os.getpid()))
+            self.conn.execute("DELETE FROM leases WHERE scope = ? AND owner = ? AND pid = ?",
+                              (scope, owner, os.getpid()))
 
     def heartbeat(self, *, force: bool = False) -> None:
         """Refresh this process's leases (at most every ``LEASE_HEARTBEAT_S``) in the open transaction, if any."""
@@ -177,9 +184,10 @@ class LeaseHolder:
         return out
 
     def _leases(self) -> list[dict[str, Any]]:
-        cur = self.conn.execute("SELECT scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at FROM leases")
+        cur = self.conn.execute(
+            "SELECT scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at FROM leases")
         names = [d[0] for d in cur.description]
-        return [dict(zip(names, r)) for r in cur]
+        return [dict(zip(names, r, strict=True)) for r in cur]
 
     def _lease(self, scope: str) -> dict[str, Any] | None:
         return next((r for r in self._leases() if r["scope"] == scope), None)
@@ -193,8 +201,8 @@ class LeaseHolder:
         now = now_iso()
         pid = os.getpid()
         self.conn.execute(
-            "INSERT OR REPLACE INTO leases (scope, owner, pid, host, process_start, command, acquired_at, heartbeat_at) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+            "INSERT OR REPLACE INTO leases (scope, owner, pid, host, process_start, command, acquired_at, "
+            "heartbeat_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
             (scope, owner, pid, socket.gethostname(), process_identity(pid), command or _command_line(), now, now),
         )
         self._owners.add(owner)
@@ -211,7 +219,7 @@ class LeaseHolder:
             beat = _dt.datetime.fromisoformat(row["heartbeat_at"])
         except (TypeError, ValueError):
             return False
-        return (_dt.datetime.now(_dt.timezone.utc) - beat).total_seconds() < LEASE_STALE_S
+        return (_dt.datetime.now(_dt.UTC) - beat).total_seconds() < LEASE_STALE_S
 
     def _held_message(self, row: dict[str, Any], what: str) -> str:
         where = "" if row["host"] == socket.gethostname() else f" on {row['host']}"

@@ -48,7 +48,8 @@ def _per_session(conn: sqlite3.Connection, sql: str, args: list[tuple[Any, ...]]
 
 
 def _has(conn: sqlite3.Connection, table: str) -> bool:
-    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone() is not None
+    row = conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone()
+    return row is not None
 
 
 def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | None:

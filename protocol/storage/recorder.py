@@ -15,6 +15,7 @@ import sqlite3
 import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,7 +26,72 @@ from protocol.records import TrialRecord
 from protocol.storage.common import StorageError
 from protocol.storage.database import StudyDatabase
 
-__all__ = ["Recorder"]
+__all__ = ["Call", "Event", "Group", "Message", "Recorder", "Records", "Samples", "Segment", "Trial"]
+
+
+# -- what the queue carries: one typed message per kind of write ------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class Samples:
+    """Rows of the ``samples`` table (schema versions 1 and 2)."""
+
+    rows: Sequence[Sequence[float]] | np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class Trial:
+    """A finished trial's record (committed at once)."""
+
+    record: TrialRecord
+
+
+@dataclass(frozen=True, slots=True)
+class Event:
+    """A phase change or an experimenter action."""
+
+    session_id: int
+    t_s: float
+    kind: str
+    detail: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Segment:
+    """A segment of a session's recording opens (committed at once)."""
+
+    session_id: int
+    segment: int
+    started_at_s: float
+    t0_ns: int
+    snapshot: dict[str, Any]
+    scales: dict[str, float]
+
+
+@dataclass(frozen=True, slots=True)
+class Records:
+    """Loop records of a segment and the replay log of their ticks."""
+
+    session_id: int
+    segment: int
+    records: np.ndarray
+    log: list[tuple[int, str, Any]]
+
+
+@dataclass(frozen=True, slots=True)
+class Call:
+    """A function run in the writer (committed at once)."""
+
+    fn: Callable[[StudyDatabase], Any]
+
+
+@dataclass(frozen=True, slots=True)
+class Group:
+    """Messages queued inside :meth:`Recorder.atomic`: applied and committed together."""
+
+    items: list[Message]
+
+
+#: What the recorder's queue carries.
+Message = Samples | Trial | Event | Segment | Records | Call | Group
 
 
 class Recorder:
@@ -62,11 +128,11 @@ class Recorder:
     ) -> None:
         self.db = db
         self.short_transactions = short_transactions
-        self._held: list[tuple[str, Any]] = []
+        self._held: list[Message] = []
         self.max_latency_s = max_latency_s
         self._clock = clock
         self._first_pending: float | None = None
-        self._q: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
+        self._q: queue.SimpleQueue[Message | None] = queue.SimpleQueue()
         #: The open block of every segment being recorded, and the segment's clock: (session, segment) -> both.
         self._blocks: dict[tuple[int, int], tuple[BlockBuilder, SessionClock]] = {}
         self._thread: threading.Thread | None = None
@@ -79,20 +145,20 @@ class Recorder:
     # producers ----------------------------------------------------------------------------------
     def samples(self, rows: Sequence[Sequence[float]] | np.ndarray) -> None:
         """Queue sample rows (a sequence of rows or a 2-D float array, not modified afterwards)."""
-        self._put(("samples", rows))
+        self._put(Samples(rows))
 
     def trial(self, record: TrialRecord) -> None:
         """Queue a finished trial's record (committed at once with the samples before it)."""
-        self._put(("trial", record))
+        self._put(Trial(record))
 
     def event(self, session_id: int, t_s: float, kind: str, detail: str = "") -> None:
         """Queue an event."""
-        self._put(("event", (session_id, t_s, kind, detail)))
+        self._put(Event(session_id, t_s, kind, detail))
 
     def segment(self, session_id: int, segment: int, started_at_s: float, t0_ns: int, snapshot: dict[str, Any],
                 scales: dict[str, float]) -> None:
         """Open a segment of the session's recording (committed at once, before any of its blocks)."""
-        self._put(("segment", (session_id, segment, started_at_s, t0_ns, snapshot, scales)))
+        self._put(Segment(session_id, segment, started_at_s, t0_ns, snapshot, scales))
 
     def records(self, session_id: int, segment: int, records: np.ndarray,
                 log: Sequence[tuple[int, str, Any]] = ()) -> None:
@@ -102,11 +168,11 @@ class Recorder:
 
         They are cut into blocks as they fill; the open block is written as it stands at every commit.
         """
-        self._put(("records", (session_id, segment, records, list(log))))
+        self._put(Records(session_id, segment, records, list(log)))
 
     def call(self, fn: Callable[[StudyDatabase], Any]) -> None:
         """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
-        self._put(("call", fn))
+        self._put(Call(fn))
 
     @contextlib.contextmanager
     def atomic(self) -> Iterator[None]:
@@ -129,13 +195,13 @@ class Recorder:
             raise
         group, local.group = local.group, None
         if group:
-            self._put(("group", group))
+            self._put(Group(group))
 
-    def _put(self, item: tuple[str, Any]) -> None:
+    def _put(self, item: Message) -> None:
         if self.error is not None:
             raise StorageError(f"the recorder stopped after an error: {self.error}")
         group = getattr(self._local, "group", None)
-        if group is not None and item[0] != "group":
+        if group is not None and not isinstance(item, Group):
             group.append(item)
             return
         if self._thread is None:
@@ -145,7 +211,7 @@ class Recorder:
             self._q.put(item)
 
     # writer -------------------------------------------------------------------------------------
-    def _handle(self, item: tuple[str, Any]) -> None:
+    def _handle(self, item: Message) -> None:
         if self._first_pending is None:
             self._first_pending = self._clock()
         if self.short_transactions:
@@ -155,40 +221,34 @@ class Recorder:
             return
         self._apply(item)
 
-    def _apply(self, item: tuple[str, Any], commit: bool = True) -> None:
-        """Apply one item in the open transaction; a trial, a call, a segment or a group commits (unless ``commit`` is False)."""
-        kind, payload = item
+    def _apply(self, item: Message, commit: bool = True) -> None:
+        """Apply one message in the open transaction; a trial, a call, a segment or a group holding one commits
+        (unless ``commit`` is False)."""
         db = self.db
         db.begin()
-        if kind == "group":
-            for sub in payload:
+        if isinstance(item, Group):
+            for sub in item.items:
                 self._apply(sub, commit=False)
-            if commit and _commits(item):
-                self._commit()
-        elif kind == "samples":
-            db.insert_samples(payload)
-        elif kind == "event":
-            db.insert_event(*payload)
-        elif kind == "records":
-            sid, seg, records, log = payload
-            builder, _ = self._blocks[(sid, seg)]
-            builder.add(records, log)
+        elif isinstance(item, Records):
+            builder, _ = self._blocks[(item.session_id, item.segment)]
+            builder.add(item.records, item.log)
             for block in builder.take_full():
-                self._write_block(sid, seg, block)
-        elif kind == "segment":
-            sid, seg, started_at_s, t0_ns, snapshot, scales = payload
-            db.insert_recording(sid, seg, started_at_s, t0_ns, snapshot, scales)
-            self._blocks[(sid, seg)] = (BlockBuilder(scales=scales), SessionClock(started_at_s, t0_ns))
-            if commit:
-                self._commit()
-        elif kind == "trial":
-            db.insert_trial(payload.to_row())
-            if commit:
-                self._commit()
-        elif kind == "call":
-            payload(db)
-            if commit:
-                self._commit()
+                self._write_block(item.session_id, item.segment, block)
+        elif isinstance(item, Samples):
+            db.insert_samples(item.rows)
+        elif isinstance(item, Event):
+            db.insert_event(item.session_id, item.t_s, item.kind, item.detail)
+        elif isinstance(item, Segment):
+            db.insert_recording(item.session_id, item.segment, item.started_at_s, item.t0_ns, item.snapshot,
+                                item.scales)
+            self._blocks[(item.session_id, item.segment)] = (BlockBuilder(scales=item.scales),
+                                                             SessionClock(item.started_at_s, item.t0_ns))
+        elif isinstance(item, Trial):
+            db.insert_trial(item.record.to_row())
+        else:
+            item.fn(db)
+        if commit and _commits(item):
+            self._commit()
 
     def _write_block(self, session_id: int, segment: int, block: tuple[int, int, np.ndarray, bytes]) -> None:
         _, clock = self._blocks[(session_id, segment)]
@@ -238,12 +298,11 @@ class Recorder:
                 self._handle(item)
                 self._maybe_commit()
             self._commit(final=True)
-        except BaseException as exc:  # noqa: BLE001 - reported to the producer on its next call
+        except BaseException as exc:  # reported to the producer on its next call
             self.error = exc
-            try:
-                self.db.conn.execute("ROLLBACK") if self.db.conn.in_transaction else None
-            except sqlite3.Error:
-                pass
+            with contextlib.suppress(sqlite3.Error):
+                if self.db.conn.in_transaction:
+                    self.db.conn.execute("ROLLBACK")
 
     def flush(self) -> None:
         """Commit everything queued so far (blocks until the writer has)."""
@@ -275,10 +334,9 @@ class Recorder:
             raise StorageError(f"the recorder failed: {self.error}")
 
 
-def _commits(item: tuple[str, Any]) -> bool:
-    """Whether an item is committed at once: a trial, a call, a segment, or a group holding one (events and records
-    wait for the deadline)."""
-    kind, payload = item
-    if kind == "group":
-        return any(_commits(sub) for sub in payload)
-    return kind in ("trial", "call", "segment")
+def _commits(item: Message) -> bool:
+    """Whether a message is committed at once: a trial, a call, a segment, or a group holding one (events and
+    records wait for the deadline)."""
+    if isinstance(item, Group):
+        return any(_commits(sub) for sub in item.items)
+    return isinstance(item, (Trial, Call, Segment))

@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import os
 import sqlite3
@@ -76,7 +77,8 @@ SAMPLE_COLUMNS = (
 
 
 def schema_path() -> Path:
-    """Location of the schema: ``data/schema.sql`` of a checkout, shipped in an installed wheel as ``protocol/storage/sql``.
+    """Location of the schema: ``data/schema.sql`` of a checkout, shipped in an installed wheel as
+    ``protocol/storage/sql``.
 
     The installed copy is looked for first, so an install never reads a ``data/`` folder that is not its own.
     """
@@ -187,7 +189,8 @@ class SchemaFile:
             if not os.access(p, os.W_OK):
                 raise StorageError(f"{p}: the database is not writable (open it read-only, e.g. with report)")
             if not os.access(parent, os.W_OK):
-                raise StorageError(f"{p}: the folder {parent} is not writable (SQLite writes its journal beside the database)")
+                raise StorageError(f"{p}: the folder {parent} is not writable (SQLite writes its journal beside "
+                                   "the database)")
             return False
         if not os.access(parent, os.W_OK):
             raise StorageError(f"{p}: cannot create the database here (folder {parent} is not writable)")
@@ -226,7 +229,8 @@ class SchemaFile:
             )
         if version == 0:
             if tables:
-                raise StorageError(f"{self.path}: not a haptic-study database (it has other tables: {', '.join(sorted(tables))})")
+                raise StorageError(f"{self.path}: not a haptic-study database (it has other tables: "
+                                   f"{', '.join(sorted(tables))})")
             if readonly:
                 raise EmptyDatabase(f"{self.path}: empty database (no study data)")
             script = schema_path().read_text(encoding="utf-8")
@@ -283,10 +287,8 @@ class SchemaFile:
             os.close(os.open(backup, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
             self._backup_to(backup)
         except (OSError, sqlite3.Error) as exc:
-            try:
+            with contextlib.suppress(OSError):
                 backup.unlink()
-            except OSError:
-                pass
             raise StorageError(f"{self.path}: schema version {version} must be upgraded to {SCHEMA_VERSION}, and the "
                                f"backup copy {backup.name} could not be written ({exc}); nothing was changed") from None
         c = self.conn
@@ -297,7 +299,8 @@ class SchemaFile:
                     for stmt in _UPGRADE_1_TO_2:
                         c.execute(stmt)
                     try:
-                        # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps its index
+                        # v2 keeps one sample per time and trial; a v1 file that already holds duplicates keeps
+                        # its index
                         c.execute("SAVEPOINT unique_samples")
                         c.execute("DROP INDEX IF EXISTS samples_by_trial")
                         c.execute("CREATE UNIQUE INDEX samples_by_trial ON samples (trial_id, t_s)")

@@ -205,7 +205,8 @@ def nobody_reading(db: StudyDatabase) -> bool:
 
 
 def rewrite_file(db: StudyDatabase) -> bool:
-    """After :func:`erase_participant`: the zeroed pages written over the file's own, the file rewritten, the log emptied.
+    """After :func:`erase_participant`: the zeroed pages written over the file's own, the file rewritten, the log
+    emptied.
 
     Returns
     -------

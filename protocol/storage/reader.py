@@ -1,0 +1,361 @@
+"""The one reader of a study database: sessions, participants, trials, events and the recording, read-only.
+
+Every query that reads a study outside the writer's own bookkeeping is here, named for what it returns;
+analysis, power, the run summary, replay and the recording's readers (:mod:`protocol.recording`) read
+through :class:`StudyReader`, and no module outside ``protocol/storage/`` holds SQL
+(``tests/protocol/test_sql_only_in_storage.py``).
+
+A reader opened on a path is read-only as :class:`StudyDatabase` ``(path, readonly=True, check=True)`` is:
+the file is checked first (a damaged, foreign or newer file is refused in one line) and left byte-identical.
+:meth:`StudyReader.over` reads through a connection already open -- a writer's, inside its transaction (a
+resume reads what it continues), or one a caller of :mod:`protocol.recording` holds.
+"""
+
+from __future__ import annotations
+
+import os
+import sqlite3
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+from protocol.records import TrialRecord
+from protocol.storage.database import SessionInfo, StudyDatabase
+from protocol.storage.participant_data import ParticipantRows, participant_rows
+from protocol.storage.withdrawal import Withdrawal, withdrawal_of, withdrawals
+
+__all__ = ["Rows", "StudyReader"]
+
+#: Columns of a ``sessions`` row as :class:`SessionInfo` has them.
+_SESSION_INFO = (
+    "SELECT s.session_id, s.participant_id, p.code, s.kind, s.seed, s.participant_number, s.protocol_json, "
+    "s.schedule_json, s.status, s.started_at, s.calibration_json, s.config_json "
+    "FROM sessions s JOIN participants p USING (participant_id)"
+)
+
+
+@dataclass(frozen=True, slots=True)
+class Rows:
+    """A query's result as a table: its column names and its rows, in order.
+
+    What a tidy table is built from (``pandas.DataFrame.from_records(rows.rows, columns=rows.columns)``);
+    the protocol floor does not depend on pandas.
+    """
+
+    columns: tuple[str, ...]
+    rows: list[tuple[Any, ...]]
+
+
+def _in(n: int) -> str:
+    """Placeholders of an ``IN (…)`` list of ``n`` values (``NULL`` when there are none: matches nothing)."""
+    return ",".join("?" * n) or "NULL"
+
+
+class StudyReader:
+    """Read-only access to a study database; every method returns what its name says.
+
+    Parameters
+    ----------
+    path
+        The study database.  Opened as :class:`StudyDatabase` ``(path, readonly=True, check=check)``: never
+        created, upgraded or locked for writing; an archive in a read-only folder opens immutable.
+    check
+        Run ``PRAGMA quick_check`` first (default): a damaged file is refused with one line.
+    busy_timeout_s
+        How long a read waits for a writer's lock (default 5 s).
+
+    Raises
+    ------
+    StorageError
+        Not a study database (damaged, foreign, newer schema, empty: :class:`EmptyDatabase`), or no such file.
+    """
+
+    def __init__(self, path: str | os.PathLike[str], *, check: bool = True, busy_timeout_s: float | None = None,
+                 ) -> None:
+        db = StudyDatabase(path, readonly=True, check=check, busy_timeout_s=busy_timeout_s)
+        self.path: Path = db.path
+        self.conn: sqlite3.Connection = db.conn
+        self._db: StudyDatabase | None = db
+        self._owned = True
+
+    @classmethod
+    def over(cls, source: StudyDatabase | sqlite3.Connection | StudyReader) -> StudyReader:
+        """A reader through a connection already open (not closed by :meth:`close`): a writer's, or a caller's."""
+        if isinstance(source, StudyReader):
+            return source
+        reader = cls.__new__(cls)
+        if isinstance(source, StudyDatabase):
+            reader.path, reader.conn, reader._db = source.path, source.conn, source
+        else:
+            reader.path, reader.conn, reader._db = Path(""), source, None
+        reader._owned = False
+        return reader
+
+    def close(self) -> None:
+        """Close the connection, if this reader opened it."""
+        if self._owned:
+            self.conn.close()
+
+    def __enter__(self) -> StudyReader:
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def _rows(self, sql: str, args: Sequence[Any] = ()) -> Rows:
+        cur = self.conn.execute(sql, tuple(args))
+        return Rows(tuple(d[0] for d in cur.description), [tuple(r) for r in cur.fetchall()])
+
+    def _has_columns(self, table: str) -> set[str]:
+        return {str(r[1]) for r in self.conn.execute(f"PRAGMA table_info({table})")}
+
+    # -- the file ---------------------------------------------------------------------------------------------
+    @property
+    def schema_version(self) -> int:
+        """The file's schema version (``PRAGMA user_version``)."""
+        if self._db is not None:
+            return self._db.schema_version
+        return int(self.conn.execute("PRAGMA user_version").fetchone()[0])
+
+    def has_recordings(self) -> bool:
+        """Whether the file has the recording's tables (schema version 3 and later)."""
+        return bool(self.conn.execute(
+            "SELECT COUNT(*) FROM sqlite_master WHERE name = 'session_blocks'").fetchone()[0])
+
+    # -- participants and sessions ------------------------------------------------------------------------------
+    def participant_codes(self, limit: int | None = None) -> list[str]:
+        """Participant codes stored, in code order (the first ``limit`` of them)."""
+        sql = "SELECT code FROM participants ORDER BY code" + ("" if limit is None else " LIMIT ?")
+        return [str(r[0]) for r in self.conn.execute(sql, () if limit is None else (int(limit),))]
+
+    def session_ids(self) -> list[int]:
+        """Every session's id, in order."""
+        return [int(r[0]) for r in self.conn.execute("SELECT session_id FROM sessions ORDER BY session_id")]
+
+    def session_codes(self) -> dict[int, str]:
+        """Each session's participant code, by session id."""
+        return {int(s): str(c) for s, c in self.conn.execute(
+            "SELECT s.session_id, p.code FROM sessions s JOIN participants p USING (participant_id)")}
+
+    def participant_data(self, code: str) -> ParticipantRows | None:
+        """Everything stored of one participant, table by table (None when the code is not stored)."""
+        return participant_rows(self.conn, code)
+
+    def withdrawals(self) -> list[Withdrawal]:
+        """Every withdrawal recorded in the study, oldest first."""
+        return withdrawals(self.conn)
+
+    def withdrawal(self, code: str) -> Withdrawal | None:
+        """A participant's withdrawal, or None when they did not withdraw."""
+        return withdrawal_of(self.conn, code)
+
+    def sessions(self) -> list[SessionInfo]:
+        """Every stored session, oldest first."""
+        return [SessionInfo(*r) for r in self.conn.execute(_SESSION_INFO + " ORDER BY s.session_id")]
+
+    def session(self, session_id: int) -> SessionInfo | None:
+        """One stored session, or None when there is no such session."""
+        row = self.conn.execute(_SESSION_INFO + " WHERE s.session_id = ?", (int(session_id),)).fetchone()
+        return None if row is None else SessionInfo(*row)
+
+    def session_overview(self) -> list[tuple[Any, ...]]:
+        """Every session as people ask about it (``haptic-study sessions``), in order: ``session_id, code,
+        participant_number, kind, status, rig, seed, started_at, ended_at, end_reason, schedule_json``, then its
+        trials counted -- not aborted, aborted, successful -- and its first and last trial index (None: none)."""
+        return [tuple(r) for r in self.conn.execute(
+            "SELECT s.session_id, p.code, s.participant_number, s.kind, s.status, s.rig, s.seed, s.started_at, "
+            "s.ended_at, s.end_reason, s.schedule_json, "
+            "(SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome != 'aborted'), "
+            "(SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'aborted'), "
+            "(SELECT COUNT(*) FROM trials t WHERE t.session_id = s.session_id AND t.outcome = 'success'), "
+            "(SELECT MIN(trial_index) FROM trials t WHERE t.session_id = s.session_id), "
+            "(SELECT MAX(trial_index) FROM trials t WHERE t.session_id = s.session_id) "
+            "FROM sessions s JOIN participants p USING (participant_id) ORDER BY s.session_id")]
+
+    def session_table(self) -> Rows:
+        """Every session with its participant code, for the tidy sessions table, in order.
+
+        Columns ``session_id, participant_code, participant_number, kind, status, seed, started_at, ended_at,
+        end_reason, software_version, software_commit, software_dirty, rig, protocol_json, config_json,
+        schedule_json`` (which code ran it is NULL before schema version 4).
+        """
+        has = self._has_columns("sessions")
+        v4 = ", ".join(f"s.{c}" if c in has else f"NULL AS {c}" for c in ("software_commit", "software_dirty"))
+        return self._rows(
+            "SELECT s.session_id, p.code AS participant_code, s.participant_number, s.kind, s.status, s.seed, "
+            f"s.started_at, s.ended_at, s.end_reason, s.software_version, {v4}, s.rig, s.protocol_json, "
+            "s.config_json, s.schedule_json FROM sessions s JOIN participants p USING (participant_id) "
+            "ORDER BY s.session_id")
+
+    # -- trials -------------------------------------------------------------------------------------------------
+    def trial_table(self, later_columns: Sequence[str]) -> Rows:
+        """Every stored trial, by session and index, its stored metrics prefixed ``stored_``.
+
+        ``later_columns`` (added by later schema versions: the abort cause, the loop's health, where the
+        trial is in the recording) read as NULL where the file lacks them.
+        """
+        has = self._has_columns("trials")
+        later = ", ".join(c if c in has else f"NULL AS {c}" for c in later_columns)
+        return self._rows(
+            "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
+            "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
+            "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
+            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, repeat_of, {later} "
+            "FROM trials ORDER BY session_id, trial_index")
+
+    def trial_records(self, session_ids: Sequence[int] | None = None) -> list[TrialRecord]:
+        """The stored trials (of some sessions, or all) as :class:`TrialRecord` s, by session and index."""
+        where = "" if session_ids is None else f" WHERE session_id IN ({_in(len(session_ids))})"
+        rows = self._rows(f"SELECT * FROM trials{where} ORDER BY session_id, trial_index",
+                          [int(s) for s in session_ids or ()])
+        return [TrialRecord.from_row(dict(zip(rows.columns, r, strict=True))) for r in rows.rows]
+
+    def recorded_trial_table(self, session_id: int) -> Rows:
+        """A session's recorded trials (those with a place in its recording), by index, for replay's marks."""
+        return self._rows(
+            "SELECT trial_index, target_label, target_force_n, haptic_mode, outcome, segment, first_tick, last_tick, "
+            "started_at_s, ended_at_s, abort_reason FROM trials WHERE session_id = ? AND first_tick IS NOT NULL "
+            "ORDER BY trial_index", (int(session_id),))
+
+    def trial_window(self, trial_id: int) -> tuple[Any, Any, Any] | None:
+        """Where a trial is in its session's recording: ``(segment, first_tick, last_tick)`` (NULLs when it is not
+        recorded), or None when there is no such trial.  Schema version 3 and later."""
+        row = self.conn.execute("SELECT segment, first_tick, last_tick FROM trials WHERE trial_id = ?",
+                                (int(trial_id),)).fetchone()
+        return None if row is None else (row[0], row[1], row[2])
+
+    def trial_cues(self, session_id: int) -> dict[int, tuple[int, float]]:
+        """Each recorded trial's cue: ``{trial_index: (first_tick, started_at_s)}``."""
+        return {int(i): (int(f), float(c)) for i, f, c in self.conn.execute(
+            "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
+            (int(session_id),))}
+
+    def trials_touching(self, session_id: int, segment: int, first_tick: int, last_tick: int) -> tuple[int, ...]:
+        """Indices of the trials whose records overlap ticks ``first_tick`` … ``last_tick`` of a segment, in order."""
+        if "first_tick" not in self._has_columns("trials"):
+            return ()
+        return tuple(int(i) for (i,) in self.conn.execute(
+            "SELECT trial_index FROM trials WHERE session_id = ? AND segment = ? AND first_tick <= ? "
+            "AND last_tick >= ? ORDER BY trial_index", (session_id, segment, last_tick, first_tick)))
+
+    def trial_samples(self, trial_id: int, columns: Sequence[str] = ("t_s", "force_n")) -> Rows:
+        """A trial's rows of the ``samples`` table (schema versions 1 and 2), in time order."""
+        return self._rows(f"SELECT {', '.join(columns)} FROM samples WHERE trial_id = ? ORDER BY t_s",
+                          (int(trial_id),))
+
+    def session_samples(self, session_id: int) -> Rows:
+        """A session's rows of the ``samples`` table with their trial's index and start, by trial and time."""
+        return self._rows(
+            "SELECT t.trial_index, t.started_at_s, s.* FROM samples s JOIN trials t USING (trial_id) "
+            "WHERE t.session_id = ? ORDER BY t.trial_index, s.t_s", (int(session_id),))
+
+    # -- events -------------------------------------------------------------------------------------------------
+    def events(self, kinds: Sequence[str]) -> Rows:
+        """Events of some kinds, every session's: ``session_id, t_s, kind, detail``, by session and time."""
+        return self._rows(f"SELECT session_id, t_s, kind, detail FROM events WHERE kind IN ({_in(len(kinds))}) "
+                          "ORDER BY session_id, t_s", list(kinds))
+
+    def session_events(self, session_id: int, kind: str, details: Sequence[str]) -> list[tuple[float, str]]:
+        """A session's events of one kind with one of some details: ``(t_s, detail)``, in time order."""
+        return [(float(t), str(d)) for t, d in self.conn.execute(
+            f"SELECT t_s, detail FROM events WHERE session_id = ? AND kind = ? AND detail IN ({_in(len(details))}) "
+            "ORDER BY t_s", (int(session_id), kind, *details))]
+
+    def trial_start_events(self, session_id: int, names: Sequence[str]) -> list[tuple[str, float]]:
+        """When a trial (named any of ``names``) began: its ``phase`` events ``"<name>: cued -> active"`` and its
+        ``cue`` events ``"<name>: …"``, as ``(kind, t_s)``, latest first."""
+        phases = [f"{n}: cued -> active" for n in names]
+        cues = [f"{n}: %" for n in names]
+        likes = " OR ".join("detail LIKE ?" for _ in cues) or "0"
+        return [(str(k), float(t)) for k, t in self.conn.execute(
+            f"SELECT kind, t_s FROM events WHERE session_id = ? AND ((kind = 'phase' AND detail IN "
+            f"({_in(len(phases))})) OR (kind = 'cue' AND ({likes}))) ORDER BY t_s DESC",
+            (int(session_id), *phases, *cues))]
+
+    # -- the recording ------------------------------------------------------------------------------------------
+    def recordings(self, session_id: int) -> list[tuple[int, float, int]]:
+        """A session's recorded segments: ``(segment, started_at_s, t0_ns)``, in order (none before version 3)."""
+        return [(int(a), float(b), int(c)) for a, b, c in self.conn.execute(
+            "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment",
+            (int(session_id),))]
+
+    def recording(self, session_id: int, segment: int) -> tuple[float, int, str] | None:
+        """One segment's start: ``(started_at_s, t0_ns, snapshot_json)``, or None when there is no such segment."""
+        row = self.conn.execute(
+            "SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
+            (int(session_id), int(segment))).fetchone()
+        return None if row is None else (float(row[0]), int(row[1]), str(row[2]))
+
+    def blocks(self, session_id: int | None = None, segment: int | None = None,
+               ticks: tuple[int, int] | None = None) -> Iterator[tuple[Any, ...]]:
+        """Recorded blocks (of a session, a segment, those overlapping ticks ``(first, last)``), in order.
+
+        Each is ``(session_id, segment, block, first_tick, last_tick, n_records, data, t_first_s, t_last_s,
+        crc32)``; a column the file lacks (``crc32`` before version 4) reads as None.
+        """
+        have = {d[0] for d in self.conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
+        cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
+        where, args = [], []
+        for cond, value in (("session_id = ?", session_id), ("segment = ?", segment)):
+            if value is not None:
+                where.append(cond)
+                args.append(int(value))
+        if ticks is not None:
+            where.append("last_tick >= ? AND first_tick <= ?")
+            args.extend((int(ticks[0]), int(ticks[1])))
+        yield from self.conn.execute(
+            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM session_blocks "
+            f"{'WHERE ' + ' AND '.join(where) if where else ''} ORDER BY session_id, segment, block", args)
+
+    def block_count(self) -> int:
+        """How many recorded blocks the file holds."""
+        return int(self.conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
+
+    # -- the audit (haptic-study check) ----------------------------------------------------------------------------
+    def integrity_check(self, max_errors: int = 20) -> list[str]:
+        """SQLite's own ``PRAGMA integrity_check``: ``["ok"]``, or up to ``max_errors`` lines of what is wrong."""
+        return [" ".join(str(r[0]).split()) for r in self.conn.execute(f"PRAGMA integrity_check({int(max_errors)})")]
+
+    def session_count(self) -> int:
+        """How many sessions are stored."""
+        return int(self.conn.execute("SELECT COUNT(*) FROM sessions").fetchone()[0])
+
+    def trial_count(self) -> int:
+        """How many trials are stored."""
+        return int(self.conn.execute("SELECT COUNT(*) FROM trials").fetchone()[0])
+
+    def trial_places(self) -> list[tuple[int, int, int, int, int]]:
+        """Every recorded trial's place: ``(session_id, trial_index, segment, first_tick, last_tick)``, in order."""
+        return [tuple(r) for r in self.conn.execute(
+            "SELECT session_id, trial_index, segment, first_tick, last_tick FROM trials "
+            "WHERE segment IS NOT NULL AND first_tick IS NOT NULL ORDER BY session_id, trial_index")]
+
+    def experiment_designs(self) -> list[tuple[int, str, str, str, str]]:
+        """Every experiment session's design: ``(session_id, code, status, protocol_json, schedule_json)``."""
+        return [tuple(r) for r in self.conn.execute(
+            "SELECT s.session_id, p.code, s.status, s.protocol_json, s.schedule_json FROM sessions s "
+            "JOIN participants p USING (participant_id) WHERE s.kind = 'experiment' ORDER BY s.session_id")]
+
+    def trial_cells(self, session_id: int) -> list[tuple[int, str, str, str]]:
+        """A session's trials' cells: ``(trial_index, target_label, haptic_mode, outcome)``."""
+        return [tuple(r) for r in self.conn.execute(
+            "SELECT trial_index, target_label, haptic_mode, outcome FROM trials WHERE session_id = ?",
+            (int(session_id),))]
+
+    # -- counts (the run summary) -------------------------------------------------------------------------------
+    def sample_count(self, session_ids: Sequence[int]) -> int:
+        """How many ``samples`` rows (schema versions 1 and 2) some sessions' trials have."""
+        return int(self.conn.execute(
+            f"SELECT COUNT(*) FROM samples WHERE trial_id / 1000000 IN ({_in(len(session_ids))})",
+            [int(s) for s in session_ids]).fetchone()[0])
+
+    def record_count(self, session_ids: Sequence[int]) -> int:
+        """How many 1 kHz records some sessions' recordings hold (0 without a recording)."""
+        if not self.has_recordings():
+            return 0
+        return int(self.conn.execute(
+            f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({_in(len(session_ids))})",
+            [int(s) for s in session_ids]).fetchone()[0])
