@@ -18,7 +18,6 @@ from matplotlib.ticker import NullLocator, PercentFormatter
 from analysis.figures import _style
 from analysis.power import FAMILY_ALL, FAMILY_LABELS, PowerResult, metric_label
 
-
 __all__ = ["METRIC_COLORS", "power_curves"]
 
 #: Okabe–Ito colours and markers per metric.
@@ -105,7 +104,7 @@ def _thinned_labels(ns: list[int], log: bool, min_gap: float = 0.06) -> list[str
     labels, last = [], -math.inf
     for n, p in zip(ns, pos):
         need = min_gap * max(2, len(str(n))) / 2  # three-digit labels need more room than two-digit ones
-        show = (p - last) / width >= need or n == ns[-1] and (p - last) / width >= need / 2
+        show = (p - last) / width >= need or (n == ns[-1] and (p - last) / width >= need / 2)
         labels.append(str(n) if show else "")
         last = p if show else last
     return labels

@@ -39,13 +39,13 @@ from analysis.learning import first_modes, learning_curve, learning_models, orde
 from analysis.load import Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.models import MIN_PARTICIPANTS, ModelFit
-from analysis.sensitivity import max_ae_from_approach, window_sensitivity
-from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
-from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, plural, power_html
+from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.stats import WilcoxonResult
+from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
+from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.withdrawals import study_withdrawals, withdrawals_html
 
 __all__ = [

@@ -32,7 +32,7 @@ METHOD_NAMES = ("", "exact", "permutation", "approx")
 _METHOD_CODE = {name: code for code, name in enumerate(METHOD_NAMES)}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _exact_p(n: int) -> np.ndarray:
     """Two-sided exact p-value of every W⁺ = 0 … n(n+1)/2 for n untied, non-zero differences."""
     return _two_sided_p(signed_rank_null_counts(n), float(2**n))

@@ -29,11 +29,11 @@ import numpy as np
 
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, default_protocol
 from protocol.design import build_schedule
-from pipeline.sim.participant import SimulatedParticipant
-from pipeline.sim.participant_params import ParticipantParams
 from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = [

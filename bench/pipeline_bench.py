@@ -32,7 +32,7 @@ from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework
 
-__all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
+__all__ = ["filter_trade_table", "naive_numpy_pipeline", "record_samples", "run_pipeline_bench"]
 
 
 def record_samples(n: int, seed: int = 0) -> dict[str, Any]:

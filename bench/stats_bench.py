@@ -22,7 +22,7 @@ from analysis.correlation import correlation
 from analysis.hodges_lehmann import hodges_lehmann
 from analysis.stats import holm, paired_wilcoxon
 
-__all__ = ["run_stats_bench", "format_stats_bench"]
+__all__ = ["format_stats_bench", "run_stats_bench"]
 
 
 def _best_s(fn: Callable[[], Any], repeats: int) -> float:

@@ -72,7 +72,7 @@ class MovingAverage3:
     # read and one write per sample, which is what makes it cheap at 1 kHz.
     # The rings are cleared in place and never replaced: HapticFramework's
     # fused per-tick path holds them instead of loading them every tick.
-    __slots__ = ("window", "rejected", "_buf", "_st")
+    __slots__ = ("_buf", "_st", "rejected", "window")
 
     def __init__(self, window: int) -> None:
         self.window = _check_window(window)

@@ -40,8 +40,14 @@ _FSUM = math.fsum
 _INF = math.inf
 
 __all__ = [
-    "FrameworkConfig", "HapticFramework", "SNAPSHOT_VERSION", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE",
-    "DEFAULT_ROT_TIP_SENSOR", "framework_config_from_dict", "framework_config_to_dict",
+    "DEFAULT_ROT_HAPTIC_BASE",
+    "DEFAULT_ROT_TIP_SENSOR",
+    "SNAPSHOT_VERSION",
+    "STEP_FIELDS",
+    "FrameworkConfig",
+    "HapticFramework",
+    "framework_config_from_dict",
+    "framework_config_to_dict",
 ]
 
 #: Touch frame (+x right, +y up, +z toward the user) for an experimenter facing
@@ -118,9 +124,25 @@ class HapticFramework:
     """
 
     __slots__ = (
-        "config", "_cal", "_mounted", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_hot_head", "_hot_tail", "_ft_safe",
+        "_bias",
+        "_cal",
+        "_fmax",
+        "_fscale",
+        "_ft_safe",
+        "_hot",
+        "_hot_head",
+        "_hot_tail",
+        "_mounted",
+        "_off",
+        "_payload",
+        "_rbt",
+        "_rhb",
+        "_rts",
+        "config",
         "device_peak_n",
+        "filter",
+        "rls",
+        "safety",
     )
 
     def __init__(

@@ -13,23 +13,23 @@ names the device.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
 
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
-from pipeline.framework import FrameworkConfig
 from pipeline.frames import Vec3
+from pipeline.framework import FrameworkConfig
 from pipeline.tomlfields import Fields, read_toml
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 from pipeline.watchdog import WatchdogConfig
 
 __all__ = [
+    "HapticSettings",
     "HardwareConfig",
     "HardwareError",
-    "HapticSettings",
     "JawSettings",
     "RealRig",
     "RobotSettings",
@@ -405,7 +405,7 @@ class RealRig:
                 continue
             try:
                 dev.close()
-            except Exception as exc:  # noqa: BLE001 - close everything, report after
+            except Exception as exc:  # close everything, report after
                 errors.append(f"{type(dev).__name__}: {exc}")
         if errors:
             raise DeviceError("closing the rig: " + "; ".join(errors))
@@ -547,7 +547,7 @@ def build_real_rig(
             for dev in reversed(opened):
                 try:
                     dev.close()
-                except Exception:  # noqa: BLE001 - already failing; the first error is the one to show
+                except Exception:  # already failing; the first error is the one to show
                     pass
             raise DeviceError(f"{what}: {exc}") from None
     servo = opened.pop() if teleop else None

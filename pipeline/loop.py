@@ -50,14 +50,30 @@ from pipeline.clock import Clock, prepare_realtime_thread
 from pipeline.devices import Fault, HapticState, PoseSample, WrenchSample
 from pipeline.framework import HapticFramework
 from pipeline.loop_messages import (
-    RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, LatchFault, LoopEvent, Mark, OperatorStop,
-    ResetFaults, SetCalibration, SetHaptics, StartRecording, StopRecording,
+    RECORD_FIELDS,
+    AllowBiasRefinement,
+    Command,
+    ControllerDetached,
+    LatchFault,
+    LoopEvent,
+    Mark,
+    OperatorStop,
+    ResetFaults,
+    SetCalibration,
+    SetHaptics,
+    StartRecording,
+    StopRecording,
 )
 from pipeline.loop_stats import LoopStats
 from pipeline.rig import Rig
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S
 from pipeline.watchdog import (
-    WatchdogConfig, derating_detail, derating_ended_detail, fault_detail, output_restarted_detail, stall_detail,
+    WatchdogConfig,
+    derating_detail,
+    derating_ended_detail,
+    fault_detail,
+    output_restarted_detail,
+    stall_detail,
 )
 
 # The commands, events, record columns, statistics and watchdog limits are defined in
@@ -432,7 +448,7 @@ class HapticLoop:
         self._emit(ev)
         try:
             self.rig.haptic.command_force(0.0, 0.0, 0.0)
-        except Exception as exc:  # noqa: BLE001 - the device's own watchdog zeroes it anyway; say so
+        except Exception as exc:  # the device's own watchdog zeroes it anyway; say so
             self._emit(LoopEvent(t, "fault", ev.faults, f"the haptic device refused the zero command ({exc!r}); "
                                  "its command watchdog drops the force"))
         return ev
@@ -449,7 +465,7 @@ class HapticLoop:
             return
         try:
             hook(Fault(self.faults))
-        except Exception as exc:  # noqa: BLE001 - the loop must keep ramping the force down; report it
+        except Exception as exc:  # the loop must keep ramping the force down; report it
             self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
 
     def _emit(self, ev: LoopEvent) -> None:
@@ -534,7 +550,7 @@ class HapticLoop:
                 # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
                 try:
                     self._rig_stop_motion("haptic loop stopped")
-                except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
+                except Exception as exc:  # still ramp the force down; report it
                     self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
                                          f"the rig could not stop the robot: {exc!r}"))
             # ramp ticks continue the period grid: the next slot after the last tick, not one later
@@ -562,7 +578,7 @@ class HapticLoop:
             self.scheduling = prepare_realtime_thread()
             try:
                 self.run(self._stop)
-            except BaseException as exc:  # noqa: BLE001 - kept for the supervisor, which reports and stores it
+            except BaseException as exc:  # kept for the supervisor, which reports and stores it
                 first = exc.__context__  # the exception the ramp-down was handling when this one struck
                 why = repr(exc)
                 self.crash = why + (f" while handling {first!r}" if first is not None and repr(first) != why else "")

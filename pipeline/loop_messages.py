@@ -15,6 +15,7 @@ from typing import NamedTuple
 from pipeline import tick_record
 
 __all__ = [
+    "RECORD_FIELDS",
     "AllowBiasRefinement",
     "Command",
     "ControllerDetached",
@@ -22,7 +23,6 @@ __all__ = [
     "LoopEvent",
     "Mark",
     "OperatorStop",
-    "RECORD_FIELDS",
     "ResetFaults",
     "SetCalibration",
     "SetHaptics",

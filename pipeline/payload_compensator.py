@@ -391,7 +391,7 @@ class MountedPayload:
         Sensor mount ᵀ_S R, row-major.
     """
 
-    __slots__ = ("_k", "_com", "_gravity_base", "_along_z", "_bias")
+    __slots__ = ("_along_z", "_bias", "_com", "_gravity_base", "_k")
 
     def __init__(self, calibration: PayloadCalibration, rot_tip_sensor: Mat3) -> None:
         k = mat_mul(calibration.gravity_matrix, transpose(rot_tip_sensor))

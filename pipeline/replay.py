@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
+from pipeline.payload_compensator import PayloadCalibration
 
 __all__ = ["REPLAY_LOG_KINDS", "ReplayInputs", "ReplayOutputs", "replay"]
 

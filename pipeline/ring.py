@@ -32,10 +32,10 @@ breaks the 1 kHz loop (science.md §7).
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Sequence
 import mmap
 import os
+import struct
+from collections.abc import Sequence
 from multiprocessing import shared_memory
 
 import numpy as np
@@ -52,7 +52,7 @@ _NAMES_OFF = 32
 class RingReadResult:
     """Rows copied out of the ring: ``rows`` (structured array), next ``cursor``, and ``lost`` rows."""
 
-    __slots__ = ("rows", "cursor", "lost")
+    __slots__ = ("cursor", "lost", "rows")
 
     def __init__(self, rows: npt.NDArray[np.void], cursor: int, lost: int) -> None:
         self.rows = rows
@@ -189,7 +189,7 @@ class RingBuffer:
             from multiprocessing import resource_tracker
 
             resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
-        except Exception:  # noqa: BLE001 - the tracker is only told to keep quiet; the segment is gone already
+        except Exception:  # the tracker is only told to keep quiet; the segment is gone already
             pass
         return True
 

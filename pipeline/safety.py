@@ -78,7 +78,7 @@ class SafetyGovernor:
         ``min(config.f_max_n, device_peak_n)``.
     """
 
-    __slots__ = ("config", "limit_n", "static_limit_n", "device_limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
+    __slots__ = ("_down", "_lim2", "_lim_inner", "_max_dt", "_slew", "_sx", "_sy", "_sz", "_up", "config", "device_limit_n", "gain", "limit_n", "static_limit_n")
 
     def __init__(self, config: SafetyConfig, device_peak_n: float) -> None:
         if not (isinstance(device_peak_n, (int, float)) and 1e-6 <= device_peak_n <= 1e3):

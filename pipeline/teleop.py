@@ -68,6 +68,8 @@ from pipeline.frames import Mat3, Vec3, check_rotation, mat_vec, transpose
 
 __all__ = [
     "STOP",
+    "TOUCH_BUTTON_DARK_GREY",
+    "TOUCH_BUTTON_LIGHT_GREY",
     "ServoTarget",
     "Stop",
     "TeleopCommand",
@@ -75,8 +77,6 @@ __all__ = [
     "TeleopController",
     "TeleopDriver",
     "TeleopState",
-    "TOUCH_BUTTON_DARK_GREY",
-    "TOUCH_BUTTON_LIGHT_GREY",
 ]
 
 #: ``HD_DEVICE_BUTTON_1``: the Touch's front (dark-grey) stylus button.

@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 from pipeline.frames import Mat3, Vec3, check_rotation
 
-__all__ = ["Fields", "SQLITE_INTEGER_MAX", "host_problem", "parse_toml", "read_toml", "show"]
+__all__ = ["SQLITE_INTEGER_MAX", "Fields", "host_problem", "parse_toml", "read_toml", "show"]
 
 #: The largest SQLite INTEGER (signed 64-bit): a larger Python int cannot be stored.
 SQLITE_INTEGER_MAX = 2**63 - 1
@@ -146,7 +146,7 @@ class Fields:
         The exception class to raise (a ``ValueError`` subclass).
     """
 
-    __slots__ = ("source", "error")
+    __slots__ = ("error", "source")
 
     def __init__(self, source: str, error: type[ValueError]) -> None:
         self.source = source

@@ -29,8 +29,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from protocol.storage import CODE_PATTERN
 from protocol.records import Outcome, TrialRecord
+from protocol.storage import CODE_PATTERN
 from protocol.trial import PhaseChanged, TrialPhase
 
 __all__ = ["FAULT_KINDS", "FaultPlan", "RehearsalTrigger", "parse_fault_plan"]

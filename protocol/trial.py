@@ -28,7 +28,7 @@ from protocol.design import TrialSpec
 from protocol.metrics import HoldDetector, TrialMetrics, trial_metrics
 from protocol.records import Outcome
 
-__all__ = ["PhaseChanged", "TrialFinished", "TrialMachine", "TrialPhase", "TRANSITIONS", "TrialMachineError"]
+__all__ = ["TRANSITIONS", "PhaseChanged", "TrialFinished", "TrialMachine", "TrialMachineError", "TrialPhase"]
 
 
 class TrialPhase(StrEnum):

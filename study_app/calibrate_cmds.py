@@ -361,9 +361,9 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
 def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
     import numpy as np
 
+    from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
     from pipeline.payload_compensator import PayloadCalibration
     from pipeline.payload_identification import CalibrationPose, identify_payload
-    from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
     from study_app.commissioning import pose_set
 
     rots = pose_set(name)

@@ -21,16 +21,20 @@ from typing import Any
 import numpy as np
 
 from pipeline.clock import MonotonicClock
-from pipeline.payload_compensator import PayloadCalibration
-from pipeline.payload_identification import CalibrationPose, DegeneratePoseSetError, identify_payload, recommended_pose_set
 from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
 from pipeline.frames import Mat3, axis_angle, mat_mul
 from pipeline.loop_messages import SetCalibration
+from pipeline.payload_compensator import PayloadCalibration
+from pipeline.payload_identification import (
+    CalibrationPose,
+    DegeneratePoseSetError,
+    identify_payload,
+    recommended_pose_set,
+)
 from pipeline.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
 from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from study_app import messages as m
 from study_app.engine_core import EngineCore
-
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "REST_CHECK_S", "REST_MAX_FORCE_N", "Commissioning",

@@ -24,17 +24,16 @@ from __future__ import annotations
 
 import collections
 import math
+import queue
 import sys
 import threading
 import time
-import queue
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from pipeline.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.devices import DeviceError
 from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
@@ -43,6 +42,7 @@ from pipeline.jitter_trace import LateTickTracer
 from pipeline.loop_messages import ControllerDetached, LoopEvent
 from pipeline.loop_messages import OperatorStop as LoopOperatorStop
 from pipeline.loop_messages import ResetFaults as LoopResetFaults
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.supervisor import LoopSupervisor
 from protocol.config import ProtocolError
 from protocol.session import SessionRunner
@@ -223,7 +223,7 @@ class StudyEngine:
             n = self.config.block_ticks
             try:
                 self.loop.run_ticks(n)
-            except Exception as exc:  # noqa: BLE001 - the loop died in this thread: make safe, report, store
+            except Exception as exc:  # the loop died in this thread: make safe, report, store
                 self.loop.fail_safe(f"the haptic loop died ({exc!r}); the haptic device's command watchdog dropped "
                                     "the force to zero", thread_dead=True)
                 self._loop_died(repr(exc))
@@ -510,7 +510,7 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     publish = events.put
     try:
         engine = StudyEngine(config, publish)
-    except Exception as exc:  # noqa: BLE001 - reported to the GUI as one line
+    except Exception as exc:  # reported to the GUI as one line
         publish(m.CommandRefused("connect", str(exc)))
         publish(m.EngineStopped(str(exc), {}))
         return

@@ -19,22 +19,27 @@ from collections.abc import Callable
 from typing import Any
 
 from protocol.config import ProtocolConfig, load_protocol
+from protocol.records import AbortCause, TrialRecord
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
-    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    raw_wrench_scales, start_runner,
+    OpenedSession,
+    delivery_limits,
+    finish_session,
+    open_new_session,
+    open_resumed_session,
+    participant_seeds,
+    raw_wrench_scales,
+    start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
 from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
-from protocol.records import AbortCause, TrialRecord
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app import messages as m
 from study_app.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine_core import EngineCore
 from study_app.engine_setup import SwitchableDriver
 from study_app.session_config import config_record, real_config_record
-
 
 __all__ = ["EngineSessions", "list_resumable"]
 

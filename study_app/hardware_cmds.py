@@ -99,7 +99,7 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
         finally:
             try:
                 dev.close()
-            except Exception:  # noqa: BLE001 - the description is what matters here
+            except Exception:  # the description is what matters here
                 pass
 
     def describe_sensor(s: Any) -> str:

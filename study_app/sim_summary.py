@@ -72,7 +72,7 @@ def run_scripted_sim(
                 prepare_realtime_thread()
                 try:
                     loop.run(max_ticks=total)
-                except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+                except BaseException as exc:  # re-raised in the caller's thread
                     failed.append(exc)
 
             worker = threading.Thread(target=run, name="haptic-loop", daemon=True)

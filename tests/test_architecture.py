@@ -202,8 +202,8 @@ def import_cycles(graph: Iterable[Import]) -> list[str]:
     out = []
     for component in sorted(components):
         members = set(component)
-        joins = sorted({str(i) for i in graph if i.source in members and i.target in members and i.source != i.target
-                        or i.source == i.target and i.source in members})
+        joins = sorted({str(i) for i in graph if (i.source in members and i.target in members and i.source != i.target)
+                        or (i.source == i.target and i.source in members)})
         out.append(f"circle {' <-> '.join(component)}: " + "; ".join(joins))
     return out
 

@@ -42,15 +42,15 @@ __all__ = [
     "CMD_START_REALTIME",
     "CMD_STOP",
     "DEFAULT_RANGE",
+    "RDT_HEADER",
+    "RDT_PORT",
+    "RECORD",
+    "REQUEST",
     "NetFTCalibration",
     "NetFTError",
     "NetFTForceSensor",
     "NetFTStats",
-    "RDT_HEADER",
-    "RDT_PORT",
-    "RECORD",
     "RdtSequencer",
-    "REQUEST",
     "force_unit_to_n",
     "parse_netft_xml",
     "read_netft_calibration",
@@ -208,7 +208,7 @@ def read_netft_calibration(host: str, http_port: int = 80, timeout_s: float = 2.
     url = f"http://{host}:{http_port}/netftapi2.xml"
     hint = "set [sensor] counts_per_force and counts_per_torque in hardware.toml to skip it"
     try:
-        with urllib.request.urlopen(url, timeout=timeout_s) as resp:  # noqa: S310 - a lab device on the LAN
+        with urllib.request.urlopen(url, timeout=timeout_s) as resp:  # a lab device on the LAN
             body = resp.read(1 << 20)
     except urllib.error.HTTPError as exc:
         raise NetFTError(f"cannot read the Net F/T calibration from {url}: HTTP {exc.code} {exc.reason}; {hint}") from None
@@ -435,7 +435,7 @@ class NetFTForceSensor:
         while not self._stop.is_set():
             try:
                 data = sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 self.stats.timeouts += 1
                 continue
             except OSError as exc:

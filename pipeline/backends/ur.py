@@ -98,7 +98,7 @@ def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
     try:
         with socket.create_connection((host, port), timeout=timeout_s):
             return None
-    except socket.timeout:
+    except TimeoutError:
         return f"no answer within {timeout_s:g} s"
     except (OSError, UnicodeError) as exc:
         return exc.strerror or str(exc)
@@ -202,7 +202,7 @@ class UrRtdeRobot:
         if rtde is not None:
             try:
                 rtde.disconnect()
-            except Exception:  # noqa: BLE001 - the link may already be gone
+            except Exception:  # the link may already be gone
                 pass
         self.state = "closed"
 
@@ -252,7 +252,7 @@ class UrRtdeRobot:
             try:
                 connected = rtde is not None and rtde.isConnected()
                 ts = rtde.getTimestamp() if connected else None
-            except Exception as exc:  # noqa: BLE001 - any failure of the link is a lost link
+            except Exception as exc:  # any failure of the link is a lost link
                 connected, ts = False, None
                 self.last_error = str(exc)
             if connected and ts is not None and ts != last_ts:
@@ -309,7 +309,7 @@ class UrRtdeRobot:
                         self._rtde = self._factory(self.host, self.frequency_hz)
                     self.reconnects += 1
                     return True
-                except Exception as exc:  # noqa: BLE001 - keep trying; the state says why
+                except Exception as exc:  # keep trying; the state says why
                     why = str(exc)
             self.last_error = f"reconnect to {self.host}: {why}"
             backoff = min(self.max_backoff_s, backoff * 2.0)

@@ -126,7 +126,7 @@ class UrRtdeServo:
         def _run() -> None:
             try:
                 box["ctrl"] = factory(host, frequency_hz)
-            except Exception as exc:  # noqa: BLE001 - reported to the caller below
+            except Exception as exc:  # reported to the caller below
                 box["error"] = exc
             done.set()
 
@@ -180,7 +180,7 @@ class UrRtdeServo:
         for call in (lambda: ctrl.servoStop(self.stop_deceleration_m_s2), ctrl.stopScript, ctrl.disconnect):
             try:
                 call()
-            except Exception:  # noqa: BLE001 - the link may already be gone; keep releasing
+            except Exception:  # the link may already be gone; keep releasing
                 pass
 
     # -- worker -------------------------------------------------------------------------------
@@ -223,7 +223,7 @@ class UrRtdeServo:
                 elif self.servoing and now - target_ns > timeout_ns:
                     self._error = f"no teleoperation target for {(now - target_ns) * 1e-6:.0f} ms: stopped the robot"
                     self._do_stop(ctrl, clears_error=False)
-            except Exception as exc:  # noqa: BLE001 - a lost link or a controller error: stop and report
+            except Exception as exc:  # a lost link or a controller error: stop and report
                 self._error = f"RTDE control: {exc}"
                 self.servoing = False
 

@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from pipeline.clock import Clock
+from pipeline.frames import Mat3, mat_mul, transpose
 from pipeline.payload_compensator import PayloadCalibration
 from pipeline.payload_identification import CalibrationPose, identify_payload, recommended_pose_set
-from pipeline.frames import Mat3, mat_mul, transpose
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN

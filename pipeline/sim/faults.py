@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Final
 
-__all__ = ["BAD_STATUS_WORD", "DEVICE_FAULT_KINDS", "DEFAULT_DURATION_S", "FaultInjector", "SimFault", "latch_delay_s"]
+__all__ = ["BAD_STATUS_WORD", "DEFAULT_DURATION_S", "DEVICE_FAULT_KINDS", "FaultInjector", "SimFault", "latch_delay_s"]
 
 #: The simulated rig's fault kinds (the names used on the command line).
 DEVICE_FAULT_KINDS: Final = ("sensor-stall", "nan-burst", "bad-status", "stale-pose", "device-error")

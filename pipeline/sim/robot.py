@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pipeline.devices import PoseSample
 from pipeline.frames import Mat3, Vec3
 
-__all__ = ["RobotParams", "SimRobot", "TOOL_DOWN"]
+__all__ = ["TOOL_DOWN", "RobotParams", "SimRobot"]
 
 #: Tool pointing straight down: tip z axis along base −z (rotation π about base x).
 TOOL_DOWN: Mat3 = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)

@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from statistics import NormalDist
 
 from pipeline.devices import WrenchSample
 from pipeline.frames import Mat3, Vec3, cross, mat_vec

@@ -66,7 +66,7 @@ class TissueParams:
 class HuntCrossleyTissue:
     """Stateful tissue: call :meth:`step` with the tip penetration each tick."""
 
-    __slots__ = ("params", "_prev_depth", "_maxwell_n", "force_n")
+    __slots__ = ("_maxwell_n", "_prev_depth", "force_n", "params")
 
     def __init__(self, params: TissueParams | None = None) -> None:
         self.params = params or TissueParams()

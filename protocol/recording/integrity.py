@@ -133,7 +133,7 @@ def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: b
     names = [c.name for c in COLUMNS] if whole or columns is None else list(dict.fromkeys(["tick", *columns]))
     try:
         cols = decode_block(row.data)[0] if whole or columns is None else decode_columns(row.data, names)
-    except Exception as exc:  # noqa: BLE001 - any failure to decode is damage: zlib, struct, json, numpy alike
+    except Exception as exc:  # any failure to decode is damage: zlib, struct, json, numpy alike
         return decode_failure(exc)
     why = columns_problem(cols, names)
     if why:

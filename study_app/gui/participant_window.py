@@ -25,7 +25,7 @@ class ForceGauge(QWidget):
         self.force_n, self.band, self.max_n = force_n, band, max_n
         self.update()
 
-    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def paintEvent(self, event) -> None:  # Qt's name
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         w, h = self.width(), self.height()
@@ -107,7 +107,7 @@ class ParticipantWindow(QWidget):
         sub = max(12, min(22, px // 4))
         self.subline.setStyleSheet(f"font-size: {sub}px; color: #b8b8c0;")
 
-    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def resizeEvent(self, event) -> None:  # Qt's name
         super().resizeEvent(event)
         self._scale_text()
 
@@ -115,7 +115,7 @@ class ParticipantWindow(QWidget):
         """Full screen on the participant's monitor, or back."""
         self.showNormal() if self.isFullScreen() else self.showFullScreen()
 
-    def mouseDoubleClickEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mouseDoubleClickEvent(self, event) -> None:  # Qt's name
         self.toggle_fullscreen()
 
     def _on_changed(self) -> None:

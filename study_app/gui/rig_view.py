@@ -7,7 +7,14 @@ import time
 from PySide6.QtCore import QPointF, QRectF, QSignalBlocker, Qt
 from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import (
-    QButtonGroup, QComboBox, QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QRadioButton, QVBoxLayout,
+    QButtonGroup,
+    QComboBox,
+    QDoubleSpinBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QRadioButton,
+    QVBoxLayout,
     QWidget,
 )
 
@@ -46,7 +53,7 @@ class RigCanvas(QWidget):
         return _Z_LO + (self.height() - y_px) / self._scale()
 
     # -- painting --------------------------------------------------------------------------------
-    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def paintEvent(self, event) -> None:  # Qt's name
         m = self.model
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
@@ -106,14 +113,14 @@ class RigCanvas(QWidget):
         self.model.set_manual_target(self.model.target_for_tip_mm(self.to_z_mm(y_px)))
         self.update()
 
-    def mousePressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mousePressEvent(self, event) -> None:  # Qt's name
         self._target_from_mouse(event.position().y(), force=True)
 
-    def mouseMoveEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mouseMoveEvent(self, event) -> None:  # Qt's name
         if event.buttons() & Qt.MouseButton.LeftButton:
             self._target_from_mouse(event.position().y())
 
-    def keyPressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def keyPressEvent(self, event) -> None:  # Qt's name
         if self.model.driver == "manual" and event.key() in (Qt.Key.Key_Up, Qt.Key.Key_Down, Qt.Key.Key_Home):
             if event.key() == Qt.Key.Key_Home:
                 self.model.set_manual_target(0.0)
@@ -212,7 +219,7 @@ class RigWindow(QWidget):
             self.fault_trial.setCurrentIndex(index)
         self.fault_seconds.setEnabled(self.fault_trial.currentData() is not None)
 
-    def showEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def showEvent(self, event) -> None:  # Qt's name
         super().showEvent(event)
         self.canvas.setFocus()
 

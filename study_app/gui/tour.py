@@ -73,7 +73,7 @@ class ScreenshotTour:
             self._deadline = time.monotonic() + 60.0
         except StopIteration:
             self._finish()
-        except Exception as exc:  # noqa: BLE001 - reported by run_gui
+        except Exception as exc:  # reported by run_gui
             self.error = f"{type(exc).__name__}: {exc}"
             self._finish()
 

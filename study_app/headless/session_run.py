@@ -15,8 +15,8 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -29,11 +29,18 @@ from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
-    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    raw_wrench_scales, start_runner, training_schedule,
+    OpenedSession,
+    delivery_limits,
+    finish_session,
+    open_new_session,
+    open_resumed_session,
+    participant_code,
+    participant_seeds,
+    raw_wrench_scales,
+    start_runner,
+    training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
-from protocol.session_setup import participant_code
 from study_app.headless.plan import Step
 from study_app.session_config import config_record
 

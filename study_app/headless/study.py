@@ -30,9 +30,16 @@ from collections.abc import Callable, Sequence
 
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.rehearsal import FaultPlan
-from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.session_setup import participant_code
-from study_app.headless.plan import check_fault_plans, interrupted_session_of, open_notes, peek, plan_study, remaining_trials
+from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
+from study_app.headless.plan import (
+    check_fault_plans,
+    interrupted_session_of,
+    open_notes,
+    peek,
+    plan_study,
+    remaining_trials,
+)
 from study_app.headless.pool import default_jobs, run_parallel
 from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
 

@@ -29,7 +29,7 @@ REHEARSAL_KINDS: dict[str, str] = {
     "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
 }
 
-__all__ = ["AppModel", "CUE_ACTIONS", "CueWait", "Notice", "REHEARSAL_KINDS"]
+__all__ = ["CUE_ACTIONS", "REHEARSAL_KINDS", "AppModel", "CueWait", "Notice"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5

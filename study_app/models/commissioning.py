@@ -180,7 +180,7 @@ class CommissioningModel:
         r = self.tcp_result
         if self.tcp_state == "running":
             return "computing …" if self.real else "turning the instrument about the divot …"
-        if r is None or self.tcp_message and self.tcp_state == "idle":
+        if r is None or (self.tcp_message and self.tcp_state == "idle"):
             return self.tcp_message
         if not r.accepted:
             return f"Refused: {r.reason}"

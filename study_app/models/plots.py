@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from protocol.display import task_axis_top_n
 
-__all__ = ["PlotModel", "TASK_SERIES", "nice_range", "peak_downsample"]
+__all__ = ["TASK_SERIES", "PlotModel", "nice_range", "peak_downsample"]
 
 #: Curves of the task-force panel: the task force the trial is judged on, and the force rendered on the Touch.
 TASK_SERIES = ("force_n", "render_n")

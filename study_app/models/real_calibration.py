@@ -17,12 +17,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pipeline.payload_identification import recommended_pose_set
 from pipeline.frames import IDENTITY, Mat3, mat_mul, matrix_to_rotvec, transpose
+from pipeline.payload_identification import recommended_pose_set
 from study_app import messages as m
 from study_app.models import Emitter
 
-__all__ = ["MIN_POSES", "OFF_TARGET_WARN_DEG", "PoseStep", "REAL_POSE_SETS", "RealCalibrationModel"]
+__all__ = ["MIN_POSES", "OFF_TARGET_WARN_DEG", "REAL_POSE_SETS", "PoseStep", "RealCalibrationModel"]
 
 #: Pose sets offered on the real rig (number of poses).
 REAL_POSE_SETS = {"recommended": 24, "quick": 6}

@@ -32,7 +32,7 @@ from study_app.models import Emitter
 from study_app.models.session import TrialCount
 from study_app.session_list import next_participant_number
 
-__all__ = ["SessionSetup", "SetupModel", "KINDS", "article", "TRAINING_OVERRIDE_HINT"]
+__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article"]
 
 KINDS = ("training", "experiment")
 #: What the form adds to a training refusal: the way past it, and what it costs.

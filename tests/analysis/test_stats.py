@@ -15,9 +15,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
-from analysis.hodges_lehmann import _midpoint, _walsh_select
 from analysis.correlation import CorrelationResult, correlation
-from analysis.hodges_lehmann import hodges_lehmann
+from analysis.hodges_lehmann import _midpoint, _walsh_select, hodges_lehmann
 from analysis.signed_rank import signed_rank_null_counts
 from analysis.stats import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
 

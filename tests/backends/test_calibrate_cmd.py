@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+
 from pipeline.frames import matrix_to_rotvec
 from pipeline.rig_calibration import RigCalibrationFile
 from pipeline.sim.robot import TOOL_DOWN

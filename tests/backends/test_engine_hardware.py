@@ -6,14 +6,14 @@ import time
 from pathlib import Path
 
 import pytest
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from test_hardware_config import write_rig_file
+
 from study_app import messages as m
 from study_app.engine_client import EngineClient, EngineStartError
 from study_app.engine_setup import HostConfig
-from test_hardware_config import write_rig_file
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
 

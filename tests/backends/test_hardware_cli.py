@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+
 from study_app.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]

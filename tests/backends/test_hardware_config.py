@@ -8,11 +8,12 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from hypothesis import given, settings
+from tomlvalues import TOML_VALUES, replaced
+
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.ur import UrRtdeRobot
@@ -22,9 +23,8 @@ from pipeline.engine import build_hardware_engine
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
 from pipeline.payload_compensator import NO_PAYLOAD
-from pipeline.touch_output import TouchSpec
 from pipeline.tomlfields import host_problem
-from tomlvalues import TOML_VALUES, replaced
+from pipeline.touch_output import TouchSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "hardware.example.toml"

@@ -6,10 +6,10 @@ import time
 from pathlib import Path
 
 import pytest
+from fake_jaw import INO, PROTOCOL_LITERALS, C, JawFirmware, PtyJaw
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fake_jaw import INO, PROTOCOL_LITERALS, C, JawFirmware, PtyJaw
 from pipeline.backends.jaw import PROTOCOL_VERSION, JawFault, SerialJawActuator
 from pipeline.devices import JawActuator
 

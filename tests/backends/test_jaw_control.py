@@ -5,6 +5,7 @@ on the real serial backend against the pty Arduino running the sketch's logic.""
 from __future__ import annotations
 
 from fake_jaw import C, PtyJaw
+
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.jaw_control import CONT_STEP_US, STEP_US, JawController, StylusButtons
 from pipeline.sim.jaw import SimJaw

@@ -5,10 +5,10 @@ from __future__ import annotations
 import time
 
 import pytest
+from fake_netft import RECORD, FakeNetFT
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fake_netft import RECORD, FakeNetFT
 from pipeline.backends.netft import (
     NetFTCalibration,
     NetFTError,
@@ -91,9 +91,8 @@ def test_no_http_page_is_a_clear_error_fast() -> None:
 
 
 def test_http_404_and_a_page_that_is_not_the_box() -> None:
-    with FakeNetFT(xml_status=404) as fake:
-        with pytest.raises(NetFTError, match="HTTP 404"):
-            open_sensor(fake)
+    with FakeNetFT(xml_status=404) as fake, pytest.raises(NetFTError, match="HTTP 404"):
+        open_sensor(fake)
     with FakeNetFT(xml_body="<html><body>router login</body></html>") as fake:
         with pytest.raises(NetFTError, match="has no <cfgcpf>: is this a Net F/T box"):
             open_sensor(fake)

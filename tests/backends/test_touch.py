@@ -20,7 +20,6 @@ from pipeline.backends.touch import (
     TouchHapticDevice,
     load_pyopenhaptics,
 )
-from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 from pipeline.clock import VirtualClock
 from pipeline.devices import DeviceError, Fault, HapticDevice
 from pipeline.framework import FrameworkConfig, HapticFramework
@@ -28,6 +27,7 @@ from pipeline.loop import HapticLoop
 from pipeline.loop_messages import ResetFaults, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import SimForceSensor
+from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 
 
 class FakeHD:
@@ -199,7 +199,7 @@ def test_missing_openhaptics_names_what_to_install(monkeypatch: pytest.MonkeyPat
         load_pyopenhaptics()
     monkeypatch.undo()
     try:
-        import pyOpenHaptics  # noqa: F401
+        import pyOpenHaptics
     except (ImportError, OSError):
         with pytest.raises(DeviceError, match=r"pip install 'haptic-study\[touch\]'"):
             TouchHapticDevice()

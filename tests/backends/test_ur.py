@@ -7,8 +7,8 @@ import random
 import time
 
 import pytest
-
 from fake_rtde import FakeRtde
+
 from pipeline.backends.ur import UrRtdeRobot, ur3_flange_pose, ur3_tcp_pose
 from pipeline.clock import MonotonicClock
 from pipeline.devices import DeviceError, Robot

@@ -16,7 +16,7 @@ from pipeline.clock import Clock
 from pipeline.hardware import HapticSettings
 
 #: Every device opened in this process, newest last (tests inspect the forces it was sent).
-OPENED: list["ThreadedHD"] = []
+OPENED: list[ThreadedHD] = []
 
 
 class ThreadedHD:

@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 import pytest
+from gui_trials import trial_record
 from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.loop_messages import RECORD_FIELDS
-from pipeline.tick_record import TICK_DTYPE
 from pipeline.ring import RingBuffer
+from pipeline.tick_record import TICK_DTYPE
 from protocol.records import TrialRecord
-from gui_trials import trial_record
 from study_app import messages as m
 from study_app.models.app import AppModel, Notice
 from study_app.models.calibration import CalibrationModel

@@ -19,16 +19,16 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 
-from fake_netft import FakeNetFT  # noqa: E402
-from fake_rtde import FakeRtde  # noqa: E402
+from fake_netft import FakeNetFT
+from fake_rtde import FakeRtde
 
-from pipeline.devices import Fault  # noqa: E402
-from pipeline.frames import matrix_to_rotvec  # noqa: E402
-from study_app import messages as m  # noqa: E402
-from study_app.engine_client import EngineClient  # noqa: E402
-from study_app.engine_host import StudyEngine  # noqa: E402
-from study_app.engine_setup import HostConfig  # noqa: E402
-from study_app.models.real_calibration import RealCalibrationModel  # noqa: E402
+from pipeline.devices import Fault
+from pipeline.frames import matrix_to_rotvec
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import StudyEngine
+from study_app.engine_setup import HostConfig
+from study_app.models.real_calibration import RealCalibrationModel
 
 FAKE_TOUCH = "fake_touch:open_fake_touch"
 G = 9.80665

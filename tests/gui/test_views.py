@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-
+from gui_trials import trial_record
 from PySide6.QtCore import QPoint, Qt
 
 from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
-from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
@@ -21,8 +21,6 @@ from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
 from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel, TrialTable
-
-from gui_trials import trial_record
 from study_app.models.setup import SetupModel
 
 READY = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
@@ -58,7 +56,7 @@ def test_health_panel_shows_faults_and_enables_reset(qtbot):
     qtbot.addWidget(view)
     h.apply(READY)
     assert view.faults.text() == "Faults: none" and not view.reset_button.isEnabled()
-    h.apply(m.EngineFault(2.0, "fault", int(64), "OPERATOR_STOP"))
+    h.apply(m.EngineFault(2.0, "fault", 64, "OPERATOR_STOP"))
     assert view.faults.text() == "Faults: OPERATOR_STOP" and view.reset_button.isEnabled()
     h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False))
     text = view.loop.text()

@@ -16,11 +16,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frame_check import AXES, FrameCheck, check_axis
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.frames import IDENTITY, axis_angle, mat_mul
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
+from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.rig_calibration import CalibrationFileError, RigCalibrationFile, ToolCalibration
 from pipeline.sim.commissioning import pivot_poses, push_axes
 from pipeline.sim.rig import SimRig, SimRigConfig

@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.filters import MovingAverage3
 from pipeline.frames import axis_angle, mat_mul, mat_vec, rotvec_to_matrix, transpose
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import scale_components, scale_force
 

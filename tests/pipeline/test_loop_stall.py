@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 
 import pytest
-
 from drivers import PressAndHold
 from test_teleop_faults import Teleop
 

@@ -11,10 +11,10 @@ from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.loop_messages import Mark, SetHaptics
 from pipeline.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
-from pipeline.sim.rig import SimRigConfig
-from protocol.metrics import trial_metrics
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams
+from pipeline.sim.rig import SimRigConfig
+from protocol.metrics import trial_metrics
 
 K_TISSUE = 1.1e4
 GAP_M = 0.015

@@ -143,7 +143,7 @@ def test_f_max_below_device_peak_clamps_at_f_max():
     gov = SafetyGovernor(SafetyConfig(), 3.3)
     assert gov.limit_n == 3.0
     out = run_constant(gov, (0.0, 0.0, -1e6), True, 0.001, 1000)[-1]
-    assert 3.0 * (1 - 1e-9) <= -out[2] and math.hypot(*out) <= 3.0
+    assert -out[2] >= 3.0 * (1 - 1e-9) and math.hypot(*out) <= 3.0
 
 
 @pytest.mark.parametrize("f", [(INF, 0.0, 0.0), (1.7e308, 1.7e308, 1.7e308)])

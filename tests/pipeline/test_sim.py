@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from pipeline.clock import VirtualClock
-from pipeline.payload_identification import recommended_pose_set
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frames import IDENTITY, mat_mul, transpose
+from pipeline.payload_identification import recommended_pose_set
 from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot

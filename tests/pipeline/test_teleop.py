@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 from pipeline.clock import VirtualClock
 from pipeline.devices import TcpServo
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.frames import mat_vec, transpose
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.sim.robot import SimRobot
 from pipeline.sim.touch import SimTouch
 from pipeline.teleop import ServoTarget, Stop, TeleopConfig, TeleopController, TeleopDriver, TeleopState

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from tomlvalues import TOML_VALUES, replaced
 
 from protocol.config import (
     ABORT_POLICIES,
@@ -24,7 +25,6 @@ from protocol.config import (
     protocol_from_dict,
 )
 from protocol.session_setup import training_protocol as _training_protocol
-from tomlvalues import TOML_VALUES, replaced
 
 DEFAULT_TEXT = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
 

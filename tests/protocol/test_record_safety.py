@@ -235,7 +235,7 @@ def test_an_upgrade_whose_backup_cannot_be_written_changes_nothing(tmp_path, mon
     _v1_database(path)
     before = path.read_bytes()
 
-    def no_space(self, target, *a, **k):  # noqa: ANN001 - sqlite3.Connection.backup's signature
+    def no_space(self, target, *a, **k):  # sqlite3.Connection.backup's signature
         raise sqlite3.OperationalError("database or disk is full")
 
     monkeypatch.setattr(StudyDatabase, "_backup_to", no_space, raising=True)
@@ -247,7 +247,7 @@ def test_an_upgrade_whose_backup_cannot_be_written_changes_nothing(tmp_path, mon
 
 
 # -- leases ---------------------------------------------------------------------------------------
-def _hold_lease(path: str, scope: str, ready, release) -> None:  # noqa: ANN001 - mp events
+def _hold_lease(path: str, scope: str, ready, release) -> None:  # mp events
     d = StudyDatabase(path, check=False)
     d.acquire_lease(scope, new_owner_token(), command="haptic-study run --resume P01")
     ready.set()
@@ -352,7 +352,7 @@ def test_a_reused_pid_does_not_keep_a_lease_alive(tmp_path):
 def test_a_lease_from_another_host_lives_by_its_heartbeat(tmp_path):
     path = tmp_path / "study.db"
     d = StudyDatabase(path)
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     fresh = (now - dt.timedelta(seconds=LEASE_STALE_S / 3)).isoformat()
     d.conn.execute("INSERT INTO leases VALUES ('session 9', 'x', 1, 'lab-pc-2', '', 'haptic-study gui', ?, ?)",
                    (fresh, fresh))

@@ -13,8 +13,16 @@ from protocol.config import ProtocolError, default_protocol, protocol_from_dict
 from protocol.session_setup import open_new_session
 from protocol.storage import StudyDatabase, new_owner_token, session_scope
 from protocol.study_rules import (
-    DEVIATION_EVENT, TRAINING_SKIPPED, StoredSession, StudyRuleError, check_new_session, next_kind, requires_training,
-    seed_refusal, stored_sessions, training_refusal,
+    DEVIATION_EVENT,
+    TRAINING_SKIPPED,
+    StoredSession,
+    StudyRuleError,
+    check_new_session,
+    next_kind,
+    requires_training,
+    seed_refusal,
+    stored_sessions,
+    training_refusal,
 )
 from study_app.cli import main
 
