@@ -59,7 +59,7 @@ def cmd_export_participant(args: argparse.Namespace) -> int:
                                        inputs=[args.db], force=args.force))  # before the work
     if args.format == "parquet":
         try:
-            import pyarrow
+            import pyarrow  # noqa: F401
         except ImportError:
             raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
     if sys.stderr.isatty():

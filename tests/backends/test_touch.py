@@ -199,7 +199,7 @@ def test_missing_openhaptics_names_what_to_install(monkeypatch: pytest.MonkeyPat
         load_pyopenhaptics()
     monkeypatch.undo()
     try:
-        import pyOpenHaptics
+        import pyOpenHaptics  # noqa: F401
     except (ImportError, OSError):
         with pytest.raises(DeviceError, match=r"pip install 'haptic-study\[touch\]'"):
             TouchHapticDevice()

@@ -168,7 +168,7 @@ def test_a_session_with_late_ticks_and_latched_loop_faults_replays_bit_for_bit(
     counts = dict(zip(*abort_counts(study).to_dict("list").values()))
     assert (counts["fault"], counts["gap"], sum(counts.values())) == (3, 1, 4)
     health = health_table(study).set_index("trial_index")
-    assert health.loc[0, "period_max_ms"] == pytest.approx(21.0) and health.loc[0, "within_bounds"] == False
+    assert health.loc[0, "period_max_ms"] == pytest.approx(21.0) and health.loc[0, "within_bounds"] == False  # noqa: E712
     stall = next(i for i, (c, r) in enumerate(rows(db, "SELECT abort_cause, abort_reason FROM trials ORDER BY "
                                                       "trial_index")) if r and "61.0 ms" in r)
     assert health.loc[stall, "period_max_ms"] == pytest.approx(61.0) and "longest tick period 61 > 2" in health.loc[stall, "outside_bounds"]
