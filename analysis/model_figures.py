@@ -18,16 +18,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.aggregate import METRIC_LABELS
-from analysis.figures import (
-    MODE_COLORS,
-    MODE_MARKERS,
-    PAGE_IN,
-    _style,
-    add_note,
-    margins,
-    note_lines,
-    styled,
-)
+from analysis.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, _style, add_note, margins, note_lines, styled
 
 __all__ = ["learning_curves", "trade_slopes"]
 

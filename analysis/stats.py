@@ -37,12 +37,7 @@ import scipy
 from scipy import stats as sps
 
 from analysis.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
-from analysis.signed_rank import (
-    EXACT_MAX_N,
-    PERMUTATION_AUTO_MAX_N,
-    SCIPY_AUTO_RANGE,
-    auto_method,
-)
+from analysis.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, auto_method
 
 __all__ = [
     "ALTERNATIVES",

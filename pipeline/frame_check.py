@@ -141,8 +141,8 @@ class AxisCheck:
         def num(v: Any) -> float:
             return math.nan if v is None else float(v)
 
-        return cls(str(d["axis"]), tuple(d["expected_base"]), tuple(d["expected_haptic"]),  # type: ignore[arg-type]
-                   tuple(d["measured_base"]), tuple(d["measured_haptic"]),  # type: ignore[arg-type]
+        return cls(str(d["axis"]), tuple(d["expected_base"]), tuple(d["expected_haptic"]),
+                   tuple(d["measured_base"]), tuple(d["measured_haptic"]),
                    num(d["base_angle_deg"]), num(d["haptic_angle_deg"]), float(d["peak_n"]), int(d["samples"]),
                    bool(d["passed"]))
 
@@ -239,8 +239,8 @@ class FrameCheck:
     def from_dict(cls, d: Mapping[str, Any]) -> FrameCheck:
         """Inverse of :meth:`to_dict`; :class:`ValueError` naming a missing or bad field."""
         try:
-            return cls(tuple(AxisCheck.from_dict(a) for a in d["axes"]), tuple(d["rot_tip_sensor"]),  # type: ignore[arg-type]
-                       tuple(d["rot_haptic_base"]))  # type: ignore[arg-type]
+            return cls(tuple(AxisCheck.from_dict(a) for a in d["axes"]), tuple(d["rot_tip_sensor"]),
+                       tuple(d["rot_haptic_base"]))
         except KeyError as exc:
             raise ValueError(f"frames field {exc.args[0]!r} is missing") from None
         except (TypeError, ValueError) as exc:

@@ -170,7 +170,7 @@ class HapticFramework:
         self._rts = config.rot_tip_sensor
         self._rhb = config.rot_haptic_base
         self._rbt: Mat3 = IDENTITY
-        self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6  # type: ignore[assignment]
+        self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6
         # the parts of the per-tick tuple that no pose or bias change touches
         # (the filter rings are cleared in place by MovingAverage3.reset, so
         # holding them is safe)
@@ -450,7 +450,7 @@ def framework_config_from_dict(d: dict[str, Any]) -> FrameworkConfig:
     """The configuration :func:`framework_config_to_dict` wrote (validated like any other)."""
     return FrameworkConfig(
         f_max_n=d["f_max_n"], f_scale_n=d["f_scale_n"], filter_window=d["filter_window"],
-        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),  # type: ignore[arg-type]
+        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),
         safety=SafetyConfig(**d["safety"]),
     )
 

@@ -63,7 +63,7 @@ GRAVITY_BASE: Vec3 = (0.0, 0.0, -9.80665)
 #: The payload models a calibration can hold (science.md §1.1 and §1.3).
 PAYLOAD_MODELS = ("affine", "rigid")
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
-_ZERO_MAT: Mat3 = (0.0,) * 9  # type: ignore[assignment]
+_ZERO_MAT: Mat3 = (0.0,) * 9
 _DICT_VERSION = 1
 
 
@@ -400,7 +400,7 @@ class MountedPayload:
         self._k: Mat3 = tuple(v * gz for v in k) if self._along_z else k  # type: ignore[assignment]
         self._gravity_base = calibration.gravity_base
         self._com = calibration.com_m
-        self._bias: Wrench = (*calibration.force_bias_n, *calibration.torque_bias_nm)  # type: ignore[assignment]
+        self._bias: Wrench = (*calibration.force_bias_n, *calibration.torque_bias_nm)
 
     def payload_wrench(self, rot_base_tip: Mat3) -> Wrench:
         """Weight of the payload as the sensor reads it at tip orientation ``rot_base_tip``, without the bias.

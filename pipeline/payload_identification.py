@@ -312,9 +312,9 @@ def _with_residuals(fit: _Fit, rank: int, gb: Vec3, poses: Sequence[CalibrationP
     """The calibration of ``fit`` with its per-pose residuals and their RMS."""
     cal = PayloadCalibration(
         mass_kg=fit.mass_kg,
-        com_m=tuple(fit.com_m),  # type: ignore[arg-type]
-        force_bias_n=tuple(fit.force_bias_n),  # type: ignore[arg-type]
-        torque_bias_nm=tuple(fit.torque_bias_nm),  # type: ignore[arg-type]
+        com_m=tuple(fit.com_m),
+        force_bias_n=tuple(fit.force_bias_n),
+        torque_bias_nm=tuple(fit.torque_bias_nm),
         gravity_matrix=fit.gravity_matrix,
         model=fit.model,
         rank=rank,

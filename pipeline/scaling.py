@@ -159,7 +159,7 @@ def _to_floats(fx: object, fy: object, fz: object) -> tuple[float, float, float]
 
 def _saturate_huge(fx: object, fy: object, fz: object, f_max_n: float) -> Vec3:
     """Direction of a force whose components exceed DBL_MAX, at magnitude f_max (tanh(∞) = 1)."""
-    comps = [Fraction(c) for c in (fx, fy, fz)]  # type: ignore[arg-type]
+    comps = [Fraction(c) for c in (fx, fy, fz)]
     big = max(abs(c) for c in comps)
     ux, uy, uz = (float(c / big) for c in comps)  # each in [-1, 1], exact to rounding
     n = _HYPOT(ux, uy, uz)

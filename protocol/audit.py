@@ -31,13 +31,7 @@ from typing import Any
 
 from protocol.config import ProtocolError, protocol_from_dict
 from protocol.design import schedule_from_json
-from protocol.recording.integrity import (
-    BlockDamage,
-    BlockRow,
-    block_problem,
-    block_rows,
-    describe_damage,
-)
+from protocol.recording.integrity import BlockDamage, BlockRow, block_problem, block_rows, describe_damage
 
 __all__ = ["Audit", "audit_database"]
 

@@ -42,7 +42,7 @@ _PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
 _STILL_M, _STILL_DEG = 0.0002, 0.2
 
 
-def add_calibrate_command(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_calibrate_command(sub: argparse._SubParsersAction) -> None:
     """Add ``calibrate`` to the ``haptic-study`` subcommands."""
     c = add_command(
         sub, "calibrate", "commission the rig: TCP pivot calibration, payload/bias, frame and sign check",
@@ -341,7 +341,7 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
             rot = pose.rot_base_tip
             d = mat_vec(rot, off)
             flange = tuple(p - q for p, q in zip(pose.position_m, d))
-            poses.append(PivotPose(rot, flange, f"O{k}"))  # type: ignore[arg-type]
+            poses.append(PivotPose(rot, flange, f"O{k}"))
             rv = matrix_to_rotvec(rot)
             _say(f"O{k} recorded: flange at ({_mm(flange)}) mm, rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
                  f"{rv[2]:+.3f}) rad")

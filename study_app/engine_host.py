@@ -147,7 +147,7 @@ class StudyEngine:
         self.publish(m.EngineReady(
             ring_name=self.ring.name or "", rig=self.config.rig, clock=self.config.clock,
             calibration=self.calibration.to_dict(), surface_z_m=surface_z_m,
-            tip_home_m=tip_home_m, driver=self.driver_name,  # type: ignore[arg-type]
+            tip_home_m=tip_home_m, driver=self.driver_name,
             rot_tip_sensor=tuple(float(x) for x in rot_tip_sensor),
             devices=self._device_summary(),
         ))

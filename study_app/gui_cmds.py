@@ -20,7 +20,7 @@ __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
 SCREENSHOT_MARKER = ".haptic-study-screenshots"
 
 
-def add_gui_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_gui_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``gui``."""
     g = add_command(sub, "gui", "the experimenter's window (simulated rig by default)",
                     "haptic-study gui --db study.db\n"

@@ -156,7 +156,7 @@ def _port_number(name: str) -> Callable[[str], int]:
     return whole_number(name, 1, 65535)
 
 
-def add_probe_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_probe_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``probe`` and its devices."""
     pr = add_command(sub, "probe", "read a real device once and report (no loop)",
                      "haptic-study probe netft --host 192.168.1.1 --samples 1000")
@@ -172,7 +172,7 @@ def add_probe_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
     pn.set_defaults(handler=cmd_hardware)
 
 
-def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``check-hardware``."""
     ch = add_command(sub, "check-hardware", "connect to every device in the hardware file and print its state",
                      "haptic-study check-hardware --hardware hardware.toml")

@@ -31,7 +31,7 @@ def add_analysis_options(parser: argparse.ArgumentParser) -> None:
                         help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
 
 
-def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_report_parsers(sub: argparse._SubParsersAction) -> None:
     """Register ``report`` and ``plot-trial``."""
     r = add_command(
         sub, "report",

@@ -18,7 +18,7 @@ from study_app.cli_error import CliError
 __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
 
 
-def _fault_plan(text: str):  # type: ignore[no-untyped-def]
+def _fault_plan(text: str):
     """An argument type: one ``--inject-fault`` plan (protocol.rehearsal), or the parser's one-line error."""
     from protocol.rehearsal import parse_fault_plan
 
@@ -28,7 +28,7 @@ def _fault_plan(text: str):  # type: ignore[no-untyped-def]
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_sim_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_sim_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``sim``."""
     s = add_command(sub, "sim", "run the simulated rig with scripted presses and summarise what the pipeline saw",
                     "haptic-study sim --seconds 30 --seed 1")
@@ -41,7 +41,7 @@ def add_sim_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
     s.set_defaults(handler=cmd_sim)
 
 
-def add_run_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_run_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``run``."""
     r = add_command(sub, "run", "run a complete simulated study into a study database (headless)",
                     "haptic-study run --participants 10 --seed 0 --db study.db\n"
@@ -72,7 +72,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
     r.set_defaults(handler=cmd_run)
 
 
-def add_sessions_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_sessions_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``sessions``."""
     ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
                      "haptic-study sessions --db study.db")
@@ -129,7 +129,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
 
-        def show(p):  # type: ignore[no-untyped-def]
+        def show(p):
             nonlocal bar
             if bar is None:
                 bar = ProgressBar(p.study_trials_total, "study", "trials", decimals=0)

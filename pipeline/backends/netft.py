@@ -236,7 +236,7 @@ class NetFTStats:
 
     def as_dict(self) -> dict[str, int | str]:
         """Plain data for JSON output."""
-        return {k: getattr(self, k) for k in self.__slots__}  # type: ignore[attr-defined]
+        return {k: getattr(self, k) for k in self.__slots__}
 
 
 class RdtSequencer:

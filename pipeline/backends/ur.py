@@ -280,7 +280,7 @@ class UrRtdeRobot:
         try:
             rot = rotvec_to_matrix(pose[3], pose[4], pose[5])
         except (ValueError, OverflowError):
-            rot = (math.nan,) * 9  # type: ignore[assignment]
+            rot = (math.nan,) * 9
         self.q_rad = tuple(q) if len(q) == 6 else (math.nan,) * 6
         x, y, z = pose[0], pose[1], pose[2]
         cx, cy, cz = self.tcp_correction_m

@@ -67,7 +67,7 @@ class ChainStatus(QWidget):
 class TcpPage(QWidget):
     """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real one)."""
 
-    def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.instruction = QLabel()
@@ -129,7 +129,7 @@ class TcpPage(QWidget):
 class FramesPage(QWidget):
     """Step 3: the frame and sign check (automatic on the simulated rig, one push per axis on the real one)."""
 
-    def __init__(self, model: CommissioningModel, on_check, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: CommissioningModel, on_check, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.instruction = QLabel()
@@ -173,7 +173,7 @@ class RealPosePanel(QWidget):
 
     COLUMNS = ("Pose", "Off target (°)", "|F| (N)", "Force noise (N)")
 
-    def __init__(self, model: RealCalibrationModel, on_record, on_identify, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: RealCalibrationModel, on_record, on_identify, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.pose_set = QComboBox()
@@ -252,7 +252,7 @@ class CalibrationWizard(QWidget):
 
     hidden = Signal()
 
-    def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,  # type: ignore[no-untyped-def]
+    def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,
                  parent: QWidget | None = None, chain: CommissioningModel | None = None, on_tcp=None,
                  on_compute_tcp=None, on_frames=None) -> None:
         super().__init__(parent, Qt.WindowType.Window)

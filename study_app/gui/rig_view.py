@@ -134,7 +134,7 @@ class RigCanvas(QWidget):
 class RigWindow(QWidget):
     """Side view plus the driver choice."""
 
-    def __init__(self, model: RigViewModel, on_driver, on_inject=None,  # type: ignore[no-untyped-def]
+    def __init__(self, model: RigViewModel, on_driver, on_inject=None,
                  parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Simulated rig — side view")
@@ -165,7 +165,7 @@ class RigWindow(QWidget):
             lay.addLayout(self._rehearsal_row(on_inject))
         model.changed.connect(self._on_changed)
 
-    def _rehearsal_row(self, on_inject) -> QHBoxLayout:  # type: ignore[no-untyped-def]
+    def _rehearsal_row(self, on_inject) -> QHBoxLayout:
         """Rehearse a fault: what, and when (now, or seconds after a trial's cue)."""
         self.fault_kind = QComboBox()
         for kind, text in REHEARSAL_KINDS.items():

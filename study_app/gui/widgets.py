@@ -531,7 +531,7 @@ class QtSetupPanel(QGroupBox):
             text = self.setup.describe_resumable(s)
             item = QListWidgetItem(text)
             item.setToolTip(text)
-            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]
+            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))
             self.resumable.addItem(item)
             if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]
                 self.resumable.setCurrentItem(item)

@@ -143,7 +143,7 @@ class RealCalibrationModel:
         poses = tuple((s.label, s.recorded.rot_base_sensor, s.recorded.wrench) for s in self.recorded)  # type: ignore[union-attr]
         self.state, self.message = "identifying", ""
         self.changed.emit()
-        return m.IdentifyPoses(poses, self.pose_set)  # type: ignore[arg-type]
+        return m.IdentifyPoses(poses, self.pose_set)
 
     # -- engine events -----------------------------------------------------------------------------
     def apply(self, ev: object) -> None:

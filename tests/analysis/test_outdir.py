@@ -15,13 +15,7 @@ from mounts import can_mount, tmpfs
 
 from analysis import outdir
 from analysis.load import AnalysisError
-from analysis.outdir import (
-    check_output_file,
-    check_output_folder,
-    sha256_file,
-    write_output_file,
-    write_output_folder,
-)
+from analysis.outdir import check_output_file, check_output_folder, sha256_file, write_output_file, write_output_folder
 from analysis.outfs import OutputError
 
 MARKER = ".haptic-study-test"

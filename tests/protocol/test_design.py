@@ -9,14 +9,7 @@ import numpy as np
 import pytest
 
 from protocol.config import ORDERINGS, ProtocolConfig, Target, default_protocol
-from protocol.design import (
-    HapticMode,
-    TrialSpec,
-    build_schedule,
-    requeue_aborted,
-    schedule_from_json,
-    schedule_to_json,
-)
+from protocol.design import HapticMode, TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 
 FORCE = {"GENTLE": 0.6, "FIRM": 1.2}
 
