@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 from matplotlib.figure import Figure
 
@@ -285,7 +286,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     t = samples["t_s"].to_numpy(dtype=float)
 
     def mag(prefix: str) -> np.ndarray:
-        c = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
+        c: list[npt.NDArray[np.float64]] = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
         return np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
 
     task = samples["force_n"].to_numpy(dtype=float)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.ticker import NullLocator, PercentFormatter
 
 from analysis.figures import _style
@@ -41,7 +42,7 @@ def power_curves(result: PowerResult) -> Figure:
     scopes = list(dict.fromkeys(f["scope"]))
     fig = Figure(figsize=(4.2 * len(scopes) + 0.6, 4.6), layout="constrained")
     axes = fig.subplots(1, len(scopes), sharey=True, squeeze=False)[0]
-    handles: dict[str, object] = {}
+    handles: dict[str, Line2D] = {}
     for ax, scope in zip(axes, scopes):
         sel = f[f["scope"] == scope]
         for level, style in ((0.8, (0, (4, 3))), (0.9, (0, (1, 2)))):

@@ -238,7 +238,7 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     common = {str(r.haptic_mode): (float(r.slope_s_per_n), rm_caption(r)) for r in a.within.sa.itertuples()}
     tct_label = "TCT (s), successful trials" if options.tct_policy == "successful" else "TCT (s), failures at the cap"
     bars = dict(target_order=a.target_order)
-    tasks: list[tuple[str, tuple, dict, str, str]] = [
+    tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
         ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),

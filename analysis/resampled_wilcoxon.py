@@ -46,7 +46,7 @@ def _two_sided_p(weights: np.ndarray, total: float) -> np.ndarray:
     cdf = np.cumsum(weights)
     p_less = cdf / total
     p_greater = (cdf[-1] - cdf + weights) / total  # integer counts of S ≥ s
-    p = np.minimum(2.0 * np.minimum(p_less, p_greater), 1.0)
+    p: np.ndarray = np.minimum(2.0 * np.minimum(p_less, p_greater), 1.0)
     p.flags.writeable = False
     return p
 

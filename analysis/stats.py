@@ -247,7 +247,8 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     half_zero = float(ranks[d == 0].sum()) / 2.0 if zero_method == "zsplit" else 0.0
 
     def w_plus(x: np.ndarray, axis: int) -> np.ndarray:
-        return np.sum((x > 0) * ranks, axis=axis) + half_zero
+        w: np.ndarray = np.sum((x > 0) * ranks, axis=axis) + half_zero
+        return w
 
     res = sps.permutation_test((d,), w_plus, permutation_type="samples", vectorized=True,
                                alternative=alternative, axis=-1)

@@ -166,7 +166,8 @@ def summarise_study(rows: list[TrialRow], max_trial_s: float = 12.0) -> dict[str
             agg["max_ae_n"].append(statistics.fmean(r.max_ae_n for r in mine))
             tcts = [r.tct_s for r in mine if r.success and r.tct_s is not None]
             agg["tct_s"].append(statistics.fmean(tcts) if tcts else math.nan)
-            agg["tct_cens_s"].append(statistics.fmean(r.tct_s if r.success else max_trial_s for r in mine))
+            agg["tct_cens_s"].append(statistics.fmean(r.tct_s if r.success else max_trial_s  # type: ignore[misc]  # a success has its TCT
+                                                      for r in mine))
             for lab in ("GENTLE", "FIRM"):
                 sub = [r for r in mine if r.target == lab]
                 agg[f"success_{lab}"].append(sum(r.success for r in sub) / len(sub) if sub else math.nan)

@@ -71,7 +71,7 @@ def naive_numpy_pipeline(cal: Any, cfg: FrameworkConfig) -> Callable[[tuple[floa
     rhb = np.array(cfg.rot_haptic_base).reshape(3, 3)
     g_base = np.array([0.0, 0.0, -9.80665])
     buf: deque[np.ndarray] = deque(maxlen=cfg.filter_window)
-    state = {"prev": np.zeros(3), "gain": 0.0}
+    state: dict[str, Any] = {"prev": np.zeros(3), "gain": 0.0}
     limit = min(cfg.f_max_n, 3.3)
     slew = cfg.safety.slew_n_per_s * 0.001
 

@@ -362,7 +362,7 @@ class LateTickTracer:
 
 def _frames(frame: Any, depth: int = 3) -> str:
     """``fn (file:line) < caller (file:line) ...`` innermost first, paths shortened to the package."""
-    out = []
+    out: list[str] = []
     f = frame
     while f is not None and len(out) < depth:
         code = f.f_code

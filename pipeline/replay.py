@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -60,7 +61,7 @@ class ReplayInputs:
     raw_wrench: npt.NDArray[np.float64]
     haptic_on: npt.NDArray[np.bool_]
     faults: npt.NDArray[np.int64]
-    snapshot: dict
+    snapshot: dict[str, Any]
     events: Sequence[tuple[int, str, object]]
 
 

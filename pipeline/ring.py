@@ -140,6 +140,7 @@ class RingBuffer:
         shm: shared_memory.SharedMemory | None
         if shared:
             shm = shared_memory.SharedMemory(create=True, size=size)
+            assert shm.buf is not None  # None only once closed
             buf = shm.buf
         else:
             shm = None

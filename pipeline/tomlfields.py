@@ -219,7 +219,8 @@ class Fields:
             ok = not any(c.isspace() for c in v.strip())
         if not ok:
             raise self.fail(field, v, f"must be {what}")
-        return v.strip() if pattern is None else v
+        text: str = v
+        return text.strip() if pattern is None else text
 
     def list_of(self, field: str, v: Any, item: Callable[[str, Any], T], *, min_len: int, max_len: int,
                 what: str) -> list[T]:
@@ -253,4 +254,5 @@ class Fields:
         problem = host_problem(v, ipv6=ipv6)
         if problem is not None:
             raise self.fail(field, v, problem)
-        return v
+        name: str = v  # host_problem accepts only a str
+        return name

@@ -45,6 +45,7 @@ row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 
 from __future__ import annotations
 
+import functools
 import secrets
 import threading
 from collections.abc import Callable, Sequence
@@ -69,7 +70,7 @@ from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.records import AbortCause, Outcome, TrialRecord
-from protocol.storage import Recorder
+from protocol.storage import Recorder, StudyDatabase
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = ["SessionRunner", "SessionState", "TrialParticipant", "first_unfinished", "trial_words"]
@@ -549,7 +550,7 @@ class SessionRunner:
                 policy, sid = self.protocol.abort_policy, self.session_id
                 self.schedule = requeue_aborted(self.schedule, spec, spec.index + 1, policy, self._rng)
                 sj = schedule_to_json(self.schedule)
-                self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
+                self.recorder.call(functools.partial(StudyDatabase.update_schedule, session_id=sid, schedule_json=sj))
                 self.state.trials_total = len(self.schedule)
 
     def _handle_requests(self, t_ns: int) -> None:

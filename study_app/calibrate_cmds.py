@@ -430,9 +430,9 @@ def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, n
             for s in sensor.collect(3000, 4.0):
                 pose = robot.read_pose()
                 fw.set_pose(pose.rot_base_tip)
-                out = fw.step(s[1], s[2], s[3], False, 0.001)
-                base.append(out[9:12])
-                scaled.append(out[15:18])
+                step = fw.step(s[1], s[2], s[3], False, 0.001)
+                base.append(step[9:12])
+                scaled.append(step[15:18])
             res = check_axis(axis, np.asarray(base).reshape(-1, 3), np.asarray(scaled).reshape(-1, 3),
                              hw.framework.rot_haptic_base)
             _say(res.describe())

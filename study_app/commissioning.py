@@ -22,7 +22,7 @@ import numpy as np
 
 from pipeline.clock import MonotonicClock
 from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
-from pipeline.frames import Mat3, axis_angle, mat_mul
+from pipeline.frames import Mat3, as_mat3, axis_angle, mat_mul
 from pipeline.loop_messages import SetCalibration
 from pipeline.payload_compensator import PayloadCalibration
 from pipeline.payload_identification import (
@@ -198,7 +198,7 @@ class Commissioning:
         mean = w.mean(axis=0)
         e.publish(m.PoseRecorded(
             label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]
-            rot_base_sensor=tuple(float(x) for x in rot_base_sensor),
+            rot_base_sensor=as_mat3(rot_base_sensor),
             tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]
             off_target_deg=rotation_angle_deg(target, rot_base_sensor) if target is not None else math.nan,
             force_std_n=float(np.std(np.linalg.norm(w[:, :3], axis=1))),
@@ -353,7 +353,7 @@ class Commissioning:
                 self.engine.hardware.robot.tcp_offset_m if self.engine.hardware is not None else (0.0, 0.0, 0.0))
             off = np.asarray(rot).reshape(3, 3) @ np.asarray(tip)
             flange = tuple(float(v) for v in p.mean(axis=0) - off)
-            self.engine.publish(m.PivotRecorded(label, tuple(float(x) for x in rot), flange, moved * 1e3))  # type: ignore[arg-type]
+            self.engine.publish(m.PivotRecorded(label, as_mat3(rot), flange, moved * 1e3))  # type: ignore[arg-type]
 
         self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
 

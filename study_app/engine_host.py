@@ -36,6 +36,7 @@ import numpy as np
 from pipeline.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
 from pipeline.devices import DeviceError
 from pipeline.engine import Engine
+from pipeline.frames import as_mat3
 from pipeline.hardware import HardwareConfig
 from pipeline.jaw_control import JawController
 from pipeline.jitter_trace import LateTickTracer
@@ -148,7 +149,7 @@ class StudyEngine:
             ring_name=self.ring.name or "", rig=self.config.rig, clock=self.config.clock,
             calibration=self.calibration.to_dict(), surface_z_m=surface_z_m,
             tip_home_m=tip_home_m, driver=self.driver_name,
-            rot_tip_sensor=tuple(float(x) for x in rot_tip_sensor),
+            rot_tip_sensor=as_mat3(rot_tip_sensor),
             devices=self._device_summary(),
         ))
         self.commissioning.publish_status()
@@ -380,7 +381,7 @@ class StudyEngine:
                 cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path, check=False))),
             m.Pause: self._session_command, m.Resume: self._session_command, m.AbortTrial: self._session_command,
             m.AbortSession: self._session_command,
-            m.ResetFaults: lambda cmd: (self._require_loop("reset faults"), self.loop.submit(LoopResetFaults())),
+            m.ResetFaults: self._reset_faults,
             m.OperatorStop: lambda cmd: self.loop.submit(LoopOperatorStop()),
             m.Calibrate: self._calibrate, m.RecordPose: c.record_pose, m.IdentifyPoses: c.identify,
             m.CalibrateTcp: lambda cmd: c.calibrate_tcp(cmd.pose_set), m.RecordPivot: c.record_pivot,
@@ -389,6 +390,10 @@ class StudyEngine:
             m.SetDriver: self._driver_command, m.ManualTarget: self._driver_command,
             m.ResetStats: self._reset_stats,
         }
+
+    def _reset_faults(self, cmd: m.ResetFaults) -> None:
+        self._require_loop("reset faults")
+        self.loop.submit(LoopResetFaults())
 
     def _session_command(self, cmd: m.Pause | m.Resume | m.AbortTrial | m.AbortSession) -> None:
         runner = self.sessions.runner

@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.frames import Mat3, Vec3
+from pipeline.payload_compensator import Wrench
 from protocol.records import TrialRecord
 
 __all__ = [
@@ -190,14 +192,14 @@ class RecordPose:
 
     label: str
     seconds: float = 1.0
-    target_rot_base_sensor: tuple[float, ...] | None = None  # 9 numbers, row-major
+    target_rot_base_sensor: Mat3 | None = None  # row-major
 
 
 @dataclass(frozen=True, slots=True)
 class IdentifyPoses:
     """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if accepted."""
 
-    poses: tuple[tuple[str, tuple[float, ...], tuple[float, ...]], ...]
+    poses: tuple[tuple[str, Mat3, Wrench], ...]
     pose_set: str = "recommended"
 
 
@@ -220,7 +222,7 @@ class RecordPivot:
 class IdentifyTcp:
     """Real rig: pivot calibration from recorded flange poses (label, rot_base_flange as 9 numbers, position m)."""
 
-    poses: tuple[tuple[str, tuple[float, ...], tuple[float, float, float]], ...]
+    poses: tuple[tuple[str, Mat3, Vec3], ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -279,7 +281,7 @@ class EngineReady:
     surface_z_m: float
     tip_home_m: tuple[float, float, float]
     driver: str
-    rot_tip_sensor: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
+    rot_tip_sensor: Mat3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
     devices: list[str] = field(default_factory=list)
 
 
@@ -409,7 +411,7 @@ class PoseRecorded:
     label: str
     samples: int
     wrench: tuple[float, float, float, float, float, float]
-    rot_base_sensor: tuple[float, ...]  # 9 numbers, row-major
+    rot_base_sensor: Mat3  # row-major
     tcp_position_m: tuple[float, float, float]
     off_target_deg: float
     force_std_n: float
@@ -420,7 +422,7 @@ class PivotRecorded:
     """Real rig: one orientation of the TCP pivot calibration, as the flange pose (base frame)."""
 
     label: str
-    rot_base_flange: tuple[float, ...]  # 9 numbers, row-major
+    rot_base_flange: Mat3  # row-major
     flange_position_m: tuple[float, float, float]
     moved_mm: float
 

@@ -101,7 +101,8 @@ def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
     except TimeoutError:
         return f"no answer within {timeout_s:g} s"
     except (OSError, UnicodeError) as exc:
-        return exc.strerror or str(exc)
+        # a UnicodeError (a host name IDNA cannot encode) has no strerror
+        return (exc.strerror if isinstance(exc, OSError) else None) or str(exc)
 
 
 def _default_factory(host: str, frequency_hz: float) -> Any:

@@ -56,7 +56,7 @@ class TissueParams:
         """Static indentation (m) that produces ``force_n`` (inverse of ``k δⁿ``)."""
         if force_n <= 0:
             return 0.0
-        return (force_n / self.stiffness_n_per_m_pow) ** (1.0 / self.exponent)
+        return float((force_n / self.stiffness_n_per_m_pow) ** (1.0 / self.exponent))
 
     def static_force(self, depth_m: float) -> float:
         """Elastic force ``k δⁿ`` at rest, N."""

@@ -110,8 +110,8 @@ class TcpPage(QWidget):
         self.instruction.setText(mdl.tcp_instruction())
         for w in (self.pose_set, self.pose_label):
             w.setVisible(not real)
-        for w in (self.compute_button, self.clear_button, self.orientations):
-            w.setVisible(real)
+        for b in (self.compute_button, self.clear_button, self.orientations):
+            b.setVisible(real)
         self.run_button.setText("Record orientation" if real else "Run TCP calibration")
         self.run_button.setEnabled(mdl.tcp_state not in ("running", "recording"))
         why = mdl.compute_refusal()

@@ -332,7 +332,7 @@ class ExperimenterWindow(QMainWindow):
             self.plots.refresh()
 
     # -- questions -----------------------------------------------------------------------------------------
-    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], None], *,
+    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], object], *,
             moot_when: Callable[[object], bool] | None = None, moot_text: str = "") -> None:
         """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event."""
         if self.confirm is not None:
@@ -544,7 +544,7 @@ class ExperimenterWindow(QMainWindow):
         self.model.setup.update(
             db_path=db_path or str(s.value("setup/db_path", "") or ""),
             protocol_path=str(s.value("setup/protocol_path", "") or ""),
-            seed=int(s.value("setup/seed", 0) or 0),
+            seed=int(s.value("setup/seed", 0) or 0),  # type: ignore[call-overload]  # QSettings.value is typed object
         )
 
     def _save_settings(self) -> None:

@@ -84,7 +84,7 @@ class ParticipantWindow(QWidget):
         lay.addStretch(1)
         lay.addWidget(self.gauge)
         lay.addStretch(1)
-        QShortcut(QKeySequence(Qt.Key.Key_F11), self, activated=self.toggle_fullscreen)
+        QShortcut(QKeySequence(Qt.Key.Key_F11), self).activated.connect(self.toggle_fullscreen)
         model.changed.connect(self._on_changed)
         self._on_changed()
 

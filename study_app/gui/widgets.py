@@ -531,9 +531,9 @@ class QtSetupPanel(QGroupBox):
             text = self.setup.describe_resumable(s)
             item = QListWidgetItem(text)
             item.setToolTip(text)
-            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))
+            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[call-overload]  # an int in an untyped row
             self.resumable.addItem(item)
-            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]
+            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]  # as above
                 self.resumable.setCurrentItem(item)
 
     def selected_session(self) -> int | None:

@@ -124,7 +124,7 @@ def run_parallel(
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
-    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    ctx = mp.get_context("fork") if threading.active_count() == 1 else mp.get_context("spawn")
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

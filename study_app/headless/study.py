@@ -135,7 +135,8 @@ def _run_under_lease(
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
     # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
-    db: StudyDatabase | None = StudyDatabase(db_path, check=False)
+    db = StudyDatabase(db_path, check=False)
+    held: StudyDatabase | None = db  # None once the workers have the database
     try:
         taken = db.acquire_lease("study", owner)  # a second `run` stops here
         progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
@@ -146,7 +147,7 @@ def _run_under_lease(
         jobs_used = min(jobs, len(plan))
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
-            db = None
+            held = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
                                 faults=faults)
@@ -156,7 +157,7 @@ def _run_under_lease(
                       on_progress=on_progress, study_owner=owner, faults=faults)
         return progress
     finally:
-        _release_study(db, db_path, owner)
+        _release_study(held, db_path, owner)
 
 
 def _release_study(db: StudyDatabase | None, db_path: str, owner: str) -> None:

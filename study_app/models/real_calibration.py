@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pipeline.frames import IDENTITY, Mat3, mat_mul, matrix_to_rotvec, transpose
+from pipeline.frames import IDENTITY, Mat3, as_mat3, mat_mul, matrix_to_rotvec, transpose
 from pipeline.payload_identification import recommended_pose_set
 from study_app import messages as m
 from study_app.models import Emitter
@@ -122,7 +122,7 @@ class RealCalibrationModel:
             raise RuntimeError("no pose to record: start the pose set first")
         self.state, self.message = "recording", ""
         self.changed.emit()
-        return m.RecordPose(step.label, self.seconds, tuple(float(x) for x in step.target_rot_base_sensor))
+        return m.RecordPose(step.label, self.seconds, as_mat3(step.target_rot_base_sensor))
 
     def identify_refusal(self) -> str:
         """Why identification is not possible now ("" if it is)."""
