@@ -348,7 +348,8 @@ def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> 
     # at the window's end, where the force has settled (at the target, or wherever the trial ended) rather than
     # rising through the label; a light box keeps it legible over a trace that does pass
     ax.text(t[-1], y * 2.2, f"error window ({what}): RMSE, Max AE", ha="right", va="bottom", fontsize=6.5,
-            color="#444444", bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.8},
+            color="#444444",
+            bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.8},
             zorder=5)
 
 

@@ -67,7 +67,8 @@ class TrialTable:
     trials
         One row per analysed trial: ``participant_code, participant_number,
         session_id, trial_index, started_at_s`` (the cue, session clock),
-        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n,
+        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s,
+        peak_force_n,
         first_contact_s, tct_censored_s, database``.  ``tct_s`` is NaN unless
         the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
     n_from_samples

@@ -429,7 +429,8 @@ def estimate_power(
 # ------------------------------------------------------------------------------------------------
 # In words, and on disk
 # ------------------------------------------------------------------------------------------------
-def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *, holm_adjusted: bool = False) -> int | None:
+def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *,
+               holm_adjusted: bool = False) -> int | None:
     """The smallest n tried from which on every larger n tried reaches ``target`` power (None: not reached).
 
     "From which on" rather than "the first n that reaches it": the discrete

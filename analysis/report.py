@@ -140,7 +140,8 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     per_target: list[pd.DataFrame] = []
     target_results: dict[str, list[WilcoxonResult]] = {}
     for label in target_order:
-        res, frame = mode_tests(by_target[by_target["target_label"] == label], zero_method=zero_method, confidence=confidence)
+        res, frame = mode_tests(by_target[by_target["target_label"] == label], zero_method=zero_method,
+                                confidence=confidence)
         frame.insert(0, "target_label", label)
         per_target.append(frame)
         target_results[label] = res

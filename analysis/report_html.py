@@ -166,8 +166,9 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
                       f"{reasons}.")
     else:
         incomplete = (f"{plural(len(inc), 'experiment session')} did not complete and {are} left out with "
-                      f"{'its' if len(inc) == 1 else 'their'} {plural(excluded['incomplete_trials'], 'finished trial')} "
-                      f"(the default; report --include-incomplete analyses them): {reasons}.")
+                      f"{'its' if len(inc) == 1 else 'their'} "
+                      f"{plural(excluded['incomplete_trials'], 'finished trial')} (the default; report "
+                      f"--include-incomplete analyses them): {reasons}.")
     n_ab, n_rerun = within.reruns
     if n_ab == 0:
         aborted = "no aborted trial"

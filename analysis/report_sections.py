@@ -178,8 +178,8 @@ def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, tar
             + (_model_table(fe, labels, "metric ~ mode × target + trial number + (1 | participant); success: logistic "
                             "GEE, estimates in log-odds") if not too_few else "")
             + f"<figure>{img(png, 'each metric over the trials of the session by mode')}</figure>"
-            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per participant, "
-            "ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
+            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per "
+            "participant, ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
             "</caption><thead><tr><th>measure</th><th>ON first</th><th>OFF first</th><th>median ON − OFF, ON first"
             "</th><th>median ON − OFF, OFF first</th><th>U</th><th>p</th><th>note</th></tr></thead>"
             f"<tbody>{rows}</tbody></table></div>")

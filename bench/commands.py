@@ -43,13 +43,15 @@ def _add_pipeline(bsub: argparse._SubParsersAction) -> None:
     bp = add_command(bsub, "pipeline", "per-tick cost vs NumPy, 1 kHz loop timing, filter trade table",
                      "haptic-study bench pipeline --loop-seconds 15 --explain")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
-    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"), default=30.0,
+    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"),
+                    default=30.0,
                     help="real time to run the loop (default 30; 0 skips)")
     bp.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
-    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
+    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000,
+                    help="samples for the cost benchmark")
     bp.set_defaults(handler=_cmd_pipeline)
 
 
@@ -75,7 +77,8 @@ def _add_study(bsub: argparse._SubParsersAction) -> None:
     bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock, and its storage as "
                      "blocks and as rows",
                      "haptic-study bench study --participants 4")
-    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
+    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10,
+                    help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
     bs.set_defaults(handler=_cmd_study)
 

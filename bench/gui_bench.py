@@ -107,7 +107,8 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
     app = QApplication.instance() or QApplication(["haptic-study-bench"])
     tmp = tempfile.TemporaryDirectory(prefix="haptic-study-bench-")
     settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
-    win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings, os.path.join(tmp.name, "bench.db"))
+    win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings,
+                             os.path.join(tmp.name, "bench.db"))
     win.confirm = lambda title, text: True
     win.show()
     app.processEvents()

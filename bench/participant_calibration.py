@@ -274,7 +274,8 @@ def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--studies", type=int, default=5, help="number of simulated studies (different seeds)")
     ap.add_argument("--participants", type=int, default=10, help="participants per study")
     ap.add_argument("--first-study", type=int, default=0, help="seed index of the first study")

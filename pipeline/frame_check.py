@@ -50,7 +50,8 @@ MAX_ANGLE_DEG = 30.0
 #: Samples with less force than this are rest, not push, N.
 MIN_PUSH_N = 0.3
 #: The Touch frame's directions as the participant feels them (HDAPI: +x right, +y up, +z toward the user).
-_HAPTIC_WORDS = {"+x": "right", "-x": "left", "+y": "up", "-y": "down", "+z": "toward the user", "-z": "away from the user"}
+_HAPTIC_WORDS = {"+x": "right", "-x": "left", "+y": "up", "-y": "down", "+z": "toward the user",
+                 "-z": "away from the user"}
 
 
 def axis_vector(axis: str) -> Vec3:

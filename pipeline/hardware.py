@@ -122,7 +122,8 @@ class HardwareConfig:
     haptic: HapticSettings
     jaw: JawSettings | None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
-    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by default.
+    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by
+    #: default.
     calibration_file: str | None = None
     source: str = "hardware"
     teleop: TeleopSettings | None = None
@@ -144,7 +145,8 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         One line naming ``source``, the field, the value and what is allowed.
     """
     f = Fields(source, HardwareError)
-    top = f.table("", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
+    top = f.table("", d,
+                  {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
     f.version(top, "hardware file")
     for required in ("sensor", "robot", "haptic"):
         f.required(top, "", required, f"the [{required}] table is required")
@@ -177,7 +179,8 @@ def _sensor(f: Fields, v: Any) -> SensorSettings:
     cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
     if (cpf is None) != (cpt is None):
         missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
-        raise f.fail(missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
+        raise f.fail(missing, None,
+                     "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
     from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
 
     if cpf is not None:  # counts per *unit*: a unit taken by default would scale every force by a guess
@@ -332,7 +335,8 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
         deadman_button=deadman, clutch_button=clutch,
         stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
         pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
-        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0, hi=0.2),
+        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0,
+                                      hi=0.2),
         lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.1), lo=0.03, hi=0.2, lo_open=False,
                              note="s (servoL's look-ahead time)"),
         gain=f.number("teleop.gain", t.get("gain", 300.0), lo=100.0, hi=2000.0, lo_open=False,
@@ -357,7 +361,8 @@ class RealRig:
     """The devices of the real rig, satisfying :class:`pipeline.rig.Rig`."""
 
     def __init__(
-        self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None, teleop: Any = None
+        self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None,
+        teleop: Any = None
     ) -> None:
         self.sensor = sensor
         self.robot = robot
@@ -369,7 +374,8 @@ class RealRig:
         self.on_buttons: Callable[[int, int], None] | None = None
 
     def advance(self, now_ns: int) -> None:
-        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends).
+        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread
+        sends).
 
         The stylus buttons go to the jaw's controller (no I/O either: it queues).
         """
@@ -439,7 +445,8 @@ def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = 
 
 
 def open_servo(
-    robot: RobotSettings, teleop: TeleopSettings, clock: Clock, control_factory: Callable[[str, float], Any] | None = None
+    robot: RobotSettings, teleop: TeleopSettings, clock: Clock,
+    control_factory: Callable[[str, float], Any] | None = None
 ) -> Any:
     """Take control of the UR for teleoperation (uploads ur_rtde's control script).
 
@@ -466,8 +473,10 @@ def teleop_config(config: HardwareConfig) -> Any:
     return TeleopConfig(
         workspace_min_m=t.workspace_min_m, workspace_max_m=t.workspace_max_m, max_speed_m_s=t.max_speed_m_s,
         motion_scale=t.motion_scale, period_s=1.0 / freq if freq > 0 else 0.008,
-        rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button, clutch_button=t.clutch_button,
-        stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s, max_tracking_error_m=t.max_tracking_error_m,
+        rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button,
+        clutch_button=t.clutch_button,
+        stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s,
+        max_tracking_error_m=t.max_tracking_error_m,
     )
 
 
@@ -537,7 +546,8 @@ def build_real_rig(
         tcfg = teleop_config(config)
         t_settings = config.teleop
         assert t_settings is not None
-        steps.append(("robot control (teleoperation)", lambda: open_servo(config.robot, t_settings, clk, control_factory)))
+        steps.append(("robot control (teleoperation)",
+                      lambda: open_servo(config.robot, t_settings, clk, control_factory)))
     for what, opener in steps:
         if on_open is not None:
             on_open(what)

@@ -208,8 +208,9 @@ class JawController:
             return
         pos, frac, _, _ = self._status()
         secs = (self.clock_ns() - mv[1]) * 1e-9
-        self._report("stylus", f"{mv[0]} continuously: stopped ({why}) at {pos} µs ({frac:.0%} open) after {secs:.2f} s, "
-                               f"{abs(pos - mv[2])} µs moved")
+        self._report("stylus",
+                     f"{mv[0]} continuously: stopped ({why}) at {pos} µs ({frac:.0%} open) after {secs:.2f} s, "
+                     f"{abs(pos - mv[2])} µs moved")
 
     # -- lifetime ----------------------------------------------------------------------------------
     def start(self) -> None:

@@ -318,7 +318,8 @@ class HapticLoop:
         return latched
 
     def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
-        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets through.
+        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
+        through.
 
         Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
         """
@@ -388,7 +389,8 @@ class HapticLoop:
             self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
         elif isinstance(cmd, OperatorStop):
             self._latch(Fault.OPERATOR_STOP, now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, "OPERATOR_STOP: the experimenter stopped the force"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
+                                 "OPERATOR_STOP: the experimenter stopped the force"))
         elif isinstance(cmd, ControllerDetached):
             self._latch(Fault.ENGINE_DETACHED, now)
             self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
@@ -466,7 +468,8 @@ class HapticLoop:
         try:
             hook(Fault(self.faults))
         except Exception as exc:  # the loop must keep ramping the force down; report it
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
+                                 f"the rig could not act on the faults: {exc!r}"))
 
     def _emit(self, ev: LoopEvent) -> None:
         self.events.append(ev)

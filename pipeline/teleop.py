@@ -171,7 +171,8 @@ class TeleopConfig:
             raise ValueError(f"teleop workspace {lo!r}..{hi!r}: must be two finite 3-vectors in metres")
         for i, axis in enumerate("xyz"):
             if not lo[i] < hi[i]:
-                raise ValueError(f"teleop.workspace_min_m[{axis}] = {lo[i]!r} must be below workspace_max_m[{axis}] = {hi[i]!r}")
+                raise ValueError(f"teleop.workspace_min_m[{axis}] = {lo[i]!r} must be below workspace_max_m[{axis}] = "
+                                 f"{hi[i]!r}")
         for name in ("max_speed_m_s", "motion_scale", "period_s", "stylus_max_age_s", "pose_max_age_s",
                      "stylus_range_m", "stylus_max_speed_m_s", "max_tracking_error_m", "settle_after_stop_s"):
             v = getattr(self, name)
@@ -264,8 +265,8 @@ class TeleopController:
                 return f"stylus jumped {jump * 1e3:.1f} mm in {dt * 1e3:.1f} ms (faster than {cfg.stylus_max_speed_m_s:g} m/s)"
         last = self.last_target_m
         if last is not None and math.dist(q, last) > cfg.max_tracking_error_m:
-            return (f"TCP {math.dist(q, last) * 1e3:.1f} mm from its target (limit {cfg.max_tracking_error_m * 1e3:g} mm): "
-                    "collision or protective stop?")
+            return (f"TCP {math.dist(q, last) * 1e3:.1f} mm from its target (limit {cfg.max_tracking_error_m * 1e3:g} "
+                    "mm): collision or protective stop?")
         return ""
 
     def _servo(self, now_ns: int, target_m: Vec3) -> ServoTarget:
@@ -362,8 +363,9 @@ class TeleopController:
             p = stylus.position_m
             if self.state is TeleopState.IDLE:
                 if not cfg.contains(pose.position_m):
-                    return self._stop(TeleopState.FAULT, f"TCP {pose.position_m!r} m is outside the teleoperation workspace; "
-                                      "jog it inside before engaging")
+                    return self._stop(TeleopState.FAULT,
+                                      f"TCP {pose.position_m!r} m is outside the teleoperation workspace; jog it "
+                                      "inside before engaging")
                 if self._stop_ns is not None and pose.t_ns < self._stop_ns + self._settle_ns:
                     return Stop("waiting for the arm to come to rest")
                 self._anchor_stylus_m = p

@@ -174,7 +174,8 @@ class Fields:
         return self.table(name, top.get(name, {}), allowed_keys)
 
     def required(self, t: dict[str, Any], field: str, key: str, allowed: str) -> None:
-        """Refuse a table ``t`` (at ``field``; "" for the top level) without ``key``: ``<field>.<key> = None: <allowed>``."""
+        """Refuse a table ``t`` (at ``field``; "" for the top level) without ``key``: ``<field>.<key> = None:
+        <allowed>``."""
         if key not in t:
             raise self.fail(f"{field}.{key}" if field else key, None, allowed)
 
@@ -241,7 +242,8 @@ class Fields:
             not isinstance(v, list) or len(v) != 3
             or not all(isinstance(row, list) and len(row) == 3 and all(_finite(x) for x in row) for row in v)
         ):
-            raise self.fail(field, v, "must be a rotation matrix: 3 rows of 3 numbers, e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]]")
+            raise self.fail(field, v,
+                            "must be a rotation matrix: 3 rows of 3 numbers, e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]]")
         if any(abs(x) > 2 for row in v for x in row):  # (and an int too large for a float stops here)
             raise self.fail(field, v, "is not a rotation: every entry of a rotation matrix lies within ±1")
         try:

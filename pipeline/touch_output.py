@@ -209,7 +209,8 @@ class TouchOutput:
     def __init__(self, spec: TouchSpec, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
         if isinstance(command_timeout_s, bool) or not (isinstance(command_timeout_s, (int, float))
                                                        and 0.0 < command_timeout_s <= 1.0):
-            raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, at most 1")
+            raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, "
+                             "at most 1")
         self.spec = spec
         self.heat = MotorHeat(spec)
         self.command_timeout_s = float(command_timeout_s)

@@ -261,7 +261,8 @@ class SessionRunner:
         """Abort the running trial (not re-queued) and end the session."""
         self._request("abort_session", reason)
 
-    def _request(self, kind: str, detail: str = "", cause: str = "experimenter", trial_index: int | None = None) -> None:
+    def _request(self, kind: str, detail: str = "", cause: str = "experimenter",
+                 trial_index: int | None = None) -> None:
         with self._lock:
             self._requests.append((kind, detail, cause, trial_index))
 
@@ -489,8 +490,8 @@ class SessionRunner:
     def _too_many_failed(self, t_ns: int) -> None:
         """The loop failed several trials in a row: stop cueing (headless: interrupt; a person's session: pause)."""
         last = self.finished[-1]
-        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: {last.abort_reason}); "
-               "the rig or the machine cannot hold the designed condition")
+        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: "
+               f"{last.abort_reason}); the rig or the machine cannot hold the designed condition")
         self._failed_in_a_row = 0
         if self.auto_reset_faults:
             self._interrupt(t_ns, f"{why}: the session is interrupted and can be resumed")

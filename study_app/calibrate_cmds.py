@@ -246,8 +246,8 @@ def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]
         raise CliError(f"calibrate payload: no TCP calibration on record for tool {tool!r}; the chain runs in order: "
                     "calibrate tcp first")
     if args.step == "frames" and record.payload is None:
-        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in order: "
-                    "calibrate payload first")
+        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in "
+                       "order: calibrate payload first")
     note = f"tool {tool!r}"
     clock = MonotonicClock()
     try:
@@ -320,9 +320,9 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
     robot = open_robot(hw.robot, clock)  # the pendant's TCP: poses are turned back into flange poses below
     off = hw.robot.tcp_offset_m
     poses: list[PivotPose] = []
-    _say(f"TCP pivot calibration of {note}: rest the instrument tip in the divot and keep it there. Turn the instrument "
-         f"through at least {MIN_PIVOT_POSES} orientations, tilted at least {MIN_SPREAD_DEG:g}° apart in two "
-         "directions (e.g. toward the front, back, left and right), and record each one standing still.")
+    _say(f"TCP pivot calibration of {note}: rest the instrument tip in the divot and keep it there. Turn the "
+         f"instrument through at least {MIN_PIVOT_POSES} orientations, tilted at least {MIN_SPREAD_DEG:g}° apart in "
+         "two directions (e.g. toward the front, back, left and right), and record each one standing still.")
     try:
         while True:
             k = len(poses) + 1

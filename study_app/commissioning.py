@@ -1,7 +1,8 @@
 """Commissioning the rig from the study engine: payload, TCP and frame steps, what is on record, and the session gate.
 
 :class:`Commissioning` belongs to a :class:`study_app.engine_host.StudyEngine`
-(it sees it as an :class:`study_app.engine_core.EngineCore`) and runs on its driver thread.  On the simulated rig each step runs
+(it sees it as an :class:`study_app.engine_core.EngineCore`) and runs on its driver thread.  On the simulated rig each
+step runs
 automatically; on the real rig the experimenter records poses, pivot
 orientations and axis pushes one at a time, each averaged over a window of
 the ring's records (:class:`_Window`).  Accepted results are put on record for
@@ -273,8 +274,8 @@ class Commissioning:
     def publish_status(self) -> None:
         eng = self.engine.eng
         path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else ""
-        self.engine.publish(m.CalibrationStatus(self.engine.config.rig, self.tool_cal.tool, path, self.tool_cal.status(),
-                                         self.tool_cal.missing(*self.frames_in_use())))
+        self.engine.publish(m.CalibrationStatus(self.engine.config.rig, self.tool_cal.tool, path,
+                                                self.tool_cal.status(), self.tool_cal.missing(*self.frames_in_use())))
 
     def _record_step(self, step: str, result: Any) -> None:
         """Put an accepted result on record (real rig: saved in the calibration file) and publish the status."""
@@ -345,8 +346,8 @@ class Commissioning:
             turned = rotation_angle_deg(pose0.rot_base_tip, pose1.rot_base_tip)
             if not (moved <= PIVOT_STILL_M and turned <= PIVOT_STILL_DEG):
                 self.engine.publish(m.CommandRefused("RecordPivot", (
-                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; allowed "
-                    f"{PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
+                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; "
+                    f"allowed {PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
                 return
             rot = pose1.rot_base_tip
             tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
@@ -440,7 +441,8 @@ class Commissioning:
                     again = ("measuring the force at rest (check the Devices tab) — press Start again"
                              if w.command in ("StartSession", "ResumeSession")
                              else "recording (check the Devices tab) — record again")
-                    self.engine.publish(m.CommandRefused(w.command, w.stalled or f"the force sensor stalled while {again}"))
+                    self.engine.publish(m.CommandRefused(w.command,
+                                                         w.stalled or f"the force sensor stalled while {again}"))
                     if w.abandoned is not None:
                         w.abandoned()
                     continue
@@ -502,7 +504,8 @@ class Commissioning:
         except RuntimeError:
             self._starting = None
             raise
-        self.engine.publish(m.StartChecking(REST_CHECK_S, f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
-                                     f"the compensated force at rest for {REST_CHECK_S:g} s — keep the instrument "
-                                     "still and clear of everything"))
+        self.engine.publish(m.StartChecking(REST_CHECK_S,
+                                            f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
+                                            f"the compensated force at rest for {REST_CHECK_S:g} s — keep the "
+                                            "instrument still and clear of everything"))
         return True

@@ -263,8 +263,8 @@ class StudyEngine:
             reason = (f"the haptic loop died ({why}); the session is interrupted: restart the engine (Restart engine "
                       "in the window) and resume it")
             assert self.sessions.recorder is not None
-            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns), "session_interrupted",
-                                reason)
+            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns),
+                                         "session_interrupted", reason)
             self.sessions.end("interrupted", reason)
         self.publish(self.health())
 

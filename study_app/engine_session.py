@@ -77,7 +77,8 @@ class EngineSessions:
         if cmd.kind not in ("training", "experiment"):
             raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
         if cmd.seed < 0 or cmd.participant_number < 1:
-            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
+            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
+                             "number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
         _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):
@@ -100,7 +101,8 @@ class EngineSessions:
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
-            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed, participant_seed)
+            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
+                                 participant_seed)
         assert self.engine.hardware is not None
         return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
 
@@ -141,9 +143,9 @@ class EngineSessions:
         if override is not None:
             missing, why, rest_n = override
             recorder.event(opened.session_id, opened.clock_offset_s, CALIBRATION_OVERRIDE_EVENT,
-                           f"started by the experimenter's override: {missing or 'the calibration chain was on record'}; "
-                           f"the compensated force at rest was {rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). "
-                           f"Reason: {why}")
+                           "started by the experimenter's override: "
+                           f"{missing or 'the calibration chain was on record'}; the compensated force at rest was "
+                           f"{rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). Reason: {why}")
         if self.engine.config.clock == "real":
             gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
         tr = opened.protocol.trial
@@ -241,7 +243,8 @@ class EngineSessions:
         finally:
             db.close()
         st = runner.state
-        self.engine.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted, st.successes))
+        self.engine.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted,
+                                           st.successes))
 
     def _open_db(self, path: str) -> StudyDatabase:
         if not path:

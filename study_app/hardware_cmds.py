@@ -120,8 +120,9 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
         p = r.read_pose()
         fk, _ = ur3_tcp_pose(r.q_rad, hw.robot.tcp_offset_m)
         dist = math.dist(fk, p.position_m) if all(math.isfinite(v) for v in (*fk, *p.position_m)) else math.nan
-        return (f"{hw.robot.host}: {r.state}, TCP ({p.position_m[0]:+.4f}, {p.position_m[1]:+.4f}, {p.position_m[2]:+.4f}) m, "
-                f"controller time {p.controller_time_s:.3f} s, UR3 DH FK differs by {dist * 1000:.1f} mm")
+        return (f"{hw.robot.host}: {r.state}, TCP ({p.position_m[0]:+.4f}, {p.position_m[1]:+.4f}, "
+                f"{p.position_m[2]:+.4f}) m, controller time {p.controller_time_s:.3f} s, UR3 DH FK differs by "
+                f"{dist * 1000:.1f} mm")
 
     def describe_haptic(h: Any) -> str:
         st = h.read_state()
@@ -166,8 +167,10 @@ def add_probe_parser(sub: argparse._SubParsersAction) -> None:
                      "haptic-study probe netft --host 192.168.1.1 --samples 1000")
     pn.add_argument("--host", required=True, type=host_name("--host", ipv6=False), help="the Net F/T box's IP address")
     pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
-    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
-    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000, help="samples to average (default 1000)")
+    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80,
+                    help="web server port for netftapi2.xml (default 80)")
+    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000,
+                    help="samples to average (default 1000)")
     pn.add_argument("--json", action="store_true", help="print one JSON object")
     pn.set_defaults(handler=cmd_hardware)
 

@@ -106,7 +106,8 @@ class StartSession:
 
 @dataclass(frozen=True, slots=True)
 class ResumeSession:
-    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as StartSession)."""
+    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as
+    StartSession)."""
 
     db_path: str
     session_id: int
@@ -197,7 +198,8 @@ class RecordPose:
 
 @dataclass(frozen=True, slots=True)
 class IdentifyPoses:
-    """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if accepted."""
+    """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if
+    accepted."""
 
     poses: tuple[tuple[str, Mat3, Wrench], ...]
     pose_set: str = "recommended"
@@ -212,7 +214,8 @@ class CalibrateTcp:
 
 @dataclass(frozen=True, slots=True)
 class RecordPivot:
-    """Real rig: the tip rests in the divot; average the TCP pose for ``seconds`` (answered by :class:`PivotRecorded`)."""
+    """Real rig: the tip rests in the divot; average the TCP pose for ``seconds`` (answered by
+    :class:`PivotRecorded`)."""
 
     label: str
     seconds: float = 0.5
@@ -429,7 +432,8 @@ class PivotRecorded:
 
 @dataclass(frozen=True, slots=True)
 class TcpCalibrationDone:
-    """Result of a TCP pivot calibration: saved and in use if ``accepted``, else ``reason`` says which orientations to add.
+    """Result of a TCP pivot calibration: saved and in use if ``accepted``, else ``reason`` says which orientations to
+    add.
 
     ``result`` is :meth:`pipeline.tcp.TipCalibration.to_dict`; ``error_mm`` the distance from the simulated
     rig's true tip (NaN on the real rig).
@@ -487,7 +491,8 @@ class StartChecking:
 
 @dataclass(frozen=True, slots=True)
 class JawState:
-    """The jaw: position (fraction open, pulse width), whether at a limit, its fault ("" when healthy), the last command."""
+    """The jaw: position (fraction open, pulse width), whether at a limit, its fault ("" when healthy), the last
+    command."""
 
     fraction_open: float
     pulse_us: int
@@ -498,7 +503,8 @@ class JawState:
 
 @dataclass(frozen=True, slots=True)
 class EngineFault:
-    """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset (``'faults_reset'``)."""
+    """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset
+    (``'faults_reset'``)."""
 
     t_s: float
     kind: str
@@ -536,7 +542,8 @@ class Health:
     period_max_us: float = float("nan")
     #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), when tracing.
     late_periods: dict[str, Any] | None = None
-    #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after it.
+    #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after
+    #: it.
     waiting: str = ""
     #: The haptic device's motor heat as a fraction of its thermal budget, and the force it may render now (derated), N.
     haptic_heat_fraction: float = 0.0

@@ -48,7 +48,8 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                     "haptic-study run --participants 10 --seed 0 --db study.db --continue   # after an interruption",
                     "Run a complete simulated study (training and experiment sessions of simulated participants on "
                     "the simulated rig) into a study database, headless, and print a summary")
-    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10, help="number of simulated participants (default 10)")
+    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10,
+                   help="number of simulated participants (default 10)")
     r.add_argument("--seed", type=SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
     r.add_argument("--db", required=True, metavar="PATH", help="study database (SQLite); created if missing")
     r.add_argument("--protocol", default=None, metavar="FILE",
@@ -56,7 +57,8 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
-                   help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
+                   help="participants run at once, each in its own process (default: the usable cores; 1: one after "
+                        "the other)")
     after = r.add_mutually_exclusive_group()
     after.add_argument("--resume", metavar="CODE", default=None,
                        help="continue this participant's interrupted session (training or experiment) "
@@ -81,7 +83,8 @@ def add_sessions_parser(sub: argparse._SubParsersAction) -> None:
     ss.set_defaults(handler=cmd_sessions)
 
 
-#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a margin.
+#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a
+#: margin.
 _SIM_BYTES_PER_TICK = 160
 
 

@@ -68,7 +68,8 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "status": status, "rig": rig, "seed": int(seed), "started_at": started, "ended_at": ended,
             "end_reason": reason or "", "trials_planned": planned, "trials_done": int(done),
             "trials_aborted": int(aborted), "successes": int(successes),
-            "first_trial": None if first is None else int(first) + 1, "last_trial": None if last is None else int(last) + 1,
+            "first_trial": None if first is None else int(first) + 1,
+            "last_trial": None if last is None else int(last) + 1,
             "writer": writers.get(int(sid), "") if status == "running" else "",
         })
     return out

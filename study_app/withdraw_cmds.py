@@ -62,7 +62,8 @@ def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:
         "the counts removed; the report lists it. Refused while a session is being written",
     )
     w.add_argument("--db", required=True, metavar="PATH", help="study database")
-    w.add_argument("--participant", required=True, type=participant_code_arg, metavar="CODE", help="the participant's code")
+    w.add_argument("--participant", required=True, type=participant_code_arg, metavar="CODE",
+                   help="the participant's code")
     w.add_argument("--reason", required=True, type=_reason, metavar="TEXT",
                    help=f"why, in a few words, stored with the record (no personal data; at most {REASON_MAX} "
                         "characters)")

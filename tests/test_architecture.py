@@ -279,7 +279,8 @@ def _tree_with(tmp_path: Path, files: Mapping[str, str], *, append: bool = False
 
 def test_a_lazy_import_circle_is_reported(tmp_path: Path) -> None:
     # the circle this project had: a command module importing the CLI's error from the CLI that imports it
-    graph = _tree_with(tmp_path, {"study_app/report_cmds.py": "\n\ndef _bad():\n    from study_app.cli import CliError\n"},
+    graph = _tree_with(tmp_path,
+                       {"study_app/report_cmds.py": "\n\ndef _bad():\n    from study_app.cli import CliError\n"},
                        append=True)
     cycles = _new_cycles(graph)
     assert len(cycles) == 1

@@ -74,10 +74,13 @@ _SEQ_HALF = 1 << 31
 _RECENT = 256  # rdt sequences remembered to tell a duplicate from a late record
 
 # Net F/T unit names (scfgfu / scfgtu), normalised to lower case without spaces.
-_FORCE_UNITS = {"lbf": 4.4482216152605, "n": 1.0, "klbf": 4448.2216152605, "kn": 1000.0, "kgf": 9.80665, "gf": 0.00980665, "g": 0.00980665}
+_FORCE_UNITS = {"lbf": 4.4482216152605, "n": 1.0, "klbf": 4448.2216152605, "kn": 1000.0, "kgf": 9.80665,
+                "gf": 0.00980665, "g": 0.00980665}
 _TORQUE_UNITS = {
-    "lbf-in": 0.1129848290276167, "lbfin": 0.1129848290276167, "lbf-ft": 1.3558179483314004, "lbfft": 1.3558179483314004,
-    "nm": 1.0, "n-m": 1.0, "nmm": 0.001, "n-mm": 0.001, "kgf-cm": 0.0980665, "kgfcm": 0.0980665, "knm": 1000.0, "kn-m": 1000.0,
+    "lbf-in": 0.1129848290276167, "lbfin": 0.1129848290276167, "lbf-ft": 1.3558179483314004,
+    "lbfft": 1.3558179483314004,
+    "nm": 1.0, "n-m": 1.0, "nmm": 0.001, "n-mm": 0.001, "kgf-cm": 0.0980665, "kgfcm": 0.0980665, "knm": 1000.0,
+    "kn-m": 1000.0,
 }
 
 

@@ -30,7 +30,8 @@ def calibration_duration_ns(n_poses: int, *, samples_per_pose: int = 200, settle
     return n_poses * (_settle_ticks(settle_s) + samples_per_pose) * 1_000_000
 
 
-def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "", period_ns: int = 1_000_000) -> CalibrationPose:
+def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "",
+                 period_ns: int = 1_000_000) -> CalibrationPose:
     """Average ``samples`` ticks of wrench at the current pose into a :class:`CalibrationPose`.
 
     The orientation is the one the robot *reports*, combined with the

@@ -89,7 +89,8 @@ class FaultInjector:
         self._scheduled.sort(key=lambda f: f.at_ns)
 
     def cancel(self, kind: str, at_ns: int, rig: Any = None) -> bool:
-        """Withdraw a scheduled fault that has not started, or (given the ``rig``) end one that has; True if there was one.
+        """Withdraw a scheduled fault that has not started, or (given the ``rig``) end one that has; True if there was
+        one.
 
         Ending a fault early switches its device back at once: the fault of a trial that ended before
         the watchdog latched it does not go on into the pause or the next trial.

@@ -75,7 +75,8 @@ class BlockDamage:
     trials: tuple[int, ...] = ()
 
     def describe(self) -> str:
-        """One line: ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches trial 5``."""
+        """One line: ``session 4, recorded run 0, 12.000–13.999 s (blocks 12–13): checksum mismatch; touches trial
+        5``."""
         blocks = (f"block {self.first_block}" if self.first_block == self.last_block
                   else f"blocks {self.first_block}–{self.last_block}")
         touches = ("touches no trial" if not self.trials else

@@ -1,6 +1,8 @@
-"""The calibration wizard: the commissioning chain in order -- TCP, payload/bias, frames and signs -- and what is on record.
+"""The calibration wizard: the commissioning chain in order -- TCP, payload/bias, frames and signs -- and what is on
+record.
 
-Layout and wiring only: the TCP and frame steps and the status are :class:`study_app.models.commissioning.CommissioningModel`,
+Layout and wiring only: the TCP and frame steps and the status are
+:class:`study_app.models.commissioning.CommissioningModel`,
 the payload step :class:`study_app.models.calibration.CalibrationModel` (and, on the real rig,
 :class:`study_app.models.real_calibration.RealCalibrationModel`).
 """
@@ -65,7 +67,8 @@ class ChainStatus(QWidget):
 
 
 class TcpPage(QWidget):
-    """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real one)."""
+    """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real
+    one)."""
 
     def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -80,7 +83,8 @@ class TcpPage(QWidget):
         self.verdict = QLabel()
         self.verdict.setWordWrap(True)
         self.orientations = QTableWidget(0, 3)
-        self.orientations.setHorizontalHeaderLabels(["Orientation", "Flange position (mm)", "Moved while recording (mm)"])
+        self.orientations.setHorizontalHeaderLabels(["Orientation", "Flange position (mm)",
+                                                     "Moved while recording (mm)"])
         self.orientations.verticalHeader().setVisible(False)
         self.orientations.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.orientations.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
@@ -169,7 +173,8 @@ class FramesPage(QWidget):
 
 
 class RealPosePanel(QWidget):
-    """Real rig: one target pose at a time, Record pose, the recorded poses, Identify (layout of :class:`RealCalibrationModel`)."""
+    """Real rig: one target pose at a time, Record pose, the recorded poses, Identify (layout of
+    :class:`RealCalibrationModel`)."""
 
     COLUMNS = ("Pose", "Off target (°)", "|F| (N)", "Force noise (N)")
 

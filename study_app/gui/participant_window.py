@@ -37,7 +37,8 @@ class ForceGauge(QWidget):
             p.fillRect(QRectF(x0 + lo * scale, y0, (hi - lo) * scale, bar_h), QColor(60, 170, 90))
         f = min(max(self.force_n, 0.0), self.max_n)
         inside = self.band is not None and self.band[0] <= self.force_n <= self.band[1]
-        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4), QColor(250, 250, 250) if inside else QColor(240, 180, 40))
+        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4),
+                   QColor(250, 250, 250) if inside else QColor(240, 180, 40))
         p.setPen(QPen(QColor(200, 200, 200), 1))
         p.setFont(QFont("Sans", 11))
         for k in range(int(self.max_n) + 1):

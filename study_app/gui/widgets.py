@@ -39,11 +39,13 @@ from study_app.models.setup import KINDS, SetupModel
 
 __all__ = ["ElidedLabel", "FollowNewest", "QtCueWait", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
-_OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
+_OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
+                    "aborted": QColor(235, 235, 235)}
 
 
 class ElidedLabel(QLabel):
-    """One line of text that never wraps or widens its column: what does not fit ends in '…', all of it in the tooltip."""
+    """One line of text that never wraps or widens its column: what does not fit ends in '…', all of it in the
+    tooltip."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -118,7 +120,8 @@ class FollowNewest:
 
 
 class QtTrialTable(QTableWidget):
-    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view (:class:`FollowNewest`)."""
+    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view
+    (:class:`FollowNewest`)."""
 
     def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
         super().__init__(0, len(TRIAL_COLUMNS), parent)
@@ -469,7 +472,8 @@ class QtSetupPanel(QGroupBox):
         self._on_resumable()
 
     def _browse_db(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(), "SQLite (*.db *.sqlite);;All files (*)",
+        path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(),
+                                              "SQLite (*.db *.sqlite);;All files (*)",
                                               options=QFileDialog.Option.DontConfirmOverwrite)
         if path:
             self.db.setText(path)

@@ -60,7 +60,8 @@ _kill_target_pid: int | None = None
 
 
 def set_kill_target(pid: int) -> None:
-    """In a parallel study's worker: a planned ``kill`` ends ``pid`` (the study's main process), as ``kill -9`` would."""
+    """In a parallel study's worker: a planned ``kill`` ends ``pid`` (the study's main process), as ``kill -9``
+    would."""
     global _kill_target_pid
     _kill_target_pid = pid
 
@@ -107,7 +108,8 @@ def _engine(rig_seed: int, clock: str) -> Engine:
 
 
 def _drive(
-    eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress,
+    on_progress: Callable[[StudyProgress], None] | None,
     trigger: RehearsalTrigger | None = None,
 ) -> None:
     """Alternate loop ticks and runner blocks until the session ends."""

@@ -139,7 +139,8 @@ def _run_under_lease(
     held: StudyDatabase | None = db  # None once the workers have the database
     try:
         taken = db.acquire_lease("study", owner)  # a second `run` stops here
-        progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
+        progress = StudyProgress(participants_total=participants,
+                                 planned_s=planned_study_time_s(protocol, participants))
         progress.notes.extend(open_notes(db, taken))
         # again under the lease: what another process did in between counts
         plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study)

@@ -49,7 +49,8 @@ def peak_downsample(t: _F, y: _F, bins: int) -> tuple[_F, _F]:
     return t_out, y_out
 
 
-def nice_range(lo: float, hi: float, step: float = 0.5, min_span: float = 1.0, floor_zero: bool = False) -> tuple[float, float]:
+def nice_range(lo: float, hi: float, step: float = 0.5, min_span: float = 1.0,
+               floor_zero: bool = False) -> tuple[float, float]:
     """An axis range covering ``[lo, hi]`` with 5 % headroom, snapped outwards to multiples of ``step``.
 
     Snapping is what keeps the axes still: the range changes only when the data
@@ -158,7 +159,8 @@ class PlotModel:
         """Sample time of the newest record (0 before any)."""
         return float(self.t[-1]) if len(self.t) else 0.0
 
-    def y_range(self, names: tuple[str, ...], floor_zero: bool = False, include: tuple[float, ...] = ()) -> tuple[float, float]:
+    def y_range(self, names: tuple[str, ...], floor_zero: bool = False,
+                include: tuple[float, ...] = ()) -> tuple[float, float]:
         """Axis range for these series over the window and the values ``include`` (see :func:`nice_range`)."""
         lo, hi = min(include, default=math.inf), max(include, default=-math.inf)
         for k in names:

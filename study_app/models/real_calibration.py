@@ -177,7 +177,8 @@ class RealCalibrationModel:
 
     # -- what the view shows -------------------------------------------------------------------------
     def target_tcp(self, step: PoseStep) -> tuple[tuple[float, float, float], float]:
-        """The target as the UR pendant shows it: TCP rotation vector (rad), and the sensor axis' tilt from vertical (°)."""
+        """The target as the UR pendant shows it: TCP rotation vector (rad), and the sensor axis' tilt from vertical
+        (°)."""
         rot_base_tip = mat_mul(step.target_rot_base_sensor, transpose(self.rot_tip_sensor))
         rotvec = matrix_to_rotvec(rot_base_tip)
         z = step.target_rot_base_sensor[8]  # base-z component of the sensor's z axis (Mat3 is row-major, flat)

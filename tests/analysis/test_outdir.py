@@ -56,7 +56,8 @@ def test_an_existing_non_empty_folder_needs_force(tmp_path):
     _write(out, {"a.csv": "1"})
     before = _snapshot(out)
     with pytest.raises(AnalysisError, match=r"the folder exists and holds a.csv; choose another folder, or pass "
-                       r"--force to replace a folder test wrote before \(--force replaces only test's own unedited files\)"):
+                       r"--force to replace a folder test wrote before \(--force replaces only test's own unedited "
+                       r"files\)"):
         _write(out, {"a.csv": "2"})
     assert _snapshot(out) == before
 

@@ -85,7 +85,9 @@ def test_manual_calibration_needs_no_http_page() -> None:
 def test_no_http_page_is_a_clear_error_fast() -> None:
     with FakeNetFT(http=False) as fake:
         t0 = time.monotonic()
-        with pytest.raises(NetFTError, match=r"cannot read the Net F/T calibration from http://127\.0\.0\.1:\d+/netftapi2\.xml: .*refused.*counts_per_force"):
+        with pytest.raises(NetFTError,
+                           match=r"cannot read the Net F/T calibration from http://127\.0\.0\.1:\d+/netftapi2\.xml: "
+                                 r".*refused.*counts_per_force"):
             open_sensor(fake)
         assert time.monotonic() - t0 < 1.0
 
@@ -108,7 +110,8 @@ def test_closed_rdt_port_is_a_clear_error_fast() -> None:
         # a UDP port nobody listens on: the kernel answers ICMP port unreachable
         fake_port = fake.udp_port
     t0 = time.monotonic()
-    with pytest.raises(NetFTError, match=rf"no RDT data from the Net F/T at 127\.0\.0\.1:{fake_port} within 0\.3 s.*check the IP"):
+    with pytest.raises(NetFTError,
+                       match=rf"no RDT data from the Net F/T at 127\.0\.0\.1:{fake_port} within 0\.3 s.*check the IP"):
         NetFTForceSensor("127.0.0.1", port=fake_port, calibration=cal, connect_timeout_s=0.3)
     assert time.monotonic() - t0 < 1.0
 
@@ -218,7 +221,8 @@ def test_status_word_and_stalled_ft_sequence_reach_the_watchdog() -> None:
                 loop.run_ticks(1)
             assert s.stats.stalled == 7 and s.read_wrench().t_ns == t_fresh
             assert loop.faults == Fault.SENSOR_STALE
-            assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS", "SENSOR_STALE"]
+            assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS",
+                                                                                          "SENSOR_STALE"]
             assert [e.detail for e in loop.events if e.kind == "fault"][0] == "SENSOR_STATUS: status word 0x80000001"
         finally:
             s.close()

@@ -20,7 +20,8 @@ OPENED: list[ThreadedHD] = []
 
 
 class ThreadedHD:
-    """The HDAPI of one Touch whose scheduler calls the servo callback about every millisecond, like hdStartScheduler."""
+    """The HDAPI of one Touch whose scheduler calls the servo callback about every millisecond, like
+    hdStartScheduler."""
 
     def __init__(self) -> None:
         self.callback: Callable[[], None] | None = None

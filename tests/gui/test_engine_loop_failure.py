@@ -61,8 +61,8 @@ def test_a_loop_that_dies_mid_trial_is_stored_and_interrupts_the_session(tmp_pat
         e.release_ring()
     kinds = stored_events(db)
     died = [d for k, d in kinds if k == "fault" and d.startswith("LOOP_STALLED")]
-    assert died == ["LOOP_STALLED: the haptic loop died (OSError('Net F/T socket closed')); the haptic device's command "
-                    "watchdog dropped the force to zero"]
+    assert died == ["LOOP_STALLED: the haptic loop died (OSError('Net F/T socket closed')); the haptic device's "
+                    "command watchdog dropped the force to zero"]
     assert [k for k, _ in kinds][-1] == "session_interrupted"
     assert [s["code"] for s in list_resumable(db)] == ["P01"]  # interrupted, resumable
 

@@ -31,7 +31,8 @@ def started(kind: str = "experiment", aid: bool = False, total: int = 2) -> m.Se
                             tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
 
 
-def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2, mode: str = "on") -> m.TrialStarted:
+def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2,
+          mode: str = "on") -> m.TrialStarted:
     return m.TrialStarted(t_s, position - 1, position, 2, label, force, mode)
 
 
@@ -187,7 +188,8 @@ def test_plot_model_keeps_a_window_and_computes_magnitudes():
         fill_ring(ring, 1500, raw_fx=3.0, raw_fz=4.0, filt_fx=0.6, filt_fy=0.8, render_fz=-2.0, force_n=1.0)
         assert p.pull() == 1000 and p.skipped == 500  # only the window is read
         assert len(p.t) == 1000 and p.t[0] == pytest.approx(0.5) and p.latest_t_s == pytest.approx(1.499)
-        assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"], 1.0) and np.all(p.data["render_n"] == 2.0)
+        assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"],
+                                                              1.0) and np.all(p.data["render_n"] == 2.0)
         t, y = p.curve("raw_n")
         # constant data: each bin keeps its first sample twice
         assert len(t) == 200 and t[0] == pytest.approx(-0.999) and t[-1] == pytest.approx(-0.009)
@@ -225,7 +227,8 @@ def test_participant_screen_training_shows_gauge_and_band():
 
 _EVENTS = st.one_of(
     st.builds(lambda t, pos: trial(t_s=t, position=pos), st.floats(0, 100), st.integers(1, 2)),
-    st.builds(lambda t, ph: m.PhaseEntered(t, 0, ph), st.floats(0, 100), st.sampled_from(["active", "pause", "idle", "cued"])),
+    st.builds(lambda t, ph: m.PhaseEntered(t, 0, ph), st.floats(0, 100),
+              st.sampled_from(["active", "pause", "idle", "cued"])),
     st.builds(lambda t, f: ("sample", t, f), st.floats(0, 100), st.floats(0, 3.0)),
 )
 
@@ -459,14 +462,14 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
     h.apply(m.EngineFault(1.0, "fault", 1, "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"))
     for k in range(30):
         h.apply(m.EngineFault(2.0 + k, "output_restarted", 0, f"no loop tick for {11 + k / 10:.1f} ms: the haptic "
-                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in again "
-                              "from zero", session_t_s=1.0 + k))
+                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in "
+                              "again from zero", session_t_s=1.0 + k))
     h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
     h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
     assert len(h.fault_log) == 4
     assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
-                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to zero; "
-                              "feedback ramps in again from zero")
+                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to "
+                              "zero; feedback ramps in again from zero")
     assert h.fault_log[2].endswith("reset: SENSOR_STALE")
     assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
     # a restart is a line of its own: the same event after it starts a new run; the log keeps the newest 50 lines

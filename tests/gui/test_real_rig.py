@@ -96,7 +96,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         assert refused == [
             "real rig: a person holds the stylus; the simulated participant and manual driving exist on the "
             "simulated rig only",
-            "real rig: the poses are recorded one at a time in the calibration wizard (move the robot, then Record pose)",
+            "real rig: the poses are recorded one at a time in the calibration wizard (move the robot, then Record "
+            "pose)",
         ]
 
         wiz = RealCalibrationModel(seconds=0.2)
@@ -285,7 +286,8 @@ def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(ri
 
 
 def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_path):
-    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is fed in."""
+    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is
+    fed in."""
     from PySide6.QtCore import QSettings
 
     from study_app.gui.main_window import ExperimenterWindow

@@ -1,4 +1,5 @@
-"""What keeps the GUI thread short: bounded per-tick work, incremental tables, still axes, and the stall detector's attribution."""
+"""What keeps the GUI thread short: bounded per-tick work, incremental tables, still axes, and the stall detector's
+attribution."""
 
 from __future__ import annotations
 

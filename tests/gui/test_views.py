@@ -33,7 +33,8 @@ def test_trial_table_view_fills_from_the_model(qtbot):
     table.add(trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
                            outcome="success", tct_s=2.5, rmse_n=0.2, max_ae_n=0.4))
     assert view.rowCount() == 1
-    assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200", "0.400"]
+    assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200",
+                                                          "0.400"]
     table.clear()
     assert view.rowCount() == 0
 
@@ -141,10 +142,12 @@ def test_calibration_wizard_shows_refusal_and_figures(qtbot):
     assert runs == [1]
     c.command()
     assert not view.run_button.isEnabled()
-    c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [], None))
+    c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [],
+                              None))
     assert view.verdict.text() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10: add tilted poses"
     assert view.run_button.isEnabled() and view.residuals.rowCount() == 0
-    c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003, [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],
+    c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003,
+                              [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],
                               {"mass_kg": 0.65, "model": "affine"}))
     assert view.verdict.text().startswith("Accepted")
     assert view.residuals.rowCount() == 2 and view.residuals.item(1, 1).text() == "0.0020"

@@ -61,7 +61,8 @@ def test_a_roll_only_set_is_refused_naming_the_undetermined_axis_and_what_to_add
 
 def test_tilting_about_one_axis_only_leaves_that_axis_undetermined() -> None:
     rots = [mat_mul(axis_angle((1.0, 0.0, 0.0), math.radians(a)), TOOL_DOWN) for a in (-30, -10, 10, 30)]
-    with pytest.raises(DegeneratePivotError, match=r"along the flange x axis is not determined .* about the flange y or z"):
+    with pytest.raises(DegeneratePivotError,
+                       match=r"along the flange x axis is not determined .* about the flange y or z"):
         identify_tip(pivot_poses(SimRig(), rots))
 
 

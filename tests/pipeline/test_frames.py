@@ -311,7 +311,8 @@ def test_force_frame_round_trip(rot_tip_sensor, rot_base_tip, rot_haptic_base, f
     f_t = mat_vec(rot_tip_sensor, f_s)
     f_b = mat_vec(rot_base_tip, f_t)
     f_h = mat_vec(rot_haptic_base, f_b)
-    back = mat_vec(transpose(rot_tip_sensor), mat_vec(transpose(rot_base_tip), mat_vec(transpose(rot_haptic_base), f_h)))
+    back = mat_vec(transpose(rot_tip_sensor),
+                   mat_vec(transpose(rot_base_tip), mat_vec(transpose(rot_haptic_base), f_h)))
     assert max_abs_diff(back, f_s) <= 1e-12
     # rotations preserve the magnitude of the force
     assert math.hypot(*f_h) == pytest.approx(math.hypot(*f_s), abs=1e-12)

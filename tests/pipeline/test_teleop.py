@@ -36,7 +36,8 @@ class Bench:
         self.log: list[tuple[int, object]] = []
         self.cycles: list[tuple[float, float, float]] = []  # robot position at each controller cycle
 
-    def tick(self, stylus: tuple[float, float, float] | None = None, buttons: int | None = None, fresh: bool = True) -> object:
+    def tick(self, stylus: tuple[float, float, float] | None = None, buttons: int | None = None,
+             fresh: bool = True) -> object:
         self.clock.advance(1_000_000)
         now = self.clock.now_ns()
         if stylus is not None:

@@ -55,11 +55,13 @@ def test_golden_schedule_of_the_default_protocol():
 
 
 def test_golden_schedule_blocked_by_mode():
-    assert _pairs(build_schedule(_protocol("blocked_by_mode"), seed=7, participant_number=1)) == GOLDEN_BLOCKED_SEED_7_P1
+    assert _pairs(build_schedule(_protocol("blocked_by_mode"), seed=7,
+                                 participant_number=1)) == GOLDEN_BLOCKED_SEED_7_P1
 
 
 def test_participant_number_defaults_to_one():
-    assert build_schedule(default_protocol(), seed=7) == build_schedule(default_protocol(), seed=7, participant_number=1)
+    assert build_schedule(default_protocol(), seed=7) == build_schedule(default_protocol(), seed=7,
+                                                                        participant_number=1)
 
 
 # -- balance --------------------------------------------------------------------------------------
@@ -144,7 +146,8 @@ def test_blocked_by_mode_shuffles_targets_within_blocks():
 def test_counterbalanced_alternates_the_starting_mode(participant, first):
     other = "off" if first == "on" else "on"
     for seed in (0, 7, 99):
-        modes = [t.haptic_mode for t in build_schedule(_protocol("counterbalanced"), seed=seed, participant_number=participant)]
+        modes = [t.haptic_mode for t in build_schedule(_protocol("counterbalanced"), seed=seed,
+                                                       participant_number=participant)]
         assert modes == [first] * 10 + [other] * 10
 
 

@@ -54,7 +54,8 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     db = tmp_path / "study.db"
     proto = short_protocol()
     # 1 s after the cue of the 2nd trial: no trial can have succeeded yet (the hold alone lasts 1 s)
-    progress = run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1, faults=[FaultPlan(kind, "P01", 2, 1.0)])
+    progress = run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1,
+                         faults=[FaultPlan(kind, "P01", 2, 1.0)])
     assert progress.rehearsals == [f"{kind}@P01:2+1: injected during trial 2"]
     schedule = build_schedule(proto, 3, 1)
     second = schedule[1]
@@ -68,7 +69,8 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     (reset_t, reset_detail), = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'faults_reset'")
     assert reset_detail == f"cleared {LATCHES[kind]}" and reset_t > end
     # re-run at the end, and every cell complete
-    trials = rows(db, "SELECT trial_index, outcome, target_label, haptic_mode, repeat_of FROM trials ORDER BY trial_index")
+    trials = rows(db,
+                  "SELECT trial_index, outcome, target_label, haptic_mode, repeat_of FROM trials ORDER BY trial_index")
     assert trials[-1][4] == 1 and trials[-1][2:4] == (second.target_label, second.haptic_mode)
     done = sorted((t[2], t[3]) for t in trials if t[1] != "aborted")
     assert done == sorted((s.target_label, s.haptic_mode) for s in schedule)
@@ -106,7 +108,8 @@ def test_a_fault_that_does_not_clear_interrupts_the_session_and_it_resumes(tmp_p
     # the sensor stays silent for 30 s: it is still stalled 10 s after the runner began waiting
     monkeypatch.setitem(pipeline.sim.faults.DEFAULT_DURATION_S, "sensor-stall", 30.0)
     with pytest.raises(SessionInterrupted) as info:
-        run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1, faults=[FaultPlan("sensor-stall", "P01", 2, 1.0)])
+        run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1,
+                  faults=[FaultPlan("sensor-stall", "P01", 2, 1.0)])
     msg = str(info.value)
     assert msg.startswith("P01's experiment session 1: SENSOR_STALE was still latched 10 s after the runner began")
     assert msg.endswith("the session is interrupted and can be resumed") and "\n" not in msg

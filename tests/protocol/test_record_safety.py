@@ -55,7 +55,8 @@ def _v1_database(path: Path) -> None:
               "(1, 1, 'experiment', 0, 1, '{}', '[]', 'running', 'x', '0.1.0', 'sim', '{}')")
     c.execute("INSERT INTO trials (trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, "
               "outcome, started_at_s, ended_at_s) VALUES (1000000, 1, 0, 'GENTLE', 0.6, 'on', 'timeout', 1.0, 13.0)")
-    c.executemany("INSERT INTO samples (trial_id, t_s, force_n) VALUES (?, ?, ?)", [(1000000, 0.0, 0.1), (1000000, 0.001, 0.2)])
+    c.executemany("INSERT INTO samples (trial_id, t_s, force_n) VALUES (?, ?, ?)",
+                  [(1000000, 0.0, 0.1), (1000000, 0.001, 0.2)])
     c.commit()
     c.close()
 

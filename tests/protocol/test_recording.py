@@ -72,7 +72,8 @@ def blocks(draw: st.DrawFn) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray
 @given(blocks())
 def test_any_block_decodes_to_the_same_bits(block) -> None:
     cols, poses, events = block
-    blob = encode_block(cols, poses, events, {f"raw_{k}": COUNTS_PER_UNIT for k in ("fx", "fy", "fz", "tx", "ty", "tz")})
+    blob = encode_block(cols, poses, events,
+                        {f"raw_{k}": COUNTS_PER_UNIT for k in ("fx", "fy", "fz", "tx", "ty", "tz")})
     back, back_poses, back_events = decode_block(blob)
     for name, values in cols.items():
         assert np.array_equal(bits(back[name]), bits(values)), name

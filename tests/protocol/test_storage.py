@@ -210,7 +210,8 @@ def test_a_path_in_a_missing_folder_is_refused_and_nothing_is_created(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs a POSIX user that folder permissions apply to")
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0,
+                    reason="needs a POSIX user that folder permissions apply to")
 def test_a_read_only_folder_is_refused_and_nothing_is_created(tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
