@@ -246,11 +246,14 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
 
 
 _CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;
+color:#222;line-height:1.45}
 h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.8em}
 .meta{color:#666;font-size:.9em}table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.85em}
-th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}th{background:#f4f4f4;vertical-align:bottom}
-td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}tr.nc td{color:#999;font-style:italic}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}
+th{background:#f4f4f4;vertical-align:bottom}
+td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}
+tr.nc td{color:#999;font-style:italic}
 img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .key{display:grid;grid-template-columns:repeat(auto-fit,minmax(200px,1fr));gap:.6em;margin:1em 0}
 .key div{background:#f7f9fc;border:1px solid #e3e8f0;border-radius:6px;padding:.6em .8em}
@@ -339,7 +342,8 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
 
         listed = "".join(
             f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}"
-            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>"
+            for r in outside.head(20).itertuples())
         more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
         verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
                    "bounds.</p>" if outside.empty else

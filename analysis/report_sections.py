@@ -66,7 +66,8 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
         warn = f" <sup>{marks[str(r.note)]}</sup>" if str(r.note) in marks else ""
         body.append(f'<tr><td class="m">{html.escape(str(r.outcome))}</td>'
                     f'<td class="m">{html.escape(labels.get(r.term, r.term))}{warn}</td>'
-                    f"<td>{fmt(r.estimate, 4)}</td><td>{_ci(r.ci_low, r.ci_high, 4)}</td><td>{fmt_p(r.p_value)}</td></tr>")
+                    f"<td>{fmt(r.estimate, 4)}</td><td>{_ci(r.ci_low, r.ci_high, 4)}</td>"
+                    f"<td>{fmt_p(r.p_value)}</td></tr>")
     foot = "".join(f"<li>{k}: {html.escape(n)}</li>" for n, k in marks.items())
     return (f'<div class="scroll"><table class="within"><caption>{caption}</caption><thead><tr><th>outcome</th>'
             "<th>term</th><th>estimate</th><th>95 % CI</th><th>p</th></tr></thead>"

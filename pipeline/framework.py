@@ -295,7 +295,8 @@ class HapticFramework:
             A snapshot of another version, or one that does not read.
         """
         if snap.get("version") != SNAPSHOT_VERSION:
-            raise ValueError(f"framework snapshot version = {snap.get('version')!r}: this code reads {SNAPSHOT_VERSION}")
+            raise ValueError(f"framework snapshot version = {snap.get('version')!r}: "
+                             f"this code reads {SNAPSHOT_VERSION}")
         stored = framework_config_from_dict(snap["config"])
         cfg = stored if config is None else config
         cal = PayloadCalibration.from_dict(snap["calibration"])

@@ -100,7 +100,8 @@ class ToolCalibration:
             why = f"no frame and sign check on record for tool {t!r}"
             step = "frames"
         elif not self.frames.matches(rot_tip_sensor, rot_haptic_base):
-            why = f"the frame check on record for tool {t!r} was made with other [frames] rotations than the ones in use"
+            why = (f"the frame check on record for tool {t!r} was made with other [frames] rotations than the ones "
+                   "in use")
             step = "frames"
         elif not self.frames.passed:
             why = f"the frame check on record for tool {t!r} failed ({self.frames.summary().split(': ', 1)[1]})"

@@ -247,7 +247,8 @@ class TeleopController:
         if not _finite3(p):
             return f"stylus position {p!r} is not finite"
         if (now_ns - stylus.t_ns) * 1e-9 > cfg.stylus_max_age_s:
-            return f"stylus data stale ({(now_ns - stylus.t_ns) * 1e-6:.1f} ms old, limit {cfg.stylus_max_age_s * 1e3:g} ms)"
+            return (f"stylus data stale ({(now_ns - stylus.t_ns) * 1e-6:.1f} ms old, "
+                    f"limit {cfg.stylus_max_age_s * 1e3:g} ms)")
         r = cfg.stylus_range_m
         if not (-r <= p[0] <= r and -r <= p[1] <= r and -r <= p[2] <= r):
             return f"stylus position {p!r} m outside ±{r:g} m: implausible"
@@ -262,7 +263,8 @@ class TeleopController:
             jump = math.dist(p, prev)
             # 1 mm slack for encoder quantisation on very short intervals
             if jump > cfg.stylus_max_speed_m_s * dt + 1e-3:
-                return f"stylus jumped {jump * 1e3:.1f} mm in {dt * 1e3:.1f} ms (faster than {cfg.stylus_max_speed_m_s:g} m/s)"
+                return (f"stylus jumped {jump * 1e3:.1f} mm in {dt * 1e3:.1f} ms "
+                        f"(faster than {cfg.stylus_max_speed_m_s:g} m/s)")
         last = self.last_target_m
         if last is not None and math.dist(q, last) > cfg.max_tracking_error_m:
             return (f"TCP {math.dist(q, last) * 1e3:.1f} mm from its target (limit {cfg.max_tracking_error_m * 1e3:g} "

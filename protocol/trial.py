@@ -177,7 +177,8 @@ class TrialMachine:
             tolerance_fraction=self.timing.tolerance_fraction, hold_s=self.timing.hold_s,
             max_trial_s=self.timing.max_trial_s, sample_period_s=self.sample_period_s,
         )
-        if outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS):  # pragma: no cover - one definition
+        disagree = outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS)
+        if disagree:  # pragma: no cover - one definition
             raise TrialMachineError("live hold decision disagrees with trial_metrics")
         done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason)
         self.pause_until_ns = end_ns + self._pause_ns

@@ -263,7 +263,9 @@ class Commissioning:
     def _tool_record(self) -> ToolCalibration:
         eng = self.engine.eng
         if not eng.simulated:
-            return eng.calibration_file.tool(eng.tool) if eng.calibration_file is not None else ToolCalibration(eng.tool)
+            if eng.calibration_file is None:
+                return ToolCalibration(eng.tool)
+            return eng.calibration_file.tool(eng.tool)
         # the simulated rig calibrated its payload as it was built; TCP and frames are this run's, never saved
         return ToolCalibration("simulated instrument", payload=eng.calibration, payload_date=now_iso())
 

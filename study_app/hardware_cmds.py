@@ -126,11 +126,13 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
 
     def describe_haptic(h: Any) -> str:
         st = h.read_state()
-        return f"{hw.haptic.device_name}: peak {h.peak_force_n:g} N, continuous {h.continuous_force_n:g} N, error 0x{st.error_code:04x}"
+        return (f"{hw.haptic.device_name}: peak {h.peak_force_n:g} N, continuous {h.continuous_force_n:g} N, "
+                f"error 0x{st.error_code:04x}")
 
     def describe_jaw(j: Any) -> str:
         s = j.status
-        return f"{hw.jaw.port if hw.jaw else ''}: READY, limits {s.closed_us}-{s.open_us} µs, at {s.pos_us} µs ({s.fraction_open:.0%} open)"
+        return (f"{hw.jaw.port if hw.jaw else ''}: READY, limits {s.closed_us}-{s.open_us} µs, at {s.pos_us} µs "
+                f"({s.fraction_open:.0%} open)")
 
     attempt("force sensor", lambda: open_sensor(hw.sensor, clock), describe_sensor)
     attempt("robot", lambda: open_robot(hw.robot, clock), describe_robot)

@@ -240,7 +240,8 @@ class SerialJawActuator:
             try:
                 line = self._replies.get(timeout=max(0.0, deadline - time.monotonic()))
             except queue.Empty:
-                raise JawFault(f"jaw actuator on {self.port} did not answer {text!r} within {self.reply_timeout_s:g} s") from None
+                raise JawFault(f"jaw actuator on {self.port} did not answer {text!r} within "
+                               f"{self.reply_timeout_s:g} s") from None
             if not line:
                 raise JawFault(f"jaw actuator: {s.fault}")
             w = line.split()

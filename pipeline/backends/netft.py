@@ -214,7 +214,8 @@ def read_netft_calibration(host: str, http_port: int = 80, timeout_s: float = 2.
         with urllib.request.urlopen(url, timeout=timeout_s) as resp:  # a lab device on the LAN
             body = resp.read(1 << 20)
     except urllib.error.HTTPError as exc:
-        raise NetFTError(f"cannot read the Net F/T calibration from {url}: HTTP {exc.code} {exc.reason}; {hint}") from None
+        raise NetFTError(f"cannot read the Net F/T calibration from {url}: HTTP {exc.code} {exc.reason}; "
+                         f"{hint}") from None
     except (urllib.error.URLError, OSError) as exc:
         reason = getattr(exc, "reason", exc)
         raise NetFTError(f"cannot read the Net F/T calibration from {url}: {reason}; {hint}") from None

@@ -216,7 +216,8 @@ class UrRtdeServo:
                     ok = ctrl.servoL(list(target), 0.0, 0.0, self.period_s, self.lookahead_s, self.gain)
                     self.servo_commands += 1
                     if ok is False:
-                        self._error = "servoL refused the target (protective stop, or the control script is not running)"
+                        self._error = ("servoL refused the target (protective stop, or the control script is not "
+                                       "running)")
                         self._do_stop(ctrl, clears_error=False)
                     else:
                         self.servoing = True

@@ -465,7 +465,9 @@ def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...
     return out
 
 
-def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
+def join_blocks(
+    blobs: Iterable[bytes],
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
     """Decode and concatenate a segment's blocks, in order."""
     return join_decoded(decode_block(blob) for blob in blobs)
 

@@ -340,7 +340,8 @@ class AppModel:
         if action == "record_pose":
             return self.ready and not s.running and self.rig_kind == "real" and self.real_calibration.can_record()
         if action == "identify":
-            return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
+            return (self.ready and not s.running and self.rig_kind == "real"
+                    and not self.real_calibration.identify_refusal())
         if action == "restart_engine":
             return (bool(self.engine_trouble) or self.loop_stalled) and self.restarter is not None
         if action == "sim_rig_view":

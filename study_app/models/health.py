@@ -298,7 +298,8 @@ class HealthModel:
         p99 = "–" if math.isnan(h.abs_dev_p99_us) else f"{h.abs_dev_p99_us:.0f} µs"
         lim = LOOP_LIMITS
         return [
-            LoopFigure("rate", f"loop {h.loop_rate_hz:.0f} Hz", _level(abs(h.loop_rate_hz - 1000.0), lim["rate_off_hz"]),
+            LoopFigure("rate", f"loop {h.loop_rate_hz:.0f} Hz",
+                       _level(abs(h.loop_rate_hz - 1000.0), lim["rate_off_hz"]),
                        f"1000 ± {lim['rate_off_hz'][0]:g} Hz"),
             LoopFigure("p99", f"p99 |period − 1 ms| {p99}", _level(h.abs_dev_p99_us, lim["p99_us"]),
                        f"≤ {lim['p99_us'][0]:g} µs"),

@@ -155,9 +155,9 @@ class RealCalibrationModel:
             if step is None:
                 return
             step.recorded = ev
+            far = ev.off_target_deg > OFF_TARGET_WARN_DEG
             self.message = (f"{ev.label} is {ev.off_target_deg:.0f}° from its target — kept (the fit uses the measured "
-                            "orientation), but the set may be less well spread" if ev.off_target_deg > OFF_TARGET_WARN_DEG
-                            else "")
+                            "orientation), but the set may be less well spread" if far else "")
             nxt = self._next_unrecorded(self.steps.index(step) + 1)
             self.state = "at_pose"
             if nxt is not None:

@@ -84,7 +84,8 @@ def hw_file(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde) -> Path:
         'connect_timeout_s = 1.0\n'
         f'[robot]\nhost = "{rtde.host}"\nconnect_timeout_s = 1.0\ntcp_offset_m = {list(PENDANT_TCP)}\n[haptic]\n'
         '[calibration]\ntool = "grasper"\n'
-        '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n'
+        '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n'
+        'rot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n'
         '[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
         encoding="utf-8")
     return p

@@ -224,7 +224,8 @@ def write_rig_file(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde, jaw: PtyJaw
     d = tomllib.loads(text)
     lines = [
         "version = 1",
-        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\nconnect_timeout_s = 1.0',
+        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
+        'connect_timeout_s = 1.0',
         f'[robot]\nhost = "{rtde.host}"\nconnect_timeout_s = 1.0',
         "[haptic]",
     ]

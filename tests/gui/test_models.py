@@ -402,7 +402,8 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     a.apply(trial())
     assert not a.can("restart_engine")  # nothing to restart while it runs
     a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
-    assert a.engine_trouble == "The study engine exited unexpectedly. Session 3 was interrupted; its stored trials are kept."
+    assert a.engine_trouble == ("The study engine exited unexpectedly. Session 3 was interrupted; its stored trials "
+                                "are kept.")
     assert a.engine_trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
     assert not a.can("restart_engine")  # no restarter: no button that does nothing
     a.restarter = lambda: restarts.append(1)

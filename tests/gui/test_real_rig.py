@@ -194,7 +194,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         e.release_ring()
     con = sqlite3.connect(db)
     try:
-        rig_kind, config_json, cal_json = con.execute("SELECT rig, config_json, calibration_json FROM sessions").fetchone()
+        rig_kind, config_json, cal_json = con.execute(
+            "SELECT rig, config_json, calibration_json FROM sessions").fetchone()
     finally:
         con.close()
     config, cal = json.loads(config_json), json.loads(cal_json)

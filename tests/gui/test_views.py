@@ -144,7 +144,8 @@ def test_calibration_wizard_shows_refusal_and_figures(qtbot):
     assert not view.run_button.isEnabled()
     c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [],
                               None))
-    assert view.verdict.text() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10: add tilted poses"
+    assert view.verdict.text() == ("Refused — the previous calibration stays in use. Reason: rank 6 of 10: "
+                                   "add tilted poses")
     assert view.run_button.isEnabled() and view.residuals.rowCount() == 0
     c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003,
                               [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],

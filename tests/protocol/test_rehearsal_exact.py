@@ -103,7 +103,8 @@ def test_a_fault_planned_at_the_cap_is_moved_into_its_trial_and_said_so(tmp_path
     delay = latch_delay_s(kind, 0.005, 0.050)
     (note,) = progress.rehearsals
     assert note == (f"{kind}@P01:1+3: injected during trial 1, moved to +{3.0 - delay - 0.001:.3f} s: a {kind} is "
-                    f"latched up to {delay * 1e3:g} ms after it begins and trial 1 ends 3 s after its cue at the latest")
+                    f"latched up to {delay * 1e3:g} ms after it begins and trial 1 ends 3 s after its cue at the "
+                    "latest")
 
 
 class _Rig:

@@ -120,7 +120,8 @@ def test_new_database_gets_the_schema(db, db_path):
             assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
-        indexes = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")}
+        named = other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")
+        indexes = {r[0] for r in named}
         assert indexes == {"samples_by_trial", "events_by_session"}
     finally:
         other.close()
