@@ -215,7 +215,7 @@ def mode_bars(
     margins(fig, 0.5, 0.08, 0.3 + extra, 0.62 + 0.2 * bool(title), wspace=0.3)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     rng = np.random.default_rng(0)  # jitter of the dots, fixed so figures are reproducible
-    for ax, metric in zip(axes, metrics):
+    for ax, metric in zip(axes, metrics, strict=True):
         groups = [(t, by_target[by_target["target_label"] == t], marks.get((metric, t), "")) for t in targets]
         groups.append(("overall", overall, marks.get((metric, "overall"), "")))
         _bars_panel(ax, groups, metric, rng)
@@ -238,7 +238,7 @@ def paired_lines(per_part: pd.DataFrame, metrics: Sequence[str], marks: Mapping[
     fig = Figure(figsize=(PAGE_IN, 2.5), dpi=_DPI)
     margins(fig, 0.45, 0.08, 0.25, 0.5, wspace=0.55)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
-    for ax, metric in zip(axes, metrics):
+    for ax, metric in zip(axes, metrics, strict=True):
         wide = by_mode(per_part, metric)
         k = len(wide)
         for i, (_, row) in enumerate(wide.iterrows()):
@@ -296,7 +296,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     contact = task > CONTACT_THRESHOLD_N
     if contact.any():
         edges = np.flatnonzero(np.diff(np.concatenate(([0], contact.astype(np.int8), [0]))))
-        for a, b in zip(edges[::2], edges[1::2]):
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
             for axis in (ax, ax_raw):
                 axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
                              label="in contact" if (a == edges[0] and axis is ax) else None)

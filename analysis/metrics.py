@@ -165,7 +165,8 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
 def _checks(inc: pd.DataFrame) -> list[_Check]:
     """What each analysed trial's worker needs, in row order."""
     crit = {c: inc[c].to_numpy(dtype=float) for c in ("tolerance_fraction", "hold_s", "max_trial_s")}
-    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"])]
+    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"],
+                                              strict=True)]
     return [_Check(i, rec, crit["tolerance_fraction"][i], crit["hold_s"][i], crit["max_trial_s"][i], wheres[i])
             for i, rec in enumerate(stored_records(inc))]
 

@@ -177,4 +177,4 @@ def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     """[start, stop) of every run of True."""
     m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[0::2].tolist(), edges[1::2].tolist()))
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))

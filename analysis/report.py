@@ -82,7 +82,7 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
 
 
 def _marks(results: Sequence[WilcoxonResult], frame: pd.DataFrame) -> dict[str, str]:
-    holm = dict(zip(frame["metric"], frame["p_holm"]))
+    holm = dict(zip(frame["metric"], frame["p_holm"], strict=True))
     return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric)) for r in results}
 
 
@@ -265,7 +265,7 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
         titles.append((name, title))
     drawn = run_tasks(_work, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],
                       workers=default_workers() if workers is None else workers)
-    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn)}
+    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn, strict=True)}
     models = out.pop("models")
     return out, [(title, out[name]) for name, title in titles], models
 

@@ -205,7 +205,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     hold = sorted(set(trials["hold_s"]))
     cap = sorted(set(trials["max_trial_s"]))
     targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
-    target_txt = ", ".join(f"{lab} {f:g} N" for lab, f in zip(targets["target_label"], targets["target_force_n"]))
+    target_txt = ", ".join(f"{lab} {f:g} N"
+                           for lab, f in zip(targets["target_label"], targets["target_force_n"], strict=True))
 
     def one(vals: list[float], unit: str) -> str:
         return " / ".join(f"{v:g}{unit}" for v in vals)
@@ -325,7 +326,7 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
     counts = abort_counts(study)
     total = int(counts["n_trials"].sum())
     rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
-                   for c, n in zip(counts["abort_cause"], counts["n_trials"]))
+                   for c, n in zip(counts["abort_cause"], counts["n_trials"], strict=True))
     aborted = (f"<p>{plural(total, 'experiment trial')} did not count (a trial aborted in a session that went on is "
                "re-run under the protocol's abort policy; see the methods for how many were), by cause:</p>"
                f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'

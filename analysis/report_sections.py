@@ -55,7 +55,8 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
     A fitted model's note (a warning of the fit, the participant variance at its boundary) is a footnote marked
     on each of its rows; an unfitted model is one row with its note.
     """
-    notes = list(dict.fromkeys(str(n) for n, t in zip(fe["note"], fe["term"]) if t and isinstance(n, str) and n))
+    notes = list(dict.fromkeys(str(n) for n, t in zip(fe["note"], fe["term"], strict=True)
+                               if t and isinstance(n, str) and n))
     marks = {n: "†" * (k + 1) if k < 3 else str(k + 1) for k, n in enumerate(notes)}
     body = []
     for r in fe.itertuples():

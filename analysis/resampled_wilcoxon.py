@@ -195,7 +195,7 @@ def _permutation_rows(rows: _Rows, sel: np.ndarray, zero_method: str, p: np.ndar
     key = (shape * 64 + below) * 64 + rows.count[sel] - (n_zero if zero_method != "wilcox" else 0)
     kinds, first, which = np.unique(key, return_index=True, return_inverse=True)
     tables = []
-    for kk, i in zip(kinds.tolist(), first.tolist()):
+    for kk, i in zip(kinds.tolist(), first.tolist(), strict=True):
         t = _PERM_CACHE.get(kk)
         tables.append(t if t is not None else _permutation_p(kk, rows.units[sel[i]][nz[i]]))
     stacked = np.full((len(tables), max(t.size for t in tables)), np.nan)

@@ -26,7 +26,7 @@ _RAW, _COMP, _RENDER, _REPLAY = "#d62728", "#1f77b4", "#2ca02c", "#E69F00"
 def _spans(ax, t: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_], **kw) -> None:  # type: ignore[no-untyped-def]
     m = np.concatenate(([False], mask, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    for k, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2])):
+    for k, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2], strict=True)):
         ax.axvspan(t[lo], t[hi - 1], label=kw.pop("label", None) if k == 0 else None, **kw)
 
 
@@ -35,7 +35,7 @@ def contact_mask(force_n: npt.NDArray[np.float64], min_ms: int = 50) -> npt.NDAr
     above = np.asarray(force_n, dtype=np.float64) > CONTACT_THRESHOLD_N
     m = np.concatenate(([False], above, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    runs = [(lo, hi) for lo, hi in zip(edges[0::2], edges[1::2]) if hi - lo >= min_ms]
+    runs = [(lo, hi) for lo, hi in zip(edges[0::2], edges[1::2], strict=True) if hi - lo >= min_ms]
     out = np.zeros(len(above), dtype=bool)
     for k, (lo, hi) in enumerate(runs):
         if k and lo - runs[k - 1][1] < min_ms:  # bridge a short gap between two contacts
@@ -187,7 +187,7 @@ def _mark_events(top, bottom, t_s: npt.NDArray[np.float64], marks: SessionMarks,
         low = -0.05 * ymax
         m = np.concatenate(([False], latched, [False]))
         edges = np.flatnonzero(m[1:] != m[:-1])
-        for j, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2])):
+        for j, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2], strict=True)):
             top.fill_between([t_s[lo], t_s[hi - 1] + 0.05], low, low * 0.2, color="#b00020", linewidth=0, zorder=5,
                              label="fault latched" if j == 0 else None)
         for k, i in enumerate(onsets):

@@ -107,7 +107,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
             cursor = res.cursor
             r = res.rows
             t_ns = [int(round(x * 1e9)) for x in r["t_s"].tolist()]
-            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()])
+            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()], strict=True)
             for ev in machine.feed(samples):
                 if isinstance(ev, TrialFinished):
                     m = ev.metrics
@@ -143,7 +143,7 @@ def _wilcoxon_p(off: list[float], on: list[float]) -> float:
     """Two-sided Wilcoxon signed-rank p of the paired differences (NaN when undefined)."""
     from scipy.stats import wilcoxon
 
-    d = [round(a - b, 12) for a, b in zip(off, on) if not (math.isnan(a) or math.isnan(b))]
+    d = [round(a - b, 12) for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))]
     if len(d) < 2 or all(x == 0 for x in d):
         return math.nan
     try:
@@ -182,7 +182,7 @@ def summarise_study(rows: list[TrialRow], max_trial_s: float = 12.0) -> dict[str
             "on": m_on,
             "change": (m_on / m_off - 1.0) if m_off else math.nan,
             "p": _wilcoxon_p(off, on),
-            "n_pairs": sum(1 for a, b in zip(off, on) if not (math.isnan(a) or math.isnan(b))),
+            "n_pairs": sum(1 for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))),
         }
     return out
 

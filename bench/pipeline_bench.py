@@ -249,7 +249,7 @@ def filter_trade_table(data: dict[str, Any],
     fw0 = HapticFramework(FrameworkConfig(filter_window=1), data["calibration"])
     rest: list[tuple[float, float, float]] = []
     last = None
-    for raw, rot, tf in zip(data["raw"], data["rot"], data["true_force_n"]):
+    for raw, rot, tf in zip(data["raw"], data["rot"], data["true_force_n"], strict=True):
         if rot is not last:
             fw0.set_pose(rot)
             last = rot
@@ -257,7 +257,7 @@ def filter_trade_table(data: dict[str, Any],
         if tf == 0.0:
             rest.append((out[0], out[1], out[2]))
     del eng
-    mean = [statistics.fmean(c) for c in zip(*rest)]
+    mean = [statistics.fmean(c) for c in zip(*rest, strict=True)]
     rows = []
     for w in windows:
         ma = MovingAverage3(w)

@@ -181,7 +181,7 @@ class HapticLoop:
     def last_record(self) -> dict[str, float | int] | None:
         """The newest record as a dict (for tests and status displays)."""
         r = self._last_record
-        return None if r is None else dict(zip(RECORD_FIELDS, r))
+        return None if r is None else dict(zip(RECORD_FIELDS, r, strict=True))
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self) -> None:

@@ -76,7 +76,7 @@ def _header_fields(fields: Sequence[str] | np.dtype) -> tuple[bytes, tuple[str, 
             raise ValueError("ring fields must be packed int64 or float64 (little-endian)")
     else:
         names, types = tuple(fields), ["<f8"] * len(fields)
-    header = ",".join(f"{n}:{t[1:]}" for n, t in zip(names, types)).encode("ascii")
+    header = ",".join(f"{n}:{t[1:]}" for n, t in zip(names, types, strict=True)).encode("ascii")
     if (not names or any(not n or "," in n or ":" in n for n in names) or len(set(names)) != len(names)
             or len(header) > _HEADER - _NAMES_OFF):
         raise ValueError("field names must be non-empty, unique, free of ',' and ':' and fit in 4064 bytes")

@@ -219,7 +219,7 @@ def identify_tip(poses: Sequence[PivotPose], *, min_spread_deg: float = MIN_SPRE
             "and record the orientations again")
     return TipCalibration(
         tuple(float(v) for v in tip), tuple(float(v) for v in pivot), rms,  # type: ignore[arg-type]
-        tuple((lab, float(d)) for lab, d in zip(labels, dist)), spread,
+        tuple((lab, float(d)) for lab, d in zip(labels, dist, strict=True)), spread,
     )
 
 

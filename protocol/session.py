@@ -372,7 +372,7 @@ class SessionRunner:
         spec = m.spec
         running = m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
         t_ns_all = rows["t_ns"]
-        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist()))
+        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist(), strict=True))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
             ended = next((e for e in events if isinstance(e, TrialFinished)), None)

@@ -340,7 +340,7 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
                 continue
             rot = pose.rot_base_tip
             d = mat_vec(rot, off)
-            flange = tuple(p - q for p, q in zip(pose.position_m, d))
+            flange = tuple(p - q for p, q in zip(pose.position_m, d, strict=True))
             poses.append(PivotPose(rot, flange, f"O{k}"))
             rv = matrix_to_rotvec(rot)
             _say(f"O{k} recorded: flange at ({_mm(flange)}) mm, rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "

@@ -291,7 +291,7 @@ class Commissioning:
             if step == "tcp" and self.engine.hardware is not None:
                 # the robot's poses move to the new tip at once (the pendant's TCP stays what the file says)
                 off = self.engine.hardware.robot.tcp_offset_m
-                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off))
+                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off, strict=True))
         else:
             self.tool_cal = self.tool_cal.with_step(step, result)
         self.publish_status()

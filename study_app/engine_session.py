@@ -126,7 +126,11 @@ class EngineSessions:
             self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
             sim_rig = self.engine.eng.rig
             participant: SwitchableDriver | None = self.engine.driver
-            participant_time: Callable[[], float] | None = lambda: sim_rig.sim_time_s
+
+            def sim_time_s() -> float:
+                return sim_rig.sim_time_s
+
+            participant_time: Callable[[], float] | None = sim_time_s
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)

@@ -104,7 +104,8 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
             str(s["started_at"])[:16].replace("T", " "),
         ))
     widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
-    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths, strict=True)))
              for r in rows]
     n_participants = len({s["code"] for s in sessions})
     lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")

@@ -94,7 +94,7 @@ def run_scripted_sim(
 
 def _contacts(true_f: np.ndarray) -> list[tuple[int, int]]:
     on = np.flatnonzero(np.diff(np.concatenate(([0], (true_f > _CONTACT_N).astype(np.int8), [0]))))
-    return list(zip(on[::2].tolist(), on[1::2].tolist()))
+    return list(zip(on[::2].tolist(), on[1::2].tolist(), strict=True))
 
 
 def _summarise(

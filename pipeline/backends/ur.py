@@ -66,7 +66,7 @@ def ur3_flange_pose(q_rad: Sequence[float]) -> tuple[Vec3, Mat3]:
         raise ValueError(f"q_rad = {list(q_rad)!r}: a UR3 has 6 joints")
     rot: Mat3 = IDENTITY
     p = (0.0, 0.0, 0.0)
-    for (a, d, alpha), th in zip(UR3_DH, q_rad):
+    for (a, d, alpha), th in zip(UR3_DH, q_rad, strict=True):
         ct, st = math.cos(th), math.sin(th)
         ca, sa = math.cos(alpha), math.sin(alpha)
         # rotation and translation of one DH link

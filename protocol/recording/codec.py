@@ -264,7 +264,8 @@ def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarr
     events = [(int(t), str(k), p) for t, k, p in header["events"]]
     if out[2]:
         # back among the events, after a tick's others (a stable sort; the device limit commutes with them)
-        events += [(t, "device_limit", v) for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist())]
+        events += [(t, "device_limit", v)
+                   for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist(), strict=True)]
         events.sort(key=lambda e: e[0])
     return out[0], out[1], events
 
@@ -310,8 +311,8 @@ def _decode_fast(blob: bytes, names: Iterable[str] | None,
     n, m, dtypes = header["n"], header["m"], header["dtypes"]
     k = len(dtypes) - len(POSE_COLUMNS)  # the columns of the code that wrote it: a prefix of ours (appended since)
     split = n * 8 * k
-    cols = dict(zip((c.name for c in COLUMNS[:k]), _unstack8(raw[:split], dtypes[:k], n)))
-    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[k:], m)))
+    cols = dict(zip((c.name for c in COLUMNS[:k]), _unstack8(raw[:split], dtypes[:k], n), strict=True))
+    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[k:], m), strict=True))
     _fill_missing(cols, _MISSING.keys(), n)
     if names is not None:
         cols = {k: v for k, v in cols.items() if k in set(names)}

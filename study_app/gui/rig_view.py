@@ -63,7 +63,7 @@ class RigCanvas(QWidget):
         s = self._scale()
         px = self.width() / 2 + x * s
         py = self.height() - (z - _Z_LO) * s
-        poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist())])
+        poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist(), strict=True)])
         poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
         poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
         top = self.to_px(0, 0).y()

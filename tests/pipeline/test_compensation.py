@@ -475,9 +475,9 @@ def test_mounted_payload_is_the_same_model_from_the_tip_orientation(
     exact = [*fg, c[1] * fg[2] - c[2] * fg[1], c[2] * fg[0] - c[0] * fg[2], c[0] * fg[1] - c[1] * fg[0]]
     scale = max(abs(v) for v in a) * math.hypot(*gravity) * (1.0 + max(abs(v) for v in com))
     tol = 64 * 2.0**-52 * scale
-    assert max(abs(float(Q(x) - e)) for x, e in zip(got, exact)) <= tol
+    assert max(abs(float(Q(x) - e)) for x, e in zip(got, exact, strict=True)) <= tol
     old = cal.payload_wrench(frames.transpose(frames.mat_mul(rbt, rts)))
-    assert max(abs(float(Q(x) - e)) for x, e in zip(old, exact)) <= tol
+    assert max(abs(float(Q(x) - e)) for x, e in zip(old, exact, strict=True)) <= tol
     bias = (*fb, *tb)
     assert mounted.compensate(meas, rbt) == tuple(meas[i] - (got[i] + bias[i]) for i in range(6))
 
@@ -609,7 +609,7 @@ def test_rls_follows_a_bias_step_as_the_closed_form(
     lam: float, p0: float, k: int, step: tuple[float, ...]
 ) -> None:
     theta0 = (0.8, -0.5, 1.2, 0.03, -0.02, 0.01)
-    z = tuple(t + s for t, s in zip(theta0, step))
+    z = tuple(t + s for t, s in zip(theta0, step, strict=True))
     rls = RlsBias(theta0[:3], theta0[3:], forgetting=lam, p0=p0)
     for _ in range(k):
         assert rls.update(z, allowed=True)

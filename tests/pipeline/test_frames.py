@@ -74,7 +74,7 @@ def max_abs_diff(a, b) -> float:
 
 def rotvec_distance_mod_2pi(r2, r, k, th) -> float:
     """Distance of r2 from r, or from r - 2π·k (the same rotation), whichever is closer."""
-    alt = tuple(c - 2 * PI * kc for c, kc in zip(r, k))
+    alt = tuple(c - 2 * PI * kc for c, kc in zip(r, k, strict=True))
     return min(max_abs_diff(r2, r), max_abs_diff(r2, alt))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -112,8 +113,8 @@ def test_end_trial_retracts_to_the_start_pose_within_half_a_second() -> None:
     # the retraction starts where the command was (no jump) and is monotone up to the start pose
     assert abs(ys[end_i] - ys[end_i - 1]) < 1e-5
     seg = ys[end_i : end_i + 402]
-    assert all(b >= a - 1e-15 for a, b in zip(seg, seg[1:]))  # up to rounding of the polynomial
-    assert max(b - a for a, b in zip(seg, seg[1:])) < 1e-4
+    assert all(b >= a - 1e-15 for a, b in itertools.pairwise(seg))  # up to rounding of the polynomial
+    assert max(b - a for a, b in itertools.pairwise(seg)) < 1e-4
     assert not p.in_trial
 
 

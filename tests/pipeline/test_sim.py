@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -149,7 +150,7 @@ def test_touch_derates_toward_its_continuous_rating_and_stays_under_budget() -> 
     # full peak until half the budget, then falling monotonically toward the continuous rating
     half = next(i for i, h in enumerate(heat) if h > 0.5)
     assert all(x == 3.3 for x in limits[:half])
-    assert all(b <= a for a, b in zip(limits[half:], limits[half + 1:]))
+    assert all(b <= a for a, b in itertools.pairwise(limits[half:]))
     assert 0.88 < limits[-1] < 1.0 and t.read_state().heat_fraction > 0.95
     # resting cools it: the full peak comes back
     for k in range(3000, 6000):

@@ -7,6 +7,7 @@ Everything runs headless on the virtual clock, one participant of a 4-trial prot
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import re
 import sqlite3
 from pathlib import Path
@@ -45,7 +46,7 @@ def assert_true_timeline(db: Path, pause_s: float) -> None:
     for (sid,) in rows(db, "SELECT session_id FROM sessions"):
         trials = rows(db, "SELECT trial_index, started_at_s, ended_at_s FROM trials WHERE session_id = ? "
                           "ORDER BY started_at_s", sid)
-        for (_, _, end), (idx, start, _) in zip(trials, trials[1:]):
+        for (_, _, end), (idx, start, _) in itertools.pairwise(trials):
             assert start - end >= pause_s - 1e-9, f"session {sid}: trial {idx} cued {start - end:.3f} s after the last"
 
 
@@ -81,7 +82,7 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     assert_true_timeline(db, proto.trial.pause_s)
     # the analysis counts it, by cause; and every trial has its loop health
     study = load_study([str(db)])
-    counts = dict(zip(*abort_counts(study).to_dict("list").values()))
+    counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert counts["fault"] == 1 and sum(counts.values()) == 1
     health = health_table(study)
     assert health[list(HEALTH_COLUMNS)].notna().all().all()

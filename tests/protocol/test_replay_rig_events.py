@@ -165,7 +165,7 @@ def test_a_session_with_late_ticks_and_latched_loop_faults_replays_bit_for_bit(
     assert all(r.startswith("fault: LOOP_STALLED") for _, r in aborted[1:])
     # the report: aborted trials by cause, and the late and stalled ticks in the loop health of the trials they ended
     study = load_study([str(db)])
-    counts = dict(zip(*abort_counts(study).to_dict("list").values()))
+    counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert (counts["fault"], counts["gap"], sum(counts.values())) == (3, 1, 4)
     health = health_table(study).set_index("trial_index")
     assert health.loc[0, "period_max_ms"] == pytest.approx(21.0) and health.loc[0, "within_bounds"] == False  # noqa: E712
