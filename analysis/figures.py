@@ -145,7 +145,7 @@ def margins(fig: Figure, left: float, right: float, bottom: float, top: float, *
 def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]
     width = 0.36
     top = 0.0
-    for gi, (label, frame, mark) in enumerate(groups):
+    for gi, (_label, frame, mark) in enumerate(groups):
         heights = {}
         for k, mode in enumerate(("off", "on")):
             vals = frame.loc[frame["haptic_mode"] == mode, metric].to_numpy(dtype=float)

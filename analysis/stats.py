@@ -494,7 +494,7 @@ def _holm_rows(q: np.ndarray) -> np.ndarray:
 
 
 #: Column order of :func:`results_frame`.
-RESULT_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(WilcoxonResult)) + ("p_holm",)
+RESULT_COLUMNS: tuple[str, ...] = (*tuple(f.name for f in fields(WilcoxonResult)), "p_holm")
 
 
 def results_frame(results: Sequence[WilcoxonResult]) -> pd.DataFrame:

@@ -279,10 +279,7 @@ def filter_trade_table(data: dict[str, Any],
         settle: int | None = None
         for k in range(2 * w + 10):  # k = samples since the 1 N step
             y = ma.update(1.0, 0.0, 0.0)[0]
-            if abs(y - 1.0) <= 0.02:
-                settle = k if settle is None else settle
-            else:
-                settle = None
+            settle = (k if settle is None else settle) if abs(y - 1.0) <= 0.02 else None
         rows.append(
             {
                 "window": float(w),

@@ -215,12 +215,11 @@ def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
     if not (type(freq) is int and freq == -1):
         freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
     pose_limit_s = WatchdogConfig().pose_max_age_s
-    if type(freq) is not int or freq != -1:
-        if 1.0 / freq >= pose_limit_s:
-            raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
-                         f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
-                         f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
-                         f"is {1e3 / freq:g} ms old when the next arrives")
+    if (type(freq) is not int or freq != -1) and 1.0 / freq >= pose_limit_s:
+        raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
+                     f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
+                     f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
+                     f"is {1e3 / freq:g} ms old when the next arrives")
     mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
     if mode == "teleop" and not has_teleop:
         raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "

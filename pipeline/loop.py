@@ -375,9 +375,8 @@ class HapticLoop:
             # Only conditions that are gone can be cleared; the operator
             # stop and device errors are cleared by the reset itself.
             persisting = self.active_faults & ~(Fault.OPERATOR_STOP | Fault.HAPTIC_DEVICE)
-            if before & Fault.HAPTIC_DEVICE:
-                if not self.rig.haptic.rearm():
-                    persisting |= Fault.HAPTIC_DEVICE
+            if before & Fault.HAPTIC_DEVICE and not self.rig.haptic.rearm():
+                persisting |= Fault.HAPTIC_DEVICE
             self.faults = int(persisting)
             self._gone_reported &= persisting
             if before and not persisting:

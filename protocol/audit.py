@@ -168,7 +168,7 @@ def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
         rows = {int(i): (lab, mode, out) for i, lab, mode, out in conn.execute(
             "SELECT trial_index, target_label, haptic_mode, outcome FROM trials WHERE session_id = ?", (sid,))}
         found: list[str] = []
-        for i, (lab, mode, out) in sorted(rows.items()):
+        for i, (lab, mode, _out) in sorted(rows.items()):
             if i >= len(schedule) or (schedule[i].target_label, str(schedule[i].haptic_mode)) != (lab, mode):
                 found.append(f"trial {i + 1} ({lab}, {mode}) is not that trial of the stored schedule")
         reruns = Counter(s.repeat_of for s in schedule if s.repeat_of is not None)

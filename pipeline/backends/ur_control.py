@@ -190,7 +190,7 @@ class UrRtdeServo:
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda: self._closing or self._stop_requested or self._target_seq != sent_seq,
+                    lambda sent=sent_seq: self._closing or self._stop_requested or self._target_seq != sent,
                     timeout=self.period_s,
                 )
                 if self._closing:

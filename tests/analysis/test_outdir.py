@@ -105,7 +105,7 @@ def test_force_refuses_a_folder_without_marker(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     (out / "a.csv").write_text("someone's")
-    with pytest.raises(AnalysisError, match="not a folder test wrote .no readable .haptic-study-test in it."):
+    with pytest.raises(AnalysisError, match=r"not a folder test wrote .no readable .haptic-study-test in it."):
         _write(out, {"a.csv": "new"}, force=True)
     assert (out / "a.csv").read_text() == "someone's"
 

@@ -186,7 +186,7 @@ def test_the_real_chain_in_order_saves_each_step_for_the_tool(rig, tmp_path) -> 
 
 def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_saves_nothing(rig, tmp_path,
                                                                                           capsys) -> None:
-    netft, rtde, hw = rig
+    _netft, rtde, hw = rig
     rots = pivot_orientations("minimal", TOOL_DOWN)
     state = {"n": 0}
 
@@ -212,7 +212,7 @@ def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_save
 
 def test_from_a_terminal_the_prompts_go_to_stderr_and_stdout_is_only_the_result(rig, tmp_path, monkeypatch,
                                                                                   capsys) -> None:
-    netft, rtde, hw = rig
+    _netft, rtde, hw = rig
     rots = iter(pivot_orientations("minimal", TOOL_DOWN))
 
     class Experimenter(io.StringIO):

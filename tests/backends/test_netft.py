@@ -95,9 +95,9 @@ def test_no_http_page_is_a_clear_error_fast() -> None:
 def test_http_404_and_a_page_that_is_not_the_box() -> None:
     with FakeNetFT(xml_status=404) as fake, pytest.raises(NetFTError, match="HTTP 404"):
         open_sensor(fake)
-    with FakeNetFT(xml_body="<html><body>router login</body></html>") as fake:
-        with pytest.raises(NetFTError, match="has no <cfgcpf>: is this a Net F/T box"):
-            open_sensor(fake)
+    with (FakeNetFT(xml_body="<html><body>router login</body></html>") as fake,
+          pytest.raises(NetFTError, match="has no <cfgcpf>: is this a Net F/T box")):
+        open_sensor(fake)
     with pytest.raises(NetFTError, match="not XML"):
         parse_netft_xml("{json: 1}")
     with pytest.raises(NetFTError, match=r"force unit 'stone' is not known; allowed: N, lbf"):
@@ -223,7 +223,7 @@ def test_status_word_and_stalled_ft_sequence_reach_the_watchdog() -> None:
             assert loop.faults == Fault.SENSOR_STALE
             assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS",
                                                                                           "SENSOR_STALE"]
-            assert [e.detail for e in loop.events if e.kind == "fault"][0] == "SENSOR_STATUS: status word 0x80000001"
+            assert next(e.detail for e in loop.events if e.kind == "fault") == "SENSOR_STATUS: status word 0x80000001"
         finally:
             s.close()
 

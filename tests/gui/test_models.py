@@ -190,7 +190,7 @@ def test_plot_model_keeps_a_window_and_computes_magnitudes():
         assert len(p.t) == 1000 and p.t[0] == pytest.approx(0.5) and p.latest_t_s == pytest.approx(1.499)
         assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"],
                                                               1.0) and np.all(p.data["render_n"] == 2.0)
-        t, y = p.curve("raw_n")
+        t, _y = p.curve("raw_n")
         # constant data: each bin keeps its first sample twice
         assert len(t) == 200 and t[0] == pytest.approx(-0.999) and t[-1] == pytest.approx(-0.009)
         assert p.pull() == 0
@@ -274,7 +274,7 @@ def test_rig_model_geometry_and_manual_target():
     r.apply(m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot"))
     r.update(0.098, 0.9)
     assert r.tip_z_mm == pytest.approx(-2.0) and r.indentation_mm == pytest.approx(2.0)
-    x, z = r.surface_profile(30.0, 61)
+    _x, z = r.surface_profile(30.0, 61)
     assert z[30] == pytest.approx(-2.0) and z[0] > -1e-3 and np.all(z <= 0)
     assert r.target_for_tip_mm(15.0) == pytest.approx(0.0)
     assert r.target_for_tip_mm(-3.0) == pytest.approx(-0.018)

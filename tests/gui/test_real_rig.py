@@ -111,15 +111,16 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             rtde.send(f"pose 0.3 -0.1 0.2 {rv[0]} {rv[1]} {rv[2]}")
             netft.counts = payload_counts(step.target_rot_base_sensor)
             target = np.asarray(step.target_rot_base_sensor).reshape(3, 3)
-            wait_for(e, lambda: np.allclose(np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target,
-                                            atol=1e-9))
+            wait_for(e, lambda target=target: np.allclose(
+                np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target, atol=1e-9))
             wait_for(e, lambda: (r := e.loop.last_record) is not None
                      and abs(r["raw_fx"] - netft.counts[0] / CPF) < 1e-9)
             # ... and presses Record pose: the engine averages 0.2 s of wrench off the GUI thread
             n_before = len(events)
             e.handle(wiz.record_command())
             assert wiz.state == "recording"
-            wait_for(e, lambda: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused)) for ev in events[n_before:]))
+            wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused))
+                                                      for ev in events[n_before:]))
             for ev in events[n_before:]:
                 wiz.apply(ev)
             rec = step.recorded
@@ -183,7 +184,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         wait_for(e, started, timeout_s=30.0)
         e.handle(m.AbortSession("rehearsal over"))
         wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
-        ended = [ev for ev in events if isinstance(ev, m.SessionEnded)][0]
+        ended = next(ev for ev in events if isinstance(ev, m.SessionEnded))
         assert ended.status == "aborted" and ended.aborted >= 1  # (more if a stalled fake sensor aborted one)
         # fault rehearsal exists on the simulated rig only: a person's hand is on this one
         e.handle(m.InjectFault("sensor-stall"))
@@ -228,7 +229,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
 
 
 def test_a_pose_recorded_while_the_robot_moves_is_refused(rig):
-    netft, rtde, hw_path = rig
+    _netft, rtde, hw_path = rig
     events: list[object] = []
     e = StudyEngine(HostConfig(rig="real", hardware_path=str(hw_path), haptic_factory=FAKE_TOUCH), events.append,
                     shared_ring=False)
@@ -267,7 +268,7 @@ def test_a_bad_hardware_file_is_one_line(tmp_path, extra, message):
 
 def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(rig):
     """No Touch on this machine: the engine process reports the haptic device in one line and exits (no hang)."""
-    netft, rtde, hw_path = rig
+    _netft, _rtde, hw_path = rig
     client = EngineClient(HostConfig(rig="real", hardware_path=str(hw_path)))
     client.start()
     try:

@@ -545,9 +545,9 @@ def test_with_bias_returns_an_updated_copy() -> None:
 
 def test_calibration_pose_rejects_bad_input_naming_the_pose() -> None:
     w = (0.0,) * 6
-    with pytest.raises(ValueError, match="(?s)pose tilt-3 rot_base_sensor.*not a rotation"):
+    with pytest.raises(ValueError, match=r"(?s)pose tilt-3 rot_base_sensor.*not a rotation"):
         CalibrationPose(2.0 * np.eye(3), w, label="tilt-3")
-    with pytest.raises(ValueError, match="(?s)pose mirror rot_base_sensor.*reflection"):
+    with pytest.raises(ValueError, match=r"(?s)pose mirror rot_base_sensor.*reflection"):
         CalibrationPose(np.diag([1.0, 1.0, -1.0]), w, label="mirror")
     with pytest.raises(ValueError, match="pose nan-pose wrench"):
         CalibrationPose(np.eye(3), (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), label="nan-pose")
@@ -582,7 +582,7 @@ def test_recommended_pose_set_geometry() -> None:
 
 @pytest.mark.parametrize(("n", "tilt"), [(5, 60.0), (24, 0.0), (24, 95.0), (24, math.nan)])
 def test_recommended_pose_set_validates_arguments(n: int, tilt: float) -> None:
-    with pytest.raises(ValueError, match="n = 5|tilt_deg"):
+    with pytest.raises(ValueError, match=r"n = 5|tilt_deg"):
         recommended_pose_set(n, tilt)
 
 

@@ -54,7 +54,7 @@ def test_hunt_crossley_damping_and_relaxation() -> None:
     for _ in range(20000):  # 20 τ
         held = r.step(0.002, 0.001)
     assert peak > held and held == pytest.approx(1.1e4 * 0.002**1.5, rel=1e-6)  # relaxes to the elastic part
-    with pytest.raises(ValueError, match="tissue.exponent"):
+    with pytest.raises(ValueError, match=r"tissue.exponent"):
         TissueParams(exponent=0.0)
 
 
@@ -194,7 +194,7 @@ def test_sim_calibration_recovers_payload_and_rest_residual_is_small() -> None:
 
     # at rest, tool down, the compensated force is noise only
     errs = []
-    for k in range(2000):
+    for _ in range(2000):
         clock.advance(1_000_000)
         rig.advance(clock.now_ns())
         w = rig.sensor.read_wrench()

@@ -155,7 +155,7 @@ def _case(ctx: Any, folder: Path, crash_at: str, expect_killed: bool) -> list[st
     problems = [] if seen is None else [f"{crash_at}, at the crash: {p}" for p in _problems(seen, finished=False)]
     code = _child(ctx, db, "", cont=True)
     if code != 0:
-        return problems + [f"{crash_at}: --continue ended with {code}"]
+        return [*problems, f"{crash_at}: --continue ended with {code}"]
     after = _view(db)
     assert after is not None
     problems += [f"{crash_at}, after --continue: {p}" for p in _problems(after, finished=True)]

@@ -38,12 +38,14 @@ GOLDEN_SEED_7_P1 = [
     ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"),
 ]
 
-GOLDEN_BLOCKED_SEED_7_P1 = (
-    [("FIRM", "on"), ("GENTLE", "on"), ("FIRM", "on"), ("FIRM", "on"), ("FIRM", "on"),
-     ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "on")]
-    + [("GENTLE", "off"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"),
-       ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"), ("FIRM", "off"), ("FIRM", "off")]
-)
+GOLDEN_BLOCKED_SEED_7_P1 = [
+    # the ON block
+    ("FIRM", "on"), ("GENTLE", "on"), ("FIRM", "on"), ("FIRM", "on"), ("FIRM", "on"),
+    ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "on"),
+    # then the OFF block
+    ("GENTLE", "off"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"),
+    ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"), ("FIRM", "off"), ("FIRM", "off"),
+]
 
 
 def test_golden_schedule_of_the_default_protocol():

@@ -77,7 +77,7 @@ def _session_args(code: str = "P01", kind: str = "experiment", seed: int = 7) ->
 
 
 def _sample_row(trial_id: int, k: int) -> tuple:
-    return (trial_id, k / 1000, 0.5 + k / 10_000) + tuple(float(k + j) for j in range(12))
+    return (trial_id, k / 1000, 0.5 + k / 10000, *tuple(float(k + j) for j in range(12)))
 
 
 def _trial_row(session_id: int, index: int, outcome: str = "success", tct_s: float | None = 1.5) -> dict:
