@@ -190,7 +190,8 @@ class UrRtdeServo:
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda sent=sent_seq: self._closing or self._stop_requested or self._target_seq != sent,
+                    # wait_for calls it at once, in this iteration
+                    lambda: self._closing or self._stop_requested or self._target_seq != sent_seq,  # noqa: B023
                     timeout=self.period_s,
                 )
                 if self._closing:
