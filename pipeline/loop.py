@@ -45,6 +45,7 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pipeline.clock import Clock, prepare_realtime_thread
 from pipeline.devices import Fault, HapticState, PoseSample, WrenchSample
@@ -75,6 +76,9 @@ from pipeline.watchdog import (
     output_restarted_detail,
     stall_detail,
 )
+
+if TYPE_CHECKING:
+    from pipeline.ring import RingBuffer
 
 # The commands, events, record columns, statistics and watchdog limits are defined in
 # pipeline.loop_messages, pipeline.loop_stats and pipeline.watchdog; they are named here
@@ -114,7 +118,7 @@ class HapticLoop:
         rig: Rig,
         framework: HapticFramework,
         clock: Clock,
-        ring: object | None = None,
+        ring: RingBuffer | None = None,
         *,
         period_ns: int = 1_000_000,
         watchdog: WatchdogConfig | None = None,
@@ -262,7 +266,7 @@ class HapticLoop:
         )
         self._last_record = rec
         if self.ring is not None:
-            self.ring.write(rec)  # type: ignore[attr-defined]
+            self.ring.write(rec)
         self.tick_count += 1
 
     def _start_of_tick(self, now: int, period: int) -> None:
@@ -404,9 +408,9 @@ class HapticLoop:
                 self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
-            self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
+            self.framework.set_calibration(cmd.calibration)
             if self.recording:
-                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))  # type: ignore[attr-defined]
+                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))
         elif isinstance(cmd, StartRecording):
             self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
         elif isinstance(cmd, StopRecording):

@@ -10,9 +10,12 @@ writes at every tick.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from pipeline import tick_record
+
+if TYPE_CHECKING:
+    from pipeline.payload_compensator import PayloadCalibration
 
 __all__ = [
     "RECORD_FIELDS",
@@ -85,7 +88,7 @@ class AllowBiasRefinement:
 class SetCalibration:
     """Install a new payload calibration (a :class:`pipeline.payload_compensator.PayloadCalibration`)."""
 
-    calibration: object
+    calibration: PayloadCalibration
 
 
 @dataclass(frozen=True, slots=True)
