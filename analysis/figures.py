@@ -81,7 +81,7 @@ def styled(builder: _F) -> _F:
         with matplotlib.rc_context(cast(Any, STYLE)):
             return builder(*args, **kwargs)
 
-    return build  # type: ignore[return-value]
+    return build  # type: ignore[return-value]  # functools.wraps keeps the signature; mypy cannot see it
 #: Print resolution of the PNGs.
 _DPI = 300
 #: Text stays text in SVG and PDF (selectable, searchable, editable in a journal's tools).
@@ -110,7 +110,7 @@ def significance_mark(result: WilcoxonResult | None, *, adjusted: bool = True, p
     return "***" if p < 0.001 else "**" if p < 0.01 else "*" if p < 0.05 else "n.s."
 
 
-def _style(ax) -> None:  # type: ignore[no-untyped-def]
+def _style(ax) -> None:  # type: ignore[no-untyped-def]  # matplotlib Axes left untyped in the figure helpers
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
     ax.grid(axis="y", color="#dddddd", linewidth=0.6)
@@ -142,7 +142,7 @@ def margins(fig: Figure, left: float, right: float, bottom: float, top: float, *
     fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, **space)
 
 
-def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]
+def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]  # as above
     width = 0.36
     top = 0.0
     for gi, (_label, frame, mark) in enumerate(groups):
@@ -332,7 +332,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     return fig
 
 
-def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> None:  # type: ignore[no-untyped-def]
+def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> None:  # type: ignore[no-untyped-def]  # as above
     """A bracket along the bottom of the force axis: the samples RMSE and Max AE are taken over."""
     if window is None or not len(t):
         return
@@ -353,7 +353,7 @@ def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> 
             zorder=5)
 
 
-def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]
+def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]  # as above
     """An aborted trial: where a watchdog fault latched (from the recorded flags) and where the trial ended, each
     a red line with its time and cause in a boxed label (on the left of a line in the right half of the axis)."""
     labels: list[tuple[float, str, str]] = []  # (time, text, line style)

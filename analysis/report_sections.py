@@ -45,7 +45,7 @@ def short_commit(v: object) -> str:
 
 
 def _ci(lo: object, hi: object, digits: int = 3) -> str:
-    lo_f, hi_f = float(lo), float(hi)  # type: ignore[arg-type]
+    lo_f, hi_f = float(lo), float(hi)  # type: ignore[arg-type]  # a number from the model table (NaN when missing)
     return f"[{fmt(lo_f, digits)}, {fmt(hi_f, digits)}]" if math.isfinite(lo_f) else "–"
 
 

@@ -310,7 +310,7 @@ class HapticFramework:
         if device_limit is not None:
             fw.set_device_limit(float(device_limit))  # before the safety state: the state was clamped by it already
         fw.safety.load_state(snap["safety"])
-        fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]
+        fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]  # nine items: mypy cannot count a generator
         return fw
 
     def step(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:

@@ -440,7 +440,7 @@ def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = 
     corr = (0.0, 0.0, 0.0) if tip_in_flange_m is None else tuple(
         t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m, strict=True))
     return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s,
-                       tcp_correction_m=corr)  # type: ignore[arg-type]
+                       tcp_correction_m=corr)  # type: ignore[arg-type]  # three items: mypy cannot count a generator
 
 
 def open_servo(

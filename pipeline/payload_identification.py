@@ -196,7 +196,7 @@ def _checked_inputs(
     """The poses as a non-empty list and gravity as a :data:`Vec3`, or the error naming what is wrong."""
     if model not in ("auto", *PAYLOAD_MODELS):
         raise ValueError(f"model = {model!r}: must be 'auto', 'affine' or 'rigid'")
-    gb: Vec3 = finite_tuple(gravity_base, 3, "gravity_base")  # type: ignore[assignment]
+    gb: Vec3 = finite_tuple(gravity_base, 3, "gravity_base")  # type: ignore[assignment]  # finite_tuple checked it has 3 items
     g_norm = math.hypot(*gb)
     if not g_norm > 0:
         raise ValueError(f"gravity_base = {gravity_base!r}: must be a non-zero vector")

@@ -144,15 +144,15 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
         if evs is not None:
             for kind, payload in evs:
                 if kind == "pose":
-                    fw.set_pose(tuple(payload[0]))  # type: ignore[index]
+                    fw.set_pose(tuple(payload[0]))  # type: ignore[index]  # a log payload is typed object; its kind says what it holds
                 elif kind == "refine":
                     refine = bool(payload)
                 elif kind == "reset":
                     fw.reset()
                 elif kind == "calibration":
-                    fw.set_calibration(PayloadCalibration.from_dict(payload))  # type: ignore[arg-type]
+                    fw.set_calibration(PayloadCalibration.from_dict(payload))  # type: ignore[arg-type]  # as above
                 elif kind == "device_limit":
-                    fw.set_device_limit(float(payload))  # type: ignore[arg-type]
+                    fw.set_device_limit(float(payload))  # type: ignore[arg-type]  # as above
                 elif kind == "zero":
                     safety.force_zero()
         fx, fy, fz, tx, ty, tz = raw[k]

@@ -71,7 +71,7 @@ def _header_fields(fields: Sequence[str] | np.dtype) -> tuple[bytes, tuple[str, 
     """
     if isinstance(fields, np.dtype):
         names = tuple(fields.names or ())
-        types = [fields.fields[n][0].str for n in names]  # type: ignore[index]
+        types = [fields.fields[n][0].str for n in names]  # type: ignore[index]  # fields is None only for an unstructured dtype, which has no names
         if any(t not in ("<i8", "<f8") for t in types) or fields.itemsize != 8 * len(names):
             raise ValueError("ring fields must be packed int64 or float64 (little-endian)")
     else:
@@ -271,8 +271,8 @@ class RingBuffer:
     def close(self) -> None:
         """Detach; the creator also frees the shared segment."""
         self._rows = None  # type: ignore[assignment]  # drop the numpy views before closing the buffer
-        self._count_cell = None  # type: ignore[assignment]
-        buf, self._buf = self._buf, None  # type: ignore[assignment]
+        self._count_cell = None  # type: ignore[assignment]  # released: None only once closed
+        buf, self._buf = self._buf, None  # type: ignore[assignment]  # as above
         if self._mmap is not None:
             buf.release()
             self._mmap.close()

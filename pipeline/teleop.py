@@ -297,7 +297,7 @@ class TeleopController:
             step = (step[0] * k, step[1] * k, step[2] * k)
         # the last target and the wanted point are both in the (convex) box, so is every point between;
         # the final clamp only absorbs rounding
-        return tuple(min(max(last[i] + step[i], lo[i]), hi[i]) for i in range(3))  # type: ignore[return-value]
+        return tuple(min(max(last[i] + step[i], lo[i]), hi[i]) for i in range(3))  # type: ignore[return-value]  # three items: mypy cannot count a generator
 
     # -- the step -----------------------------------------------------------------------------
     def halt(self, reason: str) -> Stop:

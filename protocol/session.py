@@ -312,7 +312,7 @@ class SessionRunner:
             t0 = int(rows["t_ns"][0])
             self.clock = SessionClock(self._offset_s, t0)
             self.recorder.segment(self.session_id, self.segment, self._offset_s, t0,
-                                  self._snapshot, self._scales)  # type: ignore[arg-type]
+                                  self._snapshot, self._scales)  # type: ignore[arg-type]  # set with the snapshot found above
             self._ready_ns = t0 + self._initial_pause_ns
             first_faults = int(rows["faults"][0])
             if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
@@ -349,7 +349,7 @@ class SessionRunner:
     def _from_snapshot(self, rows: np.ndarray) -> np.ndarray:
         """Find this runner's snapshot in the log; the records from its tick on (none before it is found)."""
         for i, (tick, kind, payload) in enumerate(self._log):
-            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]
+            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]  # a log payload is typed object; a snapshot's is a dict
                 self._start_tick = int(tick)
                 self._snapshot = payload
                 self._log = self._log[i + 1 :]

@@ -134,28 +134,28 @@ class TrialMachine:
         for t_ns, force, mark in samples:
             phase = self.phase
             if phase is TrialPhase.PAUSE:
-                if t_ns >= self.pause_until_ns:  # type: ignore[operator]
+                if t_ns >= self.pause_until_ns:  # type: ignore[operator]  # set in PAUSE (no assert on the per-tick path)
                     events.append(self._go(TrialPhase.IDLE, t_ns))
                     self.spec = None
                 continue
             if phase is TrialPhase.CUED:
-                if mark != self.spec.index:  # type: ignore[union-attr]
+                if mark != self.spec.index:  # type: ignore[union-attr]  # set once started (no assert on the per-tick path)
                     continue  # the loop has not applied the trial's mark yet
                 self.cue_ns = t_ns
                 events.append(self._go(TrialPhase.ACTIVE, t_ns))
                 phase = TrialPhase.ACTIVE
             if phase is TrialPhase.ACTIVE:
-                rel = t_ns - self.cue_ns  # type: ignore[operator]
+                rel = t_ns - self.cue_ns  # type: ignore[operator]  # set from CUE on (no assert on the per-tick path)
                 if rel > self._cap_ns:
-                    events.extend(self._finish(Outcome.TIMEOUT, self.cue_ns + self._cap_ns))  # type: ignore[operator]
+                    events.extend(self._finish(Outcome.TIMEOUT, self.cue_ns + self._cap_ns))  # type: ignore[operator]  # as above
                     # this sample already belongs to the pause
-                    if t_ns >= self.pause_until_ns:  # type: ignore[operator]
+                    if t_ns >= self.pause_until_ns:  # type: ignore[operator]  # set in PAUSE (no assert on the per-tick path)
                         events.append(self._go(TrialPhase.IDLE, t_ns))
                         self.spec = None
                     continue
                 self._t.append(rel)
                 self._f.append(force)
-                if self._hold.feed(rel, force):  # type: ignore[union-attr]
+                if self._hold.feed(rel, force):  # type: ignore[union-attr]  # set from CUE on (no assert on the per-tick path)
                     events.extend(self._finish(Outcome.SUCCESS, t_ns))
                 elif rel == self._cap_ns:
                     events.extend(self._finish(Outcome.TIMEOUT, t_ns))

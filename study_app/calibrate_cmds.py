@@ -392,7 +392,7 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
                 _say(f"P{k + 1:02d} not recorded: {why or 'the force sensor sent too few samples'}")
                 continue
             w = np.asarray([s[1:7] for s in samples], dtype=float).mean(axis=0)
-            poses.append(CalibrationPose(mat_mul(pose.rot_base_tip, rts), tuple(float(v) for v in w),  # type: ignore[arg-type]
+            poses.append(CalibrationPose(mat_mul(pose.rot_base_tip, rts), tuple(float(v) for v in w),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
                                          f"P{k + 1:02d}"))
             _say(f"P{k + 1:02d} recorded: |F| = {float(np.linalg.norm(w[:3])):.3f} N")
             k += 1

@@ -198,9 +198,9 @@ class Commissioning:
         rot_base_sensor = mat_mul(pose1.rot_base_tip, e.eng.framework.config.rot_tip_sensor)
         mean = w.mean(axis=0)
         e.publish(m.PoseRecorded(
-            label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]
+            label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
             rot_base_sensor=as_mat3(rot_base_sensor),
-            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]
+            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]  # three items, likewise
             off_target_deg=rotation_angle_deg(target, rot_base_sensor) if target is not None else math.nan,
             force_std_n=float(np.std(np.linalg.norm(w[:, :3], axis=1))),
         ))
@@ -356,7 +356,7 @@ class Commissioning:
                 self.engine.hardware.robot.tcp_offset_m if self.engine.hardware is not None else (0.0, 0.0, 0.0))
             off = np.asarray(rot).reshape(3, 3) @ np.asarray(tip)
             flange = tuple(float(v) for v in p.mean(axis=0) - off)
-            self.engine.publish(m.PivotRecorded(label, as_mat3(rot), flange, moved * 1e3))  # type: ignore[arg-type]
+            self.engine.publish(m.PivotRecorded(label, as_mat3(rot), flange, moved * 1e3))  # type: ignore[arg-type]  # flange: three items, likewise
 
         self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
 

@@ -387,7 +387,7 @@ class NetFTForceSensor:
     @property
     def range_n(self) -> tuple[float, float, float, float, float, float]:
         """Full-scale range per channel (N, N, N, N·m, N·m, N·m)."""
-        return self._range  # type: ignore[return-value]
+        return self._range  # type: ignore[return-value]  # six items, counted where it is set
 
     def read_wrench(self) -> WrenchSample:
         """The newest fresh record (never blocks)."""

@@ -160,7 +160,7 @@ class UrRtdeRobot:
     ) -> None:
         check_rtde_frequency(frequency_hz)
         self.host = host
-        self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]
+        self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]  # three items: mypy cannot count a generator
         self.port = port
         self.frequency_hz = float(frequency_hz)
         self.clock: Clock = clock or MonotonicClock()

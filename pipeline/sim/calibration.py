@@ -48,7 +48,7 @@ def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "",
             acc[i] += w[1 + i]
     pose = rig.robot.read_pose()
     rot_base_sensor = mat_mul(pose.rot_base_tip, rig.config.rot_tip_sensor)
-    return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]
+    return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]  # six items: mypy cannot count a generator
 
 
 def auto_calibrate(

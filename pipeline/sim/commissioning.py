@@ -49,7 +49,7 @@ def pivot_poses(rig: SimRig, orientations: Sequence[Mat3], seed: int = 0) -> lis
         seat = cfg.pivot_m + rng.normal(0.0, cfg.pivot_noise_m, 3)
         tip_base = mat_vec(rot, t)
         flange = seat - np.asarray(tip_base) + rng.normal(0.0, cfg.pivot_noise_m, 3)
-        out.append(PivotPose(rot, tuple(float(v) for v in flange), f"O{k + 1}"))  # type: ignore[arg-type]
+        out.append(PivotPose(rot, tuple(float(v) for v in flange), f"O{k + 1}"))  # type: ignore[arg-type]  # three items: mypy cannot count a generator
     return out
 
 
@@ -78,7 +78,7 @@ def push_axes(
             n_ramp, n_hold = int(_RAMP_S * 1000), int(_HOLD_S * 1000)
             profile = np.concatenate([np.linspace(0.0, 1.0, n_ramp), np.ones(n_hold), np.linspace(1.0, 0.0, n_ramp)])
             for k in profile:
-                rig.push_base_n = tuple(float(v) for v in push_n * k * e)  # type: ignore[assignment]
+                rig.push_base_n = tuple(float(v) for v in push_n * k * e)  # type: ignore[assignment]  # three items: mypy cannot count a generator
                 loop.run_ticks(1)
             rig.push_base_n = (0.0, 0.0, 0.0)
             loop.run_ticks(int(_REST_S * 1000))

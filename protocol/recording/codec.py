@@ -297,7 +297,7 @@ def _encode_fast(records: np.ndarray | Mapping[str, np.ndarray], poses: Mapping[
     if any(a.dtype.itemsize != 8 for a in pose):
         raise ValueError("recorded columns are 8-byte values")
     packed = zlib.compress(_stack_records(recs) + _stack8(pose, m), _FAST_LEVEL)
-    dtypes = [recs.dtype.fields[c.name][0].str for c in COLUMNS] + [a.dtype.str for a in pose]  # type: ignore[index]
+    dtypes = [recs.dtype.fields[c.name][0].str for c in COLUMNS] + [a.dtype.str for a in pose]  # type: ignore[index]  # the records are of the structured TICK_DTYPE
     header = {"n": n, "m": m, "dtypes": dtypes, "events": [list(e) for e in events]}
     head = json.dumps(header, separators=(",", ":")).encode()
     return _FAST + struct.pack("<I", len(head)) + head + packed

@@ -129,4 +129,4 @@ class ParticipantWindow(QWidget):
         show = s.show_gauge and s.gauge_force_n is not None and self.model.gauge_allowed
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]
+            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]  # not None when show is True

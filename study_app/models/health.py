@@ -236,7 +236,7 @@ class HealthModel:
             bits = Fault(self.faults & _DEVICE_FAULTS.get(d.name, 0))
             state = "disconnected" if not self.connected else ("FAULT: " + bits.describe() if bits else "ok")
             if state == "ok" and d.name == "Haptic device" and self.derating():
-                state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]
+                state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]  # derating() is True only with a loop
             out.append(DeviceStatus(d.name, state, d.rate_hz, d.age_ms))
         j = self.jaw
         if j is not None:

@@ -101,7 +101,7 @@ class PlotModel:
     def attach(self, ring: object) -> None:
         """Read from this ring (anything with ``read_since`` / ``write_count``), starting with its last window."""
         self.ring = ring
-        self.cursor = max(0, ring.write_count - self.capacity)  # type: ignore[attr-defined]
+        self.cursor = max(0, ring.write_count - self.capacity)  # type: ignore[attr-defined]  # the ring is typed object here
 
     def detach(self) -> None:
         """Stop reading (the engine is going away)."""
@@ -124,11 +124,11 @@ class PlotModel:
             return 0
         # Far behind (a stall, a suspended laptop)?  Only the last window can be shown: skip the rest
         # unread, so one pull never copies or converts more than `capacity` records.
-        oldest_needed = ring.write_count - self.capacity  # type: ignore[attr-defined]
+        oldest_needed = ring.write_count - self.capacity  # type: ignore[attr-defined]  # as above
         if self.cursor < oldest_needed:
             self.skipped += oldest_needed - self.cursor
             self.cursor = oldest_needed
-        res = ring.read_since(self.cursor)  # type: ignore[attr-defined]
+        res = ring.read_since(self.cursor)  # type: ignore[attr-defined]  # as above
         self.cursor = res.cursor
         self.lost += res.lost
         rows = res.rows

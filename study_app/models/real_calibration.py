@@ -140,7 +140,7 @@ class RealCalibrationModel:
         why = self.identify_refusal()
         if why:
             raise RuntimeError(f"cannot identify: {why}")
-        poses = tuple((s.label, s.recorded.rot_base_sensor, s.recorded.wrench) for s in self.recorded)  # type: ignore[union-attr]
+        poses = tuple((s.label, s.recorded.rot_base_sensor, s.recorded.wrench) for s in self.recorded)  # type: ignore[union-attr]  # every step is recorded (identify_refusal)
         self.state, self.message = "identifying", ""
         self.changed.emit()
         return m.IdentifyPoses(poses, self.pose_set)
@@ -149,7 +149,7 @@ class RealCalibrationModel:
     def apply(self, ev: object) -> None:
         """Update from engine events."""
         if isinstance(ev, m.EngineReady):
-            self.rot_tip_sensor = tuple(ev.rot_tip_sensor)  # type: ignore[assignment]
+            self.rot_tip_sensor = tuple(ev.rot_tip_sensor)  # type: ignore[assignment]  # nine items: mypy cannot count tuple()
         elif isinstance(ev, m.PoseRecorded):
             step = next((s for s in self.steps if s.label == ev.label), None)
             if step is None:
