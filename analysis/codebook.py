@@ -443,7 +443,8 @@ def _round(values: pd.Series, c: Column) -> pd.Series:
         with np.errstate(divide="ignore", invalid="ignore"):
             mag = np.floor(np.log10(np.abs(x)))
         digits = np.where(np.isfinite(mag), c.significant - 1 - mag, 0).astype(np.int64)
-        out = [v if not math.isfinite(v) or v == 0 else round(v, int(d)) for v, d in zip(x.tolist(), digits.tolist())]
+        out = [v if not math.isfinite(v) or v == 0 else round(v, int(d))
+               for v, d in zip(x.tolist(), digits.tolist(), strict=True)]
         return pd.Series(out, index=values.index, dtype=np.float64)
     return values
 

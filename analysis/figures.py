@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any, TypeVar, cast
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 from matplotlib.figure import Figure
 
@@ -80,7 +81,7 @@ def styled(builder: _F) -> _F:
         with matplotlib.rc_context(cast(Any, STYLE)):
             return builder(*args, **kwargs)
 
-    return build  # type: ignore[return-value]
+    return build  # type: ignore[return-value]  # functools.wraps keeps the signature; mypy cannot see it
 #: Print resolution of the PNGs.
 _DPI = 300
 #: Text stays text in SVG and PDF (selectable, searchable, editable in a journal's tools).
@@ -109,7 +110,7 @@ def significance_mark(result: WilcoxonResult | None, *, adjusted: bool = True, p
     return "***" if p < 0.001 else "**" if p < 0.01 else "*" if p < 0.05 else "n.s."
 
 
-def _style(ax) -> None:  # type: ignore[no-untyped-def]
+def _style(ax) -> None:  # type: ignore[no-untyped-def]  # matplotlib Axes left untyped in the figure helpers
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
     ax.grid(axis="y", color="#dddddd", linewidth=0.6)
@@ -141,10 +142,10 @@ def margins(fig: Figure, left: float, right: float, bottom: float, top: float, *
     fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h, **space)
 
 
-def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]
+def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str, rng: np.random.Generator) -> None:  # type: ignore[no-untyped-def]  # as above
     width = 0.36
     top = 0.0
-    for gi, (label, frame, mark) in enumerate(groups):
+    for gi, (_label, frame, mark) in enumerate(groups):
         heights = {}
         for k, mode in enumerate(("off", "on")):
             vals = frame.loc[frame["haptic_mode"] == mode, metric].to_numpy(dtype=float)
@@ -214,7 +215,7 @@ def mode_bars(
     margins(fig, 0.5, 0.08, 0.3 + extra, 0.62 + 0.2 * bool(title), wspace=0.3)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
     rng = np.random.default_rng(0)  # jitter of the dots, fixed so figures are reproducible
-    for ax, metric in zip(axes, metrics):
+    for ax, metric in zip(axes, metrics, strict=True):
         groups = [(t, by_target[by_target["target_label"] == t], marks.get((metric, t), "")) for t in targets]
         groups.append(("overall", overall, marks.get((metric, "overall"), "")))
         _bars_panel(ax, groups, metric, rng)
@@ -237,7 +238,7 @@ def paired_lines(per_part: pd.DataFrame, metrics: Sequence[str], marks: Mapping[
     fig = Figure(figsize=(PAGE_IN, 2.5), dpi=_DPI)
     margins(fig, 0.45, 0.08, 0.25, 0.5, wspace=0.55)
     axes = fig.subplots(1, len(metrics), squeeze=False)[0]
-    for ax, metric in zip(axes, metrics):
+    for ax, metric in zip(axes, metrics, strict=True):
         wide = by_mode(per_part, metric)
         k = len(wide)
         for i, (_, row) in enumerate(wide.iterrows()):
@@ -285,7 +286,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     t = samples["t_s"].to_numpy(dtype=float)
 
     def mag(prefix: str) -> np.ndarray:
-        c = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
+        c: list[npt.NDArray[np.float64]] = [samples[f"{prefix}_f{a}"].to_numpy(dtype=float) for a in "xyz"]
         return np.sqrt(c[0] ** 2 + c[1] ** 2 + c[2] ** 2)
 
     task = samples["force_n"].to_numpy(dtype=float)
@@ -295,7 +296,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     contact = task > CONTACT_THRESHOLD_N
     if contact.any():
         edges = np.flatnonzero(np.diff(np.concatenate(([0], contact.astype(np.int8), [0]))))
-        for a, b in zip(edges[::2], edges[1::2]):
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
             for axis in (ax, ax_raw):
                 axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
                              label="in contact" if (a == edges[0] and axis is ax) else None)
@@ -331,7 +332,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     return fig
 
 
-def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> None:  # type: ignore[no-untyped-def]
+def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> None:  # type: ignore[no-untyped-def]  # as above
     """A bracket along the bottom of the force axis: the samples RMSE and Max AE are taken over."""
     if window is None or not len(t):
         return
@@ -347,11 +348,12 @@ def _mark_window(ax, t: np.ndarray, contact: np.ndarray, window: str | None) -> 
     # at the window's end, where the force has settled (at the target, or wherever the trial ended) rather than
     # rising through the label; a light box keeps it legible over a trace that does pass
     ax.text(t[-1], y * 2.2, f"error window ({what}): RMSE, Max AE", ha="right", va="bottom", fontsize=6.5,
-            color="#444444", bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.8},
+            color="#444444",
+            bbox={"boxstyle": "square,pad=0.1", "facecolor": "white", "edgecolor": "none", "alpha": 0.8},
             zorder=5)
 
 
-def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]
+def _mark_abort(ax, ax_raw, t: np.ndarray, samples: pd.DataFrame, abort: tuple[float, str] | None) -> None:  # type: ignore[no-untyped-def]  # as above
     """An aborted trial: where a watchdog fault latched (from the recorded flags) and where the trial ended, each
     a red line with its time and cause in a boxed label (on the left of a line in the right half of the axis)."""
     labels: list[tuple[float, str, str]] = []  # (time, text, line style)

@@ -25,12 +25,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.aggregate import PRIMARY_METRICS, by_mode
-from analysis.models import (
-    ModelFit,
-    design,
-    fit_gee_logistic,
-    fit_mixed,
-)
+from analysis.models import ModelFit, design, fit_gee_logistic, fit_mixed
 
 __all__ = ["MIN_ORDER_GROUP", "first_modes", "learning_curve", "learning_models", "order_check", "trial_terms"]
 

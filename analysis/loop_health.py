@@ -73,7 +73,7 @@ def health_table(study: StudyData) -> pd.DataFrame:
     recorded = out[list(HEALTH_COLUMNS)].notna().all(axis=1).to_numpy()
     notes: list[str] = []
     within: list[bool | None] = []
-    for ok_row, row, session in zip(recorded, out.itertuples(index=False), t.itertuples(index=False)):
+    for ok_row, row, session in zip(recorded, out.itertuples(index=False), t.itertuples(index=False), strict=True):
         if not ok_row:
             within.append(None)
             notes.append("")

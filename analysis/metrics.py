@@ -67,7 +67,8 @@ class TrialTable:
     trials
         One row per analysed trial: ``participant_code, participant_number,
         session_id, trial_index, started_at_s`` (the cue, session clock),
-        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n,
+        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s,
+        peak_force_n,
         first_contact_s, tct_censored_s, database``.  ``tct_s`` is NaN unless
         the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
     n_from_samples
@@ -164,7 +165,8 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
 def _checks(inc: pd.DataFrame) -> list[_Check]:
     """What each analysed trial's worker needs, in row order."""
     crit = {c: inc[c].to_numpy(dtype=float) for c in ("tolerance_fraction", "hold_s", "max_trial_s")}
-    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"])]
+    wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"],
+                                              strict=True)]
     return [_Check(i, rec, crit["tolerance_fraction"][i], crit["hold_s"][i], crit["max_trial_s"][i], wheres[i])
             for i, rec in enumerate(stored_records(inc))]
 

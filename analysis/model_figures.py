@@ -18,16 +18,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.aggregate import METRIC_LABELS
-from analysis.figures import (
-    MODE_COLORS,
-    MODE_MARKERS,
-    PAGE_IN,
-    _style,
-    add_note,
-    margins,
-    note_lines,
-    styled,
-)
+from analysis.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, _style, add_note, margins, note_lines, styled
 
 __all__ = ["learning_curves", "trade_slopes"]
 
@@ -57,7 +48,7 @@ def trade_slopes(pairs: pd.DataFrame, slopes: pd.DataFrame, common: Mapping[str,
     fig = Figure(figsize=(PAGE_IN, 3.0 + extra), dpi=_DPI)
     margins(fig, 0.5, 0.1, 0.4 + extra, 0.62, wspace=0.12)
     axes = fig.subplots(1, 2, sharey=True)
-    for ax, mode in zip(axes, ("off", "on")):
+    for ax, mode in zip(axes, ("off", "on"), strict=True):
         sel = pairs[pairs["haptic_mode"] == mode]
         ax.scatter(sel["rmse"], sel["tct"], s=7, color=MODE_COLORS[mode], alpha=0.55, linewidths=0,
                    marker=MODE_MARKERS[mode], label="trial", zorder=3)
@@ -103,8 +94,8 @@ def learning_curves(curve: pd.DataFrame, note: str = "") -> Figure:
     axes = fig.subplots(1, len(metrics))
     blocks = curve.drop_duplicates("block").sort_values("block")
     ticks = blocks["block"].to_list()
-    names = [f"{a}–{b}" if a != b else str(a) for a, b in zip(blocks["first_trial"], blocks["last_trial"])]
-    for ax, m in zip(axes, metrics):
+    names = [f"{a}–{b}" if a != b else str(a) for a, b in zip(blocks["first_trial"], blocks["last_trial"], strict=True)]
+    for ax, m in zip(axes, metrics, strict=True):
         for k, mode in enumerate(("off", "on")):
             sel = curve[(curve["metric"] == m) & (curve["haptic_mode"] == mode)].sort_values("block")
             dx = (k - 0.5) * 0.16  # side by side, so equal means and their bars do not hide each other

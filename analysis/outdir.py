@@ -342,7 +342,8 @@ def _seal(tmp_fd: int) -> dict[str, str]:
 
 
 def _move_in(out_fd: int, tmp_fd: int, hashes: dict[str, str], *, command: str, marker: str) -> None:
-    """Put the files of the temporary folder in place, the marker first accepting old and new (the folder was judged)."""
+    """Put the files of the temporary folder in place, the marker first accepting old and new (the folder was
+    judged)."""
     old = _read_marker_at(out_fd, marker) or {}
     old_present = {f: h for f in old if (h := sha256_at_or_none(out_fd, f)) is not None and h in old[f]}
     write_bytes_at(out_fd, marker, _marker_bytes(command, old_present, pending=hashes))
@@ -454,7 +455,8 @@ def write_output_folder(
             tmp_fd = open_folder(tmp_name, out_fd)
             try:
                 hashes = _seal(tmp_fd)
-                _judge(out, out_fd, command=command, marker=marker, force=force, keep=keep, option=option)  # as it is now
+                # as it is now
+                _judge(out, out_fd, command=command, marker=marker, force=force, keep=keep, option=option)
                 _move_in(out_fd, tmp_fd, hashes, command=command, marker=marker)
             finally:
                 os.close(tmp_fd)

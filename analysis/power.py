@@ -202,8 +202,8 @@ def _pool_notes(pool: PairedPool, prepared: list[list[PreparedMetric]], directio
                              "its power is 0 at every n")
                 continue
             if undefined and scope == "overall":
-                why = (" (no successful trial in a mode)" if metric == "tct_s" and pool.options.tct_policy == "successful"
-                       else "")
+                successful_only = metric == "tct_s" and pool.options.tct_policy == "successful"
+                why = " (no successful trial in a mode)" if successful_only else ""
                 notes.append(
                     f"{label} is undefined for {undefined} of {P} participants{why}: resampled studies leave "
                     f"those pairs out, as the report does, so a study of n participants has about "
@@ -429,7 +429,8 @@ def estimate_power(
 # ------------------------------------------------------------------------------------------------
 # In words, and on disk
 # ------------------------------------------------------------------------------------------------
-def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *, holm_adjusted: bool = False) -> int | None:
+def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *,
+               holm_adjusted: bool = False) -> int | None:
     """The smallest n tried from which on every larger n tried reaches ``target`` power (None: not reached).
 
     "From which on" rather than "the first n that reaches it": the discrete
@@ -469,7 +470,8 @@ def summary_text(result: PowerResult) -> str:
         f"({result.resamples} studies per n, seed {result.seed}).",
         f"Test: the report's paired Wilcoxon signed-rank test ON vs OFF per metric, two-sided, significant at "
         f"p < {result.alpha:g}; TCT {tct}; RMSE and Max AE from the "
-        f"{'cue' if result.options.error_window == 'cue' else 'first contact'}; zero differences: {result.zero_method}.",
+        f"{'cue' if result.options.error_window == 'cue' else 'first contact'}; "
+        f"zero differences: {result.zero_method}.",
         "Power: the probability that a study detects the effect in the direction this pool shows (a rejection "
         "counts only when the resampled study's effect lies on the pool's side); the two-sided rejection rate, "
         "which also counts significant effects the other way, is power_two_sided.",

@@ -13,11 +13,11 @@ from __future__ import annotations
 import math
 
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.ticker import NullLocator, PercentFormatter
 
 from analysis.figures import _style
 from analysis.power import FAMILY_ALL, FAMILY_LABELS, PowerResult, metric_label
-
 
 __all__ = ["METRIC_COLORS", "power_curves"]
 
@@ -42,8 +42,8 @@ def power_curves(result: PowerResult) -> Figure:
     scopes = list(dict.fromkeys(f["scope"]))
     fig = Figure(figsize=(4.2 * len(scopes) + 0.6, 4.6), layout="constrained")
     axes = fig.subplots(1, len(scopes), sharey=True, squeeze=False)[0]
-    handles: dict[str, object] = {}
-    for ax, scope in zip(axes, scopes):
+    handles: dict[str, Line2D] = {}
+    for ax, scope in zip(axes, scopes, strict=True):
         sel = f[f["scope"] == scope]
         for level, style in ((0.8, (0, (4, 3))), (0.9, (0, (1, 2)))):
             ax.axhline(level, color="#555555", linewidth=0.9, linestyle=style, zorder=1)
@@ -103,9 +103,9 @@ def _thinned_labels(ns: list[int], log: bool, min_gap: float = 0.06) -> list[str
     pos = [math.log(n) if log else float(n) for n in ns]
     width = (pos[-1] - pos[0]) or 1.0
     labels, last = [], -math.inf
-    for n, p in zip(ns, pos):
+    for n, p in zip(ns, pos, strict=True):
         need = min_gap * max(2, len(str(n))) / 2  # three-digit labels need more room than two-digit ones
-        show = (p - last) / width >= need or n == ns[-1] and (p - last) / width >= need / 2
+        show = (p - last) / width >= need or (n == ns[-1] and (p - last) / width >= need / 2)
         labels.append(str(n) if show else "")
         last = p if show else last
     return labels

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis import power_figures
 from analysis.metrics import MetricOptions
 from analysis.paired_pool import pool_from_trials
 from analysis.power import PowerError, PowerResult, estimate_power, summary_text
-from analysis import power_figures
 
 __all__ = ["ReportPower", "report_section", "write_power"]
 

@@ -32,7 +32,7 @@ def moving_average(x: npt.NDArray[np.float64], window: int) -> npt.NDArray[np.fl
     """Trailing mean of the last ``window`` samples (fewer at the start), as the pipeline's filter forms it."""
     if window <= 1:
         return np.asarray(x, dtype=np.float64).copy()
-    c = np.cumsum(np.concatenate(([0.0], np.asarray(x, dtype=np.float64))))
+    c: npt.NDArray[np.float64] = np.cumsum(np.concatenate(([0.0], np.asarray(x, dtype=np.float64))))
     n = np.arange(1, len(x) + 1)
     lo = np.maximum(0, n - window)
     return (c[n] - c[lo]) / (n - lo)
@@ -177,4 +177,4 @@ def _runs(mask: npt.NDArray[np.bool_]) -> list[tuple[int, int]]:
     """[start, stop) of every run of True."""
     m = np.concatenate(([False], np.asarray(mask, dtype=bool), [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    return list(zip(edges[0::2].tolist(), edges[1::2].tolist()))
+    return list(zip(edges[0::2].tolist(), edges[1::2].tolist(), strict=True))

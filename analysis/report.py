@@ -39,13 +39,13 @@ from analysis.learning import first_modes, learning_curve, learning_models, orde
 from analysis.load import Progress, StudyData, load_study
 from analysis.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.models import MIN_PARTICIPANTS, ModelFit
-from analysis.sensitivity import max_ae_from_approach, window_sensitivity
-from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
-from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, plural, power_html
+from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.stats import WilcoxonResult
+from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
+from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.withdrawals import study_withdrawals, withdrawals_html
 
 __all__ = [
@@ -82,7 +82,7 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
 
 
 def _marks(results: Sequence[WilcoxonResult], frame: pd.DataFrame) -> dict[str, str]:
-    holm = dict(zip(frame["metric"], frame["p_holm"]))
+    holm = dict(zip(frame["metric"], frame["p_holm"], strict=True))
     return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric)) for r in results}
 
 
@@ -140,7 +140,8 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     per_target: list[pd.DataFrame] = []
     target_results: dict[str, list[WilcoxonResult]] = {}
     for label in target_order:
-        res, frame = mode_tests(by_target[by_target["target_label"] == label], zero_method=zero_method, confidence=confidence)
+        res, frame = mode_tests(by_target[by_target["target_label"] == label], zero_method=zero_method,
+                                confidence=confidence)
         frame.insert(0, "target_label", label)
         per_target.append(frame)
         target_results[label] = res
@@ -238,7 +239,7 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     common = {str(r.haptic_mode): (float(r.slope_s_per_n), rm_caption(r)) for r in a.within.sa.itertuples()}
     tct_label = "TCT (s), successful trials" if options.tct_policy == "successful" else "TCT (s), failures at the cap"
     bars = dict(target_order=a.target_order)
-    tasks: list[tuple[str, tuple, dict, str, str]] = [
+    tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
         ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),
@@ -264,7 +265,7 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
         titles.append((name, title))
     drawn = run_tasks(_work, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],
                       workers=default_workers() if workers is None else workers)
-    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn)}
+    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn, strict=True)}
     models = out.pop("models")
     return out, [(title, out[name]) for name, title in titles], models
 

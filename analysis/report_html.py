@@ -166,8 +166,9 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
                       f"{reasons}.")
     else:
         incomplete = (f"{plural(len(inc), 'experiment session')} did not complete and {are} left out with "
-                      f"{'its' if len(inc) == 1 else 'their'} {plural(excluded['incomplete_trials'], 'finished trial')} "
-                      f"(the default; report --include-incomplete analyses them): {reasons}.")
+                      f"{'its' if len(inc) == 1 else 'their'} "
+                      f"{plural(excluded['incomplete_trials'], 'finished trial')} (the default; report "
+                      f"--include-incomplete analyses them): {reasons}.")
     n_ab, n_rerun = within.reruns
     if n_ab == 0:
         aborted = "no aborted trial"
@@ -204,7 +205,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     hold = sorted(set(trials["hold_s"]))
     cap = sorted(set(trials["max_trial_s"]))
     targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
-    target_txt = ", ".join(f"{lab} {f:g} N" for lab, f in zip(targets["target_label"], targets["target_force_n"]))
+    target_txt = ", ".join(f"{lab} {f:g} N"
+                           for lab, f in zip(targets["target_label"], targets["target_force_n"], strict=True))
 
     def one(vals: list[float], unit: str) -> str:
         return " / ".join(f"{v:g}{unit}" for v in vals)
@@ -245,11 +247,14 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
 
 
 _CSS = """
-body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;color:#222;line-height:1.45}
+body{font-family:system-ui,-apple-system,'Segoe UI',Roboto,sans-serif;max-width:1100px;margin:2em auto;padding:0 1em;
+color:#222;line-height:1.45}
 h1{font-size:1.6em;margin-bottom:.2em}h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:1.8em}
 .meta{color:#666;font-size:.9em}table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.85em}
-th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}th{background:#f4f4f4;vertical-align:bottom}
-td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}tr.nc td{color:#999;font-style:italic}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right}td{white-space:nowrap}
+th{background:#f4f4f4;vertical-align:bottom}
+td:first-child,th:first-child,td.m{text-align:left}figure{margin:0;break-inside:avoid}
+tr.nc td{color:#999;font-style:italic}
 img{max-width:100%;height:auto;display:block;margin:.5em 0}
 .key{display:grid;grid-template-columns:repeat(auto-fit,minmax(200px,1fr));gap:.6em;margin:1em 0}
 .key div{background:#f7f9fc;border:1px solid #e3e8f0;border-radius:6px;padding:.6em .8em}
@@ -321,7 +326,7 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
     counts = abort_counts(study)
     total = int(counts["n_trials"].sum())
     rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
-                   for c, n in zip(counts["abort_cause"], counts["n_trials"]))
+                   for c, n in zip(counts["abort_cause"], counts["n_trials"], strict=True))
     aborted = (f"<p>{plural(total, 'experiment trial')} did not count (a trial aborted in a session that went on is "
                "re-run under the protocol's abort policy; see the methods for how many were), by cause:</p>"
                f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
@@ -338,7 +343,8 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
 
         listed = "".join(
             f"<li>{html.escape(str(r.participant_code))}, session {int(r.session_id)}, trial {int(r.trial_number)}"
-            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>" for r in outside.head(20).itertuples())
+            f"{html.escape(counted(r))}: {html.escape(str(r.outside_bounds))}</li>"
+            for r in outside.head(20).itertuples())
         more = f"<li>… and {len(outside) - 20} more (loop_health.csv)</li>" if len(outside) > 20 else ""
         verdict = (f"<p>Every one of the {plural(len(recorded), 'trial')} with a loop record stayed within the "
                    "bounds.</p>" if outside.empty else

@@ -45,7 +45,7 @@ def short_commit(v: object) -> str:
 
 
 def _ci(lo: object, hi: object, digits: int = 3) -> str:
-    lo_f, hi_f = float(lo), float(hi)  # type: ignore[arg-type]
+    lo_f, hi_f = float(lo), float(hi)  # type: ignore[arg-type]  # a number from the model table (NaN when missing)
     return f"[{fmt(lo_f, digits)}, {fmt(hi_f, digits)}]" if math.isfinite(lo_f) else "–"
 
 
@@ -55,7 +55,8 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
     A fitted model's note (a warning of the fit, the participant variance at its boundary) is a footnote marked
     on each of its rows; an unfitted model is one row with its note.
     """
-    notes = list(dict.fromkeys(str(n) for n, t in zip(fe["note"], fe["term"]) if t and isinstance(n, str) and n))
+    notes = list(dict.fromkeys(str(n) for n, t in zip(fe["note"], fe["term"], strict=True)
+                               if t and isinstance(n, str) and n))
     marks = {n: "†" * (k + 1) if k < 3 else str(k + 1) for k, n in enumerate(notes)}
     body = []
     for r in fe.itertuples():
@@ -66,7 +67,8 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
         warn = f" <sup>{marks[str(r.note)]}</sup>" if str(r.note) in marks else ""
         body.append(f'<tr><td class="m">{html.escape(str(r.outcome))}</td>'
                     f'<td class="m">{html.escape(labels.get(r.term, r.term))}{warn}</td>'
-                    f"<td>{fmt(r.estimate, 4)}</td><td>{_ci(r.ci_low, r.ci_high, 4)}</td><td>{fmt_p(r.p_value)}</td></tr>")
+                    f"<td>{fmt(r.estimate, 4)}</td><td>{_ci(r.ci_low, r.ci_high, 4)}</td>"
+                    f"<td>{fmt_p(r.p_value)}</td></tr>")
     foot = "".join(f"<li>{k}: {html.escape(n)}</li>" for n, k in marks.items())
     return (f'<div class="scroll"><table class="within"><caption>{caption}</caption><thead><tr><th>outcome</th>'
             "<th>term</th><th>estimate</th><th>95 % CI</th><th>p</th></tr></thead>"
@@ -178,8 +180,8 @@ def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, tar
             + (_model_table(fe, labels, "metric ~ mode × target + trial number + (1 | participant); success: logistic "
                             "GEE, estimates in log-odds") if not too_few else "")
             + f"<figure>{img(png, 'each metric over the trials of the session by mode')}</figure>"
-            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per participant, "
-            "ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
+            f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per "
+            "participant, ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
             "</caption><thead><tr><th>measure</th><th>ON first</th><th>OFF first</th><th>median ON − OFF, ON first"
             "</th><th>median ON − OFF, OFF first</th><th>U</th><th>p</th><th>note</th></tr></thead>"
             f"<tbody>{rows}</tbody></table></div>")

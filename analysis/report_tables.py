@@ -60,7 +60,7 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     dict of str to pandas.DataFrame
         File name → table, in the order the files are listed.
     """
-    numbers = dict(zip(trials["participant_code"], trials["participant_number"]))
+    numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
     order = sorted(numbers, key=lambda code: (numbers[code], code))
     rank = {code: i for i, code in enumerate(order)}
 

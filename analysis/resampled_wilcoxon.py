@@ -32,7 +32,7 @@ METHOD_NAMES = ("", "exact", "permutation", "approx")
 _METHOD_CODE = {name: code for code, name in enumerate(METHOD_NAMES)}
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _exact_p(n: int) -> np.ndarray:
     """Two-sided exact p-value of every W⁺ = 0 … n(n+1)/2 for n untied, non-zero differences."""
     return _two_sided_p(signed_rank_null_counts(n), float(2**n))
@@ -46,7 +46,7 @@ def _two_sided_p(weights: np.ndarray, total: float) -> np.ndarray:
     cdf = np.cumsum(weights)
     p_less = cdf / total
     p_greater = (cdf[-1] - cdf + weights) / total  # integer counts of S ≥ s
-    p = np.minimum(2.0 * np.minimum(p_less, p_greater), 1.0)
+    p: np.ndarray = np.minimum(2.0 * np.minimum(p_less, p_greater), 1.0)
     p.flags.writeable = False
     return p
 
@@ -195,7 +195,7 @@ def _permutation_rows(rows: _Rows, sel: np.ndarray, zero_method: str, p: np.ndar
     key = (shape * 64 + below) * 64 + rows.count[sel] - (n_zero if zero_method != "wilcox" else 0)
     kinds, first, which = np.unique(key, return_index=True, return_inverse=True)
     tables = []
-    for kk, i in zip(kinds.tolist(), first.tolist()):
+    for kk, i in zip(kinds.tolist(), first.tolist(), strict=True):
         t = _PERM_CACHE.get(kk)
         tables.append(t if t is not None else _permutation_p(kk, rows.units[sel[i]][nz[i]]))
     stacked = np.full((len(tables), max(t.size for t in tables)), np.nan)

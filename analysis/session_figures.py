@@ -23,10 +23,10 @@ __all__ = ["SessionMarks", "contact_mask", "replay_figure", "session_trace"]
 _RAW, _COMP, _RENDER, _REPLAY = "#d62728", "#1f77b4", "#2ca02c", "#E69F00"
 
 
-def _spans(ax, t: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_], **kw) -> None:  # type: ignore[no-untyped-def]
+def _spans(ax, t: npt.NDArray[np.float64], mask: npt.NDArray[np.bool_], **kw) -> None:  # type: ignore[no-untyped-def]  # matplotlib Axes left untyped in the figure helpers
     m = np.concatenate(([False], mask, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    for k, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2])):
+    for k, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2], strict=True)):
         ax.axvspan(t[lo], t[hi - 1], label=kw.pop("label", None) if k == 0 else None, **kw)
 
 
@@ -35,7 +35,7 @@ def contact_mask(force_n: npt.NDArray[np.float64], min_ms: int = 50) -> npt.NDAr
     above = np.asarray(force_n, dtype=np.float64) > CONTACT_THRESHOLD_N
     m = np.concatenate(([False], above, [False]))
     edges = np.flatnonzero(m[1:] != m[:-1])
-    runs = [(lo, hi) for lo, hi in zip(edges[0::2], edges[1::2]) if hi - lo >= min_ms]
+    runs = [(lo, hi) for lo, hi in zip(edges[0::2], edges[1::2], strict=True) if hi - lo >= min_ms]
     out = np.zeros(len(above), dtype=bool)
     for k, (lo, hi) in enumerate(runs):
         if k and lo - runs[k - 1][1] < min_ms:  # bridge a short gap between two contacts
@@ -159,14 +159,14 @@ def _listing(t_s: npt.NDArray[np.float64], marks: SessionMarks, faults: npt.NDAr
     from protocol.labels import fault_names
 
     items = [(a, f"A{k + 1}  {why}, {a:.3f}–{b:.3f} s") for k, (a, b, why) in enumerate(marks.aborted)]
-    items += [(float(t_s[i]), f"F{k + 1}  {fault_names(int(faults[i]))} latched at {t_s[i]:.3f} s")  # type: ignore[index]
+    items += [(float(t_s[i]), f"F{k + 1}  {fault_names(int(faults[i]))} latched at {t_s[i]:.3f} s")  # type: ignore[index]  # no onsets when faults is None
               for k, i in enumerate(_fault_onsets(faults))]
     items += [(a, f"experimenter pause {a:.3f}–{b:.3f} s") for a, b in marks.pauses]
     items += [(t, f"resumed at {t:.3f} s (a new run of the session)") for t in marks.resumes]
     return [text for _, text in sorted(items, key=lambda x: x[0])]
 
 
-def _mark_events(top, bottom, t_s: npt.NDArray[np.float64], marks: SessionMarks,  # type: ignore[no-untyped-def]
+def _mark_events(top, bottom, t_s: npt.NDArray[np.float64], marks: SessionMarks,  # type: ignore[no-untyped-def]  # matplotlib Axes left untyped in the figure helpers
                  faults: npt.NDArray[np.int64] | None, ymax: float) -> None:
     """Aborted trials (hatched, tagged A1 …), pauses (hatched grey), faults (a red bar along the bottom, tagged
     F1 …) and resumes (a dashed line); the tags are listed in words under the figure (:func:`_listing`)."""
@@ -187,7 +187,7 @@ def _mark_events(top, bottom, t_s: npt.NDArray[np.float64], marks: SessionMarks,
         low = -0.05 * ymax
         m = np.concatenate(([False], latched, [False]))
         edges = np.flatnonzero(m[1:] != m[:-1])
-        for j, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2])):
+        for j, (lo, hi) in enumerate(zip(edges[0::2], edges[1::2], strict=True)):
             top.fill_between([t_s[lo], t_s[hi - 1] + 0.05], low, low * 0.2, color="#b00020", linewidth=0, zorder=5,
                              label="fault latched" if j == 0 else None)
         for k, i in enumerate(onsets):

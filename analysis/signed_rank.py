@@ -25,8 +25,10 @@ a public function and two other rooms need:
 from __future__ import annotations
 
 import functools
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "EXACT_MAX_N",
@@ -97,7 +99,7 @@ def sign_flip_distribution(units: np.ndarray) -> tuple[np.ndarray, float]:
     """
     size = int(units.sum()) + 1
     exact = units.size <= _INT_COUNTS_MAX_N
-    w = np.zeros(size, dtype=np.int64 if exact else np.float64)
+    w: npt.NDArray[Any] = np.zeros(size, dtype=np.int64 if exact else np.float64)  # its dtype is chosen at run time
     w[0] = 1
     top = 0
     for u in units.tolist():

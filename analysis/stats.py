@@ -37,20 +37,15 @@ import scipy
 from scipy import stats as sps
 
 from analysis.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
-from analysis.signed_rank import (
-    EXACT_MAX_N,
-    PERMUTATION_AUTO_MAX_N,
-    SCIPY_AUTO_RANGE,
-    auto_method,
-)
+from analysis.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, auto_method
 
 __all__ = [
     "ALTERNATIVES",
     "DEFAULT_DECIMALS",
     "EXPLICIT_EXACT_MAX_N",
     "METHODS",
-    "WilcoxonResult",
     "ZERO_METHODS",
+    "WilcoxonResult",
     "check_zero_method",
     "holm",
     "methods_text",
@@ -252,7 +247,8 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     half_zero = float(ranks[d == 0].sum()) / 2.0 if zero_method == "zsplit" else 0.0
 
     def w_plus(x: np.ndarray, axis: int) -> np.ndarray:
-        return np.sum((x > 0) * ranks, axis=axis) + half_zero
+        w: np.ndarray = np.sum((x > 0) * ranks, axis=axis) + half_zero
+        return w
 
     res = sps.permutation_test((d,), w_plus, permutation_type="samples", vectorized=True,
                                alternative=alternative, axis=-1)
@@ -498,7 +494,7 @@ def _holm_rows(q: np.ndarray) -> np.ndarray:
 
 
 #: Column order of :func:`results_frame`.
-RESULT_COLUMNS: tuple[str, ...] = tuple(f.name for f in fields(WilcoxonResult)) + ("p_holm",)
+RESULT_COLUMNS: tuple[str, ...] = (*tuple(f.name for f in fields(WilcoxonResult)), "p_holm")
 
 
 def results_frame(results: Sequence[WilcoxonResult]) -> pd.DataFrame:

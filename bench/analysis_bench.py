@@ -91,7 +91,7 @@ def _stats_at_scale(participants: int) -> dict[str, Any]:
         "participants": participants,
         "trials": len(trials),
         "stats_wall_s": round(wall, 3),
-        "methods": dict(zip(frame["metric"], frame["method"])),
+        "methods": dict(zip(frame["metric"], frame["method"], strict=True)),
         "r_rm_all": round(float(sa.set_index("haptic_mode").at["all", "r_rm"]), 4),
     }
 
@@ -113,7 +113,7 @@ def _read_all_samples(db: str) -> tuple[float, int]:
     n = 0
     try:
         for tid, sid, seg, first, last in zip(inc["trial_id"], inc["session_id"], inc["segment"], inc["first_tick"],
-                                              inc["last_tick"]):
+                                              inc["last_tick"], strict=True):
             n += len(read_task_force(conn, int(tid), recorded_where(sid, seg, first, last))[0])
     finally:
         conn.close()

@@ -28,7 +28,7 @@ def _say(line: str) -> None:
     print(f"bench: {line}", file=sys.stderr, flush=True)
 
 
-def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def register(sub: argparse._SubParsersAction) -> None:
     """Add ``bench`` and its benchmarks to the ``haptic-study`` subcommands (the entry point's target)."""
     b = add_command(sub, "bench", "benchmarks (see README for recorded figures)",
                     "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
@@ -39,17 +39,19 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 # -- bench pipeline --------------------------------------------------------------------------------------
-def _add_pipeline(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_pipeline(bsub: argparse._SubParsersAction) -> None:
     bp = add_command(bsub, "pipeline", "per-tick cost vs NumPy, 1 kHz loop timing, filter trade table",
                      "haptic-study bench pipeline --loop-seconds 15 --explain")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
-    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"), default=30.0,
+    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"),
+                    default=30.0,
                     help="real time to run the loop (default 30; 0 skips)")
     bp.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
-    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000, help="samples for the cost benchmark")
+    bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000,
+                    help="samples for the cost benchmark")
     bp.set_defaults(handler=_cmd_pipeline)
 
 
@@ -71,11 +73,12 @@ def _cmd_pipeline(args: argparse.Namespace) -> int:
 
 
 # -- bench study -----------------------------------------------------------------------------------------
-def _add_study(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_study(bsub: argparse._SubParsersAction) -> None:
     bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock, and its storage as "
                      "blocks and as rows",
                      "haptic-study bench study --participants 4")
-    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10, help="participants (default 10)")
+    bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10,
+                    help="participants (default 10)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
     bs.set_defaults(handler=_cmd_study)
 
@@ -89,7 +92,7 @@ def _cmd_study(args: argparse.Namespace) -> int:
 
 
 # -- bench report ----------------------------------------------------------------------------------------
-def _add_report(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_report(bsub: argparse._SubParsersAction) -> None:
     br = add_command(bsub, "report", "report wall time on a 10-participant study, recorded and in the row format "
                      "of versions 1-2; statistics for 10 000 participants",
                      "haptic-study bench report --db study.db")
@@ -118,7 +121,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 # -- bench power -----------------------------------------------------------------------------------------
-def _add_power(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_power(bsub: argparse._SubParsersAction) -> None:
     # option values parsed by the command, as ``haptic-study power`` parses its own (study_app.power_cmds)
     b = bsub.add_parser("power", help="power analysis: the vectorised engine against paired_wilcoxon per resample")
     b.add_argument("--db", default=None, metavar="PATH",
@@ -144,7 +147,7 @@ def _cmd_power(args: argparse.Namespace) -> int:
 
 
 # -- bench stats -----------------------------------------------------------------------------------------
-def _add_stats(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_stats(bsub: argparse._SubParsersAction) -> None:
     bst = add_command(bsub, "stats", "analysis.stats on 10 000 pairs: Wilcoxon, Hodges–Lehmann, correlation, Holm",
                       "haptic-study bench stats --json")
     bst.add_argument("--json", action="store_true", help="print one JSON object")
@@ -160,7 +163,7 @@ def _cmd_stats(args: argparse.Namespace) -> int:
 
 
 # -- bench gui -------------------------------------------------------------------------------------------
-def _add_gui(bsub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_gui(bsub: argparse._SubParsersAction) -> None:
     bg = add_command(bsub, "gui", "1 kHz loop timing with and without the GUI attached; GUI stalls and start-up time",
                      "haptic-study bench gui --seconds 20")
     bg.add_argument("--json", action="store_true", help="print one JSON object")

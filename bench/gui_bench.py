@@ -107,7 +107,8 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
     app = QApplication.instance() or QApplication(["haptic-study-bench"])
     tmp = tempfile.TemporaryDirectory(prefix="haptic-study-bench-")
     settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
-    win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings, os.path.join(tmp.name, "bench.db"))
+    win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings,
+                             os.path.join(tmp.name, "bench.db"))
     win.confirm = lambda title, text: True
     win.show()
     app.processEvents()
@@ -116,7 +117,11 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
     detector = StallDetector(win, _STALL_TIMER_MS, threshold_ms=_STALL_THRESHOLD_MS)
     detector.start("connect")
     health: list[m.Health] = []
-    win.bridge.event_received.connect(lambda ev: isinstance(ev, m.Health) and health.append(ev))
+    def keep_health(ev: object) -> None:
+        if isinstance(ev, m.Health):
+            health.append(ev)
+
+    win.bridge.event_received.connect(keep_health)
 
     try:
         _run_until(app, lambda: win.model.session.state == "ready", 60.0)
@@ -152,7 +157,7 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
         "load_average": load_average(),
         "startup_s": {"window_usable": round(t_usable, 2), "engine_ready": round(t_ready, 2)},
         "trials_during_measurement": trials,
-        "qt_platform": app.platformName(),
+        "qt_platform": QApplication.platformName(),
         "host": f"{platform.python_implementation()} {platform.python_version()}, {os.cpu_count()} CPUs",
     }
 

@@ -29,11 +29,11 @@ import numpy as np
 
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig, default_protocol
 from protocol.design import build_schedule
-from pipeline.sim.participant import SimulatedParticipant
-from pipeline.sim.participant_params import ParticipantParams
 from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = [
@@ -107,7 +107,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
             cursor = res.cursor
             r = res.rows
             t_ns = [int(round(x * 1e9)) for x in r["t_s"].tolist()]
-            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()])
+            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()], strict=True)
             for ev in machine.feed(samples):
                 if isinstance(ev, TrialFinished):
                     m = ev.metrics
@@ -143,7 +143,7 @@ def _wilcoxon_p(off: list[float], on: list[float]) -> float:
     """Two-sided Wilcoxon signed-rank p of the paired differences (NaN when undefined)."""
     from scipy.stats import wilcoxon
 
-    d = [round(a - b, 12) for a, b in zip(off, on) if not (math.isnan(a) or math.isnan(b))]
+    d = [round(a - b, 12) for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))]
     if len(d) < 2 or all(x == 0 for x in d):
         return math.nan
     try:
@@ -166,7 +166,8 @@ def summarise_study(rows: list[TrialRow], max_trial_s: float = 12.0) -> dict[str
             agg["max_ae_n"].append(statistics.fmean(r.max_ae_n for r in mine))
             tcts = [r.tct_s for r in mine if r.success and r.tct_s is not None]
             agg["tct_s"].append(statistics.fmean(tcts) if tcts else math.nan)
-            agg["tct_cens_s"].append(statistics.fmean(r.tct_s if r.success else max_trial_s for r in mine))
+            agg["tct_cens_s"].append(statistics.fmean(r.tct_s if r.success else max_trial_s  # type: ignore[misc]  # a success has its TCT
+                                                      for r in mine))
             for lab in ("GENTLE", "FIRM"):
                 sub = [r for r in mine if r.target == lab]
                 agg[f"success_{lab}"].append(sum(r.success for r in sub) / len(sub) if sub else math.nan)
@@ -181,7 +182,7 @@ def summarise_study(rows: list[TrialRow], max_trial_s: float = 12.0) -> dict[str
             "on": m_on,
             "change": (m_on / m_off - 1.0) if m_off else math.nan,
             "p": _wilcoxon_p(off, on),
-            "n_pairs": sum(1 for a, b in zip(off, on) if not (math.isnan(a) or math.isnan(b))),
+            "n_pairs": sum(1 for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))),
         }
     return out
 
@@ -273,7 +274,8 @@ def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--studies", type=int, default=5, help="number of simulated studies (different seeds)")
     ap.add_argument("--participants", type=int, default=10, help="participants per study")
     ap.add_argument("--first-study", type=int, default=0, help="seed index of the first study")

@@ -32,7 +32,7 @@ from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.filters import MovingAverage3
 from pipeline.framework import FrameworkConfig, HapticFramework
 
-__all__ = ["record_samples", "naive_numpy_pipeline", "run_pipeline_bench", "filter_trade_table"]
+__all__ = ["filter_trade_table", "naive_numpy_pipeline", "record_samples", "run_pipeline_bench"]
 
 
 def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
@@ -63,7 +63,8 @@ def _sim_cfg(seed: int) -> Any:
     return SimRigConfig(seed=seed)
 
 
-def naive_numpy_pipeline(cal: Any, cfg: FrameworkConfig) -> Callable[[tuple[float, ...], tuple[float, ...]], np.ndarray]:
+def naive_numpy_pipeline(cal: Any,
+                         cfg: FrameworkConfig) -> Callable[[tuple[float, ...], tuple[float, ...]], np.ndarray]:
     """A line-by-line NumPy transcription of Algorithm 1 with compensation and safety, as a first draft would be."""
     A = np.array(cal.gravity_matrix).reshape(3, 3)
     fb = np.array(cal.force_bias_n)
@@ -71,7 +72,7 @@ def naive_numpy_pipeline(cal: Any, cfg: FrameworkConfig) -> Callable[[tuple[floa
     rhb = np.array(cfg.rot_haptic_base).reshape(3, 3)
     g_base = np.array([0.0, 0.0, -9.80665])
     buf: deque[np.ndarray] = deque(maxlen=cfg.filter_window)
-    state = {"prev": np.zeros(3), "gain": 0.0}
+    state: dict[str, Any] = {"prev": np.zeros(3), "gain": 0.0}
     limit = min(cfg.f_max_n, 3.3)
     slew = cfg.safety.slew_n_per_s * 0.001
 
@@ -235,7 +236,8 @@ def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int
     }
 
 
-def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5, 10, 20, 50, 100)) -> list[dict[str, float]]:
+def filter_trade_table(data: dict[str, Any],
+                       windows: tuple[int, ...] = (1, 2, 5, 10, 20, 50, 100)) -> list[dict[str, float]]:
     """Window length vs output noise RMS, group delay and 2 % step settling time.
 
     Noise is the compensated force magnitude error while the simulated tool
@@ -247,7 +249,7 @@ def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5
     fw0 = HapticFramework(FrameworkConfig(filter_window=1), data["calibration"])
     rest: list[tuple[float, float, float]] = []
     last = None
-    for raw, rot, tf in zip(data["raw"], data["rot"], data["true_force_n"]):
+    for raw, rot, tf in zip(data["raw"], data["rot"], data["true_force_n"], strict=True):
         if rot is not last:
             fw0.set_pose(rot)
             last = rot
@@ -255,7 +257,7 @@ def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5
         if tf == 0.0:
             rest.append((out[0], out[1], out[2]))
     del eng
-    mean = [statistics.fmean(c) for c in zip(*rest)]
+    mean = [statistics.fmean(c) for c in zip(*rest, strict=True)]
     rows = []
     for w in windows:
         ma = MovingAverage3(w)
@@ -277,10 +279,7 @@ def filter_trade_table(data: dict[str, Any], windows: tuple[int, ...] = (1, 2, 5
         settle: int | None = None
         for k in range(2 * w + 10):  # k = samples since the 1 N step
             y = ma.update(1.0, 0.0, 0.0)[0]
-            if abs(y - 1.0) <= 0.02:
-                settle = k if settle is None else settle
-            else:
-                settle = None
+            settle = (k if settle is None else settle) if abs(y - 1.0) <= 0.02 else None
         rows.append(
             {
                 "window": float(w),
@@ -370,8 +369,10 @@ def _loop_lines(r: dict[str, Any]) -> list[str]:
     if r["loop_ticks"] is None:
         return ["1 kHz loop: not run (--loop-seconds 0)"]
     return [
-        f"1 kHz loop in the study-engine process, {r['loop_seconds']:g} s of real time ({r.get('loop_scheduling') or 'normal'}):",
-        f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / {r['loop_period_max_us']:.0f} µs",
+        f"1 kHz loop in the study-engine process, {r['loop_seconds']:g} s of real time "
+        f"({r.get('loop_scheduling') or 'normal'}):",
+        f"  period p50 / p99 / max    {r['loop_period_p50_us']:.0f} / {r['loop_period_p99_us']:.0f} / "
+        f"{r['loop_period_max_us']:.0f} µs",
         f"  p99 |period - 1 ms|       {r['loop_abs_dev_p99_us']:.0f} µs",
         f"  periods over 2 ms         {r['loop_periods_over_2ms']:.0f}   (missed slots {r['loop_missed_slots']:.0f})",
         *_machine_lines(r),
@@ -391,8 +392,8 @@ def _machine_lines(r: dict[str, Any]) -> list[str]:
     b = r.get("bare_loop")
     if b:
         lines.append(
-            f"  empty reference loop, the next {r['loop_seconds']:g} s: p99 |period - 1 ms| {b['abs_dev_p99_us']:.0f} µs, "
-            f"max {b['period_max_us']:.0f} µs, periods over 2 ms {b['periods_over_2ms']:.0f}"
+            f"  empty reference loop, the next {r['loop_seconds']:g} s: p99 |period - 1 ms| {b['abs_dev_p99_us']:.0f} "
+            f"µs, max {b['period_max_us']:.0f} µs, periods over 2 ms {b['periods_over_2ms']:.0f}"
         )
     return lines
 
@@ -401,9 +402,11 @@ def format_pipeline_bench(r: dict[str, Any]) -> str:
     """Human-readable report of :func:`run_pipeline_bench`."""
     lines = [
         "Per-tick pipeline (compensation + filter + 3 rotations + scaling + safety), median µs:",
-        f"  ours                      {r['ours_us_per_tick']:8.3f}   (pose change every tick: {r['ours_pose_every_tick_us']:.3f})",
+        f"  ours                      {r['ours_us_per_tick']:8.3f}   (pose change every tick: "
+        f"{r['ours_pose_every_tick_us']:.3f})",
         f"  NumPy transcription       {r['naive_numpy_us_per_tick']:8.3f}",
-        f"  speed-up                  {r['speedup']:8.1f}x   (outputs agree to {r['ours_vs_naive_max_abs_diff_n']:.2e} N)",
+        f"  speed-up                  {r['speedup']:8.1f}x   "
+        f"(outputs agree to {r['ours_vs_naive_max_abs_diff_n']:.2e} N)",
         f"  (timing-harness overhead of {r['harness_overhead_us']:.3f} µs per tick subtracted from both)",
         "",
         *_loop_lines(r),
@@ -413,6 +416,7 @@ def format_pipeline_bench(r: dict[str, Any]) -> str:
     ]
     for row in r["filter_trade"]:
         lines.append(
-            f"  {row['window']:6.0f}  {row['noise_rms_n']:13.5f}  {row['group_delay_ms']:16.1f}  {row['settling_ms']:16.0f}"
+            f"  {row['window']:6.0f}  {row['noise_rms_n']:13.5f}  {row['group_delay_ms']:16.1f}  "
+            f"{row['settling_ms']:16.0f}"
         )
     return "\n".join(lines)

@@ -35,7 +35,7 @@ from bench.machine import cpu_times, load_average, steal_percent
 __all__ = ["format_power_bench", "run_power_bench"]
 
 
-def _cold(fn):  # type: ignore[no-untyped-def]
+def _cold(fn):
     _PERM_CACHE.clear()
     _exact_p.cache_clear()
     t0 = time.perf_counter()

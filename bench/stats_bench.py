@@ -22,7 +22,7 @@ from analysis.correlation import correlation
 from analysis.hodges_lehmann import hodges_lehmann
 from analysis.stats import holm, paired_wilcoxon
 
-__all__ = ["run_stats_bench", "format_stats_bench"]
+__all__ = ["format_stats_bench", "run_stats_bench"]
 
 
 def _best_s(fn: Callable[[], Any], repeats: int) -> float:
@@ -34,7 +34,8 @@ def _best_s(fn: Callable[[], Any], repeats: int) -> float:
     return best
 
 
-def run_stats_bench(participants: int = 10_000, trials: int = 200_000, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
+def run_stats_bench(participants: int = 10_000, trials: int = 200_000, repeats: int = 3,
+                    seed: int = 0) -> dict[str, Any]:
     """Time the statistics on synthetic paired data; returns seconds per call (best of ``repeats``)."""
     rng = np.random.default_rng(seed)
     # Per-participant means on a 0.1 grid: many ties and about 1 in 4 zero differences.

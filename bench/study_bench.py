@@ -60,7 +60,8 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
         src.backup(dst)
         segments = [read_segment(src, sid, seg) for (sid,) in src.execute("SELECT session_id FROM sessions")
                     for seg, _, _ in segments_of(src, sid)]
-        scales = {(sid, seg): s for sid, seg, s in src.execute("SELECT session_id, segment, scales_json FROM recordings")}
+        recordings = src.execute("SELECT session_id, segment, scales_json FROM recordings")
+        scales = {(sid, seg): s for sid, seg, s in recordings}
         dst.execute("DELETE FROM session_blocks")
         dst.execute("DELETE FROM recordings")
         dst.commit()

@@ -64,7 +64,7 @@ class RlsBias:
     samples, and a growing count at rest means: re-bias offline.
     """
 
-    __slots__ = ("_lam", "_p", "_p0", "_p_max", "_gate2", "_theta", "updates", "rejected")
+    __slots__ = ("_gate2", "_lam", "_p", "_p0", "_p_max", "_theta", "rejected", "updates")
 
     def __init__(
         self,

@@ -106,7 +106,7 @@ def set_timer_slack_ns(slack_ns: int = 1) -> bool:
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
         PR_SET_TIMERSLACK = 29
-        return libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(slack_ns), 0, 0, 0) == 0
+        return bool(libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(slack_ns), 0, 0, 0) == 0)
     except (OSError, AttributeError):
         return False
 

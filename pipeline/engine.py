@@ -16,15 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from pipeline.clock import Clock, MonotonicClock, VirtualClock
 from pipeline.bias_refinement import RlsBias
-from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
+from pipeline.clock import Clock, MonotonicClock, VirtualClock
 from pipeline.framework import FrameworkConfig, HapticFramework
 from pipeline.loop import HapticLoop
 from pipeline.loop_messages import AllowBiasRefinement, SetHaptics
-from pipeline.watchdog import WatchdogConfig
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.ring import RingBuffer
 from pipeline.tick_record import TICK_DTYPE
+from pipeline.watchdog import WatchdogConfig
 
 if TYPE_CHECKING:
     from pipeline.sim.rig import SimRigConfig

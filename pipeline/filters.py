@@ -72,7 +72,7 @@ class MovingAverage3:
     # read and one write per sample, which is what makes it cheap at 1 kHz.
     # The rings are cleared in place and never replaced: HapticFramework's
     # fused per-tick path holds them instead of loading them every tick.
-    __slots__ = ("window", "rejected", "_buf", "_st")
+    __slots__ = ("_buf", "_st", "rejected", "window")
 
     def __init__(self, window: int) -> None:
         self.window = _check_window(window)
@@ -100,7 +100,7 @@ class MovingAverage3:
         """Continue exactly from a :meth:`state` of a filter of the same window (rings refilled in place)."""
         if int(d["window"]) != self.window:
             raise ValueError(f"filter state of window {d['window']!r}: this filter's window is {self.window}")
-        for ring, values in zip(self._buf, d["buf"]):
+        for ring, values in zip(self._buf, d["buf"], strict=True):
             ring[:] = [float(v) for v in values]
         sx, sy, sz, i, n = d["st"]
         self._st = (float(sx), float(sy), float(sz), int(i), int(n))

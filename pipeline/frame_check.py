@@ -50,7 +50,8 @@ MAX_ANGLE_DEG = 30.0
 #: Samples with less force than this are rest, not push, N.
 MIN_PUSH_N = 0.3
 #: The Touch frame's directions as the participant feels them (HDAPI: +x right, +y up, +z toward the user).
-_HAPTIC_WORDS = {"+x": "right", "-x": "left", "+y": "up", "-y": "down", "+z": "toward the user", "-z": "away from the user"}
+_HAPTIC_WORDS = {"+x": "right", "-x": "left", "+y": "up", "-y": "down", "+z": "toward the user",
+                 "-z": "away from the user"}
 
 
 def axis_vector(axis: str) -> Vec3:
@@ -141,8 +142,8 @@ class AxisCheck:
         def num(v: Any) -> float:
             return math.nan if v is None else float(v)
 
-        return cls(str(d["axis"]), tuple(d["expected_base"]), tuple(d["expected_haptic"]),  # type: ignore[arg-type]
-                   tuple(d["measured_base"]), tuple(d["measured_haptic"]),  # type: ignore[arg-type]
+        return cls(str(d["axis"]), tuple(d["expected_base"]), tuple(d["expected_haptic"]),
+                   tuple(d["measured_base"]), tuple(d["measured_haptic"]),
                    num(d["base_angle_deg"]), num(d["haptic_angle_deg"]), float(d["peak_n"]), int(d["samples"]),
                    bool(d["passed"]))
 
@@ -183,7 +184,7 @@ def check_axis(axis: str, base_f: np.ndarray, scaled_f: np.ndarray, rot_haptic_b
     ab = _angle_deg(ub, e) if nb > 0 else math.nan
     ah = _angle_deg(uh, eh) if nh > 0 else math.nan
     passed = ab <= max_angle_deg and ah <= max_angle_deg
-    return AxisCheck(axis, e, eh, tuple(float(v) for v in ub), tuple(float(v) for v in uh),  # type: ignore[arg-type]
+    return AxisCheck(axis, e, eh, tuple(float(v) for v in ub), tuple(float(v) for v in uh),  # type: ignore[arg-type]  # three items each: mypy cannot count a generator
                      ab, ah, peak, n, bool(passed))
 
 
@@ -239,8 +240,8 @@ class FrameCheck:
     def from_dict(cls, d: Mapping[str, Any]) -> FrameCheck:
         """Inverse of :meth:`to_dict`; :class:`ValueError` naming a missing or bad field."""
         try:
-            return cls(tuple(AxisCheck.from_dict(a) for a in d["axes"]), tuple(d["rot_tip_sensor"]),  # type: ignore[arg-type]
-                       tuple(d["rot_haptic_base"]))  # type: ignore[arg-type]
+            return cls(tuple(AxisCheck.from_dict(a) for a in d["axes"]), tuple(d["rot_tip_sensor"]),
+                       tuple(d["rot_haptic_base"]))
         except KeyError as exc:
             raise ValueError(f"frames field {exc.args[0]!r} is missing") from None
         except (TypeError, ValueError) as exc:

@@ -39,7 +39,7 @@ ORTHONORMAL_TOL = 1e-6
 def as_mat3(m: object) -> Mat3:
     """Convert a 3x3 nested sequence, a flat 9-sequence or an ndarray to :data:`Mat3`."""
     try:
-        rows = list(m)  # type: ignore[call-overload]
+        rows = list(m)  # type: ignore[call-overload]  # m is any sequence or array; a TypeError is caught below
     except TypeError as exc:
         raise TypeError(f"expected a 3x3 matrix, got {m!r}") from exc
     if len(rows) == 9:
@@ -53,7 +53,7 @@ def as_mat3(m: object) -> Mat3:
             flat.extend(float(v) for v in r)
     else:
         raise ValueError(f"expected a 3x3 matrix (3 rows or 9 numbers), got {len(rows)} entries: {m!r}")
-    return tuple(flat)  # type: ignore[return-value]
+    return tuple(flat)  # type: ignore[return-value]  # nine items, counted above
 
 
 def mat_vec(r: Mat3, v: Sequence[float]) -> Vec3:

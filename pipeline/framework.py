@@ -40,8 +40,14 @@ _FSUM = math.fsum
 _INF = math.inf
 
 __all__ = [
-    "FrameworkConfig", "HapticFramework", "SNAPSHOT_VERSION", "STEP_FIELDS", "DEFAULT_ROT_HAPTIC_BASE",
-    "DEFAULT_ROT_TIP_SENSOR", "framework_config_from_dict", "framework_config_to_dict",
+    "DEFAULT_ROT_HAPTIC_BASE",
+    "DEFAULT_ROT_TIP_SENSOR",
+    "SNAPSHOT_VERSION",
+    "STEP_FIELDS",
+    "FrameworkConfig",
+    "HapticFramework",
+    "framework_config_from_dict",
+    "framework_config_to_dict",
 ]
 
 #: Touch frame (+x right, +y up, +z toward the user) for an experimenter facing
@@ -118,9 +124,25 @@ class HapticFramework:
     """
 
     __slots__ = (
-        "config", "_cal", "_mounted", "_bias", "_payload", "filter", "safety", "rls",
-        "_off", "_rts", "_rbt", "_rhb", "_fmax", "_fscale", "_hot", "_hot_head", "_hot_tail", "_ft_safe",
+        "_bias",
+        "_cal",
+        "_fmax",
+        "_fscale",
+        "_ft_safe",
+        "_hot",
+        "_hot_head",
+        "_hot_tail",
+        "_mounted",
+        "_off",
+        "_payload",
+        "_rbt",
+        "_rhb",
+        "_rts",
+        "config",
         "device_peak_n",
+        "filter",
+        "rls",
+        "safety",
     )
 
     def __init__(
@@ -148,7 +170,7 @@ class HapticFramework:
         self._rts = config.rot_tip_sensor
         self._rhb = config.rot_haptic_base
         self._rbt: Mat3 = IDENTITY
-        self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6  # type: ignore[assignment]
+        self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6
         # the parts of the per-tick tuple that no pose or bias change touches
         # (the filter rings are cleared in place by MovingAverage3.reset, so
         # holding them is safe)
@@ -273,7 +295,8 @@ class HapticFramework:
             A snapshot of another version, or one that does not read.
         """
         if snap.get("version") != SNAPSHOT_VERSION:
-            raise ValueError(f"framework snapshot version = {snap.get('version')!r}: this code reads {SNAPSHOT_VERSION}")
+            raise ValueError(f"framework snapshot version = {snap.get('version')!r}: "
+                             f"this code reads {SNAPSHOT_VERSION}")
         stored = framework_config_from_dict(snap["config"])
         cfg = stored if config is None else config
         cal = PayloadCalibration.from_dict(snap["calibration"])
@@ -287,7 +310,7 @@ class HapticFramework:
         if device_limit is not None:
             fw.set_device_limit(float(device_limit))  # before the safety state: the state was clamped by it already
         fw.safety.load_state(snap["safety"])
-        fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]
+        fw.set_pose(tuple(float(v) for v in snap["rot_base_tip"]))  # type: ignore[arg-type]  # nine items: mypy cannot count a generator
         return fw
 
     def step(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:
@@ -428,7 +451,7 @@ def framework_config_from_dict(d: dict[str, Any]) -> FrameworkConfig:
     """The configuration :func:`framework_config_to_dict` wrote (validated like any other)."""
     return FrameworkConfig(
         f_max_n=d["f_max_n"], f_scale_n=d["f_scale_n"], filter_window=d["filter_window"],
-        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),  # type: ignore[arg-type]
+        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),
         safety=SafetyConfig(**d["safety"]),
     )
 

@@ -13,23 +13,23 @@ names the device.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any
 
 from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
-from pipeline.framework import FrameworkConfig
 from pipeline.frames import Vec3
+from pipeline.framework import FrameworkConfig
 from pipeline.tomlfields import Fields, read_toml
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 from pipeline.watchdog import WatchdogConfig
 
 __all__ = [
+    "HapticSettings",
     "HardwareConfig",
     "HardwareError",
-    "HapticSettings",
     "JawSettings",
     "RealRig",
     "RobotSettings",
@@ -122,7 +122,8 @@ class HardwareConfig:
     haptic: HapticSettings
     jaw: JawSettings | None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
-    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by default.
+    #: The calibration file (:mod:`pipeline.rig_calibration`); ``calibration.json`` next to the hardware file by
+    #: default.
     calibration_file: str | None = None
     source: str = "hardware"
     teleop: TeleopSettings | None = None
@@ -144,7 +145,8 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         One line naming ``source``, the field, the value and what is allowed.
     """
     f = Fields(source, HardwareError)
-    top = f.table("", d, {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
+    top = f.table("", d,
+                  {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
     f.version(top, "hardware file")
     for required in ("sensor", "robot", "haptic"):
         f.required(top, "", required, f"the [{required}] table is required")
@@ -177,7 +179,8 @@ def _sensor(f: Fields, v: Any) -> SensorSettings:
     cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
     if (cpf is None) != (cpt is None):
         missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
-        raise f.fail(missing, None, "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
+        raise f.fail(missing, None,
+                     "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
     from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
 
     if cpf is not None:  # counts per *unit*: a unit taken by default would scale every force by a guess
@@ -212,12 +215,11 @@ def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
     if not (type(freq) is int and freq == -1):
         freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
     pose_limit_s = WatchdogConfig().pose_max_age_s
-    if type(freq) is not int or freq != -1:
-        if 1.0 / freq >= pose_limit_s:
-            raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
-                         f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
-                         f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
-                         f"is {1e3 / freq:g} ms old when the next arrives")
+    if (type(freq) is not int or freq != -1) and 1.0 / freq >= pose_limit_s:
+        raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
+                     f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
+                     f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
+                     f"is {1e3 / freq:g} ms old when the next arrives")
     mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
     if mode == "teleop" and not has_teleop:
         raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
@@ -332,7 +334,8 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
         deadman_button=deadman, clutch_button=clutch,
         stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
         pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
-        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0, hi=0.2),
+        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0,
+                                      hi=0.2),
         lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.1), lo=0.03, hi=0.2, lo_open=False,
                              note="s (servoL's look-ahead time)"),
         gain=f.number("teleop.gain", t.get("gain", 300.0), lo=100.0, hi=2000.0, lo_open=False,
@@ -357,7 +360,8 @@ class RealRig:
     """The devices of the real rig, satisfying :class:`pipeline.rig.Rig`."""
 
     def __init__(
-        self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None, teleop: Any = None
+        self, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None,
+        teleop: Any = None
     ) -> None:
         self.sensor = sensor
         self.robot = robot
@@ -369,7 +373,8 @@ class RealRig:
         self.on_buttons: Callable[[int, int], None] | None = None
 
     def advance(self, now_ns: int) -> None:
-        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread sends).
+        """The devices run on their own; with teleoperation, one call of the controller (no I/O: the adapter's thread
+        sends).
 
         The stylus buttons go to the jaw's controller (no I/O either: it queues).
         """
@@ -405,7 +410,7 @@ class RealRig:
                 continue
             try:
                 dev.close()
-            except Exception as exc:  # noqa: BLE001 - close everything, report after
+            except Exception as exc:  # close everything, report after
                 errors.append(f"{type(dev).__name__}: {exc}")
         if errors:
             raise DeviceError("closing the rig: " + "; ".join(errors))
@@ -433,13 +438,14 @@ def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = 
     from pipeline.backends.ur import UrRtdeRobot
 
     corr = (0.0, 0.0, 0.0) if tip_in_flange_m is None else tuple(
-        t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m))
+        t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m, strict=True))
     return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s,
-                       tcp_correction_m=corr)  # type: ignore[arg-type]
+                       tcp_correction_m=corr)  # type: ignore[arg-type]  # three items: mypy cannot count a generator
 
 
 def open_servo(
-    robot: RobotSettings, teleop: TeleopSettings, clock: Clock, control_factory: Callable[[str, float], Any] | None = None
+    robot: RobotSettings, teleop: TeleopSettings, clock: Clock,
+    control_factory: Callable[[str, float], Any] | None = None
 ) -> Any:
     """Take control of the UR for teleoperation (uploads ur_rtde's control script).
 
@@ -466,8 +472,10 @@ def teleop_config(config: HardwareConfig) -> Any:
     return TeleopConfig(
         workspace_min_m=t.workspace_min_m, workspace_max_m=t.workspace_max_m, max_speed_m_s=t.max_speed_m_s,
         motion_scale=t.motion_scale, period_s=1.0 / freq if freq > 0 else 0.008,
-        rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button, clutch_button=t.clutch_button,
-        stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s, max_tracking_error_m=t.max_tracking_error_m,
+        rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button,
+        clutch_button=t.clutch_button,
+        stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s,
+        max_tracking_error_m=t.max_tracking_error_m,
     )
 
 
@@ -537,7 +545,8 @@ def build_real_rig(
         tcfg = teleop_config(config)
         t_settings = config.teleop
         assert t_settings is not None
-        steps.append(("robot control (teleoperation)", lambda: open_servo(config.robot, t_settings, clk, control_factory)))
+        steps.append(("robot control (teleoperation)",
+                      lambda: open_servo(config.robot, t_settings, clk, control_factory)))
     for what, opener in steps:
         if on_open is not None:
             on_open(what)
@@ -547,7 +556,7 @@ def build_real_rig(
             for dev in reversed(opened):
                 try:
                     dev.close()
-                except Exception:  # noqa: BLE001 - already failing; the first error is the one to show
+                except Exception:  # already failing; the first error is the one to show
                     pass
             raise DeviceError(f"{what}: {exc}") from None
     servo = opened.pop() if teleop else None

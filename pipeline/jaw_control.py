@@ -28,8 +28,16 @@ import threading
 import time
 from typing import Any, NamedTuple
 
-__all__ = ["CONT_PERIOD_S", "CONT_STEP_US", "JAW_ACTIONS", "JawController", "JawEvent", "LONG_PRESS_S", "STEP_US",
-           "StylusButtons"]
+__all__ = [
+    "CONT_PERIOD_S",
+    "CONT_STEP_US",
+    "JAW_ACTIONS",
+    "LONG_PRESS_S",
+    "STEP_US",
+    "JawController",
+    "JawEvent",
+    "StylusButtons",
+]
 
 #: One step of a short press or a step control, µs of pulse width (50 µs/mm: 1 mm of rod travel).
 STEP_US = 50
@@ -162,7 +170,7 @@ class JawController:
     def _call(self, fn: Any, *args: Any) -> str:
         try:
             fn(*args)
-        except Exception as exc:  # noqa: BLE001 - JawFault / a lost port: reported, the jaw stays where it is
+        except Exception as exc:  # JawFault / a lost port: reported, the jaw stays where it is
             return f"refused: {exc}"
         return ""
 
@@ -200,8 +208,9 @@ class JawController:
             return
         pos, frac, _, _ = self._status()
         secs = (self.clock_ns() - mv[1]) * 1e-9
-        self._report("stylus", f"{mv[0]} continuously: stopped ({why}) at {pos} µs ({frac:.0%} open) after {secs:.2f} s, "
-                               f"{abs(pos - mv[2])} µs moved")
+        self._report("stylus",
+                     f"{mv[0]} continuously: stopped ({why}) at {pos} µs ({frac:.0%} open) after {secs:.2f} s, "
+                     f"{abs(pos - mv[2])} µs moved")
 
     # -- lifetime ----------------------------------------------------------------------------------
     def start(self) -> None:

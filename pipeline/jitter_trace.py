@@ -325,7 +325,8 @@ class LateTickTracer:
             "cpu-busy": loop_wait,
             "loop-work": loop_run - self._run_norm - gc_loop_ns,  # a pass in the loop thread counts as "gc"
             f"gil:{busiest}": min(blocked, others_cpu.get(busiest, 0.0) * 1000.0) if busiest else 0,
-            f"gil-holder-preempted:{waitiest}": min(blocked, others_wait.get(waitiest, 0.0) * 1000.0) if waitiest else 0,
+            f"gil-holder-preempted:{waitiest}": min(blocked,
+                                                    others_wait.get(waitiest, 0.0) * 1000.0) if waitiest else 0,
         }
         cause, score = max(scores.items(), key=lambda kv: kv[1])
         if score < 0.3 * excess:
@@ -355,14 +356,15 @@ class LateTickTracer:
             self.culprits[where] += 1
         if len(self.late) < self.keep:
             self.late.append(LatePeriod(
-                period / 1000.0, late / 1000.0, cause, where, self._tick_ns / 1000.0, blocked / 1000.0, loop_wait / 1000.0,
+                period / 1000.0, late / 1000.0, cause, where, self._tick_ns / 1000.0, blocked / 1000.0,
+                loop_wait / 1000.0,
                 gc_ns / 1000.0, others_cpu, others_wait,
             ))
 
 
 def _frames(frame: Any, depth: int = 3) -> str:
     """``fn (file:line) < caller (file:line) ...`` innermost first, paths shortened to the package."""
-    out = []
+    out: list[str] = []
     f = frame
     while f is not None and len(out) < depth:
         code = f.f_code

@@ -45,20 +45,40 @@ import math
 import threading
 from collections import deque
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from pipeline.clock import Clock, prepare_realtime_thread
 from pipeline.devices import Fault, HapticState, PoseSample, WrenchSample
 from pipeline.framework import HapticFramework
 from pipeline.loop_messages import (
-    RECORD_FIELDS, AllowBiasRefinement, Command, ControllerDetached, LatchFault, LoopEvent, Mark, OperatorStop,
-    ResetFaults, SetCalibration, SetHaptics, StartRecording, StopRecording,
+    RECORD_FIELDS,
+    AllowBiasRefinement,
+    Command,
+    ControllerDetached,
+    LatchFault,
+    LoopEvent,
+    Mark,
+    OperatorStop,
+    ResetFaults,
+    SetCalibration,
+    SetHaptics,
+    StartRecording,
+    StopRecording,
 )
 from pipeline.loop_stats import LoopStats
 from pipeline.rig import Rig
 from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S
 from pipeline.watchdog import (
-    WatchdogConfig, derating_detail, derating_ended_detail, fault_detail, output_restarted_detail, stall_detail,
+    WatchdogConfig,
+    derating_detail,
+    derating_ended_detail,
+    fault_detail,
+    output_restarted_detail,
+    stall_detail,
 )
+
+if TYPE_CHECKING:
+    from pipeline.ring import RingBuffer
 
 # The commands, events, record columns, statistics and watchdog limits are defined in
 # pipeline.loop_messages, pipeline.loop_stats and pipeline.watchdog; they are named here
@@ -98,7 +118,7 @@ class HapticLoop:
         rig: Rig,
         framework: HapticFramework,
         clock: Clock,
-        ring: object | None = None,
+        ring: RingBuffer | None = None,
         *,
         period_ns: int = 1_000_000,
         watchdog: WatchdogConfig | None = None,
@@ -165,7 +185,7 @@ class HapticLoop:
     def last_record(self) -> dict[str, float | int] | None:
         """The newest record as a dict (for tests and status displays)."""
         r = self._last_record
-        return None if r is None else dict(zip(RECORD_FIELDS, r))
+        return None if r is None else dict(zip(RECORD_FIELDS, r, strict=True))
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self) -> None:
@@ -246,7 +266,7 @@ class HapticLoop:
         )
         self._last_record = rec
         if self.ring is not None:
-            self.ring.write(rec)  # type: ignore[attr-defined]
+            self.ring.write(rec)
         self.tick_count += 1
 
     def _start_of_tick(self, now: int, period: int) -> None:
@@ -302,7 +322,8 @@ class HapticLoop:
         return latched
 
     def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
-        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets through.
+        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
+        through.
 
         Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
         """
@@ -358,9 +379,8 @@ class HapticLoop:
             # Only conditions that are gone can be cleared; the operator
             # stop and device errors are cleared by the reset itself.
             persisting = self.active_faults & ~(Fault.OPERATOR_STOP | Fault.HAPTIC_DEVICE)
-            if before & Fault.HAPTIC_DEVICE:
-                if not self.rig.haptic.rearm():
-                    persisting |= Fault.HAPTIC_DEVICE
+            if before & Fault.HAPTIC_DEVICE and not self.rig.haptic.rearm():
+                persisting |= Fault.HAPTIC_DEVICE
             self.faults = int(persisting)
             self._gone_reported &= persisting
             if before and not persisting:
@@ -372,7 +392,8 @@ class HapticLoop:
             self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
         elif isinstance(cmd, OperatorStop):
             self._latch(Fault.OPERATOR_STOP, now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, "OPERATOR_STOP: the experimenter stopped the force"))
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
+                                 "OPERATOR_STOP: the experimenter stopped the force"))
         elif isinstance(cmd, ControllerDetached):
             self._latch(Fault.ENGINE_DETACHED, now)
             self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
@@ -387,9 +408,9 @@ class HapticLoop:
                 self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
-            self.framework.set_calibration(cmd.calibration)  # type: ignore[arg-type]
+            self.framework.set_calibration(cmd.calibration)
             if self.recording:
-                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))  # type: ignore[attr-defined]
+                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))
         elif isinstance(cmd, StartRecording):
             self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
         elif isinstance(cmd, StopRecording):
@@ -432,7 +453,7 @@ class HapticLoop:
         self._emit(ev)
         try:
             self.rig.haptic.command_force(0.0, 0.0, 0.0)
-        except Exception as exc:  # noqa: BLE001 - the device's own watchdog zeroes it anyway; say so
+        except Exception as exc:  # the device's own watchdog zeroes it anyway; say so
             self._emit(LoopEvent(t, "fault", ev.faults, f"the haptic device refused the zero command ({exc!r}); "
                                  "its command watchdog drops the force"))
         return ev
@@ -449,8 +470,9 @@ class HapticLoop:
             return
         try:
             hook(Fault(self.faults))
-        except Exception as exc:  # noqa: BLE001 - the loop must keep ramping the force down; report it
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults, f"the rig could not act on the faults: {exc!r}"))
+        except Exception as exc:  # the loop must keep ramping the force down; report it
+            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
+                                 f"the rig could not act on the faults: {exc!r}"))
 
     def _emit(self, ev: LoopEvent) -> None:
         self.events.append(ev)
@@ -534,7 +556,7 @@ class HapticLoop:
                 # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
                 try:
                     self._rig_stop_motion("haptic loop stopped")
-                except Exception as exc:  # noqa: BLE001 - still ramp the force down; report it
+                except Exception as exc:  # still ramp the force down; report it
                     self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
                                          f"the rig could not stop the robot: {exc!r}"))
             # ramp ticks continue the period grid: the next slot after the last tick, not one later
@@ -562,7 +584,7 @@ class HapticLoop:
             self.scheduling = prepare_realtime_thread()
             try:
                 self.run(self._stop)
-            except BaseException as exc:  # noqa: BLE001 - kept for the supervisor, which reports and stores it
+            except BaseException as exc:  # kept for the supervisor, which reports and stores it
                 first = exc.__context__  # the exception the ramp-down was handling when this one struck
                 why = repr(exc)
                 self.crash = why + (f" while handling {first!r}" if first is not None and repr(first) != why else "")

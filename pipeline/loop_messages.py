@@ -10,11 +10,15 @@ writes at every tick.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from pipeline import tick_record
 
+if TYPE_CHECKING:
+    from pipeline.payload_compensator import PayloadCalibration
+
 __all__ = [
+    "RECORD_FIELDS",
     "AllowBiasRefinement",
     "Command",
     "ControllerDetached",
@@ -22,7 +26,6 @@ __all__ = [
     "LoopEvent",
     "Mark",
     "OperatorStop",
-    "RECORD_FIELDS",
     "ResetFaults",
     "SetCalibration",
     "SetHaptics",
@@ -85,7 +88,7 @@ class AllowBiasRefinement:
 class SetCalibration:
     """Install a new payload calibration (a :class:`pipeline.payload_compensator.PayloadCalibration`)."""
 
-    calibration: object
+    calibration: PayloadCalibration
 
 
 @dataclass(frozen=True, slots=True)

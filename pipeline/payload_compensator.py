@@ -63,7 +63,7 @@ GRAVITY_BASE: Vec3 = (0.0, 0.0, -9.80665)
 #: The payload models a calibration can hold (science.md §1.1 and §1.3).
 PAYLOAD_MODELS = ("affine", "rigid")
 _ZERO3: Vec3 = (0.0, 0.0, 0.0)
-_ZERO_MAT: Mat3 = (0.0,) * 9  # type: ignore[assignment]
+_ZERO_MAT: Mat3 = (0.0,) * 9
 _DICT_VERSION = 1
 
 
@@ -76,7 +76,7 @@ def finite_tuple(values: object, n: int, name: str) -> tuple[float, ...]:
         ``<name> = <values>: expected <n> finite numbers``.
     """
     try:
-        out = tuple(float(v) for v in values)  # type: ignore[attr-defined]
+        out = tuple(float(v) for v in values)  # type: ignore[attr-defined]  # any iterable; a TypeError is caught below
     except (TypeError, ValueError):
         raise ValueError(f"{name} = {values!r}: expected {n} finite numbers") from None
     if len(out) != n or not all(math.isfinite(v) for v in out):
@@ -276,7 +276,7 @@ class PayloadCalibration:
         The residual fields still describe the original offline fit.
         """
         fb, tb = tuple(force_bias_n), tuple(torque_bias_nm)
-        return replace(self, force_bias_n=fb, torque_bias_nm=tb)  # type: ignore[arg-type]
+        return replace(self, force_bias_n=fb, torque_bias_nm=tb)  # type: ignore[arg-type]  # three items each: mypy cannot count them
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe dictionary (lists and finite floats), inverse of :meth:`from_dict`."""
@@ -356,7 +356,7 @@ class PayloadCalibration:
             rms_force_residual_n=0.0,
             rms_torque_residual_nm=0.0,
             mount_angle_deg=0.0,
-            gravity_base=tuple(gravity_base),  # type: ignore[arg-type]
+            gravity_base=tuple(gravity_base),  # type: ignore[arg-type]  # a Vec3: mypy cannot count tuple()
         )
 
 
@@ -391,16 +391,16 @@ class MountedPayload:
         Sensor mount ᵀ_S R, row-major.
     """
 
-    __slots__ = ("_k", "_com", "_gravity_base", "_along_z", "_bias")
+    __slots__ = ("_along_z", "_bias", "_com", "_gravity_base", "_k")
 
     def __init__(self, calibration: PayloadCalibration, rot_tip_sensor: Mat3) -> None:
         k = mat_mul(calibration.gravity_matrix, transpose(rot_tip_sensor))
         gx, gy, gz = calibration.gravity_base
         self._along_z = gx == 0.0 and gy == 0.0
-        self._k: Mat3 = tuple(v * gz for v in k) if self._along_z else k  # type: ignore[assignment]
+        self._k: Mat3 = tuple(v * gz for v in k) if self._along_z else k  # type: ignore[assignment]  # nine items: mypy cannot count a generator
         self._gravity_base = calibration.gravity_base
         self._com = calibration.com_m
-        self._bias: Wrench = (*calibration.force_bias_n, *calibration.torque_bias_nm)  # type: ignore[assignment]
+        self._bias: Wrench = (*calibration.force_bias_n, *calibration.torque_bias_nm)
 
     def payload_wrench(self, rot_base_tip: Mat3) -> Wrench:
         """Weight of the payload as the sensor reads it at tip orientation ``rot_base_tip``, without the bias.

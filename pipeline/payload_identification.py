@@ -196,7 +196,7 @@ def _checked_inputs(
     """The poses as a non-empty list and gravity as a :data:`Vec3`, or the error naming what is wrong."""
     if model not in ("auto", *PAYLOAD_MODELS):
         raise ValueError(f"model = {model!r}: must be 'auto', 'affine' or 'rigid'")
-    gb: Vec3 = finite_tuple(gravity_base, 3, "gravity_base")  # type: ignore[assignment]
+    gb: Vec3 = finite_tuple(gravity_base, 3, "gravity_base")  # type: ignore[assignment]  # finite_tuple checked it has 3 items
     g_norm = math.hypot(*gb)
     if not g_norm > 0:
         raise ValueError(f"gravity_base = {gravity_base!r}: must be a non-zero vector")
@@ -312,9 +312,9 @@ def _with_residuals(fit: _Fit, rank: int, gb: Vec3, poses: Sequence[CalibrationP
     """The calibration of ``fit`` with its per-pose residuals and their RMS."""
     cal = PayloadCalibration(
         mass_kg=fit.mass_kg,
-        com_m=tuple(fit.com_m),  # type: ignore[arg-type]
-        force_bias_n=tuple(fit.force_bias_n),  # type: ignore[arg-type]
-        torque_bias_nm=tuple(fit.torque_bias_nm),  # type: ignore[arg-type]
+        com_m=tuple(fit.com_m),
+        force_bias_n=tuple(fit.force_bias_n),
+        torque_bias_nm=tuple(fit.torque_bias_nm),
         gravity_matrix=fit.gravity_matrix,
         model=fit.model,
         rank=rank,

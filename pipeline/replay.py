@@ -22,12 +22,13 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
+from pipeline.payload_compensator import PayloadCalibration
 
 __all__ = ["REPLAY_LOG_KINDS", "ReplayInputs", "ReplayOutputs", "replay"]
 
@@ -60,7 +61,7 @@ class ReplayInputs:
     raw_wrench: npt.NDArray[np.float64]
     haptic_on: npt.NDArray[np.bool_]
     faults: npt.NDArray[np.int64]
-    snapshot: dict
+    snapshot: dict[str, Any]
     events: Sequence[tuple[int, str, object]]
 
 
@@ -143,15 +144,15 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
         if evs is not None:
             for kind, payload in evs:
                 if kind == "pose":
-                    fw.set_pose(tuple(payload[0]))  # type: ignore[index]
+                    fw.set_pose(tuple(payload[0]))  # type: ignore[index]  # a log payload is typed object; its kind says what it holds
                 elif kind == "refine":
                     refine = bool(payload)
                 elif kind == "reset":
                     fw.reset()
                 elif kind == "calibration":
-                    fw.set_calibration(PayloadCalibration.from_dict(payload))  # type: ignore[arg-type]
+                    fw.set_calibration(PayloadCalibration.from_dict(payload))  # type: ignore[arg-type]  # as above
                 elif kind == "device_limit":
-                    fw.set_device_limit(float(payload))  # type: ignore[arg-type]
+                    fw.set_device_limit(float(payload))  # type: ignore[arg-type]  # as above
                 elif kind == "zero":
                     safety.force_zero()
         fx, fy, fz, tx, ty, tz = raw[k]

@@ -30,9 +30,15 @@ class Rig(Protocol):
     Neither runs in the fault-free steady state, so the tick costs nothing extra.
     """
 
-    sensor: ForceSensor
-    robot: Robot
-    haptic: HapticDevice
+    # read-only members: a rig may hold a more specific device (the simulated rig's SimTouch is a HapticDevice)
+    @property
+    def sensor(self) -> ForceSensor: ...
+
+    @property
+    def robot(self) -> Robot: ...
+
+    @property
+    def haptic(self) -> HapticDevice: ...
 
     def advance(self, now_ns: int) -> None:
         """Bring the rig to time ``now_ns`` (simulated rig: step the physics)."""

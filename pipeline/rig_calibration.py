@@ -34,16 +34,16 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.frame_check import FrameCheck
 from pipeline.frames import Mat3
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.tcp import TipCalibration
 
 __all__ = [
     "CALIBRATION_FORMAT",
+    "STEPS",
     "CalibrationFileError",
     "RigCalibrationFile",
-    "STEPS",
     "ToolCalibration",
     "now_iso",
 ]
@@ -66,7 +66,7 @@ class CalibrationFileError(ValueError):
 
 def now_iso() -> str:
     """The current time, UTC, ISO 8601 to the second (the date stored with each step)."""
-    return _dt.datetime.now(_dt.timezone.utc).replace(microsecond=0).isoformat()
+    return _dt.datetime.now(_dt.UTC).replace(microsecond=0).isoformat()
 
 
 @dataclass(frozen=True)
@@ -100,7 +100,8 @@ class ToolCalibration:
             why = f"no frame and sign check on record for tool {t!r}"
             step = "frames"
         elif not self.frames.matches(rot_tip_sensor, rot_haptic_base):
-            why = f"the frame check on record for tool {t!r} was made with other [frames] rotations than the ones in use"
+            why = (f"the frame check on record for tool {t!r} was made with other [frames] rotations than the ones "
+                   "in use")
             step = "frames"
         elif not self.frames.passed:
             why = f"the frame check on record for tool {t!r} failed ({self.frames.summary().split(': ', 1)[1]})"

@@ -32,10 +32,10 @@ breaks the 1 kHz loop (science.md §7).
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Sequence
 import mmap
 import os
+import struct
+from collections.abc import Sequence
 from multiprocessing import shared_memory
 
 import numpy as np
@@ -52,7 +52,7 @@ _NAMES_OFF = 32
 class RingReadResult:
     """Rows copied out of the ring: ``rows`` (structured array), next ``cursor``, and ``lost`` rows."""
 
-    __slots__ = ("rows", "cursor", "lost")
+    __slots__ = ("cursor", "lost", "rows")
 
     def __init__(self, rows: npt.NDArray[np.void], cursor: int, lost: int) -> None:
         self.rows = rows
@@ -71,12 +71,12 @@ def _header_fields(fields: Sequence[str] | np.dtype) -> tuple[bytes, tuple[str, 
     """
     if isinstance(fields, np.dtype):
         names = tuple(fields.names or ())
-        types = [fields.fields[n][0].str for n in names]  # type: ignore[index]
+        types = [fields.fields[n][0].str for n in names]  # type: ignore[index]  # fields is None only for an unstructured dtype, which has no names
         if any(t not in ("<i8", "<f8") for t in types) or fields.itemsize != 8 * len(names):
             raise ValueError("ring fields must be packed int64 or float64 (little-endian)")
     else:
         names, types = tuple(fields), ["<f8"] * len(fields)
-    header = ",".join(f"{n}:{t[1:]}" for n, t in zip(names, types)).encode("ascii")
+    header = ",".join(f"{n}:{t[1:]}" for n, t in zip(names, types, strict=True)).encode("ascii")
     if (not names or any(not n or "," in n or ":" in n for n in names) or len(set(names)) != len(names)
             or len(header) > _HEADER - _NAMES_OFF):
         raise ValueError("field names must be non-empty, unique, free of ',' and ':' and fit in 4064 bytes")
@@ -140,6 +140,7 @@ class RingBuffer:
         shm: shared_memory.SharedMemory | None
         if shared:
             shm = shared_memory.SharedMemory(create=True, size=size)
+            assert shm.buf is not None  # None only once closed
             buf = shm.buf
         else:
             shm = None
@@ -189,7 +190,7 @@ class RingBuffer:
             from multiprocessing import resource_tracker
 
             resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
-        except Exception:  # noqa: BLE001 - the tracker is only told to keep quiet; the segment is gone already
+        except Exception:  # the tracker is only told to keep quiet; the segment is gone already
             pass
         return True
 
@@ -270,8 +271,8 @@ class RingBuffer:
     def close(self) -> None:
         """Detach; the creator also frees the shared segment."""
         self._rows = None  # type: ignore[assignment]  # drop the numpy views before closing the buffer
-        self._count_cell = None  # type: ignore[assignment]
-        buf, self._buf = self._buf, None  # type: ignore[assignment]
+        self._count_cell = None  # type: ignore[assignment]  # released: None only once closed
+        buf, self._buf = self._buf, None  # type: ignore[assignment]  # as above
         if self._mmap is not None:
             buf.release()
             self._mmap.close()

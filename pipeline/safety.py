@@ -78,7 +78,8 @@ class SafetyGovernor:
         ``min(config.f_max_n, device_peak_n)``.
     """
 
-    __slots__ = ("config", "limit_n", "static_limit_n", "device_limit_n", "_lim_inner", "_lim2", "_sx", "_sy", "_sz", "gain", "_up", "_down", "_slew", "_max_dt")
+    __slots__ = ("_down", "_lim2", "_lim_inner", "_max_dt", "_slew", "_sx", "_sy", "_sz", "_up", "config",
+                 "device_limit_n", "gain", "limit_n", "static_limit_n")
 
     def __init__(self, config: SafetyConfig, device_peak_n: float) -> None:
         if not (isinstance(device_peak_n, (int, float)) and 1e-6 <= device_peak_n <= 1e3):
@@ -105,7 +106,8 @@ class SafetyGovernor:
         self._lim2 = self._lim_inner * self._lim_inner
 
     def set_device_limit(self, device_limit_n: float) -> None:
-        """The device's current force limit (its thermal derating), N: the clamp becomes the lower of it and the static one.
+        """The device's current force limit (its thermal derating), N: the clamp becomes the lower of it and the static
+        one.
 
         A non-finite or non-positive limit leaves the static clamp (a device that does not say); the
         slew-limited state is clamped at once, so the next output is already within the new limit.

@@ -159,7 +159,8 @@ def _to_floats(fx: object, fy: object, fz: object) -> tuple[float, float, float]
 
 def _saturate_huge(fx: object, fy: object, fz: object, f_max_n: float) -> Vec3:
     """Direction of a force whose components exceed DBL_MAX, at magnitude f_max (tanh(∞) = 1)."""
-    comps = [Fraction(c) for c in (fx, fy, fz)]  # type: ignore[arg-type]
+    # any Real that _to_floats let through (a huge int, a Decimal, ...); typeshed has no Fraction(Real) overload
+    comps = [Fraction(c) for c in (fx, fy, fz)]  # type: ignore[call-overload]  # see above
     big = max(abs(c) for c in comps)
     ux, uy, uz = (float(c / big) for c in comps)  # each in [-1, 1], exact to rounding
     n = _HYPOT(ux, uy, uz)

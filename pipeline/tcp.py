@@ -218,8 +218,8 @@ def identify_tip(poses: Sequence[PivotPose], *, min_spread_deg: float = MIN_SPRE
             f"{dist[k] * 1e3:.2f} mm): the tip moved in the divot or the robot moved while recording; re-seat the tip "
             "and record the orientations again")
     return TipCalibration(
-        tuple(float(v) for v in tip), tuple(float(v) for v in pivot), rms,  # type: ignore[arg-type]
-        tuple((lab, float(d)) for lab, d in zip(labels, dist)), spread,
+        tuple(float(v) for v in tip), tuple(float(v) for v in pivot), rms,  # type: ignore[arg-type]  # three items each: mypy cannot count a generator
+        tuple((lab, float(d)) for lab, d in zip(labels, dist, strict=True)), spread,
     )
 
 

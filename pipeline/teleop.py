@@ -68,6 +68,8 @@ from pipeline.frames import Mat3, Vec3, check_rotation, mat_vec, transpose
 
 __all__ = [
     "STOP",
+    "TOUCH_BUTTON_DARK_GREY",
+    "TOUCH_BUTTON_LIGHT_GREY",
     "ServoTarget",
     "Stop",
     "TeleopCommand",
@@ -75,8 +77,6 @@ __all__ = [
     "TeleopController",
     "TeleopDriver",
     "TeleopState",
-    "TOUCH_BUTTON_DARK_GREY",
-    "TOUCH_BUTTON_LIGHT_GREY",
 ]
 
 #: ``HD_DEVICE_BUTTON_1``: the Touch's front (dark-grey) stylus button.
@@ -171,7 +171,8 @@ class TeleopConfig:
             raise ValueError(f"teleop workspace {lo!r}..{hi!r}: must be two finite 3-vectors in metres")
         for i, axis in enumerate("xyz"):
             if not lo[i] < hi[i]:
-                raise ValueError(f"teleop.workspace_min_m[{axis}] = {lo[i]!r} must be below workspace_max_m[{axis}] = {hi[i]!r}")
+                raise ValueError(f"teleop.workspace_min_m[{axis}] = {lo[i]!r} must be below workspace_max_m[{axis}] = "
+                                 f"{hi[i]!r}")
         for name in ("max_speed_m_s", "motion_scale", "period_s", "stylus_max_age_s", "pose_max_age_s",
                      "stylus_range_m", "stylus_max_speed_m_s", "max_tracking_error_m", "settle_after_stop_s"):
             v = getattr(self, name)
@@ -246,7 +247,8 @@ class TeleopController:
         if not _finite3(p):
             return f"stylus position {p!r} is not finite"
         if (now_ns - stylus.t_ns) * 1e-9 > cfg.stylus_max_age_s:
-            return f"stylus data stale ({(now_ns - stylus.t_ns) * 1e-6:.1f} ms old, limit {cfg.stylus_max_age_s * 1e3:g} ms)"
+            return (f"stylus data stale ({(now_ns - stylus.t_ns) * 1e-6:.1f} ms old, "
+                    f"limit {cfg.stylus_max_age_s * 1e3:g} ms)")
         r = cfg.stylus_range_m
         if not (-r <= p[0] <= r and -r <= p[1] <= r and -r <= p[2] <= r):
             return f"stylus position {p!r} m outside ±{r:g} m: implausible"
@@ -261,11 +263,12 @@ class TeleopController:
             jump = math.dist(p, prev)
             # 1 mm slack for encoder quantisation on very short intervals
             if jump > cfg.stylus_max_speed_m_s * dt + 1e-3:
-                return f"stylus jumped {jump * 1e3:.1f} mm in {dt * 1e3:.1f} ms (faster than {cfg.stylus_max_speed_m_s:g} m/s)"
+                return (f"stylus jumped {jump * 1e3:.1f} mm in {dt * 1e3:.1f} ms "
+                        f"(faster than {cfg.stylus_max_speed_m_s:g} m/s)")
         last = self.last_target_m
         if last is not None and math.dist(q, last) > cfg.max_tracking_error_m:
-            return (f"TCP {math.dist(q, last) * 1e3:.1f} mm from its target (limit {cfg.max_tracking_error_m * 1e3:g} mm): "
-                    "collision or protective stop?")
+            return (f"TCP {math.dist(q, last) * 1e3:.1f} mm from its target (limit {cfg.max_tracking_error_m * 1e3:g} "
+                    "mm): collision or protective stop?")
         return ""
 
     def _servo(self, now_ns: int, target_m: Vec3) -> ServoTarget:
@@ -294,7 +297,7 @@ class TeleopController:
             step = (step[0] * k, step[1] * k, step[2] * k)
         # the last target and the wanted point are both in the (convex) box, so is every point between;
         # the final clamp only absorbs rounding
-        return tuple(min(max(last[i] + step[i], lo[i]), hi[i]) for i in range(3))  # type: ignore[return-value]
+        return tuple(min(max(last[i] + step[i], lo[i]), hi[i]) for i in range(3))  # type: ignore[return-value]  # three items: mypy cannot count a generator
 
     # -- the step -----------------------------------------------------------------------------
     def halt(self, reason: str) -> Stop:
@@ -362,8 +365,9 @@ class TeleopController:
             p = stylus.position_m
             if self.state is TeleopState.IDLE:
                 if not cfg.contains(pose.position_m):
-                    return self._stop(TeleopState.FAULT, f"TCP {pose.position_m!r} m is outside the teleoperation workspace; "
-                                      "jog it inside before engaging")
+                    return self._stop(TeleopState.FAULT,
+                                      f"TCP {pose.position_m!r} m is outside the teleoperation workspace; jog it "
+                                      "inside before engaging")
                 if self._stop_ns is not None and pose.t_ns < self._stop_ns + self._settle_ns:
                     return Stop("waiting for the arm to come to rest")
                 self._anchor_stylus_m = p

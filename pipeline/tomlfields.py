@@ -32,7 +32,7 @@ from typing import Any, TypeVar
 
 from pipeline.frames import Mat3, Vec3, check_rotation
 
-__all__ = ["Fields", "SQLITE_INTEGER_MAX", "host_problem", "parse_toml", "read_toml", "show"]
+__all__ = ["SQLITE_INTEGER_MAX", "Fields", "host_problem", "parse_toml", "read_toml", "show"]
 
 #: The largest SQLite INTEGER (signed 64-bit): a larger Python int cannot be stored.
 SQLITE_INTEGER_MAX = 2**63 - 1
@@ -146,7 +146,7 @@ class Fields:
         The exception class to raise (a ``ValueError`` subclass).
     """
 
-    __slots__ = ("source", "error")
+    __slots__ = ("error", "source")
 
     def __init__(self, source: str, error: type[ValueError]) -> None:
         self.source = source
@@ -174,7 +174,8 @@ class Fields:
         return self.table(name, top.get(name, {}), allowed_keys)
 
     def required(self, t: dict[str, Any], field: str, key: str, allowed: str) -> None:
-        """Refuse a table ``t`` (at ``field``; "" for the top level) without ``key``: ``<field>.<key> = None: <allowed>``."""
+        """Refuse a table ``t`` (at ``field``; "" for the top level) without ``key``: ``<field>.<key> = None:
+        <allowed>``."""
         if key not in t:
             raise self.fail(f"{field}.{key}" if field else key, None, allowed)
 
@@ -219,7 +220,8 @@ class Fields:
             ok = not any(c.isspace() for c in v.strip())
         if not ok:
             raise self.fail(field, v, f"must be {what}")
-        return v.strip() if pattern is None else v
+        text: str = v
+        return text.strip() if pattern is None else text
 
     def list_of(self, field: str, v: Any, item: Callable[[str, Any], T], *, min_len: int, max_len: int,
                 what: str) -> list[T]:
@@ -240,7 +242,8 @@ class Fields:
             not isinstance(v, list) or len(v) != 3
             or not all(isinstance(row, list) and len(row) == 3 and all(_finite(x) for x in row) for row in v)
         ):
-            raise self.fail(field, v, "must be a rotation matrix: 3 rows of 3 numbers, e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]]")
+            raise self.fail(field, v,
+                            "must be a rotation matrix: 3 rows of 3 numbers, e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]]")
         if any(abs(x) > 2 for row in v for x in row):  # (and an int too large for a float stops here)
             raise self.fail(field, v, "is not a rotation: every entry of a rotation matrix lies within ±1")
         try:
@@ -253,4 +256,5 @@ class Fields:
         problem = host_problem(v, ipv6=ipv6)
         if problem is not None:
             raise self.fail(field, v, problem)
-        return v
+        name: str = v  # host_problem accepts only a str
+        return name

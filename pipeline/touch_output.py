@@ -114,8 +114,19 @@ class MotorHeat:
         Peak, continuous rating, budget and where derating starts.
     """
 
-    __slots__ = ("spec", "_h", "limit_n", "fraction", "over_budget", "_cont2", "_budget", "_from", "_span",
-                 "_peak", "_drop")
+    __slots__ = (
+        "_budget",
+        "_cont2",
+        "_drop",
+        "_from",
+        "_h",
+        "_peak",
+        "_span",
+        "fraction",
+        "limit_n",
+        "over_budget",
+        "spec",
+    )
 
     def __init__(self, spec: TouchSpec) -> None:
         self.spec = spec
@@ -183,13 +194,23 @@ class TouchOutput:
         this long after the last command, so at most this long after the loop stopped.
     """
 
-    __slots__ = ("spec", "heat", "command_timeout_s", "_timeout_ns", "_cmd", "rendered_n", "stale",
-                 "stale_ticks", "warm")
+    __slots__ = (
+        "_cmd",
+        "_timeout_ns",
+        "command_timeout_s",
+        "heat",
+        "rendered_n",
+        "spec",
+        "stale",
+        "stale_ticks",
+        "warm",
+    )
 
     def __init__(self, spec: TouchSpec, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
         if isinstance(command_timeout_s, bool) or not (isinstance(command_timeout_s, (int, float))
                                                        and 0.0 < command_timeout_s <= 1.0):
-            raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, at most 1")
+            raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, "
+                             "at most 1")
         self.spec = spec
         self.heat = MotorHeat(spec)
         self.command_timeout_s = float(command_timeout_s)

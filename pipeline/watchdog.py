@@ -86,13 +86,13 @@ def fault_detail(
         parts.append(f"SENSOR_STATUS: status word 0x{int(w.status):08X}")
     if new & Fault.NON_FINITE:
         names = ("fx", "fy", "fz", "tx", "ty", "tz")
-        bad = [f"{n} = {v!r}" for n, v in zip(names, w[1:7]) if not math.isfinite(v)]
+        bad = [f"{n} = {v!r}" for n, v in zip(names, w[1:7], strict=True) if not math.isfinite(v)]
         bad += [f"pose {v!r}" for v in (*pose.position_m, *pose.rot_base_tip) if not math.isfinite(v)][:1]
         parts.append(f"NON_FINITE: {', '.join(bad) or 'a non-finite reading'}")
     if new & Fault.SENSOR_SATURATION:
         names = ("fx", "fy", "fz", "tx", "ty", "tz")
         units = ("N", "N", "N", "N·m", "N·m", "N·m")
-        over = [(n, v, r, u) for n, v, r, u in zip(names, w[1:7], saturation_n, units) if abs(v) > r]
+        over = [(n, v, r, u) for n, v, r, u in zip(names, w[1:7], saturation_n, units, strict=True) if abs(v) > r]
         n, v, r, u = over[0] if over else ("a channel", math.nan, math.nan, "")
         parts.append(f"SENSOR_SATURATION: {n} = {v:.2f} {u} beyond {wd.saturation_fraction:.0%} of its range "
                      f"(±{r:.3g} {u})")

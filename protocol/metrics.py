@@ -73,7 +73,7 @@ class HoldDetector:
         Required continuous time in band, ns (1 s = 1_000_000_000).
     """
 
-    __slots__ = ("_target", "_half", "_hold_ns", "hold_start_ns", "completed_ns")
+    __slots__ = ("_half", "_hold_ns", "_target", "completed_ns", "hold_start_ns")
 
     def __init__(self, target_force_n: float, tolerance_fraction: float, hold_ns: int) -> None:
         self._target = float(target_force_n)
@@ -226,7 +226,7 @@ def trial_metrics(
         max_ae_n=max_ae,
         time_in_band_s=float(np.count_nonzero(np.abs(f - target_force_n) <= half)) * sample_period_s,
         peak_force_n=float(np.nanmax(f)) if len(f) and np.isfinite(f).any() else math.nan,
-        n_samples=int(len(f)),
+        n_samples=len(f),
         end_s=float(end_s),
         first_contact_s=first_contact_s,
     )

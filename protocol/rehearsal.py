@@ -29,8 +29,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from protocol.storage import CODE_PATTERN
 from protocol.records import Outcome, TrialRecord
+from protocol.storage import CODE_PATTERN
 from protocol.trial import PhaseChanged, TrialPhase
 
 __all__ = ["FAULT_KINDS", "FaultPlan", "RehearsalTrigger", "parse_fault_plan"]
@@ -152,7 +152,8 @@ class RehearsalTrigger:
         cancel: Callable[[str, int], object] = lambda kind, at_ns: None, max_trial_s: float | None = None,
         latch_s: Callable[[str], float] = lambda kind: 0.0,
     ) -> RehearsalTrigger:
-        """The trigger of one session: the plans for its participant and kind, counting trials from ``start_position``."""
+        """The trigger of one session: the plans for its participant and kind, counting trials from
+        ``start_position``."""
         mine = [p for p in plans if p.code == code and p.session == kind]
         trig = cls(mine, inject, kill, cancel, max_trial_s, latch_s)
         trig._position = start_position

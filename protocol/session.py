@@ -45,6 +45,7 @@ row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 
 from __future__ import annotations
 
+import functools
 import secrets
 import threading
 from collections.abc import Callable, Sequence
@@ -69,7 +70,7 @@ from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.records import AbortCause, Outcome, TrialRecord
-from protocol.storage import Recorder
+from protocol.storage import Recorder, StudyDatabase
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = ["SessionRunner", "SessionState", "TrialParticipant", "first_unfinished", "trial_words"]
@@ -260,7 +261,8 @@ class SessionRunner:
         """Abort the running trial (not re-queued) and end the session."""
         self._request("abort_session", reason)
 
-    def _request(self, kind: str, detail: str = "", cause: str = "experimenter", trial_index: int | None = None) -> None:
+    def _request(self, kind: str, detail: str = "", cause: str = "experimenter",
+                 trial_index: int | None = None) -> None:
         with self._lock:
             self._requests.append((kind, detail, cause, trial_index))
 
@@ -310,7 +312,7 @@ class SessionRunner:
             t0 = int(rows["t_ns"][0])
             self.clock = SessionClock(self._offset_s, t0)
             self.recorder.segment(self.session_id, self.segment, self._offset_s, t0,
-                                  self._snapshot, self._scales)  # type: ignore[arg-type]
+                                  self._snapshot, self._scales)  # type: ignore[arg-type]  # set with the snapshot found above
             self._ready_ns = t0 + self._initial_pause_ns
             first_faults = int(rows["faults"][0])
             if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
@@ -347,7 +349,7 @@ class SessionRunner:
     def _from_snapshot(self, rows: np.ndarray) -> np.ndarray:
         """Find this runner's snapshot in the log; the records from its tick on (none before it is found)."""
         for i, (tick, kind, payload) in enumerate(self._log):
-            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]
+            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]  # a log payload is typed object; a snapshot's is a dict
                 self._start_tick = int(tick)
                 self._snapshot = payload
                 self._log = self._log[i + 1 :]
@@ -370,7 +372,7 @@ class SessionRunner:
         spec = m.spec
         running = m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
         t_ns_all = rows["t_ns"]
-        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist()))
+        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist(), strict=True))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
             ended = next((e for e in events if isinstance(e, TrialFinished)), None)
@@ -488,8 +490,8 @@ class SessionRunner:
     def _too_many_failed(self, t_ns: int) -> None:
         """The loop failed several trials in a row: stop cueing (headless: interrupt; a person's session: pause)."""
         last = self.finished[-1]
-        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: {last.abort_reason}); "
-               "the rig or the machine cannot hold the designed condition")
+        why = (f"{self._failed_in_a_row} trials in a row were not delivered as designed (the last: "
+               f"{last.abort_reason}); the rig or the machine cannot hold the designed condition")
         self._failed_in_a_row = 0
         if self.auto_reset_faults:
             self._interrupt(t_ns, f"{why}: the session is interrupted and can be resumed")
@@ -549,7 +551,7 @@ class SessionRunner:
                 policy, sid = self.protocol.abort_policy, self.session_id
                 self.schedule = requeue_aborted(self.schedule, spec, spec.index + 1, policy, self._rng)
                 sj = schedule_to_json(self.schedule)
-                self.recorder.call(lambda db, sj=sj, sid=sid: db.update_schedule(sid, sj))
+                self.recorder.call(functools.partial(StudyDatabase.update_schedule, session_id=sid, schedule_json=sj))
                 self.state.trials_total = len(self.schedule)
 
     def _handle_requests(self, t_ns: int) -> None:

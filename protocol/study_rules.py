@@ -29,7 +29,8 @@ from protocol.config import ProtocolConfig
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = [
-    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession", "StudyRuleError", "check_new_session", "next_kind",
+    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession",
+    "StudyRuleError", "check_new_session", "next_kind",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
 

@@ -28,7 +28,7 @@ from protocol.design import TrialSpec
 from protocol.metrics import HoldDetector, TrialMetrics, trial_metrics
 from protocol.records import Outcome
 
-__all__ = ["PhaseChanged", "TrialFinished", "TrialMachine", "TrialPhase", "TRANSITIONS", "TrialMachineError"]
+__all__ = ["TRANSITIONS", "PhaseChanged", "TrialFinished", "TrialMachine", "TrialMachineError", "TrialPhase"]
 
 
 class TrialPhase(StrEnum):
@@ -134,28 +134,28 @@ class TrialMachine:
         for t_ns, force, mark in samples:
             phase = self.phase
             if phase is TrialPhase.PAUSE:
-                if t_ns >= self.pause_until_ns:  # type: ignore[operator]
+                if t_ns >= self.pause_until_ns:  # type: ignore[operator]  # set in PAUSE (no assert on the per-tick path)
                     events.append(self._go(TrialPhase.IDLE, t_ns))
                     self.spec = None
                 continue
             if phase is TrialPhase.CUED:
-                if mark != self.spec.index:  # type: ignore[union-attr]
+                if mark != self.spec.index:  # type: ignore[union-attr]  # set once started (no assert on the per-tick path)
                     continue  # the loop has not applied the trial's mark yet
                 self.cue_ns = t_ns
                 events.append(self._go(TrialPhase.ACTIVE, t_ns))
                 phase = TrialPhase.ACTIVE
             if phase is TrialPhase.ACTIVE:
-                rel = t_ns - self.cue_ns  # type: ignore[operator]
+                rel = t_ns - self.cue_ns  # type: ignore[operator]  # set from CUE on (no assert on the per-tick path)
                 if rel > self._cap_ns:
-                    events.extend(self._finish(Outcome.TIMEOUT, self.cue_ns + self._cap_ns))  # type: ignore[operator]
+                    events.extend(self._finish(Outcome.TIMEOUT, self.cue_ns + self._cap_ns))  # type: ignore[operator]  # as above
                     # this sample already belongs to the pause
-                    if t_ns >= self.pause_until_ns:  # type: ignore[operator]
+                    if t_ns >= self.pause_until_ns:  # type: ignore[operator]  # set in PAUSE (no assert on the per-tick path)
                         events.append(self._go(TrialPhase.IDLE, t_ns))
                         self.spec = None
                     continue
                 self._t.append(rel)
                 self._f.append(force)
-                if self._hold.feed(rel, force):  # type: ignore[union-attr]
+                if self._hold.feed(rel, force):  # type: ignore[union-attr]  # set from CUE on (no assert on the per-tick path)
                     events.extend(self._finish(Outcome.SUCCESS, t_ns))
                 elif rel == self._cap_ns:
                     events.extend(self._finish(Outcome.TIMEOUT, t_ns))
@@ -177,7 +177,8 @@ class TrialMachine:
             tolerance_fraction=self.timing.tolerance_fraction, hold_s=self.timing.hold_s,
             max_trial_s=self.timing.max_trial_s, sample_period_s=self.sample_period_s,
         )
-        if outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS):  # pragma: no cover - one definition
+        disagree = outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS)
+        if disagree:  # pragma: no cover - one definition
             raise TrialMachineError("live hold decision disagrees with trial_metrics")
         done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason)
         self.pause_until_ns = end_ns + self._pause_ns

@@ -54,7 +54,8 @@ def table_digest(path: str, table: str) -> tuple[int, str]:
             "trial_id": lambda t: (sess[t // 1_000_000], t % 1_000_000),
         }
         cols = [r[1] for r in c.execute(f"PRAGMA table_info({table})") if r[1] not in SKIP_COLUMNS.get(table, ())]
-        rows = sorted((tuple(_exact(name[k](v) if k in name and v is not None else v) for k, v in zip(cols, r))
+        rows = sorted((tuple(_exact(name[k](v) if k in name and v is not None else v)
+                             for k, v in zip(cols, r, strict=True))
                        for r in c.execute(f"SELECT {', '.join(cols)} FROM {table}")), key=repr)
     finally:
         c.close()

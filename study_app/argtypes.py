@@ -91,7 +91,7 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
     return parse
 
 
-def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,  # type: ignore[type-arg]
+def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,
                 description: str = "") -> argparse.ArgumentParser:
     """A subcommand whose ``--help`` starts with what it does and ends with an example."""
     import shutil

@@ -42,7 +42,7 @@ _PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
 _STILL_M, _STILL_DEG = 0.0002, 0.2
 
 
-def add_calibrate_command(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_calibrate_command(sub: argparse._SubParsersAction) -> None:
     """Add ``calibrate`` to the ``haptic-study`` subcommands."""
     c = add_command(
         sub, "calibrate", "commission the rig: TCP pivot calibration, payload/bias, frame and sign check",
@@ -246,8 +246,8 @@ def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]
         raise CliError(f"calibrate payload: no TCP calibration on record for tool {tool!r}; the chain runs in order: "
                     "calibrate tcp first")
     if args.step == "frames" and record.payload is None:
-        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in order: "
-                    "calibrate payload first")
+        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in "
+                       "order: calibrate payload first")
     note = f"tool {tool!r}"
     clock = MonotonicClock()
     try:
@@ -320,9 +320,9 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
     robot = open_robot(hw.robot, clock)  # the pendant's TCP: poses are turned back into flange poses below
     off = hw.robot.tcp_offset_m
     poses: list[PivotPose] = []
-    _say(f"TCP pivot calibration of {note}: rest the instrument tip in the divot and keep it there. Turn the instrument "
-         f"through at least {MIN_PIVOT_POSES} orientations, tilted at least {MIN_SPREAD_DEG:g}° apart in two "
-         "directions (e.g. toward the front, back, left and right), and record each one standing still.")
+    _say(f"TCP pivot calibration of {note}: rest the instrument tip in the divot and keep it there. Turn the "
+         f"instrument through at least {MIN_PIVOT_POSES} orientations, tilted at least {MIN_SPREAD_DEG:g}° apart in "
+         "two directions (e.g. toward the front, back, left and right), and record each one standing still.")
     try:
         while True:
             k = len(poses) + 1
@@ -340,8 +340,8 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
                 continue
             rot = pose.rot_base_tip
             d = mat_vec(rot, off)
-            flange = tuple(p - q for p, q in zip(pose.position_m, d))
-            poses.append(PivotPose(rot, flange, f"O{k}"))  # type: ignore[arg-type]
+            flange = tuple(p - q for p, q in zip(pose.position_m, d, strict=True))
+            poses.append(PivotPose(rot, flange, f"O{k}"))
             rv = matrix_to_rotvec(rot)
             _say(f"O{k} recorded: flange at ({_mm(flange)}) mm, rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
                  f"{rv[2]:+.3f}) rad")
@@ -361,9 +361,9 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
 def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
     import numpy as np
 
+    from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
     from pipeline.payload_compensator import PayloadCalibration
     from pipeline.payload_identification import CalibrationPose, identify_payload
-    from pipeline.frames import mat_mul, matrix_to_rotvec, transpose
     from study_app.commissioning import pose_set
 
     rots = pose_set(name)
@@ -392,7 +392,7 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
                 _say(f"P{k + 1:02d} not recorded: {why or 'the force sensor sent too few samples'}")
                 continue
             w = np.asarray([s[1:7] for s in samples], dtype=float).mean(axis=0)
-            poses.append(CalibrationPose(mat_mul(pose.rot_base_tip, rts), tuple(float(v) for v in w),  # type: ignore[arg-type]
+            poses.append(CalibrationPose(mat_mul(pose.rot_base_tip, rts), tuple(float(v) for v in w),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
                                          f"P{k + 1:02d}"))
             _say(f"P{k + 1:02d} recorded: |F| = {float(np.linalg.norm(w[:3])):.3f} N")
             k += 1
@@ -430,9 +430,9 @@ def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, n
             for s in sensor.collect(3000, 4.0):
                 pose = robot.read_pose()
                 fw.set_pose(pose.rot_base_tip)
-                out = fw.step(s[1], s[2], s[3], False, 0.001)
-                base.append(out[9:12])
-                scaled.append(out[15:18])
+                step = fw.step(s[1], s[2], s[3], False, 0.001)
+                base.append(step[9:12])
+                scaled.append(step[15:18])
             res = check_axis(axis, np.asarray(base).reshape(-1, 3), np.asarray(scaled).reshape(-1, 3),
                              hw.framework.rot_haptic_base)
             _say(res.describe())

@@ -19,7 +19,7 @@ from study_app.cli_error import CliError
 __all__ = ["add_check_parser", "cmd_check", "format_audit"]
 
 
-def add_check_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_check_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``check``."""
     c = add_command(sub, "check", "verify a study database: SQLite's integrity check, every recorded block's "
                     "checksum and decoding, trials against the recording and the design",

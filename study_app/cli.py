@@ -52,7 +52,7 @@ class _VersionAction(argparse.Action):
         super().__init__(option_strings, dest, nargs=0, default=argparse.SUPPRESS,
                          help="print the version (and the git commit of a checkout) and exit")
 
-    def __call__(self, parser, namespace, values, option_string=None):  # type: ignore[no-untyped-def]
+    def __call__(self, parser, namespace, values, option_string=None):
         print(f"haptic-study {version_text()}")
         parser.exit()
 
@@ -74,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _add_installed_commands(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def _add_installed_commands(sub: argparse._SubParsersAction) -> None:
     """The commands registered in :data:`COMMANDS_GROUP`, by name; an optional one that is absent says so."""
     from importlib.metadata import entry_points
 
@@ -95,7 +95,7 @@ def _add_installed_commands(sub: argparse._SubParsersAction) -> None:  # type: i
             _add_absent_command(sub, name, what)
 
 
-def _add_absent_command(sub: argparse._SubParsersAction, name: str, what: str) -> None:  # type: ignore[type-arg]
+def _add_absent_command(sub: argparse._SubParsersAction, name: str, what: str) -> None:
     """``name`` whose package is not installed: any use of it is one line naming what is missing, exit 2."""
 
     def absent(args: argparse.Namespace) -> int:

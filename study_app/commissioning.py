@@ -1,7 +1,8 @@
 """Commissioning the rig from the study engine: payload, TCP and frame steps, what is on record, and the session gate.
 
 :class:`Commissioning` belongs to a :class:`study_app.engine_host.StudyEngine`
-(it sees it as an :class:`study_app.engine_core.EngineCore`) and runs on its driver thread.  On the simulated rig each step runs
+(it sees it as an :class:`study_app.engine_core.EngineCore`) and runs on its driver thread.  On the simulated rig each
+step runs
 automatically; on the real rig the experimenter records poses, pivot
 orientations and axis pushes one at a time, each averaged over a window of
 the ring's records (:class:`_Window`).  Accepted results are put on record for
@@ -21,16 +22,20 @@ from typing import Any
 import numpy as np
 
 from pipeline.clock import MonotonicClock
-from pipeline.payload_compensator import PayloadCalibration
-from pipeline.payload_identification import CalibrationPose, DegeneratePoseSetError, identify_payload, recommended_pose_set
 from pipeline.frame_check import AXES, AxisCheck, FrameCheck, check_axis
-from pipeline.frames import Mat3, axis_angle, mat_mul
+from pipeline.frames import Mat3, as_mat3, axis_angle, mat_mul
 from pipeline.loop_messages import SetCalibration
+from pipeline.payload_compensator import PayloadCalibration
+from pipeline.payload_identification import (
+    CalibrationPose,
+    DegeneratePoseSetError,
+    identify_payload,
+    recommended_pose_set,
+)
 from pipeline.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
 from pipeline.tcp import PivotPose, identify_tip, pivot_orientations
 from study_app import messages as m
 from study_app.engine_core import EngineCore
-
 
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "REST_CHECK_S", "REST_MAX_FORCE_N", "Commissioning",
@@ -193,9 +198,9 @@ class Commissioning:
         rot_base_sensor = mat_mul(pose1.rot_base_tip, e.eng.framework.config.rot_tip_sensor)
         mean = w.mean(axis=0)
         e.publish(m.PoseRecorded(
-            label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]
-            rot_base_sensor=tuple(float(x) for x in rot_base_sensor),
-            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]
+            label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
+            rot_base_sensor=as_mat3(rot_base_sensor),
+            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]  # three items, likewise
             off_target_deg=rotation_angle_deg(target, rot_base_sensor) if target is not None else math.nan,
             force_std_n=float(np.std(np.linalg.norm(w[:, :3], axis=1))),
         ))
@@ -258,7 +263,9 @@ class Commissioning:
     def _tool_record(self) -> ToolCalibration:
         eng = self.engine.eng
         if not eng.simulated:
-            return eng.calibration_file.tool(eng.tool) if eng.calibration_file is not None else ToolCalibration(eng.tool)
+            if eng.calibration_file is None:
+                return ToolCalibration(eng.tool)
+            return eng.calibration_file.tool(eng.tool)
         # the simulated rig calibrated its payload as it was built; TCP and frames are this run's, never saved
         return ToolCalibration("simulated instrument", payload=eng.calibration, payload_date=now_iso())
 
@@ -269,8 +276,8 @@ class Commissioning:
     def publish_status(self) -> None:
         eng = self.engine.eng
         path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else ""
-        self.engine.publish(m.CalibrationStatus(self.engine.config.rig, self.tool_cal.tool, path, self.tool_cal.status(),
-                                         self.tool_cal.missing(*self.frames_in_use())))
+        self.engine.publish(m.CalibrationStatus(self.engine.config.rig, self.tool_cal.tool, path,
+                                                self.tool_cal.status(), self.tool_cal.missing(*self.frames_in_use())))
 
     def _record_step(self, step: str, result: Any) -> None:
         """Put an accepted result on record (real rig: saved in the calibration file) and publish the status."""
@@ -284,7 +291,7 @@ class Commissioning:
             if step == "tcp" and self.engine.hardware is not None:
                 # the robot's poses move to the new tip at once (the pendant's TCP stays what the file says)
                 off = self.engine.hardware.robot.tcp_offset_m
-                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off))
+                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off, strict=True))
         else:
             self.tool_cal = self.tool_cal.with_step(step, result)
         self.publish_status()
@@ -341,15 +348,15 @@ class Commissioning:
             turned = rotation_angle_deg(pose0.rot_base_tip, pose1.rot_base_tip)
             if not (moved <= PIVOT_STILL_M and turned <= PIVOT_STILL_DEG):
                 self.engine.publish(m.CommandRefused("RecordPivot", (
-                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; allowed "
-                    f"{PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
+                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; "
+                    f"allowed {PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
                 return
             rot = pose1.rot_base_tip
             tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
                 self.engine.hardware.robot.tcp_offset_m if self.engine.hardware is not None else (0.0, 0.0, 0.0))
             off = np.asarray(rot).reshape(3, 3) @ np.asarray(tip)
             flange = tuple(float(v) for v in p.mean(axis=0) - off)
-            self.engine.publish(m.PivotRecorded(label, tuple(float(x) for x in rot), flange, moved * 1e3))  # type: ignore[arg-type]
+            self.engine.publish(m.PivotRecorded(label, as_mat3(rot), flange, moved * 1e3))  # type: ignore[arg-type]  # flange: three items, likewise
 
         self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
 
@@ -436,7 +443,8 @@ class Commissioning:
                     again = ("measuring the force at rest (check the Devices tab) — press Start again"
                              if w.command in ("StartSession", "ResumeSession")
                              else "recording (check the Devices tab) — record again")
-                    self.engine.publish(m.CommandRefused(w.command, w.stalled or f"the force sensor stalled while {again}"))
+                    self.engine.publish(m.CommandRefused(w.command,
+                                                         w.stalled or f"the force sensor stalled while {again}"))
                     if w.abandoned is not None:
                         w.abandoned()
                     continue
@@ -498,7 +506,8 @@ class Commissioning:
         except RuntimeError:
             self._starting = None
             raise
-        self.engine.publish(m.StartChecking(REST_CHECK_S, f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
-                                     f"the compensated force at rest for {REST_CHECK_S:g} s — keep the instrument "
-                                     "still and clear of everything"))
+        self.engine.publish(m.StartChecking(REST_CHECK_S,
+                                            f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
+                                            f"the compensated force at rest for {REST_CHECK_S:g} s — keep the "
+                                            "instrument still and clear of everything"))
         return True

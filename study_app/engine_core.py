@@ -10,10 +10,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.engine import Engine
 from pipeline.hardware import HardwareConfig
 from pipeline.loop import HapticLoop
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.ring import RingBuffer
 from study_app.engine_setup import HostConfig, SwitchableDriver
 

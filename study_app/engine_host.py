@@ -24,25 +24,26 @@ from __future__ import annotations
 
 import collections
 import math
+import queue
 import sys
 import threading
 import time
-import queue
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from pipeline.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
-from pipeline.payload_compensator import PayloadCalibration
 from pipeline.devices import DeviceError
 from pipeline.engine import Engine
+from pipeline.frames import as_mat3
 from pipeline.hardware import HardwareConfig
 from pipeline.jaw_control import JawController
 from pipeline.jitter_trace import LateTickTracer
 from pipeline.loop_messages import ControllerDetached, LoopEvent
 from pipeline.loop_messages import OperatorStop as LoopOperatorStop
 from pipeline.loop_messages import ResetFaults as LoopResetFaults
+from pipeline.payload_compensator import PayloadCalibration
 from pipeline.supervisor import LoopSupervisor
 from protocol.config import ProtocolError
 from protocol.session import SessionRunner
@@ -147,8 +148,8 @@ class StudyEngine:
         self.publish(m.EngineReady(
             ring_name=self.ring.name or "", rig=self.config.rig, clock=self.config.clock,
             calibration=self.calibration.to_dict(), surface_z_m=surface_z_m,
-            tip_home_m=tip_home_m, driver=self.driver_name,  # type: ignore[arg-type]
-            rot_tip_sensor=tuple(float(x) for x in rot_tip_sensor),
+            tip_home_m=tip_home_m, driver=self.driver_name,
+            rot_tip_sensor=as_mat3(rot_tip_sensor),
             devices=self._device_summary(),
         ))
         self.commissioning.publish_status()
@@ -223,7 +224,7 @@ class StudyEngine:
             n = self.config.block_ticks
             try:
                 self.loop.run_ticks(n)
-            except Exception as exc:  # noqa: BLE001 - the loop died in this thread: make safe, report, store
+            except Exception as exc:  # the loop died in this thread: make safe, report, store
                 self.loop.fail_safe(f"the haptic loop died ({exc!r}); the haptic device's command watchdog dropped "
                                     "the force to zero", thread_dead=True)
                 self._loop_died(repr(exc))
@@ -262,8 +263,8 @@ class StudyEngine:
             reason = (f"the haptic loop died ({why}); the session is interrupted: restart the engine (Restart engine "
                       "in the window) and resume it")
             assert self.sessions.recorder is not None
-            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns), "session_interrupted",
-                                reason)
+            self.sessions.recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns),
+                                         "session_interrupted", reason)
             self.sessions.end("interrupted", reason)
         self.publish(self.health())
 
@@ -380,7 +381,7 @@ class StudyEngine:
                 cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path, check=False))),
             m.Pause: self._session_command, m.Resume: self._session_command, m.AbortTrial: self._session_command,
             m.AbortSession: self._session_command,
-            m.ResetFaults: lambda cmd: (self._require_loop("reset faults"), self.loop.submit(LoopResetFaults())),
+            m.ResetFaults: self._reset_faults,
             m.OperatorStop: lambda cmd: self.loop.submit(LoopOperatorStop()),
             m.Calibrate: self._calibrate, m.RecordPose: c.record_pose, m.IdentifyPoses: c.identify,
             m.CalibrateTcp: lambda cmd: c.calibrate_tcp(cmd.pose_set), m.RecordPivot: c.record_pivot,
@@ -389,6 +390,10 @@ class StudyEngine:
             m.SetDriver: self._driver_command, m.ManualTarget: self._driver_command,
             m.ResetStats: self._reset_stats,
         }
+
+    def _reset_faults(self, cmd: m.ResetFaults) -> None:
+        self._require_loop("reset faults")
+        self.loop.submit(LoopResetFaults())
 
     def _session_command(self, cmd: m.Pause | m.Resume | m.AbortTrial | m.AbortSession) -> None:
         runner = self.sessions.runner
@@ -510,7 +515,7 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     publish = events.put
     try:
         engine = StudyEngine(config, publish)
-    except Exception as exc:  # noqa: BLE001 - reported to the GUI as one line
+    except Exception as exc:  # reported to the GUI as one line
         publish(m.CommandRefused("connect", str(exc)))
         publish(m.EngineStopped(str(exc), {}))
         return

@@ -19,22 +19,27 @@ from collections.abc import Callable
 from typing import Any
 
 from protocol.config import ProtocolConfig, load_protocol
+from protocol.records import AbortCause, TrialRecord
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
-    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    raw_wrench_scales, start_runner,
+    OpenedSession,
+    delivery_limits,
+    finish_session,
+    open_new_session,
+    open_resumed_session,
+    participant_seeds,
+    raw_wrench_scales,
+    start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
 from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
-from protocol.records import AbortCause, TrialRecord
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app import messages as m
 from study_app.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine_core import EngineCore
 from study_app.engine_setup import SwitchableDriver
 from study_app.session_config import config_record, real_config_record
-
 
 __all__ = ["EngineSessions", "list_resumable"]
 
@@ -72,7 +77,8 @@ class EngineSessions:
         if cmd.kind not in ("training", "experiment"):
             raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
         if cmd.seed < 0 or cmd.participant_number < 1:
-            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and number ≥ 1")
+            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
+                             "number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
         _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):
@@ -95,7 +101,8 @@ class EngineSessions:
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
-            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed, participant_seed)
+            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
+                                 participant_seed)
         assert self.engine.hardware is not None
         return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
 
@@ -119,7 +126,11 @@ class EngineSessions:
             self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
             sim_rig = self.engine.eng.rig
             participant: SwitchableDriver | None = self.engine.driver
-            participant_time: Callable[[], float] | None = lambda: sim_rig.sim_time_s
+
+            def sim_time_s() -> float:
+                return sim_rig.sim_time_s
+
+            participant_time: Callable[[], float] | None = sim_time_s
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)
@@ -136,9 +147,9 @@ class EngineSessions:
         if override is not None:
             missing, why, rest_n = override
             recorder.event(opened.session_id, opened.clock_offset_s, CALIBRATION_OVERRIDE_EVENT,
-                           f"started by the experimenter's override: {missing or 'the calibration chain was on record'}; "
-                           f"the compensated force at rest was {rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). "
-                           f"Reason: {why}")
+                           "started by the experimenter's override: "
+                           f"{missing or 'the calibration chain was on record'}; the compensated force at rest was "
+                           f"{rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). Reason: {why}")
         if self.engine.config.clock == "real":
             gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
         tr = opened.protocol.trial
@@ -236,7 +247,8 @@ class EngineSessions:
         finally:
             db.close()
         st = runner.state
-        self.engine.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted, st.successes))
+        self.engine.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted,
+                                           st.successes))
 
     def _open_db(self, path: str) -> StudyDatabase:
         if not path:

@@ -139,7 +139,7 @@ def _import_factory(spec: str) -> Callable[..., Any]:
 
     module, _, attr = spec.partition(":")
     try:
-        return getattr(importlib.import_module(module), attr)  # type: ignore[no-any-return]
+        return getattr(importlib.import_module(module), attr)
     except (ImportError, AttributeError) as exc:
         raise RuntimeError(f"haptic_factory = {spec!r}: cannot be imported ({exc})") from None
 
@@ -171,7 +171,7 @@ def build_real_engine(
     # Tests (no Touch on CI) swap in a device that speaks the HDAPI through the real Touch backend.
     original = hardware_module.open_haptic
     if config.haptic_factory is not None:
-        hardware_module.open_haptic = _import_factory(config.haptic_factory)  # type: ignore[assignment]
+        hardware_module.open_haptic = _import_factory(config.haptic_factory)
     try:
         eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open)
     except (DeviceError, CalibrationFileError) as exc:

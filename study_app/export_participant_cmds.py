@@ -16,7 +16,7 @@ from study_app.cli_error import CliError
 __all__ = ["add_export_participant_parser", "cmd_export_participant"]
 
 
-def add_export_participant_parser(esub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_export_participant_parser(esub: argparse._SubParsersAction) -> None:
     """Register ``export participant`` under ``export``."""
     from study_app.withdraw_cmds import participant_code_arg
 
@@ -43,13 +43,9 @@ def cmd_export_participant(args: argparse.Namespace) -> int:
     """Run ``haptic-study export participant``; errors raise :class:`CliError`."""
     from analysis.errors import AnalysisError
     from analysis.outdir import check_output_folder
-    from analysis.participant_export import (
-        PARTICIPANT_MARKER,
-        participant_export,
-        write_participant_export,
-    )
+    from analysis.participant_export import PARTICIPANT_MARKER, participant_export, write_participant_export
 
-    def policy(call):  # type: ignore[no-untyped-def]
+    def policy(call):
         try:
             return call()
         except AnalysisError as exc:

@@ -20,7 +20,7 @@ __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
 SCREENSHOT_MARKER = ".haptic-study-screenshots"
 
 
-def add_gui_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_gui_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``gui``."""
     g = add_command(sub, "gui", "the experimenter's window (simulated rig by default)",
                     "haptic-study gui --db study.db\n"
@@ -63,7 +63,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
     if args.sim_mount_error_deg and args.rig != "sim":
         raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
-    if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")):
+    if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY",
+                                                                       "QT_QPA_PLATFORM")):
         # without this Qt aborts the process with a core dump and a page of plugin names
         raise CliError(
             "no display to open the window on (DISPLAY and WAYLAND_DISPLAY are unset): run it on the lab PC's "

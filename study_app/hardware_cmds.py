@@ -99,7 +99,7 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
         finally:
             try:
                 dev.close()
-            except Exception:  # noqa: BLE001 - the description is what matters here
+            except Exception:  # the description is what matters here
                 pass
 
     def describe_sensor(s: Any) -> str:
@@ -120,16 +120,19 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
         p = r.read_pose()
         fk, _ = ur3_tcp_pose(r.q_rad, hw.robot.tcp_offset_m)
         dist = math.dist(fk, p.position_m) if all(math.isfinite(v) for v in (*fk, *p.position_m)) else math.nan
-        return (f"{hw.robot.host}: {r.state}, TCP ({p.position_m[0]:+.4f}, {p.position_m[1]:+.4f}, {p.position_m[2]:+.4f}) m, "
-                f"controller time {p.controller_time_s:.3f} s, UR3 DH FK differs by {dist * 1000:.1f} mm")
+        return (f"{hw.robot.host}: {r.state}, TCP ({p.position_m[0]:+.4f}, {p.position_m[1]:+.4f}, "
+                f"{p.position_m[2]:+.4f}) m, controller time {p.controller_time_s:.3f} s, UR3 DH FK differs by "
+                f"{dist * 1000:.1f} mm")
 
     def describe_haptic(h: Any) -> str:
         st = h.read_state()
-        return f"{hw.haptic.device_name}: peak {h.peak_force_n:g} N, continuous {h.continuous_force_n:g} N, error 0x{st.error_code:04x}"
+        return (f"{hw.haptic.device_name}: peak {h.peak_force_n:g} N, continuous {h.continuous_force_n:g} N, "
+                f"error 0x{st.error_code:04x}")
 
     def describe_jaw(j: Any) -> str:
         s = j.status
-        return f"{hw.jaw.port if hw.jaw else ''}: READY, limits {s.closed_us}-{s.open_us} µs, at {s.pos_us} µs ({s.fraction_open:.0%} open)"
+        return (f"{hw.jaw.port if hw.jaw else ''}: READY, limits {s.closed_us}-{s.open_us} µs, at {s.pos_us} µs "
+                f"({s.fraction_open:.0%} open)")
 
     attempt("force sensor", lambda: open_sensor(hw.sensor, clock), describe_sensor)
     attempt("robot", lambda: open_robot(hw.robot, clock), describe_robot)
@@ -156,7 +159,7 @@ def _port_number(name: str) -> Callable[[str], int]:
     return whole_number(name, 1, 65535)
 
 
-def add_probe_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_probe_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``probe`` and its devices."""
     pr = add_command(sub, "probe", "read a real device once and report (no loop)",
                      "haptic-study probe netft --host 192.168.1.1 --samples 1000")
@@ -166,13 +169,15 @@ def add_probe_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[t
                      "haptic-study probe netft --host 192.168.1.1 --samples 1000")
     pn.add_argument("--host", required=True, type=host_name("--host", ipv6=False), help="the Net F/T box's IP address")
     pn.add_argument("--port", type=_port_number("--port"), default=49152, help="RDT UDP port (default 49152)")
-    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80, help="web server port for netftapi2.xml (default 80)")
-    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000, help="samples to average (default 1000)")
+    pn.add_argument("--http-port", type=_port_number("--http-port"), default=80,
+                    help="web server port for netftapi2.xml (default 80)")
+    pn.add_argument("--samples", type=whole_number("--samples", 1, 1_000_000), default=1000,
+                    help="samples to average (default 1000)")
     pn.add_argument("--json", action="store_true", help="print one JSON object")
     pn.set_defaults(handler=cmd_hardware)
 
 
-def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``check-hardware``."""
     ch = add_command(sub, "check-hardware", "connect to every device in the hardware file and print its state",
                      "haptic-study check-hardware --hardware hardware.toml")

@@ -12,18 +12,61 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.frames import Mat3, Vec3
+from pipeline.payload_compensator import Wrench
 from protocol.records import TrialRecord
 
 __all__ = [
-    "AbortSession", "AbortTrial", "Calibrate", "CalibrationDone", "CalibrationProgress", "CommandRefused",
-    "EngineFault", "EngineOpening", "EngineReady", "EngineStopped", "FaultInjected", "Health", "InjectFault", "ListSessions", "ManualTarget",
+    "DRIVER_MODES",
+    "JAW_ACTIONS",
+    "PIVOT_SETS",
+    "POSE_SETS",
+    "AbortSession",
+    "AbortTrial",
+    "Calibrate",
+    "CalibrateTcp",
+    "CalibrationDone",
+    "CalibrationProgress",
+    "CalibrationStatus",
+    "CheckFrames",
+    "CommandRefused",
+    "EngineFault",
+    "EngineOpening",
+    "EngineReady",
+    "EngineStopped",
+    "FaultInjected",
+    "FrameAxisChecked",
+    "FrameCheckDone",
+    "Health",
+    "IdentifyPoses",
+    "IdentifyTcp",
+    "InjectFault",
+    "JawCommand",
+    "JawState",
+    "ListSessions",
+    "ManualTarget",
     "OperatorStop",
-    "IdentifyPoses", "Pause", "PhaseEntered", "PoseRecorded", "RecordPose", "ResetFaults", "ResetStats", "Resume", "ResumeSession", "SessionEnded",
-    "SessionStarted", "SessionsListed", "SetDriver", "Shutdown", "StartSession", "TrialEnded", "TrialStarted",
-    "DRIVER_MODES", "POSE_SETS",
-    "CalibrateTcp", "CalibrationStatus", "CheckFrames", "FrameAxisChecked", "FrameCheckDone", "IdentifyTcp",
-    "JawCommand", "JawState", "PivotRecorded", "RecordFrameAxis", "RecordPivot", "StartChecking", "TcpCalibrationDone",
-    "JAW_ACTIONS", "PIVOT_SETS",
+    "Pause",
+    "PhaseEntered",
+    "PivotRecorded",
+    "PoseRecorded",
+    "RecordFrameAxis",
+    "RecordPivot",
+    "RecordPose",
+    "ResetFaults",
+    "ResetStats",
+    "Resume",
+    "ResumeSession",
+    "SessionEnded",
+    "SessionStarted",
+    "SessionsListed",
+    "SetDriver",
+    "Shutdown",
+    "StartChecking",
+    "StartSession",
+    "TcpCalibrationDone",
+    "TrialEnded",
+    "TrialStarted",
 ]
 
 #: Who holds the simulated stylus.
@@ -63,7 +106,8 @@ class StartSession:
 
 @dataclass(frozen=True, slots=True)
 class ResumeSession:
-    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as StartSession)."""
+    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as
+    StartSession)."""
 
     db_path: str
     session_id: int
@@ -149,14 +193,15 @@ class RecordPose:
 
     label: str
     seconds: float = 1.0
-    target_rot_base_sensor: tuple[float, ...] | None = None  # 9 numbers, row-major
+    target_rot_base_sensor: Mat3 | None = None  # row-major
 
 
 @dataclass(frozen=True, slots=True)
 class IdentifyPoses:
-    """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if accepted."""
+    """Real rig: identify payload and bias from recorded poses (label, rot_base_sensor as 9 numbers, wrench); install if
+    accepted."""
 
-    poses: tuple[tuple[str, tuple[float, ...], tuple[float, ...]], ...]
+    poses: tuple[tuple[str, Mat3, Wrench], ...]
     pose_set: str = "recommended"
 
 
@@ -169,7 +214,8 @@ class CalibrateTcp:
 
 @dataclass(frozen=True, slots=True)
 class RecordPivot:
-    """Real rig: the tip rests in the divot; average the TCP pose for ``seconds`` (answered by :class:`PivotRecorded`)."""
+    """Real rig: the tip rests in the divot; average the TCP pose for ``seconds`` (answered by
+    :class:`PivotRecorded`)."""
 
     label: str
     seconds: float = 0.5
@@ -179,7 +225,7 @@ class RecordPivot:
 class IdentifyTcp:
     """Real rig: pivot calibration from recorded flange poses (label, rot_base_flange as 9 numbers, position m)."""
 
-    poses: tuple[tuple[str, tuple[float, ...], tuple[float, float, float]], ...]
+    poses: tuple[tuple[str, Mat3, Vec3], ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -238,7 +284,7 @@ class EngineReady:
     surface_z_m: float
     tip_home_m: tuple[float, float, float]
     driver: str
-    rot_tip_sensor: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
+    rot_tip_sensor: Mat3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
     devices: list[str] = field(default_factory=list)
 
 
@@ -368,7 +414,7 @@ class PoseRecorded:
     label: str
     samples: int
     wrench: tuple[float, float, float, float, float, float]
-    rot_base_sensor: tuple[float, ...]  # 9 numbers, row-major
+    rot_base_sensor: Mat3  # row-major
     tcp_position_m: tuple[float, float, float]
     off_target_deg: float
     force_std_n: float
@@ -379,14 +425,15 @@ class PivotRecorded:
     """Real rig: one orientation of the TCP pivot calibration, as the flange pose (base frame)."""
 
     label: str
-    rot_base_flange: tuple[float, ...]  # 9 numbers, row-major
+    rot_base_flange: Mat3  # row-major
     flange_position_m: tuple[float, float, float]
     moved_mm: float
 
 
 @dataclass(frozen=True, slots=True)
 class TcpCalibrationDone:
-    """Result of a TCP pivot calibration: saved and in use if ``accepted``, else ``reason`` says which orientations to add.
+    """Result of a TCP pivot calibration: saved and in use if ``accepted``, else ``reason`` says which orientations to
+    add.
 
     ``result`` is :meth:`pipeline.tcp.TipCalibration.to_dict`; ``error_mm`` the distance from the simulated
     rig's true tip (NaN on the real rig).
@@ -444,7 +491,8 @@ class StartChecking:
 
 @dataclass(frozen=True, slots=True)
 class JawState:
-    """The jaw: position (fraction open, pulse width), whether at a limit, its fault ("" when healthy), the last command."""
+    """The jaw: position (fraction open, pulse width), whether at a limit, its fault ("" when healthy), the last
+    command."""
 
     fraction_open: float
     pulse_us: int
@@ -455,7 +503,8 @@ class JawState:
 
 @dataclass(frozen=True, slots=True)
 class EngineFault:
-    """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset (``'faults_reset'``)."""
+    """The loop latched (``kind='fault'``), saw a latched fault's condition go (``'fault_cleared'``) or reset
+    (``'faults_reset'``)."""
 
     t_s: float
     kind: str
@@ -493,7 +542,8 @@ class Health:
     period_max_us: float = float("nan")
     #: Late periods explained by cause (:meth:`pipeline.jitter_trace.LateTickTracer.summary`), when tracing.
     late_periods: dict[str, Any] | None = None
-    #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after it.
+    #: Why the session's next cue is held back ("" = it is not): a latched fault waiting for a reset, the pause after
+    #: it.
     waiting: str = ""
     #: The haptic device's motor heat as a fraction of its thermal budget, and the force it may render now (derated), N.
     haptic_heat_fraction: float = 0.0

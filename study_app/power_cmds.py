@@ -24,7 +24,7 @@ _BAR_DRAWS = 5_000_000
 POWER_MARKER = ".haptic-study-power"
 
 
-def add_power_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_power_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``power``."""
     from study_app.report_cmds import add_analysis_options
 
@@ -143,7 +143,7 @@ def cmd_power(args: argparse.Namespace) -> int:
             bars.append(ProgressBar(total, "resampling studies", "participants drawn", decimals=0))
         bars[-1].update(done)
 
-    def simulating(p) -> None:  # type: ignore[no-untyped-def]
+    def simulating(p) -> None:
         if not bars:
             bars.append(ProgressBar(p.study_trials_total, "simulating pool", "trials", decimals=0))
         bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"

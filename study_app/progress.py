@@ -53,7 +53,8 @@ class ProgressBar:
         bar = "#" * fill + " " * (width - fill)
         unit = f" {self.unit}" if self.unit else ""
         elapsed = now - self._start
-        text = f"{self.label} [{bar}] {pct:3d}% {done:,.{self.decimals}f}/{self.total:,.{self.decimals}f}{unit}  ({elapsed:.1f} s)"
+        text = (f"{self.label} [{bar}] {pct:3d}% {done:,.{self.decimals}f}/{self.total:,.{self.decimals}f}{unit}  "
+                f"({elapsed:.1f} s)")
         if self._tty:
             self.stream.write("\r" + text)
         else:

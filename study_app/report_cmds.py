@@ -31,7 +31,7 @@ def add_analysis_options(parser: argparse.ArgumentParser) -> None:
                         help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
 
 
-def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_report_parsers(sub: argparse._SubParsersAction) -> None:
     """Register ``report`` and ``plot-trial``."""
     r = add_command(
         sub, "report",
@@ -71,7 +71,8 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore
     p.add_argument("--db", required=True, metavar="PATH", help="study database")
     p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
                    help="session id (haptic-study sessions --db PATH lists them)")
-    p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"), required=True, metavar="N",
+    p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"),
+                   required=True, metavar="N",
                    help="trial number within the session, from 1, as the GUI and trials.csv number them")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
     p.set_defaults(handler=cmd_plot_trial)
@@ -110,8 +111,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     ex = summary.excluded
-    print(f"Report {summary.out_dir / 'report.html'}: {summary.n_participants} participants, {summary.n_trials} trials, "
-          f"{summary.n_samples:,} samples (excluded: {ex['training_trials']} training trials, "
+    print(f"Report {summary.out_dir / 'report.html'}: {summary.n_participants} participants, {summary.n_trials} "
+          f"trials, {summary.n_samples:,} samples (excluded: {ex['training_trials']} training trials, "
           f"{ex['aborted_trials']} aborted trials)")
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
     print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")

@@ -18,7 +18,7 @@ from study_app.cli_error import CliError
 __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
 
 
-def _fault_plan(text: str):  # type: ignore[no-untyped-def]
+def _fault_plan(text: str):
     """An argument type: one ``--inject-fault`` plan (protocol.rehearsal), or the parser's one-line error."""
     from protocol.rehearsal import parse_fault_plan
 
@@ -28,7 +28,7 @@ def _fault_plan(text: str):  # type: ignore[no-untyped-def]
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def add_sim_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_sim_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``sim``."""
     s = add_command(sub, "sim", "run the simulated rig with scripted presses and summarise what the pipeline saw",
                     "haptic-study sim --seconds 30 --seed 1")
@@ -41,14 +41,15 @@ def add_sim_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
     s.set_defaults(handler=cmd_sim)
 
 
-def add_run_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_run_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``run``."""
     r = add_command(sub, "run", "run a complete simulated study into a study database (headless)",
                     "haptic-study run --participants 10 --seed 0 --db study.db\n"
                     "haptic-study run --participants 10 --seed 0 --db study.db --continue   # after an interruption",
                     "Run a complete simulated study (training and experiment sessions of simulated participants on "
                     "the simulated rig) into a study database, headless, and print a summary")
-    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10, help="number of simulated participants (default 10)")
+    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10,
+                   help="number of simulated participants (default 10)")
     r.add_argument("--seed", type=SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
     r.add_argument("--db", required=True, metavar="PATH", help="study database (SQLite); created if missing")
     r.add_argument("--protocol", default=None, metavar="FILE",
@@ -56,7 +57,8 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
-                   help="participants run at once, each in its own process (default: the usable cores; 1: one after the other)")
+                   help="participants run at once, each in its own process (default: the usable cores; 1: one after "
+                        "the other)")
     after = r.add_mutually_exclusive_group()
     after.add_argument("--resume", metavar="CODE", default=None,
                        help="continue this participant's interrupted session (training or experiment) "
@@ -72,7 +74,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[typ
     r.set_defaults(handler=cmd_run)
 
 
-def add_sessions_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_sessions_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``sessions``."""
     ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
                      "haptic-study sessions --db study.db")
@@ -81,7 +83,8 @@ def add_sessions_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
     ss.set_defaults(handler=cmd_sessions)
 
 
-#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a margin.
+#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a
+#: margin.
 _SIM_BYTES_PER_TICK = 160
 
 
@@ -129,7 +132,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
 
-        def show(p):  # type: ignore[no-untyped-def]
+        def show(p):
             nonlocal bar
             if bar is None:
                 bar = ProgressBar(p.study_trials_total, "study", "trials", decimals=0)

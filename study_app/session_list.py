@@ -55,7 +55,8 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "status": status, "rig": rig, "seed": int(seed), "started_at": started, "ended_at": ended,
             "end_reason": reason or "", "trials_planned": planned, "trials_done": int(done),
             "trials_aborted": int(aborted), "successes": int(successes),
-            "first_trial": None if first is None else int(first) + 1, "last_trial": None if last is None else int(last) + 1,
+            "first_trial": None if first is None else int(first) + 1,
+            "last_trial": None if last is None else int(last) + 1,
             "writer": writers.get(int(sid), "") if status == "running" else "",
         })
     return out
@@ -90,7 +91,8 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
             str(s["started_at"])[:16].replace("T", " "),
         ))
     widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
-    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths)))
+    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w)
+                       for i, (c, w) in enumerate(zip(r, widths, strict=True)))
              for r in rows]
     n_participants = len({s["code"] for s in sessions})
     lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")

@@ -72,7 +72,7 @@ def run_scripted_sim(
                 prepare_realtime_thread()
                 try:
                     loop.run(max_ticks=total)
-                except BaseException as exc:  # noqa: BLE001 - re-raised in the caller's thread
+                except BaseException as exc:  # re-raised in the caller's thread
                     failed.append(exc)
 
             worker = threading.Thread(target=run, name="haptic-loop", daemon=True)
@@ -94,7 +94,7 @@ def run_scripted_sim(
 
 def _contacts(true_f: np.ndarray) -> list[tuple[int, int]]:
     on = np.flatnonzero(np.diff(np.concatenate(([0], (true_f > _CONTACT_N).astype(np.int8), [0]))))
-    return list(zip(on[::2].tolist(), on[1::2].tolist()))
+    return list(zip(on[::2].tolist(), on[1::2].tolist(), strict=True))
 
 
 def _summarise(
@@ -127,7 +127,8 @@ def _summarise(
         "contacts": len(contacts),
         "peak_true_force_n": max((p[0] for p in peaks), default=0.0),
         "peak_error_n": max((abs(p[1] - p[0]) for p in peaks), default=0.0),
-        "contact_rms_error_n": float(np.sqrt(np.mean((force - true_f)[in_contact] ** 2))) if in_contact.any() else math.nan,
+        "contact_rms_error_n": (float(np.sqrt(np.mean((force - true_f)[in_contact] ** 2))) if in_contact.any()
+                                else math.nan),
         "rest_rms_force_n": float(np.sqrt(np.mean(force[far] ** 2))) if far.any() else math.nan,
         "max_render_n": float(render.max()) if len(render) else 0.0,
         "faults": Fault(faults).describe(),
@@ -146,7 +147,8 @@ def format_summary(s: dict[str, Any]) -> str:
     c = s["calibration"]
     com = ", ".join(f"{v:.1f}" for v in c["com_mm"])
     lines = [
-        f"Simulated rig: seed {s['seed']}, {s['seconds']:g} s on the {s['clock']} clock, haptic feedback {s['haptics']}",
+        f"Simulated rig: seed {s['seed']}, {s['seconds']:g} s on the {s['clock']} clock, "
+        f"haptic feedback {s['haptics']}",
         f"Calibration ({c['model']} model, 24 poses): m = {c['mass_kg']:.4f} kg, c = ({com}) mm, "
         f"cond {c['condition_number']:.1f}, residual {1000 * c['rms_force_residual_n']:.1f} mN RMS, "
         f"mount {c['mount_angle_deg']:.2f}°",

@@ -50,7 +50,7 @@ def _reason(text: str) -> str:
     return text
 
 
-def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``withdraw``."""
     w = add_command(
         sub, "withdraw", "a participant withdraws: erase every trace of their data from the study database",
@@ -62,7 +62,8 @@ def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:  # type: ignor
         "the counts removed; the report lists it. Refused while a session is being written",
     )
     w.add_argument("--db", required=True, metavar="PATH", help="study database")
-    w.add_argument("--participant", required=True, type=participant_code_arg, metavar="CODE", help="the participant's code")
+    w.add_argument("--participant", required=True, type=participant_code_arg, metavar="CODE",
+                   help="the participant's code")
     w.add_argument("--reason", required=True, type=_reason, metavar="TEXT",
                    help=f"why, in a few words, stored with the record (no personal data; at most {REASON_MAX} "
                         "characters)")
@@ -179,11 +180,7 @@ def _reader_line(db_path: str, code: str, removed: bool) -> str:
 def _erase(db: Any, args: argparse.Namespace, finishing: Any) -> tuple[Any, bool]:
     """Under the study's lease: the participant's rows removed (unless ``finishing``), the file rewritten."""
     from protocol.storage import new_owner_token
-    from protocol.storage.withdrawal import (
-        erase_participant,
-        nobody_reading,
-        rewrite_file,
-    )
+    from protocol.storage.withdrawal import erase_participant, nobody_reading, rewrite_file
 
     owner = new_owner_token()
     db.acquire_lease("study", owner, command="haptic-study withdraw")  # no participant code in the lease

@@ -202,8 +202,8 @@ def import_cycles(graph: Iterable[Import]) -> list[str]:
     out = []
     for component in sorted(components):
         members = set(component)
-        joins = sorted({str(i) for i in graph if i.source in members and i.target in members and i.source != i.target
-                        or i.source == i.target and i.source in members})
+        joins = sorted({str(i) for i in graph if (i.source in members and i.target in members and i.source != i.target)
+                        or (i.source == i.target and i.source in members)})
         out.append(f"circle {' <-> '.join(component)}: " + "; ".join(joins))
     return out
 
@@ -279,7 +279,8 @@ def _tree_with(tmp_path: Path, files: Mapping[str, str], *, append: bool = False
 
 def test_a_lazy_import_circle_is_reported(tmp_path: Path) -> None:
     # the circle this project had: a command module importing the CLI's error from the CLI that imports it
-    graph = _tree_with(tmp_path, {"study_app/report_cmds.py": "\n\ndef _bad():\n    from study_app.cli import CliError\n"},
+    graph = _tree_with(tmp_path,
+                       {"study_app/report_cmds.py": "\n\ndef _bad():\n    from study_app.cli import CliError\n"},
                        append=True)
     cycles = _new_cycles(graph)
     assert len(cycles) == 1

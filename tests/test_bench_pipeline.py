@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -18,7 +19,7 @@ def samples() -> dict:
 def test_recorded_poses_update_at_the_robots_125_hz(samples) -> None:
     t = samples["pose_t_ns"]
     changes = [i for i in range(1, len(t)) if t[i] != t[i - 1]]
-    assert {b - a for a, b in zip(changes, changes[1:])} == {8}  # every 8th 1 ms tick
+    assert {b - a for a, b in itertools.pairwise(changes)} == {8}  # every 8th 1 ms tick
 
 
 def test_cost_drives_the_framework_as_the_loop_does_and_agrees_with_numpy(samples) -> None:

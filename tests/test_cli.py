@@ -36,12 +36,16 @@ def test_sim_text_summary_and_progress(capsys: pytest.CaptureFixture[str]) -> No
     [
         (["sim", "--seconds", "-1"], "--seconds = '-1': must be a number > 0 and ≤ 86400"),
         (["sim", "--seconds", "abc"], "--seconds = 'abc': must be a number > 0 and ≤ 86400"),
-        (["sim", "--seed", "-3"], "--seed = '-3': must be a whole number from 0 to 9223372036854775807 (the largest integer SQLite stores)"),
+        (["sim", "--seed", "-3"],
+         "--seed = '-3': must be a whole number from 0 to 9223372036854775807 (the largest integer SQLite stores)"),
         (["sim", "--clock", "wall"], "invalid choice: 'wall'"),
         (["bench", "nothing"], "invalid choice: 'nothing'"),
-        (["bench", "pipeline", "--loop-seconds", "-1"], "--loop-seconds = '-1': must be a number from 0 to 3600 (0 skips the loop)"),
-        (["report", "--db", "/nonexistent/study.db", "--out", "/nonexistent/out"], "the folder /nonexistent does not exist"),
-        (["bench", "pipeline", "--loop-seconds", "nan"], "--loop-seconds = 'nan': must be a number from 0 to 3600 (0 skips the loop)"),
+        (["bench", "pipeline", "--loop-seconds", "-1"],
+         "--loop-seconds = '-1': must be a number from 0 to 3600 (0 skips the loop)"),
+        (["report", "--db", "/nonexistent/study.db", "--out", "/nonexistent/out"],
+         "the folder /nonexistent does not exist"),
+        (["bench", "pipeline", "--loop-seconds", "nan"],
+         "--loop-seconds = 'nan': must be a number from 0 to 3600 (0 skips the loop)"),
     ],
 )
 def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:

@@ -224,7 +224,8 @@ def copy(study, tmp_path) -> Path:
 
 
 def test_a_withdrawal_during_a_running_session_is_refused(copy, capsys) -> None:
-    sid = _rows(copy, "SELECT session_id FROM sessions JOIN participants USING (participant_id) WHERE code = 'P03'")[0][0]
+    sid = _rows(copy,
+                "SELECT session_id FROM sessions JOIN participants USING (participant_id) WHERE code = 'P03'")[0][0]
     other = StudyDatabase(copy)  # a live writer of P03's session: this process, under another command's token
     try:
         other.acquire_lease(session_scope(sid), new_owner_token(), command="haptic-study gui")
@@ -254,7 +255,8 @@ def test_the_confirmation_names_what_will_go_and_needs_the_code(copy, capsys, mo
             return True
 
     monkeypatch.setattr("sys.stdin", Terminal("P2\n"))
-    _refused(capsys, copy, "withdraw", "--db", str(copy), "--participant", "P02", "--reason", "x", expect="not confirmed")
+    _refused(capsys, copy, "withdraw", "--db", str(copy), "--participant", "P02", "--reason", "x",
+             expect="not confirmed")
     monkeypatch.setattr("sys.stdin", Terminal("P02\n"))
     assert main(["withdraw", "--db", str(copy), "--participant", "P02", "--reason", "x"]) == 0
     out = capsys.readouterr().out

@@ -22,7 +22,7 @@ from typing import Any
 
 from pipeline.devices import DeviceError
 
-__all__ = ["BAUD", "JawFault", "JawStatus", "PROTOCOL_VERSION", "SerialJawActuator"]
+__all__ = ["BAUD", "PROTOCOL_VERSION", "JawFault", "JawStatus", "SerialJawActuator"]
 
 BAUD = 115200
 PROTOCOL_VERSION = 1
@@ -35,7 +35,7 @@ class JawFault(DeviceError):
 class JawStatus:
     """What the experimenter sees: position, limits, last limit hit, fault text."""
 
-    __slots__ = ("closed_us", "open_us", "pos_us", "at_limit", "fault", "button_moves")
+    __slots__ = ("at_limit", "button_moves", "closed_us", "fault", "open_us", "pos_us")
 
     def __init__(self) -> None:
         self.closed_us = 0
@@ -118,7 +118,7 @@ class SerialJawActuator:
         if ser is not None:
             try:
                 ser.close()
-            except Exception:  # noqa: BLE001 - the port may already be gone
+            except Exception:  # the port may already be gone
                 pass
         t = self._thread
         if t is not None and t.is_alive() and threading.current_thread() is not t:
@@ -193,7 +193,7 @@ class SerialJawActuator:
         while not self._stop.is_set():
             try:
                 chunk = ser.read(256)
-            except Exception as exc:  # noqa: BLE001 - SerialException/OSError: the port went away
+            except Exception as exc:  # SerialException/OSError: the port went away
                 if not self._stop.is_set():
                     self.status.fault = f"serial port {self.port} lost: {exc}"
                     self._replies.put("")  # wake a waiting command
@@ -233,14 +233,15 @@ class SerialJawActuator:
                 self._replies.get_nowait()
             try:
                 self._ser.write((text + "\n").encode("ascii"))
-            except Exception as exc:  # noqa: BLE001 - the port went away
+            except Exception as exc:  # the port went away
                 s.fault = f"serial port {self.port} lost: {exc}"
                 raise JawFault(f"jaw actuator: {s.fault}") from None
             deadline = time.monotonic() + self.reply_timeout_s
             try:
                 line = self._replies.get(timeout=max(0.0, deadline - time.monotonic()))
             except queue.Empty:
-                raise JawFault(f"jaw actuator on {self.port} did not answer {text!r} within {self.reply_timeout_s:g} s") from None
+                raise JawFault(f"jaw actuator on {self.port} did not answer {text!r} within "
+                               f"{self.reply_timeout_s:g} s") from None
             if not line:
                 raise JawFault(f"jaw actuator: {s.fault}")
             w = line.split()

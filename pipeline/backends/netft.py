@@ -42,15 +42,15 @@ __all__ = [
     "CMD_START_REALTIME",
     "CMD_STOP",
     "DEFAULT_RANGE",
+    "RDT_HEADER",
+    "RDT_PORT",
+    "RECORD",
+    "REQUEST",
     "NetFTCalibration",
     "NetFTError",
     "NetFTForceSensor",
     "NetFTStats",
-    "RDT_HEADER",
-    "RDT_PORT",
-    "RECORD",
     "RdtSequencer",
-    "REQUEST",
     "force_unit_to_n",
     "parse_netft_xml",
     "read_netft_calibration",
@@ -74,10 +74,13 @@ _SEQ_HALF = 1 << 31
 _RECENT = 256  # rdt sequences remembered to tell a duplicate from a late record
 
 # Net F/T unit names (scfgfu / scfgtu), normalised to lower case without spaces.
-_FORCE_UNITS = {"lbf": 4.4482216152605, "n": 1.0, "klbf": 4448.2216152605, "kn": 1000.0, "kgf": 9.80665, "gf": 0.00980665, "g": 0.00980665}
+_FORCE_UNITS = {"lbf": 4.4482216152605, "n": 1.0, "klbf": 4448.2216152605, "kn": 1000.0, "kgf": 9.80665,
+                "gf": 0.00980665, "g": 0.00980665}
 _TORQUE_UNITS = {
-    "lbf-in": 0.1129848290276167, "lbfin": 0.1129848290276167, "lbf-ft": 1.3558179483314004, "lbfft": 1.3558179483314004,
-    "nm": 1.0, "n-m": 1.0, "nmm": 0.001, "n-mm": 0.001, "kgf-cm": 0.0980665, "kgfcm": 0.0980665, "knm": 1000.0, "kn-m": 1000.0,
+    "lbf-in": 0.1129848290276167, "lbfin": 0.1129848290276167, "lbf-ft": 1.3558179483314004,
+    "lbfft": 1.3558179483314004,
+    "nm": 1.0, "n-m": 1.0, "nmm": 0.001, "n-mm": 0.001, "kgf-cm": 0.0980665, "kgfcm": 0.0980665, "knm": 1000.0,
+    "kn-m": 1000.0,
 }
 
 
@@ -208,10 +211,11 @@ def read_netft_calibration(host: str, http_port: int = 80, timeout_s: float = 2.
     url = f"http://{host}:{http_port}/netftapi2.xml"
     hint = "set [sensor] counts_per_force and counts_per_torque in hardware.toml to skip it"
     try:
-        with urllib.request.urlopen(url, timeout=timeout_s) as resp:  # noqa: S310 - a lab device on the LAN
+        with urllib.request.urlopen(url, timeout=timeout_s) as resp:  # a lab device on the LAN
             body = resp.read(1 << 20)
     except urllib.error.HTTPError as exc:
-        raise NetFTError(f"cannot read the Net F/T calibration from {url}: HTTP {exc.code} {exc.reason}; {hint}") from None
+        raise NetFTError(f"cannot read the Net F/T calibration from {url}: HTTP {exc.code} {exc.reason}; "
+                         f"{hint}") from None
     except (urllib.error.URLError, OSError) as exc:
         reason = getattr(exc, "reason", exc)
         raise NetFTError(f"cannot read the Net F/T calibration from {url}: {reason}; {hint}") from None
@@ -236,7 +240,7 @@ class NetFTStats:
 
     def as_dict(self) -> dict[str, int | str]:
         """Plain data for JSON output."""
-        return {k: getattr(self, k) for k in self.__slots__}  # type: ignore[attr-defined]
+        return {k: getattr(self, k) for k in self.__slots__}
 
 
 class RdtSequencer:
@@ -383,7 +387,7 @@ class NetFTForceSensor:
     @property
     def range_n(self) -> tuple[float, float, float, float, float, float]:
         """Full-scale range per channel (N, N, N, N·m, N·m, N·m)."""
-        return self._range  # type: ignore[return-value]
+        return self._range  # type: ignore[return-value]  # six items, counted where it is set
 
     def read_wrench(self) -> WrenchSample:
         """The newest fresh record (never blocks)."""
@@ -435,7 +439,7 @@ class NetFTForceSensor:
         while not self._stop.is_set():
             try:
                 data = sock.recv(65536)
-            except socket.timeout:
+            except TimeoutError:
                 self.stats.timeouts += 1
                 continue
             except OSError as exc:

@@ -35,18 +35,22 @@ from pipeline.clock import Clock, MonotonicClock
 from pipeline.devices import DeviceError, HapticState
 from pipeline.frames import Vec3
 from pipeline.touch_output import (
-    DEFAULT_COMMAND_TIMEOUT_S, DEFAULT_THERMAL_BUDGET_N2S, HD_WARM_MOTORS, TouchOutput, TouchSpec,
+    DEFAULT_COMMAND_TIMEOUT_S,
+    DEFAULT_THERMAL_BUDGET_N2S,
+    HD_WARM_MOTORS,
+    TouchOutput,
+    TouchSpec,
 )
 
 __all__ = [
-    "HDApi",
     "HD_DEVICE_FAULT",
     "HD_FORCE_OUTPUT",
     "HD_MAX_FORCE_CLAMPING",
     "HD_NOMINAL_MAX_CONTINUOUS_FORCE",
     "HD_NOMINAL_MAX_FORCE",
-    "PyOpenHapticsApi",
     "TOUCH_INSTALL_HINT",
+    "HDApi",
+    "PyOpenHapticsApi",
     "TouchHapticDevice",
     "load_pyopenhaptics",
 ]
@@ -118,7 +122,7 @@ class HDApi(Protocol):
 def load_pyopenhaptics() -> Any:
     """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot."""
     try:
-        import pyOpenHaptics.hd as hd  # noqa: F401 - loads libHD.so
+        import pyOpenHaptics.hd as hd  # loads libHD.so
         import pyOpenHaptics.hd_callback as hd_callback
         import pyOpenHaptics.hd_define as hd_define
     except ImportError as exc:

@@ -66,7 +66,7 @@ def ur3_flange_pose(q_rad: Sequence[float]) -> tuple[Vec3, Mat3]:
         raise ValueError(f"q_rad = {list(q_rad)!r}: a UR3 has 6 joints")
     rot: Mat3 = IDENTITY
     p = (0.0, 0.0, 0.0)
-    for (a, d, alpha), th in zip(UR3_DH, q_rad):
+    for (a, d, alpha), th in zip(UR3_DH, q_rad, strict=True):
         ct, st = math.cos(th), math.sin(th)
         ca, sa = math.cos(alpha), math.sin(alpha)
         # rotation and translation of one DH link
@@ -98,10 +98,11 @@ def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
     try:
         with socket.create_connection((host, port), timeout=timeout_s):
             return None
-    except socket.timeout:
+    except TimeoutError:
         return f"no answer within {timeout_s:g} s"
     except (OSError, UnicodeError) as exc:
-        return exc.strerror or str(exc)
+        # a UnicodeError (a host name IDNA cannot encode) has no strerror
+        return (exc.strerror if isinstance(exc, OSError) else None) or str(exc)
 
 
 def _default_factory(host: str, frequency_hz: float) -> Any:
@@ -159,7 +160,7 @@ class UrRtdeRobot:
     ) -> None:
         check_rtde_frequency(frequency_hz)
         self.host = host
-        self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]
+        self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]  # three items: mypy cannot count a generator
         self.port = port
         self.frequency_hz = float(frequency_hz)
         self.clock: Clock = clock or MonotonicClock()
@@ -202,7 +203,7 @@ class UrRtdeRobot:
         if rtde is not None:
             try:
                 rtde.disconnect()
-            except Exception:  # noqa: BLE001 - the link may already be gone
+            except Exception:  # the link may already be gone
                 pass
         self.state = "closed"
 
@@ -252,7 +253,7 @@ class UrRtdeRobot:
             try:
                 connected = rtde is not None and rtde.isConnected()
                 ts = rtde.getTimestamp() if connected else None
-            except Exception as exc:  # noqa: BLE001 - any failure of the link is a lost link
+            except Exception as exc:  # any failure of the link is a lost link
                 connected, ts = False, None
                 self.last_error = str(exc)
             if connected and ts is not None and ts != last_ts:
@@ -280,7 +281,7 @@ class UrRtdeRobot:
         try:
             rot = rotvec_to_matrix(pose[3], pose[4], pose[5])
         except (ValueError, OverflowError):
-            rot = (math.nan,) * 9  # type: ignore[assignment]
+            rot = (math.nan,) * 9
         self.q_rad = tuple(q) if len(q) == 6 else (math.nan,) * 6
         x, y, z = pose[0], pose[1], pose[2]
         cx, cy, cz = self.tcp_correction_m
@@ -309,7 +310,7 @@ class UrRtdeRobot:
                         self._rtde = self._factory(self.host, self.frequency_hz)
                     self.reconnects += 1
                     return True
-                except Exception as exc:  # noqa: BLE001 - keep trying; the state says why
+                except Exception as exc:  # keep trying; the state says why
                     why = str(exc)
             self.last_error = f"reconnect to {self.host}: {why}"
             backoff = min(self.max_backoff_s, backoff * 2.0)

@@ -126,7 +126,7 @@ class UrRtdeServo:
         def _run() -> None:
             try:
                 box["ctrl"] = factory(host, frequency_hz)
-            except Exception as exc:  # noqa: BLE001 - reported to the caller below
+            except Exception as exc:  # reported to the caller below
                 box["error"] = exc
             done.set()
 
@@ -180,7 +180,7 @@ class UrRtdeServo:
         for call in (lambda: ctrl.servoStop(self.stop_deceleration_m_s2), ctrl.stopScript, ctrl.disconnect):
             try:
                 call()
-            except Exception:  # noqa: BLE001 - the link may already be gone; keep releasing
+            except Exception:  # the link may already be gone; keep releasing
                 pass
 
     # -- worker -------------------------------------------------------------------------------
@@ -190,7 +190,8 @@ class UrRtdeServo:
         while True:
             with self._cond:
                 self._cond.wait_for(
-                    lambda: self._closing or self._stop_requested or self._target_seq != sent_seq,
+                    # wait_for calls it at once, in this iteration
+                    lambda: self._closing or self._stop_requested or self._target_seq != sent_seq,  # noqa: B023
                     timeout=self.period_s,
                 )
                 if self._closing:
@@ -216,14 +217,15 @@ class UrRtdeServo:
                     ok = ctrl.servoL(list(target), 0.0, 0.0, self.period_s, self.lookahead_s, self.gain)
                     self.servo_commands += 1
                     if ok is False:
-                        self._error = "servoL refused the target (protective stop, or the control script is not running)"
+                        self._error = ("servoL refused the target (protective stop, or the control script is not "
+                                       "running)")
                         self._do_stop(ctrl, clears_error=False)
                     else:
                         self.servoing = True
                 elif self.servoing and now - target_ns > timeout_ns:
                     self._error = f"no teleoperation target for {(now - target_ns) * 1e-6:.0f} ms: stopped the robot"
                     self._do_stop(ctrl, clears_error=False)
-            except Exception as exc:  # noqa: BLE001 - a lost link or a controller error: stop and report
+            except Exception as exc:  # a lost link or a controller error: stop and report
                 self._error = f"RTDE control: {exc}"
                 self.servoing = False
 

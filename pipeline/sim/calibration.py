@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from pipeline.clock import Clock
+from pipeline.frames import Mat3, mat_mul, transpose
 from pipeline.payload_compensator import PayloadCalibration
 from pipeline.payload_identification import CalibrationPose, identify_payload, recommended_pose_set
-from pipeline.frames import Mat3, mat_mul, transpose
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN
@@ -30,7 +30,8 @@ def calibration_duration_ns(n_poses: int, *, samples_per_pose: int = 200, settle
     return n_poses * (_settle_ticks(settle_s) + samples_per_pose) * 1_000_000
 
 
-def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "", period_ns: int = 1_000_000) -> CalibrationPose:
+def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "",
+                 period_ns: int = 1_000_000) -> CalibrationPose:
     """Average ``samples`` ticks of wrench at the current pose into a :class:`CalibrationPose`.
 
     The orientation is the one the robot *reports*, combined with the
@@ -47,7 +48,7 @@ def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "", perio
             acc[i] += w[1 + i]
     pose = rig.robot.read_pose()
     rot_base_sensor = mat_mul(pose.rot_base_tip, rig.config.rot_tip_sensor)
-    return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]
+    return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]  # six items: mypy cannot count a generator
 
 
 def auto_calibrate(

@@ -17,6 +17,7 @@ The payload/bias step is :func:`pipeline.sim.calibration.auto_calibrate`.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from pipeline.loop_messages import AllowBiasRefinement, SetHaptics
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.tcp import PivotPose
+
+if TYPE_CHECKING:
+    from pipeline.ring import RingBuffer
 
 __all__ = ["PUSH_N", "pivot_poses", "push_axes"]
 
@@ -45,12 +49,12 @@ def pivot_poses(rig: SimRig, orientations: Sequence[Mat3], seed: int = 0) -> lis
         seat = cfg.pivot_m + rng.normal(0.0, cfg.pivot_noise_m, 3)
         tip_base = mat_vec(rot, t)
         flange = seat - np.asarray(tip_base) + rng.normal(0.0, cfg.pivot_noise_m, 3)
-        out.append(PivotPose(rot, tuple(float(v) for v in flange), f"O{k + 1}"))  # type: ignore[arg-type]
+        out.append(PivotPose(rot, tuple(float(v) for v in flange), f"O{k + 1}"))  # type: ignore[arg-type]  # three items: mypy cannot count a generator
     return out
 
 
 def push_axes(
-    rig: SimRig, loop: HapticLoop, ring: object, axes: Sequence[str] = AXES, *, push_n: float = PUSH_N,
+    rig: SimRig, loop: HapticLoop, ring: RingBuffer, axes: Sequence[str] = AXES, *, push_n: float = PUSH_N,
     progress: Callable[[str], None] | None = None,
 ) -> FrameCheck:
     """Push the free tip along each axis with the loop running (feedback off) and check the directions.
@@ -70,15 +74,15 @@ def push_axes(
             if progress is not None:
                 progress(axis)
             e = np.asarray(axis_vector(axis), dtype=float)
-            cursor = ring.write_count  # type: ignore[attr-defined]
+            cursor = ring.write_count
             n_ramp, n_hold = int(_RAMP_S * 1000), int(_HOLD_S * 1000)
             profile = np.concatenate([np.linspace(0.0, 1.0, n_ramp), np.ones(n_hold), np.linspace(1.0, 0.0, n_ramp)])
             for k in profile:
-                rig.push_base_n = tuple(float(v) for v in push_n * k * e)  # type: ignore[assignment]
+                rig.push_base_n = tuple(float(v) for v in push_n * k * e)  # type: ignore[assignment]  # three items: mypy cannot count a generator
                 loop.run_ticks(1)
             rig.push_base_n = (0.0, 0.0, 0.0)
             loop.run_ticks(int(_REST_S * 1000))
-            rows = ring.read_since(cursor).rows  # type: ignore[attr-defined]
+            rows = ring.read_since(cursor).rows
             base = np.stack([rows["base_fx"], rows["base_fy"], rows["base_fz"]], axis=1)
             scaled = np.stack([rows["scaled_fx"], rows["scaled_fy"], rows["scaled_fz"]], axis=1)
             results.append(check_axis(axis, base, scaled, fw.config.rot_haptic_base))

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, Final
 
-__all__ = ["BAD_STATUS_WORD", "DEVICE_FAULT_KINDS", "DEFAULT_DURATION_S", "FaultInjector", "SimFault", "latch_delay_s"]
+__all__ = ["BAD_STATUS_WORD", "DEFAULT_DURATION_S", "DEVICE_FAULT_KINDS", "FaultInjector", "SimFault", "latch_delay_s"]
 
 #: The simulated rig's fault kinds (the names used on the command line).
 DEVICE_FAULT_KINDS: Final = ("sensor-stall", "nan-burst", "bad-status", "stale-pose", "device-error")
@@ -89,7 +89,8 @@ class FaultInjector:
         self._scheduled.sort(key=lambda f: f.at_ns)
 
     def cancel(self, kind: str, at_ns: int, rig: Any = None) -> bool:
-        """Withdraw a scheduled fault that has not started, or (given the ``rig``) end one that has; True if there was one.
+        """Withdraw a scheduled fault that has not started, or (given the ``rig``) end one that has; True if there was
+        one.
 
         Ending a fault early switches its device back at once: the fault of a trial that ended before
         the watchdog latched it does not go on into the pause or the next trial.

@@ -57,7 +57,7 @@ class ArmParams:
 class CompliantArm:
     """Integrates the arm along y with semi-implicit Euler (stable at 1 kHz: ω ≈ 45 rad/s)."""
 
-    __slots__ = ("params", "y_m", "v_m_s")
+    __slots__ = ("params", "v_m_s", "y_m")
 
     def __init__(self, params: ArmParams | None = None) -> None:
         self.params = params or ArmParams()

@@ -274,10 +274,7 @@ class SimulatedParticipant:
         if t >= self._next:
             self._event(t)
         # the current plan
-        if t >= self._p_end:
-            y = self._p_y1
-        else:
-            y = min_jerk(t, self._p_t0, self._p_dur, self._p_y0, self._p_y1)
+        y = self._p_y1 if t >= self._p_end else min_jerk(t, self._p_t0, self._p_dur, self._p_y0, self._p_y1)
         if self._drift_on:
             if t >= self._d_t1:
                 self._drift_advance(t)
@@ -286,7 +283,7 @@ class SimulatedParticipant:
             y = -0.030
         elif y > 0.005:
             y = 0.005
-        elif not (y == y):  # pragma: no cover - the plan is built from finite values only
+        elif y != y:  # pragma: no cover - the plan is built from finite values only
             y = self._out
         self._out = y
         return y
@@ -296,7 +293,7 @@ class SimulatedParticipant:
         """Start a minimum-jerk move from the current plan output (without drift) to ``y1``."""
         y0 = self._plan_value(t0)
         lo, hi = SAFE_Y_RANGE_M
-        if not (y1 == y1):
+        if y1 != y1:
             y1 = y0
         y1 = lo if y1 < lo else (hi if y1 > hi else y1)
         self._p_t0, self._p_dur, self._p_y0, self._p_y1 = t0, dur, y0, y1
@@ -333,7 +330,7 @@ class SimulatedParticipant:
         by the jump, as if the clock had been re-based.
         """
         last = self._t
-        if not (last == last):  # first observation
+        if last != last:  # first observation
             self._t = t if (t - t == 0.0 and abs(t) < 1e12) else 0.0
             return self._t
         if not (-1e6 <= dt <= 1e6):

@@ -114,7 +114,8 @@ class SimRig:
         self.sim_time_s = 0.0
         self._truth: Vec3 = (0.0, 0.0, 0.0)
         self.last_observation = HandObservation(0.0, 0.0, 0.0, 0.0, cfg.tip_home_m[2] - cfg.surface_z_m)
-        #: App-side teleoperation (a :class:`pipeline.teleop.TeleopDriver`); None: the robot follows the stylus directly.
+        #: App-side teleoperation (a :class:`pipeline.teleop.TeleopDriver`); None: the robot follows the stylus
+        #: directly.
         self.teleop: Any = None
         #: Fault rehearsal: faults scheduled on the rig's clock (:meth:`inject_fault`).
         self.faults = FaultInjector()
@@ -144,7 +145,8 @@ class SimRig:
         robot = self.robot
         tip_z = robot.position_m[2]
         depth = cfg.surface_z_m - tip_z
-        obs = HandObservation(self.sim_time_s, self.arm.y_m, felt, depth if depth > 0 else 0.0, -depth if depth < 0 else 0.0)
+        obs = HandObservation(self.sim_time_s, self.arm.y_m, felt, depth if depth > 0 else 0.0,
+                              -depth if depth < 0 else 0.0)
         self.last_observation = obs
         y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
         touch.stylus_m = (0.0, y, 0.0)
@@ -174,7 +176,8 @@ class SimRig:
         return self._truth
 
     def on_faults(self, faults: int) -> None:
-        """The loop's latched faults changed: an attached teleoperation driver stops the arm (see ``pipeline.rig.Rig``)."""
+        """The loop's latched faults changed: an attached teleoperation driver stops the arm (see
+        ``pipeline.rig.Rig``)."""
         if self.teleop is not None:
             self.teleop.on_faults(faults)
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pipeline.devices import PoseSample
 from pipeline.frames import Mat3, Vec3
 
-__all__ = ["RobotParams", "SimRobot", "TOOL_DOWN"]
+__all__ = ["TOOL_DOWN", "RobotParams", "SimRobot"]
 
 #: Tool pointing straight down: tip z axis along base −z (rotation π about base x).
 TOOL_DOWN: Mat3 = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
@@ -53,11 +53,11 @@ class SimRobot:
         self._cycle_ns = int(round(1e9 / self.params.controller_rate_hz))
         self.position_m: list[float] = list(home_m)
         self.orientation: Mat3 = orientation
-        self._target: Vec3 = tuple(home_m)  # type: ignore[assignment]
+        self._target: Vec3 = tuple(home_m)  # type: ignore[assignment]  # a Vec3: mypy cannot count tuple()
         self._held_target: Vec3 = self._target
         self._pending_orientation: Mat3 = orientation
         self._next_cycle_ns: int | None = None
-        self._pose = PoseSample(0, tuple(home_m), orientation, 0.0)  # type: ignore[arg-type]
+        self._pose = PoseSample(0, tuple(home_m), orientation, 0.0)  # type: ignore[arg-type]  # as above
         self.frozen = False
         self._stop_requested = False
         #: True between a ``servo_tcp`` and the controller cycle that carries out a ``stop_servo``.
@@ -130,7 +130,7 @@ class SimRobot:
     def teleport(self, position_m: Vec3) -> None:
         """Place the tool at ``position_m`` at rest (set-up and calibration, not teleoperation)."""
         self.position_m = list(position_m)
-        self._target = self._held_target = tuple(position_m)  # type: ignore[assignment]
+        self._target = self._held_target = tuple(position_m)  # type: ignore[assignment]  # a Vec3: mypy cannot count tuple()
 
     def read_pose(self) -> PoseSample:
         """The pose published at the last controller cycle."""

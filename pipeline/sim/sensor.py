@@ -13,9 +13,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from statistics import NormalDist
 
 import numpy as np
-from statistics import NormalDist
 
 from pipeline.devices import WrenchSample
 from pipeline.frames import Mat3, Vec3, cross, mat_vec
@@ -134,7 +134,7 @@ class SimForceSensor:
         drift scaled by 0.01 m (science.md §1.5).
         """
         w = 1.0 - math.exp(-t_s / self.params.drift_tau_s)
-        return tuple(b + d * w for b, d in zip(self._bias0, self._drift))
+        return tuple(b + d * w for b, d in zip(self._bias0, self._drift, strict=True))
 
     def current_bias(self, t_s: float) -> tuple[float, ...]:
         """Full bias at ``t_s`` including the random walk so far (ground truth for tests)."""
@@ -188,7 +188,7 @@ class SimForceSensor:
         ):
             # saturated gauges read full scale and the box flags it
             status |= SATURATION_STATUS
-            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip((v0, v1, v2, v3, v4, v5), r))
+            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip((v0, v1, v2, v3, v4, v5), r, strict=True))
         cpf, cpt = p.counts_per_force, p.counts_per_torque
         # integer counts on the wire
         vals = [

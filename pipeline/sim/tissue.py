@@ -56,7 +56,7 @@ class TissueParams:
         """Static indentation (m) that produces ``force_n`` (inverse of ``k δⁿ``)."""
         if force_n <= 0:
             return 0.0
-        return (force_n / self.stiffness_n_per_m_pow) ** (1.0 / self.exponent)
+        return float((force_n / self.stiffness_n_per_m_pow) ** (1.0 / self.exponent))
 
     def static_force(self, depth_m: float) -> float:
         """Elastic force ``k δⁿ`` at rest, N."""
@@ -66,7 +66,7 @@ class TissueParams:
 class HuntCrossleyTissue:
     """Stateful tissue: call :meth:`step` with the tip penetration each tick."""
 
-    __slots__ = ("params", "_prev_depth", "_maxwell_n", "force_n")
+    __slots__ = ("_maxwell_n", "_prev_depth", "force_n", "params")
 
     def __init__(self, params: TissueParams | None = None) -> None:
         self.params = params or TissueParams()

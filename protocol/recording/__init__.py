@@ -48,13 +48,7 @@ from protocol.recording.codec import (
     kept_records,
 )
 from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
-from protocol.recording.reading import (
-    SegmentData,
-    marked_records,
-    read_segment,
-    read_ticks,
-    segments_of,
-)
+from protocol.recording.reading import SegmentData, marked_records, read_segment, read_ticks, segments_of
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Column",

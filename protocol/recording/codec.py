@@ -264,7 +264,8 @@ def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarr
     events = [(int(t), str(k), p) for t, k, p in header["events"]]
     if out[2]:
         # back among the events, after a tick's others (a stable sort; the device limit commutes with them)
-        events += [(t, "device_limit", v) for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist())]
+        events += [(t, "device_limit", v)
+                   for t, v in zip(out[2]["tick"].tolist(), out[2]["limit_n"].tolist(), strict=True)]
         events.sort(key=lambda e: e[0])
     return out[0], out[1], events
 
@@ -296,7 +297,7 @@ def _encode_fast(records: np.ndarray | Mapping[str, np.ndarray], poses: Mapping[
     if any(a.dtype.itemsize != 8 for a in pose):
         raise ValueError("recorded columns are 8-byte values")
     packed = zlib.compress(_stack_records(recs) + _stack8(pose, m), _FAST_LEVEL)
-    dtypes = [recs.dtype.fields[c.name][0].str for c in COLUMNS] + [a.dtype.str for a in pose]  # type: ignore[index]
+    dtypes = [recs.dtype.fields[c.name][0].str for c in COLUMNS] + [a.dtype.str for a in pose]  # type: ignore[index]  # the records are of the structured TICK_DTYPE
     header = {"n": n, "m": m, "dtypes": dtypes, "events": [list(e) for e in events]}
     head = json.dumps(header, separators=(",", ":")).encode()
     return _FAST + struct.pack("<I", len(head)) + head + packed
@@ -310,8 +311,8 @@ def _decode_fast(blob: bytes, names: Iterable[str] | None,
     n, m, dtypes = header["n"], header["m"], header["dtypes"]
     k = len(dtypes) - len(POSE_COLUMNS)  # the columns of the code that wrote it: a prefix of ours (appended since)
     split = n * 8 * k
-    cols = dict(zip((c.name for c in COLUMNS[:k]), _unstack8(raw[:split], dtypes[:k], n)))
-    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[k:], m)))
+    cols = dict(zip((c.name for c in COLUMNS[:k]), _unstack8(raw[:split], dtypes[:k], n), strict=True))
+    poses = dict(zip((c.name for c in POSE_COLUMNS), _unstack8(raw[split:], dtypes[k:], m), strict=True))
     _fill_missing(cols, _MISSING.keys(), n)
     if names is not None:
         cols = {k: v for k, v in cols.items() if k in set(names)}
@@ -465,7 +466,9 @@ def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...
     return out
 
 
-def join_blocks(blobs: Iterable[bytes]) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
+def join_blocks(
+    blobs: Iterable[bytes],
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
     """Decode and concatenate a segment's blocks, in order."""
     return join_decoded(decode_block(blob) for blob in blobs)
 

@@ -67,7 +67,7 @@ class QtEngineBridge(QObject):
     def _run(self, gen: int, client: EngineClient) -> None:
         try:
             client.start()
-        except Exception as exc:  # noqa: BLE001 - shown to the experimenter
+        except Exception as exc:  # shown to the experimenter
             self._raw.emit(gen, m.CommandRefused("connect", f"cannot start the study engine: {exc}"))
             self._raw.emit(gen, m.EngineStopped(f"cannot start the study engine: {exc}", {}))
             return

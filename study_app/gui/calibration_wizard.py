@@ -1,6 +1,8 @@
-"""The calibration wizard: the commissioning chain in order -- TCP, payload/bias, frames and signs -- and what is on record.
+"""The calibration wizard: the commissioning chain in order -- TCP, payload/bias, frames and signs -- and what is on
+record.
 
-Layout and wiring only: the TCP and frame steps and the status are :class:`study_app.models.commissioning.CommissioningModel`,
+Layout and wiring only: the TCP and frame steps and the status are
+:class:`study_app.models.commissioning.CommissioningModel`,
 the payload step :class:`study_app.models.calibration.CalibrationModel` (and, on the real rig,
 :class:`study_app.models.real_calibration.RealCalibrationModel`).
 """
@@ -9,8 +11,20 @@ from __future__ import annotations
 
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
-    QAbstractItemView, QComboBox, QFormLayout, QHBoxLayout, QHeaderView, QLabel, QPlainTextEdit, QProgressBar,
-    QPushButton, QTabWidget, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView,
+    QComboBox,
+    QFormLayout,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QPlainTextEdit,
+    QProgressBar,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QTabWidget,
+    QVBoxLayout,
+    QWidget,
 )
 
 from study_app import messages as m
@@ -53,9 +67,10 @@ class ChainStatus(QWidget):
 
 
 class TcpPage(QWidget):
-    """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real one)."""
+    """Step 1: the TCP pivot calibration (automatic on the simulated rig, orientation by orientation on the real
+    one)."""
 
-    def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: CommissioningModel, on_run, on_compute, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.instruction = QLabel()
@@ -68,7 +83,8 @@ class TcpPage(QWidget):
         self.verdict = QLabel()
         self.verdict.setWordWrap(True)
         self.orientations = QTableWidget(0, 3)
-        self.orientations.setHorizontalHeaderLabels(["Orientation", "Flange position (mm)", "Moved while recording (mm)"])
+        self.orientations.setHorizontalHeaderLabels(["Orientation", "Flange position (mm)",
+                                                     "Moved while recording (mm)"])
         self.orientations.verticalHeader().setVisible(False)
         self.orientations.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.orientations.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
@@ -98,8 +114,8 @@ class TcpPage(QWidget):
         self.instruction.setText(mdl.tcp_instruction())
         for w in (self.pose_set, self.pose_label):
             w.setVisible(not real)
-        for w in (self.compute_button, self.clear_button, self.orientations):
-            w.setVisible(real)
+        for b in (self.compute_button, self.clear_button, self.orientations):
+            b.setVisible(real)
         self.run_button.setText("Record orientation" if real else "Run TCP calibration")
         self.run_button.setEnabled(mdl.tcp_state not in ("running", "recording"))
         why = mdl.compute_refusal()
@@ -117,7 +133,7 @@ class TcpPage(QWidget):
 class FramesPage(QWidget):
     """Step 3: the frame and sign check (automatic on the simulated rig, one push per axis on the real one)."""
 
-    def __init__(self, model: CommissioningModel, on_check, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: CommissioningModel, on_check, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.instruction = QLabel()
@@ -157,11 +173,12 @@ class FramesPage(QWidget):
 
 
 class RealPosePanel(QWidget):
-    """Real rig: one target pose at a time, Record pose, the recorded poses, Identify (layout of :class:`RealCalibrationModel`)."""
+    """Real rig: one target pose at a time, Record pose, the recorded poses, Identify (layout of
+    :class:`RealCalibrationModel`)."""
 
     COLUMNS = ("Pose", "Off target (°)", "|F| (N)", "Force noise (N)")
 
-    def __init__(self, model: RealCalibrationModel, on_record, on_identify, parent: QWidget | None = None) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, model: RealCalibrationModel, on_record, on_identify, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
         self.pose_set = QComboBox()
@@ -240,7 +257,7 @@ class CalibrationWizard(QWidget):
 
     hidden = Signal()
 
-    def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,  # type: ignore[no-untyped-def]
+    def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,
                  parent: QWidget | None = None, chain: CommissioningModel | None = None, on_tcp=None,
                  on_compute_tcp=None, on_frames=None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
@@ -321,7 +338,7 @@ class CalibrationWizard(QWidget):
             self.blocked.setText(text)
             self.blocked.setVisible(bool(text))
 
-    def hideEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def hideEvent(self, event) -> None:  # Qt's name
         super().hideEvent(event)
         self.hidden.emit()
 

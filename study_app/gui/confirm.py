@@ -35,7 +35,7 @@ class Confirmation:
         Called when it was closed that way (to say so where the experimenter looks).
     """
 
-    def __init__(self, parent: QWidget, title: str, text: str, on_yes: Callable[[], None], *,
+    def __init__(self, parent: QWidget, title: str, text: str, on_yes: Callable[[], object], *,
                  moot_when: Callable[[object], bool] | None = None, on_moot: Callable[[], None] | None = None) -> None:
         self.on_yes = on_yes
         self.moot_when = moot_when

@@ -34,7 +34,8 @@ LOWER_CHOICES: dict[str, tuple[tuple[str, ...], tuple[object, ...], tuple[tuple[
     "raw sensor |F| (tool weight included)": (
         ("raw_n",), (RAW_PEN,), ((RAW_COLOUR, "raw sensor |F| (the tool's weight included)"),), "raw |F| (N)"),
     "compensated x, y, z (sensor frame)": (
-        COMP_SERIES, AXIS_PENS, tuple(zip(AXIS_COLOURS, ("compensated Fx", "Fy", "Fz (sensor frame)"))), "F (N)"),
+        COMP_SERIES, AXIS_PENS, tuple(zip(AXIS_COLOURS, ("compensated Fx", "Fy", "Fz (sensor frame)"), strict=True)),
+        "F (N)"),
     "none": ((), (), (), ""),
 }
 BAND_RGB = (0, 114, 178)
@@ -131,7 +132,7 @@ class QtForcePlots(QWidget):
         for c in self.lower_curves.values():
             self.lower_plot.removeItem(c)
         names, pens, legend, axis = LOWER_CHOICES[choice]
-        self.lower_curves = {n: self.lower_plot.plot(pen=pen) for n, pen in zip(names, pens)}
+        self.lower_curves = {n: self.lower_plot.plot(pen=pen) for n, pen in zip(names, pens, strict=True)}
         self.lower_plot.setVisible(bool(names))
         self.lower_plot.setMaximumHeight(10_000 if names else 0)
         self.lower_plot.setLabel("left", axis)

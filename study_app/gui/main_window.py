@@ -8,15 +8,27 @@ from collections.abc import Callable
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
-    QApplication, QFrame, QGroupBox, QHBoxLayout, QInputDialog, QLabel, QMainWindow, QPushButton, QScrollArea, QSplitter,
-    QTabWidget, QToolButton, QVBoxLayout, QWidget,
+    QApplication,
+    QFrame,
+    QGroupBox,
+    QHBoxLayout,
+    QInputDialog,
+    QLabel,
+    QMainWindow,
+    QPushButton,
+    QScrollArea,
+    QSplitter,
+    QTabWidget,
+    QToolButton,
+    QVBoxLayout,
+    QWidget,
 )
 
 from study_app import messages as m
 from study_app.engine_client import EngineClient
 from study_app.engine_setup import HostConfig
-from study_app.gui.bridge import QtEngineBridge
 from study_app.gui import placement
+from study_app.gui.bridge import QtEngineBridge
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
 from study_app.gui.confirm import Confirmation
 from study_app.gui.force_plots import QtForcePlots
@@ -26,7 +38,13 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import (
-    LEVEL_COLOURS, ElidedLabel, QtCueWait, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable,
+    LEVEL_COLOURS,
+    ElidedLabel,
+    QtCueWait,
+    QtHealthPanel,
+    QtProgress,
+    QtSetupPanel,
+    QtTrialTable,
 )
 from study_app.models.app import CALIBRATION_COMMANDS, AppModel
 
@@ -314,7 +332,7 @@ class ExperimenterWindow(QMainWindow):
             self.plots.refresh()
 
     # -- questions -----------------------------------------------------------------------------------------
-    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], None], *,
+    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], object], *,
             moot_when: Callable[[object], bool] | None = None, moot_text: str = "") -> None:
         """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event."""
         if self.confirm is not None:
@@ -526,7 +544,7 @@ class ExperimenterWindow(QMainWindow):
         self.model.setup.update(
             db_path=db_path or str(s.value("setup/db_path", "") or ""),
             protocol_path=str(s.value("setup/protocol_path", "") or ""),
-            seed=int(s.value("setup/seed", 0) or 0),
+            seed=int(s.value("setup/seed", 0) or 0),  # type: ignore[call-overload]  # QSettings.value is typed object
         )
 
     def _save_settings(self) -> None:
@@ -557,7 +575,7 @@ class ExperimenterWindow(QMainWindow):
             w.close()
             w.deleteLater()
 
-    def closeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def closeEvent(self, event) -> None:  # Qt's name
         if self.model.session.running and not self._quit_confirmed:
             title = "Quit"
             text = ("A session is running. Quit anyway? A trial still running is stored as aborted and the session "

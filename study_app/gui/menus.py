@@ -53,7 +53,8 @@ class WindowMenus:
         self.help = bar.addMenu("&Help")
         for menu in (self.file, self.session, self.view, self.help):
             menu.setToolTipsVisible(True)  # a disabled action says why
-        self.open_db = self._add(self.file, "&Open study database…", self.choose_database, QKeySequence.StandardKey.Open)
+        self.open_db = self._add(self.file, "&Open study database…", self.choose_database,
+                                 QKeySequence.StandardKey.Open)
         self.recent = self.file.addMenu("&Recent databases")
         self.recent.setToolTipsVisible(True)
         self.file.addSeparator()

@@ -25,7 +25,7 @@ class ForceGauge(QWidget):
         self.force_n, self.band, self.max_n = force_n, band, max_n
         self.update()
 
-    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def paintEvent(self, event) -> None:  # Qt's name
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         w, h = self.width(), self.height()
@@ -37,7 +37,8 @@ class ForceGauge(QWidget):
             p.fillRect(QRectF(x0 + lo * scale, y0, (hi - lo) * scale, bar_h), QColor(60, 170, 90))
         f = min(max(self.force_n, 0.0), self.max_n)
         inside = self.band is not None and self.band[0] <= self.force_n <= self.band[1]
-        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4), QColor(250, 250, 250) if inside else QColor(240, 180, 40))
+        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4),
+                   QColor(250, 250, 250) if inside else QColor(240, 180, 40))
         p.setPen(QPen(QColor(200, 200, 200), 1))
         p.setFont(QFont("Sans", 11))
         for k in range(int(self.max_n) + 1):
@@ -84,7 +85,7 @@ class ParticipantWindow(QWidget):
         lay.addStretch(1)
         lay.addWidget(self.gauge)
         lay.addStretch(1)
-        QShortcut(QKeySequence(Qt.Key.Key_F11), self, activated=self.toggle_fullscreen)
+        QShortcut(QKeySequence(Qt.Key.Key_F11), self).activated.connect(self.toggle_fullscreen)
         model.changed.connect(self._on_changed)
         self._on_changed()
 
@@ -107,7 +108,7 @@ class ParticipantWindow(QWidget):
         sub = max(12, min(22, px // 4))
         self.subline.setStyleSheet(f"font-size: {sub}px; color: #b8b8c0;")
 
-    def resizeEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def resizeEvent(self, event) -> None:  # Qt's name
         super().resizeEvent(event)
         self._scale_text()
 
@@ -115,7 +116,7 @@ class ParticipantWindow(QWidget):
         """Full screen on the participant's monitor, or back."""
         self.showNormal() if self.isFullScreen() else self.showFullScreen()
 
-    def mouseDoubleClickEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mouseDoubleClickEvent(self, event) -> None:  # Qt's name
         self.toggle_fullscreen()
 
     def _on_changed(self) -> None:
@@ -128,4 +129,4 @@ class ParticipantWindow(QWidget):
         show = s.show_gauge and s.gauge_force_n is not None and self.model.gauge_allowed
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]
+            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]  # not None when show is True

@@ -131,9 +131,7 @@ def restore(window: QWidget, settings: QSettings, key: str) -> bool:
     geom = settings.value(f"window/{key}")
     if not isinstance(geom, (QByteArray, bytes)) or not window.restoreGeometry(geom):
         return False
-    if not _on_a_screen(window.frameGeometry()):
-        return False
-    return True
+    return _on_a_screen(window.frameGeometry())
 
 
 def save(window: QWidget, settings: QSettings, key: str) -> None:

@@ -7,7 +7,14 @@ import time
 from PySide6.QtCore import QPointF, QRectF, QSignalBlocker, Qt
 from PySide6.QtGui import QBrush, QColor, QFont, QLinearGradient, QPainter, QPainterPath, QPen, QPolygonF
 from PySide6.QtWidgets import (
-    QButtonGroup, QComboBox, QDoubleSpinBox, QHBoxLayout, QLabel, QPushButton, QRadioButton, QVBoxLayout,
+    QButtonGroup,
+    QComboBox,
+    QDoubleSpinBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QRadioButton,
+    QVBoxLayout,
     QWidget,
 )
 
@@ -46,7 +53,7 @@ class RigCanvas(QWidget):
         return _Z_LO + (self.height() - y_px) / self._scale()
 
     # -- painting --------------------------------------------------------------------------------
-    def paintEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def paintEvent(self, event) -> None:  # Qt's name
         m = self.model
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
@@ -56,7 +63,7 @@ class RigCanvas(QWidget):
         s = self._scale()
         px = self.width() / 2 + x * s
         py = self.height() - (z - _Z_LO) * s
-        poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist())])
+        poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist(), strict=True)])
         poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
         poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
         top = self.to_px(0, 0).y()
@@ -106,14 +113,14 @@ class RigCanvas(QWidget):
         self.model.set_manual_target(self.model.target_for_tip_mm(self.to_z_mm(y_px)))
         self.update()
 
-    def mousePressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mousePressEvent(self, event) -> None:  # Qt's name
         self._target_from_mouse(event.position().y(), force=True)
 
-    def mouseMoveEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def mouseMoveEvent(self, event) -> None:  # Qt's name
         if event.buttons() & Qt.MouseButton.LeftButton:
             self._target_from_mouse(event.position().y())
 
-    def keyPressEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def keyPressEvent(self, event) -> None:  # Qt's name
         if self.model.driver == "manual" and event.key() in (Qt.Key.Key_Up, Qt.Key.Key_Down, Qt.Key.Key_Home):
             if event.key() == Qt.Key.Key_Home:
                 self.model.set_manual_target(0.0)
@@ -127,7 +134,7 @@ class RigCanvas(QWidget):
 class RigWindow(QWidget):
     """Side view plus the driver choice."""
 
-    def __init__(self, model: RigViewModel, on_driver, on_inject=None,  # type: ignore[no-untyped-def]
+    def __init__(self, model: RigViewModel, on_driver, on_inject=None,
                  parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Simulated rig — side view")
@@ -158,7 +165,7 @@ class RigWindow(QWidget):
             lay.addLayout(self._rehearsal_row(on_inject))
         model.changed.connect(self._on_changed)
 
-    def _rehearsal_row(self, on_inject) -> QHBoxLayout:  # type: ignore[no-untyped-def]
+    def _rehearsal_row(self, on_inject) -> QHBoxLayout:
         """Rehearse a fault: what, and when (now, or seconds after a trial's cue)."""
         self.fault_kind = QComboBox()
         for kind, text in REHEARSAL_KINDS.items():
@@ -212,7 +219,7 @@ class RigWindow(QWidget):
             self.fault_trial.setCurrentIndex(index)
         self.fault_seconds.setEnabled(self.fault_trial.currentData() is not None)
 
-    def showEvent(self, event) -> None:  # noqa: N802 - Qt's name
+    def showEvent(self, event) -> None:  # Qt's name
         super().showEvent(event)
         self.canvas.setFocus()
 

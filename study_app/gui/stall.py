@@ -47,7 +47,7 @@ def _short(path: str) -> str:
 
 def stack_of(frame: FrameType | None, depth: int = 40) -> tuple[str, ...]:
     """``file:line function`` of a frame and its callers, innermost first."""
-    out = []
+    out: list[str] = []
     while frame is not None and len(out) < depth:
         code = frame.f_code
         out.append(f"{_short(code.co_filename)}:{frame.f_lineno} {code.co_name}")

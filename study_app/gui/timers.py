@@ -8,10 +8,10 @@ from PySide6.QtCore import QObject, QTimer
 
 __all__ = ["active_timers", "tracked_timer"]
 
-_TIMERS: "weakref.WeakSet[QTimer]" = weakref.WeakSet()
+_TIMERS: weakref.WeakSet[QTimer] = weakref.WeakSet()
 
 
-def tracked_timer(parent: QObject, interval_ms: int, slot, *, name: str) -> QTimer:  # type: ignore[no-untyped-def]
+def tracked_timer(parent: QObject, interval_ms: int, slot, *, name: str) -> QTimer:
     """A repeating timer owned by ``parent`` (not started)."""
     t = QTimer(parent)
     t.setObjectName(name)

@@ -73,7 +73,7 @@ class ScreenshotTour:
             self._deadline = time.monotonic() + 60.0
         except StopIteration:
             self._finish()
-        except Exception as exc:  # noqa: BLE001 - reported by run_gui
+        except Exception as exc:  # reported by run_gui
             self.error = f"{type(exc).__name__}: {exc}"
             self._finish()
 
@@ -220,7 +220,8 @@ class ScreenshotTour:
             reason = f"gap: no loop record for {gap_ms:.1f} ms (limit 5 ms)"
             model.health.apply(m.EngineFault(k * 15.0, "gap", 0, reason, k * 15.0))
             record = TrialRecord(session_id=99, trial_index=k - 1, target_label="FIRM", target_force_n=1.2,
-                                 haptic_mode=HapticMode.ON, outcome=Outcome.ABORTED, clock=SessionClock(0.0, 0), cue_ns=0,
+                                 haptic_mode=HapticMode.ON, outcome=Outcome.ABORTED, clock=SessionClock(0.0, 0),
+                                 cue_ns=0,
                                  end_ns=int(3e9), abort_reason=reason, abort_cause=AbortCause.GAP)
             model.health.apply(m.TrialEnded(k * 15.0, record, 23))
         w.tabs.setCurrentWidget(w.health_panel)

@@ -7,9 +7,29 @@ from collections.abc import Callable
 from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
-    QAbstractItemView, QAbstractScrollArea, QFrame, QScrollArea, QComboBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel, QLineEdit,
-    QListWidget, QListWidgetItem, QPlainTextEdit, QProgressBar, QPushButton, QSizePolicy, QSpinBox, QTableWidget,
-    QTableWidgetItem, QVBoxLayout, QWidget,
+    QAbstractItemView,
+    QAbstractScrollArea,
+    QComboBox,
+    QFileDialog,
+    QFormLayout,
+    QFrame,
+    QGroupBox,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QLineEdit,
+    QListWidget,
+    QListWidgetItem,
+    QPlainTextEdit,
+    QProgressBar,
+    QPushButton,
+    QScrollArea,
+    QSizePolicy,
+    QSpinBox,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
 )
 
 from study_app.models.app import CUE_ACTIONS, AppModel
@@ -19,11 +39,13 @@ from study_app.models.setup import KINDS, SetupModel
 
 __all__ = ["ElidedLabel", "FollowNewest", "QtCueWait", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
-_OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205), "aborted": QColor(235, 235, 235)}
+_OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
+                    "aborted": QColor(235, 235, 235)}
 
 
 class ElidedLabel(QLabel):
-    """One line of text that never wraps or widens its column: what does not fit ends in '…', all of it in the tooltip."""
+    """One line of text that never wraps or widens its column: what does not fit ends in '…', all of it in the
+    tooltip."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
@@ -40,7 +62,7 @@ class ElidedLabel(QLabel):
         self.setToolTip(text)
         self._elide()
 
-    def resizeEvent(self, event):  # noqa: N802 - Qt's name
+    def resizeEvent(self, event):  # Qt's name
         super().resizeEvent(event)
         self._elide()
 
@@ -98,7 +120,8 @@ class FollowNewest:
 
 
 class QtTrialTable(QTableWidget):
-    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view (:class:`FollowNewest`)."""
+    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view
+    (:class:`FollowNewest`)."""
 
     def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
         super().__init__(0, len(TRIAL_COLUMNS), parent)
@@ -449,7 +472,8 @@ class QtSetupPanel(QGroupBox):
         self._on_resumable()
 
     def _browse_db(self) -> None:
-        path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(), "SQLite (*.db *.sqlite);;All files (*)",
+        path, _ = QFileDialog.getSaveFileName(self, "Study database", self.db.text(),
+                                              "SQLite (*.db *.sqlite);;All files (*)",
                                               options=QFileDialog.Option.DontConfirmOverwrite)
         if path:
             self.db.setText(path)
@@ -493,7 +517,7 @@ class QtSetupPanel(QGroupBox):
             "The study's seed (schedules, simulated rigs and participants derive from it): fixed when this database "
             "gets its first session, read-only after that")
 
-    def eventFilter(self, obj, event) -> bool:  # noqa: N802 - Qt's name
+    def eventFilter(self, obj, event) -> bool:  # Qt's name
         if (event.type() == QEvent.Type.KeyPress and event.key() == Qt.Key.Key_Space
                 and not event.modifiers() & ~Qt.KeyboardModifier.KeypadModifier):
             self.start_requested.emit()
@@ -511,9 +535,9 @@ class QtSetupPanel(QGroupBox):
             text = self.setup.describe_resumable(s)
             item = QListWidgetItem(text)
             item.setToolTip(text)
-            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[arg-type]
+            item.setData(Qt.ItemDataRole.UserRole, int(s["session_id"]))  # type: ignore[call-overload]  # an int in an untyped row
             self.resumable.addItem(item)
-            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]
+            if int(s["session_id"]) == self.setup.default_resume():  # type: ignore[call-overload]  # as above
                 self.resumable.setCurrentItem(item)
 
     def selected_session(self) -> int | None:

@@ -52,7 +52,8 @@ def _plan_continue(
     this one would mix two designs in one study.
     """
     kinds = ("training", "experiment") if protocol.training.enabled else ("experiment",)
-    wanted = {"training": json.loads(training_protocol(protocol).to_json()), "experiment": json.loads(protocol.to_json())}
+    wanted = {"training": json.loads(training_protocol(protocol).to_json()),
+              "experiment": json.loads(protocol.to_json())}
     plan: dict[int, list[Step]] = {}
     kept: list[int] = []
     trials = 0
@@ -151,7 +152,8 @@ def peek(db_path: str) -> StudyDatabase | None:
 
 
 def plan_study(
-    db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig, continue_study: bool,
+    db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
+    continue_study: bool,
 ) -> tuple[dict[int, list[Step]], int, list[int]]:
     """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
 
@@ -201,8 +203,8 @@ def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:
         notes.append(f"{db.path}: {taken_over}")
     gone = [w.code for w in withdrawals(db.conn)]
     if gone:
-        notes.append(f"{db.path}: {', '.join(gone)} withdrew (haptic-study withdraw): not run again; the participant numbers "
-                     "stay vacant, so the other participants keep their schedules")
+        notes.append(f"{db.path}: {', '.join(gone)} withdrew (haptic-study withdraw): not run again; the participant "
+                     "numbers stay vacant, so the other participants keep their schedules")
     return notes
 
 

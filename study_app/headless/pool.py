@@ -21,8 +21,8 @@ from typing import Any
 
 from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan
-from protocol.storage import StorageError, StudyDatabase
 from protocol.session_setup import participant_code
+from protocol.storage import StorageError, StudyDatabase
 from study_app.headless.plan import Step
 from study_app.headless.session_run import SessionInterrupted, StudyProgress, run_steps, set_kill_target
 
@@ -84,7 +84,7 @@ def _participant_worker(
                        on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True)
         finally:
             db.close()
-    except BaseException as exc:  # noqa: BLE001 - reported to the parent, which stops the study
+    except BaseException as exc:  # reported to the parent, which stops the study
         why = str(exc) if isinstance(exc, (SessionInterrupted, StorageError)) else f"{type(exc).__name__}: {exc}"
         messages.put(("error", number, why))
         messages.close()
@@ -124,7 +124,7 @@ def run_parallel(
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
-    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    ctx = mp.get_context("fork") if threading.active_count() == 1 else mp.get_context("spawn")
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

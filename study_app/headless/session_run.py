@@ -15,8 +15,8 @@ import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
-from typing import Any
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -29,11 +29,18 @@ from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
 from protocol.session_setup import (
-    OpenedSession, delivery_limits, finish_session, open_new_session, open_resumed_session, participant_seeds,
-    raw_wrench_scales, start_runner, training_schedule,
+    OpenedSession,
+    delivery_limits,
+    finish_session,
+    open_new_session,
+    open_resumed_session,
+    participant_code,
+    participant_seeds,
+    raw_wrench_scales,
+    start_runner,
+    training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
-from protocol.session_setup import participant_code
 from study_app.headless.plan import Step
 from study_app.session_config import config_record
 
@@ -53,7 +60,8 @@ _kill_target_pid: int | None = None
 
 
 def set_kill_target(pid: int) -> None:
-    """In a parallel study's worker: a planned ``kill`` ends ``pid`` (the study's main process), as ``kill -9`` would."""
+    """In a parallel study's worker: a planned ``kill`` ends ``pid`` (the study's main process), as ``kill -9``
+    would."""
     global _kill_target_pid
     _kill_target_pid = pid
 
@@ -100,7 +108,8 @@ def _engine(rig_seed: int, clock: str) -> Engine:
 
 
 def _drive(
-    eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
+    eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress,
+    on_progress: Callable[[StudyProgress], None] | None,
     trigger: RehearsalTrigger | None = None,
 ) -> None:
     """Alternate loop ticks and runner blocks until the session ends."""

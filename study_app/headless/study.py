@@ -30,9 +30,16 @@ from collections.abc import Callable, Sequence
 
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.rehearsal import FaultPlan
-from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.session_setup import participant_code
-from study_app.headless.plan import check_fault_plans, interrupted_session_of, open_notes, peek, plan_study, remaining_trials
+from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
+from study_app.headless.plan import (
+    check_fault_plans,
+    interrupted_session_of,
+    open_notes,
+    peek,
+    plan_study,
+    remaining_trials,
+)
 from study_app.headless.pool import default_jobs, run_parallel
 from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
 
@@ -128,10 +135,12 @@ def _run_under_lease(
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
     # just checked: the writer need not quick_check again; a version-1 file is upgraded (after a backup) only now
-    db: StudyDatabase | None = StudyDatabase(db_path, check=False)
+    db = StudyDatabase(db_path, check=False)
+    held: StudyDatabase | None = db  # None once the workers have the database
     try:
         taken = db.acquire_lease("study", owner)  # a second `run` stops here
-        progress = StudyProgress(participants_total=participants, planned_s=planned_study_time_s(protocol, participants))
+        progress = StudyProgress(participants_total=participants,
+                                 planned_s=planned_study_time_s(protocol, participants))
         progress.notes.extend(open_notes(db, taken))
         # again under the lease: what another process did in between counts
         plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study)
@@ -139,7 +148,7 @@ def _run_under_lease(
         jobs_used = min(jobs, len(plan))
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
-            db = None
+            held = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
                                 faults=faults)
@@ -149,7 +158,7 @@ def _run_under_lease(
                       on_progress=on_progress, study_owner=owner, faults=faults)
         return progress
     finally:
-        _release_study(db, db_path, owner)
+        _release_study(held, db_path, owner)
 
 
 def _release_study(db: StudyDatabase | None, db_path: str, owner: str) -> None:

@@ -34,7 +34,7 @@ class Emitter:
         for fn in list(self._slots):
             try:
                 fn(*args)
-            except Exception as exc:  # noqa: BLE001 - one broken view must not starve the others
+            except Exception as exc:  # one broken view must not starve the others
                 error = error or exc
         if error is not None:
             raise error

@@ -29,7 +29,7 @@ REHEARSAL_KINDS: dict[str, str] = {
     "device-error": "Touch device error (until Reset)", "kill": "engine crashes (kill -9)",
 }
 
-__all__ = ["AppModel", "CUE_ACTIONS", "CueWait", "Notice", "REHEARSAL_KINDS"]
+__all__ = ["CUE_ACTIONS", "REHEARSAL_KINDS", "AppModel", "CueWait", "Notice"]
 
 #: Sample time over which device rates are measured.
 _RATE_WINDOW_S = 0.5
@@ -137,8 +137,9 @@ class AppModel:
         elif isinstance(ev, m.CommandRefused):
             # a late confirmation the engine refused changed nothing: say so, not as an error
             moot = ev.command in ("AbortTrial", "AbortSession") and "had already ended" in ev.message
-            self.notify("info" if moot else "error", ev.message if moot else f"{_COMMAND_NAMES.get(ev.command, ev.command)} "
-                        f"refused: {ev.message}", ev.command)
+            self.notify("info" if moot else "error",
+                        ev.message if moot else f"{_COMMAND_NAMES.get(ev.command, ev.command)} refused: {ev.message}",
+                        ev.command)
         elif isinstance(ev, m.TrialEnded) and self.notice is not None and self.notice.level == "info":
             self.clear_notice()  # news about an earlier trial: stale once the next one has ended
         elif isinstance(ev, m.SessionStarted):
@@ -325,7 +326,8 @@ class AppModel:
         return self.session.state in ("ready", "running", "paused", "ended") and not self.engine_trouble
 
     def can(self, action: str) -> bool:
-        """Whether an action is available: start, pause, resume, abort_trial, abort_session, calibrate, resume_session."""
+        """Whether an action is available: start, pause, resume, abort_trial, abort_session, calibrate,
+        resume_session."""
         s = self.session
         if action == "start":
             return self.ready and not s.running and self.setup.valid
@@ -338,7 +340,8 @@ class AppModel:
         if action == "record_pose":
             return self.ready and not s.running and self.rig_kind == "real" and self.real_calibration.can_record()
         if action == "identify":
-            return self.ready and not s.running and self.rig_kind == "real" and not self.real_calibration.identify_refusal()
+            return (self.ready and not s.running and self.rig_kind == "real"
+                    and not self.real_calibration.identify_refusal())
         if action == "restart_engine":
             return (bool(self.engine_trouble) or self.loop_stalled) and self.restarter is not None
         if action == "sim_rig_view":
@@ -403,7 +406,8 @@ class AppModel:
         return ""
 
     def calibration_missing(self) -> str:
-        """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated rig)."""
+        """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated
+        rig)."""
         st = self.commissioning.status
         return st.missing if st is not None and st.rig == "real" else ""
 
@@ -440,7 +444,8 @@ class AppModel:
         self.session.changed.emit()
 
     def abort_trial(self, trial_index: int | None = None) -> None:
-        """Abort the running trial (stored as aborted, re-run later); the engine refuses if ``trial_index`` has ended."""
+        """Abort the running trial (stored as aborted, re-run later); the engine refuses if ``trial_index`` has
+        ended."""
         self._send(m.AbortTrial(trial_index=trial_index))
 
     def abort_session(self, session_id: int | None = None) -> None:

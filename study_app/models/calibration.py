@@ -107,7 +107,7 @@ class CalibrationModel:
         out.append(("RMS torque residual", _fmt(r.rms_torque_residual_nm, "{:.5f} N·m")))
         cal = r.calibration
         if cal is not None:
-            out.append(("Payload mass", f"{float(cal['mass_kg']):.4f} kg"))  # type: ignore[arg-type]
+            out.append(("Payload mass", f"{float(cal['mass_kg']):.4f} kg"))
             out.append(("Model", str(cal["model"])))
         return out
 

@@ -1,4 +1,5 @@
-"""The calibration wizard's commissioning steps besides the payload (Qt-free): TCP, frames, what is on record, and the jaw.
+"""The calibration wizard's commissioning steps besides the payload (Qt-free): TCP, frames, what is on record, and the
+jaw.
 
 * :class:`CommissioningModel` -- the chain's status for the mounted tool (from
   :class:`study_app.messages.CalibrationStatus`), the TCP pivot step (simulated
@@ -180,14 +181,14 @@ class CommissioningModel:
         r = self.tcp_result
         if self.tcp_state == "running":
             return "computing …" if self.real else "turning the instrument about the divot …"
-        if r is None or self.tcp_message and self.tcp_state == "idle":
+        if r is None or (self.tcp_message and self.tcp_state == "idle"):
             return self.tcp_message
         if not r.accepted:
             return f"Refused: {r.reason}"
         res = r.result or {}
         tip = ", ".join(f"{1e3 * v:+.2f}" for v in res.get("tip_in_flange_m", []))
-        text = (f"Accepted: tip ({tip}) mm in the flange frame, RMS residual {1e3 * res.get('rms_residual_m', math.nan):.3f} "
-                f"mm over {r.n_poses} orientations")
+        text = (f"Accepted: tip ({tip}) mm in the flange frame, RMS residual "
+                f"{1e3 * res.get('rms_residual_m', math.nan):.3f} mm over {r.n_poses} orientations")
         if math.isfinite(r.error_mm):
             text += f"; {r.error_mm:.3f} mm from the simulated truth"
         return text + (" — saved for the tool." if self.real else ".")

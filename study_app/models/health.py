@@ -238,7 +238,7 @@ class HealthModel:
             bits = Fault(self.faults & _DEVICE_FAULTS.get(d.name, 0))
             state = "disconnected" if not self.connected else ("FAULT: " + bits.describe() if bits else "ok")
             if state == "ok" and d.name == "Haptic device" and self.derating():
-                state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]
+                state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]  # derating() is True only with a loop
             out.append(DeviceStatus(d.name, state, d.rate_hz, d.age_ms))
         j = self.jaw
         if j is not None:
@@ -300,7 +300,8 @@ class HealthModel:
         p99 = "–" if math.isnan(h.abs_dev_p99_us) else f"{h.abs_dev_p99_us:.0f} µs"
         lim = LOOP_LIMITS
         return [
-            LoopFigure("rate", f"loop {h.loop_rate_hz:.0f} Hz", _level(abs(h.loop_rate_hz - 1000.0), lim["rate_off_hz"]),
+            LoopFigure("rate", f"loop {h.loop_rate_hz:.0f} Hz",
+                       _level(abs(h.loop_rate_hz - 1000.0), lim["rate_off_hz"]),
                        f"1000 ± {lim['rate_off_hz'][0]:g} Hz"),
             LoopFigure("p99", f"p99 |period − 1 ms| {p99}", _level(h.abs_dev_p99_us, lim["p99_us"]),
                        f"≤ {lim['p99_us'][0]:g} µs"),

@@ -17,7 +17,7 @@ import numpy.typing as npt
 
 from protocol.display import task_axis_top_n
 
-__all__ = ["PlotModel", "TASK_SERIES", "nice_range", "peak_downsample"]
+__all__ = ["TASK_SERIES", "PlotModel", "nice_range", "peak_downsample"]
 
 #: Curves of the task-force panel: the task force the trial is judged on, and the force rendered on the Touch.
 TASK_SERIES = ("force_n", "render_n")
@@ -49,7 +49,8 @@ def peak_downsample(t: _F, y: _F, bins: int) -> tuple[_F, _F]:
     return t_out, y_out
 
 
-def nice_range(lo: float, hi: float, step: float = 0.5, min_span: float = 1.0, floor_zero: bool = False) -> tuple[float, float]:
+def nice_range(lo: float, hi: float, step: float = 0.5, min_span: float = 1.0,
+               floor_zero: bool = False) -> tuple[float, float]:
     """An axis range covering ``[lo, hi]`` with 5 % headroom, snapped outwards to multiples of ``step``.
 
     Snapping is what keeps the axes still: the range changes only when the data
@@ -100,7 +101,7 @@ class PlotModel:
     def attach(self, ring: object) -> None:
         """Read from this ring (anything with ``read_since`` / ``write_count``), starting with its last window."""
         self.ring = ring
-        self.cursor = max(0, ring.write_count - self.capacity)  # type: ignore[attr-defined]
+        self.cursor = max(0, ring.write_count - self.capacity)  # type: ignore[attr-defined]  # the ring is typed object here
 
     def detach(self) -> None:
         """Stop reading (the engine is going away)."""
@@ -123,11 +124,11 @@ class PlotModel:
             return 0
         # Far behind (a stall, a suspended laptop)?  Only the last window can be shown: skip the rest
         # unread, so one pull never copies or converts more than `capacity` records.
-        oldest_needed = ring.write_count - self.capacity  # type: ignore[attr-defined]
+        oldest_needed = ring.write_count - self.capacity  # type: ignore[attr-defined]  # as above
         if self.cursor < oldest_needed:
             self.skipped += oldest_needed - self.cursor
             self.cursor = oldest_needed
-        res = ring.read_since(self.cursor)  # type: ignore[attr-defined]
+        res = ring.read_since(self.cursor)  # type: ignore[attr-defined]  # as above
         self.cursor = res.cursor
         self.lost += res.lost
         rows = res.rows
@@ -158,7 +159,8 @@ class PlotModel:
         """Sample time of the newest record (0 before any)."""
         return float(self.t[-1]) if len(self.t) else 0.0
 
-    def y_range(self, names: tuple[str, ...], floor_zero: bool = False, include: tuple[float, ...] = ()) -> tuple[float, float]:
+    def y_range(self, names: tuple[str, ...], floor_zero: bool = False,
+                include: tuple[float, ...] = ()) -> tuple[float, float]:
         """Axis range for these series over the window and the values ``include`` (see :func:`nice_range`)."""
         lo, hi = min(include, default=math.inf), max(include, default=-math.inf)
         for k in names:

@@ -17,12 +17,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from pipeline.frames import IDENTITY, Mat3, as_mat3, mat_mul, matrix_to_rotvec, transpose
 from pipeline.payload_identification import recommended_pose_set
-from pipeline.frames import IDENTITY, Mat3, mat_mul, matrix_to_rotvec, transpose
 from study_app import messages as m
 from study_app.models import Emitter
 
-__all__ = ["MIN_POSES", "OFF_TARGET_WARN_DEG", "PoseStep", "REAL_POSE_SETS", "RealCalibrationModel"]
+__all__ = ["MIN_POSES", "OFF_TARGET_WARN_DEG", "REAL_POSE_SETS", "PoseStep", "RealCalibrationModel"]
 
 #: Pose sets offered on the real rig (number of poses).
 REAL_POSE_SETS = {"recommended": 24, "quick": 6}
@@ -122,7 +122,7 @@ class RealCalibrationModel:
             raise RuntimeError("no pose to record: start the pose set first")
         self.state, self.message = "recording", ""
         self.changed.emit()
-        return m.RecordPose(step.label, self.seconds, tuple(float(x) for x in step.target_rot_base_sensor))
+        return m.RecordPose(step.label, self.seconds, as_mat3(step.target_rot_base_sensor))
 
     def identify_refusal(self) -> str:
         """Why identification is not possible now ("" if it is)."""
@@ -140,24 +140,24 @@ class RealCalibrationModel:
         why = self.identify_refusal()
         if why:
             raise RuntimeError(f"cannot identify: {why}")
-        poses = tuple((s.label, s.recorded.rot_base_sensor, s.recorded.wrench) for s in self.recorded)  # type: ignore[union-attr]
+        poses = tuple((s.label, s.recorded.rot_base_sensor, s.recorded.wrench) for s in self.recorded)  # type: ignore[union-attr]  # every step is recorded (identify_refusal)
         self.state, self.message = "identifying", ""
         self.changed.emit()
-        return m.IdentifyPoses(poses, self.pose_set)  # type: ignore[arg-type]
+        return m.IdentifyPoses(poses, self.pose_set)
 
     # -- engine events -----------------------------------------------------------------------------
     def apply(self, ev: object) -> None:
         """Update from engine events."""
         if isinstance(ev, m.EngineReady):
-            self.rot_tip_sensor = tuple(ev.rot_tip_sensor)  # type: ignore[assignment]
+            self.rot_tip_sensor = tuple(ev.rot_tip_sensor)  # type: ignore[assignment]  # nine items: mypy cannot count tuple()
         elif isinstance(ev, m.PoseRecorded):
             step = next((s for s in self.steps if s.label == ev.label), None)
             if step is None:
                 return
             step.recorded = ev
+            far = ev.off_target_deg > OFF_TARGET_WARN_DEG
             self.message = (f"{ev.label} is {ev.off_target_deg:.0f}° from its target — kept (the fit uses the measured "
-                            "orientation), but the set may be less well spread" if ev.off_target_deg > OFF_TARGET_WARN_DEG
-                            else "")
+                            "orientation), but the set may be less well spread" if far else "")
             nxt = self._next_unrecorded(self.steps.index(step) + 1)
             self.state = "at_pose"
             if nxt is not None:
@@ -177,7 +177,8 @@ class RealCalibrationModel:
 
     # -- what the view shows -------------------------------------------------------------------------
     def target_tcp(self, step: PoseStep) -> tuple[tuple[float, float, float], float]:
-        """The target as the UR pendant shows it: TCP rotation vector (rad), and the sensor axis' tilt from vertical (°)."""
+        """The target as the UR pendant shows it: TCP rotation vector (rad), and the sensor axis' tilt from vertical
+        (°)."""
         rot_base_tip = mat_mul(step.target_rot_base_sensor, transpose(self.rot_tip_sensor))
         rotvec = matrix_to_rotvec(rot_base_tip)
         z = step.target_rot_base_sensor[8]  # base-z component of the sensor's z axis (Mat3 is row-major, flat)

@@ -11,7 +11,7 @@ from protocol.records import Outcome, TrialRecord
 from study_app import messages as m
 from study_app.models import Emitter
 
-__all__ = ["SessionModel", "TrialCount", "TrialTable", "TRIAL_COLUMNS", "time_left_text"]
+__all__ = ["TRIAL_COLUMNS", "SessionModel", "TrialCount", "TrialTable", "time_left_text"]
 
 #: Columns of the live trial table.
 TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)")

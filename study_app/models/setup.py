@@ -32,7 +32,7 @@ from study_app.models import Emitter
 from study_app.models.session import TrialCount
 from study_app.session_list import next_participant_number
 
-__all__ = ["SessionSetup", "SetupModel", "KINDS", "article", "TRAINING_OVERRIDE_HINT"]
+__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article"]
 
 KINDS = ("training", "experiment")
 #: What the form adds to a training refusal: the way past it, and what it costs.
@@ -95,7 +95,7 @@ class SetupModel:
             self.number_suggested = False
         if "kind" in kwargs:
             self.kind_suggested = False
-        self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]
+        self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]  # kwargs are checked field names
         self._suggest_number()
         self._suggest_kind()
         self.validate()
@@ -264,7 +264,7 @@ class SetupModel:
 
     def default_resume(self) -> int | None:
         """The session the resume list selects: the one an engine failure interrupted, else the first listed."""
-        ids = [int(s["session_id"]) for s in self.resumable]  # type: ignore[call-overload]
+        ids = [int(s["session_id"]) for s in self.resumable]  # type: ignore[call-overload]  # an int in an untyped row
         if self.preferred_resume in ids:
             return self.preferred_resume
         return ids[0] if ids else None

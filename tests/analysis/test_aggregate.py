@@ -11,9 +11,9 @@ import scipy.stats
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant
-from analysis.trade import speed_accuracy
 from analysis.load import load_study
 from analysis.metrics import MetricOptions, compute_trials
+from analysis.trade import speed_accuracy
 
 
 @pytest.fixture(scope="module")

@@ -15,13 +15,7 @@ from mounts import can_mount, tmpfs
 
 from analysis import outdir
 from analysis.load import AnalysisError
-from analysis.outdir import (
-    check_output_file,
-    check_output_folder,
-    sha256_file,
-    write_output_file,
-    write_output_folder,
-)
+from analysis.outdir import check_output_file, check_output_folder, sha256_file, write_output_file, write_output_folder
 from analysis.outfs import OutputError
 
 MARKER = ".haptic-study-test"
@@ -54,7 +48,8 @@ def test_a_new_folder_gets_the_files_and_a_marker_with_their_hashes(tmp_path):
     marker = json.loads((out / MARKER).read_text())
     assert marker["files"] == {"a.csv": sha256_file(out / "a.csv"), "figures/b.png": sha256_file(out / "figures/b.png")}
     assert "pending" not in marker
-    _no_temporaries(tmp_path); _no_temporaries(out, MARKER)
+    _no_temporaries(tmp_path)
+    _no_temporaries(out, MARKER)
 
 
 def test_an_existing_non_empty_folder_needs_force(tmp_path):
@@ -62,7 +57,8 @@ def test_an_existing_non_empty_folder_needs_force(tmp_path):
     _write(out, {"a.csv": "1"})
     before = _snapshot(out)
     with pytest.raises(AnalysisError, match=r"the folder exists and holds a.csv; choose another folder, or pass "
-                       r"--force to replace a folder test wrote before \(--force replaces only test's own unedited files\)"):
+                       r"--force to replace a folder test wrote before \(--force replaces only test's own unedited "
+                       r"files\)"):
         _write(out, {"a.csv": "2"})
     assert _snapshot(out) == before
 
@@ -74,7 +70,8 @@ def test_force_replaces_own_unedited_files_and_removes_those_no_longer_written(t
     assert _snapshot(out).keys() == {"a.csv", "c.csv", MARKER}
     assert (out / "a.csv").read_text() == "new" and not (out / "figures").exists()
     assert json.loads((out / MARKER).read_text())["files"].keys() == {"a.csv", "c.csv"}
-    _no_temporaries(tmp_path); _no_temporaries(out, MARKER)
+    _no_temporaries(tmp_path)
+    _no_temporaries(out, MARKER)
 
 
 def test_force_refuses_an_edited_file_naming_it_and_touches_nothing(tmp_path):
@@ -87,7 +84,8 @@ def test_force_refuses_an_edited_file_naming_it_and_touches_nothing(tmp_path):
     assert str(err.value) == (f"--out {out}: b.csv was changed since test wrote it; keep your edits elsewhere or "
                               "choose another folder (nothing was deleted)")
     assert _snapshot(out) == before
-    _no_temporaries(tmp_path); _no_temporaries(out, MARKER)
+    _no_temporaries(tmp_path)
+    _no_temporaries(out, MARKER)
 
 
 def test_force_refuses_a_foreign_file_naming_it_and_touches_nothing(tmp_path):
@@ -107,7 +105,7 @@ def test_force_refuses_a_folder_without_marker(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     (out / "a.csv").write_text("someone's")
-    with pytest.raises(AnalysisError, match="not a folder test wrote .no readable .haptic-study-test in it."):
+    with pytest.raises(AnalysisError, match=r"not a folder test wrote .no readable .haptic-study-test in it."):
         _write(out, {"a.csv": "new"}, force=True)
     assert (out / "a.csv").read_text() == "someone's"
 
@@ -137,7 +135,8 @@ def test_a_crash_while_writing_leaves_the_old_output_intact(tmp_path):
     with pytest.raises(RuntimeError, match="the figure failed"):
         write_output_folder(out, crash, command="test", marker=MARKER, force=True)
     assert _snapshot(out) == before
-    _no_temporaries(tmp_path); _no_temporaries(out, MARKER)
+    _no_temporaries(tmp_path)
+    _no_temporaries(out, MARKER)
     # also into a folder that did not exist: nothing is left
     with pytest.raises(RuntimeError):
         write_output_folder(tmp_path / "new", crash, command="test", marker=MARKER)

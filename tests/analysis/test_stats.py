@@ -15,9 +15,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
-from analysis.hodges_lehmann import _midpoint, _walsh_select
 from analysis.correlation import CorrelationResult, correlation
-from analysis.hodges_lehmann import hodges_lehmann
+from analysis.hodges_lehmann import _midpoint, _walsh_select, hodges_lehmann
 from analysis.signed_rank import signed_rank_null_counts
 from analysis.stats import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
 
@@ -238,7 +237,7 @@ def test_computable_results_have_no_nan(data):
     if not res.computable:
         assert np.all(on == off) and res.note
         return
-    for name in TEST_FIELDS + ("median_off", "median_on", "hl_estimate", "hl_ci_low", "hl_ci_high", "ci_level"):
+    for name in (*TEST_FIELDS, "median_off", "median_on", "hl_estimate", "hl_ci_low", "hl_ci_high", "ci_level"):
         assert math.isfinite(getattr(res, name)), name
     assert -1.0 <= res.rank_biserial <= 1.0
     assert 0.0 <= res.p_value <= 1.0
@@ -301,7 +300,7 @@ def test_nan_pairs_are_dropped_and_counted():
     ref = paired_wilcoxon(off[keep], on[keep], metric="tct_s")
     assert res.n_dropped_nan == 2 and res.n_pairs == 6
     assert "2 of 8 pairs dropped" in res.note
-    for name in TEST_FIELDS + ("hl_estimate", "hl_ci_low", "hl_ci_high", "median_off", "median_on"):
+    for name in (*TEST_FIELDS, "hl_estimate", "hl_ci_low", "hl_ci_high", "median_off", "median_on"):
         assert getattr(res, name) == getattr(ref, name)
     assert res.p_value == sps.wilcoxon(on, off, nan_policy="omit").pvalue
 
@@ -337,7 +336,7 @@ def test_bad_arguments_raise_naming_the_value():
         paired_wilcoxon([1, 2], [2, 3], method="mc")
     with pytest.raises(ValueError, match="off has 2 values and on has 3"):
         paired_wilcoxon([1, 2], [2, 3, 4])
-    with pytest.raises(ValueError, match="confidence = 1.5"):
+    with pytest.raises(ValueError, match=r"confidence = 1.5"):
         paired_wilcoxon([1, 2], [2, 3], confidence=1.5)
     with pytest.raises(ValueError, match="allowed up to 400"):
         paired_wilcoxon(np.zeros(401), np.arange(1.0, 402.0), method="exact")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 import sqlite3
 
@@ -93,7 +94,7 @@ def test_progress_reaches_the_total(one_session):
     seen = []
     compute_trials(load_study([one_session]), workers=1, progress=lambda d, t: seen.append((d, t)))
     assert seen[0][0] == 0.0 and seen[-1][0] == seen[-1][1] and len(seen) >= 2
-    assert all(a[0] <= b[0] for a, b in zip(seen, seen[1:]))
+    assert all(a[0] <= b[0] for a, b in itertools.pairwise(seen))
 
 
 # -- what is excluded -----------------------------------------------------------------------------

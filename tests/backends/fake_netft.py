@@ -105,7 +105,7 @@ class FakeNetFT:
             fake = self
 
             class Handler(BaseHTTPRequestHandler):
-                def do_GET(self) -> None:  # noqa: N802 - http.server API
+                def do_GET(self) -> None:  # http.server API
                     fake.http_requests.append(self.path)
                     if self.path.split("?")[0] == "/netftapi2.xml" and fake.xml_status == 200:
                         body = fake.xml.encode()
@@ -187,7 +187,7 @@ class FakeNetFT:
         while not self._stop.is_set():
             try:
                 data, addr = self.udp.recvfrom(1024)
-            except (socket.timeout, OSError):
+            except (TimeoutError, OSError):
                 continue
             if len(data) != REQUEST.size:
                 self.bad_requests += 1

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+
 from pipeline.frames import matrix_to_rotvec
 from pipeline.rig_calibration import RigCalibrationFile
 from pipeline.sim.robot import TOOL_DOWN
@@ -80,9 +80,13 @@ def test_sim_payload_and_refusals(capsys) -> None:
 def hw_file(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde) -> Path:
     p = tmp_path / "hardware.toml"
     p.write_text(
-        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\nconnect_timeout_s = 1.0\n'
+        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
+        'connect_timeout_s = 1.0\n'
         f'[robot]\nhost = "{rtde.host}"\nconnect_timeout_s = 1.0\ntcp_offset_m = {list(PENDANT_TCP)}\n[haptic]\n'
-        '[calibration]\ntool = "grasper"\n[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
+        '[calibration]\ntool = "grasper"\n'
+        '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n'
+        'rot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n'
+        '[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
         encoding="utf-8")
     return p
 
@@ -180,8 +184,9 @@ def test_the_real_chain_in_order_saves_each_step_for_the_tool(rig, tmp_path) -> 
     assert rec.missing(fw.rot_tip_sensor, fw.rot_haptic_base) == ""
 
 
-def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_saves_nothing(rig, tmp_path, capsys) -> None:
-    netft, rtde, hw = rig
+def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_saves_nothing(rig, tmp_path,
+                                                                                          capsys) -> None:
+    _netft, rtde, hw = rig
     rots = pivot_orientations("minimal", TOOL_DOWN)
     state = {"n": 0}
 
@@ -207,7 +212,7 @@ def test_a_real_tcp_recording_while_the_robot_moves_is_refused_and_quitting_save
 
 def test_from_a_terminal_the_prompts_go_to_stderr_and_stdout_is_only_the_result(rig, tmp_path, monkeypatch,
                                                                                   capsys) -> None:
-    netft, rtde, hw = rig
+    _netft, rtde, hw = rig
     rots = iter(pivot_orientations("minimal", TOOL_DOWN))
 
     class Experimenter(io.StringIO):

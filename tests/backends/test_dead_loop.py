@@ -19,7 +19,6 @@ import threading
 from collections.abc import Callable
 
 import pytest
-
 from stepped_clock import SteppedClock
 from test_touch import FakeHD
 

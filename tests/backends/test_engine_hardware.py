@@ -1,4 +1,5 @@
-"""The study engine process on the real rig: built from a hardware file, against the loopback fakes (real clock, short)."""
+"""The study engine process on the real rig: built from a hardware file, against the loopback fakes (real clock,
+short)."""
 
 from __future__ import annotations
 
@@ -6,14 +7,14 @@ import time
 from pathlib import Path
 
 import pytest
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from test_hardware_config import write_rig_file
+
 from study_app import messages as m
 from study_app.engine_client import EngineClient, EngineStartError
 from study_app.engine_setup import HostConfig
-from test_hardware_config import write_rig_file
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
 
@@ -28,7 +29,8 @@ def test_engine_process_runs_the_real_rig_from_a_hardware_file(tmp_path: Path, m
         try:
             ready, before = client.wait_ready(10.0)
             opened = [ev.device for ev in before if isinstance(ev, m.EngineOpening)]
-            assert opened == ["force sensor", "robot", "haptic device", "jaw actuator"] and client.opening == "jaw actuator"
+            assert opened == ["force sensor", "robot", "haptic device", "jaw actuator"]
+            assert client.opening == "jaw actuator"
             assert ready.rig == "real" and ready.calibration is not None
             ring = client.ring
             assert ring is not None
@@ -56,14 +58,17 @@ def test_a_device_that_fails_to_open_is_one_clear_start_error(tmp_path: Path) ->
         path = write_rig_file(tmp_path, netft, rtde, None)
         client = EngineClient(HostConfig(rig="real", hardware_path=str(path)))
         with pytest.raises(EngineStartError,
-                           match=r"^engine could not start: real rig: haptic device: the 3D Systems Touch needs OpenHaptics"):
+                           match=r"^engine could not start: real rig: haptic device: the 3D Systems Touch needs "
+                                 r"OpenHaptics"):
             client.wait_ready(10.0)
         assert not client.alive and client.opening == "haptic device"
         assert [r[1] for r in netft.requests] == [2, 0]  # START, then STOP when the rig was unwound
     bad = tmp_path / "bad.toml"
-    bad.write_text('[sensor]\nhost = "1.2.3.4"\n[robot]\nhost = "1.2.3.5"\nmode = "teleop"\n[haptic]\n', encoding="utf-8")
+    bad.write_text('[sensor]\nhost = "1.2.3.4"\n[robot]\nhost = "1.2.3.5"\nmode = "teleop"\n[haptic]\n',
+                   encoding="utf-8")
     client = EngineClient(HostConfig(rig="real", hardware_path=str(bad)))
-    with pytest.raises(EngineStartError, match=r"bad.toml: teleop = None: robot.mode = 'teleop' needs a \[teleop\] table"):
+    with pytest.raises(EngineStartError,
+                       match=r"bad.toml: teleop = None: robot.mode = 'teleop' needs a \[teleop\] table"):
         client.wait_ready(10.0)
     assert not client.alive
 
@@ -72,9 +77,11 @@ def test_a_device_that_hangs_times_out_naming_it(tmp_path: Path) -> None:
     # the Net F/T answers HTTP but never streams: the sensor waits its own 3 s; the parent gives up first
     with FakeNetFT(initial_records=0) as netft, FakeRtde() as rtde:
         path = write_rig_file(tmp_path, netft, rtde, None)
-        path.write_text(path.read_text(encoding="utf-8").replace("connect_timeout_s = 1.0", "connect_timeout_s = 3.0", 1),
+        path.write_text(path.read_text(encoding="utf-8").replace("connect_timeout_s = 1.0", "connect_timeout_s = 3.0",
+                                                                 1),
                         encoding="utf-8")
         client = EngineClient(HostConfig(rig="real", hardware_path=str(path)))
-        with pytest.raises(EngineStartError, match=r"^engine did not become ready within 1.5 s \(still opening the force sensor\)$"):
+        with pytest.raises(EngineStartError,
+                           match=r"^engine did not become ready within 1.5 s \(still opening the force sensor\)$"):
             client.wait_ready(1.5)
         assert not client.alive

@@ -8,10 +8,10 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+
 from study_app.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -39,15 +39,18 @@ def test_probe_netft_text(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True, timeout=30, cwd=ROOT)
+    return subprocess.run([sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True, timeout=30,
+                          cwd=ROOT)
 
 
 @pytest.mark.parametrize(
     ("args", "message"),
     [
         (["probe", "netft", "--host", "127.0.0.1", "--http-port", "1"], "cannot read the Net F/T calibration from http://127.0.0.1:1/netftapi2.xml"),
-        (["probe", "netft", "--host", "127.0.0.1", "--port", "0"], "--port = '0': must be a whole number from 1 to 65535"),
-        (["probe", "netft", "--host", "127.0.0.1", "--samples", "0"], "--samples = '0': must be a whole number from 1 to 1000000"),
+        (["probe", "netft", "--host", "127.0.0.1", "--port", "0"],
+         "--port = '0': must be a whole number from 1 to 65535"),
+        (["probe", "netft", "--host", "127.0.0.1", "--samples", "0"],
+         "--samples = '0': must be a whole number from 1 to 1000000"),
         (["check-hardware", "--hardware", "/nonexistent/hw.toml"], "/nonexistent/hw.toml: no such hardware file"),
     ],
 )
@@ -64,13 +67,15 @@ def test_check_hardware_reports_each_device(tmp_path: Path, capsys: pytest.Captu
         p.write_text(
             f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
             f'[robot]\nhost = "{rtde.host}"\n[haptic]\n[jaw]\nport = "{jaw.path}"\nready_timeout_s = 1.0\n'
-            '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
+            '[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\nrot_haptic_base = [[1, 0, 0], [0, 0, 1], '
+            '[0, -1, 0]]\n[framework]\nf_max_n = 3.0\nf_scale_n = 7.0\n',
             encoding="utf-8",
         )
         rc = main(["check-hardware", "--hardware", str(p)])
     out = capsys.readouterr().out.splitlines()
     assert rc == 1  # the Touch cannot be opened on this machine
-    assert out[0].startswith("force sensor   OK   127.0.0.1: streaming, F = (+1.500, -2.000, +3.250) N, status 0x00000000")
+    assert out[0].startswith("force sensor   OK   127.0.0.1: streaming, F = (+1.500, -2.000, +3.250) N, status "
+                             "0x00000000")
     assert out[1].startswith(f"robot          OK   {rtde.host}: connected, TCP (+0.3000, -0.1000, +0.2000) m")
     assert out[2].startswith("haptic device  FAIL the 3D Systems Touch needs OpenHaptics")
     assert out[3] == f"jaw actuator   OK   {jaw.path}: READY, limits 1100-1900 µs, at 1100 µs (0% open)"

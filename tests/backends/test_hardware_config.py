@@ -8,11 +8,12 @@ import tomllib
 from pathlib import Path
 
 import pytest
-from hypothesis import given, settings
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from hypothesis import given, settings
+from tomlvalues import TOML_VALUES, replaced
+
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.ur import UrRtdeRobot
@@ -22,9 +23,8 @@ from pipeline.engine import build_hardware_engine
 from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
 from pipeline.payload_compensator import NO_PAYLOAD
-from pipeline.touch_output import TouchSpec
 from pipeline.tomlfields import host_problem
-from tomlvalues import TOML_VALUES, replaced
+from pipeline.touch_output import TouchSpec
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "hardware.example.toml"
@@ -92,11 +92,15 @@ def test_values_valid_alone_but_not_together_name_both_fields(patch: dict, messa
 @pytest.mark.parametrize(
     ("patch", "message"),
     [
-        ({"sensor": {"host": "10.0.0.1", "port": 70000}}, "sensor.port = 70000: must be a whole port number from 1 to 65535"),
-        ({"sensor": {"host": "10.0.0.1", "counts_per_force": 1e6}}, "sensor.counts_per_torque = None: give counts_per_force and counts_per_torque together"),
+        ({"sensor": {"host": "10.0.0.1", "port": 70000}},
+         "sensor.port = 70000: must be a whole port number from 1 to 65535"),
+        ({"sensor": {"host": "10.0.0.1", "counts_per_force": 1e6}},
+         "sensor.counts_per_torque = None: give counts_per_force and counts_per_torque together"),
         ({"sensor": {"host": "10.0.0.1", "force_unit": "stone"}}, "sensor.force_unit = 'stone': allowed: N, lbf"),
-        ({"sensor": {"host": "10 0 0 1"}}, "sensor.host = '10 0 0 1': must be an IPv4 address (e.g. 192.168.1.1) or a host name"),
-        ({"sensor": {"hots": "10.0.0.1"}}, "sensor.hots = '10.0.0.1': unknown field; allowed: buffered, connect_timeout_s"),
+        ({"sensor": {"host": "10 0 0 1"}},
+         "sensor.host = '10 0 0 1': must be an IPv4 address (e.g. 192.168.1.1) or a host name"),
+        ({"sensor": {"hots": "10.0.0.1"}},
+         "sensor.hots = '10.0.0.1': unknown field; allowed: buffered, connect_timeout_s"),
         ({"sensor": {}}, "sensor.host = None: required: the Net F/T box's IP address"),
         ({"haptic": {"command_timeout_s": 0.2}},
          "haptic.command_timeout_s = 0.2: must be a number from 0.002 to 0.05 s (a force command this old renders as "
@@ -104,33 +108,54 @@ def test_values_valid_alone_but_not_together_name_both_fields(patch: dict, messa
         ({"haptic": {"command_timeout_s": True}}, "haptic.command_timeout_s = true: must be a number"),
         ({"calibration": {"tool": ""}}, "calibration.tool = '': must be a non-empty name of the mounted instrument"),
         ({"jaw": {"port": "/dev/ttyACM0", "open_button": 1}}, "jaw.open_button = 1: must differ from jaw.close_button"),
-        ({"jaw": {"port": "/dev/ttyACM0", "close_button": 3}}, "jaw.close_button = 3: allowed values: 1 (the Touch's front"),
+        ({"jaw": {"port": "/dev/ttyACM0", "close_button": 3}},
+         "jaw.close_button = 3: allowed values: 1 (the Touch's front"),
         ({"robot": {"host": "10.0.0.2", "mode": "drive"}}, "robot.mode = 'drive': allowed values: observe, teleop"),
-        ({"robot": {"host": "10.0.0.2", "mode": "teleop"}}, "teleop = None: robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0]}}, "teleop.workspace_max_m = None: required: the corner of the box"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2], "workspace_max_m": [0.4, 0.2, 0.3]}}, "teleop.workspace_min_m = [0.1, -0.2]: must be 3 numbers in metres"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.3], "workspace_max_m": [0.4, 0.2, 0.3]}}, "teleop.workspace_max_m = [0.4, 0.2, 0.3]: each coordinate must be above workspace_min_m's (z: 0.3 ≤ 0.3)"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 1.5]}}, "teleop.workspace_max_m = [0.4, 0.2, 1.5]: must be 3 numbers in metres (x, y, z in the robot base frame), each within ±1 m"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "max_speed_m_s": 0.5}}, "teleop.max_speed_m_s = 0.5: must be a number > 0 and ≤ 0.25"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "max_speed_m_s": float("nan")}}, "teleop.max_speed_m_s = nan: must be a number > 0 and ≤ 0.25"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "clutch_button": 1}}, "teleop.clutch_button = 1: must differ from teleop.deadman_button"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "deadman_button": 4}}, "teleop.deadman_button = 4: allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "gain": 50}}, "teleop.gain = 50: must be a number from 100 to 2000"),
-        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "speed": 1}}, "teleop.speed = 1: unknown field; allowed: clutch_button"),
-        ({"robot": {"host": "10.0.0.2", "frequency_hz": 1000}}, "robot.frequency_hz = 1000: must be a number > 0 and ≤ 500"),
-        ({"robot": {"host": "10.0.0.2", "tcp_offset_m": [0, 0]}}, "robot.tcp_offset_m = [0, 0]: must be 3 numbers in metres"),
+        ({"robot": {"host": "10.0.0.2", "mode": "teleop"}},
+         "teleop = None: robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0]}},
+         "teleop.workspace_max_m = None: required: the corner of the box"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2], "workspace_max_m": [0.4, 0.2, 0.3]}},
+         "teleop.workspace_min_m = [0.1, -0.2]: must be 3 numbers in metres"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.3], "workspace_max_m": [0.4, 0.2, 0.3]}},
+         "teleop.workspace_max_m = [0.4, 0.2, 0.3]: each coordinate must be above workspace_min_m's (z: 0.3 ≤ 0.3)"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 1.5]}},
+         "teleop.workspace_max_m = [0.4, 0.2, 1.5]: must be 3 numbers in metres (x, y, z in the robot base frame), "
+         "each within ±1 m"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "max_speed_m_s": 0.5}},
+         "teleop.max_speed_m_s = 0.5: must be a number > 0 and ≤ 0.25"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3],
+                     "max_speed_m_s": float("nan")}}, "teleop.max_speed_m_s = nan: must be a number > 0 and ≤ 0.25"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "clutch_button": 1}},
+         "teleop.clutch_button = 1: must differ from teleop.deadman_button"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "deadman_button": 4}},
+         "teleop.deadman_button = 4: allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "gain": 50}},
+         "teleop.gain = 50: must be a number from 100 to 2000"),
+        ({"teleop": {"workspace_min_m": [0.1, -0.2, 0.0], "workspace_max_m": [0.4, 0.2, 0.3], "speed": 1}},
+         "teleop.speed = 1: unknown field; allowed: clutch_button"),
+        ({"robot": {"host": "10.0.0.2", "frequency_hz": 1000}},
+         "robot.frequency_hz = 1000: must be a number > 0 and ≤ 500"),
+        ({"robot": {"host": "10.0.0.2", "tcp_offset_m": [0, 0]}},
+         "robot.tcp_offset_m = [0, 0]: must be 3 numbers in metres"),
         ({"jaw": {"port": "/dev/ttyACM0", "baud": 1234}}, "jaw.baud = 1234: allowed values: 9600"),
         ({"jaw": {}}, "jaw.port = None: required: the Arduino's serial port"),
-        ({"frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}}, "frames.rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, -1]] is a reflection"),
-        ({"frames": {"rot_haptic_base": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]] is not a rotation"),
-        ({"framework": {"f_max_n": -3}}, "framework.f_max_n = -3: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
-        ({"framework": {"filter_window": 0}}, "framework.filter_window = 0: must be a whole number of samples from 1 to 1000"),
+        ({"frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, -1]]}},
+         "frames.rot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, -1]] is a reflection"),
+        ({"frames": {"rot_haptic_base": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}},
+         "frames.rot_haptic_base = [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]] is not a rotation"),
+        ({"framework": {"f_max_n": -3}},
+         "framework.f_max_n = -3: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"filter_window": 0}},
+         "framework.filter_window = 0: must be a whole number of samples from 1 to 1000"),
         ({"version": 2}, "version = 2: this software reads hardware file version 1"),
         ({"haptic": None}, "haptic = None: must be a table"),
         # types: in Python True is an int (True == 1) and 1.0 == 1, so both are refused explicitly
         ({"version": True}, "version = true: this software reads hardware file version 1"),
-        ({"sensor": {"host": "10.0.0.1", "port": True}}, "sensor.port = true: must be a whole port number from 1 to 65535"),
-        ({"sensor": {"host": "10.0.0.1", "http_port": 80.0}}, "sensor.http_port = 80.0: must be a whole port number from 1 to 65535"),
+        ({"sensor": {"host": "10.0.0.1", "port": True}},
+         "sensor.port = true: must be a whole port number from 1 to 65535"),
+        ({"sensor": {"host": "10.0.0.1", "http_port": 80.0}},
+         "sensor.http_port = 80.0: must be a whole port number from 1 to 65535"),
         ({"sensor": {"host": "10.0.0.1", "buffered": 1}}, "sensor.buffered = 1: must be true or false"),
         ({"jaw": {"port": "/dev/ttyACM0", "baud": 115200.0}}, "jaw.baud = 115200.0: allowed values: 9600"),
         ({"jaw": {"port": "/dev/tty ACM0"}}, "jaw.port = '/dev/tty ACM0': must be a non-empty string without spaces"),
@@ -138,26 +163,36 @@ def test_values_valid_alone_but_not_together_name_both_fields(patch: dict, messa
          "teleop.deadman_button = true: allowed values: 1 (the Touch's front"),
         ({"teleop": {"workspace_min_m": [0.1, -0.2, True], "workspace_max_m": [0.4, 0.2, 0.3]}},
          "teleop.workspace_min_m = [0.1, -0.2, True]: must be 3 numbers in metres"),
-        ({"framework": {"filter_window": True}}, "framework.filter_window = true: must be a whole number of samples from 1 to 1000"),
-        ({"robot": {"host": "10.0.0.2", "frequency_hz": "125"}}, "robot.frequency_hz = '125': must be a number > 0 and ≤ 500 (Hz), or -1 to let ur_rtde choose"),
+        ({"framework": {"filter_window": True}},
+         "framework.filter_window = true: must be a whole number of samples from 1 to 1000"),
+        ({"robot": {"host": "10.0.0.2", "frequency_hz": "125"}},
+         "robot.frequency_hz = '125': must be a number > 0 and ≤ 500 (Hz), or -1 to let ur_rtde choose"),
         # hosts: an IP address or an RFC 1123 host name; the Net F/T speaks IPv4 only
-        ({"robot": {"host": "robot one"}}, "robot.host = 'robot one': must be an IP address (e.g. 192.168.1.1 or fe80::1) or a host name"),
+        ({"robot": {"host": "robot one"}},
+         "robot.host = 'robot one': must be an IP address (e.g. 192.168.1.1 or fe80::1) or a host name"),
         ({"robot": {"host": "10.0.0.256"}}, "robot.host = '10.0.0.256': must be an IP address"),
         ({"robot": {"host": 10}}, "robot.host = 10: must be an IP address"),
-        ({"sensor": {"host": "fe80::1"}}, "sensor.host = 'fe80::1': must be an IPv4 address (e.g. 192.168.1.1) or a host name "
-                                          "(letters, digits, '-', separated by '.'); this device speaks IPv4 only"),
+        ({"sensor": {"host": "fe80::1"}},
+         "sensor.host = 'fe80::1': must be an IPv4 address (e.g. 192.168.1.1) or a host name "
+         "(letters, digits, '-', separated by '.'); this device speaks IPv4 only"),
         # rotations: 3 rows of 3 real numbers
         ({"frames": {"rot_tip_sensor": [["1", "0", "0"], ["0", "1", "0"], ["0", "0", "1"]]}},
-         "frames.rot_tip_sensor = [['1', '0', '0'], ['0', '1', '0'], ['0', '0', '1']]: must be a rotation matrix: 3 rows of 3 numbers"),
+         "frames.rot_tip_sensor = [['1', '0', '0'], ['0', '1', '0'], ['0', '0', '1']]: must be a rotation matrix: 3 "
+         "rows of 3 numbers"),
         ({"frames": {"rot_tip_sensor": [[True, False, False], [False, True, False], [False, False, True]]}},
-         "frames.rot_tip_sensor = [[True, False, False], [False, True, False], [False, False, True]]: must be a rotation matrix"),
+         "frames.rot_tip_sensor = [[True, False, False], [False, True, False], [False, False, True]]: must be a "
+         "rotation matrix"),
         ({"frames": {"rot_tip_sensor": "identity"}}, "frames.rot_tip_sensor = 'identity': must be a rotation matrix"),
-        ({"frames": {"rot_tip_sensor": [1, 0, 0, 0, 1, 0, 0, 0, 1]}}, "frames.rot_tip_sensor = [1, 0, 0, 0, 1, 0, 0, 0, 1]: must be a rotation matrix: 3 rows"),
+        ({"frames": {"rot_tip_sensor": [1, 0, 0, 0, 1, 0, 0, 0, 1]}},
+         "frames.rot_tip_sensor = [1, 0, 0, 0, 1, 0, 0, 0, 1]: must be a rotation matrix: 3 rows"),
         ({"frames": {"rot_tip_sensor": [[10**400, 0, 0], [0, 1, 0], [0, 0, 1]]}},
-         "frames.rot_tip_sensor = [[100000000000000000...0000000000000000000, 0, 0], [0, 1, 0], [0, 0, 1]]: is not a rotation: every entry of a rotation matrix lies within ±1"),
-        ({"frames": {"rot_haptic_base": [[1, 0, 0], [0, float("nan"), 0], [0, 0, 1]]}}, "frames.rot_haptic_base = [[1, 0, 0], [0, nan, 0], [0, 0, 1]]: must be a rotation matrix"),
+         "frames.rot_tip_sensor = [[100000000000000000...0000000000000000000, 0, 0], [0, 1, 0], [0, 0, 1]]: is not a "
+         "rotation: every entry of a rotation matrix lies within ±1"),
+        ({"frames": {"rot_haptic_base": [[1, 0, 0], [0, float("nan"), 0], [0, 0, 1]]}},
+         "frames.rot_haptic_base = [[1, 0, 0], [0, nan, 0], [0, 0, 1]]: must be a rotation matrix"),
         # f_max: never above the Touch's peak force
-        ({"framework": {"f_max_n": 5.0}}, "framework.f_max_n = 5.0: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
+        ({"framework": {"f_max_n": 5.0}},
+         "framework.f_max_n = 5.0: must be a number from 1e-06 to 3.3 (N; the 3D Systems Touch's peak force)"),
         ({"framework": {"f_max_n": 3.31}}, "framework.f_max_n = 3.31: must be a number from 1e-06 to 3.3"),
     ],
 )
@@ -189,7 +224,8 @@ def write_rig_file(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde, jaw: PtyJaw
     d = tomllib.loads(text)
     lines = [
         "version = 1",
-        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\nconnect_timeout_s = 1.0',
+        f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
+        'connect_timeout_s = 1.0',
         f'[robot]\nhost = "{rtde.host}"\nconnect_timeout_s = 1.0',
         "[haptic]",
     ]
@@ -235,7 +271,9 @@ def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path, monke
         eng = build_hardware_engine(hw, clock=VirtualClock())
         rig = eng.rig
         try:
-            assert isinstance(rig, RealRig) and all(hasattr(rig, a) for a in ("sensor", "robot", "haptic", "advance", "true_contact_force", "close"))
+            assert isinstance(rig,
+                              RealRig) and all(hasattr(rig, a) for a in ("sensor", "robot", "haptic", "advance",
+                                                                         "true_contact_force", "close"))
             assert isinstance(rig.sensor, NetFTForceSensor) and isinstance(rig.robot, UrRtdeRobot)
             assert isinstance(rig.jaw, SerialJawActuator) and rig.true_contact_force() is None
             assert eng.calibration == NO_PAYLOAD and eng.framework.safety.config.f_max_n == 3.0
@@ -297,7 +335,8 @@ _TELEOP = {"workspace_min_m": [0.2, -0.1, 0.05], "workspace_max_m": [0.4, 0.1, 0
            "motion_scale": 0.5, "deadman_button": 1, "clutch_button": 2, "stylus_max_age_s": 0.02,
            "pose_max_age_s": 0.05, "max_tracking_error_m": 0.05, "lookahead_s": 0.1, "gain": 300,
            "control_timeout_s": 5.0}
-_FULL = {**tomllib.loads(EXAMPLE.read_text(encoding="utf-8")), "calibration": {"file": "payload.json"}, "teleop": _TELEOP}
+_FULL = {**tomllib.loads(EXAMPLE.read_text(encoding="utf-8")), "calibration": {"file": "payload.json"},
+         "teleop": _TELEOP}
 _FULL["robot"] = {**_FULL["robot"], "mode": "teleop"}
 _FULL["sensor"] = {**_FULL["sensor"], "counts_per_force": 1e6, "counts_per_torque": 1e6, "force_unit": "N",
                    "torque_unit": "Nm"}

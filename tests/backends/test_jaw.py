@@ -6,10 +6,10 @@ import time
 from pathlib import Path
 
 import pytest
+from fake_jaw import INO, PROTOCOL_LITERALS, C, JawFirmware, PtyJaw
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fake_jaw import INO, PROTOCOL_LITERALS, C, JawFirmware, PtyJaw
 from pipeline.backends.jaw import PROTOCOL_VERSION, JawFault, SerialJawActuator
 from pipeline.devices import JawActuator
 
@@ -42,7 +42,8 @@ def test_handshake_and_commands() -> None:
             assert jaw.set_pulse_us(2400) == 1900 and s.at_limit
             jaw.set_position(1.7)  # clamped on the host to 1 before it is sent
             assert jaw.ping()
-            assert fake.received == ["SET 1500", "OPEN", "CLOSE", "STEP 50", "STEP -100", "SET 2400", "SET 1900", "PING"]
+            assert fake.received == ["SET 1500", "OPEN", "CLOSE", "STEP 50", "STEP -100", "SET 2400", "SET 1900",
+                                     "PING"]
         finally:
             jaw.close()
 
@@ -104,7 +105,9 @@ def test_port_disappearing_is_a_visible_fault() -> None:
 def test_no_ready_and_missing_port_are_clear_errors_fast() -> None:
     with PtyJaw(send_ready=False) as fake:
         t0 = time.monotonic()
-        with pytest.raises(JawFault, match=rf"no READY from the jaw actuator on {fake.path} within 0\.2 s; check the port, that firmware/jaw_actuator is flashed and the baud rate \(115200\)"):
+        with pytest.raises(JawFault,
+                           match=rf"no READY from the jaw actuator on {fake.path} within 0\.2 s; check the port, that "
+                                 r"firmware/jaw_actuator is flashed and the baud rate \(115200\)"):
             SerialJawActuator(fake.path, ready_timeout_s=0.2)
         assert time.monotonic() - t0 < 1.0
     with pytest.raises(JawFault, match=r"cannot open the jaw actuator port '/dev/no-such-jaw'"):

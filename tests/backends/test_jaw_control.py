@@ -5,6 +5,7 @@ on the real serial backend against the pty Arduino running the sketch's logic.""
 from __future__ import annotations
 
 from fake_jaw import C, PtyJaw
+
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.jaw_control import CONT_STEP_US, STEP_US, JawController, StylusButtons
 from pipeline.sim.jaw import SimJaw
@@ -14,7 +15,8 @@ CLOSE, OPEN = 1, 2
 
 
 def test_the_firmware_and_the_host_agree_on_the_paper_s_button_logic() -> None:
-    assert (C["STEP_US"], C["LONG_PRESS_MS"], C["CONT_STEP_US"], C["CONT_PERIOD_MS"]) == (STEP_US, 300, CONT_STEP_US, 20)
+    assert (C["STEP_US"], C["LONG_PRESS_MS"], C["CONT_STEP_US"], C["CONT_PERIOD_MS"]) == (STEP_US, 300, CONT_STEP_US,
+                                                                                          20)
 
 
 def test_stylus_buttons_short_press_steps_long_press_moves_until_released() -> None:

@@ -14,7 +14,6 @@ import subprocess
 from pathlib import Path
 
 import pytest
-
 from fake_jaw import INO, PROTOCOL_LITERALS
 
 SKETCH_DIR = INO.parent

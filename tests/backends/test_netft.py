@@ -5,10 +5,10 @@ from __future__ import annotations
 import time
 
 import pytest
+from fake_netft import RECORD, FakeNetFT
 from hypothesis import given
 from hypothesis import strategies as st
 
-from fake_netft import RECORD, FakeNetFT
 from pipeline.backends.netft import (
     NetFTCalibration,
     NetFTError,
@@ -85,18 +85,19 @@ def test_manual_calibration_needs_no_http_page() -> None:
 def test_no_http_page_is_a_clear_error_fast() -> None:
     with FakeNetFT(http=False) as fake:
         t0 = time.monotonic()
-        with pytest.raises(NetFTError, match=r"cannot read the Net F/T calibration from http://127\.0\.0\.1:\d+/netftapi2\.xml: .*refused.*counts_per_force"):
+        with pytest.raises(NetFTError,
+                           match=r"cannot read the Net F/T calibration from http://127\.0\.0\.1:\d+/netftapi2\.xml: "
+                                 r".*refused.*counts_per_force"):
             open_sensor(fake)
         assert time.monotonic() - t0 < 1.0
 
 
 def test_http_404_and_a_page_that_is_not_the_box() -> None:
-    with FakeNetFT(xml_status=404) as fake:
-        with pytest.raises(NetFTError, match="HTTP 404"):
-            open_sensor(fake)
-    with FakeNetFT(xml_body="<html><body>router login</body></html>") as fake:
-        with pytest.raises(NetFTError, match="has no <cfgcpf>: is this a Net F/T box"):
-            open_sensor(fake)
+    with FakeNetFT(xml_status=404) as fake, pytest.raises(NetFTError, match="HTTP 404"):
+        open_sensor(fake)
+    with (FakeNetFT(xml_body="<html><body>router login</body></html>") as fake,
+          pytest.raises(NetFTError, match="has no <cfgcpf>: is this a Net F/T box")):
+        open_sensor(fake)
     with pytest.raises(NetFTError, match="not XML"):
         parse_netft_xml("{json: 1}")
     with pytest.raises(NetFTError, match=r"force unit 'stone' is not known; allowed: N, lbf"):
@@ -109,7 +110,8 @@ def test_closed_rdt_port_is_a_clear_error_fast() -> None:
         # a UDP port nobody listens on: the kernel answers ICMP port unreachable
         fake_port = fake.udp_port
     t0 = time.monotonic()
-    with pytest.raises(NetFTError, match=rf"no RDT data from the Net F/T at 127\.0\.0\.1:{fake_port} within 0\.3 s.*check the IP"):
+    with pytest.raises(NetFTError,
+                       match=rf"no RDT data from the Net F/T at 127\.0\.0\.1:{fake_port} within 0\.3 s.*check the IP"):
         NetFTForceSensor("127.0.0.1", port=fake_port, calibration=cal, connect_timeout_s=0.3)
     assert time.monotonic() - t0 < 1.0
 
@@ -219,8 +221,9 @@ def test_status_word_and_stalled_ft_sequence_reach_the_watchdog() -> None:
                 loop.run_ticks(1)
             assert s.stats.stalled == 7 and s.read_wrench().t_ns == t_fresh
             assert loop.faults == Fault.SENSOR_STALE
-            assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS", "SENSOR_STALE"]
-            assert [e.detail for e in loop.events if e.kind == "fault"][0] == "SENSOR_STATUS: status word 0x80000001"
+            assert [e.detail.split(":")[0] for e in loop.events if e.kind == "fault"] == ["SENSOR_STATUS",
+                                                                                          "SENSOR_STALE"]
+            assert next(e.detail for e in loop.events if e.kind == "fault") == "SENSOR_STATUS: status word 0x80000001"
         finally:
             s.close()
 

@@ -19,18 +19,18 @@ from types import ModuleType
 from typing import Any
 
 import pytest
-
 from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from fake_ur_control import FakeControl
+from test_hardware_config import write_rig_file
+
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
 from pipeline.clock import MonotonicClock
 from pipeline.devices import DeviceError
 from pipeline.hardware import RealRig, build_real_rig, hardware_from_dict
 from pipeline.teleop import ServoTarget, TeleopDriver, TeleopState
-from test_hardware_config import write_rig_file
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
 OPEN_ORDER = ["force sensor", "robot", "haptic device", "jaw actuator", "robot control (teleoperation)"]

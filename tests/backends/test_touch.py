@@ -20,7 +20,6 @@ from pipeline.backends.touch import (
     TouchHapticDevice,
     load_pyopenhaptics,
 )
-from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 from pipeline.clock import VirtualClock
 from pipeline.devices import DeviceError, Fault, HapticDevice
 from pipeline.framework import FrameworkConfig, HapticFramework
@@ -28,6 +27,7 @@ from pipeline.loop import HapticLoop
 from pipeline.loop_messages import ResetFaults, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import SimForceSensor
+from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 
 
 class FakeHD:
@@ -47,7 +47,8 @@ class FakeHD:
 
     def init_device(self, name: str) -> None:
         if self.init_error:
-            raise DeviceError(f"OpenHaptics could not open the haptic device {name!r} (HD error 0x{self.init_error:04x})")
+            raise DeviceError(f"OpenHaptics could not open the haptic device {name!r} (HD error "
+                              f"0x{self.init_error:04x})")
 
     def error_code(self) -> int:
         e, self.pending_error = self.pending_error, 0
@@ -195,7 +196,9 @@ def test_missing_openhaptics_names_what_to_install(monkeypatch: pytest.MonkeyPat
         return real_import(name, *args, **kw)
 
     monkeypatch.setattr(builtins, "__import__", no_libhd)
-    with pytest.raises(DeviceError, match=r"install the OpenHaptics SDK .* pip install 'haptic-study\[touch\]' .*\(OpenHaptics library not found: libHD\.so"):
+    with pytest.raises(DeviceError,
+                       match=r"install the OpenHaptics SDK .* pip install 'haptic-study\[touch\]' .*\(OpenHaptics "
+                             r"library not found: libHD\.so"):
         load_pyopenhaptics()
     monkeypatch.undo()
     try:

@@ -7,8 +7,8 @@ import random
 import time
 
 import pytest
-
 from fake_rtde import FakeRtde
+
 from pipeline.backends.ur import UrRtdeRobot, ur3_flange_pose, ur3_tcp_pose
 from pipeline.clock import MonotonicClock
 from pipeline.devices import DeviceError, Robot
@@ -122,7 +122,8 @@ def test_non_finite_pose_is_passed_to_the_watchdog() -> None:
 def test_closed_port_and_unreachable_host_are_clear_errors_fast() -> None:
     host = f"127.{random.randint(1, 254)}.{random.randint(0, 255)}.{random.randint(1, 254)}"
     t0 = time.monotonic()
-    with pytest.raises(DeviceError, match=rf"cannot reach the UR controller at {host}:30004 \(Connection refused\); check the IP"):
+    with pytest.raises(DeviceError,
+                       match=rf"cannot reach the UR controller at {host}:30004 \(Connection refused\); check the IP"):
         UrRtdeRobot(host, connect_timeout_s=0.3)
     assert time.monotonic() - t0 < 0.5
     t0 = time.monotonic()

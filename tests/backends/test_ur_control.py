@@ -21,8 +21,8 @@ import time
 from collections.abc import Iterator
 
 import pytest
-
 from fake_ur_control import FakeControl
+
 from pipeline.backends.ur_control import UrRtdeServo
 from pipeline.clock import VirtualClock
 from pipeline.devices import DeviceError, TcpServo

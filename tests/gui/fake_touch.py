@@ -16,11 +16,12 @@ from pipeline.clock import Clock
 from pipeline.hardware import HapticSettings
 
 #: Every device opened in this process, newest last (tests inspect the forces it was sent).
-OPENED: list["ThreadedHD"] = []
+OPENED: list[ThreadedHD] = []
 
 
 class ThreadedHD:
-    """The HDAPI of one Touch whose scheduler calls the servo callback about every millisecond, like hdStartScheduler."""
+    """The HDAPI of one Touch whose scheduler calls the servo callback about every millisecond, like
+    hdStartScheduler."""
 
     def __init__(self) -> None:
         self.callback: Callable[[], None] | None = None

@@ -141,7 +141,8 @@ def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
     h.apply(m.Health(1000.0, 1000, 1010, 10, 0, 0, 5000, 0, True, "autopilot", True, False,
                      haptic_heat_fraction=0.62, haptic_force_limit_n=2.52, haptic_peak_force_n=3.3,
                      haptic_continuous_force_n=0.88))
-    h.apply(m.JawState(0.4, 1420, False, "serial port /dev/ttyACM0 lost: [Errno 5]", "experimenter: open fully: refused"))
+    h.apply(m.JawState(0.4, 1420, False, "serial port /dev/ttyACM0 lost: [Errno 5]",
+                       "experimenter: open fully: refused"))
     assert panel.devices.item(3, 1).text() == "FAULT: serial port /dev/ttyACM0 lost: [Errno 5]"
     jaw = JawModel()
     jaw.apply(m.JawState(1.0, 1900, False, "", "stylus: open fully → 1900 µs (100% open)"))

@@ -54,7 +54,7 @@ def test_a_thermally_derated_on_trial_is_aborted_as_feedback_not_delivered(engin
     db = str(tmp_path / "s.db")
     e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
     steps_until(e, lambda: any(isinstance(ev, m.TrialEnded) and ev.record.haptic_mode == "on" for ev in events))
-    on = [ev.record for ev in events if isinstance(ev, m.TrialEnded) and ev.record.haptic_mode == "on"][0]
+    on = next(ev.record for ev in events if isinstance(ev, m.TrialEnded) and ev.record.haptic_mode == "on")
     assert on.outcome == "aborted"
     assert on.abort_reason.startswith("feedback: the haptic device's thermal derating rendered ")
     assert on.abort_reason.endswith("% of the designed force in a haptics-ON trial")

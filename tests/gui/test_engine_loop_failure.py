@@ -55,14 +55,15 @@ def test_a_loop_that_dies_mid_trial_is_stored_and_interrupts_the_session(tmp_pat
         e.handle(m.StartSession(db, "P02", "experiment", short_protocol, 3, 2))
         e.handle(m.ResetFaults())
         refused = [ev.message for ev in events if isinstance(ev, m.CommandRefused)]
-        assert len(refused) == 2 and all("the haptic loop died (OSError('Net F/T socket closed'))" in r for r in refused)
+        assert len(refused) == 2
+        assert all("the haptic loop died (OSError('Net F/T socket closed'))" in r for r in refused)
     finally:
         e.close("test over")
         e.release_ring()
     kinds = stored_events(db)
     died = [d for k, d in kinds if k == "fault" and d.startswith("LOOP_STALLED")]
-    assert died == ["LOOP_STALLED: the haptic loop died (OSError('Net F/T socket closed')); the haptic device's command "
-                    "watchdog dropped the force to zero"]
+    assert died == ["LOOP_STALLED: the haptic loop died (OSError('Net F/T socket closed')); the haptic device's "
+                    "command watchdog dropped the force to zero"]
     assert [k for k, _ in kinds][-1] == "session_interrupted"
     assert [s["code"] for s in list_resumable(db)] == ["P01"]  # interrupted, resumable
 

@@ -11,7 +11,8 @@ from PySide6.QtCore import Qt
 
 TIMEOUT_MS = 30_000
 # four trials, a 3 s pause between them (0.75 s of real time): long enough to be seen
-PROTOCOL = SHORT_PROTOCOL.replace("trials_per_cell = 1", "trials_per_cell = 2").replace("pause_s = 0.3", "pause_s = 3.0")
+PROTOCOL = SHORT_PROTOCOL.replace("trials_per_cell = 1", "trials_per_cell = 2").replace("pause_s = 0.3",
+                                                                                        "pause_s = 3.0")
 
 
 @pytest.fixture

@@ -96,8 +96,9 @@ def test_a_dead_haptic_loop_in_a_live_engine_leads_to_the_same_restart(qtbot, wi
 
 
 def test_a_stalled_loop_offers_reset_and_a_restart_that_asks_first(qtbot, window) -> None:
-    from pipeline.devices import Fault
     from PySide6.QtWidgets import QMessageBox
+
+    from pipeline.devices import Fault
 
     w = window
     sid = start_session(qtbot, w, "P03")

@@ -59,7 +59,7 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     settings, db = setup
     w = open_window(qtbot, settings, db)
     panel = w.setup_panel
-    assert w.width() <= 1366 and w.height() <= 768 or w.screen().availableGeometry().height() > 768
+    assert (w.width() <= 1366 and w.height() <= 768) or w.screen().availableGeometry().height() > 768
     assert panel.number.value() == 1 and panel.hint.text().startswith("Enter the participant's code")
 
     # the experiment (the protocol does not require training: that rule is test_gui_study_rules.py's)

@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 import pytest
+from gui_trials import trial_record
 from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.loop_messages import RECORD_FIELDS
-from pipeline.tick_record import TICK_DTYPE
 from pipeline.ring import RingBuffer
+from pipeline.tick_record import TICK_DTYPE
 from protocol.records import TrialRecord
-from gui_trials import trial_record
 from study_app import messages as m
 from study_app.models.app import AppModel, Notice
 from study_app.models.calibration import CalibrationModel
@@ -31,7 +31,8 @@ def started(kind: str = "experiment", aid: bool = False, total: int = 2) -> m.Se
                             tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
 
 
-def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2, mode: str = "on") -> m.TrialStarted:
+def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2,
+          mode: str = "on") -> m.TrialStarted:
     return m.TrialStarted(t_s, position - 1, position, 2, label, force, mode)
 
 
@@ -187,8 +188,9 @@ def test_plot_model_keeps_a_window_and_computes_magnitudes():
         fill_ring(ring, 1500, raw_fx=3.0, raw_fz=4.0, filt_fx=0.6, filt_fy=0.8, render_fz=-2.0, force_n=1.0)
         assert p.pull() == 1000 and p.skipped == 500  # only the window is read
         assert len(p.t) == 1000 and p.t[0] == pytest.approx(0.5) and p.latest_t_s == pytest.approx(1.499)
-        assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"], 1.0) and np.all(p.data["render_n"] == 2.0)
-        t, y = p.curve("raw_n")
+        assert np.all(p.data["raw_n"] == 5.0) and np.allclose(p.data["comp_n"],
+                                                              1.0) and np.all(p.data["render_n"] == 2.0)
+        t, _y = p.curve("raw_n")
         # constant data: each bin keeps its first sample twice
         assert len(t) == 200 and t[0] == pytest.approx(-0.999) and t[-1] == pytest.approx(-0.009)
         assert p.pull() == 0
@@ -225,7 +227,8 @@ def test_participant_screen_training_shows_gauge_and_band():
 
 _EVENTS = st.one_of(
     st.builds(lambda t, pos: trial(t_s=t, position=pos), st.floats(0, 100), st.integers(1, 2)),
-    st.builds(lambda t, ph: m.PhaseEntered(t, 0, ph), st.floats(0, 100), st.sampled_from(["active", "pause", "idle", "cued"])),
+    st.builds(lambda t, ph: m.PhaseEntered(t, 0, ph), st.floats(0, 100),
+              st.sampled_from(["active", "pause", "idle", "cued"])),
     st.builds(lambda t, f: ("sample", t, f), st.floats(0, 100), st.floats(0, 3.0)),
 )
 
@@ -271,7 +274,7 @@ def test_rig_model_geometry_and_manual_target():
     r.apply(m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot"))
     r.update(0.098, 0.9)
     assert r.tip_z_mm == pytest.approx(-2.0) and r.indentation_mm == pytest.approx(2.0)
-    x, z = r.surface_profile(30.0, 61)
+    _x, z = r.surface_profile(30.0, 61)
     assert z[30] == pytest.approx(-2.0) and z[0] > -1e-3 and np.all(z <= 0)
     assert r.target_for_tip_mm(15.0) == pytest.approx(0.0)
     assert r.target_for_tip_mm(-3.0) == pytest.approx(-0.018)
@@ -399,7 +402,8 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     a.apply(trial())
     assert not a.can("restart_engine")  # nothing to restart while it runs
     a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
-    assert a.engine_trouble == "The study engine exited unexpectedly. Session 3 was interrupted; its stored trials are kept."
+    assert a.engine_trouble == ("The study engine exited unexpectedly. Session 3 was interrupted; its stored trials "
+                                "are kept.")
     assert a.engine_trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
     assert not a.can("restart_engine")  # no restarter: no button that does nothing
     a.restarter = lambda: restarts.append(1)
@@ -459,14 +463,14 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
     h.apply(m.EngineFault(1.0, "fault", 1, "SENSOR_STALE: newest F/T sample 6.0 ms old (limit 5 ms)"))
     for k in range(30):
         h.apply(m.EngineFault(2.0 + k, "output_restarted", 0, f"no loop tick for {11 + k / 10:.1f} ms: the haptic "
-                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in again "
-                              "from zero", session_t_s=1.0 + k))
+                              "device's command watchdog (10 ms) had dropped the force to zero; feedback ramps in "
+                              "again from zero", session_t_s=1.0 + k))
     h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
     h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
     assert len(h.fault_log) == 4
     assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
-                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to zero; "
-                              "feedback ramps in again from zero")
+                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to "
+                              "zero; feedback ramps in again from zero")
     assert h.fault_log[2].endswith("reset: SENSOR_STALE")
     assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
     # a restart is a line of its own: the same event after it starts a new run; the log keeps the newest 50 lines

@@ -19,16 +19,16 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 
-from fake_netft import FakeNetFT  # noqa: E402
-from fake_rtde import FakeRtde  # noqa: E402
+from fake_netft import FakeNetFT
+from fake_rtde import FakeRtde
 
-from pipeline.devices import Fault  # noqa: E402
-from pipeline.frames import matrix_to_rotvec  # noqa: E402
-from study_app import messages as m  # noqa: E402
-from study_app.engine_client import EngineClient  # noqa: E402
-from study_app.engine_host import StudyEngine  # noqa: E402
-from study_app.engine_setup import HostConfig  # noqa: E402
-from study_app.models.real_calibration import RealCalibrationModel  # noqa: E402
+from pipeline.devices import Fault
+from pipeline.frames import matrix_to_rotvec
+from study_app import messages as m
+from study_app.engine_client import EngineClient
+from study_app.engine_host import StudyEngine
+from study_app.engine_setup import HostConfig
+from study_app.models.real_calibration import RealCalibrationModel
 
 FAKE_TOUCH = "fake_touch:open_fake_touch"
 G = 9.80665
@@ -96,7 +96,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         assert refused == [
             "real rig: a person holds the stylus; the simulated participant and manual driving exist on the "
             "simulated rig only",
-            "real rig: the poses are recorded one at a time in the calibration wizard (move the robot, then Record pose)",
+            "real rig: the poses are recorded one at a time in the calibration wizard (move the robot, then Record "
+            "pose)",
         ]
 
         wiz = RealCalibrationModel(seconds=0.2)
@@ -110,15 +111,16 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             rtde.send(f"pose 0.3 -0.1 0.2 {rv[0]} {rv[1]} {rv[2]}")
             netft.counts = payload_counts(step.target_rot_base_sensor)
             target = np.asarray(step.target_rot_base_sensor).reshape(3, 3)
-            wait_for(e, lambda: np.allclose(np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target,
-                                            atol=1e-9))
+            wait_for(e, lambda target=target: np.allclose(
+                np.asarray(e.eng.rig.robot.read_pose().rot_base_tip).reshape(3, 3), target, atol=1e-9))
             wait_for(e, lambda: (r := e.loop.last_record) is not None
                      and abs(r["raw_fx"] - netft.counts[0] / CPF) < 1e-9)
             # ... and presses Record pose: the engine averages 0.2 s of wrench off the GUI thread
             n_before = len(events)
             e.handle(wiz.record_command())
             assert wiz.state == "recording"
-            wait_for(e, lambda: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused)) for ev in events[n_before:]))
+            wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused))
+                                                      for ev in events[n_before:]))
             for ev in events[n_before:]:
                 wiz.apply(ev)
             rec = step.recorded
@@ -182,7 +184,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         wait_for(e, started, timeout_s=30.0)
         e.handle(m.AbortSession("rehearsal over"))
         wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
-        ended = [ev for ev in events if isinstance(ev, m.SessionEnded)][0]
+        ended = next(ev for ev in events if isinstance(ev, m.SessionEnded))
         assert ended.status == "aborted" and ended.aborted >= 1  # (more if a stalled fake sensor aborted one)
         # fault rehearsal exists on the simulated rig only: a person's hand is on this one
         e.handle(m.InjectFault("sensor-stall"))
@@ -193,7 +195,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         e.release_ring()
     con = sqlite3.connect(db)
     try:
-        rig_kind, config_json, cal_json = con.execute("SELECT rig, config_json, calibration_json FROM sessions").fetchone()
+        rig_kind, config_json, cal_json = con.execute(
+            "SELECT rig, config_json, calibration_json FROM sessions").fetchone()
     finally:
         con.close()
     config, cal = json.loads(config_json), json.loads(cal_json)
@@ -226,7 +229,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
 
 
 def test_a_pose_recorded_while_the_robot_moves_is_refused(rig):
-    netft, rtde, hw_path = rig
+    _netft, rtde, hw_path = rig
     events: list[object] = []
     e = StudyEngine(HostConfig(rig="real", hardware_path=str(hw_path), haptic_factory=FAKE_TOUCH), events.append,
                     shared_ring=False)
@@ -265,7 +268,7 @@ def test_a_bad_hardware_file_is_one_line(tmp_path, extra, message):
 
 def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(rig):
     """No Touch on this machine: the engine process reports the haptic device in one line and exits (no hang)."""
-    netft, rtde, hw_path = rig
+    _netft, _rtde, hw_path = rig
     client = EngineClient(HostConfig(rig="real", hardware_path=str(hw_path)))
     client.start()
     try:
@@ -285,7 +288,8 @@ def test_a_device_that_cannot_be_opened_is_named_and_the_engine_process_exits(ri
 
 
 def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_path):
-    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is fed in."""
+    """The window's real-rig wiring; the engine fails to connect (no such file), then an EngineReady of a real rig is
+    fed in."""
     from PySide6.QtCore import QSettings
 
     from study_app.gui.main_window import ExperimenterWindow

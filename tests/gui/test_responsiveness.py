@@ -1,20 +1,20 @@
-"""What keeps the GUI thread short: bounded per-tick work, incremental tables, still axes, and the stall detector's attribution."""
+"""What keeps the GUI thread short: bounded per-tick work, incremental tables, still axes, and the stall detector's
+attribution."""
 
 from __future__ import annotations
 
 import dataclasses
 
 import numpy as np
+from gui_trials import trial_record
 
 from pipeline.loop_messages import RECORD_FIELDS
-from pipeline.tick_record import TICK_DTYPE
 from pipeline.ring import RingBuffer
+from pipeline.tick_record import TICK_DTYPE
 from study_app.gui.stall import Stall, StallRecorder, culprit
 from study_app.gui.widgets import QtTrialTable
 from study_app.models.plots import PlotModel, nice_range
 from study_app.models.session import TrialTable
-
-from gui_trials import trial_record
 
 _T = RECORD_FIELDS.index("t_s")
 _RAW_FZ = RECORD_FIELDS.index("raw_fz")

@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 import pytest
-
+from gui_trials import trial_record
 from PySide6.QtCore import QPoint, Qt
 
 from study_app import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
+from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
-from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
@@ -21,8 +21,6 @@ from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
 from study_app.models.rig import RigViewModel
 from study_app.models.session import SessionModel, TrialTable
-
-from gui_trials import trial_record
 from study_app.models.setup import SetupModel
 
 READY = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
@@ -35,7 +33,8 @@ def test_trial_table_view_fills_from_the_model(qtbot):
     table.add(trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
                            outcome="success", tct_s=2.5, rmse_n=0.2, max_ae_n=0.4))
     assert view.rowCount() == 1
-    assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200", "0.400"]
+    assert [view.item(0, j).text() for j in range(7)] == ["1", "FIRM 1.2 N", "haptics ON", "success", "2.50", "0.200",
+                                                          "0.400"]
     table.clear()
     assert view.rowCount() == 0
 
@@ -58,7 +57,7 @@ def test_health_panel_shows_faults_and_enables_reset(qtbot):
     qtbot.addWidget(view)
     h.apply(READY)
     assert view.faults.text() == "Faults: none" and not view.reset_button.isEnabled()
-    h.apply(m.EngineFault(2.0, "fault", int(64), "OPERATOR_STOP"))
+    h.apply(m.EngineFault(2.0, "fault", 64, "OPERATOR_STOP"))
     assert view.faults.text() == "Faults: OPERATOR_STOP" and view.reset_button.isEnabled()
     h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False))
     text = view.loop.text()
@@ -143,10 +142,13 @@ def test_calibration_wizard_shows_refusal_and_figures(qtbot):
     assert runs == [1]
     c.command()
     assert not view.run_button.isEnabled()
-    c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [], None))
-    assert view.verdict.text() == "Refused — the previous calibration stays in use. Reason: rank 6 of 10: add tilted poses"
+    c.apply(m.CalibrationDone(False, "rank 6 of 10: add tilted poses", "quick", 6, 3.1e17, math.nan, math.nan, [],
+                              None))
+    assert view.verdict.text() == ("Refused — the previous calibration stays in use. Reason: rank 6 of 10: "
+                                   "add tilted poses")
     assert view.run_button.isEnabled() and view.residuals.rowCount() == 0
-    c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003, [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],
+    c.apply(m.CalibrationDone(True, "", "quick", 2, 9.7, 0.0015, 0.0003,
+                              [("P01", 0.001, 0.0002), ("P02", 0.002, 0.0004)],
                               {"mass_kg": 0.65, "model": "affine"}))
     assert view.verdict.text().startswith("Accepted")
     assert view.residuals.rowCount() == 2 and view.residuals.item(1, 1).text() == "0.0020"

@@ -16,11 +16,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frame_check import AXES, FrameCheck, check_axis
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.frames import IDENTITY, axis_angle, mat_mul
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
+from pipeline.payload_compensator import NO_PAYLOAD
 from pipeline.rig_calibration import CalibrationFileError, RigCalibrationFile, ToolCalibration
 from pipeline.sim.commissioning import pivot_poses, push_axes
 from pipeline.sim.rig import SimRig, SimRigConfig
@@ -61,7 +61,8 @@ def test_a_roll_only_set_is_refused_naming_the_undetermined_axis_and_what_to_add
 
 def test_tilting_about_one_axis_only_leaves_that_axis_undetermined() -> None:
     rots = [mat_mul(axis_angle((1.0, 0.0, 0.0), math.radians(a)), TOOL_DOWN) for a in (-30, -10, 10, 30)]
-    with pytest.raises(DegeneratePivotError, match=r"along the flange x axis is not determined .* about the flange y or z"):
+    with pytest.raises(DegeneratePivotError,
+                       match=r"along the flange x axis is not determined .* about the flange y or z"):
         identify_tip(pivot_poses(SimRig(), rots))
 
 

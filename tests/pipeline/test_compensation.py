@@ -475,9 +475,9 @@ def test_mounted_payload_is_the_same_model_from_the_tip_orientation(
     exact = [*fg, c[1] * fg[2] - c[2] * fg[1], c[2] * fg[0] - c[0] * fg[2], c[0] * fg[1] - c[1] * fg[0]]
     scale = max(abs(v) for v in a) * math.hypot(*gravity) * (1.0 + max(abs(v) for v in com))
     tol = 64 * 2.0**-52 * scale
-    assert max(abs(float(Q(x) - e)) for x, e in zip(got, exact)) <= tol
+    assert max(abs(float(Q(x) - e)) for x, e in zip(got, exact, strict=True)) <= tol
     old = cal.payload_wrench(frames.transpose(frames.mat_mul(rbt, rts)))
-    assert max(abs(float(Q(x) - e)) for x, e in zip(old, exact)) <= tol
+    assert max(abs(float(Q(x) - e)) for x, e in zip(old, exact, strict=True)) <= tol
     bias = (*fb, *tb)
     assert mounted.compensate(meas, rbt) == tuple(meas[i] - (got[i] + bias[i]) for i in range(6))
 
@@ -545,9 +545,9 @@ def test_with_bias_returns_an_updated_copy() -> None:
 
 def test_calibration_pose_rejects_bad_input_naming_the_pose() -> None:
     w = (0.0,) * 6
-    with pytest.raises(ValueError, match="(?s)pose tilt-3 rot_base_sensor.*not a rotation"):
+    with pytest.raises(ValueError, match=r"(?s)pose tilt-3 rot_base_sensor.*not a rotation"):
         CalibrationPose(2.0 * np.eye(3), w, label="tilt-3")
-    with pytest.raises(ValueError, match="(?s)pose mirror rot_base_sensor.*reflection"):
+    with pytest.raises(ValueError, match=r"(?s)pose mirror rot_base_sensor.*reflection"):
         CalibrationPose(np.diag([1.0, 1.0, -1.0]), w, label="mirror")
     with pytest.raises(ValueError, match="pose nan-pose wrench"):
         CalibrationPose(np.eye(3), (0.0, 0.0, math.nan, 0.0, 0.0, 0.0), label="nan-pose")
@@ -582,7 +582,7 @@ def test_recommended_pose_set_geometry() -> None:
 
 @pytest.mark.parametrize(("n", "tilt"), [(5, 60.0), (24, 0.0), (24, 95.0), (24, math.nan)])
 def test_recommended_pose_set_validates_arguments(n: int, tilt: float) -> None:
-    with pytest.raises(ValueError, match="n = 5|tilt_deg"):
+    with pytest.raises(ValueError, match=r"n = 5|tilt_deg"):
         recommended_pose_set(n, tilt)
 
 
@@ -609,7 +609,7 @@ def test_rls_follows_a_bias_step_as_the_closed_form(
     lam: float, p0: float, k: int, step: tuple[float, ...]
 ) -> None:
     theta0 = (0.8, -0.5, 1.2, 0.03, -0.02, 0.01)
-    z = tuple(t + s for t, s in zip(theta0, step))
+    z = tuple(t + s for t, s in zip(theta0, step, strict=True))
     rls = RlsBias(theta0[:3], theta0[3:], forgetting=lam, p0=p0)
     for _ in range(k):
         assert rls.update(z, allowed=True)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pipeline.engine import EngineConfig
 
+
 class _SteppedClock:
     """A clock that is not a VirtualClock, as the real one is to ``build_sim_engine``, without real time."""
 

@@ -74,7 +74,7 @@ def max_abs_diff(a, b) -> float:
 
 def rotvec_distance_mod_2pi(r2, r, k, th) -> float:
     """Distance of r2 from r, or from r - 2π·k (the same rotation), whichever is closer."""
-    alt = tuple(c - 2 * PI * kc for c, kc in zip(r, k))
+    alt = tuple(c - 2 * PI * kc for c, kc in zip(r, k, strict=True))
     return min(max_abs_diff(r2, r), max_abs_diff(r2, alt))
 
 
@@ -311,7 +311,8 @@ def test_force_frame_round_trip(rot_tip_sensor, rot_base_tip, rot_haptic_base, f
     f_t = mat_vec(rot_tip_sensor, f_s)
     f_b = mat_vec(rot_base_tip, f_t)
     f_h = mat_vec(rot_haptic_base, f_b)
-    back = mat_vec(transpose(rot_tip_sensor), mat_vec(transpose(rot_base_tip), mat_vec(transpose(rot_haptic_base), f_h)))
+    back = mat_vec(transpose(rot_tip_sensor),
+                   mat_vec(transpose(rot_base_tip), mat_vec(transpose(rot_haptic_base), f_h)))
     assert max_abs_diff(back, f_s) <= 1e-12
     # rotations preserve the magnitude of the force
     assert math.hypot(*f_h) == pytest.approx(math.hypot(*f_s), abs=1e-12)

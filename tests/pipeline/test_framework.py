@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.filters import MovingAverage3
 from pipeline.frames import axis_angle, mat_mul, mat_vec, rotvec_to_matrix, transpose
 from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
+from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.safety import SafetyConfig, SafetyGovernor
 from pipeline.scaling import scale_components, scale_force
 
@@ -102,7 +102,7 @@ def test_fused_step_equals_composed_stages(window, samples, rv, mount, peak, res
         # compensation is evaluated from precomputed offsets in the fused path:
         # identical arithmetic order (f − (A g + b)) makes it exact too
         assert len(got) == len(STEP_FIELDS)
-        assert all(_same(g, x) for g, x in zip(got, want)), (w, enabled, dt, got, want)
+        assert all(_same(g, x) for g, x in zip(got, want, strict=True)), (w, enabled, dt, got, want)
 
 
 @pytest.mark.parametrize("peak", [3.3, 2.0, 0.5])
@@ -140,7 +140,7 @@ def test_steady_state_matches_paper_mapping() -> None:
     # tissue pushes the tool up (+z base) = −z in the tool-down sensor frame
     for _ in range(200):
         out = fw.step(0.0, 0.0, -1.2, True, 0.001)
-    rec = dict(zip(STEP_FIELDS, out))
+    rec = dict(zip(STEP_FIELDS, out, strict=True))
     assert rec["base_fz"] == pytest.approx(1.2, abs=1e-15)
     assert rec["haptic_fy"] == pytest.approx(1.2, abs=1e-15)
     expected = 3.0 * math.tanh(1.2 / 7.0)
@@ -211,8 +211,8 @@ def test_a_snapshot_carries_the_device_limit_and_restores_bit_for_bit() -> None:
     assert twin.safety.limit_n == fw.safety.limit_n == 1.7
     ours, theirs = _pushing(fw, 300), _pushing(twin, 300)
     assert math.hypot(*ours[-1][18:21]) == pytest.approx(1.7)  # the limit is what clamps
-    for a, b in zip(ours, theirs):
-        assert all(_same(x, y) for x, y in zip(a, b))
+    for a, b in zip(ours, theirs, strict=True):
+        assert all(_same(x, y) for x, y in zip(a, b, strict=True))
     # replay with another f_max: the device's own limit still clamps (the raw limit is kept, not the clamp)
     higher = HapticFramework.restore(snap, FrameworkConfig(f_max_n=3.2))
     assert higher.safety.static_limit_n == 3.2 and higher.safety.limit_n == fw.safety.limit_n

@@ -7,6 +7,7 @@ import threading
 
 import numpy as np
 import pytest
+from drivers import PressAndHold
 
 from pipeline.clock import VirtualClock
 from pipeline.devices import Fault
@@ -18,7 +19,6 @@ from pipeline.safety import SafetyConfig
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import TouchSpec
-from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9

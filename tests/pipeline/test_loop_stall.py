@@ -1,4 +1,5 @@
-"""The loop's own checks on itself, on the virtual clock: late ticks, stalls, a ramp-down that fails, a dead loop and the robot.
+"""The loop's own checks on itself, on the virtual clock: late ticks, stalls, a ramp-down that fails, a dead loop and
+the robot.
 
 * a tick later than the Touch's command timeout (10 ms) finds the device's
   output dropped: the loop restarts it from zero (no kick back to the old
@@ -16,7 +17,6 @@ from __future__ import annotations
 import math
 
 import pytest
-
 from drivers import PressAndHold
 from test_teleop_faults import Teleop
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -11,10 +12,10 @@ from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.loop_messages import Mark, SetHaptics
 from pipeline.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
-from pipeline.sim.rig import SimRigConfig
-from protocol.metrics import trial_metrics
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams
+from pipeline.sim.rig import SimRigConfig
+from protocol.metrics import trial_metrics
 
 K_TISSUE = 1.1e4
 GAP_M = 0.015
@@ -112,8 +113,8 @@ def test_end_trial_retracts_to_the_start_pose_within_half_a_second() -> None:
     # the retraction starts where the command was (no jump) and is monotone up to the start pose
     assert abs(ys[end_i] - ys[end_i - 1]) < 1e-5
     seg = ys[end_i : end_i + 402]
-    assert all(b >= a - 1e-15 for a, b in zip(seg, seg[1:]))  # up to rounding of the polynomial
-    assert max(b - a for a, b in zip(seg, seg[1:])) < 1e-4
+    assert all(b >= a - 1e-15 for a, b in itertools.pairwise(seg))  # up to rounding of the polynomial
+    assert max(b - a for a, b in itertools.pairwise(seg)) < 1e-4
     assert not p.in_trial
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import os
+import struct
 
 import numpy as np
 import pytest
@@ -303,7 +304,7 @@ def test_private_ring_has_no_name_and_no_segment(created_segments):
 
 def test_write_with_wrong_number_of_values_raises():
     with RingBuffer.create(FIELDS, 3, shared=False) as ring:
-        with pytest.raises(Exception):
+        with pytest.raises(struct.error):
             ring.write((1.0, 2.0))
         assert ring.write_count == 0
 

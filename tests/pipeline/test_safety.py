@@ -6,6 +6,7 @@ Time is virtual: every test passes ``dt_s`` explicitly, nothing sleeps.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 
 import pytest
@@ -143,7 +144,7 @@ def test_f_max_below_device_peak_clamps_at_f_max():
     gov = SafetyGovernor(SafetyConfig(), 3.3)
     assert gov.limit_n == 3.0
     out = run_constant(gov, (0.0, 0.0, -1e6), True, 0.001, 1000)[-1]
-    assert 3.0 * (1 - 1e-9) <= -out[2] and math.hypot(*out) <= 3.0
+    assert -out[2] >= 3.0 * (1 - 1e-9) and math.hypot(*out) <= 3.0
 
 
 @pytest.mark.parametrize("f", [(INF, 0.0, 0.0), (1.7e308, 1.7e308, 1.7e308)])
@@ -178,7 +179,7 @@ def test_enable_ramps_in_at_one_millisecond():
     for k in range(1, 520):
         out = gov.step(*target, True, 0.001)
         g = min(1.0, k * 0.001 / 0.5)
-        for o, c in zip(out, target):
+        for o, c in zip(out, target, strict=True):
             assert o == pytest.approx(c * g, rel=1e-13, abs=1e-15), k
         if k >= 501:
             assert out == target
@@ -244,7 +245,7 @@ def test_disable_from_full_force_reaches_zero_within_fault_ramp(fault_ramp_s, sl
     assert first_zero <= n_allowed <= 50
     assert all(o == ZERO for o in outs[first_zero - 1:])
     mags = [math.hypot(*start)] + [math.hypot(*o) for o in outs]
-    assert all(b <= a for a, b in zip(mags, mags[1:]))  # fades monotonically
+    assert all(b <= a for a, b in itertools.pairwise(mags))  # fades monotonically
     assert gov.gain == 0.0
 
 
@@ -316,7 +317,7 @@ def test_non_finite_request_while_enabled_moves_output_toward_zero(bad):
     mags = [math.hypot(*start)] + [math.hypot(*o) for o in outs]
     for o in outs:
         assert all(math.isfinite(c) for c in o)
-    for a, b in zip(mags, mags[1:]):
+    for a, b in itertools.pairwise(mags):
         assert b <= a and a - b <= 0.05 + 1e-12  # toward zero, at the slew rate
     # 2 N at 0.05 N per tick: 40 ticks, one more if rounding leaves a last ulp
     first_zero = next(i for i, o in enumerate(outs, start=1) if o == ZERO)

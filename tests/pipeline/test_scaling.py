@@ -231,7 +231,7 @@ def test_zero_gives_zero(f):
 def test_components_match_high_precision_reference(f):
     out = scale_force(f)
     comps, mag = reference(f)
-    for o, r in zip(out, comps):
+    for o, r in zip(out, comps, strict=True):
         assert rel_close(o, r, 4.0), (f, out, [str(c) for c in comps])
     # hypot of subnormal components also carries their three absolute roundings
     assert rel_close(math.hypot(*out), mag, 4.0, n_tiny=4), (f, out, str(mag))
@@ -258,7 +258,7 @@ def test_near_zero_the_law_is_linear_with_gain_f_max_over_f_scale(norm, d):
     n = math.hypot(*d)
     f = tuple(c / n * norm for c in d)
     out = scale_force(f)
-    for o, c in zip(out, f):
+    for o, c in zip(out, f, strict=True):
         exact = Fraction(c) * 3 / 7
         assert abs(Fraction(o) - exact) <= 2 * Fraction(math.ulp(float(exact))), (f, out)
 
@@ -335,9 +335,9 @@ def test_direction_preserved_same_sense(f):
     tol = Fraction(16 * EPS) * Fraction(big_o) * Fraction(big_f) + 2 * Fraction(TINY) * Fraction(big_f)
     assert exact_cross_inf_norm(out, f) <= tol, (f, out)
     # same sense: no component flips sign; non-zero unless every component is ≤ 5e-324
-    assert all(o == 0.0 or (o > 0.0) == (c > 0.0) for o, c in zip(out, f)), (f, out)
+    assert all(o == 0.0 or (o > 0.0) == (c > 0.0) for o, c in zip(out, f, strict=True)), (f, out)
     if big_f > TINY:
-        dot = sum(Fraction(o) * Fraction(c) for o, c in zip(out, f))
+        dot = sum(Fraction(o) * Fraction(c) for o, c in zip(out, f, strict=True))
         assert dot > 0, (f, out)
 
 
@@ -403,8 +403,8 @@ def test_other_plausible_parameters_keep_the_guarantees(f_max, f_scale, f):
     # accuracy "for normal ranges": above ~1e300, f_max/|f| can be subnormal for small
     # f_max and the kernel's factor loses bits (bounded, but not ulp-exact)
     if all(math.isfinite(c) for c in f) and math.hypot(*f) <= 1e300 and any(f):
-        comps, mag = reference(f, f_max, f_scale)
-        for o, r in zip(out, comps):
+        comps, _mag = reference(f, f_max, f_scale)
+        for o, r in zip(out, comps, strict=True):
             assert rel_close(o, r, 4.0), (f, f_max, f_scale, out)
 
 

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
 import pytest
 
 from pipeline.clock import VirtualClock
-from pipeline.payload_identification import recommended_pose_set
 from pipeline.engine import EngineConfig, build_sim_engine
 from pipeline.frames import IDENTITY, mat_mul, transpose
+from pipeline.payload_identification import recommended_pose_set
 from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
@@ -53,7 +54,7 @@ def test_hunt_crossley_damping_and_relaxation() -> None:
     for _ in range(20000):  # 20 τ
         held = r.step(0.002, 0.001)
     assert peak > held and held == pytest.approx(1.1e4 * 0.002**1.5, rel=1e-6)  # relaxes to the elastic part
-    with pytest.raises(ValueError, match="tissue.exponent"):
+    with pytest.raises(ValueError, match=r"tissue.exponent"):
         TissueParams(exponent=0.0)
 
 
@@ -149,7 +150,7 @@ def test_touch_derates_toward_its_continuous_rating_and_stays_under_budget() -> 
     # full peak until half the budget, then falling monotonically toward the continuous rating
     half = next(i for i, h in enumerate(heat) if h > 0.5)
     assert all(x == 3.3 for x in limits[:half])
-    assert all(b <= a for a, b in zip(limits[half:], limits[half + 1:]))
+    assert all(b <= a for a, b in itertools.pairwise(limits[half:]))
     assert 0.88 < limits[-1] < 1.0 and t.read_state().heat_fraction > 0.95
     # resting cools it: the full peak comes back
     for k in range(3000, 6000):
@@ -193,7 +194,7 @@ def test_sim_calibration_recovers_payload_and_rest_residual_is_small() -> None:
 
     # at rest, tool down, the compensated force is noise only
     errs = []
-    for k in range(2000):
+    for _ in range(2000):
         clock.advance(1_000_000)
         rig.advance(clock.now_ns())
         w = rig.sensor.read_wrench()

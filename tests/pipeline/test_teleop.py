@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -10,8 +11,8 @@ from hypothesis import strategies as st
 
 from pipeline.clock import VirtualClock
 from pipeline.devices import TcpServo
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.frames import mat_vec, transpose
+from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.sim.robot import SimRobot
 from pipeline.sim.touch import SimTouch
 from pipeline.teleop import ServoTarget, Stop, TeleopConfig, TeleopController, TeleopDriver, TeleopState
@@ -36,7 +37,8 @@ class Bench:
         self.log: list[tuple[int, object]] = []
         self.cycles: list[tuple[float, float, float]] = []  # robot position at each controller cycle
 
-    def tick(self, stylus: tuple[float, float, float] | None = None, buttons: int | None = None, fresh: bool = True) -> object:
+    def tick(self, stylus: tuple[float, float, float] | None = None, buttons: int | None = None,
+             fresh: bool = True) -> object:
         self.clock.advance(1_000_000)
         now = self.clock.now_ns()
         if stylus is not None:
@@ -114,12 +116,12 @@ def test_targets_are_clamped_to_the_workspace_and_rate_limited() -> None:
         b.tick(stylus=(0.0, min(0.3, 0.002 * k), 0.0))
     b.run(2000)
     ts = b.targets()[n0 - 1:]
-    steps = [math.dist(a, c) for a, c in zip(ts, ts[1:])]
+    steps = [math.dist(a, c) for a, c in itertools.pairwise(ts)]
     assert max(steps) == pytest.approx(CFG.max_step_m, rel=1e-9)  # 0.8 mm per 8 ms = 0.1 m/s
     assert all(s <= CFG.max_step_m * (1 + 1e-12) for s in steps)
     assert ts[-1] == pytest.approx((0.3, 0.0, HI[2]), abs=1e-15) and max(t[2] for t in ts) == HI[2]
     cyc = b.cycles
-    assert max(math.dist(a, c) for a, c in zip(cyc, cyc[1:])) <= CFG.max_step_m * (1 + 1e-12)
+    assert max(math.dist(a, c) for a, c in itertools.pairwise(cyc)) <= CFG.max_step_m * (1 + 1e-12)
 
 
 def test_clutch_holds_then_reanchors_without_a_jump() -> None:
@@ -142,7 +144,7 @@ def test_clutch_holds_then_reanchors_without_a_jump() -> None:
     b.run(100)
     assert b.targets()[-1] == pytest.approx(expected((0.0, 0.01, 0.0), held), abs=1e-12)
     ts = b.targets()
-    assert all(math.dist(a, c) <= CFG.max_step_m * (1 + 1e-12) for a, c in zip(ts, ts[1:]))
+    assert all(math.dist(a, c) <= CFG.max_step_m * (1 + 1e-12) for a, c in itertools.pairwise(ts))
 
 
 def test_deadman_release_stops_at_once_and_the_arm_holds() -> None:
@@ -266,4 +268,4 @@ def test_property_targets_stay_in_the_box_below_the_speed_limit_whatever_the_sty
                 assert isinstance(cmd, Stop)  # released: stopped in this very call
             assert cfg.contains(tuple(b.robot.position_m))
     cyc = b.cycles
-    assert all(math.dist(a, c) <= cfg.max_step_m * (1 + 1e-9) for a, c in zip(cyc, cyc[1:]))
+    assert all(math.dist(a, c) <= cfg.max_step_m * (1 + 1e-9) for a, c in itertools.pairwise(cyc))

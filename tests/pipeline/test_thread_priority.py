@@ -10,7 +10,13 @@ import threading
 
 import pytest
 
-from pipeline.clock import HELPER_PRIORITY, REALTIME_ENV, REALTIME_PRIORITY, prepare_helper_thread, prepare_realtime_thread
+from pipeline.clock import (
+    HELPER_PRIORITY,
+    REALTIME_ENV,
+    REALTIME_PRIORITY,
+    prepare_helper_thread,
+    prepare_realtime_thread,
+)
 
 
 def in_thread(fn):

@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from drivers import PressAndHold
 
 from pipeline.devices import Fault
 from pipeline.engine import Engine, EngineConfig, build_sim_engine
@@ -24,7 +25,6 @@ from pipeline.loop_messages import OperatorStop, ResetFaults
 from pipeline.safety import SafetyConfig
 from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import HD_WARM_MOTORS, TouchSpec
-from drivers import PressAndHold
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from tomlvalues import TOML_VALUES, replaced
 
 from protocol.config import (
     ABORT_POLICIES,
@@ -24,7 +25,6 @@ from protocol.config import (
     protocol_from_dict,
 )
 from protocol.session_setup import training_protocol as _training_protocol
-from tomlvalues import TOML_VALUES, replaced
 
 DEFAULT_TEXT = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
 
@@ -217,7 +217,8 @@ def test_bad_field_is_refused_naming_file_field_value_and_what_is_allowed(tmp_pa
 
 
 def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(tmp_path):
-    text = DEFAULT_TEXT.replace("max_trial_s = 12.0 ", "max_trial_s = 0.002 ").replace("hold_s = 1.0 ", "hold_s = 0.001 ")
+    text = DEFAULT_TEXT.replace("max_trial_s = 12.0 ", "max_trial_s = 0.002 ").replace("hold_s = 1.0 ",
+                                                                                       "hold_s = 0.001 ")
     path = tmp_path / "short.toml"
     path.write_text(text, encoding="utf-8")
     assert _error_of(path).startswith(f"{path}: trial.max_trial_s = 0.002: must be at least trial.hold_s = 0.001 + "
@@ -245,7 +246,8 @@ def test_non_toml_text_is_refused(tmp_path):
 
 def test_an_integer_too_long_for_python_is_refused_as_toml(tmp_path):
     path = tmp_path / "long.toml"
-    path.write_text(DEFAULT_TEXT.replace("trials_per_cell = 5 ", "trials_per_cell = " + "9" * 5000 + " "), encoding="utf-8")
+    path.write_text(DEFAULT_TEXT.replace("trials_per_cell = 5 ", "trials_per_cell = " + "9" * 5000 + " "),
+                    encoding="utf-8")
     assert _error_of(path).startswith(f"{path}: not valid TOML (Exceeds the limit (4300 digits) for integer string")
 
 
@@ -375,12 +377,14 @@ def test_any_toml_value_in_any_field_is_a_one_line_error_or_a_well_typed_protoco
 
 
 @given(
-    hold_s=st.floats(0.0, 61.0), trial_beyond_hold_s=st.floats(0.0, 601.0), training_beyond_hold_s=st.floats(0.0, 601.0),
+    hold_s=st.floats(0.0, 61.0), trial_beyond_hold_s=st.floats(0.0, 601.0),
+    training_beyond_hold_s=st.floats(0.0, 601.0),
     enabled=st.booleans(),
 )
 def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resumable(
         hold_s, trial_beyond_hold_s, training_beyond_hold_s, enabled):
-    """The protocol a training session runs and stores (the headless study runner) reads back: a resume can always load it.
+    """The protocol a training session runs and stores (the headless study runner) reads back: a resume can always load
+    it.
 
     The caps are drawn as the hold plus a margin, and training is required exactly when
     it is enabled: drawn on their own, most protocols would be refused by a cross-field

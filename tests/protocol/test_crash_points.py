@@ -138,7 +138,7 @@ def _unchanged(before: dict[str, list[tuple[Any, ...]]], after: dict[str, list[t
         missing = set(before[table]) - set(after[table])
         if missing:
             out.append(f"{table}: {len(missing)} row(s) seen at the crash changed or gone, e.g. {min(missing)[:4]}")
-    for (sid, _, _, sched), (sid2, _, _, sched2) in zip(before["sessions"], after["sessions"]):
+    for (sid, _, _, sched), (sid2, _, _, sched2) in zip(before["sessions"], after["sessions"], strict=True):
         old, new = schedule_from_json(sched), schedule_from_json(sched2)
         if sid != sid2 or new[: len(old)] != old:
             out.append(f"session {sid}: the stored schedule was rewritten, not extended")
@@ -155,7 +155,7 @@ def _case(ctx: Any, folder: Path, crash_at: str, expect_killed: bool) -> list[st
     problems = [] if seen is None else [f"{crash_at}, at the crash: {p}" for p in _problems(seen, finished=False)]
     code = _child(ctx, db, "", cont=True)
     if code != 0:
-        return problems + [f"{crash_at}: --continue ended with {code}"]
+        return [*problems, f"{crash_at}: --continue ended with {code}"]
     after = _view(db)
     assert after is not None
     problems += [f"{crash_at}, after --continue: {p}" for p in _problems(after, finished=True)]

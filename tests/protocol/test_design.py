@@ -9,14 +9,7 @@ import numpy as np
 import pytest
 
 from protocol.config import ORDERINGS, ProtocolConfig, Target, default_protocol
-from protocol.design import (
-    HapticMode,
-    TrialSpec,
-    build_schedule,
-    requeue_aborted,
-    schedule_from_json,
-    schedule_to_json,
-)
+from protocol.design import HapticMode, TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
 
 FORCE = {"GENTLE": 0.6, "FIRM": 1.2}
 
@@ -45,12 +38,14 @@ GOLDEN_SEED_7_P1 = [
     ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"),
 ]
 
-GOLDEN_BLOCKED_SEED_7_P1 = (
-    [("FIRM", "on"), ("GENTLE", "on"), ("FIRM", "on"), ("FIRM", "on"), ("FIRM", "on"),
-     ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "on")]
-    + [("GENTLE", "off"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"),
-       ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"), ("FIRM", "off"), ("FIRM", "off")]
-)
+GOLDEN_BLOCKED_SEED_7_P1 = [
+    # the ON block
+    ("FIRM", "on"), ("GENTLE", "on"), ("FIRM", "on"), ("FIRM", "on"), ("FIRM", "on"),
+    ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("GENTLE", "on"), ("FIRM", "on"),
+    # then the OFF block
+    ("GENTLE", "off"), ("FIRM", "off"), ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"),
+    ("GENTLE", "off"), ("GENTLE", "off"), ("FIRM", "off"), ("FIRM", "off"), ("FIRM", "off"),
+]
 
 
 def test_golden_schedule_of_the_default_protocol():
@@ -62,11 +57,13 @@ def test_golden_schedule_of_the_default_protocol():
 
 
 def test_golden_schedule_blocked_by_mode():
-    assert _pairs(build_schedule(_protocol("blocked_by_mode"), seed=7, participant_number=1)) == GOLDEN_BLOCKED_SEED_7_P1
+    assert _pairs(build_schedule(_protocol("blocked_by_mode"), seed=7,
+                                 participant_number=1)) == GOLDEN_BLOCKED_SEED_7_P1
 
 
 def test_participant_number_defaults_to_one():
-    assert build_schedule(default_protocol(), seed=7) == build_schedule(default_protocol(), seed=7, participant_number=1)
+    assert build_schedule(default_protocol(), seed=7) == build_schedule(default_protocol(), seed=7,
+                                                                        participant_number=1)
 
 
 # -- balance --------------------------------------------------------------------------------------
@@ -151,7 +148,8 @@ def test_blocked_by_mode_shuffles_targets_within_blocks():
 def test_counterbalanced_alternates_the_starting_mode(participant, first):
     other = "off" if first == "on" else "on"
     for seed in (0, 7, 99):
-        modes = [t.haptic_mode for t in build_schedule(_protocol("counterbalanced"), seed=seed, participant_number=participant)]
+        modes = [t.haptic_mode for t in build_schedule(_protocol("counterbalanced"), seed=seed,
+                                                       participant_number=participant)]
         assert modes == [first] * 10 + [other] * 10
 
 

@@ -7,6 +7,7 @@ Everything runs headless on the virtual clock, one participant of a 4-trial prot
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import re
 import sqlite3
 from pathlib import Path
@@ -45,7 +46,7 @@ def assert_true_timeline(db: Path, pause_s: float) -> None:
     for (sid,) in rows(db, "SELECT session_id FROM sessions"):
         trials = rows(db, "SELECT trial_index, started_at_s, ended_at_s FROM trials WHERE session_id = ? "
                           "ORDER BY started_at_s", sid)
-        for (_, _, end), (idx, start, _) in zip(trials, trials[1:]):
+        for (_, _, end), (idx, start, _) in itertools.pairwise(trials):
             assert start - end >= pause_s - 1e-9, f"session {sid}: trial {idx} cued {start - end:.3f} s after the last"
 
 
@@ -54,7 +55,8 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     db = tmp_path / "study.db"
     proto = short_protocol()
     # 1 s after the cue of the 2nd trial: no trial can have succeeded yet (the hold alone lasts 1 s)
-    progress = run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1, faults=[FaultPlan(kind, "P01", 2, 1.0)])
+    progress = run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1,
+                         faults=[FaultPlan(kind, "P01", 2, 1.0)])
     assert progress.rehearsals == [f"{kind}@P01:2+1: injected during trial 2"]
     schedule = build_schedule(proto, 3, 1)
     second = schedule[1]
@@ -68,7 +70,8 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     (reset_t, reset_detail), = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'faults_reset'")
     assert reset_detail == f"cleared {LATCHES[kind]}" and reset_t > end
     # re-run at the end, and every cell complete
-    trials = rows(db, "SELECT trial_index, outcome, target_label, haptic_mode, repeat_of FROM trials ORDER BY trial_index")
+    trials = rows(db,
+                  "SELECT trial_index, outcome, target_label, haptic_mode, repeat_of FROM trials ORDER BY trial_index")
     assert trials[-1][4] == 1 and trials[-1][2:4] == (second.target_label, second.haptic_mode)
     done = sorted((t[2], t[3]) for t in trials if t[1] != "aborted")
     assert done == sorted((s.target_label, s.haptic_mode) for s in schedule)
@@ -79,7 +82,7 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     assert_true_timeline(db, proto.trial.pause_s)
     # the analysis counts it, by cause; and every trial has its loop health
     study = load_study([str(db)])
-    counts = dict(zip(*abort_counts(study).to_dict("list").values()))
+    counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert counts["fault"] == 1 and sum(counts.values()) == 1
     health = health_table(study)
     assert health[list(HEALTH_COLUMNS)].notna().all().all()
@@ -106,7 +109,8 @@ def test_a_fault_that_does_not_clear_interrupts_the_session_and_it_resumes(tmp_p
     # the sensor stays silent for 30 s: it is still stalled 10 s after the runner began waiting
     monkeypatch.setitem(pipeline.sim.faults.DEFAULT_DURATION_S, "sensor-stall", 30.0)
     with pytest.raises(SessionInterrupted) as info:
-        run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1, faults=[FaultPlan("sensor-stall", "P01", 2, 1.0)])
+        run_study(str(db), participants=1, seed=3, protocol=proto, jobs=1,
+                  faults=[FaultPlan("sensor-stall", "P01", 2, 1.0)])
     msg = str(info.value)
     assert msg.startswith("P01's experiment session 1: SENSOR_STALE was still latched 10 s after the runner began")
     assert msg.endswith("the session is interrupted and can be resumed") and "\n" not in msg

@@ -216,7 +216,7 @@ def test_trial_metrics_and_hold_detector_agree_on_random_traces():
         f = np.clip(0.6 + rng.normal(0, 0.04, 12001).cumsum() * 0.05, 0, None)
         t = _t(12001)
         det = HoldDetector(0.6, 0.10, 1 * S)
-        done = next((int(ti) for ti, fi in zip(t, f) if det.feed(int(ti), float(fi))), None)
+        done = next((int(ti) for ti, fi in zip(t, f, strict=True) if det.feed(int(ti), float(fi))), None)
         m = trial_metrics(t, f, 0.6)
         assert m.success is (done is not None)
         assert m.tct_s == (None if done is None else done / 1e9)
@@ -236,7 +236,8 @@ def test_vectorised_hold_equals_the_streaming_detector(steps_ms, forces, hold_ms
     t = np.cumsum(np.asarray(steps_ms, dtype=np.int64) * MS)
     f = np.asarray(forces[: len(t)], dtype=np.float64)
     det = HoldDetector(0.6, 0.10, hold_ms * MS)
-    expected = next((i for i, (ti, fi) in enumerate(zip(t.tolist(), f.tolist())) if det.feed(ti, fi)), None)
+    expected = next((i for i, (ti, fi) in enumerate(zip(t.tolist(), f.tolist(), strict=True)) if det.feed(ti, fi)),
+                    None)
     assert hold_completion_index(t, f, 0.6, 0.10, hold_ms * MS) == expected
 
 

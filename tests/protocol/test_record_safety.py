@@ -55,7 +55,8 @@ def _v1_database(path: Path) -> None:
               "(1, 1, 'experiment', 0, 1, '{}', '[]', 'running', 'x', '0.1.0', 'sim', '{}')")
     c.execute("INSERT INTO trials (trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, "
               "outcome, started_at_s, ended_at_s) VALUES (1000000, 1, 0, 'GENTLE', 0.6, 'on', 'timeout', 1.0, 13.0)")
-    c.executemany("INSERT INTO samples (trial_id, t_s, force_n) VALUES (?, ?, ?)", [(1000000, 0.0, 0.1), (1000000, 0.001, 0.2)])
+    c.executemany("INSERT INTO samples (trial_id, t_s, force_n) VALUES (?, ?, ?)",
+                  [(1000000, 0.0, 0.1), (1000000, 0.001, 0.2)])
     c.commit()
     c.close()
 
@@ -235,7 +236,7 @@ def test_an_upgrade_whose_backup_cannot_be_written_changes_nothing(tmp_path, mon
     _v1_database(path)
     before = path.read_bytes()
 
-    def no_space(self, target, *a, **k):  # noqa: ANN001 - sqlite3.Connection.backup's signature
+    def no_space(self, target, *a, **k):  # sqlite3.Connection.backup's signature
         raise sqlite3.OperationalError("database or disk is full")
 
     monkeypatch.setattr(StudyDatabase, "_backup_to", no_space, raising=True)
@@ -247,7 +248,7 @@ def test_an_upgrade_whose_backup_cannot_be_written_changes_nothing(tmp_path, mon
 
 
 # -- leases ---------------------------------------------------------------------------------------
-def _hold_lease(path: str, scope: str, ready, release) -> None:  # noqa: ANN001 - mp events
+def _hold_lease(path: str, scope: str, ready, release) -> None:  # mp events
     d = StudyDatabase(path, check=False)
     d.acquire_lease(scope, new_owner_token(), command="haptic-study run --resume P01")
     ready.set()
@@ -352,7 +353,7 @@ def test_a_reused_pid_does_not_keep_a_lease_alive(tmp_path):
 def test_a_lease_from_another_host_lives_by_its_heartbeat(tmp_path):
     path = tmp_path / "study.db"
     d = StudyDatabase(path)
-    now = dt.datetime.now(dt.timezone.utc)
+    now = dt.datetime.now(dt.UTC)
     fresh = (now - dt.timedelta(seconds=LEASE_STALE_S / 3)).isoformat()
     d.conn.execute("INSERT INTO leases VALUES ('session 9', 'x', 1, 'lab-pc-2', '', 'haptic-study gui', ?, ?)",
                    (fresh, fresh))

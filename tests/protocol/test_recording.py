@@ -11,15 +11,23 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from test_storage import FakeClock, _session_args
 
 from pipeline.tick_record import TICK_DTYPE
-from protocol.recording import codec as recording
 from protocol.recording import (
-    BLOCK_RECORDS, COLUMNS, POSE_COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, kept_records,
-    read_segment, read_ticks,
+    BLOCK_RECORDS,
+    COLUMNS,
+    POSE_COLUMNS,
+    BlockBuilder,
+    decode_block,
+    decode_columns,
+    encode_block,
+    kept_records,
+    read_segment,
+    read_ticks,
 )
+from protocol.recording import codec as recording
 from protocol.storage import Recorder, StudyDatabase
-from test_storage import FakeClock, _session_args
 
 #: Every kind of float64 the loop could hand over, the awkward ones often.
 ANY_FLOAT = st.one_of(
@@ -64,7 +72,8 @@ def blocks(draw: st.DrawFn) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray
 @given(blocks())
 def test_any_block_decodes_to_the_same_bits(block) -> None:
     cols, poses, events = block
-    blob = encode_block(cols, poses, events, {f"raw_{k}": COUNTS_PER_UNIT for k in ("fx", "fy", "fz", "tx", "ty", "tz")})
+    blob = encode_block(cols, poses, events,
+                        {f"raw_{k}": COUNTS_PER_UNIT for k in ("fx", "fy", "fz", "tx", "ty", "tz")})
     back, back_poses, back_events = decode_block(blob)
     for name, values in cols.items():
         assert np.array_equal(bits(back[name]), bits(values)), name

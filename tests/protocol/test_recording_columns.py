@@ -1,4 +1,5 @@
-"""The recorded columns: ``derate`` is kept exactly, and a block written before it existed still reads (as 1: no cut)."""
+"""The recorded columns: ``derate`` is kept exactly, and a block written before it existed still reads (as 1: no
+cut)."""
 
 from __future__ import annotations
 

@@ -73,7 +73,8 @@ def test_a_planned_kill_loses_at_most_100_ms_and_its_trial_is_stored_as_interrup
     killed = cli(["run", "--participants", "1", "--seed", "2", "--db", str(db), "--protocol", "p.toml",
                   "--inject-fault", f"kill@P01:2+{seconds:g}"], tmp_path)
     assert killed.returncode == -9, killed.stderr
-    (cue_s,) = rows(db, "SELECT t_s FROM events WHERE kind = 'phase' AND detail = 'trial 2 (index 1): cued -> active'")[0]
+    (cue_s,) = rows(db,
+                    "SELECT t_s FROM events WHERE kind = 'phase' AND detail = 'trial 2 (index 1): cued -> active'")[0]
     kill_s = cue_s + min(seconds, 2.0 - 0.001)
     (last_s,) = rows(db, "SELECT MAX(t_last_s) FROM session_blocks WHERE segment = 0")[0]
     assert kill_s - 0.100 - 1e-9 <= last_s <= kill_s + 1e-9  # at most one commit interval of records lost
@@ -102,7 +103,8 @@ def test_a_fault_planned_at_the_cap_is_moved_into_its_trial_and_said_so(tmp_path
     delay = latch_delay_s(kind, 0.005, 0.050)
     (note,) = progress.rehearsals
     assert note == (f"{kind}@P01:1+3: injected during trial 1, moved to +{3.0 - delay - 0.001:.3f} s: a {kind} is "
-                    f"latched up to {delay * 1e3:g} ms after it begins and trial 1 ends 3 s after its cue at the latest")
+                    f"latched up to {delay * 1e3:g} ms after it begins and trial 1 ends 3 s after its cue at the "
+                    "latest")
 
 
 class _Rig:

@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_faults_in_the_record import rows, short_protocol
+from test_recording import bits
 
 import study_app.headless.session_run as session_run
 from analysis.load import load_study
@@ -34,8 +36,6 @@ from pipeline.sim.rig import SimRigConfig
 from pipeline.touch_output import TouchSpec
 from protocol.recording import SegmentData, read_segment, segments_of
 from study_app.headless import run_study
-from test_faults_in_the_record import rows, short_protocol
-from test_recording import bits
 
 MS = 1_000_000
 #: A Touch whose motors warm within a trial at the study's forces (continuous rating 0.3 N, budget 1 N²·s).
@@ -165,11 +165,12 @@ def test_a_session_with_late_ticks_and_latched_loop_faults_replays_bit_for_bit(
     assert all(r.startswith("fault: LOOP_STALLED") for _, r in aborted[1:])
     # the report: aborted trials by cause, and the late and stalled ticks in the loop health of the trials they ended
     study = load_study([str(db)])
-    counts = dict(zip(*abort_counts(study).to_dict("list").values()))
+    counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert (counts["fault"], counts["gap"], sum(counts.values())) == (3, 1, 4)
     health = health_table(study).set_index("trial_index")
     assert health.loc[0, "period_max_ms"] == pytest.approx(21.0) and health.loc[0, "within_bounds"] == False  # noqa: E712
     stall = next(i for i, (c, r) in enumerate(rows(db, "SELECT abort_cause, abort_reason FROM trials ORDER BY "
                                                       "trial_index")) if r and "61.0 ms" in r)
-    assert health.loc[stall, "period_max_ms"] == pytest.approx(61.0) and "longest tick period 61 > 2" in health.loc[stall, "outside_bounds"]
+    assert health.loc[stall, "period_max_ms"] == pytest.approx(61.0)
+    assert "longest tick period 61 > 2" in health.loc[stall, "outside_bounds"]
     assert rows(db, "SELECT status FROM sessions") == [("completed",)]

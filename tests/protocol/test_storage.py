@@ -77,7 +77,7 @@ def _session_args(code: str = "P01", kind: str = "experiment", seed: int = 7) ->
 
 
 def _sample_row(trial_id: int, k: int) -> tuple:
-    return (trial_id, k / 1000, 0.5 + k / 10_000) + tuple(float(k + j) for j in range(12))
+    return (trial_id, k / 1000, 0.5 + k / 10000, *tuple(float(k + j) for j in range(12)))
 
 
 def _trial_row(session_id: int, index: int, outcome: str = "success", tct_s: float | None = 1.5) -> dict:
@@ -120,7 +120,8 @@ def test_new_database_gets_the_schema(db, db_path):
             assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
-        indexes = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")}
+        named = other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")
+        indexes = {r[0] for r in named}
         assert indexes == {"samples_by_trial", "events_by_session"}
     finally:
         other.close()
@@ -210,7 +211,8 @@ def test_a_path_in_a_missing_folder_is_refused_and_nothing_is_created(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="needs a POSIX user that folder permissions apply to")
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0,
+                    reason="needs a POSIX user that folder permissions apply to")
 def test_a_read_only_folder_is_refused_and_nothing_is_created(tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()

@@ -13,8 +13,16 @@ from protocol.config import ProtocolError, default_protocol, protocol_from_dict
 from protocol.session_setup import open_new_session
 from protocol.storage import StudyDatabase, new_owner_token, session_scope
 from protocol.study_rules import (
-    DEVIATION_EVENT, TRAINING_SKIPPED, StoredSession, StudyRuleError, check_new_session, next_kind, requires_training,
-    seed_refusal, stored_sessions, training_refusal,
+    DEVIATION_EVENT,
+    TRAINING_SKIPPED,
+    StoredSession,
+    StudyRuleError,
+    check_new_session,
+    next_kind,
+    requires_training,
+    seed_refusal,
+    stored_sessions,
+    training_refusal,
 )
 from study_app.cli import main
 
@@ -62,7 +70,7 @@ def test_seed_training_and_next_step_rules():
     # the seed is never overridable; a missing training only with a reason (whitespace is no reason)
     with pytest.raises(StudyRuleError, match="this study's seed is 3"):
         check_new_session(study, code="P04", kind="training", seed=4, protocol=PAPER, training_override="because")
-    with pytest.raises(StudyRuleError, match="^P04 has no training session"):
+    with pytest.raises(StudyRuleError, match=r"^P04 has no training session"):
         check_new_session(study, code="P04", kind="experiment", seed=3, protocol=PAPER, training_override="  \n ")
     detail = check_new_session(study, code="P04", kind="experiment", seed=3, protocol=PAPER,
                                training_override="  trained\nin the pilot ")
@@ -83,7 +91,7 @@ def _open(db: StudyDatabase, code: str, kind: str, seed: int, override: str = ""
 def test_where_sessions_are_stored_the_rules_refuse_or_store_the_deviation(tmp_path: Path):
     db = StudyDatabase(tmp_path / "study.db")
     try:
-        with pytest.raises(StudyRuleError, match="^P01 has no training session"):
+        with pytest.raises(StudyRuleError, match=r"^P01 has no training session"):
             _open(db, "P01", "experiment", 2)
         assert stored_sessions(db) == []  # refused before anything was stored
         sid = _open(db, "P01", "experiment", 2, override="trained on the rig in the pilot")

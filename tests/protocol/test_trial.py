@@ -61,12 +61,12 @@ def _success_trace(k_ms: float) -> float:
 # -- the table ------------------------------------------------------------------------------------
 def test_transitions_table_matches_the_phases():
     assert set(TRANSITIONS) == set(TrialPhase)
-    assert TRANSITIONS == {
+    assert {
         IDLE: frozenset({CUED}),
         CUED: frozenset({ACTIVE, PAUSE}),
         ACTIVE: frozenset({PAUSE}),
         PAUSE: frozenset({IDLE}),
-    }
+    } == TRANSITIONS
     assert {str(p) for p in TrialPhase} == {"idle", "cued", "active", "pause"}
     assert PHASE_CODES == {IDLE: 0, CUED: 1, ACTIVE: 2, PAUSE: 3}
 
