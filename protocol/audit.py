@@ -31,13 +31,7 @@ from typing import Any
 
 from protocol.config import ProtocolError, protocol_from_dict
 from protocol.design import schedule_from_json
-from protocol.recording.integrity import (
-    BlockDamage,
-    BlockRow,
-    block_problem,
-    block_rows,
-    describe_damage,
-)
+from protocol.recording.integrity import BlockDamage, BlockRow, block_problem, block_rows, describe_damage
 from protocol.storage.reader import StudyReader
 
 __all__ = ["Audit", "audit_database"]
@@ -170,7 +164,7 @@ def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
             continue
         rows = {int(i): (lab, mode, out) for i, lab, mode, out in StudyReader.over(conn).trial_cells(sid)}
         found: list[str] = []
-        for i, (lab, mode, out) in sorted(rows.items()):
+        for i, (lab, mode, _out) in sorted(rows.items()):
             if i >= len(schedule) or (schedule[i].target_label, str(schedule[i].haptic_mode)) != (lab, mode):
                 found.append(f"trial {i + 1} ({lab}, {mode}) is not that trial of the stored schedule")
         reruns = Counter(s.repeat_of for s in schedule if s.repeat_of is not None)

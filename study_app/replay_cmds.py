@@ -29,7 +29,7 @@ __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
 
-def add_replay_parsers(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     """Register ``replay``, ``plot-session`` and ``export``."""
     r = add_command(
         sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
@@ -239,7 +239,7 @@ def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     return trade
 
 
-def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, float]) -> Any:
+def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, Any]) -> Any:
     """Replay with ``changes`` to the recorded settings; the rendered force's difference, trial by trial.
 
     Prints the table and returns ``write(folder)``, which writes it and the figure (for ``--out``).

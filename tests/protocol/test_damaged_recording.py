@@ -33,12 +33,7 @@ import pytest
 
 from analysis.load import load_study
 from protocol.config import protocol_from_dict
-from protocol.recording import (
-    RecordingDamaged,
-    read_segment,
-    read_ticks,
-    recording_damage,
-)
+from protocol.recording import RecordingDamaged, read_segment, read_ticks, recording_damage
 from protocol.session_setup import open_resumed_session
 from protocol.storage import StorageError, StudyDatabase
 from study_app.headless import run_study
