@@ -29,7 +29,7 @@ import pytest
 from fake_ur_control import FakeControl
 from stepped_clock import SteppedClock
 from test_dead_loop import MS, Bench, Rig, stalled
-from test_ur_control import QUIET_S  # the fixture: a loopback port for the adapter's probe
+from test_ur_control import QUIET_S, listener  # noqa: F401 - the fixture: a loopback port for the adapter's probe
 
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
@@ -101,7 +101,7 @@ class TeleopBench(Bench):
 
 
 @pytest.fixture
-def bench(listener: int) -> Iterator[TeleopBench]:  # the imported fixture
+def bench(listener: int) -> Iterator[TeleopBench]:  # noqa: F811 - the imported fixture
     b = TeleopBench(listener)
     try:
         yield b

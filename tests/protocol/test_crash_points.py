@@ -138,7 +138,7 @@ def _unchanged(before: dict[str, list[tuple[Any, ...]]], after: dict[str, list[t
         missing = set(before[table]) - set(after[table])
         if missing:
             out.append(f"{table}: {len(missing)} row(s) seen at the crash changed or gone, e.g. {min(missing)[:4]}")
-    for (sid, _, _, sched), (sid2, _, _, sched2) in zip(before["sessions"], after["sessions"], strict=True):
+    for (sid, _, _, sched), (sid2, _, _, sched2) in zip(before["sessions"], after["sessions"], strict=False):
         old, new = schedule_from_json(sched), schedule_from_json(sched2)
         if sid != sid2 or new[: len(old)] != old:
             out.append(f"session {sid}: the stored schedule was rewritten, not extended")
