@@ -120,7 +120,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     from protocol.storage import StorageError
     from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
     from study_app.progress import ProgressBar
-    from study_app.study_summary import format_study_summary
 
     if args.resume is not None:
         for f in args.inject_fault:
@@ -172,6 +171,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     if args.continue_study and progress.study_trials_total == 0:
         print(f"haptic-study: nothing to continue in {args.db}: every session of participants "
               f"1–{args.participants} has ended", file=sys.stderr)
+    # imported only now: the summary's statistics (pandas, SciPy) cost a second that a refused run need not pay
+    from study_app.study_summary import format_study_summary
+
     print(format_study_summary(args.db, progress.sessions, wall))
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
