@@ -107,7 +107,6 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
     A damaged recording is that one-line error, or with ``partial`` its damaged blocks are left out and
     named on standard error (a partial result, stated as such).
     """
-    from analysis.load import frame_of
     from protocol.recording import RecordingDamaged, read_segment, segments_of
     from protocol.storage import StorageError, StudyReader
 
@@ -135,6 +134,8 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
                        "every damaged block)") from None
     for d in (d for seg in segments for d in seg.damage):
         print(f"haptic-study: recording damaged: {d.describe()}: left out, the result is partial", file=sys.stderr)
+    from analysis.load import frame_of  # pandas: not before the database was found good (a refusal stays cheap)
+
     trials = frame_of(db.recorded_trial_table(session_id))
     db.close()
     trials.insert(0, "code", row[0])
