@@ -407,7 +407,7 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
         Columns ``t_s`` (since the cue), ``force_n``, ``raw_f*``, ``raw_t*``, ``render_f*``, and
         ``faults`` (the latched watchdog faults, a bitmask) for a recorded trial, or
         ``comp_f*`` for a trial of schema version 1 or 2 (a recorded session's compensated force is
-        recomputed by replay, :func:`pipeline.replay.replay`, not stored).
+        recomputed by replay, :func:`pipeline.force.replay.replay`, not stored).
 
     Raises
     ------

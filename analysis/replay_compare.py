@@ -1,6 +1,6 @@
 """What another setting would have changed, measured on a recorded session (the numbers ``replay`` prints).
 
-Pure array arithmetic on what :mod:`pipeline.replay` computed and what the
+Pure array arithmetic on what :mod:`pipeline.force.replay` computed and what the
 session recorded:
 
 * :func:`trial_differences` -- per trial, the rendered force replayed with

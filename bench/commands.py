@@ -2,7 +2,7 @@
 
 The product imports nothing from ``bench``: ``pyproject.toml`` names
 :func:`register` in the entry-point group ``haptic_study.commands``, and
-``study_app.cli`` calls what that group names while it builds its parser.
+``study_app.cli.main`` calls what that group names while it builds its parser.
 The dependency runs one way, bench → product, and an install without
 ``bench`` still has a working ``haptic-study`` (``bench`` then says so).
 
@@ -17,9 +17,9 @@ import json
 import os
 import sys
 
-from study_app.argtypes import add_command, positive_seconds, real_number, whole_number
-from study_app.cli_error import CliError
-from study_app.power_cmds import whole_option
+from study_app.cli.argtypes import add_command, positive_seconds, real_number, whole_number
+from study_app.cli.error import CliError
+from study_app.cli.power_cmds import whole_option
 
 __all__ = ["register"]
 
@@ -113,7 +113,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
     if args.db is not None and not os.path.isfile(args.db):
         raise CliError(f"--db = {args.db!r}: no such file")
     if args.reference is not None and not os.path.isfile(os.path.join(args.reference, "study_app", "cli.py")):
-        raise CliError(f"--reference = {args.reference!r}: not a haptic-study source tree (no study_app/cli.py)")
+        raise CliError(f"--reference = {args.reference!r}: not a haptic-study source tree (no study_app/cli/main.py)")
     result = run_report_bench(args.db, stats_participants=args.stats_participants, log=_say,
                               reference=args.reference)
     print(json.dumps(result) if args.json else format_report_bench(result))
@@ -122,7 +122,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 # -- bench power -----------------------------------------------------------------------------------------
 def _add_power(bsub: argparse._SubParsersAction) -> None:
-    # option values parsed by the command, as ``haptic-study power`` parses its own (study_app.power_cmds)
+    # option values parsed by the command, as ``haptic-study power`` parses its own (study_app.cli.power_cmds)
     b = bsub.add_parser("power", help="power analysis: the vectorised engine against paired_wilcoxon per resample")
     b.add_argument("--db", default=None, metavar="PATH",
                    help="pilot study database (default: a synthetic 10-participant pilot)")

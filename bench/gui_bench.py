@@ -13,7 +13,7 @@ One run, real clock, the loop in its study-engine process as the app runs it:
 Loop timing is the engine's own: the ``period_ns`` of every loop record,
 |period − 1 ms| quantiles and the share of periods over 2 ms.  With
 ``explain=True`` (``--explain``) the engine also names the cause of every tick
-starting over 100 µs late (:mod:`pipeline.jitter_trace`: another thread of the
+starting over 100 µs late (:mod:`pipeline.runtime.jitter_trace`: another thread of the
 engine holding the GIL, a garbage-collector pass, the loop's own work, or the
 machine -- nothing in the process); the tracing costs the loop ~25 µs per tick,
 so it is off by default.  The share of CPU time the hypervisor stole during
@@ -34,8 +34,8 @@ from collections.abc import Callable
 from typing import Any
 
 from bench.machine import cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
-from study_app import messages as m
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.setup import HostConfig
 
 __all__ = ["format_gui_bench", "run_gui_bench"]
 

@@ -13,11 +13,11 @@ import os
 import time
 from typing import Any
 
-from pipeline.clock import MonotonicClock, prepare_realtime_thread
-from pipeline.loop_stats import LoopStats
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_setup import HostConfig
+from pipeline.runtime.clock import MonotonicClock, prepare_realtime_thread
+from pipeline.runtime.loop_stats import LoopStats
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
+from study_app.engine.setup import HostConfig
 
 __all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
 
@@ -45,7 +45,7 @@ def load_average() -> list[float]:
 
 
 def format_late_ticks(late: dict[str, Any], indent: str = "      ") -> str:
-    """One or more lines from a :meth:`pipeline.jitter_trace.LateTickTracer.summary`: late ticks by cause."""
+    """One or more lines from a :meth:`pipeline.runtime.jitter_trace.LateTickTracer.summary`: late ticks by cause."""
     causes = ", ".join(f"{k} {v}" for k, v in late["causes"].items()) or "none"
     text = (f"{indent}ticks > {late['late_threshold_us']:.0f} µs late: {late['late_ticks']} ({causes}); "
             "periods > 2 ms by cause: "
@@ -71,9 +71,9 @@ def _bare_loop(seconds: float, out: Any) -> None:
 def bare_loop_stats(seconds: float) -> dict[str, Any]:
     """The machine's own floor: a loop with nothing in its tick, paced and scheduled as the haptic loop is.
 
-    Same clock (:class:`pipeline.clock.MonotonicClock`: sleep, then spin),
+    Same clock (:class:`pipeline.runtime.clock.MonotonicClock`: sleep, then spin),
     same thread preparation (``SCHED_FIFO``, 1 ns timer slack) and the same
-    statistics (:class:`pipeline.loop.LoopStats`), in a process of its own.
+    statistics (:class:`pipeline.runtime.loop.LoopStats`), in a process of its own.
     Periods over 2 ms here are the machine's (a late timer, the hypervisor),
     since there is nothing else to be late for.
     """
@@ -93,7 +93,7 @@ def bare_loop_stats(seconds: float) -> dict[str, Any]:
 def engine_loop_health(seconds: float, explain: bool) -> tuple[m.Health, m.Health, list[int] | None]:
     """Run the study engine (simulated rig, real clock, no GUI) for ``seconds`` after a timing reset.
 
-    Returns the first :class:`study_app.messages.Health` after the reset, the first one published after
+    Returns the first :class:`study_app.engine.messages.Health` after the reset, the first one published after
     ``seconds`` (its timing covers the whole window), and the CPU times at the window's start
     (:func:`cpu_times`).  ``explain``: trace every late tick's cause (``HostConfig.trace_jitter``).
     """

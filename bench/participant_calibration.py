@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.runtime.engine import EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.rig import SimRigConfig
@@ -243,7 +243,7 @@ def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
     (tip lag 30 ms, Hunt–Crossley tissue, scaled felt force) and replayed to a fresh
     participant with the same seed, so the replay takes the same decisions.
     """
-    from pipeline.scaling import scale_magnitude
+    from pipeline.force.scaling import scale_magnitude
     from pipeline.sim.hand import HandObservation
 
     def fresh() -> SimulatedParticipant:

@@ -2,7 +2,7 @@
 
 Three measurements in one run, on the same recorded samples:
 
-1. **Per-tick pipeline cost.** Our :class:`pipeline.framework.HapticFramework`
+1. **Per-tick pipeline cost.** Our :class:`pipeline.force.framework.HapticFramework`
    against a straightforward NumPy transcription of Algorithm 1 (one array per
    step, ``@``, ``np.linalg.norm``, a deque for the moving average), both fed
    the same raw wrenches and poses recorded from the simulated rig.  The
@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 
 from bench.machine import bare_loop_stats, cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
-from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.filters import MovingAverage3
-from pipeline.framework import FrameworkConfig, HapticFramework
+from pipeline.force.filters import MovingAverage3
+from pipeline.force.framework import FrameworkConfig, HapticFramework
+from pipeline.runtime.engine import EngineConfig, build_sim_engine
 
 __all__ = ["filter_trade_table", "naive_numpy_pipeline", "record_samples", "run_pipeline_bench"]
 
@@ -176,7 +176,7 @@ def _max_abs_diff_to_naive(data: dict[str, Any], cfg: FrameworkConfig, m: int) -
 def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int = 1000) -> dict[str, Any]:
     """Median per-tick cost of ours vs the NumPy transcription on the same samples, and their agreement.
 
-    Ours is driven as :class:`pipeline.loop.HapticLoop` drives it: ``set_pose``
+    Ours is driven as :class:`pipeline.runtime.loop.HapticLoop` drives it: ``set_pose``
     whenever the robot reports a new pose (its timestamp changes, 125 Hz on a
     CB3, every 8th tick), ``step`` on every sample.  Each timed run keeps only
     the latest output, as the loop does (it writes each record into the ring
@@ -294,11 +294,11 @@ def filter_trade_table(data: dict[str, Any],
 def measure_loop(seconds: float, explain: bool = False) -> dict[str, Any]:
     """Run the real 1 kHz loop in the study-engine process for ``seconds`` and return its period statistics.
 
-    The engine is the app's own (:class:`study_app.engine_client.EngineClient`:
+    The engine is the app's own (:class:`study_app.engine.client.EngineClient`:
     the simulated rig, the loop in its thread, the engine's driver draining the
     ring beside it), without a GUI (``bench gui`` adds one).  With ``explain``
     the engine traces every late tick's cause
-    (:class:`pipeline.jitter_trace.LateTickTracer`, ~30 µs per tick, which
+    (:class:`pipeline.runtime.jitter_trace.LateTickTracer`, ~30 µs per tick, which
     shows in the p99).  The share of CPU time the hypervisor stole and the
     load average are reported either way.
     """

@@ -5,7 +5,7 @@ Until schema version 3 the database kept each trial's window only, one
 compensated and rendered force: 15 values).  :func:`row_format_copy` writes
 that file from a version-3 study: the trial windows come from the recording,
 and the compensated force, which the recording does not keep, from running the
-session through the pipeline again (:func:`pipeline.replay.replay`, checked bit
+session through the pipeline again (:func:`pipeline.force.replay.replay`, checked bit
 for bit against the recorded rendered force first).  The copy is then a
 version-2 database, as the software of that version would have written it,
 which the analysis reads from its ``samples`` table.
@@ -26,7 +26,7 @@ import numpy as np
 import numpy.typing as npt
 
 from analysis.parallel import default_workers, run_tasks
-from pipeline.replay import replay
+from pipeline.force.replay import replay
 from protocol.recording import read_segment, segments_of
 from protocol.storage import connect_readonly
 

@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from bench.row_format import row_format_copy
-from pipeline.tick_record import TICK_DTYPE
+from pipeline.runtime.tick_record import TICK_DTYPE
 from protocol.config import load_protocol
 from protocol.recording import SegmentData, read_segment, segments_of
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
@@ -45,7 +45,7 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
     """Write every recorded segment of ``source`` again into ``target`` through the recorder, at the live commit rate.
 
     Each segment's records are handed over as a live session hands them: loop records as the ring holds them
-    (:data:`pipeline.tick_record.TICK_DTYPE`; the fields a recording does not keep are zero here), ``_CHUNK``
+    (:data:`pipeline.runtime.tick_record.TICK_DTYPE`; the fields a recording does not keep are zero here), ``_CHUNK``
     at a time, each with the log entries of its ticks.
 
     Returns

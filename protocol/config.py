@@ -15,8 +15,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from pipeline.safety import SafetyConfig
-from pipeline.tomlfields import Fields, parse_toml, read_toml
+from pipeline.force.safety import SafetyConfig
+from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 
 __all__ = [
     "ABORT_POLICIES",
@@ -218,7 +218,7 @@ def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, mo
       this value (the headless study runner), so it must fit a hold (and the
       ramp-in) too.
 
-    The ramps are the safety stage's own (:class:`pipeline.safety.SafetyConfig`, their one definition).
+    The ramps are the safety stage's own (:class:`pipeline.force.safety.SafetyConfig`, their one definition).
     """
     ramps = SafetyConfig()
     on = "on" in modes

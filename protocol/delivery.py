@@ -29,9 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.devices import Fault
-from pipeline.safety import SafetyConfig
-from pipeline.watchdog import WatchdogConfig
+from pipeline.devices.interfaces import Fault
+from pipeline.force.safety import SafetyConfig
+from pipeline.runtime.watchdog import WatchdogConfig
 from protocol.design import HapticMode, TrialSpec
 from protocol.records import AbortCause, LoopHealth, trial_health
 from protocol.trial import TrialFinished

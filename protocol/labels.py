@@ -1,13 +1,13 @@
 """What the recorded codes mean, in words: the trial phase code and the watchdog's fault bits.
 
 The recording stores each 1 kHz record's trial phase as a small integer (:data:`protocol.trial.PHASE_CODES`)
-and the latched faults as a bitmask (:class:`pipeline.devices.Fault`).  Analysis (which does not import the
+and the latched faults as a bitmask (:class:`pipeline.devices.interfaces.Fault`).  Analysis (which does not import the
 pipeline) and the exports name them through here.
 """
 
 from __future__ import annotations
 
-from pipeline.devices import Fault
+from pipeline.devices.interfaces import Fault
 from protocol.trial import PHASE_CODES
 
 __all__ = ["FAULT_BITS", "PHASE_NAMES", "fault_names", "phase_name"]
@@ -25,7 +25,7 @@ def phase_name(code: int) -> str:
 
 def fault_names(bits: int) -> str:
     """The latched faults of a bitmask joined by ``|`` (``SENSOR_STALE|NON_FINITE``); ``none`` for 0 (as
-    :meth:`pipeline.devices.Fault.describe`; never empty, so a table reads the same in SQL and pandas).
+    :meth:`pipeline.devices.interfaces.Fault.describe`; never empty, so a table reads the same in SQL and pandas).
 
     A bit this version does not know is named by its value (``bit 1024``), never dropped.
     """

@@ -35,10 +35,10 @@ A finished trial is one :class:`protocol.records.TrialRecord`: stored by the rec
 to the runner's listeners as it is.
 
 **The whole session is recorded** (:mod:`protocol.recording`): the runner asks
-the loop for a snapshot of the framework (:class:`pipeline.loop.StartRecording`)
+the loop for a snapshot of the framework (:class:`pipeline.runtime.loop.StartRecording`)
 and, from the tick it was taken on, hands every record and the loop's replay
 log to the recorder -- trials, pauses and waits alike -- so the session can be
-replayed through the pipeline (:mod:`pipeline.replay`).  Records before that
+replayed through the pipeline (:mod:`pipeline.force.replay`).  Records before that
 tick (the loop ran before the session began) are not the session's.  A trial
 row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 """
@@ -54,8 +54,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from pipeline.devices import Fault
-from pipeline.loop_messages import (
+from pipeline.devices.interfaces import Fault
+from pipeline.runtime.loop_messages import (
     AllowBiasRefinement,
     Command,
     LoopEvent,
@@ -291,12 +291,13 @@ class SessionRunner:
     # -- the work ----------------------------------------------------------------------------------
     def process(self, rows: np.ndarray, loop_events: Sequence[LoopEvent] = (),
                 replay_log: Sequence[tuple[int, str, object]] = ()) -> None:
-        """Consume a block of loop records (rows of :data:`pipeline.tick_record.TICK_DTYPE`, as the ring holds them).
+        """Consume a block of loop records (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`, as the ring holds
+        them).
 
         ``loop_events`` are the loop's events since the previous call (times on
         the records' axis); they are stored, and a fault's detail names the
         cause of the trial it aborts.  ``replay_log`` is what the loop logged
-        for replay since the previous call (:attr:`pipeline.loop.HapticLoop.replay_log`),
+        for replay since the previous call (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`),
         read after the records.
         """
         if self._start_tick is None:
@@ -324,7 +325,7 @@ class SessionRunner:
         if len(rows) == 0:
             return
         self._record(rows)
-        t_ns_all = rows["t_ns"]  # int64 (pipeline.tick_record)
+        t_ns_all = rows["t_ns"]  # int64 (pipeline.runtime.tick_record)
         self._handle_requests(int(t_ns_all[0]))
         if self.done:
             return

@@ -31,8 +31,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.loop import HapticLoop
-from pipeline.loop_messages import Command
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import Command
 from protocol.clock import SessionClock
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.delivery import DeliveryLimits

@@ -60,7 +60,7 @@ class StoredSession:
 
     @classmethod
     def of(cls, d: dict[str, Any]) -> StoredSession:
-        """From a dict with these keys (:func:`study_app.session_list.list_sessions`' rows)."""
+        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows)."""
         return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]))
 
 

@@ -82,7 +82,7 @@ def compare(a: str, b: str) -> bool:
 def run_study(code: Path, db: str, participants: int, seed: int) -> None:
     """``haptic-study run`` with the code in ``code`` (this interpreter, ``code`` first on the path)."""
     env = dict(os.environ, PYTHONPATH=str(code))
-    cmd = [sys.executable, "-c", "import sys; from study_app.cli import main; sys.exit(main())",
+    cmd = [sys.executable, "-c", "import sys; from study_app.cli.main import main; sys.exit(main())",
            "run", "--participants", str(participants), "--seed", str(seed), "--db", db]
     print(f"running the study with {code} ...", flush=True)
     subprocess.run(cmd, cwd=code, env=env, check=True, stdout=subprocess.DEVNULL)

@@ -385,7 +385,7 @@ def _teleop_hw(extra: str) -> Builder:
 # -- part 1, added by issue 22: values valid alone but not together, what sets a force's direction or size, odd
 # -- files where a file was expected, the arguments of the commands that write, and every command on a bad database
 CASES += [
-    # protocol: values valid alone but not together (the ramps are the safety stage's, pipeline/safety.py)
+    # protocol: values valid alone but not together (the ramps are the safety stage's, pipeline/force/safety.py)
     Case("protocol: a trial shorter than ramp-in + hold", RUN_NEW,
          "p.toml: trial.max_trial_s = 1.2: must be at least trial.hold_s = 1 + the feedback's 0.5 s ramp-in",
          {"p.toml": protocol("max_trial_s = 12.0 ", "max_trial_s = 1.2 ")}),

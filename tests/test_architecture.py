@@ -8,7 +8,7 @@ Every contract is checked on one import graph (:func:`import_graph`), built with
 statement of every module -- the ones at the top of a file *and* the ones inside functions (lazy imports), and
 ``importlib.import_module("...")`` / ``__import__("...")`` with a literal name.  Lazy imports count because
 they hide a dependency from the interpreter at load time, not from the reader or from the install: a lazy
-``from study_app.cli import CliError`` inside ``report_cmds`` was a circle all the same, and a lazy
+``from study_app.cli.main import CliError`` inside ``report_cmds`` was a circle all the same, and a lazy
 ``import bench`` makes the product need the benchmarks all the same.  Imports under ``if TYPE_CHECKING:``
 count too: a type named across floors is a dependency of the code that names it.
 
@@ -54,12 +54,12 @@ NO_BENCH = {package: {"bench"} for package in PRODUCT}
 SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
-    "pipeline.engine",
-    "study_app.engine_setup",
-    "study_app.engine_session",
-    "study_app.commissioning",
-    "study_app.calibrate_cmds",
-    "study_app.sim_summary",
+    "pipeline.runtime.engine",
+    "study_app.engine.setup",
+    "study_app.engine.sessions",
+    "study_app.engine.commissioning",
+    "study_app.cli.calibrate_cmds",
+    "study_app.cli.sim_summary",
     "study_app.headless",
     "bench",
 )
@@ -127,7 +127,7 @@ def imports_of(module: str, path: Path, known: Mapping[str, Path]) -> list[Impor
             if node.level:
                 up = package.split(".")[: len(package.split(".")) - (node.level - 1)]
                 base = ".".join([*up, base] if base else up)
-            for alias in node.names:  # ``from study_app import messages`` imports the module study_app.messages
+            for alias in node.names:  # ``from study_app import messages`` imports the module study_app.engine.messages
                 sub = f"{base}.{alias.name}"
                 add(node, sub if sub in known else base)
         elif (isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant)
@@ -235,7 +235,7 @@ def graph() -> list[Import]:
 def test_the_graph_sees_lazy_and_relative_imports(graph: list[Import]) -> None:
     # the checks below are only as good as the graph: it must hold the imports the contracts are about
     assert any(i.lazy for i in graph)
-    assert any(i.source == "study_app.cli" and i.target == "study_app.run_cmds" for i in graph)
+    assert any(i.source == "study_app.cli.main" and i.target == "study_app.cli.run_cmds" for i in graph)
     assert len({i.source for i in graph}) > 100  # every module of the five packages, not a few
 
 
@@ -280,14 +280,17 @@ def _tree_with(tmp_path: Path, files: Mapping[str, str], *, append: bool = False
 def test_a_lazy_import_circle_is_reported(tmp_path: Path) -> None:
     # the circle this project had: a command module importing the CLI's error from the CLI that imports it
     graph = _tree_with(tmp_path,
-                       {"study_app/report_cmds.py": "\n\ndef _bad():\n    from study_app.cli import CliError\n"},
+                       {"study_app/cli/report_cmds.py":
+                            "\n\ndef _bad():\n    from study_app.cli.main import CliError\n"},
                        append=True)
     cycles = _new_cycles(graph)
     assert len(cycles) == 1
     # power_cmds is in it too: it imports report_cmds (the analysis options) and is imported by the CLI
-    assert cycles[0].startswith("circle study_app.cli <-> study_app.power_cmds <-> study_app.report_cmds: ")
-    line = len((ROOT / "study_app/report_cmds.py").read_text(encoding="utf-8").splitlines()) + 4
-    assert cycles[0].endswith(f"; study_app.report_cmds imports study_app.cli (line {line}, inside a function)")
+    assert cycles[0].startswith(
+        "circle study_app.cli.main <-> study_app.cli.power_cmds <-> study_app.cli.report_cmds: ")
+    line = len((ROOT / "study_app/cli/report_cmds.py").read_text(encoding="utf-8").splitlines()) + 4
+    assert cycles[0].endswith(
+        f"; study_app.cli.report_cmds imports study_app.cli.main (line {line}, inside a function)")
 
 
 def test_a_circle_through_relative_imports_is_reported(tmp_path: Path) -> None:
@@ -304,10 +307,10 @@ def test_a_circle_through_relative_imports_is_reported(tmp_path: Path) -> None:
                                   "import importlib\n\n\ndef _bad():\n    importlib.import_module('bench.commands')\n"],
                          ids=["lazy-import", "lazy-from", "import_module"])
 def test_the_product_importing_bench_is_reported(tmp_path: Path, code: str) -> None:
-    graph = _tree_with(tmp_path, {"study_app/cli.py": "\n\n" + code}, append=True)
+    graph = _tree_with(tmp_path, {"study_app/cli/main.py": "\n\n" + code}, append=True)
     assert forbidden_imports(graph, NO_BENCH) == forbidden_imports(graph)
     bad = forbidden_imports(graph, NO_BENCH)
-    assert len(bad) == 1 and bad[0].startswith("study_app.cli imports bench")
+    assert len(bad) == 1 and bad[0].startswith("study_app.cli.main imports bench")
     assert bad[0].endswith("inside a function) -- study_app must not import bench")
 
 
@@ -318,8 +321,8 @@ def test_qt_in_a_model_is_reported(tmp_path: Path) -> None:
     ]
 
 
-@pytest.mark.parametrize("floor, above", [("pipeline", "protocol.trial"), ("pipeline", "study_app.cli"),
-                                          ("protocol", "analysis.stats"), ("protocol", "study_app.messages")])
+@pytest.mark.parametrize("floor, above", [("pipeline", "protocol.trial"), ("pipeline", "study_app.cli.main"),
+                                          ("protocol", "analysis.stats"), ("protocol", "study_app.engine.messages")])
 def test_an_upward_import_is_reported(tmp_path: Path, floor: str, above: str) -> None:
     graph = _tree_with(tmp_path, {f"{floor}/_bad.py": f"def f():\n    import {above}\n"})
     assert forbidden_imports(graph) == [
@@ -334,7 +337,7 @@ def test_the_simulators_imported_outside_the_wiring_is_reported(tmp_path: Path) 
 
 def test_the_real_rigs_engine_loads_no_simulator() -> None:
     # what a real rig's engine process imports before it builds anything: the simulators stay unloaded
-    code = ("import sys, study_app.engine_host, study_app.engine_client, pipeline.hardware; "
+    code = ("import sys, study_app.engine.host, study_app.engine.client, pipeline.settings.hardware; "
             "print(sorted(m for m in sys.modules if m == 'pipeline.sim' or m.startswith('pipeline.sim.')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr

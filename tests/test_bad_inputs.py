@@ -42,7 +42,7 @@ from mounts import can_mount, mount_tmpfs, unmount
 
 SQLITE_COMPANIONS = ("-wal", "-shm", "-journal")
 _SCRIPT = Path(sys.executable).with_name("haptic-study")
-#: The command as users run it: the installed console script (``python -m study_app.cli`` where there is none).
+#: The command as users run it: the installed console script (``python -m study_app.cli.main`` where there is none).
 CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
 CASES: list[Case] = [*INPUT_CASES, *OUTPUT_CASES]
 #: A case that has not answered by then hung (the slowest take a few seconds on a loaded 2-core machine).

@@ -8,7 +8,7 @@ import math
 import pytest
 
 from bench.pipeline_bench import format_pipeline_bench, measure_pipeline_cost, record_samples, run_pipeline_bench
-from pipeline.framework import FrameworkConfig
+from pipeline.force.framework import FrameworkConfig
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from study_app.cli import main
+from study_app.cli.main import main
 
 
 def test_sim_json_summary(capsys: pytest.CaptureFixture[str]) -> None:
@@ -62,7 +62,7 @@ def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:
 def test_bench_is_registered_by_entry_point_not_imported() -> None:
     from importlib.metadata import entry_points
 
-    from study_app.cli import COMMANDS_GROUP, build_parser
+    from study_app.cli.main import COMMANDS_GROUP, build_parser
 
     eps = {ep.name: ep.value for ep in entry_points(group=COMMANDS_GROUP)}
     assert eps.get("bench") == "bench.commands:register"  # pip install -e . (scripts/setup.sh) wrote it
@@ -74,7 +74,7 @@ def test_bench_is_registered_by_entry_point_not_imported() -> None:
 def _entry_points_of(monkeypatch: pytest.MonkeyPatch, *values: str) -> None:
     import importlib.metadata as md
 
-    from study_app.cli import COMMANDS_GROUP
+    from study_app.cli.main import COMMANDS_GROUP
 
     eps = tuple(md.EntryPoint(name="bench", value=v, group=COMMANDS_GROUP) for v in values)
     monkeypatch.setattr(md, "entry_points", lambda group: eps if group == COMMANDS_GROUP else ())

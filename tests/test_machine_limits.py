@@ -7,7 +7,7 @@ import pytest
 
 import analysis.resources
 from analysis.resources import available_memory_bytes, memory_problem
-from study_app.cli import main
+from study_app.cli.main import main
 
 
 def test_the_available_memory_is_read_from_the_machine():

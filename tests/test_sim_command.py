@@ -7,7 +7,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-import study_app.sim_summary as sim_summary
+import study_app.cli.sim_summary as sim_summary
 
 
 @pytest.fixture

@@ -28,7 +28,7 @@ from analysis.report import build_report
 from protocol.config import default_protocol
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, session_scope
 from protocol.storage.withdrawal import footprint, withdrawals
-from study_app.cli import main
+from study_app.cli.main import main
 from study_app.headless import run_study
 
 GONE = "P02"

@@ -1,4 +1,4 @@
-"""Real device backends: each implements the same Protocol (:mod:`pipeline.devices`) as its simulated twin.
+"""Real device backends: each implements the same Protocol (:mod:`pipeline.devices.interfaces`) as its simulated twin.
 
 Vendor SDKs (``rtde_receive``, ``pyOpenHaptics``, ``serial``) are imported
 lazily inside the backend that needs them, so importing this package -- and

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.devices import DeviceError
+from pipeline.devices.interfaces import DeviceError
 
 __all__ = ["BAUD", "PROTOCOL_VERSION", "JawFault", "JawStatus", "SerialJawActuator"]
 
@@ -62,7 +62,7 @@ def _open_serial(port: str, baud: int, timeout_s: float) -> Any:
 
 
 class SerialJawActuator:
-    """A :class:`pipeline.devices.JawActuator` talking to the jaw_actuator sketch.
+    """A :class:`pipeline.devices.interfaces.JawActuator` talking to the jaw_actuator sketch.
 
     Parameters
     ----------

@@ -33,8 +33,8 @@ import xml.etree.ElementTree as ET
 from collections import deque
 from dataclasses import dataclass
 
-from pipeline.clock import Clock, MonotonicClock
-from pipeline.devices import DeviceError, WrenchSample
+from pipeline.devices.interfaces import DeviceError, WrenchSample
+from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = [
     "CMD_SET_SOFTWARE_BIAS",
@@ -301,7 +301,7 @@ class RdtSequencer:
 
 
 class NetFTForceSensor:
-    """A :class:`pipeline.devices.ForceSensor` reading an ATI Net F/T box over RDT.
+    """A :class:`pipeline.devices.interfaces.ForceSensor` reading an ATI Net F/T box over RDT.
 
     Parameters
     ----------

@@ -7,7 +7,7 @@ OpenHaptics gets one clear error naming what to install (docs/hardware.md §3d).
 
 The servo callback runs ~1 kHz in OpenHaptics' scheduler thread: it reads the
 stylus transform and buttons, checks ``hdGetError``, and writes what
-:class:`pipeline.touch_output.TouchOutput` renders from the latest command --
+:class:`pipeline.devices.touch_output.TouchOutput` renders from the latest command --
 zero once the command is ``command_timeout_s`` old (10 ms: the loop
 thread died or froze), clamped to the device's reported peak and derated by
 the motor-heat model of its reported continuous rating (the same model as the
@@ -31,16 +31,16 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from pipeline.clock import Clock, MonotonicClock
-from pipeline.devices import DeviceError, HapticState
-from pipeline.frames import Vec3
-from pipeline.touch_output import (
+from pipeline.devices.interfaces import DeviceError, HapticState
+from pipeline.devices.touch_output import (
     DEFAULT_COMMAND_TIMEOUT_S,
     DEFAULT_THERMAL_BUDGET_N2S,
     HD_WARM_MOTORS,
     TouchOutput,
     TouchSpec,
 )
+from pipeline.force.frames import Vec3
+from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = [
     "HD_DEVICE_FAULT",
@@ -208,7 +208,7 @@ class PyOpenHapticsApi:
 
 
 class TouchHapticDevice:
-    """A :class:`pipeline.devices.HapticDevice` for the 3D Systems Touch.
+    """A :class:`pipeline.devices.interfaces.HapticDevice` for the 3D Systems Touch.
 
     Parameters
     ----------
@@ -302,7 +302,7 @@ class TouchHapticDevice:
     def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
         """Latest force to render, N, device frame, computed at ``t_ns`` on the loop's clock (default now).
 
-        Rendered while fresh; clamped; non-finite → zero (:class:`pipeline.touch_output.TouchOutput`).
+        Rendered while fresh; clamped; non-finite → zero (:class:`pipeline.devices.touch_output.TouchOutput`).
         """
         self.output.command(fx, fy, fz, self.clock.now_ns() if t_ns is None else t_ns)
 

@@ -29,9 +29,9 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from pipeline.clock import Clock, MonotonicClock
-from pipeline.devices import DeviceError, PoseSample
-from pipeline.frames import IDENTITY, Mat3, Vec3, mat_mul, mat_vec, rotvec_to_matrix
+from pipeline.devices.interfaces import DeviceError, PoseSample
+from pipeline.force.frames import IDENTITY, Mat3, Vec3, mat_mul, mat_vec, rotvec_to_matrix
+from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = [
     "RTDE_PORT",
@@ -114,7 +114,7 @@ def _default_factory(host: str, frequency_hz: float) -> Any:
 
 
 class UrRtdeRobot:
-    """A :class:`pipeline.devices.Robot` reading a UR controller's TCP pose over RTDE.
+    """A :class:`pipeline.devices.interfaces.Robot` reading a UR controller's TCP pose over RTDE.
 
     Parameters
     ----------
@@ -140,7 +140,7 @@ class UrRtdeRobot:
         Port of the TCP probe (ur_rtde itself always uses 30004).
     tcp_correction_m
         Added to the reported TCP, in the TCP's own (flange-aligned) frame, m: the calibrated tip minus the
-        TCP set on the pendant (:mod:`pipeline.tcp`), so the poses the app uses are at the instrument tip.
+        TCP set on the pendant (:mod:`pipeline.commissioning.tcp`), so the poses the app uses are at the instrument tip.
     """
 
     def __init__(

@@ -1,6 +1,6 @@
 """UR TCP servoing over ``ur_rtde``'s ``RTDEControlInterface`` -- app-side teleoperation only.
 
-Used only with ``robot.mode = "teleop"`` (pipeline/teleop.py): the control
+Used only with ``robot.mode = "teleop"`` (pipeline/devices/teleop.py): the control
 interface uploads a URScript and takes control of the robot, so in the
 default ``"observe"`` mode it is never constructed (docs/hardware.md §1.2).
 
@@ -28,9 +28,9 @@ from collections.abc import Callable
 from typing import Any
 
 from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, probe_tcp
-from pipeline.clock import Clock, MonotonicClock
-from pipeline.devices import DeviceError
-from pipeline.frames import Mat3, Vec3, matrix_to_rotvec
+from pipeline.devices.interfaces import DeviceError
+from pipeline.force.frames import Mat3, Vec3, matrix_to_rotvec
+from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = ["UrRtdeServo"]
 
@@ -44,7 +44,7 @@ def _default_factory(host: str, frequency_hz: float) -> Any:
 
 
 class UrRtdeServo:
-    """A :class:`pipeline.devices.TcpServo` streaming ``servoL`` targets to a UR controller.
+    """A :class:`pipeline.devices.interfaces.TcpServo` streaming ``servoL`` targets to a UR controller.
 
     Parameters
     ----------

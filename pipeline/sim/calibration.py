@@ -3,17 +3,17 @@
 On hardware the experimenter moves the robot through the pose set; here the
 simulated robot is re-oriented pose by pose, with the tool hanging clear of the
 tissue, and the same averaging and least squares as on hardware
-(:func:`pipeline.payload_identification.identify_payload`) produce the calibration.
+(:func:`pipeline.commissioning.payload_identification.identify_payload`) produce the calibration.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 
-from pipeline.clock import Clock
-from pipeline.frames import Mat3, mat_mul, transpose
-from pipeline.payload_compensator import PayloadCalibration
-from pipeline.payload_identification import CalibrationPose, identify_payload, recommended_pose_set
+from pipeline.commissioning.payload_identification import CalibrationPose, identify_payload, recommended_pose_set
+from pipeline.force.frames import Mat3, mat_mul, transpose
+from pipeline.force.payload_compensator import PayloadCalibration
+from pipeline.runtime.clock import Clock
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN
@@ -69,7 +69,7 @@ def auto_calibrate(
         The rig and the clock that paces it (a virtual clock makes this instant).
     orientations
         Sensor orientations ``rot_base_sensor``; default
-        :func:`pipeline.payload_identification.recommended_pose_set` (24 poses).
+        :func:`pipeline.commissioning.payload_identification.recommended_pose_set` (24 poses).
     samples_per_pose, settle_s
         Averaging and settling per pose (science.md §1.2: settle, then average 100–500).
     progress

@@ -21,16 +21,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.frame_check import AXES, FrameCheck, axis_vector, check_axis
-from pipeline.frames import Mat3, mat_vec
-from pipeline.loop import HapticLoop
-from pipeline.loop_messages import AllowBiasRefinement, SetHaptics
+from pipeline.commissioning.frame_check import AXES, FrameCheck, axis_vector, check_axis
+from pipeline.commissioning.tcp import PivotPose
+from pipeline.force.frames import Mat3, mat_vec
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import AllowBiasRefinement, SetHaptics
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
-from pipeline.tcp import PivotPose
 
 if TYPE_CHECKING:
-    from pipeline.ring import RingBuffer
+    from pipeline.runtime.ring import RingBuffer
 
 __all__ = ["PUSH_N", "pivot_poses", "push_axes"]
 

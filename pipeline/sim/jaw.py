@@ -19,7 +19,7 @@ CLOSED_US, OPEN_US, START_US = 1100, 1900, 1100
 
 
 class SimJaw:
-    """A :class:`pipeline.devices.JawActuator` with the firmware's limits."""
+    """A :class:`pipeline.devices.interfaces.JawActuator` with the firmware's limits."""
 
     def __init__(self) -> None:
         self.status = JawStatus()

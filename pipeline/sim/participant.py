@@ -17,7 +17,7 @@ driven by delayed, biased, noisy force percepts):
     indentation, per-trial stiffness belief ``k̂ = k·LogN(median 0.80, σ 0.22)``;
   - haptic (feedback ON only), delayed ``τ_h``: the felt rendered force with
     per-look log noise ``σ_h``, mapped back to tissue force by inverting the
-    pipeline's tanh law (f_max 3 N, f_scale 7 N; :func:`pipeline.scaling.scale_magnitude`
+    pipeline's tanh law (f_max 3 N, f_scale 7 N; :func:`pipeline.force.scaling.scale_magnitude`
     is the forward law); ``σ_h`` is the participant's Weber fraction at the
     GENTLE display (0.257 N), falling as ``(0.257/f)^0.325`` to 0.8 σ_h at FIRM's
     0.509 N;
@@ -83,7 +83,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.scaling import scale_magnitude
+from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.tissue import TissueParams

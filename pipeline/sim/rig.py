@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
+from pipeline.devices.touch_output import TouchSpec
+from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
+from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
 from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
 from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
 from pipeline.sim.jaw import SimJaw
@@ -25,7 +26,6 @@ from pipeline.sim.robot import TOOL_DOWN, RobotParams, SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
 from pipeline.sim.touch import SimTouch
-from pipeline.touch_output import TouchSpec
 
 __all__ = ["SimRig", "SimRigConfig"]
 
@@ -114,14 +114,15 @@ class SimRig:
         self.sim_time_s = 0.0
         self._truth: Vec3 = (0.0, 0.0, 0.0)
         self.last_observation = HandObservation(0.0, 0.0, 0.0, 0.0, cfg.tip_home_m[2] - cfg.surface_z_m)
-        #: App-side teleoperation (a :class:`pipeline.teleop.TeleopDriver`); None: the robot follows the stylus
+        #: App-side teleoperation (a :class:`pipeline.devices.teleop.TeleopDriver`); None: the robot follows the stylus
         #: directly.
         self.teleop: Any = None
         #: Fault rehearsal: faults scheduled on the rig's clock (:meth:`inject_fault`).
         self.faults = FaultInjector()
         #: The instrument's jaw (the sketch's limits, no serial port).
         self.jaw = SimJaw()
-        #: Called with (now_ns, the stylus buttons) every step: :meth:`pipeline.jaw_control.JawController.buttons`.
+        #: Called with (now_ns, the stylus buttons) every step:
+        #: :meth:`pipeline.devices.jaw_control.JawController.buttons`.
         self.on_buttons: Callable[[int, int], None] | None = None
 
     # -- Rig interface ------------------------------------------------------------------------
@@ -177,7 +178,7 @@ class SimRig:
 
     def on_faults(self, faults: int) -> None:
         """The loop's latched faults changed: an attached teleoperation driver stops the arm (see
-        ``pipeline.rig.Rig``)."""
+        ``pipeline.devices.rig.Rig``)."""
         if self.teleop is not None:
             self.teleop.on_faults(faults)
 
@@ -194,7 +195,7 @@ class SimRig:
 
     # -- scenario control ---------------------------------------------------------------------
     def attach_teleop(self, driver: Any) -> None:
-        """Let a :class:`pipeline.teleop.TeleopDriver` (servoing :attr:`robot`) move the arm; None detaches."""
+        """Let a :class:`pipeline.devices.teleop.TeleopDriver` (servoing :attr:`robot`) move the arm; None detaches."""
         self.teleop = driver
 
     def inject_fault(self, kind: str, at_ns: int, duration_s: float | None = None) -> None:

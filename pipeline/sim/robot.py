@@ -9,7 +9,7 @@ Orientation changes (calibration poses) are applied at the next controller
 cycle.
 
 It is also the simulated twin of the teleoperation servo adapter
-(:class:`pipeline.devices.TcpServo`): ``servo_tcp`` sets the target like
+(:class:`pipeline.devices.interfaces.TcpServo`): ``servo_tcp`` sets the target like
 ``servoL``, and ``stop_servo`` -- like ``servoStop`` -- makes the controller
 hold the tool where it is at its next cycle.
 """
@@ -19,8 +19,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from pipeline.devices import PoseSample
-from pipeline.frames import Mat3, Vec3
+from pipeline.devices.interfaces import PoseSample
+from pipeline.force.frames import Mat3, Vec3
 
 __all__ = ["TOOL_DOWN", "RobotParams", "SimRobot"]
 

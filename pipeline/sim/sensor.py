@@ -17,8 +17,8 @@ from statistics import NormalDist
 
 import numpy as np
 
-from pipeline.devices import WrenchSample
-from pipeline.frames import Mat3, Vec3, cross, mat_vec
+from pipeline.devices.interfaces import WrenchSample
+from pipeline.force.frames import Mat3, Vec3, cross, mat_vec
 
 __all__ = ["GAMMA_RANGE", "SATURATION_STATUS", "SensorParams", "SimForceSensor"]
 

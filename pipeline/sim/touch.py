@@ -1,6 +1,6 @@
 """Simulated 3D Systems Touch: force output with the real device's limits (science.md §5).
 
-What it renders is :class:`pipeline.touch_output.TouchOutput`'s, the one
+What it renders is :class:`pipeline.devices.touch_output.TouchOutput`'s, the one
 definition the real backend uses too: a command as old as the command
 timeout (10 ms) renders as zero, the output is clamped to the peak (3.3 N)
 and derated as the motors warm (the thermal budget of the 0.88 N continuous
@@ -16,9 +16,9 @@ the loop stops commanding, the output is zero 10 ms later.
 
 from __future__ import annotations
 
-from pipeline.devices import HapticState
-from pipeline.frames import Vec3
-from pipeline.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, TouchOutput, TouchSpec
+from pipeline.devices.interfaces import HapticState
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, TouchOutput, TouchSpec
+from pipeline.force.frames import Vec3
 
 __all__ = [
     "SimTouch",
@@ -63,7 +63,7 @@ class SimTouch:
 
     @property
     def heat_n2s(self) -> float:
-        """Motor heat, N²·s (:class:`pipeline.touch_output.MotorHeat`)."""
+        """Motor heat, N²·s (:class:`pipeline.devices.touch_output.MotorHeat`)."""
         return self.output.heat.heat_n2s
 
     def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:

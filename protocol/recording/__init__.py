@@ -1,7 +1,7 @@
 """The whole session at full rate, compactly, in the study database: per-column blocks of about one second.
 
 Every 1 kHz record of a session -- training, pauses, trials, waits, every
-resumed run -- is kept with what replay needs (:mod:`pipeline.replay`): the
+resumed run -- is kept with what replay needs (:mod:`pipeline.force.replay`): the
 loop's inputs (the raw F/T wrench, the tick period and the sensor's age, the
 robot pose at its own 125 Hz), its outputs (the rendered force, the feedback
 gain, the latched faults), the stylus position, the trial and phase marks,

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
+from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Column", "decode_block",
@@ -50,7 +50,8 @@ class Column:
 
 
 #: What a block keeps of each record, in order: the kept fields of the tick's record
-#: (:data:`pipeline.tick_record.KEPT_FIELDS`, where a field's codec and ``missing`` value are defined).  A column
+#: (:data:`pipeline.runtime.tick_record.KEPT_FIELDS`, where a field's codec and ``missing`` value are defined).  A
+#: column
 #: added later goes at the end, with its ``missing`` value: a block or chunk written before it then reads as the
 #: columns before it plus that value.
 COLUMNS: tuple[Column, ...] = tuple(Column(f.name, f.name, f.keep or "", f.missing) for f in KEPT_FIELDS)
@@ -72,7 +73,7 @@ _INT_CODECS = ("int", "small")
 def kept_records(records: np.ndarray | Mapping[str, np.ndarray]) -> np.ndarray:
     """The kept part of loop records: a structured array of :data:`COLUMNS`' fields, each with the record's type.
 
-    ``records``: rows of :data:`pipeline.tick_record.TICK_DTYPE` (the ring's), whose kept fields are one prefix
+    ``records``: rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE` (the ring's), whose kept fields are one prefix
     of each row's bytes, taken in one copy; rows of the kept type itself, returned as they are; or anything
     else with the columns by name (a structured array, a mapping of columns), copied field by field.
 
@@ -107,7 +108,7 @@ def _kept_dtype() -> np.dtype:
 def _record_bytes(records: np.ndarray | Mapping[str, np.ndarray], dtype: np.dtype) -> npt.NDArray[np.uint8]:
     """The kept part of records as bytes, one row a record (``dtype.itemsize`` bytes): a view where it can be.
 
-    Loop records (:data:`pipeline.tick_record.TICK_DTYPE`) and kept records lay their kept fields out as
+    Loop records (:data:`pipeline.runtime.tick_record.TICK_DTYPE`) and kept records lay their kept fields out as
     ``dtype`` does, so their bytes are viewed, not converted (NumPy's structured copies cost ~2 µs a record);
     anything else goes through :func:`kept_records`.
     """

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.replay import ReplayInputs
-from pipeline.tick_record import TICK_DTYPE
+from pipeline.force.replay import ReplayInputs
+from pipeline.runtime.tick_record import TICK_DTYPE
 from protocol.clock import SessionClock
 from protocol.recording.codec import COLUMNS, decode_block, decode_columns, join_decoded
 from protocol.recording.integrity import (
@@ -62,7 +62,7 @@ class SegmentData:
         return self.clock.seconds_of(self.columns["t_ns"])
 
     def replay_inputs(self) -> ReplayInputs:
-        """What :func:`pipeline.replay.replay` needs to run this segment through the pipeline again."""
+        """What :func:`pipeline.force.replay.replay` needs to run this segment through the pipeline again."""
         c = self.columns
         return ReplayInputs(
             tick=c["tick"], period_ns=c["period_ns"],  # int64, as the tick record has them
@@ -81,7 +81,7 @@ class SegmentData:
         """The replay log: poses and events merged in tick order, poses last within a tick.
 
         The loop logs a tick's commands and drops to zero before its pose, and its device limit after
-        it; a pose and a device limit commute (:meth:`pipeline.framework.HapticFramework.set_pose` and
+        it; a pose and a device limit commute (:meth:`pipeline.force.framework.HapticFramework.set_pose` and
         ``set_device_limit`` change disjoint state), so this order replays as the loop ran.
         """
         merged = [(t, 0, i, k, p) for i, (t, k, p) in enumerate(self.events)]

@@ -162,7 +162,7 @@ class Recorder:
 
     def records(self, session_id: int, segment: int, records: np.ndarray,
                 log: Sequence[tuple[int, str, Any]] = ()) -> None:
-        """Queue loop records of a segment (rows of :data:`pipeline.tick_record.TICK_DTYPE`, or their kept part,
+        """Queue loop records of a segment (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`, or their kept part,
         :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
         after they are queued (the ring's copies do not).
 

@@ -11,7 +11,7 @@ from pathlib import Path
 from PySide6.QtCore import QSettings, QtMsgType, qInstallMessageHandler
 from PySide6.QtWidgets import QApplication
 
-from study_app.engine_setup import HostConfig
+from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
 from study_app.gui.tour import SCREEN, ScreenshotTour
 

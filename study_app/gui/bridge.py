@@ -13,8 +13,8 @@ import threading
 
 from PySide6.QtCore import QObject, Qt, Signal, Slot
 
-from study_app import messages as m
-from study_app.engine_client import EngineClient
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
 
 __all__ = ["QtEngineBridge"]
 
@@ -49,7 +49,7 @@ class QtEngineBridge(QObject):
     def restart(self) -> None:
         """Replace the engine by a new one (the old one is asked to close its records and exit, else killed).
 
-        Returns at once; the new engine's :class:`study_app.messages.EngineReady` arrives as an event.
+        Returns at once; the new engine's :class:`study_app.engine.messages.EngineReady` arrives as an event.
         """
         old_client, old_thread = self.client, self._thread
         self.generation += 1

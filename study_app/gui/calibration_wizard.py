@@ -27,7 +27,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import AXIS_WORDS, CommissioningModel
 from study_app.models.real_calibration import REAL_POSE_SETS, RealCalibrationModel

@@ -4,7 +4,7 @@ A :class:`Confirmation` is a non-blocking question whose default (Enter,
 Space, Esc) is **No**, and which closes itself, as No, when what it was asked
 about is over: "Abort trial 7?" goes away when trial 7 ends, so a late Yes can
 never abort trial 9.  The engine refuses a bound command for a trial that is no
-longer running as well (:class:`study_app.messages.AbortTrial`), which covers
+longer running as well (:class:`study_app.engine.messages.AbortTrial`), which covers
 the instant between the trial's end and the window hearing of it.
 """
 

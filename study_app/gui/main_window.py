@@ -24,9 +24,9 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
+from study_app.engine.setup import HostConfig
 from study_app.gui import placement
 from study_app.gui.bridge import QtEngineBridge
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel

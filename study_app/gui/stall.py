@@ -31,7 +31,7 @@ __all__ = ["Stall", "StallDetector", "StallRecorder", "stack_of"]
 
 #: Frames from these directories (relative to the repository) name a culprit; library frames only give context.
 _OURS = ("study_app", "protocol", "pipeline", "analysis")
-_ENTRY_POINTS = ("study_app/cli.py", "study_app/gui/stall.py", "study_app/gui/app.py")
+_ENTRY_POINTS = ("study_app/cli/main.py", "study_app/gui/stall.py", "study_app/gui/app.py")
 _ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 

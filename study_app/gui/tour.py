@@ -26,7 +26,7 @@ from PySide6.QtWidgets import QApplication, QMenu, QMessageBox, QWidget
 from protocol.clock import SessionClock
 from protocol.design import HapticMode
 from protocol.records import AbortCause, Outcome, TrialRecord
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.gui.timers import tracked_timer
 
 if TYPE_CHECKING:

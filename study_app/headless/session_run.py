@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop_messages import LoopEvent
+from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
@@ -41,8 +41,8 @@ from protocol.session_setup import (
     training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
+from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
-from study_app.session_config import config_record
 
 __all__ = [
     "BLOCK_TICKS", "VIRTUAL_COMMIT_S", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",

@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.devices import Fault
-from study_app import messages as m
+from pipeline.devices.interfaces import Fault
+from study_app.engine import messages as m
 from study_app.models import Emitter
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel

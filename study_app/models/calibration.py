@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["CalibrationModel"]
@@ -39,7 +39,7 @@ class CalibrationModel:
         return _DESCRIPTIONS[pose_set]
 
     def set_pose_set(self, name: str) -> None:
-        """Choose one of :data:`study_app.messages.POSE_SETS`."""
+        """Choose one of :data:`study_app.engine.messages.POSE_SETS`."""
         if name not in m.POSE_SETS:
             raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.POSE_SETS)}")
         self.pose_set = name

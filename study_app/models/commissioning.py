@@ -2,7 +2,7 @@
 jaw.
 
 * :class:`CommissioningModel` -- the chain's status for the mounted tool (from
-  :class:`study_app.messages.CalibrationStatus`), the TCP pivot step (simulated
+  :class:`study_app.engine.messages.CalibrationStatus`), the TCP pivot step (simulated
   rig: a pose set run automatically; real rig: orientations recorded one at a
   time about the divot, then Compute) and the frame and sign check (simulated:
   automatic; real: one recording per base axis while the experimenter pushes
@@ -18,9 +18,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.frame_check import AXES
-from pipeline.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG
-from study_app import messages as m
+from pipeline.commissioning.frame_check import AXES
+from pipeline.commissioning.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["CommissioningModel", "JawModel"]
@@ -252,7 +252,7 @@ class JawModel:
         return self.state is not None
 
     def apply(self, ev: object) -> None:
-        """Update from :class:`study_app.messages.JawState` events."""
+        """Update from :class:`study_app.engine.messages.JawState` events."""
         if isinstance(ev, m.JawState):
             self.state = ev
             if ev.last:

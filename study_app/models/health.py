@@ -8,9 +8,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pipeline.devices import Fault
+from pipeline.devices.interfaces import Fault
 from protocol.records import AbortCause, TrialRecord
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFigure", "lost_to_the_machine"]
@@ -109,7 +109,7 @@ class DeviceStatus:
 
 @dataclass
 class HealthModel:
-    """Health from :class:`study_app.messages.Health` events, fault events and the ring's records.
+    """Health from :class:`study_app.engine.messages.Health` events, fault events and the ring's records.
 
     Device rates are measured in sample time from the records: a new F/T
     sample changes the raw wrench, a new robot pose resets the pose age.

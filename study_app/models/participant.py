@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["ParticipantScreen", "ParticipantScreenModel"]

@@ -1,7 +1,7 @@
 """The real rig's calibration wizard, step by step (Qt-free).
 
 On hardware nobody can re-orient the tool for us: the wizard shows one target
-pose of :func:`pipeline.payload_identification.recommended_pose_set` at a time, the
+pose of :func:`pipeline.commissioning.payload_identification.recommended_pose_set` at a time, the
 experimenter moves the robot there with its own teach pendant or teleoperation,
 and presses *Record pose*; the engine averages the raw wrench for
 ``seconds`` and reads the TCP orientation the robot reports (off the GUI
@@ -17,9 +17,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from pipeline.frames import IDENTITY, Mat3, as_mat3, mat_mul, matrix_to_rotvec, transpose
-from pipeline.payload_identification import recommended_pose_set
-from study_app import messages as m
+from pipeline.commissioning.payload_identification import recommended_pose_set
+from pipeline.force.frames import IDENTITY, Mat3, as_mat3, mat_mul, matrix_to_rotvec, transpose
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["MIN_POSES", "OFF_TARGET_WARN_DEG", "REAL_POSE_SETS", "PoseStep", "RealCalibrationModel"]
@@ -48,7 +48,7 @@ class RealCalibrationModel:
     Parameters
     ----------
     rot_tip_sensor
-        The sensor mount of the hardware file (from :class:`study_app.messages.EngineReady`):
+        The sensor mount of the hardware file (from :class:`study_app.engine.messages.EngineReady`):
         converts a target sensor orientation into the TCP orientation the pendant shows.
     seconds
         Averaging time per pose.

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["RigViewModel"]

@@ -8,7 +8,7 @@ from typing import Any
 
 from protocol.design import HapticMode
 from protocol.records import Outcome, TrialRecord
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["TRIAL_COLUMNS", "SessionModel", "TrialCount", "TrialTable", "time_left_text"]
@@ -76,7 +76,7 @@ def time_left_text(seconds: float, *, bound: bool = False) -> str:
 
 @dataclass
 class TrialTable:
-    """Finished trials, filled live from :class:`study_app.messages.TrialEnded` records."""
+    """Finished trials, filled live from :class:`study_app.engine.messages.TrialEnded` records."""
 
     rows: list[TrialRecord] = field(default_factory=list)
     row_added: Emitter = field(default_factory=Emitter)

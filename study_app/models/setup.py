@@ -27,10 +27,10 @@ from typing import Any
 from protocol.config import ProtocolConfig, ProtocolError, load_protocol
 from protocol.storage import StorageError, validate_code
 from protocol.study_rules import StoredSession, next_kind, requires_training, seed_refusal, study_seed, training_refusal
-from study_app import messages as m
+from study_app.engine import messages as m
+from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.session import TrialCount
-from study_app.session_list import next_participant_number
 
 __all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article"]
 
@@ -69,7 +69,7 @@ class SetupModel:
     warnings: dict[str, str] = field(default_factory=dict)
     hint: str = ""
     resumable: list[dict[str, object]] = field(default_factory=list)
-    #: Every session of the database (:func:`study_app.session_list.list_sessions`), as the engine listed them.
+    #: Every session of the database (:func:`study_app.engine.session_list.list_sessions`), as the engine listed them.
     known: list[dict[str, Any]] = field(default_factory=list)
     #: The number follows the suggestion until the experimenter sets it.
     number_suggested: bool = True

@@ -14,7 +14,7 @@ import pytest
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.power import POWER_CSV_COLUMNS
-from study_app.cli import main
+from study_app.cli.main import main
 
 
 def _participant(code: str, i: int) -> SessionDef:
@@ -342,10 +342,11 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
 
 def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import():
     from analysis.power import DEFAULT_N_VALUES
-    from study_app.power_cmds import DEFAULT_N_TEXT
+    from study_app.cli.power_cmds import DEFAULT_N_TEXT
 
     assert ",".join(str(n) for n in DEFAULT_N_VALUES) == DEFAULT_N_TEXT
-    proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli import build_parser; build_parser(); "
+    proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli.main import build_parser; "
+                          "build_parser(); "
                            "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
                           capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "[]"

@@ -20,7 +20,7 @@ from analysis.samples import SAMPLES_COLUMNS, samples_frame
 from bench.row_format import row_format_copy
 from protocol.config import default_protocol
 from protocol.rehearsal import FaultPlan
-from study_app.cli import main
+from study_app.cli.main import main
 from study_app.headless import SessionInterrupted, resume_session, run_study
 
 

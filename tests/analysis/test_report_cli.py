@@ -21,7 +21,7 @@ from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.figures import peak_downsample, significance_mark
 from analysis.report_tables import STATS_CSV_COLUMNS, TRIALS_CSV_COLUMNS
-from study_app.cli import main
+from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 

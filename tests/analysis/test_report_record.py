@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 from studybuilder import SessionDef, TrialDef, build, success_trial, timeout_trial
 
-from study_app.cli import main
+from study_app.cli.main import main
 
 COMMIT_A, COMMIT_B = "a" * 8 + "1" * 32, "b" * 8 + "2" * 32
 
@@ -121,7 +121,7 @@ def test_a_session_run_from_a_checkout_stores_its_commit(tmp_path):
     from protocol.session_setup import open_new_session
     from protocol.storage import StudyDatabase
     from protocol.version import checkout_provenance, software_provenance
-    from study_app.cli import version_text
+    from study_app.cli.main import version_text
 
     root = Path(__file__).resolve().parents[2]
     head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,

@@ -26,13 +26,13 @@ import pytest
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 
-from pipeline.frames import matrix_to_rotvec
-from pipeline.rig_calibration import RigCalibrationFile
+from pipeline.commissioning.rig_calibration import RigCalibrationFile
+from pipeline.commissioning.tcp import pivot_orientations
+from pipeline.force.frames import matrix_to_rotvec
 from pipeline.sim.robot import TOOL_DOWN
-from pipeline.tcp import pivot_orientations
-from study_app.calibrate_cmds import cmd_calibrate
-from study_app.cli import build_parser, main
-from study_app.cli_error import CliError
+from study_app.cli.calibrate_cmds import cmd_calibrate
+from study_app.cli.error import CliError
+from study_app.cli.main import build_parser, main
 
 G = 9.80665
 TIP = np.array([0.0012, -0.0009, 0.2513])  # the fake tool's true tip in the flange frame
@@ -141,7 +141,7 @@ def test_the_real_chain_in_order_saves_each_step_for_the_tool(rig, tmp_path) -> 
     assert rec.tcp is not None and np.allclose(rec.tcp.tip_in_flange_m, TIP, atol=1e-5) and rec.payload is None
 
     # payload: 6 poses, the fake box reads the tool's weight and bias at each
-    from study_app.commissioning import pose_set
+    from study_app.engine.commissioning import pose_set
 
     poses = iter(pose_set("quick"))
 
@@ -178,7 +178,7 @@ def test_the_real_chain_in_order_saves_each_step_for_the_tool(rig, tmp_path) -> 
     assert code == 0 and r["passed"] and [a["axis"] for a in r["axes"]] == ["+x", "+y", "+z"]
     assert all(a["base_angle_deg"] < 1.0 for a in r["axes"])
     rec = RigCalibrationFile.load(tmp_path / "calibration.json").tool("grasper")
-    from pipeline.hardware import load_hardware
+    from pipeline.settings.hardware import load_hardware
 
     fw = load_hardware(hw).framework
     assert rec.missing(fw.rot_tip_sensor, fw.rot_haptic_base) == ""

@@ -23,13 +23,13 @@ from stepped_clock import SteppedClock
 from test_touch import FakeHD
 
 from pipeline.backends.touch import TouchHapticDevice
-from pipeline.devices import Fault, WrenchSample
-from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop
-from pipeline.loop_messages import LoopEvent, SetHaptics
+from pipeline.devices.interfaces import Fault, WrenchSample
+from pipeline.force.framework import FrameworkConfig, HapticFramework
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import LoopEvent, SetHaptics
+from pipeline.runtime.supervisor import LoopSupervisor
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import GAMMA_RANGE
-from pipeline.supervisor import LoopSupervisor
 
 MS = 1_000_000
 LIMIT_MS = 10  # the Touch's default command timeout

@@ -3,7 +3,7 @@
 The bench of :mod:`test_dead_loop` -- the loop in its own thread on a
 :class:`stepped_clock.SteppedClock`, the real Touch backend over the HD API
 stand-in clocked by the test, the supervisor -- with the robot teleoperated:
-a :class:`pipeline.teleop.TeleopDriver` (deadman held) streams targets to the
+a :class:`pipeline.devices.teleop.TeleopDriver` (deadman held) streams targets to the
 real servo adapter :class:`pipeline.backends.ur_control.UrRtdeServo`, whose
 control interface is the stand-in of :mod:`fake_ur_control`, aged on the same
 stepped clock.  The targets come from the loop thread (``Rig.advance``), so a
@@ -33,15 +33,16 @@ from test_ur_control import QUIET_S, listener  # noqa: F401 - the fixture: a loo
 
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
-from pipeline.devices import Fault
-from pipeline.teleop import TeleopConfig, TeleopController, TeleopDriver, TeleopState
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.teleop import TeleopConfig, TeleopController, TeleopDriver, TeleopState
 
 DEADMAN = 1
 WATCHDOG_MS = 50  # UrRtdeServo's default target_timeout_s
 
 
 class TeleopRig(Rig):
-    """The dead-loop bench's rig with the robot driven from the stylus (as ``pipeline.hardware.RealRig`` does)."""
+    """The dead-loop bench's rig with the robot driven from the stylus (as ``pipeline.devices.real_rig.RealRig``
+    does)."""
 
     def __init__(self, clock: SteppedClock, touch: TouchHapticDevice, servo: UrRtdeServo) -> None:
         super().__init__(clock, touch)

@@ -12,9 +12,9 @@ from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from test_hardware_config import write_rig_file
 
-from study_app import messages as m
-from study_app.engine_client import EngineClient, EngineStartError
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient, EngineStartError
+from study_app.engine.setup import HostConfig
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
 

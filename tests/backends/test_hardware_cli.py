@@ -12,7 +12,7 @@ from fake_jaw import PtyJaw
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 
-from study_app.cli import main
+from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -39,7 +39,8 @@ def test_probe_netft_text(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def run_cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True, timeout=30,
+    return subprocess.run([sys.executable, "-m", "study_app.cli", *args], capture_output=True, text=True,
+                          timeout=30,
                           cwd=ROOT)
 
 

@@ -17,14 +17,15 @@ from tomlvalues import TOML_VALUES, replaced
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.ur import UrRtdeRobot
-from pipeline.clock import VirtualClock
-from pipeline.devices import DeviceError, HapticState
-from pipeline.engine import build_hardware_engine
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
-from pipeline.hardware import HardwareConfig, HardwareError, RealRig, build_real_rig, hardware_from_dict, load_hardware
-from pipeline.payload_compensator import NO_PAYLOAD
-from pipeline.tomlfields import host_problem
-from pipeline.touch_output import TouchSpec
+from pipeline.devices.interfaces import DeviceError, HapticState
+from pipeline.devices.real_rig import RealRig, build_real_rig
+from pipeline.devices.touch_output import TouchSpec
+from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
+from pipeline.force.payload_compensator import NO_PAYLOAD
+from pipeline.runtime.clock import VirtualClock
+from pipeline.runtime.engine import build_hardware_engine
+from pipeline.settings.hardware import HardwareConfig, HardwareError, hardware_from_dict, load_hardware
+from pipeline.settings.tomlfields import host_problem
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = ROOT / "hardware.example.toml"
@@ -264,7 +265,7 @@ class _FakeTouch:
 
 
 def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("pipeline.hardware.open_haptic", lambda cfg, clock: _FakeTouch())
+    monkeypatch.setattr("pipeline.devices.real_rig.open_haptic", lambda cfg, clock: _FakeTouch())
     with FakeNetFT() as netft, FakeRtde() as rtde, PtyJaw() as jaw:
         hw = load_hardware(write_rig_file(tmp_path, netft, rtde, jaw, cal=True))
         assert hw.calibration_file == str(tmp_path / "payload.json")

@@ -11,7 +11,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from pipeline.backends.jaw import PROTOCOL_VERSION, JawFault, SerialJawActuator
-from pipeline.devices import JawActuator
+from pipeline.devices.interfaces import JawActuator
 
 WAIT_S = 2.0
 

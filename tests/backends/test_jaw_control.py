@@ -7,7 +7,7 @@ from __future__ import annotations
 from fake_jaw import C, PtyJaw
 
 from pipeline.backends.jaw import SerialJawActuator
-from pipeline.jaw_control import CONT_STEP_US, STEP_US, JawController, StylusButtons
+from pipeline.devices.jaw_control import CONT_STEP_US, STEP_US, JawController, StylusButtons
 from pipeline.sim.jaw import SimJaw
 
 MS = 1_000_000

@@ -17,11 +17,11 @@ from pipeline.backends.netft import (
     RdtSequencer,
     parse_netft_xml,
 )
-from pipeline.clock import VirtualClock
-from pipeline.devices import Fault, ForceSensor
-from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop
-from pipeline.loop_messages import ResetFaults
+from pipeline.devices.interfaces import Fault, ForceSensor
+from pipeline.force.framework import FrameworkConfig, HapticFramework
+from pipeline.runtime.clock import VirtualClock
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import ResetFaults
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.touch import SimTouch
 

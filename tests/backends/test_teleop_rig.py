@@ -27,10 +27,11 @@ from test_hardware_config import write_rig_file
 
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
-from pipeline.clock import MonotonicClock
-from pipeline.devices import DeviceError
-from pipeline.hardware import RealRig, build_real_rig, hardware_from_dict
-from pipeline.teleop import ServoTarget, TeleopDriver, TeleopState
+from pipeline.devices.interfaces import DeviceError
+from pipeline.devices.real_rig import RealRig, build_real_rig
+from pipeline.devices.teleop import ServoTarget, TeleopDriver, TeleopState
+from pipeline.runtime.clock import MonotonicClock
+from pipeline.settings.hardware import hardware_from_dict
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
 OPEN_ORDER = ["force sensor", "robot", "haptic device", "jaw actuator", "robot control (teleoperation)"]

@@ -20,14 +20,14 @@ from pipeline.backends.touch import (
     TouchHapticDevice,
     load_pyopenhaptics,
 )
-from pipeline.clock import VirtualClock
-from pipeline.devices import DeviceError, Fault, HapticDevice
-from pipeline.framework import FrameworkConfig, HapticFramework
-from pipeline.loop import HapticLoop
-from pipeline.loop_messages import ResetFaults, SetHaptics
+from pipeline.devices.interfaces import DeviceError, Fault, HapticDevice
+from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
+from pipeline.force.framework import FrameworkConfig, HapticFramework
+from pipeline.runtime.clock import VirtualClock
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import ResetFaults, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import SimForceSensor
-from pipeline.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 
 
 class FakeHD:

@@ -47,7 +47,7 @@ def open_ready_window(qtbot, tmp_path, protocol: str, speed: float, timeout_ms: 
     the simulated hand on manual; closing it answers every question Yes."""
     from PySide6.QtCore import QSettings
 
-    from study_app.engine_setup import HostConfig
+    from study_app.engine.setup import HostConfig
     from study_app.gui.main_window import ExperimenterWindow
 
     proto = tmp_path / "p.toml"

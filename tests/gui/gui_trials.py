@@ -1,4 +1,5 @@
-"""Trial records as the engine hands them to the GUI (:class:`study_app.messages.TrialEnded`), for the GUI tests."""
+"""Trial records as the engine hands them to the GUI (:class:`study_app.engine.messages.TrialEnded`), for the GUI
+tests."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from study_app.cli import main
+from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -28,7 +28,7 @@ def test_missing_hardware_file_is_refused(capsys, tmp_path):
 
 
 def test_refusing_real_rig_does_not_load_qt():
-    code = ("import sys; from study_app.cli import main; rc = main(['gui', '--rig', 'real']); "
+    code = ("import sys; from study_app.cli.main import main; rc = main(['gui', '--rig', 'real']); "
             "print(rc, 'PySide6' in sys.modules, 'pyqtgraph' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
@@ -37,7 +37,7 @@ def test_refusing_real_rig_does_not_load_qt():
 
 def test_no_display_is_one_clear_line_not_a_qt_abort():
     # Qt itself would abort the process (SIGABRT) listing its platform plugins
-    code = ("import sys; from study_app.cli import main; rc = main(['gui']); "
+    code = ("import sys; from study_app.cli.main import main; rc = main(['gui']); "
             "print(rc, 'PySide6' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})

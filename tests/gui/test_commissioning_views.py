@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 
-from pipeline.frames import axis_angle, mat_mul
+from pipeline.force.frames import axis_angle, mat_mul
+from pipeline.runtime.tick_record import TICK_DTYPE
 from pipeline.sim.robot import TOOL_DOWN
-from pipeline.tick_record import TICK_DTYPE
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.widgets import QtHealthPanel
 from study_app.models.app import AppModel

@@ -8,12 +8,12 @@ import time
 
 import pytest
 
+from pipeline.devices.touch_output import TouchSpec
 from pipeline.sim.touch import SimTouch
-from pipeline.touch_output import TouchSpec
 from protocol.trial import TrialPhase
-from study_app import messages as m
-from study_app.engine_host import StudyEngine
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.host import StudyEngine
+from study_app.engine.setup import HostConfig
 
 
 @pytest.fixture

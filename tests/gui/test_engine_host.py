@@ -8,11 +8,11 @@ import time
 
 import pytest
 
-from pipeline.devices import Fault
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_host import StudyEngine
-from study_app.engine_setup import HostConfig
+from pipeline.devices.interfaces import Fault
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
+from study_app.engine.host import StudyEngine
+from study_app.engine.setup import HostConfig
 
 
 @pytest.fixture
@@ -168,7 +168,7 @@ def _assert_replays_bit_for_bit(db: str, session_id: int, runs: int) -> None:
     """Each recorded run of the session, through the pipeline again, renders exactly what the GUI's engine did."""
     import numpy as np
 
-    from pipeline.replay import replay
+    from pipeline.force.replay import replay
     from protocol.recording import read_segment, segments_of
     from protocol.storage import connect_readonly
 

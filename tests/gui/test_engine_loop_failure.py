@@ -1,7 +1,7 @@
 """The study engine when its haptic loop dies: the fault is latched, reported, stored; the session is left resumable.
 
 On the virtual clock the loop runs inside the engine's ``step``; on the real
-clock in its own thread, watched by :class:`pipeline.supervisor.LoopSupervisor`
+clock in its own thread, watched by :class:`pipeline.runtime.supervisor.LoopSupervisor`
 from the driver thread.  Either way a dead loop cannot emit its own event, so
 the engine pushes one into the runner's event path, interrupts the session
 (resumable) and refuses what needs a loop.
@@ -12,12 +12,12 @@ from __future__ import annotations
 import sqlite3
 import time
 
-from pipeline.devices import Fault
+from pipeline.devices.interfaces import Fault
 from protocol.trial import TrialPhase
-from study_app import messages as m
-from study_app.engine_host import StudyEngine
-from study_app.engine_session import list_resumable
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.host import StudyEngine
+from study_app.engine.sessions import list_resumable
+from study_app.engine.setup import HostConfig
 
 
 def _fail() -> None:
@@ -97,7 +97,7 @@ def test_a_frozen_loop_in_a_session_on_the_real_clock_is_latched_and_stored(tmp_
     after 50 ms without a tick, the runner stores it, and the loop latches it when it runs again."""
     import threading
 
-    from pipeline.clock import VirtualClock
+    from pipeline.runtime.clock import VirtualClock
 
     events: list[object] = []
     e = StudyEngine(HostConfig(clock="real"), events.append, shared_ring=False)

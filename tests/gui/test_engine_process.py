@@ -12,10 +12,10 @@ import time
 
 import numpy as np
 
-from pipeline.loop_messages import RECORD_FIELDS
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_setup import HostConfig
+from pipeline.runtime.loop_messages import RECORD_FIELDS
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
+from study_app.engine.setup import HostConfig
 
 START_TIMEOUT_S = 60.0
 EXIT_TIMEOUT_S = 15.0

@@ -15,8 +15,8 @@ import signal
 import pytest
 from PySide6.QtCore import QSettings, Qt
 
-from study_app import messages as m
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
 
 TIMEOUT_MS = 30_000
@@ -98,7 +98,7 @@ def test_a_dead_haptic_loop_in_a_live_engine_leads_to_the_same_restart(qtbot, wi
 def test_a_stalled_loop_offers_reset_and_a_restart_that_asks_first(qtbot, window) -> None:
     from PySide6.QtWidgets import QMessageBox
 
-    from pipeline.devices import Fault
+    from pipeline.devices.interfaces import Fault
 
     w = window
     sid = start_session(qtbot, w, "P03")

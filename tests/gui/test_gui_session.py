@@ -10,7 +10,7 @@ import pytest
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtWidgets import QApplication
 
-from study_app.engine_setup import HostConfig
+from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
 
 TIMEOUT_MS = 30_000

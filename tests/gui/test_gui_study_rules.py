@@ -16,7 +16,7 @@ from conftest import SHORT_PROTOCOL, open_ready_window
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QApplication, QInputDialog, QMessageBox
 
-from study_app import messages as m
+from study_app.engine import messages as m
 
 TIMEOUT_MS = 30_000
 #: The short protocol as a study protocol: it requires training before the experiment (the default); a 6 s cap

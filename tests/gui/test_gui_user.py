@@ -14,7 +14,7 @@ from conftest import SHORT_PROTOCOL
 from PySide6.QtCore import QSettings, Qt
 from PySide6.QtWidgets import QApplication, QMessageBox
 
-from study_app.engine_setup import HostConfig
+from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
 
 TIMEOUT_MS = 30_000

@@ -10,11 +10,11 @@ import time
 
 import pytest
 
-from pipeline.clock import collect_garbage
-from pipeline.jitter_trace import LateTickTracer, _Task
-from study_app import messages as m
-from study_app.engine_host import QUIET_OFFSET_NS, StudyEngine
-from study_app.engine_setup import HostConfig
+from pipeline.runtime.clock import collect_garbage
+from pipeline.runtime.jitter_trace import LateTickTracer, _Task
+from study_app.engine import messages as m
+from study_app.engine.host import QUIET_OFFSET_NS, StudyEngine
+from study_app.engine.setup import HostConfig
 
 
 @pytest.fixture

@@ -22,12 +22,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 
-from pipeline.devices import Fault
-from pipeline.frames import matrix_to_rotvec
-from study_app import messages as m
-from study_app.engine_client import EngineClient
-from study_app.engine_host import StudyEngine
-from study_app.engine_setup import HostConfig
+from pipeline.devices.interfaces import Fault
+from pipeline.force.frames import matrix_to_rotvec
+from study_app.engine import messages as m
+from study_app.engine.client import EngineClient
+from study_app.engine.host import StudyEngine
+from study_app.engine.setup import HostConfig
 from study_app.models.real_calibration import RealCalibrationModel
 
 FAKE_TOUCH = "fake_touch:open_fake_touch"

@@ -21,13 +21,13 @@ from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from test_real_rig import CPF, FAKE_TOUCH, G, hardware_file, wait_for
 
-from pipeline.frames import matrix_to_rotvec
+from pipeline.commissioning.tcp import pivot_orientations
+from pipeline.force.frames import matrix_to_rotvec
 from pipeline.sim.robot import TOOL_DOWN
-from pipeline.tcp import pivot_orientations
-from study_app import messages as m
-from study_app.commissioning import pose_set
-from study_app.engine_host import StudyEngine
-from study_app.engine_setup import HostConfig
+from study_app.engine import messages as m
+from study_app.engine.commissioning import pose_set
+from study_app.engine.host import StudyEngine
+from study_app.engine.setup import HostConfig
 
 TIP = np.array([0.0015, -0.0010, 0.2212])  # the tool's true tip in the flange frame (the pendant's TCP is zero)
 PIVOT = np.array([0.30, -0.10, 0.15])

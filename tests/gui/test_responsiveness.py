@@ -8,9 +8,9 @@ import dataclasses
 import numpy as np
 from gui_trials import trial_record
 
-from pipeline.loop_messages import RECORD_FIELDS
-from pipeline.ring import RingBuffer
-from pipeline.tick_record import TICK_DTYPE
+from pipeline.runtime.loop_messages import RECORD_FIELDS
+from pipeline.runtime.ring import RingBuffer
+from pipeline.runtime.tick_record import TICK_DTYPE
 from study_app.gui.stall import Stall, StallRecorder, culprit
 from study_app.gui.widgets import QtTrialTable
 from study_app.models.plots import PlotModel, nice_range
@@ -85,8 +85,8 @@ def test_stall_recorder_attributes_the_gap_to_the_sampled_callback():
     rec.beat(10.005)
     assert not rec.overdue(10.02) and rec.overdue(10.045)
     plot_stack = ("pyqtgraph/functions.py:2090 arrayToQPath", "study_app/gui/widgets.py:140 refresh",
-                  "study_app/gui/main_window.py:173 _on_plot_timer", "study_app/cli.py:166 main")
-    rig_stack = ("study_app/gui/rig_view.py:51 paintEvent", "study_app/cli.py:166 main")
+                  "study_app/gui/main_window.py:173 _on_plot_timer", "study_app/cli/main.py:166 main")
+    rig_stack = ("study_app/gui/rig_view.py:51 paintEvent", "study_app/cli/main.py:166 main")
     rec.sample(plot_stack)
     rec.sample(plot_stack)
     rec.sample(rig_stack)
@@ -102,4 +102,5 @@ def test_stall_recorder_attributes_the_gap_to_the_sampled_callback():
     rec.beat(11.045)  # overdue, but nothing sampled
     assert rec.worst("calibration") == Stall("calibration", 40.0, "(not sampled: the GUI thread held the GIL)", 0)
     assert rec.worst() is rec.stalls[0]
-    assert culprit(("study_app/cli.py:166 main",)) == "event loop (Qt painting/layout) in study_app/cli.py:166 main"
+    where = "study_app/cli/main.py:166 main"
+    assert culprit((where,)) == f"event loop (Qt painting/layout) in {where}"

@@ -9,7 +9,7 @@ import pytest
 from gui_trials import trial_record
 from PySide6.QtCore import QPoint, Qt
 
-from study_app import messages as m
+from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.participant_window import ParticipantWindow

@@ -1,5 +1,6 @@
-"""Tests of gravity/bias compensation (pipeline/payload_compensator.py, pipeline/payload_identification.py,
-pipeline/bias_refinement.py; science.md §1).
+"""Tests of gravity/bias compensation (pipeline/force/payload_compensator.py,
+pipeline/commissioning/payload_identification.py,
+pipeline/force/bias_refinement.py; science.md §1).
 
 Synthetic data are made here with NumPy/SciPy, independently of the module:
 a 0.65 kg instrument with centre of mass (3, −2, 110) mm, bias
@@ -23,15 +24,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from pipeline import frames
-from pipeline.bias_refinement import RlsBias
-from pipeline.payload_compensator import GRAVITY_BASE, NO_PAYLOAD, PayloadCalibration, PoseResidual
-from pipeline.payload_identification import (
+from pipeline.commissioning.payload_identification import (
     CalibrationPose,
     DegeneratePoseSetError,
     identify_payload,
     recommended_pose_set,
 )
+from pipeline.force import frames
+from pipeline.force.bias_refinement import RlsBias
+from pipeline.force.payload_compensator import GRAVITY_BASE, NO_PAYLOAD, PayloadCalibration, PoseResidual
 
 G_BASE = np.array([0.0, 0.0, -9.80665])
 MASS = 0.65

@@ -12,7 +12,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from pipeline.filters import MovingAverage, MovingAverage3, group_delay_s
+from pipeline.force.filters import MovingAverage, MovingAverage3, group_delay_s
 
 U = 2.0**-53  # unit roundoff
 TINY = 5e-324

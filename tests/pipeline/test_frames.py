@@ -14,7 +14,7 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from pipeline.frames import (
+from pipeline.force.frames import (
     IDENTITY,
     as_mat3,
     axis_angle,

@@ -8,12 +8,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pipeline.filters import MovingAverage3
-from pipeline.frames import axis_angle, mat_mul, mat_vec, rotvec_to_matrix, transpose
-from pipeline.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
-from pipeline.payload_compensator import NO_PAYLOAD, PayloadCalibration
-from pipeline.safety import SafetyConfig, SafetyGovernor
-from pipeline.scaling import scale_components, scale_force
+from pipeline.force.filters import MovingAverage3
+from pipeline.force.frames import axis_angle, mat_mul, mat_vec, rotvec_to_matrix, transpose
+from pipeline.force.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
+from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
+from pipeline.force.safety import SafetyConfig, SafetyGovernor
+from pipeline.force.scaling import scale_components, scale_force
 
 
 def _calibration() -> PayloadCalibration:
@@ -162,7 +162,7 @@ def test_disabled_output_ramps_to_zero_but_path_runs() -> None:
 
 
 def test_rls_refinement_tracks_bias_and_updates_offsets() -> None:
-    from pipeline.bias_refinement import RlsBias
+    from pipeline.force.bias_refinement import RlsBias
 
     cal = _calibration()
     rls = RlsBias(cal.force_bias_n, cal.torque_bias_nm, forgetting=0.99, gate_force_n=0.15)

@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 from drivers import PressAndHold
 
-from pipeline.clock import VirtualClock
-from pipeline.devices import Fault
-from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.framework import FrameworkConfig
-from pipeline.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
-from pipeline.loop_stats import LoopStats
-from pipeline.safety import SafetyConfig
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.touch_output import TouchSpec
+from pipeline.force.framework import FrameworkConfig
+from pipeline.force.safety import SafetyConfig
+from pipeline.runtime.clock import VirtualClock
+from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
+from pipeline.runtime.loop_stats import LoopStats
 from pipeline.sim.hand import ScriptedPresses
 from pipeline.sim.rig import SimRigConfig
-from pipeline.touch_output import TouchSpec
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9

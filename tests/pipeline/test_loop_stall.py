@@ -20,10 +20,10 @@ import pytest
 from drivers import PressAndHold
 from test_teleop_faults import Teleop
 
-from pipeline.devices import Fault
-from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop_messages import ResetFaults
-from pipeline.teleop import TeleopState
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.teleop import TeleopState
+from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import ResetFaults
 
 MS = 1_000_000
 

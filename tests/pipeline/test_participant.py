@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.loop_messages import Mark, SetHaptics
-from pipeline.scaling import scale_magnitude
+from pipeline.force.scaling import scale_magnitude
+from pipeline.runtime.engine import EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import Mark, SetHaptics
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams

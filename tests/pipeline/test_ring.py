@@ -9,7 +9,7 @@ import struct
 import numpy as np
 import pytest
 
-from pipeline.ring import RingBuffer
+from pipeline.runtime.ring import RingBuffer
 
 FIELDS = ("t_s", "a", "b")
 TIMEOUT_S = 30.0

@@ -13,7 +13,7 @@ import pytest
 from hypothesis import example, given
 from hypothesis import strategies as st
 
-from pipeline.safety import SafetyConfig, SafetyGovernor
+from pipeline.force.safety import SafetyConfig, SafetyGovernor
 
 NAN = math.nan
 INF = math.inf

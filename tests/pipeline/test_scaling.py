@@ -17,7 +17,7 @@ import pytest
 from hypothesis import assume, example, given
 from hypothesis import strategies as st
 
-from pipeline.scaling import scale_components, scale_force, scale_magnitude, small_signal_gain
+from pipeline.force.scaling import scale_components, scale_force, scale_magnitude, small_signal_gain
 
 F_MAX = 3.0
 F_SCALE = 7.0

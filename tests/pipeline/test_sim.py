@@ -8,17 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.clock import VirtualClock
-from pipeline.engine import EngineConfig, build_sim_engine
-from pipeline.frames import IDENTITY, mat_mul, transpose
-from pipeline.payload_identification import recommended_pose_set
+from pipeline.commissioning.payload_identification import recommended_pose_set
+from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
+from pipeline.force.frames import IDENTITY, mat_mul, transpose
+from pipeline.runtime.clock import VirtualClock
+from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
 from pipeline.sim.touch import SimTouch
-from pipeline.touch_output import HD_WARM_MOTORS, TouchSpec
 
 QUIET = SensorParams(
     noise_force_n=(0.0, 0.0, 0.0), noise_torque_nm=(0.0, 0.0, 0.0), random_walk_n_per_sqrt_s=0.0,

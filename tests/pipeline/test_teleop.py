@@ -9,13 +9,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from pipeline.clock import VirtualClock
-from pipeline.devices import TcpServo
-from pipeline.frames import mat_vec, transpose
-from pipeline.framework import DEFAULT_ROT_HAPTIC_BASE
+from pipeline.devices.interfaces import TcpServo
+from pipeline.devices.teleop import ServoTarget, Stop, TeleopConfig, TeleopController, TeleopDriver, TeleopState
+from pipeline.force.frames import mat_vec, transpose
+from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
+from pipeline.runtime.clock import VirtualClock
 from pipeline.sim.robot import SimRobot
 from pipeline.sim.touch import SimTouch
-from pipeline.teleop import ServoTarget, Stop, TeleopConfig, TeleopController, TeleopDriver, TeleopState
 
 LO, HI = (0.2, -0.1, 0.05), (0.4, 0.1, 0.25)
 HOME = (0.3, 0.0, 0.15)

@@ -20,11 +20,11 @@ import math
 
 import pytest
 
-from pipeline.devices import Fault
-from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.loop_messages import ControllerDetached, OperatorStop, ResetFaults
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.teleop import ServoTarget, TeleopConfig, TeleopController, TeleopDriver, TeleopState
+from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import ControllerDetached, OperatorStop, ResetFaults
 from pipeline.sim.hand import HandObservation
-from pipeline.teleop import ServoTarget, TeleopConfig, TeleopController, TeleopDriver, TeleopState
 
 DEADMAN = 1
 PERIOD_TICKS = 8  # the simulated CB3's control period, in 1 ms loop ticks

@@ -10,7 +10,7 @@ import threading
 
 import pytest
 
-from pipeline.clock import (
+from pipeline.runtime.clock import (
     HELPER_PRIORITY,
     REALTIME_ENV,
     REALTIME_PRIORITY,

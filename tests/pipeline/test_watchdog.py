@@ -18,13 +18,13 @@ import math
 import pytest
 from drivers import PressAndHold
 
-from pipeline.devices import Fault
-from pipeline.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.framework import STEP_FIELDS
-from pipeline.loop_messages import OperatorStop, ResetFaults
-from pipeline.safety import SafetyConfig
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
+from pipeline.force.framework import STEP_FIELDS
+from pipeline.force.safety import SafetyConfig
+from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import OperatorStop, ResetFaults
 from pipeline.sim.rig import SimRigConfig
-from pipeline.touch_output import HD_WARM_MOTORS, TouchSpec
 
 PERIOD_NS = 1_000_000
 DT_S = PERIOD_NS * 1e-9

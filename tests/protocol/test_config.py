@@ -109,7 +109,7 @@ BAD_FIELDS = [
     ("hold longer than the cap", "max_trial_s = 12.0 ", "max_trial_s = 0.5 ",
      "trial.hold_s = 1.0: must be shorter than trial.max_trial_s = 0.5"),
     # values valid alone but not together (issue 22): the ON trial must hold the feedback's ramp-in, the pause its
-    # ramp-out (both the safety stage's, pipeline/safety.py)
+    # ramp-out (both the safety stage's, pipeline/force/safety.py)
     ("a trial shorter than ramp-in + hold", "max_trial_s = 12.0 ", "max_trial_s = 1.2 ",
      "trial.max_trial_s = 1.2: must be at least trial.hold_s = 1 + the feedback's 0.5 s ramp-in "
      "(safety.ramp_in_s) = 1.5 s when design.modes has 'on': a shorter haptics-ON trial would be judged at a "
@@ -229,7 +229,7 @@ def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(
 
 
 def test_the_ramps_have_one_definition():
-    from pipeline.safety import SafetyConfig
+    from pipeline.force.safety import SafetyConfig
     from protocol.delivery import DeliveryLimits
 
     limits, safety = DeliveryLimits(), SafetyConfig()

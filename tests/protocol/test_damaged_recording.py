@@ -336,9 +336,9 @@ def test_the_engines_resume_refuses_a_damaged_session_and_changes_nothing(study:
         w.close()
     assert content() == before  # not even the lease was taken
     # and the engine the GUI drives answers its Resume with that line
-    from study_app import messages as m
-    from study_app.engine_host import StudyEngine
-    from study_app.engine_setup import HostConfig
+    from study_app.engine import messages as m
+    from study_app.engine.host import StudyEngine
+    from study_app.engine.setup import HostConfig
 
     events: list[object] = []
     e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)

@@ -110,7 +110,7 @@ def test_a_second_run_is_refused_while_a_study_runs_and_names_it(tmp_path: Path)
         listing = run("sessions", "--db", str(db))
         assert listing.returncode == 0 and f"in progress (process {first.pid})" in listing.stdout, listing.stdout
         assert "interrupted" not in listing.stdout
-        from study_app.engine_session import list_resumable
+        from study_app.engine.sessions import list_resumable
 
         assert list_resumable(str(db)) == []
         assert first.poll() is None  # (all of this while the first run still wrote)

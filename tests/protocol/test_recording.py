@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 from test_storage import FakeClock, _session_args
 
-from pipeline.tick_record import TICK_DTYPE
+from pipeline.runtime.tick_record import TICK_DTYPE
 from protocol.recording import (
     BLOCK_RECORDS,
     COLUMNS,

@@ -6,10 +6,10 @@ A headless session on the simulated rig (virtual clock) is recorded while
   ``"device_limit"`` in the replay log, ``derate`` in the records);
 * the loop ticks late (the device's command watchdog dropped the force: the output restarts from
   zero), stalls (``LOOP_STALLED``), is found frozen (its supervisor latches through a
-  :class:`pipeline.loop.LatchFault`) and found dead (:meth:`pipeline.loop.HapticLoop.fail_safe`) --
+  :class:`pipeline.runtime.loop.LatchFault`) and found dead (:meth:`pipeline.runtime.loop.HapticLoop.fail_safe`) --
   each a ``"zero"`` in the log;
 
-and :func:`pipeline.replay.replay` of the stored recording must reproduce the rendered force, the
+and :func:`pipeline.force.replay.replay` of the stored recording must reproduce the rendered force, the
 task force and the ramp gain bit for bit -- and must not without those log entries (the test can fail).
 The faults and causes reach the database as they should: LOOP_STALLED aborts its trial with cause
 ``fault``, a late tick with ``gap``, derating a haptics-ON trial with ``feedback``.
@@ -30,10 +30,10 @@ from test_recording import bits
 import study_app.headless.session_run as session_run
 from analysis.load import load_study
 from analysis.loop_health import abort_counts, health_table
-from pipeline.engine import Engine
-from pipeline.replay import ReplayInputs, replay
+from pipeline.devices.touch_output import TouchSpec
+from pipeline.force.replay import ReplayInputs, replay
+from pipeline.runtime.engine import Engine
 from pipeline.sim.rig import SimRigConfig
-from pipeline.touch_output import TouchSpec
 from protocol.recording import SegmentData, read_segment, segments_of
 from study_app.headless import run_study
 

@@ -24,7 +24,7 @@ from protocol.study_rules import (
     stored_sessions,
     training_refusal,
 )
-from study_app.cli import main
+from study_app.cli.main import main
 
 PAPER = default_protocol()
 NO_TRAINING = dataclasses.replace(PAPER, training=dataclasses.replace(PAPER.training, enabled=False))

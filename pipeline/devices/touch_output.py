@@ -1,0 +1,291 @@
+"""What a 3D Systems Touch renders from the force it was last commanded: one definition for both devices.
+
+The simulated Touch (:class:`pipeline.sim.touch.SimTouch`, once per rig step)
+and the real one (:class:`pipeline.backends.touch.TouchHapticDevice`, once per
+OpenHaptics servo tick, in the device's own scheduler thread) both render
+through :meth:`TouchOutput.render`, which applies, in this order:
+
+1. **Command watchdog.**  A command is rendered only while it is fresh: once
+   it is ``command_timeout_s`` old (10 ms by default) the output is
+   exactly zero, whatever the process that commands the device is doing --
+   its loop thread may have died, frozen, or its final zero command may have
+   been skipped.  OpenHaptics has no such watchdog of its own (the device
+   renders the last ``hdSetDoublev`` for as long as the scheduler runs); the
+   dVRK's IO watchdog does the same at 30 ms (science.md §5).  10 ms is ten
+   missed loop ticks, inside the 50 ms in which every fault must reach zero.
+2. **Non-finite → zero; clamp to the derated peak.**  The peak is the
+   device's (3.3 N); the motor-heat model below lowers it when the motors
+   get warm.
+3. **Motor heat** (:class:`MotorHeat`): the thermal budget of the continuous
+   rating, and ``HD_WARM_MOTORS`` as a backstop.
+
+Heat model (science.md §5: "track an I²t or time-above-continuous budget")::
+
+    heat += (|f|² − f_cont²)·dt,   never below 0           (N²·s)
+
+``f_cont`` is the continuous rating (0.88 N); the budget is
+``TouchSpec.thermal_budget_n2s``.  Above ``derate_from_fraction`` of the budget
+the device **derates**: its force limit falls linearly from the peak to the
+continuous rating as the heat approaches the budget -- the OpenHaptics
+examples' "clamp toward the continuous value when the motors warm up".  At the
+continuous rating the heat stops growing, so a derating device reaches the
+budget only asymptotically; should it pass the budget anyway (a long servo
+stall followed by a full-force tick), the device raises ``HD_WARM_MOTORS`` and
+renders nothing until it has cooled to half the budget and is re-armed, as
+OpenHaptics' ErrorHandling example prescribes.
+
+The paper's study forces stay below the continuous rating (a 1.2 N tissue
+force renders 0.51 N), so heat only accumulates when a participant presses
+the tissue above ~2.1 N (science.md §0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from pipeline.force.frames import Vec3
+
+__all__ = [
+    "DEFAULT_COMMAND_TIMEOUT_S",
+    "DEFAULT_THERMAL_BUDGET_N2S",
+    "HD_EXCEEDED_MAX_FORCE",
+    "HD_WARM_MOTORS",
+    "MotorHeat",
+    "TouchOutput",
+    "TouchSpec",
+]
+
+#: OpenHaptics ``HD_WARM_MOTORS`` (hdDefines.h).
+HD_WARM_MOTORS = 0x0200
+#: OpenHaptics ``HD_EXCEEDED_MAX_FORCE``.
+HD_EXCEEDED_MAX_FORCE = 0x0201
+#: A command this old renders as zero (device-side watchdog), s.
+DEFAULT_COMMAND_TIMEOUT_S = 0.010
+#: Heat budget of the 3D Systems Touch's motors above the continuous rating, N²·s (~35 s at 1.5 N).
+DEFAULT_THERMAL_BUDGET_N2S = 60.0
+#: Longest servo interval the heat model integrates in one step, s (a stalled servo thread is not an eternity).
+_MAX_HEAT_DT_S = 0.1
+
+
+@dataclass(frozen=True, slots=True)
+class TouchSpec:
+    """Device limits (3D Systems Touch defaults) and its thermal model.
+
+    Attributes
+    ----------
+    peak_force_n
+        ``HD_NOMINAL_MAX_FORCE`` (3.3 N).
+    continuous_force_n
+        ``HD_NOMINAL_MAX_CONTINUOUS_FORCE`` (0.88 N).
+    thermal_budget_n2s
+        Heat the motors take above the continuous rating, N²·s (60: ~35 s at 1.5 N).
+    derate_from_fraction
+        Derating starts at this fraction of the budget.
+    """
+
+    peak_force_n: float = 3.3
+    continuous_force_n: float = 0.88
+    thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S
+    derate_from_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("peak_force_n", "continuous_force_n", "thermal_budget_n2s"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"touch.{name} = {v!r}: must be a finite number > 0")
+        if self.continuous_force_n > self.peak_force_n:
+            raise ValueError(f"touch.continuous_force_n = {self.continuous_force_n!r}: must be at most "
+                             f"peak_force_n ({self.peak_force_n!r})")
+        f = self.derate_from_fraction
+        if not (math.isfinite(f) and 0.0 <= f < 1.0):
+            raise ValueError(f"touch.derate_from_fraction = {f!r}: must be a number from 0 to below 1")
+
+
+class MotorHeat:
+    """The Touch's thermal budget: heat, the derated force limit, and whether the budget was passed.
+
+    :attr:`limit_n`, :attr:`fraction` and :attr:`over_budget` are kept up to date whenever the heat changes
+    (they are read every servo and loop tick; the heat changes once per servo tick).
+
+    Parameters
+    ----------
+    spec
+        Peak, continuous rating, budget and where derating starts.
+    """
+
+    __slots__ = (
+        "_budget",
+        "_cont2",
+        "_drop",
+        "_from",
+        "_h",
+        "_peak",
+        "_span",
+        "fraction",
+        "limit_n",
+        "over_budget",
+        "spec",
+    )
+
+    def __init__(self, spec: TouchSpec) -> None:
+        self.spec = spec
+        self._cont2 = spec.continuous_force_n ** 2
+        self._budget = spec.thermal_budget_n2s
+        self._from = spec.derate_from_fraction * spec.thermal_budget_n2s
+        self._span = spec.thermal_budget_n2s - self._from
+        self._peak = spec.peak_force_n
+        self._drop = spec.peak_force_n - spec.continuous_force_n
+        #: The force the device may render now, N: its peak, falling to the continuous rating as it warms.
+        self.limit_n = self._peak
+        #: Heat as a fraction of the budget (0 cold, 1 at the budget).
+        self.fraction = 0.0
+        #: The heat passed the budget (the device must stop: ``HD_WARM_MOTORS``).
+        self.over_budget = False
+        self._h = 0.0
+        self.heat_n2s = 0.0
+
+    @property
+    def heat_n2s(self) -> float:
+        """Motor heat above the continuous rating's steady state, N²·s (0 cold)."""
+        return self._h
+
+    @heat_n2s.setter
+    def heat_n2s(self, h: float) -> None:
+        self._h = h
+        if h <= self._from:
+            self.limit_n = self._peak
+        elif h >= self._budget:
+            self.limit_n = self.spec.continuous_force_n
+        else:
+            self.limit_n = self._peak - self._drop * (h - self._from) / self._span
+        self.fraction = h / self._budget
+        self.over_budget = h > self._budget
+
+    def add(self, force_n: float, dt_s: float) -> None:
+        """Account ``dt_s`` of rendering ``force_n`` (a magnitude, N)."""
+        if dt_s > _MAX_HEAT_DT_S:
+            dt_s = _MAX_HEAT_DT_S
+        h = self._h + (force_n * force_n - self._cont2) * dt_s
+        if h > 0.0:
+            self.heat_n2s = h
+        elif self._h != 0.0:  # cold, and it stays so: nothing to update (the common case at rest)
+            self.heat_n2s = 0.0
+
+    def cooled(self) -> bool:
+        """Cool enough to re-arm after ``HD_WARM_MOTORS`` (half the budget)."""
+        return self._h <= 0.5 * self._budget
+
+
+class TouchOutput:
+    """The latest command, with its time, and what the device renders from it (see the module docstring).
+
+    :meth:`command` is called by whoever commands the device (the haptic loop's
+    thread); :meth:`render` only in the device's own servo tick.  The command
+    is one tuple replaced in a single assignment, so the servo thread never
+    reads half of one.
+
+    Parameters
+    ----------
+    spec
+        Limits and thermal model.
+    command_timeout_s
+        A command this old renders as zero, s: a servo tick on the loop's 1 ms grid puts out zero at most
+        this long after the last command, so at most this long after the loop stopped.
+    """
+
+    __slots__ = (
+        "_cmd",
+        "_timeout_ns",
+        "command_timeout_s",
+        "heat",
+        "rendered_n",
+        "spec",
+        "stale",
+        "stale_ticks",
+        "warm",
+    )
+
+    def __init__(self, spec: TouchSpec, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
+        if isinstance(command_timeout_s, bool) or not (isinstance(command_timeout_s, (int, float))
+                                                       and 0.0 < command_timeout_s <= 1.0):
+            raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, "
+                             "at most 1")
+        self.spec = spec
+        self.heat = MotorHeat(spec)
+        self.command_timeout_s = float(command_timeout_s)
+        self._timeout_ns = int(round(command_timeout_s * 1e9))
+        self._cmd: tuple[float, float, float, int | None] = (0.0, 0.0, 0.0, None)
+        #: What the last :meth:`render` put out, N (device frame).
+        self.rendered_n: Vec3 = (0.0, 0.0, 0.0)
+        #: The last render found the command stale (as old as the timeout) and put out zero.
+        self.stale = False
+        #: Renders that found the command stale (diagnostics).
+        self.stale_ticks = 0
+        #: The heat passed the budget: nothing is rendered until :meth:`rearm` succeeds.
+        self.warm = False
+
+    def command(self, fx: float, fy: float, fz: float, t_ns: int) -> None:
+        """The force to render from now on (N, device frame), commanded at ``t_ns`` on the device's clock."""
+        self._cmd = (fx, fy, fz, t_ns)
+
+    @property
+    def commanded(self) -> Vec3:
+        """The latest command, N (whatever its age)."""
+        c = self._cmd
+        return (c[0], c[1], c[2])
+
+    def clear(self) -> None:
+        """Forget the command (a re-arm starts from zero, not from a stale command)."""
+        self._cmd = (0.0, 0.0, 0.0, None)
+
+    @property
+    def limit_n(self) -> float:
+        """The force the device may render now (its derated peak), N."""
+        return self.heat.limit_n
+
+    def render(self, now_ns: int, dt_s: float, enabled: bool = True) -> Vec3:
+        """The force to put out this servo tick, and account its heat over ``dt_s``.
+
+        Parameters
+        ----------
+        now_ns
+            The device's clock now (the clock :meth:`command` times are on).
+        dt_s
+            Time since the previous render, s (the heat integration step).
+        enabled
+            False while the device is in an error state: output zero.
+        """
+        fx, fy, fz, t_cmd = self._cmd
+        stale = t_cmd is None or now_ns - t_cmd >= self._timeout_ns
+        self.stale = stale
+        if stale or not enabled or self.warm:
+            if stale:
+                self.stale_ticks += 1
+            fx = fy = fz = m = 0.0
+        else:
+            m = math.hypot(fx, fy, fz)
+            if not math.isfinite(m):
+                fx = fy = fz = m = 0.0
+            else:
+                lim = self.heat.limit_n
+                if m > lim:
+                    k = lim / m
+                    fx, fy, fz, m = fx * k, fy * k, fz * k, lim
+        heat = self.heat
+        if dt_s > 0.0:
+            heat.add(m, dt_s)
+        if heat.over_budget and not self.warm:
+            self.warm = True
+            fx = fy = fz = 0.0
+        out = (fx, fy, fz)
+        self.rendered_n = out
+        return out
+
+    def rearm(self) -> bool:
+        """Clear :attr:`warm` if the motors have cooled to half the budget; True if no longer warm."""
+        if self.warm and not self.heat.cooled():
+            return False
+        self.warm = False
+        self.clear()
+        return True

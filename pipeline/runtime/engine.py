@@ -1,0 +1,198 @@
+"""Assembling an engine: the rig (simulated or real), Algorithm 1 and the 1 kHz loop, in this process.
+
+:func:`build_sim_engine` builds the simulated rig (and calibrates its payload);
+:func:`build_hardware_engine` opens the real rig a hardware file describes and
+puts the calibration on record for its tool to use.  Both return one
+:class:`Engine`.  Running an engine in a process of its own, talking to it and
+supervising it is the top floor's job (``study_app.engine.host``, the GUI's
+study engine; ``study_app.headless``, the headless study runner).
+
+The simulators are imported only when a simulated rig is built: a real rig's
+process never loads them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from pipeline.force.bias_refinement import RlsBias
+from pipeline.force.framework import FrameworkConfig, HapticFramework
+from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
+from pipeline.runtime.clock import Clock, MonotonicClock, VirtualClock
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import AllowBiasRefinement, SetHaptics
+from pipeline.runtime.ring import RingBuffer
+from pipeline.runtime.tick_record import TICK_DTYPE
+from pipeline.runtime.watchdog import WatchdogConfig
+
+if TYPE_CHECKING:
+    from pipeline.sim.rig import SimRigConfig
+
+__all__ = ["Engine", "EngineConfig", "build_hardware_engine", "build_sim_engine"]
+
+
+@dataclass(frozen=True, slots=True)
+class EngineConfig:
+    """What the engine builds.
+
+    Attributes
+    ----------
+    sim
+        Simulated-rig parameters (:class:`pipeline.sim.rig.SimRigConfig`; None: its defaults).
+    framework
+        Algorithm 1 parameters.
+    watchdog
+        Fault limits.
+    clock
+        ``"real"`` (paced at 1 kHz) or ``"virtual"`` (as fast as the CPU allows).
+    calibrate
+        Run the automatic gravity/bias calibration before the loop starts.
+    driver
+        Who holds the stylus: ``"scripted"`` (repeated presses) or ``"hold"``.
+    haptics_on
+        Feedback state at start.
+    refine_bias
+        Online bias refinement (RLS, science.md §1.4) allowed from the start.
+        The study runner allows it only between trials; the estimator's own
+        contact gate refuses samples with more than 0.15 N of innovation.
+    ring_seconds
+        Ring buffer length in seconds of records.
+    """
+
+    sim: SimRigConfig | None = None
+    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    watchdog: WatchdogConfig = field(default_factory=WatchdogConfig)
+    clock: str = "real"
+    calibrate: bool = True
+    driver: str = "scripted"
+    haptics_on: bool = True
+    refine_bias: bool = True
+    ring_seconds: float = 30.0
+
+    def __post_init__(self) -> None:
+        if self.clock not in ("real", "virtual"):
+            raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
+        if self.driver not in ("scripted", "hold"):
+            raise ValueError(f"driver = {self.driver!r}: allowed values are 'scripted' and 'hold'")
+        if not 1.0 <= self.ring_seconds <= 3600.0:
+            raise ValueError(f"ring_seconds = {self.ring_seconds!r}: must be between 1 and 3600")
+
+
+@dataclass
+class Engine:
+    """An assembled rig, force path and loop (in-process), simulated or real.
+
+    Attributes
+    ----------
+    rig
+        :class:`pipeline.sim.rig.SimRig` or :class:`pipeline.devices.real_rig.RealRig`.
+    simulated
+        True for the simulated rig (its configuration is ``rig.config``).
+    calibration_file
+        Real rig: its calibration file (:mod:`pipeline.commissioning.rig_calibration`), if the hardware file names one.
+    tool
+        Real rig: the mounted instrument whose record in the calibration file is in use.
+    """
+
+    rig: Any
+    framework: HapticFramework
+    loop: HapticLoop
+    clock: Clock
+    calibration: PayloadCalibration
+    ring: RingBuffer | None
+    simulated: bool
+    calibration_file: Any = None
+    tool: str = "instrument"
+
+
+def build_sim_engine(
+    config: EngineConfig,
+    *,
+    shared_ring: bool = False,
+    clock: Clock | None = None,
+    progress: Any = None,
+) -> Engine:
+    """Assemble rig → calibration → framework → loop for the simulated rig.
+
+    Parameters
+    ----------
+    config
+        What to build.
+    shared_ring
+        Put the ring buffer in shared memory (another process will read it).
+    clock
+        Override the clock (default from ``config.clock``).
+    progress
+        Optional ``progress(done, total)`` for the calibration.
+    """
+    from pipeline.commissioning.payload_identification import recommended_pose_set
+    from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
+    from pipeline.sim.hand import ScriptedPresses
+    from pipeline.sim.rig import SimRig, SimRigConfig
+
+    clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
+    rig = SimRig(config.sim if config.sim is not None else SimRigConfig())
+    calibration = NO_PAYLOAD
+    if config.calibrate:
+        poses = recommended_pose_set(24)
+        cal_clock = clk
+        if not isinstance(clk, VirtualClock):
+            # Instant even when the loop is paced in real time: on a virtual clock placed so that it
+            # ends now.  The rig's clocked state (the robot's next controller cycle, sample times) then
+            # carries on with the real clock; a clock starting now would leave the rig 12 s in the
+            # future, and the robot would hold the last calibration pose until real time caught up.
+            cal_clock = VirtualClock(clk.now_ns() - calibration_duration_ns(len(poses)))
+        calibration, _ = auto_calibrate(rig, cal_clock, poses, progress=progress)
+    if config.driver == "scripted":
+        rig.set_driver(ScriptedPresses())
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
+    framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
+    ring = RingBuffer.create(TICK_DTYPE, int(config.ring_seconds * 1000), shared=shared_ring)
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
+    loop.submit(SetHaptics(config.haptics_on))
+    loop.submit(AllowBiasRefinement(config.refine_bias))
+    return Engine(rig, framework, loop, clk, calibration, ring, simulated=True)
+
+
+def build_hardware_engine(
+    hardware: Any,
+    *,
+    watchdog: WatchdogConfig | None = None,
+    clock: Clock | None = None,
+    shared_ring: bool = False,
+    ring_seconds: float = 30.0,
+    on_open: Any = None,
+) -> Engine:
+    """Open the real rig of a :class:`pipeline.settings.hardware.HardwareConfig` and assemble framework and loop.
+
+    What is on record for the mounted tool (``[calibration] tool``) in the calibration file
+    (:class:`pipeline.commissioning.rig_calibration.RigCalibrationFile`) is put to use: its payload calibration
+    compensates, and online bias refinement runs on top of it; its TCP calibration moves the robot's
+    poses to the calibrated tip.  Without a payload on record there is no compensation and no bias
+    refinement -- an "online bias only" start cannot work (its contact gate sees the tool's weight as
+    contact), and a session on the real rig is refused until the payload step is done.
+    Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
+    called before each device is opened (see :func:`pipeline.devices.real_rig.build_real_rig`).
+
+    Raises
+    ------
+    pipeline.commissioning.rig_calibration.CalibrationFileError
+        The calibration file cannot be read (before any device is opened).
+    """
+    from pipeline.commissioning.rig_calibration import RigCalibrationFile
+    from pipeline.devices.real_rig import build_real_rig
+
+    clk: Clock = clock or MonotonicClock()
+    cal_file = RigCalibrationFile.load(hardware.calibration_file) if hardware.calibration_file else None
+    record = cal_file.tool(hardware.calibration_tool) if cal_file is not None else None
+    payload = record.payload if record is not None else None
+    tip = record.tcp.tip_in_flange_m if record is not None and record.tcp is not None else None
+    rig = build_real_rig(hardware, clk, on_open=on_open, tip_in_flange_m=tip)
+    calibration = payload if payload is not None else NO_PAYLOAD
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm) if payload is not None else None
+    framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
+    ring = RingBuffer.create(TICK_DTYPE, int(ring_seconds * 1000), shared=shared_ring)
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
+    return Engine(rig, framework, loop, clk, calibration, ring, simulated=False, calibration_file=cal_file,
+                  tool=hardware.calibration_tool)

@@ -1,0 +1,64 @@
+"""Tick-period statistics of the haptic loop (:attr:`pipeline.runtime.loop.HapticLoop.stats`)."""
+
+from __future__ import annotations
+
+import math
+
+__all__ = ["LoopStats"]
+
+
+class LoopStats:
+    """Tick-period statistics over arbitrarily long runs (1 µs histogram up to 50 ms)."""
+
+    _BINS = 50_000
+
+    def __init__(self, period_ns: int) -> None:
+        self.period_ns = period_ns
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all periods."""
+        self._hist = [0] * (self._BINS + 1)
+        self.count = 0
+        self.max_ns = 0
+        self.over_2ms = 0
+        self.missed_slots = 0
+
+    def add(self, period_ns: int) -> None:
+        """Record one tick period."""
+        us = period_ns // 1000
+        self._hist[us if 0 <= us < self._BINS else self._BINS] += 1
+        self.count += 1
+        if period_ns > self.max_ns:
+            self.max_ns = period_ns
+        if period_ns > 2_000_000:
+            self.over_2ms += 1
+
+    def _quantile_us(self, q: float, hist: list[int]) -> float:
+        n = sum(hist)
+        if n == 0:
+            return math.nan
+        target = q * n
+        acc = 0
+        for i, c in enumerate(hist):
+            acc += c
+            if acc >= target:
+                return float(i)
+        return float(len(hist) - 1)
+
+    def summary(self) -> dict[str, float]:
+        """p50/p99/max of the period and p99 of |period − nominal|, µs; counts."""
+        nominal_us = self.period_ns // 1000
+        dev = [0] * (self._BINS + 1)
+        for i, c in enumerate(self._hist):
+            if c:
+                dev[abs(i - nominal_us)] += c
+        return {
+            "ticks": float(self.count),
+            "period_p50_us": self._quantile_us(0.5, self._hist),
+            "period_p99_us": self._quantile_us(0.99, self._hist),
+            "period_max_us": self.max_ns / 1000.0,
+            "abs_dev_p99_us": self._quantile_us(0.99, dev),
+            "periods_over_2ms": float(self.over_2ms),
+            "missed_slots": float(self.missed_slots),
+        }

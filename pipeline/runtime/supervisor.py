@@ -1,0 +1,70 @@
+"""Watching the haptic loop from outside: a dead loop thread or a tick counter that stops is a latched fault.
+
+The loop cannot report its own death: a thread killed by an exception emits
+nothing, and a frozen one nothing until it runs again.  Whoever drives it
+(the study engine's driver thread, every ~10 ms) calls
+:meth:`LoopSupervisor.check`; when the loop thread has died, or has not
+ticked for longer than ``WatchdogConfig.loop_stall_s``, it latches
+``LOOP_STALLED`` and reports it through the loop's own event path
+(:meth:`pipeline.runtime.loop.HapticLoop.fail_safe`), so the study record stores it
+like any other fault.  The force on the hand never depends on this check:
+the haptic device drops a command older than its own timeout (10 ms) in its
+own servo thread (:mod:`pipeline.devices.touch_output`), and a teleoperated robot's
+servo adapter stops the arm when no target has come for 50 ms
+(:mod:`pipeline.backends.ur_control`).
+"""
+
+from __future__ import annotations
+
+from pipeline.runtime.clock import Clock, MonotonicClock
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import LoopEvent
+
+__all__ = ["LoopSupervisor"]
+
+
+class LoopSupervisor:
+    """Checks a loop that runs in its own thread (:meth:`pipeline.runtime.loop.HapticLoop.start`).
+
+    Parameters
+    ----------
+    loop
+        The loop.
+    clock
+        Wall clock to time the tick counter by (the loop's own clock stops with it).
+    """
+
+    def __init__(self, loop: HapticLoop, clock: Clock | None = None) -> None:
+        self.loop = loop
+        self.clock: Clock = clock or MonotonicClock()
+        self._stall_ns = int(loop.watchdog.loop_stall_s * 1e9)
+        self._ticks = loop.tick_count
+        self._seen_ns = self.clock.now_ns()
+        self._stall_reported = False
+        #: Why the loop thread died ("" while it has not).
+        self.dead = ""
+
+    def check(self) -> LoopEvent | None:
+        """Look once; the event if the loop was found dead or newly stalled (reported once each)."""
+        if self.dead:
+            return None
+        loop = self.loop
+        now = self.clock.now_ns()
+        ticks = loop.tick_count
+        if ticks != self._ticks:
+            self._ticks, self._seen_ns, self._stall_reported = ticks, now, False
+        alive = loop.thread_alive
+        if alive is None:  # not started, or stopped on purpose (a calibration): nothing to watch
+            self._seen_ns = now
+            return None
+        if not alive:
+            self.dead = loop.crash or "the loop thread ended"
+            return loop.fail_safe(f"the haptic loop thread died ({self.dead}); the haptic device's command watchdog "
+                                  "dropped the force to zero", thread_dead=True)
+        quiet = now - self._seen_ns
+        if quiet > self._stall_ns and not self._stall_reported:
+            self._stall_reported = True
+            return loop.fail_safe(f"no loop tick for {quiet * 1e-6:.0f} ms (limit {self._stall_ns * 1e-6:g} ms): the "
+                                  "haptic loop is frozen; the haptic device's command watchdog dropped the force to "
+                                  "zero", thread_dead=False)
+        return None

@@ -1,0 +1,349 @@
+"""The real rig's settings: ``hardware.toml`` loaded and validated.
+
+:func:`load_hardware` checks every field and raises one :class:`HardwareError`
+naming the field, the offending value and what is allowed (the style of
+``protocol/config.py``); nothing is opened with a bad file.  The documented
+example is ``hardware.example.toml`` at the repository root.
+
+The settings only describe the rig; :mod:`pipeline.devices.real_rig` opens the
+devices they name (so a new device adds its settings here and its opening there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
+from pipeline.force.frames import Vec3
+from pipeline.force.framework import FrameworkConfig
+from pipeline.runtime.watchdog import WatchdogConfig
+from pipeline.settings.tomlfields import Fields, read_toml
+
+__all__ = [
+    "HapticSettings",
+    "HardwareConfig",
+    "HardwareError",
+    "JawSettings",
+    "RobotSettings",
+    "SensorSettings",
+    "TeleopSettings",
+    "hardware_from_dict",
+    "load_hardware",
+]
+
+ROBOT_MODES = ("observe", "teleop")
+#: The calibration file when ``[calibration] file`` is not given (next to the hardware file).
+DEFAULT_CALIBRATION_FILE = "calibration.json"
+
+
+class HardwareError(ValueError):
+    """A hardware file or value is invalid; the message names field, value and what is allowed."""
+
+
+@dataclass(frozen=True, slots=True)
+class SensorSettings:
+    """ATI Net F/T box."""
+
+    host: str
+    port: int = 49152
+    http_port: int = 80
+    counts_per_force: float | None = None
+    counts_per_torque: float | None = None
+    force_unit: str = "N"
+    torque_unit: str = "Nm"
+    buffered: bool = False
+    connect_timeout_s: float = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class RobotSettings:
+    """UR controller over RTDE."""
+
+    host: str
+    frequency_hz: float = 125.0
+    mode: str = "observe"
+    tcp_offset_m: Vec3 = (0.0, 0.0, 0.0)
+    connect_timeout_s: float = 2.0
+
+
+@dataclass(frozen=True, slots=True)
+class TeleopSettings:
+    """App-side teleoperation (``robot.mode = "teleop"``); see :class:`pipeline.devices.teleop.TeleopConfig`."""
+
+    workspace_min_m: Vec3
+    workspace_max_m: Vec3
+    max_speed_m_s: float = 0.1
+    motion_scale: float = 1.0
+    deadman_button: int = 1
+    clutch_button: int = 2
+    stylus_max_age_s: float = 0.02
+    pose_max_age_s: float = 0.05
+    max_tracking_error_m: float = 0.05
+    lookahead_s: float = 0.1
+    gain: float = 300.0
+    control_timeout_s: float = 5.0
+
+
+@dataclass(frozen=True, slots=True)
+class HapticSettings:
+    """3D Systems Touch."""
+
+    device_name: str = "Default Device"
+    #: A command this old renders as zero, in the Touch's own servo thread (the device-side watchdog).
+    command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
+
+
+@dataclass(frozen=True, slots=True)
+class JawSettings:
+    """Jaw actuator Arduino, and the Touch's stylus buttons that drive it (when teleoperation does not claim them)."""
+
+    port: str
+    baud: int = 115200
+    ready_timeout_s: float = 3.0
+    close_button: int = 1
+    open_button: int = 2
+
+
+@dataclass(frozen=True, slots=True)
+class HardwareConfig:
+    """A validated hardware file."""
+
+    sensor: SensorSettings
+    robot: RobotSettings
+    haptic: HapticSettings
+    jaw: JawSettings | None
+    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    #: The calibration file (:mod:`pipeline.commissioning.rig_calibration`); ``calibration.json`` next to the hardware
+    #: file by
+    #: default.
+    calibration_file: str | None = None
+    source: str = "hardware"
+    teleop: TeleopSettings | None = None
+    #: The instrument mounted now: its record in the calibration file is the one in use.
+    calibration_tool: str = "instrument"
+
+
+# -- validation ------------------------------------------------------------------------------
+_PORT = "a whole port number"
+_DEVICE_PATH = "a non-empty string without spaces (a serial device path such as /dev/ttyACM0 or COM3)"
+
+
+def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
+    """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`.
+
+    Raises
+    ------
+    HardwareError
+        One line naming ``source``, the field, the value and what is allowed.
+    """
+    f = Fields(source, HardwareError)
+    top = f.table("", d,
+                  {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
+    f.version(top, "hardware file")
+    for required in ("sensor", "robot", "haptic"):
+        f.required(top, "", required, f"the [{required}] table is required")
+    sensor = _sensor(f, top["sensor"])
+    robot = _robot(f, top["robot"], has_teleop="teleop" in top)
+    haptic = _haptic(f, top["haptic"])
+    jaw = _jaw(f, top["jaw"]) if "jaw" in top else None
+    framework = _framework(f, top)
+    cal = f.section(top, "calibration", {"file", "tool"})
+    cal_file = cal.get("file")
+    if cal_file is not None:
+        cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
+    tool = f.string("calibration.tool", cal.get("tool", "instrument"),
+                    what="a non-empty name of the mounted instrument (its calibration is kept under it)")
+    teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
+    if teleop is not None and robot.frequency_hz > 0 and teleop.pose_max_age_s <= 1.0 / robot.frequency_hz:
+        raise f.fail("teleop.pose_max_age_s", teleop.pose_max_age_s,
+                     f"must be longer than the robot's pose period, 1 / robot.frequency_hz = "
+                     f"{1e3 / robot.frequency_hz:g} ms (teleoperation would stop the robot at every pose)")
+    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
+
+
+def _sensor(f: Fields, v: Any) -> SensorSettings:
+    """``[sensor]``: the Net F/T box."""
+    s = f.table("sensor", v, {
+        "host", "port", "http_port", "counts_per_force", "counts_per_torque", "force_unit", "torque_unit",
+        "buffered", "connect_timeout_s",
+    })
+    f.required(s, "sensor", "host", "required: the Net F/T box's IP address")
+    cpf, cpt = s.get("counts_per_force"), s.get("counts_per_torque")
+    if (cpf is None) != (cpt is None):
+        missing = "sensor.counts_per_torque" if cpt is None else "sensor.counts_per_force"
+        raise f.fail(missing, None,
+                     "give counts_per_force and counts_per_torque together (or neither, to read the box's XML)")
+    from pipeline.backends.netft import NetFTError, force_unit_to_n, torque_unit_to_nm
+
+    if cpf is not None:  # counts per *unit*: a unit taken by default would scale every force by a guess
+        for unit, counts in (("force_unit", "counts_per_force"), ("torque_unit", "counts_per_torque")):
+            f.required(s, "sensor", unit, f"required with sensor.{counts}: the unit the box's counts are per (as its "
+                                          "web page shows it, e.g. N or lbf); a wrong one scales every force")
+    fu, tu = s.get("force_unit", "N"), s.get("torque_unit", "Nm")
+    for fld, unit, check in (("sensor.force_unit", fu, force_unit_to_n), ("sensor.torque_unit", tu, torque_unit_to_nm)):
+        try:
+            if not isinstance(unit, str):
+                raise NetFTError("must be a string")
+            check(unit)
+        except NetFTError as exc:
+            raise f.fail(fld, unit, str(exc).split("; ")[-1]) from None
+    return SensorSettings(
+        # the Net F/T backend opens an AF_INET socket and builds an http:// URL from the host: IPv4 only
+        host=f.host("sensor.host", s["host"], ipv6=False),
+        port=f.integer("sensor.port", s.get("port", 49152), lo=1, hi=65535, what=_PORT),
+        http_port=f.integer("sensor.http_port", s.get("http_port", 80), lo=1, hi=65535, what=_PORT),
+        counts_per_force=None if cpf is None else f.number("sensor.counts_per_force", cpf, lo=0.0, hi=1e12),
+        counts_per_torque=None if cpt is None else f.number("sensor.counts_per_torque", cpt, lo=0.0, hi=1e12),
+        force_unit=fu, torque_unit=tu, buffered=f.boolean("sensor.buffered", s.get("buffered", False)),
+        connect_timeout_s=f.number("sensor.connect_timeout_s", s.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
+    )
+
+
+def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
+    """``[robot]``: the UR controller (``has_teleop``: the file has a ``[teleop]`` table)."""
+    r = f.table("robot", v, {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
+    f.required(r, "robot", "host", "required: the UR controller's IP address")
+    freq = r.get("frequency_hz", 125.0)
+    if not (type(freq) is int and freq == -1):
+        freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
+    pose_limit_s = WatchdogConfig().pose_max_age_s
+    if (type(freq) is not int or freq != -1) and 1.0 / freq >= pose_limit_s:
+        raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
+                     f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
+                     f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
+                     f"is {1e3 / freq:g} ms old when the next arrives")
+    mode = f.choice("robot.mode", r.get("mode", "observe"), ROBOT_MODES)
+    if mode == "teleop" and not has_teleop:
+        raise f.fail("teleop", None, "robot.mode = 'teleop' needs a [teleop] table with at least workspace_min_m "
+                     "and workspace_max_m (see hardware.example.toml)")
+    return RobotSettings(
+        host=f.host("robot.host", r["host"]), frequency_hz=float(freq), mode=mode,
+        tcp_offset_m=f.vec3("robot.tcp_offset_m", r.get("tcp_offset_m", [0.0, 0.0, 0.0]), limit=1.0,
+                            what="must be 3 numbers in metres, each within ±1 m"),
+        connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
+    )
+
+
+def _haptic(f: Fields, v: Any) -> HapticSettings:
+    """``[haptic]``: the Touch."""
+    h = f.table("haptic", v, {"device_name", "command_timeout_s"})
+    return HapticSettings(
+        f.string("haptic.device_name", h.get("device_name", "Default Device"),
+                 what="a non-empty string (the OpenHaptics device name)"),
+        # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
+        f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S), lo=0.002, hi=0.05,
+                 lo_open=False, note="s (a force command this old renders as zero)"),
+    )
+
+
+def _jaw(f: Fields, v: Any) -> JawSettings:
+    """``[jaw]``: the jaw actuator's Arduino and its buttons."""
+    j = f.table("jaw", v, {"port", "baud", "ready_timeout_s", "close_button", "open_button"})
+    f.required(j, "jaw", "port", "required: the Arduino's serial port, e.g. /dev/ttyACM0 or COM3")
+    close_button, open_button = _two_buttons(f, "jaw", j, "close_button", "open_button")
+    return JawSettings(
+        f.string("jaw.port", j["port"], what=_DEVICE_PATH, spaces=False),
+        f.choice("jaw.baud", j.get("baud", 115200), (9600, 19200, 38400, 57600, 115200),
+                 "allowed values: 9600, 19200, 38400, 57600, 115200 (the sketch uses 115200)"),
+        f.number("jaw.ready_timeout_s", j.get("ready_timeout_s", 3.0), lo=0.0, hi=60.0),
+        close_button, open_button,
+    )
+
+
+#: What the two rotations of ``[frames]`` are, for the message when one is missing (no default: a guess sets a
+#: force's direction).
+_ROTATIONS = {
+    "rot_tip_sensor": "the sensor's mounting on the instrument (e.g. [[1, 0, 0], [0, 1, 0], [0, 0, 1]] for a sensor "
+                      "coaxial with it)",
+    "rot_haptic_base": "how the experimenter faces the robot (e.g. [[1, 0, 0], [0, 0, 1], [0, -1, 0]] facing it along "
+                       "base +y)",
+}
+
+
+def _framework(f: Fields, top: dict[str, Any]) -> FrameworkConfig:
+    """``[frames]`` and ``[framework]``: Algorithm 1's rotations and scaling.
+
+    What sets a rendered force's direction (both rotations) or size (f_max,
+    f_scale) has no default on a real rig: a file without it is refused, so no
+    identity or textbook value is ever taken silently.
+    """
+    fr = f.section(top, "frames", {"rot_tip_sensor", "rot_haptic_base"})
+    fw = f.section(top, "framework", {"f_max_n", "f_scale_n", "filter_window"})
+    # the safety clamp is min(f_max, the device's reported peak): an f_max above the Touch's peak would be a
+    # setting the device silently ignores (and the paper's scaling law would no longer hold)
+    peak_n = TouchSpec().peak_force_n
+    # what the file gives is checked first, then what it lacks
+    # (f_max from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there)
+    f_max = (f.number("framework.f_max_n", fw["f_max_n"], lo=1e-6, hi=peak_n, lo_open=False,
+                      note="(N; the 3D Systems Touch's peak force)") if "f_max_n" in fw else None)
+    f_scale = f.number("framework.f_scale_n", fw["f_scale_n"], lo=0.0, hi=1000.0) if "f_scale_n" in fw else None
+    rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else None
+    rot_hb = f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr else None
+    window = f.integer("framework.filter_window", fw.get("filter_window", 10), lo=1, hi=1000,
+                       what="a whole number of samples")
+    for key, what in (("f_max_n", "the largest force rendered (the paper's 3.0 N)"),
+                      ("f_scale_n", "the tanh scaling's force scale (the paper's 7.0 N)")):
+        f.required(fw, "framework", key, f"required on a real rig: {what}; it sets the size of every rendered force")
+    for key, what in _ROTATIONS.items():
+        f.required(fr, "frames", key, f"required on a real rig: {what}; it sets the direction of every rendered "
+                                      "force (see hardware.example.toml)")
+    assert f_max is not None and f_scale is not None and rot_ts is not None and rot_hb is not None
+    return FrameworkConfig(
+        f_max_n=f_max, f_scale_n=f_scale, filter_window=window, rot_tip_sensor=rot_ts, rot_haptic_base=rot_hb,
+    )
+
+
+def _two_buttons(f: Fields, table: str, t: dict[str, Any], first: str, second: str) -> tuple[int, int]:
+    """Two of the Touch's stylus buttons, ``first`` (default 1) and ``second`` (default 2), which must differ."""
+    a, b = (f.choice(f"{table}.{fld}", t.get(fld, default), (1, 2),
+                     "allowed values: 1 (the Touch's front, dark-grey button), 2 (rear, light-grey)")
+            for fld, default in ((first, 1), (second, 2)))
+    if a == b:
+        raise f.fail(f"{table}.{second}", b, f"must differ from {table}.{first}")
+    return a, b
+
+
+def _teleop(f: Fields, v: Any) -> TeleopSettings:
+    """``[teleop]``: app-side teleoperation."""
+    t = f.table("teleop", v, {
+        "workspace_min_m", "workspace_max_m", "max_speed_m_s", "motion_scale", "deadman_button", "clutch_button",
+        "stylus_max_age_s", "pose_max_age_s", "max_tracking_error_m", "lookahead_s", "gain", "control_timeout_s",
+    })
+    for req in ("workspace_min_m", "workspace_max_m"):
+        f.required(t, "teleop", req, "required: the corner of the box (m, robot base frame) the TCP must stay in")
+    box = "must be 3 numbers in metres (x, y, z in the robot base frame), each within ±1 m"
+    lo = f.vec3("teleop.workspace_min_m", t["workspace_min_m"], limit=1.0, what=box)
+    hi = f.vec3("teleop.workspace_max_m", t["workspace_max_m"], limit=1.0, what=box)
+    for i, axis in enumerate("xyz"):
+        if not lo[i] < hi[i]:
+            raise f.fail("teleop.workspace_max_m", t["workspace_max_m"],
+                         f"each coordinate must be above workspace_min_m's ({axis}: {hi[i]:g} ≤ {lo[i]:g})")
+    deadman, clutch = _two_buttons(f, "teleop", t, "deadman_button", "clutch_button")
+    return TeleopSettings(
+        workspace_min_m=lo, workspace_max_m=hi,
+        max_speed_m_s=f.number("teleop.max_speed_m_s", t.get("max_speed_m_s", 0.1), lo=0.0, hi=0.25),
+        motion_scale=f.number("teleop.motion_scale", t.get("motion_scale", 1.0), lo=0.0, hi=10.0),
+        deadman_button=deadman, clutch_button=clutch,
+        stylus_max_age_s=f.number("teleop.stylus_max_age_s", t.get("stylus_max_age_s", 0.02), lo=0.0, hi=1.0),
+        pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
+        max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0,
+                                      hi=0.2),
+        lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.1), lo=0.03, hi=0.2, lo_open=False,
+                             note="s (servoL's look-ahead time)"),
+        gain=f.number("teleop.gain", t.get("gain", 300.0), lo=100.0, hi=2000.0, lo_open=False,
+                      note="(servoL's proportional gain)"),
+        control_timeout_s=f.number("teleop.control_timeout_s", t.get("control_timeout_s", 5.0), lo=0.0, hi=60.0),
+    )
+
+
+def load_hardware(path: str | Path) -> HardwareConfig:
+    """Load and validate a hardware file."""
+    p = Path(path)
+    src = str(p)
+    data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
+    hw = hardware_from_dict(data, src)
+    # a relative calibration path is relative to the hardware file, not to the working directory
+    cal = Path(hw.calibration_file if hw.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
+    return replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))

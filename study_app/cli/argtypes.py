@@ -1,0 +1,114 @@
+"""Argument types of the ``haptic-study`` command line: every number bounded, every error one line.
+
+A bad argument is refused while the command line is parsed -- before any
+file or database is touched -- with one line on stderr naming the option, the
+value and what is allowed, and exit status 2 (the style of ``CliError``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+from collections.abc import Callable
+from typing import NoReturn
+
+from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX, host_problem
+
+__all__ = [
+    "SEED",
+    "OneLineParser",
+    "add_command",
+    "host_name",
+    "one_line",
+    "positive_seconds",
+    "real_number",
+    "whole_number",
+]
+
+
+def one_line(text: str) -> str:
+    """``text`` with line breaks and other control characters escaped: an error stays on one line."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line (argparse prints the usage line first).
+
+    Subparsers inherit the class (``add_subparsers`` makes parsers of the parent's type).
+    """
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``<prog>: error: <message>`` on one line and exit with status 2."""
+        own = re.match(r"argument (\S+): (\1 = .*)", message, re.DOTALL)
+        if own:  # an argument type's own message already names the option, the value and what is allowed
+            message = own.group(2)
+        else:
+            message += f" (see '{self.prog} --help')"
+        self.exit(2, f"{self.prog}: error: {one_line(message)}\n")
+
+
+def whole_number(name: str, lo: int, hi: int, note: str = "") -> Callable[[str], int]:
+    """An argument type: an integer from ``lo`` to ``hi`` (``note`` is appended to the error)."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:  # not an integer, or too many digits for Python to read
+            v = None
+        if v is None or not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a whole number from {lo} to {hi}{note}")
+        return v
+
+    return parse
+
+
+def real_number(name: str, lo: float, hi: float, *, lo_open: bool = False, note: str = "") -> Callable[[str], float]:
+    """An argument type: a finite number in ``[lo, hi]``, or ``(lo, hi]`` with ``lo_open``."""
+
+    def parse(text: str) -> float:
+        try:
+            v = float(text)
+        except ValueError:
+            v = math.nan
+        if not (math.isfinite(v) and (v > lo if lo_open else v >= lo) and v <= hi):
+            rng = f"> {lo:g} and ≤ {hi:g}" if lo_open else f"from {lo:g} to {hi:g}"
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be a number {rng}{note}")
+        return v
+
+    return parse
+
+
+def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
+    """An argument type: an IP address or an RFC 1123 host name (the hardware file's rule)."""
+
+    def parse(text: str) -> str:
+        problem = host_problem(text, ipv6=ipv6)
+        if problem is not None:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: {problem}")
+        return text
+
+    return parse
+
+
+def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,
+                description: str = "") -> argparse.ArgumentParser:
+    """A subcommand whose ``--help`` starts with what it does and ends with an example."""
+    import shutil
+    import textwrap
+
+    width = max(40, min(100, shutil.get_terminal_size().columns - 2))
+    return sub.add_parser(
+        name, help=help, description=textwrap.fill((description or help[:1].upper() + help[1:]) + ".", width),
+        epilog="example:\n  " + "\n  ".join(example.splitlines()),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+
+
+def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
+    """An argument type: a finite number of seconds > 0 and ≤ ``hi`` (default one day)."""
+    return real_number(name, 0.0, hi, lo_open=True)
+
+
+#: Seeds are stored in the study database: at most SQLite's largest INTEGER.
+SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")

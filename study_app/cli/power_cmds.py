@@ -1,0 +1,190 @@
+"""The ``power`` subcommand: planning the next study's sample size.
+
+Option values are parsed here rather than by argparse so that a bad value is
+one line on stderr naming the option, the value and what is allowed (exit 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+from study_app.cli.error import CliError
+
+__all__ = ["add_power_parser", "cmd_power", "whole_option"]
+
+_N_MAX = 10_000
+#: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
+DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
+_POOL_DEFAULT = 100
+#: Resampled participants (studies × n) from which on ``power`` shows a progress bar: ~10 s of work and more.
+_BAR_DRAWS = 5_000_000
+#: The marker of a power output folder (analysis.outdir): the files power wrote there, with their SHA-256.
+POWER_MARKER = ".haptic-study-power"
+
+
+def add_power_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``power``."""
+    from study_app.cli.report_cmds import add_analysis_options
+
+    p = sub.add_parser(
+        "power",
+        help="plan the next study: power of the report's tests to detect the effect in the pilot's direction "
+             "against the number of participants, by resampling a pilot study or simulated participants",
+    )
+    p.add_argument("--db", action="append", metavar="PILOT.db",
+                   help="pilot study database; repeat to merge several (the report's aggregation and tests)")
+    p.add_argument("--simulated", action="store_true",
+                   help="no pilot yet: simulate a pool of participants from the calibrated population, kept in DIR "
+                        "as pool-N-seedS.db with a record of how it was made; a later call reuses it (or the first "
+                        "N of a larger pool of the same seed) after checking its SHA-256, and completes an "
+                        "interrupted simulation")
+    p.add_argument("--pool", default=None, metavar="N",
+                   help=f"participants in the simulated pool (default {_POOL_DEFAULT}; with --simulated)")
+    p.add_argument("--n", default=None, metavar="LIST",
+                   help=f"planned study sizes, comma-separated (default {DEFAULT_N_TEXT})")
+    p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
+    p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
+    p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool); it must "
+                        "be new or empty, or hold only a simulated pool, unless --force")
+    p.add_argument("--force", action="store_true",
+                   help="replace the files an earlier power run wrote in DIR, if unedited (the marker "
+                        ".haptic-study-power lists them with their SHA-256); any other file, or an edited one, is "
+                        "a refusal; the simulated pool is never deleted")
+    add_analysis_options(p)
+    p.set_defaults(handler=cmd_power)
+
+
+def whole_option(option: str, text: str, low: int, high: int) -> int:
+    """``text`` as a whole number from ``low`` to ``high``, or a :class:`CliError` naming ``option``."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = None
+    if v is None or not low <= v <= high:
+        raise CliError(f"{option} = {text!r}: must be a whole number from {low} to {high}")
+    return v
+
+
+def _n_values(text: str) -> tuple[int, ...]:
+    out = []
+    for part in text.split(","):
+        try:
+            v = int(part.strip())
+        except ValueError:
+            v = None
+        if v is None or not 2 <= v <= _N_MAX:
+            raise CliError(f"--n = {text!r}: each n must be a whole number from 2 to {_N_MAX}, comma-separated "
+                           "(e.g. 6,8,10,12)")
+        out.append(v)
+    return tuple(out)
+
+
+def _alpha(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = float("nan")
+    if not 0.0 < v < 1.0:
+        raise CliError(f"--alpha = {text!r}: must be a number with 0 < alpha < 1 (e.g. 0.05)")
+    return v
+
+
+def cmd_power(args: argparse.Namespace) -> int:
+    """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
+    if args.db and args.simulated:
+        raise CliError("--db and --simulated: give one or the other (a pilot study, or simulated participants)")
+    if not args.db and not args.simulated:
+        raise CliError("power needs a source: --db PILOT.db (a pilot study) or --simulated (simulated participants)")
+    if args.pool is not None and not args.simulated:
+        raise CliError(f"--pool = {args.pool!r}: only with --simulated (a pilot's size is its own)")
+    n_values = _n_values(DEFAULT_N_TEXT if args.n is None else args.n)
+    resamples = whole_option("--resamples", args.resamples, 1, 1_000_000)
+    alpha = _alpha(args.alpha)
+    seed = whole_option("--seed", args.seed, 0, 2**32 - 1)
+    pool_size = whole_option("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
+    if args.out is None:
+        raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
+
+    from analysis.errors import AnalysisError
+    from analysis.outdir import check_output_folder, write_output_folder
+    from analysis.power_pool import is_pool_file
+
+    folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
+                  keep=is_pool_file)
+    try:
+        check_output_folder(args.out, **folder)  # before any work (and before the analysis is imported)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
+
+    from analysis.metrics import MetricOptions
+    from analysis.paired_pool import load_pool
+    from analysis.power import FAMILY_LABELS, estimate_power, summary_text
+    from analysis.power_outputs import write_power
+    from analysis.power_pool import simulated_pool
+    from study_app.cli.progress import ProgressBar
+    from study_app.headless import run_study
+
+    options = MetricOptions(args.error_window, args.tct)
+    bars: list[ProgressBar] = []
+
+    def reading(done: float, total: float) -> None:
+        if not bars or bars[-1].unit != "samples":
+            bars.append(ProgressBar(total, "reading samples", "samples", decimals=0))
+        bars[-1].update(done)
+
+    def resampling(done: int, total: int) -> None:
+        if total < _BAR_DRAWS:  # a few seconds: no bar
+            return
+        if not bars or bars[-1].unit != "participants drawn":
+            bars.append(ProgressBar(total, "resampling studies", "participants drawn", decimals=0))
+        bars[-1].update(done)
+
+    def simulating(p) -> None:
+        if not bars:
+            bars.append(ProgressBar(p.study_trials_total, "simulating pool", "trials", decimals=0))
+        bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
+        bars[-1].update(p.study_trials_done)
+
+    try:
+        participants = None
+        if args.simulated:
+            t0 = time.perf_counter()
+            pool_db = simulated_pool(args.out, pool_size, seed, simulate=run_study, on_progress=simulating)
+            for bar in bars:
+                bar.close()
+            path = pool_db.path
+            said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
+                    "reused-larger": f"reusing the first {pool_size} participants of the simulated pool {path} "
+                                     "(SHA-256 checked; participant k is the same in a pool of any size)",
+                    "resumed": f"completed the interrupted simulated pool {path} ({time.perf_counter() - t0:.0f} s)",
+                    "simulated": f"simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); the next "
+                                 "call with the same --pool and --seed reuses it"}
+            print(f"power: {said[pool_db.status]}", file=sys.stderr)
+            databases = [str(path)]
+            participants = pool_db.participants
+            first = f"the first {pool_size} of " if pool_db.status == "reused-larger" else ""
+            source = f"a simulated pool of {pool_size} participants (study seed {seed}, {first}{path.name})"
+        else:
+            databases = list(args.db)
+            source = None
+        pool = load_pool(databases, options, source=source, progress=reading, participants=participants)
+        for bar in bars:
+            bar.close()
+        t0 = time.perf_counter()
+        result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
+                                zero_method=args.zero_method, progress=resampling)
+        if bars and bars[-1].unit == "participants drawn":
+            bars[-1].close()
+        wall = time.perf_counter() - t0
+        files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
+    except AnalysisError as exc:  # PowerError, PoolError, OutputError included
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
+    print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
+    print(summary_text(result))
+    print(f"Written in {args.out}/: {', '.join(files)}")
+    return 0

@@ -1,0 +1,174 @@
+"""The ``report`` and ``plot-trial`` subcommands: analysis from the command line."""
+
+from __future__ import annotations
+
+import argparse
+
+from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
+from study_app.cli.argtypes import add_command, whole_number
+from study_app.cli.error import CliError
+
+__all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
+
+
+def _confidence(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--confidence = {text!r}: expected a number") from None
+    if not 0.5 <= v < 1.0:
+        raise argparse.ArgumentTypeError(f"--confidence = {text!r}: must be in [0.5, 1), e.g. 0.95")
+    return v
+
+
+def add_analysis_options(parser: argparse.ArgumentParser) -> None:
+    """The aggregation and test choices a report is made with (``report`` and ``power`` share them)."""
+    parser.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
+                        help="RMSE / Max AE from the cue (default) or from first contact")
+    parser.add_argument("--tct", choices=("successful", "censored"), default="successful",
+                        help="TCT over successful trials only (default) or failures censored at the trial cap")
+    parser.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
+                        help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
+
+
+def add_report_parsers(sub: argparse._SubParsersAction) -> None:
+    """Register ``report`` and ``plot-trial``."""
+    r = add_command(
+        sub, "report",
+        "analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
+        "haptic-study report --db study.db --out report\n"
+        "haptic-study report --db day1.db --db day2.db --out report --force   # two databases, one study",
+        "Analyse one study (one or more databases): recompute every trial from its samples, test haptics ON "
+        "against OFF per participant (paired Wilcoxon), draw the paper's figures, and write report.html, tidy "
+        "CSV tables (trials, participants long and wide, tests) and codebook.csv describing every column",
+    )
+    r.add_argument("--db", action="append", required=True, metavar="PATH",
+                   help="study database; repeat to merge several into one study")
+    r.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, *.csv, figures/)")
+    r.add_argument("--force", action="store_true",
+                   help="replace the files an earlier report wrote in DIR, if unedited (the marker "
+                        ".haptic-study-report lists them with their SHA-256); any other file, an edited one or an "
+                        "input database in DIR is a refusal")
+    add_analysis_options(r)
+    r.add_argument("--confidence", type=_confidence, default=0.95,
+                   help="confidence level of the Hodges–Lehmann interval (default 0.95)")
+    r.add_argument("--power", action="store_true",
+                   help="add 'what n would a study need': power against the number of participants, resampling "
+                        "this study's participants (as haptic-study power with its defaults)")
+    r.add_argument("--include-incomplete", action="store_true",
+                   help="analyse the finished trials of experiment sessions that did not complete (aborted by the "
+                        "experimenter, or interrupted and not resumed); by default they are left out, and listed "
+                        "with the reason either way")
+    r.set_defaults(handler=cmd_report)
+
+    p = add_command(
+        sub, "plot-trial", "one trial's force through the pipeline: task force against its band, rendered, raw",
+        "haptic-study sessions --db study.db            # find the session\n"
+        "haptic-study plot-trial --db study.db --session 4 --trial 7 --out trial7.pdf",
+        "Draw one stored trial (the paper's Fig. 6): the task force the trial was judged on against its target "
+        "band, the force rendered on the haptic device, and the raw sensor force on an axis of its own",
+    )
+    p.add_argument("--db", required=True, metavar="PATH", help="study database")
+    p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
+                   help="session id (haptic-study sessions --db PATH lists them)")
+    p.add_argument("--trial", type=whole_number("--trial", 1, SQLITE_INTEGER_MAX, " (trials are numbered from 1)"),
+                   required=True, metavar="N",
+                   help="trial number within the session, from 1, as the GUI and trials.csv number them")
+    p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.set_defaults(handler=cmd_plot_trial)
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    """Run ``haptic-study report``; errors raise :class:`study_app.cli.error.CliError`."""
+    from analysis.errors import AnalysisError
+    from analysis.outdir import REPORT_MARKER, check_output_folder
+
+    try:  # before the analysis is imported (seconds): a refused folder is said at once
+        check_output_folder(args.out, command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
+    from analysis.metrics import MetricOptions
+    from analysis.report import build_report
+    from study_app.cli.progress import ProgressBar
+
+    bar: ProgressBar | None = None
+
+    def show(done: float, total: float) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = ProgressBar(total, "reading samples", "samples", decimals=0)
+        bar.update(done)
+
+    try:
+        summary = build_report(
+            args.db, args.out, options=MetricOptions(args.error_window, args.tct),
+            zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
+            power=args.power, include_incomplete=args.include_incomplete,
+        )
+    except AnalysisError as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    finally:
+        if bar is not None:
+            bar.close()
+    ex = summary.excluded
+    print(f"Report {summary.out_dir / 'report.html'}: {summary.n_participants} participants, {summary.n_trials} "
+          f"trials, {summary.n_samples:,} samples (excluded: {ex['training_trials']} training trials, "
+          f"{ex['aborted_trials']} aborted trials)")
+    cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
+    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")
+    print(summary.stats[cols].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
+    return 0
+
+
+def _trial_numbers(numbers: list[int]) -> str:
+    """``1–20`` or ``1–5, 7, 9–12``: stored trial numbers, compactly."""
+    runs: list[list[int]] = []
+    for n in sorted(numbers):
+        if runs and n == runs[-1][1] + 1:
+            runs[-1][1] = n
+        else:
+            runs.append([n, n])
+    return ", ".join(f"{a}" if a == b else f"{a}–{b}" for a, b in runs)
+
+
+def cmd_plot_trial(args: argparse.Namespace) -> int:
+    """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
+    from pathlib import Path
+
+    from analysis.errors import AnalysisError
+    from analysis.outdir import check_output_file, write_output_file
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
+    try:
+        check_output_file(out, command="plot-trial")  # before the work: an existing file is never replaced
+        from analysis.load import load_study, read_trial_samples
+
+        study = load_study([args.db])
+        trials = study.trials
+        in_session = trials[trials["session_id"] == args.session]
+        if in_session.empty:
+            ids = ", ".join(str(int(i)) for i in sorted(trials["session_id"].unique()))
+            raise CliError(f"--session {args.session}: no such session with trials in {args.db}; sessions with "
+                           f"trials: {ids} (haptic-study sessions --db {args.db} lists them)")
+        rows = in_session[in_session["trial_index"] == args.trial - 1]
+        if rows.empty:
+            numbers = [int(i) + 1 for i in in_session["trial_index"]]
+            raise CliError(f"--trial {args.trial}: no such trial in session {args.session}; its stored trials are "
+                           f"{_trial_numbers(numbers)}")
+        row = rows.iloc[0]
+        samples = read_trial_samples(args.db, args.session, args.trial - 1)
+    except AnalysisError as exc:
+        raise CliError(str(exc)) from None
+    # matplotlib: once the trial is known to be there
+    from analysis.figures import save_one, stored_trial_figure
+
+    fig = stored_trial_figure(args.db, row, samples)  # an aborted trial: its abort, time and cause marked
+    try:
+        write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
+    except AnalysisError as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,214 @@
+"""``haptic-study sim``, ``run`` and ``sessions``: the simulated rig and the headless study runner.
+
+Each command's parser is registered beside the command; the machinery is
+imported when the command runs, so ``haptic-study --help`` stays light.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sqlite3
+import sys
+
+from study_app.cli.argtypes import SEED, add_command, positive_seconds, whole_number
+from study_app.cli.error import CliError
+
+__all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
+
+
+def _fault_plan(text: str):
+    """An argument type: one ``--inject-fault`` plan (protocol.rehearsal), or the parser's one-line error."""
+    from protocol.rehearsal import parse_fault_plan
+
+    try:
+        return parse_fault_plan(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def add_sim_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``sim``."""
+    s = add_command(sub, "sim", "run the simulated rig with scripted presses and summarise what the pipeline saw",
+                    "haptic-study sim --seconds 30 --seed 1")
+    s.add_argument("--seconds", type=positive_seconds("--seconds"), default=60.0, help="simulated time (default 60)")
+    s.add_argument("--seed", type=SEED, default=0, help="seed of every random process (default 0)")
+    s.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                   help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
+    s.add_argument("--haptics", choices=("on", "off"), default="on", help="haptic feedback (default on)")
+    s.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    s.set_defaults(handler=cmd_sim)
+
+
+def add_run_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``run``."""
+    r = add_command(sub, "run", "run a complete simulated study into a study database (headless)",
+                    "haptic-study run --participants 10 --seed 0 --db study.db\n"
+                    "haptic-study run --participants 10 --seed 0 --db study.db --continue   # after an interruption",
+                    "Run a complete simulated study (training and experiment sessions of simulated participants on "
+                    "the simulated rig) into a study database, headless, and print a summary")
+    r.add_argument("--participants", type=whole_number("--participants", 1, 9999), default=10,
+                   help="number of simulated participants (default 10)")
+    r.add_argument("--seed", type=SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
+    r.add_argument("--db", required=True, metavar="PATH", help="study database (SQLite); created if missing")
+    r.add_argument("--protocol", default=None, metavar="FILE",
+                   help="protocol file (default: the paper's study, protocol/default.toml)")
+    r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
+                   help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
+    r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
+                   help="participants run at once, each in its own process (default: the usable cores; 1: one after "
+                        "the other)")
+    after = r.add_mutually_exclusive_group()
+    after.add_argument("--resume", metavar="CODE", default=None,
+                       help="continue this participant's interrupted session (training or experiment) "
+                            "at its first unfinished trial")
+    after.add_argument("--continue", dest="continue_study", action="store_true",
+                       help="complete a study that stopped part-way in --db: resume interrupted sessions, run what "
+                            "was not started (give the --participants, --seed and --protocol it was started with)")
+    r.add_argument("--inject-fault", dest="inject_fault", action="append", default=[], type=_fault_plan,
+                   metavar="KIND@CODE:TRIAL[+SECONDS]",
+                   help="rehearse a fault on the simulated rig, SECONDS (default 3) after the cue of participant "
+                        "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
+                        "device-error, kill (ends this command as kill -9 would); repeatable")
+    r.set_defaults(handler=cmd_run)
+
+
+def add_sessions_parser(sub: argparse._SubParsersAction) -> None:
+    """Register ``sessions``."""
+    ss = add_command(sub, "sessions", "list the sessions of a study database: participant, kind, status, trials",
+                     "haptic-study sessions --db study.db")
+    ss.add_argument("--db", required=True, metavar="PATH", help="study database")
+    ss.add_argument("--json", action="store_true", help="print one JSON array")
+    ss.set_defaults(handler=cmd_sessions)
+
+
+#: Memory ``sim`` keeps per simulated tick: 8 float64 columns read from the ring, and their concatenation, with a
+#: margin.
+_SIM_BYTES_PER_TICK = 160
+
+
+def cmd_sim(args: argparse.Namespace) -> int:
+    """Run ``haptic-study sim``."""
+    from analysis.resources import memory_problem
+    from study_app.cli.progress import ProgressBar
+    from study_app.cli.sim_summary import run_scripted_sim
+
+    problem = memory_problem(args.seconds * 1000 * _SIM_BYTES_PER_TICK, f"sim --seconds {args.seconds:g}",
+                             "simulate fewer seconds (the summary keeps every tick)")
+    if problem is not None:
+        raise CliError(problem)
+    bar = None if args.json else ProgressBar(args.seconds, "simulating", "s")
+    summary = run_scripted_sim(
+        seconds=args.seconds, seed=args.seed, clock=args.clock, haptics_on=args.haptics == "on",
+        progress=None if bar is None else bar.update,
+    )
+    if bar is not None:
+        bar.close()
+    if args.json:
+        print(json.dumps(summary, indent=None))
+    else:
+        from study_app.cli.sim_summary import format_summary
+
+        print(format_summary(summary))
+    return 0
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    """Run ``haptic-study run``; errors raise :class:`CliError`."""
+    from protocol.config import ProtocolError, load_protocol
+    from protocol.storage import StorageError
+    from study_app.cli.progress import ProgressBar
+    from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
+
+    if args.resume is not None:
+        for f in args.inject_fault:
+            if f.code != args.resume:
+                raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    _refuse_a_full_disk(args.db)
+    bar: ProgressBar | None = None
+    try:
+        if args.resume is None:
+            protocol = load_protocol(args.protocol)
+
+        def show(p):
+            nonlocal bar
+            if bar is None:
+                bar = ProgressBar(p.study_trials_total, "study", "trials", decimals=0)
+            bar.label = f"{p.code} {p.kind:<10} trial {p.trials_done:>2}/{p.trials_total:<2}"
+            bar.update(p.study_trials_done)
+
+        import time as _time
+
+        t0 = _time.perf_counter()
+        if args.resume is not None:
+            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
+                                      faults=args.inject_fault)
+        else:
+            progress = run_study(
+                args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
+                on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
+            )
+        wall = _time.perf_counter() - t0
+        if bar is not None:
+            bar.close()
+    except SessionInterrupted as exc:
+        if bar is not None:
+            bar.close()
+        print(f"haptic-study: interrupted: {exc}; complete it with the same command and --continue "
+              "(or --resume CODE)", file=sys.stderr)
+        return 1
+    except (ProtocolError, StorageError, StudyWorkerError, ValueError) as exc:
+        if bar is not None:
+            bar.close()
+        raise CliError(str(exc)) from None
+    except (OSError, sqlite3.Error):  # the machine failed (a full disk): one line from the CLI's error path
+        if bar is not None:
+            bar.close()
+        raise
+    for note in progress.notes:
+        print(f"haptic-study: {note}", file=sys.stderr)
+    if args.continue_study and progress.study_trials_total == 0:
+        print(f"haptic-study: nothing to continue in {args.db}: every session of participants "
+              f"1–{args.participants} has ended", file=sys.stderr)
+    # imported only now: the summary's statistics (pandas, SciPy) cost a second that a refused run need not pay
+    from study_app.cli.study_summary import format_study_summary
+
+    print(format_study_summary(args.db, progress.sessions, wall))
+    for line in progress.rehearsals:
+        print(f"Fault rehearsal {line}")
+    return 0
+
+
+#: Free space below which ``run`` does not start: SQLite's journal and the first recorded blocks need about this.
+_RUN_MIN_FREE_BYTES = 1 << 20
+
+
+def _refuse_a_full_disk(db: str) -> None:
+    """A database on a (nearly) full disk is refused before the study starts (a fuller one mid-run: cli's one line)."""
+    from analysis.outfs import free_bytes, read_only
+
+    folder = os.path.dirname(os.path.abspath(db))
+    if not os.path.isdir(folder) or read_only(folder):
+        return  # the database's own checks say what is wrong with the folder
+    free = free_bytes(folder)
+    if free is not None and free < _RUN_MIN_FREE_BYTES:
+        raise CliError(f"--db {db}: no space left on the device ({free / 1e6:.2f} MB free, a study needs at least "
+                       f"{_RUN_MIN_FREE_BYTES / 1e6:.0f} MB to start); free some space or use a database on another "
+                       "disk (nothing was written)")
+
+
+def cmd_sessions(args: argparse.Namespace) -> int:
+    """Run ``haptic-study sessions``; errors raise :class:`CliError`."""
+    from protocol.storage import StorageError
+    from study_app.engine.session_list import format_sessions, list_sessions
+
+    if not os.path.isfile(args.db):
+        raise CliError(f"--db = {args.db!r}: " + ("is a folder, not a database file" if os.path.isdir(args.db)
+                                                  else "no such file"))
+    try:
+        sessions = list_sessions(args.db)
+    except StorageError as exc:
+        raise CliError(str(exc)) from None
+    print(json.dumps(sessions) if args.json else format_sessions(args.db, sessions))
+    return 0

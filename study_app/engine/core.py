@@ -1,0 +1,53 @@
+"""What the study engine's rooms (its sessions, its commissioning chain) use of the engine they belong to.
+
+A :class:`typing.Protocol`, so that :mod:`study_app.engine.sessions` and
+:mod:`study_app.engine.commissioning` name what they need without importing
+:mod:`study_app.engine.host`, which builds them (no circle, not even for typing).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Protocol
+
+from pipeline.force.payload_compensator import PayloadCalibration
+from pipeline.runtime.engine import Engine
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.ring import RingBuffer
+from pipeline.settings.hardware import HardwareConfig
+from study_app.engine.setup import HostConfig, SwitchableDriver
+
+__all__ = ["EngineCore"]
+
+
+class EngineCore(Protocol):
+    """The study engine as its rooms see it (driver thread only)."""
+
+    config: HostConfig
+    eng: Engine
+    loop: HapticLoop
+    ring: RingBuffer
+    #: The ring's read cursor (a room that ran the loop itself moves it past its own records).
+    cursor: int
+    real: bool
+    hardware: HardwareConfig | None
+    hardware_text: str
+    #: The payload calibration in use (a room that identifies a new one installs it here).
+    calibration: PayloadCalibration
+    driver: SwitchableDriver
+    lease_owner: str
+    #: Loop time of the newest record the driver has read, ns.
+    last_t_ns: int
+    publish: Callable[[object], None]
+
+    def handle(self, cmd: object) -> None:
+        """Apply a command as if it had just arrived."""
+
+    def drain_ring(self) -> None:
+        """Read every new record now (and hand it to whoever waits for it)."""
+
+    def require_idle(self, what: str) -> None:
+        """Raise :class:`RuntimeError` naming ``what`` if the loop is dead or a session runs."""
+
+    def after_loop_pause(self, restart: bool) -> None:
+        """The loop ran the rig for a step of its own: restart the timing statistics (and the loop thread)."""

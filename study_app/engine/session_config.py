@@ -1,0 +1,47 @@
+"""What a session stores of the rig it ran on (``sessions.config_json``), for the headless runner and the GUI engine."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from pipeline.runtime.engine import Engine
+from pipeline.settings.hardware import HardwareConfig
+
+__all__ = ["config_record", "real_config_record"]
+
+
+def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
+    fw = eng.framework.config
+    return {
+        "rig": "sim",
+        "clock": clock,
+        "rig_seed": rig_seed,
+        "participant_seed": participant_seed,
+        "sim": _plain(dataclasses.asdict(eng.rig.config)),
+        "framework": _plain(dataclasses.asdict(fw)),
+        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+    }
+
+
+def real_config_record(hw: HardwareConfig, hardware_text: str, eng: Engine) -> dict[str, Any]:
+    """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
+    return {
+        "rig": "real",
+        "clock": "real",
+        "participant": "person",
+        "hardware_file": hw.source,
+        "hardware_toml": hardware_text,
+        "hardware": _plain(dataclasses.asdict(hw)),
+        "framework": _plain(dataclasses.asdict(eng.framework.config)),
+        "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+    }
+
+
+def _plain(d: Any) -> Any:
+    if isinstance(d, dict):
+        return {k: _plain(v) for k, v in d.items()}
+    if isinstance(d, (list, tuple)):
+        return [_plain(v) for v in d]
+    return d

@@ -1,0 +1,297 @@
+"""The study engine's sessions: start, resume, run, rehearse a fault, end -- one at a time.
+
+:class:`EngineSessions` belongs to a :class:`study_app.engine.host.StudyEngine`
+and runs on its driver thread.  Sessions are opened and closed through
+:mod:`protocol.session_setup`, as the headless runner's are
+(:mod:`study_app.headless`); what a session stores of the rig it ran on is
+:mod:`study_app.engine.session_config`'s.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import json
+import math
+import os
+import signal
+from collections.abc import Callable
+from typing import Any
+
+from protocol.config import ProtocolConfig, load_protocol
+from protocol.records import AbortCause, TrialRecord
+from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
+from protocol.session import SessionRunner
+from protocol.session_setup import (
+    OpenedSession,
+    delivery_limits,
+    finish_session,
+    open_new_session,
+    open_resumed_session,
+    participant_seeds,
+    raw_wrench_scales,
+    start_runner,
+)
+from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
+from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
+from protocol.trial import PhaseChanged, TrialPhase
+from study_app.engine import messages as m
+from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
+from study_app.engine.core import EngineCore
+from study_app.engine.session_config import config_record, real_config_record
+from study_app.engine.setup import SwitchableDriver
+
+__all__ = ["EngineSessions", "list_resumable"]
+
+
+
+class EngineSessions:
+    """The session the study engine runs (at most one), its runner, recorder and database (driver thread only).
+
+    Parameters
+    ----------
+    engine
+        The engine whose loop the session's runner commands.
+    commissioning
+        The engine's commissioning chain: the real rig's gate before a start, and what it puts on record.
+    """
+
+    def __init__(self, engine: EngineCore, commissioning: Commissioning) -> None:
+        self.engine = engine
+        self.commissioning = commissioning
+        self.runner: SessionRunner | None = None
+        self.recorder: Recorder | None = None
+        self.db: StudyDatabase | None = None
+        self.opened: OpenedSession | None = None
+        self.trigger: RehearsalTrigger | None = None
+        self.session_code = ""
+
+    @property
+    def running(self) -> bool:
+        """A session runs (not yet done)."""
+        return self.runner is not None and not self.runner.done
+
+    def start(self, cmd: m.StartSession) -> None:
+        self.engine.require_idle("start")
+        validate_code(cmd.code)
+        if cmd.kind not in ("training", "experiment"):
+            raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
+        if cmd.seed < 0 or cmd.participant_number < 1:
+            raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
+                             "number ≥ 1")
+        protocol = load_protocol(cmd.protocol_path or None)
+        _check_rules_first(cmd, protocol)
+        if self.commissioning.gate(cmd):
+            return
+        db = self._open_db(cmd.db_path)
+        try:
+            opened = open_new_session(
+                db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
+                rig=self.engine.config.rig,
+                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui",
+                        **self.commissioning.provenance()},
+                calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
+                note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
+                training_override=cmd.training_override,
+            )
+        except BaseException:
+            db.close()
+            raise
+        self._run(db, opened)
+
+    def _config_record(self, participant_seed: int) -> dict[str, Any]:
+        if self.engine.eng.simulated:
+            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
+                                 participant_seed)
+        assert self.engine.hardware is not None
+        return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
+
+    def resume(self, cmd: m.ResumeSession) -> None:
+        self.engine.require_idle("resume")
+        if self.commissioning.gate(cmd):
+            return
+        db = self._open_db(cmd.db_path)
+        try:
+            opened = open_resumed_session(db, cmd.session_id, lease_owner=self.engine.lease_owner,
+                                          calibration=self.engine.calibration.to_dict())
+        except BaseException:
+            db.close()
+            raise
+        self._run(db, opened)
+
+    def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
+        if self.engine.eng.simulated:
+            from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
+
+            self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
+            sim_rig = self.engine.eng.rig
+            participant: SwitchableDriver | None = self.engine.driver
+
+            def sim_time_s() -> float:
+                return sim_rig.sim_time_s
+
+            participant_time: Callable[[], float] | None = sim_time_s
+        else:  # a person holds the Touch: nothing to notify, nothing simulated
+            participant, participant_time = None, None
+        # a resumed session's table and progress start from what is stored (read before the recorder writes)
+        stored = [TrialRecord.from_row(r) for r in db.trial_rows(opened.session_id)] if opened.resumed else []
+        recorder, runner = start_runner(
+            db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
+            limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
+            scales=raw_wrench_scales(self.engine.eng.rig.sensor),
+        )
+        runner.listeners.append(self._on_runner_event)
+        self.trigger = None
+        self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
+        override = self.commissioning.take_override()
+        if override is not None:
+            missing, why, rest_n = override
+            recorder.event(opened.session_id, opened.clock_offset_s, CALIBRATION_OVERRIDE_EVENT,
+                           "started by the experimenter's override: "
+                           f"{missing or 'the calibration chain was on record'}; the compensated force at rest was "
+                           f"{rest_n:.3f} N (limit {REST_MAX_FORCE_N:g} N). Reason: {why}")
+        if self.engine.config.clock == "real":
+            gc.freeze()  # the session's long-lived objects: out of the collector's full passes (see host_main)
+        tr = opened.protocol.trial
+        self.engine.publish(m.SessionStarted(
+            session_id=opened.session_id, code=opened.code, kind=opened.kind, trials_total=len(opened.schedule),
+            start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
+            max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
+            schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
+            participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
+        ))
+
+    def inject_fault(self, cmd: m.InjectFault) -> None:
+        if not self.engine.eng.simulated:
+            raise RuntimeError("fault rehearsal: refused on the real rig (a person's hand is on it); "
+                               "rehearse on the simulated rig")
+        if cmd.kind not in FAULT_KINDS:
+            raise ValueError(f"fault kind = {cmd.kind!r}: allowed values are {', '.join(FAULT_KINDS)}")
+        if not (math.isfinite(cmd.seconds) and 0 <= cmd.seconds <= 600):
+            raise ValueError(f"fault seconds = {cmd.seconds!r}: must be a number from 0 to 600")
+        if cmd.trial is None:
+            if cmd.kind == "kill":
+                os.kill(os.getpid(), signal.SIGKILL)  # as a crash would: the GUI sees the engine die
+            rig, loop = self.engine.eng.rig, self.engine.loop
+            rig.inject_fault(cmd.kind, loop.clock.now_ns())
+            self.engine.publish(m.FaultInjected(cmd.kind, "now"))
+            return
+        runner, opened = self.runner, self.opened
+        if runner is None or runner.done or opened is None:
+            raise RuntimeError("fault rehearsal at a trial: start or resume a session first (or inject it now)")
+        n, begun = len(runner.schedule), runner.state.trial_position
+        later = (f"the trials still to come are {begun + 1} to {n}" if begun + 1 < n
+                 else f"the one still to come is trial {n}" if begun + 1 == n
+                 else f"every trial of this session has begun (all {n}); inject it now instead")
+        if cmd.trial < 1 or cmd.trial > n:
+            raise ValueError(f"fault trial = {cmd.trial}: the session has trials 1 to {n}; {later}")
+        if cmd.trial <= begun:
+            raise ValueError(f"fault trial = {cmd.trial}: trial {cmd.trial} has already begun; {later}")
+        plan = FaultPlan(cmd.kind, opened.code, cmd.trial, cmd.seconds, opened.kind)
+        eng = self.engine.eng
+
+        def inject(kind: str, at_ns: int) -> None:
+            eng.rig.inject_fault(kind, eng.loop.t0_ns + at_ns)
+
+        def kill() -> None:
+            os.kill(os.getpid(), signal.SIGKILL)
+
+        def cancel(kind: str, at_ns: int) -> None:
+            eng.rig.cancel_fault(kind, eng.loop.t0_ns + at_ns)
+
+        from pipeline.sim.faults import latch_delay_s  # the simulated rig only
+
+        wd = eng.loop.watchdog
+        trig = RehearsalTrigger.for_session(
+            [plan], opened.code, opened.kind, runner.state.trial_position, inject, kill, cancel,
+            max_trial_s=opened.protocol.trial.max_trial_s,  # moved to land in its trial, or withdrawn, and said so
+            latch_s=lambda kind: latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s))
+        if self.trigger is not None:  # keep what was planned before
+            trig._pending.extend(self.trigger._pending)
+        else:
+            runner.listeners.append(lambda ev: self.trigger.on_runner_event(ev) if self.trigger else None)
+        self.trigger = trig
+        self.engine.publish(m.FaultInjected(cmd.kind, f"trial {cmd.trial} + {cmd.seconds:g} s"))
+
+    def _on_runner_event(self, ev: object) -> None:
+        runner = self.runner
+        if runner is None:
+            return
+        if isinstance(ev, PhaseChanged):
+            t_s = ev.t_ns * 1e-9
+            if ev.new is TrialPhase.ACTIVE and runner.machine.spec is not None:
+                spec = runner.machine.spec
+                self.engine.publish(m.TrialStarted(
+                    t_s, spec.index, runner.state.trial_position, runner.state.trials_total, spec.target_label,
+                    spec.target_force_n, spec.haptic_mode, spec.repeat_of,
+                ))
+            self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
+        elif isinstance(ev, TrialRecord):
+            cause = ev.abort_cause
+            if cause in (AbortCause.GAP, AbortCause.FEEDBACK):  # not a watchdog fault, so the loop said nothing
+                self.engine.publish(m.EngineFault(ev.end_ns * 1e-9, cause.value, int(self.engine.loop.faults),
+                                                  ev.abort_reason or "", ev.ended_at_s))
+            self.engine.publish(m.TrialEnded(ev.end_ns * 1e-9, ev, runner.state.trials_total))
+
+    def end(self, status: str, reason: str) -> None:
+        runner, recorder, db, opened = self.runner, self.recorder, self.db, self.opened
+        assert runner is not None and recorder is not None and db is not None and opened is not None
+        self.runner = self.recorder = self.db = self.opened = None
+        self.trigger = None
+        self.engine.driver.participant = None
+        error = ""
+        try:
+            finish_session(db, recorder, opened)
+        except StorageError as exc:
+            error = str(exc)
+        finally:
+            db.close()
+        st = runner.state
+        self.engine.publish(m.SessionEnded(runner.session_id, status, reason or error, st.completed, st.aborted,
+                                           st.successes))
+
+    def _open_db(self, path: str) -> StudyDatabase:
+        if not path:
+            raise StorageError("study database: no file given")
+        return StudyDatabase(path)
+
+
+def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig) -> None:
+    """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
+    where the session is stored, by :func:`protocol.session_setup.open_new_session`)."""
+    if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
+        return
+    db = StudyDatabase(cmd.db_path, readonly=True)
+    try:
+        if not db.sessions_of(cmd.code, cmd.kind):
+            check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
+                              training_override=cmd.training_override)
+    finally:
+        db.close()
+
+
+def list_resumable(db_path: str) -> list[dict[str, Any]]:
+    """Interrupted sessions of a database (none if the file does not exist yet)."""
+    if not db_path or not os.path.exists(db_path):
+        return []
+    db = StudyDatabase(db_path, readonly=True)
+    try:
+        out = []
+        busy = db.sessions_being_written()
+        for s in db.open_sessions():
+            if s.session_id in busy:
+                continue  # another process runs it right now: not interrupted
+            schedule = json.loads(s.schedule_json)
+            rows = db.trial_rows(s.session_id)
+            outcomes = [r["outcome"] for r in rows]
+            aborted = sum(o == "aborted" for o in outcomes)
+            out.append({
+                "session_id": s.session_id, "code": s.code, "kind": s.kind, "started_at": s.started_at,
+                # counted as everywhere (study_app.models.session.TrialCount): designed trials done, aborted attempts
+                "trials_planned": sum(1 for t in schedule if t.get("repeat_of") is None),
+                "trials_done": len(outcomes) - aborted, "trials_aborted": aborted, "trials_total": len(schedule),
+                "reruns_run": sum(r["repeat_of"] is not None for r in rows),
+            })
+        return out
+    finally:
+        db.close()

@@ -1,0 +1,204 @@
+"""What the study engine is built from: its configuration, the rig (simulated or real), the simulated stylus's driver.
+
+:func:`build_engine` assembles the :class:`pipeline.runtime.engine.Engine` a
+:class:`HostConfig` asks for -- the simulated rig with its driver, or the real
+rig of a hardware file (devices opened one by one, each announced first).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+from pipeline.commissioning.rig_calibration import CalibrationFileError
+from pipeline.devices.interfaces import DeviceError
+from pipeline.runtime.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
+from pipeline.settings.hardware import HardwareConfig, HardwareError, load_hardware
+from study_app.engine import messages as m
+
+if TYPE_CHECKING:  # the simulated rig's types: a real rig's engine process never loads the simulators
+    from pipeline.sim.hand import HandObservation
+    from pipeline.sim.participant import SimulatedParticipant
+
+__all__ = ["MANUAL_Y_RANGE_M", "HostConfig", "SwitchableDriver", "build_engine", "build_real_engine"]
+
+#: Lowest / highest equilibrium a person may command with the mouse, m along the Touch's +y.
+MANUAL_Y_RANGE_M = (-0.030, 0.005)
+
+
+@dataclass(frozen=True, slots=True)
+class HostConfig:
+    """What the study engine builds.
+
+    Attributes
+    ----------
+    rig
+        ``"sim"`` or ``"real"``.
+    hardware_path
+        hardware.toml for the real rig.
+    haptic_factory
+        Real rig, tests only: ``"module:function"`` opening the haptic device instead of the Touch
+        (called as ``open_haptic(HapticSettings, clock)``; no Touch on CI machines).
+    clock
+        ``"real"`` (1 kHz on the monotonic clock, loop in its own thread) or
+        ``"virtual"`` (rehearsals, screenshots, tests).
+    speed
+        Virtual clock only: simulated seconds per wall second (0 = as fast as the CPU allows).
+    rig_seed
+        Seed of the simulated rig.
+    block_ticks
+        Virtual clock: ticks per driver step.
+    health_period_s
+        Wall time between :class:`study_app.engine.messages.Health` events.
+    trace_jitter
+        Real clock only: explain every loop period over 1.5 ms (:mod:`pipeline.runtime.jitter_trace`),
+        reported in :attr:`study_app.engine.messages.Health.late_periods` (diagnosis and benchmarks).
+    sim_mount_error_deg
+        Simulated rig: the sensor is mounted turned about its z axis by this much, unknown to the pipeline
+        (``SimRigConfig.sensor_z_mount_deg``): rehearse the frame check failing.
+    """
+
+    rig: str = "sim"
+    hardware_path: str | None = None
+    clock: str = "real"
+    haptic_factory: str | None = None
+    speed: float = 1.0
+    rig_seed: int = 0
+    block_ticks: int = 50
+    health_period_s: float = 0.5
+    trace_jitter: bool = False
+    sim_mount_error_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.rig not in ("sim", "real"):
+            raise ValueError(f"rig = {self.rig!r}: allowed values are 'sim' and 'real'")
+        if self.clock not in ("real", "virtual"):
+            raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
+        if self.rig == "real" and self.clock != "real":
+            raise ValueError(f"clock = {self.clock!r}: the real rig runs on the real clock only")
+        if self.haptic_factory is not None and ":" not in self.haptic_factory:
+            raise ValueError(f"haptic_factory = {self.haptic_factory!r}: must be 'module:function'")
+        if not (math.isfinite(self.speed) and self.speed >= 0):
+            raise ValueError(f"speed = {self.speed!r}: must be a finite number ≥ 0")
+        if self.block_ticks < 1:
+            raise ValueError(f"block_ticks = {self.block_ticks!r}: must be ≥ 1")
+
+
+class SwitchableDriver:
+    """The simulated stylus's driver: the simulated participant (autopilot) or a person (manual).
+
+    It is also the session runner's participant: trial notifications always
+    reach the simulated participant, and the participant always sees the
+    observations, so switching back to autopilot mid-session is seamless.
+    """
+
+    def __init__(self) -> None:
+        self.mode = "autopilot"
+        self.participant: SimulatedParticipant | None = None
+        self.manual_y_m = 0.0
+
+    def set_mode(self, mode: str) -> None:
+        """Switch who drives (one of :data:`study_app.engine.messages.DRIVER_MODES`)."""
+        if mode not in m.DRIVER_MODES:
+            raise ValueError(f"driver = {mode!r}: allowed values are {', '.join(m.DRIVER_MODES)}")
+        self.mode = mode
+
+    def set_manual_y(self, y_m: float) -> None:
+        """The person's equilibrium point, clamped to the safe stylus range."""
+        if not math.isfinite(y_m):
+            raise ValueError(f"manual target = {y_m!r}: must be a finite number of metres")
+        lo, hi = MANUAL_Y_RANGE_M
+        self.manual_y_m = min(hi, max(lo, float(y_m)))
+
+    def equilibrium_y(self, obs: HandObservation) -> float:
+        """Equilibrium of the arm this tick."""
+        p = self.participant
+        y = p.equilibrium_y(obs) if p is not None else 0.0
+        return self.manual_y_m if self.mode == "manual" else y
+
+    def begin_trial(self, target_force_n: float, haptic_on: bool, t_s: float) -> None:
+        """Forward the cue to the simulated participant."""
+        if self.participant is not None:
+            self.participant.begin_trial(target_force_n, haptic_on, t_s)
+
+    def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
+        """Forward a training trial to the simulated participant."""
+        if self.participant is not None:
+            self.participant.practice(target_force_n, haptic_on, t_s, live_force_n_visible)
+
+    def end_trial(self, t_s: float) -> None:
+        """Forward the end of a trial."""
+        if self.participant is not None:
+            self.participant.end_trial(t_s)
+
+
+def _import_factory(spec: str) -> Callable[..., Any]:
+    import importlib
+
+    module, _, attr = spec.partition(":")
+    try:
+        return getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise RuntimeError(f"haptic_factory = {spec!r}: cannot be imported ({exc})") from None
+
+
+def build_real_engine(
+    config: HostConfig, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
+) -> tuple[Engine, HardwareConfig, str]:
+    """Load the hardware file, open the devices and assemble the loop
+    (:func:`pipeline.runtime.engine.build_hardware_engine`).
+
+    Returns the engine, the validated hardware config and the file's text (stored with each session).
+    ``on_open(device)`` is called before each device is opened.
+
+    Raises
+    ------
+    RuntimeError
+        One line: the file is missing or invalid (naming the field), or a device cannot be opened (naming it).
+    """
+    if not config.hardware_path:
+        raise RuntimeError("real rig: no hardware file given; pass --hardware FILE (see hardware.example.toml)")
+    try:
+        hw = load_hardware(config.hardware_path)
+        with open(config.hardware_path, encoding="utf-8") as fh:
+            text = fh.read()
+    except HardwareError as exc:
+        raise RuntimeError(f"real rig: {exc}") from None
+    import pipeline.devices.real_rig as hardware_module
+
+    # The rig-construction seam: build_real_rig opens the Touch through pipeline.devices.real_rig.open_haptic.
+    # Tests (no Touch on CI) swap in a device that speaks the HDAPI through the real Touch backend.
+    original = hardware_module.open_haptic
+    if config.haptic_factory is not None:
+        hardware_module.open_haptic = _import_factory(config.haptic_factory)
+    try:
+        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open)
+    except (DeviceError, CalibrationFileError) as exc:
+        raise RuntimeError(f"real rig: {exc}") from None
+    finally:
+        hardware_module.open_haptic = original
+    return eng, hw, text
+
+
+def build_engine(
+    config: HostConfig, driver: SwitchableDriver, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
+) -> tuple[Engine, HardwareConfig | None, str]:
+    """The engine ``config`` asks for: the simulated rig driven by ``driver``, or the real rig of its hardware file.
+
+    Returns the engine, the validated hardware config and the file's text (None and "" for the simulated rig).
+    """
+    if config.rig == "real":
+        return build_real_engine(config, shared_ring=shared_ring, on_open=on_open)
+    from pipeline.sim.rig import SimRigConfig
+
+    eng = build_sim_engine(
+        EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
+                     clock=config.clock, calibrate=True, driver="hold", haptics_on=False, refine_bias=True,
+                     ring_seconds=30.0),
+        shared_ring=shared_ring,
+    )
+    eng.rig.set_driver(driver)
+    return eng, None, ""
+
