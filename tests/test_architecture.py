@@ -116,7 +116,7 @@ def imports_of(module: str, path: Path, known: Mapping[str, Path]) -> list[Impor
     out: list[Import] = []
 
     def add(node: ast.AST, target: str) -> None:
-        out.append(Import(module, _resolve(target, known), node.lineno, _is_within(node, parents)))  # type: ignore[attr-defined]
+        out.append(Import(module, _resolve(target, known), node.lineno, _is_within(node, parents)))
 
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

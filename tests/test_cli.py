@@ -95,7 +95,7 @@ def test_bench_absent_is_one_line(monkeypatch: pytest.MonkeyPatch, capsys: pytes
     assert main(["sessions", "--db", "/no/such.db"]) == 2  # the rest of the command line unaffected
 
 
-def test_bench_with_a_missing_dependency_is_not_masked(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:  # type: ignore[no-untyped-def]
+def test_bench_with_a_missing_dependency_is_not_masked(monkeypatch: pytest.MonkeyPatch, tmp_path) -> None:
     # the registered module exists but imports something absent: a broken install, shown as it is
     (tmp_path / "broken_bench_commands.py").write_text("import no_such_dependency_of_bench\n")
     monkeypatch.syspath_prepend(str(tmp_path))
@@ -106,7 +106,7 @@ def test_bench_with_a_missing_dependency_is_not_masked(monkeypatch: pytest.Monke
 
 @pytest.mark.parametrize("value", ["0", "-2", "two", "1.5"])
 def test_a_bad_worker_count_in_the_environment_is_one_line_and_nothing_runs(
-        value: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path) -> None:  # type: ignore[no-untyped-def]
+        value: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path) -> None:
     monkeypatch.setenv("HAPTIC_STUDY_WORKERS", value)
     assert main(["report", "--db", str(tmp_path / "absent.db"), "--out", str(tmp_path / "rep")]) == 2
     err = capsys.readouterr().err.splitlines()

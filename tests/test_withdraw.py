@@ -35,7 +35,7 @@ GONE = "P02"
 pytestmark = pytest.mark.xdist_group("withdraw")  # one worker builds the study once
 
 
-def _protocol():  # type: ignore[no-untyped-def]
+def _protocol():
     p = default_protocol()
     return dataclasses.replace(p, trials_per_cell=1, ordering="counterbalanced",
                                trial=dataclasses.replace(p.trial, max_trial_s=6.0, pause_s=1.0),
@@ -126,7 +126,7 @@ def _content(db: Path) -> list[str]:
         c.close()
 
 
-def _refused(capsys, db: Path, *argv: str, expect: str, same_bytes: bool = True) -> None:  # type: ignore[no-untyped-def]
+def _refused(capsys, db: Path, *argv: str, expect: str, same_bytes: bool = True) -> None:
     """The command is refused in one line naming ``expect``, exit 2, and the file is byte-identical (or, where the
     refusal comes after the study's lease was taken and given back, holds the same rows)."""
     before = _file_bytes(db) if same_bytes else _content(db)

@@ -24,7 +24,7 @@ from study_app.cli.main import main
 from study_app.headless import SessionInterrupted, resume_session, run_study
 
 
-def _protocol():  # type: ignore[no-untyped-def]
+def _protocol():
     p = default_protocol()
     return dataclasses.replace(p, trials_per_cell=1,
                                training=dataclasses.replace(p.training, seconds_per_target_per_mode=4.0))

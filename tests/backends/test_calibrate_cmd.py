@@ -96,7 +96,7 @@ def put_robot(rtde: FakeRtde, rot: tuple[float, ...], tcp_m: np.ndarray) -> None
     rtde.send(f"pose {tcp_m[0]} {tcp_m[1]} {tcp_m[2]} {rv[0]} {rv[1]} {rv[2]}")
 
 
-def run(argv: list[str], answers) -> tuple[int, dict]:  # type: ignore[no-untyped-def]
+def run(argv: list[str], answers) -> tuple[int, dict]:
     args = build_parser().parse_args(argv)
     buf = io.StringIO()
     with contextlib.redirect_stdout(buf):
@@ -105,7 +105,7 @@ def run(argv: list[str], answers) -> tuple[int, dict]:  # type: ignore[no-untype
 
 
 @pytest.fixture
-def rig(tmp_path):  # type: ignore[no-untyped-def]
+def rig(tmp_path):
     # the box streams at 7 kHz (the Net F/T's fastest RDT rate): the sample-count recordings take a seventh
     with FakeNetFT(rate_hz=7000, initial_records=0) as netft, FakeRtde() as rtde:
         yield netft, rtde, hw_file(tmp_path, netft, rtde)
@@ -218,7 +218,7 @@ def test_from_a_terminal_the_prompts_go_to_stderr_and_stdout_is_only_the_result(
     class Experimenter(io.StringIO):
         """stdin: before each Enter the fake robot is where the experimenter turned the instrument."""
 
-        def readline(self, *_: object) -> str:  # type: ignore[override]
+        def readline(self, *_: object) -> str:
             rot = next(rots, None)
             if rot is None:
                 return "c\n"

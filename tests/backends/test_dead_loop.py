@@ -73,7 +73,7 @@ class Rig:
             real(fx, fy, fz, t_ns)
 
         self.command_force = command_force
-        touch.command_force = command_force  # type: ignore[method-assign]
+        touch.command_force = command_force
 
     def advance(self, now_ns: int) -> None:
         self.robot.advance(now_ns, 0.001)
@@ -107,7 +107,7 @@ class Bench:
         self.loop.start()
         assert self.clock.wait_for_sleeper()
 
-    def ms(self, done=None) -> float:  # type: ignore[no-untyped-def]
+    def ms(self, done=None) -> float:
         """One millisecond: the loop's tick (if it can), the Touch's servo tick, the supervisor's look; |F| rendered."""
         self.clock.step(MS, done)
         self.hd.tick()
@@ -128,7 +128,7 @@ class Bench:
 
 
 @pytest.fixture
-def bench():  # type: ignore[no-untyped-def]
+def bench():
     b = Bench()
     try:
         yield b

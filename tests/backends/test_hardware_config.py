@@ -354,7 +354,7 @@ def _assert_well_typed(hw: HardwareConfig) -> None:
             assert not (isinstance(v, bool) and "bool" not in str(default)), (name, v)
             if isinstance(v, tuple):
                 assert all(type(x) is float for x in v), (name, v)
-    assert type(hw.sensor.port) is int and type(hw.jaw.baud) is int and type(hw.framework.filter_window) is int  # type: ignore[union-attr]
+    assert type(hw.sensor.port) is int and type(hw.jaw.baud) is int and type(hw.framework.filter_window) is int
     assert 0 < hw.framework.f_max_n <= TouchSpec().peak_force_n
     assert host_problem(hw.sensor.host, ipv6=False) is None and host_problem(hw.robot.host) is None
 

@@ -16,7 +16,7 @@ from pipeline.devices.interfaces import JawActuator
 WAIT_S = 2.0
 
 
-def wait_until(cond, timeout_s: float = WAIT_S) -> bool:  # type: ignore[no-untyped-def]
+def wait_until(cond, timeout_s: float = WAIT_S) -> bool:
     """Poll a condition the reader thread will make true (bounded socket-style wait)."""
     deadline = time.monotonic() + timeout_s
     while not cond():

@@ -30,7 +30,7 @@ WAIT_S = 2.0  # upper bound of every socket wait; each returns as soon as the da
 
 def open_sensor(fake: FakeNetFT, **kw: object) -> NetFTForceSensor:
     kw.setdefault("connect_timeout_s", 1.0)
-    return NetFTForceSensor("127.0.0.1", port=fake.udp_port, http_port=fake.http_port, **kw)  # type: ignore[arg-type]
+    return NetFTForceSensor("127.0.0.1", port=fake.udp_port, http_port=fake.http_port, **kw)
 
 
 def push(sensor: NetFTForceSensor, fake: FakeNetFT, *datagrams: bytes) -> None:

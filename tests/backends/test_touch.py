@@ -60,7 +60,7 @@ class FakeHD:
     def enable(self, code: int) -> None:
         self.enabled.append(code)
 
-    def schedule(self, callback) -> None:  # type: ignore[no-untyped-def]
+    def schedule(self, callback) -> None:
         self.callback = callback
 
     def start_scheduler(self) -> None:
@@ -190,7 +190,7 @@ def test_init_failure_and_bad_device_limits() -> None:
 def test_missing_openhaptics_names_what_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
     real_import = builtins.__import__
 
-    def no_libhd(name, *args, **kw):  # type: ignore[no-untyped-def]
+    def no_libhd(name, *args, **kw):
         if name.startswith("pyOpenHaptics"):
             raise OSError("libHD.so: cannot open shared object file: No such file or directory")
         return real_import(name, *args, **kw)

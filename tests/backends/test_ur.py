@@ -37,7 +37,7 @@ def open_robot(fake: FakeRtde, **kw: object) -> UrRtdeRobot:
     kw.setdefault("connect_timeout_s", 2.0)
     kw.setdefault("min_backoff_s", 0.05)
     kw.setdefault("max_backoff_s", 0.2)
-    return UrRtdeRobot(fake.host, clock=MonotonicClock(), **kw)  # type: ignore[arg-type]
+    return UrRtdeRobot(fake.host, clock=MonotonicClock(), **kw)
 
 
 def test_reads_pose_rotation_joints_and_controller_time() -> None:

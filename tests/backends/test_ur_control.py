@@ -50,7 +50,7 @@ def open_servo(port: int, fake: FakeControl, clock: VirtualClock, **kw: object) 
         made.append((host, frequency_hz))
         return fake
 
-    servo = UrRtdeServo("127.0.0.1", clock=clock, port=port, control_factory=factory, **kw)  # type: ignore[arg-type]
+    servo = UrRtdeServo("127.0.0.1", clock=clock, port=port, control_factory=factory, **kw)
     assert made == [("127.0.0.1", 125.0)]
     return servo
 
@@ -104,7 +104,7 @@ def test_an_unreachable_controller_is_refused_before_the_control_interface_is_bu
     with pytest.raises(DeviceError, match=rf"^cannot reach the UR controller at 127\.0\.0\.1:{port} for teleoperation "
                                           r"\(Connection refused\); check the IP address"):
         UrRtdeServo("127.0.0.1", port=port, connect_timeout_s=0.3,
-                    control_factory=lambda h, f: built.append(h))  # type: ignore[arg-type,func-returns-value]
+                    control_factory=lambda h, f: built.append(h))
     assert built == []
     with pytest.raises(ValueError, match=r"lookahead_s = 0\.5: servoL allows 0\.03 to 0\.2 s"):
         UrRtdeServo("127.0.0.1", port=port, lookahead_s=0.5)

@@ -17,7 +17,7 @@ from study_app.engine.setup import HostConfig
 
 
 @pytest.fixture
-def engine():  # type: ignore[no-untyped-def]
+def engine():
     events: list[object] = []
     e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
     e.start()
@@ -37,7 +37,7 @@ def rows(db: str, sql: str) -> list[tuple]:
         c.close()
 
 
-def steps_until(e: StudyEngine, pred, n: int = 40_000) -> None:  # type: ignore[no-untyped-def]
+def steps_until(e: StudyEngine, pred, n: int = 40_000) -> None:
     for _ in range(n):
         if pred():
             return

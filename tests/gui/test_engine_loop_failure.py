@@ -44,7 +44,7 @@ def test_a_loop_that_dies_mid_trial_is_stored_and_interrupts_the_session(tmp_pat
                 break
             e.step()
         e.step()
-        e.eng.rig.sensor.read_wrench = _fail  # type: ignore[method-assign]
+        e.eng.rig.sensor.read_wrench = _fail
         e.step()  # a tick raises inside the loop
         assert e.loop_dead == "OSError('Net F/T socket closed')"
         assert e.loop.faults & Fault.LOOP_STALLED and e.eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
@@ -75,7 +75,7 @@ def test_a_dead_loop_thread_on_the_real_clock_is_found_by_the_supervisor() -> No
     try:
         thread = e.loop._thread
         assert thread is not None
-        e.eng.rig.sensor.read_wrench = _fail  # type: ignore[method-assign]
+        e.eng.rig.sensor.read_wrench = _fail
         thread.join(5.0)  # the loop thread dies on its next tick (its ramp-down fails the same way)
         assert not thread.is_alive()
         e.step()  # the driver's regular work: the supervisor looks
@@ -104,14 +104,14 @@ def test_a_frozen_loop_in_a_session_on_the_real_clock_is_latched_and_stored(tmp_
     hang, hanging, thaw = threading.Event(), threading.Event(), threading.Event()
     read = e.eng.rig.sensor.read_wrench
 
-    def read_or_hang():  # type: ignore[no-untyped-def]
+    def read_or_hang():
         if hang.is_set():
             hang.clear()
             hanging.set()
             thaw.wait(10.0)
         return read()
 
-    e.eng.rig.sensor.read_wrench = read_or_hang  # type: ignore[method-assign]
+    e.eng.rig.sensor.read_wrench = read_or_hang
     e.start()
     db = str(tmp_path / "s.db")
     try:

@@ -46,7 +46,7 @@ def answer_input(text: str) -> None:
     QTimer.singleShot(20, fill)
 
 
-def panels(w) -> dict[str, str]:  # type: ignore[no-untyped-def]
+def panels(w) -> dict[str, str]:
     """The session's count as each panel shows it: the progress line, the status bar, the Trials tab."""
     status = w.status.full_text()
     return {"progress": w.progress.count.full_text(), "status bar": status.split(" — ", 1)[-1],
@@ -73,7 +73,7 @@ def test_training_rule_seed_rule_and_one_count_through_a_rerun_quit_and_resume(q
         ("experiment", "running"), ("training", "completed")]
 
 
-def untrained_refused_then_overridden(qtbot, w, db: str) -> None:  # type: ignore[no-untyped-def]
+def untrained_refused_then_overridden(qtbot, w, db: str) -> None:
     """A new participant: training proposed; the experiment refused with the reason; the override runs it."""
     panel = w.setup_panel
     # the menus: each shortcut shown, and what may not be done now disabled, saying why
@@ -107,7 +107,7 @@ def untrained_refused_then_overridden(qtbot, w, db: str) -> None:  # type: ignor
     assert panel.seed.isReadOnly() and "fixed by the database's first session (session 1, P01)" in panel.seed.toolTip()
 
 
-def one_count_through_a_rerun_then_quit(qtbot, w, db: str) -> str:  # type: ignore[no-untyped-def]
+def one_count_through_a_rerun_then_quit(qtbot, w, db: str) -> str:
     """Trial 1 aborted (Esc, Yes), trial 2 done, the re-run cut short by Quit; returns the count left."""
     qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
     seen = panels(w)
@@ -133,7 +133,7 @@ def one_count_through_a_rerun_then_quit(qtbot, w, db: str) -> str:  # type: igno
     return "1 of 2 trials done · 2 aborted · 1 re-run left"
 
 
-def another_seed_refused_then_trained(qtbot, w2, db: str) -> None:  # type: ignore[no-untyped-def]
+def another_seed_refused_then_trained(qtbot, w2, db: str) -> None:
     """A second participant with another seed: refused in the form and by the engine; with the study's seed, the
     training runs and the experiment is proposed and allowed."""
     p2 = w2.setup_panel

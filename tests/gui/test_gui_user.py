@@ -50,7 +50,7 @@ def question(w: ExperimenterWindow, key: str) -> QMessageBox | None:
     return q.box if q is not None and q.open else None
 
 
-def active_trial(w: ExperimenterWindow, index: int):  # type: ignore[no-untyped-def]
+def active_trial(w: ExperimenterWindow, index: int):
     return lambda: (w.model.session.trial is not None and w.model.session.trial.trial_index == index
                     and w.model.session.phase == "active")
 

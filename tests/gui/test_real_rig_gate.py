@@ -59,7 +59,7 @@ def answered(e: StudyEngine, events: list, kinds: tuple, n_before: int, timeout_
 
 
 @pytest.fixture
-def engine(tmp_path):  # type: ignore[no-untyped-def]
+def engine(tmp_path):
     with FakeNetFT(rate_hz=1000, initial_records=0) as netft, FakeRtde() as rtde:
         events: list[object] = []
         e = StudyEngine(HostConfig(rig="real", hardware_path=str(hardware_file(tmp_path, netft, rtde.host)),
@@ -89,17 +89,17 @@ def test_the_chain_in_order_then_the_gate_measures_the_force_at_rest(engine, tmp
     n = len(events)
     e.handle(m.IdentifyTcp(tuple(poses)))
     (done,) = [ev for ev in events[n:] if isinstance(ev, m.TcpCalibrationDone)]
-    assert done.accepted and np.allclose(done.result["tip_in_flange_m"], TIP, atol=1e-5)  # type: ignore[index]
+    assert done.accepted and np.allclose(done.result["tip_in_flange_m"], TIP, atol=1e-5)
     # the robot's poses are now reported at the tip: resting in the divot, the tip is at the pivot
     wait_for(e, lambda: np.allclose(e.eng.rig.robot.read_pose().position_m, PIVOT, atol=1e-5))
 
     # -- payload: six well-spread poses (what Record pose would have measured there)
     rots = pose_set("quick")
     n = len(events)
-    e.handle(m.IdentifyPoses(tuple((f"P{k + 1:02d}", rot, tuple(c / CPF for c in counts(rot)))  # type: ignore[misc]
+    e.handle(m.IdentifyPoses(tuple((f"P{k + 1:02d}", rot, tuple(c / CPF for c in counts(rot)))
                                    for k, rot in enumerate(rots)), "quick"))
     (cal,) = [ev for ev in events[n:] if isinstance(ev, m.CalibrationDone)]
-    assert cal.accepted and cal.calibration["mass_kg"] == pytest.approx(MASS, abs=1e-5)  # type: ignore[index]
+    assert cal.accepted and cal.calibration["mass_kg"] == pytest.approx(MASS, abs=1e-5)
 
     # -- frames: tool down, the experimenter pushes 1 N along each base axis
     put(rtde, TOOL_DOWN, PIVOT)

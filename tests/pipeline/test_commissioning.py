@@ -42,7 +42,7 @@ def test_pivot_calibration_recovers_the_simulated_tip_within_half_a_millimetre(s
 
 def test_pivot_calibration_is_exact_on_noise_free_poses() -> None:
     t, q = np.array([0.002, -0.001, 0.25]), np.array([0.3, 0.1, 0.05])
-    poses = [PivotPose(r, tuple(q - np.asarray(r).reshape(3, 3) @ t), f"O{k}")  # type: ignore[arg-type]
+    poses = [PivotPose(r, tuple(q - np.asarray(r).reshape(3, 3) @ t), f"O{k}")
              for k, r in enumerate(pivot_orientations("minimal", TOOL_DOWN))]
     tc = identify_tip(poses)
     assert tc.tip_in_flange_m == pytest.approx(tuple(t), abs=1e-12)
@@ -78,7 +78,7 @@ def test_too_few_orientations_and_a_tip_that_slipped_are_refused() -> None:
         identify_tip(poses[:3])
     slipped = list(poses)
     p = slipped[2]
-    slipped[2] = PivotPose(p.rot_base_flange, (p.position_m[0] + 0.004, *p.position_m[1:]), p.label)  # type: ignore[arg-type]
+    slipped[2] = PivotPose(p.rot_base_flange, (p.position_m[0] + 0.004, *p.position_m[1:]), p.label)
     with pytest.raises(ValueError, match=r"RMS residual 1\.\d\d mm is above 1 mm \(worst O3: "):
         identify_tip(slipped)
 
@@ -87,7 +87,7 @@ def test_too_few_orientations_and_a_tip_that_slipped_are_refused() -> None:
 def test_pivot_calibration_recovers_any_tip_and_pivot(t: list[float], q: list[float]) -> None:
     tt, qq = np.asarray(t) * 1e-3, np.asarray(q)
     rots = pivot_orientations("recommended", TOOL_DOWN)
-    poses = [PivotPose(r, tuple(qq - np.asarray(r).reshape(3, 3) @ tt)) for r in rots]  # type: ignore[arg-type]
+    poses = [PivotPose(r, tuple(qq - np.asarray(r).reshape(3, 3) @ tt)) for r in rots]
     tc = identify_tip(poses)
     assert np.allclose(tc.tip_in_flange_m, tt, atol=1e-9) and np.allclose(tc.pivot_base_m, qq, atol=1e-9)
 
@@ -142,7 +142,7 @@ def _chain(tool: str = "grasper") -> ToolCalibration:
 
 def test_the_gate_names_the_first_missing_step_in_order() -> None:
     full = _chain()
-    rts, rhb = full.frames.rot_tip_sensor, full.frames.rot_haptic_base  # type: ignore[union-attr]
+    rts, rhb = full.frames.rot_tip_sensor, full.frames.rot_haptic_base
     assert full.missing(rts, rhb) == ""
     assert ToolCalibration("grasper").missing(rts, rhb) == (
         "no TCP calibration on record for tool 'grasper': run haptic-study calibrate tcp --rig real --hardware FILE "
@@ -155,7 +155,7 @@ def test_the_gate_names_the_first_missing_step_in_order() -> None:
     assert full.missing(other, rhb).startswith("the frame check on record for tool 'grasper' was made with other "
                                                "[frames] rotations")
     axes = tuple(a if a.axis != "+y" else replace(a, base_angle_deg=92.0, haptic_angle_deg=92.0, passed=False)
-                 for a in full.frames.axes)  # type: ignore[union-attr]
+                 for a in full.frames.axes)
     failed = FrameCheck(axes, rts, rhb)
     assert full.with_step("frames", failed).missing(rts, rhb).startswith(
         "the frame check on record for tool 'grasper' failed (FAIL on +y (92.0° off)")

@@ -70,7 +70,7 @@ def synth_poses(
     out = []
     for i, r in enumerate(rots):
         r = np.asarray(r, dtype=float).reshape(3, 3)
-        w = true_wrench(r, **truth)  # type: ignore[arg-type]
+        w = true_wrench(r, **truth)
         if rng is not None:
             w = w + np.concatenate([rng.normal(size=3) * SIGMA_F, rng.normal(size=3) * SIGMA_T])
         out.append(CalibrationPose(r, tuple(w), label=f"p{i}" if labels else ""))
@@ -94,7 +94,7 @@ def held_out_rms_force(cal: PayloadCalibration, rots: list[np.ndarray], **truth:
     """RMS of |f_ext| after compensating the true non-contact wrench at unseen poses, N."""
     errs = []
     for r in rots:
-        out = cal.compensate(tuple(true_wrench(r, **truth)), frames.as_mat3(r.T))  # type: ignore[arg-type]
+        out = cal.compensate(tuple(true_wrench(r, **truth)), frames.as_mat3(r.T))
         errs.append(math.hypot(*out[:3]))
     return math.sqrt(float(np.mean(np.square(errs))))
 
@@ -210,7 +210,7 @@ def test_noise_free_recovery_for_any_payload(
 ) -> None:
     mount = Rotation.from_rotvec(mount_vec).as_matrix()
     truth = dict(mass=mass, com=com, f_bias=f_bias, t_bias=t_bias, mount=mount)
-    cal = identify_payload(synth_poses(recommended_pose_set(12, seed=seed), **truth))  # type: ignore[arg-type]
+    cal = identify_payload(synth_poses(recommended_pose_set(12, seed=seed), **truth))
     assert cal.mass_kg == pytest.approx(mass, abs=1e-9)
     np.testing.assert_allclose(cal.com_m, com, atol=1e-9)
     np.testing.assert_allclose(cal.force_bias_n, f_bias, atol=1e-9)
@@ -255,7 +255,7 @@ def test_ten_poses_with_gravity_along_z_and_only_yaw_are_rank_9() -> None:
     assert exc.value.rank == 9 and "rank 9" in msg
     assert "all 10 poses have gravity along the sensor ±z axis (tool up / tool down)" in msg
     assert "tilt the tool at least 45° about the sensor x and y axes" in msg
-    assert math.isinf(exc.value.condition_number) or exc.value.condition_number > 1e12  # type: ignore[operator]
+    assert math.isinf(exc.value.condition_number) or exc.value.condition_number > 1e12
 
 
 def test_two_poses_are_too_few_even_when_orthogonal() -> None:
@@ -398,7 +398,7 @@ def test_gravity_wrench_and_compensate_match_numpy_reference(
         com_m=com,
         force_bias_n=fb,
         torque_bias_nm=tb,
-        gravity_matrix=tuple(a),  # type: ignore[arg-type]
+        gravity_matrix=tuple(a),
         model="affine",
         rank=10,
         condition_number=1.0,
@@ -454,7 +454,7 @@ def test_mounted_payload_is_the_same_model_from_the_tip_orientation(
 
     cal = PayloadCalibration(
         mass_kg=1.0, com_m=com, force_bias_n=fb, torque_bias_nm=tb,
-        gravity_matrix=tuple(a),  # type: ignore[arg-type]
+        gravity_matrix=tuple(a),
         model="affine", rank=10, condition_number=1.0, residuals=(),
         rms_force_residual_n=0.0, rms_torque_residual_nm=0.0, mount_angle_deg=0.0,
         gravity_base=gravity,
@@ -691,7 +691,7 @@ def test_rls_covariance_stays_bounded_over_a_long_constant_run() -> None:
 def test_rls_rejects_bad_arguments_by_name(kwargs: dict[str, object], name: str) -> None:
     args: dict[str, object] = {"initial_force_bias_n": (0.0,) * 3, "initial_torque_bias_nm": (0.0,) * 3} | kwargs
     with pytest.raises(ValueError, match=name):
-        RlsBias(**args)  # type: ignore[arg-type]
+        RlsBias(**args)
 
 
 def test_rls_tracks_drift_from_a_calibration_in_closed_loop() -> None:

@@ -212,7 +212,7 @@ def test_a_stall_counts_missed_slots_and_keeps_the_deadline_grid():
         if loop.tick_count == 100:
             clock.advance(3_500_000)  # tick 100 takes 3.5 ms
 
-    eng.rig.advance = stalling_advance  # type: ignore[method-assign]
+    eng.rig.advance = stalling_advance
     loop.run(max_ticks=200)
 
     times = row_times_ns(all_rows(eng))

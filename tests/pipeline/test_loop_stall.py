@@ -50,7 +50,7 @@ def test_a_tick_later_than_the_command_timeout_restarts_the_output_from_zero() -
     eng.loop.run_ticks(1)
     assert eng.rig.haptic.applied_force_n == (0.0, 0.0, 0.0)  # what the Touch rendered on the late tick
     # the output ramps in from zero: one ramp-in step (a late tick counts as at most 5 ms), not back to the old force
-    assert eng.loop.last_record["gain"] == pytest.approx(0.005 / 0.5)  # type: ignore[index]
+    assert eng.loop.last_record["gain"] == pytest.approx(0.005 / 0.5)
     assert render(eng) < 0.02 * before
     (ev,) = [e for e in eng.loop.events if e.kind == "output_restarted"]
     assert ev.detail.startswith("no loop tick for 21.0 ms: the haptic device's command watchdog (10 ms) had dropped")
@@ -84,7 +84,7 @@ def test_a_ramp_down_then_a_pause_is_not_a_stall() -> None:
 
 def test_the_ramp_down_commands_zero_even_when_its_ticks_fail() -> None:
     eng = pressing()
-    eng.rig.sensor.read_wrench = lambda: (_ for _ in ()).throw(OSError("socket closed"))  # type: ignore[method-assign]
+    eng.rig.sensor.read_wrench = lambda: (_ for _ in ()).throw(OSError("socket closed"))
     with pytest.raises(OSError):
         eng.loop.ramp_down()
     assert eng.rig.haptic.output.commanded == (0.0, 0.0, 0.0)
@@ -94,7 +94,7 @@ def test_a_loop_that_dies_stops_the_teleoperated_robot_through_its_ramp_down() -
     t = Teleop()
     t.engage_and_move()
     stops = t.robot.servo_stops
-    t.eng.rig.sensor.read_wrench = lambda: (_ for _ in ()).throw(OSError("socket closed"))  # type: ignore[method-assign]
+    t.eng.rig.sensor.read_wrench = lambda: (_ for _ in ()).throw(OSError("socket closed"))
     with pytest.raises(OSError):
         t.loop.run(max_ticks=10)  # the thread's body: a tick raises, its finally ramps down
     assert t.robot.servo_stops == stops + 1 and t.ctl.state is TeleopState.FAULT

@@ -65,7 +65,7 @@ def test_given_params_are_used_and_noise_still_comes_from_the_seed() -> None:
 def test_seed_must_be_a_non_negative_integer() -> None:
     for bad in (-1, 1.5, "3", True):
         with pytest.raises(ValueError):
-            SimulatedParticipant(seed=bad)  # type: ignore[arg-type]
+            SimulatedParticipant(seed=bad)
 
 
 def test_bad_target_is_rejected() -> None:

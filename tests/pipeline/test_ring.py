@@ -62,7 +62,7 @@ def created_segments(monkeypatch):
     made: list[str] = []
     real = shared_memory.SharedMemory
 
-    class Recording(real):  # type: ignore[misc, valid-type]
+    class Recording(real):
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
             if kwargs.get("create"):
@@ -419,7 +419,7 @@ def test_second_process_attaches_by_name_and_its_exit_keeps_the_segment(shared_r
     assert not os.path.exists(_shm_path(name))
 
 
-def _create_ring_and_die(conn) -> None:  # type: ignore[no-untyped-def]
+def _create_ring_and_die(conn) -> None:
     ring = RingBuffer.create(["t"], 4, shared=True)
     ring.write([1.0])
     conn.send(ring.name)  # a pipe write: it has left the process before the kill

@@ -336,7 +336,7 @@ def test_defaults():
         3.0, 50.0, 0.5, 0.04, 0.005,
     )
     with pytest.raises(dataclasses.FrozenInstanceError):
-        cfg.f_max_n = 5.0  # type: ignore[misc]
+        cfg.f_max_n = 5.0
 
 
 @pytest.mark.parametrize("field", FIELDS)

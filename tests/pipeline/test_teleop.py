@@ -58,7 +58,7 @@ class Bench:
 
     def run(self, n: int, **kw: object) -> None:
         for _ in range(n):
-            self.tick(**kw)  # type: ignore[arg-type]
+            self.tick(**kw)
 
     def targets(self) -> list[tuple[float, float, float]]:
         return [c.position_m for _, c in self.log if isinstance(c, ServoTarget)]

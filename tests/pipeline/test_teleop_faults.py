@@ -150,7 +150,7 @@ def test_the_hook_runs_only_when_the_latched_set_changes() -> None:
     t = Teleop()
     calls: list[Fault] = []
     inner = t.driver.on_faults
-    t.driver.on_faults = lambda f: (calls.append(f), inner(f))  # type: ignore[method-assign]
+    t.driver.on_faults = lambda f: (calls.append(f), inner(f))
     t.engage_and_move()
     t.run(500)
     assert calls == []  # fault-free steady state: never called
@@ -196,7 +196,7 @@ def test_a_failing_hook_is_reported_and_the_force_still_ramps_down() -> None:
     def broken(faults: int) -> None:
         raise RuntimeError("servo adapter gone")
 
-    t.driver.on_faults = broken  # type: ignore[method-assign]
+    t.driver.on_faults = broken
     t.loop.submit(OperatorStop())
     t.run(60)
     gone = "the rig could not act on the faults: RuntimeError('servo adapter gone')"

@@ -361,7 +361,7 @@ def test_warm_motors_past_the_budget_latch_haptic_device_and_reset_waits_for_coo
         rearms.append((ok, touch.heat_n2s))
         return ok
 
-    touch.rearm = spy_rearm  # type: ignore[method-assign]
+    touch.rearm = spy_rearm
     # an immediate reset: the motors are still warm, the device refuses to re-arm
     e.loop.submit(ResetFaults())
     recs += ticks(e, 1)

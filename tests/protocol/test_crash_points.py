@@ -177,14 +177,14 @@ def reference(tmp_path_factory: pytest.TempPathFactory) -> tuple[int, list[int]]
 
     mp_env = os.environ.get(CRASH_ENV)
     os.environ[CRASH_ENV] = "commit:0"
-    StudyDatabase.insert_trial = counting  # type: ignore[method-assign]
+    StudyDatabase.insert_trial = counting
     try:
         c0, s0 = crashpoint.commits_seen(), crashpoint.statements_seen()
         _run(str(db), "commit:0", cont=False)
         commits = crashpoint.commits_seen() - c0
         inserts = [i - s0 for i in inserts]
     finally:
-        StudyDatabase.insert_trial = original  # type: ignore[method-assign]
+        StudyDatabase.insert_trial = original
         if mp_env is None:
             os.environ.pop(CRASH_ENV, None)
         else:

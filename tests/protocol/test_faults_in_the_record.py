@@ -28,7 +28,7 @@ LATCHES = {"sensor-stall": "SENSOR_STALE", "nan-burst": "NON_FINITE", "bad-statu
            "stale-pose": "POSE_STALE", "device-error": "HAPTIC_DEVICE"}
 
 
-def short_protocol():  # type: ignore[no-untyped-def]
+def short_protocol():
     p = default_protocol()
     return dataclasses.replace(p, trials_per_cell=1, training=dataclasses.replace(p.training, enabled=False))
 

@@ -133,7 +133,7 @@ def failing_loop(plan: list[tuple[int, str]], done: list[tuple[int, str]]) -> Ca
                 loop.tick()
                 clock.advance(loop.period_ns)
 
-        loop.run_ticks = run_ticks  # type: ignore[method-assign]
+        loop.run_ticks = run_ticks
 
     return tamper
 

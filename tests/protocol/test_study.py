@@ -22,7 +22,7 @@ from study_app.headless import resume_session, run_study
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def short_protocol(trials_per_cell: int = 1, training: bool = False):  # type: ignore[no-untyped-def]
+def short_protocol(trials_per_cell: int = 1, training: bool = False):
     """The paper's protocol with fewer trials (4 per participant), short pauses (the 2 s pause between trials
     only adds ticks to simulate; 0.1 s is above the feedback's ramp-out) and an optional short training block."""
     p = default_protocol()
@@ -286,7 +286,7 @@ def test_a_crashed_worker_stops_the_study_with_one_clear_error(tmp_path: Path) -
 
     db = tmp_path / "crash.db"
 
-    def kill_p02_once_started(p) -> None:  # type: ignore[no-untyped-def]
+    def kill_p02_once_started(p) -> None:
         if p.study_trials_done >= 1:
             for child in multiprocessing.active_children():
                 if child.name == "study-P02" and child.is_alive():
@@ -320,7 +320,7 @@ def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) 
     class Stop(Exception):
         pass
 
-    def fail_once_started(p) -> None:  # type: ignore[no-untyped-def]
+    def fail_once_started(p) -> None:
         if p.study_trials_done >= 1:
             raise Stop
 
@@ -451,7 +451,7 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     db = tmp_path / "raise.db"
     real_process = protocol.session.SessionRunner.process
 
-    def process_then_fail(self, rows, *args):  # type: ignore[no-untyped-def]
+    def process_then_fail(self, rows, *args):
         real_process(self, rows, *args)
         if self._last_t_ns > 3_000_000_000:
             raise RuntimeError("injected by the test 3 s into the participant")
