@@ -18,7 +18,7 @@ from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN
 
-__all__ = ["auto_calibrate", "calibration_duration_ns", "collect_pose"]
+__all__ = ["auto_calibrate", "calibration_duration_ns", "collect_pose", "measure_poses"]
 
 
 def _settle_ticks(settle_s: float) -> int:
@@ -51,6 +51,45 @@ def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "",
     return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]  # six items: mypy cannot count a generator
 
 
+def measure_poses(
+    rig: SimRig,
+    clock: Clock,
+    orientations: Sequence[Mat3],
+    *,
+    samples_per_pose: int = 200,
+    settle_s: float = 0.3,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[CalibrationPose]:
+    """Turn the simulated robot through ``orientations`` (sensor orientations ``rot_base_sensor``) and average the
+    wrench at each, the tool hanging clear of the tissue: the poses an experimenter would record.
+
+    ``progress`` is called with (poses done, total); see :func:`auto_calibrate` for the other parameters.
+    """
+    rots = list(orientations)
+    rts_t = transpose(rig.config.rot_tip_sensor)
+    old_driver = rig.driver
+    # The hand returns the stylus to its start pose: the tip hangs at the
+    # start gap above the tissue, out of contact, while the tool re-orients.
+    rig.set_driver(HoldStill(0.0))
+    settle_ticks = _settle_ticks(settle_s)
+    poses: list[CalibrationPose] = []
+    try:
+        for k, rot_base_sensor in enumerate(rots):
+            rig.robot.set_orientation(mat_mul(rot_base_sensor, rts_t))
+            t = clock.now_ns()
+            for _ in range(settle_ticks):
+                t += 1_000_000
+                clock.sleep_until(t)
+                rig.advance(clock.now_ns())
+            poses.append(collect_pose(rig, clock, samples_per_pose, label=f"P{k + 1:02d}"))
+            if progress is not None:
+                progress(k + 1, len(rots))
+    finally:
+        rig.robot.set_orientation(TOOL_DOWN)
+        rig.set_driver(old_driver)
+    return poses
+
+
 def auto_calibrate(
     rig: SimRig,
     clock: Clock,
@@ -80,25 +119,5 @@ def auto_calibrate(
     (calibration, poses)
     """
     rots = list(orientations) if orientations is not None else recommended_pose_set(24)
-    rts_t = transpose(rig.config.rot_tip_sensor)
-    old_driver = rig.driver
-    # The hand returns the stylus to its start pose: the tip hangs at the
-    # start gap above the tissue, out of contact, while the tool re-orients.
-    rig.set_driver(HoldStill(0.0))
-    settle_ticks = _settle_ticks(settle_s)
-    poses: list[CalibrationPose] = []
-    try:
-        for k, rot_base_sensor in enumerate(rots):
-            rig.robot.set_orientation(mat_mul(rot_base_sensor, rts_t))
-            t = clock.now_ns()
-            for _ in range(settle_ticks):
-                t += 1_000_000
-                clock.sleep_until(t)
-                rig.advance(clock.now_ns())
-            poses.append(collect_pose(rig, clock, samples_per_pose, label=f"P{k + 1:02d}"))
-            if progress is not None:
-                progress(k + 1, len(rots))
-    finally:
-        rig.robot.set_orientation(TOOL_DOWN)
-        rig.set_driver(old_driver)
+    poses = measure_poses(rig, clock, rots, samples_per_pose=samples_per_pose, settle_s=settle_s, progress=progress)
     return identify_payload(poses, model=model), poses

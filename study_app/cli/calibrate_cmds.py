@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from collections.abc import Callable
@@ -31,15 +30,19 @@ from typing import TYPE_CHECKING, Any
 from study_app.cli.argtypes import SEED, add_command, real_number
 from study_app.cli.error import CliError
 
-if TYPE_CHECKING:  # numpy is imported where it is used: ``haptic-study --help`` must not load it
-    pass
+# numpy, and the service that uses it, are imported where they are used: ``haptic-study --help`` must not load them
+if TYPE_CHECKING:
+    from pipeline.commissioning.steps import FramesResult, PayloadResult, TcpResult
 
 __all__ = ["add_calibrate_command", "ask_on_stderr", "cmd_calibrate"]
 
 STEPS = ("tcp", "payload", "frames")
-_PAYLOAD_SETS = ("recommended", "quick", "tool-down only")
-#: Real rig, TCP step: a recorded orientation is refused if the TCP moved more than this while averaging.
-_STILL_M, _STILL_DEG = 0.0002, 0.2
+#: Real rig: how long the TCP is watched for each pivot orientation, s (the robot reports a pose every 8 ms).
+_PIVOT_WATCH_S = 0.3
+#: Real rig, payload step: force samples averaged per pose, the least that must arrive, and how long to wait, s.
+_POSE_SAMPLES, _POSE_MIN_SAMPLES, _POSE_WAIT_S = 1000, 500, 3.0
+#: Real rig, frame check: force samples recorded per push (the Net F/T streams at 1 kHz or more), and the wait, s.
+_PUSH_SAMPLES, _PUSH_WAIT_S = 3000, 4.0
 
 
 def add_calibrate_command(sub: argparse._SubParsersAction) -> None:
@@ -89,9 +92,10 @@ def ask_on_stderr(prompt: str) -> str:
 
 def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_stderr) -> int:
     """Run the step; ``ask`` reads the experimenter's answers (real rig); a refusal raises :class:`CliError`."""
+    from pipeline.commissioning.steps import PAYLOAD_POSE_SETS
     from pipeline.commissioning.tcp import PIVOT_POSE_SETS
 
-    allowed = PIVOT_POSE_SETS if args.step == "tcp" else _PAYLOAD_SETS
+    allowed = PIVOT_POSE_SETS if args.step == "tcp" else PAYLOAD_POSE_SETS
     if args.poses is not None and (args.step == "frames" or args.poses not in allowed):
         if args.step == "frames":
             raise CliError(f"--poses = {args.poses!r}: the frames step takes no pose set (it checks +x, +y and +z)")
@@ -113,10 +117,8 @@ def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_s
 
 # -- the simulated rig ---------------------------------------------------------------------------------
 def _sim(args: argparse.Namespace) -> dict[str, Any]:
-    import numpy as np
-
-    from pipeline.runtime.engine import EngineConfig, build_sim_engine
-    from pipeline.sim.rig import SimRigConfig
+    from pipeline.commissioning.steps import frames_step, payload_step, pose_set, tcp_step
+    from pipeline.sim.rig import SimRig, SimRigConfig
 
     sim = SimRigConfig(seed=args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)
     note = f"simulated rig, seed {args.seed}" + (
@@ -125,46 +127,40 @@ def _sim(args: argparse.Namespace) -> dict[str, Any]:
     if args.step == "tcp":
         from pipeline.commissioning.tcp import pivot_orientations
         from pipeline.sim.commissioning import pivot_poses
-        from pipeline.sim.rig import SimRig
         from pipeline.sim.robot import TOOL_DOWN
 
-        rig = SimRig(sim)
         name = args.poses or "recommended"
-        out = _tcp_result(pivot_poses(rig, pivot_orientations(name, TOOL_DOWN)), name, note)
-        if out["accepted"]:
-            truth = np.asarray(sim.tip_in_flange_m)
-            err = float(np.linalg.norm(np.asarray(out["tip_in_flange_m"]) - truth))
-            out["true_tip_in_flange_m"] = truth.tolist()
-            out["error_mm"] = err * 1e3
-            out["text"] += (f"\n  simulated truth ({_mm(truth)}) mm: error {err * 1e3:.3f} mm"
+        tcp = tcp_step(pivot_poses(SimRig(sim), pivot_orientations(name, TOOL_DOWN)), name, sim.tip_in_flange_m)
+        out = _tcp_out(tcp, note)
+        if tcp.accepted:
+            out["true_tip_in_flange_m"] = [float(v) for v in sim.tip_in_flange_m]
+            out["error_mm"] = tcp.error_mm
+            out["text"] += (f"\n  simulated truth ({_mm(sim.tip_in_flange_m)}) mm: error {tcp.error_mm:.3f} mm"
                             "\nAccepted (simulated rig: not saved).")
         return out
     if args.step == "payload":
         from pipeline.runtime.clock import VirtualClock
-        from pipeline.sim.calibration import auto_calibrate
-        from pipeline.sim.rig import SimRig
-        from study_app.engine.commissioning import pose_set
+        from pipeline.sim.calibration import measure_poses
 
         name = args.poses or "recommended"
-        rig = SimRig(sim)
-        rots = pose_set(name)
-        try:
-            cal, _ = auto_calibrate(rig, VirtualClock(), rots)
-        except ValueError as exc:
-            return _refused("payload", name, len(rots), str(exc), note)
-        out = _payload_result(cal, name, note)
-        if out["accepted"]:
+        payload = payload_step(measure_poses(SimRig(sim), VirtualClock(), pose_set(name)), name)
+        out = _payload_out(payload, note)
+        if payload.accepted:
             out["text"] += "\nAccepted (simulated rig: not saved)."
         return out
-    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", haptics_on=False, refine_bias=False, sim=sim))
+    from pipeline.runtime.engine import EngineConfig, build_sim_engine
     from pipeline.sim.commissioning import push_axes
 
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", haptics_on=False, refine_bias=False, sim=sim))
     assert eng.ring is not None
-    check = push_axes(eng.rig, eng.loop, eng.ring)
-    head = (f"Frame and sign check ({note}; payload calibrated automatically first, mount "
-            f"{eng.calibration.mount_angle_deg:.1f}° from [frames]; the simulated experimenter pushes the free tip "
-            "1 N along each base axis):")
-    return _frames_result(check, head, eng.calibration.mount_angle_deg)
+    mount = eng.calibration.mount_angle_deg
+    head = (f"Frame and sign check ({note}; payload calibrated automatically first, mount {mount:.1f}° from "
+            "[frames]; the simulated experimenter pushes the free tip 1 N along each base axis):")
+    return _frames_out(frames_step(push_axes(eng.rig, eng.loop, eng.ring), mount), head)
+
+
+# -- the results, presented ------------------------------------------------------------------------------
+_TITLES = {"tcp": "TCP pivot calibration", "payload": "Payload/bias calibration", "frames": "Frame and sign check"}
 
 
 def _mm(v: Any) -> str:
@@ -177,60 +173,55 @@ def _refused(step: str, name: str, n: int, reason: str, note: str) -> dict[str, 
             "text": f"{_TITLES[step]} ({note}, {n} {what} '{name}'):\nRefused: {reason}"}
 
 
-_TITLES = {"tcp": "TCP pivot calibration", "payload": "Payload/bias calibration", "frames": "Frame and sign check"}
-
-
-def _tcp_result(poses: list[Any], name: str, note: str) -> dict[str, Any]:
-    from pipeline.commissioning.tcp import identify_tip
-
-    try:
-        tc = identify_tip(poses)
-    except ValueError as exc:
-        return _refused("tcp", name, len(poses), str(exc), note)
-    worst = max(tc.residuals, key=lambda r: r[1])
+def _tcp_out(r: TcpResult, note: str) -> dict[str, Any]:
+    tc = r.calibration
+    if tc is None:
+        return _refused("tcp", r.pose_set, r.n_poses, r.reason, note)
+    worst = max(tc.residuals, key=lambda x: x[1])
     text = "\n".join([
-        f"TCP pivot calibration ({note}, {tc.n_poses} orientations" + (f" '{name}'" if name else "") + "):",
+        f"TCP pivot calibration ({note}, {tc.n_poses} orientations" + (f" '{r.pose_set}'" if r.pose_set else "") + "):",
         f"  tip in the flange frame ({_mm(tc.tip_in_flange_m)}) mm",
         f"  pivot (the divot) in the base frame ({_mm(tc.pivot_base_m)}) mm",
         f"  RMS residual {tc.rms_residual_m * 1e3:.3f} mm (worst {worst[0]} {worst[1] * 1e3:.3f} mm); "
         f"the orientations span {tc.spread_deg:.0f}° about every axis across the tip",
     ])
-    return {"step": "tcp", "accepted": True, "pose_set": name, "poses": tc.n_poses, "result": tc.to_dict(),
+    return {"step": "tcp", "accepted": True, "pose_set": r.pose_set, "poses": tc.n_poses, "result": tc.to_dict(),
             "tip_in_flange_m": list(tc.tip_in_flange_m), "pivot_base_m": list(tc.pivot_base_m),
             "rms_residual_mm": tc.rms_residual_m * 1e3, "spread_deg": tc.spread_deg,
-            "residuals_mm": {lab: r * 1e3 for lab, r in tc.residuals}, "text": text}
+            "residuals_mm": {lab: x * 1e3 for lab, x in tc.residuals}, "text": text}
 
 
-def _payload_result(cal: Any, name: str, note: str) -> dict[str, Any]:
-    from study_app.engine.commissioning import calibration_verdict
-
-    reason = calibration_verdict(cal)
+def _payload_out(r: PayloadResult, note: str) -> dict[str, Any]:
+    cal = r.calibration
+    if cal is None:
+        return _refused("payload", r.pose_set, r.n_poses, r.reason, note)
     text = "\n".join([
-        f"Payload/bias calibration ({note}, {len(cal.residuals)} poses '{name}', {cal.model} model):",
+        f"Payload/bias calibration ({note}, {len(cal.residuals)} poses '{r.pose_set}', {cal.model} model):",
         f"  mass {cal.mass_kg:.4f} kg, centre of mass ({_mm(cal.com_m)}) mm in the sensor frame",
         f"  force bias ({', '.join(f'{v:+.3f}' for v in cal.force_bias_n)}) N, sensor mount {cal.mount_angle_deg:.2f}° "
         "from [frames] rot_tip_sensor",
         f"  condition number {cal.condition_number:.1f}, RMS residual {cal.rms_force_residual_n * 1e3:.1f} mN "
         f"(force), {cal.rms_torque_residual_nm * 1e3:.2f} mN·m (torque)",
     ])
-    if reason:
-        text += f"\nRefused: {reason}"
-    return {"step": "payload", "accepted": not reason, "pose_set": name, "poses": len(cal.residuals),
-            "reason": reason, "result": cal.to_dict(), "mass_kg": cal.mass_kg, "condition_number": cal.condition_number,
-            "rms_force_residual_n": cal.rms_force_residual_n, "mount_angle_deg": cal.mount_angle_deg, "text": text}
+    if r.reason:
+        text += f"\nRefused: {r.reason}"
+    return {"step": "payload", "accepted": r.accepted, "pose_set": r.pose_set, "poses": len(cal.residuals),
+            "reason": r.reason, "result": cal.to_dict(), "mass_kg": cal.mass_kg,
+            "condition_number": cal.condition_number, "rms_force_residual_n": cal.rms_force_residual_n,
+            "mount_angle_deg": cal.mount_angle_deg, "text": text}
 
 
-def _frames_result(check: Any, head: str, mount_deg: float | None) -> dict[str, Any]:
-    lines = [head] + [f"  {a.describe()}" for a in check.axes] + [check.summary()]
-    if not check.passed and mount_deg is not None and mount_deg > 5.0:
-        lines[-1] += f" (the payload calibration finds the sensor {mount_deg:.1f}° from its configured mount)"
-    return {"step": "frames", "accepted": check.passed, "passed": check.passed, "result": check.to_dict(),
+def _frames_out(r: FramesResult, head: str) -> dict[str, Any]:
+    check = r.check
+    lines = [head] + [f"  {a.describe()}" for a in check.axes] + [r.summary]
+    return {"step": "frames", "accepted": r.passed, "passed": r.passed, "result": check.to_dict(),
             "axes": [a.to_dict() for a in check.axes], "summary": check.summary(), "text": "\n".join(lines)}
 
 
 # -- the real rig --------------------------------------------------------------------------------------
 def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]:
     from pipeline.commissioning.rig_calibration import CalibrationFileError, RigCalibrationFile
+    from pipeline.commissioning.steps import chain_refusal
     from pipeline.devices.interfaces import DeviceError
     from pipeline.runtime.clock import MonotonicClock
     from pipeline.settings.hardware import HardwareError, load_hardware
@@ -242,62 +233,41 @@ def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]
         raise CliError(str(exc)) from None
     tool = hw.calibration_tool
     record = cal_file.tool(tool)
-    if args.step == "payload" and record.tcp is None:
-        raise CliError(f"calibrate payload: no TCP calibration on record for tool {tool!r}; the chain runs in order: "
-                    "calibrate tcp first")
-    if args.step == "frames" and record.payload is None:
-        raise CliError(f"calibrate frames: no payload calibration on record for tool {tool!r}; the chain runs in "
-                       "order: calibrate payload first")
+    refusal = chain_refusal(record, args.step)
+    if refusal:
+        raise CliError(f"calibrate {args.step}: {refusal}")
     note = f"tool {tool!r}"
     clock = MonotonicClock()
     try:
         if args.step == "tcp":
-            out = _real_tcp(hw, clock, ask, args.poses or "recommended", note)
+            result: Any = _real_tcp(hw, clock, ask, note)
+            out = _tcp_out(result, note)
+            if result.accepted:
+                t = out["tip_in_flange_m"]
+                out["text"] += (f"\n  set the TCP on the pendant to ({_mm(t)}) mm and robot.tcp_offset_m to "
+                                f"[{', '.join(f'{v:.5f}' for v in t)}] (until then the app corrects the poses itself)")
         elif args.step == "payload":
-            out = _real_payload(hw, clock, ask, args.poses or "recommended", note)
+            result = _real_payload(hw, clock, ask, args.poses or "recommended", note)
+            out = _payload_out(result, note)
         else:
-            out = _real_frames(hw, clock, ask, record.payload, note)
+            result = _real_frames(hw, clock, ask, record.payload, note)
+            out = _frames_out(result, f"Frame and sign check ({note}):")
     except DeviceError as exc:
         raise CliError(str(exc)) from None
     except (EOFError, KeyboardInterrupt):
         raise CliError(f"calibrate {args.step}: stopped before the end; nothing was saved") from None
-    if out.pop("save", False):
+    if result.record is not None:  # the service says what goes on record (a failed frame check does too)
         try:
-            cal_file.record(tool, args.step, out.pop("object"))
+            cal_file.record(tool, result.step, result.record)
         except CalibrationFileError as exc:
             raise CliError(str(exc)) from None
         out["saved_to"] = cal_file.path
         out["text"] += f"\nSaved for tool {tool!r} in {cal_file.path}."
-    out.pop("object", None)
     return out
 
 
 def _say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)  # prompts and progress on stderr: stdout is the result (--json)
-
-
-def _still_pose(robot: Any, seconds: float) -> tuple[Any, str]:
-    """Average the TCP position over ``seconds``; (pose, "") or (None, why it is refused)."""
-    import numpy as np
-
-    from study_app.engine.commissioning import rotation_angle_deg
-
-    first = robot.read_pose()
-    pts = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        pts.append(robot.read_pose().position_m)
-        time.sleep(0.004)  # the controller updates every 8 ms: read each state about twice
-    last = robot.read_pose()
-    if not all(math.isfinite(v) for v in last.position_m):
-        return None, "no TCP pose from the robot; check the RTDE connection"
-    p = np.asarray(pts)
-    moved = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-    turned = rotation_angle_deg(first.rot_base_tip, last.rot_base_tip)
-    if moved > _STILL_M or turned > _STILL_DEG:
-        return None, (f"the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; allowed "
-                      f"{_STILL_M * 1e3:g} mm and {_STILL_DEG:g}°): hold it still and record again")
-    return last._replace(position_m=tuple(float(v) for v in p.mean(axis=0))), ""
 
 
 def _sensor_and_robot(hw: Any, clock: Any) -> tuple[Any, Any]:
@@ -312,13 +282,24 @@ def _sensor_and_robot(hw: Any, clock: Any) -> tuple[Any, Any]:
         raise
 
 
-def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
+def _watch_tcp(robot: Any, seconds: float) -> tuple[Any, list[Any], Any]:
+    """The robot's pose before, its TCP positions during ``seconds``, and its pose after (wall clock)."""
+    first = robot.read_pose()
+    pts = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        pts.append(robot.read_pose().position_m)
+        time.sleep(0.004)  # the controller updates every 8 ms: read each state about twice
+    return first, pts, robot.read_pose()
+
+
+def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], note: str) -> TcpResult:
+    from pipeline.commissioning.steps import record_pivot, tcp_step
     from pipeline.commissioning.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG, PivotPose
     from pipeline.devices.real_rig import open_robot
-    from pipeline.force.frames import mat_vec, matrix_to_rotvec
+    from pipeline.force.frames import matrix_to_rotvec
 
-    robot = open_robot(hw.robot, clock)  # the pendant's TCP: poses are turned back into flange poses below
-    off = hw.robot.tcp_offset_m
+    robot = open_robot(hw.robot, clock)  # the pendant's TCP: poses are turned back into flange poses
     poses: list[PivotPose] = []
     _say(f"TCP pivot calibration of {note}: rest the instrument tip in the divot and keep it there. Turn the "
          f"instrument through at least {MIN_PIVOT_POSES} orientations, tilted at least {MIN_SPREAD_DEG:g}° apart in "
@@ -334,37 +315,26 @@ def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: s
                     break
                 _say(f"record at least {MIN_PIVOT_POSES} orientations first ({len(poses)} so far)")
                 continue
-            pose, why = _still_pose(robot, 0.3)
-            if pose is None:
-                _say(f"O{k} not recorded: {why}")
+            first, pts, last = _watch_tcp(robot, _PIVOT_WATCH_S)
+            rp = record_pivot(f"O{k}", pts, first.rot_base_tip, last.rot_base_tip, hw.robot.tcp_offset_m)
+            if not rp.accepted:
+                _say(f"O{k} not recorded: {rp.reason}")
                 continue
-            rot = pose.rot_base_tip
-            d = mat_vec(rot, off)
-            flange = tuple(p - q for p, q in zip(pose.position_m, d, strict=True))
-            poses.append(PivotPose(rot, flange, f"O{k}"))
-            rv = matrix_to_rotvec(rot)
-            _say(f"O{k} recorded: flange at ({_mm(flange)}) mm, rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
-                 f"{rv[2]:+.3f}) rad")
+            poses.append(rp.pose())
+            rv = matrix_to_rotvec(rp.rot_base_flange)
+            _say(f"O{k} recorded: flange at ({_mm(rp.flange_position_m)}) mm, rotation vector ({rv[0]:+.3f}, "
+                 f"{rv[1]:+.3f}, {rv[2]:+.3f}) rad")
     finally:
         robot.close()
-    out = _tcp_result(poses, "", note)
-    if out["accepted"]:
-        t = out["tip_in_flange_m"]
-        out["text"] += (f"\n  set the TCP on the pendant to ({_mm(t)}) mm and robot.tcp_offset_m to "
-                        f"[{', '.join(f'{v:.5f}' for v in t)}] (until then the app corrects the poses itself)")
-        from pipeline.commissioning.tcp import TipCalibration
-
-        out["save"], out["object"] = True, TipCalibration.from_dict(out["result"])
-    return out
+    return tcp_step(poses, "")
 
 
-def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> dict[str, Any]:
+def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, note: str) -> PayloadResult:
     import numpy as np
 
-    from pipeline.commissioning.payload_identification import CalibrationPose, identify_payload
-    from pipeline.force.frames import mat_mul, matrix_to_rotvec, transpose
-    from pipeline.force.payload_compensator import PayloadCalibration
-    from study_app.engine.commissioning import pose_set
+    from pipeline.commissioning.payload_identification import CalibrationPose
+    from pipeline.commissioning.steps import payload_step, pose_set, record_pose, tcp_target
+    from pipeline.force.frames import matrix_to_rotvec
 
     rots = pose_set(name)
     rts = hw.framework.rot_tip_sensor
@@ -375,9 +345,9 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
     try:
         k = 0
         while k < len(rots):
-            target = mat_mul(rots[k], transpose(rts))
-            rv = matrix_to_rotvec(target)
-            line = ask(f"pose P{k + 1:02d} of {len(rots)}: TCP rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
+            label = f"P{k + 1:02d}"
+            rv = matrix_to_rotvec(tcp_target(rots[k], rts))
+            line = ask(f"pose {label} of {len(rots)}: TCP rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
                        f"{rv[2]:+.3f}) rad -- Enter = record, s = skip, c = identify now, q = quit: ").strip().lower()
             if line == "q":
                 raise EOFError
@@ -386,39 +356,36 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
             if line == "s":
                 k += 1
                 continue
-            pose, why = _still_pose(robot, 0.2)
-            samples = sensor.collect(1000, 3.0) if pose is not None else []
-            if pose is None or len(samples) < 500:
-                _say(f"P{k + 1:02d} not recorded: {why or 'the force sensor sent too few samples'}")
+            before = robot.read_pose()
+            samples = sensor.collect(_POSE_SAMPLES, _POSE_WAIT_S)
+            if len(samples) < _POSE_MIN_SAMPLES:
+                _say(f"{label} not recorded: the force sensor sent too few samples")
                 continue
-            w = np.asarray([s[1:7] for s in samples], dtype=float).mean(axis=0)
-            poses.append(CalibrationPose(mat_mul(pose.rot_base_tip, rts), tuple(float(v) for v in w),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
-                                         f"P{k + 1:02d}"))
-            _say(f"P{k + 1:02d} recorded: |F| = {float(np.linalg.norm(w[:3])):.3f} N")
+            rp = record_pose(label, [s[1:7] for s in samples], before, robot.read_pose(), rts, rots[k])
+            if not rp.accepted:
+                _say(f"{label} not recorded: {rp.reason}")
+                continue
+            poses.append(rp.pose())
+            _say(f"{label} recorded: |F| = {float(np.linalg.norm(rp.wrench[:3])):.3f} N")
             k += 1
     finally:
         robot.close()
         sensor.close()
-    try:
-        cal = identify_payload(poses)
-    except ValueError as exc:
-        return _refused("payload", name, len(poses), str(exc), note)
-    out = _payload_result(cal, name, note)
-    if out["accepted"]:
-        out["save"], out["object"] = True, PayloadCalibration.from_dict(out["result"])
-    return out
+    return payload_step(poses, name)
 
 
-def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, note: str) -> dict[str, Any]:
+def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, note: str) -> FramesResult:
     import numpy as np
 
-    from pipeline.commissioning.frame_check import AXES, FrameCheck, check_axis
-    from pipeline.force.framework import HapticFramework
+    from pipeline.commissioning.frame_check import AXES, AxisCheck, check_axis
+    from pipeline.commissioning.steps import frame_check_of, frames_step
+    from pipeline.force.framework import STEP_FIELDS, HapticFramework
 
+    base_at, scaled_at = STEP_FIELDS.index("base_fx"), STEP_FIELDS.index("scaled_fx")
     fw = HapticFramework(hw.framework, payload)
     sensor, robot = _sensor_and_robot(hw, clock)
     words = {"+x": "+x", "+y": "+y", "+z": "+z (up)"}
-    results = []
+    results: dict[str, AxisCheck] = {}
     _say(f"Frame and sign check of {note}: the tip hangs free. At each prompt press Enter, then within 3 s push the "
          "tip gently (about 1 N) along the base axis shown and let go. Feedback stays off.")
     try:
@@ -427,20 +394,18 @@ def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, n
             if line == "q":
                 raise EOFError
             base, scaled = [], []
-            for s in sensor.collect(3000, 4.0):
-                pose = robot.read_pose()
-                fw.set_pose(pose.rot_base_tip)
+            for s in sensor.collect(_PUSH_SAMPLES, _PUSH_WAIT_S):
+                fw.set_pose(robot.read_pose().rot_base_tip)
                 step = fw.step(s[1], s[2], s[3], False, 0.001)
-                base.append(step[9:12])
-                scaled.append(step[15:18])
+                base.append(step[base_at:base_at + 3])
+                scaled.append(step[scaled_at:scaled_at + 3])
             res = check_axis(axis, np.asarray(base).reshape(-1, 3), np.asarray(scaled).reshape(-1, 3),
                              hw.framework.rot_haptic_base)
             _say(res.describe())
-            results.append(res)
+            results[axis] = res
     finally:
         robot.close()
         sensor.close()
-    check = FrameCheck(tuple(results), hw.framework.rot_tip_sensor, hw.framework.rot_haptic_base)
-    out = _frames_result(check, f"Frame and sign check ({note}):", payload.mount_angle_deg)
-    out["save"], out["object"] = True, check  # a failed check is on record too (the gate refuses it, and says so)
-    return out
+    check = frame_check_of(results, hw.framework.rot_tip_sensor, hw.framework.rot_haptic_base)
+    assert check is not None  # every axis was pushed (quitting raised)
+    return frames_step(check, payload.mount_angle_deg)

@@ -1,15 +1,15 @@
-"""Commissioning the rig from the study engine: payload, TCP and frame steps, what is on record, and the session gate.
+"""Commissioning the rig from the study engine: the steps' data gathered from the ring, their results as messages.
 
 :class:`Commissioning` belongs to a :class:`study_app.engine.host.StudyEngine`
-(it sees it as an :class:`study_app.engine.core.EngineCore`) and runs on its driver thread.  On the simulated rig each
-step runs
-automatically; on the real rig the experimenter records poses, pivot
-orientations and axis pushes one at a time, each averaged over a window of
-the ring's records (:class:`_Window`).  Accepted results are put on record for
-the mounted tool (real rig: saved in the rig's calibration file).  Before a
-session starts on the real rig, :meth:`Commissioning.gate` requires the chain
-on record (or the experimenter's reason to start without it) and then, in
-every case, a compensated force at rest below ``REST_MAX_FORCE_N``.
+(it sees it as an :class:`study_app.engine.core.EngineCore`) and runs on its driver thread.  What each step
+decides -- its limits, its verdicts, its refusals, what it puts on record -- is the commissioning service
+:mod:`pipeline.commissioning.steps`, which ``haptic-study calibrate`` presents too; this module only gathers
+the service's inputs and publishes its results.  On the simulated rig each step runs automatically; on the
+real rig the experimenter records poses, pivot orientations and axis pushes one at a time, each averaged over a
+window of the ring's records (:class:`_Window`).  Accepted results are put on record for the mounted tool (real
+rig: saved in the rig's calibration file).  Before a session starts on the real rig, :meth:`Commissioning.gate`
+requires the chain on record (or the experimenter's reason to start without it) and then, in every case, a
+compensated force at rest below ``REST_MAX_FORCE_N``.
 """
 
 from __future__ import annotations
@@ -22,16 +22,33 @@ from typing import Any
 import numpy as np
 
 from pipeline.commissioning.frame_check import AXES, AxisCheck, FrameCheck, check_axis
-from pipeline.commissioning.payload_identification import (
-    CalibrationPose,
-    DegeneratePoseSetError,
-    identify_payload,
-    recommended_pose_set,
-)
+from pipeline.commissioning.payload_identification import CalibrationPose
 from pipeline.commissioning.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
-from pipeline.commissioning.tcp import PivotPose, identify_tip, pivot_orientations
-from pipeline.force.frames import Mat3, as_mat3, axis_angle, mat_mul
-from pipeline.force.payload_compensator import PayloadCalibration
+from pipeline.commissioning.steps import (
+    CALIBRATION_MAX_CONDITION,
+    CALIBRATION_MAX_RMS_FORCE_N,
+    REST_CHECK_S,
+    REST_MAX_FORCE_N,
+    PayloadResult,
+    TcpResult,
+    calibration_verdict,
+    chain_refusal,
+    frame_check_of,
+    frames_step,
+    payload_step,
+    pose_set,
+    record_pivot,
+    record_pose,
+    rest_check_note,
+    rest_force_n,
+    rest_verdict,
+    robot_pose_refusal,
+    rotation_angle_deg,
+    sensor_stalled,
+    tcp_step,
+)
+from pipeline.commissioning.tcp import PivotPose, pivot_orientations
+from pipeline.force.frames import Mat3, check_rotation
 from pipeline.runtime.clock import MonotonicClock
 from pipeline.runtime.loop_messages import SetCalibration
 from study_app.engine import messages as m
@@ -42,65 +59,36 @@ __all__ = [
     "calibration_verdict", "check_target", "pose_set", "rotation_angle_deg",
 ]
 
-#: The wizard refuses a pose set whose (column-scaled) regressor is worse conditioned than this.
-CALIBRATION_MAX_CONDITION = 1000.0
-#: ... or whose fit leaves more than this RMS force residual (a pose in contact, a loose tool).
-CALIBRATION_MAX_RMS_FORCE_N = 0.05
-#: A calibration pose is refused if the TCP turned more than this, or moved more than the next, while averaging.
-POSE_STILL_DEG = 0.5
-POSE_STILL_M = 0.002
-#: ... or if a force sample older than this was averaged (the sensor stalled).
-POSE_MAX_SENSOR_AGE_S = 0.05
-#: Real rig: a session starts only if the compensated force at rest, averaged over this long, is below the next.
-REST_CHECK_S = 2.0
-REST_MAX_FORCE_N = 0.1
-#: Real rig, TCP pivot step: a recorded orientation is refused if the TCP moved more than this while averaging.
-PIVOT_STILL_M = 0.0002
-PIVOT_STILL_DEG = 0.2
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
-
-
-def rotation_angle_deg(a: Mat3, b: Mat3) -> float:
-    """The angle of the rotation taking orientation ``a`` to ``b``, degrees (0–180)."""
-    ra, rb = np.asarray(a, dtype=float).reshape(3, 3), np.asarray(b, dtype=float).reshape(3, 3)
-    c = (float(np.trace(ra.T @ rb)) - 1.0) / 2.0
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
-
-
-def pose_set(name: str) -> list[Mat3]:
-    """Sensor orientations ``rot_base_sensor`` of a named calibration pose set.
-
-    ``recommended``: 24 well-spread tilts (science.md §1.2); ``quick``: 6;
-    ``tool-down only``: 6 yaws about the vertical with the tool pointing down,
-    which leave gravity fixed in the sensor frame -- a degenerate set the
-    wizard must refuse (kept so an experimenter can see what a refusal says).
-    """
-    if name == "recommended":
-        return recommended_pose_set(24)
-    if name == "quick":
-        return recommended_pose_set(6)
-    if name == "tool-down only":
-        down = recommended_pose_set(24)[0]
-        return [mat_mul(axis_angle((0.0, 0.0, 1.0), k * 0.5), down) for k in range(6)]
-    raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.POSE_SETS)}")
+_TIP = ("tip_x_m", "tip_y_m", "tip_z_m")
+_COMP = ("comp_fx", "comp_fy", "comp_fz")
+_BASE_SCALED = ("base_fx", "base_fy", "base_fz", "scaled_fx", "scaled_fy", "scaled_fz")
+#: How long the experimenter may ask each real-rig recording to average (the command's ``seconds``), s.
+_SECONDS = {"RecordPose": (0.1, 10.0), "RecordPivot": (0.1, 5.0), "RecordFrameAxis": (0.5, 10.0)}
 
 
 def check_target(rows: Any) -> Mat3:
     """A requested pose's ``rot_base_sensor`` (validated)."""
-    from pipeline.force.frames import check_rotation
-
     return check_rotation(rows, "target_rot_base_sensor")
 
 
-def calibration_verdict(cal: PayloadCalibration) -> str:
-    """Empty if the calibration is acceptable, else the reason it is refused."""
-    if cal.condition_number > CALIBRATION_MAX_CONDITION:
-        return (f"condition number {cal.condition_number:.3g} is above {CALIBRATION_MAX_CONDITION:g}: the poses do not "
-                "vary the tool's orientation enough; use the recommended set")
-    if cal.rms_force_residual_n > CALIBRATION_MAX_RMS_FORCE_N:
-        return (f"RMS force residual {cal.rms_force_residual_n:.3g} N is above {CALIBRATION_MAX_RMS_FORCE_N:g} N: "
-                "a pose was in contact or the tool moved; check the tool hangs free and repeat")
-    return ""
+def _check_seconds(command: str, seconds: float) -> None:
+    lo, hi = _SECONDS[command]
+    if not (math.isfinite(seconds) and lo <= seconds <= hi):
+        raise ValueError(f"record seconds = {seconds!r}: allowed {lo:g} to {hi:g} s")
+
+
+def _calibration_done(r: PayloadResult) -> m.CalibrationDone:
+    """The payload step's result as the wizard's message."""
+    cal = r.calibration
+    if cal is None:
+        return m.CalibrationDone(False, r.reason, r.pose_set, r.n_poses, r.condition_number, math.nan, math.nan, [],
+                                 None)
+    return m.CalibrationDone(
+        r.accepted, r.reason, r.pose_set, r.n_poses, cal.condition_number, cal.rms_force_residual_n,
+        cal.rms_torque_residual_nm, [(x.label, x.force_residual_n, x.torque_residual_nm) for x in cal.residuals],
+        cal.to_dict(),
+    )
 
 
 @dataclass
@@ -147,6 +135,7 @@ class Commissioning:
         override, self._override = self._override, None
         return override
 
+    # -- payload ------------------------------------------------------------------------------------------------
     def record_pose(self, cmd: m.RecordPose) -> None:
         """Real rig: average the raw wrench over ``cmd.seconds`` at the robot's pose (it must stand still)."""
         e = self.engine
@@ -158,82 +147,48 @@ class Commissioning:
             raise RuntimeError(f"record pose: pose {busy.label} is still being recorded")
         if not cmd.label.strip():
             raise ValueError("pose label = '': must name the pose")
-        if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 10.0):
-            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.1 to 10 s")
-        target = None
-        if cmd.target_rot_base_sensor is not None:
-            target = check_target(cmd.target_rot_base_sensor)
-        now = e.eng.clock.now_ns()
-        pose0 = e.eng.rig.robot.read_pose()
-        if not all(math.isfinite(x) for x in pose0.position_m):
-            raise RuntimeError("robot: no TCP pose received yet; check the RTDE connection (Devices tab)")
-        age_s = (now - pose0.t_ns) * 1e-9
-        if age_s > 0.5:
-            raise RuntimeError(f"robot: the newest TCP pose is {age_s:.1f} s old; check the RTDE connection")
-        label = cmd.label
+        _check_seconds("RecordPose", cmd.seconds)
+        target = check_target(cmd.target_rot_base_sensor) if cmd.target_rot_base_sensor is not None else None
+        robot = e.eng.rig.robot
+        pose0 = robot.read_pose()
+        refusal = robot_pose_refusal(pose0, e.eng.clock.now_ns())
+        if refusal:
+            raise RuntimeError(f"{refusal} (Devices tab)")
+        label, rot_tip_sensor = cmd.label, e.eng.framework.config.rot_tip_sensor
 
         def done(cols: dict[str, np.ndarray]) -> None:
-            self._pose_recorded(label, pose0, target, np.stack([cols[c] for c in _RAW_WRENCH], axis=1))
+            w = np.stack([cols[c] for c in _RAW_WRENCH], axis=1)
+            rp = record_pose(label, w, pose0, robot.read_pose(), rot_tip_sensor, target)
+            if not rp.accepted:
+                e.publish(m.CommandRefused("RecordPose", f"pose {label}: {rp.reason}"))
+                return
+            e.publish(m.PoseRecorded(label, rp.samples, rp.wrench, rp.rot_base_sensor, rp.tcp_position_m,
+                                     rp.off_target_deg, rp.force_std_n))
 
         # average only records written after this command (the window drains everything up to now first)
         self._open_window("RecordPose", cmd.seconds, _RAW_WRENCH, done, label=label,
                           stalled=f"pose {label}: the force sensor stalled while recording (check the Devices tab) "
                                   "— record it again")
 
-    def _pose_recorded(self, label: str, pose0: Any, target: Mat3 | None, w: np.ndarray) -> None:
-        e = self.engine
-        pose1 = e.eng.rig.robot.read_pose()
-        turned = rotation_angle_deg(pose0.rot_base_tip, pose1.rot_base_tip)
-        moved = math.dist(pose0.position_m, pose1.position_m)
-        if not np.isfinite(w).all():
-            reason = "the force sensor gave non-finite readings"
-        elif not (turned <= POSE_STILL_DEG and moved <= POSE_STILL_M):
-            reason = (f"the robot moved while recording ({turned:.2f}°, {moved * 1e3:.1f} mm; allowed "
-                      f"{POSE_STILL_DEG:g}° and {POSE_STILL_M * 1e3:g} mm) — let it stand still and record again")
-        else:
-            reason = ""
-        if reason:
-            e.publish(m.CommandRefused("RecordPose", f"pose {label}: {reason}"))
-            return
-        rot_base_sensor = mat_mul(pose1.rot_base_tip, e.eng.framework.config.rot_tip_sensor)
-        mean = w.mean(axis=0)
-        e.publish(m.PoseRecorded(
-            label=label, samples=len(w), wrench=tuple(float(x) for x in mean),  # type: ignore[arg-type]  # six items: mypy cannot count a generator
-            rot_base_sensor=as_mat3(rot_base_sensor),
-            tcp_position_m=tuple(float(x) for x in pose1.position_m),  # type: ignore[arg-type]  # three items, likewise
-            off_target_deg=rotation_angle_deg(target, rot_base_sensor) if target is not None else math.nan,
-            force_std_n=float(np.std(np.linalg.norm(w[:, :3], axis=1))),
-        ))
-
     def identify(self, cmd: m.IdentifyPoses) -> None:
+        """Real rig: identify the payload from the recorded poses; install and record an accepted one."""
         if not self.engine.real:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self.engine.require_idle("calibrate")
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
-        self.engine.publish(self._judged(cmd.pose_set, len(poses), lambda: (identify_payload(poses), len(poses))))
+        self.engine.publish(self._installed(payload_step(poses, cmd.pose_set)))
 
-    def _judged(self, name: str, n_poses: int,
-                identify: Callable[[], tuple[PayloadCalibration, int]]) -> m.CalibrationDone:
-        """Identify (``identify`` gives the calibration and how many poses it used), judge, install an accepted one."""
-        try:
-            cal, n_used = identify()
-        except DegeneratePoseSetError as exc:
-            return m.CalibrationDone(False, str(exc), name, n_poses, float(exc.condition_number or math.inf),
-                                     math.nan, math.nan, [], None)
-        reason = calibration_verdict(cal)
-        if reason == "":
-            self.engine.calibration = cal
-            self.engine.loop.submit(SetCalibration(cal))
-            self._record_step("payload", cal)
-        return m.CalibrationDone(
-            reason == "", reason, name, n_used, cal.condition_number, cal.rms_force_residual_n,
-            cal.rms_torque_residual_nm, [(r.label, r.force_residual_n, r.torque_residual_nm) for r in cal.residuals],
-            cal.to_dict(),
-        )
+    def _installed(self, result: PayloadResult) -> m.CalibrationDone:
+        """Install and record an accepted payload calibration; the result as the wizard's message."""
+        if result.record is not None:
+            self.engine.calibration = result.record
+            self.engine.loop.submit(SetCalibration(result.record))
+            self._record_step(result.step, result.record)
+        return _calibration_done(result)
 
     def calibrate(self, name: str) -> None:
         """Simulated rig: run the pose set automatically (the loop paused), identify, judge, install."""
-        from pipeline.sim.calibration import auto_calibrate
+        from pipeline.sim.calibration import measure_poses
 
         self.engine.require_idle("calibrate")
         rots = pose_set(name)
@@ -245,21 +200,18 @@ class Commissioning:
             self.engine.loop.ramp_down()
             clock = self.engine.loop.clock
         self.engine.drain_ring()
-
-        def run_poses() -> tuple[PayloadCalibration, int]:
+        try:
             assert self.engine.eng.simulated
-            cal, used = auto_calibrate(
+            poses = measure_poses(
                 self.engine.eng.rig, clock, rots,
                 progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
             )
-            return cal, len(used)
-
-        try:
-            result = self._judged(name, len(rots), run_poses)
+            result = self._installed(payload_step(poses, name))
         finally:
             self.engine.after_loop_pause(real)
         self.engine.publish(result)
 
+    # -- what is on record --------------------------------------------------------------------------------------
     def _tool_record(self) -> ToolCalibration:
         eng = self.engine.eng
         if not eng.simulated:
@@ -306,7 +258,9 @@ class Commissioning:
                                            "rest_force_n": self._override[2]}
         return out
 
+    # -- TCP ----------------------------------------------------------------------------------------------------
     def calibrate_tcp(self, name: str) -> None:
+        """Simulated rig: the simulated robot turns the instrument about the divot; fit, judge, record."""
         from pipeline.sim.commissioning import pivot_poses
         from pipeline.sim.robot import TOOL_DOWN
 
@@ -317,56 +271,53 @@ class Commissioning:
         if name not in m.PIVOT_SETS:
             raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.PIVOT_SETS)}")
         rig = self.engine.eng.rig
-        self._tcp_identified(pivot_poses(rig, pivot_orientations(name, TOOL_DOWN)), name, rig.config.tip_in_flange_m)
+        poses = pivot_poses(rig, pivot_orientations(name, TOOL_DOWN))
+        self._tcp_done(tcp_step(poses, name, rig.config.tip_in_flange_m))
 
-    def _tcp_identified(self, poses: list[PivotPose], name: str, truth: Any = None) -> None:
-        try:
-            tc = identify_tip(poses)
-        except ValueError as exc:
-            self.engine.publish(m.TcpCalibrationDone(False, str(exc), name, len(poses), None))
-            return
-        err = math.dist(tc.tip_in_flange_m, truth) * 1e3 if truth is not None else math.nan
-        self._record_step("tcp", tc)
-        self.engine.publish(m.TcpCalibrationDone(True, "", name, tc.n_poses, tc.to_dict(), err))
+    def _tcp_done(self, r: TcpResult) -> None:
+        if r.record is not None:
+            self._record_step(r.step, r.record)
+        self.engine.publish(m.TcpCalibrationDone(r.accepted, r.reason, r.pose_set, r.n_poses,
+                                                 r.record.to_dict() if r.record is not None else None, r.error_mm))
 
     def record_pivot(self, cmd: m.RecordPivot) -> None:
+        """Real rig: average the TCP position over ``cmd.seconds`` with the tip in the divot (it must stand still)."""
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self.engine.require_idle("record orientation")
-        if not (math.isfinite(cmd.seconds) and 0.1 <= cmd.seconds <= 5.0):
-            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.1 to 5 s")
+        _check_seconds("RecordPivot", cmd.seconds)
         robot = self.engine.eng.rig.robot
         pose0 = robot.read_pose()
-        if not all(math.isfinite(x) for x in pose0.position_m):
-            raise RuntimeError("robot: no TCP pose received yet; check the RTDE connection (Devices tab)")
+        refusal = robot_pose_refusal(pose0)
+        if refusal:
+            raise RuntimeError(f"{refusal} (Devices tab)")
         label = cmd.label
+        # the TCP the ring's positions are at: the one on record (the robot's poses were moved to it), else the
+        # pendant's
+        hw = self.engine.hardware
+        tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
+            hw.robot.tcp_offset_m if hw is not None else (0.0, 0.0, 0.0))
 
         def done(cols: dict[str, np.ndarray]) -> None:
-            p = np.stack([cols["tip_x_m"], cols["tip_y_m"], cols["tip_z_m"]], axis=1)
-            pose1 = robot.read_pose()
-            moved = float(np.max(np.linalg.norm(p - p.mean(axis=0), axis=1)))
-            turned = rotation_angle_deg(pose0.rot_base_tip, pose1.rot_base_tip)
-            if not (moved <= PIVOT_STILL_M and turned <= PIVOT_STILL_DEG):
-                self.engine.publish(m.CommandRefused("RecordPivot", (
-                    f"orientation {label}: the robot moved while recording ({moved * 1e3:.2f} mm, {turned:.2f}°; "
-                    f"allowed {PIVOT_STILL_M * 1e3:g} mm and {PIVOT_STILL_DEG:g}°) — hold it still and record again")))
+            p = np.stack([cols[c] for c in _TIP], axis=1)
+            rp = record_pivot(label, p, pose0.rot_base_tip, robot.read_pose().rot_base_tip, tip)
+            if not rp.accepted:
+                self.engine.publish(m.CommandRefused("RecordPivot", f"orientation {label}: {rp.reason}"))
                 return
-            rot = pose1.rot_base_tip
-            tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
-                self.engine.hardware.robot.tcp_offset_m if self.engine.hardware is not None else (0.0, 0.0, 0.0))
-            off = np.asarray(rot).reshape(3, 3) @ np.asarray(tip)
-            flange = tuple(float(v) for v in p.mean(axis=0) - off)
-            self.engine.publish(m.PivotRecorded(label, as_mat3(rot), flange, moved * 1e3))  # type: ignore[arg-type]  # flange: three items, likewise
+            self.engine.publish(m.PivotRecorded(label, rp.rot_base_flange, rp.flange_position_m, rp.moved_mm))
 
-        self._open_window("RecordPivot", cmd.seconds, ("tip_x_m", "tip_y_m", "tip_z_m"), done)
+        self._open_window("RecordPivot", cmd.seconds, _TIP, done)
 
     def identify_tcp(self, cmd: m.IdentifyTcp) -> None:
+        """Real rig: fit the tip from the recorded orientations; record an accepted one."""
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self.engine.require_idle("TCP calibration")
-        self._tcp_identified([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded")
+        self._tcp_done(tcp_step([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded"))
 
+    # -- frames -------------------------------------------------------------------------------------------------
     def check_frames(self) -> None:
+        """Simulated rig: the simulated experimenter pushes the free tip along each axis (the loop runs)."""
         from pipeline.sim.commissioning import push_axes
 
         if not self.engine.eng.simulated:
@@ -387,41 +338,38 @@ class Commissioning:
         self._frames_done(check)
 
     def _frames_done(self, check: FrameCheck) -> None:
-        self._record_step("frames", check)
-        summary = check.summary()
-        mount = self.engine.calibration.mount_angle_deg
-        if not check.passed and mount > 5.0:
-            summary += f" (the payload calibration finds the sensor {mount:.1f}° from its configured mount)"
-        self.engine.publish(m.FrameCheckDone(check.passed, summary, [a.describe() for a in check.axes]))
+        r = frames_step(check, self.engine.calibration.mount_angle_deg)
+        self._record_step(r.step, r.record)
+        self.engine.publish(m.FrameCheckDone(r.passed, r.summary, [a.describe() for a in check.axes]))
 
     def record_frame_axis(self, cmd: m.RecordFrameAxis) -> None:
+        """Real rig: record ``cmd.seconds`` while the experimenter pushes the free tip along ``cmd.axis``."""
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the pushes run automatically (Run frame check)")
         self.engine.require_idle("frame check")
         if cmd.axis not in AXES:
             raise ValueError(f"axis = {cmd.axis!r}: allowed values are {', '.join(AXES)}")
-        if not (math.isfinite(cmd.seconds) and 0.5 <= cmd.seconds <= 10.0):
-            raise ValueError(f"record seconds = {cmd.seconds!r}: allowed 0.5 to 10 s")
-        if self.tool_cal.payload is None:
-            raise RuntimeError("frame check: no payload calibration on record for tool "
-                               f"{self.tool_cal.tool!r}; the chain runs in order: calibrate the payload first")
+        _check_seconds("RecordFrameAxis", cmd.seconds)
+        refusal = chain_refusal(self.tool_cal, "frames")
+        if refusal:
+            raise RuntimeError(f"frame check: {refusal}")
         axis = cmd.axis
-        rhb = self.frames_in_use()[1]
+        rts, rhb = self.frames_in_use()
 
         def done(cols: dict[str, np.ndarray]) -> None:
-            base = np.stack([cols["base_fx"], cols["base_fy"], cols["base_fz"]], axis=1)
-            scaled = np.stack([cols["scaled_fx"], cols["scaled_fy"], cols["scaled_fz"]], axis=1)
+            base = np.stack([cols[c] for c in _BASE_SCALED[:3]], axis=1)
+            scaled = np.stack([cols[c] for c in _BASE_SCALED[3:]], axis=1)
             res = check_axis(axis, base, scaled, rhb)
             self._frame_axes[axis] = res
             self.engine.publish(m.FrameAxisChecked(axis, res.passed, res.describe(), res.to_dict()))
-            if all(a in self._frame_axes for a in AXES):
-                check = FrameCheck(tuple(self._frame_axes[a] for a in AXES), *self.frames_in_use())
+            check = frame_check_of(self._frame_axes, rts, rhb)
+            if check is not None:
                 self._frame_axes = {}
                 self._frames_done(check)
 
-        self._open_window("RecordFrameAxis", cmd.seconds,
-                          ("base_fx", "base_fy", "base_fz", "scaled_fx", "scaled_fy", "scaled_fz"), done)
+        self._open_window("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done)
 
+    # -- the windows of the ring's records ----------------------------------------------------------------------
     def _open_window(self, command: str, seconds: float, cols: tuple[str, ...],
                      done: Callable[[dict[str, np.ndarray]], None], abandoned: Callable[[], None] | None = None,
                      *, label: str = "", stalled: str = "") -> None:
@@ -438,7 +386,7 @@ class Commissioning:
         for w in list(self._windows):
             sel = rows[rows["t_ns"] >= w.start_ns]
             if len(sel):
-                if float(np.max(sel["sensor_age_ns"])) * 1e-9 > POSE_MAX_SENSOR_AGE_S:
+                if sensor_stalled(sel["sensor_age_ns"]):
                     self._windows.remove(w)
                     again = ("measuring the force at rest (check the Devices tab) — press Start again"
                              if w.command in ("StartSession", "ResumeSession")
@@ -458,6 +406,7 @@ class Commissioning:
                 except (ValueError, RuntimeError) as exc:
                     self.engine.publish(m.CommandRefused(w.command, str(exc)))
 
+    # -- the real rig's session gate ------------------------------------------------------------------------------
     def gate(self, cmd: m.StartSession | m.ResumeSession) -> bool:
         """The real rig's calibration gate; True when the start waits for its rest check (it comes back later).
 
@@ -485,13 +434,10 @@ class Commissioning:
 
         def done(cols: dict[str, np.ndarray]) -> None:
             self._starting = None
-            f = float(math.hypot(*(float(np.mean(cols[c])) for c in ("comp_fx", "comp_fy", "comp_fz"))))
-            if not f < REST_MAX_FORCE_N:
-                self.engine.publish(m.CommandRefused(type(cmd).__name__, (
-                    f"real rig: the compensated force at rest is {f:.3f} N over {REST_CHECK_S:g} s (limit "
-                    f"{REST_MAX_FORCE_N:g} N): the tool touches something, or its payload calibration does not match "
-                    f"the mounted tool {self.tool_cal.tool!r}; keep it clear and still, or calibrate the payload again"
-                    + ("; an override does not waive this check" if reason else ""))))
+            f = rest_force_n(np.stack([cols[c] for c in _COMP], axis=1))
+            refusal = rest_verdict(f, self.tool_cal.tool, overridden=bool(reason))
+            if refusal:
+                self.engine.publish(m.CommandRefused(type(cmd).__name__, f"real rig: {refusal}"))
                 return
             if reason:
                 self._override = (missing, reason, f)
@@ -502,12 +448,9 @@ class Commissioning:
             self._starting = None  # the measurement was abandoned: Start may be pressed again
 
         try:
-            self._open_window(type(cmd).__name__, REST_CHECK_S, ("comp_fx", "comp_fy", "comp_fz"), done, abandoned)
+            self._open_window(type(cmd).__name__, REST_CHECK_S, _COMP, done, abandoned)
         except RuntimeError:
             self._starting = None
             raise
-        self.engine.publish(m.StartChecking(REST_CHECK_S,
-                                            f"calibration on record for tool {self.tool_cal.tool!r}; measuring "
-                                            f"the compensated force at rest for {REST_CHECK_S:g} s — keep the "
-                                            "instrument still and clear of everything"))
+        self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool)))
         return True

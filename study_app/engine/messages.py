@@ -12,6 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.commissioning.steps import PAYLOAD_POSE_SETS
+from pipeline.commissioning.tcp import PIVOT_POSE_SETS
 from pipeline.force.frames import Mat3, Vec3
 from pipeline.force.payload_compensator import Wrench
 from protocol.records import TrialRecord
@@ -73,11 +75,11 @@ __all__ = [
 DRIVER_MODES = ("autopilot", "manual")
 #: The driver reported by the real rig: a person holds the Touch; nothing can be switched.
 REAL_DRIVER = "participant"
-#: Calibration pose sets offered by the wizard (see :func:`study_app.engine.commissioning.pose_set`).
-POSE_SETS = ("recommended", "quick", "tool-down only")
+#: Calibration pose sets offered by the wizard (named once, by :func:`pipeline.commissioning.steps.pose_set`).
+POSE_SETS = PAYLOAD_POSE_SETS
 #: TCP pivot orientation sets the wizard offers on the simulated rig
 #: (:func:`pipeline.commissioning.tcp.pivot_orientations`).
-PIVOT_SETS = ("recommended", "minimal", "roll only")
+PIVOT_SETS = PIVOT_POSE_SETS
 #: What the jaw controls ask for: fully open, fully closed, one step toward open / toward closed.
 JAW_ACTIONS = ("open", "close", "step_open", "step_close")
 
