@@ -112,8 +112,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
     if args.db is not None and not os.path.isfile(args.db):
         raise CliError(f"--db = {args.db!r}: no such file")
-    if args.reference is not None and not os.path.isfile(os.path.join(args.reference, "study_app", "cli.py")):
-        raise CliError(f"--reference = {args.reference!r}: not a haptic-study source tree (no study_app/cli/main.py)")
+    # the command line is study_app/cli.py in trees from before the rooms were split, study_app/cli/ since
+    if args.reference is not None and not any(os.path.isfile(os.path.join(args.reference, "study_app", *where))
+                                              for where in (("cli.py",), ("cli", "__main__.py"))):
+        raise CliError(f"--reference = {args.reference!r}: not a haptic-study source tree (no study_app/cli/)")
     result = run_report_bench(args.db, stats_participants=args.stats_participants, log=_say,
                               reference=args.reference)
     print(json.dumps(result) if args.json else format_report_bench(result))
