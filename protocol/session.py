@@ -266,6 +266,21 @@ class SessionRunner:
         with self._lock:
             self._requests.append((kind, detail, cause, trial_index))
 
+    @property
+    def running_trial(self) -> TrialSpec | None:
+        """The trial that is cued or running (None between trials, paused or done)."""
+        m = self.machine
+        return m.spec if m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) else None
+
+    def trial_ended(self, trial_index: int) -> bool:
+        """Whether a request naming trial ``trial_index`` comes too late: that trial is not the one running.
+
+        The one test of a late abort: a confirmation answered after its trial ended must never abort the next one
+        (the engine refuses it at once, the runner ignores it when it applies the request).
+        """
+        spec = self.running_trial
+        return spec is None or spec.index != trial_index
+
     # -- helpers ------------------------------------------------------------------------------------
     def session_time_s(self, t_ns: int) -> float:
         """Session-clock time of a loop timestamp."""
@@ -570,9 +585,7 @@ class SessionRunner:
                 self.paused = self.state.paused = False
                 self._event(t_ns, "experimenter", "resume")
             elif kind in ("abort_trial", "abort_session"):
-                spec = self.machine.spec
-                running = self.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
-                if trial_index is not None and not (running and spec is not None and spec.index == trial_index):
+                if trial_index is not None and self.trial_ended(trial_index):
                     self._event(t_ns, "experimenter", f"{kind} for {trial_words(trial_index)} ignored: it had ended")
                     continue
                 self._event(t_ns, "experimenter", f"{kind}: {detail}")
