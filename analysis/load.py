@@ -224,6 +224,35 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     return sessions, trials, events, damage
 
 
+def _read_all(
+    paths: Sequence[str | os.PathLike[str]],
+) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str]]:
+    """Each database's sessions, trials and events (and the damage found), in order; a refusal for a path that
+    is missing or names a database given already."""
+    if not paths:
+        raise AnalysisError("--db: give at least one study database")
+    seen: dict[tuple[int, int], str] = {}
+    all_sessions: list[pd.DataFrame] = []
+    all_trials: list[pd.DataFrame] = []
+    all_events: list[pd.DataFrame] = []
+    damage: list[str] = []
+    for raw in paths:
+        path = str(raw)
+        if not Path(path).exists():
+            raise AnalysisError(f"{path}: no such database")
+        st = os.stat(path)
+        key = (st.st_dev, st.st_ino)
+        if key in seen:
+            raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
+        seen[key] = path
+        s, t, e, d = _read_one(path)
+        all_sessions.append(s)
+        all_trials.append(t)
+        all_events.append(e)
+        damage.extend(d)
+    return all_sessions, all_trials, all_events, damage
+
+
 def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False) -> StudyData:
     """Read and merge study databases.
 
@@ -248,24 +277,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         merge refuses to guess whether they are one person), or a study with
         no experiment trial to analyse.
     """
-    if not paths:
-        raise AnalysisError("--db: give at least one study database")
-    seen: dict[tuple[int, int], str] = {}
-    all_sessions, all_trials, all_events, damage = [], [], [], []
-    for raw in paths:
-        path = str(raw)
-        if not Path(path).exists():
-            raise AnalysisError(f"{path}: no such database")
-        st = os.stat(path)
-        key = (st.st_dev, st.st_ino)
-        if key in seen:
-            raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
-        seen[key] = path
-        s, t, e, d = _read_one(path)
-        all_sessions.append(s)
-        all_trials.append(t)
-        all_events.append(e)
-        damage.extend(d)
+    all_sessions, all_trials, all_events, damage = _read_all(paths)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():

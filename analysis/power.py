@@ -331,6 +331,28 @@ def _power_frame(rows: list[dict[str, object]], R: int, alpha: float, interval_l
     return frame[list(POWER_CSV_COLUMNS)]
 
 
+def _chunk_budget(pool: PairedPool, ns: tuple[int, ...], R: int, chunk_bytes: int) -> int:
+    """The bytes one chunk of resampled studies may take here; a :class:`PowerError` when the pool is too small
+    to resample from or the request does not fit in the memory available."""
+    P = pool.n_participants
+    if P < MIN_PILOT:
+        raise PowerError(
+            f"{pool.source or 'the pool'} has {P} participant{'s' if P != 1 else ''} with both haptic modes: at "
+            f"least {MIN_PILOT} are needed to resample planned studies from (with fewer, every resampled study "
+            "repeats the same few people)")
+    from analysis.resources import available_memory_bytes, memory_problem
+
+    have = available_memory_bytes()
+    if have is not None:  # a chunk takes at most a quarter of what is free (the numbers do not depend on it)
+        chunk_bytes = min(chunk_bytes, max(have // 4, BYTES_PER_ELEMENT * max(ns)))
+    need = memory_needed(ns, R, P, chunk_bytes)
+    problem = memory_problem(need, f"power: resampling studies of up to {max(ns)} participants",
+                             "ask for smaller --n values (memory grows with n; --resamples costs time only)")
+    if problem is not None:
+        raise PowerError(problem)
+    return chunk_bytes
+
+
 def estimate_power(
     pool: PairedPool,
     n_values: Sequence[int] = DEFAULT_N_VALUES,
@@ -383,22 +405,8 @@ def estimate_power(
     """
     ns = _check_request(n_values, resamples, alpha, zero_method)
     P = pool.n_participants
-    if P < MIN_PILOT:
-        raise PowerError(
-            f"{pool.source or 'the pool'} has {P} participant{'s' if P != 1 else ''} with both haptic modes: at "
-            f"least {MIN_PILOT} are needed to resample planned studies from (with fewer, every resampled study "
-            "repeats the same few people)")
     R = int(resamples)
-    from analysis.resources import available_memory_bytes, memory_problem
-
-    have = available_memory_bytes()
-    if have is not None:  # a chunk takes at most a quarter of what is free (the numbers do not depend on it)
-        chunk_bytes = min(chunk_bytes, max(have // 4, BYTES_PER_ELEMENT * max(ns)))
-    need = memory_needed(ns, R, P, chunk_bytes)
-    problem = memory_problem(need, f"power: resampling studies of up to {max(ns)} participants",
-                             "ask for smaller --n values (memory grows with n; --resamples costs time only)")
-    if problem is not None:
-        raise PowerError(problem)
+    chunk_bytes = _chunk_budget(pool, ns, R, chunk_bytes)
     prepared = [[prepare_metric(pool.off[s, m], pool.on[s, m]) for m in range(len(pool.metrics))]
                 for s in range(len(pool.scopes))]
     # the pool's own direction of effect, per scope and metric: the side its own test statistic lies on

@@ -297,6 +297,11 @@ def simulated_pool(
                  jobs=jobs, continue_study=resuming)
     except (StorageError, RuntimeError, ValueError) as exc:
         raise PoolError(f"{db}: the simulation failed ({exc}); the next call resumes it") from None
+    return SimulatedPool(db, codes, "resumed" if resuming else "simulated", _seal(db, wanted, resumed))
+
+
+def _seal(db: Path, wanted: dict[str, Any], resumed: list[Any]) -> str:
+    """Seal a pool the simulation just completed and record it complete with its SHA-256 (returned)."""
     finished = StudyDatabase(db, check=False)  # just written by the simulation
     try:
         finished.seal()  # its readers (every later power request) leave no -wal/-shm beside it
@@ -305,4 +310,4 @@ def simulated_pool(
     digest = sha256_file(db)
     _write_record(db, {**wanted, "complete": True, "sha256": digest, "bytes": db.stat().st_size,
                        "resumed_participants": resumed})
-    return SimulatedPool(db, codes, "resumed" if resuming else "simulated", digest)
+    return digest

@@ -38,15 +38,15 @@ to the runner's listeners as it is.
 the loop for a snapshot of the framework (:class:`pipeline.runtime.loop.StartRecording`)
 and, from the tick it was taken on, hands every record and the loop's replay
 log to the recorder -- trials, pauses and waits alike -- so the session can be
-replayed through the pipeline (:mod:`pipeline.force.replay`).  Records before that
-tick (the loop ran before the session began) are not the session's.  A trial
+replayed through the pipeline (:mod:`pipeline.force.replay`; the hand-off is
+:mod:`protocol.session_recording`).  Records before that tick (the loop ran
+before the session began) are not the session's.  A trial
 row names its records: ``segment``, ``first_tick`` (its cue) and ``last_tick``.
 """
 
 from __future__ import annotations
 
 import functools
-import secrets
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -70,6 +70,7 @@ from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.records import AbortCause, Outcome, TrialRecord
+from protocol.session_recording import SessionRecording
 from protocol.storage import Recorder, StudyDatabase
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
@@ -222,15 +223,11 @@ class SessionRunner:
         self._abort_cause: dict[int, AbortCause] = {}  # trial index -> cause of its abort
         self._pending_gap = ""  # records lost before the next block
         self.segment = segment
-        self._scales = dict(scales or {})
-        self._token = secrets.randbits(31)
-        self._log: list[tuple[int, str, object]] = []  # replay log entries not yet handed on
-        self._start_tick: int | None = None  # the tick the recording (and the session clock) starts at
-        self._snapshot: object = None  # the loop's snapshot payload at that tick
+        self._recording = SessionRecording(recorder, session_id, segment, scales)
         self._failed_in_a_row = 0  # trials the loop did not deliver as designed, since the last that it did
         self._enter_pause_commands()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick
-        self.submit(StartRecording(self._token))
+        self.submit(StartRecording(self._recording.token))
 
     # -- experimenter requests (any thread) ----------------------------------------------------
     def pause(self) -> None:
@@ -266,6 +263,21 @@ class SessionRunner:
         with self._lock:
             self._requests.append((kind, detail, cause, trial_index))
 
+    @property
+    def running_trial(self) -> TrialSpec | None:
+        """The trial that is cued or running (None between trials, paused or done)."""
+        m = self.machine
+        return m.spec if m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) else None
+
+    def trial_ended(self, trial_index: int) -> bool:
+        """Whether a request naming trial ``trial_index`` comes too late: that trial is not the one running.
+
+        The one test of a late abort: a confirmation answered after its trial ended must never abort the next one
+        (the engine refuses it at once, the runner ignores it when it applies the request).
+        """
+        spec = self.running_trial
+        return spec is None or spec.index != trial_index
+
     # -- helpers ------------------------------------------------------------------------------------
     def session_time_s(self, t_ns: int) -> float:
         """Session-clock time of a loop timestamp."""
@@ -300,20 +312,16 @@ class SessionRunner:
         for replay since the previous call (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`),
         read after the records.
         """
-        if self._start_tick is None:
-            self._log.extend(replay_log)
-            rows = self._from_snapshot(rows)
-            if self._start_tick is None:
-                return  # the loop has not taken the snapshot yet: these records are not the session's
-        else:
-            self._log.extend(replay_log)
+        session_rows = self._recording.session_rows(rows, replay_log)
+        if session_rows is None:
+            return  # the loop has not taken the snapshot yet: these records are not the session's
+        rows = session_rows
         if self.done or (len(rows) == 0 and self.clock is None):
             return
         if self.clock is None:
             t0 = int(rows["t_ns"][0])
             self.clock = SessionClock(self._offset_s, t0)
-            self.recorder.segment(self.session_id, self.segment, self._offset_s, t0,
-                                  self._snapshot, self._scales)  # type: ignore[arg-type]  # set with the snapshot found above
+            self._recording.open_segment(self._offset_s, t0)
             self._ready_ns = t0 + self._initial_pause_ns
             first_faults = int(rows["faults"][0])
             if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
@@ -324,7 +332,7 @@ class SessionRunner:
                 self._store_loop_event(ev)
         if len(rows) == 0:
             return
-        self._record(rows)
+        self._recording.record(rows)
         t_ns_all = rows["t_ns"]  # int64 (pipeline.runtime.tick_record)
         self._handle_requests(int(t_ns_all[0]))
         if self.done:
@@ -346,24 +354,6 @@ class SessionRunner:
                 self._window.note(rows[i : i + 1])
                 self._abort_running(int(rows["t_ns"][i]), cut.reason, cut.cause)
             rows = rows[i:]
-
-    def _from_snapshot(self, rows: np.ndarray) -> np.ndarray:
-        """Find this runner's snapshot in the log; the records from its tick on (none before it is found)."""
-        for i, (tick, kind, payload) in enumerate(self._log):
-            if kind == "snapshot" and payload["token"] == self._token:  # type: ignore[index]  # a log payload is typed object; a snapshot's is a dict
-                self._start_tick = int(tick)
-                self._snapshot = payload
-                self._log = self._log[i + 1 :]
-                return rows[rows["tick"] >= tick]
-        self._log = [e for e in self._log if e[1] == "snapshot"]  # (another runner's: kept until ours shows)
-        return rows[:0]
-
-    def _record(self, rows: np.ndarray) -> None:
-        """Hand the records and the log entries of their ticks to the recorder."""
-        last = int(rows["tick"][-1])
-        log = [e for e in self._log if e[0] <= last]
-        self._log = [e for e in self._log if e[0] > last]
-        self.recorder.records(self.session_id, self.segment, rows, log)  # (the recorder keeps the kept fields)
 
     def _process_part(self, rows: np.ndarray) -> None:
         """The trial machine, the samples and the next cue over records that need no abort."""
@@ -570,9 +560,7 @@ class SessionRunner:
                 self.paused = self.state.paused = False
                 self._event(t_ns, "experimenter", "resume")
             elif kind in ("abort_trial", "abort_session"):
-                spec = self.machine.spec
-                running = self.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
-                if trial_index is not None and not (running and spec is not None and spec.index == trial_index):
+                if trial_index is not None and self.trial_ended(trial_index):
                     self._event(t_ns, "experimenter", f"{kind} for {trial_words(trial_index)} ignored: it had ended")
                     continue
                 self._event(t_ns, "experimenter", f"{kind}: {detail}")

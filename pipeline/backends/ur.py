@@ -23,6 +23,7 @@ the simulated rig and as a cross-check of the reported TCP pose.
 
 from __future__ import annotations
 
+import importlib
 import math
 import socket
 import threading
@@ -39,6 +40,8 @@ __all__ = [
     "UrRtdeRobot",
     "check_rtde_frequency",
     "probe_tcp",
+    "require_reachable",
+    "rtde_interface",
     "ur3_flange_pose",
     "ur3_tcp_pose",
 ]
@@ -105,12 +108,35 @@ def probe_tcp(host: str, port: int, timeout_s: float) -> str | None:
         return (exc.strerror if isinstance(exc, OSError) else None) or str(exc)
 
 
-def _default_factory(host: str, frequency_hz: float) -> Any:
+def require_reachable(host: str, port: int, timeout_s: float, purpose: str = "") -> None:
+    """Raise :class:`DeviceError` unless ``host:port`` accepts a TCP connection within ``timeout_s``.
+
+    Asked before ur_rtde dials (it holds the GIL while it connects: see the module docstring).  ``purpose``
+    (e.g. ``" for teleoperation"``) follows the address in the message.
+    """
+    why = probe_tcp(host, port, timeout_s)
+    if why is not None:
+        raise DeviceError(
+            f"cannot reach the UR controller at {host}:{port}{purpose} ({why}); "
+            "check the IP address, the cable and that the robot is powered on"
+        )
+
+
+def rtde_interface(module: str, interface: str, host: str, frequency_hz: float, needed_by: str) -> Any:
+    """ur_rtde's ``module.interface(host, frequency_hz)``, its module imported only now.
+
+    Lazily: the simulated rig must not need ur_rtde, and only teleoperation takes control of the robot.
+    ``needed_by`` names what needs it in the error when ur-rtde is missing.
+    """
     try:
-        import rtde_receive  # lazily: the simulated rig must not need ur_rtde
+        sdk = importlib.import_module(module)
     except ImportError as exc:  # pragma: no cover - ur-rtde is a base dependency
-        raise DeviceError(f"the UR backend needs the ur-rtde package ({exc}); pip install ur-rtde") from None
-    return rtde_receive.RTDEReceiveInterface(host, frequency_hz)
+        raise DeviceError(f"{needed_by} needs the ur-rtde package ({exc}); pip install ur-rtde") from None
+    return getattr(sdk, interface)(host, frequency_hz)
+
+
+def _default_factory(host: str, frequency_hz: float) -> Any:
+    return rtde_interface("rtde_receive", "RTDEReceiveInterface", host, frequency_hz, "the UR backend")
 
 
 class UrRtdeRobot:
@@ -220,12 +246,7 @@ class UrRtdeRobot:
 
     # -- internals ----------------------------------------------------------------------------
     def _connect(self) -> Any:
-        why = probe_tcp(self.host, self.port, self.connect_timeout_s)
-        if why is not None:
-            raise DeviceError(
-                f"cannot reach the UR controller at {self.host}:{self.port} ({why}); "
-                "check the IP address, the cable and that the robot is powered on"
-            )
+        require_reachable(self.host, self.port, self.connect_timeout_s)
         try:
             return self._factory(self.host, self.frequency_hz)
         except RuntimeError as exc:

@@ -27,7 +27,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, probe_tcp
+from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, require_reachable, rtde_interface
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.frames import Mat3, Vec3, matrix_to_rotvec
 from pipeline.runtime.clock import Clock, MonotonicClock
@@ -36,11 +36,8 @@ __all__ = ["UrRtdeServo"]
 
 
 def _default_factory(host: str, frequency_hz: float) -> Any:
-    try:
-        import rtde_control  # lazily: only teleop mode takes control of the robot
-    except ImportError as exc:  # pragma: no cover - ur-rtde is a base dependency
-        raise DeviceError(f"teleoperation needs the ur-rtde package ({exc}); pip install ur-rtde") from None
-    return rtde_control.RTDEControlInterface(host, frequency_hz)
+    # only teleop mode takes control of the robot: rtde_control is imported (and the script uploaded) only then
+    return rtde_interface("rtde_control", "RTDEControlInterface", host, frequency_hz, "teleoperation")
 
 
 class UrRtdeServo:
@@ -108,12 +105,7 @@ class UrRtdeServo:
         self.servoing = False
         self.servo_commands = 0
         self.servo_stops = 0
-        why = probe_tcp(host, port, connect_timeout_s)
-        if why is not None:
-            raise DeviceError(
-                f"cannot reach the UR controller at {host}:{port} for teleoperation ({why}); "
-                "check the IP address, the cable and that the robot is powered on"
-            )
+        require_reachable(host, port, connect_timeout_s, " for teleoperation")
         self._ctrl = self._construct(control_factory or _default_factory, host, frequency_hz, control_timeout_s)
         self._thread = threading.Thread(target=self._work, name="ur-servo", daemon=True)
         self._thread.start()

@@ -68,6 +68,7 @@ from pipeline.runtime.loop_messages import (
     StopRecording,
 )
 from pipeline.runtime.loop_stats import LoopStats
+from pipeline.runtime.pacing import PacedTicks
 from pipeline.runtime.watchdog import (
     WatchdogConfig,
     derating_detail,
@@ -92,7 +93,7 @@ _NAN3 = (math.nan, math.nan, math.nan)
 _HYPOT = math.hypot
 
 
-class HapticLoop:
+class HapticLoop(PacedTicks):
     """Runs the rig and Algorithm 1 at a fixed rate and records every tick.
 
     Parameters
@@ -223,10 +224,8 @@ class HapticLoop:
             cond |= Fault.NON_FINITE
         else:
             s = self._sat
-            if (
-                abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
-                or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]
-            ):
+            if (abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
+                    or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]):
                 cond |= Fault.SENSOR_SATURATION
         pose_age = now - pose.t_ns
         if pose_age > self._pose_age_ns:
@@ -483,62 +482,7 @@ class HapticLoop:
             except Exception:  # an observer must never stop the loop (bluesky Dispatcher)
                 pass
 
-    # -- running ------------------------------------------------------------------------------
-    def run_ticks(self, n: int) -> None:
-        """Run ``n`` ticks paced on the clock (instant on a virtual clock)."""
-        clock = self.clock
-        deadline = clock.now_ns()
-        period = self.period_ns
-        for _ in range(n):
-            self.tick()
-            deadline += period
-            clock.sleep_until(deadline)
-
-    def run(
-        self,
-        stop: threading.Event | None = None,
-        max_ticks: int | None = None,
-        between_ticks: Callable[[], object] | None = None,
-    ) -> None:
-        """Tick at the loop rate until ``stop`` is set (or ``max_ticks`` ticks), then ramp down.
-
-        Deadlines are absolute (``t0 + k·period``), so lateness never
-        accumulates; after a stall longer than one period the missed slots
-        are counted and skipped rather than replayed in a burst.
-
-        Parameters
-        ----------
-        stop
-            Set to stop (default: the loop's own, see :meth:`stop`).
-        max_ticks
-            Stop after this many ticks.
-        between_ticks
-            Called right after each tick, when the rest of the period is
-            free: housekeeping that must not land mid-tick, such as
-            :func:`pipeline.runtime.clock.collect_garbage`.  Must be short (well under
-            a period); its exceptions propagate.
-        """
-        stop = stop or self._stop
-        clock = self.clock
-        period = self.period_ns
-        deadline = clock.now_ns()
-        n = 0
-        try:
-            while not stop.is_set() and (max_ticks is None or n < max_ticks):
-                self.tick()
-                n += 1
-                if between_ticks is not None:
-                    between_ticks()
-                deadline += period
-                behind = clock.now_ns() - deadline
-                if behind > period:
-                    skipped = behind // period
-                    self.stats.missed_slots += skipped
-                    deadline += skipped * period
-                clock.sleep_until(deadline)
-        finally:
-            self.ramp_down()
-
+    # -- running (the pacing: pipeline.runtime.pacing.PacedTicks) ----------------------------------------
     def ramp_down(self, max_ticks: int = 200) -> None:
         """Bring the rendered force to zero through the safety ramp, then command zero.
 

@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from dataclasses import dataclass
+from typing import Any
 
 from study_app.cli.error import CliError
 
@@ -93,8 +95,19 @@ def _alpha(text: str) -> float:
     return v
 
 
-def cmd_power(args: argparse.Namespace) -> int:
-    """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
+@dataclass(frozen=True)
+class _PowerRequest:
+    """The ``power`` options, checked (before any work or import of the analysis)."""
+
+    n_values: tuple[int, ...]
+    resamples: int
+    alpha: float
+    seed: int
+    pool_size: int
+
+
+def _request(args: argparse.Namespace) -> _PowerRequest:
+    """The options of ``power`` checked, each refusal one line naming the option and what is allowed."""
     if args.db and args.simulated:
         raise CliError("--db and --simulated: give one or the other (a pilot study, or simulated participants)")
     if not args.db and not args.simulated:
@@ -108,6 +121,66 @@ def cmd_power(args: argparse.Namespace) -> int:
     pool_size = whole_option("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
     if args.out is None:
         raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
+    return _PowerRequest(n_values, resamples, alpha, seed, pool_size)
+
+
+class _Bars:
+    """The progress bars of a ``power`` run on stderr: the simulated pool, the samples read, the resampling."""
+
+    def __init__(self) -> None:
+        from study_app.cli.progress import ProgressBar
+
+        self._bar = ProgressBar
+        self.bars: list[ProgressBar] = []
+
+    def reading(self, done: float, total: float) -> None:
+        if not self.bars or self.bars[-1].unit != "samples":
+            self.bars.append(self._bar(total, "reading samples", "samples", decimals=0))
+        self.bars[-1].update(done)
+
+    def resampling(self, done: int, total: int) -> None:
+        if total < _BAR_DRAWS:  # a few seconds: no bar
+            return
+        if not self.bars or self.bars[-1].unit != "participants drawn":
+            self.bars.append(self._bar(total, "resampling studies", "participants drawn", decimals=0))
+        self.bars[-1].update(done)
+
+    def simulating(self, p: Any) -> None:
+        if not self.bars:
+            self.bars.append(self._bar(p.study_trials_total, "simulating pool", "trials", decimals=0))
+        self.bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
+        self.bars[-1].update(p.study_trials_done)
+
+    def close(self) -> None:
+        for bar in self.bars:
+            bar.close()
+
+
+def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[str], Any, str]:
+    """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it."""
+    from analysis.power_pool import simulated_pool
+    from study_app.headless import run_study
+
+    pool_size, seed = req.pool_size, req.seed
+    t0 = time.perf_counter()
+    pool_db = simulated_pool(out, pool_size, seed, simulate=run_study, on_progress=bars.simulating)
+    bars.close()
+    path = pool_db.path
+    said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
+            "reused-larger": f"reusing the first {pool_size} participants of the simulated pool {path} "
+                             "(SHA-256 checked; participant k is the same in a pool of any size)",
+            "resumed": f"completed the interrupted simulated pool {path} ({time.perf_counter() - t0:.0f} s)",
+            "simulated": f"simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); the next "
+                         "call with the same --pool and --seed reuses it"}
+    print(f"power: {said[pool_db.status]}", file=sys.stderr)
+    first = f"the first {pool_size} of " if pool_db.status == "reused-larger" else ""
+    source = f"a simulated pool of {pool_size} participants (study seed {seed}, {first}{path.name})"
+    return [str(path)], pool_db.participants, source
+
+
+def cmd_power(args: argparse.Namespace) -> int:
+    """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
+    req = _request(args)
 
     from analysis.errors import AnalysisError
     from analysis.outdir import check_output_folder, write_output_folder
@@ -124,66 +197,27 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.paired_pool import load_pool
     from analysis.power import FAMILY_LABELS, estimate_power, summary_text
     from analysis.power_outputs import write_power
-    from analysis.power_pool import simulated_pool
-    from study_app.cli.progress import ProgressBar
-    from study_app.headless import run_study
 
     options = MetricOptions(args.error_window, args.tct)
-    bars: list[ProgressBar] = []
-
-    def reading(done: float, total: float) -> None:
-        if not bars or bars[-1].unit != "samples":
-            bars.append(ProgressBar(total, "reading samples", "samples", decimals=0))
-        bars[-1].update(done)
-
-    def resampling(done: int, total: int) -> None:
-        if total < _BAR_DRAWS:  # a few seconds: no bar
-            return
-        if not bars or bars[-1].unit != "participants drawn":
-            bars.append(ProgressBar(total, "resampling studies", "participants drawn", decimals=0))
-        bars[-1].update(done)
-
-    def simulating(p) -> None:
-        if not bars:
-            bars.append(ProgressBar(p.study_trials_total, "simulating pool", "trials", decimals=0))
-        bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
-        bars[-1].update(p.study_trials_done)
-
+    bars = _Bars()
     try:
         participants = None
+        source = None
+        databases = list(args.db or [])
         if args.simulated:
-            t0 = time.perf_counter()
-            pool_db = simulated_pool(args.out, pool_size, seed, simulate=run_study, on_progress=simulating)
-            for bar in bars:
-                bar.close()
-            path = pool_db.path
-            said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
-                    "reused-larger": f"reusing the first {pool_size} participants of the simulated pool {path} "
-                                     "(SHA-256 checked; participant k is the same in a pool of any size)",
-                    "resumed": f"completed the interrupted simulated pool {path} ({time.perf_counter() - t0:.0f} s)",
-                    "simulated": f"simulated pool written to {path} ({time.perf_counter() - t0:.0f} s); the next "
-                                 "call with the same --pool and --seed reuses it"}
-            print(f"power: {said[pool_db.status]}", file=sys.stderr)
-            databases = [str(path)]
-            participants = pool_db.participants
-            first = f"the first {pool_size} of " if pool_db.status == "reused-larger" else ""
-            source = f"a simulated pool of {pool_size} participants (study seed {seed}, {first}{path.name})"
-        else:
-            databases = list(args.db)
-            source = None
-        pool = load_pool(databases, options, source=source, progress=reading, participants=participants)
-        for bar in bars:
-            bar.close()
+            databases, participants, source = _simulated_source(args.out, req, bars)
+        pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants)
+        bars.close()
         t0 = time.perf_counter()
-        result = estimate_power(pool, n_values, resamples=resamples, alpha=alpha, seed=seed,
-                                zero_method=args.zero_method, progress=resampling)
-        if bars and bars[-1].unit == "participants drawn":
-            bars[-1].close()
+        result = estimate_power(pool, req.n_values, resamples=req.resamples, alpha=req.alpha, seed=req.seed,
+                                zero_method=args.zero_method, progress=bars.resampling)
+        if bars.bars and bars.bars[-1].unit == "participants drawn":
+            bars.bars[-1].close()
         wall = time.perf_counter() - t0
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
     except AnalysisError as exc:  # PowerError, PoolError, OutputError included
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
-    tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * resamples
+    tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * req.resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))
     print(f"Written in {args.out}/: {', '.join(files)}")

@@ -22,7 +22,6 @@ row is stored with the reason (the session stays resumable), commits, and exits.
 
 from __future__ import annotations
 
-import collections
 import math
 import queue
 import sys
@@ -30,8 +29,6 @@ import threading
 import time
 from collections.abc import Callable
 from typing import Any
-
-import numpy as np
 
 from pipeline.devices.interfaces import DeviceError
 from pipeline.devices.jaw_control import JawController
@@ -47,6 +44,7 @@ from pipeline.runtime.supervisor import LoopSupervisor
 from pipeline.settings.hardware import HardwareConfig
 from protocol.config import ProtocolError
 from protocol.session import SessionRunner
+from protocol.session_driver import SessionDriver
 from protocol.storage import Recorder, StorageError, new_owner_token
 from protocol.trial import TrialPhase
 from study_app.engine import messages as m
@@ -92,16 +90,15 @@ class StudyEngine:
         self.calibration: PayloadCalibration = self.eng.calibration
         assert self.eng.ring is not None
         self.ring = self.eng.ring
-        self.cursor = self.ring.write_count
         self.loop = self.eng.loop
+        #: Reads the ring from here on and feeds the running session (the loop's events and replay log with it).
+        self.ring_driver = SessionDriver(self.ring, self.loop.replay_log)
         self.loop.on_event = self._on_loop_event
         self.tracer: LateTickTracer | None = None
         if config.trace_jitter and config.clock == "real":
             self.tracer = LateTickTracer(MonotonicClock())
             self.loop.clock = self.tracer
         self.stats = PeriodStats()
-        # loop events for the runner: appended on the loop thread, taken by the driver thread (deque ops are atomic)
-        self._loop_events: collections.deque[LoopEvent] = collections.deque()
         #: This engine's lease token (one per engine process).
         self.lease_owner = new_owner_token()
         self._last_health = 0.0
@@ -132,6 +129,15 @@ class StudyEngine:
     def recorder(self) -> Recorder | None:
         """The running session's recorder."""
         return self.sessions.recorder
+
+    @property
+    def cursor(self) -> int:
+        """The ring's read cursor (a room that ran the loop itself moves it past its own records)."""
+        return self.ring_driver.cursor
+
+    @cursor.setter
+    def cursor(self, value: int) -> None:
+        self.ring_driver.cursor = value
 
     # -- lifetime -------------------------------------------------------------------------------
     def start(self) -> None:
@@ -250,8 +256,8 @@ class StudyEngine:
     def _store_loop_events(self) -> None:
         """Hand the pending loop events to the session runner without records (the loop writes none)."""
         runner = self.sessions.runner
-        if runner is not None and self._loop_events:
-            runner.process(np.empty(0), [self._loop_events.popleft() for _ in range(len(self._loop_events))])
+        if runner is not None:
+            self.ring_driver.flush_events(runner)
 
     def _loop_died(self, why: str) -> None:
         """The haptic loop is dead (its fault is latched and reported): store it, leave the session resumable."""
@@ -306,31 +312,24 @@ class StudyEngine:
         self._anchor_ticks = self._ticks_run
 
     def drain_ring(self) -> None:
-        res = self.ring.read_since(self.cursor)
-        self.cursor = res.cursor
-        rows = res.rows
-        if len(rows) == 0:
+        """Read the loop's new records: the timing statistics, the commissioning chain, the running session."""
+        block = self.ring_driver.take()
+        rows = block.rows
+        if len(rows):
+            if self._stats_from_tick:
+                # the first tick after a calibration carries the calibration's gap: not a loop overrun
+                keep = rows["tick"] >= self._stats_from_tick
+                self.stats.add(rows["period_ns"][keep] * 1e-9)
+            else:
+                self.stats.add(rows["period_ns"] * 1e-9)
+            self.last_t_ns = int(rows["t_ns"][-1])
+            self.commissioning.feed(rows)
+        elif not block.lost:
             return
-        if self._stats_from_tick:
-            # the first tick after a calibration carries the calibration's gap: not a loop overrun
-            keep = rows["tick"] >= self._stats_from_tick
-            self.stats.add(rows["period_ns"][keep] * 1e-9)
-        else:
-            self.stats.add(rows["period_ns"] * 1e-9)
-        self.last_t_ns = int(rows["t_ns"][-1])
-        self.commissioning.feed(rows)
         runner = self.sessions.runner
-        # the loop's events and replay log after its records: every entry of a tick whose record was read is in
-        events = [self._loop_events.popleft() for _ in range(len(self._loop_events))]
-        log = self.loop.replay_log
-        replay_log = [log.popleft() for _ in range(len(log))]
         if runner is None:
             return
-        if res.lost:
-            runner.records_lost(res.lost)
-        runner.process(rows, events, replay_log)
-        if self.sessions.trigger is not None:
-            self.sessions.trigger.poll(self.last_t_ns)
+        self.ring_driver.feed(runner, block, self.sessions.trigger)
         if runner.done:
             self.sessions.end(runner.status, runner.stop_reason)
 
@@ -353,7 +352,7 @@ class StudyEngine:
 
     def _on_loop_event(self, ev: LoopEvent) -> None:
         # called from the loop thread: only hand the event on (to the GUI, and to the runner for the record)
-        self._loop_events.append(ev)
+        self.ring_driver.on_loop_event(ev)  # for the runner: taken by the driver thread (a deque's ops are atomic)
         runner = self.sessions.runner
         session_t = math.nan
         if runner is not None and not runner.done and runner.clock is not None:
@@ -404,12 +403,10 @@ class StudyEngine:
         elif isinstance(cmd, m.Resume):
             runner.resume()
         elif isinstance(cmd, m.AbortTrial):
-            running = runner.machine.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
-            spec = runner.machine.spec
-            if cmd.trial_index is not None and not (running and spec is not None and spec.index == cmd.trial_index):
+            if cmd.trial_index is not None and runner.trial_ended(cmd.trial_index):
                 # confirmed for a trial that has ended since: never abort the next one instead
                 raise RuntimeError(f"trial {cmd.trial_index + 1} had already ended: nothing was aborted")
-            if not running:
+            if runner.running_trial is None:
                 raise RuntimeError("no trial is running (between trials or paused)")
             runner.abort_trial(cmd.reason, trial_index=cmd.trial_index)
         else:

@@ -10,16 +10,11 @@ from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QApplication,
     QFrame,
-    QGroupBox,
-    QHBoxLayout,
     QInputDialog,
-    QLabel,
     QMainWindow,
-    QPushButton,
     QScrollArea,
     QSplitter,
     QTabWidget,
-    QToolButton,
     QVBoxLayout,
     QWidget,
 )
@@ -31,21 +26,14 @@ from study_app.gui import placement
 from study_app.gui.bridge import QtEngineBridge
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
 from study_app.gui.confirm import Confirmation
+from study_app.gui.control_box import ControlBox
 from study_app.gui.force_plots import QtForcePlots
 from study_app.gui.jaw_box import QtJawBox
 from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.timers import tracked_timer
-from study_app.gui.widgets import (
-    LEVEL_COLOURS,
-    ElidedLabel,
-    QtCueWait,
-    QtHealthPanel,
-    QtProgress,
-    QtSetupPanel,
-    QtTrialTable,
-)
+from study_app.gui.widgets import ElidedLabel, QtCueWait, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
 from study_app.models.app import CALIBRATION_COMMANDS, AppModel
 
 __all__ = ["ExperimenterWindow"]
@@ -136,77 +124,18 @@ class ExperimenterWindow(QMainWindow):
         self.left_column = scroll
         return scroll
 
-    def _build_controls(self) -> QGroupBox:
-        """Start, pause/resume, abort, the windows' buttons; the engine's and the notices' rows above them."""
-        self.start_button = QPushButton("Start  [Space]")
-        self.pause_button = QPushButton("Pause")
-        self.resume_button = QPushButton("Resume")
-        self.abort_trial_button = QPushButton("Abort trial  [Esc]")
-        self.abort_session_button = QPushButton("Abort session")
-        self.calibrate_button = QPushButton("Calibration…")
-        self.participant_button = QPushButton("Participant screen")
-        self.rig_button = QPushButton("Simulated rig view")
-        self.start_button.setStyleSheet("font-weight: 700; padding: 6px;")
-        # an experiment the form refuses for want of training: only with a typed reason, stored as a deviation
-        self.untrained_button = QPushButton("Start without training…")
-        self.untrained_button.hide()
-        controls = QGroupBox("Control")
-        grid = QVBoxLayout(controls)
-        grid.addWidget(self._build_engine_row())
-        grid.addWidget(self.start_button)
-        grid.addWidget(self.untrained_button)
-        grid.addWidget(self._build_notice_row())
-        pr = QHBoxLayout()
-        pr.addWidget(self.pause_button)
-        pr.addWidget(self.resume_button)
-        grid.addLayout(pr)
-        ab = QHBoxLayout()
-        ab.addWidget(self.abort_trial_button)
-        ab.addWidget(self.abort_session_button)
-        grid.addLayout(ab)
-        grid.addWidget(self.calibrate_button)
-        # real rig: start although the calibration chain is incomplete -- only with a reason, which is stored
-        self.override_button = QPushButton("Start without calibration…")
-        self.override_button.hide()
-        grid.addWidget(self.override_button)
-        wr = QHBoxLayout()
-        wr.addWidget(self.participant_button)
-        wr.addWidget(self.rig_button)
-        grid.addLayout(wr)
-        return controls
-
-    def _build_engine_row(self) -> QWidget:
-        """A dead engine or haptic loop: what happened and the way out (hidden until then)."""
-        self.engine_label = QLabel()
-        self.engine_label.setWordWrap(True)
-        self.restart_button = QPushButton("Restart engine")
-        self.restart_button.setStyleSheet("font-weight: 700; padding: 6px;")
-        self.engine_row = QWidget()
-        er = QVBoxLayout(self.engine_row)
-        er.setContentsMargins(4, 4, 4, 4)
-        er.addWidget(self.engine_label)
-        er.addWidget(self.restart_button)
-        fg, bg = LEVEL_COLOURS["error"]
-        self.engine_row.setStyleSheet(f"background: {bg};")
-        self.engine_label.setStyleSheet(f"color: {fg}; font-weight: 600;")
-        self.engine_row.hide()
-        return self.engine_row
-
-    def _build_notice_row(self) -> QWidget:
-        """Refusals and questions that became moot, with a dismiss button (hidden until there is one)."""
-        self.notice = QLabel()
-        self.notice.setWordWrap(True)
-        self.notice.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        self.notice_close = QToolButton()
-        self.notice_close.setText("×")
-        self.notice_close.setToolTip("Dismiss")
-        self.notice_row = QWidget()
-        nr = QHBoxLayout(self.notice_row)
-        nr.setContentsMargins(0, 0, 0, 0)
-        nr.addWidget(self.notice, 1)
-        nr.addWidget(self.notice_close, 0, Qt.AlignmentFlag.AlignTop)
-        self.notice_row.hide()
-        return self.notice_row
+    def _build_controls(self) -> ControlBox:
+        """The "Control" box (:mod:`study_app.gui.control_box`); its widgets are the window's to wire."""
+        c = self.controls = ControlBox()
+        self.start_button, self.untrained_button, self.override_button = c.start_button, c.untrained_button, \
+            c.override_button
+        self.pause_button, self.resume_button = c.pause_button, c.resume_button
+        self.abort_trial_button, self.abort_session_button = c.abort_trial_button, c.abort_session_button
+        self.calibrate_button, self.participant_button, self.rig_button = c.calibrate_button, c.participant_button, \
+            c.rig_button
+        self.engine_row, self.engine_label, self.restart_button = c.engine_row, c.engine_label, c.restart_button
+        self.notice_row, self.notice, self.notice_close = c.notice_row, c.notice, c.notice_close
+        return c
 
     def _build_right_column(self) -> QSplitter:
         """Progress and live plots above; the trial table and device health in tabs below."""
@@ -504,11 +433,7 @@ class ExperimenterWindow(QMainWindow):
 
     def _on_engine_changed(self) -> None:
         trouble, detail = self.model.engine_notice()
-        self.engine_label.setText(trouble)
-        self.engine_label.setToolTip(detail)
-        self.restart_button.setToolTip(detail)
-        self.engine_row.setVisible(bool(trouble))
-        self.restart_button.setEnabled(self.model.can("restart_engine"))
+        self.controls.show_engine(trouble, detail, self.model.can("restart_engine"))
 
     def _on_session_changed(self) -> None:
         s = self.model.session
@@ -530,13 +455,7 @@ class ExperimenterWindow(QMainWindow):
             self.menus.refresh()
 
     def _on_notice(self) -> None:
-        n = self.model.notice
-        self.notice_row.setVisible(n is not None)
-        if n is not None:
-            fg, bg = LEVEL_COLOURS.get(n.level, LEVEL_COLOURS["info"])
-            self.notice.setText(n.text)
-            self.notice_row.setStyleSheet(f"background: {bg}; color: {fg};")
-            self.notice.setStyleSheet(f"color: {fg}; font-weight: 600; padding: 4px;")
+        self.controls.show_notice(self.model.notice)
 
     # -- settings and closing --------------------------------------------------------------------------------
     def _restore_settings(self, db_path: str | None) -> None:

@@ -18,16 +18,14 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
-from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
 from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.session import SessionRunner
+from protocol.session_driver import SessionDriver
 from protocol.session_setup import (
     OpenedSession,
     delivery_limits,
@@ -116,10 +114,8 @@ def _drive(
     ring = eng.ring
     assert ring is not None
     loop = eng.loop
-    events: list[LoopEvent] = []
-    loop.on_event = events.append  # list.append is atomic: safe from the real-clock loop thread
-    replay_log = loop.replay_log
-    cursor = ring.write_count
+    driver = SessionDriver(ring, loop.replay_log)
+    loop.on_event = driver.on_loop_event  # a deque's append is atomic: safe from the real-clock loop thread
     t_last_report = 0.0
     base_done = progress.study_trials_done
     planned = runner.state.trials_total  # re-runs of aborted trials add to the study's trials as they are queued
@@ -133,27 +129,9 @@ def _drive(
                 loop.run_ticks(BLOCK_TICKS)
             else:
                 time.sleep(0.02)
-            res = ring.read_since(cursor)
-            cursor = res.cursor
-            if res.lost:
-                runner.records_lost(res.lost)
-            # events and the replay log after the rows: every entry of a tick whose record was read is in
-            n_ev = len(events)
-            batch, events[:n_ev] = events[:n_ev], []
-            log = [replay_log.popleft() for _ in range(len(replay_log))]
-            n = len(res.rows)
-            due = trigger.due_ns() if trigger is not None else None
-            if trigger is not None and due is not None and n and int(res.rows["t_ns"][-1]) >= due:
-                # a planned kill: the runner gets the records up to its moment, then the process dies there
-                k = int(np.searchsorted(res.rows["t_ns"], due, side="right"))
-                runner.process(res.rows[:k], batch, log)
-                if k:
-                    trigger.poll(int(res.rows["t_ns"][k - 1]))
-                runner.process(res.rows[k:])
-            else:
-                runner.process(res.rows, batch, log)
-            if trigger is not None and n:
-                trigger.poll(int(res.rows["t_ns"][-1]))
+            block = driver.take()
+            driver.feed(runner, block, trigger)
+            n = len(block.rows)
             progress.study_time_s += n * 1e-3
             now = time.monotonic()
             done = runner.state.completed + runner.state.aborted

@@ -120,7 +120,13 @@ def test_abort_trial_requeues_and_close_leaves_the_session_resumable(engine, tmp
     run_until(e, lambda: len(of(events, m.TrialStarted)) == 2)
     assert of(events, m.TrialEnded)[0].record.outcome == "aborted"
     assert of(events, m.TrialStarted)[1].trials_total == 3  # re-queued at the end
+    # a confirmation for the trial that ended is refused by the engine, and ignored by the runner had it been
+    # queued before the trial ended (one test of a late abort: SessionRunner.trial_ended)
+    e.handle(m.AbortTrial("too late", trial_index=0))
+    assert of(events, m.CommandRefused)[-1].message == "trial 1 had already ended: nothing was aborted"
+    e.runner.abort_trial("too late", trial_index=0)
     run_until(e, lambda: e.runner.machine.elapsed_ns > 200_000_000)
+    assert e.runner.state.aborted == 1
     e.close("the experimenter GUI went away", detached=True)
     assert e.loop.faults & Fault.ENGINE_DETACHED
     assert e.loop.framework.safety.gain == 0.0
@@ -131,6 +137,8 @@ def test_abort_trial_requeues_and_close_leaves_the_session_resumable(engine, tmp
     assert db_rows(db, "SELECT status FROM sessions") == [("running",)]
     assert db_rows(db, "SELECT kind, detail FROM events WHERE kind = 'detached'") == [
         ("detached", "the experimenter GUI went away")]
+    assert db_rows(db, "SELECT detail FROM events WHERE detail LIKE '%ignored%'") == [
+        ("abort_trial for trial 1 (index 0) ignored: it had ended",)]
 
 
 def test_resume_continues_an_interrupted_session(tmp_path, short_protocol):

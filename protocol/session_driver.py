@@ -1,0 +1,122 @@
+"""The session driver: from the loop's ring to the session runner, one definition for every process that runs one.
+
+The study engine (:mod:`study_app.engine.host`, a person's session) and the headless study runner
+(:mod:`study_app.headless.session_run`, simulated participants) both read the loop's shared-memory ring and feed
+what they read to a :class:`protocol.session.SessionRunner`.  :class:`SessionDriver` is that hand-off:
+
+* :meth:`SessionDriver.take` copies the records written since the last call (:meth:`RingBuffer.read_since
+  <pipeline.runtime.ring.RingBuffer.read_since>`) and, *after* them, the loop's pending events and replay log --
+  so every entry of a tick whose record was read is in the block.  When no record came, the events and the log
+  wait for the next block (a runner stores an event only on its records' time axis).
+* :meth:`SessionDriver.feed` hands one block to a runner: records the ring lapped are reported first
+  (:meth:`SessionRunner.records_lost`), then the records with the events and the log.  With a rehearsal
+  trigger (:class:`protocol.rehearsal.RehearsalTrigger`), a planned ``kill`` fires at its record exactly: the
+  runner gets the records up to it, the trigger is polled there, then the rest.
+
+The loop's events reach the driver through :meth:`SessionDriver.on_loop_event` (``HapticLoop.on_event``), which
+may be called from the loop's thread: it only appends to a deque, which is atomic.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.runtime.loop_messages import LoopEvent
+from pipeline.runtime.ring import RingBuffer
+from protocol.rehearsal import RehearsalTrigger
+from protocol.session import SessionRunner
+
+__all__ = ["RingBlock", "SessionDriver"]
+
+#: One entry of the loop's replay log: (tick, kind, payload) (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`).
+ReplayEntry = tuple[int, str, object]
+
+
+@dataclass(frozen=True)
+class RingBlock:
+    """What one read of the ring gave: the records, how many were lost before them, and the loop's entries.
+
+    Attributes
+    ----------
+    rows
+        The records (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`), oldest first; may be empty.
+    lost
+        Records written since the previous read that the ring overwrote before they could be read.
+    loop_events
+        The loop's events taken after the records (empty when no record came).
+    replay_log
+        The loop's replay-log entries taken after the records (empty when no record came).
+    """
+
+    rows: npt.NDArray[np.void]
+    lost: int
+    loop_events: list[LoopEvent]
+    replay_log: list[ReplayEntry]
+
+
+class SessionDriver:
+    """Reads the loop's ring from where it was created and feeds the blocks to a session runner.
+
+    Parameters
+    ----------
+    ring
+        The ring the loop writes every tick's record to.
+    replay_log
+        The loop's replay log (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`); the driver takes its entries.
+    """
+
+    def __init__(self, ring: RingBuffer, replay_log: deque[ReplayEntry]) -> None:
+        self.ring = ring
+        self.replay_log = replay_log
+        #: The ring's write count of the next record to read (records before the driver was made are not read).
+        self.cursor = ring.write_count
+        #: The loop's events not yet handed on (appended on the loop's thread, taken on the driver's).
+        self.loop_events: deque[LoopEvent] = deque()
+
+    def on_loop_event(self, ev: LoopEvent) -> None:
+        """Keep one of the loop's events for the next block (safe from the loop's thread)."""
+        self.loop_events.append(ev)
+
+    def take_events(self) -> list[LoopEvent]:
+        """The loop's pending events, taken (oldest first)."""
+        events = self.loop_events
+        return [events.popleft() for _ in range(len(events))]
+
+    def take(self) -> RingBlock:
+        """The records written since the last call, then the loop's events and replay log (if any record came)."""
+        res = self.ring.read_since(self.cursor)
+        self.cursor = res.cursor
+        if len(res.rows) == 0:
+            return RingBlock(res.rows, res.lost, [], [])
+        # the events and the replay log after the records: every entry of a tick whose record was read is in
+        log = self.replay_log
+        return RingBlock(res.rows, res.lost, self.take_events(), [log.popleft() for _ in range(len(log))])
+
+    @staticmethod
+    def feed(runner: SessionRunner, block: RingBlock, trigger: RehearsalTrigger | None = None) -> None:
+        """Hand one block to ``runner``; poll ``trigger`` (a planned ``kill`` fires at its record exactly)."""
+        if block.lost:
+            runner.records_lost(block.lost)
+        rows = block.rows
+        n = len(rows)
+        due = trigger.due_ns() if trigger is not None else None
+        if trigger is not None and due is not None and n and int(rows["t_ns"][-1]) >= due:
+            # a planned kill: the runner gets the records up to its moment, then the process dies there
+            k = int(np.searchsorted(rows["t_ns"], due, side="right"))
+            runner.process(rows[:k], block.loop_events, block.replay_log)
+            if k:
+                trigger.poll(int(rows["t_ns"][k - 1]))
+            runner.process(rows[k:])
+        else:
+            runner.process(rows, block.loop_events, block.replay_log)
+        if trigger is not None and n:
+            trigger.poll(int(rows["t_ns"][-1]))
+
+    def flush_events(self, runner: SessionRunner) -> None:
+        """Hand the pending loop events to ``runner`` without records (the loop is frozen: it writes none)."""
+        if self.loop_events:
+            runner.process(np.empty(0), self.take_events())
