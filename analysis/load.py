@@ -17,7 +17,6 @@ import os
 import sqlite3
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import SupportsInt
 
 import numpy as np
@@ -25,6 +24,7 @@ import numpy.typing as npt
 import pandas as pd
 
 from analysis.errors import AnalysisError
+from analysis.inputs import check_databases
 from protocol.recording import RecordingDamaged, read_ticks, recording_damage
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader, trial_id_of
@@ -229,22 +229,11 @@ def _read_all(
 ) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str]]:
     """Each database's sessions, trials and events (and the damage found), in order; a refusal for a path that
     is missing or names a database given already."""
-    if not paths:
-        raise AnalysisError("--db: give at least one study database")
-    seen: dict[tuple[int, int], str] = {}
     all_sessions: list[pd.DataFrame] = []
     all_trials: list[pd.DataFrame] = []
     all_events: list[pd.DataFrame] = []
     damage: list[str] = []
-    for raw in paths:
-        path = str(raw)
-        if not Path(path).exists():
-            raise AnalysisError(f"{path}: no such database")
-        st = os.stat(path)
-        key = (st.st_dev, st.st_ino)
-        if key in seen:
-            raise AnalysisError(f"{path}: the same database is given twice (also as {seen[key]})")
-        seen[key] = path
+    for path in check_databases(paths, open_each=False):  # (each is opened, checked, just below)
         s, t, e, d = _read_one(path)
         all_sessions.append(s)
         all_trials.append(t)

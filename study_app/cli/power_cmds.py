@@ -183,6 +183,7 @@ def cmd_power(args: argparse.Namespace) -> int:
     req = _request(args)
 
     from analysis.errors import AnalysisError
+    from analysis.inputs import check_databases
     from analysis.outdir import check_output_folder, write_output_folder
     from analysis.power_pool import is_pool_file
 
@@ -190,6 +191,8 @@ def cmd_power(args: argparse.Namespace) -> int:
                   keep=is_pool_file)
     try:
         check_output_folder(args.out, **folder)  # before any work (and before the analysis is imported)
+        if args.db:
+            check_databases(args.db)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
 

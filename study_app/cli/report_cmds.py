@@ -81,10 +81,12 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:
 def cmd_report(args: argparse.Namespace) -> int:
     """Run ``haptic-study report``; errors raise :class:`study_app.cli.error.CliError`."""
     from analysis.errors import AnalysisError
+    from analysis.inputs import check_databases
     from analysis.outdir import REPORT_MARKER, check_output_folder
 
-    try:  # before the analysis is imported (seconds): a refused folder is said at once
+    try:  # before the analysis is imported (seconds): a refused folder or database is said at once
         check_output_folder(args.out, command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+        check_databases(args.db)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
     from analysis.metrics import MetricOptions
