@@ -8,8 +8,9 @@ rather than dying with a ``MemoryError`` after an hour of work.
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
+
+from pipeline.runtime.platform_support import free_physical_bytes
 
 __all__ = ["available_memory_bytes", "memory_problem"]
 
@@ -28,11 +29,7 @@ def _meminfo_available() -> int | None:
 
 def _sysconf_available() -> int | None:
     """Free physical pages × page size (POSIX ``sysconf``; less than ``MemAvailable``: the page cache not counted)."""
-    try:
-        pages, size = os.sysconf("SC_AVPHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return pages * size if pages > 0 and size > 0 else None
+    return free_physical_bytes()  # (Windows: GlobalMemoryStatusEx; platform_support)
 
 
 def _cgroup_headroom() -> int | None:

@@ -20,6 +20,7 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
+from pipeline.runtime.platform_support import process_exists
 from protocol.storage.common import LeaseHeld, now_iso
 
 __all__ = ["LEASE_HEARTBEAT_S", "LEASE_STALE_S", "LeaseHolder", "new_owner_token", "process_identity", "session_scope"]
@@ -73,15 +74,7 @@ def _pid_alive(pid: int) -> bool:
     if fields is not None:
         # a zombie (killed, not yet reaped -- an orphan whose reaper is slow) writes nothing any more
         return fields[0] not in ("Z", "X")
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # it exists, owned by someone else
-        return True
-    except (OverflowError, ValueError):
-        return False
-    return True
+    return process_exists(pid)  # (another user's counts; Windows asks OpenProcess: platform_support)
 
 
 def _command_line() -> str:
