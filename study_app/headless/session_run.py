@@ -11,7 +11,6 @@ trial's time.
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -22,6 +21,7 @@ import numpy as np
 
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import LoopEvent
+from pipeline.runtime.platform_support import kill_hard
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
@@ -249,7 +249,7 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
         # (the workers then die with it, by PR_SET_PDEATHSIG)
         sys.stdout.flush()
         sys.stderr.flush()
-        os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
+        kill_hard(_kill_target_pid or os.getpid())
 
     def cancel(kind: str, at_ns: int) -> None:
         rig.cancel_fault(kind, loop.t0_ns + at_ns)
