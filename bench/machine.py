@@ -14,21 +14,13 @@ from typing import Any
 
 from pipeline.runtime.clock import MonotonicClock, prepare_realtime_thread
 from pipeline.runtime.loop_stats import LoopStats
+from pipeline.runtime.platform_support import cpu_times
 from pipeline.runtime.platform_support import load_average as load_avg
 from study_app.engine import messages as m
 from study_app.engine.client import EngineClient
 from study_app.engine.setup import HostConfig
 
 __all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
-
-
-def cpu_times() -> list[int] | None:
-    """The machine's aggregate CPU times (first line of ``/proc/stat``: user … steal), or None off Linux."""
-    try:
-        with open("/proc/stat", encoding="ascii") as fh:
-            return [int(x) for x in fh.readline().split()[1:9]]
-    except (OSError, ValueError):
-        return None
 
 
 def steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:

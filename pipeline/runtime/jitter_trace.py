@@ -50,7 +50,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.runtime.clock import MonotonicClock
-from pipeline.runtime.platform_support import gil_keeping_pread
+from pipeline.runtime.platform_support import gil_keeping_pread, open_schedstat, thread_ids
 
 __all__ = ["LateTickTracer"]
 
@@ -64,10 +64,7 @@ class _SchedReader:
     def open(self, tid: int) -> int:
         if self._pread is None:
             return -1
-        try:
-            return os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
-        except OSError:
-            return -1
+        return open_schedstat(tid)
 
     def read(self, fd: int) -> tuple[int, int]:
         if fd < 0:
@@ -235,10 +232,7 @@ class LateTickTracer:
         """
         by_tid = {t.native_id: t for t in threading.enumerate() if t.native_id is not None}
         known = {t.tid: t for t in self._tasks}
-        try:
-            tids = [int(x) for x in os.listdir("/proc/self/task")]
-        except OSError:
-            tids = list(by_tid)
+        tids = thread_ids() or list(by_tid)  # /proc/self/task (elsewhere: Python's threads; platform_support)
         tasks = []
         loop_tid = self._loop_tid
         for tid in tids:

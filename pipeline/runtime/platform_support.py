@@ -16,7 +16,7 @@ call                        elsewhere (Windows, macOS)      what the user loses 
 =========================== ============================== ===================================================
 timer slack (``prctl``)     nothing                        about 50 µs more median wake-up lateness of the loop
 ``SCHED_FIFO`` (loop and    normal priority; the loop's    the loop can be preempted by any process: a busy
-helper threads)             ``scheduling`` says why        machine shows in the jitter figure (which says so)
+helper threads)             ``scheduling`` says why (GUI)  machine shows in the loop's jitter figures
 usable CPUs (affinity)      ``os.cpu_count()``             a CPU mask (``taskset``) is not honoured
 worker processes            ``spawn``                      each worker imports the product afresh (slower
 (``fork``)                                                  start of a parallel study)
@@ -42,6 +42,12 @@ free memory (``sysconf``)   Windows: ``GlobalMemory-       nothing (untested on 
 load average                None                           benchmarks print no load
 jitter tracing (``pread``   nothing (tracer reads zeros)   ``--explain`` names no cause for a late tick
 of ``/proc``, GIL kept)
+process identity (boot id,  "" (``/proc`` absent)          a reused process id is not told apart from the
+start time in ``/proc``)                                   lease's writer: the lease trusts its heartbeat
+zombie check (``/proc``)    ``process_exists`` alone       a killed writer not yet reaped counts as alive
+free memory (MemAvailable,  free physical memory only      the memory check is stricter (page cache not
+cgroup v2 limit)                                           counted) and blind to a container's limit
+CPU times (``/proc/stat``)  None                           benchmarks print no hypervisor steal
 =========================== ============================== ===================================================
 
 The garbage-collector and switch-interval settings of the loop's process
@@ -51,35 +57,34 @@ are CPython's, the same on every system, so they are not here.
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import mmap
-import multiprocessing as mp
 import os
-import shutil
 import signal
 import sys
 import threading
 from collections.abc import Callable
-from multiprocessing import shared_memory
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # multiprocessing is imported where it is used: a command that never needs it loads faster
+    from multiprocessing.shared_memory import SharedMemory as SharedSegment  # the ring's segment
 
 __all__ = [
     "DIR_FD_CALLS", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NONBLOCK", "SharedSegment", "attach_segment",
-    "create_segment", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
-    "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "owner_only", "process_exists",
-    "set_fd_mode", "set_fifo_priority", "set_timer_slack_ns", "umask", "usable_cpu_count", "worker_context",
+    "boot_id", "cgroup_memory_headroom", "cpu_times", "create_segment", "die_with_parent", "free_orphaned_segment",
+    "free_physical_bytes", "fs_free_bytes", "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average",
+    "meminfo_available_bytes", "open_schedstat", "owner_only", "process_exists", "process_stat_fields",
+    "set_fd_mode", "set_fifo_priority", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count",
+    "worker_context",
 ]
-
-#: A shared-memory segment the ring lives in (``multiprocessing.shared_memory``: POSIX shm or a Windows mapping).
-SharedSegment = shared_memory.SharedMemory
-
 
 def _linux() -> bool:
     return sys.platform.startswith("linux")
 
 
 def _libc() -> Any:
+    import ctypes.util
+
     return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
 
 
@@ -92,6 +97,8 @@ def set_timer_slack_ns(slack_ns: int = 1) -> bool:
     """
     if not _linux():
         return False
+    import ctypes
+
     try:
         PR_SET_TIMERSLACK = 29
         return bool(_libc().prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(slack_ns), 0, 0, 0) == 0)
@@ -125,6 +132,8 @@ def gil_keeping_pread(size: int = 128) -> Callable[[int], bytes] | None:
     """
     if not _linux():
         return None
+    import ctypes
+
     try:
         fn = ctypes.PyDLL(None).pread
         fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_long]
@@ -140,20 +149,42 @@ def gil_keeping_pread(size: int = 128) -> Callable[[int], bytes] | None:
     return read
 
 
+def thread_ids() -> list[int] | None:
+    """The kernel's ids of this process's threads (``/proc/self/task``; None where the OS does not list them)."""
+    try:
+        return [int(x) for x in os.listdir("/proc/self/task")]
+    except (OSError, ValueError):
+        return None
+
+
+def open_schedstat(tid: int) -> int:
+    """An open descriptor of thread ``tid``'s scheduler counters (``/proc/self/task/<tid>/schedstat``), or -1."""
+    try:
+        return os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
+    except OSError:
+        return -1
+
+
 # -- processes -------------------------------------------------------------------------------------------------
 if sys.platform != "win32":
-    from multiprocessing.context import ForkContext, SpawnContext
+    if TYPE_CHECKING:
+        from multiprocessing.context import ForkContext, SpawnContext
 
     def worker_context() -> ForkContext | SpawnContext:
         """Linux: ``fork`` (workers inherit the imported modules) while this is the only thread; else ``spawn``."""
+        import multiprocessing as mp
+
         if _linux() and threading.active_count() == 1:
             return mp.get_context("fork")
         return mp.get_context("spawn")
 else:
-    from multiprocessing.context import SpawnContext
+    if TYPE_CHECKING:
+        from multiprocessing.context import SpawnContext
 
     def worker_context() -> SpawnContext:
         """Windows has no ``fork``: ``spawn``."""
+        import multiprocessing as mp
+
         return mp.get_context("spawn")
 
 
@@ -191,10 +222,32 @@ def process_exists(pid: int) -> bool:
     return True
 
 
+def boot_id() -> str:
+    """This boot of the machine (Linux's ``boot_id``); empty where the OS does not say."""
+    try:
+        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
+            return fh.read().strip()
+    except OSError:
+        return ""
+
+
+def process_stat_fields(pid: int) -> list[str] | None:
+    """The fields of ``/proc/<pid>/stat`` after the command name (field 3, the state, first); None without /proc."""
+    try:
+        with open(f"/proc/{int(pid)}/stat", encoding="ascii", errors="replace") as fh:
+            stat = fh.read()
+    except (OSError, ValueError, OverflowError):
+        return None
+    # the command name (field 2) may hold spaces and parentheses: count fields after the last ')'
+    return stat[stat.rindex(")") + 2 :].split()
+
+
 def _windows_process_exists(pid: int) -> bool:
     """``OpenProcess`` + ``GetExitCodeProcess`` (``os.kill(pid, 0)`` on Windows sends Ctrl-C instead)."""
     if sys.platform != "win32" or not 0 < pid < 2**32:
         return False
+    import ctypes
+
     kernel32 = ctypes.windll.kernel32
     handle = kernel32.OpenProcess(0x1000, False, pid)  # PROCESS_QUERY_LIMITED_INFORMATION
     if not handle:
@@ -210,6 +263,8 @@ def _windows_process_exists(pid: int) -> bool:
 # -- shared memory ---------------------------------------------------------------------------------------------
 def create_segment(size: int) -> SharedSegment:
     """A new shared-memory segment of ``size`` bytes, under a fresh name (the creator unlinks it)."""
+    from multiprocessing import shared_memory
+
     return shared_memory.SharedMemory(create=True, size=size)
 
 
@@ -236,6 +291,8 @@ def attach_segment(name: str) -> tuple[memoryview, Callable[[], None]] | None:
         finally:
             os.close(fd)
         return memoryview(mm), mm.close
+    from multiprocessing import shared_memory
+
     try:
         shm = shared_memory.SharedMemory(name=name)
     except FileNotFoundError:
@@ -272,6 +329,8 @@ def free_orphaned_segment(name: str) -> bool:
             return False
         _untrack(name)
         return True
+    from multiprocessing import shared_memory
+
     try:
         shm = shared_memory.SharedMemory(name=name)
     except (FileNotFoundError, OSError):
@@ -331,6 +390,8 @@ def fs_free_bytes(folder: str | os.PathLike[str]) -> int | None:
         except OSError:
             return None
         return int(st.f_bavail * st.f_frsize)
+    import shutil
+
     try:
         return shutil.disk_usage(folder).free
     except OSError:
@@ -359,9 +420,45 @@ def free_physical_bytes() -> int | None:
     return pages * size if pages > 0 and size > 0 else None
 
 
+def meminfo_available_bytes() -> int | None:
+    """``MemAvailable`` of /proc/meminfo (Linux ≥ 3.14): what can be allocated without swapping; None elsewhere."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def cgroup_memory_headroom() -> int | None:
+    """Memory left under this process's cgroup-v2 limit (a Linux container), or None when there is none."""
+    try:
+        rel = next(line.split(":", 2)[2].strip() for line in Path("/proc/self/cgroup").read_text().splitlines()
+                   if line.startswith("0::"))
+        base = Path("/sys/fs/cgroup") / rel.lstrip("/")
+        limit = (base / "memory.max").read_text().strip()
+        if limit == "max":
+            return None
+        return max(0, int(limit) - int((base / "memory.current").read_text().strip()))
+    except (OSError, ValueError, StopIteration, IndexError):
+        return None
+
+
+def cpu_times() -> list[int] | None:
+    """The machine's aggregate CPU times (first line of ``/proc/stat``: user … steal), or None off Linux."""
+    try:
+        with open("/proc/stat", encoding="ascii") as fh:
+            return [int(x) for x in fh.readline().split()[1:9]]
+    except (OSError, ValueError):
+        return None
+
+
 def _windows_available_physical() -> int | None:
     if sys.platform != "win32":
         return None
+    import ctypes
 
     class _Status(ctypes.Structure):
         _fields_ = [("dwLength", ctypes.c_ulong), ("dwMemoryLoad", ctypes.c_ulong),

@@ -34,11 +34,15 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.runtime.platform_support import SharedSegment, attach_segment, create_segment, free_orphaned_segment
+from pipeline.runtime.platform_support import attach_segment, create_segment, free_orphaned_segment
+
+if TYPE_CHECKING:
+    from pipeline.runtime.platform_support import SharedSegment
 
 __all__ = ["RingBuffer", "RingReadResult"]
 

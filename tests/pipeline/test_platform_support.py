@@ -1,8 +1,9 @@
 """The operating system behind one module (``pipeline/runtime/platform_support.py``), and its fallbacks.
 
 The source of every module is scanned with ``ast`` for calls only some systems have (real-time scheduling, CPU
-affinity, signals, ``prctl``/``ctypes``, shared-memory names, file modes and owners, ``open`` flags, ``statvfs``,
-``sysconf``, the ``fork`` start method): none may stand outside the platform module; the scan is shown to find
+affinity, signals, ``prctl``/``ctypes``, shared-memory names, file modes and owners, ``open`` flags and ``dir_fd``,
+``statvfs``, ``sysconf``, the ``fork`` start method, paths in ``/proc`` and ``/sys``): none may stand outside the
+platform module; the scan is shown to find
 them.  Then each fallback runs on this Linux machine with ``sys.platform`` set to the system that needs it (the
 Windows API calls through ``ctypes.windll`` answered by a fake: the branch's logic is tested here, the real
 Windows calls are not).
@@ -80,6 +81,11 @@ def os_calls_in(source: str) -> list[tuple[int, str]]:
             found += [(node.lineno, "dir_fd") for k in node.keywords if k.arg in _DIR_FD]
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and "/dev/shm" in node.value:
             found.append((node.lineno, "/dev/shm"))
+        if isinstance(node, (ast.Constant, ast.JoinedStr)):
+            first = node.values[0] if isinstance(node, ast.JoinedStr) and node.values else node
+            text = first.value if isinstance(first, ast.Constant) else None
+            if isinstance(text, str) and (text.startswith(("/proc/", "/sys/")) or text in ("/proc", "/sys")):
+                found.append((node.lineno, "/proc"))
     return sorted(set(found))
 
 
@@ -90,10 +96,12 @@ def _modules() -> list[Path]:
 def test_the_scan_finds_os_calls() -> None:
     src = ("import signal, ctypes.util\nfrom multiprocessing import shared_memory\nos.kill(p, signal.SIGKILL)\n"
            "f = getattr(os, 'O_CLOEXEC', 0)\nmp.get_context('fork')\nos.open(n, 0, dir_fd=d)\np = '/dev/shm/x'\n"
-           "from os import sched_getaffinity\nos.path.join(a, b)\n")
+           "from os import sched_getaffinity\nos.path.join(a, b)\nopen(f'/proc/{pid}/stat')\n"
+           "d = 'the /proc file'\n")
     assert os_calls_in(src) == [(1, "import ctypes.util"), (1, "import signal"),
                                 (2, "import multiprocessing"), (3, "os.kill"), (4, "os.O_CLOEXEC"), (5, "fork"),
-                                (6, "dir_fd"), (7, "/dev/shm"), (8, "os.sched_getaffinity")]
+                                (6, "dir_fd"), (7, "/dev/shm"), (8, "os.sched_getaffinity"),
+                                (10, "/proc")]
     assert os_calls_in((ROOT / PLATFORM).read_text())  # the platform module does make them
 
 
@@ -280,3 +288,27 @@ def test_without_dir_fd_calls_output_folders_are_refused_before_any_work(monkeyp
     assert not (tmp_path / "new").exists()
     with pytest.raises(outfs.OutputError, match="not supported"):
         outfs.open_folder(str(tmp_path), follow=True)
+
+
+def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
+    import builtins
+    import io
+
+    from analysis.resources import available_memory_bytes
+    from protocol.storage.leases import _pid_alive, process_identity
+
+    def no_proc(real: Any) -> Any:
+        def call(path: Any, *args: Any, **kwargs: Any) -> Any:
+            if str(path).startswith(("/proc", "/sys")):
+                raise FileNotFoundError(2, "No such file or directory", str(path))
+            return real(path, *args, **kwargs)
+        return call
+
+    for owner, name in ((builtins, "open"), (io, "open"), (os, "open"), (os, "listdir")):
+        monkeypatch.setattr(owner, name, no_proc(getattr(owner, name)))
+    assert ps.boot_id() == "" and ps.process_stat_fields(os.getpid()) is None and ps.cpu_times() is None
+    assert ps.thread_ids() is None and ps.open_schedstat(threading.get_native_id()) == -1
+    assert ps.meminfo_available_bytes() is None and ps.cgroup_memory_headroom() is None
+    assert process_identity(os.getpid()) == ""  # the lease falls back on heartbeats
+    assert _pid_alive(os.getpid()) is True  # by process_exists alone
+    assert available_memory_bytes() == ps.free_physical_bytes()  # sysconf's free pages
