@@ -21,7 +21,6 @@ import numpy as np
 
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import LoopEvent
-from pipeline.runtime.platform_support import kill_hard
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
@@ -247,6 +246,8 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
     def kill() -> None:
         # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
         # (the workers then die with it, by PR_SET_PDEATHSIG)
+        from pipeline.runtime.platform_support import kill_hard
+
         sys.stdout.flush()
         sys.stderr.flush()
         kill_hard(_kill_target_pid or os.getpid())
