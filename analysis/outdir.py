@@ -68,6 +68,7 @@ from analysis.outfs import (
     writable_problem,
     write_bytes_at,
 )
+from pipeline.runtime.platform_support import O_NOFOLLOW, O_NONBLOCK, process_exists
 
 __all__ = [
     "REPORT_MARKER",
@@ -125,7 +126,7 @@ def _parse_marker(raw: bytes) -> dict[str, set[str]] | None:
 
 def _read_marker_at(dir_fd: int, marker: str) -> dict[str, set[str]] | None:
     try:
-        fd = os.open(marker, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=dir_fd)
+        fd = os.open(marker, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=dir_fd)
     except OSError:
         return None
     try:
@@ -385,11 +386,11 @@ def _remove_stale_temporaries(out_fd: int, marker: str) -> None:
             continue
         try:
             pid = int(name[len(marker) + 5:].split("-", 1)[0])
-            os.kill(pid, 0)
-        except ProcessLookupError:
-            shutil.rmtree(name, dir_fd=out_fd, ignore_errors=True)
+            alive = process_exists(pid)  # (platform_support: Windows asks OpenProcess)
         except (ValueError, OSError):
             continue
+        if not alive:
+            shutil.rmtree(name, dir_fd=out_fd, ignore_errors=True)
 
 
 def _is_write_failure(exc: OSError, tmp: Path) -> bool:

@@ -18,11 +18,23 @@ import errno
 import hashlib
 import os
 import stat
+import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 from analysis.errors import AnalysisError
 from analysis.oserrors import kind_of, os_error_line
+from pipeline.runtime.platform_support import (
+    DIR_FD_CALLS,
+    O_CLOEXEC,
+    O_DIRECTORY,
+    O_NOFOLLOW,
+    O_NONBLOCK,
+    fs_free_bytes,
+    fs_read_only,
+    set_fd_mode,
+    umask,
+)
 
 __all__ = [
     "OutputError",
@@ -44,6 +56,12 @@ __all__ = [
 ]
 
 
+#: The refusal where the OS lacks the ``*at`` calls (Windows): the output policy never writes by path.
+NO_DIR_FD_CALLS = (f"writing output files is not supported on this operating system yet ({sys.platform}): the "
+                   "output policy needs file-descriptor-relative calls (openat, O_NOFOLLOW) it lacks; run the "
+                   "command on Linux or macOS (nothing was written)")
+
+
 class OutputError(AnalysisError):
     """An output the command must not, or could not, write: one line naming the path and what to do.
 
@@ -56,35 +74,23 @@ class OutputError(AnalysisError):
         self.status = status
 
 
-def _umask() -> int:
-    """The process's umask: read from /proc where Linux shows it (setting it to read it races with threads)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError, IndexError):
-        pass
-    mask = os.umask(0o077)
-    os.umask(mask)
-    return mask
-
-
 def file_mode() -> int:
     """The mode of a new output file: that of the study database (0600), stricter if the umask says so."""
-    return 0o600 & ~_umask()
+    return 0o600 & ~umask()
 
 
 def dir_mode() -> int:
     """The mode of a new output folder: owner-only (0700), stricter if the umask says so."""
-    return 0o700 & ~_umask()
+    return 0o700 & ~umask()
 
 
 def open_folder(name: str, dir_fd: int | None = None, *, follow: bool = False) -> int:
     """Open a folder for ``*at`` calls; never through a symbolic link unless ``follow`` (the folder the user named)."""
-    flags = os.O_RDONLY | os.O_DIRECTORY | getattr(os, "O_CLOEXEC", 0)
+    if not DIR_FD_CALLS:  # (Windows) the policy is built on *at calls; refuse rather than follow links
+        raise OutputError(NO_DIR_FD_CALLS)
+    flags = os.O_RDONLY | O_DIRECTORY | O_CLOEXEC
     if not follow:
-        flags |= os.O_NOFOLLOW
+        flags |= O_NOFOLLOW
     return os.open(name, flags, dir_fd=dir_fd)
 
 
@@ -127,7 +133,7 @@ def sha256_at(dir_fd: int, rel: str) -> str | None:
     fd, name = _walk_to(dir_fd, rel)
     try:
         try:
-            f = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0), dir_fd=fd)
+            f = os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC, dir_fd=fd)
         except OSError as exc:
             if exc.errno in (errno.ELOOP, errno.ENOENT, errno.ENXIO):
                 return None
@@ -151,7 +157,7 @@ def write_bytes_at(dir_fd: int, name: str, data: bytes) -> None:
     ``name`` is replaced as an entry: a link there is replaced, never written through.
     """
     tmp = f".{name}.{os.getpid()}.{os.urandom(4).hex()}.new"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | getattr(os, "O_CLOEXEC", 0),
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | O_NOFOLLOW | O_CLOEXEC,
                  file_mode(), dir_fd=dir_fd)
     try:
         try:
@@ -181,19 +187,12 @@ def fsync_dir(dir_fd: int) -> None:
 
 def free_bytes(folder: str | os.PathLike[str]) -> int | None:
     """Bytes an unprivileged user may still write in ``folder``'s file system (None: unknown)."""
-    try:
-        st = os.statvfs(folder)
-    except (OSError, AttributeError):
-        return None
-    return st.f_bavail * st.f_frsize
+    return fs_free_bytes(folder)  # statvfs (Windows: shutil.disk_usage; platform_support)
 
 
 def read_only(folder: str | os.PathLike[str]) -> bool:
     """Whether ``folder`` lies on a file system mounted read-only."""
-    try:
-        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
-    except (OSError, AttributeError):
-        return False
+    return fs_read_only(folder)  # statvfs (False where the OS cannot tell; platform_support)
 
 
 def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | None:
@@ -202,6 +201,8 @@ def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | Non
     ``shown`` is the path as the user gave it; ``need_bytes`` the least free
     space the outputs need (0: only that some space is left).
     """
+    if not DIR_FD_CALLS:
+        return f"{shown}: {NO_DIR_FD_CALLS}"
     if read_only(folder):
         return (f"{shown}: the file system is read-only; write to a folder on a writable disk "
                 "(nothing was written)")
@@ -219,9 +220,9 @@ def chmod_at(dir_fd: int, rel: str, mode: int, *, sync: bool = False) -> None:
     """Set the mode of the file ``rel`` below ``dir_fd`` (never through a link), and with ``sync`` make it durable."""
     fd, name = _walk_to(dir_fd, rel)
     try:
-        f = os.open(name, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=fd)
+        f = os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=fd)
         try:
-            os.fchmod(f, mode)
+            set_fd_mode(f, mode)
             if sync:
                 os.fsync(f)
         finally:

@@ -12,12 +12,12 @@ spawns its workers instead.
 
 from __future__ import annotations
 
-import multiprocessing as mp
 import os
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
+
+from pipeline.runtime.platform_support import usable_cpu_count, worker_context
 
 __all__ = ["WORKERS_ENV", "default_workers", "run_tasks", "workers_env_problem"]
 
@@ -55,10 +55,7 @@ def default_workers() -> int:
     raw = os.environ.get(WORKERS_ENV, "").strip()
     if raw:
         return int(raw)
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        cores = os.cpu_count() or 1
+    cores = usable_cpu_count()  # the affinity mask (every CPU where the OS has none; platform_support)
     return max(1, min(4, cores))
 
 
@@ -95,7 +92,7 @@ def run_tasks(
                 on_done(i, r)
             out.append(r)
         return out
-    ctx = mp.get_context("fork" if threading.active_count() == 1 else "spawn")
+    ctx = worker_context()  # fork while single-threaded on Linux, else spawn (platform_support)
     results: list[Any] = [None] * len(tasks)
     with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
         pending: dict[Future[T], int] = {pool.submit(fn, *t): i for i, t in enumerate(tasks)}

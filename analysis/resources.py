@@ -8,57 +8,22 @@ rather than dying with a ``MemoryError`` after an hour of work.
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
+from pipeline.runtime.platform_support import cgroup_memory_headroom, free_physical_bytes, meminfo_available_bytes
 
 __all__ = ["available_memory_bytes", "memory_problem"]
-
-
-def _meminfo_available() -> int | None:
-    """``MemAvailable`` of /proc/meminfo (Linux ≥ 3.14): what can be allocated without swapping, in bytes."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
-
-
-def _sysconf_available() -> int | None:
-    """Free physical pages × page size (POSIX ``sysconf``; less than ``MemAvailable``: the page cache not counted)."""
-    try:
-        pages, size = os.sysconf("SC_AVPHYS_PAGES"), os.sysconf("SC_PAGE_SIZE")
-    except (OSError, ValueError, AttributeError):
-        return None
-    return pages * size if pages > 0 and size > 0 else None
-
-
-def _cgroup_headroom() -> int | None:
-    """Memory left under this process's cgroup-v2 limit (a container), or None when there is none."""
-    try:
-        rel = next(line.split(":", 2)[2].strip() for line in Path("/proc/self/cgroup").read_text().splitlines()
-                   if line.startswith("0::"))
-        base = Path("/sys/fs/cgroup") / rel.lstrip("/")
-        limit = (base / "memory.max").read_text().strip()
-        if limit == "max":
-            return None
-        return max(0, int(limit) - int((base / "memory.current").read_text().strip()))
-    except (OSError, ValueError, StopIteration, IndexError):
-        return None
 
 
 def available_memory_bytes() -> int | None:
     """Bytes this process may still allocate without swapping (None: the machine does not say).
 
     ``MemAvailable`` of /proc/meminfo, else ``sysconf``'s free pages; the
-    lower of that and what a cgroup-v2 memory limit leaves.
+    lower of that and what a cgroup-v2 memory limit leaves (each read by
+    :mod:`pipeline.runtime.platform_support`, None where the OS lacks it).
     """
-    found = _meminfo_available()
+    found = meminfo_available_bytes()
     if found is None:
-        found = _sysconf_available()
-    headroom = _cgroup_headroom()
+        found = free_physical_bytes()  # sysconf's free pages (Windows: GlobalMemoryStatusEx)
+    headroom = cgroup_memory_headroom()
     if headroom is not None:
         found = headroom if found is None else min(found, headroom)
     return found

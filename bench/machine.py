@@ -9,26 +9,18 @@ bursts that no process can cause or cure.
 from __future__ import annotations
 
 import multiprocessing as mp
-import os
 import time
 from typing import Any
 
 from pipeline.runtime.clock import MonotonicClock, prepare_realtime_thread
 from pipeline.runtime.loop_stats import LoopStats
+from pipeline.runtime.platform_support import cpu_times
+from pipeline.runtime.platform_support import load_average as load_avg
 from study_app.engine import messages as m
 from study_app.engine.client import EngineClient
 from study_app.engine.setup import HostConfig
 
 __all__ = ["bare_loop_stats", "cpu_times", "format_late_ticks", "load_average", "steal_percent"]
-
-
-def cpu_times() -> list[int] | None:
-    """The machine's aggregate CPU times (first line of ``/proc/stat``: user … steal), or None off Linux."""
-    try:
-        with open("/proc/stat", encoding="ascii") as fh:
-            return [int(x) for x in fh.readline().split()[1:9]]
-    except (OSError, ValueError):
-        return None
 
 
 def steal_percent(before: list[int] | None, after: list[int] | None) -> float | None:
@@ -41,7 +33,7 @@ def steal_percent(before: list[int] | None, after: list[int] | None) -> float | 
 
 def load_average() -> list[float]:
     """The 1, 5 and 15 minute load averages, rounded to 0.01."""
-    return [round(x, 2) for x in os.getloadavg()]
+    return [round(x, 2) for x in load_avg() or (float("nan"),) * 3]
 
 
 def format_late_ticks(late: dict[str, Any], indent: str = "      ") -> str:

@@ -8,13 +8,12 @@ as fast as the CPU allows, with no test sleeping on the wall clock -- and on
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import gc
 import os
-import sys
 import time
 from typing import Protocol, runtime_checkable
+
+from pipeline.runtime.platform_support import set_fifo_priority, set_timer_slack_ns
 
 __all__ = [
     "Clock", "MonotonicClock", "VirtualClock", "collect_garbage", "manual_garbage_collection",
@@ -95,22 +94,6 @@ class MonotonicClock:
             pass
 
 
-def set_timer_slack_ns(slack_ns: int = 1) -> bool:
-    """Ask Linux to wake this thread's sleeps within ``slack_ns`` (default slack is 50 µs).
-
-    Halves the median wake-up lateness of the loop (science.md §7).  Returns
-    False where unsupported (non-Linux), which only costs precision.
-    """
-    if not sys.platform.startswith("linux"):
-        return False
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        PR_SET_TIMERSLACK = 29
-        return bool(libc.prctl(PR_SET_TIMERSLACK, ctypes.c_ulong(slack_ns), 0, 0, 0) == 0)
-    except (OSError, AttributeError):
-        return False
-
-
 #: Set to ``0`` to keep the loop thread at normal priority.
 REALTIME_ENV = "HAPTIC_STUDY_REALTIME"
 #: SCHED_FIFO priority of the loop thread: above every normal thread, far below the kernel's own (50+).
@@ -169,13 +152,7 @@ def _set_fifo(priority: int) -> str:
     """``SCHED_FIFO`` at ``priority`` for the calling thread, unless disabled or not permitted; what it got."""
     if os.environ.get(REALTIME_ENV, "1") == "0":
         return f"normal ({REALTIME_ENV}=0)"
-    if not hasattr(os, "sched_setscheduler"):
-        return "normal (no real-time scheduling on this platform)"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError) as exc:
-        return f"normal ({exc.strerror or exc})"
-    return f"SCHED_FIFO/{priority}"
+    return set_fifo_priority(priority)  # normal priority where the OS has no SCHED_FIFO (platform_support)
 
 
 def manual_garbage_collection() -> None:

@@ -40,7 +40,6 @@ or in ``haptic-study bench gui|pipeline --explain``.
 
 from __future__ import annotations
 
-import ctypes
 import gc
 import os
 import sys
@@ -51,6 +50,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pipeline.runtime.clock import MonotonicClock
+from pipeline.runtime.platform_support import gil_keeping_pread, open_schedstat, thread_ids
 
 __all__ = ["LateTickTracer"]
 
@@ -59,33 +59,20 @@ class _SchedReader:
     """``/proc/self/task/<tid>/schedstat`` → (run_ns, wait_ns) without releasing the GIL."""
 
     def __init__(self) -> None:
-        self._pread: Any = None
-        self._buf = ctypes.create_string_buffer(128)
-        if sys.platform.startswith("linux"):
-            try:
-                libc = ctypes.PyDLL(None)  # PyDLL: the call keeps the GIL (no hand-over mid-tick)
-                fn = libc.pread
-                fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_size_t, ctypes.c_long]
-                fn.restype = ctypes.c_ssize_t
-                self._pread = fn
-            except (OSError, AttributeError):
-                self._pread = None
+        self._pread = gil_keeping_pread(128)  # None where the OS has none: the tracer then reads zeros
 
     def open(self, tid: int) -> int:
         if self._pread is None:
             return -1
-        try:
-            return os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
-        except OSError:
-            return -1
+        return open_schedstat(tid)
 
     def read(self, fd: int) -> tuple[int, int]:
         if fd < 0:
             return (0, 0)
-        n = self._pread(fd, self._buf, 128, 0)
-        if n <= 0:
+        raw = self._pread(fd) if self._pread is not None else b""
+        if not raw:
             return (0, 0)
-        parts = self._buf.raw[:n].split()
+        parts = raw.split()
         return (int(parts[0]), int(parts[1]))
 
 
@@ -245,10 +232,7 @@ class LateTickTracer:
         """
         by_tid = {t.native_id: t for t in threading.enumerate() if t.native_id is not None}
         known = {t.tid: t for t in self._tasks}
-        try:
-            tids = [int(x) for x in os.listdir("/proc/self/task")]
-        except OSError:
-            tids = list(by_tid)
+        tids = thread_ids() or list(by_tid)  # /proc/self/task (elsewhere: Python's threads; platform_support)
         tasks = []
         loop_tid = self._loop_tid
         for tid in tids:

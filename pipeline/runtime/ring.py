@@ -32,14 +32,17 @@ breaks the 1 kHz loop (science.md §7).
 
 from __future__ import annotations
 
-import mmap
-import os
 import struct
-from collections.abc import Sequence
-from multiprocessing import shared_memory
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
+
+from pipeline.runtime.platform_support import attach_segment, create_segment, free_orphaned_segment
+
+if TYPE_CHECKING:
+    from pipeline.runtime.platform_support import SharedSegment
 
 __all__ = ["RingBuffer", "RingReadResult"]
 
@@ -83,11 +86,6 @@ def _header_fields(fields: Sequence[str] | np.dtype) -> tuple[bytes, tuple[str, 
     return header, names
 
 
-def _segment_path(name: str) -> str:
-    """Where a POSIX shared-memory segment of that name lives (Linux)."""
-    return os.path.join("/dev/shm", name.lstrip("/"))
-
-
 class RingBuffer:
     """Shared-memory (or private) ring of fixed-layout records (``int64`` and ``float64`` fields).
 
@@ -97,7 +95,7 @@ class RingBuffer:
     def __init__(
         self,
         buf: memoryview,
-        shm: shared_memory.SharedMemory | None,
+        shm: SharedSegment | None,
         owner: bool,
     ) -> None:
         if bytes(buf[:8]) != _MAGIC:
@@ -110,7 +108,7 @@ class RingBuffer:
         names = [n for n, _, _ in fields]
         self._buf = buf
         self._shm = shm
-        self._mmap: mmap.mmap | None = None
+        self._release: Callable[[], None] | None = None  # an attached segment's unmapping
         self._owner = owner
         self.fields: tuple[str, ...] = tuple(names)
         self.capacity: int = int(capacity)
@@ -137,9 +135,9 @@ class RingBuffer:
             raise ValueError(f"capacity = {capacity}: must be at least 2 records")
         header, fields = _header_fields(fields)  # checked before the segment exists: a failure must not leak one
         size = _HEADER + 8 * len(fields) * capacity
-        shm: shared_memory.SharedMemory | None
+        shm: SharedSegment | None
         if shared:
-            shm = shared_memory.SharedMemory(create=True, size=size)
+            shm = create_segment(size)
             assert shm.buf is not None  # None only once closed
             buf = shm.buf
         else:
@@ -153,20 +151,12 @@ class RingBuffer:
     @classmethod
     def attach(cls, name: str) -> RingBuffer:
         """Attach to a ring created by another process (read side)."""
-        path = _segment_path(name)
-        if not os.path.exists(path):
+        attached = attach_segment(name)  # mapped directly: see platform_support.attach_segment
+        if attached is None:
             raise FileNotFoundError(f"no ring buffer named {name!r} (is the engine running?)")
-        # Map the segment directly rather than through SharedMemory: on
-        # Python < 3.13 an attached SharedMemory is registered with the
-        # resource tracker, which unlinks the writer's segment when the
-        # reader exits.
-        fd = os.open(path, os.O_RDWR)
-        try:
-            mm = mmap.mmap(fd, 0)
-        finally:
-            os.close(fd)
-        ring = cls(memoryview(mm), None, owner=False)
-        ring._mmap = mm
+        buf, release = attached
+        ring = cls(buf, None, owner=False)
+        ring._release = release
         return ring
 
     @staticmethod
@@ -179,20 +169,7 @@ class RingBuffer:
         once and tells the tracker so.  Call it only for a ring whose writer is known
         to be dead: it removes nothing but the segment of that name.
         """
-        path = _segment_path(name) if name else ""
-        if not path or not os.path.exists(path):
-            return False
-        try:
-            os.unlink(path)
-        except OSError:
-            return False
-        try:
-            from multiprocessing import resource_tracker
-
-            resource_tracker.unregister("/" + name.lstrip("/"), "shared_memory")
-        except Exception:  # the tracker is only told to keep quiet; the segment is gone already
-            pass
-        return True
+        return free_orphaned_segment(name)
 
     @property
     def name(self) -> str | None:
@@ -273,10 +250,10 @@ class RingBuffer:
         self._rows = None  # type: ignore[assignment]  # drop the numpy views before closing the buffer
         self._count_cell = None  # type: ignore[assignment]  # released: None only once closed
         buf, self._buf = self._buf, None  # type: ignore[assignment]  # as above
-        if self._mmap is not None:
+        if self._release is not None:
             buf.release()
-            self._mmap.close()
-            self._mmap = None
+            self._release()
+            self._release = None
         elif self._shm is not None:
             del buf
             self._shm.close()

@@ -21,9 +21,9 @@ Without the variable nothing is installed and the writer pays nothing.
 from __future__ import annotations
 
 import os
-import signal
 import sqlite3
 
+from pipeline.runtime.platform_support import kill_hard
 from protocol.storage.common import StorageError
 
 __all__ = ["CRASH_ENV", "commits_seen", "install", "planned", "statements_seen"]
@@ -71,6 +71,6 @@ def install(conn: sqlite3.Connection, plan: tuple[str, int] | None) -> None:
         elif what == "commit":
             return
         if at and _seen[what] == at:
-            os.kill(os.getpid(), signal.SIGKILL)
+            kill_hard(os.getpid())
 
     conn.set_trace_callback(trace)

@@ -20,6 +20,7 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
+from pipeline.runtime.platform_support import boot_id, process_exists, process_stat_fields
 from protocol.storage.common import LeaseHeld, now_iso
 
 __all__ = ["LEASE_HEARTBEAT_S", "LEASE_STALE_S", "LeaseHolder", "new_owner_token", "process_identity", "session_scope"]
@@ -40,48 +41,21 @@ def new_owner_token() -> str:
     return secrets.token_hex(8)
 
 
-def _boot_id() -> str:
-    try:
-        with open("/proc/sys/kernel/random/boot_id", encoding="ascii") as fh:
-            return fh.read().strip()
-    except OSError:
-        return ""
-
-
-def _proc_stat(pid: int) -> list[str] | None:
-    """The fields of ``/proc/<pid>/stat`` after the command name (field 3 first), or None."""
-    try:
-        with open(f"/proc/{int(pid)}/stat", encoding="ascii", errors="replace") as fh:
-            stat = fh.read()
-    except (OSError, ValueError, OverflowError):
-        return None
-    # the command name (field 2) may hold spaces and parentheses: count fields after the last ')'
-    return stat[stat.rindex(")") + 2 :].split()
-
-
 def process_identity(pid: int) -> str:
     """Boot id and start time of a process: equal for the same process, different for a reused pid.
 
     Empty where ``/proc`` cannot tell (not Linux); the caller then falls back on heartbeats.
     """
-    fields = _proc_stat(pid)
-    return "" if fields is None else f"{_boot_id()}:{fields[19]}"
+    fields = process_stat_fields(pid)
+    return "" if fields is None else f"{boot_id()}:{fields[19]}"
 
 
 def _pid_alive(pid: int) -> bool:
-    fields = _proc_stat(pid)
+    fields = process_stat_fields(pid)
     if fields is not None:
         # a zombie (killed, not yet reaped -- an orphan whose reaper is slow) writes nothing any more
         return fields[0] not in ("Z", "X")
-    try:
-        os.kill(int(pid), 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:  # it exists, owned by someone else
-        return True
-    except (OverflowError, ValueError):
-        return False
-    return True
+    return process_exists(pid)  # (another user's counts; Windows asks OpenProcess: platform_support)
 
 
 def _command_line() -> str:

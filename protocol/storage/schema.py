@@ -20,6 +20,7 @@ import sqlite3
 from dataclasses import fields
 from pathlib import Path
 
+from pipeline.runtime.platform_support import owner_only
 from protocol.records import AbortCause, LoopHealth
 from protocol.storage.common import EmptyDatabase, StorageError
 
@@ -256,8 +257,7 @@ class SchemaFile:
     def _owner_only(self) -> None:
         """A study was just created in this file (new, or empty before): readable by its owner only."""
         try:
-            if self.path.stat().st_uid == os.getuid():
-                os.chmod(self.path, 0o600)
+            owner_only(self.path)  # 0600 if ours (Windows: the folder's ACL holds; platform_support)
         except OSError:  # (not ours to change: leave it)
             pass
 

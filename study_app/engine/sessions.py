@@ -14,10 +14,10 @@ import gc
 import json
 import math
 import os
-import signal
 from collections.abc import Callable
 from typing import Any
 
+from pipeline.runtime.platform_support import kill_hard
 from protocol.config import ProtocolConfig, load_protocol
 from protocol.records import AbortCause, TrialRecord
 from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
@@ -171,7 +171,7 @@ class EngineSessions:
             raise ValueError(f"fault seconds = {cmd.seconds!r}: must be a number from 0 to 600")
         if cmd.trial is None:
             if cmd.kind == "kill":
-                os.kill(os.getpid(), signal.SIGKILL)  # as a crash would: the GUI sees the engine die
+                kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig, loop = self.engine.eng.rig, self.engine.loop
             rig.inject_fault(cmd.kind, loop.clock.now_ns())
             self.engine.publish(m.FaultInjected(cmd.kind, "now"))
@@ -194,7 +194,7 @@ class EngineSessions:
             eng.rig.inject_fault(kind, eng.loop.t0_ns + at_ns)
 
         def kill() -> None:
-            os.kill(os.getpid(), signal.SIGKILL)
+            kill_hard(os.getpid())
 
         def cancel(kind: str, at_ns: int) -> None:
             eng.rig.cancel_fault(kind, eng.loop.t0_ns + at_ns)

@@ -7,18 +7,13 @@ the same WAL database) and dies with the study's main process
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
-import multiprocessing as mp
 import os
 import queue
-import signal
-import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from pipeline.runtime.platform_support import die_with_parent, usable_cpu_count, worker_context
 from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan
 from protocol.session_setup import participant_code
@@ -35,23 +30,13 @@ class StudyWorkerError(RuntimeError):
 
 def default_jobs(participants: int) -> int:
     """Worker processes for a study: the usable cores, at most one per participant."""
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, participants))
+    return max(1, min(usable_cpu_count(), participants))
 
 
 
 def _die_with_parent(parent_pid: int) -> None:
     """Linux: have the kernel SIGKILL this process when its parent dies, so no orphan keeps writing."""
-    if sys.platform.startswith("linux"):
-        try:
-            libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-            PR_SET_PDEATHSIG = 1
-            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-        except (OSError, AttributeError):  # pragma: no cover - no libc
-            pass
+    die_with_parent()  # (nothing where the OS cannot: platform_support)
     if os.getppid() != parent_pid:  # the parent died before the request took effect
         os._exit(1)
 
@@ -124,7 +109,7 @@ def run_parallel(
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
-    ctx = mp.get_context("fork") if threading.active_count() == 1 else mp.get_context("spawn")
+    ctx = worker_context()
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

@@ -11,7 +11,6 @@ trial's time.
 from __future__ import annotations
 
 import os
-import signal
 import sys
 import time
 from collections.abc import Callable, Sequence
@@ -225,9 +224,11 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
     def kill() -> None:
         # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
         # (the workers then die with it, by PR_SET_PDEATHSIG)
+        from pipeline.runtime.platform_support import kill_hard
+
         sys.stdout.flush()
         sys.stderr.flush()
-        os.kill(_kill_target_pid or os.getpid(), signal.SIGKILL)
+        kill_hard(_kill_target_pid or os.getpid())
 
     def cancel(kind: str, at_ns: int) -> None:
         rig.cancel_fault(kind, loop.t0_ns + at_ns)

@@ -458,7 +458,7 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
 
     # the workers are forked, so they run the patched runner (spawned ones would import it afresh)
     fork = multiprocessing.get_context("fork")
-    monkeypatch.setattr(pool.mp, "get_context", lambda method=None: fork)
+    monkeypatch.setattr(pool, "worker_context", lambda: fork)
     monkeypatch.setattr(protocol.session.SessionRunner, "process", process_then_fail)
     with pytest.raises(StudyWorkerError) as err:
         run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2)

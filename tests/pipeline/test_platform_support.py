@@ -1,0 +1,314 @@
+"""The operating system behind one module (``pipeline/runtime/platform_support.py``), and its fallbacks.
+
+The source of every module is scanned with ``ast`` for calls only some systems have (real-time scheduling, CPU
+affinity, signals, ``prctl``/``ctypes``, shared-memory names, file modes and owners, ``open`` flags and ``dir_fd``,
+``statvfs``, ``sysconf``, the ``fork`` start method, paths in ``/proc`` and ``/sys``): none may stand outside the
+platform module; the scan is shown to find
+them.  Then each fallback runs on this Linux machine with ``sys.platform`` set to the system that needs it (the
+Windows API calls through ``ctypes.windll`` answered by a fake: the branch's logic is tested here, the real
+Windows calls are not).
+"""
+
+from __future__ import annotations
+
+import ast
+import ctypes
+import os
+import shutil
+import signal
+import sys
+import threading
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+
+import pipeline.runtime.platform_support as ps
+from analysis import outfs
+from analysis.outdir import check_output_folder
+from pipeline.runtime.clock import prepare_realtime_thread
+from pipeline.runtime.ring import RingBuffer
+
+ROOT = Path(__file__).resolve().parent.parent.parent
+SCANNED = ("pipeline", "protocol", "analysis", "study_app", "bench")
+PLATFORM = "pipeline/runtime/platform_support.py"
+
+_MODULES = {"ctypes", "fcntl", "signal", "resource", "msvcrt", "winreg", "_winapi", "posix", "termios",
+            "multiprocessing.shared_memory", "multiprocessing.resource_tracker"}
+_OS_NAMES = {"sched_setscheduler", "sched_getscheduler", "sched_getaffinity", "sched_setaffinity", "sched_param",
+             "SCHED_FIFO", "SCHED_RR", "mlockall", "munlockall", "kill", "killpg", "setsid", "setpgrp", "getpgid",
+             "chmod", "fchmod", "lchmod", "chown", "fchown", "umask", "getuid", "geteuid", "O_NOFOLLOW",
+             "O_DIRECTORY", "O_NONBLOCK", "O_CLOEXEC", "statvfs", "fstatvfs", "ST_RDONLY", "sysconf", "getloadavg",
+             "nice", "setpriority", "fork"}
+_DIR_FD = {"dir_fd", "src_dir_fd", "dst_dir_fd"}
+
+#: Modules allowed one kind of call, each with why (the list may only shrink: an entry with no such call fails).
+ALLOWED: dict[tuple[str, str], str] = {
+    ("pipeline/backends/touch.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
+                                                     "through pyOpenHaptics: the device's library, not the OS",
+    ("analysis/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
+                                     "open_folder, which refuses where platform_support.DIR_FD_CALLS is False",
+    ("analysis/outdir.py", "dir_fd"): "the output policy, on outfs's descriptors (refused with them: DIR_FD_CALLS)",
+}
+
+
+def os_calls_in(source: str) -> list[tuple[int, str]]:
+    """Where a module's source makes an OS-specific call: (line, kind), kinds as in :data:`ALLOWED`."""
+    found: list[tuple[int, str]] = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, f"import {a.name}") for a in node.names
+                      if a.name in _MODULES or a.name.split(".")[0] in _MODULES]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names = {f"{node.module}.{a.name}" for a in node.names} | {node.module}
+            if node.module == "os":
+                found += [(node.lineno, f"os.{a.name}") for a in node.names if a.name in _OS_NAMES]
+            elif names & _MODULES or node.module.split(".")[0] in _MODULES:
+                found.append((node.lineno, f"import {node.module}"))
+        elif (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id == "os"
+              and node.attr in _OS_NAMES):
+            found.append((node.lineno, f"os.{node.attr}"))
+        elif isinstance(node, ast.Call):
+            f = node.func
+            args = [a.value for a in node.args if isinstance(a, ast.Constant)]
+            if isinstance(f, ast.Name) and f.id in ("getattr", "hasattr") and len(node.args) >= 2 \
+                    and isinstance(node.args[0], ast.Name) and node.args[0].id == "os" and args \
+                    and args[0] in _OS_NAMES:
+                found.append((node.lineno, f"os.{args[0]}"))
+            if isinstance(f, ast.Attribute) and f.attr == "get_context" and "fork" in args:
+                found.append((node.lineno, "fork"))
+            found += [(node.lineno, "dir_fd") for k in node.keywords if k.arg in _DIR_FD]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and "/dev/shm" in node.value:
+            found.append((node.lineno, "/dev/shm"))
+        if isinstance(node, (ast.Constant, ast.JoinedStr)):
+            first = node.values[0] if isinstance(node, ast.JoinedStr) and node.values else node
+            text = first.value if isinstance(first, ast.Constant) else None
+            if isinstance(text, str) and (text.startswith(("/proc/", "/sys/")) or text in ("/proc", "/sys")):
+                found.append((node.lineno, "/proc"))
+    return sorted(set(found))
+
+
+def _modules() -> list[Path]:
+    return sorted(p for pkg in SCANNED for p in (ROOT / pkg).rglob("*.py") if ".venv" not in p.parts)
+
+
+def test_the_scan_finds_os_calls() -> None:
+    src = ("import signal, ctypes.util\nfrom multiprocessing import shared_memory\nos.kill(p, signal.SIGKILL)\n"
+           "f = getattr(os, 'O_CLOEXEC', 0)\nmp.get_context('fork')\nos.open(n, 0, dir_fd=d)\np = '/dev/shm/x'\n"
+           "from os import sched_getaffinity\nos.path.join(a, b)\nopen(f'/proc/{pid}/stat')\n"
+           "d = 'the /proc file'\n")
+    assert os_calls_in(src) == [(1, "import ctypes.util"), (1, "import signal"),
+                                (2, "import multiprocessing"), (3, "os.kill"), (4, "os.O_CLOEXEC"), (5, "fork"),
+                                (6, "dir_fd"), (7, "/dev/shm"), (8, "os.sched_getaffinity"),
+                                (10, "/proc")]
+    assert os_calls_in((ROOT / PLATFORM).read_text())  # the platform module does make them
+
+
+def test_no_os_specific_call_outside_the_platform_module() -> None:
+    offenders, used = [], set()
+    for path in _modules():
+        rel = path.relative_to(ROOT).as_posix()
+        if rel == PLATFORM:
+            continue
+        for line, kind in os_calls_in(path.read_text(encoding="utf-8")):
+            if (rel, kind) in ALLOWED:
+                used.add((rel, kind))
+            else:
+                offenders.append(f"{rel}:{line}: {kind}")
+    assert not offenders, "OS-specific calls outside pipeline/runtime/platform_support.py:\n" + "\n".join(offenders)
+    assert used == set(ALLOWED), f"no such call left in {sorted(set(ALLOWED) - used)}: take them off ALLOWED"
+
+
+# -- the fallbacks -------------------------------------------------------------------------------------------
+@pytest.fixture
+def windows(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "platform", "win32")
+
+
+@pytest.fixture
+def macos(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(sys, "platform", "darwin")
+
+
+def _never(*_: Any, **__: Any) -> None:
+    raise AssertionError("a POSIX call on the Windows branch")
+
+
+def test_no_real_time_scheduling_leaves_the_loop_at_normal_priority(windows: None, monkeypatch) -> None:
+    monkeypatch.delenv("HAPTIC_STUDY_REALTIME", raising=False)
+    monkeypatch.setattr(os, "sched_setscheduler", _never)
+    assert ps.set_timer_slack_ns(1) is False
+    assert prepare_realtime_thread() == "normal (no real-time scheduling on this platform)"
+
+
+def test_timer_slack_and_pread_exist_on_linux_only(macos: None) -> None:
+    assert ps.set_timer_slack_ns(1) is False and ps.gil_keeping_pread() is None and ps.die_with_parent() is False
+
+
+def test_the_pread_reader_reads_a_file_on_linux(tmp_path: Path) -> None:
+    read = ps.gil_keeping_pread(8)
+    assert read is not None
+    (tmp_path / "f").write_bytes(b"123 456 789\n")
+    fd = os.open(tmp_path / "f", os.O_RDONLY)
+    try:
+        assert read(fd) == b"123 456 " and read(-1) == b""
+    finally:
+        os.close(fd)
+
+
+def test_cpu_count_without_an_affinity_mask(windows: None) -> None:
+    assert ps.usable_cpu_count() == (os.cpu_count() or 1)
+
+
+@pytest.mark.parametrize("threads, method", [(1, "fork"), (2, "spawn")])
+def test_workers_fork_only_single_threaded_on_linux(monkeypatch, threads: int, method: str) -> None:
+    monkeypatch.setattr(threading, "active_count", lambda: threads)
+    assert ps.worker_context().get_start_method() == method
+
+
+@pytest.mark.parametrize("system", ["win32", "darwin"])
+def test_workers_spawn_elsewhere(monkeypatch, system: str) -> None:
+    monkeypatch.setattr(threading, "active_count", lambda: 1)
+    monkeypatch.setattr(sys, "platform", system)
+    assert ps.worker_context().get_start_method() == "spawn"
+
+
+@pytest.mark.parametrize("system, sig", [("linux", signal.SIGKILL), ("win32", signal.SIGTERM)])
+def test_the_hard_kill(monkeypatch, system: str, sig: int) -> None:
+    sent: list[tuple[int, int]] = []
+    monkeypatch.setattr(sys, "platform", system)
+    monkeypatch.setattr(os, "kill", lambda pid, s: sent.append((pid, s)))
+    ps.kill_hard(4242)
+    assert sent == [(4242, sig)]  # Windows: os.kill with SIGTERM is TerminateProcess
+
+
+@pytest.mark.parametrize("raised, alive", [(None, True), (ProcessLookupError, False), (PermissionError, True),
+                                           (OverflowError, False)])
+def test_a_process_exists_on_posix(monkeypatch, raised: type[Exception] | None, alive: bool) -> None:
+    def kill(pid: int, sig: int) -> None:
+        assert sig == 0
+        if raised is not None:
+            raise raised()
+    monkeypatch.setattr(os, "kill", kill)
+    assert ps.process_exists(1234) is alive
+
+
+class _Kernel32:
+    """``ctypes.windll.kernel32`` as far as process_exists and free_physical_bytes use it."""
+
+    def __init__(self, handle: int = 7, error: int = 0, exit_code: int = 259, avail: int = 0) -> None:
+        self.handle, self.error, self.exit_code, self.avail, self.closed = handle, error, exit_code, avail, []
+
+    def OpenProcess(self, access: int, inherit: bool, pid: int) -> int:
+        assert access == 0x1000 and not inherit
+        return self.handle
+
+    def GetLastError(self) -> int:
+        return self.error
+
+    def GetExitCodeProcess(self, handle: int, ref: Any) -> int:
+        ref._obj.value = self.exit_code  # byref(): the c_ulong behind it
+        return 1
+
+    def CloseHandle(self, handle: int) -> int:
+        self.closed.append(handle)
+        return 1
+
+    def GlobalMemoryStatusEx(self, ref: Any) -> int:
+        assert ref._obj.dwLength == ctypes.sizeof(ref._obj)
+        ref._obj.ullAvailPhys = self.avail
+        return 1
+
+
+@pytest.mark.parametrize("k32, alive", [(_Kernel32(), True), (_Kernel32(exit_code=0), False),
+                                        (_Kernel32(handle=0, error=5), True), (_Kernel32(handle=0, error=87), False)])
+def test_a_process_exists_on_windows_without_kill(windows: None, monkeypatch, k32: _Kernel32, alive: bool) -> None:
+    monkeypatch.setattr(os, "kill", _never)  # os.kill(pid, 0) on Windows would send Ctrl-C
+    monkeypatch.setattr(ctypes, "windll", SimpleNamespace(kernel32=k32), raising=False)
+    assert ps.process_exists(1234) is alive
+    assert k32.closed == ([7] if k32.handle else [])
+    assert ps.process_exists(0) is False and ps.process_exists(2**40) is False
+
+
+def test_free_memory_on_windows(windows: None, monkeypatch) -> None:
+    monkeypatch.setattr(ctypes, "windll", SimpleNamespace(kernel32=_Kernel32(avail=3 << 30)), raising=False)
+    assert ps.free_physical_bytes() == 3 << 30
+    assert ps.load_average() is None
+
+
+def test_a_ring_attaches_and_frees_through_posix_shm_names_on_macos(macos: None) -> None:
+    writer = RingBuffer.create(["t"], 4, shared=True)
+    try:
+        writer.write([1.5])
+        name = writer.name
+        assert name is not None
+        reader = RingBuffer.attach(name)
+        assert reader.latest(1)["t"].tolist() == [1.5]
+        reader.close()
+    finally:
+        writer._owner = False  # the writer dies "killed": it leaves its segment for free_orphaned
+        writer.close()
+    assert RingBuffer.free_orphaned(name) is True and RingBuffer.free_orphaned(name) is False
+    with pytest.raises(FileNotFoundError, match="no ring buffer named"):
+        RingBuffer.attach(name)
+
+
+def test_no_orphaned_segment_on_windows(windows: None) -> None:
+    assert RingBuffer.free_orphaned("psm_anything") is False
+
+
+def test_file_modes_and_owners_on_windows(windows: None, monkeypatch, tmp_path: Path) -> None:
+    (tmp_path / "f").write_bytes(b"")
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: SimpleNamespace(total=9, used=4, free=5))
+    for name in ("chmod", "fchmod", "statvfs"):
+        monkeypatch.setattr(os, name, _never)
+    ps.owner_only(tmp_path / "f")
+    ps.set_fd_mode(0, 0o600)
+    assert ps.fs_free_bytes(tmp_path) == 5
+    assert ps.fs_read_only(tmp_path) is False
+
+
+def test_the_owner_alone_reads_a_new_study_file_on_linux(tmp_path: Path) -> None:
+    (tmp_path / "f").write_bytes(b"")
+    os.chmod(tmp_path / "f", 0o644)
+    ps.owner_only(tmp_path / "f")
+    assert (tmp_path / "f").stat().st_mode & 0o777 == 0o600
+    mask = os.umask(0o022)
+    os.umask(mask)
+    assert ps.umask() == mask
+
+
+def test_without_dir_fd_calls_output_folders_are_refused_before_any_work(monkeypatch, tmp_path: Path) -> None:
+    monkeypatch.setattr(outfs, "DIR_FD_CALLS", False)
+    for out in (tmp_path / "new", tmp_path):
+        with pytest.raises(outfs.OutputError, match="not supported on this operating system") as err:
+            check_output_folder(out, command="report", marker=".haptic-report")
+        assert err.value.status == 2 and "\n" not in str(err.value)
+    assert not (tmp_path / "new").exists()
+    with pytest.raises(outfs.OutputError, match="not supported"):
+        outfs.open_folder(str(tmp_path), follow=True)
+
+
+def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
+    import builtins
+    import io
+
+    from analysis.resources import available_memory_bytes
+    from protocol.storage.leases import _pid_alive, process_identity
+
+    def no_proc(real: Any) -> Any:
+        def call(path: Any, *args: Any, **kwargs: Any) -> Any:
+            if str(path).startswith(("/proc", "/sys")):
+                raise FileNotFoundError(2, "No such file or directory", str(path))
+            return real(path, *args, **kwargs)
+        return call
+
+    for owner, name in ((builtins, "open"), (io, "open"), (os, "open"), (os, "listdir")):
+        monkeypatch.setattr(owner, name, no_proc(getattr(owner, name)))
+    assert ps.boot_id() == "" and ps.process_stat_fields(os.getpid()) is None and ps.cpu_times() is None
+    assert ps.thread_ids() is None and ps.open_schedstat(threading.get_native_id()) == -1
+    assert ps.meminfo_available_bytes() is None and ps.cgroup_memory_headroom() is None
+    assert process_identity(os.getpid()) == ""  # the lease falls back on heartbeats
+    assert _pid_alive(os.getpid()) is True  # by process_exists alone
+    assert available_memory_bytes() == ps.free_physical_bytes()  # sysconf's free pages
