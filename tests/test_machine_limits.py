@@ -36,7 +36,8 @@ def test_power_refuses_studies_larger_than_the_memory_holds(tmp_path, capsys, mo
     monkeypatch.setattr(analysis.resources, "available_memory_bytes", lambda: 8 << 20)  # 8 MiB available
     pool = PairedPool(tuple(f"P{i}" for i in range(6)), ("overall",), ("success_rate", "tct_s", "rmse_n", "max_ae_n"),
                       np.zeros((1, 4, 6)), np.ones((1, 4, 6)), "a pilot")
-    monkeypatch.setattr("analysis.paired_pool.load_pool", lambda *a, **k: pool)  # (the pilot is stood in for too)
+    monkeypatch.setattr("analysis.paired_pool.load_pool", lambda *a, **k: pool)  # (the pilot is stood in for too,
+    monkeypatch.setattr("analysis.inputs.check_databases", lambda paths, **k: list(map(str, paths)))  # and checked)
     (tmp_path / "pilot.db").write_bytes(b"")
     code = main(["power", "--db", str(tmp_path / "pilot.db"), "--out", str(tmp_path / "p"), "--n", "10000",
                  "--resamples", "1000000"])
