@@ -130,10 +130,21 @@ def _parse_marker(raw: bytes) -> dict[str, set[str]] | None:
         return None
     if not isinstance(listed, dict) or not isinstance(pending, dict):
         return None
-    accepted: dict[str, set[str]] = {str(f): {str(h)} for f, h in listed.items()}
+    accepted: dict[str, set[str]] = {str(f): {str(h)} for f, h in listed.items() if _inside(str(f))}
     for f, h in pending.items():
-        accepted.setdefault(str(f), set()).add(str(h))
+        if _inside(str(f)):
+            accepted.setdefault(str(f), set()).add(str(h))
     return accepted
+
+
+def _inside(rel: str) -> bool:
+    """Whether a marker's entry names a file inside the folder: plain names joined by ``/`` (no ``..``, no root).
+
+    A marker is a file in the folder anyone who may write there can edit: an
+    entry ``../x`` with x's hash would otherwise let ``--force`` remove a file
+    outside the folder.
+    """
+    return all(part not in ("", ".", "..") and "\\" not in part for part in rel.split("/"))
 
 
 def _read_marker_at(dir_fd: Folder, marker: str) -> dict[str, set[str]] | None:

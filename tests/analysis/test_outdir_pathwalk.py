@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import json
 import os
 import stat
 from pathlib import Path
@@ -180,3 +181,17 @@ def test_the_corpus_output_cases_end_in_the_same_line_without_dir_fd_calls(tmp_p
         assert _tree(d) == before  # every file, link and folder as it was; nothing new
         said[dir_fd_calls] = line.replace(str(d), "{d}")
     assert said[True] == said[False]
+
+
+@pytest.mark.parametrize("dir_fd_calls", [True, False])
+def test_a_forged_marker_entry_outside_the_folder_removes_nothing_there(tmp_path, monkeypatch, dir_fd_calls):
+    """A marker listing ``../victim.txt`` with its hash: ``--force`` never reaches out of the folder (both paths)."""
+    monkeypatch.setattr(outfs, "DIR_FD_CALLS", dir_fd_calls)
+    (tmp_path / "victim.txt").write_text("precious")
+    out = tmp_path / "o"
+    _write(out, {"a.csv": "1"})
+    marker = json.loads((out / MARKER).read_text())
+    marker["files"]["../victim.txt"] = hashlib.sha256(b"precious").hexdigest()
+    (out / MARKER).write_text(json.dumps(marker))
+    _write(out, {"a.csv": "2"}, force=True)
+    assert (tmp_path / "victim.txt").read_text() == "precious" and (out / "a.csv").read_text() == "2"
