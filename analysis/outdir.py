@@ -9,6 +9,10 @@ folder (:func:`write_output_folder`); ``plot-trial``, ``plot-session`` and
   symbolic link inside it (``R/figures`` pointing at someone's folder) is an
   entry the command did not make, never a way out.  The folder itself (or a
   single output file's folder) may be reached through a link the user typed.
+  Where the OS has no ``*at`` calls (Windows) each step is taken by path
+  instead, every part ``lstat``-checked (no link, no junction) right before it
+  (:mod:`analysis.outpath`): the same rules and refusals, with a race window
+  against a process that rewrites the folder during the write.
 * **Nothing overwritten that the command did not make.**  A folder holds a
   marker (``.haptic-study-report``, ``.haptic-study-power``, ...) listing each
   file the command wrote with its SHA-256.  An existing, non-empty folder is
@@ -46,29 +50,37 @@ from __future__ import annotations
 import errno
 import json
 import os
-import shutil
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from analysis.outfs import (
+    Folder,
     OutputError,
     chmod_at,
+    close_folder,
     dir_mode,
     entries,
     file_mode,
     folder_at,
     fsync_dir,
     kind_of,
+    listdir_at,
+    lstat_at,
+    mkdir_at,
     open_folder,
     os_error_line,
     place,
+    read_regular_at,
+    rmdir_at,
+    rmtree_at,
     sha256_at,
     sha256_at_or_none,
+    unlink_at,
     writable_problem,
     write_bytes_at,
 )
-from pipeline.runtime.platform_support import O_NOFOLLOW, O_NONBLOCK, process_exists
+from pipeline.runtime.platform_support import process_exists
 
 __all__ = [
     "REPORT_MARKER",
@@ -102,7 +114,7 @@ def sha256_file(path: str | os.PathLike[str]) -> str:
     try:
         digest = sha256_at(fd, p.name)
     finally:
-        os.close(fd)
+        close_folder(fd)
     if digest is None:
         raise OutputError(f"{path}: not a regular file")
     return digest
@@ -118,28 +130,26 @@ def _parse_marker(raw: bytes) -> dict[str, set[str]] | None:
         return None
     if not isinstance(listed, dict) or not isinstance(pending, dict):
         return None
-    accepted: dict[str, set[str]] = {str(f): {str(h)} for f, h in listed.items()}
+    accepted: dict[str, set[str]] = {str(f): {str(h)} for f, h in listed.items() if _inside(str(f))}
     for f, h in pending.items():
-        accepted.setdefault(str(f), set()).add(str(h))
+        if _inside(str(f)):
+            accepted.setdefault(str(f), set()).add(str(h))
     return accepted
 
 
-def _read_marker_at(dir_fd: int, marker: str) -> dict[str, set[str]] | None:
-    try:
-        fd = os.open(marker, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=dir_fd)
-    except OSError:
-        return None
-    try:
-        if not stat.S_ISREG(os.fstat(fd).st_mode):
-            return None
-        raw = b""
-        while len(raw) < (16 << 20) and (block := os.read(fd, 1 << 20)):
-            raw += block
-    except OSError:
-        return None
-    finally:
-        os.close(fd)
-    return _parse_marker(raw)
+def _inside(rel: str) -> bool:
+    """Whether a marker's entry names a file inside the folder: plain names joined by ``/`` (no ``..``, no root).
+
+    A marker is a file in the folder anyone who may write there can edit: an
+    entry ``../x`` with x's hash would otherwise let ``--force`` remove a file
+    outside the folder.
+    """
+    return all(part not in ("", ".", "..") and "\\" not in part for part in rel.split("/"))
+
+
+def _read_marker_at(dir_fd: Folder, marker: str) -> dict[str, set[str]] | None:
+    raw = read_regular_at(dir_fd, marker, 16 << 20)
+    return None if raw is None else _parse_marker(raw)
 
 
 def read_marker(out: Path, marker: str) -> dict[str, set[str]] | None:
@@ -156,7 +166,7 @@ def read_marker(out: Path, marker: str) -> dict[str, set[str]] | None:
     try:
         return _read_marker_at(fd, marker)
     finally:
-        os.close(fd)
+        close_folder(fd)
 
 
 def _marker_bytes(command: str, files: dict[str, str], pending: dict[str, str] | None = None) -> bytes:
@@ -174,7 +184,7 @@ def _ours_transient(name: str, marker: str) -> bool:
     return name.startswith(f"{marker}.tmp-") or (name.startswith(f".{marker}.") and name.endswith(".new"))
 
 
-def _present(dir_fd: int, marker: str, keep: Keep) -> list[tuple[str, int]]:
+def _present(dir_fd: Folder, marker: str, keep: Keep) -> list[tuple[str, int]]:
     """Every entry that makes the folder non-empty: (relative path, lstat mode); folders only by what they hold."""
     out = []
     skip: list[str] = []
@@ -199,7 +209,7 @@ def _refuse_inputs_inside(out: Path, inputs: Sequence[str | os.PathLike[str]], o
                               "(nothing was changed)")
 
 
-def _judge(out: Path, dir_fd: int, *, command: str, marker: str, force: bool, keep: Keep, option: str) -> None:
+def _judge(out: Path, dir_fd: Folder, *, command: str, marker: str, force: bool, keep: Keep, option: str) -> None:
     """Refuse a folder whose entries the command may not replace (the rules of the module)."""
     present = _present(dir_fd, marker, keep)
     if not present:
@@ -302,7 +312,7 @@ def check_output_folder(
         try:
             _judge(out, fd, command=command, marker=marker, force=force, keep=keep, option=option)
         finally:
-            os.close(fd)
+            close_folder(fd)
     except OSError as exc:
         raise OutputError(os_error_line(exc, f"{option} {out}", "cannot read the folder")) from None
     return out
@@ -320,7 +330,7 @@ def ensure_output_folder(out: Path, option: str = "--out") -> bool:
 
 
 # -- writing a folder ------------------------------------------------------------------------------------------------
-def _seal(tmp_fd: int) -> dict[str, str]:
+def _seal(tmp_fd: Folder) -> dict[str, str]:
     """The files ``fill`` made, each given the output mode, fsynced and hashed; folders given the folder mode."""
     hashes: dict[str, str] = {}
     for rel, mode in list(entries(tmp_fd)):
@@ -342,7 +352,7 @@ def _seal(tmp_fd: int) -> dict[str, str]:
 
 
 
-def _move_in(out_fd: int, tmp_fd: int, hashes: dict[str, str], *, command: str, marker: str) -> None:
+def _move_in(out_fd: Folder, tmp_fd: Folder, hashes: dict[str, str], *, command: str, marker: str) -> None:
     """Put the files of the temporary folder in place, the marker first accepting old and new (the folder was
     judged)."""
     old = _read_marker_at(out_fd, marker) or {}
@@ -356,32 +366,32 @@ def _move_in(out_fd: int, tmp_fd: int, hashes: dict[str, str], *, command: str, 
             place(src, dst, name, replace=rel in old_present)
             fsync_dir(dst)
         finally:
-            os.close(dst)
-            os.close(src)
+            close_folder(dst)
+            close_folder(src)
     for rel in sorted(set(old_present) - set(hashes), reverse=True):
         parts = rel.split("/")
         dst = folder_at(out_fd, "/".join(parts[:-1]), make=False)
         try:
-            os.unlink(parts[-1], dir_fd=dst)
+            unlink_at(dst, parts[-1])
         finally:
-            os.close(dst)
+            close_folder(dst)
         for k in range(len(parts) - 1, 0, -1):  # folders only ours (figures/) go with their last file; others stay
             up = folder_at(out_fd, "/".join(parts[:k - 1]), make=False)
             try:
-                os.rmdir(parts[k - 1], dir_fd=up)
+                rmdir_at(up, parts[k - 1])
             except OSError:
                 break
             finally:
-                os.close(up)
+                close_folder(up)
     write_bytes_at(out_fd, marker, _marker_bytes(command, hashes))
     fsync_dir(out_fd)
 
 
 
 
-def _remove_stale_temporaries(out_fd: int, marker: str) -> None:
+def _remove_stale_temporaries(out_fd: Folder, marker: str) -> None:
     """Temporary folders of this command left by a killed run (its process gone): they were never output."""
-    for name in os.listdir(out_fd):
+    for name in listdir_at(out_fd):
         if not name.startswith(f"{marker}.tmp-"):
             continue
         try:
@@ -390,7 +400,7 @@ def _remove_stale_temporaries(out_fd: int, marker: str) -> None:
         except (ValueError, OSError):
             continue
         if not alive:
-            shutil.rmtree(name, dir_fd=out_fd, ignore_errors=True)
+            rmtree_at(out_fd, name)
 
 
 def _is_write_failure(exc: OSError, tmp: Path) -> bool:
@@ -436,13 +446,13 @@ def write_output_folder(
                               need_bytes=need_bytes, option=option)
     created = ensure_output_folder(out, option)
     tmp_name = f"{marker}.tmp-{os.getpid()}-{os.urandom(4).hex()}"
-    out_fd = -1
+    out_fd: Folder | None = None
     failed = f"cannot write {command}'s outputs"
     try:
         try:
             out_fd = open_folder(str(out), follow=True)
             _remove_stale_temporaries(out_fd, marker)
-            os.mkdir(tmp_name, 0o700, dir_fd=out_fd)
+            mkdir_at(out_fd, tmp_name, 0o700)
         except OSError as exc:
             raise OutputError(os_error_line(exc, f"{option} {out}", failed), status=1) from None
         tmp = out / tmp_name
@@ -460,13 +470,13 @@ def write_output_folder(
                 _judge(out, out_fd, command=command, marker=marker, force=force, keep=keep, option=option)
                 _move_in(out_fd, tmp_fd, hashes, command=command, marker=marker)
             finally:
-                os.close(tmp_fd)
+                close_folder(tmp_fd)
         except OSError as exc:
             raise OutputError(os_error_line(exc, f"{option} {out}", failed), status=1) from None
     finally:
-        if out_fd >= 0:
-            shutil.rmtree(tmp_name, dir_fd=out_fd, ignore_errors=True)
-            os.close(out_fd)
+        if out_fd is not None:
+            rmtree_at(out_fd, tmp_name)
+            close_folder(out_fd)
         if created and not _safe_listdir(out):
             try:
                 os.rmdir(out)
@@ -528,11 +538,11 @@ def write_output_file(out_file: str | os.PathLike[str], fill: Callable[[Path], o
     out = check_output_file(out_file, command=command, need_bytes=need_bytes, option=option)
     parent, name = _parent(out), out.name
     tmp_name = f".{name[:64]}.tmp-{os.getpid()}-{os.urandom(4).hex()}"
-    parent_fd = -1
+    parent_fd: Folder | None = None
     try:
         try:
             parent_fd = open_folder(str(parent), follow=True)
-            os.mkdir(tmp_name, 0o700, dir_fd=parent_fd)
+            mkdir_at(parent_fd, tmp_name, 0o700)
         except OSError as exc:
             raise OutputError(os_error_line(exc, f"{option} {out}", "cannot write it"), status=1) from None
         tmp = parent / tmp_name
@@ -547,18 +557,18 @@ def write_output_file(out_file: str | os.PathLike[str], fill: Callable[[Path], o
         except OSError as exc:
             raise OutputError(os_error_line(exc, f"{option} {out}", "cannot write it"), status=1) from None
     finally:
-        if parent_fd >= 0:
-            shutil.rmtree(tmp_name, dir_fd=parent_fd, ignore_errors=True)
-            os.close(parent_fd)
+        if parent_fd is not None:
+            rmtree_at(parent_fd, tmp_name)
+            close_folder(parent_fd)
     return out
 
 
-def _put_file_inplace(parent_fd: int, tmp_name: str, name: str, out: Path, command: str, option: str) -> None:
+def _put_file_inplace(parent_fd: Folder, tmp_name: str, name: str, out: Path, command: str, option: str) -> None:
     """The one file ``fill`` made: given the output mode, fsynced, and linked in beside the temporary folder."""
     tmp_fd = open_folder(tmp_name, parent_fd)
     try:
         try:
-            mode = os.lstat(name, dir_fd=tmp_fd).st_mode
+            mode = lstat_at(tmp_fd, name).st_mode
         except FileNotFoundError:
             raise OutputError(f"{option} {out}: {command} wrote nothing (nothing was written)", status=1) from None
         if not stat.S_ISREG(mode):
@@ -572,4 +582,4 @@ def _put_file_inplace(parent_fd: int, tmp_name: str, name: str, out: Path, comma
                               "written)", status=1) from None
         fsync_dir(parent_fd)
     finally:
-        os.close(tmp_fd)
+        close_folder(tmp_fd)

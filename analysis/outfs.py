@@ -2,7 +2,13 @@
 
 Everything here works relative to an open folder (``dir_fd``) and never
 follows a symbolic link below the folder the user named: a link is an entry
-like any other, never a way out.  Files are created with ``O_EXCL`` (nothing
+like any other, never a way out.  Where the OS lacks the ``*at`` calls
+(Windows: ``platform_support.DIR_FD_CALLS`` False) an open folder is a
+:class:`analysis.outpath.PathFolder` instead of a descriptor, and each
+primitive below hands it to :mod:`analysis.outpath`, which takes the same step
+by path, checking every part with ``lstat`` (no link, no junction) right
+before it acts -- with a race window the descriptors do not have (its
+docstring says which).  On Linux and macOS every call is the ``*at`` call.  Files are created with ``O_EXCL`` (nothing
 existing is ever opened for writing), with the mode of the study database
 (``0600``, or stricter when the umask says so), and made durable with
 ``fsync`` before they are renamed into place.
@@ -17,13 +23,15 @@ from __future__ import annotations
 import errno
 import hashlib
 import os
+import shutil
 import stat
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
+from analysis import outpath
 from analysis.errors import AnalysisError
 from analysis.oserrors import kind_of, os_error_line
+from analysis.outpath import PathFolder
 from pipeline.runtime.platform_support import (
     DIR_FD_CALLS,
     O_CLOEXEC,
@@ -37,8 +45,10 @@ from pipeline.runtime.platform_support import (
 )
 
 __all__ = [
+    "Folder",
     "OutputError",
     "chmod_at",
+    "close_folder",
     "dir_mode",
     "entries",
     "file_mode",
@@ -46,20 +56,25 @@ __all__ = [
     "free_bytes",
     "fsync_dir",
     "kind_of",
+    "listdir_at",
+    "lstat_at",
+    "mkdir_at",
     "open_folder",
     "os_error_line",
     "place",
+    "read_regular_at",
+    "rmdir_at",
+    "rmtree_at",
     "sha256_at",
     "sha256_at_or_none",
+    "unlink_at",
     "writable_problem",
     "write_bytes_at",
 ]
 
 
-#: The refusal where the OS lacks the ``*at`` calls (Windows): the output policy never writes by path.
-NO_DIR_FD_CALLS = (f"writing output files is not supported on this operating system yet ({sys.platform}): the "
-                   "output policy needs file-descriptor-relative calls (openat, O_NOFOLLOW) it lacks; run the "
-                   "command on Linux or macOS (nothing was written)")
+#: An open folder: a descriptor for the ``*at`` calls, or (without them: Windows) a path checked at each step.
+Folder = int | PathFolder
 
 
 class OutputError(AnalysisError):
@@ -84,24 +99,44 @@ def dir_mode() -> int:
     return 0o700 & ~umask()
 
 
-def open_folder(name: str, dir_fd: int | None = None, *, follow: bool = False) -> int:
-    """Open a folder for ``*at`` calls; never through a symbolic link unless ``follow`` (the folder the user named)."""
-    if not DIR_FD_CALLS:  # (Windows) the policy is built on *at calls; refuse rather than follow links
-        raise OutputError(NO_DIR_FD_CALLS)
+def open_folder(name: str, dir_fd: Folder | None = None, *, follow: bool = False) -> Folder:
+    """Open a folder for ``*at`` calls; never through a symbolic link unless ``follow`` (the folder the user named).
+
+    Without the ``*at`` calls (:data:`DIR_FD_CALLS` False: Windows) the folder
+    is a :class:`analysis.outpath.PathFolder`, checked by path at each step.
+    """
+    if isinstance(dir_fd, PathFolder) or (dir_fd is None and not DIR_FD_CALLS):
+        return outpath.open_folder(name, dir_fd, follow=follow)
     flags = os.O_RDONLY | O_DIRECTORY | O_CLOEXEC
     if not follow:
         flags |= O_NOFOLLOW
     return os.open(name, flags, dir_fd=dir_fd)
 
 
-def entries(dir_fd: int, prefix: str = "") -> Iterator[tuple[str, int]]:
+def close_folder(dir_fd: Folder) -> None:
+    """Close an open folder (a path-checked one holds nothing open)."""
+    if not isinstance(dir_fd, PathFolder):
+        os.close(dir_fd)
+
+
+def _dup(dir_fd: Folder) -> Folder:
+    return dir_fd if isinstance(dir_fd, PathFolder) else os.dup(dir_fd)
+
+
+def _scan(dir_fd: Folder) -> list[tuple[str, int]]:
+    if isinstance(dir_fd, PathFolder):
+        return outpath.scan(dir_fd)
+    with os.scandir(dir_fd) as it:
+        return [(e.name, e.stat(follow_symlinks=False).st_mode) for e in it]
+
+
+def entries(dir_fd: Folder, prefix: str = "") -> Iterator[tuple[str, int]]:
     """Every entry below an open folder as (relative path with ``/``, ``lstat`` mode); links are never followed.
 
     A folder is listed itself and then walked (opened with ``O_NOFOLLOW``);
     everything else -- files, links, FIFOs, devices -- is listed only.
     """
-    with os.scandir(dir_fd) as it:
-        listed = sorted((e.name, e.stat(follow_symlinks=False).st_mode) for e in it)
+    listed = sorted(_scan(dir_fd))
     for name, mode in listed:
         rel = prefix + name
         yield rel, mode
@@ -110,30 +145,56 @@ def entries(dir_fd: int, prefix: str = "") -> Iterator[tuple[str, int]]:
             try:
                 yield from entries(fd, rel + "/")
             finally:
-                os.close(fd)
+                close_folder(fd)
 
 
-def _walk_to(dir_fd: int, rel: str) -> tuple[int, str]:
+def _walk_to(dir_fd: Folder, rel: str) -> tuple[Folder, str]:
     """(an open fd of the folder holding ``rel``, its last component); the caller closes the fd."""
     *folders, name = rel.split("/")
-    fd = os.dup(dir_fd)
+    fd = _dup(dir_fd)
     try:
         for part in folders:
             nxt = open_folder(part, fd)
-            os.close(fd)
+            close_folder(fd)
             fd = nxt
     except BaseException:
-        os.close(fd)
+        close_folder(fd)
         raise
     return fd, name
 
 
-def sha256_at(dir_fd: int, rel: str) -> str | None:
+def _open_at(dir_fd: Folder, name: str, flags: int, mode: int = 0o777) -> int:
+    """``os.open`` of ``name`` in an open folder (``flags`` as for the ``*at`` call; path-checked without it)."""
+    if isinstance(dir_fd, PathFolder):
+        return outpath.open_at(dir_fd, name, flags, mode)
+    return os.open(name, flags, mode, dir_fd=dir_fd)
+
+
+def read_regular_at(dir_fd: Folder, name: str, limit: int) -> bytes | None:
+    """Up to ``limit`` bytes of the regular file ``name`` in an open folder; None: none there (a link is none)."""
+    try:
+        fd = _open_at(dir_fd, name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK)
+    except OSError:
+        return None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            return None
+        raw = b""
+        while len(raw) < limit and (block := os.read(fd, 1 << 20)):
+            raw += block
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return raw
+
+
+def sha256_at(dir_fd: Folder, rel: str) -> str | None:
     """SHA-256 of the regular file ``rel`` below ``dir_fd``, never through a link (None: not a regular file)."""
     fd, name = _walk_to(dir_fd, rel)
     try:
         try:
-            f = os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC, dir_fd=fd)
+            f = _open_at(fd, name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC)
         except OSError as exc:
             if exc.errno in (errno.ELOOP, errno.ENOENT, errno.ENXIO):
                 return None
@@ -148,17 +209,16 @@ def sha256_at(dir_fd: int, rel: str) -> str | None:
         finally:
             os.close(f)
     finally:
-        os.close(fd)
+        close_folder(fd)
 
 
-def write_bytes_at(dir_fd: int, name: str, data: bytes) -> None:
+def write_bytes_at(dir_fd: Folder, name: str, data: bytes) -> None:
     """Write ``name`` in an open folder atomically: a new temporary file (``O_EXCL``), fsync, rename over ``name``.
 
     ``name`` is replaced as an entry: a link there is replaced, never written through.
     """
     tmp = f".{name}.{os.getpid()}.{os.urandom(4).hex()}.new"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | O_NOFOLLOW | O_CLOEXEC,
-                 file_mode(), dir_fd=dir_fd)
+    fd = _open_at(dir_fd, tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | O_NOFOLLOW | O_CLOEXEC, file_mode())
     try:
         try:
             view = memoryview(data)
@@ -167,17 +227,73 @@ def write_bytes_at(dir_fd: int, name: str, data: bytes) -> None:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.rename(tmp, name, src_dir_fd=dir_fd, dst_dir_fd=dir_fd)
+        _rename_at(dir_fd, tmp, dir_fd, name)
     except BaseException:
         try:
-            os.unlink(tmp, dir_fd=dir_fd)
+            unlink_at(dir_fd, tmp)
         except OSError:
             pass
         raise
 
 
-def fsync_dir(dir_fd: int) -> None:
+def _rename_at(src_fd: Folder, src: str, dst_fd: Folder, dst: str) -> None:
+    """Rename an entry over whatever entry has the new name (a link there is replaced, never followed)."""
+    if isinstance(src_fd, PathFolder) and isinstance(dst_fd, PathFolder):
+        outpath.rename_at(src_fd, src, dst_fd, dst)
+    else:
+        assert isinstance(src_fd, int) and isinstance(dst_fd, int)
+        os.rename(src, dst, src_dir_fd=src_fd, dst_dir_fd=dst_fd)
+
+
+def unlink_at(dir_fd: Folder, name: str) -> None:
+    """Remove the entry ``name`` of an open folder (a link itself, never its target)."""
+    if isinstance(dir_fd, PathFolder):
+        outpath.unlink_at(dir_fd, name)
+    else:
+        os.unlink(name, dir_fd=dir_fd)
+
+
+def mkdir_at(dir_fd: Folder, name: str, mode: int) -> None:
+    """Make the folder ``name`` in an open folder."""
+    if isinstance(dir_fd, PathFolder):
+        outpath.mkdir_at(dir_fd, name, mode)
+    else:
+        os.mkdir(name, mode, dir_fd=dir_fd)
+
+
+def rmdir_at(dir_fd: Folder, name: str) -> None:
+    """Remove the empty folder ``name`` of an open folder."""
+    if isinstance(dir_fd, PathFolder):
+        outpath.rmdir_at(dir_fd, name)
+    else:
+        os.rmdir(name, dir_fd=dir_fd)
+
+
+def rmtree_at(dir_fd: Folder, name: str) -> None:
+    """Remove the command's own folder ``name`` and all in it (errors ignored; links inside removed, not followed)."""
+    if isinstance(dir_fd, PathFolder):
+        outpath.rmtree_at(dir_fd, name)
+    else:
+        shutil.rmtree(name, dir_fd=dir_fd, ignore_errors=True)
+
+
+def listdir_at(dir_fd: Folder) -> list[str]:
+    """The names in an open folder."""
+    return outpath.listdir(dir_fd) if isinstance(dir_fd, PathFolder) else os.listdir(dir_fd)
+
+
+def lstat_at(dir_fd: Folder, name: str) -> os.stat_result:
+    """``lstat`` of ``name`` in an open folder."""
+    if isinstance(dir_fd, PathFolder):
+        return outpath.lstat_at(dir_fd, name)
+    return os.lstat(name, dir_fd=dir_fd)
+
+
+def fsync_dir(dir_fd: Folder) -> None:
     """Make the folder's entries (renames, new names) durable; a file system that cannot is not an error."""
+    if isinstance(dir_fd, PathFolder):
+        outpath.fsync_dir(dir_fd)
+        return
     try:
         os.fsync(dir_fd)
     except OSError as exc:
@@ -201,8 +317,6 @@ def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | Non
     ``shown`` is the path as the user gave it; ``need_bytes`` the least free
     space the outputs need (0: only that some space is left).
     """
-    if not DIR_FD_CALLS:
-        return f"{shown}: {NO_DIR_FD_CALLS}"
     if read_only(folder):
         return (f"{shown}: the file system is read-only; write to a folder on a writable disk "
                 "(nothing was written)")
@@ -216,10 +330,13 @@ def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | Non
     return None
 
 
-def chmod_at(dir_fd: int, rel: str, mode: int, *, sync: bool = False) -> None:
+def chmod_at(dir_fd: Folder, rel: str, mode: int, *, sync: bool = False) -> None:
     """Set the mode of the file ``rel`` below ``dir_fd`` (never through a link), and with ``sync`` make it durable."""
     fd, name = _walk_to(dir_fd, rel)
     try:
+        if isinstance(fd, PathFolder):
+            outpath.chmod_at(fd, name, mode, sync=sync)
+            return
         f = os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=fd)
         try:
             set_fd_mode(f, mode)
@@ -228,34 +345,42 @@ def chmod_at(dir_fd: int, rel: str, mode: int, *, sync: bool = False) -> None:
         finally:
             os.close(f)
     finally:
-        os.close(fd)
+        close_folder(fd)
 
 
-def folder_at(dir_fd: int, rel_dir: str, *, make: bool) -> int:
+def folder_at(dir_fd: Folder, rel_dir: str, *, make: bool) -> Folder:
     """Open (and with ``make`` create, owner-only) the folder ``rel_dir`` below ``dir_fd``, never through a link."""
-    fd = os.dup(dir_fd)
+    fd = _dup(dir_fd)
     try:
         for part in filter(None, rel_dir.split("/")):
             if make:
                 try:
-                    os.mkdir(part, dir_mode(), dir_fd=fd)
+                    mkdir_at(fd, part, dir_mode())
                 except FileExistsError:
                     pass
             nxt = open_folder(part, fd)
-            os.close(fd)
+            close_folder(fd)
             fd = nxt
     except BaseException:
-        os.close(fd)
+        close_folder(fd)
         raise
     return fd
 
-def place(src_fd: int, dst_fd: int, name: str, *, replace: bool) -> None:
+def _link_at(src_fd: Folder, dst_fd: Folder, name: str) -> None:
+    if isinstance(src_fd, PathFolder) and isinstance(dst_fd, PathFolder):
+        outpath.link_at(src_fd, dst_fd, name)
+    else:
+        assert isinstance(src_fd, int) and isinstance(dst_fd, int)
+        os.link(name, name, src_dir_fd=src_fd, dst_dir_fd=dst_fd, follow_symlinks=False)
+
+
+def place(src_fd: Folder, dst_fd: Folder, name: str, *, replace: bool) -> None:
     """Move ``name`` from one folder to another: over the command's own file (``replace``), or never over anything."""
     if replace:
-        os.rename(name, name, src_dir_fd=src_fd, dst_dir_fd=dst_fd)
+        _rename_at(src_fd, name, dst_fd, name)
         return
     try:
-        os.link(name, name, src_dir_fd=src_fd, dst_dir_fd=dst_fd, follow_symlinks=False)
+        _link_at(src_fd, dst_fd, name)
     except FileExistsError:
         raise OutputError(f"{name}: appeared while the command ran; it was not overwritten (run it again, or "
                           "choose another name)", status=1) from None
@@ -264,15 +389,21 @@ def place(src_fd: int, dst_fd: int, name: str, *, replace: bool) -> None:
             raise
         # a file system without hard links (FAT, some network shares): look, then rename
         try:
-            os.lstat(name, dir_fd=dst_fd)
+            if isinstance(src_fd, PathFolder) and isinstance(dst_fd, PathFolder):
+                outpath.rename_new(src_fd, dst_fd, name)  # (Windows' rename refuses an existing name itself)
+                return
+            lstat_at(dst_fd, name)
         except FileNotFoundError:
-            os.rename(name, name, src_dir_fd=src_fd, dst_dir_fd=dst_fd)
+            _rename_at(src_fd, name, dst_fd, name)
             return
+        except FileExistsError:
+            pass
         raise OutputError(f"{name}: appeared while the command ran; it was not overwritten (run it again, or "
                           "choose another name)", status=1) from None
-    os.unlink(name, dir_fd=src_fd)
+    unlink_at(src_fd, name)
 
-def sha256_at_or_none(dir_fd: int, rel: str) -> str | None:
+
+def sha256_at_or_none(dir_fd: Folder, rel: str) -> str | None:
     """:func:`analysis.outfs.sha256_at`, None also where a folder on the way is missing or a link."""
     try:
         return sha256_at(dir_fd, rel)

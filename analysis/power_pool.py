@@ -51,7 +51,7 @@ from typing import Any
 
 from analysis.errors import AnalysisError
 from analysis.outdir import ensure_output_folder, sha256_file
-from analysis.outfs import open_folder, os_error_line, write_bytes_at
+from analysis.outfs import close_folder, open_folder, os_error_line, write_bytes_at
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",
@@ -133,7 +133,7 @@ def _write_record(db: Path, record: dict[str, Any]) -> None:
         try:
             write_bytes_at(fd, path.name, json.dumps(record, indent=1, sort_keys=True).encode("utf-8"))
         finally:
-            os.close(fd)
+            close_folder(fd)
     except OSError as exc:
         raise PoolError(os_error_line(exc, path, "cannot write the pool's record", written=True)) from None
 

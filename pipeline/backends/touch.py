@@ -41,6 +41,7 @@ from pipeline.devices.touch_output import (
 )
 from pipeline.force.frames import Vec3
 from pipeline.runtime.clock import Clock, MonotonicClock
+from pipeline.runtime.platform_support import add_dll_directory
 
 __all__ = [
     "HD_DEVICE_FAULT",
@@ -66,7 +67,8 @@ HD_CALLBACK_CONTINUE = 1
 
 TOUCH_INSTALL_HINT = (
     "the 3D Systems Touch needs OpenHaptics: install the OpenHaptics SDK (3.4+) and the Touch device driver "
-    "from 3D Systems (libHD.so must be on the library path), then pip install 'haptic-study[touch]' "
+    "from 3D Systems (libHD.so on the library path; Windows: HD.dll in a system folder or [haptic] dll_dir), "
+    "then pip install 'haptic-study[touch]' "
     "(pyOpenHaptics); or choose the simulated Touch"
 )
 
@@ -119,24 +121,37 @@ class HDApi(Protocol):
         ...
 
 
-def load_pyopenhaptics() -> Any:
-    """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot."""
+def load_pyopenhaptics(dll_dir: str | None = None) -> Any:
+    """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot.
+
+    ``dll_dir`` (``[haptic] dll_dir``) is added to Windows' DLL search path
+    first (:func:`pipeline.runtime.platform_support.add_dll_directory`; nothing
+    elsewhere): pyOpenHaptics loads ``HD.dll`` by name as it is imported, and
+    Windows does not look on ``PATH`` for it.
+    """
+    if dll_dir is not None:
+        try:
+            add_dll_directory(dll_dir)
+        except OSError as exc:
+            raise DeviceError(f"haptic.dll_dir {dll_dir}: Windows refused it as a DLL folder ({exc}); give the "
+                              "folder that holds HD.dll") from None
     try:
-        import pyOpenHaptics.hd as hd  # loads libHD.so
+        import pyOpenHaptics.hd as hd  # loads libHD.so / HD.dll
         import pyOpenHaptics.hd_callback as hd_callback
         import pyOpenHaptics.hd_define as hd_define
     except ImportError as exc:
         raise DeviceError(f"{TOUCH_INSTALL_HINT} (pyOpenHaptics is not installed: {exc})") from None
     except OSError as exc:
-        raise DeviceError(f"{TOUCH_INSTALL_HINT} (OpenHaptics library not found: {exc})") from None
+        where = f"not in {dll_dir}" if dll_dir else "on Windows set [haptic] dll_dir to the folder holding HD.dll"
+        raise DeviceError(f"{TOUCH_INSTALL_HINT} (OpenHaptics library not found: {exc}; {where})") from None
     return hd, hd_callback, hd_define
 
 
 class PyOpenHapticsApi:
     """:class:`HDApi` over pyOpenHaptics 1.0.1 (ctypes around libHD)."""
 
-    def __init__(self) -> None:
-        self._hd, self._cb, self._def = load_pyopenhaptics()
+    def __init__(self, dll_dir: str | None = None) -> None:
+        self._hd, self._cb, self._def = load_pyopenhaptics(dll_dir)
         self._handle: int | None = None
         self._cfunc: Any = None  # keep the ctypes callback alive while scheduled
 
@@ -222,6 +237,9 @@ class TouchHapticDevice:
         A command this old renders as zero (the device-side watchdog), s.
     thermal_budget_n2s
         Heat budget of the motor-heat model, N²·s (peak and continuous rating are the device's own).
+    dll_dir
+        The folder holding ``HD.dll`` (``[haptic] dll_dir``), added to Windows' DLL search path before
+        pyOpenHaptics is imported (when ``api`` is not given); None: the system's folders.
     """
 
     def __init__(
@@ -232,10 +250,11 @@ class TouchHapticDevice:
         clock: Clock | None = None,
         command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S,
         thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S,
+        dll_dir: str | None = None,
     ) -> None:
         self.device_name = device_name
         self.clock: Clock = clock or MonotonicClock()
-        self.api: HDApi = api if api is not None else PyOpenHapticsApi()
+        self.api: HDApi = api if api is not None else PyOpenHapticsApi(dll_dir)
         self.api.init_device(device_name)
         peak = self.api.get_double(HD_NOMINAL_MAX_FORCE)
         cont = self.api.get_double(HD_NOMINAL_MAX_CONTINUOUS_FORCE)

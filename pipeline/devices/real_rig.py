@@ -157,7 +157,8 @@ def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
     """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
     from pipeline.backends.touch import TouchHapticDevice
 
-    return TouchHapticDevice(cfg.device_name, clock=clock, command_timeout_s=cfg.command_timeout_s)
+    return TouchHapticDevice(cfg.device_name, clock=clock, command_timeout_s=cfg.command_timeout_s,
+                             dll_dir=cfg.dll_dir)
 
 
 def open_jaw(cfg: JawSettings) -> JawActuator:

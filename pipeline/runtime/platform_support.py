@@ -30,9 +30,14 @@ shared memory by name       ``SharedMemory(name)``         Windows: nothing (a s
                                                             calls through ``shm_open``
 owner-only study file       Windows: nothing               the file keeps its folder's access rights (ACL)
 (``chmod 0600``)
-file modes, umask,          Windows: no ``*at`` calls:     the commands that write output folders (report,
-``O_NOFOLLOW``, ``dir_fd``  :data:`DIR_FD_CALLS` False,    export, power …) refuse in one line there; not yet
-                            the output policy refuses      ported (they stay safe, never follow a link)
+file modes, umask,          Windows: no ``*at`` calls:     the same policy, but each step is a look then an
+``O_NOFOLLOW``, ``dir_fd``  :data:`DIR_FD_CALLS` False:    act: a process that changes the output folder
+                            the output policy walks paths, between the two (puts a link or junction where a
+                            ``lstat``-checking each part   checked folder was) can win that race; the ``*at``
+                            (no link, no junction: see     calls leave no such window.  New files keep the
+                            :func:`redirects`) right       folder's access rights (no 0600)
+                            before each open, rename and
+                            remove (:mod:`analysis.outpath`)
 free disk space             ``shutil.disk_usage``          nothing
 (``statvfs``)
 read-only mount             not detected ahead             the write fails instead, with the OS's error in
@@ -48,6 +53,8 @@ zombie check (``/proc``)    ``process_exists`` alone       a killed writer not y
 free memory (MemAvailable,  free physical memory only      the memory check is stricter (page cache not
 cgroup v2 limit)                                           counted) and blind to a container's limit
 CPU times (``/proc/stat``)  None                           benchmarks print no hypervisor steal
+DLL search path             Linux, macOS: nothing (the     nothing: ``[haptic] dll_dir`` only tells Windows
+(``add_dll_directory``)     loader's own path)             where HD.dll is
 =========================== ============================== ===================================================
 
 The garbage-collector and switch-interval settings of the loop's process
@@ -60,6 +67,7 @@ from __future__ import annotations
 import mmap
 import os
 import signal
+import stat
 import sys
 import threading
 from collections.abc import Callable
@@ -70,12 +78,12 @@ if TYPE_CHECKING:  # multiprocessing is imported where it is used: a command tha
     from multiprocessing.shared_memory import SharedMemory as SharedSegment  # the ring's segment
 
 __all__ = [
-    "DIR_FD_CALLS", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NONBLOCK", "SharedSegment", "attach_segment",
-    "boot_id", "cgroup_memory_headroom", "cpu_times", "create_segment", "die_with_parent", "free_orphaned_segment",
-    "free_physical_bytes", "fs_free_bytes", "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average",
-    "meminfo_available_bytes", "open_schedstat", "owner_only", "process_exists", "process_stat_fields",
-    "set_fd_mode", "set_fifo_priority", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count",
-    "worker_context",
+    "DIR_FD_CALLS", "O_BINARY", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NOINHERIT", "O_NONBLOCK",
+    "SharedSegment", "add_dll_directory", "attach_segment", "boot_id", "cgroup_memory_headroom", "cpu_times",
+    "create_segment", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
+    "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "meminfo_available_bytes", "open_schedstat",
+    "owner_only", "process_exists", "process_stat_fields", "redirects", "set_fd_mode", "set_fifo_priority",
+    "set_folder_mode", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count", "worker_context",
 ]
 
 def _linux() -> bool:
@@ -345,13 +353,67 @@ if sys.platform != "win32":
     O_NOFOLLOW: int = os.O_NOFOLLOW
     O_DIRECTORY: int = os.O_DIRECTORY
     O_NONBLOCK: int = os.O_NONBLOCK
-else:  # Windows has none of them; the output policy does not run there (DIR_FD_CALLS)
+else:  # Windows has none of them; the output policy checks each path with lstat there (analysis.outpath)
     O_NOFOLLOW = O_DIRECTORY = O_NONBLOCK = 0
 #: Close the descriptor in a child process (0 where the OS has no such flag: Windows does not inherit by default).
 O_CLOEXEC: int = getattr(os, "O_CLOEXEC", 0)
+#: Windows: bytes as they are (no newline translation) and no inheritance by a child; 0 elsewhere.
+O_BINARY: int = getattr(os, "O_BINARY", 0)
+O_NOINHERIT: int = getattr(os, "O_NOINHERIT", 0)
+#: ``FILE_ATTRIBUTE_REPARSE_POINT``, and the tag bit of a reparse point that names another path (Windows).
+_REPARSE_POINT = 0x400
+_NAME_SURROGATE = 0x20000000
 #: Whether the OS has the ``*at`` calls (``openat``, ``renameat``, ``O_NOFOLLOW``) the output policy is built on.
 DIR_FD_CALLS: bool = (sys.platform != "win32" and os.open in os.supports_dir_fd and os.rename in os.supports_dir_fd
                       and hasattr(os, "O_NOFOLLOW"))
+
+
+def redirects(path: str | os.PathLike[str], st: os.stat_result) -> bool:
+    """Whether the entry at ``path`` (its ``lstat`` result ``st``) leads elsewhere: a symbolic link, or a junction.
+
+    Windows: a junction (``os.path.isjunction`` from Python 3.12), or any
+    reparse point whose tag names another path (junctions, symbolic links,
+    mount points; the tag's name-surrogate bit); a reparse point that only
+    stores data (a cloud placeholder, a deduplicated file) is an ordinary entry.
+    """
+    if stat.S_ISLNK(st.st_mode):
+        return True
+    if sys.platform != "win32":
+        return False
+    isjunction = getattr(os.path, "isjunction", None)
+    if isjunction is not None and isjunction(path):
+        return True
+    return bool(st.st_file_attributes & _REPARSE_POINT and st.st_reparse_tag & _NAME_SURROGATE)
+
+
+def set_folder_mode(path: str | os.PathLike[str], mode: int) -> None:
+    """Set a folder's mode by path, never through a link (opened ``O_NOFOLLOW``, ``fchmod``); Windows: nothing."""
+    if sys.platform == "win32":
+        return
+    fd = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | O_CLOEXEC)
+    try:
+        os.fchmod(fd, mode)
+    finally:
+        os.close(fd)
+
+
+def add_dll_directory(path: str | os.PathLike[str]) -> bool:
+    """Add ``path`` to the folders Windows searches for a DLL (``os.add_dll_directory``); False elsewhere.
+
+    The Touch's Python binding (pyOpenHaptics) loads ``HD.dll`` by name; since
+    Python 3.8 Windows no longer looks in ``PATH`` for the DLLs of an extension,
+    so a lab that installed OpenHaptics outside the system folders names that
+    folder (``[haptic] dll_dir``).  Linux and macOS find ``libHD`` through the
+    loader's own path (``LD_LIBRARY_PATH``, ``ldconfig``): nothing to do there.
+    The directory stays added for the life of the process.
+    """
+    if sys.platform != "win32":
+        return False
+    _DLL_DIRECTORIES.append(os.add_dll_directory(os.fspath(path)))  # kept: closing the handle removes it
+    return True
+
+
+_DLL_DIRECTORIES: list[object] = []
 
 
 def owner_only(path: str | os.PathLike[str]) -> None:

@@ -93,6 +93,8 @@ class HapticSettings:
     device_name: str = "Default Device"
     #: A command this old renders as zero, in the Touch's own servo thread (the device-side watchdog).
     command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
+    #: The folder holding ``HD.dll`` (Windows looks there before pyOpenHaptics loads it); None: the system's folders.
+    dll_dir: str | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -228,13 +230,21 @@ def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
 
 def _haptic(f: Fields, v: Any) -> HapticSettings:
     """``[haptic]``: the Touch."""
-    h = f.table("haptic", v, {"device_name", "command_timeout_s"})
+    h = f.table("haptic", v, {"device_name", "command_timeout_s", "dll_dir"})
+    dll_dir = h.get("dll_dir")
+    if dll_dir is not None:
+        dll_dir = f.string("haptic.dll_dir", dll_dir, what="the path of the folder holding OpenHaptics' HD.dll "
+                           "(e.g. 'C:/OpenHaptics/Developer/3.4.0/lib/x64/Release'), absolute or relative to "
+                           "this file")
+        if "\0" in dll_dir:
+            raise f.fail("haptic.dll_dir", dll_dir, "a path without NUL characters")
     return HapticSettings(
         f.string("haptic.device_name", h.get("device_name", "Default Device"),
                  what="a non-empty string (the OpenHaptics device name)"),
         # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
         f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S), lo=0.002, hi=0.05,
                  lo_open=False, note="s (a force command this old renders as zero)"),
+        dll_dir,
     )
 
 
@@ -346,4 +356,13 @@ def load_hardware(path: str | Path) -> HardwareConfig:
     hw = hardware_from_dict(data, src)
     # a relative calibration path is relative to the hardware file, not to the working directory
     cal = Path(hw.calibration_file if hw.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
-    return replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
+    hw = replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
+    if hw.haptic.dll_dir is not None:  # relative to the hardware file too; it must be a folder there now
+        dll = Path(hw.haptic.dll_dir)
+        dll = dll if dll.is_absolute() else p.parent / dll
+        if not dll.is_dir():
+            what = "is not a folder" if dll.exists() else "no such folder"
+            raise HardwareError(f"{src}: haptic.dll_dir = {hw.haptic.dll_dir!r}: {what} ({dll}); give the folder "
+                                "that holds OpenHaptics' HD.dll, or remove the line to use the system's folders")
+        hw = replace(hw, haptic=replace(hw.haptic, dll_dir=str(dll)))
+    return hw

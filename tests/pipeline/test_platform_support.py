@@ -48,8 +48,8 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("pipeline/backends/touch.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
                                                      "through pyOpenHaptics: the device's library, not the OS",
     ("analysis/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
-                                     "open_folder, which refuses where platform_support.DIR_FD_CALLS is False",
-    ("analysis/outdir.py", "dir_fd"): "the output policy, on outfs's descriptors (refused with them: DIR_FD_CALLS)",
+                                     "open_folder, which hands the walk to analysis.outpath (by checked paths) "
+                                     "where platform_support.DIR_FD_CALLS is False",
 }
 
 
@@ -279,15 +279,25 @@ def test_the_owner_alone_reads_a_new_study_file_on_linux(tmp_path: Path) -> None
     assert ps.umask() == mask
 
 
-def test_without_dir_fd_calls_output_folders_are_refused_before_any_work(monkeypatch, tmp_path: Path) -> None:
+def test_without_dir_fd_calls_output_folders_are_written_by_checked_paths(monkeypatch, tmp_path: Path) -> None:
+    """Windows' fallback (analysis.outpath; its own tests: tests/analysis/test_outdir_pathwalk.py)."""
+    from analysis.outdir import write_output_folder
+    from analysis.outpath import PathFolder
+
     monkeypatch.setattr(outfs, "DIR_FD_CALLS", False)
-    for out in (tmp_path / "new", tmp_path):
-        with pytest.raises(outfs.OutputError, match="not supported on this operating system") as err:
-            check_output_folder(out, command="report", marker=".haptic-report")
-        assert err.value.status == 2 and "\n" not in str(err.value)
-    assert not (tmp_path / "new").exists()
-    with pytest.raises(outfs.OutputError, match="not supported"):
-        outfs.open_folder(str(tmp_path), follow=True)
+    assert isinstance(outfs.open_folder(str(tmp_path), follow=True), PathFolder)
+    check_output_folder(tmp_path / "new", command="report", marker=".haptic-report")
+    files = write_output_folder(tmp_path / "new", lambda d: (d / "a.csv").write_text("1"), command="report",
+                                marker=".haptic-report")
+    assert files == ["a.csv"] and (tmp_path / "new" / "a.csv").stat().st_mode & 0o777 == 0o600
+
+
+def test_the_dll_folder_is_added_on_windows_only(monkeypatch, tmp_path: Path) -> None:
+    added: list[str] = []
+    monkeypatch.setattr(ps.os, "add_dll_directory", added.append, raising=False)
+    assert ps.add_dll_directory(tmp_path) is False and added == []  # Linux: the loader's own path
+    monkeypatch.setattr(ps.sys, "platform", "win32")
+    assert ps.add_dll_directory(tmp_path) is True and added == [str(tmp_path)]
 
 
 def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
