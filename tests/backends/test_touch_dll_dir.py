@@ -69,14 +69,18 @@ def fake_windows(monkeypatch, tmp_path):
     (package / "hd_callback.py").write_text("")
     (package / "hd_define.py").write_text("")
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
-    for name in ("pyOpenHaptics", "pyOpenHaptics.hd", "pyOpenHaptics.hd_callback", "pyOpenHaptics.hd_define"):
-        monkeypatch.delitem(sys.modules, name, raising=False)
+    names = ("pyOpenHaptics", "pyOpenHaptics.hd", "pyOpenHaptics.hd_callback", "pyOpenHaptics.hd_define")
+    real = {name: sys.modules.pop(name) for name in names if name in sys.modules}
     monkeypatch.setattr(ps, "_test_events", events, raising=False)
     monkeypatch.setattr(ps.sys, "platform", "win32")
     monkeypatch.setattr(ps.os, "add_dll_directory", lambda p: events.append(f"add_dll_directory {p}") or p,
                         raising=False)
     monkeypatch.setattr(ps, "_DLL_DIRECTORIES", [])
-    return events
+    yield events
+    # the fakes out of sys.modules, the real ones (if another test imported them) back: later tests import the real
+    for name in names:
+        sys.modules.pop(name, None)
+    sys.modules.update(real)
 
 
 def test_the_folder_is_added_before_pyopenhaptics_is_imported(fake_windows, tmp_path):
