@@ -12,7 +12,8 @@
     samples.csv         every recorded 1 kHz record of their sessions (analysis.samples_frame)
     poses.csv           the robot poses the pipeline took (125 Hz), per recorded run
     recording_log.csv   the recording's log: commands and events the pipeline applied, by tick
-    recordings.csv      their recorded runs; blocks.csv the recorded blocks (where, how many records, checksum)
+    recordings.csv      their recorded runs; blocks.csv the recorded blocks (where, how many records, checksum);
+                        chunks.csv the last block of a run that was killed, as its commits wrote it
     leases.csv          writers' leases on their sessions (normally none: a lease lives while a session runs)
     codebook.csv        every column of every table: what it holds, its unit and type
 
@@ -77,6 +78,7 @@ _DESCRIBED: dict[str, tuple[str, str, str]] = {  # column -> (description, unit,
     "t0_ns": ("loop time of the run's first record: session time = started_at_s + (t_ns − t0_ns) / 1e9", "ns",
               "integer"),
     "block": ("block within the recorded run, numbered from 0", "", "integer"),
+    "chunk": ("chunk of the block, in the order its commits wrote them, numbered from 0", "", "integer"),
     "n_records": ("1 kHz records the block holds", "count", "integer"),
     "t_first_s": ("session-clock time of the block's first record", "s", "number"),
     "t_last_s": ("session-clock time of the block's last record", "s", "number"),
@@ -137,6 +139,8 @@ FILES = {
     "recording_log": "the recording's log: what the pipeline applied, by loop tick",
     "recordings": "their sessions' recorded runs",
     "blocks": "the recorded blocks: where, how many records, checksum",
+    "chunks": "the last block of a run that was killed, in the chunks its commits wrote: where, how many records, "
+              "checksum",
     "leases": "writers' leases on their sessions (normally none)",
     "codebook.csv": "every column of every table: what it holds, its unit and type",
 }
@@ -267,6 +271,7 @@ def participant_export(database: str | os.PathLike[str], code: str,
         "recording_log": log,
         "recordings": _frame(rows, "recordings", tuple(_RECORDING_JSON)),
         "blocks": _frame(rows, "session_blocks"),
+        "chunks": _frame(rows, "session_chunks"),
         "leases": _frame(rows, "leases"),
     }
     return ParticipantExport(code, tables, _settings(rows, path), damage)

@@ -141,6 +141,7 @@ def row_format_copy(source: str, target: str, *, workers: int | None = None,
         insert_s = time.perf_counter() - t0
         # what version 2 did not have: the recording and where each trial is in it
         dst.execute("DROP TABLE session_blocks")
+        dst.execute("DROP TABLE IF EXISTS session_chunks")
         dst.execute("DROP TABLE recordings")
         for col in ("software_commit", "software_dirty"):  # (version 4: which code ran the session)
             dst.execute(f"ALTER TABLE sessions DROP COLUMN {col}")

@@ -63,6 +63,7 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
         recordings = src.execute("SELECT session_id, segment, scales_json FROM recordings")
         scales = {(sid, seg): s for sid, seg, s in recordings}
         dst.execute("DELETE FROM session_blocks")
+        dst.execute("DELETE FROM session_chunks")
         dst.execute("DELETE FROM recordings")
         dst.commit()
     finally:

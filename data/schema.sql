@@ -147,6 +147,25 @@ CREATE TABLE IF NOT EXISTS session_blocks (
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );
 
+-- Version 4: what the open block of a segment being recorded gained at each commit (the records' own bytes,
+-- protocol/recording/codec.py); replaced by its session_blocks row, in the same transaction, when the block fills
+-- or the segment ends.  Rows left here are a killed run's last block; readers join them.
+CREATE TABLE IF NOT EXISTS session_chunks (
+    session_id  INTEGER NOT NULL,
+    segment     INTEGER NOT NULL,
+    block       INTEGER NOT NULL,               -- the open block they belong to
+    chunk       INTEGER NOT NULL,               -- 0, 1, ... within the block, in the order written
+    first_tick  INTEGER NOT NULL,
+    last_tick   INTEGER NOT NULL,
+    n_records   INTEGER NOT NULL,
+    t_first_s   REAL NOT NULL,
+    t_last_s    REAL NOT NULL,
+    data        BLOB NOT NULL,
+    crc32       INTEGER NOT NULL,               -- zlib.crc32 of data
+    PRIMARY KEY (session_id, segment, block, chunk),
+    FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
+);
+
 -- version 4: a participant who withdrew (haptic-study withdraw).  Every row of theirs was removed and the file
 -- rewritten; this row keeps only the pseudonymous code, when, the reason given and how many rows of each kind were
 -- removed -- no measurement.  A withdrawn code is never given a session again.

@@ -27,6 +27,7 @@ import pytest
 from analysis.report import build_report
 from protocol.config import default_protocol
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, session_scope
+from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import footprint, withdrawals
 from study_app.cli.main import main
 from study_app.headless import run_study
@@ -306,20 +307,24 @@ def test_the_export_in_parquet_opens_in_pandas(withdrawn) -> None:
     assert list(pd.read_parquet(out / "participant.parquet")["code"]) == ["P01"]
 
 
-def test_a_version_4_file_from_before_withdrawals_gains_the_table(tmp_path) -> None:
+def test_a_version_4_file_from_before_withdrawals_and_chunks_gains_the_tables(tmp_path) -> None:
     db = tmp_path / "old4.db"
     StudyDatabase(db).close()
     c = sqlite3.connect(db)
     c.execute("DROP TABLE withdrawals")
+    c.execute("DROP TABLE session_chunks")
     c.commit()
     c.close()
     r = StudyDatabase(db, readonly=True)
     try:
         assert withdrawals(r.conn) == []  # a reader takes it as it is
+        reader = StudyReader.over(r)
+        assert list(reader.blocks()) == [] and reader.block_count() == 0 and reader.record_count([1]) == 0
     finally:
         r.close()
     StudyDatabase(db).close()  # a writer completes version 4
     assert _rows(db, "SELECT COUNT(*) FROM withdrawals") == [(0,)]
+    assert _rows(db, "SELECT COUNT(*) FROM session_chunks") == [(0,)]
     assert os.path.getsize(db) > 0
 
 

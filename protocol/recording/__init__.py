@@ -25,9 +25,12 @@ the codec cannot keep exactly is stored as plain float64 instead: nothing is
 ever rounded.  About 40 bytes a record, where a ``samples`` row took ~150.
 
 **Crash safety.**  The writer (:class:`protocol.storage.Recorder`) appends records
-to the open block and, at each commit (at least every 100 ms), writes the
-block as it stands; a full block is written once and the next one opened.  A
-``kill -9`` loses at most the records since the last commit, as before.
+to the open block and, at each commit (at least every 100 ms), writes what the
+block gained since the last one as a *chunk* (a ``session_chunks`` row: the
+records' own bytes, uncompressed); when the block fills, or its segment ends,
+the block is encoded once and replaces its chunks in the same transaction.  A
+``kill -9`` loses at most the records since the last commit; a killed
+segment's open block reads back from its chunks.
 
 **Integrity.**  Each block carries the CRC-32 of its bytes (schema version 4);
 every reader verifies it, and a damaged block is named in one line -- session,
@@ -40,18 +43,21 @@ from protocol.recording.codec import (
     LIMIT_COLUMNS,
     POSE_COLUMNS,
     BlockBuilder,
+    Chunk,
     Column,
     decode_block,
     decode_columns,
     encode_block,
     join_blocks,
+    join_chunks,
     kept_records,
 )
 from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
 from protocol.recording.reading import SegmentData, marked_records, read_segment, read_ticks, segments_of
 
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Column",
-    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks", "kept_records",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Chunk", "Column",
+    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks", "join_chunks",
+    "kept_records",
     "marked_records", "read_segment", "read_ticks", "recording_damage", "segments_of",
 ]

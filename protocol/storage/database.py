@@ -282,13 +282,26 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
                     n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
-        """Write a recorded block with its checksum, or rewrite the segment's open block as it grew (the recorder's
-        own row)."""
+        """Write a recorded block with its checksum, in place of the chunks it was written in so far (the recorder's
+        own rows; :meth:`write_chunk`)."""
         self.conn.execute(
             "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
             "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data,
              zlib.crc32(data)),
+        )
+        self.conn.execute("DELETE FROM session_chunks WHERE session_id = ? AND segment = ? AND block = ?",
+                          (session_id, segment, block))
+
+    def write_chunk(self, session_id: int, segment: int, block: int, chunk: int, first_tick: int, last_tick: int,
+                    n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
+        """Append what a segment's open block gained since the last commit, with its checksum (until
+        :meth:`write_block` replaces the block's chunks)."""
+        self.conn.execute(
+            "INSERT INTO session_chunks (session_id, segment, block, chunk, first_tick, last_tick, n_records, "
+            "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+            (session_id, segment, block, chunk, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s,
+             data, zlib.crc32(data)),
         )
 
     def next_segment(self, session_id: int) -> int:
@@ -309,12 +322,13 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def last_session_time_s(self, session_id: int) -> float:
         """Latest session-clock time recorded (events, trials, recorded records), for resuming the clock."""
-        blocks = ("UNION ALL SELECT MAX(t_last_s) FROM session_blocks WHERE session_id = ?"
-                  if self.schema_version >= 3 else "")
-        args = (session_id,) * (3 if blocks else 2)
+        tables = {r[0] for r in self.conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        blocks = "".join(f" UNION ALL SELECT MAX(t_last_s) FROM {t} WHERE session_id = ?"
+                         for t in ("session_blocks", "session_chunks") if t in tables)
+        args = (session_id,) * (2 + blocks.count("?"))
         r = self.conn.execute(
             "SELECT MAX(t) FROM (SELECT MAX(t_s) AS t FROM events WHERE session_id = ? "
-            f"UNION ALL SELECT MAX(ended_at_s) FROM trials WHERE session_id = ? {blocks})", args,
+            f"UNION ALL SELECT MAX(ended_at_s) FROM trials WHERE session_id = ?{blocks})", args,
         ).fetchone()
         return float(r[0]) if r and r[0] is not None else 0.0
 

@@ -55,8 +55,8 @@ def _has(conn: sqlite3.Connection, table: str) -> bool:
 def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | None:
     """Every stored row about participant ``code`` (None: no such participant), sessions and trials in order.
 
-    ``session_blocks`` is described without its ``data`` (the blocks' bytes); tables a file of an older schema
-    version lacks are empty.
+    ``session_blocks`` and ``session_chunks`` are described without their ``data`` (the blocks' bytes); tables a
+    file of an older schema version lacks are empty.
     """
     person = _table(conn, "SELECT * FROM participants WHERE code = ?", (code,))
     if not person.rows:
@@ -73,6 +73,9 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
         "recordings": ("SELECT * FROM recordings WHERE session_id = ? ORDER BY segment", _has(conn, "recordings")),
         "session_blocks": (f"SELECT {blocks_cols} FROM session_blocks WHERE session_id = ? ORDER BY segment, block",
                            _has(conn, "session_blocks")),
+        "session_chunks": ("SELECT session_id, segment, block, chunk, first_tick, last_tick, n_records, t_first_s, "
+                           "t_last_s, crc32 FROM session_chunks WHERE session_id = ? ORDER BY segment, block, chunk",
+                           _has(conn, "session_chunks")),
     }
     tables = {"participants": person, "sessions": sessions}
     for name, (sql, present) in queries.items():

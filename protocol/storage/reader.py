@@ -13,14 +13,18 @@ resume reads what it continues), or one a caller of :mod:`protocol.recording` ho
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import os
 import sqlite3
+import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from protocol.recording.codec import join_chunks
 from protocol.records import TrialRecord
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
@@ -46,6 +50,21 @@ class Rows:
 
     columns: tuple[str, ...]
     rows: list[tuple[Any, ...]]
+
+
+def _block_filter(session_id: int | None, segment: int | None, ticks: tuple[int, int] | None,
+                  prefix: str = "") -> tuple[str, list[int]]:
+    """The ``WHERE`` clause (or "") and its arguments that pick blocks or chunks of a session, a segment, a tick
+    range."""
+    where, args = [], []
+    for cond, value in ((f"{prefix}session_id = ?", session_id), (f"{prefix}segment = ?", segment)):
+        if value is not None:
+            where.append(cond)
+            args.append(int(value))
+    if ticks is not None:
+        where.append(f"{prefix}last_tick >= ? AND {prefix}first_tick <= ?")
+        args.extend((int(ticks[0]), int(ticks[1])))
+    return ("WHERE " + " AND ".join(where) if where else ""), args
 
 
 def _in(n: int) -> str:
@@ -294,25 +313,56 @@ class StudyReader:
         """Recorded blocks (of a session, a segment, those overlapping ticks ``(first, last)``), in order.
 
         Each is ``(session_id, segment, block, first_tick, last_tick, n_records, data, t_first_s, t_last_s,
-        crc32)``; a column the file lacks (``crc32`` before version 4) reads as None.
+        crc32)``; a column the file lacks (``crc32`` before version 4) reads as None.  A block a killed run left
+        open is read from its chunks (``session_chunks``), joined into one (:func:`protocol.recording.join_chunks`).
         """
         have = {d[0] for d in self.conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
         cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
-        where, args = [], []
-        for cond, value in (("session_id = ?", session_id), ("segment = ?", segment)):
-            if value is not None:
-                where.append(cond)
-                args.append(int(value))
-        if ticks is not None:
-            where.append("last_tick >= ? AND first_tick <= ?")
-            args.extend((int(ticks[0]), int(ticks[1])))
-        yield from self.conn.execute(
+        where, args = _block_filter(session_id, segment, ticks)
+        rows = self.conn.execute(
             f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM session_blocks "
-            f"{'WHERE ' + ' AND '.join(where) if where else ''} ORDER BY session_id, segment, block", args)
+            f"{where} ORDER BY session_id, segment, block", args)
+        open_blocks = self._open_blocks(session_id, segment, ticks)
+        if not open_blocks:
+            yield from rows
+            return
+        yield from heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2]))
+
+    def _open_blocks(self, session_id: int | None, segment: int | None,
+                     ticks: tuple[int, int] | None) -> list[tuple[Any, ...]]:
+        """Blocks left open by a killed run, each joined from its chunks as :meth:`blocks` returns a block.
+
+        The joined block's checksum is that of its bytes when every chunk's own checksum holds, else one that
+        cannot match: a damaged chunk is reported as its block's damage.
+        """
+        if not self._has_table("session_chunks"):
+            return []
+        where, args = _block_filter(session_id, segment, ticks, "c.")
+        done = ("NOT EXISTS (SELECT 1 FROM session_blocks b WHERE b.session_id = c.session_id "
+                "AND b.segment = c.segment AND b.block = c.block)")  # (replaced in the same transaction: never both)
+        where = f"{where} AND {done}" if where else f"WHERE {done}"
+        chunks = self.conn.execute(
+            "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, c.data, c.t_first_s, "
+            f"c.t_last_s, c.crc32 FROM session_chunks c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
+            args)
+        out = []
+        for key, group in itertools.groupby(chunks, key=lambda r: (r[0], r[1], r[2])):
+            parts = list(group)
+            data = join_chunks(bytes(r[6]) for r in parts)
+            intact = all(zlib.crc32(r[6]) == r[9] for r in parts)
+            crc = zlib.crc32(data) if intact else zlib.crc32(data) ^ 1
+            out.append((*key, min(r[3] for r in parts), max(r[4] for r in parts), sum(r[5] for r in parts), data,
+                        min(r[7] for r in parts), max(r[8] for r in parts), crc))
+        return out
+
+    def _has_table(self, name: str) -> bool:
+        return bool(self.conn.execute("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = ?",
+                                      (name,)).fetchone()[0])
 
     def block_count(self) -> int:
-        """How many recorded blocks the file holds."""
-        return int(self.conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
+        """How many recorded blocks the file holds (a block left open by a killed run counts once)."""
+        n = int(self.conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
+        return n + len(self._open_blocks(None, None, None))
 
     # -- the audit (haptic-study check) ----------------------------------------------------------------------------
     def integrity_check(self, max_errors: int = 20) -> list[str]:
@@ -356,6 +406,8 @@ class StudyReader:
         """How many 1 kHz records some sessions' recordings hold (0 without a recording)."""
         if not self.has_recordings():
             return 0
-        return int(self.conn.execute(
-            f"SELECT COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id IN ({_in(len(session_ids))})",
-            [int(s) for s in session_ids]).fetchone()[0])
+        ids = [int(s) for s in session_ids]
+        tables = ("session_blocks", "session_chunks") if self._has_table("session_chunks") else ("session_blocks",)
+        return sum(int(self.conn.execute(
+            f"SELECT COALESCE(SUM(n_records), 0) FROM {t} WHERE session_id IN ({_in(len(ids))})", ids).fetchone()[0])
+            for t in tables)

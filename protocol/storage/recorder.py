@@ -166,7 +166,7 @@ class Recorder:
         :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
         after they are queued (the ring's copies do not).
 
-        They are cut into blocks as they fill; the open block is written as it stands at every commit.
+        They are cut into blocks as they fill; what the open block gained is written at every commit (a chunk).
         """
         self._put(Records(session_id, segment, records, list(log)))
 
@@ -267,12 +267,18 @@ class Recorder:
                 if self.db.conn.in_transaction:
                     self.db.conn.execute("ROLLBACK")
                 raise
-        for (sid, seg), (builder, _) in self._blocks.items():
-            # the records since the last commit reach the disk with it; at the end, the open block whole
-            open_block = builder.final() if final else builder.partial()
-            if open_block is not None:
+        for (sid, seg), (builder, clock) in self._blocks.items():
+            # the records since the last commit reach the disk with it (a chunk); at the end, the open block whole
+            if final:
+                block = builder.final()
+                if block is not None:
+                    self.db.begin()
+                    self._write_block(sid, seg, block)
+            elif (chunk := builder.partial()) is not None:
+                ticks, t_ns = chunk.records["tick"], chunk.records["t_ns"]
                 self.db.begin()
-                self._write_block(sid, seg, open_block)
+                self.db.write_chunk(sid, seg, chunk.block, chunk.number, int(ticks[0]), int(ticks[-1]), len(ticks),
+                                    clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1])), chunk.data)
         if self.db.conn.in_transaction:
             self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()

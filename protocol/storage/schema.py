@@ -60,6 +60,15 @@ _WITHDRAWALS = (
     "removed_sessions INTEGER NOT NULL, removed_trials INTEGER NOT NULL, removed_events INTEGER NOT NULL, "
     "removed_blocks INTEGER NOT NULL, removed_records INTEGER NOT NULL, removed_samples INTEGER NOT NULL)"
 )
+#: Version 4's open blocks: what a segment being recorded gained at each commit (:mod:`protocol.recording`).  Added
+#: to version 4 after files of version 4 existed: a writer that opens a version-4 file without it adds it.
+_CHUNKS = (
+    "CREATE TABLE IF NOT EXISTS session_chunks (session_id INTEGER NOT NULL, segment INTEGER NOT NULL, "
+    "block INTEGER NOT NULL, chunk INTEGER NOT NULL, first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, "
+    "n_records INTEGER NOT NULL, t_first_s REAL NOT NULL, t_last_s REAL NOT NULL, data BLOB NOT NULL, "
+    "crc32 INTEGER NOT NULL, PRIMARY KEY (session_id, segment, block, chunk), "
+    "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))"
+)
 #: What upgrades a version-3 database to version 4: a checksum per recorded block (NULL in blocks written before it,
 #: which cannot be verified), and which code ran each session (the commit, and whether the checkout had uncommitted
 #: changes; NULL where it is not known, e.g. an install from a wheel).
@@ -68,6 +77,7 @@ _UPGRADE_3_TO_4 = (
     "ALTER TABLE sessions ADD COLUMN software_commit TEXT",
     "ALTER TABLE sessions ADD COLUMN software_dirty INTEGER CHECK (software_dirty IS NULL OR software_dirty IN (0, 1))",
     _WITHDRAWALS,
+    _CHUNKS,
 )
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
@@ -245,8 +255,9 @@ class SchemaFile:
                 raise StorageError(f"{self.path}: database schema version {version} must be upgraded to "
                                    f"{SCHEMA_VERSION} before it is written to; nothing was changed")
             self._upgrade(version)
-        elif not readonly and "withdrawals" not in tables:  # a version-4 file from before withdrawals
+        elif not readonly and not {"withdrawals", "session_chunks"} <= tables:  # a version-4 file from before them
             c.execute(_WITHDRAWALS)
+            c.execute(_CHUNKS)
         if not readonly:
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process

@@ -128,6 +128,7 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
         "SELECT session_id, kind, status FROM sessions WHERE participant_id = ? ORDER BY session_id", (pid,)))
     trials = events = segments = blocks = records = samples = 0
     recorded = _has_table(conn, "session_blocks")
+    open_blocks = _has_table(conn, "session_chunks")  # (a killed run's last block, in the chunks it was written in)
     for sid, _, _ in sessions:
         trials += conn.execute("SELECT COUNT(*) FROM trials WHERE session_id = ?", (sid,)).fetchone()[0]
         events += conn.execute("SELECT COUNT(*) FROM events WHERE session_id = ?", (sid,)).fetchone()[0]
@@ -138,6 +139,10 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
             b, r = conn.execute("SELECT COUNT(*), COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id = ?",
                                 (sid,)).fetchone()
             blocks, records = blocks + int(b), records + int(r)
+            if open_blocks:
+                b, r = conn.execute("SELECT COUNT(DISTINCT segment * 1000000000 + block), COALESCE(SUM(n_records), 0) "
+                                    "FROM session_chunks WHERE session_id = ?", (sid,)).fetchone()
+                blocks, records = blocks + int(b), records + int(r)
     return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples))
 
 
@@ -170,6 +175,8 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
             c.execute("DELETE FROM samples WHERE trial_id >= ? AND trial_id < ?",
                       (trial_id_of(sid, 0), trial_id_of(sid + 1, 0)))
             c.execute("DELETE FROM session_blocks WHERE session_id = ?", (sid,))
+            if _has_table(c, "session_chunks"):
+                c.execute("DELETE FROM session_chunks WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM recordings WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM events WHERE session_id = ?", (sid,))

@@ -361,3 +361,27 @@ def test_checksums_are_the_blocks_own(study: Path) -> None:
     finally:
         c.close()
     assert rows and all(zlib.crc32(d) == crc for d, crc in rows)
+
+
+def test_a_killed_runs_open_block_reads_from_its_chunks_and_a_damaged_chunk_is_named_as_its_block(
+        study: Path, tmp_path: Path) -> None:
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    c = sqlite3.connect(db)
+    try:
+        chunks = c.execute("SELECT block, chunk, first_tick, last_tick, data FROM session_chunks WHERE session_id = ? "
+                           "ORDER BY chunk", (DAMAGED_SESSION,)).fetchall()
+        assert chunks and {r[0] for r in chunks} == {chunks[0][0]}  # the kill left one block open, in chunks
+        block = chunks[0][0]
+        whole = read_segment(c, DAMAGED_SESSION, 0).columns["tick"]
+        assert whole[0] == 0 and whole[-1] == chunks[-1][3] and len(whole) == whole[-1] + 1  # none missing
+        data = bytes(chunks[-1][4])
+        c.execute("UPDATE session_chunks SET data = ? WHERE session_id = ? AND block = ? AND chunk = ?",
+                  (data[:-9] + bytes([data[-9] ^ 0x10]) + data[-8:], DAMAGED_SESSION, block, chunks[-1][1]))
+        c.commit()
+        (d,) = recording_damage(c)
+        assert (d.session_id, d.first_block, d.last_block) == (DAMAGED_SESSION, block, block)
+        assert d.why.startswith("checksum mismatch")
+        assert len(read_segment(c, DAMAGED_SESSION, 0, skip_damaged=True).columns["tick"]) == block * 1000
+    finally:
+        c.close()

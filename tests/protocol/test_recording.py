@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+from old_chunks import old_chunk, old_open_block
 from test_storage import FakeClock, _session_args
 
 from pipeline.runtime.tick_record import TICK_DTYPE
@@ -22,12 +23,15 @@ from protocol.recording import (
     decode_block,
     decode_columns,
     encode_block,
+    join_chunks,
     kept_records,
     read_segment,
     read_ticks,
 )
 from protocol.recording import codec as recording
 from protocol.storage import Recorder, StudyDatabase
+from protocol.storage.reader import StudyReader
+from protocol.storage.withdrawal import erase_participant, footprint
 
 #: Every kind of float64 the loop could hand over, the awkward ones often.
 ANY_FLOAT = st.one_of(
@@ -83,11 +87,17 @@ def test_any_block_decodes_to_the_same_bits(block) -> None:
     # reading some columns only gives the same values
     part = decode_columns(blob, ["t_ns", "force_n", "raw_fx"])
     assert all(np.array_equal(bits(part[k]), bits(cols[k])) for k in part)
-    # so does an open block's cheap chunk, alone or after another
-    chunk = recording._encode_fast(cols, poses, events)
-    for blob in (chunk, recording._CHUNKED + b"".join(len(c).to_bytes(4, "little") + c for c in (chunk, chunk))):
+    # so does an open block's chunk -- as the writer makes it, and as the writers before session_chunks did --
+    # alone or joined after another
+    kept = kept_records(cols)
+    pose_list = [(int(poses["tick"][i]), tuple(float(poses[f"r{j}"][i]) for j in range(9)),
+                  tuple(float(poses[f"{a}_m"][i]) for a in "xyz"), int(poses["pose_t_ns"][i]))
+                 for i in range(len(poses["tick"]))]
+    chunk = recording._encode_raw(np.ndarray((len(kept), kept.dtype.itemsize), np.uint8, kept), kept.dtype,
+                                  pose_list, events)
+    for blob, k in ((chunk, 1), (join_chunks([chunk, chunk]), 2), (old_chunk(cols, poses, events), 1),
+                    (old_open_block([old_chunk(cols, poses, events)] * 2), 2)):
         back, back_poses, back_events = decode_block(blob)
-        k = 2 if blob[:4] == recording._CHUNKED else 1
         for name, values in cols.items():
             assert np.array_equal(bits(back[name]), bits(np.tile(values, k))), name
         for name, values in poses.items():
@@ -131,6 +141,7 @@ def records(first_tick: int, n: int) -> dict[str, np.ndarray]:
 def test_the_builder_cuts_full_blocks_and_keeps_the_rest_open(chunk: int) -> None:
     builder = BlockBuilder()
     written: dict[int, bytes] = {}
+    chunks: dict[int, list[bytes]] = {}
     full: set[int] = set()
     total = 3210
     for start in range(0, total, chunk):
@@ -143,9 +154,11 @@ def test_the_builder_cuts_full_blocks_and_keeps_the_rest_open(chunk: int) -> Non
             full.add(number)
         part = builder.partial()
         if part is not None:
-            assert part[0] not in full
-            written[part[0]] = part[3]  # rewritten as it grows, as the recorder does at each commit
+            assert part.block not in full and part.number == len(chunks.get(part.block, []))
+            assert len(part.records) == n or part.number == 0  # only what the block gained since the last commit
+            chunks.setdefault(part.block, []).append(part.data)  # appended, as the recorder does at each commit
     assert builder.partial() is None  # nothing new since
+    written.update({b: join_chunks(c) for b, c in chunks.items() if b not in full})  # as a reader joins them
     assert sorted(written) == [0, 1, 2, 3]
     cols = [decode_block(written[k]) for k in sorted(written)]
     ticks = np.concatenate([c[0]["tick"] for c in cols])
@@ -173,14 +186,41 @@ def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_onl
         stored = len(seg.columns["tick"])
         assert 1540 - 100 - 10 <= stored < 1540  # at most 100 ms (one commit deadline) of records lost
         assert np.array_equal(seg.columns["tick"], np.arange(stored))  # and what is there is whole and in order
-        n_blocks = other.execute("SELECT COUNT(*), MAX(n_records) FROM session_blocks").fetchone()
-        assert n_blocks == (2, BLOCK_RECORDS)
+        # one full block, and the open one in the chunks its commits appended (each only what it gained)
+        assert other.execute("SELECT COUNT(*), MAX(n_records) FROM session_blocks").fetchone() == (1, BLOCK_RECORDS)
+        chunk_rows = other.execute("SELECT block, chunk, n_records FROM session_chunks ORDER BY chunk").fetchall()
+        assert [r[:2] for r in chunk_rows] == [(1, k) for k in range(len(chunk_rows))]
+        assert sum(r[2] for r in chunk_rows) == stored - BLOCK_RECORDS
         window = read_ticks(other, sid, 0, 990, 1010, ["t_ns", "force_n"])  # across the blocks' seam
         assert np.array_equal(window["tick"], np.arange(990, 1011))
         assert np.array_equal(window["t_ns"], np.arange(990, 1011) * 1_000_000)
+        fp = footprint(other, "P01")  # what a withdrawal would remove counts the open block and its records
+        assert fp is not None and (fp.blocks, fp.records) == (2, stored)
+        assert StudyReader.over(other).record_count([sid]) == stored
+        assert db.last_session_time_s(sid) == pytest.approx((stored - 1) / 1000)  # a resume's clock goes on from it
     finally:
         other.close()
+    db.conn.execute("ROLLBACK")  # the crash: what was not committed is gone
+    erase_participant(db, "P01", "test")  # a withdrawal removes the open block's chunks with the rest
+    assert db.conn.execute("SELECT (SELECT COUNT(*) FROM session_blocks) + (SELECT COUNT(*) FROM session_chunks)"
+                           ).fetchone() == (0,)
+    db.close()
+
+
+def test_a_segment_that_ends_has_its_last_block_whole_in_place_of_its_chunks(tmp_path: Path) -> None:
+    db = StudyDatabase(tmp_path / "rec.db")
+    sid = db.create_session(**_session_args())
+    clock = FakeClock()
+    rec = Recorder(db, threaded=False, clock=clock)
+    rec.segment(sid, 0, 0.0, 0, {"framework": {}}, {})
+    for k in range(0, 1540, 10):
+        clock.now = k / 1000
+        rec.records(sid, 0, records(k, 10))
+    assert db.conn.execute("SELECT COUNT(*) FROM session_chunks").fetchone()[0] > 0
     rec.close()
+    assert db.conn.execute("SELECT COUNT(*) FROM session_chunks").fetchone() == (0,)
+    assert db.conn.execute("SELECT block, n_records FROM session_blocks").fetchall() == [(0, 1000), (1, 540)]
+    assert np.array_equal(read_segment(db.conn, sid, 0).columns["tick"], np.arange(1540))
     db.close()
 
 
@@ -196,8 +236,6 @@ def test_loop_records_are_encoded_from_their_layout_into_the_same_bytes() -> Non
     assert kept.dtype.names == tuple(c.name for c in COLUMNS)
     assert all(np.array_equal(bits(kept[c.name]), bits(cols[c.name])) for c in COLUMNS)
     assert kept_records(kept) is kept
-    # an open block's chunk: the records' bytes shuffled as they lie are the columns' bytes shuffled
-    assert recording._stack_records(kept[:100]) == recording._stack8([cols[c.name][:100] for c in COLUMNS], 100)
     # the builder fed loop records and the builder fed columns write the same blocks, full and open
     log = [(k, "pose", ((1.0,) * 9, (0.1, 0.2, 0.3), k * 1000)) for k in range(0, n, 8)]
     by_rows, by_cols = BlockBuilder(), BlockBuilder()
@@ -208,7 +246,7 @@ def test_loop_records_are_encoded_from_their_layout_into_the_same_bytes() -> Non
         by_cols.add({k: v[lo:hi] for k, v in cols.items()}, part)
         assert [b[3] for b in by_rows.take_full()] == [b[3] for b in by_cols.take_full()]
         a, b = by_rows.partial(), by_cols.partial()
-        assert (a is None and b is None) or (a is not None and b is not None and a[3] == b[3])
+        assert (a is None and b is None) or (a is not None and b is not None and a.data == b.data)
     final_rows, final_cols = by_rows.final(), by_cols.final()
     assert final_rows is not None and final_cols is not None and final_rows[3] == final_cols[3]
     # an integer column handed over as floats is refused unless every value is an integer

@@ -7,9 +7,10 @@ import sqlite3
 
 import numpy as np
 import pytest
+from old_chunks import old_chunk, old_open_block
 
 import protocol.recording.codec as recording
-from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, read_ticks
+from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, join_chunks, read_ticks
 
 
 def block_columns(n: int, derate: np.ndarray | None = None) -> dict[str, np.ndarray]:
@@ -85,17 +86,29 @@ def test_an_open_block_written_in_chunks_before_the_derate_column_reads_as_not_c
         b = recording.BlockBuilder()
         old = {k: v for k, v in cols.items() if k != "derate"}
         b.add({k: v[:10] for k, v in old.items()}, [(4, "refine", True)])
-        b.partial()
+        first = b.partial()
         b.add({k: v[10:] for k, v in old.items()}, [(12, "device_limit", 3.1)])
-        blob = b.partial()[3]  # (what a session killed mid-block leaves: its chunks)
+        second = b.partial()
+        assert first is not None and second is not None
+        blob = join_chunks([first.data, second.data])  # (what a session killed mid-block leaves: its chunks)
     back, _, events = decode_block(blob)
     np.testing.assert_array_equal(back["derate"], np.ones(n))
     np.testing.assert_array_equal(back["gain"].view(np.int64), cols["gain"].view(np.int64))
     assert events == [(4, "refine", True), (12, "device_limit", 3.1)]
     np.testing.assert_array_equal(decode_columns(blob, ["derate"])["derate"], np.ones(n))
+    # so does one the writers before session_chunks left (deflated chunks joined in a session_blocks row)
+    poses = {c.name: np.empty(0, np.int64 if c.codec == "int" else np.float64) for c in recording.POSE_COLUMNS}
+    blob = old_open_block([old_chunk({k: v[:10] for k, v in old.items()}, poses, [(4, "refine", True)], list(old)),
+                           old_chunk({k: v[10:] for k, v in old.items()}, poses, [], list(old))])
+    back, _, events = decode_block(blob)
+    np.testing.assert_array_equal(back["derate"], np.ones(n))
+    np.testing.assert_array_equal(back["gain"].view(np.int64), cols["gain"].view(np.int64))
+    assert events == [(4, "refine", True)]
     # and one this code writes keeps the values
     b = recording.BlockBuilder()
     cols["derate"][5] = 0.75
     b.add(cols)
-    back, _, _ = decode_block(b.partial()[3])
+    part = b.partial()
+    assert part is not None
+    back, _, _ = decode_block(part.data)
     assert back["derate"][5] == 0.75

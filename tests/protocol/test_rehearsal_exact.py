@@ -76,7 +76,8 @@ def test_a_planned_kill_loses_at_most_100_ms_and_its_trial_is_stored_as_interrup
     (cue_s,) = rows(db,
                     "SELECT t_s FROM events WHERE kind = 'phase' AND detail = 'trial 2 (index 1): cued -> active'")[0]
     kill_s = cue_s + min(seconds, 2.0 - 0.001)
-    (last_s,) = rows(db, "SELECT MAX(t_last_s) FROM session_blocks WHERE segment = 0")[0]
+    # the last record of the killed run: in its open block's chunks, appended at each commit
+    (last_s,) = rows(db, "SELECT MAX(t_last_s) FROM session_chunks WHERE segment = 0")[0]
     assert kill_s - 0.100 - 1e-9 <= last_s <= kill_s + 1e-9  # at most one commit interval of records lost
     assert rows(db, "SELECT trial_index FROM trials") == [(0,)]
     run_study(str(db), participants=1, seed=2, protocol=protocol(), continue_study=True)

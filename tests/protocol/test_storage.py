@@ -51,6 +51,8 @@ COLUMNS = {
     "recordings": ["session_id", "segment", "started_at_s", "t0_ns", "snapshot_json", "scales_json"],
     "session_blocks": ["session_id", "segment", "block", "first_tick", "last_tick", "n_records", "t_first_s",
                        "t_last_s", "data", "crc32"],
+    "session_chunks": ["session_id", "segment", "block", "chunk", "first_tick", "last_tick", "n_records", "t_first_s",
+                       "t_last_s", "data", "crc32"],
     "withdrawals": ["code", "withdrawn_at", "reason", "removed_sessions", "removed_trials", "removed_events",
                     "removed_blocks", "removed_records", "removed_samples"],
 }
