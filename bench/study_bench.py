@@ -63,7 +63,8 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
         recordings = src.execute("SELECT session_id, segment, scales_json FROM recordings")
         scales = {(sid, seg): s for sid, seg, s in recordings}
         dst.execute("DELETE FROM session_blocks")
-        dst.execute("DELETE FROM session_chunks")
+        if dst.execute("SELECT 1 FROM sqlite_master WHERE name = 'session_chunks'").fetchone():  # (a file before it)
+            dst.execute("DELETE FROM session_chunks")
         dst.execute("DELETE FROM recordings")
         dst.commit()
     finally:
