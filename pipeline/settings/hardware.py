@@ -16,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME  # the one arm of a file without [[arm]] tables
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 from pipeline.force.frames import Vec3
 from pipeline.force.framework import FrameworkConfig
@@ -40,10 +41,6 @@ __all__ = [
 ROBOT_MODES = ("observe", "teleop")
 #: The calibration file when ``[calibration] file`` is not given (next to the hardware file).
 DEFAULT_CALIBRATION_FILE = "calibration.json"
-#: The name of the one arm a hardware file without ``[[arm]]`` tables describes.  ``right``: the protocol's default
-#: task arm, so a one-arm file of before the arms keeps working with a default protocol, and a lab that adds its
-#: second instrument adds ``left`` beside the arm it has commissioned (which keeps its name and calibration).
-SINGLE_ARM_NAME = "right"
 #: What a fault on one arm does to the others (``[rig] fault_policy``): ``both`` -- every arm ramps to zero (a
 #: person's two hands are on the rig; the default); ``independent`` -- the other arms keep rendering.
 FAULT_POLICIES = ("both", "independent")
