@@ -203,8 +203,16 @@ def build_real_rig(
     Raises
     ------
     DeviceError
-        Naming the device that failed; the devices opened before it are closed again.
+        Naming the device that failed; the devices opened before it are closed again.  A file with more than
+        one arm is refused before any device is opened: the real devices of a second arm (two Touch devices
+        in one OpenHaptics servo scheduler, a second Net F/T and RTDE connection) are not opened by this
+        version, and a rig that silently ran one of two configured arms would not be the rig on record.
     """
+    if len(config.arms) > 1:
+        names = ", ".join(a.name for a in config.arms)
+        raise DeviceError(f"{config.source}: {len(config.arms)} arms ({names}): this version opens the real devices "
+                          "of one arm only (two Touch devices in one servo scheduler are not built yet); give one "
+                          "[[arm]] table, or run the two-arm simulated rig")
     clk = clock or MonotonicClock()
     opened: list[Any] = []
     steps: list[tuple[str, Any]] = [
