@@ -11,6 +11,7 @@ devices they name (so a new device adds its settings here and its opening there)
 
 from __future__ import annotations
 
+import os
 import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -166,10 +167,11 @@ class HardwareConfig:
     fault_policy: str = "both"
 
     def __post_init__(self) -> None:
-        if not self.arms:
-            one = ArmSettings(SINGLE_ARM_NAME, self.sensor, self.robot, self.haptic, self.jaw, self.framework,
-                              self.calibration_file, self.teleop, self.calibration_tool, self.source)
-            object.__setattr__(self, "arms", (one,))
+        name = self.arms[0].name if self.arms else SINGLE_ARM_NAME
+        first = ArmSettings(name, self.sensor, self.robot, self.haptic, self.jaw, self.framework,
+                            self.calibration_file, self.teleop, self.calibration_tool, self.source)
+        if not self.arms or self.arms[0] != first:  # built from the one-arm fields, or they were replaced
+            object.__setattr__(self, "arms", (first, *self.arms[1:]))
 
     @classmethod
     def of_arms(cls, arms: tuple[ArmSettings, ...], fault_policy: str = "both") -> HardwareConfig:
@@ -271,7 +273,9 @@ def _distinct(f: Fields, arms: list[ArmSettings]) -> None:
          lambda a: a.haptic.device_name),
         ("jaw.port", "one jaw actuator's serial port serves one arm", lambda a: None if a.jaw is None else a.jaw.port),
         ("calibration.tool", "the two arms' calibrations would overwrite each other in one calibration file: name "
-         "another calibration.file or tool", lambda a: (a.calibration_file, a.calibration_tool)),
+         "another calibration.file or tool",
+         lambda a: (os.path.normcase(os.path.normpath(a.calibration_file or DEFAULT_CALIBRATION_FILE)),
+                    a.calibration_tool)),
     ]
     for fld, why, key in keys:
         seen: dict[Any, str] = {}

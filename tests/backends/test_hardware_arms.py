@@ -112,7 +112,7 @@ def test_each_refusal_names_the_arm_the_field_and_the_value(path: tuple[Any, ...
     d = _edit(path, value)
     if path == ("arm", 0, "calibration"):  # a file of its own: fine; the same file and tool on both: refused
         hardware_from_dict(d)
-        d["arm"][1]["calibration"] = {"file": "cal.json"}
+        d["arm"][1]["calibration"] = {"file": "./cal.json"}
         parts = ("arm 'left': calibration.tool = 'instrument'", "overwrite each other")
     _refused(d, *parts)
 
@@ -150,3 +150,12 @@ def test_the_real_rig_refuses_two_arms_before_opening_anything(tmp_path: Path) -
     with pytest.raises(DeviceError, match=r"2 arms \(right, left\): this version opens the real devices of one arm"):
         build_real_rig(load_hardware(p), on_open=opened.append)
     assert opened == []
+
+
+def test_replacing_a_one_arm_field_replaces_the_first_arms() -> None:
+    import dataclasses
+
+    hw = hardware_from_dict(two_arms())
+    moved = dataclasses.replace(hw, sensor=dataclasses.replace(hw.sensor, host="10.0.0.9"))
+    assert moved.arms[0].sensor.host == "10.0.0.9" and moved.arms[0].name == "right"
+    assert moved.arms[1] is hw.arms[1]
