@@ -11,6 +11,10 @@ Three measurements in one run, on the same recorded samples:
    app runs it, without a GUI), paced on the monotonic clock for ``--loop-seconds``.
 3. **Filter trade.** Moving-average window vs output noise RMS, group delay
    and step settling time: how users choose the window (speed vs accuracy).
+4. **Both arms.** The loop's whole tick (every arm's devices read, watchdog, Algorithm 1, command, record
+   into its ring) with two arms against one, replaying the same recorded inputs (the devices cost nothing:
+   :func:`measure_arms_cost`); and the 1 kHz loop's p99 |period - 1 ms| with two simulated arms against one,
+   alternating in the same run (:func:`measure_arms_loop`).
 """
 
 from __future__ import annotations
@@ -28,11 +32,22 @@ from typing import Any
 import numpy as np
 
 from bench.machine import bare_loop_stats, cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
+from pipeline.devices.interfaces import HapticState, PoseSample, WrenchSample
+from pipeline.devices.rig import RigArm
 from pipeline.force.filters import MovingAverage3
 from pipeline.force.framework import FrameworkConfig, HapticFramework
 from pipeline.runtime.engine import EngineConfig, build_sim_engine
+from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_messages import SetHaptics
+from pipeline.runtime.loop_stats import LoopStats
+from pipeline.runtime.ring import RingBuffer
+from pipeline.runtime.tick_record import TICK_DTYPE
 
-__all__ = ["filter_trade_table", "naive_numpy_pipeline", "record_samples", "run_pipeline_bench"]
+__all__ = ["filter_trade_table", "measure_arms_cost", "measure_arms_loop", "naive_numpy_pipeline", "record_samples",
+           "run_pipeline_bench"]
+
+#: The arms of the two-arm figures.
+_TWO_ARMS = ("right", "left")
 
 
 def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
@@ -43,6 +58,7 @@ def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
     rots: list[tuple[float, ...]] = []
     pose_t_ns: list[int] = []
     true_f: list[float] = []
+    samples: list[tuple[int, WrenchSample, PoseSample, HapticState]] = []
     for _ in range(n):
         loop.run_ticks(1)
         w = eng.rig.sensor.read_wrench()
@@ -51,9 +67,10 @@ def record_samples(n: int, seed: int = 0) -> dict[str, Any]:
         rots.append(pose.rot_base_tip)
         pose_t_ns.append(pose.t_ns)
         true_f.append(eng.rig.true_contact_force()[2])
+        samples.append((eng.clock.now_ns(), w, pose, eng.rig.haptic.read_state()))
     return {
         "raw": raws, "rot": rots, "pose_t_ns": pose_t_ns, "true_force_n": true_f,
-        "calibration": eng.calibration, "engine": eng,
+        "calibration": eng.calibration, "engine": eng, "samples": samples,
     }
 
 
@@ -236,6 +253,125 @@ def measure_pipeline_cost(data: dict[str, Any], cfg: FrameworkConfig, batch: int
     }
 
 
+class _Replay:
+    """A clock and the devices of any number of arms, replaying one recorded run tick by tick (no physics, no I/O).
+
+    ``i`` is the tick to replay; :meth:`now_ns` is its recorded time, and every arm's sensor, robot and Touch
+    read that tick's recorded sample.  What a loop commands is kept, not rendered.
+    """
+
+    range_n = (660.0, 660.0, 1980.0, 60.0, 60.0, 60.0)
+    peak_force_n = 3.3
+    command_timeout_s = 0.010
+
+    def __init__(self, samples: list[tuple[int, WrenchSample, PoseSample, HapticState]], names: tuple[str, ...]):
+        self.samples = samples
+        self.i = 0
+        self.command = (0.0, 0.0, 0.0)
+        self.arms = tuple(RigArm(name, self, self, self) for name in names)  # type: ignore[arg-type]
+        self.sensor = self.robot = self.haptic = self
+
+    def now_ns(self) -> int:
+        return self.samples[self.i][0]
+
+    def sleep_until(self, t_ns: int) -> None:
+        pass
+
+    def read_wrench(self) -> WrenchSample:
+        return self.samples[self.i][1]
+
+    def read_pose(self) -> PoseSample:
+        return self.samples[self.i][2]
+
+    def read_state(self) -> HapticState:
+        return self.samples[self.i][3]
+
+    def command_force(self, fx: float, fy: float, fz: float, t_ns: int | None = None) -> None:
+        self.command = (fx, fy, fz)
+
+    def rearm(self) -> bool:
+        return True
+
+    def advance(self, now_ns: int) -> None:
+        pass
+
+    def true_contact_force(self) -> None:
+        return None
+
+    def close(self) -> None:
+        pass
+
+
+def _replay_loop(data: dict[str, Any], names: tuple[str, ...]) -> tuple[_Replay, HapticLoop]:
+    """A loop over :class:`_Replay`'s arms, each with its own framework and ring, feedback on."""
+    rep = _Replay(data["samples"], names)
+    pipes = [(HapticFramework(FrameworkConfig(), data["calibration"]), RingBuffer.create(TICK_DTYPE, 30_000,
+                                                                                         shared=False))
+             for _ in names]
+    loop = HapticLoop(rep, pipes[0][0], rep, pipes[0][1], arm_pipelines=pipes[1:])  # type: ignore[arg-type]
+    loop.submit(SetHaptics(True))
+    return rep, loop
+
+
+def measure_arms_cost(data: dict[str, Any], batch: int = 1000) -> dict[str, Any]:
+    """Median cost of the loop's whole tick (:meth:`HapticLoop.tick`) with one arm and with two, µs.
+
+    Both loops replay the same recorded run (:class:`_Replay`: every device read is a list lookup), in
+    alternating batches so that both see the same machine; each arm has its own framework and ring.
+    """
+    n = len(data["samples"])
+    runs = {k: _replay_loop(data, _TWO_ARMS[:k]) for k in (1, 2)}
+    times: dict[int, list[float]] = {1: [], 2: []}
+    enabled = gc.isenabled()
+    try:
+        for start in range(0, n - batch + 1, batch):
+            for k, (rep, loop) in runs.items():
+                tick = loop.tick
+                gc.disable()
+                t0 = time.perf_counter_ns()
+                for i in range(start, start + batch):
+                    rep.i = i
+                    tick()
+                t1 = time.perf_counter_ns()
+                if enabled:
+                    gc.enable()
+                if start:  # the first batch warms up
+                    times[k].append((t1 - t0) / batch / 1000.0)
+    finally:
+        if enabled:
+            gc.enable()
+    one, two = statistics.median(times[1]), statistics.median(times[2])
+    return {"arms_tick_one_us": round(one, 3), "arms_tick_two_us": round(two, 3),
+            "arms_cost_ratio": round(two / one, 3), "arms_ticks_timed": len(times[1]) * batch}
+
+
+def measure_arms_loop(seconds: float, segment_s: float = 2.5) -> dict[str, Any]:
+    """The 1 kHz loop (simulated rig, monotonic clock, its own thread as the engine runs it) with one arm and with
+    two, alternating in segments of ``segment_s`` until each ran ``seconds / 2``; p99 |period - 1 ms| of each.
+
+    Each segment is a fresh engine (no payload calibration: the tool's weight is a steady force to render);
+    the periods of a configuration's segments are pooled.
+    """
+    pooled = {1: LoopStats(1_000_000), 2: LoopStats(1_000_000)}
+    per = max(segment_s, 0.5)
+    segments = max(1, round(seconds / 2 / per))
+    for _ in range(segments):
+        for k in (1, 2):
+            eng = build_sim_engine(EngineConfig(clock="real", calibrate=False, arms=_TWO_ARMS[:k], ring_seconds=5.0))
+            eng.loop.start()
+            time.sleep(seconds / 2 / segments)
+            eng.loop.stop()
+            eng.rig.close()
+            pooled[k].merge(eng.loop.stats)
+    one, two = pooled[1].summary(), pooled[2].summary()
+    return {
+        "arms_loop_seconds_each": round(seconds / 2, 3), "arms_loop_segments": segments,
+        "arms_loop_one_abs_dev_p99_us": one["abs_dev_p99_us"], "arms_loop_two_abs_dev_p99_us": two["abs_dev_p99_us"],
+        "arms_loop_one_over_2ms": one["periods_over_2ms"], "arms_loop_two_over_2ms": two["periods_over_2ms"],
+        "arms_loop_one_ticks": one["ticks"], "arms_loop_two_ticks": two["ticks"],
+    }
+
+
 def filter_trade_table(data: dict[str, Any],
                        windows: tuple[int, ...] = (1, 2, 5, 10, 20, 50, 100)) -> list[dict[str, float]]:
     """Window length vs output noise RMS, group delay and 2 % step settling time.
@@ -335,13 +471,19 @@ def run_pipeline_bench(
     cost = measure_pipeline_cost(data, FrameworkConfig())
     say("filter trade table")
     trade = filter_trade_table(data)
+    say("timing the loop's tick with two arms against one (the same recorded inputs)")
+    arms = measure_arms_cost(data)
     say(f"running the 1 kHz loop for {loop_seconds:g} s in the study-engine process")
     stats = measure_loop(loop_seconds, explain) if loop_seconds > 0 else {}
+    if loop_seconds > 0:
+        say(f"running the 1 kHz loop with one arm and with two, alternating, {loop_seconds:g} s in all")
+        arms.update(measure_arms_loop(loop_seconds))
     bare: dict[str, Any] | None = None
     if reference and loop_seconds > 0:
         say(f"running an empty reference loop for {loop_seconds:g} s: the machine's own floor")
         bare = bare_loop_stats(loop_seconds)
     result: dict[str, Any] = dict(cost)
+    result.update(arms)
     result.update(
         {
             "loop_seconds": loop_seconds,
@@ -398,6 +540,28 @@ def _machine_lines(r: dict[str, Any]) -> list[str]:
     return lines
 
 
+def _arms_lines(r: dict[str, Any]) -> list[str]:
+    ratio = r["arms_cost_ratio"]
+    lines = [
+        "Both arms of the rig (each arm: devices read, watchdog, Algorithm 1, command, its own ring):",
+        f"  loop tick, one arm        {r['arms_tick_one_us']:8.3f} µs   (median, recorded inputs replayed)",
+        f"  loop tick, two arms       {r['arms_tick_two_us']:8.3f} µs   = {ratio:.2f}x one arm "
+        f"({'within' if ratio <= 2.2 else 'OVER'} the 2.2x target)",
+    ]
+    if r.get("arms_loop_one_ticks"):
+        one, two = r["arms_loop_one_abs_dev_p99_us"], r["arms_loop_two_abs_dev_p99_us"]
+        rel = (two - one) / one * 100.0 if one else math.nan
+        lines += [
+            f"  1 kHz loop (in this process, simulated arms), {r['arms_loop_seconds_each']:g} s each, alternating in "
+            f"{r['arms_loop_segments']} segments:",
+            f"  p99 |period - 1 ms|       one arm {one:.0f} µs, two arms {two:.0f} µs ({rel:+.0f} %; target within "
+            f"10 %)",
+            f"  periods over 2 ms         one arm {r['arms_loop_one_over_2ms']:.0f}, two arms "
+            f"{r['arms_loop_two_over_2ms']:.0f}",
+        ]
+    return lines
+
+
 def format_pipeline_bench(r: dict[str, Any]) -> str:
     """Human-readable report of :func:`run_pipeline_bench`."""
     lines = [
@@ -410,6 +574,8 @@ def format_pipeline_bench(r: dict[str, Any]) -> str:
         f"  (timing-harness overhead of {r['harness_overhead_us']:.3f} µs per tick subtracted from both)",
         "",
         *_loop_lines(r),
+        "",
+        *_arms_lines(r),
         "",
         "Moving-average window: speed against accuracy",
         "  window  noise RMS (N)  group delay (ms)  2% settling (ms)",

@@ -45,6 +45,7 @@ class Fault(IntFlag):
     OPERATOR_STOP = 64  # the experimenter pressed stop
     ENGINE_DETACHED = 128  # the controlling process went away
     LOOP_STALLED = 256  # the loop thread died or ticked too late (the device's command watchdog zeroed it)
+    OTHER_ARM = 512  # another arm of the rig latched a fault, and the rig's fault policy ("both") zeroes this one too
 
     def describe(self) -> str:
         """Human-readable list of the set flags, e.g. ``"SENSOR_STALE|NON_FINITE"``."""

@@ -168,6 +168,17 @@ def open_jaw(cfg: JawSettings) -> JawActuator:
     return SerialJawActuator(cfg.port, baud=cfg.baud, ready_timeout_s=cfg.ready_timeout_s)
 
 
+def _one_arm(config: HardwareConfig) -> None:
+    """Refuse a file with more than one arm: this version does not open a second arm's real devices (two Touch
+    devices in one OpenHaptics servo scheduler), and a rig that silently ran one of two configured arms would not be
+    the rig on record."""
+    if len(config.arms) > 1:
+        names = ", ".join(a.name for a in config.arms)
+        raise DeviceError(f"{config.source}: {len(config.arms)} arms ({names}): this version opens the real devices "
+                          "of one arm only (two Touch devices in one servo scheduler are not built yet); give one "
+                          "[[arm]] table, or run the two-arm simulated rig")
+
+
 def build_real_rig(
     config: HardwareConfig,
     clock: Clock | None = None,
@@ -203,8 +214,10 @@ def build_real_rig(
     Raises
     ------
     DeviceError
-        Naming the device that failed; the devices opened before it are closed again.
+        Naming the device that failed; the devices opened before it are closed again.  A file with more than
+        one arm is refused before any device is opened (:func:`_one_arm`).
     """
+    _one_arm(config)
     clk = clock or MonotonicClock()
     opened: list[Any] = []
     steps: list[tuple[str, Any]] = [

@@ -6,12 +6,19 @@ satisfy it.
 
 from __future__ import annotations
 
-from typing import Protocol
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Protocol
 
-from pipeline.devices.interfaces import ForceSensor, HapticDevice, Robot
+from pipeline.devices.interfaces import Fault, ForceSensor, HapticDevice, Robot
 from pipeline.force.frames import Vec3
 
-__all__ = ["Rig"]
+__all__ = ["SINGLE_ARM_NAME", "Rig", "RigArm", "rig_arms"]
+
+#: The name of the one arm of a rig that does not name its arms.  ``right``: the protocol's default task arm, so a
+#: one-arm rig (and a one-arm hardware file of before the arms) is the task arm, and a lab that adds its second
+#: instrument adds ``left`` beside the arm it has commissioned.
+SINGLE_ARM_NAME = "right"
 
 
 class Rig(Protocol):
@@ -51,3 +58,47 @@ class Rig(Protocol):
     def close(self) -> None:
         """Release every device."""
         ...
+
+
+def _no_truth() -> Vec3 | None:
+    return None
+
+
+@dataclass(frozen=True, slots=True)
+class RigArm:
+    """One arm of a rig: its sensor, robot and haptic device (and jaw), with the arm's optional hooks.
+
+    A rig with more than one arm lists them as ``arms`` (a sequence of these, the first arm first); its
+    ``sensor``, ``robot`` and ``haptic`` are then the first arm's.  ``on_faults`` and ``stop_motion`` are the
+    per-arm forms of the rig's hooks (see :class:`Rig`); ``true_contact_force`` the arm's ground truth.
+    """
+
+    name: str
+    sensor: ForceSensor
+    robot: Robot
+    haptic: HapticDevice
+    jaw: Any = None
+    true_contact_force: Callable[[], Vec3 | None] = _no_truth
+    on_faults: Callable[[Fault], None] | None = None
+    stop_motion: Callable[[str], None] | None = None
+
+
+def rig_arms(rig: Rig) -> tuple[RigArm, ...]:
+    """The arms of ``rig``: its ``arms`` if it lists them, else the one arm it is (named :data:`SINGLE_ARM_NAME`,
+    or the rig's ``arm_name``).
+
+    Raises
+    ------
+    ValueError
+        Two arms share a name (an arm's records, events and calibration are kept under its name).
+    """
+    arms = getattr(rig, "arms", None)
+    if arms:
+        out = tuple(arms)
+        names = [a.name for a in out]
+        if len(set(names)) != len(names):
+            raise ValueError(f"rig arms = {names!r}: each arm needs its own name")
+        return out
+    return (RigArm(str(getattr(rig, "arm_name", SINGLE_ARM_NAME)), rig.sensor, rig.robot, rig.haptic,
+                   getattr(rig, "jaw", None), rig.true_contact_force, getattr(rig, "on_faults", None),
+                   getattr(rig, "stop_motion", None)),)

@@ -16,11 +16,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.bias_refinement import RlsBias
 from pipeline.force.framework import FrameworkConfig, HapticFramework
 from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.runtime.clock import Clock, MonotonicClock, VirtualClock
-from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop import FAULT_POLICIES, HapticLoop
 from pipeline.runtime.loop_messages import AllowBiasRefinement, SetHaptics
 from pipeline.runtime.ring import RingBuffer
 from pipeline.runtime.tick_record import TICK_DTYPE
@@ -58,6 +59,11 @@ class EngineConfig:
         contact gate refuses samples with more than 0.15 N of innovation.
     ring_seconds
         Ring buffer length in seconds of records.
+    arms
+        The simulated rig's arms by name, the first first (``("right",)``: the one-arm rig; two names: two
+        :class:`pipeline.sim.rig.SimRig` on one clock, :class:`pipeline.sim.arms.SimArms`).
+    fault_policy
+        What a fault on one arm does to the others: ``"both"`` (all ramp to zero) or ``"independent"``.
     """
 
     sim: SimRigConfig | None = None
@@ -69,8 +75,15 @@ class EngineConfig:
     haptics_on: bool = True
     refine_bias: bool = True
     ring_seconds: float = 30.0
+    arms: tuple[str, ...] = (SINGLE_ARM_NAME,)
+    fault_policy: str = "both"
 
     def __post_init__(self) -> None:
+        if not 1 <= len(self.arms) <= 4 or len(set(self.arms)) != len(self.arms) or not all(
+                isinstance(a, str) and a for a in self.arms):
+            raise ValueError(f"arms = {self.arms!r}: one to four distinct, non-empty arm names")
+        if self.fault_policy not in FAULT_POLICIES:
+            raise ValueError(f"fault_policy = {self.fault_policy!r}: allowed values are 'both' and 'independent'")
         if self.clock not in ("real", "virtual"):
             raise ValueError(f"clock = {self.clock!r}: allowed values are 'real' and 'virtual'")
         if self.driver not in ("scripted", "hold"):
@@ -93,6 +106,8 @@ class Engine:
         Real rig: its calibration file (:mod:`pipeline.commissioning.rig_calibration`), if the hardware file names one.
     tool
         Real rig: the mounted instrument whose record in the calibration file is in use.
+    frameworks, rings, calibrations
+        Per arm by name, the first arm first (its are ``framework``, ``ring`` and ``calibration``).
     """
 
     rig: Any
@@ -104,6 +119,16 @@ class Engine:
     simulated: bool
     calibration_file: Any = None
     tool: str = "instrument"
+    frameworks: dict[str, HapticFramework] = field(default_factory=dict)
+    rings: dict[str, RingBuffer | None] = field(default_factory=dict)
+    calibrations: dict[str, PayloadCalibration] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.frameworks:  # one arm: the loop's own
+            name = self.loop.arms[0].name
+            self.frameworks = {name: self.framework}
+            self.rings = {name: self.ring}
+            self.calibrations = {name: self.calibration}
 
 
 def build_sim_engine(
@@ -127,32 +152,53 @@ def build_sim_engine(
         Optional ``progress(done, total)`` for the calibration.
     """
     from pipeline.commissioning.payload_identification import recommended_pose_set
+    from pipeline.sim.arms import SimArms
     from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
     from pipeline.sim.hand import ScriptedPresses
     from pipeline.sim.rig import SimRig, SimRigConfig
 
     clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
-    rig = SimRig(config.sim if config.sim is not None else SimRigConfig())
-    calibration = NO_PAYLOAD
-    if config.calibrate:
-        poses = recommended_pose_set(24)
-        cal_clock = clk
-        if not isinstance(clk, VirtualClock):
-            # Instant even when the loop is paced in real time: on a virtual clock placed so that it
-            # ends now.  The rig's clocked state (the robot's next controller cycle, sample times) then
-            # carries on with the real clock; a clock starting now would leave the rig 12 s in the
-            # future, and the robot would hold the last calibration pose until real time caught up.
-            cal_clock = VirtualClock(clk.now_ns() - calibration_duration_ns(len(poses)))
-        calibration, _ = auto_calibrate(rig, cal_clock, poses, progress=progress)
-    if config.driver == "scripted":
-        rig.set_driver(ScriptedPresses())
-    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
-    framework = HapticFramework(config.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
-    ring = RingBuffer.create(TICK_DTYPE, int(config.ring_seconds * 1000), shared=shared_ring)
-    loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog)
+    base = config.sim if config.sim is not None else SimRigConfig()
+    arms = SimArms.build(config.arms, base) if len(config.arms) > 1 else None
+    sims: list[SimRig] = list(arms.rigs) if arms is not None else [SimRig(base)]
+    calibrations: list[PayloadCalibration] = []
+    for sim in sims:
+        calibration = NO_PAYLOAD
+        if config.calibrate:
+            poses = recommended_pose_set(24)
+            cal_clock = clk
+            if not isinstance(clk, VirtualClock):
+                # Instant even when the loop is paced in real time: on a virtual clock placed so that it
+                # ends now.  The rig's clocked state (the robot's next controller cycle, sample times) then
+                # carries on with the real clock; a clock starting now would leave the rig 12 s in the
+                # future, and the robot would hold the last calibration pose until real time caught up.
+                cal_clock = VirtualClock(clk.now_ns() - calibration_duration_ns(len(poses)))
+            calibration, _ = auto_calibrate(sim, cal_clock, poses, progress=progress)
+        if config.driver == "scripted":
+            sim.set_driver(ScriptedPresses())
+        calibrations.append(calibration)
+    pipelines = [_pipeline(config.framework, cal, sim.haptic.peak_force_n, config, shared_ring)
+                 for sim, cal in zip(sims, calibrations, strict=True)]
+    rig: Any = arms if arms is not None else sims[0]
+    (framework, ring), others = pipelines[0], pipelines[1:]
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog, arm_pipelines=others,
+                      fault_policy=config.fault_policy)
     loop.submit(SetHaptics(config.haptics_on))
     loop.submit(AllowBiasRefinement(config.refine_bias))
-    return Engine(rig, framework, loop, clk, calibration, ring, simulated=True)
+    names = config.arms
+    return Engine(rig, framework, loop, clk, calibrations[0], ring, simulated=True,
+                  frameworks={n: fw for n, (fw, _) in zip(names, pipelines, strict=True)},
+                  rings={n: rg for n, (_, rg) in zip(names, pipelines, strict=True)},
+                  calibrations=dict(zip(names, calibrations, strict=True)))
+
+
+def _pipeline(
+    fw_config: FrameworkConfig, calibration: PayloadCalibration, peak_n: float, config: EngineConfig, shared: bool,
+) -> tuple[HapticFramework, RingBuffer]:
+    """One arm's framework (online bias refinement on top of its calibration) and ring."""
+    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm)
+    framework = HapticFramework(fw_config, calibration, device_peak_n=peak_n, rls=rls)
+    return framework, RingBuffer.create(TICK_DTYPE, int(config.ring_seconds * 1000), shared=shared)
 
 
 def build_hardware_engine(

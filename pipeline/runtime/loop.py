@@ -32,6 +32,16 @@ is issued whatever went wrong before it, and a loop thread that dies keeps
 its exception in :attr:`HapticLoop.crash` for whoever watches it
 (:class:`pipeline.runtime.supervisor.LoopSupervisor`).
 
+**Arms.**  A rig has one or more named arms (:func:`pipeline.devices.rig.rig_arms`); each tick runs the
+same tick body for each, in the rig's order, from that arm's own sensor and pose
+(:class:`pipeline.runtime.arm_channel.ArmChannel`: its framework, watchdog state, latched faults and ring).
+The first arm's framework, ring, faults and replay log are the loop's own
+(:attr:`HapticLoop.framework`, :attr:`HapticLoop.ring`, ...), so a caller that knows one arm sees the first.
+A fault on one arm ramps that arm to zero; the loop's ``fault_policy`` says what the others do: ``"both"``
+(the default: they latch ``Fault.OTHER_ARM`` and ramp to zero too -- a person's two hands are on the rig)
+or ``"independent"`` (they keep rendering).  Every event names its arm (``LoopEvent.arm``).  The operator
+stop, a detached controller and a stalled loop latch on every arm.
+
 **Thermal derating.**  The device reports the force it may render now
 (``HapticState.force_limit_n``, lowered as its motors warm); the loop clamps
 the safety stage to it and records, per tick, the fraction of the designed
@@ -41,16 +51,15 @@ session runner checks.  Derating starting and ending are events.
 
 from __future__ import annotations
 
-import math
 import threading
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
-from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
-from pipeline.devices.rig import Rig
-from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
+from pipeline.devices.interfaces import Fault
+from pipeline.devices.rig import Rig, rig_arms
 from pipeline.force.framework import HapticFramework
+from pipeline.runtime.arm_channel import RIG_WIDE_FAULTS, ArmChannel, own_faults
 from pipeline.runtime.clock import Clock, prepare_realtime_thread
 from pipeline.runtime.loop_messages import (
     RECORD_FIELDS,
@@ -69,14 +78,7 @@ from pipeline.runtime.loop_messages import (
 )
 from pipeline.runtime.loop_stats import LoopStats
 from pipeline.runtime.pacing import PacedTicks
-from pipeline.runtime.watchdog import (
-    WatchdogConfig,
-    derating_detail,
-    derating_ended_detail,
-    fault_detail,
-    output_restarted_detail,
-    stall_detail,
-)
+from pipeline.runtime.watchdog import WatchdogConfig, output_restarted_detail, stall_detail
 
 if TYPE_CHECKING:
     from pipeline.runtime.ring import RingBuffer
@@ -84,34 +86,39 @@ if TYPE_CHECKING:
 # The commands, events, record columns, statistics and watchdog limits are defined in
 # pipeline.runtime.loop_messages, pipeline.runtime.loop_stats and pipeline.runtime.watchdog; they are named here
 # too because the loop's callers import them from this module.  The devices the loop
-# owns are pipeline.devices.rig.Rig.
+# owns are pipeline.devices.rig.Rig; one arm's part of a tick is pipeline.runtime.arm_channel.ArmChannel.
 __all__ = [
+    "FAULT_POLICIES",
     "HapticLoop",
 ]
 
-_NAN3 = (math.nan, math.nan, math.nan)
-_HYPOT = math.hypot
+#: What a fault on one arm does to the other arms (see the module's docstring).
+FAULT_POLICIES = ("both", "independent")
 
 
 class HapticLoop(PacedTicks):
-    """Runs the rig and Algorithm 1 at a fixed rate and records every tick.
+    """Runs the rig and Algorithm 1 (one pipeline per arm) at a fixed rate and records every tick.
 
     Parameters
     ----------
     rig
-        Devices (real or simulated).
+        Devices (real or simulated), one or more arms (:func:`pipeline.devices.rig.rig_arms`).
     framework
-        The force path (calibration, filter, rotations, scaling, safety).
+        The first arm's force path (calibration, filter, rotations, scaling, safety).
     clock
         Time source; :class:`pipeline.runtime.clock.VirtualClock` for deterministic runs.
     ring
-        Where each tick's record goes (anything with ``write(values)``), or None.
+        Where the first arm's records go (anything with ``write(values)``), or None.
     period_ns
         Tick period (1 ms).
     watchdog
-        Age/range limits.
+        Age/range limits (the same for every arm).
     on_event
         Called (from the loop thread) for faults and resets; keep it cheap.
+    arm_pipelines
+        The other arms' force paths and rings, in the rig's order after the first: ``(framework, ring)`` each.
+    fault_policy
+        ``"both"`` or ``"independent"`` (:data:`FAULT_POLICIES`).
     """
 
     def __init__(
@@ -124,14 +131,17 @@ class HapticLoop(PacedTicks):
         period_ns: int = 1_000_000,
         watchdog: WatchdogConfig | None = None,
         on_event: Callable[[LoopEvent], None] | None = None,
+        arm_pipelines: Sequence[tuple[HapticFramework, RingBuffer | None]] = (),
+        fault_policy: str = "both",
     ) -> None:
+        if fault_policy not in FAULT_POLICIES:
+            raise ValueError(f"fault_policy = {fault_policy!r}: allowed values are 'both' and 'independent'")
         self.rig = rig
-        self.framework = framework
         self.clock = clock
-        self.ring = ring
         self.period_ns = int(period_ns)
         self.watchdog = watchdog or WatchdogConfig()
         self.on_event = on_event
+        self.fault_policy = fault_policy
         self.events: deque[LoopEvent] = deque(maxlen=1000)
         self.stats = LoopStats(self.period_ns)
         self._inbox: deque[Command] = deque()
@@ -143,39 +153,71 @@ class HapticLoop(PacedTicks):
         self.haptic_on = False
         self.trial_index = -1
         self.phase = 0
-        self.faults = 0  # latched
-        self.active_faults = 0  # this tick's conditions
-        self._gone_reported = 0  # latched faults whose condition was reported gone
         self.refine_bias = False
         self._last_ns: int | None = None
         #: Clock reading of the first tick; records carry time since then
         #: (``t_ns`` exact in float64 for 104 days, ``t_s`` in seconds).
         self.t0_ns = 0
-        self._pose_t_ns: int | None = None
-        self._sensor_age_ns = int(self.watchdog.sensor_max_age_s * 1e9)
-        self._pose_age_ns = int(self.watchdog.pose_max_age_s * 1e9)
-        rng = rig.sensor.range_n
-        frac = self.watchdog.saturation_fraction
-        self._sat = tuple(frac * r for r in rng)
-        self._last_record: tuple[float | int, ...] | None = None
-        #: What replay needs beyond the records, while recording (see :class:`StartRecording`); its reader drains it.
-        self.replay_log: deque[tuple[int, str, object]] = deque()
         self.recording = False
         self._snapshot_due: int | None = None
-        # optional rig hooks (see Rig); resolved once so the tick pays nothing for them
-        self._rig_on_faults: Callable[[Fault], None] | None = getattr(rig, "on_faults", None)
-        self._rig_stop_motion: Callable[[str], None] | None = getattr(rig, "stop_motion", None)
+        arms = rig_arms(rig)
+        if len(arm_pipelines) != len(arms) - 1:
+            raise ValueError(f"arm_pipelines: {len(arm_pipelines)} given; the rig has {len(arms)} arms "
+                             f"({', '.join(a.name for a in arms)}): give one (framework, ring) per arm after the first")
+        pipelines = [(framework, ring), *arm_pipelines]
+        #: One channel per arm, the first arm first.
+        self.arms: tuple[ArmChannel, ...] = tuple(ArmChannel(a, fw, rg, self)
+                                                  for a, (fw, rg) in zip(arms, pipelines, strict=True))
+        self._first = self.arms[0]
+        self._multi = len(self.arms) > 1
+        self._stop_motion = [(ch, ch.arm.stop_motion) for ch in self.arms if ch.arm.stop_motion is not None]
         #: The loop thread's exception if it died (``repr``), else "".
         self.crash = ""
         self._stall_ns = int(self.watchdog.loop_stall_s * 1e9)
-        timeout_s = getattr(rig.haptic, "command_timeout_s", None)
-        #: The device drops a command older than this (its own watchdog); a later tick restarts from zero.
-        self.command_timeout_ns = int((timeout_s if timeout_s is not None else DEFAULT_COMMAND_TIMEOUT_S) * 1e9)
+        #: The devices drop a command older than this (their own watchdog); a later tick restarts from zero.
+        self.command_timeout_ns = min(ch.command_timeout_ns for ch in self.arms)
         self._resync = True  # the next tick's period is not a stall (first tick, or after a ramp-down)
-        self._peak_n = float(rig.haptic.peak_force_n)
-        self._device_limit_n = math.inf  # the device's derated force limit as last seen
-        self._derating = False
-        self._derate_check = False  # the thermal limit is below the safety stage's own: measure what it cuts
+
+    # -- the first arm's state, as the loop's own (one-arm callers) ---------------------------------
+    @property
+    def framework(self) -> HapticFramework:
+        """The first arm's force path."""
+        return self._first.framework
+
+    @property
+    def ring(self) -> RingBuffer | None:
+        """The first arm's ring."""
+        return self._first.ring
+
+    @ring.setter
+    def ring(self, ring: RingBuffer | None) -> None:
+        self._first.ring = ring
+
+    @property
+    def faults(self) -> int:
+        """The first arm's latched faults."""
+        return self._first.faults
+
+    @faults.setter
+    def faults(self, value: int) -> None:
+        self._first.faults = int(value)
+
+    @property
+    def active_faults(self) -> int:
+        """The first arm's fault conditions at the last tick."""
+        return self._first.active_faults
+
+    @property
+    def replay_log(self) -> deque[tuple[int, str, object]]:
+        """The first arm's replay log (what replay needs beyond its records, see :class:`StartRecording`)."""
+        return self._first.replay_log
+
+    def arm(self, name: str) -> ArmChannel:
+        """The channel of the arm called ``name``."""
+        for ch in self.arms:
+            if ch.name == name:
+                return ch
+        raise KeyError(f"no arm {name!r}; the rig's arms: {', '.join(ch.name for ch in self.arms)}")
 
     # -- control (any thread) ----------------------------------------------------------------
     def submit(self, command: Command) -> None:
@@ -184,13 +226,13 @@ class HapticLoop(PacedTicks):
 
     @property
     def last_record(self) -> dict[str, float | int] | None:
-        """The newest record as a dict (for tests and status displays)."""
-        r = self._last_record
+        """The first arm's newest record as a dict (for tests and status displays)."""
+        r = self._first.last_record
         return None if r is None else dict(zip(RECORD_FIELDS, r, strict=True))
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self) -> None:
-        """Run one cycle at the clock's current time."""
+        """Run one cycle at the clock's current time: every arm's pipeline from its own sensor and pose."""
         now = self.clock.now_ns()
         last = self._last_ns
         if last is None:
@@ -201,72 +243,12 @@ class HapticLoop(PacedTicks):
             self.stats.add(period)
         self._last_ns = now
         dt_s = period * 1e-9
-        rig = self.rig
-        rig.advance(now)
+        self.rig.advance(now)
         if self._inbox or period > self.command_timeout_ns or self._snapshot_due is not None:
             self._start_of_tick(now, period)
         self._resync = False
-
-        w = rig.sensor.read_wrench()
-        pose = rig.robot.read_pose()
-        hs = rig.haptic.read_state()
-        fw = self.framework
-
-        # -- watchdog --
-        cond = 0
-        _, fx, fy, fz, tx, ty, tz = w[:7]
-        sensor_age = now - w.t_ns
-        if sensor_age > self._sensor_age_ns:
-            cond |= Fault.SENSOR_STALE
-        if w.status:
-            cond |= Fault.SENSOR_STATUS
-        if (fx - fx) + (fy - fy) + (fz - fz) + (tx - tx) + (ty - ty) + (tz - tz) != 0.0:
-            cond |= Fault.NON_FINITE
-        else:
-            s = self._sat
-            if (abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
-                    or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]):
-                cond |= Fault.SENSOR_SATURATION
-        pose_age = now - pose.t_ns
-        if pose_age > self._pose_age_ns:
-            cond |= Fault.POSE_STALE
-        if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
-            cond |= self._take_pose(pose)
-        if hs.error_code:
-            cond |= Fault.HAPTIC_DEVICE
-        if hs.force_limit_n != self._device_limit_n:  # the device derates (rare; a compare per tick otherwise)
-            self._device_limit(now, hs)
-        latched = self.faults
-        if cond != self.active_faults or cond & ~latched:  # (fault-free steady state: both false)
-            latched = self._conditions_changed(cond, now, w, pose, hs, sensor_age, pose_age)
-
-        if self.refine_bias and not latched:
-            fw.refine_bias(fx, fy, fz, tx, ty, tz)
-
-        enabled = self.haptic_on and not latched
-        (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
-         haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.runtime.tick_record.STEP_FIELDS, by name
-        # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
-        rig.haptic.command_force(render_fx, render_fy, render_fz, now)
-        derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
-        # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
-        latency_ns = self.clock.now_ns() - w.t_ns
-        true_fx, true_fy, true_fz = rig.true_contact_force() or _NAN3
-        tip_x_m, tip_y_m, tip_z_m = pose.position_m
-        stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
-        t_ns = now - self.t0_ns
-        # one record, in pipeline.runtime.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
-        rec = (
-            self.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
-            1 if self.haptic_on else 0, self.trial_index, self.phase, fw.safety.gain, render_fx, render_fy, render_fz,
-            _HYPOT(filt_fx, filt_fy, filt_fz), stylus_x_m, stylus_y_m, stylus_z_m, derate, t_ns * 1e-9, comp_fx,
-            comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx,
-            haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
-        )
-        self._last_record = rec
-        if self.ring is not None:
-            self.ring.write(rec)
+        for ch in self.arms:
+            ch.tick(now, period, dt_s)
         self.tick_count += 1
 
     def _start_of_tick(self, now: int, period: int) -> None:
@@ -281,92 +263,32 @@ class HapticLoop(PacedTicks):
         if period > self.command_timeout_ns and not self._resync:
             self._late_tick(now, period)
         if self._snapshot_due is not None:
-            self._take_snapshot()
+            token, self._snapshot_due = self._snapshot_due, None
+            self.recording = True
+            for ch in self.arms:
+                ch.snapshot(token)
 
-    def _take_pose(self, pose: PoseSample) -> int:
-        """Hand a new robot pose to the framework; a non-finite one is refused: ``Fault.NON_FINITE``, else 0."""
-        rot = pose.rot_base_tip
-        if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
-            self._pose_t_ns = pose.t_ns
-            self.framework.set_pose(rot)
-            if self.recording:
-                self.replay_log.append((self.tick_count, "pose", (rot, pose.position_m, pose.t_ns)))
-            return 0
-        return Fault.NON_FINITE
-
-    def _conditions_changed(
-        self, cond: int, now: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age: int, pose_age: int,
-    ) -> int:
-        """This tick's fault conditions differ from the last tick's: latch the new ones, report the gone ones.
-
-        Returns the latched set.
-        """
-        prev = self.active_faults
-        self.active_faults = cond
-        latched = self.faults
-        new = cond & ~latched
-        if new:
-            # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
-            latched = int(latched | new)
-            self.faults = latched
-            self._gone_reported &= ~new
-            self._faults_changed(now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", latched,
-                                 fault_detail(new, w, pose, hs, sensor_age, pose_age, self.watchdog, self._sat)))
-        if cond != prev:
-            gone = latched & prev & ~cond & ~self._gone_reported
-            if gone:
-                self._gone_reported |= gone
-                self._emit(LoopEvent(now - self.t0_ns, "fault_cleared", latched,
-                                     f"{Fault(gone).describe()}: the condition is gone (latched until a reset)"))
-        return latched
-
-    def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
-        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
-        through.
-
-        Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
-        """
-        want = _HYPOT(scaled_fx, scaled_fy, scaled_fz)
-        safety = self.framework.safety
-        lim = safety.limit_n
-        if want > lim:
-            designed = want if want < safety.static_limit_n else safety.static_limit_n
-            return lim / designed
-        return 1.0
+    def arm_faulted(self, ch: ArmChannel, new: int, now: int) -> None:
+        """Arm ``ch`` latched ``new`` faults: under the ``"both"`` policy every other arm ramps to zero too."""
+        own = own_faults(new) & ~RIG_WIDE_FAULTS
+        if not self._multi or not own or self.fault_policy != "both":
+            return
+        for other in self.arms:
+            if other is not ch and other.latch(Fault.OTHER_ARM, now):
+                other.emit(now - self.t0_ns, "fault",
+                           f"OTHER_ARM: arm {ch.name!r} latched {Fault(own).describe()}; the rig's fault policy "
+                           "'both' ramps this arm to zero too")
 
     def _late_tick(self, now: int, period: int) -> None:
-        """This tick came after the device's command watchdog dropped the force: restart from zero; latch a stall."""
-        self.framework.safety.force_zero()  # the device renders zero now: ramp in from there, never jump back
-        if self.recording:
-            self.replay_log.append((self.tick_count, "zero", "late_tick"))
+        """This tick came after the devices' command watchdog dropped the force: restart from zero; latch a stall."""
         t = now - self.t0_ns
-        if period > self._stall_ns:
-            if not self.faults & Fault.LOOP_STALLED:
-                self._latch(Fault.LOOP_STALLED, now)
-                self._emit(LoopEvent(t, "fault", self.faults,
-                                     stall_detail(period, self.watchdog, self.command_timeout_ns)))
-        else:
-            self._emit(LoopEvent(t, "output_restarted", self.faults,
-                                 output_restarted_detail(period, self.command_timeout_ns)))
-
-    def _device_limit(self, now: int, hs: HapticState) -> None:
-        """The device changed the force it may render (thermal derating): clamp to it; report derating."""
-        lim = float(hs.force_limit_n)
-        self._device_limit_n = lim
-        safety = self.framework.set_device_limit(lim)
-        if self.recording:
-            self.replay_log.append((self.tick_count, "device_limit", lim))
-        self._derate_check = safety.limit_n < safety.static_limit_n
-        frac = float(hs.heat_fraction)
-        t = now - self.t0_ns
-        if not self._derating and lim < self._peak_n:
-            self._derating = True
-            cont = float(getattr(self.rig.haptic, "continuous_force_n", math.nan))
-            self._emit(LoopEvent(t, "derating", self.faults, derating_detail(frac, self._peak_n, cont)))
-        elif self._derating and lim >= self._peak_n:
-            self._derating = False
-            self._emit(LoopEvent(t, "derating_ended", self.faults, derating_ended_detail(frac, lim)))
+        for ch in self.arms:
+            ch.force_zero("late_tick")  # the device renders zero now: ramp in from there, never jump back
+            if period > self._stall_ns:
+                if ch.latch(Fault.LOOP_STALLED, now):
+                    ch.emit(t, "fault", stall_detail(period, self.watchdog, self.command_timeout_ns))
+            else:
+                ch.emit(t, "output_restarted", output_restarted_detail(period, self.command_timeout_ns))
 
     def _apply(self, cmd: Command, now: int) -> None:
         if isinstance(cmd, Mark):
@@ -375,42 +297,25 @@ class HapticLoop(PacedTicks):
         elif isinstance(cmd, SetHaptics):
             self.haptic_on = bool(cmd.on)
         elif isinstance(cmd, ResetFaults):
-            before = self.faults
-            # Only conditions that are gone can be cleared; the operator
-            # stop and device errors are cleared by the reset itself.
-            persisting = self.active_faults & ~(Fault.OPERATOR_STOP | Fault.HAPTIC_DEVICE)
-            if before & Fault.HAPTIC_DEVICE and not self.rig.haptic.rearm():
-                persisting |= Fault.HAPTIC_DEVICE
-            self.faults = int(persisting)
-            self._gone_reported &= persisting
-            if before and not persisting:
-                self.framework.reset()
-                if self.recording:
-                    self.replay_log.append((self.tick_count, "reset", None))
-            if persisting != before:
-                self._faults_changed(now)
-            self._emit(LoopEvent(now - self.t0_ns, "faults_reset", persisting, Fault(before).describe()))
+            self._reset(now)
         elif isinstance(cmd, OperatorStop):
-            self._latch(Fault.OPERATOR_STOP, now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
-                                 "OPERATOR_STOP: the experimenter stopped the force"))
+            self._latch_all(Fault.OPERATOR_STOP, now, "OPERATOR_STOP: the experimenter stopped the force")
         elif isinstance(cmd, ControllerDetached):
-            self._latch(Fault.ENGINE_DETACHED, now)
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
-                                 "ENGINE_DETACHED: the controlling process went away"))
+            self._latch_all(Fault.ENGINE_DETACHED, now, "ENGINE_DETACHED: the controlling process went away")
         elif isinstance(cmd, LatchFault):
-            self.framework.safety.force_zero()
-            if self.recording:
-                self.replay_log.append((self.tick_count, "zero", "latch_fault"))
-            self._latch(Fault(cmd.fault), now)
+            for ch in self.arms:
+                ch.force_zero("latch_fault")
+                ch.latch(int(cmd.fault), now)
         elif isinstance(cmd, AllowBiasRefinement):
             if self.recording and bool(cmd.allowed) != self.refine_bias:
-                self.replay_log.append((self.tick_count, "refine", bool(cmd.allowed)))
+                for ch in self.arms:
+                    ch.log("refine", bool(cmd.allowed))
             self.refine_bias = bool(cmd.allowed)
         elif isinstance(cmd, SetCalibration):
-            self.framework.set_calibration(cmd.calibration)
+            ch = self.arm(cmd.arm) if cmd.arm else self._first
+            ch.framework.set_calibration(cmd.calibration)
             if self.recording:
-                self.replay_log.append((self.tick_count, "calibration", cmd.calibration.to_dict()))
+                ch.log("calibration", cmd.calibration.to_dict())
         elif isinstance(cmd, StartRecording):
             self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
         elif isinstance(cmd, StopRecording):
@@ -418,63 +323,57 @@ class HapticLoop(PacedTicks):
         else:  # pragma: no cover - typed callers cannot get here
             raise TypeError(f"unknown loop command {cmd!r}")
 
-    def _take_snapshot(self) -> None:
-        token, self._snapshot_due = self._snapshot_due, None
-        self.recording = True
-        self.replay_log.append((self.tick_count, "snapshot", {
-            "token": token, "framework": self.framework.snapshot(), "refine_bias": self.refine_bias,
-        }))
+    def _reset(self, now: int) -> None:
+        """Clear the latched faults whose condition is gone, on every arm; under ``"both"`` an arm keeps
+        ``OTHER_ARM`` while another arm keeps a fault of its own."""
+        persisting = [ch.reset_persisting() for ch in self.arms]
+        if self._multi and self.fault_policy == "both":
+            own = [own_faults(p) & ~RIG_WIDE_FAULTS for p in persisting]
+            persisting = [p | (Fault.OTHER_ARM if any(o for j, o in enumerate(own) if j != i) else 0)
+                          for i, p in enumerate(persisting)]
+        for ch, p in zip(self.arms, persisting, strict=True):
+            ch.reset(int(p), now)
+
+    def _latch_all(self, fault: Fault, now: int, detail: str) -> None:
+        for ch in self.arms:
+            ch.latch(fault, now)
+            ch.emit(now - self.t0_ns, "fault", detail)
 
     def fail_safe(self, detail: str, *, thread_dead: bool) -> LoopEvent:
-        """The loop has stopped ticking: latch ``LOOP_STALLED``, report it, and zero the device from this thread.
+        """The loop has stopped ticking: latch ``LOOP_STALLED``, report it, and zero every arm's device from this
+        thread.
 
         Called by whoever watches the loop (:class:`pipeline.runtime.supervisor.LoopSupervisor`), not by the loop.
         The event goes through the same path as the loop's own (:attr:`on_event`), on the records' time
-        axis just after the last tick.  With ``thread_dead`` (nothing else touches the loop any more) the
-        fault is latched here and the rig told (a teleoperated robot stops now, before its own 50 ms
-        watchdog); a loop that is only frozen latches it itself, through a :class:`LatchFault` command,
-        when it ticks again.  The device's own watchdog has zeroed its output already; the zero command
-        here is a second line.
+        axis just after the last tick, once per arm; the first arm's is returned.  With ``thread_dead``
+        (nothing else touches the loop any more) the fault is latched here and the rig told (a
+        teleoperated robot stops now, before its own 50 ms watchdog); a loop that is only frozen latches
+        it itself, through a :class:`LatchFault` command, when it ticks again.  The devices' own
+        watchdogs have zeroed their output already; the zero commands here are a second line.
         """
         last = self._last_ns
         t = 0 if last is None else last - self.t0_ns + self.period_ns
         if thread_dead:
-            new = not self.faults & Fault.LOOP_STALLED
-            self.faults = int(self.faults | Fault.LOOP_STALLED)
             self.haptic_on = False
-            self.framework.safety.force_zero()
-            if self.recording:  # before the next tick, should the loop ever tick again
-                self.replay_log.append((self.tick_count, "zero", "fail_safe"))
-            if new:
-                self._faults_changed(t + self.t0_ns)
+            for ch in self.arms:
+                ch.force_zero("fail_safe")  # before the next tick, should the loop ever tick again
+                ch.latch(Fault.LOOP_STALLED, t + self.t0_ns)
         else:
             self.submit(LatchFault(Fault.LOOP_STALLED))
-        ev = LoopEvent(t, "fault", int(self.faults | Fault.LOOP_STALLED), f"LOOP_STALLED: {detail}")
-        self._emit(ev)
-        try:
-            self.rig.haptic.command_force(0.0, 0.0, 0.0)
-        except Exception as exc:  # the device's own watchdog zeroes it anyway; say so
-            self._emit(LoopEvent(t, "fault", ev.faults, f"the haptic device refused the zero command ({exc!r}); "
-                                 "its command watchdog drops the force"))
-        return ev
+        first: LoopEvent | None = None
+        for ch in self.arms:
+            ev = ch.emit(t, "fault", f"LOOP_STALLED: {detail}", int(ch.faults | Fault.LOOP_STALLED))
+            first = first or ev
+        for ch in self.arms:
+            exc = ch.zero_device()
+            if exc is not None:  # the device's own watchdog zeroes it anyway; say so
+                ch.emit(t, "fault", f"the haptic device refused the zero command ({exc!r}); its command watchdog "
+                        "drops the force", int(ch.faults | Fault.LOOP_STALLED))
+        assert first is not None
+        return first
 
-    def _latch(self, fault: Fault, now: int) -> None:
-        if not self.faults & fault:
-            self.faults = int(self.faults | fault)
-            self._faults_changed(now)
-
-    def _faults_changed(self, now: int) -> None:
-        """Tell the rig the latched set changed (it stops a teleoperated robot); only on a change."""
-        hook = self._rig_on_faults
-        if hook is None:
-            return
-        try:
-            hook(Fault(self.faults))
-        except Exception as exc:  # the loop must keep ramping the force down; report it
-            self._emit(LoopEvent(now - self.t0_ns, "fault", self.faults,
-                                 f"the rig could not act on the faults: {exc!r}"))
-
-    def _emit(self, ev: LoopEvent) -> None:
+    def emit(self, ev: LoopEvent) -> None:
+        """Record an event and pass it to :attr:`on_event` (an observer's exception never stops the loop)."""
         self.events.append(ev)
         if self.on_event is not None:
             try:
@@ -484,11 +383,11 @@ class HapticLoop(PacedTicks):
 
     # -- running (the pacing: pipeline.runtime.pacing.PacedTicks) ----------------------------------------
     def ramp_down(self, max_ticks: int = 200) -> None:
-        """Bring the rendered force to zero through the safety ramp, then command zero.
+        """Bring every arm's rendered force to zero through the safety ramp, then command zero.
 
         Commands still queued (e.g. a ``ControllerDetached`` submitted together
         with the stop) are applied first, so their faults and events are not
-        lost; a queued ``SetHaptics(True)`` cannot undo the ramp-down.  A rig
+        lost; a queued ``SetHaptics(True)`` cannot undo the ramp-down.  An arm
         with a ``stop_motion`` hook is told to stop its robot before the ramp.
         """
         clock = self.clock
@@ -497,27 +396,28 @@ class HapticLoop(PacedTicks):
             while inbox:
                 self._apply(inbox.popleft(), clock.now_ns())
             self.haptic_on = False
-            if self._rig_stop_motion is not None:
+            for ch, stop_motion in self._stop_motion:
                 # nobody drives a teleoperated robot once the loop stops: stop it before the ramp
                 try:
-                    self._rig_stop_motion("haptic loop stopped")
+                    stop_motion("haptic loop stopped")
                 except Exception as exc:  # still ramp the force down; report it
-                    self._emit(LoopEvent(clock.now_ns() - self.t0_ns, "fault", self.faults,
-                                         f"the rig could not stop the robot: {exc!r}"))
+                    ch.emit(clock.now_ns() - self.t0_ns, "fault", f"the rig could not stop the robot: {exc!r}")
             # ramp ticks continue the period grid: the next slot after the last tick, not one later
             last = self._last_ns
             deadline = clock.now_ns() if last is None else max(clock.now_ns(), last + self.period_ns)
             for _ in range(max_ticks):
-                if self.framework.safety.gain == 0.0:
+                if all(ch.framework.safety.gain == 0.0 for ch in self.arms):
                     break
                 clock.sleep_until(deadline)
                 self.tick()
                 deadline += self.period_ns
         finally:
-            # whatever failed above (a tick raising, a device gone), the last command is zero -- and should even
-            # this fail, the device's command watchdog drops the force within its timeout
+            # whatever failed above (a tick raising, a device gone), the last command is zero on every arm -- and
+            # should even this fail, the device's command watchdog drops the force within its timeout
             self._resync = True
-            self.rig.haptic.command_force(0.0, 0.0, 0.0)
+            errors = [exc for exc in (ch.zero_device() for ch in self.arms) if exc is not None]
+            if errors:
+                raise errors[0]
 
     def start(self) -> None:
         """Run the loop in its own thread (real-time use)."""

@@ -86,9 +86,13 @@ class AllowBiasRefinement:
 
 @dataclass(frozen=True, slots=True)
 class SetCalibration:
-    """Install a new payload calibration (a :class:`pipeline.force.payload_compensator.PayloadCalibration`)."""
+    """Install a new payload calibration (a :class:`pipeline.force.payload_compensator.PayloadCalibration`).
+
+    ``arm``: on the arm of that name ("": the first arm, the only one of a one-arm rig).
+    """
 
     calibration: PayloadCalibration
+    arm: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,10 +135,12 @@ class LoopEvent(NamedTuple):
     peak again) or ``"output_restarted"`` (a tick came later than the
     device's command watchdog: the device had dropped the force, and the
     output ramps in again from zero).  ``t_ns`` is on the records' time axis (``t_ns`` of the tick's
-    record: ns since the loop's first tick).
+    record: ns since the loop's first tick).  ``arm`` names the rig's arm the event is about (its
+    ``faults`` are that arm's latched set); "" for one made outside a loop.
     """
 
     t_ns: int
     kind: str
     faults: int
     detail: str
+    arm: str = ""

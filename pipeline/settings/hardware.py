@@ -11,10 +11,13 @@ devices they name (so a new device adds its settings here and its opening there)
 
 from __future__ import annotations
 
+import os
+import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME  # the one arm of a file without [[arm]] tables
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 from pipeline.force.frames import Vec3
 from pipeline.force.framework import FrameworkConfig
@@ -22,6 +25,9 @@ from pipeline.runtime.watchdog import WatchdogConfig
 from pipeline.settings.tomlfields import Fields, read_toml
 
 __all__ = [
+    "FAULT_POLICIES",
+    "SINGLE_ARM_NAME",
+    "ArmSettings",
     "HapticSettings",
     "HardwareConfig",
     "HardwareError",
@@ -36,6 +42,12 @@ __all__ = [
 ROBOT_MODES = ("observe", "teleop")
 #: The calibration file when ``[calibration] file`` is not given (next to the hardware file).
 DEFAULT_CALIBRATION_FILE = "calibration.json"
+#: What a fault on one arm does to the others (``[rig] fault_policy``): ``both`` -- every arm ramps to zero (a
+#: person's two hands are on the rig; the default); ``independent`` -- the other arms keep rendering.
+FAULT_POLICIES = ("both", "independent")
+_ARM_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}\Z")
+#: The tables of one arm: a one-arm file has them at the top level, an ``[[arm]]`` table holds them.
+_ARM_TABLES = ("sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop")
 
 
 class HardwareError(ValueError):
@@ -109,8 +121,32 @@ class JawSettings:
 
 
 @dataclass(frozen=True, slots=True)
+class ArmSettings:
+    """One arm of the rig: its devices, frames and calibration (the fields of a one-arm file, and a name)."""
+
+    name: str
+    sensor: SensorSettings
+    robot: RobotSettings
+    haptic: HapticSettings
+    jaw: JawSettings | None
+    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
+    #: The arm's calibration file (:mod:`pipeline.commissioning.rig_calibration`); None: the default.
+    calibration_file: str | None = None
+    teleop: TeleopSettings | None = None
+    #: The instrument mounted on this arm now: its record in the calibration file is the one in use.
+    calibration_tool: str = "instrument"
+    #: The file the settings came from (for messages; the same for every arm of a file).
+    source: str = "hardware"
+
+
+@dataclass(frozen=True, slots=True)
 class HardwareConfig:
-    """A validated hardware file."""
+    """A validated hardware file.
+
+    ``arms`` lists every arm, the first (the task arm until the protocol names one) first; the other fields are the
+    first arm's, so code that knows one arm reads a two-arm file's first arm unchanged.  Built from the one-arm
+    fields alone (``arms`` empty), the rig is that one arm, named :data:`SINGLE_ARM_NAME`.
+    """
 
     sensor: SensorSettings
     robot: RobotSettings
@@ -125,6 +161,31 @@ class HardwareConfig:
     teleop: TeleopSettings | None = None
     #: The instrument mounted now: its record in the calibration file is the one in use.
     calibration_tool: str = "instrument"
+    #: Every arm, the first first (see the class's docstring).
+    arms: tuple[ArmSettings, ...] = ()
+    #: What a fault on one arm does to the others: one of :data:`FAULT_POLICIES`.
+    fault_policy: str = "both"
+
+    def __post_init__(self) -> None:
+        name = self.arms[0].name if self.arms else SINGLE_ARM_NAME
+        first = ArmSettings(name, self.sensor, self.robot, self.haptic, self.jaw, self.framework,
+                            self.calibration_file, self.teleop, self.calibration_tool, self.source)
+        if not self.arms or self.arms[0] != first:  # built from the one-arm fields, or they were replaced
+            object.__setattr__(self, "arms", (first, *self.arms[1:]))
+
+    @classmethod
+    def of_arms(cls, arms: tuple[ArmSettings, ...], fault_policy: str = "both") -> HardwareConfig:
+        """The configuration of these arms; its one-arm fields are the first arm's."""
+        a = arms[0]
+        return cls(a.sensor, a.robot, a.haptic, a.jaw, a.framework, a.calibration_file, a.source, a.teleop,
+                   a.calibration_tool, arms, fault_policy)
+
+    def arm(self, name: str) -> ArmSettings:
+        """The arm called ``name`` (KeyError naming the arms there are)."""
+        for a in self.arms:
+            if a.name == name:
+                return a
+        raise KeyError(f"no arm {name!r} in {self.source}; its arms: {', '.join(a.name for a in self.arms)}")
 
 
 # -- validation ------------------------------------------------------------------------------
@@ -135,15 +196,51 @@ _DEVICE_PATH = "a non-empty string without spaces (a serial device path such as 
 def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     """Validate plain data (a parsed TOML file) into a :class:`HardwareConfig`.
 
+    A file describes one arm with top-level tables (``[sensor]``, ``[robot]``, …), or one or more arms with
+    ``[[arm]]`` tables, each holding the same tables and a ``name``; never both.  A field of an arm's table is
+    named in an error after the arm (``<file>: arm 'left': sensor.host = …``).
+
     Raises
     ------
     HardwareError
-        One line naming ``source``, the field, the value and what is allowed.
+        One line naming ``source``, the arm (with ``[[arm]]`` tables), the field, the value and what is allowed.
     """
     f = Fields(source, HardwareError)
-    top = f.table("", d,
-                  {"version", "sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop"})
+    top = f.table("", d, {"version", "arm", "rig", *_ARM_TABLES})
     f.version(top, "hardware file")
+    rig = f.section(top, "rig", {"fault_policy"})
+    policy = f.choice("rig.fault_policy", rig.get("fault_policy", "both"), FAULT_POLICIES,
+                      "allowed values: 'both' (a fault on one arm ramps every arm to zero) and 'independent' (the "
+                      "other arms keep rendering)")
+    if "arm" not in top:
+        return HardwareConfig.of_arms((_arm(f, top, SINGLE_ARM_NAME, source),), policy)
+    stray = [k for k in _ARM_TABLES if k in top]
+    if stray:
+        raise f.fail(stray[0], top[stray[0]], "with [[arm]] tables every device table belongs to an arm: move "
+                     f"[{stray[0]}] into an [[arm]] table as [arm.{stray[0]}] (see hardware.example.toml)")
+    tables = top["arm"]
+    if not isinstance(tables, list) or not tables or not all(isinstance(t, dict) for t in tables):
+        raise f.fail("arm", tables, "must be one or more [[arm]] tables, each with a name and its devices")
+    if len(tables) > 4:
+        raise f.fail("arm", f"{len(tables)} [[arm]] tables", "at most 4 arms")
+    arms: list[ArmSettings] = []
+    for i, t in enumerate(tables):
+        f.required(t, f"arm[{i}]", "name", "required: the arm's name, e.g. 'left' or 'right'")
+        name = f.string(f"arm[{i}].name", t["name"], pattern=_ARM_NAME,
+                        what="a name of letters, digits, '_' and '-', starting with a letter, at most 32 characters "
+                             "(e.g. 'left', 'right')")
+        if any(a.name == name for a in arms):
+            raise f.fail(f"arm[{i}].name", name, "each arm needs its own name; this one is taken by an earlier arm")
+        fa = Fields(f"{source}: arm {name!r}", HardwareError)
+        arm_top = fa.table("", {k: v for k, v in t.items() if k != "name"}, set(_ARM_TABLES))
+        arms.append(_arm(fa, arm_top, name, source, default_calibration=f"calibration-{name}.json"))
+    _distinct(f, arms)
+    return HardwareConfig.of_arms(tuple(arms), policy)
+
+
+def _arm(f: Fields, top: dict[str, Any], name: str, source: str,
+         default_calibration: str | None = None) -> ArmSettings:
+    """One arm's tables (the top level of a one-arm file, or an ``[[arm]]`` table), validated."""
     for required in ("sensor", "robot", "haptic"):
         f.required(top, "", required, f"the [{required}] table is required")
     sensor = _sensor(f, top["sensor"])
@@ -152,7 +249,7 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     jaw = _jaw(f, top["jaw"]) if "jaw" in top else None
     framework = _framework(f, top)
     cal = f.section(top, "calibration", {"file", "tool"})
-    cal_file = cal.get("file")
+    cal_file = cal.get("file", default_calibration)
     if cal_file is not None:
         cal_file = f.string("calibration.file", cal_file, what="the path of the calibration JSON file")
     tool = f.string("calibration.tool", cal.get("tool", "instrument"),
@@ -162,7 +259,35 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
         raise f.fail("teleop.pose_max_age_s", teleop.pose_max_age_s,
                      f"must be longer than the robot's pose period, 1 / robot.frequency_hz = "
                      f"{1e3 / robot.frequency_hz:g} ms (teleoperation would stop the robot at every pose)")
-    return HardwareConfig(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool)
+    return ArmSettings(name, sensor, robot, haptic, jaw, framework, cal_file, teleop, tool, source)
+
+
+def _distinct(f: Fields, arms: list[ArmSettings]) -> None:
+    """Refuse two arms on one device: one sensor address, robot address, Touch, jaw port or calibration record."""
+    keys: list[tuple[str, str, Any]] = [
+        ("sensor.host", "a Net F/T box has one address: two arms cannot read one sensor",
+         lambda a: a.sensor.host.lower()),
+        ("robot.host", "a UR controller drives one arm: two arms cannot share one robot",
+         lambda a: a.robot.host.lower()),
+        ("haptic.device_name", "one Touch (its OpenHaptics device name) serves one arm",
+         lambda a: a.haptic.device_name),
+        ("jaw.port", "one jaw actuator's serial port serves one arm", lambda a: None if a.jaw is None else a.jaw.port),
+        ("calibration.tool", "the two arms' calibrations would overwrite each other in one calibration file: name "
+         "another calibration.file or tool",
+         lambda a: (os.path.normcase(os.path.normpath(a.calibration_file or DEFAULT_CALIBRATION_FILE)),
+                    a.calibration_tool)),
+    ]
+    for fld, why, key in keys:
+        seen: dict[Any, str] = {}
+        for a in arms:
+            k = key(a)
+            if k is None:
+                continue
+            if k in seen:
+                value = k[1] if isinstance(k, tuple) else k
+                raise HardwareError(f"{f.source}: arm {a.name!r}: {fld} = {value!r}: arm {seen[k]!r} has it already; "
+                                    f"{why}")
+            seen[k] = a.name
 
 
 def _sensor(f: Fields, v: Any) -> SensorSettings:
@@ -349,20 +474,27 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
 
 
 def load_hardware(path: str | Path) -> HardwareConfig:
-    """Load and validate a hardware file."""
+    """Load and validate a hardware file (paths in it are relative to it)."""
     p = Path(path)
     src = str(p)
     data = read_toml(p, HardwareError, "hardware file", " (copy hardware.example.toml and edit it)")
     hw = hardware_from_dict(data, src)
+    arms = tuple(_resolve_paths(a, p, multi="arm" in data) for a in hw.arms)
+    return HardwareConfig.of_arms(arms, hw.fault_policy)
+
+
+def _resolve_paths(arm: ArmSettings, p: Path, *, multi: bool) -> ArmSettings:
+    """The arm's calibration file and DLL folder relative to the hardware file ``p``; the folder must exist."""
     # a relative calibration path is relative to the hardware file, not to the working directory
-    cal = Path(hw.calibration_file if hw.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
-    hw = replace(hw, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
-    if hw.haptic.dll_dir is not None:  # relative to the hardware file too; it must be a folder there now
-        dll = Path(hw.haptic.dll_dir)
+    cal = Path(arm.calibration_file if arm.calibration_file is not None else DEFAULT_CALIBRATION_FILE)
+    arm = replace(arm, calibration_file=str(cal if cal.is_absolute() else p.parent / cal))
+    if arm.haptic.dll_dir is not None:  # relative to the hardware file too; it must be a folder there now
+        dll = Path(arm.haptic.dll_dir)
         dll = dll if dll.is_absolute() else p.parent / dll
         if not dll.is_dir():
             what = "is not a folder" if dll.exists() else "no such folder"
-            raise HardwareError(f"{src}: haptic.dll_dir = {hw.haptic.dll_dir!r}: {what} ({dll}); give the folder "
-                                "that holds OpenHaptics' HD.dll, or remove the line to use the system's folders")
-        hw = replace(hw, haptic=replace(hw.haptic, dll_dir=str(dll)))
-    return hw
+            where = f"arm {arm.name!r}: " if multi else ""
+            raise HardwareError(f"{p}: {where}haptic.dll_dir = {arm.haptic.dll_dir!r}: {what} ({dll}); give the "
+                                "folder that holds OpenHaptics' HD.dll, or remove the line to use the system's folders")
+        arm = replace(arm, haptic=replace(arm.haptic, dll_dir=str(dll)))
+    return arm

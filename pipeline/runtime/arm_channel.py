@@ -1,0 +1,326 @@
+"""One arm's pipeline inside the 1 kHz loop: its devices, its Algorithm 1, its watchdog state, its ring.
+
+A rig has one or more arms (:func:`pipeline.devices.rig.rig_arms`); the loop
+(:class:`pipeline.runtime.loop.HapticLoop`) holds one :class:`ArmChannel` per
+arm and runs the same tick body, :meth:`ArmChannel.tick`, for each in the same
+tick: the arm's own F/T sample and robot pose, its watchdog (faults latched per
+arm), its :class:`pipeline.force.framework.HapticFramework` (safety, slew and
+ramp-in per arm), its haptic device's command, and one record in the arm's own
+ring (the tick-record dtype of :mod:`pipeline.runtime.tick_record`).
+
+What one arm's fault does to the others is the loop's policy
+(:data:`pipeline.settings.hardware.FAULT_POLICIES`): with ``both`` the other
+arms latch ``Fault.OTHER_ARM`` and ramp to zero too; with ``independent`` they
+keep rendering.  Every event a channel emits carries its arm's name.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from typing import TYPE_CHECKING, Protocol
+
+from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
+from pipeline.devices.rig import RigArm
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
+from pipeline.force.framework import HapticFramework
+from pipeline.runtime.clock import Clock
+from pipeline.runtime.loop_messages import LoopEvent
+from pipeline.runtime.watchdog import WatchdogConfig, derating_detail, derating_ended_detail, fault_detail
+
+if TYPE_CHECKING:
+    from pipeline.runtime.ring import RingBuffer
+
+__all__ = ["RIG_WIDE_FAULTS", "ArmChannel", "LoopSide", "own_faults"]
+
+
+class LoopSide(Protocol):
+    """What a channel reads of the loop that runs it (:class:`pipeline.runtime.loop.HapticLoop`)."""
+
+    watchdog: WatchdogConfig
+    clock: Clock
+    t0_ns: int
+    tick_count: int
+    trial_index: int
+    phase: int
+    haptic_on: bool
+    refine_bias: bool
+    recording: bool
+
+    def emit(self, ev: LoopEvent) -> None:
+        """Record and pass on an event."""
+        ...
+
+    def arm_faulted(self, ch: ArmChannel, new: int, now: int) -> None:
+        """An arm latched new faults (the fault policy acts on the others)."""
+        ...
+
+_NAN3 = (math.nan, math.nan, math.nan)
+_HYPOT = math.hypot
+
+
+class ArmChannel:
+    """One arm's state in the loop (see the module's docstring).
+
+    Parameters
+    ----------
+    arm
+        The arm's devices and hooks.
+    framework
+        The arm's force path.
+    ring
+        Where the arm's records go, or None.
+    loop
+        The loop that runs it (its clock, tick counter, marks, feedback switch and event path are shared).
+    """
+
+    def __init__(self, arm: RigArm, framework: HapticFramework, ring: RingBuffer | None, loop: LoopSide) -> None:
+        self.name = arm.name
+        self.arm = arm
+        self.sensor = arm.sensor
+        self.robot = arm.robot
+        self.haptic = arm.haptic
+        self.framework = framework
+        self.ring = ring
+        self.loop = loop
+        wd: WatchdogConfig = loop.watchdog
+        self.faults = 0  # latched
+        self.active_faults = 0  # this tick's conditions
+        self._gone_reported = 0  # latched faults whose condition was reported gone
+        self._pose_t_ns: int | None = None
+        self._sensor_age_ns = int(wd.sensor_max_age_s * 1e9)
+        self._pose_age_ns = int(wd.pose_max_age_s * 1e9)
+        self._sat = tuple(wd.saturation_fraction * r for r in arm.sensor.range_n)
+        self._last_record: tuple[float | int, ...] | None = None
+        #: What replay of this arm needs beyond its records, while recording (see ``StartRecording``).
+        self.replay_log: deque[tuple[int, str, object]] = deque()
+        self._truth = arm.true_contact_force
+        self._on_faults = arm.on_faults
+        timeout_s = getattr(arm.haptic, "command_timeout_s", None)
+        #: The device drops a command older than this (its own watchdog).
+        self.command_timeout_ns = int((timeout_s if timeout_s is not None else DEFAULT_COMMAND_TIMEOUT_S) * 1e9)
+        self._peak_n = float(arm.haptic.peak_force_n)
+        self._device_limit_n = math.inf  # the device's derated force limit as last seen
+        self._derating = False
+        self._derate_check = False  # the thermal limit is below the safety stage's own: measure what it cuts
+
+    # -- one tick -----------------------------------------------------------------------------
+    def tick(self, now: int, period: int, dt_s: float) -> None:
+        """Run this arm's part of the tick at ``now``: read, watchdog, Algorithm 1, command, record."""
+        loop = self.loop
+        w = self.sensor.read_wrench()
+        pose = self.robot.read_pose()
+        hs = self.haptic.read_state()
+        fw = self.framework
+
+        # -- watchdog --
+        cond = 0
+        _, fx, fy, fz, tx, ty, tz = w[:7]
+        sensor_age = now - w.t_ns
+        if sensor_age > self._sensor_age_ns:
+            cond |= Fault.SENSOR_STALE
+        if w.status:
+            cond |= Fault.SENSOR_STATUS
+        if (fx - fx) + (fy - fy) + (fz - fz) + (tx - tx) + (ty - ty) + (tz - tz) != 0.0:
+            cond |= Fault.NON_FINITE
+        else:
+            s = self._sat
+            if (abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
+                    or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]):
+                cond |= Fault.SENSOR_SATURATION
+        pose_age = now - pose.t_ns
+        if pose_age > self._pose_age_ns:
+            cond |= Fault.POSE_STALE
+        if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
+            cond |= self._take_pose(pose)
+        if hs.error_code:
+            cond |= Fault.HAPTIC_DEVICE
+        if hs.force_limit_n != self._device_limit_n:  # the device derates (rare; a compare per tick otherwise)
+            self._device_limit(now, hs)
+        latched = self.faults
+        if cond != self.active_faults or cond & ~latched:  # (fault-free steady state: both false)
+            latched = self._conditions_changed(cond, now, w, pose, hs, sensor_age, pose_age)
+
+        if loop.refine_bias and not latched:
+            fw.refine_bias(fx, fy, fz, tx, ty, tz)
+
+        haptic_on = loop.haptic_on
+        enabled = haptic_on and not latched
+        (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
+         haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
+         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.runtime.tick_record.STEP_FIELDS, by name
+        # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
+        self.haptic.command_force(render_fx, render_fy, render_fz, now)
+        derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
+        # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
+        latency_ns = loop.clock.now_ns() - w.t_ns
+        true_fx, true_fy, true_fz = self._truth() or _NAN3
+        tip_x_m, tip_y_m, tip_z_m = pose.position_m
+        stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
+        t_ns = now - loop.t0_ns
+        # one record, in pipeline.runtime.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
+        rec = (
+            loop.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
+            1 if haptic_on else 0, loop.trial_index, loop.phase, fw.safety.gain, render_fx, render_fy, render_fz,
+            _HYPOT(filt_fx, filt_fy, filt_fz), stylus_x_m, stylus_y_m, stylus_z_m, derate, t_ns * 1e-9, comp_fx,
+            comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx,
+            haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
+        )
+        self._last_record = rec
+        if self.ring is not None:
+            self.ring.write(rec)
+
+    def _take_pose(self, pose: PoseSample) -> int:
+        """Hand a new robot pose to the framework; a non-finite one is refused: ``Fault.NON_FINITE``, else 0."""
+        rot = pose.rot_base_tip
+        if all(v - v == 0.0 for v in rot) and all(v - v == 0.0 for v in pose.position_m):
+            self._pose_t_ns = pose.t_ns
+            self.framework.set_pose(rot)
+            if self.loop.recording:
+                self.log("pose", (rot, pose.position_m, pose.t_ns))
+            return 0
+        return Fault.NON_FINITE
+
+    def _conditions_changed(
+        self, cond: int, now: int, w: WrenchSample, pose: PoseSample, hs: HapticState, sensor_age: int, pose_age: int,
+    ) -> int:
+        """This tick's fault conditions differ from the last tick's: latch the new ones, report the gone ones.
+
+        Returns the latched set.
+        """
+        prev = self.active_faults
+        self.active_faults = cond
+        latched = self.faults
+        new = cond & ~latched
+        loop = self.loop
+        if new:
+            # a plain int, not a Fault: IntFlag's ~ and & run in Python (~1 µs per tick)
+            latched = int(latched | new)
+            self.faults = latched
+            self._gone_reported &= ~new
+            self.faults_changed(now)
+            self.emit(now - loop.t0_ns, "fault", fault_detail(new, w, pose, hs, sensor_age, pose_age, loop.watchdog,
+                                                              self._sat))
+            loop.arm_faulted(self, new, now)
+        if cond != prev:
+            gone = latched & prev & ~cond & ~self._gone_reported
+            if gone:
+                self._gone_reported |= gone
+                self.emit(now - loop.t0_ns, "fault_cleared",
+                          f"{Fault(gone).describe()}: the condition is gone (latched until a reset)")
+        return latched
+
+    def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
+        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
+        through.
+
+        Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
+        """
+        want = _HYPOT(scaled_fx, scaled_fy, scaled_fz)
+        safety = self.framework.safety
+        lim = safety.limit_n
+        if want > lim:
+            designed = want if want < safety.static_limit_n else safety.static_limit_n
+            return lim / designed
+        return 1.0
+
+    def _device_limit(self, now: int, hs: HapticState) -> None:
+        """The device changed the force it may render (thermal derating): clamp to it; report derating."""
+        lim = float(hs.force_limit_n)
+        self._device_limit_n = lim
+        safety = self.framework.set_device_limit(lim)
+        if self.loop.recording:
+            self.log("device_limit", lim)
+        self._derate_check = safety.limit_n < safety.static_limit_n
+        frac = float(hs.heat_fraction)
+        t = now - self.loop.t0_ns
+        if not self._derating and lim < self._peak_n:
+            self._derating = True
+            cont = float(getattr(self.haptic, "continuous_force_n", math.nan))
+            self.emit(t, "derating", derating_detail(frac, self._peak_n, cont))
+        elif self._derating and lim >= self._peak_n:
+            self._derating = False
+            self.emit(t, "derating_ended", derating_ended_detail(frac, lim))
+
+    # -- faults, resets and the record (rare paths) ----------------------------------------------
+    def latch(self, fault: int, now: int) -> bool:
+        """Latch ``fault`` (bits); True if any was new (the rig was told)."""
+        if self.faults & fault == fault:
+            return False
+        self.faults = int(self.faults | fault)
+        self.faults_changed(now)
+        return True
+
+    def reset_persisting(self) -> int:
+        """What a reset cannot clear on this arm: conditions still present (and a device that does not re-arm)."""
+        # the operator stop and device errors are cleared by the reset itself
+        persisting = self.active_faults & ~(Fault.OPERATOR_STOP | Fault.HAPTIC_DEVICE)
+        if self.faults & Fault.HAPTIC_DEVICE and not self.haptic.rearm():
+            persisting |= Fault.HAPTIC_DEVICE
+        return int(persisting)
+
+    def reset(self, persisting: int, now: int) -> None:
+        """Clear the latched faults but ``persisting``; report the reset."""
+        before = self.faults
+        self.faults = persisting
+        self._gone_reported &= persisting
+        if before and not persisting:
+            self.framework.reset()
+            if self.loop.recording:
+                self.log("reset", None)
+        if persisting != before:
+            self.faults_changed(now)
+        self.emit(now - self.loop.t0_ns, "faults_reset", Fault(before).describe())
+
+    def force_zero(self, why: str) -> None:
+        """Drop the output to zero outside the framework's step (logged for replay as ``"zero"``)."""
+        self.framework.safety.force_zero()
+        if self.loop.recording:
+            self.log("zero", why)
+
+    def faults_changed(self, now: int) -> None:
+        """Tell the arm's rig hook the latched set changed (it stops a teleoperated robot); only on a change."""
+        hook = self._on_faults
+        if hook is None:
+            return
+        try:
+            hook(Fault(self.faults))
+        except Exception as exc:  # the loop must keep ramping the force down; report it
+            self.emit(now - self.loop.t0_ns, "fault", f"the rig could not act on the faults: {exc!r}")
+
+    def emit(self, t_ns: int, kind: str, detail: str, faults: int | None = None) -> LoopEvent:
+        """Report an event of this arm through the loop's event path."""
+        ev = LoopEvent(t_ns, kind, self.faults if faults is None else faults, detail, self.name)
+        self.loop.emit(ev)
+        return ev
+
+    def log(self, what: str, value: object) -> None:
+        """Append to the arm's replay log, at the loop's current tick."""
+        self.replay_log.append((self.loop.tick_count, what, value))
+
+    def snapshot(self, token: int) -> None:
+        """Start the arm's replayable record: the framework's state now."""
+        self.log("snapshot", {"token": token, "framework": self.framework.snapshot(),
+                              "refine_bias": self.loop.refine_bias})
+
+    def zero_device(self) -> Exception | None:
+        """Command zero force now (any thread); the exception if the device refused."""
+        try:
+            self.haptic.command_force(0.0, 0.0, 0.0)
+        except Exception as exc:  # the device's own watchdog drops the force anyway
+            return exc
+        return None
+
+    @property
+    def last_record(self) -> tuple[float | int, ...] | None:
+        """The arm's newest record (a tuple in the record's field order)."""
+        return self._last_record
+
+
+def own_faults(faults: int) -> int:
+    """The faults that are this arm's own, not the policy's copy of another arm's."""
+    return faults & ~Fault.OTHER_ARM
+
+
+#: Faults every arm latches by itself (the loop's or the experimenter's): they do not propagate between arms.
+RIG_WIDE_FAULTS = int(Fault.OPERATOR_STOP | Fault.ENGINE_DETACHED | Fault.LOOP_STALLED)
