@@ -198,7 +198,7 @@ def _run_forked(prepared: list[_Prepared], scratch: Path) -> dict[str, Outcome]:
     ended = {r["id"]: r for r in map(json.loads, zygote.stdout.splitlines())}
     assert set(ended) == {p.case.id for p in prepared}, zygote.stdout
     results = {}
-    for p, req in zip(prepared, requests):
+    for p, req in zip(prepared, requests, strict=True):
         r = ended[p.case.id]
         if r["returncode"] == -9:
             results[p.case.id] = _hung(p)
@@ -298,7 +298,7 @@ def test_a_forked_command_ends_as_the_script_does(corpus: tuple[dict[str, Outcom
     ends exactly as its fork did (status, both streams, what changed in its folder)."""
     forked, script = corpus
     by_id = {c.id: c for c in CASES}
-    assert END_TO_END <= set(by_id)
+    assert set(by_id) >= END_TO_END
     assert set(script) == {i for i in END_TO_END if not (by_id[i].mounts and _MOUNT)}
     for case_id, out in script.items():
         _ends_in_one_line_and_touches_nothing(by_id[case_id], out)
