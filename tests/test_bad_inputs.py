@@ -1,6 +1,6 @@
 """A corpus of bad inputs through the real command line: one line on stderr, the right exit status, nothing touched.
 
-Every case runs the ``haptic-study`` console script in a subprocess, in a folder of its
+Every case runs the ``haptic-study`` command in a process of its own, in a folder of its
 own holding the files it needs (protocol and hardware files, study databases
 good, damaged, foreign, newer and read-only, FIFOs and links, small full or
 read-only tmpfs mounts).  Each must end with its exit status (2: refused; 1: the
@@ -11,8 +11,11 @@ transient ``-wal``/``-shm`` beside a database that was already there).
 
 The cases (tests/bad_inputs_corpus.py: files, arguments, databases;
 tests/bad_outputs_corpus.py: outputs, links, permissions, file systems) run
-concurrently (they are subprocesses, mostly waiting on Python's start-up), once
-per session, and each case is its own test.  The mounts need root: where the
+once per session, three at a time, each a fork of one process that imported the
+command line once (tests/cli_zygote.py: a new interpreter per case spent most of
+the corpus's time importing), and each case is its own test.  The cases of
+:data:`END_TO_END` also run through the installed console script, as a user types
+them, and must end exactly as their forks did.  The mounts need root: where the
 tests may not mount, those cases skip and say why.
 """
 
@@ -20,6 +23,7 @@ from __future__ import annotations
 
 import errno
 import hashlib
+import json
 import os
 import pwd
 import shutil
@@ -30,7 +34,6 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,6 +52,14 @@ CASES: list[Case] = [*INPUT_CASES, *OUTPUT_CASES]
 CASE_TIMEOUT_S = 180
 #: One worker runs the whole corpus (pytest runs with --dist loadfile: a module in one worker, its fixture once).
 _MOUNT = can_mount()
+#: The cases run end to end through the installed script too (a new interpreter, as a user types them): a refusal
+#: of argparse, of a protocol, a hardware file, a database, a FIFO, a folder the user may not write, a full disk
+#: mid-write, and one after the work; :func:`test_a_forked_command_ends_as_the_script_does` compares them.
+END_TO_END = frozenset({
+    "no command", "protocol: version = true", "hardware: no such file", "database: damaged, sessions",
+    "protocol: a FIFO", "report --out a folder it may not write", "full while writing: plot-trial",
+    "full: export, larger than the space left",
+})
 
 
 @dataclass
@@ -121,7 +132,19 @@ def _mount(case: Case, d: Path, good: Path) -> list[Path]:
     return mounted
 
 
-def _run_case(case: Case, d: Path, good: Path) -> Outcome:
+@dataclass
+class _Prepared:
+    """A case's folder made ready: its files and mounts in place, the user it runs as, what was there before."""
+
+    case: Case
+    folder: Path
+    args: list[str]
+    user: tuple[int, int] | None
+    mounted: list[Path]
+    before: dict[str, str]
+
+
+def _prepare(case: Case, d: Path, good: Path) -> _Prepared:
     for name, build in case.files.items():
         build(d / name, good)
     mounted = _mount(case, d, good)
@@ -132,65 +155,125 @@ def _run_case(case: Case, d: Path, good: Path) -> Outcome:
         user = _unprivileged()
         if user is not None:
             d.chmod(0o755)  # nobody can read the folder, and not write to it
+    args = [a.replace("{d}", str(d)) for a in case.args]
+    return _Prepared(case, d, args, user, mounted, _snapshot(d))
+
+
+def _command_env() -> dict[str, str]:
+    """The environment a command gets: none of ours (no worker count, no display), no byte-code written."""
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("HAPTIC_STUDY") and k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    return env
+
+
+def _hung(p: _Prepared) -> Outcome:
+    return Outcome(-9, "", f"Traceback: no answer within {CASE_TIMEOUT_S} s (it hung)", p.before, _snapshot(p.folder),
+                   str(p.folder))
+
+
+def _run_script(p: _Prepared) -> Outcome:
+    """The case through the installed console script, in a new interpreter (the end-to-end cases)."""
+    t0 = time.perf_counter()
     try:
-        before = _snapshot(d)
-        env = {k: v for k, v in os.environ.items()
-               if not k.startswith("HAPTIC_STUDY") and k not in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM")}
-        env["PYTHONDONTWRITEBYTECODE"] = "1"
-        args = [a.replace("{d}", str(d)) for a in case.args]
-        t0 = time.perf_counter()
-        try:
-            proc = subprocess.run(
-                [*CLI, *args], capture_output=True, text=True, timeout=CASE_TIMEOUT_S, cwd=ROOT, env=env,
-                **({"user": user[0], "group": user[1], "extra_groups": []} if user else {}),
-            )
-        except subprocess.TimeoutExpired:  # a hang (a FIFO read for ever) fails its own case, not the corpus
-            return Outcome(-9, "", f"Traceback: no answer within {CASE_TIMEOUT_S} s (it hung)", before,
-                           _snapshot(d), str(d))
-        return Outcome(proc.returncode, proc.stdout, proc.stderr, before, _snapshot(d), str(d),
-                       time.perf_counter() - t0)
+        proc = subprocess.run(
+            [*CLI, *p.args], capture_output=True, text=True, timeout=CASE_TIMEOUT_S, cwd=ROOT, env=_command_env(),
+            **({"user": p.user[0], "group": p.user[1], "extra_groups": []} if p.user else {}),
+        )
+    except subprocess.TimeoutExpired:  # a hang (a FIFO read for ever) fails its own case, not the corpus
+        return _hung(p)
+    return Outcome(proc.returncode, proc.stdout, proc.stderr, p.before, _snapshot(p.folder), str(p.folder),
+                   time.perf_counter() - t0)
+
+
+def _run_forked(prepared: list[_Prepared], scratch: Path) -> dict[str, Outcome]:
+    """The cases as forks of one process that imported the command line once (tests/cli_zygote.py), 3 at once."""
+    requests = [{"id": p.case.id, "args": p.args, "cwd": str(ROOT), "env": _command_env(),
+                 "user": list(p.user) if p.user else None, "out": str(scratch / f"{i}.out"),
+                 "err": str(scratch / f"{i}.err"), "timeout_s": CASE_TIMEOUT_S} for i, p in enumerate(prepared)]
+    zygote = subprocess.run([sys.executable, str(Path(__file__).with_name("cli_zygote.py")), "3"],
+                            input=json.dumps(requests), capture_output=True, text=True, cwd=ROOT, env=_command_env(),
+                            timeout=CASE_TIMEOUT_S + 60 * len(requests))
+    assert zygote.returncode == 0, zygote.stderr
+    ended = {r["id"]: r for r in map(json.loads, zygote.stdout.splitlines())}
+    assert set(ended) == {p.case.id for p in prepared}, zygote.stdout
+    results = {}
+    for p, req in zip(prepared, requests, strict=True):
+        r = ended[p.case.id]
+        if r["returncode"] == -9:
+            results[p.case.id] = _hung(p)
+            continue
+        results[p.case.id] = Outcome(r["returncode"], Path(req["out"]).read_text(errors="replace"),
+                                     Path(req["err"]).read_text(errors="replace"), p.before, _snapshot(p.folder),
+                                     str(p.folder), r["seconds"])
+    return results
+
+
+def _make_good_database(made: Path) -> Path:
+    """The good study database, made by the real command (a success, end to end) and checkpointed into one file."""
+    (made / "tiny.toml").write_text(TINY_PROTOCOL, encoding="utf-8")
+    good = made / "good.db"
+    r = subprocess.run(
+        [*CLI, "run", "--participants", "1", "--seed", "0", "--jobs", "1",
+         "--db", str(good), "--protocol", str(made / "tiny.toml")],
+        capture_output=True, text=True, timeout=300, cwd=ROOT,
+    )
+    assert r.returncode == 0, r.stderr
+    c = sqlite3.connect(good)
+    c.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # everything in the one file: copies of it are complete
+    c.close()
+    return good
+
+
+def _run_corpus(base: Path, good: Path) -> tuple[dict[str, Outcome], dict[str, Outcome]]:
+    """Every runnable case forked, and the end-to-end cases once more through the console script (in folders of
+    their own, prepared the same way): (forked outcomes, script outcomes)."""
+    runnable = [c for c in CASES if not (c.mounts and _MOUNT)]
+    twice = [c for c in runnable if c.id in END_TO_END]
+    prepared: list[_Prepared] = []
+    try:
+        for i, case in enumerate([*runnable, *twice]):
+            d = base / f"case{i:03d}"
+            d.mkdir()
+            prepared.append(_prepare(case, d, good))
+        scratch = base / "streams"
+        scratch.mkdir()
+        forked = _run_forked(prepared[:len(runnable)], scratch)
+        script = {p.case.id: _run_script(p) for p in prepared[len(runnable):]}
+        return forked, script
     finally:
-        for where in mounted:
-            unmount(where)
+        for p in prepared:
+            for where in p.mounted:
+                unmount(where)
 
 
 @pytest.fixture(scope="module")
-def outcomes() -> Iterator[dict[str, Outcome]]:
-    """Every case run once, three at a time; the good study database is made first by the real command."""
+def corpus() -> Iterator[tuple[dict[str, Outcome], dict[str, Outcome]]]:
+    """Every case run once (forked, see :func:`_run_forked`), the end-to-end ones also through the script; the good
+    study database is made first by the real command."""
     base = Path(tempfile.mkdtemp(prefix="haptic-bad-inputs-"))
     base.chmod(0o755)  # the read-only case may run as an unprivileged user
     try:
         made = base / "made"
         made.mkdir()
-        (made / "tiny.toml").write_text(TINY_PROTOCOL, encoding="utf-8")
-        good = made / "good.db"
-        r = subprocess.run(
-            [*CLI, "run", "--participants", "1", "--seed", "0", "--jobs", "1",
-             "--db", str(good), "--protocol", str(made / "tiny.toml")],
-            capture_output=True, text=True, timeout=300, cwd=ROOT,
-        )
-        assert r.returncode == 0, r.stderr
-        c = sqlite3.connect(good)
-        c.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # everything in the one file: copies of it are complete
-        c.close()
-        dirs = {}
-        runnable = [c for c in CASES if not (c.mounts and _MOUNT)]
-        for i, case in enumerate(runnable):
-            dirs[case.id] = base / f"case{i:03d}"
-            dirs[case.id].mkdir()
+        good = _make_good_database(made)
         t0 = time.perf_counter()
-        with ThreadPoolExecutor(max_workers=3) as pool:
-            futures = {case.id: pool.submit(_run_case, case, dirs[case.id], good) for case in runnable}
-            results = {k: f.result() for k, f in futures.items()}
-        print(f"\n{len(runnable)} bad-input cases in {time.perf_counter() - t0:.1f} s; the slowest:")
-        for case_id, out in sorted(results.items(), key=lambda kv: -kv[1].seconds)[:12]:
+        forked, script = _run_corpus(base, good)
+        print(f"\n{len(forked)} bad-input cases (and {len(script)} through the script) in "
+              f"{time.perf_counter() - t0:.1f} s; the slowest:")
+        for case_id, out in sorted(forked.items(), key=lambda kv: -kv[1].seconds)[:12]:
             print(f"  {out.seconds:5.1f} s  {case_id}")
-        yield results
+        yield forked, script
     finally:
         for p in base.rglob("*"):  # read-only files and folders left by a case
             if p.is_dir() and not p.is_symlink():
                 p.chmod(0o755)
         shutil.rmtree(base, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def outcomes(corpus: tuple[dict[str, Outcome], dict[str, Outcome]]) -> dict[str, Outcome]:
+    return corpus[0]
 
 
 def test_the_corpus_is_large_and_each_case_distinct() -> None:
@@ -207,7 +290,28 @@ def test_bad_input_ends_in_one_line_with_its_status_and_touches_nothing(case: Ca
                                                                      outcomes: dict[str, Outcome]) -> None:
     if case.mounts and _MOUNT:
         pytest.skip(_MOUNT)
-    out = outcomes[case.id]
+    _ends_in_one_line_and_touches_nothing(case, outcomes[case.id])
+
+
+def test_a_forked_command_ends_as_the_script_does(corpus: tuple[dict[str, Outcome], dict[str, Outcome]]) -> None:
+    """The end-to-end cases through the console script (a new interpreter): each passes the corpus's checks, and
+    ends exactly as its fork did (status, both streams, what changed in its folder)."""
+    forked, script = corpus
+    by_id = {c.id: c for c in CASES}
+    assert set(by_id) >= END_TO_END
+    assert set(script) == {i for i in END_TO_END if not (by_id[i].mounts and _MOUNT)}
+    for case_id, out in script.items():
+        _ends_in_one_line_and_touches_nothing(by_id[case_id], out)
+        fork = forked[case_id]
+        assert out.returncode == fork.returncode, case_id
+        assert out.stdout.replace(out.folder, "{d}") == fork.stdout.replace(fork.folder, "{d}"), case_id
+        assert out.stderr.replace(out.folder, "{d}") == fork.stderr.replace(fork.folder, "{d}"), case_id
+        assert set(out.after) - set(out.before) == set(fork.after) - set(fork.before), case_id
+
+
+def _ends_in_one_line_and_touches_nothing(case: Case, out: Outcome) -> None:
+    """The corpus's checks of one outcome: no traceback, its status, one line saying what it must, nothing
+    changed or left behind."""
     assert "Traceback" not in out.stdout + out.stderr, out.stderr
     assert out.returncode == case.exit, (out.returncode, out.stderr)
     lines = out.stderr.splitlines()
