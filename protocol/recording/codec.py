@@ -269,7 +269,8 @@ def _fields_json(dtype: np.dtype) -> str:
     return json.dumps([[name, dtype[name].str] for name in dtype.names or ()], separators=(",", ":"))
 
 
-#: A pose as a chunk keeps it: :data:`POSE_COLUMNS`, 8 bytes each.
+#: A pose's bytes in a chunk: :data:`POSE_COLUMNS`, 8 bytes each (kept as a table of the two integers, then one of
+#: the twelve floats).
 _POSE_DTYPE = np.dtype([(c.name, "<i8" if c.codec == "int" else "<f8") for c in POSE_COLUMNS])
 
 
@@ -284,17 +285,20 @@ def _encode_raw(raw: npt.NDArray[np.uint8], dtype: np.dtype,
     plane whose bytes are all equal -- the high bytes of times and counters, the marks, an exponent that
     does not change -- is kept as one byte.  That keeps ~75 bytes of a record's 200 for ~0.4 µs, where deflate
     at its fastest level keeps ~67 for ~2 µs, and a commit's cost is mostly the bytes it writes.  The poses
-    (~12 a chunk) are kept as they are.  Lossless by construction.
+    (~12 a chunk) are kept as they are (their integers, then their floats).  Lossless by construction.
     """
     n = len(raw)
     planes = np.ascontiguousarray(raw.T)  # (bytes per record, n)
     same = (planes == planes[:, :1]).all(axis=1) if n else np.ones(len(planes), bool)
     firsts = planes[:, 0] if n else np.zeros(len(planes), np.uint8)
-    pose = np.array([(p[0], p[3], *p[1], *p[2]) for p in poses], dtype=_POSE_DTYPE)
-    head = (f'{{"n":{n},"m":{len(pose)},"fields":{_fields_json(dtype)},'
-            f'"events":{json.dumps([list(e) for e in events], separators=(",", ":"))}}}').encode()
+    # the poses as two tables (tick and time; rotation and position): NumPy makes plain arrays from tuples ~5x
+    # faster than structured ones
+    ints = np.array([(p[0], p[3]) for p in poses], np.int64)
+    floats = np.array([(*p[1], *p[2]) for p in poses], np.float64)
+    log = json.dumps([list(e) for e in events], separators=(",", ":")) if events else "[]"
+    head = f'{{"n":{n},"m":{len(poses)},"fields":{_fields_json(dtype)},"events":{log}}}'.encode()
     return b"".join((_RAW, struct.pack("<I", len(head)), head, np.packbits(same).tobytes(), firsts.tobytes(),
-                     planes[~same].tobytes(), pose.tobytes()))
+                     planes[~same].tobytes(), ints.tobytes(), floats.tobytes()))
 
 
 def _decode_raw(blob: bytes, names: Iterable[str] | None,
@@ -315,11 +319,14 @@ def _decode_raw(blob: bytes, names: Iterable[str] | None,
     planes[:] = data[flags : flags + size, None]
     planes[~same] = data[flags + size : flags + size + changing * n].reshape(changing, n)
     recs = np.ascontiguousarray(planes.T).view(dtype).reshape(n)
-    pose = np.frombuffer(blob, _POSE_DTYPE, m, len(blob) - m * _POSE_DTYPE.itemsize)
+    at = len(blob) - m * _POSE_DTYPE.itemsize
+    ints = np.frombuffer(blob, np.int64, 2 * m, at).reshape(m, 2)
+    floats = np.frombuffer(blob, np.float64, 12 * m, at + 16 * m).reshape(m, 12)
     known = [c.name for c in COLUMNS if c.name in (dtype.names or ())]  # (a newer writer's extra fields: not ours)
     cols = {name: recs[name].copy() for name in (known if names is None else [k for k in names if k in known])}
     _fill_missing(cols, [k for k in (_MISSING.keys() if names is None else names) if k in _MISSING], n)
-    poses = {c.name: pose[c.name].copy() for c in POSE_COLUMNS}
+    poses = {"tick": ints[:, 0].copy(), "pose_t_ns": ints[:, 1].copy(),
+             **{c.name: floats[:, i].copy() for i, c in enumerate(POSE_COLUMNS[2:])}}
     return cols, poses, [(int(t), str(k), p) for t, k, p in header["events"]]
 
 
