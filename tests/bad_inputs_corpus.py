@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import random
+import re
 import shutil
 import sqlite3
 from collections.abc import Callable
@@ -49,9 +50,13 @@ def _text(content: str | bytes) -> Builder:
 
 
 def _variant(base: str, old: str, new: str) -> Builder:
-    """``base`` with exactly one occurrence of ``old`` replaced by ``new``."""
-    assert base.count(old) == 1, f"{old!r} must occur exactly once"
-    return _text(base.replace(old, new))
+    """``base`` with exactly one occurrence of ``old`` replaced by ``new`` (or, where commented-out examples repeat
+    it, its one occurrence at the start of a line)."""
+    if base.count(old) == 1:
+        return _text(base.replace(old, new))
+    at_start = [m.start() for m in re.finditer(r"(?m)^" + re.escape(old), base)]
+    assert len(at_start) == 1, f"{old!r} must occur exactly once (at the start of a line)"
+    return _text(base[: at_start[0]] + new + base[at_start[0] + len(old) :])
 
 
 def protocol(old: str, new: str) -> Builder:

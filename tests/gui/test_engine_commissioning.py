@@ -50,7 +50,8 @@ def test_a_thermally_derated_on_trial_is_aborted_as_feedback_not_delivered(engin
     # a Touch whose motors are hot and whose continuous rating is low: its derated limit (~0.02 N) cuts any press
     hot = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.01, thermal_budget_n2s=1.0))
     hot.output.heat.heat_n2s = 0.999
-    e.eng.rig.haptic = hot
+    e.eng.rig.haptic = hot  # the physics' device ...
+    e.eng.loop.arms[0].haptic = hot  # ... and the one the loop's arm reads and commands
     db = str(tmp_path / "s.db")
     e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
     steps_until(e, lambda: any(isinstance(ev, m.TrialEnded) and ev.record.haptic_mode == "on" for ev in events))
