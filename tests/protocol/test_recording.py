@@ -167,18 +167,24 @@ def test_the_builder_cuts_full_blocks_and_keeps_the_rest_open(chunk: int) -> Non
     assert np.array_equal(pose_ticks, np.arange(0, total, chunk))  # each pose in the block of its tick
 
 
-def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_only_the_uncommitted(
-        tmp_path: Path) -> None:
-    path = tmp_path / "rec.db"
+def _record_1540_ms(path: Path) -> tuple[StudyDatabase, int, Recorder]:
+    """A recorder that was handed 1540 records, one per millisecond, in hand-overs of 10 ms as the runner makes them;
+    not closed."""
     db = StudyDatabase(path)
     sid = db.create_session(**_session_args())
     clock = FakeClock()
     rec = Recorder(db, threaded=False, clock=clock)
     rec.segment(sid, 0, 0.0, 0, {"framework": {}}, {})
-    # one record per millisecond, handed over in chunks of 10 ms, as the runner does
     for k in range(0, 1540, 10):
         clock.now = k / 1000
         rec.records(sid, 0, records(k, 10))
+    return db, sid, rec
+
+
+def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_only_the_uncommitted(
+        tmp_path: Path) -> None:
+    path = tmp_path / "rec.db"
+    db, sid, _ = _record_1540_ms(path)
     # a crash now (no close, no flush): another connection sees what the commits wrote
     other = sqlite3.connect(path)
     try:
@@ -208,14 +214,7 @@ def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_onl
 
 
 def test_a_segment_that_ends_has_its_last_block_whole_in_place_of_its_chunks(tmp_path: Path) -> None:
-    db = StudyDatabase(tmp_path / "rec.db")
-    sid = db.create_session(**_session_args())
-    clock = FakeClock()
-    rec = Recorder(db, threaded=False, clock=clock)
-    rec.segment(sid, 0, 0.0, 0, {"framework": {}}, {})
-    for k in range(0, 1540, 10):
-        clock.now = k / 1000
-        rec.records(sid, 0, records(k, 10))
+    db, sid, rec = _record_1540_ms(tmp_path / "rec.db")
     assert db.conn.execute("SELECT COUNT(*) FROM session_chunks").fetchone()[0] > 0
     rec.close()
     assert db.conn.execute("SELECT COUNT(*) FROM session_chunks").fetchone() == (0,)
