@@ -101,12 +101,16 @@ def verify(folder: PathFolder) -> str:
     path = folder.root
     for part in folder.parts:
         path = os.path.join(path, part)
-        st = os.lstat(path)
-        if redirects(path, st):
-            raise _error(errno.ELOOP, path, "a symbolic link or junction, not followed")
-        if not stat.S_ISDIR(st.st_mode):
-            raise _error(errno.ENOTDIR, path)
+        _require_folder(path, os.lstat(path))
     return path
+
+
+def _require_folder(path: str, st: os.stat_result) -> None:
+    """Refuse an entry that is a link or junction (``ELOOP``, never followed) or not a folder (``ENOTDIR``)."""
+    if redirects(path, st):
+        raise _error(errno.ELOOP, path, "a symbolic link or junction, not followed")
+    if not stat.S_ISDIR(st.st_mode):
+        raise _error(errno.ENOTDIR, path)
 
 
 def _entry(folder: PathFolder, name: str) -> tuple[str, os.stat_result | None]:
@@ -131,10 +135,7 @@ def open_folder(name: str, parent: PathFolder | None, *, follow: bool) -> PathFo
     path, found = _entry(parent, name)  # below a folder a link is never followed (``follow`` or not)
     if found is None:
         raise _error(errno.ENOENT, path)
-    if redirects(path, found):
-        raise _error(errno.ELOOP, path, "a symbolic link or junction, not followed")
-    if not stat.S_ISDIR(found.st_mode):
-        raise _error(errno.ENOTDIR, path)
+    _require_folder(path, found)
     return PathFolder(parent.root, parent.root_id, (*parent.parts, name))
 
 

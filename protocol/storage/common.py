@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import datetime as _dt
+import sqlite3
 
-__all__ = ["EmptyDatabase", "LeaseHeld", "StorageError", "now_iso"]
+__all__ = ["EmptyDatabase", "LeaseHeld", "StorageError", "has_table", "now_iso"]
 
 
 class StorageError(Exception):
@@ -18,6 +19,12 @@ class LeaseHeld(StorageError):
 class EmptyDatabase(StorageError):
     """Opened for reading, the file holds no study yet (an empty or brand-new SQLite file)."""
 
+
+
+def has_table(conn: sqlite3.Connection, name: str) -> bool:
+    """Whether the file has the table ``name`` (a file of an older schema, or of version 4 before a table was added
+    to it, lacks some)."""
+    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone() is not None
 
 
 def now_iso() -> str:

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from protocol.storage import crashpoint
-from protocol.storage.common import StorageError, now_iso
+from protocol.storage.common import StorageError, has_table, now_iso
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
 from protocol.storage.withdrawal import withdrawal_of
@@ -322,9 +322,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     def last_session_time_s(self, session_id: int) -> float:
         """Latest session-clock time recorded (events, trials, recorded records), for resuming the clock."""
-        tables = {r[0] for r in self.conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         blocks = "".join(f" UNION ALL SELECT MAX(t_last_s) FROM {t} WHERE session_id = ?"
-                         for t in ("session_blocks", "session_chunks") if t in tables)
+                         for t in ("session_blocks", "session_chunks") if has_table(self.conn, t))
         args = (session_id,) * (2 + blocks.count("?"))
         r = self.conn.execute(
             "SELECT MAX(t) FROM (SELECT MAX(t_s) AS t FROM events WHERE session_id = ? "

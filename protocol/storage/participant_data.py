@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from protocol.records import trial_id_of
+from protocol.storage.common import has_table
 from protocol.storage.leases import session_scope
 
 __all__ = ["ParticipantRows", "Table", "participant_rows"]
@@ -47,11 +48,6 @@ def _per_session(conn: sqlite3.Connection, sql: str, args: list[tuple[Any, ...]]
     return Table(parts[0].columns, tuple(r for p in parts for r in p.rows))
 
 
-def _has(conn: sqlite3.Connection, table: str) -> bool:
-    row = conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (table,)).fetchone()
-    return row is not None
-
-
 def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | None:
     """Every stored row about participant ``code`` (None: no such participant), sessions and trials in order.
 
@@ -70,12 +66,12 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
     queries: dict[str, tuple[str, bool]] = {
         "trials": ("SELECT * FROM trials WHERE session_id = ? ORDER BY trial_index", True),
         "events": ("SELECT * FROM events WHERE session_id = ? ORDER BY t_s, rowid", True),
-        "recordings": ("SELECT * FROM recordings WHERE session_id = ? ORDER BY segment", _has(conn, "recordings")),
+        "recordings": ("SELECT * FROM recordings WHERE session_id = ? ORDER BY segment", has_table(conn, "recordings")),
         "session_blocks": (f"SELECT {blocks_cols} FROM session_blocks WHERE session_id = ? ORDER BY segment, block",
-                           _has(conn, "session_blocks")),
+                           has_table(conn, "session_blocks")),
         "session_chunks": ("SELECT session_id, segment, block, chunk, first_tick, last_tick, n_records, t_first_s, "
                            "t_last_s, crc32 FROM session_chunks WHERE session_id = ? ORDER BY segment, block, chunk",
-                           _has(conn, "session_chunks")),
+                           has_table(conn, "session_chunks")),
     }
     tables = {"participants": person, "sessions": sessions}
     for name, (sql, present) in queries.items():
@@ -84,7 +80,7 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
     tables["samples"] = _per_session(conn, "SELECT * FROM samples WHERE trial_id >= ? AND trial_id < ? "
                                      "ORDER BY trial_id, t_s",
                                      [(trial_id_of(sid, 0), trial_id_of(sid + 1, 0)) for sid in sids])
-    if _has(conn, "leases"):
+    if has_table(conn, "leases"):
         tables["leases"] = _per_session(conn, "SELECT * FROM leases WHERE scope = ?",
                                         [(session_scope(sid),) for sid in sids])
     return ParticipantRows(code, sids, tables)

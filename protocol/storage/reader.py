@@ -26,6 +26,7 @@ from typing import Any
 
 from protocol.recording.codec import join_chunks
 from protocol.records import TrialRecord
+from protocol.storage.common import has_table
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
 from protocol.storage.withdrawal import Withdrawal, withdrawal_of, withdrawals
@@ -50,6 +51,11 @@ class Rows:
 
     columns: tuple[str, ...]
     rows: list[tuple[Any, ...]]
+
+
+#: Chunks whose block has not replaced them (it does so in the same transaction, so never both: a guard).
+_STILL_OPEN = ("NOT EXISTS (SELECT 1 FROM session_blocks b WHERE b.session_id = c.session_id AND b.segment = c.segment "
+               "AND b.block = c.block)")
 
 
 def _block_filter(session_id: int | None, segment: int | None, ticks: tuple[int, int] | None,
@@ -141,8 +147,7 @@ class StudyReader:
 
     def has_recordings(self) -> bool:
         """Whether the file has the recording's tables (schema version 3 and later)."""
-        return bool(self.conn.execute(
-            "SELECT COUNT(*) FROM sqlite_master WHERE name = 'session_blocks'").fetchone()[0])
+        return has_table(self.conn, "session_blocks")
 
     # -- participants and sessions ------------------------------------------------------------------------------
     def participant_codes(self, limit: int | None = None) -> list[str]:
@@ -335,12 +340,10 @@ class StudyReader:
         The joined block's checksum is that of its bytes when every chunk's own checksum holds, else one that
         cannot match: a damaged chunk is reported as its block's damage.
         """
-        if not self._has_table("session_chunks"):
+        if not has_table(self.conn, "session_chunks"):
             return []
         where, args = _block_filter(session_id, segment, ticks, "c.")
-        done = ("NOT EXISTS (SELECT 1 FROM session_blocks b WHERE b.session_id = c.session_id "
-                "AND b.segment = c.segment AND b.block = c.block)")  # (replaced in the same transaction: never both)
-        where = f"{where} AND {done}" if where else f"WHERE {done}"
+        where = f"{where} AND {_STILL_OPEN}" if where else f"WHERE {_STILL_OPEN}"
         chunks = self.conn.execute(
             "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, c.data, c.t_first_s, "
             f"c.t_last_s, c.crc32 FROM session_chunks c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
@@ -355,14 +358,13 @@ class StudyReader:
                         min(r[7] for r in parts), max(r[8] for r in parts), crc))
         return out
 
-    def _has_table(self, name: str) -> bool:
-        return bool(self.conn.execute("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = ?",
-                                      (name,)).fetchone()[0])
-
     def block_count(self) -> int:
         """How many recorded blocks the file holds (a block left open by a killed run counts once)."""
         n = int(self.conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
-        return n + len(self._open_blocks(None, None, None))
+        if has_table(self.conn, "session_chunks"):
+            n += int(self.conn.execute("SELECT COUNT(*) FROM (SELECT DISTINCT c.session_id, c.segment, c.block "
+                                       f"FROM session_chunks c WHERE {_STILL_OPEN})").fetchone()[0])
+        return n
 
     # -- the audit (haptic-study check) ----------------------------------------------------------------------------
     def integrity_check(self, max_errors: int = 20) -> list[str]:
@@ -407,7 +409,7 @@ class StudyReader:
         if not self.has_recordings():
             return 0
         ids = [int(s) for s in session_ids]
-        tables = ("session_blocks", "session_chunks") if self._has_table("session_chunks") else ("session_blocks",)
+        tables = ("session_blocks", "session_chunks") if has_table(self.conn, "session_chunks") else ("session_blocks",)
         return sum(int(self.conn.execute(
             f"SELECT COALESCE(SUM(n_records), 0) FROM {t} WHERE session_id IN ({_in(len(ids))})", ids).fetchone()[0])
             for t in tables)

@@ -253,9 +253,7 @@ class Recorder:
     def _write_block(self, session_id: int, segment: int, block: tuple[int, int, np.ndarray, bytes]) -> None:
         _, clock = self._blocks[(session_id, segment)]
         number, _, records, data = block
-        ticks, t_ns = records["tick"], records["t_ns"]
-        self.db.write_block(session_id, segment, number, int(ticks[0]), int(ticks[-1]), len(ticks),
-                            clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1])), data)
+        self.db.write_block(session_id, segment, number, *_span(records, clock), data)
 
     def _commit(self, final: bool = False) -> None:
         if self._held:
@@ -275,10 +273,8 @@ class Recorder:
                     self.db.begin()
                     self._write_block(sid, seg, block)
             elif (chunk := builder.partial()) is not None:
-                ticks, t_ns = chunk.records["tick"], chunk.records["t_ns"]
                 self.db.begin()
-                self.db.write_chunk(sid, seg, chunk.block, chunk.number, int(ticks[0]), int(ticks[-1]), len(ticks),
-                                    clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1])), chunk.data)
+                self.db.write_chunk(sid, seg, chunk.block, chunk.number, *_span(chunk.records, clock), chunk.data)
         if self.db.conn.in_transaction:
             self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()
@@ -338,6 +334,13 @@ class Recorder:
             self._commit(final=True)
         if self.error is not None:
             raise StorageError(f"the recorder failed: {self.error}")
+
+
+def _span(records: np.ndarray, clock: SessionClock) -> tuple[int, int, int, float, float]:
+    """Where records lie, as a block's or a chunk's row says it: first and last tick, how many, and the session-clock
+    times of the first and the last."""
+    ticks, t_ns = records["tick"], records["t_ns"]
+    return int(ticks[0]), int(ticks[-1]), len(ticks), clock.seconds(int(t_ns[0])), clock.seconds(int(t_ns[-1]))
 
 
 def _commits(item: Message) -> bool:

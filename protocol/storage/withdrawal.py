@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Protocol
 
 from protocol.records import trial_id_of
-from protocol.storage.common import StorageError, now_iso
+from protocol.storage.common import StorageError, has_table, now_iso
 from protocol.storage.leases import session_scope
 
 __all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
@@ -99,20 +99,16 @@ def _n(n: int, word: str) -> str:
     return f"{n:,} {word}{'' if n == 1 else 's'}"
 
 
-def _has_table(conn: sqlite3.Connection, name: str) -> bool:
-    return conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)).fetchone() is not None
-
-
 def withdrawals(conn: sqlite3.Connection) -> list[Withdrawal]:
     """Every withdrawal recorded in a database, oldest first (none in a file from before withdrawals)."""
-    if not _has_table(conn, "withdrawals"):
+    if not has_table(conn, "withdrawals"):
         return []
     return [Withdrawal(*r) for r in conn.execute(f"SELECT {_COLUMNS} FROM withdrawals ORDER BY withdrawn_at, code")]
 
 
 def withdrawal_of(conn: sqlite3.Connection, code: str) -> Withdrawal | None:
     """The withdrawal of one participant code, or None."""
-    if not _has_table(conn, "withdrawals"):
+    if not has_table(conn, "withdrawals"):
         return None
     row = conn.execute(f"SELECT {_COLUMNS} FROM withdrawals WHERE code = ?", (code,)).fetchone()
     return None if row is None else Withdrawal(*row)
@@ -127,8 +123,8 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
     sessions = tuple((int(s), str(k), str(st)) for s, k, st in conn.execute(
         "SELECT session_id, kind, status FROM sessions WHERE participant_id = ? ORDER BY session_id", (pid,)))
     trials = events = segments = blocks = records = samples = 0
-    recorded = _has_table(conn, "session_blocks")
-    open_blocks = _has_table(conn, "session_chunks")  # (a killed run's last block, in the chunks it was written in)
+    recorded = has_table(conn, "session_blocks")
+    open_blocks = has_table(conn, "session_chunks")  # (a killed run's last block, in the chunks it was written in)
     for sid, _, _ in sessions:
         trials += conn.execute("SELECT COUNT(*) FROM trials WHERE session_id = ?", (sid,)).fetchone()[0]
         events += conn.execute("SELECT COUNT(*) FROM events WHERE session_id = ?", (sid,)).fetchone()[0]
@@ -140,8 +136,9 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
                                 (sid,)).fetchone()
             blocks, records = blocks + int(b), records + int(r)
             if open_blocks:
-                b, r = conn.execute("SELECT COUNT(DISTINCT segment * 1000000000 + block), COALESCE(SUM(n_records), 0) "
-                                    "FROM session_chunks WHERE session_id = ?", (sid,)).fetchone()
+                b, r = conn.execute("SELECT COUNT(*), COALESCE(SUM(n), 0) FROM (SELECT SUM(n_records) AS n "
+                                    "FROM session_chunks WHERE session_id = ? GROUP BY segment, block)",
+                                    (sid,)).fetchone()
                 blocks, records = blocks + int(b), records + int(r)
     return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples))
 
@@ -175,7 +172,7 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
             c.execute("DELETE FROM samples WHERE trial_id >= ? AND trial_id < ?",
                       (trial_id_of(sid, 0), trial_id_of(sid + 1, 0)))
             c.execute("DELETE FROM session_blocks WHERE session_id = ?", (sid,))
-            if _has_table(c, "session_chunks"):
+            if has_table(c, "session_chunks"):
                 c.execute("DELETE FROM session_chunks WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM recordings WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))
