@@ -130,7 +130,14 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PARAM_RANGES", "ParticipantParams"]
+__all__ = ["MODEL_FIT", "MODEL_VERSION", "PARAM_RANGES", "ParticipantParams"]
+
+#: The participant model's version: changes whenever a parameter, range or behaviour changes what a simulated
+#: study gives (a sweep's or a simulated study's results name it, so a prediction can be traced to its model).
+MODEL_VERSION = "1"
+#: What the fitted parameters were fitted to (one line; the calibration table is in this module's docstring).
+MODEL_FIT = ("hand-tuned on 10 simulated 10-participant studies (seeds 0-9) to the paper's ratios of success, "
+             "RMSE and Max AE (absolute RMSE ~60 % of the paper's)")
 
 
 def _trunc_lognormal(rng: np.random.Generator, median: float, sigma: float, k: float = 2.5) -> float:
