@@ -14,7 +14,7 @@ driven by delayed, biased, noisy force percepts):
   and never from before the cue):
 
   - visual, delayed ``τ_v + camera``: ``F̂_v = k̂·δⁿ·e^{N(0,σ_v)}``, ``δ`` = visible
-    indentation, per-trial stiffness belief ``k̂ = k·LogN(median 0.80, σ 0.22)``;
+    indentation, per-trial stiffness belief ``k̂ = k·LogN(median 0.85, σ 0.40)``;
   - haptic (feedback ON only), delayed ``τ_h``: the felt rendered force with
     per-look log noise ``σ_h``, mapped back to tissue force by inverting the
     pipeline's tanh law (f_max 3 N, f_scale 7 N; :func:`pipeline.force.scaling.scale_magnitude`
@@ -29,11 +29,12 @@ driven by delayed, biased, noisy force percepts):
   ``σ_mem = 0.10``; ON ``b ~ LogN(1, 0.05)``, ``σ_mem = 0.13``.
 
 * **Control.** After a reaction time, one feed-forward minimum-jerk approach
-  (:func:`pipeline.sim.hand.min_jerk`) to the believed surface (the visible gap
-  plus a per-trial depth error σ 3 mm) plus the believed target indentation
+  (:func:`pipeline.sim.hand.min_jerk`), 1.1–1.7 s long (× 1.75 with feedback OFF: contact
+  cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
+  σ 4.3 mm) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
   fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
-  decision every ``D + T_int`` (``T_int × 2`` with feedback OFF): hold if
+  decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
   ``|F* − F̂| < 5 % F*``; if no contact is noticed, step down by the search
   step; otherwise a submovement of duration ``D`` by
   ``Δy = G·[δ̂(F*) − δ̂(F̂) + c_pb·(f_H(F*) − f_H(F̂))/K_a]/s`` (ON term only with
@@ -68,8 +69,8 @@ Safety: the commanded equilibrium is clamped to :data:`SAFE_Y_RANGE_M`
 out-of-range observations are ignored or clipped (a NaN image is "no look", a
 NaN time "no time passes", a jump of the time base by > 0.5 s shifts every
 internal time), so ``equilibrium_y`` always returns a finite value and never
-jumps.  Cost: ≈ 0.9 µs per call (1–2.5 µs on a loaded 2-vCPU VM); decisions
-happen every 0.35–1 s, between them the current minimum-jerk value is returned.
+jumps.  Cost: ≈ 0.3–0.9 µs per call (1–2.5 µs on a loaded 2-vCPU VM); decisions
+happen every 0.35–1.75 s, between them the current minimum-jerk value is returned.
 
 The participant's constants, the population they are drawn from, the
 deviations from the model's sources and the calibration against the paper
@@ -386,8 +387,10 @@ class SimulatedParticipant:
         zs = -3.0 if zs < -3.0 else (3.0 if zs > 3.0 else zs)
         self._surface_err = p.surface_sigma_m * zs
         rt = p.reaction_center_s + float(rng.uniform(-0.1, 0.1))
-        self._approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
-        self._interval = p.interval_s * (1.0 if (haptic or gauge) else p.off_interval_factor)
+        feel = haptic or gauge  # the force is felt or shown: no slower, visual-only checking
+        approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
+        self._approach_s = approach_s * (1.0 if feel else p.off_approach_factor)
+        self._interval = p.interval_s * (1.0 if feel else p.off_interval_factor)
         self._period = p.submove_s + self._interval
         self._delta_star = (self._target / self._khat) ** self._inv_n
         # hold where we are until the reaction time has passed
