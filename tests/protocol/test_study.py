@@ -253,7 +253,7 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
         .replace("enabled = true", "enabled = false")
     )
     killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db),
-                       "--protocol", str(proto), "--inject-fault", "kill@P02:1+9"])
+                       "--protocol", str(proto), "--inject-fault", "kill@P02:3+9"])
     assert killed.returncode == -9
     # the workers got SIGKILL from the kernel when the main process died (reaped by init: poll, don't sleep blindly)
     import time
