@@ -42,9 +42,10 @@ OFF / 0.13 ON (assumptions, model v1's values); motor noise 0.15 (relative,
 literature §4.1) + 0.1 mm; hold band 5 %; contact thresholds 1 mm / 0.05 N;
 gauge noise 0.03; retraction 0.4 s (assumptions).
 
-How the fit was done: simulated 10-participant studies with seeds 100–102 (the
-calibration bench's ``--first-study 100 --studies 3``, never the seeds 0–9
-below), one or two constants changed at a time, aiming at the paper's absolute
+How the fit was done: simulated 10-participant studies with seeds 100–101, the
+last choices checked on 100–102 (the calibration bench's functions with
+``--first-study 100``; never the seeds 0–9 below), about twenty runs, one to
+five constants changed at a time, aiming at the paper's absolute
 OFF and ON levels (±25 %) of success, RMSE and Max AE and at a TCT benefit.
 Tried and dropped: a lower stiffness-belief median (0.70: OFF success fell to
 0.09 while OFF RMSE rose by 0.09 N only); an approach that undershoots the
@@ -57,9 +58,10 @@ Deviations from science.md §4.2 and from model v1, and why:
 1. **Stiffness belief: median 0.85, σ 0.40** (v1: 0.80, 0.22).  Without force
    display the force is judged from the seen indentation through a stiffness
    belief; a wider belief makes the over-pressing trials over-press more while
-   the trials whose belief is about right still
-   succeed (with 2–5: OFF RMSE 0.80 → 1.29 N).  The median keeps the *mean* over-press the novices'
-   (+27 % vs +23 %).  With σ_k also in the ML weight, ON relies more on the felt force.
+   the trials whose belief is about right still succeed (with 2–5: OFF RMSE
+   0.80 → 1.29 N).  The median keeps the *mean* over-press the novices'
+   (+27 % vs +23 %).  With σ_k also in the ML weight, ON relies more on the
+   felt force.
 2. **OFF decision-interval factor 4.0** (§4.2's knob, 1.5; v1 2.0): without
    feedback every check is a visual one (look, judge the indentation, decide),
    so OFF corrections come every 0.8–1.8 s; an overshoot lasts longer (OFF RMSE)
