@@ -183,8 +183,12 @@ class SessionRunner:
         auto_reset_faults: bool = False,
         segment: int = 0,
         scales: dict[str, float] | None = None,
+        arms: tuple[str, ...] = (),
     ) -> None:
         self.protocol = protocol
+        #: The rig's arms (() or one: events stored as ever) and the task arm, whose records the runner is given.
+        self.arms = arms
+        self.task_arm = protocol.task_arm_of(arms) if arms else ""
         self.schedule = list(schedule)
         self.session_id = session_id
         self.recorder = recorder
@@ -397,19 +401,25 @@ class SessionRunner:
         return self._window.deviation(rows, m.spec, m.cue_ns, self.limits, self._fault_detail)
 
     def _store_loop_event(self, ev: LoopEvent) -> None:
+        if len(self.arms) > 1 and ev.arm != self.task_arm:
+            # another arm's event: stored with its arm; the task's trial sees that arm only through the task arm's
+            # own records (its OTHER_ARM fault under the policy "both"), so it does not name the trial's fault
+            self._event(int(ev.t_ns), ev.kind, f"arm {ev.arm}: {self._loop_event_detail(ev)}")
+            return
         if ev.kind == "fault":
             self._fault_detail = ev.detail
             self._condition_gone = False
-            detail = ev.detail
         elif ev.kind == "fault_cleared":
             self._condition_gone = True  # a reset can clear it now
-            detail = ev.detail
-        elif ev.kind == "faults_reset":
-            detail = (f"cleared {ev.detail}" if not ev.faults
-                      else f"{Fault(int(ev.faults)).describe()} still latched (its condition persists)")
-        else:
-            detail = ev.detail
-        self._event(int(ev.t_ns), ev.kind, detail)
+        detail = self._loop_event_detail(ev)
+        self._event(int(ev.t_ns), ev.kind, f"arm {ev.arm}: {detail}" if len(self.arms) > 1 else detail)
+
+    @staticmethod
+    def _loop_event_detail(ev: LoopEvent) -> str:  # what the events table keeps of a loop event
+        if ev.kind != "faults_reset":
+            return ev.detail
+        return f"cleared {ev.detail}" if not ev.faults else \
+            f"{Fault(ev.faults).describe()} still latched (its condition persists)"
 
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):

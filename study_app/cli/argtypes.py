@@ -13,12 +13,14 @@ import re
 from collections.abc import Callable
 from typing import NoReturn
 
+from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
 __all__ = [
     "SEED",
     "OneLineParser",
     "add_command",
+    "arm_names",
     "host_name",
     "one_line",
     "positive_seconds",
@@ -87,6 +89,22 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
         if problem is not None:
             raise argparse.ArgumentTypeError(f"{name} = {text!r}: {problem}")
         return text
+
+    return parse
+
+
+def arm_names(name: str, most: int = 4) -> Callable[[str], tuple[str, ...]]:
+    """An argument type: a rig's arms, comma-separated names (the hardware file's ``[[arm]] name`` rule)."""
+
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(","))
+        bad = next((n for n in names if not ARM_NAME.match(n)), None)
+        if bad is not None:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: each arm must be {ARM_NAME_WHAT}; {bad!r} is not")
+        if len(set(names)) != len(names) or len(names) > most:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be 1 to {most} distinct arm names, "
+                                             "comma-separated (e.g. left,right)")
+        return names
 
     return parse
 

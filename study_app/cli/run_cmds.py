@@ -11,9 +11,14 @@ import json
 import os
 import sqlite3
 import sys
+from typing import TYPE_CHECKING
 
-from study_app.cli.argtypes import SEED, add_command, positive_seconds, whole_number
+from pipeline.devices.rig import SINGLE_ARM_NAME
+from study_app.cli.argtypes import SEED, add_command, arm_names, positive_seconds, whole_number
 from study_app.cli.error import CliError
+
+if TYPE_CHECKING:
+    from protocol.config import ProtocolConfig
 
 __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
 
@@ -71,6 +76,11 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help="rehearse a fault on the simulated rig, SECONDS (default 3) after the cue of participant "
                         "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
                         "device-error, kill (ends this command as kill -9 would); repeatable")
+    r.add_argument("--sim-arms", dest="sim_arms", type=arm_names("--sim-arms"), default=(SINGLE_ARM_NAME,),
+                   metavar="NAMES",
+                   help=f"the simulated rig's arms, comma-separated (default: one arm, {SINGLE_ARM_NAME}); the "
+                        "protocol's design.task_arm names the one that does the task, the others are rigged alike and "
+                        "held still (e.g. --sim-arms left,right with task_arm = \"left\")")
     r.set_defaults(handler=cmd_run)
 
 
@@ -130,6 +140,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
+            _check_task_arm(protocol, args)
 
         def show(p):
             nonlocal bar
@@ -148,6 +159,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
                 on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
+                sim_arms=args.sim_arms,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
@@ -178,6 +190,17 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
+
+
+def _check_task_arm(protocol: ProtocolConfig, args: argparse.Namespace) -> None:
+    """The protocol's task arm must be one of ``--sim-arms``: one line naming both."""
+    from protocol.config import ProtocolError
+
+    try:
+        protocol.task_arm_of(args.sim_arms)
+    except ProtocolError as exc:
+        raise CliError(f"{args.protocol or 'protocol/default.toml'}: {exc}; the simulated rig's arms are "
+                       f"--sim-arms {','.join(args.sim_arms)}") from None
 
 
 #: Free space below which ``run`` does not start: SQLite's journal and the first recorded blocks need about this.

@@ -12,9 +12,14 @@ __all__ = ["config_record", "real_config_record"]
 
 
 def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
-    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
+    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds; on a rig of
+    several arms also ``arms``: their names (the task arm, whose records the session holds, first), and each arm's
+    calibration (the session's ``calibration_json`` is the task arm's)."""
     fw = eng.framework.config
+    arms = {"arms": {"names": list(eng.calibrations),
+                     "calibrations": {name: cal.to_dict() for name, cal in eng.calibrations.items()}}}
     return {
+        **(arms if len(eng.calibrations) > 1 else {}),
         "rig": "sim",
         "clock": clock,
         "rig_seed": rig_seed,

@@ -28,6 +28,7 @@ import json
 import os
 from collections.abc import Callable, Sequence
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.rehearsal import FaultPlan
 from protocol.session_setup import participant_code
@@ -41,22 +42,15 @@ from study_app.headless.plan import (
     remaining_trials,
 )
 from study_app.headless.pool import default_jobs, run_parallel
-from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
+from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps, sim_arms_of
 
 __all__ = ["resume_session", "run_study"]
 
 
 def run_study(
-    db_path: str,
-    *,
-    participants: int,
-    seed: int,
-    protocol: ProtocolConfig,
-    clock: str = "virtual",
-    on_progress: Callable[[StudyProgress], None] | None = None,
-    jobs: int | None = None,
-    continue_study: bool = False,
-    faults: Sequence[FaultPlan] = (),
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None, continue_study: bool = False,
+    faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -89,6 +83,8 @@ def run_study(
         the study was started with.
     faults
         Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
+    sim_arms
+        The simulated rig's arms (one: ``right``), among them the protocol's task arm (a resume: the stored ones).
 
     Returns
     -------
@@ -125,12 +121,14 @@ def run_study(
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
-                            on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults)
+                            on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
+                            sim_arms=sim_arms_of(protocol, sim_arms))  # refused before anything is stored
 
 
 def _run_under_lease(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
+    sim_arms: tuple[str, ...],
 ) -> StudyProgress:
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
@@ -151,11 +149,11 @@ def _run_under_lease(
             held = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
-                                faults=faults)
+                                faults=faults, sim_arms=sim_arms)
         for n, steps in plan.items():
             progress.participant, progress.code = n, participant_code(n)
             run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                      on_progress=on_progress, study_owner=owner, faults=faults)
+                      on_progress=on_progress, study_owner=owner, faults=faults, sim_arms=sim_arms)
         return progress
     finally:
         _release_study(held, db_path, owner)
