@@ -118,3 +118,32 @@ def test_open_refusals_name_the_device() -> None:
         sched.open("Left Touch", clock)
     with pytest.raises(DeviceError, match="nothing for the servo scheduler to serve"):
         TouchScheduler(FakeMultiHD()).start()
+
+
+def test_the_pyopenhaptics_adapter_serves_two_devices_by_handle(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The real adapter (:class:`PyOpenHapticsApi`: ctypes callback, hdMakeCurrentDevice, frames by handle) over the
+    pure-Python pyOpenHaptics stand-in; the servo callback is called by hand, not by the stand-in's thread."""
+    import sys
+    from pathlib import Path
+
+    from pipeline.backends.touch import PyOpenHapticsApi
+
+    monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent / "fake_openhaptics"))
+    try:
+        from pyOpenHaptics import hd, hd_callback
+
+        clock = VirtualClock()
+        sched = TouchScheduler(PyOpenHapticsApi())
+        r, lt = sched.open("Right Touch", clock), sched.open("Left Touch", clock)
+        assert (r.handle, lt.handle) == (1, 2) and hd.STATE["names"] == {1: "Right Touch", 2: "Left Touch"}
+        sched.api.schedule_frames(sched._tick)  # what start() does, without the stand-in's scheduler thread
+        r.command_force(0.5, 0.0, 0.0)
+        lt.command_force(0.0, 0.25, 0.0)
+        hd_callback.CALLBACK(None)
+        assert hd.STATE["forces"] == {1: [0.5, 0.0, 0.0], 2: [0.0, 0.25, 0.0]}
+        assert hd.STATE["frames"] == [("begin", 1, 1), ("end", 1, 1), ("begin", 2, 2), ("end", 2, 2)]
+        r.close()
+        lt.close()
+    finally:
+        for name in [m for m in sys.modules if m == "pyOpenHaptics" or m.startswith("pyOpenHaptics.")]:
+            del sys.modules[name]
