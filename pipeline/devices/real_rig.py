@@ -245,6 +245,9 @@ def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
                              dll_dir=cfg.dll_dir)
 
 
+_OPEN_HAPTIC = open_haptic  # the module's own: see _Touches
+
+
 def open_touch_scheduler(dll_dir: str | None) -> Any:
     """One OpenHaptics servo scheduler for every arm's Touch (:class:`pipeline.backends.touch.TouchScheduler`;
     needs OpenHaptics and the ``touch`` extra)."""
@@ -263,10 +266,11 @@ def open_jaw(cfg: JawSettings) -> JawActuator:
 class _Touches:
     """Every arm's Touch: one arm's opened alone (:func:`open_haptic`, the seam the app's tests replace); two or
     more into one servo scheduler (:func:`open_touch_scheduler`), made when the first is opened and started once
-    every one is."""
+    every one is -- unless :func:`open_haptic` was replaced, which then opens each."""
 
     def __init__(self, arms: Sequence[ArmSettings], clock: Clock) -> None:
-        self.shared = len(arms) > 1
+        # a replaced open_haptic (the app's HostConfig.haptic_factory, a test's stand-in) opens every arm's Touch
+        self.shared = len(arms) > 1 and open_haptic is _OPEN_HAPTIC
         self.clock = clock
         self.dll_dir = next((a.haptic.dll_dir for a in arms if a.haptic.dll_dir is not None), None)
         self.scheduler: Any = None

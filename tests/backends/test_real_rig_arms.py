@@ -185,3 +185,18 @@ def test_a_dead_loop_leaves_no_force_on_either_touch(fakes: Any, touches: FakeMu
             assert t.forces[-3:] == [(0.0, 0.0, 0.0)] * 3 and t.forces[-12][2] < 0.0
     finally:
         eng.rig.close()
+
+
+def test_a_replaced_haptic_opener_opens_each_arms_touch(fakes: Any, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The app's rig-construction seam (``open_haptic`` replaced by a stand-in) works for two arms too."""
+    names: list[str] = []
+
+    def stand_in(cfg: Any, clock: Any) -> Any:
+        names.append(cfg.device_name)
+        return TouchScheduler(FakeMultiHD(FakeTouch(cfg.device_name))).open(cfg.device_name, clock)
+
+    monkeypatch.setattr("pipeline.devices.real_rig.open_haptic", stand_in)
+    opened: list[str] = []
+    rig = build_real_rig(_file(fakes), VirtualClock(), on_open=opened.append)
+    rig.close()
+    assert names == ["Right Touch", "Left Touch"] and not any("scheduler" in o for o in opened)
