@@ -70,7 +70,7 @@ from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.records import AbortCause, Outcome, TrialRecord
-from protocol.session_recording import SessionRecording
+from protocol.session_recording import OtherArms, SessionRecording
 from protocol.storage import Recorder, StudyDatabase
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
@@ -190,9 +190,7 @@ class SessionRunner:
         self.arms = arms
         self.task_arm = protocol.task_arm_of(arms) if arms else ""
         self.schedule = list(schedule)
-        self.session_id = session_id
-        self.recorder = recorder
-        self.submit = submit
+        self.session_id, self.recorder, self.submit = session_id, recorder, submit
         self.position = start_position
         self.participant = participant
         #: Training: the participant sees a live force gauge with the target band.
@@ -228,6 +226,7 @@ class SessionRunner:
         self._pending_gap = ""  # records lost before the next block
         self.segment = segment
         self._recording = SessionRecording(recorder, session_id, segment, scales)
+        self.other_arms = OtherArms(self._recording)  # a rig of several arms: the others' records (session_driver)
         self._failed_in_a_row = 0  # trials the loop did not deliver as designed, since the last that it did
         self._enter_pause_commands()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick

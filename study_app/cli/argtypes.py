@@ -20,6 +20,7 @@ __all__ = [
     "SEED",
     "OneLineParser",
     "add_command",
+    "arm_name",
     "arm_names",
     "host_name",
     "one_line",
@@ -88,6 +89,17 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
         problem = host_problem(text, ipv6=ipv6)
         if problem is not None:
             raise argparse.ArgumentTypeError(f"{name} = {text!r}: {problem}")
+        return text
+
+    return parse
+
+
+def arm_name(name: str) -> Callable[[str], str]:
+    """An argument type: one arm of a rig, by name (the hardware file's ``[[arm]] name`` rule)."""
+
+    def parse(text: str) -> str:
+        if not ARM_NAME.match(text):
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be {ARM_NAME_WHAT}")
         return text
 
     return parse

@@ -130,7 +130,9 @@ def _drive(
     ring = eng.ring
     assert ring is not None
     loop = eng.loop
-    driver = SessionDriver(ring, loop.replay_log)
+    others = tuple((name, rg, loop.arm(name).replay_log) for name, rg in eng.rings.items()
+                   if rg is not None and rg is not ring)
+    driver = SessionDriver(ring, loop.replay_log, others)
     loop.on_event = driver.on_loop_event  # a deque's append is atomic: safe from the real-clock loop thread
     t_last_report = 0.0
     base_done = progress.study_trials_done
