@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from pipeline.force.pipeline_settings import non_default_settings, settings_of
 from pipeline.runtime.engine import Engine
 from pipeline.settings.hardware import HardwareConfig
 
@@ -12,7 +13,12 @@ __all__ = ["config_record", "real_config_record"]
 
 
 def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
-    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
+    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds.
+
+    ``pipeline_settings`` repeats, from ``framework``, the settings ``run --set`` chooses that are not the paper's
+    (:mod:`pipeline.force.pipeline_settings`; ``{}`` for the paper's), so that analysis can say so without
+    knowing the pipeline's defaults.
+    """
     fw = eng.framework.config
     return {
         "rig": "sim",
@@ -21,6 +27,7 @@ def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int)
         "participant_seed": participant_seed,
         "sim": _plain(dataclasses.asdict(eng.rig.config)),
         "framework": _plain(dataclasses.asdict(fw)),
+        "pipeline_settings": non_default_settings(settings_of(fw)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
 
@@ -35,6 +42,7 @@ def real_config_record(hw: HardwareConfig, hardware_text: str, eng: Engine) -> d
         "hardware_toml": hardware_text,
         "hardware": _plain(dataclasses.asdict(hw)),
         "framework": _plain(dataclasses.asdict(eng.framework.config)),
+        "pipeline_settings": non_default_settings(settings_of(eng.framework.config)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
 

@@ -17,6 +17,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
@@ -97,10 +98,10 @@ def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     return per * participants
 
 
-def _engine(rig_seed: int, clock: str) -> Engine:
+def _engine(rig_seed: int, clock: str, framework: FrameworkConfig) -> Engine:
     return build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
-                     ring_seconds=30.0)
+                     ring_seconds=30.0, framework=framework)
     )
 
 
@@ -157,14 +158,18 @@ def run_session(
     db: StudyDatabase, *, code: str, number: int, kind: str | None, protocol: ProtocolConfig, study_seed: int,
     clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
     short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
-    faults: Sequence[FaultPlan] = (),
+    faults: Sequence[FaultPlan] = (), framework: FrameworkConfig | None = None,
 ) -> int:
-    """Run one session to its end on a fresh simulated rig: a new one of ``kind``, or the interrupted ``resume_id``."""
+    """Run one session to its end on a fresh simulated rig: a new one of ``kind``, or the interrupted ``resume_id``.
+
+    ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
+    """
+    fw = framework or FrameworkConfig()
     rig_seed, p_seed = participant_seeds(study_seed, number)
     if resume_id is None:
         assert kind is not None
         # training and experiment each get their own rig: the same seed gives the same study whatever ran before
-        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
+        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock, fw)
         opened = open_new_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
@@ -173,7 +178,7 @@ def run_session(
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
         # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
-        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
+        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
     participant = SimulatedParticipant(seed=opened.participant_seed)
@@ -246,7 +251,7 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
 def run_steps(
     db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
-    faults: Sequence[FaultPlan] = (), short_transactions: bool = False,
+    faults: Sequence[FaultPlan] = (), short_transactions: bool = False, framework: FrameworkConfig | None = None,
 ) -> None:
     """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
     code = participant_code(number)
@@ -254,4 +259,4 @@ def run_steps(
         run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
                      study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
                      short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
-                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults)
+                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, framework=framework)
