@@ -99,23 +99,26 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     tct = summary[summary["metric"] == "tct_s"].reset_index(drop=True)
     rmse = summary[summary["metric"] == "rmse_n"].reset_index(drop=True)
     pts: list[tuple[float, float]] = []
-    for (_, t), (_, r) in zip(tct.iterrows(), rmse.iterrows(), strict=True):
+    one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
+    for i, ((_, t), (_, r)) in enumerate(zip(tct.iterrows(), rmse.iterrows(), strict=True)):
         x, y = float(r["on"]), float(t["on"])
         xerr = [[_half(r, "low")], [_half(r, "high")]]
         yerr = [[_half(t, "low")], [_half(t, "high")]]
         star = bool(t["paper"])
         ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=MODE_COLORS["on"], marker="*" if star else "o",
                     markersize=8 if star else 4, capsize=2, linewidth=0.8)
-        ax.annotate(_label(t, swept) + (" (paper)" if star else ""), (x, y), fontsize=6.5, xytext=(4, 3),
+        text = (f"{float(t[swept[0]]):g}" if one else _label(t, swept)) + (" (paper)" if star else "")
+        ax.annotate(text, (x, y), fontsize=6.5, xytext=(5, 5) if i % 2 == 0 else (5, -9),
                     textcoords="offset points")
         pts.append((x, y))
-    for (x0, y0), (x1, y1) in itertools.pairwise(pts) if len(swept) == 1 else ():
+    for (x0, y0), (x1, y1) in itertools.pairwise(pts) if one else ():
         ax.plot([x0, x1], [y0, y1], color="#bbbbbb", linewidth=0.6, zorder=0)
+    ax.margins(x=0.2, y=0.1)
     ax.set_xlabel("RMSE (N), haptics ON")
     ax.set_ylabel("TCT, successful trials (s), haptics ON")
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
-    ax.set_title("Speed–accuracy front across settings (lower left is better)")
+    ax.set_title(("Speed–accuracy front across " + (swept[0] if one else "settings")) + " (lower left is better)")
     add_note(fig, note)
     return fig
 

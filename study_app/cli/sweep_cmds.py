@@ -112,9 +112,11 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     def show(p) -> None:
         nonlocal bar
         if bar is None:
-            bar = ProgressBar(max(p.runs_total, 1), "sweep", "participants", decimals=0)
             if p.cells_cached:
                 print(f"sweep: {p.cells_cached} of {p.cells_total} cells from {out / CACHE_FILE}", file=sys.stderr)
+            if not p.runs_total:
+                return  # every cell cached: nothing to show progress of
+            bar = ProgressBar(p.runs_total, "sweep", "participants", decimals=0)
         eta = "" if math.isnan(p.eta_s) else f", ETA {p.eta_s:.0f} s"
         bar.label = f"sweep: cells {p.cells_cached + p.cells_done}/{p.cells_total}{eta}"
         bar.update(p.runs_done)

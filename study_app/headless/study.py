@@ -49,17 +49,9 @@ __all__ = ["resume_session", "run_study"]
 
 
 def run_study(
-    db_path: str,
-    *,
-    participants: int,
-    seed: int,
-    protocol: ProtocolConfig,
-    clock: str = "virtual",
-    on_progress: Callable[[StudyProgress], None] | None = None,
-    jobs: int | None = None,
-    continue_study: bool = False,
-    faults: Sequence[FaultPlan] = (),
-    framework: FrameworkConfig | None = None,
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None,
+    continue_study: bool = False, faults: Sequence[FaultPlan] = (), framework: FrameworkConfig | None = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -93,8 +85,7 @@ def run_study(
     faults
         Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
     framework
-        The pipeline's configuration of every session (default: the paper's); stored with each session.  A study
-        whose stored sessions ran with other settings is refused (one study, one pipeline).
+        Every session's pipeline configuration (default: the paper's; stored sessions must have the same).
 
     Returns
     -------
@@ -110,7 +101,7 @@ def run_study(
         process writes to it (:class:`protocol.storage.LeaseHeld`), or one of
         the participant codes already has sessions in it (without
         ``continue_study``), or, when continuing, the stored sessions were run
-        with another seed or protocol.
+        with another seed, protocol or pipeline settings.
     StudyWorkerError
         A participant's worker failed: the others are stopped (their sessions
         stay ``running``); ``continue_study`` completes the study.
@@ -127,13 +118,13 @@ def run_study(
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study,
-                                           framework)
+    fw = framework or FrameworkConfig()
+    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
-                            framework=framework or FrameworkConfig())
+                            framework=fw)
 
 
 def _run_under_lease(
