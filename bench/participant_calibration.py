@@ -12,6 +12,10 @@ over trials, mean TCT over successful trials) and prints, per study and as the
 mean over studies, the OFF/ON values, the change, the paper's values and the
 Wilcoxon signed-rank p of the 10 paired differences, plus the per-target
 success rates and TCT with failures censored at 12 s.
+
+The runner (:mod:`study_app.headless.sim_trials`) and the per-study summary
+(:mod:`analysis.sim_study`) are the product's, shared with ``haptic-study
+sweep``: seed 0's sweep studies are this bench's studies.
 """
 
 from __future__ import annotations
