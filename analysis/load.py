@@ -85,7 +85,9 @@ class StudyData:
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
         ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
         ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
-        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored), which code
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored),
+        ``pipeline_settings`` (the pipeline settings it ran with that are not the paper's, ``run --set``, as
+        ``filter_window=50, f_scale_n=3``; ``""`` for the paper's or when not stored), which code
         ran it (``software_commit``, ``software_dirty``; empty before schema version 4 or when not known),
         ``n_designed`` (the trials its design has: the schedule less its re-runs), ``first_mode`` (the haptic
         mode of the schedule's first trial) and ``analysed`` (its trials are analysed: an experiment session,
@@ -152,14 +154,20 @@ def _protocol_fields(protocol_json: str, where: str) -> dict[str, object]:
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
 
 
-def _watchdog_limits(config_json: object) -> dict[str, float]:
-    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say)."""
+def _watchdog_limits(config_json: object) -> dict[str, float | str]:
+    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say), and its pipeline
+    settings that are not the paper's (``""``: the paper's, or not stored)."""
     try:
         wd = json.loads(str(config_json)).get("watchdog", {})
         sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
     except (ValueError, KeyError, TypeError, AttributeError):
         sensor = pose = math.nan
-    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
+    try:
+        chosen = json.loads(str(config_json)).get("pipeline_settings") or {}
+        settings = ", ".join(f"{k}={float(v):g}" for k, v in chosen.items())
+    except (ValueError, TypeError, AttributeError):
+        settings = ""
+    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose, "pipeline_settings": settings}
 
 
 #: What analysis decodes of a recorded block (a block written before version 4 has no checksum: these are tried).

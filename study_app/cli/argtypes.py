@@ -26,6 +26,8 @@ __all__ = [
     "one_line",
     "positive_seconds",
     "real_number",
+    "setting",
+    "setting_list",
     "whole_number",
 ]
 
@@ -142,3 +144,45 @@ def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
 
 #: Seeds are stored in the study database: at most SQLite's largest INTEGER.
 SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")
+
+
+def _setting_parts(text: str) -> tuple[str, str]:
+    """``NAME=VALUE`` split at its ``=``; the parser's one-line error when there is none."""
+    name, eq, value = text.partition("=")
+    if not eq or not name.strip():
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: must be NAME=VALUE, NAME one of the pipeline's settings "
+                                         "(filter_window, f_scale_n, f_max_n, slew_n_per_s, ramp_in_s)")
+    return name.strip(), value.strip()
+
+
+def setting(text: str) -> tuple[str, float]:
+    """An argument type: one pipeline setting ``NAME=VALUE`` (:mod:`pipeline.force.pipeline_settings`), checked
+    against the pipeline configuration's own limits."""
+    from pipeline.force.pipeline_settings import canonical_name, parse_setting
+
+    name, value = _setting_parts(text)
+    try:
+        if "," in value:
+            raise ValueError(f"{canonical_name(name)}: one value here (lists of values are for haptic-study sweep)")
+        return canonical_name(name), parse_setting(name, value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: {exc}") from None
+
+
+def setting_list(text: str) -> tuple[str, tuple[float, ...]]:
+    """An argument type: ``NAME=V1,V2,...``, the values of one pipeline setting a sweep runs (distinct, each checked
+    as :func:`setting` checks one)."""
+    from pipeline.force.pipeline_settings import canonical_name, parse_setting
+
+    name, value = _setting_parts(text)
+    try:
+        key = canonical_name(name)
+        texts = [v.strip() for v in value.split(",")]
+        if not value or any(not v for v in texts):
+            raise ValueError(f"{key}: an empty value; give a comma-separated list of values")
+        values = tuple(parse_setting(key, v) for v in texts)
+        if len(set(values)) != len(values):
+            raise ValueError(f"{key}: a value is given twice; give each value once")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: {exc}") from None
+    return key, values

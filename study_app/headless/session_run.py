@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
+from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
@@ -99,12 +100,12 @@ def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     return per * participants
 
 
-def _engine(rig_seed: int, clock: str, arms: tuple[str, ...]) -> Engine:
+def _engine(rig_seed: int, clock: str, arms: tuple[str, ...], framework: FrameworkConfig) -> Engine:
     """A fresh simulated rig with ``arms`` (the task arm first: the participant holds its stylus, its ring is the
-    session's records, its seed is the one-arm rig's)."""
+    session's records, its seed is the one-arm rig's) running the pipeline ``framework``."""
     return build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
-                     ring_seconds=30.0, arms=arms)
+                     ring_seconds=30.0, arms=arms, framework=framework)
     )
 
 
@@ -177,15 +178,20 @@ def run_session(
     clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
     short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    framework: FrameworkConfig | None = None,
 ) -> int:
     """Run one session to its end on a fresh simulated rig with ``sim_arms``: a new one of ``kind``, or the
-    interrupted ``resume_id`` (on the arms it ran on)."""
+    interrupted ``resume_id`` (on the arms it ran on).
+
+    ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
+    """
+    fw = framework or FrameworkConfig()
     rig_seed, p_seed = participant_seeds(study_seed, number)
     if resume_id is None:
         assert kind is not None
         arms = sim_arms_of(protocol, sim_arms)
         # training and experiment each get their own rig: the same seed gives the same study whatever ran before
-        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock, arms)
+        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock, arms, fw)
         opened = open_new_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
@@ -195,7 +201,7 @@ def run_session(
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
         # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
         arms = _stored_arms(info)
-        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms)
+        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
     participant = SimulatedParticipant(seed=opened.participant_seed)
@@ -269,6 +275,7 @@ def run_steps(
     db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
     faults: Sequence[FaultPlan] = (), short_transactions: bool = False, sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    framework: FrameworkConfig | None = None,
 ) -> None:
     """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
     code = participant_code(number)
@@ -276,4 +283,5 @@ def run_steps(
         run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
                      study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
                      short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
-                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms)
+                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
+                     framework=framework)

@@ -50,8 +50,8 @@ def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSp
     if tamper is not None:
         build = session_run._engine
 
-        def engine(rig_seed: int, clock: str, arms: tuple[str, ...]) -> Engine:
-            eng = build(rig_seed, clock, arms)
+        def engine(*args: object) -> Engine:
+            eng = build(*args)
             tamper(eng)
             return eng
 

@@ -139,10 +139,11 @@ def test_the_other_arm_is_recorded_beside_the_task_arm_read_by_name_and_checked(
 
 
 def test_a_crash_keeps_the_other_arms_committed_records_and_a_withdrawal_removes_them(tmp_path: Path) -> None:
+    from test_storage import FakeClock, _session_args
+
     from protocol.recording import BLOCK_RECORDS, COLUMNS, read_segment
     from protocol.storage import Recorder, StudyDatabase
     from protocol.storage.withdrawal import erase_participant, footprint
-    from test_storage import FakeClock, _session_args
 
     def records(first: int, n: int) -> dict[str, np.ndarray]:
         tick = np.arange(first, first + n, dtype=np.int64)
