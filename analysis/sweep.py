@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.sim_study import TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
+from pipeline.runtime.platform_support import O_NOFOLLOW
 
 __all__ = [
     "CACHE_FILE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key", "is_cache_file",
@@ -93,7 +94,7 @@ def read_cache(path: str | os.PathLike[str]) -> dict[str, list[TrialRow]]:
 def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]) -> None:
     """Append one finished cell to the cache (created owner-only; never through a link)."""
     line = json.dumps({"key": key, "rows": [trial_row_to_dict(r) for r in rows]}, separators=(",", ":")) + "\n"
-    flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | getattr(os, "O_NOFOLLOW", 0)
+    flags = os.O_WRONLY | os.O_CREAT | os.O_APPEND | O_NOFOLLOW  # (0 where the OS has none: platform_support)
     fd = os.open(path, flags, 0o600)
     try:
         size = os.fstat(fd).st_size
