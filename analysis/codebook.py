@@ -330,6 +330,9 @@ COLUMNS: tuple[Column, ...] = (
            label="sensor age limit (ms)", decimals=3),
     Column("watchdog_pose_max_age_ms", "the watchdog's robot pose age limit the session ran with", "ms",
            label="pose age limit (ms)", decimals=3),
+    Column("pipeline_settings", "the pipeline settings the session ran with that are not the paper's "
+           "(haptic-study run --set), as NAME=VALUE, comma-separated; empty: the paper's", type="text",
+           label="pipeline settings"),
     Column("n_trials", "experiment trials with a loop record", "count", "integer", label="trials",
            files=("loop_health_by_participant.csv",)),
     Column("n_outside_bounds", "of those, trials outside the bounds", "count", "integer", label="outside bounds"),

@@ -85,7 +85,9 @@ class StudyData:
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
         ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
         ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
-        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored), which code
+        ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored),
+        ``pipeline_settings`` (the pipeline settings it ran with that are not the paper's, ``run --set``, as
+        ``filter_window=50, f_scale_n=3``; ``""`` for the paper's or when not stored), which code
         ran it (``software_commit``, ``software_dirty``; empty before schema version 4 or when not known),
         ``n_designed`` (the trials its design has: the schedule less its re-runs), ``first_mode`` (the haptic
         mode of the schedule's first trial) and ``analysed`` (its trials are analysed: an experiment session,
@@ -152,14 +154,20 @@ def _protocol_fields(protocol_json: str, where: str) -> dict[str, object]:
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
 
 
-def _watchdog_limits(config_json: object) -> dict[str, float]:
-    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say)."""
+def _watchdog_limits(config_json: object) -> dict[str, float | str]:
+    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say), and its pipeline
+    settings that are not the paper's (``""``: the paper's, or not stored)."""
     try:
         wd = json.loads(str(config_json)).get("watchdog", {})
         sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
     except (ValueError, KeyError, TypeError, AttributeError):
         sensor = pose = math.nan
-    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose}
+    try:
+        chosen = json.loads(str(config_json)).get("pipeline_settings") or {}
+        settings = ", ".join(f"{k}={float(v):g}" for k, v in chosen.items())
+    except (ValueError, TypeError, AttributeError):
+        settings = ""
+    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose, "pipeline_settings": settings}
 
 
 #: What analysis decodes of a recorded block (a block written before version 4 has no checksum: these are tried).
@@ -392,7 +400,8 @@ _RECORDED_TRACE = ("force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", 
                    "render_fx", "render_fy", "render_fz", "faults")
 
 
-def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int) -> pd.DataFrame:
+def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_index: int,
+                       arm: str | None = None) -> pd.DataFrame:
     """Every stored column of one trial's samples, in time order.
 
     Parameters
@@ -401,6 +410,8 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
         The study database.
     session_id, trial_index
         Which trial.
+    arm
+        A rig of several arms: whose records over the trial's window (None: the task arm's, the trial's own).
 
     Returns
     -------
@@ -417,19 +428,23 @@ def read_trial_samples(database: str | os.PathLike[str], session_id: int, trial_
     """
     db = _open(str(database))
     try:
+        try:
+            key = db.arm_key(int(session_id), arm)
+        except KeyError as exc:
+            raise AnalysisError(f"{database}: {exc.args[0]}") from None
         frame = pd.DataFrame()
         if db.schema_version >= 3:
             row = db.trial_window(trial_id_of(int(session_id), int(trial_index)))
             where = None if row is None else recorded_where(session_id, *row)
             if where is not None:
                 try:
-                    cols = read_ticks(db, *where, ("t_ns", *_RECORDED_TRACE))
+                    cols = read_ticks(db, *where, ("t_ns", *_RECORDED_TRACE), arm=key)
                 except RecordingDamaged as exc:
                     raise AnalysisError(f"{database}: trial {int(trial_index) + 1} of session {session_id}: "
                                         f"{exc}") from None
                 t_ns = cols.pop("t_ns")
                 frame = pd.DataFrame({"t_s": (t_ns - t_ns[0]) / 1e9, **{c: cols[c] for c in _RECORDED_TRACE}})
-        if frame.empty:
+        if frame.empty and not key:
             frame = frame_of(db.trial_samples(trial_id_of(int(session_id), int(trial_index)), _SAMPLE_COLUMNS))
     finally:
         db.close()
@@ -447,7 +462,8 @@ RECORDED_COLUMNS = (
 )
 
 
-def recorded_samples(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+def recorded_samples(database: str | os.PathLike[str], session_id: int | None = None,
+                     arm: str | None = None) -> pd.DataFrame:
     """The 1 kHz records of one session (or all) as one table, with the recording's own column names.
 
     :func:`analysis.samples.samples_frame` labels it for people (``haptic-study export samples``).
@@ -462,6 +478,9 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
         The study database (opened read-only).
     session_id
         One session, or None for every session.
+    arm
+        A rig of several arms: the arm whose records to read, by name (None: the task arm's, which the trials are
+        judged on).
 
     Returns
     -------
@@ -489,7 +508,11 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
                 raise AnalysisError(f"{database}: no session {session_id} (sessions: {listed})")
             ids = [int(session_id)]
         damage: list[str] = []
-        parts = [_session_samples(db, sid, damage) for sid in ids]
+        try:
+            keys = {sid: db.arm_key(sid, arm) for sid in ids}
+        except KeyError as exc:
+            raise AnalysisError(f"{database}: {exc.args[0]}") from None
+        parts = [_session_samples(db, sid, damage, keys[sid]) for sid in ids]
     finally:
         db.close()
     parts = [p for p in parts if len(p)]
@@ -498,15 +521,15 @@ def recorded_samples(database: str | os.PathLike[str], session_id: int | None = 
     return out
 
 
-def _session_samples(db: StudyReader, session_id: int, damage: list[str]) -> pd.DataFrame:
+def _session_samples(db: StudyReader, session_id: int, damage: list[str], arm: str = "") -> pd.DataFrame:
     """A session's records (see :func:`samples_frame`); damaged blocks are left out and described in ``damage``."""
     from protocol.recording import read_segment, segments_of
 
     frames = []
     if db.schema_version >= 3:
         cues = db.trial_cues(session_id)
-        for seg, _, _ in segments_of(db, session_id):
-            d = read_segment(db, session_id, seg, skip_damaged=True)
+        for seg, _, _ in segments_of(db, session_id, arm):
+            d = read_segment(db, session_id, seg, skip_damaged=True, arm=arm)
             damage.extend(x.describe() for x in d.damage)
             c = d.columns
             n = len(c["tick"])
@@ -532,7 +555,7 @@ def _session_samples(db: StudyReader, session_id: int, damage: list[str]) -> pd.
                 "latency_ms": c["latency_ns"] / 1e6,
             })
             frames.append(frame)
-    old = frame_of(db.session_samples(session_id))
+    old = frame_of(db.session_samples(session_id)) if not arm else pd.DataFrame()  # (v1/v2 kept one arm's)
     if len(old):
         frames.append(pd.DataFrame({
             "session_id": session_id, "session_time_s": old["started_at_s"] + old["t_s"],

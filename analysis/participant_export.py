@@ -14,6 +14,8 @@
     recording_log.csv   the recording's log: commands and events the pipeline applied, by tick
     recordings.csv      their recorded runs; blocks.csv the recorded blocks (where, how many records, checksum);
                         chunks.csv the last block of a run that was killed, as its commits wrote it
+    arm_samples.csv     a rig of several arms: the other arms' 1 kHz records (as samples.csv, with the arm);
+                        arm_recordings.csv, arm_blocks.csv, arm_chunks.csv their runs and blocks (only when stored)
     leases.csv          writers' leases on their sessions (normally none: a lease lives while a session runs)
     codebook.csv        every column of every table: what it holds, its unit and type
 
@@ -79,6 +81,7 @@ _DESCRIBED: dict[str, tuple[str, str, str]] = {  # column -> (description, unit,
               "integer"),
     "block": ("block within the recorded run, numbered from 0", "", "integer"),
     "chunk": ("chunk of the block, in the order its commits wrote them, numbered from 0", "", "integer"),
+    "arm": ("the rig's arm the records are of (a rig of several arms; the task arm's are samples.csv)", "", "text"),
     "n_records": ("1 kHz records the block holds", "count", "integer"),
     "t_first_s": ("session-clock time of the block's first record", "s", "number"),
     "t_last_s": ("session-clock time of the block's last record", "s", "number"),
@@ -141,6 +144,10 @@ FILES = {
     "blocks": "the recorded blocks: where, how many records, checksum",
     "chunks": "the last block of a run that was killed, in the chunks its commits wrote: where, how many records, "
               "checksum",
+    "arm_samples": "a rig of several arms: every recorded 1 kHz record of the other arms than the task arm",
+    "arm_recordings": "a rig of several arms: the other arms' recorded runs",
+    "arm_blocks": "a rig of several arms: the other arms' recorded blocks",
+    "arm_chunks": "a rig of several arms: the other arms' last blocks of a run that was killed, in their chunks",
     "leases": "writers' leases on their sessions (normally none)",
     "codebook.csv": "every column of every table: what it holds, its unit and type",
 }
@@ -190,6 +197,17 @@ def _settings(rows: ParticipantRows, database: str) -> dict[str, Any]:
     return {"participant": rows.code, "database": os.path.basename(database),
             "exported_at": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
             "exported_by": f"haptic-study {software_version()}", "files": FILES, "sessions": out}
+
+
+def _other_arms(path: str, rows: ParticipantRows) -> dict[str, pd.DataFrame]:
+    """A rig of several arms: the other arms' records and recordings ({} when none is stored)."""
+    recs = _frame(rows, "arm_recordings", tuple(_RECORDING_JSON))
+    if recs.empty:
+        return {}
+    samples = [samples_frame(path, int(sid), str(arm))
+               for sid, arm in recs[["session_id", "arm"]].drop_duplicates().itertuples(index=False)]
+    return {"arm_samples": pd.concat(samples, ignore_index=True), "arm_recordings": recs,
+            "arm_blocks": _frame(rows, "arm_blocks"), "arm_chunks": _frame(rows, "arm_chunks")}
 
 
 def _recording_extras(database: str, session_ids: tuple[int, ...]) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -272,6 +290,7 @@ def participant_export(database: str | os.PathLike[str], code: str,
         "recordings": _frame(rows, "recordings", tuple(_RECORDING_JSON)),
         "blocks": _frame(rows, "session_blocks"),
         "chunks": _frame(rows, "session_chunks"),
+        **_other_arms(path, rows),
         "leases": _frame(rows, "leases"),
     }
     return ParticipantExport(code, tables, _settings(rows, path), damage)
@@ -286,7 +305,7 @@ def _describe(file: str, column: str) -> tuple[str, str, str]:
     file = Path(file).stem + ".csv"  # a Parquet table is described as its CSV twin
     if (file, column) in _FILE_DESCRIBED:
         return _FILE_DESCRIBED[(file, column)]
-    if file == "samples.csv" and column in _SAMPLE_COLUMNS:  # the labelled records, as `export samples` says
+    if file in ("samples.csv", "arm_samples.csv") and column in _SAMPLE_COLUMNS:  # labelled as `export samples` says
         return _SAMPLE_COLUMNS[column]
     c = (codebook.lookup(file, column) if file == "trials.csv" else None)
     if c is not None:

@@ -292,13 +292,15 @@ def _origin(study: StudyData) -> tuple[str, str]:
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     rigs = exp["rig"].value_counts()
     n_sim, n_real = int(rigs.get("sim", 0)), int(rigs.get("real", 0))
+    chosen = sorted({str(s) for s in exp.get("pipeline_settings", pd.Series(dtype=str)) if s and str(s) != "nan"})
+    settings = (f" Pipeline settings not the paper's (run --set): {' / '.join(chosen)}." if chosen else "")
     if n_real == 0:
         return "sim", ("Simulated data: every experiment session was recorded on the simulated rig (rig = sim) with "
-                       "simulated participants. These numbers describe the simulation, not people.")
+                       "simulated participants. These numbers describe the simulation, not people." + settings)
     if n_sim == 0:
-        return "real", "Recorded on the real rig (rig = real) with real participants."
+        return "real", "Recorded on the real rig (rig = real) with real participants." + settings
     return "mixed", (f"Mixed data: {plural(n_sim, 'experiment session')} on the simulated rig (rig = sim) and "
-                     f"{n_real} on the real rig (rig = real); see the sessions table.")
+                     f"{n_real} on the real rig (rig = real); see the sessions table." + settings)
 
 
 def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> str:

@@ -29,6 +29,8 @@ _FAULTS = ", ".join(f"{bit} {name}" for bit, name in sorted(FAULT_BITS.items()))
 SAMPLES_COLUMNS: tuple[tuple[str, str, str, str], ...] = (
     ("participant_code", "text", "", "pseudonymous participant code of the session"),
     ("session_id", "integer", "", "session in its database (sessions.session_id; haptic-study sessions lists them)"),
+    ("arm", "text", "", ("the rig's arm whose records these are (exported with --arm on a rig of several arms; "
+     "without it the task arm's, the trials' own)")),
     ("segment", "integer", "", "run of the session the record belongs to: 0, then one more per resume"),
     ("tick", "integer", "count", "the 1 kHz loop's tick number within its run"),
     ("session_time_s", "number", "s", "time since the session started (session clock)"),
@@ -72,7 +74,8 @@ def _codes(database: str | os.PathLike[str]) -> dict[int, str]:
         db.close()
 
 
-def samples_frame(database: str | os.PathLike[str], session_id: int | None = None) -> pd.DataFrame:
+def samples_frame(database: str | os.PathLike[str], session_id: int | None = None,
+                  arm: str | None = None) -> pd.DataFrame:
     """The 1 kHz records of one session (or all), labelled: what ``haptic-study export samples`` writes.
 
     A session recorded by schema version 3 or later gives every record from its start to its end (training,
@@ -84,6 +87,8 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
         The study database (opened read-only).
     session_id
         One session, or None for every session.
+    arm
+        A rig of several arms: the arm whose records, by name (None: the task arm's); named, it is a column too.
 
     Returns
     -------
@@ -96,10 +101,12 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
     AnalysisError
         Not a study database, or no such session.
     """
-    raw = recorded_samples(database, session_id)
+    raw = recorded_samples(database, session_id, arm)
     out = raw.rename(columns=_RENAME)
     codes = _codes(database)
     out.insert(0, "participant_code", out["session_id"].map(lambda s: codes.get(int(s), "")).astype(str))
+    if arm is not None:
+        out.insert(2, "arm", arm)
     if "phase_code" in out.columns:
         phase = out["phase_code"]
         names = {int(c): PHASE_NAMES.get(int(c), f"unknown ({int(c)})") for c in pd.unique(phase.dropna())}

@@ -12,29 +12,25 @@ over trials, mean TCT over successful trials) and prints, per study and as the
 mean over studies, the OFF/ON values, the change, the paper's values and the
 Wilcoxon signed-rank p of the 10 paired differences, plus the per-target
 success rates and TCT with failures censored at 12 s.
+
+The runner (:mod:`study_app.headless.sim_trials`) and the per-study summary
+(:mod:`analysis.sim_study`) are the product's, shared with ``haptic-study
+sweep``: seed 0's sweep studies are this bench's studies.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import multiprocessing as mp
 import statistics
 import sys
 import time
-from dataclasses import dataclass
 from typing import Any
 
-import numpy as np
-
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
-from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from analysis.sim_study import TrialRow, summarise_study
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import ParticipantParams
-from pipeline.sim.rig import SimRigConfig
-from protocol.config import ProtocolConfig, default_protocol
-from protocol.design import build_schedule
-from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
+from study_app.headless.sim_trials import participant_seeds, run_participant, run_study
 
 __all__ = [
     "PAPER", "TrialRow", "driver_cost_us", "format_table", "main", "participant_seeds", "run_participant", "run_study",
@@ -49,143 +45,6 @@ PAPER: dict[str, tuple[float | None, float | None]] = {
     "tct_s": (None, None),
 }
 PAPER_CHANGE = {"success": "x2.0", "rmse_n": "-36 %", "max_ae_n": "-31 %", "tct_s": "-16 %", "tct_cens_s": "n/a"}
-
-_BLOCK_TICKS = 20
-_PHASE_ACTIVE = 2
-_PHASE_PAUSE = 3
-
-
-@dataclass(frozen=True, slots=True)
-class TrialRow:
-    """One trial's outcome."""
-
-    study: int
-    participant: int
-    index: int
-    target: str
-    mode: str
-    success: bool
-    tct_s: float | None
-    rmse_n: float
-    max_ae_n: float
-    peak_n: float
-
-
-def participant_seeds(study: int, participant: int) -> tuple[int, int, int]:
-    """(rig seed, participant seed, schedule seed) of participant ``participant`` (1-based) of ``study``."""
-    return 10_000 * study + participant, 1_000_003 * (study + 1) + 7919 * participant, study
-
-
-def run_participant(study: int, participant: int, protocol: ProtocolConfig | None = None) -> list[TrialRow]:
-    """Run one simulated participant through the full schedule; return the trial rows."""
-    proto = protocol or default_protocol()
-    rig_seed, p_seed, sched_seed = participant_seeds(study, participant)
-    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", sim=SimRigConfig(seed=rig_seed)))
-    loop, ring = eng.loop, eng.ring
-    assert ring is not None
-    p = SimulatedParticipant(seed=p_seed, tissue=eng.rig.config.tissue, arm=eng.rig.config.arm,
-                             motion_scale=eng.rig.config.motion_scale)
-    eng.rig.set_driver(p)
-    schedule = build_schedule(proto, sched_seed, participant)
-    machine = TrialMachine(proto.trial)
-    loop.submit(SetHaptics(False))
-    loop.run_ticks(200)  # settle on the start pose
-    cursor = ring.write_count
-    rows: list[TrialRow] = []
-    for spec in schedule:
-        on = spec.haptic_mode == "on"
-        now_ns = eng.clock.now_ns()
-        machine.start(spec, now_ns)
-        loop.submit(AllowBiasRefinement(False))
-        loop.submit(SetHaptics(on))
-        loop.submit(Mark(spec.index, _PHASE_ACTIVE))
-        p.begin_trial(spec.target_force_n, on, eng.rig.sim_time_s)
-        idle = False
-        while not idle:
-            loop.run_ticks(_BLOCK_TICKS)
-            res = ring.read_since(cursor)
-            cursor = res.cursor
-            r = res.rows
-            t_ns = [int(round(x * 1e9)) for x in r["t_s"].tolist()]
-            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()], strict=True)
-            for ev in machine.feed(samples):
-                if isinstance(ev, TrialFinished):
-                    m = ev.metrics
-                    rows.append(TrialRow(study, participant, spec.index, spec.target_label, spec.haptic_mode,
-                                         m.success, m.tct_s, m.rmse_n, m.max_ae_n, m.peak_force_n))
-                    p.end_trial(eng.rig.sim_time_s)
-                    loop.submit(Mark(-1, _PHASE_PAUSE))
-                    loop.submit(SetHaptics(False))
-                    loop.submit(AllowBiasRefinement(True))
-                elif isinstance(ev, PhaseChanged) and ev.new is TrialPhase.IDLE:
-                    idle = True
-    eng.rig.close()
-    ring.close()
-    return rows
-
-
-def _run_participant_args(args: tuple[int, int]) -> list[TrialRow]:
-    return run_participant(*args)
-
-
-def run_study(study: int, participants: int = 10, jobs: int = 1) -> list[TrialRow]:
-    """All participants of one study."""
-    work = [(study, j) for j in range(1, participants + 1)]
-    if jobs > 1:
-        with mp.get_context("spawn").Pool(jobs) as pool:
-            parts = pool.map(_run_participant_args, work)
-    else:
-        parts = [_run_participant_args(w) for w in work]
-    return [r for part in parts for r in part]
-
-
-def _wilcoxon_p(off: list[float], on: list[float]) -> float:
-    """Two-sided Wilcoxon signed-rank p of the paired differences (NaN when undefined)."""
-    from scipy.stats import wilcoxon
-
-    d = [round(a - b, 12) for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))]
-    if len(d) < 2 or all(x == 0 for x in d):
-        return math.nan
-    try:
-        return float(wilcoxon(d).pvalue)
-    except ValueError:
-        return math.nan
-
-
-def summarise_study(rows: list[TrialRow], max_trial_s: float = 12.0) -> dict[str, Any]:
-    """Per participant × mode aggregates (science.md §6), group means, changes and Wilcoxon p."""
-    parts = sorted({r.participant for r in rows})
-    per: dict[str, dict[str, list[float]]] = {m: {} for m in ("off", "on")}
-    for mode in ("off", "on"):
-        agg: dict[str, list[float]] = {k: [] for k in ("success", "rmse_n", "max_ae_n", "tct_s", "tct_cens_s",
-                                                        "success_GENTLE", "success_FIRM")}
-        for pid in parts:
-            mine = [r for r in rows if r.participant == pid and r.mode == mode]
-            agg["success"].append(sum(r.success for r in mine) / len(mine))
-            agg["rmse_n"].append(statistics.fmean(r.rmse_n for r in mine))
-            agg["max_ae_n"].append(statistics.fmean(r.max_ae_n for r in mine))
-            tcts = [r.tct_s for r in mine if r.success and r.tct_s is not None]
-            agg["tct_s"].append(statistics.fmean(tcts) if tcts else math.nan)
-            agg["tct_cens_s"].append(statistics.fmean(r.tct_s if r.success else max_trial_s  # type: ignore[misc]  # a success has its TCT
-                                                      for r in mine))
-            for lab in ("GENTLE", "FIRM"):
-                sub = [r for r in mine if r.target == lab]
-                agg[f"success_{lab}"].append(sum(r.success for r in sub) / len(sub) if sub else math.nan)
-        per[mode] = agg
-    out: dict[str, Any] = {"n_participants": len(parts)}
-    for key in ("success", "rmse_n", "max_ae_n", "tct_s", "tct_cens_s", "success_GENTLE", "success_FIRM"):
-        off, on = per["off"][key], per["on"][key]
-        m_off = float(np.nanmean(off)) if not all(math.isnan(x) for x in off) else math.nan
-        m_on = float(np.nanmean(on)) if not all(math.isnan(x) for x in on) else math.nan
-        out[key] = {
-            "off": m_off,
-            "on": m_on,
-            "change": (m_on / m_off - 1.0) if m_off else math.nan,
-            "p": _wilcoxon_p(off, on),
-            "n_pairs": sum(1 for a, b in zip(off, on, strict=True) if not (math.isnan(a) or math.isnan(b))),
-        }
-    return out
-
 
 _LABELS = {
     "success": "success",

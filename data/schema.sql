@@ -166,6 +166,51 @@ CREATE TABLE IF NOT EXISTS session_chunks (
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );
 
+-- Version 4, a rig of several arms: the other arms' recordings (the task arm's are recordings, session_blocks and
+-- session_chunks, as on a one-arm rig).  The same columns as those three tables, with the arm's name
+-- (sessions.config_json lists the arms); the same segment numbers as the session's runs.
+CREATE TABLE IF NOT EXISTS arm_recordings (
+    session_id    INTEGER NOT NULL REFERENCES sessions(session_id),
+    arm           TEXT NOT NULL,
+    segment       INTEGER NOT NULL,
+    started_at_s  REAL NOT NULL,
+    t0_ns         INTEGER NOT NULL,
+    snapshot_json TEXT NOT NULL,
+    scales_json   TEXT NOT NULL,
+    PRIMARY KEY (session_id, arm, segment)
+);
+CREATE TABLE IF NOT EXISTS arm_blocks (
+    session_id  INTEGER NOT NULL,
+    arm         TEXT NOT NULL,
+    segment     INTEGER NOT NULL,
+    block       INTEGER NOT NULL,
+    first_tick  INTEGER NOT NULL,
+    last_tick   INTEGER NOT NULL,
+    n_records   INTEGER NOT NULL,
+    t_first_s   REAL NOT NULL,
+    t_last_s    REAL NOT NULL,
+    data        BLOB NOT NULL,
+    crc32       INTEGER,
+    PRIMARY KEY (session_id, arm, segment, block),
+    FOREIGN KEY (session_id, arm, segment) REFERENCES arm_recordings (session_id, arm, segment)
+);
+CREATE TABLE IF NOT EXISTS arm_chunks (
+    session_id  INTEGER NOT NULL,
+    arm         TEXT NOT NULL,
+    segment     INTEGER NOT NULL,
+    block       INTEGER NOT NULL,
+    chunk       INTEGER NOT NULL,
+    first_tick  INTEGER NOT NULL,
+    last_tick   INTEGER NOT NULL,
+    n_records   INTEGER NOT NULL,
+    t_first_s   REAL NOT NULL,
+    t_last_s    REAL NOT NULL,
+    data        BLOB NOT NULL,
+    crc32       INTEGER NOT NULL,
+    PRIMARY KEY (session_id, arm, segment, block, chunk),
+    FOREIGN KEY (session_id, arm, segment) REFERENCES arm_recordings (session_id, arm, segment)
+);
+
 -- version 4: a participant who withdrew (haptic-study withdraw).  Every row of theirs was removed and the file
 -- rewritten; this row keeps only the pseudonymous code, when, the reason given and how many rows of each kind were
 -- removed -- no measurement.  A withdrawn code is never given a session again.

@@ -131,6 +131,27 @@ def _blocks(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int
     return runs
 
 
+def _other_arms(conn: sqlite3.Connection, audit: Audit) -> None:
+    """Verify the other arms' blocks (a rig of several arms): each one's checksum and decoding, and no block missing;
+    a damaged one is a problem naming its arm (the trials are the task arm's: their records are checked above)."""
+    for arm in StudyReader.over(conn).arms():
+        last: dict[tuple[int, int], int] = {}
+        for row in block_rows(conn, arm=arm):
+            key = (row.session_id, row.segment)
+            why = block_problem(row, whole=True)
+            if why:
+                audit.problems.append(f"arm {arm}, session {row.session_id}, recorded run {row.segment}, block "
+                                      f"{row.block} (ticks {row.first_tick}–{row.last_tick}): {why}")
+            elif last.get(key, -1) + 1 != row.block:
+                audit.problems.append(f"arm {arm}, session {row.session_id}, recorded run {row.segment}: block "
+                                      f"{row.block} follows block {last.get(key, -1)} (blocks missing)")
+            elif row.crc32 is None:
+                audit.blocks_unverifiable += 1
+            else:
+                audit.blocks_verified += 1
+            last[key] = row.block
+
+
 def _readable(runs: list[tuple[int, int, bool]], first: int, last: int) -> bool:
     """Whether ticks ``first`` … ``last`` lie in readable blocks with no damaged block between them."""
     touching = [r for r in runs if r[1] >= first and r[0] <= last]
@@ -215,6 +236,7 @@ def audit_database(conn: sqlite3.Connection, path: str,
         audit.trials = StudyReader.over(conn).trial_count()
         if audit.schema_version >= 3:
             runs = _blocks(conn, audit, progress)
+            _other_arms(conn, audit)
             _trials_against_recording(conn, audit, runs)
         else:
             audit.notes.append(f"schema version {audit.schema_version}: sessions were not recorded whole "

@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import json
 import re
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 
@@ -93,6 +95,9 @@ class ProtocolConfig:
     trial: TrialTiming
     training: TrainingConfig
     version: int = 1
+    #: The rig's arm whose instrument does the task (its force is the trial's task force; the other arms are
+    #: recorded too).  "" (the default): the rig's only arm, or ``right`` on a rig of several (:meth:`task_arm_of`).
+    task_arm: str = ""
 
     @property
     def trials_per_participant(self) -> int:
@@ -106,8 +111,30 @@ class ProtocolConfig:
                 return t
         raise KeyError(label)
 
+    def task_arm_of(self, arms: Sequence[str]) -> str:
+        """The task arm on a rig whose arms are ``arms`` (the first first).
+
+        Raises
+        ------
+        ProtocolError
+            One line when the protocol names an arm the rig does not have, or leaves the choice to a rig of
+            several arms none of which is called ``right``.
+        """
+        if self.task_arm:
+            if self.task_arm not in arms:
+                raise ProtocolError(f"design.task_arm = {self.task_arm!r}: the rig has no such arm (its arms: "
+                                    f"{', '.join(arms)})")
+            return self.task_arm
+        if len(arms) == 1:
+            return arms[0]
+        if SINGLE_ARM_NAME in arms:
+            return SINGLE_ARM_NAME
+        raise ProtocolError(f"design.task_arm is not set and the rig has {len(arms)} arms ({', '.join(arms)}), none "
+                            f"called {SINGLE_ARM_NAME!r}: name the arm that does the task in the protocol")
+
     def to_dict(self) -> dict[str, Any]:
-        """Plain data in the file's structure (stored with each session)."""
+        """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set, so a
+        protocol of before the arms stores what it always stored)."""
         return {
             "name": self.name,
             "version": self.version,
@@ -117,6 +144,7 @@ class ProtocolConfig:
                 "trials_per_cell": self.trials_per_cell,
                 "ordering": self.ordering,
                 "abort_policy": self.abort_policy,
+                **({"task_arm": self.task_arm} if self.task_arm else {}),
             },
             "trial": asdict(self.trial),
             "training": asdict(self.training),
@@ -157,7 +185,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     if len(set(labels)) != len(labels):
         raise f.fail("targets", labels, "labels must be unique")
 
-    design = f.section(top, "design", {"modes", "trials_per_cell", "ordering", "abort_policy"})
+    design = f.section(top, "design", {"modes", "trials_per_cell", "ordering", "abort_policy", "task_arm"})
     modes = design.get("modes", list(MODES))
     if (
         not isinstance(modes, list) or not modes
@@ -167,6 +195,8 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     per_cell = f.integer("design.trials_per_cell", design.get("trials_per_cell", 5), lo=1, hi=100)
     ordering = f.choice("design.ordering", design.get("ordering", "random"), ORDERINGS)
     policy = f.choice("design.abort_policy", design.get("abort_policy", "append"), ABORT_POLICIES)
+    task_arm = f.string("design.task_arm", design["task_arm"], pattern=ARM_NAME, what=ARM_NAME_WHAT) \
+        if "task_arm" in design else ""
 
     tr = f.section(top, "trial", {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
     timing = TrialTiming(
@@ -189,7 +219,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     _check_together(f, timing, training, tuple(modes))
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
-        ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1,
+        ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
     )
 
 

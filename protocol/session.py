@@ -70,7 +70,7 @@ from protocol.config import ProtocolConfig
 from protocol.delivery import DeliveryLimits, Deviation, TrialWindow
 from protocol.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.records import AbortCause, Outcome, TrialRecord
-from protocol.session_recording import SessionRecording
+from protocol.session_recording import OtherArms, SessionRecording
 from protocol.storage import Recorder, StudyDatabase
 from protocol.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
@@ -183,12 +183,14 @@ class SessionRunner:
         auto_reset_faults: bool = False,
         segment: int = 0,
         scales: dict[str, float] | None = None,
+        arms: tuple[str, ...] = (),
     ) -> None:
         self.protocol = protocol
+        #: The rig's arms (() or one: events stored as ever) and the task arm, whose records the runner is given.
+        self.arms = arms
+        self.task_arm = protocol.task_arm_of(arms) if arms else ""
         self.schedule = list(schedule)
-        self.session_id = session_id
-        self.recorder = recorder
-        self.submit = submit
+        self.session_id, self.recorder, self.submit = session_id, recorder, submit
         self.position = start_position
         self.participant = participant
         #: Training: the participant sees a live force gauge with the target band.
@@ -224,6 +226,7 @@ class SessionRunner:
         self._pending_gap = ""  # records lost before the next block
         self.segment = segment
         self._recording = SessionRecording(recorder, session_id, segment, scales)
+        self.other_arms = OtherArms(self._recording)  # a rig of several arms: the others' records (session_driver)
         self._failed_in_a_row = 0  # trials the loop did not deliver as designed, since the last that it did
         self._enter_pause_commands()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick
@@ -397,19 +400,25 @@ class SessionRunner:
         return self._window.deviation(rows, m.spec, m.cue_ns, self.limits, self._fault_detail)
 
     def _store_loop_event(self, ev: LoopEvent) -> None:
+        if len(self.arms) > 1 and ev.arm != self.task_arm:
+            # another arm's event: stored with its arm; the task's trial sees that arm only through the task arm's
+            # own records (its OTHER_ARM fault under the policy "both"), so it does not name the trial's fault
+            self._event(int(ev.t_ns), ev.kind, f"arm {ev.arm}: {self._loop_event_detail(ev)}")
+            return
         if ev.kind == "fault":
             self._fault_detail = ev.detail
             self._condition_gone = False
-            detail = ev.detail
         elif ev.kind == "fault_cleared":
             self._condition_gone = True  # a reset can clear it now
-            detail = ev.detail
-        elif ev.kind == "faults_reset":
-            detail = (f"cleared {ev.detail}" if not ev.faults
-                      else f"{Fault(int(ev.faults)).describe()} still latched (its condition persists)")
-        else:
-            detail = ev.detail
-        self._event(int(ev.t_ns), ev.kind, detail)
+        detail = self._loop_event_detail(ev)
+        self._event(int(ev.t_ns), ev.kind, f"arm {ev.arm}: {detail}" if len(self.arms) > 1 else detail)
+
+    @staticmethod
+    def _loop_event_detail(ev: LoopEvent) -> str:  # what the events table keeps of a loop event
+        if ev.kind != "faults_reset":
+            return ev.detail
+        return f"cleared {ev.detail}" if not ev.faults else \
+            f"{Fault(ev.faults).describe()} still latched (its condition persists)"
 
     def _on_event(self, ev: object) -> None:
         if isinstance(ev, PhaseChanged):

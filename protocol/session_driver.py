@@ -50,12 +50,15 @@ class RingBlock:
         The loop's events taken after the records (empty when no record came).
     replay_log
         The loop's replay-log entries taken after the records (empty when no record came).
+    other_arms
+        On a rig of several arms, per other arm: its name, its records read after the task arm's, its replay log.
     """
 
     rows: npt.NDArray[np.void]
     lost: int
     loop_events: list[LoopEvent]
     replay_log: list[ReplayEntry]
+    other_arms: tuple[tuple[str, npt.NDArray[np.void], list[ReplayEntry]], ...] = ()
 
 
 class SessionDriver:
@@ -67,11 +70,17 @@ class SessionDriver:
         The ring the loop writes every tick's record to.
     replay_log
         The loop's replay log (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`); the driver takes its entries.
+    other_arms
+        A rig of several arms: per arm other than the task arm (whose ``ring`` and log the two above are), its name,
+        ring and replay log (:class:`pipeline.runtime.arm_channel.ArmChannel`), recorded beside the session's.
     """
 
-    def __init__(self, ring: RingBuffer, replay_log: deque[ReplayEntry]) -> None:
+    def __init__(self, ring: RingBuffer, replay_log: deque[ReplayEntry],
+                 other_arms: tuple[tuple[str, RingBuffer, deque[ReplayEntry]], ...] = ()) -> None:
         self.ring = ring
         self.replay_log = replay_log
+        self.other_arms = other_arms
+        self._other_cursors = [r.write_count for _, r, _ in other_arms]
         #: The ring's write count of the next record to read (records before the driver was made are not read).
         self.cursor = ring.write_count
         #: The loop's events not yet handed on (appended on the loop's thread, taken on the driver's).
@@ -94,7 +103,18 @@ class SessionDriver:
             return RingBlock(res.rows, res.lost, [], [])
         # the events and the replay log after the records: every entry of a tick whose record was read is in
         log = self.replay_log
-        return RingBlock(res.rows, res.lost, self.take_events(), [log.popleft() for _ in range(len(log))])
+        return RingBlock(res.rows, res.lost, self.take_events(), [log.popleft() for _ in range(len(log))],
+                         self._take_other_arms())
+
+    def _take_other_arms(self) -> tuple[tuple[str, npt.NDArray[np.void], list[ReplayEntry]], ...]:
+        """The other arms' records since the last read, each with its replay log (an arm's lost records show as a
+        gap in its own recording; the trial is the task arm's)."""
+        out = []
+        for i, (name, ring, log) in enumerate(self.other_arms):
+            res = ring.read_since(self._other_cursors[i])
+            self._other_cursors[i] = res.cursor
+            out.append((name, res.rows, [log.popleft() for _ in range(len(log))]))
+        return tuple(out)
 
     @staticmethod
     def feed(runner: SessionRunner, block: RingBlock, trigger: RehearsalTrigger | None = None) -> None:
@@ -103,6 +123,7 @@ class SessionDriver:
             runner.records_lost(block.lost)
         rows = block.rows
         n = len(rows)
+        recording = not runner.done  # (the other arms' records of the block that ends the session are kept too)
         due = trigger.due_ns() if trigger is not None else None
         if trigger is not None and due is not None and n and int(rows["t_ns"][-1]) >= due:
             # a planned kill: the runner gets the records up to its moment, then the process dies there
@@ -113,6 +134,9 @@ class SessionDriver:
             runner.process(rows[k:])
         else:
             runner.process(rows, block.loop_events, block.replay_log)
+        if recording:
+            for name, arm_rows, arm_log in block.other_arms:
+                runner.other_arms.record(name, arm_rows, arm_log, runner.clock)
         if trigger is not None and n:
             trigger.poll(int(rows["t_ns"][-1]))
 

@@ -17,9 +17,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from protocol.clock import SessionClock
 from protocol.storage import Recorder
 
-__all__ = ["SessionRecording"]
+__all__ = ["OtherArms", "SessionRecording"]
 
 
 class SessionRecording:
@@ -35,15 +36,20 @@ class SessionRecording:
         The recording's segment this run writes (0, then one more per resume).
     scales
         Counts per unit of the raw wrench columns (the recording codec's hint; empty: store floats).
+    arm, token
+        Another arm's recording than the task arm's (""), and the snapshot token of the session's own recording
+        (every arm takes its snapshot in the same tick).
     """
 
-    def __init__(self, recorder: Recorder, session_id: int, segment: int, scales: dict[str, float] | None) -> None:
+    def __init__(self, recorder: Recorder, session_id: int, segment: int, scales: dict[str, float] | None,
+                 arm: str = "", token: int | None = None) -> None:
         self.recorder = recorder
         self.session_id = session_id
         self.segment = segment
         self.scales = dict(scales or {})
+        self.arm = arm
         #: Names this run's snapshot among the loop's (sent with ``StartRecording``).
-        self.token = secrets.randbits(31)
+        self.token = secrets.randbits(31) if token is None else token
         self._log: list[tuple[int, str, object]] = []  # replay log entries not yet handed on
         #: The tick the recording (and the session clock) starts at; None until the loop took the snapshot.
         self.start_tick: int | None = None
@@ -75,11 +81,54 @@ class SessionRecording:
 
     def open_segment(self, started_at_s: float, t0_ns: int) -> None:
         """Open the run's segment at its first record (session time ``started_at_s``, loop time ``t0_ns``)."""
-        self.recorder.segment(self.session_id, self.segment, started_at_s, t0_ns, self._snapshot, self.scales)
+        self.recorder.segment(self.session_id, self.segment, started_at_s, t0_ns, self._snapshot, self.scales,
+                              self.arm)
 
     def record(self, rows: npt.NDArray[np.void]) -> None:
         """Hand the records and the log entries of their ticks to the recorder (it keeps the kept fields)."""
         last = int(rows["tick"][-1])
         log = [e for e in self._log if e[0] <= last]
         self._log = [e for e in self._log if e[0] > last]
-        self.recorder.records(self.session_id, self.segment, rows, log)
+        self.recorder.records(self.session_id, self.segment, rows, log, self.arm)
+
+
+class OtherArms:
+    """The recordings of a rig's arms other than the task arm, on the session's clock.
+
+    Each arm's records, from the same snapshot tick as the session's own, go to that arm's tables
+    (:func:`protocol.storage.common.recording_tables`); its segment opens with the session's once the session's
+    clock has started, and its records wait until then.
+
+    Parameters
+    ----------
+    own
+        The session's own recording (the task arm's): its recorder, session, segment, scales and snapshot token.
+    """
+
+    def __init__(self, own: SessionRecording) -> None:
+        self._own = own
+        self._arms: dict[str, SessionRecording] = {}
+        self._waiting: dict[str, list[npt.NDArray[np.void]]] = {}
+        self._open: set[str] = set()
+
+    def record(self, arm: str, rows: npt.NDArray[np.void], replay_log: Sequence[tuple[int, str, object]],
+               clock: SessionClock | None) -> None:
+        """Hand one block of ``arm``'s records and its replay log on (``clock``: the session's; None: not started)."""
+        rec = self._arms.get(arm)
+        if rec is None:
+            own = self._own
+            rec = self._arms[arm] = SessionRecording(own.recorder, own.session_id, own.segment, own.scales, arm,
+                                                     own.token)
+        mine = rec.session_rows(rows, replay_log)
+        if mine is None:
+            return
+        waiting = self._waiting.setdefault(arm, [])
+        if len(mine):
+            waiting.append(mine)
+        if clock is None or not waiting:
+            return
+        if arm not in self._open:
+            self._open.add(arm)
+            rec.open_segment(clock.started_at_s, clock.t0_ns)
+        rec.record(np.concatenate(waiting) if len(waiting) > 1 else waiting[0])
+        waiting.clear()

@@ -379,7 +379,7 @@ def start_runner(
     db: StudyDatabase, opened: OpenedSession, *, submit: Callable[[Command], None],
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
-    commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1,
+    commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1, arms: tuple[str, ...] = (),
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -405,6 +405,8 @@ def start_runner(
         The recorder's commit deadline: its clock, s (None: the wall clock), and the longest time a record waits
         for its commit (100 ms).  A run on the virtual clock passes the loop's time, so its commits fall on the
         same records every time (see :mod:`study_app.headless.session_run`).
+    arms
+        The rig's arms by name (:attr:`protocol.session.SessionRunner.arms`; the task arm's records are the runner's).
     """
     recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
                         **({} if commit_clock is None else {"clock": commit_clock}))
@@ -413,7 +415,7 @@ def start_runner(
         submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,
         participant=participant, participant_time=participant_time, seed=opened.seed, limits=limits,
         initial_pause_s=opened.initial_pause_s, auto_reset_faults=auto_reset_faults, segment=opened.segment,
-        scales=scales,
+        scales=scales, arms=arms,
     )
     runner.live_force_aid = opened.live_force_aid
     return recorder, runner

@@ -20,8 +20,19 @@ the error is reported through :class:`HapticState.error_code` (the loop's
 ``HAPTIC_DEVICE`` fault) and only :meth:`rearm` -- the experimenter's reset --
 enables output again.
 
-The thin :class:`HDApi` adapter is the seam to the C library: tests drive the
-backend through a fake implementing it (no libHD on CI machines).
+Several Touch devices (both arms of the rig) share ONE OpenHaptics servo
+scheduler, :class:`TouchScheduler`: each device is opened by its OpenHaptics
+name (``hdInitDevice``), and the one scheduled callback makes each device
+current in turn (``hdMakeCurrentDevice``), frames it, reads it and writes its
+force -- pyOpenHaptics' own callback serves only the current device (its issue
+#10).  Every device keeps its own command watchdog, clamp, heat model and HD
+errors: an error is charged to the device ``hdGetError`` names (``hHD``), so one
+device's error disables that device's output only (what the other arms do is
+the loop's ``fault_policy``).
+
+The thin :class:`HDApi` / :class:`MultiHDApi` adapters are the seam to the C
+library: tests drive the backend through fakes implementing them (no libHD on CI
+machines).
 """
 
 from __future__ import annotations
@@ -51,8 +62,10 @@ __all__ = [
     "HD_NOMINAL_MAX_FORCE",
     "TOUCH_INSTALL_HINT",
     "HDApi",
+    "MultiHDApi",
     "PyOpenHapticsApi",
     "TouchHapticDevice",
+    "TouchScheduler",
     "load_pyopenhaptics",
 ]
 
@@ -73,16 +86,8 @@ TOUCH_INSTALL_HINT = (
 )
 
 
-class HDApi(Protocol):
-    """The HDAPI calls the backend uses (a handle-less subset; one device)."""
-
-    def init_device(self, name: str) -> None:
-        """``hdInitDevice``; raises :class:`DeviceError` on failure."""
-        ...
-
-    def error_code(self) -> int:
-        """``hdGetError().errorCode`` (0 = none); pops the error."""
-        ...
+class _DeviceCalls(Protocol):
+    """The HDAPI calls on the current device, with one device or several."""
 
     def get_double(self, code: int) -> float:
         """``hdGetDoublev`` of a scalar."""
@@ -90,6 +95,70 @@ class HDApi(Protocol):
 
     def enable(self, code: int) -> None:
         """``hdEnable``."""
+        ...
+
+    def position_mm(self) -> Vec3:
+        """Stylus position from ``HD_CURRENT_TRANSFORM``, mm, device frame."""
+        ...
+
+    def buttons(self) -> int:
+        """``HD_CURRENT_BUTTONS`` bitmask."""
+        ...
+
+    def set_force(self, fx: float, fy: float, fz: float) -> None:
+        """``hdSetDoublev(HD_CURRENT_FORCE)``, N, device frame."""
+        ...
+
+
+class MultiHDApi(_DeviceCalls, Protocol):
+    """The HDAPI calls for several devices in one servo scheduler (:class:`TouchScheduler`), by handle."""
+
+    def open_device(self, name: str) -> int:
+        """``hdInitDevice``: the device's handle (it is now the current device); :class:`DeviceError` on failure."""
+        ...
+
+    def make_current(self, handle: int) -> None:
+        """``hdMakeCurrentDevice``: the calls that follow read and write this device."""
+        ...
+
+    def begin_frame(self, handle: int) -> None:
+        """``hdBeginFrame``."""
+        ...
+
+    def end_frame(self, handle: int) -> None:
+        """``hdEndFrame``: the frame's force goes to the device."""
+        ...
+
+    def next_error(self) -> tuple[int, int]:
+        """``hdGetError``: ``(errorCode, hHD)`` of the oldest error, popped; ``(0, 0)`` when there is none."""
+        ...
+
+    def schedule_frames(self, callback: Callable[[], None]) -> None:
+        """``hdScheduleAsynchronous`` of a callback run every servo tick that frames each device itself."""
+        ...
+
+    def start_scheduler(self) -> None:
+        """``hdStartScheduler``."""
+        ...
+
+    def stop_scheduler(self) -> None:
+        """``hdStopScheduler``."""
+        ...
+
+    def close_handle(self, handle: int) -> None:
+        """``hdDisableDevice(handle)``."""
+        ...
+
+
+class HDApi(_DeviceCalls, Protocol):
+    """The HDAPI calls the backend uses for a Touch with a scheduler of its own (handle-less; one device)."""
+
+    def init_device(self, name: str) -> None:
+        """``hdInitDevice``; raises :class:`DeviceError` on failure."""
+        ...
+
+    def error_code(self) -> int:
+        """``hdGetError().errorCode`` (0 = none); pops the error."""
         ...
 
     def schedule(self, callback: Callable[[], None]) -> None:
@@ -106,18 +175,6 @@ class HDApi(Protocol):
 
     def close_device(self) -> None:
         """``hdDisableDevice``."""
-        ...
-
-    def position_mm(self) -> Vec3:
-        """Stylus position from ``HD_CURRENT_TRANSFORM``, mm, device frame."""
-        ...
-
-    def buttons(self) -> int:
-        """``HD_CURRENT_BUTTONS`` bitmask."""
-        ...
-
-    def set_force(self, fx: float, fy: float, fz: float) -> None:
-        """``hdSetDoublev(HD_CURRENT_FORCE)``, N, device frame."""
         ...
 
 
@@ -148,15 +205,15 @@ def load_pyopenhaptics(dll_dir: str | None = None) -> Any:
 
 
 class PyOpenHapticsApi:
-    """:class:`HDApi` over pyOpenHaptics 1.0.1 (ctypes around libHD)."""
+    """:class:`HDApi` and :class:`MultiHDApi` over pyOpenHaptics 1.0.1 (ctypes around libHD)."""
 
     def __init__(self, dll_dir: str | None = None) -> None:
         self._hd, self._cb, self._def = load_pyopenhaptics(dll_dir)
         self._handle: int | None = None
         self._cfunc: Any = None  # keep the ctypes callback alive while scheduled
 
-    def init_device(self, name: str) -> None:
-        """Open the device; pyOpenHaptics prints and returns None on failure, so check both."""
+    def open_device(self, name: str) -> int:
+        """Open the device by its OpenHaptics name; pyOpenHaptics prints and returns None on failure, so check both."""
         import ctypes
 
         lib = self._cb._lib_hd
@@ -169,10 +226,31 @@ class PyOpenHapticsApi:
                 f"OpenHaptics could not open the haptic device {name!r} (HD error 0x{code:04x}); "
                 "check the USB cable and the device name, and run Touch_Setup/Touch_Diagnostic"
             )
-        self._handle = handle
+        return int(handle)
+
+    def init_device(self, name: str) -> None:
+        """Open the one device (:meth:`open_device`) and keep its handle."""
+        self._handle = self.open_device(name)
 
     def error_code(self) -> int:
         return int(self._hd._get_error().errorCode)
+
+    def next_error(self) -> tuple[int, int]:
+        info = self._hd._get_error()
+        code = int(info.errorCode)
+        return (code, int(getattr(info, "hHD", 0))) if code else (0, 0)
+
+    def make_current(self, handle: int) -> None:
+        lib = self._cb._lib_hd
+        lib.hdMakeCurrentDevice.argtypes = [self._def.HHD]
+        lib.hdMakeCurrentDevice.restype = None
+        lib.hdMakeCurrentDevice(handle)
+
+    def begin_frame(self, handle: int) -> None:
+        self._hd.begin_frame(handle)
+
+    def end_frame(self, handle: int) -> None:
+        self._hd.end_frame(handle)
 
     def get_double(self, code: int) -> float:
         import ctypes
@@ -186,15 +264,21 @@ class PyOpenHapticsApi:
         lib.hdEnable(code)
 
     def schedule(self, callback: Callable[[], None]) -> None:
-        import ctypes
-
         hd = self._hd
 
-        def _tick(_user: Any) -> int:
+        def _framed() -> None:
             dev = hd.get_current_device()
             hd.begin_frame(dev)
             callback()
             hd.end_frame(dev)
+
+        self.schedule_frames(_framed)
+
+    def schedule_frames(self, callback: Callable[[], None]) -> None:
+        import ctypes
+
+        def _tick(_user: Any) -> int:
+            callback()
             return HD_CALLBACK_CONTINUE  # never DONE: an error must not end the servo loop for good
 
         self._cfunc = ctypes.CFUNCTYPE(self._def.HDCallbackCode, ctypes.POINTER(ctypes.c_void_p))(_tick)
@@ -208,8 +292,11 @@ class PyOpenHapticsApi:
 
     def close_device(self) -> None:
         if self._handle is not None:
-            self._hd.close_device(self._handle)
+            self.close_handle(self._handle)
             self._handle = None
+
+    def close_handle(self, handle: int) -> None:
+        self._hd.close_device(handle)
 
     def position_mm(self) -> Vec3:
         t = self._hd.get_transform()  # column-major 4x4: translation in the last column
@@ -230,7 +317,7 @@ class TouchHapticDevice:
     device_name
         OpenHaptics device name (Touch_Setup), ``"Default Device"`` by default.
     api
-        The HDAPI adapter (default: :class:`PyOpenHapticsApi`, imported lazily).
+        The HDAPI adapter (default: :class:`PyOpenHapticsApi`, imported lazily); not with ``scheduler``.
     clock
         The loop's clock: stylus-state timestamps, and the command ages the servo judges freshness by.
     command_timeout_s
@@ -240,6 +327,9 @@ class TouchHapticDevice:
     dll_dir
         The folder holding ``HD.dll`` (``[haptic] dll_dir``), added to Windows' DLL search path before
         pyOpenHaptics is imported (when ``api`` is not given); None: the system's folders.
+    scheduler
+        Open the device into this shared servo scheduler (:meth:`TouchScheduler.open`) instead of starting one of
+        its own; it is served once the scheduler starts.
     """
 
     def __init__(
@@ -251,15 +341,25 @@ class TouchHapticDevice:
         command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S,
         thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S,
         dll_dir: str | None = None,
+        scheduler: TouchScheduler | None = None,
     ) -> None:
         self.device_name = device_name
         self.clock: Clock = clock or MonotonicClock()
-        self.api: HDApi = api if api is not None else PyOpenHapticsApi(dll_dir)
-        self.api.init_device(device_name)
+        self._scheduler = scheduler
+        self._own: HDApi | None = None
+        #: The device's handle in a shared scheduler (None with a scheduler of its own).
+        self.handle: int | None = None
+        if scheduler is None:
+            self._own = api if api is not None else PyOpenHapticsApi(dll_dir)
+            self._own.init_device(device_name)
+            self.api: _DeviceCalls = self._own
+        else:
+            self.handle = scheduler.api.open_device(device_name)  # now the current device: enable/get act on it
+            self.api = scheduler.api
         peak = self.api.get_double(HD_NOMINAL_MAX_FORCE)
         cont = self.api.get_double(HD_NOMINAL_MAX_CONTINUOUS_FORCE)
         if not (math.isfinite(peak) and peak > 0 and math.isfinite(cont) and 0 < cont <= peak):
-            self.api.close_device()
+            self._release()
             raise DeviceError(f"{device_name!r} reports nominal max force {peak!r} N / continuous {cont!r} N; expected "
                               "numbers > 0, the continuous one at most the peak")
         self._peak = peak
@@ -275,29 +375,42 @@ class TouchHapticDevice:
         self._lock = threading.Lock()  # only rearm/servo hand-over; the servo never waits on the loop
         self.api.enable(HD_FORCE_OUTPUT)
         self.api.enable(HD_MAX_FORCE_CLAMPING)  # the device's own clamp as a second line of defence
-        self.api.schedule(self._servo)
-        self.api.start_scheduler()
+        if self._own is not None:
+            self._own.schedule(self._servo)
+            self._own.start_scheduler()
+
+    def _release(self) -> None:
+        if self._own is not None:
+            self._own.close_device()
+        elif self._scheduler is not None and self.handle is not None:
+            self._scheduler.api.close_handle(self.handle)
 
     # -- servo thread -------------------------------------------------------------------------
     def _servo(self) -> None:
         api = self.api
         x, y, z = api.position_mm()
         buttons = api.buttons()
-        err = api.error_code()
+        assert self._own is not None
+        self._render(x, y, z, buttons, self._own.error_code())
+
+    def hd_error(self, code: int) -> None:
+        """An HD error of this device (servo thread): output off until :meth:`rearm`."""
+        self._error = code
+        self._armed = False
+        self.errors.append(code)
+
+    def _render(self, x: float, y: float, z: float, buttons: int, err: int) -> None:
+        """One servo tick of this device, which is the current one: render the latest command, write it."""
         if err:
-            self._error = err
-            self._armed = False
-            self.errors.append(err)
+            self.hd_error(err)
         now = self.clock.now_ns()
         last = self._last_servo_ns
         self._last_servo_ns = now
         out = self.output
         fx, fy, fz = out.render(now, 0.0 if last is None else (now - last) * 1e-9, self._armed)
         if out.warm and self._armed:  # our own heat model passed the budget: as the device's HD_WARM_MOTORS
-            self._error = HD_WARM_MOTORS
-            self._armed = False
-            self.errors.append(HD_WARM_MOTORS)
-        api.set_force(fx, fy, fz)
+            self.hd_error(HD_WARM_MOTORS)
+        self.api.set_force(fx, fy, fz)
         self.ticks += 1
         self._state = HapticState(now, (x * 1e-3, y * 1e-3, z * 1e-3), buttons, self._error, out.limit_n,
                                   out.heat.fraction)
@@ -344,10 +457,112 @@ class TouchHapticDevice:
         return True
 
     def close(self) -> None:
-        """Zero the force, stop the servo loop and release the device."""
+        """Zero the force, stop the servo loop and release the device.
+
+        In a shared scheduler the device renders zero until the last of its devices is closed, which stops the
+        scheduler and releases them all (:meth:`TouchScheduler.release`).
+        """
         self.output.clear()
         self._armed = False
+        if self._scheduler is not None:
+            self._scheduler.release(self)
+            return
+        assert self._own is not None
         try:
-            self.api.stop_scheduler()
+            self._own.stop_scheduler()
         finally:
-            self.api.close_device()
+            self._own.close_device()
+
+
+
+class TouchScheduler:
+    """One OpenHaptics servo scheduler for several Touch devices (one per arm), selected by their device names.
+
+    :meth:`open` each device (``hdInitDevice``; it is enabled while current), then :meth:`start` once
+    (``hdStartScheduler``).  Every servo tick the one callback takes each device in turn: makes it current
+    (``hdMakeCurrentDevice``), frames it, reads its stylus, charges the HD errors pending to the devices they name,
+    and writes that device's own force -- its own command watchdog, clamp and heat model
+    (:class:`TouchHapticDevice`).  An error naming no open device is charged to every device: whose it was is unknown,
+    and the loop's fault policy decides what the arms do.
+
+    Parameters
+    ----------
+    api
+        The HDAPI adapter (default: :class:`PyOpenHapticsApi`, imported lazily).
+    dll_dir
+        As :class:`TouchHapticDevice`'s, when ``api`` is not given.
+    """
+
+    #: At most this many errors are drained per device and tick (the library's error stack is bounded anyway).
+    MAX_ERRORS_PER_TICK = 8
+
+    def __init__(self, api: MultiHDApi | None = None, dll_dir: str | None = None) -> None:
+        self.api: MultiHDApi = api if api is not None else PyOpenHapticsApi(dll_dir)
+        self.devices: list[TouchHapticDevice] = []
+        self._by_handle: dict[int, TouchHapticDevice] = {}
+        self._open: set[int] = set()
+        self.running = False
+        self._released = False
+
+    def open(self, device_name: str, clock: Clock, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S,
+             thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S) -> TouchHapticDevice:
+        """Open the device called ``device_name`` into this scheduler (before :meth:`start`)."""
+        if self.running or self._released:
+            raise DeviceError(f"haptic device {device_name!r}: open every Touch before the servo scheduler starts")
+        names = [d.device_name for d in self.devices]
+        if device_name in names:
+            raise DeviceError(f"haptic device {device_name!r} is opened already; each arm needs its own Touch")
+        dev = TouchHapticDevice(device_name, clock=clock, command_timeout_s=command_timeout_s,
+                                thermal_budget_n2s=thermal_budget_n2s, scheduler=self)
+        assert dev.handle is not None
+        self.devices.append(dev)
+        self._by_handle[dev.handle] = dev
+        self._open.add(id(dev))
+        return dev
+
+    def start(self) -> None:
+        """Schedule the callback and start the servo loop (``hdStartScheduler``) for every device opened."""
+        if not self.devices:
+            raise DeviceError("no Touch opened: nothing for the servo scheduler to serve")
+        self.api.schedule_frames(self._tick)
+        self.api.start_scheduler()
+        self.running = True
+
+    def _tick(self) -> None:
+        api = self.api
+        for dev in self.devices:
+            handle = dev.handle
+            assert handle is not None
+            api.make_current(handle)
+            api.begin_frame(handle)
+            try:
+                x, y, z = api.position_mm()
+                buttons = api.buttons()
+                self._charge_errors()
+                dev._render(x, y, z, buttons, 0)
+            finally:
+                api.end_frame(handle)
+
+    def _charge_errors(self) -> None:
+        for _ in range(self.MAX_ERRORS_PER_TICK):
+            code, handle = self.api.next_error()
+            if not code:
+                return
+            dev = self._by_handle.get(handle)
+            for d in (dev,) if dev is not None else self.devices:
+                d.hd_error(code)
+
+    def release(self, dev: TouchHapticDevice) -> None:
+        """``dev`` was closed: when it was the last open one, stop the scheduler and release every device."""
+        self._open.discard(id(dev))
+        if self._open or self._released:
+            return
+        self._released = True
+        try:
+            if self.running:
+                self.running = False
+                self.api.stop_scheduler()
+        finally:
+            for d in self.devices:
+                assert d.handle is not None
+                self.api.close_handle(d.handle)

@@ -6,6 +6,7 @@ satisfy it.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -13,12 +14,18 @@ from typing import Any, Protocol
 from pipeline.devices.interfaces import Fault, ForceSensor, HapticDevice, Robot
 from pipeline.force.frames import Vec3
 
-__all__ = ["SINGLE_ARM_NAME", "Rig", "RigArm", "rig_arms"]
+__all__ = ["ARM_NAME", "ARM_NAME_WHAT", "SINGLE_ARM_NAME", "Rig", "RigArm", "rig_arms"]
 
 #: The name of the one arm of a rig that does not name its arms.  ``right``: the protocol's default task arm, so a
 #: one-arm rig (and a one-arm hardware file of before the arms) is the task arm, and a lab that adds its second
 #: instrument adds ``left`` beside the arm it has commissioned.
 SINGLE_ARM_NAME = "right"
+#: What an arm's name may be (the hardware file's ``[[arm]] name``, the protocol's ``design.task_arm``): a letter,
+#: then up to 31 letters, digits, ``_`` or ``-`` (it names the arm in events, files and options).
+ARM_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}\Z")
+#: :data:`ARM_NAME` in words, for refusals.
+ARM_NAME_WHAT = ("a name of letters, digits, '_' and '-', starting with a letter, at most 32 characters "
+                 "(e.g. 'left', 'right')")
 
 
 class Rig(Protocol):

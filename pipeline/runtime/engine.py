@@ -217,7 +217,8 @@ def build_hardware_engine(
     compensates, and online bias refinement runs on top of it; its TCP calibration moves the robot's
     poses to the calibrated tip.  Without a payload on record there is no compensation and no bias
     refinement -- an "online bias only" start cannot work (its contact gate sees the tool's weight as
-    contact), and a session on the real rig is refused until the payload step is done.
+    contact), and a session on the real rig is refused until the payload step is done.  Each arm uses its own
+    calibration file and tool, and has its own framework and ring; the loop follows the file's ``fault_policy``.
     Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
     called before each device is opened (see :func:`pipeline.devices.real_rig.build_real_rig`).
 
@@ -230,15 +231,27 @@ def build_hardware_engine(
     from pipeline.devices.real_rig import build_real_rig
 
     clk: Clock = clock or MonotonicClock()
-    cal_file = RigCalibrationFile.load(hardware.calibration_file) if hardware.calibration_file else None
-    record = cal_file.tool(hardware.calibration_tool) if cal_file is not None else None
-    payload = record.payload if record is not None else None
-    tip = record.tcp.tip_in_flange_m if record is not None and record.tcp is not None else None
-    rig = build_real_rig(hardware, clk, on_open=on_open, tip_in_flange_m=tip)
-    calibration = payload if payload is not None else NO_PAYLOAD
-    rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm) if payload is not None else None
-    framework = HapticFramework(hardware.framework, calibration, device_peak_n=rig.haptic.peak_force_n, rls=rls)
-    ring = RingBuffer.create(TICK_DTYPE, int(ring_seconds * 1000), shared=shared_ring)
-    loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig())
-    return Engine(rig, framework, loop, clk, calibration, ring, simulated=False, calibration_file=cal_file,
-                  tool=hardware.calibration_tool)
+    arms = hardware.arms
+    files = [RigCalibrationFile.load(a.calibration_file) if a.calibration_file else None for a in arms]
+    records = [f.tool(a.calibration_tool) if f is not None else None for a, f in zip(arms, files, strict=True)]
+    tips = {a.name: r.tcp.tip_in_flange_m if r is not None and r.tcp is not None else None
+            for a, r in zip(arms, records, strict=True)}
+    rig = build_real_rig(hardware, clk, on_open=on_open, arm_tips_m=tips)
+    pipelines: list[tuple[HapticFramework, RingBuffer]] = []
+    calibrations: list[PayloadCalibration] = []
+    for a, r, dev in zip(arms, records, rig.real_arms, strict=True):
+        payload = r.payload if r is not None else None
+        calibration = payload if payload is not None else NO_PAYLOAD
+        rls = RlsBias(calibration.force_bias_n, calibration.torque_bias_nm) if payload is not None else None
+        framework = HapticFramework(a.framework, calibration, device_peak_n=dev.haptic.peak_force_n, rls=rls)
+        pipelines.append((framework, RingBuffer.create(TICK_DTYPE, int(ring_seconds * 1000), shared=shared_ring)))
+        calibrations.append(calibration)
+    (framework, ring), others = pipelines[0], pipelines[1:]
+    loop = HapticLoop(rig, framework, clk, ring, watchdog=watchdog or WatchdogConfig(), arm_pipelines=others,
+                      fault_policy=hardware.fault_policy)
+    names = [a.name for a in arms]
+    return Engine(rig, framework, loop, clk, calibrations[0], ring, simulated=False, calibration_file=files[0],
+                  tool=hardware.calibration_tool,
+                  frameworks={n: fw for n, (fw, _) in zip(names, pipelines, strict=True)},
+                  rings={n: rg for n, (_, rg) in zip(names, pipelines, strict=True)},
+                  calibrations=dict(zip(names, calibrations, strict=True)))

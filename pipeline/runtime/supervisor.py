@@ -8,10 +8,10 @@ ticked for longer than ``WatchdogConfig.loop_stall_s``, it latches
 ``LOOP_STALLED`` and reports it through the loop's own event path
 (:meth:`pipeline.runtime.loop.HapticLoop.fail_safe`), so the study record stores it
 like any other fault.  The force on the hand never depends on this check:
-the haptic device drops a command older than its own timeout (10 ms) in its
-own servo thread (:mod:`pipeline.devices.touch_output`), and a teleoperated robot's
-servo adapter stops the arm when no target has come for 50 ms
-(:mod:`pipeline.backends.ur_control`).
+every arm's haptic device drops a command older than its own timeout (10 ms) in
+its own servo thread (:mod:`pipeline.devices.touch_output`; two Touch devices in one
+servo scheduler each keep their own), and a teleoperated robot's servo adapter
+stops the arm when no target has come for 50 ms (:mod:`pipeline.backends.ur_control`).
 """
 
 from __future__ import annotations

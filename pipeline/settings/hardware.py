@@ -12,12 +12,12 @@ devices they name (so a new device adds its settings here and its opening there)
 from __future__ import annotations
 
 import os
-import re
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from pipeline.devices.rig import SINGLE_ARM_NAME  # the one arm of a file without [[arm]] tables
+# SINGLE_ARM_NAME: the one arm of a file without [[arm]] tables
+from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
 from pipeline.force.frames import Vec3
 from pipeline.force.framework import FrameworkConfig
@@ -45,7 +45,6 @@ DEFAULT_CALIBRATION_FILE = "calibration.json"
 #: What a fault on one arm does to the others (``[rig] fault_policy``): ``both`` -- every arm ramps to zero (a
 #: person's two hands are on the rig; the default); ``independent`` -- the other arms keep rendering.
 FAULT_POLICIES = ("both", "independent")
-_ARM_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_-]{0,31}\Z")
 #: The tables of one arm: a one-arm file has them at the top level, an ``[[arm]]`` table holds them.
 _ARM_TABLES = ("sensor", "robot", "haptic", "jaw", "frames", "framework", "calibration", "teleop")
 
@@ -226,9 +225,7 @@ def hardware_from_dict(d: Any, source: str = "hardware") -> HardwareConfig:
     arms: list[ArmSettings] = []
     for i, t in enumerate(tables):
         f.required(t, f"arm[{i}]", "name", "required: the arm's name, e.g. 'left' or 'right'")
-        name = f.string(f"arm[{i}].name", t["name"], pattern=_ARM_NAME,
-                        what="a name of letters, digits, '_' and '-', starting with a letter, at most 32 characters "
-                             "(e.g. 'left', 'right')")
+        name = f.string(f"arm[{i}].name", t["name"], pattern=ARM_NAME, what=ARM_NAME_WHAT)
         if any(a.name == name for a in arms):
             raise f.fail(f"arm[{i}].name", name, "each arm needs its own name; this one is taken by an earlier arm")
         fa = Fields(f"{source}: arm {name!r}", HardwareError)

@@ -111,14 +111,14 @@ def reader_of(source: Any) -> StudyReader:
 
 
 def block_rows(source: Any, session_id: int | None = None, segment: int | None = None,
-               ticks: tuple[int, int] | None = None) -> Iterable[BlockRow]:
+               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterable[BlockRow]:
     """``session_blocks`` rows (of a session, a segment, those overlapping ticks ``(first, last)``), by session,
     segment and block; ``source`` is a reader, a ``StudyDatabase`` or a connection (:func:`reader_of`).
 
     A version-3 file read as it is has no ``crc32`` (its blocks read as not verifiable); a column a table
-    lacks reads as NULL (NaN times).
+    lacks reads as NULL (NaN times).  ``arm``: another arm's blocks than the task arm's.
     """
-    for r in reader_of(source).blocks(session_id, segment, ticks):
+    for r in reader_of(source).blocks(session_id, segment, ticks, arm):
         yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
                        math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
                        bytes(r[6]), None if r[9] is None else int(r[9]))

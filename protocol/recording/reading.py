@@ -94,9 +94,10 @@ class SegmentData:
         return [(t, k, pl) for t, _, _, k, pl in merged]
 
 
-def segments_of(conn: Any, session_id: int) -> list[tuple[int, float, int]]:
-    """A session's recorded segments: (segment, started_at_s, t0_ns), in order (none for a version-2 session)."""
-    return reader_of(conn).recordings(session_id)
+def segments_of(conn: Any, session_id: int, arm: str = "") -> list[tuple[int, float, int]]:
+    """A session's recorded segments: (segment, started_at_s, t0_ns), in order (none for a version-2 session);
+    ``arm``: another arm's than the task arm's (:meth:`protocol.storage.StudyReader.arm_key`)."""
+    return reader_of(conn).recordings(session_id, arm)
 
 
 def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: list[str] | None = None,
@@ -124,7 +125,8 @@ def _decoded(conn: Any, rows: Iterable[BlockRow], skip_damaged: bool, names: lis
     return good, damage
 
 
-def read_segment(conn: Any, session_id: int, segment: int, *, skip_damaged: bool = False) -> SegmentData:
+def read_segment(conn: Any, session_id: int, segment: int, *, skip_damaged: bool = False, arm: str = "",
+                 ) -> SegmentData:
     """One segment in full: every column, the poses, the log and the snapshot.
 
     Raises
@@ -134,18 +136,19 @@ def read_segment(conn: Any, session_id: int, segment: int, *, skip_damaged: bool
         out instead and listed in :attr:`SegmentData.damage`.
     """
     reader = reader_of(conn)
-    row = reader.recording(session_id, segment)
+    row = reader.recording(session_id, segment, arm)
     if row is None:
-        raise KeyError(f"session {session_id} has no recorded segment {segment}")
-    good, damage = _decoded(reader, block_rows(reader, session_id, segment), skip_damaged)
+        raise KeyError(f"session {session_id} has no recorded segment {segment}" + (f" of arm {arm}" if arm else ""))
+    good, damage = _decoded(reader, block_rows(reader, session_id, segment, arm=arm), skip_damaged)
     cols, poses, events = join_decoded(good)
     return SegmentData(session_id, segment, float(row[0]), int(row[1]), json.loads(row[2]), cols, poses, events,
                        damage)
 
 
 def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
-               names: Iterable[str]) -> dict[str, np.ndarray]:
-    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window).
+               names: Iterable[str], arm: str = "") -> dict[str, np.ndarray]:
+    """Some columns of the records ``first_tick`` … ``last_tick`` of a segment (a trial's window; ``arm``: of
+    another arm than the task arm, the same ticks).
 
     Raises
     ------
@@ -155,7 +158,7 @@ def read_ticks(conn: Any, session_id: int, segment: int, first_tick: int, last_t
     names = list(dict.fromkeys(["tick", *names]))
     parts: list[dict[str, np.ndarray]] = []
     bad: list[tuple[BlockRow, str]] = []
-    for r in block_rows(conn, session_id, segment, (first_tick, last_tick)):
+    for r in block_rows(conn, session_id, segment, (first_tick, last_tick), arm):
         why = block_problem(r)
         if not why:
             try:

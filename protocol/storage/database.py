@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from protocol.storage import crashpoint
-from protocol.storage.common import StorageError, has_table, now_iso
+from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
 from protocol.storage.withdrawal import withdrawal_of
@@ -272,37 +272,39 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self.conn.execute(f"INSERT INTO trials ({cols}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
 
     def insert_recording(self, session_id: int, segment: int, started_at_s: float, t0_ns: int,
-                         snapshot: dict[str, Any], scales: dict[str, float]) -> None:
-        """Open a segment of a session's recording (version 3): where it starts, and the framework's state then."""
-        self.conn.execute(
-            "INSERT INTO recordings (session_id, segment, started_at_s, t0_ns, snapshot_json, scales_json) "
-            "VALUES (?, ?, ?, ?, ?, ?)",
-            (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot), json.dumps(scales)),
-        )
+                         snapshot: dict[str, Any], scales: dict[str, float], arm: str = "") -> None:
+        """Open a segment of a session's recording (version 3): where it starts, and the framework's state then
+        (``arm``: another arm's than the task arm's, :func:`protocol.storage.common.recording_tables`)."""
+        self._insert(recording_tables(arm)[0], arm, "session_id, segment, started_at_s, t0_ns, snapshot_json, "
+                     "scales_json", (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot),
+                                     json.dumps(scales)))
 
     def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
-                    n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
+                    n_records: int, t_first_s: float, t_last_s: float, data: bytes, arm: str = "") -> None:
         """Write a recorded block with its checksum, in place of the chunks it was written in so far (the recorder's
         own rows; :meth:`write_chunk`)."""
-        self.conn.execute(
-            "INSERT OR REPLACE INTO session_blocks (session_id, segment, block, first_tick, last_tick, n_records, "
-            "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (session_id, segment, block, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s, data,
-             zlib.crc32(data)),
-        )
-        self.conn.execute("DELETE FROM session_chunks WHERE session_id = ? AND segment = ? AND block = ?",
-                          (session_id, segment, block))
+        _, blocks, chunks = recording_tables(arm)
+        self._insert(blocks, arm, "session_id, segment, block, first_tick, last_tick, n_records, t_first_s, t_last_s, "
+                     "data, crc32", (session_id, segment, block, int(first_tick), int(last_tick), int(n_records),
+                                     t_first_s, t_last_s, data, zlib.crc32(data)), replace=True)
+        self.conn.execute(f"DELETE FROM {chunks} WHERE session_id = ? AND segment = ? AND block = ?"
+                          + (" AND arm = ?" if arm else ""), (session_id, segment, block, *((arm,) if arm else ())))
 
     def write_chunk(self, session_id: int, segment: int, block: int, chunk: int, first_tick: int, last_tick: int,
-                    n_records: int, t_first_s: float, t_last_s: float, data: bytes) -> None:
+                    n_records: int, t_first_s: float, t_last_s: float, data: bytes, arm: str = "") -> None:
         """Append what a segment's open block gained since the last commit, with its checksum (until
         :meth:`write_block` replaces the block's chunks)."""
-        self.conn.execute(
-            "INSERT INTO session_chunks (session_id, segment, block, chunk, first_tick, last_tick, n_records, "
-            "t_first_s, t_last_s, data, crc32) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            (session_id, segment, block, chunk, int(first_tick), int(last_tick), int(n_records), t_first_s, t_last_s,
-             data, zlib.crc32(data)),
-        )
+        self._insert(recording_tables(arm)[2], arm, "session_id, segment, block, chunk, first_tick, last_tick, "
+                     "n_records, t_first_s, t_last_s, data, crc32",
+                     (session_id, segment, block, chunk, int(first_tick), int(last_tick), int(n_records), t_first_s,
+                      t_last_s, data, zlib.crc32(data)))
+
+    def _insert(self, table: str, arm: str, columns: str, values: tuple[Any, ...], replace: bool = False) -> None:
+        """One row of a recording's table (with ``arm`` in another arm's)."""
+        if arm:
+            columns, values = f"arm, {columns}", (arm, *values)
+        verb = "INSERT OR REPLACE" if replace else "INSERT"
+        self.conn.execute(f"{verb} INTO {table} ({columns}) VALUES ({', '.join('?' * len(values))})", values)
 
     def next_segment(self, session_id: int) -> int:
         """The number the next run of a session records under (0 for its first)."""

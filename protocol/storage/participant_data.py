@@ -72,6 +72,15 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
         "session_chunks": ("SELECT session_id, segment, block, chunk, first_tick, last_tick, n_records, t_first_s, "
                            "t_last_s, crc32 FROM session_chunks WHERE session_id = ? ORDER BY segment, block, chunk",
                            has_table(conn, "session_chunks")),
+        # a rig of several arms: the other arms' recordings, described like the task arm's
+        "arm_recordings": ("SELECT * FROM arm_recordings WHERE session_id = ? ORDER BY arm, segment",
+                           has_table(conn, "arm_recordings")),
+        "arm_blocks": ("SELECT session_id, arm, segment, block, first_tick, last_tick, n_records, t_first_s, t_last_s, "
+                       "crc32 FROM arm_blocks WHERE session_id = ? ORDER BY arm, segment, block",
+                       has_table(conn, "arm_blocks")),
+        "arm_chunks": ("SELECT session_id, arm, segment, block, chunk, first_tick, last_tick, n_records, t_first_s, "
+                       "t_last_s, crc32 FROM arm_chunks WHERE session_id = ? ORDER BY arm, segment, block, chunk",
+                       has_table(conn, "arm_chunks")),
     }
     tables = {"participants": person, "sessions": sessions}
     for name, (sql, present) in queries.items():

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import json
 import os
 import sqlite3
 import zlib
@@ -24,9 +25,10 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.recording.codec import join_chunks
 from protocol.records import TrialRecord
-from protocol.storage.common import has_table
+from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
 from protocol.storage.withdrawal import Withdrawal, withdrawal_of, withdrawals
@@ -53,16 +55,23 @@ class Rows:
     rows: list[tuple[Any, ...]]
 
 
-#: Chunks whose block has not replaced them (it does so in the same transaction, so never both: a guard).
-_STILL_OPEN = ("NOT EXISTS (SELECT 1 FROM session_blocks b WHERE b.session_id = c.session_id AND b.segment = c.segment "
-               "AND b.block = c.block)")
+def _still_open(arm: str) -> str:
+    """Chunks whose block has not replaced them (it does so in the same transaction, so never both: a guard)."""
+    blocks = recording_tables(arm)[1]
+    same_arm = " AND b.arm = c.arm" if arm else ""
+    return (f"NOT EXISTS (SELECT 1 FROM {blocks} b WHERE b.session_id = c.session_id AND b.segment = c.segment "
+            f"AND b.block = c.block{same_arm})")
 
 
 def _block_filter(session_id: int | None, segment: int | None, ticks: tuple[int, int] | None,
-                  prefix: str = "") -> tuple[str, list[int]]:
+                  prefix: str = "", arm: str = "") -> tuple[str, list[Any]]:
     """The ``WHERE`` clause (or "") and its arguments that pick blocks or chunks of a session, a segment, a tick
-    range."""
-    where, args = [], []
+    range (of another arm than the task arm: ``arm``)."""
+    where: list[str] = []
+    args: list[Any] = []
+    if arm:
+        where.append(f"{prefix}arm = ?")
+        args.append(arm)
     for cond, value in ((f"{prefix}session_id = ?", session_id), (f"{prefix}segment = ?", segment)):
         if value is not None:
             where.append(cond)
@@ -185,6 +194,27 @@ class StudyReader:
         row = self.conn.execute(_SESSION_INFO + " WHERE s.session_id = ?", (int(session_id),)).fetchone()
         return None if row is None else SessionInfo(*row)
 
+    def arm_key(self, session_id: int, arm: str | None) -> str:
+        """Which recording ``arm`` names in a session: "" for the task arm's (``None``, or its name), else the name
+        of another arm whose records are stored (:meth:`arms`).
+
+        Raises
+        ------
+        KeyError
+            One line naming the session's arms, the task arm first.
+        """
+        info = self.session(session_id)
+        config = json.loads(info.config_json) if info is not None else {}
+        names = config.get("arms", {}).get("names") or [a["name"] for a in config.get("hardware", {}).get("arms", [])]
+        task = names[0] if names else SINGLE_ARM_NAME
+        if arm is None or arm == task:
+            return ""
+        others = self.arms(session_id)
+        if arm in others:
+            return arm
+        raise KeyError(f"--arm {arm}: session {session_id} has no recorded arm of that name (its arms: {task}, the "
+                       f"task arm{''.join(', ' + a for a in others)})")
+
     def session_overview(self) -> list[tuple[Any, ...]]:
         """Every session as people ask about it (``haptic-study sessions``), in order: ``session_id, code,
         participant_number, kind, status, rig, seed, started_at, ended_at, end_reason, schedule_json``, then its
@@ -300,53 +330,72 @@ class StudyReader:
             (int(session_id), *phases, *cues))]
 
     # -- the recording ------------------------------------------------------------------------------------------
-    def recordings(self, session_id: int) -> list[tuple[int, float, int]]:
-        """A session's recorded segments: ``(segment, started_at_s, t0_ns)``, in order (none before version 3)."""
-        return [(int(a), float(b), int(c)) for a, b, c in self.conn.execute(
-            "SELECT segment, started_at_s, t0_ns FROM recordings WHERE session_id = ? ORDER BY segment",
-            (int(session_id),))]
+    def arms(self, session_id: int | None = None) -> list[str]:
+        """The arms other than the task arm whose records are stored (of a session), by name; [] for a one-arm rig
+        or a file from before the arms."""
+        if not has_table(self.conn, "arm_recordings"):
+            return []
+        where, args = ("WHERE session_id = ?", [int(session_id)]) if session_id is not None else ("", [])
+        return [str(r[0]) for r in self.conn.execute(
+            f"SELECT DISTINCT arm FROM arm_recordings {where} ORDER BY arm", args)]
 
-    def recording(self, session_id: int, segment: int) -> tuple[float, int, str] | None:
+    def recordings(self, session_id: int, arm: str = "") -> list[tuple[int, float, int]]:
+        """A session's recorded segments: ``(segment, started_at_s, t0_ns)``, in order (none before version 3);
+        ``arm``: another arm's than the task arm's (:meth:`arms`)."""
+        if arm and not has_table(self.conn, "arm_recordings"):
+            return []
+        where, args = _block_filter(session_id, None, None, arm=arm)
+        return [(int(a), float(b), int(c)) for a, b, c in self.conn.execute(
+            f"SELECT segment, started_at_s, t0_ns FROM {recording_tables(arm)[0]} {where} ORDER BY segment", args)]
+
+    def recording(self, session_id: int, segment: int, arm: str = "") -> tuple[float, int, str] | None:
         """One segment's start: ``(started_at_s, t0_ns, snapshot_json)``, or None when there is no such segment."""
+        if arm and not has_table(self.conn, "arm_recordings"):
+            return None
+        where, args = _block_filter(session_id, segment, None, arm=arm)
         row = self.conn.execute(
-            "SELECT started_at_s, t0_ns, snapshot_json FROM recordings WHERE session_id = ? AND segment = ?",
-            (int(session_id), int(segment))).fetchone()
+            f"SELECT started_at_s, t0_ns, snapshot_json FROM {recording_tables(arm)[0]} {where}", args).fetchone()
         return None if row is None else (float(row[0]), int(row[1]), str(row[2]))
 
     def blocks(self, session_id: int | None = None, segment: int | None = None,
-               ticks: tuple[int, int] | None = None) -> Iterator[tuple[Any, ...]]:
+               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterator[tuple[Any, ...]]:
         """Recorded blocks (of a session, a segment, those overlapping ticks ``(first, last)``), in order.
 
         Each is ``(session_id, segment, block, first_tick, last_tick, n_records, data, t_first_s, t_last_s,
         crc32)``; a column the file lacks (``crc32`` before version 4) reads as None.  A block a killed run left
         open is read from its chunks (``session_chunks``), joined into one (:func:`protocol.recording.join_chunks`).
+        ``arm``: another arm's blocks than the task arm's (:meth:`arms`).
         """
-        have = {d[0] for d in self.conn.execute("SELECT * FROM session_blocks LIMIT 0").description}
+        if arm and not has_table(self.conn, "arm_blocks"):
+            return
+        table = recording_tables(arm)[1]
+        have = {d[0] for d in self.conn.execute(f"SELECT * FROM {table} LIMIT 0").description}
         cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
-        where, args = _block_filter(session_id, segment, ticks)
+        where, args = _block_filter(session_id, segment, ticks, arm=arm)
         rows = self.conn.execute(
-            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM session_blocks "
+            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM {table} "
             f"{where} ORDER BY session_id, segment, block", args)
-        open_blocks = self._open_blocks(session_id, segment, ticks)
+        open_blocks = self._open_blocks(session_id, segment, ticks, arm)
         if not open_blocks:
             yield from rows
             return
         yield from heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2]))
 
     def _open_blocks(self, session_id: int | None, segment: int | None,
-                     ticks: tuple[int, int] | None) -> list[tuple[Any, ...]]:
+                     ticks: tuple[int, int] | None, arm: str = "") -> list[tuple[Any, ...]]:
         """Blocks left open by a killed run, each joined from its chunks as :meth:`blocks` returns a block.
 
         The joined block's checksum is that of its bytes when every chunk's own checksum holds, else one that
         cannot match: a damaged chunk is reported as its block's damage.
         """
-        if not has_table(self.conn, "session_chunks"):
+        table = recording_tables(arm)[2]
+        if not has_table(self.conn, table):
             return []
-        where, args = _block_filter(session_id, segment, ticks, "c.")
-        where = f"{where} AND {_STILL_OPEN}" if where else f"WHERE {_STILL_OPEN}"
+        where, args = _block_filter(session_id, segment, ticks, "c.", arm)
+        where = f"{where} AND {_still_open(arm)}" if where else f"WHERE {_still_open(arm)}"
         chunks = self.conn.execute(
             "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, c.data, c.t_first_s, "
-            f"c.t_last_s, c.crc32 FROM session_chunks c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
+            f"c.t_last_s, c.crc32 FROM {table} c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
             args)
         out = []
         for key, group in itertools.groupby(chunks, key=lambda r: (r[0], r[1], r[2])):
@@ -363,7 +412,7 @@ class StudyReader:
         n = int(self.conn.execute("SELECT COUNT(*) FROM session_blocks").fetchone()[0])
         if has_table(self.conn, "session_chunks"):
             n += int(self.conn.execute("SELECT COUNT(*) FROM (SELECT DISTINCT c.session_id, c.segment, c.block "
-                                       f"FROM session_chunks c WHERE {_STILL_OPEN})").fetchone()[0])
+                                       f"FROM session_chunks c WHERE {_still_open('')})").fetchone()[0])
         return n
 
     # -- the audit (haptic-study check) ----------------------------------------------------------------------------

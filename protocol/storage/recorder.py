@@ -64,6 +64,7 @@ class Segment:
     t0_ns: int
     snapshot: dict[str, Any]
     scales: dict[str, float]
+    arm: str = ""  # "": the task arm's (protocol.storage.common.recording_tables)
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +75,7 @@ class Records:
     segment: int
     records: np.ndarray
     log: list[tuple[int, str, Any]]
+    arm: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -134,7 +136,7 @@ class Recorder:
         self._first_pending: float | None = None
         self._q: queue.SimpleQueue[Message | None] = queue.SimpleQueue()
         #: The open block of every segment being recorded, and the segment's clock: (session, segment) -> both.
-        self._blocks: dict[tuple[int, int], tuple[BlockBuilder, SessionClock]] = {}
+        self._blocks: dict[tuple[int, int, str], tuple[BlockBuilder, SessionClock]] = {}  # (session, segment, arm)
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self._local = threading.local()  # per producer thread: the items queued inside atomic(), not yet handed on
@@ -156,19 +158,20 @@ class Recorder:
         self._put(Event(session_id, t_s, kind, detail))
 
     def segment(self, session_id: int, segment: int, started_at_s: float, t0_ns: int, snapshot: dict[str, Any],
-                scales: dict[str, float]) -> None:
-        """Open a segment of the session's recording (committed at once, before any of its blocks)."""
-        self._put(Segment(session_id, segment, started_at_s, t0_ns, snapshot, scales))
+                scales: dict[str, float], arm: str = "") -> None:
+        """Open a segment of the session's recording (committed at once, before any of its blocks); ``arm``: of
+        another arm than the task arm."""
+        self._put(Segment(session_id, segment, started_at_s, t0_ns, snapshot, scales, arm))
 
     def records(self, session_id: int, segment: int, records: np.ndarray,
-                log: Sequence[tuple[int, str, Any]] = ()) -> None:
+                log: Sequence[tuple[int, str, Any]] = (), arm: str = "") -> None:
         """Queue loop records of a segment (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`, or their kept part,
         :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
         after they are queued (the ring's copies do not).
 
         They are cut into blocks as they fill; what the open block gained is written at every commit (a chunk).
         """
-        self._put(Records(session_id, segment, records, list(log)))
+        self._put(Records(session_id, segment, records, list(log), arm))
 
     def call(self, fn: Callable[[StudyDatabase], Any]) -> None:
         """Run ``fn(db)`` in the writer, committed at once (session start/end, schedule updates)."""
@@ -230,19 +233,20 @@ class Recorder:
             for sub in item.items:
                 self._apply(sub, commit=False)
         elif isinstance(item, Records):
-            builder, _ = self._blocks[(item.session_id, item.segment)]
+            key = (item.session_id, item.segment, item.arm)
+            builder, _ = self._blocks[key]
             builder.add(item.records, item.log)
             for block in builder.take_full():
-                self._write_block(item.session_id, item.segment, block)
+                self._write_block(key, block)
         elif isinstance(item, Samples):
             db.insert_samples(item.rows)
         elif isinstance(item, Event):
             db.insert_event(item.session_id, item.t_s, item.kind, item.detail)
         elif isinstance(item, Segment):
             db.insert_recording(item.session_id, item.segment, item.started_at_s, item.t0_ns, item.snapshot,
-                                item.scales)
-            self._blocks[(item.session_id, item.segment)] = (BlockBuilder(scales=item.scales),
-                                                             SessionClock(item.started_at_s, item.t0_ns))
+                                item.scales, item.arm)
+            self._blocks[(item.session_id, item.segment, item.arm)] = (BlockBuilder(scales=item.scales),
+                                                                       SessionClock(item.started_at_s, item.t0_ns))
         elif isinstance(item, Trial):
             db.insert_trial(item.record.to_row())
         else:
@@ -250,10 +254,11 @@ class Recorder:
         if commit and _commits(item):
             self._commit()
 
-    def _write_block(self, session_id: int, segment: int, block: tuple[int, int, np.ndarray, bytes]) -> None:
-        _, clock = self._blocks[(session_id, segment)]
+    def _write_block(self, key: tuple[int, int, str], block: tuple[int, int, np.ndarray, bytes]) -> None:
+        _, clock = self._blocks[key]
         number, _, records, data = block
-        self.db.write_block(session_id, segment, number, *_span(records, clock), data)
+        session_id, segment, arm = key
+        self.db.write_block(session_id, segment, number, *_span(records, clock), data, arm=arm)
 
     def _commit(self, final: bool = False) -> None:
         if self._held:
@@ -265,16 +270,18 @@ class Recorder:
                 if self.db.conn.in_transaction:
                     self.db.conn.execute("ROLLBACK")
                 raise
-        for (sid, seg), (builder, clock) in self._blocks.items():
+        for key, (builder, clock) in self._blocks.items():
             # the records since the last commit reach the disk with it (a chunk); at the end, the open block whole
             if final:
                 block = builder.final()
                 if block is not None:
                     self.db.begin()
-                    self._write_block(sid, seg, block)
+                    self._write_block(key, block)
             elif (chunk := builder.partial()) is not None:
                 self.db.begin()
-                self.db.write_chunk(sid, seg, chunk.block, chunk.number, *_span(chunk.records, clock), chunk.data)
+                sid, seg, arm = key
+                self.db.write_chunk(sid, seg, chunk.block, chunk.number, *_span(chunk.records, clock), chunk.data,
+                                    arm=arm)
         if self.db.conn.in_transaction:
             self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()

@@ -69,6 +69,24 @@ _CHUNKS = (
     "crc32 INTEGER NOT NULL, PRIMARY KEY (session_id, segment, block, chunk), "
     "FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment))"
 )
+#: Version 4's other arms (a rig of several arms: the arms other than the task arm, :mod:`protocol.recording`): the
+#: columns of ``recordings``, ``session_blocks`` and ``session_chunks`` with the arm's name.  Added to version 4 after
+#: files of version 4 existed: a writer that opens a version-4 file without them adds them.
+_ARMS = (
+    "CREATE TABLE IF NOT EXISTS arm_recordings (session_id INTEGER NOT NULL REFERENCES sessions(session_id), "
+    "arm TEXT NOT NULL, segment INTEGER NOT NULL, started_at_s REAL NOT NULL, t0_ns INTEGER NOT NULL, "
+    "snapshot_json TEXT NOT NULL, scales_json TEXT NOT NULL, PRIMARY KEY (session_id, arm, segment))",
+    "CREATE TABLE IF NOT EXISTS arm_blocks (session_id INTEGER NOT NULL, arm TEXT NOT NULL, segment INTEGER NOT NULL, "
+    "block INTEGER NOT NULL, first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, n_records INTEGER NOT NULL, "
+    "t_first_s REAL NOT NULL, t_last_s REAL NOT NULL, data BLOB NOT NULL, crc32 INTEGER, "
+    "PRIMARY KEY (session_id, arm, segment, block), "
+    "FOREIGN KEY (session_id, arm, segment) REFERENCES arm_recordings (session_id, arm, segment))",
+    "CREATE TABLE IF NOT EXISTS arm_chunks (session_id INTEGER NOT NULL, arm TEXT NOT NULL, segment INTEGER NOT NULL, "
+    "block INTEGER NOT NULL, chunk INTEGER NOT NULL, first_tick INTEGER NOT NULL, last_tick INTEGER NOT NULL, "
+    "n_records INTEGER NOT NULL, t_first_s REAL NOT NULL, t_last_s REAL NOT NULL, data BLOB NOT NULL, "
+    "crc32 INTEGER NOT NULL, PRIMARY KEY (session_id, arm, segment, block, chunk), "
+    "FOREIGN KEY (session_id, arm, segment) REFERENCES arm_recordings (session_id, arm, segment))",
+)
 #: What upgrades a version-3 database to version 4: a checksum per recorded block (NULL in blocks written before it,
 #: which cannot be verified), and which code ran each session (the commit, and whether the checkout had uncommitted
 #: changes; NULL where it is not known, e.g. an install from a wheel).
@@ -78,6 +96,7 @@ _UPGRADE_3_TO_4 = (
     "ALTER TABLE sessions ADD COLUMN software_dirty INTEGER CHECK (software_dirty IS NULL OR software_dirty IN (0, 1))",
     _WITHDRAWALS,
     _CHUNKS,
+    *_ARMS,
 )
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
@@ -255,9 +274,9 @@ class SchemaFile:
                 raise StorageError(f"{self.path}: database schema version {version} must be upgraded to "
                                    f"{SCHEMA_VERSION} before it is written to; nothing was changed")
             self._upgrade(version)
-        elif not readonly and not {"withdrawals", "session_chunks"} <= tables:  # a version-4 file from before them
-            c.execute(_WITHDRAWALS)
-            c.execute(_CHUNKS)
+        elif not readonly and not {"withdrawals", "session_chunks", "arm_chunks"} <= tables:  # a v4 file before them
+            for statement in (_WITHDRAWALS, _CHUNKS, *_ARMS):
+                c.execute(statement)
         if not readonly:
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Protocol
 
 from protocol.records import trial_id_of
-from protocol.storage.common import StorageError, has_table, now_iso
+from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import session_scope
 
 __all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
@@ -130,14 +130,18 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
         events += conn.execute("SELECT COUNT(*) FROM events WHERE session_id = ?", (sid,)).fetchone()[0]
         samples += conn.execute("SELECT COUNT(*) FROM samples WHERE trial_id >= ? AND trial_id < ?",
                                 (trial_id_of(sid, 0), trial_id_of(sid + 1, 0))).fetchone()[0]
-        if recorded:
-            segments += conn.execute("SELECT COUNT(*) FROM recordings WHERE session_id = ?", (sid,)).fetchone()[0]
-            b, r = conn.execute("SELECT COUNT(*), COALESCE(SUM(n_records), 0) FROM session_blocks WHERE session_id = ?",
-                                (sid,)).fetchone()
+        for arm in ("", "arm") if recorded else ():  # the task arm's recording, then the other arms' (if any)
+            recs, blocks_table, chunks = recording_tables(arm)
+            if not has_table(conn, recs):
+                continue
+            if not arm:  # (a run records every arm: counted once)
+                segments += conn.execute(f"SELECT COUNT(*) FROM {recs} WHERE session_id = ?", (sid,)).fetchone()[0]
+            b, r = conn.execute(f"SELECT COUNT(*), COALESCE(SUM(n_records), 0) FROM {blocks_table} "
+                                "WHERE session_id = ?", (sid,)).fetchone()
             blocks, records = blocks + int(b), records + int(r)
-            if open_blocks:
-                b, r = conn.execute("SELECT COUNT(*), COALESCE(SUM(n), 0) FROM (SELECT SUM(n_records) AS n "
-                                    "FROM session_chunks WHERE session_id = ? GROUP BY segment, block)",
+            if open_blocks and has_table(conn, chunks):
+                b, r = conn.execute(f"SELECT COUNT(*), COALESCE(SUM(n), 0) FROM (SELECT SUM(n_records) AS n FROM "
+                                    f"{chunks} WHERE session_id = ? GROUP BY {'arm, ' if arm else ''}segment, block)",
                                     (sid,)).fetchone()
                 blocks, records = blocks + int(b), records + int(r)
     return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples))
@@ -171,10 +175,10 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
         for sid, _, _ in fp.sessions:
             c.execute("DELETE FROM samples WHERE trial_id >= ? AND trial_id < ?",
                       (trial_id_of(sid, 0), trial_id_of(sid + 1, 0)))
-            c.execute("DELETE FROM session_blocks WHERE session_id = ?", (sid,))
-            if has_table(c, "session_chunks"):
-                c.execute("DELETE FROM session_chunks WHERE session_id = ?", (sid,))
-            c.execute("DELETE FROM recordings WHERE session_id = ?", (sid,))
+            for arm in ("", "arm"):  # the task arm's recording, then the other arms'; chunks and blocks first
+                for table in reversed(recording_tables(arm)):
+                    if has_table(c, table):
+                        c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM events WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM leases WHERE scope = ?", (session_scope(sid),))

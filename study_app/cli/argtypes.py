@@ -13,16 +13,21 @@ import re
 from collections.abc import Callable
 from typing import NoReturn
 
+from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX, host_problem
 
 __all__ = [
     "SEED",
     "OneLineParser",
     "add_command",
+    "arm_name",
+    "arm_names",
     "host_name",
     "one_line",
     "positive_seconds",
     "real_number",
+    "setting",
+    "setting_list",
     "whole_number",
 ]
 
@@ -91,6 +96,33 @@ def host_name(name: str, *, ipv6: bool = True) -> Callable[[str], str]:
     return parse
 
 
+def arm_name(name: str) -> Callable[[str], str]:
+    """An argument type: one arm of a rig, by name (the hardware file's ``[[arm]] name`` rule)."""
+
+    def parse(text: str) -> str:
+        if not ARM_NAME.match(text):
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be {ARM_NAME_WHAT}")
+        return text
+
+    return parse
+
+
+def arm_names(name: str, most: int = 4) -> Callable[[str], tuple[str, ...]]:
+    """An argument type: a rig's arms, comma-separated names (the hardware file's ``[[arm]] name`` rule)."""
+
+    def parse(text: str) -> tuple[str, ...]:
+        names = tuple(n.strip() for n in text.split(","))
+        bad = next((n for n in names if not ARM_NAME.match(n)), None)
+        if bad is not None:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: each arm must be {ARM_NAME_WHAT}; {bad!r} is not")
+        if len(set(names)) != len(names) or len(names) > most:
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be 1 to {most} distinct arm names, "
+                                             "comma-separated (e.g. left,right)")
+        return names
+
+    return parse
+
+
 def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: str,
                 description: str = "") -> argparse.ArgumentParser:
     """A subcommand whose ``--help`` starts with what it does and ends with an example."""
@@ -112,3 +144,45 @@ def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
 
 #: Seeds are stored in the study database: at most SQLite's largest INTEGER.
 SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")
+
+
+def _setting_parts(text: str) -> tuple[str, str]:
+    """``NAME=VALUE`` split at its ``=``; the parser's one-line error when there is none."""
+    name, eq, value = text.partition("=")
+    if not eq or not name.strip():
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: must be NAME=VALUE, NAME one of the pipeline's settings "
+                                         "(filter_window, f_scale_n, f_max_n, slew_n_per_s, ramp_in_s)")
+    return name.strip(), value.strip()
+
+
+def setting(text: str) -> tuple[str, float]:
+    """An argument type: one pipeline setting ``NAME=VALUE`` (:mod:`pipeline.force.pipeline_settings`), checked
+    against the pipeline configuration's own limits."""
+    from pipeline.force.pipeline_settings import canonical_name, parse_setting
+
+    name, value = _setting_parts(text)
+    try:
+        if "," in value:
+            raise ValueError(f"{canonical_name(name)}: one value here (lists of values are for haptic-study sweep)")
+        return canonical_name(name), parse_setting(name, value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: {exc}") from None
+
+
+def setting_list(text: str) -> tuple[str, tuple[float, ...]]:
+    """An argument type: ``NAME=V1,V2,...``, the values of one pipeline setting a sweep runs (distinct, each checked
+    as :func:`setting` checks one)."""
+    from pipeline.force.pipeline_settings import canonical_name, parse_setting
+
+    name, value = _setting_parts(text)
+    try:
+        key = canonical_name(name)
+        texts = [v.strip() for v in value.split(",")]
+        if not value or any(not v for v in texts):
+            raise ValueError(f"{key}: an empty value; give a comma-separated list of values")
+        values = tuple(parse_setting(key, v) for v in texts)
+        if len(set(values)) != len(values):
+            raise ValueError(f"{key}: a value is given twice; give each value once")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"--set = {text!r}: {exc}") from None
+    return key, values

@@ -11,7 +11,7 @@ import os
 from pathlib import Path
 from typing import Any
 
-from study_app.cli.argtypes import add_command, real_number
+from study_app.cli.argtypes import add_command, real_number, setting
 from study_app.cli.error import CliError
 
 __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
@@ -40,6 +40,9 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
                    metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
                                        "telling the pipeline (rehearse the wizard's frame check failing)")
+    g.add_argument("--set", dest="settings", action="append", default=[], type=setting, metavar="NAME=VALUE",
+                   help="simulated rig: a pipeline setting of its sessions, as run --set (filter_window, f_scale_n, "
+                        "f_max_n, slew_n_per_s, ramp_in_s); repeatable")
     g.set_defaults(handler=cmd_gui)
 
 
@@ -63,6 +66,12 @@ def cmd_gui(args: argparse.Namespace) -> int:
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
     if args.sim_mount_error_deg and args.rig != "sim":
         raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
+    if args.settings and args.rig != "sim":
+        raise CliError("--set applies to the simulated rig only (the real rig's pipeline is its hardware file's)")
+    from pipeline.force.pipeline_settings import non_default_settings, settings_of
+    from study_app.cli.run_cmds import framework_of
+
+    sim_settings = tuple(non_default_settings(settings_of(framework_of(args.settings))).items())
     if args.screenshot is None and not any(os.environ.get(v) for v in ("DISPLAY", "WAYLAND_DISPLAY",
                                                                        "QT_QPA_PLATFORM")):
         # without this Qt aborts the process with a core dump and a page of plugin names
@@ -77,7 +86,7 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from study_app.gui.app import run_gui
 
     host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
-                      sim_mount_error_deg=args.sim_mount_error_deg)
+                      sim_mount_error_deg=args.sim_mount_error_deg, sim_settings=sim_settings)
     try:
         return run_gui(host, db_path=args.db)
     except RuntimeError as exc:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
-from study_app.cli.argtypes import add_command, real_number, whole_number
+from study_app.cli.argtypes import add_command, arm_name, real_number, whole_number
 from study_app.cli.error import CliError
 from study_app.cli.export_participant_cmds import add_export_participant_parser
 
@@ -51,6 +51,9 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
                    help="tanh scaling f_max to try, N (the device's own peak still clamps)")
     r.add_argument("--out", default=None, metavar="DIR",
                    help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new folder)")
+    r.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                   help="a rig of several arms: the arm whose records to replay, over the task arm's trials "
+                        "(default: the task arm's)")
     r.set_defaults(handler=cmd_replay)
 
     p = add_command(
@@ -65,6 +68,8 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), required=True, metavar="ID",
                    help="session id")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                   help="a rig of several arms: the arm whose records to draw (default: the task arm's)")
     p.set_defaults(handler=cmd_plot_session)
 
     e = add_command(
@@ -94,6 +99,9 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     es.add_argument("--session", type=whole_number("--session", 1, SQLITE_INTEGER_MAX), default=None, metavar="ID",
                     help="one session (default: all)")
     es.add_argument("--format", choices=("csv", "parquet"), default="csv", help="file format (default csv)")
+    es.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                   help="a rig of several arms: the arm whose records to export, named in an arm column "
+                        "(default: the task arm's)")
     es.add_argument("--out", required=True, metavar="FILE",
                     help="file to write (must not exist); - writes csv to standard output")
     es.set_defaults(handler=cmd_export)
@@ -101,8 +109,10 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
 
 
 # -- shared -------------------------------------------------------------------------------------------------
-def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any, list[Any], Any]:
-    """(open read-only database, its recorded segments, the session's trials frame), or a one-line error.
+def _session(db_path: str, session_id: int, partial: bool = False, arm: str | None = None,
+             ) -> tuple[Any, list[Any], Any]:
+    """(open read-only database, its recorded segments -- of ``arm``, default the task arm --, the session's trials
+    frame), or a one-line error.
 
     A damaged recording is that one-line error, or with ``partial`` its damaged blocks are left out and
     named on standard error (a partial result, stated as such).
@@ -121,13 +131,18 @@ def _session(db_path: str, session_id: int, partial: bool = False) -> tuple[Any,
         raise CliError(f"--session {session_id}: no such session in {db_path} (sessions: "
                          f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
     row = (info.code, info.kind)
-    segs = segments_of(db, session_id) if db.schema_version >= 3 else []
+    try:
+        key = db.arm_key(session_id, arm)
+    except KeyError as exc:
+        db.close()
+        raise CliError(exc.args[0]) from None
+    segs = segments_of(db, session_id, key) if db.schema_version >= 3 else []
     if not segs:
         db.close()
         raise CliError(f"--session {session_id}: was not recorded whole (it was stored by an earlier version, "
                          "which kept its trials' samples only); replay and plot-session need a recorded session")
     try:
-        segments = [read_segment(db, session_id, s[0], skip_damaged=partial) for s in segs]
+        segments = [read_segment(db, session_id, s[0], skip_damaged=partial, arm=key) for s in segs]
     except RecordingDamaged as exc:
         db.close()
         raise CliError(f"--session {session_id} in {db_path}: {exc} (haptic-study check --db {db_path} lists "
@@ -171,7 +186,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db]}
     if args.out:  # refused before the work, not after it
         _output_policy(lambda: check_output_folder(args.out, **folder))
-    (code, kind), segments, trials = _session(args.db, args.session)
+    (code, kind), segments, trials = _session(args.db, args.session, arm=args.arm)
     outputs, exact = _replay_as_recorded(args.session, code, kind, segments)
     trade = _filter_trade(outputs, segments)
     changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
@@ -301,7 +316,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
         raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     _output_policy(lambda: check_output_file(out, command="plot-session"))  # before the work
-    (code, kind), segments, trials = _session(args.db, args.session, partial=True)
+    (code, kind), segments, trials = _session(args.db, args.session, partial=True, arm=args.arm)
     # matplotlib: once the session is known to be there
     from analysis.figures import save_one
     from analysis.session_figures import session_trace
@@ -318,6 +333,8 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     title = (f"{code}, {kind} session {args.session}: {len(trials)} trials ({n_aborted} aborted), "
              f"{t_s[-1] - t_s[0]:.0f} s (trial number, target, haptics)") if len(t_s) else \
         f"{code}, session {args.session}: no records"
+    if args.arm:
+        title += f"; arm {args.arm}"
     gone = [f"{d.t_first_s:.3f}–{d.t_last_s:.3f} s" for s in segments for d in s.damage]
     if gone:
         title += f"; PARTIAL: recording damaged at {', '.join(gone)}, left out"
@@ -393,7 +410,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     from analysis.samples import codebook_frame, samples_frame
 
     try:
-        frame = samples_frame(args.db, args.session)
+        frame = samples_frame(args.db, args.session, args.arm)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
     if to_stdout:

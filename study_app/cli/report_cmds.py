@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
-from study_app.cli.argtypes import add_command, whole_number
+from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
@@ -75,6 +75,9 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:
                    required=True, metavar="N",
                    help="trial number within the session, from 1, as the GUI and trials.csv number them")
     p.add_argument("--out", required=True, metavar="FILE", help="figure file: .png (300 dpi), .pdf or .svg")
+    p.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                   help="a rig of several arms: draw this arm's records over the trial's window (default: the task "
+                        "arm's, the trial's own)")
     p.set_defaults(handler=cmd_plot_trial)
 
 
@@ -161,7 +164,7 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
             raise CliError(f"--trial {args.trial}: no such trial in session {args.session}; its stored trials are "
                            f"{_trial_numbers(numbers)}")
         row = rows.iloc[0]
-        samples = read_trial_samples(args.db, args.session, args.trial - 1)
+        samples = read_trial_samples(args.db, args.session, args.trial - 1, args.arm)
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
     # matplotlib: once the trial is known to be there

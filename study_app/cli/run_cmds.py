@@ -11,9 +11,14 @@ import json
 import os
 import sqlite3
 import sys
+from typing import TYPE_CHECKING
 
-from study_app.cli.argtypes import SEED, add_command, positive_seconds, whole_number
+from pipeline.devices.rig import SINGLE_ARM_NAME
+from study_app.cli.argtypes import SEED, add_command, arm_names, positive_seconds, setting, whole_number
 from study_app.cli.error import CliError
+
+if TYPE_CHECKING:
+    from protocol.config import ProtocolConfig
 
 __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
 
@@ -66,11 +71,20 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     after.add_argument("--continue", dest="continue_study", action="store_true",
                        help="complete a study that stopped part-way in --db: resume interrupted sessions, run what "
                             "was not started (give the --participants, --seed and --protocol it was started with)")
+    r.add_argument("--set", dest="settings", action="append", default=[], type=setting, metavar="NAME=VALUE",
+                   help="a pipeline setting of every session, stored with it (default: the paper's): filter_window "
+                        "(samples, 10), f_scale_n (f_scale, N, 7), f_max_n (f_max, N, 3), slew_n_per_s (slew, N/s, "
+                        "50), ramp_in_s (ramp_in, s, 0.5); repeatable; --continue and --resume need the same")
     r.add_argument("--inject-fault", dest="inject_fault", action="append", default=[], type=_fault_plan,
                    metavar="KIND@CODE:TRIAL[+SECONDS]",
                    help="rehearse a fault on the simulated rig, SECONDS (default 3) after the cue of participant "
                         "CODE's TRIAL-th experiment trial; KIND: sensor-stall, nan-burst, bad-status, stale-pose, "
                         "device-error, kill (ends this command as kill -9 would); repeatable")
+    r.add_argument("--sim-arms", dest="sim_arms", type=arm_names("--sim-arms"), default=(SINGLE_ARM_NAME,),
+                   metavar="NAMES",
+                   help=f"the simulated rig's arms, comma-separated (default: one arm, {SINGLE_ARM_NAME}); the "
+                        "protocol's design.task_arm names the one that does the task, the others are rigged alike and "
+                        "held still (e.g. --sim-arms left,right with task_arm = \"left\")")
     r.set_defaults(handler=cmd_run)
 
 
@@ -125,11 +139,13 @@ def cmd_run(args: argparse.Namespace) -> int:
         for f in args.inject_fault:
             if f.code != args.resume:
                 raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    framework = framework_of(args.settings)
     _refuse_a_full_disk(args.db)
     bar: ProgressBar | None = None
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
+            _check_task_arm(protocol, args)
 
         def show(p):
             nonlocal bar
@@ -143,11 +159,12 @@ def cmd_run(args: argparse.Namespace) -> int:
         t0 = _time.perf_counter()
         if args.resume is not None:
             progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
-                                      faults=args.inject_fault)
+                                      faults=args.inject_fault, framework=framework)
         else:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
                 on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
+                sim_arms=args.sim_arms, framework=framework,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
@@ -178,6 +195,33 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
+
+
+def _check_task_arm(protocol: ProtocolConfig, args: argparse.Namespace) -> None:
+    """The protocol's task arm must be one of ``--sim-arms``: one line naming both."""
+    from protocol.config import ProtocolError
+
+    try:
+        protocol.task_arm_of(args.sim_arms)
+    except ProtocolError as exc:
+        raise CliError(f"{args.protocol or 'protocol/default.toml'}: {exc}; the simulated rig's arms are "
+                       f"--sim-arms {','.join(args.sim_arms)}") from None
+
+
+def framework_of(settings: list[tuple[str, float]]):
+    """The pipeline configuration of ``--set``'s settings (the paper's for the others); a setting given twice, or
+    a combination the configuration refuses, is the one-line :class:`CliError`."""
+    from pipeline.force.pipeline_settings import framework_with
+
+    chosen: dict[str, float] = {}
+    for name, value in settings:
+        if name in chosen:
+            raise CliError(f"--set {name}: given twice ({chosen[name]:g} and {value:g}); give each setting once")
+        chosen[name] = value
+    try:
+        return framework_with(chosen)
+    except ValueError as exc:
+        raise CliError(f"--set: {exc}") from None
 
 
 #: Free space below which ``run`` does not start: SQLite's journal and the first recorded blocks need about this.

@@ -12,6 +12,7 @@ from collections import Counter
 import pandas as pd
 
 from analysis.aggregate import by_mode, mean_sd, per_participant
+from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import StudyReader
 
@@ -63,6 +64,21 @@ def _cell(v: tuple[float, float]) -> str:
     return f"{v[0]:.3f}" + (f" ± {v[1]:.3f}" if math.isfinite(v[1]) else "")
 
 
+def _settings_line(config_jsons: list[str]) -> str:
+    """The pipeline settings the sessions ran with (``run --set``), as far as they are not the paper's."""
+    import json
+
+    found = set()
+    for cj in config_jsons:
+        try:
+            record = json.loads(cj or "{}").get("framework")
+        except (ValueError, TypeError, AttributeError):
+            record = None
+        found.add(describe(non_default_settings(stored_settings(record))))
+    return "Pipeline settings: " + " / ".join(sorted(found or {"the paper's"})) + (
+        "" if found <= {"the paper's"} else " (the paper's for the others)")
+
+
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
     """Per-mode mean ± SD across participants, each participant's trials averaged first (as ``report`` does)."""
     with StudyReader(db_path, check=False) as reader:  # the run just wrote it
@@ -82,6 +98,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
         f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), "
         + (f"{recorded:,} records (whole sessions at 1 kHz)" if recorded else f"{n_samples:,} samples"),
+        _settings_line([sessions[i].config_json for i in session_ids if i in sessions]),
         "",
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",

@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from pipeline.force.pipeline_settings import non_default_settings, settings_of
 from pipeline.runtime.engine import Engine
 from pipeline.settings.hardware import HardwareConfig
 
@@ -12,15 +13,26 @@ __all__ = ["config_record", "real_config_record"]
 
 
 def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
-    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds."""
+    """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds; on a rig of
+    several arms also ``arms``: their names (the task arm, whose records the session holds, first), and each arm's
+    calibration (the session's ``calibration_json`` is the task arm's).
+
+    ``pipeline_settings`` repeats, from ``framework``, the settings ``run --set`` chooses that are not the paper's
+    (:mod:`pipeline.force.pipeline_settings`; ``{}`` for the paper's), so that analysis can say so without
+    knowing the pipeline's defaults.
+    """
     fw = eng.framework.config
+    arms = {"arms": {"names": list(eng.calibrations),
+                     "calibrations": {name: cal.to_dict() for name, cal in eng.calibrations.items()}}}
     return {
+        **(arms if len(eng.calibrations) > 1 else {}),
         "rig": "sim",
         "clock": clock,
         "rig_seed": rig_seed,
         "participant_seed": participant_seed,
         "sim": _plain(dataclasses.asdict(eng.rig.config)),
         "framework": _plain(dataclasses.asdict(fw)),
+        "pipeline_settings": non_default_settings(settings_of(fw)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
 
@@ -35,6 +47,7 @@ def real_config_record(hw: HardwareConfig, hardware_text: str, eng: Engine) -> d
         "hardware_toml": hardware_text,
         "hardware": _plain(dataclasses.asdict(hw)),
         "framework": _plain(dataclasses.asdict(eng.framework.config)),
+        "pipeline_settings": non_default_settings(settings_of(eng.framework.config)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
 

@@ -12,6 +12,7 @@ import json
 import os
 from typing import Any
 
+from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["format_sessions", "list_sessions", "next_participant_number"]
@@ -25,7 +26,8 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         ``session_id, code, participant_number, kind, status, rig, seed, started_at, ended_at, end_reason,
         trials_planned, trials_done, trials_aborted, successes``, ``first_trial``, ``last_trial``: the
         stored trials' numbers, from 1 (None when none is stored), and ``writer``: the live process running
-        a session right now ("" when none: a ``running`` session without one was interrupted).
+        a session right now ("" when none: a ``running`` session without one was interrupted), and
+        ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the paper's).
 
     ``check``: run the integrity check first (the command line does; the GUI's engine, listing between
     sessions, checks when it opens the database to write).
@@ -39,7 +41,9 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         return []
     db = StudyDatabase(db_path, readonly=True, check=check)
     try:
-        rows = StudyReader.over(db).session_overview()
+        reader = StudyReader.over(db)
+        rows = reader.session_overview()
+        pipeline = {int(s.session_id): _pipeline_settings(s.config_json) for s in reader.sessions()}
         writers = db.sessions_being_written()
     finally:
         db.close()
@@ -58,8 +62,18 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "first_trial": None if first is None else int(first) + 1,
             "last_trial": None if last is None else int(last) + 1,
             "writer": writers.get(int(sid), "") if status == "running" else "",
+            "pipeline": pipeline.get(int(sid), {}),
         })
     return out
+
+
+def _pipeline_settings(config_json: str | None) -> dict[str, float]:
+    """The settings a session's ``config_json`` records that are not the paper's."""
+    try:
+        record = json.loads(config_json or "{}").get("framework")
+    except (ValueError, TypeError, AttributeError):
+        return {}
+    return non_default_settings(stored_settings(record))
 
 
 def next_participant_number(sessions: list[dict[str, Any]]) -> int:
@@ -97,6 +111,13 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     n_participants = len({s["code"] for s in sessions})
     lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")
     lines.append("")
+    by_settings: dict[str, list[str]] = {}
+    for s in sessions:
+        if s.get("pipeline"):
+            by_settings.setdefault(describe(s["pipeline"]), []).append(str(s["session_id"]))
+    for text, ids in by_settings.items():
+        lines.append(f"pipeline settings not the paper's (run --set): {text} (session{'s' if len(ids) > 1 else ''} "
+                     f"{', '.join(ids)})")
     lines.append("trials: finished / planned (aborted trials are re-run and not counted as finished)")
     if any(_status(s) == "interrupted" for s in sessions):
         lines.append("an interrupted session can be resumed: haptic-study run --resume CODE, or the GUI")

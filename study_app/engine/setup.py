@@ -58,6 +58,9 @@ class HostConfig:
     sim_mount_error_deg
         Simulated rig: the sensor is mounted turned about its z axis by this much, unknown to the pipeline
         (``SimRigConfig.sensor_z_mount_deg``): rehearse the frame check failing.
+    sim_settings
+        Simulated rig: the pipeline settings (``gui --set``, :mod:`pipeline.force.pipeline_settings`) that are not
+        the paper's, as (name, value) pairs; stored with each session like ``run --set``'s.
     """
 
     rig: str = "sim"
@@ -70,6 +73,7 @@ class HostConfig:
     health_period_s: float = 0.5
     trace_jitter: bool = False
     sim_mount_error_deg: float = 0.0
+    sim_settings: tuple[tuple[str, float], ...] = ()
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -191,12 +195,13 @@ def build_engine(
     """
     if config.rig == "real":
         return build_real_engine(config, shared_ring=shared_ring, on_open=on_open)
+    from pipeline.force.pipeline_settings import framework_with
     from pipeline.sim.rig import SimRigConfig
 
     eng = build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
                      clock=config.clock, calibrate=True, driver="hold", haptics_on=False, refine_bias=True,
-                     ring_seconds=30.0),
+                     ring_seconds=30.0, framework=framework_with(dict(config.sim_settings))),
         shared_ring=shared_ring,
     )
     eng.rig.set_driver(driver)

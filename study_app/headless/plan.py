@@ -11,18 +11,21 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+from pipeline.force.framework import FrameworkConfig
+from pipeline.force.pipeline_settings import describe, non_default_settings, settings_of, stored_settings
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import schedule_from_json
 from protocol.rehearsal import FaultPlan
 from protocol.session import first_unfinished
 from protocol.session_setup import participant_code, refuse_damaged_recording, training_protocol, training_schedule
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
+from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import withdrawals
 from protocol.study_rules import StudyRuleError, seed_refusal, stored_sessions, training_refusal
 
 __all__ = [
-    "Step", "all_steps", "check_fault_plans", "interrupted_session_of", "open_notes", "peek", "plan_study",
-    "remaining_trials",
+    "Step", "all_steps", "check_fault_plans", "check_settings", "interrupted_session_of", "open_notes", "peek",
+    "plan_study", "remaining_trials",
 ]
 
 
@@ -153,11 +156,12 @@ def peek(db_path: str) -> StudyDatabase | None:
 
 def plan_study(
     db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
-    continue_study: bool,
+    continue_study: bool, framework: FrameworkConfig | None = None,
 ) -> tuple[dict[int, list[Step]], int, list[int]]:
     """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
 
-    ``db`` None: a new database.  A read-only ``db`` is closed afterwards.
+    ``db`` None: a new database.  A read-only ``db`` is closed afterwards.  ``framework`` (default: the paper's)
+    must be the pipeline configuration every stored session of the study ran with (:func:`check_settings`).
     """
     try:
         if continue_study:
@@ -168,6 +172,7 @@ def plan_study(
             if db is not None:
                 planned = _plan_continue(db, db_path, participants, seed, protocol)
                 _check_seed(db, db_path, seed)
+                check_settings(StudyReader.over(db).sessions(), db_path, framework)
                 return planned
         if db is not None:
             for n in range(1, participants + 1):
@@ -178,6 +183,7 @@ def plan_study(
                         f"(use a new database, or the same command with --continue to complete the study)"
                     )
             _check_seed(db, db_path, seed)
+            check_settings(StudyReader.over(db).sessions(), db_path, framework)
         plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
         return plan, per * participants, []
@@ -191,6 +197,28 @@ def _check_seed(db: StudyDatabase, db_path: str, seed: int) -> None:
     why = seed_refusal(stored_sessions(db), seed)
     if why:
         raise StudyRuleError(f"{db_path}: {why}; nothing was changed")
+
+
+def check_settings(sessions: Sequence[SessionInfo], db_path: str, framework: FrameworkConfig | None) -> None:
+    """One pipeline per study: refuse (:class:`StorageError`) settings other than those a stored session ran with.
+
+    The settings are the ones ``run --set`` chooses (:mod:`pipeline.force.pipeline_settings`), read from each
+    session's ``config_json``; a study whose sessions ran with different filters or scalings compares nothing.
+    """
+    chosen = settings_of(framework or FrameworkConfig())
+    for info in sessions:
+        try:
+            record = json.loads(info.config_json).get("framework")
+        except (TypeError, ValueError, AttributeError):
+            record = None
+        have = stored_settings(record)
+        if have != chosen:
+            raise StorageError(
+                f"{db_path}: {info.code}'s {info.kind} session {info.session_id} ran with the pipeline settings: "
+                f"{describe(non_default_settings(have))}; this command's: {describe(non_default_settings(chosen))}; "
+                "one study runs one pipeline, nothing was changed (give the --set the study was started with, or use "
+                "a new database)"
+            )
 
 
 def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:

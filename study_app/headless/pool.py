@@ -13,6 +13,7 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.platform_support import die_with_parent, usable_cpu_count, worker_context
 from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan
@@ -43,7 +44,8 @@ def _die_with_parent(parent_pid: int) -> None:
 
 def _participant_worker(
     db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
-    messages: Any, study_owner: str, faults: Sequence[FaultPlan],
+    messages: Any, study_owner: str, faults: Sequence[FaultPlan], sim_arms: tuple[str, ...],
+    framework: FrameworkConfig,
 ) -> None:
     """One participant's steps (training, then experiment; or what is left of them) in a worker process.
 
@@ -66,7 +68,8 @@ def _participant_worker(
         db = StudyDatabase(db_path, check=False)
         try:
             run_steps(db, number, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                       on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True)
+                       on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True,
+                       sim_arms=sim_arms, framework=framework)
         finally:
             db.close()
     except BaseException as exc:  # reported to the parent, which stops the study
@@ -105,7 +108,7 @@ def _ended_workers(
 def run_parallel(
     db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress, study_owner: str,
-    faults: Sequence[FaultPlan],
+    faults: Sequence[FaultPlan], sim_arms: tuple[str, ...], framework: FrameworkConfig,
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
@@ -140,7 +143,7 @@ def run_parallel(
                 n = waiting.pop(0)
                 p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
                                 args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages, study_owner,
-                                      faults), daemon=True)
+                                      faults, sim_arms, framework), daemon=True)
                 p.start()
                 running[n] = p
             try:

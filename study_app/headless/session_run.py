@@ -10,6 +10,7 @@ trial's time.
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -17,6 +18,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
+from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
@@ -37,13 +40,13 @@ from protocol.session_setup import (
     start_runner,
     training_schedule,
 )
-from protocol.storage import StudyDatabase, new_owner_token
+from protocol.storage import SessionInfo, StudyDatabase, new_owner_token
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
 __all__ = [
     "BLOCK_TICKS", "VIRTUAL_COMMIT_S", "SessionInterrupted", "StudyProgress", "planned_study_time_s", "run_session",
-    "run_steps", "set_kill_target",
+    "run_steps", "set_kill_target", "sim_arms_of",
 ]
 
 #: Records per step of the headless driver (the runner reads the ring this often).
@@ -97,11 +100,26 @@ def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     return per * participants
 
 
-def _engine(rig_seed: int, clock: str) -> Engine:
+def _engine(rig_seed: int, clock: str, arms: tuple[str, ...], framework: FrameworkConfig) -> Engine:
+    """A fresh simulated rig with ``arms`` (the task arm first: the participant holds its stylus, its ring is the
+    session's records, its seed is the one-arm rig's) running the pipeline ``framework``."""
     return build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
-                     ring_seconds=30.0)
+                     ring_seconds=30.0, arms=arms, framework=framework)
     )
+
+
+def sim_arms_of(protocol: ProtocolConfig, arms: Sequence[str]) -> tuple[str, ...]:
+    """The simulated rig's arms for ``protocol``, its task arm first (a bad task arm: one
+    :class:`protocol.config.ProtocolError` line)."""
+    task = protocol.task_arm_of(arms)
+    return (task, *(a for a in arms if a != task))
+
+
+def _stored_arms(info: SessionInfo) -> tuple[str, ...]:
+    """The arms a stored session ran on (its task arm first; a session of one arm stores none)."""
+    names = json.loads(info.config_json).get("arms", {}).get("names")
+    return tuple(names) if names else (SINGLE_ARM_NAME,)
 
 
 def _drive(
@@ -113,7 +131,9 @@ def _drive(
     ring = eng.ring
     assert ring is not None
     loop = eng.loop
-    driver = SessionDriver(ring, loop.replay_log)
+    others = tuple((name, rg, loop.arm(name).replay_log) for name, rg in eng.rings.items()
+                   if rg is not None and rg is not ring)
+    driver = SessionDriver(ring, loop.replay_log, others)
     loop.on_event = driver.on_loop_event  # a deque's append is atomic: safe from the real-clock loop thread
     t_last_report = 0.0
     base_done = progress.study_trials_done
@@ -157,14 +177,21 @@ def run_session(
     db: StudyDatabase, *, code: str, number: int, kind: str | None, protocol: ProtocolConfig, study_seed: int,
     clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
     short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
-    faults: Sequence[FaultPlan] = (),
+    faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    framework: FrameworkConfig | None = None,
 ) -> int:
-    """Run one session to its end on a fresh simulated rig: a new one of ``kind``, or the interrupted ``resume_id``."""
+    """Run one session to its end on a fresh simulated rig with ``sim_arms``: a new one of ``kind``, or the
+    interrupted ``resume_id`` (on the arms it ran on).
+
+    ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
+    """
+    fw = framework or FrameworkConfig()
     rig_seed, p_seed = participant_seeds(study_seed, number)
     if resume_id is None:
         assert kind is not None
+        arms = sim_arms_of(protocol, sim_arms)
         # training and experiment each get their own rig: the same seed gives the same study whatever ran before
-        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock)
+        eng = _engine(rig_seed + (1 if kind == "training" else 0), clock, arms, fw)
         opened = open_new_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
@@ -173,7 +200,8 @@ def run_session(
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
         # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
-        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock)
+        arms = _stored_arms(info)
+        eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
     participant = SimulatedParticipant(seed=opened.participant_seed)
@@ -183,7 +211,7 @@ def run_session(
     recorder, runner = start_runner(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
-        short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor),
+        short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor), arms=arms,
         **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng)
@@ -246,7 +274,8 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
 def run_steps(
     db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
-    faults: Sequence[FaultPlan] = (), short_transactions: bool = False,
+    faults: Sequence[FaultPlan] = (), short_transactions: bool = False, sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    framework: FrameworkConfig | None = None,
 ) -> None:
     """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
     code = participant_code(number)
@@ -254,4 +283,5 @@ def run_steps(
         run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
                      study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
                      short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
-                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults)
+                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
+                     framework=framework)

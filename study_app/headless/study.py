@@ -28,12 +28,15 @@ import json
 import os
 from collections.abc import Callable, Sequence
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
+from pipeline.force.framework import FrameworkConfig
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.rehearsal import FaultPlan
 from protocol.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from study_app.headless.plan import (
     check_fault_plans,
+    check_settings,
     interrupted_session_of,
     open_notes,
     peek,
@@ -41,22 +44,16 @@ from study_app.headless.plan import (
     remaining_trials,
 )
 from study_app.headless.pool import default_jobs, run_parallel
-from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps
+from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps, sim_arms_of
 
 __all__ = ["resume_session", "run_study"]
 
 
 def run_study(
-    db_path: str,
-    *,
-    participants: int,
-    seed: int,
-    protocol: ProtocolConfig,
-    clock: str = "virtual",
-    on_progress: Callable[[StudyProgress], None] | None = None,
-    jobs: int | None = None,
-    continue_study: bool = False,
-    faults: Sequence[FaultPlan] = (),
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str = "virtual",
+    on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None, continue_study: bool = False,
+    faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    framework: FrameworkConfig | None = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -89,6 +86,10 @@ def run_study(
         the study was started with.
     faults
         Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
+    sim_arms
+        The simulated rig's arms (one: ``right``), among them the protocol's task arm (a resume: the stored ones).
+    framework
+        Every session's pipeline configuration (default: the paper's; stored sessions must have the same).
 
     Returns
     -------
@@ -104,7 +105,7 @@ def run_study(
         process writes to it (:class:`protocol.storage.LeaseHeld`), or one of
         the participant codes already has sessions in it (without
         ``continue_study``), or, when continuing, the stored sessions were run
-        with another seed or protocol.
+        with another seed, protocol or pipeline settings.
     StudyWorkerError
         A participant's worker failed: the others are stopped (their sessions
         stay ``running``); ``continue_study`` completes the study.
@@ -121,16 +122,19 @@ def run_study(
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study)
+    fw = framework or FrameworkConfig()
+    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
-                            on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults)
+                            on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
+                            sim_arms=sim_arms_of(protocol, sim_arms), framework=fw)  # refused before anything is stored
 
 
 def _run_under_lease(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
+    sim_arms: tuple[str, ...], framework: FrameworkConfig,
 ) -> StudyProgress:
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
@@ -143,7 +147,8 @@ def _run_under_lease(
                                  planned_s=planned_study_time_s(protocol, participants))
         progress.notes.extend(open_notes(db, taken))
         # again under the lease: what another process did in between counts
-        plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study)
+        plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study,
+                                                             framework)
         progress.sessions.extend(kept)
         jobs_used = min(jobs, len(plan))
         if jobs_used > 1:
@@ -151,11 +156,11 @@ def _run_under_lease(
             held = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
-                                faults=faults)
+                                faults=faults, sim_arms=sim_arms, framework=framework)
         for n, steps in plan.items():
             progress.participant, progress.code = n, participant_code(n)
             run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                      on_progress=on_progress, study_owner=owner, faults=faults)
+                      on_progress=on_progress, study_owner=owner, faults=faults, sim_arms=sim_arms, framework=framework)
         return progress
     finally:
         _release_study(held, db_path, owner)
@@ -182,6 +187,7 @@ def resume_session(
     clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None,
     faults: Sequence[FaultPlan] = (),
+    framework: FrameworkConfig | None = None,
 ) -> StudyProgress:
     """Continue the interrupted session of participant ``code`` (training or experiment).
 
@@ -196,7 +202,8 @@ def resume_session(
     Raises
     ------
     StorageError
-        No such participant or interrupted session; or another process writes
+        No such participant or interrupted session; the session ran with other pipeline settings than
+        ``framework`` (default: the paper's); or another process writes
         to the session or runs the study (:class:`protocol.storage.LeaseHeld`): nothing is changed.
     SessionInterrupted
         A fault did not clear; the session stays resumable.
@@ -205,7 +212,7 @@ def resume_session(
     if not os.path.exists(db_path):
         raise StorageError(f"cannot resume {code}: no database at {db_path}")
     # refusals are decided on a read-only look first: a refused command leaves the file byte-identical
-    interrupted_session_of(peek(db_path), db_path, code)
+    check_settings([interrupted_session_of(peek(db_path), db_path, code)], db_path, framework)
     db = StudyDatabase(db_path, check=False)
     try:
         info = interrupted_session_of(db, db_path, code)
@@ -217,7 +224,8 @@ def resume_session(
         progress.planned_s = remaining * (protocol.trial.max_trial_s + protocol.trial.pause_s)
         run_session(db, code=code, number=info.participant_number, kind=None, protocol=protocol,
                      study_seed=info.seed, clock=clock, progress=progress, on_progress=on_progress,
-                     resume_id=info.session_id, lease_owner=new_owner_token(), faults=faults)
+                     resume_id=info.session_id, lease_owner=new_owner_token(), faults=faults,
+                     framework=framework or FrameworkConfig())
         return progress
     finally:
         db.close()

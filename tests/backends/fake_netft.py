@@ -52,6 +52,8 @@ class FakeNetFT:
         HTTP status of ``/netftapi2.xml`` (404 = no calibration page); ``xml_body`` overrides the page.
     http
         Start the web server at all (False: the HTTP port is closed).
+    host
+        The loopback address to serve on (two boxes of two arms need two addresses: 127.0.0.2, ...).
     initial_records
         Records sent at once when a START arrives (scripted mode).
     rate_hz
@@ -76,7 +78,9 @@ class FakeNetFT:
         duplicate_every: int = 0,
         reorder_every: int = 0,
         status: int = 0,
+        host: str = "127.0.0.1",
     ) -> None:
+        self.host = host
         self.counts = counts
         self.status = status
         self.initial_records = initial_records
@@ -92,7 +96,7 @@ class FakeNetFT:
         self.streaming = threading.Event()
         self._stop = threading.Event()
         self.udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        self.udp.bind(("127.0.0.1", 0))
+        self.udp.bind((host, 0))
         self.udp.settimeout(0.05)
         self.udp_port = self.udp.getsockname()[1]
         self.xml = xml_body if xml_body is not None else XML_TEMPLATE.format(
@@ -121,13 +125,13 @@ class FakeNetFT:
                 def log_message(self, *args: object) -> None:
                     pass
 
-            self._http = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+            self._http = ThreadingHTTPServer((host, 0), Handler)
             self.http_port = self._http.server_address[1]
             threading.Thread(target=self._http.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
         else:
             # a port that is certainly closed: bind, note, close
             s = socket.socket()
-            s.bind(("127.0.0.1", 0))
+            s.bind((host, 0))
             self.http_port = s.getsockname()[1]
             s.close()
         self._threads = [threading.Thread(target=self._serve_udp, daemon=True)]

@@ -140,18 +140,6 @@ def test_refusals_are_one_line_from_the_file(tmp_path: Path) -> None:
     assert tomllib.loads(text)["arm"][1]["name"] == "left"
 
 
-def test_the_real_rig_refuses_two_arms_before_opening_anything(tmp_path: Path) -> None:
-    from pipeline.devices.interfaces import DeviceError
-    from pipeline.devices.real_rig import build_real_rig
-
-    p = tmp_path / "hw.toml"
-    p.write_text(example_two_arm_text(), encoding="utf-8")
-    opened: list[str] = []
-    with pytest.raises(DeviceError, match=r"2 arms \(right, left\): this version opens the real devices of one arm"):
-        build_real_rig(load_hardware(p), on_open=opened.append)
-    assert opened == []
-
-
 def test_replacing_a_one_arm_field_replaces_the_first_arms() -> None:
     import dataclasses
 

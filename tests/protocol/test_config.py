@@ -162,7 +162,7 @@ BAD_FIELDS = [
      "trial.hold_sec = 1.0: unknown field; allowed: cue_s, hold_s, max_trial_s, pause_s, tolerance_fraction"),
     ("typo inside [design]", "trials_per_cell = 5 ", "trials_per_cel = 5 ",
      "design.trials_per_cel = 5: unknown field; "
-     "allowed: abort_policy, modes, ordering, trials_per_cell"),
+     "allowed: abort_policy, modes, ordering, task_arm, trials_per_cell"),
     ("unknown key in a target", 'label = "FIRM"', 'label = "FIRM"\nforce = 1.2',
      "targets[1].force = 1.2: unknown field; allowed: force_n, label"),
     ("training enabled as text", "enabled = true", 'enabled = "yes"',

@@ -52,8 +52,8 @@ def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSp
     if tamper is not None:
         build = session_run._engine
 
-        def engine(rig_seed: int, clock: str) -> Engine:
-            eng = build(rig_seed, clock)
+        def engine(*args: object) -> Engine:
+            eng = build(*args)
             tamper(eng)
             return eng
 

@@ -55,6 +55,11 @@ COLUMNS = {
                        "t_last_s", "data", "crc32"],
     "withdrawals": ["code", "withdrawn_at", "reason", "removed_sessions", "removed_trials", "removed_events",
                     "removed_blocks", "removed_records", "removed_samples"],
+    "arm_recordings": ["session_id", "arm", "segment", "started_at_s", "t0_ns", "snapshot_json", "scales_json"],
+    "arm_blocks": ["session_id", "arm", "segment", "block", "first_tick", "last_tick", "n_records", "t_first_s",
+                   "t_last_s", "data", "crc32"],
+    "arm_chunks": ["session_id", "arm", "segment", "block", "chunk", "first_tick", "last_tick", "n_records",
+                   "t_first_s", "t_last_s", "data", "crc32"],
 }
 
 

@@ -467,7 +467,9 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
                            "participant P02 failed (RuntimeError: injected by the test 3 s into the participant)")), msg
     assert msg.endswith("complete the study with the same command and --continue")
     assert multiprocessing.active_children() == []
-    assert rows(db, "SELECT status FROM sessions") == [("running",), ("running",)]
+    # every session stored stays resumable (the other worker may not have opened its own yet on a loaded machine)
+    statuses = rows(db, "SELECT status FROM sessions")
+    assert statuses and set(statuses) == {("running",)}
     monkeypatch.setattr(protocol.session.SessionRunner, "process", real_process)
     run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2, continue_study=True)
     assert rows(db, "SELECT status FROM sessions") == [("completed",), ("completed",)]

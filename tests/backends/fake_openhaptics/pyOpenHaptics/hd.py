@@ -2,7 +2,8 @@ import threading
 import time
 from types import SimpleNamespace
 
-STATE = {"force": [0.0, 0.0, 0.0], "running": False, "buttons": 0}
+STATE = {"force": [0.0, 0.0, 0.0], "running": False, "buttons": 0, "names": {}, "current": 0, "forces": {},
+         "frames": []}
 
 
 def _get_error():
@@ -17,12 +18,17 @@ def get_current_device():
     return 1
 
 
+def _frame(what, dev):
+    if len(STATE["frames"]) < 1000:  # the first servo ticks are enough to look at
+        STATE["frames"].append((what, dev, STATE["current"]))
+
+
 def begin_frame(dev):
-    pass
+    _frame("begin", dev)
 
 
 def end_frame(dev):
-    pass
+    _frame("end", dev)
 
 
 def _servo():
@@ -59,3 +65,4 @@ def get_buttons():
 
 def set_force(f):
     STATE["force"] = list(f)
+    STATE["forces"][STATE["current"]] = list(f)  # the current device's, as libHD

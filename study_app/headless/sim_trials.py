@@ -1,0 +1,116 @@
+"""Simulated participants through the experiment's schedule without a database (the sweep's and the bench's runner).
+
+:func:`run_participant` builds the simulated rig on the virtual clock with the
+given pipeline configuration, hands the stylus to a
+:class:`pipeline.sim.participant.SimulatedParticipant` and walks the protocol's
+experiment schedule through the real :class:`protocol.trial.TrialMachine`, so
+success, TCT, RMSE and Max AE come from the one definition in
+:mod:`protocol.metrics`.  Nothing is stored: it is ``haptic-study run``'s
+experiment session less the recording, training and resumption, about 2 s of
+wall clock per participant.
+
+Seeds depend on the study number and the participant number only
+(:func:`participant_seeds`), never on the pipeline's settings: the same
+participants meet every setting of a sweep, so the comparison is paired.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+
+from analysis.sim_study import TrialRow
+from pipeline.force.framework import FrameworkConfig
+from pipeline.runtime.engine import EngineConfig, build_sim_engine
+from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
+from pipeline.sim.rig import SimRigConfig
+from protocol.config import ProtocolConfig, default_protocol
+from protocol.design import build_schedule
+from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
+
+__all__ = ["MODEL_FIT", "MODEL_VERSION", "participant_seeds", "run_participant", "run_study"]
+
+#: Ticks per step of the loop between reads of the ring.
+_BLOCK_TICKS = 20
+#: The ring's phase marks (as the session runner writes them).
+_PHASE_ACTIVE = 2
+_PHASE_PAUSE = 3
+
+
+def participant_seeds(study: int, participant: int) -> tuple[int, int, int]:
+    """(rig seed, participant seed, schedule seed) of participant ``participant`` (1-based) of ``study``."""
+    return 10_000 * study + participant, 1_000_003 * (study + 1) + 7919 * participant, study
+
+
+def run_participant(study: int, participant: int, protocol: ProtocolConfig | None = None,
+                    framework: FrameworkConfig | None = None) -> list[TrialRow]:
+    """Run one simulated participant through the experiment's schedule; return the trial rows.
+
+    Parameters
+    ----------
+    study, participant
+        Study number (≥ 0) and participant number (≥ 1): they alone fix the seeds.
+    protocol
+        The protocol (default: the paper's); its experiment schedule is run, no training.
+    framework
+        The pipeline's configuration (default: the paper's).
+    """
+    proto = protocol or default_protocol()
+    rig_seed, p_seed, sched_seed = participant_seeds(study, participant)
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", sim=SimRigConfig(seed=rig_seed),
+                                        framework=framework or FrameworkConfig()))
+    loop, ring = eng.loop, eng.ring
+    assert ring is not None
+    p = SimulatedParticipant(seed=p_seed, tissue=eng.rig.config.tissue, arm=eng.rig.config.arm,
+                             motion_scale=eng.rig.config.motion_scale)
+    eng.rig.set_driver(p)
+    machine = TrialMachine(proto.trial)
+    loop.submit(SetHaptics(False))
+    loop.run_ticks(200)  # settle on the start pose
+    cursor = ring.write_count
+    rows: list[TrialRow] = []
+    for spec in build_schedule(proto, sched_seed, participant):
+        on = spec.haptic_mode == "on"
+        machine.start(spec, eng.clock.now_ns())
+        loop.submit(AllowBiasRefinement(False))
+        loop.submit(SetHaptics(on))
+        loop.submit(Mark(spec.index, _PHASE_ACTIVE))
+        p.begin_trial(spec.target_force_n, on, eng.rig.sim_time_s)
+        idle = False
+        while not idle:
+            loop.run_ticks(_BLOCK_TICKS)
+            res = ring.read_since(cursor)
+            cursor = res.cursor
+            r = res.rows
+            t_ns = [int(round(x * 1e9)) for x in r["t_s"].tolist()]
+            samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()], strict=True)
+            for ev in machine.feed(samples):
+                if isinstance(ev, TrialFinished):
+                    m = ev.metrics
+                    rows.append(TrialRow(study, participant, spec.index, spec.target_label, spec.haptic_mode,
+                                         m.success, m.tct_s, m.rmse_n, m.max_ae_n, m.peak_force_n))
+                    p.end_trial(eng.rig.sim_time_s)
+                    loop.submit(Mark(-1, _PHASE_PAUSE))
+                    loop.submit(SetHaptics(False))
+                    loop.submit(AllowBiasRefinement(True))
+                elif isinstance(ev, PhaseChanged) and ev.new is TrialPhase.IDLE:
+                    idle = True
+    eng.rig.close()
+    ring.close()
+    return rows
+
+
+def _run_participant_args(args: tuple[int, int]) -> list[TrialRow]:
+    return run_participant(*args)
+
+
+def run_study(study: int, participants: int = 10, jobs: int = 1) -> list[TrialRow]:
+    """All participants of one study at the paper's settings (``jobs`` > 1: a process per participant)."""
+    work = [(study, j) for j in range(1, participants + 1)]
+    if jobs > 1:
+        with mp.get_context("spawn").Pool(jobs) as pool:
+            parts = pool.map(_run_participant_args, work)
+    else:
+        parts = [_run_participant_args(w) for w in work]
+    return [r for part in parts for r in part]
