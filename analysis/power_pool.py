@@ -5,15 +5,18 @@ headless study runner (``simulate``, given by the caller: ``haptic-study power``
 passes :func:`study_app.headless.run_study`, the paper's protocol, participants
 in parallel on the usable cores).  Beside it,
 ``pool-N-seedS.db.json`` records what it is: pool size, study seed, the
-protocol's identity (SHA-256 of its JSON), the software that simulated it
-(there is no separate participant-model version: the model is part of the
-software), whether the simulation finished, and then the pool's SHA-256.
+protocol's identity (SHA-256 of its JSON), the software that simulated it and
+the simulated participant model's version (``participant_model``:
+:data:`pipeline.sim.participant_params.MODEL_VERSION`, which changes whenever the model's
+behaviour does, while the software's version may not), whether the simulation
+finished, and then the pool's SHA-256.
 
 Reuse is trusted only when that record says so:
 
 * a complete pool whose parameters match and whose bytes still hash to the
   recorded SHA-256 is opened read-only and reused;
-* a pool whose record says another size, seed, protocol or software, or whose
+* a pool whose record says another size, seed, protocol, software or participant
+  model (a record from before the model had a version says none), or whose
   hash differs (the file changed since), or a pool file with no record, is
   refused in one line: it is never used silently, and never deleted;
 * a pool whose simulation was interrupted (Ctrl-C, a kill, a failed worker;
@@ -83,11 +86,13 @@ def pool_name(participants: int, seed: int) -> str:
 
 def pool_parameters(participants: int, seed: int, protocol: Any) -> dict[str, Any]:
     """What a pool's record must say for it to serve a request (besides being complete and unchanged)."""
+    from pipeline.sim.participant_params import MODEL_VERSION
     from protocol.version import software_version
 
     return {"kind": _KIND, "participants": int(participants), "seed": int(seed),
             "protocol_sha256": hashlib.sha256(protocol.to_json().encode("utf-8")).hexdigest(),
-            "protocol_name": getattr(protocol, "name", ""), "software_version": software_version()}
+            "protocol_name": getattr(protocol, "name", ""), "software_version": software_version(),
+            "participant_model": MODEL_VERSION}
 
 
 @dataclass(frozen=True, slots=True)

@@ -113,6 +113,9 @@ def test_a_changed_pool_is_refused_not_used(pools, short, tmp_path):
     (lambda r: r.update(seed=99), "recorded with seed 99, not 5"),
     (lambda r: r.update(protocol_sha256="0" * 64), "recorded with protocol_sha256 '000"),
     (lambda r: r.update(software_version="0.0.1"), "recorded with software_version '0.0.1'"),
+    # a pool of another participant model, or from before the model had a version, is another model's prediction
+    (lambda r: r.update(participant_model="1"), "recorded with participant_model '1'"),
+    (lambda r: r.pop("participant_model"), "recorded with participant_model None"),
 ])
 def test_a_pool_recorded_with_other_parameters_is_refused(pools, short, tmp_path, change, message):
     three, _ = pools
