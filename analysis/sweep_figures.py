@@ -16,6 +16,8 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import matplotlib
+import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
@@ -100,16 +102,16 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     rmse = summary[summary["metric"] == "rmse_n"].reset_index(drop=True)
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
+    # each setting its own colour, named in the legend: labels beside points collide where the points crowd
+    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, max(len(tct), 1)))
     for i, ((_, t), (_, r)) in enumerate(zip(tct.iterrows(), rmse.iterrows(), strict=True)):
         x, y = float(r["on"]), float(t["on"])
         xerr = [[_half(r, "low")], [_half(r, "high")]]
         yerr = [[_half(t, "low")], [_half(t, "high")]]
         star = bool(t["paper"])
-        ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=MODE_COLORS["on"], marker="*" if star else "o",
-                    markersize=8 if star else 4, capsize=2, linewidth=0.8)
         text = (f"{float(t[swept[0]]):g}" if one else _label(t, swept)) + (" (paper)" if star else "")
-        ax.annotate(text, (x, y), fontsize=6.5, xytext=(5, 5) if i % 2 == 0 else (5, -9),
-                    textcoords="offset points")
+        ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=colours[i], marker="*" if star else "o",
+                    markersize=9 if star else 5, capsize=2, linewidth=0.8, label=text)
         pts.append((x, y))
     for (x0, y0), (x1, y1) in itertools.pairwise(pts) if one else ():
         ax.plot([x0, x1], [y0, y1], color="#bbbbbb", linewidth=0.6, zorder=0)
@@ -119,6 +121,7 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
     ax.set_title(("Speed–accuracy front across " + (swept[0] if one else "settings")) + " (lower left is better)")
+    ax.legend(title=swept[0] if one else "setting", frameon=False, fontsize=6.5, title_fontsize=7, loc="best")
     add_note(fig, note)
     return fig
 
