@@ -86,6 +86,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         records = reader.trial_records(session_ids)
         n_samples = reader.sample_count(session_ids)
         recorded = reader.record_count(session_ids)
+        other_arms = reader.arms()
     experiment = [t for t in records if sessions[t.session_id].kind == "experiment"]
     exp = [(sessions[t.session_id].code, t) for t in experiment if t.outcome is not Outcome.ABORTED]
     causes = Counter("cause not recorded" if t.abort_cause is None else t.abort_cause.value
@@ -119,6 +120,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         lines.append(f"  {'success, ' + label:<30}{_cell(off):>16}{_cell(on):>16}")
     lines.append("")
     where = "recordings, session_blocks" if recorded else "samples"
+    if other_arms:  # a rig of several arms: the others' records beside the task arm's
+        where += f", arm_recordings, arm_blocks ({', '.join(other_arms)})"
     lines.append(f"Wall time {wall_s:.1f} s. Every trial, record and event is in the database (tables trials, {where}, "
                  "events).")
     return "\n".join(lines)
