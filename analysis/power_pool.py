@@ -6,10 +6,10 @@ passes :func:`study_app.headless.run_study`, the paper's protocol, participants
 in parallel on the usable cores).  Beside it,
 ``pool-N-seedS.db.json`` records what it is: pool size, study seed, the
 protocol's identity (SHA-256 of its JSON), the software that simulated it and
-the simulated participant model's version (``participant_model``:
-:data:`pipeline.sim.participant_params.MODEL_VERSION`, which changes whenever the model's
-behaviour does, while the software's version may not), whether the simulation
-finished, and then the pool's SHA-256.
+the simulated participant model's version (``participant_model``, given by the
+caller: :data:`pipeline.sim.participant_params.MODEL_VERSION`, which changes whenever
+the model's behaviour does, while the software's version may not), whether the
+simulation finished, and then the pool's SHA-256.
 
 Reuse is trusted only when that record says so:
 
@@ -84,15 +84,14 @@ def pool_name(participants: int, seed: int) -> str:
     return f"pool-{participants}-seed{seed}.db"
 
 
-def pool_parameters(participants: int, seed: int, protocol: Any) -> dict[str, Any]:
+def pool_parameters(participants: int, seed: int, protocol: Any, participant_model: str) -> dict[str, Any]:
     """What a pool's record must say for it to serve a request (besides being complete and unchanged)."""
-    from pipeline.sim.participant_params import MODEL_VERSION
     from protocol.version import software_version
 
     return {"kind": _KIND, "participants": int(participants), "seed": int(seed),
             "protocol_sha256": hashlib.sha256(protocol.to_json().encode("utf-8")).hexdigest(),
             "protocol_name": getattr(protocol, "name", ""), "software_version": software_version(),
-            "participant_model": MODEL_VERSION}
+            "participant_model": participant_model}
 
 
 @dataclass(frozen=True, slots=True)
@@ -236,6 +235,7 @@ def simulated_pool(
     seed: int,
     *,
     simulate: Callable[..., Any],
+    participant_model: str,
     protocol: Any = None,
     on_progress: Callable[..., None] | None = None,
     jobs: int | None = None,
@@ -254,6 +254,8 @@ def simulated_pool(
         :class:`protocol.storage.StorageError`, :class:`RuntimeError` or
         :class:`ValueError` when the simulation fails (the study floor sits above
         analysis, so it is passed in, not imported).
+    participant_model
+        The version of the participant model ``simulate`` simulates (recorded; a pool of another is not reused).
     protocol
         The study protocol (default: :func:`protocol.config.default_protocol`, the paper's).
     on_progress
@@ -279,7 +281,7 @@ def simulated_pool(
     if protocol is None:
         protocol = default_protocol()
     out = Path(out_dir)
-    wanted = pool_parameters(participants, seed, protocol)
+    wanted = pool_parameters(participants, seed, protocol, participant_model)
     codes = tuple(participant_code(k) for k in range(1, participants + 1))
     db = out / pool_name(participants, seed)
     record = _read_record(db) if db.exists() else None

@@ -160,10 +160,12 @@ def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[s
     """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it."""
     from analysis.power_pool import simulated_pool
     from study_app.headless import run_study
+    from study_app.headless.sim_trials import MODEL_VERSION
 
     pool_size, seed = req.pool_size, req.seed
     t0 = time.perf_counter()
-    pool_db = simulated_pool(out, pool_size, seed, simulate=run_study, on_progress=bars.simulating)
+    pool_db = simulated_pool(out, pool_size, seed, simulate=run_study, participant_model=MODEL_VERSION,
+                             on_progress=bars.simulating)
     bars.close()
     path = pool_db.path
     said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",

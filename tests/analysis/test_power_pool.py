@@ -15,11 +15,18 @@ import pytest
 
 import analysis.power_pool as power_pool
 from analysis.paired_pool import load_pool
-from analysis.power_pool import PoolError, is_pool_file, simulated_pool
+from analysis.power_pool import PoolError, is_pool_file
+from analysis.power_pool import simulated_pool as _simulated_pool
 from protocol.config import default_protocol
 from study_app.headless import run_study
+from study_app.headless.sim_trials import MODEL_VERSION
 
 SEED = 5
+
+
+def simulated_pool(*args, **kwargs):
+    """The call ``haptic-study power`` makes: pools of the participant model the runner simulates."""
+    return _simulated_pool(*args, participant_model=MODEL_VERSION, **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -60,8 +67,9 @@ def test_a_pool_is_recorded_with_its_parameters_and_hash(pools, short):
     record = json.loads(three.path.with_name(three.path.name + ".json").read_text())
     assert record["complete"] is True and record["sha256"] == three.sha256 == power_pool.sha256_file(three.path)
     assert record["participants"] == 3 and record["seed"] == SEED
-    assert record == {**power_pool.pool_parameters(3, SEED, short), "complete": True, "sha256": three.sha256,
-                      "bytes": three.path.stat().st_size, "resumed_participants": []}
+    assert record == {**power_pool.pool_parameters(3, SEED, short, MODEL_VERSION), "complete": True,
+                      "sha256": three.sha256, "bytes": three.path.stat().st_size, "resumed_participants": []}
+    assert record["participant_model"] == MODEL_VERSION
     assert is_pool_file(three.path.name) and is_pool_file(three.path.name + ".json")
 
 
@@ -188,5 +196,6 @@ def test_an_interrupted_simulation_is_completed_not_used_as_it_is(pools, short, 
     assert (p02["excluded"] == "aborted trial").sum() == 1
     assert simulated_pool(tmp_path, 3, SEED, simulate=run_study, protocol=short, jobs=1).status == "reused"
     # the first 2 of this pool are not those of a pool of 2 (P02 was resumed): a pool of 2 is simulated instead
-    assert power_pool._larger_pool(tmp_path, 2, SEED, power_pool.pool_parameters(2, SEED, short)) is None
-    assert power_pool._larger_pool(tmp_path, 1, SEED, power_pool.pool_parameters(1, SEED, short)) == resumed.path
+    wanted = [power_pool.pool_parameters(n, SEED, short, MODEL_VERSION) for n in (1, 2)]
+    assert power_pool._larger_pool(tmp_path, 2, SEED, wanted[1]) is None
+    assert power_pool._larger_pool(tmp_path, 1, SEED, wanted[0]) == resumed.path
