@@ -92,7 +92,10 @@ class StudyEngine:
         self.ring = self.eng.ring
         self.loop = self.eng.loop
         #: Reads the ring from here on and feeds the running session (the loop's events and replay log with it).
-        self.ring_driver = SessionDriver(self.ring, self.loop.replay_log)
+        #: The other arms' rings are read too (a rig of several arms): a session records every arm, as run's do.
+        others = tuple((name, rg, self.loop.arm(name).replay_log) for name, rg in self.eng.rings.items()
+                       if rg is not None and rg is not self.ring)
+        self.ring_driver = SessionDriver(self.ring, self.loop.replay_log, others)
         self.loop.on_event = self._on_loop_event
         self.tracer: LateTickTracer | None = None
         if config.trace_jitter and config.clock == "real":

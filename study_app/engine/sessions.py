@@ -80,6 +80,7 @@ class EngineSessions:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
                              "number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
+        self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):
             return
@@ -98,6 +99,19 @@ class EngineSessions:
             db.close()
             raise
         self._run(db, opened)
+
+    def _arms(self) -> tuple[str, ...]:
+        """The rig's arms by name, the one whose ring is the session's (the task arm's) first."""
+        return tuple(self.engine.eng.calibrations)
+
+    def _check_task_arm(self, protocol: ProtocolConfig) -> None:
+        """The protocol's task arm must be the arm whose ring the engine reads as the session's (its first)."""
+        arms = self._arms()
+        task = protocol.task_arm_of(arms)  # ProtocolError (a ValueError): one line naming the arm
+        if task != arms[0]:
+            hint = (f"restart the GUI with --sim-arms {','.join((task, *(a for a in arms if a != task)))}"
+                    if self.engine.eng.simulated else "list it first in the hardware file")
+            raise ValueError(f"design.task_arm = {task!r}: this rig's task arm is {arms[0]!r}, its first; {hint}")
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
@@ -138,7 +152,7 @@ class EngineSessions:
         recorder, runner = start_runner(
             db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
-            scales=raw_wrench_scales(self.engine.eng.rig.sensor),
+            scales=raw_wrench_scales(self.engine.eng.rig.sensor), arms=self._arms(),
         )
         runner.listeners.append(self._on_runner_event)
         self.trigger = None
