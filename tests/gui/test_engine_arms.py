@@ -61,3 +61,28 @@ def test_a_protocol_whose_task_arm_is_not_the_rigs_first_is_refused_in_one_line(
     assert e.runner is None
     e.handle(m.StartSession(str(tmp_path / "s.db"), "P01", "experiment", _protocol(tmp_path, "centre"), 3, 1))
     assert "no such arm" in [ev for ev in events if isinstance(ev, m.CommandRefused)][-1].message
+
+
+def test_health_names_each_arm_and_a_fault_names_its_arm(two_arms):
+    from pipeline.devices.interfaces import Fault
+    from pipeline.runtime.loop_messages import LoopEvent
+    from study_app.models.health import HealthModel
+
+    e, events = two_arms
+    for _ in range(5):
+        e.step()
+    h = e.health()
+    assert [name for name, _, _ in h.arms] == ["left", "right"]
+    assert all(force == force and faults == 0 for _, force, faults in h.arms)  # a force (not NaN), no fault
+    e._on_loop_event(LoopEvent(1_000_000, "fault", int(Fault.SENSOR_STALE), "sensor stale", arm="right"))
+    fault = [ev for ev in events if isinstance(ev, m.EngineFault)][-1]
+    assert fault.detail == "arm right: sensor stale"
+    model = HealthModel()
+    model.apply(h)
+    model.apply(fault)
+    lines = model.arms_text().splitlines()
+    assert lines[0].startswith("left (task): ") and lines[1].startswith("right: ")
+    assert "arm right: sensor stale" in model.fault_log[-1]
+    one = HealthModel()
+    one.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 1, 0, False, "autopilot", False, False))
+    assert one.arms_text() == ""  # a rig of one arm looks as before
