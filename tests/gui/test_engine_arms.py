@@ -86,3 +86,33 @@ def test_health_names_each_arm_and_a_fault_names_its_arm(two_arms):
     one = HealthModel()
     one.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 1, 0, False, "autopilot", False, False))
     assert one.arms_text() == ""  # a rig of one arm looks as before
+
+
+def test_the_real_rigs_gate_needs_every_arms_chain(tmp_path):
+    from types import SimpleNamespace
+
+    from pipeline.commissioning.rig_calibration import RigCalibrationFile
+    from study_app.engine.commissioning import other_arms_missing
+    from tests.pipeline.test_commissioning import _chain
+
+    full = _chain("grasper")
+    frameworks = {n: SimpleNamespace(config=SimpleNamespace(rot_tip_sensor=full.frames.rot_tip_sensor,
+                                                            rot_haptic_base=full.frames.rot_haptic_base))
+                  for n in ("right", "left")}
+    good = tmp_path / "left.json"
+    f = RigCalibrationFile.load(good)
+    f.tools["grasper"] = full
+    f.save()
+
+    def arm(name, file, tool="grasper"):
+        return SimpleNamespace(name=name, calibration_file=file, calibration_tool=tool)
+
+    first = arm("right", None)
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(good)))), frameworks) == ""
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", None))), frameworks).startswith(
+        "arm left: no TCP calibration on record for tool 'grasper'")
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(good), "scissors"))), frameworks
+                              ).startswith("arm left: no TCP calibration on record for tool 'scissors'")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{", encoding="utf-8")
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(bad)))), frameworks).startswith("arm left: ")
