@@ -216,8 +216,9 @@ class StudyEngine:
         self.publish(m.EngineStopped(reason, self.stats.summary()))
 
     def release_ring(self) -> None:
-        """Free the shared ring (after the GUI had a chance to copy the last records)."""
-        self.ring.close()
+        """Free the shared rings, every arm's (after the GUI had a chance to copy the last records)."""
+        for ring in {id(r): r for r in (self.ring, *self.eng.rings.values()) if r is not None}.values():
+            ring.close()
 
     def _step_until(self, done: Callable[[], bool], timeout_s: float = 2.0) -> None:
         end = time.monotonic() + timeout_s
