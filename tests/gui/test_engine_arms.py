@@ -116,3 +116,38 @@ def test_the_real_rigs_gate_needs_every_arms_chain(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text("{", encoding="utf-8")
     assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(bad)))), frameworks).startswith("arm left: ")
+
+
+def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
+    db = str(tmp_path / "s.db")
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
+                    shared_ring=False)
+    e.start()
+    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
+    for _ in range(50):
+        e.step()
+    sid = e.sessions.opened.session_id
+    e.close("interrupted")
+    e.release_ring()
+    one: list[object] = []
+    e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
+    e1.start()
+    try:
+        e1.handle(m.ResumeSession(db, sid))
+        refused = [ev for ev in one if isinstance(ev, m.CommandRefused)]
+        assert len(refused) == 1 and "ran on the arms left, right" in refused[0].message
+        assert "--sim-arms left,right" in refused[0].message
+    finally:
+        e1.close("test over")
+        e1.release_ring()
+    two: list[object] = []
+    e2 = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), two.append, shared_ring=False)
+    e2.start()
+    try:
+        e2.handle(m.ResumeSession(db, sid))
+        assert [ev for ev in two if isinstance(ev, m.CommandRefused)] == []
+        assert e2.sessions.runner is not None and e2.sessions.runner.arms == ("left", "right")
+    finally:
+        e2.close("test over")
+        e2.release_ring()
