@@ -11,7 +11,8 @@ import os
 from pathlib import Path
 from typing import Any
 
-from study_app.cli.argtypes import add_command, real_number, setting
+from pipeline.devices.rig import SINGLE_ARM_NAME
+from study_app.cli.argtypes import add_command, arm_names, real_number, setting
 from study_app.cli.error import CliError
 
 __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
@@ -43,6 +44,11 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--set", dest="settings", action="append", default=[], type=setting, metavar="NAME=VALUE",
                    help="simulated rig: a pipeline setting of its sessions, as run --set (filter_window, f_scale_n, "
                         "f_max_n, slew_n_per_s, ramp_in_s); repeatable")
+    g.add_argument("--sim-arms", dest="sim_arms", type=arm_names("--sim-arms"), default=(SINGLE_ARM_NAME,),
+                   metavar="NAMES",
+                   help=f"simulated rig: its arms, comma-separated, the one the participant holds first (default: one "
+                        f"arm, {SINGLE_ARM_NAME}); a session's protocol must name that one design.task_arm, and "
+                        "records every arm (e.g. --sim-arms left,right with task_arm = \"left\")")
     g.set_defaults(handler=cmd_gui)
 
 
@@ -66,6 +72,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
         raise CliError("--screenshot runs on the simulated rig only (omit --rig real)")
     if args.sim_mount_error_deg and args.rig != "sim":
         raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
+    if args.sim_arms != (SINGLE_ARM_NAME,) and args.rig != "sim":
+        raise CliError("--sim-arms applies to the simulated rig only (the real rig's arms are its hardware file's)")
     if args.settings and args.rig != "sim":
         raise CliError("--set applies to the simulated rig only (the real rig's pipeline is its hardware file's)")
     from pipeline.force.pipeline_settings import non_default_settings, settings_of
@@ -86,7 +94,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
     from study_app.gui.app import run_gui
 
     host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
-                      sim_mount_error_deg=args.sim_mount_error_deg, sim_settings=sim_settings)
+                      sim_mount_error_deg=args.sim_mount_error_deg, sim_settings=sim_settings,
+                      sim_arms=args.sim_arms)
     try:
         return run_gui(host, db_path=args.db)
     except RuntimeError as exc:

@@ -17,13 +17,13 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from pipeline.commissioning.frame_check import AXES, AxisCheck, FrameCheck, check_axis
 from pipeline.commissioning.payload_identification import CalibrationPose
-from pipeline.commissioning.rig_calibration import CalibrationFileError, ToolCalibration, now_iso
+from pipeline.commissioning.rig_calibration import CalibrationFileError, RigCalibrationFile, ToolCalibration, now_iso
 from pipeline.commissioning.steps import (
     CALIBRATION_MAX_CONDITION,
     CALIBRATION_MAX_RMS_FORCE_N,
@@ -54,9 +54,12 @@ from pipeline.runtime.loop_messages import SetCalibration
 from study_app.engine import messages as m
 from study_app.engine.core import EngineCore
 
+if TYPE_CHECKING:
+    from pipeline.settings.hardware import HardwareConfig
+
 __all__ = [
     "CALIBRATION_MAX_CONDITION", "CALIBRATION_MAX_RMS_FORCE_N", "REST_CHECK_S", "REST_MAX_FORCE_N", "Commissioning",
-    "calibration_verdict", "check_target", "pose_set", "rotation_angle_deg",
+    "calibration_verdict", "check_target", "other_arms_missing", "pose_set", "rotation_angle_deg",
 ]
 
 _RAW_WRENCH = ("raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz")
@@ -423,6 +426,11 @@ class Commissioning:
             return False
         self._override = None  # a start that failed after its check must not lend its override to this one
         missing = self.tool_cal.missing(*self.frames_in_use())
+        if self.engine.hardware is not None and len(self.engine.hardware.arms) > 1:
+            # a rig of several arms: every arm's chain, each named (the first's is the wizard's)
+            first = self.engine.hardware.arms[0].name
+            missing = (f"arm {first}: {missing}" if missing else
+                       other_arms_missing(self.engine.hardware, self.engine.eng.frameworks))
         # the override waives the steps on record, never the force at rest: without a payload that fits the
         # mounted tool the tool's own weight would be rendered as feedback
         reason = cmd.override_reason.strip()
@@ -454,3 +462,22 @@ class Commissioning:
             raise
         self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool)))
         return True
+
+
+def other_arms_missing(hardware: HardwareConfig, frameworks: dict[str, Any]) -> str:
+    """The real rig's arms after the first: "" when each has its calibration chain (TCP, payload, frame check) on
+    record in its own calibration file for its tool, else one line naming the arm and its first missing step.
+
+    ``frameworks``: each arm's pipeline by name (its ``config`` holds the frame rotations in use).
+    """
+    for arm in hardware.arms[1:]:
+        try:
+            rec = (RigCalibrationFile.load(arm.calibration_file).tool(arm.calibration_tool) if arm.calibration_file
+                   else ToolCalibration(arm.calibration_tool))
+        except CalibrationFileError as exc:
+            return f"arm {arm.name}: {exc}"
+        fw = frameworks[arm.name].config
+        missing = rec.missing(fw.rot_tip_sensor, fw.rot_haptic_base)
+        if missing:
+            return f"arm {arm.name}: {missing}"
+    return ""

@@ -30,6 +30,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from pipeline.devices.interfaces import DeviceError
 from pipeline.devices.jaw_control import JawController
 from pipeline.force.frames import as_mat3
@@ -92,7 +94,10 @@ class StudyEngine:
         self.ring = self.eng.ring
         self.loop = self.eng.loop
         #: Reads the ring from here on and feeds the running session (the loop's events and replay log with it).
-        self.ring_driver = SessionDriver(self.ring, self.loop.replay_log)
+        #: The other arms' rings are read too (a rig of several arms): a session records every arm, as run's do.
+        others = tuple((name, rg, self.loop.arm(name).replay_log) for name, rg in self.eng.rings.items()
+                       if rg is not None and rg is not self.ring)
+        self.ring_driver = SessionDriver(self.ring, self.loop.replay_log, others)
         self.loop.on_event = self._on_loop_event
         self.tracer: LateTickTracer | None = None
         if config.trace_jitter and config.clock == "real":
@@ -211,8 +216,9 @@ class StudyEngine:
         self.publish(m.EngineStopped(reason, self.stats.summary()))
 
     def release_ring(self) -> None:
-        """Free the shared ring (after the GUI had a chance to copy the last records)."""
-        self.ring.close()
+        """Free the shared rings, every arm's (after the GUI had a chance to copy the last records)."""
+        for ring in {id(r): r for r in (self.ring, *self.eng.rings.values()) if r is not None}.values():
+            ring.close()
 
     def _step_until(self, done: Callable[[], bool], timeout_s: float = 2.0) -> None:
         end = time.monotonic() + timeout_s
@@ -357,7 +363,9 @@ class StudyEngine:
         session_t = math.nan
         if runner is not None and not runner.done and runner.clock is not None:
             session_t = runner.session_time_s(ev.t_ns)  # what the events table will say
-        self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), ev.detail, session_t))
+        # a rig of several arms: the arm named, as the events table stores it (protocol.session)
+        detail = f"arm {ev.arm}: {ev.detail}" if len(self.eng.calibrations) > 1 else ev.detail
+        self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), detail, session_t))
 
     # -- commands -------------------------------------------------------------------------------------
     def handle(self, cmd: object) -> None:
@@ -462,7 +470,19 @@ class StudyEngine:
         st = haptic.read_state()
         return {"haptic_heat_fraction": float(st.heat_fraction), "haptic_force_limit_n": float(st.force_limit_n),
                 "haptic_peak_force_n": float(haptic.peak_force_n),
-                "haptic_continuous_force_n": float(haptic.continuous_force_n), "loop_dead": self.loop_dead}
+                "haptic_continuous_force_n": float(haptic.continuous_force_n), "loop_dead": self.loop_dead,
+                "arms": self._arm_health()}
+
+    def _arm_health(self) -> tuple[tuple[str, float, int], ...]:
+        """A rig of several arms: each arm's largest task force over its newest 50 ms and its latched faults."""
+        if len(self.eng.calibrations) < 2:
+            return ()
+        out = []
+        for name, ring in self.eng.rings.items():
+            rows = ring.latest(50) if ring is not None else None
+            force = float(np.nanmax(np.abs(rows["force_n"]))) if rows is not None and len(rows) else math.nan
+            out.append((name, force, int(self.loop.arm(name).faults)))
+        return tuple(out)
 
     def _make_jaw(self) -> JawController | None:
         rig = self.eng.rig

@@ -561,6 +561,9 @@ class Health:
     #: How the loop thread is scheduled (:func:`pipeline.runtime.clock.prepare_realtime_thread`; "virtual clock" when
     #: virtual).
     scheduling: str = ""
+    #: A rig of several arms: per arm, the task arm first, (name, largest task force of its newest records in N,
+    #: latched faults); empty on a rig of one arm.
+    arms: tuple[tuple[str, float, int], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,6 +17,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.runtime.platform_support import kill_hard
 from protocol.config import ProtocolConfig, load_protocol
 from protocol.records import AbortCause, TrialRecord
@@ -80,6 +81,7 @@ class EngineSessions:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
                              "number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
+        self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):
             return
@@ -99,6 +101,28 @@ class EngineSessions:
             raise
         self._run(db, opened)
 
+    def _arms(self) -> tuple[str, ...]:
+        """The rig's arms by name, the one whose ring is the session's (the task arm's) first."""
+        return tuple(self.engine.eng.calibrations)
+
+    def _check_task_arm(self, protocol: ProtocolConfig) -> None:
+        """The protocol's task arm must be the arm whose ring the engine reads as the session's (its first)."""
+        arms = self._arms()
+        task = protocol.task_arm_of(arms)  # ProtocolError (a ValueError): one line naming the arm
+        if task != arms[0]:
+            hint = (f"restart the GUI with --sim-arms {','.join((task, *(a for a in arms if a != task)))}"
+                    if self.engine.eng.simulated else "list it first in the hardware file")
+            raise ValueError(f"design.task_arm = {task!r}: this rig's task arm is {arms[0]!r}, its first; {hint}")
+
+    def _check_stored_arms(self, db: StudyDatabase, session_id: int) -> None:
+        """A resumed session continues on the arms it ran on (its config_json's; none stored: one arm)."""
+        row = db.conn.execute("SELECT config_json FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
+        names = json.loads(row[0]).get("arms", {}).get("names") if row is not None else None
+        stored = tuple(names) if names else (SINGLE_ARM_NAME,)
+        if row is not None and stored != self._arms():
+            raise ValueError(f"resume: session {session_id} ran on the arms {', '.join(stored)}; this rig's are "
+                             f"{', '.join(self._arms())} (restart the GUI with --sim-arms {','.join(stored)})")
+
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
             return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
@@ -112,6 +136,7 @@ class EngineSessions:
             return
         db = self._open_db(cmd.db_path)
         try:
+            self._check_stored_arms(db, cmd.session_id)
             opened = open_resumed_session(db, cmd.session_id, lease_owner=self.engine.lease_owner,
                                           calibration=self.engine.calibration.to_dict())
         except BaseException:
@@ -138,7 +163,7 @@ class EngineSessions:
         recorder, runner = start_runner(
             db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
-            scales=raw_wrench_scales(self.engine.eng.rig.sensor),
+            scales=raw_wrench_scales(self.engine.eng.rig.sensor), arms=self._arms(),
         )
         runner.listeners.append(self._on_runner_event)
         self.trigger = None

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from pipeline.commissioning.rig_calibration import CalibrationFileError
 from pipeline.devices.interfaces import DeviceError
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.runtime.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.settings.hardware import HardwareConfig, HardwareError, load_hardware
 from study_app.engine import messages as m
@@ -61,6 +62,10 @@ class HostConfig:
     sim_settings
         Simulated rig: the pipeline settings (``gui --set``, :mod:`pipeline.force.pipeline_settings`) that are not
         the paper's, as (name, value) pairs; stored with each session like ``run --set``'s.
+    sim_arms
+        Simulated rig: its arms by name (``gui --sim-arms``), the one the participant holds first; a session's
+        protocol must name that one its task arm (``design.task_arm``), and records every arm (docs/architecture.md,
+        "Every arm recorded").
     """
 
     rig: str = "sim"
@@ -74,6 +79,7 @@ class HostConfig:
     trace_jitter: bool = False
     sim_mount_error_deg: float = 0.0
     sim_settings: tuple[tuple[str, float], ...] = ()
+    sim_arms: tuple[str, ...] = (SINGLE_ARM_NAME,)
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -88,6 +94,10 @@ class HostConfig:
             raise ValueError(f"speed = {self.speed!r}: must be a finite number ≥ 0")
         if self.block_ticks < 1:
             raise ValueError(f"block_ticks = {self.block_ticks!r}: must be ≥ 1")
+        if not self.sim_arms or len(set(self.sim_arms)) != len(self.sim_arms):
+            raise ValueError(f"sim_arms = {self.sim_arms!r}: must be distinct arm names")
+        if self.rig == "real" and self.sim_arms != (SINGLE_ARM_NAME,):
+            raise ValueError("sim_arms: the real rig's arms are its hardware file's")
 
 
 class SwitchableDriver:
@@ -201,7 +211,7 @@ def build_engine(
     eng = build_sim_engine(
         EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
                      clock=config.clock, calibrate=True, driver="hold", haptics_on=False, refine_bias=True,
-                     ring_seconds=30.0, framework=framework_with(dict(config.sim_settings))),
+                     ring_seconds=30.0, framework=framework_with(dict(config.sim_settings)), arms=config.sim_arms),
         shared_ring=shared_ring,
     )
     eng.rig.set_driver(driver)

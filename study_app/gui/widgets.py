@@ -276,6 +276,8 @@ class QtHealthPanel(QWidget):
         self.devices.verticalHeader().setDefaultSectionSize(22)
         self.devices.setFixedHeight(4 * 22 + self.devices.horizontalHeader().sizeHint().height() + 4)
         self.faults = QLabel()
+        self.arms = QLabel()  # a rig of several arms: one line per arm, the task arm marked
+        self.arms.hide()
         self.reset_button = QPushButton("Reset faults")
         self.waiting = QLabel()
         self.waiting.setWordWrap(True)
@@ -309,6 +311,7 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.machine)
         lay.addWidget(self.devices)
         lay.addLayout(row)
+        lay.addWidget(self.arms)
         lay.addWidget(self.waiting)
         lay.addWidget(self.loop)
         lay.addWidget(self.thermal)
@@ -363,6 +366,10 @@ class QtHealthPanel(QWidget):
         self.faults.setStyleSheet(f"color: {LEVEL_COLOURS[level][0]}; font-weight: 600;")
         self.reset_button.setEnabled(bool(h.faults))
         self.reset_button.setToolTip("" if h.faults else "No fault is latched")
+        arms = h.arms_text()
+        if arms != self.arms.text():
+            self.arms.setText(arms)
+            self.arms.setVisible(bool(arms))
         waiting = h.waiting_text()
         self.waiting.setText(f"The next cue waits: {waiting}" if waiting else "")
         self.waiting.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]}; font-weight: 600;")

@@ -278,6 +278,15 @@ class HealthModel:
         """Latched faults, or 'none'."""
         return Fault(self.faults).describe()
 
+    def arms_text(self) -> str:
+        """A rig of several arms: one line per arm (the task arm first, marked), its force now and its latched
+        faults ("" on a rig of one arm)."""
+        arms = self.loop.arms if self.loop is not None else ()
+        return "\n".join(
+            f"{name}{' (task)' if k == 0 else ''}: {force:.2f} N, faults: {Fault(faults).describe()}"
+            if math.isfinite(force) else f"{name}{' (task)' if k == 0 else ''}: no record yet"
+            for k, (name, force, faults) in enumerate(arms))
+
     def waiting_text(self) -> str:
         """Why the session's next cue is held back ('' when it is not, or between pauses)."""
         h = self.loop

@@ -1,0 +1,153 @@
+"""The study engine on a simulated rig of two arms: the task arm's session records every arm, as ``run``'s do."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+
+import pytest
+
+from study_app.engine import messages as m
+from study_app.engine.host import StudyEngine
+from study_app.engine.setup import HostConfig
+from tests.gui.conftest import SHORT_PROTOCOL
+
+
+def _protocol(tmp_path, task_arm: str) -> str:
+    p = tmp_path / f"task_{task_arm}.toml"
+    p.write_text(SHORT_PROTOCOL.replace("[design]\n", f"[design]\ntask_arm = \"{task_arm}\"\n"), encoding="utf-8")
+    return str(p)
+
+
+@pytest.fixture
+def two_arms():
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
+                    shared_ring=False)
+    e.start()
+    yield e, events
+    if not e.closed:
+        e.close("test over")
+    e.release_ring()
+
+
+def test_a_gui_session_on_two_arms_records_both(two_arms, tmp_path):
+    e, events = two_arms
+    db = str(tmp_path / "s.db")
+    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
+    assert [ev for ev in events if isinstance(ev, m.CommandRefused)] == []
+    for _ in range(20_000):
+        if e.runner is None:
+            break
+        e.step()
+    assert e.runner is None
+    c = sqlite3.connect(db)
+    try:
+        (cfg,), = c.execute("SELECT config_json FROM sessions").fetchall()
+        assert json.loads(cfg)["arms"]["names"] == ["left", "right"]
+        # the other arm's records: as many as the task arm's, give or take a block being handed over
+        task_n = c.execute("SELECT SUM(n_records) FROM session_blocks").fetchone()[0]
+        other_n = c.execute("SELECT SUM(n_records) FROM arm_blocks WHERE arm = 'right'").fetchone()[0]
+    finally:
+        c.close()
+    assert task_n > 2000 and other_n > 2000
+
+
+def test_a_protocol_whose_task_arm_is_not_the_rigs_first_is_refused_in_one_line(two_arms, tmp_path):
+    e, events = two_arms
+    e.handle(m.StartSession(str(tmp_path / "s.db"), "P01", "experiment", _protocol(tmp_path, "right"), 3, 1))
+    refused = [ev for ev in events if isinstance(ev, m.CommandRefused)]
+    assert len(refused) == 1 and "--sim-arms right,left" in refused[0].message
+    assert e.runner is None
+    e.handle(m.StartSession(str(tmp_path / "s.db"), "P01", "experiment", _protocol(tmp_path, "centre"), 3, 1))
+    assert "no such arm" in [ev for ev in events if isinstance(ev, m.CommandRefused)][-1].message
+
+
+def test_health_names_each_arm_and_a_fault_names_its_arm(two_arms):
+    from pipeline.devices.interfaces import Fault
+    from pipeline.runtime.loop_messages import LoopEvent
+    from study_app.models.health import HealthModel
+
+    e, events = two_arms
+    for _ in range(5):
+        e.step()
+    h = e.health()
+    assert [name for name, _, _ in h.arms] == ["left", "right"]
+    assert all(force == force and faults == 0 for _, force, faults in h.arms)  # a force (not NaN), no fault
+    e._on_loop_event(LoopEvent(1_000_000, "fault", int(Fault.SENSOR_STALE), "sensor stale", arm="right"))
+    fault = [ev for ev in events if isinstance(ev, m.EngineFault)][-1]
+    assert fault.detail == "arm right: sensor stale"
+    model = HealthModel()
+    model.apply(h)
+    model.apply(fault)
+    lines = model.arms_text().splitlines()
+    assert lines[0].startswith("left (task): ") and lines[1].startswith("right: ")
+    assert "arm right: sensor stale" in model.fault_log[-1]
+    one = HealthModel()
+    one.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 1, 0, False, "autopilot", False, False))
+    assert one.arms_text() == ""  # a rig of one arm looks as before
+
+
+def test_the_real_rigs_gate_needs_every_arms_chain(tmp_path):
+    from types import SimpleNamespace
+
+    from pipeline.commissioning.rig_calibration import RigCalibrationFile
+    from study_app.engine.commissioning import other_arms_missing
+    from tests.pipeline.test_commissioning import _chain
+
+    full = _chain("grasper")
+    frameworks = {n: SimpleNamespace(config=SimpleNamespace(rot_tip_sensor=full.frames.rot_tip_sensor,
+                                                            rot_haptic_base=full.frames.rot_haptic_base))
+                  for n in ("right", "left")}
+    good = tmp_path / "left.json"
+    f = RigCalibrationFile.load(good)
+    f.tools["grasper"] = full
+    f.save()
+
+    def arm(name, file, tool="grasper"):
+        return SimpleNamespace(name=name, calibration_file=file, calibration_tool=tool)
+
+    first = arm("right", None)
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(good)))), frameworks) == ""
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", None))), frameworks).startswith(
+        "arm left: no TCP calibration on record for tool 'grasper'")
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(good), "scissors"))), frameworks
+                              ).startswith("arm left: no TCP calibration on record for tool 'scissors'")
+    bad = tmp_path / "bad.json"
+    bad.write_text("{", encoding="utf-8")
+    assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(bad)))), frameworks).startswith("arm left: ")
+
+
+def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
+    db = str(tmp_path / "s.db")
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
+                    shared_ring=False)
+    e.start()
+    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
+    for _ in range(50):
+        e.step()
+    sid = e.sessions.opened.session_id
+    e.close("interrupted")
+    e.release_ring()
+    one: list[object] = []
+    e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
+    e1.start()
+    try:
+        e1.handle(m.ResumeSession(db, sid))
+        refused = [ev for ev in one if isinstance(ev, m.CommandRefused)]
+        assert len(refused) == 1 and "ran on the arms left, right" in refused[0].message
+        assert "--sim-arms left,right" in refused[0].message
+    finally:
+        e1.close("test over")
+        e1.release_ring()
+    two: list[object] = []
+    e2 = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), two.append, shared_ring=False)
+    e2.start()
+    try:
+        e2.handle(m.ResumeSession(db, sid))
+        assert [ev for ev in two if isinstance(ev, m.CommandRefused)] == []
+        assert e2.sessions.runner is not None and e2.sessions.runner.arms == ("left", "right")
+    finally:
+        e2.close("test over")
+        e2.release_ring()
