@@ -155,7 +155,10 @@ def _sim(args: argparse.Namespace) -> dict[str, Any]:
     from pipeline.sim.rig import SimRigConfig
 
     names = args.sim_arms or (SINGLE_ARM_NAME,)
-    arm = chosen_arm(names, args.arm, f"the simulated rig (--sim-arms {','.join(names)})")
+    where = f"the simulated rig (--sim-arms {','.join(names)})" if args.sim_arms else (
+        f"the simulated rig (one arm, {SINGLE_ARM_NAME}; --sim-arms names more)")
+    arm = chosen_arm(names, args.arm, where)
+    assert arm is not None  # required: one arm or a refusal
     # the arm's own configuration (its own seed) as the simulated rig of several arms builds it
     sim = dict(arm_configs(names, SimRigConfig(seed=args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)))[arm]
     note = f"simulated rig, seed {args.seed}" + (f", arm {arm!r}" if len(names) > 1 else "") + (
