@@ -67,6 +67,16 @@ def hardware(old: str, new: str) -> Builder:
     return _variant(EXAMPLE_HARDWARE, old, new)
 
 
+def _two_arm_example() -> str:
+    """The example file's commented two-arm file, uncommented (arms right and left)."""
+    lines = EXAMPLE_HARDWARE.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("# The lines below, uncommented")) + 1
+    return "\n".join(line[2:] if line.startswith("# ") else line[1:] for line in lines[start:]) + "\n"
+
+
+TWO_ARMS = {"hw.toml": _text(_two_arm_example())}
+
+
 def good_db(path: Path, good: Path) -> None:
     shutil.copyfile(good, path)
 
@@ -279,6 +289,20 @@ CASES: list[Case] = [
          "--poses = 'quick': allowed for tcp: 'recommended', 'minimal', 'roll only'"),
     Case("calibrate: real rig without a hardware file", ("calibrate", "tcp", "--rig", "real"),
          "--rig real needs --hardware FILE"),
+    Case("calibrate: two arms, no --arm", ("calibrate", "tcp", "--rig", "real", "--hardware", "{d}/hw.toml"),
+         "hw.toml has 2 arms (right, left): name the one to commission with --arm (e.g. --arm right)", TWO_ARMS),
+    Case("calibrate: --arm not in the file", ("calibrate", "payload", "--rig", "real", "--hardware", "{d}/hw.toml",
+                                              "--arm", "middle"),
+         "--arm = 'middle': ", TWO_ARMS),
+    Case("calibrate: --arm not a name", ("calibrate", "tcp", "--arm", "two words"),
+         "--arm = 'two words': must be a name of letters"),
+    Case("calibrate: --arm not among --sim-arms", ("calibrate", "tcp", "--sim-arms", "left,right", "--arm", "middle"),
+         "--arm = 'middle': the simulated rig (--sim-arms left,right) has no such arm; its arms: left, right"),
+    Case("calibrate: --sim-arms on the real rig", ("calibrate", "tcp", "--rig", "real", "--hardware", "{d}/hw.toml",
+                                                   "--sim-arms", "left,right"),
+         "--sim-arms applies to the simulated rig only", TWO_ARMS),
+    Case("check-hardware: --arm not in the file", (*CHECK, "--arm", "middle"),
+         "hw.toml has no such arm; its arms: right, left", TWO_ARMS),
     # -- command-line arguments ---------------------------------------------------------------------------------
     Case("--seed beyond SQLite's INTEGER (no database created)",
          ("run", "--seed", "99999999999999999999", "--db", "{d}/new.db"),

@@ -124,9 +124,11 @@ class SimArms:
         """Withdraw a rehearsed fault on an arm (the first by default)."""
         return (self.first if arm is None else self.rig(arm)).cancel_fault(kind, at_ns)
 
-    def attach_teleop(self, driver: Any) -> None:
-        """Teleoperate the first arm (see :meth:`pipeline.sim.rig.SimRig.attach_teleop`)."""
-        self.first.attach_teleop(driver)
+    def attach_teleop(self, driver: Any, arm: str | None = None) -> None:
+        """Teleoperate an arm (the first by default) with ``driver``, a
+        :class:`pipeline.devices.teleop.TeleopDriver` of that arm's own Touch and robot (its own clutch and deadman
+        state); see :meth:`pipeline.sim.rig.SimRig.attach_teleop`.  None detaches."""
+        (self.first if arm is None else self.rig(arm)).attach_teleop(driver)
 
     @property
     def push_base_n(self) -> Vec3:

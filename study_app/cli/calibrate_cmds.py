@@ -11,7 +11,9 @@ the simulated experimenter pushes) and nothing is saved.  On the real rig the
 experimenter moves the robot and presses Enter at each prompt; an accepted
 result is saved under the mounted tool in the calibration file the hardware
 file names (:mod:`pipeline.commissioning.rig_calibration`), which the engine reads and the
-session gate checks.  The steps run in order: ``payload`` needs a TCP on
+session gate checks.  A rig of several arms is commissioned an arm at a time:
+``--arm NAME`` runs the step on that arm's devices and saves to that arm's
+calibration file (``--sim-arms`` names the simulated rig's arms).  The steps run in order: ``payload`` needs a TCP on
 record, ``frames`` a payload.
 
 Exit status: 0 accepted / passed, 1 refused / failed (the reason on stdout),
@@ -27,14 +29,14 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from study_app.cli.argtypes import SEED, add_command, real_number
+from study_app.cli.argtypes import SEED, add_command, arm_name, arm_names, real_number
 from study_app.cli.error import CliError
 
 # numpy, and the service that uses it, are imported where they are used: ``haptic-study --help`` must not load them
 if TYPE_CHECKING:
     from pipeline.commissioning.steps import FramesResult, PayloadResult, TcpResult
 
-__all__ = ["add_calibrate_command", "ask_on_stderr", "cmd_calibrate"]
+__all__ = ["add_calibrate_command", "ask_on_stderr", "chosen_arm", "cmd_calibrate"]
 
 STEPS = ("tcp", "payload", "frames")
 #: Real rig: how long the TCP is watched for each pivot orientation, s (the robot reports a pose every 8 ms).
@@ -51,7 +53,8 @@ def add_calibrate_command(sub: argparse._SubParsersAction) -> None:
         sub, "calibrate", "commission the rig: TCP pivot calibration, payload/bias, frame and sign check",
         "haptic-study calibrate tcp --rig sim --json\n"
         "haptic-study calibrate frames --rig sim --sim-mount-error-deg 90   # a sensor mounted 90° off: FAIL\n"
-        "haptic-study calibrate tcp --rig real --hardware hardware.toml     # then payload, then frames",
+        "haptic-study calibrate tcp --rig real --hardware hardware.toml     # then payload, then frames\n"
+        "haptic-study calibrate tcp --rig real --hardware hardware.toml --arm left   # a rig of two arms",
         "Run one step of the commissioning chain, in order: tcp (the tip rests in a divot while the instrument is "
         "turned; least squares gives the tip in the flange frame), payload (the tool's weight and the sensor bias "
         "from static poses), frames (push the free tip along each base axis; the force must come out the right way "
@@ -64,6 +67,11 @@ def add_calibrate_command(sub: argparse._SubParsersAction) -> None:
     c.add_argument("--poses", default=None, metavar="SET",
                    help="tcp: recommended (8, default), minimal (4), 'roll only' (refused: shows why); "
                         "payload: recommended (24, default), quick (6), 'tool-down only' (refused)")
+    c.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                   help="a rig of several arms: the arm to commission (its devices, its calibration file); "
+                        "required when the rig has more than one arm")
+    c.add_argument("--sim-arms", dest="sim_arms", type=arm_names("--sim-arms"), default=None, metavar="NAMES",
+                   help="simulated rig: its arms, comma-separated (default: one arm, right), e.g. left,right")
     c.add_argument("--seed", type=SEED, default=0, help="simulated rig: seed (default 0)")
     c.add_argument("--sim-mount-error-deg", type=real_number("--sim-mount-error-deg", -180.0, 180.0), default=0.0,
                    metavar="DEG", help="simulated rig: mount the sensor turned about its own z axis by DEG without "
@@ -90,6 +98,28 @@ def ask_on_stderr(prompt: str) -> str:
     return line.rstrip("\r\n")
 
 
+def chosen_arm(names: tuple[str, ...], arm: str | None, where: str, *, required: bool = True) -> str | None:
+    """The arm ``--arm`` names among ``names`` (the rig's, from ``where``); with no ``--arm``, the only arm, or
+    None when ``required`` is False (every arm).
+
+    Raises
+    ------
+    CliError
+        ``--arm`` names no arm of the rig, or the rig has several and none is named while one is ``required``.
+    """
+    listed = ", ".join(names)
+    if arm is None:
+        if len(names) == 1:
+            return names[0]
+        if required:
+            raise CliError(f"{where} has {len(names)} arms ({listed}): name the one to commission with --arm "
+                           f"(e.g. --arm {names[0]}), one arm at a time")
+        return None
+    if arm not in names:
+        raise CliError(f"--arm = {arm!r}: {where} has no such arm; its arms: {listed}")
+    return arm
+
+
 def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_stderr) -> int:
     """Run the step; ``ask`` reads the experimenter's answers (real rig); a refusal raises :class:`CliError`."""
     from pipeline.commissioning.steps import PAYLOAD_POSE_SETS
@@ -103,6 +133,9 @@ def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_s
     if args.rig == "real":
         if args.sim_mount_error_deg:
             raise CliError("--sim-mount-error-deg applies to the simulated rig only (omit it with --rig real)")
+        if args.sim_arms is not None:
+            raise CliError("--sim-arms applies to the simulated rig only (with --rig real the hardware file names "
+                           "the arms)")
         if args.hardware is None:
             raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
         result = _real(args, ask)
@@ -117,13 +150,30 @@ def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_s
 
 # -- the simulated rig ---------------------------------------------------------------------------------
 def _sim(args: argparse.Namespace) -> dict[str, Any]:
-    from pipeline.commissioning.steps import frames_step, payload_step, pose_set, tcp_step
-    from pipeline.sim.rig import SimRig, SimRigConfig
+    from pipeline.devices.rig import SINGLE_ARM_NAME
+    from pipeline.sim.arms import arm_configs
+    from pipeline.sim.rig import SimRigConfig
 
-    sim = SimRigConfig(seed=args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)
-    note = f"simulated rig, seed {args.seed}" + (
+    names = args.sim_arms or (SINGLE_ARM_NAME,)
+    where = f"the simulated rig (--sim-arms {','.join(names)})" if args.sim_arms else (
+        f"the simulated rig (one arm, {SINGLE_ARM_NAME}; --sim-arms names more)")
+    arm = chosen_arm(names, args.arm, where)
+    assert arm is not None  # required: one arm or a refusal
+    # the arm's own configuration (its own seed) as the simulated rig of several arms builds it
+    sim = dict(arm_configs(names, SimRigConfig(seed=args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)))[arm]
+    note = f"simulated rig, seed {args.seed}" + (f", arm {arm!r}" if len(names) > 1 else "") + (
         f", sensor mounted {args.sim_mount_error_deg:g}° about its z axis (not told to the pipeline)"
         if args.sim_mount_error_deg else "")
+    out = _sim_step(args, sim, note)
+    out["arm"] = arm
+    return out
+
+
+def _sim_step(args: argparse.Namespace, sim: Any, note: str) -> dict[str, Any]:
+    """Run the step on the simulated arm of configuration ``sim``."""
+    from pipeline.commissioning.steps import frames_step, payload_step, pose_set, tcp_step
+    from pipeline.sim.rig import SimRig
+
     if args.step == "tcp":
         from pipeline.commissioning.tcp import pivot_orientations
         from pipeline.sim.commissioning import pivot_poses
@@ -227,16 +277,24 @@ def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]
     from pipeline.settings.hardware import HardwareError, load_hardware
 
     try:
-        hw = load_hardware(args.hardware)
+        rig = load_hardware(args.hardware)
+    except HardwareError as exc:
+        raise CliError(str(exc)) from None
+    names = tuple(a.name for a in rig.arms)
+    arm = chosen_arm(names, args.arm, args.hardware)
+    assert arm is not None
+    hw = rig.arm(arm)  # this arm's devices, frames, calibration file and tool
+    try:
         cal_file = RigCalibrationFile.load(hw.calibration_file or "calibration.json")
-    except (HardwareError, CalibrationFileError) as exc:
+    except CalibrationFileError as exc:
         raise CliError(str(exc)) from None
     tool = hw.calibration_tool
     record = cal_file.tool(tool)
     refusal = chain_refusal(record, args.step)
+    which = f" --arm {arm}" if len(names) > 1 else ""
     if refusal:
-        raise CliError(f"calibrate {args.step}: {refusal}")
-    note = f"tool {tool!r}"
+        raise CliError(f"calibrate {args.step}{which}: {refusal}")
+    note = (f"arm {arm!r}, " if len(names) > 1 else "") + f"tool {tool!r}"
     clock = MonotonicClock()
     try:
         if args.step == "tcp":
@@ -255,7 +313,8 @@ def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]
     except DeviceError as exc:
         raise CliError(str(exc)) from None
     except (EOFError, KeyboardInterrupt):
-        raise CliError(f"calibrate {args.step}: stopped before the end; nothing was saved") from None
+        raise CliError(f"calibrate {args.step}{which}: stopped before the end; nothing was saved") from None
+    out["arm"] = arm
     if result.record is not None:  # the service says what goes on record (a failed frame check does too)
         try:
             cal_file.record(tool, result.step, result.record)

@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from study_app.cli.argtypes import add_command, host_name, whole_number
+from study_app.cli.argtypes import add_command, arm_name, host_name, whole_number
 from study_app.cli.error import CliError
 
 
@@ -69,27 +69,45 @@ def format_probe(r: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
+def check_hardware(path: str, arm: str | None = None) -> tuple[list[tuple[str, bool, str]], bool]:
     """Open each configured device in turn, describe it, close it; ``(rows, all_ok)``.
+
+    ``arm`` names the one arm to check; None checks every arm in turn (the rows of a rig of several arms start
+    with the arm's name).
 
     Raises
     ------
     HardwareCmdError
         When the hardware file itself is invalid.
+    CliError
+        ``arm`` names no arm of the file.
     """
-    from pipeline.devices.interfaces import DeviceError
-    from pipeline.devices.real_rig import open_haptic, open_jaw, open_robot, open_sensor
     from pipeline.runtime.clock import MonotonicClock
     from pipeline.settings.hardware import HardwareError, load_hardware
+    from study_app.cli.calibrate_cmds import chosen_arm
 
     try:
         hw = load_hardware(path)
     except HardwareError as exc:
         raise HardwareCmdError(str(exc)) from None
+    names = tuple(a.name for a in hw.arms)
+    one = chosen_arm(names, arm, path, required=False)
     clock = MonotonicClock()
     rows: list[tuple[str, bool, str]] = []
+    for a in hw.arms:
+        if one is None or a.name == one:
+            _check_arm(a, clock, rows, f"{a.name}: " if len(names) > 1 else "")
+    return rows, all(ok for _, ok, _ in rows)
+
+
+def _check_arm(hw: Any, clock: Any, rows: list[tuple[str, bool, str]], prefix: str) -> None:
+    """Open, describe and close each device of the arm ``hw`` (:class:`pipeline.settings.hardware.ArmSettings`),
+    a row each, named after ``prefix``."""
+    from pipeline.devices.interfaces import DeviceError
+    from pipeline.devices.real_rig import open_haptic, open_jaw, open_robot, open_sensor
 
     def attempt(name: str, opener: Any, describe: Any) -> None:
+        name = prefix + name
         try:
             dev = opener()
         except (DeviceError, OSError, ValueError) as exc:
@@ -141,12 +159,12 @@ def check_hardware(path: str) -> tuple[list[tuple[str, bool, str]], bool]:
     if hw.jaw is not None:
         jaw_cfg = hw.jaw
         attempt("jaw actuator", lambda: open_jaw(jaw_cfg), describe_jaw)
-    return rows, all(ok for _, ok, _ in rows)
 
 
 def format_check(rows: list[tuple[str, bool, str]]) -> str:
     """One line per device."""
-    return "\n".join(f"{name:<14} {'OK  ' if ok else 'FAIL'} {text}" for name, ok, text in rows)
+    width = max([14, *(len(name) for name, _, _ in rows)])
+    return "\n".join(f"{name:<{width}} {'OK  ' if ok else 'FAIL'} {text}" for name, ok, text in rows)
 
 
 def to_json(obj: Any) -> str:
@@ -184,6 +202,8 @@ def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:
                      "haptic-study check-hardware --hardware hardware.toml")
     ch.add_argument("--hardware", default="hardware.toml", metavar="FILE",
                     help="hardware file (default ./hardware.toml; see hardware.example.toml)")
+    ch.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
+                    help="a rig of several arms: check this arm's devices only (default: every arm in turn)")
     ch.set_defaults(handler=cmd_hardware)
 
 
@@ -194,7 +214,7 @@ def cmd_hardware(args: argparse.Namespace) -> int:
             result = probe_netft(args.host, args.port, args.http_port, args.samples)
             print(json.dumps(result) if args.json else format_probe(result))
             return 0
-        rows, ok = check_hardware(args.hardware)
+        rows, ok = check_hardware(args.hardware, args.arm)
     except HardwareCmdError as exc:
         raise CliError(str(exc)) from None
     print(format_check(rows))

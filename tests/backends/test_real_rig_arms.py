@@ -200,3 +200,51 @@ def test_a_replaced_haptic_opener_opens_each_arms_touch(fakes: Any, monkeypatch:
     rig = build_real_rig(_file(fakes), VirtualClock(), on_open=opened.append)
     rig.close()
     assert names == ["Right Touch", "Left Touch"] and not any("scheduler" in o for o in opened)
+
+
+def test_each_teleoperated_arm_has_its_own_controller_clutch_and_deadman(fakes: Any, touches: FakeMultiHD) -> None:
+    """``robot.mode = "teleop"`` on both arms: each arm's Touch drives its own robot's control interface through its
+    own controller; the clutch on one stylus and the deadman released on the other change only that arm's state."""
+    from fake_ur_control import FakeControl
+
+    from pipeline.devices.teleop import TeleopState
+    from pipeline.runtime.clock import MonotonicClock
+
+    controls = {ur.host: FakeControl() for _, ur in fakes.values()}
+    raw: dict[str, Any] = {"arm": [], "rig": {"fault_policy": "both"}}
+    for arm, (box, ur) in fakes.items():  # the fake controllers' TCP is at (0.3, -0.1, 0.2) m
+        raw["arm"].append({"name": arm, "sensor": {"host": box.host, "port": box.udp_port, "http_port": box.http_port,
+                                                   "connect_timeout_s": 1.0},
+                           "robot": {"host": ur.host, "connect_timeout_s": 1.0, "mode": "teleop"},
+                           "haptic": {"device_name": f"{arm.title()} Touch"},
+                           "frames": {"rot_tip_sensor": [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+                                      "rot_haptic_base": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+                           "framework": {"f_max_n": 3.0, "f_scale_n": 7.0},
+                           "teleop": {"workspace_min_m": [0.2, -0.2, 0.1], "workspace_max_m": [0.4, 0.0, 0.3],
+                                      "control_timeout_s": 1.0}})
+    clock = MonotonicClock()
+    rig = build_real_rig(hardware_from_dict(raw, "two-arm teleop file"), clock,
+                         control_factory=lambda host, hz: controls[host])
+    try:
+        right, left = rig.real_arms
+        assert right.teleop is not None and left.teleop is not None
+        assert right.teleop.controller is not left.teleop.controller
+        assert (right.teleop.haptic, left.teleop.haptic) == (right.haptic, left.haptic)
+        assert (right.teleop.robot, left.teleop.robot) == (right.robot, left.robot)
+
+        def press(**masks: int) -> dict[str, TeleopState]:
+            for name, mask in masks.items():
+                touches.plugged[f"{name.title()} Touch"].button_mask = mask
+            touches.tick()
+            rig.advance(clock.now_ns())
+            return {"right": right.teleop.controller.state, "left": left.teleop.controller.state}
+
+        r_ctl, l_ctl = controls[fakes["right"][1].host], controls[fakes["left"][1].host]
+        assert press(right=1, left=1) == {"right": TeleopState.ENGAGED, "left": TeleopState.ENGAGED}
+        assert r_ctl.wait_count("servoL", 1) and l_ctl.wait_count("servoL", 1)  # each robot its own target
+        assert press(left=1 | 2) == {"right": TeleopState.ENGAGED, "left": TeleopState.CLUTCHED}  # left clutch
+        assert press(right=0) == {"right": TeleopState.IDLE, "left": TeleopState.CLUTCHED}  # right deadman off
+        assert r_ctl.wait_count("servoStop", 1)  # the right robot stopped; the left one was never told to
+        assert not any(n == "servoStop" for n, _ in l_ctl.calls)
+    finally:
+        rig.close()
