@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.storage import crashpoint
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
@@ -55,6 +56,18 @@ class SessionInfo:
     started_at: str
     calibration_json: str | None
     config_json: str
+
+    @property
+    def arms(self) -> tuple[str, ...]:
+        """The rig's arms the session ran on, its task arm (whose records are the session's) first: those a
+        session of several arms stores in ``config_json``, else the one arm (:data:`SINGLE_ARM_NAME`)."""
+        try:
+            config = json.loads(self.config_json)
+        except (TypeError, ValueError):
+            config = {}
+        names = (config.get("arms", {}).get("names")
+                 or [a["name"] for a in config.get("hardware", {}).get("arms", [])])
+        return tuple(names) if names else (SINGLE_ARM_NAME,)
 
 
 class StudyDatabase(SchemaFile, LeaseHolder):

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
 import os
 import sqlite3
 import zlib
@@ -204,9 +203,7 @@ class StudyReader:
             One line naming the session's arms, the task arm first.
         """
         info = self.session(session_id)
-        config = json.loads(info.config_json) if info is not None else {}
-        names = config.get("arms", {}).get("names") or [a["name"] for a in config.get("hardware", {}).get("arms", [])]
-        task = names[0] if names else SINGLE_ARM_NAME
+        task = info.arms[0] if info is not None else SINGLE_ARM_NAME
         if arm is None or arm == task:
             return ""
         others = self.arms(session_id)

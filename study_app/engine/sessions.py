@@ -17,7 +17,6 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.runtime.platform_support import kill_hard
 from protocol.config import ProtocolConfig, load_protocol
 from protocol.records import AbortCause, TrialRecord
@@ -33,7 +32,7 @@ from protocol.session_setup import (
     raw_wrench_scales,
     start_runner,
 )
-from protocol.storage import Recorder, StorageError, StudyDatabase, validate_code
+from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
 from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
@@ -116,10 +115,9 @@ class EngineSessions:
 
     def _check_stored_arms(self, db: StudyDatabase, session_id: int) -> None:
         """A resumed session continues on the arms it ran on (its config_json's; none stored: one arm)."""
-        row = db.conn.execute("SELECT config_json FROM sessions WHERE session_id = ?", (session_id,)).fetchone()
-        names = json.loads(row[0]).get("arms", {}).get("names") if row is not None else None
-        stored = tuple(names) if names else (SINGLE_ARM_NAME,)
-        if row is not None and stored != self._arms():
+        info = StudyReader.over(db).session(session_id)
+        stored = info.arms if info is not None else self._arms()
+        if stored != self._arms():
             raise ValueError(f"resume: session {session_id} ran on the arms {', '.join(stored)}; this rig's are "
                              f"{', '.join(self._arms())} (restart the GUI with --sim-arms {','.join(stored)})")
 

@@ -10,7 +10,6 @@ trial's time.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 import time
@@ -40,7 +39,7 @@ from protocol.session_setup import (
     start_runner,
     training_schedule,
 )
-from protocol.storage import SessionInfo, StudyDatabase, new_owner_token
+from protocol.storage import StudyDatabase, new_owner_token
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
@@ -114,12 +113,6 @@ def sim_arms_of(protocol: ProtocolConfig, arms: Sequence[str]) -> tuple[str, ...
     :class:`protocol.config.ProtocolError` line)."""
     task = protocol.task_arm_of(arms)
     return (task, *(a for a in arms if a != task))
-
-
-def _stored_arms(info: SessionInfo) -> tuple[str, ...]:
-    """The arms a stored session ran on (its task arm first; a session of one arm stores none)."""
-    names = json.loads(info.config_json).get("arms", {}).get("names")
-    return tuple(names) if names else (SINGLE_ARM_NAME,)
 
 
 def _drive(
@@ -200,7 +193,7 @@ def run_session(
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
         # a fresh rig (re-calibrated, its own seed) and the same participant (same seed, same parameters)
-        arms = _stored_arms(info)
+        arms = info.arms
         eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
