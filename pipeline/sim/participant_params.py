@@ -52,6 +52,13 @@ Tried and dropped: a lower stiffness-belief median (0.70: OFF success fell to
 target depth (primary submovements undershoot, Elliott et al. 2001): it removed
 the overshoots that make the paper's Max AE; more ON memory noise, ON bias
 or haptic-model uncertainty: ON success fell, ON RMSE did not rise.
+Tried for TCT's significance (issue 27, seeds 100–109, 10 studies each; v2
+there: OFF success 0.249, TCT significant in 6/10): OFF decision interval × 3.0
+with OFF approach × 2.0 (OFF success 0.210, TCT 5/10) and OFF interval × 5.0
+(OFF success 0.224, OFF RMSE 1.35 N, TCT 6/10): both shorter and longer OFF
+pauses cost OFF successes (not measured why; a guess: shorter pauses break the
+1 s hold, longer ones leave fewer corrections in 12 s), so neither adds pairs;
+not adopted.
 
 Deviations from science.md §4.2 and from model v1, and why:
 
