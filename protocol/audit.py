@@ -242,6 +242,9 @@ def audit_database(conn: sqlite3.Connection, path: str,
             audit.notes.append(f"schema version {audit.schema_version}: sessions were not recorded whole "
                                "(trial windows in the samples table), so there are no blocks to verify")
         _cells(conn, audit)
+        for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
+            audit.notes.append(f"participant {w.code} withdrew ({w.withdrawn_at[:16].replace('T', ' ')} UTC): "
+                               f"{w.counts()} erased; their number stays vacant")
     except sqlite3.DatabaseError as exc:
         audit.problems.append(f"cannot read the study tables ({' '.join(str(exc).split())})")
     return audit

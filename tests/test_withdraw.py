@@ -183,6 +183,9 @@ def test_the_record_keeps_only_the_code_time_reason_and_counts(withdrawn) -> Non
 
 def test_check_passes_and_the_others_are_unchanged(withdrawn, capsys) -> None:
     assert main(["check", "--db", str(withdrawn["db"])]) == 0, capsys.readouterr().out
+    assert main(["check", "--db", str(withdrawn["db"])]) == 0
+    out = capsys.readouterr().out
+    assert "participant P02 withdrew (" in out and "erased; their number stays vacant" in out  # said, not a problem
     after = _rows(withdrawn["db"], "SELECT session_id, participant_number, schedule_json FROM sessions "
                                    "JOIN participants USING (participant_id) ORDER BY session_id")
     assert after == withdrawn["before"]["sessions"]  # same sessions, numbers and schedules: counterbalancing kept
