@@ -130,7 +130,7 @@ def _session(db_path: str, session_id: int, partial: bool = False, arm: str | No
         db.close()
         raise CliError(f"--session {session_id}: no such session in {db_path} (sessions: "
                          f"{', '.join(map(str, ids)) or 'none'}; haptic-study sessions --db PATH lists them)")
-    row = (info.code, info.kind)
+    row = (info.code, info.kind, info.status)
     try:
         key = db.arm_key(session_id, arm)
     except KeyError as exc:
@@ -186,7 +186,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
     folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db]}
     if args.out:  # refused before the work, not after it
         _output_policy(lambda: check_output_folder(args.out, **folder))
-    (code, kind), segments, trials = _session(args.db, args.session, arm=args.arm)
+    (code, kind, _), segments, trials = _session(args.db, args.session, arm=args.arm)
     outputs, exact = _replay_as_recorded(args.session, code, kind, segments)
     trade = _filter_trade(outputs, segments)
     changes = {k: v for k, v in (("filter_window", args.filter_window), ("f_scale_n", args.f_scale),
@@ -316,7 +316,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
         raise CliError(f"--out {out}: must end in .png, .pdf or .svg")
     _output_policy(lambda: check_output_file(out, command="plot-session"))  # before the work
-    (code, kind), segments, trials = _session(args.db, args.session, partial=True, arm=args.arm)
+    (code, kind, status), segments, trials = _session(args.db, args.session, partial=True, arm=args.arm)
     # matplotlib: once the session is known to be there
     from analysis.figures import save_one
     from analysis.session_figures import session_trace
@@ -333,6 +333,8 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     title = (f"{code}, {kind} session {args.session}: {len(trials)} trials ({n_aborted} aborted), "
              f"{t_s[-1] - t_s[0]:.0f} s (trial number, target, haptics)") if len(t_s) else \
         f"{code}, session {args.session}: no records"
+    if status == "running":  # a session a run left unfinished: what is drawn is not the whole designed session
+        title += "; INTERRUPTED, not complete (resume it: run --continue or the GUI)"
     if args.arm:
         title += f"; arm {args.arm}"
     gone = [f"{d.t_first_s:.3f}–{d.t_last_s:.3f} s" for s in segments for d in s.damage]
