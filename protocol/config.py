@@ -132,6 +132,12 @@ class ProtocolConfig:
         raise ProtocolError(f"design.task_arm is not set and the rig has {len(arms)} arms ({', '.join(arms)}), none "
                             f"called {SINGLE_ARM_NAME!r}: name the arm that does the task in the protocol")
 
+    def check_ramps(self, safety: SafetyConfig, source: str = "protocol") -> None:
+        """This protocol run by a pipeline whose ramps are ``safety``'s (``run --set ramp_in_s=…``): refused in one
+        :class:`ProtocolError` line where an ON trial could not hold the ramp-in, or a pause the ramp-out (the
+        checks the file had with the paper's ramps, :func:`_check_together`)."""
+        _check_together(Fields(source, ProtocolError), self.trial, self.training, self.modes, safety)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set, so a
         protocol of before the arms stores what it always stored)."""
@@ -233,7 +239,8 @@ def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
     return required
 
 
-def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...]) -> None:
+def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...],
+                    ramps: SafetyConfig | None = None) -> None:
     """Values valid alone but not together: one line naming both fields.
 
     * ``trial.hold_s`` < ``trial.max_trial_s``, and with haptics ON in the
@@ -248,9 +255,11 @@ def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, mo
       this value (the headless study runner), so it must fit a hold (and the
       ramp-in) too.
 
-    The ramps are the safety stage's own (:class:`pipeline.force.safety.SafetyConfig`, their one definition).
+    The ramps are the safety stage's own (:class:`pipeline.force.safety.SafetyConfig`, their one definition):
+    the paper's pipeline when the file is loaded, the pipeline a study runs with (``run --set``) at its start
+    (:meth:`ProtocolConfig.check_ramps`).
     """
-    ramps = SafetyConfig()
+    ramps = ramps or SafetyConfig()
     on = "on" in modes
     if timing.hold_s >= timing.max_trial_s:
         raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")

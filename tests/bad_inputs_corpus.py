@@ -346,6 +346,11 @@ CASES: list[Case] = [
          "--set = 'filter_window=1,10': filter_window: one value here (lists of values are for haptic-study sweep)"),
     Case("run --set a setting twice", ("run", "--db", "{d}/new.db", "--set", "f_scale=3", "--set", "f_scale_n=4"),
          "--set f_scale_n: given twice (3 and 4); give each setting once"),
+    Case("run --set a ramp-in longer than a trial", ("run", "--db", "{d}/new.db", "--set", "ramp_in_s=20"),
+         "protocol with the pipeline's settings: trial.max_trial_s = 12.0: must be at least trial.hold_s = 1 + the "
+         "feedback's 20 s ramp-in"),
+    Case("sweep --set a ramp-in longer than a trial", ("sweep", "--set", "ramp_in=0.5,20", "--out", "{d}/out"),
+         "protocol with --set ramp_in_s=20: trial.max_trial_s = 12.0: must be at least trial.hold_s = 1"),
     Case("sweep without --set", ("sweep", "--out", "{d}/out"), "--set: give at least one setting to sweep"),
     Case("sweep --set an unknown setting", ("sweep", "--set", "window=1,2", "--out", "{d}/out"),
          "--set = 'window=1,2': unknown setting 'window'"),

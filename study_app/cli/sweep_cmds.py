@@ -89,10 +89,14 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         out = check_output_folder(args.out, **folder)  # before any work
     except AnalysisError as exc:
         raise CliError(str(exc)) from None
+    from pipeline.force.pipeline_settings import describe, framework_with, non_default_settings
     from protocol.config import ProtocolError, load_protocol
 
     try:
         protocol = load_protocol(args.protocol)
+        for setting in grid:  # every setting's ramps fit the protocol's trials and pauses (else: one line)
+            protocol.check_ramps(framework_with(setting).safety,
+                                 f"protocol with --set {describe(non_default_settings(setting))}")
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
     from analysis.sweep import caveat, summary_frame, summary_lines, sweep_frame, write_sweep

@@ -80,6 +80,7 @@ class EngineSessions:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
                              "number ≥ 1")
         protocol = load_protocol(cmd.protocol_path or None)
+        protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol)
         if self.commissioning.gate(cmd):

@@ -400,3 +400,15 @@ def test_every_accepted_protocol_has_a_training_protocol_that_is_valid_and_resum
         assume(False)
     training = _training_protocol(p)
     assert protocol_from_dict(json.loads(training.to_json()), "stored training protocol") == training
+
+
+def test_the_ramps_of_the_pipeline_a_study_runs_with_must_fit_its_trials() -> None:
+    """run --set ramp_in_s=20 with 12 s trials would judge every ON trial at a gain below 1: refused in one line."""
+    from pipeline.force.safety import SafetyConfig
+
+    p = default_protocol()
+    p.check_ramps(SafetyConfig())  # the paper's pipeline: the file's own check
+    p.check_ramps(SafetyConfig(ramp_in_s=10.0))  # 10 s + the 1 s hold fit a 12 s trial (and the 20 s training)
+    with pytest.raises(ProtocolError, match=r"^protocol: trial\.max_trial_s = 12\.0: must be at least trial\.hold_s "
+                                            r"= 1 \+ the feedback's 11.5 s ramp-in"):
+        p.check_ramps(SafetyConfig(ramp_in_s=11.5))
