@@ -21,16 +21,19 @@ detail begins with :data:`TRAINING_SKIPPED`, so the report can list it among the
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from pipeline.force.framework import FrameworkConfig
+from pipeline.force.pipeline_settings import describe, non_default_settings, settings_of, stored_settings
 from protocol.config import ProtocolConfig
-from protocol.storage import StorageError, StudyDatabase, StudyReader
+from protocol.storage import SessionInfo, StorageError, StudyDatabase, StudyReader
 
 __all__ = [
     "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession",
-    "StudyRuleError", "check_new_session", "next_kind",
+    "StudyRuleError", "check_new_session", "check_settings", "next_kind",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
 
@@ -154,3 +157,25 @@ def check_new_session(
         raise StudyRuleError(why)
     return f"{TRAINING_SKIPPED}: {code}'s experiment started without a completed training session ({why}). " \
            f"Reason given: {reason}"
+
+
+def check_settings(sessions: Sequence[SessionInfo], db_path: str, framework: FrameworkConfig | None) -> None:
+    """One pipeline per study: refuse (:class:`StorageError`) settings other than those a stored session ran with.
+
+    The settings are the ones ``run --set`` chooses (:mod:`pipeline.force.pipeline_settings`), read from each
+    session's ``config_json``; a study whose sessions ran with different filters or scalings compares nothing.
+    """
+    chosen = settings_of(framework or FrameworkConfig())
+    for info in sessions:
+        try:
+            record = json.loads(info.config_json).get("framework")
+        except (TypeError, ValueError, AttributeError):
+            record = None
+        have = stored_settings(record)
+        if have != chosen:
+            raise StorageError(
+                f"{db_path}: {info.code}'s {info.kind} session {info.session_id} ran with the pipeline settings: "
+                f"{describe(non_default_settings(have))}; this command's: {describe(non_default_settings(chosen))}; "
+                "one study runs one pipeline, nothing was changed (give the --set the study was started with, or use "
+                "a new database)"
+            )

@@ -17,6 +17,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.platform_support import kill_hard
 from protocol.config import ProtocolConfig, load_protocol
 from protocol.records import AbortCause, TrialRecord
@@ -33,7 +34,7 @@ from protocol.session_setup import (
     start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
-from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, stored_sessions
+from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
 from protocol.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
@@ -82,7 +83,7 @@ class EngineSessions:
         protocol = load_protocol(cmd.protocol_path or None)
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
-        _check_rules_first(cmd, protocol)
+        _check_rules_first(cmd, protocol, self.engine.eng.framework.config)
         if self.commissioning.gate(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -136,6 +137,8 @@ class EngineSessions:
         db = self._open_db(cmd.db_path)
         try:
             self._check_stored_arms(db, cmd.session_id)
+            check_settings([s for s in StudyReader.over(db).sessions() if s.session_id == cmd.session_id],
+                           cmd.db_path, self.engine.eng.framework.config)  # a resume runs the pipeline it ran
             opened = open_resumed_session(db, cmd.session_id, lease_owner=self.engine.lease_owner,
                                           calibration=self.engine.calibration.to_dict())
         except BaseException:
@@ -280,13 +283,15 @@ class EngineSessions:
         return StudyDatabase(path)
 
 
-def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig) -> None:
+def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig) -> None:
     """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
-    where the session is stored, by :func:`protocol.session_setup.open_new_session`)."""
+    where the session is stored, by :func:`protocol.session_setup.open_new_session`), and one pipeline per study
+    (``gui --set``: the settings every stored session ran with)."""
     if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
         return
     db = StudyDatabase(cmd.db_path, readonly=True)
     try:
+        check_settings(StudyReader.over(db).sessions(), cmd.db_path, framework)
         if not db.sessions_of(cmd.code, cmd.kind):
             check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
                               training_override=cmd.training_override)

@@ -12,7 +12,6 @@ from collections.abc import Sequence
 from typing import Any
 
 from pipeline.force.framework import FrameworkConfig
-from pipeline.force.pipeline_settings import describe, non_default_settings, settings_of, stored_settings
 from protocol.config import ProtocolConfig, protocol_from_dict
 from protocol.design import schedule_from_json
 from protocol.rehearsal import FaultPlan
@@ -21,7 +20,7 @@ from protocol.session_setup import participant_code, refuse_damaged_recording, t
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
 from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import withdrawals
-from protocol.study_rules import StudyRuleError, seed_refusal, stored_sessions, training_refusal
+from protocol.study_rules import StudyRuleError, check_settings, seed_refusal, stored_sessions, training_refusal
 
 __all__ = [
     "Step", "all_steps", "check_fault_plans", "check_settings", "interrupted_session_of", "open_notes", "peek",
@@ -197,28 +196,6 @@ def _check_seed(db: StudyDatabase, db_path: str, seed: int) -> None:
     why = seed_refusal(stored_sessions(db), seed)
     if why:
         raise StudyRuleError(f"{db_path}: {why}; nothing was changed")
-
-
-def check_settings(sessions: Sequence[SessionInfo], db_path: str, framework: FrameworkConfig | None) -> None:
-    """One pipeline per study: refuse (:class:`StorageError`) settings other than those a stored session ran with.
-
-    The settings are the ones ``run --set`` chooses (:mod:`pipeline.force.pipeline_settings`), read from each
-    session's ``config_json``; a study whose sessions ran with different filters or scalings compares nothing.
-    """
-    chosen = settings_of(framework or FrameworkConfig())
-    for info in sessions:
-        try:
-            record = json.loads(info.config_json).get("framework")
-        except (TypeError, ValueError, AttributeError):
-            record = None
-        have = stored_settings(record)
-        if have != chosen:
-            raise StorageError(
-                f"{db_path}: {info.code}'s {info.kind} session {info.session_id} ran with the pipeline settings: "
-                f"{describe(non_default_settings(have))}; this command's: {describe(non_default_settings(chosen))}; "
-                "one study runs one pipeline, nothing was changed (give the --set the study was started with, or use "
-                "a new database)"
-            )
 
 
 def open_notes(db: StudyDatabase, taken_over: str) -> list[str]:

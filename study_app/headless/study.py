@@ -122,8 +122,7 @@ def run_study(
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    fw = framework or FrameworkConfig()
-    protocol.check_ramps(fw.safety, "protocol with the pipeline's settings")  # e.g. a ramp-in longer than a trial
+    protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
     first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))

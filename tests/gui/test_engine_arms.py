@@ -151,3 +151,27 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
     finally:
         e2.close("test over")
         e2.release_ring()
+
+
+def test_a_gui_session_with_other_pipeline_settings_than_the_studys_is_refused(tmp_path):
+    """One pipeline per study, from the GUI as from run: a stored study's settings against gui --set's; and a ramp-in
+    no ON trial can hold."""
+    db = tmp_path / "s.db"
+    from protocol.config import load_protocol
+    from study_app.headless import run_study
+
+    run_study(str(db), participants=1, seed=3, protocol=load_protocol(_protocol(tmp_path, "right")), jobs=1)
+    for settings, says in (((("filter_window", 50),), "ran with the pipeline settings: the paper's; this command's: "
+                            "filter_window=50"),
+                           ((("ramp_in_s", 30.0),), "must be at least trial.hold_s")):
+        events: list[object] = []
+        e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_settings=settings), events.append, shared_ring=False)
+        e.start()
+        try:
+            e.handle(m.StartSession(str(db), "P02", "experiment", _protocol(tmp_path, "right"), 3, 2,
+                                    override_reason="test"))
+            refused = [ev for ev in events if isinstance(ev, m.CommandRefused)]
+            assert len(refused) == 1 and says in refused[0].message and "\n" not in refused[0].message
+        finally:
+            e.close("test over")
+            e.release_ring()
