@@ -8,6 +8,7 @@ bursts that no process can cause or cure.
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import time
 from typing import Any
@@ -82,14 +83,17 @@ def bare_loop_stats(seconds: float) -> dict[str, Any]:
     return result
 
 
-def engine_loop_health(seconds: float, explain: bool) -> tuple[m.Health, m.Health, list[int] | None]:
+def engine_loop_health(seconds: float, explain: bool, sim_arms: tuple[str, ...] | None = None,
+                       ) -> tuple[m.Health, m.Health, list[int] | None]:
     """Run the study engine (simulated rig, real clock, no GUI) for ``seconds`` after a timing reset.
 
     Returns the first :class:`study_app.engine.messages.Health` after the reset, the first one published after
     ``seconds`` (its timing covers the whole window), and the CPU times at the window's start
     (:func:`cpu_times`).  ``explain``: trace every late tick's cause (``HostConfig.trace_jitter``).
+    ``sim_arms``: the simulated rig's arms by name (``HostConfig.sim_arms``; None: the one-arm rig).
     """
-    client = EngineClient(HostConfig(clock="real", trace_jitter=explain))
+    cfg = HostConfig(clock="real", trace_jitter=explain)
+    client = EngineClient(cfg if sim_arms is None else dataclasses.replace(cfg, sim_arms=sim_arms))
     try:
         client.wait_ready(60.0)
         client.send(m.ResetStats())

@@ -34,16 +34,6 @@ class LoopStats:
         if period_ns > 2_000_000:
             self.over_2ms += 1
 
-    def merge(self, other: LoopStats) -> None:
-        """Add another run's periods (at the same nominal period) to these, as if one run had ticked them all."""
-        if other.period_ns != self.period_ns:
-            raise ValueError(f"period_ns = {other.period_ns}: the statistics to merge are at {self.period_ns} ns")
-        self._hist = [a + b for a, b in zip(self._hist, other._hist, strict=True)]
-        self.count += other.count
-        self.max_ns = max(self.max_ns, other.max_ns)
-        self.over_2ms += other.over_2ms
-        self.missed_slots += other.missed_slots
-
     def _quantile_us(self, q: float, hist: list[int]) -> float:
         n = sum(hist)
         if n == 0:
