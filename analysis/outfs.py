@@ -151,16 +151,7 @@ def entries(dir_fd: Folder, prefix: str = "") -> Iterator[tuple[str, int]]:
 def _walk_to(dir_fd: Folder, rel: str) -> tuple[Folder, str]:
     """(an open fd of the folder holding ``rel``, its last component); the caller closes the fd."""
     *folders, name = rel.split("/")
-    fd = _dup(dir_fd)
-    try:
-        for part in folders:
-            nxt = open_folder(part, fd)
-            close_folder(fd)
-            fd = nxt
-    except BaseException:
-        close_folder(fd)
-        raise
-    return fd, name
+    return folder_at(dir_fd, "/".join(folders), make=False), name
 
 
 def _open_at(dir_fd: Folder, name: str, flags: int, mode: int = 0o777) -> int:
@@ -294,11 +285,7 @@ def fsync_dir(dir_fd: Folder) -> None:
     if isinstance(dir_fd, PathFolder):
         outpath.fsync_dir(dir_fd)
         return
-    try:
-        os.fsync(dir_fd)
-    except OSError as exc:
-        if exc.errno not in (errno.EINVAL, errno.EBADF, errno.ENOTSUP):
-            raise
+    outpath.fsync_tolerant(dir_fd)
 
 
 def free_bytes(folder: str | os.PathLike[str]) -> int | None:

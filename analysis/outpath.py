@@ -50,8 +50,8 @@ from pipeline.runtime.platform_support import (
     set_folder_mode,
 )
 
-__all__ = ["PathFolder", "chmod_at", "fsync_dir", "link_at", "listdir", "lstat_at", "mkdir_at", "open_at",
-           "open_folder", "rename_at", "rename_new", "rmdir_at", "rmtree_at", "scan", "unlink_at"]
+__all__ = ["PathFolder", "chmod_at", "fsync_dir", "fsync_tolerant", "link_at", "listdir", "lstat_at", "mkdir_at",
+           "open_at", "open_folder", "rename_at", "rename_new", "rmdir_at", "rmtree_at", "scan", "unlink_at"]
 
 #: The flags every open here adds: those of them the system has (0 elsewhere).
 _OPEN_FLAGS = O_BINARY | O_NOINHERIT | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK
@@ -273,9 +273,15 @@ def fsync_dir(folder: PathFolder) -> None:
     except (PermissionError, IsADirectoryError):  # Windows opens no folder as a file
         return
     try:
+        fsync_tolerant(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_tolerant(fd: int) -> None:
+    """``fsync`` an open folder; a file system that cannot sync a folder (EINVAL, EBADF, ENOTSUP) is not an error."""
+    try:
         os.fsync(fd)
     except OSError as exc:
         if exc.errno not in (errno.EINVAL, errno.EBADF, errno.ENOTSUP):
             raise
-    finally:
-        os.close(fd)
