@@ -17,16 +17,12 @@ import numpy as np
 import pandas as pd
 
 from analysis import codebook
+from protocol.labels import plural
 
 __all__ = ["fmt", "fmt_p", "fmt_w", "html_table", "img", "plural", "th"]
 
 #: The resolution the figures are saved at (:func:`analysis.figures.save`).
 _DPI = 300
-
-
-def plural(n: int, word: str, many: str | None = None) -> str:
-    """``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
-    return f"{n} {word if n == 1 else (many or word + 's')}"
 
 
 def fmt(v: object, digits: int = 3) -> str:

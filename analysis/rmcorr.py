@@ -27,12 +27,9 @@ import numpy.typing as npt
 from scipy import special
 from scipy import stats as sps
 
+from protocol.labels import plural
+
 __all__ = ["RmCorrResult", "rmcorr"]
-
-
-def plural(n: int, word: str) -> str:
-    """``1 participant``, ``2 participants``."""
-    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 @dataclass(frozen=True, slots=True)

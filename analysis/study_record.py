@@ -21,15 +21,12 @@ import os
 import pandas as pd
 
 from analysis.load import DEVIATION_EVENTS, StudyData
+from protocol.labels import plural
 
 #: A session whose commit is not stored: run from an installed wheel, or recorded before commits were stored.
 COMMIT_UNKNOWN = "not known (installed from a wheel, or recorded before commits were stored)"
 
 __all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "deviations", "incomplete_sessions", "provenance"]
-
-
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def incomplete_sessions(study: StudyData) -> pd.DataFrame:
@@ -141,14 +138,14 @@ def provenance(study: StudyData) -> tuple[pd.DataFrame, list[str]]:
     warn = []
     if len(table) > 1:
         warn.append("The sessions of this study ran different code (" + "; ".join(
-            f"{r.code}: {_plural(r.n_sessions, 'session')}" for r in table.itertuples()) + "): a difference "
+            f"{r.code}: {plural(r.n_sessions, 'session')}" for r in table.itertuples()) + "): a difference "
             "between sessions may come from the software, not the participants; check what changed between them.")
     dirty = int(code.str.endswith("with uncommitted changes").sum())
     if dirty:
-        warn.append(f"{_plural(dirty, 'session')} ran from a checkout with uncommitted changes: the code that ran "
+        warn.append(f"{plural(dirty, 'session')} ran from a checkout with uncommitted changes: the code that ran "
                     f"{'it' if dirty == 1 else 'them'} is not exactly known from the commit.")
     unknown = int(code.str.endswith(COMMIT_UNKNOWN).sum())
     if unknown and unknown < len(code):
-        warn.append(f"{_plural(unknown, 'session')}: commit {COMMIT_UNKNOWN}; only the package version says which "
+        warn.append(f"{plural(unknown, 'session')}: commit {COMMIT_UNKNOWN}; only the package version says which "
                     "code ran them.")
     return table, warn

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pipeline.devices.interfaces import Fault
 from protocol.trial import PHASE_CODES
 
-__all__ = ["FAULT_BITS", "PHASE_NAMES", "fault_names", "phase_name"]
+__all__ = ["FAULT_BITS", "PHASE_NAMES", "fault_names", "phase_name", "plural"]
 
 #: Phase code -> name (``idle``, ``cued``, ``active``, ``pause``).
 PHASE_NAMES: dict[int, str] = {code: phase.value for phase, code in PHASE_CODES.items()}
@@ -39,3 +39,8 @@ def fault_names(bits: int) -> str:
         rest >>= 1
         k += 1
     return "|".join(names) or "none"
+
+
+def plural(n: int, word: str, many: str | None = None) -> str:
+    """A count with its noun for people: ``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
+    return f"{n} {word if n == 1 else (many or word + 's')}"

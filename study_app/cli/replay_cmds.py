@@ -311,6 +311,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     import numpy as np
 
     from analysis.outdir import check_output_file, write_output_file
+    from protocol.labels import plural
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
@@ -330,7 +331,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     starts = [(float(r.started_at_s), f"{r.trial_index + 1} {r.target_label} {r.haptic_mode.upper()}")
               for r in trials.itertuples()]
     n_aborted = int((trials["outcome"] == "aborted").sum())
-    title = (f"{code}, {kind} session {args.session}: {len(trials)} trials ({n_aborted} aborted), "
+    title = (f"{code}, {kind} session {args.session}: {plural(len(trials), 'trial')} ({n_aborted} aborted), "
              f"{t_s[-1] - t_s[0]:.0f} s (trial number, target, haptics)") if len(t_s) else \
         f"{code}, session {args.session}: no records"
     if status == "running":  # a session a run left unfinished: what is drawn is not the whole designed session

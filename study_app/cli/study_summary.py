@@ -13,6 +13,7 @@ import pandas as pd
 
 from analysis.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
+from protocol.labels import plural
 from protocol.records import Outcome, TrialRecord
 from protocol.storage import StudyReader
 
@@ -28,10 +29,6 @@ _ROWS = (
     ("RMSE (N)", "rmse_n", "rmse_n"),
     ("Max AE (N)", "max_ae_n", "max_ae_n"),
 )
-
-
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}{'' if n == 1 else 's'}"
 
 
 def _value(v: float | None) -> float:
@@ -96,8 +93,8 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     training = sum(1 for t in records if sessions[t.session_id].kind == "training")
     codes = sorted({c for c, _ in exp})
     lines = [
-        f"Study database {db_path}: {_plural(len(codes), 'participant')}, {_plural(len(exp), 'experiment trial')} "
-        f"({aborted} aborted and re-run{why}; {_plural(training, 'training trial')} excluded), "
+        f"Study database {db_path}: {plural(len(codes), 'participant')}, {plural(len(exp), 'experiment trial')} "
+        f"({aborted} aborted and re-run{why}; {plural(training, 'training trial')} excluded), "
         + (f"{recorded:,} records (whole sessions at 1 kHz)" if recorded else f"{n_samples:,} samples"),
         _settings_line([sessions[i].config_json for i in session_ids if i in sessions]),
         "",
