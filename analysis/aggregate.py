@@ -119,11 +119,6 @@ def by_mode(per_part: pd.DataFrame, metric: str, codes: Sequence[str] | None = N
     return wide if codes is None else wide.reindex(list(codes))
 
 
-def _paired(per_part: pd.DataFrame, metric: str) -> tuple[np.ndarray, np.ndarray]:
-    wide = by_mode(per_part, metric)
-    return wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
-
-
 def mode_tests(
     per_part: pd.DataFrame,
     metrics: Sequence[str] = PRIMARY_METRICS,
@@ -149,6 +144,7 @@ def mode_tests(
     """
     results = []
     for m in metrics:
-        off, on = _paired(per_part, m)
+        wide = by_mode(per_part, m)
+        off, on = wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
         results.append(paired_wilcoxon(off, on, metric=m, zero_method=zero_method, confidence=confidence))
     return results, results_frame(results)

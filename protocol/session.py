@@ -315,10 +315,13 @@ class SessionRunner:
         for replay since the previous call (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`),
         read after the records.
         """
-        session_rows = self._recording.session_rows(rows, replay_log)
-        if session_rows is None:
-            return  # the loop has not taken the snapshot yet: these records are not the session's
-        rows = session_rows
+        if self._recording.start_tick is None:  # (after it, every record is the session's: no need to hand them over)
+            session_rows = self._recording.session_rows(rows, replay_log)
+            if session_rows is None:
+                return  # the loop has not taken the snapshot yet: these records are not the session's
+            rows = session_rows
+        else:
+            self._recording.keep_log(replay_log)
         if self.done or (len(rows) == 0 and self.clock is None):
             return
         if self.clock is None:

@@ -59,7 +59,8 @@ class SessionRecording:
                      replay_log: Sequence[tuple[int, str, object]]) -> npt.NDArray[np.void] | None:
         """The session's part of a block of records (None: the loop has not taken the snapshot yet).
 
-        ``replay_log`` is what the loop logged since the previous block, read after the records.
+        ``replay_log`` is what the loop logged since the previous block, read after the records.  Once the start
+        tick is known every record is the session's: :meth:`keep_log` is all a block then needs.
         """
         self._log.extend(replay_log)
         if self.start_tick is None:
@@ -67,6 +68,10 @@ class SessionRecording:
             if self.start_tick is None:
                 return None
         return rows
+
+    def keep_log(self, replay_log: Sequence[tuple[int, str, object]]) -> None:
+        """Keep what the loop logged since the previous block for :meth:`record` (the recording has started)."""
+        self._log.extend(replay_log)
 
     def _from_snapshot(self, rows: npt.NDArray[np.void]) -> npt.NDArray[np.void]:
         """Find this run's snapshot in the log; the records from its tick on (none before it is found)."""
