@@ -175,3 +175,69 @@ def test_a_gui_session_with_other_pipeline_settings_than_the_studys_is_refused(t
         finally:
             e.close("test over")
             e.release_ring()
+
+
+def _last(events: list[object], kind: type) -> object:
+    return [ev for ev in events if isinstance(ev, kind)][-1]
+
+
+def _status(events: list[object], arm: str) -> m.CalibrationStatus:
+    return [ev for ev in events if isinstance(ev, m.CalibrationStatus) and ev.arm == arm][-1]
+
+
+def test_each_arm_is_commissioned_on_its_own_as_calibrate_arm_does(two_arms, capsys):
+    """TCP, payload and frames on the second arm: its devices, its force path, its record; the first arm's untouched.
+    The TCP result is the one ``calibrate tcp --sim-arms left,right --arm right`` prints (one service, one rig)."""
+    from study_app.cli.main import main
+
+    e, events = two_arms
+    assert {ev.arm for ev in events if isinstance(ev, m.CalibrationStatus)} == {"left", "right"}
+    left_cal = e.calibration
+    e.handle(m.CalibrateTcp("recommended", arm="right"))
+    done = _last(events, m.TcpCalibrationDone)
+    assert done.accepted and done.error_mm <= 0.5
+    assert main(["calibrate", "tcp", "--sim-arms", "left,right", "--arm", "right", "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert done.result["tip_in_flange_m"] == pytest.approx(cli["tip_in_flange_m"], abs=1e-12)
+    right = {name: ok for name, ok, _ in _status(events, "right").steps}
+    left = {name: ok for name, ok, _ in _status(events, "left").steps}
+    assert right["TCP"] and not left["TCP"]
+
+    e.handle(m.Calibrate("quick", arm="right"))
+    assert _last(events, m.CalibrationDone).accepted
+    new = e.eng.calibrations["right"]
+    assert e.calibration is left_cal and e.eng.calibrations["left"] is left_cal
+    for _ in range(3):
+        e.step()
+    # installed in the right arm's path only (the bias then refines online: compare the payload)
+    assert new.mass_kg != left_cal.mass_kg
+    assert e.loop.arm("right").framework.calibration.mass_kg == new.mass_kg
+    assert e.loop.arm("left").framework.calibration.mass_kg == left_cal.mass_kg
+
+    e.handle(m.CheckFrames(arm="right"))
+    assert _last(events, m.FrameCheckDone).passed
+    right = {name: ok for name, ok, _ in _status(events, "right").steps}
+    assert right["frames"] and not {name: ok for name, ok, _ in _status(events, "left").steps}["frames"]
+    assert set(e.commissioning.provenance()["arms_rig_calibration"]) == {"left", "right"}
+
+    e.handle(m.CalibrateTcp("recommended", arm="centre"))
+    refused = _last(events, m.CommandRefused)
+    assert refused.message == "arm = 'centre': this rig has no such arm; its arms: left, right"
+
+
+def test_each_arms_stylus_buttons_drive_its_own_jaw(two_arms):
+    e, events = two_arms
+    arms = e.eng.rig
+    assert e.jaw is not None and set(e.other_jaws) == {"right"}
+    assert arms.rig("left").on_buttons == e.jaw.buttons
+    assert arms.rig("right").on_buttons == e.other_jaws["right"].buttons
+    left_open, right_open = arms.rig("left").jaw.status.fraction_open, arms.rig("right").jaw.status.fraction_open
+    hook = arms.rig("right").on_buttons
+    hook(1_000_000, 0)
+    hook(2_000_000, 2)  # the right Touch's open button pressed (the jaws start closed) ...
+    hook(3_000_000, 0)
+    e.other_jaws["right"].service()
+    assert arms.rig("right").jaw.status.fraction_open > right_open  # ... opens the right jaw
+    assert arms.rig("left").jaw.status.fraction_open == left_open  # and not the left one
+    e.step()
+    assert not e.other_jaws["right"].events  # drained (into the running session's events, arm named, if one runs)
