@@ -99,11 +99,11 @@ class ArmPicker(QWidget):
         if mdl.arms != self._items:
             self._items = mdl.arms
             self.choice.clear()
-            self.choice.addItems([f"{a} (task arm)" if i == 0 else a for i, a in enumerate(mdl.arms)])
+            self.choice.addItems(list(mdl.arms))
         if mdl.arm in self._items and self.choice.currentIndex() != self._items.index(mdl.arm):
             self.choice.setCurrentIndex(self._items.index(mdl.arm))
         self.choice.setEnabled(not mdl.busy())
-        self.overview.setText(" · ".join(f"{a}: {what}" for a, what in mdl.arms_overview()))
+        self.overview.setText("    ".join(f"{a}: {what}" for a, what in mdl.arms_overview()))
 
 
 class TcpPage(QWidget):

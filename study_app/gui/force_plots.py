@@ -124,12 +124,12 @@ class QtForcePlots(QWidget):
         self._set_lower(self.lower_choice.currentText())
 
     def legend_entries(self) -> list[str]:
-        """The upper plot's legend, in words: on a rig of several arms every arm's force, the task arm marked."""
-        task = self.plots.task_arm
-        out = [f"task force |F| (compensated, filtered){f' — arm {task} (task arm)' if task else ''}",
-               "rendered on the haptic device" + (f" of arm {task}" if task else "")]
-        out += [f"arm {name}: |F| (compensated, filtered)" for name in self.plots.arms]
-        return [*out, "target band"]
+        """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the task
+        arm (whose force is the task force) marked."""
+        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band"]
+        if self.plots.arms:
+            out += [f"{self.plots.task_arm} (task arm)", *self.plots.arms]
+        return out
 
     def _set_arms(self) -> None:
         """One curve per other arm in the upper plot, and the legend naming every arm (when the arms change)."""
@@ -142,9 +142,12 @@ class QtForcePlots(QWidget):
         colours = dict(zip(names, ARM_COLOURS, strict=False))
         self.arm_curves = {n: self.task.plot(pen=pg.mkPen(colours.get(n, "#555"), width=1)) for n in names}
         words = self.legend_entries()
-        marks = [TASK_COLOUR, RENDER_COLOUR, *(colours.get(n, "#555") for n in names)]
-        self.legend.setText("  ".join([*(_swatch(c, w) for c, w in zip(marks, words, strict=False)),
-                                       _swatch("rgba(0,114,178,0.35)", words[-1], block=True)]))
+        text = "  ".join((_swatch(TASK_COLOUR, words[0]), _swatch(RENDER_COLOUR, words[1]),
+                          _swatch("rgba(0,114,178,0.35)", words[2], block=True)))
+        if names:  # each arm's force by its colour: the task arm's is the task force
+            marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
+            text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[3:], strict=True))
+        self.legend.setText(text)
 
     @property
     def lower_series(self) -> tuple[str, ...]:

@@ -80,10 +80,9 @@ class CommissioningModel:
         self.changed.emit()
 
     def arm_title(self) -> str:
-        """Which arm the steps commission, in a few words ("" on a rig of one arm); the task arm is marked."""
-        if not self.arm:
-            return ""
-        return f"arm {self.arm}" + (" (task arm)" if self.arm == self.arms[0] else "")
+        """Which arm the steps commission, in a few words ("" on a rig of one arm).  No arm is marked the task arm
+        here: every arm needs its chain, and which one does the task is the session's protocol's to say."""
+        return f"arm {self.arm}" if self.arm else ""
 
     def first_missing(self) -> str:
         """The first step a session still needs ("" when none): on a rig of several arms, the first arm's with one,
@@ -93,11 +92,12 @@ class CommissioningModel:
         return next((f"arm {a}: {s.missing}" for a in self.arms if (s := self.statuses.get(a)) and s.missing), "")
 
     def arms_overview(self) -> list[tuple[str, str]]:
-        """Per arm: (name, what its gate says: "complete" or its first missing step) -- a rig of several arms."""
+        """Per arm: (name, each step on record ✔ or not ✘, e.g. ``✔ TCP ✔ payload ✘ frames``) -- a rig of several
+        arms."""
         out = []
         for a in self.arms:
             st = self.statuses.get(a)
-            out.append((a, "–" if st is None else (st.missing or "chain complete")))
+            out.append((a, "–" if st is None else " ".join(f"{'✔' if ok else '✘'} {n}" for n, ok, _ in st.steps)))
         return out
 
     # -- commands ----------------------------------------------------------------------------------

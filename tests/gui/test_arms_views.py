@@ -30,7 +30,7 @@ def test_the_calibration_steps_go_to_the_chosen_arm_and_each_arm_keeps_its_statu
     a = AppModel(lambda c: sent.append(c) or True)
     a.apply(TWO)
     chain = a.commissioning
-    assert chain.arms == ("left", "right") and chain.arm == "left" and chain.arm_title() == "arm left (task arm)"
+    assert chain.arms == ("left", "right") and chain.arm == "left" and chain.arm_title() == "arm left"
     a.apply(m.CalibrationStatus("sim", "simulated instrument", "", STEPS, "", "left"))
     a.apply(m.CalibrationStatus("sim", "simulated instrument", "", [("TCP", True, "tip …"), *STEPS[1:]], "", "right"))
     assert chain.status.arm == "left"
@@ -64,7 +64,8 @@ def test_the_real_gate_line_names_the_arm_whose_chain_is_missing() -> None:
                                            "yet: arm left: no TCP calibration on record.")
     a.select_calibration_arm("left")
     assert a.commissioning.gate_text() == ("A session cannot start yet: arm left: no TCP calibration on record.")
-    assert a.commissioning.arms_overview() == [("right", "chain complete"), ("left", "no TCP calibration on record")]
+    assert a.commissioning.arms_overview() == [("right", "✔ TCP ✔ payload ✔ frames"),
+                                               ("left", "✘ TCP ✔ payload ✘ frames")]
 
 
 def test_the_task_arm_goes_first_as_run_puts_it(tmp_path) -> None:
@@ -122,6 +123,8 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     view = QtForcePlots(plots, SessionModel())
     qtbot.addWidget(view)
     assert list(view.arm_curves) == [] and "arm" not in view.legend.text()  # one arm: as before
+    assert view.legend_entries() == ["task force |F| (compensated, filtered)", "rendered on the haptic device",
+                                     "target band"]
     plots.attach(task)
     plots.attach_arms("left", {"right": other})
     for k in range(50):
@@ -132,9 +135,8 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     plots.pull()
     view.refresh()
     assert list(view.arm_curves) == ["right"]
-    assert view.legend_entries()[0].endswith("— arm left (task arm)")
-    assert view.legend_entries()[2] == "arm right: |F| (compensated, filtered)"
-    assert "arm left (task arm)" in view.legend.text() and "arm right" in view.legend.text()
+    assert view.legend_entries()[3:] == ["left (task arm)", "right"]
+    assert "each arm's |F|:" in view.legend.text() and "left (task arm)" in view.legend.text()
     assert len(view.arm_curves["right"].getData()[1]) > 0
     assert "arm right peak 9.0 N: above the axis" in view.title_text
 
@@ -152,7 +154,7 @@ def test_the_wizards_arm_picker_asks_for_the_arm_chosen(qtbot) -> None:
     chain.apply(TWO)
     chain.apply(m.CalibrationStatus("sim", "simulated instrument", "", STEPS, "", "right"))
     assert wiz.arm_picker.isVisible()
-    assert [wiz.arm_picker.choice.itemText(i) for i in range(2)] == ["left (task arm)", "right"]
+    assert [wiz.arm_picker.choice.itemText(i) for i in range(2)] == ["left", "right"]
     wiz.arm_picker.choice.activated.emit(1)
     assert asked == ["right"]
     chain.select_arm("right")
