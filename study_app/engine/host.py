@@ -167,6 +167,8 @@ class StudyEngine:
             devices=self._device_summary(),
             arm_rings=tuple((n, r.name or "") for n, r in self.eng.rings.items() if r is not None)
             if len(self.eng.rings) > 1 else (),
+            arm_mounts=tuple((n, as_mat3(fw.config.rot_tip_sensor)) for n, fw in self.eng.frameworks.items())
+            if len(self.eng.frameworks) > 1 else (),
         ))
         self.commissioning.publish_status()
         for ctl in self.other_jaws.values():

@@ -300,6 +300,8 @@ class EngineReady:
     devices: list[str] = field(default_factory=list)
     #: The rig's arms (the task arm first) with their shared rings' names (the first's is ``ring_name``); one arm: ().
     arm_rings: tuple[tuple[str, str], ...] = ()
+    #: Each arm's sensor mount (``rot_tip_sensor``, row-major), by name, on a rig of several arms.
+    arm_mounts: tuple[tuple[str, Mat3], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

@@ -169,6 +169,8 @@ class AppModel:
         if self.loop_stalled != was_stalled:
             self.engine_changed.emit()
             self.actions_changed.emit()
+        if isinstance(ev, m.EngineReady) and self.commissioning.arm in self.commissioning.mounts:
+            self.real_calibration.rot_tip_sensor = self.commissioning.mounts[self.commissioning.arm]
         if isinstance(ev, m.EngineReady) and self._pending_start is not None:
             cmd, self._pending_start = self._pending_start, None
             self._send(cmd, clear=False)  # the start the rearranged engine was restarted for
@@ -440,6 +442,8 @@ class AppModel:
         self.commissioning.select_arm(name)
         self.calibration.state, self.calibration.result, self.calibration.done = "idle", None, 0
         self.calibration.changed.emit()
+        if name in self.commissioning.mounts:  # the pose targets as this arm's pendant shows them
+            self.real_calibration.rot_tip_sensor = self.commissioning.mounts[name]
         if self.real_calibration.steps:
             self.real_calibration.begin(self.real_calibration.pose_set)  # this arm's poses, from the first
 

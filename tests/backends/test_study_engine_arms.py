@@ -82,7 +82,7 @@ def test_each_arm_of_the_real_rig_is_commissioned_from_its_own_devices_into_its_
     try:
         e.start()
         ready = next(ev for ev in events if isinstance(ev, m.EngineReady))
-        assert [a for a, _ in ready.arm_rings] == ["right", "left"]
+        assert [a for a, _ in ready.arm_rings] == ["right", "left"] == [a for a, _ in ready.arm_mounts]
         statuses = {ev.arm: ev for ev in events if isinstance(ev, m.CalibrationStatus)}
         assert set(statuses) == {"right", "left"} and statuses["left"].file == str(tmp_path / "cal-left.json")
         # a pose recorded on the left arm averages the left box (2 N along z), not the right one (1 N)

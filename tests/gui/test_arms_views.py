@@ -54,16 +54,23 @@ def test_the_calibration_steps_go_to_the_chosen_arm_and_each_arm_keeps_its_statu
 
 def test_the_real_gate_line_names_the_arm_whose_chain_is_missing() -> None:
     a = AppModel(lambda c: True)
+    turned = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # the left sensor mounted 90° about z
     a.apply(m.EngineReady("", "real", "real", {}, float("nan"), (float("nan"),) * 3, "participant",
-                          arm_rings=(("right", "r"), ("left", "l"))))
+                          arm_rings=(("right", "r"), ("left", "l")),
+                          arm_mounts=(("right", (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)), ("left", turned))))
     done = [(n, True, "on record") for n, _, _ in STEPS]
     a.apply(m.CalibrationStatus("real", "grasper", "/lab/right.json", done, "", "right"))
     a.apply(m.CalibrationStatus("real", "grasper", "/lab/left.json", STEPS, "no TCP calibration on record", "left"))
     assert a.calibration_missing() == "arm left: no TCP calibration on record"
     assert a.commissioning.gate_text() == ("Arm right's chain is on record (/lab/right.json); a session cannot start "
                                            "yet: arm left: no TCP calibration on record.")
+    a.real_calibration.begin("quick")
+    right_target = a.real_calibration.target_tcp(a.real_calibration.current)
     a.select_calibration_arm("left")
     assert a.commissioning.gate_text() == ("A session cannot start yet: arm left: no TCP calibration on record.")
+    # the pose targets as the left arm's pendant shows them: its own sensor mount
+    assert a.real_calibration.rot_tip_sensor == turned and a.real_calibration.index == 0
+    assert a.real_calibration.target_tcp(a.real_calibration.current) != right_target
     assert a.commissioning.arms_overview() == [("right", "✔ TCP ✔ payload ✔ frames"),
                                                ("left", "✘ TCP ✔ payload ✘ frames")]
 
