@@ -12,7 +12,7 @@ import numpy as np
 from pipeline.devices.interfaces import Fault
 from study_app.engine import messages as m
 from study_app.models import Emitter
-from study_app.models.arms import task_arm_first
+from study_app.models.arms import stored_arm_order, task_arm_first
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel
 from study_app.models.cue_wait import CUE_ACTIONS, CUE_STUCK_S, CueWait, cue_wait_now
@@ -104,7 +104,7 @@ class AppModel:
         #: Replaces the engine by a new one (the window's bridge; given arm names, a simulated rig with those arms in
         #: that order); None: nothing can restart it.
         self.restarter: Callable[..., None] | None = None
-        self._pending_start: m.StartSession | None = None  # sent when the rearranged engine is ready
+        self._pending_start: m.StartSession | m.ResumeSession | None = None  # sent when the new engine is ready
         self._restarting = False
         #: The session the failure interrupted (selected for resume after the restart).
         self._interrupted: int | None = None
@@ -169,8 +169,8 @@ class AppModel:
         if self.loop_stalled != was_stalled:
             self.engine_changed.emit()
             self.actions_changed.emit()
-        if isinstance(ev, m.EngineReady) and self.commissioning.arm in self.commissioning.mounts:
-            self.real_calibration.rot_tip_sensor = self.commissioning.mounts[self.commissioning.arm]
+        if isinstance(ev, m.EngineReady) and self.commissioning.arm:
+            self.real_calibration.for_arm(self.commissioning.arm)
         if isinstance(ev, m.EngineReady) and self._pending_start is not None:
             cmd, self._pending_start = self._pending_start, None
             self._send(cmd, clear=False)  # the start the rearranged engine was restarted for
@@ -394,15 +394,19 @@ class AppModel:
         if override_reason.strip():
             cmd = dataclasses.replace(cmd, override_reason=override_reason.strip())
         self._training_override = cmd.training_override
-        order = task_arm_first(self.commissioning.arms, self.rig_kind, cmd.protocol_path or "")
-        if order and self.restarter is not None:  # the protocol's task arm first, as run --sim-arms arranges it
-            self.restart_engine(order)
-            self._pending_start = cmd
-            self.notify("info", f"The protocol's task arm is {order[0]}: restarting the simulated rig with arm "
-                                f"{order[0]} first (--sim-arms {','.join(order)}); the session starts when it is "
-                                "ready …", "StartSession")
-            return True
-        return self._send(cmd)
+        # the protocol's task arm first, as run --sim-arms arranges it
+        return self._send_on_arms(cmd, task_arm_first(self.commissioning.arms, self.rig_kind, cmd.protocol_path or ""))
+
+    def _send_on_arms(self, cmd: m.StartSession | m.ResumeSession, order: tuple[str, ...]) -> bool:
+        """Send a start or resume; with an ``order`` of the simulated rig's arms, restart the rig so first."""
+        if not order or self.restarter is None:
+            return self._send(cmd)
+        self.restart_engine(order)
+        self._pending_start = cmd
+        self.notify("info", f"The session's task arm is {order[0]}: restarting the simulated rig with arm {order[0]} "
+                            f"first (--sim-arms {','.join(order)}); the session starts when it is ready …",
+                    type(cmd).__name__)
+        return True
 
     def start_refusal(self) -> str:
         """Why Start is not available now, in words ("" when it is): for the button's and the menu's tooltip."""
@@ -442,10 +446,7 @@ class AppModel:
         self.commissioning.select_arm(name)
         self.calibration.state, self.calibration.result, self.calibration.done = "idle", None, 0
         self.calibration.changed.emit()
-        if name in self.commissioning.mounts:  # the pose targets as this arm's pendant shows them
-            self.real_calibration.rot_tip_sensor = self.commissioning.mounts[name]
-        if self.real_calibration.steps:
-            self.real_calibration.begin(self.real_calibration.pose_set)  # this arm's poses, from the first
+        self.real_calibration.for_arm(name)
 
     def _send_step(self, cmd: Any) -> None:
         """A calibration step's command, for the arm the calibration window commissions."""
@@ -594,4 +595,6 @@ class AppModel:
         """Continue an interrupted session."""
         import os
 
-        self._send(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)))
+        stored = next((r.get("arms", []) for r in self.setup.resumable if r["session_id"] == session_id), [])
+        self._send_on_arms(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)),
+                           stored_arm_order(self.commissioning.arms, self.rig_kind, stored))

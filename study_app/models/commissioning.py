@@ -20,7 +20,6 @@ import numpy as np
 
 from pipeline.commissioning.frame_check import AXES
 from pipeline.commissioning.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG
-from pipeline.force.frames import Mat3
 from study_app.engine import messages as m
 from study_app.models import Emitter
 
@@ -55,8 +54,6 @@ class CommissioningModel:
     arms: tuple[str, ...] = ()
     arm: str = ""
     statuses: dict[str, m.CalibrationStatus] = field(default_factory=dict)
-    #: Each arm's sensor mount (the real rig's pose targets are shown for the chosen arm's).
-    mounts: dict[str, Mat3] = field(default_factory=dict)
     changed: Emitter = field(default_factory=Emitter)
 
     @property
@@ -154,7 +151,6 @@ class CommissioningModel:
         if isinstance(ev, m.EngineReady):
             self.rig = ev.rig
             self.arms = tuple(name for name, _ in ev.arm_rings)
-            self.mounts = dict(ev.arm_mounts)
             self.statuses = {}
             if self.arm not in self.arms:  # a new engine (a restart): the task arm, or no arm on a one-arm rig
                 self.arm = self.arms[0] if self.arms else ""

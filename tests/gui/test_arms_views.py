@@ -105,6 +105,28 @@ def test_a_start_whose_task_arm_is_not_first_restarts_the_rig_with_it_first_then
     assert len(sent) == n  # sent once
 
 
+def test_an_interrupted_session_resumes_on_its_arms_in_their_order(tmp_path) -> None:
+    """Launched as --sim-arms left,right, a session that ran with right first is resumed after a restart of the
+    simulated rig with right first; a session of other arms goes to the engine, which refuses it in one line."""
+    sent: list[object] = []
+    restarts: list[tuple[str, ...]] = []
+    a = AppModel(lambda c: sent.append(c) or True)
+    a.restarter = lambda arms=(): restarts.append(arms)
+    a.apply(TWO)
+    a.setup.update(db_path=str(tmp_path / "s.db"))
+    entry = {"session_id": 4, "code": "P01", "kind": "experiment", "started_at": "2026-01-01T10:00:00Z",
+             "trials_planned": 20, "trials_done": 3, "trials_aborted": 0, "trials_total": 20, "reruns_run": 0}
+    a.apply(m.SessionsListed(str(tmp_path / "s.db"), [{**entry, "arms": ["right", "left"]},
+                                                      {**entry, "session_id": 5, "arms": ["right", "centre"]}]))
+    a.resume_session(4)
+    assert restarts == [("right", "left")] and sent == []
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
+                          arm_rings=(("right", "r"), ("left", "l"))))
+    assert sent == [m.ResumeSession(str(tmp_path / "s.db"), 4)]
+    a.resume_session(5)
+    assert restarts == [("right", "left")] and sent[-1] == m.ResumeSession(str(tmp_path / "s.db"), 5)
+
+
 def test_each_arms_force_is_pulled_from_its_own_ring() -> None:
     task, other = RingBuffer.create(TICK_DTYPE, 5000), RingBuffer.create(TICK_DTYPE, 5000)
     a = AppModel(lambda c: True)

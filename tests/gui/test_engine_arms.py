@@ -130,6 +130,9 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
     sid = e.sessions.opened.session_id
     e.close("interrupted")
     e.release_ring()
+    from study_app.engine.sessions import list_resumable
+
+    assert [r["arms"] for r in list_resumable(db)] == [["left", "right"]]  # the window rearranges a rig by it
     one: list[object] = []
     e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
     e1.start()
