@@ -30,6 +30,7 @@ from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 
 if TYPE_CHECKING:
+    from pipeline.force.framework import HapticFramework
     from pipeline.runtime.ring import RingBuffer
 
 __all__ = ["PUSH_N", "pivot_poses", "push_axes"]
@@ -55,18 +56,19 @@ def pivot_poses(rig: SimRig, orientations: Sequence[Mat3], seed: int = 0) -> lis
 
 def push_axes(
     rig: SimRig, loop: HapticLoop, ring: RingBuffer, axes: Sequence[str] = AXES, *, push_n: float = PUSH_N,
-    progress: Callable[[str], None] | None = None,
+    progress: Callable[[str], None] | None = None, framework: HapticFramework | None = None,
 ) -> FrameCheck:
     """Push the free tip along each axis with the loop running (feedback off) and check the directions.
 
     ``ring`` is the loop's ring buffer (the records are read back from it).  The rig's stylus is held
-    still (the tip hangs clear of the tissue) and restored afterwards.
+    still (the tip hangs clear of the tissue) and restored afterwards.  On a loop of several arms ``rig``,
+    ``ring`` and ``framework`` are the checked arm's (``framework`` None: the loop's first arm's).
     """
     old = rig.driver
     rig.set_driver(HoldStill(0.0))
     loop.submit(SetHaptics(False))
     loop.submit(AllowBiasRefinement(False))
-    fw = loop.framework
+    fw = framework if framework is not None else loop.framework
     results = []
     try:
         loop.run_ticks(int(_REST_S * 1000))

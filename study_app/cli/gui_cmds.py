@@ -46,9 +46,9 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
                         "f_max_n, slew_n_per_s, ramp_in_s); repeatable")
     g.add_argument("--sim-arms", dest="sim_arms", type=arm_names("--sim-arms"), default=(SINGLE_ARM_NAME,),
                    metavar="NAMES",
-                   help=f"simulated rig: its arms, comma-separated, the one the participant holds first (default: one "
-                        f"arm, {SINGLE_ARM_NAME}); a session's protocol must name that one design.task_arm, and "
-                        "records every arm (e.g. --sim-arms left,right with task_arm = \"left\")")
+                   help=f"simulated rig: its arms, comma-separated, in any order (default: one arm, "
+                        f"{SINGLE_ARM_NAME}); Start puts the protocol's task arm (design.task_arm) first, restarting "
+                        "the simulated rig if needed, as run --sim-arms does; a session records every arm")
     g.set_defaults(handler=cmd_gui)
 
 

@@ -45,6 +45,10 @@ class EngineClient:
         self.ring: RingBuffer | None = None
         #: The shared segment of the engine's ring ("" before EngineReady).
         self.ring_name = ""
+        #: A rig of several arms: the other arms' rings by arm name (attached on EngineReady), and the task arm's
+        #: name ("" for one arm).
+        self.arm_rings: dict[str, RingBuffer] = {}
+        self.task_arm = ""
         self.started = False
         #: The device the engine was opening last (real rig; "" before the first :class:`EngineOpening`).
         self.opening = ""
@@ -74,6 +78,9 @@ class EngineClient:
         if isinstance(ev, m.EngineReady) and ev.ring_name and self.ring is None:
             self.ring = RingBuffer.attach(ev.ring_name)
             self.ring_name = ev.ring_name
+            if ev.arm_rings:
+                self.task_arm = ev.arm_rings[0][0]
+                self.arm_rings = {n: RingBuffer.attach(r) for n, r in ev.arm_rings[1:] if r}
         elif isinstance(ev, m.EngineOpening):
             self.opening = ev.device
         elif isinstance(ev, m.EngineStopped):
@@ -152,6 +159,9 @@ class EngineClient:
         if self.ring is not None:
             self.ring.close()
             self.ring = None
+        for ring in self.arm_rings.values():
+            ring.close()
+        self.arm_rings = {}
         if self.started and not self._proc.is_alive():
             RingBuffer.free_orphaned(self.ring_name)  # killed: it could not free its own ring
         self._events.close()

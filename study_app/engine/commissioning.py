@@ -112,6 +112,9 @@ class _Window:
     abandoned: Callable[[], None] | None = None
     label: str = ""  # what is being recorded (a pose's label), for messages
     stalled: str = ""  # the refusal if the sensor stalls ("" for the generic one)
+    #: The arm whose ring is read ("": the first's, fed by the engine's drain); another arm's from ``cursor`` on.
+    arm: str = ""
+    cursor: int = 0
 
 
 class Commissioning:
@@ -125,13 +128,53 @@ class Commissioning:
 
     def __init__(self, engine: EngineCore) -> None:
         self.engine = engine
-        #: What is on record for the mounted tool (real rig: from the calibration file; simulated: this run's).
-        self.tool_cal = self._tool_record()
+        #: The rig's arms by name, the first (the task arm) first; each is commissioned on its own.
+        self.arms: tuple[str, ...] = tuple(engine.eng.frameworks)
+        self._files = {a: self._calibration_file(a) for a in self.arms}
+        #: Per arm, what is on record for its mounted tool (real rig: from its calibration file; simulated: this run's).
+        self.tool_cals: dict[str, ToolCalibration] = {a: self._tool_record(a) for a in self.arms}
         self._windows: list[_Window] = []
         self._frame_axes: dict[str, AxisCheck] = {}
+        self._frame_arm = ""  # the arm whose axes ``_frame_axes`` holds
         self._gate_passed: object | None = None  # a start whose rest check passed: let it through once
         self._starting: object | None = None  # a start waiting for its rest check
         self._override: tuple[str, str, float] | None = None  # (what was missing, the reason, force at rest N)
+
+    @property
+    def tool_cal(self) -> ToolCalibration:
+        """What is on record for the first arm's tool (a one-arm rig's)."""
+        return self.tool_cals[self.arms[0]]
+
+    def arm_of(self, name: str) -> str:
+        """The arm a command names ("": the first), checked: a name the rig lacks is a ValueError naming its arms."""
+        if not name:
+            return self.arms[0]
+        if name not in self.arms:
+            raise ValueError(f"arm = {name!r}: this rig has no such arm; its arms: {', '.join(self.arms)}")
+        return name
+
+    def devices(self, arm: str) -> Any:
+        """An arm's devices (``sensor``, ``robot``; simulated: its whole rig): the rig itself for the first arm,
+        whose calls it forwards, else the arm's own."""
+        rig = self.engine.eng.rig
+        if arm == self.arms[0]:
+            return rig
+        return rig.rig(arm) if self.engine.eng.simulated else rig.arm(arm)
+
+    def _hardware_arm(self, arm: str) -> Any:
+        """The hardware file's table of an arm (real rig), None on the simulated rig."""
+        hw = self.engine.hardware
+        return hw.arm(arm) if hw is not None else None
+
+    def _calibration_file(self, arm: str) -> RigCalibrationFile | None:
+        """The real rig's calibration file of an arm (loaded when the engine was built, so it reads), else None."""
+        eng = self.engine.eng
+        if eng.simulated:
+            return None
+        if arm == self.arms[0]:
+            return eng.calibration_file
+        hw = self._hardware_arm(arm)
+        return RigCalibrationFile.load(hw.calibration_file) if hw is not None and hw.calibration_file else None
 
     def take_override(self) -> tuple[str, str, float] | None:
         """The override the session that just started was let through with (once), or None."""
@@ -152,12 +195,13 @@ class Commissioning:
             raise ValueError("pose label = '': must name the pose")
         _check_seconds("RecordPose", cmd.seconds)
         target = check_target(cmd.target_rot_base_sensor) if cmd.target_rot_base_sensor is not None else None
-        robot = e.eng.rig.robot
+        arm = self.arm_of(cmd.arm)
+        robot = self.devices(arm).robot
         pose0 = robot.read_pose()
         refusal = robot_pose_refusal(pose0, e.eng.clock.now_ns())
         if refusal:
             raise RuntimeError(f"{refusal} (Devices tab)")
-        label, rot_tip_sensor = cmd.label, e.eng.framework.config.rot_tip_sensor
+        label, rot_tip_sensor = cmd.label, e.eng.frameworks[arm].config.rot_tip_sensor
 
         def done(cols: dict[str, np.ndarray]) -> None:
             w = np.stack([cols[c] for c in _RAW_WRENCH], axis=1)
@@ -169,7 +213,7 @@ class Commissioning:
                                      rp.off_target_deg, rp.force_std_n))
 
         # average only records written after this command (the window drains everything up to now first)
-        self._open_window("RecordPose", cmd.seconds, _RAW_WRENCH, done, label=label,
+        self._open_window("RecordPose", cmd.seconds, _RAW_WRENCH, done, label=label, arm=arm,
                           stalled=f"pose {label}: the force sensor stalled while recording (check the Devices tab) "
                                   "— record it again")
 
@@ -178,22 +222,26 @@ class Commissioning:
         if not self.engine.real:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self.engine.require_idle("calibrate")
+        arm = self.arm_of(cmd.arm)
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
-        self.engine.publish(self._installed(payload_step(poses, cmd.pose_set)))
+        self.engine.publish(self._installed(arm, payload_step(poses, cmd.pose_set)))
 
-    def _installed(self, result: PayloadResult) -> m.CalibrationDone:
-        """Install and record an accepted payload calibration; the result as the wizard's message."""
+    def _installed(self, arm: str, result: PayloadResult) -> m.CalibrationDone:
+        """Install an accepted payload calibration in the arm's force path and record it; the wizard's message."""
         if result.record is not None:
-            self.engine.calibration = result.record
-            self.engine.loop.submit(SetCalibration(result.record))
-            self._record_step(result.step, result.record)
+            if arm == self.arms[0]:
+                self.engine.calibration = result.record  # the task arm's: the session's calibration_json
+            self.engine.eng.calibrations[arm] = result.record  # every arm's: the session's config_json
+            self.engine.loop.submit(SetCalibration(result.record, arm=arm))
+            self._record_step(arm, result.step, result.record)
         return _calibration_done(result)
 
-    def calibrate(self, name: str) -> None:
-        """Simulated rig: run the pose set automatically (the loop paused), identify, judge, install."""
+    def calibrate(self, name: str, arm_name: str = "") -> None:
+        """Simulated rig: run the pose set automatically on an arm (the loop paused), identify, judge, install."""
         from pipeline.sim.calibration import measure_poses
 
         self.engine.require_idle("calibrate")
+        arm = self.arm_of(arm_name)
         rots = pose_set(name)
         real = self.engine.config.clock == "real"
         if real:
@@ -206,49 +254,59 @@ class Commissioning:
         try:
             assert self.engine.eng.simulated
             poses = measure_poses(
-                self.engine.eng.rig, clock, rots,
+                self.devices(arm), clock, rots,
                 progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
             )
-            result = self._installed(payload_step(poses, name))
+            result = self._installed(arm, payload_step(poses, name))
         finally:
             self.engine.after_loop_pause(real)
         self.engine.publish(result)
 
     # -- what is on record --------------------------------------------------------------------------------------
-    def _tool_record(self) -> ToolCalibration:
+    def _tool(self, arm: str) -> str:
+        """The tool mounted on an arm (real rig: the hardware file's, its record's name in the calibration file)."""
+        hw = self._hardware_arm(arm)
+        return str(hw.calibration_tool) if hw is not None and arm != self.arms[0] else self.engine.eng.tool
+
+    def _tool_record(self, arm: str) -> ToolCalibration:
         eng = self.engine.eng
         if not eng.simulated:
-            if eng.calibration_file is None:
-                return ToolCalibration(eng.tool)
-            return eng.calibration_file.tool(eng.tool)
+            f = self._files[arm]
+            return ToolCalibration(self._tool(arm)) if f is None else f.tool(self._tool(arm))
         # the simulated rig calibrated its payload as it was built; TCP and frames are this run's, never saved
-        return ToolCalibration("simulated instrument", payload=eng.calibration, payload_date=now_iso())
+        return ToolCalibration("simulated instrument", payload=eng.calibrations[arm], payload_date=now_iso())
 
-    def frames_in_use(self) -> tuple[Mat3, Mat3]:
-        fw = self.engine.eng.framework.config
+    def frames_in_use(self, arm: str = "") -> tuple[Mat3, Mat3]:
+        """The frame rotations an arm's force path uses (the first arm's by default)."""
+        fw = self.engine.eng.frameworks[arm or self.arms[0]].config
         return fw.rot_tip_sensor, fw.rot_haptic_base
 
     def publish_status(self) -> None:
-        eng = self.engine.eng
-        path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else ""
-        self.engine.publish(m.CalibrationStatus(self.engine.config.rig, self.tool_cal.tool, path,
-                                                self.tool_cal.status(), self.tool_cal.missing(*self.frames_in_use())))
+        """What is on record, per arm (a one-arm rig's status names no arm)."""
+        several = len(self.arms) > 1
+        for arm in self.arms:
+            f, rec = self._files[arm], self.tool_cals[arm]
+            self.engine.publish(m.CalibrationStatus(self.engine.config.rig, rec.tool, f.path if f is not None else "",
+                                                    rec.status(), rec.missing(*self.frames_in_use(arm)),
+                                                    arm if several else ""))
 
-    def _record_step(self, step: str, result: Any) -> None:
-        """Put an accepted result on record (real rig: saved in the calibration file) and publish the status."""
-        eng = self.engine.eng
-        if not eng.simulated and eng.calibration_file is not None:
+    def _record_step(self, arm: str, step: str, result: Any) -> None:
+        """Put an accepted result on record for an arm (real rig: saved in its calibration file); publish the status."""
+        f = self._files[arm]
+        if f is not None:
             try:
-                self.tool_cal = eng.calibration_file.record(eng.tool, step, result)
+                self.tool_cals[arm] = f.record(self._tool(arm), step, result)
             except CalibrationFileError as exc:
-                self.tool_cal = self.tool_cal.with_step(step, result)
+                self.tool_cals[arm] = self.tool_cals[arm].with_step(step, result)
                 self.engine.publish(m.CommandRefused("calibration file", f"{exc}: the result is in use but not saved"))
-            if step == "tcp" and self.engine.hardware is not None:
+            hw = self._hardware_arm(arm)
+            if step == "tcp" and hw is not None:
                 # the robot's poses move to the new tip at once (the pendant's TCP stays what the file says)
-                off = self.engine.hardware.robot.tcp_offset_m
-                eng.rig.robot.tcp_correction_m = tuple(t - o for t, o in zip(result.tip_in_flange_m, off, strict=True))
+                off = hw.robot.tcp_offset_m
+                self.devices(arm).robot.tcp_correction_m = tuple(
+                    t - o for t, o in zip(result.tip_in_flange_m, off, strict=True))
         else:
-            self.tool_cal = self.tool_cal.with_step(step, result)
+            self.tool_cals[arm] = self.tool_cals[arm].with_step(step, result)
         self.publish_status()
 
     def provenance(self) -> dict[str, Any]:
@@ -256,13 +314,17 @@ class Commissioning:
         eng = self.engine.eng
         path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else None
         out: dict[str, Any] = {"rig_calibration": {"tool": self.tool_cal.tool, "file": path, **self.tool_cal.to_dict()}}
+        if len(self.arms) > 1:  # every arm's chain (the first's is rig_calibration)
+            out["arms_rig_calibration"] = {
+                a: {"tool": r.tool, "file": self._files[a].path if self._files[a] is not None else None,  # type: ignore[union-attr]  # checked in the same line
+                    **r.to_dict()} for a, r in self.tool_cals.items()}
         if self._override is not None:
             out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1],
                                            "rest_force_n": self._override[2]}
         return out
 
     # -- TCP ----------------------------------------------------------------------------------------------------
-    def calibrate_tcp(self, name: str) -> None:
+    def calibrate_tcp(self, name: str, arm_name: str = "") -> None:
         """Simulated rig: the simulated robot turns the instrument about the divot; fit, judge, record."""
         from pipeline.sim.commissioning import pivot_poses
         from pipeline.sim.robot import TOOL_DOWN
@@ -273,13 +335,14 @@ class Commissioning:
         self.engine.require_idle("TCP calibration")
         if name not in m.PIVOT_SETS:
             raise ValueError(f"pose set = {name!r}: allowed values are {', '.join(m.PIVOT_SETS)}")
-        rig = self.engine.eng.rig
+        arm = self.arm_of(arm_name)
+        rig = self.devices(arm)
         poses = pivot_poses(rig, pivot_orientations(name, TOOL_DOWN))
-        self._tcp_done(tcp_step(poses, name, rig.config.tip_in_flange_m))
+        self._tcp_done(arm, tcp_step(poses, name, rig.config.tip_in_flange_m))
 
-    def _tcp_done(self, r: TcpResult) -> None:
+    def _tcp_done(self, arm: str, r: TcpResult) -> None:
         if r.record is not None:
-            self._record_step(r.step, r.record)
+            self._record_step(arm, r.step, r.record)
         self.engine.publish(m.TcpCalibrationDone(r.accepted, r.reason, r.pose_set, r.n_poses,
                                                  r.record.to_dict() if r.record is not None else None, r.error_mm))
 
@@ -289,7 +352,8 @@ class Commissioning:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self.engine.require_idle("record orientation")
         _check_seconds("RecordPivot", cmd.seconds)
-        robot = self.engine.eng.rig.robot
+        arm = self.arm_of(cmd.arm)
+        robot = self.devices(arm).robot
         pose0 = robot.read_pose()
         refusal = robot_pose_refusal(pose0)
         if refusal:
@@ -297,8 +361,8 @@ class Commissioning:
         label = cmd.label
         # the TCP the ring's positions are at: the one on record (the robot's poses were moved to it), else the
         # pendant's
-        hw = self.engine.hardware
-        tip = self.tool_cal.tcp.tip_in_flange_m if self.tool_cal.tcp is not None else (
+        hw, rec = self._hardware_arm(arm), self.tool_cals[arm]
+        tip = rec.tcp.tip_in_flange_m if rec.tcp is not None else (
             hw.robot.tcp_offset_m if hw is not None else (0.0, 0.0, 0.0))
 
         def done(cols: dict[str, np.ndarray]) -> None:
@@ -309,40 +373,43 @@ class Commissioning:
                 return
             self.engine.publish(m.PivotRecorded(label, rp.rot_base_flange, rp.flange_position_m, rp.moved_mm))
 
-        self._open_window("RecordPivot", cmd.seconds, _TIP, done)
+        self._open_window("RecordPivot", cmd.seconds, _TIP, done, arm=arm)
 
     def identify_tcp(self, cmd: m.IdentifyTcp) -> None:
         """Real rig: fit the tip from the recorded orientations; record an accepted one."""
         if self.engine.eng.simulated:
             raise RuntimeError("simulated rig: the orientations run automatically (Run TCP calibration)")
         self.engine.require_idle("TCP calibration")
-        self._tcp_done(tcp_step([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded"))
+        arm = self.arm_of(cmd.arm)
+        self._tcp_done(arm, tcp_step([PivotPose(rot, pos, label) for label, rot, pos in cmd.poses], "recorded"))
 
     # -- frames -------------------------------------------------------------------------------------------------
-    def check_frames(self) -> None:
+    def check_frames(self, arm_name: str = "") -> None:
         """Simulated rig: the simulated experimenter pushes the free tip along each axis (the loop runs)."""
         from pipeline.sim.commissioning import push_axes
 
         if not self.engine.eng.simulated:
             raise RuntimeError("real rig: push the free tip along each axis in turn (Record +x, +y, +z)")
         self.engine.require_idle("frame check")
+        arm = self.arm_of(arm_name)
+        ring = self.engine.eng.rings[arm]
         real = self.engine.config.clock == "real"
         if real:
             self.engine.loop.stop(timeout_s=5.0)  # the check runs the loop itself, paced on the same clock
         self.engine.drain_ring()
         try:
-            assert self.engine.ring is not None
-            check = push_axes(self.engine.eng.rig, self.engine.loop, self.engine.ring)
+            assert ring is not None
+            check = push_axes(self.devices(arm), self.engine.loop, ring, framework=self.engine.eng.frameworks[arm])
         finally:
             self.engine.cursor = self.engine.ring.write_count  # the check's own records are not the loop's timing
             self.engine.after_loop_pause(real)
         for a in check.axes:
             self.engine.publish(m.FrameAxisChecked(a.axis, a.passed, a.describe(), a.to_dict()))
-        self._frames_done(check)
+        self._frames_done(arm, check)
 
-    def _frames_done(self, check: FrameCheck) -> None:
-        r = frames_step(check, self.engine.calibration.mount_angle_deg)
-        self._record_step(r.step, r.record)
+    def _frames_done(self, arm: str, check: FrameCheck) -> None:
+        r = frames_step(check, self.engine.eng.calibrations[arm].mount_angle_deg)
+        self._record_step(arm, r.step, r.record)
         self.engine.publish(m.FrameCheckDone(r.passed, r.summary, [a.describe() for a in check.axes]))
 
     def record_frame_axis(self, cmd: m.RecordFrameAxis) -> None:
@@ -353,11 +420,14 @@ class Commissioning:
         if cmd.axis not in AXES:
             raise ValueError(f"axis = {cmd.axis!r}: allowed values are {', '.join(AXES)}")
         _check_seconds("RecordFrameAxis", cmd.seconds)
-        refusal = chain_refusal(self.tool_cal, "frames")
+        arm = self.arm_of(cmd.arm)
+        refusal = chain_refusal(self.tool_cals[arm], "frames")
         if refusal:
             raise RuntimeError(f"frame check: {refusal}")
+        if arm != self._frame_arm:  # another arm's pushes are not this arm's
+            self._frame_axes, self._frame_arm = {}, arm
         axis = cmd.axis
-        rts, rhb = self.frames_in_use()
+        rts, rhb = self.frames_in_use(arm)
 
         def done(cols: dict[str, np.ndarray]) -> None:
             base = np.stack([cols[c] for c in _BASE_SCALED[:3]], axis=1)
@@ -368,26 +438,30 @@ class Commissioning:
             check = frame_check_of(self._frame_axes, rts, rhb)
             if check is not None:
                 self._frame_axes = {}
-                self._frames_done(check)
+                self._frames_done(arm, check)
 
-        self._open_window("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done)
+        self._open_window("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done, arm=arm)
 
     # -- the windows of the ring's records ----------------------------------------------------------------------
     def _open_window(self, command: str, seconds: float, cols: tuple[str, ...],
                      done: Callable[[dict[str, np.ndarray]], None], abandoned: Callable[[], None] | None = None,
-                     *, label: str = "", stalled: str = "") -> None:
-        """Collect ``seconds`` of records written after now, then call ``done`` (see :class:`_Window`)."""
+                     *, label: str = "", stalled: str = "", arm: str = "") -> None:
+        """Collect ``seconds`` of an arm's records written after now (the first arm's by default), then call ``done``
+        (see :class:`_Window`)."""
         if any(w.command == command for w in self._windows):
             raise RuntimeError(f"{command}: a recording is already running")
         self.engine.drain_ring()
         start = self.engine.last_t_ns + 1 if self.engine.loop.tick_count else 0
+        other = arm if arm and arm != self.arms[0] else ""
+        ring = self.engine.eng.rings[other] if other else None
         self._windows.append(_Window(command, int(round(seconds * 1000)), start, cols, done, [], abandoned=abandoned,
-                                     label=label, stalled=stalled))
+                                     label=label, stalled=stalled, arm=other,
+                                     cursor=ring.write_count if ring is not None else 0))
 
     def feed(self, rows: np.ndarray) -> None:
         """The newest records of the ring: fill the open windows, finish those that are full."""
         for w in list(self._windows):
-            sel = rows[rows["t_ns"] >= w.start_ns]
+            sel = rows[rows["t_ns"] >= w.start_ns] if not w.arm else self._arm_rows(w)
             if len(sel):
                 if sensor_stalled(sel["sensor_age_ns"]):
                     self._windows.remove(w)
@@ -408,6 +482,14 @@ class Commissioning:
                     w.done({c: data[:, i] for i, c in enumerate(w.cols)})
                 except (ValueError, RuntimeError) as exc:
                     self.engine.publish(m.CommandRefused(w.command, str(exc)))
+
+    def _arm_rows(self, w: _Window) -> np.ndarray:
+        """The records another arm's ring got since the window last read it (each arm's loop writes its own)."""
+        ring = self.engine.eng.rings[w.arm]
+        assert ring is not None
+        got = ring.read_since(w.cursor)
+        w.cursor = got.cursor
+        return got.rows[got.rows["t_ns"] >= w.start_ns]
 
     # -- the real rig's session gate ------------------------------------------------------------------------------
     def gate(self, cmd: m.StartSession | m.ResumeSession) -> bool:

@@ -33,7 +33,6 @@ from typing import Any
 import numpy as np
 
 from pipeline.devices.interfaces import DeviceError
-from pipeline.devices.jaw_control import JawController
 from pipeline.force.frames import as_mat3
 from pipeline.force.payload_compensator import PayloadCalibration
 from pipeline.runtime.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
@@ -51,6 +50,7 @@ from protocol.storage import Recorder, StorageError, new_owner_token
 from protocol.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import Commissioning
+from study_app.engine.jaws import arm_jaws, other_arm_jaw_events
 from study_app.engine.period_stats import PeriodStats
 from study_app.engine.session_list import list_sessions
 from study_app.engine.sessions import EngineSessions, list_resumable
@@ -121,8 +121,11 @@ class StudyEngine:
         #: The session being run (at most one), and the commissioning chain (calibration steps, the real rig's gate).
         self.commissioning = Commissioning(self)
         self.sessions = EngineSessions(self, self.commissioning)
-        #: The instrument's jaw (the simulated one, or the Arduino of the hardware file); None: there is none.
-        self.jaw = self._make_jaw()
+        jaws = arm_jaws(self.eng, self.hardware, self.commissioning.devices)
+        #: The first arm's jaw (the simulated one, or the Arduino of the hardware file): the window's jaw box drives
+        #: it too; None: there is none.  The other arms' jaws follow their own stylus buttons only.
+        self.jaw = jaws.pop(self.commissioning.arms[0], None)
+        self.other_jaws = jaws
         self._commands = self._command_table()
 
     @property
@@ -162,8 +165,14 @@ class StudyEngine:
             tip_home_m=tip_home_m, driver=self.driver_name,
             rot_tip_sensor=as_mat3(rot_tip_sensor),
             devices=self._device_summary(),
+            arm_rings=tuple((n, r.name or "") for n, r in self.eng.rings.items() if r is not None)
+            if len(self.eng.rings) > 1 else (),
+            arm_mounts=tuple((n, as_mat3(fw.config.rot_tip_sensor)) for n, fw in self.eng.frameworks.items())
+            if len(self.eng.frameworks) > 1 else (),
         ))
         self.commissioning.publish_status()
+        for ctl in self.other_jaws.values():
+            ctl.start()
         if self.jaw is not None:
             self.jaw.start()
             self._publish_jaw("")
@@ -205,8 +214,9 @@ class StudyEngine:
             self.loop.ramp_down()
         if self.tracer is not None:
             self.tracer.close()
-        if self.jaw is not None:
-            self.jaw.close()
+        for ctl in (self.jaw, *self.other_jaws.values()):
+            if ctl is not None:
+                ctl.close()
         self.drain_ring()
         try:
             self.eng.rig.close()
@@ -250,7 +260,7 @@ class StudyEngine:
                 return
             self._store_loop_events()  # frozen: no records come, but its event must reach the record now
         self.drain_ring()
-        if self.jaw is not None and self.jaw.events:
+        if (self.jaw is not None and self.jaw.events) or self.other_jaws:
             self._drain_jaw()
         now = time.monotonic()
         if now - self._last_health >= self.config.health_period_s:
@@ -391,8 +401,8 @@ class StudyEngine:
             m.ResetFaults: self._reset_faults,
             m.OperatorStop: lambda cmd: self.loop.submit(LoopOperatorStop()),
             m.Calibrate: self._calibrate, m.RecordPose: c.record_pose, m.IdentifyPoses: c.identify,
-            m.CalibrateTcp: lambda cmd: c.calibrate_tcp(cmd.pose_set), m.RecordPivot: c.record_pivot,
-            m.IdentifyTcp: c.identify_tcp, m.CheckFrames: lambda cmd: c.check_frames(),
+            m.CalibrateTcp: lambda cmd: c.calibrate_tcp(cmd.pose_set, cmd.arm), m.RecordPivot: c.record_pivot,
+            m.IdentifyTcp: c.identify_tcp, m.CheckFrames: lambda cmd: c.check_frames(cmd.arm),
             m.RecordFrameAxis: c.record_frame_axis, m.JawCommand: self._jaw_command,
             m.SetDriver: self._driver_command, m.ManualTarget: self._driver_command,
             m.ResetStats: self._reset_stats,
@@ -426,7 +436,7 @@ class StudyEngine:
         if self.real:
             raise RuntimeError("real rig: the poses are recorded one at a time in the calibration wizard "
                                "(move the robot, then Record pose)")
-        self.commissioning.calibrate(cmd.pose_set)
+        self.commissioning.calibrate(cmd.pose_set, cmd.arm)
 
     def _jaw_command(self, cmd: m.JawCommand) -> None:
         if self.jaw is None:
@@ -484,34 +494,25 @@ class StudyEngine:
             out.append((name, force, int(self.loop.arm(name).faults)))
         return tuple(out)
 
-    def _make_jaw(self) -> JawController | None:
-        rig = self.eng.rig
-        jaw = getattr(rig, "jaw", None)
-        if jaw is None:
-            return None
-        if self.hardware is not None and self.hardware.jaw is not None:
-            j = self.hardware.jaw
-            ctl = JawController(jaw, close_button=j.close_button, open_button=j.open_button,
-                                stylus=self.hardware.robot.mode != "teleop")  # teleoperation claims both buttons
-        else:
-            ctl = JawController(jaw)
-        rig.on_buttons = ctl.buttons
-        return ctl
-
     def _publish_jaw(self, last: str) -> None:
         assert self.jaw is not None
         s = self.jaw.jaw.status
         self.publish(m.JawState(float(s.fraction_open), int(s.pos_us), bool(s.at_limit), str(s.fault), last))
 
     def _drain_jaw(self) -> None:
-        """Every jaw command carried out: to the display, and into the running session's events."""
-        assert self.jaw is not None
+        """Every jaw command carried out: to the display (the first arm's), and into the running session's events."""
         runner, recorder = self.sessions.runner, self.sessions.recorder
-        while self.jaw.events:
-            ev = self.jaw.events.popleft()
-            text = f"{ev.source}: {ev.detail}"
+
+        def store(text: str) -> None:
             if runner is not None and recorder is not None and not runner.done:
                 recorder.event(runner.session_id, runner.session_time_s(self.last_t_ns), "jaw", text)
+
+        for text in other_arm_jaw_events(self.other_jaws):
+            store(text)
+        while self.jaw is not None and self.jaw.events:
+            ev = self.jaw.events.popleft()
+            text = f"{ev.source}: {ev.detail}"
+            store(text)
             self.publish(m.JawState(ev.fraction_open, ev.pulse_us, ev.at_limit, ev.fault, text))
 
 

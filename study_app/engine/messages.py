@@ -183,6 +183,7 @@ class Calibrate:
     """Run the gravity/bias identification with one of :data:`POSE_SETS`."""
 
     pose_set: str = "recommended"
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -197,6 +198,7 @@ class RecordPose:
     label: str
     seconds: float = 1.0
     target_rot_base_sensor: Mat3 | None = None  # row-major
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,6 +208,7 @@ class IdentifyPoses:
 
     poses: tuple[tuple[str, Mat3, Wrench], ...]
     pose_set: str = "recommended"
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -213,6 +216,7 @@ class CalibrateTcp:
     """Simulated rig: run the TCP pivot calibration with one of :data:`PIVOT_SETS` (the simulated robot turns)."""
 
     pose_set: str = "recommended"
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,6 +226,7 @@ class RecordPivot:
 
     label: str
     seconds: float = 0.5
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -229,11 +234,14 @@ class IdentifyTcp:
     """Real rig: pivot calibration from recorded flange poses (label, rot_base_flange as 9 numbers, position m)."""
 
     poses: tuple[tuple[str, Mat3, Vec3], ...]
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
 class CheckFrames:
     """Simulated rig: the frame and sign check (the simulated experimenter pushes the free tip along each axis)."""
+
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -242,6 +250,7 @@ class RecordFrameAxis:
 
     axis: str
     seconds: float = 3.0
+    arm: str = ""  # the arm to commission ("": the first, a one-arm rig's only one)
 
 
 @dataclass(frozen=True, slots=True)
@@ -289,6 +298,10 @@ class EngineReady:
     driver: str
     rot_tip_sensor: Mat3 = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # the sensor mount, row-major
     devices: list[str] = field(default_factory=list)
+    #: The rig's arms (the task arm first) with their shared rings' names (the first's is ``ring_name``); one arm: ().
+    arm_rings: tuple[tuple[str, str], ...] = ()
+    #: Each arm's sensor mount (``rot_tip_sensor``, row-major), by name, on a rig of several arms.
+    arm_mounts: tuple[tuple[str, Mat3], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -484,6 +497,7 @@ class CalibrationStatus:
     file: str
     steps: list[tuple[str, bool, str]]
     missing: str
+    arm: str = ""  # the arm it is about ("": a one-arm rig's)
 
 
 @dataclass(frozen=True, slots=True)

@@ -307,9 +307,11 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
     try:
         out = []
         busy = db.sessions_being_written()
+        reader = StudyReader.over(db)
         for s in db.open_sessions():
             if s.session_id in busy:
                 continue  # another process runs it right now: not interrupted
+            info = reader.session(s.session_id)
             schedule = json.loads(s.schedule_json)
             rows = db.trial_rows(s.session_id)
             outcomes = [r["outcome"] for r in rows]
@@ -320,6 +322,7 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
                 "trials_planned": sum(1 for t in schedule if t.get("repeat_of") is None),
                 "trials_done": len(outcomes) - aborted, "trials_aborted": aborted, "trials_total": len(schedule),
                 "reruns_run": sum(r["repeat_of"] is not None for r in rows),
+                "arms": list(info.arms) if info is not None else [],  # the task arm first: resumed on these only
             })
         return out
     finally:

@@ -63,9 +63,9 @@ class HostConfig:
         Simulated rig: the pipeline settings (``gui --set``, :mod:`pipeline.force.pipeline_settings`) that are not
         the paper's, as (name, value) pairs; stored with each session like ``run --set``'s.
     sim_arms
-        Simulated rig: its arms by name (``gui --sim-arms``), the one the participant holds first; a session's
-        protocol must name that one its task arm (``design.task_arm``), and records every arm (docs/architecture.md,
-        "Every arm recorded").
+        Simulated rig: its arms by name, the one the participant holds first; a session's protocol must name that
+        one its task arm (``design.task_arm``; the window restarts the engine with the task arm first when it is not,
+        :mod:`study_app.models.arms`), and records every arm (docs/architecture.md, "Every arm recorded").
     """
 
     rig: str = "sim"

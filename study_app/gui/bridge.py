@@ -9,6 +9,7 @@ spawned.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 
 from PySide6.QtCore import QObject, Qt, Signal, Slot
@@ -46,14 +47,16 @@ class QtEngineBridge(QObject):
         self._thread = threading.Thread(target=self._run, args=(gen, client), name="engine-monitor", daemon=True)
         self._thread.start()
 
-    def restart(self) -> None:
-        """Replace the engine by a new one (the old one is asked to close its records and exit, else killed).
+    def restart(self, sim_arms: tuple[str, ...] = ()) -> None:
+        """Replace the engine by a new one (the old one is asked to close its records and exit, else killed); with
+        ``sim_arms``, a simulated rig of those arms in that order (the protocol's task arm first).
 
         Returns at once; the new engine's :class:`study_app.engine.messages.EngineReady` arrives as an event.
         """
         old_client, old_thread = self.client, self._thread
         self.generation += 1
-        self.client = EngineClient(old_client.config)
+        config = dataclasses.replace(old_client.config, sim_arms=sim_arms) if sim_arms else old_client.config
+        self.client = EngineClient(config)
         gen, client = self.generation, self.client
 
         def run() -> None:

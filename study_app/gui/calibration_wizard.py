@@ -32,7 +32,7 @@ from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import AXIS_WORDS, CommissioningModel
 from study_app.models.real_calibration import REAL_POSE_SETS, RealCalibrationModel
 
-__all__ = ["CalibrationWizard", "ChainStatus", "FramesPage", "RealPosePanel", "TcpPage"]
+__all__ = ["ArmPicker", "CalibrationWizard", "ChainStatus", "FramesPage", "RealPosePanel", "TcpPage"]
 
 _VERDICT_COLOURS = {"accepted": "#147f28", "passed": "#147f28", "refused": "#c81e1e", "failed": "#c81e1e"}
 
@@ -57,13 +57,53 @@ class ChainStatus(QWidget):
     def _on_changed(self) -> None:
         mdl = self.model
         st = mdl.status
-        head = f"<b>On record for {st.tool!r}</b>" if st is not None else "<b>On record</b>: –"
+        arm = f" on {mdl.arm_title()}" if mdl.arm else ""
+        head = f"<b>On record for {st.tool!r}{arm}</b>" if st is not None else f"<b>On record{arm}</b>: –"
         rows = [f'<span style="color:{"#147f28" if ok else "#c81e1e"}">{"✔" if ok else "✘"} {n}</span>: {text}'
                 for n, ok, text in mdl.status_lines()]
         self.steps.setText(head + ("<br>" + "<br>".join(rows) if rows else ""))
         self.gate.setText(mdl.gate_text())
         blocked = st is not None and st.rig == "real" and bool(st.missing)
         self.gate.setStyleSheet("color: #c81e1e; font-weight: 600;" if blocked else "color: #555;")
+
+
+class ArmPicker(QWidget):
+    """A rig of several arms: the arm the steps commission, and each arm's chain in one line (hidden for one arm).
+
+    ``on_select(name)`` asks for another arm (the model refuses while a step runs; the choice then goes back).
+    """
+
+    def __init__(self, model: CommissioningModel, on_select, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model = model
+        self.choice = QComboBox()
+        self.choice.setToolTip("The arm whose devices the steps use and whose calibration file they save to — "
+                               "as haptic-study calibrate --arm NAME; commission each arm in turn")
+        self.overview = QLabel()
+        self.overview.setWordWrap(True)
+        self.overview.setStyleSheet("color: #555;")
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        head = QLabel("<b>Arm to commission</b>")
+        lay.addWidget(head)
+        lay.addWidget(self.choice)
+        lay.addWidget(self.overview, 1)
+        self._items: tuple[str, ...] = ()
+        self.choice.activated.connect(lambda i: on_select(self._items[i]) if 0 <= i < len(self._items) else None)
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        mdl = self.model
+        self.setVisible(bool(mdl.arms))
+        if mdl.arms != self._items:
+            self._items = mdl.arms
+            self.choice.clear()
+            self.choice.addItems(list(mdl.arms))
+        if mdl.arm in self._items and self.choice.currentIndex() != self._items.index(mdl.arm):
+            self.choice.setCurrentIndex(self._items.index(mdl.arm))
+        self.choice.setEnabled(not mdl.busy())
+        self.overview.setText("    ".join(f"{a}: {what}" for a, what in mdl.arms_overview()))
 
 
 class TcpPage(QWidget):
@@ -259,7 +299,7 @@ class CalibrationWizard(QWidget):
 
     def __init__(self, model: CalibrationModel, on_run, real_panel: RealPosePanel | None = None,
                  parent: QWidget | None = None, chain: CommissioningModel | None = None, on_tcp=None,
-                 on_compute_tcp=None, on_frames=None) -> None:
+                 on_compute_tcp=None, on_frames=None, on_arm=None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.setWindowTitle("Calibration — TCP, payload, frames")
         self.model = model
@@ -303,6 +343,7 @@ class CalibrationWizard(QWidget):
         lay.addWidget(self.residuals, 1)
         # the chain in order: TCP, payload, frames; what is on record above the steps
         chain = chain if chain is not None else CommissioningModel()
+        self.arm_picker = ArmPicker(chain, on_arm or (lambda name: None))
         self.chain_status = ChainStatus(chain)
         self.tcp_page = TcpPage(chain, on_tcp or (lambda: None), on_compute_tcp or (lambda: None))
         self.frames_page = FramesPage(chain, on_frames or (lambda axis: None))
@@ -315,6 +356,7 @@ class CalibrationWizard(QWidget):
         self.blocked.setStyleSheet("color: #8a5a00; background: #fff4e0; font-weight: 600; padding: 4px;")
         self.blocked.hide()
         outer = QVBoxLayout(self)
+        outer.addWidget(self.arm_picker)
         outer.addWidget(self.chain_status)
         outer.addWidget(self.blocked)
         outer.addWidget(self.steps, 1)
@@ -325,7 +367,7 @@ class CalibrationWizard(QWidget):
 
     def set_blocked(self, why: str) -> None:
         """Disable the steps' actions while no calibration may run (``why``; "" enables them), saying why."""
-        pages = [self.tcp_page, self.frames_page, self.sim_controls]
+        pages = [self.tcp_page, self.frames_page, self.sim_controls, self.arm_picker]
         if self.real_panel is not None:
             pages.append(self.real_panel)
         text = f"Calibration is not available now: {why}." if why else ""

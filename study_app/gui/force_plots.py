@@ -28,6 +28,8 @@ RAW_PEN = pg.mkPen(RAW_COLOUR, width=1)
 RENDER_PEN = pg.mkPen(RENDER_COLOUR, width=1)
 TASK_PEN = pg.mkPen(TASK_COLOUR, width=1)
 AXIS_PENS = tuple(pg.mkPen(c, width=1) for c in AXIS_COLOURS)
+#: The other arms' task force (a rig of several arms), one colour per arm after the task arm.
+ARM_COLOURS = ("#e07b00", "#8e44ad", "#6b4f2a")
 COMP_SERIES = ("comp_fx", "comp_fy", "comp_fz")
 #: The lower panel's choices: (series, pens, legend entries (colour, words), axis label).
 LOWER_CHOICES: dict[str, tuple[tuple[str, ...], tuple[object, ...], tuple[tuple[str, str], ...], str]] = {
@@ -55,7 +57,8 @@ class QtForcePlots(QWidget):
     """The live force view, built for the task: is the force in the band?
 
     Top: the task force (|compensated, filtered|, what the trial is judged on) and the force rendered on
-    the haptic device, with the target band drawn, on an axis set by the target
+    the haptic device, with the target band drawn (on a rig of several arms also each other arm's force, one
+    colour per arm, the task arm marked in the legend), on an axis set by the target
     (:meth:`study_app.models.plots.PlotModel.task_axis`); the band's words and a force above the axis are
     named in the plot's title line.  Below, on its own axis, the raw sensor force (tool weight included),
     the compensated components (with their legend in the title line), or nothing.
@@ -65,11 +68,11 @@ class QtForcePlots(QWidget):
         super().__init__(parent)
         self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
         self.plots, self.session = plots, session
-        self.legend = QLabel("  ".join((
-            _swatch(TASK_COLOUR, "task force |F| (compensated, filtered)"),
-            _swatch(RENDER_COLOUR, "rendered on the haptic device"),
-            _swatch("rgba(0,114,178,0.35)", "target band", block=True),
-        )))
+        self.legend = QLabel()
+        self.legend.setWordWrap(True)
+        #: A rig of several arms: each other arm's force curve in the upper plot (name → curve).
+        self.arm_curves: dict[str, pg.PlotDataItem] = {}
+        self._arms_shown: tuple[str, ...] | None = None
         self.lower_choice = QComboBox()
         self.lower_choice.addItems(list(LOWER_CHOICES))
         self.lower_choice.setToolTip("What the lower plot shows, on an axis of its own")
@@ -117,7 +120,34 @@ class QtForcePlots(QWidget):
         self._title_html = ""
         self.task.setTitle(_BLANK, justify="left", size="9pt")
         self.lower_choice.currentTextChanged.connect(self._set_lower)
+        self._set_arms()
         self._set_lower(self.lower_choice.currentText())
+
+    def legend_entries(self) -> list[str]:
+        """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the task
+        arm (whose force is the task force) marked."""
+        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band"]
+        if self.plots.arms:
+            out += [f"{self.plots.task_arm} (task arm)", *self.plots.arms]
+        return out
+
+    def _set_arms(self) -> None:
+        """One curve per other arm in the upper plot, and the legend naming every arm (when the arms change)."""
+        names = tuple(self.plots.arms)
+        if names == self._arms_shown:
+            return
+        self._arms_shown = names
+        for c in self.arm_curves.values():
+            self.task.removeItem(c)
+        colours = dict(zip(names, ARM_COLOURS, strict=False))
+        self.arm_curves = {n: self.task.plot(pen=pg.mkPen(colours.get(n, "#555"), width=1)) for n in names}
+        words = self.legend_entries()
+        text = "  ".join((_swatch(TASK_COLOUR, words[0]), _swatch(RENDER_COLOUR, words[1]),
+                          _swatch("rgba(0,114,178,0.35)", words[2], block=True)))
+        if names:  # each arm's force by its colour: the task arm's is the task force
+            marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
+            text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[3:], strict=True))
+        self.legend.setText(text)
 
     @property
     def lower_series(self) -> tuple[str, ...]:
@@ -163,7 +193,12 @@ class QtForcePlots(QWidget):
                 self.lower_plot.setYRange(*r, padding=0)
         top = self._y["task"][1]
         peak = self.plots.peak(TASK_SERIES)
-        return f"peak {peak:.1f} N: above the axis" if bool(np.isfinite(peak) and peak > top) else ""
+        over = [f"peak {peak:.1f} N: above the axis"] if bool(np.isfinite(peak) and peak > top) else []
+        for name, arm in self.plots.arms.items():
+            p = arm.peak(("force_n",))
+            if bool(np.isfinite(p) and p > top):
+                over.append(f"arm {name} peak {p:.1f} N: above the axis")
+        return " · ".join(over)
 
     def refresh(self) -> None:
         """Redraw from the model (the window's 30 Hz timer calls this after a pull)."""
@@ -171,6 +206,9 @@ class QtForcePlots(QWidget):
             curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
         for name, curve in self.lower_curves.items():
             curve.setData(*self.plots.curve(name), skipFiniteCheck=True)
+        self._set_arms()
+        for name, curve in self.arm_curves.items():
+            curve.setData(*self.plots.arms[name].curve("force_n"), skipFiniteCheck=True)
         x0 = self.task.viewRange()[0][0]
         if abs(x0 + self.plots.window_s) > 1e-6:  # the x link re-scales the range while the layout settles
             self.task.setXRange(-self.plots.window_s, 0.0, padding=0)

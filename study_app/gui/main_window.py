@@ -178,7 +178,7 @@ class ExperimenterWindow(QMainWindow):
             self.model.calibration, self.model.calibrate,
             RealPosePanel(self.model.real_calibration, self.model.record_pose, self.model.identify),
             chain=self.model.commissioning, on_tcp=self.model.run_tcp, on_compute_tcp=self.model.compute_tcp,
-            on_frames=self.model.check_frames,
+            on_frames=self.model.check_frames, on_arm=self.model.select_calibration_arm,
         )
         self.calibration_wizard.hidden.connect(lambda: self.model.clear_notice(CALIBRATION_COMMANDS))
         self.menus = WindowMenus(self)
@@ -236,7 +236,8 @@ class ExperimenterWindow(QMainWindow):
     @Slot(object)
     def _on_engine_event(self, ev: object) -> None:
         if isinstance(ev, m.EngineReady) and self.bridge.client.ring is not None:
-            self.model.attach_ring(self.bridge.client.ring)
+            client = self.bridge.client
+            self.model.attach_ring(client.ring, client.task_arm, dict(client.arm_rings))
             self.model.list_sessions()
         self.model.apply(ev)
         for q in list(self.questions.values()):

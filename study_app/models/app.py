@@ -5,12 +5,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from pipeline.devices.interfaces import Fault
 from study_app.engine import messages as m
 from study_app.models import Emitter
+from study_app.models.arms import stored_arm_order, task_arm_first
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel
 from study_app.models.cue_wait import CUE_ACTIONS, CUE_STUCK_S, CueWait, cue_wait_now
@@ -99,8 +101,10 @@ class AppModel:
         #: The whole story of :attr:`engine_trouble`: the reason as the engine gave it, and what Restart does.
         self.engine_trouble_detail = ""
         self.engine_changed = Emitter()
-        #: Replaces the engine by a new one (the window's bridge); None: nothing can restart it.
-        self.restarter: Callable[[], None] | None = None
+        #: Replaces the engine by a new one (the window's bridge; given arm names, a simulated rig with those arms in
+        #: that order); None: nothing can restart it.
+        self.restarter: Callable[..., None] | None = None
+        self._pending_start: m.StartSession | m.ResumeSession | None = None  # sent when the new engine is ready
         self._restarting = False
         #: The session the failure interrupted (selected for resume after the restart).
         self._interrupted: int | None = None
@@ -165,6 +169,11 @@ class AppModel:
         if self.loop_stalled != was_stalled:
             self.engine_changed.emit()
             self.actions_changed.emit()
+        if isinstance(ev, m.EngineReady) and self.commissioning.arm:
+            self.real_calibration.for_arm(self.commissioning.arm)
+        if isinstance(ev, m.EngineReady) and self._pending_start is not None:
+            cmd, self._pending_start = self._pending_start, None
+            self._send(cmd, clear=False)  # the start the rearranged engine was restarted for
         self._refresh_cue_wait()
 
     # -- why the next cue waits ----------------------------------------------------------------------
@@ -254,9 +263,10 @@ class AppModel:
                        "resume." if s is not None else "."))
         return "", ""
 
-    def restart_engine(self) -> bool:
-        """Replace a dead engine by a new one: plots, session and health start afresh; the interrupted session
-        will be selected for resume.  False if nothing can restart it."""
+    def restart_engine(self, sim_arms: tuple[str, ...] = ()) -> bool:
+        """Replace a dead engine by a new one (with ``sim_arms``: a simulated rig of those arms, in that order):
+        plots, session and health start afresh; the interrupted session will be selected for resume.  False if
+        nothing can restart it."""
         if self.restarter is None:
             return False
         if self.session.running and self.session.session is not None:
@@ -274,7 +284,7 @@ class AppModel:
         self.clear_notice()
         self.engine_changed.emit()
         self.actions_changed.emit()
-        self.restarter()
+        self.restarter(*((sim_arms,) if sim_arms else ()))
         self._refresh_cue_wait()
         return True
 
@@ -294,9 +304,10 @@ class AppModel:
         if self.notice is not None and self.notice.source == "StartSession":
             self.clear_notice()  # the form changed: the refusal was about what it said before
 
-    def attach_ring(self, ring: object) -> None:
-        """Start pulling samples from the engine's ring."""
+    def attach_ring(self, ring: object, task_arm: str = "", arm_rings: dict[str, object] | None = None) -> None:
+        """Start pulling samples from the engine's ring (and, on a rig of several arms, the other arms' rings)."""
         self.plots.attach(ring)
+        self.plots.attach_arms(task_arm, dict(arm_rings or {}))
 
     def tick(self) -> int:
         """Pull new samples (call at ~30 Hz) and update every sample-driven model; returns the number pulled."""
@@ -383,7 +394,19 @@ class AppModel:
         if override_reason.strip():
             cmd = dataclasses.replace(cmd, override_reason=override_reason.strip())
         self._training_override = cmd.training_override
-        return self._send(cmd)
+        # the protocol's task arm first, as run --sim-arms arranges it
+        return self._send_on_arms(cmd, task_arm_first(self.commissioning.arms, self.rig_kind, cmd.protocol_path or ""))
+
+    def _send_on_arms(self, cmd: m.StartSession | m.ResumeSession, order: tuple[str, ...]) -> bool:
+        """Send a start or resume; with an ``order`` of the simulated rig's arms, restart the rig so first."""
+        if not order or self.restarter is None:
+            return self._send(cmd)
+        self.restart_engine(order)
+        self._pending_start = cmd
+        self.notify("info", f"The session's task arm is {order[0]}: restarting the simulated rig with arm {order[0]} "
+                            f"first (--sim-arms {','.join(order)}); the session starts when it is ready …",
+                    type(cmd).__name__)
+        return True
 
     def start_refusal(self) -> str:
         """Why Start is not available now, in words ("" when it is): for the button's and the menu's tooltip."""
@@ -409,11 +432,29 @@ class AppModel:
         """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated
         rig)."""
         st = self.commissioning.status
-        return st.missing if st is not None and st.rig == "real" else ""
+        return self.commissioning.first_missing() if st is not None and st.rig == "real" else ""
+
+    def select_calibration_arm(self, name: str) -> None:
+        """Commission the arm called ``name`` in the calibration window (refused while a step runs)."""
+        if self.commissioning.busy() or self.calibration.state == "running" or \
+                self.real_calibration.state in ("recording", "identifying"):
+            self.notify("error", "Calibration: finish the step under way first; then choose another arm.", "arm")
+            self.commissioning.changed.emit()  # the selector goes back to the arm under way
+            return
+        if name == self.commissioning.arm:
+            return
+        self.commissioning.select_arm(name)
+        self.calibration.state, self.calibration.result, self.calibration.done = "idle", None, 0
+        self.calibration.changed.emit()
+        self.real_calibration.for_arm(name)
+
+    def _send_step(self, cmd: Any) -> None:
+        """A calibration step's command, for the arm the calibration window commissions."""
+        self._send(dataclasses.replace(cmd, arm=self.commissioning.arm))
 
     def run_tcp(self) -> None:
         """TCP step: run the pose set (simulated rig) or record the orientation the instrument is in (real rig)."""
-        self._send(self.commissioning.tcp_command())
+        self._send_step(self.commissioning.tcp_command())
 
     def compute_tcp(self) -> None:
         """Real rig: the pivot calibration from the recorded orientations, or say why not."""
@@ -421,11 +462,11 @@ class AppModel:
         if why:
             self.notify("error", f"Cannot compute the TCP: {why}", "IdentifyTcp")
             return
-        self._send(self.commissioning.compute_command())
+        self._send_step(self.commissioning.compute_command())
 
     def check_frames(self, axis: str = "") -> None:
         """Frames step: the whole check (simulated rig) or one axis' push (real rig)."""
-        self._send(self.commissioning.frames_command(axis))
+        self._send_step(self.commissioning.frames_command(axis))
 
     def jaw_action(self, action: str) -> None:
         """A jaw control: open, close, step_open, step_close."""
@@ -520,12 +561,12 @@ class AppModel:
 
     def calibrate(self) -> None:
         """Run the chosen pose set."""
-        self._send(self.calibration.command())
+        self._send_step(self.calibration.command())
 
     def record_pose(self) -> None:
         """Real rig: measure the shown pose (the engine averages the wrench; nothing blocks here)."""
         if self.can("record_pose"):
-            self._send(self.real_calibration.record_command())
+            self._send_step(self.real_calibration.record_command())
 
     def identify(self) -> None:
         """Real rig: identify from the recorded poses, or say why not."""
@@ -535,7 +576,7 @@ class AppModel:
             return
         self.calibration.state, self.calibration.result = "running", None
         self.calibration.changed.emit()
-        self._send(self.real_calibration.identify_command())
+        self._send_step(self.real_calibration.identify_command())
 
     def set_driver(self, mode: str) -> None:
         """Autopilot (simulated participant) or manual (mouse/keyboard)."""
@@ -554,4 +595,6 @@ class AppModel:
         """Continue an interrupted session."""
         import os
 
-        self._send(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)))
+        stored = next((r.get("arms", []) for r in self.setup.resumable if r["session_id"] == session_id), [])
+        self._send_on_arms(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)),
+                           stored_arm_order(self.commissioning.arms, self.rig_kind, stored))

@@ -49,12 +49,56 @@ class CommissioningModel:
     frames_summary: str = ""
     frames_passed: bool = False
     recording_axis: str = ""
+    #: A rig of several arms: their names (the task arm first; () for one arm), the arm the window commissions, and
+    #: what is on record for each (``status`` is the chosen arm's).
+    arms: tuple[str, ...] = ()
+    arm: str = ""
+    statuses: dict[str, m.CalibrationStatus] = field(default_factory=dict)
     changed: Emitter = field(default_factory=Emitter)
 
     @property
     def real(self) -> bool:
         """The engine drives the real rig."""
         return self.rig == "real"
+
+    # -- the arm -------------------------------------------------------------------------------------
+    def busy(self) -> bool:
+        """A TCP or frame step is under way (the arm may not change)."""
+        return self.tcp_state in ("running", "recording") or self.frames_state in ("running", "recording")
+
+    def select_arm(self, name: str) -> None:
+        """Commission the arm called ``name`` from now on: its status shown, the steps' state of the arm before
+        cleared (its results are on record; a half-recorded step is not carried over to another arm)."""
+        if name not in self.arms:
+            raise ValueError(f"arm = {name!r}: allowed values are {', '.join(self.arms) or 'none (one arm)'}")
+        if name == self.arm:
+            return
+        self.arm, self.status = name, self.statuses.get(name)
+        self.pivots, self.tcp_state, self.tcp_message, self.tcp_result = [], "idle", "", None
+        self.frames_state, self.frames_lines, self.frames_summary, self.recording_axis = "idle", {}, "", ""
+        self.frames_passed = False
+        self.changed.emit()
+
+    def arm_title(self) -> str:
+        """Which arm the steps commission, in a few words ("" on a rig of one arm).  No arm is marked the task arm
+        here: every arm needs its chain, and which one does the task is the session's protocol's to say."""
+        return f"arm {self.arm}" if self.arm else ""
+
+    def first_missing(self) -> str:
+        """The first step a session still needs ("" when none): on a rig of several arms, the first arm's with one,
+        named as the engine's gate names it."""
+        if not self.arms:
+            return self.status.missing if self.status is not None else ""
+        return next((f"arm {a}: {s.missing}" for a in self.arms if (s := self.statuses.get(a)) and s.missing), "")
+
+    def arms_overview(self) -> list[tuple[str, str]]:
+        """Per arm: (name, each step on record ✔ or not ✘, e.g. ``✔ TCP ✔ payload ✘ frames``) -- a rig of several
+        arms."""
+        out = []
+        for a in self.arms:
+            st = self.statuses.get(a)
+            out.append((a, "–" if st is None else " ".join(f"{'✔' if ok else '✘'} {n}" for n, ok, _ in st.steps)))
+        return out
 
     # -- commands ----------------------------------------------------------------------------------
     def tcp_command(self) -> object:
@@ -106,8 +150,14 @@ class CommissioningModel:
         """Update from engine events."""
         if isinstance(ev, m.EngineReady):
             self.rig = ev.rig
+            self.arms = tuple(name for name, _ in ev.arm_rings)
+            self.statuses = {}
+            if self.arm not in self.arms:  # a new engine (a restart): the task arm, or no arm on a one-arm rig
+                self.arm = self.arms[0] if self.arms else ""
         elif isinstance(ev, m.CalibrationStatus):
-            self.status = ev
+            self.statuses[ev.arm] = ev
+            if ev.arm == self.arm:  # another arm's is shown in the overview only
+                self.status = ev
         elif isinstance(ev, m.PivotRecorded):
             self.pivots.append(ev)
             self.tcp_state, self.tcp_message = "idle", self._too_close(ev)
@@ -160,9 +210,13 @@ class CommissioningModel:
                     f"accepted step is saved for the mounted tool and a session starts only when all three are on "
                     f"record{where}.")
         if st.missing:
-            return f"A session cannot start yet: {st.missing}."
+            return f"A session cannot start yet: {self.arm_title() + ': ' if self.arm else ''}{st.missing}."
+        other = next((a for a, s in self.statuses.items() if s.missing), None)
+        if other is not None:  # the gate needs every arm's chain
+            return (f"Arm {self.arm}'s chain is on record{where}; a session cannot start yet: arm {other}: "
+                    f"{self.statuses[other].missing}.")
         return (f"Tool {st.tool!r}: TCP, payload and frames on record{where}; a session starts after the force at "
-                "rest is checked (2 s, below 0.1 N).")
+                "rest is checked (2 s, below 0.1 N)" + (" on every arm." if self.arms else "."))
 
     def tcp_instruction(self) -> str:
         """What to do in the TCP step now."""

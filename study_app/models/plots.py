@@ -97,6 +97,19 @@ class PlotModel:
         self.lost = 0
         #: Records passed over unread because the GUI was more than a window behind.
         self.skipped = 0
+        #: A rig of several arms: the task arm's name ("" for one arm), and each other arm's live force, pulled
+        #: from that arm's own ring as this model pulls the task arm's (name → model).
+        self.task_arm = ""
+        self.arms: dict[str, PlotModel] = {}
+
+    def attach_arms(self, task_arm: str, rings: dict[str, object]) -> None:
+        """Pull the other arms' records too, each from its own ring (a rig of several arms)."""
+        self.task_arm = task_arm
+        self.arms = {}
+        for name, ring in rings.items():
+            p = PlotModel(self.window_s, bins=self.bins)
+            p.attach(ring)
+            self.arms[name] = p
 
     def attach(self, ring: object) -> None:
         """Read from this ring (anything with ``read_since`` / ``write_count``), starting with its last window."""
@@ -106,10 +119,13 @@ class PlotModel:
     def detach(self) -> None:
         """Stop reading (the engine is going away)."""
         self.ring = None
+        for p in self.arms.values():
+            p.detach()
 
     def reset(self) -> None:
         """Forget every sample (a new engine: its clock starts again at zero)."""
         self.detach()
+        self.task_arm, self.arms = "", {}
         self.t = np.empty(0)
         self.data = {k: np.empty(0) for k in self.SERIES}
         self.cursor = 0
@@ -117,7 +133,9 @@ class PlotModel:
         self.new_rows = np.empty(0)
 
     def pull(self) -> int:
-        """Copy what is new; returns the number of new records."""
+        """Copy what is new (the other arms' too); returns the number of the task arm's new records."""
+        for p in self.arms.values():
+            p.pull()
         ring = self.ring
         if ring is None:
             self.new_rows = np.empty(0)

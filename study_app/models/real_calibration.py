@@ -61,9 +61,19 @@ class RealCalibrationModel:
     steps: list[PoseStep] = field(default_factory=list)
     index: int = 0
     message: str = ""
+    #: A rig of several arms: each arm's sensor mount by name (from EngineReady).
+    mounts: dict[str, Mat3] = field(default_factory=dict)
     changed: Emitter = field(default_factory=Emitter)
 
     # -- the walk ----------------------------------------------------------------------------------
+    def for_arm(self, name: str) -> None:
+        """Walk the poses of the arm called ``name`` (a rig of several arms): its targets as its pendant shows them
+        (its own sensor mount); a walk under way starts again from its first pose (its poses were the other arm's)."""
+        if name in self.mounts:
+            self.rot_tip_sensor = self.mounts[name]
+        if self.steps:
+            self.begin(self.pose_set)
+
     def begin(self, pose_set: str = "recommended") -> None:
         """Start (or restart) a pose set: every pose unrecorded, the first one shown."""
         if pose_set not in REAL_POSE_SETS:
@@ -150,6 +160,7 @@ class RealCalibrationModel:
         """Update from engine events."""
         if isinstance(ev, m.EngineReady):
             self.rot_tip_sensor = tuple(ev.rot_tip_sensor)  # type: ignore[assignment]  # nine items: mypy cannot count tuple()
+            self.mounts = dict(ev.arm_mounts)
         elif isinstance(ev, m.PoseRecorded):
             step = next((s for s in self.steps if s.label == ev.label), None)
             if step is None:

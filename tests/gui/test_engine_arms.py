@@ -130,6 +130,9 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
     sid = e.sessions.opened.session_id
     e.close("interrupted")
     e.release_ring()
+    from study_app.engine.sessions import list_resumable
+
+    assert [r["arms"] for r in list_resumable(db)] == [["left", "right"]]  # the window rearranges a rig by it
     one: list[object] = []
     e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
     e1.start()
@@ -175,3 +178,87 @@ def test_a_gui_session_with_other_pipeline_settings_than_the_studys_is_refused(t
         finally:
             e.close("test over")
             e.release_ring()
+
+
+def _last(events: list[object], kind: type) -> object:
+    return [ev for ev in events if isinstance(ev, kind)][-1]
+
+
+def _status(events: list[object], arm: str) -> m.CalibrationStatus:
+    return [ev for ev in events if isinstance(ev, m.CalibrationStatus) and ev.arm == arm][-1]
+
+
+def test_each_arm_is_commissioned_on_its_own_as_calibrate_arm_does(two_arms, capsys):
+    """TCP, payload and frames on the second arm: its devices, its force path, its record; the first arm's untouched.
+    The TCP result is the one ``calibrate tcp --sim-arms left,right --arm right`` prints (one service, one rig)."""
+    from study_app.cli.main import main
+
+    e, events = two_arms
+    assert {ev.arm for ev in events if isinstance(ev, m.CalibrationStatus)} == {"left", "right"}
+    left_cal = e.calibration
+    e.handle(m.CalibrateTcp("recommended", arm="right"))
+    done = _last(events, m.TcpCalibrationDone)
+    assert done.accepted and done.error_mm <= 0.5
+    assert main(["calibrate", "tcp", "--sim-arms", "left,right", "--arm", "right", "--json"]) == 0
+    cli = json.loads(capsys.readouterr().out)
+    assert done.result["tip_in_flange_m"] == pytest.approx(cli["tip_in_flange_m"], abs=1e-12)
+    right = {name: ok for name, ok, _ in _status(events, "right").steps}
+    left = {name: ok for name, ok, _ in _status(events, "left").steps}
+    assert right["TCP"] and not left["TCP"]
+
+    e.handle(m.Calibrate("quick", arm="right"))
+    assert _last(events, m.CalibrationDone).accepted
+    new = e.eng.calibrations["right"]
+    assert e.calibration is left_cal and e.eng.calibrations["left"] is left_cal
+    for _ in range(3):
+        e.step()
+    # installed in the right arm's path only (the bias then refines online: compare the payload)
+    assert new.mass_kg != left_cal.mass_kg
+    assert e.loop.arm("right").framework.calibration.mass_kg == new.mass_kg
+    assert e.loop.arm("left").framework.calibration.mass_kg == left_cal.mass_kg
+
+    e.handle(m.CheckFrames(arm="right"))
+    assert _last(events, m.FrameCheckDone).passed
+    right = {name: ok for name, ok, _ in _status(events, "right").steps}
+    assert right["frames"] and not {name: ok for name, ok, _ in _status(events, "left").steps}["frames"]
+    assert set(e.commissioning.provenance()["arms_rig_calibration"]) == {"left", "right"}
+
+    e.handle(m.CalibrateTcp("recommended", arm="centre"))
+    refused = _last(events, m.CommandRefused)
+    assert refused.message == "arm = 'centre': this rig has no such arm; its arms: left, right"
+
+
+def test_each_arms_stylus_buttons_drive_its_own_jaw(two_arms, tmp_path):
+    """The right Touch's open button opens the right jaw, not the left; the command is stored with the session, the
+    arm named."""
+    import time
+
+    e, _ = two_arms
+    arms = e.eng.rig
+    assert e.jaw is not None and set(e.other_jaws) == {"right"}
+    assert arms.rig("left").on_buttons == e.jaw.buttons
+    assert arms.rig("right").on_buttons == e.other_jaws["right"].buttons
+    db = str(tmp_path / "s.db")
+    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
+    e.step()
+    left_open, right_open = arms.rig("left").jaw.status.fraction_open, arms.rig("right").jaw.status.fraction_open
+    arms.rig("right").haptic.buttons = 2  # a short press of the right stylus' open button (the jaws start closed)
+    e.step()
+    arms.rig("right").haptic.buttons = 0
+    end = time.monotonic() + 5.0
+    while arms.rig("right").jaw.status.fraction_open == right_open and time.monotonic() < end:
+        e.step()  # the jaw's own thread carries the command out (wall time, as the actuator moves)
+    e.step()
+    assert arms.rig("right").jaw.status.fraction_open > right_open
+    assert arms.rig("left").jaw.status.fraction_open == left_open
+    e.handle(m.AbortSession("done"))
+    for _ in range(1000):
+        if e.runner is None:
+            break
+        e.step()
+    c = sqlite3.connect(db)
+    try:
+        stored = [d for (d,) in c.execute("SELECT detail FROM events WHERE kind = 'jaw' ORDER BY rowid")]
+    finally:
+        c.close()
+    assert stored == ["arm right: stylus: step 50 µs toward open → 1150 µs (6% open)"]
