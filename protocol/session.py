@@ -309,19 +309,16 @@ class SessionRunner:
         """Consume a block of loop records (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`, as the ring holds
         them).
 
-        ``loop_events`` are the loop's events since the previous call (times on
-        the records' axis); they are stored, and a fault's detail names the
-        cause of the trial it aborts.  ``replay_log`` is what the loop logged
-        for replay since the previous call (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`),
-        read after the records.
+        ``loop_events`` are the loop's events since the previous call (times on the records' axis); they are stored,
+        and a fault's detail names the cause of the trial it aborts.  ``replay_log`` is what the loop logged for
+        replay since the previous call (:attr:`pipeline.runtime.loop.HapticLoop.replay_log`), read after the records.
         """
-        if self._recording.start_tick is None:  # (after it, every record is the session's: no need to hand them over)
-            session_rows = self._recording.session_rows(rows, replay_log)
-            if session_rows is None:
-                return  # the loop has not taken the snapshot yet: these records are not the session's
-            rows = session_rows
-        else:
+        if self._recording.start_tick is not None:  # every record is the session's now: only the log to keep
             self._recording.keep_log(replay_log)
+        elif (session_rows := self._recording.session_rows(rows, replay_log)) is None:
+            return  # the loop has not taken the snapshot yet: these records are not the session's
+        else:
+            rows = session_rows
         if self.done or (len(rows) == 0 and self.clock is None):
             return
         if self.clock is None:
