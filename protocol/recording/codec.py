@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
+from protocol.recording.table_encode import column_words, encode_table, record_words
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Chunk", "Column", "decode_block",
@@ -217,14 +218,30 @@ def encode_block(
                          "limits", len(limits)))
     parts: list[bytes] = []
     for specs, data, key, count in sections:
-        for c in specs:
-            values = np.asarray(data[c.name]) if count else np.empty(0)
-            entry, payload = _encode(values, c.codec, (scales or {}).get(c.name))
+        for c, (entry, payload) in zip(specs, _encode_section(specs, data, count, scales or {}), strict=True):
             entry.update(name=c.name, bytes=len(payload))
             header[key].append(entry)
             parts.append(payload)
     head = json.dumps(header, separators=(",", ":")).encode()
     return _MAGIC + struct.pack("<I", len(head)) + head + b"".join(parts)
+
+
+def _encode_section(specs: Sequence[Column], data: np.ndarray | Mapping[str, np.ndarray], count: int,
+                    scales: Mapping[str, float]) -> list[tuple[dict[str, Any], bytes]]:
+    """A block's section (records, poses or device limits): each column's (header entry, compressed bytes).
+
+    Kept records and columns of the codecs' own types go as one table (:mod:`protocol.recording.table_encode`,
+    ~4x fewer NumPy calls); anything else column by column (:func:`_encode`), the same bytes either way.
+    """
+    if count:
+        names, codecs = [c.name for c in specs], [c.codec for c in specs]
+        if isinstance(data, np.ndarray):
+            words = record_words(data, len(specs)) if data.dtype.names == tuple(names) else None
+        else:
+            words = column_words(data, names, codecs)
+        if words is not None:
+            return encode_table(words, names, codecs, scales, _LEVEL)
+    return [_encode(np.asarray(data[c.name]) if count else np.empty(0), c.codec, scales.get(c.name)) for c in specs]
 
 
 def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
