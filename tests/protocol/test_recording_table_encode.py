@@ -76,3 +76,19 @@ def test_columns_not_of_the_codecs_own_types_go_column_by_column() -> None:
     assert column_words(floats, names, codecs) is None
     assert encode_block(floats, _poses(2), []) == encode_block(_column_by_column(floats), _poses(2), [])
     assert record_words(kept_records(cols)[:0], len(COLUMNS)) is None
+
+
+def test_blocks_of_constant_columns_reuse_no_other_inputs_deflated_bytes() -> None:
+    # one value after the first: the deflated bytes are kept by (values, first value, the others' value); every
+    # input here differs from the one before it in exactly one of them, or in how it is kept (int32, planes)
+    seen = set()
+    for n, first, rest in [(1000, 5, 7), (1000, 6, 7), (1000, 5, 8), (999, 5, 7), (1, 5, 5), (2, 5, 7)]:
+        cols = _records(n, seed=0)
+        for c in COLUMNS:
+            values = np.full(n, rest, np.int64)
+            values[0] = first
+            cols[c.name] = values if c.codec in ("int", "small") else values.astype(np.float64) / 4
+        blob = encode_block(kept_records(cols), _poses(3), [], SCALES)
+        assert blob == encode_block(_column_by_column(cols), _column_by_column(_poses(3)), [], SCALES)
+        seen.add(blob)
+    assert len(seen) == 6
