@@ -121,12 +121,12 @@ def _compress(data: npt.NDArray[Any], level: int, key: tuple[bool, int, int, int
     input saved).
     """
     if key is None:
-        return zlib.compress(data, level)
+        return zlib.compress(data.data, level)
     got = _FLAT.get(key)
     if got is None:
         if len(_FLAT) >= _FLAT_MAX:
             _FLAT.clear()
-        got = _FLAT[key] = zlib.compress(data, level)
+        got = _FLAT[key] = zlib.compress(data.data, level)
     return got
 
 
