@@ -304,10 +304,12 @@ def _encode_raw(raw: npt.NDArray[np.uint8], dtype: np.dtype,
     at its fastest level keeps ~67 for ~2 µs, and a commit's cost is mostly the bytes it writes.  The poses
     (~12 a chunk) are kept as they are (their integers, then their floats).  Lossless by construction.
     """
-    n = len(raw)
-    planes = np.ascontiguousarray(raw.T)  # (bytes per record, n)
-    same = (planes == planes[:, :1]).all(axis=1) if n else np.ones(len(planes), bool)
-    firsts = planes[:, 0] if n else np.zeros(len(planes), np.uint8)
+    n, size = raw.shape
+    # which planes are one byte, found on the records as they lie; then only the other planes transposed (NumPy
+    # moves bytes one at a time: a third of them, ~2.5x faster than the whole table and picking after)
+    same = (raw == raw[0]).all(axis=0) if n else np.ones(size, bool)
+    firsts = raw[0] if n else np.zeros(size, np.uint8)
+    changing = np.ascontiguousarray(raw[:, ~same].T)  # (changing planes, n)
     # the poses as two tables (tick and time; rotation and position): NumPy makes plain arrays from tuples ~5x
     # faster than structured ones
     ints = np.array([(p[0], p[3]) for p in poses], np.int64)
@@ -315,7 +317,7 @@ def _encode_raw(raw: npt.NDArray[np.uint8], dtype: np.dtype,
     log = json.dumps([list(e) for e in events], separators=(",", ":")) if events else "[]"
     head = f'{{"n":{n},"m":{len(poses)},"fields":{_fields_json(dtype)},"events":{log}}}'.encode()
     return b"".join((_RAW, struct.pack("<I", len(head)), head, np.packbits(same).tobytes(), firsts.tobytes(),
-                     planes[~same].tobytes(), ints.tobytes(), floats.tobytes()))
+                     changing.tobytes(), ints.tobytes(), floats.tobytes()))
 
 
 def _decode_raw(blob: bytes, names: Iterable[str] | None,

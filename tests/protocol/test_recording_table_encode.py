@@ -92,3 +92,19 @@ def test_blocks_of_constant_columns_reuse_no_other_inputs_deflated_bytes() -> No
         assert blob == encode_block(_column_by_column(cols), _column_by_column(_poses(3)), [], SCALES)
         seen.add(blob)
     assert len(seen) == 6
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 100, 137])
+def test_a_chunk_keeps_each_byte_plane_that_changes_and_one_byte_of_each_other(n: int) -> None:
+    cols = _records(max(n, 1), seed=n)
+    cols["gain"][:] = 1.0  # a column of one value: every plane one byte
+    raw = np.ndarray((max(n, 1), 200), np.uint8, kept_records(cols))[:n]
+    blob = recording._encode_raw(raw, kept_records(cols).dtype, [], [])
+    planes = raw.T  # the definition: every record's byte b, for each b
+    same = np.array([len(set(p.tolist())) <= 1 for p in planes], bool)
+    tail = np.packbits(same).tobytes() + (planes[:, 0].tobytes() if n else bytes(200)) + planes[~same].tobytes()
+    assert blob.endswith(tail)
+    if n:
+        got, _, _ = decode_block(blob)
+        np.testing.assert_array_equal(got["gain"], cols["gain"][:n])
+        assert same[8 * 16 : 8 * 17].all()  # gain is the 17th column
