@@ -132,7 +132,7 @@ def _compress(data: npt.NDArray[Any], level: int, key: tuple[bool, int, int, int
 
 def _byte_planes(table: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
     """Each row's byte planes (``[j, b]``: byte ``b`` of every value of row ``j``, little-endian): by eight shifts of
-    the whole table, ~3x faster than NumPy's byte-by-byte transpose."""
+    the whole table, ~2.5x faster than NumPy's byte-by-byte transpose (35 against 88 µs for a block)."""
     k, n = table.shape
     words = table.view(np.uint64)
     planes = np.empty((k, 8, n), np.uint8)
