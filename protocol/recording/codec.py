@@ -19,6 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
+from protocol.recording.table_encode import column_words, encode_table, record_words
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Chunk", "Column", "decode_block",
@@ -217,14 +218,30 @@ def encode_block(
                          "limits", len(limits)))
     parts: list[bytes] = []
     for specs, data, key, count in sections:
-        for c in specs:
-            values = np.asarray(data[c.name]) if count else np.empty(0)
-            entry, payload = _encode(values, c.codec, (scales or {}).get(c.name))
+        for c, (entry, payload) in zip(specs, _encode_section(specs, data, count, scales or {}), strict=True):
             entry.update(name=c.name, bytes=len(payload))
             header[key].append(entry)
             parts.append(payload)
     head = json.dumps(header, separators=(",", ":")).encode()
     return _MAGIC + struct.pack("<I", len(head)) + head + b"".join(parts)
+
+
+def _encode_section(specs: Sequence[Column], data: np.ndarray | Mapping[str, np.ndarray], count: int,
+                    scales: Mapping[str, float]) -> list[tuple[dict[str, Any], bytes]]:
+    """A block's section (records, poses or device limits): each column's (header entry, compressed bytes).
+
+    Kept records and columns of the codecs' own types go as one table (:mod:`protocol.recording.table_encode`,
+    ~4x fewer NumPy calls); anything else column by column (:func:`_encode`), the same bytes either way.
+    """
+    if count:
+        names, codecs = [c.name for c in specs], [c.codec for c in specs]
+        if isinstance(data, np.ndarray):
+            words = record_words(data, len(specs)) if data.dtype.names == tuple(names) else None
+        else:
+            words = column_words(data, names, codecs)
+        if words is not None:
+            return encode_table(words, names, codecs, scales, _LEVEL)
+    return [_encode(np.asarray(data[c.name]) if count else np.empty(0), c.codec, scales.get(c.name)) for c in specs]
 
 
 def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
@@ -287,10 +304,12 @@ def _encode_raw(raw: npt.NDArray[np.uint8], dtype: np.dtype,
     at its fastest level keeps ~67 for ~2 µs, and a commit's cost is mostly the bytes it writes.  The poses
     (~12 a chunk) are kept as they are (their integers, then their floats).  Lossless by construction.
     """
-    n = len(raw)
-    planes = np.ascontiguousarray(raw.T)  # (bytes per record, n)
-    same = (planes == planes[:, :1]).all(axis=1) if n else np.ones(len(planes), bool)
-    firsts = planes[:, 0] if n else np.zeros(len(planes), np.uint8)
+    n, size = raw.shape
+    # which planes are one byte, found on the records as they lie; then only the other planes transposed (NumPy
+    # moves bytes one at a time: a third of them, ~2.5x faster than the whole table and picking after)
+    same = (raw == raw[0]).all(axis=0) if n else np.ones(size, bool)
+    firsts = raw[0] if n else np.zeros(size, np.uint8)
+    changing = np.ascontiguousarray(raw[:, ~same].T)  # (changing planes, n)
     # the poses as two tables (tick and time; rotation and position): NumPy makes plain arrays from tuples ~5x
     # faster than structured ones
     ints = np.array([(p[0], p[3]) for p in poses], np.int64)
@@ -298,7 +317,7 @@ def _encode_raw(raw: npt.NDArray[np.uint8], dtype: np.dtype,
     log = json.dumps([list(e) for e in events], separators=(",", ":")) if events else "[]"
     head = f'{{"n":{n},"m":{len(poses)},"fields":{_fields_json(dtype)},"events":{log}}}'.encode()
     return b"".join((_RAW, struct.pack("<I", len(head)), head, np.packbits(same).tobytes(), firsts.tobytes(),
-                     planes[~same].tobytes(), ints.tobytes(), floats.tobytes()))
+                     changing.tobytes(), ints.tobytes(), floats.tobytes()))
 
 
 def _decode_raw(blob: bytes, names: Iterable[str] | None,

@@ -137,6 +137,10 @@ class Recorder:
         self._q: queue.SimpleQueue[Message | None] = queue.SimpleQueue()
         #: The open block of every segment being recorded, and the segment's clock: (session, segment) -> both.
         self._blocks: dict[tuple[int, int, str], tuple[BlockBuilder, SessionClock]] = {}  # (session, segment, arm)
+        #: The segments given records since the last commit, each with its place in ``_blocks`` (a commit writes
+        #: their chunks in that order, and skips the segments of a study's other sessions, often dozens).
+        self._fresh: dict[tuple[int, int, str], int] = {}
+        self._rank: dict[tuple[int, int, str], int] = {}  # each segment's place in ``_blocks``
         self._thread: threading.Thread | None = None
         self.error: BaseException | None = None
         self._local = threading.local()  # per producer thread: the items queued inside atomic(), not yet handed on
@@ -236,6 +240,8 @@ class Recorder:
             key = (item.session_id, item.segment, item.arm)
             builder, _ = self._blocks[key]
             builder.add(item.records, item.log)
+            if key not in self._fresh:
+                self._fresh[key] = self._rank[key]
             for block in builder.take_full():
                 self._write_block(key, block)
         elif isinstance(item, Samples):
@@ -245,8 +251,9 @@ class Recorder:
         elif isinstance(item, Segment):
             db.insert_recording(item.session_id, item.segment, item.started_at_s, item.t0_ns, item.snapshot,
                                 item.scales, item.arm)
-            self._blocks[(item.session_id, item.segment, item.arm)] = (BlockBuilder(scales=item.scales),
-                                                                       SessionClock(item.started_at_s, item.t0_ns))
+            key = (item.session_id, item.segment, item.arm)
+            self._blocks[key] = (BlockBuilder(scales=item.scales), SessionClock(item.started_at_s, item.t0_ns))
+            self._rank.setdefault(key, len(self._rank))
         elif isinstance(item, Trial):
             db.insert_trial(item.record.to_row())
         else:
@@ -270,7 +277,10 @@ class Recorder:
                 if self.db.conn.in_transaction:
                     self.db.conn.execute("ROLLBACK")
                 raise
-        for key, (builder, clock) in self._blocks.items():
+        fresh = sorted(self._fresh, key=self._fresh.__getitem__) if len(self._fresh) > 1 else list(self._fresh)
+        self._fresh.clear()
+        for key in self._blocks if final else fresh:
+            builder, clock = self._blocks[key]
             # the records since the last commit reach the disk with it (a chunk); at the end, the open block whole
             if final:
                 block = builder.final()

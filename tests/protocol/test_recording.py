@@ -213,6 +213,27 @@ def test_the_recorder_writes_the_open_block_at_each_commit_and_a_crash_loses_onl
     db.close()
 
 
+def test_a_commit_writes_a_chunk_for_each_segment_given_records_since_the_last_in_the_order_they_opened(
+        tmp_path: Path) -> None:
+    db = StudyDatabase(tmp_path / "rec.db")
+    sids = [db.create_session(**_session_args(code=f"P0{i}")) for i in (1, 2, 3)]
+    clock = FakeClock()
+    rec = Recorder(db, threaded=False, clock=clock)
+    for sid in sids:
+        rec.segment(sid, 0, 0.0, 0, {"framework": {}}, {})
+    for k in range(0, 300, 10):  # the third session's records first, then the first's; the second has none after 100
+        clock.now = k / 1000
+        for sid in (sids[2], sids[0], *((sids[1],) if k < 100 else ())):
+            rec.records(sid, 0, records(k, 10))
+    rows = db.conn.execute("SELECT session_id, chunk, n_records FROM session_chunks ORDER BY rowid").fetchall()
+    assert [r[0] for r in rows] == [sids[0], sids[1], sids[2], sids[0], sids[2]]  # (2 commits; then 1 pending)
+    assert [r[1] for r in rows] == [0, 0, 0, 1, 1]
+    rec.close()
+    for sid, n in zip(sids, (300, 100, 300), strict=True):
+        assert np.array_equal(read_segment(db.conn, sid, 0).columns["tick"], np.arange(n))
+    db.close()
+
+
 def test_a_segment_that_ends_has_its_last_block_whole_in_place_of_its_chunks(tmp_path: Path) -> None:
     db, sid, rec = _record_1540_ms(tmp_path / "rec.db")
     assert db.conn.execute("SELECT COUNT(*) FROM session_chunks").fetchone()[0] > 0
