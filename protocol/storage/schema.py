@@ -283,6 +283,12 @@ class SchemaFile:
             # crash (SIGKILL); only a power cut can lose the last commits.
             c.execute("PRAGMA synchronous = NORMAL")
             c.execute("PRAGMA foreign_keys = ON")
+            # A writer deletes only its own scaffolding: the chunks of a block it just wrote whole (the same records,
+            # in the same transaction) and its lease rows.  FAST zeroes deleted content on the pages it writes
+            # anyway but not freed pages (Debian's SQLite zeroes those too by default: ~20 extra pages a block).
+            # Erasing a participant's data is withdrawal's job, on its own connection with secure_delete ON
+            # (protocol/storage/withdrawal.py), which then rewrites the whole file.
+            c.execute("PRAGMA secure_delete = FAST")
 
     def _owner_only(self) -> None:
         """A study was just created in this file (new, or empty before): readable by its owner only."""
