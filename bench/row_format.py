@@ -28,14 +28,14 @@ import numpy.typing as npt
 from analysis.parallel import default_workers, run_tasks
 from pipeline.force.replay import replay
 from protocol.recording import read_segment, segments_of
-from protocol.storage import connect_readonly
+from protocol.storage import Recorder, StudyDatabase, connect_readonly
 
 __all__ = ["ROW_COLUMNS", "RowCopy", "row_format_copy", "trial_window_rows"]
 
 #: One ``samples`` row of versions 1 and 2 (after ``trial_id``).
 ROW_COLUMNS = ("t_s", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
                "comp_fx", "comp_fy", "comp_fz", "render_fx", "render_fy", "render_fz")
-_COMMIT_EVERY = 100  # rows: what version 2's recorder committed at 1 kHz, every 100 ms
+_HANDOVER = 10  # rows a hand-over, as the blocks are handed over in ``bench study`` (a live session: ~every 10 ms)
 
 
 @dataclass(frozen=True)
@@ -46,7 +46,7 @@ class RowCopy:
     trials: int
     samples: int
     replay_s: float  # recomputing the compensated force (not part of what version 2 paid)
-    insert_s: float  # writing the rows, committed every 100 rows as version 2 did
+    insert_s: float  # writing the rows through the recorder, committed every 100 rows as version 2 did
     size_bytes: int
 
 
@@ -116,29 +116,23 @@ def row_format_copy(source: str, target: str, *, workers: int | None = None,
         # version 2's pragmas (protocol.storage): write-ahead log, synced at checkpoints
         dst.execute("PRAGMA journal_mode = WAL")
         dst.execute("PRAGMA synchronous = NORMAL")
-        t0 = time.perf_counter()
-        n_workers = default_workers() if workers is None else workers
-        done = [0]
+        dst.commit()
+    finally:
+        dst.close()
+    t0 = time.perf_counter()
+    n_workers = default_workers() if workers is None else workers
+    done = [0]
 
-        def tick(_: int, __: object) -> None:
-            done[0] += 1
-            if progress is not None:
-                progress(done[0], len(sessions))
+    def tick(_: int, __: object) -> None:
+        done[0] += 1
+        if progress is not None:
+            progress(done[0], len(sessions))
 
-        per_session = run_tasks(trial_window_rows, [(source, s) for s in sessions], workers=n_workers, on_done=tick)
-        replay_s = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        n = trials = 0
-        sql = f"INSERT INTO samples (trial_id, {', '.join(ROW_COLUMNS)}) VALUES ({', '.join('?' * 15)})"
-        for windows in per_session:
-            for trial_id, rows in windows:
-                trials += 1
-                for i in range(0, len(rows), _COMMIT_EVERY):
-                    part = rows[i : i + _COMMIT_EVERY]
-                    dst.executemany(sql, ((trial_id, *r) for r in part.tolist()))
-                    dst.commit()
-                    n += len(part)
-        insert_s = time.perf_counter() - t0
+    per_session = run_tasks(trial_window_rows, [(source, s) for s in sessions], workers=n_workers, on_done=tick)
+    replay_s = time.perf_counter() - t0
+    trials, n, insert_s = _insert_rows(target, per_session)
+    dst = sqlite3.connect(target)
+    try:
         # what version 2 did not have: the recording and where each trial is in it
         dst.execute("DROP TABLE session_blocks")
         dst.execute("DROP TABLE IF EXISTS session_chunks")
@@ -154,3 +148,28 @@ def row_format_copy(source: str, target: str, *, workers: int | None = None,
     finally:
         dst.close()
     return RowCopy(target, trials, n, replay_s, insert_s, os.path.getsize(target))
+
+
+def _insert_rows(target: str, per_session: list[list[tuple[int, npt.NDArray[np.float64]]]]) -> tuple[int, int, float]:
+    """Write the trial windows into ``target``'s ``samples`` as version 2's session runner did: ``_HANDOVER`` rows
+    at a time, each built into one float array and queued to the recorder, which commits every 100 ms of records
+    (a clock the records drive: every 100 rows) -- the same recorder path and cadence ``bench study`` times the blocks
+    through.  Returns (trials, rows, seconds spent handing over and writing)."""
+    db = StudyDatabase(target)
+    now_s = [0.0]
+    rec = Recorder(db, threaded=False, clock=lambda: now_s[0])
+    trials = n = 0
+    try:
+        t0 = time.perf_counter()
+        for windows in per_session:
+            for trial_id, rows in windows:
+                trials += 1
+                for i in range(0, len(rows), _HANDOVER):
+                    part = rows[i : i + _HANDOVER]
+                    now_s[0] += len(part) * 1e-3
+                    rec.samples(np.column_stack((np.full(len(part), float(trial_id)), part)))
+                    n += len(part)
+        rec.close()
+        return trials, n, time.perf_counter() - t0
+    finally:
+        db.close()

@@ -3,8 +3,9 @@
 Side by side in the same run, on the same records: the study's whole sessions
 written again as the recorder writes them (compressed blocks, schema version 3)
 and the trial windows as version 2 kept them (one ``samples`` row per record,
-:mod:`bench.row_format`), both at a live session's commit rate (every 100
-records, i.e. every 100 ms at 1 kHz).
+:mod:`bench.row_format`), both handed to the recorder as a live session hands
+them (10 records a hand-over) and committed at its rate (every 100 records, i.e.
+every 100 ms at 1 kHz).
 """
 
 from __future__ import annotations
@@ -168,7 +169,7 @@ def format_study_bench(r: dict[str, Any]) -> str:
     b, w = r["storage"]["blocks"], r["storage"]["rows"]
 
     def per(x: dict[str, Any]) -> str:
-        return f"{x['write_s'] / x['records'] * 1e6:5.1f} µs/record" if x["records"] else "   -"
+        return f"{x['write_s'] / x['records'] * 1e6:5.2f} µs/record" if x["records"] else "   -"
 
     return (
         f"{r['participants']} simulated participants (training + experiment), virtual clock, "
@@ -179,7 +180,8 @@ def format_study_bench(r: dict[str, Any]) -> str:
         f"runner + storage)\n"
         f"  stored                {r['experiment_trials']} experiment trials, whole sessions: "
         f"{r['records_stored']:,} records, {r['database_mb']:.0f} MB\n"
-        f"the same study stored both ways, at a live session's commit rate (every 100 records), same run:\n"
+        f"the same study stored both ways, through the recorder at a live session's pace (10 records a hand-over, "
+        f"a commit every 100), same run:\n"
         f"  whole sessions, blocks (v3)      {b['records']:>10,} records  {b['database_mb']:6.1f} MB  "
         f"{b['write_s']:6.1f} s writing ({per(b)})\n"
         f"  trial windows, rows (v1/v2)      {w['records']:>10,} records  {w['database_mb']:6.1f} MB  "
