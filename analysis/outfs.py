@@ -40,7 +40,6 @@ from pipeline.runtime.platform_support import (
     O_NONBLOCK,
     fs_free_bytes,
     fs_read_only,
-    set_fd_mode,
     umask,
 )
 
@@ -324,13 +323,7 @@ def chmod_at(dir_fd: Folder, rel: str, mode: int, *, sync: bool = False) -> None
         if isinstance(fd, PathFolder):
             outpath.chmod_at(fd, name, mode, sync=sync)
             return
-        f = os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=fd)
-        try:
-            set_fd_mode(f, mode)
-            if sync:
-                os.fsync(f)
-        finally:
-            os.close(f)
+        outpath.set_mode_and_close(os.open(name, os.O_RDONLY | O_NOFOLLOW | O_NONBLOCK, dir_fd=fd), mode, sync=sync)
     finally:
         close_folder(fd)
 

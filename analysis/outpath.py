@@ -50,8 +50,25 @@ from pipeline.runtime.platform_support import (
     set_folder_mode,
 )
 
-__all__ = ["PathFolder", "chmod_at", "fsync_dir", "fsync_tolerant", "link_at", "listdir", "lstat_at", "mkdir_at",
-           "open_at", "open_folder", "rename_at", "rename_new", "rmdir_at", "rmtree_at", "scan", "unlink_at"]
+__all__ = [
+    "PathFolder",
+    "chmod_at",
+    "fsync_dir",
+    "fsync_tolerant",
+    "link_at",
+    "listdir",
+    "lstat_at",
+    "mkdir_at",
+    "open_at",
+    "open_folder",
+    "rename_at",
+    "rename_new",
+    "rmdir_at",
+    "rmtree_at",
+    "scan",
+    "set_mode_and_close",
+    "unlink_at",
+]
 
 #: The flags every open here adds: those of them the system has (0 elsewhere).
 _OPEN_FLAGS = O_BINARY | O_NOINHERIT | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK
@@ -194,7 +211,12 @@ def chmod_at(folder: PathFolder, name: str, mode: int, *, sync: bool) -> None:
     if stat.S_ISDIR(st.st_mode) and not redirects(path, st):
         set_folder_mode(path, mode)  # (Windows: nothing; a folder cannot be opened as a file there)
         return
-    f = open_at(folder, name, os.O_RDWR if sync else os.O_RDONLY)  # Windows flushes only a writable handle
+    # (Windows flushes only a writable handle)
+    set_mode_and_close(open_at(folder, name, os.O_RDWR if sync else os.O_RDONLY), mode, sync=sync)
+
+
+def set_mode_and_close(f: int, mode: int, *, sync: bool) -> None:
+    """Give the open file ``f`` its ``mode``, with ``sync`` make that durable, and close it (whatever happens)."""
     try:
         set_fd_mode(f, mode)
         if sync:
