@@ -124,11 +124,12 @@ class QtForcePlots(QWidget):
         self._set_lower(self.lower_choice.currentText())
 
     def legend_entries(self) -> list[str]:
-        """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the task
-        arm (whose force is the task force) marked."""
+        """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the one
+        drawn as the task force marked (the engine's first arm: the protocol's task arm once a session starts, since
+        Start puts it first; before that it may be another)."""
         out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band"]
         if self.plots.arms:
-            out += [f"{self.plots.task_arm} (task arm)", *self.plots.arms]
+            out += [f"{self.plots.task_arm} (task force)", *self.plots.arms]
         return out
 
     def _set_arms(self) -> None:

@@ -164,8 +164,8 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     plots.pull()
     view.refresh()
     assert list(view.arm_curves) == ["right"]
-    assert view.legend_entries()[3:] == ["left (task arm)", "right"]
-    assert "each arm's |F|:" in view.legend.text() and "left (task arm)" in view.legend.text()
+    assert view.legend_entries()[3:] == ["left (task force)", "right"]
+    assert "each arm's |F|:" in view.legend.text() and "left (task force)" in view.legend.text()
     assert len(view.arm_curves["right"].getData()[1]) > 0
     assert "arm right peak 9.0 N: above the axis" in view.title_text
 
