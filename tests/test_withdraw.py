@@ -359,3 +359,33 @@ def test_a_reader_that_holds_up_the_rewrite_is_named_and_a_second_run_finishes_i
         assert [t for t in study["before"]["traces"] if t in _file_bytes(copy)] == []
     finally:
         reader.close()
+
+
+def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path) -> None:
+    """A writer frees its chunks with ``secure_delete = FAST`` (their bytes stay in free pages); the withdrawal
+    zeroes every free page before the file is rewritten, so no copy is left on the file's blocks that VACUUM drops."""
+    from protocol.design import build_schedule, schedule_to_json
+    from protocol.storage.withdrawal import erase_participant
+
+    path = tmp_path / "s.db"
+    db = StudyDatabase(path)
+    p = default_protocol()
+    sid = db.create_session(code="P01", kind="experiment", seed=7, participant_number=1, protocol_json=p.to_json(),
+                            schedule_json=schedule_to_json(build_schedule(p, seed=7, participant_number=1)),
+                            software_version="0.1.0+test", rig="sim", config={}, calibration={})
+    marker = b"PARTICIPANT-DATA" * 1000  # 16 kB: overflow pages
+    db.begin()
+    db.insert_recording(sid, 0, 0.0, 0, {}, {})
+    for k in range(5):
+        db.write_chunk(sid, 0, 0, k, 0, 1, 2, 0.0, 0.001, marker)
+    db.commit()
+    db.begin()
+    db.write_block(sid, 0, 0, 0, 1, 2, 0.0, 0.001, b"x" * 100)  # the chunks go, their pages freed (FAST)
+    db.commit()
+    db.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+    assert path.read_bytes().count(b"PARTICIPANT-DATA") > 100  # what FAST leaves (the test can fail)
+    erase_participant(db, "P01", "test")
+    db.conn.execute("PRAGMA wal_checkpoint(TRUNCATE)")  # what rewrite_file does first, before VACUUM shrinks
+    assert path.read_bytes().count(b"PARTICIPANT-DATA") == 0
+    assert not db.conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'withdrawal_scrub'").fetchone()
+    db.close()

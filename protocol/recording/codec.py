@@ -236,7 +236,7 @@ def _encode_section(specs: Sequence[Column], data: np.ndarray | Mapping[str, np.
     if count:
         names, codecs = [c.name for c in specs], [c.codec for c in specs]
         if isinstance(data, np.ndarray):
-            words = record_words(data, len(specs)) if data.dtype.names == tuple(names) else None
+            words = record_words(data, codecs) if data.dtype.names == tuple(names) else None
         else:
             words = column_words(data, names, codecs)
         if words is not None:

@@ -23,16 +23,19 @@ __all__ = ["column_words", "encode_table", "record_words"]
 _INTEGER = ("int", "small")  # codecs of integer values (the others keep float64)
 
 
-def record_words(records: np.ndarray, n_columns: int) -> npt.NDArray[np.int64] | None:
-    """Records of ``n_columns`` 8-byte little-endian fields, in a row with no gap, as a ``(n_columns, n)`` table of
-    their 64-bit words (one row a column); None when they are not laid out so, or there are none."""
+def record_words(records: np.ndarray, codecs: Sequence[str]) -> npt.NDArray[np.int64] | None:
+    """Records of one 8-byte little-endian field per codec, in a row with no gap, each of its codec's type (int64
+    for an integer codec, float64 for the others), as a ``(len(codecs), n)`` table of their 64-bit words (one row a
+    column); None when they are not laid out so, or there are none (the caller then converts column by column)."""
     dtype = records.dtype
     names = dtype.names or ()
+    n_columns = len(codecs)
     if len(records) == 0 or len(names) != n_columns or dtype.itemsize != 8 * n_columns:
         return None
-    for j, name in enumerate(names):
+    for j, (name, codec) in enumerate(zip(names, codecs, strict=True)):
         field_dtype, offset = dtype.fields[name][:2]  # type: ignore[index]  # (names are this dtype's fields)
-        if offset != 8 * j or field_dtype.str not in ("<i8", "<f8"):
+        # the words are read as they lie: a float field under an integer codec (or the reverse) would need converting
+        if offset != 8 * j or field_dtype.str != ("<i8" if codec in _INTEGER else "<f8"):
             return None
     words = np.ndarray((len(records), n_columns), np.int64, np.ascontiguousarray(records))
     return np.ascontiguousarray(words.T)

@@ -278,7 +278,6 @@ class Recorder:
                     self.db.conn.execute("ROLLBACK")
                 raise
         fresh = sorted(self._fresh, key=self._fresh.__getitem__) if len(self._fresh) > 1 else list(self._fresh)
-        self._fresh.clear()
         for key in self._blocks if final else fresh:
             builder, clock = self._blocks[key]
             # the records since the last commit reach the disk with it (a chunk); at the end, the open block whole
@@ -292,6 +291,7 @@ class Recorder:
                 sid, seg, arm = key
                 self.db.write_chunk(sid, seg, chunk.block, chunk.number, *_span(chunk.records, clock), chunk.data,
                                     arm=arm)
+        self._fresh.clear()  # (after the loop: a chunk that failed to write is looked at again next time)
         if self.db.conn.in_transaction:
             self.db.heartbeat()  # with data anyway: a live writer's leases stay fresh for other hosts
         self.db.commit()

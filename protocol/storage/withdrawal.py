@@ -3,7 +3,8 @@
 An ethics approval lets a participant withdraw and have their data erased.  :func:`erase_participant` removes,
 in one transaction, the participant row and everything that refers to it -- their sessions, trials, events,
 recorded runs and blocks, the samples rows of older versions and the leases of their sessions -- with SQLite's
-``secure_delete`` on, so the freed bytes are overwritten with zeros rather than left in free pages, and stores a
+``secure_delete`` on, so the freed bytes are overwritten with zeros rather than left in free pages (and every page
+that was already free, which a writer's ``secure_delete = FAST`` may have left with old bytes, zeroed too), and stores a
 :class:`Withdrawal` record that keeps only the pseudonymous code, the time, the reason and how many rows of each kind
 were removed (no measurement).  :func:`rewrite_file` then checkpoints the write-ahead log into the file (so the
 zeroed pages land on the file's own blocks), rewrites the whole file (``VACUUM``) and empties the log, so nothing of
@@ -188,7 +189,26 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
                             fp.samples)
         c.execute(f"INSERT INTO withdrawals ({_COLUMNS}) VALUES ({', '.join('?' * len(fields(Withdrawal)))})",
                   astuple(record))
+        _scrub_free_pages(c)
     return record
+
+
+def _scrub_free_pages(c: sqlite3.Connection) -> None:
+    """Overwrite every free page of the file with zeros, in the open transaction.
+
+    A writer deletes its own chunks with ``secure_delete = FAST`` (:mod:`protocol.storage.schema`), which leaves
+    the freed pages' old bytes -- copies of recorded blocks, possibly this participant's -- until a page is used
+    again.  SQLite hands out free pages first, so one zero-filled blob as large as the free list takes every one of
+    them and writes zeros over it; dropping it (``secure_delete`` on) frees them again, zeroed, for ``VACUUM`` to
+    drop.
+    """
+    free = int(c.execute("PRAGMA freelist_count").fetchone()[0])
+    if free == 0:
+        return
+    page = int(c.execute("PRAGMA page_size").fetchone()[0])
+    c.execute("CREATE TABLE withdrawal_scrub (zeros BLOB)")
+    c.execute("INSERT INTO withdrawal_scrub VALUES (zeroblob(?))", (free * page,))
+    c.execute("DROP TABLE withdrawal_scrub")
 
 
 #: How long emptying the write-ahead log waits for programs reading the study to finish their read.

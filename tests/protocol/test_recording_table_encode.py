@@ -58,7 +58,7 @@ def test_the_table_encoding_is_the_column_encoding_byte_for_byte(n: int, edges: 
     poses = _poses(n // 8 + 1)
     events = [(0, "device_limit", 4.0), (0, "refine", True)]
     rows = kept_records(cols)
-    assert record_words(rows, len(COLUMNS)) is not None  # (the table path is the one taken)
+    assert record_words(rows, [c.codec for c in COLUMNS]) is not None  # (the table path is the one taken)
     for scales in (SCALES, {}, {"raw_fx": float(SCALE)}):
         reference = encode_block(_column_by_column(cols), _column_by_column(poses), events, scales)
         assert encode_block(rows, poses, events, scales) == reference
@@ -75,7 +75,7 @@ def test_columns_not_of_the_codecs_own_types_go_column_by_column() -> None:
     floats = {**cols, "tick": cols["tick"].astype(np.float64)}  # an integer column as float64: values, not bits
     assert column_words(floats, names, codecs) is None
     assert encode_block(floats, _poses(2), []) == encode_block(_column_by_column(floats), _poses(2), [])
-    assert record_words(kept_records(cols)[:0], len(COLUMNS)) is None
+    assert record_words(kept_records(cols)[:0], [c.codec for c in COLUMNS]) is None
 
 
 def test_blocks_of_constant_columns_reuse_no_other_inputs_deflated_bytes() -> None:
@@ -108,3 +108,17 @@ def test_a_chunk_keeps_each_byte_plane_that_changes_and_one_byte_of_each_other(n
         got, _, _ = decode_block(blob)
         np.testing.assert_array_equal(got["gain"], cols["gain"][:n])
         assert same[8 * 16 : 8 * 17].all()  # gain is the 17th column
+
+
+def test_records_whose_field_types_are_not_the_codecs_go_column_by_column() -> None:
+    cols = _records(10, seed=4)
+    codecs = [c.codec for c in COLUMNS]
+    swapped = np.dtype([(c.name, "<f8" if c.codec in ("int", "small") else "<i8") for c in COLUMNS])
+    rows = np.zeros(10, swapped)
+    for c in COLUMNS:
+        rows[c.name] = np.rint(cols[c.name]) if c.codec not in ("int", "small") else cols[c.name]
+    assert record_words(rows, codecs) is None  # (read as they lie, the words would be the other type's bits)
+    by_name = {c.name: rows[c.name] for c in COLUMNS}
+    assert encode_block(rows, _poses(2), []) == encode_block(_column_by_column(by_name), _poses(2), [])
+    got, _, _ = decode_block(encode_block(rows, _poses(2), []))
+    np.testing.assert_array_equal(got["tick"], cols["tick"])
