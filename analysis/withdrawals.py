@@ -17,6 +17,7 @@ import pandas as pd
 
 from analysis.errors import AnalysisError
 from analysis.load import StudyData
+from protocol.labels import plural
 from protocol.storage import StorageError, StudyReader
 
 __all__ = ["study_withdrawals", "withdrawals_html"]
@@ -60,7 +61,7 @@ def withdrawals_html(frame: pd.DataFrame, study: StudyData) -> str:
         f"<td class=\"m\">{html.escape(os.path.basename(str(r.database)))}</td></tr>"
         for r in frame.itertuples())
     return (
-        f"<h2>Withdrawals</h2><p class=\"warn\">{n} participant{'' if n == 1 else 's'} withdrew; excluded: {who}.</p>"
+        f"<h2>Withdrawals</h2><p class=\"warn\">{plural(n, 'participant')} withdrew; excluded: {who}.</p>"
         f"<p>At {'their' if n > 1 else 'the participant’s'} request every record of theirs was erased from the "
         "study database (<code>haptic-study withdraw</code>): "
         "nothing of theirs is analysed in this report, and the database keeps only the code, the time, the reason "

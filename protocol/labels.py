@@ -42,5 +42,6 @@ def fault_names(bits: int) -> str:
 
 
 def plural(n: int, word: str, many: str | None = None) -> str:
-    """A count with its noun for people: ``1 participant``, ``2 participants`` (``many`` for irregular plurals)."""
-    return f"{n} {word if n == 1 else (many or word + 's')}"
+    """A count with its noun for people: ``1 participant``, ``2 participants``, ``20,250 records`` (``many`` for
+    irregular plurals)."""
+    return f"{n:,} {word if n == 1 else (many or word + 's')}"

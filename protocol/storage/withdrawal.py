@@ -24,6 +24,7 @@ from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 from typing import Protocol
 
+from protocol.labels import plural
 from protocol.records import trial_id_of
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import session_scope
@@ -64,11 +65,11 @@ class Footprint:
         """One sentence naming what is stored (what a withdrawal will remove)."""
         kinds = ", ".join(f"{k} session {sid} ({'interrupted' if st == 'running' else st})"
                           for sid, k, st in self.sessions)
-        recorded = (f"{_n(self.segments, 'recorded run')} in {_n(self.blocks, 'block')} "
+        recorded = (f"{plural(self.segments, 'recorded run')} in {plural(self.blocks, 'block')} "
                     f"({self.records:,} records at 1 kHz)")
-        older = f", {_n(self.samples, 'samples row')} (an older version's)" if self.samples else ""
-        return (f"participant {self.code}: {_n(len(self.sessions), 'session')}{': ' + kinds if kinds else ''}; "
-                f"{_n(self.trials, 'trial')}, {_n(self.events, 'event')}, {recorded}{older}")
+        older = f", {plural(self.samples, 'samples row')} (an older version's)" if self.samples else ""
+        return (f"participant {self.code}: {plural(len(self.sessions), 'session')}{': ' + kinds if kinds else ''}; "
+                f"{plural(self.trials, 'trial')}, {plural(self.events, 'event')}, {recorded}{older}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,17 +88,13 @@ class Withdrawal:
 
     def counts(self) -> str:
         """What was removed, in words."""
-        return (f"{_n(self.removed_sessions, 'session')}, {_n(self.removed_trials, 'trial')}, "
-                f"{_n(self.removed_events, 'event')}, {_n(self.removed_blocks, 'recorded block')} "
+        return (f"{plural(self.removed_sessions, 'session')}, {plural(self.removed_trials, 'trial')}, "
+                f"{plural(self.removed_events, 'event')}, {plural(self.removed_blocks, 'recorded block')} "
                 f"({self.removed_records:,} records)"
-                + (f", {_n(self.removed_samples, 'samples row')}" if self.removed_samples else ""))
+                + (f", {plural(self.removed_samples, 'samples row')}" if self.removed_samples else ""))
 
 
 _COLUMNS = ", ".join(f.name for f in fields(Withdrawal))
-
-
-def _n(n: int, word: str) -> str:
-    return f"{n:,} {word}{'' if n == 1 else 's'}"
 
 
 def withdrawals(conn: sqlite3.Connection) -> list[Withdrawal]:

@@ -31,17 +31,14 @@ def add_check_parser(sub: argparse._SubParsersAction) -> None:
     c.set_defaults(handler=cmd_check)
 
 
-def _count(n: int, what: str) -> str:
-    return f"{n:,} {what}{'' if n == 1 else 's'}"
-
-
 def format_audit(a: object) -> str:
     """The findings in words (an :class:`protocol.audit.Audit`)."""
     from protocol.audit import Audit
+    from protocol.labels import plural
 
     assert isinstance(a, Audit)
-    lines = [(f"{a.path}: schema version {a.schema_version}, {_count(a.sessions, 'session')} "
-              f"({a.experiment_sessions} experiment), {_count(a.trials, 'trial')}")]
+    lines = [(f"{a.path}: schema version {a.schema_version}, {plural(a.sessions, 'session')} "
+              f"({a.experiment_sessions} experiment), {plural(a.trials, 'trial')}")]
     lines.append("  SQLite integrity check: " + ("ok" if a.integrity == ["ok"] else "; ".join(a.integrity)))
     if a.schema_version >= 3 and a.integrity == ["ok"]:
         lines.append(f"  recorded blocks: {a.blocks_verified:,} verified by their checksum, "
@@ -57,13 +54,14 @@ def format_audit(a: object) -> str:
              and p not in a.trials_not_in_recording]
     lines += [f"  problem: {p}" for p in other]
     lines += [f"  note: {n}" for n in a.notes]
-    lines.append("No problem found." if not a.problems else f"{_count(len(a.problems), 'problem')} found.")
+    lines.append("No problem found." if not a.problems else f"{plural(len(a.problems), 'problem')} found.")
     return "\n".join(lines)
 
 
 def cmd_check(args: argparse.Namespace) -> int:
     """Run ``haptic-study check``; errors raise :class:`CliError`."""
     from protocol.audit import audit_database
+    from protocol.labels import plural
     from protocol.storage import StorageError, StudyDatabase
     from study_app.cli.progress import ProgressBar
 
@@ -92,5 +90,5 @@ def cmd_check(args: argparse.Namespace) -> int:
     else:
         print(format_audit(audit))
     if audit.problems and not args.json:
-        print(f"haptic-study: check: {_count(len(audit.problems), 'problem')} found in {args.db}", file=sys.stderr)
+        print(f"haptic-study: check: {plural(len(audit.problems), 'problem')} found in {args.db}", file=sys.stderr)
     return 1 if audit.problems else 0

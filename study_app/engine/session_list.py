@@ -13,6 +13,7 @@ import os
 from typing import Any
 
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
+from protocol.labels import plural
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["format_sessions", "list_sessions", "next_participant_number"]
@@ -81,10 +82,6 @@ def next_participant_number(sessions: list[dict[str, Any]]) -> int:
     return max((int(s["participant_number"]) for s in sessions), default=0) + 1
 
 
-def _count(n: int, word: str) -> str:
-    return f"{n} {word}" + ("" if n == 1 else "s")
-
-
 def _status(s: dict[str, Any]) -> str:
     if s["status"] != "running":
         return str(s["status"])
@@ -109,7 +106,7 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
                        for i, (c, w) in enumerate(zip(r, widths, strict=True)))
              for r in rows]
     n_participants = len({s["code"] for s in sessions})
-    lines.insert(0, f"{db_path}: {_count(len(sessions), 'session')}, {_count(n_participants, 'participant')}")
+    lines.insert(0, f"{db_path}: {plural(len(sessions), 'session')}, {plural(n_participants, 'participant')}")
     lines.append("")
     by_settings: dict[str, list[str]] = {}
     for s in sessions:
