@@ -311,13 +311,13 @@ class Commissioning:
 
     def provenance(self) -> dict[str, Any]:
         """What a session stores about the calibration chain (``config_json``): tool, file, every step on record."""
-        eng = self.engine.eng
-        path = eng.calibration_file.path if not eng.simulated and eng.calibration_file is not None else None
-        out: dict[str, Any] = {"rig_calibration": {"tool": self.tool_cal.tool, "file": path, **self.tool_cal.to_dict()}}
+        def chain(arm: str) -> dict[str, Any]:
+            f, rec = self._files[arm], self.tool_cals[arm]
+            return {"tool": rec.tool, "file": f.path if f is not None else None, **rec.to_dict()}
+
+        out: dict[str, Any] = {"rig_calibration": chain(self.arms[0])}
         if len(self.arms) > 1:  # every arm's chain (the first's is rig_calibration)
-            out["arms_rig_calibration"] = {
-                a: {"tool": r.tool, "file": self._files[a].path if self._files[a] is not None else None,  # type: ignore[union-attr]  # checked in the same line
-                    **r.to_dict()} for a, r in self.tool_cals.items()}
+            out["arms_rig_calibration"] = {a: chain(a) for a in self.arms}
         if self._override is not None:
             out["calibration_override"] = {"missing": self._override[0], "reason": self._override[1],
                                            "rest_force_n": self._override[2]}

@@ -260,7 +260,7 @@ class StudyEngine:
                 return
             self._store_loop_events()  # frozen: no records come, but its event must reach the record now
         self.drain_ring()
-        if (self.jaw is not None and self.jaw.events) or self.other_jaws:
+        if any(ctl.events for ctl in (self.jaw, *self.other_jaws.values()) if ctl is not None):
             self._drain_jaw()
         now = time.monotonic()
         if now - self._last_health >= self.config.health_period_s:

@@ -269,6 +269,8 @@ class AppModel:
         nothing can restart it."""
         if self.restarter is None:
             return False
+        # a start that waited for an earlier restart is not this one's: the experimenter starts again
+        self._pending_start = None
         if self.session.running and self.session.session is not None:
             self._interrupted = self.session.session.session_id  # a live engine closes it as interrupted
         self._restarting = True

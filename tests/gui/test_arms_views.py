@@ -225,3 +225,19 @@ def test_the_window_on_two_arms_commissions_the_second_and_starts_with_the_task_
         return y is not None and len(y) > 0
 
     qtbot.waitUntil(drawn, timeout=10_000)
+
+
+def test_a_start_waiting_for_a_restart_is_dropped_when_the_engine_is_restarted_again(tmp_path) -> None:
+    """The rearranged engine never came up; a later Restart engine must not start that session by itself."""
+    sent: list[object] = []
+    a = AppModel(lambda c: sent.append(c) or True)
+    a.restarter = lambda arms=(): None
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
+                          arm_rings=(("right", "r"), ("left", "l"))))
+    a.setup.update(db_path=str(tmp_path / "s.db"), code="P01", protocol_path=_protocol(tmp_path, "left"))
+    assert a.start()
+    a.apply(m.EngineStopped("the engine exited unexpectedly", {}))
+    assert a.restart_engine()
+    a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
+                          arm_rings=(("left", "l"), ("right", "r"))))
+    assert not any(isinstance(c, m.StartSession) for c in sent)
