@@ -264,13 +264,11 @@ class AppModel:
         return "", ""
 
     def restart_engine(self, sim_arms: tuple[str, ...] = ()) -> bool:
-        """Replace a dead engine by a new one (with ``sim_arms``: a simulated rig of those arms, in that order):
-        plots, session and health start afresh; the interrupted session will be selected for resume.  False if
-        nothing can restart it."""
+        """Replace a dead engine by a new one (``sim_arms``: a simulated rig of those arms, in that order): plots,
+        session and health start afresh, the interrupted session selected for resume.  False: nothing can."""
         if self.restarter is None:
             return False
-        # a start that waited for an earlier restart is not this one's: the experimenter starts again
-        self._pending_start = None
+        self._pending_start = None  # a start that waited for an earlier restart is not this one's
         if self.session.running and self.session.session is not None:
             self._interrupted = self.session.session.session_id  # a live engine closes it as interrupted
         self._restarting = True
