@@ -70,6 +70,9 @@ class Column:
 
 
 _STATS = ("stats.csv", "stats_by_target.csv")
+#: The tests' files (:data:`_STATS`): the columns every consumer may rely on, first and in this order (more follow).
+STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
+                     "zero_method", "rank_biserial", "p_holm")
 _SA = ("speed_accuracy.csv",)
 _SLOPES = ("speed_accuracy_slopes.csv",)
 _MODELS = ("speed_accuracy_model.csv", "learning_models.csv")
@@ -455,9 +458,13 @@ def _round(values: pd.Series, c: Column) -> pd.Series:
 def export(frame: pd.DataFrame, file: str) -> pd.DataFrame:
     """``frame`` as ``file`` is written: exported names (also as values of ``metric``) and rounded numbers.
 
-    Trial indices become 1-based trial numbers.
+    Trial indices become 1-based trial numbers; a tests' file (``stats.csv``, ``stats_by_target.csv``, tables of
+    :func:`analysis.stats.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS` first.
     """
     out = frame.rename(columns=_RENAMED)
+    if file in _STATS:
+        out.insert(1, "n", out["n_used"])
+        out = out[[*STATS_CSV_COLUMNS, *(c for c in out.columns if c not in STATS_CSV_COLUMNS)]]
     if "trial_index" in frame.columns:
         out["trial_number"] = frame["trial_index"].astype(np.int64) + 1
     if "metric" in out.columns:

@@ -19,23 +19,13 @@ from analysis.load import StudyData
 from analysis.loop_health import health_summary, health_table
 from analysis.models import fixed_effects
 
-__all__ = ["STATS_CSV_COLUMNS", "TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
+__all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
 #: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
 #: number, participant code, session and trial.  Names and rounding: :mod:`analysis.codebook`.
 TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
                       "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
                       "cue_at_s")
-#: stats.csv: the columns every consumer may rely on, in this order (more follow).
-STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
-                     "zero_method", "rank_biserial", "p_holm")
-
-
-def _stats_table(frame: pd.DataFrame) -> pd.DataFrame:
-    out = frame.copy()
-    out.insert(1, "n", out["n_used"])
-    rest = [c for c in out.columns if c not in STATS_CSV_COLUMNS]
-    return out[list(STATS_CSV_COLUMNS) + rest]
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
@@ -82,8 +72,8 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     for c in wide_cols:
         if c.startswith("n_"):
             wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
-    st = codebook.export(_stats_table(stats), "stats.csv")
-    st_t = codebook.export(_stats_table(stats_by_target.drop(columns="target_label")), "stats_by_target.csv")
+    st = codebook.export(stats, "stats.csv")
+    st_t = codebook.export(stats_by_target.drop(columns="target_label"), "stats_by_target.csv")
     st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
     sess = study.sessions.copy()
     sess["database"] = sess["database"].map(os.path.basename)

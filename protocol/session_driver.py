@@ -116,9 +116,16 @@ class SessionDriver:
             out.append((name, res.rows, [log.popleft() for _ in range(len(log))]))
         return tuple(out)
 
-    @staticmethod
-    def feed(runner: SessionRunner, block: RingBlock, trigger: RehearsalTrigger | None = None) -> None:
-        """Hand one block to ``runner``; poll ``trigger`` (a planned ``kill`` fires at its record exactly)."""
+    def feed(self, runner: SessionRunner, block: RingBlock | None = None,
+             trigger: RehearsalTrigger | None = None) -> RingBlock:
+        """Hand one block to ``runner`` (None: the records written since the last read, :meth:`take`); poll
+        ``trigger`` (a planned ``kill`` fires at its record exactly).  Returns the block handed.
+
+        A driver with nothing to do between reading and feeding (the headless runner) leaves the reading to this,
+        so the records do not pass through its hands.
+        """
+        if block is None:
+            block = self.take()
         if block.lost:
             runner.records_lost(block.lost)
         rows = block.rows
@@ -139,6 +146,7 @@ class SessionDriver:
                 runner.other_arms.record(name, arm_rows, arm_log, runner.clock)
         if trigger is not None and n:
             trigger.poll(int(rows["t_ns"][-1]))
+        return block
 
     def flush_events(self, runner: SessionRunner) -> None:
         """Hand the pending loop events to ``runner`` without records (the loop is frozen: it writes none)."""

@@ -19,10 +19,11 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
-from protocol.recording.table_encode import column_words, encode_table, record_words
+from protocol.recording.table_encode import encode_table
 
 __all__ = [
-    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "Chunk", "Column", "decode_block",
+    "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockRow", "Chunk", "Column",
+    "decode_block",
     "decode_columns", "encode_block", "join_blocks", "join_chunks", "join_decoded", "kept_records",
 ]
 
@@ -217,31 +218,20 @@ def encode_block(
                                          "limit_n": np.array([e[2] for e in limits], dtype=np.float64)},
                          "limits", len(limits)))
     parts: list[bytes] = []
+    scales = scales or {}
     for specs, data, key, count in sections:
-        for c, (entry, payload) in zip(specs, _encode_section(specs, data, count, scales or {}), strict=True):
+        # kept records and columns of the codecs' own types go as one table (~4x fewer NumPy calls); anything else
+        # column by column: the same bytes either way
+        coded = encode_table(data, [c.name for c in specs], [c.codec for c in specs], scales, _LEVEL) if count else None
+        if coded is None:
+            coded = [_encode(np.asarray(data[c.name]) if count else np.empty(0), c.codec, scales.get(c.name))
+                     for c in specs]
+        for c, (entry, payload) in zip(specs, coded, strict=True):
             entry.update(name=c.name, bytes=len(payload))
             header[key].append(entry)
             parts.append(payload)
     head = json.dumps(header, separators=(",", ":")).encode()
     return _MAGIC + struct.pack("<I", len(head)) + head + b"".join(parts)
-
-
-def _encode_section(specs: Sequence[Column], data: np.ndarray | Mapping[str, np.ndarray], count: int,
-                    scales: Mapping[str, float]) -> list[tuple[dict[str, Any], bytes]]:
-    """A block's section (records, poses or device limits): each column's (header entry, compressed bytes).
-
-    Kept records and columns of the codecs' own types go as one table (:mod:`protocol.recording.table_encode`,
-    ~4x fewer NumPy calls); anything else column by column (:func:`_encode`), the same bytes either way.
-    """
-    if count:
-        names, codecs = [c.name for c in specs], [c.codec for c in specs]
-        if isinstance(data, np.ndarray):
-            words = record_words(data, codecs) if data.dtype.names == tuple(names) else None
-        else:
-            words = column_words(data, names, codecs)
-        if words is not None:
-            return encode_table(words, names, codecs, scales, _LEVEL)
-    return [_encode(np.asarray(data[c.name]) if count else np.empty(0), c.codec, scales.get(c.name)) for c in specs]
 
 
 def decode_block(blob: bytes) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], list[tuple[int, str, Any]]]:
@@ -399,6 +389,23 @@ class Chunk(NamedTuple):
     data: bytes  # :func:`_encode_raw`'s bytes
 
 
+@dataclass(frozen=True, slots=True)
+class BlockRow:
+    """One ``session_blocks`` row as read (:meth:`protocol.storage.StudyReader.blocks`; ``crc32`` None: written
+    before schema version 4, not verifiable)."""
+
+    session_id: int
+    segment: int
+    block: int
+    first_tick: int
+    last_tick: int
+    n_records: int
+    t_first_s: float
+    t_last_s: float
+    data: bytes
+    crc32: int | None
+
+
 @dataclass
 class BlockBuilder:
     """The open block of one segment: records and log entries appended as they come, encoded on demand.
@@ -457,29 +464,26 @@ class BlockBuilder:
             return np.empty(0, _kept_dtype())
         return _as_records(self._raw[: self._n], self._dtype)
 
-    def _cut(self, n: int) -> tuple[np.ndarray, dict[str, np.ndarray], list[tuple[int, str, Any]]]:
-        """The first ``n`` records with their log entries; keep the rest open."""
-        raw = self._raw
-        assert raw is not None and self._dtype is not None  # (n ≤ _n records were added)
-        head = _as_records(raw[:n].copy(), self._dtype)
-        rest = self._n - n
-        if rest:
-            raw[:rest] = raw[n : self._n].copy()  # (overlapping: through a copy)
-        self._n = rest
-        last_tick = int(head["tick"][-1]) if n else -1
-        poses = [p for p in self._poses if p[0] <= last_tick]
-        self._poses = [p for p in self._poses if p[0] > last_tick]
-        events = [e for e in self._events if e[0] <= last_tick]
-        self._events = [e for e in self._events if e[0] > last_tick]
-        self._chunk, self._chunked_n, self._chunked_tick = 0, 0, -(2**63)  # the next block starts unwritten
-        return head, _pose_columns(poses), events
-
     def take_full(self) -> list[tuple[int, int, np.ndarray, bytes]]:
-        """Complete blocks: (block number, first record, kept records, encoded) each."""
+        """Complete blocks, cut off the open one: (block number, first record, kept records, encoded) each."""
         out = []
         while self._n >= BLOCK_RECORDS:
-            cols, poses, events = self._cut(BLOCK_RECORDS)
-            out.append((self.block, self.records_before, cols, encode_block(cols, poses, events, self.scales)))
+            raw, dtype, n = self._raw, self._dtype, BLOCK_RECORDS
+            assert raw is not None and dtype is not None  # (n ≤ _n records were added)
+            records = np.ndarray((n,), dtype, raw[:n].copy())  # (the bytes seen as records)
+            rest = self._n - n
+            if rest:
+                raw[:rest] = raw[n : self._n].copy()  # (overlapping: through a copy)
+            self._n = rest
+            # the log entries of the block's ticks go with it, the later ones stay open
+            last_tick = int(records["tick"][-1])
+            poses = [p for p in self._poses if p[0] <= last_tick]
+            self._poses = [p for p in self._poses if p[0] > last_tick]
+            events = [e for e in self._events if e[0] <= last_tick]
+            self._events = [e for e in self._events if e[0] > last_tick]
+            self._chunk, self._chunked_n, self._chunked_tick = 0, 0, -(2**63)  # the next block starts unwritten
+            out.append((self.block, self.records_before, records,
+                        encode_block(records, _pose_columns(poses), events, self.scales)))
             self.block += 1
             self.records_before += BLOCK_RECORDS
         return out

@@ -18,7 +18,6 @@ refuses to append to a damaged session).
 
 from __future__ import annotations
 
-import math
 import zlib
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
@@ -26,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from protocol.recording.codec import COLUMNS, decode_block, decode_columns
+from protocol.recording.codec import COLUMNS, BlockRow, decode_block, decode_columns
 
 if TYPE_CHECKING:
     from protocol.storage.reader import StudyReader
@@ -41,22 +40,6 @@ __all__ = [
     "reader_of",
     "recording_damage",
 ]
-
-
-@dataclass(frozen=True, slots=True)
-class BlockRow:
-    """One ``session_blocks`` row as read (``crc32`` None: written before schema version 4, not verifiable)."""
-
-    session_id: int
-    segment: int
-    block: int
-    first_tick: int
-    last_tick: int
-    n_records: int
-    t_first_s: float
-    t_last_s: float
-    data: bytes
-    crc32: int | None
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,10 +101,7 @@ def block_rows(source: Any, session_id: int | None = None, segment: int | None =
     A version-3 file read as it is has no ``crc32`` (its blocks read as not verifiable); a column a table
     lacks reads as NULL (NaN times).  ``arm``: another arm's blocks than the task arm's.
     """
-    for r in reader_of(source).blocks(session_id, segment, ticks, arm):
-        yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
-                       math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
-                       bytes(r[6]), None if r[9] is None else int(r[9]))
+    return reader_of(source).blocks(session_id, segment, ticks, arm)  # (its rows go straight to the caller)
 
 
 def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: bool = False) -> str:

@@ -60,14 +60,16 @@ def column_words(columns: Mapping[str, np.ndarray], names: Sequence[str],
     return out
 
 
-def encode_table(words: npt.NDArray[np.int64], names: Sequence[str], codecs: Sequence[str],
-                 scales: Mapping[str, Any], level: int) -> list[tuple[dict[str, Any], bytes]]:
-    """Each column's (header entry, compressed bytes), as the column-by-column encoder makes them.
+def encode_table(data: np.ndarray | Mapping[str, np.ndarray], names: Sequence[str], codecs: Sequence[str],
+                 scales: Mapping[str, Any], level: int) -> list[tuple[dict[str, Any], bytes]] | None:
+    """Each column's (header entry, compressed bytes), as the column-by-column encoder makes them; None when the
+    columns cannot be read as 64-bit words as they lie (the caller then encodes column by column).
 
     Parameters
     ----------
-    words
-        The columns' values as 64-bit words, one row a column (:func:`record_words`, :func:`column_words`).
+    data
+        Records with a field per column, in order (:func:`record_words`), or the columns by name
+        (:func:`column_words`).
     names, codecs
         Each column's name and declared codec (``"int"``, ``"small"``, ``"counts"``, ``"float"``, ``"smooth"``).
     scales
@@ -76,6 +78,12 @@ def encode_table(words: npt.NDArray[np.int64], names: Sequence[str], codecs: Seq
     level
         zlib's level.
     """
+    if isinstance(data, np.ndarray):
+        words = record_words(data, codecs) if data.dtype.names == tuple(names) else None
+    else:
+        words = column_words(data, names, codecs)
+    if words is None:
+        return None
     k = len(words)
     final = list(codecs)  # each column's codec as written (a column its declared one cannot keep falls back)
     entries: list[dict[str, Any]] = [{} for _ in range(k)]
@@ -105,9 +113,9 @@ def encode_table(words: npt.NDArray[np.int64], names: Sequence[str], codecs: Seq
     out = []
     for j, codec in enumerate(final):
         entries[j].setdefault("codec", codec)
-        data = as_int32[j] if codec == "small" else planes[j]
-        key = (codec == "small", len(data.T), int(table[j, 0]), int(table[j, -1]), level) if flat[j] else None
-        out.append((entries[j], _compress(data, level, key)))
+        deflated = as_int32[j] if codec == "small" else planes[j]
+        key = (codec == "small", len(deflated.T), int(table[j, 0]), int(table[j, -1]), level) if flat[j] else None
+        out.append((entries[j], _compress(deflated, level, key)))
     return out
 
 

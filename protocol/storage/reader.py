@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 import os
 import sqlite3
 import zlib
@@ -25,7 +26,7 @@ from types import TracebackType
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from protocol.recording.codec import join_chunks
+from protocol.recording.codec import BlockRow, join_chunks
 from protocol.records import TrialRecord
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
@@ -355,13 +356,13 @@ class StudyReader:
         return None if row is None else (float(row[0]), int(row[1]), str(row[2]))
 
     def blocks(self, session_id: int | None = None, segment: int | None = None,
-               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterator[tuple[Any, ...]]:
+               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterator[BlockRow]:
         """Recorded blocks (of a session, a segment, those overlapping ticks ``(first, last)``), in order.
 
-        Each is ``(session_id, segment, block, first_tick, last_tick, n_records, data, t_first_s, t_last_s,
-        crc32)``; a column the file lacks (``crc32`` before version 4) reads as None.  A block a killed run left
-        open is read from its chunks (``session_chunks``), joined into one (:func:`protocol.recording.join_chunks`).
-        ``arm``: another arm's blocks than the task arm's (:meth:`arms`).
+        A column the file lacks reads as missing (``crc32`` before version 4: None, the block not verifiable;
+        the times: NaN).  A block a killed run left open is read from its chunks (``session_chunks``), joined
+        into one (:func:`protocol.recording.join_chunks`).  ``arm``: another arm's blocks than the task arm's
+        (:meth:`arms`).
         """
         if arm and not has_table(self.conn, "arm_blocks"):
             return
@@ -373,10 +374,10 @@ class StudyReader:
             f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM {table} "
             f"{where} ORDER BY session_id, segment, block", args)
         open_blocks = self._open_blocks(session_id, segment, ticks, arm)
-        if not open_blocks:
-            yield from rows
-            return
-        yield from heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2]))
+        for r in heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2])) if open_blocks else rows:
+            yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
+                           math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
+                           bytes(r[6]), None if r[9] is None else int(r[9]))
 
     def _open_blocks(self, session_id: int | None, segment: int | None,
                      ticks: tuple[int, int] | None, arm: str = "") -> list[tuple[Any, ...]]:

@@ -141,8 +141,7 @@ def _drive(
                 loop.run_ticks(BLOCK_TICKS)
             else:
                 time.sleep(0.02)
-            block = driver.take()
-            driver.feed(runner, block, trigger)
+            block = driver.feed(runner, trigger=trigger)
             n = len(block.rows)
             progress.study_time_s += n * 1e-3
             now = time.monotonic()

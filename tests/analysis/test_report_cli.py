@@ -19,8 +19,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
+from analysis.codebook import STATS_CSV_COLUMNS
 from analysis.figures import peak_downsample, significance_mark
-from analysis.report_tables import STATS_CSV_COLUMNS, TRIALS_CSV_COLUMNS
+from analysis.report_tables import TRIALS_CSV_COLUMNS
 from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
