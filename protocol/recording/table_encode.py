@@ -114,31 +114,24 @@ def encode_table(data: np.ndarray | Mapping[str, np.ndarray], names: Sequence[st
     for j, codec in enumerate(final):
         entries[j].setdefault("codec", codec)
         deflated = as_int32[j] if codec == "small" else planes[j]
-        key = (codec == "small", len(deflated.T), int(table[j, 0]), int(table[j, -1]), level) if flat[j] else None
-        out.append((entries[j], _compress(deflated, level, key)))
+        if not flat[j]:
+            out.append((entries[j], zlib.compress(deflated.data, level)))
+            continue
+        # deflate is deterministic: an input deflated before gives the bytes it gave then (~10 µs an input saved);
+        # the key is all its bytes depend on (int32 bytes, else byte planes; values; first value; the others; level)
+        key = (codec == "small", len(deflated.T), int(table[j, 0]), int(table[j, -1]), level)
+        got = _FLAT.get(key)
+        if got is None:
+            if len(_FLAT) >= _FLAT_MAX:
+                _FLAT.clear()
+            got = _FLAT[key] = zlib.compress(deflated.data, level)
+        out.append((entries[j], got))
     return out
 
 
-#: Deflated inputs of one value after the first (:func:`_compress`): the input's key -> its deflated bytes.
+#: Deflated inputs of one value after the first (:func:`encode_table`): the input's key -> its deflated bytes.
 _FLAT: dict[tuple[bool, int, int, int, int], bytes] = {}
 _FLAT_MAX = 1024  # keys kept (a key is a few dozen bytes, its value a few dozen more)
-
-
-def _compress(data: npt.NDArray[Any], level: int, key: tuple[bool, int, int, int, int] | None) -> bytes:
-    """``zlib.compress(data, level)``, from the inputs already deflated when ``key`` says which input it is.
-
-    ``key``: (int32 bytes, else byte planes; values; first value; every other value; level) -- all the input's
-    bytes depend on.  Deflate is deterministic, so a stored result is the bytes it would make again (~10 µs an
-    input saved).
-    """
-    if key is None:
-        return zlib.compress(data.data, level)
-    got = _FLAT.get(key)
-    if got is None:
-        if len(_FLAT) >= _FLAT_MAX:
-            _FLAT.clear()
-        got = _FLAT[key] = zlib.compress(data.data, level)
-    return got
 
 
 def _byte_planes(table: npt.NDArray[np.int64]) -> npt.NDArray[np.uint8]:
