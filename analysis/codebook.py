@@ -459,12 +459,14 @@ def export(frame: pd.DataFrame, file: str) -> pd.DataFrame:
     """``frame`` as ``file`` is written: exported names (also as values of ``metric``) and rounded numbers.
 
     Trial indices become 1-based trial numbers; a tests' file (``stats.csv``, ``stats_by_target.csv``, tables of
-    :func:`analysis.stats.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS` first.
+    :func:`analysis.stats.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS` first (after
+    ``target_label``, in a table by target).
     """
     out = frame.rename(columns=_RENAMED)
     if file in _STATS:
         out.insert(1, "n", out["n_used"])
-        out = out[[*STATS_CSV_COLUMNS, *(c for c in out.columns if c not in STATS_CSV_COLUMNS)]]
+        first = ["target_label", *STATS_CSV_COLUMNS] if "target_label" in out.columns else list(STATS_CSV_COLUMNS)
+        out = out[[*first, *(c for c in out.columns if c not in first)]]
     if "trial_index" in frame.columns:
         out["trial_number"] = frame["trial_index"].astype(np.int64) + 1
     if "metric" in out.columns:

@@ -73,8 +73,7 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         if c.startswith("n_"):
             wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
     st = codebook.export(stats, "stats.csv")
-    st_t = codebook.export(stats_by_target.drop(columns="target_label"), "stats_by_target.csv")
-    st_t.insert(0, "target_label", stats_by_target["target_label"].to_numpy())
+    st_t = codebook.export(stats_by_target, "stats_by_target.csv")
     sess = study.sessions.copy()
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)

@@ -19,7 +19,7 @@ refuses to append to a damaged session).
 from __future__ import annotations
 
 import zlib
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
@@ -94,7 +94,7 @@ def reader_of(source: Any) -> StudyReader:
 
 
 def block_rows(source: Any, session_id: int | None = None, segment: int | None = None,
-               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterable[BlockRow]:
+               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterator[BlockRow]:
     """``session_blocks`` rows (of a session, a segment, those overlapping ticks ``(first, last)``), by session,
     segment and block; ``source`` is a reader, a ``StudyDatabase`` or a connection (:func:`reader_of`).
 
