@@ -88,10 +88,12 @@ def _nanmean(values: list[float]) -> float:
     return float(np.nanmean(values)) if not all(math.isnan(x) for x in values) else math.nan
 
 
-def summarise_study(rows: Sequence[TrialRow], max_trial_s: float = 12.0) -> dict[str, Any]:
+def summarise_study(rows: Sequence[TrialRow], max_trial_s: float = 12.0,
+                    keys: Sequence[str] = SUMMARY_KEYS) -> dict[str, Any]:
     """Per participant × mode aggregates (science.md §6), group means, changes and Wilcoxon p.
 
-    Returns ``{"n_participants": n, key: {"off", "on", "change", "p", "n_pairs"} for key in SUMMARY_KEYS}``;
+    Returns ``{"n_participants": n, key: {"off", "on", "change", "p", "n_pairs"} for key in keys}``
+    (``keys``: some of :data:`SUMMARY_KEYS`; a test with ties is an exact permutation test, ~0.1 s);
     ``change`` is ON/OFF − 1 (NaN when OFF is 0); a mode a participant has no trials of counts as NaN.
     """
     parts = sorted({r.participant for r in rows})
@@ -104,7 +106,7 @@ def summarise_study(rows: Sequence[TrialRow], max_trial_s: float = 12.0) -> dict
             for k in SUMMARY_KEYS:
                 per[mode][k].append(vals[k])
     out: dict[str, Any] = {"n_participants": len(parts)}
-    for key in SUMMARY_KEYS:
+    for key in keys:
         off, on = per["off"][key], per["on"][key]
         m_off, m_on = _nanmean(off), _nanmean(on)
         out[key] = {
