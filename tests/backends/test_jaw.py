@@ -9,21 +9,12 @@ import pytest
 from fake_jaw import INO, PROTOCOL_LITERALS, C, JawFirmware, PtyJaw
 from hypothesis import given
 from hypothesis import strategies as st
+from waits import until
 
 from pipeline.backends.jaw import PROTOCOL_VERSION, JawFault, SerialJawActuator
 from pipeline.devices.interfaces import JawActuator
 
-WAIT_S = 2.0
-
-
-def wait_until(cond, timeout_s: float = WAIT_S) -> bool:
-    """Poll a condition the reader thread will make true (bounded socket-style wait)."""
-    deadline = time.monotonic() + timeout_s
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.001)
-    return True
+WAIT_S = 2.0  # the jaw's ready timeout and every bounded wait
 
 
 def test_handshake_and_commands() -> None:
@@ -72,16 +63,16 @@ def test_buttons_short_press_steps_long_press_moves_continuously() -> None:
         try:
             # short press: one step on the (debounced) rising edge, nothing more
             assert fake.press("open", 100) == ["POS 1150"]
-            assert wait_until(lambda: jaw.status.button_moves == 1) and jaw.status.pos_us == 1150
+            assert until(lambda: jaw.status.button_moves == 1) and jaw.status.pos_us == 1150
             # 600 ms hold: the step at t=20 ms after the press, continuous from > 300 ms,
             # one 15 µs increment every 20 ms until the release is debounced
             out = fake.press("open", 600)
             assert out == ["POS 1200"] + [f"POS {1200 + 15 * k}" for k in range(1, 15)]
-            assert wait_until(lambda: jaw.status.button_moves == 16) and jaw.status.pos_us == 1410
+            assert until(lambda: jaw.status.button_moves == 16) and jaw.status.pos_us == 1410
             # hold "close" long enough to reach the closed limit: the firmware stops there
             out = fake.press("close", 2000)
             assert out[-1] == "POS 1100 LIMIT" and all(int(x.split()[1]) >= 1100 for x in out)
-            assert wait_until(lambda: jaw.status.at_limit) and jaw.status.pos_us == 1100
+            assert until(lambda: jaw.status.at_limit) and jaw.status.pos_us == 1100
         finally:
             jaw.close()
 
@@ -92,7 +83,7 @@ def test_port_disappearing_is_a_visible_fault() -> None:
         try:
             jaw.open_jaw()
             fake.unplug()
-            assert wait_until(lambda: jaw.status.fault != "")
+            assert until(lambda: jaw.status.fault != "")
             assert jaw.status.fault.startswith(f"serial port {fake.path} lost:")
             with pytest.raises(JawFault, match=r"jaw actuator is in fault: serial port .* lost: .*; reconnect it"):
                 jaw.set_position(0.2)

@@ -8,7 +8,6 @@ over :class:`fake_multi_hd.FakeMultiHD` (libHD's current-device semantics), put 
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from typing import Any
@@ -17,6 +16,7 @@ import pytest
 from fake_multi_hd import FakeMultiHD, FakeTouch
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from waits import until
 
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.touch import TouchHapticDevice, TouchScheduler
@@ -33,14 +33,6 @@ from pipeline.settings.hardware import hardware_from_dict
 
 ARMS = ("right", "left")
 COUNTS = {"right": (0, 0, 1_000_000, 0, 0, 0), "left": (0, 0, 2_000_000, 0, 0, 0)}  # 1 N and 2 N along z
-
-
-def _until(pred: Any, timeout_s: float = 2.0) -> bool:
-    """Bounded wait for what a fake's own thread makes true (the backends run in real time)."""
-    deadline = time.monotonic() + timeout_s
-    while not pred() and time.monotonic() < deadline:
-        time.sleep(0.002)
-    return bool(pred())
 
 
 @pytest.fixture
@@ -94,7 +86,7 @@ def test_two_arms_open_by_name_into_one_scheduler_and_close(fakes: Any, touches:
         rig.close()
     assert touches.calls == ["start", "stop", "close Right Touch", "close Left Touch"]
     for box, ur in fakes.values():
-        assert _until(lambda b=box: [r[1] for r in b.requests] == [2, 0])
+        assert until(lambda b=box: [r[1] for r in b.requests] == [2, 0])
         assert ur.wait_for("DISCONNECTED")
 
 
@@ -109,7 +101,7 @@ def test_a_failing_device_of_the_second_arm_closes_the_first_arms_and_names_the_
     assert "\n" not in msg and opened[-1] == "arm 'left': haptic device"
     assert touches.calls == ["close Right Touch"] and touches.plugged["Right Touch"].closed  # never started
     for box, ur in fakes.values():
-        assert _until(lambda b=box: [r[1] for r in b.requests] == [2, 0])
+        assert until(lambda b=box: [r[1] for r in b.requests] == [2, 0])
         assert ur.wait_for("DISCONNECTED")
 
 

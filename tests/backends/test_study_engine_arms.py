@@ -9,7 +9,6 @@ the boxes streaming at 1 kHz).
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Iterator
 from contextlib import ExitStack
 from pathlib import Path
@@ -20,6 +19,7 @@ import pytest
 from fake_multi_hd import FakeMultiHD, FakeTouch
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
+from waits import until
 
 from pipeline.backends.touch import TouchScheduler
 from pipeline.commissioning.payload_identification import recommended_pose_set
@@ -67,11 +67,8 @@ def _hardware(tmp_path: Path, fakes: dict[str, Any]) -> Path:
 
 
 def _wait(e: StudyEngine, pred: Any, timeout_s: float = 5.0) -> None:
-    end = time.monotonic() + timeout_s
-    while not pred():
-        assert time.monotonic() < end, "condition not reached"
-        e.step()
-        time.sleep(0.002)
+    """Step the engine until ``pred`` holds (its devices' fakes stream in real time)."""
+    assert until(lambda: pred() or e.step(), timeout_s), "condition not reached"
 
 
 def test_each_arm_of_the_real_rig_is_commissioned_from_its_own_devices_into_its_own_file(
