@@ -361,11 +361,17 @@ def test_a_reader_that_holds_up_the_rewrite_is_named_and_a_second_run_finishes_i
         reader.close()
 
 
-def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path) -> None:
+@pytest.mark.parametrize("blob_bytes", [None, 4096])
+def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path, monkeypatch, blob_bytes) -> None:
     """A writer frees its chunks with ``secure_delete = FAST`` (their bytes stay in free pages); the withdrawal
-    zeroes every free page before the file is rewritten, so no copy is left on the file's blocks that VACUUM drops."""
+    zeroes every free page before the file is rewritten, so no copy is left on the file's blocks that VACUUM drops.
+    Also with the zeros in many small rows (as a free list over SQLite's 1e9-byte value limit is written)."""
     from protocol.design import build_schedule, schedule_to_json
+    from protocol.storage import withdrawal
     from protocol.storage.withdrawal import erase_participant
+
+    if blob_bytes is not None:
+        monkeypatch.setattr(withdrawal, "_SCRUB_BLOB_BYTES", blob_bytes)
 
     path = tmp_path / "s.db"
     db = StudyDatabase(path)

@@ -204,8 +204,13 @@ def _scrub_free_pages(c: sqlite3.Connection) -> None:
         return
     page = int(c.execute("PRAGMA page_size").fetchone()[0])
     c.execute("CREATE TABLE withdrawal_scrub (zeros BLOB)")
-    c.execute("INSERT INTO withdrawal_scrub VALUES (zeroblob(?))", (free * page,))
+    # in blobs of at most _SCRUB_BLOB_BYTES: SQLite refuses a value over 1e9 bytes (its SQLITE_MAX_LENGTH)
+    for start in range(0, free * page, _SCRUB_BLOB_BYTES):
+        c.execute("INSERT INTO withdrawal_scrub VALUES (zeroblob(?))", (min(_SCRUB_BLOB_BYTES, free * page - start),))
     c.execute("DROP TABLE withdrawal_scrub")
+
+
+_SCRUB_BLOB_BYTES = 1 << 26  # 64 MiB a row of zeros
 
 
 #: How long emptying the write-ahead log waits for programs reading the study to finish their read.
