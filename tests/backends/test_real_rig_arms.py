@@ -9,10 +9,10 @@ over :class:`fake_multi_hd.FakeMultiHD` (libHD's current-device semantics), put 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import ExitStack
 from typing import Any
 
 import pytest
+from arm_fakes import arm_fakes
 from fake_multi_hd import FakeMultiHD, FakeTouch
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
@@ -32,16 +32,11 @@ from pipeline.runtime.watchdog import WatchdogConfig
 from pipeline.settings.hardware import hardware_from_dict
 
 ARMS = ("right", "left")
-COUNTS = {"right": (0, 0, 1_000_000, 0, 0, 0), "left": (0, 0, 2_000_000, 0, 0, 0)}  # 1 N and 2 N along z
 
 
 @pytest.fixture
 def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
-    with ExitStack() as stack:
-        out = {}
-        for i, arm in enumerate(ARMS):
-            box = stack.enter_context(FakeNetFT(counts=COUNTS[arm], host=f"127.0.0.{i + 2}"))
-            out[arm] = (box, stack.enter_context(FakeRtde()))
+    with arm_fakes() as out:
         yield out
 
 

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
-from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from arm_fakes import arm_fakes
 from fake_multi_hd import FakeMultiHD, FakeTouch
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
@@ -29,18 +29,12 @@ from study_app.engine.setup import HostConfig
 
 G = 9.80665
 MASS_KG, COM_M = 0.3, np.array([0.0, 0.01, 0.06])
-COUNTS = {"right": (0, 0, 1_000_000, 0, 0, 0), "left": (0, 0, 2_000_000, 0, 0, 0)}  # 1 N and 2 N along z
 
 
 @pytest.fixture
 def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
     """Two boxes streaming at 1 kHz (the right arm's first) and two UR controllers."""
-    with ExitStack() as stack:
-        out = {}
-        for i, arm in enumerate(COUNTS):
-            box = stack.enter_context(FakeNetFT(counts=COUNTS[arm], host=f"127.0.0.{i + 2}", rate_hz=1000,
-                                                initial_records=0))
-            out[arm] = (box, stack.enter_context(FakeRtde()))
+    with arm_fakes(rate_hz=1000, initial_records=0) as out:
         yield out
 
 
