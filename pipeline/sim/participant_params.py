@@ -135,6 +135,26 @@ noise must fall, i.e. more OFF successes or a steadier successful trial.  At the
 paper's own sizes (v2: TCT −18 %, 6/10 on seeds 100–109 and 5/10 on 0–9) the power
 is lower still: ≥ 8/10 for all four at once asks for larger effects or less trial
 noise than the paper's, so the two targets pull apart.
+Where TCT's noise comes from (v2, fit seeds 400–409, never used before; power from
+1000 drawn studies: success .97, RMSE 1.00, Max AE .90, TCT .58, all four .52): a
+successful trial's TCT has a within-participant SD of 2.05 s OFF and 2.26 s ON (1.39
+and 0.98 s between participants' means; 2.5 OFF and 5.3 ON successes each; paired
+difference −1.57 ± 1.70 s, dz −0.92, 91 of 100 pairs).  It follows the number of
+submovements in the trial (r = 0.90 in both modes, 30 participants traced): an OFF
+success comes after 0–6 visual corrections of ~1.2 s each (4.1 s with none, 10.5 s
+with four), an ON success after 1–11 felt ones of ~0.5 s.  So the spread is the
+variable number of corrections a surface-depth error and the gain leave, not the
+timing of a step.  Tried: after judging the force on target, keep still 1.2 s (the
+trial ends on success, so waiting is how a participant learns they hold it) instead
+of looking again each period: ON TCT SD 2.29 → 2.03 s, OFF unchanged (its checks are
+0.8–1.75 s apart already); 3 fit studies, not pursued.  What the target asks: with
+the paper's levels (success 0.27 → 0.54, TCT −16 % of 8.1 s) and its design, a
+Monte-Carlo of the Wilcoxon test (2000 studies per row) gives TCT power 0.51 at a
+within-participant SD of 2.1 s, 0.77 at 1.5 s, 0.92 at 1.2 s (P(≥ 8/10) 0.96) and 0.97
+at 1.0 s.  Significance in ≥ 8 of 10 studies at the paper's sizes therefore asks for
+a successful trial's TCT twice as steady as this model's (SD ≤ 1.2 s, CV ≈ 15 %), a
+number nothing in science.md gives; at 2.1 s a lab repeating the paper would find its
+TCT effect about half the time.
 Checked: the rig's random streams (sensor noise) run through a whole session,
 so a constant that changes ON trials only moves OFF figures too (an ON-only
 change: 28 of 1000 OFF trials changed outcome, the others' TCT by 0.06 s on
