@@ -37,7 +37,7 @@ from study_app.headless.sim_trials import participant_seeds, run_participant, ru
 
 __all__ = [
     "EFFECTS", "PAPER", "TrialRow", "driver_cost_us", "format_power", "format_table", "main", "participant_seeds",
-    "resampled_power", "run_participant", "run_study", "summarise_study",
+    "resampled_power", "run_participant", "run_study", "summarise_study", "tct_power_at_spread",
 ]
 
 #: The paper's results (§V-B): OFF, ON.  TCT is only given as a change (−16 %).
@@ -124,6 +124,33 @@ def resampled_power(rows: list[TrialRow], participants: int = 10, draws: int = 1
     return {k: n / draws for k, n in hits.items()}
 
 
+def tct_power_at_spread(spread_s: float, draws: int = 2000, participants: int = 10, seed: int = 0) -> float:
+    """TCT's power (successful trials, the bench's test) in a study at the paper's sizes, when a successful trial's
+    completion time varies by ``spread_s`` (SD, s) within a participant.
+
+    Each participant has 10 trials a mode (the paper's design), succeeds in each with the paper's rates (0.27 OFF,
+    0.54 ON), and completes a success in ``N(m, spread_s)`` s clipped to the 1 s hold and the 12 s cap, with ``m``
+    drawn per participant (8.1 s ± 0.5 s OFF, the model's mean) and 16 % less ON (the paper's change).  What is left
+    free is the spread: the one number this answers for is how steady a successful trial must be for the test to find
+    the paper's TCT effect.
+    """
+    if not (math.isfinite(spread_s) and spread_s > 0):
+        raise ValueError(f"TCT spread = {spread_s!r}: must be a finite number of seconds > 0")
+    rng = np.random.default_rng(seed)
+    hits = 0
+    for _ in range(draws):
+        rows = []
+        for j in range(1, participants + 1):
+            centre_off_s = 8.1 + 0.5 * float(rng.standard_normal())
+            for mode, rate, centre_s in (("off", 0.27, centre_off_s), ("on", 0.54, centre_off_s * 0.84)):
+                for i in range(10):
+                    won = bool(rng.random() < rate)
+                    tct = min(12.0, max(1.0, centre_s + spread_s * float(rng.standard_normal()))) if won else None
+                    rows.append(TrialRow(0, j, i, "GENTLE", mode, won, tct, 1.0, 1.0, 1.0))
+        hits += bool(summarise_study(rows, keys=("tct_s",))["tct_s"]["p"] < 0.05)
+    return hits / draws
+
+
 def _at_least(k: int, n: int, p: float) -> float:
     """P(at least ``k`` of ``n`` studies significant) at power ``p``."""
     return sum(math.comb(n, i) * p**i * (1.0 - p) ** (n - i) for i in range(k, n + 1))
@@ -182,6 +209,22 @@ def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
     return best / n * 1e6
 
 
+def _print_spread(ap: argparse.ArgumentParser, text: str, participants: int) -> int:
+    try:
+        spreads = [float(x) for x in text.split(",")]
+        if not all(math.isfinite(x) and x > 0 for x in spreads):
+            raise ValueError
+    except ValueError:
+        ap.error(f"--tct-spread: {text!r} is not allowed; give seconds > 0, comma-separated (e.g. 2.1,1.5,1.2)")
+    print(f"TCT over successful trials at the paper's sizes (success 0.27 -> 0.54, TCT -16 % of 8.1 s), "
+          f"{participants} participants x 10 trials a mode, 2000 simulated studies each:")
+    for sd in spreads:
+        power = tct_power_at_spread(sd, participants=participants)
+        print(f"  within-participant SD {sd:4.2f} s   power {power:.2f}   "
+              f"P(significant in >= 8 of 10 studies) {_at_least(8, 10, power):.2f}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
@@ -193,9 +236,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true", help="only the final table")
     ap.add_argument("--power", type=int, default=0, metavar="DRAWS",
                     help="also each effect's power: DRAWS studies drawn from every participant run (e.g. 2000)")
+    ap.add_argument("--tct-spread", metavar="SD,...", default="",
+                    help="instead: TCT's power at the paper's sizes for each within-participant SD of a successful "
+                         "trial's completion time, s (e.g. 2.1,1.5,1.2)")
     args = ap.parse_args(argv)
     if args.power < 0:
         ap.error(f"--power: {args.power} is not allowed; give the number of studies to draw (0: no power table)")
+    if args.tct_spread:
+        return _print_spread(ap, args.tct_spread, args.participants)
     summaries = []
     every: list[TrialRow] = []
     t_total = time.perf_counter()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from analysis.sim_study import TrialRow
-from bench.participant_calibration import EFFECTS, format_power, main, resampled_power
+from bench.participant_calibration import EFFECTS, format_power, main, resampled_power, tct_power_at_spread
 
 
 def _rows(studies: int, participants: int, effect: bool, seed: int = 0) -> list[TrialRow]:
@@ -56,3 +56,26 @@ def test_a_negative_number_of_draws_is_refused_in_one_line(capsys: pytest.Captur
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--power: -5 is not allowed" in err
+
+
+def test_tct_power_falls_as_a_successful_trial_varies_more() -> None:
+    steady = tct_power_at_spread(0.3, draws=40)
+    noisy = tct_power_at_spread(6.0, draws=40)
+    assert steady >= 0.9  # 16 % of 8.1 s is 1.3 s: four times this spread
+    assert noisy <= 0.3
+    assert tct_power_at_spread(0.3, draws=40) == steady  # seeded
+
+
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), float("inf")])
+def test_a_spread_that_is_no_time_is_refused(bad: float) -> None:
+    with pytest.raises(ValueError, match="TCT spread"):
+        tct_power_at_spread(bad, draws=1)
+
+
+@pytest.mark.parametrize("bad", ["0", "1.2,x", "nan", "-1"])
+def test_the_spread_option_refuses_bad_values_in_one_line(bad: str, capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--tct-spread", bad])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert f"--tct-spread: {bad!r} is not allowed" in err

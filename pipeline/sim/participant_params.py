@@ -148,10 +148,10 @@ timing of a step.  Tried: after judging the force on target, keep still 1.2 s (t
 trial ends on success, so waiting is how a participant learns they hold it) instead
 of looking again each period: ON TCT SD 2.29 → 2.03 s, OFF unchanged (its checks are
 0.8–1.75 s apart already); 3 fit studies, not pursued.  What the target asks: with
-the paper's levels (success 0.27 → 0.54, TCT −16 % of 8.1 s) and its design, a
-Monte-Carlo of the Wilcoxon test (2000 studies per row) gives TCT power 0.51 at a
-within-participant SD of 2.1 s, 0.77 at 1.5 s, 0.92 at 1.2 s (P(≥ 8/10) 0.96) and 0.97
-at 1.0 s.  Significance in ≥ 8 of 10 studies at the paper's sizes therefore asks for
+the paper's levels (success 0.27 → 0.54, TCT −16 % of 8.1 s) and its design,
+the bench's ``--tct-spread 2.1,1.5,1.2,1.0`` (2000 simulated studies each, the bench's
+test) gives TCT power 0.50 at a within-participant SD of 2.1 s, 0.78 at 1.5 s, 0.92 at
+1.2 s (P(≥ 8/10) 0.96) and 0.97 at 1.0 s.  Significance in ≥ 8 of 10 studies at the paper's sizes therefore asks for
 a successful trial's TCT twice as steady as this model's (SD ≤ 1.2 s, CV ≈ 15 %), a
 number nothing in science.md gives; at 2.1 s a lab repeating the paper would find its
 TCT effect about half the time.
