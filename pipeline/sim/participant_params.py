@@ -147,7 +147,10 @@ variable number of corrections a surface-depth error and the gain leave, not the
 timing of a step.  Tried: after judging the force on target, keep still 1.2 s (the
 trial ends on success, so waiting is how a participant learns they hold it) instead
 of looking again each period: ON TCT SD 2.29 → 2.03 s, OFF unchanged (its checks are
-0.8–1.75 s apart already); 3 fit studies, not pursued.  What the target asks: with
+0.8–1.75 s apart already); 3 fit studies.  With it, OFF checks at science.md's × 1.5
+instead of × 4 (so a success would need less time per correction) and the approach
+× 2.5 to keep the TCT gap: OFF success 0.26 → 0.20 and the OFF spread unchanged (2.03
+s; faster visual checks act on looks that do not yet show the last step); not pursued.  What the target asks: with
 the paper's levels (success 0.27 → 0.54, TCT −16 % of 8.1 s) and its design,
 the bench's ``--tct-spread 2.1,1.5,1.2,1.0`` (2000 simulated studies each, the bench's
 test) gives TCT power 0.50 at a within-participant SD of 2.1 s, 0.78 at 1.5 s, 0.92 at
