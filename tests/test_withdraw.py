@@ -219,6 +219,19 @@ def test_a_withdrawn_code_is_not_run_again(withdrawn, tmp_path) -> None:
         d.close()
 
 
+def test_the_gui_form_hears_of_the_withdrawal_and_refuses_the_code_before_start(withdrawn) -> None:
+    from study_app.engine.session_list import list_sessions, list_withdrawn
+    from study_app.models.setup import SetupModel
+
+    gone = list_withdrawn(withdrawn["db"])
+    assert [w["code"] for w in gone] == [GONE] and gone[0]["withdrawn_at"][:4].isdigit()
+    form = SetupModel()
+    form.update(db_path=str(withdrawn["db"]))
+    form.set_known(list_sessions(withdrawn["db"]), gone)
+    form.update(code=GONE)
+    assert form.errors["code"].startswith(f"{GONE} withdrew from the study (") and not form.valid
+
+
 # -- refusals: nothing touched --------------------------------------------------------------------------------
 @pytest.fixture
 def copy(study, tmp_path) -> Path:

@@ -230,7 +230,14 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             existing = self.sessions_of(code, kind)
             if existing:
                 s = existing[-1]
-                hint = "resume it with --resume " + code if s.status == "running" else "use a new participant code"
+                writer = self.sessions_being_written().get(s.session_id) if s.status == "running" else None
+                if writer is not None:  # live in another window or process: one writer per session
+                    hint = f"it is being run right now by {writer}; wait for it to end there"
+                elif s.status == "running":
+                    hint = (f"it was interrupted: resume it (haptic-study run --resume {code}, or Resume selected in "
+                            "the GUI)")
+                else:
+                    hint = "use a new participant code"
                 raise StorageError(
                     f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
                     f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"

@@ -52,7 +52,7 @@ from study_app.engine import messages as m
 from study_app.engine.commissioning import Commissioning
 from study_app.engine.jaws import arm_jaws, other_arm_jaw_events
 from study_app.engine.period_stats import PeriodStats
-from study_app.engine.session_list import list_sessions
+from study_app.engine.session_list import list_sessions, list_withdrawn
 from study_app.engine.sessions import EngineSessions, list_resumable
 from study_app.engine.setup import HostConfig, SwitchableDriver, build_engine
 
@@ -395,7 +395,8 @@ class StudyEngine:
         return {
             m.StartSession: s.start, m.ResumeSession: s.resume, m.InjectFault: s.inject_fault,
             m.ListSessions: lambda cmd: self.publish(m.SessionsListed(
-                cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path, check=False))),
+                cmd.db_path, list_resumable(cmd.db_path), list_sessions(cmd.db_path, check=False),
+                list_withdrawn(cmd.db_path))),
             m.Pause: self._session_command, m.Resume: self._session_command, m.AbortTrial: self._session_command,
             m.AbortSession: self._session_command,
             m.ResetFaults: self._reset_faults,

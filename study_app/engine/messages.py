@@ -319,12 +319,14 @@ class SessionsListed:
     (the schedule with its re-runs).
 
     ``known``: every session of the database (:func:`study_app.engine.session_list.list_sessions`), for the setup
-    form's checks (a code or participant number already used).
+    form's checks (a code or participant number already used); ``withdrawn``: who withdrew (``code``,
+    ``withdrawn_at``; :func:`study_app.engine.session_list.list_withdrawn`), whose codes are not used again.
     """
 
     db_path: str
     sessions: list[dict[str, Any]]
     known: list[dict[str, Any]] = field(default_factory=list)
+    withdrawn: list[dict[str, str]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)

@@ -15,8 +15,9 @@ from typing import Any
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.labels import plural
 from protocol.storage import StorageError, StudyDatabase, StudyReader
+from protocol.storage.withdrawal import withdrawals
 
-__all__ = ["format_sessions", "list_sessions", "next_participant_number"]
+__all__ = ["format_sessions", "list_sessions", "list_withdrawn", "next_participant_number"]
 
 def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> list[dict[str, Any]]:
     """Every session of a study database, oldest first; empty when the file does not exist yet.
@@ -66,6 +67,18 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "pipeline": pipeline.get(int(sid), {}),
         })
     return out
+
+
+def list_withdrawn(db_path: str | os.PathLike[str]) -> list[dict[str, str]]:
+    """The participants who withdrew from a study (``code``, ``withdrawn_at``), oldest first; their codes are not
+    used again.  Empty when the file does not exist yet."""
+    if not os.path.exists(db_path):
+        return []
+    db = StudyDatabase(db_path, readonly=True, check=False)
+    try:
+        return [{"code": w.code, "withdrawn_at": w.withdrawn_at} for w in withdrawals(db.conn)]
+    finally:
+        db.close()
 
 
 def _pipeline_settings(config_json: str | None) -> dict[str, float]:

@@ -395,11 +395,18 @@ class QtHealthPanel(QWidget):
             self.log_follow.keep(lambda: self.log.setPlainText(log))
 
 
+#: The line a Space typed into a setup field shows instead of starting (or becoming part of the code).
+SPACE_WHILE_TYPING = "A code or number has no spaces: press Enter to start (Space starts once you leave the field)."
+
+
 class QtSetupPanel(QGroupBox):
     """Session setup form and the list of interrupted sessions to resume.
 
-    Space in the code, number, kind or seed field starts (``start_requested``), as everywhere else in the
-    window: a code has no spaces, so a Space typed there can only mean Start.
+    Enter in the code, number, kind or seed field starts (``start_requested``), as a form is submitted; Space
+    starts from the kind field as everywhere else in the window, but not while typing: a Space typed into a code
+    ("P 07") would start the session for "P", so there it is refused with a line saying how to start.  A number
+    field whose text is no number it takes (empty, "0") is an error until it is one again, so Start never uses a
+    value that is not on screen.
     """
 
     start_requested = Signal()
@@ -465,6 +472,10 @@ class QtSetupPanel(QGroupBox):
                                "number, or the next free one) until you change it")
         for w in (self.code, self.number, self.kind, self.seed):
             w.installEventFilter(self)
+        for name, spin in (("participant_number", self.number), ("seed", self.seed)):
+            # typed text, and a value set (Qt then rewrites the text without a signal) or restored on leaving
+            for signal in (spin.lineEdit().textChanged, spin.valueChanged, spin.editingFinished):
+                signal.connect(lambda *_a, n=name, b=spin: self._check_entry(n, b))
         # the experimenter's choice only (textActivated): the form's own proposal of the next step is set from the model
         self.kind.textActivated.connect(lambda k: setup.update(kind=k))
         self.kind.setToolTip("Training (practice with the live force gauge) or the experiment. The form proposes "
@@ -525,11 +536,23 @@ class QtSetupPanel(QGroupBox):
             "gets its first session, read-only after that")
 
     def eventFilter(self, obj, event) -> bool:  # Qt's name
-        if (event.type() == QEvent.Type.KeyPress and event.key() == Qt.Key.Key_Space
-                and not event.modifiers() & ~Qt.KeyboardModifier.KeypadModifier):
+        if event.type() != QEvent.Type.KeyPress or event.modifiers() & ~Qt.KeyboardModifier.KeypadModifier:
+            return super().eventFilter(obj, event)
+        key = event.key()
+        if key in (Qt.Key.Key_Return, Qt.Key.Key_Enter) or (key == Qt.Key.Key_Space and obj is self.kind):
             self.start_requested.emit()
             return True
+        if key == Qt.Key.Key_Space:  # typing: not part of a code or a number, and not Start either
+            self.hint.setText(SPACE_WHILE_TYPING)
+            self.hint.setVisible(True)
+            return True
         return super().eventFilter(obj, event)
+
+    def _check_entry(self, name: str, spin: QSpinBox) -> None:
+        """Tell the form when a number field's text is no value it takes (Qt would keep the last one that was)."""
+        ok = spin.hasAcceptableInput()
+        self.setup.set_entry_problem(name, spin.text(), None if ok else
+                                     f"must be a whole number from {spin.minimum()} to {spin.maximum()}")
 
     def _on_resumable(self) -> None:
         # an empty list takes one line, not the list's height: the column must fit a 768-px screen

@@ -137,7 +137,7 @@ class AppModel:
             self.notify("info", ev.message, "StartSession")
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
-            self.setup.set_known(ev.known)
+            self.setup.set_known(ev.known, ev.withdrawn)
         elif isinstance(ev, m.CommandRefused):
             # a late confirmation the engine refused changed nothing: say so, not as an error
             moot = ev.command in ("AbortTrial", "AbortSession") and "had already ended" in ev.message

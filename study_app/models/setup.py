@@ -26,7 +26,15 @@ from typing import Any
 
 from protocol.config import ProtocolConfig, ProtocolError, load_protocol
 from protocol.storage import StorageError, validate_code
-from protocol.study_rules import StoredSession, next_kind, requires_training, seed_refusal, study_seed, training_refusal
+from protocol.study_rules import (
+    StoredSession,
+    next_kind,
+    requires_training,
+    seed_refusal,
+    study_seed,
+    training_refusal,
+    training_state,
+)
 from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
@@ -35,8 +43,12 @@ from study_app.models.session import TrialCount
 __all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article"]
 
 KINDS = ("training", "experiment")
+_FIELD_NAMES = {"participant_number": "participant number", "seed": "seed"}
 #: What the form adds to a training refusal: the way past it, and what it costs.
 TRAINING_OVERRIDE_HINT = "Run the training first, or Start without training… with a reason (stored as a deviation)"
+#: The same, when the training ended early: the database keeps one training session per participant.
+TRAINING_ENDED_HINT = ("A participant's training is not run twice (one session per kind): Start without training… "
+                       "with a reason (stored as a deviation)")
 
 
 def article(word: str) -> str:
@@ -71,6 +83,11 @@ class SetupModel:
     resumable: list[dict[str, object]] = field(default_factory=list)
     #: Every session of the database (:func:`study_app.engine.session_list.list_sessions`), as the engine listed them.
     known: list[dict[str, Any]] = field(default_factory=list)
+    #: Who withdrew (``code``, ``withdrawn_at``): a withdrawn code is not used again.
+    withdrawn: list[dict[str, str]] = field(default_factory=list)
+    #: Field → the text typed into it when that text is no value the field takes (an empty or partial number):
+    #: the form would otherwise start with the last value the field took, which is no longer on screen.
+    entry_problems: dict[str, str] = field(default_factory=dict)
     #: The number follows the suggestion until the experimenter sets it.
     number_suggested: bool = True
     #: The kind follows the participant's next step (training, then experiment) until the experimenter picks one.
@@ -173,6 +190,7 @@ class SetupModel:
             errors["seed"] = f"seed = {v.seed!r}: must be a whole number ≥ 0"
         if not (isinstance(v.participant_number, int) and v.participant_number >= 1):
             errors["participant_number"] = f"participant number = {v.participant_number!r}: must be a whole number ≥ 1"
+        errors.update(self.entry_problems)
         warnings: dict[str, str] = {}
         self.seed_fixed_by = study_seed(self._stored())
         why = seed_refusal(self._stored(), v.seed) if "seed" not in errors else ""
@@ -184,23 +202,43 @@ class SetupModel:
         self.changed.emit()
         return errors
 
+    def set_entry_problem(self, name: str, text: str, message: str | None) -> None:
+        """The view's field ``name`` shows ``text``, which is no value it takes (``message`` says what is allowed);
+        None: its text is a value again.  Start is refused meanwhile."""
+        if message is None:
+            if self.entry_problems.pop(name, None) is not None:
+                self.validate()
+            return
+        self.entry_problems[name] = f"{_FIELD_NAMES.get(name, name)} = {text!r}: {message}"
+        self.validate()
+
     def _check_against_database(self, errors: dict[str, str], warnings: dict[str, str]) -> None:
         v = self.values
+        gone = next((w for w in self.withdrawn if w["code"] == v.code), None)
+        if gone is not None:
+            errors["code"] = (f"{v.code} withdrew from the study ({gone['withdrawn_at'][:16].replace('T', ' ')} UTC) "
+                              "and their data were erased; a withdrawn code is not used again: enter a new code")
+            return
         same = [s for s in self.known if s["code"] == v.code and s["kind"] == v.kind
                 and s["session_id"] != self.running_session]
         if same:
             s = same[-1]
-            if s["status"] == "running":
+            if s["status"] == "running" and s.get("writer"):
+                errors["code"] = (f"{v.code}'s {v.kind} session (session {s['session_id']}) is being run right now "
+                                  f"by {s['writer']} (another window or command): one writer per session")
+            elif s["status"] == "running":
                 errors["code"] = (f"{v.code} has an interrupted {v.kind} session (session {s['session_id']}, "
                                   f"{self.count_of(s).text()}): resume it from the list below")
             else:
+                way = ("choose the experiment (Start without training… with a reason, if the training did not "
+                       "complete) or enter a new code" if v.kind == "training" else "enter a new code")
                 errors["code"] = (f"{v.code} already has {article(str(s['status']))} {s['status']} {v.kind} session "
-                                  f"(session {s['session_id']}); the database keeps one per participant: enter a new "
-                                  "code")
+                                  f"(session {s['session_id']}); the database keeps one per participant: {way}")
         elif v.kind == "experiment" and self.protocol is not None and self.running_session is None:
             why = training_refusal(self._stored(), v.code, self.protocol)
             if why:
-                errors["training"] = f"{why}. {TRAINING_OVERRIDE_HINT}."
+                ended = training_state(self._stored(), v.code)[0] == "ended"
+                errors["training"] = f"{why}. {TRAINING_ENDED_HINT if ended else TRAINING_OVERRIDE_HINT}."
         others = sorted({s["code"] for s in self.known
                          if s["participant_number"] == v.participant_number and s["code"] != v.code})
         if others:
@@ -269,10 +307,11 @@ class SetupModel:
             return self.preferred_resume
         return ids[0] if ids else None
 
-    def set_known(self, sessions: list[dict[str, Any]]) -> None:
-        """Every session of the database (listed by the engine): suggestions and checks follow it; a database
-        with sessions has its seed, and the form takes it (the view shows it read-only)."""
+    def set_known(self, sessions: list[dict[str, Any]], withdrawn: list[dict[str, str]] | None = None) -> None:
+        """Every session of the database and who withdrew (listed by the engine): suggestions and checks follow
+        them; a database with sessions has its seed, and the form takes it (the view shows it read-only)."""
         self.known = list(sessions)
+        self.withdrawn = list(withdrawn or [])
         first = study_seed(self._stored())
         if first is not None and self.values.seed != first.seed:
             self.values = replace(self.values, seed=first.seed)

@@ -16,6 +16,7 @@ from PySide6.QtWidgets import QApplication, QMessageBox
 
 from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
+from study_app.gui.widgets import SPACE_WHILE_TYPING
 
 TIMEOUT_MS = 30_000
 
@@ -64,10 +65,25 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
 
     # the experiment (the protocol does not require training: that rule is test_gui_study_rules.py's)
     w.model.setup.update(kind="experiment")
-    # the code, then Space in the code field: Start (a code has no spaces)
+    # the code, then a Space typed into it: neither part of the code nor Start ("P 11" would start "P")
     panel.code.setFocus()
-    qtbot.keyClicks(panel.code, " P11")
+    qtbot.keyClicks(panel.code, "P1")
     qtbot.keyClick(panel.code, Qt.Key.Key_Space)
+    assert panel.hint.text() == SPACE_WHILE_TYPING and panel.hint.isVisible()  # until the next change
+    qtbot.keyClicks(panel.code, "1")
+    assert panel.code.text() == "P11" and not w.model.session.running
+    # a number field showing no number it takes ("0", or empty) is an error: Start would use a value not on screen
+    panel.number.lineEdit().selectAll()
+    qtbot.keyClicks(panel.number, "0")
+    assert panel.number.text() == "0" and panel.number.value() != 0
+    assert panel.errors.text() == "participant number = '0': must be a whole number from 1 to 9999"
+    qtbot.keyClick(panel.number, Qt.Key.Key_Return)
+    assert not w.model.session.running and w.notice.text().startswith("Cannot start: participant number = '0'")
+    qtbot.keyClick(panel.number, Qt.Key.Key_Backspace)
+    qtbot.keyClicks(panel.number, "1")
+    assert panel.errors.text() == "" and panel.number.value() == 1
+    # Enter in the code field: Start, as a form is submitted
+    qtbot.keyClick(panel.code, Qt.Key.Key_Return)
     qtbot.waitUntil(lambda: w.model.session.running, timeout=TIMEOUT_MS)
     assert panel.code.text() == "P11" and w.model.session.session.code == "P11"
 

@@ -100,6 +100,43 @@ def test_setup_suggests_the_next_number_and_checks_the_entry_against_the_databas
     assert s.values.code == "" and s.values.participant_number == 6  # the next free number (P05 has 5)
 
 
+def test_setup_refuses_a_withdrawn_code_a_live_session_and_says_how_past_an_ended_training(tmp_path):
+    s = SetupModel()
+    s.update(db_path=str(tmp_path / "study.db"))
+    live = dict(known("P05", 5, status="running", sid=4), writer="process 4242 (haptic-study gui)")
+    ended = known("P02", 2, "training", status="aborted", sid=2)
+    s.set_known([ended, live], [{"code": "P03", "withdrawn_at": "2026-11-29T09:00:00+00:00"}])
+    s.update(code="P03")  # withdrew: refused before Start, as the engine would refuse it after
+    assert s.errors["code"].startswith("P03 withdrew from the study (2026-11-29 09:00 UTC)") and not s.valid
+    assert "not used again" in s.errors["code"]
+    s.update(code="P05", participant_number=5)  # another window runs it now: not "interrupted, resume it"
+    assert "is being run right now by process 4242 (haptic-study gui)" in s.errors["code"]
+    assert "resume" not in s.errors["code"]
+    # the training ended early: not "run the training first" (it cannot run twice), but the way that is left
+    s.update(code="P02", participant_number=2, kind="experiment")
+    why = s.errors["training"]
+    assert "ended aborted, not completed" in why and "Run the training first" not in why
+    assert "is not run twice" in s.errors["training"] and "Start without training…" in s.errors["training"]
+    s.update(kind="training")
+    assert "choose the experiment (Start without training…" in s.errors["code"]
+
+
+def test_setup_refuses_a_number_field_whose_text_is_no_number(tmp_path):
+    s = SetupModel()
+    s.update(db_path=str(tmp_path / "study.db"), code="P01", kind="training")
+    assert s.valid
+    s.set_entry_problem("participant_number", "0", "must be a whole number from 1 to 9999")
+    assert s.errors["participant_number"] == "participant number = '0': must be a whole number from 1 to 9999"
+    assert not s.valid
+    with pytest.raises(ValueError, match="participant number = '0'"):
+        s.start_command()  # not with the number the field took last
+    s.set_entry_problem("seed", "", "must be a whole number from 0 to 2147483647")
+    s.set_entry_problem("participant_number", "4", None)
+    assert list(s.errors) == ["seed"] and s.errors["seed"].startswith("seed = '': must be")
+    s.set_entry_problem("seed", "7", None)
+    assert s.valid
+
+
 def test_setup_refuses_to_build_a_command_when_invalid():
     s = SetupModel()
     with pytest.raises(ValueError, match="study database: choose a file"):

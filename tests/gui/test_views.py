@@ -78,8 +78,12 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     assert view.hint.text().startswith("Enter the participant's code") and view.errors.isHidden()
     started = []
     view.start_requested.connect(lambda: started.append(1))
-    qtbot.keyClicks(view.code, "P 1")  # Space in the code field is Start, never a character of the code
-    assert s.values.code == "P1" and started == [1]
+    qtbot.keyClicks(view.code, "P 1")  # Space in the code field: neither a character of the code nor Start
+    assert s.values.code == "P1" and started == []
+    qtbot.keyClick(view.code, Qt.Key.Key_Return)  # Enter is Start
+    assert started == [1]
+    qtbot.keyClick(view.kind, Qt.Key.Key_Space)  # outside the typing fields Space is Start, as in the whole window
+    assert started == [1, 1]
     view.code.setText("P-1!")
     assert view.errors.text().startswith("participant code = 'P-1!'")
     view.code.clear()

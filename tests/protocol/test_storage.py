@@ -318,6 +318,18 @@ def test_a_second_session_of_the_same_kind_is_refused_and_the_first_is_untouched
     c.close()
 
 
+def test_a_second_session_of_one_being_run_names_the_process_running_it(db):
+    from protocol.storage.leases import new_owner_token
+
+    sid = db.create_session(**_session_args(), lease_owner=new_owner_token(), command="haptic-study gui")
+    with pytest.raises(StorageError) as info:
+        db.create_session(**_session_args())
+    msg = str(info.value)
+    assert f"session {sid}, status running" in msg
+    assert f"it is being run right now by process {os.getpid()} (haptic-study gui)" in msg
+    assert "--resume" not in msg  # not interrupted: nothing to resume
+
+
 def test_a_second_session_after_the_end_asks_for_a_new_code(db):
     sid = db.create_session(**_session_args())
     db.end_session(sid, "completed", "all trials done")
