@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -138,6 +139,7 @@ class AppModel:
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
             self.setup.set_known(ev.known, ev.withdrawn)
+            self.session.listed(ev.db_path, ev.known)
         elif isinstance(ev, m.CommandRefused):
             # a late confirmation the engine refused changed nothing: say so, not as an error
             moot = ev.command in ("AbortTrial", "AbortSession") and "had already ended" in ev.message
@@ -148,6 +150,7 @@ class AppModel:
             self.clear_notice()  # news about an earlier trial: stale once the next one has ended
         elif isinstance(ev, m.SessionStarted):
             self.clear_notice()
+            self.session.db_path = os.path.abspath(self.setup.values.db_path)
             if any(s["session_id"] == ev.session_id for s in self.setup.resumable):  # it runs now: not to resume
                 self.setup.set_resumable([s for s in self.setup.resumable if s["session_id"] != ev.session_id])
             if ev.kind == "experiment" and self._training_override:
@@ -587,14 +590,10 @@ class AppModel:
     def list_sessions(self) -> None:
         """Ask the engine for the database's resumable sessions (database work stays off the GUI thread)."""
         if self.setup.values.db_path.strip():
-            import os
-
             self._send(m.ListSessions(os.path.abspath(self.setup.values.db_path)), clear=False)
 
     def resume_session(self, session_id: int) -> None:
         """Continue an interrupted session."""
-        import os
-
         stored = next((r.get("arms", []) for r in self.setup.resumable if r["session_id"] == session_id), [])
         self._send_on_arms(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)),
                            stored_arm_order(self.commissioning.arms, self.rig_kind, stored))

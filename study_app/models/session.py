@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -136,6 +137,8 @@ class SessionModel:
     #: The newest trial started, kept after it ends (the live axis keeps its target's scale between trials).
     last_trial: m.TrialStarted | None = None
     table: TrialTable = field(default_factory=TrialTable)
+    #: The database of the session shown (absolute path; "" before one started).
+    db_path: str = ""
     changed: Emitter = field(default_factory=Emitter)
 
     # -- events -------------------------------------------------------------------------------------
@@ -189,6 +192,23 @@ class SessionModel:
             self.state, self.message = "failed", ev.message
         else:
             return
+        self.changed.emit()
+
+    def listed(self, db_path: str, known: list[dict[str, Any]]) -> None:
+        """The engine listed ``db_path``'s sessions: an ended session shown from another database, or one that is
+        no longer in it (a withdrawal erased it), is shown no longer -- its trials are not this database's."""
+        if self.state != "ended" or self.session is None:
+            return
+        if db_path == self.db_path and any(s["session_id"] == self.session.session_id for s in known):
+            return
+        gone = self.session.session_id
+        self.session = self.last_trial = None
+        self.completed = self.aborted = self.reruns_run = self.designed = 0
+        self._durations_s = []
+        self.table.clear()
+        self.state = "ready"
+        self.message = (f"{os.path.basename(db_path)} open: no session running" if db_path != self.db_path else
+                        f"session {gone} is no longer stored (withdrawn): no session running")
         self.changed.emit()
 
     def reset(self, message: str) -> None:

@@ -144,6 +144,29 @@ def test_setup_refuses_to_build_a_command_when_invalid():
 
 
 # -- trial table and progress ----------------------------------------------------------------------
+def test_an_ended_session_of_another_database_or_erased_is_no_longer_shown():
+    s = SessionModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started())
+    s.db_path = "/data/study1.db"
+    s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, outcome="success", tct_s=4.0), 2))
+    s.apply(m.SessionEnded(3, "aborted", "the experimenter aborted it", 1, 0, 1))
+    this = [known("P01", 1, status="aborted", sid=3)]
+    s.listed("/data/study1.db", this)  # its own database, still stored: shown as it ended
+    assert s.state == "ended" and len(s.table.rows) == 1 and s.message.startswith("session 3 aborted")
+    s.listed("/data/study2.db", this)  # another database (the same session number there is another session)
+    assert s.state == "ready" and s.session is None and s.table.rows == [] and s.completed == 0
+    assert s.message == "study2.db open: no session running"
+    s.apply(started())
+    s.db_path = "/data/study1.db"
+    s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
+    s.listed("/data/study1.db", [])  # the participant withdrew: the session is erased
+    assert s.session is None and s.message == "session 3 is no longer stored (withdrawn): no session running"
+    s.apply(started())
+    s.listed("/data/study2.db", [])  # a running session is never hidden
+    assert s.state == "running" and s.session is not None
+
+
 def test_trial_table_cells():
     row = trial_record(trial_index=4, target_label="GENTLE", target_force_n=0.6, haptic_mode="off", outcome="success",
                        tct_s=3.456, rmse_n=0.12345, max_ae_n=0.5, abort_reason=None)
