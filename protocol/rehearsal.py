@@ -130,6 +130,10 @@ class RehearsalTrigger:
         The trials' cap (None: not known, no fault is moved).
     latch_s
         ``latch_s(kind)``: the longest time from a fault's start to the watchdog's latch, s.
+    note
+        ``note(t_ns, text)`` stores a line in the session's record (a
+        :data:`~protocol.study_rules.FAULT_REHEARSAL_EVENT` event): each plan when its trial is cued, and what it
+        did -- so a trial a rehearsal aborted is never taken for a device's failure.
     """
 
     plans: Sequence[FaultPlan]
@@ -138,6 +142,7 @@ class RehearsalTrigger:
     cancel: Callable[[str, int], object] = lambda kind, at_ns: None
     max_trial_s: float | None = None
     latch_s: Callable[[str], float] = lambda kind: 0.0
+    note: Callable[[int, str], object] = lambda t_ns, text: None
     report: list[str] = field(default_factory=list)
     _pending: list[_Pending] = field(default_factory=list)
     _position: int = 0  # trials cued so far in this run of the session
@@ -150,12 +155,12 @@ class RehearsalTrigger:
         cls, plans: Sequence[FaultPlan], code: str, kind: str, start_position: int,
         inject: Callable[[str, int], None], kill: Callable[[], None],
         cancel: Callable[[str, int], object] = lambda kind, at_ns: None, max_trial_s: float | None = None,
-        latch_s: Callable[[str], float] = lambda kind: 0.0,
+        latch_s: Callable[[str], float] = lambda kind: 0.0, note: Callable[[int, str], object] = lambda t, x: None,
     ) -> RehearsalTrigger:
         """The trigger of one session: the plans for its participant and kind, counting trials from
         ``start_position``."""
         mine = [p for p in plans if p.code == code and p.session == kind]
-        trig = cls(mine, inject, kill, cancel, max_trial_s, latch_s)
+        trig = cls(mine, inject, kill, cancel, max_trial_s, latch_s, note)
         trig._position = start_position
         return trig
 
@@ -181,6 +186,10 @@ class RehearsalTrigger:
             for p in self._pending:
                 if p.at_ns is None and p.plan.trial == self._position:
                     self._place(p, ev.t_ns, ev.trial_index)
+                    assert p.at_ns is not None
+                    self.note(ev.t_ns, f"{p.plan}: rehearsed on the simulated rig (not a device failure), due "
+                                       f"+{(p.at_ns - p.cue_ns) * 1e-9:g} s into trial {p.plan.trial}"
+                                       f"{f', {p.moved}' if p.moved else ''}")
                     if p.plan.kind != "kill":
                         assert p.at_ns is not None
                         self.inject(p.plan.kind, p.at_ns)
@@ -197,20 +206,26 @@ class RehearsalTrigger:
             self._pending.remove(p)
             if plan.kind != "kill":
                 self.cancel(plan.kind, p.at_ns)
-            self.report.append(f"{plan}: not injected: trial {plan.trial} ended ({ev.outcome}) "
-                               f"{(ev.end_ns - p.cue_ns) * 1e-9:.1f} s after its cue, before "
-                               f"+{(p.at_ns - p.cue_ns) * 1e-9:g} s{moved}")
+            self._tell(ev.end_ns, f"{plan}: not injected: trial {plan.trial} ended ({ev.outcome}) "
+                                  f"{(ev.end_ns - p.cue_ns) * 1e-9:.1f} s after its cue, before "
+                                  f"+{(p.at_ns - p.cue_ns) * 1e-9:g} s{moved}")
         elif plan.kind != "kill":
             self._pending.remove(p)
             if ev.outcome is Outcome.ABORTED:
-                self.report.append(f"{plan}: injected during trial {plan.trial}{moved}")
+                self._tell(ev.end_ns, f"{plan}: injected during trial {plan.trial}{moved}")
             else:
                 # it began, but the trial ended before the watchdog latched it: end it now, not in the next trial
                 self.cancel(plan.kind, p.at_ns)
-                self.report.append(
+                self._tell(
+                    ev.end_ns,
                     f"{plan}: begun {(p.at_ns - p.cue_ns) * 1e-9:g} s into trial {plan.trial}{moved}, which ended "
                     f"({ev.outcome}) {(ev.end_ns - p.at_ns) * 1e-6:.0f} ms later, before the watchdog latched it: "
                     "ended at once, the trial was not aborted")
+
+    def _tell(self, t_ns: int, line: str) -> None:
+        """What a plan did: in the command's report and in the session's record."""
+        self.report.append(line)
+        self.note(t_ns, line)
 
     def due_ns(self) -> int | None:
         """When the next planned ``kill`` fires (loop time, the records' axis), or None."""

@@ -42,7 +42,7 @@ from protocol.recording import marked_records, recording_damage
 from protocol.records import AbortCause, Outcome, TrialRecord, trial_id_of
 from protocol.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
-from protocol.study_rules import DEVIATION_EVENT, check_new_session, stored_sessions
+from protocol.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
 from protocol.version import software_provenance
 
 __all__ = [
@@ -54,6 +54,7 @@ __all__ = [
     "participant_seeds",
     "raw_wrench_scales",
     "refuse_damaged_recording",
+    "rehearsal_note",
     "start_runner",
     "training_protocol",
     "training_schedule",
@@ -429,3 +430,14 @@ def finish_session(db: StudyDatabase, recorder: Recorder, opened: OpenedSession)
         # a lease left behind is taken over once this process is gone
         with contextlib.suppress(Exception):
             db.release_lease(session_scope(opened.session_id), opened.lease_owner)
+
+
+def rehearsal_note(runner: SessionRunner) -> Callable[[int, str], None]:
+    """What a :class:`protocol.rehearsal.RehearsalTrigger` (or a fault rehearsed "now") of ``runner``'s session
+    stores: ``note(t_ns, text)`` writes a :data:`~protocol.study_rules.FAULT_REHEARSAL_EVENT` at loop time ``t_ns``,
+    committed with the session's next commit."""
+
+    def note(t_ns: int, text: str) -> None:
+        runner.recorder.event(runner.session_id, runner.session_time_s(t_ns), FAULT_REHEARSAL_EVENT, text)
+
+    return note

@@ -32,7 +32,8 @@ from protocol.config import ProtocolConfig
 from protocol.storage import SessionInfo, StorageError, StudyDatabase, StudyReader
 
 __all__ = [
-    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "TRAINING_SKIPPED", "StoredSession",
+    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "FAULT_REHEARSAL_EVENT", "TRAINING_SKIPPED",
+    "StoredSession",
     "StudyRuleError", "check_new_session", "check_settings", "next_kind",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
@@ -41,8 +42,12 @@ __all__ = [
 DEVIATION_EVENT = "deviation"
 #: The ``events.kind`` of a real-rig session started by the experimenter's override of the calibration chain.
 CALIBRATION_OVERRIDE_EVENT = "calibration_override"
+#: The ``events.kind`` of a fault rehearsed on the simulated rig (``run --inject-fault``, the GUI's Rehearse a
+#: fault): planned, and what it did.  A rehearsed fault aborts its trial like a real one; this says it was no
+#: device failure.
+FAULT_REHEARSAL_EVENT = "fault_rehearsal"
 #: Every ``events.kind`` that records a deviation from the designed study (the report lists them all).
-DEVIATION_KINDS = (DEVIATION_EVENT, CALIBRATION_OVERRIDE_EVENT)
+DEVIATION_KINDS = (DEVIATION_EVENT, CALIBRATION_OVERRIDE_EVENT, FAULT_REHEARSAL_EVENT)
 #: How the detail of the deviation "experiment without a completed training session" begins.
 TRAINING_SKIPPED = "training skipped"
 

@@ -31,6 +31,7 @@ from protocol.session_setup import (
     open_resumed_session,
     participant_seeds,
     raw_wrench_scales,
+    rehearsal_note,
     start_runner,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
@@ -200,7 +201,11 @@ class EngineSessions:
             if cmd.kind == "kill":
                 kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig, loop = self.engine.eng.rig, self.engine.loop
-            rig.inject_fault(cmd.kind, loop.clock.now_ns())
+            now_ns = loop.clock.now_ns()
+            rig.inject_fault(cmd.kind, now_ns)
+            if self.runner is not None and not self.runner.done:  # in a session: its record says it was rehearsed
+                rehearsal_note(self.runner)(now_ns - loop.t0_ns,
+                                            f"{cmd.kind}: rehearsed on the simulated rig (not a device failure), now")
             self.engine.publish(m.FaultInjected(cmd.kind, "now"))
             return
         runner, opened = self.runner, self.opened
@@ -232,7 +237,8 @@ class EngineSessions:
         trig = RehearsalTrigger.for_session(
             [plan], opened.code, opened.kind, runner.state.trial_position, inject, kill, cancel,
             max_trial_s=opened.protocol.trial.max_trial_s,  # moved to land in its trial, or withdrawn, and said so
-            latch_s=lambda kind: latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s))
+            latch_s=lambda kind: latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s),
+            note=rehearsal_note(runner))
         if self.trigger is not None:  # keep what was planned before
             trig._pending.extend(self.trigger._pending)
         else:

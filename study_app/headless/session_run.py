@@ -36,6 +36,7 @@ from protocol.session_setup import (
     participant_code,
     participant_seeds,
     raw_wrench_scales,
+    rehearsal_note,
     start_runner,
     training_schedule,
 )
@@ -206,7 +207,7 @@ def run_session(
         short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor), arms=arms,
         **_commit_deadline(eng, clock, faults, opened),
     )
-    trigger = _trigger(faults, opened, eng)
+    trigger = _trigger(faults, opened, eng, runner)
     try:
         _drive(eng, runner, clock, progress, on_progress, trigger)
     finally:
@@ -232,8 +233,10 @@ def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opene
             "commit_interval_s": 0.1 if kill else VIRTUAL_COMMIT_S}
 
 
-def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) -> RehearsalTrigger | None:
-    """The rehearsal trigger of a session run, if faults are planned for it."""
+def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine,
+             runner: SessionRunner) -> RehearsalTrigger | None:
+    """The rehearsal trigger of a session run, if faults are planned for it (each stored as a
+    :data:`~protocol.study_rules.FAULT_REHEARSAL_EVENT` of the session)."""
     if not faults:
         return None
     loop, rig = eng.loop, eng.rig
@@ -259,7 +262,8 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine) ->
         return latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s)
 
     trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel,
-                                        max_trial_s=opened.protocol.trial.max_trial_s, latch_s=latch_s)
+                                        max_trial_s=opened.protocol.trial.max_trial_s, latch_s=latch_s,
+                                        note=rehearsal_note(runner))
     return trig if trig.plans else None
 
 

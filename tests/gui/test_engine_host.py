@@ -255,6 +255,9 @@ def test_a_rehearsed_fault_is_stored_aborts_the_trial_and_waits_for_the_experime
     assert fin.status == "completed" and fin.aborted == 1 and fin.completed == 2
     stored = db_rows(db, "SELECT kind, detail FROM events WHERE kind IN ('fault', 'fault_cleared', 'faults_reset')")
     assert [k for k, _ in stored] == ["fault", "fault_cleared", "faults_reset"]
+    rehearsal = db_rows(db, "SELECT detail FROM events WHERE kind = 'fault_rehearsal' ORDER BY t_s")
+    assert rehearsal == [("sensor-stall@P01:1+0.2: rehearsed on the simulated rig (not a device failure), due +0.2 s "
+                          "into trial 1",), ("sensor-stall@P01:1+0.2: injected during trial 1",)]
     assert db_rows(db, "SELECT abort_cause FROM trials WHERE outcome = 'aborted'") == [("fault",)]
     assert db_rows(db, "SELECT repeat_of FROM trials ORDER BY trial_index DESC LIMIT 1") == [(0,)]
     assert db_rows(db, "SELECT COUNT(*) FROM leases") == [(0,)]
@@ -278,3 +281,11 @@ def test_fault_rehearsal_now_and_its_refusals(engine, tmp_path, short_protocol):
     refused = [r.message for r in of(events, m.CommandRefused)]
     assert refused[-2:] == ["fault trial = 1: trial 1 has already begun; the one still to come is trial 2",
                             "fault trial = 3: the session has trials 1 to 2; the one still to come is trial 2"]
+    # one rehearsed "now" during the session: its trial aborts, and the record says it was rehearsed
+    e.handle(m.InjectFault("nan-burst"))
+    run_until(e, lambda: of(events, m.TrialEnded))
+    assert of(events, m.TrialEnded)[0].record.outcome == "aborted"
+    e.handle(m.AbortSession("test over"))
+    run_until(e, lambda: e.runner is None)
+    assert db_rows(str(tmp_path / "r.db"), "SELECT detail FROM events WHERE kind = 'fault_rehearsal'") == [
+        ("nan-burst: rehearsed on the simulated rig (not a device failure), now",)]

@@ -17,6 +17,7 @@ import pytest
 import pipeline.sim.faults
 from analysis.load import load_study
 from analysis.loop_health import abort_counts, health_table
+from analysis.study_record import deviations
 from protocol.config import default_protocol
 from protocol.design import build_schedule
 from protocol.rehearsal import FaultPlan, parse_fault_plan
@@ -65,6 +66,11 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     assert (outcome, cause) == ("aborted", "fault") and reason.startswith(f"fault: {LATCHES[kind]}")
     faults = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'fault'")
     assert len(faults) == 1 and faults[0][1].startswith(LATCHES[kind]) and start < faults[0][0] <= end
+    # the record says it was rehearsed, when it was planned and what it did: never taken for a device's failure
+    planned, did = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'fault_rehearsal' ORDER BY t_s")
+    assert planned == (pytest.approx(start, abs=1e-9),
+                       f"{kind}@P01:2+1: rehearsed on the simulated rig (not a device failure), due +1 s into trial 2")
+    assert did == (pytest.approx(end, abs=1e-9), f"{kind}@P01:2+1: injected during trial 2")
     assert faults[0][0] == pytest.approx(end, abs=1e-9)  # the trial ended at the fault
     assert end - start == pytest.approx(1.0, abs=0.06)  # 1 s after the cue, plus the watchdog's own limit
     (reset_t, reset_detail), = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'faults_reset'")
@@ -84,6 +90,9 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     study = load_study([str(db)])
     counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert counts["fault"] == 1 and sum(counts.values()) == 1
+    listed = deviations(study)  # and the report lists the rehearsal among the deviations from the design
+    assert list(listed["kind"]) == ["fault_rehearsal", "fault_rehearsal"]
+    assert listed["detail"].iloc[1] == f"{kind}@P01:2+1: injected during trial 2"
     health = health_table(study)
     assert health[list(HEALTH_COLUMNS)].notna().all().all()
     if kind == "sensor-stall":  # the record that tripped the abort is the trial's: its health shows the stall
