@@ -32,7 +32,8 @@ from analysis.sim_study import TrialRow, summarise_study, trial_row_from_dict, t
 from pipeline.runtime.platform_support import O_NOFOLLOW
 
 __all__ = [
-    "CACHE_FILE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key", "is_cache_file",
+    "CACHE_FILE", "FILTER_NOTE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key",
+    "is_cache_file",
     "protocol_digest", "read_cache", "summary_frame", "sweep_frame", "t_interval", "write_sweep",
 ]
 
@@ -109,8 +110,17 @@ def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]
         os.close(fd)
 
 
-def t_interval(values: Sequence[float], level: float = 0.95) -> tuple[float, float, float]:
-    """Mean and the two ends of the ``level`` t-interval of the mean (NaN ends with fewer than two values)."""
+#: What each measure can be (success a rate, the rest ≥ 0; the change ON/OFF − 1 of a measure ≥ 0 is ≥ −1): the
+#: ends of a t-interval over a few studies can pass these, and are clipped to them (``sweep.md`` says so).
+_BOUNDS: dict[str, tuple[float, float]] = {"success": (0.0, 1.0), "tct_s": (0.0, math.inf),
+                                           "rmse_n": (0.0, math.inf), "max_ae_n": (0.0, math.inf)}
+_CHANGE_BOUNDS = (-1.0, math.inf)
+
+
+def t_interval(values: Sequence[float], level: float = 0.95,
+               bounds: tuple[float, float] = (-math.inf, math.inf)) -> tuple[float, float, float]:
+    """Mean and the two ends of the ``level`` t-interval of the mean (NaN ends with fewer than two values), the ends
+    clipped to ``bounds``, the values the quantity can take."""
     from scipy.stats import t
 
     v = np.asarray([x for x in values if math.isfinite(x)], dtype=np.float64)
@@ -120,7 +130,7 @@ def t_interval(values: Sequence[float], level: float = 0.95) -> tuple[float, flo
     if v.size < 2:
         return mean, math.nan, math.nan
     half = float(t.ppf(0.5 + level / 2, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-    return mean, mean - half, mean + half
+    return mean, max(bounds[0], mean - half), min(bounds[1], mean + half)
 
 
 def sweep_frame(cells: Sequence[SweepCell], swept: Sequence[str], max_trial_s: float) -> pd.DataFrame:
@@ -142,10 +152,17 @@ def summary_frame(tidy: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, 
         values = dict(zip([*swept, "metric"], key if isinstance(key, tuple) else (key,), strict=True))
         row: dict[str, Any] = {**values, "n_studies": int(grp["study"].nunique())}
         for col in ("off", "on", "change"):
-            row[col], row[f"{col}_ci_low"], row[f"{col}_ci_high"] = t_interval(grp[col].tolist())
+            bounds = _CHANGE_BOUNDS if col == "change" else _BOUNDS[str(values["metric"])]
+            row[col], row[f"{col}_ci_low"], row[f"{col}_ci_high"] = t_interval(grp[col].tolist(), bounds=bounds)
         row["paper"] = all(float(values[k]) == float(paper[k]) for k in swept)
         rows.append(row)
     return pd.DataFrame(rows)
+
+
+#: What a sweep of the filter window changes besides what the participant feels (docs/science.md §4.3).
+FILTER_NOTE = ("The filter window also changes the task force every trial is judged on (success, TCT, RMSE and "
+               "Max AE are computed from the filtered force, protocol/metrics.py), for haptics-OFF trials too: a "
+               "change with the window is partly the measurement's, not only the participants'.")
 
 
 def caveat(model_version: str, model_fit: str) -> str:
@@ -192,9 +209,11 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")
     save_one(front_figure(summary, swept, caveat(model_version, model_fit)), folder / "sweep_front.png")
     md = ["# Pipeline settings sweep", "", f"**{caveat(model_version, model_fit)}**", "", *header, "",
-          "Mean over studies [95 % t-interval over the study means]; each study's value is the mean over its "
-          "participants of their own means (success: their success rate; TCT: their successful trials only). "
-          "Change: ON/OFF − 1.  The paper's setting is marked (paper).", "", *summary_lines(summary, swept), "",
+          "Mean over studies [95 % t-interval over the study means, its ends clipped to what the measure can be: "
+          "a rate 0–1, the rest ≥ 0, a change ≥ −100 %; with few studies the interval is wide]; each study's value "
+          "is the mean over its participants of their own means (success: their success rate; TCT: their "
+          "successful trials only). Change: ON/OFF − 1.  The paper's setting is marked (paper).",
+          *(["", FILTER_NOTE] if "filter_window" in swept else []), "", *summary_lines(summary, swept), "",
           "Files: sweep.csv (per study), sweep_summary.csv (this table), sweep.png (the measures against the "
           "setting), sweep_front.png (TCT against RMSE, haptics ON), cells.jsonl (the cache of finished cells).", ""]
     (folder / "sweep.md").write_text("\n".join(md), encoding="utf-8")

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from analysis.sim_study import TrialRow
-from analysis.sweep import CACHE_FILE, cell_key, read_cache, summary_frame, sweep_frame, t_interval
+from analysis.sweep import CACHE_FILE, FILTER_NOTE, cell_key, read_cache, summary_frame, sweep_frame, t_interval
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
 from protocol.config import protocol_from_dict
 from study_app.cli.main import main
@@ -105,6 +105,9 @@ def test_the_t_interval_over_study_means() -> None:
     mean, lo, hi = t_interval([1.0, 2.0, 3.0])
     assert mean == 2.0 and hi - mean == pytest.approx(4.302653 * 1.0 / math.sqrt(3), rel=1e-6) and lo < mean
     assert math.isnan(t_interval([1.0])[1]) and math.isnan(t_interval([])[0])
+    # two studies of a rate: the t-interval (t 12.7) passes 0 and 1; its ends are clipped to what a rate can be
+    assert t_interval([0.0, 0.36]) == pytest.approx((0.18, -2.1073, 2.4673), abs=1e-3)
+    assert t_interval([0.0, 0.36], bounds=(0.0, 1.0)) == pytest.approx((0.18, 0.0, 1.0))
 
 
 def _row(study: int, p: int, mode: str, ok: bool, rmse: float) -> TrialRow:
@@ -127,6 +130,9 @@ def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
     assert set(paper_rows["filter_window"]) == {10}
     s = summary[(summary["metric"] == "success") & (summary["filter_window"] == 10)].iloc[0]
     assert (s["off"], s["on"], s["n_studies"]) == (0.0, 1.0, 2)
+    r = summary[(summary["metric"] == "rmse_n") & (summary["filter_window"] == 10)].iloc[0]
+    assert r["off_ci_low"] == 0.0 < r["off_ci_high"]  # 1.0 and 2.0 over two studies: the t-interval passes 0
+    assert (summary["change_ci_low"].dropna() >= -1.0).all()
 
 
 def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys) -> None:
@@ -138,6 +144,7 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
     said = capsys.readouterr().out
     assert said.startswith(f"These results are a prediction of simulated participant model v{MODEL_VERSION} (")
     assert "| 10 (paper) | RMSE (N) |" in said
+    assert FILTER_NOTE in said and FILTER_NOTE in (out / "sweep.md").read_text(encoding="utf-8")
     for name in ("sweep.csv", "sweep_summary.csv", "sweep.png", "sweep_front.png", "sweep.md", CACHE_FILE):
         assert (out / name).is_file(), name
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]

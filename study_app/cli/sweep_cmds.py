@@ -99,7 +99,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                  f"protocol with --set {describe(non_default_settings(setting))}")
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
-    from analysis.sweep import caveat, summary_frame, summary_lines, sweep_frame, write_sweep
+    from analysis.sweep import FILTER_NOTE, caveat, summary_frame, summary_lines, sweep_frame, write_sweep
     from pipeline.force.pipeline_settings import paper_settings
     from study_app.cli.progress import ProgressBar
     from study_app.headless.pool import default_jobs
@@ -146,7 +146,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     print(caveat(MODEL_VERSION, MODEL_FIT))
     print(*header, sep="\n")
-    print("Mean over studies [95 % t-interval over the study means]; change = ON/OFF - 1.")
+    print("Mean over studies [95 % t-interval over the study means, clipped to what the measure can be]; "
+          "change = ON/OFF - 1.")
+    if "filter_window" in swept:
+        print(FILTER_NOTE)
     print("\n".join(summary_lines(summary, swept)))
     print(f"Sweep: {len(cells)} cells ({len(grid)} settings x {args.studies} studies) in {wall:.1f} s wall "
           f"(jobs {jobs}). Written in {out}/: {', '.join(files)} (and {CACHE_FILE}, the cache)")
