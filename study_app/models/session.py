@@ -135,6 +135,9 @@ class SessionModel:
     latest_t_s: float = 0.0
     #: The newest trial started, kept after it ends (the live axis keeps its target's scale between trials).
     last_trial: m.TrialStarted | None = None
+    #: Sample time of this session's newest cue (None before its first trial): the live plot marks it, draws the
+    #: band from it on and judges a force above the axis only on the samples since.
+    cue_t_s: float | None = None
     table: TrialTable = field(default_factory=TrialTable)
     changed: Emitter = field(default_factory=Emitter)
 
@@ -146,7 +149,7 @@ class SessionModel:
         elif isinstance(ev, m.EngineOpening) and self.state == "connecting":
             self.message = f"starting the engine: opening the {ev.device} …"  # a device that hangs is named
         elif isinstance(ev, m.SessionStarted):
-            self.session, self.trial, self.phase = ev, None, "idle"
+            self.session, self.trial, self.phase, self.cue_t_s = ev, None, "idle", None
             resumed = " (resumed)" if ev.stored_trials else ""
             self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}{resumed}"
             self.completed = self.aborted = self.reruns_run = 0
@@ -160,7 +163,7 @@ class SessionModel:
                 self._count(row)
         elif isinstance(ev, m.TrialStarted):
             self.trial, self.phase, self.pause_until_s = ev, "active", None
-            self.last_trial = ev
+            self.last_trial, self.cue_t_s = ev, ev.t_s
             if self.session is not None:  # an aborted trial's re-run lengthens the schedule
                 self.session = _with_total(self.session, ev.trials_total)
             self.latest_t_s = max(self.latest_t_s, ev.t_s)
@@ -195,6 +198,7 @@ class SessionModel:
         """A new engine is starting: no session, no trial, an empty table (the old engine's clock is gone)."""
         self.state, self.message = "connecting", message
         self.session = self.trial = self.last_trial = None
+        self.cue_t_s = None
         self.phase, self.pause_until_s, self.paused_requested = "idle", None, False
         self.completed = self.aborted = self.reruns_run = self.designed = 0
         self._durations_s = []

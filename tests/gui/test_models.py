@@ -492,3 +492,32 @@ def test_a_starting_engine_names_the_device_it_is_opening():
                           tip_home_m=(0.0, 0.0, 0.0), driver="participant", rot_tip_sensor=(1.0,) * 9, devices=[]))
     s.apply(m.EngineOpening("robot"))  # late news changes nothing once ready
     assert s.state == "ready" and s.message == "engine ready (real rig, real clock)"
+
+
+def test_after_a_cue_the_live_plot_judges_only_the_current_trials_samples():
+    """The window still holds the last trial's force for seconds after a cue: its peak is not this trial's."""
+    ring = RingBuffer.create(TICK_DTYPE, 20000, shared=False)
+    try:
+        p = PlotModel(window_s=10.0, bins=100)
+        p.attach(ring)
+        fill_ring(ring, 4000, force_n=2.7)  # the previous trial: far above a GENTLE target's axis
+        fill_ring(ring, 2000, start=4000, force_n=0.6)  # the cue at 4.0 s; the current trial holds 0.6 N
+        p.pull()
+        s = SessionModel()
+        s.apply(started())
+        assert s.cue_t_s is None
+        s.apply(trial(t_s=4.0, label="GENTLE", force=0.6))
+        assert s.cue_t_s == 4.0
+        assert p.peak(("force_n",)) == 2.7 and p.peak(("force_n",), s.cue_t_s) == 0.6
+        assert p.task_axis(0.6) == pytest.approx((0.0, 2.4))  # the old peak would stretch the axis ...
+        assert p.task_axis(0.6, s.cue_t_s) == pytest.approx((0.0, 1.5))  # ... the current trial's does not
+        assert p.x_of(s.cue_t_s) == pytest.approx(-1.999)  # the cue's place on the time axis
+        assert p.x_of(None) is None and p.x_of(-20.0) is None  # no cue; a cue scrolled out of the window
+        assert p.x_of(9.0) == 0.0  # a cue announced before the ring's records of its moment: at the right edge
+        s.apply(started())  # a new session: no cue of its own yet
+        assert s.cue_t_s is None
+        s.reset("restarting")
+        assert s.cue_t_s is None
+    finally:
+        ring.close()
+
