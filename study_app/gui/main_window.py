@@ -139,7 +139,7 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_right_column(self) -> QSplitter:
         """Progress and live plots above; the trial table and device health in tabs below."""
-        self.progress = QtProgress(self.model.session, self.model.health)
+        self.progress = QtProgress(self.model.session, self.model.health, app=self.model)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
         self.cue_wait = QtCueWait(self.model)

@@ -42,6 +42,9 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
     qtbot.waitUntil(lambda: w.model.cue_wait is not None and w.model.cue_wait.action == "reset_faults",
                     timeout=TIMEOUT_MS)
     assert banner.label.text().startswith("Next cue waits: fault latched (HAPTIC_DEVICE")
+    # the headline above the plots says the same, never "The next trial is due"
+    assert w.progress.label.full_text().startswith("Next trial waits: fault latched (HAPTIC_DEVICE")
+    assert w.progress.label.full_text().endswith(" · Reset faults")
     assert banner.button.text() == "Reset faults" and banner.button.isVisible()
     assert "fault log under Devices & health" in banner.help.text()
     qtbot.waitUntil(lambda: "waiting" in banner.label.text(), timeout=TIMEOUT_MS)  # and for how long

@@ -521,3 +521,31 @@ def test_after_a_cue_the_live_plot_judges_only_the_current_trials_samples():
     finally:
         ring.close()
 
+
+def test_the_headline_agrees_with_the_banner_when_a_fault_holds_the_next_cue():
+    """A user trial: "The next trial is due" above a red "Next cue waits: fault latched (SENSOR_STALE)"."""
+    from study_app.models.cue_wait import cue_wait_now, headline
+
+    s, h = SessionModel(), HealthModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started())
+    s.apply(trial(t_s=5.0))
+    s.apply(m.TrialEnded(6.0, trial_record(trial_index=0, outcome="aborted", abort_reason="fault: SENSOR_STALE"), 3))
+    s.apply(m.PhaseEntered(6.0, 0, "idle"))
+    assert s.progress_text() == "The next trial is due"  # what the session alone knows
+    held = m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 1, True, "autopilot", True, False,
+                    waiting="fault latched (SENSOR_STALE): reset to continue")
+    s.apply(held)
+    h.apply(held)
+    _, wait = cue_wait_now(s, h, "", None)
+    assert wait is not None and wait.text() == "Next cue waits: fault latched (SENSOR_STALE)"
+    assert headline(s, wait) == "Next trial waits: fault latched (SENSOR_STALE) · Reset faults"
+    # the protocol's pause, a pause asked for, a running trial: the headline's own words agree already
+    s.apply(dataclasses.replace(held, waiting=""))
+    h.apply(dataclasses.replace(held, waiting=""))
+    s.apply(m.PhaseEntered(7.0, 0, "pause"))
+    s.set_time(7.5)
+    _, wait = cue_wait_now(s, h, "", None)
+    assert wait is not None and headline(s, wait) == "Next trial in 1.5 s"
+    s.apply(trial(t_s=8.0, position=2))
+    assert headline(s, cue_wait_now(s, h, "", None)[1]).startswith("Trial 2 · FIRM")
