@@ -255,6 +255,32 @@ class SessionModel:
         first = tr is None and not self.table.rows
         return ("Session started: the first trial is due" if first else "The next trial is due") + pending
 
+    def abort_session_question(self) -> str:
+        """The question Abort session asks, saying what will happen now ("" without a session).
+
+        Only a trial that is running is stored as aborted (and, unlike Abort trial, not run again); paused or
+        between trials, none is.  Either way the trials not yet done are not run, and the session cannot be
+        resumed.  Between trials (not paused) the next cue may come before the answer: the question says so.
+        """
+        s = self.session
+        if s is None:
+            return ""
+        tr = self.trial if self.phase in ("active", "cued") else None
+        left = max(0, self.count.designed - self.count.done)
+        head = f"Abort session {s.session_id} ({s.code}, {s.kind})?"
+        if tr is not None:
+            again = "" if tr.repeat_of is None else f" (re-run of trial {tr.repeat_of + 1})"
+            now = (f"Trial {tr.trial_index + 1}{again} ({tr.target_label}, haptics {tr.haptic_mode.upper()}) is "
+                   "running: it is stored as aborted (unless it ends before you answer) and not run again.")
+            rest = _not_run(left - 1, "other ")
+        else:
+            where = "the session is paused" if self.state == "paused" else "between trials"
+            now = f"No trial is running ({where}): none is stored as aborted."
+            if self.state != "paused":
+                now += " If the next trial is cued before you answer, that trial is."
+            rest = _not_run(left)
+        return " ".join(p for p in (head, now, rest, "The session ends; it cannot be resumed.") if p)
+
     def count_text(self) -> str:
         """The progress count and the time left: ``7 of 20 trials done · 2 aborted · 1 re-run left · about
         4 min left`` ("" without a session)."""
@@ -313,6 +339,15 @@ class SessionModel:
             return None
         f, tol = self.trial.target_force_n, self.session.tolerance_fraction
         return (f * (1 - tol), f * (1 + tol))
+
+
+def _not_run(n: int, other: str = "") -> str:
+    """``The 3 other trials not yet done are not run.`` ("" for none)."""
+    if n <= 0:
+        return ""
+    if n == 1:
+        return f"The {n} {other}trial not yet done is not run."
+    return f"The {n} {other}trials not yet done are not run."
 
 
 def _with_total(s: m.SessionStarted, total: int) -> m.SessionStarted:

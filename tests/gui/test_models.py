@@ -549,3 +549,26 @@ def test_the_headline_agrees_with_the_banner_when_a_fault_holds_the_next_cue():
     assert wait is not None and headline(s, wait) == "Next trial in 1.5 s"
     s.apply(trial(t_s=8.0, position=2))
     assert headline(s, cue_wait_now(s, h, "", None)[1]).startswith("Trial 2 · FIRM")
+
+
+def test_abort_session_asks_what_will_actually_happen():
+    """A user trial: paused, with no trial running, the question said "The running trial is stored as aborted"."""
+    s = SessionModel()
+    assert s.abort_session_question() == ""
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started(total=4))
+    s.apply(trial(t_s=5.0, position=1))
+    q = s.abort_session_question()
+    assert q == ("Abort session 3 (P01, experiment)? Trial 1 (FIRM, haptics ON) is running: it is stored as aborted "
+                 "(unless it ends before you answer) and not run again. The 3 other trials not yet done are not run. "
+                 "The session ends; it cannot be resumed.")
+    s.apply(m.TrialEnded(9.0, row(0), 4))
+    s.apply(m.PhaseEntered(9.0, 0, "pause"))
+    q = s.abort_session_question()
+    assert "No trial is running (between trials): none is stored as aborted." in q
+    assert "If the next trial is cued before you answer, that trial is." in q
+    assert "The 3 trials not yet done are not run." in q and "running: it is stored" not in q
+    s.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, True, "autopilot", True, True))  # paused
+    q = s.abort_session_question()
+    assert s.state == "paused" and "No trial is running (the session is paused): none is stored as aborted." in q
+    assert "cued before you answer" not in q  # nothing is cued while paused
