@@ -353,3 +353,29 @@ def test_a_placed_window_fits_with_its_title_bar(qtbot):
     extra = placement.FRAME_ALLOWANCE
     assert w.y() >= avail.y() and w.y() + extra.height() + w.height() <= avail.y() + avail.height()
     assert w.x() >= avail.x() and w.x() + extra.width() + w.width() <= avail.x() + avail.width()
+
+
+def test_the_rig_views_readout_is_never_drawn_over_the_instrument(qtbot):
+    """A user trial: "contact force 1.61 N" was drawn over the grey stylus shaft, unreadable."""
+    r = RigViewModel()
+    r.apply(READY)
+    r.update(r.surface_z_m - 0.0028, 1.61)  # the tip 2.8 mm into the tissue: the shaft reaches the top
+    view = RigWindow(r, lambda mode: None)
+    qtbot.addWidget(view)
+    view.resize(760, 480)
+    view.show()
+    qtbot.waitExposed(view)
+    canvas = view.canvas
+    assert "contact force 1.61 N (ground truth)" in canvas.readout_lines()[0]
+    strip, scene = canvas.readout_rect(), canvas.drawing_rect()
+    assert strip.bottom() <= scene.top() and strip.height() >= 40  # the readout's strip is its own
+    image = canvas.grab().toImage()
+    dpr = image.devicePixelRatio()
+    shaft = (150, 155, 165)  # the shaft's fill
+    x_mid = int(canvas.width() / 2 * dpr)
+    below = image.pixelColor(x_mid, int((scene.top() + 20) * dpr))
+    assert (below.red(), below.green(), below.blue()) == shaft  # the shaft is drawn in the scene, up to its top
+    for y in range(int(strip.bottom() * dpr)):  # and nowhere in the readout's strip
+        for x in range(x_mid - int(10 * dpr), x_mid + int(10 * dpr)):
+            c = image.pixelColor(x, y)
+            assert (c.red(), c.green(), c.blue()) != shaft, (x, y)
