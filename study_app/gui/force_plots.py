@@ -48,7 +48,8 @@ BAND_RGB = (0, 114, 178)
 BAND_BRUSH = pg.mkBrush(*BAND_RGB, 60)
 BAND_PEN = pg.mkPen(BAND_RGB, width=1, style=Qt.PenStyle.DashLine)
 CUE_COLOUR = "#444444"
-CUE_PEN = pg.mkPen(CUE_COLOUR, width=1)
+#: Dashed: a solid dark line looked like the task force's steep edges.
+CUE_PEN = pg.mkPen(CUE_COLOUR, width=1, style=Qt.PenStyle.DashLine)
 #: A title line that says nothing still takes its height, so the plots never jump as it fills and empties.
 _BLANK = "&nbsp;"
 
@@ -157,7 +158,7 @@ class QtForcePlots(QWidget):
         words = self.legend_entries()
         text = "  ".join((_swatch(TASK_COLOUR, words[0]), _swatch(RENDER_COLOUR, words[1]),
                           _swatch("rgba(0,114,178,0.35)", words[2], block=True),
-                          f'<span style="color:{CUE_COLOUR}; font-weight:900">│</span>&nbsp;{html.escape(words[3])}'))
+                          f'<span style="color:{CUE_COLOUR}; font-weight:900">┆</span>&nbsp;{html.escape(words[3])}'))
         if names:  # each arm's force by its colour: the task arm's is the task force
             marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
             text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[4:], strict=True))
