@@ -139,8 +139,7 @@ class QtForcePlots(QWidget):
         """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the one
         drawn as the task force marked (the engine's first arm: the protocol's task arm once a session starts, since
         Start puts it first; before that it may be another)."""
-        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band",
-               "cue of the trial"]
+        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band", "cue"]
         if self.plots.arms:
             out += [f"{self.plots.task_arm} (task force)", *self.plots.arms]
         return out

@@ -73,14 +73,15 @@ class RigCanvas(QWidget):
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
         p.fillRect(self.rect(), _BACKGROUND)
         p.setClipRect(self.drawing_rect())  # the shaft reaches up past the top of the scene
-        x, z = m.surface_profile(_X_MM + 5, n=61)
-        # one vectorised transform, not 61 Python calls of to_px (this paints at 30 Hz)
         s = self._scale()
+        half_mm = max(_X_MM, self.width() / 2 / s) + 5  # the tissue reaches both edges, however wide the view
+        x, z = m.surface_profile(half_mm, n=61)
+        # one vectorised transform, not 61 Python calls of to_px (this paints at 30 Hz)
         px = self.width() / 2 + x * s
         py = self.height() - (z - _Z_LO) * s
         poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist(), strict=True)])
-        poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
-        poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
+        poly.append(self.to_px(half_mm, _Z_LO - 2))
+        poly.append(self.to_px(-half_mm, _Z_LO - 2))
         top = self.to_px(0, 0).y()
         grad = QLinearGradient(0, top, 0, self.height())
         grad.setColorAt(0.0, QColor(214, 120, 120))

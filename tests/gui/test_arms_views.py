@@ -153,7 +153,7 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     qtbot.addWidget(view)
     assert list(view.arm_curves) == [] and "arm" not in view.legend.text()  # one arm: as before
     assert view.legend_entries() == ["task force |F| (compensated, filtered)", "rendered on the haptic device",
-                                     "target band", "cue of the trial"]
+                                     "target band", "cue"]
     plots.attach(task)
     plots.attach_arms("left", {"right": other})
     for k in range(50):
