@@ -3,8 +3,12 @@
 Every label and legend sits outside the plots' data areas: the legend of the
 upper plot above it, the target band's words and a force above the axis in
 the upper plot's title line, the lower plot's legend (each of its curves, by
-colour) in its own title line.  The data areas hold only the curves and the
-band, so the newest seconds at the right edge are never hidden.
+colour) in its own title line.  The data areas hold only the curves, the
+band and the cue's line, so the newest seconds at the right edge are never hidden.
+
+The window holds the last 10 s, so for seconds after a cue it still shows the previous trial's force: the cue
+is marked by a vertical line, the target band is drawn from the cue on only, and a force above the axis is
+judged on the samples since the cue (:attr:`study_app.models.session.SessionModel.cue_t_s`).
 """
 
 from __future__ import annotations
@@ -14,7 +18,7 @@ import html
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QGraphicsRectItem, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import SessionModel
@@ -43,6 +47,9 @@ LOWER_CHOICES: dict[str, tuple[tuple[str, ...], tuple[object, ...], tuple[tuple[
 BAND_RGB = (0, 114, 178)
 BAND_BRUSH = pg.mkBrush(*BAND_RGB, 60)
 BAND_PEN = pg.mkPen(BAND_RGB, width=1, style=Qt.PenStyle.DashLine)
+CUE_COLOUR = "#444444"
+#: Dashed: a solid dark line looked like the task force's steep edges.
+CUE_PEN = pg.mkPen(CUE_COLOUR, width=1, style=Qt.PenStyle.DashLine)
 #: A title line that says nothing still takes its height, so the plots never jump as it fills and empties.
 _BLANK = "&nbsp;"
 
@@ -91,10 +98,16 @@ class QtForcePlots(QWidget):
 
         self.task: pg.PlotItem = self.view.addPlot(row=0, col=0)
         self.task.setLabel("left", "force (N)")
-        self.band = pg.LinearRegionItem(orientation="horizontal", movable=False, brush=BAND_BRUSH, pen=BAND_PEN)
-        self.band.setZValue(-10)
-        self.band.setVisible(False)
-        self.task.addItem(self.band)
+        # the band from the current trial's cue to now (not across the window: its left part is the last trial)
+        self.band = QGraphicsRectItem()
+        self.band.setBrush(BAND_BRUSH)
+        self.band.setPen(pg.mkPen(None))
+        self.band_edges = pg.PlotDataItem(pen=BAND_PEN, connect="pairs")  # its lower and upper edge, dashed
+        self.cue_line = pg.InfiniteLine(angle=90, movable=False, pen=CUE_PEN)
+        for item in (self.band, self.band_edges, self.cue_line):
+            item.setZValue(-10)
+            item.setVisible(False)
+            self.task.addItem(item)
         self.curves = {"force_n": self.task.plot(pen=TASK_PEN), "render_n": self.task.plot(pen=RENDER_PEN)}
         self.lower_plot: pg.PlotItem = self.view.addPlot(row=1, col=0)  # (not "lower": QWidget.lower() exists)
         self.lower_plot.setLabel("bottom", "time (s)")
@@ -114,7 +127,6 @@ class QtForcePlots(QWidget):
             p.getAxis("left").enableAutoSIPrefix(False)
             p.getAxis("left").setWidth(48)
         self._y: dict[str, tuple[float, float]] = {}
-        self._band: tuple[float, float] | None = None
         #: The upper plot's title line as shown (the band's words; a force above the axis).
         self.title_text = ""
         self._title_html = ""
@@ -127,7 +139,7 @@ class QtForcePlots(QWidget):
         """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the one
         drawn as the task force marked (the engine's first arm: the protocol's task arm once a session starts, since
         Start puts it first; before that it may be another)."""
-        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band"]
+        out = ["task force |F| (compensated, filtered)", "rendered on the haptic device", "target band", "cue"]
         if self.plots.arms:
             out += [f"{self.plots.task_arm} (task force)", *self.plots.arms]
         return out
@@ -144,10 +156,11 @@ class QtForcePlots(QWidget):
         self.arm_curves = {n: self.task.plot(pen=pg.mkPen(colours.get(n, "#555"), width=1)) for n in names}
         words = self.legend_entries()
         text = "  ".join((_swatch(TASK_COLOUR, words[0]), _swatch(RENDER_COLOUR, words[1]),
-                          _swatch("rgba(0,114,178,0.35)", words[2], block=True)))
+                          _swatch("rgba(0,114,178,0.35)", words[2], block=True),
+                          f'<span style="color:{CUE_COLOUR}; font-weight:900">┆</span>&nbsp;{html.escape(words[3])}'))
         if names:  # each arm's force by its colour: the task arm's is the task force
             marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
-            text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[3:], strict=True))
+            text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[4:], strict=True))
         self.legend.setText(text)
 
     @property
@@ -181,8 +194,10 @@ class QtForcePlots(QWidget):
         return 1.2 if band is None else (band[0] + band[1]) / 2
 
     def _set_y_ranges(self) -> str:
-        """Set the axes; returns the words for a force above the upper axis ("" when there is none)."""
-        r = self.plots.task_axis(self._target_n())
+        """Set the axes; returns the words for a force above the upper axis ("" when there is none), judged on the
+        samples since the current trial's cue (the window's older samples are the previous trial's)."""
+        since = self.session.cue_t_s
+        r = self.plots.task_axis(self._target_n(), since)
         if self._y.get("task") != r:
             self._y["task"] = r
             self.task.setYRange(*r, padding=0)
@@ -193,10 +208,10 @@ class QtForcePlots(QWidget):
                 self._y["lower"] = r
                 self.lower_plot.setYRange(*r, padding=0)
         top = self._y["task"][1]
-        peak = self.plots.peak(TASK_SERIES)
+        peak = self.plots.peak(TASK_SERIES, since)
         over = [f"peak {peak:.1f} N: above the axis"] if bool(np.isfinite(peak) and peak > top) else []
         for name, arm in self.plots.arms.items():
-            p = arm.peak(("force_n",))
+            p = arm.peak(("force_n",), since)
             if bool(np.isfinite(p) and p > top):
                 over.append(f"arm {name} peak {p:.1f} N: above the axis")
         return " · ".join(over)
@@ -214,13 +229,25 @@ class QtForcePlots(QWidget):
         if abs(x0 + self.plots.window_s) > 1e-6:  # the x link re-scales the range while the layout settles
             self.task.setXRange(-self.plots.window_s, 0.0, padding=0)
         over = self._set_y_ranges()
-        band = self.session.band()
-        if band != self._band:
-            self._band = band
-            self.band.setVisible(band is not None)
-            if band is not None:
-                self.band.setRegion(band)
+        band = self._set_cue_and_band()
         self._set_title(self.session.band_label() if band is not None else "", over)
+
+    def _set_cue_and_band(self) -> tuple[float, float] | None:
+        """The cue's line where it is in the window, and the band from it to now; returns the band (None: none)."""
+        cue_x = self.plots.x_of(self.session.cue_t_s)
+        self.cue_line.setVisible(cue_x is not None)
+        if cue_x is not None:
+            self.cue_line.setValue(cue_x)
+        band = self.session.band()
+        shown = band is not None and len(self.plots.t) > 0
+        self.band.setVisible(shown)
+        self.band_edges.setVisible(shown)
+        if band is not None and shown:
+            x0 = -self.plots.window_s if cue_x is None else cue_x  # a cue scrolled out: the whole window is its
+            lo, hi = band
+            self.band.setRect(x0, lo, -x0, hi - lo)
+            self.band_edges.setData([x0, 0.0, x0, 0.0], [lo, lo, hi, hi])
+        return band
 
     def _set_title(self, band_words: str, over: str) -> None:
         """The upper plot's title line: the band in its colour, a force above the axis in red (set on change only:

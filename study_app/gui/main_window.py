@@ -139,7 +139,7 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_right_column(self) -> QSplitter:
         """Progress and live plots above; the trial table and device health in tabs below."""
-        self.progress = QtProgress(self.model.session, self.model.health)
+        self.progress = QtProgress(self.model.session, self.model.health, app=self.model)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
         self.cue_wait = QtCueWait(self.model)
@@ -353,9 +353,8 @@ class ExperimenterWindow(QMainWindow):
         if not self.model.can("abort_session") or s is None:
             return
         sid = s.session_id
-        self.ask("abort_session", "Abort session",
-                 f"Abort session {sid} ({s.code}, {s.kind})? The running trial is stored as aborted and the session "
-                 "ends; it cannot be resumed.", lambda: self.model.abort_session(sid),
+        self.ask("abort_session", "Abort session", self.model.session.abort_session_question(),
+                 lambda: self.model.abort_session(sid),
                  moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)),
                  moot_text=f"Session {sid} ended before you answered: nothing was aborted.")
 

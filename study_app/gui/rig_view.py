@@ -28,6 +28,10 @@ _X_MM = 30.0
 _Z_LO, _Z_HI = -12.0, 24.0
 #: Shortest interval between manual targets sent to the engine (the loop needs no more).
 _SEND_INTERVAL_S = 0.02
+#: The readout's strip above the drawing: its lines (always two, so the drawing's scale never jumps), line height.
+_READOUT_LINES, _LINE_PX, _READOUT_PAD_PX = 2, 18, 6
+_BACKGROUND = QColor(238, 242, 247)
+_READOUT_BACKGROUND = QColor(250, 251, 253)
 
 
 class RigCanvas(QWidget):
@@ -42,8 +46,18 @@ class RigCanvas(QWidget):
         model.changed.connect(self.update)
 
     # -- geometry --------------------------------------------------------------------------------
+    def readout_rect(self) -> QRectF:
+        """The strip at the top that holds the readout: nothing of the drawing enters it (the shaft passes under
+        a readout drawn over the scene, which made the contact force unreadable)."""
+        return QRectF(0, 0, self.width(), 2 * _READOUT_PAD_PX + _LINE_PX * _READOUT_LINES)
+
+    def drawing_rect(self) -> QRectF:
+        """Where tissue and instrument are drawn: below the readout."""
+        top = self.readout_rect().bottom()
+        return QRectF(0, top, self.width(), max(1.0, self.height() - top))
+
     def _scale(self) -> float:
-        return min(self.width() / (2 * _X_MM), self.height() / (_Z_HI - _Z_LO))
+        return min(self.width() / (2 * _X_MM), self.drawing_rect().height() / (_Z_HI - _Z_LO))
 
     def to_px(self, x_mm: float, z_mm: float) -> QPointF:
         s = self._scale()
@@ -57,15 +71,17 @@ class RigCanvas(QWidget):
         m = self.model
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
-        p.fillRect(self.rect(), QColor(238, 242, 247))
-        x, z = m.surface_profile(_X_MM + 5, n=61)
-        # one vectorised transform, not 61 Python calls of to_px (this paints at 30 Hz)
+        p.fillRect(self.rect(), _BACKGROUND)
+        p.setClipRect(self.drawing_rect())  # the shaft reaches up past the top of the scene
         s = self._scale()
+        half_mm = max(_X_MM, self.width() / 2 / s) + 5  # the tissue reaches both edges, however wide the view
+        x, z = m.surface_profile(half_mm, n=61)
+        # one vectorised transform, not 61 Python calls of to_px (this paints at 30 Hz)
         px = self.width() / 2 + x * s
         py = self.height() - (z - _Z_LO) * s
         poly = QPolygonF([QPointF(a, b) for a, b in zip(px.tolist(), py.tolist(), strict=True)])
-        poly.append(self.to_px(_X_MM + 5, _Z_LO - 2))
-        poly.append(self.to_px(-_X_MM - 5, _Z_LO - 2))
+        poly.append(self.to_px(half_mm, _Z_LO - 2))
+        poly.append(self.to_px(-half_mm, _Z_LO - 2))
         top = self.to_px(0, 0).y()
         grad = QLinearGradient(0, top, 0, self.height())
         grad.setColorAt(0.0, QColor(214, 120, 120))
@@ -88,19 +104,29 @@ class RigCanvas(QWidget):
             ty = self.to_px(0, target_z).y()
             p.setPen(QPen(QColor(30, 90, 220), 1.5, Qt.PenStyle.DashLine))
             p.drawLine(QPointF(tip.x() - 12 * s, ty), QPointF(tip.x() + 12 * s, ty))
-        p.setFont(QFont("Sans", 10))
-        lines = [f"tip {m.tip_z_mm:+5.1f} mm · indentation {m.indentation_mm:4.2f} mm · "
-                 f"contact force {m.contact_force_n:4.2f} N (ground truth)"]
-        if m.driver == "manual":
-            lines.append("manual: drag vertically to move the tip · ↑/↓ 0.5 mm steps · Home: lift off")
-        for k, text in enumerate(lines):
-            box = QRectF(8, 6 + 18 * k, self.width() - 16, 20)
-            # on a pale backing: the shaft passes under the readout
-            back = p.boundingRect(box, Qt.AlignmentFlag.AlignLeft, text).adjusted(-3, 0, 3, 0)
-            p.fillRect(back, QColor(238, 242, 247, 225))
-            p.setPen(QColor(40, 40, 50))
-            p.drawText(box, Qt.AlignmentFlag.AlignLeft, text)
+        self._paint_readout(p)
         p.end()
+
+    def readout_lines(self) -> list[str]:
+        """The readout: where the tip is and the ground-truth force; then how the stylus is driven."""
+        m = self.model
+        return [f"tip {m.tip_z_mm:+5.1f} mm · indentation {m.indentation_mm:4.2f} mm · "
+                f"contact force {m.contact_force_n:4.2f} N (ground truth)",
+                "manual: drag vertically to move the tip · ↑/↓ 0.5 mm steps · Home: lift off"
+                if m.driver == "manual" else "driven by the simulated participant (autopilot)"]
+
+    def _paint_readout(self, p: QPainter) -> None:
+        """The readout in its own strip, above the drawing: never over the shaft."""
+        p.setClipping(False)
+        strip = self.readout_rect()
+        p.fillRect(strip, _READOUT_BACKGROUND)
+        p.setPen(QPen(QColor(200, 205, 215), 1))
+        p.drawLine(strip.bottomLeft(), strip.bottomRight())
+        p.setFont(QFont("Sans", 10))
+        for k, text in enumerate(self.readout_lines()):
+            p.setPen(QColor(40, 40, 50) if k == 0 else QColor(90, 95, 110))
+            p.drawText(QRectF(8, _READOUT_PAD_PX + _LINE_PX * k, self.width() - 16, _LINE_PX),
+                       Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignVCenter, text)
 
     # -- manual driving --------------------------------------------------------------------------
     def _target_from_mouse(self, y_px: float, force: bool = False) -> None:

@@ -33,6 +33,7 @@ from PySide6.QtWidgets import (
 )
 
 from study_app.models.app import CUE_ACTIONS, AppModel
+from study_app.models.cue_wait import headline
 from study_app.models.health import HealthModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 from study_app.models.setup import KINDS, SetupModel
@@ -213,10 +214,13 @@ class QtProgress(QWidget):
     """What happens now (the trial and its time left, the pause), the session's count and time left with a bar
     of the designed trials done, and a warning line when the force on the tissue is too high."""
 
-    def __init__(self, session: SessionModel, health: HealthModel | None = None, parent: QWidget | None = None) -> None:
+    def __init__(self, session: SessionModel, health: HealthModel | None = None, parent: QWidget | None = None,
+                 *, app: AppModel | None = None) -> None:
         super().__init__(parent)
         self.session = session
         self.health = health
+        #: Why the next cue waits (the banner's model): the headline says the same (None: the session alone).
+        self.app = app
         self.label = ElidedLabel()
         self.label.setStyleSheet("font-size: 15px; font-weight: 600;")
         self.count = ElidedLabel()
@@ -240,10 +244,12 @@ class QtProgress(QWidget):
         session.changed.connect(self._on_changed)
         if health is not None:
             health.changed.connect(self._on_health)
+        if app is not None:
+            app.cue_wait_changed.connect(self._on_changed)
         self._on_changed()
 
     def _on_changed(self) -> None:
-        self.label.set_full_text(self.session.progress_text())
+        self.label.set_full_text(headline(self.session, self.app.cue_wait if self.app is not None else None))
         count = self.session.count_text() if self.session.running else ""
         if count != self.count.full_text():
             self.count.set_full_text(count)

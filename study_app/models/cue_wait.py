@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from study_app.models.health import HealthModel
 from study_app.models.session import SessionModel
 
-__all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "cue_wait_now"]
+__all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "cue_wait_now", "headline"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,3 +78,14 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
         return "pause-again", CueWait("info", f"the protocol's {s.session.pause_s:g} s pause before the next cue "
                                       "(after the session began or a fault was cleared)")
     return "due", CueWait("info", "the next cue is due")
+
+
+def headline(session: SessionModel, wait: CueWait | None) -> str:
+    """The progress line above the plots, in agreement with the banner: while the next cue is held by something
+    that must be put right (a latched fault, a dead engine), ``Next trial waits: fault latched (SENSOR_STALE) ·
+    Reset faults`` -- never "The next trial is due" above a red "Next cue waits".  Otherwise
+    :meth:`SessionModel.progress_text` (a pause, the experimenter's or the session's, has its own words there)."""
+    if wait is None or wait.level != "error" or session.state == "paused" or session.phase in ("active", "cued"):
+        return session.progress_text()
+    action = CUE_ACTIONS.get(wait.action, "")
+    return f"Next trial waits: {wait.reason}" + (f" · {action}" if action else "")

@@ -190,14 +190,29 @@ class PlotModel:
             return nice_range(math.nan, math.nan, floor_zero=floor_zero)
         return nice_range(lo, hi, floor_zero=floor_zero)
 
-    def peak(self, names: tuple[str, ...]) -> float:
-        """Largest finite value of these series over the window (NaN when there is none)."""
-        peaks = [float(np.max(v[np.isfinite(v)])) for v in (self.data[k] for k in names) if np.isfinite(v).any()]
+    def peak(self, names: tuple[str, ...], since_t_s: float | None = None) -> float:
+        """Largest finite value of these series over the window (NaN when there is none).
+
+        With ``since_t_s`` (a trial's cue, sample time) only the samples from then on count: the window still
+        holds the previous trial's force for seconds after a cue, and its peak is not the current trial's.
+        """
+        keep = slice(None) if since_t_s is None else self.t >= since_t_s
+        peaks = [float(np.max(v[np.isfinite(v)])) for v in (self.data[k][keep] for k in names)
+                 if np.isfinite(v).any()]
         return max(peaks, default=math.nan)
 
-    def task_axis(self, target_force_n: float | None) -> tuple[float, float]:
-        """The task-force axis (0, top): set by the target (:func:`protocol.display.task_axis_top_n`), in steps."""
-        return (0.0, task_axis_top_n(target_force_n, self.peak(TASK_SERIES), snap_fraction=0.5))
+    def task_axis(self, target_force_n: float | None, since_t_s: float | None = None) -> tuple[float, float]:
+        """The task-force axis (0, top): set by the target (:func:`protocol.display.task_axis_top_n`), in steps,
+        stretched for the peak since ``since_t_s`` (the current trial's cue; the whole window when None)."""
+        return (0.0, task_axis_top_n(target_force_n, self.peak(TASK_SERIES, since_t_s), snap_fraction=0.5))
+
+    def x_of(self, t_s: float | None) -> float | None:
+        """Where sample time ``t_s`` falls on the plots' time axis (seconds relative to the newest sample, at
+        most 0), or None: no time given, no data yet, or older than the window (it has scrolled out)."""
+        if t_s is None or len(self.t) == 0:
+            return None
+        x = min(0.0, t_s - float(self.t[-1]))  # an event can arrive before the ring's records of its moment
+        return x if x >= -self.window_s else None
 
     def curve(self, name: str) -> tuple[_F, _F]:
         """(time relative to the newest sample, values), peak-downsampled."""

@@ -136,6 +136,9 @@ class SessionModel:
     latest_t_s: float = 0.0
     #: The newest trial started, kept after it ends (the live axis keeps its target's scale between trials).
     last_trial: m.TrialStarted | None = None
+    #: Sample time of this session's newest cue (None before its first trial): the live plot marks it, draws the
+    #: band from it on and judges a force above the axis only on the samples since.
+    cue_t_s: float | None = None
     table: TrialTable = field(default_factory=TrialTable)
     #: The database of the session shown (absolute path; "" before one started).
     db_path: str = ""
@@ -149,7 +152,7 @@ class SessionModel:
         elif isinstance(ev, m.EngineOpening) and self.state == "connecting":
             self.message = f"starting the engine: opening the {ev.device} …"  # a device that hangs is named
         elif isinstance(ev, m.SessionStarted):
-            self.session, self.trial, self.phase = ev, None, "idle"
+            self.session, self.trial, self.phase, self.cue_t_s = ev, None, "idle", None
             resumed = " (resumed)" if ev.stored_trials else ""
             self.state, self.message = "running", f"session {ev.session_id}: {ev.code} {ev.kind}{resumed}"
             self.completed = self.aborted = self.reruns_run = 0
@@ -163,7 +166,7 @@ class SessionModel:
                 self._count(row)
         elif isinstance(ev, m.TrialStarted):
             self.trial, self.phase, self.pause_until_s = ev, "active", None
-            self.last_trial = ev
+            self.last_trial, self.cue_t_s = ev, ev.t_s
             if self.session is not None:  # an aborted trial's re-run lengthens the schedule
                 self.session = _with_total(self.session, ev.trials_total)
             self.latest_t_s = max(self.latest_t_s, ev.t_s)
@@ -215,6 +218,7 @@ class SessionModel:
         """A new engine is starting: no session, no trial, an empty table (the old engine's clock is gone)."""
         self.state, self.message = "connecting", message
         self.session = self.trial = self.last_trial = None
+        self.cue_t_s = None
         self.phase, self.pause_until_s, self.paused_requested = "idle", None, False
         self.completed = self.aborted = self.reruns_run = self.designed = 0
         self._durations_s = []
@@ -270,6 +274,32 @@ class SessionModel:
             return "Pausing before the next trial" if pending else f"Next trial in {left:3.1f} s"
         first = tr is None and not self.table.rows
         return ("Session started: the first trial is due" if first else "The next trial is due") + pending
+
+    def abort_session_question(self) -> str:
+        """The question Abort session asks, saying what will happen now ("" without a session).
+
+        Only a trial that is running is stored as aborted (and, unlike Abort trial, not run again); paused or
+        between trials, none is.  Either way the trials not yet done are not run, and the session cannot be
+        resumed.  Between trials (not paused) the next cue may come before the answer: the question says so.
+        """
+        s = self.session
+        if s is None:
+            return ""
+        tr = self.trial if self.phase in ("active", "cued") else None
+        left = max(0, self.count.designed - self.count.done)
+        head = f"Abort session {s.session_id} ({s.code}, {s.kind})?"
+        if tr is not None:
+            again = "" if tr.repeat_of is None else f" (re-run of trial {tr.repeat_of + 1})"
+            now = (f"Trial {tr.trial_index + 1}{again} ({tr.target_label}, haptics {tr.haptic_mode.upper()}) is "
+                   "running: it is stored as aborted (unless it ends before you answer) and not run again.")
+            rest = _not_run(left - 1, "other ")
+        else:
+            where = "the session is paused" if self.state == "paused" else "between trials"
+            now = f"No trial is running ({where}): none is stored as aborted."
+            if self.state != "paused":
+                now += " If the next trial is cued before you answer, that trial is."
+            rest = _not_run(left)
+        return " ".join(p for p in (head, now, rest, "The session ends; it cannot be resumed.") if p)
 
     def count_text(self) -> str:
         """The progress count and the time left: ``7 of 20 trials done · 2 aborted · 1 re-run left · about
@@ -329,6 +359,15 @@ class SessionModel:
             return None
         f, tol = self.trial.target_force_n, self.session.tolerance_fraction
         return (f * (1 - tol), f * (1 + tol))
+
+
+def _not_run(n: int, other: str = "") -> str:
+    """``The 3 other trials not yet done are not run.`` ("" for none)."""
+    if n <= 0:
+        return ""
+    if n == 1:
+        return f"The {n} {other}trial not yet done is not run."
+    return f"The {n} {other}trials not yet done are not run."
 
 
 def _with_total(s: m.SessionStarted, total: int) -> m.SessionStarted:

@@ -153,7 +153,7 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     qtbot.addWidget(view)
     assert list(view.arm_curves) == [] and "arm" not in view.legend.text()  # one arm: as before
     assert view.legend_entries() == ["task force |F| (compensated, filtered)", "rendered on the haptic device",
-                                     "target band"]
+                                     "target band", "cue"]
     plots.attach(task)
     plots.attach_arms("left", {"right": other})
     for k in range(50):
@@ -164,7 +164,7 @@ def test_the_force_plot_has_a_curve_per_arm_and_marks_the_task_arm(qtbot) -> Non
     plots.pull()
     view.refresh()
     assert list(view.arm_curves) == ["right"]
-    assert view.legend_entries()[3:] == ["left (task force)", "right"]
+    assert view.legend_entries()[4:] == ["left (task force)", "right"]
     assert "each arm's |F|:" in view.legend.text() and "left (task force)" in view.legend.text()
     assert len(view.arm_curves["right"].getData()[1]) > 0
     assert "arm right peak 9.0 N: above the axis" in view.title_text

@@ -42,6 +42,9 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
     qtbot.waitUntil(lambda: w.model.cue_wait is not None and w.model.cue_wait.action == "reset_faults",
                     timeout=TIMEOUT_MS)
     assert banner.label.text().startswith("Next cue waits: fault latched (HAPTIC_DEVICE")
+    # the headline above the plots says the same, never "The next trial is due"
+    assert w.progress.label.full_text().startswith("Next trial waits: fault latched (HAPTIC_DEVICE")
+    assert w.progress.label.full_text().endswith(" · Reset faults")
     assert banner.button.text() == "Reset faults" and banner.button.isVisible()
     assert "fault log under Devices & health" in banner.help.text()
     qtbot.waitUntil(lambda: "waiting" in banner.label.text(), timeout=TIMEOUT_MS)  # and for how long
@@ -58,3 +61,22 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
     assert banner.button.text() == "Resume"
     qtbot.mouseClick(banner.button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
+
+
+def test_abort_session_says_whether_a_trial_is_stored_as_aborted(qtbot, window) -> None:
+    """A user trial: paused, no trial running, and Abort session still said "The running trial is stored as
+    aborted"."""
+    w = window
+    asked: list[str] = []
+    w.confirm = lambda title, text: asked.append(text) and False  # answer No: read the question only
+    w.model.setup.update(code="P01", kind="experiment")
+    qtbot.mouseClick(w.start_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
+    w.abort_session()
+    assert "Trial 1 (" in asked[-1] and "is running: it is stored as aborted" in asked[-1]
+    qtbot.mouseClick(w.pause_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.model.session.state == "paused", timeout=TIMEOUT_MS)
+    w.abort_session()
+    assert "No trial is running (the session is paused): none is stored as aborted." in asked[-1]
+    assert "is running: it is stored" not in asked[-1] and "not yet done are not run" in asked[-1]
+    assert w.model.session.running  # No: nothing was aborted

@@ -552,3 +552,83 @@ def test_a_starting_engine_names_the_device_it_is_opening():
                           tip_home_m=(0.0, 0.0, 0.0), driver="participant", rot_tip_sensor=(1.0,) * 9, devices=[]))
     s.apply(m.EngineOpening("robot"))  # late news changes nothing once ready
     assert s.state == "ready" and s.message == "engine ready (real rig, real clock)"
+
+
+def test_after_a_cue_the_live_plot_judges_only_the_current_trials_samples():
+    """The window still holds the last trial's force for seconds after a cue: its peak is not this trial's."""
+    ring = RingBuffer.create(TICK_DTYPE, 20000, shared=False)
+    try:
+        p = PlotModel(window_s=10.0, bins=100)
+        p.attach(ring)
+        fill_ring(ring, 4000, force_n=2.7)  # the previous trial: far above a GENTLE target's axis
+        fill_ring(ring, 2000, start=4000, force_n=0.6)  # the cue at 4.0 s; the current trial holds 0.6 N
+        p.pull()
+        s = SessionModel()
+        s.apply(started())
+        assert s.cue_t_s is None
+        s.apply(trial(t_s=4.0, label="GENTLE", force=0.6))
+        assert s.cue_t_s == 4.0
+        assert p.peak(("force_n",)) == 2.7 and p.peak(("force_n",), s.cue_t_s) == 0.6
+        assert p.task_axis(0.6) == pytest.approx((0.0, 2.4))  # the old peak would stretch the axis ...
+        assert p.task_axis(0.6, s.cue_t_s) == pytest.approx((0.0, 1.5))  # ... the current trial's does not
+        assert p.x_of(s.cue_t_s) == pytest.approx(-1.999)  # the cue's place on the time axis
+        assert p.x_of(None) is None and p.x_of(-20.0) is None  # no cue; a cue scrolled out of the window
+        assert p.x_of(9.0) == 0.0  # a cue announced before the ring's records of its moment: at the right edge
+        s.apply(started())  # a new session: no cue of its own yet
+        assert s.cue_t_s is None
+        s.reset("restarting")
+        assert s.cue_t_s is None
+    finally:
+        ring.close()
+
+
+def test_the_headline_agrees_with_the_banner_when_a_fault_holds_the_next_cue():
+    """A user trial: "The next trial is due" above a red "Next cue waits: fault latched (SENSOR_STALE)"."""
+    from study_app.models.cue_wait import cue_wait_now, headline
+
+    s, h = SessionModel(), HealthModel()
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started())
+    s.apply(trial(t_s=5.0))
+    s.apply(m.TrialEnded(6.0, trial_record(trial_index=0, outcome="aborted", abort_reason="fault: SENSOR_STALE"), 3))
+    s.apply(m.PhaseEntered(6.0, 0, "idle"))
+    assert s.progress_text() == "The next trial is due"  # what the session alone knows
+    held = m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 1, True, "autopilot", True, False,
+                    waiting="fault latched (SENSOR_STALE): reset to continue")
+    s.apply(held)
+    h.apply(held)
+    _, wait = cue_wait_now(s, h, "", None)
+    assert wait is not None and wait.text() == "Next cue waits: fault latched (SENSOR_STALE)"
+    assert headline(s, wait) == "Next trial waits: fault latched (SENSOR_STALE) · Reset faults"
+    # the protocol's pause, a pause asked for, a running trial: the headline's own words agree already
+    s.apply(dataclasses.replace(held, waiting=""))
+    h.apply(dataclasses.replace(held, waiting=""))
+    s.apply(m.PhaseEntered(7.0, 0, "pause"))
+    s.set_time(7.5)
+    _, wait = cue_wait_now(s, h, "", None)
+    assert wait is not None and headline(s, wait) == "Next trial in 1.5 s"
+    s.apply(trial(t_s=8.0, position=2))
+    assert headline(s, cue_wait_now(s, h, "", None)[1]).startswith("Trial 2 · FIRM")
+
+
+def test_abort_session_asks_what_will_actually_happen():
+    """A user trial: paused, with no trial running, the question said "The running trial is stored as aborted"."""
+    s = SessionModel()
+    assert s.abort_session_question() == ""
+    s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
+    s.apply(started(total=4))
+    s.apply(trial(t_s=5.0, position=1))
+    q = s.abort_session_question()
+    assert q == ("Abort session 3 (P01, experiment)? Trial 1 (FIRM, haptics ON) is running: it is stored as aborted "
+                 "(unless it ends before you answer) and not run again. The 3 other trials not yet done are not run. "
+                 "The session ends; it cannot be resumed.")
+    s.apply(m.TrialEnded(9.0, row(0), 4))
+    s.apply(m.PhaseEntered(9.0, 0, "pause"))
+    q = s.abort_session_question()
+    assert "No trial is running (between trials): none is stored as aborted." in q
+    assert "If the next trial is cued before you answer, that trial is." in q
+    assert "The 3 trials not yet done are not run." in q and "running: it is stored" not in q
+    s.apply(m.Health(1000.0, 1000.0, 1000.0, 1.0, 0, 0, 100, 0, True, "autopilot", True, True))  # paused
+    q = s.abort_session_question()
+    assert s.state == "paused" and "No trial is running (the session is paused): none is stored as aborted." in q
+    assert "cued before you answer" not in q  # nothing is cued while paused

@@ -208,13 +208,17 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     plots.data["force_n"][:] = 0.6
     view.refresh()
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
-    assert view.band.getRegion() == pytest.approx((0.54, 0.66))
+    r = view.band.rect()  # from the cue (t = 1 s, 4 s before the newest sample) to now
+    assert (r.left(), r.right(), r.top(), r.bottom()) == pytest.approx((-4.0, 0.0, 0.54, 0.66))
+    assert view.cue_line.isVisible() and view.cue_line.value() == pytest.approx(-4.0)
     # the band's words in the title line, outside the data area: nothing is drawn over the trace
     assert view.title_text == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
     assert view.task.titleLabel.isVisible() and not view.task.vb.sceneBoundingRect().intersects(
         view.task.titleLabel.sceneBoundingRect())
     in_data = [i for i in view.task.vb.addedItems if i.isVisible()]
-    assert set(map(type, in_data)) <= {type(view.band), type(view.curves["force_n"])}  # curves and the band only
+    # curves, the band and the cue's line only
+    assert set(map(type, in_data)) <= {type(view.band), type(view.band_edges), type(view.cue_line),
+                                       type(view.curves["force_n"])}
     assert view.lower_plot.viewRange()[1][1] >= 7.6
     assert view.lower_legend() == ["raw sensor |F| (the tool's weight included)"]
     plots.data["force_n"][-1] = 18.0
@@ -235,6 +239,41 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     assert all(w in view.lower_plot.titleLabel.text for w in ("Fx", "Fy", "Fz"))
     view.lower_choice.setCurrentText("none")
     assert not view.lower_plot.isVisible() and view.task.getAxis("bottom").style["showValues"]
+
+
+def test_after_a_cue_the_live_view_marks_it_and_leaves_the_last_trials_force_alone(qtbot):
+    """A user trial: right after a cue the window still showed the previous trial's 2.7 N, the new trial's band
+    across the whole window and "peak 2.7 N: above the axis", read as the participant overshooting now."""
+    s = SessionModel()
+    plots = PlotModel(window_s=10.0)
+    view = QtForcePlots(plots, s)
+    qtbot.addWidget(view)
+    s.apply(READY)
+    s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.TrialStarted(1.0, 0, 1, 2, "GENTLE", 0.6, "off"))
+    plots.t = np.linspace(0.0, 10.0, 1001)
+    for k in plots.data:
+        plots.data[k] = np.zeros(1001)
+    plots.data["force_n"][plots.t < 8.0] = 2.7  # trial 1, pressed hard, ended at 7 s
+    s.apply(m.TrialEnded(7.0, trial_record(trial_index=0, target_label="GENTLE", target_force_n=0.6,
+                                           haptic_mode="off", outcome="timeout"), 2))
+    s.apply(m.PhaseEntered(7.0, 0, "pause"))
+    view.refresh()
+    assert "peak 2.7 N: above the axis" in view.title_text  # between trials: the trial just ended is the last
+    assert not view.band.isVisible()
+    s.apply(m.TrialStarted(9.0, 1, 2, 2, "GENTLE", 0.6, "off"))  # the cue, 1 s before the newest sample
+    view.refresh()
+    assert "above the axis" not in view.title_text  # the previous trial's force is not this trial's
+    assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
+    assert view.cue_line.isVisible() and view.cue_line.value() == pytest.approx(-1.0)
+    r = view.band.rect()
+    assert view.band.isVisible() and (r.left(), r.right()) == pytest.approx((-1.0, 0.0))
+    plots.data["force_n"][-1] = 2.7  # this trial overshoots: said at once
+    view.refresh()
+    assert view.title_text.endswith("peak 2.7 N: above the axis")
+    plots.t = plots.t + 20.0  # the cue has scrolled out: the band spans the whole window, no line
+    view.refresh()
+    assert not view.cue_line.isVisible() and view.band.rect().left() == pytest.approx(-10.0)
 
 
 def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):
@@ -318,3 +357,29 @@ def test_a_placed_window_fits_with_its_title_bar(qtbot):
     extra = placement.FRAME_ALLOWANCE
     assert w.y() >= avail.y() and w.y() + extra.height() + w.height() <= avail.y() + avail.height()
     assert w.x() >= avail.x() and w.x() + extra.width() + w.width() <= avail.x() + avail.width()
+
+
+def test_the_rig_views_readout_is_never_drawn_over_the_instrument(qtbot):
+    """A user trial: "contact force 1.61 N" was drawn over the grey stylus shaft, unreadable."""
+    r = RigViewModel()
+    r.apply(READY)
+    r.update(r.surface_z_m - 0.0028, 1.61)  # the tip 2.8 mm into the tissue: the shaft reaches the top
+    view = RigWindow(r, lambda mode: None)
+    qtbot.addWidget(view)
+    view.resize(760, 480)
+    view.show()
+    qtbot.waitExposed(view)
+    canvas = view.canvas
+    assert "contact force 1.61 N (ground truth)" in canvas.readout_lines()[0]
+    strip, scene = canvas.readout_rect(), canvas.drawing_rect()
+    assert strip.bottom() <= scene.top() and strip.height() >= 40  # the readout's strip is its own
+    image = canvas.grab().toImage()
+    dpr = image.devicePixelRatio()
+    shaft = (150, 155, 165)  # the shaft's fill
+    x_mid = int(canvas.width() / 2 * dpr)
+    below = image.pixelColor(x_mid, int((scene.top() + 20) * dpr))
+    assert (below.red(), below.green(), below.blue()) == shaft  # the shaft is drawn in the scene, up to its top
+    for y in range(int(strip.bottom() * dpr)):  # and nowhere in the readout's strip
+        for x in range(x_mid - int(10 * dpr), x_mid + int(10 * dpr)):
+            c = image.pixelColor(x, y)
+            assert (c.red(), c.green(), c.blue()) != shaft, (x, y)
