@@ -34,6 +34,11 @@ REPLAY_MARKER = ".haptic-study-replay"
 
 def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     """Register ``replay``, ``plot-session`` and ``export``."""
+    _add_replay_parser(sub)
+    _add_plot_and_export_parsers(sub)
+
+
+def _add_replay_parser(sub: argparse._SubParsersAction) -> None:
     r = add_command(
         sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
         "haptic-study replay --db study.db --session 2\n"
@@ -64,6 +69,9 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
                    help="a rig of several arms: the arm whose records to replay, over the task arm's trials "
                         "(default: the task arm's)")
     r.set_defaults(handler=cmd_replay)
+
+
+def _add_plot_and_export_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = add_command(
         sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
