@@ -17,7 +17,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
-from pipeline.runtime.platform_support import usable_cpu_count, worker_context
+from pipeline.runtime.platform_support import die_with, usable_cpu_count, worker_context
 
 __all__ = ["WORKERS_ENV", "default_workers", "run_tasks", "workers_env_problem"]
 
@@ -94,7 +94,9 @@ def run_tasks(
         return out
     ctx = worker_context()  # fork while single-threaded on Linux, else spawn (platform_support)
     results: list[Any] = [None] * len(tasks)
-    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx) as pool:
+    # the workers die with this process (PR_SET_PDEATHSIG): a killed command leaves no orphan computing on
+    with ProcessPoolExecutor(max_workers=min(workers, len(tasks)), mp_context=ctx, initializer=die_with,
+                             initargs=(os.getpid(),)) as pool:
         pending: dict[Future[T], int] = {pool.submit(fn, *t): i for i, t in enumerate(tasks)}
         try:
             while pending:

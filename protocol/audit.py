@@ -23,9 +23,10 @@ Four checks, each reported with what it found:
 from __future__ import annotations
 
 import json
+import re
 import sqlite3
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -171,12 +172,22 @@ def _trials_against_recording(conn: sqlite3.Connection, audit: Audit,
         audit.problems.append(line)
 
 
-def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
+def _where(sid: int, code: str, status: str, writer: str | None) -> str:
+    """A session named for a finding: its status as ``sessions`` says it (a running one is in progress or
+    interrupted)."""
+    if status == "running" and writer:
+        who = re.sub(r"^(process \d+) \((.*)\)$", r"\1, \2", writer)  # "process N (command)" -> "process N, command"
+        return f"session {sid} ({code}) in progress ({who})"
+    return f"session {sid} ({code}, {'interrupted' if status == 'running' else status})"
+
+
+def _cells(conn: sqlite3.Connection, audit: Audit, writers: Mapping[int, str]) -> None:
     """Every experiment session's trials against its schedule and its protocol's design."""
     sessions = StudyReader.over(conn).experiment_designs()
     audit.experiment_sessions = len(sessions)
     for sid, code, status, protocol_json, schedule_json in sessions:
-        where = f"session {sid} ({code}, {status})"
+        live = status == "running" and bool(writers.get(int(sid)))
+        where = _where(int(sid), code, status, writers.get(int(sid)))
         try:
             protocol = protocol_from_dict(json.loads(protocol_json), f"session {sid} protocol")
             schedule = schedule_from_json(schedule_json)
@@ -208,14 +219,17 @@ def _cells(conn: sqlite3.Connection, audit: Audit) -> None:
                               if done[(lab, mode)] != n)
             found.append(f"marked completed with cells not full: {short}")
         elif status != "completed" and not full:
+            # a session another process writes now is not resumed (that would be refused): no advice
+            advice = f"; resume it with --continue or --resume {code}" if status == "running" and not live else ""
             audit.notes.append(f"{where}: {sum(done.values())} of {sum(want.values())} designed trials done"
-                               f"{'; resume it with --continue or --resume ' + code if status == 'running' else ''}")
+                               f"{' so far' if live else advice}")
         audit.problems.extend(f"{where}: {f}" for f in found)
         audit.cells_complete += full and not found
 
 
 def audit_database(conn: sqlite3.Connection, path: str,
-                   progress: Callable[[int, int], None] | None = None) -> Audit:
+                   progress: Callable[[int, int], None] | None = None,
+                   writers: Mapping[int, str] | None = None) -> Audit:
     """Check a study database read-only (see the module docstring).
 
     Parameters
@@ -226,6 +240,10 @@ def audit_database(conn: sqlite3.Connection, path: str,
         Its name, for the findings.
     progress
         ``progress(blocks done, blocks)`` while the blocks are decoded.
+    writers
+        The sessions a live process writes right now, session id -> ``"process N (command)"``
+        (:meth:`protocol.storage.StudyDatabase.sessions_being_written`): such a running session is said to be
+        in progress, by whom, with no advice to resume it; a running session without one was interrupted.
     """
     audit = Audit(path=path)
     audit.schema_version = StudyReader.over(conn).schema_version
@@ -241,7 +259,7 @@ def audit_database(conn: sqlite3.Connection, path: str,
         else:
             audit.notes.append(f"schema version {audit.schema_version}: sessions were not recorded whole "
                                "(trial windows in the samples table), so there are no blocks to verify")
-        _cells(conn, audit)
+        _cells(conn, audit, writers or {})
         for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
             audit.notes.append(f"participant {w.code} withdrew ({w.withdrawn_at[:16].replace('T', ' ')} UTC): "
                                f"{w.counts()} erased; their number stays vacant")

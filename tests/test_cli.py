@@ -115,6 +115,28 @@ def test_a_bad_worker_count_in_the_environment_is_one_line_and_nothing_runs(
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("value", ["banana", "off", "2", "yes"])
+def test_a_bad_realtime_switch_in_the_environment_is_one_line_and_nothing_runs(
+        value: str, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """HAPTIC_STUDY_REALTIME=banana ran `sim` with exit 0 (anything but "0" silently meant real-time on)."""
+    monkeypatch.setenv("HAPTIC_STUDY_REALTIME", value)
+    assert main(["sim", "--seconds", "1"]) == 2
+    out = capsys.readouterr()
+    assert out.out == ""
+    assert out.err.splitlines() == [f"haptic-study: error: HAPTIC_STUDY_REALTIME = {value!r}: must be 0 (the loop at "
+                                    "normal priority) or 1 (SCHED_FIFO, the default; also when unset)"]
+
+
+@pytest.mark.parametrize("value", ["0", "1", " 0 ", ""])
+def test_a_good_realtime_switch_is_taken(value: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    from pipeline.runtime.clock import _set_fifo, realtime_env_problem
+
+    monkeypatch.setenv("HAPTIC_STUDY_REALTIME", value)
+    assert realtime_env_problem() is None
+    if value.strip() == "0":
+        assert _set_fifo(1) == "normal (HAPTIC_STUDY_REALTIME=0)"
+
+
 def test_the_worker_count_in_the_environment_is_used(monkeypatch: pytest.MonkeyPatch) -> None:
     from analysis.parallel import default_workers
 

@@ -408,3 +408,55 @@ def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path
     assert path.read_bytes().count(b"PARTICIPANT-DATA") == 0
     assert not db.conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'withdrawal_scrub'").fetchone()
     db.close()
+
+
+_STOPPED = """
+import os, sys
+import protocol.storage.withdrawal as w
+from pipeline.runtime.platform_support import kill_hard
+
+real = w.rewrite_file
+
+
+def rewrite_file(db):
+    if {where!r} == "before the rewrite":
+        kill_hard(os.getpid())
+    # killed as VACUUM begins: the log was just emptied into the file, the free pages are still there
+    db.conn.set_trace_callback(lambda sql: sql.lstrip().upper().startswith("VACUUM") and kill_hard(os.getpid()))
+    return real(db)
+
+
+w.rewrite_file = rewrite_file
+from study_app.cli.main import main
+sys.exit(main(["withdraw", "--db", {db!r}, "--participant", {code!r}, "--reason", "x", "--yes", {code!r}]))
+"""
+
+
+@pytest.mark.parametrize("where", ["before the rewrite", "as VACUUM begins"])
+def test_a_withdrawal_killed_between_the_removal_and_the_rewrite_is_finished_by_running_it_again(
+        study, copy, capsys, where) -> None:
+    """kill -9 after the rows were committed and before the file was rewritten: the same command run again said
+    "already withdrew ... nothing to remove" and the file kept its free pages for ever; now it finishes the rewrite."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    stopped = subprocess.run([sys.executable, "-c", _STOPPED.format(where=where, db=str(copy), code=GONE)],
+                             cwd=root, env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert stopped.returncode == -9, stopped.stderr
+    # (these looks, each a connection of its own, empty the log into the file as they close, as any program that
+    # opens the study may: then only the free pages say the rewrite is still to do)
+    assert [r[0] for r in _rows(copy, "SELECT code FROM withdrawals")] == [GONE]  # the removal was committed
+    assert _rows(copy, "SELECT COUNT(*) FROM participants WHERE code = ?", GONE) == [(0,)]
+    assert _rows(copy, "PRAGMA freelist_count")[0][0] > 0  # ... and the file not rewritten
+    assert main(["withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE]) == 0
+    out = capsys.readouterr().out
+    assert "but the rewrite of" in out and "the rewrite is finished now" in out, out
+    assert _rows(copy, "PRAGMA freelist_count") == [(0,)]
+    assert not Path(f"{copy}-wal").exists() or Path(f"{copy}-wal").stat().st_size == 0
+    assert [t for t in study["before"]["traces"] if t in _file_bytes(copy)] == []
+    assert main(["check", "--db", str(copy)]) == 0, capsys.readouterr().out
+    capsys.readouterr()
+    _refused(capsys, copy, "withdraw", "--db", str(copy), "--participant", GONE, "--reason", "again", "--yes", GONE,
+             expect="already withdrew")  # finished: a third run has nothing to do

@@ -17,7 +17,7 @@ from pipeline.runtime.platform_support import set_fifo_priority, set_timer_slack
 
 __all__ = [
     "Clock", "MonotonicClock", "VirtualClock", "collect_garbage", "manual_garbage_collection",
-    "prepare_helper_thread", "prepare_realtime_thread", "set_timer_slack_ns",
+    "prepare_helper_thread", "prepare_realtime_thread", "realtime_env_problem", "set_timer_slack_ns",
 ]
 
 
@@ -94,8 +94,20 @@ class MonotonicClock:
             pass
 
 
-#: Set to ``0`` to keep the loop thread at normal priority.
+#: Set to ``0`` to keep the loop thread at normal priority (``1``, or unset: ask for ``SCHED_FIFO``).
 REALTIME_ENV = "HAPTIC_STUDY_REALTIME"
+
+
+def realtime_env_problem() -> str | None:
+    """What is wrong with :data:`REALTIME_ENV` in one line, or None when it is unset, empty, ``0`` or ``1``.
+
+    Anything else (``banana``, ``off``, ``no``) would silently mean "real-time on"; the command line refuses it.
+    """
+    raw = os.environ.get(REALTIME_ENV)
+    if raw is None or raw.strip() in ("", "0", "1"):
+        return None
+    return (f"{REALTIME_ENV} = {raw!r}: must be 0 (the loop at normal priority) or 1 (SCHED_FIFO, the default; "
+            "also when unset)")
 #: SCHED_FIFO priority of the loop thread: above every normal thread, far below the kernel's own (50+).
 REALTIME_PRIORITY = 20
 #: SCHED_FIFO priority of the other threads of the loop's process (:func:`prepare_helper_thread`): below the loop.
@@ -150,7 +162,7 @@ def prepare_helper_thread(priority: int = HELPER_PRIORITY) -> str:
 
 def _set_fifo(priority: int) -> str:
     """``SCHED_FIFO`` at ``priority`` for the calling thread, unless disabled or not permitted; what it got."""
-    if os.environ.get(REALTIME_ENV, "1") == "0":
+    if os.environ.get(REALTIME_ENV, "1").strip() == "0":
         return f"normal ({REALTIME_ENV}=0)"
     return set_fifo_priority(priority)  # normal priority where the OS has no SCHED_FIFO (platform_support)
 

@@ -20,8 +20,9 @@ helper threads)             ``scheduling`` says why (GUI)  machine shows in the 
 usable CPUs (affinity)      ``os.cpu_count()``             a CPU mask (``taskset``) is not honoured
 worker processes            ``spawn``                      each worker imports the product afresh (slower
 (``fork``)                                                  start of a parallel study)
-die with the parent         nothing                        a killed ``run`` leaves its workers to finish their
-(``PR_SET_PDEATHSIG``)                                      participant (each under its own session's lease)
+die with the parent         nothing                        a killed command leaves its worker processes to
+(``PR_SET_PDEATHSIG``;                                      finish their task (``run``: their participant,
+:func:`die_with`)                                           each under its own session's lease)
 hard kill (``SIGKILL``)     Windows: ``TerminateProcess``  nothing: both end the process with no clean-up
 process exists (kill 0)     Windows: ``OpenProcess``       nothing (Windows' ``kill(pid, 0)`` would send
                                                             Ctrl-C, so it is never used there)
@@ -80,10 +81,10 @@ if TYPE_CHECKING:  # multiprocessing is imported where it is used: a command tha
 __all__ = [
     "DIR_FD_CALLS", "O_BINARY", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NOINHERIT", "O_NONBLOCK",
     "SharedSegment", "add_dll_directory", "attach_segment", "boot_id", "cgroup_memory_headroom", "cpu_times",
-    "create_segment", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
+    "create_segment", "die_with", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
     "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "meminfo_available_bytes", "open_schedstat",
     "owner_only", "process_exists", "process_stat_fields", "redirects", "set_fd_mode", "set_fifo_priority",
-    "set_folder_mode", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count", "worker_context",
+    "set_folder_mode", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count", "worker_context", "worker_pool",
 ]
 
 def _linux() -> bool:
@@ -205,6 +206,28 @@ def die_with_parent() -> bool:
         return bool(_libc().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0)
     except (OSError, AttributeError):  # pragma: no cover - no libc
         return False
+
+
+def die_with(parent_pid: int) -> None:
+    """A worker process's first act: die with ``parent_pid`` (:func:`die_with_parent`), or exit now if it is gone.
+
+    The initializer of every pool of worker processes (:func:`worker_pool`, ``ProcessPoolExecutor(initializer=
+    die_with, initargs=(os.getpid(),))``): a ``kill -9`` of a command leaves no orphaned worker computing on
+    (and holding its memory) for ever.  The parent may die before the request takes effect: then the worker's
+    parent is already another process, and it exits at once.
+    """
+    die_with_parent()  # (nothing where the OS cannot; the check below still catches a parent gone before the start)
+    if os.getppid() != parent_pid:
+        os._exit(1)
+
+
+def worker_pool(processes: int, context: Any = None) -> Any:
+    """A ``multiprocessing`` pool whose workers die with this process (:func:`die_with`).
+
+    ``context``: the start method's context (default :func:`worker_context`).
+    """
+    ctx = worker_context() if context is None else context
+    return ctx.Pool(processes, initializer=die_with, initargs=(os.getpid(),))
 
 
 def kill_hard(pid: int) -> None:

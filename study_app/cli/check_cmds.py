@@ -80,7 +80,8 @@ def cmd_check(args: argparse.Namespace) -> int:
         bar.update(done)
 
     try:
-        audit = audit_database(db.conn, args.db, progress)
+        # which running sessions another process writes now: in progress, not interrupted (as `sessions` says)
+        audit = audit_database(db.conn, args.db, progress, writers=db.sessions_being_written())
     finally:
         db.close()
         if bar is not None:

@@ -114,14 +114,15 @@ _INPUT_FILES = {"db": "database", "protocol": "protocol", "hardware": "hardware"
 
 
 def _refuse_special_inputs(args: argparse.Namespace) -> None:
-    """An input path that is a FIFO, a socket or a device, or a bad worker count in the environment: one line
-    (a missing file is each command's to say)."""
+    """An input path that is a FIFO, a socket or a device, or a bad worker count or real-time switch in the
+    environment: one line (a missing file is each command's to say)."""
     from analysis.oserrors import kind_of
     from analysis.parallel import workers_env_problem
+    from pipeline.runtime.clock import realtime_env_problem
 
-    problem = workers_env_problem()
-    if problem is not None:
-        raise CliError(problem)
+    for problem in (workers_env_problem(), realtime_env_problem()):
+        if problem is not None:
+            raise CliError(problem)
 
     for option, what in _INPUT_FILES.items():
         value = getattr(args, option, None)

@@ -28,13 +28,22 @@ __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
 _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
+#: The marker of a replay output folder (analysis.outdir): the files replay wrote there, with their SHA-256.
+REPLAY_MARKER = ".haptic-study-replay"
+
 
 def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     """Register ``replay``, ``plot-session`` and ``export``."""
+    _add_replay_parser(sub)
+    _add_plot_and_export_parsers(sub)
+
+
+def _add_replay_parser(sub: argparse._SubParsersAction) -> None:
     r = add_command(
         sub, "replay", "run a recorded session through the pipeline again, as recorded or with other settings",
         "haptic-study replay --db study.db --session 2\n"
-        "haptic-study replay --db study.db --session 2 --filter-window 20 --out replay-w20",
+        "haptic-study replay --db study.db --session 2 --filter-window 20 --out replay-w20\n"
+        "haptic-study replay --db study.db --session 2 --filter-window 30 --out replay-w20 --force",
         "Run a recorded session's inputs (raw sensor wrench, robot poses, feedback switch, faults) through the "
         "same pipeline code as the live loop. With the recorded settings it reproduces the rendered force bit for "
         "bit; with another --filter-window, --f-scale or --f-max it writes, per trial, how the rendered force would "
@@ -50,11 +59,19 @@ def add_replay_parsers(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--f-max", type=real_number("--f-max", 0.0, 100.0, lo_open=True), default=None, metavar="N",
                    help="tanh scaling f_max to try, N (the device's own peak still clamps)")
     r.add_argument("--out", default=None, metavar="DIR",
-                   help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new folder)")
+                   help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new or empty "
+                        "folder, unless --force)")
+    r.add_argument("--force", action="store_true",
+                   help="replace the files an earlier replay wrote in DIR, if unedited (the marker "
+                        f"{REPLAY_MARKER} lists them with their SHA-256); any other file, an edited one or the "
+                        "input database in DIR is a refusal")
     r.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
                    help="a rig of several arms: the arm whose records to replay, over the task arm's trials "
                         "(default: the task arm's)")
     r.set_defaults(handler=cmd_replay)
+
+
+def _add_plot_and_export_parsers(sub: argparse._SubParsersAction) -> None:
 
     p = add_command(
         sub, "plot-session", "a whole recorded session's force through the pipeline (the paper's Fig. 6)",
@@ -164,10 +181,6 @@ def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
     return np.sqrt(cols[f"{prefix}_fx"] ** 2 + cols[f"{prefix}_fy"] ** 2 + cols[f"{prefix}_fz"] ** 2)
 
 
-#: The marker of a replay output folder (analysis.outdir): the files replay wrote there, with their SHA-256.
-REPLAY_MARKER = ".haptic-study-replay"
-
-
 def _output_policy(call: Any) -> Any:
     """Run an output-policy call (analysis.outdir); its refusal or failure is one line (exit 2, or 1 mid-write)."""
     from analysis.errors import AnalysisError
@@ -183,7 +196,9 @@ def cmd_replay(args: argparse.Namespace) -> int:
     """``haptic-study replay``."""
     from analysis.outdir import check_output_folder, write_output_folder
 
-    folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db]}
+    folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db], "force": args.force}
+    if args.force and not args.out:
+        raise CliError("--force applies to --out DIR only (without --out, replay writes no folder)")
     if args.out:  # refused before the work, not after it
         _output_policy(lambda: check_output_folder(args.out, **folder))
     (code, kind, _), segments, trials = _session(args.db, args.session, arm=args.arm)

@@ -10,6 +10,10 @@ What it does, in order (:mod:`protocol.storage.withdrawal` holds the storage hal
 4. it rewrites the file (``VACUUM``) and empties its write-ahead log, so nothing of theirs can be read back from
    the database, and names what else on disk may still hold their data (upgrade backups beside the database,
    copies, reports and exports made earlier): files it did not make are never deleted.
+
+If step 4 did not finish -- a program reading the study held it up, or the command was stopped (killed, a power
+cut) after step 3's commit -- the same command run again finds the withdrawal record and a file still to rewrite
+(a non-empty log, free pages) and finishes the rewrite.
 """
 
 from __future__ import annotations
@@ -80,13 +84,36 @@ def _log_holds_pages(path: str) -> bool:
         return False
 
 
+def _rewrite_pending(db: Any, path: str) -> bool:
+    """The file still needs a withdrawal's rewrite: its write-ahead log holds pages (a reader held the rewrite up),
+    or it has free pages (the command was stopped -- killed, a power cut -- after the rows were removed and before
+    ``VACUUM`` finished: the removal frees pages, and only the rewrite drops them).
+
+    (Free pages a writer left later make a further run rewrite the file once more: harmless, and it says so.)
+    """
+    return _log_holds_pages(path) or int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
+
+
+def _refuse_live_writers(db: Any, path: str) -> None:
+    """Withdraw rewrites the whole file: refused while any process writes to the study."""
+    from protocol.storage import LeaseHeld
+
+    study = [h for h in db.lease_holders() if h["alive"]]
+    if study:
+        h = study[0]
+        raise LeaseHeld(f"{path}: {'the study in' if h['scope'] == 'study' else h['scope'] + ' of'} this database "
+                        f"is being written by process {h['pid']} ({h['command']}); withdraw rewrites the whole "
+                        "file, so it waits until nothing writes to it; nothing was changed")
+
+
 def _look(path: str, code: str) -> Any:
     """The read-only look that decides every refusal: the participant's :class:`Footprint`.
 
-    A participant who already withdrew is refused, unless a program reading the study kept that withdrawal's
-    rewrite of the file from finishing: then their :class:`Withdrawal` is returned, and this command finishes it.
+    A participant who already withdrew is refused, unless that withdrawal's rewrite of the file did not finish
+    (:func:`_rewrite_pending`: a program reading the study held it up, or the command was stopped between the
+    removal and the rewrite): then their :class:`Withdrawal` is returned, and this command finishes it.
     """
-    from protocol.storage import LeaseHeld, StorageError, StudyDatabase, StudyReader
+    from protocol.storage import StorageError, StudyDatabase, StudyReader
     from protocol.storage.withdrawal import footprint, withdrawal_of
 
     if not Path(path).exists():
@@ -97,8 +124,9 @@ def _look(path: str, code: str) -> Any:
         raise CliError(str(exc)) from None
     try:
         done = withdrawal_of(db.conn, code)
-        if done is not None and _log_holds_pages(path):
-            return done  # withdrawn, but a reader held the file's rewrite up: this command finishes it
+        if done is not None and _rewrite_pending(db, path):
+            _refuse_live_writers(db, path)
+            return done  # withdrawn, but the file's rewrite did not finish: this command finishes it
         if done is not None:
             raise CliError(f"--participant {code}: already withdrew from {path} on "
                            f"{done.withdrawn_at[:16].replace('T', ' ')} UTC ({done.counts()} removed then); "
@@ -113,12 +141,7 @@ def _look(path: str, code: str) -> Any:
             if sid in writing:
                 raise CliError(f"--participant {code}: session {sid} is running (being written by {writing[sid]}); "
                                "withdraw once it has ended; nothing was changed")
-        study = [h for h in db.lease_holders() if h["alive"]]
-        if study:
-            h = study[0]
-            raise LeaseHeld(f"{path}: {'the study in' if h['scope'] == 'study' else h['scope'] + ' of'} this database "
-                            f"is being written by process {h['pid']} ({h['command']}); withdraw rewrites the whole "
-                            "file, so it waits until nothing writes to it; nothing was changed")
+        _refuse_live_writers(db, path)
         return fp
     except StorageError as exc:
         raise CliError(str(exc)) from None
@@ -227,8 +250,9 @@ def cmd_withdraw(args: argparse.Namespace) -> int:
     if not clean:
         raise CliError(_reader_line(args.db, code, removed=True), 1)
     if finishing is not None:
-        print(f"{code} had withdrawn ({record.withdrawn_at[:16].replace('T', ' ')} UTC); the rewrite of {args.db} "
-              "that a reader held up is finished: none of their data can be read back from the database.")
+        print(f"{code} had withdrawn ({record.withdrawn_at[:16].replace('T', ' ')} UTC), but the rewrite of {args.db} "
+              "had not finished (a reader held it up, or the command was stopped); the rewrite is finished now: "
+              "none of their data can be read back from the database.")
         return 0
     print(f"Withdrew {code} from {args.db}: removed {record.counts()}; the file was rewritten and its write-ahead "
           "log emptied, so none of it can be read back from the database.")

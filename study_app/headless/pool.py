@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from pipeline.force.framework import FrameworkConfig
-from pipeline.runtime.platform_support import die_with_parent, usable_cpu_count, worker_context
+from pipeline.runtime.platform_support import die_with, usable_cpu_count, worker_context
 from protocol.config import ProtocolConfig
 from protocol.rehearsal import FaultPlan
 from protocol.session_setup import participant_code
@@ -35,13 +35,6 @@ def default_jobs(participants: int) -> int:
 
 
 
-def _die_with_parent(parent_pid: int) -> None:
-    """Linux: have the kernel SIGKILL this process when its parent dies, so no orphan keeps writing."""
-    die_with_parent()  # (nothing where the OS cannot: platform_support)
-    if os.getppid() != parent_pid:  # the parent died before the request took effect
-        os._exit(1)
-
-
 def _participant_worker(
     db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
     messages: Any, study_owner: str, faults: Sequence[FaultPlan], sim_arms: tuple[str, ...],
@@ -55,7 +48,7 @@ def _participant_worker(
     ``("done", number, session ids, participant_trials_done, study_time_s, rehearsal reports)``,
     ``("error", number, message)``.
     """
-    _die_with_parent(parent_pid)
+    die_with(parent_pid)  # Linux: the kernel SIGKILLs this process when its parent dies: no orphan keeps writing
     set_kill_target(parent_pid)
     code = participant_code(number)
     progress = StudyProgress(participants_total=1, participant=number, code=code)

@@ -22,6 +22,7 @@ from analysis.sim_study import TrialRow
 from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
+from pipeline.runtime.platform_support import worker_pool
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
 from pipeline.sim.rig import SimRigConfig
@@ -109,7 +110,7 @@ def run_study(study: int, participants: int = 10, jobs: int = 1) -> list[TrialRo
     """All participants of one study at the paper's settings (``jobs`` > 1: a process per participant)."""
     work = [(study, j) for j in range(1, participants + 1)]
     if jobs > 1:
-        with mp.get_context("spawn").Pool(jobs) as pool:
+        with worker_pool(jobs, mp.get_context("spawn")) as pool:  # its workers die with this process
             parts = pool.map(_run_participant_args, work)
     else:
         parts = [_run_participant_args(w) for w in work]

@@ -20,7 +20,7 @@ from pathlib import Path
 from analysis.sim_study import TrialRow
 from analysis.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
 from pipeline.force.pipeline_settings import framework_with
-from pipeline.runtime.platform_support import worker_context
+from pipeline.runtime.platform_support import worker_pool
 from protocol.config import ProtocolConfig, default_protocol
 from study_app.headless.sim_trials import MODEL_VERSION, run_participant
 
@@ -112,7 +112,7 @@ def run_sweep(
     if on_progress is not None:
         on_progress(progress)
     if jobs > 1 and len(tasks) > 1:
-        with worker_context().Pool(min(jobs, len(tasks))) as pool:
+        with worker_pool(min(jobs, len(tasks))) as pool:  # its workers die with this process
             for result in pool.imap_unordered(_task, tasks):
                 done(result)
     else:

@@ -239,3 +239,28 @@ def test_a_row_format_database_reads_as_before_and_says_it_cannot_replay(study, 
     key = ["participant_number", "session_id", "trial_number"]
     a, b = (f.drop(columns="database").sort_values(key).reset_index(drop=True) for f in (a, b))
     pd.testing.assert_frame_equal(a[b.columns], b)
+
+
+def test_replay_force_replaces_only_its_own_unedited_files(study, tmp_path, capsys) -> None:
+    """The refusal of an existing --out offered --force, which replay did not have ("unrecognized arguments")."""
+    sid = str(sessions(study)["P01/experiment"])
+    out_dir = tmp_path / "rp1"
+    argv = ["replay", "--db", str(study), "--session", sid, "--filter-window", "20", "--out", str(out_dir)]
+    code, _, err = _run(capsys, *argv)
+    assert code == 0, err
+    code, _, err = _run(capsys, *argv)  # again: refused, and the way past it it names exists
+    assert code == 2 and "pass --force to replace a folder replay wrote before" in err, err
+    first = (out_dir / "filter_trade.csv").read_bytes()
+    (out_dir / "filter_trade.csv").write_bytes(b"stale")  # (an edit: the hash no longer matches)
+    code, _, err = _run(capsys, *argv, "--force")
+    assert code == 2 and "filter_trade.csv was changed since replay wrote it" in err, err
+    (out_dir / "filter_trade.csv").write_bytes(first)
+    code, out, err = _run(capsys, *argv, "--force")
+    assert code == 0, err
+    assert f"Files in {out_dir}/" in out and (out_dir / "filter_trade.csv").read_bytes() == first
+    (out_dir / "notes.txt").write_text("mine")
+    code, _, err = _run(capsys, *argv, "--force")
+    assert code == 2 and "holds notes.txt, which replay did not write" in err, err
+    assert (out_dir / "notes.txt").read_text() == "mine"
+    code, _, err = _run(capsys, "replay", "--db", str(study), "--session", sid, "--force")
+    assert code == 2 and err.count("\n") == 1 and "--force applies to --out DIR only" in err, err

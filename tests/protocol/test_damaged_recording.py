@@ -250,7 +250,38 @@ def test_one_flipped_bit_passes_sqlites_check_and_is_found_by_check(study: Path,
     clean = _cli(["check", "--db", str(study)], tmp_path)
     assert clean.returncode == 0 and "No problem found." in clean.stdout, clean.stdout + clean.stderr
     assert "2 of 3 experiment sessions" in clean.stdout  # P03's is interrupted: a note, not a problem
-    assert "P03, running): " in clean.stdout and "designed trials done" in clean.stdout
+    assert "P03, interrupted): " in clean.stdout and "designed trials done" in clean.stdout
+    assert "; resume it with --continue or --resume P03" in clean.stdout
+
+
+def test_check_says_a_session_another_process_writes_is_in_progress_not_to_be_resumed(
+        study: Path, tmp_path: Path) -> None:
+    """`check` called a session a live process wrote "running ... resume it", which `run` would then refuse."""
+    from protocol.storage import new_owner_token
+    from protocol.storage.leases import session_scope
+
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    (sid,) = sqlite3.connect(db).execute(
+        "SELECT session_id FROM sessions JOIN participants USING (participant_id) WHERE code = 'P03'").fetchone()
+    writer = StudyDatabase(str(db))
+    owner = new_owner_token()
+    writer.acquire_lease(session_scope(sid), owner, command="haptic-study run --resume P03")  # this process: live
+    try:
+        busy = _cli(["check", "--db", str(db)], tmp_path)
+        assert busy.returncode == 0, busy.stdout + busy.stderr
+        (line,) = [n for n in busy.stdout.splitlines() if "P03" in n]
+        assert line.startswith(f"  note: session {sid} (P03) in progress (process {os.getpid()}, "
+                               "haptic-study run --resume P03): "), line
+        assert "designed trials done so far" in line and "resume" not in line.split("): ", 1)[1]
+        assert "running" not in busy.stdout and "interrupted" not in busy.stdout
+    finally:
+        writer.release_lease(session_scope(sid), owner)
+        writer.close()
+    idle = _cli(["check", "--db", str(db)], tmp_path)
+    (line,) = [n for n in idle.stdout.splitlines() if "P03" in n]
+    assert line.startswith(f"  note: session {sid} (P03, interrupted): ") and line.endswith(
+        "designed trials done; resume it with --continue or --resume P03"), line
 
 
 def test_the_report_leaves_out_the_trials_a_damaged_block_touches_and_analyses_the_rest(
