@@ -29,7 +29,10 @@ from analysis.stats import methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
 from protocol.version import software_provenance
 
-__all__ = ["page", "plural", "power_html"]
+__all__ = ["DAMAGED_TEXT", "page", "plural", "power_html"]
+
+#: How a trial left out for a damaged recording reads in the table of trials that did not count.
+DAMAGED_TEXT = "recording damaged (the trial ended, but its records touch a damaged block: not analysed)"
 
 #: The Wilcoxon table on the page (``hl`` is the Hodges–Lehmann estimate with its interval).
 _STAT_HTML_COLUMNS = ("metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
@@ -179,6 +182,11 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
     else:
         aborted = (f"{plural(n_ab, 'aborted trial')} ({n_rerun} of them re-run later in their session; the other "
                    f"{n_ab - n_rerun} not)")
+    dmg = within.damaged
+    damaged = ("" if dmg.empty else
+               f" and {plural(len(dmg), 'trial')} whose recording is damaged (listed under Trials that did not count; "
+               "the tests are computed without "
+               f"{'it' if len(dmg) == 1 else 'them'}): " + "; ".join(html.escape(str(r)) for r in dmg["reason"]))
     codes = "; ".join(f"{html.escape(r.code)} ({plural(int(r.n_sessions), 'session')})"
                       for r in within.provenance.itertuples())
     dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
@@ -193,7 +201,8 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
             f"{plural(len(study.databases), 'database')} ({dbs}), {plural(len(study.included), 'analysed trial')}. "
             f"{_origin(study)[1]} {incomplete} Excluded: "
             f"{plural(excluded['training_sessions'], 'training session')} "
-            f"({plural(excluded['training_trials'], 'trial')}) and {aborted}. {_deviations_methods(within)} "
+            f"({plural(excluded['training_trials'], 'trial')}){',' if damaged else ' and'} {aborted}{damaged}. "
+            f"{_deviations_methods(within)} "
             f"Recorded with haptic-study {codes}; "
             f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
@@ -326,13 +335,21 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
 def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any) -> str:
     """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
     counts = abort_counts(study)
-    total = int(counts["n_trials"].sum())
+    damaged = within.damaged
+    total = int(counts["n_trials"].sum()) + len(damaged)
     rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
                    for c, n in zip(counts["abort_cause"], counts["n_trials"], strict=True))
+    rows += f"<tr><td>{html.escape(DAMAGED_TEXT)}</td><td>{len(damaged)}</td></tr>"
+    listed = ("" if damaged.empty else
+              f'<p class="warn">{plural(len(damaged), "trial")} ran to {"its" if len(damaged) == 1 else "their"} '
+              f"end but {'is' if len(damaged) == 1 else 'are'} left out: the records a trial's metrics are "
+              "recomputed from touch a damaged block of the recording (haptic-study check names it), so they are "
+              "not analysed from what is left:</p><ul>"
+              + "".join(f"<li>{html.escape(str(r))}</li>" for r in damaged["reason"]) + "</ul>")
     aborted = (f"<p>{plural(total, 'experiment trial')} did not count (a trial aborted in a session that went on is "
                "re-run under the protocol's abort policy; see the methods for how many were), by cause:</p>"
                f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
-               f"<tbody>{rows}</tbody></table></div>")
+               f"<tbody>{rows}</tbody></table></div>{listed}")
     health = tables["loop_health.csv"]
     recorded = health[health["within_bounds"].notna()]
     bounds = "; ".join(b.describe() for b in LOOP_BOUNDS)

@@ -225,6 +225,10 @@ def top_warnings(within: Any, included: bool) -> str:
     if len(inc):
         out.append(f"{plural(len(inc), 'experiment session')} did not complete and "
                    f"{'are analysed (--include-incomplete)' if included else 'are left out'}; see What was delivered.")
+    n_dmg = len(within.damaged)
+    if n_dmg:
+        out.append(f"{plural(n_dmg, 'trial')} left out: {'its' if n_dmg == 1 else 'their'} recording is damaged; "
+                   "see Trials that did not count.")
     n_diff = int(within.sensitivity.drop_duplicates(["analysis", "measure"])["differs"].sum())
     if n_diff:
         out.append(f"{plural(n_diff, 'conclusion')} depend{'s' if n_diff == 1 else ''} on the error window; see "

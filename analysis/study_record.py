@@ -3,6 +3,8 @@
 * :func:`incomplete_sessions` -- every experiment session that did not complete, with the reason in words
   ("P07, session 14: aborted by the experimenter after 10 of 20 trials") and whether it is analysed
   (``report --include-incomplete``) or left out (the default);
+* :func:`damaged_trials` -- every trial left out because its records touch a damaged block of the recording,
+  with where ("P01, session 1, trial 4: d.db: session 1, recorded run 0, 3.000–3.999 s (block 3): ...");
 * :func:`aborted_reruns` -- of the aborted trials of the analysed sessions, how many were run again later in
   their session (an incomplete session may end before it re-runs them);
 * :func:`deviations` -- every event of a deviation kind (:data:`analysis.load.DEVIATION_EVENTS`): a generic
@@ -26,7 +28,8 @@ from protocol.labels import plural
 #: A session whose commit is not stored: run from an installed wheel, or recorded before commits were stored.
 COMMIT_UNKNOWN = "not known (installed from a wheel, or recorded before commits were stored)"
 
-__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "deviations", "incomplete_sessions", "provenance"]
+__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "damaged_trials", "deviations", "incomplete_sessions",
+           "provenance"]
 
 
 def incomplete_sessions(study: StudyData) -> pd.DataFrame:
@@ -62,6 +65,33 @@ def incomplete_sessions(study: StudyData) -> pd.DataFrame:
                      "reason": f"{r.participant_code}, session {int(r.session_id)}: {why}"})
     return pd.DataFrame(rows, columns=["database", "participant_code", "session_id", "status", "n_finished",
                                        "n_designed", "n_aborted", "analysed", "reason"])
+
+
+def damaged_trials(study: StudyData) -> pd.DataFrame:
+    """The trials left out because their records touch a damaged block of the recording (``"recording damaged"``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``database, participant_code, session_id, trial_number, damage, reason``, by database, session and trial:
+        ``trial_number`` counts from 1, ``damage`` is the damaged stretch (:attr:`StudyData.damage`, the database
+        by its file name) and ``reason`` the whole line ("P01, session 1, trial 4: recording damaged (...)").
+    """
+    t = study.trials[study.trials["excluded"] == "recording damaged"].sort_values(
+        ["database", "session_id", "trial_index"], kind="stable")
+    rows = []
+    for r in t.itertuples():
+        where = str(r.damage)
+        db = str(r.database)
+        if where.startswith(f"{db}: "):  # the line names the database by its path; the report by its file name
+            where = f"{os.path.basename(db)}: {where[len(db) + 2:]}"
+        number = int(r.trial_index) + 1
+        rows.append({"database": os.path.basename(db), "participant_code": r.participant_code,
+                     "session_id": int(r.session_id), "trial_number": number, "damage": where,
+                     "reason": f"{r.participant_code}, session {int(r.session_id)}, trial {number}: recording damaged "
+                               f"({where})"})
+    return pd.DataFrame(rows, columns=["database", "participant_code", "session_id", "trial_number", "damage",
+                                       "reason"])
 
 
 def aborted_reruns(study: StudyData) -> tuple[int, int]:
