@@ -279,6 +279,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("analysed", "true when the session's finished trials are analysed (experiment sessions that "
            "completed, and with --include-incomplete the others)", type="boolean"),
     Column("reason", "why the session is incomplete, in words", type="text", files=("incomplete_sessions.csv",)),
+    Column("n_runs", "the runs the session took: 1 when it ran in one go, one more per resume after an "
+           "interruption (report.html lists each resume under What was delivered)", "count", "integer",
+           files=("sessions.csv",)),
     Column("kind", "the kind of deviation event (deviation, calibration_override)", type="text",
            files=("deviations.csv",)),
     Column("t_s", "session clock of the event", "s", files=("deviations.csv",), decimals=_T),

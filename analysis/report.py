@@ -44,7 +44,14 @@ from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, plural, power_html
 from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.stats import WilcoxonResult
-from analysis.study_record import aborted_reruns, damaged_trials, deviations, incomplete_sessions, provenance
+from analysis.study_record import (
+    aborted_reruns,
+    damaged_trials,
+    deviations,
+    incomplete_sessions,
+    provenance,
+    resumed_sessions,
+)
 from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.withdrawals import study_withdrawals, withdrawals_html
 
@@ -128,6 +135,7 @@ class _Within:
     provenance_warnings: list[str]
     reruns: tuple[int, int]
     damaged: pd.DataFrame
+    resumed: pd.DataFrame
 
 
 def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
@@ -186,6 +194,7 @@ def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_o
         curve=learning_curve(trials, tct_column(options)),
         incomplete=incomplete_sessions(study), deviations=deviations(study), provenance=prov,
         provenance_warnings=warn, reruns=aborted_reruns(study), damaged=damaged_trials(study),
+        resumed=resumed_sessions(study),
     )
 
 

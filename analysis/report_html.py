@@ -172,6 +172,15 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
                       f"{'its' if len(inc) == 1 else 'their'} "
                       f"{plural(excluded['incomplete_trials'], 'finished trial')} (the default; report "
                       f"--include-incomplete analyses them): {reasons}.")
+    res = within.resumed
+    if len(res):
+        n_res = res.drop_duplicates(["database", "session_id"]).shape[0]
+        incomplete += (f" {plural(n_res, 'session')} {'was' if n_res == 1 else 'were'} interrupted and resumed, "
+                       "analysed as one session each, the trial an interruption cut stored as aborted (listed "
+                       "under What was delivered): " + "; ".join(
+                           f"{html.escape(str(r.participant_code))}, session {r.session_id}, run {r.run} from "
+                           f"{r.resumed_at_s:.3f} s" + ("" if pd.isna(r.cut_trial) else f" (cut trial {r.cut_trial})")
+                           for r in res.itertuples()) + ".")
     n_ab, n_rerun = within.reruns
     if n_ab == 0:
         aborted = "no aborted trial"
@@ -374,7 +383,8 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
              "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
              "the latency is the sample's age. A real-clock session measures them in real time.</p>")
     return (f"<h2>What was delivered</h2>{report_sections.incomplete_html(within, study.include_incomplete)}"
-            f"{report_sections.deviations_html(within)}<h3>Trials that did not count</h3>{aborted}"
+            f"{report_sections.resumed_html(within)}{report_sections.deviations_html(within)}"
+            f"<h3>Trials that did not count</h3>{aborted}"
             f"<h3>The 1 kHz loop, per trial</h3>"
             f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
 
@@ -431,7 +441,8 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
                 "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
     sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "software_version", "software_commit", "software_dirty", "analysed"]
+                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
+                 "analysed"]
     short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>

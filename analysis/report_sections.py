@@ -27,7 +27,7 @@ from analysis.models import MIN_PARTICIPANTS
 from analysis.sensitivity import ALPHA
 from analysis.trade import TRADE_MODEL_TERMS
 
-__all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "secondary_html",
+__all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
 
 _MODE = {"off": "haptics OFF", "on": "haptics ON", "all": "both modes (within participant × mode)"}
@@ -191,12 +191,29 @@ def incomplete_html(within: Any, included: bool) -> str:
     """The incomplete experiment sessions, each with its reason, and whether they are analysed."""
     inc = within.incomplete
     if inc.empty:
-        return "<p>Every experiment session completed.</p>"
+        res = within.resumed
+        res = res[res["kind"] == "experiment"].drop_duplicates(["database", "session_id"])
+        after = (f" ({len(res)} of them after an interruption: see Interrupted and resumed sessions)"
+                 if len(res) else "")
+        return f"<p>Every experiment session completed{after}.</p>"
     how = ("analysed with their finished trials (report --include-incomplete)" if included else
            "left out of every analysis (the default; report --include-incomplete analyses their finished trials)")
     items = "".join(f"<li>{html.escape(str(r))}</li>" for r in inc["reason"])
     return (f"<h3>Incomplete sessions</h3><p>{plural(len(inc), 'experiment session')} did not complete, {how}:</p>"
             f"<ul>{items}</ul>")
+
+
+def resumed_html(within: Any) -> str:
+    """Every session interrupted and resumed: when, which trial the interruption cut, the break where known."""
+    res = within.resumed
+    if res.empty:
+        return "<h3>Interrupted and resumed sessions</h3><p>None: every session ran in one go.</p>"
+    n = res.drop_duplicates(["database", "session_id"]).shape[0]
+    items = "".join(f"<li>{html.escape(str(r))}</li>" for r in res["reason"])
+    return (f"<h3>Interrupted and resumed sessions</h3><p>{plural(n, 'session')} {'was' if n == 1 else 'were'} "
+            f"interrupted and resumed ({plural(len(res), 'resume')}; sessions.csv counts each session's runs, "
+            "n_runs). The trial an interruption cut is stored as aborted (interrupted) and counted under Trials "
+            f"that did not count; the session clock goes on from the last stored moment:</p><ul>{items}</ul>")
 
 
 def deviations_html(within: Any) -> str:
