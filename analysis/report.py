@@ -347,6 +347,9 @@ def build_report(
         tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
                                              within, options.error_window)
         results.update(tables)
+        # the page rounds each number once, from its unrounded value (the files' rounding would be a second one)
+        shown = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
+                                            within, options.error_window, rounded=False)
         section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
         if power:
             from analysis.power_outputs import report_section
@@ -355,7 +358,7 @@ def build_report(
         report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         html = page(
             study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
-            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=tables,
+            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
             marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
             target_order=a.target_order,
         )

@@ -330,14 +330,15 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         parts, ns = [], []
         for mode in ("off", "on"):
             mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
-            parts.append(f"{_fmt(mean)} ± {_fmt(sd)}")
+            parts.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
             ns.append(n)
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
+        what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
         test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
                 else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, mean ± SD across {who}; {html.escape(test)}</small></div>")
+                     f"<small>OFF → ON, {what} across {who}; {html.escape(test)}</small></div>")
     return f'<div class="key">{"".join(cards)}</div>'
 
 

@@ -146,9 +146,9 @@ def window_fact(within: Any, options: MetricOptions) -> str:
     approach, n = within.max_ae_approach
     if not n:
         return ""
-    return (f"From the cue, Max AE is the approach in {approach} of {n} trials ({approach / n:.0%}): the largest "
-            "error comes before first contact (at the cue the force is 0 N, an error of the whole target force), "
-            "not from a peak force excursion; from first contact it never is.")
+    return (f"From the cue, Max AE is the approach in {approach} of {plural(n, 'trial')} ({approach / n:.0%}): the "
+            "largest error comes before first contact (at the cue the force is 0 N, an error of the whole target "
+            "force), not from a peak force excursion; from first contact it never is.")
 
 
 def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, target_order: list[str]) -> str:
@@ -240,8 +240,9 @@ def top_warnings(within: Any, included: bool) -> str:
     out = [w for w in within.provenance_warnings if w.startswith("The sessions of this study ran different code")]
     inc = within.incomplete
     if len(inc):
+        are = "is" if len(inc) == 1 else "are"
         out.append(f"{plural(len(inc), 'experiment session')} did not complete and "
-                   f"{'are analysed (--include-incomplete)' if included else 'are left out'}; see What was delivered.")
+                   f"{are} {'analysed (--include-incomplete)' if included else 'left out'}; see What was delivered.")
     n_dmg = len(within.damaged)
     if n_dmg:
         out.append(f"{plural(n_dmg, 'trial')} left out: {'its' if n_dmg == 1 else 'their'} recording is damaged; "
