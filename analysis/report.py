@@ -344,12 +344,11 @@ def build_report(
         marks_overall, marks = _all_marks(a)
         pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
         within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
-        tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
-                                             within, options.error_window)
+        # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
+        tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                     a.stats_by_target, within, options.error_window, rounded=r)
+                         for r in (True, False))
         results.update(tables)
-        # the page rounds each number once, from its unrounded value (the files' rounding would be a second one)
-        shown = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
-                                            within, options.error_window, rounded=False)
         section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
         if power:
             from analysis.power_outputs import report_section

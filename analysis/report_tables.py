@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -53,9 +54,7 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     dict of str to pandas.DataFrame
         File name → table, in the order the files are listed.
     """
-    def exp(frame: pd.DataFrame, file: str) -> pd.DataFrame:
-        return codebook.export(frame, file, rounded=rounded)
-
+    exp = functools.partial(codebook.export, rounded=rounded)
     numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
     order = sorted(numbers, key=lambda code: (numbers[code], code))
     rank = {code: i for i, code in enumerate(order)}
