@@ -85,13 +85,13 @@ def per_participant(
 def mean_sd(values: np.ndarray | pd.Series) -> tuple[float, float, int]:
     """Mean, SD (n − 1) and n of the finite values: what the report's bars and headline figures show.
 
-    The SD is 0 for one value and both are NaN for none.
+    The SD is NaN for one value (there is no spread to show: not 0) and both are NaN for none.
     """
     v = np.asarray(values, dtype=np.float64)
     v = v[np.isfinite(v)]
     if len(v) == 0:
         return np.nan, np.nan, 0
-    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0, len(v)
+    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else np.nan, len(v)
 
 
 def by_mode(per_part: pd.DataFrame, metric: str, codes: Sequence[str] | None = None) -> pd.DataFrame:

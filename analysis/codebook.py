@@ -279,6 +279,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("analysed", "true when the session's finished trials are analysed (experiment sessions that "
            "completed, and with --include-incomplete the others)", type="boolean"),
     Column("reason", "why the session is incomplete, in words", type="text", files=("incomplete_sessions.csv",)),
+    Column("n_runs", "the runs the session took: 1 when it ran in one go, one more per resume after an "
+           "interruption (report.html lists each resume under What was delivered)", "count", "integer",
+           files=("sessions.csv",)),
     Column("kind", "the kind of deviation event (deviation, calibration_override)", type="text",
            files=("deviations.csv",)),
     Column("t_s", "session clock of the event", "s", files=("deviations.csv",), decimals=_T),
@@ -455,8 +458,12 @@ def _round(values: pd.Series, c: Column) -> pd.Series:
     return values
 
 
-def export(frame: pd.DataFrame, file: str) -> pd.DataFrame:
+def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFrame:
     """``frame`` as ``file`` is written: exported names (also as values of ``metric``) and rounded numbers.
+
+    ``rounded=False``: the same table with every number as computed, for a page that rounds each number once,
+    from the unrounded value, as it shows it (a number rounded for the file and again for the page can differ from
+    the same number rounded once: -0.02154 is -0.0215 in the file, which shows as -0.021, not -0.022).
 
     Trial indices become 1-based trial numbers; a tests' file (``stats.csv``, ``stats_by_target.csv``, tables of
     :func:`analysis.stats.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS` first (after
@@ -473,7 +480,7 @@ def export(frame: pd.DataFrame, file: str) -> pd.DataFrame:
         out["metric"] = out["metric"].map(exported_name)
     for name in out.columns:
         c = lookup(file, name)
-        if c is not None:
+        if c is not None and rounded:
             out[name] = _round(out[name], c)
     return out
 

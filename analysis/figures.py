@@ -156,7 +156,8 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             ax.bar(x, mean if math.isfinite(mean) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
                    label=_MODE_NAMES[mode] if gi == 0 else None, zorder=2)
             if len(vals):
-                ax.errorbar(x, mean, yerr=sd, color="#333333", capsize=3, linewidth=0.9, zorder=3)
+                if len(vals) > 1:  # one participant has no spread: no error bar (not one of length 0)
+                    ax.errorbar(x, mean, yerr=sd, color="#333333", capsize=3, linewidth=0.9, zorder=3)
                 ax.scatter(x + rng.uniform(-0.08, 0.08, len(vals)), vals, s=6, color="#222222", alpha=0.55,
                            zorder=4, linewidths=0)
                 heights[mode] = max(mean + sd, float(vals.max()))

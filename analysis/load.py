@@ -35,9 +35,10 @@ from protocol.study_rules import DEVIATION_KINDS
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
 #: Events the report lists: deviations from the protocol ("deviation": any recorded departure from the
 #: design, e.g. an experiment started without a completed training; "calibration_override": a session started
-#: without a calibration step on record) and which code ran each resumed part of a session ("software").
+#: without a calibration step on record), which code ran each resumed part of a session ("software") and each resume
+#: of an interrupted session ("resume": which trial the interruption cut).
 DEVIATION_EVENTS = DEVIATION_KINDS  # their one definition: protocol.study_rules
-LISTED_EVENTS = (*DEVIATION_EVENTS, "software")
+LISTED_EVENTS = (*DEVIATION_EVENTS, "software", "resume")
 
 __all__ = [
     "DEVIATION_EVENTS",
@@ -91,7 +92,8 @@ class StudyData:
         ran it (``software_commit``, ``software_dirty``; empty before schema version 4 or when not known),
         ``n_designed`` (the trials its design has: the schedule less its re-runs), ``first_mode`` (the haptic
         mode of the schedule's first trial) and ``analysed`` (its trials are analysed: an experiment session,
-        completed, or any with ``include_incomplete``).
+        completed, or any with ``include_incomplete``) and ``n_runs`` (the runs it took: 1, and one more per
+        resume after an interruption).
     databases
         The database paths, in the order given.
     damage
@@ -101,6 +103,9 @@ class StudyData:
         from what is left; every other trial is.
     events
         The events the report lists (:data:`LISTED_EVENTS`): ``database, session_id, t_s, kind, detail``.
+    runs
+        Every recorded run of every session (a resumed session has one per run): ``database, session_id, segment,
+        started_at_s, last_record_s`` (session clock; empty before schema version 3).
     include_incomplete
         Whether experiment sessions that did not complete are analysed.
     """
@@ -111,6 +116,7 @@ class StudyData:
     damage: tuple[str, ...] = ()
     events: pd.DataFrame = field(default_factory=pd.DataFrame)
     include_incomplete: bool = False
+    runs: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     @property
     def included(self) -> pd.DataFrame:
@@ -204,7 +210,7 @@ def _schedule_fields(schedule_json: object) -> dict[str, object]:
         return {"n_designed": np.nan, "first_mode": ""}
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str]]:
+def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str], pd.DataFrame]:
     db = _open(path)
     try:
         # schema version 4 records which code ran a session; earlier files do not (NULL)
@@ -213,6 +219,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
         trials = _query(db, lambda: db.trial_table(("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS)))
         damage = _mark_damage(db, path, trials)
         events = _query(db, lambda: db.events(LISTED_EVENTS))
+        runs = _query(db, db.recorded_runs)
     finally:
         db.close()
     if sessions.empty:
@@ -227,27 +234,29 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
                           design], axis=1)
     sessions["software_dirty"] = sessions["software_dirty"].astype("boolean")
-    for frame in (sessions, trials, events):
+    for frame in (sessions, trials, events, runs):
         frame.insert(0, "database", path)
-    return sessions, trials, events, damage
+    return sessions, trials, events, damage, runs
 
 
 def _read_all(
     paths: Sequence[str | os.PathLike[str]],
-) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str]]:
-    """Each database's sessions, trials and events (and the damage found), in order; a refusal for a path that
-    is missing or names a database given already."""
+) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str], list[pd.DataFrame]]:
+    """Each database's sessions, trials and events (and the damage found, and its recorded runs), in order; a
+    refusal for a path that is missing or names a database given already."""
     all_sessions: list[pd.DataFrame] = []
     all_trials: list[pd.DataFrame] = []
     all_events: list[pd.DataFrame] = []
+    all_runs: list[pd.DataFrame] = []
     damage: list[str] = []
     for path in check_databases(paths, open_each=False):  # (each is opened, checked, just below)
-        s, t, e, d = _read_one(path)
+        s, t, e, d, r = _read_one(path)
         all_sessions.append(s)
         all_trials.append(t)
         all_events.append(e)
         damage.extend(d)
-    return all_sessions, all_trials, all_events, damage
+        all_runs.append(r)
+    return all_sessions, all_trials, all_events, damage, all_runs
 
 
 def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False) -> StudyData:
@@ -274,7 +283,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         merge refuses to guess whether they are one person), or a study with
         no experiment trial to analyse.
     """
-    all_sessions, all_trials, all_events, damage = _read_all(paths)
+    all_sessions, all_trials, all_events, damage, all_runs = _read_all(paths)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():
@@ -285,6 +294,9 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
             )
     experiment = sessions["kind"] == "experiment"
     sessions["analysed"] = experiment & ((sessions["status"] == "completed") | include_incomplete)
+    events = pd.concat(all_events, ignore_index=True)
+    runs = pd.concat(all_runs, ignore_index=True)
+    sessions["n_runs"] = _run_counts(sessions, events, runs)
     trials = pd.concat(all_trials, ignore_index=True)
     meta = sessions[["database", "session_id", "participant_code", "participant_number", "kind", "status",
                      "tolerance_fraction", "hold_s", "max_trial_s", "analysed"]].rename(
@@ -313,7 +325,18 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                                 "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=pd.concat(all_events, ignore_index=True), include_incomplete=include_incomplete)
+                     events=events, include_incomplete=include_incomplete, runs=runs)
+
+
+def _run_counts(sessions: pd.DataFrame, events: pd.DataFrame, runs: pd.DataFrame) -> pd.Series:
+    """How many runs each session took: 1, and one more per resume after an interruption (its ``resume`` events;
+    its recorded runs, where they are more -- a resume whose event a version-3 file does not have)."""
+    key = list(zip(sessions["database"], sessions["session_id"], strict=True))
+    resumes = (events[events["kind"] == "resume"].groupby(["database", "session_id"]).size()
+               if len(events) else pd.Series(dtype=np.int64))
+    recorded = runs.groupby(["database", "session_id"]).size() if len(runs) else pd.Series(dtype=np.int64)
+    return pd.Series([max(1 + int(resumes.get(k, 0)), int(recorded.get(k, 0))) for k in key], index=sessions.index,
+                     dtype=np.int64)
 
 
 def read_task_force(conn: sqlite3.Connection | StudyReader, trial_id: int,

@@ -25,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from protocol.labels import plural
+
 __all__ = ["FIXED_EFFECT_COLUMNS", "MIN_PARTICIPANTS", "MIXED_METHODS", "ModelFit", "design", "fit_gee_logistic",
            "fit_mixed", "fixed_effects"]
 
@@ -94,10 +96,11 @@ def _unfitted(model: str, outcome: str, scale: str, method: str, n: int, k: int,
 def _too_few(groups: np.ndarray, n_terms: int) -> str:
     k = len(np.unique(groups))
     if k < MIN_PARTICIPANTS:
-        return (f"not fitted: {k} participants; a model with a participant effect needs at least "
+        return (f"not fitted: {plural(k, 'participant')}; a model with a participant effect needs at least "
                 f"{MIN_PARTICIPANTS} for its participant variance to mean anything")
     if len(groups) <= n_terms + k:
-        return f"not fitted: {len(groups)} observations for {n_terms} fixed effects and {k} participants"
+        return (f"not fitted: {plural(len(groups), 'observation')} for {plural(n_terms, 'fixed effect')} and "
+                f"{plural(k, 'participant')}")
     return ""
 
 

@@ -44,7 +44,14 @@ from analysis.parallel import default_workers, run_tasks
 from analysis.report_html import page, plural, power_html
 from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.stats import WilcoxonResult
-from analysis.study_record import aborted_reruns, deviations, incomplete_sessions, provenance
+from analysis.study_record import (
+    aborted_reruns,
+    damaged_trials,
+    deviations,
+    incomplete_sessions,
+    provenance,
+    resumed_sessions,
+)
 from analysis.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.withdrawals import study_withdrawals, withdrawals_html
 
@@ -65,6 +72,9 @@ class ReportSummary:
     excluded: dict[str, int]
     stats: pd.DataFrame
     files: list[str] = field(default_factory=list)
+    #: One line per run of damaged recorded blocks (:attr:`analysis.load.StudyData.damage`); the trials they touch
+    #: are left out of the analysis and listed in the report.
+    damage: tuple[str, ...] = ()
 
 
 def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
@@ -124,6 +134,8 @@ class _Within:
     provenance: pd.DataFrame
     provenance_warnings: list[str]
     reruns: tuple[int, int]
+    damaged: pd.DataFrame
+    resumed: pd.DataFrame
 
 
 def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
@@ -152,6 +164,7 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
         "incomplete_sessions": int(((study.sessions["kind"] == "experiment") & ~study.sessions["analysed"]).sum()),
         "incomplete_trials": int(((all_t["excluded"] == "incomplete session") & (all_t["outcome"] != "aborted")).sum()),
         "aborted_trials": int((all_t["excluded"] == "aborted trial").sum()),
+        "damaged_trials": int((all_t["excluded"] == "recording damaged").sum()),
     }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     within = _within(study, table, overall, target_order, options, zero_method, confidence)
@@ -180,7 +193,8 @@ def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_o
         order=order_check(overall, first_modes(study.sessions)),
         curve=learning_curve(trials, tct_column(options)),
         incomplete=incomplete_sessions(study), deviations=deviations(study), provenance=prov,
-        provenance_warnings=warn, reruns=aborted_reruns(study),
+        provenance_warnings=warn, reruns=aborted_reruns(study), damaged=damaged_trials(study),
+        resumed=resumed_sessions(study),
     )
 
 
@@ -330,8 +344,10 @@ def build_report(
         marks_overall, marks = _all_marks(a)
         pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
         within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
-        tables = report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats, a.stats_by_target,
-                                             within, options.error_window)
+        # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
+        tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                     a.stats_by_target, within, options.error_window, rounded=r)
+                         for r in (True, False))
         results.update(tables)
         section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
         if power:
@@ -341,7 +357,7 @@ def build_report(
         report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
         html = page(
             study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
-            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=tables,
+            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
             marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
             target_order=a.target_order,
         )
@@ -349,4 +365,4 @@ def build_report(
 
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, a.n_participants, len(a.trials), int(a.study.included["n_samples"].fillna(0).sum()),
-                         a.excluded, results["stats.csv"], files)
+                         a.excluded, results["stats.csv"], files, a.study.damage)

@@ -29,7 +29,10 @@ from analysis.stats import methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
 from protocol.version import software_provenance
 
-__all__ = ["page", "plural", "power_html"]
+__all__ = ["DAMAGED_TEXT", "page", "plural", "power_html"]
+
+#: How a trial left out for a damaged recording reads in the table of trials that did not count.
+DAMAGED_TEXT = "recording damaged (the trial ended, but its records touch a damaged block: not analysed)"
 
 #: The Wilcoxon table on the page (``hl`` is the Hodges–Lehmann estimate with its interval).
 _STAT_HTML_COLUMNS = ("metric", "n", "n_zero", "n_ties", "median_off", "median_on", "hl", "statistic", "method",
@@ -169,6 +172,15 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
                       f"{'its' if len(inc) == 1 else 'their'} "
                       f"{plural(excluded['incomplete_trials'], 'finished trial')} (the default; report "
                       f"--include-incomplete analyses them): {reasons}.")
+    res = within.resumed
+    if len(res):
+        n_res = res.drop_duplicates(["database", "session_id"]).shape[0]
+        incomplete += (f" {plural(n_res, 'session')} {'was' if n_res == 1 else 'were'} interrupted and resumed, "
+                       "analysed as one session each, the trial an interruption cut stored as aborted (listed "
+                       "under What was delivered): " + "; ".join(
+                           f"{html.escape(str(r.participant_code))}, session {r.session_id}, run {r.run} from "
+                           f"{r.resumed_at_s:.3f} s" + ("" if pd.isna(r.cut_trial) else f" (cut trial {r.cut_trial})")
+                           for r in res.itertuples()) + ".")
     n_ab, n_rerun = within.reruns
     if n_ab == 0:
         aborted = "no aborted trial"
@@ -179,6 +191,11 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
     else:
         aborted = (f"{plural(n_ab, 'aborted trial')} ({n_rerun} of them re-run later in their session; the other "
                    f"{n_ab - n_rerun} not)")
+    dmg = within.damaged
+    damaged = ("" if dmg.empty else
+               f" and {plural(len(dmg), 'trial')} whose recording is damaged (listed under Trials that did not count; "
+               "the tests are computed without "
+               f"{'it' if len(dmg) == 1 else 'them'}): " + "; ".join(html.escape(str(r)) for r in dmg["reason"]))
     codes = "; ".join(f"{html.escape(r.code)} ({plural(int(r.n_sessions), 'session')})"
                       for r in within.provenance.itertuples())
     dbs = ", ".join(html.escape(os.path.basename(d)) for d in study.databases)
@@ -193,7 +210,8 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
             f"{plural(len(study.databases), 'database')} ({dbs}), {plural(len(study.included), 'analysed trial')}. "
             f"{_origin(study)[1]} {incomplete} Excluded: "
             f"{plural(excluded['training_sessions'], 'training session')} "
-            f"({plural(excluded['training_trials'], 'trial')}) and {aborted}. {_deviations_methods(within)} "
+            f"({plural(excluded['training_trials'], 'trial')}){',' if damaged else ' and'} {aborted}{damaged}. "
+            f"{_deviations_methods(within)} "
             f"Recorded with haptic-study {codes}; "
             f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
@@ -312,27 +330,36 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         parts, ns = [], []
         for mode in ("off", "on"):
             mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
-            parts.append(f"{_fmt(mean)} ± {_fmt(sd)}")
+            parts.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
             ns.append(n)
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
+        what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
         test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
                 else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, mean ± SD across {who}; {html.escape(test)}</small></div>")
+                     f"<small>OFF → ON, {what} across {who}; {html.escape(test)}</small></div>")
     return f'<div class="key">{"".join(cards)}</div>'
 
 
 def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any) -> str:
     """Trials not counted (by cause) and the loop's health per participant, with the trials outside the bounds."""
     counts = abort_counts(study)
-    total = int(counts["n_trials"].sum())
+    damaged = within.damaged
+    total = int(counts["n_trials"].sum()) + len(damaged)
     rows = "".join(f"<tr><td>{html.escape(ABORT_CAUSE_TEXT.get(c, c))}</td><td>{n}</td></tr>"
                    for c, n in zip(counts["abort_cause"], counts["n_trials"], strict=True))
+    rows += f"<tr><td>{html.escape(DAMAGED_TEXT)}</td><td>{len(damaged)}</td></tr>"
+    listed = ("" if damaged.empty else
+              f'<p class="warn">{plural(len(damaged), "trial")} ran to {"its" if len(damaged) == 1 else "their"} '
+              f"end but {'is' if len(damaged) == 1 else 'are'} left out: the records a trial's metrics are "
+              "recomputed from touch a damaged block of the recording (haptic-study check names it), so they are "
+              "not analysed from what is left:</p><ul>"
+              + "".join(f"<li>{html.escape(str(r))}</li>" for r in damaged["reason"]) + "</ul>")
     aborted = (f"<p>{plural(total, 'experiment trial')} did not count (a trial aborted in a session that went on is "
                "re-run under the protocol's abort policy; see the methods for how many were), by cause:</p>"
                f'<div class="scroll"><table><thead><tr><th>cause</th><th>trials</th></tr></thead>'
-               f"<tbody>{rows}</tbody></table></div>")
+               f"<tbody>{rows}</tbody></table></div>{listed}")
     health = tables["loop_health.csv"]
     recorded = health[health["within_bounds"].notna()]
     bounds = "; ".join(b.describe() for b in LOOP_BOUNDS)
@@ -357,7 +384,8 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
              "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
              "the latency is the sample's age. A real-clock session measures them in real time.</p>")
     return (f"<h2>What was delivered</h2>{report_sections.incomplete_html(within, study.include_incomplete)}"
-            f"{report_sections.deviations_html(within)}<h3>Trials that did not count</h3>{aborted}"
+            f"{report_sections.resumed_html(within)}{report_sections.deviations_html(within)}"
+            f"<h3>Trials that did not count</h3>{aborted}"
             f"<h3>The 1 kHz loop, per trial</h3>"
             f"<p>Each trial records how the haptic loop ran during it. Bounds: {html.escape(bounds)}.</p>{clock}{loop}")
 
@@ -414,7 +442,8 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
                 "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
     sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "software_version", "software_commit", "software_dirty", "analysed"]
+                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
+                 "analysed"]
     short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>

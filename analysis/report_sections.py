@@ -27,7 +27,7 @@ from analysis.models import MIN_PARTICIPANTS
 from analysis.sensitivity import ALPHA
 from analysis.trade import TRADE_MODEL_TERMS
 
-__all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "secondary_html",
+__all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
 
 _MODE = {"off": "haptics OFF", "on": "haptics ON", "all": "both modes (within participant × mode)"}
@@ -146,9 +146,9 @@ def window_fact(within: Any, options: MetricOptions) -> str:
     approach, n = within.max_ae_approach
     if not n:
         return ""
-    return (f"From the cue, Max AE is the approach in {approach} of {n} trials ({approach / n:.0%}): the largest "
-            "error comes before first contact (at the cue the force is 0 N, an error of the whole target force), "
-            "not from a peak force excursion; from first contact it never is.")
+    return (f"From the cue, Max AE is the approach in {approach} of {plural(n, 'trial')} ({approach / n:.0%}): the "
+            "largest error comes before first contact (at the cue the force is 0 N, an error of the whole target "
+            "force), not from a peak force excursion; from first contact it never is.")
 
 
 def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, target_order: list[str]) -> str:
@@ -191,12 +191,29 @@ def incomplete_html(within: Any, included: bool) -> str:
     """The incomplete experiment sessions, each with its reason, and whether they are analysed."""
     inc = within.incomplete
     if inc.empty:
-        return "<p>Every experiment session completed.</p>"
+        res = within.resumed
+        res = res[res["kind"] == "experiment"].drop_duplicates(["database", "session_id"])
+        after = (f" ({len(res)} of them after an interruption: see Interrupted and resumed sessions)"
+                 if len(res) else "")
+        return f"<p>Every experiment session completed{after}.</p>"
     how = ("analysed with their finished trials (report --include-incomplete)" if included else
            "left out of every analysis (the default; report --include-incomplete analyses their finished trials)")
     items = "".join(f"<li>{html.escape(str(r))}</li>" for r in inc["reason"])
     return (f"<h3>Incomplete sessions</h3><p>{plural(len(inc), 'experiment session')} did not complete, {how}:</p>"
             f"<ul>{items}</ul>")
+
+
+def resumed_html(within: Any) -> str:
+    """Every session interrupted and resumed: when, which trial the interruption cut, the break where known."""
+    res = within.resumed
+    if res.empty:
+        return "<h3>Interrupted and resumed sessions</h3><p>None: every session ran in one go.</p>"
+    n = res.drop_duplicates(["database", "session_id"]).shape[0]
+    items = "".join(f"<li>{html.escape(str(r))}</li>" for r in res["reason"])
+    return (f"<h3>Interrupted and resumed sessions</h3><p>{plural(n, 'session')} {'was' if n == 1 else 'were'} "
+            f"interrupted and resumed ({plural(len(res), 'resume')}; sessions.csv counts each session's runs, "
+            "n_runs). The trial an interruption cut is stored as aborted (interrupted) and counted under Trials "
+            f"that did not count; the session clock goes on from the last stored moment:</p><ul>{items}</ul>")
 
 
 def deviations_html(within: Any) -> str:
@@ -223,8 +240,13 @@ def top_warnings(within: Any, included: bool) -> str:
     out = [w for w in within.provenance_warnings if w.startswith("The sessions of this study ran different code")]
     inc = within.incomplete
     if len(inc):
+        are = "is" if len(inc) == 1 else "are"
         out.append(f"{plural(len(inc), 'experiment session')} did not complete and "
-                   f"{'are analysed (--include-incomplete)' if included else 'are left out'}; see What was delivered.")
+                   f"{are} {'analysed (--include-incomplete)' if included else 'left out'}; see What was delivered.")
+    n_dmg = len(within.damaged)
+    if n_dmg:
+        out.append(f"{plural(n_dmg, 'trial')} left out: {'its' if n_dmg == 1 else 'their'} recording is damaged; "
+                   "see Trials that did not count.")
     n_diff = int(within.sensitivity.drop_duplicates(["analysis", "measure"])["differs"].sum())
     if n_diff:
         out.append(f"{plural(n_diff, 'conclusion')} depend{'s' if n_diff == 1 else ''} on the error window; see "

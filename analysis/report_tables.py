@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -30,7 +31,7 @@ TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "t
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
                   stats: pd.DataFrame, stats_by_target: pd.DataFrame, within: Any,
-                  error_window: str) -> dict[str, pd.DataFrame]:
+                  error_window: str, rounded: bool = True) -> dict[str, pd.DataFrame]:
     """Every CSV of the report as written: exported names, rounded (:func:`analysis.codebook.export`), sorted.
 
     Parameters
@@ -44,12 +45,16 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         learning and order, incomplete sessions, deviations.
     error_window
         The error window of every RMSE and Max AE in the files, named in each (column ``error_window``).
+    rounded
+        Round each number as its file has it (the default); False: the same tables unrounded, for the page, which
+        rounds each number once as it shows it (:func:`analysis.codebook.export`).
 
     Returns
     -------
     dict of str to pandas.DataFrame
         File name → table, in the order the files are listed.
     """
+    exp = functools.partial(codebook.export, rounded=rounded)
     numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
     order = sorted(numbers, key=lambda code: (numbers[code], code))
     rank = {code: i for i, code in enumerate(order)}
@@ -61,9 +66,9 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         out["_rank"] = out["participant_code"].map(rank)
         return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
 
-    t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window)
-    per = codebook.export(by_participant(overall, "haptic_mode"), "participants.csv")
-    per_t = codebook.export(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
+    t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window, rounded)
+    per = exp(by_participant(overall, "haptic_mode"), "participants.csv")
+    per_t = exp(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
     wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
                      values=list(codebook.WIDE_MEASURES))
     wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
@@ -72,8 +77,8 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     for c in wide_cols:
         if c.startswith("n_"):
             wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
-    st = codebook.export(stats, "stats.csv")
-    st_t = codebook.export(stats_by_target, "stats_by_target.csv")
+    st = exp(stats, "stats.csv")
+    st_t = exp(stats_by_target, "stats_by_target.csv")
     sess = study.sessions.copy()
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)
@@ -81,23 +86,23 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     tables = {
         "trials.csv": t,
         "participants.csv": per,
-        "participants_wide.csv": codebook.export(wide, "participants_wide.csv"),
+        "participants_wide.csv": exp(wide, "participants_wide.csv"),
         "participants_by_target.csv": per_t,
         "stats.csv": st,
         "stats_by_target.csv": st_t,
-        "sensitivity.csv": codebook.export(within.sensitivity.assign(
+        "sensitivity.csv": exp(within.sensitivity.assign(
             measure=within.sensitivity["measure"].map(codebook.exported_name)), "sensitivity.csv"),
-        "speed_accuracy.csv": codebook.export(within.sa, "speed_accuracy.csv"),
-        "speed_accuracy_model.csv": codebook.export(fixed_effects([within.trade_fit]), "speed_accuracy_model.csv"),
-        "speed_accuracy_slopes.csv": codebook.export(by_participant(within.slopes, "haptic_mode"),
+        "speed_accuracy.csv": exp(within.sa, "speed_accuracy.csv"),
+        "speed_accuracy_model.csv": exp(fixed_effects([within.trade_fit]), "speed_accuracy_model.csv"),
+        "speed_accuracy_slopes.csv": exp(by_participant(within.slopes, "haptic_mode"),
                                                      "speed_accuracy_slopes.csv"),
-        "learning_models.csv": codebook.export(fixed_effects(within.learning), "learning_models.csv"),
-        "order_check.csv": codebook.export(within.order, "order_check.csv"),
-        "sessions.csv": codebook.export(sess, "sessions.csv"),
-        "incomplete_sessions.csv": codebook.export(within.incomplete, "incomplete_sessions.csv"),
-        "deviations.csv": codebook.export(within.deviations, "deviations.csv"),
-        "loop_health.csv": codebook.export(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
-        "loop_health_by_participant.csv": codebook.export(by_participant(health_summary(health)),
+        "learning_models.csv": exp(fixed_effects(within.learning), "learning_models.csv"),
+        "order_check.csv": exp(within.order, "order_check.csv"),
+        "sessions.csv": exp(sess, "sessions.csv"),
+        "incomplete_sessions.csv": exp(within.incomplete, "incomplete_sessions.csv"),
+        "deviations.csv": exp(within.deviations, "deviations.csv"),
+        "loop_health.csv": exp(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
+        "loop_health_by_participant.csv": exp(by_participant(health_summary(health)),
                                                           "loop_health_by_participant.csv"),
     }
     for name in _WINDOWED_FILES:  # every table with an RMSE or Max AE names the window it was taken over
@@ -105,12 +110,12 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     return tables
 
 
-def trials_csv(trials: pd.DataFrame, error_window: str) -> pd.DataFrame:
+def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) -> pd.DataFrame:
     """The rows of ``trials.csv`` for these trials, in their order: exported names, the database's file name,
     the columns every consumer relies on first, and the error window their RMSE and Max AE were taken over."""
     t = trials.copy()
     t["database"] = t["database"].map(os.path.basename)
-    t = codebook.export(t, "trials.csv")
+    t = codebook.export(t, "trials.csv", rounded=rounded)
     t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
     t["error_window"] = error_window
     return t.reset_index(drop=True)

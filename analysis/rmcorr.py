@@ -138,7 +138,8 @@ def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
 
     df = n - k - 1
     if df < 1:
-        return fail(f"{n} observations of {k} participants leave {df} degrees of freedom: at least 1 is needed "
+        return fail(f"{plural(n, 'observation')} of {plural(k, 'participant')} leave{'s' if n == 1 else ''} "
+                    f"{plural(df, 'degree')} of freedom: at least 1 is needed "
                     "(two participants with two observations each, or one with three)")
     xs, ys = xa[idx], ya[idx]
     member = np.searchsorted(groups, codes[several])

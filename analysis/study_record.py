@@ -3,6 +3,10 @@
 * :func:`incomplete_sessions` -- every experiment session that did not complete, with the reason in words
   ("P07, session 14: aborted by the experimenter after 10 of 20 trials") and whether it is analysed
   (``report --include-incomplete``) or left out (the default);
+* :func:`damaged_trials` -- every trial left out because its records touch a damaged block of the recording,
+  with where ("P01, session 1, trial 4: d.db: session 1, recorded run 0, 3.000–3.999 s (block 3): ...");
+* :func:`resumed_sessions` -- every resume of an interrupted session: when the run before it stopped, which trial
+  the interruption cut, when the session went on, and the real-time break where the record says it;
 * :func:`aborted_reruns` -- of the aborted trials of the analysed sessions, how many were run again later in
   their session (an incomplete session may end before it re-runs them);
 * :func:`deviations` -- every event of a deviation kind (:data:`analysis.load.DEVIATION_EVENTS`): a generic
@@ -15,7 +19,9 @@
 
 from __future__ import annotations
 
+import datetime as dt
 import json
+import math
 import os
 
 import pandas as pd
@@ -26,7 +32,12 @@ from protocol.labels import plural
 #: A session whose commit is not stored: run from an installed wheel, or recorded before commits were stored.
 COMMIT_UNKNOWN = "not known (installed from a wheel, or recorded before commits were stored)"
 
-__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "deviations", "incomplete_sessions", "provenance"]
+__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "damaged_trials", "deviations", "incomplete_sessions",
+           "provenance", "resumed_sessions"]
+
+#: The columns of :func:`resumed_sessions`.
+RESUMED_COLUMNS = ("database", "participant_code", "session_id", "kind", "run", "n_runs", "interrupted_at_s",
+                   "resumed_at_s", "cut_trial", "break_s", "reason")
 
 
 def incomplete_sessions(study: StudyData) -> pd.DataFrame:
@@ -62,6 +73,107 @@ def incomplete_sessions(study: StudyData) -> pd.DataFrame:
                      "reason": f"{r.participant_code}, session {int(r.session_id)}: {why}"})
     return pd.DataFrame(rows, columns=["database", "participant_code", "session_id", "status", "n_finished",
                                        "n_designed", "n_aborted", "analysed", "reason"])
+
+
+def damaged_trials(study: StudyData) -> pd.DataFrame:
+    """The trials left out because their records touch a damaged block of the recording (``"recording damaged"``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``database, participant_code, session_id, trial_number, damage, reason``, by database, session and trial:
+        ``trial_number`` counts from 1, ``damage`` is the damaged stretch (:attr:`StudyData.damage`, the database
+        by its file name) and ``reason`` the whole line ("P01, session 1, trial 4: recording damaged (...)").
+    """
+    t = study.trials[study.trials["excluded"] == "recording damaged"].sort_values(
+        ["database", "session_id", "trial_index"], kind="stable")
+    rows = []
+    for r in t.itertuples():
+        where = str(r.damage)
+        db = str(r.database)
+        if where.startswith(f"{db}: "):  # the line names the database by its path; the report by its file name
+            where = f"{os.path.basename(db)}: {where[len(db) + 2:]}"
+        number = int(r.trial_index) + 1
+        rows.append({"database": os.path.basename(db), "participant_code": r.participant_code,
+                     "session_id": int(r.session_id), "trial_number": number, "damage": where,
+                     "reason": f"{r.participant_code}, session {int(r.session_id)}, trial {number}: recording damaged "
+                               f"({where})"})
+    return pd.DataFrame(rows, columns=["database", "participant_code", "session_id", "trial_number", "damage",
+                                       "reason"])
+
+
+def _wall_break_s(session: pd.Series, runs: pd.DataFrame) -> float:
+    """The real time a session spent between its runs, s: its wall-clock span less its session-clock span -- on
+    the real rig, whose session clock runs in real time and steps over a break; NaN on the simulated rig (a
+    virtual clock) or when the session has not ended."""
+    if session["rig"] != "real" or not isinstance(session["ended_at"], str) or runs["last_record_s"].isna().all():
+        return math.nan
+    try:
+        wall = (dt.datetime.fromisoformat(session["ended_at"])
+                - dt.datetime.fromisoformat(str(session["started_at"]))).total_seconds()
+    except ValueError:
+        return math.nan
+    return max(0.0, wall - float(runs["last_record_s"].max()))
+
+
+def _cut(trials: pd.DataFrame, after_s: float, before_s: float) -> tuple[object, str]:
+    """The trial an interruption cut (stored as aborted, cause interrupted, ending between the runs): its number
+    and what became of it, or (None, words) when the run stopped between trials."""
+    hit = trials[(trials["abort_cause"] == "interrupted") & (trials["ended_at_s"] > after_s)
+                 & (trials["ended_at_s"] <= before_s)]
+    if hit.empty:
+        return None, "no trial was under way (the run stopped between trials)"
+    r = hit.iloc[0]
+    number = int(r["trial_index"]) + 1
+    rerun = (trials["repeat_of"] == r["trial_index"]).any()
+    return number, (f"it cut trial {number} (cue at {float(r['started_at_s']):.3f} s), stored as aborted "
+                    f"(interrupted) and {'re-run later in the session' if rerun else 'not re-run'}")
+
+
+def resumed_sessions(study: StudyData) -> pd.DataFrame:
+    """Every resume of an interrupted session (its ``resume`` events), one row each, by database and session.
+
+    Returns
+    -------
+    pandas.DataFrame
+        :data:`RESUMED_COLUMNS`: ``run`` is the run the resume began (2 for the first), ``n_runs`` the session's
+        runs; ``interrupted_at_s`` the session clock of the previous run's last record (NaN when not recorded),
+        ``resumed_at_s`` of the resume; ``cut_trial`` the number of the trial the interruption cut (None when the
+        run stopped between trials); ``break_s`` the real time between the runs, summed over a session's resumes
+        (NaN where not derivable: the simulated rig's clock is virtual); ``reason`` all of it in words.
+    """
+    ev = study.events
+    if ev.empty:
+        return pd.DataFrame(columns=list(RESUMED_COLUMNS))
+    rows = []
+    resumes = ev[ev["kind"] == "resume"].sort_values(["database", "session_id", "t_s"], kind="stable")
+    for (db, sid), g in resumes.groupby(["database", "session_id"], sort=False):
+        session = study.sessions[(study.sessions["database"] == db) & (study.sessions["session_id"] == sid)].iloc[0]
+        runs = study.runs[(study.runs["database"] == db) & (study.runs["session_id"] == sid)] if len(study.runs) \
+            else pd.DataFrame(columns=["segment", "started_at_s", "last_record_s"])
+        trials = study.trials[(study.trials["database"] == db) & (study.trials["session_id"] == sid)]
+        wall = _wall_break_s(session, runs)
+        brk = (f"the real-time break between the runs was {wall / 60:.1f} min{' in all' if len(g) > 1 else ''} "
+               "(the session's wall-clock span less its session-clock span)" if math.isfinite(wall) else
+               "the real-time break between the runs is not derivable (no wall-clock time of a run's start is "
+               "stored" + (", and the simulated rig's session clock is virtual)" if session["rig"] == "sim" else ")"))
+        previous = -math.inf
+        for k, r in enumerate(g.itertuples(), start=2):
+            before = runs[runs["started_at_s"] < float(r.t_s)]["last_record_s"].dropna()
+            stopped = float(before.max()) if len(before) else math.nan
+            number, cut = _cut(trials, previous, float(r.t_s))
+            previous = float(r.t_s)
+            stop = f"after {stopped:.3f} s of session time" if math.isfinite(stopped) else "(last record not stored)"
+            rows.append({
+                "database": os.path.basename(str(db)), "participant_code": session["participant_code"],
+                "session_id": int(sid), "kind": session["kind"], "run": k, "n_runs": int(session["n_runs"]),
+                "interrupted_at_s": stopped, "resumed_at_s": float(r.t_s), "cut_trial": number, "break_s": wall,
+                "reason": (f"{session['participant_code']}, {session['kind']} session {int(sid)}: run {k - 1} was "
+                           f"interrupted {stop}; {cut}; the session was resumed as run {k} of "
+                           f"{int(session['n_runs'])} at {float(r.t_s):.3f} s; {brk}")})
+    out = pd.DataFrame(rows, columns=list(RESUMED_COLUMNS))
+    out["cut_trial"] = out["cut_trial"].astype("Int64")  # a resume between trials cut none: empty, not NaN
+    return out
 
 
 def aborted_reruns(study: StudyData) -> tuple[int, int]:

@@ -346,6 +346,18 @@ class StudyReader:
         return [(int(a), float(b), int(c)) for a, b, c in self.conn.execute(
             f"SELECT segment, started_at_s, t0_ns FROM {recording_tables(arm)[0]} {where} ORDER BY segment", args)]
 
+    def recorded_runs(self) -> Rows:
+        """Every recorded run of every session -- a session resumed after an interruption has one per run -- by
+        session and run: ``session_id, segment, started_at_s`` (session clock of its first record) and
+        ``last_record_s`` (of its last block's last record; NULL when it has no block).  None before version 3."""
+        cols = ("session_id", "segment", "started_at_s", "last_record_s")
+        if not self.has_recordings():
+            return Rows(cols, [])
+        return self._rows(
+            "SELECT r.session_id, r.segment, r.started_at_s, (SELECT MAX(b.t_last_s) FROM session_blocks b WHERE "
+            "b.session_id = r.session_id AND b.segment = r.segment) AS last_record_s FROM recordings r "
+            "ORDER BY r.session_id, r.segment")
+
     def recording(self, session_id: int, segment: int, arm: str = "") -> tuple[float, int, str] | None:
         """One segment's start: ``(started_at_s, t0_ns, snapshot_json)``, or None when there is no such segment."""
         if arm and not has_table(self.conn, "arm_recordings"):

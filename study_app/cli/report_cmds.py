@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
+from protocol.labels import plural
 from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
 
@@ -116,9 +118,14 @@ def cmd_report(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     ex = summary.excluded
-    print(f"Report {summary.out_dir / 'report.html'}: {summary.n_participants} participants, {summary.n_trials} "
-          f"trials, {summary.n_samples:,} samples (excluded: {ex['training_trials']} training trials, "
-          f"{ex['aborted_trials']} aborted trials)")
+    for line in summary.damage:  # as every reader of the recording names it; the report lists the trials
+        print(f"haptic-study: recording damaged: {line}: the trials it touches are left out of the analysis "
+              f"(listed in {summary.out_dir / 'report.html'} under Trials that did not count)", file=sys.stderr)
+    damaged = f", {plural(ex['damaged_trials'], 'trial')} with a damaged recording" if ex["damaged_trials"] else ""
+    print(f"Report {summary.out_dir / 'report.html'}: {plural(summary.n_participants, 'participant')}, "
+          f"{plural(summary.n_trials, 'trial')}, {plural(summary.n_samples, 'sample')} (excluded: "
+          f"{plural(ex['training_trials'], 'training trial')}, {plural(ex['aborted_trials'], 'aborted trial')}"
+          f"{damaged})")
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
     print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")
     print(summary.stats[cols].to_string(index=False, float_format=lambda v: f"{v:.4g}"))

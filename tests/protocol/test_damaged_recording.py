@@ -307,6 +307,21 @@ def test_the_report_leaves_out_the_trials_a_damaged_block_touches_and_analyses_t
     analysed = {(int(ln.split(",")[2]), int(ln.split(",")[3])) for ln in rows[1:]}  # session, trial number
     assert not analysed & {(1, i + 1) for (i,) in touched}  # the touched trials are left out ...
     assert len(analysed) == len(data.included) and {(2, 1), (1, 1)} <= analysed  # ... and only they
+    # ... and said so: one line on stderr, the trials listed as not counted, the methods counting them
+    said = [ln for ln in r.stderr.splitlines() if "recording damaged" in ln]
+    assert len(said) == 1 and "session 1, recorded run 0, 3.000–3.999 s (block 3)" in said[0], r.stderr
+    assert "left out of the analysis" in said[0] and "Trials that did not count" in said[0]
+    n = len(touched)
+    assert f"{n} trial{'s' if n > 1 else ''} with a damaged recording" in r.stdout
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    not_counted = page.split("<h3>Trials that did not count</h3>")[1].split("<h3>")[0]
+    for (i,) in touched:
+        assert (f"P01, session 1, trial {i + 1}: recording damaged (study.db: session 1, recorded run 0, "
+                "3.000–3.999 s (block 3): checksum mismatch") in not_counted
+    methods = page.split("<b>Data.</b>")[1].split("</p>")[0]
+    assert f"{len(analysed)} analysed trials" in methods
+    assert f"and {n} trial{'s' if n > 1 else ''} whose recording is damaged" in methods
+    assert f"P01, session 1, trial {touched[0][0] + 1}: recording damaged" in methods
 
 
 def test_readers_raise_one_error_naming_the_damage_or_read_around_it(study: Path, tmp_path: Path) -> None:

@@ -1,0 +1,102 @@
+"""The numbers the report shows: one value per number, no spread of one participant, counts in good English.
+
+* one participant: the headline shows each mean without "± 0.000" (there is no SD of one value), as ``run``'s
+  summary does;
+* a number the page shows in two tables (the Hodges–Lehmann bound in the test table and in the sensitivity
+  table) is rounded once, from its unrounded value, in both: a bound of -0.02154 is -0.022 on the page
+  (stats.csv keeps it to 4 decimals, -0.0215, which rounded again would read -0.021);
+* counts read "1 participant", "1 aborted trial", "1 experiment session did not complete and is left out".
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+import pandas as pd
+import pytest
+from studybuilder import SessionDef, TrialDef, build, success_trial, timeout_trial
+
+from analysis import report as report_module
+from analysis import sensitivity as sensitivity_module
+from analysis.aggregate import mean_sd
+from analysis.report import build_report
+from study_app.cli.main import main
+
+
+def _aborted(label: str, mode: str) -> TrialDef:
+    t = success_trial(label, mode, 0)
+    t.outcome_override = "aborted"
+    return t
+
+
+def _session(code: str, i: int) -> SessionDef:
+    return SessionDef(code, [success_trial("GENTLE", "on", 100 * i), timeout_trial("GENTLE", "off", 0.2 + 0.05 * i),
+                             success_trial("FIRM", "off", 300 + 80 * i), timeout_trial("FIRM", "on", 2.0 + 0.1 * i),
+                             success_trial("GENTLE", "off", 500 + 60 * i), success_trial("FIRM", "on", 150 * i)],
+                      max_trial_s=4.0)
+
+
+def _headline(page: str) -> str:
+    return page.split('<div class="key">')[1].split("<h2>")[0]
+
+
+@pytest.fixture(scope="module")
+def one_participant(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """P01 complete with one aborted trial; P02's session ended by the experimenter (left out)."""
+    d = tmp_path_factory.mktemp("one")
+    p01 = _session("P01", 1)
+    p01.trials.insert(2, _aborted("FIRM", "on"))
+    p02 = SessionDef("P02", [success_trial("GENTLE", "on", 200)], max_trial_s=4.0, status="aborted",
+                     end_reason="test", designed=6)
+    db = build(d / "one.db", [p01, p02])
+    return db, str(d / "rep")
+
+
+def test_one_participant_has_no_sd(one_participant: tuple[Path, str], capsys: pytest.CaptureFixture[str]) -> None:
+    db, out = one_participant
+    assert main(["report", "--db", str(db), "--out", out]) == 0
+    printed = capsys.readouterr().out
+    page = Path(out, "report.html").read_text(encoding="utf-8")
+    head = _headline(page)
+    assert "±" not in head and "0.000 ±" not in head, head
+    assert "OFF → ON, mean across 1 participant;" in head
+    mean, sd, n = mean_sd(pd.Series([0.4]))
+    assert (mean, n) == (0.4, 1) and math.isnan(sd)
+    # -- and the counts read as English
+    assert re.search(r": 1 participant, \d+ trials, [\d,]+ samples \(excluded: 0 training trials, 1 aborted trial\)",
+                     printed), printed
+    assert "1 experiment session did not complete and is left out; see What was delivered." in page
+    assert "1 participants" not in page and "1 aborted trials" not in page
+
+
+@pytest.fixture(scope="module")
+def three(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return build(tmp_path_factory.mktemp("three") / "three.db", [_session(f"P0{i}", i) for i in range(1, 4)])
+
+
+def test_a_number_shown_twice_is_rounded_once_from_its_unrounded_value(
+        three: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    real = report_module.mode_tests
+
+    def bound(per: pd.DataFrame, *args: object, **kwargs: object) -> tuple[object, pd.DataFrame]:
+        """The tests as computed, with RMSE's Hodges–Lehmann interval set to one whose upper bound is -0.02154."""
+        results, frame = real(per, *args, **kwargs)  # type: ignore[arg-type]
+        rmse = frame["metric"] == "rmse_n"
+        frame.loc[rmse, ["hl_estimate", "hl_ci_low", "hl_ci_high"]] = (-0.3, -0.5, -0.02154)
+        return results, frame
+
+    monkeypatch.setattr(report_module, "mode_tests", bound)
+    monkeypatch.setattr(sensitivity_module, "mode_tests", bound)
+    build_report([three], tmp_path / "rep", workers=1)
+    stats = pd.read_csv(tmp_path / "rep" / "stats.csv").set_index("metric")
+    assert stats.at["rmse_N", "hl_ci_high"] == -0.0215  # the file: 4 decimals
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    test_table = page.split('<table class="stats">')[1].split("</table>")[0]
+    rmse_row = next(r for r in test_table.split("<tbody>")[1].split("<tr") if "RMSE" in r)
+    assert "-0.300 [-0.500, -0.022]" in rmse_row, rmse_row
+    sens = page.split('<table class="within sens">')[1].split("</table>")[0]
+    sens_row = next(r for r in sens.split("<tbody>")[1].split("<tr") if "RMSE" in r)
+    assert "-0.300 [-0.500, -0.022]" in sens_row, sens_row
+    assert "-0.021]" not in page
