@@ -282,7 +282,9 @@ COLUMNS: tuple[Column, ...] = (
     Column("n_runs", "the runs the session took: 1 when it ran in one go, one more per resume after an "
            "interruption (report.html lists each resume under What was delivered)", "count", "integer",
            files=("sessions.csv",)),
-    Column("kind", "the kind of deviation event (deviation, calibration_override)", type="text",
+    Column("writer", "the live process running the session while the report was made (\"process N (command)\"); "
+           "empty when none: a running session without one was interrupted", type="text", files=("sessions.csv",)),
+    Column("kind", "the kind of deviation event (deviation, calibration_override, fault_rehearsal)", type="text",
            files=("deviations.csv",)),
     Column("t_s", "session clock of the event", "s", files=("deviations.csv",), decimals=_T),
     Column("detail", "what the event records, as stored", type="text", files=("deviations.csv",)),

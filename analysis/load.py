@@ -220,6 +220,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
         damage = _mark_damage(db, path, trials)
         events = _query(db, lambda: db.events(LISTED_EVENTS))
         runs = _query(db, db.recorded_runs)
+        writers = db.sessions_being_written()  # a session "running" with a live writer is in progress, not interrupted
     finally:
         db.close()
     if sessions.empty:
@@ -234,6 +235,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
                           design], axis=1)
     sessions["software_dirty"] = sessions["software_dirty"].astype("boolean")
+    sessions["writer"] = [writers.get(int(sid), "") for sid in sessions["session_id"]]
     for frame in (sessions, trials, events, runs):
         frame.insert(0, "database", path)
     return sessions, trials, events, damage, runs

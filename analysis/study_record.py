@@ -64,6 +64,9 @@ def incomplete_sessions(study: StudyData) -> pd.DataFrame:
             detail = str(r.end_reason or "").strip()
             if detail:
                 why += f" ({detail})"
+        elif getattr(r, "writer", ""):  # its lease is live: another process runs it now
+            why = (f"in progress ({r.writer}), {finished} of {designed} trials done so far: still being run, not "
+                   "interrupted; report again once it has ended")
         else:
             why = (f"interrupted after {finished} of {designed} trials and not resumed (haptic-study run --resume "
                    f"{r.participant_code} continues it)")

@@ -346,6 +346,11 @@ class StudyReader:
         return [(int(a), float(b), int(c)) for a, b, c in self.conn.execute(
             f"SELECT segment, started_at_s, t0_ns FROM {recording_tables(arm)[0]} {where} ORDER BY segment", args)]
 
+    def sessions_being_written(self) -> dict[int, str]:
+        """Sessions a live process writes to right now (their leases): session id -> "process N (command)"; {}
+        through a bare connection."""
+        return self._db.sessions_being_written() if self._db is not None else {}
+
     def recorded_runs(self) -> Rows:
         """Every recorded run of every session -- a session resumed after an interruption has one per run -- by
         session and run: ``session_id, segment, started_at_s`` (session clock of its first record) and

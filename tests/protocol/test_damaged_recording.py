@@ -268,6 +268,12 @@ def test_check_says_a_session_another_process_writes_is_in_progress_not_to_be_re
     owner = new_owner_token()
     writer.acquire_lease(session_scope(sid), owner, command="haptic-study run --resume P03")  # this process: live
     try:
+        # the report's list of incomplete sessions says the same (not "interrupted ... --resume continues it")
+        from analysis.study_record import incomplete_sessions
+
+        (reason,) = incomplete_sessions(load_study([db]))["reason"]
+        assert reason.startswith(f"P03, session {sid}: in progress (process {os.getpid()} (haptic-study run --resume "
+                                 "P03)), ") and "not interrupted" in reason and "--resume P03 continues" not in reason
         busy = _cli(["check", "--db", str(db)], tmp_path)
         assert busy.returncode == 0, busy.stdout + busy.stderr
         (line,) = [n for n in busy.stdout.splitlines() if "P03" in n]
@@ -278,6 +284,8 @@ def test_check_says_a_session_another_process_writes_is_in_progress_not_to_be_re
     finally:
         writer.release_lease(session_scope(sid), owner)
         writer.close()
+    (reason,) = incomplete_sessions(load_study([db]))["reason"]
+    assert "interrupted after" in reason and "haptic-study run --resume P03 continues it" in reason
     idle = _cli(["check", "--db", str(db)], tmp_path)
     (line,) = [n for n in idle.stdout.splitlines() if "P03" in n]
     assert line.startswith(f"  note: session {sid} (P03, interrupted): ") and line.endswith(
