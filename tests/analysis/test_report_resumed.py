@@ -9,38 +9,18 @@ each session's runs.
 from __future__ import annotations
 
 import csv
-import os
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
+from cli_subprocess import cli as _cli
+from cli_subprocess import tiny_protocol
 
 from protocol.config import protocol_from_dict
 from study_app.headless import run_study
 
-_SCRIPT = Path(sys.executable).with_name("haptic-study")
-CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
-PROTOCOL = """name = "resume"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 2
-[trial]
-max_trial_s = 1.5
-hold_s = 0.3
-pause_s = 0.3
-[training]
-enabled = false
-"""
+PROTOCOL = tiny_protocol("resume")
 
-
-def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
-    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=300, cwd=cwd, env=env)
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,6 @@ import json
 import os
 import shutil
 import sqlite3
-import subprocess
-import sys
 import tomllib
 import zlib
 from collections.abc import Callable, Iterator
@@ -30,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+from cli_subprocess import cli as _cli
+from cli_subprocess import tiny_protocol
 
 from analysis.load import load_study
 from protocol.config import protocol_from_dict
@@ -39,30 +39,11 @@ from protocol.storage import StorageError, StudyDatabase
 from study_app.headless import run_study
 
 ROOT = Path(__file__).resolve().parents[2]
-_SCRIPT = Path(sys.executable).with_name("haptic-study")
-CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
-PROTOCOL = """name = "damage"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 2
-[trial]
-max_trial_s = 1.5
-hold_s = 0.3
-pause_s = 0.3
-[training]
-enabled = false
-"""
+PROTOCOL = tiny_protocol("damage")
 #: P03's session: interrupted during its 3rd trial (resumable), and the one damaged.
 DAMAGED_SESSION = 3
 DAMAGED_BLOCK = 2  # 2.0–2.999 s: trial 2 (and the pause before it)
 
-
-def _cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
-    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=300, cwd=cwd, env=env)
 
 
 @pytest.fixture(scope="module")

@@ -10,12 +10,11 @@ from __future__ import annotations
 import os
 import re
 import sqlite3
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
 import pytest
+from cli_subprocess import cli, tiny_protocol
 
 from pipeline.sim.faults import FaultInjector, SimFault, latch_delay_s
 from protocol.clock import SessionClock
@@ -26,25 +25,10 @@ from protocol.trial import PhaseChanged, TrialPhase
 from study_app.headless import run_study
 
 ROOT = Path(__file__).resolve().parents[2]
-_SCRIPT = Path(sys.executable).with_name("haptic-study")
-CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-m", "study_app.cli"]
 
 
 def protocol_text(max_trial_s: float = 2.0, pause_s: float = 0.5) -> str:
-    return f"""name = "rehearsal"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 2
-[trial]
-max_trial_s = {max_trial_s}
-hold_s = 0.5
-pause_s = {pause_s}
-[training]
-enabled = false
-"""
+    return tiny_protocol("rehearsal", max_trial_s, 0.5, pause_s)
 
 
 def protocol(max_trial_s: float = 2.0, pause_s: float = 0.5) -> ProtocolConfig:
@@ -58,10 +42,6 @@ def rows(db: Path, sql: str, *args: object) -> list[tuple]:
     finally:
         c.close()
 
-
-def cli(args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess[str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("HAPTIC_STUDY")}
-    return subprocess.run([*CLI, *args], check=False, capture_output=True, text=True, timeout=timeout, cwd=cwd, env=env)
 
 
 @pytest.mark.parametrize("seconds", [0.5, 2.0])
