@@ -210,6 +210,11 @@ def test_a_withdrawn_code_is_not_run_again(withdrawn, tmp_path) -> None:
     shutil.copy(withdrawn["db"], db)
     run_study(str(db), participants=4, seed=11, protocol=_protocol(), jobs=1, continue_study=True)
     assert _rows(db, "SELECT COUNT(*) FROM participants WHERE code = ?", GONE) == [(0,)]
+    # withdraw again: the later sessions' free pages are not a withdrawal's rewrite left undone -- refused, the
+    # file untouched (it rewrote the whole file and said the first withdrawal had not finished)
+    before = _file_bytes(db)
+    assert main(["withdraw", "--db", str(db), "--participant", GONE, "--reason", "again", "--yes", GONE]) == 2
+    assert _file_bytes(db) == before
     d = StudyDatabase(db)
     try:
         with pytest.raises(StorageError, match="withdrew from the study"):
@@ -367,7 +372,7 @@ def test_a_reader_that_holds_up_the_rewrite_is_named_and_a_second_run_finishes_i
             db.close()
         reader.execute("COMMIT")  # it has finished reading, but keeps the file open
         assert main(["withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE]) == 0
-        assert "the rewrite of" in capsys.readouterr().out
+        assert "the rewrite is finished now" in capsys.readouterr().out
         assert Path(f"{copy}-wal").stat().st_size == 0
         assert [t for t in study["before"]["traces"] if t in _file_bytes(copy)] == []
     finally:
@@ -452,7 +457,7 @@ def test_a_withdrawal_killed_between_the_removal_and_the_rewrite_is_finished_by_
     assert _rows(copy, "PRAGMA freelist_count")[0][0] > 0  # ... and the file not rewritten
     assert main(["withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE]) == 0
     out = capsys.readouterr().out
-    assert "but the rewrite of" in out and "the rewrite is finished now" in out, out
+    assert "still held pages the withdrawal's rewrite drops" in out and "the rewrite is finished now" in out, out
     assert _rows(copy, "PRAGMA freelist_count") == [(0,)]
     assert not Path(f"{copy}-wal").exists() or Path(f"{copy}-wal").stat().st_size == 0
     assert [t for t in study["before"]["traces"] if t in _file_bytes(copy)] == []

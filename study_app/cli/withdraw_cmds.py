@@ -84,14 +84,19 @@ def _log_holds_pages(path: str) -> bool:
         return False
 
 
-def _rewrite_pending(db: Any, path: str) -> bool:
-    """The file still needs a withdrawal's rewrite: its write-ahead log holds pages (a reader held the rewrite up),
-    or it has free pages (the command was stopped -- killed, a power cut -- after the rows were removed and before
-    ``VACUUM`` finished: the removal frees pages, and only the rewrite drops them).
-
-    (Free pages a writer left later make a further run rewrite the file once more: harmless, and it says so.)
+def _rewrite_pending(db: Any, path: str, withdrawn_at: str) -> bool:
+    """The file still needs the rewrite of the withdrawal made at ``withdrawn_at``: its write-ahead log holds pages
+    (a reader held the rewrite up), or it has free pages (the command was stopped -- killed, a power cut -- after
+    the rows were removed and their freed pages zeroed, and before ``VACUUM`` finished: only the rewrite drops
+    them) while no session began after the withdrawal (a later session's writes leave free pages of their own, not
+    the withdrawal's: then nothing is pending and the withdrawal is not run again).
     """
-    return _log_holds_pages(path) or int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
+    from protocol.storage import StudyReader
+
+    if _log_holds_pages(path):
+        return True
+    later = any(str(s.started_at) > withdrawn_at for s in StudyReader.over(db).sessions())
+    return not later and int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
 
 
 def _refuse_live_writers(db: Any, path: str) -> None:
@@ -124,7 +129,7 @@ def _look(path: str, code: str) -> Any:
         raise CliError(str(exc)) from None
     try:
         done = withdrawal_of(db.conn, code)
-        if done is not None and _rewrite_pending(db, path):
+        if done is not None and _rewrite_pending(db, path, done.withdrawn_at):
             _refuse_live_writers(db, path)
             return done  # withdrawn, but the file's rewrite did not finish: this command finishes it
         if done is not None:
@@ -250,9 +255,10 @@ def cmd_withdraw(args: argparse.Namespace) -> int:
     if not clean:
         raise CliError(_reader_line(args.db, code, removed=True), 1)
     if finishing is not None:
-        print(f"{code} had withdrawn ({record.withdrawn_at[:16].replace('T', ' ')} UTC), but the rewrite of {args.db} "
-              "had not finished (a reader held it up, or the command was stopped); the rewrite is finished now: "
-              "none of their data can be read back from the database.")
+        print(f"{code} had withdrawn ({record.withdrawn_at[:16].replace('T', ' ')} UTC; their rows were removed "
+              f"then), and {args.db} still held pages the withdrawal's rewrite drops (a reader held the rewrite up, "
+              "or the command was stopped before it ended); the rewrite is finished now: none of their data can be "
+              "read back from the database. The withdrawal's record keeps the reason given then.")
         return 0
     print(f"Withdrew {code} from {args.db}: removed {record.counts()}; the file was rewritten and its write-ahead "
           "log emptied, so none of it can be read back from the database.")
