@@ -27,6 +27,7 @@ from analysis.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
 from analysis.metrics import MetricOptions, TrialTable
 from analysis.stats import methods_text
 from protocol.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
+from protocol.study_rules import FAULT_REHEARSAL_EVENT
 from protocol.version import software_provenance
 
 __all__ = ["DAMAGED_TEXT", "page", "plural", "power_html"]
@@ -141,16 +142,31 @@ def power_html(section: Any) -> str:
 
 def _deviations_methods(within: Any) -> str:
     """The methods' sentence on recorded deviations from the protocol: none, or each with its participant."""
-    dev = within.deviations
+    every = within.deviations
+    rehearsed = every[every["kind"] == FAULT_REHEARSAL_EVENT]
+    dev = every[every["kind"] != FAULT_REHEARSAL_EVENT]
+    said = _rehearsals_methods(rehearsed)
     if dev.empty:
-        return "No deviation from the protocol was recorded (events of kind deviation or calibration_override)."
+        return ("No deviation from the protocol was recorded (events of kind deviation or calibration_override)."
+                + said)
     items = "; ".join(f"{html.escape(str(r.participant_code))}: {html.escape(str(r.detail).rstrip('. '))}"
                       for r in dev.head(5).itertuples())
     if len(dev) > 5:
         items += f"; and {len(dev) - 5} more"
     return (f"{plural(len(dev), 'deviation')} from the protocol {'was' if len(dev) == 1 else 'were'} recorded "
             f"(listed under Deviations from the protocol, deviations.csv; the trials they concern are analysed "
-            f"as recorded): {items}.")
+            f"as recorded): {items}." + said)
+
+
+def _rehearsals_methods(rehearsed: Any) -> str:
+    """The methods' sentence on faults rehearsed on the simulated rig ("" when none): counted by plan, not event."""
+    if rehearsed.empty:
+        return ""
+    plans = {(r.participant_code, r.session_id, str(r.detail).split(": ", 1)[0]) for r in rehearsed.itertuples()}
+    return (f" Faults were rehearsed on the simulated rig: {plural(len(plans), 'planned fault')} "
+            f"({plural(len(rehearsed), 'event')} of kind fault_rehearsal under Deviations from the protocol: when "
+            "each was planned and what it did); a trial a rehearsed fault aborted is left out like any aborted "
+            "trial (Trials that did not count) and is no device's failure.")
 
 
 def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int], n_participants: int,

@@ -56,6 +56,7 @@ __all__ = [
     "refuse_damaged_recording",
     "rehearsal_note",
     "start_runner",
+    "store_rehearsal_plan",
     "training_protocol",
     "training_schedule",
 ]
@@ -441,3 +442,13 @@ def rehearsal_note(runner: SessionRunner) -> Callable[[int, str], None]:
         runner.recorder.event(runner.session_id, runner.session_time_s(t_ns), FAULT_REHEARSAL_EVENT, text)
 
     return note
+
+
+def store_rehearsal_plan(runner: SessionRunner, plan: object, t_ns: int = 0) -> None:
+    """Store, committed at once, that ``plan`` (a :class:`protocol.rehearsal.FaultPlan`, or a fault's kind) is to be
+    rehearsed in ``runner``'s session: a planned ``kill`` ends the process before the session's next commit, and
+    the record must still say the interruption was a rehearsal.  ``t_ns``: loop time it was planned at (0: before
+    the session's first record)."""
+    t_s = runner.session_time_s(t_ns)
+    text = f"{plan}: planned, to be rehearsed on the simulated rig (not a device failure)"
+    runner.recorder.call(lambda db: db.insert_event(runner.session_id, t_s, FAULT_REHEARSAL_EVENT, text))

@@ -33,6 +33,7 @@ from protocol.session_setup import (
     raw_wrench_scales,
     rehearsal_note,
     start_runner,
+    store_rehearsal_plan,
 )
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
 from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
@@ -198,12 +199,16 @@ class EngineSessions:
         if not (math.isfinite(cmd.seconds) and 0 <= cmd.seconds <= 600):
             raise ValueError(f"fault seconds = {cmd.seconds!r}: must be a number from 0 to 600")
         if cmd.trial is None:
-            if cmd.kind == "kill":
-                kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig, loop = self.engine.eng.rig, self.engine.loop
             now_ns = loop.clock.now_ns()
+            live = self.runner is not None and not self.runner.done
+            if cmd.kind == "kill":
+                if live and self.runner is not None:  # the record says the engine's death was a rehearsal
+                    store_rehearsal_plan(self.runner, "kill now", now_ns - loop.t0_ns)
+                    self.runner.recorder.flush()
+                kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig.inject_fault(cmd.kind, now_ns)
-            if self.runner is not None and not self.runner.done:  # in a session: its record says it was rehearsed
+            if live and self.runner is not None:  # in a session: its record says it was rehearsed
                 rehearsal_note(self.runner)(now_ns - loop.t0_ns,
                                             f"{cmd.kind}: rehearsed on the simulated rig (not a device failure), now")
             self.engine.publish(m.FaultInjected(cmd.kind, "now"))
@@ -239,6 +244,7 @@ class EngineSessions:
             max_trial_s=opened.protocol.trial.max_trial_s,  # moved to land in its trial, or withdrawn, and said so
             latch_s=lambda kind: latch_delay_s(kind, wd.sensor_max_age_s, wd.pose_max_age_s),
             note=rehearsal_note(runner))
+        store_rehearsal_plan(runner, plan, eng.loop.clock.now_ns() - eng.loop.t0_ns)  # committed now (a kill)
         if self.trigger is not None:  # keep what was planned before
             trig._pending.extend(self.trigger._pending)
         else:

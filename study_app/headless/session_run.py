@@ -38,6 +38,7 @@ from protocol.session_setup import (
     raw_wrench_scales,
     rehearsal_note,
     start_runner,
+    store_rehearsal_plan,
     training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
@@ -264,6 +265,8 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine,
     trig = RehearsalTrigger.for_session(faults, opened.code, opened.kind, opened.start_position, inject, kill, cancel,
                                         max_trial_s=opened.protocol.trial.max_trial_s, latch_s=latch_s,
                                         note=rehearsal_note(runner))
+    for plan in trig.plans:  # committed now: a planned kill ends the process before the session's next commit
+        store_rehearsal_plan(runner, plan)
     return trig if trig.plans else None
 
 

@@ -53,6 +53,9 @@ def test_the_report_names_the_resumed_session_where_it_states_delivery(report: P
     assert "the real-time break between the runs is not derivable" in item  # the simulated rig: a virtual clock
     methods = page.split("<b>Data.</b>")[1].split("</p>")[0]
     assert "1 session was interrupted and resumed, analysed as one session each" in methods
+    # the interruption was a rehearsed kill: the methods say so, counted by plan (not by its events)
+    assert "No deviation from the protocol was recorded" in methods
+    assert "Faults were rehearsed on the simulated rig: 1 planned fault (" in methods
     assert "P02, session 2, run 2 from " in methods and "(cut trial 3)" in methods
 
 

@@ -256,8 +256,10 @@ def test_a_rehearsed_fault_is_stored_aborts_the_trial_and_waits_for_the_experime
     stored = db_rows(db, "SELECT kind, detail FROM events WHERE kind IN ('fault', 'fault_cleared', 'faults_reset')")
     assert [k for k, _ in stored] == ["fault", "fault_cleared", "faults_reset"]
     rehearsal = db_rows(db, "SELECT detail FROM events WHERE kind = 'fault_rehearsal' ORDER BY t_s")
-    assert rehearsal == [("sensor-stall@P01:1+0.2: rehearsed on the simulated rig (not a device failure), due +0.2 s "
-                          "into trial 1",), ("sensor-stall@P01:1+0.2: injected during trial 1",)]
+    assert rehearsal == [
+        ("sensor-stall@P01:1+0.2: planned, to be rehearsed on the simulated rig (not a device failure)",),
+        ("sensor-stall@P01:1+0.2: rehearsed on the simulated rig (not a device failure), due +0.2 s into trial 1",),
+        ("sensor-stall@P01:1+0.2: injected during trial 1",)]
     assert db_rows(db, "SELECT abort_cause FROM trials WHERE outcome = 'aborted'") == [("fault",)]
     assert db_rows(db, "SELECT repeat_of FROM trials ORDER BY trial_index DESC LIMIT 1") == [(0,)]
     assert db_rows(db, "SELECT COUNT(*) FROM leases") == [(0,)]

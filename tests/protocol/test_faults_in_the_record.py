@@ -67,9 +67,10 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     faults = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'fault'")
     assert len(faults) == 1 and faults[0][1].startswith(LATCHES[kind]) and start < faults[0][0] <= end
     # the record says it was rehearsed, when it was planned and what it did: never taken for a device's failure
-    planned, did = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'fault_rehearsal' ORDER BY t_s")
-    assert planned == (pytest.approx(start, abs=1e-9),
-                       f"{kind}@P01:2+1: rehearsed on the simulated rig (not a device failure), due +1 s into trial 2")
+    planned, due, did = rows(db, "SELECT t_s, detail FROM events WHERE kind = 'fault_rehearsal' ORDER BY t_s")
+    assert planned == (0.0, f"{kind}@P01:2+1: planned, to be rehearsed on the simulated rig (not a device failure)")
+    assert due == (pytest.approx(start, abs=1e-9),
+                   f"{kind}@P01:2+1: rehearsed on the simulated rig (not a device failure), due +1 s into trial 2")
     assert did == (pytest.approx(end, abs=1e-9), f"{kind}@P01:2+1: injected during trial 2")
     assert faults[0][0] == pytest.approx(end, abs=1e-9)  # the trial ended at the fault
     assert end - start == pytest.approx(1.0, abs=0.06)  # 1 s after the cue, plus the watchdog's own limit
@@ -91,8 +92,8 @@ def test_every_fault_kind_is_stored_aborts_its_trial_and_is_rerun(tmp_path: Path
     counts = dict(zip(*abort_counts(study).to_dict("list").values(), strict=True))
     assert counts["fault"] == 1 and sum(counts.values()) == 1
     listed = deviations(study)  # and the report lists the rehearsal among the deviations from the design
-    assert list(listed["kind"]) == ["fault_rehearsal", "fault_rehearsal"]
-    assert listed["detail"].iloc[1] == f"{kind}@P01:2+1: injected during trial 2"
+    assert list(listed["kind"]) == ["fault_rehearsal"] * 3
+    assert listed["detail"].iloc[2] == f"{kind}@P01:2+1: injected during trial 2"
     health = health_table(study)
     assert health[list(HEALTH_COLUMNS)].notna().all().all()
     if kind == "sensor-stall":  # the record that tripped the abort is the trial's: its health shows the stall

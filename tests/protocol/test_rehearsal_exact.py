@@ -53,6 +53,9 @@ def test_a_planned_kill_loses_at_most_100_ms_and_its_trial_is_stored_as_interrup
     killed = cli(["run", "--participants", "1", "--seed", "2", "--db", str(db), "--protocol", "p.toml",
                   "--inject-fault", f"kill@P01:2+{seconds:g}"], tmp_path)
     assert killed.returncode == -9, killed.stderr
+    # the record says the interruption was a rehearsal (stored before it, whenever the kill falls)
+    assert rows(db, "SELECT detail FROM events WHERE kind = 'fault_rehearsal'")[0] == (
+        f"kill@P01:2+{seconds:g}: planned, to be rehearsed on the simulated rig (not a device failure)",)
     (cue_s,) = rows(db,
                     "SELECT t_s FROM events WHERE kind = 'phase' AND detail = 'trial 2 (index 1): cued -> active'")[0]
     kill_s = cue_s + min(seconds, 2.0 - 0.001)
