@@ -29,7 +29,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Final
 
-from protocol.records import Outcome, TrialRecord
+from protocol.records import AbortCause, Outcome, TrialRecord
 from protocol.storage import CODE_PATTERN
 from protocol.trial import PhaseChanged, TrialPhase
 
@@ -211,8 +211,14 @@ class RehearsalTrigger:
                                   f"+{(p.at_ns - p.cue_ns) * 1e-9:g} s{moved}")
         elif plan.kind != "kill":
             self._pending.remove(p)
-            if ev.outcome is Outcome.ABORTED:
+            if ev.outcome is Outcome.ABORTED and ev.abort_cause is AbortCause.FAULT:
                 self._tell(ev.end_ns, f"{plan}: injected during trial {plan.trial}{moved}")
+            elif ev.outcome is Outcome.ABORTED:
+                # aborted for another cause (the experimenter's Esc) before the watchdog latched it: not its doing
+                self.cancel(plan.kind, p.at_ns)
+                self._tell(ev.end_ns, f"{plan}: begun {(p.at_ns - p.cue_ns) * 1e-9:g} s into trial {plan.trial}"
+                                      f"{moved}, which was aborted ({ev.abort_cause}) before the watchdog latched it: "
+                                      "ended at once, not the trial's abort")
             else:
                 # it began, but the trial ended before the watchdog latched it: end it now, not in the next trial
                 self.cancel(plan.kind, p.at_ns)

@@ -125,6 +125,26 @@ def test_a_fault_whose_trial_ends_before_the_watchdog_latches_it_is_ended_at_onc
                             "the watchdog latched it: ended at once, the trial was not aborted")]
 
 
+def test_a_fault_whose_trial_the_experimenter_aborted_first_is_not_taken_for_its_abort() -> None:
+    """Review: any aborted trial was stored as the fault's doing ("injected during trial 1"), an Esc inside the
+    latch window too, and the fault was left to run on into the pause."""
+    calls: list[tuple[str, int]] = []
+    notes: list[str] = []
+    trig = RehearsalTrigger.for_session([FaultPlan("sensor-stall", "P01", 1, 1.0)], "P01", "experiment", 0,
+                                        lambda kind, at: None, lambda: pytest.fail("no kill planned"),
+                                        lambda kind, at: calls.append((kind, at)), max_trial_s=2.0,
+                                        latch_s=lambda kind: 0.007, note=lambda t, text: notes.append(text))
+    trig.on_runner_event(PhaseChanged(5_000_000, 0, TrialPhase.CUED, TrialPhase.ACTIVE))
+    rec = TrialRecord(session_id=1, trial_index=0, target_label="GENTLE", target_force_n=0.6, haptic_mode="on",
+                      outcome="aborted", clock=SessionClock(0.0, 0), cue_ns=5_000_000, end_ns=1_007_000_000,
+                      abort_reason="operator", abort_cause="experimenter")
+    trig.on_runner_event(rec)
+    assert calls == [("sensor-stall", 1_005_000_000)]  # ended at once, not left to run into the pause
+    assert trig.report == ["sensor-stall@P01:1+1: begun 1 s into trial 1, which was aborted (experimenter) before "
+                           "the watchdog latched it: ended at once, not the trial's abort"]
+    assert notes[-1] == trig.report[-1] and "injected" not in notes[-1]
+
+
 #: How the refusal of a path that is no regular file reads (the CLI names what it is, the storage layer says so)
 _NOT_A_FILE = re.compile(r"is not a regular file|not a database file; give the path of a regular file")
 
