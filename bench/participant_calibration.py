@@ -236,13 +236,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true", help="only the final table")
     ap.add_argument("--power", type=int, default=0, metavar="DRAWS",
                     help="also each effect's power: DRAWS studies drawn from every participant run (e.g. 2000)")
-    ap.add_argument("--tct-spread", metavar="SD,...", default="",
+    ap.add_argument("--tct-spread", metavar="SD,...", default=None,
                     help="instead: TCT's power at the paper's sizes for each within-participant SD of a successful "
                          "trial's completion time, s (e.g. 2.1,1.5,1.2)")
     args = ap.parse_args(argv)
     if args.power < 0:
         ap.error(f"--power: {args.power} is not allowed; give the number of studies to draw (0: no power table)")
-    if args.tct_spread:
+    if args.tct_spread is not None:
         return _print_spread(ap, args.tct_spread, args.participants)
     summaries = []
     every: list[TrialRow] = []

@@ -72,7 +72,7 @@ def test_a_spread_that_is_no_time_is_refused(bad: float) -> None:
         tct_power_at_spread(bad, draws=1)
 
 
-@pytest.mark.parametrize("bad", ["0", "1.2,x", "nan", "-1"])
+@pytest.mark.parametrize("bad", ["0", "1.2,x", "nan", "-1", ""])
 def test_the_spread_option_refuses_bad_values_in_one_line(bad: str, capsys: pytest.CaptureFixture[str]) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["--tct-spread", bad])
