@@ -30,7 +30,7 @@ from protocol.storage.common import StorageError, has_table, now_iso, recording_
 from protocol.storage.leases import session_scope
 
 __all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
-           "withdrawal_of", "withdrawals"]
+           "rewrite_pending", "withdrawal_of", "withdrawals"]
 
 
 class StudyDatabase(Protocol):
@@ -222,6 +222,27 @@ def _checkpoint(conn: sqlite3.Connection) -> bool:
     conn.execute(f"PRAGMA busy_timeout = {int(CHECKPOINT_WAIT_S * 1000)}")  # a reader's snapshot: wait this long
     busy, _, _ = conn.execute("PRAGMA wal_checkpoint(TRUNCATE)").fetchone()
     return int(busy) == 0
+
+
+def _log_holds_pages(path: str) -> bool:
+    """The database's write-ahead log is not empty (after a withdrawal: its rewrite was held up by a reader)."""
+    try:
+        return os.path.getsize(f"{path}-wal") > 0
+    except OSError:
+        return False
+
+
+def rewrite_pending(db: StudyDatabase, withdrawn_at: str) -> bool:
+    """The file still needs the rewrite of the withdrawal made at ``withdrawn_at``: its write-ahead log holds pages
+    (a reader held the rewrite up), or it has free pages (the command was stopped -- killed, a power cut -- after
+    the rows were removed and their freed pages zeroed, and before ``VACUUM`` finished: only the rewrite drops
+    them) while no session began after the withdrawal (a later session's writes leave free pages of their own, not
+    the withdrawal's: then nothing is pending and the withdrawal is not run again).
+    """
+    if _log_holds_pages(str(db.path)):
+        return True
+    later = db.conn.execute("SELECT COUNT(*) FROM sessions WHERE started_at > ?", (withdrawn_at,)).fetchone()[0]
+    return int(later) == 0 and int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
 
 
 def nobody_reading(db: StudyDatabase) -> bool:

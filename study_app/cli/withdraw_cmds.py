@@ -19,7 +19,6 @@ cut) after step 3's commit -- the same command run again finds the withdrawal re
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -76,29 +75,6 @@ def add_withdraw_parser(sub: argparse._SubParsersAction) -> None:
     w.set_defaults(handler=cmd_withdraw)
 
 
-def _log_holds_pages(path: str) -> bool:
-    """The database's write-ahead log is not empty (after a withdrawal: its rewrite was held up by a reader)."""
-    try:
-        return os.path.getsize(f"{path}-wal") > 0
-    except OSError:
-        return False
-
-
-def _rewrite_pending(db: Any, path: str, withdrawn_at: str) -> bool:
-    """The file still needs the rewrite of the withdrawal made at ``withdrawn_at``: its write-ahead log holds pages
-    (a reader held the rewrite up), or it has free pages (the command was stopped -- killed, a power cut -- after
-    the rows were removed and their freed pages zeroed, and before ``VACUUM`` finished: only the rewrite drops
-    them) while no session began after the withdrawal (a later session's writes leave free pages of their own, not
-    the withdrawal's: then nothing is pending and the withdrawal is not run again).
-    """
-    from protocol.storage import StudyReader
-
-    if _log_holds_pages(path):
-        return True
-    later = any(str(s.started_at) > withdrawn_at for s in StudyReader.over(db).sessions())
-    return not later and int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
-
-
 def _refuse_live_writers(db: Any, path: str) -> None:
     """Withdraw rewrites the whole file: refused while any process writes to the study."""
     from protocol.storage import LeaseHeld
@@ -115,11 +91,12 @@ def _look(path: str, code: str) -> Any:
     """The read-only look that decides every refusal: the participant's :class:`Footprint`.
 
     A participant who already withdrew is refused, unless that withdrawal's rewrite of the file did not finish
-    (:func:`_rewrite_pending`: a program reading the study held it up, or the command was stopped between the
-    removal and the rewrite): then their :class:`Withdrawal` is returned, and this command finishes it.
+    (:func:`protocol.storage.withdrawal.rewrite_pending`: a program reading the study held it up, or the command
+    was stopped between the removal and the rewrite): then their :class:`Withdrawal` is returned, and this command
+    finishes it.
     """
     from protocol.storage import StorageError, StudyDatabase, StudyReader
-    from protocol.storage.withdrawal import footprint, withdrawal_of
+    from protocol.storage.withdrawal import footprint, rewrite_pending, withdrawal_of
 
     if not Path(path).exists():
         raise CliError(f"--db {path}: no such database")
@@ -129,7 +106,7 @@ def _look(path: str, code: str) -> Any:
         raise CliError(str(exc)) from None
     try:
         done = withdrawal_of(db.conn, code)
-        if done is not None and _rewrite_pending(db, path, done.withdrawn_at):
+        if done is not None and rewrite_pending(db, done.withdrawn_at):
             _refuse_live_writers(db, path)
             return done  # withdrawn, but the file's rewrite did not finish: this command finishes it
         if done is not None:
