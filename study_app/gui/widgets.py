@@ -486,6 +486,8 @@ class QtSetupPanel(QGroupBox):
         self.kind.textActivated.connect(lambda k: setup.update(kind=k))
         self.kind.setToolTip("Training (practice with the live force gauge) or the experiment. The form proposes "
                              "the participant's next step — training, then the experiment — until you choose")
+        # checked as typed (a refusal of the path before stays on screen no longer than that path), and when left
+        self.protocol.textEdited.connect(lambda t: setup.update(protocol_path=t))
         self.protocol.editingFinished.connect(lambda: setup.update(protocol_path=self.protocol.text()))
         self.seed.valueChanged.connect(lambda n: setup.update(seed=int(n)))
         self.db_browse.clicked.connect(self._browse_db)

@@ -89,6 +89,12 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view.code.clear()
     qtbot.keyClicks(view.code, "P01")
     assert view.errors.text() == "" and s.valid
+    # the protocol path is checked as it is typed: the old path's refusal does not stay while a new one is typed
+    qtbot.keyClicks(view.protocol, "nope.toml")
+    assert "nope.toml" in view.errors.text()
+    view.protocol.selectAll()
+    qtbot.keyClick(view.protocol, Qt.Key.Key_Backspace)
+    assert view.errors.text() == "" and s.valid and s.values.protocol_path == ""
     view.resize(340, 700)  # the left column's narrowest
     view.show()
     qtbot.waitExposed(view)
