@@ -36,7 +36,7 @@ from study_app.models.app import CUE_ACTIONS, AppModel
 from study_app.models.cue_wait import headline
 from study_app.models.health import HealthModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
-from study_app.models.setup import KINDS, SetupModel
+from study_app.models.setup import KINDS, SetupModel, breakable
 
 __all__ = ["ElidedLabel", "FollowNewest", "QtCueWait", "QtHealthPanel", "QtProgress", "QtSetupPanel", "QtTrialTable"]
 
@@ -522,8 +522,8 @@ class QtSetupPanel(QGroupBox):
             self.seed.setValue(v.seed)
         if self.number.value() != v.participant_number:
             self.number.setValue(v.participant_number)
-        self.errors.setText("\n".join(self.setup.errors.values()))
-        self.warnings.setText("\n".join(self.setup.warnings.values()))
+        self.errors.setText(breakable("\n".join(self.setup.errors.values())))
+        self.warnings.setText(breakable("\n".join(self.setup.warnings.values())))
         idle = self.setup.running_session is None
         self.hint.setText(self.setup.hint or ("" if self.setup.errors or not idle else self.setup.next_step()))
         for label in (self.errors, self.warnings, self.hint):

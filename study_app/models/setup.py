@@ -21,6 +21,7 @@ step: training, then the experiment.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -40,7 +41,7 @@ from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.session import TrialCount
 
-__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article"]
+__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable"]
 
 KINDS = ("training", "experiment")
 _FIELD_NAMES = {"participant_number": "participant number", "seed": "seed"}
@@ -49,6 +50,13 @@ TRAINING_OVERRIDE_HINT = "Run the training first, or Start without training… w
 #: The same, when the training ended early: the database keeps one training session per participant.
 TRAINING_ENDED_HINT = ("A participant's training is not run twice (one session per kind): Start without training… "
                        "with a reason (stored as a deviation)")
+
+
+def breakable(text: str, run: int = 16) -> str:
+    """``text`` with a zero-width space after every ``run`` characters of a word longer than that (for display): a
+    label wraps only between words, and a long pasted code in a message ran past the form's narrow column and
+    pushed the lines above it out of view."""
+    return re.sub(rf"\S{{{run}}}(?=\S)", lambda m: m.group(0) + "\u200b", text)
 
 
 def article(word: str) -> str:

@@ -137,6 +137,16 @@ def test_setup_refuses_a_number_field_whose_text_is_no_number(tmp_path):
     assert s.valid
 
 
+def test_a_long_word_in_a_message_gets_places_to_wrap():
+    from study_app.models.setup import breakable
+
+    code = "P" + "0123456789" * 4
+    shown = breakable(f"participant code = {code!r}: must be 1–32 characters")
+    assert shown.replace("\u200b", "") == f"participant code = {code!r}: must be 1–32 characters"
+    assert max(len(w) for w in shown.replace("\u200b", " ").split()) <= 16
+    assert breakable("short words only") == "short words only"
+
+
 def test_setup_refuses_to_build_a_command_when_invalid():
     s = SetupModel()
     with pytest.raises(ValueError, match="study database: choose a file"):

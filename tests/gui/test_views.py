@@ -98,6 +98,10 @@ def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     view.resize(340, 700)  # the left column's narrowest
     view.show()
     qtbot.waitExposed(view)
+    # a long pasted code: its refusal wraps inside the column (a label wraps only between words)
+    view.code.setText("P" + "0123456789" * 4)
+    assert "\u200b" in view.errors.text() and view.errors.minimumSizeHint().width() <= view.width()
+    view.code.setText("P01")
     s.set_resumable([{"session_id": 4, "code": "P02", "kind": "experiment", "started_at": "2026-01-02T10:11:12",
                       "trials_planned": 20, "trials_done": 7, "trials_aborted": 2, "reruns_run": 1,
                       "trials_total": 22},
