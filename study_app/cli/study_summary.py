@@ -92,8 +92,12 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     why = (": " + ", ".join(f"{n} {c}" for c, n in sorted(causes.items()))) if causes else ""
     training = sum(1 for t in records if sessions[t.session_id].kind == "training")
     codes = sorted({c for c, _ in exp})
+    # after a --resume or --continue the command ran only some of the study's sessions: say whose figures these are
+    scope = "" if set(session_ids) >= set(sessions) else (
+        f" (the {plural(len(set(session_ids)), 'session')} this command ran, of {len(sessions)} stored; "
+        "haptic-study report analyses them all)")
     lines = [
-        f"Study database {db_path}: {plural(len(codes), 'participant')}, {plural(len(exp), 'experiment trial')} "
+        f"Study database {db_path}{scope}: {plural(len(codes), 'participant')}, {plural(len(exp), 'experiment trial')} "
         f"({aborted} aborted and re-run{why}; {plural(training, 'training trial')} excluded), "
         + (f"{recorded:,} records (whole sessions at 1 kHz)" if recorded else f"{n_samples:,} samples"),
         _settings_line([sessions[i].config_json for i in session_ids if i in sessions]),
