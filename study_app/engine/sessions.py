@@ -201,16 +201,16 @@ class EngineSessions:
         if cmd.trial is None:
             rig, loop = self.engine.eng.rig, self.engine.loop
             now_ns = loop.clock.now_ns()
-            live = self.runner is not None and not self.runner.done
+            live = self.runner if self.runner is not None and not self.runner.done else None
             if cmd.kind == "kill":
-                if live and self.runner is not None:  # the record says the engine's death was a rehearsal
-                    store_rehearsal_plan(self.runner, "kill now", now_ns - loop.t0_ns)
-                    self.runner.recorder.flush()
+                if live is not None:  # the record says the engine's death was a rehearsal
+                    store_rehearsal_plan(live, "kill now", now_ns - loop.t0_ns)
+                    live.recorder.flush()
                 kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig.inject_fault(cmd.kind, now_ns)
-            if live and self.runner is not None:  # in a session: its record says it was rehearsed
-                rehearsal_note(self.runner)(now_ns - loop.t0_ns,
-                                            f"{cmd.kind}: rehearsed on the simulated rig (not a device failure), now")
+            if live is not None:  # in a session: its record says it was rehearsed
+                rehearsal_note(live)(now_ns - loop.t0_ns,
+                                     f"{cmd.kind}: rehearsed on the simulated rig (not a device failure), now")
             self.engine.publish(m.FaultInjected(cmd.kind, "now"))
             return
         runner, opened = self.runner, self.opened

@@ -204,19 +204,13 @@ class SessionModel:
             return
         if db_path == self.db_path and any(s["session_id"] == self.session.session_id for s in known):
             return
-        gone = self.session.session_id
-        self.session = self.last_trial = None
-        self.completed = self.aborted = self.reruns_run = self.designed = 0
-        self._durations_s = []
-        self.table.clear()
-        self.state = "ready"
-        self.message = (f"{os.path.basename(db_path)} open: no session running" if db_path != self.db_path else
-                        f"session {gone} is no longer stored (withdrawn): no session running")
-        self.changed.emit()
+        self.reset(f"{os.path.basename(db_path)} open: no session running" if db_path != self.db_path else
+                   f"session {self.session.session_id} is no longer stored (withdrawn): no session running", "ready")
 
-    def reset(self, message: str) -> None:
-        """A new engine is starting: no session, no trial, an empty table (the old engine's clock is gone)."""
-        self.state, self.message = "connecting", message
+    def reset(self, message: str, state: str = "connecting") -> None:
+        """No session, no trial, an empty table: a new engine is starting (the old engine's clock is gone), or
+        (``state`` ready) the session shown is not the open database's."""
+        self.state, self.message = state, message
         self.session = self.trial = self.last_trial = None
         self.cue_t_s = None
         self.phase, self.pause_until_s, self.paused_requested = "idle", None, False

@@ -203,7 +203,8 @@ def test_rig_view_manual_driving_with_mouse_and_keys(qtbot):
     assert view.autopilot.isChecked() and drivers == ["manual"]
 
 
-def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
+def _live_view_in_trial_1(qtbot, t_s: np.ndarray) -> tuple[SessionModel, PlotModel, QtForcePlots]:
+    """The live view of a session whose trial 1 (GENTLE, haptics OFF) was cued at 1 s; samples at ``t_s``, all 0."""
     s = SessionModel()
     plots = PlotModel(window_s=10.0)
     view = QtForcePlots(plots, s)
@@ -211,9 +212,14 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     s.apply(READY)
     s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 2, "GENTLE", 0.6, "off"))
-    plots.t = np.linspace(0, 5, 500)
+    plots.t = t_s
     for k in plots.data:
-        plots.data[k] = np.zeros(500)
+        plots.data[k] = np.zeros(len(t_s))
+    return s, plots, view
+
+
+def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
+    _, plots, view = _live_view_in_trial_1(qtbot, np.linspace(0, 5, 500))
     plots.data["raw_n"][:] = 7.6  # the tool's weight: on the lower plot's own axis, never the task axis
     plots.data["force_n"][:] = 0.6
     view.refresh()
@@ -254,16 +260,7 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
 def test_after_a_cue_the_live_view_marks_it_and_leaves_the_last_trials_force_alone(qtbot):
     """A user trial: right after a cue the window still showed the previous trial's 2.7 N, the new trial's band
     across the whole window and "peak 2.7 N: above the axis", read as the participant overshooting now."""
-    s = SessionModel()
-    plots = PlotModel(window_s=10.0)
-    view = QtForcePlots(plots, s)
-    qtbot.addWidget(view)
-    s.apply(READY)
-    s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
-    s.apply(m.TrialStarted(1.0, 0, 1, 2, "GENTLE", 0.6, "off"))
-    plots.t = np.linspace(0.0, 10.0, 1001)
-    for k in plots.data:
-        plots.data[k] = np.zeros(1001)
+    s, plots, view = _live_view_in_trial_1(qtbot, np.linspace(0.0, 10.0, 1001))
     plots.data["force_n"][plots.t < 8.0] = 2.7  # trial 1, pressed hard, ended at 7 s
     s.apply(m.TrialEnded(7.0, trial_record(trial_index=0, target_label="GENTLE", target_force_n=0.6,
                                            haptic_mode="off", outcome="timeout"), 2))
