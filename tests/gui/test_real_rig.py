@@ -71,6 +71,17 @@ def wait_for(e: StudyEngine, pred, timeout_s: float = 5.0) -> None:
         time.sleep(0.002)
 
 
+#: How often a test records again when the fake sensor's thread stalled past 50 ms on a busy machine (as the
+#: experimenter would: the refusal says "record it again"); a stall on every try is a real failure.
+STALL_RETRIES = 5
+
+
+def stalled_refusal(events: list[object]) -> bool:
+    """Whether these events hold a recording's refusal because the sensor stalled (the machine was busy)."""
+    return any(isinstance(ev, m.CommandRefused) and "the force sensor stalled while recording" in ev.message
+               for ev in events)
+
+
 @pytest.fixture
 def rig(tmp_path):
     with FakeNetFT(rate_hz=1000, initial_records=0) as netft, FakeRtde() as rtde:
@@ -116,13 +127,16 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             wait_for(e, lambda: (r := e.loop.last_record) is not None
                      and abs(r["raw_fx"] - netft.counts[0] / CPF) < 1e-9)
             # ... and presses Record pose: the engine averages 0.2 s of wrench off the GUI thread
-            n_before = len(events)
-            e.handle(wiz.record_command())
-            assert wiz.state == "recording"
-            wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused))
-                                                      for ev in events[n_before:]))
-            for ev in events[n_before:]:
-                wiz.apply(ev)
+            for _attempt in range(STALL_RETRIES):
+                n_before = len(events)
+                e.handle(wiz.record_command())
+                assert wiz.state == "recording"
+                wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused))
+                                                          for ev in events[n_before:]))
+                for ev in events[n_before:]:
+                    wiz.apply(ev)
+                if not stalled_refusal(events[n_before:]):
+                    break
             rec = step.recorded
             assert rec is not None and rec.samples == 200 and rec.off_target_deg < 1e-3 and rec.force_std_n < 1e-9
             assert np.allclose(rec.wrench, np.asarray(netft.counts) / CPF, atol=1e-9)
@@ -235,13 +249,20 @@ def test_a_pose_recorded_while_the_robot_moves_is_refused(rig):
                     shared_ring=False)
     try:
         e.start()
-        wait_for(e, lambda: math.isfinite(e.eng.rig.robot.read_pose().position_m[0]))
-        e.handle(m.RecordPose("P01", 0.3))
-        rtde.send("pose 0.3 -0.1 0.25 0 0 0")  # 50 mm up during the recording
-        end = time.monotonic() + 5.0  # the engine's driver is not stepped until the robot reports the move
-        while e.eng.rig.robot.read_pose().position_m[2] != 0.25 and time.monotonic() < end:
-            time.sleep(0.002)
-        wait_for(e, lambda: any(isinstance(ev, (m.CommandRefused, m.PoseRecorded)) for ev in events))
+        for _attempt in range(STALL_RETRIES):
+            rtde.send("pose 0.3 -0.1 0.2 0 0 0")
+            wait_for(e, lambda: e.eng.rig.robot.read_pose().position_m[2] == 0.2)
+            n_before = len(events)
+            e.handle(m.RecordPose("P01", 0.3))
+            rtde.send("pose 0.3 -0.1 0.25 0 0 0")  # 50 mm up during the recording
+            end = time.monotonic() + 5.0  # the engine's driver is not stepped until the robot reports the move
+            while e.eng.rig.robot.read_pose().position_m[2] != 0.25 and time.monotonic() < end:
+                time.sleep(0.002)
+            wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.CommandRefused, m.PoseRecorded))
+                                                      for ev in events[n_before:]))
+            if not stalled_refusal(events[n_before:]):
+                break
+            del events[n_before:]  # the experimenter records it again
         (ev,) = [ev for ev in events if isinstance(ev, m.CommandRefused)]
         assert ev.command == "RecordPose" and ev.message.startswith("pose P01: the robot moved while recording (")
         assert not any(isinstance(ev, m.PoseRecorded) for ev in events)
