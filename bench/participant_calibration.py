@@ -36,7 +36,8 @@ from pipeline.sim.participant_params import ParticipantParams
 from study_app.headless.sim_trials import participant_seeds, run_participant, run_study
 
 __all__ = [
-    "EFFECTS", "PAPER", "TrialRow", "driver_cost_us", "format_power", "format_table", "main", "participant_seeds",
+    "EFFECTS", "PAPER", "TrialRow", "driver_cost_us", "format_power", "format_table", "format_verdict", "main",
+    "participant_seeds",
     "resampled_power", "run_participant", "run_study", "summarise_study", "tct_power_at_spread",
 ]
 
@@ -93,6 +94,42 @@ def format_table(summaries: list[dict[str, Any]]) -> str:
 
 #: The paper's effects that issue 27's target counts (each significant in ≥ 8 of 10 studies).
 EFFECTS = ("success", "rmse_n", "max_ae_n", "tct_s")
+#: How far from the paper's a level may be (issue 27: within ±25 %).
+LEVEL_TOLERANCE = 0.25
+
+
+def format_verdict(summaries: list[dict[str, Any]]) -> str:
+    """The calibration target, judged on these studies: each OFF and ON level against the paper's (±25 %), TCT over
+    successful trials improved in the mean, and each effect significant in ≥ 80 % of the studies.
+
+    TCT is judged in both of the paper's possible readings: its text defines TCT as the time to reach the target
+    and hold it, but its figure averages TCT "across all targets and trials", where a failed trial ends at 12 s.
+    """
+    n = len(summaries)
+    need = math.ceil(0.8 * n)
+    mean = {k: (statistics.fmean(s[k]["off"] for s in summaries), statistics.fmean(s[k]["on"] for s in summaries))
+            for k in ("success", "rmse_n", "max_ae_n", "tct_s")}
+    lines = [f"the target over {n} {'study' if n == 1 else 'studies'}:"]
+    for key in ("success", "rmse_n", "max_ae_n"):
+        paper = PAPER[key]
+        parts = []
+        for i, mode in enumerate(("OFF", "ON")):
+            ref = paper[i]
+            assert ref is not None
+            off_by = mean[key][i] / ref - 1.0
+            ok = abs(off_by) <= LEVEL_TOLERANCE
+            parts.append(f"{mode} {mean[key][i]:.3g} vs {ref:g} ({off_by * 100:+.0f} %, {'yes' if ok else 'NO'})")
+        lines.append(f"  {_LABELS[key]:22s} level within ±{LEVEL_TOLERANCE * 100:.0f} %: " + "; ".join(parts))
+    improved = mean["tct_s"][1] < mean["tct_s"][0]
+    lines.append(f"  {_LABELS['tct_s']:22s} improved in the mean: {'yes' if improved else 'NO'} "
+                 f"({(mean['tct_s'][1] / mean['tct_s'][0] - 1.0) * 100:+.0f} %)")
+    for key in (*EFFECTS, "tct_cens_s"):
+        hits = sum(bool(s[key]["p"] < 0.05) for s in summaries)
+        lines.append(f"  {_LABELS[key]:22s} significant in {hits}/{n} studies (need {need}): "
+                     f"{'yes' if hits >= need else 'NO'}")
+    lines.append("  (the paper's TCT: its text defines it as the time to reach and hold the target -- successful "
+                 "trials; its figure averages it 'across all targets and trials' -- a failure at 12 s)")
+    return "\n".join(lines)
 
 
 def resampled_power(rows: list[TrialRow], participants: int = 10, draws: int = 1000,
@@ -261,6 +298,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"\n== mean ± SD [min–max] over {len(summaries)} studies "
           f"({time.perf_counter() - t_total:.0f} s wall, jobs={args.jobs}) ==")
     print(format_table(summaries))
+    print()
+    print(format_verdict(summaries))
     if args.power:
         power = resampled_power(every, args.participants, args.power)
         print()
