@@ -48,7 +48,10 @@ for m in (analysis, bench, pipeline, protocol, study_app):
 assert str(schema_path()).startswith(site) and schema_path().is_file(), schema_path()
 venv = f"{src}/.venv/"
 assert not any((p == src or p.startswith(src + "/")) and not p.startswith(venv) for p in sys.path), sys.path
-print(f"wheel: every package imports from {site}")
+from study_app.guide_paths import guide, hardware_template
+for path in (guide("gui.md"), guide("hardware-setup.md"), hardware_template()):
+    assert path.startswith(site) and open(path, encoding="utf-8").read(), f"{path}: not the installed copy"
+print(f"wheel: every package imports from {site}, the guides are in it")
 EOF
 HS="$WORK/venv/bin/haptic-study"
 "$HS" --version | tee version.txt
@@ -78,7 +81,8 @@ assert got == want, f"entry points {sorted(got)} != pyproject.toml's {sorted(wan
 shipped = {n for n in zipfile.ZipFile(wheel).namelist() if ".dist-info/" not in n}
 floors = ("pipeline", "protocol", "analysis", "study_app", "bench")
 source = {p.relative_to(src).as_posix() for f in floors for p in (src / f).rglob("*.py") if "__pycache__" not in p.parts}
-source |= {"protocol/default.toml", "protocol/storage/sql/schema.sql"}
+source |= {"protocol/default.toml", "protocol/storage/sql/schema.sql", "study_app/guide/template/hardware.example.toml"}
+source |= {f"study_app/guide/{p.name}" for p in (src / "docs").glob("*.md")}  # the guides the help names
 assert shipped == source, f"the wheel lacks {sorted(source - shipped)}, and ships {sorted(shipped - source)} besides"
 print(f"wheel: {len(shipped)} files, Requires-Dist and entry points as pyproject.toml says "
       f"({', '.join(r for r in declared if r.startswith('PySide6'))})")

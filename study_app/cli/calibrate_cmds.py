@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 from study_app.cli.argtypes import SEED, add_command, arm_name, arm_names, real_number
 from study_app.cli.error import CliError
+from study_app.guide_paths import hardware_template
 
 # numpy, and the service that uses it, are imported where they are used: ``haptic-study --help`` must not load them
 if TYPE_CHECKING:
@@ -137,7 +138,8 @@ def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_s
             raise CliError("--sim-arms applies to the simulated rig only (with --rig real the hardware file names "
                            "the arms)")
         if args.hardware is None:
-            raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
+            raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; "
+                           f"see {hardware_template()})")
         result = _real(args, ask)
     else:
         if args.hardware is not None:

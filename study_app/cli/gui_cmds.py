@@ -14,6 +14,7 @@ from typing import Any
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from study_app.cli.argtypes import add_command, arm_names, real_number, setting
 from study_app.cli.error import CliError
+from study_app.guide_paths import guide, hardware_template
 
 __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
 
@@ -28,7 +29,7 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
                     "haptic-study gui --rig real --hardware hardware.toml --db study.db\n"
                     "haptic-study gui --screenshot shots   # the guide's screenshots, into a new folder shots/",
                     "Open the experimenter's window: session setup, live force, trial table, device health, the "
-                    "participant screen and the calibration wizard (simulated rig by default; see docs/gui.md)")
+                    f"participant screen and the calibration wizard (simulated rig by default; see {guide('gui.md')})")
     g.add_argument("--db", default=None, metavar="PATH", help="study database (SQLite); default: the last one used")
     g.add_argument("--rig", choices=("sim", "real"), default="sim", help="simulated rig (default) or the real hardware")
     g.add_argument("--hardware", default=None, metavar="FILE", help="hardware.toml for --rig real")
@@ -55,7 +56,7 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
 def cmd_gui(args: argparse.Namespace) -> int:
     """Run ``haptic-study gui``: checks first (one line, exit 2), then Qt is loaded and the window opens."""
     if args.rig == "real" and args.hardware is None:
-        raise CliError("--rig real needs --hardware FILE (the hardware.toml of the lab; see hardware.example.toml)")
+        raise CliError(f"--rig real needs --hardware FILE (the hardware.toml of the lab; see {hardware_template()})")
     if args.hardware is not None and not os.path.isfile(args.hardware):
         raise CliError(f"--hardware = {args.hardware!r}: no such file")
     if args.rig == "real":

@@ -15,6 +15,7 @@ from typing import Any
 
 from study_app.cli.argtypes import add_command, arm_name, host_name, whole_number
 from study_app.cli.error import CliError
+from study_app.guide_paths import hardware_template
 
 
 class HardwareCmdError(Exception):
@@ -201,7 +202,7 @@ def add_check_hardware_parser(sub: argparse._SubParsersAction) -> None:
     ch = add_command(sub, "check-hardware", "connect to every device in the hardware file and print its state",
                      "haptic-study check-hardware --hardware hardware.toml")
     ch.add_argument("--hardware", default="hardware.toml", metavar="FILE",
-                    help="hardware file (default ./hardware.toml; see hardware.example.toml)")
+                    help=f"hardware file (default ./hardware.toml; see {hardware_template()})")
     ch.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
                     help="a rig of several arms: check this arm's devices only (default: every arm in turn)")
     ch.set_defaults(handler=cmd_hardware)

@@ -18,6 +18,7 @@ from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.runtime.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.settings.hardware import HardwareConfig, HardwareError, load_hardware
 from study_app.engine import messages as m
+from study_app.guide_paths import hardware_template
 
 if TYPE_CHECKING:  # the simulated rig's types: a real rig's engine process never loads the simulators
     from pipeline.sim.hand import HandObservation
@@ -173,7 +174,7 @@ def build_real_engine(
         One line: the file is missing or invalid (naming the field), or a device cannot be opened (naming it).
     """
     if not config.hardware_path:
-        raise RuntimeError("real rig: no hardware file given; pass --hardware FILE (see hardware.example.toml)")
+        raise RuntimeError(f"real rig: no hardware file given; pass --hardware FILE (see {hardware_template()})")
     try:
         hw = load_hardware(config.hardware_path)
         with open(config.hardware_path, encoding="utf-8") as fh:

@@ -10,6 +10,8 @@ from typing import Any
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import QFileDialog, QMenu, QMessageBox, QWidget
 
+from study_app.guide_paths import guide
+
 __all__ = ["MAX_RECENT", "PAPER", "WindowMenus", "about_text", "remember_recent"]
 
 #: Databases listed under File → Recent databases.
@@ -33,7 +35,8 @@ def about_text() -> str:
             "Runs a force-feedback training study end to end: the haptic feedback framework at 1 kHz, the "
             "study protocol and its sessions, the study database and the report.<br><br>"
             f"It implements the system of {PAPER}.<br><br>"
-            "The experimenter's guide: docs/gui.md in the source.")
+            f"The experimenter's guide: {guide('gui.md')}<br>"
+            f"Setting up a real rig: {guide('hardware-setup.md')}")
 
 
 class WindowMenus:

@@ -8,6 +8,8 @@ from pathlib import Path
 
 from study_app.cli.main import main
 
+REPO = Path(__file__).resolve().parents[2]
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -18,8 +20,9 @@ def test_real_rig_with_an_invalid_hardware_file_is_one_clear_line(capsys, tmp_pa
     err = capsys.readouterr().err
     assert err == f"haptic-study: error: {p}: sensor.port = 0: must be a whole port number from 1 to 65535\n"
     assert main(["gui", "--rig", "real"]) == 2
+    # the template by a path that exists on this machine (the checkout's here; the installed copy from a wheel)
     assert capsys.readouterr().err == ("haptic-study: error: --rig real needs --hardware FILE (the hardware.toml of "
-                                       "the lab; see hardware.example.toml)\n")
+                                       f"the lab; see {REPO / 'hardware.example.toml'})\n")
 
 
 def test_missing_hardware_file_is_refused(capsys, tmp_path):
