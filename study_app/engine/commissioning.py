@@ -435,9 +435,10 @@ class Commissioning:
             res = check_axis(axis, base, scaled, rhb)
             self._frame_axes[axis] = res
             self.engine.publish(m.FrameAxisChecked(axis, res.passed, res.describe(), res.to_dict()))
+            # the newest push of each axis is kept after a check, as the window shows them: pushing one axis again
+            # (the one that failed) judges the three newest pushes and puts that verdict on record
             check = frame_check_of(self._frame_axes, rts, rhb)
             if check is not None:
-                self._frame_axes = {}
                 self._frames_done(arm, check)
 
         self._open_window("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done, arm=arm)

@@ -152,6 +152,8 @@ class CommissioningModel:
             self.rig = ev.rig
             self.arms = tuple(name for name, _ in ev.arm_rings)
             self.statuses = {}
+            # a new engine (a restart) holds no pushes: the window must not show axes it would not count
+            self.frames_lines, self.frames_summary = {}, ""
             if self.arm not in self.arms:  # a new engine (a restart): the task arm, or no arm on a one-arm rig
                 self.arm = self.arms[0] if self.arms else ""
         elif isinstance(ev, m.CalibrationStatus):
@@ -167,6 +169,7 @@ class CommissioningModel:
             self.tcp_message = ev.reason
         elif isinstance(ev, m.FrameAxisChecked):
             self.frames_lines[ev.axis] = ev.line
+            self.frames_summary = ""  # a new push: an earlier verdict or refusal is no longer the news
             if self.frames_state == "recording":
                 self.frames_state = "idle"
         elif isinstance(ev, m.FrameCheckDone):

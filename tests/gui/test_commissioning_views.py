@@ -83,6 +83,26 @@ def test_the_real_frames_step_records_one_axis_at_a_time(qtbot) -> None:
     assert chain.frames_view()[0].endswith("· PASS")  # (what the terminal prints is unchanged)
 
 
+def test_a_new_push_replaces_an_old_verdict_and_a_restarted_engine_starts_the_pushes_afresh() -> None:
+    chain = CommissioningModel()
+    chain.apply(REAL)
+    for axis in ("+x", "+y", "+z"):
+        chain.frames_command(axis)
+        chain.apply(m.FrameAxisChecked(axis, axis != "+z", f"{axis}  peak 1.00 N · PASS", {}))
+    chain.apply(m.FrameCheckDone(False, "Frames and signs: FAIL on +z (180.0° off): …", []))
+    chain.frames_command("+z")
+    chain.apply(m.CommandRefused("RecordFrameAxis", "the force sensor stalled while recording — record again"))
+    assert chain.frames_view()[-1] == "the force sensor stalled while recording — record again"
+    chain.frames_command("+z")
+    chain.apply(m.FrameAxisChecked("+z", True, "+z  peak 1.00 N · PASS", {}))
+    # the refusal (and the old FAIL) were about earlier pushes: not shown under the new one
+    assert chain.frames_view() == ["+x  peak 1.00 N · PASS", "+y  peak 1.00 N · PASS", "+z  peak 1.00 N · PASS"]
+    chain.apply(m.FrameCheckDone(True, "Frames and signs: PASS (3 of 3 axes)", []))
+    assert chain.frames_view()[-1] == "Frames and signs: PASS (3 of 3 axes)"
+    chain.apply(REAL)  # the engine was restarted: it holds none of these pushes
+    assert chain.frames_view() == [] and chain.frames_instruction().endswith("(still to do: +x, +y, +z).")
+
+
 def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:
     chain = CommissioningModel()
     sent: list[object] = []

@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
-from test_real_rig import CPF, FAKE_TOUCH, G, hardware_file, wait_for
+from test_real_rig import CPF, FAKE_TOUCH, STALL_RETRIES, G, hardware_file, wait_for
 
 from pipeline.commissioning.tcp import pivot_orientations
 from pipeline.force.frames import matrix_to_rotvec
@@ -189,3 +189,45 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
     n = len(events)
     e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
     assert isinstance(events[n], m.StartChecking), events[n:]
+
+
+def test_one_axis_pushed_again_after_a_failed_check_completes_a_new_check(engine, tmp_path) -> None:
+    """The window keeps every axis's newest push and says nothing is left to do after a check: pushing the failed
+    axis again must judge the three newest pushes and put that verdict on record (it was kept as the old FAIL, the
+    engine waiting for two more pushes the window never asked for)."""
+    e, events, netft, rtde = engine
+    poses = []
+    for k, rot in enumerate(pivot_orientations("minimal", TOOL_DOWN)):
+        r = np.asarray(rot).reshape(3, 3)
+        poses.append((f"O{k + 1}", rot, tuple(PIVOT - r @ TIP)))
+    e.handle(m.IdentifyTcp(tuple(poses)))
+    rots = pose_set("quick")
+    e.handle(m.IdentifyPoses(tuple((f"P{k + 1:02d}", rot, tuple(c / CPF for c in counts(rot)))
+                                   for k, rot in enumerate(rots)), "quick"))
+    put(rtde, TOOL_DOWN, PIVOT)
+    at(e, TOOL_DOWN, PIVOT)
+
+    def push(axis: str, force: tuple[float, float, float]) -> None:
+        netft.counts = counts(TOOL_DOWN, np.asarray(force))
+        wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
+        for _attempt in range(STALL_RETRIES):
+            n = len(events)
+            e.handle(m.RecordFrameAxis(axis, 0.6))
+            (res,) = answered(e, events, (m.FrameAxisChecked, m.CommandRefused), n)
+            if isinstance(res, m.FrameAxisChecked):
+                return
+            assert "stalled" in res.message, res  # a busy machine: the experimenter records it again
+        raise AssertionError(f"{axis}: the sensor stalled on every try")
+
+    push("+x", (1.0, 0, 0))
+    push("+y", (0, 1.0, 0))
+    push("+z", (0, 0, -1.0))  # pushed down, not up
+    (failed,) = [ev for ev in events if isinstance(ev, m.FrameCheckDone)]
+    assert not failed.passed
+    push("+z", (0, 0, 1.0))  # the failed axis again, the right way
+    done = [ev for ev in events if isinstance(ev, m.FrameCheckDone)]
+    assert len(done) == 2 and done[-1].passed, done
+    status = [ev for ev in events if isinstance(ev, m.CalibrationStatus)][-1]
+    assert status.missing == "" and all(ok for _, ok, _ in status.steps)
+    saved = json.loads((tmp_path / "calibration.json").read_text(encoding="utf-8"))["tools"]["instrument"]
+    assert saved["frames"]["passed"]
