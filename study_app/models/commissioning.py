@@ -248,7 +248,13 @@ class CommissioningModel:
                 f"{1e3 * res.get('rms_residual_m', math.nan):.3f} mm over {r.n_poses} orientations")
         if math.isfinite(r.error_mm):
             text += f"; {r.error_mm:.3f} mm from the simulated truth"
-        return text + (" — saved for the tool." if self.real else ".")
+        if not self.real:
+            return text + "."
+        # as `calibrate tcp` says it: the robot's own program needs the tip on its pendant, the file for a restart
+        t = res.get("tip_in_flange_m", [])
+        metres = ", ".join(f"{v:.5f}" for v in t)
+        return (text + f" — saved for the tool. Set the TCP on the pendant to ({tip}) mm and robot.tcp_offset_m to "
+                f"[{metres}] (until then the app corrects the poses itself).")
 
     def frames_instruction(self) -> str:
         """What to do in the frames step now."""
