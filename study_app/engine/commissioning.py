@@ -526,7 +526,8 @@ class Commissioning:
         def done(cols: dict[str, np.ndarray]) -> None:
             self._starting = None
             f = rest_force_n(np.stack([cols[c] for c in _COMP], axis=1))
-            refusal = rest_verdict(f, self.tool_cal.tool, overridden=bool(reason))
+            refusal = rest_verdict(f, self.tool_cal.tool, overridden=bool(reason),
+                                   payload_on_record=self.tool_cal.payload is not None)
             if refusal:
                 self.engine.publish(m.CommandRefused(type(cmd).__name__, f"real rig: {refusal}"))
                 return
@@ -543,7 +544,8 @@ class Commissioning:
         except RuntimeError:
             self._starting = None
             raise
-        self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool)))
+        self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool,
+                                                                          overridden=bool(missing and reason))))
         return True
 
 

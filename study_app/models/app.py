@@ -426,7 +426,8 @@ class AppModel:
 
     def calibration_refusal(self) -> str:
         """Why the calibration steps may not run now ("" when they may)."""
-        if self.engine_trouble:  # a step's button would send into nothing; the notice saying so is behind the window
+        if self.engine_trouble and self.session.state in ("stopped", "failed"):
+            # a step's button would send into nothing; the notice saying so is behind the calibration window
             return "the study engine is not running: press Restart engine in the main window"
         if self.session.running:
             return ("not during a session: a calibration step moves the robot and replaces what the force path "

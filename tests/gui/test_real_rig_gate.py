@@ -163,7 +163,10 @@ def test_nothing_on_record_is_refused_in_one_line_and_an_override_does_not_waive
     weight = float(np.linalg.norm(np.asarray(counts(TOOL_DOWN)[:3]) / CPF))
     assert isinstance(refused, m.CommandRefused) and refused.message.startswith(
         f"real rig: the compensated force at rest is {weight:.3f} N over 2 s (limit 0.1 N)")
-    assert refused.message.endswith("; an override does not waive this check")
+    assert refused.message.endswith("no payload calibration is on record for tool 'instrument', so the tool's own "
+                                    "weight counts as force; calibrate the payload first (the calibration wizard's "
+                                    "step 2, or haptic-study calibrate payload); an override does not waive this check")
+    assert events[n].message.startswith("starting without the calibration chain of tool 'instrument'")
     assert not Path(db).exists()
 
 
