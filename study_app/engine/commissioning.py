@@ -196,6 +196,7 @@ class Commissioning:
         _check_seconds("RecordPose", cmd.seconds)
         target = check_target(cmd.target_rot_base_sensor) if cmd.target_rot_base_sensor is not None else None
         arm = self.arm_of(cmd.arm)
+        self._payload_chain(arm)  # at the first pose, not after the experimenter has jogged the robot through all
         robot = self.devices(arm).robot
         pose0 = robot.read_pose()
         refusal = robot_pose_refusal(pose0, e.eng.clock.now_ns())
@@ -223,8 +224,15 @@ class Commissioning:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self.engine.require_idle("calibrate")
         arm = self.arm_of(cmd.arm)
+        self._payload_chain(arm)
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
         self.engine.publish(self._installed(arm, payload_step(poses, cmd.pose_set)))
+
+    def _payload_chain(self, arm: str) -> None:
+        """The chain's order, as ``calibrate payload`` keeps it: the payload step needs the tool's TCP on record."""
+        refusal = chain_refusal(self.tool_cals[arm], "payload")
+        if refusal:
+            raise RuntimeError(f"payload: {refusal}")
 
     def _installed(self, arm: str, result: PayloadResult) -> m.CalibrationDone:
         """Install an accepted payload calibration in the arm's force path and record it; the wizard's message."""

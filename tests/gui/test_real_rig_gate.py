@@ -234,3 +234,18 @@ def test_one_axis_pushed_again_after_a_failed_check_completes_a_new_check(engine
     assert status.missing == "" and all(ok for _, ok, _ in status.steps)
     saved = json.loads((tmp_path / "calibration.json").read_text(encoding="utf-8"))["tools"]["instrument"]
     assert saved["frames"]["passed"]
+
+
+def test_the_payload_step_refuses_at_its_first_pose_without_a_tcp_on_record(engine) -> None:
+    """As `calibrate payload` does, and before the experimenter has jogged the robot through the whole pose set (the
+    wizard accepted a payload without a TCP, against the documented chain)."""
+    e, events, _netft, _rtde = engine
+    n = len(events)
+    e.handle(m.RecordPose("P01", 0.2))
+    rots = pose_set("quick")
+    e.handle(m.IdentifyPoses(tuple((f"P{k + 1:02d}", rot, tuple(c / CPF for c in counts(rot)))
+                                   for k, rot in enumerate(rots)), "quick"))
+    refused = [(ev.command, ev.message) for ev in events[n:] if isinstance(ev, m.CommandRefused)]
+    why = "payload: no TCP calibration on record for tool 'instrument'; the chain runs in order: calibrate tcp first"
+    assert refused == [("RecordPose", why), ("IdentifyPoses", why)]
+    assert not any(isinstance(ev, (m.PoseRecorded, m.CalibrationDone)) for ev in events[n:])
