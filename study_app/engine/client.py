@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue
+import signal
 import time
 from typing import Any
 
@@ -18,7 +19,20 @@ from study_app.engine import messages as m
 from study_app.engine.host import host_main
 from study_app.engine.setup import HostConfig
 
-__all__ = ["EngineClient", "EngineStartError"]
+__all__ = ["EngineClient", "EngineStartError", "describe_exit"]
+
+
+def describe_exit(exitcode: int | None) -> str:
+    """How a process ended, for a lab's bug report: ``killed by SIGSEGV (signal 11)``, ``exit status 1``."""
+    if exitcode is None:
+        return "still running"
+    if exitcode < 0:
+        try:
+            name = signal.Signals(-exitcode).name
+        except ValueError:
+            name = "an unknown signal"
+        return f"killed by {name} (signal {-exitcode})"
+    return f"exit status {exitcode}"
 
 
 class EngineStartError(RuntimeError):
@@ -122,6 +136,11 @@ class EngineClient:
     def pid(self) -> int | None:
         """The engine process's id (None before it is started)."""
         return self._proc.pid
+
+    @property
+    def exit_status(self) -> str:
+        """How the engine process ended (:func:`describe_exit`)."""
+        return describe_exit(self._proc.exitcode if self.started else None)
 
     @property
     def alive(self) -> bool:
