@@ -194,8 +194,9 @@ class CommissioningModel:
                 best = (ang, p.label)
         if best is None or best[0] >= 5.0:
             return ""
-        return (f"{ev.label} is only {best[0]:.1f}° from {best[1]}: it adds little -- turn the instrument further "
-                f"(at least {MIN_SPREAD_DEG:g}° between orientations, in two directions) and record again")
+        # it stays in the fit (harmless, nothing to undo): the advice is about the next orientation
+        return (f"{ev.label} is only {best[0]:.1f}° from {best[1]}: kept, but it adds little — turn the instrument "
+                f"further before the next one (at least {MIN_SPREAD_DEG:g}° between orientations, in two directions)")
 
     # -- what the wizard shows -------------------------------------------------------------------------
     def status_lines(self) -> list[tuple[str, bool, str]]:

@@ -47,7 +47,9 @@ def test_the_real_tcp_step_records_orientations_warns_on_a_repeat_and_computes(q
     chain.apply(m.PivotRecorded("O2", mat_mul(axis_angle((1.0, 0.0, 0.0), math.radians(1.0)), TOOL_DOWN),
                                 (0.3, -0.1, 0.2), 0.01))
     assert page.orientations.rowCount() == 2 and page.orientations.item(1, 1).text() == "+300.0, -100.0, +200.0"
-    assert page.verdict.text().startswith("O2 is only 1.0° from O1: it adds little")
+    # kept (there is nothing to undo): the advice is for the next one, not "record again"
+    assert page.verdict.text() == ("O2 is only 1.0° from O1: kept, but it adds little — turn the instrument further "
+                                   "before the next one (at least 20° between orientations, in two directions)")
     for k, deg in ((3, 30.0), (4, -30.0)):
         chain.apply(m.PivotRecorded(f"O{k}", mat_mul(axis_angle((0.0, 1.0, 0.0), math.radians(deg)), TOOL_DOWN),
                                     (0.3, -0.1, 0.2), 0.01))
