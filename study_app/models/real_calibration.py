@@ -172,9 +172,7 @@ class RealCalibrationModel:
             nxt = self._next_unrecorded(self.steps.index(step) + 1)
             self.state = "at_pose"
             if nxt is not None:
-                self.index = nxt
-            elif not self.message:
-                self.message = "every pose is recorded: Identify"
+                self.index = nxt  # (when every pose is recorded the instruction says so: press Identify)
         elif isinstance(ev, m.CommandRefused) and ev.command == "RecordPose":
             self.state, self.message = "at_pose", ev.message
         elif isinstance(ev, m.CommandRefused) and ev.command == "IdentifyPoses":

@@ -124,6 +124,7 @@ def test_the_real_payload_step_names_its_buttons_and_says_when_every_pose_is_rec
     # no target is left: not "move the TCP to … then press Record pose" for a pose already recorded
     assert real.instruction() == ("All 6 poses are recorded: press Identify (Previous pose goes back to record one "
                                   "again).")
+    assert real.message == ""  # not said twice
     real.identify_command()
     done = m.CalibrationDone(True, "", "quick", 6, 9.7, 2e-4, 3e-4, [], {"mass_kg": 0.4, "model": "affine"})
     for mdl in (cal, real):

@@ -160,7 +160,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             assert np.allclose(rec.wrench, np.asarray(netft.counts) / CPF, atol=1e-9)
             if len(wiz.recorded) == len(wiz.steps):
                 break
-        assert wiz.progress() == (6, 6) and wiz.message == "every pose is recorded: Identify"
+        assert wiz.progress() == (6, 6) and wiz.instruction().startswith("All 6 poses are recorded: press Identify")
+        assert wiz.message == ""  # said once, in the instruction
 
         n_before = len(events)
         e.handle(wiz.identify_command())
