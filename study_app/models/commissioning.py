@@ -91,6 +91,24 @@ class CommissioningModel:
             return self.status.missing if self.status is not None else ""
         return next((f"arm {a}: {s.missing}" for a in self.arms if (s := self.statuses.get(a)) and s.missing), "")
 
+    def override_prompt(self) -> str:
+        """What *Start without calibration…* asks: every step not on record (not only the first), and what the
+        override does not waive -- a tool with no payload on record is refused for its own weight."""
+        missing = self.first_missing()
+        if not missing:
+            return ""
+        st = self.status
+        # one arm: its steps (with several, the first line names the arm and its step; the picker shows each chain)
+        absent = [name for name, done, _ in (st.steps if st is not None and not self.arms else []) if not done]
+        text = f"{missing}."
+        if len(absent) > 1:
+            text += f"\n\nNot on record for {st.tool!r}: {', '.join(absent)}."  # type: ignore[union-attr]  # absent implies a status
+        text += ("\n\nStart anyway? The session stores this override and your reason (the force at rest is still "
+                 "measured for 2 s and must be below 0.1 N")
+        if "payload" in absent:
+            text += ": with no payload on record the tool's own weight counts as force, and the start is refused"
+        return text + ").\n\nReason:"
+
     def arms_overview(self) -> list[tuple[str, str]]:
         """Per arm: (name, each step on record ✔ or not ✘, e.g. ``✔ TCP ✔ payload ✘ frames``) -- a rig of several
         arms."""

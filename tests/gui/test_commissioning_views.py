@@ -134,6 +134,24 @@ def test_the_real_payload_step_names_its_buttons_and_says_when_every_pose_is_rec
     assert cal.verdict() == "Accepted: installed in the force path, saved for the tool and stored with every session."
 
 
+def test_start_without_calibration_asks_with_every_step_missing_and_what_the_override_does_not_waive() -> None:
+    chain = CommissioningModel()
+    chain.apply(REAL)
+    nothing = m.CalibrationStatus("real", "scalpel", "/lab/calibration.json",
+                                  [("TCP", False, "not on record"), ("payload", False, "not on record"),
+                                   ("frames", False, "not on record")], MISSING.replace("grasper", "scalpel"))
+    chain.apply(nothing)
+    # it named the TCP only; the payload's absence is what refuses the start (the tool's weight at rest)
+    assert chain.override_prompt() == (
+        f"{MISSING.replace('grasper', 'scalpel')}.\n\nNot on record for 'scalpel': TCP, payload, frames.\n\nStart "
+        "anyway? The session stores this override and your reason (the force at rest is still measured for 2 s and "
+        "must be below 0.1 N: with no payload on record the tool's own weight counts as force, and the start is "
+        "refused).\n\nReason:")
+    chain.apply(STATUS)  # the payload on record: only the TCP and the frames are missing
+    assert "Not on record for 'grasper': TCP, frames." in chain.override_prompt()
+    assert "own weight" not in chain.override_prompt()
+
+
 def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:
     chain = CommissioningModel()
     sent: list[object] = []
