@@ -103,11 +103,12 @@ class CommissioningModel:
         text = f"{missing}."
         if len(absent) > 1:
             text += f"\n\nNot on record for {st.tool!r}: {', '.join(absent)}."  # type: ignore[union-attr]  # absent implies a status
-        text += ("\n\nStart anyway? The session stores this override and your reason (the force at rest is still "
+        # short lines: the question's label does not wrap, and a long one stretched it across a laptop's screen
+        text += ("\n\nStart anyway? The session stores this override and your reason.\nThe force at rest is still "
                  "measured for 2 s and must be below 0.1 N")
         if "payload" in absent:
-            text += ": with no payload on record the tool's own weight counts as force, and the start is refused"
-        return text + ").\n\nReason:"
+            text += ";\nwith no payload on record the tool's own weight counts as force, and the start is refused"
+        return text + ".\n\nReason:"
 
     def arms_overview(self) -> list[tuple[str, str]]:
         """Per arm: (name, each step on record ✔ or not ✘, e.g. ``✔ TCP ✔ payload ✘ frames``) -- a rig of several

@@ -144,9 +144,9 @@ def test_start_without_calibration_asks_with_every_step_missing_and_what_the_ove
     # it named the TCP only; the payload's absence is what refuses the start (the tool's weight at rest)
     assert chain.override_prompt() == (
         f"{MISSING.replace('grasper', 'scalpel')}.\n\nNot on record for 'scalpel': TCP, payload, frames.\n\nStart "
-        "anyway? The session stores this override and your reason (the force at rest is still measured for 2 s and "
-        "must be below 0.1 N: with no payload on record the tool's own weight counts as force, and the start is "
-        "refused).\n\nReason:")
+        "anyway? The session stores this override and your reason.\nThe force at rest is still measured for 2 s and "
+        "must be below 0.1 N;\nwith no payload on record the tool's own weight counts as force, and the start is "
+        "refused.\n\nReason:")
     chain.apply(STATUS)  # the payload on record: only the TCP and the frames are missing
     assert "Not on record for 'grasper': TCP, frames." in chain.override_prompt()
     assert "own weight" not in chain.override_prompt()
