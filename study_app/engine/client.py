@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import multiprocessing as mp
 import queue
-import signal
 import time
 from typing import Any
 
+from pipeline.runtime.platform_support import signal_name
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
 from study_app.engine.host import host_main
@@ -27,11 +27,7 @@ def describe_exit(exitcode: int | None) -> str:
     if exitcode is None:
         return "still running"
     if exitcode < 0:
-        try:
-            name = signal.Signals(-exitcode).name
-        except ValueError:
-            name = "an unknown signal"
-        return f"killed by {name} (signal {-exitcode})"
+        return f"killed by {signal_name(-exitcode)} (signal {-exitcode})"
     return f"exit status {exitcode}"
 
 
