@@ -324,11 +324,15 @@ class UrRtdeRobot:
             why = probe_tcp(self.host, self.port, min(self.connect_timeout_s, backoff))
             if why is None:
                 try:
-                    rtde = self._rtde
-                    if rtde is not None:
-                        rtde.reconnect()
-                    else:
-                        self._rtde = self._factory(self.host, self.frequency_hz)
+                    # A fresh interface, never ur_rtde's reconnect(): on a link that is up but silent (a controller
+                    # quiet past reconnect_after_s) reconnect() hung for good or crashed the process in rtde_receive.
+                    old, self._rtde = self._rtde, None
+                    if old is not None:
+                        try:
+                            old.disconnect()
+                        except Exception:  # the link may already be gone
+                            pass
+                    self._rtde = self._factory(self.host, self.frequency_hz)
                     self.reconnects += 1
                     return True
                 except Exception as exc:  # keep trying; the state says why

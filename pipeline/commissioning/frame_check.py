@@ -223,8 +223,26 @@ class FrameCheck:
                 worst = max(v for v in (a.base_angle_deg, a.haptic_angle_deg) if math.isfinite(v))
                 parts.append(f"{a.axis} ({worst:.1f}° off)")
         parts += [f"{a} (not checked)" for a in missing]
-        return ("Frames and signs: FAIL on " + ", ".join(parts) + ": the force would push the hand the wrong way; "
+        head = "Frames and signs: FAIL on " + ", ".join(parts)
+        reversed_push = self._pushed_the_wrong_way()
+        if reversed_push is not None:
+            # a mounting or [frames] error is a rotation: it never turns one axis around while the other two pass
+            a = reversed_push
+            others = " and ".join(c.axis for c in self.axes if c is not a)
+            return (f"{head}: the push was felt along {direction_name(a.measured_base)}, opposite to {a.axis}, while "
+                    f"{others} pass; no sensor mounting or [frames] rotation turns one axis around alone, so the tip "
+                    f"was pushed the wrong way: push along {a.axis}{' (up)' if a.axis == '+z' else ''} again "
+                    "(leave [frames] as it is)")
+        return (head + ": the force would push the hand the wrong way; "
                 "check the sensor mounting and [frames] rot_tip_sensor / rot_haptic_base, then check again")
+
+    def _pushed_the_wrong_way(self) -> AxisCheck | None:
+        """The one axis felt opposite to its push while every other axis passed, else None."""
+        failed = self.failed
+        if len(failed) != 1 or {a.axis for a in self.axes} != set(AXES) or len(self.axes) != len(AXES):
+            return None
+        a = failed[0]
+        return a if a.samples > 0 and math.isfinite(a.base_angle_deg) and a.base_angle_deg > 150.0 else None
 
     def matches(self, rot_tip_sensor: Mat3, rot_haptic_base: Mat3) -> bool:
         """The check was made with this frame configuration."""

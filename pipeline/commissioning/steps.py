@@ -406,17 +406,28 @@ def rest_force_n(comp_f: npt.ArrayLike) -> float:
     return float(math.hypot(*(float(np.mean(f[:, i])) for i in range(3))))
 
 
-def rest_verdict(force_n: float, tool: str, overridden: bool = False) -> str:
-    """"" if a session may start with this force at rest, else why not (an override never waives it)."""
+def rest_verdict(force_n: float, tool: str, overridden: bool = False, payload_on_record: bool = True) -> str:
+    """"" if a session may start with this force at rest, else why not (an override never waives it).
+
+    ``payload_on_record``: False when the tool has no payload calibration, so its own weight is what was measured
+    (a refusal must not send the experimenter looking for a contact or a payload "again").
+    """
     if force_n < REST_MAX_FORCE_N:
         return ""
-    return (f"the compensated force at rest is {force_n:.3f} N over {REST_CHECK_S:g} s (limit {REST_MAX_FORCE_N:g} "
-            f"N): the tool touches something, or its payload calibration does not match the mounted tool {tool!r}; "
-            "keep it clear and still, or calibrate the payload again"
-            + ("; an override does not waive this check" if overridden else ""))
+    head = f"the compensated force at rest is {force_n:.3f} N over {REST_CHECK_S:g} s (limit {REST_MAX_FORCE_N:g} N)"
+    if payload_on_record:
+        why = (f"the tool touches something, or its payload calibration does not match the mounted tool {tool!r}; "
+               "keep it clear and still, or calibrate the payload again")
+    else:
+        why = (f"no payload calibration is on record for tool {tool!r}, so the tool's own weight counts as force; "
+               "calibrate the payload first (the calibration wizard's step 2, or haptic-study calibrate payload)")
+    return f"{head}: {why}" + ("; an override does not waive this check" if overridden else "")
 
 
-def rest_check_note(tool: str) -> str:
-    """What the experimenter is told while the force at rest is measured."""
-    return (f"calibration on record for tool {tool!r}; measuring the compensated force at rest for {REST_CHECK_S:g} s "
-            "— keep the instrument still and clear of everything")
+def rest_check_note(tool: str, overridden: bool = False) -> str:
+    """What the experimenter is told while the force at rest is measured (``overridden``: started without the
+    calibration chain on record, with a reason)."""
+    head = (f"starting without the calibration chain of tool {tool!r} (your reason is stored)" if overridden
+            else f"calibration on record for tool {tool!r}")
+    return (f"{head}; measuring the compensated force at rest for {REST_CHECK_S:g} s — keep the instrument still and "
+            "clear of everything")

@@ -238,6 +238,15 @@ def kill_hard(pid: int) -> None:
         os.kill(pid, signal.SIGKILL)
 
 
+def signal_name(signum: int) -> str:
+    """The name of signal ``signum`` (``SIGSEGV``), or ``an unknown signal`` where this OS has none of that number
+    (a process's negative exit code names the signal that ended it, on POSIX)."""
+    try:
+        return signal.Signals(signum).name
+    except ValueError:
+        return "an unknown signal"
+
+
 def process_exists(pid: int) -> bool:
     """Whether a process of that id exists (one of another user's too); False for an impossible id."""
     if sys.platform == "win32":

@@ -13,12 +13,22 @@ import queue
 import time
 from typing import Any
 
+from pipeline.runtime.platform_support import signal_name
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
 from study_app.engine.host import host_main
 from study_app.engine.setup import HostConfig
 
-__all__ = ["EngineClient", "EngineStartError"]
+__all__ = ["EngineClient", "EngineStartError", "describe_exit"]
+
+
+def describe_exit(exitcode: int | None) -> str:
+    """How a process ended, for a lab's bug report: ``killed by SIGSEGV (signal 11)``, ``exit status 1``."""
+    if exitcode is None:
+        return "still running"
+    if exitcode < 0:
+        return f"killed by {signal_name(-exitcode)} (signal {-exitcode})"
+    return f"exit status {exitcode}"
 
 
 class EngineStartError(RuntimeError):
@@ -122,6 +132,11 @@ class EngineClient:
     def pid(self) -> int | None:
         """The engine process's id (None before it is started)."""
         return self._proc.pid
+
+    @property
+    def exit_status(self) -> str:
+        """How the engine process ended (:func:`describe_exit`)."""
+        return describe_exit(self._proc.exitcode if self.started else None)
 
     @property
     def alive(self) -> bool:

@@ -196,6 +196,7 @@ class Commissioning:
         _check_seconds("RecordPose", cmd.seconds)
         target = check_target(cmd.target_rot_base_sensor) if cmd.target_rot_base_sensor is not None else None
         arm = self.arm_of(cmd.arm)
+        self._payload_chain(arm)  # at the first pose, not after the experimenter has jogged the robot through all
         robot = self.devices(arm).robot
         pose0 = robot.read_pose()
         refusal = robot_pose_refusal(pose0, e.eng.clock.now_ns())
@@ -223,8 +224,15 @@ class Commissioning:
             raise RuntimeError("simulated rig: the poses run automatically (Run calibration)")
         self.engine.require_idle("calibrate")
         arm = self.arm_of(cmd.arm)
+        self._payload_chain(arm)
         poses = [CalibrationPose(rot, wrench, label) for label, rot, wrench in cmd.poses]
         self.engine.publish(self._installed(arm, payload_step(poses, cmd.pose_set)))
+
+    def _payload_chain(self, arm: str) -> None:
+        """The chain's order, as ``calibrate payload`` keeps it: the payload step needs the tool's TCP on record."""
+        refusal = chain_refusal(self.tool_cals[arm], "payload")
+        if refusal:
+            raise RuntimeError(f"payload: {refusal}")
 
     def _installed(self, arm: str, result: PayloadResult) -> m.CalibrationDone:
         """Install an accepted payload calibration in the arm's force path and record it; the wizard's message."""
@@ -435,9 +443,10 @@ class Commissioning:
             res = check_axis(axis, base, scaled, rhb)
             self._frame_axes[axis] = res
             self.engine.publish(m.FrameAxisChecked(axis, res.passed, res.describe(), res.to_dict()))
+            # the newest push of each axis is kept after a check, as the window shows them: pushing one axis again
+            # (the one that failed) judges the three newest pushes and puts that verdict on record
             check = frame_check_of(self._frame_axes, rts, rhb)
             if check is not None:
-                self._frame_axes = {}
                 self._frames_done(arm, check)
 
         self._open_window("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done, arm=arm)
@@ -525,7 +534,8 @@ class Commissioning:
         def done(cols: dict[str, np.ndarray]) -> None:
             self._starting = None
             f = rest_force_n(np.stack([cols[c] for c in _COMP], axis=1))
-            refusal = rest_verdict(f, self.tool_cal.tool, overridden=bool(reason))
+            refusal = rest_verdict(f, self.tool_cal.tool, overridden=bool(reason),
+                                   payload_on_record=self.tool_cal.payload is not None)
             if refusal:
                 self.engine.publish(m.CommandRefused(type(cmd).__name__, f"real rig: {refusal}"))
                 return
@@ -542,7 +552,8 @@ class Commissioning:
         except RuntimeError:
             self._starting = None
             raise
-        self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool)))
+        self.engine.publish(m.StartChecking(REST_CHECK_S, rest_check_note(self.tool_cal.tool,
+                                                                          overridden=bool(missing and reason))))
         return True
 
 

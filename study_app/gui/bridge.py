@@ -88,7 +88,9 @@ class QtEngineBridge(QObject):
                 while (ev := client.get(0.05)) is not None:
                     self._raw.emit(gen, ev)
                 if not self._closing.is_set():
-                    self._raw.emit(gen, m.EngineStopped("the study engine exited unexpectedly", {}))
+                    # how it ended (a crash in a device library is a signal) goes in the notice's detail
+                    self._raw.emit(gen, m.EngineStopped(
+                        f"the study engine exited unexpectedly ({client.exit_status})", {}))
                 return
 
     def send(self, cmd: object) -> bool:

@@ -222,8 +222,7 @@ class ExperimenterWindow(QMainWindow):
         if not missing or not self.model.can("start"):
             return
         self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
-        prompt = (f"{missing}.\n\nStart anyway? The session stores this override and your reason "
-                  "(the force at rest is still measured for 2 s and must be below 0.1 N).\n\nReason:")
+        prompt = self.model.commissioning.override_prompt()
         if self.confirm is not None:  # a scripted run answers at once
             reason = "scripted override" if self.confirm("Start without calibration", prompt) else ""
         else:

@@ -426,14 +426,15 @@ class AppModel:
 
     def calibration_refusal(self) -> str:
         """Why the calibration steps may not run now ("" when they may)."""
+        if self.engine_trouble and self.session.state in ("stopped", "failed"):  # (its notice is behind this window)
+            return "the study engine is not running: press Restart engine in the main window"
         if self.session.running:
             return ("not during a session: a calibration step moves the robot and replaces what the force path "
                     "uses; finish or end the session first")
         return ""
 
     def calibration_missing(self) -> str:
-        """Real rig: the first step of the chain not on record ("" when a session may start, or on the simulated
-        rig)."""
+        """Real rig: the first step of the chain not on record ("" when a session may start, or on the sim rig)."""
         st = self.commissioning.status
         return self.commissioning.first_missing() if st is not None and st.rig == "real" else ""
 

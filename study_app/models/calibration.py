@@ -94,6 +94,8 @@ class CalibrationModel:
         if r is None:
             return "Run the pose set to identify the tool's weight, centre of mass and the sensor bias."
         if r.accepted:
+            if self.rig == "real":  # the real rig saves it for the mounted tool too (the chain's record)
+                return "Accepted: installed in the force path, saved for the tool and stored with every session."
             return "Accepted: installed in the force path and stored with the next session."
         return f"Refused — the previous calibration stays in use. Reason: {r.reason}"
 

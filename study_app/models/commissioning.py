@@ -91,6 +91,25 @@ class CommissioningModel:
             return self.status.missing if self.status is not None else ""
         return next((f"arm {a}: {s.missing}" for a in self.arms if (s := self.statuses.get(a)) and s.missing), "")
 
+    def override_prompt(self) -> str:
+        """What *Start without calibration…* asks: every step not on record (not only the first), and what the
+        override does not waive -- a tool with no payload on record is refused for its own weight."""
+        missing = self.first_missing()
+        if not missing:
+            return ""
+        st = self.status
+        # one arm: its steps (with several, the first line names the arm and its step; the picker shows each chain)
+        absent = [name for name, done, _ in (st.steps if st is not None and not self.arms else []) if not done]
+        text = f"{missing}."
+        if len(absent) > 1:
+            text += f"\n\nNot on record for {st.tool!r}: {', '.join(absent)}."  # type: ignore[union-attr]  # absent implies a status
+        # short lines: the question's label does not wrap, and a long one stretched it across a laptop's screen
+        text += ("\n\nStart anyway? The session stores this override and your reason.\nThe force at rest is still "
+                 "measured for 2 s and must be below 0.1 N")
+        if "payload" in absent:
+            text += ";\nwith no payload on record the tool's own weight counts as force, and the start is refused"
+        return text + ".\n\nReason:"
+
     def arms_overview(self) -> list[tuple[str, str]]:
         """Per arm: (name, each step on record ✔ or not ✘, e.g. ``✔ TCP ✔ payload ✘ frames``) -- a rig of several
         arms."""
@@ -152,6 +171,8 @@ class CommissioningModel:
             self.rig = ev.rig
             self.arms = tuple(name for name, _ in ev.arm_rings)
             self.statuses = {}
+            # a new engine (a restart) holds no pushes: the window must not show axes it would not count
+            self.frames_lines, self.frames_summary = {}, ""
             if self.arm not in self.arms:  # a new engine (a restart): the task arm, or no arm on a one-arm rig
                 self.arm = self.arms[0] if self.arms else ""
         elif isinstance(ev, m.CalibrationStatus):
@@ -167,6 +188,7 @@ class CommissioningModel:
             self.tcp_message = ev.reason
         elif isinstance(ev, m.FrameAxisChecked):
             self.frames_lines[ev.axis] = ev.line
+            self.frames_summary = ""  # a new push: an earlier verdict or refusal is no longer the news
             if self.frames_state == "recording":
                 self.frames_state = "idle"
         elif isinstance(ev, m.FrameCheckDone):
@@ -191,8 +213,9 @@ class CommissioningModel:
                 best = (ang, p.label)
         if best is None or best[0] >= 5.0:
             return ""
-        return (f"{ev.label} is only {best[0]:.1f}° from {best[1]}: it adds little -- turn the instrument further "
-                f"(at least {MIN_SPREAD_DEG:g}° between orientations, in two directions) and record again")
+        # it stays in the fit (harmless, nothing to undo): the advice is about the next orientation
+        return (f"{ev.label} is only {best[0]:.1f}° from {best[1]}: kept, but it adds little — turn the instrument "
+                f"further before the next one (at least {MIN_SPREAD_DEG:g}° between orientations, in two directions)")
 
     # -- what the wizard shows -------------------------------------------------------------------------
     def status_lines(self) -> list[tuple[str, bool, str]]:
@@ -245,7 +268,13 @@ class CommissioningModel:
                 f"{1e3 * res.get('rms_residual_m', math.nan):.3f} mm over {r.n_poses} orientations")
         if math.isfinite(r.error_mm):
             text += f"; {r.error_mm:.3f} mm from the simulated truth"
-        return text + (" — saved for the tool." if self.real else ".")
+        if not self.real:
+            return text + "."
+        # as `calibrate tcp` says it: the robot's own program needs the tip on its pendant, the file for a restart
+        t = res.get("tip_in_flange_m", [])
+        metres = ", ".join(f"{v:.5f}" for v in t)
+        return (text + f" — saved for the tool. Set the TCP on the pendant to ({tip}) mm and robot.tcp_offset_m to "
+                f"[{metres}] (until then the app corrects the poses itself).")
 
     def frames_instruction(self) -> str:
         """What to do in the frames step now."""

@@ -18,6 +18,9 @@ __all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFi
 #: Task force above which the window warns: well above every target of the paper's protocol (≤ 1.2 N) and above
 #: what the Touch can render (3.3 N peak), so no trial needs it; it only presses the tissue (and the hand) harder.
 HIGH_FORCE_N = 5.0
+#: Real rig without a payload on record: a task force above this is the tool's weight, and said so (N; the
+#: session gate's limit for the force at rest).
+UNCOMPENSATED_NOTE_N = 0.1
 
 #: The loop's figures against their limits: (within limits, still acceptable).  Above the second: red.
 #: Rate in Hz off the nominal 1000; p99 |period - 1 ms| in µs (the lab PC reaches ~10 µs, README);
@@ -329,12 +332,15 @@ class HealthModel:
             self.changed.emit()
 
     def force_warning(self) -> str:
-        """A warning when the task force is above :data:`HIGH_FORCE_N`, else ''."""
+        """A warning when the task force is above :data:`HIGH_FORCE_N`, else ''; on the real rig without a payload
+        on record, whenever there is a task force at all (a tool lighter than 0.5 kg weighs less than the limit,
+        and its weight would read as a contact)."""
+        if self.uncompensated and self.force_n > UNCOMPENSATED_NOTE_N:
+            # not a force on the tissue: the tool's weight, nothing subtracts it
+            return (f"{self.force_n:.1f} N task force: no payload calibration on record, so the tool's own weight "
+                    "counts as force; run the calibration wizard's payload step")
         if self.force_n <= HIGH_FORCE_N:
             return ""
-        if self.uncompensated:  # not a force on the tissue: the tool's weight, nothing subtracts it
-            return (f"{self.force_n:.1f} N task force (warning above {HIGH_FORCE_N:g} N): no payload calibration "
-                    "on record, so the tool's own weight counts as force; run the calibration wizard's payload step")
         where = "" if self.in_trial else " while no trial is running"
         return (f"{self.force_n:.1f} N on the tissue{where} (warning above {HIGH_FORCE_N:g} N): "
                 "lift the instrument")

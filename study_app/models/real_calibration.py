@@ -172,9 +172,7 @@ class RealCalibrationModel:
             nxt = self._next_unrecorded(self.steps.index(step) + 1)
             self.state = "at_pose"
             if nxt is not None:
-                self.index = nxt
-            elif not self.message:
-                self.message = "every pose is recorded: Identify"
+                self.index = nxt  # (when every pose is recorded the instruction says so: press Identify)
         elif isinstance(ev, m.CommandRefused) and ev.command == "RecordPose":
             self.state, self.message = "at_pose", ev.message
         elif isinstance(ev, m.CommandRefused) and ev.command == "IdentifyPoses":
@@ -200,12 +198,18 @@ class RealCalibrationModel:
         """What the experimenter should do now."""
         step = self.current
         if self.state == "idle":
-            return "Choose a pose set and press Start: the wizard shows one pose at a time."
+            return "Choose a pose set and press Start pose set: the wizard shows one pose at a time."
         if self.state in ("accepted", "refused", "identifying"):
-            return {"identifying": "identifying …", "accepted": "Accepted: installed and stored with the next session.",
+            return {"identifying": "identifying …",
+                    "accepted": "Accepted: installed in the force path and saved for the tool (on record above).",
                     "refused": f"Refused — the previous calibration stays in use. Reason: {self.message}"}[self.state]
         if step is None:
             return ""
+        done, total = self.progress()
+        if self.state == "at_pose" and done == total:
+            # the last pose is recorded: no target is left to move to
+            return (f"All {total} poses are recorded: press Identify (Previous pose goes back to record one "
+                    "again).")
         (rx, ry, rz), tilt = self.target_tcp(step)
         k = self.steps.index(step) + 1
         head = f"Pose {step.label} ({k} of {len(self.steps)}): "

@@ -23,6 +23,8 @@ from waits import until
 
 from pipeline.backends.touch import TouchScheduler
 from pipeline.commissioning.payload_identification import recommended_pose_set
+from pipeline.commissioning.tcp import pivot_orientations
+from pipeline.sim.robot import TOOL_DOWN
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
 from study_app.engine.setup import HostConfig
@@ -78,6 +80,13 @@ def test_each_arm_of_the_real_rig_is_commissioned_from_its_own_devices_into_its_
         assert set(statuses) == {"right", "left"} and statuses["left"].file == str(tmp_path / "cal-left.json")
         # a pose recorded on the left arm averages the left box (2 N along z), not the right one (1 N)
         _wait(e, lambda: e.loop.tick_count > 50)
+        # the chain in order: the left arm's TCP first (the payload step refuses without it)
+        e.handle(m.IdentifyTcp(tuple(
+            (f"O{k + 1}", rot, tuple(np.array([0.3, -0.1, 0.15]) - np.asarray(rot).reshape(3, 3) @ [0.0, 0.0, 0.2]))
+            for k, rot in enumerate(pivot_orientations("minimal", TOOL_DOWN))), arm="left"))
+        assert [ev.accepted for ev in events if isinstance(ev, m.TcpCalibrationDone)] == [True]
+        ticks = e.loop.tick_count
+        _wait(e, lambda: e.loop.tick_count > ticks + 100)  # the left arm's poses reported at the new tip first
         e.handle(m.RecordPose("P01", seconds=0.2, arm="left"))
         _wait(e, lambda: any(isinstance(ev, (m.PoseRecorded, m.CommandRefused)) for ev in events))
         rec = next(ev for ev in events if isinstance(ev, (m.PoseRecorded, m.CommandRefused)))

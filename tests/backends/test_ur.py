@@ -84,6 +84,26 @@ def test_stalled_controller_goes_stale_then_recovers() -> None:
             robot.close()
 
 
+def test_a_controller_silent_past_the_reconnect_time_is_dialled_afresh_and_its_poses_come_back() -> None:
+    """The link stays up but the controller sends nothing for longer than ``reconnect_after_s`` (a busy machine, a
+    network hiccup): the backend must get poses again once it speaks. ur_rtde's own ``reconnect()`` on such a live
+    link hung for good (no pose ever again: POSE_STALE for the rest of the day) or crashed the engine process in
+    rtde_receive (seen in a real window on the fakes)."""
+    with FakeRtde() as fake:
+        robot = open_robot(fake, reconnect_after_s=0.3)
+        try:
+            for _ in range(2):  # twice: the fresh link must survive the next silence too
+                fake.send("stall")
+                assert robot.wait_for_state("reconnecting", WAIT_S)
+                fake.send("resume")
+                assert robot.wait_for_state("connected", 4 * WAIT_S), (robot.state, robot.last_error)
+                n = robot.samples
+                assert robot.wait_for_samples(n + 5, WAIT_S)
+            assert robot.reconnects == 2
+        finally:
+            robot.close()
+
+
 def test_lost_link_reconnects_with_backoff() -> None:
     with FakeRtde() as fake:
         robot = open_robot(fake)

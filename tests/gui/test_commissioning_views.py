@@ -17,6 +17,7 @@ from study_app.models.app import AppModel
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel
 from study_app.models.health import HealthModel
+from study_app.models.real_calibration import RealCalibrationModel
 
 REAL = m.EngineReady("", "real", "real", {}, math.nan, (math.nan,) * 3, "participant")
 SIM = m.EngineReady("", "sim", "virtual", {}, 0.10, (0.3, 0.0, 0.115), "autopilot")
@@ -46,7 +47,9 @@ def test_the_real_tcp_step_records_orientations_warns_on_a_repeat_and_computes(q
     chain.apply(m.PivotRecorded("O2", mat_mul(axis_angle((1.0, 0.0, 0.0), math.radians(1.0)), TOOL_DOWN),
                                 (0.3, -0.1, 0.2), 0.01))
     assert page.orientations.rowCount() == 2 and page.orientations.item(1, 1).text() == "+300.0, -100.0, +200.0"
-    assert page.verdict.text().startswith("O2 is only 1.0° from O1: it adds little")
+    # kept (there is nothing to undo): the advice is for the next one, not "record again"
+    assert page.verdict.text() == ("O2 is only 1.0° from O1: kept, but it adds little — turn the instrument further "
+                                   "before the next one (at least 20° between orientations, in two directions)")
     for k, deg in ((3, 30.0), (4, -30.0)):
         chain.apply(m.PivotRecorded(f"O{k}", mat_mul(axis_angle((0.0, 1.0, 0.0), math.radians(deg)), TOOL_DOWN),
                                     (0.3, -0.1, 0.2), 0.01))
@@ -55,8 +58,11 @@ def test_the_real_tcp_step_records_orientations_warns_on_a_repeat_and_computes(q
     assert isinstance(sent[-1], m.IdentifyTcp) and [p[0] for p in sent[-1].poses] == ["O1", "O2", "O3", "O4"]
     chain.apply(m.TcpCalibrationDone(True, "", "recorded", 4, {"tip_in_flange_m": [0.001, -0.001, 0.25],
                                                                "rms_residual_m": 4e-5}))
+    # what `calibrate tcp` says too: the pendant's TCP and the file's offset (docs/hardware-setup.md: "as it says")
     assert page.verdict.text() == ("Accepted: tip (+1.00, -1.00, +250.00) mm in the flange frame, RMS residual 0.040 "
-                                   "mm over 4 orientations — saved for the tool.")
+                                   "mm over 4 orientations — saved for the tool. Set the TCP on the pendant to (+1.00, "
+                                   "-1.00, +250.00) mm and robot.tcp_offset_m to [0.00100, -0.00100, 0.25000] (until "
+                                   "then the app corrects the poses itself).")
 
 
 def test_the_real_frames_step_records_one_axis_at_a_time(qtbot) -> None:
@@ -81,6 +87,69 @@ def test_the_real_frames_step_records_one_axis_at_a_time(qtbot) -> None:
     assert page.result.toPlainText().splitlines()[:3] == [
         "+x  PASS · peak 1.03 N", "    base force   0.2° from +x", "    rendered force   0.2° from haptic +x (right)"]
     assert chain.frames_view()[0].endswith("· PASS")  # (what the terminal prints is unchanged)
+
+
+def test_a_new_push_replaces_an_old_verdict_and_a_restarted_engine_starts_the_pushes_afresh() -> None:
+    chain = CommissioningModel()
+    chain.apply(REAL)
+    for axis in ("+x", "+y", "+z"):
+        chain.frames_command(axis)
+        chain.apply(m.FrameAxisChecked(axis, axis != "+z", f"{axis}  peak 1.00 N · PASS", {}))
+    chain.apply(m.FrameCheckDone(False, "Frames and signs: FAIL on +z (180.0° off): …", []))
+    chain.frames_command("+z")
+    chain.apply(m.CommandRefused("RecordFrameAxis", "the force sensor stalled while recording — record again"))
+    assert chain.frames_view()[-1] == "the force sensor stalled while recording — record again"
+    chain.frames_command("+z")
+    chain.apply(m.FrameAxisChecked("+z", True, "+z  peak 1.00 N · PASS", {}))
+    # the refusal (and the old FAIL) were about earlier pushes: not shown under the new one
+    assert chain.frames_view() == ["+x  peak 1.00 N · PASS", "+y  peak 1.00 N · PASS", "+z  peak 1.00 N · PASS"]
+    chain.apply(m.FrameCheckDone(True, "Frames and signs: PASS (3 of 3 axes)", []))
+    assert chain.frames_view()[-1] == "Frames and signs: PASS (3 of 3 axes)"
+    chain.apply(REAL)  # the engine was restarted: it holds none of these pushes
+    assert chain.frames_view() == [] and chain.frames_instruction().endswith("(still to do: +x, +y, +z).")
+
+
+def test_the_real_payload_step_names_its_buttons_and_says_when_every_pose_is_recorded() -> None:
+    cal = CalibrationModel()
+    real = RealCalibrationModel(seconds=1.0)
+    for mdl in (cal, real):
+        mdl.apply(REAL)
+    # the button is "Start pose set" (the window's own Start starts a session)
+    assert real.instruction() == "Choose a pose set and press Start pose set: the wizard shows one pose at a time."
+    real.begin("quick")
+    for step in list(real.steps):
+        real.record_command()
+        real.apply(m.PoseRecorded(step.label, 1000, (0.0, 0.0, 2.0, 0.0, 0.0, 0.0), step.target_rot_base_sensor,
+                                  (0.3, -0.1, 0.2), 0.0, 0.001))
+    # no target is left: not "move the TCP to … then press Record pose" for a pose already recorded
+    assert real.instruction() == ("All 6 poses are recorded: press Identify (Previous pose goes back to record one "
+                                  "again).")
+    assert real.message == ""  # not said twice
+    real.identify_command()
+    done = m.CalibrationDone(True, "", "quick", 6, 9.7, 2e-4, 3e-4, [], {"mass_kg": 0.4, "model": "affine"})
+    for mdl in (cal, real):
+        mdl.apply(done)
+    # saved for the mounted tool, as the TCP step says, not only "stored with the next session"
+    assert real.instruction() == "Accepted: installed in the force path and saved for the tool (on record above)."
+    assert cal.verdict() == "Accepted: installed in the force path, saved for the tool and stored with every session."
+
+
+def test_start_without_calibration_asks_with_every_step_missing_and_what_the_override_does_not_waive() -> None:
+    chain = CommissioningModel()
+    chain.apply(REAL)
+    nothing = m.CalibrationStatus("real", "scalpel", "/lab/calibration.json",
+                                  [("TCP", False, "not on record"), ("payload", False, "not on record"),
+                                   ("frames", False, "not on record")], MISSING.replace("grasper", "scalpel"))
+    chain.apply(nothing)
+    # it named the TCP only; the payload's absence is what refuses the start (the tool's weight at rest)
+    assert chain.override_prompt() == (
+        f"{MISSING.replace('grasper', 'scalpel')}.\n\nNot on record for 'scalpel': TCP, payload, frames.\n\nStart "
+        "anyway? The session stores this override and your reason.\nThe force at rest is still measured for 2 s and "
+        "must be below 0.1 N;\nwith no payload on record the tool's own weight counts as force, and the start is "
+        "refused.\n\nReason:")
+    chain.apply(STATUS)  # the payload on record: only the TCP and the frames are missing
+    assert "Not on record for 'grasper': TCP, frames." in chain.override_prompt()
+    assert "own weight" not in chain.override_prompt()
 
 
 def test_the_simulated_rig_runs_each_step_at_once(qtbot) -> None:

@@ -14,7 +14,7 @@ import numpy as np
 
 from pipeline.runtime.loop_messages import RECORD_FIELDS
 from study_app.engine import messages as m
-from study_app.engine.client import EngineClient
+from study_app.engine.client import EngineClient, describe_exit
 from study_app.engine.setup import HostConfig
 
 START_TIMEOUT_S = 60.0
@@ -94,3 +94,11 @@ def test_a_virtual_clock_engine_traces_nothing_and_says_so():
         assert isinstance(health, m.Health) and health.late_periods is None and health.scheduling == "virtual clock"
     finally:
         client.shutdown()
+
+
+def test_how_the_engine_ended_is_said_for_a_bug_report() -> None:
+    """A crash in a device library (ur_rtde segfaulted in a real window on the fakes) showed only 'exited
+    unexpectedly'."""
+    assert describe_exit(-11) == "killed by SIGSEGV (signal 11)"
+    assert describe_exit(-9) == "killed by SIGKILL (signal 9)"
+    assert describe_exit(1) == "exit status 1" and describe_exit(None) == "still running"

@@ -141,6 +141,9 @@ def test_notices_go_with_their_cause_and_the_form_speaks_plainly(tmp_path):
     assert app.notice is not None and app.notice.text == "TCP calibration refused: a session is running"
     app.apply(m.SessionEnded(1, "completed", "", 2, 0, 0))
     assert app.notice is None and app.calibration_refusal() == ""  # the cause has gone: so has the notice
+    app.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
+    # the calibration window (over the main window) says so too: its buttons would send into nothing
+    assert app.calibration_refusal() == "the study engine is not running: press Restart engine in the main window"
     app.apply(m.CommandRefused("CheckFrames", "no payload"))
     app.clear_notice(("Calibrate",))
     assert app.notice is not None  # another command's notice stays

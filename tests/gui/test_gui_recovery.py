@@ -72,6 +72,7 @@ def test_an_engine_killed_in_a_session_is_restarted_and_its_session_resumed(qtbo
     assert text == f"The study engine exited unexpectedly. Session {sid} was interrupted; its stored trials are kept."
     assert w.restart_button.toolTip().endswith(f"After Restart engine, session {sid} is selected under Interrupted "
                                                "sessions: press Resume selected.")
+    assert "exited unexpectedly (killed by SIGKILL (signal 9))" in w.restart_button.toolTip()  # for a bug report
     assert not w.start_button.isEnabled() and not w.abort_trial_button.isEnabled()
     restart_and_find(qtbot, w, sid)
     assert not os.path.exists(ring)  # the dead engine's shared ring is freed, not left until the GUI exits

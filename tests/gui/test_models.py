@@ -403,8 +403,11 @@ def test_without_a_payload_on_record_the_real_rig_warns_of_the_tools_weight_not_
     steps = [("TCP", False, "not on record"), ("payload", False, "not on record"), ("frames", False, "not on record")]
     h.apply(m.CalibrationStatus("real", "grasper", "/lab/calibration.json", steps, "real rig: no TCP ..."))
     h.update_force(6.4, in_trial=False)
-    assert h.force_warning() == ("6.4 N task force (warning above 5 N): no payload calibration on record, so the "
-                                 "tool's own weight counts as force; run the calibration wizard's payload step")
+    assert h.force_warning() == ("6.4 N task force: no payload calibration on record, so the tool's own weight "
+                                 "counts as force; run the calibration wizard's payload step")
+    h.update_force(4.2, in_trial=False)  # a 0.4 kg tool: below the 5 N warning, still its weight, not a contact
+    assert h.force_warning().startswith("4.2 N task force: no payload calibration on record")
+    h.update_force(6.4, in_trial=False)
     steps[1] = ("payload", True, "0.650 kg, RMS residual 2.9 mN")
     h.apply(m.CalibrationStatus("real", "grasper", "/lab/calibration.json", steps, ""))
     assert h.force_warning().startswith("6.4 N on the tissue while no trial is running")

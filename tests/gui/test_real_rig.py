@@ -22,8 +22,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 
+from pipeline.commissioning.tcp import pivot_orientations
 from pipeline.devices.interfaces import Fault
 from pipeline.force.frames import matrix_to_rotvec
+from pipeline.sim.robot import TOOL_DOWN
 from study_app.engine import messages as m
 from study_app.engine.client import EngineClient
 from study_app.engine.host import StudyEngine
@@ -82,6 +84,21 @@ def stalled_refusal(events: list[object]) -> bool:
                for ev in events)
 
 
+def tcp_on_record(e: StudyEngine, events: list[object], arm: str = "") -> None:
+    """The chain in order: a TCP on record first (from four orientations about a divot, the tool 200 mm long; the
+    payload step refuses without it), and the robot's poses reported at that tip before anything is recorded."""
+    n_before = len(events)
+    e.handle(m.IdentifyTcp(tuple(
+        (f"O{k + 1}", rot, tuple(np.array([0.3, -0.1, 0.15]) - np.asarray(rot).reshape(3, 3) @ [0.0, 0.0, 0.2]))
+        for k, rot in enumerate(pivot_orientations("minimal", TOOL_DOWN))), arm=arm))
+    assert [ev.accepted for ev in events[n_before:] if isinstance(ev, m.TcpCalibrationDone)] == [True]
+    ticks = e.loop.tick_count
+    end = time.monotonic() + 5.0
+    while e.loop.tick_count < ticks + 100 and time.monotonic() < end:  # 100 ms: poses at the new tip (125 Hz)
+        e.step()
+        time.sleep(0.002)
+
+
 @pytest.fixture
 def rig(tmp_path):
     with FakeNetFT(rate_hz=1000, initial_records=0) as netft, FakeRtde() as rtde:
@@ -111,6 +128,7 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             "pose)",
         ]
 
+        tcp_on_record(e, events)
         wiz = RealCalibrationModel(seconds=0.2)
         wiz.apply(ready)
         wiz.begin("quick")
@@ -142,7 +160,8 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
             assert np.allclose(rec.wrench, np.asarray(netft.counts) / CPF, atol=1e-9)
             if len(wiz.recorded) == len(wiz.steps):
                 break
-        assert wiz.progress() == (6, 6) and wiz.message == "every pose is recorded: Identify"
+        assert wiz.progress() == (6, 6) and wiz.instruction().startswith("All 6 poses are recorded: press Identify")
+        assert wiz.message == ""  # said once, in the instruction
 
         n_before = len(events)
         e.handle(wiz.identify_command())
@@ -158,15 +177,15 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
         # also have come after the loop started, a stale start latched until the reset)
         e.handle(m.OperatorStop())
         wait_for(e, lambda: e.loop.faults & Fault.OPERATOR_STOP)
-        # the payload is on record (the wizard saved it) but no TCP and no frame check: the gate refuses, one line
+        # the TCP and the payload are on record (the wizard saved them) but no frame check: the gate refuses, one line
         e.handle(m.StartSession(db, "R01", "experiment", short_protocol, 1, 1))
         refusal = [ev for ev in events if isinstance(ev, m.CommandRefused)][-1]
         assert refusal.command == "StartSession" and refusal.message == (
-            "real rig: no TCP calibration on record for tool 'instrument': run haptic-study calibrate tcp --rig real "
-            "--hardware FILE (or the calibration wizard's TCP step)")
+            "real rig: no frame and sign check on record for tool 'instrument': run haptic-study calibrate frames "
+            "--rig real --hardware FILE (or the wizard's Frames step)")
         assert not Path(db).exists()  # nothing was created
         status = [ev for ev in events if isinstance(ev, m.CalibrationStatus)][-1]
-        assert [(n, ok) for n, ok, _ in status.steps] == [("TCP", False), ("payload", True), ("frames", False)]
+        assert [(n, ok) for n, ok, _ in status.steps] == [("TCP", True), ("payload", True), ("frames", False)]
         # the experimenter overrides, with a reason: the session starts and the reason is stored with it
         start = m.StartSession(db, "R01", "experiment", short_protocol, 1, 1,
                                override_reason="rehearsal of the session flow, nobody holds the stylus")
@@ -224,16 +243,17 @@ def test_real_rig_calibration_wizard_and_a_session(rig, tmp_path, short_protocol
     # the calibration chain's provenance: the tool, the file, what was on record, the override and its reason
     rc = config["rig_calibration"]
     assert rc["tool"] == "instrument" and rc["file"] == str(tmp_path / "calibration.json")
-    assert rc["payload"]["mass_kg"] == pytest.approx(MASS_KG, abs=1e-5) and "tcp" not in rc and "frames" not in rc
+    assert rc["payload"]["mass_kg"] == pytest.approx(MASS_KG, abs=1e-5) and "tcp" in rc and "frames" not in rc
     assert config["calibration_override"]["reason"] == "rehearsal of the session flow, nobody holds the stylus"
-    assert config["calibration_override"]["missing"].startswith("no TCP calibration on record for tool 'instrument'")
+    assert config["calibration_override"]["missing"].startswith("no frame and sign check on record for tool "
+                                                                "'instrument'")
     assert config["calibration_override"]["rest_force_n"] < 0.1  # the override waived the steps, not the force at rest
     con = sqlite3.connect(db)
     try:
         (detail,) = con.execute("SELECT detail FROM events WHERE kind = 'calibration_override'").fetchone()
     finally:
         con.close()
-    assert detail.startswith("started by the experimenter's override: no TCP calibration on record for tool") and \
+    assert detail.startswith("started by the experimenter's override: no frame and sign check on record for tool") and \
         "; the compensated force at rest was 0.0" in detail and \
         detail.endswith("N (limit 0.1 N). Reason: rehearsal of the session flow, nobody holds the stylus")
     # and the wizard's accepted payload is in the calibration file, for the tool, dated
@@ -249,14 +269,15 @@ def test_a_pose_recorded_while_the_robot_moves_is_refused(rig):
                     shared_ring=False)
     try:
         e.start()
+        tcp_on_record(e, events)  # (poses are then reported 200 mm further along the tool axis)
         for _attempt in range(STALL_RETRIES):
             rtde.send("pose 0.3 -0.1 0.2 0 0 0")
-            wait_for(e, lambda: e.eng.rig.robot.read_pose().position_m[2] == 0.2)
+            wait_for(e, lambda: e.eng.rig.robot.read_pose().position_m[2] == pytest.approx(0.4))
             n_before = len(events)
             e.handle(m.RecordPose("P01", 0.3))
             rtde.send("pose 0.3 -0.1 0.25 0 0 0")  # 50 mm up during the recording
             end = time.monotonic() + 5.0  # the engine's driver is not stepped until the robot reports the move
-            while e.eng.rig.robot.read_pose().position_m[2] != 0.25 and time.monotonic() < end:
+            while e.eng.rig.robot.read_pose().position_m[2] != pytest.approx(0.45) and time.monotonic() < end:
                 time.sleep(0.002)
             wait_for(e, lambda n_before=n_before: any(isinstance(ev, (m.CommandRefused, m.PoseRecorded))
                                                       for ev in events[n_before:]))

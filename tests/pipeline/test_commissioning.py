@@ -123,6 +123,28 @@ def test_a_sign_error_in_the_haptic_rotation_fails_only_the_haptic_side() -> Non
     assert not a.passed and "along -x (left)" in a.describe()
 
 
+def test_one_axis_felt_opposite_while_the_others_pass_is_a_push_the_wrong_way_not_a_mounting_error() -> None:
+    """A first-day experimenter pushes down when asked for +z (up): the check must not send them to change [frames]
+    (which is right), since no rotation reverses one axis alone."""
+    rhb = DEFAULT_ROT_HAPTIC_BASE
+
+    def pushed(axis: str, along: tuple[float, float, float]):
+        base = np.tile(along, (200, 1))
+        return check_axis(axis, base, base @ np.asarray(rhb).reshape(3, 3).T, rhb)
+
+    fc = FrameCheck((pushed("+x", (1.0, 0, 0)), pushed("+y", (0, 1.0, 0)), pushed("+z", (0, 0, -1.0))), IDENTITY, rhb)
+    assert not fc.passed
+    assert fc.summary() == (
+        "Frames and signs: FAIL on +z (180.0° off): the push was felt along -z, opposite to +z, while +x and +y pass; "
+        "no sensor mounting or [frames] rotation turns one axis around alone, so the tip was pushed the wrong way: "
+        "push along +z (up) again (leave [frames] as it is)")
+    # two axes off (a real mounting error), or one axis 90° off: the frames are suspect, as before
+    fc = FrameCheck((pushed("+x", (0, 1.0, 0)), pushed("+y", (-1.0, 0, 0)), pushed("+z", (0, 0, 1.0))), IDENTITY, rhb)
+    assert "check the sensor mounting and [frames]" in fc.summary()
+    fc = FrameCheck((pushed("+x", (1.0, 0, 0)), pushed("+y", (0, 0, 1.0)), pushed("+z", (0, 0, 1.0))), IDENTITY, rhb)
+    assert "check the sensor mounting and [frames]" in fc.summary()
+
+
 def test_no_push_is_a_failure_that_says_so() -> None:
     a = check_axis("+z", np.full((100, 3), 0.05), np.full((100, 3), 0.02), DEFAULT_ROT_HAPTIC_BASE)
     assert not a.passed and a.samples == 0

@@ -32,6 +32,7 @@ from pipeline.commissioning.steps import (
     pose_set,
     record_pivot,
     record_pose,
+    rest_check_note,
     rest_force_n,
     rest_verdict,
     robot_pose_refusal,
@@ -234,6 +235,16 @@ def test_the_force_at_rest_passes_only_below_its_limit_and_an_override_never_wai
         "again")
     assert rest_verdict(math.nan, "grasper").startswith("the compensated force at rest is nan N")
     assert rest_verdict(0.3, "grasper", overridden=True).endswith("; an override does not waive this check")
+    # nothing to "calibrate again" and no contact to look for: the tool has no payload on record, its weight is measured
+    assert rest_verdict(4.228, "scalpel", overridden=True, payload_on_record=False) == (
+        "the compensated force at rest is 4.228 N over 2 s (limit 0.1 N): no payload calibration is on record for tool "
+        "'scalpel', so the tool's own weight counts as force; calibrate the payload first (the calibration wizard's "
+        "step 2, or haptic-study calibrate payload); an override does not waive this check")
+    # while it is measured: an override's start does not claim a calibration on record
+    assert rest_check_note("grasper").startswith("calibration on record for tool 'grasper'; measuring")
+    assert rest_check_note("scalpel", overridden=True) == (
+        "starting without the calibration chain of tool 'scalpel' (your reason is stored); measuring the compensated "
+        "force at rest for 2 s — keep the instrument still and clear of everything")
 
 
 # -- numerics ----------------------------------------------------------------------------------------------------
