@@ -11,6 +11,7 @@ import numpy as np
 from pipeline.devices.interfaces import Fault
 from protocol.records import AbortCause, TrialRecord
 from study_app.engine import messages as m
+from study_app.guide_paths import guide
 from study_app.models import Emitter
 
 __all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFigure", "lost_to_the_machine"]
@@ -183,7 +184,7 @@ class HealthModel:
         elif sched.startswith("normal"):
             why = sched[len("normal"):].strip(" ()")
             text += (f" The loop asked for real-time priority and did not get it ({why}): it runs at normal priority, "
-                     "so any busy program can delay it; allow real-time scheduling for this user (docs/gui.md, "
+                     f"so any busy program can delay it; allow real-time scheduling for this user ({guide('gui.md')}, "
                      "Machine health).")
         return text
 
