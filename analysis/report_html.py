@@ -351,10 +351,11 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
         what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
-        test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
-                else "Wilcoxon test not computable")
+        n_test = by_metric.at[name, "n"]  # the ranked pairs: zero differences and missing sides left out
+        test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
+                if np.isfinite(p_holm) else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, {what} across {who}; {html.escape(test)}</small></div>")
+                     f"<small>OFF → ON, {what} across {who}; {test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 
