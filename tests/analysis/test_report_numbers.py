@@ -161,3 +161,14 @@ def test_databases_of_two_trial_caps_merged_are_named_at_the_top_and_on_the_term
     assert main(["report", "--db", str(three), "--out", str(tmp_path / "one")]) == 0
     assert "ran under different" not in capsys.readouterr().err
     assert "ran under different" not in (tmp_path / "one" / "report.html").read_text(encoding="utf-8")
+
+
+def test_every_interval_is_headed_with_the_level_it_was_computed_at(three: Path, tmp_path: Path) -> None:
+    """``--confidence 0.9``: the intervals of r_rm, the models and the sensitivity table are 90 % intervals, but
+    their headings said "95 % CI"; and ``--tct censored`` read "Over the all trials, failures at the trial cap"."""
+    out = tmp_path / "rep"
+    assert main(["report", "--db", str(three), "--out", str(out), "--confidence", "0.9", "--tct", "censored"]) == 0
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "95 % CI" not in page and "95%" not in page, re.findall(r".{60}95 ?%.{20}", page)
+    assert "<th>90 % CI</th>" in page and "(or r_rm) [90 % CI]" in page
+    assert "Over the all trials" not in page and "Over the trials (failures at the trial cap) with a TCT" in page
