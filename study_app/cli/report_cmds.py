@@ -129,7 +129,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     for line in summary.conditions:  # as the page opens with them
         print(f"haptic-study: warning: {line}", file=sys.stderr)
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
-    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")
+    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted; "
+          f"error window: {args.error_window}, TCT: {args.tct}, zero differences: {args.zero_method}):")
     # stats.csv's values as it has them: rounded once there, never again here (2.4965 is not 2.497 here and
     # 2.496 on the page)
     print(summary.stats[cols].to_string(index=False, float_format=lambda v: "NaN" if v != v else repr(float(v))))

@@ -119,6 +119,8 @@ def test_a_p_value_reads_the_same_on_the_page_in_the_csv_and_on_the_terminal(
     out = tmp_path / "rep"
     assert main(["report", "--db", str(three), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
+    # the choices that change the numbers, as the page's header names them
+    assert "Holm-adjusted; error window: cue, TCT: successful, zero differences: wilcox):" in printed, printed
     rmse_line = next(line for line in printed.splitlines() if line.strip().startswith("rmse_N"))
     assert rmse_line.split()[4:6] == ["0.03125", "0.03125"], rmse_line
     stats = pd.read_csv(out / "stats.csv").set_index("metric")
