@@ -245,7 +245,8 @@ def provenance_html(within: Any) -> str:
 def top_warnings(within: Any, included: bool) -> str:
     """The warnings the page opens with: different code, incomplete sessions, window-dependent conclusions."""
     out = [w for w in within.provenance_warnings
-           if w.startswith(("The sessions of this study ran different code", "The analysed sessions ran under"))]
+           if w.startswith(("The sessions of this study ran different code", "The analysed sessions ran under",
+                            "Participant numbers repeat"))]
     inc = within.incomplete
     if len(inc):
         are = "is" if len(inc) == 1 else "are"

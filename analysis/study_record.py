@@ -292,7 +292,8 @@ def condition_warnings(study: StudyData) -> list[str]:
     -------
     list of str
         One sentence per condition that differs (trial rules, targets, pipeline settings), naming each value with
-        how many sessions in which databases ran it; empty when every analysed session ran the same.
+        how many sessions in which databases ran it, and one naming participant numbers held by more than one
+        participant; empty when every analysed session ran the same.
     """
     s = study.sessions[study.sessions["analysed"].astype(bool)].copy()
     if s.empty:
@@ -312,4 +313,13 @@ def condition_warnings(study: StudyData) -> list[str]:
         out.append(f"The analysed sessions ran under different {what} ({each}): the tests pool them, so a "
                    "difference may come from the conditions, not the feedback; analyse each condition apart "
                    "(one report per database) before pooling.")
+    twice = s.groupby("participant_number", sort=True).filter(lambda g: g["participant_code"].nunique() > 1)
+    if len(twice):
+        each = "; ".join(f"{int(n)}: " + ", ".join(f"{r.participant_code} ({os.path.basename(str(r.database))})"
+                                                    for r in g.drop_duplicates("participant_code").itertuples())
+                         for n, g in twice.groupby("participant_number", sort=True))
+        out.append(f"Participant numbers repeat across the analysed sessions ({each}): a participant's number sets "
+                   "their counterbalancing position and, with the seed, their schedule, so these participants may "
+                   "have met the same order, where the design gives each participant a number of their own "
+                   "(merged databases that each numbered from 1?).")
     return out

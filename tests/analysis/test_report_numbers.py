@@ -159,9 +159,13 @@ def test_databases_of_two_trial_caps_merged_are_named_at_the_top_and_on_the_term
     top = page.split("<h2>")[0]
     assert f'<p class="warn">{said}' in top, top[-2000:]
     assert "different targets" not in page and "different pipeline settings" not in page
+    # six.db numbered its participant from 1, as three.db did: two participants hold number 1
+    numbers = "Participant numbers repeat across the analysed sessions (1: P01 (three.db), P04 (six.db)): "
+    assert f"haptic-study: warning: {numbers}" in err and f'<p class="warn">{numbers}' in top, err
     # one protocol: no such warning
     assert main(["report", "--db", str(three), "--out", str(tmp_path / "one")]) == 0
-    assert "ran under different" not in capsys.readouterr().err
+    assert "ran under different" not in capsys.readouterr().err  # nor numbers that repeat
+    assert "Participant numbers repeat" not in (tmp_path / "one" / "report.html").read_text(encoding="utf-8")
     assert "ran under different" not in (tmp_path / "one" / "report.html").read_text(encoding="utf-8")
 
 
