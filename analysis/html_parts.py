@@ -52,11 +52,12 @@ def fmt_w(v: object) -> str:
 
 
 def fmt_p(v: object) -> str:
-    """A p-value: 3 significant digits, ``< 0.0001`` below that."""
+    """A p-value as the CSV files and the terminal give it: 4 significant digits (an exact p of 1/32 is
+    ``0.03125`` everywhere, not ``0.0312`` on the page), ``< 0.0001`` below that."""
     if not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(float(v)):
         return "–"
     f = float(v)
-    return "&lt; 0.0001" if f < 1e-4 else f"{f:.3g}"
+    return "&lt; 0.0001" if f < 1e-4 else f"{f:.4g}"
 
 
 def th(file: str, column: str) -> str:

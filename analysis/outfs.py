@@ -40,6 +40,7 @@ from pipeline.runtime.platform_support import (
     O_NONBLOCK,
     fs_free_bytes,
     fs_read_only,
+    may_write,
     umask,
 )
 
@@ -306,7 +307,7 @@ def writable_problem(folder: Path, shown: str, need_bytes: int = 0) -> str | Non
     if read_only(folder):
         return (f"{shown}: the file system is read-only; write to a folder on a writable disk "
                 "(nothing was written)")
-    if not os.access(folder, os.W_OK | os.X_OK):
+    if not may_write(folder, os.W_OK | os.X_OK):
         return f"{shown}: permission denied (cannot create files in {folder}); choose a folder you may write to"
     free = free_bytes(folder)
     if free is not None and free < max(need_bytes, 1):

@@ -13,12 +13,18 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis import power_figures
+from analysis import codebook, power_figures
 from analysis.metrics import MetricOptions
 from analysis.paired_pool import pool_from_trials
 from analysis.power import PowerError, PowerResult, estimate_power, summary_text
 
-__all__ = ["ReportPower", "report_section", "write_power"]
+__all__ = ["ReportPower", "power_csv", "report_section", "write_power"]
+
+
+def power_csv(result: PowerResult, path: Path) -> None:
+    """Write ``power.csv`` as the codebook describes it: the measures by their exported names (``rmse_N``, as in
+    every other CSV, not the analysis' ``rmse_n``) and each number rounded as its column says (4 decimals)."""
+    codebook.export(result.frame, "power.csv").to_csv(path, index=False)
 
 
 def write_power(result: PowerResult, folder: str | os.PathLike[str]) -> list[str]:
@@ -34,7 +40,7 @@ def write_power(result: PowerResult, folder: str | os.PathLike[str]) -> list[str
         The file names written.
     """
     out = Path(folder)
-    result.frame.to_csv(out / "power.csv", index=False)
+    power_csv(result, out / "power.csv")
     (out / "power.txt").write_text(summary_text(result) + "\n", encoding="utf-8")
     fig = power_figures.power_curves(result)
     names = ["power.csv", "power.txt"]
@@ -86,5 +92,5 @@ def report_section(trials: pd.DataFrame, options: MetricOptions, zero_method: st
     except PowerError as exc:
         return ReportPower(None, f"Not estimated: {exc}.", None)
     out = Path(out_dir)
-    result.frame.to_csv(out / "power.csv", index=False)
+    power_csv(result, out / "power.csv")
     return ReportPower(result, "", save(power_figures.power_curves(result), out / "figures", "power"))

@@ -46,6 +46,7 @@ from analysis.sensitivity import max_ae_from_approach, window_sensitivity
 from analysis.stats import WilcoxonResult
 from analysis.study_record import (
     aborted_reruns,
+    condition_warnings,
     damaged_trials,
     deviations,
     incomplete_sessions,
@@ -75,6 +76,8 @@ class ReportSummary:
     #: One line per run of damaged recorded blocks (:attr:`analysis.load.StudyData.damage`); the trials they touch
     #: are left out of the analysis and listed in the report.
     damage: tuple[str, ...] = ()
+    #: Conditions the analysed sessions did not share (:func:`analysis.study_record.condition_warnings`).
+    conditions: tuple[str, ...] = ()
 
 
 def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
@@ -183,6 +186,7 @@ def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_o
     """
     trials = table.trials
     prov, warn = provenance(study)
+    warn = condition_warnings(study) + warn  # pooled conditions first: they qualify every test
     return _Within(
         sa=speed_accuracy(trials, options, confidence=confidence),
         trade_fit=None,
@@ -312,9 +316,8 @@ def build_report(
     zero_method, confidence
         Wilcoxon zero handling and the Hodges–Lehmann confidence level.
     force
-        Replace an existing, non-empty ``out_dir`` -- only the files ``report``
-        itself wrote there, unedited (its marker lists each with its SHA-256),
-        and only when it holds nothing else: no input database, no file of
+        Replace an existing, non-empty ``out_dir`` -- only the files ``report`` itself wrote there, unedited (its
+        marker lists each with its SHA-256), and only when it holds nothing else: no input database, no file of
         anybody else's (:mod:`analysis.outdir`).
     progress
         ``progress(samples read, samples expected)``.
@@ -364,5 +367,6 @@ def build_report(
         (tmp / "report.html").write_text(html, encoding="utf-8")
 
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    return ReportSummary(out, a.n_participants, len(a.trials), int(a.study.included["n_samples"].fillna(0).sum()),
-                         a.excluded, results["stats.csv"], files, a.study.damage)
+    n_samples = int(a.study.included["n_samples"].fillna(0).sum())
+    return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,
+                         a.study.damage, tuple(condition_warnings(a.study)))

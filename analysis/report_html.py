@@ -351,10 +351,11 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
         what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
-        test = (f"Wilcoxon p (Holm) = {_fmt(p_holm)}, {marks.get(m, '')}" if np.isfinite(p_holm)
-                else "Wilcoxon test not computable")
+        n_test = by_metric.at[name, "n"]  # the ranked pairs: zero differences and missing sides left out
+        test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
+                if np.isfinite(p_holm) else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, {what} across {who}; {html.escape(test)}</small></div>")
+                     f"<small>OFF → ON, {what} across {who}; {test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 
@@ -478,7 +479,7 @@ measures. Medians are across participants; the HL shift is the Hodges–Lehmann 
 <h3>Within each target</h3>
 {_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
              caption=f"ON vs OFF within each target; RMSE and Max AE {win}")}
-{report_sections.sensitivity_html(within, options)}
+{report_sections.sensitivity_html(within, options, confidence)}
 <figure><h2>Success rate</h2>
 <p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after Holm's correction
 (n.s. not significant, n/c not computable).</p>
@@ -489,12 +490,12 @@ measures. Medians are across participants; the HL shift is the Hodges–Lehmann 
 <p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
 across participants.</p></figure>
 {_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; RMSE and Max AE {win}")}
-{report_sections.trade_html(within, tables, options, pngs["speed_accuracy"])}
+{report_sections.trade_html(within, tables, options, pngs["speed_accuracy"], confidence)}
 <h2>Force through the pipeline</h2>
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device, the target
 band and the error window; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>
 {"".join(f"<figure>{_img(p, t)}</figure>" for t, p in examples)}
-{report_sections.secondary_html(within, tables, pngs["learning"], list(target_order))}
+{report_sections.secondary_html(within, tables, pngs["learning"], list(target_order), confidence)}
 {power_html}
 {_record_html(study, tables, within)}
 <h2>Methods</h2>

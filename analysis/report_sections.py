@@ -49,7 +49,12 @@ def _ci(lo: object, hi: object, digits: int = 3) -> str:
     return f"[{fmt(lo_f, digits)}, {fmt(hi_f, digits)}]" if math.isfinite(lo_f) else "–"
 
 
-def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
+def _ci_heading(confidence: float) -> str:
+    """``95 % CI`` at the level the report was made with (``--confidence``): the intervals' own level."""
+    return f"{confidence * 100:g} % CI"
+
+
+def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str, confidence: float = 0.95) -> str:
     """A fixed-effects table (:func:`analysis.models.fixed_effects` rows of one or more fits).
 
     A fitted model's note (a warning of the fit, the participant variance at its boundary) is a footnote marked
@@ -71,11 +76,12 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str) -> str:
                     f"<td>{fmt_p(r.p_value)}</td></tr>")
     foot = "".join(f"<li>{k}: {html.escape(n)}</li>" for n, k in marks.items())
     return (f'<div class="scroll"><table class="within"><caption>{caption}</caption><thead><tr><th>outcome</th>'
-            "<th>term</th><th>estimate</th><th>95 % CI</th><th>p</th></tr></thead>"
+            f"<th>term</th><th>estimate</th><th>{_ci_heading(confidence)}</th><th>p</th></tr></thead>"
             f'<tbody>{"".join(body)}</tbody></table></div>' + (f'<ul class="notes">{foot}</ul>' if foot else ""))
 
 
-def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOptions, png: bytes) -> str:
+def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOptions, png: bytes,
+               confidence: float = 0.95) -> str:
     """The speed–accuracy section: r_rm per mode, the mixed model's fixed effects, the slopes figure."""
     from analysis.models import fixed_effects
 
@@ -87,11 +93,11 @@ def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOpti
         for r in within.sa.itertuples())
     sa = (f'<div class="scroll"><table class="within"><caption>Repeated-measures correlation of TCT with RMSE; RMSE '
           f"{win}</caption><thead><tr><th>trials of</th><th>trials</th><th>participants</th><th>r_rm</th>"
-          "<th>95 % CI</th><th>df</th><th>p</th><th>slope (s/N)</th><th>note</th></tr></thead>"
+          f"<th>{_ci_heading(confidence)}</th><th>df</th><th>p</th><th>slope (s/N)</th><th>note</th></tr></thead>"
           f"<tbody>{rows}</tbody></table></div>")
     labels = {k: v for k, v in TRADE_MODEL_TERMS.items()}
     model = _model_table(fixed_effects([within.trade_fit]), labels,
-                         f"Linear mixed model TCT ~ RMSE × mode + (1 | participant), REML; RMSE {win}")
+                         f"Linear mixed model TCT ~ RMSE × mode + (1 | participant), REML; RMSE {win}", confidence)
     tct = "successful trials" if options.tct_policy == "successful" else "every trial, failures at the trial cap"
     return (f"<h2>Speed against accuracy</h2><p>Is a participant's faster trial a less accurate one? Asked within "
             f"participants ({tct}): the repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017) is the "
@@ -106,7 +112,7 @@ def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOpti
             "speed_accuracy_slopes.csv have every number.</p>")
 
 
-def sensitivity_html(within: Any, options: MetricOptions) -> str:
+def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.95) -> str:
     """The headline results under both error windows side by side; a differing conclusion is flagged."""
     sens = within.sensitivity
     windows = list(dict.fromkeys(sens["error_window"]))
@@ -135,7 +141,7 @@ def sensitivity_html(within: Any, options: MetricOptions) -> str:
     return (f"<h3>Does the error window change the answer?</h3><p>RMSE and Max AE depend on the window they are "
             f"taken over. {window_fact(within, options)} The same tests (Holm across the four measures in each "
             "window) and the speed–accuracy correlations, in both windows; conclusions at p &lt; "
-            f"{ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [95 % CI].</p>{verdict}"
+            f"{ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [{_ci_heading(confidence)}].</p>{verdict}"
             f'<div class="scroll"><table class="within sens"><caption>Sensitivity to the error window '
             f"(sensitivity.csv)</caption><thead><tr><th>analysis</th><th>measure</th>{head}<th>conclusion</th></tr>"
             f'</thead><tbody>{"".join(body)}</tbody></table></div>')
@@ -151,7 +157,8 @@ def window_fact(within: Any, options: MetricOptions) -> str:
             "force), not from a peak force excursion; from first contact it never is.")
 
 
-def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, target_order: list[str]) -> str:
+def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, target_order: list[str],
+                   confidence: float = 0.95) -> str:
     """Learning and order, labelled as a secondary analysis; a plain statement where n is too small."""
     from analysis.models import fixed_effects
 
@@ -178,7 +185,7 @@ def secondary_html(within: Any, tables: dict[str, pd.DataFrame], png: bytes, tar
             "tests:</i> did participants improve over the session, and does the effect of feedback depend on the "
             f"mode met first? Trial-level models per outcome (participant as the unit).</p>{plain}"
             + (_model_table(fe, labels, "metric ~ mode × target + trial number + (1 | participant); success: logistic "
-                            "GEE, estimates in log-odds") if not too_few else "")
+                            "GEE, estimates in log-odds", confidence) if not too_few else "")
             + f"<figure>{img(png, 'each metric over the trials of the session by mode')}</figure>"
             f"<h3>Order</h3>{order_plain}<div class=\"scroll\"><table class=\"within\"><caption>ON − OFF per "
             "participant, ON-first against OFF-first participants (first trial of the stored schedule), Mann–Whitney U"
@@ -237,7 +244,9 @@ def provenance_html(within: Any) -> str:
 
 def top_warnings(within: Any, included: bool) -> str:
     """The warnings the page opens with: different code, incomplete sessions, window-dependent conclusions."""
-    out = [w for w in within.provenance_warnings if w.startswith("The sessions of this study ran different code")]
+    out = [w for w in within.provenance_warnings
+           if w.startswith(("The sessions of this study ran different code", "The analysed sessions ran under",
+                            "Participant numbers repeat"))]
     inc = within.incomplete
     if len(inc):
         are = "is" if len(inc) == 1 else "are"
@@ -256,7 +265,7 @@ def top_warnings(within: Any, included: bool) -> str:
 
 def methods_within(within: Any, options: MetricOptions, confidence: float) -> str:
     """The methods sentences of the within-participant analyses (the trade, the windows, learning and order)."""
-    tct = "successful trials" if options.tct_policy == "successful" else "all trials, failures at the trial cap"
+    tct = "successful trials" if options.tct_policy == "successful" else "trials (failures at the trial cap)"
     fitted = all(f.fitted for f in within.learning)
     learning_n = ("" if fitted else f" With fewer than {MIN_PARTICIPANTS} participants the models are not fitted "
                   "and the section says so.")

@@ -14,7 +14,9 @@
   as an event of kind ``deviation``;
 * :func:`provenance` -- the package version, git commit and uncommitted-changes flag of every session (and
   of every resumed part of one), and the warnings a reviewer needs: sessions run by different code, code
-  with uncommitted changes, code whose commit is not known.
+  with uncommitted changes, code whose commit is not known;
+* :func:`condition_warnings` -- analysed sessions that ran under different trial rules, targets or pipeline
+  settings (databases of two protocols merged into one report): pooled, a difference may be the conditions'.
 """
 
 from __future__ import annotations
@@ -32,8 +34,8 @@ from protocol.labels import plural
 #: A session whose commit is not stored: run from an installed wheel, or recorded before commits were stored.
 COMMIT_UNKNOWN = "not known (installed from a wheel, or recorded before commits were stored)"
 
-__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "damaged_trials", "deviations", "incomplete_sessions",
-           "provenance", "resumed_sessions"]
+__all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "condition_warnings", "damaged_trials", "deviations",
+           "incomplete_sessions", "provenance", "resumed_sessions"]
 
 #: The columns of :func:`resumed_sessions`.
 RESUMED_COLUMNS = ("database", "participant_code", "session_id", "kind", "run", "n_runs", "interrupted_at_s",
@@ -264,3 +266,60 @@ def provenance(study: StudyData) -> tuple[pd.DataFrame, list[str]]:
         warn.append(f"{plural(unknown, 'session')}: commit {COMMIT_UNKNOWN}; only the package version says which "
                     "code ran them.")
     return table, warn
+
+
+def _targets_by_session(study: StudyData) -> pd.Series:
+    """Each analysed session's targets as the trials name them (``GENTLE 0.6 N, FIRM 1.2 N``), by ``(db, id)``."""
+    t = study.trials.drop_duplicates(["database", "session_id", "target_label"]).sort_values("target_force_n")
+    return t.groupby(["database", "session_id"], sort=False).apply(
+        lambda g: ", ".join(f"{lab} {f:g} N" for lab, f in zip(g["target_label"], g["target_force_n"], strict=True)),
+        include_groups=False)
+
+
+def _databases(sessions: pd.DataFrame) -> str:
+    return ", ".join(sorted({os.path.basename(str(d)) for d in sessions["database"]}))
+
+
+def condition_warnings(study: StudyData) -> list[str]:
+    """A warning for each condition the analysed experiment sessions did not share.
+
+    Each database's sessions run one protocol and one pipeline (``run`` refuses another), but ``report`` merges
+    databases: one of another protocol (another band, hold or trial cap: success and TCT mean something else;
+    other targets) or of other pipeline settings (``run --set``) would be pooled into one test without a word
+    beyond the methods' "8 s / 6 s".
+
+    Returns
+    -------
+    list of str
+        One sentence per condition that differs (trial rules, targets, pipeline settings), naming each value with
+        how many sessions in which databases ran it, and one naming participant numbers held by more than one
+        participant; empty when every analysed session ran the same.
+    """
+    s = study.sessions[study.sessions["analysed"].astype(bool)].copy()
+    if s.empty:
+        return []
+    s["targets"] = [_targets_by_session(study).get((db, sid), "") for db, sid in
+                    zip(s["database"], s["session_id"], strict=True)]
+    s["rules"] = [f"band ±{tol:.0%}, hold {hold:g} s, cap {cap:g} s" for tol, hold, cap in
+                  zip(s["tolerance_fraction"], s["hold_s"], s["max_trial_s"], strict=True)]
+    settings = s.get("pipeline_settings", pd.Series("", index=s.index))
+    s["settings"] = [str(v) if isinstance(v, str) and v else "the paper's" for v in settings]
+    out = []
+    for column, what in (("rules", "trial rules"), ("targets", "targets"), ("settings", "pipeline settings")):
+        groups = s.groupby(column, sort=False)
+        if len(groups) < 2:
+            continue
+        each = "; ".join(f"{value}: {plural(len(g), 'session')} ({_databases(g)})" for value, g in groups)
+        out.append(f"The analysed sessions ran under different {what} ({each}): the tests pool them, so a "
+                   "difference may come from the conditions, not the feedback; analyse each condition apart "
+                   "(one report per database) before pooling.")
+    twice = s.groupby("participant_number", sort=True).filter(lambda g: g["participant_code"].nunique() > 1)
+    if len(twice):
+        each = "; ".join(f"{int(n)}: " + ", ".join(f"{r.participant_code} ({os.path.basename(str(r.database))})"
+                                                    for r in g.drop_duplicates("participant_code").itertuples())
+                         for n, g in twice.groupby("participant_number", sort=True))
+        out.append(f"Participant numbers repeat across the analysed sessions ({each}): a participant's number sets "
+                   "their counterbalancing position and, with the seed, their schedule, so these participants may "
+                   "have met the same order, where the design gives each participant a number of their own "
+                   "(merged databases that each numbered from 1?).")
+    return out

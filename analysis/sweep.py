@@ -204,8 +204,10 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     from analysis.figures import save_one
     from analysis.sweep_figures import front_figure, metrics_figure
 
-    tidy.to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
-    summary.to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
+    # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
+    named = {"success": "success_rate", "rmse_n": "rmse_N", "max_ae_n": "max_ae_N"}
+    tidy.replace({"metric": named}).to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
+    summary.replace({"metric": named}).to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")
     save_one(front_figure(summary, swept, caveat(model_version, model_fit)), folder / "sweep_front.png")
     md = ["# Pipeline settings sweep", "", f"**{caveat(model_version, model_fit)}**", "", *header, "",

@@ -10,6 +10,7 @@ import math
 import sqlite3
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from analysis.sim_study import TrialRow
@@ -148,6 +149,8 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
     for name in ("sweep.csv", "sweep_summary.csv", "sweep.png", "sweep_front.png", "sweep.md", CACHE_FILE):
         assert (out / name).is_file(), name
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]
+    for name in ("sweep.csv", "sweep_summary.csv"):  # the report's names (they said success, rmse_n, max_ae_n)
+        assert set(pd.read_csv(out / name)["metric"]) == {"success_rate", "tct_s", "rmse_N", "max_ae_N"}, name
     # the same command again: refused (the outputs are there) unless --force, which computes nothing new
     assert main(args) == 2
     before = (out / CACHE_FILE).read_bytes()

@@ -290,6 +290,8 @@ def test_the_confirmation_names_what_will_go_and_needs_the_code(copy, capsys, mo
 def test_the_export_opens_in_pandas_and_matches_what_the_report_used(withdrawn, report, capsys) -> None:
     db, out = withdrawn["db"], withdrawn["folder"] / "P03-data"
     assert main(["export", "participant", "--db", str(db), "--participant", "P03", "--out", str(out)]) == 0
+    said = capsys.readouterr().out  # counts in words, as every command says them (it said "1 session(s)")
+    assert f"Wrote {out}/ for P03: 1 session, " in said and "(s)" not in said, said
     mine = pd.read_csv(out / "trials.csv")
     used = pd.read_csv(report / "trials.csv")
     theirs = used[used["participant_code"] == "P03"].reset_index(drop=True)

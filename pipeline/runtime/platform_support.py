@@ -82,7 +82,8 @@ __all__ = [
     "DIR_FD_CALLS", "O_BINARY", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NOINHERIT", "O_NONBLOCK",
     "SharedSegment", "add_dll_directory", "attach_segment", "boot_id", "cgroup_memory_headroom", "cpu_times",
     "create_segment", "die_with", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
-    "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "meminfo_available_bytes", "open_schedstat",
+    "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "may_write", "meminfo_available_bytes",
+    "open_schedstat",
     "owner_only", "process_exists", "process_stat_fields", "redirects", "set_fd_mode", "set_fifo_priority",
     "set_folder_mode", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count", "worker_context", "worker_pool",
 ]
@@ -500,6 +501,23 @@ def fs_read_only(folder: str | os.PathLike[str]) -> bool:
         return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
     except OSError:
         return False
+
+
+def may_write(path: str | os.PathLike[str], mode: int = os.W_OK) -> bool:
+    """Whether this user may write ``path`` (``mode``: ``os.W_OK``, with ``os.X_OK`` for a folder to create in).
+
+    ``os.access``, and one thing more for the superuser, whom it always allows: a file or folder without any write
+    bit (``chmod a-w``, an archive) is not written by root either -- in a container everyone is root, and the mode
+    is the owner's word that this is not to be changed.
+    """
+    if not os.access(path, mode):
+        return False
+    if sys.platform != "win32" and os.geteuid() == 0:
+        try:
+            return bool(os.stat(path).st_mode & 0o222)
+        except OSError:
+            return False
+    return True
 
 
 # -- the machine -----------------------------------------------------------------------------------------------

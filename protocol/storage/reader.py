@@ -388,7 +388,9 @@ class StudyReader:
         cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
         where, args = _block_filter(session_id, segment, ticks, arm=arm)
         rows = self.conn.execute(
-            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, data, {cols} FROM {table} "
+            # CAST: a block whose value was changed to TEXT is bytes to check, not a UTF-8 error for every reader
+            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, CAST(data AS BLOB), {cols} "
+            f"FROM {table} "
             f"{where} ORDER BY session_id, segment, block", args)
         open_blocks = self._open_blocks(session_id, segment, ticks, arm)
         for r in heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2])) if open_blocks else rows:
@@ -409,7 +411,8 @@ class StudyReader:
         where, args = _block_filter(session_id, segment, ticks, "c.", arm)
         where = f"{where} AND {_still_open(arm)}" if where else f"WHERE {_still_open(arm)}"
         chunks = self.conn.execute(
-            "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, c.data, c.t_first_s, "
+            "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, CAST(c.data AS BLOB), "
+            "c.t_first_s, "
             f"c.t_last_s, c.crc32 FROM {table} c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
             args)
         out = []

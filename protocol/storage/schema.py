@@ -20,7 +20,7 @@ import sqlite3
 from dataclasses import fields
 from pathlib import Path
 
-from pipeline.runtime.platform_support import owner_only
+from pipeline.runtime.platform_support import may_write, owner_only
 from protocol.records import AbortCause, LoopHealth
 from protocol.storage.common import EmptyDatabase, StorageError
 
@@ -158,25 +158,28 @@ def connect_readonly(path: str | os.PathLike[str], *, timeout_s: float = 5.0) ->
         raise StorageError(f"{p}: no such database")
     _refuse_special(p)
     uri = p.resolve().as_uri()
+    folder = p.resolve().parent
+    wal = p.with_name(p.name + "-wal")
     try:
-        conn = sqlite3.connect(f"{uri}?mode=ro", uri=True, check_same_thread=False, timeout=timeout_s)
-        try:
-            conn.execute("PRAGMA user_version").fetchone()
-            return conn
-        except sqlite3.OperationalError:
-            conn.close()
-            folder = p.resolve().parent
-            wal = p.with_name(p.name + "-wal")
-            if os.access(folder, os.W_OK):
-                raise
-            if wal.exists() and wal.stat().st_size > 0:
+        # a folder without a write bit is an archive to root too (may_write), whom SQLite lets make -shm in it
+        archive = not may_write(folder)
+        pending = wal.exists() and wal.stat().st_size > 0  # changes only a WAL reader sees
+        if not archive or pending:
+            conn = sqlite3.connect(f"{uri}?mode=ro", uri=True, check_same_thread=False, timeout=timeout_s)
+            try:
+                conn.execute("PRAGMA user_version").fetchone()
+                return conn
+            except sqlite3.OperationalError:
+                conn.close()
+                if not archive:
+                    raise
                 raise StorageError(
                     f"{p}: cannot be read where it is: its last changes are still in {wal.name}, which SQLite can "
                     f"read only with a writable folder and {folder} is read-only; copy the database and its "
                     f"{wal.name} into a writable folder and read the copy") from None
-        except sqlite3.DatabaseError:
-            conn.close()
-            raise
+            except sqlite3.DatabaseError:
+                conn.close()
+                raise
         # an archive (nobody can write here): immutable needs no -shm and takes no lock
         conn = sqlite3.connect(f"{uri}?immutable=1", uri=True, check_same_thread=False, timeout=timeout_s)
         try:
@@ -216,13 +219,13 @@ class SchemaFile:
             raise StorageError(f"{p}: the folder {parent} does not exist")
         if p.exists():
             _check_sqlite_header(p)
-            if not os.access(p, os.W_OK):
+            if not may_write(p):
                 raise StorageError(f"{p}: the database is not writable (open it read-only, e.g. with report)")
-            if not os.access(parent, os.W_OK):
+            if not may_write(parent):
                 raise StorageError(f"{p}: the folder {parent} is not writable (SQLite writes its journal beside "
                                    "the database)")
             return False
-        if not os.access(parent, os.W_OK):
+        if not may_write(parent):
             raise StorageError(f"{p}: cannot create the database here (folder {parent} is not writable)")
         try:
             # owner-only from the first byte: SQLite gives the -wal and -shm files the database's permissions

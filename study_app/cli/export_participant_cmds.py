@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from protocol.labels import plural
 from study_app.cli.argtypes import add_command
 from study_app.cli.error import CliError
 
@@ -64,8 +65,9 @@ def cmd_export_participant(args: argparse.Namespace) -> int:
     files = policy(lambda: write_participant_export(export, args.out, fmt=args.format, inputs=(args.db,),
                                                     force=args.force))
     t = export.tables
-    print(f"Wrote {args.out}/ for {args.participant}: {len(t['sessions'])} session(s), {len(t['stored_trials'])} "
-          f"trial(s), {len(t['events'])} event(s), {len(t['samples']):,} records at 1 kHz; files: {', '.join(files)}")
+    print(f"Wrote {args.out}/ for {args.participant}: {plural(len(t['sessions']), 'session')}, "
+          f"{plural(len(t['stored_trials']), 'trial')}, {plural(len(t['events']), 'event')}, "
+          f"{plural(len(t['samples']), 'record')} at 1 kHz; files: {', '.join(files)}")
     for line in export.damage:
         print(f"haptic-study: recording damaged: {line}: left out of {args.out}", file=sys.stderr)
     return 1 if export.damage else 0

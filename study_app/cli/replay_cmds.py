@@ -304,8 +304,11 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, An
               f"{r.peak_difference_N:13.4f}  {r.delay_ms:10.1f}")
 
     def write(out: Path) -> None:
-        table = diffs.drop(columns=["first_tick", "last_tick"]).assign(trial_number=diffs["trial_index"] + 1)
-        table.drop(columns="trial_index").round(6).to_csv(out / "replay_trials.csv", index=False)
+        # named as the report's trials.csv names them (participant_code, trial_number first, a force's unit _N)
+        table = diffs.drop(columns=["first_tick", "last_tick", "trial_index"]).rename(
+            columns={"code": "participant_code", "target_force_n": "target_force_N"})
+        table.insert(1, "trial_number", diffs["trial_index"].to_numpy() + 1)
+        table.round(6).to_csv(out / "replay_trials.csv", index=False)
         from analysis.figures import save
         from analysis.session_figures import replay_figure
 

@@ -126,9 +126,19 @@ def cmd_report(args: argparse.Namespace) -> int:
           f"{plural(summary.n_trials, 'trial')}, {plural(summary.n_samples, 'sample')} (excluded: "
           f"{plural(ex['training_trials'], 'training trial')}, {plural(ex['aborted_trials'], 'aborted trial')}"
           f"{damaged})")
+    for line in summary.conditions:  # as the page opens with them
+        print(f"haptic-study: warning: {line}", file=sys.stderr)
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
-    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted):")
-    print(summary.stats[cols].to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted; "
+          f"error window: {args.error_window}, TCT: {args.tct}, zero differences: {args.zero_method}):")
+    # stats.csv's values as it has them: rounded once there, never again here (2.4965 is not 2.497 here and
+    # 2.496 on the page)
+    print(summary.stats[cols].to_string(index=False, float_format=lambda v: "NaN" if v != v else repr(float(v))))
+    for r in summary.stats.itertuples():  # why n is below the participants, as the page's footnotes say
+        note = f": {r.note}" if isinstance(r.note, str) and r.note else ""
+        if note or int(r.n) != summary.n_participants:
+            print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
+                  f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
     print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
     return 0
 

@@ -114,6 +114,12 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
         lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
+    if overall is not None and not overall.empty:  # TCT's mean is over fewer people where some never succeeded
+        tct = by_mode(overall, "tct_s")
+        n_off, n_on = (int(tct[m].notna().sum()) if m in tct else 0 for m in ("off", "on"))
+        if min(n_off, n_on) < len(codes):
+            lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
+                         "with no success in a mode has no TCT there)")
     targets = None if frame is None else per_participant(frame, by_target=True)
     for label in sorted({t.target_label for _, t in exp}):
         part = None if targets is None else targets[targets["target_label"] == label]

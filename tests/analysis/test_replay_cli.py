@@ -101,6 +101,9 @@ def test_other_settings_say_what_would_have_been_felt(study, tmp_path, capsys) -
                                                          "replay.png", "replay.svg", "replay_trials.csv"]
     trials = pd.read_csv(out_dir / "replay_trials.csv")
     assert len(trials) == 4 and trials["trial_number"].tolist() == [1, 2, 3, 4]
+    # the report's names: it said code, target_force_n (a count, by the CSVs' convention) and put trial_number last
+    assert list(trials.columns[:2]) == ["participant_code", "trial_number"] and "target_force_N" in trials.columns
+    assert not {"code", "target_force_n"} & set(trials.columns)
     on, off = trials[trials["haptic_mode"] == "on"], trials[trials["haptic_mode"] == "off"]
     assert (on["rms_difference_N"] > 0).all() and (on["peak_difference_N"] >= on["rms_difference_N"]).all()
     assert (off["rms_difference_N"] == 0).all()  # no feedback either way

@@ -420,3 +420,24 @@ def test_a_killed_runs_open_block_reads_from_its_chunks_and_a_damaged_chunk_is_n
         assert len(read_segment(c, DAMAGED_SESSION, 0, skip_damaged=True).columns["tick"]) == block * 1000
     finally:
         c.close()
+
+
+def test_a_block_whose_value_became_text_is_named_as_damage_not_a_utf8_error(study: Path, tmp_path: Path) -> None:
+    """A block edited with sqlite3 (``substr(data, ...) || x'..'`` gives TEXT) made every reader fail on
+    "Could not decode to UTF-8 column 'data'": check said it could not read the study tables (0 experiment
+    sessions) and report refused the whole study, instead of naming the block and leaving out its trials."""
+    db = tmp_path / "study.db"
+    shutil.copy(study, db)
+    _sql(db, "UPDATE session_blocks SET data = substr(data, 1, 300) || x'DEADBEEF' || substr(data, 305) "
+             "WHERE session_id = ? AND segment = 0 AND block = ?", DAMAGED_SESSION, DAMAGED_BLOCK)
+    c = sqlite3.connect(db)
+    try:
+        assert c.execute("SELECT typeof(data) FROM session_blocks WHERE session_id = ? AND block = ?",
+                         (DAMAGED_SESSION, DAMAGED_BLOCK)).fetchone() == ("text",)
+        (d,) = recording_damage(c)
+        assert (d.session_id, d.first_block) == (DAMAGED_SESSION, DAMAGED_BLOCK) and "checksum mismatch" in d.why
+    finally:
+        c.close()
+    r = _cli(["check", "--db", str(db)], tmp_path)
+    assert r.returncode == 1 and "UTF-8" not in r.stdout + r.stderr, r.stdout
+    assert f"damaged: session {DAMAGED_SESSION}, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch" in r.stdout

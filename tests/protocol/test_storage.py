@@ -24,6 +24,7 @@ from protocol.storage import (
     SessionInfo,
     StorageError,
     StudyDatabase,
+    connect_readonly,
     trial_id_of,
     validate_code,
 )
@@ -579,3 +580,39 @@ def test_samples_given_as_one_float_array_are_stored_like_rows(db):
     got = db.conn.execute(f"SELECT {', '.join(SAMPLE_COLUMNS)} FROM samples ORDER BY rowid").fetchall()
     assert got == rows
     assert {type(v) for r in got for v in r} == {int, float}  # trial_id stays an integer key
+
+
+def _listing(folder: Path) -> dict[str, tuple[int, bytes]]:
+    return {p.name: (p.stat().st_mode, p.read_bytes()) for p in sorted(folder.iterdir())}
+
+
+def test_a_file_and_folder_without_write_bits_are_not_written_even_by_root(tmp_path):
+    """``chmod a-w`` on an archived study was no refusal for root (os.access allows root everything): ``withdraw``
+    removed a participant from a 0444 file in a 0555 folder, ``run --continue`` added one, and every reader left
+    -wal and -shm files beside it.  The mode is the owner's word, and in a container everyone is root."""
+    from pipeline.runtime.platform_support import may_write
+
+    folder = tmp_path / "archive"
+    folder.mkdir()
+    path = folder / "study.db"
+    StudyDatabase(path).close()
+    for extra in folder.glob("study.db-*"):
+        extra.unlink()
+    path.chmod(0o444)
+    folder.chmod(0o555)
+    try:
+        before = _listing(folder)
+        assert not may_write(path) and not may_write(folder, os.W_OK | os.X_OK)
+        with pytest.raises(StorageError) as info:
+            StudyDatabase(path)
+        assert str(info.value) == f"{path}: the database is not writable (open it read-only, e.g. with report)"
+        conn = connect_readonly(path)  # an archive: read immutable, nothing made beside it
+        try:
+            assert conn.execute("PRAGMA user_version").fetchone()[0] > 0
+        finally:
+            conn.close()
+        assert _listing(folder) == before
+    finally:
+        folder.chmod(0o755)
+        path.chmod(0o644)
+    assert may_write(path) and may_write(folder, os.W_OK | os.X_OK)
