@@ -25,6 +25,7 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from pipeline.runtime.platform_support import may_write
 from protocol.config import ProtocolConfig, ProtocolError, load_protocol
 from protocol.storage import StorageError, validate_code
 from protocol.study_rules import (
@@ -176,7 +177,7 @@ class SetupModel:
                 errors["db_path"] = f"study database = {v.db_path!r}: is a folder, not a file"
             elif not os.path.isdir(parent):
                 errors["db_path"] = f"study database = {v.db_path!r}: the folder {parent} does not exist"
-            elif not os.access(p if os.path.exists(p) else parent, os.W_OK):
+            elif not may_write(p) if os.path.exists(p) else not may_write(parent, os.W_OK | os.X_OK):
                 errors["db_path"] = f"study database = {v.db_path!r}: not writable"
         self.hint = ""
         if not v.code:

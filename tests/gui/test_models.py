@@ -44,6 +44,24 @@ def fill_ring(ring: RingBuffer, n: int, start: int = 0, **cols: float) -> None:
 
 
 # -- setup -----------------------------------------------------------------------------------------
+def test_a_database_without_write_bits_is_not_writable_even_for_root(tmp_path):
+    # chmod a-w is the owner's word (an archive): the form refuses it as every command does, root included
+    db = tmp_path / "archive.db"
+    db.write_bytes(b"")
+    db.chmod(0o444)
+    s = SetupModel()
+    s.update(db_path=str(db), code="P01")
+    assert s.errors.get("db_path") == f"study database = {str(db)!r}: not writable"
+    folder = tmp_path / "sealed"
+    folder.mkdir()
+    folder.chmod(0o555)
+    try:
+        s.update(db_path=str(folder / "new.db"))
+        assert s.errors.get("db_path") == f"study database = {str(folder / 'new.db')!r}: not writable"
+    finally:
+        folder.chmod(0o755)
+
+
 def test_setup_validation_names_field_value_and_rule(tmp_path):
     s = SetupModel()
     s.update(db_path=str(tmp_path / "study.db"), code="P 01")
