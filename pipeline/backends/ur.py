@@ -225,13 +225,17 @@ class UrRtdeRobot:
         t = getattr(self, "_thread", None)
         if t is not None and t.is_alive() and threading.current_thread() is not t:
             t.join(2.0)
+        self._drop_link()
+        self.state = "closed"
+
+    def _drop_link(self) -> None:
+        """Disconnect the current RTDE interface, if any, and forget it (the link may already be gone)."""
         rtde, self._rtde = self._rtde, None
         if rtde is not None:
             try:
                 rtde.disconnect()
             except Exception:  # the link may already be gone
                 pass
-        self.state = "closed"
 
     # -- extras -------------------------------------------------------------------------------
     def wait_for_samples(self, n: int, timeout_s: float) -> bool:
@@ -326,12 +330,7 @@ class UrRtdeRobot:
                 try:
                     # A fresh interface, never ur_rtde's reconnect(): on a link that is up but silent (a controller
                     # quiet past reconnect_after_s) reconnect() hung for good or crashed the process in rtde_receive.
-                    old, self._rtde = self._rtde, None
-                    if old is not None:
-                        try:
-                            old.disconnect()
-                        except Exception:  # the link may already be gone
-                            pass
+                    self._drop_link()
                     self._rtde = self._factory(self.host, self.frequency_hz)
                     self.reconnects += 1
                     return True
