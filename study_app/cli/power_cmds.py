@@ -81,6 +81,8 @@ def _n_values(text: str) -> tuple[int, ...]:
         if v is None or not 2 <= v <= _N_MAX:
             raise CliError(f"--n = {text!r}: each n must be a whole number from 2 to {_N_MAX}, comma-separated "
                            "(e.g. 6,8,10,12)")
+        if v in out:  # the table would show the size once: say so rather than drop it silently
+            raise CliError(f"--n = {text!r}: {v} is given twice; give each n once")
         out.append(v)
     return tuple(out)
 

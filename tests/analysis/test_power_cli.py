@@ -161,6 +161,7 @@ def test_power_refuses_a_pilot_of_three_in_one_line(pilots, tmp_path, capsys):
         (["--n", "0"], "--n = '0': each n must be a whole number from 2 to 10000, comma-separated (e.g. 6,8,10,12)"),
         (["--n", "abc"], "--n = 'abc': each n must be a whole number from 2 to 10000"),
         (["--n", "6,,8"], "--n = '6,,8': each n must be a whole number"),
+        (["--n", "4,8,4"], "--n = '4,8,4': 4 is given twice; give each n once"),
         (["--resamples", "-1"], "--resamples = '-1': must be a whole number from 1 to 1000000"),
         (["--resamples", "1.5"], "--resamples = '1.5': must be a whole number from 1 to 1000000"),
         (["--alpha", "2"], "--alpha = '2': must be a number with 0 < alpha < 1 (e.g. 0.05)"),
