@@ -163,11 +163,19 @@ class TcpPage(QWidget):
         self.compute_button.setToolTip(why)
         self.verdict.setText(mdl.tcp_verdict())
         self.verdict.setStyleSheet(f"color: {_VERDICT_COLOURS.get(mdl.tcp_state, '#333')}; font-weight: 600;")
-        self.orientations.setRowCount(len(mdl.pivots))
+        _grow(self.orientations, len(mdl.pivots))
         for i, p in enumerate(mdl.pivots):
             pos = ", ".join(f"{1e3 * v:+.1f}" for v in p.flange_position_m)
             for j, text in enumerate((p.label, pos, f"{p.moved_mm:.3f}")):
                 self.orientations.setItem(i, j, QTableWidgetItem(text))
+
+
+def _grow(table: QTableWidget, rows: int) -> None:
+    """Give ``table`` its rows; one just recorded is scrolled into view (it went below the fold after ten)."""
+    added = rows > table.rowCount()
+    table.setRowCount(rows)
+    if added:
+        table.scrollToBottom()
 
 
 class FramesPage(QWidget):
@@ -275,7 +283,7 @@ class RealPosePanel(QWidget):
         self.identify_button.setEnabled(not why)
         self.identify_button.setToolTip(why)
         rec = mdl.recorded
-        self.poses.setRowCount(len(rec))
+        _grow(self.poses, len(rec))
         for i, step in enumerate(rec):
             r = step.recorded
             assert r is not None

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from PySide6.QtWidgets import QApplication
 
 from pipeline.force.frames import axis_angle, mat_mul
 from pipeline.runtime.tick_record import TICK_DTYPE
@@ -217,3 +218,21 @@ def test_the_jaw_and_the_touch_motors_in_the_health_panel(qtbot) -> None:
     jaw.apply(m.JawState(1.0, 1900, False, "", "stylus: open fully → 1900 µs (100% open)"))
     assert jaw.text() == "100% open (1900 µs)" and jaw.log == ["stylus: open fully → 1900 µs (100% open)"]
     assert JawModel.command("step_open") == m.JawCommand("step_open")
+
+
+def test_a_row_just_recorded_is_scrolled_into_view(qtbot) -> None:
+    chain = CommissioningModel()
+    wiz = CalibrationWizard(CalibrationModel(), lambda: None, chain=chain, on_tcp=lambda: None,
+                            on_compute_tcp=lambda: None)
+    qtbot.addWidget(wiz)
+    wiz.resize(900, 500)
+    wiz.show()
+    for ev in (REAL, STATUS):
+        chain.apply(ev)
+    table = wiz.tcp_page.orientations
+    for k in range(1, 31):
+        chain.apply(m.PivotRecorded(f"O{k}", mat_mul(axis_angle((0.0, 1.0, 0.0), math.radians(3.0 * k)), TOOL_DOWN),
+                                    (0.3, -0.1, 0.2), 0.01))
+        QApplication.processEvents()  # Qt lays the table out
+    bar = table.verticalScrollBar()
+    assert table.rowCount() == 30 and bar.maximum() > 0 and bar.value() == bar.maximum()
