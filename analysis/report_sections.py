@@ -203,8 +203,9 @@ def incomplete_html(within: Any, included: bool) -> str:
         after = (f" ({len(res)} of them after an interruption: see Interrupted and resumed sessions)"
                  if len(res) else "")
         return f"<p>Every experiment session completed{after}.</p>"
-    how = ("analysed with their finished trials (report --include-incomplete)" if included else
-           "left out of every analysis (the default; report --include-incomplete analyses their finished trials)")
+    their = "its" if len(inc) == 1 else "their"
+    how = (f"analysed with {their} finished trials (report --include-incomplete)" if included else
+           f"left out of every analysis (the default; report --include-incomplete analyses {their} finished trials)")
     items = "".join(f"<li>{html.escape(str(r))}</li>" for r in inc["reason"])
     return (f"<h3>Incomplete sessions</h3><p>{plural(len(inc), 'experiment session')} did not complete, {how}:</p>"
             f"<ul>{items}</ul>")
