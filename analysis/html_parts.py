@@ -19,7 +19,7 @@ import pandas as pd
 from analysis import codebook
 from protocol.labels import plural
 
-__all__ = ["fmt", "fmt_p", "fmt_w", "html_table", "img", "plural", "th"]
+__all__ = ["fmt", "fmt_p", "p_text", "fmt_w", "html_table", "img", "plural", "th"]
 
 #: The resolution the figures are saved at (:func:`analysis.figures.save`).
 _DPI = 300
@@ -51,13 +51,19 @@ def fmt_w(v: object) -> str:
     return str(int(f)) if f.is_integer() else (f"{f:.1f}" if (2 * f).is_integer() else f"{f:.2f}")
 
 
-def fmt_p(v: object) -> str:
-    """A p-value as the CSV files and the terminal give it: 4 significant digits (an exact p of 1/32 is
-    ``0.03125`` everywhere, not ``0.0312`` on the page), ``< 0.0001`` below that."""
+def p_text(v: object) -> str:
+    """A p-value as the CSV files, the terminal, the page and the figures give it: 4 significant digits (an exact
+    p of 1/32 is ``0.03125`` everywhere, not ``0.0312`` on the page or ``0.031`` under a figure), ``< 0.0001`` below
+    that, ``–`` when there is none."""
     if not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(float(v)):
         return "–"
     f = float(v)
-    return "&lt; 0.0001" if f < 1e-4 else f"{f:.4g}"
+    return "< 0.0001" if f < 1e-4 else f"{f:.4g}"
+
+
+def fmt_p(v: object) -> str:
+    """:func:`p_text` for the page (HTML)."""
+    return html.escape(p_text(v))
 
 
 def th(file: str, column: str) -> str:

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from analysis.html_parts import p_text
 from analysis.metrics import MetricOptions
 from analysis.models import ModelFit, design, fit_mixed
 from analysis.rmcorr import rmcorr
@@ -127,9 +128,11 @@ def participant_slopes(trials: pd.DataFrame, options: MetricOptions = _DEFAULT_O
 
 
 def rm_caption(row: Any) -> str:
-    """``r_rm = −0.31 [−0.55, −0.03], df = 40, p = 0.031`` for a row of :func:`speed_accuracy`."""
+    """``r_rm = −0.31 [−0.55, −0.03], df = 40, p = 0.03125`` for a row of :func:`speed_accuracy` (p as every
+    table gives it)."""
     if not bool(row.computable):
         return "r_rm not computable"
     r, lo, hi = (float(getattr(row, k)) for k in ("r_rm", "ci_low", "ci_high"))
     ci = f" [{lo:.2f}, {hi:.2f}]" if np.isfinite(lo) else ""
-    return f"r_rm = {r:.2f}{ci}, df = {int(row.df)}, p = {float(row.p_value):.2g}"
+    p = p_text(float(row.p_value))
+    return f"r_rm = {r:.2f}{ci}, df = {int(row.df)}, p {p if p.startswith('<') else '= ' + p}"
