@@ -19,7 +19,7 @@ import pandas as pd
 from analysis import codebook
 from protocol.labels import plural
 
-__all__ = ["fmt", "fmt_p", "p_text", "fmt_w", "html_table", "img", "plural", "th"]
+__all__ = ["fmt", "fmt_p", "fmt_w", "html_table", "img", "p_text", "plural", "th"]
 
 #: The resolution the figures are saved at (:func:`analysis.figures.save`).
 _DPI = 300
