@@ -81,11 +81,11 @@ if TYPE_CHECKING:  # multiprocessing is imported where it is used: a command tha
 __all__ = [
     "DIR_FD_CALLS", "O_BINARY", "O_CLOEXEC", "O_DIRECTORY", "O_NOFOLLOW", "O_NOINHERIT", "O_NONBLOCK",
     "SharedSegment", "add_dll_directory", "attach_segment", "boot_id", "cgroup_memory_headroom", "cpu_times",
-    "create_segment", "die_with", "die_with_parent", "free_orphaned_segment", "free_physical_bytes", "fs_free_bytes",
-    "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "may_write", "meminfo_available_bytes",
-    "open_schedstat",
-    "owner_only", "process_exists", "process_stat_fields", "redirects", "set_fd_mode", "set_fifo_priority",
-    "set_folder_mode", "set_timer_slack_ns", "thread_ids", "umask", "usable_cpu_count", "worker_context", "worker_pool",
+    "create_segment", "die_with", "die_with_parent", "free_orphaned_segment", "free_physical_bytes",
+    "fs_free_bytes", "fs_read_only", "gil_keeping_pread", "kill_hard", "load_average", "may_write",
+    "meminfo_available_bytes", "open_schedstat", "owner_only", "process_exists", "process_stat_fields", "redirects",
+    "set_fd_mode", "set_fifo_priority", "set_folder_mode", "set_timer_slack_ns", "signal_name", "thread_ids",
+    "umask", "usable_cpu_count", "worker_context", "worker_pool",
 ]
 
 def _linux() -> bool:
