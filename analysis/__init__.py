@@ -13,7 +13,7 @@ or the whole report: ``build_report(["study.db"], "out/")`` (``haptic-study repo
 Every 1 kHz record of a session, as a pandas table: ``samples_frame("study.db", session_id=2)``
 (``haptic-study export samples``).
 
-Names are loaded on first use, so importing one module (e.g. :mod:`analysis.stats`)
+Names are loaded on first use, so importing one module (e.g. :mod:`analysis.stats.wilcoxon`)
 does not pull in matplotlib.
 """
 
@@ -37,17 +37,17 @@ __all__ = [
 ]
 
 _WHERE = {
-    "AnalysisError": "analysis.load",
-    "load_study": "analysis.load",
-    "read_trial_samples": "analysis.load",
-    "samples_frame": "analysis.samples",
-    "MetricOptions": "analysis.metrics",
-    "compute_trials": "analysis.metrics",
-    "per_participant": "analysis.aggregate",
-    "mode_tests": "analysis.aggregate",
-    "speed_accuracy": "analysis.trade",
-    "paired_wilcoxon": "analysis.stats",
-    "build_report": "analysis.report",
+    "AnalysisError": "analysis.reading.load",
+    "load_study": "analysis.reading.load",
+    "read_trial_samples": "analysis.reading.load",
+    "samples_frame": "analysis.reading.samples",
+    "MetricOptions": "analysis.reading.metrics",
+    "compute_trials": "analysis.reading.metrics",
+    "per_participant": "analysis.stats.aggregate",
+    "mode_tests": "analysis.stats.aggregate",
+    "speed_accuracy": "analysis.stats.trade",
+    "paired_wilcoxon": "analysis.stats.wilcoxon",
+    "build_report": "analysis.report.report",
 }
 
 

@@ -25,14 +25,14 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from analysis.parallel import default_workers
+from foundation.parallel import default_workers
 from protocol.storage import connect_readonly
 
 __all__ = ["format_report_bench", "run_report_bench", "synthetic_trials"]
 
 
 def synthetic_trials(participants: int, seed: int = 0) -> pd.DataFrame:
-    """A trial table (columns of :class:`analysis.metrics.TrialTable`) for many simulated participants.
+    """A trial table (columns of :class:`analysis.reading.metrics.TrialTable`) for many simulated participants.
 
     Parameters
     ----------
@@ -75,8 +75,8 @@ def synthetic_trials(participants: int, seed: int = 0) -> pd.DataFrame:
 
 
 def _stats_at_scale(participants: int) -> dict[str, Any]:
-    from analysis.aggregate import mode_tests, per_participant
-    from analysis.trade import speed_accuracy
+    from analysis.stats.aggregate import mode_tests, per_participant
+    from analysis.stats.trade import speed_accuracy
 
     trials = synthetic_trials(participants)
     t0 = time.perf_counter()
@@ -105,7 +105,7 @@ def _make_study(db: str, participants: int) -> float:
 
 def _read_all_samples(db: str) -> tuple[float, int]:
     """Read every analysed trial's task force as the report does, in this process: (seconds, samples)."""
-    from analysis.load import load_study, read_task_force, recorded_where
+    from analysis.reading.load import load_study, read_task_force, recorded_where
 
     inc = load_study([db]).included
     t0 = time.perf_counter()

@@ -13,10 +13,10 @@ import multiprocessing as mp
 import time
 from typing import Any
 
-from pipeline.runtime.clock import MonotonicClock, prepare_realtime_thread
+from foundation.platform_support import cpu_times
+from foundation.platform_support import load_average as load_avg
+from pipeline.core.clock import MonotonicClock, prepare_realtime_thread
 from pipeline.runtime.loop_stats import LoopStats
-from pipeline.runtime.platform_support import cpu_times
-from pipeline.runtime.platform_support import load_average as load_avg
 from study_app.engine import messages as m
 from study_app.engine.client import EngineClient
 from study_app.engine.setup import HostConfig
@@ -64,7 +64,7 @@ def _bare_loop(seconds: float, out: Any) -> None:
 def bare_loop_stats(seconds: float) -> dict[str, Any]:
     """The machine's own floor: a loop with nothing in its tick, paced and scheduled as the haptic loop is.
 
-    Same clock (:class:`pipeline.runtime.clock.MonotonicClock`: sleep, then spin),
+    Same clock (:class:`pipeline.core.clock.MonotonicClock`: sleep, then spin),
     same thread preparation (``SCHED_FIFO``, 1 ns timer slack) and the same
     statistics (:class:`pipeline.runtime.loop.LoopStats`), in a process of its own.
     Periods over 2 ms here are the machine's (a late timer, the hypervisor),

@@ -5,8 +5,8 @@
 For every participant of every study this builds the simulated rig on a
 virtual clock, hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`
 and walks the paper's 20-trial random schedule through the real
-:class:`protocol.trial.TrialMachine` (so success, TCT, RMSE and Max AE come from
-the one definition in :mod:`protocol.metrics`).  Per participant × mode it
+:class:`protocol.study.trial.TrialMachine` (so success, TCT, RMSE and Max AE come from
+the one definition in :mod:`protocol.study.metrics`).  Per participant × mode it
 aggregates like science.md §6 (success over 10 trials, mean RMSE and Max AE
 over trials, mean TCT over successful trials) and prints, per study and as the
 mean over studies, the OFF/ON values, the change, the paper's values and the
@@ -14,7 +14,7 @@ Wilcoxon signed-rank p of the 10 paired differences, plus the per-target
 success rates and TCT with failures censored at 12 s.
 
 The runner (:mod:`study_app.headless.sim_trials`) and the per-study summary
-(:mod:`analysis.sim_study`) are the product's, shared with ``haptic-study
+(:mod:`analysis.planning.sim_study`) are the product's, shared with ``haptic-study
 sweep``: seed 0's sweep studies are this bench's studies.
 """
 
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from analysis.sim_study import TrialRow, summarise_study
+from analysis.planning.sim_study import TrialRow, summarise_study
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import ParticipantParams
 from study_app.headless.sim_trials import participant_seeds, run_participant, run_study

@@ -32,15 +32,15 @@ from typing import Any
 import numpy as np
 
 from bench.machine import bare_loop_stats, cpu_times, engine_loop_health, format_late_ticks, load_average, steal_percent
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.devices.interfaces import HapticState, PoseSample, WrenchSample
 from pipeline.devices.rig import RigArm
 from pipeline.force.filters import MovingAverage3
 from pipeline.force.framework import FrameworkConfig, HapticFramework
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import SetHaptics
 from pipeline.runtime.ring import RingBuffer
-from pipeline.runtime.tick_record import TICK_DTYPE
 
 __all__ = ["filter_trade_table", "measure_arms_cost", "measure_arms_loop", "naive_numpy_pipeline", "record_samples",
            "run_pipeline_bench"]

@@ -1,11 +1,11 @@
-"""``haptic-study bench power``: the power analysis against a plain loop over :func:`analysis.stats.paired_wilcoxon`.
+"""``haptic-study bench power``: the power analysis against a plain loop over the paired Wilcoxon test.
 
 The figure the planning issue asks for: ``--resamples 2000`` over the 7
 default study sizes and the 4 metrics, in one process.  In the same run, the
 same resampled studies are tested by a straightforward loop that calls
-:func:`analysis.stats.paired_wilcoxon` once per study and metric (its side,
+:func:`analysis.stats.wilcoxon.paired_wilcoxon` once per study and metric (its side,
 for the directional power, from the sign of its rank-biserial correlation,
-(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.holm` per study; the
+(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.wilcoxon.holm` per study; the
 loop is timed on the first ``reference_resamples`` studies of each n and
 scaled to all of them, and the two must give identical p-values and sides on
 every study both ran.
@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from analysis.paired_pool import PairedPool, load_pool, pool_from_trials
-from analysis.power import DEFAULT_N_VALUES, estimate_power, resample_indices
-from analysis.resampled_wilcoxon import _PERM_CACHE, _exact_p, resampled_p_values
-from analysis.stats import holm, paired_wilcoxon
+from analysis.planning.paired_pool import PairedPool, load_pool, pool_from_trials
+from analysis.planning.power import DEFAULT_N_VALUES, estimate_power, resample_indices
+from analysis.stats.resampled_wilcoxon import _PERM_CACHE, _exact_p, resampled_p_values
+from analysis.stats.wilcoxon import holm, paired_wilcoxon
 from bench.analysis_bench import synthetic_trials
 from bench.machine import cpu_times, load_average, steal_percent
 
@@ -49,7 +49,7 @@ def _overall_only(pool: PairedPool) -> PairedPool:
 
 def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_resamples: int = 100,
                     n_values: tuple[int, ...] = DEFAULT_N_VALUES, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
-    """Time :func:`analysis.power.estimate_power` and the paired_wilcoxon loop on the same resampled studies.
+    """Time :func:`analysis.planning.power.estimate_power` and the paired_wilcoxon loop on the same resampled studies.
 
     Parameters
     ----------

@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from analysis.parallel import default_workers, run_tasks
+from foundation.parallel import default_workers, run_tasks
 from pipeline.force.replay import replay
-from protocol.recording import read_segment, segments_of
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
+from protocol.storage.recordings import read_segment, segments_of
 
 __all__ = ["ROW_COLUMNS", "RowCopy", "row_format_copy", "trial_window_rows"]
 
@@ -99,7 +99,7 @@ def row_format_copy(source: str, target: str, *, workers: int | None = None,
     target
         A new file (refused if it exists).
     workers
-        Processes replaying sessions (default: :func:`analysis.parallel.default_workers`).
+        Processes replaying sessions (default: :func:`foundation.parallel.default_workers`).
     progress
         ``progress(sessions done, sessions)``.
     """

@@ -1,13 +1,13 @@
-"""Benchmark of analysis.stats at study scale: 10 000 simulated participants.
+"""Benchmark of analysis.stats.wilcoxon at study scale: 10 000 simulated participants.
 
 ``python -m bench.stats_bench`` prints wall times (best of ``repeats``) of
 
-* :func:`analysis.stats.paired_wilcoxon` on n = 10 000 pairs with heavy ties
+* :func:`analysis.stats.wilcoxon.paired_wilcoxon` on n = 10 000 pairs with heavy ties
   and zeros (values on a 0.1 grid), the Hodges–Lehmann interval included;
-* :func:`analysis.stats.hodges_lehmann` alone on the same differences
+* :func:`analysis.stats.wilcoxon.hodges_lehmann` alone on the same differences
   (5·10⁷ Walsh averages, never materialized) and on 200 000 trial-level differences;
-* :func:`analysis.stats.correlation` (Spearman) on 200 000 trials (TCT vs RMSE);
-* :func:`analysis.stats.holm` on 10 metrics.
+* :func:`analysis.stats.wilcoxon.correlation` (Spearman) on 200 000 trials (TCT vs RMSE);
+* :func:`analysis.stats.wilcoxon.holm` on 10 metrics.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ from typing import Any
 
 import numpy as np
 
-from analysis.correlation import correlation
-from analysis.hodges_lehmann import hodges_lehmann
-from analysis.stats import holm, paired_wilcoxon
+from analysis.stats.correlation import correlation
+from analysis.stats.hodges_lehmann import hodges_lehmann
+from analysis.stats.wilcoxon import holm, paired_wilcoxon
 
 __all__ = ["format_stats_bench", "run_stats_bench"]
 
@@ -66,7 +66,7 @@ def run_stats_bench(participants: int = 10_000, trials: int = 200_000, repeats: 
 def format_stats_bench(r: dict[str, Any]) -> str:
     """Human-readable lines of :func:`run_stats_bench`'s result."""
     return "\n".join([
-        f"analysis.stats, {r['participants']} participants "
+        f"analysis.stats.wilcoxon, {r['participants']} participants "
         f"({r['n_zero']} zero differences, {r['n_tie_groups']} tie groups, method {r['method']}):",
         f"  paired_wilcoxon (test + effect sizes + HL interval): {r['paired_wilcoxon_s'] * 1e3:8.1f} ms",
         f"  hodges_lehmann, n = {r['participants']}:                  {r['hodges_lehmann_s'] * 1e3:8.1f} ms",

@@ -21,10 +21,10 @@ from typing import Any
 import numpy as np
 
 from bench.row_format import row_format_copy
-from pipeline.runtime.tick_record import TICK_DTYPE
-from protocol.config import load_protocol
-from protocol.recording import SegmentData, read_segment, segments_of
+from pipeline.core.tick_record import TICK_DTYPE
 from protocol.storage import Recorder, StudyDatabase, connect_readonly
+from protocol.storage.recordings import SegmentData, read_segment, segments_of
+from protocol.study.config import load_protocol
 from study_app.headless import default_jobs, run_study
 
 __all__ = ["format_study_bench", "rewrite_recording", "run_study_bench"]
@@ -46,7 +46,7 @@ def rewrite_recording(source: str, target: str) -> tuple[float, int]:
     """Write every recorded segment of ``source`` again into ``target`` through the recorder, at the live commit rate.
 
     Each segment's records are handed over as a live session hands them: loop records as the ring holds them
-    (:data:`pipeline.runtime.tick_record.TICK_DTYPE`; the fields a recording does not keep are zero here), ``_CHUNK``
+    (:data:`pipeline.core.tick_record.TICK_DTYPE`; the fields a recording does not keep are zero here), ``_CHUNK``
     at a time, each with the log entries of its ticks.
 
     Returns

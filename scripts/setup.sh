@@ -66,4 +66,4 @@ fi
 # Byte-compile the product once: every command, study worker and engine process imports it, and where the
 # environment forbids writing bytecode at import (PYTHONDONTWRITEBYTECODE) each would compile it again (~0.4 s).
 # Quiet, and cheap when nothing changed (only changed files are compiled).
-.venv/bin/python -m compileall -q pipeline protocol analysis study_app bench >/dev/null
+.venv/bin/python -m compileall -q foundation pipeline protocol analysis study_app bench >/dev/null

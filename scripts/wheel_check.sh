@@ -79,9 +79,9 @@ want |= {(g, n, v) for g, eps in project["entry-points"].items() for n, v in eps
 got = {(ep.group, ep.name, ep.value) for ep in dist.entry_points}
 assert got == want, f"entry points {sorted(got)} != pyproject.toml's {sorted(want)}"
 shipped = {n for n in zipfile.ZipFile(wheel).namelist() if ".dist-info/" not in n}
-floors = ("pipeline", "protocol", "analysis", "study_app", "bench")
+floors = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench")
 source = {p.relative_to(src).as_posix() for f in floors for p in (src / f).rglob("*.py") if "__pycache__" not in p.parts}
-source |= {"protocol/default.toml", "protocol/storage/sql/schema.sql", "study_app/guide/template/hardware.example.toml"}
+source |= {"protocol/study/default.toml", "protocol/storage/sql/schema.sql", "study_app/guide/template/hardware.example.toml"}
 source |= {f"study_app/guide/{p.name}" for p in (src / "docs").glob("*.md")}  # the guides the help names
 assert shipped == source, f"the wheel lacks {sorted(source - shipped)}, and ships {sorted(shipped - source)} besides"
 print(f"wheel: {len(shipped)} files, Requires-Dist and entry points as pyproject.toml says "
@@ -104,7 +104,7 @@ print(f"wheel: --help of {walk(top, [])} commands and subcommands")
 EOF
 "$WORK/venv/bin/python" - <<'EOF'
 from importlib import resources
-text = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
+text = resources.files("protocol.study").joinpath("default.toml").read_text(encoding="utf-8")
 text = text.replace("trials_per_cell = 5 ", "trials_per_cell = 1 ").replace("\nenabled = true", "\nenabled = false")
 text = text.replace("max_trial_s = 12.0", "max_trial_s = 4.0").replace("pause_s = 2.0", "pause_s = 1.0")
 open("small.toml", "w", encoding="utf-8").write(text)

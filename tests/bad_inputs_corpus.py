@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-DEFAULT_PROTOCOL = (ROOT / "protocol" / "default.toml").read_text(encoding="utf-8")
+DEFAULT_PROTOCOL = (ROOT / "protocol" / "study" / "default.toml").read_text(encoding="utf-8")
 EXAMPLE_HARDWARE = (ROOT / "hardware.example.toml").read_text(encoding="utf-8")
 #: A one-trial study without training: the good database is made by the real command in about a second.
 TINY_PROTOCOL = """name = "tiny"

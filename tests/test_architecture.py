@@ -1,8 +1,10 @@
-"""Import contracts: the folder layout is the architecture (docs/architecture.md, "Five floors").
+"""Import contracts: the folder layout is the architecture (docs/architecture.md, "Floors").
 
-The project is a house of floors, ``study_app`` → ``bench`` → ``analysis`` → ``protocol`` → ``pipeline``, but
-``bench`` stands beside the product rather than inside it: the benchmarks import the product, the product never
-imports them (``haptic-study bench`` reaches them through an entry point, by name).
+The project is a house of floors, ``study_app`` → ``analysis`` → ``protocol`` → ``pipeline`` → ``foundation``,
+each package itself built of floors (its sub-folders, :data:`FLOORS`), and ``bench`` beside the product: the
+benchmarks import the product, the product never imports them (``haptic-study bench`` reaches them through an
+entry point, by name).  A module may import its own floor and the floors below it, never one above, and never a
+sibling on its own level (``pipeline.sim`` and ``pipeline.settings`` know nothing of each other).
 
 Every contract is checked on one import graph (:func:`import_graph`), built with ``ast`` from every ``import``
 statement of every module -- the ones at the top of a file *and* the ones inside functions (lazy imports), and
@@ -10,7 +12,9 @@ statement of every module -- the ones at the top of a file *and* the ones inside
 they hide a dependency from the interpreter at load time, not from the reader or from the install: a lazy
 ``from study_app.cli.main import CliError`` inside ``report_cmds`` was a circle all the same, and a lazy
 ``import bench`` makes the product need the benchmarks all the same.  Imports under ``if TYPE_CHECKING:``
-count too: a type named across floors is a dependency of the code that names it.
+count too: a type named across floors is a dependency of the code that names it.  The same floors are also
+import-linter's contracts (``[tool.importlinter]`` in pyproject.toml, :func:`test_import_linter_contracts_hold`),
+the well-kept tool a reader may already know; this graph adds what it does not see (``import_module`` calls).
 
 Each contract is shown to fail (the ``test_*_reports_*`` tests): a deliberately bad module is written into a
 temporary copy of the tree and the same checking function must report it.
@@ -23,7 +27,7 @@ import functools
 import shutil
 import subprocess
 import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,11 +36,12 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 QT = {"PySide6", "pyqtgraph", "PyQt5", "PyQt6", "shiboken6"}
 #: The product's packages; ``bench`` is the project's but not the product's.
-PRODUCT = ("pipeline", "protocol", "analysis", "study_app")
+PRODUCT = ("foundation", "pipeline", "protocol", "analysis", "study_app")
 PACKAGES = (*PRODUCT, "bench")
 
 # module (or package: the rule covers what is inside it) -> top-level names it must never import
 FORBIDDEN = {
+    "foundation": QT | {"pipeline", "protocol", "analysis", "study_app", "bench"},
     "pipeline": QT | {"protocol", "analysis", "study_app", "bench"},
     "protocol": QT | {"analysis", "study_app", "bench"},
     "analysis": QT | {"study_app", "pipeline", "bench"},
@@ -46,10 +51,21 @@ FORBIDDEN = {
     "study_app.models": QT,
 }
 
-#: The one module every floor may import: the operating system's calls and their fallbacks (it imports nothing of
-#: the product: its own rule in FORBIDDEN); analysis imports nothing else of pipeline.
-EVERY_FLOOR = {"pipeline.runtime.platform_support"}
-FORBIDDEN["pipeline.runtime.platform_support"] = {"pipeline", "protocol", "analysis", "study_app", "bench"}
+#: The floors, from the bottom up: a module's floor is the longest entry that names its package (or it), and it may
+#: import only modules of its own floor or of floors below; entries in one tuple are siblings on one level, which
+#: import nothing of each other.  A package's root module sits where its entry stands (``analysis``, the notebook's
+#: lazy front door, above every analysis floor; ``study_app``'s shared modules below its sub-floors).
+FLOORS: tuple[tuple[str, ...], ...] = (
+    ("foundation",),
+    ("pipeline", "pipeline.core"), ("pipeline.force",), ("pipeline.devices",), ("pipeline.commissioning",),
+    ("pipeline.backends",), ("pipeline.runtime",), ("pipeline.sim", "pipeline.settings"), ("pipeline.assembly",),
+    ("protocol", "protocol.study"), ("protocol.recording",), ("protocol.storage",), ("protocol.runner",),
+    ("analysis.reading",), ("analysis.stats",), ("analysis.plots",), ("analysis.planning",), ("analysis.report",),
+    ("analysis.export",), ("analysis",),
+    ("study_app",), ("study_app.engine",), ("study_app.headless",), ("study_app.models",), ("study_app.gui",),
+    ("study_app.cli",),
+    ("bench",),
+)
 
 #: The benchmarks import the product, never the reverse (also within FORBIDDEN; named here on its own).
 NO_BENCH = {package: {"bench"} for package in PRODUCT}
@@ -59,7 +75,7 @@ NO_BENCH = {package: {"bench"} for package in PRODUCT}
 SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
-    "pipeline.runtime.engine",
+    "pipeline.assembly.engine",
     "study_app.engine.setup",
     "study_app.engine.sessions",
     "study_app.engine.commissioning",
@@ -218,12 +234,33 @@ def forbidden_imports(graph: Iterable[Import], rules: Mapping[str, set[str]] = F
     out = []
     for i in graph:
         top = i.target.split(".")[0]
-        if i.target in EVERY_FLOOR:
-            continue
         for where, names in rules.items():
             if _within(i.source, where) and top in names:
                 out.append(f"{i} -- {where} must not import {top}")
     return sorted(out)
+
+
+def floor_of(module: str, floors: Sequence[Sequence[str]] = FLOORS) -> tuple[int, str] | None:
+    """A module's floor (its index, and the entry that names it), or None for a module no floor names."""
+    best: tuple[int, str] | None = None
+    for level, entries in enumerate(floors):
+        for entry in entries:
+            if _within(module, entry) and (best is None or len(entry) > len(best[1])):
+                best = (level, entry)
+    return best
+
+
+def floor_violations(graph: Iterable[Import], floors: Sequence[Sequence[str]] = FLOORS) -> list[str]:
+    """Imports that go up a floor, or across to a sibling on the same level (and modules no floor names)."""
+    out = []
+    for i in graph:
+        here, there = floor_of(i.source, floors), floor_of(i.target, floors)
+        if here is None:
+            out.append(f"{i.source} is on no floor (FLOORS)")
+        elif there is not None and (there[0] > here[0] or (there[0] == here[0] and there[1] != here[1])):
+            way = "up to" if there[0] > here[0] else "across to its sibling"
+            out.append(f"{i} -- {here[1]} must not import {way} {there[1]}")
+    return sorted(set(out))
 
 
 def sim_importers(graph: Iterable[Import], allowed: Iterable[str] = SIM_IMPORTERS) -> list[str]:
@@ -253,6 +290,27 @@ def test_no_import_cycles(graph: list[Import]) -> None:
 @pytest.mark.parametrize("where", sorted(FORBIDDEN))
 def test_layering(graph: list[Import], where: str) -> None:
     assert forbidden_imports(graph, {where: FORBIDDEN[where]}) == []
+
+
+def test_every_import_goes_down_a_floor(graph: list[Import]) -> None:
+    assert floor_violations(graph) == []
+
+
+def test_every_package_of_the_tree_has_its_floor() -> None:
+    # a new sub-folder must be given its place: the floors are the architecture, not a list that lags behind it
+    inits = [p for pkg in PACKAGES for p in (ROOT / pkg).rglob("__init__.py")]
+    folders = {".".join(p.parent.relative_to(ROOT).parts) for p in inits}
+    named = {entry for level in FLOORS for entry in level}
+    assert sorted(f for f in folders if f not in named and floor_of(f) is None) == []
+    assert sorted(f for f in folders if f not in named) == [], "give each folder its own entry in FLOORS"
+
+
+def test_import_linter_contracts_hold() -> None:
+    # the same floors as import-linter's layers contracts (pyproject.toml), checked by the tool itself
+    out = subprocess.run([sys.executable, "-c", "from importlinter.cli import lint_imports_command; "
+                          "lint_imports_command()"], capture_output=True, text=True, cwd=ROOT, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert "0 broken" in out.stdout
 
 
 def test_bench_is_imported_by_nothing_in_the_product(graph: list[Import]) -> None:
@@ -328,12 +386,27 @@ def test_qt_in_a_model_is_reported(tmp_path: Path) -> None:
     ]
 
 
-@pytest.mark.parametrize("floor, above", [("pipeline", "protocol.trial"), ("pipeline", "study_app.cli.main"),
-                                          ("protocol", "analysis.stats"), ("protocol", "study_app.engine.messages")])
+@pytest.mark.parametrize("floor, above", [("pipeline/force", "pipeline.runtime.loop"),
+                                          ("pipeline/core", "protocol.study.trial"),
+                                          ("protocol/storage", "protocol.runner.session"),
+                                          ("analysis/stats", "analysis.report.html_parts"),
+                                          ("foundation", "analysis.reading.errors"),
+                                          ("study_app/gui", "study_app.cli.main")])
 def test_an_upward_import_is_reported(tmp_path: Path, floor: str, above: str) -> None:
     graph = _tree_with(tmp_path, {f"{floor}/_bad.py": f"def f():\n    import {above}\n"})
-    assert forbidden_imports(graph) == [
-        f"{floor}._bad imports {above} (line 2, inside a function) -- {floor} must not import {above.split('.')[0]}"
+    here, there = floor_of(floor.replace("/", ".")), floor_of(above)
+    assert here is not None and there is not None
+    assert [v for v in floor_violations(graph) if "._bad " in v] == [
+        f"{floor.replace('/', '.')}._bad imports {above} (line 2, inside a function) -- {here[1]} must not import "
+        f"up to {there[1]}"
+    ]
+
+
+def test_a_sibling_import_is_reported(tmp_path: Path) -> None:
+    graph = _tree_with(tmp_path, {"pipeline/sim/_bad.py": "from pipeline.settings import hardware\n"})
+    assert [v for v in floor_violations(graph) if "._bad " in v] == [
+        "pipeline.sim._bad imports pipeline.settings.hardware (line 1) -- pipeline.sim must not import across to "
+        "its sibling pipeline.settings"
     ]
 
 

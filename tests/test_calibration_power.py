@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.sim_study import TrialRow, summarise_study
+from analysis.planning.sim_study import TrialRow, summarise_study
 from bench.participant_calibration import (
     EFFECTS,
     format_power,

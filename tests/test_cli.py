@@ -129,7 +129,7 @@ def test_a_bad_realtime_switch_in_the_environment_is_one_line_and_nothing_runs(
 
 @pytest.mark.parametrize("value", ["0", "1", " 0 ", ""])
 def test_a_good_realtime_switch_is_taken(value: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    from pipeline.runtime.clock import _set_fifo, realtime_env_problem
+    from pipeline.core.clock import _set_fifo, realtime_env_problem
 
     monkeypatch.setenv("HAPTIC_STUDY_REALTIME", value)
     assert realtime_env_problem() is None
@@ -138,7 +138,7 @@ def test_a_good_realtime_switch_is_taken(value: str, monkeypatch: pytest.MonkeyP
 
 
 def test_the_worker_count_in_the_environment_is_used(monkeypatch: pytest.MonkeyPatch) -> None:
-    from analysis.parallel import default_workers
+    from foundation.parallel import default_workers
 
     monkeypatch.setenv("HAPTIC_STUDY_WORKERS", "3")
     assert default_workers() == 3

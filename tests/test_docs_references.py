@@ -14,7 +14,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Where citations are looked for: the product, its tests, scripts, docs and the project's own files.
-SCANNED = ("pipeline", "protocol", "analysis", "study_app", "bench", "tests", "scripts", "docs", "data", "firmware")
+SCANNED = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench", "tests", "scripts", "docs", "data",
+           "firmware")
 TOP_FILES = ("README.md", "pyproject.toml", "hardware.example.toml")
 SUFFIXES = {".py", ".md", ".toml", ".sh", ".sql", ".ino"}
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-import analysis.resources
-from analysis.resources import available_memory_bytes, memory_problem
+import foundation.resources
+from foundation.resources import available_memory_bytes, memory_problem
 from study_app.cli.main import main
 
 
@@ -18,7 +18,7 @@ def test_the_available_memory_is_read_from_the_machine():
 
 @pytest.fixture
 def small_machine(monkeypatch):
-    monkeypatch.setattr(analysis.resources, "available_memory_bytes", lambda: 512 << 20)  # 512 MiB available
+    monkeypatch.setattr(foundation.resources, "available_memory_bytes", lambda: 512 << 20)  # 512 MiB available
 
 
 def test_sim_refuses_a_run_longer_than_the_memory_holds(small_machine, capsys):
@@ -31,13 +31,14 @@ def test_sim_refuses_a_run_longer_than_the_memory_holds(small_machine, capsys):
 def test_power_refuses_studies_larger_than_the_memory_holds(tmp_path, capsys, monkeypatch):
     import numpy as np
 
-    from analysis.paired_pool import PairedPool
+    from analysis.planning.paired_pool import PairedPool
 
-    monkeypatch.setattr(analysis.resources, "available_memory_bytes", lambda: 8 << 20)  # 8 MiB available
+    monkeypatch.setattr(foundation.resources, "available_memory_bytes", lambda: 8 << 20)  # 8 MiB available
     pool = PairedPool(tuple(f"P{i}" for i in range(6)), ("overall",), ("success_rate", "tct_s", "rmse_n", "max_ae_n"),
                       np.zeros((1, 4, 6)), np.ones((1, 4, 6)), "a pilot")
-    monkeypatch.setattr("analysis.paired_pool.load_pool", lambda *a, **k: pool)  # (the pilot is stood in for too,
-    monkeypatch.setattr("analysis.inputs.check_databases", lambda paths, **k: list(map(str, paths)))  # and checked)
+    # (the pilot is stood in for too, and checked)
+    monkeypatch.setattr("analysis.planning.paired_pool.load_pool", lambda *a, **k: pool)
+    monkeypatch.setattr("analysis.reading.inputs.check_databases", lambda paths, **k: list(map(str, paths)))
     (tmp_path / "pilot.db").write_bytes(b"")
     code = main(["power", "--db", str(tmp_path / "pilot.db"), "--out", str(tmp_path / "p"), "--n", "10000",
                  "--resamples", "1000000"])

@@ -14,7 +14,7 @@ from pathlib import Path
 from protocol.storage import schema_path
 
 ROOT = Path(__file__).resolve().parents[1]
-FLOORS = ("pipeline", "protocol", "analysis", "bench", "study_app")
+FLOORS = ("foundation", "pipeline", "protocol", "analysis", "bench", "study_app")
 
 
 def _setuptools() -> dict:
@@ -35,7 +35,8 @@ def test_the_data_files_read_at_run_time_are_shipped() -> None:
     cfg = _setuptools()
     assert cfg["package-dir"]["protocol.storage.sql"] == "data"
     assert "schema.sql" in cfg["package-data"]["protocol.storage.sql"]
-    assert "*.toml" in cfg["package-data"]["protocol"] and (ROOT / "protocol" / "default.toml").is_file()
+    assert "*.toml" in cfg["package-data"]["protocol.study"]
+    assert (ROOT / "protocol" / "study" / "default.toml").is_file()
     # a checkout reads data/schema.sql (an installed wheel its copy in protocol/storage/sql/)
     assert schema_path() == ROOT / "data" / "schema.sql" and schema_path().is_file()
 

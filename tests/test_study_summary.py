@@ -7,8 +7,8 @@ from pathlib import Path
 
 from cli_subprocess import tiny_protocol
 
-from protocol.config import protocol_from_dict
 from protocol.storage import StudyReader
+from protocol.study.config import protocol_from_dict
 from study_app.cli.study_summary import format_study_summary
 from study_app.headless import run_study
 

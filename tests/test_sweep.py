@@ -13,10 +13,18 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from analysis.sim_study import TrialRow
-from analysis.sweep import CACHE_FILE, FILTER_NOTE, cell_key, read_cache, summary_frame, sweep_frame, t_interval
+from analysis.planning.sim_study import TrialRow
+from analysis.planning.sweep import (
+    CACHE_FILE,
+    FILTER_NOTE,
+    cell_key,
+    read_cache,
+    summary_frame,
+    sweep_frame,
+    t_interval,
+)
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
-from protocol.config import protocol_from_dict
+from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import sweep_run
 from study_app.headless.sim_trials import MODEL_VERSION
@@ -116,7 +124,7 @@ def _row(study: int, p: int, mode: str, ok: bool, rmse: float) -> TrialRow:
 
 
 def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
-    from analysis.sweep import SweepCell
+    from analysis.planning.sweep import SweepCell
 
     cells = [SweepCell({**paper_settings(), "filter_window": w}, k,
                        [_row(k, 1, "off", False, 1.0 + k), _row(k, 1, "on", True, 0.5 * w / 10)])

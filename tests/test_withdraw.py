@@ -24,11 +24,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from analysis.report import build_report
-from protocol.config import default_protocol
+from analysis.report.report import build_report
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, session_scope
 from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import footprint, withdrawals
+from protocol.study.config import default_protocol
 from study_app.cli.main import main
 from study_app.headless import run_study
 
@@ -386,9 +386,9 @@ def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path
     """A writer frees its chunks with ``secure_delete = FAST`` (their bytes stay in free pages); the withdrawal
     zeroes every free page before the file is rewritten, so no copy is left on the file's blocks that VACUUM drops.
     Also with the zeros in many small rows (as a free list over SQLite's 1e9-byte value limit is written)."""
-    from protocol.design import build_schedule, schedule_to_json
     from protocol.storage import withdrawal
     from protocol.storage.withdrawal import erase_participant
+    from protocol.study.design import build_schedule, schedule_to_json
 
     if blob_bytes is not None:
         monkeypatch.setattr(withdrawal, "_SCRUB_BLOB_BYTES", blob_bytes)
@@ -420,7 +420,7 @@ def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path
 _STOPPED = """
 import os, sys
 import protocol.storage.withdrawal as w
-from pipeline.runtime.platform_support import kill_hard
+from foundation.platform_support import kill_hard
 
 real = w.rewrite_file
 

@@ -1,7 +1,7 @@
 """A command killed with ``kill -9`` leaves no worker process behind (``PR_SET_PDEATHSIG``, by every pool).
 
 ``run``'s participant workers always died with it; ``report`` (and every other command with a pool of worker
-processes: the analysis's :func:`analysis.parallel.run_tasks`, ``sweep``'s and the calibration bench's pools)
+processes: the analysis's :func:`foundation.parallel.run_tasks`, ``sweep``'s and the calibration bench's pools)
 left its workers orphaned, each computing on with ~200 MB, for ever.  Each test starts the command in a
 subprocess, waits until it has worker processes, kills it with SIGKILL and polls (within a bound) until every
 worker it had is gone.
@@ -84,20 +84,20 @@ def _kill_and_watch(script: str, workers: int, env: dict[str, str] | None = None
 
 
 _POOLS = {
-    "analysis.parallel.run_tasks (report, bench)": """
+    "foundation.parallel.run_tasks (report, bench)": """
         import time
-        from analysis.parallel import run_tasks
+        from foundation.parallel import run_tasks
         run_tasks(time.sleep, [(600,), (600,)], workers=2)
     """,
     "worker_pool, fork (sweep)": """
         import time
-        from pipeline.runtime.platform_support import worker_pool
+        from foundation.platform_support import worker_pool
         with worker_pool(2) as pool:
             pool.map(time.sleep, [600, 600])
     """,
     "worker_pool, spawn (calibration bench)": """
         import multiprocessing as mp, time
-        from pipeline.runtime.platform_support import worker_pool
+        from foundation.platform_support import worker_pool
         if __name__ == "__main__":
             with worker_pool(2, mp.get_context("spawn")) as pool:
                 pool.map(time.sleep, [600, 600])
@@ -120,7 +120,7 @@ def test_kill_9_of_report_leaves_no_worker(tmp_path: Path) -> None:
     # the workers' task made slow (they inherit it: fork), so the report is still computing when it is killed
     script = textwrap.dedent(f"""
         import sys, time
-        import analysis.metrics as m
+        import analysis.reading.metrics as m
         real = m._chunk
         def _chunk(*args):
             time.sleep(600)
@@ -135,9 +135,9 @@ def test_kill_9_of_report_leaves_no_worker(tmp_path: Path) -> None:
 
 def test_every_pool_of_the_product_makes_its_workers_die_with_it() -> None:
     """A pool made anywhere else than in the two places that pass :func:`die_with` would orphan its workers."""
-    allowed = {("pipeline/runtime/platform_support.py", "Pool"), ("analysis/parallel.py", "ProcessPoolExecutor")}
+    allowed = {("foundation/platform_support.py", "Pool"), ("foundation/parallel.py", "ProcessPoolExecutor")}
     found = []
-    for folder in ("analysis", "bench", "pipeline", "protocol", "study_app"):
+    for folder in ("foundation", "analysis", "bench", "pipeline", "protocol", "study_app"):
         for path in (ROOT / folder).rglob("*.py"):
             rel = path.relative_to(ROOT).as_posix()
             for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):

@@ -33,8 +33,8 @@ import xml.etree.ElementTree as ET
 from collections import deque
 from dataclasses import dataclass
 
+from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError, WrenchSample
-from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = [
     "CMD_SET_SOFTWARE_BIAS",

@@ -42,6 +42,8 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol
 
+from foundation.platform_support import add_dll_directory
+from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError, HapticState
 from pipeline.devices.touch_output import (
     DEFAULT_COMMAND_TIMEOUT_S,
@@ -51,8 +53,6 @@ from pipeline.devices.touch_output import (
     TouchSpec,
 )
 from pipeline.force.frames import Vec3
-from pipeline.runtime.clock import Clock, MonotonicClock
-from pipeline.runtime.platform_support import add_dll_directory
 
 __all__ = [
     "HD_DEVICE_FAULT",
@@ -182,7 +182,7 @@ def load_pyopenhaptics(dll_dir: str | None = None) -> Any:
     """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot.
 
     ``dll_dir`` (``[haptic] dll_dir``) is added to Windows' DLL search path
-    first (:func:`pipeline.runtime.platform_support.add_dll_directory`; nothing
+    first (:func:`foundation.platform_support.add_dll_directory`; nothing
     elsewhere): pyOpenHaptics loads ``HD.dll`` by name as it is imported, and
     Windows does not look on ``PATH`` for it.
     """

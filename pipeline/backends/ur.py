@@ -30,9 +30,9 @@ import threading
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError, PoseSample
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, mat_mul, mat_vec, rotvec_to_matrix
-from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = [
     "RTDE_PORT",

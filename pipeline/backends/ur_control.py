@@ -28,9 +28,9 @@ from collections.abc import Callable
 from typing import Any
 
 from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, require_reachable, rtde_interface
+from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.frames import Mat3, Vec3, matrix_to_rotvec
-from pipeline.runtime.clock import Clock, MonotonicClock
 
 __all__ = ["UrRtdeServo"]
 

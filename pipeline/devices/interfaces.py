@@ -7,7 +7,7 @@ one-interface-many-backends).  All reads are non-blocking "latest value"
 reads: a device that talks to hardware does its I/O in its own thread or
 servo callback and hands the newest sample over through a single slot.
 
-Timestamps ``t_ns`` are on the loop's clock (:mod:`pipeline.runtime.clock`).
+Timestamps ``t_ns`` are on the loop's clock (:mod:`pipeline.core.clock`).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The devices the haptic loop owns (:class:`pipeline.runtime.loop.HapticLoop`), real or simulated, as one interface.
 
-:class:`pipeline.devices.real_rig.RealRig` and :class:`pipeline.sim.rig.SimRig`
+:class:`pipeline.assembly.real_rig.RealRig` and :class:`pipeline.sim.rig.SimRig`
 satisfy it.
 """
 

@@ -26,13 +26,13 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.core import tick_record
 from pipeline.force.bias_refinement import RlsBias
 from pipeline.force.filters import MovingAverage3, exact_sum
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, check_rotation
 from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
 from pipeline.force.safety import SafetyConfig, SafetyGovernor
 from pipeline.force.scaling import _SATURATED_T, _SERIES_T, scale_components
-from pipeline.runtime import tick_record
 
 _HYPOT = math.hypot
 _TANH = math.tanh
@@ -102,7 +102,7 @@ class FrameworkConfig:
 
 
 #: Names of the values :meth:`HapticFramework.step` returns, in order (defined with the tick's record,
-#: :data:`pipeline.runtime.tick_record.STEP_FIELDS`; indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14,
+#: :data:`pipeline.core.tick_record.STEP_FIELDS`; indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14,
 #: scaled 15–17, render 18–20).
 STEP_FIELDS = tick_record.STEP_FIELDS
 

@@ -6,7 +6,7 @@ arm and runs the same tick body, :meth:`ArmChannel.tick`, for each in the same
 tick: the arm's own F/T sample and robot pose, its watchdog (faults latched per
 arm), its :class:`pipeline.force.framework.HapticFramework` (safety, slew and
 ramp-in per arm), its haptic device's command, and one record in the arm's own
-ring (the tick-record dtype of :mod:`pipeline.runtime.tick_record`).
+ring (the tick-record dtype of :mod:`pipeline.core.tick_record`).
 
 What one arm's fault does to the others is the loop's policy
 (:data:`pipeline.settings.hardware.FAULT_POLICIES`): with ``both`` the other
@@ -20,11 +20,11 @@ import math
 from collections import deque
 from typing import TYPE_CHECKING, Protocol
 
+from pipeline.core.clock import Clock
 from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
 from pipeline.devices.rig import RigArm
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
 from pipeline.force.framework import HapticFramework
-from pipeline.runtime.clock import Clock
 from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.runtime.watchdog import WatchdogConfig, derating_detail, derating_ended_detail, fault_detail
 
@@ -148,7 +148,7 @@ class ArmChannel:
         enabled = haptic_on and not latched
         (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
          haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.runtime.tick_record.STEP_FIELDS, by name
+         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.core.tick_record.STEP_FIELDS, by name
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         self.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
@@ -158,7 +158,7 @@ class ArmChannel:
         tip_x_m, tip_y_m, tip_z_m = pose.position_m
         stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
         t_ns = now - loop.t0_ns
-        # one record, in pipeline.runtime.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
+        # one record, in pipeline.core.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
         rec = (
             loop.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
             1 if haptic_on else 0, loop.trial_index, loop.phase, fw.safety.gain, render_fx, render_fy, render_fz,

@@ -3,7 +3,7 @@
 The 1 kHz loop shares its process -- and the GIL -- with the engine's other
 threads (the command receiver; in the study engine also the driver / session
 runner, recorder and event feeder).
-:class:`LateTickTracer` wraps the loop's :class:`pipeline.runtime.clock.MonotonicClock`
+:class:`LateTickTracer` wraps the loop's :class:`pipeline.core.clock.MonotonicClock`
 (the loop's only contact with time, so :mod:`pipeline.runtime.loop` is untouched) and,
 at the start of every tick, snapshots from the loop thread:
 
@@ -49,8 +49,8 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.runtime.clock import MonotonicClock
-from pipeline.runtime.platform_support import gil_keeping_pread, open_schedstat, thread_ids
+from foundation.platform_support import gil_keeping_pread, open_schedstat, thread_ids
+from pipeline.core.clock import MonotonicClock
 
 __all__ = ["LateTickTracer"]
 
@@ -101,7 +101,7 @@ class LatePeriod:
 
 
 class LateTickTracer:
-    """A :class:`pipeline.runtime.clock.Clock` that times the loop like ``MonotonicClock`` and explains late periods.
+    """A :class:`pipeline.core.clock.Clock` that times the loop like ``MonotonicClock`` and explains late periods.
 
     Parameters
     ----------

@@ -56,11 +56,11 @@ from collections import deque
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
+from pipeline.core.clock import Clock, prepare_realtime_thread
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.rig import Rig, rig_arms
 from pipeline.force.framework import HapticFramework
 from pipeline.runtime.arm_channel import RIG_WIDE_FAULTS, ArmChannel, own_faults
-from pipeline.runtime.clock import Clock, prepare_realtime_thread
 from pipeline.runtime.loop_messages import (
     RECORD_FIELDS,
     AllowBiasRefinement,
@@ -106,7 +106,7 @@ class HapticLoop(PacedTicks):
     framework
         The first arm's force path (calibration, filter, rotations, scaling, safety).
     clock
-        Time source; :class:`pipeline.runtime.clock.VirtualClock` for deterministic runs.
+        Time source; :class:`pipeline.core.clock.VirtualClock` for deterministic runs.
     ring
         Where the first arm's records go (anything with ``write(values)``), or None.
     period_ns

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, NamedTuple
 
-from pipeline.runtime import tick_record
+from pipeline.core import tick_record
 
 if TYPE_CHECKING:
     from pipeline.force.payload_compensator import PayloadCalibration
@@ -33,7 +33,7 @@ __all__ = [
     "StopRecording",
 ]
 
-#: Fields of one loop record, in order (defined with their types in :mod:`pipeline.runtime.tick_record`).
+#: Fields of one loop record, in order (defined with their types in :mod:`pipeline.core.tick_record`).
 RECORD_FIELDS = tick_record.RECORD_FIELDS
 
 

@@ -4,7 +4,7 @@
 (the loop decides what a tick does).  Deadlines are absolute (``t0 + k·period``), so lateness never accumulates;
 after a stall longer than one period the missed slots are counted (:attr:`LoopStats.missed_slots
 <pipeline.runtime.loop_stats.LoopStats.missed_slots>`) and skipped rather than replayed in a burst.  On a
-:class:`pipeline.runtime.clock.VirtualClock` the sleeps advance the clock, so the same code runs a deterministic
+:class:`pipeline.core.clock.VirtualClock` the sleeps advance the clock, so the same code runs a deterministic
 simulation as fast as it computes.
 """
 
@@ -13,7 +13,7 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-from pipeline.runtime.clock import Clock
+from pipeline.core.clock import Clock
 from pipeline.runtime.loop_stats import LoopStats
 
 __all__ = ["PacedTicks"]
@@ -62,7 +62,7 @@ class PacedTicks:
         between_ticks
             Called right after each tick, when the rest of the period is
             free: housekeeping that must not land mid-tick, such as
-            :func:`pipeline.runtime.clock.collect_garbage`.  Must be short (well under
+            :func:`pipeline.core.clock.collect_garbage`.  Must be short (well under
             a period); its exceptions propagate.
         """
         stop = stop or self._stop

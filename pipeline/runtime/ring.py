@@ -1,7 +1,7 @@
 """A preallocated ring buffer of loop records that other processes read without blocking the writer.
 
 One writer (the 1 kHz loop) appends fixed-size records of 8-byte fields (``int64`` or ``float64``; the
-loop's are :data:`pipeline.runtime.tick_record.TICK_DTYPE`);
+loop's are :data:`pipeline.core.tick_record.TICK_DTYPE`);
 any number of readers, in this or another process, copy what is new.  No
 lock is shared: the writer stores the record first and only then publishes
 it by bumping the 64-bit write counter; a reader copies a range and then
@@ -39,10 +39,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.runtime.platform_support import attach_segment, create_segment, free_orphaned_segment
+from foundation.platform_support import attach_segment, create_segment, free_orphaned_segment
 
 if TYPE_CHECKING:
-    from pipeline.runtime.platform_support import SharedSegment
+    from foundation.platform_support import SharedSegment
 
 __all__ = ["RingBuffer", "RingReadResult"]
 
@@ -127,7 +127,7 @@ class RingBuffer:
         """Allocate a ring for ``capacity`` records of ``fields``.
 
         ``fields``: a structured type of ``int64`` and ``float64`` fields (the loop's
-        :data:`pipeline.runtime.tick_record.TICK_DTYPE`), or names (all ``float64``).
+        :data:`pipeline.core.tick_record.TICK_DTYPE`), or names (all ``float64``).
         ``shared=False`` keeps it in private memory (headless runs and tests
         that need no second process).
         """

@@ -16,7 +16,7 @@ stops the arm when no target has come for 50 ms (:mod:`pipeline.backends.ur_cont
 
 from __future__ import annotations
 
-from pipeline.runtime.clock import Clock, MonotonicClock
+from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import LoopEvent
 

@@ -2,10 +2,10 @@
 
 :func:`load_hardware` checks every field and raises one :class:`HardwareError`
 naming the field, the offending value and what is allowed (the style of
-``protocol/config.py``); nothing is opened with a bad file.  The documented
+``protocol/study/config.py``); nothing is opened with a bad file.  The documented
 example is ``hardware.example.toml`` at the repository root.
 
-The settings only describe the rig; :mod:`pipeline.devices.real_rig` opens the
+The settings only describe the rig; :mod:`pipeline.assembly.real_rig` opens the
 devices they name (so a new device adds its settings here and its opening there).
 """
 

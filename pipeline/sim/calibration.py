@@ -11,9 +11,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 
 from pipeline.commissioning.payload_identification import CalibrationPose, identify_payload, recommended_pose_set
+from pipeline.core.clock import Clock
 from pipeline.force.frames import Mat3, mat_mul, transpose
 from pipeline.force.payload_compensator import PayloadCalibration
-from pipeline.runtime.clock import Clock
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN

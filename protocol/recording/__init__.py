@@ -35,6 +35,11 @@ segment's open block reads back from its chunks.
 **Integrity.**  Each block carries the CRC-32 of its bytes (schema version 4);
 every reader verifies it, and a damaged block is named in one line -- session,
 time range, trials -- never a decoding traceback (:mod:`protocol.recording.integrity`).
+
+**Floors.**  This package is the format: encoding, decoding and a block's own checks, below the database that
+stores it (:mod:`protocol.storage`).  Reading a session's records back (:mod:`protocol.storage.recordings`) and
+scanning a database for damage (:mod:`protocol.storage.damage`) go through the database's one reader, so they
+are the storage floor's.
 """
 
 from protocol.recording.codec import (
@@ -52,12 +57,9 @@ from protocol.recording.codec import (
     join_chunks,
     kept_records,
 )
-from protocol.recording.integrity import BlockDamage, RecordingDamaged, recording_damage
-from protocol.recording.reading import SegmentData, marked_records, read_segment, read_ticks, segments_of
+from protocol.recording.integrity import BlockDamage, RecordingDamaged
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Chunk", "Column",
-    "RecordingDamaged", "SegmentData", "decode_block", "decode_columns", "encode_block", "join_blocks", "join_chunks",
-    "kept_records",
-    "marked_records", "read_segment", "read_ticks", "recording_damage", "segments_of",
+    "RecordingDamaged", "decode_block", "decode_columns", "encode_block", "join_blocks", "join_chunks", "kept_records",
 ]

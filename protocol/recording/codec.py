@@ -18,7 +18,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
+from pipeline.core.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE
 from protocol.recording.table_encode import encode_table
 
 __all__ = [
@@ -53,7 +53,7 @@ class Column:
 
 
 #: What a block keeps of each record, in order: the kept fields of the tick's record
-#: (:data:`pipeline.runtime.tick_record.KEPT_FIELDS`, where a field's codec and ``missing`` value are defined).  A
+#: (:data:`pipeline.core.tick_record.KEPT_FIELDS`, where a field's codec and ``missing`` value are defined).  A
 #: column
 #: added later goes at the end, with its ``missing`` value: a block or chunk written before it then reads as the
 #: columns before it plus that value.
@@ -76,7 +76,7 @@ _INT_CODECS = ("int", "small")
 def kept_records(records: np.ndarray | Mapping[str, np.ndarray]) -> np.ndarray:
     """The kept part of loop records: a structured array of :data:`COLUMNS`' fields, each with the record's type.
 
-    ``records``: rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE` (the ring's), whose kept fields are one prefix
+    ``records``: rows of :data:`pipeline.core.tick_record.TICK_DTYPE` (the ring's), whose kept fields are one prefix
     of each row's bytes, taken in one copy; rows of the kept type itself, returned as they are; or anything
     else with the columns by name (a structured array, a mapping of columns), copied field by field.
 
@@ -111,7 +111,7 @@ def _kept_dtype() -> np.dtype:
 def _record_bytes(records: np.ndarray | Mapping[str, np.ndarray], dtype: np.dtype) -> npt.NDArray[np.uint8]:
     """The kept part of records as bytes, one row a record (``dtype.itemsize`` bytes): a view where it can be.
 
-    Loop records (:data:`pipeline.runtime.tick_record.TICK_DTYPE`) and kept records lay their kept fields out as
+    Loop records (:data:`pipeline.core.tick_record.TICK_DTYPE`) and kept records lay their kept fields out as
     ``dtype`` does, so their bytes are viewed, not converted (NumPy's structured copies cost ~2 µs a record);
     anything else goes through :func:`kept_records`.
     """

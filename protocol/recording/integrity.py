@@ -11,34 +11,28 @@ can still fail to decode), is **damaged**, and the reader raises
 of damaged blocks naming the session, the session-time range and the trials it
 touches (:meth:`BlockDamage.describe`).
 
-:func:`recording_damage` scans a whole database or session for damage without
-reading the records (``haptic-study check``, the report, and a resume, which
-refuses to append to a damaged session).
+What a block's checksum and decoding say is here, pure; scanning a database for damage, which needs its
+reader, is :mod:`protocol.storage.damage` (``haptic-study check``, the report, and a resume, which refuses to
+append to a damaged session).
 """
 
 from __future__ import annotations
 
 import zlib
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from protocol.recording.codec import COLUMNS, BlockRow, decode_block, decode_columns
-
-if TYPE_CHECKING:
-    from protocol.storage.reader import StudyReader
 
 __all__ = [
     "BlockDamage",
     "BlockRow",
     "RecordingDamaged",
     "block_problem",
-    "block_rows",
-    "describe_damage",
-    "reader_of",
-    "recording_damage",
+    "columns_problem",
+    "decode_failure",
 ]
 
 
@@ -84,24 +78,6 @@ class RecordingDamaged(ValueError):
     def __init__(self, damage: Sequence[BlockDamage]) -> None:
         self.damage = list(damage)
         super().__init__("; ".join(f"recording damaged: {d.describe()}" for d in self.damage))
-
-
-def reader_of(source: Any) -> StudyReader:
-    """A :class:`protocol.storage.StudyReader` over ``source`` (a reader, a ``StudyDatabase`` or a connection)."""
-    from protocol.storage.reader import StudyReader  # (protocol.storage's recorder imports this package)
-
-    return StudyReader.over(source)
-
-
-def block_rows(source: Any, session_id: int | None = None, segment: int | None = None,
-               ticks: tuple[int, int] | None = None, arm: str = "") -> Iterator[BlockRow]:
-    """``session_blocks`` rows (of a session, a segment, those overlapping ticks ``(first, last)``), by session,
-    segment and block; ``source`` is a reader, a ``StudyDatabase`` or a connection (:func:`reader_of`).
-
-    A version-3 file read as it is has no ``crc32`` (its blocks read as not verifiable); a column a table
-    lacks reads as NULL (NaN times).  ``arm``: another arm's blocks than the task arm's.
-    """
-    return reader_of(source).blocks(session_id, segment, ticks, arm)  # (its rows go straight to the caller)
 
 
 def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: bool = False) -> str:
@@ -154,38 +130,3 @@ def columns_problem(cols: Mapping[str, np.ndarray], names: Iterable[str]) -> str
     if len({len(cols[n]) for n in names}) > 1:
         return "decodes to columns of different lengths (its header changed)"
     return ""
-
-
-def _trials_touched(source: Any, session_id: int, segment: int, first_tick: int, last_tick: int,
-                   ) -> tuple[int, ...]:
-    return tuple(i + 1 for i in reader_of(source).trials_touching(session_id, segment, first_tick, last_tick))
-
-
-def describe_damage(conn: Any, bad: Sequence[tuple[BlockRow, str]]) -> list[BlockDamage]:
-    """Damaged blocks (each with what is wrong), merged into runs of consecutive blocks, with the trials they touch."""
-    runs: list[BlockDamage] = []
-    for row, why in bad:
-        last = runs[-1] if runs else None
-        if (last is not None and (last.session_id, last.segment) == (row.session_id, row.segment)
-                and last.last_block + 1 == row.block):
-            runs[-1] = replace(last, last_block=row.block, last_tick=row.last_tick, t_last_s=row.t_last_s)
-        else:
-            runs.append(BlockDamage(row.session_id, row.segment, row.block, row.block, row.first_tick, row.last_tick,
-                                    row.t_first_s, row.t_last_s, why))
-    return [replace(d, trials=_trials_touched(conn, d.session_id, d.segment, d.first_tick, d.last_tick)) for d in runs]
-
-
-def recording_damage(conn: Any, session_id: int | None = None, *, columns: Iterable[str] | None = (),
-                     whole: bool = False) -> list[BlockDamage]:
-    """The damaged blocks of a database's recordings (or one session's), merged into runs.
-
-    Every block's checksum is verified; a block without one (written before version 4) is decoded as
-    ``columns`` say (see :func:`block_problem`), and with ``whole`` every block is decoded in full.
-    A database without recordings (version 1 or 2) has none.
-    """
-    reader = reader_of(conn)
-    if not reader.has_recordings():
-        return []
-    cols = None if columns is None else tuple(columns)
-    bad = [(r, why) for r in block_rows(reader, session_id) if (why := block_problem(r, cols, whole=whole))]
-    return describe_damage(reader, bad)

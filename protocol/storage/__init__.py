@@ -25,7 +25,6 @@ What protects the record:
   SQLite creates with the database's permissions) are readable by their owner only.
 """
 
-from protocol.records import trial_id_of
 from protocol.storage.common import EmptyDatabase, LeaseHeld, StorageError
 from protocol.storage.database import CODE_PATTERN, SessionInfo, StudyDatabase, validate_code
 from protocol.storage.leases import LEASE_HEARTBEAT_S, LEASE_STALE_S, new_owner_token, process_identity, session_scope
@@ -39,6 +38,7 @@ from protocol.storage.schema import (
     connect_readonly,
     schema_path,
 )
+from protocol.study.records import trial_id_of
 
 __all__ = [
     "ABORT_CAUSES",

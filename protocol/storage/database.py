@@ -209,7 +209,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         transaction (see :meth:`acquire_lease`), so no other process can write
         to it from its first moment; with ``start_event`` its ``session_start``
         event (at session time 0) is stored in it too.  ``rules`` (the study's
-        rules, :mod:`protocol.study_rules`) is called inside the same
+        rules, :mod:`protocol.runner.study_rules`) is called inside the same
         transaction, before the insert, so no other writer can change what it
         checked: it raises to refuse the session, or returns the events
         ``(kind, detail)`` (a deviation) to store with it at session time 0.
@@ -287,7 +287,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             self.conn.executemany(_INSERT_SAMPLES, rows.tolist() if isinstance(rows, np.ndarray) else rows)
 
     def insert_trial(self, row: Mapping[str, Any]) -> None:
-        """Insert one ``trials`` row (:meth:`protocol.records.TrialRecord.to_row`; atomic: its own statement)."""
+        """Insert one ``trials`` row (:meth:`protocol.study.records.TrialRecord.to_row`; atomic: its own statement)."""
         cols = ", ".join(row)
         self.conn.execute(f"INSERT INTO trials ({cols}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
 

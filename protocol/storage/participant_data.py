@@ -4,7 +4,7 @@
 them -- their sessions, trials, events, recorded runs (``recordings``), the recorded blocks' descriptions (the
 blocks' bytes are decoded by :mod:`protocol.recording`), the ``samples`` rows of older versions and the leases of
 their sessions -- as plain column names and value tuples.  ``haptic-study export participant`` writes them out
-(:mod:`analysis.participant_export`); ``withdraw`` removes the same rows (:mod:`protocol.storage.withdrawal`).
+(:mod:`analysis.export.participant_export`); ``withdraw`` removes the same rows (:mod:`protocol.storage.withdrawal`).
 """
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import sqlite3
 from dataclasses import dataclass
 from typing import Any
 
-from protocol.records import trial_id_of
 from protocol.storage.common import has_table
 from protocol.storage.leases import session_scope
+from protocol.study.records import trial_id_of
 
 __all__ = ["ParticipantRows", "Table", "participant_rows"]
 

@@ -27,11 +27,11 @@ from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.recording.codec import BlockRow, join_chunks
-from protocol.records import TrialRecord
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
 from protocol.storage.withdrawal import Withdrawal, withdrawal_of, withdrawals
+from protocol.study.records import TrialRecord
 
 __all__ = ["Rows", "StudyReader"]
 

@@ -20,11 +20,11 @@ from typing import Any
 
 import numpy as np
 
-from protocol.clock import SessionClock
 from protocol.recording import BlockBuilder
-from protocol.records import TrialRecord
 from protocol.storage.common import StorageError
 from protocol.storage.database import StudyDatabase
+from protocol.study.clock import SessionClock
+from protocol.study.records import TrialRecord
 
 __all__ = ["Call", "Event", "Group", "Message", "Recorder", "Records", "Samples", "Segment", "Trial"]
 
@@ -169,7 +169,7 @@ class Recorder:
 
     def records(self, session_id: int, segment: int, records: np.ndarray,
                 log: Sequence[tuple[int, str, Any]] = (), arm: str = "") -> None:
-        """Queue loop records of a segment (rows of :data:`pipeline.runtime.tick_record.TICK_DTYPE`, or their kept part,
+        """Queue loop records of a segment (rows of :data:`pipeline.core.tick_record.TICK_DTYPE`, or their kept part,
         :func:`protocol.recording.kept_records`) and the replay log of their ticks.  The rows must not change
         after they are queued (the ring's copies do not).
 

@@ -20,9 +20,9 @@ import sqlite3
 from dataclasses import fields
 from pathlib import Path
 
-from pipeline.runtime.platform_support import may_write, owner_only
-from protocol.records import AbortCause, LoopHealth
+from foundation.platform_support import may_write, owner_only
 from protocol.storage.common import EmptyDatabase, StorageError
+from protocol.study.records import AbortCause, LoopHealth
 
 __all__ = ["ABORT_CAUSES", "HEALTH_COLUMNS", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SchemaFile", "connect_readonly",
            "schema_path"]

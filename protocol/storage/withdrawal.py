@@ -24,10 +24,10 @@ from dataclasses import astuple, dataclass, fields
 from pathlib import Path
 from typing import Protocol
 
-from protocol.labels import plural
-from protocol.records import trial_id_of
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import session_scope
+from protocol.study.labels import plural
+from protocol.study.records import trial_id_of
 
 __all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
            "rewrite_pending", "withdrawal_of", "withdrawals"]

@@ -191,7 +191,7 @@ def _sim_step(args: argparse.Namespace, sim: Any, note: str) -> dict[str, Any]:
                             "\nAccepted (simulated rig: not saved).")
         return out
     if args.step == "payload":
-        from pipeline.runtime.clock import VirtualClock
+        from pipeline.core.clock import VirtualClock
         from pipeline.sim.calibration import measure_poses
 
         name = args.poses or "recommended"
@@ -200,7 +200,7 @@ def _sim_step(args: argparse.Namespace, sim: Any, note: str) -> dict[str, Any]:
         if payload.accepted:
             out["text"] += "\nAccepted (simulated rig: not saved)."
         return out
-    from pipeline.runtime.engine import EngineConfig, build_sim_engine
+    from pipeline.assembly.engine import EngineConfig, build_sim_engine
     from pipeline.sim.commissioning import push_axes
 
     eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", haptics_on=False, refine_bias=False, sim=sim))
@@ -274,8 +274,8 @@ def _frames_out(r: FramesResult, head: str) -> dict[str, Any]:
 def _real(args: argparse.Namespace, ask: Callable[[str], str]) -> dict[str, Any]:
     from pipeline.commissioning.rig_calibration import CalibrationFileError, RigCalibrationFile
     from pipeline.commissioning.steps import chain_refusal
+    from pipeline.core.clock import MonotonicClock
     from pipeline.devices.interfaces import DeviceError
-    from pipeline.runtime.clock import MonotonicClock
     from pipeline.settings.hardware import HardwareError, load_hardware
 
     try:
@@ -333,7 +333,7 @@ def _say(text: str) -> None:
 
 def _sensor_and_robot(hw: Any, clock: Any) -> tuple[Any, Any]:
     """Open the Net F/T and the robot (read only); the sensor is closed again if the robot cannot be opened."""
-    from pipeline.devices.real_rig import open_robot, open_sensor
+    from pipeline.assembly.real_rig import open_robot, open_sensor
 
     sensor = open_sensor(hw.sensor, clock)
     try:
@@ -355,9 +355,9 @@ def _watch_tcp(robot: Any, seconds: float) -> tuple[Any, list[Any], Any]:
 
 
 def _real_tcp(hw: Any, clock: Any, ask: Callable[[str], str], note: str) -> TcpResult:
+    from pipeline.assembly.real_rig import open_robot
     from pipeline.commissioning.steps import record_pivot, tcp_step
     from pipeline.commissioning.tcp import MIN_PIVOT_POSES, MIN_SPREAD_DEG, PivotPose
-    from pipeline.devices.real_rig import open_robot
     from pipeline.force.frames import matrix_to_rotvec
 
     robot = open_robot(hw.robot, clock)  # the pendant's TCP: poses are turned back into flange poses

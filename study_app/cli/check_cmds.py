@@ -2,7 +2,7 @@
 
 SQLite's integrity check, every recorded block's checksum and decoding, every
 trial against the recording, and every experiment session's trials against its
-design (:mod:`protocol.audit`).  Read only: the file is never changed.  Exit 0
+design (:mod:`protocol.storage.audit`).  Read only: the file is never changed.  Exit 0
 when clean, 1 when problems were found, 2 when the input cannot be checked (no
 such file, not a study database).
 """
@@ -32,9 +32,9 @@ def add_check_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def format_audit(a: object) -> str:
-    """The findings in words (an :class:`protocol.audit.Audit`)."""
-    from protocol.audit import Audit
-    from protocol.labels import plural
+    """The findings in words (an :class:`protocol.storage.audit.Audit`)."""
+    from protocol.storage.audit import Audit
+    from protocol.study.labels import plural
 
     assert isinstance(a, Audit)
     lines = [(f"{a.path}: schema version {a.schema_version}, {plural(a.sessions, 'session')} "
@@ -60,9 +60,9 @@ def format_audit(a: object) -> str:
 
 def cmd_check(args: argparse.Namespace) -> int:
     """Run ``haptic-study check``; errors raise :class:`CliError`."""
-    from protocol.audit import audit_database
-    from protocol.labels import plural
     from protocol.storage import StorageError, StudyDatabase
+    from protocol.storage.audit import audit_database
+    from protocol.study.labels import plural
     from study_app.cli.progress import ProgressBar
 
     try:

@@ -1,7 +1,7 @@
 """``haptic-study export participant``: everything stored about one participant, for a subject-access request.
 
 Registered beside ``export samples`` (:mod:`study_app.cli.replay_cmds`); the export itself is
-:mod:`analysis.participant_export`, written under the output policy of :mod:`analysis.outdir` (a new folder, or
+:mod:`analysis.export.participant_export`, written under the output policy of :mod:`foundation.outdir` (a new folder, or
 one this command wrote before with ``--force``; nothing else in it replaced; owner-only files).
 """
 
@@ -10,7 +10,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from protocol.labels import plural
+from foundation.errors import InputRefused
+from protocol.study.labels import plural
 from study_app.cli.argtypes import add_command
 from study_app.cli.error import CliError
 
@@ -42,14 +43,13 @@ def add_export_participant_parser(esub: argparse._SubParsersAction) -> None:
 
 def cmd_export_participant(args: argparse.Namespace) -> int:
     """Run ``haptic-study export participant``; errors raise :class:`CliError`."""
-    from analysis.errors import AnalysisError
-    from analysis.outdir import check_output_folder
-    from analysis.participant_export import PARTICIPANT_MARKER, participant_export, write_participant_export
+    from analysis.export.participant_export import PARTICIPANT_MARKER, participant_export, write_participant_export
+    from foundation.outdir import check_output_folder
 
     def policy(call):
         try:
             return call()
-        except AnalysisError as exc:
+        except InputRefused as exc:
             raise CliError(str(exc), getattr(exc, "status", 2)) from None
 
     policy(lambda: check_output_folder(args.out, command="export participant", marker=PARTICIPANT_MARKER,

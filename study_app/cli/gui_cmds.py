@@ -11,6 +11,7 @@ import os
 from pathlib import Path
 from typing import Any
 
+from foundation.errors import InputRefused
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from study_app.cli.argtypes import add_command, arm_names, real_number, setting
 from study_app.cli.error import CliError
@@ -18,7 +19,7 @@ from study_app.guide_paths import guide, hardware_template
 
 __all__ = ["SCREENSHOT_MARKER", "add_gui_parser", "cmd_gui"]
 
-#: The marker of a screenshot folder (analysis.outdir): the PNGs ``gui --screenshot`` wrote, with their SHA-256.
+#: The marker of a screenshot folder (foundation.outdir): the PNGs ``gui --screenshot`` wrote, with their SHA-256.
 SCREENSHOT_MARKER = ".haptic-study-screenshots"
 
 
@@ -104,9 +105,8 @@ def cmd_gui(args: argparse.Namespace) -> int:
 
 
 def _screenshots(args: argparse.Namespace) -> int:
-    """``gui --screenshot DIR``: the tour's PNGs, written under the output policy (:mod:`analysis.outdir`)."""
-    from analysis.load import AnalysisError
-    from analysis.outdir import check_output_folder, write_output_folder
+    """``gui --screenshot DIR``: the tour's PNGs, written under the output policy (:mod:`foundation.outdir`)."""
+    from foundation.outdir import check_output_folder, write_output_folder
 
     folder: dict[str, Any] = {"command": "gui --screenshot", "marker": SCREENSHOT_MARKER, "force": args.force,
                               "option": "--screenshot",
@@ -125,7 +125,7 @@ def _screenshots(args: argparse.Namespace) -> int:
     try:
         check_output_folder(args.screenshot, **folder)  # before the window opens
         files = write_output_folder(args.screenshot, tour, **folder)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     except RuntimeError as exc:
         raise CliError(str(exc), 1) from None

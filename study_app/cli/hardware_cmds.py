@@ -83,7 +83,7 @@ def check_hardware(path: str, arm: str | None = None) -> tuple[list[tuple[str, b
     CliError
         ``arm`` names no arm of the file.
     """
-    from pipeline.runtime.clock import MonotonicClock
+    from pipeline.core.clock import MonotonicClock
     from pipeline.settings.hardware import HardwareError, load_hardware
     from study_app.cli.calibrate_cmds import chosen_arm
 
@@ -104,8 +104,8 @@ def check_hardware(path: str, arm: str | None = None) -> tuple[list[tuple[str, b
 def _check_arm(hw: Any, clock: Any, rows: list[tuple[str, bool, str]], prefix: str) -> None:
     """Open, describe and close each device of the arm ``hw`` (:class:`pipeline.settings.hardware.ArmSettings`),
     a row each, named after ``prefix``."""
+    from pipeline.assembly.real_rig import open_haptic, open_jaw, open_robot, open_sensor
     from pipeline.devices.interfaces import DeviceError
-    from pipeline.devices.real_rig import open_haptic, open_jaw, open_robot, open_sensor
 
     def attempt(name: str, opener: Any, describe: Any) -> None:
         name = prefix + name

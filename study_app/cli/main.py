@@ -28,8 +28,8 @@ from study_app.cli.replay_cmds import add_replay_parsers
 from study_app.cli.report_cmds import add_report_parsers
 from study_app.cli.run_cmds import add_run_parser, add_sessions_parser, add_sim_parser
 from study_app.cli.sweep_cmds import add_sweep_parser
-from study_app.cli.version_info import version_text
 from study_app.cli.withdraw_cmds import add_withdraw_parser
+from study_app.version_info import version_text
 
 __all__ = [
     "COMMANDS_GROUP",
@@ -116,9 +116,9 @@ _INPUT_FILES = {"db": "database", "protocol": "protocol", "hardware": "hardware"
 def _refuse_special_inputs(args: argparse.Namespace) -> None:
     """An input path that is a FIFO, a socket or a device, or a bad worker count or real-time switch in the
     environment: one line (a missing file is each command's to say)."""
-    from analysis.oserrors import kind_of
-    from analysis.parallel import workers_env_problem
-    from pipeline.runtime.clock import realtime_env_problem
+    from foundation.oserrors import kind_of
+    from foundation.parallel import workers_env_problem
+    from pipeline.core.clock import realtime_env_problem
 
     for problem in (workers_env_problem(), realtime_env_problem()):
         if problem is not None:
@@ -146,7 +146,7 @@ def _machine_failure(args: argparse.Namespace, exc: BaseException) -> str | None
     import errno
     import sqlite3
 
-    from analysis.oserrors import os_error_line
+    from foundation.oserrors import os_error_line
 
     db = getattr(args, "db", None)
     db = db[0] if isinstance(db, list) and len(db) == 1 else db

@@ -12,17 +12,18 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
+from foundation.errors import InputRefused
 from study_app.cli.error import CliError
 
 __all__ = ["add_power_parser", "cmd_power", "whole_option"]
 
 _N_MAX = 10_000
-#: analysis.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
+#: analysis.planning.power.DEFAULT_N_VALUES, written out so that building the parser does not import the analysis
 DEFAULT_N_TEXT = "6,8,10,12,16,20,30"
 _POOL_DEFAULT = 100
 #: Resampled participants (studies × n) from which on ``power`` shows a progress bar: ~10 s of work and more.
 _BAR_DRAWS = 5_000_000
-#: The marker of a power output folder (analysis.outdir): the files power wrote there, with their SHA-256.
+#: The marker of a power output folder (foundation.outdir): the files power wrote there, with their SHA-256.
 POWER_MARKER = ".haptic-study-power"
 
 
@@ -160,7 +161,7 @@ class _Bars:
 
 def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[str], Any, str]:
     """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it."""
-    from analysis.power_pool import simulated_pool
+    from analysis.planning.power_pool import simulated_pool
     from study_app.headless import run_study
     from study_app.headless.sim_trials import MODEL_VERSION
 
@@ -186,10 +187,9 @@ def cmd_power(args: argparse.Namespace) -> int:
     """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
     req = _request(args)
 
-    from analysis.errors import AnalysisError
-    from analysis.inputs import check_databases
-    from analysis.outdir import check_output_folder, write_output_folder
-    from analysis.power_pool import is_pool_file
+    from analysis.planning.power_pool import is_pool_file
+    from analysis.reading.inputs import check_databases
+    from foundation.outdir import check_output_folder, write_output_folder
 
     folder = dict(command="power", marker=POWER_MARKER, inputs=list(args.db or []), force=args.force,
                   keep=is_pool_file)
@@ -197,13 +197,13 @@ def cmd_power(args: argparse.Namespace) -> int:
         check_output_folder(args.out, **folder)  # before any work (and before the analysis is imported)
         if args.db:
             check_databases(args.db)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc)) from None
 
-    from analysis.metrics import MetricOptions
-    from analysis.paired_pool import load_pool
-    from analysis.power import FAMILY_LABELS, estimate_power, summary_text
-    from analysis.power_outputs import write_power
+    from analysis.planning.paired_pool import load_pool
+    from analysis.planning.power import FAMILY_LABELS, estimate_power, summary_text
+    from analysis.planning.power_outputs import write_power
+    from analysis.reading.metrics import MetricOptions
 
     options = MetricOptions(args.error_window, args.tct)
     bars = _Bars()
@@ -222,7 +222,7 @@ def cmd_power(args: argparse.Namespace) -> int:
             bars.bars[-1].close()
         wall = time.perf_counter() - t0
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
-    except AnalysisError as exc:  # PowerError, PoolError, OutputError included
+    except InputRefused as exc:  # PowerError, PoolError, OutputError included
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * req.resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)

@@ -16,6 +16,7 @@ import time
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from foundation.errors import InputRefused
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
 from study_app.cli.argtypes import add_command, arm_name, real_number, whole_number
 from study_app.cli.error import CliError
@@ -28,7 +29,7 @@ __all__ = ["add_replay_parsers", "cmd_export", "cmd_plot_session", "cmd_replay"]
 
 _FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
 
-#: The marker of a replay output folder (analysis.outdir): the files replay wrote there, with their SHA-256.
+#: The marker of a replay output folder (foundation.outdir): the files replay wrote there, with their SHA-256.
 REPLAY_MARKER = ".haptic-study-replay"
 
 
@@ -134,8 +135,9 @@ def _session(db_path: str, session_id: int, partial: bool = False, arm: str | No
     A damaged recording is that one-line error, or with ``partial`` its damaged blocks are left out and
     named on standard error (a partial result, stated as such).
     """
-    from protocol.recording import RecordingDamaged, read_segment, segments_of
+    from protocol.recording import RecordingDamaged
     from protocol.storage import StorageError, StudyReader
+    from protocol.storage.recordings import read_segment, segments_of
 
     try:
         db = StudyReader(db_path, check=True)
@@ -166,7 +168,7 @@ def _session(db_path: str, session_id: int, partial: bool = False, arm: str | No
                        "every damaged block)") from None
     for d in (d for seg in segments for d in seg.damage):
         print(f"haptic-study: recording damaged: {d.describe()}: left out, the result is partial", file=sys.stderr)
-    from analysis.load import frame_of  # pandas: not before the database was found good (a refusal stays cheap)
+    from analysis.reading.load import frame_of  # pandas: not before the database was found good (a refusal stays cheap)
 
     trials = frame_of(db.recorded_trial_table(session_id))
     db.close()
@@ -182,19 +184,18 @@ def _magnitude(cols: dict[str, np.ndarray], prefix: str) -> np.ndarray:
 
 
 def _output_policy(call: Any) -> Any:
-    """Run an output-policy call (analysis.outdir); its refusal or failure is one line (exit 2, or 1 mid-write)."""
-    from analysis.errors import AnalysisError
+    """Run an output-policy call (foundation.outdir); its refusal or failure is one line (exit 2, or 1 mid-write)."""
 
     try:
         return call()
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
 
 
 # -- replay ---------------------------------------------------------------------------------------------------
 def cmd_replay(args: argparse.Namespace) -> int:
     """``haptic-study replay``."""
-    from analysis.outdir import check_output_folder, write_output_folder
+    from foundation.outdir import check_output_folder, write_output_folder
 
     folder: dict[str, Any] = {"command": "replay", "marker": REPLAY_MARKER, "inputs": [args.db], "force": args.force}
     if args.force and not args.out:
@@ -249,9 +250,9 @@ def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     """Print (and return) the filter's trade on this recording: noise at rest against delay in contact."""
     import numpy as np
 
-    from analysis.replay_compare import filter_trade
-    from protocol.metrics import CONTACT_THRESHOLD_N
-    from protocol.trial import PHASE_CODES, TrialPhase
+    from analysis.stats.replay_compare import filter_trade
+    from protocol.study.metrics import CONTACT_THRESHOLD_N
+    from protocol.study.trial import PHASE_CODES, TrialPhase
 
     # the compensated force replay recomputed, at rest and in contact
     comp = np.concatenate([o.stage_force("comp") for o in outputs])
@@ -277,7 +278,7 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, An
     """
     import numpy as np
 
-    from analysis.replay_compare import trial_differences
+    from analysis.stats.replay_compare import trial_differences
     from pipeline.force.framework import framework_config_from_dict
     from pipeline.force.replay import replay
 
@@ -309,8 +310,8 @@ def _replay_with_changes(segments: list[Any], trials: Any, changes: dict[str, An
             columns={"code": "participant_code", "target_force_n": "target_force_N"})
         table.insert(1, "trial_number", diffs["trial_index"].to_numpy() + 1)
         table.round(6).to_csv(out / "replay_trials.csv", index=False)
-        from analysis.figures import save
-        from analysis.session_figures import replay_figure
+        from analysis.plots.figures import save
+        from analysis.plots.session_figures import replay_figure
 
         t_s = np.concatenate([s.session_time_s for s in segments])
         worst = None
@@ -328,8 +329,8 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     """``haptic-study plot-session``."""
     import numpy as np
 
-    from analysis.outdir import check_output_file, write_output_file
-    from protocol.labels import plural
+    from foundation.outdir import check_output_file, write_output_file
+    from protocol.study.labels import plural
 
     out = Path(args.out)
     if out.suffix.lower() not in _FIGURE_SUFFIXES:
@@ -337,8 +338,8 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     _output_policy(lambda: check_output_file(out, command="plot-session"))  # before the work
     (code, kind, status), segments, trials = _session(args.db, args.session, partial=True, arm=args.arm)
     # matplotlib: once the session is known to be there
-    from analysis.figures import save_one
-    from analysis.session_figures import session_trace
+    from analysis.plots.figures import save_one
+    from analysis.plots.session_figures import session_trace
 
     comp = np.concatenate([s.columns["force_n"] for s in segments])  # filtered and compensated, as recorded
     t_s = np.concatenate([s.session_time_s for s in segments])
@@ -371,9 +372,9 @@ def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: A
     """What plot-session marks besides the force: target bands, aborted trials, pauses, resumes."""
     import json
 
-    from analysis.session_figures import SessionMarks
-    from protocol.metrics import band_halfwidth_n
+    from analysis.plots.session_figures import SessionMarks
     from protocol.storage import StorageError, StudyReader
+    from protocol.study.metrics import band_halfwidth_n
 
     try:
         db = StudyReader(db_path, check=False)  # (checked by _session, which read the segments)
@@ -410,8 +411,7 @@ def _codebook_path(out: Path) -> Path:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``haptic-study export samples``: the labelled records, and their codebook beside the file."""
-    from analysis.errors import AnalysisError
-    from analysis.outdir import check_output_file, write_output_file
+    from foundation.outdir import check_output_file, write_output_file
 
     to_stdout = args.out == "-"
     if to_stdout and args.format != "csv":
@@ -428,11 +428,11 @@ def cmd_export(args: argparse.Namespace) -> int:
             raise CliError("--format parquet needs pyarrow (pip install pyarrow); or use --format csv") from None
     if sys.stderr.isatty():  # a person waits: say what takes the time (a log gets only the result, or one error)
         print("export: reading the records ...", file=sys.stderr, flush=True)
-    from analysis.samples import codebook_frame, samples_frame
+    from analysis.reading.samples import codebook_frame, samples_frame
 
     try:
         frame = samples_frame(args.db, args.session, args.arm)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc)) from None
     if to_stdout:
         frame.to_csv(sys.stdout, index=False)

@@ -5,8 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from foundation.errors import InputRefused
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
-from protocol.labels import plural
+from protocol.study.labels import plural
 from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
 
@@ -85,17 +86,16 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:
 
 def cmd_report(args: argparse.Namespace) -> int:
     """Run ``haptic-study report``; errors raise :class:`study_app.cli.error.CliError`."""
-    from analysis.errors import AnalysisError
-    from analysis.inputs import check_databases
-    from analysis.outdir import REPORT_MARKER, check_output_folder
+    from analysis.reading.inputs import check_databases
+    from foundation.outdir import REPORT_MARKER, check_output_folder
 
     try:  # before the analysis is imported (seconds): a refused folder or database is said at once
         check_output_folder(args.out, command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
         check_databases(args.db)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc)) from None
-    from analysis.metrics import MetricOptions
-    from analysis.report import build_report
+    from analysis.reading.metrics import MetricOptions
+    from analysis.report.report import build_report
     from study_app.cli.progress import ProgressBar
 
     bar: ProgressBar | None = None
@@ -112,7 +112,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
             power=args.power, include_incomplete=args.include_incomplete,
         )
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     finally:
         if bar is not None:
@@ -158,15 +158,14 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
     """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
     from pathlib import Path
 
-    from analysis.errors import AnalysisError
-    from analysis.outdir import check_output_file, write_output_file
+    from foundation.outdir import check_output_file, write_output_file
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):
         raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
     try:
         check_output_file(out, command="plot-trial")  # before the work: an existing file is never replaced
-        from analysis.load import load_study, read_trial_samples
+        from analysis.reading.load import load_study, read_trial_samples
 
         study = load_study([args.db])
         trials = study.trials
@@ -182,15 +181,15 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
                            f"{_trial_numbers(numbers)}")
         row = rows.iloc[0]
         samples = read_trial_samples(args.db, args.session, args.trial - 1, args.arm)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc)) from None
     # matplotlib: once the trial is known to be there
-    from analysis.figures import save_one, stored_trial_figure
+    from analysis.plots.figures import save_one, stored_trial_figure
 
     fig = stored_trial_figure(args.db, row, samples)  # an aborted trial: its abort, time and cause marked
     try:
         write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     print(f"wrote {out}")
     return 0

@@ -18,14 +18,14 @@ from study_app.cli.argtypes import SEED, add_command, arm_names, positive_second
 from study_app.cli.error import CliError
 
 if TYPE_CHECKING:
-    from protocol.config import ProtocolConfig
+    from protocol.study.config import ProtocolConfig
 
 __all__ = ["add_run_parser", "add_sessions_parser", "add_sim_parser", "cmd_run", "cmd_sessions", "cmd_sim"]
 
 
 def _fault_plan(text: str):
-    """An argument type: one ``--inject-fault`` plan (protocol.rehearsal), or the parser's one-line error."""
-    from protocol.rehearsal import parse_fault_plan
+    """An argument type: one ``--inject-fault`` plan (protocol.runner.rehearsal), or the parser's one-line error."""
+    from protocol.runner.rehearsal import parse_fault_plan
 
     try:
         return parse_fault_plan(text)
@@ -58,7 +58,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--seed", type=SEED, default=0, help="study seed: schedules, rigs and participants (default 0)")
     r.add_argument("--db", required=True, metavar="PATH", help="study database (SQLite); created if missing")
     r.add_argument("--protocol", default=None, metavar="FILE",
-                   help="protocol file (default: the paper's study, protocol/default.toml)")
+                   help="protocol file (default: the paper's study, protocol/study/default.toml)")
     r.add_argument("--clock", choices=("virtual", "real"), default="virtual",
                    help="virtual: as fast as the CPU allows (default); real: paced at 1 kHz")
     r.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
@@ -104,7 +104,7 @@ _SIM_BYTES_PER_TICK = 160
 
 def cmd_sim(args: argparse.Namespace) -> int:
     """Run ``haptic-study sim``."""
-    from analysis.resources import memory_problem
+    from foundation.resources import memory_problem
     from study_app.cli.progress import ProgressBar
     from study_app.cli.sim_summary import run_scripted_sim
 
@@ -130,8 +130,8 @@ def cmd_sim(args: argparse.Namespace) -> int:
 
 def cmd_run(args: argparse.Namespace) -> int:
     """Run ``haptic-study run``; errors raise :class:`CliError`."""
-    from protocol.config import ProtocolError, load_protocol
     from protocol.storage import StorageError
+    from protocol.study.config import ProtocolError, load_protocol
     from study_app.cli.progress import ProgressBar
     from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
 
@@ -199,12 +199,12 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 def _check_task_arm(protocol: ProtocolConfig, args: argparse.Namespace) -> None:
     """The protocol's task arm must be one of ``--sim-arms``: one line naming both."""
-    from protocol.config import ProtocolError
+    from protocol.study.config import ProtocolError
 
     try:
         protocol.task_arm_of(args.sim_arms)
     except ProtocolError as exc:
-        raise CliError(f"{args.protocol or 'protocol/default.toml'}: {exc}; the simulated rig's arms are "
+        raise CliError(f"{args.protocol or 'protocol/study/default.toml'}: {exc}; the simulated rig's arms are "
                        f"--sim-arms {','.join(args.sim_arms)}") from None
 
 
@@ -230,7 +230,7 @@ _RUN_MIN_FREE_BYTES = 1 << 20
 
 def _refuse_a_full_disk(db: str) -> None:
     """A database on a (nearly) full disk is refused before the study starts (a fuller one mid-run: cli's one line)."""
-    from analysis.outfs import free_bytes, read_only
+    from foundation.outfs import free_bytes, read_only
 
     folder = os.path.dirname(os.path.abspath(db))
     if not os.path.isdir(folder) or read_only(folder):

@@ -10,9 +10,9 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.core.clock import prepare_realtime_thread
 from pipeline.devices.interfaces import Fault
-from pipeline.runtime.clock import prepare_realtime_thread
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.sim.rig import SimRigConfig
 
 __all__ = ["format_summary", "run_scripted_sim"]

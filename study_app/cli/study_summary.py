@@ -1,7 +1,7 @@
 """The one-screen summary printed after ``haptic-study run``.
 
-Its per-mode mean ± SD across participants is the report's (:func:`analysis.aggregate.per_participant`, then
-:func:`analysis.aggregate.mean_sd` across participants), computed from the metrics each trial stored live.
+Its per-mode mean ± SD across participants is the report's (:func:`analysis.stats.aggregate.per_participant`, then
+:func:`analysis.stats.aggregate.mean_sd` across participants), computed from the metrics each trial stored live.
 """
 
 from __future__ import annotations
@@ -11,11 +11,11 @@ from collections import Counter
 
 import pandas as pd
 
-from analysis.aggregate import by_mode, mean_sd, per_participant
+from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
-from protocol.labels import plural
-from protocol.records import Outcome, TrialRecord
 from protocol.storage import StudyReader
+from protocol.study.labels import plural
+from protocol.study.records import Outcome, TrialRecord
 
 __all__ = ["format_study_summary"]
 
@@ -36,7 +36,7 @@ def _value(v: float | None) -> float:
 
 
 def _trials_frame(exp: list[tuple[str, TrialRecord]]) -> pd.DataFrame:
-    """The analysed trials as :func:`analysis.aggregate.per_participant` takes them, with their stored metrics."""
+    """The analysed trials as :func:`analysis.stats.aggregate.per_participant` takes them, with their stored metrics."""
     ok = [t.outcome is Outcome.SUCCESS for _, t in exp]
     return pd.DataFrame({
         "participant_code": [c for c, _ in exp], "haptic_mode": [t.haptic_mode.value for _, t in exp],

@@ -2,7 +2,7 @@
 
 The grid is the cartesian product of the ``--set NAME=V1,V2,...`` lists; each setting runs ``--studies``
 simulated studies of ``--participants`` participants (the same participants for every setting).  The cells run
-in :mod:`study_app.headless.sweep_run`; the tables, figures and summary are :mod:`analysis.sweep`'s.
+in :mod:`study_app.headless.sweep_run`; the tables, figures and summary are :mod:`analysis.planning.sweep`'s.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import math
 import sys
 import time
 
+from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, setting_list, whole_number
 from study_app.cli.error import CliError
 
@@ -79,18 +80,17 @@ def grid_of(sets: list[tuple[str, tuple[float, ...]]]) -> tuple[list[str], list[
 
 def cmd_sweep(args: argparse.Namespace) -> int:
     """Run ``haptic-study sweep``; errors raise :class:`CliError`."""
-    from analysis.errors import AnalysisError
-    from analysis.outdir import check_output_folder, ensure_output_folder, write_output_folder
-    from analysis.sweep import CACHE_FILE, SWEEP_MARKER, is_cache_file
+    from analysis.planning.sweep import CACHE_FILE, SWEEP_MARKER, is_cache_file
+    from foundation.outdir import check_output_folder, ensure_output_folder, write_output_folder
 
     swept, grid = grid_of(args.grid)
     folder = dict(command="sweep", marker=SWEEP_MARKER, force=args.force, keep=is_cache_file)
     try:
         out = check_output_folder(args.out, **folder)  # before any work
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc)) from None
     from pipeline.force.pipeline_settings import describe, framework_with, non_default_settings
-    from protocol.config import ProtocolError, load_protocol
+    from protocol.study.config import ProtocolError, load_protocol
 
     try:
         protocol = load_protocol(args.protocol)
@@ -99,7 +99,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                  f"protocol with --set {describe(non_default_settings(setting))}")
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
-    from analysis.sweep import FILTER_NOTE, caveat, summary_frame, summary_lines, sweep_frame, write_sweep
+    from analysis.planning.sweep import FILTER_NOTE, caveat, summary_frame, summary_lines, sweep_frame, write_sweep
     from pipeline.force.pipeline_settings import paper_settings
     from study_app.cli.progress import ProgressBar
     from study_app.headless.pool import default_jobs
@@ -109,7 +109,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     jobs = args.jobs or default_jobs(len(grid) * args.studies * args.participants)
     try:
         ensure_output_folder(out)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     bar: ProgressBar | None = None
 
@@ -142,7 +142,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
         files = write_output_folder(out, lambda tmp: write_sweep(
             tmp, tidy=tidy, summary=summary, swept=swept, paper=paper, model_version=MODEL_VERSION,
             model_fit=MODEL_FIT, header=header), **folder)
-    except AnalysisError as exc:
+    except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     print(caveat(MODEL_VERSION, MODEL_FIT))
     print(*header, sep="\n")

@@ -48,8 +48,8 @@ from pipeline.commissioning.steps import (
     tcp_step,
 )
 from pipeline.commissioning.tcp import PivotPose, pivot_orientations
+from pipeline.core.clock import MonotonicClock
 from pipeline.force.frames import Mat3, check_rotation
-from pipeline.runtime.clock import MonotonicClock
 from pipeline.runtime.loop_messages import SetCalibration
 from study_app.engine import messages as m
 from study_app.engine.core import EngineCore

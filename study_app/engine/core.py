@@ -10,8 +10,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Protocol
 
+from pipeline.assembly.engine import Engine
 from pipeline.force.payload_compensator import PayloadCalibration
-from pipeline.runtime.engine import Engine
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.ring import RingBuffer
 from pipeline.settings.hardware import HardwareConfig

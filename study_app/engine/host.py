@@ -32,22 +32,22 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.assembly.engine import Engine
+from pipeline.core.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.frames import as_mat3
 from pipeline.force.payload_compensator import PayloadCalibration
-from pipeline.runtime.clock import MonotonicClock, collect_garbage, manual_garbage_collection, prepare_helper_thread
-from pipeline.runtime.engine import Engine
 from pipeline.runtime.jitter_trace import LateTickTracer
 from pipeline.runtime.loop_messages import ControllerDetached, LoopEvent
 from pipeline.runtime.loop_messages import OperatorStop as LoopOperatorStop
 from pipeline.runtime.loop_messages import ResetFaults as LoopResetFaults
 from pipeline.runtime.supervisor import LoopSupervisor
 from pipeline.settings.hardware import HardwareConfig
-from protocol.config import ProtocolError
-from protocol.session import SessionRunner
-from protocol.session_driver import SessionDriver
+from protocol.runner.session import SessionRunner
+from protocol.runner.session_driver import SessionDriver
 from protocol.storage import Recorder, StorageError, new_owner_token
-from protocol.trial import TrialPhase
+from protocol.study.config import ProtocolError
+from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import Commissioning
 from study_app.engine.jaws import arm_jaws, other_arm_jaw_events
@@ -373,7 +373,7 @@ class StudyEngine:
         session_t = math.nan
         if runner is not None and not runner.done and runner.clock is not None:
             session_t = runner.session_time_s(ev.t_ns)  # what the events table will say
-        # a rig of several arms: the arm named, as the events table stores it (protocol.session)
+        # a rig of several arms: the arm named, as the events table stores it (protocol.runner.session)
         detail = f"arm {ev.arm}: {ev.detail}" if len(self.eng.calibrations) > 1 else ev.detail
         self.publish(m.EngineFault(ev.t_ns * 1e-9, ev.kind, int(ev.faults), detail, session_t))
 

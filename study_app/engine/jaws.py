@@ -12,8 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+from pipeline.assembly.engine import Engine
 from pipeline.devices.jaw_control import JawController
-from pipeline.runtime.engine import Engine
 from pipeline.settings.hardware import HardwareConfig
 
 __all__ = ["arm_jaws", "other_arm_jaw_events"]

@@ -16,7 +16,7 @@ from pipeline.commissioning.steps import PAYLOAD_POSE_SETS
 from pipeline.commissioning.tcp import PIVOT_POSE_SETS
 from pipeline.force.frames import Mat3, Vec3
 from pipeline.force.payload_compensator import Wrench
-from protocol.records import TrialRecord
+from protocol.study.records import TrialRecord
 
 __all__ = [
     "DRIVER_MODES",
@@ -91,7 +91,7 @@ class StartSession:
 
     On the real rig a session starts only with the calibration chain on record for the mounted tool and
     the compensated force at rest below 0.1 N; ``override_reason`` (non-empty) starts it anyway, and the
-    reason is stored with the session.  The study's rules (:mod:`protocol.study_rules`: one seed per
+    reason is stored with the session.  The study's rules (:mod:`protocol.runner.study_rules`: one seed per
     study, training before the experiment) are the engine's to enforce; ``training_override`` (non-empty)
     starts an experiment without the completed training the protocol requires, and is stored as a
     ``deviation`` event.
@@ -166,7 +166,7 @@ class OperatorStop:
 
 @dataclass(frozen=True, slots=True)
 class InjectFault:
-    """Simulated rig only: rehearse a fault (:mod:`pipeline.sim.faults`, :mod:`protocol.rehearsal`).
+    """Simulated rig only: rehearse a fault (:mod:`pipeline.sim.faults`, :mod:`protocol.runner.rehearsal`).
 
     ``trial`` None: now; else ``seconds`` after the cue of the running
     session's ``trial``-th trial (1-based, the order the participant meets them).
@@ -574,7 +574,7 @@ class Health:
     haptic_continuous_force_n: float = float("nan")
     #: Why the haptic loop is dead ("" while it runs).
     loop_dead: str = ""
-    #: How the loop thread is scheduled (:func:`pipeline.runtime.clock.prepare_realtime_thread`; "virtual clock" when
+    #: How the loop thread is scheduled (:func:`pipeline.core.clock.prepare_realtime_thread`; "virtual clock" when
     #: virtual).
     scheduling: str = ""
     #: A rig of several arms: per arm, the task arm first, (name, largest task force of its newest records in N,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+from pipeline.assembly.engine import Engine
 from pipeline.force.pipeline_settings import non_default_settings, settings_of
-from pipeline.runtime.engine import Engine
 from pipeline.settings.hardware import HardwareConfig
 
 __all__ = ["config_record", "real_config_record"]

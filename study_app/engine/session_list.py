@@ -13,9 +13,9 @@ import os
 from typing import Any
 
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
-from protocol.labels import plural
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 from protocol.storage.withdrawal import withdrawals
+from protocol.study.labels import plural
 
 __all__ = ["format_sessions", "list_sessions", "list_withdrawn", "next_participant_number"]
 

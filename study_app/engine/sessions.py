@@ -2,7 +2,7 @@
 
 :class:`EngineSessions` belongs to a :class:`study_app.engine.host.StudyEngine`
 and runs on its driver thread.  Sessions are opened and closed through
-:mod:`protocol.session_setup`, as the headless runner's are
+:mod:`protocol.runner.session_setup`, as the headless runner's are
 (:mod:`study_app.headless`); what a session stores of the rig it ran on is
 :mod:`study_app.engine.session_config`'s.
 """
@@ -17,13 +17,11 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+from foundation.platform_support import kill_hard
 from pipeline.force.framework import FrameworkConfig
-from pipeline.runtime.platform_support import kill_hard
-from protocol.config import ProtocolConfig, load_protocol
-from protocol.records import AbortCause, TrialRecord
-from protocol.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
-from protocol.session import SessionRunner
-from protocol.session_setup import (
+from protocol.runner.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
+from protocol.runner.session import SessionRunner
+from protocol.runner.session_setup import (
     OpenedSession,
     delivery_limits,
     finish_session,
@@ -35,9 +33,11 @@ from protocol.session_setup import (
     start_runner,
     store_rehearsal_plan,
 )
+from protocol.runner.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
-from protocol.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
-from protocol.trial import PhaseChanged, TrialPhase
+from protocol.study.config import ProtocolConfig, load_protocol
+from protocol.study.records import AbortCause, TrialRecord
+from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
@@ -297,7 +297,7 @@ class EngineSessions:
 
 def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig) -> None:
     """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
-    where the session is stored, by :func:`protocol.session_setup.open_new_session`), and one pipeline per study
+    where the session is stored, by :func:`protocol.runner.session_setup.open_new_session`), and one pipeline per study
     (``gui --set``: the settings every stored session ran with)."""
     if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
         return

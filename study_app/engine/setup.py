@@ -1,6 +1,6 @@
 """What the study engine is built from: its configuration, the rig (simulated or real), the simulated stylus's driver.
 
-:func:`build_engine` assembles the :class:`pipeline.runtime.engine.Engine` a
+:func:`build_engine` assembles the :class:`pipeline.assembly.engine.Engine` a
 :class:`HostConfig` asks for -- the simulated rig with its driver, or the real
 rig of a hardware file (devices opened one by one, each announced first).
 """
@@ -12,10 +12,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.commissioning.rig_calibration import CalibrationFileError
 from pipeline.devices.interfaces import DeviceError
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from pipeline.runtime.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.settings.hardware import HardwareConfig, HardwareError, load_hardware
 from study_app.engine import messages as m
 from study_app.guide_paths import hardware_template
@@ -163,7 +163,7 @@ def build_real_engine(
     config: HostConfig, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
 ) -> tuple[Engine, HardwareConfig, str]:
     """Load the hardware file, open the devices and assemble the loop
-    (:func:`pipeline.runtime.engine.build_hardware_engine`).
+    (:func:`pipeline.assembly.engine.build_hardware_engine`).
 
     Returns the engine, the validated hardware config and the file's text (stored with each session).
     ``on_open(device)`` is called before each device is opened.
@@ -181,9 +181,9 @@ def build_real_engine(
             text = fh.read()
     except HardwareError as exc:
         raise RuntimeError(f"real rig: {exc}") from None
-    import pipeline.devices.real_rig as hardware_module
+    import pipeline.assembly.real_rig as hardware_module
 
-    # The rig-construction seam: build_real_rig opens the Touch through pipeline.devices.real_rig.open_haptic.
+    # The rig-construction seam: build_real_rig opens the Touch through pipeline.assembly.real_rig.open_haptic.
     # Tests (no Touch on CI) swap in a device that speaks the HDAPI through the real Touch backend.
     original = hardware_module.open_haptic
     if config.haptic_factory is not None:

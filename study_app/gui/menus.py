@@ -29,7 +29,7 @@ def remember_recent(recent: list[str], path: str) -> list[str]:
 
 def about_text() -> str:
     """Help → About: what this is, its version and commit, the paper it implements."""
-    from study_app.cli.version_info import version_text
+    from study_app.version_info import version_text
 
     return (f"<b>haptic-study</b> {version_text()}<br><br>"
             "Runs a force-feedback training study end to end: the haptic feedback framework at 1 kHz, the "

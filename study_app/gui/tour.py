@@ -23,9 +23,9 @@ from PySide6.QtCore import QPoint, QRect
 from PySide6.QtGui import QColor, QPainter, QPixmap
 from PySide6.QtWidgets import QApplication, QMenu, QMessageBox, QWidget
 
-from protocol.clock import SessionClock
-from protocol.design import HapticMode
-from protocol.records import AbortCause, Outcome, TrialRecord
+from protocol.study.clock import SessionClock
+from protocol.study.design import HapticMode
+from protocol.study.records import AbortCause, Outcome, TrialRecord
 from study_app.engine import messages as m
 from study_app.gui.timers import tracked_timer
 

@@ -12,15 +12,20 @@ from collections.abc import Sequence
 from typing import Any
 
 from pipeline.force.framework import FrameworkConfig
-from protocol.config import ProtocolConfig, protocol_from_dict
-from protocol.design import schedule_from_json
-from protocol.rehearsal import FaultPlan
-from protocol.session import first_unfinished
-from protocol.session_setup import participant_code, refuse_damaged_recording, training_protocol, training_schedule
+from protocol.runner.rehearsal import FaultPlan
+from protocol.runner.session import first_unfinished
+from protocol.runner.session_setup import (
+    participant_code,
+    refuse_damaged_recording,
+    training_protocol,
+    training_schedule,
+)
+from protocol.runner.study_rules import StudyRuleError, check_settings, seed_refusal, stored_sessions, training_refusal
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
 from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import withdrawals
-from protocol.study_rules import StudyRuleError, check_settings, seed_refusal, stored_sessions, training_refusal
+from protocol.study.config import ProtocolConfig, protocol_from_dict
+from protocol.study.design import schedule_from_json
 
 __all__ = [
     "Step", "all_steps", "check_fault_plans", "check_settings", "interrupted_session_of", "open_notes", "peek",
@@ -32,7 +37,7 @@ def remaining_trials(db: StudyDatabase, info: SessionInfo) -> int:
     """Trials a resume of this session will run.
 
     An interrupted trial is stored as aborted by
-    :func:`protocol.session_setup.open_resumed_session`, not run, and its
+    :func:`protocol.runner.session_setup.open_resumed_session`, not run, and its
     re-run takes its place in the count.
     """
     schedule = schedule_from_json(info.schedule_json)
@@ -109,7 +114,7 @@ def _same_protocol(stored_json: str) -> Any:
 
 def _check_training(db: StudyDatabase, db_path: str, code: str, steps: list[Step], protocol: ProtocolConfig) -> None:
     """Refuse, before anything is written, a new experiment session the training rule would refuse
-    (:mod:`protocol.study_rules`): one whose training is neither completed nor run by this command."""
+    (:mod:`protocol.runner.study_rules`): one whose training is neither completed nor run by this command."""
     if ("new", "experiment") not in steps or steps.index(("new", "experiment")) > 0:
         return  # no new experiment, or its training runs (or resumes) first in this command
     why = training_refusal(stored_sessions(db), code, protocol)
@@ -192,7 +197,7 @@ def plan_study(
 
 
 def _check_seed(db: StudyDatabase, db_path: str, seed: int) -> None:
-    """One seed per study (:mod:`protocol.study_rules`), whoever ran its sessions (this command, the GUI)."""
+    """One seed per study (:mod:`protocol.runner.study_rules`), whoever ran its sessions (this command, the GUI)."""
     why = seed_refusal(stored_sessions(db), seed)
     if why:
         raise StudyRuleError(f"{db_path}: {why}; nothing was changed")

@@ -13,12 +13,12 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from foundation.platform_support import die_with, usable_cpu_count, worker_context
 from pipeline.force.framework import FrameworkConfig
-from pipeline.runtime.platform_support import die_with, usable_cpu_count, worker_context
-from protocol.config import ProtocolConfig
-from protocol.rehearsal import FaultPlan
-from protocol.session_setup import participant_code
+from protocol.runner.rehearsal import FaultPlan
+from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase
+from protocol.study.config import ProtocolConfig
 from study_app.headless.plan import Step
 from study_app.headless.session_run import SessionInterrupted, StudyProgress, run_steps, set_kill_target
 

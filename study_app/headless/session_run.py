@@ -2,9 +2,9 @@
 
 :func:`run_session` builds a fresh simulated rig (calibrating its payload),
 hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`,
-opens the session through :mod:`protocol.session_setup` (as the GUI's engine
+opens the session through :mod:`protocol.runner.session_setup` (as the GUI's engine
 does) and alternates loop ticks and runner blocks until the session ends.
-Planned faults (:mod:`protocol.rehearsal`) are fired on the rig at their
+Planned faults (:mod:`protocol.runner.rehearsal`) are fired on the rig at their
 trial's time.
 """
 
@@ -17,17 +17,16 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRigConfig
-from protocol.config import ProtocolConfig
-from protocol.rehearsal import FaultPlan, RehearsalTrigger
-from protocol.session import SessionRunner
-from protocol.session_driver import SessionDriver
-from protocol.session_setup import (
+from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
+from protocol.runner.session import SessionRunner
+from protocol.runner.session_driver import SessionDriver
+from protocol.runner.session_setup import (
     OpenedSession,
     delivery_limits,
     finish_session,
@@ -42,6 +41,7 @@ from protocol.session_setup import (
     training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
+from protocol.study.config import ProtocolConfig
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
@@ -112,7 +112,7 @@ def _engine(rig_seed: int, clock: str, arms: tuple[str, ...], framework: Framewo
 
 def sim_arms_of(protocol: ProtocolConfig, arms: Sequence[str]) -> tuple[str, ...]:
     """The simulated rig's arms for ``protocol``, its task arm first (a bad task arm: one
-    :class:`protocol.config.ProtocolError` line)."""
+    :class:`protocol.study.config.ProtocolError` line)."""
     task = protocol.task_arm_of(arms)
     return (task, *(a for a in arms if a != task))
 
@@ -219,7 +219,8 @@ def run_session(
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:
-    """The recorder's commit deadline for a session run (:func:`protocol.session_setup.start_runner`'s arguments).
+    """The recorder's commit deadline for a session run (:func:`protocol.runner.session_setup.start_runner`'s
+    arguments).
 
     On the virtual clock it runs on the records' own time, so the commits fall on the same records every
     time (a crash at the N-th commit is one state: ``tests/protocol/test_crash_points.py``): every
@@ -237,7 +238,7 @@ def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opene
 def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine,
              runner: SessionRunner) -> RehearsalTrigger | None:
     """The rehearsal trigger of a session run, if faults are planned for it (each stored as a
-    :data:`~protocol.study_rules.FAULT_REHEARSAL_EVENT` of the session)."""
+    :data:`~protocol.runner.study_rules.FAULT_REHEARSAL_EVENT` of the session)."""
     if not faults:
         return None
     loop, rig = eng.loop, eng.rig
@@ -248,7 +249,7 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine,
     def kill() -> None:
         # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
         # (the workers then die with it, by PR_SET_PDEATHSIG)
-        from pipeline.runtime.platform_support import kill_hard
+        from foundation.platform_support import kill_hard
 
         sys.stdout.flush()
         sys.stderr.flush()

@@ -3,9 +3,9 @@
 :func:`run_participant` builds the simulated rig on the virtual clock with the
 given pipeline configuration, hands the stylus to a
 :class:`pipeline.sim.participant.SimulatedParticipant` and walks the protocol's
-experiment schedule through the real :class:`protocol.trial.TrialMachine`, so
+experiment schedule through the real :class:`protocol.study.trial.TrialMachine`, so
 success, TCT, RMSE and Max AE come from the one definition in
-:mod:`protocol.metrics`.  Nothing is stored: it is ``haptic-study run``'s
+:mod:`protocol.study.metrics`.  Nothing is stored: it is ``haptic-study run``'s
 experiment session less the recording, training and resumption, about 2 s of
 wall clock per participant.
 
@@ -18,17 +18,17 @@ from __future__ import annotations
 
 import multiprocessing as mp
 
-from analysis.sim_study import TrialRow
+from analysis.planning.sim_study import TrialRow
+from foundation.platform_support import worker_pool
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.force.framework import FrameworkConfig
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
-from pipeline.runtime.platform_support import worker_pool
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
 from pipeline.sim.rig import SimRigConfig
-from protocol.config import ProtocolConfig, default_protocol
-from protocol.design import build_schedule
-from protocol.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
+from protocol.study.config import ProtocolConfig, default_protocol
+from protocol.study.design import build_schedule
+from protocol.study.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = ["MODEL_FIT", "MODEL_VERSION", "participant_seeds", "run_participant", "run_study"]
 

@@ -13,11 +13,11 @@ as aborted, with the reason, and re-run per the abort policy.
 completes a study that stopped part-way: it resumes every interrupted session,
 runs what each participant has not started, and leaves finished sessions alone.
 
-Sessions are opened and closed through :mod:`protocol.session_setup`, as the
+Sessions are opened and closed through :mod:`protocol.runner.session_setup`, as the
 GUI's engine does.  A ``run`` owns the whole database while it works (the
 ``study`` lease): a second ``run`` on it is refused before it writes, and its
 parallel workers hold their sessions' leases under it.  Planned faults
-(:mod:`protocol.rehearsal`, ``--inject-fault``) are fired on the simulated rig
+(:mod:`protocol.runner.rehearsal`, ``--inject-fault``) are fired on the simulated rig
 at their trial's time; a latched fault is reset by the runner in the pause,
 and a fault that does not clear stops the study with :class:`SessionInterrupted`.
 """
@@ -30,10 +30,10 @@ from collections.abc import Callable, Sequence
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
-from protocol.config import ProtocolConfig, protocol_from_dict
-from protocol.rehearsal import FaultPlan
-from protocol.session_setup import participant_code
+from protocol.runner.rehearsal import FaultPlan
+from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
+from protocol.study.config import ProtocolConfig, protocol_from_dict
 from study_app.headless.plan import (
     check_fault_plans,
     check_settings,
@@ -85,7 +85,7 @@ def run_study(
         experimenter) are left alone.  ``seed`` and ``protocol`` must be those
         the study was started with.
     faults
-        Planned faults (:mod:`protocol.rehearsal`) for the sessions this call runs.
+        Planned faults (:mod:`protocol.runner.rehearsal`) for the sessions this call runs.
     sim_arms
         The simulated rig's arms (one: ``right``), among them the protocol's task arm (a resume: the stored ones).
     framework
@@ -195,7 +195,7 @@ def resume_session(
     was running when the previous run ended is stored as aborted (cause
     ``interrupted``) with its real cue time and samples and re-run per the
     abort policy; no trial is duplicated or skipped
-    (:func:`protocol.session_setup.open_resumed_session`).  Only that session is
+    (:func:`protocol.runner.session_setup.open_resumed_session`).  Only that session is
     continued: a participant interrupted in training still has the experiment
     to run (``run_study(..., continue_study=True)``, ``haptic-study run --continue``).
 

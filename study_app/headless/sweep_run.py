@@ -5,7 +5,7 @@ study's, whatever the setting (:func:`study_number` and
 :func:`study_app.headless.sim_trials.participant_seeds` depend on the seed, ``k``
 and the participant number only), so every setting meets the same simulated
 people.  The participants of all cells still to run go to one process pool (on
-the virtual clock); a cell is appended to the cache (:func:`analysis.sweep.append_cell`)
+the virtual clock); a cell is appended to the cache (:func:`analysis.planning.sweep.append_cell`)
 as soon as its last participant is done, so an interrupted sweep loses at most
 the cells under way, and cells in the cache are not run again.
 """
@@ -17,11 +17,11 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from analysis.sim_study import TrialRow
-from analysis.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
+from analysis.planning.sim_study import TrialRow
+from analysis.planning.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
+from foundation.platform_support import worker_pool
 from pipeline.force.pipeline_settings import framework_with
-from pipeline.runtime.platform_support import worker_pool
-from protocol.config import ProtocolConfig, default_protocol
+from protocol.study.config import ProtocolConfig, default_protocol
 from study_app.headless.sim_trials import MODEL_VERSION, run_participant
 
 __all__ = ["SweepProgress", "run_sweep", "study_number"]

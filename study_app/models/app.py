@@ -384,7 +384,7 @@ class AppModel:
 
         ``override_reason``: start on the real rig although the calibration chain is not complete (stored).
         ``training_override``: start an experiment without the completed training the protocol requires; the
-        engine stores the reason as a ``deviation`` event (:mod:`protocol.study_rules`).
+        engine stores the reason as a ``deviation`` event (:mod:`protocol.runner.study_rules`).
         """
         skip_training = bool(training_override.strip()) and self.can("start_without_training")
         if not (self.can("start") or skip_training):
@@ -531,7 +531,7 @@ class AppModel:
         return f"trial {trial} has already begun; {later}"
 
     def rehearsal_notice(self, ev: m.FaultInjected) -> str:
-        """What a rehearsed fault does, as the engine runs it (:mod:`protocol.rehearsal`, the session runner)."""
+        """What a rehearsed fault does, as the engine runs it (:mod:`protocol.runner.rehearsal`, the session runner)."""
         what = REHEARSAL_KINDS.get(ev.kind, ev.kind)
         planned = self._planned if ev.when != "now" else None
         when = (f"{planned[1]:g} s after the cue of trial {planned[0]}" if planned is not None

@@ -19,7 +19,7 @@ def task_arm_first(arms: tuple[str, ...], rig: str, protocol_path: str) -> tuple
     protocol that does not load or names no arm of the rig: the engine refuses those in one line)."""
     if rig != "sim" or len(arms) < 2:
         return ()
-    from protocol.config import ProtocolError, load_protocol
+    from protocol.study.config import ProtocolError, load_protocol
     from study_app.headless.session_run import sim_arms_of  # loads the simulator: only for a rig of several arms
 
     try:

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.devices.interfaces import Fault
-from protocol.records import AbortCause, TrialRecord
+from protocol.study.records import AbortCause, TrialRecord
 from study_app.engine import messages as m
 from study_app.guide_paths import guide
 from study_app.models import Emitter

@@ -15,7 +15,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from protocol.display import task_axis_top_n
+from protocol.study.display import task_axis_top_n
 
 __all__ = ["TASK_SERIES", "PlotModel", "nice_range", "peak_downsample"]
 
@@ -202,7 +202,7 @@ class PlotModel:
         return max(peaks, default=math.nan)
 
     def task_axis(self, target_force_n: float | None, since_t_s: float | None = None) -> tuple[float, float]:
-        """The task-force axis (0, top): set by the target (:func:`protocol.display.task_axis_top_n`), in steps,
+        """The task-force axis (0, top): set by the target (:func:`protocol.study.display.task_axis_top_n`), in steps,
         stretched for the peak since ``since_t_s`` (the current trial's cue; the whole window when None)."""
         return (0.0, task_axis_top_n(target_force_n, self.peak(TASK_SERIES, since_t_s), snap_fraction=0.5))
 

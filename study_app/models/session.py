@@ -7,8 +7,8 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
-from protocol.design import HapticMode
-from protocol.records import Outcome, TrialRecord
+from protocol.study.design import HapticMode
+from protocol.study.records import Outcome, TrialRecord
 from study_app.engine import messages as m
 from study_app.models import Emitter
 

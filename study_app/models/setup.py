@@ -9,7 +9,7 @@ schedule, which is right only when replacing a participant who dropped out).
 Until the experimenter sets the number, the form suggests one: the code's own
 number if it has sessions (training, then experiment), else the next free one.
 
-The study's rules (:mod:`protocol.study_rules`, the functions the engine applies
+The study's rules (:mod:`protocol.runner.study_rules`, the functions the engine applies
 when it stores a session) are checked here too, so the form says why before
 Start: a database's seed is fixed by its first session (the form takes it and
 the view shows it read-only); an experiment without the completed training the
@@ -25,10 +25,8 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from pipeline.runtime.platform_support import may_write
-from protocol.config import ProtocolConfig, ProtocolError, load_protocol
-from protocol.storage import StorageError, validate_code
-from protocol.study_rules import (
+from foundation.platform_support import may_write
+from protocol.runner.study_rules import (
     StoredSession,
     next_kind,
     requires_training,
@@ -37,6 +35,8 @@ from protocol.study_rules import (
     training_refusal,
     training_state,
 )
+from protocol.storage import StorageError, validate_code
+from protocol.study.config import ProtocolConfig, ProtocolError, load_protocol
 from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter

@@ -2,7 +2,7 @@
 
 Each trial's task force is piecewise constant at 1 kHz: ``(level_n, until_ms)``
 segments after the cue.  The stored summary is computed by the live definition
-(``protocol.metrics.trial_metrics``) exactly as the session runner stores it, so
+(``protocol.study.metrics.trial_metrics``) exactly as the session runner stores it, so
 analysis must reproduce it, and tests can compute every expectation by hand.
 """
 
@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.config import default_protocol
-from protocol.metrics import trial_metrics
 from protocol.storage import StudyDatabase, trial_id_of
+from protocol.study.config import default_protocol
+from protocol.study.metrics import trial_metrics
 
 MS = 1_000_000
 

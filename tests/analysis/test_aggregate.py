@@ -10,10 +10,10 @@ import pytest
 import scipy.stats
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
-from analysis.aggregate import PRIMARY_METRICS, mode_tests, per_participant
-from analysis.load import load_study
-from analysis.metrics import MetricOptions, compute_trials
-from analysis.trade import speed_accuracy
+from analysis.reading.load import load_study
+from analysis.reading.metrics import MetricOptions, compute_trials
+from analysis.stats.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.stats.trade import speed_accuracy
 
 
 @pytest.fixture(scope="module")

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import pandas as pd
 
-from analysis.report_sections import incomplete_html
+from analysis.report.report_sections import incomplete_html
 
 
 def _within(reasons: list[str]) -> SimpleNamespace:

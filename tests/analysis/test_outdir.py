@@ -1,4 +1,4 @@
-"""The one output policy of every command that writes files (analysis.outdir): folders, single files, links,
+"""The one output policy of every command that writes files (foundation.outdir): folders, single files, links,
 permissions, and the file system failing."""
 
 from __future__ import annotations
@@ -13,10 +13,15 @@ from contextlib import contextmanager
 import pytest
 from mounts import can_mount, tmpfs
 
-from analysis import outdir
-from analysis.load import AnalysisError
-from analysis.outdir import check_output_file, check_output_folder, sha256_file, write_output_file, write_output_folder
-from analysis.outfs import OutputError
+from foundation import outdir
+from foundation.outdir import (
+    check_output_file,
+    check_output_folder,
+    sha256_file,
+    write_output_file,
+    write_output_folder,
+)
+from foundation.outfs import OutputError
 
 MARKER = ".haptic-study-test"
 
@@ -56,7 +61,7 @@ def test_an_existing_non_empty_folder_needs_force(tmp_path):
     out = tmp_path / "o"
     _write(out, {"a.csv": "1"})
     before = _snapshot(out)
-    with pytest.raises(AnalysisError, match=r"the folder exists and holds a.csv; choose another folder, or pass "
+    with pytest.raises(OutputError, match=r"the folder exists and holds a.csv; choose another folder, or pass "
                        r"--force to replace a folder test wrote before \(--force replaces only test's own unedited "
                        r"files\)"):
         _write(out, {"a.csv": "2"})
@@ -79,7 +84,7 @@ def test_force_refuses_an_edited_file_naming_it_and_touches_nothing(tmp_path):
     _write(out, {"a.csv": "1", "b.csv": "2"})
     (out / "b.csv").write_text("2, with my correction")
     before = _snapshot(out)
-    with pytest.raises(AnalysisError) as err:
+    with pytest.raises(OutputError) as err:
         _write(out, {"a.csv": "new"}, force=True)
     assert str(err.value) == (f"--out {out}: b.csv was changed since test wrote it; keep your edits elsewhere or "
                               "choose another folder (nothing was deleted)")
@@ -94,7 +99,7 @@ def test_force_refuses_a_foreign_file_naming_it_and_touches_nothing(tmp_path):
     (out / "sub").mkdir()
     (out / "sub" / "notes.md").write_text("mine")
     before = _snapshot(out)
-    with pytest.raises(AnalysisError) as err:
+    with pytest.raises(OutputError) as err:
         _write(out, {"a.csv": "new"}, force=True)
     assert str(err.value) == (f"--out {out}: holds sub/notes.md, which test did not write; move it or choose another "
                               "folder (nothing was deleted)")
@@ -105,7 +110,7 @@ def test_force_refuses_a_folder_without_marker(tmp_path):
     out = tmp_path / "o"
     out.mkdir()
     (out / "a.csv").write_text("someone's")
-    with pytest.raises(AnalysisError, match=r"not a folder test wrote .no readable .haptic-study-test in it."):
+    with pytest.raises(OutputError, match=r"not a folder test wrote .no readable .haptic-study-test in it."):
         _write(out, {"a.csv": "new"}, force=True)
     assert (out / "a.csv").read_text() == "someone's"
 
@@ -118,7 +123,7 @@ def test_an_input_database_inside_the_folder_is_refused(tmp_path, where):
     for db in ("study.db", "sub/study.db"):
         (out / db).write_bytes(b"SQLite format 3\x00")
     before = _snapshot(out)
-    with pytest.raises(AnalysisError, match="holds the input database"):
+    with pytest.raises(OutputError, match="holds the input database"):
         _write(out, {"a.csv": "new"}, inputs=[tmp_path / where], force=True)
     assert _snapshot(out) == before
 
@@ -176,7 +181,7 @@ def test_kept_files_are_never_touched_and_do_not_make_the_folder_non_empty(tmp_p
 
     _write(out, {"a.csv": "1"}, keep=keep)  # only the kept file there: no --force needed
     assert (out / "pool.db").read_text() == "pool" and (out / "a.csv").read_text() == "1"
-    with pytest.raises(AnalysisError, match="pass --force"):
+    with pytest.raises(OutputError, match="pass --force"):
         _write(out, {"a.csv": "2"}, keep=keep)
     _write(out, {"a.csv": "2"}, keep=keep, force=True)
     assert (out / "pool.db").read_text() == "pool" and (out / "a.csv").read_text() == "2"
@@ -185,9 +190,9 @@ def test_kept_files_are_never_touched_and_do_not_make_the_folder_non_empty(tmp_p
 
 def test_a_file_not_a_folder_and_a_missing_parent_are_refused(tmp_path):
     (tmp_path / "f").write_text("x")
-    with pytest.raises(AnalysisError, match="exists and is not a folder"):
+    with pytest.raises(OutputError, match="exists and is not a folder"):
         _write(tmp_path / "f", {"a": "1"})
-    with pytest.raises(AnalysisError, match="does not exist"):
+    with pytest.raises(OutputError, match="does not exist"):
         _write(tmp_path / "no" / "o", {"a": "1"})
 
 
@@ -405,7 +410,7 @@ def test_a_disk_that_fills_while_writing_leaves_the_old_output(tmp_path):
     (errno.EACCES, "permission denied; choose a folder you may write to"),
 ])
 def test_a_failing_disk_while_the_outputs_are_made_durable_is_one_line(tmp_path, monkeypatch, code, says):
-    from analysis import outfs
+    from foundation import outfs
 
     def fail(fd):
         raise OSError(code, os.strerror(code))

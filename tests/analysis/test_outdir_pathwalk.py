@@ -1,4 +1,4 @@
-"""The output policy without the ``*at`` calls (Windows' path-checking fallback, analysis.outpath), forced on Linux.
+"""The output policy without the ``*at`` calls (Windows' path-checking fallback, foundation.outpath), forced on Linux.
 
 Every test of tests/analysis/test_outdir.py runs again here with
 ``DIR_FD_CALLS`` False, so each step goes by path with ``lstat`` checks; then
@@ -22,11 +22,11 @@ from bad_outputs_corpus import CASES as OUTPUT_CASES
 from test_outdir import *  # noqa: F403  (every test of the descriptor path, collected again here)
 from test_outdir import MARKER, _fill, _no_temporaries, _write
 
-import pipeline.runtime.platform_support as ps
-from analysis import outfs, outpath
-from analysis.outdir import check_output_folder, write_output_file, write_output_folder
-from analysis.outfs import OutputError
-from analysis.power_pool import is_pool_file
+import foundation.platform_support as ps
+from analysis.planning.power_pool import is_pool_file
+from foundation import outfs, outpath
+from foundation.outdir import check_output_folder, write_output_file, write_output_folder
+from foundation.outfs import OutputError
 
 
 @pytest.fixture(autouse=True)
@@ -35,7 +35,7 @@ def _no_dir_fd_calls(monkeypatch):
 
 
 def test_the_fallback_is_in_force(tmp_path):
-    from analysis.outpath import PathFolder
+    from foundation.outpath import PathFolder
 
     assert isinstance(outfs.open_folder(str(tmp_path), follow=True), PathFolder)
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from types import SimpleNamespace
 
-from analysis.html_parts import fmt_p, p_text
-from analysis.trade import rm_caption
+from analysis.report.html_parts import fmt_p, p_text
+from analysis.stats.trade import rm_caption
 
 
 def test_a_p_value_reads_the_same_under_a_figure_as_in_the_tables() -> None:

@@ -1,6 +1,6 @@
-"""Tests of analysis.power: the vectorised test equals paired_wilcoxon, power agrees with a direct Monte Carlo.
+"""Tests of analysis.planning.power: the vectorised test equals paired_wilcoxon, power agrees with a direct Monte Carlo.
 
-The vectorised engine must reproduce :func:`analysis.stats.paired_wilcoxon`
+The vectorised engine must reproduce :func:`analysis.stats.wilcoxon.paired_wilcoxon`
 bit for bit on every resampled study (same p-value, same method), ties,
 zeros, missing and infinite values included; then, on populations whose
 power is known by direct simulation, the resampled estimate must agree within
@@ -19,9 +19,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
-from analysis.metrics import MetricOptions
-from analysis.paired_pool import PairedPool, pool_from_trials
-from analysis.power import (
+import foundation.resources
+from analysis.planning.paired_pool import PairedPool, pool_from_trials
+from analysis.planning.power import (
     FAMILY_ALL,
     FAMILY_ANY,
     POWER_CSV_COLUMNS,
@@ -32,8 +32,9 @@ from analysis.power import (
     smallest_n,
     summary_text,
 )
-from analysis.resampled_wilcoxon import METHOD_NAMES, resampled_p_values
-from analysis.stats import holm, paired_wilcoxon
+from analysis.reading.metrics import MetricOptions
+from analysis.stats.resampled_wilcoxon import METHOD_NAMES, resampled_p_values
+from analysis.stats.wilcoxon import holm, paired_wilcoxon
 
 zero_methods = st.sampled_from(["wilcox", "pratt", "zsplit"])
 
@@ -244,7 +245,7 @@ def _trials(participants: int, seed: int = 0, success_off: float = 0.3, success_
 
 
 def test_pool_uses_the_reports_aggregation():
-    from analysis.aggregate import per_participant
+    from analysis.stats.aggregate import per_participant
 
     trials = _trials(6)
     pool = pool_from_trials(trials, MetricOptions(tct_policy="censored"))
@@ -372,7 +373,7 @@ def test_chunked_resampling_gives_the_same_numbers_bit_for_bit():
 def test_memory_does_not_grow_with_the_resamples():
     import tracemalloc
 
-    from analysis.power import memory_needed
+    from analysis.planning.power import memory_needed
 
     pool = pool_from_trials(_trials(8))
     tracemalloc.start()
@@ -386,9 +387,8 @@ def test_memory_does_not_grow_with_the_resamples():
 
 
 def test_a_request_the_machine_cannot_hold_is_refused_in_one_line(monkeypatch):
-    import analysis.resources
 
-    monkeypatch.setattr(analysis.resources, "available_memory_bytes", lambda: 8 << 20)
+    monkeypatch.setattr(foundation.resources, "available_memory_bytes", lambda: 8 << 20)
     pool = pool_from_trials(_trials(8))
     with pytest.raises(PowerError) as err:
         estimate_power(pool, (6, 10_000), resamples=10)

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
-from analysis.power import POWER_CSV_COLUMNS
+from analysis.planning.power import POWER_CSV_COLUMNS
 from study_app.cli.main import main
 
 
@@ -129,7 +129,7 @@ def test_power_refuses_a_pilot_inside_the_output_folder(pilots, tmp_path, capsys
 
 
 def test_power_crashing_while_writing_leaves_the_old_output(pilots, tmp_path, capsys, monkeypatch):
-    import analysis.power_figures
+    import analysis.planning.power_figures
 
     out = tmp_path / "plan"
     argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "50", "--n", "6")
@@ -139,7 +139,7 @@ def test_power_crashing_while_writing_leaves_the_old_output(pilots, tmp_path, ca
     def broken(result):
         raise RuntimeError("the figure crashed")
 
-    monkeypatch.setattr(analysis.power_figures, "power_curves", broken)
+    monkeypatch.setattr(analysis.planning.power_figures, "power_curves", broken)
     with pytest.raises(RuntimeError, match="the figure crashed"):
         main([str(a) for a in (*argv[:-2], "--n", "8", "--force")])
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
@@ -208,13 +208,13 @@ def test_bad_value_in_a_fresh_process_has_no_traceback(tmp_path):
 def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypatch):
     import dataclasses
 
-    import protocol.config
+    import protocol.study.config
 
     # the paper's protocol with one trial per cell and no training: the same runner, a sixth of the simulation
-    paper = protocol.config.default_protocol()
+    paper = protocol.study.config.default_protocol()
     short = dataclasses.replace(paper, trials_per_cell=1, training=dataclasses.replace(paper.training, enabled=False),
                                 trial=dataclasses.replace(paper.trial, pause_s=0.1))  # short pauses: fewer ticks
-    monkeypatch.setattr(protocol.config, "default_protocol", lambda: short)
+    monkeypatch.setattr(protocol.study.config, "default_protocol", lambda: short)
     out = tmp_path / "plan"
     argv = ("power", "--simulated", "--pool", "4", "--seed", "7", "--resamples", "200", "--n", "6,10", "--out", out)
     code, stdout, stderr = _run(capsys, *argv)
@@ -293,9 +293,9 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
 
 
 def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsys):
-    from analysis.load import load_study
-    from analysis.metrics import MetricOptions, compute_trials
-    from analysis.power_outputs import report_section
+    from analysis.planning.power_outputs import report_section
+    from analysis.reading.load import load_study
+    from analysis.reading.metrics import MetricOptions, compute_trials
 
     trials = compute_trials(load_study([pilots[1]]), workers=1).trials
     section = report_section(trials, MetricOptions(), "wilcox", tmp_path)
@@ -313,11 +313,11 @@ def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsy
 
 
 def test_report_power_table_leaves_out_empty_columns(monkeypatch):
-    import analysis.power
-    from analysis.paired_pool import pool_from_trials
-    from analysis.power import estimate_power, plan_table
-    from analysis.power_outputs import ReportPower
-    from analysis.report_html import power_html as _power_html
+    import analysis.planning.power
+    from analysis.planning.paired_pool import pool_from_trials
+    from analysis.planning.power import estimate_power, plan_table
+    from analysis.planning.power_outputs import ReportPower
+    from analysis.report.report_html import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
                                 success=True, tct_s=3.0 + p + (m == "on"), rmse_n=1.0 + p * (m == "on"),
@@ -332,7 +332,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
         t["direction"] = ""
         return t
 
-    monkeypatch.setattr(analysis.power, "plan_table", without_direction)
+    monkeypatch.setattr(analysis.planning.power, "plan_table", without_direction)
     page = _power_html(ReportPower(result, "", None))
     assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
     assert page.count("<td") == full.count("<td") - len(plan_table(result))
@@ -350,7 +350,7 @@ def test_bench_power_agrees_with_the_paired_wilcoxon_loop(capsys):
 
 
 def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import():
-    from analysis.power import DEFAULT_N_VALUES
+    from analysis.planning.power import DEFAULT_N_VALUES
     from study_app.cli.power_cmds import DEFAULT_N_TEXT
 
     assert ",".join(str(n) for n in DEFAULT_N_VALUES) == DEFAULT_N_TEXT

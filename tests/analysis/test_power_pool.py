@@ -1,4 +1,4 @@
-"""The simulated pool of ``power --simulated``: recorded, verified, reused, resumed (analysis.power_pool).
+"""The simulated pool of ``power --simulated``: recorded, verified, reused, resumed (analysis.planning.power_pool).
 
 The pools here run the paper's protocol cut to one trial per cell and no
 training (four trials a participant): the same runner, a fraction of the time.
@@ -13,11 +13,11 @@ from collections import namedtuple
 import numpy as np
 import pytest
 
-import analysis.power_pool as power_pool
-from analysis.paired_pool import load_pool
-from analysis.power_pool import PoolError, is_pool_file
-from analysis.power_pool import simulated_pool as _simulated_pool
-from protocol.config import default_protocol
+import analysis.planning.power_pool as power_pool
+from analysis.planning.paired_pool import load_pool
+from analysis.planning.power_pool import PoolError, is_pool_file
+from analysis.planning.power_pool import simulated_pool as _simulated_pool
+from protocol.study.config import default_protocol
 from study_app.headless import run_study
 from study_app.headless.sim_trials import MODEL_VERSION
 
@@ -188,7 +188,7 @@ def test_an_interrupted_simulation_is_completed_not_used_as_it_is(pools, short, 
     for k in (0, 2):
         np.testing.assert_array_equal(done[1][..., k], ref[1][..., k])
         np.testing.assert_array_equal(done[2][..., k], ref[2][..., k])
-    from analysis.load import load_study
+    from analysis.reading.load import load_study
 
     trials = load_study([str(resumed.path)]).trials
     p02 = trials[trials["participant_code"] == "P02"]

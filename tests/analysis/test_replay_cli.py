@@ -17,13 +17,13 @@ import pandas as pd
 import pytest
 
 import pipeline.sim.faults
-from analysis.load import load_study
-from analysis.metrics import MetricOptions, compute_trials
-from analysis.report_tables import trials_csv
-from analysis.samples import SAMPLES_COLUMNS, samples_frame
+from analysis.reading.load import load_study
+from analysis.reading.metrics import MetricOptions, compute_trials
+from analysis.reading.samples import SAMPLES_COLUMNS, samples_frame
+from analysis.report.report_tables import trials_csv
 from bench.row_format import row_format_copy
-from protocol.config import default_protocol
-from protocol.rehearsal import FaultPlan
+from protocol.runner.rehearsal import FaultPlan
+from protocol.study.config import default_protocol
 from study_app.cli.main import main
 from study_app.headless import SessionInterrupted, resume_session, run_study
 
@@ -168,7 +168,7 @@ def test_export_gives_every_record_as_a_table(study, tmp_path, capsys) -> None:
 
 
 def test_export_labels_phases_and_faults_and_writes_a_codebook_for_every_column(study, tmp_path, capsys) -> None:
-    from protocol.labels import PHASE_NAMES
+    from protocol.study.labels import PHASE_NAMES
 
     sid = sessions(study)["P02/experiment"]  # the session with the fault, alone: a lean test
     code, _, err = _run(capsys, "export", "samples", "--db", str(study), "--session", str(sid),

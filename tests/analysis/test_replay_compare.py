@@ -1,4 +1,4 @@
-"""analysis.replay_compare: the delay estimate against a plain shift-by-shift reference, and on known delays."""
+"""analysis.stats.replay_compare: the delay estimate against a plain shift-by-shift reference, and on known delays."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis.replay_compare import best_lag_ms, moving_average
+from analysis.stats.replay_compare import best_lag_ms, moving_average
 
 
 def _reference_lag(ref: np.ndarray, dly: np.ndarray, max_lag: int) -> float:

@@ -19,9 +19,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
-from analysis.codebook import STATS_CSV_COLUMNS
-from analysis.figures import peak_downsample, significance_mark
-from analysis.report_tables import TRIALS_CSV_COLUMNS
+from analysis.plots.figures import peak_downsample, significance_mark
+from analysis.reading.codebook import STATS_CSV_COLUMNS
+from analysis.report.report_tables import TRIALS_CSV_COLUMNS
 from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -218,7 +218,7 @@ def test_force_never_replaces_a_folder_holding_the_database(tmp_path, capsys):
 
 
 def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, report, tmp_path, capsys, monkeypatch):
-    import analysis.report_tables
+    import analysis.report.report_tables
 
     out = tmp_path / "rep"
     shutil.copytree(report, out)  # a folder report wrote (the module's report, copied: bytes, modes and marker)
@@ -228,7 +228,7 @@ def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, report,
         (folder / "stats.csv").write_text("half")
         raise RuntimeError("disk trouble")
 
-    monkeypatch.setattr(analysis.report_tables, "write_tables", crash)
+    monkeypatch.setattr(analysis.report.report_tables, "write_tables", crash)
     with pytest.raises(RuntimeError, match="disk trouble"):
         main(["report", "--db", str(dbs[0]), "--out", str(out), "--force"])
     assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
@@ -296,7 +296,7 @@ def test_plot_trial(dbs, tmp_path, capsys):
 
 
 def test_the_trace_axis_is_set_by_the_target_not_by_the_data():
-    from protocol.display import task_axis_top_n
+    from protocol.study.display import task_axis_top_n
 
     assert task_axis_top_n(0.6, 0.7) == pytest.approx(1.5)       # band 0.54-0.66 N: 8 % of the axis
     assert task_axis_top_n(0.6, 2.0) == pytest.approx(2.1)       # a peak up to 4 F* stretches it

@@ -18,10 +18,10 @@ import pandas as pd
 import pytest
 from studybuilder import SessionDef, TrialDef, build, success_trial, timeout_trial
 
-from analysis import report as report_module
-from analysis import sensitivity as sensitivity_module
-from analysis.aggregate import mean_sd
-from analysis.report import build_report
+from analysis.report import report as report_module
+from analysis.report.report import build_report
+from analysis.stats import sensitivity as sensitivity_module
+from analysis.stats.aggregate import mean_sd
 from study_app.cli.main import main
 
 

@@ -117,10 +117,10 @@ def test_recorded_deviations_are_listed(reports):
 
 
 def test_a_session_run_from_a_checkout_stores_its_commit(tmp_path):
-    from protocol.config import default_protocol
-    from protocol.session_setup import open_new_session
+    from foundation.version import checkout_provenance, software_provenance
+    from protocol.runner.session_setup import open_new_session
     from protocol.storage import StudyDatabase
-    from protocol.version import checkout_provenance, software_provenance
+    from protocol.study.config import default_protocol
     from study_app.cli.main import version_text
 
     root = Path(__file__).resolve().parents[2]

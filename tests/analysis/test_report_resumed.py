@@ -16,7 +16,7 @@ import pytest
 from cli_subprocess import cli as _cli
 from cli_subprocess import tiny_protocol
 
-from protocol.config import protocol_from_dict
+from protocol.study.config import protocol_from_dict
 from study_app.headless import run_study
 
 PROTOCOL = tiny_protocol("resume")

@@ -1,4 +1,4 @@
-"""Tests of analysis.stats against scipy.stats.wilcoxon (SciPy 1.17.1), brute force and hand-computed values.
+"""Tests of analysis.stats.wilcoxon against scipy.stats.wilcoxon (SciPy 1.17.1), brute force and hand-computed values.
 
 Values are built from integers and halves so that ON − OFF is exact in floating
 point and ties and zeros occur often; then "equal to SciPy" means bit-equal.
@@ -15,10 +15,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy import stats as sps
 
-from analysis.correlation import CorrelationResult, correlation
-from analysis.hodges_lehmann import _midpoint, _walsh_select, hodges_lehmann
-from analysis.signed_rank import signed_rank_null_counts
-from analysis.stats import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
+from analysis.stats.correlation import CorrelationResult, correlation
+from analysis.stats.hodges_lehmann import _midpoint, _walsh_select, hodges_lehmann
+from analysis.stats.signed_rank import signed_rank_null_counts
+from analysis.stats.wilcoxon import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
 
 _SCIPY_METHOD = {"exact": "exact", "approx": "asymptotic"}
 TEST_FIELDS = ("statistic", "p_value", "z", "rank_biserial", "r")
@@ -551,7 +551,7 @@ def test_scipy_pin_is_the_range_whose_auto_rule_was_read():
 
     import scipy
 
-    from analysis.signed_rank import SCIPY_AUTO_RANGE
+    from analysis.stats.signed_rank import SCIPY_AUTO_RANGE
 
     deps = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())["project"]["dependencies"]
     (spec,) = [d for d in deps if d.startswith("scipy")]

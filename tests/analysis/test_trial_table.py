@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 from studybuilder import SessionDef, build, rmse_of_success, success_trial, timeout_trial
 
-from analysis.load import AnalysisError, load_study
-from analysis.metrics import MetricOptions, compute_trials
+from analysis.reading.load import AnalysisError, load_study
+from analysis.reading.metrics import MetricOptions, compute_trials
 
 EXACT = dict(rel=1e-12, abs=1e-15)
 

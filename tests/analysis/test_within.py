@@ -16,10 +16,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from analysis.learning import learning_models, order_check
-from analysis.models import MIN_PARTICIPANTS, MIXED_METHODS
-from analysis.rmcorr import rmcorr
-from analysis.trade import speed_accuracy, trade_model
+from analysis.stats.learning import learning_models, order_check
+from analysis.stats.models import MIN_PARTICIPANTS, MIXED_METHODS
+from analysis.stats.rmcorr import rmcorr
+from analysis.stats.trade import speed_accuracy, trade_model
 
 # Bland & Altman (1995), BMJ 310:446, Table 1: intramural pH and PaCO2 of eight subjects (the rmcorr package's
 # bland1995).  rmcorr(Subject, PacO2, pH, bland1995) prints r = -0.5067697, df = 38, p = 0.0008471081,
@@ -171,7 +171,7 @@ def test_too_few_participants_is_a_plain_statement_not_a_fit():
 
 
 def test_the_order_check_compares_on_first_with_off_first_participants():
-    from analysis.aggregate import per_participant
+    from analysis.stats.aggregate import per_participant
 
     per = per_participant(_trials(8, seed=2))
     first = pd.Series(["on", "off"] * 4, index=[f"P{p:02d}" for p in range(8)])

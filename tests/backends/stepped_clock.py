@@ -1,6 +1,6 @@
 """A clock the test steps, for a loop that runs in its own thread: the thread's waits end only when the test says.
 
-:class:`pipeline.runtime.clock.VirtualClock` jumps straight to every deadline, so a
+:class:`pipeline.core.clock.VirtualClock` jumps straight to every deadline, so a
 loop *thread* on it would race ahead of the test.  Here ``sleep_until``
 blocks until the test has moved time past the deadline (:meth:`SteppedClock.step`),
 and :meth:`SteppedClock.step` returns once the loop thread has run up to its

@@ -41,7 +41,7 @@ WATCHDOG_MS = 50  # UrRtdeServo's default target_timeout_s
 
 
 class TeleopRig(Rig):
-    """The dead-loop bench's rig with the robot driven from the stylus (as ``pipeline.devices.real_rig.RealRig``
+    """The dead-loop bench's rig with the robot driven from the stylus (as ``pipeline.assembly.real_rig.RealRig``
     does)."""
 
     def __init__(self, clock: SteppedClock, touch: TouchHapticDevice, servo: UrRtdeServo) -> None:

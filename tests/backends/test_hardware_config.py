@@ -14,16 +14,16 @@ from fake_rtde import FakeRtde
 from hypothesis import given, settings
 from tomlvalues import TOML_VALUES, replaced
 
+from pipeline.assembly.engine import build_hardware_engine
+from pipeline.assembly.real_rig import RealRig, build_real_rig
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.ur import UrRtdeRobot
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, HapticState
-from pipeline.devices.real_rig import RealRig, build_real_rig
 from pipeline.devices.touch_output import TouchSpec
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.force.payload_compensator import NO_PAYLOAD
-from pipeline.runtime.clock import VirtualClock
-from pipeline.runtime.engine import build_hardware_engine
 from pipeline.settings.hardware import HardwareConfig, HardwareError, hardware_from_dict, load_hardware
 from pipeline.settings.tomlfields import host_problem
 
@@ -265,7 +265,7 @@ class _FakeTouch:
 
 
 def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("pipeline.devices.real_rig.open_haptic", lambda cfg, clock: _FakeTouch())
+    monkeypatch.setattr("pipeline.assembly.real_rig.open_haptic", lambda cfg, clock: _FakeTouch())
     with FakeNetFT() as netft, FakeRtde() as rtde, PtyJaw() as jaw:
         hw = load_hardware(write_rig_file(tmp_path, netft, rtde, jaw, cal=True))
         assert hw.calibration_file == str(tmp_path / "payload.json")

@@ -17,9 +17,9 @@ from pipeline.backends.netft import (
     RdtSequencer,
     parse_netft_xml,
 )
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import Fault, ForceSensor
 from pipeline.force.framework import FrameworkConfig, HapticFramework
-from pipeline.runtime.clock import VirtualClock
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import ResetFaults
 from pipeline.sim.robot import TOOL_DOWN, SimRobot

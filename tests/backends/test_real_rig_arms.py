@@ -18,16 +18,16 @@ from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from waits import until
 
+from pipeline.assembly.engine import build_hardware_engine
+from pipeline.assembly.real_rig import RealRig, build_real_rig
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.touch import TouchHapticDevice, TouchScheduler
 from pipeline.backends.ur import UrRtdeRobot
+from pipeline.core.clock import VirtualClock
+from pipeline.core.tick_record import RECORD_FIELDS
 from pipeline.devices.interfaces import DeviceError, Fault
-from pipeline.devices.real_rig import RealRig, build_real_rig
 from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE
-from pipeline.runtime.clock import VirtualClock
-from pipeline.runtime.engine import build_hardware_engine
 from pipeline.runtime.loop_messages import SetHaptics
-from pipeline.runtime.tick_record import RECORD_FIELDS
 from pipeline.runtime.watchdog import WatchdogConfig
 from pipeline.settings.hardware import hardware_from_dict
 
@@ -44,7 +44,7 @@ def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
 def touches(monkeypatch: pytest.MonkeyPatch) -> FakeMultiHD:
     hd = FakeMultiHD(FakeTouch("Right Touch", position=(10.0, 0.0, 0.0)),
                      FakeTouch("Left Touch", peak=2.0, position=(-10.0, 0.0, 0.0)))
-    monkeypatch.setattr("pipeline.devices.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
+    monkeypatch.setattr("pipeline.assembly.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
     return hd
 
 
@@ -182,7 +182,7 @@ def test_a_replaced_haptic_opener_opens_each_arms_touch(fakes: Any, monkeypatch:
         names.append(cfg.device_name)
         return TouchScheduler(FakeMultiHD(FakeTouch(cfg.device_name))).open(cfg.device_name, clock)
 
-    monkeypatch.setattr("pipeline.devices.real_rig.open_haptic", stand_in)
+    monkeypatch.setattr("pipeline.assembly.real_rig.open_haptic", stand_in)
     opened: list[str] = []
     rig = build_real_rig(_file(fakes), VirtualClock(), on_open=opened.append)
     rig.close()
@@ -194,8 +194,8 @@ def test_each_teleoperated_arm_has_its_own_controller_clutch_and_deadman(fakes: 
     own controller; the clutch on one stylus and the deadman released on the other change only that arm's state."""
     from fake_ur_control import FakeControl
 
+    from pipeline.core.clock import MonotonicClock
     from pipeline.devices.teleop import TeleopState
-    from pipeline.runtime.clock import MonotonicClock
 
     controls = {ur.host: FakeControl() for _, ur in fakes.values()}
     raw: dict[str, Any] = {"arm": [], "rig": {"fault_policy": "both"}}

@@ -43,7 +43,7 @@ def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
 @pytest.fixture
 def two_touches(monkeypatch: pytest.MonkeyPatch) -> FakeMultiHD:
     hd = FakeMultiHD(FakeTouch("Right Touch"), FakeTouch("Left Touch"))
-    monkeypatch.setattr("pipeline.devices.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
+    monkeypatch.setattr("pipeline.assembly.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
     return hd
 
 

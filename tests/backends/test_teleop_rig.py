@@ -25,12 +25,12 @@ from fake_rtde import FakeRtde
 from fake_ur_control import FakeControl
 from test_hardware_config import write_rig_file
 
+from pipeline.assembly.real_rig import RealRig, build_real_rig
 from pipeline.backends.touch import TouchHapticDevice
 from pipeline.backends.ur_control import UrRtdeServo
+from pipeline.core.clock import MonotonicClock
 from pipeline.devices.interfaces import DeviceError
-from pipeline.devices.real_rig import RealRig, build_real_rig
 from pipeline.devices.teleop import ServoTarget, TeleopDriver, TeleopState
-from pipeline.runtime.clock import MonotonicClock
 from pipeline.settings.hardware import hardware_from_dict
 
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"

@@ -20,10 +20,10 @@ from pipeline.backends.touch import (
     TouchHapticDevice,
     load_pyopenhaptics,
 )
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, Fault, HapticDevice
 from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
 from pipeline.force.framework import FrameworkConfig, HapticFramework
-from pipeline.runtime.clock import VirtualClock
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import ResetFaults, SetHaptics
 from pipeline.sim.robot import TOOL_DOWN, SimRobot

@@ -14,14 +14,14 @@ from pathlib import Path
 
 import pytest
 
-import pipeline.runtime.platform_support as ps
+import foundation.platform_support as ps
 from pipeline.backends import touch
 from pipeline.devices.interfaces import DeviceError
 from pipeline.settings.hardware import HardwareError, load_hardware
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLE = (ROOT / "hardware.example.toml").read_text(encoding="utf-8")
-FAKE_HD = "import pipeline.runtime.platform_support as ps\nps._test_events.append('import pyOpenHaptics.hd')\n"
+FAKE_HD = "import foundation.platform_support as ps\nps._test_events.append('import pyOpenHaptics.hd')\n"
 
 
 def _hardware(tmp_path: Path, line: str) -> Path:
@@ -90,8 +90,8 @@ def test_the_folder_is_added_before_pyopenhaptics_is_imported(fake_windows, tmp_
 
 
 def test_the_touch_passes_its_setting_down_to_the_import(fake_windows, tmp_path, monkeypatch):
-    from pipeline.devices.real_rig import open_haptic
-    from pipeline.runtime.clock import VirtualClock
+    from pipeline.assembly.real_rig import open_haptic
+    from pipeline.core.clock import VirtualClock
     from pipeline.settings.hardware import HapticSettings
 
     monkeypatch.setattr(touch.PyOpenHapticsApi, "init_device", lambda self, name: (_ for _ in ()).throw(

@@ -10,9 +10,9 @@ import pytest
 from fake_multi_hd import FakeMultiHD, FakeTouch
 
 from pipeline.backends.touch import HD_FORCE_OUTPUT, HD_MAX_FORCE_CLAMPING, TouchScheduler
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, HapticDevice
 from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
-from pipeline.runtime.clock import VirtualClock
 
 MS = 1_000_000
 

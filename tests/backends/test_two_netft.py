@@ -8,7 +8,7 @@ from __future__ import annotations
 from fake_netft import FakeNetFT
 
 from pipeline.backends.netft import NetFTForceSensor
-from pipeline.runtime.clock import VirtualClock
+from pipeline.core.clock import VirtualClock
 
 
 def test_two_boxes_stream_to_two_sensors_independently() -> None:

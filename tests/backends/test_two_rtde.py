@@ -12,7 +12,7 @@ import time
 from fake_rtde import FakeRtde
 
 from pipeline.backends.ur import UrRtdeRobot
-from pipeline.runtime.clock import MonotonicClock
+from pipeline.core.clock import MonotonicClock
 
 WAIT_S = 3.0
 

@@ -10,9 +10,9 @@ import pytest
 from fake_rtde import FakeRtde
 
 from pipeline.backends.ur import UrRtdeRobot, ur3_flange_pose, ur3_tcp_pose
+from pipeline.core.clock import MonotonicClock
 from pipeline.devices.interfaces import DeviceError, Robot
 from pipeline.force.frames import matrix_to_rotvec, rotvec_to_matrix
-from pipeline.runtime.clock import MonotonicClock
 
 WAIT_S = 3.0
 

@@ -24,8 +24,8 @@ import pytest
 from fake_ur_control import FakeControl
 
 from pipeline.backends.ur_control import UrRtdeServo
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, TcpServo
-from pipeline.runtime.clock import VirtualClock
 from pipeline.sim.robot import TOOL_DOWN
 
 QUIET_S = 0.05  # how long "nothing happens" is watched (> 6 worker periods)

@@ -12,7 +12,7 @@ import threading
 from collections.abc import Callable
 
 from pipeline.backends.touch import HD_NOMINAL_MAX_CONTINUOUS_FORCE, HD_NOMINAL_MAX_FORCE, TouchHapticDevice
-from pipeline.runtime.clock import Clock
+from pipeline.core.clock import Clock
 from pipeline.settings.hardware import HapticSettings
 
 #: Every device opened in this process, newest last (tests inspect the forces it was sent).
@@ -75,7 +75,7 @@ class ThreadedHD:
 
 
 def open_fake_touch(settings: HapticSettings, clock: Clock) -> TouchHapticDevice:
-    """``pipeline.devices.real_rig.open_haptic``'s signature, on :class:`ThreadedHD`."""
+    """``pipeline.assembly.real_rig.open_haptic``'s signature, on :class:`ThreadedHD`."""
     api = ThreadedHD()
     OPENED.append(api)
     return TouchHapticDevice(settings.device_name, api=api, clock=clock, command_timeout_s=settings.command_timeout_s)

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from protocol.clock import SessionClock
-from protocol.records import TrialRecord
+from protocol.study.clock import SessionClock
+from protocol.study.records import TrialRecord
 
 
 def trial_record(**fields: Any) -> TrialRecord:

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.runtime.ring import RingBuffer
-from pipeline.runtime.tick_record import TICK_DTYPE
 from study_app.engine import messages as m
 from study_app.models.app import AppModel
 from study_app.models.arms import task_arm_first

@@ -8,8 +8,8 @@ import math
 import numpy as np
 from PySide6.QtWidgets import QApplication
 
+from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.force.frames import axis_angle, mat_mul
-from pipeline.runtime.tick_record import TICK_DTYPE
 from pipeline.sim.robot import TOOL_DOWN
 from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard

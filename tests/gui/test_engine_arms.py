@@ -160,7 +160,7 @@ def test_a_gui_session_with_other_pipeline_settings_than_the_studys_is_refused(t
     """One pipeline per study, from the GUI as from run: a stored study's settings against gui --set's; and a ramp-in
     no ON trial can hold."""
     db = tmp_path / "s.db"
-    from protocol.config import load_protocol
+    from protocol.study.config import load_protocol
     from study_app.headless import run_study
 
     run_study(str(db), participants=1, seed=3, protocol=load_protocol(_protocol(tmp_path, "right")), jobs=1)

@@ -10,7 +10,7 @@ import pytest
 
 from pipeline.devices.touch_output import TouchSpec
 from pipeline.sim.touch import SimTouch
-from protocol.trial import TrialPhase
+from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
 from study_app.engine.setup import HostConfig

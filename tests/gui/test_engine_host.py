@@ -177,8 +177,8 @@ def _assert_replays_bit_for_bit(db: str, session_id: int, runs: int) -> None:
     import numpy as np
 
     from pipeline.force.replay import replay
-    from protocol.recording import read_segment, segments_of
     from protocol.storage import connect_readonly
+    from protocol.storage.recordings import read_segment, segments_of
 
     c = connect_readonly(db)
     try:

@@ -13,7 +13,7 @@ import sqlite3
 import time
 
 from pipeline.devices.interfaces import Fault
-from protocol.trial import TrialPhase
+from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
 from study_app.engine.sessions import list_resumable
@@ -97,7 +97,7 @@ def test_a_frozen_loop_in_a_session_on_the_real_clock_is_latched_and_stored(tmp_
     after 50 ms without a tick, the runner stores it, and the loop latches it when it runs again."""
     import threading
 
-    from pipeline.runtime.clock import VirtualClock
+    from pipeline.core.clock import VirtualClock
 
     events: list[object] = []
     e = StudyEngine(HostConfig(clock="real"), events.append, shared_ring=False)

@@ -10,7 +10,7 @@ from gui_trials import trial_record
 from PySide6.QtCore import QRect, QSize
 from PySide6.QtWidgets import QApplication
 
-from protocol.records import AbortCause
+from protocol.study.records import AbortCause
 from study_app.engine import messages as m
 from study_app.gui.participant_window import HEADLINE_MAX_PX, ParticipantWindow
 from study_app.gui.placement import BESIDE_MIN, beside
@@ -175,8 +175,8 @@ def test_one_count_never_grows_with_re_runs():
 
 
 def test_help_about_names_the_version_the_commit_and_the_paper():
-    from study_app.cli.version_info import version_text
     from study_app.gui.menus import about_text
+    from study_app.version_info import version_text
 
     text = about_text()
     assert version_text() in text and "Shaker and M. S. Erden" in text and "Robotic Surgery Training" in text

@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from pipeline.runtime.clock import collect_garbage
+from pipeline.core.clock import collect_garbage
 from pipeline.runtime.jitter_trace import LateTickTracer, _Task
 from study_app.engine import messages as m
 from study_app.engine.host import QUIET_OFFSET_NS, StudyEngine

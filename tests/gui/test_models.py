@@ -11,10 +11,10 @@ from gui_trials import trial_record
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.runtime.loop_messages import RECORD_FIELDS
 from pipeline.runtime.ring import RingBuffer
-from pipeline.runtime.tick_record import TICK_DTYPE
-from protocol.records import TrialRecord
+from protocol.study.records import TrialRecord
 from study_app.engine import messages as m
 from study_app.models.app import AppModel, Notice
 from study_app.models.calibration import CalibrationModel

@@ -16,13 +16,13 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.commissioning.frame_check import AXES, FrameCheck, check_axis
 from pipeline.commissioning.rig_calibration import CalibrationFileError, RigCalibrationFile, ToolCalibration
 from pipeline.commissioning.tcp import DegeneratePivotError, PivotPose, identify_tip, pivot_orientations
 from pipeline.force.frames import IDENTITY, axis_angle, mat_mul
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.force.payload_compensator import NO_PAYLOAD
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.sim.commissioning import pivot_poses, push_axes
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN

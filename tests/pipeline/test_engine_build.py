@@ -1,9 +1,9 @@
-"""Assembling an engine in-process (:mod:`pipeline.runtime.engine`): the simulated rig's instant start-up
+"""Assembling an engine in-process (:mod:`pipeline.assembly.engine`): the simulated rig's instant start-up
 calibration."""
 
 from __future__ import annotations
 
-from pipeline.runtime.engine import EngineConfig
+from pipeline.assembly.engine import EngineConfig
 
 
 class _SteppedClock:
@@ -24,7 +24,7 @@ def test_a_real_clock_sim_engine_starts_in_the_working_pose_at_once():
     (Before: the robot held the last calibration pose for the first 12 s of a
     real-clock run, and the stylus moved nothing.)
     """
-    from pipeline.runtime.engine import build_sim_engine
+    from pipeline.assembly.engine import build_sim_engine
     from pipeline.sim.robot import TOOL_DOWN
 
     clock = _SteppedClock(5_000_000_000_000)

@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 from drivers import PressAndHold
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.touch_output import TouchSpec
 from pipeline.force.framework import FrameworkConfig
 from pipeline.force.safety import SafetyConfig
-from pipeline.runtime.clock import VirtualClock
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
 from pipeline.runtime.loop_stats import LoopStats
 from pipeline.sim.hand import ScriptedPresses

@@ -12,10 +12,10 @@ import math
 
 import pytest
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
 from pipeline.force.framework import FrameworkConfig, HapticFramework
 from pipeline.runtime.arm_channel import ArmChannel
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import RECORD_FIELDS, OperatorStop, ResetFaults
 from pipeline.runtime.supervisor import LoopSupervisor
@@ -167,6 +167,6 @@ def test_the_loop_refuses_a_pipeline_count_that_does_not_match_the_arms() -> Non
 
 
 def eng_clock():  # type: ignore[no-untyped-def]
-    from pipeline.runtime.clock import VirtualClock
+    from pipeline.core.clock import VirtualClock
 
     return VirtualClock()

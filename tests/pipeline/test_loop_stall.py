@@ -20,9 +20,9 @@ import pytest
 from drivers import PressAndHold
 from test_teleop_faults import Teleop
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.teleop import TeleopState
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import ResetFaults
 
 MS = 1_000_000

@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.force.scaling import scale_magnitude
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import Mark, SetHaptics
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams
 from pipeline.sim.rig import SimRigConfig
-from protocol.metrics import trial_metrics
+from protocol.study.metrics import trial_metrics
 
 K_TISSUE = 1.1e4
 GAP_M = 0.015

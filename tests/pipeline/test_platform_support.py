@@ -1,4 +1,4 @@
-"""The operating system behind one module (``pipeline/runtime/platform_support.py``), and its fallbacks.
+"""The operating system behind one module (``foundation/platform_support.py``), and its fallbacks.
 
 The source of every module is scanned with ``ast`` for calls only some systems have (real-time scheduling, CPU
 affinity, signals, ``prctl``/``ctypes``, shared-memory names, file modes and owners, ``open`` flags and ``dir_fd``,
@@ -24,15 +24,15 @@ from typing import Any
 
 import pytest
 
-import pipeline.runtime.platform_support as ps
-from analysis import outfs
-from analysis.outdir import check_output_folder
-from pipeline.runtime.clock import prepare_realtime_thread
+import foundation.platform_support as ps
+from foundation import outfs
+from foundation.outdir import check_output_folder
+from pipeline.core.clock import prepare_realtime_thread
 from pipeline.runtime.ring import RingBuffer
 
 ROOT = Path(__file__).resolve().parent.parent.parent
-SCANNED = ("pipeline", "protocol", "analysis", "study_app", "bench")
-PLATFORM = "pipeline/runtime/platform_support.py"
+SCANNED = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench")
+PLATFORM = "foundation/platform_support.py"
 
 _MODULES = {"ctypes", "fcntl", "signal", "resource", "msvcrt", "winreg", "_winapi", "posix", "termios",
             "multiprocessing.shared_memory", "multiprocessing.resource_tracker"}
@@ -47,8 +47,8 @@ _DIR_FD = {"dir_fd", "src_dir_fd", "dst_dir_fd"}
 ALLOWED: dict[tuple[str, str], str] = {
     ("pipeline/backends/touch.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
                                                      "through pyOpenHaptics: the device's library, not the OS",
-    ("analysis/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
-                                     "open_folder, which hands the walk to analysis.outpath (by checked paths) "
+    ("foundation/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
+                                     "open_folder, which hands the walk to foundation.outpath (by checked paths) "
                                      "where platform_support.DIR_FD_CALLS is False",
 }
 
@@ -116,7 +116,7 @@ def test_no_os_specific_call_outside_the_platform_module() -> None:
                 used.add((rel, kind))
             else:
                 offenders.append(f"{rel}:{line}: {kind}")
-    assert not offenders, "OS-specific calls outside pipeline/runtime/platform_support.py:\n" + "\n".join(offenders)
+    assert not offenders, "OS-specific calls outside foundation/platform_support.py:\n" + "\n".join(offenders)
     assert used == set(ALLOWED), f"no such call left in {sorted(set(ALLOWED) - used)}: take them off ALLOWED"
 
 
@@ -280,9 +280,9 @@ def test_the_owner_alone_reads_a_new_study_file_on_linux(tmp_path: Path) -> None
 
 
 def test_without_dir_fd_calls_output_folders_are_written_by_checked_paths(monkeypatch, tmp_path: Path) -> None:
-    """Windows' fallback (analysis.outpath; its own tests: tests/analysis/test_outdir_pathwalk.py)."""
-    from analysis.outdir import write_output_folder
-    from analysis.outpath import PathFolder
+    """Windows' fallback (foundation.outpath; its own tests: tests/analysis/test_outdir_pathwalk.py)."""
+    from foundation.outdir import write_output_folder
+    from foundation.outpath import PathFolder
 
     monkeypatch.setattr(outfs, "DIR_FD_CALLS", False)
     assert isinstance(outfs.open_folder(str(tmp_path), follow=True), PathFolder)
@@ -304,7 +304,7 @@ def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
     import builtins
     import io
 
-    from analysis.resources import available_memory_bytes
+    from foundation.resources import available_memory_bytes
     from protocol.storage.leases import _pid_alive, process_identity
 
     def no_proc(real: Any) -> Any:

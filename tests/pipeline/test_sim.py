@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.commissioning.payload_identification import recommended_pose_set
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
 from pipeline.force.frames import IDENTITY, mat_mul, transpose
-from pipeline.runtime.clock import VirtualClock
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot

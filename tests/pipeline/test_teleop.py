@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import TcpServo
 from pipeline.devices.teleop import ServoTarget, Stop, TeleopConfig, TeleopController, TeleopDriver, TeleopState
 from pipeline.force.frames import mat_vec, transpose
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
-from pipeline.runtime.clock import VirtualClock
 from pipeline.sim.robot import SimRobot
 from pipeline.sim.touch import SimTouch
 

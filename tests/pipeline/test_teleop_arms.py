@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.devices.teleop import TeleopConfig, TeleopController, TeleopDriver, TeleopState
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.sim.arms import SimArms
 from pipeline.sim.hand import HandObservation
 

@@ -20,9 +20,9 @@ import math
 
 import pytest
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.teleop import ServoTarget, TeleopConfig, TeleopController, TeleopDriver, TeleopState
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import ControllerDetached, OperatorStop, ResetFaults
 from pipeline.sim.hand import HandObservation
 

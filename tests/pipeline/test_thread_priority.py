@@ -10,7 +10,7 @@ import threading
 
 import pytest
 
-from pipeline.runtime.clock import (
+from pipeline.core.clock import (
     HELPER_PRIORITY,
     REALTIME_ENV,
     REALTIME_PRIORITY,

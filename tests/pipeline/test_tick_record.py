@@ -7,11 +7,11 @@ import struct
 import numpy as np
 import pytest
 
+from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.core.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE, TICK_FIELDS
 from pipeline.force.framework import STEP_FIELDS
-from pipeline.runtime.engine import EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import RECORD_FIELDS, Mark
 from pipeline.runtime.ring import RingBuffer
-from pipeline.runtime.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE, TICK_FIELDS
 
 #: What is an integer in a record (the rest are measurements: float64).
 INTEGERS = {"tick", "t_ns", "period_ns", "sensor_age_ns", "pose_age_ns", "latency_ns", "faults", "haptic_on",

@@ -18,11 +18,11 @@ import math
 import pytest
 from drivers import PressAndHold
 
+from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
 from pipeline.force.framework import STEP_FIELDS
 from pipeline.force.safety import SafetyConfig
-from pipeline.runtime.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.runtime.loop_messages import OperatorStop, ResetFaults
 from pipeline.sim.rig import SimRigConfig
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.load import AnalysisError, read_trial_samples
-from protocol.recording import read_segment, segments_of
+from analysis.reading.load import AnalysisError, read_trial_samples
+from protocol.storage.recordings import read_segment, segments_of
 
 
 def trial_samples(db: Path, trial_id: int) -> pd.DataFrame:

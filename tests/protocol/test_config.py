@@ -11,7 +11,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from tomlvalues import TOML_VALUES, replaced
 
-from protocol.config import (
+from protocol.runner.session_setup import training_protocol as _training_protocol
+from protocol.study.config import (
     ABORT_POLICIES,
     MODES,
     ORDERINGS,
@@ -24,9 +25,8 @@ from protocol.config import (
     load_protocol,
     protocol_from_dict,
 )
-from protocol.session_setup import training_protocol as _training_protocol
 
-DEFAULT_TEXT = resources.files("protocol").joinpath("default.toml").read_text(encoding="utf-8")
+DEFAULT_TEXT = resources.files("protocol.study").joinpath("default.toml").read_text(encoding="utf-8")
 
 
 def _write_variant(tmp_path: Path, old: str, new: str, name: str = "study.toml") -> Path:
@@ -230,7 +230,7 @@ def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(
 
 def test_the_ramps_have_one_definition():
     from pipeline.force.safety import SafetyConfig
-    from protocol.delivery import DeliveryLimits
+    from protocol.study.delivery import DeliveryLimits
 
     limits, safety = DeliveryLimits(), SafetyConfig()
     assert (limits.feedback_ramp_in_s, limits.feedback_ramp_out_s) == (safety.ramp_in_s, safety.fault_ramp_s)

@@ -29,12 +29,12 @@ from typing import Any
 import pytest
 from test_storage import FakeClock, _session_args
 
-from protocol.config import ProtocolConfig, protocol_from_dict
-from protocol.design import build_schedule, schedule_from_json
-from protocol.rehearsal import parse_fault_plan
+from protocol.runner.rehearsal import parse_fault_plan
 from protocol.storage import crashpoint
 from protocol.storage.crashpoint import CRASH_ENV
 from protocol.storage.database import StudyDatabase
+from protocol.study.config import ProtocolConfig, protocol_from_dict
+from protocol.study.design import build_schedule, schedule_from_json
 from study_app.headless import run_study
 
 #: Two designed trials (one per mode), no training; short trials and pauses keep the commits few.
@@ -205,7 +205,7 @@ def test_a_crash_at_any_commit_or_inside_the_abort_transaction_loses_and_duplica
     cases = [(f"commit:{n}", n <= commits) for n in range(1, commits + 2)]
     cases += [(f"statement:{n}", True) for n in (inserts[0], inserts[0] + 2, inserts[0] + 3)]
     ctx = mp.get_context("forkserver")
-    ctx.set_forkserver_preload(["study_app.headless", "protocol.config", "protocol.rehearsal", __name__])
+    ctx.set_forkserver_preload(["study_app.headless", "protocol.study.config", "protocol.runner.rehearsal", __name__])
     with ThreadPoolExecutor(max_workers=2) as pool:
         found = list(pool.map(lambda c: _case(ctx, tmp_path / c[0].replace(":", "-"), *c), cases))
     problems = [p for f in found for p in f]
@@ -222,9 +222,9 @@ def test_the_crash_point_is_refused_when_misspelt(tmp_path: Path, monkeypatch: p
 
 
 def test_what_is_queued_in_one_atomic_block_is_one_commit_whatever_the_deadline(tmp_path: Path) -> None:
-    from protocol.clock import SessionClock
-    from protocol.records import TrialRecord
     from protocol.storage import Recorder
+    from protocol.study.clock import SessionClock
+    from protocol.study.records import TrialRecord
 
     path = tmp_path / "s.db"
     db = StudyDatabase(path)

@@ -31,11 +31,13 @@ import pytest
 from cli_subprocess import cli as _cli
 from cli_subprocess import tiny_protocol
 
-from analysis.load import load_study
-from protocol.config import protocol_from_dict
-from protocol.recording import RecordingDamaged, read_segment, read_ticks, recording_damage
-from protocol.session_setup import open_resumed_session
+from analysis.reading.load import load_study
+from protocol.recording import RecordingDamaged
+from protocol.runner.session_setup import open_resumed_session
 from protocol.storage import StorageError, StudyDatabase
+from protocol.storage.damage import recording_damage
+from protocol.storage.recordings import read_segment, read_ticks
+from protocol.study.config import protocol_from_dict
 from study_app.headless import run_study
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -250,7 +252,7 @@ def test_check_says_a_session_another_process_writes_is_in_progress_not_to_be_re
     writer.acquire_lease(session_scope(sid), owner, command="haptic-study run --resume P03")  # this process: live
     try:
         # the report's list of incomplete sessions says the same (not "interrupted ... --resume continues it")
-        from analysis.study_record import incomplete_sessions
+        from analysis.report.study_record import incomplete_sessions
 
         (reason,) = incomplete_sessions(load_study([db]))["reason"]
         assert reason.startswith(f"P03, session {sid}: in progress (process {os.getpid()} (haptic-study run --resume "

@@ -8,8 +8,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from protocol.config import ORDERINGS, ProtocolConfig, Target, default_protocol
-from protocol.design import HapticMode, TrialSpec, build_schedule, requeue_aborted, schedule_from_json, schedule_to_json
+from protocol.study.config import ORDERINGS, ProtocolConfig, Target, default_protocol
+from protocol.study.design import (
+    HapticMode,
+    TrialSpec,
+    build_schedule,
+    requeue_aborted,
+    schedule_from_json,
+    schedule_to_json,
+)
 
 FORCE = {"GENTLE": 0.6, "FIRM": 1.2}
 

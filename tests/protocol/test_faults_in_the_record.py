@@ -15,13 +15,13 @@ from pathlib import Path
 import pytest
 
 import pipeline.sim.faults
-from analysis.load import load_study
-from analysis.loop_health import abort_counts, health_table
-from analysis.study_record import deviations
-from protocol.config import default_protocol
-from protocol.design import build_schedule
-from protocol.rehearsal import FaultPlan, parse_fault_plan
+from analysis.reading.load import load_study
+from analysis.report.study_record import deviations
+from analysis.stats.loop_health import abort_counts, health_table
+from protocol.runner.rehearsal import FaultPlan, parse_fault_plan
 from protocol.storage import HEALTH_COLUMNS
+from protocol.study.config import default_protocol
+from protocol.study.design import build_schedule
 from study_app.headless import SessionInterrupted, resume_session, run_study
 
 #: What each rehearsed kind latches, as the loop names it.

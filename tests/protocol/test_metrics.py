@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from protocol.metrics import (
+from protocol.study.metrics import (
     BAND_SLACK,
     CONTACT_THRESHOLD_N,
     HoldDetector,

@@ -22,7 +22,8 @@ PAUSE_S = 2.0
 
 def short_toml(tmp_path: Path, training: bool = False) -> Path:
     p = tmp_path / "short.toml"
-    text = (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
+    text = (ROOT / "protocol" / "study" / "default.toml").read_text()
+    text = text.replace("trials_per_cell = 5", "trials_per_cell = 1")
     text = text.replace("seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 4.0")
     p.write_text(text if training else text.replace("enabled = true", "enabled = false"))
     return p
@@ -143,8 +144,8 @@ def test_kill_at_any_moment_then_continue_keeps_the_true_timeline(tmp_path: Path
 
 def test_kill_during_training_then_continue_keeps_the_true_timeline(tmp_path: Path) -> None:
     db, proto = tmp_path / "t.db", short_toml(tmp_path, training=True)
-    code = ("from protocol.config import load_protocol\n"
-            "from protocol.rehearsal import FaultPlan\n"
+    code = ("from protocol.study.config import load_protocol\n"
+            "from protocol.runner.rehearsal import FaultPlan\n"
             "from study_app.headless import run_study\n"
             f"run_study({str(db)!r}, participants=1, seed=4, protocol=load_protocol({str(proto)!r}), jobs=1, "
             "faults=[FaultPlan('kill', 'P01', 3, 0.5, 'training')])\n")
@@ -161,8 +162,8 @@ def _as_version_1(db: Path) -> None:
     leases or later columns)."""
     import sqlite3
 
-    from protocol.recording import read_ticks
     from protocol.storage import HEALTH_COLUMNS
+    from protocol.storage.recordings import read_ticks
 
     c = sqlite3.connect(db)
     # what version 1 stored of each trial: its window's samples, in rows

@@ -17,8 +17,6 @@ from pathlib import Path
 
 import pytest
 
-from protocol.config import default_protocol
-from protocol.design import build_schedule, schedule_to_json
 from protocol.storage import (
     LEASE_STALE_S,
     SCHEMA_VERSION,
@@ -30,6 +28,8 @@ from protocol.storage import (
     process_identity,
     session_scope,
 )
+from protocol.study.config import default_protocol
+from protocol.study.design import build_schedule, schedule_to_json
 
 V1_SCHEMA = Path(__file__).parent / "data" / "schema_v1.sql"
 V3_SCHEMA = Path(__file__).parent / "data" / "schema_v3.sql"

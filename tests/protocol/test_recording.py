@@ -14,7 +14,7 @@ from hypothesis.extra import numpy as hnp
 from old_chunks import old_chunk, old_open_block
 from test_storage import FakeClock, _session_args
 
-from pipeline.runtime.tick_record import TICK_DTYPE
+from pipeline.core.tick_record import TICK_DTYPE
 from protocol.recording import (
     BLOCK_RECORDS,
     COLUMNS,
@@ -25,12 +25,11 @@ from protocol.recording import (
     encode_block,
     join_chunks,
     kept_records,
-    read_segment,
-    read_ticks,
 )
 from protocol.recording import codec as recording
 from protocol.storage import Recorder, StudyDatabase
 from protocol.storage.reader import StudyReader
+from protocol.storage.recordings import read_segment, read_ticks
 from protocol.storage.withdrawal import erase_participant, footprint
 
 #: Every kind of float64 the loop could hand over, the awkward ones often.

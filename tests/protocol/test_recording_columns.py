@@ -10,7 +10,8 @@ import pytest
 from old_chunks import old_chunk, old_open_block
 
 import protocol.recording.codec as recording
-from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, join_chunks, read_ticks
+from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, join_chunks
+from protocol.storage.recordings import read_ticks
 
 
 def block_columns(n: int, derate: np.ndarray | None = None) -> dict[str, np.ndarray]:

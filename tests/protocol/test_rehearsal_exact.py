@@ -17,11 +17,11 @@ import pytest
 from cli_subprocess import cli, tiny_protocol
 
 from pipeline.sim.faults import FaultInjector, SimFault, latch_delay_s
-from protocol.clock import SessionClock
-from protocol.config import ProtocolConfig, protocol_from_dict
-from protocol.records import TrialRecord
-from protocol.rehearsal import FaultPlan, RehearsalTrigger
-from protocol.trial import PhaseChanged, TrialPhase
+from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
+from protocol.study.clock import SessionClock
+from protocol.study.config import ProtocolConfig, protocol_from_dict
+from protocol.study.records import TrialRecord
+from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.headless import run_study
 
 ROOT = Path(__file__).resolve().parents[2]

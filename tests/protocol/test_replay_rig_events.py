@@ -28,13 +28,13 @@ from test_faults_in_the_record import rows, short_protocol
 from test_recording import bits
 
 import study_app.headless.session_run as session_run
-from analysis.load import load_study
-from analysis.loop_health import abort_counts, health_table
+from analysis.reading.load import load_study
+from analysis.stats.loop_health import abort_counts, health_table
+from pipeline.assembly.engine import Engine
 from pipeline.devices.touch_output import TouchSpec
 from pipeline.force.replay import ReplayInputs, replay
-from pipeline.runtime.engine import Engine
 from pipeline.sim.rig import SimRigConfig
-from protocol.recording import SegmentData, read_segment, segments_of
+from protocol.storage.recordings import SegmentData, read_segment, segments_of
 from study_app.headless import run_study
 
 MS = 1_000_000

@@ -10,7 +10,7 @@ from collections import deque
 
 from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.runtime.ring import RingBuffer
-from protocol.session_driver import SessionDriver
+from protocol.runner.session_driver import SessionDriver
 
 
 def _ring(capacity: int = 8) -> RingBuffer:

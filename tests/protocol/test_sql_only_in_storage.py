@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent.parent
-SCANNED = ("pipeline", "protocol", "analysis", "study_app", "bench")
+SCANNED = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench")
 STORAGE = ROOT / "protocol" / "storage"
 _KEYWORD = re.compile(r"^\s*(SELECT|INSERT|UPDATE|DELETE|PRAGMA|CREATE|ALTER|DROP|VACUUM|BEGIN|COMMIT|ROLLBACK)\b")
 _CALLS = {"execute", "executemany", "executescript", "read_sql", "read_sql_query"}

@@ -14,9 +14,6 @@ from pathlib import Path
 
 import pytest
 
-from protocol.config import default_protocol
-from protocol.design import build_schedule, schedule_to_json
-from protocol.records import TrialRecord
 from protocol.storage import (
     SAMPLE_COLUMNS,
     SCHEMA_VERSION,
@@ -28,6 +25,9 @@ from protocol.storage import (
     trial_id_of,
     validate_code,
 )
+from protocol.study.config import default_protocol
+from protocol.study.design import build_schedule, schedule_to_json
+from protocol.study.records import TrialRecord
 
 COLUMNS = {
     "participants": ["participant_id", "code", "created_at"],
@@ -590,7 +590,7 @@ def test_a_file_and_folder_without_write_bits_are_not_written_even_by_root(tmp_p
     """``chmod a-w`` on an archived study was no refusal for root (os.access allows root everything): ``withdraw``
     removed a participant from a 0444 file in a 0555 folder, ``run --continue`` added one, and every reader left
     -wal and -shm files beside it.  The mode is the owner's word, and in a container everyone is root."""
-    from pipeline.runtime.platform_support import may_write
+    from foundation.platform_support import may_write
 
     folder = tmp_path / "archive"
     folder.mkdir()

@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 from records import all_records, trial_samples
 
-from protocol.config import default_protocol
-from protocol.design import build_schedule, schedule_from_json
 from protocol.storage import StorageError, StudyDatabase
+from protocol.study.config import default_protocol
+from protocol.study.design import build_schedule, schedule_from_json
 from study_app.headless import resume_session, run_study
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -102,8 +102,8 @@ def _run_killed_in_training(db: Path, proto: Path, participants: int, seed: int,
     """A study killed (SIGKILL) ``seconds`` into P01's ``trial``-th practice trial; the command line plans only
     experiment trials, so this runs the library in a subprocess of its own.  Returns the exit status."""
     code = (
-        "from protocol.config import load_protocol\n"
-        "from protocol.rehearsal import FaultPlan\n"
+        "from protocol.study.config import load_protocol\n"
+        "from protocol.runner.rehearsal import FaultPlan\n"
         "from study_app.headless import run_study\n"
         f"run_study({str(db)!r}, participants={participants}, seed={seed}, protocol=load_protocol({str(proto)!r}), "
         f"jobs=1, faults=[FaultPlan('kill', 'P01', {trial}, {seconds}, 'training')])\n"
@@ -118,7 +118,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
     db = tmp_path / "crash.db"
     proto = tmp_path / "short.toml"
     proto.write_text(
-        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 2")
+        (ROOT / "protocol" / "study" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 2")
         .replace("enabled = true", "enabled = false")
     )
     killed = _run_cli(["run", "--participants", "1", "--seed", "3", "--db", str(db), "--protocol", str(proto),
@@ -168,7 +168,7 @@ def test_sigkill_then_resume_loses_and_duplicates_nothing(tmp_path: Path, kill_a
 
 def test_bad_input_is_refused_before_anything_is_stored(tmp_path: Path) -> None:
     bad = tmp_path / "bad.toml"
-    bad.write_text((ROOT / "protocol" / "default.toml").read_text().replace("hold_s = 1.0", "hold_s = -1.0"))
+    bad.write_text((ROOT / "protocol" / "study" / "default.toml").read_text().replace("hold_s = 1.0", "hold_s = -1.0"))
     db = tmp_path / "x.db"
     r = _run_cli(["run", "--participants", "1", "--db", str(db), "--protocol", str(bad)], timeout=60)
     assert r.returncode == 2 and "trial.hold_s = -1.0" in r.stderr and "Traceback" not in r.stderr
@@ -249,7 +249,7 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
     db = tmp_path / "crash-par.db"
     proto = tmp_path / "short.toml"
     proto.write_text(
-        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
+        (ROOT / "protocol" / "study" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
         .replace("enabled = true", "enabled = false")
     )
     killed = _run_cli(["run", "--participants", "2", "--jobs", "2", "--seed", "3", "--db", str(db),
@@ -341,7 +341,7 @@ def test_parallel_study_stops_its_workers_when_the_parent_fails(tmp_path: Path) 
 def _short_training_toml(tmp_path: Path) -> Path:
     proto = tmp_path / "short-training.toml"
     proto.write_text(
-        (ROOT / "protocol" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
+        (ROOT / "protocol" / "study" / "default.toml").read_text().replace("trials_per_cell = 5", "trials_per_cell = 1")
         .replace("seconds_per_target_per_mode = 20.0", "seconds_per_target_per_mode = 4.0")
     )
     return proto
@@ -446,12 +446,12 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     """A Python exception inside a participant's worker (injected) is reported by name; the study then completes."""
     import multiprocessing
 
-    import protocol.session
+    import protocol.runner.session
     import study_app.headless.pool as pool
     from study_app.headless import StudyWorkerError
 
     db = tmp_path / "raise.db"
-    real_process = protocol.session.SessionRunner.process
+    real_process = protocol.runner.session.SessionRunner.process
 
     def process_then_fail(self, rows, *args):
         real_process(self, rows, *args)
@@ -461,7 +461,7 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     # the workers are forked, so they run the patched runner (spawned ones would import it afresh)
     fork = multiprocessing.get_context("fork")
     monkeypatch.setattr(pool, "worker_context", lambda: fork)
-    monkeypatch.setattr(protocol.session.SessionRunner, "process", process_then_fail)
+    monkeypatch.setattr(protocol.runner.session.SessionRunner, "process", process_then_fail)
     with pytest.raises(StudyWorkerError) as err:
         run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2)
     msg = str(err.value)
@@ -472,7 +472,7 @@ def test_an_exception_in_a_worker_stops_the_study_with_its_message_and_continue_
     # every session stored stays resumable (the other worker may not have opened its own yet on a loaded machine)
     statuses = rows(db, "SELECT status FROM sessions")
     assert statuses and set(statuses) == {("running",)}
-    monkeypatch.setattr(protocol.session.SessionRunner, "process", real_process)
+    monkeypatch.setattr(protocol.runner.session.SessionRunner, "process", real_process)
     run_study(str(db), participants=2, seed=9, protocol=short_protocol(), jobs=2, continue_study=True)
     assert rows(db, "SELECT status FROM sessions") == [("completed",), ("completed",)]
     for sid in (1, 2):

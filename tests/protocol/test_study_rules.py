@@ -1,5 +1,6 @@
-"""The study's rules across sessions (protocol.study_rules): one seed per study, training before the experiment --
-one definition, applied where sessions are stored (the GUI's engine and ``run`` alike) and by ``run``'s plan."""
+"""The study's rules across sessions (protocol.runner.study_rules): one seed per study, training before the
+experiment -- one definition, applied where sessions are stored (the GUI's engine and ``run`` alike) and by
+``run``'s plan."""
 
 from __future__ import annotations
 
@@ -9,10 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from protocol.config import ProtocolError, default_protocol, protocol_from_dict
-from protocol.session_setup import open_new_session
-from protocol.storage import StudyDatabase, new_owner_token, session_scope
-from protocol.study_rules import (
+from protocol.runner.session_setup import open_new_session
+from protocol.runner.study_rules import (
     DEVIATION_EVENT,
     TRAINING_SKIPPED,
     StoredSession,
@@ -24,6 +23,8 @@ from protocol.study_rules import (
     stored_sessions,
     training_refusal,
 )
+from protocol.storage import StudyDatabase, new_owner_token, session_scope
+from protocol.study.config import ProtocolError, default_protocol, protocol_from_dict
 from study_app.cli.main import main
 
 PAPER = default_protocol()

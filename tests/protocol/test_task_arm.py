@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from analysis.load import load_study
-from analysis.metrics import compute_trials
+from analysis.reading.load import load_study
+from analysis.reading.metrics import compute_trials
 from pipeline.runtime.loop_messages import LoopEvent
-from protocol.audit import audit_database
-from protocol.config import ProtocolError, default_protocol, protocol_from_dict
-from protocol.design import build_schedule
-from protocol.session import SessionRunner
+from protocol.runner.session import SessionRunner
+from protocol.storage.audit import audit_database
+from protocol.study.config import ProtocolError, default_protocol, protocol_from_dict
+from protocol.study.design import build_schedule
 from study_app.headless import run_study
 
 
@@ -93,8 +93,8 @@ def test_a_one_arm_rig_stores_its_events_as_before() -> None:
 
 
 def test_the_other_arm_is_recorded_beside_the_task_arm_read_by_name_and_checked(tmp_path: Path) -> None:
-    from protocol.recording import read_segment
     from protocol.storage import StudyReader
+    from protocol.storage.recordings import read_segment
 
     db = tmp_path / "two.db"
     run_study(str(db), participants=1, seed=5, protocol=short_protocol("left"), jobs=1, sim_arms=("left", "right"))
@@ -141,8 +141,9 @@ def test_the_other_arm_is_recorded_beside_the_task_arm_read_by_name_and_checked(
 def test_a_crash_keeps_the_other_arms_committed_records_and_a_withdrawal_removes_them(tmp_path: Path) -> None:
     from test_storage import FakeClock, _session_args
 
-    from protocol.recording import BLOCK_RECORDS, COLUMNS, read_segment
+    from protocol.recording import BLOCK_RECORDS, COLUMNS
     from protocol.storage import Recorder, StudyDatabase
+    from protocol.storage.recordings import read_segment
     from protocol.storage.withdrawal import erase_participant, footprint
 
     def records(first: int, n: int) -> dict[str, np.ndarray]:

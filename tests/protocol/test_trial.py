@@ -9,10 +9,10 @@ import math
 
 import pytest
 
-from protocol.config import TrialTiming
-from protocol.design import TrialSpec
-from protocol.metrics import trial_metrics
-from protocol.trial import (
+from protocol.study.config import TrialTiming
+from protocol.study.design import TrialSpec
+from protocol.study.metrics import trial_metrics
+from protocol.study.trial import (
     PHASE_CODES,
     TRANSITIONS,
     PhaseChanged,

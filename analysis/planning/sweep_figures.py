@@ -1,0 +1,132 @@
+"""The figures of a pipeline settings sweep (``haptic-study sweep``, :mod:`analysis.planning.sweep`).
+
+* :func:`metrics_figure` -- success rate, TCT over successful trials, RMSE and Max AE against the first swept
+  setting, haptics OFF and ON, each point the mean over studies with its 95 % t-interval, the paper's value of the
+  setting marked; a second swept setting is a line per value (its own line style);
+* :func:`front_figure` -- the speed–accuracy front: TCT against RMSE with haptics ON, one point per setting
+  (both intervals drawn), each labelled, the paper's setting starred.
+
+Both carry the sweep's caveat (a model's prediction) along the bottom.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import matplotlib
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
+
+__all__ = ["front_figure", "metrics_figure"]
+
+_PANELS = (("success", "success rate"), ("tct_s", "TCT, successful trials (s)"), ("rmse_n", "RMSE (N)"),
+           ("max_ae_n", "Max AE (N)"))
+_MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
+_DASHES = ("-", "--", ":", "-.")
+
+
+def _log_x(values: Sequence[float]) -> bool:
+    """A log axis when the values are positive and span a factor of 10 or more."""
+    return min(values) > 0 and max(values) / min(values) >= 10
+
+
+def _label(settings: Mapping[str, Any], names: Sequence[str]) -> str:
+    return ", ".join(f"{k}={float(settings[k]):g}" for k in names)
+
+
+def _errorbar(ax: Any, x: Sequence[float], sel: pd.DataFrame, col: str, **kw: Any) -> None:
+    y = sel[col].to_numpy(dtype=float)
+    lo = (y - sel[f"{col}_ci_low"].to_numpy(dtype=float))
+    hi = (sel[f"{col}_ci_high"].to_numpy(dtype=float) - y)
+    lo[~(lo == lo)] = 0.0  # no interval (one study): a bare point
+    hi[~(hi == hi)] = 0.0
+    ax.errorbar(x, y, yerr=[lo, hi], capsize=2, markersize=3.5, **kw)
+
+
+@styled
+def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, float], note: str) -> Figure:
+    """The four measures against the first swept setting (see the module docstring)."""
+    x_name, others = swept[0], list(swept[1:])
+    xs = sorted({float(v) for v in summary[x_name]})
+    lines = note_lines(note, PAGE_IN)
+    fig = Figure(figsize=(PAGE_IN, 5.2 + 0.11 * lines))
+    margins(fig, 0.6, 0.15, 0.55 + 0.11 * lines, 0.3, wspace=0.3, hspace=0.45)
+    axes = fig.subplots(2, 2)
+    groups = (list(summary.groupby(others, sort=True)) if others else [((), summary)])
+    for ax, (metric, label) in zip(axes.flat, _PANELS, strict=True):
+        for g_i, (g_key, grp) in enumerate(groups):
+            sel = grp[grp["metric"] == metric].sort_values(x_name)
+            tag = "" if not others else " · " + _label(
+                dict(zip(others, g_key if isinstance(g_key, tuple) else (g_key,), strict=True)), others)
+            for mode, dx in (("off", 0.985), ("on", 1.015)):
+                x = [float(v) * (dx if _log_x(xs) else 1.0) for v in sel[x_name]]
+                _errorbar(ax, x, sel, mode, color=MODE_COLORS[mode], marker=MODE_MARKERS[mode],
+                          linestyle=_DASHES[g_i % len(_DASHES)], label=_MODE_NAMES[mode] + tag)
+        if x_name in paper:
+            ax.axvline(float(paper[x_name]), color="#777777", linewidth=0.8, linestyle=(0, (2, 2)), zorder=0)
+            ax.annotate("paper", (float(paper[x_name]), 1.0), xycoords=("data", "axes fraction"), fontsize=6.5,
+                        color="#555555", ha="left", va="top", xytext=(2, -1), textcoords="offset points")
+        if _log_x(xs):
+            ax.set_xscale("log")
+            ax.set_xlim(xs[0] / 1.5, xs[-1] * 1.5)
+        elif len(xs) > 1:
+            pad = (xs[-1] - xs[0]) * 0.08
+            ax.set_xlim(xs[0] - pad, xs[-1] + pad)
+        ax.set_xticks(xs, [f"{v:g}" for v in xs])
+        ax.minorticks_off()
+        ax.set_xlabel(x_name)
+        ax.set_ylabel(label)
+        ax.spines["top"].set_visible(False)
+        ax.spines["right"].set_visible(False)
+        ax.grid(axis="y", color="#dddddd", linewidth=0.6)
+    axes.flat[0].legend(frameon=False, loc="best")
+    fig.suptitle("Pipeline settings sweep: mean over studies, 95 % t-interval")
+    add_note(fig, note)
+    return fig
+
+
+@styled
+def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figure:
+    """TCT against RMSE with haptics ON, one labelled point per setting (see the module docstring)."""
+    lines = note_lines(note, PAGE_IN * 0.62)
+    fig = Figure(figsize=(PAGE_IN * 0.62, 3.6 + 0.11 * lines))
+    margins(fig, 0.6, 0.2, 0.5 + 0.11 * lines, 0.3)
+    ax = fig.add_subplot()
+    tct = summary[summary["metric"] == "tct_s"].reset_index(drop=True)
+    rmse = summary[summary["metric"] == "rmse_n"].reset_index(drop=True)
+    pts: list[tuple[float, float]] = []
+    one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
+    # each setting its own colour, named in the legend: labels beside points collide where the points crowd
+    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, max(len(tct), 1)))
+    for i, ((_, t), (_, r)) in enumerate(zip(tct.iterrows(), rmse.iterrows(), strict=True)):
+        x, y = float(r["on"]), float(t["on"])
+        xerr = [[_half(r, "low")], [_half(r, "high")]]
+        yerr = [[_half(t, "low")], [_half(t, "high")]]
+        star = bool(t["paper"])
+        text = (f"{float(t[swept[0]]):g}" if one else _label(t, swept)) + (" (paper)" if star else "")
+        ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=colours[i], marker="*" if star else "o",
+                    markersize=9 if star else 5, capsize=2, linewidth=0.8, label=text)
+        pts.append((x, y))
+    for (x0, y0), (x1, y1) in itertools.pairwise(pts) if one else ():
+        ax.plot([x0, x1], [y0, y1], color="#bbbbbb", linewidth=0.6, zorder=0)
+    ax.margins(x=0.2, y=0.1)
+    ax.set_xlabel("RMSE (N), haptics ON")
+    ax.set_ylabel("TCT, successful trials (s), haptics ON")
+    ax.spines["top"].set_visible(False)
+    ax.spines["right"].set_visible(False)
+    ax.set_title(("Speed–accuracy front across " + (swept[0] if one else "settings")) + " (lower left is better)")
+    ax.legend(title=swept[0] if one else "setting", frameon=False, fontsize=6.5, title_fontsize=7, loc="best")
+    add_note(fig, note)
+    return fig
+
+
+def _half(row: pd.Series, end: str) -> float:
+    """The distance from the ON mean to one end of its interval (0 without one)."""
+    v = abs(float(row[f"on_ci_{end}"]) - float(row["on"]))
+    return v if math.isfinite(v) else 0.0

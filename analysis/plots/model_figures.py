@@ -1,0 +1,117 @@
+"""The figures of the within-participant analyses: the speed–accuracy slopes and learning over the session.
+
+* :func:`trade_slopes` -- TCT against RMSE per haptic mode: every trial a dot, every participant's own
+  least-squares line, and the common within-participant slope of the repeated-measures correlation;
+* :func:`learning_curves` -- each metric over the session's trials by mode (blocks of trials, the
+  participants' block means averaged), labelled as the secondary analysis it belongs to.
+
+Both are drawn in the report's journal style (:data:`analysis.plots.figures.STYLE`), the page's width.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+from matplotlib.figure import Figure
+
+from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, _style, add_note, margins, note_lines, styled
+from analysis.stats.aggregate import METRIC_LABELS
+
+__all__ = ["learning_curves", "trade_slopes"]
+
+_DPI = 300
+_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
+
+
+@styled
+def trade_slopes(pairs: pd.DataFrame, slopes: pd.DataFrame, common: Mapping[str, tuple[float, str]],
+                 tct_label: str, note: str = "") -> Figure:
+    """TCT against RMSE, one panel per mode: trials, each participant's own line, the common slope.
+
+    Parameters
+    ----------
+    pairs
+        Trials with ``participant_code``, ``haptic_mode``, ``rmse`` (N) and ``tct`` (s).
+    slopes
+        :func:`analysis.stats.trade.participant_slopes`.
+    common
+        Per mode: (the common within-participant slope in s per N, its caption, e.g. the r_rm with its interval).
+    tct_label
+        The TCT axis label (which trials have a TCT).
+    note
+        A caveat printed under the panels.
+    """
+    extra = 0.12 * note_lines(note, PAGE_IN)
+    fig = Figure(figsize=(PAGE_IN, 3.0 + extra), dpi=_DPI)
+    margins(fig, 0.5, 0.1, 0.4 + extra, 0.62, wspace=0.12)
+    axes = fig.subplots(1, 2, sharey=True)
+    for ax, mode in zip(axes, ("off", "on"), strict=True):
+        sel = pairs[pairs["haptic_mode"] == mode]
+        ax.scatter(sel["rmse"], sel["tct"], s=7, color=MODE_COLORS[mode], alpha=0.55, linewidths=0,
+                   marker=MODE_MARKERS[mode], label="trial", zorder=3)
+        first = True
+        for r in slopes[slopes["haptic_mode"] == mode].itertuples():
+            if not math.isfinite(r.slope_s_per_n):
+                continue
+            x = np.array([r.rmse_min_n, r.rmse_max_n])
+            ax.plot(x, r.intercept_s + r.slope_s_per_n * x, color="#555555", linewidth=0.6, alpha=0.8, zorder=2,
+                    label="a participant's own line" if first else None)
+            first = False
+        slope, caption = common.get(mode, (math.nan, "not computable"))
+        if len(sel) and math.isfinite(slope):
+            x0, y0 = float(sel["rmse"].mean()), float(sel["tct"].mean())
+            x = np.array([float(sel["rmse"].min()), float(sel["rmse"].max())])
+            ax.plot(x, y0 + slope * (x - x0), color="black", linewidth=1.6, linestyle="--", zorder=4,
+                    label="common within-participant slope")
+        ax.set_title(f"{_NAMES[mode]}\n{caption}", loc="left")
+        ax.set_xlabel("RMSE (N)")
+        _style(ax)
+    axes[0].set_ylabel(tct_label)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, frameon=False, ncols=3, loc="upper right", bbox_to_anchor=(1.0, 1.0))
+    add_note(fig, note)
+    return fig
+
+
+@styled
+def learning_curves(curve: pd.DataFrame, note: str = "") -> Figure:
+    """Each metric over the session by haptic mode: mean ± SE across participants per block of trials.
+
+    Parameters
+    ----------
+    curve
+        :func:`analysis.stats.learning.learning_curve`.
+    note
+        A caveat printed under the panels (what the points are, what the models say).
+    """
+    metrics = ["success_rate", "tct_s", "rmse_n", "max_ae_n"]
+    extra = 0.12 * note_lines(note, PAGE_IN)
+    fig = Figure(figsize=(PAGE_IN, 2.4 + extra), dpi=_DPI)
+    margins(fig, 0.45, 0.08, 0.42 + extra, 0.72, wspace=0.5)
+    axes = fig.subplots(1, len(metrics))
+    blocks = curve.drop_duplicates("block").sort_values("block")
+    ticks = blocks["block"].to_list()
+    names = [f"{a}–{b}" if a != b else str(a) for a, b in zip(blocks["first_trial"], blocks["last_trial"], strict=True)]
+    for ax, m in zip(axes, metrics, strict=True):
+        for k, mode in enumerate(("off", "on")):
+            sel = curve[(curve["metric"] == m) & (curve["haptic_mode"] == mode)].sort_values("block")
+            dx = (k - 0.5) * 0.16  # side by side, so equal means and their bars do not hide each other
+            ax.errorbar(sel["block"] + dx, sel["mean"], yerr=sel["se"].fillna(0.0), color=MODE_COLORS[mode],
+                        marker=MODE_MARKERS[mode], markersize=3.5, linewidth=0.9, capsize=2, elinewidth=0.7,
+                        label=_NAMES[mode])
+        ax.set_xticks(ticks, names, rotation=0)
+        ax.set_xlim(min(ticks, default=0) - 0.4, max(ticks, default=0) + 0.4)
+        ax.set_title(METRIC_LABELS.get(m, m))
+        ax.set_xlabel("trials")
+        if m == "success_rate":
+            ax.set_ylim(-0.05, 1.05)
+        _style(ax)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, frameon=False, ncols=2, loc="upper left", bbox_to_anchor=(0.0, 1.0),
+               title="secondary analysis: mean ± SE across participants of each participant's block mean",
+               alignment="left")
+    add_note(fig, note)
+    return fig

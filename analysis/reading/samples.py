@@ -1,0 +1,130 @@
+"""Every recorded 1 kHz record as one labelled table, for pandas, R and SQL users, with its codebook.
+
+:func:`samples_frame` is ``haptic-study export samples`` as a DataFrame: the recording's columns
+(:func:`analysis.reading.load.recorded_samples`) with what a reader needs and the source code used to be needed for --
+the participant code, the trial phase by name beside its code, the latched faults by name beside the bitmask,
+and a unit at the end of every name, spelled as the report's CSVs spell them (``_N`` newtons, ``_Nm``
+newton-metres, ``_s``, ``_ms``, ``_m``; a fraction or flag has its unit in the codebook).
+:func:`codebook_frame` describes every column: ``file, column, type, unit, description``, the same form as
+the report's ``codebook.csv``.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pandas as pd
+
+from analysis.reading.load import _open, recorded_samples
+from protocol.study.labels import FAULT_BITS, PHASE_NAMES, fault_names
+
+__all__ = ["SAMPLES_COLUMNS", "codebook_frame", "samples_frame"]
+
+_PHASES = ", ".join(f"{code} {name}" for code, name in sorted(PHASE_NAMES.items()))
+_FAULTS = ", ".join(f"{bit} {name}" for bit, name in sorted(FAULT_BITS.items()))
+
+#: Every column of the export, in order: (name, type, unit, description).  ``comp_*`` only for sessions
+#: recorded before schema version 3 (whose compensated force was stored; a recording's is recomputed by replay).
+SAMPLES_COLUMNS: tuple[tuple[str, str, str, str], ...] = (
+    ("participant_code", "text", "", "pseudonymous participant code of the session"),
+    ("session_id", "integer", "", "session in its database (sessions.session_id; haptic-study sessions lists them)"),
+    ("arm", "text", "", ("the rig's arm whose records these are (exported with --arm on a rig of several arms; "
+     "without it the task arm's, the trials' own)")),
+    ("segment", "integer", "", "run of the session the record belongs to: 0, then one more per resume"),
+    ("tick", "integer", "count", "the 1 kHz loop's tick number within its run"),
+    ("session_time_s", "number", "s", "time since the session started (session clock)"),
+    ("trial_number", "integer", "", ("trial within its session, numbered from 1 as the report and the GUI number "
+     "them; empty between trials")),
+    ("t_since_cue_s", "number", "s", "time since the trial's cue; empty between trials"),
+    ("phase", "text", "", "the trial machine's phase: idle, cued (cue given, not yet in contact), active, pause"),
+    ("phase_code", "integer", "", f"the phase as recorded ({_PHASES})"),
+    ("force_N", "number", "N", ("task force: magnitude of the filtered, compensated contact force (what the trial "
+     "was judged on)")),
+    *((f"raw_f{a}_N", "number", "N", (f"raw F/T sensor force, {a} axis of the sensor frame (tool weight and bias "
+       "included)")) for a in "xyz"),
+    *((f"raw_t{a}_Nm", "number", "N·m", f"raw F/T sensor torque, {a} axis of the sensor frame") for a in "xyz"),
+    *((f"render_f{a}_N", "number", "N", f"force commanded to the haptic device, {a} axis of the haptic frame")
+      for a in "xyz"),
+    ("gain", "number", "fraction (0–1)", "the safety stage's gain on the rendered force (ramps in and out)"),
+    ("derate", "number", "fraction (0–1)", ("the fraction of the designed force the haptic device's thermal "
+     "derating let through (1: not cut)")),
+    ("haptic_on", "boolean", "", "force feedback switched on"),
+    ("faults", "integer", "bitmask", f"latched watchdog faults as a bitmask ({_FAULTS}); 0 none"),
+    ("fault_names", "text", "", "the latched faults by name, joined by |; none when none is latched"),
+    *((f"stylus_{a}_m", "number", "m", f"stylus position, {a} axis") for a in "xyz"),
+    ("sensor_age_ms", "number", "ms", "age of the F/T sample the tick used (watchdog limit 5 ms)"),
+    ("pose_age_ms", "number", "ms", "age of the robot pose the tick used (watchdog limit 50 ms)"),
+    ("latency_ms", "number", "ms", "time from the F/T sample's arrival to the force command it produced"),
+    *((f"comp_f{a}_N", "number", "N", f"compensated force, {a} axis (stored by schema versions 1 and 2 only)")
+      for a in "xyz"),
+)
+
+#: recorded name -> exported name
+_RENAME = {"force_n": "force_N", "phase": "phase_code",
+           **{f"raw_f{a}": f"raw_f{a}_N" for a in "xyz"}, **{f"raw_t{a}": f"raw_t{a}_Nm" for a in "xyz"},
+           **{f"render_f{a}": f"render_f{a}_N" for a in "xyz"}, **{f"comp_f{a}": f"comp_f{a}_N" for a in "xyz"}}
+
+
+def _codes(database: str | os.PathLike[str]) -> dict[int, str]:
+    db = _open(str(database))
+    try:
+        return db.session_codes()
+    finally:
+        db.close()
+
+
+def samples_frame(database: str | os.PathLike[str], session_id: int | None = None,
+                  arm: str | None = None) -> pd.DataFrame:
+    """The 1 kHz records of one session (or all), labelled: what ``haptic-study export samples`` writes.
+
+    A session recorded by schema version 3 or later gives every record from its start to its end (training,
+    pauses, trials, waits, every resumed run); one recorded before gives its trials' samples.
+
+    Parameters
+    ----------
+    database
+        The study database (opened read-only).
+    session_id
+        One session, or None for every session.
+    arm
+        A rig of several arms: the arm whose records, by name (None: the task arm's); named, it is a column too.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per record, the columns of :data:`SAMPLES_COLUMNS` that the sessions have, in that order;
+        sorted by session and time.
+
+    Raises
+    ------
+    AnalysisError
+        Not a study database, or no such session.
+    """
+    raw = recorded_samples(database, session_id, arm)
+    out = raw.rename(columns=_RENAME)
+    codes = _codes(database)
+    out.insert(0, "participant_code", out["session_id"].map(lambda s: codes.get(int(s), "")).astype(str))
+    if arm is not None:
+        out.insert(2, "arm", arm)
+    if "phase_code" in out.columns:
+        phase = out["phase_code"]
+        names = {int(c): PHASE_NAMES.get(int(c), f"unknown ({int(c)})") for c in pd.unique(phase.dropna())}
+        out.insert(out.columns.get_loc("phase_code"), "phase", phase.map(names))
+    if "faults" in out.columns:
+        bits = out["faults"].to_numpy()
+        names = {int(b): fault_names(int(b)) for b in np.unique(bits[~pd.isna(bits)])}
+        out.insert(out.columns.get_loc("faults") + 1, "fault_names", out["faults"].map(names))
+    order = [c for c, *_ in SAMPLES_COLUMNS if c in out.columns]
+    labelled = out[order + [c for c in out.columns if c not in order]]
+    labelled.attrs["damage"] = list(raw.attrs.get("damage", []))  # the damaged stretches left out, one line each
+    return labelled
+
+
+def codebook_frame(file: str, columns: list[str]) -> pd.DataFrame:
+    """The codebook of an export: one row per column of ``file`` (``file, column, type, unit, description``)."""
+    entries = {name: (kind, unit, text) for name, kind, unit, text in SAMPLES_COLUMNS}
+    rows = [{"file": file, "column": c, "type": entries.get(c, ("", "", ""))[0],
+             "unit": entries.get(c, ("", "", ""))[1],
+             "description": entries.get(c, ("", "", ""))[2]} for c in columns]
+    return pd.DataFrame(rows, columns=["file", "column", "type", "unit", "description"])

@@ -1,0 +1,373 @@
+"""The study report: one self-contained HTML page, tidy CSV tables and the figures.
+
+:func:`build_report` reads one or more study databases, recomputes every
+trial's metrics from its samples, aggregates per participant and mode, tests
+ON vs OFF, draws the paper's figures and writes::
+
+    DIR/report.html            figures embedded, tables, methods paragraph
+    DIR/trials.csv             one row per analysed trial
+    DIR/participants.csv       per participant × haptic mode
+    DIR/participants_wide.csv  one row per participant: OFF and ON columns per measure (JASP, SPSS)
+    DIR/participants_by_target.csv
+    DIR/stats.csv              one row per metric (paired Wilcoxon ON vs OFF, Holm across metrics)
+    DIR/stats_by_target.csv    the same within each target
+    DIR/speed_accuracy.csv     TCT–RMSE rank correlation per mode
+    DIR/sessions.csv           every session read, with what was excluded
+    DIR/codebook.csv           every column of every CSV: meaning, unit, type
+    DIR/figures/*.png, *.pdf, *.svg
+
+The report is built in a temporary folder beside ``DIR`` and moved into place
+at the end, so a failed run never leaves half a report or touches an old one;
+``--force`` replaces only a report's own, unedited files (the folder policy
+of :mod:`foundation.outdir`, shared with ``power``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from analysis.plots import figures, model_figures
+from analysis.reading.load import Progress, StudyData, load_study
+from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
+from analysis.report import report_tables
+from analysis.report.report_html import page, plural, power_html
+from analysis.report.study_record import (
+    aborted_reruns,
+    condition_warnings,
+    damaged_trials,
+    deviations,
+    incomplete_sessions,
+    provenance,
+    resumed_sessions,
+)
+from analysis.report.withdrawals import study_withdrawals, withdrawals_html
+from analysis.stats.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
+from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
+from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
+from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
+from analysis.stats.wilcoxon import WilcoxonResult
+from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
+from foundation.parallel import default_workers, run_tasks
+
+__all__ = [
+    "ReportSummary",
+    "build_report",
+]
+
+
+@dataclass(frozen=True, slots=True)
+class ReportSummary:
+    """What :func:`build_report` wrote and found."""
+
+    out_dir: Path
+    n_participants: int
+    n_trials: int
+    n_samples: int
+    excluded: dict[str, int]
+    stats: pd.DataFrame
+    files: list[str] = field(default_factory=list)
+    #: One line per run of damaged recorded blocks (:attr:`analysis.reading.load.StudyData.damage`); the trials they
+    #: touch are left out of the analysis and listed in the report.
+    damage: tuple[str, ...] = ()
+    #: Conditions the analysed sessions did not share (:func:`analysis.report.study_record.condition_warnings`).
+    conditions: tuple[str, ...] = ()
+
+
+def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
+    """One trial per mode for the pipeline figure: the first participant's first success (else first trial)."""
+    first = sorted(trials["participant_code"].unique())[0]
+    mine = trials[trials["participant_code"] == first]
+    picks = []
+    for mode in ("on", "off"):
+        sel = mine[mine["haptic_mode"] == mode]
+        if sel.empty:
+            continue
+        ok = sel[sel["success"]]
+        picks.append((ok if not ok.empty else sel).iloc[0])
+    return picks
+
+
+def _marks(results: Sequence[WilcoxonResult], frame: pd.DataFrame) -> dict[str, str]:
+    holm = dict(zip(frame["metric"], frame["p_holm"], strict=True))
+    return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric)) for r in results}
+
+
+@dataclass(frozen=True, slots=True)
+class _Analysis:
+    """Everything the report computes from the study, before any table or page is made."""
+
+    study: StudyData
+    table: TrialTable
+    trials: pd.DataFrame
+    overall: pd.DataFrame
+    by_target: pd.DataFrame
+    results: list[WilcoxonResult]
+    stats: pd.DataFrame
+    target_order: list[str]
+    target_results: dict[str, list[WilcoxonResult]]
+    stats_by_target: pd.DataFrame
+    excluded: dict[str, int]
+    n_incomplete: int
+    n_participants: int
+    within: _Within
+    confidence: float = 0.95
+
+
+@dataclass(frozen=True, slots=True)
+class _Within:
+    """The within-participant analyses: the trade, the error-window sensitivity, learning and order, the record."""
+
+    sa: pd.DataFrame
+    trade_fit: ModelFit | None
+    slopes: pd.DataFrame
+    sensitivity: pd.DataFrame
+    max_ae_approach: tuple[int, int]
+    learning: list[ModelFit]
+    order: pd.DataFrame
+    curve: pd.DataFrame
+    incomplete: pd.DataFrame
+    deviations: pd.DataFrame
+    provenance: pd.DataFrame
+    provenance_warnings: list[str]
+    reruns: tuple[int, int]
+    damaged: pd.DataFrame
+    resumed: pd.DataFrame
+
+
+def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
+             confidence: float, progress: Progress | None, workers: int | None,
+             include_incomplete: bool = False) -> _Analysis:
+    """Read the study, recompute every trial, aggregate per participant and test ON vs OFF (overall, per target)."""
+    study = load_study(databases, include_incomplete=include_incomplete)
+    table = compute_trials(study, options, progress=progress, workers=workers)
+    trials = table.trials
+    overall = per_participant(trials, options)
+    by_target = per_participant(trials, options, by_target=True)
+    results, stats = mode_tests(overall, zero_method=zero_method, confidence=confidence)
+    target_order = list(trials.drop_duplicates("target_label").sort_values("target_force_n")["target_label"])
+    per_target: list[pd.DataFrame] = []
+    target_results: dict[str, list[WilcoxonResult]] = {}
+    for label in target_order:
+        res, frame = mode_tests(by_target[by_target["target_label"] == label], zero_method=zero_method,
+                                confidence=confidence)
+        frame.insert(0, "target_label", label)
+        per_target.append(frame)
+        target_results[label] = res
+    all_t = study.trials
+    excluded = {
+        "training_sessions": int((study.sessions["kind"] != "experiment").sum()),
+        "training_trials": int((all_t["excluded"] == "training session").sum()),
+        "incomplete_sessions": int(((study.sessions["kind"] == "experiment") & ~study.sessions["analysed"]).sum()),
+        "incomplete_trials": int(((all_t["excluded"] == "incomplete session") & (all_t["outcome"] != "aborted")).sum()),
+        "aborted_trials": int((all_t["excluded"] == "aborted trial").sum()),
+        "damaged_trials": int((all_t["excluded"] == "recording damaged").sum()),
+    }
+    exp = study.sessions[study.sessions["kind"] == "experiment"]
+    within = _within(study, table, overall, target_order, options, zero_method, confidence)
+    return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
+                     pd.concat(per_target, ignore_index=True), excluded,
+                     int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
+                     confidence)
+
+
+def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
+            options: MetricOptions, zero_method: str, confidence: float) -> _Within:
+    """The trade, the sensitivity to the error window, learning and order, and the study record's lists.
+
+    The models are not fitted here (``trade_fit`` None, ``learning`` empty): :func:`_draw` fits them in a worker
+    while the figures are drawn (:func:`_fit_models`), each once.
+    """
+    trials = table.trials
+    prov, warn = provenance(study)
+    warn = condition_warnings(study) + warn  # pooled conditions first: they qualify every test
+    return _Within(
+        sa=speed_accuracy(trials, options, confidence=confidence),
+        trade_fit=None,
+        slopes=participant_slopes(trials, options),
+        sensitivity=window_sensitivity(table, options, zero_method=zero_method, confidence=confidence),
+        max_ae_approach=max_ae_from_approach(table),
+        learning=[],
+        order=order_check(overall, first_modes(study.sessions)),
+        curve=learning_curve(trials, tct_column(options)),
+        incomplete=incomplete_sessions(study), deviations=deviations(study), provenance=prov,
+        provenance_warnings=warn, reruns=aborted_reruns(study), damaged=damaged_trials(study),
+        resumed=resumed_sessions(study),
+    )
+
+
+def _all_marks(a: _Analysis) -> tuple[dict[str, str], dict[tuple[str, str], str]]:
+    """Significance marks per metric overall, and per (metric, scope) for the figures with targets."""
+    marks_overall = _marks(a.results, a.stats)
+    marks: dict[tuple[str, str], str] = {(m, "overall"): s for m, s in marks_overall.items()}
+    for label in a.target_order:
+        frame = a.stats_by_target[a.stats_by_target["target_label"] == label]
+        for m, s in _marks(a.target_results[label], frame).items():
+            marks[(m, label)] = s
+    return marks_overall, marks
+
+
+def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
+    """The caveats printed on the figures they qualify."""
+    window = ("from the cue, the approach from 0 N included" if options.error_window == "cue" else
+              "from first contact")
+    no_tct = int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+    tct = ("TCT over successful trials only" + (f"; {plural(no_tct, 'participant')} without a success in a mode "
+                                                 "have no TCT there" if no_tct else "")
+           if options.tct_policy == "successful" else "TCT with failed trials counted at the trial cap")
+    learning = ("Descriptive; the trial-number effects at fixed mode and target are the models' (report table)."
+                if a.n_participants >= MIN_PARTICIPANTS else
+                f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
+                f"(at least {MIN_PARTICIPANTS}).")
+    return {"tct": tct + ".", "errors": f"RMSE and Max AE: error window {window}.",
+            "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
+            "learning": learning}
+
+
+def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOptions,
+                confidence: float) -> tuple[ModelFit, list[ModelFit]]:
+    """Every model of the report, each fitted once: the trade's mixed model and one learning model per outcome."""
+    return (trade_model(trials, options, confidence=confidence),
+            learning_models(trials, target_order, tct_column(options), confidence))
+
+
+def _work(kind: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str, name: str) -> Any:
+    """One task of the report's worker pool: draw a figure (``kind`` is its builder, in :mod:`analysis.plots.figures` or
+    :mod:`analysis.plots.model_figures`) or fit the models."""
+    if kind == "models":
+        return _fit_models(*args)
+    if kind in ("trade_slopes", "learning_curves"):
+        return figures.save(getattr(model_figures, kind)(*args, **kwargs), folder, name)
+    return figures.render(kind, args, kwargs, folder, name)
+
+
+def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], marks: dict[tuple[str, str], str],
+          fig_dir: Path, workers: int | None,
+          ) -> tuple[dict[str, bytes], list[tuple[str, bytes]], tuple[ModelFit, list[ModelFit]]]:
+    """Draw the figures into ``fig_dir`` and fit the models, in parallel: the PNGs by key, the example trials
+    with titles, and the fitted models (the trade's, the learning ones)."""
+    overall, by_target, trials = a.overall, a.by_target, a.trials
+    notes = _notes(a, options)
+    common = {str(r.haptic_mode): (float(r.slope_s_per_n), rm_caption(r)) for r in a.within.sa.itertuples()}
+    tct_label = "TCT (s), successful trials" if options.tct_policy == "successful" else "TCT (s), failures at the cap"
+    bars = dict(target_order=a.target_order)
+    tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
+        ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
+        ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
+        ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),
+        ("mode_bars", (["rmse_n", "max_ae_n"], overall, by_target, marks), {**bars, "note": notes["errors"]},
+         "rmse_max_ae", "errors"),
+        ("paired_lines", (overall, PRIMARY_METRICS, marks_overall), {}, "paired", "paired"),
+        ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
+         {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
+        ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
+    ]
+    titles = []
+    included = a.study.included
+    for ex in _example_trials(trials):
+        number = int(ex["trial_index"]) + 1  # trials are numbered from 1 for people (see analysis.reading.codebook)
+        name = f"pipeline_{ex['participant_code']}_s{int(ex['session_id'])}_trial{number}"
+        title = (f"{ex['participant_code']}, session {int(ex['session_id'])}, trial {number}: {ex['target_label']} "
+                 f"{ex['target_force_n']:g} N, haptics {str(ex['haptic_mode']).upper()}, {ex['outcome']}")
+        tol = float(included.loc[(included["database"] == ex["database"]) &
+                                 (included["session_id"] == ex["session_id"]), "tolerance_fraction"].iloc[0])
+        tasks.append(("trial_trace", (str(ex["database"]), int(ex["session_id"]), int(ex["trial_index"])),
+                      dict(target_force_n=float(ex["target_force_n"]), tolerance_fraction=tol, title=title,
+                           error_window=options.error_window), name, name))
+        titles.append((name, title))
+    drawn = run_tasks(_work, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],
+                      workers=default_workers() if workers is None else workers)
+    out = {key: result for (_, _, _, _, key), result in zip(tasks, drawn, strict=True)}
+    models = out.pop("models")
+    return out, [(title, out[name]) for name, title in titles], models
+
+
+
+
+def build_report(
+    databases: Sequence[str | os.PathLike[str]],
+    out_dir: str | os.PathLike[str],
+    *,
+    options: MetricOptions = MetricOptions(),
+    zero_method: str = "wilcox",
+    confidence: float = 0.95,
+    force: bool = False,
+    progress: Progress | None = None,
+    workers: int | None = None,
+    power: bool = False,
+    include_incomplete: bool = False,
+) -> ReportSummary:
+    """Analyse one study (one or more databases) and write its report.
+
+    Parameters
+    ----------
+    databases
+        Study databases; they merge into one study.
+    out_dir
+        Output folder.  It must not exist (or be empty) unless ``force``.
+    options
+        Error window and TCT policy.
+    zero_method, confidence
+        Wilcoxon zero handling and the Hodges–Lehmann confidence level.
+    force
+        Replace an existing, non-empty ``out_dir`` -- only the files ``report`` itself wrote there, unedited (its
+        marker lists each with its SHA-256), and only when it holds nothing else: no input database, no file of
+        anybody else's (:mod:`foundation.outdir`).
+    progress
+        ``progress(samples read, samples expected)``.
+    workers
+        Processes for reading samples and drawing figures (default: the usable cores, at most 4; 1 = none).
+    power
+        Add "What n would a study need?": the power of the tests against the number of participants, by
+        resampling this study's participants (:func:`analysis.planning.power.report_section`; writes ``power.csv``).
+    include_incomplete
+        Analyse the finished trials of experiment sessions that did not complete (by default they are left
+        out; either way the report lists them with the reason).
+
+    Returns
+    -------
+    ReportSummary
+
+    Raises
+    ------
+    AnalysisError
+        Unreadable input, nothing to analyse, or an existing output folder without ``force``.
+    """
+    out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
+    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete)
+    results: dict[str, pd.DataFrame] = {}
+
+    def fill(tmp: Path) -> None:
+        marks_overall, marks = _all_marks(a)
+        pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
+        within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
+        # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
+        tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                     a.stats_by_target, within, options.error_window, rounded=r)
+                         for r in (True, False))
+        results.update(tables)
+        section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
+        if power:
+            from analysis.planning.power_outputs import report_section
+
+            section += power_html(report_section(a.trials, options, zero_method, tmp))
+        report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
+        html = page(
+            study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
+            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
+            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
+            target_order=a.target_order,
+        )
+        (tmp / "report.html").write_text(html, encoding="utf-8")
+
+    files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
+    n_samples = int(a.study.included["n_samples"].fillna(0).sum())
+    return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,
+                         a.study.damage, tuple(condition_warnings(a.study)))

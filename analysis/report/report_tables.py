@@ -1,0 +1,149 @@
+"""The report's CSV tables: exported names and rounding (:mod:`analysis.reading.codebook`), sorted, and the codebook.
+
+:func:`export_tables` turns the computed frames into every CSV as written;
+:func:`write_tables` writes them and ``codebook.csv``.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from analysis.reading import codebook
+from analysis.reading.load import StudyData
+from analysis.stats.loop_health import health_summary, health_table
+from analysis.stats.models import fixed_effects
+
+__all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
+
+#: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
+#: number, participant code, session and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
+TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
+                      "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
+                      "cue_at_s")
+
+
+def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
+                  stats: pd.DataFrame, stats_by_target: pd.DataFrame, within: Any,
+                  error_window: str, rounded: bool = True) -> dict[str, pd.DataFrame]:
+    """Every CSV of the report as written: exported names, rounded (:func:`analysis.reading.codebook.export`), sorted.
+
+    Parameters
+    ----------
+    study : StudyData
+        The study read (its sessions and loop records).
+    trials, overall, by_target, stats, stats_by_target : pandas.DataFrame
+        The analysed trials, the per-participant tables and the tests.
+    within
+        The within-participant analyses (``analysis.report.report._Within``): the trade, the sensitivity table,
+        learning and order, incomplete sessions, deviations.
+    error_window
+        The error window of every RMSE and Max AE in the files, named in each (column ``error_window``).
+    rounded
+        Round each number as its file has it (the default); False: the same tables unrounded, for the page, which
+        rounds each number once as it shows it (:func:`analysis.reading.codebook.export`).
+
+    Returns
+    -------
+    dict of str to pandas.DataFrame
+        File name → table, in the order the files are listed.
+    """
+    exp = functools.partial(codebook.export, rounded=rounded)
+    numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
+    order = sorted(numbers, key=lambda code: (numbers[code], code))
+    rank = {code: i for i, code in enumerate(order)}
+
+    def by_participant(frame: pd.DataFrame, *keys: str) -> pd.DataFrame:
+        out = frame.copy()
+        if "participant_number" not in out.columns:
+            out.insert(1, "participant_number", out["participant_code"].map(numbers).astype(np.int64))
+        out["_rank"] = out["participant_code"].map(rank)
+        return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
+
+    t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window, rounded)
+    per = exp(by_participant(overall, "haptic_mode"), "participants.csv")
+    per_t = exp(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
+                     values=list(codebook.WIDE_MEASURES))
+    wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
+    for c in wide_cols:
+        if c.startswith("n_"):
+            wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    st = exp(stats, "stats.csv")
+    st_t = exp(stats_by_target, "stats_by_target.csv")
+    sess = study.sessions.copy()
+    sess["database"] = sess["database"].map(os.path.basename)
+    health = health_table(study)
+    health["database"] = health["database"].map(os.path.basename)
+    tables = {
+        "trials.csv": t,
+        "participants.csv": per,
+        "participants_wide.csv": exp(wide, "participants_wide.csv"),
+        "participants_by_target.csv": per_t,
+        "stats.csv": st,
+        "stats_by_target.csv": st_t,
+        "sensitivity.csv": exp(within.sensitivity.assign(
+            measure=within.sensitivity["measure"].map(codebook.exported_name)), "sensitivity.csv"),
+        "speed_accuracy.csv": exp(within.sa, "speed_accuracy.csv"),
+        "speed_accuracy_model.csv": exp(fixed_effects([within.trade_fit]), "speed_accuracy_model.csv"),
+        "speed_accuracy_slopes.csv": exp(by_participant(within.slopes, "haptic_mode"),
+                                                     "speed_accuracy_slopes.csv"),
+        "learning_models.csv": exp(fixed_effects(within.learning), "learning_models.csv"),
+        "order_check.csv": exp(within.order, "order_check.csv"),
+        "sessions.csv": exp(sess, "sessions.csv"),
+        "incomplete_sessions.csv": exp(within.incomplete, "incomplete_sessions.csv"),
+        "deviations.csv": exp(within.deviations, "deviations.csv"),
+        "loop_health.csv": exp(by_participant(health, "session_id", "trial_index"), "loop_health.csv"),
+        "loop_health_by_participant.csv": exp(by_participant(health_summary(health)),
+                                                          "loop_health_by_participant.csv"),
+    }
+    for name in _WINDOWED_FILES:  # every table with an RMSE or Max AE names the window it was taken over
+        tables[name]["error_window"] = error_window
+    return tables
+
+
+def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) -> pd.DataFrame:
+    """The rows of ``trials.csv`` for these trials, in their order: exported names, the database's file name,
+    the columns every consumer relies on first, and the error window their RMSE and Max AE were taken over."""
+    t = trials.copy()
+    t["database"] = t["database"].map(os.path.basename)
+    t = codebook.export(t, "trials.csv", rounded=rounded)
+    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    t["error_window"] = error_window
+    return t.reset_index(drop=True)
+
+
+#: The files whose numbers depend on the error window (sensitivity.csv names it per row).
+_WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by_target.csv",
+                   "stats.csv", "stats_by_target.csv", "speed_accuracy.csv", "speed_accuracy_model.csv",
+                   "speed_accuracy_slopes.csv", "learning_models.csv", "order_check.csv")
+
+
+def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+    """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+        Where to write.
+    tables : dict of str to pandas.DataFrame
+        :func:`export_tables`' result.
+    written_too : sequence of str
+        CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    """
+    for name, frame in tables.items():
+        frame.to_csv(folder / name, index=False)
+    columns = {name: list(frame.columns) for name, frame in tables.items()}
+    for name in written_too:
+        columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
+    columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
+    codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
+

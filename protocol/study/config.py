@@ -1,0 +1,297 @@
+"""The study protocol as data: load and validate a protocol TOML file.
+
+A protocol names the targets, the haptic modes, the trial counts and timing,
+the ordering method and the training block.  :func:`load_protocol` checks
+every field and raises one :class:`ProtocolError` that names the field, the
+offending value and what is allowed -- nothing starts with a bad file.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
+from pipeline.force.safety import SafetyConfig
+from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
+
+__all__ = [
+    "ABORT_POLICIES",
+    "MAX_TRIAL_S",
+    "MODES",
+    "ORDERINGS",
+    "ProtocolConfig",
+    "ProtocolError",
+    "Target",
+    "TrainingConfig",
+    "TrialTiming",
+    "default_protocol",
+    "load_protocol",
+    "protocol_from_dict",
+]
+
+ORDERINGS = ("random", "blocked_by_mode", "counterbalanced")
+ABORT_POLICIES = ("append", "reinsert")
+MODES = ("on", "off")
+#: Longest trial cap (s): ``trial.max_trial_s``, and each training trial's length.
+MAX_TRIAL_S = 600.0
+_LABEL = re.compile(r"^[A-Z][A-Z0-9_]{0,15}\Z")  # \Z, not $: "$" also matches before a final newline
+
+
+class ProtocolError(ValueError):
+    """A protocol file or value is invalid; the message names field, value and what is allowed."""
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """A target force and the word the participant sees."""
+
+    label: str
+    force_n: float
+
+
+@dataclass(frozen=True, slots=True)
+class TrialTiming:
+    """Success criterion and timing of each trial (paper §V-B)."""
+
+    tolerance_fraction: float = 0.10
+    hold_s: float = 1.0
+    max_trial_s: float = 12.0
+    pause_s: float = 2.0
+    cue_s: float = 1.0
+
+
+@dataclass(frozen=True, slots=True)
+class TrainingConfig:
+    """Free-practice block before the experiment."""
+
+    enabled: bool = True
+    seconds_per_target_per_mode: float = 20.0
+    live_force_aid: bool = True
+    #: An experiment session needs a completed training session of the same participant
+    #: (:mod:`protocol.runner.study_rules`).  In a file it defaults to ``enabled``; without training it is False.
+    required: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.enabled and self.required:  # nothing to require (e.g. dataclasses.replace(t, enabled=False))
+            object.__setattr__(self, "required", False)
+
+
+@dataclass(frozen=True, slots=True)
+class ProtocolConfig:
+    """A validated study protocol."""
+
+    name: str
+    targets: tuple[Target, ...]
+    modes: tuple[str, ...]
+    trials_per_cell: int
+    ordering: str
+    abort_policy: str
+    trial: TrialTiming
+    training: TrainingConfig
+    version: int = 1
+    #: The rig's arm whose instrument does the task (its force is the trial's task force; the other arms are
+    #: recorded too).  "" (the default): the rig's only arm, or ``right`` on a rig of several (:meth:`task_arm_of`).
+    task_arm: str = ""
+
+    @property
+    def trials_per_participant(self) -> int:
+        """Targets × modes × trials per cell (20 for the paper)."""
+        return len(self.targets) * len(self.modes) * self.trials_per_cell
+
+    def target(self, label: str) -> Target:
+        """The target with this label."""
+        for t in self.targets:
+            if t.label == label:
+                return t
+        raise KeyError(label)
+
+    def task_arm_of(self, arms: Sequence[str]) -> str:
+        """The task arm on a rig whose arms are ``arms`` (the first first).
+
+        Raises
+        ------
+        ProtocolError
+            One line when the protocol names an arm the rig does not have, or leaves the choice to a rig of
+            several arms none of which is called ``right``.
+        """
+        if self.task_arm:
+            if self.task_arm not in arms:
+                raise ProtocolError(f"design.task_arm = {self.task_arm!r}: the rig has no such arm (its arms: "
+                                    f"{', '.join(arms)})")
+            return self.task_arm
+        if len(arms) == 1:
+            return arms[0]
+        if SINGLE_ARM_NAME in arms:
+            return SINGLE_ARM_NAME
+        raise ProtocolError(f"design.task_arm is not set and the rig has {len(arms)} arms ({', '.join(arms)}), none "
+                            f"called {SINGLE_ARM_NAME!r}: name the arm that does the task in the protocol")
+
+    def check_ramps(self, safety: SafetyConfig, source: str = "protocol") -> None:
+        """This protocol run by a pipeline whose ramps are ``safety``'s (``run --set ramp_in_s=…``): refused in one
+        :class:`ProtocolError` line where an ON trial could not hold the ramp-in, or a pause the ramp-out (the
+        checks the file had with the paper's ramps, :func:`_check_together`)."""
+        _check_together(Fields(source, ProtocolError), self.trial, self.training, self.modes, safety)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set, so a
+        protocol of before the arms stores what it always stored)."""
+        return {
+            "name": self.name,
+            "version": self.version,
+            "targets": [asdict(t) for t in self.targets],
+            "design": {
+                "modes": list(self.modes),
+                "trials_per_cell": self.trials_per_cell,
+                "ordering": self.ordering,
+                "abort_policy": self.abort_policy,
+                **({"task_arm": self.task_arm} if self.task_arm else {}),
+            },
+            "trial": asdict(self.trial),
+            "training": asdict(self.training),
+        }
+
+    def to_json(self) -> str:
+        """Canonical JSON of :meth:`to_dict`."""
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
+    """Validate plain data (a parsed TOML file) into a :class:`ProtocolConfig`.
+
+    Besides every field, what is derived from them is checked: the training
+    session runs (and stores, and on resume re-reads) the protocol with
+    ``trial.max_trial_s = training.seconds_per_target_per_mode``, so that
+    value must be a valid trial cap too.
+
+    Raises
+    ------
+    ProtocolError
+        One line naming ``source``, the field, the value and what is allowed.
+    """
+    f = Fields(source, ProtocolError)
+    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training"})
+    name = f.string("name", top.get("name", "unnamed protocol"))
+    f.version(top, "protocol")
+
+    def target(field: str, t: Any) -> Target:
+        t = f.table(field, t, {"label", "force_n"})
+        label = f.string(f"{field}.label", t.get("label"), pattern=_LABEL,
+                         what="an upper-case word of 1–16 letters/digits/_ (e.g. GENTLE)")
+        return Target(label, f.number(f"{field}.force_n", t.get("force_n"), lo=0.0, hi=20.0))
+
+    targets = f.list_of("targets", top.get("targets"), target, min_len=1, max_len=8,
+                        what="a list of 1 to 8 [[targets]] tables")
+    labels = [t.label for t in targets]
+    if len(set(labels)) != len(labels):
+        raise f.fail("targets", labels, "labels must be unique")
+
+    design = f.section(top, "design", {"modes", "trials_per_cell", "ordering", "abort_policy", "task_arm"})
+    modes = design.get("modes", list(MODES))
+    if (
+        not isinstance(modes, list) or not modes
+        or any(not isinstance(m, str) or m not in MODES for m in modes) or len(set(modes)) != len(modes)
+    ):
+        raise f.fail("design.modes", modes, "must be a non-empty list of distinct values from 'on', 'off'")
+    per_cell = f.integer("design.trials_per_cell", design.get("trials_per_cell", 5), lo=1, hi=100)
+    ordering = f.choice("design.ordering", design.get("ordering", "random"), ORDERINGS)
+    policy = f.choice("design.abort_policy", design.get("abort_policy", "append"), ABORT_POLICIES)
+    task_arm = f.string("design.task_arm", design["task_arm"], pattern=ARM_NAME, what=ARM_NAME_WHAT) \
+        if "task_arm" in design else ""
+
+    tr = f.section(top, "trial", {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
+    timing = TrialTiming(
+        tolerance_fraction=f.number("trial.tolerance_fraction", tr.get("tolerance_fraction", 0.10), lo=0.0, hi=0.5),
+        hold_s=f.number("trial.hold_s", tr.get("hold_s", 1.0), lo=0.0, hi=60.0),
+        max_trial_s=f.number("trial.max_trial_s", tr.get("max_trial_s", 12.0), lo=0.0, hi=MAX_TRIAL_S),
+        pause_s=f.number("trial.pause_s", tr.get("pause_s", 2.0), lo=0.0, hi=600.0, lo_open=False),
+        cue_s=f.number("trial.cue_s", tr.get("cue_s", 1.0), lo=0.0, hi=60.0, lo_open=False),
+    )
+
+    trn = f.section(top, "training", {"enabled", "seconds_per_target_per_mode", "live_force_aid", "required"})
+    training = TrainingConfig(
+        enabled=f.boolean("training.enabled", trn.get("enabled", True)),
+        seconds_per_target_per_mode=f.number(
+            "training.seconds_per_target_per_mode", trn.get("seconds_per_target_per_mode", 20.0), lo=0.0, hi=MAX_TRIAL_S
+        ),
+        live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
+        required=_training_required(f, trn),
+    )
+    _check_together(f, timing, training, tuple(modes))
+    return ProtocolConfig(
+        name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
+        ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
+    )
+
+
+def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
+    """``training.required``: defaults to ``training.enabled``; required without a training block is refused."""
+    enabled = bool(trn.get("enabled", True))
+    required = f.boolean("training.required", trn.get("required", enabled))
+    if required and not enabled:
+        raise f.fail("training.required", required, "must be false when training.enabled = false (an experiment "
+                     "cannot require a training session the protocol does not have)")
+    return required
+
+
+def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...],
+                    ramps: SafetyConfig | None = None) -> None:
+    """Values valid alone but not together: one line naming both fields.
+
+    * ``trial.hold_s`` < ``trial.max_trial_s``, and with haptics ON in the
+      design the trial must also hold the feedback's ramp-in: an ON trial
+      shorter than ramp-in + hold could only succeed (or be counted) at a gain
+      below 1 -- feedback weaker than designed.
+    * ``trial.pause_s`` ≥ the feedback's ramp-out when haptics ON is in the
+      design: otherwise the next trial is cued while the last one's force is
+      still fading out (an OFF trial would start with feedback).
+    * ``training.seconds_per_target_per_mode``: the training session runs,
+      stores and on resume re-reads this protocol with its trials capped at
+      this value (the headless study runner), so it must fit a hold (and the
+      ramp-in) too.
+
+    The ramps are the safety stage's own (:class:`pipeline.force.safety.SafetyConfig`, their one definition):
+    the paper's pipeline when the file is loaded, the pipeline a study runs with (``run --set``) at its start
+    (:meth:`ProtocolConfig.check_ramps`).
+    """
+    ramps = ramps or SafetyConfig()
+    on = "on" in modes
+    if timing.hold_s >= timing.max_trial_s:
+        raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
+    if not timing.hold_s < training.seconds_per_target_per_mode:
+        raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
+                     f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "
+                     f"and must leave time to complete a hold)")
+    for field, cap in (("trial.max_trial_s", timing.max_trial_s),
+                       ("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode)):
+        if on and cap < ramps.ramp_in_s + timing.hold_s:
+            raise f.fail(field, cap, f"must be at least trial.hold_s = {timing.hold_s:g} + the feedback's "
+                         f"{ramps.ramp_in_s:g} s ramp-in (safety.ramp_in_s) = {ramps.ramp_in_s + timing.hold_s:g} s "
+                         "when design.modes has 'on': a shorter haptics-ON trial would be judged at a feedback gain "
+                         "below 1")
+    if on and timing.pause_s < ramps.fault_ramp_s:
+        raise f.fail("trial.pause_s", timing.pause_s,
+                     f"must be at least the feedback's {ramps.fault_ramp_s:g} s ramp-out (safety.fault_ramp_s) when "
+                     "design.modes has 'on': otherwise a trial is cued while the last one's force still fades out")
+
+
+def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
+    """Load and validate a protocol file (default: the paper's study, ``protocol/study/default.toml``)."""
+    if path is None:
+        source = "protocol/study/default.toml"
+        text = resources.files("protocol.study").joinpath("default.toml").read_text(encoding="utf-8")
+        data = parse_toml(text, source, ProtocolError)
+    else:
+        source = str(Path(path))
+        data = read_toml(Path(path), ProtocolError, "protocol file")
+    return protocol_from_dict(data, source)
+
+
+def default_protocol() -> ProtocolConfig:
+    """The paper's study."""
+    return load_protocol(None)

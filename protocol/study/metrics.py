@@ -1,0 +1,232 @@
+"""The one definition of a trial's success, TCT, RMSE and Max AE.
+
+The live trial machine (:mod:`protocol.study.trial`) and the offline analysis
+(``analysis``) both call these functions, so the numbers in the study
+database and in the report cannot disagree.
+
+Definitions (the paper, §V-B, made exact where it is silent):
+
+* **task force** ``F`` -- the magnitude of the filtered, compensated contact
+  force (the ``force_n`` column of every sample);
+* **band** -- ``|F − F*| ≤ tol·F*``, inclusive of its nominal edges (a relative
+  slack of 1e-9 absorbs the decimal representation of e.g. 0.66 = 1.1·0.6);
+* **hold** -- starts at the first in-band sample after an out-of-band one and
+  completes at the first sample at least ``hold_s`` later with every sample
+  in between in band; leaving the band restarts it;
+* **success** -- the hold completes within the trial window; **TCT** is the
+  time from the cue to that sample (the end of the 1 s hold);
+* **trial window** -- from the cue (t = 0) to the trial end: the completing
+  sample on success, otherwise ``max_trial_s`` (12 s), both inclusive;
+* **RMSE** and **Max AE** -- ``√mean((F − F*)²)`` and ``max |F − F*|`` over the
+  samples of the window, *including* the approach before contact (F = 0);
+  analysis may instead start at first contact (:data:`CONTACT_THRESHOLD_N`).
+* **time in band** -- samples in band × sample period; **peak force** -- max F.
+
+Decisions use integer-nanosecond sample timestamps, so they are exact however
+late the caller processes the samples.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = [
+    "BAND_SLACK",
+    "CONTACT_THRESHOLD_N",
+    "HoldDetector",
+    "TrialMetrics",
+    "band_halfwidth_n",
+    "hold_completion_index",
+    "in_band",
+    "trial_metrics",
+]
+
+#: Relative slack that makes the nominal band edges inclusive despite rounding.
+BAND_SLACK = 1e-9
+#: Task force above which the tool counts as in contact (first-contact windows), N.
+CONTACT_THRESHOLD_N = 0.05
+
+
+def band_halfwidth_n(target_force_n: float, tolerance_fraction: float) -> float:
+    """Half-width of the success band, N (``tol·F*``, plus the edge slack)."""
+    return tolerance_fraction * target_force_n * (1.0 + BAND_SLACK)
+
+
+def in_band(force_n: float, target_force_n: float, tolerance_fraction: float) -> bool:
+    """True when ``|F − F*| ≤ tol·F*`` (edges included)."""
+    return abs(force_n - target_force_n) <= band_halfwidth_n(target_force_n, tolerance_fraction)
+
+
+class HoldDetector:
+    """Streaming form of the hold criterion: feed samples in time order, learn when the hold completes.
+
+    Parameters
+    ----------
+    target_force_n, tolerance_fraction
+        The band.
+    hold_ns
+        Required continuous time in band, ns (1 s = 1_000_000_000).
+    """
+
+    __slots__ = ("_half", "_hold_ns", "_target", "completed_ns", "hold_start_ns")
+
+    def __init__(self, target_force_n: float, tolerance_fraction: float, hold_ns: int) -> None:
+        self._target = float(target_force_n)
+        self._half = band_halfwidth_n(target_force_n, tolerance_fraction)
+        self._hold_ns = int(hold_ns)
+        #: Timestamp of the first sample of the current hold (None when out of band).
+        self.hold_start_ns: int | None = None
+        #: Timestamp of the sample that completed the hold (None until then).
+        self.completed_ns: int | None = None
+
+    def feed(self, t_ns: int, force_n: float) -> bool:
+        """Process one sample; True at the sample that completes the hold (once)."""
+        if self.completed_ns is not None:
+            return False
+        if abs(force_n - self._target) <= self._half:  # NaN compares False: out of band
+            start = self.hold_start_ns
+            if start is None:
+                self.hold_start_ns = start = t_ns
+            if t_ns - start >= self._hold_ns:
+                self.completed_ns = t_ns
+                return True
+        else:
+            self.hold_start_ns = None
+        return False
+
+
+def hold_completion_index(
+    t_ns: npt.NDArray[np.int64],
+    force_n: npt.NDArray[np.float64],
+    target_force_n: float,
+    tolerance_fraction: float,
+    hold_ns: int,
+) -> int | None:
+    """Index of the sample that completes the hold, or None: :class:`HoldDetector` over a whole trace.
+
+    The same criterion as the streaming detector (a test proves them equal on
+    random traces), vectorised for offline analysis of millions of samples:
+    every in-band sample knows the start of its in-band run, and the hold
+    completes at the first in-band sample whose run began ``hold_ns`` or more
+    before it.
+
+    Parameters
+    ----------
+    t_ns
+        Sample times, integer ns, non-decreasing.
+    force_n
+        Task force at those times, N (NaN is out of band).
+    target_force_n, tolerance_fraction, hold_ns
+        The band and the required hold.
+
+    Returns
+    -------
+    int or None
+    """
+    n = len(t_ns)
+    if n == 0:
+        return None
+    inb = np.abs(force_n - target_force_n) <= band_halfwidth_n(target_force_n, tolerance_fraction)
+    starts = inb.copy()
+    starts[1:] &= ~inb[:-1]
+    # index of the latest run start at or before each sample (-1 before the first run)
+    run_start = np.maximum.accumulate(np.where(starts, np.arange(n), -1))
+    ok = inb & (t_ns - t_ns[np.maximum(run_start, 0)] >= hold_ns)
+    hit = int(np.argmax(ok))
+    return hit if ok[hit] else None
+
+
+@dataclass(frozen=True, slots=True)
+class TrialMetrics:
+    """Per-trial results (units in the names)."""
+
+    success: bool
+    tct_s: float | None
+    rmse_n: float
+    max_ae_n: float
+    time_in_band_s: float
+    peak_force_n: float
+    n_samples: int
+    end_s: float
+    first_contact_s: float | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data."""
+        return asdict(self)
+
+
+def trial_metrics(
+    t_ns: npt.ArrayLike,
+    force_n: npt.ArrayLike,
+    target_force_n: float,
+    *,
+    tolerance_fraction: float = 0.10,
+    hold_s: float = 1.0,
+    max_trial_s: float = 12.0,
+    window: str = "cue",
+    sample_period_s: float = 0.001,
+) -> TrialMetrics:
+    """Compute a trial's metrics from its samples.
+
+    Parameters
+    ----------
+    t_ns
+        Sample times since the cue, integer ns (t = 0 at the cue).  Samples
+        after the trial end are ignored.
+    force_n
+        Task force at those times, N.
+    target_force_n
+        F*, N.
+    tolerance_fraction, hold_s, max_trial_s
+        The success criterion and the trial cap.
+    window
+        ``"cue"`` (default): RMSE/Max AE from the cue to the trial end;
+        ``"first_contact"``: from the first sample above
+        :data:`CONTACT_THRESHOLD_N` (NaN when there was no contact).
+    sample_period_s
+        For time in band.
+
+    Returns
+    -------
+    TrialMetrics
+    """
+    if window not in ("cue", "first_contact"):
+        raise ValueError(f"window = {window!r}: allowed values are 'cue' and 'first_contact'")
+    t = np.asarray(t_ns, dtype=np.int64)
+    f = np.asarray(force_n, dtype=np.float64)
+    if t.shape != f.shape or t.ndim != 1:
+        raise ValueError(f"t_ns and force_n must be 1-D of equal length, got {t.shape} and {f.shape}")
+    cap_ns = int(round(max_trial_s * 1e9))
+    keep = (t >= 0) & (t <= cap_ns)
+    t, f = t[keep], f[keep]
+    done = hold_completion_index(t, f, target_force_n, tolerance_fraction, int(round(hold_s * 1e9)))
+    success = done is not None
+    end = done + 1 if done is not None else len(t)
+    completed_ns = int(t[done]) if done is not None else None
+    t, f = t[:end], f[:end]
+    # ns / 1e9 (not ns * 1e-9) is the double nearest the exact time: 2009 ms → 2.009, not 2.0090000000000003
+    end_s = completed_ns / 1e9 if completed_ns is not None else max_trial_s
+    contact = np.flatnonzero(f > CONTACT_THRESHOLD_N)
+    first_contact_s = float(t[contact[0]] / 1e9) if len(contact) else None
+    err_f = f if window == "cue" else (f[contact[0] :] if len(contact) else f[:0])
+    err = err_f - target_force_n
+    finite = err[np.isfinite(err)]
+    rmse = float(np.sqrt(np.mean(finite * finite))) if len(finite) else math.nan
+    max_ae = float(np.max(np.abs(finite))) if len(finite) else math.nan
+    half = band_halfwidth_n(target_force_n, tolerance_fraction)
+    return TrialMetrics(
+        success=success,
+        tct_s=end_s if success else None,
+        rmse_n=rmse,
+        max_ae_n=max_ae,
+        time_in_band_s=float(np.count_nonzero(np.abs(f - target_force_n) <= half)) * sample_period_s,
+        peak_force_n=float(np.nanmax(f)) if len(f) and np.isfinite(f).any() else math.nan,
+        n_samples=len(f),
+        end_s=float(end_s),
+        first_contact_s=first_contact_s,
+    )
