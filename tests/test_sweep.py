@@ -75,7 +75,7 @@ def test_every_setting_meets_the_same_participants(tmp_path: Path, short_protoco
         b = [(r.participant, r.index, r.target, r.mode) for r in cells[2 + k].rows]
         assert a == b and len(a) == 4
     # the filter changes what the participants did
-    assert [r.rmse_n for r in cells[0].rows] != [r.rmse_n for r in cells[2].rows]
+    assert [r.values["rmse_n"] for r in cells[0].rows] != [r.values["rmse_n"] for r in cells[2].rows]
 
 
 def test_a_second_run_computes_nothing_and_a_cut_line_is_run_again(tmp_path: Path, short_protocol,
@@ -120,7 +120,8 @@ def test_the_t_interval_over_study_means() -> None:
 
 
 def _row(study: int, p: int, mode: str, ok: bool, rmse: float) -> TrialRow:
-    return TrialRow(study, p, 0, "GENTLE", mode, ok, 1.5 if ok else None, rmse, 2 * rmse, 1.0)
+    return TrialRow(study, p, 0, "GENTLE", mode,
+                    {"success": ok, "tct_s": 1.5 if ok else None, "rmse_n": rmse, "max_ae_n": 2 * rmse})
 
 
 def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:

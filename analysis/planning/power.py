@@ -27,9 +27,9 @@ pool's direction is that of the whole pool; ``power`` is the fraction of R
 resampled studies that reject *and* lie on the pool's side (about α/2 when
 there is no effect), ``power_two_sided`` the fraction that reject either way
 (about α), each with a Clopper–Pearson interval for the Monte Carlo error.
-The family-wise figures apply Holm's correction across the four metrics
-within each resampled study, as the report does, and count a metric only
-when its rejection is directional.
+The family-wise figures apply Holm's correction across the primary metrics
+(the report's family) within each resampled study, as the report does, and count a metric only
+when its rejection is directional; a secondary metric has its own power and none with Holm.
 
 **Speed.**  The R tests of one metric run at once
 (:mod:`analysis.stats.resampled_wilcoxon`), bit for bit those of
@@ -60,9 +60,10 @@ from scipy import stats as sps
 from analysis.planning.paired_pool import PairedPool
 from analysis.reading.load import AnalysisError
 from analysis.reading.metrics import MetricOptions
-from analysis.stats.aggregate import METRIC_LABELS
+from analysis.stats.aggregate import METRIC_LABELS, PRIMARY_METRICS
 from analysis.stats.resampled_wilcoxon import METHOD_NAMES, PreparedMetric, prepare_metric, study_tests
 from analysis.stats.wilcoxon import ZERO_METHODS, holm
+from protocol.metrics import by_participant_name, family_word
 
 __all__ = [
     "DEFAULT_N_VALUES",
@@ -75,6 +76,7 @@ __all__ = [
     "PowerError",
     "PowerResult",
     "estimate_power",
+    "holm_applies",
     "monte_carlo_interval",
     "plan_table",
     "resample_indices",
@@ -86,10 +88,10 @@ __all__ = [
 DEFAULT_N_VALUES: tuple[int, ...] = (6, 8, 10, 12, 16, 20, 30)
 #: A pilot needs at least this many participants with both modes to be resampled.
 MIN_PILOT = 4
-#: Pseudo-metrics of the family rows: Holm across the four metrics rejects all of them / at least one.
-FAMILY_ALL = "all_four_holm"
+#: Pseudo-metrics of the family rows: Holm across the primary metrics rejects all of them / at least one.
+FAMILY_ALL = f"all_{family_word()}_holm"
 FAMILY_ANY = "any_holm"
-FAMILY_LABELS = {FAMILY_ALL: "all four (Holm)", FAMILY_ANY: "at least one (Holm)"}
+FAMILY_LABELS = {FAMILY_ALL: f"all {family_word()} (Holm)", FAMILY_ANY: "at least one (Holm)"}
 #: power.csv: its columns, in this order.
 POWER_CSV_COLUMNS = (
     "scope", "metric", "direction", "n", "resamples", "alpha", "rejections", "power", "ci_low", "ci_high",
@@ -202,7 +204,8 @@ def _pool_notes(pool: PairedPool, prepared: list[list[PreparedMetric]], directio
                              "its power is 0 at every n")
                 continue
             if undefined and scope == "overall":
-                successful_only = metric == "tct_s" and pool.options.tct_policy == "successful"
+                known = by_participant_name(metric)
+                successful_only = known is not None and known.success_only and pool.options.tct_policy == "successful"
                 why = " (no successful trial in a mode)" if successful_only else ""
                 notes.append(
                     f"{label} is undefined for {undefined} of {P} participants{why}: resampled studies leave "
@@ -244,18 +247,19 @@ class _Counts:
     """Rejection counts of one scope and study size, summed over the chunks of resampled studies."""
 
     metrics: int
+    family: np.ndarray  # which metrics Holm's correction runs across (the report's primary measures)
     reject: np.ndarray = field(init=False)
     two_sided: np.ndarray = field(init=False)
     holm: np.ndarray = field(init=False)
     pairs: np.ndarray = field(init=False)
     methods: np.ndarray = field(init=False)
-    family: np.ndarray = field(init=False)  # all four (Holm), at least one (Holm)
+    family_rows: np.ndarray = field(init=False)  # all of the family (Holm), at least one (Holm)
 
     def __post_init__(self) -> None:
         m = self.metrics
         self.reject, self.two_sided, self.holm, self.pairs = (np.zeros(m, dtype=np.int64) for _ in range(4))
         self.methods = np.zeros((m, len(METHOD_NAMES)), dtype=np.int64)
-        self.family = np.zeros(2, dtype=np.int64)
+        self.family_rows = np.zeros(2, dtype=np.int64)
 
     def add(self, prepared: list[PreparedMetric], direction: np.ndarray, idx: np.ndarray, zero_method: str,
             alpha: float) -> None:
@@ -269,13 +273,14 @@ class _Counts:
             agree[:, m] = (side == direction[m]) & (direction[m] != 0)
             self.methods[m] += np.bincount(method, minlength=len(METHOD_NAMES))
             self.pairs[m] += int(n_pairs.sum())
+        family = self.family
         with np.errstate(invalid="ignore"):
             reject_two = pvals < alpha
-            reject_holm = (holm(pvals, axis=1) < alpha) & agree
+            reject_holm = (holm(pvals[:, family], axis=1) < alpha) & agree[:, family]
         self.reject += (reject_two & agree).sum(axis=0)
         self.two_sided += reject_two.sum(axis=0)
-        self.holm += reject_holm.sum(axis=0)
-        self.family += (int(reject_holm.all(axis=1).sum()), int(reject_holm.any(axis=1).sum()))
+        self.holm[family] += reject_holm.sum(axis=0)
+        self.family_rows += (int(reject_holm.all(axis=1).sum()), int(reject_holm.any(axis=1).sum()))
 
     def rows(self, metrics: Sequence[str], direction: np.ndarray, scope: str, n: int,
              R: int) -> list[dict[str, object]]:
@@ -285,10 +290,11 @@ class _Counts:
             counts = self.methods[m]
             rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[m])], n=n,
                              rejections=int(self.reject[m]), rejections_two_sided=int(self.two_sided[m]),
-                             rejections_holm=int(self.holm[m]), mean_pairs=float(self.pairs[m]) / R,
+                             rejections_holm=int(self.holm[m]) if self.family[m] else np.nan,  # none: not in it
+                             mean_pairs=float(self.pairs[m]) / R,
                              not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
                              approx=int(counts[3])))
-        for fam, k in ((FAMILY_ALL, int(self.family[0])), (FAMILY_ANY, int(self.family[1]))):
+        for fam, k in ((FAMILY_ALL, int(self.family_rows[0])), (FAMILY_ANY, int(self.family_rows[1]))):
             rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
                              rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
                              not_computable=0, exact=0, permutation=0, approx=0))
@@ -320,6 +326,7 @@ def _power_frame(rows: list[dict[str, object]], R: int, alpha: float, interval_l
     frame["resamples"] = R
     frame["alpha"] = alpha
     frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
+    frame["rejections_holm"] = frame["rejections_holm"].astype("Int64")  # empty on a secondary metric's rows
     for prefix, col, power_col in (("", "rejections", "power"),
                                    ("two_sided_", "rejections_two_sided", "power_two_sided"),
                                    ("holm_", "rejections_holm", "power_holm")):
@@ -417,7 +424,7 @@ def estimate_power(
     for n in ns:
         # the studies of size n, drawn in chunks from one generator: the same draws as one call would make
         rng = np.random.default_rng([int(seed), int(n)])
-        counts = [_Counts(len(pool.metrics)) for _ in pool.scopes]
+        counts = [_Counts(len(pool.metrics), pool.family) for _ in pool.scopes]
         step = chunk_rows(n, chunk_bytes)
         for start in range(0, R, step):
             idx = rng.integers(0, P, size=(min(step, R - start), n))
@@ -461,6 +468,11 @@ def metric_label(metric: str) -> str:
     return FAMILY_LABELS.get(metric, METRIC_LABELS.get(metric, metric))
 
 
+def holm_applies(metric: str) -> bool:
+    """Whether a row of power.csv has a power with Holm's correction: a primary metric's and the family rows'."""
+    return metric in FAMILY_LABELS or metric in PRIMARY_METRICS
+
+
 def _reach(frame: pd.DataFrame, scope: str, metric: str, target: float, holm_adjusted: bool) -> str:
     n = smallest_n(frame, scope, metric, target, holm_adjusted=holm_adjusted)
     if n is not None:
@@ -487,7 +499,8 @@ def summary_text(result: PowerResult) -> str:
         f"resampling only, not the uncertainty of the {result.n_pool} participants' own effects: a plan from a "
         "small pilot is itself uncertain.",
         f"Participants needed: the smallest n of {', '.join(str(n) for n in result.n_values)} from which on power "
-        "stays at or above the target, for the test alone and with Holm across the four metrics (as the report's "
+        f"stays at or above the target, for the test alone and with Holm across the {family_word()} primary metrics "
+        "(as the report's "
         "significance marks); '> N (x %)': not reached, x = power at the largest n tried.",
         f"  {'':<21s}{'80 % power':<28s}90 % power",
         f"  {'':<21s}{'test':<14s}{'with Holm':<14s}{'test':<14s}with Holm",
@@ -500,7 +513,7 @@ def summary_text(result: PowerResult) -> str:
             cells = []
             for target in (0.8, 0.9):
                 cells.append("" if family else _reach(f, scope, metric, target, False))
-                cells.append(_reach(f, scope, metric, target, True))
+                cells.append(_reach(f, scope, metric, target, True) if holm_applies(metric) else "")
             name = metric_label(metric) if scope == "overall" else f"  {metric_label(metric)}"
             lines.append(f"  {name:<21s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     lines.append("Power at each n (overall; the two-sided rejection rate in brackets):")
@@ -545,7 +558,8 @@ def plan_table(result: PowerResult) -> pd.DataFrame:
             for target in (0.8, 0.9):
                 key = f"n{round(target * 100)}"
                 row[key] = "" if family else _reach(f, scope, metric, target, False).removeprefix("n = ")
-                row[f"{key}_holm"] = _reach(f, scope, metric, target, True).removeprefix("n = ")
+                row[f"{key}_holm"] = (_reach(f, scope, metric, target, True).removeprefix("n = ")
+                                      if holm_applies(metric) else "")
             for n in result.n_values:
                 row[f"power_n{n}"] = float(sel.at[n, "power_holm" if family else "power"])
             rows.append(row)

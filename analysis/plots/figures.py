@@ -34,6 +34,7 @@ from matplotlib.figure import Figure
 from analysis.reading.load import read_trial_samples
 from analysis.stats.aggregate import METRIC_LABELS, by_mode, mean_sd
 from analysis.stats.wilcoxon import WilcoxonResult
+from protocol.metrics import by_participant_name
 from protocol.study.display import task_axis_top_n
 from protocol.study.labels import fault_names
 from protocol.study.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
@@ -172,7 +173,7 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             top = max(top, y * 1.15)
     ax.set_xticks(range(len(groups)), [g[0] for g in groups])
     ax.set_ylabel(METRIC_LABELS.get(metric, metric))
-    if metric == "success_rate":
+    if (known := by_participant_name(metric)) is not None and known.boolean:
         top = 1.15  # a rate: room for the marks above 1, nothing more
     if top > 0:
         ax.set_ylim(0, top)

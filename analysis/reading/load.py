@@ -25,6 +25,7 @@ import pandas as pd
 
 from analysis.reading.errors import AnalysisError
 from analysis.reading.inputs import check_databases
+from protocol.metrics import stored
 from protocol.recording import RecordingDamaged
 from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader, trial_id_of
@@ -35,6 +36,8 @@ from protocol.study.records import Outcome, TrialRecord
 
 #: Where a trial's records are in its session's recording (schema version 3).
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
+#: The metrics stored live, one column per stored metric of the registry (:func:`protocol.metrics.stored`).
+STORED_METRIC_COLUMNS = tuple(f"stored_{m.name}" for m in stored())
 #: Events the report lists: deviations from the protocol ("deviation": any recorded departure from the
 #: design, e.g. an experiment started without a completed training; "calibration_override": a session started
 #: without a calibration step on record), which code ran each resumed part of a session ("software") and each resume
@@ -72,8 +75,8 @@ class StudyData:
         ``participant_number``, ``session_id``, ``session_kind``, ``session_status``, ``trial_id``,
         ``trial_index``, ``target_label``, ``target_force_n``, ``haptic_mode``,
         ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live
-        (``stored_tct_s``, ``stored_rmse_n``, ``stored_max_ae_n``,
-        ``stored_time_in_band_s``, ``stored_peak_force_n``), ``n_samples``,
+        (:data:`STORED_METRIC_COLUMNS`: ``stored_tct_s``, ``stored_rmse_n``, … one per stored metric of
+        :mod:`protocol.metrics`; empty in a file from before a metric existed), ``n_samples``,
         ``abort_reason``, ``abort_cause`` and the loop-health columns
         (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
         databases), where its records are in the session's recording
@@ -316,8 +319,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     trials["excluded"] = excluded
     order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
-             "ended_at_s", "stored_tct_s", "stored_rmse_n", "stored_max_ae_n", "stored_time_in_band_s",
-             "stored_peak_force_n", "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS,
+             "ended_at_s", *STORED_METRIC_COLUMNS, "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
+             *RECORD_COLUMNS,
              "tolerance_fraction", "hold_s", "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)

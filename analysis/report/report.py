@@ -37,6 +37,7 @@ from analysis.plots import figures, model_figures
 from analysis.reading.load import Progress, StudyData, load_study
 from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
+from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
 from analysis.report.study_record import (
     aborted_reruns,
@@ -48,7 +49,7 @@ from analysis.report.study_record import (
     resumed_sessions,
 )
 from analysis.report.withdrawals import study_withdrawals, withdrawals_html
-from analysis.stats.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests, per_participant
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
@@ -56,6 +57,7 @@ from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy,
 from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from foundation.parallel import default_workers, run_tasks
+from protocol.metrics import Role
 
 __all__ = [
     "ReportSummary",
@@ -96,8 +98,10 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
 
 
 def _marks(results: Sequence[WilcoxonResult], frame: pd.DataFrame) -> dict[str, str]:
+    """Each test's mark: from Holm's p for a primary measure, from its own p for a secondary one."""
     holm = dict(zip(frame["metric"], frame["p_holm"], strict=True))
-    return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric)) for r in results}
+    return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric) if r.metric in PRIMARY_METRICS else None)
+            for r in results}
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,9 +230,13 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
-    return {"tct": tct + ".", "errors": f"RMSE and Max AE: error window {window}.",
-            "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
-            "learning": learning}
+    notes = {"tct": tct + ".", "errors": f"{windowed_words()}: error window {window}.",
+             "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
+             "learning": learning}
+    for group in figure_groups():  # a figure with a secondary measure says whose marks are not Holm's
+        if any(m.role is Role.SECONDARY for m in group.metrics):
+            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note())))
+    return notes
 
 
 def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOptions,
@@ -260,11 +268,9 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     bars = dict(target_order=a.target_order)
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
-        ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
-        ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),
-        ("mode_bars", (["rmse_n", "max_ae_n"], overall, by_target, marks), {**bars, "note": notes["errors"]},
-         "rmse_max_ae", "errors"),
-        ("paired_lines", (overall, PRIMARY_METRICS, marks_overall), {}, "paired", "paired"),
+        *(("mode_bars", ([m.participant for m in g.metrics], overall, by_target, marks),
+           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key) for g in figure_groups()),
+        ("paired_lines", (overall, TESTED_METRICS, marks_overall), {}, "paired", "paired"),
         ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),

@@ -19,14 +19,16 @@ from analysis.reading import codebook
 from analysis.reading.load import StudyData
 from analysis.stats.loop_health import health_summary, health_table
 from analysis.stats.models import fixed_effects
+from protocol.metrics import primary
 
 __all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
-#: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
-#: number, participant code, session and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
+#: trials.csv: the columns every consumer may rely on, in this order (more follow: the other metrics, in the
+#: registry's order).  The primary metrics' are among them.  Sorted by participant number, participant code, session
+#: and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
 TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
-                      "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
-                      "cue_at_s")
+                      "target_force_N", "haptic_mode", "outcome",
+                      *(m.name if m.boolean else m.exported for m in primary()), "cue_at_s")
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,

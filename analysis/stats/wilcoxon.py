@@ -26,7 +26,7 @@ r = z/√n; and the Hodges–Lehmann shift with its interval
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
@@ -497,25 +497,31 @@ def _holm_rows(q: np.ndarray) -> np.ndarray:
 RESULT_COLUMNS: tuple[str, ...] = (*tuple(f.name for f in fields(WilcoxonResult)), "p_holm")
 
 
-def results_frame(results: Sequence[WilcoxonResult]) -> pd.DataFrame:
+def results_frame(results: Sequence[WilcoxonResult], family: Collection[str] | None = None) -> pd.DataFrame:
     """One tidy row per metric with every field of :class:`WilcoxonResult` plus ``p_holm``.
 
     Parameters
     ----------
     results : sequence of WilcoxonResult
-        One test per metric (the Holm family).
+        One test per metric.
+    family : collection of str, optional
+        The metrics Holm's correction runs across (default: every one of ``results``); a metric outside it keeps
+        its own p-value and has no ``p_holm`` (NaN).
 
     Returns
     -------
     pandas.DataFrame
         Columns are the snake_case field names in declaration order, then
-        ``p_holm``: Holm-adjusted p across the *computable* rows of this table
+        ``p_holm``: Holm-adjusted p across the *computable* rows of the family
         (a non-computable row has NaN and does not count in m).
     """
     rows = [asdict(r) for r in results]
     frame = pd.DataFrame(rows, columns=list(RESULT_COLUMNS[:-1]))
     p = frame["p_value"].to_numpy(dtype=np.float64)
-    p = np.where(frame["computable"].to_numpy(dtype=bool), p, np.nan)
+    counted = frame["computable"].to_numpy(dtype=bool)
+    if family is not None:
+        counted = counted & frame["metric"].isin(list(family)).to_numpy(dtype=bool)
+    p = np.where(counted, p, np.nan)
     frame["p_holm"] = holm(p)
     return frame
 
