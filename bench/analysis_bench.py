@@ -105,7 +105,8 @@ def _make_study(db: str, participants: int) -> float:
 
 def _read_all_samples(db: str) -> tuple[float, int]:
     """Read every analysed trial's task force as the report does, in this process: (seconds, samples)."""
-    from analysis.reading.load import load_study, read_task_force, recorded_where
+    from analysis.reading.load import load_study, recorded_where
+    from analysis.reading.recorded import read_task_force
 
     inc = load_study([db]).included
     t0 = time.perf_counter()

@@ -31,7 +31,7 @@ import numpy.typing as npt
 import pandas as pd
 from matplotlib.figure import Figure
 
-from analysis.reading.load import read_trial_samples
+from analysis.reading.recorded import read_trial_samples
 from analysis.stats.aggregate import METRIC_LABELS, by_mode, mean_sd
 from analysis.stats.wilcoxon import WilcoxonResult
 from protocol.metrics import by_participant_name
@@ -274,7 +274,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     Parameters
     ----------
     samples
-        :func:`analysis.reading.load.read_trial_samples` output (its ``faults`` column, where recorded, marks when a
+        :func:`analysis.reading.recorded.read_trial_samples` output (its ``faults`` column, where recorded, marks when a
         watchdog fault latched).
     target_force_n, tolerance_fraction
         The trial's band, drawn when ``target_force_n`` is given.

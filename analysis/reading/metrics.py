@@ -14,7 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from analysis.reading.load import Progress, StudyData, connect_readonly, read_task_force, recorded_where, stored_records
+from analysis.reading.load import Progress, StudyData, connect_readonly, recorded_where, stored_records
+from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
 from protocol.metrics import METRICS, MetricValue, stored, windowed
 from protocol.study.metrics import TrialMetrics, trial_metrics
