@@ -5,7 +5,7 @@ default study sizes and the 4 metrics, in one process.  In the same run, the
 same resampled studies are tested by a straightforward loop that calls
 :func:`analysis.stats.wilcoxon.paired_wilcoxon` once per study and metric (its side,
 for the directional power, from the sign of its rank-biserial correlation,
-(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.wilcoxon.holm` per study; the
+(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.holm.holm` per study; the
 loop is timed on the first ``reference_resamples`` studies of each n and
 scaled to all of them, and the two must give identical p-values and sides on
 every study both ran.
@@ -27,8 +27,9 @@ import numpy as np
 
 from analysis.planning.paired_pool import PairedPool, load_pool, pool_from_trials
 from analysis.planning.power import DEFAULT_N_VALUES, estimate_power, resample_indices
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import _PERM_CACHE, _exact_p, resampled_p_values
-from analysis.stats.wilcoxon import holm, paired_wilcoxon
+from analysis.stats.wilcoxon import paired_wilcoxon
 from bench.analysis_bench import synthetic_trials
 from bench.machine import cpu_times, load_average, steal_percent
 

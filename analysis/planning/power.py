@@ -61,8 +61,9 @@ from analysis.planning.paired_pool import PairedPool
 from analysis.reading.load import AnalysisError
 from analysis.reading.metrics import MetricOptions
 from analysis.stats.aggregate import METRIC_LABELS, PRIMARY_METRICS
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import METHOD_NAMES, PreparedMetric, prepare_metric, study_tests
-from analysis.stats.wilcoxon import ZERO_METHODS, holm
+from analysis.stats.wilcoxon import ZERO_METHODS
 from protocol.metrics import by_participant_name, family_word
 
 __all__ = [

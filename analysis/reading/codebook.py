@@ -120,7 +120,7 @@ def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFr
     the same number rounded once: -0.02154 is -0.0215 in the file, which shows as -0.021, not -0.022).
 
     Trial indices become 1-based trial numbers; a tests' file (``stats.csv``, ``stats_by_target.csv``, tables
-    of :func:`analysis.stats.wilcoxon.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS`
+    of :func:`analysis.stats.holm.results_frame`) gets ``n`` (the pairs ranked) and :data:`STATS_CSV_COLUMNS`
     first (after ``target_label``, in a table by target).
     """
     out = frame.rename(columns=_RENAMED)

@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.reading.metrics import MetricOptions
-from analysis.stats.wilcoxon import WilcoxonResult, paired_wilcoxon, results_frame
+from analysis.stats.holm import results_frame
+from analysis.stats.wilcoxon import WilcoxonResult, paired_wilcoxon
 from protocol.metrics import METRICS, Metric, primary, tested
 
 __all__ = [

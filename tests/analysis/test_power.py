@@ -33,8 +33,9 @@ from analysis.planning.power import (
     summary_text,
 )
 from analysis.reading.metrics import MetricOptions
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import METHOD_NAMES, resampled_p_values
-from analysis.stats.wilcoxon import holm, paired_wilcoxon
+from analysis.stats.wilcoxon import paired_wilcoxon
 
 zero_methods = st.sampled_from(["wilcox", "pratt", "zsplit"])
 
