@@ -91,11 +91,12 @@ def power_html(section: Any) -> str:
     """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
 
     ``section`` is an :class:`analysis.planning.power.ReportPower`.  The table is built
-    from the structured result (:func:`analysis.planning.power.plan_table`); columns
+    from the structured result (:func:`analysis.planning.power_plan.plan_table`); columns
     with no value in any row are left out.  In print, its rows never split,
     its head repeats on every page and the heading stays with it (``_CSS``).
     """
-    from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label, plan_table
+    from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label
+    from analysis.planning.power_plan import plan_table
 
     head = "<h2>What n would a study need?</h2>"
     if section.result is None:

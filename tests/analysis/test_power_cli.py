@@ -313,10 +313,11 @@ def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsy
 
 
 def test_report_power_table_leaves_out_empty_columns(monkeypatch):
-    import analysis.planning.power
+    import analysis.planning.power_plan
     from analysis.planning.paired_pool import pool_from_trials
-    from analysis.planning.power import estimate_power, plan_table
+    from analysis.planning.power import estimate_power
     from analysis.planning.power_outputs import ReportPower
+    from analysis.planning.power_plan import plan_table
     from analysis.report.report_html import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
@@ -332,7 +333,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
         t["direction"] = ""
         return t
 
-    monkeypatch.setattr(analysis.planning.power, "plan_table", without_direction)
+    monkeypatch.setattr(analysis.planning.power_plan, "plan_table", without_direction)
     page = _power_html(ReportPower(result, "", None))
     assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
     assert page.count("<td") == full.count("<td") - len(plan_table(result))
