@@ -48,6 +48,39 @@ def _overall_only(pool: PairedPool) -> PairedPool:
     return dataclasses.replace(pool, scopes=pool.scopes[:1], off=pool.off[:1], on=pool.on[:1])
 
 
+def _reference_loop(pool: PairedPool, n_values: tuple[int, ...], resamples: int, reference_resamples: int,
+                    seed: int) -> tuple[float, int, int, int, int]:
+    """The reference: one paired_wilcoxon per study and metric, Holm per study, overall scope, on the first
+    ``reference_resamples`` of the engine's draw.  (seconds, tests, identical p-values, identical sides, sided
+    tests)."""
+    P = pool.n_participants
+    metrics = range(len(pool.metrics))
+    loop_s = 0.0
+    tests = identical = same_side = sided = 0
+    for n in n_values:
+        idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
+        got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
+        engine = np.stack([g[0] for g in got], axis=1)
+        engine_side = np.stack([g[2] for g in got], axis=1)
+        t0 = time.perf_counter()
+        ref = np.empty_like(engine)
+        ref_side = np.zeros_like(engine_side)
+        computable = np.zeros(engine.shape, dtype=bool)  # a side is compared only where the test could run
+        for r, rows in enumerate(idx):
+            for m in metrics:
+                res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
+                ref[r, m] = res.p_value if res.computable else np.nan
+                if res.computable:
+                    ref_side[r, m], computable[r, m] = np.sign(res.rank_biserial), True
+            holm(ref[r])
+        loop_s += time.perf_counter() - t0
+        tests += engine.size
+        identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
+        same_side += int(((engine_side == ref_side) & computable).sum())
+        sided += int(computable.sum())
+    return loop_s, tests, identical, same_side, sided
+
+
 def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_resamples: int = 100,
                     n_values: tuple[int, ...] = DEFAULT_N_VALUES, repeats: int = 3, seed: int = 0) -> dict[str, Any]:
     """Time :func:`analysis.planning.power.estimate_power` and the paired_wilcoxon loop on the same resampled studies.
@@ -79,32 +112,8 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
                 for _ in range(repeats)]
     stolen = steal_percent(cpu_before, cpu_times())
 
-    # the reference: one paired_wilcoxon per study and metric, Holm per study, overall scope
     P = pool.n_participants
-    metrics = range(len(pool.metrics))
-    loop_s = 0.0
-    tests = identical = same_side = sided = 0
-    for n in n_values:
-        idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
-        got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
-        engine = np.stack([g[0] for g in got], axis=1)
-        engine_side = np.stack([g[2] for g in got], axis=1)
-        t0 = time.perf_counter()
-        ref = np.empty_like(engine)
-        ref_side = np.zeros_like(engine_side)
-        computable = np.zeros(engine.shape, dtype=bool)  # a side is compared only where the test could run
-        for r, rows in enumerate(idx):
-            for m in metrics:
-                res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
-                ref[r, m] = res.p_value if res.computable else np.nan
-                if res.computable:
-                    ref_side[r, m], computable[r, m] = np.sign(res.rank_biserial), True
-            holm(ref[r])
-        loop_s += time.perf_counter() - t0
-        tests += engine.size
-        identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
-        same_side += int(((engine_side == ref_side) & computable).sum())
-        sided += int(computable.sum())
+    loop_s, tests, identical, same_side, sided = _reference_loop(pool, n_values, resamples, reference_resamples, seed)
     loop_scaled = loop_s * resamples / reference_resamples
     overall_s = float(np.median(runs_overall))
     return {

@@ -295,6 +295,31 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     return out, [(title, out[name]) for name, title in titles], models
 
 
+def _write(tmp: Path, a: _Analysis, databases: Sequence[str | os.PathLike[str]], options: MetricOptions,
+           zero_method: str, confidence: float, power: bool, workers: int | None) -> dict[str, pd.DataFrame]:
+    """The report's files, written into the folder ``tmp``: the figures, the CSVs with their codebook (and
+    ``power.csv``) and report.html.  Returns the CSVs' tables as written."""
+    marks_overall, marks = _all_marks(a)
+    pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
+    within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
+    # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
+    tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                 a.stats_by_target, within, options.error_window, rounded=r)
+                     for r in (True, False))
+    section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
+    if power:
+        from analysis.planning.power_outputs import report_section
+
+        section += power_html(report_section(a.trials, options, zero_method, tmp))
+    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
+    html = page(
+        study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
+        excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
+        marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
+        target_order=a.target_order,
+    )
+    (tmp / "report.html").write_text(html, encoding="utf-8")
+    return tables
 
 
 def build_report(
@@ -351,27 +376,7 @@ def build_report(
     results: dict[str, pd.DataFrame] = {}
 
     def fill(tmp: Path) -> None:
-        marks_overall, marks = _all_marks(a)
-        pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
-        within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
-        # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
-        tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
-                                                     a.stats_by_target, within, options.error_window, rounded=r)
-                         for r in (True, False))
-        results.update(tables)
-        section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
-        if power:
-            from analysis.planning.power_outputs import report_section
-
-            section += power_html(report_section(a.trials, options, zero_method, tmp))
-        report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
-        html = page(
-            study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
-            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
-            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-            target_order=a.target_order,
-        )
-        (tmp / "report.html").write_text(html, encoding="utf-8")
+        results.update(_write(tmp, a, databases, options, zero_method, confidence, power, workers))
 
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     n_samples = int(a.study.included["n_samples"].fillna(0).sum())

@@ -146,6 +146,19 @@ def power_html(section: Any) -> str:
                if section.png else "") + "</section>")
 
 
+def _tests_html(tables: dict[str, pd.DataFrame], win: str, confidence: float) -> str:
+    """The ON-vs-OFF tests: overall and within each target (stats.csv, stats_by_target.csv)."""
+    return f"""<h2>Haptics ON vs OFF</h2>
+<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
+{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
+Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
+{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
+{_stats_html(tables["stats.csv"], "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
+<h3>Within each target</h3>
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
+             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}"""
+
+
 def _bar_figures(pngs: dict[str, bytes]) -> str:
     """The bar figures, one per figure of the registry's metrics (:func:`analysis.report.measures.figure_groups`)."""
     caption = ('<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after '
@@ -492,15 +505,7 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
 <p class="origin {origin_class}">{html.escape(origin_text)}</p>
 {warn}
 {_headline(per, stats, marks_overall)}
-<h2>Haptics ON vs OFF</h2>
-<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
-{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
-Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
-{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
-{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
-<h3>Within each target</h3>
-{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
-             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}
+{_tests_html(tables, win, confidence)}
 {report_sections.sensitivity_html(within, options, confidence)}
 {_bar_figures(pngs)}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
