@@ -44,12 +44,12 @@ def _tct_s(w: TrialWindow) -> MetricValue:
 
 
 def _rmse_n(w: TrialWindow) -> MetricValue:
-    e = w.finite_error_n
+    e = w.error_n
     return float(np.sqrt(np.mean(e * e))) if len(e) else math.nan
 
 
 def _max_ae_n(w: TrialWindow) -> MetricValue:
-    e = w.finite_error_n
+    e = w.error_n
     return float(np.max(np.abs(e))) if len(e) else math.nan
 
 
@@ -60,9 +60,8 @@ def _time_in_band_s(w: TrialWindow) -> MetricValue:
 def _abs_impulse_n_s(w: TrialWindow) -> MetricValue:
     # ∫|F − F*| dt by the trapezoid rule on the samples' own times: exact for the piecewise-linear trace the samples
     # describe, and right on a clock whose periods vary (the rectangle sum, samples × 1 ms, would assume 1 kHz)
-    e = np.abs(w.finite_error_n)
-    t = w.finite_error_t_s
-    return float(np.sum((e[1:] + e[:-1]) * np.diff(t)) / 2.0) if len(e) else math.nan
+    e = np.abs(w.error_n)
+    return float(np.sum((e[1:] + e[:-1]) * np.diff(w.error_t_s)) / 2.0) if len(e) else math.nan
 
 
 def _peak_force_n(w: TrialWindow) -> MetricValue:

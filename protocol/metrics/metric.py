@@ -14,7 +14,6 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
-from functools import cached_property
 from typing import Literal
 
 import numpy as np
@@ -60,9 +59,10 @@ class Role(StrEnum):
     DESCRIPTIVE = "descriptive"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class TrialWindow:
-    """One trial as its metrics see it: the samples of its window and what the task made of them.
+    """One trial as its metrics see it: the samples of its window and what the task made of them (a plain record,
+    filled by the task's window, :func:`protocol.study.metrics.trial_metrics`, live and offline alike).
 
     Attributes
     ----------
@@ -78,9 +78,11 @@ class TrialWindow:
         The task's success rule was met within the window (the hold completed).
     end_s
         The trial end, s since the cue: the completing sample on success, else the trial cap.
-    error_from
-        Index of the error window's first sample: 0 (from the cue), first contact's, or ``len(t_ns)`` (no error
-        window: a trial without contact, under the first-contact window).
+    error_n
+        F − target over the error window -- from the cue, or from first contact (none without contact) -- at its
+        samples with a finite force, in time order, N.
+    error_t_s
+        The times of :attr:`error_n`, s since the cue (ns / 1e9: the double nearest the exact time).
     sample_period_s
         The nominal sample period, s.
     """
@@ -91,28 +93,9 @@ class TrialWindow:
     on_target: npt.NDArray[np.bool_]
     completed: bool
     end_s: float
-    error_from: int = 0
+    error_n: npt.NDArray[np.float64]
+    error_t_s: npt.NDArray[np.float64]
     sample_period_s: float = 0.001
-
-    @cached_property
-    def error_n(self) -> npt.NDArray[np.float64]:
-        """F − target over the error window, N (NaN where the force is NaN)."""
-        return self.force_n[self.error_from:] - self.target_n[self.error_from:]
-
-    @cached_property
-    def finite(self) -> npt.NDArray[np.bool_]:
-        """Which samples of the error window have a finite error."""
-        return np.isfinite(self.error_n)
-
-    @cached_property
-    def finite_error_n(self) -> npt.NDArray[np.float64]:
-        """The finite errors of the error window, in time order, N."""
-        return self.error_n[self.finite]
-
-    @cached_property
-    def finite_error_t_s(self) -> npt.NDArray[np.float64]:
-        """The times of :attr:`finite_error_n`, s since the cue (ns / 1e9: the double nearest the exact time)."""
-        return self.t_ns[self.error_from:][self.finite] / 1e9
 
 
 @dataclass(frozen=True)

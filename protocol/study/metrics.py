@@ -226,9 +226,13 @@ def trial_metrics(
     end_s = completed_ns / 1e9 if completed_ns is not None else max_trial_s
     contact = np.flatnonzero(f > CONTACT_THRESHOLD_N)
     first_contact_s = float(t[contact[0]] / 1e9) if len(contact) else None
-    error_from = 0 if window == "cue" else (int(contact[0]) if len(contact) else len(f))
+    target = np.full(len(f), float(target_force_n))
+    # the error window: from the cue, or from first contact (none without contact); a non-finite force left out
+    start = 0 if window == "cue" else (int(contact[0]) if len(contact) else len(f))
+    err = f[start:] - target[start:]
+    finite = np.isfinite(err)
     half = band_halfwidth_n(target_force_n, tolerance_fraction)
-    trial = TrialWindow(t_ns=t, force_n=f, target_n=np.full(len(f), float(target_force_n)),
-                        on_target=np.abs(f - target_force_n) <= half, completed=success, end_s=float(end_s),
-                        error_from=error_from, sample_period_s=sample_period_s)
+    trial = TrialWindow(t_ns=t, force_n=f, target_n=target, on_target=np.abs(f - target_force_n) <= half,
+                        completed=success, end_s=float(end_s), error_n=err[finite],
+                        error_t_s=t[start:][finite] / 1e9, sample_period_s=sample_period_s)
     return TrialMetrics(compute(trial, metrics), success, len(f), float(end_s), first_contact_s)
