@@ -25,6 +25,7 @@ of :mod:`foundation.outdir`, shared with ``power``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -295,10 +296,11 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     return out, [(title, out[name]) for name, title in titles], models
 
 
-def _write(tmp: Path, a: _Analysis, databases: Sequence[str | os.PathLike[str]], options: MetricOptions,
-           zero_method: str, confidence: float, power: bool, workers: int | None) -> dict[str, pd.DataFrame]:
-    """The report's files, written into the folder ``tmp``: the figures, the CSVs with their codebook (and
-    ``power.csv``) and report.html.  Returns the CSVs' tables as written."""
+def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str]], options: MetricOptions,
+           zero_method: str, confidence: float, power: bool, workers: int | None,
+           results: dict[str, pd.DataFrame]) -> None:
+    """The report's files, written into the folder ``tmp`` (the output policy's temporary folder): the figures, the
+    CSVs with their codebook (and ``power.csv``) and report.html; the CSVs' tables as written into ``results``."""
     marks_overall, marks = _all_marks(a)
     pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
     within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
@@ -319,7 +321,7 @@ def _write(tmp: Path, a: _Analysis, databases: Sequence[str | os.PathLike[str]],
         target_order=a.target_order,
     )
     (tmp / "report.html").write_text(html, encoding="utf-8")
-    return tables
+    results.update(tables)
 
 
 def build_report(
@@ -374,10 +376,8 @@ def build_report(
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete)
     results: dict[str, pd.DataFrame] = {}
-
-    def fill(tmp: Path) -> None:
-        results.update(_write(tmp, a, databases, options, zero_method, confidence, power, workers))
-
+    fill = functools.partial(_write, a=a, databases=databases, options=options, zero_method=zero_method,
+                             confidence=confidence, power=power, workers=workers, results=results)
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     n_samples = int(a.study.included["n_samples"].fillna(0).sum())
     return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,

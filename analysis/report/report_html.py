@@ -146,19 +146,6 @@ def power_html(section: Any) -> str:
                if section.png else "") + "</section>")
 
 
-def _tests_html(tables: dict[str, pd.DataFrame], win: str, confidence: float) -> str:
-    """The ON-vs-OFF tests: overall and within each target (stats.csv, stats_by_target.csv)."""
-    return f"""<h2>Haptics ON vs OFF</h2>
-<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
-{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
-Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
-{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
-{_stats_html(tables["stats.csv"], "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
-<h3>Within each target</h3>
-{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
-             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}"""
-
-
 def _bar_figures(pngs: dict[str, bytes]) -> str:
     """The bar figures, one per figure of the registry's metrics (:func:`analysis.report.measures.figure_groups`)."""
     caption = ('<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after '
@@ -461,6 +448,30 @@ def _warnings(study: StudyData, table: TrialTable, stats: pd.DataFrame, within: 
     return warn + report_sections.top_warnings(within, study.include_incomplete)
 
 
+def _head_html(study: StudyData, table: TrialTable, options: MetricOptions, n_participants: int,
+               tables: dict[str, pd.DataFrame], within: Any) -> str:
+    """The page's head: title, what it covers and how it was made, where the data come from, and its warnings."""
+    origin_class, origin_text = _origin(study)
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    n_trials = len(tables["trials.csv"])
+    return f"""<h1>Haptic feedback study: report</h1>
+<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
+{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
+{'· incomplete sessions included' if study.include_incomplete else ''}</p>
+<p class="origin {origin_class}">{html.escape(origin_text)}</p>
+{_warnings(study, table, tables["stats.csv"], within)}"""
+
+
+def _sessions_html(sess: pd.DataFrame, within: Any) -> str:
+    """The sessions read: which code ran each, and the table of sessions.csv's main columns."""
+    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
+                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
+                 "analysed"]
+    short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
+    return (f"<h2>Sessions</h2>\n{report_sections.provenance_html(within)}\n"
+            f"{_html_table(sess, 'sessions.csv', sess_cols, cell=short)}")
+
+
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
@@ -485,27 +496,22 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     str
         The HTML document.
     """
-    stats, per, sess = (tables[k] for k in ("stats.csv", "participants.csv", "sessions.csv"))
-    warn = _warnings(study, table, stats, within)
-    origin_class, origin_text = _origin(study)
-    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
-    n_trials = len(tables["trials.csv"])
+    stats, per = tables["stats.csv"], tables["participants.csv"]
     win = report_sections.window_words(options.error_window)
     per_cols = ["participant_code", "participant_number", "haptic_mode", *codebook.WIDE_MEASURES]
-    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
-                 "analysed"]
-    short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
-<h1>Haptic feedback study: report</h1>
-<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
-{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
-{'· incomplete sessions included' if study.include_incomplete else ''}</p>
-<p class="origin {origin_class}">{html.escape(origin_text)}</p>
-{warn}
+{_head_html(study, table, options, n_participants, tables, within)}
 {_headline(per, stats, marks_overall)}
-{_tests_html(tables, win, confidence)}
+<h2>Haptics ON vs OFF</h2>
+<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
+{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
+Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
+{confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
+{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
+<h3>Within each target</h3>
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
+             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}
 {report_sections.sensitivity_html(within, options, confidence)}
 {_bar_figures(pngs)}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
@@ -522,8 +528,6 @@ band and the error window; bottom, on an axis of its own: the raw sensor force, 
 {_record_html(study, tables, within)}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, within)}
-<h2>Sessions</h2>
-{report_sections.provenance_html(within)}
-{_html_table(sess, "sessions.csv", sess_cols, cell=short)}
+{_sessions_html(tables["sessions.csv"], within)}
 </body></html>
 """

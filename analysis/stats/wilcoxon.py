@@ -417,7 +417,9 @@ def paired_wilcoxon(
         return _not_computable(base, "; ".join([*lead, why]))
     used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
     _check_size(used, base["n_used"] if used == "exact" else d.size)
-    return _tested(d, base, lead, used, correction, confidence)
+    notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
+    return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
+                          **_tested(d, zero_method, alternative, used, correction, base["n_used"]), **base)
 
 
 def _pairs_counted(x_off: np.ndarray, keep: np.ndarray, metric: str, zero_method: str,
@@ -433,21 +435,14 @@ def _pairs_counted(x_off: np.ndarray, keep: np.ndarray, metric: str, zero_method
     return base, lead
 
 
-def _tested(d: np.ndarray, base: dict[str, Any], lead: list[str], used: str, correction: bool,
-            confidence: float) -> WilcoxonResult:
-    """The test of differences ``d`` by method ``used``, with its effect sizes and notes, as a result.
-
-    ``base`` holds the result's pairs, counts and descriptives so far (:func:`_descriptives`), ``lead`` the notes
-    on the pairs dropped.
-    """
-    zero_method = base["zero_method"]
-    statistic, p, z = _scipy_test(d, zero_method, base["alternative"], used, correction)
+def _tested(d: np.ndarray, zero_method: str, alternative: str, used: str, correction: bool,
+            n_used: int) -> dict[str, Any]:
+    """The test of differences ``d`` by method ``used`` and its effect sizes, as the result's fields: the statistic,
+    p, z, both rank sums, the rank-biserial correlation and r = z/√n."""
+    statistic, p, z = _scipy_test(d, zero_method, alternative, used, correction)
     w_plus, w_minus = _rank_sums(d, zero_method)
-    notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
-    return WilcoxonResult(
-        method=used, statistic=statistic, p_value=p, z=z, rank_biserial=(w_plus - w_minus) / (w_plus + w_minus),
-        r=z / math.sqrt(base["n_used"]), computable=True, note="; ".join([*lead, *notes]), w_plus=w_plus,
-        w_minus=w_minus, **base)
+    return {"statistic": statistic, "p_value": p, "z": z, "rank_biserial": (w_plus - w_minus) / (w_plus + w_minus),
+            "r": z / math.sqrt(n_used), "w_plus": w_plus, "w_minus": w_minus}
 
 
 # ------------------------------------------------------------------------------------------------
