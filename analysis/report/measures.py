@@ -72,7 +72,8 @@ def secondary_note() -> str:
     if not names:
         return ""
     one = len(names) == 1
-    return (f"{listed(names)} {'is a secondary measure' if one else 'are secondary measures'}: tested like the "
-            f"others, but outside Holm's family of the {family_word()} primary measures "
+    said = listed(names)
+    return (f"{said[:1].upper()}{said[1:]} {'is a secondary measure' if one else 'are secondary measures'}: tested "
+            f"like the others, but outside Holm's family of the {family_word()} primary measures "
             f"({listed([m.short for m in primary()])}), so {'its' if one else 'their'} p is not adjusted and p (Holm) "
             "is empty; a measure added after the paper's outcomes must not change their correction.")

@@ -156,8 +156,8 @@ def _bar_figures(pngs: dict[str, bytes]) -> str:
 
 def _secondary_definitions() -> str:
     """The secondary measures' definitions, for the methods ("" when there is none)."""
-    return "".join(f" {html.escape(m.short)} ({html.escape(m.unit)}) is the {html.escape(m.description)}."
-                   for m in secondary())
+    return "".join(f" {html.escape(m.short[:1].upper() + m.short[1:])} ({html.escape(m.unit)}) is the "
+                   f"{html.escape(m.description)}." for m in secondary())
 
 
 def _deviations_methods(within: Any) -> str:
