@@ -42,7 +42,7 @@ import threading
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from foundation.platform_support import add_dll_directory
+from foundation.platform_support.files import add_dll_directory
 from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError, HapticState
 from pipeline.devices.touch_output import (
