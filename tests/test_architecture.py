@@ -62,7 +62,8 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("protocol", "protocol.study"), ("protocol.recording",), ("protocol.storage",), ("protocol.runner",),
     ("analysis.reading",), ("analysis.stats",), ("analysis.plots",), ("analysis.planning",), ("analysis.report",),
     ("analysis.export",), ("analysis",),
-    ("study_app",), ("study_app.engine",), ("study_app.headless",), ("study_app.models",), ("study_app.gui",),
+    ("study_app",), ("study_app.engine.messages",), ("study_app.engine",), ("study_app.headless",),
+    ("study_app.models",), ("study_app.gui",),
     ("study_app.cli",),
     ("bench",),
 )

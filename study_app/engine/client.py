@@ -16,7 +16,7 @@ from typing import Any
 from foundation.platform_support.processes import signal_name
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
-from study_app.engine.host import host_main
+from study_app.engine.process import host_main
 from study_app.engine.setup import HostConfig
 
 __all__ = ["EngineClient", "EngineStartError", "describe_exit"]
