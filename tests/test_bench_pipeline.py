@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from bench.pipeline_bench import format_pipeline_bench, measure_pipeline_cost, record_samples, run_pipeline_bench
+from bench.pipeline_bench import format_pipeline_bench, run_pipeline_bench
+from bench.pipeline_cost import measure_pipeline_cost, record_samples
 from pipeline.force.framework import FrameworkConfig
 
 
