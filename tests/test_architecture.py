@@ -56,7 +56,7 @@ FORBIDDEN = {
 #: import nothing of each other.  A package's root module sits where its entry stands (``analysis``, the notebook's
 #: lazy front door, above every analysis floor; ``study_app``'s shared modules below its sub-floors).
 FLOORS: tuple[tuple[str, ...], ...] = (
-    ("foundation",),
+    ("foundation.platform_support",), ("foundation",),
     ("pipeline", "pipeline.core"), ("pipeline.force",), ("pipeline.devices",), ("pipeline.commissioning",),
     ("pipeline.backends",), ("pipeline.runtime",), ("pipeline.sim", "pipeline.settings"), ("pipeline.assembly",),
     ("protocol", "protocol.study"), ("protocol.recording",), ("protocol.storage",), ("protocol.runner",),

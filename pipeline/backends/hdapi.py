@@ -18,7 +18,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any, Protocol
 
-from foundation.platform_support import add_dll_directory
+from foundation.platform_support.files import add_dll_directory
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.frames import Vec3
 
@@ -150,7 +150,7 @@ def load_pyopenhaptics(dll_dir: str | None = None) -> Any:
     """Import pyOpenHaptics (which loads libHD); :class:`DeviceError` with the install hint if it cannot.
 
     ``dll_dir`` (``[haptic] dll_dir``) is added to Windows' DLL search path
-    first (:func:`foundation.platform_support.add_dll_directory`; nothing
+    first (:func:`foundation.platform_support.files.add_dll_directory`; nothing
     elsewhere): pyOpenHaptics loads ``HD.dll`` by name as it is imported, and
     Windows does not look on ``PATH`` for it.
     """

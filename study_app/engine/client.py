@@ -13,7 +13,7 @@ import queue
 import time
 from typing import Any
 
-from foundation.platform_support import signal_name
+from foundation.platform_support.processes import signal_name
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
 from study_app.engine.host import host_main

@@ -17,7 +17,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from foundation.platform_support import kill_hard
+from foundation.platform_support.processes import kill_hard
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner

@@ -249,7 +249,7 @@ def _trigger(faults: Sequence[FaultPlan], opened: OpenedSession, eng: Engine,
     def kill() -> None:
         # as `kill -9` of `haptic-study run` would: in a parallel study's worker, the study's main process
         # (the workers then die with it, by PR_SET_PDEATHSIG)
-        from foundation.platform_support import kill_hard
+        from foundation.platform_support.processes import kill_hard
 
         sys.stdout.flush()
         sys.stderr.flush()

@@ -19,7 +19,7 @@ from __future__ import annotations
 import multiprocessing as mp
 
 from analysis.planning.sim_study import TrialRow
-from foundation.platform_support import worker_pool
+from foundation.platform_support.processes import worker_pool
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.force.framework import FrameworkConfig

@@ -8,6 +8,7 @@ No real DLL is loaded.
 
 from __future__ import annotations
 
+import os
 import sys
 import tomllib
 from pathlib import Path
@@ -15,6 +16,7 @@ from pathlib import Path
 import pytest
 
 import foundation.platform_support as ps
+from foundation.platform_support import files
 from pipeline.backends import hdapi
 from pipeline.devices.interfaces import DeviceError
 from pipeline.settings.hardware import HardwareError, load_hardware
@@ -72,10 +74,10 @@ def fake_windows(monkeypatch, tmp_path):
     names = ("pyOpenHaptics", "pyOpenHaptics.hd", "pyOpenHaptics.hd_callback", "pyOpenHaptics.hd_define")
     real = {name: sys.modules.pop(name) for name in names if name in sys.modules}
     monkeypatch.setattr(ps, "_test_events", events, raising=False)
-    monkeypatch.setattr(ps.sys, "platform", "win32")
-    monkeypatch.setattr(ps.os, "add_dll_directory", lambda p: events.append(f"add_dll_directory {p}") or p,
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.setattr(os, "add_dll_directory", lambda p: events.append(f"add_dll_directory {p}") or p,
                         raising=False)
-    monkeypatch.setattr(ps, "_DLL_DIRECTORIES", [])
+    monkeypatch.setattr(files, "_DLL_DIRECTORIES", [])
     yield events
     # the fakes out of sys.modules, the real ones (if another test imported them) back: later tests import the real
     for name in names:
