@@ -77,6 +77,7 @@ SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
     "pipeline.assembly.engine",
+    "pipeline.assembly.sim_config",
     "study_app.engine.setup",
     "study_app.engine.sessions",
     "study_app.engine.commissioning",
