@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from bench.source_trees import check_tree, source_env
 from foundation.parallel import default_workers
 from protocol.storage import connect_readonly
 
@@ -121,30 +122,15 @@ def _read_all_samples(db: str) -> tuple[float, int]:
     return time.perf_counter() - t0, n
 
 
-def _source_env(source: str | None) -> dict[str, str] | None:
-    """The environment that puts the source tree ``source`` first on the import path (None: ours)."""
-    if source is None:
-        return None
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(source),
-                                                         os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
-
-
 def _report_wall(db: str, out: str, source: str | None = None) -> float:
     """One ``haptic-study report`` in a fresh process: ours, or the source tree ``source``'s (its code first on
     the import path, this interpreter and its installed libraries).  It runs in the output's folder: ``python -m``
     puts the working directory before PYTHONPATH, so run from our checkout the "reference" would be our code."""
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", os.path.abspath(db), "--out", out],
-                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_source_env(source),
+                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=source_env(source),
                    cwd=os.path.dirname(os.path.abspath(out)))
     return time.perf_counter() - t0
-
-
-def _imported_from(source: str | None, cwd: str) -> str:
-    """Where a fresh process set up as :func:`_report_wall` sets it up imports ``study_app`` from."""
-    out = subprocess.run([sys.executable, "-c", "import study_app; print(study_app.__file__)"], check=True,
-                         capture_output=True, text=True, env=_source_env(source), cwd=cwd)
-    return out.stdout.strip()
 
 
 def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
@@ -154,10 +140,7 @@ def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
 def _reference_walls(db: str, tmp: str, source: str, repeats: int) -> tuple[list[float], list[float]]:
     """Our report and the reference tree's on the same database, run in turn (ours, theirs, ours, …) so a busy
     spell of the machine falls on both alike: (ours, theirs)."""
-    where = _imported_from(source, tmp)
-    if not os.path.abspath(where).startswith(os.path.join(os.path.abspath(source), "")):
-        raise RuntimeError(f"--reference {source}: its report would import study_app from {where}, not from the tree "
-                           "(is it a source tree of haptic-study?)")
+    check_tree(source, tmp, "--reference")
     ours, theirs = [], []
     for k in range(repeats):
         ours.append(_report_wall(db, os.path.join(tmp, f"report-ours{k}")))

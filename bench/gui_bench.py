@@ -109,7 +109,7 @@ def run_gui_bench(seconds: float = 20.0, *, explain: bool = False) -> dict[str, 
     settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
     win = ExperimenterWindow(HostConfig(clock="real", trace_jitter=explain), settings,
                              os.path.join(tmp.name, "bench.db"))
-    win.confirm = lambda title, text: True
+    win.session_actions.confirm = lambda title, text: True
     win.show()
     app.processEvents()
     t_usable = time.perf_counter() - t0

@@ -13,8 +13,8 @@ import multiprocessing as mp
 import time
 from typing import Any
 
-from foundation.platform_support import cpu_times
-from foundation.platform_support import load_average as load_avg
+from foundation.platform_support.machine import cpu_times
+from foundation.platform_support.machine import load_average as load_avg
 from pipeline.core.clock import MonotonicClock, prepare_realtime_thread
 from pipeline.runtime.loop_stats import LoopStats
 from study_app.engine import messages as m

@@ -2,7 +2,8 @@
 
 ``report``, ``power``, ``replay --out`` and ``gui --screenshot`` write a
 folder (:func:`write_output_folder`); ``plot-trial``, ``plot-session`` and
-``export samples`` write one file (:func:`write_output_file`).  The rules:
+``export samples`` write one file (:func:`foundation.outfile.write_output_file`).  The rules (the folder's
+marker is :mod:`foundation.outmarker`):
 
 * **Nothing outside the folder, never through a link.**  Below the folder the
   user named, every step is taken by file descriptor with ``O_NOFOLLOW``: a
@@ -36,7 +37,7 @@ folder (:func:`write_output_folder`); ``plot-trial``, ``plot-session`` and
   every file, so even a crash between two renames leaves a folder ``force``
   may replace.
 * **Checked before the work, one line after it.**  :func:`check_output_folder`
-  and :func:`check_output_file` refuse (exit 2) a folder that is read-only,
+  and :func:`foundation.outfile.check_output_file` refuse (exit 2) a folder that is read-only,
   not writable, or full before any long work; an ``OSError`` while writing
   (ENOSPC, EROFS, EIO, ...) is one line naming the path and what to do (exit
   1), and leaves nothing of the run behind.
@@ -47,8 +48,6 @@ Every refusal is an :class:`foundation.outfs.OutputError` (an
 
 from __future__ import annotations
 
-import errno
-import json
 import os
 import stat
 from collections.abc import Callable, Sequence
@@ -64,14 +63,14 @@ from foundation.outfs import (
     file_mode,
     folder_at,
     fsync_dir,
+    is_write_failure,
     kind_of,
     listdir_at,
-    lstat_at,
     mkdir_at,
     open_folder,
     os_error_line,
+    parent_of,
     place,
-    read_regular_at,
     rmdir_at,
     rmtree_at,
     sha256_at,
@@ -80,102 +79,20 @@ from foundation.outfs import (
     writable_problem,
     write_bytes_at,
 )
-from foundation.platform_support import process_exists
+from foundation.outmarker import marker_bytes, read_marker_at
+from foundation.platform_support.processes import process_exists
 
-__all__ = [
-    "REPORT_MARKER",
-    "OutputError",
-    "check_output_file",
-    "check_output_folder",
-    "ensure_output_folder",
-    "read_marker",
-    "sha256_file",
-    "write_output_file",
-    "write_output_folder",
-]
+__all__ = ["REPORT_MARKER", "OutputError", "check_output_folder", "ensure_output_folder", "write_output_folder"]
 
 #: The marker of ``report``'s output folder (here, so that the command line checks ``--out`` before it imports
 #: the analysis).
 REPORT_MARKER = ".haptic-study-report"
 #: Decides whether a file (its path relative to the folder, with ``/``) belongs to what the command keeps.
 Keep = Callable[[str], bool]
-#: OSErrors of the file system itself: while outputs are written they are the command's failure to write.
-_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EFBIG, errno.EACCES, errno.EPERM}
 
 
 def _keep_nothing(_: str) -> bool:
     return False
-
-
-def sha256_file(path: str | os.PathLike[str]) -> str:
-    """SHA-256 of a regular file's bytes, read in 1 MiB blocks (a simulated pool may be gigabytes)."""
-    p = Path(path)
-    fd = open_folder(str(p.parent), follow=True)
-    try:
-        digest = sha256_at(fd, p.name)
-    finally:
-        close_folder(fd)
-    if digest is None:
-        raise OutputError(f"{path}: not a regular file")
-    return digest
-
-
-# -- the marker -------------------------------------------------------------------------------------------------
-def _parse_marker(raw: bytes) -> dict[str, set[str]] | None:
-    try:
-        data = json.loads(raw.decode("utf-8"))
-        listed = data["files"]
-        pending = data.get("pending", {})
-    except (ValueError, KeyError, TypeError, AttributeError):
-        return None
-    if not isinstance(listed, dict) or not isinstance(pending, dict):
-        return None
-    accepted: dict[str, set[str]] = {str(f): {str(h)} for f, h in listed.items() if _inside(str(f))}
-    for f, h in pending.items():
-        if _inside(str(f)):
-            accepted.setdefault(str(f), set()).add(str(h))
-    return accepted
-
-
-def _inside(rel: str) -> bool:
-    """Whether a marker's entry names a file inside the folder: plain names joined by ``/`` (no ``..``, no root).
-
-    A marker is a file in the folder anyone who may write there can edit: an
-    entry ``../x`` with x's hash would otherwise let ``--force`` remove a file
-    outside the folder.
-    """
-    return all(part not in ("", ".", "..") and "\\" not in part for part in rel.split("/"))
-
-
-def _read_marker_at(dir_fd: Folder, marker: str) -> dict[str, set[str]] | None:
-    raw = read_regular_at(dir_fd, marker, 16 << 20)
-    return None if raw is None else _parse_marker(raw)
-
-
-def read_marker(out: Path, marker: str) -> dict[str, set[str]] | None:
-    """The files a previous run listed in ``out/marker``, each with the hashes accepted for it.
-
-    None when there is no readable marker (a link in its place is not one).  A
-    marker written while files were being moved into place (``pending``)
-    accepts the old and the new hash.
-    """
-    try:
-        fd = open_folder(str(out), follow=True)
-    except OSError:
-        return None
-    try:
-        return _read_marker_at(fd, marker)
-    finally:
-        close_folder(fd)
-
-
-def _marker_bytes(command: str, files: dict[str, str], pending: dict[str, str] | None = None) -> bytes:
-    from foundation.version import software_version
-
-    data: dict[str, object] = {"written_by": f"haptic-study {software_version()} {command}", "files": files}
-    if pending:
-        data["pending"] = pending
-    return json.dumps(data, indent=1, sort_keys=True).encode("utf-8")
 
 
 # -- what a folder holds --------------------------------------------------------------------------------------------
@@ -220,7 +137,7 @@ def _judge(out: Path, dir_fd: Folder, *, command: str, marker: str, force: bool,
         raise OutputError(f"{option} {out}: the folder exists and holds {names[0]}{more}; choose another folder, or "
                           f"pass --force to replace a folder {command} wrote before (--force replaces only "
                           f"{command}'s own unedited files)")
-    listed = _read_marker_at(dir_fd, marker)
+    listed = read_marker_at(dir_fd, marker)
     if listed is None:
         raise OutputError(f"{option} {out}: not a folder {command} wrote (no readable {marker} in it); --force "
                           f"replaces only {command}'s own files: choose another folder (nothing was deleted)")
@@ -236,10 +153,6 @@ def _judge(out: Path, dir_fd: Folder, *, command: str, marker: str, force: bool,
         raise OutputError(f"{option} {out}: {edited[0]} was changed since {command} wrote it"
                           f"{f' (and {len(edited) - 1} more)' if len(edited) > 1 else ''}; keep your edits "
                           "elsewhere or choose another folder (nothing was deleted)")
-
-
-def _parent(path: Path) -> Path:
-    return Path(os.path.dirname(os.path.abspath(path)))
 
 
 def check_output_folder(
@@ -292,7 +205,7 @@ def check_output_folder(
         if os.path.lexists(out):
             raise OutputError(f"{option} {out}: is a symbolic link to nothing; choose another folder") from None
         _refuse_inputs_inside(out, inputs, option)
-        parent = _parent(out)
+        parent = parent_of(out)
         if not parent.is_dir():
             raise OutputError(f"{option} {out}: the folder {parent} does not exist") from None
         problem = writable_problem(parent, f"{option} {out}", need_bytes)
@@ -355,9 +268,9 @@ def _seal(tmp_fd: Folder) -> dict[str, str]:
 def _move_in(out_fd: Folder, tmp_fd: Folder, hashes: dict[str, str], *, command: str, marker: str) -> None:
     """Put the files of the temporary folder in place, the marker first accepting old and new (the folder was
     judged)."""
-    old = _read_marker_at(out_fd, marker) or {}
+    old = read_marker_at(out_fd, marker) or {}
     old_present = {f: h for f in old if (h := sha256_at_or_none(out_fd, f)) is not None and h in old[f]}
-    write_bytes_at(out_fd, marker, _marker_bytes(command, old_present, pending=hashes))
+    write_bytes_at(out_fd, marker, marker_bytes(command, old_present, pending=hashes))
     for rel in hashes:
         folder, _, name = rel.rpartition("/")
         dst = folder_at(out_fd, folder, make=True)
@@ -383,7 +296,7 @@ def _move_in(out_fd: Folder, tmp_fd: Folder, hashes: dict[str, str], *, command:
                 break
             finally:
                 close_folder(up)
-    write_bytes_at(out_fd, marker, _marker_bytes(command, hashes))
+    write_bytes_at(out_fd, marker, marker_bytes(command, hashes))
     fsync_dir(out_fd)
 
 
@@ -401,10 +314,6 @@ def _remove_stale_temporaries(out_fd: Folder, marker: str) -> None:
             continue
         if not alive:
             rmtree_at(out_fd, name)
-
-
-def _is_write_failure(exc: OSError, tmp: Path) -> bool:
-    return exc.errno in _WRITE_ERRNOS or str(exc.filename or "").startswith(str(tmp))
 
 
 def write_output_folder(
@@ -459,7 +368,7 @@ def write_output_folder(
         try:
             fill(tmp)
         except OSError as exc:
-            if not _is_write_failure(exc, tmp):
+            if not is_write_failure(exc, tmp):
                 raise
             raise OutputError(os_error_line(exc, f"{option} {out}", failed), status=1) from None
         try:
@@ -492,94 +401,3 @@ def _safe_listdir(out: Path) -> list[str]:
         return ["?"]
 
 
-# -- writing one file ----------------------------------------------------------------------------------------------
-def check_output_file(out_file: str | os.PathLike[str], *, command: str, need_bytes: int = 0,
-                      option: str = "--out") -> Path:
-    """Refuse an output file the command must not write: one that exists (a link included), or a folder it cannot write.
-
-    Raises
-    ------
-    OutputError
-        One line naming the file and what is wrong; nothing was touched.
-    """
-    out = Path(out_file)
-    try:
-        st = os.lstat(out)
-    except FileNotFoundError:
-        pass
-    except OSError as exc:
-        raise OutputError(os_error_line(exc, f"{option} {out}", "cannot use it")) from None
-    else:
-        what = "" if stat.S_ISREG(st.st_mode) else f" (it is {kind_of(st.st_mode)})"
-        raise OutputError(f"{option} {out}: exists{what}; {command} writes a new file only and never replaces one: "
-                          "choose another name (nothing was written)")
-    parent = _parent(out)
-    if not parent.is_dir():
-        raise OutputError(f"{option} {out}: the folder {parent} does not exist")
-    problem = writable_problem(parent, f"{option} {out}", need_bytes)
-    if problem:
-        raise OutputError(problem)
-    return out
-
-
-def write_output_file(out_file: str | os.PathLike[str], fill: Callable[[Path], object], *, command: str,
-                      need_bytes: int = 0, option: str = "--out") -> Path:
-    """Write one new file: ``fill(path)`` writes it in a private temporary folder beside it, then it is linked in.
-
-    The file gets the output mode (0600), is fsynced, and appears whole or not
-    at all; it never replaces anything (a file that appeared meanwhile is
-    refused, not overwritten).
-
-    Raises
-    ------
-    OutputError
-        The file must not be written, or writing failed; nothing is left behind.
-    """
-    out = check_output_file(out_file, command=command, need_bytes=need_bytes, option=option)
-    parent, name = _parent(out), out.name
-    tmp_name = f".{name[:64]}.tmp-{os.getpid()}-{os.urandom(4).hex()}"
-    parent_fd: Folder | None = None
-    try:
-        try:
-            parent_fd = open_folder(str(parent), follow=True)
-            mkdir_at(parent_fd, tmp_name, 0o700)
-        except OSError as exc:
-            raise OutputError(os_error_line(exc, f"{option} {out}", "cannot write it"), status=1) from None
-        tmp = parent / tmp_name
-        try:
-            fill(tmp / name)
-        except OSError as exc:
-            if not _is_write_failure(exc, tmp):
-                raise
-            raise OutputError(os_error_line(exc, f"{option} {out}", "cannot write it"), status=1) from None
-        try:
-            _put_file_inplace(parent_fd, tmp_name, name, out, command, option)
-        except OSError as exc:
-            raise OutputError(os_error_line(exc, f"{option} {out}", "cannot write it"), status=1) from None
-    finally:
-        if parent_fd is not None:
-            rmtree_at(parent_fd, tmp_name)
-            close_folder(parent_fd)
-    return out
-
-
-def _put_file_inplace(parent_fd: Folder, tmp_name: str, name: str, out: Path, command: str, option: str) -> None:
-    """The one file ``fill`` made: given the output mode, fsynced, and linked in beside the temporary folder."""
-    tmp_fd = open_folder(tmp_name, parent_fd)
-    try:
-        try:
-            mode = lstat_at(tmp_fd, name).st_mode
-        except FileNotFoundError:
-            raise OutputError(f"{option} {out}: {command} wrote nothing (nothing was written)", status=1) from None
-        if not stat.S_ISREG(mode):
-            raise OutputError(f"{option} {out}: {command} made {kind_of(mode)}, not a file (nothing was written)",
-                              status=1)
-        chmod_at(tmp_fd, name, file_mode(), sync=True)
-        try:
-            place(tmp_fd, parent_fd, name, replace=False)
-        except OutputError:
-            raise OutputError(f"{option} {out}: appeared while {command} ran; it was not overwritten (nothing was "
-                              "written)", status=1) from None
-        fsync_dir(parent_fd)
-    finally:
-        close_folder(tmp_fd)

@@ -32,7 +32,7 @@ from foundation import outpath
 from foundation.errors import InputRefused
 from foundation.oserrors import kind_of, os_error_line
 from foundation.outpath import PathFolder
-from foundation.platform_support import (
+from foundation.platform_support.files import (
     DIR_FD_CALLS,
     O_CLOEXEC,
     O_DIRECTORY,
@@ -390,3 +390,18 @@ def sha256_at_or_none(dir_fd: Folder, rel: str) -> str | None:
         return sha256_at(dir_fd, rel)
     except OSError:
         return None
+
+
+#: OSErrors of the file system itself: while outputs are written they are the command's failure to write.
+_WRITE_ERRNOS = {errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EIO, errno.EFBIG, errno.EACCES, errno.EPERM}
+
+
+def parent_of(path: Path) -> Path:
+    """The folder an output (file or folder) is made in: its parent, as an absolute path."""
+    return Path(os.path.dirname(os.path.abspath(path)))
+
+
+def is_write_failure(exc: OSError, tmp: Path) -> bool:
+    """Whether ``exc``, raised while outputs were made in the temporary folder ``tmp``, is the file system's failure
+    to write them (full, read-only, quota, I/O, permissions), not a bug of the code that made them."""
+    return exc.errno in _WRITE_ERRNOS or str(exc.filename or "").startswith(str(tmp))

@@ -38,7 +38,7 @@ import shutil
 import stat
 from dataclasses import dataclass
 
-from foundation.platform_support import (
+from foundation.platform_support.files import (
     O_BINARY,
     O_CLOEXEC,
     O_DIRECTORY,

@@ -17,7 +17,8 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from typing import Any, TypeVar
 
-from foundation.platform_support import die_with, usable_cpu_count, worker_context
+from foundation.platform_support.processes import die_with, worker_context
+from foundation.platform_support.threads import usable_cpu_count
 
 __all__ = ["WORKERS_ENV", "default_workers", "run_tasks", "workers_env_problem"]
 

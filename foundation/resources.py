@@ -8,7 +8,7 @@ rather than dying with a ``MemoryError`` after an hour of work.
 
 from __future__ import annotations
 
-from foundation.platform_support import cgroup_memory_headroom, free_physical_bytes, meminfo_available_bytes
+from foundation.platform_support.machine import cgroup_memory_headroom, free_physical_bytes, meminfo_available_bytes
 
 __all__ = ["available_memory_bytes", "memory_problem"]
 

@@ -420,7 +420,7 @@ def test_free_pages_a_writer_left_unzeroed_are_zeroed_by_the_withdrawal(tmp_path
 _STOPPED = """
 import os, sys
 import protocol.storage.withdrawal as w
-from foundation.platform_support import kill_hard
+from foundation.platform_support.processes import kill_hard
 
 real = w.rewrite_file
 

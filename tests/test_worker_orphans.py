@@ -91,13 +91,13 @@ _POOLS = {
     """,
     "worker_pool, fork (sweep)": """
         import time
-        from foundation.platform_support import worker_pool
+        from foundation.platform_support.processes import worker_pool
         with worker_pool(2) as pool:
             pool.map(time.sleep, [600, 600])
     """,
     "worker_pool, spawn (calibration bench)": """
         import multiprocessing as mp, time
-        from foundation.platform_support import worker_pool
+        from foundation.platform_support.processes import worker_pool
         if __name__ == "__main__":
             with worker_pool(2, mp.get_context("spawn")) as pool:
                 pool.map(time.sleep, [600, 600])
@@ -135,7 +135,7 @@ def test_kill_9_of_report_leaves_no_worker(tmp_path: Path) -> None:
 
 def test_every_pool_of_the_product_makes_its_workers_die_with_it() -> None:
     """A pool made anywhere else than in the two places that pass :func:`die_with` would orphan its workers."""
-    allowed = {("foundation/platform_support.py", "Pool"), ("foundation/parallel.py", "ProcessPoolExecutor")}
+    allowed = {("foundation/platform_support/processes.py", "Pool"), ("foundation/parallel.py", "ProcessPoolExecutor")}
     found = []
     for folder in ("foundation", "analysis", "bench", "pipeline", "protocol", "study_app"):
         for path in (ROOT / folder).rglob("*.py"):

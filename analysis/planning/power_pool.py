@@ -53,8 +53,9 @@ from pathlib import Path
 from typing import Any
 
 from analysis.reading.errors import AnalysisError
-from foundation.outdir import ensure_output_folder, sha256_file
+from foundation.outdir import ensure_output_folder
 from foundation.outfs import close_folder, open_folder, os_error_line, write_bytes_at
+from foundation.outmarker import sha256_file
 from protocol.storage import StorageError, StudyDatabase, StudyReader
 
 __all__ = ["POOL_MB_PER_PARTICIPANT", "PoolError", "SimulatedPool", "is_pool_file", "pool_name", "pool_parameters",

@@ -29,7 +29,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.planning.sim_study import SIM_METRICS, TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
-from foundation.platform_support import O_NOFOLLOW
+from foundation.platform_support.files import O_NOFOLLOW
 from protocol.metrics import get
 
 __all__ = [

@@ -13,7 +13,7 @@ import os
 import time
 from typing import Protocol, runtime_checkable
 
-from foundation.platform_support import set_fifo_priority, set_timer_slack_ns
+from foundation.platform_support.threads import set_fifo_priority, set_timer_slack_ns
 
 __all__ = [
     "Clock", "MonotonicClock", "VirtualClock", "collect_garbage", "manual_garbage_collection",

@@ -49,7 +49,7 @@ from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
-from foundation.platform_support import gil_keeping_pread, open_schedstat, thread_ids
+from foundation.platform_support.threads import gil_keeping_pread, open_schedstat, thread_ids
 from pipeline.core.clock import MonotonicClock
 
 __all__ = ["LateTickTracer"]

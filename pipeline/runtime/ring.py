@@ -39,10 +39,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from foundation.platform_support import attach_segment, create_segment, free_orphaned_segment
+from foundation.platform_support.shared_memory import attach_segment, create_segment, free_orphaned_segment
 
 if TYPE_CHECKING:
-    from foundation.platform_support import SharedSegment
+    from foundation.platform_support.shared_memory import SharedSegment
 
 __all__ = ["RingBuffer", "RingReadResult"]
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 import sqlite3
 
-from foundation.platform_support import kill_hard
+from foundation.platform_support.processes import kill_hard
 from protocol.storage.common import StorageError
 
 __all__ = ["CRASH_ENV", "commits_seen", "install", "planned", "statements_seen"]

@@ -20,7 +20,7 @@ from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
 
-from foundation.platform_support import boot_id, process_exists, process_stat_fields
+from foundation.platform_support.processes import boot_id, process_exists, process_stat_fields
 from protocol.storage.common import LeaseHeld, now_iso
 
 __all__ = ["LEASE_HEARTBEAT_S", "LEASE_STALE_S", "LeaseHolder", "new_owner_token", "process_identity", "session_scope"]

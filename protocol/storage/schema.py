@@ -20,7 +20,7 @@ import sqlite3
 from dataclasses import fields
 from pathlib import Path
 
-from foundation.platform_support import may_write, owner_only
+from foundation.platform_support.files import may_write, owner_only
 from protocol.metrics import stored
 from protocol.storage.common import EmptyDatabase, StorageError
 from protocol.study.records import AbortCause, LoopHealth

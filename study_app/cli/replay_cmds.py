@@ -329,7 +329,7 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     """``haptic-study plot-session``."""
     import numpy as np
 
-    from foundation.outdir import check_output_file, write_output_file
+    from foundation.outfile import check_output_file, write_output_file
     from protocol.study.labels import plural
 
     out = Path(args.out)
@@ -411,7 +411,7 @@ def _codebook_path(out: Path) -> Path:
 
 def cmd_export(args: argparse.Namespace) -> int:
     """``haptic-study export samples``: the labelled records, and their codebook beside the file."""
-    from foundation.outdir import check_output_file, write_output_file
+    from foundation.outfile import check_output_file, write_output_file
 
     to_stdout = args.out == "-"
     if to_stdout and args.format != "csv":

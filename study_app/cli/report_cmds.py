@@ -158,7 +158,7 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
     """Run ``haptic-study plot-trial`` (``--trial`` counts from 1)."""
     from pathlib import Path
 
-    from foundation.outdir import check_output_file, write_output_file
+    from foundation.outfile import check_output_file, write_output_file
 
     out = Path(args.out)
     if out.suffix.lower() not in (".png", ".pdf", ".svg"):

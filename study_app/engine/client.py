@@ -13,10 +13,10 @@ import queue
 import time
 from typing import Any
 
-from foundation.platform_support import signal_name
+from foundation.platform_support.processes import signal_name
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
-from study_app.engine.host import host_main
+from study_app.engine.process import host_main
 from study_app.engine.setup import HostConfig
 
 __all__ = ["EngineClient", "EngineStartError", "describe_exit"]

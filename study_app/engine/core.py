@@ -1,8 +1,10 @@
-"""What the study engine's rooms (its sessions, its commissioning chain) use of the engine they belong to.
+"""What the study engine's rooms (its sessions, its commissioning chain and the chain's parts) use of the engine
+they belong to.
 
-A :class:`typing.Protocol`, so that :mod:`study_app.engine.sessions` and
-:mod:`study_app.engine.commissioning` name what they need without importing
-:mod:`study_app.engine.host`, which builds them (no circle, not even for typing).
+A :class:`typing.Protocol`, so that :mod:`study_app.engine.sessions`, :mod:`study_app.engine.commissioning`,
+:mod:`study_app.engine.tool_records`, :mod:`study_app.engine.ring_windows` and :mod:`study_app.engine.start_gate`
+name what they need without importing :mod:`study_app.engine.host`, which builds them (no circle, not even for
+typing).
 """
 
 from __future__ import annotations

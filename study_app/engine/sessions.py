@@ -17,7 +17,7 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from foundation.platform_support import kill_hard
+from foundation.platform_support.processes import kill_hard
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
@@ -39,13 +39,13 @@ from protocol.study.config import ProtocolConfig, load_protocol
 from protocol.study.records import AbortCause, TrialRecord
 from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
+from study_app.engine import session_list
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
 from study_app.engine.session_config import config_record, real_config_record
 from study_app.engine.setup import SwitchableDriver
 
 __all__ = ["EngineSessions", "list_resumable"]
-
 
 
 class EngineSessions:
@@ -86,7 +86,7 @@ class EngineSessions:
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol, self.engine.eng.framework.config)
-        if self.commissioning.gate(cmd):
+        if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
         try:
@@ -134,7 +134,7 @@ class EngineSessions:
 
     def resume(self, cmd: m.ResumeSession) -> None:
         self.engine.require_idle("resume")
-        if self.commissioning.gate(cmd):
+        if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
         try:
@@ -172,7 +172,7 @@ class EngineSessions:
         runner.listeners.append(self._on_runner_event)
         self.trigger = None
         self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
-        override = self.commissioning.take_override()
+        override = self.commissioning.gate.take_override()
         if override is not None:
             missing, why, rest_n = override
             recorder.event(opened.session_id, opened.clock_offset_s, CALIBRATION_OVERRIDE_EVENT,
@@ -189,6 +189,33 @@ class EngineSessions:
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
             participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
         ))
+
+    def control(self, cmd: m.Pause | m.Resume | m.AbortTrial | m.AbortSession) -> None:
+        """Pause, resume, abort the running trial or the session -- each bound to what the experimenter confirmed."""
+        runner = self.runner
+        if runner is None or runner.done:
+            raise RuntimeError("no session is running")
+        if isinstance(cmd, m.Pause):
+            runner.pause()
+        elif isinstance(cmd, m.Resume):
+            runner.resume()
+        elif isinstance(cmd, m.AbortTrial):
+            if cmd.trial_index is not None and runner.trial_ended(cmd.trial_index):
+                # confirmed for a trial that has ended since: never abort the next one instead
+                raise RuntimeError(f"trial {cmd.trial_index + 1} had already ended: nothing was aborted")
+            if runner.running_trial is None:
+                raise RuntimeError("no trial is running (between trials or paused)")
+            runner.abort_trial(cmd.reason, trial_index=cmd.trial_index)
+        else:
+            if cmd.session_id is not None and cmd.session_id != runner.session_id:
+                raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
+            runner.abort_session(cmd.reason)
+
+    def list_sessions(self, cmd: m.ListSessions) -> None:
+        """Publish a database's interrupted sessions, every session it holds and who withdrew (read-only)."""
+        self.engine.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path),
+                                             session_list.list_sessions(cmd.db_path, check=False),
+                                             session_list.list_withdrawn(cmd.db_path)))
 
     def inject_fault(self, cmd: m.InjectFault) -> None:
         if not self.engine.eng.simulated:

@@ -37,7 +37,7 @@ def run_gui(host: HostConfig, *, db_path: str | None = None, screenshot_dir: str
     if screenshot_dir is not None and tmp is not None:
         settings = QSettings(os.path.join(tmp.name, "settings.ini"), QSettings.Format.IniFormat)
         win = ExperimenterWindow(host, settings, db_path or os.path.join(tmp.name, "screenshots.db"))
-        win.confirm = lambda title, text: True
+        win.session_actions.confirm = lambda title, text: True
         tour = ScreenshotTour(win, Path(screenshot_dir), on_done=app.quit)
         win.show()
         tour.start()

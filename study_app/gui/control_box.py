@@ -12,7 +12,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QGroupBox, QHBoxLayout, QLabel, QPushButton, QToolButton, QVBoxLayout, QWidget
 
 from study_app.gui.widgets import LEVEL_COLOURS
-from study_app.models.app import Notice
+from study_app.models.notices import Notice
 
 __all__ = ["ControlBox"]
 

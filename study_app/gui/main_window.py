@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
 
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
     QApplication,
     QFrame,
-    QInputDialog,
     QMainWindow,
     QScrollArea,
     QSplitter,
@@ -25,16 +23,20 @@ from study_app.engine.setup import HostConfig
 from study_app.gui import placement
 from study_app.gui.bridge import QtEngineBridge
 from study_app.gui.calibration_wizard import CalibrationWizard, RealPosePanel
-from study_app.gui.confirm import Confirmation
 from study_app.gui.control_box import ControlBox
 from study_app.gui.force_plots import QtForcePlots
+from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.jaw_box import QtJawBox
 from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
+from study_app.gui.session_actions import SessionActions
+from study_app.gui.session_views import QtCueWait, QtProgress, QtTrialTable
+from study_app.gui.setup_panel import QtSetupPanel
 from study_app.gui.timers import tracked_timer
-from study_app.gui.widgets import ElidedLabel, QtCueWait, QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
-from study_app.models.app import CALIBRATION_COMMANDS, AppModel
+from study_app.gui.widgets import ElidedLabel
+from study_app.models.app import AppModel
+from study_app.models.notices import CALIBRATION_COMMANDS
 
 __all__ = ["ExperimenterWindow"]
 
@@ -66,18 +68,17 @@ class ExperimenterWindow(QMainWindow):
         super().__init__()
         self.setWindowTitle("haptic-study — experimenter")
         self.settings = settings if settings is not None else QSettings("haptic-study", "gui")
-        #: None: destructive actions ask in a dialog bound to what it asks about (default No).  Scripted runs
-        #: (the screenshot tour, benchmarks, tests) set a function that answers at once instead.
-        self.confirm: Callable[[str, str], bool] | None = None
-        self.questions: dict[str, Confirmation] = {}
-        self._quit_confirmed = False
         self.bridge = QtEngineBridge(EngineClient(host), self)
         self.model = AppModel(self.bridge.send)
-        self.model.restarter = self.bridge.restart
+        self.model.engine.restarter = self.bridge.restart
         self._restore_settings(db_path)
         self._shut_down = False
 
         self.setup_panel = QtSetupPanel(self.model.setup)
+        #: Start, abort, restart, quit: each destructive one asked first (``session_actions.confirm`` answers at once
+        #: in scripted runs).
+        self.session_actions = SessionActions(self, self.model, self.setup_panel, self.question_parent,
+                                              self._save_settings)
         left = self._build_left_column()
         right = self._build_right_column()
         split = QSplitter(Qt.Orientation.Horizontal)
@@ -103,7 +104,7 @@ class ExperimenterWindow(QMainWindow):
     def _build_left_column(self) -> QWidget:
         """Session setup, the controls and the jaw, top to bottom."""
         controls = self._build_controls()
-        self.jaw_box = QtJawBox(self.model.jaw, self.model.jaw_action)
+        self.jaw_box = QtJawBox(self.model.jaw, self.model.rig_control.jaw_action)
         left = QWidget()
         ll = QVBoxLayout(left)
         ll.addWidget(self.setup_panel)
@@ -139,10 +140,10 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_right_column(self) -> QSplitter:
         """Progress and live plots above; the trial table and device health in tabs below."""
-        self.progress = QtProgress(self.model.session, self.model.health, app=self.model)
+        self.progress = QtProgress(self.model.session, self.model.health, cue=self.model.cue)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
-        self.cue_wait = QtCueWait(self.model)
+        self.cue_wait = QtCueWait(self.model.cue)
         self.trials_tab = QWidget()
         self.trials_count = ElidedLabel()  # the session's count, as the progress line above reads it
         self.trials_count.setContentsMargins(6, 2, 6, 0)
@@ -173,63 +174,50 @@ class ExperimenterWindow(QMainWindow):
     def _build_windows(self) -> None:
         """The participant screen, the simulated rig view, the calibration wizard and the menu."""
         self.participant_window = ParticipantWindow(self.model.participant)
-        self.rig_window = RigWindow(self.model.rig, self.model.set_driver, self.model.inject_fault)
+        rig, steps = self.model.rig_control, self.model.steps
+        self.rig_window = RigWindow(self.model.rig, rig.set_driver, rig.inject_fault)
         self.calibration_wizard = CalibrationWizard(
-            self.model.calibration, self.model.calibrate,
-            RealPosePanel(self.model.real_calibration, self.model.record_pose, self.model.identify),
-            chain=self.model.commissioning, on_tcp=self.model.run_tcp, on_compute_tcp=self.model.compute_tcp,
-            on_frames=self.model.check_frames, on_arm=self.model.select_calibration_arm,
+            self.model.calibration, steps.calibrate,
+            RealPosePanel(self.model.real_calibration, steps.record_pose, steps.identify),
+            chain=self.model.commissioning, on_tcp=steps.run_tcp, on_compute_tcp=steps.compute_tcp,
+            on_frames=steps.check_frames, on_arm=steps.select_arm,
         )
-        self.calibration_wizard.hidden.connect(lambda: self.model.clear_notice(CALIBRATION_COMMANDS))
+        self.calibration_wizard.hidden.connect(lambda: self.model.notices.clear(CALIBRATION_COMMANDS))
         self.menus = WindowMenus(self)
         self.view_actions = self.menus.windows
 
     def _wire_signals(self) -> None:
         """Buttons, keys and the model's signals to the window's slots."""
-        self.start_button.clicked.connect(self.start_session)
-        self.pause_button.clicked.connect(self.model.pause)
-        self.resume_button.clicked.connect(self.model.resume)
-        self.abort_trial_button.clicked.connect(self.abort_trial)
-        self.abort_session_button.clicked.connect(self.abort_session)
+        act = self.session_actions
+        self.start_button.clicked.connect(act.start_session)
+        self.pause_button.clicked.connect(self.model.control.pause)
+        self.resume_button.clicked.connect(self.model.control.resume)
+        self.abort_trial_button.clicked.connect(act.abort_trial)
+        self.abort_session_button.clicked.connect(act.abort_session)
         self.calibrate_button.clicked.connect(lambda: self.open_window(self.calibration_wizard))
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
-        self.notice_close.clicked.connect(self.model.clear_notice)
-        self.restart_button.clicked.connect(self.restart_engine)
-        self.model.engine_changed.connect(self._on_engine_changed)
-        self.override_button.clicked.connect(self.start_with_override)
-        self.untrained_button.clicked.connect(self.start_without_training)
+        self.notice_close.clicked.connect(self.model.notices.clear)
+        self.restart_button.clicked.connect(act.restart_engine)
+        self.model.engine.changed.connect(self._on_engine_changed)
+        self.override_button.clicked.connect(act.start_with_override)
+        self.untrained_button.clicked.connect(act.start_without_training)
         self.health_panel.health.changed.connect(self._on_health_changed)
         self.model.commissioning.changed.connect(self._on_actions_changed)
-        self.setup_panel.start_requested.connect(self.start_session)
-        self.health_panel.reset_button.clicked.connect(self.model.reset_faults)
-        self.setup_panel.refresh_button.clicked.connect(self.model.list_sessions)
-        self.setup_panel.resume_button.clicked.connect(self.resume_selected)
-        self.setup_panel.db.editingFinished.connect(self.model.list_sessions)
+        self.setup_panel.start_requested.connect(act.start_session)
+        self.health_panel.reset_button.clicked.connect(self.model.control.reset_faults)
+        self.setup_panel.refresh_button.clicked.connect(self.model.control.list_sessions)
+        self.setup_panel.resume_button.clicked.connect(act.resume_selected)
+        self.setup_panel.db.editingFinished.connect(self.model.control.list_sessions)
         # application-wide: the experimenter may have the rig view or the participant screen focused
-        for key, slot in ((Qt.Key.Key_Space, self.start_session), (Qt.Key.Key_Escape, self.abort_trial)):
+        for key, slot in ((Qt.Key.Key_Space, act.start_session), (Qt.Key.Key_Escape, act.abort_trial)):
             sc = QShortcut(QKeySequence(key), self)
             sc.setContext(Qt.ShortcutContext.ApplicationShortcut)
             sc.activated.connect(slot)
-        self.model.actions_changed.connect(self._on_actions_changed)
+        self.model.actions.changed.connect(self._on_actions_changed)
         self.model.session.changed.connect(self._on_session_changed)
-        self.model.notice_changed.connect(self._on_notice)
+        self.model.notices.changed.connect(self._on_notice)
         self.bridge.event_received.connect(self._on_engine_event, Qt.ConnectionType.QueuedConnection)
-
-    def start_with_override(self) -> None:
-        """Real rig, calibration incomplete: ask for a reason, then start anyway (the reason is stored)."""
-        missing = self.model.calibration_missing()
-        if not missing or not self.model.can("start"):
-            return
-        self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
-        prompt = self.model.commissioning.override_prompt()
-        if self.confirm is not None:  # a scripted run answers at once
-            reason = "scripted override" if self.confirm("Start without calibration", prompt) else ""
-        else:
-            reason, ok = QInputDialog.getText(self, "Start without calibration", prompt)
-            reason = reason if ok else ""
-        if reason.strip() and self.model.start(override_reason=reason):
-            self._save_settings()
 
     # -- engine events (GUI thread, queued from the monitor thread) -------------------------------------
     @Slot(object)
@@ -237,10 +225,9 @@ class ExperimenterWindow(QMainWindow):
         if isinstance(ev, m.EngineReady) and self.bridge.client.ring is not None:
             client = self.bridge.client
             self.model.attach_ring(client.ring, client.task_arm, dict(client.arm_rings))
-            self.model.list_sessions()
+            self.model.control.list_sessions()
         self.model.apply(ev)
-        for q in list(self.questions.values()):
-            q.event(ev)
+        self.session_actions.event(ev)
         if isinstance(ev, m.EngineReady):
             self._on_rig_known(ev.rig)
 
@@ -261,22 +248,6 @@ class ExperimenterWindow(QMainWindow):
             self.plots.refresh()
 
     # -- questions -----------------------------------------------------------------------------------------
-    def ask(self, key: str, title: str, text: str, on_yes: Callable[[], object], *,
-            moot_when: Callable[[object], bool] | None = None, moot_text: str = "") -> None:
-        """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event."""
-        if self.confirm is not None:
-            if self.confirm(title, text):
-                on_yes()
-            return
-        old = self.questions.pop(key, None)
-        if old is not None:
-            old.dismiss()
-            old.box.deleteLater()
-        say = (lambda: self.model.notify("info", moot_text)) if moot_text else None
-        q = Confirmation(self.question_parent(), title, text, on_yes, moot_when=moot_when, on_moot=say)
-        self.questions[key] = q
-        q.show()
-
     def question_parent(self) -> QWidget:
         """The window a question opens over: the one the experimenter is looking at (Esc pressed in the rig
         view asks over the rig view, which so stays in front), never the participant's own monitor."""
@@ -286,91 +257,6 @@ class ExperimenterWindow(QMainWindow):
         if active is self.participant_window and active.screen() is self.screen():
             return active  # one monitor: the experimenter sees the participant view too
         return self
-
-    # -- actions -----------------------------------------------------------------------------------------
-    def start_without_training(self) -> None:
-        """An experiment for a participant without the completed training the protocol requires: only with a
-        typed reason, which the engine stores as a ``deviation`` event (listed in the report)."""
-        missing = self.model.setup.training_missing
-        if not missing or not self.model.can("start_without_training"):
-            return
-        code = self.model.setup.values.code
-        prompt = (f"{missing.split('. ')[0]}.\n\nStart {code}'s experiment anyway? The session is stored with "
-                  "this deviation from the protocol and your reason; the study report lists it.\n\nReason:")
-        if self.confirm is not None:  # a scripted run answers at once
-            reason = "scripted override" if self.confirm("Start without training", prompt) else ""
-        else:
-            reason, ok = QInputDialog.getText(self, "Start without training", prompt)
-            reason = reason if ok else ""
-        if not reason.strip():
-            self.model.notify("info", "Nothing was started: a start without training needs a reason.",
-                              "StartSession")
-            return
-        if self.model.start(training_override=reason):
-            self._save_settings()
-
-    def start_session(self) -> None:
-        """Space: start a session from the setup form (or resume a paused one); asks first on a warning."""
-        if self.model.can("resume") and self.model.session.state == "paused":
-            self.model.resume()
-            return
-        if self.model.session.running:
-            return
-        self.model.setup.update(db_path=self.setup_panel.db.text(), protocol_path=self.setup_panel.protocol.text())
-        warnings = self.model.setup.warnings
-        if warnings and self.model.can("start"):
-            self.ask("start", "Start anyway?", "\n\n".join(warnings.values()) + "\n\nStart the session anyway?",
-                     self._start, moot_when=lambda ev: isinstance(ev, (m.SessionStarted, m.EngineStopped)))
-        else:
-            self._start()
-
-    def _start(self) -> None:
-        if self.model.start():
-            self._save_settings()
-
-    def abort_trial(self) -> None:
-        """Esc: abort the running trial after confirmation -- that trial only, however late the answer."""
-        tr = self.model.session.trial
-        if not self.model.can("abort_trial") or tr is None:
-            return
-        k = tr.trial_index
-
-        def moot(ev: object) -> bool:
-            return ((isinstance(ev, m.TrialEnded) and ev.record.trial_index == k)
-                    or (isinstance(ev, m.TrialStarted) and ev.trial_index != k)
-                    or isinstance(ev, (m.SessionEnded, m.EngineStopped)))
-
-        self.ask("abort_trial", "Abort trial",
-                 f"Abort trial {k + 1} ({tr.target_label}, haptics {tr.haptic_mode.upper()})? It is stored as aborted "
-                 "and run again later.\n\nIf the trial ends before you answer, this question closes and nothing is "
-                 "aborted.", lambda: self.model.abort_trial(k), moot_when=moot,
-                 moot_text=f"Trial {k + 1} ended before you answered: nothing was aborted.")
-
-    def abort_session(self) -> None:
-        """Abort the session after confirmation (that session only)."""
-        s = self.model.session.session
-        if not self.model.can("abort_session") or s is None:
-            return
-        sid = s.session_id
-        self.ask("abort_session", "Abort session", self.model.session.abort_session_question(),
-                 lambda: self.model.abort_session(sid),
-                 moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)),
-                 moot_text=f"Session {sid} ended before you answered: nothing was aborted.")
-
-    def restart_engine(self) -> None:
-        """Restart engine: at once if it is dead; asks first if it still runs a session (a stalled loop)."""
-        s = self.model.session.session
-        if not self.model.can("restart_engine"):
-            return
-        if self.model.session.running and s is not None:
-            sid = s.session_id
-            self.ask("restart", "Restart engine",
-                     f"Restart the study engine? Session {sid} stops here: the running trial is stored as aborted if "
-                     "the engine can still store it, and the session can be resumed after the restart.",
-                     self.model.restart_engine,
-                     moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)))
-        else:
-            self.model.restart_engine()
 
     def open_window(self, w: QWidget) -> None:
         """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
@@ -391,23 +277,18 @@ class ExperimenterWindow(QMainWindow):
             placement.keep_above(w, self)
         _show(w)
 
-    def resume_selected(self) -> None:
-        """Continue the interrupted session selected in the list."""
-        sid = self.setup_panel.selected_session()
-        if sid is not None and self.model.can("resume_session"):
-            self.model.resume_session(sid)
-
     # -- views of state ------------------------------------------------------------------------------------
     def _on_actions_changed(self) -> None:
-        can = self.model.can
+        actions = self.model.actions
+        can = actions.can
         self.start_button.setEnabled(can("start"))
-        self.start_button.setToolTip("" if can("start") else f"Start is not available: {self.model.start_refusal()}")
+        self.start_button.setToolTip("" if can("start") else f"Start is not available: {actions.start_refusal()}")
         untrained = bool(self.model.setup.training_missing)
         self.untrained_button.setVisible(untrained)
         self.untrained_button.setEnabled(can("start_without_training"))
         self.untrained_button.setToolTip("Asks for the reason; it is stored with the session as a deviation from "
                                          "the protocol, and the report lists it")
-        self.calibration_wizard.set_blocked(self.model.calibration_refusal())
+        self.calibration_wizard.set_blocked(self.model.actions.calibration_refusal())
         db = self.model.setup.values.db_path
         title = f"{os.path.basename(db)} — haptic-study experimenter" if db else "haptic-study — experimenter"
         if title != self.windowTitle():
@@ -425,14 +306,14 @@ class ExperimenterWindow(QMainWindow):
         self.abort_session_button.setEnabled(can("abort_session"))
         self.setup_panel.resume_button.setEnabled(can("resume_session"))
         self.setup_panel.setEnabled(not self.model.session.running)
-        missing = self.model.calibration_missing()
+        missing = self.model.actions.calibration_missing()
         self.override_button.setVisible(bool(missing))
         self.override_button.setEnabled(bool(missing) and can("start"))
         self.override_button.setToolTip(missing)
 
     def _on_engine_changed(self) -> None:
-        trouble, detail = self.model.engine_notice()
-        self.controls.show_engine(trouble, detail, self.model.can("restart_engine"))
+        trouble, detail = self.model.engine.notice()
+        self.controls.show_engine(trouble, detail, self.model.actions.can("restart_engine"))
 
     def _on_session_changed(self) -> None:
         s = self.model.session
@@ -442,7 +323,7 @@ class ExperimenterWindow(QMainWindow):
             self.trials_count.set_full_text(count)
             self.trials_count.setVisible(bool(count))
         if hasattr(self.rig_window, "fault_trial"):
-            self.rig_window.set_trials(self.model.rehearsal_trials())
+            self.rig_window.set_trials(self.model.rig_control.rehearsal_trials())
 
     def _on_health_changed(self) -> None:
         """The health tab's title says when something there needs the experimenter (a fault, a busy machine)."""
@@ -454,7 +335,7 @@ class ExperimenterWindow(QMainWindow):
             self.menus.refresh()
 
     def _on_notice(self) -> None:
-        self.controls.show_notice(self.model.notice)
+        self.controls.show_notice(self.model.notices.notice)
 
     # -- settings and closing --------------------------------------------------------------------------------
     def _restore_settings(self, db_path: str | None) -> None:
@@ -494,28 +375,13 @@ class ExperimenterWindow(QMainWindow):
             w.deleteLater()
 
     def closeEvent(self, event) -> None:  # Qt's name
-        if self.model.session.running and not self._quit_confirmed:
-            title = "Quit"
-            text = ("A session is running. Quit anyway? A trial still running is stored as aborted and the session "
-                    "can be resumed later.")
-            if self.confirm is not None:  # a scripted run answers at once
-                if not self.confirm(title, text):
-                    event.ignore()
-                    return
-            else:
-                event.ignore()
-                self.ask("quit", title, text, self._quit,
-                         moot_when=lambda ev: isinstance(ev, (m.SessionEnded, m.EngineStopped)))
-                return
-        for q in self.questions.values():
-            q.dismiss()
+        if not self.session_actions.may_quit():  # a session runs: asked (or refused by a scripted run)
+            event.ignore()
+            return
+        self.session_actions.dismiss()
         self._save_settings()
         self.shutdown()
         event.accept()
-
-    def _quit(self) -> None:
-        self._quit_confirmed = True
-        self.close()
 
 
 def _show(w: QWidget) -> None:

@@ -62,15 +62,16 @@ class WindowMenus:
         self.recent.setToolTipsVisible(True)
         self.file.addSeparator()
         self.quit = self._add(self.file, "&Quit", win.close, QKeySequence.StandardKey.Quit)
-        self.start = self._add(self.session, "&Start\tSpace", win.start_session)
-        self.start_untrained = self._add(self.session, "Start &without training…", win.start_without_training)
-        self.pause = self._add(self.session, "&Pause", win.model.pause)
-        self.resume = self._add(self.session, "&Resume\tSpace", win.model.resume)
-        self.abort_trial = self._add(self.session, "Abort &trial…\tEsc", win.abort_trial)
-        self.abort_session = self._add(self.session, "Abort s&ession…", win.abort_session)
+        act, control = win.session_actions, win.model.control
+        self.start = self._add(self.session, "&Start\tSpace", act.start_session)
+        self.start_untrained = self._add(self.session, "Start &without training…", act.start_without_training)
+        self.pause = self._add(self.session, "&Pause", control.pause)
+        self.resume = self._add(self.session, "&Resume\tSpace", control.resume)
+        self.abort_trial = self._add(self.session, "Abort &trial…\tEsc", act.abort_trial)
+        self.abort_session = self._add(self.session, "Abort s&ession…", act.abort_session)
         self.session.addSeparator()
-        self.reset = self._add(self.session, "Reset &faults", win.model.reset_faults, "Ctrl+Shift+F")
-        self.restart = self._add(self.session, "Restart &engine", win.restart_engine)
+        self.reset = self._add(self.session, "Reset &faults", control.reset_faults, "Ctrl+Shift+F")
+        self.restart = self._add(self.session, "Restart &engine", act.restart_engine)
         self.windows: dict[str, QAction] = {}
         for text, key, window in (("&Participant screen", "Ctrl+P", win.participant_window),
                                   ("&Simulated rig", "Ctrl+R", win.rig_window),
@@ -128,11 +129,11 @@ class WindowMenus:
         """Use the study database at ``path`` (refused while a session runs, with why)."""
         win = self.win
         if win.model.session.running:
-            win.model.notify("error", "Open study database refused: a session is running; finish or end it first.",
-                             "OpenDatabase")
+            win.model.notices.notify("error", "Open study database refused: a session is running; finish or end it "
+                                     "first.", "OpenDatabase")
             return
         win.model.setup.update(db_path=path)
-        win.model.list_sessions()
+        win.model.control.list_sessions()
         win.settings.setValue("recent/databases", remember_recent(self.recent_paths(), path))
         self.refresh_recent()
 
@@ -145,18 +146,19 @@ class WindowMenus:
     def refresh(self) -> None:
         """Enable each action only when it is allowed now; a disabled one says why in its tooltip."""
         model, s = self.win.model, self.win.model.session
+        can = model.actions.can
         running = "a session is running: finish or end it first"
         no_session = "no session is running"
         for act, allowed, why in (
-            (self.start, model.can("start") or (model.can("resume") and s.state == "paused"), model.start_refusal()),
-            (self.start_untrained, model.can("start_without_training"),
+            (self.start, can("start") or (can("resume") and s.state == "paused"), model.actions.start_refusal()),
+            (self.start_untrained, can("start_without_training"),
              "only for an experiment the form refuses for want of training"),
-            (self.pause, model.can("pause"), no_session if not s.running else "a pause is already requested"),
-            (self.resume, model.can("resume"), "the session is not paused"),
-            (self.abort_trial, model.can("abort_trial"), "no trial is running"),
-            (self.abort_session, model.can("abort_session"), no_session),
+            (self.pause, can("pause"), no_session if not s.running else "a pause is already requested"),
+            (self.resume, can("resume"), "the session is not paused"),
+            (self.abort_trial, can("abort_trial"), "no trial is running"),
+            (self.abort_session, can("abort_session"), no_session),
             (self.reset, bool(model.health.faults), "no fault is latched"),
-            (self.restart, model.can("restart_engine"), "the study engine runs"),
+            (self.restart, can("restart_engine"), "the study engine runs"),
             (self.open_db, not s.running, running),
             (self.recent.menuAction(), not s.running and bool(self.recent_paths()),
              running if s.running else "no study database opened yet"),

@@ -18,8 +18,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from study_app.models.app import REHEARSAL_KINDS
 from study_app.models.rig import RigViewModel
+from study_app.models.rig_control import REHEARSAL_KINDS
 
 __all__ = ["RigCanvas", "RigWindow"]
 

@@ -169,13 +169,13 @@ class ScreenshotTour:
         self._save(w.health_panel, "health-panel")
         w.tabs.setCurrentWidget(w.trials_tab)
         trial = model.session.trial
-        model.abort_trial(None if trial is None else trial.trial_index)  # (the tour's confirm answers Yes)
+        model.control.abort_trial(None if trial is None else trial.trial_index)  # (the tour's confirm answers Yes)
         yield lambda: model.session.aborted >= 1 and model.session.completed >= 3
         yield lambda: model.session.phase == "active"
         self._save(w, "progress-rerun")
         yield lambda: model.session.phase == "pause"
         self._save(w.participant_window, "participant-rest")
-        yield lambda: model.cue_wait is not None and model.cue_wait.left_s is not None and model.cue_wait.left_s < 1.6
+        yield lambda: model.cue.wait is not None and model.cue.wait.left_s is not None and model.cue.wait.left_s < 1.6
         self._save(w.tabs, "trials-cue-wait")
         # not during a session: the calibration steps are disabled, and say why; the menus show the same
         w.open_window(w.calibration_wizard)
@@ -234,7 +234,7 @@ class ScreenshotTour:
         """The engine crashes (the rehearsal's kill): the window says so and offers the restart."""
         w, model = self.win, self.win.model
         w.participant_window.hide()
-        model.inject_fault("kill", None, 0.0)
+        model.rig_control.inject_fault("kill", None, 0.0)
         yield lambda: w.engine_row.isVisible()
         self._save(w, "engine-restart")
         w.restart_button.click()

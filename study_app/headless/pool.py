@@ -13,7 +13,8 @@ import time
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from foundation.platform_support import die_with, usable_cpu_count, worker_context
+from foundation.platform_support.processes import die_with, worker_context
+from foundation.platform_support.threads import usable_cpu_count
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code

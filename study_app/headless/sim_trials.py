@@ -19,13 +19,13 @@ from __future__ import annotations
 import multiprocessing as mp
 
 from analysis.planning.sim_study import SIM_METRICS, TrialRow
-from foundation.platform_support import worker_pool
+from foundation.platform_support.processes import worker_pool
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
-from pipeline.sim.rig import SimRigConfig
 from protocol.study.config import ProtocolConfig, default_protocol
 from protocol.study.design import build_schedule
 from protocol.study.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
@@ -59,7 +59,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
     """
     proto = protocol or default_protocol()
     rig_seed, p_seed, sched_seed = participant_seeds(study, participant)
-    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", sim=SimRigConfig(seed=rig_seed),
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", sim=sim_rig_config(rig_seed),
                                         framework=framework or FrameworkConfig()))
     loop, ring = eng.loop, eng.ring
     assert ring is not None

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from analysis.planning.sim_study import TrialRow
 from analysis.planning.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
-from foundation.platform_support import worker_pool
+from foundation.platform_support.processes import worker_pool
 from pipeline.force.pipeline_settings import framework_with
 from protocol.study.config import ProtocolConfig, default_protocol
 from study_app.headless.sim_trials import MODEL_VERSION, run_participant

@@ -120,7 +120,7 @@ class CommissioningModel:
         return out
 
     # -- commands ----------------------------------------------------------------------------------
-    def tcp_command(self) -> object:
+    def tcp_command(self) -> m.RecordPivot | m.CalibrateTcp:
         """Simulated rig: run the pose set; real rig: record the orientation the instrument is in now."""
         if self.real:
             self.tcp_state, self.tcp_message = "recording", ""
@@ -152,7 +152,7 @@ class CommissioningModel:
         self.pivots, self.tcp_state, self.tcp_message, self.tcp_result = [], "idle", "", None
         self.changed.emit()
 
-    def frames_command(self, axis: str = "") -> object:
+    def frames_command(self, axis: str = "") -> m.RecordFrameAxis | m.CheckFrames:
         """Simulated rig: the whole check; real rig: record a push along ``axis``."""
         if self.real:
             if axis not in AXES:

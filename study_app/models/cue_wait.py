@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
+from study_app.models import Emitter
+from study_app.models.engine import EngineModel
 from study_app.models.health import HealthModel
 from study_app.models.session import SessionModel
 
-__all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "cue_wait_now", "headline"]
+__all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "CueWaitModel", "cue_wait_now", "headline"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,3 +93,56 @@ def headline(session: SessionModel, wait: CueWait | None) -> str:
         return session.progress_text()
     action = CUE_ACTIONS.get(wait.action, "")
     return f"Next trial waits: {wait.reason}" + (f" · {action}" if action else "")
+
+
+class CueWaitModel:
+    """Why the next cue waits now (:attr:`wait`; None: a trial runs, or no session does), kept up to date as events
+    and samples come; its button does what ends the wait.
+
+    Parameters
+    ----------
+    session, health, engine
+        What the wait is read from (:func:`cue_wait_now`).
+    actions
+        What ends each wait, by its action's name (:data:`CUE_ACTIONS`).
+    """
+
+    def __init__(self, session: SessionModel, health: HealthModel, engine: EngineModel,
+                 actions: Mapping[str, Callable[[], object]]) -> None:
+        self.session = session
+        self.health = health
+        self.engine = engine
+        self.actions = actions
+        self.wait: CueWait | None = None
+        self.changed = Emitter()
+        self._key = ""
+        self._since_s = 0.0
+
+    def refresh(self) -> None:
+        """Read the wait afresh: its kind, how long it has lasted, and -- stuck -- where to look."""
+        key, wait = cue_wait_now(self.session, self.health, self.engine.trouble, self.engine.interrupted)
+        if key != self._key:
+            s = self.session
+            since = s.latest_t_s
+            if key == "pause" and s.pause_until_s is not None and s.session is not None:
+                since = s.pause_until_s - s.session.pause_s  # the pause began when the trial ended
+            self._key, self._since_s = key, since
+        if wait is not None:
+            waited = max(0.0, self.session.latest_t_s - self._since_s)
+            help_ = wait.help
+            # a wait that should end by itself but has not: say where to look, and the way out
+            expected = self.session.session.pause_s if key in ("pause", "pause-again") and self.session.session else 0.0
+            if not wait.action and waited >= expected + CUE_STUCK_S:
+                help_ = (f"No cue for {waited:.0f} s and nothing to reset: look under Devices & health (the loop's "
+                         "figures, the fault log). If it stays stuck, Quit: the running trial is stored as aborted and "
+                         "the session can be resumed after a restart.")
+            wait = dataclasses.replace(wait, waited_s=round(waited, 1), help=help_)
+        if wait != self.wait:
+            self.wait = wait
+            self.changed.emit()
+
+    def end(self) -> None:
+        """Do what ends the current wait (the banner's button)."""
+        end = self.actions.get(self.wait.action) if self.wait is not None else None
+        if end is not None:
+            end()

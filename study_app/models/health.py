@@ -14,8 +14,11 @@ from study_app.engine import messages as m
 from study_app.guide_paths import guide
 from study_app.models import Emitter
 
-__all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "DeviceStatus", "HealthModel", "LoopFigure", "lost_to_the_machine"]
+__all__ = ["HIGH_FORCE_N", "LOOP_LIMITS", "RATE_WINDOW_S", "DeviceStatus", "HealthModel", "LoopFigure",
+           "lost_to_the_machine"]
 
+#: Sample time over which device rates are measured, s.
+RATE_WINDOW_S = 0.5
 #: Task force above which the window warns: well above every target of the paper's protocol (≤ 1.2 N) and above
 #: what the Touch can render (3.3 N peak), so no trial needs it; it only presses the tissue (and the hand) harder.
 HIGH_FORCE_N = 5.0
@@ -135,6 +138,9 @@ class HealthModel:
     busy_trials: list[int] = field(default_factory=list)
     #: The runs behind :attr:`fault_log`, oldest first.
     _log_runs: list[_LogRun] = field(default_factory=list, repr=False)
+    #: The newest records not yet measured for the device rates, and the sample time they span, s.
+    _rate_rows: list[np.ndarray] = field(default_factory=list, repr=False)
+    _rate_span_s: float = 0.0
 
     @property
     def fault_log(self) -> list[str]:
@@ -210,9 +216,18 @@ class HealthModel:
         """A new engine replaces the old one: its figures and faults are gone (the log keeps what happened)."""
         self.connected, self.loop, self.faults, self.devices = False, None, 0, []
         self.busy_trials = []
+        self._rate_rows, self._rate_span_s = [], 0.0
         self._log_runs.append(_LogRun(("engine restarted", ""), "", "", ""))
         del self._log_runs[:-_LOG_LINES]
         self.changed.emit()
+
+    def add_rows(self, rows: np.ndarray) -> None:
+        """The newest records: the device rates are measured over every ``RATE_WINDOW_S`` of them."""
+        self._rate_rows.append(rows)
+        self._rate_span_s += float(rows["t_s"][-1] - rows["t_s"][0]) if len(rows) > 1 else 0.0
+        if self._rate_span_s >= RATE_WINDOW_S:
+            self.update_from_rows(np.concatenate(self._rate_rows))
+            self._rate_rows, self._rate_span_s = [], 0.0
 
     def update_from_rows(self, rows: np.ndarray) -> None:
         """Measure device rates and ages over a block of records (≥ ~0.2 s gives stable rates)."""

@@ -25,7 +25,7 @@ import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from foundation.platform_support import may_write
+from foundation.platform_support.files import may_write
 from protocol.runner.study_rules import (
     StoredSession,
     next_kind,

@@ -14,14 +14,10 @@ import pytest
 from mounts import can_mount, tmpfs
 
 from foundation import outdir
-from foundation.outdir import (
-    check_output_file,
-    check_output_folder,
-    sha256_file,
-    write_output_file,
-    write_output_folder,
-)
+from foundation.outdir import check_output_folder, write_output_folder
+from foundation.outfile import check_output_file, write_output_file
 from foundation.outfs import OutputError
+from foundation.outmarker import sha256_file
 
 MARKER = ".haptic-study-test"
 

@@ -14,6 +14,7 @@ import hashlib
 import json
 import os
 import stat
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -22,11 +23,12 @@ from bad_outputs_corpus import CASES as OUTPUT_CASES
 from test_outdir import *  # noqa: F403  (every test of the descriptor path, collected again here)
 from test_outdir import MARKER, _fill, _no_temporaries, _write
 
-import foundation.platform_support as ps
 from analysis.planning.power_pool import is_pool_file
 from foundation import outfs, outpath
-from foundation.outdir import check_output_folder, write_output_file, write_output_folder
+from foundation.outdir import check_output_folder, write_output_folder
+from foundation.outfile import write_output_file
 from foundation.outfs import OutputError
+from foundation.platform_support import files
 
 
 @pytest.fixture(autouse=True)
@@ -120,10 +122,10 @@ def test_a_name_is_one_entry_never_a_way_out(tmp_path, name):
     (0x420, 0x9000001A, False),  # a OneDrive placeholder: a reparse point that names no other path
 ])
 def test_junctions_count_as_links_on_windows(monkeypatch, attributes, tag, redirects):
-    monkeypatch.setattr(ps.sys, "platform", "win32")
-    monkeypatch.delattr(ps.os.path, "isjunction", raising=False)
+    monkeypatch.setattr(sys, "platform", "win32")
+    monkeypatch.delattr(os.path, "isjunction", raising=False)
     st = SimpleNamespace(st_mode=stat.S_IFDIR | 0o777, st_file_attributes=attributes, st_reparse_tag=tag)
-    assert ps.redirects("C:\\out\\figures", st) is redirects  # type: ignore[arg-type]
+    assert files.redirects("C:\\out\\figures", st) is redirects  # type: ignore[arg-type]
 
 
 # -- the output cases of the bad-input corpus, in-process, on both paths ------------------------------------------

@@ -55,10 +55,10 @@ def open_ready_window(qtbot, tmp_path, protocol: str, speed: float, timeout_ms: 
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     settings.setValue("setup/protocol_path", str(proto))
     w = ExperimenterWindow(HostConfig(clock="virtual", speed=speed), settings, str(tmp_path / "study.db"))
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win.session_actions, "confirm", lambda title, text: True))
     w.show()
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=timeout_ms)
-    w.model.set_driver("manual")
+    w.model.rig_control.set_driver("manual")
     return w
 
 

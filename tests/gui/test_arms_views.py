@@ -34,20 +34,20 @@ def test_the_calibration_steps_go_to_the_chosen_arm_and_each_arm_keeps_its_statu
     a.apply(m.CalibrationStatus("sim", "simulated instrument", "", STEPS, "", "left"))
     a.apply(m.CalibrationStatus("sim", "simulated instrument", "", [("TCP", True, "tip …"), *STEPS[1:]], "", "right"))
     assert chain.status.arm == "left"
-    a.run_tcp()
+    a.steps.run_tcp()
     assert sent[-1] == m.CalibrateTcp("recommended", arm="left")
     a.apply(m.TcpCalibrationDone(True, "", "recommended", 8, {"tip_in_flange_m": [0, 0, 0.25]}))
-    a.select_calibration_arm("right")
+    a.steps.select_arm("right")
     assert chain.arm == "right" and chain.status.arm == "right" and chain.status.steps[0][1]
     assert chain.tcp_result is None and chain.tcp_state == "idle"  # the left arm's result is not the right's
-    a.run_tcp()
-    a.calibrate()
-    a.check_frames()
+    a.steps.run_tcp()
+    a.steps.calibrate()
+    a.steps.check_frames()
     assert sent[-3:] == [m.CalibrateTcp("recommended", arm="right"), m.Calibrate("recommended", arm="right"),
                          m.CheckFrames(arm="right")]
     # while a step runs the arm stays: the results that come belong to it
-    a.select_calibration_arm("left")
-    assert chain.arm == "right" and a.notice.text.startswith("Calibration: finish the step under way first")
+    a.steps.select_arm("left")
+    assert chain.arm == "right" and a.notices.notice.text.startswith("Calibration: finish the step under way first")
     with pytest.raises(ValueError, match="arm = 'centre': allowed values are left, right"):
         chain.select_arm("centre")
 
@@ -61,12 +61,12 @@ def test_the_real_gate_line_names_the_arm_whose_chain_is_missing() -> None:
     done = [(n, True, "on record") for n, _, _ in STEPS]
     a.apply(m.CalibrationStatus("real", "grasper", "/lab/right.json", done, "", "right"))
     a.apply(m.CalibrationStatus("real", "grasper", "/lab/left.json", STEPS, "no TCP calibration on record", "left"))
-    assert a.calibration_missing() == "arm left: no TCP calibration on record"
+    assert a.actions.calibration_missing() == "arm left: no TCP calibration on record"
     assert a.commissioning.gate_text() == ("Arm right's chain is on record (/lab/right.json); a session cannot start "
                                            "yet: arm left: no TCP calibration on record.")
     a.real_calibration.begin("quick")
     right_target = a.real_calibration.target_tcp(a.real_calibration.current)
-    a.select_calibration_arm("left")
+    a.steps.select_arm("left")
     assert a.commissioning.gate_text() == ("A session cannot start yet: arm left: no TCP calibration on record.")
     # the pose targets as the left arm's pendant shows them: its own sensor mount
     assert a.real_calibration.rot_tip_sensor == turned and a.real_calibration.index == 0
@@ -89,14 +89,14 @@ def test_a_start_whose_task_arm_is_not_first_restarts_the_rig_with_it_first_then
     sent: list[object] = []
     restarts: list[tuple[str, ...]] = []
     a = AppModel(lambda c: sent.append(c) or True)
-    a.restarter = lambda arms=(): restarts.append(arms)
+    a.engine.restarter = lambda arms=(): restarts.append(arms)
     ready = m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
                           arm_rings=(("right", "r"), ("left", "l")))
     a.apply(ready)
     a.setup.update(db_path=str(tmp_path / "s.db"), code="P01", protocol_path=_protocol(tmp_path, "left"))
-    assert a.start()
+    assert a.control.start()
     assert restarts == [("left", "right")] and not any(isinstance(c, m.StartSession) for c in sent)
-    assert "restarting the simulated rig with arm left first" in a.notice.text
+    assert "restarting the simulated rig with arm left first" in a.notices.notice.text
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
                           arm_rings=(("left", "l"), ("right", "r"))))
     assert isinstance(sent[-1], m.StartSession) and sent[-1].code == "P01"
@@ -111,19 +111,19 @@ def test_an_interrupted_session_resumes_on_its_arms_in_their_order(tmp_path) -> 
     sent: list[object] = []
     restarts: list[tuple[str, ...]] = []
     a = AppModel(lambda c: sent.append(c) or True)
-    a.restarter = lambda arms=(): restarts.append(arms)
+    a.engine.restarter = lambda arms=(): restarts.append(arms)
     a.apply(TWO)
     a.setup.update(db_path=str(tmp_path / "s.db"))
     entry = {"session_id": 4, "code": "P01", "kind": "experiment", "started_at": "2026-01-01T10:00:00Z",
              "trials_planned": 20, "trials_done": 3, "trials_aborted": 0, "trials_total": 20, "reruns_run": 0}
     a.apply(m.SessionsListed(str(tmp_path / "s.db"), [{**entry, "arms": ["right", "left"]},
                                                       {**entry, "session_id": 5, "arms": ["right", "centre"]}]))
-    a.resume_session(4)
+    a.control.resume_session(4)
     assert restarts == [("right", "left")] and sent == []
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
                           arm_rings=(("right", "r"), ("left", "l"))))
     assert sent == [m.ResumeSession(str(tmp_path / "s.db"), 4)]
-    a.resume_session(5)
+    a.control.resume_session(5)
     assert restarts == [("right", "left")] and sent[-1] == m.ResumeSession(str(tmp_path / "s.db"), 5)
 
 
@@ -205,18 +205,18 @@ def test_the_window_on_two_arms_commissions_the_second_and_starts_with_the_task_
     settings.setValue("setup/protocol_path", _protocol(tmp_path, "left"))
     w = ExperimenterWindow(HostConfig(clock="virtual", speed=4.0, sim_arms=("right", "left")), settings,
                            str(tmp_path / "study.db"))
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win.session_actions, "confirm", lambda title, text: True))
     w.show()
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=30_000)
     chain = w.model.commissioning
     assert chain.arms == ("right", "left") and set(w.model.plots.arms) == {"left"}
-    w.model.select_calibration_arm("left")
-    w.model.run_tcp()
+    w.model.steps.select_arm("left")
+    w.model.steps.run_tcp()
     qtbot.waitUntil(lambda: chain.tcp_state == "accepted", timeout=30_000)
     qtbot.waitUntil(lambda: chain.statuses["left"].steps[0][1], timeout=10_000)
     assert not chain.statuses["right"].steps[0][1]  # the other arm's record is untouched
     w.model.setup.update(code="P01")
-    assert w.model.start()
+    assert w.model.control.start()
     qtbot.waitUntil(lambda: w.model.session.running, timeout=60_000)
     assert chain.arms == ("left", "right") and w.bridge.client.config.sim_arms == ("left", "right")
     assert w.model.plots.task_arm == "left" and set(w.model.plots.arms) == {"right"}
@@ -231,13 +231,13 @@ def test_a_start_waiting_for_a_restart_is_dropped_when_the_engine_is_restarted_a
     """The rearranged engine never came up; a later Restart engine must not start that session by itself."""
     sent: list[object] = []
     a = AppModel(lambda c: sent.append(c) or True)
-    a.restarter = lambda arms=(): None
+    a.engine.restarter = lambda arms=(): None
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
                           arm_rings=(("right", "r"), ("left", "l"))))
     a.setup.update(db_path=str(tmp_path / "s.db"), code="P01", protocol_path=_protocol(tmp_path, "left"))
-    assert a.start()
+    assert a.control.start()
     a.apply(m.EngineStopped("the engine exited unexpectedly", {}))
-    assert a.restart_engine()
+    assert a.engine.restart()
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot",
                           arm_rings=(("left", "l"), ("right", "r"))))
     assert not any(isinstance(c, m.StartSession) for c in sent)

@@ -13,7 +13,7 @@ from pipeline.force.frames import axis_angle, mat_mul
 from pipeline.sim.robot import TOOL_DOWN
 from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
-from study_app.gui.widgets import QtHealthPanel
+from study_app.gui.health_panel import QtHealthPanel
 from study_app.models.app import AppModel
 from study_app.models.calibration import CalibrationModel
 from study_app.models.commissioning import CommissioningModel, JawModel
@@ -175,12 +175,12 @@ def test_the_app_offers_an_override_only_on_an_incomplete_real_rig_and_sends_the
     sent: list[object] = []
     app = AppModel(lambda cmd: sent.append(cmd) or True)
     app.apply(REAL)
-    assert app.calibration_missing() == ""
+    assert app.actions.calibration_missing() == ""
     app.apply(STATUS)
-    assert app.calibration_missing() == MISSING
+    assert app.actions.calibration_missing() == MISSING
     app.setup.update(db_path="/tmp/x.db", code="R01")
     app.session.state = "ready"
-    assert app.start(override_reason="  rehearsal  ")
+    assert app.control.start(override_reason="  rehearsal  ")
     assert isinstance(sent[-1], m.StartSession) and sent[-1].override_reason == "rehearsal"
 
 

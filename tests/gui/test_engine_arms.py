@@ -92,7 +92,7 @@ def test_the_real_rigs_gate_needs_every_arms_chain(tmp_path):
     from types import SimpleNamespace
 
     from pipeline.commissioning.rig_calibration import RigCalibrationFile
-    from study_app.engine.commissioning import other_arms_missing
+    from study_app.engine.start_gate import other_arms_missing
     from tests.pipeline.test_commissioning import _chain
 
     full = _chain("grasper")
@@ -235,9 +235,9 @@ def test_each_arms_stylus_buttons_drive_its_own_jaw(two_arms, tmp_path):
 
     e, _ = two_arms
     arms = e.eng.rig
-    assert e.jaw is not None and set(e.other_jaws) == {"right"}
-    assert arms.rig("left").on_buttons == e.jaw.buttons
-    assert arms.rig("right").on_buttons == e.other_jaws["right"].buttons
+    assert e.jaws.first is not None and set(e.jaws.others) == {"right"}
+    assert arms.rig("left").on_buttons == e.jaws.first.buttons
+    assert arms.rig("right").on_buttons == e.jaws.others["right"].buttons
     db = str(tmp_path / "s.db")
     e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
     e.step()

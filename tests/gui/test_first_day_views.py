@@ -12,9 +12,10 @@ from PySide6.QtWidgets import QApplication
 
 from protocol.study.records import AbortCause
 from study_app.engine import messages as m
+from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.participant_window import HEADLINE_MAX_PX, ParticipantWindow
 from study_app.gui.placement import BESIDE_MIN, beside
-from study_app.gui.widgets import QtHealthPanel, QtTrialTable
+from study_app.gui.session_views import QtTrialTable
 from study_app.models.app import AppModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
@@ -140,17 +141,19 @@ def test_notices_go_with_their_cause_and_the_form_speaks_plainly(tmp_path):
     app = AppModel()
     app.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     app.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
-    assert app.calibration_refusal().startswith("not during a session")
+    assert app.actions.calibration_refusal().startswith("not during a session")
     app.apply(m.CommandRefused("CalibrateTcp", "a session is running"))
-    assert app.notice is not None and app.notice.text == "TCP calibration refused: a session is running"
+    assert app.notices.notice is not None and app.notices.notice.text == "TCP calibration refused: a session is running"
     app.apply(m.SessionEnded(1, "completed", "", 2, 0, 0))
-    assert app.notice is None and app.calibration_refusal() == ""  # the cause has gone: so has the notice
+    # the cause has gone: so has the notice
+    assert app.notices.notice is None and app.actions.calibration_refusal() == ""
     app.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
     # the calibration window (over the main window) says so too: its buttons would send into nothing
-    assert app.calibration_refusal() == "the study engine is not running: press Restart engine in the main window"
+    assert app.actions.calibration_refusal() == ("the study engine is not running: press Restart engine in the main "
+                                                 "window")
     app.apply(m.CommandRefused("CheckFrames", "no payload"))
-    app.clear_notice(("Calibrate",))
-    assert app.notice is not None  # another command's notice stays
+    app.notices.clear(("Calibrate",))
+    assert app.notices.notice is not None  # another command's notice stays
     s = SetupModel()
     s.update(db_path=str(tmp_path / "s.db"))
     s.set_known([{"session_id": 3, "code": "P01", "participant_number": 1, "kind": "experiment", "status": "aborted",

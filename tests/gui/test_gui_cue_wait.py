@@ -30,16 +30,16 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
     assert banner.isHidden()  # a trial runs: its cue has come
 
     # the protocol's pause: why, and the seconds left; nothing to press
-    qtbot.waitUntil(lambda: w.model.session.phase == "pause" and w.model.cue_wait is not None
-                    and w.model.cue_wait.left_s is not None and w.model.cue_wait.left_s < 2.9, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.model.session.phase == "pause" and w.model.cue.wait is not None
+                    and w.model.cue.wait.left_s is not None and w.model.cue.wait.left_s < 2.9, timeout=TIMEOUT_MS)
     text = banner.label.text()
     assert text.startswith("Next cue waits: the protocol's 3 s pause between trials · ") and text.endswith(" s left")
     assert not banner.isHidden() and banner.button.isHidden()
 
     # a fault that only a reset clears, during trial 2: the next cue waits for Reset faults, and the banner has it
     qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
-    w.model.inject_fault("device-error", None, 0.0)
-    qtbot.waitUntil(lambda: w.model.cue_wait is not None and w.model.cue_wait.action == "reset_faults",
+    w.model.rig_control.inject_fault("device-error", None, 0.0)
+    qtbot.waitUntil(lambda: w.model.cue.wait is not None and w.model.cue.wait.action == "reset_faults",
                     timeout=TIMEOUT_MS)
     assert banner.label.text().startswith("Next cue waits: fault latched (HAPTIC_DEVICE")
     # the headline above the plots says the same, never "The next trial is due"
@@ -55,8 +55,8 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
 
     # a pause the experimenter asked for: said so, with Resume
     qtbot.mouseClick(w.pause_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: w.model.session.state == "paused" and w.model.cue_wait is not None
-                    and w.model.cue_wait.action == "resume", timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.model.session.state == "paused" and w.model.cue.wait is not None
+                    and w.model.cue.wait.action == "resume", timeout=TIMEOUT_MS)
     assert banner.label.text().startswith("Next cue waits: the session is paused")
     assert banner.button.text() == "Resume"
     qtbot.mouseClick(banner.button, Qt.MouseButton.LeftButton)
@@ -68,15 +68,15 @@ def test_abort_session_says_whether_a_trial_is_stored_as_aborted(qtbot, window) 
     aborted"."""
     w = window
     asked: list[str] = []
-    w.confirm = lambda title, text: asked.append(text) and False  # answer No: read the question only
+    w.session_actions.confirm = lambda title, text: asked.append(text) and False  # answer No: read the question only
     w.model.setup.update(code="P01", kind="experiment")
     qtbot.mouseClick(w.start_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: w.model.session.phase == "active", timeout=TIMEOUT_MS)
-    w.abort_session()
+    w.session_actions.abort_session()
     assert "Trial 1 (" in asked[-1] and "is running: it is stored as aborted" in asked[-1]
     qtbot.mouseClick(w.pause_button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: w.model.session.state == "paused", timeout=TIMEOUT_MS)
-    w.abort_session()
+    w.session_actions.abort_session()
     assert "No trial is running (the session is paused): none is stored as aborted." in asked[-1]
     assert "is running: it is stored" not in asked[-1] and "not yet done are not run" in asked[-1]
     assert w.model.session.running  # No: nothing was aborted

@@ -31,7 +31,7 @@ def test_esc_in_an_extra_window_asks_over_it_and_no_is_the_default(qtbot, window
     w.open_window(extra)
     qtbot.waitUntil(lambda: QApplication.activeWindow() is extra, timeout=TIMEOUT_MS)
     qtbot.keyClick(extra.focusWidget() or extra, Qt.Key.Key_Escape)  # bound application-wide
-    q = w.questions.get("abort_trial")
+    q = w.session_actions.questions.get("abort_trial")
     assert q is not None and q.open
     assert q.box.parentWidget() is extra  # over the window the experimenter looks at, not the main window
     assert q.box.defaultButton() is q.box.button(QMessageBox.StandardButton.No)

@@ -27,10 +27,10 @@ def window(qtbot, tmp_path, short_protocol):
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     settings.setValue("setup/protocol_path", short_protocol)
     w = ExperimenterWindow(HostConfig(clock="virtual", speed=4.0), settings, str(tmp_path / "study.db"))
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win.session_actions, "confirm", lambda title, text: True))
     w.show()
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
-    w.model.set_driver("manual")  # nobody presses: each trial runs to its cap
+    w.model.rig_control.set_driver("manual")  # nobody presses: each trial runs to its cap
     return w
 
 
@@ -111,7 +111,7 @@ def test_a_stalled_loop_offers_reset_and_a_restart_that_asks_first(qtbot, window
     assert "Reset faults" in w.engine_label.text() and w.restart_button.isEnabled()
     assert w.start_button.isEnabled() is False  # a session runs
     qtbot.mouseClick(w.restart_button, Qt.MouseButton.LeftButton)
-    q = w.questions["restart"]
+    q = w.session_actions.questions["restart"]
     assert q.open and q.box.defaultButton() is q.box.button(QMessageBox.StandardButton.No)
     assert f"Session {sid} stops here" in q.box.text()
     q.box.button(QMessageBox.StandardButton.Yes).click()

@@ -21,7 +21,7 @@ def window(qtbot, tmp_path):
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
     # virtual clock at 3x real time: the 2-trial protocol takes a few seconds
     w = ExperimenterWindow(HostConfig(clock="virtual", speed=3.0), settings, str(tmp_path / "study.db"))
-    w.confirm = lambda title, text: True
+    w.session_actions.confirm = lambda title, text: True
     qtbot.addWidget(w)  # closed at teardown: the engine is shut down and joined
     w.show()
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
@@ -123,7 +123,7 @@ def test_closing_the_window_mid_trial_leaves_complete_records(window, qtbot, tmp
     qtbot.waitUntil(lambda: w.model.session.trial is not None and
                     w.model.session.latest_t_s > w.model.session.trial.t_s + 0.3, timeout=TIMEOUT_MS)
     asked = []
-    w.confirm = lambda title, text: asked.append(title) or True
+    w.session_actions.confirm = lambda title, text: asked.append(title) or True
     w.close()
     assert asked == ["Quit"]
     assert not w.bridge.client.alive

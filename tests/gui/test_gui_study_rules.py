@@ -115,7 +115,7 @@ def one_count_through_a_rerun_then_quit(qtbot, w, db: str) -> str:
     w.activateWindow()  # (the dialog had the keyboard)
     qtbot.waitUntil(lambda: QApplication.activeWindow() is w, timeout=TIMEOUT_MS)
     qtbot.keyClick(w.plots, Qt.Key.Key_Escape)
-    w.questions["abort_trial"].box.button(QMessageBox.StandardButton.Yes).click()
+    w.session_actions.questions["abort_trial"].box.button(QMessageBox.StandardButton.Yes).click()
     qtbot.waitUntil(lambda: w.trial_table.rowCount() == 2, timeout=TIMEOUT_MS)  # trial 2 ended too
     seen = panels(w)  # the same in every panel, and never grown by the re-run
     assert len(set(seen.values())) == 1, seen
@@ -125,7 +125,7 @@ def one_count_through_a_rerun_then_quit(qtbot, w, db: str) -> str:
     qtbot.waitUntil(lambda: w.model.session.trial is not None and w.model.session.trial.repeat_of == 0
                     and w.model.session.phase == "active", timeout=TIMEOUT_MS)
     assert w.progress.label.full_text().startswith("Trial 3 (re-run of trial 1) · GENTLE")
-    w.confirm = lambda title, text: True
+    w.session_actions.confirm = lambda title, text: True
     w.close()
     qtbot.waitUntil(lambda: not w.bridge.client.alive, timeout=TIMEOUT_MS)
     assert [r[0] for r in rows(db, "SELECT outcome FROM trials ORDER BY trial_index")] == [
@@ -143,7 +143,7 @@ def another_seed_refused_then_trained(qtbot, w2, db: str) -> None:
     one_line = "seed = 5: this study's seed is 0, fixed by its first session (session 1, P01)"
     assert p2.errors.text().startswith(one_line) and not w2.start_button.isEnabled()
     assert not p2.seed.isReadOnly()  # (so the assistant can put it back)
-    w2.model._send(m.StartSession(db, "P02", "training", w2.model.setup.values.protocol_path, 5, 2))
+    w2.model.commands(m.StartSession(db, "P02", "training", w2.model.setup.values.protocol_path, 5, 2))
     qtbot.waitUntil(lambda: w2.notice_row.isVisible(), timeout=TIMEOUT_MS)
     assert w2.notice.text().startswith(f"Start refused: {one_line}") and "\n" not in w2.notice.text()
     assert rows(db, "SELECT COUNT(*) FROM sessions") == [(1,)]

@@ -16,7 +16,7 @@ from PySide6.QtWidgets import QApplication, QMessageBox
 
 from study_app.engine.setup import HostConfig
 from study_app.gui.main_window import ExperimenterWindow
-from study_app.gui.widgets import SPACE_WHILE_TYPING
+from study_app.gui.setup_panel import SPACE_WHILE_TYPING
 
 TIMEOUT_MS = 30_000
 
@@ -39,15 +39,15 @@ def open_window(qtbot, settings, db) -> ExperimenterWindow:
     # virtual clock at 4x real time: a 6 s trial takes 1.5 s
     w = ExperimenterWindow(HostConfig(clock="virtual", speed=4.0), settings, db)
     # at teardown (also of a failed test) quit without asking, so the engine is shut down and joined
-    qtbot.addWidget(w, before_close_func=lambda win: setattr(win, "confirm", lambda title, text: True))
+    qtbot.addWidget(w, before_close_func=lambda win: setattr(win.session_actions, "confirm", lambda title, text: True))
     w.show()
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
-    w.model.set_driver("manual")  # nobody presses: each trial times out at its cap
+    w.model.rig_control.set_driver("manual")  # nobody presses: each trial times out at its cap
     return w
 
 
 def question(w: ExperimenterWindow, key: str) -> QMessageBox | None:
-    q = w.questions.get(key)
+    q = w.session_actions.questions.get(key)
     return q.box if q is not None and q.open else None
 
 
@@ -98,7 +98,7 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     assert w.notice.text() == "Trial 1 ended before you answered: nothing was aborted." and w.notice_row.isVisible()
     # a Yes that left the window just before it heard of the end: the engine refuses it for the next trial
     qtbot.waitUntil(active_trial(w, 1), timeout=TIMEOUT_MS)
-    w.model.abort_trial(0)
+    w.model.control.abort_trial(0)
     qtbot.waitUntil(lambda: w.notice.text() == "trial 1 had already ended: nothing was aborted", timeout=TIMEOUT_MS)
 
     # Esc during trial 2 and Yes in time: trial 2, and only trial 2, is aborted

@@ -16,9 +16,10 @@ from pipeline.runtime.loop_messages import RECORD_FIELDS
 from pipeline.runtime.ring import RingBuffer
 from protocol.study.records import TrialRecord
 from study_app.engine import messages as m
-from study_app.models.app import AppModel, Notice
+from study_app.models.app import AppModel
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
+from study_app.models.notices import Notice
 from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel, peak_downsample
 from study_app.models.rig import RigViewModel
@@ -437,36 +438,37 @@ def test_without_a_payload_on_record_the_real_rig_warns_of_the_tools_weight_not_
 def test_app_model_actions_follow_state(tmp_path):
     sent: list[object] = []
     a = AppModel(lambda c: sent.append(c) or True)
-    assert not a.can("start") and not a.can("calibrate")
+    assert not a.actions.can("start") and not a.actions.can("calibrate")
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
-    assert a.can("start") and a.can("calibrate") and not a.can("abort_trial")
-    assert a.start() and sent[-1] == a.setup.start_command()
+    assert a.actions.can("start") and a.actions.can("calibrate") and not a.actions.can("abort_trial")
+    assert a.control.start() and sent[-1] == a.setup.start_command()
     a.apply(started())
-    assert not a.can("start") and a.can("abort_session") and not a.can("abort_trial")
+    assert not a.actions.can("start") and a.actions.can("abort_session") and not a.actions.can("abort_trial")
     a.apply(trial())
-    assert a.can("abort_trial")
-    a.abort_trial(0)
+    assert a.actions.can("abort_trial")
+    a.control.abort_trial(0)
     assert sent[-1] == m.AbortTrial(trial_index=0)
     a.apply(m.CommandRefused("Pause", "no session is running"))
-    assert a.notice == Notice("error", "Pause refused: no session is running", "Pause")
-    a.pause()  # a new action clears the old notice
-    assert a.notice is None and not a.can("pause") and a.can("resume")  # pending: Resume cancels it
+    assert a.notices.notice == Notice("error", "Pause refused: no session is running", "Pause")
+    a.control.pause()  # a new action clears the old notice
+    # pending: Resume cancels it
+    assert a.notices.notice is None and not a.actions.can("pause") and a.actions.can("resume")
     a.apply(m.CommandRefused("AbortTrial", "trial 1 had already ended: nothing was aborted"))
-    assert a.notice.level == "info"  # a late confirmation that changed nothing is not an error
+    assert a.notices.notice.level == "info"  # a late confirmation that changed nothing is not an error
 
 
 def test_a_refused_start_is_shown_until_the_form_changes(tmp_path):
     a = AppModel(lambda c: True)
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
-    a.start()
+    a.control.start()
     a.apply(m.CommandRefused("StartSession", "participant P01 already has an experiment session"))
-    assert a.notice.text.startswith("Start refused: participant P01")
+    assert a.notices.notice.text.startswith("Start refused: participant P01")
     a.setup.update(code="P02")
-    assert a.notice is None
+    assert a.notices.notice is None
     a.setup.update(code="")
-    assert not a.start() and a.notice.text.startswith("Cannot start: Enter the participant's code")
+    assert not a.control.start() and a.notices.notice.text.startswith("Cannot start: Enter the participant's code")
 
 
 def test_health_says_why_the_next_cue_waits_and_logs_every_fault_event():
@@ -492,17 +494,17 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     a.setup.update(db_path=str(tmp_path / "s.db"), code="P01")
     a.apply(started())
     a.apply(trial())
-    assert not a.can("restart_engine")  # nothing to restart while it runs
+    assert not a.actions.can("restart_engine")  # nothing to restart while it runs
     a.apply(m.EngineStopped("the study engine exited unexpectedly", {}))
-    assert a.engine_trouble == ("The study engine exited unexpectedly. Session 3 was interrupted; its stored trials "
+    assert a.engine.trouble == ("The study engine exited unexpectedly. Session 3 was interrupted; its stored trials "
                                 "are kept.")
-    assert a.engine_trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
-    assert not a.can("restart_engine")  # no restarter: no button that does nothing
-    a.restarter = lambda: restarts.append(1)
-    assert a.can("restart_engine") and not a.can("start") and not a.can("resume_session")
+    assert a.engine.trouble_detail.startswith("The study engine exited unexpectedly. Without the engine the haptic")
+    assert not a.actions.can("restart_engine")  # no restarter: no button that does nothing
+    a.engine.restarter = lambda: restarts.append(1)
+    assert a.actions.can("restart_engine") and not a.actions.can("start") and not a.actions.can("resume_session")
     a.plots.t = np.arange(3.0)
-    assert a.restart_engine() and restarts == [1]
-    assert a.engine_trouble == "" and len(a.plots.t) == 0 and a.session.state == "connecting"
+    assert a.engine.restart() and restarts == [1]
+    assert a.engine.trouble == "" and len(a.plots.t) == 0 and a.session.state == "connecting"
     assert a.session.trial is None and a.session.last_trial is None and not a.session.table.rows
     a.apply(ready)
     a.apply(m.SessionsListed(str(tmp_path / "s.db"), [{"session_id": 2}, {"session_id": 3}]))
@@ -510,42 +512,42 @@ def test_a_dead_engine_or_loop_offers_a_restart_that_starts_afresh(tmp_path):
     # a loop that died in a live engine: the same way out
     a.apply(m.SessionEnded(4, "interrupted", "the haptic loop died (x)", 0, 0, 0))
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", False, False, loop_dead="OSError('x')"))
-    assert a.engine_trouble == "The haptic loop died; the force is at zero. Session 4 was interrupted; its stored " \
+    assert a.engine.trouble == "The haptic loop died; the force is at zero. Session 4 was interrupted; its stored " \
         "trials are kept."
-    assert a.engine_trouble_detail.startswith("The haptic loop died (OSError('x')); the haptic device's command")
-    assert a.can("restart_engine") and not a.can("start")
+    assert a.engine.trouble_detail.startswith("The haptic loop died (OSError('x')); the haptic device's command")
+    assert a.actions.can("restart_engine") and not a.actions.can("start")
 
 
 def test_cue_wait_names_the_wait_its_length_and_what_ends_it():
     a = AppModel(lambda c: True)
     a.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
-    assert a.cue_wait is None
+    assert a.cue.wait is None
     a.apply(started())
     a.apply(trial(t_s=1.0))
-    assert a.cue_wait is None  # a trial runs
+    assert a.cue.wait is None  # a trial runs
     a.apply(m.PhaseEntered(4.0, 0, "pause"))
     a.session.set_time(4.5)
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting="pause"))
-    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 1.5 s left"
-    assert a.cue_wait.action == "" and a.cue_wait.level == "info"
+    assert a.cue.wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 1.5 s left"
+    assert a.cue.wait.action == "" and a.cue.wait.level == "info"
     # the pause is over and no cue comes, nothing latched: after a while, where to look and the way out
     a.session.set_time(11.5)
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
     a.session.set_time(17.0)
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 0, False, "manual", True, False, waiting=""))
-    assert a.cue_wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 0.0 s left"
-    assert a.cue_wait.help.startswith("No cue for 13 s and nothing to reset: look under Devices & health")
+    assert a.cue.wait.text() == "Next cue waits: the protocol's 2 s pause between trials · 0.0 s left"
+    assert a.cue.wait.help.startswith("No cue for 13 s and nothing to reset: look under Devices & health")
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
                      waiting="fault latched (SENSOR_STALE): reset to continue"))
     a.session.set_time(20.0)
     a.apply(m.Health(1000.0, 1.0, 2.0, 1.0, 0, 0, 1, 1, False, "manual", True, False,
                      waiting="fault latched (SENSOR_STALE): reset to continue"))
-    w = a.cue_wait
+    w = a.cue.wait
     assert (w.level, w.action, w.text()) == ("error", "reset_faults",
                                              "Next cue waits: fault latched (SENSOR_STALE) · waiting 3 s")
     sent: list[object] = []
-    a.send = lambda c: sent.append(c) or True
-    a.end_cue_wait()
+    a.commands.send = lambda c: sent.append(c) or True
+    a.cue.end()
     assert sent == [m.ResetFaults()]
 
 

@@ -11,8 +11,8 @@ from gui_trials import trial_record
 from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.runtime.loop_messages import RECORD_FIELDS
 from pipeline.runtime.ring import RingBuffer
+from study_app.gui.session_views import QtTrialTable
 from study_app.gui.stall import Stall, StallRecorder, culprit
-from study_app.gui.widgets import QtTrialTable
 from study_app.models.plots import PlotModel, nice_range
 from study_app.models.session import TrialTable
 

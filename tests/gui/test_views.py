@@ -12,9 +12,11 @@ from PySide6.QtCore import QPoint, Qt
 from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.force_plots import QtForcePlots
+from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
-from study_app.gui.widgets import QtHealthPanel, QtProgress, QtSetupPanel, QtTrialTable
+from study_app.gui.session_views import QtProgress, QtTrialTable
+from study_app.gui.setup_panel import QtSetupPanel
 from study_app.models.calibration import CalibrationModel
 from study_app.models.health import HealthModel
 from study_app.models.participant import ParticipantScreenModel
@@ -317,34 +319,35 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     sent: list[object] = []
     app = AppModel(send=lambda cmd: sent.append(cmd) or True)
     app.apply(READY)
-    app.inject_fault("stale-pose", 3, 1.5)  # no session: refused here, saying why
-    assert not sent and app.notice.text == ("Fault rehearsal refused: a fault at trial 3 needs a running session: "
-                                            "start or resume one, or inject it now.")
+    app.rig_control.inject_fault("stale-pose", 3, 1.5)  # no session: refused here, saying why
+    assert not sent and app.notices.notice.text == ("Fault rehearsal refused: a fault at trial 3 needs a running "
+                                                    "session: start or resume one, or inject it now.")
     app.apply(m.SessionStarted(session_id=3, code="P01", kind="experiment", trials_total=8, start_position=0,
                                tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=False))
     app.apply(m.TrialStarted(1.0, 0, 1, 8, "FIRM", 1.2, "on"))
-    assert app.rehearsal_trials() == range(2, 9)
+    assert app.rig_control.rehearsal_trials() == range(2, 9)
     app.apply(m.TrialStarted(9.0, 1, 2, 8, "FIRM", 1.2, "on"))
-    app.inject_fault("stale-pose", 2, 1.5)
-    assert not sent and app.notice.text == ("Fault rehearsal refused: trial 2 has already begun; the trials still to "
-                                            "come are 3 to 8.")
-    app.inject_fault("stale-pose", 9, 1.5)
-    assert app.notice.text.endswith("trial 9: the session has 8 trials; the trials still to come are 3 to 8.")
-    app.inject_fault("stale-pose", 3, 1.5)
+    app.rig_control.inject_fault("stale-pose", 2, 1.5)
+    assert not sent and app.notices.notice.text == ("Fault rehearsal refused: trial 2 has already begun; the trials "
+                                                    "still to come are 3 to 8.")
+    app.rig_control.inject_fault("stale-pose", 9, 1.5)
+    assert app.notices.notice.text.endswith("trial 9: the session has 8 trials; the trials still to come are 3 to 8.")
+    app.rig_control.inject_fault("stale-pose", 3, 1.5)
     assert sent == [m.InjectFault("stale-pose", 3, 1.5)]
     app.apply(m.FaultInjected("stale-pose", "trial 3 + 1.5 s"))
-    assert app.notice is not None and app.notice.level == "info"
-    assert app.notice.text == (
+    assert app.notices.notice is not None and app.notices.notice.level == "info"
+    assert app.notices.notice.text == (
         "Rehearsal planned: robot pose stops (100 ms), 1.5 s after the cue of trial 3 (if trial 3 ends sooner, nothing "
         "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault — "
         "nothing in the record marks it as rehearsed: trial 3 is stored as aborted (cause: fault), does not count, "
         "and is run again later. The fault latches: the next cue waits for Reset faults.")
     app.apply(m.FaultInjected("nan-burst", "now"))
     assert "Rehearsal: F/T sensor sends NaN (5 ms), now: a real fault of the simulated rig. It is stored with the " \
-        "running session" in app.notice.text
+        "running session" in app.notices.notice.text
     app.apply(m.SessionEnded(3, "aborted", "", 0, 1, 0))
     app.apply(m.FaultInjected("nan-burst", "now"))
-    assert app.notice.text.endswith("No session is running: nothing is stored. The fault latches until Reset faults.")
+    assert app.notices.notice.text.endswith("No session is running: nothing is stored. The fault latches until Reset "
+                                            "faults.")
 
 
 def test_a_placed_window_fits_with_its_title_bar(qtbot):

@@ -1,4 +1,4 @@
-"""The operating system behind one module (``foundation/platform_support.py``), and its fallbacks.
+"""The operating system behind one package (``foundation/platform_support/``), and its fallbacks.
 
 The source of every module is scanned with ``ast`` for calls only some systems have (real-time scheduling, CPU
 affinity, signals, ``prctl``/``ctypes``, shared-memory names, file modes and owners, ``open`` flags and ``dir_fd``,
@@ -24,15 +24,15 @@ from typing import Any
 
 import pytest
 
-import foundation.platform_support as ps
 from foundation import outfs
 from foundation.outdir import check_output_folder
+from foundation.platform_support import files, machine, processes, threads
 from pipeline.core.clock import prepare_realtime_thread
 from pipeline.runtime.ring import RingBuffer
 
 ROOT = Path(__file__).resolve().parent.parent.parent
 SCANNED = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench")
-PLATFORM = "foundation/platform_support.py"
+PLATFORM = "foundation/platform_support/"
 
 _MODULES = {"ctypes", "fcntl", "signal", "resource", "msvcrt", "winreg", "_winapi", "posix", "termios",
             "multiprocessing.shared_memory", "multiprocessing.resource_tracker"}
@@ -45,7 +45,7 @@ _DIR_FD = {"dir_fd", "src_dir_fd", "dst_dir_fd"}
 
 #: Modules allowed one kind of call, each with why (the list may only shrink: an entry with no such call fails).
 ALLOWED: dict[tuple[str, str], str] = {
-    ("pipeline/backends/touch.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
+    ("pipeline/backends/hdapi.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
                                                      "through pyOpenHaptics: the device's library, not the OS",
     ("foundation/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
                                      "open_folder, which hands the walk to foundation.outpath (by checked paths) "
@@ -102,21 +102,21 @@ def test_the_scan_finds_os_calls() -> None:
                                 (2, "import multiprocessing"), (3, "os.kill"), (4, "os.O_CLOEXEC"), (5, "fork"),
                                 (6, "dir_fd"), (7, "/dev/shm"), (8, "os.sched_getaffinity"),
                                 (10, "/proc")]
-    assert os_calls_in((ROOT / PLATFORM).read_text())  # the platform module does make them
+    assert any(os_calls_in(p.read_text()) for p in (ROOT / PLATFORM).glob("*.py"))  # the platform package makes them
 
 
 def test_no_os_specific_call_outside_the_platform_module() -> None:
     offenders, used = [], set()
     for path in _modules():
         rel = path.relative_to(ROOT).as_posix()
-        if rel == PLATFORM:
+        if rel.startswith(PLATFORM):
             continue
         for line, kind in os_calls_in(path.read_text(encoding="utf-8")):
             if (rel, kind) in ALLOWED:
                 used.add((rel, kind))
             else:
                 offenders.append(f"{rel}:{line}: {kind}")
-    assert not offenders, "OS-specific calls outside foundation/platform_support.py:\n" + "\n".join(offenders)
+    assert not offenders, "OS-specific calls outside foundation/platform_support/:\n" + "\n".join(offenders)
     assert used == set(ALLOWED), f"no such call left in {sorted(set(ALLOWED) - used)}: take them off ALLOWED"
 
 
@@ -138,16 +138,17 @@ def _never(*_: Any, **__: Any) -> None:
 def test_no_real_time_scheduling_leaves_the_loop_at_normal_priority(windows: None, monkeypatch) -> None:
     monkeypatch.delenv("HAPTIC_STUDY_REALTIME", raising=False)
     monkeypatch.setattr(os, "sched_setscheduler", _never)
-    assert ps.set_timer_slack_ns(1) is False
+    assert threads.set_timer_slack_ns(1) is False
     assert prepare_realtime_thread() == "normal (no real-time scheduling on this platform)"
 
 
 def test_timer_slack_and_pread_exist_on_linux_only(macos: None) -> None:
-    assert ps.set_timer_slack_ns(1) is False and ps.gil_keeping_pread() is None and ps.die_with_parent() is False
+    assert threads.set_timer_slack_ns(1) is False and threads.gil_keeping_pread() is None
+    assert processes.die_with_parent() is False
 
 
 def test_the_pread_reader_reads_a_file_on_linux(tmp_path: Path) -> None:
-    read = ps.gil_keeping_pread(8)
+    read = threads.gil_keeping_pread(8)
     assert read is not None
     (tmp_path / "f").write_bytes(b"123 456 789\n")
     fd = os.open(tmp_path / "f", os.O_RDONLY)
@@ -158,20 +159,20 @@ def test_the_pread_reader_reads_a_file_on_linux(tmp_path: Path) -> None:
 
 
 def test_cpu_count_without_an_affinity_mask(windows: None) -> None:
-    assert ps.usable_cpu_count() == (os.cpu_count() or 1)
+    assert threads.usable_cpu_count() == (os.cpu_count() or 1)
 
 
 @pytest.mark.parametrize("threads, method", [(1, "fork"), (2, "spawn")])
 def test_workers_fork_only_single_threaded_on_linux(monkeypatch, threads: int, method: str) -> None:
     monkeypatch.setattr(threading, "active_count", lambda: threads)
-    assert ps.worker_context().get_start_method() == method
+    assert processes.worker_context().get_start_method() == method
 
 
 @pytest.mark.parametrize("system", ["win32", "darwin"])
 def test_workers_spawn_elsewhere(monkeypatch, system: str) -> None:
     monkeypatch.setattr(threading, "active_count", lambda: 1)
     monkeypatch.setattr(sys, "platform", system)
-    assert ps.worker_context().get_start_method() == "spawn"
+    assert processes.worker_context().get_start_method() == "spawn"
 
 
 @pytest.mark.parametrize("system, sig", [("linux", signal.SIGKILL), ("win32", signal.SIGTERM)])
@@ -179,7 +180,7 @@ def test_the_hard_kill(monkeypatch, system: str, sig: int) -> None:
     sent: list[tuple[int, int]] = []
     monkeypatch.setattr(sys, "platform", system)
     monkeypatch.setattr(os, "kill", lambda pid, s: sent.append((pid, s)))
-    ps.kill_hard(4242)
+    processes.kill_hard(4242)
     assert sent == [(4242, sig)]  # Windows: os.kill with SIGTERM is TerminateProcess
 
 
@@ -191,7 +192,7 @@ def test_a_process_exists_on_posix(monkeypatch, raised: type[Exception] | None, 
         if raised is not None:
             raise raised()
     monkeypatch.setattr(os, "kill", kill)
-    assert ps.process_exists(1234) is alive
+    assert processes.process_exists(1234) is alive
 
 
 class _Kernel32:
@@ -226,15 +227,15 @@ class _Kernel32:
 def test_a_process_exists_on_windows_without_kill(windows: None, monkeypatch, k32: _Kernel32, alive: bool) -> None:
     monkeypatch.setattr(os, "kill", _never)  # os.kill(pid, 0) on Windows would send Ctrl-C
     monkeypatch.setattr(ctypes, "windll", SimpleNamespace(kernel32=k32), raising=False)
-    assert ps.process_exists(1234) is alive
+    assert processes.process_exists(1234) is alive
     assert k32.closed == ([7] if k32.handle else [])
-    assert ps.process_exists(0) is False and ps.process_exists(2**40) is False
+    assert processes.process_exists(0) is False and processes.process_exists(2**40) is False
 
 
 def test_free_memory_on_windows(windows: None, monkeypatch) -> None:
     monkeypatch.setattr(ctypes, "windll", SimpleNamespace(kernel32=_Kernel32(avail=3 << 30)), raising=False)
-    assert ps.free_physical_bytes() == 3 << 30
-    assert ps.load_average() is None
+    assert machine.free_physical_bytes() == 3 << 30
+    assert machine.load_average() is None
 
 
 def test_a_ring_attaches_and_frees_through_posix_shm_names_on_macos(macos: None) -> None:
@@ -263,20 +264,20 @@ def test_file_modes_and_owners_on_windows(windows: None, monkeypatch, tmp_path: 
     monkeypatch.setattr(shutil, "disk_usage", lambda p: SimpleNamespace(total=9, used=4, free=5))
     for name in ("chmod", "fchmod", "statvfs"):
         monkeypatch.setattr(os, name, _never)
-    ps.owner_only(tmp_path / "f")
-    ps.set_fd_mode(0, 0o600)
-    assert ps.fs_free_bytes(tmp_path) == 5
-    assert ps.fs_read_only(tmp_path) is False
+    files.owner_only(tmp_path / "f")
+    files.set_fd_mode(0, 0o600)
+    assert files.fs_free_bytes(tmp_path) == 5
+    assert files.fs_read_only(tmp_path) is False
 
 
 def test_the_owner_alone_reads_a_new_study_file_on_linux(tmp_path: Path) -> None:
     (tmp_path / "f").write_bytes(b"")
     os.chmod(tmp_path / "f", 0o644)
-    ps.owner_only(tmp_path / "f")
+    files.owner_only(tmp_path / "f")
     assert (tmp_path / "f").stat().st_mode & 0o777 == 0o600
     mask = os.umask(0o022)
     os.umask(mask)
-    assert ps.umask() == mask
+    assert files.umask() == mask
 
 
 def test_without_dir_fd_calls_output_folders_are_written_by_checked_paths(monkeypatch, tmp_path: Path) -> None:
@@ -294,10 +295,10 @@ def test_without_dir_fd_calls_output_folders_are_written_by_checked_paths(monkey
 
 def test_the_dll_folder_is_added_on_windows_only(monkeypatch, tmp_path: Path) -> None:
     added: list[str] = []
-    monkeypatch.setattr(ps.os, "add_dll_directory", added.append, raising=False)
-    assert ps.add_dll_directory(tmp_path) is False and added == []  # Linux: the loader's own path
-    monkeypatch.setattr(ps.sys, "platform", "win32")
-    assert ps.add_dll_directory(tmp_path) is True and added == [str(tmp_path)]
+    monkeypatch.setattr(os, "add_dll_directory", added.append, raising=False)
+    assert files.add_dll_directory(tmp_path) is False and added == []  # Linux: the loader's own path
+    monkeypatch.setattr(sys, "platform", "win32")
+    assert files.add_dll_directory(tmp_path) is True and added == [str(tmp_path)]
 
 
 def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
@@ -316,9 +317,10 @@ def test_without_proc_every_reader_says_it_cannot_tell(monkeypatch) -> None:
 
     for owner, name in ((builtins, "open"), (io, "open"), (os, "open"), (os, "listdir")):
         monkeypatch.setattr(owner, name, no_proc(getattr(owner, name)))
-    assert ps.boot_id() == "" and ps.process_stat_fields(os.getpid()) is None and ps.cpu_times() is None
-    assert ps.thread_ids() is None and ps.open_schedstat(threading.get_native_id()) == -1
-    assert ps.meminfo_available_bytes() is None and ps.cgroup_memory_headroom() is None
+    assert processes.boot_id() == "" and processes.process_stat_fields(os.getpid()) is None
+    assert machine.cpu_times() is None
+    assert threads.thread_ids() is None and threads.open_schedstat(threading.get_native_id()) == -1
+    assert machine.meminfo_available_bytes() is None and machine.cgroup_memory_headroom() is None
     assert process_identity(os.getpid()) == ""  # the lease falls back on heartbeats
     assert _pid_alive(os.getpid()) is True  # by process_exists alone
-    assert available_memory_bytes() == ps.free_physical_bytes()  # sysconf's free pages
+    assert available_memory_bytes() == machine.free_physical_bytes()  # sysconf's free pages

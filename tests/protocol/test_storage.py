@@ -595,7 +595,7 @@ def test_a_file_and_folder_without_write_bits_are_not_written_even_by_root(tmp_p
     """``chmod a-w`` on an archived study was no refusal for root (os.access allows root everything): ``withdraw``
     removed a participant from a 0444 file in a 0555 folder, ``run --continue`` added one, and every reader left
     -wal and -shm files beside it.  The mode is the owner's word, and in a container everyone is root."""
-    from foundation.platform_support import may_write
+    from foundation.platform_support.files import may_write
 
     folder = tmp_path / "archive"
     folder.mkdir()

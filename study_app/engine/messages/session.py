@@ -1,0 +1,192 @@
+"""The messages of a session: start, resume, pause, abort (GUI → engine); what the session does (engine → GUI).
+
+Run by :class:`study_app.engine.sessions.EngineSessions`; shown by :mod:`study_app.models.session` and the setup
+form.  Times called ``t_s`` are sample times of the loop records (see :mod:`study_app.engine.messages`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from protocol.study.records import TrialRecord
+
+__all__ = [
+    "AbortSession",
+    "AbortTrial",
+    "ListSessions",
+    "Pause",
+    "PhaseEntered",
+    "Resume",
+    "ResumeSession",
+    "SessionEnded",
+    "SessionStarted",
+    "SessionsListed",
+    "StartChecking",
+    "StartSession",
+    "TrialEnded",
+    "TrialStarted",
+]
+
+
+# -- commands (GUI → engine) --------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class StartSession:
+    """Create a session in the database (schedule and calibration stored first) and run it.
+
+    On the real rig a session starts only with the calibration chain on record for the mounted tool and
+    the compensated force at rest below 0.1 N; ``override_reason`` (non-empty) starts it anyway, and the
+    reason is stored with the session.  The study's rules (:mod:`protocol.runner.study_rules`: one seed per
+    study, training before the experiment) are the engine's to enforce; ``training_override`` (non-empty)
+    starts an experiment without the completed training the protocol requires, and is stored as a
+    ``deviation`` event.
+    """
+
+    db_path: str
+    code: str
+    kind: str  # "training" | "experiment"
+    protocol_path: str | None
+    seed: int
+    participant_number: int
+    override_reason: str = ""
+    training_override: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ResumeSession:
+    """Continue an interrupted session at its first unfinished trial (real rig: the calibration gate, as
+    StartSession)."""
+
+    db_path: str
+    session_id: int
+    override_reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class ListSessions:
+    """List the interrupted (resumable) sessions of a database."""
+
+    db_path: str
+
+
+@dataclass(frozen=True, slots=True)
+class Pause:
+    """Hold before the next trial."""
+
+
+@dataclass(frozen=True, slots=True)
+class Resume:
+    """Continue after a pause."""
+
+
+@dataclass(frozen=True, slots=True)
+class AbortTrial:
+    """Abort the running trial (stored as aborted, re-queued).
+
+    ``trial_index`` binds the command to the trial the experimenter confirmed: the engine refuses it
+    when that trial is no longer running (a late "Yes" never aborts the next trial).
+    """
+
+    reason: str = "aborted by the experimenter"
+    trial_index: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class AbortSession:
+    """Abort the running trial and end the session (refused if ``session_id`` is given and is not the running one)."""
+
+    reason: str = "aborted by the experimenter"
+    session_id: int | None = None
+
+
+# -- events (engine → GUI) ----------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class SessionsListed:
+    """Resumable sessions of a database: dicts with session_id, code, kind, started_at, trials_planned (the
+    designed trials), trials_done (designed trials done), trials_aborted (aborted attempts) and trials_total
+    (the schedule with its re-runs).
+
+    ``known``: every session of the database (:func:`study_app.engine.session_list.list_sessions`), for the setup
+    form's checks (a code or participant number already used); ``withdrawn``: who withdrew (``code``,
+    ``withdrawn_at``; :func:`study_app.engine.session_list.list_withdrawn`), whose codes are not used again.
+    """
+
+    db_path: str
+    sessions: list[dict[str, Any]]
+    known: list[dict[str, Any]] = field(default_factory=list)
+    withdrawn: list[dict[str, str]] = field(default_factory=list)
+
+
+@dataclass(frozen=True, slots=True)
+class SessionStarted:
+    """A session is stored and running."""
+
+    session_id: int
+    code: str
+    kind: str
+    trials_total: int
+    start_position: int
+    tolerance_fraction: float
+    max_trial_s: float
+    pause_s: float
+    cue_s: float
+    live_force_aid: bool
+    schedule: list[dict[str, Any]] = field(default_factory=list)
+    participant_number: int = 0
+    #: A resumed session's trials stored before, in index order.
+    stored_trials: list[TrialRecord] = field(default_factory=list)
+    #: The session's (so the study's) seed.
+    seed: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class TrialStarted:
+    """The cue of a trial (the participant screen shows its word)."""
+
+    t_s: float
+    trial_index: int
+    position: int  # 1-based position in the schedule
+    trials_total: int
+    target_label: str
+    target_force_n: float
+    haptic_mode: str
+    #: The trial this one re-runs (an aborted one), or None for a trial of the design.
+    repeat_of: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class PhaseEntered:
+    """The trial machine entered ``phase`` (idle, cued, active, pause) at sample time ``t_s``."""
+
+    t_s: float
+    trial_index: int
+    phase: str
+
+
+@dataclass(frozen=True, slots=True)
+class TrialEnded:
+    """A trial ended and its record was stored; ``trials_total`` is the schedule's length now (re-runs included)."""
+
+    t_s: float
+    record: TrialRecord
+    trials_total: int
+
+
+@dataclass(frozen=True, slots=True)
+class SessionEnded:
+    """The session ended (``status``: completed or aborted; or ``interrupted`` when left resumable)."""
+
+    session_id: int
+    status: str
+    reason: str
+    completed: int
+    aborted: int
+    successes: int
+
+
+@dataclass(frozen=True, slots=True)
+class StartChecking:
+    """Real rig: Start was accepted by the calibration gate; the force at rest is measured for ``seconds`` first."""
+
+    seconds: float
+    message: str

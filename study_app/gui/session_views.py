@@ -1,0 +1,164 @@
+"""Views of the running session in the experimenter window, one per model (``Qt<Model>(model)``, napari style):
+what happens now and how far the session is, why the next cue waits, and the trial table."""
+
+from __future__ import annotations
+
+from PySide6.QtCore import Qt
+from PySide6.QtGui import QColor
+from PySide6.QtWidgets import (
+    QAbstractItemView,
+    QHBoxLayout,
+    QHeaderView,
+    QLabel,
+    QProgressBar,
+    QPushButton,
+    QTableWidget,
+    QTableWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+from study_app.gui.widgets import LEVEL_COLOURS, ElidedLabel, FollowNewest
+from study_app.models.cue_wait import CUE_ACTIONS, CueWaitModel, headline
+from study_app.models.health import HealthModel
+from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
+
+__all__ = ["QtCueWait", "QtProgress", "QtTrialTable"]
+
+_OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
+                    "aborted": QColor(235, 235, 235)}
+
+
+class QtTrialTable(QTableWidget):
+    """The trial table, filled as :class:`TrialTable` rows arrive; the newest row stays in view
+    (:class:`FollowNewest`)."""
+
+    def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
+        super().__init__(0, len(TRIAL_COLUMNS), parent)
+        self.table = table
+        self.setHorizontalHeaderLabels(list(TRIAL_COLUMNS))
+        self.verticalHeader().setVisible(False)
+        self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
+        self.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
+        self.setTextElideMode(Qt.TextElideMode.ElideRight)
+        header = self.horizontalHeader()
+        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        header.setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
+        self.follow = FollowNewest(self)
+        table.row_added.connect(self._on_row_added)
+        table.cleared.connect(self._on_cleared)
+
+    def _on_cleared(self) -> None:
+        self.setRowCount(0)
+        self.follow.following = True
+
+    def _on_row_added(self, i: int) -> None:
+        row = self.table.rows[i]
+        self.insertRow(i)
+        colour = _OUTCOME_COLOURS.get(str(row.outcome))
+        for j, text in enumerate(TrialTable.cells(row)):
+            item = QTableWidgetItem(text)
+            item.setToolTip(text)  # an abort's reason may be longer than its column
+            if j != 3:
+                item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+            if colour is not None:
+                item.setBackground(colour)
+            self.setItem(i, j, item)
+        self.follow.to_end()
+
+
+class QtCueWait(QWidget):
+    """Above the trial table: why the next cue waits, for how long, and the button that ends the wait."""
+
+    def __init__(self, model: CueWaitModel, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.model, self._actions = model, CUE_ACTIONS
+        self.label = QLabel()
+        self.label.setWordWrap(True)
+        self.help = QLabel()
+        self.help.setWordWrap(True)
+        self.button = QPushButton()
+        self.button.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # Space stays Start / Resume
+        self.button.clicked.connect(model.end)
+        text = QVBoxLayout()
+        text.setContentsMargins(0, 0, 0, 0)
+        text.setSpacing(0)
+        text.addWidget(self.label)
+        text.addWidget(self.help)
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(6, 3, 6, 3)
+        lay.addLayout(text, 1)
+        lay.addWidget(self.button, 0, Qt.AlignmentFlag.AlignTop)
+        model.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        w = self.model.wait
+        self.setVisible(w is not None)
+        if w is None:
+            return
+        fg, bg = LEVEL_COLOURS.get(w.level, LEVEL_COLOURS["info"])
+        self.setAutoFillBackground(True)
+        pal = self.palette()
+        pal.setColor(self.backgroundRole(), QColor(bg))
+        self.setPalette(pal)
+        self.label.setText(w.text())
+        self.label.setStyleSheet(f"color: {fg}; font-weight: 600;")
+        self.help.setStyleSheet(f"color: {fg};")
+        self.help.setText(w.help)
+        self.help.setVisible(bool(w.help))
+        self.button.setText(self._actions.get(w.action, ""))
+        self.button.setVisible(bool(w.action))
+
+
+class QtProgress(QWidget):
+    """What happens now (the trial and its time left, the pause), the session's count and time left with a bar
+    of the designed trials done, and a warning line when the force on the tissue is too high."""
+
+    def __init__(self, session: SessionModel, health: HealthModel | None = None, parent: QWidget | None = None,
+                 *, cue: CueWaitModel | None = None) -> None:
+        super().__init__(parent)
+        self.session = session
+        self.health = health
+        #: Why the next cue waits (the banner's model): the headline says the same (None: the session alone).
+        self.cue = cue
+        self.label = ElidedLabel()
+        self.label.setStyleSheet("font-size: 15px; font-weight: 600;")
+        self.count = ElidedLabel()
+        self.count.setStyleSheet("font-size: 13px;")
+        self.bar = QProgressBar()
+        self.bar.setRange(0, 1000)
+        self.bar.setTextVisible(False)
+        self.bar.setMaximumHeight(10)
+        self.warning = QLabel()
+        self.warning.setWordWrap(True)
+        fg, bg = LEVEL_COLOURS["bad"]
+        self.warning.setStyleSheet(f"color: {fg}; background: {bg}; font-weight: 600; padding: 3px 6px;")
+        self.warning.hide()
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(4, 2, 4, 2)
+        lay.setSpacing(1)
+        lay.addWidget(self.label)
+        lay.addWidget(self.count)
+        lay.addWidget(self.bar)
+        lay.addWidget(self.warning)
+        session.changed.connect(self._on_changed)
+        if health is not None:
+            health.changed.connect(self._on_health)
+        if cue is not None:
+            cue.changed.connect(self._on_changed)
+        self._on_changed()
+
+    def _on_changed(self) -> None:
+        self.label.set_full_text(headline(self.session, self.cue.wait if self.cue is not None else None))
+        count = self.session.count_text() if self.session.running else ""
+        if count != self.count.full_text():
+            self.count.set_full_text(count)
+            self.count.setVisible(bool(count))
+        self.bar.setValue(int(1000 * self.session.fraction_done()))
+
+    def _on_health(self) -> None:
+        text = self.health.force_warning() if self.health is not None else ""
+        if text != self.warning.text():
+            self.warning.setText(text)
+            self.warning.setVisible(bool(text))
