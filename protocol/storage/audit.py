@@ -1,6 +1,6 @@
 """Verifying a whole study database: what ``haptic-study check`` finds.
 
-Four checks, each reported with what it found:
+Five checks, each reported with what it found:
 
 1. **SQLite's own** -- ``PRAGMA integrity_check``: the file's pages, indexes and
    constraints.  It cannot see a flipped bit inside a value;
@@ -11,7 +11,9 @@ Four checks, each reported with what it found:
 3. **trials against the recording** -- every trial's first and last records
    (``first_tick``, ``last_tick``) lie in its recorded run, in readable blocks
    with no damaged block between them;
-4. **the design** -- per experiment session, every trial row is a trial of the
+4. **the record against itself** -- references, every trial against its cue event and its first record
+   (:mod:`protocol.storage.audit_record`);
+5. **the design** -- per experiment session, every trial row is a trial of the
    stored schedule, every aborted trial has exactly one re-run in it, the
    designed trials are the protocol's, and the trials that count fill each
    target × mode cell: exactly for a completed session, at most for one
@@ -31,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from protocol.recording.integrity import BlockDamage, BlockRow, block_problem
+from protocol.storage.audit_record import check_record
 from protocol.storage.damage import block_rows, describe_damage
 from protocol.storage.reader import StudyReader
 from protocol.study.config import ProtocolError, protocol_from_dict
@@ -285,6 +288,7 @@ def _audit(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int]
             audit.notes.append(f"schema version {audit.schema_version}: sessions were not recorded whole "
                                "(trial windows in the samples table), so there are no blocks to verify")
         _cells(conn, audit, writers)
+        check_record(conn, audit.problems.append)
         for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
             audit.notes.append(f"participant {w.code} withdrew ({w.withdrawn_at[:16].replace('T', ' ')} UTC): "
                                f"{w.counts()} erased; their number stays vacant")
