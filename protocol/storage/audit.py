@@ -128,6 +128,7 @@ def _blocks(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int
         runs.setdefault(key, []).append((row.first_tick, row.last_tick, not why))
         if progress is not None and (i % 200 == 0 or i + 1 == total):
             progress(i + 1, total)
+    _runs_complete(conn, audit, last)
     audit.damage = describe_damage(conn, bad)
     audit.problems.extend(f"recording damaged: {d.describe()}" for d in audit.damage)
     if audit.blocks_unverifiable:
@@ -155,6 +156,19 @@ def _other_arms(conn: sqlite3.Connection, audit: Audit) -> None:
             else:
                 audit.blocks_verified += 1
             last[key] = row.block
+        _runs_complete(conn, audit, last, arm)
+
+
+def _runs_complete(conn: sqlite3.Connection, audit: Audit, last: Mapping[tuple[int, int], int], arm: str = "") -> None:
+    """Every run that counts its blocks holds them all, its last ones too (a block deleted from the end leaves no
+    gap to see): ``last`` is each run's last block found (an open one, in chunks, may follow the count)."""
+    where = f"arm {arm}, " if arm else ""
+    for sid, seg, n_blocks in StudyReader.over(conn).block_counts(arm):
+        found = last.get((sid, seg), -1)
+        if found < n_blocks - 1:
+            missing = f"block {n_blocks - 1}" if found == n_blocks - 2 else f"blocks {found + 1}–{n_blocks - 1}"
+            audit.problems.append(f"{where}session {sid}, recorded run {seg}: {n_blocks} blocks were written, "
+                                  f"{missing} missing from the recording")
 
 
 def _readable(runs: list[tuple[int, int, bool]], first: int, last: int) -> bool:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from foundation.platform_support.files import may_write, owner_only
 from protocol.metrics import stored
-from protocol.storage.common import EmptyDatabase, StorageError
+from protocol.storage.common import EmptyDatabase, StorageError, has_table
 from protocol.study.records import AbortCause, LoopHealth
 
 __all__ = ["ABORT_CAUSES", "HEALTH_COLUMNS", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SchemaFile", "connect_readonly",
@@ -128,6 +128,37 @@ def add_metric_columns(conn: sqlite3.Connection) -> list[str]:
         conn.execute("ROLLBACK")
         raise
     return missing
+
+
+#: The tables whose runs count their blocks (``n_blocks``: the run's blocks written whole so far; NULL in a run
+#: recorded before it, whose blocks' checksums cover their bytes only).
+_COUNTED = ("recordings", "arm_recordings")
+
+
+def add_block_counts(conn: sqlite3.Connection) -> list[str]:
+    """Give ``recordings`` and ``arm_recordings`` their ``n_blocks`` column where the file lacks it (a file made
+    before it): NULL in every run recorded before, whose blocks keep their checksums of bytes alone.
+
+    As :func:`add_metric_columns`: only a writer, in its own transaction, no row changed, the schema version kept
+    (an older haptic-study writes runs without it -- NULL -- and never appends to a run it did not start).
+    Returns the tables given the column.
+    """
+    def missing() -> list[str]:
+        return [t for t in _COUNTED if has_table(conn, t)
+                and "n_blocks" not in {r[1] for r in conn.execute(f"PRAGMA table_info({t})")}]
+
+    if not missing():
+        return []
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        added = missing()
+        for table in added:
+            conn.execute(f"ALTER TABLE {table} ADD COLUMN n_blocks INTEGER")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    return added
 
 
 SAMPLE_COLUMNS = (
@@ -314,6 +345,7 @@ class SchemaFile:
                 c.execute(statement)
         if not readonly:
             add_metric_columns(c)
+            add_block_counts(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.

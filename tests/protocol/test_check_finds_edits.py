@@ -76,6 +76,48 @@ EDITS: list[tuple[str, Edit, str]] = [
 ]
 
 
+def _swap_blocks(c: sqlite3.Connection) -> None:
+    """Session 1's block 2 and session 2's (the same ticks, the same tiny protocol): each intact, in the other's
+    place, with its own checksum."""
+    get = "SELECT data, crc32 FROM session_blocks WHERE session_id = ? AND segment = 0 AND block = 2"
+    one, two = c.execute(get, (1,)).fetchone(), c.execute(get, (2,)).fetchone()
+    put = "UPDATE session_blocks SET data = ?, crc32 = ? WHERE session_id = ? AND segment = 0 AND block = 2"
+    c.execute(put, (*two, 1))
+    c.execute(put, (*one, 2))
+
+
+def _task_block_over_the_arms(c: sqlite3.Connection) -> None:
+    """The task arm's block 3 of session 1 copied, checksum and all, over the other arm's (the same ticks)."""
+    data, crc = c.execute("SELECT data, crc32 FROM session_blocks WHERE session_id = 1 AND segment = 0 AND block = 3"
+                          ).fetchone()
+    assert c.execute("UPDATE arm_blocks SET data = ?, crc32 = ? WHERE session_id = 1 AND segment = 0 AND block = 3 "
+                     "AND arm = 'left'", (data, crc)).rowcount == 1
+
+
+BLOCK_EDITS: list[tuple[str, Edit, str]] = [
+    ("blocks swapped between two sessions with the same tick range", _swap_blocks,
+     "session 2, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes, or the place"),
+    ("one arm's block copied over the other's", _task_block_over_the_arms,
+     "arm left, session 1, recorded run 0, block 3 (ticks 3000–3999): checksum mismatch"),
+    ("a session's last block deleted",
+     _sql("DELETE FROM session_blocks WHERE session_id = 3 AND segment = 0 "
+          "AND block = (SELECT MAX(block) FROM session_blocks WHERE session_id = 3)"),
+     "blocks were written, block"),
+    ("an arm's last block deleted",
+     _sql("DELETE FROM arm_blocks WHERE session_id = 2 AND segment = 0 "
+          "AND block = (SELECT MAX(block) FROM arm_blocks WHERE session_id = 2)"),
+     "arm left, session 2, recorded run 0:"),
+    ("a session's last two blocks deleted",
+     _sql("DELETE FROM session_blocks WHERE session_id = 1 AND segment = 0 "
+          "AND block >= (SELECT MAX(block) - 1 FROM session_blocks WHERE session_id = 1)"),
+     "missing from the recording"),
+    ("a block renumbered",
+     _sql("UPDATE session_blocks SET block = block + 1000 WHERE session_id = 2 AND segment = 0 AND block = 1"),
+     "(block 1001): checksum mismatch (the block's bytes, or the place"),
+]
+EDITS += BLOCK_EDITS
+
+
 def _check(db: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
     before = db.read_bytes()
     status = main(["check", "--db", str(db)])
