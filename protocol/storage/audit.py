@@ -304,6 +304,11 @@ def _audit(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int]
         _cells(conn, audit, writers)
         check_record(conn, audit.problems.append)
         for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
+            if w.rewritten == 0:  # their rows are gone, their bytes may not be: the rewrite did not finish
+                audit.problems.append(f"withdrawal of {w.code} incomplete: their rows were removed but the file was "
+                                      "not rewritten, so their bytes may still be read back from it; run withdraw "
+                                      f"again (haptic-study withdraw --db {audit.path} --participant {w.code})")
+                continue
             audit.notes.append(f"participant {w.code} withdrew ({w.withdrawn_at[:16].replace('T', ' ')} UTC): "
                                f"{w.counts()} erased; their number stays vacant")
     except sqlite3.DatabaseError as exc:

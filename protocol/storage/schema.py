@@ -130,35 +130,35 @@ def add_metric_columns(conn: sqlite3.Connection) -> list[str]:
     return missing
 
 
-#: The tables whose runs count their blocks (``n_blocks``: the run's blocks written whole so far; NULL in a run
-#: recorded before it, whose blocks' checksums cover their bytes only).
-_COUNTED = ("recordings", "arm_recordings")
+#: Columns added to version 4 after files of version 4 existed, NULL in the rows stored before (table, column):
+#: a run's count of its blocks (``n_blocks``: not NULL, its blocks' checksums bind their place; NULL, a run recorded
+#: before, whose checksums cover their bytes alone), and whether a withdrawal's rewrite of the file finished.
+_LATER_COLUMNS = (("recordings", "n_blocks"), ("arm_recordings", "n_blocks"), ("withdrawals", "rewritten"))
 
 
-def add_block_counts(conn: sqlite3.Connection) -> list[str]:
-    """Give ``recordings`` and ``arm_recordings`` their ``n_blocks`` column where the file lacks it (a file made
-    before it): NULL in every run recorded before, whose blocks keep their checksums of bytes alone.
+def add_later_columns(conn: sqlite3.Connection) -> list[str]:
+    """Give a file made before them the columns of :data:`_LATER_COLUMNS` (INTEGER, NULL in every row before).
 
     As :func:`add_metric_columns`: only a writer, in its own transaction, no row changed, the schema version kept
-    (an older haptic-study writes runs without it -- NULL -- and never appends to a run it did not start).
-    Returns the tables given the column.
+    (an older haptic-study writes rows without them -- NULL -- and never appends to a run it did not start).
+    Returns the ``table.column`` added.
     """
-    def missing() -> list[str]:
-        return [t for t in _COUNTED if has_table(conn, t)
-                and "n_blocks" not in {r[1] for r in conn.execute(f"PRAGMA table_info({t})")}]
+    def missing() -> list[tuple[str, str]]:
+        return [(t, col) for t, col in _LATER_COLUMNS if has_table(conn, t)
+                and col not in {r[1] for r in conn.execute(f"PRAGMA table_info({t})")}]
 
     if not missing():
         return []
     conn.execute("BEGIN IMMEDIATE")
     try:
         added = missing()
-        for table in added:
-            conn.execute(f"ALTER TABLE {table} ADD COLUMN n_blocks INTEGER")
+        for table, column in added:
+            conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} INTEGER")
         conn.execute("COMMIT")
     except BaseException:
         conn.execute("ROLLBACK")
         raise
-    return added
+    return [f"{t}.{c}" for t, c in added]
 
 
 SAMPLE_COLUMNS = (
@@ -345,7 +345,7 @@ class SchemaFile:
                 c.execute(statement)
         if not readonly:
             add_metric_columns(c)
-            add_block_counts(c)
+            add_later_columns(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.
