@@ -118,6 +118,71 @@ BLOCK_EDITS: list[tuple[str, Edit, str]] = [
 EDITS += BLOCK_EDITS
 
 
+def _plain_crc(c: sqlite3.Connection) -> None:
+    """A tool that 'repairs' a block by giving it the CRC-32 of its bytes alone (the pre-binding checksum)."""
+    import zlib
+
+    data = c.execute("SELECT data FROM session_blocks WHERE session_id = 3 AND segment = 0 AND block = 4").fetchone()[0]
+    c.execute("UPDATE session_blocks SET crc32 = ? WHERE session_id = 3 AND segment = 0 AND block = 4",
+              (zlib.crc32(data),))
+
+
+def _swap_arm_blocks(c: sqlite3.Connection) -> None:
+    get = "SELECT data, crc32 FROM arm_blocks WHERE session_id = ? AND segment = 0 AND block = 1 AND arm = 'left'"
+    one, two = c.execute(get, (1,)).fetchone(), c.execute(get, (3,)).fetchone()
+    put = ("UPDATE arm_blocks SET data = ?, crc32 = ? "
+           "WHERE session_id = ? AND segment = 0 AND block = 1 AND arm = 'left'")
+    c.execute(put, (*two, 1))
+    c.execute(put, (*one, 3))
+
+
+MORE_EDITS: list[tuple[str, Edit, str]] = [
+    ("a block given the checksum of its bytes alone", _plain_crc, "(block 4): checksum mismatch"),
+    ("the other arm's blocks swapped between two sessions", _swap_arm_blocks,
+     "arm left, session 1, recorded run 0, block 1"),
+    ("every block of a session deleted",
+     _sql("DELETE FROM session_blocks WHERE session_id = 2"), "blocks 0–"),
+    ("a block's record count changed", _sql(
+        "UPDATE session_blocks SET n_records = n_records - 1 WHERE session_id = 1 AND segment = 0 AND block = 5"),
+     "(block 5): checksum mismatch"),
+    ("a block's ticks changed", _sql(
+        "UPDATE session_blocks SET first_tick = first_tick + 1 WHERE session_id = 2 AND segment = 0 AND block = 3"),
+     "(block 3): checksum mismatch"),
+    ("a recorded run's row deleted", _sql("DELETE FROM recordings WHERE session_id = 3"),
+     "refers to a row of recordings that does not exist"),
+    ("the other arm's run row deleted", _sql("DELETE FROM arm_recordings WHERE session_id = 1"),
+     "refers to a row of arm_recordings that does not exist"),
+    ("a session moved to a participant who does not exist",
+     _sql("UPDATE sessions SET participant_id = 99 WHERE session_id = 2"),
+     "sessions row 2 refers to a row of participants that does not exist"),
+    ("a trial moved to a run that does not exist",
+     _sql("UPDATE trials SET segment = 5 WHERE trial_id = (SELECT MAX(trial_id) FROM trials)"),
+     "are not all in readable blocks"),
+    ("a trial's label rewritten",
+     _sql("UPDATE trials SET target_label = 'FIRM' WHERE trial_id = (SELECT MIN(trial_id) FROM trials)"),
+     "the trial row 'FIRM 0.6 N"),
+    ("two trials' modes swapped",
+     _sql("UPDATE trials SET haptic_mode = CASE haptic_mode WHEN 'on' THEN 'off' ELSE 'on' END "
+          "WHERE session_id = 2 AND trial_index IN (SELECT trial_index FROM trials t WHERE t.session_id = 2 "
+          "AND t.haptic_mode = 'on' LIMIT 1) OR session_id = 2 AND trial_index IN (SELECT trial_index FROM trials t "
+          "WHERE t.session_id = 2 AND t.haptic_mode = 'off' LIMIT 1)"),
+     "its cue event says"),
+    ("a trial's window and start moved together by 1.5 s (its cue event left)",
+     _sql("UPDATE trials SET first_tick = first_tick + 1500, last_tick = last_tick + 1500, "
+          "started_at_s = started_at_s + 1.5 WHERE trial_id = (SELECT MIN(trial_id) FROM trials WHERE session_id = 3)"),
+     "no cue event within 0.1 s of its start"),
+    ("a cue event's words garbled",
+     _sql("UPDATE events SET detail = 'GENTLE' WHERE rowid = (SELECT MAX(rowid) FROM events WHERE kind = 'cue')"),
+     "does not name a trial as the runner does"),
+    ("a withdrawal's rewrite marked unfinished",
+     _sql("INSERT INTO withdrawals (code, withdrawn_at, reason, removed_sessions, removed_trials, removed_events, "
+          "removed_blocks, removed_records, removed_samples, rewritten) "
+          "VALUES ('P09', '2026-01-01T00:00:00+00:00', 'consent withdrawn', 1, 4, 20, 8, 8000, 0, 0)"),
+     "withdrawal of P09 incomplete"),
+]
+EDITS += MORE_EDITS
+
+
 def _check(db: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
     before = db.read_bytes()
     status = main(["check", "--db", str(db)])
