@@ -11,19 +11,25 @@ afterwards and still read well.  So :func:`check_record` compares them:
   ``started_at_s`` plus the loop time since the run's first record) is its ``started_at_s``, within
   :data:`CUE_TOLERANCE_S`: a window moved to other records is not where the trial ran.
 
-The trial's metrics against the recording need the report's recompute (``haptic-study check`` adds it: the
-analysis is a floor above this one).
+* **a trial's metrics against its records** -- its session's task judges the trial's records again, as the report
+  does (:meth:`protocol.tasks.base.Task.judge`, the cue window), and the outcome and every stored metric must be
+  the stored ones (:func:`protocol.study.records.disagreement`, to :data:`protocol.study.records.AGREE_REL`).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import sqlite3
 from collections.abc import Callable
 
 from protocol.recording.codec import decode_columns
+from protocol.recording.integrity import RecordingDamaged
 from protocol.storage.damage import block_rows
+from protocol.storage.recordings import read_ticks
+from protocol.study.config import ProtocolConfig, ProtocolError, protocol_from_dict
+from protocol.study.records import TrialRecord, disagreement
 
 __all__ = ["CUE_TOLERANCE_S", "check_record"]
 
@@ -40,6 +46,40 @@ def check_record(conn: sqlite3.Connection, problem: Callable[[str], None]) -> No
     _references(conn, problem)
     _trials_against_events(conn, problem)
     _trials_against_records(conn, problem)
+    _metrics_against_records(conn, problem)
+
+
+def _metrics_against_records(conn: sqlite3.Connection, problem: Callable[[str], None]) -> None:
+    protocols = {int(sid): pj for sid, pj in conn.execute("SELECT session_id, protocol_json FROM sessions")}
+    cur = conn.execute("SELECT * FROM trials WHERE segment IS NOT NULL AND first_tick IS NOT NULL "
+                       "AND outcome != 'aborted' ORDER BY session_id, trial_index")
+    names = [d[0] for d in cur.description]
+    read: dict[int, ProtocolConfig | None] = {}
+    for values in cur.fetchall():
+        row = dict(zip(names, values, strict=True))
+        sid = int(row["session_id"])
+        if sid not in read:
+            try:
+                read[sid] = protocol_from_dict(json.loads(protocols[sid]), f"session {sid} protocol")
+            except (KeyError, ProtocolError, ValueError, TypeError):
+                read[sid] = None  # no such session, or its protocol unreadable: said by the other checks
+        protocol = read[sid]
+        if protocol is None:
+            continue
+        try:
+            cols = read_ticks(conn, sid, int(row["segment"]), int(row["first_tick"]), int(row["last_tick"]),
+                              ("t_ns", "force_n"))
+        except RecordingDamaged:
+            continue  # the recording's check names it
+        if len(cols["t_ns"]) == 0:
+            continue  # no records there: the recording's check says so
+        record = TrialRecord.from_row(row)
+        t_ns = cols["t_ns"] - cols["t_ns"][0]  # the first record is the cue
+        again = protocol.task.judge(t_ns, cols["force_n"], record, max_trial_s=protocol.trial.max_trial_s)
+        why = disagreement(again, record)
+        if why:
+            problem(f"trial {record.trial_index + 1} of session {sid}: {why} (the stored metrics are not its "
+                    "records')")
 
 
 def _references(conn: sqlite3.Connection, problem: Callable[[str], None]) -> None:

@@ -182,6 +182,22 @@ MORE_EDITS: list[tuple[str, Edit, str]] = [
 ]
 EDITS += MORE_EDITS
 
+_A_TRIAL = "trial_id = (SELECT MIN(trial_id) FROM trials WHERE outcome != 'aborted' AND session_id = 2)"
+METRIC_EDITS: list[tuple[str, Edit, str]] = [
+    ("a trial's stored RMSE edited by 1 %", _sql(f"UPDATE trials SET rmse_n = rmse_n * 1.01 WHERE {_A_TRIAL}"),
+     "its rmse_n recomputed from the recording is"),
+    ("a trial's stored Max AE edited", _sql(f"UPDATE trials SET max_ae_n = max_ae_n + 0.05 WHERE {_A_TRIAL}"),
+     "its max_ae_n recomputed from the recording is"),
+    ("a trial's stored error impulse edited",
+     _sql(f"UPDATE trials SET abs_impulse_n_s = abs_impulse_n_s * 0.9 WHERE {_A_TRIAL}"),
+     "its abs_impulse_n_s recomputed from the recording is"),
+    ("a timeout stored as a success",
+     _sql("UPDATE trials SET outcome = 'success', tct_s = 1.0 WHERE trial_id = "
+          "(SELECT MIN(trial_id) FROM trials WHERE outcome = 'timeout')"),
+     "its outcome recomputed from the recording is no success, stored success"),
+]
+EDITS += METRIC_EDITS
+
 
 def _check(db: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
     before = db.read_bytes()
