@@ -27,6 +27,7 @@ from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.recording.codec import BlockRow, join_chunks
+from protocol.storage.codes import stored_clash
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
@@ -174,7 +175,9 @@ class StudyReader:
             "SELECT s.session_id, p.code FROM sessions s JOIN participants p USING (participant_id)")}
 
     def participant_data(self, code: str) -> ParticipantRows | None:
-        """Everything stored of one participant, table by table (None when the code is not stored)."""
+        """Everything stored of one participant, table by table (None when the code is not stored; a code that reads
+        as a stored one without being it, ``p01`` for ``P01``, is refused naming it: :mod:`protocol.storage.codes`)."""
+        stored_clash(self.conn, code, str(self.path))
         return participant_rows(self.conn, code)
 
     def withdrawals(self) -> list[Withdrawal]:

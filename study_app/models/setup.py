@@ -35,7 +35,7 @@ from protocol.runner.study_rules import (
     training_refusal,
     training_state,
 )
-from protocol.storage import StorageError, validate_code
+from protocol.storage import StorageError, clash_of, near_duplicate, normalise_code, validate_code
 from protocol.study.config import ProtocolConfig, ProtocolError, load_protocol
 from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
@@ -114,9 +114,9 @@ class SetupModel:
     resumable_changed: Emitter = field(default_factory=Emitter)
 
     def update(self, **kwargs: object) -> None:
-        """Change fields and re-validate (codes are trimmed: a pasted ' P07 ' is P07)."""
+        """Change fields and re-validate (codes are normalised as storage stores them: a pasted ' P07 ' is P07)."""
         if isinstance(kwargs.get("code"), str):
-            kwargs["code"] = str(kwargs["code"]).strip()
+            kwargs["code"] = normalise_code(str(kwargs["code"]))
         if "participant_number" in kwargs:
             self.number_suggested = False
         if "kind" in kwargs:
@@ -223,6 +223,10 @@ class SetupModel:
 
     def _check_against_database(self, errors: dict[str, str], warnings: dict[str, str]) -> None:
         v = self.values
+        other = near_duplicate(v.code, [str(s["code"]) for s in self.known] + [w["code"] for w in self.withdrawn])
+        if other is not None:  # p01 beside P01: one participant as a person reads them (protocol.storage.codes)
+            errors["code"] = clash_of(v.code, other, "this study")
+            return
         gone = next((w for w in self.withdrawn if w["code"] == v.code), None)
         if gone is not None:
             errors["code"] = (f"{v.code} withdrew from the study ({gone['withdrawn_at'][:16].replace('T', ' ')} UTC) "

@@ -267,7 +267,12 @@ def test_valid_codes(code):
     assert validate_code(code) == code
 
 
-@pytest.mark.parametrize("code", ["", "Q" * 33, "P 01", "P01;DROP", "P01\n", "Pé", None, 1])
+def test_a_code_is_normalised_before_it_is_checked():
+    # a pasted code's line end and spaces go, and a full-width P01 reads as P01 (protocol.storage.codes)
+    assert validate_code("P01\n") == validate_code(" Ｐ０１ ") == "P01"
+
+
+@pytest.mark.parametrize("code", ["", "Q" * 33, "P 01", "P01;DROP", "P0\n1", "Pé", None, 1])
 def test_invalid_codes_are_refused(code):
     with pytest.raises(StorageError) as info:
         validate_code(code)
