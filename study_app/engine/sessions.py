@@ -68,6 +68,10 @@ class EngineSessions:
         self.opened: OpenedSession | None = None
         self.trigger: RehearsalTrigger | None = None
         self.session_code = ""
+        #: Whether the participant screen is open where the participant sees it, as the GUI last said (None: its
+        #: client never said; a script or a test has no participant screen).
+        self.screen_open: bool | None = None
+        self.screen_detail = ""
 
     @property
     def running(self) -> bool:
@@ -76,6 +80,7 @@ class EngineSessions:
 
     def start(self, cmd: m.StartSession) -> None:
         self.engine.require_idle("start")
+        self._require_screen("start")
         validate_code(cmd.code)
         if cmd.kind not in ("training", "experiment"):
             raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
@@ -134,6 +139,7 @@ class EngineSessions:
 
     def resume(self, cmd: m.ResumeSession) -> None:
         self.engine.require_idle("resume")
+        self._require_screen("resume")
         if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -198,6 +204,7 @@ class EngineSessions:
         if isinstance(cmd, m.Pause):
             runner.pause()
         elif isinstance(cmd, m.Resume):
+            self._require_screen("resume")
             runner.resume()
         elif isinstance(cmd, m.AbortTrial):
             if cmd.trial_index is not None and runner.trial_ended(cmd.trial_index):
@@ -210,6 +217,32 @@ class EngineSessions:
             if cmd.session_id is not None and cmd.session_id != runner.session_id:
                 raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
             runner.abort_session(cmd.reason)
+
+    def _require_screen(self, what: str) -> None:
+        """No trial is cued to a participant screen that is closed: a start or resume is refused, saying why."""
+        if self.screen_open is False:
+            raise RuntimeError(f"{what}: the participant screen is {self.screen_detail or 'closed'}, so the "
+                               "participant would not see the cue; open it (View → Participant screen, Ctrl+P)")
+
+    def participant_screen(self, cmd: m.ParticipantScreenState) -> None:
+        """The participant screen opened or closed.  Closed during a session: the running trial is aborted (cause
+        ``participant_screen``, stored and run again later, as a trial a closed GUI cut is stored) and the session
+        pauses, so no cue goes to a screen nobody sees; the event is stored."""
+        was, self.screen_open, self.screen_detail = self.screen_open, cmd.open, cmd.detail
+        runner, recorder = self.runner, self.recorder
+        if cmd.open or was is False or runner is None or runner.done or recorder is None:
+            return
+        how = cmd.detail or "closed"
+        spec = runner.running_trial
+        if spec is not None:
+            runner.abort_trial(f"the participant screen was {how} during the trial: the participant could not see "
+                               "the cue", cause=AbortCause.PARTICIPANT_SCREEN, trial_index=spec.index)
+        runner.pause()
+        cut = f"trial {spec.index + 1} is stored as aborted and run again later" if spec is not None else \
+            "no trial was running"
+        recorder.event(runner.session_id, runner.session_time_s(self.engine.last_t_ns), "participant_screen",
+                       f"the participant screen was {how}: {cut}; the session pauses until the screen is open "
+                       "and the experimenter resumes")
 
     def list_sessions(self, cmd: m.ListSessions) -> None:
         """Publish a database's interrupted sessions, every session it holds and who withdrew (read-only)."""

@@ -97,6 +97,7 @@ class ExperimenterWindow(QMainWindow):
         self._on_session_changed()
         if not placement.restore(self, self.settings, "experimenter"):
             placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
+            placement.leave_room_beside(self, PARTICIPANT_BESIDE_SIZE)  # one monitor: the participant screen's room
         self.bridge.start()
         self.plot_timer.start()
 
@@ -183,6 +184,13 @@ class ExperimenterWindow(QMainWindow):
             on_frames=steps.check_frames, on_arm=steps.select_arm,
         )
         self.calibration_wizard.hidden.connect(lambda: self.model.notices.clear(CALIBRATION_COMMANDS))
+        # no trial is cued to a participant screen nobody sees: the engine hears each change, a start opens it
+        self.participant_window.seen_changed.connect(self.model.screen.shown)
+        self.model.screen.opener = self.open_participant_screen
+        app = QGuiApplication.instance()
+        if isinstance(app, QGuiApplication):  # a monitor unplugged or added: is the participant screen still seen?
+            app.screenAdded.connect(lambda _s: self.participant_window.report_soon())
+            app.screenRemoved.connect(lambda _s: self.participant_window.report_soon())
         self.menus = WindowMenus(self)
         self.view_actions = self.menus.windows
 
@@ -258,8 +266,19 @@ class ExperimenterWindow(QMainWindow):
             return active  # one monitor: the experimenter sees the participant view too
         return self
 
-    def open_window(self, w: QWidget) -> None:
-        """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
+    def open_participant_screen(self) -> str:
+        """Open the participant screen where it was (first: beside this window, or on its own monitor), brought
+        onto a monitor and out of its minimised state; returns how the participant still cannot see it ("")."""
+        w, before = self.participant_window, QApplication.activeWindow()
+        self.open_window(w, activate=False)
+        if before is not None and before is not w and QApplication.activeWindow() is not before:
+            before.activateWindow()  # the experimenter's keys stay where they were (a platform may have moved them)
+        w.report()  # at once: the engine hears it is open before the start that follows
+        return w.unseen()
+
+    def open_window(self, w: QWidget, activate: bool = True) -> None:
+        """Show one of the extra windows: where it was last (brought onto a monitor if it is off every one), else at
+        a size that fits, on the right screen; in front, and with the keyboard if ``activate``."""
         if not w.property("placed"):
             w.setProperty("placed", True)
             key, size = {id(self.participant_window): ("participant", PARTICIPANT_SIZE),
@@ -275,7 +294,8 @@ class ExperimenterWindow(QMainWindow):
                     placement.place(w, size, self.screen())
         if w is self.participant_window:
             placement.keep_above(w, self)
-        _show(w)
+        _show(w, activate)
+        placement.onto_a_screen(w)
 
     # -- views of state ------------------------------------------------------------------------------------
     def _on_actions_changed(self) -> None:
@@ -367,6 +387,8 @@ class ExperimenterWindow(QMainWindow):
         if self._shut_down:
             return
         self._shut_down = True
+        self.model.screen.opener = None
+        self.participant_window.seen_changed.disconnect(self.model.screen.shown)  # closing it is no news to the engine
         self.plot_timer.stop()
         self.model.plots.detach()
         self.bridge.shutdown()
@@ -384,7 +406,13 @@ class ExperimenterWindow(QMainWindow):
         event.accept()
 
 
-def _show(w: QWidget) -> None:
+def _show(w: QWidget, activate: bool = True) -> None:
+    """Show ``w`` in front -- also out of its minimised state (``show`` alone leaves a minimised window an icon),
+    keeping full screen or maximised as it was -- with the keyboard if ``activate``."""
+    if w.isMinimized():
+        w.setWindowState(w.windowState() & ~Qt.WindowState.WindowMinimized)
+    w.setAttribute(Qt.WidgetAttribute.WA_ShowWithoutActivating, not activate)
     w.show()
     w.raise_()
-    w.activateWindow()
+    if activate:
+        w.activateWindow()

@@ -14,7 +14,7 @@ from protocol.study.records import AbortCause
 from study_app.engine import messages as m
 from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.participant_window import HEADLINE_MAX_PX, ParticipantWindow
-from study_app.gui.placement import BESIDE_MIN, beside
+from study_app.gui.placement import BESIDE_MIN, onto_a_screen, over_the_older_plots, side_by_side
 from study_app.gui.session_views import QtTrialTable
 from study_app.models.app import AppModel
 from study_app.models.health import HealthModel
@@ -25,19 +25,40 @@ from study_app.models.setup import SetupModel
 FRAME = QSize(8, 34)  # a window manager's borders and title bar
 
 
-def test_the_participant_screen_goes_beside_the_window_never_over_its_controls():
+def test_the_participant_screen_goes_beside_the_window_never_over_it():
+    # issue 40, item 4: on one 1366-px monitor it covered the plots' newest seconds and the table's outcome columns
     laptop = QRect(0, 0, 1366, 768)
-    main = QRect(40, 5, 1288, 762)  # the experimenter's window, its frame
-    controls = QRect(44, 60, 360, 650)  # the setup form and the buttons
-    r = beside(laptop, main, controls, QSize(640, 400), FRAME)
-    assert laptop.contains(r) and r.left() > controls.right()  # over the plots' corner, clear of the controls
-    assert (r.width(), r.height()) == (648, 434) and r.bottomRight() == laptop.bottomRight()
+    main = QRect(40, 5, 1288, 762)  # the experimenter's window, its frame: no room beside it
+    got = side_by_side(laptop, main, 790, QSize(640, 400), FRAME)
+    assert got is not None
+    main_after, r = got
+    assert not r.intersects(main_after) and laptop.contains(r) and laptop.contains(main_after)
+    assert main_after.left() == 0 and main_after.width() >= 790  # moved to the edge and narrowed to leave the room
+    assert r.width() - FRAME.width() >= BESIDE_MIN.width() and r.left() == main_after.right() + 1
     wide = QRect(0, 0, 1920, 1080)
-    r = beside(wide, QRect(0, 0, 1288, 762), controls, QSize(640, 400), FRAME)
-    assert r.left() == 1288 and r.right() < 1920  # room beside it: beside it
-    tiny = QRect(0, 0, 800, 600)
-    r = beside(tiny, QRect(0, 0, 800, 600), QRect(0, 40, 350, 500), QSize(640, 400), FRAME)
-    assert r.left() > 350 and tiny.contains(r) and r.width() < BESIDE_MIN.width()  # narrow rather than over them
+    main_after, r = side_by_side(wide, QRect(316, 159, 1288, 762), 790, QSize(640, 400), FRAME)
+    assert main_after == QRect(0, 159, 1288, 762)  # centred, no room on either side: moved, not narrowed
+    assert (r.left(), r.width(), r.height()) == (1288, 632, 424) and wide.contains(r)  # the room there is
+    main_after, r = side_by_side(wide, QRect(0, 0, 1288, 762), 790, QSize(640, 400), FRAME)
+    assert main_after == QRect(0, 0, 1288, 762) and r.left() == 1288  # room already: the main window stays
+    tiny = QRect(0, 0, 800, 600)  # too narrow for both: over the older plots, clear of the controls
+    assert side_by_side(tiny, QRect(0, 0, 800, 600), 790, QSize(640, 400), FRAME) is None
+    controls = QRect(0, 40, 350, 500)
+    r = over_the_older_plots(tiny, controls, QSize(640, 400), FRAME)
+    assert r.left() > controls.right() and tiny.contains(r) and r.right() < 350 + (800 - 350) // 2 + 10
+
+
+def test_a_participant_screen_off_every_monitor_is_brought_back(qtbot):
+    w = ParticipantWindow(ParticipantScreenModel())
+    qtbot.addWidget(w)
+    w.resize(400, 260)
+    w.show()
+    qtbot.waitExposed(w)
+    avail = w.screen().availableGeometry()
+    w.move(avail.right() - 100, avail.bottom() + 20)  # reopened 20 px below the screen's edge
+    assert w.unseen() == "off every monitor"
+    onto_a_screen(w)
+    assert avail.contains(w.frameGeometry()) and w.unseen() == ""
 
 
 def test_the_participant_screen_keeps_the_size_given_and_scales_the_cue(qtbot):
