@@ -288,6 +288,13 @@ class StudyReader:
             "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
             (int(session_id),))}
 
+    def trial_ends(self, session_id: int) -> dict[int, tuple[int, int]]:
+        """Each recorded trial's end: ``{trial_index: (segment, last_tick)}`` (its last record, the one its metrics
+        end on)."""
+        return {int(i): (int(s), int(t)) for i, s, t in self.conn.execute(
+            "SELECT trial_index, segment, last_tick FROM trials WHERE session_id = ? AND last_tick IS NOT NULL",
+            (int(session_id),))}
+
     def trials_touching(self, session_id: int, segment: int, first_tick: int, last_tick: int) -> tuple[int, ...]:
         """Indices of the trials whose records overlap ticks ``first_tick`` … ``last_tick`` of a segment, in order."""
         if "first_tick" not in self._has_columns("trials"):
