@@ -7,12 +7,16 @@ import os
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
+    QAbstractSpinBox,
     QApplication,
     QFrame,
+    QLineEdit,
     QMainWindow,
+    QPlainTextEdit,
     QScrollArea,
     QSplitter,
     QTabWidget,
+    QTextEdit,
     QVBoxLayout,
     QWidget,
 )
@@ -32,7 +36,7 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.session_actions import SessionActions
 from study_app.gui.session_views import QtCueWait, QtProgress, QtTrialTable
-from study_app.gui.setup_panel import QtSetupPanel
+from study_app.gui.setup_panel import SPACE_IN_A_FIELD, QtSetupPanel
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import ElidedLabel
 from study_app.models.app import AppModel
@@ -218,7 +222,7 @@ class ExperimenterWindow(QMainWindow):
         self.setup_panel.resume_button.clicked.connect(act.resume_selected)
         self.setup_panel.db.editingFinished.connect(self.model.control.list_sessions)
         # application-wide: the experimenter may have the rig view or the participant screen focused
-        for key, slot in ((Qt.Key.Key_Space, act.start_session), (Qt.Key.Key_Escape, act.abort_trial)):
+        for key, slot in ((Qt.Key.Key_Space, self._on_space), (Qt.Key.Key_Escape, act.abort_trial)):
             sc = QShortcut(QKeySequence(key), self)
             sc.setContext(Qt.ShortcutContext.ApplicationShortcut)
             sc.activated.connect(slot)
@@ -250,6 +254,20 @@ class ExperimenterWindow(QMainWindow):
             w.setToolTip(why if real else "")
         if real:
             self.rig_window.hide()
+
+    def _on_space(self) -> None:
+        """Space: Start (or Resume) -- but not from a text field.  An editable field takes its Space as a character
+        (the setup form's code, number and seed refuse it, saying how to start); a read-only one (the study's seed
+        once fixed, the fault log, a calibration result) would pass it on to this shortcut, and a Space meant for the
+        field would start a session: it is refused with the same line."""
+        focus = QApplication.focusWidget()
+        if isinstance(focus, (QLineEdit, QAbstractSpinBox, QPlainTextEdit, QTextEdit)):
+            if self.setup_panel.isAncestorOf(focus):
+                self.setup_panel.refuse_space()
+            else:
+                self.model.notices.notify("info", SPACE_IN_A_FIELD)
+            return
+        self.session_actions.start_session()
 
     def _on_plot_timer(self) -> None:
         if self.model.tick():  # nothing new (engine paused or gone): nothing to redraw
