@@ -52,6 +52,9 @@ PARTICIPANT_SIZE = QSize(900, 560)
 #: The participant screen beside this window on a one-monitor machine (a rehearsal): small enough to leave room.
 PARTICIPANT_BESIDE_SIZE = QSize(640, 400)
 RIG_SIZE = QSize(760, 480)
+#: The least the plot/table splitter leaves the progress line and plots, and the trial table's tabs, px.
+PLOTS_MIN_HEIGHT = 240
+TABLE_MIN_HEIGHT = 120
 WIZARD_SIZE = QSize(720, 640)
 
 
@@ -89,6 +92,7 @@ class ExperimenterWindow(QMainWindow):
         split.addWidget(left)
         split.addWidget(right)
         split.setStretchFactor(1, 1)
+        split.setChildrenCollapsible(False)  # neither the controls nor the plots can be dragged away to nothing
         self.setCentralWidget(split)
         self.status = ElidedLabel()
         self.statusBar().addWidget(self.status, 1)
@@ -171,6 +175,10 @@ class ExperimenterWindow(QMainWindow):
         tl.addWidget(self.plots, 1)
         right.addWidget(top)
         right.addWidget(self.tabs)
+        # the splitter's handle never squashes the plots (or the table) to nothing: each keeps room to be read
+        right.setChildrenCollapsible(False)
+        top.setMinimumHeight(PLOTS_MIN_HEIGHT)
+        self.tabs.setMinimumHeight(TABLE_MIN_HEIGHT)
         right.setSizes([520, 220])
         right.setStretchFactor(0, 3)  # a taller window gives the plots the room
         right.setStretchFactor(1, 1)

@@ -56,7 +56,8 @@ class QtTrialTable(QTableWidget):
         row = self.table.rows[i]
         self.insertRow(i)
         colour = _OUTCOME_COLOURS.get(str(row.outcome))
-        for j, text in enumerate(TrialTable.cells(row)):
+        designed = None if row.repeat_of is None else self.table.designed_of(row.repeat_of)
+        for j, text in enumerate(TrialTable.cells(row, designed)):
             item = QTableWidgetItem(text)
             item.setToolTip(text)  # an abort's reason may be longer than its column
             if j != 3:

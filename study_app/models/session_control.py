@@ -16,7 +16,20 @@ from study_app.models.screen_guard import ScreenGuard
 from study_app.models.session import SessionModel
 from study_app.models.setup import SetupModel
 
-__all__ = ["SessionControl"]
+__all__ = ["REASON_MIN_CHARS", "SessionControl", "reason_refusal"]
+
+#: The shortest reason a start that deviates from the protocol (without training, without calibration) is given:
+#: a few words -- "x" tells whoever reads the report nothing.
+REASON_MIN_CHARS = 10
+
+
+def reason_refusal(reason: str) -> str:
+    """Why a deviation's reason is refused ("" when it is taken): it must say why in a few words."""
+    text = reason.strip()
+    if len(text) >= REASON_MIN_CHARS:
+        return ""
+    return (f"reason = {text!r}: say why in a few words (at least {REASON_MIN_CHARS} characters): it is stored with "
+            "the session and the study report lists it")
 
 
 class SessionControl:
@@ -84,6 +97,11 @@ class SessionControl:
         engine stores the reason as a ``deviation`` event (:mod:`protocol.runner.study_rules`).
         """
         can = self.actions.can
+        for given in (training_override, override_reason):
+            why = reason_refusal(given) if given.strip() else ""
+            if why:
+                self.notices.notify("error", f"Nothing was started: {why}.", "StartSession")
+                return False
         skip_training = bool(training_override.strip()) and can("start_without_training")
         if not (can("start") or skip_training):
             errors = self.setup.validate()

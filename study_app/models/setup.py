@@ -42,7 +42,7 @@ from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.session import TrialCount
 
-__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable"]
+__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable", "with_db_suffix"]
 
 KINDS = ("training", "experiment")
 _FIELD_NAMES = {"participant_number": "participant number", "seed": "seed"}
@@ -58,6 +58,15 @@ def breakable(text: str, run: int = 16) -> str:
     label wraps only between words, and a long pasted code in a message ran past the form's narrow column and
     pushed the lines above it out of view."""
     return re.sub(rf"\S{{{run}}}(?=\S)", lambda m: m.group(0) + "\u200b", text)
+
+
+def with_db_suffix(path: str) -> str:
+    """A new study database typed without a file type (``study``) is ``study.db``: a file no program knows what to
+    open with is no study record.  A file that exists (or a folder, refused later) keeps its name."""
+    text = path.strip()
+    if not text or os.path.exists(text) or os.path.splitext(text)[1] or text.endswith(os.sep):
+        return path
+    return text + ".db"
 
 
 def article(word: str) -> str:
@@ -117,6 +126,8 @@ class SetupModel:
         """Change fields and re-validate (codes are normalised as storage stores them: a pasted ' P07 ' is P07)."""
         if isinstance(kwargs.get("code"), str):
             kwargs["code"] = normalise_code(str(kwargs["code"]))
+        if isinstance(kwargs.get("db_path"), str):
+            kwargs["db_path"] = with_db_suffix(str(kwargs["db_path"]))
         if "participant_number" in kwargs:
             self.number_suggested = False
         if "kind" in kwargs:
