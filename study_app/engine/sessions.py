@@ -263,9 +263,8 @@ class EngineSessions:
             now_ns = loop.clock.now_ns()
             live = self.runner if self.runner is not None and not self.runner.done else None
             if cmd.kind == "kill":
-                if live is not None:  # the record says the engine's death was a rehearsal
-                    store_rehearsal_plan(live, "kill now", now_ns - loop.t0_ns)
-                    live.recorder.flush()
+                if live is not None:  # the record says the engine's death was a rehearsal, and when it came
+                    _store_kill(live, "kill now", now_ns - loop.t0_ns)
                 kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig.inject_fault(cmd.kind, now_ns)
             if live is not None:  # in a session: its record says it was rehearsed
@@ -291,6 +290,7 @@ class EngineSessions:
             eng.rig.inject_fault(kind, eng.loop.t0_ns + at_ns)
 
         def kill() -> None:
+            _store_kill(runner, str(plan), eng.loop.clock.now_ns() - eng.loop.t0_ns)
             kill_hard(os.getpid())
 
         def cancel(kind: str, at_ns: int) -> None:
@@ -353,6 +353,15 @@ class EngineSessions:
         if not path:
             raise StorageError("study database: no file given")
         return StudyDatabase(path)
+
+
+def _store_kill(runner: SessionRunner, what: str, t_ns: int) -> None:
+    """The record says, committed before the engine dies, that its death is the rehearsal ``what`` and when it came
+    (the plan stored earlier says only that it was planned)."""
+    rehearsal_note(runner)(t_ns, f"{what}: the engine process is killed now, as a crash would kill it -- a rehearsal "
+                                 "on the simulated rig, not a crash or a device failure; the session is left "
+                                 "interrupted here, to be resumed")
+    runner.recorder.flush()
 
 
 def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig) -> None:
