@@ -408,7 +408,7 @@ CASES: list[Case] = [
     Case("no command", (), "the following arguments are required: COMMAND"),
     Case("a choice with a line break", ("sim", "--clock", "real\nvirtual"), "invalid choice: 'real\\nvirtual'"),
     Case("--resume with a bad participant code", ("run", "--db", "{d}/good.db", "--resume", "P01; DROP TABLE trials"),
-         "participant code = 'P01; DROP TABLE trials': must be 1–32 characters", {"good.db": good_db}),
+         "--resume: 'P01; DROP TABLE trials': must be 1–32 characters", {"good.db": good_db}),
     # -- study databases ----------------------------------------------------------------------------------------
     Case("database: participant already has a session",
          ("run", "--participants", "1", "--seed", "0", "--protocol", "{d}/tiny.toml", "--db", "{d}/good.db"),

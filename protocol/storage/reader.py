@@ -291,6 +291,8 @@ class StudyReader:
     def trial_ends(self, session_id: int) -> dict[int, tuple[int, int]]:
         """Each recorded trial's end: ``{trial_index: (segment, last_tick)}`` (its last record, the one its metrics
         end on)."""
+        if "last_tick" not in self._has_columns("trials"):
+            return {}  # a file of schema version 1 or 2: no recording, no ticks
         return {int(i): (int(s), int(t)) for i, s, t in self.conn.execute(
             "SELECT trial_index, segment, last_tick FROM trials WHERE session_id = ? AND last_tick IS NOT NULL",
             (int(session_id),))}

@@ -20,7 +20,7 @@ __all__ = ["REASON_MIN_CHARS", "SessionControl", "reason_refusal"]
 
 #: The shortest reason a start that deviates from the protocol (without training, without calibration) is given:
 #: a few words -- "x" tells whoever reads the report nothing.
-REASON_MIN_CHARS = 10
+REASON_MIN_CHARS = 8
 
 
 def reason_refusal(reason: str) -> str:

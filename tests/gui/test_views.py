@@ -49,7 +49,7 @@ def test_progress_view_follows_the_session(qtbot):
     s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 20, "GENTLE", 0.6, "off"))
     s.set_time(4.0)
-    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF ·  9.0 s left"
+    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF · times out in 9.0 s"
     assert view.count.full_text() == "0 of 20 trials done · at most 5 min left"
 
 
