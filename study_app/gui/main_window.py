@@ -317,7 +317,7 @@ class ExperimenterWindow(QMainWindow):
                 elif w is self.participant_window:  # one monitor: beside this window, never over its controls
                     placement.place_beside(w, self, self.left_column, PARTICIPANT_BESIDE_SIZE)
                 else:
-                    placement.place(w, size, self.screen())
+                    placement.place_over(w, size, self)  # over this window, not the participant screen beside
         if w is self.participant_window:
             placement.keep_above(w, self)
         _show(w, activate)

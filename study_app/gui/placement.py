@@ -12,7 +12,8 @@ from PySide6.QtGui import QGuiApplication, QScreen
 from PySide6.QtWidgets import QWidget
 
 __all__ = ["BESIDE_MIN", "centre_on_a_screen", "fit_size", "keep_above", "leave_room_beside", "onto_a_screen",
-           "other_screen", "over_the_older_plots", "place", "place_beside", "restore", "save", "side_by_side"]
+           "other_screen", "over_the_older_plots", "place", "place_beside", "place_over", "restore", "save",
+           "side_by_side"]
 
 #: A restored window must show at least this much of itself on some screen, px (else it is placed afresh).
 _MIN_VISIBLE = 120
@@ -141,6 +142,18 @@ def leave_room_beside(main: QWidget, preferred: QSize) -> None:
     if layout is not None and layout[0] != main.frameGeometry():
         main.resize(layout[0].width() - extra.width(), layout[0].height() - extra.height())
         main.move(layout[0].topLeft())
+
+
+def place_over(window: QWidget, preferred: QSize, main: QWidget) -> None:
+    """Size ``window`` to fit ``main``'s screen and centre it over ``main`` (kept on the screen): a window of the
+    experimenter's (the rig view, the calibration window) opens over the experimenter's window, not over a
+    participant screen beside it."""
+    place(window, preferred, _screen_of(main))
+    avail, frame = _screen_of(main).availableGeometry(), window.frameGeometry()
+    centre = main.frameGeometry().center()
+    x = min(max(centre.x() - frame.width() // 2, avail.left()), avail.right() + 1 - frame.width())
+    y = min(max(centre.y() - frame.height() // 2, avail.top()), avail.bottom() + 1 - frame.height())
+    window.move(x, y)
 
 
 def onto_a_screen(window: QWidget) -> None:

@@ -110,6 +110,19 @@ class QtCueWait(QWidget):
         self.help.setVisible(bool(w.help))
         self.button.setText(self._actions.get(w.action, ""))
         self.button.setVisible(bool(w.action))
+        self._fit()
+
+    def resizeEvent(self, event) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._fit()
+
+    def _fit(self) -> None:
+        """Each wrapped line as tall as its text at its width: a nested layout sized a long reason for a wider
+        label and cut its last line ("… check the machine's load and the" without "devices, then Resume")."""
+        for label in (self.label, self.help):
+            height = label.heightForWidth(label.width()) if label.isVisibleTo(self) and label.width() > 0 else 0
+            if height != label.minimumHeight():
+                label.setMinimumHeight(max(0, height))
 
 
 class QtProgress(QWidget):

@@ -206,3 +206,21 @@ def test_help_about_names_the_version_the_commit_and_the_paper():
 
     text = about_text()
     assert version_text() in text and "Shaker and M. S. Erden" in text and "Robotic Surgery Training" in text
+
+
+def test_the_experimenter_s_other_windows_open_over_its_window_not_the_participant_screen(qtbot):
+    """Seen at 1920×1080: the rig view opened centred on the screen, over the participant screen beside the window."""
+    from PySide6.QtWidgets import QWidget
+
+    from study_app.gui.placement import place_over
+
+    main, rig = QWidget(), QWidget()
+    qtbot.addWidget(main)
+    qtbot.addWidget(rig)
+    avail = main.screen().availableGeometry()
+    main.resize(avail.width() // 2, avail.height() // 2)
+    main.move(avail.topLeft())
+    main.show()
+    qtbot.waitExposed(main)
+    place_over(rig, QSize(avail.width() // 4, avail.height() // 4), main)
+    assert main.frameGeometry().contains(rig.frameGeometry().center()) and avail.contains(rig.frameGeometry())

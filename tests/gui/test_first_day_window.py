@@ -132,3 +132,34 @@ def test_the_fault_log_says_when_one_way_and_whose_session_each_line_is():
     assert h.fault_log == ["— session 3 (P01 experiment) started —", "session 3, 2.500 s  fault: SENSOR_STALE",
                            "no session, engine clock 20.000 s  fault: POSE_STALE",
                            "— session 4 (P02 training) started —"]
+
+
+def test_the_banner_shows_a_long_reason_whole(qtbot):
+    """Seen in the real window at 1366×768: the banner cut the last line of the runner's long reason."""
+    from PySide6.QtWidgets import QVBoxLayout, QWidget
+
+    from study_app.gui.session_views import QtCueWait
+    from study_app.models.cue_wait import CueWait
+
+    from PySide6.QtWidgets import QTableWidget
+
+    app = AppModel()
+    holder = QWidget()  # the Trials tab: the count, the banner, the table taking the rest
+    qtbot.addWidget(holder)
+    lay = QVBoxLayout(holder)
+    lay.setContentsMargins(0, 0, 0, 0)
+    lay.setSpacing(2)
+    banner = QtCueWait(app.cue)
+    lay.addWidget(banner)
+    lay.addWidget(QTableWidget(5, 7), 1)
+    holder.resize(620, 190)
+    holder.show()
+    qtbot.waitExposed(holder)
+    app.cue.wait = CueWait("error", "3 trials in a row were not delivered as designed (the last: gap: no loop record "
+                           "for 8.8 ms (limit 5 ms)); the rig or the machine cannot hold the designed condition: "
+                           "paused — check the machine's load and the devices, then Resume", action="resume",
+                           help="Resume (Space) once the cause is dealt with; Devices & health says whether this "
+                                "computer is too busy for the loop.")
+    app.cue.changed.emit()
+    for label in (banner.label, banner.help):
+        qtbot.waitUntil(lambda lb=label: lb.height() >= lb.heightForWidth(lb.width()), timeout=5_000)
