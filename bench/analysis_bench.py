@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from bench.source_trees import check_tree, source_env
 from foundation.parallel import default_workers
 from protocol.storage import connect_readonly
 
@@ -105,7 +106,8 @@ def _make_study(db: str, participants: int) -> float:
 
 def _read_all_samples(db: str) -> tuple[float, int]:
     """Read every analysed trial's task force as the report does, in this process: (seconds, samples)."""
-    from analysis.reading.load import load_study, read_task_force, recorded_where
+    from analysis.reading.load import load_study, recorded_where
+    from analysis.reading.recorded import read_task_force
 
     inc = load_study([db]).included
     t0 = time.perf_counter()
@@ -120,30 +122,15 @@ def _read_all_samples(db: str) -> tuple[float, int]:
     return time.perf_counter() - t0, n
 
 
-def _source_env(source: str | None) -> dict[str, str] | None:
-    """The environment that puts the source tree ``source`` first on the import path (None: ours)."""
-    if source is None:
-        return None
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([os.path.abspath(source),
-                                                         os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
-
-
 def _report_wall(db: str, out: str, source: str | None = None) -> float:
     """One ``haptic-study report`` in a fresh process: ours, or the source tree ``source``'s (its code first on
     the import path, this interpreter and its installed libraries).  It runs in the output's folder: ``python -m``
     puts the working directory before PYTHONPATH, so run from our checkout the "reference" would be our code."""
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "study_app.cli", "report", "--db", os.path.abspath(db), "--out", out],
-                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_source_env(source),
+                   check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=source_env(source),
                    cwd=os.path.dirname(os.path.abspath(out)))
     return time.perf_counter() - t0
-
-
-def _imported_from(source: str | None, cwd: str) -> str:
-    """Where a fresh process set up as :func:`_report_wall` sets it up imports ``study_app`` from."""
-    out = subprocess.run([sys.executable, "-c", "import study_app; print(study_app.__file__)"], check=True,
-                         capture_output=True, text=True, env=_source_env(source), cwd=cwd)
-    return out.stdout.strip()
 
 
 def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
@@ -153,15 +140,28 @@ def _report_walls(db: str, tmp: str, tag: str, repeats: int) -> list[float]:
 def _reference_walls(db: str, tmp: str, source: str, repeats: int) -> tuple[list[float], list[float]]:
     """Our report and the reference tree's on the same database, run in turn (ours, theirs, ours, …) so a busy
     spell of the machine falls on both alike: (ours, theirs)."""
-    where = _imported_from(source, tmp)
-    if not os.path.abspath(where).startswith(os.path.join(os.path.abspath(source), "")):
-        raise RuntimeError(f"--reference {source}: its report would import study_app from {where}, not from the tree "
-                           "(is it a source tree of haptic-study?)")
+    check_tree(source, tmp, "--reference")
     ours, theirs = [], []
     for k in range(repeats):
         ours.append(_report_wall(db, os.path.join(tmp, f"report-ours{k}")))
         theirs.append(_report_wall(db, os.path.join(tmp, f"report-ref{k}"), source))
     return ours, theirs
+
+
+def _study_facts(db: str) -> tuple[tuple[int, int, int], bool]:
+    """(samples, trials, participants) of the analysed experiment trials, and whether the study is recorded
+    (schema version 3's blocks) rather than in rows."""
+    c = connect_readonly(db)
+    try:
+        samples = c.execute(
+            "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "
+            "JOIN sessions s USING (session_id) WHERE s.kind = 'experiment' AND t.outcome != 'aborted'"
+        ).fetchone()
+        recorded = c.execute("PRAGMA user_version").fetchone()[0] >= 3 and \
+            c.execute("SELECT COUNT(*) FROM recordings").fetchone()[0] > 0
+    finally:
+        c.close()
+    return samples, bool(recorded)
 
 
 def run_report_bench(db: str | None = None, participants: int = 10, stats_participants: int = 10_000,
@@ -197,16 +197,7 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
             say(f"simulating a {participants}-participant study ...")
             db = os.path.join(tmp, "study.db")
             made_s = _make_study(db, participants)
-        c = connect_readonly(db)
-        try:
-            samples = c.execute(
-                "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "
-                "JOIN sessions s USING (session_id) WHERE s.kind = 'experiment' AND t.outcome != 'aborted'"
-            ).fetchone()
-            recorded = c.execute("PRAGMA user_version").fetchone()[0] >= 3 and \
-                c.execute("SELECT COUNT(*) FROM recordings").fetchone()[0] > 0
-        finally:
-            c.close()
+        samples, recorded = _study_facts(db)
         rows_db = None
         if recorded:
             say("writing the same study in the row format of versions 1 and 2 (replaying every session) ...")

@@ -16,6 +16,7 @@ import argparse
 import json
 import os
 import sys
+from collections.abc import Callable
 
 from study_app.cli.argtypes import add_command, positive_seconds, real_number, whole_number
 from study_app.cli.error import CliError
@@ -44,14 +45,19 @@ def _add_pipeline(bsub: argparse._SubParsersAction) -> None:
                      "haptic-study bench pipeline --loop-seconds 15 --explain")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
     bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"),
-                    default=30.0,
-                    help="real time to run the loop (default 30; 0 skips)")
+                    default=None,
+                    help="real time to run the loop (default 30, with --reference-tree 0; 0 skips)")
     bp.add_argument("--explain", action="store_true",
                     help="name the cause of every loop tick over 100 µs late (costs the loop ~30 µs per tick)")
     bp.add_argument("--reference", action="store_true",
                     help="then run an empty loop as long: the machine's own floor for the loop figures")
     bp.add_argument("--ticks", type=whole_number("--ticks", 2000, 10_000_000), default=20_000,
                     help="samples for the cost benchmark")
+    bp.add_argument("--reference-tree", default=None, metavar="TREE",
+                    help="a source tree of another version (e.g. a git worktree of main): its per-tick figures are "
+                         "measured in turn with ours, in fresh processes, in the same run")
+    bp.add_argument("--rounds", type=whole_number("--rounds", 1, 100), default=5,
+                    help="with --reference-tree: rounds of ours and theirs in turn (default 5)")
     bp.set_defaults(handler=_cmd_pipeline)
 
 
@@ -61,14 +67,30 @@ def _cmd_pipeline(args: argparse.Namespace) -> int:
     def say(msg: str) -> None:
         _say(f"{msg} ...")
 
+    if args.reference_tree is not None:
+        return _pipeline_against(args, say)
     result = run_pipeline_bench(
-        loop_seconds=args.loop_seconds, ticks=args.ticks, progress=say, explain=args.explain,
-        reference=args.reference,
+        loop_seconds=30.0 if args.loop_seconds is None else args.loop_seconds, ticks=args.ticks, progress=say,
+        explain=args.explain, reference=args.reference,
     )
     if args.json:
         print(json.dumps(result))
     else:
         print(format_pipeline_bench(result))
+    return 0
+
+
+def _pipeline_against(args: argparse.Namespace, say: Callable[[str], None]) -> int:
+    from bench.pipeline_reference import format_reference, run_reference
+
+    tree = args.reference_tree
+    if not os.path.isfile(os.path.join(tree, "bench", "pipeline_bench.py")):
+        raise CliError(f"--reference-tree = {tree!r}: not a haptic-study source tree (no bench/pipeline_bench.py)")
+    if args.explain or args.reference:
+        raise CliError("--explain and --reference apply to a run without --reference-tree")
+    result = run_reference(tree, rounds=args.rounds, loop_seconds=args.loop_seconds or 0.0, ticks=args.ticks,
+                           progress=say)
+    print(json.dumps(result) if args.json else format_reference(result))
     return 0
 
 

@@ -59,7 +59,8 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("foundation.platform_support",), ("foundation",),
     ("pipeline", "pipeline.core"), ("pipeline.force",), ("pipeline.devices",), ("pipeline.commissioning",),
     ("pipeline.backends",), ("pipeline.runtime",), ("pipeline.sim", "pipeline.settings"), ("pipeline.assembly",),
-    ("protocol", "protocol.study"), ("protocol.recording",), ("protocol.storage",), ("protocol.runner",),
+    ("protocol", "protocol.metrics"), ("protocol.study",), ("protocol.recording",), ("protocol.storage",),
+    ("protocol.runner",),
     ("analysis.reading",), ("analysis.stats",), ("analysis.plots",), ("analysis.planning",), ("analysis.report",),
     ("analysis.export",), ("analysis",),
     ("study_app",), ("study_app.engine.messages",), ("study_app.engine",), ("study_app.headless",),
@@ -77,6 +78,7 @@ SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
     "pipeline.assembly.engine",
+    "pipeline.assembly.sim_config",
     "study_app.engine.setup",
     "study_app.engine.sessions",
     "study_app.engine.commissioning",

@@ -7,7 +7,8 @@ import math
 
 import pytest
 
-from bench.pipeline_bench import format_pipeline_bench, measure_pipeline_cost, record_samples, run_pipeline_bench
+from bench.pipeline_bench import format_pipeline_bench, run_pipeline_bench
+from bench.pipeline_cost import measure_pipeline_cost, record_samples
 from pipeline.force.framework import FrameworkConfig
 
 
@@ -57,3 +58,23 @@ def test_the_empty_reference_loop_reports_the_loops_statistics() -> None:
     assert r["ticks"] == 50.0
     assert set(r) >= {"period_p50_us", "period_p99_us", "period_max_us", "abs_dev_p99_us", "periods_over_2ms"}
     assert r["scheduling"].startswith(("SCHED_FIFO/", "normal ("))
+
+
+def test_the_reference_tree_runs_its_own_code_in_turn_with_ours(tmp_path) -> None:
+    """``--reference-tree``: the other tree's bench really runs (a stand-in tree reports its own figures), ours runs
+    ours, and the medians and ratios are of each side's rounds."""
+    from bench.pipeline_reference import format_reference, run_reference
+
+    tree = tmp_path / "ref"
+    (tree / "study_app").mkdir(parents=True)
+    (tree / "study_app" / "__init__.py").write_text("")
+    (tree / "study_app" / "cli.py").write_text(
+        "import json\nprint(json.dumps({'ours_us_per_tick': 99.0, 'arms_tick_one_us': 99.0, "
+        "'arms_tick_two_us': 198.0, 'loop_abs_dev_p99_us': None}))\n")
+    r = run_reference(str(tree), rounds=2, ticks=2000)
+    f = r["figures"]
+    assert set(f) == {"ours_us_per_tick", "arms_tick_one_us", "arms_tick_two_us"}  # no loop: no loop figure
+    assert f["arms_tick_two_us"]["reference_rounds"] == [198.0, 198.0] and f["arms_tick_two_us"]["reference"] == 198.0
+    ours = f["ours_us_per_tick"]
+    assert len(ours["ours_rounds"]) == 2 and 0 < ours["ours"] < 99.0 and ours["ratio"] == round(ours["ours"] / 99.0, 3)
+    assert "ours against" in format_reference(r).lower()

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from bench.analysis_bench import _imported_from, _report_wall
+from bench.analysis_bench import _report_wall
+from bench.source_trees import imported_from
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -20,5 +21,5 @@ def test_the_reference_runs_its_own_tree_even_when_the_bench_starts_in_our_check
     out = tmp_path / "report-ref0"
     _report_wall(str(ROOT / "pyproject.toml"), str(out), str(tree))
     assert out.read_text() == str(tree / "study_app" / "cli.py")
-    assert _imported_from(str(tree), str(tmp_path)) == str(tree / "study_app" / "__init__.py")
-    assert Path(_imported_from(None, str(tmp_path))).resolve() == ROOT / "study_app" / "__init__.py"
+    assert imported_from(str(tree), str(tmp_path)) == str(tree / "study_app" / "__init__.py")
+    assert Path(imported_from(None, str(tmp_path))).resolve() == ROOT / "study_app" / "__init__.py"

@@ -209,6 +209,7 @@ def build_hardware_engine(
     shared_ring: bool = False,
     ring_seconds: float = 30.0,
     on_open: Any = None,
+    open_haptic: Any = None,
 ) -> Engine:
     """Open the real rig of a :class:`pipeline.settings.hardware.HardwareConfig` and assemble framework and loop.
 
@@ -220,7 +221,8 @@ def build_hardware_engine(
     contact), and a session on the real rig is refused until the payload step is done.  Each arm uses its own
     calibration file and tool, and has its own framework and ring; the loop follows the file's ``fault_policy``.
     Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
-    called before each device is opened (see :func:`pipeline.assembly.real_rig.build_real_rig`).
+    called before each device is opened, and ``open_haptic(settings, clock)``, if given, opens every arm's haptic
+    device in place of its model's backend (see :func:`pipeline.assembly.real_rig.build_real_rig`).
 
     Raises
     ------
@@ -236,7 +238,7 @@ def build_hardware_engine(
     records = [f.tool(a.calibration_tool) if f is not None else None for a, f in zip(arms, files, strict=True)]
     tips = {a.name: r.tcp.tip_in_flange_m if r is not None and r.tcp is not None else None
             for a, r in zip(arms, records, strict=True)}
-    rig = build_real_rig(hardware, clk, on_open=on_open, arm_tips_m=tips)
+    rig = build_real_rig(hardware, clk, on_open=on_open, arm_tips_m=tips, open_haptic=open_haptic)
     pipelines: list[tuple[HapticFramework, RingBuffer]] = []
     calibrations: list[PayloadCalibration] = []
     for a, r, dev in zip(arms, records, rig.real_arms, strict=True):

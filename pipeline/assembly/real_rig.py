@@ -1,12 +1,15 @@
 """The real rig: the devices a :class:`~pipeline.settings.hardware.HardwareConfig` names, opened.
 
-:func:`build_real_rig` opens every arm's devices (Net F/T, UR over RTDE, Touch,
-optional jaw) into a :class:`RealRig`, which satisfies :class:`pipeline.devices.rig.Rig`
-and lists its arms (:class:`RealArm`).  With two or more arms, every arm's Touch
-is opened by its OpenHaptics device name into one servo scheduler
-(:class:`pipeline.backends.touch.TouchScheduler`), started once every arm's Touch
-is open.  If one device fails, the ones already opened are closed again and the
-error names the device (and, with more than one arm, the arm).
+:func:`build_real_rig` opens every arm's devices (Net F/T, the robot, the haptic
+device, optional jaw) into a :class:`RealRig`, which satisfies
+:class:`pipeline.devices.rig.Rig` and lists its arms (:class:`RealArm`).  The
+robot and the haptic device are opened through their models' backends
+(:mod:`pipeline.devices.registry`), imported only now: a UR over RTDE, a Touch
+through OpenHaptics -- two or more arms' Touch devices by their OpenHaptics names
+into one servo scheduler (:class:`pipeline.backends.touch.TouchBackend`), started
+once every arm's Touch is open.  If one device fails, the ones already opened
+are closed again and the error names the device (and, with more than one arm,
+the arm).
 """
 
 from __future__ import annotations
@@ -15,8 +18,9 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from pipeline.core.clock import Clock, MonotonicClock
-from pipeline.devices.interfaces import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot
-from pipeline.devices.rig import RigArm
+from pipeline.devices.interfaces import DeviceError, ForceSensor, HapticDevice, JawActuator, Robot, TcpServo
+from pipeline.devices.registry import HapticBackend, HapticConnection, haptic_model, robot_model
+from pipeline.devices.rig import FirstArmMembers, RigArm, arm_named
 from pipeline.force.frames import Vec3
 from pipeline.settings.hardware import (
     ArmSettings,
@@ -29,12 +33,12 @@ from pipeline.settings.hardware import (
     TeleopSettings,
 )
 
-__all__ = ["RealArm", "RealRig", "build_real_rig", "open_haptic", "open_jaw", "open_robot", "open_sensor",
-           "open_servo", "open_touch_scheduler", "teleop_config"]
+__all__ = ["HapticOpener", "RealArm", "RealRig", "build_real_rig", "haptic_backends", "open_haptic", "open_jaw",
+           "open_robot", "open_sensor", "open_servo", "teleop_config"]
 
 
 class RealArm:
-    """One arm's opened devices: its sensor, robot, Touch, optional jaw and teleoperation driver."""
+    """One arm's opened devices: its sensor, robot, haptic device, optional jaw and teleoperation driver."""
 
     def __init__(
         self, name: str, sensor: ForceSensor, robot: Robot, haptic: HapticDevice, jaw: JawActuator | None = None,
@@ -78,7 +82,7 @@ class RealArm:
                       stop_motion=self.stop_motion)
 
 
-class RealRig:
+class RealRig(FirstArmMembers):
     """The devices of the real rig, satisfying :class:`pipeline.devices.rig.Rig`: its ``sensor``, ``robot``,
     ``haptic``, ``jaw``, ``teleop`` and ``on_buttons`` are the first arm's; ``arms`` lists every arm for the loop.
 
@@ -92,49 +96,17 @@ class RealRig:
         if not real_arms:
             raise ValueError("a rig needs at least one arm")
         self.real_arms: tuple[RealArm, ...] = tuple(real_arms)
-        self.first = self.real_arms[0]
+        self.first: RealArm = self.real_arms[0]
         self.arms: tuple[RigArm, ...] = tuple(a.rig_arm() for a in self.real_arms)
 
     def arm(self, name: str) -> RealArm:
         """The arm called ``name`` (KeyError naming the arms there are)."""
-        for a in self.real_arms:
-            if a.name == name:
-                return a
-        raise KeyError(f"no arm {name!r}; the rig's arms: {', '.join(a.name for a in self.real_arms)}")
-
-    @property
-    def sensor(self) -> ForceSensor:
-        """The first arm's F/T sensor."""
-        return self.first.sensor
-
-    @property
-    def robot(self) -> Robot:
-        """The first arm's robot."""
-        return self.first.robot
-
-    @property
-    def haptic(self) -> HapticDevice:
-        """The first arm's Touch."""
-        return self.first.haptic
-
-    @property
-    def jaw(self) -> JawActuator | None:
-        """The first arm's jaw actuator."""
-        return self.first.jaw
+        return arm_named({a.name: a for a in self.real_arms}, name)
 
     @property
     def teleop(self) -> Any:
         """The first arm's teleoperation driver."""
         return self.first.teleop
-
-    @property
-    def on_buttons(self) -> Callable[[int, int], None] | None:
-        """The first arm's stylus-button hook (each arm's is its :attr:`RealArm.on_buttons`)."""
-        return self.first.on_buttons
-
-    @on_buttons.setter
-    def on_buttons(self, hook: Callable[[int, int], None] | None) -> None:
-        self.first.on_buttons = hook
 
     def advance(self, now_ns: int) -> None:
         """Every arm's :meth:`RealArm.advance`."""
@@ -156,7 +128,7 @@ class RealRig:
 
     def close(self) -> None:
         """Zero and release every device of every arm, a kind at a time: teleoperation first (every robot stops
-        before anything else goes away), then the Touch devices, robots, sensors and jaws; a failing close does
+        before anything else goes away), then the haptic devices, robots, sensors and jaws; a failing close does
         not skip the others."""
         errors = []
         for kind in ("teleop", "haptic", "robot", "sensor", "jaw"):
@@ -187,49 +159,45 @@ def open_sensor(cfg: SensorSettings, clock: Clock) -> ForceSensor:
 
 
 def open_robot(cfg: RobotSettings, clock: Clock, tip_in_flange_m: Vec3 | None = None) -> Robot:
-    """Connect to the UR controller described by ``cfg`` (read only).
+    """Connect to the robot ``cfg`` describes, through its model's backend (read only).
 
     With ``tip_in_flange_m`` (a TCP calibration on record) the poses are moved from the pendant's TCP
     (``robot.tcp_offset_m``) to the calibrated tip.
     """
-    from pipeline.backends.ur import UrRtdeRobot
-
     corr = (0.0, 0.0, 0.0) if tip_in_flange_m is None else tuple(
         t - o for t, o in zip(tip_in_flange_m, cfg.tcp_offset_m, strict=True))
-    return UrRtdeRobot(cfg.host, frequency_hz=cfg.frequency_hz, clock=clock, connect_timeout_s=cfg.connect_timeout_s,
-                       tcp_correction_m=corr)  # type: ignore[arg-type]  # three items: mypy cannot count a generator
+    return robot_model(cfg.model).backend_for().open_robot(
+        cfg, clock, corr)  # type: ignore[arg-type]  # three items: mypy cannot count a generator
 
 
 def open_servo(
     robot: RobotSettings, teleop: TeleopSettings, clock: Clock,
     control_factory: Callable[[str, float], Any] | None = None
-) -> Any:
-    """Take control of the UR for teleoperation (uploads ur_rtde's control script).
+) -> TcpServo:
+    """Take control of the robot for teleoperation, through its model's backend (a UR: uploads ur_rtde's script).
 
-    ``control_factory`` replaces ur_rtde's ``RTDEControlInterface`` (see
-    :class:`pipeline.backends.ur_control.UrRtdeServo`); None uses ur_rtde.
+    ``control_factory`` replaces the vendor's control interface (a UR's ``RTDEControlInterface``, see
+    :class:`pipeline.backends.ur_control.UrRtdeServo`); None uses the vendor's.
     """
-    from pipeline.backends.ur_control import UrRtdeServo
-
-    return UrRtdeServo(
-        robot.host, frequency_hz=robot.frequency_hz, clock=clock, connect_timeout_s=robot.connect_timeout_s,
-        control_timeout_s=teleop.control_timeout_s, lookahead_s=teleop.lookahead_s, gain=teleop.gain,
-        control_factory=control_factory,
-    )
+    return robot_model(robot.model).backend_for().open_servo(robot, teleop, clock, control_factory)
 
 
 def teleop_config(config: HardwareConfig | ArmSettings) -> Any:
-    """The :class:`pipeline.devices.teleop.TeleopConfig` of a teleop-mode hardware file (its first arm's) or arm."""
+    """The :class:`pipeline.devices.teleop.TeleopConfig` of a teleop-mode hardware file (its first arm's) or arm.
+
+    Targets go out once per controller cycle: the rate the file asks of the robot, ``-1`` being the robot model's
+    own (:meth:`pipeline.devices.registry.RobotModel.rate_hz`).
+    """
     from pipeline.devices.teleop import TeleopConfig
 
     t = config.teleop
     if t is None:
         where = f"arm {config.name!r}: " if isinstance(config, ArmSettings) else ""
         raise HardwareError(f"{config.source}: {where}teleop = None: robot.mode = 'teleop' needs a [teleop] table")
-    freq = config.robot.frequency_hz
+    rate_hz = robot_model(config.robot.model).rate_hz(config.robot.frequency_hz)
     return TeleopConfig(
         workspace_min_m=t.workspace_min_m, workspace_max_m=t.workspace_max_m, max_speed_m_s=t.max_speed_m_s,
-        motion_scale=t.motion_scale, period_s=1.0 / freq if freq > 0 else 0.008,
+        motion_scale=t.motion_scale, period_s=1.0 / rate_hz,
         rot_haptic_base=config.framework.rot_haptic_base, deadman_button=t.deadman_button,
         clutch_button=t.clutch_button,
         stylus_max_age_s=t.stylus_max_age_s, pose_max_age_s=t.pose_max_age_s,
@@ -238,22 +206,16 @@ def teleop_config(config: HardwareConfig | ArmSettings) -> Any:
 
 
 def open_haptic(cfg: HapticSettings, clock: Clock) -> HapticDevice:
-    """Open the Touch (needs OpenHaptics and the ``touch`` extra)."""
-    from pipeline.backends.touch import TouchHapticDevice
-
-    return TouchHapticDevice(cfg.device_name, clock=clock, command_timeout_s=cfg.command_timeout_s,
-                             dll_dir=cfg.dll_dir)
-
-
-_OPEN_HAPTIC = open_haptic  # the module's own: see _Touches
-
-
-def open_touch_scheduler(dll_dir: str | None) -> Any:
-    """One OpenHaptics servo scheduler for every arm's Touch (:class:`pipeline.backends.touch.TouchScheduler`;
-    needs OpenHaptics and the ``touch`` extra)."""
-    from pipeline.backends.touch import TouchScheduler
-
-    return TouchScheduler(dll_dir=dll_dir)
+    """Open one haptic device alone, through its model's backend (a Touch needs OpenHaptics and the ``touch``
+    extra)."""
+    backend = haptic_model(cfg.model).backend_for([cfg])
+    dev = backend.open(cfg, clock)
+    try:
+        backend.start()
+    except DeviceError:
+        dev.close()
+        raise
+    return dev
 
 
 def open_jaw(cfg: JawSettings) -> JawActuator:
@@ -263,42 +225,75 @@ def open_jaw(cfg: JawSettings) -> JawActuator:
     return SerialJawActuator(cfg.port, baud=cfg.baud, ready_timeout_s=cfg.ready_timeout_s)
 
 
-class _Touches:
-    """Every arm's Touch: one arm's opened alone (:func:`open_haptic`, the seam the app's tests replace); two or
-    more into one servo scheduler (:func:`open_touch_scheduler`), made when the first is opened and started once
-    every one is -- unless :func:`open_haptic` was replaced, which then opens each."""
+#: Opens one arm's haptic device: ``opener(settings, clock)`` (:func:`open_haptic`'s signature).
+HapticOpener = Callable[[HapticSettings, Clock], HapticDevice]
 
-    def __init__(self, arms: Sequence[ArmSettings], clock: Clock) -> None:
-        # a replaced open_haptic (the app's HostConfig.haptic_factory, a test's stand-in) opens every arm's Touch
-        self.shared = len(arms) > 1 and open_haptic is _OPEN_HAPTIC
-        self.clock = clock
-        self.dll_dir = next((a.haptic.dll_dir for a in arms if a.haptic.dll_dir is not None), None)
-        self.scheduler: Any = None
 
-    def open(self, cfg: HapticSettings) -> HapticDevice:
-        if not self.shared:
-            return open_haptic(cfg, self.clock)
-        if self.scheduler is None:
-            self.scheduler = open_touch_scheduler(self.dll_dir)
-        dev: HapticDevice = self.scheduler.open(cfg.device_name, self.clock, cfg.command_timeout_s)
-        return dev
+class _OpenEach:
+    """A haptic backend that opens each arm's device alone with one opener (what :func:`build_real_rig` is given in
+    place of the models' backends: the app's stand-in for the Touch on machines without one)."""
+
+    start_step: str | None = None
+
+    def __init__(self, opener: HapticOpener) -> None:
+        self.opener = opener
+
+    def open(self, settings: HapticConnection, clock: Clock) -> HapticDevice:
+        assert isinstance(settings, HapticSettings)
+        return self.opener(settings, clock)
 
     def start(self) -> None:
-        if self.scheduler is not None:
-            self.scheduler.start()
+        """Nothing to start: each device runs from its opening."""
+
+
+def haptic_backends(arms: Sequence[ArmSettings], open_haptic: HapticOpener | None = None) -> dict[str, HapticBackend]:
+    """The backend of each haptic model the arms name, opening every arm's device of that model; with
+    ``open_haptic``, that one opener for every arm instead."""
+    if open_haptic is not None:
+        each = _OpenEach(open_haptic)
+        return {a.haptic.model: each for a in arms}
+    by_model: dict[str, list[HapticSettings]] = {}
+    for a in arms:
+        by_model.setdefault(a.haptic.model, []).append(a.haptic)
+    return {key: haptic_model(key).backend_for(settings) for key, settings in by_model.items()}
+
+
+Step = tuple[str, str, Callable[[], Any]]
 
 
 def _arm_steps(arm: ArmSettings, clk: Clock, with_jaw: bool, tip: Vec3 | None,
-               touches: _Touches) -> list[tuple[str, Callable[[], Any]]]:
-    """What to open for one arm, in order: ``(what, opener)``; the jaw only if configured and wanted."""
-    steps: list[tuple[str, Callable[[], Any]]] = [
-        ("force sensor", lambda: open_sensor(arm.sensor, clk)),
-        ("robot", lambda: open_robot(arm.robot, clk, tip)),
-        ("haptic device", lambda: touches.open(arm.haptic)),
+               haptic: HapticBackend) -> list[Step]:
+    """What to open for one arm, in order: ``(arm, what, opener)``; the jaw only if configured and wanted."""
+    steps: list[Step] = [
+        (arm.name, "force sensor", lambda: open_sensor(arm.sensor, clk)),
+        (arm.name, "robot", lambda: open_robot(arm.robot, clk, tip)),
+        (arm.name, "haptic device", lambda: haptic.open(arm.haptic, clk)),
     ]
     jaw_cfg = arm.jaw
     if with_jaw and jaw_cfg is not None:
-        steps.append(("jaw actuator", lambda: open_jaw(jaw_cfg)))
+        steps.append((arm.name, "jaw actuator", lambda: open_jaw(jaw_cfg)))
+    return steps
+
+
+def _start_steps(arms: Sequence[ArmSettings], backends: Mapping[str, HapticBackend]) -> list[Step]:
+    """Each haptic backend that starts its devices together once all are open: ``("", what (arms …), start)``."""
+    steps: list[Step] = []
+    for key, backend in backends.items():
+        if backend.start_step is not None:
+            names = ", ".join(a.name for a in arms if a.haptic.model == key)
+            steps.append(("", f"{backend.start_step} (arms {names})", backend.start))
+    return steps
+
+
+def _servo_steps(arms: Sequence[ArmSettings], clk: Clock,
+                 factory: Callable[[str, float], Any] | None) -> list[Step]:
+    """Every teleoperated arm's robot control, last: once everything else answered."""
+    steps: list[Step] = []
+    for a in arms:
+        if a.robot.mode == "teleop":
+            robot, t_settings = a.robot, a.teleop
+            assert t_settings is not None
+            steps.append((a.name, "robot control (teleoperation)", _servo_opener(robot, t_settings, clk, factory)))
     return steps
 
 
@@ -307,8 +302,7 @@ def _servo_opener(robot: RobotSettings, teleop: TeleopSettings, clk: Clock,
     return lambda: open_servo(robot, teleop, clk, factory)
 
 
-def _open_all(steps: list[tuple[str, str, Callable[[], Any]]], on_open: Callable[[str], None] | None,
-              multi: bool) -> dict[tuple[str, str], Any]:
+def _open_all(steps: list[Step], on_open: Callable[[str], None] | None, multi: bool) -> dict[tuple[str, str], Any]:
     """Run every ``(arm, what, opener)``; on a :class:`DeviceError` close what was opened (newest first) and raise
     one line naming the device, and with more than one arm the arm."""
     opened: dict[tuple[str, str], Any] = {}
@@ -330,6 +324,18 @@ def _open_all(steps: list[tuple[str, str, Callable[[], Any]]], on_open: Callable
     return opened
 
 
+def _real_arm(a: ArmSettings, opened: Mapping[tuple[str, str], Any], teleop: Any) -> RealArm:
+    """Arm ``a``'s opened devices as a :class:`RealArm`, with a teleoperation driver when its servo was opened."""
+    sensor, robot, haptic = (opened[(a.name, w)] for w in ("force sensor", "robot", "haptic device"))
+    servo = opened.get((a.name, "robot control (teleoperation)"))
+    driver = None
+    if servo is not None:
+        from pipeline.devices.teleop import TeleopController, TeleopDriver
+
+        driver = TeleopDriver(TeleopController(teleop), haptic, robot, servo)
+    return RealArm(a.name, sensor, robot, haptic, opened.get((a.name, "jaw actuator")), driver)
+
+
 def build_real_rig(
     config: HardwareConfig,
     clock: Clock | None = None,
@@ -339,13 +345,15 @@ def build_real_rig(
     control_factory: Callable[[str, float], Any] | None = None,
     tip_in_flange_m: Vec3 | None = None,
     arm_tips_m: Mapping[str, Vec3 | None] | None = None,
+    open_haptic: HapticOpener | None = None,
 ) -> RealRig:
     """Open every arm's devices into a :class:`RealRig`.
 
-    Arm by arm (the first first): the force sensor, the robot, the Touch, the jaw; with more than one arm the
-    Touch devices share one servo scheduler, started once all are open ("haptic servo scheduler").  Last, for
-    every arm with ``robot.mode = "teleop"``, the UR's control interface (once everything else answered), and a
-    :class:`pipeline.devices.teleop.TeleopDriver` attached to that arm.
+    Arm by arm (the first first): the force sensor, the robot, the haptic device, the jaw -- the robot and the haptic
+    device through their models' backends (:mod:`pipeline.devices.registry`).  A haptic backend that serves several
+    arms' devices from one servo scheduler (the Touch's) starts it once all are open ("haptic servo scheduler").
+    Last, for every arm with ``robot.mode = "teleop"``, the robot's control interface (once everything else
+    answered), and a :class:`pipeline.devices.teleop.TeleopDriver` attached to that arm.
 
     Parameters
     ----------
@@ -365,6 +373,9 @@ def build_real_rig(
         The first arm's calibrated tip (a TCP calibration on record): its robot's poses are reported there.
     arm_tips_m
         The calibrated tip per arm name (the first arm's here wins over ``tip_in_flange_m``).
+    open_haptic
+        Opens every arm's haptic device alone, in place of the models' backends (``opener(settings, clock)``;
+        the app's ``HostConfig.haptic_factory``); None: the backends.
 
     Raises
     ------
@@ -374,30 +385,11 @@ def build_real_rig(
     """
     clk = clock or MonotonicClock()
     arms = config.arms
-    multi = len(arms) > 1
     tips = {arms[0].name: tip_in_flange_m, **(arm_tips_m or {})}
     # refused before anything opens
-    tcfgs = {a.name: teleop_config(a if multi else config) for a in arms if a.robot.mode == "teleop"}
-    touches = _Touches(arms, clk)
-    steps = [(a.name, what, opener) for a in arms
-             for what, opener in _arm_steps(a, clk, with_jaw, tips.get(a.name), touches)]
-    if touches.shared:
-        steps.append(("", f"haptic servo scheduler (arms {', '.join(a.name for a in arms)})", touches.start))
-    for a in arms:
-        if a.name in tcfgs:
-            t_settings, robot = a.teleop, a.robot
-            assert t_settings is not None
-            steps.append((a.name, "robot control (teleoperation)",
-                          _servo_opener(robot, t_settings, clk, control_factory)))
-    opened = _open_all(steps, on_open, multi)
-    real = []
-    for a in arms:
-        sensor, robot_dev, haptic = (opened[(a.name, w)] for w in ("force sensor", "robot", "haptic device"))
-        servo = opened.get((a.name, "robot control (teleoperation)"))
-        driver = None
-        if servo is not None:
-            from pipeline.devices.teleop import TeleopController, TeleopDriver
-
-            driver = TeleopDriver(TeleopController(tcfgs[a.name]), haptic, robot_dev, servo)
-        real.append(RealArm(a.name, sensor, robot_dev, haptic, opened.get((a.name, "jaw actuator")), driver))
-    return RealRig(real)
+    tcfgs = {a.name: teleop_config(a if len(arms) > 1 else config) for a in arms if a.robot.mode == "teleop"}
+    backends = haptic_backends(arms, open_haptic)
+    steps = [step for a in arms for step in _arm_steps(a, clk, with_jaw, tips.get(a.name), backends[a.haptic.model])]
+    steps += _start_steps(arms, backends) + _servo_steps(arms, clk, control_factory)
+    opened = _open_all(steps, on_open, len(arms) > 1)
+    return RealRig([_real_arm(a, opened, tcfgs.get(a.name)) for a in arms])

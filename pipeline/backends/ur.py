@@ -28,15 +28,18 @@ import math
 import socket
 import threading
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.core.clock import Clock, MonotonicClock
 from pipeline.devices.interfaces import DeviceError, PoseSample
+from pipeline.devices.registry import DEFAULT_ROBOT_MODEL, RobotModel, robot_model
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, mat_mul, mat_vec, rotvec_to_matrix
 
 __all__ = [
     "RTDE_PORT",
     "UR3_DH",
+    "RtdeLink",
     "UrRtdeRobot",
     "check_rtde_frequency",
     "probe_tcp",
@@ -135,6 +138,51 @@ def rtde_interface(module: str, interface: str, host: str, frequency_hz: float, 
     return getattr(sdk, interface)(host, frequency_hz)
 
 
+def _default_model() -> RobotModel:
+    return robot_model(DEFAULT_ROBOT_MODEL)
+
+
+@dataclass(frozen=True, slots=True)
+class RtdeLink:
+    """One UR controller over RTDE: where it is and the rate asked of it (the pose stream and the servo each open one).
+
+    Attributes
+    ----------
+    host
+        Controller IP address.
+    frequency_hz
+        RTDE rate asked of the controller: up to 125 Hz on a CB3, 500 on an e-Series; -1 lets ur_rtde ask for the
+        controller's own rate.
+    model
+        The robot (:class:`pipeline.devices.registry.RobotModel`): what ``-1`` means on it (:attr:`rate_hz`).
+    clock
+        The loop's clock (sample timestamps, target ages).
+    connect_timeout_s
+        Bound of the TCP probe (and of the wait for the first pose).
+    port
+        Port of the TCP probe (ur_rtde itself always uses 30004).
+    """
+
+    host: str
+    frequency_hz: float = 125.0
+    model: RobotModel = field(default_factory=_default_model)
+    clock: Clock = field(default_factory=MonotonicClock)
+    connect_timeout_s: float = 2.0
+    port: int = RTDE_PORT
+
+    def __post_init__(self) -> None:
+        check_rtde_frequency(self.frequency_hz)
+
+    @property
+    def rate_hz(self) -> float:
+        """The rate the controller publishes at: ``frequency_hz``, or with -1 the model's control rate."""
+        return self.model.rate_hz(self.frequency_hz)
+
+    def require_reachable(self, purpose: str = "") -> None:
+        """:func:`require_reachable` of this controller's RTDE port."""
+        require_reachable(self.host, self.port, self.connect_timeout_s, purpose)
+
+
 def _default_factory(host: str, frequency_hz: float) -> Any:
     return rtde_interface("rtde_receive", "RTDEReceiveInterface", host, frequency_hz, "the UR backend")
 
@@ -144,14 +192,9 @@ class UrRtdeRobot:
 
     Parameters
     ----------
-    host
-        Controller IP address.
-    frequency_hz
-        RTDE output rate: 125 on a CB3, 500 on an e-Series; -1 lets ur_rtde pick.
-    clock
-        The loop's clock, for the host-side sample timestamps.
-    connect_timeout_s
-        Bound of the TCP probe and of the wait for the first pose.
+    link
+        The controller, the rate asked of it, the loop's clock (the host-side sample timestamps) and the bound of
+        the TCP probe and of the wait for the first pose.
     stale_after_s
         The controller timestamp not advancing this long marks the link stale
         (the loop's own 50 ms limit latches the fault; this drives reconnects).
@@ -162,8 +205,6 @@ class UrRtdeRobot:
     receive_factory
         ``factory(host, frequency_hz)`` returning an object with the
         ``RTDEReceiveInterface`` methods (default: ur_rtde's).
-    port
-        Port of the TCP probe (ur_rtde itself always uses 30004).
     tcp_correction_m
         Added to the reported TCP, in the TCP's own (flange-aligned) frame, m: the calibrated tip minus the
         TCP set on the pendant (:mod:`pipeline.commissioning.tcp`), so the poses the app uses are at the instrument tip.
@@ -171,26 +212,21 @@ class UrRtdeRobot:
 
     def __init__(
         self,
-        host: str,
+        link: RtdeLink,
         *,
-        frequency_hz: float = 125.0,
-        clock: Clock | None = None,
-        connect_timeout_s: float = 2.0,
         stale_after_s: float = 0.05,
         reconnect_after_s: float = 0.5,
         min_backoff_s: float = 0.2,
         max_backoff_s: float = 5.0,
         receive_factory: Callable[[str, float], Any] | None = None,
-        port: int = RTDE_PORT,
         tcp_correction_m: Vec3 = (0.0, 0.0, 0.0),
     ) -> None:
-        check_rtde_frequency(frequency_hz)
-        self.host = host
+        self.link = link
+        self.host = link.host
         self.tcp_correction_m: Vec3 = tuple(float(v) for v in tcp_correction_m)  # type: ignore[assignment]  # three items: mypy cannot count a generator
-        self.port = port
-        self.frequency_hz = float(frequency_hz)
-        self.clock: Clock = clock or MonotonicClock()
-        self.connect_timeout_s = connect_timeout_s
+        self.frequency_hz = float(link.frequency_hz)
+        self.clock: Clock = link.clock
+        self.connect_timeout_s = link.connect_timeout_s
         self.stale_after_s = stale_after_s
         self.reconnect_after_s = reconnect_after_s
         self.min_backoff_s = min_backoff_s
@@ -207,10 +243,11 @@ class UrRtdeRobot:
         self._rtde = self._connect()
         self._thread = threading.Thread(target=self._monitor, name="ur-rtde-monitor", daemon=True)
         self._thread.start()
-        if not self.wait_for_samples(1, connect_timeout_s):
+        if not self.wait_for_samples(1, self.connect_timeout_s):
             self.close()
             raise DeviceError(
-                f"the UR controller at {host} accepted RTDE but sent no robot state within {connect_timeout_s:g} s; "
+                f"the UR controller at {self.host} accepted RTDE but sent no robot state within "
+                f"{self.connect_timeout_s:g} s; "
                 "is the robot powered on and the controller booted?"
             )
 
@@ -250,7 +287,7 @@ class UrRtdeRobot:
 
     # -- internals ----------------------------------------------------------------------------
     def _connect(self) -> Any:
-        require_reachable(self.host, self.port, self.connect_timeout_s)
+        self.link.require_reachable()
         try:
             return self._factory(self.host, self.frequency_hz)
         except RuntimeError as exc:
@@ -264,8 +301,7 @@ class UrRtdeRobot:
             self._new.notify_all()
 
     def _monitor(self) -> None:
-        rate = self.frequency_hz if self.frequency_hz > 0 else 500.0
-        poll_s = 0.5 / rate  # twice the controller rate: a new state is seen within half a cycle
+        poll_s = 0.5 / self.link.rate_hz  # twice the controller rate: a new state is seen within half a cycle
         clock = self.clock
         last_ts: float | None = None
         last_change_ns = clock.now_ns()
@@ -325,7 +361,7 @@ class UrRtdeRobot:
         backoff = self.min_backoff_s
         while not self._stop.wait(backoff):
             self._set_state("reconnecting")
-            why = probe_tcp(self.host, self.port, min(self.connect_timeout_s, backoff))
+            why = probe_tcp(self.host, self.link.port, min(self.connect_timeout_s, backoff))
             if why is None:
                 try:
                     # A fresh interface, never ur_rtde's reconnect(): on a link that is up but silent (a controller

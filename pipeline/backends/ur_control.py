@@ -27,8 +27,8 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.backends.ur import RTDE_PORT, check_rtde_frequency, require_reachable, rtde_interface
-from pipeline.core.clock import Clock, MonotonicClock
+from pipeline.backends.ur import RtdeLink, rtde_interface
+from pipeline.core.clock import Clock
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.frames import Mat3, Vec3, matrix_to_rotvec
 
@@ -45,14 +45,10 @@ class UrRtdeServo:
 
     Parameters
     ----------
-    host
-        Controller IP address.
-    frequency_hz
-        RTDE rate (125 on a CB3, 500 on an e-Series; -1 lets ur_rtde pick, the period is then taken as 8 ms).
-    clock
-        Clock for the target ages (the loop's clock).
-    connect_timeout_s
-        Bound of the TCP probe.
+    link
+        The controller, the rate asked of it (its period is each ``servoL``'s time; with -1 the robot model's
+        control period, :attr:`pipeline.backends.ur.RtdeLink.rate_hz`), the loop's clock (the target ages) and the
+        bound of the TCP probe.
     control_timeout_s
         Bound of ``RTDEControlInterface`` construction (it uploads and starts a script).
     lookahead_s, gain
@@ -64,33 +60,26 @@ class UrRtdeServo:
     control_factory
         ``factory(host, frequency_hz)`` returning an object with the
         ``RTDEControlInterface`` methods used here (default: ur_rtde's).
-    port
-        Port of the TCP probe (ur_rtde always uses 30004).
     """
 
     def __init__(
         self,
-        host: str,
+        link: RtdeLink,
         *,
-        frequency_hz: float = 125.0,
-        clock: Clock | None = None,
-        connect_timeout_s: float = 2.0,
         control_timeout_s: float = 5.0,
         lookahead_s: float = 0.1,
         gain: float = 300.0,
         target_timeout_s: float = 0.05,
         stop_deceleration_m_s2: float = 10.0,
         control_factory: Callable[[str, float], Any] | None = None,
-        port: int = RTDE_PORT,
     ) -> None:
-        check_rtde_frequency(frequency_hz)
         if not 0.03 <= lookahead_s <= 0.2:
             raise ValueError(f"lookahead_s = {lookahead_s!r}: servoL allows 0.03 to 0.2 s")
         if not 100 <= gain <= 2000:
             raise ValueError(f"gain = {gain!r}: servoL allows 100 to 2000")
-        self.host = host
-        self.period_s = 1.0 / frequency_hz if frequency_hz > 0 else 0.008
-        self.clock: Clock = clock or MonotonicClock()
+        self.host = link.host
+        self.period_s = 1.0 / link.rate_hz
+        self.clock: Clock = link.clock
         self.lookahead_s = lookahead_s
         self.gain = gain
         self.target_timeout_s = target_timeout_s
@@ -105,8 +94,9 @@ class UrRtdeServo:
         self.servoing = False
         self.servo_commands = 0
         self.servo_stops = 0
-        require_reachable(host, port, connect_timeout_s, " for teleoperation")
-        self._ctrl = self._construct(control_factory or _default_factory, host, frequency_hz, control_timeout_s)
+        link.require_reachable(" for teleoperation")
+        self._ctrl = self._construct(control_factory or _default_factory, link.host, link.frequency_hz,
+                                     control_timeout_s)
         self._thread = threading.Thread(target=self._work, name="ur-servo", daemon=True)
         self._thread.start()
 

@@ -1,3 +1,3 @@
-"""The devices: their interfaces (what the loop sees), the rig, the real rig opened from the hardware settings, the
-Touch's output, the jaw and teleoperation. The simulated twins are in :mod:`pipeline.sim`, the real backends in
-:mod:`pipeline.backends`."""
+"""The devices: their interfaces (what the loop sees), the device registry (every haptic device and robot model: its
+limits, its backend, its twin), the rig and its arms, the haptic output contract, the jaw and teleoperation. The
+simulated twins are in :mod:`pipeline.sim`, the real backends in :mod:`pipeline.backends`."""

@@ -7,14 +7,14 @@ satisfy it.
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
 from pipeline.devices.interfaces import Fault, ForceSensor, HapticDevice, Robot
 from pipeline.force.frames import Vec3
 
-__all__ = ["ARM_NAME", "ARM_NAME_WHAT", "SINGLE_ARM_NAME", "Rig", "RigArm", "rig_arms"]
+__all__ = ["ARM_NAME", "ARM_NAME_WHAT", "SINGLE_ARM_NAME", "FirstArmMembers", "Rig", "RigArm", "arm_named", "rig_arms"]
 
 #: The name of the one arm of a rig that does not name its arms.  ``right``: the protocol's default task arm, so a
 #: one-arm rig (and a one-arm hardware file of before the arms) is the task arm, and a lab that adds its second
@@ -109,3 +109,55 @@ def rig_arms(rig: Rig) -> tuple[RigArm, ...]:
     return (RigArm(str(getattr(rig, "arm_name", SINGLE_ARM_NAME)), rig.sensor, rig.robot, rig.haptic,
                    getattr(rig, "jaw", None), rig.true_contact_force, getattr(rig, "on_faults", None),
                    getattr(rig, "stop_motion", None)),)
+
+
+class FirstArmMembers:
+    """What a rig of several arms offers as a one-arm rig: its first arm's devices and stylus hook (a mixin).
+
+    The real rig (:class:`pipeline.assembly.real_rig.RealRig`) and the simulated rig of several arms
+    (:class:`pipeline.sim.arms.SimArms`) set ``first`` to their first arm; code that knows one arm then reads and
+    hooks the first, and the loop takes every arm from the rig's ``arms``.
+    """
+
+    first: Any
+
+    @property
+    def sensor(self) -> Any:
+        """The first arm's F/T sensor."""
+        return self.first.sensor
+
+    @property
+    def robot(self) -> Any:
+        """The first arm's robot."""
+        return self.first.robot
+
+    @property
+    def haptic(self) -> Any:
+        """The first arm's haptic device."""
+        return self.first.haptic
+
+    @property
+    def jaw(self) -> Any:
+        """The first arm's jaw actuator (None: it has none)."""
+        return self.first.jaw
+
+    @property
+    def on_buttons(self) -> Callable[[int, int], None] | None:
+        """The first arm's stylus-button hook (called with the time and the buttons every tick)."""
+        hook: Callable[[int, int], None] | None = self.first.on_buttons
+        return hook
+
+    @on_buttons.setter
+    def on_buttons(self, hook: Callable[[int, int], None] | None) -> None:
+        self.first.on_buttons = hook
+
+
+_A = TypeVar("_A")
+
+
+def arm_named(arms: Mapping[str, _A], name: str, what: str = "the rig's arms") -> _A:
+    """The arm called ``name`` of ``arms`` (by name); :class:`KeyError` naming the arms there are."""
+    try:
+        return arms[name]
+    except KeyError:
+        raise KeyError(f"no arm {name!r}; {what}: {', '.join(arms)}") from None

@@ -346,54 +346,65 @@ class TeleopController:
         """
         cfg = self.config
         self._now_ns = now_ns
-        deadman = bool(stylus.buttons & cfg.deadman_button)
         clutch = bool(stylus.buttons & cfg.clutch_button)
         try:
-            if not deadman:
-                if self.state is TeleopState.FAULT and self._data_problem(now_ns, stylus, pose, servo_error, inhibit):
-                    return Stop(self.stop_reason)  # stays latched until the data are healthy again
-                if self.state in (TeleopState.ENGAGED, TeleopState.CLUTCHED):
-                    return self._stop(TeleopState.IDLE, "deadman released")
-                if self.state is TeleopState.FAULT:
-                    self.state = TeleopState.IDLE
-                return Stop(self.stop_reason or "deadman released")
+            if not stylus.buttons & cfg.deadman_button:
+                latched = self.state is TeleopState.FAULT
+                return self._released(self._data_problem(now_ns, stylus, pose, servo_error, inhibit) if latched else "")
             if self.state is TeleopState.FAULT:
                 return Stop(self.stop_reason)
             problem = self._data_problem(now_ns, stylus, pose, servo_error, inhibit)
             if problem:
                 return self._stop(TeleopState.FAULT, problem)
-            p = stylus.position_m
             if self.state is TeleopState.IDLE:
-                if not cfg.contains(pose.position_m):
-                    return self._stop(TeleopState.FAULT,
-                                      f"TCP {pose.position_m!r} m is outside the teleoperation workspace; jog it "
-                                      "inside before engaging")
-                if self._stop_ns is not None and pose.t_ns < self._stop_ns + self._settle_ns:
-                    return Stop("waiting for the arm to come to rest")
-                self._anchor_stylus_m = p
-                self._anchor_tcp_m = pose.position_m
-                self._rot_base_tip = pose.rot_base_tip
-                self.state = TeleopState.CLUTCHED if clutch else TeleopState.ENGAGED
-                self._next_ns = None
-                return self._servo(now_ns, pose.position_m)
-            assert self.last_target_m is not None
-            if self.state is TeleopState.ENGAGED and clutch:
-                self.state = TeleopState.CLUTCHED
-                return self._servo(now_ns, self.last_target_m)
-            if self.state is TeleopState.CLUTCHED and not clutch:
-                # re-anchor at the last target: the next target starts from where the robot was told to be
-                self._anchor_stylus_m = p
-                self._anchor_tcp_m = self.last_target_m
-                self.state = TeleopState.ENGAGED
-            if self._next_ns is not None and now_ns < self._next_ns:
-                return None
-            if self.state is TeleopState.CLUTCHED:
-                return self._servo(now_ns, self.last_target_m)
-            return self._servo(now_ns, self._desired_m(p))
+                return self._engage(now_ns, stylus.position_m, pose, clutch)
+            return self._follow(now_ns, stylus.position_m, clutch)
         finally:
             if _finite3(stylus.position_m):
                 self._prev_stylus_m = stylus.position_m
                 self._prev_stylus_ns = stylus.t_ns
+
+    def _released(self, problem: str) -> Stop:
+        """The deadman is released: stop; a FAULT clears to IDLE once the data are healthy (``problem`` empty)."""
+        if self.state is TeleopState.FAULT and problem:
+            return Stop(self.stop_reason)  # stays latched until the data are healthy again
+        if self.state in (TeleopState.ENGAGED, TeleopState.CLUTCHED):
+            return self._stop(TeleopState.IDLE, "deadman released")
+        if self.state is TeleopState.FAULT:
+            self.state = TeleopState.IDLE
+        return Stop(self.stop_reason or "deadman released")
+
+    def _engage(self, now_ns: int, stylus_m: Vec3, pose: PoseSample, clutch: bool) -> TeleopCommand:
+        """The deadman is pressed in IDLE: anchor the stylus at the TCP and hold there (inside the box, at rest)."""
+        if not self.config.contains(pose.position_m):
+            return self._stop(TeleopState.FAULT, f"TCP {pose.position_m!r} m is outside the teleoperation workspace; "
+                                                 "jog it inside before engaging")
+        if self._stop_ns is not None and pose.t_ns < self._stop_ns + self._settle_ns:
+            return Stop("waiting for the arm to come to rest")
+        self._anchor_stylus_m = stylus_m
+        self._anchor_tcp_m = pose.position_m
+        self._rot_base_tip = pose.rot_base_tip
+        self.state = TeleopState.CLUTCHED if clutch else TeleopState.ENGAGED
+        self._next_ns = None
+        return self._servo(now_ns, pose.position_m)
+
+    def _follow(self, now_ns: int, stylus_m: Vec3, clutch: bool) -> TeleopCommand | None:
+        """ENGAGED or CLUTCHED with healthy data: the next target, once per control period."""
+        last = self.last_target_m
+        assert last is not None
+        if self.state is TeleopState.ENGAGED and clutch:
+            self.state = TeleopState.CLUTCHED
+            return self._servo(now_ns, last)
+        if self.state is TeleopState.CLUTCHED and not clutch:
+            # re-anchor at the last target: the next target starts from where the robot was told to be
+            self._anchor_stylus_m = stylus_m
+            self._anchor_tcp_m = last
+            self.state = TeleopState.ENGAGED
+        if self._next_ns is not None and now_ns < self._next_ns:
+            return None
+        if self.state is TeleopState.CLUTCHED:
+            return self._servo(now_ns, last)
+        return self._servo(now_ns, self._desired_m(stylus_m))
 
 
 class TeleopDriver:

@@ -14,8 +14,9 @@ through :meth:`TouchOutput.render`, which applies, in this order:
    dVRK's IO watchdog does the same at 30 ms (science.md §5).  10 ms is ten
    missed loop ticks, inside the 50 ms in which every fault must reach zero.
 2. **Non-finite → zero; clamp to the derated peak.**  The peak is the
-   device's (3.3 N); the motor-heat model below lowers it when the motors
-   get warm.
+   device's (:class:`HapticLimits`: the Touch's 3.3 N, from its model in
+   :mod:`pipeline.devices.registry`); the motor-heat model below lowers it
+   when the motors get warm.
 3. **Motor heat** (:class:`MotorHeat`): the thermal budget of the continuous
    rating, and ``HD_WARM_MOTORS`` as a backstop.
 
@@ -23,8 +24,8 @@ Heat model (science.md §5: "track an I²t or time-above-continuous budget")::
 
     heat += (|f|² − f_cont²)·dt,   never below 0           (N²·s)
 
-``f_cont`` is the continuous rating (0.88 N); the budget is
-``TouchSpec.thermal_budget_n2s``.  Above ``derate_from_fraction`` of the budget
+``f_cont`` is the continuous rating (the Touch's 0.88 N); the budget is
+``HapticLimits.thermal_budget_n2s``.  Above ``derate_from_fraction`` of the budget
 the device **derates**: its force limit falls linearly from the peak to the
 continuous rating as the heat approaches the budget -- the OpenHaptics
 examples' "clamp toward the continuous value when the motors warm up".  At the
@@ -48,13 +49,12 @@ from pipeline.force.frames import Vec3
 
 __all__ = [
     "DEFAULT_COMMAND_TIMEOUT_S",
-    "DEFAULT_THERMAL_BUDGET_N2S",
     "HD_ERRORS",
     "HD_EXCEEDED_MAX_FORCE",
     "HD_WARM_MOTORS",
+    "HapticLimits",
     "MotorHeat",
     "TouchOutput",
-    "TouchSpec",
     "hd_error_text",
 ]
 
@@ -97,44 +97,45 @@ def hd_error_text(code: int) -> str:
 
 #: A command this old renders as zero (device-side watchdog), s.
 DEFAULT_COMMAND_TIMEOUT_S = 0.010
-#: Heat budget of the 3D Systems Touch's motors above the continuous rating, N²·s (~35 s at 1.5 N).
-DEFAULT_THERMAL_BUDGET_N2S = 60.0
 #: Longest servo interval the heat model integrates in one step, s (a stalled servo thread is not an eternity).
 _MAX_HEAT_DT_S = 0.1
 
 
 @dataclass(frozen=True, slots=True)
-class TouchSpec:
-    """Device limits (3D Systems Touch defaults) and its thermal model.
+class HapticLimits:
+    """What a haptic device can render: its force limits and its motors' thermal model.
+
+    A device model's limits (:class:`pipeline.devices.registry.HapticModel`, where each value's source is
+    given); the real backend takes the peak and continuous rating the device itself reports.
 
     Attributes
     ----------
     peak_force_n
-        ``HD_NOMINAL_MAX_FORCE`` (3.3 N).
+        The largest force the device renders, N (OpenHaptics' ``HD_NOMINAL_MAX_FORCE``).
     continuous_force_n
-        ``HD_NOMINAL_MAX_CONTINUOUS_FORCE`` (0.88 N).
+        The force its motors sustain without warming, N (``HD_NOMINAL_MAX_CONTINUOUS_FORCE``).
     thermal_budget_n2s
-        Heat the motors take above the continuous rating, N²·s (60: ~35 s at 1.5 N).
+        Heat the motors take above the continuous rating, N²·s.
     derate_from_fraction
         Derating starts at this fraction of the budget.
     """
 
-    peak_force_n: float = 3.3
-    continuous_force_n: float = 0.88
-    thermal_budget_n2s: float = DEFAULT_THERMAL_BUDGET_N2S
+    peak_force_n: float
+    continuous_force_n: float
+    thermal_budget_n2s: float
     derate_from_fraction: float = 0.5
 
     def __post_init__(self) -> None:
         for name in ("peak_force_n", "continuous_force_n", "thermal_budget_n2s"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"touch.{name} = {v!r}: must be a finite number > 0")
+                raise ValueError(f"haptic.{name} = {v!r}: must be a finite number > 0")
         if self.continuous_force_n > self.peak_force_n:
-            raise ValueError(f"touch.continuous_force_n = {self.continuous_force_n!r}: must be at most "
+            raise ValueError(f"haptic.continuous_force_n = {self.continuous_force_n!r}: must be at most "
                              f"peak_force_n ({self.peak_force_n!r})")
         f = self.derate_from_fraction
         if not (math.isfinite(f) and 0.0 <= f < 1.0):
-            raise ValueError(f"touch.derate_from_fraction = {f!r}: must be a number from 0 to below 1")
+            raise ValueError(f"haptic.derate_from_fraction = {f!r}: must be a number from 0 to below 1")
 
 
 class MotorHeat:
@@ -163,7 +164,7 @@ class MotorHeat:
         "spec",
     )
 
-    def __init__(self, spec: TouchSpec) -> None:
+    def __init__(self, spec: HapticLimits) -> None:
         self.spec = spec
         self._cont2 = spec.continuous_force_n ** 2
         self._budget = spec.thermal_budget_n2s
@@ -241,7 +242,7 @@ class TouchOutput:
         "warm",
     )
 
-    def __init__(self, spec: TouchSpec, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
+    def __init__(self, spec: HapticLimits, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
         if isinstance(command_timeout_s, bool) or not (isinstance(command_timeout_s, (int, float))
                                                        and 0.0 < command_timeout_s <= 1.0):
             raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, "

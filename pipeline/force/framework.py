@@ -118,7 +118,8 @@ class HapticFramework:
         Payload/bias model from :func:`pipeline.commissioning.payload_identification.identify_payload`
         (default: none, compensation is a no-op).
     device_peak_n
-        Peak force of the haptic device, N (safety clamp).
+        Peak force of the haptic device, N (the safety clamp; the device's own report, or its model's peak:
+        :mod:`pipeline.devices.registry`).
     rls
         Optional online bias refinement (science.md §1.4).
     """
@@ -149,7 +150,8 @@ class HapticFramework:
         self,
         config: FrameworkConfig,
         calibration: PayloadCalibration = NO_PAYLOAD,
-        device_peak_n: float = 3.3,
+        *,
+        device_peak_n: float,
         rls: RlsBias | None = None,
     ) -> None:
         self.config = config

@@ -74,7 +74,7 @@ class SafetyGovernor:
     config
         The limits.
     device_peak_n
-        The haptic device's peak force, N (Touch: 3.3); the clamp is
+        The haptic device's peak force, N (the Touch's 3.3); the clamp is
         ``min(config.f_max_n, device_peak_n)``.
     """
 

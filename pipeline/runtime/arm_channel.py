@@ -105,8 +105,14 @@ class ArmChannel:
         self._derate_check = False  # the thermal limit is below the safety stage's own: measure what it cuts
 
     # -- one tick -----------------------------------------------------------------------------
-    def tick(self, now: int, period: int, dt_s: float) -> None:
-        """Run this arm's part of the tick at ``now``: read, watchdog, Algorithm 1, command, record."""
+    def tick(self, now: int, period_ns: int, dt_s: float) -> None:
+        """Run this arm's part of the tick at ``now``: read, watchdog, Algorithm 1, command, record.
+
+        The record is built by name: each of its values is the local variable named as its field
+        (:data:`pipeline.core.tick_record.RECORD_FIELDS`), and the record is those names in the fields' order
+        (``tests/pipeline/test_tick_record.py`` reads this method and holds it to that), so a field is added by
+        computing a local of its name; no value is placed by counting.
+        """
         loop = self.loop
         w = self.sensor.read_wrench()
         pose = self.robot.read_pose()
@@ -115,21 +121,22 @@ class ArmChannel:
 
         # -- watchdog --
         cond = 0
-        _, fx, fy, fz, tx, ty, tz = w[:7]
-        sensor_age = now - w.t_ns
-        if sensor_age > self._sensor_age_ns:
+        _, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz = w[:7]
+        sensor_age_ns = now - w.t_ns
+        if sensor_age_ns > self._sensor_age_ns:
             cond |= Fault.SENSOR_STALE
         if w.status:
             cond |= Fault.SENSOR_STATUS
-        if (fx - fx) + (fy - fy) + (fz - fz) + (tx - tx) + (ty - ty) + (tz - tz) != 0.0:
+        if (raw_fx - raw_fx) + (raw_fy - raw_fy) + (raw_fz - raw_fz) + (raw_tx - raw_tx) + (raw_ty - raw_ty) + (
+                raw_tz - raw_tz) != 0.0:
             cond |= Fault.NON_FINITE
         else:
             s = self._sat
-            if (abs(fx) > s[0] or abs(fy) > s[1] or abs(fz) > s[2]
-                    or abs(tx) > s[3] or abs(ty) > s[4] or abs(tz) > s[5]):
+            if (abs(raw_fx) > s[0] or abs(raw_fy) > s[1] or abs(raw_fz) > s[2]
+                    or abs(raw_tx) > s[3] or abs(raw_ty) > s[4] or abs(raw_tz) > s[5]):
                 cond |= Fault.SENSOR_SATURATION
-        pose_age = now - pose.t_ns
-        if pose_age > self._pose_age_ns:
+        pose_age_ns = now - pose.t_ns
+        if pose_age_ns > self._pose_age_ns:
             cond |= Fault.POSE_STALE
         if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
             cond |= self._take_pose(pose)
@@ -137,18 +144,19 @@ class ArmChannel:
             cond |= Fault.HAPTIC_DEVICE
         if hs.force_limit_n != self._device_limit_n:  # the device derates (rare; a compare per tick otherwise)
             self._device_limit(now, hs)
-        latched = self.faults
-        if cond != self.active_faults or cond & ~latched:  # (fault-free steady state: both false)
-            latched = self._conditions_changed(cond, now, w, pose, hs, sensor_age, pose_age)
+        faults = self.faults  # latched
+        if cond != self.active_faults or cond & ~faults:  # (fault-free steady state: both false)
+            faults = self._conditions_changed(cond, now, w, pose, hs, sensor_age_ns, pose_age_ns)
 
-        if loop.refine_bias and not latched:
-            fw.refine_bias(fx, fy, fz, tx, ty, tz)
+        if loop.refine_bias and not faults:
+            fw.refine_bias(raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz)
 
-        haptic_on = loop.haptic_on
-        enabled = haptic_on and not latched
+        on = loop.haptic_on
+        enabled = on and not faults
+        # the stages by their names in pipeline.core.tick_record.STEP_FIELDS (the step's one definition of its output)
         (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
          haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = fw.step(fx, fy, fz, enabled, dt_s)  # the stages of pipeline.core.tick_record.STEP_FIELDS, by name
+         ) = fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s)
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         self.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
@@ -157,14 +165,21 @@ class ArmChannel:
         true_fx, true_fy, true_fz = self._truth() or _NAN3
         tip_x_m, tip_y_m, tip_z_m = pose.position_m
         stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
+        tick = loop.tick_count
         t_ns = now - loop.t0_ns
-        # one record, in pipeline.core.tick_record.TICK_FIELDS' order (the ring refuses a float for an int64)
+        t_s = t_ns * 1e-9
+        haptic_on = 1 if on else 0  # an int64 field (the ring refuses a float or a bool for one)
+        trial_index = loop.trial_index
+        phase = loop.phase
+        gain = fw.safety.gain
+        force_n = _HYPOT(filt_fx, filt_fy, filt_fz)
+        # the record: every field by its name, in pipeline.core.tick_record.RECORD_FIELDS' order
         rec = (
-            loop.tick_count, t_ns, period, fx, fy, fz, tx, ty, tz, sensor_age, pose_age, latency_ns, latched,
-            1 if haptic_on else 0, loop.trial_index, loop.phase, fw.safety.gain, render_fx, render_fy, render_fz,
-            _HYPOT(filt_fx, filt_fy, filt_fz), stylus_x_m, stylus_y_m, stylus_z_m, derate, t_ns * 1e-9, comp_fx,
-            comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx,
-            haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
+            tick, t_ns, period_ns, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, sensor_age_ns, pose_age_ns,
+            latency_ns, faults, haptic_on, trial_index, phase, gain, render_fx, render_fy, render_fz, force_n,
+            stylus_x_m, stylus_y_m, stylus_z_m, derate, t_s, comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz,
+            tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy,
+            scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
         )
         self._last_record = rec
         if self.ring is not None:

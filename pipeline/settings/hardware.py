@@ -6,19 +6,34 @@ naming the field, the offending value and what is allowed (the style of
 example is ``hardware.example.toml`` at the repository root.
 
 The settings only describe the rig; :mod:`pipeline.assembly.real_rig` opens the
-devices they name (so a new device adds its settings here and its opening there).
+devices they name.  The haptic device and the robot are models of the device
+registry (:mod:`pipeline.devices.registry`; ``[haptic] model``, ``[robot] model``,
+by default the paper's Touch and UR3), whose limits the file is checked against:
+``framework.f_max_n`` at most the haptic device's peak force,
+``haptic.command_timeout_s`` at least two of its servo periods, and the robot's
+automatic rate (``frequency_hz = -1``) its controller's own.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
+from pipeline.devices.registry import (
+    DEFAULT_HAPTIC_MODEL,
+    DEFAULT_ROBOT_MODEL,
+    HapticModel,
+    haptic_model,
+    haptic_models,
+    robot_model,
+    robot_models,
+)
+
 # SINGLE_ARM_NAME: the one arm of a file without [[arm]] tables
 from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
-from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, TouchSpec
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
 from pipeline.force.frames import Vec3
 from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.watchdog import WatchdogConfig
@@ -70,13 +85,14 @@ class SensorSettings:
 
 @dataclass(frozen=True, slots=True)
 class RobotSettings:
-    """UR controller over RTDE."""
+    """The robot's controller (a UR over RTDE); ``model`` is its key in :mod:`pipeline.devices.registry`."""
 
     host: str
     frequency_hz: float = 125.0
     mode: str = "observe"
     tcp_offset_m: Vec3 = (0.0, 0.0, 0.0)
     connect_timeout_s: float = 2.0
+    model: str = DEFAULT_ROBOT_MODEL
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,13 +115,16 @@ class TeleopSettings:
 
 @dataclass(frozen=True, slots=True)
 class HapticSettings:
-    """3D Systems Touch."""
+    """The haptic device (the 3D Systems Touch by default); ``model`` is its key in :mod:`pipeline.devices.registry`."""
 
+    #: The device's name in its vendor's set-up (OpenHaptics' Touch Setup).
     device_name: str = "Default Device"
-    #: A command this old renders as zero, in the Touch's own servo thread (the device-side watchdog).
+    #: A command this old renders as zero, in the device's own servo thread (the device-side watchdog).
     command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S
-    #: The folder holding ``HD.dll`` (Windows looks there before pyOpenHaptics loads it); None: the system's folders.
+    #: The folder holding the vendor's library (``HD.dll``; Windows looks there before pyOpenHaptics loads it); None:
+    #: the system's folders.
     dll_dir: str | None = None
+    model: str = DEFAULT_HAPTIC_MODEL
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,26 +139,33 @@ class JawSettings:
 
 
 @dataclass(frozen=True, slots=True)
-class ArmSettings:
-    """One arm of the rig: its devices, frames and calibration (the fields of a one-arm file, and a name)."""
+class ArmFields:
+    """What a one-arm file's top level and each ``[[arm]]`` table say: the arm's devices, frames and calibration."""
 
-    name: str
     sensor: SensorSettings
     robot: RobotSettings
     haptic: HapticSettings
     jaw: JawSettings | None
     framework: FrameworkConfig = field(default_factory=FrameworkConfig)
-    #: The arm's calibration file (:mod:`pipeline.commissioning.rig_calibration`); None: the default.
+    #: The arm's calibration file (:mod:`pipeline.commissioning.rig_calibration`); ``calibration.json`` next to the
+    #: hardware file by default.
     calibration_file: str | None = None
-    teleop: TeleopSettings | None = None
-    #: The instrument mounted on this arm now: its record in the calibration file is the one in use.
-    calibration_tool: str = "instrument"
     #: The file the settings came from (for messages; the same for every arm of a file).
     source: str = "hardware"
+    teleop: TeleopSettings | None = None
+    #: The instrument mounted on the arm now: its record in the calibration file is the one in use.
+    calibration_tool: str = "instrument"
 
 
 @dataclass(frozen=True, slots=True)
-class HardwareConfig:
+class ArmSettings(ArmFields):
+    """One arm of the rig: its devices, frames and calibration (the fields of a one-arm file), and its name."""
+
+    name: str = field(kw_only=True)
+
+
+@dataclass(frozen=True, slots=True)
+class HardwareConfig(ArmFields):
     """A validated hardware file.
 
     ``arms`` lists every arm, the first (the task arm until the protocol names one) first; the other fields are the
@@ -147,19 +173,6 @@ class HardwareConfig:
     fields alone (``arms`` empty), the rig is that one arm, named :data:`SINGLE_ARM_NAME`.
     """
 
-    sensor: SensorSettings
-    robot: RobotSettings
-    haptic: HapticSettings
-    jaw: JawSettings | None
-    framework: FrameworkConfig = field(default_factory=FrameworkConfig)
-    #: The calibration file (:mod:`pipeline.commissioning.rig_calibration`); ``calibration.json`` next to the hardware
-    #: file by
-    #: default.
-    calibration_file: str | None = None
-    source: str = "hardware"
-    teleop: TeleopSettings | None = None
-    #: The instrument mounted now: its record in the calibration file is the one in use.
-    calibration_tool: str = "instrument"
     #: Every arm, the first first (see the class's docstring).
     arms: tuple[ArmSettings, ...] = ()
     #: What a fault on one arm does to the others: one of :data:`FAULT_POLICIES`.
@@ -167,17 +180,14 @@ class HardwareConfig:
 
     def __post_init__(self) -> None:
         name = self.arms[0].name if self.arms else SINGLE_ARM_NAME
-        first = ArmSettings(name, self.sensor, self.robot, self.haptic, self.jaw, self.framework,
-                            self.calibration_file, self.teleop, self.calibration_tool, self.source)
+        first = ArmSettings(**_arm_fields(self), name=name)
         if not self.arms or self.arms[0] != first:  # built from the one-arm fields, or they were replaced
             object.__setattr__(self, "arms", (first, *self.arms[1:]))
 
     @classmethod
     def of_arms(cls, arms: tuple[ArmSettings, ...], fault_policy: str = "both") -> HardwareConfig:
         """The configuration of these arms; its one-arm fields are the first arm's."""
-        a = arms[0]
-        return cls(a.sensor, a.robot, a.haptic, a.jaw, a.framework, a.calibration_file, a.source, a.teleop,
-                   a.calibration_tool, arms, fault_policy)
+        return cls(**_arm_fields(arms[0]), arms=arms, fault_policy=fault_policy)
 
     def arm(self, name: str) -> ArmSettings:
         """The arm called ``name`` (KeyError naming the arms there are)."""
@@ -185,6 +195,11 @@ class HardwareConfig:
             if a.name == name:
                 return a
         raise KeyError(f"no arm {name!r} in {self.source}; its arms: {', '.join(a.name for a in self.arms)}")
+
+
+def _arm_fields(a: ArmFields) -> dict[str, Any]:
+    """An arm's (or a configuration's first arm's) :class:`ArmFields`, by name."""
+    return {f.name: getattr(a, f.name) for f in fields(ArmFields)}
 
 
 # -- validation ------------------------------------------------------------------------------
@@ -244,7 +259,7 @@ def _arm(f: Fields, top: dict[str, Any], name: str, source: str,
     robot = _robot(f, top["robot"], has_teleop="teleop" in top)
     haptic = _haptic(f, top["haptic"])
     jaw = _jaw(f, top["jaw"]) if "jaw" in top else None
-    framework = _framework(f, top)
+    framework = _framework(f, top, haptic_model(haptic.model))
     cal = f.section(top, "calibration", {"file", "tool"})
     cal_file = cal.get("file", default_calibration)
     if cal_file is not None:
@@ -252,11 +267,12 @@ def _arm(f: Fields, top: dict[str, Any], name: str, source: str,
     tool = f.string("calibration.tool", cal.get("tool", "instrument"),
                     what="a non-empty name of the mounted instrument (its calibration is kept under it)")
     teleop = _teleop(f, top["teleop"]) if "teleop" in top else None
-    if teleop is not None and robot.frequency_hz > 0 and teleop.pose_max_age_s <= 1.0 / robot.frequency_hz:
+    rate_hz = robot_model(robot.model).rate_hz(robot.frequency_hz)
+    if teleop is not None and teleop.pose_max_age_s <= 1.0 / rate_hz:
         raise f.fail("teleop.pose_max_age_s", teleop.pose_max_age_s,
                      f"must be longer than the robot's pose period, 1 / robot.frequency_hz = "
-                     f"{1e3 / robot.frequency_hz:g} ms (teleoperation would stop the robot at every pose)")
-    return ArmSettings(name, sensor, robot, haptic, jaw, framework, cal_file, teleop, tool, source)
+                     f"{1e3 / rate_hz:g} ms (teleoperation would stop the robot at every pose)")
+    return ArmSettings(sensor, robot, haptic, jaw, framework, cal_file, source, teleop, tool, name=name)
 
 
 def _distinct(f: Fields, arms: list[ArmSettings]) -> None:
@@ -266,8 +282,8 @@ def _distinct(f: Fields, arms: list[ArmSettings]) -> None:
          lambda a: a.sensor.host.lower()),
         ("robot.host", "a UR controller drives one arm: two arms cannot share one robot",
          lambda a: a.robot.host.lower()),
-        ("haptic.device_name", "one Touch (its OpenHaptics device name) serves one arm",
-         lambda a: a.haptic.device_name),
+        ("haptic.device_name", "one Touch (its OpenHaptics device name), as any haptic device by its name, serves "
+         "one arm", lambda a: (a.haptic.model, a.haptic.device_name)),
         ("jaw.port", "one jaw actuator's serial port serves one arm", lambda a: None if a.jaw is None else a.jaw.port),
         ("calibration.tool", "the two arms' calibrations would overwrite each other in one calibration file: name "
          "another calibration.file or tool",
@@ -327,13 +343,15 @@ def _sensor(f: Fields, v: Any) -> SensorSettings:
 
 def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
     """``[robot]``: the UR controller (``has_teleop``: the file has a ``[teleop]`` table)."""
-    r = f.table("robot", v, {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s"})
+    r = f.table("robot", v, {"host", "frequency_hz", "mode", "tcp_offset_m", "connect_timeout_s", "model"})
     f.required(r, "robot", "host", "required: the UR controller's IP address")
+    model = robot_model(f.choice("robot.model", r.get("model", DEFAULT_ROBOT_MODEL), robot_models(),
+                                 _models_allowed(robot_models(), lambda k: robot_model(k).name)))
     freq = r.get("frequency_hz", 125.0)
     if not (type(freq) is int and freq == -1):
         freq = f.number("robot.frequency_hz", freq, lo=0.0, hi=500.0, note="(Hz), or -1 to let ur_rtde choose")
     pose_limit_s = WatchdogConfig().pose_max_age_s
-    if (type(freq) is not int or freq != -1) and 1.0 / freq >= pose_limit_s:
+    if 1.0 / model.rate_hz(freq) >= pose_limit_s:
         raise f.fail("robot.frequency_hz", r.get("frequency_hz"),
                      f"must be above {1.0 / pose_limit_s:g} Hz: the watchdog faults when the robot pose is older "
                      f"than {pose_limit_s * 1e3:g} ms (watchdog.pose_max_age_s), and at {freq:g} Hz each pose "
@@ -347,12 +365,20 @@ def _robot(f: Fields, v: Any, *, has_teleop: bool) -> RobotSettings:
         tcp_offset_m=f.vec3("robot.tcp_offset_m", r.get("tcp_offset_m", [0.0, 0.0, 0.0]), limit=1.0,
                             what="must be 3 numbers in metres, each within ±1 m"),
         connect_timeout_s=f.number("robot.connect_timeout_s", r.get("connect_timeout_s", 2.0), lo=0.0, hi=60.0),
+        model=model.key,
     )
 
 
+def _models_allowed(keys: tuple[str, ...], name: Any) -> str:
+    """The refusal's "what is allowed" of a model key: every registered model, by key and name."""
+    return "allowed values: " + ", ".join(f"{k!r} ({name(k)})" for k in keys)
+
+
 def _haptic(f: Fields, v: Any) -> HapticSettings:
-    """``[haptic]``: the Touch."""
-    h = f.table("haptic", v, {"device_name", "command_timeout_s", "dll_dir"})
+    """``[haptic]``: the haptic device (a Touch by default)."""
+    h = f.table("haptic", v, {"device_name", "command_timeout_s", "dll_dir", "model"})
+    model = haptic_model(f.choice("haptic.model", h.get("model", DEFAULT_HAPTIC_MODEL), haptic_models(),
+                                  _models_allowed(haptic_models(), lambda k: haptic_model(k).name)))
     dll_dir = h.get("dll_dir")
     if dll_dir is not None:
         dll_dir = f.string("haptic.dll_dir", dll_dir, what="the path of the folder holding OpenHaptics' HD.dll "
@@ -363,10 +389,13 @@ def _haptic(f: Fields, v: Any) -> HapticSettings:
     return HapticSettings(
         f.string("haptic.device_name", h.get("device_name", "Default Device"),
                  what="a non-empty string (the OpenHaptics device name)"),
-        # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included
-        f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S), lo=0.002, hi=0.05,
-                 lo_open=False, note="s (a force command this old renders as zero)"),
+        # at most 50 ms: every fault must reach zero force within 50 ms, a dead loop included; at least two of the
+        # device's servo periods (one late servo tick must not drop a fresh command)
+        f.number("haptic.command_timeout_s", h.get("command_timeout_s", DEFAULT_COMMAND_TIMEOUT_S),
+                 lo=model.min_command_timeout_s, hi=0.05, lo_open=False,
+                 note="s (a force command this old renders as zero)"),
         dll_dir,
+        model.key,
     )
 
 
@@ -394,7 +423,7 @@ _ROTATIONS = {
 }
 
 
-def _framework(f: Fields, top: dict[str, Any]) -> FrameworkConfig:
+def _framework(f: Fields, top: dict[str, Any], haptic: HapticModel) -> FrameworkConfig:
     """``[frames]`` and ``[framework]``: Algorithm 1's rotations and scaling.
 
     What sets a rendered force's direction (both rotations) or size (f_max,
@@ -403,13 +432,12 @@ def _framework(f: Fields, top: dict[str, Any]) -> FrameworkConfig:
     """
     fr = f.section(top, "frames", {"rot_tip_sensor", "rot_haptic_base"})
     fw = f.section(top, "framework", {"f_max_n", "f_scale_n", "filter_window"})
-    # the safety clamp is min(f_max, the device's reported peak): an f_max above the Touch's peak would be a
+    # the safety clamp is min(f_max, the device's reported peak): an f_max above the device's peak would be a
     # setting the device silently ignores (and the paper's scaling law would no longer hold)
-    peak_n = TouchSpec().peak_force_n
     # what the file gives is checked first, then what it lacks
     # (f_max from 1 µN: the safety stage's own lower bound (SafetyConfig), so no value passes here and fails there)
-    f_max = (f.number("framework.f_max_n", fw["f_max_n"], lo=1e-6, hi=peak_n, lo_open=False,
-                      note="(N; the 3D Systems Touch's peak force)") if "f_max_n" in fw else None)
+    f_max = (f.number("framework.f_max_n", fw["f_max_n"], lo=1e-6, hi=haptic.peak_force_n, lo_open=False,
+                      note=f"(N; the {haptic.name}'s peak force)") if "f_max_n" in fw else None)
     f_scale = f.number("framework.f_scale_n", fw["f_scale_n"], lo=0.0, hi=1000.0) if "f_scale_n" in fw else None
     rot_ts = f.rotation("frames.rot_tip_sensor", fr["rot_tip_sensor"]) if "rot_tip_sensor" in fr else None
     rot_hb = f.rotation("frames.rot_haptic_base", fr["rot_haptic_base"]) if "rot_haptic_base" in fr else None

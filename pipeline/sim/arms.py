@@ -13,11 +13,11 @@ arm's own :class:`~pipeline.sim.rig.SimRig`.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
-from pipeline.devices.rig import RigArm
+from pipeline.devices.rig import FirstArmMembers, RigArm, arm_named
 from pipeline.force.frames import Vec3
 from pipeline.sim.hand import HandObservation, StylusDriver
 from pipeline.sim.rig import SimRig, SimRigConfig
@@ -31,7 +31,7 @@ def arm_configs(names: Sequence[str], base: SimRigConfig) -> list[tuple[str, Sim
     return [(name, base if i == 0 else replace(base, seed=base.seed * 1009 + i)) for i, name in enumerate(names)]
 
 
-class SimArms:
+class SimArms(FirstArmMembers):
     """Several simulated arms on one clock (see the module's docstring).
 
     Parameters
@@ -48,7 +48,7 @@ class SimArms:
             raise ValueError(f"arm names = {names!r}: each arm needs its own name")
         self._rigs = dict(arms)
         self.rigs: tuple[SimRig, ...] = tuple(r for _, r in arms)
-        self.first = self.rigs[0]
+        self.first: SimRig = self.rigs[0]
         self.arms: tuple[RigArm, ...] = tuple(
             RigArm(name, r.sensor, r.robot, r.haptic, r.jaw, r.true_contact_force, r.on_faults, r.stop_motion)
             for name, r in arms)
@@ -60,27 +60,9 @@ class SimArms:
 
     def rig(self, name: str) -> SimRig:
         """The simulated rig of the arm called ``name``."""
-        try:
-            return self._rigs[name]
-        except KeyError:
-            raise KeyError(f"no arm {name!r}; the arms: {', '.join(self._rigs)}") from None
+        return arm_named(self._rigs, name, "the arms")
 
-    # -- Rig interface (the first arm's devices; every arm's physics) -------------------------
-    @property
-    def sensor(self) -> Any:
-        """The first arm's F/T sensor."""
-        return self.first.sensor
-
-    @property
-    def robot(self) -> Any:
-        """The first arm's robot."""
-        return self.first.robot
-
-    @property
-    def haptic(self) -> Any:
-        """The first arm's Touch."""
-        return self.first.haptic
-
+    # -- Rig interface (the first arm's devices, FirstArmMembers; every arm's physics) -----------
     def advance(self, now_ns: int) -> None:
         """Step every arm's physics to ``now_ns``."""
         for r in self.rigs:
@@ -138,20 +120,6 @@ class SimArms:
     @push_base_n.setter
     def push_base_n(self, value: Vec3) -> None:
         self.first.push_base_n = value
-
-    @property
-    def on_buttons(self) -> Callable[[int, int], None] | None:
-        """The first arm's stylus-button hook."""
-        return self.first.on_buttons
-
-    @on_buttons.setter
-    def on_buttons(self, hook: Callable[[int, int], None] | None) -> None:
-        self.first.on_buttons = hook
-
-    @property
-    def jaw(self) -> Any:
-        """The first arm's jaw."""
-        return self.first.jaw
 
     @property
     def sim_time_s(self) -> float:

@@ -1,6 +1,7 @@
 """The hand on the stylus: a compliant arm driven toward an equilibrium point (science.md §4.2 item 1).
 
-Along the tissue normal (the Touch's +y axis, up)::
+Along the tissue normal (up; the haptic device's axis along it is its +y with the paper's frames,
+:attr:`pipeline.sim.rig.SimRig.hand_axis`)::
 
     m_a ÿ = K_a (y_c − y) − B_a ẏ + f_H,y
 

@@ -1,22 +1,32 @@
-"""The simulated rig: hand → Touch → UR3 → tissue → wrist sensor, stepped by the loop.
+"""The simulated rig: hand → haptic device → robot → tissue → wrist sensor, stepped by the loop.
 
 Only what the force-regulation scene needs (science.md §2, §3, §5): a 1-D
 Hunt–Crossley tissue under a horizontal surface, an arm that follows the
-stylus through a 125 Hz controller with a tracking lag, a sensor that sees
+stylus through its controller's cycle with a tracking lag, a sensor that sees
 the tool's weight at the current orientation plus the contact force, and a
-Touch with real limits.  Everything derives from one seed, so a run is
+haptic device with real limits.  Everything derives from one seed, so a run is
 reproducible bit for bit on the virtual clock.
+
+The haptic device and the robot are their models' simulated twins
+(:mod:`pipeline.devices.registry`; by default the paper's Touch and UR3 on a
+CB3): the registry gives each twin its limits -- the haptic device's peak,
+continuous rating and thermal budget, the robot controller's rate -- so the
+simulated rig of another device is a configuration, not another rig.  The
+scene is one-dimensional: the hand moves the stylus along the tissue normal
+(base +z) as the device's frame sees it (``rot_haptic_base``'s third column;
+the Touch's +y with the paper's frames) and feels the rendered force along it.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
 import numpy as np
 
-from pipeline.devices.touch_output import TouchSpec
+from pipeline.devices.registry import DEFAULT_HAPTIC_MODEL, DEFAULT_ROBOT_MODEL, haptic_model, robot_model
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HapticLimits
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
 from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
@@ -67,6 +77,12 @@ class SimRigConfig:
     pivot_noise_m
         Per-axis standard deviation of the robot's reported flange position and
         of the tip's seat in the divot, m (UR3 repeatability ±0.1 mm).
+    robot
+        The simulated arm's timing; None: its model's control rate, the default tracking lag.
+    touch
+        The haptic device's limits; None: its model's (a rehearsal gives hotter motors here).
+    haptic_model, robot_model
+        The devices' models (:mod:`pipeline.devices.registry`), whose twins the rig builds.
     """
 
     seed: int = 0
@@ -82,9 +98,38 @@ class SimRigConfig:
     pivot_noise_m: float = 3e-5
     tissue: TissueParams = field(default_factory=TissueParams)
     sensor: SensorParams = field(default_factory=SensorParams)
-    robot: RobotParams = field(default_factory=RobotParams)
-    touch: TouchSpec = field(default_factory=TouchSpec)
+    robot: RobotParams | None = None
+    touch: HapticLimits | None = None
     arm: ArmParams = field(default_factory=ArmParams)
+    haptic_model: str = DEFAULT_HAPTIC_MODEL
+    robot_model: str = DEFAULT_ROBOT_MODEL
+
+    def __post_init__(self) -> None:
+        haptic_model(self.haptic_model)  # KeyError naming the models there are
+        robot_model(self.robot_model)
+
+    @property
+    def robot_params(self) -> RobotParams:
+        """The simulated arm's timing: :attr:`robot`, or its model's control rate with the default tracking lag."""
+        if self.robot is not None:
+            return self.robot
+        return RobotParams(controller_rate_hz=robot_model(self.robot_model).control_rate_hz)
+
+    @property
+    def haptic_limits(self) -> HapticLimits:
+        """The haptic device's limits: :attr:`touch`, or its model's."""
+        return self.touch if self.touch is not None else haptic_model(self.haptic_model).limits
+
+    def record(self) -> dict[str, Any]:
+        """What a session stores of the rig (``config_json``'s ``"sim"``): every field, the devices' parameters
+        resolved; the models named only when they are not the paper's (a session on the paper's rig stores what it
+        stored before the models)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out["robot"], out["touch"] = self.robot_params, self.haptic_limits
+        for key, default in (("haptic_model", DEFAULT_HAPTIC_MODEL), ("robot_model", DEFAULT_ROBOT_MODEL)):
+            if out[key] == default:
+                del out[key]
+        return {k: asdict(v) if is_dataclass(v) and not isinstance(v, type) else v for k, v in out.items()}
 
 
 class SimRig:
@@ -95,12 +140,20 @@ class SimRig:
         self.config = cfg
         seeds = np.random.SeedSequence(cfg.seed).generate_state(4)
         self.sensor = SimForceSensor(cfg.sensor, seed=int(seeds[0]))
-        self.robot = SimRobot(cfg.tip_home_m, TOOL_DOWN, cfg.robot)
-        self.haptic = SimTouch(cfg.touch)
+        #: The robot's twin (a :class:`pipeline.sim.robot.SimRobot` for a UR).
+        self.robot: SimRobot = robot_model(cfg.robot_model).open_twin(cfg.tip_home_m, TOOL_DOWN, cfg.robot_params)
+        #: The haptic device's twin (a :class:`pipeline.sim.touch.SimTouch` for a Touch).
+        self.haptic: SimTouch = haptic_model(cfg.haptic_model).open_twin(DEFAULT_COMMAND_TIMEOUT_S, cfg.haptic_limits)
         self.tissue = HuntCrossleyTissue(cfg.tissue)
         self.arm = CompliantArm(cfg.arm)
         self.driver: StylusDriver = driver or HoldStill()
         self._rot_base_haptic = transpose(cfg.rot_haptic_base)
+        r = cfg.rot_haptic_base
+        #: The tissue normal (base +z) in the haptic device's frame: the axis the hand moves the stylus along.
+        self.hand_axis: Vec3 = (r[2], r[5], r[8])
+        along = [(i, c) for i, c in enumerate(self.hand_axis) if c != 0.0]
+        # one device axis (the paper's frames: +y): the felt force is that component, exactly
+        self._hand_one_axis = along[0] if len(along) == 1 else None
         err = axis_angle((1.0, 1.0, 0.3), cfg.mount_error_deg * np.pi / 180.0) if cfg.mount_error_deg else IDENTITY
         if cfg.sensor_z_mount_deg:
             err = mat_mul(err, axis_angle((0.0, 0.0, 1.0), cfg.sensor_z_mount_deg * np.pi / 180.0))
@@ -141,7 +194,7 @@ class SimRig:
         cfg = self.config
         touch = self.haptic
         touch.advance(now_ns, dt)
-        felt = touch.applied_force_n[1]
+        felt = self._felt(touch.applied_force_n)
 
         robot = self.robot
         tip_z = robot.position_m[2]
@@ -150,9 +203,9 @@ class SimRig:
                               -depth if depth < 0 else 0.0)
         self.last_observation = obs
         y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
-        touch.stylus_m = (0.0, y, 0.0)
+        touch.stylus_m = self._along(y)
         if self.teleop is None:
-            d = mat_vec(self._rot_base_haptic, (0.0, y * cfg.motion_scale, 0.0))
+            d = mat_vec(self._rot_base_haptic, self._along(y * cfg.motion_scale))
             home = cfg.tip_home_m
             robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
         else:
@@ -172,6 +225,19 @@ class SimRig:
             self._rot_sensor_base = transpose(mat_mul(robot.orientation, self.true_rot_tip_sensor))
         self.sensor.sample(now_ns, self._rot_sensor_base, self._truth, dt)
 
+    def _felt(self, force_n: Vec3) -> float:
+        """The component of a rendered force (device frame) along the hand's axis, N."""
+        one = self._hand_one_axis
+        if one is not None:
+            return force_n[one[0]] * one[1]
+        a = self.hand_axis
+        return force_n[0] * a[0] + force_n[1] * a[1] + force_n[2] * a[2]
+
+    def _along(self, y: float) -> Vec3:
+        """A displacement ``y`` along the hand's axis, device frame, m (off-axis components exactly zero)."""
+        ax, ay, az = self.hand_axis
+        return (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+
     def true_contact_force(self) -> Vec3:
         """Contact force on the tool tip in the base frame, N (ground truth)."""
         return self._truth
@@ -188,7 +254,7 @@ class SimRig:
             self.teleop.stop_motion(reason)
 
     def close(self) -> None:
-        """Stop a teleoperated arm, zero the Touch."""
+        """Stop a teleoperated arm, zero the haptic device."""
         if self.teleop is not None:
             self.teleop.close()
         self.haptic.close()

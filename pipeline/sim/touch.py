@@ -1,13 +1,16 @@
 """Simulated 3D Systems Touch: force output with the real device's limits (science.md §5).
 
-What it renders is :class:`pipeline.devices.touch_output.TouchOutput`'s, the one
-definition the real backend uses too: a command as old as the command
-timeout (10 ms) renders as zero, the output is clamped to the peak (3.3 N)
-and derated as the motors warm (the thermal budget of the 0.88 N continuous
-rating), and past the budget the device raises ``HD_WARM_MOTORS`` and renders
+The Touch's twin in the device registry (:mod:`pipeline.devices.registry`),
+built with its model's limits.  What it renders is
+:class:`pipeline.devices.touch_output.TouchOutput`'s, the one definition the
+real backend uses too: a command as old as the command timeout (10 ms)
+renders as zero, the output is clamped to the peak (the Touch's 3.3 N) and
+derated as the motors warm (the thermal budget of the continuous rating,
+0.88 N), and past the budget the device raises ``HD_WARM_MOTORS`` and renders
 nothing until it has cooled to half the budget *and* the experimenter
 re-arms it -- as OpenHaptics' ErrorHandling example prescribes.  Limits come
-from a :class:`TouchSpec`, not constants.
+from a :class:`HapticLimits`, not constants; another impedance-type device
+with the same output contract may use this twin with its own limits.
 
 The rig steps it (:meth:`SimTouch.advance`) before the loop reads and
 commands it in the same tick, so a command is one tick old when rendered; if
@@ -17,7 +20,8 @@ the loop stops commanding, the output is zero 10 ms later.
 from __future__ import annotations
 
 from pipeline.devices.interfaces import HapticState
-from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, TouchOutput, TouchSpec
+from pipeline.devices.registry import haptic_model
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, HapticLimits, TouchOutput
 from pipeline.force.frames import Vec3
 
 __all__ = [
@@ -31,13 +35,13 @@ class SimTouch:
     Parameters
     ----------
     spec
-        Limits and thermal model.
+        Limits and thermal model (None: the Touch model's).
     command_timeout_s
         A command this old (on the rig's clock) renders as zero.
     """
 
-    def __init__(self, spec: TouchSpec | None = None, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
-        self.spec = spec or TouchSpec()
+    def __init__(self, spec: HapticLimits | None = None, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
+        self.spec = spec or haptic_model("touch").limits
         self.output = TouchOutput(self.spec, command_timeout_s)
         self.applied_force_n: Vec3 = (0.0, 0.0, 0.0)
         #: An HD error code (0 = none): ``HD_WARM_MOTORS`` from the heat model, or one a fault rehearsal sets.

@@ -152,9 +152,9 @@ def cmd_calibrate(args: argparse.Namespace, ask: Callable[[str], str] = ask_on_s
 
 # -- the simulated rig ---------------------------------------------------------------------------------
 def _sim(args: argparse.Namespace) -> dict[str, Any]:
+    from pipeline.assembly.sim_config import sim_rig_config
     from pipeline.devices.rig import SINGLE_ARM_NAME
     from pipeline.sim.arms import arm_configs
-    from pipeline.sim.rig import SimRigConfig
 
     names = args.sim_arms or (SINGLE_ARM_NAME,)
     where = f"the simulated rig (--sim-arms {','.join(names)})" if args.sim_arms else (
@@ -162,7 +162,7 @@ def _sim(args: argparse.Namespace) -> dict[str, Any]:
     arm = chosen_arm(names, args.arm, where)
     assert arm is not None  # required: one arm or a refusal
     # the arm's own configuration (its own seed) as the simulated rig of several arms builds it
-    sim = dict(arm_configs(names, SimRigConfig(seed=args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)))[arm]
+    sim = dict(arm_configs(names, sim_rig_config(args.seed, sensor_z_mount_deg=args.sim_mount_error_deg)))[arm]
     note = f"simulated rig, seed {args.seed}" + (f", arm {arm!r}" if len(names) > 1 else "") + (
         f", sensor mounted {args.sim_mount_error_deg:g}° about its z axis (not told to the pipeline)"
         if args.sim_mount_error_deg else "")
@@ -440,10 +440,11 @@ def _real_frames(hw: Any, clock: Any, ask: Callable[[str], str], payload: Any, n
 
     from pipeline.commissioning.frame_check import AXES, AxisCheck, check_axis
     from pipeline.commissioning.steps import frame_check_of, frames_step
+    from pipeline.devices.registry import haptic_model
     from pipeline.force.framework import STEP_FIELDS, HapticFramework
 
     base_at, scaled_at = STEP_FIELDS.index("base_fx"), STEP_FIELDS.index("scaled_fx")
-    fw = HapticFramework(hw.framework, payload)
+    fw = HapticFramework(hw.framework, payload, device_peak_n=haptic_model(hw.haptic.model).peak_force_n)
     sensor, robot = _sensor_and_robot(hw, clock)
     words = {"+x": "+x", "+y": "+y", "+z": "+z (up)"}
     results: dict[str, AxisCheck] = {}

@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.core.clock import prepare_realtime_thread
 from pipeline.devices.interfaces import Fault
-from pipeline.sim.rig import SimRigConfig
 
 __all__ = ["format_summary", "run_scripted_sim"]
 
@@ -35,7 +35,7 @@ def run_scripted_sim(
     """
     wall0 = time.perf_counter()
     eng = build_sim_engine(
-        EngineConfig(sim=SimRigConfig(seed=seed), clock=clock, haptics_on=haptics_on, ring_seconds=10.0)
+        EngineConfig(sim=sim_rig_config(seed), clock=clock, haptics_on=haptics_on, ring_seconds=10.0)
     )
     loop, ring = eng.loop, eng.ring
     assert ring is not None

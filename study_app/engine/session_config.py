@@ -30,7 +30,7 @@ def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int)
         "clock": clock,
         "rig_seed": rig_seed,
         "participant_seed": participant_seed,
-        "sim": _plain(dataclasses.asdict(eng.rig.config)),
+        "sim": _plain(eng.rig.config.record()),
         "framework": _plain(dataclasses.asdict(fw)),
         "pipeline_settings": non_default_settings(settings_of(fw)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),

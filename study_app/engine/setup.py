@@ -181,19 +181,14 @@ def build_real_engine(
             text = fh.read()
     except HardwareError as exc:
         raise RuntimeError(f"real rig: {exc}") from None
-    import pipeline.assembly.real_rig as hardware_module
-
-    # The rig-construction seam: build_real_rig opens the Touch through pipeline.assembly.real_rig.open_haptic.
-    # Tests (no Touch on CI) swap in a device that speaks the HDAPI through the real Touch backend.
-    original = hardware_module.open_haptic
-    if config.haptic_factory is not None:
-        hardware_module.open_haptic = _import_factory(config.haptic_factory)
+    # The rig-construction seam: haptic_factory opens every arm's haptic device in place of its model's backend
+    # (tests, with no Touch on CI, open one that speaks the HDAPI through the real Touch backend).
+    open_haptic = None if config.haptic_factory is None else _import_factory(config.haptic_factory)
     try:
-        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open)
+        eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open,
+                                    open_haptic=open_haptic)
     except (DeviceError, CalibrationFileError) as exc:
         raise RuntimeError(f"real rig: {exc}") from None
-    finally:
-        hardware_module.open_haptic = original
     return eng, hw, text
 
 
@@ -206,11 +201,11 @@ def build_engine(
     """
     if config.rig == "real":
         return build_real_engine(config, shared_ring=shared_ring, on_open=on_open)
+    from pipeline.assembly.sim_config import sim_rig_config
     from pipeline.force.pipeline_settings import framework_with
-    from pipeline.sim.rig import SimRigConfig
 
     eng = build_sim_engine(
-        EngineConfig(sim=SimRigConfig(seed=config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
+        EngineConfig(sim=sim_rig_config(config.rig_seed, sensor_z_mount_deg=config.sim_mount_error_deg),
                      clock=config.clock, calibrate=True, driver="hold", haptics_on=False, refine_bias=True,
                      ring_seconds=30.0, framework=framework_with(dict(config.sim_settings)), arms=config.sim_arms),
         shared_ring=shared_ring,

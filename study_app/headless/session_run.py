@@ -18,11 +18,11 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
+from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.participant import SimulatedParticipant
-from pipeline.sim.rig import SimRigConfig
 from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
 from protocol.runner.session_driver import SessionDriver
@@ -105,7 +105,7 @@ def _engine(rig_seed: int, clock: str, arms: tuple[str, ...], framework: Framewo
     """A fresh simulated rig with ``arms`` (the task arm first: the participant holds its stylus, its ring is the
     session's records, its seed is the one-arm rig's) running the pipeline ``framework``."""
     return build_sim_engine(
-        EngineConfig(sim=SimRigConfig(seed=rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
+        EngineConfig(sim=sim_rig_config(rig_seed), clock=clock, driver="hold", haptics_on=False, refine_bias=True,
                      ring_seconds=30.0, arms=arms, framework=framework)
     )
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from pipeline.backends.touch import HD_NOMINAL_MAX_CONTINUOUS_FORCE, HD_NOMINAL_MAX_FORCE
+from pipeline.backends.hdapi import HD_NOMINAL_MAX_CONTINUOUS_FORCE, HD_NOMINAL_MAX_FORCE
 from pipeline.devices.interfaces import DeviceError
 
 

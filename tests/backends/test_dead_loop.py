@@ -100,7 +100,7 @@ class Bench:
         self.hd.tick()  # a stylus state before the loop's first tick
         self.rig = make_rig(self.clock, self.touch)
         self.events: list[LoopEvent] = []
-        self.loop = HapticLoop(self.rig, HapticFramework(FrameworkConfig()), self.clock)
+        self.loop = HapticLoop(self.rig, HapticFramework(FrameworkConfig(), device_peak_n=3.3), self.clock)
         self.loop.on_event = self.events.append
         self.supervisor = LoopSupervisor(self.loop, self.clock)
         self.loop.submit(SetHaptics(True))

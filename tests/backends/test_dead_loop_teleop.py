@@ -32,6 +32,7 @@ from test_dead_loop import MS, Bench, Rig, stalled
 from test_ur_control import QUIET_S, listener  # noqa: F401 - the fixture: a loopback port for the adapter's probe
 
 from pipeline.backends.touch import TouchHapticDevice
+from pipeline.backends.ur import RtdeLink
 from pipeline.backends.ur_control import UrRtdeServo
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.teleop import TeleopConfig, TeleopController, TeleopDriver, TeleopState
@@ -73,7 +74,8 @@ class TeleopBench(Bench):
         self.control = FakeControl()
 
         def make_rig(clock: SteppedClock, touch: TouchHapticDevice) -> TeleopRig:
-            self.servo = UrRtdeServo("127.0.0.1", clock=clock, port=port, control_factory=lambda h, f: self.control)
+            self.servo = UrRtdeServo(RtdeLink("127.0.0.1", clock=clock, port=port),
+                                     control_factory=lambda h, f: self.control)
             return TeleopRig(clock, touch, self.servo)
 
         super().__init__(make_rig, buttons=DEADMAN)

@@ -21,7 +21,7 @@ from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.ur import UrRtdeRobot
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, HapticState
-from pipeline.devices.touch_output import TouchSpec
+from pipeline.devices.registry import haptic_model
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE
 from pipeline.force.payload_compensator import NO_PAYLOAD
 from pipeline.settings.hardware import HardwareConfig, HardwareError, hardware_from_dict, load_hardware
@@ -264,12 +264,11 @@ class _FakeTouch:
         self.closed = True
 
 
-def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr("pipeline.assembly.real_rig.open_haptic", lambda cfg, clock: _FakeTouch())
+def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path) -> None:
     with FakeNetFT() as netft, FakeRtde() as rtde, PtyJaw() as jaw:
         hw = load_hardware(write_rig_file(tmp_path, netft, rtde, jaw, cal=True))
         assert hw.calibration_file == str(tmp_path / "payload.json")
-        eng = build_hardware_engine(hw, clock=VirtualClock())
+        eng = build_hardware_engine(hw, clock=VirtualClock(), open_haptic=lambda cfg, clock: _FakeTouch())
         rig = eng.rig
         try:
             assert isinstance(rig,
@@ -302,8 +301,8 @@ def test_a_failing_device_closes_the_ones_already_open(tmp_path: Path) -> None:
 
 def test_f_max_may_equal_the_touchs_peak_force() -> None:
     d = base()
-    d["framework"]["f_max_n"] = TouchSpec().peak_force_n
-    assert hardware_from_dict(d).framework.f_max_n == TouchSpec().peak_force_n
+    d["framework"]["f_max_n"] = haptic_model("touch").limits.peak_force_n
+    assert hardware_from_dict(d).framework.f_max_n == haptic_model("touch").limits.peak_force_n
 
 
 def test_an_integer_too_long_for_python_is_refused_as_toml(tmp_path: Path) -> None:
@@ -355,7 +354,7 @@ def _assert_well_typed(hw: HardwareConfig) -> None:
             if isinstance(v, tuple):
                 assert all(type(x) is float for x in v), (name, v)
     assert type(hw.sensor.port) is int and type(hw.jaw.baud) is int and type(hw.framework.filter_window) is int
-    assert 0 < hw.framework.f_max_n <= TouchSpec().peak_force_n
+    assert 0 < hw.framework.f_max_n <= haptic_model("touch").limits.peak_force_n
     assert host_problem(hw.sensor.host, ipv6=False) is None and host_problem(hw.robot.host) is None
 
 

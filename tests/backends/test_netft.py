@@ -201,7 +201,7 @@ def test_status_word_and_stalled_ft_sequence_reach_the_watchdog() -> None:
         clock = VirtualClock(0)
         s = open_sensor(fake, clock=clock)
         try:
-            loop = HapticLoop(_OneSensorRig(s), HapticFramework(FrameworkConfig()), clock)
+            loop = HapticLoop(_OneSensorRig(s), HapticFramework(FrameworkConfig(), device_peak_n=3.3), clock)
             loop.run_ticks(1)
             assert loop.faults == 0
             push(s, fake, fake.record(status=0x80000001))

@@ -3,7 +3,8 @@ failing device closes what was opened and names its arm, and the loop drives bot
 
 Net F/T and RTDE are the real backends against two loopback fakes each (two boxes on 127.0.0.2 / 127.0.0.3, two
 fake UR controllers); the Touch devices are the real backend in one :class:`pipeline.backends.touch.TouchScheduler`
-over :class:`fake_multi_hd.FakeMultiHD` (libHD's current-device semantics), put in at ``open_touch_scheduler``.
+over :class:`fake_multi_hd.FakeMultiHD` (libHD's current-device semantics), put in at the C library's seam
+(``pipeline.backends.touch.PyOpenHapticsApi``): the Touch's backend is chosen by the registry as on a real rig.
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
 def touches(monkeypatch: pytest.MonkeyPatch) -> FakeMultiHD:
     hd = FakeMultiHD(FakeTouch("Right Touch", position=(10.0, 0.0, 0.0)),
                      FakeTouch("Left Touch", peak=2.0, position=(-10.0, 0.0, 0.0)))
-    monkeypatch.setattr("pipeline.assembly.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
+    monkeypatch.setattr("pipeline.backends.touch.PyOpenHapticsApi", lambda dll_dir=None: hd)
     return hd
 
 
@@ -174,17 +175,17 @@ def test_a_dead_loop_leaves_no_force_on_either_touch(fakes: Any, touches: FakeMu
         eng.rig.close()
 
 
-def test_a_replaced_haptic_opener_opens_each_arms_touch(fakes: Any, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The app's rig-construction seam (``open_haptic`` replaced by a stand-in) works for two arms too."""
+def test_a_given_haptic_opener_opens_each_arms_touch(fakes: Any) -> None:
+    """The app's rig-construction seam (``open_haptic``, opening each arm's device in place of its model's backend)
+    works for two arms too."""
     names: list[str] = []
 
     def stand_in(cfg: Any, clock: Any) -> Any:
         names.append(cfg.device_name)
         return TouchScheduler(FakeMultiHD(FakeTouch(cfg.device_name))).open(cfg.device_name, clock)
 
-    monkeypatch.setattr("pipeline.assembly.real_rig.open_haptic", stand_in)
     opened: list[str] = []
-    rig = build_real_rig(_file(fakes), VirtualClock(), on_open=opened.append)
+    rig = build_real_rig(_file(fakes), VirtualClock(), on_open=opened.append, open_haptic=stand_in)
     rig.close()
     assert names == ["Right Touch", "Left Touch"] and not any("scheduler" in o for o in opened)
 

@@ -21,7 +21,6 @@ from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
 from waits import until
 
-from pipeline.backends.touch import TouchScheduler
 from pipeline.commissioning.payload_identification import recommended_pose_set
 from pipeline.commissioning.tcp import pivot_orientations
 from pipeline.sim.robot import TOOL_DOWN
@@ -43,7 +42,7 @@ def fakes() -> Iterator[dict[str, tuple[FakeNetFT, FakeRtde]]]:
 @pytest.fixture
 def two_touches(monkeypatch: pytest.MonkeyPatch) -> FakeMultiHD:
     hd = FakeMultiHD(FakeTouch("Right Touch"), FakeTouch("Left Touch"))
-    monkeypatch.setattr("pipeline.assembly.real_rig.open_touch_scheduler", lambda dll_dir: TouchScheduler(hd))
+    monkeypatch.setattr("pipeline.backends.touch.PyOpenHapticsApi", lambda dll_dir=None: hd)
     return hd
 
 

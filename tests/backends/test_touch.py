@@ -12,14 +12,14 @@ import math
 
 import pytest
 
-from pipeline.backends.touch import (
+from pipeline.backends.hdapi import (
     HD_FORCE_OUTPUT,
     HD_MAX_FORCE_CLAMPING,
     HD_NOMINAL_MAX_CONTINUOUS_FORCE,
     HD_NOMINAL_MAX_FORCE,
-    TouchHapticDevice,
     load_pyopenhaptics,
 )
+from pipeline.backends.touch import TouchHapticDevice
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, Fault, HapticDevice
 from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
@@ -163,7 +163,7 @@ def test_hd_error_latches_the_loops_fault_and_reset_rearms() -> None:
     clock = VirtualClock()
     hd = FakeHD()
     touch = TouchHapticDevice(api=hd, clock=clock)
-    loop = HapticLoop(_TouchRig(touch), HapticFramework(FrameworkConfig()), clock)
+    loop = HapticLoop(_TouchRig(touch), HapticFramework(FrameworkConfig(), device_peak_n=3.3), clock)
     loop.submit(SetHaptics(True))
     loop.run_ticks(2)
     hd.tick()

@@ -17,7 +17,7 @@ import pytest
 
 import foundation.platform_support as ps
 from foundation.platform_support import files
-from pipeline.backends import touch
+from pipeline.backends import hdapi
 from pipeline.devices.interfaces import DeviceError
 from pipeline.settings.hardware import HardwareError, load_hardware
 
@@ -86,7 +86,7 @@ def fake_windows(monkeypatch, tmp_path):
 
 
 def test_the_folder_is_added_before_pyopenhaptics_is_imported(fake_windows, tmp_path):
-    hd, _, _ = touch.load_pyopenhaptics(str(tmp_path))
+    hd, _, _ = hdapi.load_pyopenhaptics(str(tmp_path))
     assert hd.__name__ == "pyOpenHaptics.hd"
     assert fake_windows == [f"add_dll_directory {tmp_path}", "import pyOpenHaptics.hd"]
 
@@ -96,7 +96,7 @@ def test_the_touch_passes_its_setting_down_to_the_import(fake_windows, tmp_path,
     from pipeline.core.clock import VirtualClock
     from pipeline.settings.hardware import HapticSettings
 
-    monkeypatch.setattr(touch.PyOpenHapticsApi, "init_device", lambda self, name: (_ for _ in ()).throw(
+    monkeypatch.setattr(hdapi.PyOpenHapticsApi, "init_device", lambda self, name: (_ for _ in ()).throw(
         DeviceError("stop after the import")))
     with pytest.raises(DeviceError, match="stop after the import"):
         open_haptic(HapticSettings(dll_dir=str(tmp_path)), VirtualClock())
@@ -104,13 +104,13 @@ def test_the_touch_passes_its_setting_down_to_the_import(fake_windows, tmp_path,
 
 
 def test_without_a_folder_nothing_is_added(fake_windows):
-    touch.load_pyopenhaptics(None)
+    hdapi.load_pyopenhaptics(None)
     assert fake_windows == ["import pyOpenHaptics.hd"]
 
 
 def test_a_missing_dll_names_the_setting(fake_windows, tmp_path):
     (tmp_path / "site" / "pyOpenHaptics" / "hd.py").write_text("raise OSError(\"Could not find module 'HD.dll'\")\n")
     with pytest.raises(DeviceError, match=r"HD\.dll'; on Windows set \[haptic\] dll_dir to the folder holding HD\.dll"):
-        touch.load_pyopenhaptics(None)
+        hdapi.load_pyopenhaptics(None)
     with pytest.raises(DeviceError, match=f"HD.dll'; not in {tmp_path}"):
-        touch.load_pyopenhaptics(str(tmp_path))
+        hdapi.load_pyopenhaptics(str(tmp_path))

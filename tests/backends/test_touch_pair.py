@@ -9,7 +9,8 @@ from __future__ import annotations
 import pytest
 from fake_multi_hd import FakeMultiHD, FakeTouch
 
-from pipeline.backends.touch import HD_FORCE_OUTPUT, HD_MAX_FORCE_CLAMPING, TouchScheduler
+from pipeline.backends.hdapi import HD_FORCE_OUTPUT, HD_MAX_FORCE_CLAMPING
+from pipeline.backends.touch import TouchScheduler
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, HapticDevice
 from pipeline.devices.touch_output import HD_EXCEEDED_MAX_FORCE, HD_WARM_MOTORS
@@ -126,7 +127,7 @@ def test_the_pyopenhaptics_adapter_serves_two_devices_by_handle(monkeypatch: pyt
     import sys
     from pathlib import Path
 
-    from pipeline.backends.touch import PyOpenHapticsApi
+    from pipeline.backends.hdapi import PyOpenHapticsApi
 
     monkeypatch.syspath_prepend(str(Path(__file__).resolve().parent / "fake_openhaptics"))
     try:

@@ -11,14 +11,14 @@ import time
 
 from fake_rtde import FakeRtde
 
-from pipeline.backends.ur import UrRtdeRobot
+from pipeline.backends.ur import RtdeLink, UrRtdeRobot
 from pipeline.core.clock import MonotonicClock
 
 WAIT_S = 3.0
 
 
 def _open(fake: FakeRtde) -> UrRtdeRobot:
-    return UrRtdeRobot(fake.host, clock=MonotonicClock(), connect_timeout_s=2.0, min_backoff_s=0.05,
+    return UrRtdeRobot(RtdeLink(fake.host, clock=MonotonicClock(), connect_timeout_s=2.0), min_backoff_s=0.05,
                        max_backoff_s=0.2)
 
 

@@ -9,7 +9,7 @@ import time
 import pytest
 from fake_rtde import FakeRtde
 
-from pipeline.backends.ur import UrRtdeRobot, ur3_flange_pose, ur3_tcp_pose
+from pipeline.backends.ur import RtdeLink, UrRtdeRobot, ur3_flange_pose, ur3_tcp_pose
 from pipeline.core.clock import MonotonicClock
 from pipeline.devices.interfaces import DeviceError, Robot
 from pipeline.force.frames import matrix_to_rotvec, rotvec_to_matrix
@@ -34,10 +34,9 @@ def test_ur3_forward_kinematics_matches_the_dh_reference_vectors() -> None:
 
 
 def open_robot(fake: FakeRtde, **kw: object) -> UrRtdeRobot:
-    kw.setdefault("connect_timeout_s", 2.0)
     kw.setdefault("min_backoff_s", 0.05)
     kw.setdefault("max_backoff_s", 0.2)
-    return UrRtdeRobot(fake.host, clock=MonotonicClock(), **kw)
+    return UrRtdeRobot(RtdeLink(fake.host, clock=MonotonicClock(), connect_timeout_s=2.0), **kw)  # type: ignore[arg-type]
 
 
 def test_reads_pose_rotation_joints_and_controller_time() -> None:
@@ -144,11 +143,11 @@ def test_closed_port_and_unreachable_host_are_clear_errors_fast() -> None:
     t0 = time.monotonic()
     with pytest.raises(DeviceError,
                        match=rf"cannot reach the UR controller at {host}:30004 \(Connection refused\); check the IP"):
-        UrRtdeRobot(host, connect_timeout_s=0.3)
+        UrRtdeRobot(RtdeLink(host, connect_timeout_s=0.3))
     assert time.monotonic() - t0 < 0.5
     t0 = time.monotonic()
     with pytest.raises(DeviceError, match=r"cannot reach the UR controller at 192\.0\.2\.1:30004"):
-        UrRtdeRobot("192.0.2.1", connect_timeout_s=0.3)
+        UrRtdeRobot(RtdeLink("192.0.2.1", connect_timeout_s=0.3))
     assert time.monotonic() - t0 < 1.0
     with pytest.raises(ValueError, match=r"frequency_hz = 2000: must be -1 \(automatic\) or in \(0, 500\]"):
-        UrRtdeRobot(host, frequency_hz=2000)
+        RtdeLink(host, frequency_hz=2000)

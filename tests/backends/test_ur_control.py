@@ -23,6 +23,7 @@ from collections.abc import Iterator
 import pytest
 from fake_ur_control import FakeControl
 
+from pipeline.backends.ur import RtdeLink
 from pipeline.backends.ur_control import UrRtdeServo
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, TcpServo
@@ -50,7 +51,7 @@ def open_servo(port: int, fake: FakeControl, clock: VirtualClock, **kw: object) 
         made.append((host, frequency_hz))
         return fake
 
-    servo = UrRtdeServo("127.0.0.1", clock=clock, port=port, control_factory=factory, **kw)
+    servo = UrRtdeServo(RtdeLink("127.0.0.1", clock=clock, port=port), control_factory=factory, **kw)  # type: ignore[arg-type]
     assert made == [("127.0.0.1", 125.0)]
     return servo
 
@@ -82,7 +83,7 @@ def test_a_control_interface_that_never_comes_up_is_a_clear_error_naming_the_hos
     try:
         with pytest.raises(DeviceError, match=r"^the UR controller at 127\.0\.0\.1 did not start the ur_rtde control "
                                               r"script within 0\.2 s; is the robot in remote control mode"):
-            UrRtdeServo("127.0.0.1", port=listener, control_timeout_s=0.2, control_factory=hangs)
+            UrRtdeServo(RtdeLink("127.0.0.1", port=listener), control_timeout_s=0.2, control_factory=hangs)
         assert time.monotonic() - t0 < 1.0  # bounded by the timeout: no hang
     finally:
         release.set()
@@ -92,7 +93,7 @@ def test_a_control_interface_that_never_comes_up_is_a_clear_error_naming_the_hos
 
     with pytest.raises(DeviceError, match=r"^ur_rtde could not take control of the UR controller at 127\.0\.0\.1: "
                                           r"RTDE control script not running$"):
-        UrRtdeServo("127.0.0.1", port=listener, control_factory=refuses)
+        UrRtdeServo(RtdeLink("127.0.0.1", port=listener), control_factory=refuses)
 
 
 def test_an_unreachable_controller_is_refused_before_the_control_interface_is_built() -> None:
@@ -103,13 +104,13 @@ def test_an_unreachable_controller_is_refused_before_the_control_interface_is_bu
     built: list[str] = []
     with pytest.raises(DeviceError, match=rf"^cannot reach the UR controller at 127\.0\.0\.1:{port} for teleoperation "
                                           r"\(Connection refused\); check the IP address"):
-        UrRtdeServo("127.0.0.1", port=port, connect_timeout_s=0.3,
+        UrRtdeServo(RtdeLink("127.0.0.1", port=port, connect_timeout_s=0.3),
                     control_factory=lambda h, f: built.append(h))
     assert built == []
     with pytest.raises(ValueError, match=r"lookahead_s = 0\.5: servoL allows 0\.03 to 0\.2 s"):
-        UrRtdeServo("127.0.0.1", port=port, lookahead_s=0.5)
+        UrRtdeServo(RtdeLink("127.0.0.1", port=port), lookahead_s=0.5)
     with pytest.raises(ValueError, match=r"gain = 50: servoL allows 100 to 2000"):
-        UrRtdeServo("127.0.0.1", port=port, gain=50)
+        UrRtdeServo(RtdeLink("127.0.0.1", port=port), gain=50)
 
 
 def clear_error_and_resume(servo: UrRtdeServo, fake: FakeControl) -> None:

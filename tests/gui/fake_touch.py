@@ -11,7 +11,8 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-from pipeline.backends.touch import HD_NOMINAL_MAX_CONTINUOUS_FORCE, HD_NOMINAL_MAX_FORCE, TouchHapticDevice
+from pipeline.backends.hdapi import HD_NOMINAL_MAX_CONTINUOUS_FORCE, HD_NOMINAL_MAX_FORCE
+from pipeline.backends.touch import TouchHapticDevice
 from pipeline.core.clock import Clock
 from pipeline.settings.hardware import HapticSettings
 

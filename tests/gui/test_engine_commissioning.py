@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from pipeline.devices.touch_output import TouchSpec
+from pipeline.devices.touch_output import HapticLimits
 from pipeline.sim.touch import SimTouch
 from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
@@ -48,7 +48,7 @@ def steps_until(e: StudyEngine, pred, n: int = 40_000) -> None:
 def test_a_thermally_derated_on_trial_is_aborted_as_feedback_not_delivered(engine, tmp_path, short_protocol) -> None:
     e, events = engine
     # a Touch whose motors are hot and whose continuous rating is low: its derated limit (~0.02 N) cuts any press
-    hot = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.01, thermal_budget_n2s=1.0))
+    hot = SimTouch(HapticLimits(peak_force_n=3.3, continuous_force_n=0.01, thermal_budget_n2s=1.0))
     hot.output.heat.heat_n2s = 0.999
     e.eng.rig.haptic = hot  # the physics' device ...
     e.eng.loop.arms[0].haptic = hot  # ... and the one the loop's arm reads and commands

@@ -136,12 +136,10 @@ def test_the_fault_log_says_when_one_way_and_whose_session_each_line_is():
 
 def test_the_banner_shows_a_long_reason_whole(qtbot):
     """Seen in the real window at 1366×768: the banner cut the last line of the runner's long reason."""
-    from PySide6.QtWidgets import QVBoxLayout, QWidget
+    from PySide6.QtWidgets import QTableWidget, QVBoxLayout, QWidget
 
     from study_app.gui.session_views import QtCueWait
     from study_app.models.cue_wait import CueWait
-
-    from PySide6.QtWidgets import QTableWidget
 
     app = AppModel()
     holder = QWidget()  # the Trials tab: the count, the banner, the table taking the rest

@@ -134,7 +134,7 @@ def test_fused_step_equals_composed_stages_at_the_clamp(peak) -> None:
 def test_steady_state_matches_paper_mapping() -> None:
     """A constant 1.2 N contact force along the tool axis renders 3·tanh(1.2/7) N along the haptic +y."""
     cfg = FrameworkConfig(safety=SafetyConfig(ramp_in_s=0.01))
-    fw = HapticFramework(cfg)
+    fw = HapticFramework(cfg, device_peak_n=3.3)
     tool_down = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
     fw.set_pose(tool_down)
     # tissue pushes the tool up (+z base) = −z in the tool-down sensor frame
@@ -151,7 +151,7 @@ def test_steady_state_matches_paper_mapping() -> None:
 
 def test_disabled_output_ramps_to_zero_but_path_runs() -> None:
     cfg = FrameworkConfig(safety=SafetyConfig(ramp_in_s=0.01))
-    fw = HapticFramework(cfg)
+    fw = HapticFramework(cfg, device_peak_n=3.3)
     for _ in range(100):
         fw.step(0.5, 0.0, 0.0, True, 0.001)
     outs = [fw.step(0.5, 0.0, 0.0, False, 0.001) for _ in range(60)]
@@ -166,7 +166,7 @@ def test_rls_refinement_tracks_bias_and_updates_offsets() -> None:
 
     cal = _calibration()
     rls = RlsBias(cal.force_bias_n, cal.torque_bias_nm, forgetting=0.99, gate_force_n=0.15)
-    fw = HapticFramework(FrameworkConfig(), cal, rls=rls)
+    fw = HapticFramework(FrameworkConfig(), cal, device_peak_n=3.3, rls=rls)
     pose = (1.0, 0.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, -1.0)
     fw.set_pose(pose)
     rsb = transpose(mat_mul(pose, FrameworkConfig().rot_tip_sensor))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 
@@ -12,7 +13,7 @@ from drivers import PressAndHold
 from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import Fault
-from pipeline.devices.touch_output import TouchSpec
+from pipeline.devices.registry import haptic_model
 from pipeline.force.framework import FrameworkConfig
 from pipeline.force.safety import SafetyConfig
 from pipeline.runtime.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
@@ -373,7 +374,7 @@ def test_rendered_force_never_exceeds_min_of_f_max_and_touch_peak(f_max_n, peak_
     cfg = EngineConfig(
         clock="virtual",
         driver="hold",
-        sim=SimRigConfig(touch=TouchSpec(peak_force_n=peak_n)),
+        sim=SimRigConfig(touch=dataclasses.replace(haptic_model("touch").limits, peak_force_n=peak_n)),
         framework=FrameworkConfig(f_max_n=f_max_n),
     )
     eng = build_sim_engine(cfg)

@@ -154,11 +154,11 @@ def test_one_arm_is_the_loop_of_before() -> None:
 
 def test_the_loop_refuses_a_pipeline_count_that_does_not_match_the_arms() -> None:
     rig = SimArms.build(ARMS)
-    fw = HapticFramework(FrameworkConfig())
+    fw = HapticFramework(FrameworkConfig(), device_peak_n=3.3)
     with pytest.raises(ValueError, match=r"the rig has 2 arms \(right, left\)"):
         HapticLoop(rig, fw, eng_clock())
     with pytest.raises(ValueError, match="fault_policy = 'some'"):
-        HapticLoop(rig, fw, eng_clock(), arm_pipelines=[(HapticFramework(FrameworkConfig()), None)],
+        HapticLoop(rig, fw, eng_clock(), arm_pipelines=[(HapticFramework(FrameworkConfig(), device_peak_n=3.3), None)],
                    fault_policy="some")
     with pytest.raises(ValueError, match="arms = "):
         EngineConfig(arms=("left", "left"))

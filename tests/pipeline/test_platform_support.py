@@ -45,7 +45,7 @@ _DIR_FD = {"dir_fd", "src_dir_fd", "dst_dir_fd"}
 
 #: Modules allowed one kind of call, each with why (the list may only shrink: an entry with no such call fails).
 ALLOWED: dict[tuple[str, str], str] = {
-    ("pipeline/backends/touch.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
+    ("pipeline/backends/hdapi.py", "import ctypes"): "the Touch's own C API (OpenHaptics HD, HD.dll / libHD.so) "
                                                      "through pyOpenHaptics: the device's library, not the OS",
     ("foundation/outfs.py", "dir_fd"): "the output policy's file-descriptor primitives: every walk starts in "
                                      "open_folder, which hands the walk to foundation.outpath (by checked paths) "

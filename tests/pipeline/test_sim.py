@@ -11,7 +11,7 @@ import pytest
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.commissioning.payload_identification import recommended_pose_set
 from pipeline.core.clock import VirtualClock
-from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
+from pipeline.devices.touch_output import HD_WARM_MOTORS, HapticLimits
 from pipeline.force.frames import IDENTITY, mat_mul, transpose
 from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.rig import SimRig, SimRigConfig
@@ -119,7 +119,7 @@ def test_sensor_packet_loss_and_stall_keep_the_old_sample() -> None:
 
 # -- Touch ----------------------------------------------------------------------------------------
 def test_touch_clamps_to_its_peak_and_renders_only_fresh_commands() -> None:
-    t = SimTouch(TouchSpec(peak_force_n=3.3, continuous_force_n=0.88))
+    t = SimTouch(HapticLimits(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=60.0))
     t.advance(0, 0.001)
     t.command_force(10.0, 0.0, 0.0)  # commanded at t = 0 ms
     t.advance(1_000_000, 0.001)
@@ -135,7 +135,7 @@ def test_touch_clamps_to_its_peak_and_renders_only_fresh_commands() -> None:
 
 
 def test_touch_derates_toward_its_continuous_rating_and_stays_under_budget() -> None:
-    spec = TouchSpec(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0)
+    spec = HapticLimits(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0)
     t = SimTouch(spec)
     limits, heat = [], []
     for k in range(3000):  # the loop commands 10 N every tick for 3 s
@@ -160,7 +160,7 @@ def test_touch_derates_toward_its_continuous_rating_and_stays_under_budget() -> 
 
 
 def test_touch_past_its_budget_raises_warm_motors_until_cooled_and_rearmed() -> None:
-    t = SimTouch(TouchSpec(thermal_budget_n2s=1.0))
+    t = SimTouch(HapticLimits(peak_force_n=3.3, continuous_force_n=0.88, thermal_budget_n2s=1.0))
     t.advance(0, 0.001)
     t.command_force(1.0, 0.0, 0.0)
     t.output.heat.heat_n2s = 1.01  # past the budget (e.g. after a servo stall): the backstop

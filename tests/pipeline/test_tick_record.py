@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import ast
+import math
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +13,7 @@ import pytest
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.core.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE, TICK_FIELDS
 from pipeline.force.framework import STEP_FIELDS
+from pipeline.runtime import arm_channel
 from pipeline.runtime.loop_messages import RECORD_FIELDS, Mark
 from pipeline.runtime.ring import RingBuffer
 
@@ -73,3 +77,50 @@ def test_the_loop_writes_its_integers_as_ints() -> None:
     last = eng.loop.last_record
     assert last is not None and all(type(last[n]) is int for n in INTEGERS)
     assert np.array([tuple(last[n] for n in RECORD_FIELDS)], TICK_DTYPE).tobytes() == rows[-1:].tobytes()
+
+
+def _tick_assignments() -> dict[str, ast.AST]:
+    """``ArmChannel.tick``'s assignments by target: a name, or the tuple of names a step's stages unpack into."""
+    tree = ast.parse(Path(arm_channel.__file__).read_text(encoding="utf-8"))
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "ArmChannel")
+    tick = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "tick")
+    out: dict[str, ast.AST] = {}
+    for node in ast.walk(tick):
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target = node.targets[0]
+            key = target.id if isinstance(target, ast.Name) else ast.unparse(target)
+            out[key] = node.value
+    return out
+
+
+def _names(node: ast.AST) -> tuple[str, ...] | None:
+    """The names of a tuple of plain names (None: anything else)."""
+    if isinstance(node, ast.Tuple) and all(isinstance(e, ast.Name) for e in node.elts):
+        return tuple(e.id for e in node.elts)  # type: ignore[attr-defined]
+    return None
+
+
+def test_the_tick_builds_its_record_by_name() -> None:
+    """Each value of a record is the tick's local variable named as its field, in the one definition's order, and
+    the framework's stages are unpacked into locals named by STEP_FIELDS: no value is placed by counting."""
+    assigned = _tick_assignments()
+    assert _names(assigned["rec"]) == RECORD_FIELDS
+    stages = next(ast.parse(k, mode="eval").body for k, v in assigned.items()
+                  if isinstance(v, ast.Call) and ast.unparse(v.func) == "fw.step")
+    assert _names(stages) == STEP_FIELDS
+    computed = {n for k in assigned for n in (_names(ast.parse(k, mode="eval").body) or (k,))}
+    params = {"now", "period_ns", "dt_s"}
+    assert set(RECORD_FIELDS) <= computed | params  # every field is a value the tick computed under its name
+
+
+def test_a_record_written_by_the_tick_reads_back_by_name() -> None:
+    """The loop's record, read from the ring by field name, holds what the tick computed under that name."""
+    eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", ring_seconds=1.0))
+    eng.loop.run_ticks(300)
+    ch = eng.loop.arms[0]
+    row = eng.ring.latest(1)[0]  # type: ignore[union-attr]
+    rec = dict(zip(RECORD_FIELDS, ch.last_record or (), strict=True))
+    assert all(row[name] == rec[name] for name in RECORD_FIELDS if not np.isnan(row[name]))
+    assert rec["tick"] == eng.loop.tick_count - 1 and rec["t_s"] == rec["t_ns"] * 1e-9
+    assert rec["force_n"] == math.hypot(rec["filt_fx"], rec["filt_fy"], rec["filt_fz"])
+    assert rec["haptic_on"] == 1 and isinstance(rec["haptic_on"], int)

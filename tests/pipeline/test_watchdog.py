@@ -13,6 +13,7 @@ through the simulation's fault switches and checks, tick by tick:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import pytest
@@ -20,7 +21,8 @@ from drivers import PressAndHold
 
 from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
-from pipeline.devices.touch_output import HD_WARM_MOTORS, TouchSpec
+from pipeline.devices.registry import haptic_model
+from pipeline.devices.touch_output import HD_WARM_MOTORS
 from pipeline.force.framework import STEP_FIELDS
 from pipeline.force.safety import SafetyConfig
 from pipeline.runtime.loop_messages import OperatorStop, ResetFaults
@@ -309,7 +311,7 @@ def test_operator_stop_latches_and_ramps_to_zero_until_reset(eng):
 # -- (g) the Touch's motors get warm -----------------------------------------------------------------------
 def test_warm_motors_derate_the_output_and_the_loop_records_and_reports_it():
     budget = 0.5
-    spec = TouchSpec(thermal_budget_n2s=budget)
+    spec = dataclasses.replace(haptic_model("touch").limits, thermal_budget_n2s=budget)
     e = make_engine(SimRigConfig(touch=spec), y_m=-0.025)  # ~5 N of tissue force, ~1.9 N rendered
     touch = e.rig.haptic
     recs = ticks(e, 6000)
@@ -344,7 +346,7 @@ def test_warm_motors_derate_the_output_and_the_loop_records_and_reports_it():
 
 def test_warm_motors_past_the_budget_latch_haptic_device_and_reset_waits_for_cooling():
     budget = 2.0
-    e = make_engine(SimRigConfig(touch=TouchSpec(thermal_budget_n2s=budget)))
+    e = make_engine(SimRigConfig(touch=dataclasses.replace(haptic_model("touch").limits, thermal_budget_n2s=budget)))
     touch = e.rig.haptic
     settle(e, 1500)
     touch.output.heat.heat_n2s = budget * 1.01  # past the budget anyway (a servo stall at full force): the backstop

@@ -31,7 +31,8 @@ import study_app.headless.session_run as session_run
 from analysis.reading.load import load_study
 from analysis.stats.loop_health import abort_counts, health_table
 from pipeline.assembly.engine import Engine
-from pipeline.devices.touch_output import TouchSpec
+from pipeline.devices.registry import haptic_model
+from pipeline.devices.touch_output import HapticLimits
 from pipeline.force.replay import ReplayInputs, replay
 from pipeline.sim.rig import SimRigConfig
 from protocol.storage.recordings import SegmentData, read_segment, segments_of
@@ -39,16 +40,16 @@ from study_app.headless import run_study
 
 MS = 1_000_000
 #: A Touch whose motors warm within a trial at the study's forces (continuous rating 0.3 N, budget 1 N²·s).
-HOT_TOUCH = TouchSpec(continuous_force_n=0.3, thermal_budget_n2s=1.0)
+HOT_TOUCH = dataclasses.replace(haptic_model("touch").limits, continuous_force_n=0.3, thermal_budget_n2s=1.0)
 #: A study seed whose participant holds a FIRM trial with feedback long enough for HOT_TOUCH to derate in it.
 HOT_SEED = 2
 
 
-def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: TouchSpec | None,
+def run_recorded(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, touch: HapticLimits | None,
                  tamper: Callable[[Engine], None] | None = None, seed: int = 3) -> tuple[Path, list[SegmentData]]:
     """One participant's session on a simulated rig built as ``run`` builds it, with this Touch; its recording."""
     if touch is not None:
-        monkeypatch.setattr(session_run, "SimRigConfig", lambda seed: SimRigConfig(seed=seed, touch=touch))
+        monkeypatch.setattr(session_run, "sim_rig_config", lambda seed: SimRigConfig(seed=seed, touch=touch))
     if tamper is not None:
         build = session_run._engine
 
@@ -105,7 +106,8 @@ def test_a_cold_session_records_no_cut(tmp_path: Path, monkeypatch: pytest.Monke
     newer = dataclasses.replace(inputs, events=[*inputs.events, (int(seg.columns["tick"][5]), "haptic_gain_2", 0.5)])
     with pytest.raises(ValueError, match=r"'haptic_gain_2' at tick \d+: this version of replay applies only pose, "):
         replay(newer)
-    assert [p for _, k, p in seg.log() if k == "device_limit"] == [TouchSpec().peak_force_n]  # once, at the start
+    peak_n = haptic_model("touch").limits.peak_force_n
+    assert [p for _, k, p in seg.log() if k == "device_limit"] == [peak_n]  # once, at the start
     assert_bit_identical(seg)
 
 
