@@ -14,6 +14,7 @@ judged on the samples since the cue (:attr:`study_app.models.session.SessionMode
 from __future__ import annotations
 
 import html
+import math
 
 import numpy as np
 import pyqtgraph as pg
@@ -23,7 +24,7 @@ from PySide6.QtWidgets import QComboBox, QGraphicsRectItem, QHBoxLayout, QLabel,
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import SessionModel
 
-__all__ = ["LOWER_CHOICES", "QtForcePlots"]
+__all__ = ["LOWER_CHOICES", "LOWER_PLOT_MIN_PX", "UPPER_PLOT_MIN_PX", "QtForcePlots"]
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_COLOUR, RENDER_COLOUR, TASK_COLOUR = "#dc2828", "#14a03c", "#1f4e9c"
@@ -58,6 +59,12 @@ def _swatch(colour: str, text: str, *, block: bool = False) -> str:
     mark = (f'<span style="background:{colour}">&nbsp;&nbsp;&nbsp;&nbsp;</span>' if block
             else f'<span style="color:{colour}; font-weight:900">━━</span>')
     return f"{mark}&nbsp;{html.escape(text)}"
+
+
+#: The least height of each plot's data area, px: the splitter above the trial table never squashes a plot past
+#: reading (its axis title would run into the other plot's).
+UPPER_PLOT_MIN_PX = 100
+LOWER_PLOT_MIN_PX = 40
 
 
 class QtForcePlots(QWidget):
@@ -114,6 +121,7 @@ class QtForcePlots(QWidget):
         self.lower_plot.setXLink(self.task)
         self.view.ci.layout.setRowStretchFactor(0, 3)
         self.view.ci.layout.setRowStretchFactor(1, 1)
+        self.task.getViewBox().setMinimumHeight(UPPER_PLOT_MIN_PX)
         self.lower_curves: dict[str, pg.PlotDataItem] = {}
         # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
         # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
@@ -185,6 +193,10 @@ class QtForcePlots(QWidget):
                             size="9pt")
         self.task.setLabel("bottom", "" if names else "time (s)")
         self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
+        self.lower_plot.getViewBox().setMinimumHeight(LOWER_PLOT_MIN_PX if names else 0)
+        # the widget asks for what its plots need now (the data areas with their titles and axes), so no splitter
+        # or layout gives it less
+        self.view.setMinimumHeight(math.ceil(self.view.ci.effectiveSizeHint(Qt.SizeHint.MinimumSize).height()))
         self._y.pop("lower", None)
         self.refresh()
 

@@ -52,8 +52,7 @@ PARTICIPANT_SIZE = QSize(900, 560)
 #: The participant screen beside this window on a one-monitor machine (a rehearsal): small enough to leave room.
 PARTICIPANT_BESIDE_SIZE = QSize(640, 400)
 RIG_SIZE = QSize(760, 480)
-#: The least the plot/table splitter leaves the progress line and plots, and the trial table's tabs, px.
-PLOTS_MIN_HEIGHT = 240
+#: The least the plot/table splitter leaves the trial table's tabs, px (the plots ask for their own least).
 TABLE_MIN_HEIGHT = 120
 WIZARD_SIZE = QSize(720, 640)
 
@@ -175,9 +174,9 @@ class ExperimenterWindow(QMainWindow):
         tl.addWidget(self.plots, 1)
         right.addWidget(top)
         right.addWidget(self.tabs)
-        # the splitter's handle never squashes the plots (or the table) to nothing: each keeps room to be read
+        # the splitter's handle never squashes the plots (or the table) to nothing: each keeps room to be read (the
+        # plots: what their layout asks for, each plot's data area readable -- QtForcePlots)
         right.setChildrenCollapsible(False)
-        top.setMinimumHeight(PLOTS_MIN_HEIGHT)
         self.tabs.setMinimumHeight(TABLE_MIN_HEIGHT)
         right.setSizes([520, 220])
         right.setStretchFactor(0, 3)  # a taller window gives the plots the room

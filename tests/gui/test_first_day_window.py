@@ -11,7 +11,8 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QApplication, QSplitter
 
 from study_app.engine import messages as m
-from study_app.gui.main_window import PLOTS_MIN_HEIGHT, TABLE_MIN_HEIGHT
+from study_app.gui.force_plots import LOWER_PLOT_MIN_PX, UPPER_PLOT_MIN_PX
+from study_app.gui.main_window import TABLE_MIN_HEIGHT
 from study_app.gui.setup_panel import SPACE_IN_A_FIELD, SPACE_WHILE_TYPING
 from study_app.models.app import AppModel
 from study_app.models.calibration import pose_name
@@ -57,9 +58,21 @@ def test_the_splitters_never_squash_the_plots_or_the_table_to_nothing(qtbot, tmp
     w = open_ready_window(qtbot, tmp_path, SHORT_PROTOCOL, speed=4.0, timeout_ms=TIMEOUT_MS)
     right = w.tabs.parentWidget()
     assert isinstance(right, QSplitter)
+    w.resize(1280, 728)  # a 1366x768 laptop's window
     right.setSizes([0, 5000])  # the handle dragged to the top
     QApplication.processEvents()
-    assert right.sizes()[0] >= PLOTS_MIN_HEIGHT and w.plots.height() > 100
+    # each plot's data area keeps room to be read (the 240 px the column kept left the upper one 20 px tall, its
+    # axis title over the lower one's), and nothing of the column is cut to fit
+    upper, lower = (p.getViewBox().height() for p in (w.plots.task, w.plots.lower_plot))
+    assert upper >= UPPER_PLOT_MIN_PX and lower >= LOWER_PLOT_MIN_PX, (upper, lower)
+    bottom = w.plots.lower_plot.sceneBoundingRect().bottom()  # the time axis under the lower plot, not cut off
+    assert bottom <= w.plots.view.height() + 1, (bottom, w.plots.view.height())  # (+1: sub-pixel layout)
+    top = right.widget(0)
+    assert top.height() >= top.minimumSizeHint().height()
+    w.plots.lower_choice.setCurrentText("none")  # the lower plot hidden: the upper one keeps its time axis
+    QApplication.processEvents()
+    bottom = w.plots.task.sceneBoundingRect().bottom()
+    assert w.plots.task.getViewBox().height() >= UPPER_PLOT_MIN_PX and bottom <= w.plots.view.height() + 1
     right.setSizes([5000, 0])
     QApplication.processEvents()
     assert right.sizes()[1] >= TABLE_MIN_HEIGHT
