@@ -18,7 +18,8 @@ import math
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QSize, Qt
+from PySide6.QtGui import QResizeEvent
 from PySide6.QtWidgets import QComboBox, QGraphicsRectItem, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from study_app.models.plots import TASK_SERIES, PlotModel
@@ -62,9 +63,9 @@ def _swatch(colour: str, text: str, *, block: bool = False) -> str:
 
 
 #: The least height of each plot's data area, px: the splitter above the trial table never squashes a plot past
-#: reading (its axis title would run into the other plot's).
+#: reading (its axis title would run into the other plot's, or be cut: "raw |F| (N)" takes 75 px).
 UPPER_PLOT_MIN_PX = 100
-LOWER_PLOT_MIN_PX = 40
+LOWER_PLOT_MIN_PX = 80
 
 
 class QtForcePlots(QWidget):
@@ -84,6 +85,7 @@ class QtForcePlots(QWidget):
         self.plots, self.session = plots, session
         self.legend = QLabel()
         self.legend.setWordWrap(True)
+        self._legend_height = -1  # as last wrapped (minimumSizeHint)
         #: A rig of several arms: each other arm's force curve in the upper plot (name → curve).
         self.arm_curves: dict[str, pg.PlotDataItem] = {}
         self._arms_shown: tuple[str, ...] | None = None
@@ -143,6 +145,24 @@ class QtForcePlots(QWidget):
         self._set_arms()
         self._set_lower(self.lower_choice.currentText())
 
+    def minimumSizeHint(self) -> QSize:  # Qt's name
+        """The layout's least size with the legend as tall as it wraps at its width: the layout counts a wrapped
+        label as one line, so a splitter dragged to the top ran the plots' time axis past this widget's bottom."""
+        hint = super().minimumSizeHint()
+        wrapped = self.legend.heightForWidth(self.legend.width()) if self.legend.width() > 0 else -1
+        return QSize(hint.width(), hint.height() + max(0, wrapped - self.legend.minimumSizeHint().height()))
+
+    def resizeEvent(self, event: QResizeEvent) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._legend_wrapped()
+
+    def _legend_wrapped(self) -> None:
+        """Tell the layouts above when the legend's wrapped height changed (a new width or new words)."""
+        height = self.legend.heightForWidth(self.legend.width())
+        if height != self._legend_height:
+            self._legend_height = height
+            self.updateGeometry()
+
     def legend_entries(self) -> list[str]:
         """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the one
         drawn as the task force marked (the engine's first arm: the protocol's task arm once a session starts, since
@@ -170,6 +190,7 @@ class QtForcePlots(QWidget):
             marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
             text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[4:], strict=True))
         self.legend.setText(text)
+        self._legend_wrapped()
 
     @property
     def lower_series(self) -> tuple[str, ...]:

@@ -58,15 +58,19 @@ def test_the_splitters_never_squash_the_plots_or_the_table_to_nothing(qtbot, tmp
     w = open_ready_window(qtbot, tmp_path, SHORT_PROTOCOL, speed=4.0, timeout_ms=TIMEOUT_MS)
     right = w.tabs.parentWidget()
     assert isinstance(right, QSplitter)
-    w.resize(1280, 728)  # a 1366x768 laptop's window
+    w.resize(990, 728)  # a 1366x768 laptop's window beside the participant screen: the legend wraps to 3 lines
     right.setSizes([0, 5000])  # the handle dragged to the top
     QApplication.processEvents()
     # each plot's data area keeps room to be read (the 240 px the column kept left the upper one 20 px tall, its
     # axis title over the lower one's), and nothing of the column is cut to fit
     upper, lower = (p.getViewBox().height() for p in (w.plots.task, w.plots.lower_plot))
     assert upper >= UPPER_PLOT_MIN_PX and lower >= LOWER_PLOT_MIN_PX, (upper, lower)
+    for p, height in ((w.plots.task, upper), (w.plots.lower_plot, lower)):  # each axis title whole beside its plot
+        assert p.getAxis("left").label.boundingRect().width() <= height, p.getAxis("left").labelText
     bottom = w.plots.lower_plot.sceneBoundingRect().bottom()  # the time axis under the lower plot, not cut off
     assert bottom <= w.plots.view.height() + 1, (bottom, w.plots.view.height())  # (+1: sub-pixel layout)
+    # ... by the widget around it either (the wrapped legend above took its room: the view ran past the bottom)
+    assert w.plots.view.geometry().bottom() < w.plots.height(), (w.plots.view.geometry(), w.plots.height())
     top = right.widget(0)
     assert top.height() >= top.minimumSizeHint().height()
     w.plots.lower_choice.setCurrentText("none")  # the lower plot hidden: the upper one keeps its time axis
