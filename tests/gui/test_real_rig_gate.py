@@ -62,11 +62,17 @@ def answered(e: StudyEngine, events: list, kinds: tuple, n_before: int, timeout_
     return [ev for ev in events[n_before:] if isinstance(ev, kinds)]
 
 
+def first_answer(events: list, n_before: int) -> object:
+    """The engine's first answer to a start pressed after ``events[n_before - 1]``: its rest check's notice or a
+    refusal (a fault the loop latched meanwhile on a busy machine, a health report, may come before it)."""
+    return next(ev for ev in events[n_before:] if isinstance(ev, (m.StartChecking, m.CommandRefused)))
+
+
 def start_answered(e: StudyEngine, events: list, cmd: m.StartSession) -> tuple[m.StartChecking, object]:
     """Press Start and wait for the gate's answer after its 2 s rest check: (the check's notice, the answer)."""
     n = len(events)
     e.handle(cmd)
-    checking = events[n]
+    checking = first_answer(events, n)
     assert isinstance(checking, m.StartChecking), events[n:]
     (answer,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
     return checking, answer
@@ -201,7 +207,7 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
                            override_reason="rehearsal")
     n = len(events)
     e.handle(start)
-    assert isinstance(events[n], m.StartChecking)
+    assert isinstance(first_answer(events, n), m.StartChecking), events[n:]
     netft.streaming.clear()  # the box stops streaming during the 2 s measurement
     try:
         (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
@@ -214,7 +220,7 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
              and r["sensor_age_ns"] * 1e-9 < steps.POSE_MAX_SENSOR_AGE_S)
     n = len(events)
     e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
-    assert isinstance(events[n], m.StartChecking), events[n:]
+    assert isinstance(first_answer(events, n), m.StartChecking), events[n:]
 
 
 @pytest.mark.usefixtures("steady_stream")
