@@ -10,6 +10,7 @@ from conftest import SHORT_PROTOCOL, open_ready_window
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QApplication, QSplitter
 
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.gui.force_plots import LOWER_PLOT_MIN_PX, UPPER_PLOT_MIN_PX
 from study_app.gui.main_window import TABLE_MIN_HEIGHT
@@ -124,7 +125,7 @@ def test_a_re_run_of_a_re_run_names_the_designed_trial():
     from study_app.models.session import SessionModel, TrialTable
 
     s = SessionModel()
-    s.apply(m.SessionStarted(1, "P01", "experiment", 60, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.SessionStarted(1, "P01", "experiment", 60, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     for index, repeat_of in ((11, None), (47, 11)):
         s.apply(m.TrialEnded(1.0, trial_record(trial_index=index, repeat_of=repeat_of, outcome="aborted",
                                                abort_reason="operator", abort_cause=AbortCause.EXPERIMENTER), 60))
@@ -141,11 +142,11 @@ def test_the_fault_log_says_when_one_way_and_whose_session_each_line_is():
     from study_app.models.health import HealthModel
 
     h = HealthModel()
-    h.apply(m.SessionStarted(3, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    h.apply(m.SessionStarted(3, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     h.apply(m.EngineFault(10.0, "fault", 1, "SENSOR_STALE", session_t_s=2.5))
     h.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     h.apply(m.EngineFault(20.0, "fault", 2, "POSE_STALE"))
-    h.apply(m.SessionStarted(4, "P02", "training", 2, 0, 0.1, 12.0, 2.0, 1.0, True))
+    h.apply(m.SessionStarted(4, "P02", "training", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, True))
     assert h.fault_log == ["— session 3 (P01 experiment) started —", "session 3, 2.500 s  fault: SENSOR_STALE",
                            "no session, engine clock 20.000 s  fault: POSE_STALE",
                            "— session 4 (P02 training) started —"]
