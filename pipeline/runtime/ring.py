@@ -110,6 +110,8 @@ class RingBuffer:
         self._shm = shm
         self._release: Callable[[], None] | None = None  # an attached segment's unmapping
         self._owner = owner
+        self._attached_name: str | None = None
+        self._cap: Callable[[], int] | None = None  # this reader's limit (see cap())
         self.fields: tuple[str, ...] = tuple(names)
         self.capacity: int = int(capacity)
         self._row_bytes = 8 * n_fields
@@ -157,6 +159,7 @@ class RingBuffer:
         buf, release = attached
         ring = cls(buf, None, owner=False)
         ring._release = release
+        ring._attached_name = name
         return ring
 
     @staticmethod
@@ -173,8 +176,26 @@ class RingBuffer:
 
     @property
     def name(self) -> str | None:
-        """Shared-memory name for :meth:`attach` (None for a private ring)."""
+        """Shared-memory name for :meth:`attach` (None for a private ring, and for a reader: only the creator names,
+        and frees, the segment)."""
         return self._shm.name if self._shm is not None and self._owner else None
+
+    @property
+    def segment(self) -> str:
+        """The shared-memory segment's name, the creator's or the reader's ("" for a private ring): what another
+        reader attaches by."""
+        return self._attached_name or self.name or ""
+
+    def cap(self, limit: Callable[[], int] | None) -> None:
+        """:meth:`read_since` through this object returns no record at or after ``limit()`` (a write count); None: no
+        limit.
+
+        For a reader in another process than the writer that must not take a record before something the writer
+        sends beside it (:mod:`pipeline.runtime.loop_link`: a tick's events and replay log).  :attr:`write_count`
+        and :meth:`latest` are not capped (the newest record's state, a cursor moved past everything so far), nor
+        are the writer and other readers.
+        """
+        self._cap = limit
 
     # -- writer ---------------------------------------------------------------------------------
     def write(self, values: Sequence[float]) -> None:
@@ -201,13 +222,15 @@ class RingBuffer:
         copy (see the module docstring), so no row is ever torn.
         """
         c1 = self.write_count
+        cap = self._cap
+        end = c1 if cap is None else min(c1, cap())  # (a capped reader stops at its cap)
         start = max(cursor, self._oldest_readable(c1))
-        rows = self._copy(start, c1)
+        rows = self._copy(start, end)
         c2 = self.write_count
         valid = max(start, self._oldest_readable(c2))  # rows below this may have been overwritten mid-copy
         if valid > start:
-            rows = rows[min(valid, c1) - start :]
-        return RingReadResult(rows, c1, max(0, min(valid, c1) - cursor))
+            rows = rows[min(valid, end) - start :]
+        return RingReadResult(rows, max(end, cursor), max(0, min(valid, end) - cursor))
 
     def latest(self, n: int) -> npt.NDArray[np.void]:
         """Copy of the newest ``n`` records (all of them if fewer exist, at most ``capacity - 1``).

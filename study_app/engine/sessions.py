@@ -43,7 +43,7 @@ from study_app.engine import session_list
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
 from study_app.engine.session_config import config_record, real_config_record
-from study_app.engine.setup import SwitchableDriver
+from study_app.engine.setup import StylusControl
 
 __all__ = ["EngineSessions", "list_resumable"]
 
@@ -152,14 +152,15 @@ class EngineSessions:
         if self.engine.eng.simulated:
             from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
 
-            self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
+            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed))
             sim_rig = self.engine.eng.rig
-            participant: SwitchableDriver | None = self.engine.driver
+            participant: StylusControl | None = self.engine.driver
 
             def sim_time_s() -> float:
-                return sim_rig.sim_time_s
+                return float(sim_rig.sim_time_s)
 
-            participant_time: Callable[[], float] | None = sim_time_s
+            # the cues' time is the rig's own; in the loop's own process it is stamped there (RemoteDriver)
+            participant_time: Callable[[], float] | None = sim_time_s if hasattr(sim_rig, "sim_time_s") else None
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)
@@ -304,7 +305,7 @@ class EngineSessions:
         assert runner is not None and recorder is not None and db is not None and opened is not None
         self.runner = self.recorder = self.db = self.opened = None
         self.trigger = None
-        self.engine.driver.participant = None
+        self.engine.driver.install(None)
         error = ""
         try:
             finish_session(db, recorder, opened)

@@ -1,0 +1,586 @@
+"""The driver's side of a loop that runs alone in its own process: the link, and stand-ins for the loop and its rig.
+
+:mod:`pipeline.assembly.loop_host` runs the rig, Algorithm 1 and the 1 kHz loop in a process of their own.  The
+process that drives it (the study engine) sees them through the stand-ins here, which offer what that process
+used of an in-process :class:`pipeline.assembly.engine.Engine`:
+
+* :class:`RemoteLoop` is a :class:`pipeline.runtime.loop_view.LoopView`: commands go over the link, the loop's
+  events and replay logs come back over it (:meth:`RemoteLoop.pump`, called where the driver reads the rings), its
+  tick count, first tick and missed slots come from the status record, its faults from the newest record;
+* :class:`RemoteEngine` is the assembled engine: each arm's ring (attached, capped at what the link has delivered:
+  :meth:`pipeline.runtime.ring.RingBuffer.cap`), framework settings and calibration, and :class:`RemoteDevices` --
+  an arm's devices, whose calls (a robot pose, a rehearsed fault) go to the loop's process between two ticks;
+  the jaws are the driver's own (the loop needs only the stylus buttons, which it forwards);
+* :meth:`LoopLink.job` runs a calibration step that drives the rig itself, with the loop paused.
+"""
+
+from __future__ import annotations
+
+import math
+import socket
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from foundation.platform_support.processes import exit_description
+from pipeline.core.clock import Clock, MonotonicClock
+from pipeline.devices.interfaces import Fault, HapticState, PoseSample
+from pipeline.force.payload_compensator import PayloadCalibration
+from pipeline.runtime.loop_link import (
+    Assembled,
+    BuildFailed,
+    Call,
+    Closed,
+    Entries,
+    FrameReader,
+    FrameWriter,
+    Job,
+    LinkClosed,
+    Opening,
+    Progress,
+    Reply,
+    Start,
+    Stop,
+    Submit,
+    wait_readable,
+)
+from pipeline.runtime.loop_messages import RECORD_FIELDS, Command, LatchFault, LoopEvent, SetHaptics
+from pipeline.runtime.ring import RingBuffer
+from pipeline.runtime.watchdog import WatchdogConfig
+
+__all__ = ["LoopLink", "RemoteDevices", "RemoteEngine", "RemoteLoop", "connect"]
+
+_ERRORS: dict[str, type[Exception]] = {"ValueError": ValueError, "RuntimeError": RuntimeError, "KeyError": KeyError}
+
+
+class LoopLink:
+    """The driver's end of the link (:mod:`pipeline.runtime.loop_link`) and the loop's process.
+
+    Parameters
+    ----------
+    sock
+        The driver's end of the socket.
+    process
+        The loop's process (``poll()``, ``returncode``, ``pid``, ``kill()``, ``wait(timeout)``: a ``Popen``).
+    """
+
+    def __init__(self, sock: socket.socket, process: Any) -> None:
+        self.sock = sock
+        self.process = process
+        self.writer = FrameWriter(sock)
+        self.reader = FrameReader(sock)
+        #: Where every message that is no :class:`Reply` goes (the loop's stand-in dispatches them).
+        self.handle: Callable[[object], None] = lambda msg: None
+        self._replies: dict[int, Reply] = {}
+        self._next_id = 1
+        #: The socket is closed: the loop's process ended (or closed it).
+        self.gone = False
+        #: The loop's process's last word, once it came.
+        self.closed: Closed | None = None
+
+    # -- sending ----------------------------------------------------------------------------------------------------
+    def send(self, msg: object) -> None:
+        """Send ``msg`` (what the socket does not take now goes with the next send or pump)."""
+        self.writer.put(msg)
+        self._flush()
+
+    def _flush(self) -> None:
+        try:
+            self.writer.flush()
+        except LinkClosed:
+            self.gone = True
+
+    def notify(self, arm: str, attr: str, *args: Any) -> None:
+        """Call ``attr`` on an arm's devices (or :data:`pipeline.assembly.loop_host.DRIVER`) without an answer."""
+        self.send(Call(0, arm, attr, args))
+
+    def call(self, arm: str, attr: str, *args: Any, assign: bool = False, timeout_s: float = 2.0) -> Any:
+        """Call (or set) ``attr`` on an arm's devices between two ticks and return what it returned.
+
+        Raises
+        ------
+        RuntimeError
+            The loop's process did not answer within ``timeout_s``, or is gone; the call's own ``ValueError``,
+            ``RuntimeError`` or ``KeyError`` is raised again here, any other exception as a RuntimeError.
+        """
+        call_id = self._id()
+        self.send(Call(call_id, arm, attr, args, assign))
+        return self._answer(call_id, f"{attr}", timeout_s)
+
+    def job(self, name: str, kwargs: dict[str, Any], timeout_s: float) -> Any:
+        """Run the job ``name`` (:data:`pipeline.assembly.loop_jobs.JOBS`) with the loop paused; its value."""
+        call_id = self._id()
+        self.send(Job(call_id, name, kwargs))
+        return self._answer(call_id, f"the {name} step", timeout_s)
+
+    def _id(self) -> int:
+        self._next_id += 1
+        return self._next_id
+
+    def _answer(self, call_id: int, what: str, timeout_s: float) -> Any:
+        if not self.wait(lambda: call_id in self._replies, timeout_s):
+            why = "its process is gone" if self.gone or not self.alive else f"no answer within {timeout_s:g} s"
+            raise RuntimeError(f"the haptic loop's process did not carry out {what} ({why})")
+        reply = self._replies.pop(call_id)
+        if reply.error_type:
+            raise _ERRORS.get(reply.error_type, RuntimeError)(
+                reply.error if reply.error_type in _ERRORS else f"{reply.error_type}: {reply.error}")
+        return reply.value
+
+    # -- receiving --------------------------------------------------------------------------------------------------
+    def pump(self) -> None:
+        """Take every message that has come: replies are kept for their caller, the rest handed to :attr:`handle`."""
+        self._flush()
+        if self.gone:
+            return
+        try:
+            msgs = self.reader.take()
+        except LinkClosed:
+            self.gone = True
+            return
+        for msg in msgs:
+            if isinstance(msg, Reply):
+                self._replies[msg.call_id] = msg
+            else:
+                if isinstance(msg, Closed):
+                    self.closed = msg
+                self.handle(msg)
+
+    def wait(self, done: Callable[[], bool], timeout_s: float) -> bool:
+        """Pump until ``done()`` or ``timeout_s`` passed or the link closed; True if ``done()``."""
+        end = time.monotonic() + timeout_s
+        while True:
+            self.pump()
+            if done():
+                return True
+            left = end - time.monotonic()
+            if left <= 0 or self.gone:
+                return False
+            wait_readable(self.sock, min(left, 0.05))
+
+    # -- the process ------------------------------------------------------------------------------------------------
+    @property
+    def alive(self) -> bool:
+        """The loop's process runs."""
+        return bool(self.process.poll() is None)
+
+    @property
+    def exit_status(self) -> str:
+        """How the loop's process ended (``killed by SIGKILL (signal 9)``, ``exit status 0``, ``still running``)."""
+        return exit_description(self.process.poll())
+
+    def end(self, timeout_s: float) -> None:
+        """Wait up to ``timeout_s`` for the process to end; kill it if it does not."""
+        try:
+            self.process.wait(timeout_s)
+        except Exception:  # subprocess.TimeoutExpired: it hangs; as a crash would
+            self.process.kill()
+            self.process.wait(5.0)
+        self.sock.close()
+
+
+@dataclass
+class _Missed:
+    missed_slots: int = 0
+
+
+@dataclass(frozen=True)
+class _Settings:
+    """An arm's Algorithm 1 settings as the driver holds them (the loop's process holds the framework)."""
+
+    config: Any
+
+
+@dataclass
+class RemoteArm:
+    """One arm of a :class:`RemoteLoop`: its name, ring (its newest record's faults) and replay log."""
+
+    name: str
+    ring: RingBuffer
+    loop: RemoteLoop
+    replay_log: deque[tuple[int, str, object]] = field(default_factory=deque)
+
+    @property
+    def faults(self) -> int:
+        """The arm's latched faults: its newest record's, with what the driver latched for a dead loop."""
+        rows = self.ring.latest(1)
+        return (int(rows["faults"][0]) if len(rows) else 0) | self.loop.latched
+
+
+class RemoteLoop:
+    """The loop that runs in its own process, as its driver sees it (a :class:`pipeline.runtime.loop_view.LoopView`).
+
+    Parameters
+    ----------
+    link
+        The link to its process.
+    assembled
+        What the process said it built.
+    rings
+        Every arm's ring by name, the first first (attached; capped here).
+    status
+        The status ring (attached).
+    """
+
+    runs_in = "process"
+
+    def __init__(self, link: LoopLink, assembled: Assembled, rings: Mapping[str, RingBuffer],
+                 status: RingBuffer) -> None:
+        self.link = link
+        self.period_ns = int(assembled.period_ns)
+        self.watchdog: WatchdogConfig = assembled.watchdog
+        self.clock: Clock = MonotonicClock()
+        self.scheduling = assembled.scheduling
+        self.on_event: Callable[[LoopEvent], None] | None = None
+        self.arms = tuple(RemoteArm(name, ring, self) for name, ring in rings.items())
+        self._first = self.arms[0]
+        self.framework = _Settings(assembled.arms[0][2])
+        self.status = status
+        self._row: Any = None
+        self._sent = 0
+        for ring in rings.values():
+            ring.cap(self._sent_through)
+        #: Faults the driver latched itself: ``LOOP_STALLED`` once the loop's process was found dead.
+        self.latched = 0
+        self.crash = ""
+        self._started = False
+        self._stopped = False
+        #: The stylus buttons' hooks by arm index (the jaws' controllers), set by :class:`RemoteDevices`.
+        self.button_hooks: dict[int, Callable[[int, int], None] | None] = {}
+        self._buttons: dict[int, int] = {}
+        self.progress: Callable[[int, int], None] | None = None
+        link.handle = self._handle
+
+    def _sent_through(self) -> int:
+        return self._sent
+
+    # -- reading --------------------------------------------------------------------------------------------------
+    def pump(self) -> None:
+        """Take what the loop's process sent, then let the rings be read as far as it had sent it.
+
+        The status is read first: every event and replay-log entry of the ticks it counts was in the socket by
+        then, so the rings' records up to it never reach a reader before their tick's entries.
+        """
+        rows = self.status.latest(1)
+        self.link.pump()
+        if len(rows):
+            self._row = rows[0]
+            self._sent = int(self._row["sent_through"])
+        if self.link.gone and self.link.closed is not None and not self.crash:
+            self.crash = self.link.closed.crash
+        now = self.clock.now_ns()
+        for i, mask in self._buttons.items():  # a held button: its controller times the long press
+            hook = self.button_hooks.get(i)
+            if hook is not None and mask:
+                hook(now, mask)
+
+    def _handle(self, msg: object) -> None:
+        if isinstance(msg, Entries):
+            for i, entry in msg.replay:
+                self.arms[i].replay_log.append(entry)
+            for i, t_ns, mask in msg.buttons:
+                self._buttons[i] = mask
+                hook = self.button_hooks.get(i)
+                if hook is not None:
+                    hook(t_ns, mask)
+            for ev in msg.events:
+                self._emit(ev)
+        elif isinstance(msg, Progress) and self.progress is not None:
+            self.progress(msg.done, msg.total)
+
+    def _emit(self, ev: LoopEvent) -> None:
+        hook = self.on_event
+        if hook is not None:
+            hook(ev)
+
+    def _status(self, name: str) -> int:
+        return 0 if self._row is None else int(self._row[name])
+
+    @property
+    def t0_ns(self) -> int:
+        """The loop clock's reading at its first tick."""
+        return self._status("t0_ns")
+
+    @property
+    def tick_count(self) -> int:
+        """Ticks run so far (the status record's)."""
+        return self._status("ticks")
+
+    @property
+    def stats(self) -> _Missed:
+        """The missed slots, as the loop counts them."""
+        return _Missed(self._status("missed_slots"))
+
+    @property
+    def heat(self) -> tuple[float, float]:
+        """The first arm's haptic device's heat fraction and force limit (N), as the status last said."""
+        if self._row is None:
+            return 0.0, math.inf
+        return float(self._row["heat_fraction"]), float(self._row["force_limit_n"])
+
+    @property
+    def faults(self) -> int:
+        """The first arm's latched faults."""
+        return self._first.faults
+
+    @property
+    def haptic_on(self) -> bool:
+        """Feedback is on (the newest record says so)."""
+        rows = self._first.ring.latest(1)
+        return bool(len(rows) and rows["haptic_on"][0])
+
+    @property
+    def replay_log(self) -> deque[tuple[int, str, object]]:
+        """The first arm's replay log."""
+        return self._first.replay_log
+
+    @property
+    def last_record(self) -> dict[str, float | int] | None:
+        """The first arm's newest record as a dict."""
+        rows = self._first.ring.latest(1)
+        return None if not len(rows) else {f: rows[f][0].item() for f in RECORD_FIELDS}
+
+    def arm(self, name: str) -> RemoteArm:
+        """The arm called ``name``."""
+        for a in self.arms:
+            if a.name == name:
+                return a
+        raise KeyError(f"no arm {name!r}; the rig's arms: {', '.join(a.name for a in self.arms)}")
+
+    @property
+    def thread_alive(self) -> bool | None:
+        """Whether the loop's process runs: None before it started ticking or once stopped on purpose."""
+        if not self._started or self._stopped:
+            return None
+        return self.link.alive and not self.link.gone
+
+    # -- commands ---------------------------------------------------------------------------------------------------
+    def submit(self, command: Command) -> None:
+        """Queue a loop command (applied at the start of the loop's next tick)."""
+        self.link.send(Submit(command))
+
+    def start(self) -> None:
+        """Tick (again)."""
+        self._started = True
+        self.link.send(Start())
+
+    def stop(self, timeout_s: float = 2.0) -> None:
+        """Ramp the force to zero, close the devices and end the loop's process; wait for it (kill it after
+        ``timeout_s`` more)."""
+        if self._stopped:
+            return
+        self._stopped = True
+        self.link.send(Stop("the study engine closed"))
+        self.link.wait(lambda: self.link.closed is not None, timeout_s)
+        self.status_at_end()
+        self.link.end(timeout_s)
+
+    def status_at_end(self) -> None:
+        """The last status and entries the loop's process sent (after it closed)."""
+        self.pump()
+
+    def ramp_down(self, max_ticks: int = 200) -> None:
+        """Switch feedback off: the force ramps to zero in the loop's process (the loop keeps ticking)."""
+        self.submit(SetHaptics(False))
+
+    def fail_safe(self, detail: str, *, thread_dead: bool) -> LoopEvent:
+        """The loop's process stopped ticking: report ``LOOP_STALLED`` for every arm, on the records' time axis just
+        after the newest record.
+
+        A dead process cannot latch it: the driver keeps it (:attr:`latched`); each haptic device's own command
+        watchdog, and its driver once the process that opened it is gone, have ended the force.  A frozen one is
+        told to latch it when it ticks again (:class:`pipeline.runtime.loop_messages.LatchFault`).
+        """
+        rows = self._first.ring.latest(1)
+        t = int(rows["t_ns"][0]) + self.period_ns if len(rows) else 0
+        if thread_dead:
+            self.latched |= int(Fault.LOOP_STALLED)
+            self.crash = self.crash or self.link.exit_status
+        else:
+            self.submit(LatchFault(Fault.LOOP_STALLED))
+        first: LoopEvent | None = None
+        for a in self.arms:
+            ev = LoopEvent(t, "fault", int(a.faults | Fault.LOOP_STALLED), f"LOOP_STALLED: {detail}", a.name)
+            self._emit(ev)
+            first = first or ev
+        assert first is not None
+        return first
+
+
+class RemoteDevices:
+    """An arm's devices in the loop's process, as the driver reaches them: fixed facts here, calls over the link.
+
+    ``jaw`` is the driver's own, set by it (None: the arm has none); ``on_buttons``, when set, gets the arm's stylus
+    buttons.
+    """
+
+    def __init__(self, loop: RemoteLoop, index: int, name: str, facts: dict[str, Any],
+                 others: Mapping[str, RemoteDevices] | None = None) -> None:
+        self._loop, self._index, self._arm = loop, index, name
+        self._facts = facts
+        #: The simulated rig's configuration of this arm (None on the real rig).
+        self.config = facts.get("sim_config")
+        self.sensor = _Sensor(facts.get("counts_per_unit"))
+        self.robot = _Robot(loop.link, name)
+        self.haptic = _Haptic(loop, index, name, facts)
+        self.jaw: Any = None
+        self._others = others or {}
+
+    @property
+    def on_buttons(self) -> Callable[[int, int], None] | None:
+        """The arm's stylus-button hook (called with the time and the buttons as they change, and while held)."""
+        return self._loop.button_hooks.get(self._index)
+
+    @on_buttons.setter
+    def on_buttons(self, hook: Callable[[int, int], None] | None) -> None:
+        self._loop.button_hooks[self._index] = hook
+
+    def inject_fault(self, kind: str, at_ns: int, duration_s: float | None = None) -> None:
+        """Rehearse a fault on the simulated rig (:meth:`pipeline.sim.rig.SimRig.inject_fault`)."""
+        self._loop.link.call(self._arm, "inject_fault", kind, at_ns, duration_s)
+
+    def cancel_fault(self, kind: str, at_ns: int) -> bool:
+        """Withdraw a rehearsed fault; True if there was one."""
+        return bool(self._loop.link.call(self._arm, "cancel_fault", kind, at_ns))
+
+    def rig(self, name: str) -> RemoteDevices:
+        """The simulated rig of another arm."""
+        return self._others[name]
+
+    def arm(self, name: str) -> RemoteDevices:
+        """The real rig's other arm."""
+        return self._others[name]
+
+    def close(self) -> None:
+        """Close the driver's own jaws (the loop's process closes the rest)."""
+        for dev in (self, *self._others.values()):
+            jaw = dev.jaw
+            if jaw is not None and hasattr(jaw, "close"):
+                jaw.close()
+
+
+class _Sensor:
+    def __init__(self, counts_per_unit: Any) -> None:
+        if counts_per_unit is not None:
+            self.counts_per_unit = counts_per_unit
+
+
+class _Robot:
+    """An arm's robot in the loop's process: its pose and its TCP correction, through the link."""
+
+    def __init__(self, link: LoopLink, arm: str) -> None:
+        self._link, self._arm = link, arm
+
+    def read_pose(self) -> PoseSample:
+        pose: PoseSample = self._link.call(self._arm, "robot.read_pose")
+        return pose
+
+    @property
+    def tcp_correction_m(self) -> Any:
+        return self._link.call(self._arm, "robot.tcp_correction_m")
+
+    @tcp_correction_m.setter
+    def tcp_correction_m(self, value: Any) -> None:
+        self._link.call(self._arm, "robot.tcp_correction_m", tuple(value), assign=True)
+
+
+class _Haptic:
+    """An arm's haptic device: its ratings, and its heat and force limit (the first arm's from the status)."""
+
+    def __init__(self, loop: RemoteLoop, index: int, arm: str, facts: dict[str, Any]) -> None:
+        self._loop, self._index, self._arm = loop, index, arm
+        self.peak_force_n = float(facts.get("peak_force_n", math.nan))
+        self.continuous_force_n = float(facts.get("continuous_force_n", math.nan))
+
+    def read_state(self) -> HapticState:
+        if self._index:
+            state: HapticState = self._loop.link.call(self._arm, "haptic.read_state")
+            return state
+        heat, limit = self._loop.heat
+        return HapticState(0, (math.nan, math.nan, math.nan), force_limit_n=limit, heat_fraction=heat)
+
+
+@dataclass
+class RemoteEngine:
+    """An assembled engine whose rig, frameworks and loop live in the loop's own process (see the module)."""
+
+    rig: RemoteDevices
+    loop: RemoteLoop
+    simulated: bool
+    tool: str
+    frameworks: dict[str, _Settings]
+    rings: dict[str, RingBuffer | None]
+    calibrations: dict[str, PayloadCalibration]
+    status: RingBuffer
+    calibration_file: Any = None
+    clock: Clock = field(default_factory=MonotonicClock)
+
+    @property
+    def framework(self) -> _Settings:
+        """The first arm's settings."""
+        return next(iter(self.frameworks.values()))
+
+    @property
+    def ring(self) -> RingBuffer | None:
+        """The first arm's ring."""
+        return next(iter(self.rings.values()))
+
+    @property
+    def calibration(self) -> PayloadCalibration:
+        """The first arm's calibration in use."""
+        return next(iter(self.calibrations.values()))
+
+    def release(self) -> None:
+        """Close the rings' mappings; free the segments of a loop process that could not free them itself."""
+        orphaned = self.loop.link.closed is None
+        names = [r.segment for r in (*self.rings.values(), self.status) if r is not None]
+        for r in (*self.rings.values(), self.status):
+            if r is not None:
+                r.close()
+        if orphaned:
+            for name in names:
+                if name:
+                    RingBuffer.free_orphaned(name)
+
+
+def connect(link: LoopLink, *, on_open: Callable[[str], None] | None, timeout_s: float = 180.0) -> RemoteEngine:
+    """Wait for the loop's process to assemble the rig (announcing each device it opens), then attach to it.
+
+    The arms' jaws are the driver's to open and set (:attr:`RemoteDevices.jaw`).
+
+    Raises
+    ------
+    RuntimeError
+        One line: why the rig could not be assembled, or that the process ended or did not answer in time.
+    """
+    got: list[object] = []
+
+    def handle(msg: object) -> None:
+        if isinstance(msg, Opening) and on_open is not None:
+            on_open(msg.device)
+        elif isinstance(msg, (Assembled, BuildFailed)):
+            got.append(msg)
+
+    link.handle = handle
+    if not link.wait(lambda: bool(got), timeout_s):
+        link.end(1.0)
+        why = f"it ended ({link.exit_status})" if link.gone or not link.alive else f"no answer in {timeout_s:g} s"
+        raise RuntimeError(f"the haptic loop's process could not assemble the rig: {why}")
+    msg = got[0]
+    if isinstance(msg, BuildFailed):
+        link.end(5.0)
+        raise RuntimeError(msg.reason)
+    assert isinstance(msg, Assembled)
+    rings = {name: RingBuffer.attach(ring) for name, ring, _, _, _ in msg.arms}
+    loop = RemoteLoop(link, msg, rings, RingBuffer.attach(msg.status_ring))
+    devices: dict[str, RemoteDevices] = {}
+    for i, (name, _, _, _, facts) in enumerate(msg.arms[1:], start=1):
+        devices[name] = RemoteDevices(loop, i, name, facts)
+    first_name, _, _, _, first_facts = msg.arms[0]
+    rig = RemoteDevices(loop, 0, first_name, first_facts, devices)
+    return RemoteEngine(
+        rig=rig, loop=loop, simulated=msg.simulated, tool=msg.tool,
+        frameworks={name: _Settings(cfg) for name, _, cfg, _, _ in msg.arms},
+        rings=dict(rings), calibrations={name: cal for name, _, _, cal, _ in msg.arms}, status=loop.status)
