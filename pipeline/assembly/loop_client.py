@@ -168,8 +168,15 @@ class LoopLink:
 
     @property
     def exit_status(self) -> str:
-        """How the loop's process ended (``killed by SIGKILL (signal 9)``, ``exit status 0``, ``still running``)."""
-        return exit_description(self.process.poll())
+        """How the loop's process ended (``killed by SIGKILL (signal 9)``, ``exit status 0``, ``still running``); its
+        link closing comes a moment before the process is gone: waited for, briefly."""
+        code = self.process.poll()
+        if code is None and self.gone:
+            try:
+                code = self.process.wait(1.0)
+            except Exception:  # subprocess.TimeoutExpired: it closed the link and lives on
+                code = None
+        return exit_description(code)
 
     def end(self, timeout_s: float) -> None:
         """Wait up to ``timeout_s`` for the process to end; kill it if it does not."""
@@ -233,18 +240,18 @@ class RemoteLoop:
         self.watchdog: WatchdogConfig = assembled.watchdog
         self.clock: Clock = MonotonicClock()
         self.scheduling = assembled.scheduling
+        #: The loop's process's id.
+        self.pid = int(assembled.pid)
         self.on_event: Callable[[LoopEvent], None] | None = None
         self.arms = tuple(RemoteArm(name, ring, self) for name, ring in rings.items())
         self._first = self.arms[0]
         self.framework = _Settings(assembled.arms[0][2])
         self.status = status
-        self._row: Any = None
         self._sent = 0
         for ring in rings.values():
             ring.cap(self._sent_through)
         #: Faults the driver latched itself: ``LOOP_STALLED`` once the loop's process was found dead.
         self.latched = 0
-        self.crash = ""
         self._started = False
         self._stopped = False
         #: The stylus buttons' hooks by arm index (the jaws' controllers), set by :class:`RemoteDevices`.
@@ -266,10 +273,7 @@ class RemoteLoop:
         rows = self.status.latest(1)
         self.link.pump()
         if len(rows):
-            self._row = rows[0]
-            self._sent = int(self._row["sent_through"])
-        if self.link.gone and self.link.closed is not None and not self.crash:
-            self.crash = self.link.closed.crash
+            self._sent = int(rows["sent_through"][0])
         now = self.clock.now_ns()
         for i, mask in self._buttons.items():  # a held button: its controller times the long press
             hook = self.button_hooks.get(i)
@@ -296,7 +300,9 @@ class RemoteLoop:
             hook(ev)
 
     def _status(self, name: str) -> int:
-        return 0 if self._row is None else int(self._row[name])
+        """A field of the newest status record (read now: the supervisor watches the tick count move)."""
+        rows = self.status.latest(1)
+        return int(rows[name][0]) if len(rows) else 0
 
     @property
     def t0_ns(self) -> int:
@@ -316,9 +322,10 @@ class RemoteLoop:
     @property
     def heat(self) -> tuple[float, float]:
         """The first arm's haptic device's heat fraction and force limit (N), as the status last said."""
-        if self._row is None:
+        rows = self.status.latest(1)
+        if not len(rows):
             return 0.0, math.inf
-        return float(self._row["heat_fraction"]), float(self._row["force_limit_n"])
+        return float(rows["heat_fraction"][0]), float(rows["force_limit_n"][0])
 
     @property
     def faults(self) -> int:
@@ -348,6 +355,16 @@ class RemoteLoop:
             if a.name == name:
                 return a
         raise KeyError(f"no arm {name!r}; the rig's arms: {', '.join(a.name for a in self.arms)}")
+
+    @property
+    def crash(self) -> str:
+        """Why the loop's process ended, once it has (its loop's exception, else how the process ended), else ""."""
+        closed = self.link.closed
+        if closed is not None and closed.crash:
+            return closed.crash
+        if not self.link.gone and self.link.alive:
+            return ""
+        return self.link.exit_status
 
     @property
     def thread_alive(self) -> bool | None:
@@ -397,7 +414,6 @@ class RemoteLoop:
         t = int(rows["t_ns"][0]) + self.period_ns if len(rows) else 0
         if thread_dead:
             self.latched |= int(Fault.LOOP_STALLED)
-            self.crash = self.crash or self.link.exit_status
         else:
             self.submit(LatchFault(Fault.LOOP_STALLED))
         first: LoopEvent | None = None

@@ -128,7 +128,8 @@ class StudyEngine:
         #: Reads the ring from here on: the timing statistics, the commissioning chain, the running session.
         self.reader = RingReader(self.eng, self.commissioning, self.sessions)
         self.pacer = LoopPacer(self.loop, config.speed)
-        self.reports = HealthReport(self.eng, config.clock, self.reader.stats, self.tracer)
+        self.reports = HealthReport(self.eng, config.clock, self.reader.stats, self.tracer,
+                                    self.remote.loop.pid if self.remote is not None else 0)
         self.jaws = EngineJaws(self.eng, self.hardware, self.arms.devices, self.arms.first, publish)
         self._commands = self._command_table()
 

@@ -19,12 +19,7 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
-from foundation.platform_support.processes import (
-    die_with_parent,
-    ignore_interrupts,
-    socket_handover,
-    spawn_with_socket,
-)
+from foundation.platform_support.processes import die_with_parent, ignore_interrupts, socket_handover, spawn_with_socket
 from pipeline.assembly.engine import arm_devices
 from pipeline.assembly.loop_client import LoopLink, RemoteEngine, connect
 from pipeline.assembly.loop_host import DRIVER, TRACER, LoopHost

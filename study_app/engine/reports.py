@@ -84,13 +84,16 @@ class HealthReport:
     tracer
         Explains the late periods (real clock, ``trace_jitter``): a
         :class:`pipeline.runtime.jitter_trace.LateTickTracer` or its stand-in in the loop's own process; or None.
+    loop_pid
+        The loop's own process's id (0: the loop is a thread of the engine's process).
     """
 
-    def __init__(self, eng: EngineView, clock: str, stats: PeriodStats, tracer: Any) -> None:
+    def __init__(self, eng: EngineView, clock: str, stats: PeriodStats, tracer: Any, loop_pid: int = 0) -> None:
         self.eng = eng
         self.clock = clock
         self.stats = stats
         self.tracer = tracer
+        self.loop_pid = loop_pid
 
     def health(self, runner: SessionRunner | None, *, driver: str, loop_dead: str) -> m.Health:
         """The engine's state and loop timing since the last stats reset."""
@@ -106,7 +109,7 @@ class HealthReport:
             late_periods=None if self.tracer is None else self.tracer.summary(),
             waiting=runner.state.waiting if runner is not None and not runner.done else "",
             scheduling=loop.scheduling if self.clock == "real" else "virtual clock",
-            loop_dead=loop_dead, **self._haptic(), arms=self._arms(),
+            loop_dead=loop_dead, **self._haptic(), arms=self._arms(), loop_pid=self.loop_pid,
         )
 
     def _haptic(self) -> dict[str, Any]:
