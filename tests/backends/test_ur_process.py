@@ -89,7 +89,8 @@ def _hardware(tmp_path: Path, netft: FakeNetFT, rtde: FakeRtde) -> Path:
         f'[sensor]\nhost = "127.0.0.1"\nport = {netft.udp_port}\nhttp_port = {netft.http_port}\n'
         f'[robot]\nhost = "{rtde.host}"\nconnect_timeout_s = 1.0\n[haptic]\ndevice_name = "Fake Touch"\n'
         "[frames]\nrot_tip_sensor = [[1, 0, 0], [0, 1, 0], [0, 0, 1]]\n"
-        "rot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n[framework]\nf_max_n = 2.5\nf_scale_n = 6.0\nfilter_window = 8\n", encoding="utf-8")
+        "rot_haptic_base = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]\n"
+        "[framework]\nf_max_n = 2.5\nf_scale_n = 6.0\nfilter_window = 8\n", encoding="utf-8")
     return p
 
 
