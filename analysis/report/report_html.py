@@ -24,6 +24,7 @@ from analysis.report.html_parts import fmt_p, fmt_w, plural
 from analysis.report.html_parts import html_table as _html_table
 from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
+from analysis.report.latency_methods import latency_paragraph
 from analysis.stats.aggregate import PRIMARY_METRICS, mean_sd
 from analysis.stats.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
 from analysis.stats.wilcoxon import methods_text
@@ -278,6 +279,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). No p-value in this report comes "
         f"from trials pooled as if independent.</p>"
         + report_sections.methods_within(within, options, confidence)
+        + latency_paragraph(study)
     )
 
 

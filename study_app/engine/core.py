@@ -17,6 +17,7 @@ from pipeline.force.payload_compensator import PayloadCalibration
 from pipeline.runtime.loop_view import LoopView
 from pipeline.runtime.ring import RingBuffer
 from pipeline.settings.hardware import HardwareConfig
+from study_app.engine.latency_report import LatencyReport
 from study_app.engine.setup import HostConfig, StylusControl
 
 __all__ = ["EngineCore"]
@@ -38,6 +39,8 @@ class EngineCore(Protocol):
     calibration: PayloadCalibration
     #: The simulated stylus's driver (the session's simulated participant is installed in it).
     driver: StylusControl
+    #: The end-to-end latency's breakdown (real clock), stored with each session; None on the virtual clock.
+    latency: LatencyReport | None
     lease_owner: str
     #: Loop time of the newest record the driver has read, ns.
     last_t_ns: int

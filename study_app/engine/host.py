@@ -52,6 +52,7 @@ from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import Commissioning
 from study_app.engine.jaws import EngineJaws
+from study_app.engine.latency_report import LatencyReport
 from study_app.engine.loop_process import RemoteTracer, loop_runs_alone, start_remote_engine
 from study_app.engine.pacing import QUIET_OFFSET_NS, LoopPacer
 from study_app.engine.reports import HealthReport, engine_ready, fault_event
@@ -128,8 +129,12 @@ class StudyEngine:
         #: Reads the ring from here on: the timing statistics, the commissioning chain, the running session.
         self.reader = RingReader(self.eng, self.commissioning, self.sessions)
         self.pacer = LoopPacer(self.loop, config.speed)
+        #: The end-to-end latency's breakdown (real clock: nobody feels a force on the virtual one).
+        self.latency = LatencyReport(self.eng, self.hardware) if config.clock == "real" else None
+        if self.latency is not None:
+            self.latency.measure()
         self.reports = HealthReport(self.eng, config.clock, self.reader.stats, self.tracer,
-                                    self.remote.loop.pid if self.remote is not None else 0)
+                                    self.remote.loop.pid if self.remote is not None else 0, self.latency)
         self.jaws = EngineJaws(self.eng, self.hardware, self.arms.devices, self.arms.first, publish)
         self._commands = self._command_table()
 

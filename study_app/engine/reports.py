@@ -15,6 +15,7 @@ from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.settings.hardware import HardwareConfig
 from protocol.runner.session import SessionRunner
 from study_app.engine import messages as m
+from study_app.engine.latency_report import LatencyReport
 from study_app.engine.period_stats import PeriodStats
 from study_app.engine.setup import HostConfig
 
@@ -86,14 +87,18 @@ class HealthReport:
         :class:`pipeline.runtime.jitter_trace.LateTickTracer` or its stand-in in the loop's own process; or None.
     loop_pid
         The loop's own process's id (0: the loop is a thread of the engine's process).
+    latency
+        The end-to-end latency's breakdown (real clock), or None.
     """
 
-    def __init__(self, eng: EngineView, clock: str, stats: PeriodStats, tracer: Any, loop_pid: int = 0) -> None:
+    def __init__(self, eng: EngineView, clock: str, stats: PeriodStats, tracer: Any, loop_pid: int = 0,
+                 latency: LatencyReport | None = None) -> None:
         self.eng = eng
         self.clock = clock
         self.stats = stats
         self.tracer = tracer
         self.loop_pid = loop_pid
+        self.latency = latency
 
     def health(self, runner: SessionRunner | None, *, driver: str, loop_dead: str) -> m.Health:
         """The engine's state and loop timing since the last stats reset."""
@@ -110,6 +115,7 @@ class HealthReport:
             waiting=runner.state.waiting if runner is not None and not runner.done else "",
             scheduling=loop.scheduling if self.clock == "real" else "virtual clock",
             loop_dead=loop_dead, **self._haptic(), arms=self._arms(), loop_pid=self.loop_pid,
+            latency=self.latency.latency().to_dict() if self.latency is not None else None,
         )
 
     def _haptic(self) -> dict[str, Any]:

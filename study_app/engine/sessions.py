@@ -127,10 +127,14 @@ class EngineSessions:
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
-            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
-                                 participant_seed)
-        assert self.engine.hardware is not None
-        return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
+            record = config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
+                                   participant_seed)
+        else:
+            assert self.engine.hardware is not None
+            record = real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
+        if self.engine.latency is not None:  # the real clock: the delay a participant feels, as it was at the start
+            record["latency"] = self.engine.latency.latency().to_dict()
+        return record
 
     def resume(self, cmd: m.ResumeSession) -> None:
         self.engine.require_idle("resume")

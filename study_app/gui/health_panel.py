@@ -61,6 +61,10 @@ class QtHealthPanel(QWidget):
         self.loop.setWordWrap(True)
         self.thermal = QLabel()
         self.thermal.setWordWrap(True)
+        self.placement = QLabel()  # where the loop runs: its own process, its CPU, its priority
+        self.placement.setWordWrap(True)
+        self.latency = QLabel()  # the end-to-end latency, its stages in the tooltip
+        self.latency.setWordWrap(True)
         self.force = QLabel()
         self.force.setWordWrap(True)
         self.force.hide()
@@ -83,6 +87,8 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.arms)
         lay.addWidget(self.waiting)
         lay.addWidget(self.loop)
+        lay.addWidget(self.placement)
+        lay.addWidget(self.latency)
         lay.addWidget(self.thermal)
         lay.addWidget(self.force)
         lay.addWidget(self.log_label)
@@ -150,6 +156,11 @@ class QtHealthPanel(QWidget):
         loop = self.loop_html()
         if self.loop.text() != loop:
             self.loop.setText(loop)
+        self.placement.setText(h.placement_text())
+        latency = h.latency_text()
+        if latency != self.latency.text():
+            self.latency.setText(latency)
+            self.latency.setToolTip("\n".join(h.latency_stages()))
         th = h.thermal_figure()
         self.thermal.setText(th.text if th is not None else "")
         if th is not None:

@@ -7,8 +7,10 @@ bounded polls, and assert nothing about timing (``bench loop`` measures it).
 
 from __future__ import annotations
 
+import json
 import os
 import signal
+import sqlite3
 import threading
 import time
 from collections.abc import Callable
@@ -16,6 +18,8 @@ from collections.abc import Callable
 import pytest
 from test_engine_loop_failure import stored_events
 
+from analysis.reading.load import load_study
+from analysis.report.latency_methods import latency_paragraph
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import Fault
 from pipeline.runtime.ring import RingBuffer
@@ -62,6 +66,10 @@ def test_the_loop_runs_in_a_process_of_its_own_and_a_session_there_is_stored_and
     health = e.health()
     assert health.loop_pid == pid
     assert " on CPU " in health.scheduling or " on any CPU " in health.scheduling  # the core it runs on, said
+    lat = health.latency  # the end-to-end latency: the loop's own share from its records, the rest measured
+    assert lat is not None and [s["name"] for s in lat["stages"]][:2] == [
+        "loop: the F/T sample waits for the next tick", "loop: the tick computes the command"]
+    assert lat["force_ms"] >= 5.0 and lat["motion_ms"] > 0
     db = str(tmp_path / "s.db")
     e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
     events = e.events  # type: ignore[attr-defined]
@@ -70,6 +78,15 @@ def test_the_loop_runs_in_a_process_of_its_own_and_a_session_there_is_stored_and
     assert len(ended) >= 2 and not [ev for ev in events if isinstance(ev, m.CommandRefused)]
     kinds = [k for k, _ in stored_events(db)]
     assert kinds[0] == "session_start" and "cue" in kinds  # the runner's events, stored from this process
+    con = sqlite3.connect(db)
+    try:
+        (config_json,) = con.execute("SELECT config_json FROM sessions").fetchone()
+    finally:
+        con.close()
+    stored = json.loads(config_json)["latency"]  # stored with the session (the real clock's only)
+    assert [s["name"] for s in stored["stages"]] == [s["name"] for s in lat["stages"]]
+    said = latency_paragraph(load_study([db], include_incomplete=True))
+    assert "Measured when each of the 1 session on the real clock started, and stored with it: tip → hand" in said
     # the recording's replay log came over the link beside the records: replay reproduces every rendered force
     assert main(["replay", "--db", db, "--session", "1"]) == 0
     assert "bit-identical to the recording" in capsys.readouterr().out
@@ -203,3 +220,25 @@ def test_a_ring_capped_at_what_the_link_delivered_reads_no_further() -> None:
     assert [r[0] for r in got.rows] == [4.0, 5.0, 6.0, 7.0, 8.0, 9.0] and got.cursor == 10
     assert ring.write_count == 10 and len(ring.latest(3)) == 3  # the newest record's state is not capped
     ring.close()
+
+
+def test_on_the_virtual_clock_the_loop_stays_in_the_engine_and_no_latency_is_stored(tmp_path, short_protocol) -> None:
+    """Simulated time: the loop runs in the engine's step, nobody feels a force, and a session stores what it always
+    stored (no latency in its config_json: the headless studies' bytes do not change)."""
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
+    e.start()
+    db = str(tmp_path / "v.db")
+    try:
+        assert e.remote is None and e.latency is None and e.health().latency is None
+        e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+        run_until(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events), 120.0)
+    finally:
+        e.close("test over")
+        e.release_ring()
+    con = sqlite3.connect(db)
+    try:
+        (config_json,) = con.execute("SELECT config_json FROM sessions").fetchone()
+    finally:
+        con.close()
+    assert "latency" not in json.loads(config_json)
