@@ -133,7 +133,7 @@ class Engine:
 
 def arm_devices(eng: Any, arm: str) -> Any:
     """An arm's devices by name ("": the first) of an assembled engine (this process's :class:`Engine`, or the
-    stand-in for one in the loop's own process, :class:`pipeline.assembly.loop_client.RemoteEngine`): the rig itself
+    stand-in for one in the loop's own process, :class:`pipeline.assembly.remote_engine.RemoteEngine`): the rig itself
     for the first arm (it forwards to it), else the simulated rig's own rig of that arm or the real rig's arm."""
     if not arm or arm == next(iter(eng.frameworks)):
         return eng.rig

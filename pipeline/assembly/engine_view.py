@@ -1,7 +1,7 @@
 """The assembled engine as the code that drives it sees it, wherever its loop runs.
 
 Two things satisfy :class:`EngineView`: an :class:`pipeline.assembly.engine.Engine` built in the driver's own
-process, and :class:`pipeline.assembly.loop_client.RemoteEngine`, the stand-in for one whose rig, frameworks and
+process, and :class:`pipeline.assembly.remote_engine.RemoteEngine`, the stand-in for one whose rig, frameworks and
 loop run in the loop's own process.  The study engine's rooms read only this.
 """
 

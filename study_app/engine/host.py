@@ -33,8 +33,8 @@ from typing import Any
 
 from pipeline.assembly.engine import Engine
 from pipeline.assembly.engine_view import EngineView
-from pipeline.assembly.loop_client import RemoteEngine
 from pipeline.assembly.loop_jobs import JOBS
+from pipeline.assembly.remote_engine import RemoteEngine
 from pipeline.core.clock import MonotonicClock
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.payload_compensator import PayloadCalibration

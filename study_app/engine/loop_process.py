@@ -5,7 +5,7 @@ jaws and its messages to the GUI; the rig, Algorithm 1 and the 1 kHz loop run al
 (:mod:`pipeline.assembly.loop_host`: the loop ticks in its main thread, pinned to one CPU at ``SCHED_FIFO``; the
 device receivers its ticks need are its only other threads).  :func:`start_remote_engine` starts it, hands it the
 engine's :class:`study_app.engine.setup.HostConfig` over the link, opens the jaws the engine drives itself, and
-returns the stand-in for the assembled engine (:class:`pipeline.assembly.loop_client.RemoteEngine`).  Where the OS
+returns the stand-in for the assembled engine (:class:`pipeline.assembly.remote_engine.RemoteEngine`).  Where the OS
 cannot hand a socket to a new process (Windows) it returns None, and the engine runs the loop in a thread of its
 own process as before.
 
@@ -21,8 +21,9 @@ from typing import Any
 
 from foundation.platform_support.processes import die_with_parent, ignore_interrupts, socket_handover, spawn_with_socket
 from pipeline.assembly.engine import arm_devices
-from pipeline.assembly.loop_client import LoopLink, RemoteEngine, connect
+from pipeline.assembly.loop_client import LoopLink
 from pipeline.assembly.loop_host import DRIVER, TRACER, LoopHost
+from pipeline.assembly.remote_engine import RemoteEngine, connect
 from pipeline.core.clock import (
     MonotonicClock,
     manual_garbage_collection,
