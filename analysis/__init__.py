@@ -39,7 +39,7 @@ __all__ = [
 _WHERE = {
     "AnalysisError": "analysis.reading.load",
     "load_study": "analysis.reading.load",
-    "read_trial_samples": "analysis.reading.load",
+    "read_trial_samples": "analysis.reading.recorded",
     "samples_frame": "analysis.reading.samples",
     "MetricOptions": "analysis.reading.metrics",
     "compute_trials": "analysis.reading.metrics",

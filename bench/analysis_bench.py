@@ -106,7 +106,8 @@ def _make_study(db: str, participants: int) -> float:
 
 def _read_all_samples(db: str) -> tuple[float, int]:
     """Read every analysed trial's task force as the report does, in this process: (seconds, samples)."""
-    from analysis.reading.load import load_study, read_task_force, recorded_where
+    from analysis.reading.load import load_study, recorded_where
+    from analysis.reading.recorded import read_task_force
 
     inc = load_study([db]).included
     t0 = time.perf_counter()
@@ -147,6 +148,22 @@ def _reference_walls(db: str, tmp: str, source: str, repeats: int) -> tuple[list
     return ours, theirs
 
 
+def _study_facts(db: str) -> tuple[tuple[int, int, int], bool]:
+    """(samples, trials, participants) of the analysed experiment trials, and whether the study is recorded
+    (schema version 3's blocks) rather than in rows."""
+    c = connect_readonly(db)
+    try:
+        samples = c.execute(
+            "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "
+            "JOIN sessions s USING (session_id) WHERE s.kind = 'experiment' AND t.outcome != 'aborted'"
+        ).fetchone()
+        recorded = c.execute("PRAGMA user_version").fetchone()[0] >= 3 and \
+            c.execute("SELECT COUNT(*) FROM recordings").fetchone()[0] > 0
+    finally:
+        c.close()
+    return samples, bool(recorded)
+
+
 def run_report_bench(db: str | None = None, participants: int = 10, stats_participants: int = 10_000,
                      repeats: int = 3, log: Callable[[str], None] | None = None,
                      reference: str | None = None) -> dict[str, Any]:
@@ -180,16 +197,7 @@ def run_report_bench(db: str | None = None, participants: int = 10, stats_partic
             say(f"simulating a {participants}-participant study ...")
             db = os.path.join(tmp, "study.db")
             made_s = _make_study(db, participants)
-        c = connect_readonly(db)
-        try:
-            samples = c.execute(
-                "SELECT COALESCE(SUM(t.n_samples), 0), COUNT(*), COUNT(DISTINCT s.participant_id) FROM trials t "
-                "JOIN sessions s USING (session_id) WHERE s.kind = 'experiment' AND t.outcome != 'aborted'"
-            ).fetchone()
-            recorded = c.execute("PRAGMA user_version").fetchone()[0] >= 3 and \
-                c.execute("SELECT COUNT(*) FROM recordings").fetchone()[0] > 0
-        finally:
-            c.close()
+        samples, recorded = _study_facts(db)
         rows_db = None
         if recorded:
             say("writing the same study in the row format of versions 1 and 2 (replaying every session) ...")

@@ -183,7 +183,8 @@ def tct_power_at_spread(spread_s: float, draws: int = 2000, participants: int = 
                 for i in range(10):
                     won = bool(rng.random() < rate)
                     tct = min(12.0, max(1.0, centre_s + spread_s * float(rng.standard_normal()))) if won else None
-                    rows.append(TrialRow(0, j, i, "GENTLE", mode, won, tct, 1.0, 1.0, 1.0))
+                    rows.append(TrialRow(0, j, i, "GENTLE", mode,
+                                         {"success": won, "tct_s": tct, "rmse_n": 1.0, "max_ae_n": 1.0}))
         hits += bool(summarise_study(rows, keys=("tct_s",))["tct_s"]["p"] < 0.05)
     return hits / draws
 

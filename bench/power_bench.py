@@ -5,7 +5,7 @@ default study sizes and the 4 metrics, in one process.  In the same run, the
 same resampled studies are tested by a straightforward loop that calls
 :func:`analysis.stats.wilcoxon.paired_wilcoxon` once per study and metric (its side,
 for the directional power, from the sign of its rank-biserial correlation,
-(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.wilcoxon.holm` per study; the
+(W⁺ − W⁻)/(W⁺ + W⁻)) and applies :func:`analysis.stats.holm.holm` per study; the
 loop is timed on the first ``reference_resamples`` studies of each n and
 scaled to all of them, and the two must give identical p-values and sides on
 every study both ran.
@@ -27,8 +27,9 @@ import numpy as np
 
 from analysis.planning.paired_pool import PairedPool, load_pool, pool_from_trials
 from analysis.planning.power import DEFAULT_N_VALUES, estimate_power, resample_indices
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import _PERM_CACHE, _exact_p, resampled_p_values
-from analysis.stats.wilcoxon import holm, paired_wilcoxon
+from analysis.stats.wilcoxon import paired_wilcoxon
 from bench.analysis_bench import synthetic_trials
 from bench.machine import cpu_times, load_average, steal_percent
 
@@ -45,6 +46,39 @@ def _cold(fn):
 
 def _overall_only(pool: PairedPool) -> PairedPool:
     return dataclasses.replace(pool, scopes=pool.scopes[:1], off=pool.off[:1], on=pool.on[:1])
+
+
+def _reference_loop(pool: PairedPool, n_values: tuple[int, ...], resamples: int, reference_resamples: int,
+                    seed: int) -> tuple[float, int, int, int, int]:
+    """The reference: one paired_wilcoxon per study and metric, Holm per study, overall scope, on the first
+    ``reference_resamples`` of the engine's draw.  (seconds, tests, identical p-values, identical sides, sided
+    tests)."""
+    P = pool.n_participants
+    metrics = range(len(pool.metrics))
+    loop_s = 0.0
+    tests = identical = same_side = sided = 0
+    for n in n_values:
+        idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
+        got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
+        engine = np.stack([g[0] for g in got], axis=1)
+        engine_side = np.stack([g[2] for g in got], axis=1)
+        t0 = time.perf_counter()
+        ref = np.empty_like(engine)
+        ref_side = np.zeros_like(engine_side)
+        computable = np.zeros(engine.shape, dtype=bool)  # a side is compared only where the test could run
+        for r, rows in enumerate(idx):
+            for m in metrics:
+                res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
+                ref[r, m] = res.p_value if res.computable else np.nan
+                if res.computable:
+                    ref_side[r, m], computable[r, m] = np.sign(res.rank_biserial), True
+            holm(ref[r])
+        loop_s += time.perf_counter() - t0
+        tests += engine.size
+        identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
+        same_side += int(((engine_side == ref_side) & computable).sum())
+        sided += int(computable.sum())
+    return loop_s, tests, identical, same_side, sided
 
 
 def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_resamples: int = 100,
@@ -78,32 +112,8 @@ def run_power_bench(db: str | None = None, *, resamples: int = 2000, reference_r
                 for _ in range(repeats)]
     stolen = steal_percent(cpu_before, cpu_times())
 
-    # the reference: one paired_wilcoxon per study and metric, Holm per study, overall scope
     P = pool.n_participants
-    metrics = range(len(pool.metrics))
-    loop_s = 0.0
-    tests = identical = same_side = sided = 0
-    for n in n_values:
-        idx = resample_indices(seed, n, resamples, P)[:reference_resamples]
-        got = [resampled_p_values(pool.off[0, m], pool.on[0, m], idx, sides=True) for m in metrics]
-        engine = np.stack([g[0] for g in got], axis=1)
-        engine_side = np.stack([g[2] for g in got], axis=1)
-        t0 = time.perf_counter()
-        ref = np.empty_like(engine)
-        ref_side = np.zeros_like(engine_side)
-        computable = np.zeros(engine.shape, dtype=bool)  # a side is compared only where the test could run
-        for r, rows in enumerate(idx):
-            for m in metrics:
-                res = paired_wilcoxon(pool.off[0, m, rows], pool.on[0, m, rows], metric=pool.metrics[m])
-                ref[r, m] = res.p_value if res.computable else np.nan
-                if res.computable:
-                    ref_side[r, m], computable[r, m] = np.sign(res.rank_biserial), True
-            holm(ref[r])
-        loop_s += time.perf_counter() - t0
-        tests += engine.size
-        identical += int(((engine == ref) | (np.isnan(engine) & np.isnan(ref))).sum())
-        same_side += int(((engine_side == ref_side) & computable).sum())
-        sided += int(computable.sum())
+    loop_s, tests, identical, same_side, sided = _reference_loop(pool, n_values, resamples, reference_resamples, seed)
     loop_scaled = loop_s * resamples / reference_resamples
     overall_s = float(np.median(runs_overall))
     return {

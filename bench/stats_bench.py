@@ -7,7 +7,7 @@
 * :func:`analysis.stats.wilcoxon.hodges_lehmann` alone on the same differences
   (5·10⁷ Walsh averages, never materialized) and on 200 000 trial-level differences;
 * :func:`analysis.stats.wilcoxon.correlation` (Spearman) on 200 000 trials (TCT vs RMSE);
-* :func:`analysis.stats.wilcoxon.holm` on 10 metrics.
+* :func:`analysis.stats.holm.holm` on 10 metrics.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import numpy as np
 
 from analysis.stats.correlation import correlation
 from analysis.stats.hodges_lehmann import hodges_lehmann
-from analysis.stats.wilcoxon import holm, paired_wilcoxon
+from analysis.stats.holm import holm
+from analysis.stats.wilcoxon import paired_wilcoxon
 
 __all__ = ["format_stats_bench", "run_stats_bench"]
 

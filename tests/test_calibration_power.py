@@ -28,8 +28,8 @@ def _rows(studies: int, participants: int, effect: bool, seed: int = 0) -> list[
                 success = better or bool(rng.random() < 0.4)
                 tct = float(rng.normal(5.0 if better else 8.0, 0.5)) if success else None
                 rmse = float(rng.normal(0.6 if better else 1.3, 0.1))
-                rows.append(TrialRow(study, p, i, "GENTLE" if i % 4 < 2 else "FIRM", mode, success, tct, rmse,
-                                     rmse * 2.0, rmse * 2.5))
+                rows.append(TrialRow(study, p, i, "GENTLE" if i % 4 < 2 else "FIRM", mode,
+                                     {"success": success, "tct_s": tct, "rmse_n": rmse, "max_ae_n": rmse * 2.0}))
     return rows
 
 

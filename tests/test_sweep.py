@@ -17,6 +17,7 @@ from analysis.planning.sim_study import TrialRow
 from analysis.planning.sweep import (
     CACHE_FILE,
     FILTER_NOTE,
+    METRICS,
     cell_key,
     read_cache,
     summary_frame,
@@ -24,6 +25,7 @@ from analysis.planning.sweep import (
     t_interval,
 )
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
+from protocol.metrics import tested
 from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import sweep_run
@@ -75,7 +77,7 @@ def test_every_setting_meets_the_same_participants(tmp_path: Path, short_protoco
         b = [(r.participant, r.index, r.target, r.mode) for r in cells[2 + k].rows]
         assert a == b and len(a) == 4
     # the filter changes what the participants did
-    assert [r.rmse_n for r in cells[0].rows] != [r.rmse_n for r in cells[2].rows]
+    assert [r.values["rmse_n"] for r in cells[0].rows] != [r.values["rmse_n"] for r in cells[2].rows]
 
 
 def test_a_second_run_computes_nothing_and_a_cut_line_is_run_again(tmp_path: Path, short_protocol,
@@ -120,7 +122,8 @@ def test_the_t_interval_over_study_means() -> None:
 
 
 def _row(study: int, p: int, mode: str, ok: bool, rmse: float) -> TrialRow:
-    return TrialRow(study, p, 0, "GENTLE", mode, ok, 1.5 if ok else None, rmse, 2 * rmse, 1.0)
+    return TrialRow(study, p, 0, "GENTLE", mode,
+                    {"success": ok, "tct_s": 1.5 if ok else None, "rmse_n": rmse, "max_ae_n": 2 * rmse})
 
 
 def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
@@ -131,7 +134,7 @@ def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
              for w in (10, 20) for k in range(2)]
     tidy = sweep_frame(cells, ["filter_window"], 12.0)
     assert list(tidy.columns) == ["filter_window", "study", "metric", "off", "on", "change"]
-    assert len(tidy) == 4 * 4
+    assert len(tidy) == 4 * len(METRICS)  # 2 settings × 2 studies, a row per measure
     rm = tidy[(tidy["metric"] == "rmse_n") & (tidy["filter_window"] == 20)]
     assert rm["on"].tolist() == [1.0, 1.0] and rm["off"].tolist() == [1.0, 2.0]
     summary = summary_frame(tidy, ["filter_window"], paper_settings())
@@ -158,7 +161,7 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
         assert (out / name).is_file(), name
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]
     for name in ("sweep.csv", "sweep_summary.csv"):  # the report's names (they said success, rmse_n, max_ae_n)
-        assert set(pd.read_csv(out / name)["metric"]) == {"success_rate", "tct_s", "rmse_N", "max_ae_N"}, name
+        assert set(pd.read_csv(out / name)["metric"]) == {m.participant_exported for m in tested()}, name
     # the same command again: refused (the outputs are there) unless --force, which computes nothing new
     assert main(args) == 2
     before = (out / CACHE_FILE).read_bytes()

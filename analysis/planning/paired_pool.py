@@ -12,7 +12,7 @@ import pandas as pd
 
 from analysis.reading.load import Progress, load_study
 from analysis.reading.metrics import MetricOptions, compute_trials
-from analysis.stats.aggregate import PRIMARY_METRICS, by_mode, per_participant
+from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, by_mode, per_participant
 
 __all__ = ["PairedPool", "load_pool", "pool_from_trials"]
 
@@ -28,7 +28,8 @@ class PairedPool:
     scopes
         ``"overall"``, then the target labels in order of target force.
     metrics
-        The metrics (the Holm family): :data:`analysis.stats.aggregate.PRIMARY_METRICS`.
+        The metrics the report tests (:data:`analysis.stats.aggregate.TESTED_METRICS`): the primary ones, Holm's
+        family (:attr:`family`), then any secondary one.
     off, on
         Shape (scopes, metrics, participants); NaN where a value is undefined
         (TCT with no successful trial in that mode) or a participant lacks a mode.
@@ -50,6 +51,11 @@ class PairedPool:
     def n_participants(self) -> int:
         """Participants in the pool."""
         return len(self.participants)
+
+    @property
+    def family(self) -> npt.NDArray[np.bool_]:
+        """Which of :attr:`metrics` are in Holm's family (the primary measures), as the report corrects them."""
+        return np.array([m in PRIMARY_METRICS for m in self.metrics], dtype=bool)
 
 
 def pool_from_trials(trials: pd.DataFrame, options: MetricOptions = MetricOptions(), *, source: str = "") -> PairedPool:
@@ -75,7 +81,7 @@ def pool_from_trials(trials: pd.DataFrame, options: MetricOptions = MetricOption
     by_target = per_participant(trials, options, by_target=True)
     order = trials.drop_duplicates("target_label").sort_values("target_force_n")["target_label"].tolist()
     scopes = ("overall", *[str(t) for t in order])
-    metrics = tuple(PRIMARY_METRICS)
+    metrics = tuple(m for m in TESTED_METRICS if m in overall.columns)
     off = np.full((len(scopes), len(metrics), len(codes)), np.nan)
     on = off.copy()
     for s, scope in enumerate(scopes):

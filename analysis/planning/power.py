@@ -27,9 +27,9 @@ pool's direction is that of the whole pool; ``power`` is the fraction of R
 resampled studies that reject *and* lie on the pool's side (about α/2 when
 there is no effect), ``power_two_sided`` the fraction that reject either way
 (about α), each with a Clopper–Pearson interval for the Monte Carlo error.
-The family-wise figures apply Holm's correction across the four metrics
-within each resampled study, as the report does, and count a metric only
-when its rejection is directional.
+The family-wise figures apply Holm's correction across the primary metrics
+(the report's family) within each resampled study, as the report does, and count a metric only
+when its rejection is directional; a secondary metric has its own power and none with Holm.
 
 **Speed.**  The R tests of one metric run at once
 (:mod:`analysis.stats.resampled_wilcoxon`), bit for bit those of
@@ -60,9 +60,11 @@ from scipy import stats as sps
 from analysis.planning.paired_pool import PairedPool
 from analysis.reading.load import AnalysisError
 from analysis.reading.metrics import MetricOptions
-from analysis.stats.aggregate import METRIC_LABELS
+from analysis.stats.aggregate import METRIC_LABELS, PRIMARY_METRICS
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import METHOD_NAMES, PreparedMetric, prepare_metric, study_tests
-from analysis.stats.wilcoxon import ZERO_METHODS, holm
+from analysis.stats.wilcoxon import ZERO_METHODS
+from protocol.metrics import by_participant_name, family_word
 
 __all__ = [
     "DEFAULT_N_VALUES",
@@ -75,21 +77,20 @@ __all__ = [
     "PowerError",
     "PowerResult",
     "estimate_power",
+    "holm_applies",
+    "metric_label",
     "monte_carlo_interval",
-    "plan_table",
     "resample_indices",
-    "smallest_n",
-    "summary_text",
 ]
 
 #: Planned study sizes tried by default.
 DEFAULT_N_VALUES: tuple[int, ...] = (6, 8, 10, 12, 16, 20, 30)
 #: A pilot needs at least this many participants with both modes to be resampled.
 MIN_PILOT = 4
-#: Pseudo-metrics of the family rows: Holm across the four metrics rejects all of them / at least one.
-FAMILY_ALL = "all_four_holm"
+#: Pseudo-metrics of the family rows: Holm across the primary metrics rejects all of them / at least one.
+FAMILY_ALL = f"all_{family_word()}_holm"
 FAMILY_ANY = "any_holm"
-FAMILY_LABELS = {FAMILY_ALL: "all four (Holm)", FAMILY_ANY: "at least one (Holm)"}
+FAMILY_LABELS = {FAMILY_ALL: f"all {family_word()} (Holm)", FAMILY_ANY: "at least one (Holm)"}
 #: power.csv: its columns, in this order.
 POWER_CSV_COLUMNS = (
     "scope", "metric", "direction", "n", "resamples", "alpha", "rejections", "power", "ci_low", "ci_high",
@@ -202,7 +203,8 @@ def _pool_notes(pool: PairedPool, prepared: list[list[PreparedMetric]], directio
                              "its power is 0 at every n")
                 continue
             if undefined and scope == "overall":
-                successful_only = metric == "tct_s" and pool.options.tct_policy == "successful"
+                known = by_participant_name(metric)
+                successful_only = known is not None and known.success_only and pool.options.tct_policy == "successful"
                 why = " (no successful trial in a mode)" if successful_only else ""
                 notes.append(
                     f"{label} is undefined for {undefined} of {P} participants{why}: resampled studies leave "
@@ -244,18 +246,19 @@ class _Counts:
     """Rejection counts of one scope and study size, summed over the chunks of resampled studies."""
 
     metrics: int
+    family: np.ndarray  # which metrics Holm's correction runs across (the report's primary measures)
     reject: np.ndarray = field(init=False)
     two_sided: np.ndarray = field(init=False)
     holm: np.ndarray = field(init=False)
     pairs: np.ndarray = field(init=False)
     methods: np.ndarray = field(init=False)
-    family: np.ndarray = field(init=False)  # all four (Holm), at least one (Holm)
+    family_rows: np.ndarray = field(init=False)  # all of the family (Holm), at least one (Holm)
 
     def __post_init__(self) -> None:
         m = self.metrics
         self.reject, self.two_sided, self.holm, self.pairs = (np.zeros(m, dtype=np.int64) for _ in range(4))
         self.methods = np.zeros((m, len(METHOD_NAMES)), dtype=np.int64)
-        self.family = np.zeros(2, dtype=np.int64)
+        self.family_rows = np.zeros(2, dtype=np.int64)
 
     def add(self, prepared: list[PreparedMetric], direction: np.ndarray, idx: np.ndarray, zero_method: str,
             alpha: float) -> None:
@@ -269,13 +272,14 @@ class _Counts:
             agree[:, m] = (side == direction[m]) & (direction[m] != 0)
             self.methods[m] += np.bincount(method, minlength=len(METHOD_NAMES))
             self.pairs[m] += int(n_pairs.sum())
+        family = self.family
         with np.errstate(invalid="ignore"):
             reject_two = pvals < alpha
-            reject_holm = (holm(pvals, axis=1) < alpha) & agree
+            reject_holm = (holm(pvals[:, family], axis=1) < alpha) & agree[:, family]
         self.reject += (reject_two & agree).sum(axis=0)
         self.two_sided += reject_two.sum(axis=0)
-        self.holm += reject_holm.sum(axis=0)
-        self.family += (int(reject_holm.all(axis=1).sum()), int(reject_holm.any(axis=1).sum()))
+        self.holm[family] += reject_holm.sum(axis=0)
+        self.family_rows += (int(reject_holm.all(axis=1).sum()), int(reject_holm.any(axis=1).sum()))
 
     def rows(self, metrics: Sequence[str], direction: np.ndarray, scope: str, n: int,
              R: int) -> list[dict[str, object]]:
@@ -285,10 +289,11 @@ class _Counts:
             counts = self.methods[m]
             rows.append(dict(scope=scope, metric=metric, direction=DIRECTION_NAMES[int(direction[m])], n=n,
                              rejections=int(self.reject[m]), rejections_two_sided=int(self.two_sided[m]),
-                             rejections_holm=int(self.holm[m]), mean_pairs=float(self.pairs[m]) / R,
+                             rejections_holm=int(self.holm[m]) if self.family[m] else np.nan,  # none: not in it
+                             mean_pairs=float(self.pairs[m]) / R,
                              not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
                              approx=int(counts[3])))
-        for fam, k in ((FAMILY_ALL, int(self.family[0])), (FAMILY_ANY, int(self.family[1]))):
+        for fam, k in ((FAMILY_ALL, int(self.family_rows[0])), (FAMILY_ANY, int(self.family_rows[1]))):
             rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
                              rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
                              not_computable=0, exact=0, permutation=0, approx=0))
@@ -320,6 +325,7 @@ def _power_frame(rows: list[dict[str, object]], R: int, alpha: float, interval_l
     frame["resamples"] = R
     frame["alpha"] = alpha
     frame["rejections_two_sided"] = frame["rejections_two_sided"].astype("Int64")  # empty on the family rows
+    frame["rejections_holm"] = frame["rejections_holm"].astype("Int64")  # empty on a secondary metric's rows
     for prefix, col, power_col in (("", "rejections", "power"),
                                    ("two_sided_", "rejections_two_sided", "power_two_sided"),
                                    ("holm_", "rejections_holm", "power_holm")):
@@ -351,6 +357,27 @@ def _chunk_budget(pool: PairedPool, ns: tuple[int, ...], R: int, chunk_bytes: in
     if problem is not None:
         raise PowerError(problem)
     return chunk_bytes
+
+
+def _studies_of(n: int, pool: PairedPool, prepared: list[list[PreparedMetric]], direction: np.ndarray, R: int,
+                seed: int, zero_method: str, alpha: float, chunk_bytes: int,
+                progress: Callable[[int, int], None] | None, done: int, total: int) -> list[_Counts]:
+    """The rejection counts of ``R`` resampled studies of ``n`` participants, per scope.
+
+    The studies are drawn in chunks of at most ``chunk_bytes`` from one generator, ``default_rng([seed, n])``: the
+    same draws as one call would make.  ``progress(participants drawn, total)`` after each chunk, ``done`` drawn
+    before these.
+    """
+    rng = np.random.default_rng([int(seed), int(n)])
+    counts = [_Counts(len(pool.metrics), pool.family) for _ in pool.scopes]
+    step = chunk_rows(n, chunk_bytes)
+    for start in range(0, R, step):
+        idx = rng.integers(0, pool.n_participants, size=(min(step, R - start), n))
+        for s in range(len(pool.scopes)):
+            counts[s].add(prepared[s], direction[s], idx, zero_method, alpha)
+        if progress is not None:
+            progress(done + (start + len(idx)) * n, total)
+    return counts
 
 
 def estimate_power(
@@ -415,17 +442,9 @@ def estimate_power(
     rows: list[dict[str, object]] = []
     total, done = R * sum(ns), 0
     for n in ns:
-        # the studies of size n, drawn in chunks from one generator: the same draws as one call would make
-        rng = np.random.default_rng([int(seed), int(n)])
-        counts = [_Counts(len(pool.metrics)) for _ in pool.scopes]
-        step = chunk_rows(n, chunk_bytes)
-        for start in range(0, R, step):
-            idx = rng.integers(0, P, size=(min(step, R - start), n))
-            for s in range(len(pool.scopes)):
-                counts[s].add(prepared[s], direction[s], idx, zero_method, float(alpha))
-            done += idx.size
-            if progress is not None:
-                progress(done, total)
+        counts = _studies_of(n, pool, prepared, direction, R, seed, zero_method, float(alpha), chunk_bytes,
+                             progress, done, total)
+        done += R * n
         for s, scope in enumerate(pool.scopes):
             rows.extend(counts[s].rows(pool.metrics, direction[s], scope, n, R))
     frame = _power_frame(rows, R, float(alpha), interval_level)
@@ -435,118 +454,12 @@ def estimate_power(
 
 
 # ------------------------------------------------------------------------------------------------
-# In words, and on disk
+# Names (the plan in words and tables: :mod:`analysis.planning.power_plan`)
 # ------------------------------------------------------------------------------------------------
-def smallest_n(frame: pd.DataFrame, scope: str, metric: str, target: float, *,
-               holm_adjusted: bool = False) -> int | None:
-    """The smallest n tried from which on every larger n tried reaches ``target`` power (None: not reached).
-
-    "From which on" rather than "the first n that reaches it": the discrete
-    Wilcoxon test can make power dip between neighbouring n, and a plan needs
-    an n that is not followed by a shortfall.
-    """
-    sel = frame[(frame["scope"] == scope) & (frame["metric"] == metric)].sort_values("n")
-    col = "power_holm" if holm_adjusted else "power"
-    ok = (sel[col].to_numpy() >= target)
-    ns = sel["n"].to_numpy()
-    best = None
-    for i in range(len(ns) - 1, -1, -1):
-        if not ok[i]:
-            break
-        best = int(ns[i])
-    return best
-
-
 def metric_label(metric: str) -> str:
     return FAMILY_LABELS.get(metric, METRIC_LABELS.get(metric, metric))
 
 
-def _reach(frame: pd.DataFrame, scope: str, metric: str, target: float, holm_adjusted: bool) -> str:
-    n = smallest_n(frame, scope, metric, target, holm_adjusted=holm_adjusted)
-    if n is not None:
-        return f"n = {n}"
-    last = frame[(frame["scope"] == scope) & (frame["metric"] == metric)].sort_values("n").iloc[-1]
-    return f"> {int(last['n'])} ({last['power_holm' if holm_adjusted else 'power']:.0%})"
-
-
-def summary_text(result: PowerResult) -> str:
-    """The plan in words: per metric, the smallest n reaching 80 % and 90 % power, and the notes."""
-    f = result.frame
-    tct = "over successful trials" if result.options.tct_policy == "successful" else "failures counted at the trial cap"
-    lines = [
-        f"Source: {result.source}; {result.n_pool} participants with both haptic modes, resampled with replacement "
-        f"({result.resamples} studies per n, seed {result.seed}).",
-        f"Test: the report's paired Wilcoxon signed-rank test ON vs OFF per metric, two-sided, significant at "
-        f"p < {result.alpha:g}; TCT {tct}; RMSE and Max AE from the "
-        f"{'cue' if result.options.error_window == 'cue' else 'first contact'}; "
-        f"zero differences: {result.zero_method}.",
-        "Power: the probability that a study detects the effect in the direction this pool shows (a rejection "
-        "counts only when the resampled study's effect lies on the pool's side); the two-sided rejection rate, "
-        "which also counts significant effects the other way, is power_two_sided.",
-        f"Intervals ({result.interval_level:.0%}, in power.csv and the figure) are the Monte Carlo error of the "
-        f"resampling only, not the uncertainty of the {result.n_pool} participants' own effects: a plan from a "
-        "small pilot is itself uncertain.",
-        f"Participants needed: the smallest n of {', '.join(str(n) for n in result.n_values)} from which on power "
-        "stays at or above the target, for the test alone and with Holm across the four metrics (as the report's "
-        "significance marks); '> N (x %)': not reached, x = power at the largest n tried.",
-        f"  {'':<21s}{'80 % power':<28s}90 % power",
-        f"  {'':<21s}{'test':<14s}{'with Holm':<14s}{'test':<14s}with Holm",
-    ]
-    for scope in dict.fromkeys(f["scope"]):
-        if scope != "overall":
-            lines.append(f"  within {scope}:")
-        for metric in dict.fromkeys(f["metric"]):
-            family = metric in FAMILY_LABELS
-            cells = []
-            for target in (0.8, 0.9):
-                cells.append("" if family else _reach(f, scope, metric, target, False))
-                cells.append(_reach(f, scope, metric, target, True))
-            name = metric_label(metric) if scope == "overall" else f"  {metric_label(metric)}"
-            lines.append(f"  {name:<21s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
-    lines.append("Power at each n (overall; the two-sided rejection rate in brackets):")
-    ns = list(result.n_values)
-    lines.append(f"  {'':<21s}{'pool shows':<12s}" + "".join(f"{'n = ' + str(n):<14s}" for n in ns).rstrip())
-    overall = f[f["scope"] == "overall"]
-    for metric in dict.fromkeys(overall["metric"]):
-        if metric in FAMILY_LABELS:
-            continue
-        sel = overall[overall["metric"] == metric].set_index("n")
-        direction = DIRECTION_TEXT[str(sel["direction"].iloc[0])]
-        cells = [f"{sel.at[n, 'power']:.0%} ({sel.at[n, 'power_two_sided']:.0%})" for n in ns]
-        lines.append(f"  {metric_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
-    last = max(result.n_values)
-    under = [metric_label(m) for m in dict.fromkeys(f["metric"])
-             if m not in FAMILY_LABELS and smallest_n(f, "overall", m, 0.8) is None]
-    if under:
-        lines.append(f"Under-powered: {', '.join(under)} do{'es' if len(under) == 1 else ''} not reach 80 % power "
-                     f"by n = {last}: a study testing {'it' if len(under) == 1 else 'them'} needs more participants "
-                     "(try a larger --n) or a more sensitive definition.")
-    if result.notes:
-        lines.append("Notes:")
-        lines.extend(f"  - {n}" for n in result.notes)
-    return "\n".join(lines)
-
-
-def plan_table(result: PowerResult) -> pd.DataFrame:
-    """The plan as a table, one row per scope × metric (family rows included), for the report's page.
-
-    Columns: ``scope``, ``metric``, ``direction``, ``n80``, ``n90``,
-    ``n80_holm``, ``n90_holm`` (text: ``"12"``, ``"> 30 (64%)"`` when not
-    reached, ``""`` where it does not apply) and ``power_n{n}`` per n tried
-    (directional power, a fraction; NaN where it does not apply).
-    """
-    f = result.frame
-    rows = []
-    for scope in dict.fromkeys(f["scope"]):
-        for metric in dict.fromkeys(f[f["scope"] == scope]["metric"]):
-            family = metric in FAMILY_LABELS
-            sel = f[(f["scope"] == scope) & (f["metric"] == metric)].set_index("n")
-            row: dict[str, object] = {"scope": scope, "metric": metric, "direction": str(sel["direction"].iloc[0])}
-            for target in (0.8, 0.9):
-                key = f"n{round(target * 100)}"
-                row[key] = "" if family else _reach(f, scope, metric, target, False).removeprefix("n = ")
-                row[f"{key}_holm"] = _reach(f, scope, metric, target, True).removeprefix("n = ")
-            for n in result.n_values:
-                row[f"power_n{n}"] = float(sel.at[n, "power_holm" if family else "power"])
-            rows.append(row)
-    return pd.DataFrame(rows)
+def holm_applies(metric: str) -> bool:
+    """Whether a row of power.csv has a power with Holm's correction: a primary metric's and the family rows'."""
+    return metric in FAMILY_LABELS or metric in PRIMARY_METRICS

@@ -1,7 +1,7 @@
 """The power-curve figure of :mod:`analysis.planning.power`: power against the number of participants.
 
 One panel per scope (overall, then each target); one line per metric with its
-Monte Carlo interval as a band, the Holm family-wise power of all four
+Monte Carlo interval as a band, the Holm family-wise power of all the primary
 metrics as a dashed black line, and the 80 % and 90 % targets.  Power is
 directional (:mod:`analysis.planning.power`): a rejection in the pool's direction.  Colours are
 Okabe–Ito, distinguishable with every common colour-vision deficiency, and
@@ -18,16 +18,19 @@ from matplotlib.ticker import NullLocator, PercentFormatter
 
 from analysis.planning.power import FAMILY_ALL, FAMILY_LABELS, PowerResult, metric_label
 from analysis.plots.figures import _style
+from analysis.stats.aggregate import TESTED_METRICS
 
 __all__ = ["METRIC_COLORS", "power_curves"]
 
-#: Okabe–Ito colours and markers per metric.
-METRIC_COLORS = {"success_rate": "#009E73", "tct_s": "#D55E00", "rmse_n": "#0072B2", "max_ae_n": "#CC79A7"}
-_MARKERS = {"success_rate": "o", "tct_s": "s", "rmse_n": "^", "max_ae_n": "D"}
+#: Okabe–Ito colours and markers, one per tested metric in the registry's order.
+_PALETTE = ("#009E73", "#D55E00", "#0072B2", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442")
+_MARKER_CYCLE = ("o", "s", "^", "D", "v", "P", "X")
+METRIC_COLORS = {m: _PALETTE[i % len(_PALETTE)] for i, m in enumerate(TESTED_METRICS)}
+_MARKERS = {m: _MARKER_CYCLE[i % len(_MARKER_CYCLE)] for i, m in enumerate(TESTED_METRICS)}
 
 
 def power_curves(result: PowerResult) -> Figure:
-    """Power of each metric's test (and of all four under Holm) against n, one panel per scope.
+    """Power of each metric's test (and of all the primary ones under Holm) against n, one panel per scope.
 
     Parameters
     ----------

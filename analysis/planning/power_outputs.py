@@ -15,7 +15,8 @@ import pandas as pd
 
 from analysis.planning import power_figures
 from analysis.planning.paired_pool import pool_from_trials
-from analysis.planning.power import PowerError, PowerResult, estimate_power, summary_text
+from analysis.planning.power import PowerError, PowerResult, estimate_power
+from analysis.planning.power_plan import summary_text
 from analysis.reading import codebook
 from analysis.reading.metrics import MetricOptions
 

@@ -2,7 +2,7 @@
 
 :mod:`study_app.headless.sim_trials` runs simulated participants through the
 protocol's schedule on the simulated rig and returns :class:`TrialRow` s (their
-metrics come from the one definition in :mod:`protocol.study.metrics`, through
+metrics -- the ones the report tests -- come from the one definition in :mod:`protocol.metrics`, through
 :class:`protocol.study.trial.TrialMachine`); :func:`summarise_study` aggregates them
 like science.md §6 (success over a participant's trials, mean RMSE and Max AE
 over trials, mean TCT over successful trials) and compares the modes.  The
@@ -12,7 +12,6 @@ sweep`` (:mod:`analysis.planning.sweep`) share both.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import statistics
 from collections.abc import Mapping, Sequence
@@ -21,38 +20,63 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SUMMARY_KEYS", "TrialRow", "summarise_study", "trial_row_from_dict", "trial_row_to_dict"]
+from protocol.metrics import Metric, MetricValue, split_unit, tested
 
-#: What :func:`summarise_study` gives per key: ``off``, ``on``, ``change`` (ON/OFF − 1), ``p``, ``n_pairs``.
-SUMMARY_KEYS = ("success", "rmse_n", "max_ae_n", "tct_s", "tct_cens_s", "success_GENTLE", "success_FIRM")
+__all__ = ["SIM_METRICS", "SUMMARY_KEYS", "TrialRow", "summarise_study", "trial_row_from_dict", "trial_row_to_dict"]
+
+#: The metrics a simulated trial carries: the ones the report tests (:func:`protocol.metrics.tested`), in order.
+SIM_METRICS: tuple[Metric, ...] = tested()
+#: The yes/no outcome among them (the task's verdict): whose mean is a participant's success rate.
+_VERDICT = next(m.name for m in SIM_METRICS if m.boolean)
+
+
+def _censored_key(m: Metric) -> str:
+    """A success-only metric with failures counted at the trial cap, as the summary names it (``tct_cens_s``)."""
+    stem, units = split_unit(m.name)
+    return "_".join((stem, "cens", *units))
+
+
+#: What :func:`summarise_study` gives per key: ``off``, ``on``, ``change`` (ON/OFF − 1), ``p``, ``n_pairs``: each
+#: metric of :data:`SIM_METRICS`, a success-only one also censored at the cap, and the success rate per target.
+SUMMARY_KEYS = (*(m.name for m in SIM_METRICS), *(_censored_key(m) for m in SIM_METRICS if m.success_only),
+                "success_GENTLE", "success_FIRM")
 
 
 @dataclass(frozen=True, slots=True)
 class TrialRow:
-    """One simulated trial's outcome (``tct_s`` None for a failure)."""
+    """One simulated trial's outcome: its metrics by name (:data:`SIM_METRICS`; ``tct_s`` None for a failure)."""
 
     study: int
     participant: int
     index: int
     target: str
     mode: str
-    success: bool
-    tct_s: float | None
-    rmse_n: float
-    max_ae_n: float
-    peak_n: float
+    values: Mapping[str, MetricValue]
+
+    @property
+    def success(self) -> bool:
+        """The trial succeeded (the task's verdict)."""
+        return bool(self.values[_VERDICT])
 
 
 def trial_row_to_dict(row: TrialRow) -> dict[str, Any]:
-    """A row as plain JSON values."""
-    return dataclasses.asdict(row)
+    """A row as plain JSON values: who and which trial, then each metric by name."""
+    return {"study": row.study, "participant": row.participant, "index": row.index, "target": row.target,
+            "mode": row.mode, **{m.name: row.values.get(m.name) for m in SIM_METRICS}}
+
+
+def _number(v: MetricValue) -> float:
+    return math.nan if v is None else float(v)
+
+
+def _value(m: Metric, v: Any) -> MetricValue:
+    return bool(v) if m.boolean else None if v is None else float(v)
 
 
 def trial_row_from_dict(d: Mapping[str, Any]) -> TrialRow:
-    """The row :func:`trial_row_to_dict` wrote."""
+    """The row :func:`trial_row_to_dict` wrote (:class:`KeyError` when it lacks a metric: written before it existed)."""
     return TrialRow(int(d["study"]), int(d["participant"]), int(d["index"]), str(d["target"]), str(d["mode"]),
-                    bool(d["success"]), None if d["tct_s"] is None else float(d["tct_s"]), float(d["rmse_n"]),
-                    float(d["max_ae_n"]), float(d["peak_n"]))
+                    {m.name: _value(m, d[m.name]) for m in SIM_METRICS})
 
 
 def _wilcoxon_p(off: list[float], on: list[float]) -> float:
@@ -69,15 +93,19 @@ def _wilcoxon_p(off: list[float], on: list[float]) -> float:
 
 
 def _participant_values(mine: Sequence[TrialRow], max_trial_s: float) -> dict[str, float]:
-    """One participant's values in one mode (science.md §6)."""
-    tcts = [r.tct_s for r in mine if r.success and r.tct_s is not None]
-    out = {
-        "success": sum(r.success for r in mine) / len(mine),
-        "rmse_n": statistics.fmean(r.rmse_n for r in mine),
-        "max_ae_n": statistics.fmean(r.max_ae_n for r in mine),
-        "tct_s": statistics.fmean(tcts) if tcts else math.nan,
-        "tct_cens_s": statistics.fmean(r.tct_s if r.success and r.tct_s is not None else max_trial_s for r in mine),
-    }
+    """One participant's values in one mode (science.md §6): a yes/no outcome's rate, a success-only metric's mean
+    over successful trials (and with failures at the cap), every other metric's mean over the trials."""
+    out: dict[str, float] = {}
+    for m in SIM_METRICS:
+        if m.boolean:
+            out[m.name] = sum(bool(r.values[m.name]) for r in mine) / len(mine)
+        elif m.success_only:
+            kept = [float(v) for r in mine if r.success and (v := r.values.get(m.name)) is not None]
+            out[m.name] = statistics.fmean(kept) if kept else math.nan
+            out[_censored_key(m)] = statistics.fmean(
+                float(v) if r.success and (v := r.values.get(m.name)) is not None else max_trial_s for r in mine)
+        else:  # (a row made without it, by hand: NaN)
+            out[m.name] = statistics.fmean(_number(r.values.get(m.name)) for r in mine)
     for lab in ("GENTLE", "FIRM"):
         sub = [r for r in mine if r.target == lab]
         out[f"success_{lab}"] = sum(r.success for r in sub) / len(sub) if sub else math.nan

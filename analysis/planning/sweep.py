@@ -28,8 +28,9 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from analysis.planning.sim_study import TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
+from analysis.planning.sim_study import SIM_METRICS, TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
 from foundation.platform_support.files import O_NOFOLLOW
+from protocol.metrics import get
 
 __all__ = [
     "CACHE_FILE", "FILTER_NOTE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key",
@@ -41,9 +42,8 @@ __all__ = [
 SWEEP_MARKER = ".haptic-study-sweep"
 #: The cache of finished cells, kept in the output folder (never replaced by ``--force``).
 CACHE_FILE = "cells.jsonl"
-#: The measures a sweep reports, in order, with their labels.
-METRICS: dict[str, str] = {"success": "success rate", "tct_s": "TCT, successful trials (s)", "rmse_n": "RMSE (N)",
-                           "max_ae_n": "Max AE (N)"}
+#: The measures a sweep reports (the simulated trials' metrics, the ones the report tests), in order, with their labels.
+METRICS: dict[str, str] = {m.name: m.summary_label for m in SIM_METRICS}
 
 
 @dataclass(frozen=True)
@@ -112,8 +112,7 @@ def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]
 
 #: What each measure can be (success a rate, the rest ≥ 0; the change ON/OFF − 1 of a measure ≥ 0 is ≥ −1): the
 #: ends of a t-interval over a few studies can pass these, and are clipped to them (``sweep.md`` says so).
-_BOUNDS: dict[str, tuple[float, float]] = {"success": (0.0, 1.0), "tct_s": (0.0, math.inf),
-                                           "rmse_n": (0.0, math.inf), "max_ae_n": (0.0, math.inf)}
+_BOUNDS: dict[str, tuple[float, float]] = {m.name: m.values for m in SIM_METRICS}
 _CHANGE_BOUNDS = (-1.0, math.inf)
 
 
@@ -174,7 +173,7 @@ def caveat(model_version: str, model_fit: str) -> str:
 def _fmt(v: float, metric: str) -> str:
     if not math.isfinite(v):
         return "–"
-    return f"{v:.2f}" if metric == "success" else f"{v:.3f}"
+    return f"{v:.2f}" if get(metric).boolean else f"{v:.3f}"  # a rate, or a mean
 
 
 def _ci(row: Mapping[str, Any], col: str, metric: str) -> str:
@@ -205,7 +204,7 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     from analysis.plots.figures import save_one
 
     # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
-    named = {"success": "success_rate", "rmse_n": "rmse_N", "max_ae_n": "max_ae_N"}
+    named = {m.name: m.participant_exported for m in SIM_METRICS}
     tidy.replace({"metric": named}).to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
     summary.replace({"metric": named}).to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")

@@ -1,8 +1,8 @@
 """The figures of a pipeline settings sweep (``haptic-study sweep``, :mod:`analysis.planning.sweep`).
 
-* :func:`metrics_figure` -- success rate, TCT over successful trials, RMSE and Max AE against the first swept
-  setting, haptics OFF and ON, each point the mean over studies with its 95 % t-interval, the paper's value of the
-  setting marked; a second swept setting is a line per value (its own line style);
+* :func:`metrics_figure` -- each measure of the sweep (success rate, TCT over successful trials, RMSE, Max AE, ...)
+  against the first swept setting, haptics OFF and ON, each point the mean over studies with its 95 % t-interval,
+  the paper's value of the setting marked; a second swept setting is a line per value (its own line style);
 * :func:`front_figure` -- the speed–accuracy front: TCT against RMSE with haptics ON, one point per setting
   (both intervals drawn), each labelled, the paper's setting starred.
 
@@ -21,12 +21,14 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from analysis.planning.sim_study import SIM_METRICS
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
 
 __all__ = ["front_figure", "metrics_figure"]
 
-_PANELS = (("success", "success rate"), ("tct_s", "TCT, successful trials (s)"), ("rmse_n", "RMSE (N)"),
-           ("max_ae_n", "Max AE (N)"))
+#: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`), two to
+#: a row.
+_PANELS = tuple((m.name, m.summary_label) for m in SIM_METRICS)
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 _DASHES = ("-", "--", ":", "-.")
 
@@ -51,15 +53,18 @@ def _errorbar(ax: Any, x: Sequence[float], sel: pd.DataFrame, col: str, **kw: An
 
 @styled
 def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, float], note: str) -> Figure:
-    """The four measures against the first swept setting (see the module docstring)."""
+    """The sweep's measures against the first swept setting (see the module docstring)."""
     x_name, others = swept[0], list(swept[1:])
     xs = sorted({float(v) for v in summary[x_name]})
     lines = note_lines(note, PAGE_IN)
-    fig = Figure(figsize=(PAGE_IN, 5.2 + 0.11 * lines))
+    rows = math.ceil(len(_PANELS) / 2)
+    fig = Figure(figsize=(PAGE_IN, 2.6 * rows + 0.11 * lines))
     margins(fig, 0.6, 0.15, 0.55 + 0.11 * lines, 0.3, wspace=0.3, hspace=0.45)
-    axes = fig.subplots(2, 2)
+    axes = fig.subplots(rows, 2, squeeze=False)
+    for spare in axes.flat[len(_PANELS):]:  # an odd number of measures: the last row's second panel is empty
+        spare.set_visible(False)
     groups = (list(summary.groupby(others, sort=True)) if others else [((), summary)])
-    for ax, (metric, label) in zip(axes.flat, _PANELS, strict=True):
+    for ax, (metric, label) in zip(axes.flat, _PANELS, strict=False):
         for g_i, (g_key, grp) in enumerate(groups):
             sel = grp[grp["metric"] == metric].sort_values(x_name)
             tag = "" if not others else " · " + _label(

@@ -31,9 +31,10 @@ import numpy.typing as npt
 import pandas as pd
 from matplotlib.figure import Figure
 
-from analysis.reading.load import read_trial_samples
+from analysis.reading.recorded import read_trial_samples
 from analysis.stats.aggregate import METRIC_LABELS, by_mode, mean_sd
 from analysis.stats.wilcoxon import WilcoxonResult
+from protocol.metrics import by_participant_name
 from protocol.study.display import task_axis_top_n
 from protocol.study.labels import fault_names
 from protocol.study.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
@@ -172,7 +173,7 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             top = max(top, y * 1.15)
     ax.set_xticks(range(len(groups)), [g[0] for g in groups])
     ax.set_ylabel(METRIC_LABELS.get(metric, metric))
-    if metric == "success_rate":
+    if (known := by_participant_name(metric)) is not None and known.boolean:
         top = 1.15  # a rate: room for the marks above 1, nothing more
     if top > 0:
         ax.set_ylim(0, top)
@@ -273,7 +274,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     Parameters
     ----------
     samples
-        :func:`analysis.reading.load.read_trial_samples` output (its ``faults`` column, where recorded, marks when a
+        :func:`analysis.reading.recorded.read_trial_samples` output (its ``faults`` column, where recorded, marks when a
         watchdog fault latched).
     target_force_n, tolerance_fraction
         The trial's band, drawn when ``target_force_n`` is given.

@@ -18,7 +18,8 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, _style, add_note, margins, note_lines, styled
-from analysis.stats.aggregate import METRIC_LABELS
+from analysis.stats.aggregate import METRIC_LABELS, TESTED_METRICS
+from protocol.metrics import by_participant_name
 
 __all__ = ["learning_curves", "trade_slopes"]
 
@@ -87,7 +88,7 @@ def learning_curves(curve: pd.DataFrame, note: str = "") -> Figure:
     note
         A caveat printed under the panels (what the points are, what the models say).
     """
-    metrics = ["success_rate", "tct_s", "rmse_n", "max_ae_n"]
+    metrics = list(TESTED_METRICS)  # every tested metric, a panel each (learning_curve computes each)
     extra = 0.12 * note_lines(note, PAGE_IN)
     fig = Figure(figsize=(PAGE_IN, 2.4 + extra), dpi=_DPI)
     margins(fig, 0.45, 0.08, 0.42 + extra, 0.72, wspace=0.5)
@@ -106,7 +107,7 @@ def learning_curves(curve: pd.DataFrame, note: str = "") -> Figure:
         ax.set_xlim(min(ticks, default=0) - 0.4, max(ticks, default=0) + 0.4)
         ax.set_title(METRIC_LABELS.get(m, m))
         ax.set_xlabel("trials")
-        if m == "success_rate":
+        if (metric := by_participant_name(m)) is not None and metric.boolean:  # a rate
             ax.set_ylim(-0.05, 1.05)
         _style(ax)
     handles, labels = axes[0].get_legend_handles_labels()

@@ -14,8 +14,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from analysis.reading.load import Progress, StudyData, connect_readonly, read_task_force, recorded_where, stored_records
+from analysis.reading.load import Progress, StudyData, connect_readonly, recorded_where, stored_records
+from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
+from protocol.metrics import METRICS, MetricValue, stored, windowed
 from protocol.study.metrics import TrialMetrics, trial_metrics
 from protocol.study.records import Outcome, TrialRecord
 
@@ -26,7 +28,7 @@ ERROR_WINDOWS = ("cue", "first_contact")
 #: How a failed trial enters TCT: left out (default) or censored at the trial cap.
 TCT_POLICIES = ("successful", "censored")
 
-#: Relative agreement required between recomputed and stored RMSE / Max AE (summation order only).
+#: Relative agreement required between recomputed and stored metrics (summation order only).
 _AGREE_REL = 1e-9
 
 
@@ -67,24 +69,24 @@ class TrialTable:
     trials
         One row per analysed trial: ``participant_code, participant_number,
         session_id, trial_index, started_at_s`` (the cue, session clock),
-        ``target_label, target_force_n, haptic_mode, outcome, success, tct_s, rmse_n, max_ae_n, time_in_band_s,
-        peak_force_n,
-        first_contact_s, tct_censored_s, database``.  ``tct_s`` is NaN unless
-        the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
+        ``target_label, target_force_n, haptic_mode, outcome``, every metric of :mod:`protocol.metrics` in its
+        order (``success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n``, ...), ``first_contact_s``, each
+        success-only metric censored at the trial cap (``tct_censored_s``) and ``database``.  ``tct_s`` is NaN
+        unless the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
     n_from_samples
         Trials whose metrics were recomputed from samples.
     n_stored_only
         Trials without samples, whose stored metrics were used.
     n_disagree
-        Trials whose recomputed outcome, TCT, RMSE or Max AE (cue window)
-        differ from the stored ones (should be 0; a non-zero count is reported).
+        Trials whose recomputed outcome or stored metrics (cue window) differ from the ones stored live (should be
+        0; a non-zero count is reported).
     by_window
-        The window-dependent metrics (``rmse_n``, ``max_ae_n``, ``peak_force_n``) of every trial in each
-        error window (:data:`ERROR_WINDOWS`), row for row with ``trials``: what the sensitivity analysis
-        compares.  A trial without samples has its stored (cue-window) values in the cue window, NaN in
+        The window-dependent metrics (:func:`protocol.metrics.windowed`: ``rmse_n``, ``max_ae_n``, ...) of every
+        trial in each error window (:data:`ERROR_WINDOWS`), row for row with ``trials``: what the sensitivity
+        analysis compares.  A trial without samples has its stored (cue-window) values in the cue window, NaN in
         the other.
     error_window
-        The window of ``trials``' own ``rmse_n``, ``max_ae_n`` and ``peak_force_n``.
+        The window of ``trials``' own window-dependent metrics.
     """
 
     trials: pd.DataFrame
@@ -133,14 +135,21 @@ class _Recomputed:
     by_window: dict[str, TrialMetrics] | None = None
 
 
-def _nan(v: float | None) -> float:
+def _nan(v: MetricValue) -> float:
     return math.nan if v is None else float(v)
 
 
-def _agrees(live: TrialMetrics, stored: TrialRecord) -> bool:
-    """The metrics recomputed over the cue window are the ones stored during the session."""
-    return (live.success == stored.success and _close(_nan(live.tct_s), _nan(stored.tct_s))
-            and _close(live.rmse_n, _nan(stored.rmse_n)) and _close(live.max_ae_n, _nan(stored.max_ae_n)))
+def _agrees(live: TrialMetrics, stored_live: TrialRecord) -> bool:
+    """The metrics recomputed over the cue window are the ones stored during the session: the outcome, and every
+    stored metric the file has a value for (a metric defined after the file was written has none; NaN is stored
+    as NULL, and an undefined TCT is None on both sides)."""
+    if live.success != stored_live.success:
+        return False
+    for m in stored():
+        kept = stored_live.metrics.get(m.name)
+        if kept is not None and not _close(_nan(live[m.name]), float(kept)):
+            return False
+    return True
 
 
 def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed]:
@@ -153,9 +162,10 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
             if len(t_ns) == 0:
                 out.append(_Recomputed(c.row, None, True))
                 continue
-            kw = dict(tolerance_fraction=c.tolerance_fraction, hold_s=c.hold_s, max_trial_s=c.max_trial_s)
             # every window, for the report's sensitivity table; the live metrics are the cue window's
-            every = {w: trial_metrics(t_ns, force, c.stored.target_force_n, window=w, **kw) for w in ERROR_WINDOWS}
+            every = {w: trial_metrics(t_ns, force, c.stored.target_force_n, window=w, hold_s=c.hold_s,
+                                      tolerance_fraction=c.tolerance_fraction, max_trial_s=c.max_trial_s)
+                     for w in ERROR_WINDOWS}
             out.append(_Recomputed(c.row, every[window], _agrees(every["cue"], c.stored), every))
     finally:
         conn.close()
@@ -200,7 +210,8 @@ def _tasks(inc: pd.DataFrame, checks: list[_Check], workers: int, window: str,
 def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricOptions) -> TrialTable:
     """The analysed trials: recomputed metrics where there were samples, the stored ones elsewhere."""
     n = len(inc)
-    cols = np.full((n, 6), np.nan)
+    values = {m.name: np.full(n, np.nan) for m in METRICS if not m.boolean}
+    first_contact = np.full(n, np.nan)
     success = (inc["outcome"] == Outcome.SUCCESS).to_numpy().copy()
     from_samples = np.zeros(n, dtype=bool)
     disagree = 0
@@ -210,14 +221,16 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                 m = r.metrics
                 from_samples[r.row] = True
                 success[r.row] = m.success
-                cols[r.row] = (_nan(m.tct_s), m.rmse_n, m.max_ae_n, m.time_in_band_s, m.peak_force_n,
-                               _nan(m.first_contact_s))
+                for name, column in values.items():
+                    column[r.row] = _nan(m[name])
+                first_contact[r.row] = _nan(m.first_contact_s)
                 disagree += not r.agrees
     # trials without samples keep the metrics stored live (cue window only)
     missing = ~from_samples
-    for k, name in enumerate(("tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")):
-        if options.error_window == "cue" or name not in ("rmse_n", "max_ae_n"):
-            cols[missing, k] = inc.loc[missing, f"stored_{name}"].to_numpy(dtype=float)
+    for metric in stored():
+        if options.error_window == "cue" or not metric.windowed:
+            values[metric.name][missing] = inc.loc[missing, f"stored_{metric.name}"].to_numpy(dtype=float)
+    cap = inc["max_trial_s"].to_numpy(dtype=float)
     out = pd.DataFrame(
         {
             "participant_code": inc["participant_code"],
@@ -229,14 +242,10 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "target_force_n": inc["target_force_n"].to_numpy(dtype=float),
             "haptic_mode": inc["haptic_mode"],
             "outcome": np.where(success, Outcome.SUCCESS.value, Outcome.TIMEOUT.value),
-            "success": success,
-            "tct_s": cols[:, 0],
-            "rmse_n": cols[:, 1],
-            "max_ae_n": cols[:, 2],
-            "time_in_band_s": cols[:, 3],
-            "peak_force_n": cols[:, 4],
-            "first_contact_s": cols[:, 5],
-            "tct_censored_s": np.where(success, cols[:, 0], inc["max_trial_s"].to_numpy(dtype=float)),
+            # a yes/no metric is the task's verdict; the others by name, in the registry's order
+            **{m.name: success if m.boolean else values[m.name] for m in METRICS},
+            "first_contact_s": first_contact,
+            **{m.censored: np.where(success, values[m.name], cap) for m in METRICS if m.censored},
             "database": inc["database"],
         }
     )
@@ -244,21 +253,18 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                       options.error_window)
 
 
-#: The metrics that depend on the error window.
-WINDOWED = ("rmse_n", "max_ae_n", "peak_force_n")
-
-
 def _by_window(inc: pd.DataFrame, results: list[list[_Recomputed]]) -> dict[str, pd.DataFrame]:
     """Every trial's window-dependent metrics in each window (stored cue values where there are no samples)."""
     n = len(inc)
-    out = {w: np.full((n, len(WINDOWED)), np.nan) for w in ERROR_WINDOWS}
-    out["cue"][:] = inc[[f"stored_{m}" for m in WINDOWED]].to_numpy(dtype=float)
+    names = [m.name for m in windowed()]
+    out = {w: np.full((n, len(names)), np.nan) for w in ERROR_WINDOWS}
+    out["cue"][:] = inc[[f"stored_{m}" for m in names]].to_numpy(dtype=float)
     for chunk in results:
         for r in chunk:
             if r.by_window is not None:
                 for w, m in r.by_window.items():
-                    out[w][r.row] = (m.rmse_n, m.max_ae_n, m.peak_force_n)
-    return {w: pd.DataFrame(v, columns=list(WINDOWED), index=inc.index) for w, v in out.items()}
+                    out[w][r.row] = [_nan(m[name]) for name in names]
+    return {w: pd.DataFrame(v, columns=names, index=inc.index) for w, v in out.items()}
 
 
 def compute_trials(

@@ -1,9 +1,9 @@
 """Every recorded 1 kHz record as one labelled table, for pandas, R and SQL users, with its codebook.
 
 :func:`samples_frame` is ``haptic-study export samples`` as a DataFrame: the recording's columns
-(:func:`analysis.reading.load.recorded_samples`) with what a reader needs and the source code used to be needed for --
-the participant code, the trial phase by name beside its code, the latched faults by name beside the bitmask,
-and a unit at the end of every name, spelled as the report's CSVs spell them (``_N`` newtons, ``_Nm``
+(:func:`analysis.reading.recorded.recorded_samples`) with what a reader needs and the source code used to be
+needed for -- the participant code, the trial phase by name beside its code, the latched faults by name beside the
+bitmask, and a unit at the end of every name, spelled as the report's CSVs spell them (``_N`` newtons, ``_Nm``
 newton-metres, ``_s``, ``_ms``, ``_m``; a fraction or flag has its unit in the codebook).
 :func:`codebook_frame` describes every column: ``file, column, type, unit, description``, the same form as
 the report's ``codebook.csv``.
@@ -16,7 +16,8 @@ import os
 import numpy as np
 import pandas as pd
 
-from analysis.reading.load import _open, recorded_samples
+from analysis.reading.load import _open
+from analysis.reading.recorded import recorded_samples
 from protocol.study.labels import FAULT_BITS, PHASE_NAMES, fault_names
 
 __all__ = ["SAMPLES_COLUMNS", "codebook_frame", "samples_frame"]
@@ -78,17 +79,8 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
                   arm: str | None = None) -> pd.DataFrame:
     """The 1 kHz records of one session (or all), labelled: what ``haptic-study export samples`` writes.
 
-    A session recorded by schema version 3 or later gives every record from its start to its end (training,
-    pauses, trials, waits, every resumed run); one recorded before gives its trials' samples.
-
-    Parameters
-    ----------
-    database
-        The study database (opened read-only).
-    session_id
-        One session, or None for every session.
-    arm
-        A rig of several arms: the arm whose records, by name (None: the task arm's); named, it is a column too.
+    The records, and the parameters, are :func:`analysis.reading.recorded.recorded_samples`'; a named ``arm`` is a
+    column too.
 
     Returns
     -------

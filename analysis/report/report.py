@@ -25,6 +25,7 @@ of :mod:`foundation.outdir`, shared with ``power``).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -37,6 +38,7 @@ from analysis.plots import figures, model_figures
 from analysis.reading.load import Progress, StudyData, load_study
 from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
+from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
 from analysis.report.study_record import (
     aborted_reruns,
@@ -48,7 +50,7 @@ from analysis.report.study_record import (
     resumed_sessions,
 )
 from analysis.report.withdrawals import study_withdrawals, withdrawals_html
-from analysis.stats.aggregate import PRIMARY_METRICS, mode_tests, per_participant
+from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests, per_participant
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
@@ -56,6 +58,7 @@ from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy,
 from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from foundation.parallel import default_workers, run_tasks
+from protocol.metrics import Role
 
 __all__ = [
     "ReportSummary",
@@ -96,8 +99,10 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
 
 
 def _marks(results: Sequence[WilcoxonResult], frame: pd.DataFrame) -> dict[str, str]:
+    """Each test's mark: from Holm's p for a primary measure, from its own p for a secondary one."""
     holm = dict(zip(frame["metric"], frame["p_holm"], strict=True))
-    return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric)) for r in results}
+    return {r.metric: figures.significance_mark(r, p_holm=holm.get(r.metric) if r.metric in PRIMARY_METRICS else None)
+            for r in results}
 
 
 @dataclass(frozen=True, slots=True)
@@ -226,9 +231,13 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
-    return {"tct": tct + ".", "errors": f"RMSE and Max AE: error window {window}.",
-            "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
-            "learning": learning}
+    notes = {"tct": tct + ".", "errors": f"{windowed_words()}: error window {window}.",
+             "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
+             "learning": learning}
+    for group in figure_groups():  # a figure with a secondary measure says whose marks are not Holm's
+        if any(m.role is Role.SECONDARY for m in group.metrics):
+            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note())))
+    return notes
 
 
 def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOptions,
@@ -260,11 +269,9 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     bars = dict(target_order=a.target_order)
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
-        ("mode_bars", (["success_rate"], overall, by_target, marks), bars, "success_rate", "success_rate"),
-        ("mode_bars", (["tct_s"], overall, by_target, marks), {**bars, "note": notes["tct"]}, "tct", "tct"),
-        ("mode_bars", (["rmse_n", "max_ae_n"], overall, by_target, marks), {**bars, "note": notes["errors"]},
-         "rmse_max_ae", "errors"),
-        ("paired_lines", (overall, PRIMARY_METRICS, marks_overall), {}, "paired", "paired"),
+        *(("mode_bars", ([m.participant for m in g.metrics], overall, by_target, marks),
+           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key) for g in figure_groups()),
+        ("paired_lines", (overall, TESTED_METRICS, marks_overall), {}, "paired", "paired"),
         ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
@@ -289,6 +296,32 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     return out, [(title, out[name]) for name, title in titles], models
 
 
+def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str]], options: MetricOptions,
+           zero_method: str, confidence: float, power: bool, workers: int | None,
+           results: dict[str, pd.DataFrame]) -> None:
+    """The report's files, written into the folder ``tmp`` (the output policy's temporary folder): the figures, the
+    CSVs with their codebook (and ``power.csv``) and report.html; the CSVs' tables as written into ``results``."""
+    marks_overall, marks = _all_marks(a)
+    pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
+    within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
+    # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
+    tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                 a.stats_by_target, within, options.error_window, rounded=r)
+                     for r in (True, False))
+    section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
+    if power:
+        from analysis.planning.power_outputs import report_section
+
+        section += power_html(report_section(a.trials, options, zero_method, tmp))
+    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
+    html = page(
+        study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
+        excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
+        marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
+        target_order=a.target_order,
+    )
+    (tmp / "report.html").write_text(html, encoding="utf-8")
+    results.update(tables)
 
 
 def build_report(
@@ -343,30 +376,8 @@ def build_report(
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete)
     results: dict[str, pd.DataFrame] = {}
-
-    def fill(tmp: Path) -> None:
-        marks_overall, marks = _all_marks(a)
-        pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
-        within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
-        # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
-        tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
-                                                     a.stats_by_target, within, options.error_window, rounded=r)
-                         for r in (True, False))
-        results.update(tables)
-        section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
-        if power:
-            from analysis.planning.power_outputs import report_section
-
-            section += power_html(report_section(a.trials, options, zero_method, tmp))
-        report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
-        html = page(
-            study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
-            excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
-            marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-            target_order=a.target_order,
-        )
-        (tmp / "report.html").write_text(html, encoding="utf-8")
-
+    fill = functools.partial(_write, a=a, databases=databases, options=options, zero_method=zero_method,
+                             confidence=confidence, power=power, workers=workers, results=results)
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     n_samples = int(a.study.included["n_samples"].fillna(0).sum())
     return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,

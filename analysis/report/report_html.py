@@ -25,10 +25,12 @@ from analysis.report.html_parts import html_table as _html_table
 from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
 from analysis.report.latency_methods import latency_paragraph
+from analysis.report.measures import figure_groups, mean_words, secondary, secondary_note, windowed_words
 from analysis.stats.aggregate import PRIMARY_METRICS, mean_sd
 from analysis.stats.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
 from analysis.stats.wilcoxon import methods_text
 from foundation.version import software_provenance
+from protocol.metrics import family_word
 from protocol.runner.study_rules import FAULT_REHEARSAL_EVENT
 from protocol.study.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
 
@@ -61,12 +63,13 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), captio
         "[CI]</th>" if c == "hl" else _th(file, c) for c in cols
     )
     body = []
+    secondaries = {m.participant_exported for m in secondary()}
     for _, row in frame.iterrows():
         label = html.escape(_measure_label(str(row["metric"])))
-        note = row.get("note")
-        if isinstance(note, str) and note:
-            k = notes.setdefault(note, len(notes) + 1)
-            label += f" <sup>{k}</sup>"
+        for note in (row.get("note"), secondary_note() if row["metric"] in secondaries else ""):
+            if isinstance(note, str) and note:  # the row's own note; a secondary measure's why, beside its p
+                k = notes.setdefault(note, len(notes) + 1)
+                label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
         special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
@@ -89,11 +92,12 @@ def power_html(section: Any) -> str:
     """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
 
     ``section`` is an :class:`analysis.planning.power.ReportPower`.  The table is built
-    from the structured result (:func:`analysis.planning.power.plan_table`); columns
+    from the structured result (:func:`analysis.planning.power_plan.plan_table`); columns
     with no value in any row are left out.  In print, its rows never split,
     its head repeats on every page and the heading stays with it (``_CSS``).
     """
-    from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label, plan_table
+    from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label
+    from analysis.planning.power_plan import plan_table
 
     head = "<h2>What n would a study need?</h2>"
     if section.result is None:
@@ -128,8 +132,9 @@ def power_html(section: Any) -> str:
             f"{r.alpha:g}; TCT {tct}) to detect the effect <b>in the direction this study shows</b>"
             f"{' (pilot shows)' if 'direction' in shown else ''}. "
             "n for 80 %: the smallest n tried from which on power stays at or above 80 %; '&gt; N (x %)': not "
-            "reached by the largest n tried. Holm: with Holm's correction across the four measures, as the "
-            "significance marks above. power.csv has every number, with the two-sided rejection rate "
+            f"reached by the largest n tried. Holm: with Holm's correction across the {family_word()} primary "
+            "measures, as the significance marks above (a secondary measure has none). power.csv has every number, "
+            "with the two-sided rejection rate "
             "(power_two_sided) and the Monte Carlo intervals.</p>")
     caption = (f"<caption>Participants needed, and power at each n ({r.interval_level:.0%} Monte Carlo intervals "
                "in power.csv)</caption>")
@@ -140,6 +145,20 @@ def power_html(section: Any) -> str:
             + (f'<ul class="notes">{notes}</ul>' if notes else "")
             + (f"<figure>{_img(section.png, 'power of each test against the number of participants')}</figure>"
                if section.png else "") + "</section>")
+
+
+def _bar_figures(pngs: dict[str, bytes]) -> str:
+    """The bar figures, one per figure of the registry's metrics (:func:`analysis.report.measures.figure_groups`)."""
+    caption = ('<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after '
+               "Holm's correction (n.s. not significant, n/c not computable).</p>")
+    return "\n".join(f"<figure><h2>{html.escape(g.heading)}</h2>{caption if i == 0 else ''}"
+                     f"{_img(pngs[g.key], g.alt)}</figure>" for i, g in enumerate(figure_groups()))
+
+
+def _secondary_definitions() -> str:
+    """The secondary measures' definitions, for the methods ("" when there is none)."""
+    return "".join(f" {html.escape(m.short[:1].upper() + m.short[1:])} ({html.escape(m.unit)}) is the "
+                   f"{html.escape(m.description)}." for m in secondary())
 
 
 def _deviations_methods(within: Any) -> str:
@@ -262,12 +281,13 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
         f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
         f"when the force stays in the band continuously for {one(hold, ' s')} (leaving the band restarts the hold) "
-        f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. RMSE and Max AE "
+        f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. {windowed_words()} "
         f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
-        f"is the largest task force in the window. These are the definitions of protocol.study.metrics, the same code "
-        f"that judged the trials live. {report_sections.window_fact(within, options)}</p>"
+        f"is the largest task force in the window.{_secondary_definitions()} These are the definitions of "
+        "protocol.metrics, the same code that judged the trials live. "
+        f"{report_sections.window_fact(within, options)}</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
-        f"RMSE, Max AE, time in band and peak force are means over trials; TCT is {tct}. Across participants, the "
+        f"{mean_words()} are means over trials; TCT is {tct}. Across participants, the "
         f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
         f"and the dots are participants; the test tables give medians, the summary the Wilcoxon test is about. "
         f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
@@ -276,8 +296,9 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"applied across the {len(PRIMARY_METRICS)} outcome measures "
         f"({', '.join(codebook.exported_name(m) for m in PRIMARY_METRICS)}), and separately "
         f"within each target; significance marks in the figures use the Holm-adjusted p-values "
-        f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). No p-value in this report comes "
-        f"from trials pooled as if independent.</p>"
+        f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). "
+        f"{html.escape(secondary_note())}{' Its mark uses its own p. ' if secondary() else ''}"
+        "No p-value in this report comes from trials pooled as if independent.</p>"
         + report_sections.methods_within(within, options, confidence)
         + latency_paragraph(study)
     )
@@ -429,6 +450,30 @@ def _warnings(study: StudyData, table: TrialTable, stats: pd.DataFrame, within: 
     return warn + report_sections.top_warnings(within, study.include_incomplete)
 
 
+def _head_html(study: StudyData, table: TrialTable, options: MetricOptions, n_participants: int,
+               tables: dict[str, pd.DataFrame], within: Any) -> str:
+    """The page's head: title, what it covers and how it was made, where the data come from, and its warnings."""
+    origin_class, origin_text = _origin(study)
+    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
+    n_trials = len(tables["trials.csv"])
+    return f"""<h1>Haptic feedback study: report</h1>
+<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
+{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
+{'· incomplete sessions included' if study.include_incomplete else ''}</p>
+<p class="origin {origin_class}">{html.escape(origin_text)}</p>
+{_warnings(study, table, tables["stats.csv"], within)}"""
+
+
+def _sessions_html(sess: pd.DataFrame, within: Any) -> str:
+    """The sessions read: which code ran each, and the table of sessions.csv's main columns."""
+    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
+                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
+                 "analysed"]
+    short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
+    return (f"<h2>Sessions</h2>\n{report_sections.provenance_html(within)}\n"
+            f"{_html_table(sess, 'sessions.csv', sess_cols, cell=short)}")
+
+
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
@@ -453,46 +498,28 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     str
         The HTML document.
     """
-    stats, per, sess = (tables[k] for k in ("stats.csv", "participants.csv", "sessions.csv"))
-    warn = _warnings(study, table, stats, within)
-    origin_class, origin_text = _origin(study)
-    now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
-    n_trials = len(tables["trials.csv"])
+    stats, per = tables["stats.csv"], tables["participants.csv"]
     win = report_sections.window_words(options.error_window)
-    per_cols = ["participant_code", "participant_number", "haptic_mode", "n_trials", "n_success", "success_rate",
-                "tct_s", "n_tct", "rmse_N", "max_ae_N", "time_in_band_s", "peak_force_N"]
-    sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
-                 "analysed"]
-    short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
+    per_cols = ["participant_code", "participant_number", "haptic_mode", *codebook.WIDE_MEASURES]
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
-<h1>Haptic feedback study: report</h1>
-<p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
-{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
-{'· incomplete sessions included' if study.include_incomplete else ''}</p>
-<p class="origin {origin_class}">{html.escape(origin_text)}</p>
-{warn}
+{_head_html(study, table, options, n_participants, tables, within)}
 {_headline(per, stats, marks_overall)}
 <h2>Haptics ON vs OFF</h2>
-<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the four
-measures. Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
+<p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
+{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
+Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
 {confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
-{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; RMSE and Max AE {win}")}
+{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
 <h3>Within each target</h3>
 {_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
-             caption=f"ON vs OFF within each target; RMSE and Max AE {win}")}
+             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}
 {report_sections.sensitivity_html(within, options, confidence)}
-<figure><h2>Success rate</h2>
-<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after Holm's correction
-(n.s. not significant, n/c not computable).</p>
-{_img(pngs["success_rate"], "success rate per target and overall")}</figure>
-<figure><h2>Task completion time</h2>{_img(pngs["tct"], "TCT per target and overall")}</figure>
-<figure><h2>Force errors</h2>{_img(pngs["errors"], "RMSE and Max AE per target and overall")}</figure>
+{_bar_figures(pngs)}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
 <p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
 across participants.</p></figure>
-{_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; RMSE and Max AE {win}")}
+{_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; {windowed_words()} {win}")}
 {report_sections.trade_html(within, tables, options, pngs["speed_accuracy"], confidence)}
 <h2>Force through the pipeline</h2>
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device, the target
@@ -503,8 +530,6 @@ band and the error window; bottom, on an axis of its own: the raw sensor force, 
 {_record_html(study, tables, within)}
 <h2>Methods</h2>
 {_methods(study, table, options, zero_method, confidence, excluded, n_participants, within)}
-<h2>Sessions</h2>
-{report_sections.provenance_html(within)}
-{_html_table(sess, "sessions.csv", sess_cols, cell=short)}
+{_sessions_html(tables["sessions.csv"], within)}
 </body></html>
 """

@@ -22,10 +22,12 @@ import pandas as pd
 from analysis.reading import codebook
 from analysis.reading.metrics import MetricOptions
 from analysis.report.html_parts import fmt, fmt_p, html_table, img, plural
+from analysis.report.measures import listed, windowed_words
 from analysis.stats.learning import MIN_ORDER_GROUP
 from analysis.stats.models import MIN_PARTICIPANTS
 from analysis.stats.sensitivity import ALPHA
 from analysis.stats.trade import TRADE_MODEL_TERMS
+from protocol.metrics import family_word, tested
 
 __all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
@@ -138,10 +140,11 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
     verdict = (f'<p class="warn">{plural(int(n_diff), "conclusion")} {"differs" if n_diff == 1 else "differ"} '
                "between the error windows (flagged): report the window with the result.</p>" if n_diff else
                "<p>Every conclusion is the same in both windows.</p>")
-    return (f"<h3>Does the error window change the answer?</h3><p>RMSE and Max AE depend on the window they are "
-            f"taken over. {window_fact(within, options)} The same tests (Holm across the four measures in each "
-            "window) and the speed–accuracy correlations, in both windows; conclusions at p &lt; "
-            f"{ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [{_ci_heading(confidence)}].</p>{verdict}"
+    return (f"<h3>Does the error window change the answer?</h3><p>{windowed_words()} depend on the window they are "
+            f"taken over. {window_fact(within, options)} The same tests of the primary measures (Holm across the "
+            f"{family_word()} in each window) and the speed–accuracy correlations, in both windows; conclusions at "
+            f"p &lt; {ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [{_ci_heading(confidence)}]."
+            f"</p>{verdict}"
             f'<div class="scroll"><table class="within sens"><caption>Sensitivity to the error window '
             f"(sensitivity.csv)</caption><thead><tr><th>analysis</th><th>measure</th>{head}<th>conclusion</th></tr>"
             f'</thead><tbody>{"".join(body)}</tbody></table></div>')
@@ -281,13 +284,15 @@ def methods_within(within: Any, options: MetricOptions, confidence: float) -> st
         "difference, with Wald "
         "intervals. Each participant's own least-squares line is drawn; no pooled-trial p-value is computed.</p>"
         "<p><b>Error windows.</b> Every analysis uses the window named in the header; the sensitivity table repeats "
-        "the ON-vs-OFF tests (Holm within each window) and r_rm with RMSE and Max AE from the cue and from first "
-        f"contact, and flags each conclusion (at p &lt; {ALPHA:g}) that differs between them.</p>"
+        f"the primary ON-vs-OFF tests (Holm within each window) and r_rm with {windowed_words()} from the cue and "
+        f"from first contact, and flags each conclusion (at p &lt; {ALPHA:g}) that differs between them.</p>"
         "<p><b>Secondary analysis: learning and order.</b> Per outcome, a trial-level model with haptic mode, "
         "target, their interaction and the trial's number in the session (its position, aborted trials counted) "
         "as fixed effects and participant as the unit: linear mixed models with a random intercept (REML) for "
-        "TCT, RMSE and Max AE, a logistic GEE with an exchangeable working correlation within a participant and "
-        "robust standard errors for success (statsmodels); the trial-number coefficient is the change per trial. "
+        f"{listed([m.short for m in tested() if not m.boolean])}, a logistic GEE with an exchangeable working "
+        f"correlation within a participant and robust standard errors for "
+        f"{listed([m.name for m in tested() if m.boolean])} (statsmodels); the trial-number coefficient is the "
+        "change per trial. "
         "Order: each participant's ON − OFF difference compared between participants whose stored schedule "
         "began with an ON trial and those whose began with an OFF trial (two-sided Mann–Whitney U; not tested "
         f"with fewer than {MIN_ORDER_GROUP} in a group).{learning_n} These tests are exploratory and are not "

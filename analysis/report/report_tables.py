@@ -19,14 +19,16 @@ from analysis.reading import codebook
 from analysis.reading.load import StudyData
 from analysis.stats.loop_health import health_summary, health_table
 from analysis.stats.models import fixed_effects
+from protocol.metrics import primary
 
 __all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
-#: trials.csv: the columns every consumer may rely on, in this order (more follow).  Sorted by participant
-#: number, participant code, session and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
+#: trials.csv: the columns every consumer may rely on, in this order (more follow: the other metrics, in the
+#: registry's order).  The primary metrics' are among them.  Sorted by participant number, participant code, session
+#: and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
 TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
-                      "target_force_N", "haptic_mode", "outcome", "success", "tct_s", "rmse_N", "max_ae_N",
-                      "cue_at_s")
+                      "target_force_N", "haptic_mode", "outcome",
+                      *(m.name if m.boolean else m.exported for m in primary()), "cue_at_s")
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
@@ -55,28 +57,11 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         File name → table, in the order the files are listed.
     """
     exp = functools.partial(codebook.export, rounded=rounded)
-    numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
-    order = sorted(numbers, key=lambda code: (numbers[code], code))
-    rank = {code: i for i, code in enumerate(order)}
-
-    def by_participant(frame: pd.DataFrame, *keys: str) -> pd.DataFrame:
-        out = frame.copy()
-        if "participant_number" not in out.columns:
-            out.insert(1, "participant_number", out["participant_code"].map(numbers).astype(np.int64))
-        out["_rank"] = out["participant_code"].map(rank)
-        return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
-
+    by_participant = _ByParticipant(trials)
     t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window, rounded)
     per = exp(by_participant(overall, "haptic_mode"), "participants.csv")
     per_t = exp(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
-    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
-                     values=list(codebook.WIDE_MEASURES))
-    wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
-    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
-    wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
-    for c in wide_cols:
-        if c.startswith("n_"):
-            wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    wide = _wide(per, by_participant)
     st = exp(stats, "stats.csv")
     st_t = exp(stats_by_target, "stats_by_target.csv")
     sess = study.sessions.copy()
@@ -108,6 +93,35 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     for name in _WINDOWED_FILES:  # every table with an RMSE or Max AE names the window it was taken over
         tables[name]["error_window"] = error_window
     return tables
+
+
+class _ByParticipant:
+    """Sorts a table's rows by participant number, then code (then the keys given), adding the number if missing."""
+
+    def __init__(self, trials: pd.DataFrame) -> None:
+        self.numbers = dict(zip(trials["participant_code"], trials["participant_number"], strict=True))
+        order = sorted(self.numbers, key=lambda code: (self.numbers[code], code))
+        self.rank = {code: i for i, code in enumerate(order)}
+
+    def __call__(self, frame: pd.DataFrame, *keys: str) -> pd.DataFrame:
+        out = frame.copy()
+        if "participant_number" not in out.columns:
+            out.insert(1, "participant_number", out["participant_code"].map(self.numbers).astype(np.int64))
+        out["_rank"] = out["participant_code"].map(self.rank)
+        return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
+
+
+def _wide(per: pd.DataFrame, by_participant: _ByParticipant) -> pd.DataFrame:
+    """participants_wide.csv's rows (before export): each measure of participants.csv as an OFF and an ON column."""
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
+                     values=list(codebook.WIDE_MEASURES))
+    wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
+    for c in wide_cols:
+        if c.startswith("n_"):
+            wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    return wide
 
 
 def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) -> pd.DataFrame:

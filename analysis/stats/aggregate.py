@@ -14,29 +14,34 @@ import numpy as np
 import pandas as pd
 
 from analysis.reading.metrics import MetricOptions
-from analysis.stats.wilcoxon import WilcoxonResult, paired_wilcoxon, results_frame
+from analysis.stats.holm import results_frame
+from analysis.stats.wilcoxon import WilcoxonResult, paired_wilcoxon
+from protocol.metrics import METRICS, Metric, primary, tested
 
 __all__ = [
     "METRIC_LABELS",
     "PRIMARY_METRICS",
+    "TESTED_METRICS",
     "by_mode",
     "mean_sd",
+    "metrics_in",
     "mode_tests",
     "per_participant",
 ]
 
-#: The paper's outcome measures, in report order; Holm's correction runs across them.
-PRIMARY_METRICS: tuple[str, ...] = ("success_rate", "tct_s", "rmse_n", "max_ae_n")
+#: The paper's outcome measures (per-participant columns), in report order; Holm's correction runs across them.
+PRIMARY_METRICS: tuple[str, ...] = tuple(m.participant for m in primary())
+#: Every measure the report tests ON vs OFF: the primary ones, then the secondary ones (each with its own p).
+TESTED_METRICS: tuple[str, ...] = tuple(m.participant for m in tested())
 
-#: Human labels with units, for tables and figures.
-METRIC_LABELS: dict[str, str] = {
-    "success_rate": "success rate",
-    "tct_s": "TCT (s)",
-    "rmse_n": "RMSE (N)",
-    "max_ae_n": "Max AE (N)",
-    "time_in_band_s": "time in band (s)",
-    "peak_force_n": "peak force (N)",
-}
+#: Human labels with units, for tables and figures, by per-participant column.
+METRIC_LABELS: dict[str, str] = {m.participant: m.label for m in METRICS}
+
+
+def metrics_in(trials: pd.DataFrame) -> tuple[Metric, ...]:
+    """The registry's metrics a trials table has a column for, in order (every one, in a table the analysis made;
+    a table of trials built by hand, or by an older version, may lack one)."""
+    return tuple(m for m in METRICS if m.name in trials.columns)
 
 
 def per_participant(
@@ -57,29 +62,29 @@ def per_participant(
     Returns
     -------
     pandas.DataFrame
-        Columns ``participant_code, haptic_mode, [target_label,] n_trials,
-        n_success, success_rate, tct_s, n_tct, rmse_n, max_ae_n,
-        time_in_band_s, peak_force_n`` (``n_tct`` is the number of trials
-        that entered the TCT mean).
+        Columns ``participant_code, haptic_mode, [target_label,] n_trials``, then per metric of the registry
+        that ``trials`` has (:func:`metrics_in`), in order: a yes/no outcome's count and rate (``n_success,
+        success_rate``), a success-only metric's mean and the trials that entered it (``tct_s, n_tct``), every other
+        metric's mean (``rmse_n, max_ae_n, time_in_band_s, peak_force_n``, ...).
     """
     keys = ["participant_code", "haptic_mode"] + (["target_label"] if by_target else [])
+    metrics = metrics_in(trials)
     t = trials.copy()
-    t["_tct"] = t["tct_s"] if options.tct_policy == "successful" else t["tct_censored_s"]
+    for m in metrics:  # a success-only metric (TCT) under the TCT policy: successful trials only, or censored
+        if m.success_only:
+            t[f"_{m.name}"] = t[m.name] if options.tct_policy == "successful" else t[str(m.censored)]
     g = t.groupby(keys, sort=True, observed=True)
-    out = pd.DataFrame(
-        {
-            "n_trials": g.size(),
-            "n_success": g["success"].sum().astype(np.int64),
-            "success_rate": g["success"].mean(),
-            "tct_s": g["_tct"].mean(),  # NaN-skipping: failed trials are NaN under "successful"
-            "n_tct": g["_tct"].count().astype(np.int64),
-            "rmse_n": g["rmse_n"].mean(),
-            "max_ae_n": g["max_ae_n"].mean(),
-            "time_in_band_s": g["time_in_band_s"].mean(),
-            "peak_force_n": g["peak_force_n"].mean(),
-        }
-    )
-    return out.reset_index()
+    columns: dict[str, pd.Series] = {"n_trials": g.size()}
+    for m in metrics:
+        if m.boolean:  # a yes/no outcome: how many, and the rate
+            columns[str(m.count)] = g[m.name].sum().astype(np.int64)
+            columns[m.participant] = g[m.name].mean()
+        elif m.success_only:
+            columns[m.name] = g[f"_{m.name}"].mean()  # NaN-skipping: failed trials are NaN under "successful"
+            columns[str(m.count)] = g[f"_{m.name}"].count().astype(np.int64)
+        else:
+            columns[m.name] = g[m.name].mean()
+    return pd.DataFrame(columns).reset_index()
 
 
 def mean_sd(values: np.ndarray | pd.Series) -> tuple[float, float, int]:
@@ -121,7 +126,7 @@ def by_mode(per_part: pd.DataFrame, metric: str, codes: Sequence[str] | None = N
 
 def mode_tests(
     per_part: pd.DataFrame,
-    metrics: Sequence[str] = PRIMARY_METRICS,
+    metrics: Sequence[str] | None = None,
     *,
     zero_method: str = "wilcox",
     confidence: float = 0.95,
@@ -133,7 +138,8 @@ def mode_tests(
     per_part
         :func:`per_participant` output without the target split (or one target's rows).
     metrics
-        Columns to test; Holm's correction runs across exactly these.
+        Columns to test (default: :data:`TESTED_METRICS` that ``per_part`` has); Holm's correction runs across
+        those of them that are primary (:data:`PRIMARY_METRICS`), a secondary one keeps its own p (``p_holm`` NaN).
     zero_method, confidence
         Passed to :func:`analysis.stats.wilcoxon.paired_wilcoxon`.
 
@@ -142,9 +148,11 @@ def mode_tests(
     results, frame
         The named results and their tidy table (one row per metric, with ``p_holm``).
     """
+    if metrics is None:
+        metrics = [m for m in TESTED_METRICS if m in per_part.columns]
     results = []
     for m in metrics:
         wide = by_mode(per_part, m)
         off, on = wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
         results.append(paired_wilcoxon(off, on, metric=m, zero_method=zero_method, confidence=confidence))
-    return results, results_frame(results)
+    return results, results_frame(results, family=PRIMARY_METRICS)

@@ -4,7 +4,7 @@ A within-subject design with a randomised or counterbalanced order raises two qu
 reviewer reads the ON-vs-OFF tests: did participants improve over the session (learning), and does the
 effect of feedback depend on which mode a participant met first (order, carry-over)?
 
-* :func:`learning_models` -- per outcome, one trial-level model
+* :func:`learning_models` -- per tested metric (:mod:`protocol.metrics`), one trial-level model
   ``metric ~ haptic mode × target + trial number + (1 | participant)``: a linear mixed model for TCT, RMSE
   and Max AE, a logistic GEE (exchangeable within a participant) for success
   (:mod:`analysis.stats.models`).  The trial-number coefficient is the change per trial, at fixed mode and target.
@@ -24,15 +24,20 @@ import math
 import numpy as np
 import pandas as pd
 
-from analysis.stats.aggregate import PRIMARY_METRICS, by_mode
+from analysis.stats.aggregate import TESTED_METRICS, by_mode, metrics_in
 from analysis.stats.models import ModelFit, design, fit_gee_logistic, fit_mixed
+from protocol.metrics import Metric
 
 __all__ = ["MIN_ORDER_GROUP", "first_modes", "learning_curve", "learning_models", "order_check", "trial_terms"]
 
 #: Fewest participants in each order group for the order check to be tested.
 MIN_ORDER_GROUP = 3
 
-_OUTCOMES = {"tct_s": ("TCT (s)", "s"), "rmse_n": ("RMSE (N)", "N"), "max_ae_n": ("Max AE (N)", "N")}
+
+
+def _tested(trials: pd.DataFrame) -> tuple[Metric, ...]:
+    """The metrics the report tests (:data:`analysis.stats.aggregate.TESTED_METRICS`) that ``trials`` has."""
+    return tuple(m for m in metrics_in(trials) if m.tested)
 
 
 def trial_terms(trials: pd.DataFrame, target_order: list[str]) -> dict[str, pd.Series | float]:
@@ -50,7 +55,8 @@ def trial_terms(trials: pd.DataFrame, target_order: list[str]) -> dict[str, pd.S
 
 def learning_models(trials: pd.DataFrame, target_order: list[str], tct_column: str = "tct_s",
                     confidence: float = 0.95) -> list[ModelFit]:
-    """The learning models, one per outcome: success (logistic GEE), then TCT, RMSE, Max AE (mixed models).
+    """The learning models, one per tested metric, in order: a yes/no outcome (success) by a logistic GEE, the
+    others (TCT, RMSE, Max AE, ...) by linear mixed models.
 
     Parameters
     ----------
@@ -59,17 +65,19 @@ def learning_models(trials: pd.DataFrame, target_order: list[str], tct_column: s
     target_order
         Target labels, the first the reference level.
     tct_column
-        ``tct_s`` (successful trials only) or ``tct_censored_s``.
+        The success-only metric's column: ``tct_s`` (successful trials only) or ``tct_censored_s``.
     confidence
         Level of the Wald intervals.
     """
     groups = trials["participant_code"]
     exog = design(trials, trial_terms(trials, target_order))
-    fits = [fit_gee_logistic("learning", "success", trials["success"].astype(float), exog, groups, confidence)]
-    for col in ("tct_s", "rmse_n", "max_ae_n"):
-        label, unit = _OUTCOMES[col]
-        y = trials[tct_column if col == "tct_s" else col].astype(float)
-        fits.append(fit_mixed("learning", label, unit, y, exog, groups, confidence))
+    fits = []
+    for m in _tested(trials):
+        if m.boolean:
+            fits.append(fit_gee_logistic("learning", m.name, trials[m.name].astype(float), exog, groups, confidence))
+        else:
+            y = trials[tct_column if m.success_only else m.name].astype(float)
+            fits.append(fit_mixed("learning", m.label, m.unit, y, exog, groups, confidence))
     return fits
 
 
@@ -92,7 +100,7 @@ def order_check(per_part: pd.DataFrame, first_mode: pd.Series) -> pd.DataFrame:
     from scipy.stats import mannwhitneyu
 
     rows = []
-    for m in PRIMARY_METRICS:
+    for m in (name for name in TESTED_METRICS if name in per_part.columns):
         wide = by_mode(per_part, m)
         diff = (wide["on"] - wide["off"]).dropna()
         order = first_mode.reindex(diff.index)
@@ -114,7 +122,7 @@ def order_check(per_part: pd.DataFrame, first_mode: pd.Series) -> pd.DataFrame:
 
 
 def learning_curve(trials: pd.DataFrame, tct_column: str = "tct_s", blocks: int = 4) -> pd.DataFrame:
-    """Each metric over the session by mode: trials cut into ``blocks`` equal runs of trial numbers.
+    """Each tested metric over the session by mode: trials cut into ``blocks`` equal runs of trial numbers.
 
     Each participant's mean per block and mode comes first; the table gives their mean and standard error
     across participants, so every participant weighs the same.
@@ -127,11 +135,13 @@ def learning_curve(trials: pd.DataFrame, tct_column: str = "tct_s", blocks: int 
     number = trials["trial_index"].astype(int) + 1
     top = int(number.max()) if len(number) else 1
     size = max(1, math.ceil(top / blocks))
-    t = trials.assign(block=(number - 1) // size, tct_any=trials[tct_column],
-                      success_rate=trials["success"].astype(float))
+    # each tested metric as a number per trial: a yes/no outcome as 0/1 (its mean a rate), TCT under the policy
+    values = {f"_{m.participant}": (trials[m.name].astype(float) if m.boolean else
+                                    trials[tct_column] if m.success_only else trials[m.name]) for m in _tested(trials)}
+    t = trials.assign(block=(number - 1) // size, **values)
     rows = []
-    for m, col in (("success_rate", "success_rate"), ("tct_s", "tct_any"), ("rmse_n", "rmse_n"),
-                   ("max_ae_n", "max_ae_n")):
+    for col in values:
+        m = col[1:]
         cell = t.groupby(["haptic_mode", "block", "participant_code"], sort=True)[col].mean().dropna()
         for (mode, block), vals in cell.groupby(level=[0, 1]):
             v = vals.to_numpy(float)

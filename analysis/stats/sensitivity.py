@@ -3,9 +3,9 @@
 RMSE and Max AE are taken over an error window (:data:`analysis.reading.metrics.ERROR_WINDOWS`): from the cue (the
 paper's "during the trial", the default) or from first contact.  From the cue, the approach from 0 N is
 part of the error, and Max AE is often exactly the target (the error at the cue, before contact) rather than
-a peak excursion.  :func:`window_sensitivity` runs the ON-vs-OFF tests (Holm across the four measures, as
-the report) and the speed–accuracy repeated-measures correlation in each window and flags every conclusion
-that differs; :func:`max_ae_from_approach` counts the trials whose Max AE is the approach.
+a peak excursion.  :func:`window_sensitivity` runs the ON-vs-OFF tests of the primary measures (Holm across
+them, as the report: the paper's answer) and the speed–accuracy repeated-measures correlation in each window and
+flags every conclusion that differs; :func:`max_ae_from_approach` counts the trials whose Max AE is the approach.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.reading.metrics import ERROR_WINDOWS, MetricOptions, TrialTable
-from analysis.stats.aggregate import mode_tests, per_participant
+from analysis.stats.aggregate import PRIMARY_METRICS, mode_tests, per_participant
 from analysis.stats.trade import speed_accuracy
 
 __all__ = ["ALPHA", "SENSITIVITY_COLUMNS", "max_ae_from_approach", "window_sensitivity"]
@@ -70,7 +70,7 @@ def window_sensitivity(table: TrialTable, options: MetricOptions, *, zero_method
     for window in ERROR_WINDOWS:
         trials = table.in_window(window)
         per = per_participant(trials, options)
-        _, frame = mode_tests(per, zero_method=zero_method, confidence=confidence)
+        _, frame = mode_tests(per, PRIMARY_METRICS, zero_method=zero_method, confidence=confidence)
         for r in frame.itertuples():
             rows.append({"analysis": "ON vs OFF", "measure": r.metric, "error_window": window, "n": r.n_used,
                          "estimate": r.hl_estimate, "ci_low": r.hl_ci_low, "ci_high": r.hl_ci_high,

@@ -1,4 +1,5 @@
-"""Paired ON-vs-OFF statistics: Wilcoxon signed-rank, Hodges–Lehmann, Holm, correlation.
+"""Paired ON-vs-OFF statistics: the Wilcoxon signed-rank test with its effect sizes and Hodges–Lehmann shift
+(Holm's correction across a family of them: :mod:`analysis.stats.holm`).
 
 Everything here works on *paired* data: one OFF value and one ON value per
 participant (or per trial for trial-level analyses). The paired difference is
@@ -26,13 +27,11 @@ r = z/√n; and the Hodges–Lehmann shift with its interval
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pandas as pd
 import scipy
 from scipy import stats as sps
 
@@ -47,10 +46,8 @@ __all__ = [
     "ZERO_METHODS",
     "WilcoxonResult",
     "check_zero_method",
-    "holm",
     "methods_text",
     "paired_wilcoxon",
-    "results_frame",
 ]
 
 ZERO_METHODS = ("wilcox", "pratt", "zsplit")
@@ -411,13 +408,7 @@ def paired_wilcoxon(
     """
     zero_method, alternative, requested = _check_arguments(zero_method, alternative, method, confidence)
     x_off, x_on, keep = _complete_pairs(off, on)
-    base: dict[str, Any] = dict(
-        metric=metric, n_pairs=int(keep.sum()), n_dropped_nan=int(x_off.size - keep.sum()), n_used=0, n_zero=0,
-        n_ties=0, zero_method=zero_method, alternative=alternative,
-    )
-    dropped = base["n_dropped_nan"]
-    lead = [f"{dropped} of {x_off.size} pairs dropped because a side was NaN (e.g. undefined in one mode)"
-            ] if dropped else []
+    base, lead = _pairs_counted(x_off, keep, metric, zero_method, alternative)
     d, why = _differences(x_off, x_on, keep, decimals)
     if d is not None:
         base.update(_descriptives(d, x_off[keep], x_on[keep], zero_method, confidence))
@@ -426,100 +417,37 @@ def paired_wilcoxon(
         return _not_computable(base, "; ".join([*lead, why]))
     used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
     _check_size(used, base["n_used"] if used == "exact" else d.size)
+    notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
+    return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
+                          **_tested(d, zero_method, alternative, used, correction, base["n_used"]), **base)
+
+
+def _pairs_counted(x_off: np.ndarray, keep: np.ndarray, metric: str, zero_method: str,
+                   alternative: str) -> tuple[dict[str, Any], list[str]]:
+    """The result's fields so far (the pairs kept and dropped, the choices) and the note on the pairs dropped."""
+    base: dict[str, Any] = dict(
+        metric=metric, n_pairs=int(keep.sum()), n_dropped_nan=int(x_off.size - keep.sum()), n_used=0, n_zero=0,
+        n_ties=0, zero_method=zero_method, alternative=alternative,
+    )
+    dropped = base["n_dropped_nan"]
+    lead = [f"{dropped} of {x_off.size} pairs dropped because a side was NaN (e.g. undefined in one mode)"
+            ] if dropped else []
+    return base, lead
+
+
+def _tested(d: np.ndarray, zero_method: str, alternative: str, used: str, correction: bool,
+            n_used: int) -> dict[str, Any]:
+    """The test of differences ``d`` by method ``used`` and its effect sizes, as the result's fields: the statistic,
+    p, z, both rank sums, the rank-biserial correlation and r = z/√n."""
     statistic, p, z = _scipy_test(d, zero_method, alternative, used, correction)
     w_plus, w_minus = _rank_sums(d, zero_method)
-    notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
-    return WilcoxonResult(
-        method=used, statistic=statistic, p_value=p, z=z, rank_biserial=(w_plus - w_minus) / (w_plus + w_minus),
-        r=z / math.sqrt(base["n_used"]), computable=True, note="; ".join([*lead, *notes]), w_plus=w_plus,
-        w_minus=w_minus, **base)
+    return {"statistic": statistic, "p_value": p, "z": z, "rank_biserial": (w_plus - w_minus) / (w_plus + w_minus),
+            "r": z / math.sqrt(n_used), "w_plus": w_plus, "w_minus": w_minus}
 
 
 # ------------------------------------------------------------------------------------------------
-# Multiple comparisons, tables, methods text
+# Methods text
 # ------------------------------------------------------------------------------------------------
-def holm(p_values: npt.ArrayLike, *, axis: int | None = None) -> np.ndarray:
-    """Holm (1979) step-down adjusted p-values.
-
-    Parameters
-    ----------
-    p_values : array_like
-        p-values in [0, 1]; NaN entries (untested metrics) stay NaN and do not
-        count towards the family size m.
-    axis : int or None
-        None (default): the whole array is one family.  An axis: every slice
-        along it is a family of its own, all adjusted at once (e.g. the four
-        metrics of each of thousands of resampled studies, ``axis=-1``).
-
-    Returns
-    -------
-    numpy.ndarray
-        Same shape. With the m finite p-values of a family sorted, p₍₁₎ ≤ … ≤ p₍ₘ₎,
-        ``p̃₍ᵢ₎ = min(1, max_{j ≤ i} (m − j + 1)·p₍ⱼ₎)`` — monotone in p and capped
-        at 1, as ``statsmodels.stats.multitest.multipletests(method="holm")``.
-
-    Raises
-    ------
-    ValueError
-        If a p-value is outside [0, 1] or infinite.
-    """
-    p = np.asarray(p_values, dtype=np.float64)
-    flat = p.ravel()
-    ok = ~np.isnan(flat)
-    bad = ok & ~((flat >= 0.0) & (flat <= 1.0))
-    if bad.any():
-        i = int(np.nonzero(bad)[0][0])
-        raise ValueError(f"p_values[{i}] = {flat[i]}: p-values must lie in [0, 1] (or be NaN)")
-    if axis is None:
-        return _holm_rows(flat.reshape(1, -1)).reshape(p.shape)
-    moved = np.moveaxis(p, axis, -1)
-    rows = _holm_rows(moved.reshape(-1, moved.shape[-1]))
-    return np.moveaxis(rows.reshape(moved.shape), -1, axis)
-
-
-def _holm_rows(q: np.ndarray) -> np.ndarray:
-    """Holm's adjustment of every row of a 2-D array, each row a family (NaN: not in the family)."""
-    missing = np.isnan(q)
-    m = (~missing).sum(axis=1, keepdims=True)
-    # NaN sorts last, so the first m sorted entries of a row are its family, in ascending order
-    order = np.argsort(np.where(missing, np.inf, q), axis=1, kind="stable")
-    ranked = np.take_along_axis(q, order, axis=1)
-    with np.errstate(invalid="ignore"):
-        adj = np.minimum(1.0, np.maximum.accumulate((m - np.arange(q.shape[1])) * ranked, axis=1))
-    out = np.empty_like(q)
-    np.put_along_axis(out, order, adj, axis=1)
-    out[missing] = np.nan
-    return out
-
-
-
-#: Column order of :func:`results_frame`.
-RESULT_COLUMNS: tuple[str, ...] = (*tuple(f.name for f in fields(WilcoxonResult)), "p_holm")
-
-
-def results_frame(results: Sequence[WilcoxonResult]) -> pd.DataFrame:
-    """One tidy row per metric with every field of :class:`WilcoxonResult` plus ``p_holm``.
-
-    Parameters
-    ----------
-    results : sequence of WilcoxonResult
-        One test per metric (the Holm family).
-
-    Returns
-    -------
-    pandas.DataFrame
-        Columns are the snake_case field names in declaration order, then
-        ``p_holm``: Holm-adjusted p across the *computable* rows of this table
-        (a non-computable row has NaN and does not count in m).
-    """
-    rows = [asdict(r) for r in results]
-    frame = pd.DataFrame(rows, columns=list(RESULT_COLUMNS[:-1]))
-    p = frame["p_value"].to_numpy(dtype=np.float64)
-    p = np.where(frame["computable"].to_numpy(dtype=bool), p, np.nan)
-    frame["p_holm"] = holm(p)
-    return frame
-
-
 def methods_text(zero_method: str = "wilcox", confidence: float = 0.95) -> str:
     """One plain-English paragraph stating the statistical choices, for the report's methods section.
 

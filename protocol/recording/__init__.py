@@ -47,8 +47,6 @@ from protocol.recording.codec import (
     COLUMNS,
     LIMIT_COLUMNS,
     POSE_COLUMNS,
-    BlockBuilder,
-    Chunk,
     Column,
     decode_block,
     decode_columns,
@@ -58,6 +56,7 @@ from protocol.recording.codec import (
     kept_records,
 )
 from protocol.recording.integrity import BlockDamage, RecordingDamaged
+from protocol.recording.open_block import BlockBuilder, Chunk
 
 __all__ = [
     "BLOCK_RECORDS", "COLUMNS", "LIMIT_COLUMNS", "POSE_COLUMNS", "BlockBuilder", "BlockDamage", "Chunk", "Column",

@@ -26,6 +26,7 @@ from types import TracebackType
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
+from protocol.metrics import stored
 from protocol.recording.codec import BlockRow, join_chunks
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
@@ -244,18 +245,20 @@ class StudyReader:
 
     # -- trials -------------------------------------------------------------------------------------------------
     def trial_table(self, later_columns: Sequence[str]) -> Rows:
-        """Every stored trial, by session and index, its stored metrics prefixed ``stored_``.
+        """Every stored trial, by session and index, its stored metrics (:func:`protocol.metrics.stored`) prefixed
+        ``stored_``.
 
         ``later_columns`` (added by later schema versions: the abort cause, the loop's health, where the
         trial is in the recording) read as NULL where the file lacks them.
         """
         has = self._has_columns("trials")
         later = ", ".join(c if c in has else f"NULL AS {c}" for c in later_columns)
+        # every stored metric of the registry; one the file has no column for (defined after it was written) is NULL
+        stored_metrics = ", ".join(f"{m.name} AS stored_{m.name}" if m.name in has else f"NULL AS stored_{m.name}"
+                                   for m in stored())
         return self._rows(
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
-            "started_at_s, ended_at_s, tct_s AS stored_tct_s, rmse_n AS stored_rmse_n, "
-            "max_ae_n AS stored_max_ae_n, time_in_band_s AS stored_time_in_band_s, "
-            f"peak_force_n AS stored_peak_force_n, n_samples, abort_reason, repeat_of, {later} "
+            f"started_at_s, ended_at_s, {stored_metrics}, n_samples, abort_reason, repeat_of, {later} "
             "FROM trials ORDER BY session_id, trial_index")
 
     def trial_records(self, session_ids: Sequence[int] | None = None) -> list[TrialRecord]:

@@ -21,6 +21,7 @@ from dataclasses import fields
 from pathlib import Path
 
 from foundation.platform_support.files import may_write, owner_only
+from protocol.metrics import stored
 from protocol.storage.common import EmptyDatabase, StorageError
 from protocol.study.records import AbortCause, LoopHealth
 
@@ -98,6 +99,37 @@ _UPGRADE_3_TO_4 = (
     _CHUNKS,
     *_ARMS,
 )
+
+
+def metric_columns_missing(conn: sqlite3.Connection) -> list[str]:
+    """The registry's stored metrics (:func:`protocol.metrics.stored`) the file's ``trials`` table has no column for."""
+    has = {r[1] for r in conn.execute("PRAGMA table_info(trials)")}
+    return [m.name for m in stored() if m.name not in has]
+
+
+def add_metric_columns(conn: sqlite3.Connection) -> list[str]:
+    """Give the ``trials`` table a column for every stored metric it lacks (a metric defined after the file was made).
+
+    Only a writer calls this, on a file it is about to write to: the column is added empty (NULL in every trial
+    stored before: that metric was not computed live then), no row is changed, and the schema version stays (an
+    older haptic-study reads and writes the file as before: it names the columns it knows).  In its own transaction,
+    the columns checked again under the write lock, so two writers opening the file at once add each column once.
+    Returns the columns added.
+    """
+    if not metric_columns_missing(conn):  # the common case: no lock taken
+        return []
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        missing = metric_columns_missing(conn)
+        for name in missing:
+            conn.execute(f"ALTER TABLE trials ADD COLUMN {name} REAL")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    return missing
+
+
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
@@ -281,6 +313,7 @@ class SchemaFile:
             for statement in (_WITHDRAWALS, _CHUNKS, *_ARMS):
                 c.execute(statement)
         if not readonly:
+            add_metric_columns(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.

@@ -1,10 +1,11 @@
-"""The one definition of a trial's success, TCT, RMSE and Max AE.
+"""The force-regulation task's trial window: its band, its hold, and the metrics computed over its samples.
 
-The live trial machine (:mod:`protocol.study.trial`) and the offline analysis
-(``analysis``) both call these functions, so the numbers in the study
-database and in the report cannot disagree.
+The live trial machine (:mod:`protocol.study.trial`) and the offline analysis (``analysis``) both call
+:func:`trial_metrics`, which applies the task's rule to a trial's samples and hands the window to the metric
+registry (:mod:`protocol.metrics`), so the numbers in the study database and in the report cannot disagree.
 
-Definitions (the paper, §V-B, made exact where it is silent):
+Definitions (the paper, §V-B, made exact where it is silent; each metric's own is in
+:mod:`protocol.metrics.definitions`):
 
 * **task force** ``F`` -- the magnitude of the filtered, compensated contact
   force (the ``force_n`` column of every sample);
@@ -17,10 +18,9 @@ Definitions (the paper, §V-B, made exact where it is silent):
   time from the cue to that sample (the end of the 1 s hold);
 * **trial window** -- from the cue (t = 0) to the trial end: the completing
   sample on success, otherwise ``max_trial_s`` (12 s), both inclusive;
-* **RMSE** and **Max AE** -- ``√mean((F − F*)²)`` and ``max |F − F*|`` over the
-  samples of the window, *including* the approach before contact (F = 0);
-  analysis may instead start at first contact (:data:`CONTACT_THRESHOLD_N`).
-* **time in band** -- samples in band × sample period; **peak force** -- max F.
+* **error window** -- the samples RMSE, Max AE (and every metric taken over the error window) see: the trial
+  window, *including* the approach before contact (F = 0); analysis may instead start at first contact
+  (:data:`CONTACT_THRESHOLD_N`).
 
 Decisions use integer-nanosecond sample timestamps, so they are exact however
 late the caller processes the samples.
@@ -28,12 +28,13 @@ late the caller processes the samples.
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass
-from typing import Any
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from protocol.metrics import METRICS, Metric, MetricValue, TrialWindow, compute
 
 __all__ = [
     "BAND_SLACK",
@@ -143,21 +144,30 @@ def hold_completion_index(
 
 @dataclass(frozen=True, slots=True)
 class TrialMetrics:
-    """Per-trial results (units in the names)."""
+    """A trial's metrics (:attr:`values`, by name: ``metrics["rmse_n"]``) and the facts of its window.
 
+    Attributes
+    ----------
+    values
+        Each metric's value (:mod:`protocol.metrics`), by name, in the registry's order.
+    success
+        The task's verdict: the hold completed within the trial window.
+    n_samples
+        Samples in the trial window.
+    end_s
+        The trial end, s since the cue.
+    first_contact_s
+        The first sample above :data:`CONTACT_THRESHOLD_N`, s since the cue (None: no contact).
+    """
+
+    values: Mapping[str, MetricValue]
     success: bool
-    tct_s: float | None
-    rmse_n: float
-    max_ae_n: float
-    time_in_band_s: float
-    peak_force_n: float
     n_samples: int
     end_s: float
     first_contact_s: float | None
 
-    def to_dict(self) -> dict[str, Any]:
-        """Plain data."""
-        return asdict(self)
+    def __getitem__(self, name: str) -> MetricValue:
+        return self.values[name]
 
 
 def trial_metrics(
@@ -170,6 +180,7 @@ def trial_metrics(
     max_trial_s: float = 12.0,
     window: str = "cue",
     sample_period_s: float = 0.001,
+    metrics: Sequence[Metric] = METRICS,
 ) -> TrialMetrics:
     """Compute a trial's metrics from its samples.
 
@@ -185,11 +196,13 @@ def trial_metrics(
     tolerance_fraction, hold_s, max_trial_s
         The success criterion and the trial cap.
     window
-        ``"cue"`` (default): RMSE/Max AE from the cue to the trial end;
+        ``"cue"`` (default): the error window (RMSE, Max AE, ...) from the cue to the trial end;
         ``"first_contact"``: from the first sample above
         :data:`CONTACT_THRESHOLD_N` (NaN when there was no contact).
     sample_period_s
         For time in band.
+    metrics
+        The metrics to compute (default: every metric of :mod:`protocol.metrics`).
 
     Returns
     -------
@@ -213,20 +226,13 @@ def trial_metrics(
     end_s = completed_ns / 1e9 if completed_ns is not None else max_trial_s
     contact = np.flatnonzero(f > CONTACT_THRESHOLD_N)
     first_contact_s = float(t[contact[0]] / 1e9) if len(contact) else None
-    err_f = f if window == "cue" else (f[contact[0] :] if len(contact) else f[:0])
-    err = err_f - target_force_n
-    finite = err[np.isfinite(err)]
-    rmse = float(np.sqrt(np.mean(finite * finite))) if len(finite) else math.nan
-    max_ae = float(np.max(np.abs(finite))) if len(finite) else math.nan
+    target = np.full(len(f), float(target_force_n))
+    # the error window: from the cue, or from first contact (none without contact); a non-finite force left out
+    start = 0 if window == "cue" else (int(contact[0]) if len(contact) else len(f))
+    err = f[start:] - target[start:]
+    finite = np.isfinite(err)
     half = band_halfwidth_n(target_force_n, tolerance_fraction)
-    return TrialMetrics(
-        success=success,
-        tct_s=end_s if success else None,
-        rmse_n=rmse,
-        max_ae_n=max_ae,
-        time_in_band_s=float(np.count_nonzero(np.abs(f - target_force_n) <= half)) * sample_period_s,
-        peak_force_n=float(np.nanmax(f)) if len(f) and np.isfinite(f).any() else math.nan,
-        n_samples=len(f),
-        end_s=float(end_s),
-        first_contact_s=first_contact_s,
-    )
+    trial = TrialWindow(t_ns=t, force_n=f, target_n=target, on_target=np.abs(f - target_force_n) <= half,
+                        completed=success, end_s=float(end_s), error_n=err[finite],
+                        error_t_s=t[start:][finite] / 1e9, sample_period_s=sample_period_s)
+    return TrialMetrics(compute(trial, metrics), success, len(f), float(end_s), first_contact_s)

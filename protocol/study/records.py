@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from protocol.metrics import MetricValue, get, stored, values_of
 from protocol.study.clock import SessionClock
 from protocol.study.design import HapticMode, TrialSpec
 from protocol.study.metrics import TrialMetrics
@@ -132,8 +133,12 @@ class TrialRecord:
         Maps ``cue_ns`` and ``end_ns`` to session time (:attr:`started_at_s`, :attr:`ended_at_s`).
     cue_ns, end_ns
         The trial's time origin (its first record under its condition) and its end, loop clock, ns.
-    tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n, n_samples
-        Its metrics (:func:`protocol.study.metrics.trial_metrics`); ``tct_s`` only for a success.
+    metrics
+        Its metrics as stored (:func:`protocol.study.metrics.trial_metrics`), by name: every metric with a
+        ``trials`` column (:func:`protocol.metrics.stored`; a success-only one, TCT, only for a success; a metric
+        an older file has no column for is None).  :meth:`metric` reads one.
+    n_samples
+        The samples of its trial window.
     abort_reason, abort_cause
         Why an aborted trial was aborted (None otherwise).
     repeat_of
@@ -153,11 +158,7 @@ class TrialRecord:
     clock: SessionClock
     cue_ns: int
     end_ns: int
-    tct_s: float | None = None
-    rmse_n: float | None = None
-    max_ae_n: float | None = None
-    time_in_band_s: float | None = None
-    peak_force_n: float | None = None
+    metrics: Mapping[str, MetricValue] = field(default_factory=dict, hash=False)
     n_samples: int | None = None
     abort_reason: str | None = None
     abort_cause: AbortCause | None = None
@@ -184,13 +185,12 @@ class TrialRecord:
 
         ``ticks`` are its first and last record's loop ticks in recording ``segment`` (None: it has no records).
         """
+        kept = {m.name: (None if m.success_only and outcome is not Outcome.SUCCESS else metrics.values.get(m.name))
+                for m in stored()}
         return cls(
             session_id=session_id, trial_index=spec.index, target_label=spec.target_label,
             target_force_n=spec.target_force_n, haptic_mode=spec.haptic_mode, outcome=outcome, clock=clock,
-            cue_ns=cue_ns, end_ns=end_ns,
-            tct_s=metrics.tct_s if outcome is Outcome.SUCCESS else None,
-            rmse_n=metrics.rmse_n, max_ae_n=metrics.max_ae_n, time_in_band_s=metrics.time_in_band_s,
-            peak_force_n=metrics.peak_force_n, n_samples=metrics.n_samples, abort_reason=reason or None,
+            cue_ns=cue_ns, end_ns=end_ns, metrics=kept, n_samples=metrics.n_samples, abort_reason=reason or None,
             abort_cause=cause, repeat_of=spec.repeat_of, health=health,
             segment=segment if ticks is not None else None,
             first_tick=ticks[0] if ticks is not None else None, last_tick=ticks[1] if ticks is not None else None,
@@ -216,6 +216,10 @@ class TrialRecord:
         """The trial succeeded."""
         return self.outcome is Outcome.SUCCESS
 
+    def metric(self, name: str) -> MetricValue:
+        """One stored metric by name (``record.metric("rmse_n")``; None: not stored, or undefined for this trial)."""
+        return self.success if get(name).boolean else self.metrics.get(name)
+
     def to_row(self) -> dict[str, Any]:
         """The ``trials`` row: times in session seconds, the enums as their TEXT."""
         return {
@@ -223,8 +227,7 @@ class TrialRecord:
             "target_label": self.target_label, "target_force_n": self.target_force_n,
             "haptic_mode": self.haptic_mode.value, "outcome": self.outcome.value,
             "started_at_s": self.started_at_s, "ended_at_s": self.ended_at_s,
-            "tct_s": self.tct_s, "rmse_n": self.rmse_n, "max_ae_n": self.max_ae_n,
-            "time_in_band_s": self.time_in_band_s, "peak_force_n": self.peak_force_n, "n_samples": self.n_samples,
+            **{m.name: self.metrics.get(m.name) for m in stored()}, "n_samples": self.n_samples,
             "abort_reason": self.abort_reason, "repeat_of": self.repeat_of,
             "abort_cause": None if self.abort_cause is None else self.abort_cause.value,
             **self.health.columns(),
@@ -247,9 +250,7 @@ class TrialRecord:
             target_label=str(row["target_label"]), target_force_n=float(row["target_force_n"]),
             haptic_mode=HapticMode(row["haptic_mode"]), outcome=Outcome(row["outcome"]),
             clock=SessionClock(started, 0), cue_ns=0, end_ns=round((ended - started) * 1e9),
-            tct_s=row.get("tct_s"), rmse_n=row.get("rmse_n"), max_ae_n=row.get("max_ae_n"),
-            time_in_band_s=row.get("time_in_band_s"), peak_force_n=row.get("peak_force_n"),
-            n_samples=row.get("n_samples"), abort_reason=row.get("abort_reason"),
+            metrics=values_of(row, stored()), n_samples=row.get("n_samples"), abort_reason=row.get("abort_reason"),
             abort_cause=row.get("abort_cause"), repeat_of=row.get("repeat_of"),
             health=LoopHealth(**{k: row.get(k) for k in names}),
             segment=row.get("segment"), first_tick=row.get("first_tick"), last_tick=row.get("last_tick"),

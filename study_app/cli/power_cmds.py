@@ -201,8 +201,9 @@ def cmd_power(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
     from analysis.planning.paired_pool import load_pool
-    from analysis.planning.power import FAMILY_LABELS, estimate_power, summary_text
+    from analysis.planning.power import FAMILY_LABELS, estimate_power
     from analysis.planning.power_outputs import write_power
+    from analysis.planning.power_plan import summary_text
     from analysis.reading.metrics import MetricOptions
 
     options = MetricOptions(args.error_window, args.tct)

@@ -165,7 +165,8 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
         raise CliError(f"--out = {args.out!r}: the file name must end in .png, .pdf or .svg")
     try:
         check_output_file(out, command="plot-trial")  # before the work: an existing file is never replaced
-        from analysis.reading.load import load_study, read_trial_samples
+        from analysis.reading.load import load_study
+        from analysis.reading.recorded import read_trial_samples
 
         study = load_study([args.db])
         trials = study.trials

@@ -13,22 +13,19 @@ import pandas as pd
 
 from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
+from protocol.metrics import METRICS, tested
 from protocol.storage import StudyReader
 from protocol.study.labels import plural
 from protocol.study.records import Outcome, TrialRecord
 
 __all__ = ["format_study_summary"]
 
-#: The paper's results (Sec. V-B), for the comparison column.
-PAPER = {"success": (0.27, 0.54), "rmse_n": (1.35, 0.86), "max_ae_n": (2.12, 1.46)}
+#: The paper's results (Sec. V-B), for the comparison column: OFF → ON means, or the change it quotes (TCT).
+PAPER: dict[str, tuple[float, float] | str] = {"success": (0.27, 0.54), "tct_s": "−16 %", "rmse_n": (1.35, 0.86),
+                                               "max_ae_n": (2.12, 1.46)}
 
-#: The summary's rows: label, the paper's key (None: TCT, quoted as a change), the column of per_participant.
-_ROWS = (
-    ("success rate", "success", "success_rate"),
-    ("TCT, successful trials (s)", None, "tct_s"),
-    ("RMSE (N)", "rmse_n", "rmse_n"),
-    ("Max AE (N)", "max_ae_n", "max_ae_n"),
-)
+#: The summary's rows: the metrics the report tests (:func:`protocol.metrics.tested`), in order.
+_ROWS = tested()
 
 
 def _value(v: float | None) -> float:
@@ -40,10 +37,10 @@ def _trials_frame(exp: list[tuple[str, TrialRecord]]) -> pd.DataFrame:
     ok = [t.outcome is Outcome.SUCCESS for _, t in exp]
     return pd.DataFrame({
         "participant_code": [c for c, _ in exp], "haptic_mode": [t.haptic_mode.value for _, t in exp],
-        "target_label": [t.target_label for _, t in exp], "success": ok,
-        "tct_s": [_value(t.tct_s) if s else math.nan for (_, t), s in zip(exp, ok, strict=True)],
-        **{m: [_value(getattr(t, m)) for _, t in exp] for m in ("rmse_n", "max_ae_n", "time_in_band_s",
-                                                                  "peak_force_n")},
+        "target_label": [t.target_label for _, t in exp],
+        # every metric as stored; a success-only one (TCT) only where the trial succeeded
+        **{m.name: ok if m.boolean else [_value(t.metric(m.name)) if s or not m.success_only else math.nan
+                                         for (_, t), s in zip(exp, ok, strict=True)] for m in METRICS},
     })
 
 
@@ -107,16 +104,18 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     ]
     frame = _trials_frame(exp) if exp else None
     overall = None if frame is None else per_participant(frame)
-    for name, key, metric in _ROWS:
-        off, on = _across(overall, metric, "off"), _across(overall, metric, "on")
+    for m in _ROWS:
+        off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
         finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
         change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
-        paper = f"{PAPER[key][0]:g} → {PAPER[key][1]:g}" if key else "−16 %"
+        quoted = PAPER.get(m.name, "")  # a metric the paper did not report: no comparison
+        paper = quoted if isinstance(quoted, str) else f"{quoted[0]:g} → {quoted[1]:g}"
+        name = m.summary_label
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
         lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
     if overall is not None and not overall.empty:  # TCT's mean is over fewer people where some never succeeded
         tct = by_mode(overall, "tct_s")
-        n_off, n_on = (int(tct[m].notna().sum()) if m in tct else 0 for m in ("off", "on"))
+        n_off, n_on = (int(tct[mode].notna().sum()) if mode in tct else 0 for mode in ("off", "on"))
         if min(n_off, n_on) < len(codes):
             lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
                          "with no success in a mode has no TCT there)")

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import multiprocessing as mp
 
-from analysis.planning.sim_study import TrialRow
+from analysis.planning.sim_study import SIM_METRICS, TrialRow
 from foundation.platform_support.processes import worker_pool
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
@@ -88,9 +88,8 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
             samples = zip(t_ns, r["force_n"].tolist(), [int(x) for x in r["trial_index"].tolist()], strict=True)
             for ev in machine.feed(samples):
                 if isinstance(ev, TrialFinished):
-                    m = ev.metrics
                     rows.append(TrialRow(study, participant, spec.index, spec.target_label, spec.haptic_mode,
-                                         m.success, m.tct_s, m.rmse_n, m.max_ae_n, m.peak_force_n))
+                                         {m.name: ev.metrics[m.name] for m in SIM_METRICS}))
                     p.end_trial(eng.rig.sim_time_s)
                     loop.submit(Mark(-1, _PHASE_PAUSE))
                     loop.submit(SetHaptics(False))

@@ -113,14 +113,7 @@ def run_study(
         A fault did not clear (one participant at a time; in parallel it is a
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
-    if participants < 1:
-        raise ValueError(f"participants = {participants}: must be ≥ 1")
-    if jobs is not None and jobs < 1:
-        raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
-    check_fault_plans(faults, protocol, [participant_code(n) for n in range(1, participants + 1)])
-    n_jobs = default_jobs(participants) if jobs is None else min(jobs, participants)
-    if continue_study and not os.path.exists(db_path):
-        raise StorageError(f"cannot continue a study: no database at {db_path}")
+    n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol)
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
     protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
     first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw)
@@ -129,6 +122,19 @@ def run_study(
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
                             sim_arms=sim_arms_of(protocol, sim_arms), framework=fw)  # refused before anything is stored
+
+
+def _checked_request(db_path: str, participants: int, jobs: int | None, continue_study: bool,
+                     faults: Sequence[FaultPlan], protocol: ProtocolConfig) -> int:
+    """Refuse a request :func:`run_study` cannot run (before anything is opened); the workers it runs at once."""
+    if participants < 1:
+        raise ValueError(f"participants = {participants}: must be ≥ 1")
+    if jobs is not None and jobs < 1:
+        raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
+    check_fault_plans(faults, protocol, [participant_code(n) for n in range(1, participants + 1)])
+    if continue_study and not os.path.exists(db_path):
+        raise StorageError(f"cannot continue a study: no database at {db_path}")
+    return default_jobs(participants) if jobs is None else min(jobs, participants)
 
 
 def _run_under_lease(

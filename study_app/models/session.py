@@ -104,9 +104,9 @@ class TrialTable:
             f"{row.target_label} {row.target_force_n:g} N",
             "haptics ON" if row.haptic_mode is HapticMode.ON else "haptics OFF",
             outcome,
-            _num(row.tct_s),
-            _num(row.rmse_n, "{:.3f}"),
-            _num(row.max_ae_n, "{:.3f}"),
+            _num(row.metric("tct_s")),
+            _num(row.metric("rmse_n"), "{:.3f}"),
+            _num(row.metric("max_ae_n"), "{:.3f}"),
         )
 
 

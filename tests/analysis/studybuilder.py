@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from protocol.metrics import stored
 from protocol.storage import StudyDatabase, trial_id_of
 from protocol.study.config import default_protocol
 from protocol.study.metrics import trial_metrics
@@ -102,8 +103,9 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
                     "trial_id": tid, "session_id": sid, "trial_index": idx, "target_label": tdef.label,
                     "target_force_n": target, "haptic_mode": tdef.mode, "outcome": outcome,
                     "started_at_s": 20.0 * idx, "ended_at_s": 20.0 * idx + m.end_s,
-                    "tct_s": m.tct_s if outcome == "success" else None, "rmse_n": m.rmse_n, "max_ae_n": m.max_ae_n,
-                    "time_in_band_s": m.time_in_band_s, "peak_force_n": m.peak_force_n, "n_samples": m.n_samples,
+                    # every stored metric, as the runner stores it (TCT only with a success)
+                    **{x.name: None if x.success_only and outcome != "success" else m[x.name] for x in stored()},
+                    "n_samples": m.n_samples,
                     "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": tdef.repeat_of,
                 })
         if s.status != "running":

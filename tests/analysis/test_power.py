@@ -29,12 +29,12 @@ from analysis.planning.power import (
     estimate_power,
     monte_carlo_interval,
     resample_indices,
-    smallest_n,
-    summary_text,
 )
+from analysis.planning.power_plan import smallest_n, summary_text
 from analysis.reading.metrics import MetricOptions
+from analysis.stats.holm import holm
 from analysis.stats.resampled_wilcoxon import METHOD_NAMES, resampled_p_values
-from analysis.stats.wilcoxon import holm, paired_wilcoxon
+from analysis.stats.wilcoxon import paired_wilcoxon
 
 zero_methods = st.sampled_from(["wilcox", "pratt", "zsplit"])
 

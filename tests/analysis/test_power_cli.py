@@ -14,6 +14,7 @@ import pytest
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.planning.power import POWER_CSV_COLUMNS
+from protocol.metrics import tested
 from study_app.cli.main import main
 
 
@@ -83,7 +84,7 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert list(frame.columns[: len(POWER_CSV_COLUMNS)]) == list(POWER_CSV_COLUMNS)
     assert sorted(set(frame["n"])) == [6, 10, 16] and set(frame["resamples"]) == {400}
     assert set(frame["scope"]) == {"overall", "GENTLE", "FIRM"}
-    assert set(frame["metric"]) == {"success_rate", "tct_s", "rmse_N", "max_ae_N", "all_four_holm", "any_holm"}
+    assert set(frame["metric"]) == {*(m.participant_exported for m in tested()), "all_four_holm", "any_holm"}
     shown = frame[["power", "ci_low", "ci_high", "two_sided_ci_high"]].to_numpy().ravel()
     assert all(v != v or v == round(v, 4) for v in shown)  # rounded as the codebook says (NaN: a family row)
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
@@ -268,11 +269,11 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert list(table.columns[:7]) == ["target", "measure", "pilot shows", "n for 80 %", "n for 80 % (Holm)",
                                        "n for 90 %", "n for 90 % (Holm)"]
     assert list(table.columns[7:]) == [f"n = {n}" for n in (6, 8, 10, 12, 16, 20, 30)]
-    assert len(table) == 3 * 6 and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
+    assert len(table) == 3 * (len(tested()) + 2) and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
     frame = pd.read_csv(out / "power.csv")
     # the measures by the names every CSV and the codebook use (power.csv said rmse_n), numbers rounded as the
     # codebook says (ci_low was 0.01827534035513624)
-    assert set(frame["metric"]) == {"success_rate", "tct_s", "rmse_N", "max_ae_N", "all_four_holm", "any_holm"}
+    assert set(frame["metric"]) == {*(m.participant_exported for m in tested()), "all_four_holm", "any_holm"}
     shown = frame[["power", "ci_low", "ci_high", "holm_ci_low"]].to_numpy().ravel()
     assert all(v != v or v == round(v, 4) for v in shown)
     rmse = frame[(frame["scope"] == "overall") & (frame["metric"] == "rmse_N")].set_index("n")
@@ -313,10 +314,11 @@ def test_report_power_of_three_participants_says_why_not(pilots, tmp_path, capsy
 
 
 def test_report_power_table_leaves_out_empty_columns(monkeypatch):
-    import analysis.planning.power
+    import analysis.planning.power_plan
     from analysis.planning.paired_pool import pool_from_trials
-    from analysis.planning.power import estimate_power, plan_table
+    from analysis.planning.power import estimate_power
     from analysis.planning.power_outputs import ReportPower
+    from analysis.planning.power_plan import plan_table
     from analysis.report.report_html import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
@@ -332,7 +334,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
         t["direction"] = ""
         return t
 
-    monkeypatch.setattr(analysis.planning.power, "plan_table", without_direction)
+    monkeypatch.setattr(analysis.planning.power_plan, "plan_table", without_direction)
     page = _power_html(ReportPower(result, "", None))
     assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
     assert page.count("<td") == full.count("<td") - len(plan_table(result))

@@ -21,6 +21,7 @@ from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.plots.figures import peak_downsample, significance_mark
 from analysis.reading.codebook import STATS_CSV_COLUMNS
+from analysis.report.measures import figure_groups
 from analysis.report.report_tables import TRIALS_CSV_COLUMNS
 from study_app.cli.main import main
 
@@ -65,7 +66,7 @@ def test_report_writes_every_file_with_the_promised_columns(report):
     for name in ("report.html", "trials.csv", "participants.csv", "participants_wide.csv", "stats.csv",
                  "stats_by_target.csv", "speed_accuracy.csv", "sessions.csv", "codebook.csv"):
         assert (out / name).is_file(), name
-    for stem in ("success_rate", "tct", "rmse_max_ae", "paired", "speed_accuracy"):
+    for stem in (*(g.file for g in figure_groups()), "paired", "speed_accuracy"):  # success_rate, tct, rmse_max_ae…
         png = (out / "figures" / f"{stem}.png").read_bytes()
         # 300 dpi at a journal's width: one column (3.5 in, 1050 px) or the page (7.2 in)
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and int.from_bytes(png[16:20], "big") in (1050, 2160)

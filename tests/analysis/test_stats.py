@@ -17,8 +17,9 @@ from scipy import stats as sps
 
 from analysis.stats.correlation import CorrelationResult, correlation
 from analysis.stats.hodges_lehmann import _midpoint, _walsh_select, hodges_lehmann
+from analysis.stats.holm import RESULT_COLUMNS, holm, results_frame
 from analysis.stats.signed_rank import signed_rank_null_counts
-from analysis.stats.wilcoxon import RESULT_COLUMNS, WilcoxonResult, holm, methods_text, paired_wilcoxon, results_frame
+from analysis.stats.wilcoxon import WilcoxonResult, methods_text, paired_wilcoxon
 
 _SCIPY_METHOD = {"exact": "exact", "approx": "asymptotic"}
 TEST_FIELDS = ("statistic", "p_value", "z", "rank_biserial", "r")

@@ -61,7 +61,7 @@ def test_a_whole_session_is_stored_with_its_calibration(engine, tmp_path, short_
     assert len(fin) == 1 and fin[0].status == "completed" and fin[0].completed == 2 and fin[0].aborted == 0
     stored = db_rows(db, "SELECT trial_index, outcome, rmse_n FROM trials ORDER BY trial_index")
     assert [(r[0], r[1]) for r in stored] == [(0, ended[0].record.outcome), (1, ended[1].record.outcome)]
-    assert [r[2] for r in stored] == pytest.approx([t.record.rmse_n for t in ended])
+    assert [r[2] for r in stored] == pytest.approx([t.record.metric("rmse_n") for t in ended])
     (status, cal_json, cfg_json), = db_rows(db, "SELECT status, calibration_json, config_json FROM sessions")
     assert status == "completed"
     assert json.loads(cal_json) == e.calibration.to_dict()

@@ -201,7 +201,7 @@ def _rig_trials(seed: int, rig_seed: int, targets: list[float], haptic: bool, tr
         f = rows["force_n"]
         t_ns = np.arange(len(f), dtype=np.int64) * 1_000_000
         m = trial_metrics(t_ns, f, target, max_trial_s=trial_s)
-        out.append((float(np.max(f)), m.max_ae_n, float(np.mean(f[-1000:]))))
+        out.append((float(np.max(f)), m["max_ae_n"], float(np.mean(f[-1000:]))))
         p.end_trial(eng.rig.sim_time_s)
         eng.loop.submit(SetHaptics(False))
         eng.loop.submit(Mark(-1, 3))

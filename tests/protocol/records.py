@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from analysis.reading.load import AnalysisError, read_trial_samples
+from analysis.reading.load import AnalysisError
+from analysis.reading.recorded import read_trial_samples
 from protocol.storage.recordings import read_segment, segments_of
 
 

@@ -12,6 +12,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from protocol.metrics import names
 from protocol.study.metrics import (
     BAND_SLACK,
     CONTACT_THRESHOLD_N,
@@ -134,15 +135,15 @@ def test_ramp_then_plateau_succeeds_one_second_after_the_plateau_starts():
     t, f = _full_window(lambda k: k / 1000 if k < 500 else 0.6)
     m = trial_metrics(t, f, 0.6)
     assert m.success is True
-    assert m.tct_s == 1.5
+    assert m["tct_s"] == 1.5
     assert m.end_s == 1.5
     assert m.n_samples == 1501  # 0 … 1500 ms inclusive
     # errors: 0.6 − k/1000 for k < 500, i.e. j/1000 for j = 101 … 600; 0 on the plateau
     sum_sq = (600 * 601 * 1201 - 100 * 101 * 201) / 6 / 1e6  # Σ j² / 10⁶ = 71.84175
-    assert m.rmse_n == pytest.approx(math.sqrt(sum_sq / 1501), **EXACT)
-    assert m.max_ae_n == pytest.approx(0.6, **EXACT)
-    assert m.time_in_band_s == pytest.approx(1.001, **EXACT)  # 1001 samples, 500 … 1500 ms
-    assert m.peak_force_n == 0.6
+    assert m["rmse_n"] == pytest.approx(math.sqrt(sum_sq / 1501), **EXACT)
+    assert m["max_ae_n"] == pytest.approx(0.6, **EXACT)
+    assert m["time_in_band_s"] == pytest.approx(1.001, **EXACT)  # 1001 samples, 500 … 1500 ms
+    assert m["peak_force_n"] == 0.6
     assert m.first_contact_s == 0.051  # 0.050 N is not above the 0.05 N threshold; 0.051 N is
     assert CONTACT_THRESHOLD_N == 0.05
 
@@ -152,8 +153,8 @@ def test_tct_is_exactly_plateau_start_plus_one_second(plateau_ms):
     t, f = _full_window(lambda k: 1.2 if k >= plateau_ms else 0.0)
     m = trial_metrics(t, f, 1.2)
     assert m.success is True
-    assert m.tct_s == (plateau_ms + 1000) / 1000  # the double nearest to the exact decimal time
-    assert m.end_s == m.tct_s
+    assert m["tct_s"] == (plateau_ms + 1000) / 1000  # the double nearest to the exact decimal time
+    assert m.end_s == m["tct_s"]
     assert m.n_samples == plateau_ms + 1001
     assert m.first_contact_s == plateau_ms / 1000
 
@@ -163,22 +164,22 @@ def test_plateau_too_late_for_a_full_hold_times_out():
     t, f = _full_window(lambda k: 1.2 if k >= 11001 else 0.0)
     m = trial_metrics(t, f, 1.2)
     assert m.success is False
-    assert m.tct_s is None
-    assert m.time_in_band_s == pytest.approx(1.0, **EXACT)  # 11001 … 12000: 1000 samples
+    assert m["tct_s"] is None
+    assert m["time_in_band_s"] == pytest.approx(1.0, **EXACT)  # 11001 … 12000: 1000 samples
 
 
 @pytest.mark.parametrize("force", [0.54, 0.66])
 def test_plateau_on_a_band_edge_succeeds(force):
     t, f = _full_window(lambda k: force if k >= 300 else 0.0)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s) == (True, 1.3)
+    assert (m.success, m["tct_s"]) == (True, 1.3)
 
 
 @pytest.mark.parametrize("force", [0.5399999, 0.6600001])
 def test_plateau_just_outside_the_band_times_out(force):
     t, f = _full_window(lambda k: force if k >= 300 else 0.0)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.time_in_band_s) == (False, None, 0.0)
+    assert (m.success, m["tct_s"], m["time_in_band_s"]) == (False, None, 0.0)
 
 
 @pytest.mark.parametrize(("force", "success"), [(1.08, True), (1.32, True), (1.0799999, False), (1.3200001, False)])
@@ -191,23 +192,23 @@ def test_interrupted_hold_moves_the_tct():
     # in band from 1000 ms; one sample out of band at 1600 ms; in band again from 1601 ms
     t, f = _full_window(lambda k: 0.0 if k < 1000 else (0.7 if k == 1600 else 0.6))
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.n_samples) == (True, 2.601, 2602)
-    assert m.time_in_band_s == pytest.approx(1.601, **EXACT)  # 1000 … 2601 minus the one sample at 1600
-    assert m.peak_force_n == 0.7
+    assert (m.success, m["tct_s"], m.n_samples) == (True, 2.601, 2602)
+    assert m["time_in_band_s"] == pytest.approx(1.601, **EXACT)  # 1000 … 2601 minus the one sample at 1600
+    assert m["peak_force_n"] == 0.7
 
 
 def test_success_at_exactly_one_second_of_hold():
     # in band at 2000 … 3000 ms only: the sample 1000 ms after the first completes the hold
     t, f = _full_window(lambda k: 0.6 if 2000 <= k <= 3000 else 0.0)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.n_samples) == (True, 3.0, 3001)
+    assert (m.success, m["tct_s"], m.n_samples) == (True, 3.0, 3001)
 
 
 def test_hold_of_999_ms_is_not_a_success():
     t, f = _full_window(lambda k: 0.6 if 2000 <= k <= 2999 else 0.0)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.end_s, m.n_samples) == (False, None, 12.0, 12001)
-    assert m.time_in_band_s == pytest.approx(1.0, **EXACT)
+    assert (m.success, m["tct_s"], m.end_s, m.n_samples) == (False, None, 12.0, 12001)
+    assert m["time_in_band_s"] == pytest.approx(1.0, **EXACT)
 
 
 def test_trial_metrics_and_hold_detector_agree_on_random_traces():
@@ -219,7 +220,7 @@ def test_trial_metrics_and_hold_detector_agree_on_random_traces():
         done = next((int(ti) for ti, fi in zip(t, f, strict=True) if det.feed(int(ti), float(fi))), None)
         m = trial_metrics(t, f, 0.6)
         assert m.success is (done is not None)
-        assert m.tct_s == (None if done is None else done / 1e9)
+        assert m["tct_s"] == (None if done is None else done / 1e9)
 
 
 _LEVELS = st.sampled_from([0.0, 0.54, 0.5399999999, 0.6, 0.66, 0.6600000001, 0.7, math.nan, math.inf])
@@ -246,10 +247,10 @@ def test_never_holding_times_out_with_the_window_to_12_s_inclusive():
     t, f = _full_window(lambda k: 0.0)
     m = trial_metrics(t, f, 0.6)
     assert m == TrialMetrics(
-        success=False, tct_s=None, rmse_n=m.rmse_n, max_ae_n=0.6, time_in_band_s=0.0, peak_force_n=0.0,
-        n_samples=12001, end_s=12.0, first_contact_s=None,
+        values={**m.values, **dict(success=False, tct_s=None, max_ae_n=0.6, time_in_band_s=0.0, peak_force_n=0.0)},
+        success=False, n_samples=12001, end_s=12.0, first_contact_s=None,
     )
-    assert m.rmse_n == pytest.approx(0.6, **EXACT)
+    assert m["rmse_n"] == pytest.approx(0.6, **EXACT)
 
 
 def test_samples_outside_the_window_are_ignored():
@@ -257,14 +258,15 @@ def test_samples_outside_the_window_are_ignored():
     f = np.where(t < 0, 5.0, 0.0)  # a large force before the cue
     f[t > 12 * S] = 5.0  # and after the cap
     m = trial_metrics(t, f, 0.6)
-    assert (m.n_samples, m.peak_force_n, m.max_ae_n) == (12001, 0.0, 0.6)
-    assert m.rmse_n == pytest.approx(0.6, **EXACT)
+    assert (m.n_samples, m["peak_force_n"], m["max_ae_n"]) == (12001, 0.0, 0.6)
+    assert m["rmse_n"] == pytest.approx(0.6, **EXACT)
 
 
 def test_samples_after_the_completing_sample_are_ignored():
     t, f = _full_window(lambda k: 0.6 if k < 1500 else 9.0)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.n_samples, m.peak_force_n, m.rmse_n, m.max_ae_n) == (True, 1.0, 1001, 0.6, 0.0, 0.0)
+    assert (m.success, m["tct_s"], m.n_samples, m["peak_force_n"], m["rmse_n"], m["max_ae_n"]) == (
+        True, 1.0, 1001, 0.6, 0.0, 0.0)
 
 
 def test_cap_and_hold_are_parameters():
@@ -272,9 +274,9 @@ def test_cap_and_hold_are_parameters():
     short = trial_metrics(t, f, 0.6, max_trial_s=4.5, hold_s=1.0)
     assert (short.success, short.n_samples, short.end_s) == (False, 4501, 4.5)
     quick = trial_metrics(t, f, 0.6, hold_s=0.25)
-    assert (quick.success, quick.tct_s) == (True, 4.25)
+    assert (quick.success, quick["tct_s"]) == (True, 4.25)
     wide = trial_metrics(t, np.full(12001, 0.7), 0.6, tolerance_fraction=0.2)
-    assert (wide.success, wide.tct_s) == (True, 1.0)
+    assert (wide.success, wide["tct_s"]) == (True, 1.0)
 
 
 # -- RMSE, Max AE, time in band, peak -------------------------------------------------------------
@@ -283,11 +285,11 @@ def test_two_level_trace_rmse_and_max_ae():
     t, f = _full_window(lambda k: 0.9 if k < 6000 else 2.0)
     m = trial_metrics(t, f, 1.2)
     assert m.success is False
-    assert m.rmse_n == pytest.approx(math.sqrt((6000 * 0.09 + 6001 * 0.64) / 12001), **EXACT)
-    assert m.rmse_n == pytest.approx(0.6041713, abs=5e-8)  # √(4380.64 / 12001)
-    assert m.max_ae_n == pytest.approx(0.8, **EXACT)
-    assert m.peak_force_n == 2.0
-    assert m.time_in_band_s == 0.0
+    assert m["rmse_n"] == pytest.approx(math.sqrt((6000 * 0.09 + 6001 * 0.64) / 12001), **EXACT)
+    assert m["rmse_n"] == pytest.approx(0.6041713, abs=5e-8)  # √(4380.64 / 12001)
+    assert m["max_ae_n"] == pytest.approx(0.8, **EXACT)
+    assert m["peak_force_n"] == 2.0
+    assert m["time_in_band_s"] == 0.0
     assert m.first_contact_s == 0.0
 
 
@@ -296,14 +298,14 @@ def test_first_contact_window_excludes_the_approach():
     t, f = _full_window(lambda k: 0.0 if k < 3000 else 0.9)
     cue = trial_metrics(t, f, 1.2, window="cue")
     contact = trial_metrics(t, f, 1.2, window="first_contact")
-    assert cue.rmse_n == pytest.approx(math.sqrt((3000 * 1.44 + 9001 * 0.09) / 12001), **EXACT)
-    assert cue.max_ae_n == pytest.approx(1.2, **EXACT)
-    assert contact.rmse_n == pytest.approx(0.3, **EXACT)
-    assert contact.max_ae_n == pytest.approx(0.3, **EXACT)
+    assert cue["rmse_n"] == pytest.approx(math.sqrt((3000 * 1.44 + 9001 * 0.09) / 12001), **EXACT)
+    assert cue["max_ae_n"] == pytest.approx(1.2, **EXACT)
+    assert contact["rmse_n"] == pytest.approx(0.3, **EXACT)
+    assert contact["max_ae_n"] == pytest.approx(0.3, **EXACT)
     # the window changes RMSE / Max AE only
     assert contact.first_contact_s == cue.first_contact_s == 3.0
-    assert (contact.success, contact.n_samples, contact.time_in_band_s, contact.peak_force_n) == (
-        cue.success, cue.n_samples, cue.time_in_band_s, cue.peak_force_n
+    assert (contact.success, contact.n_samples, contact["time_in_band_s"], contact["peak_force_n"]) == (
+        cue.success, cue.n_samples, cue["time_in_band_s"], cue["peak_force_n"]
     )
 
 
@@ -311,7 +313,7 @@ def test_first_contact_window_without_contact_gives_nan():
     t, f = _full_window(lambda k: CONTACT_THRESHOLD_N)  # at, not above, the threshold
     m = trial_metrics(t, f, 0.6, window="first_contact")
     assert m.first_contact_s is None
-    assert math.isnan(m.rmse_n) and math.isnan(m.max_ae_n)
+    assert math.isnan(m["rmse_n"]) and math.isnan(m["max_ae_n"])
     assert m.n_samples == 12001
 
 
@@ -326,55 +328,57 @@ def test_time_in_band_and_peak_force():
     t, f = _full_window(force)
     m = trial_metrics(t, f, 0.6)
     # 12 periods × 400 in-band samples, plus the sample at 12000 ms (12000 % 1000 = 0)
-    assert m.time_in_band_s == pytest.approx(4.801, **EXACT)
-    assert m.peak_force_n == 3.5
-    assert m.max_ae_n == pytest.approx(2.9, **EXACT)
+    assert m["time_in_band_s"] == pytest.approx(4.801, **EXACT)
+    assert m["peak_force_n"] == 3.5
+    assert m["max_ae_n"] == pytest.approx(2.9, **EXACT)
     assert m.success is False
-    assert trial_metrics(t, f, 0.6, sample_period_s=0.002).time_in_band_s == pytest.approx(9.602, **EXACT)
+    assert trial_metrics(t, f, 0.6, sample_period_s=0.002)["time_in_band_s"] == pytest.approx(9.602, **EXACT)
 
 
 def test_nan_samples_are_out_of_band_and_excluded_from_errors():
     # constant 0 N with every 10th sample missing (NaN): errors are still exactly 0.6
     t, f = _full_window(lambda k: math.nan if k % 10 == 0 else 0.0)
     m = trial_metrics(t, f, 0.6)
-    assert m.rmse_n == pytest.approx(0.6, **EXACT)
-    assert m.max_ae_n == pytest.approx(0.6, **EXACT)
+    assert m["rmse_n"] == pytest.approx(0.6, **EXACT)
+    assert m["max_ae_n"] == pytest.approx(0.6, **EXACT)
     assert m.n_samples == 12001  # NaN samples are still samples of the window
-    assert m.peak_force_n == 0.0
+    assert m["peak_force_n"] == 0.0
 
 
 def test_nan_inside_a_plateau_restarts_the_hold_and_is_not_in_band():
     t, f = _full_window(lambda k: math.nan if k == 500 else (0.6 if k >= 200 else 0.0))
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.tct_s, m.n_samples) == (True, 1.501, 1502)
-    assert m.time_in_band_s == pytest.approx(1.301, **EXACT)  # 200 … 1501 minus the NaN at 500
+    assert (m.success, m["tct_s"], m.n_samples) == (True, 1.501, 1502)
+    assert m["time_in_band_s"] == pytest.approx(1.301, **EXACT)  # 200 … 1501 minus the NaN at 500
     # errors of the finite samples: 0.6 for 0 … 199 ms (200 samples), 0 afterwards (1301 samples)
-    assert m.rmse_n == pytest.approx(math.sqrt(200 * 0.36 / 1501), **EXACT)
-    assert m.max_ae_n == pytest.approx(0.6, **EXACT)
-    assert m.peak_force_n == 0.6
+    assert m["rmse_n"] == pytest.approx(math.sqrt(200 * 0.36 / 1501), **EXACT)
+    assert m["max_ae_n"] == pytest.approx(0.6, **EXACT)
+    assert m["peak_force_n"] == 0.6
 
 
 def test_all_nan_trace():
     t, f = _full_window(lambda k: math.nan)
     m = trial_metrics(t, f, 0.6)
-    assert (m.success, m.n_samples, m.time_in_band_s, m.first_contact_s) == (False, 12001, 0.0, None)
-    assert math.isnan(m.rmse_n) and math.isnan(m.max_ae_n) and math.isnan(m.peak_force_n)
+    assert (m.success, m.n_samples, m["time_in_band_s"], m.first_contact_s) == (False, 12001, 0.0, None)
+    assert math.isnan(m["rmse_n"]) and math.isnan(m["max_ae_n"]) and math.isnan(m["peak_force_n"])
 
 
 def test_no_samples():
     m = trial_metrics([], [], 0.6)
-    assert (m.success, m.tct_s, m.n_samples, m.end_s, m.time_in_band_s, m.first_contact_s) == (
+    assert (m.success, m["tct_s"], m.n_samples, m.end_s, m["time_in_band_s"], m.first_contact_s) == (
         False, None, 0, 12.0, 0.0, None
     )
-    assert math.isnan(m.rmse_n) and math.isnan(m.max_ae_n) and math.isnan(m.peak_force_n)
+    assert math.isnan(m["rmse_n"]) and math.isnan(m["max_ae_n"]) and math.isnan(m["peak_force_n"])
 
 
-def test_to_dict():
+def test_values_are_every_registry_metric_by_name_in_order():
     t, f = _full_window(lambda k: 0.6)
-    assert trial_metrics(t, f, 0.6).to_dict() == {
+    m = trial_metrics(t, f, 0.6)
+    assert tuple(m.values) == names()
+    assert {k: m[k] for k in ("success", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")} == {
         "success": True, "tct_s": 1.0, "rmse_n": 0.0, "max_ae_n": 0.0, "time_in_band_s": pytest.approx(1.001, **EXACT),
-        "peak_force_n": 0.6, "n_samples": 1001, "end_s": 1.0, "first_contact_s": 0.0,
-    }
+        "peak_force_n": 0.6}
+    assert (m.success, m.n_samples, m.end_s, m.first_contact_s) == (True, 1001, 1.0, 0.0)
 
 
 # -- argument checks ------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from protocol.recording import (
     join_chunks,
     kept_records,
 )
-from protocol.recording import codec as recording
+from protocol.recording.open_block import _encode_raw
 from protocol.storage import Recorder, StudyDatabase
 from protocol.storage.reader import StudyReader
 from protocol.storage.recordings import read_segment, read_ticks
@@ -92,7 +92,7 @@ def test_any_block_decodes_to_the_same_bits(block) -> None:
     pose_list = [(int(poses["tick"][i]), tuple(float(poses[f"r{j}"][i]) for j in range(9)),
                   tuple(float(poses[f"{a}_m"][i]) for a in "xyz"), int(poses["pose_t_ns"][i]))
                  for i in range(len(poses["tick"]))]
-    chunk = recording._encode_raw(np.ndarray((len(kept), kept.dtype.itemsize), np.uint8, kept), kept.dtype,
+    chunk = _encode_raw(np.ndarray((len(kept), kept.dtype.itemsize), np.uint8, kept), kept.dtype,
                                   pose_list, events)
     for blob, k in ((chunk, 1), (join_chunks([chunk, chunk]), 2), (old_chunk(cols, poses, events), 1),
                     (old_open_block([old_chunk(cols, poses, events)] * 2), 2)):

@@ -10,7 +10,7 @@ import pytest
 from old_chunks import old_chunk, old_open_block
 
 import protocol.recording.codec as recording
-from protocol.recording import COLUMNS, decode_block, decode_columns, encode_block, join_chunks
+from protocol.recording import COLUMNS, BlockBuilder, decode_block, decode_columns, encode_block, join_chunks
 from protocol.storage.recordings import read_ticks
 
 
@@ -84,7 +84,7 @@ def test_an_open_block_written_in_chunks_before_the_derate_column_reads_as_not_c
     cols = block_columns(n)
     with monkeypatch.context() as m:
         m.setattr(recording, "COLUMNS", tuple(c for c in COLUMNS if c.name != "derate"))
-        b = recording.BlockBuilder()
+        b = BlockBuilder()
         old = {k: v for k, v in cols.items() if k != "derate"}
         b.add({k: v[:10] for k, v in old.items()}, [(4, "refine", True)])
         first = b.partial()
@@ -106,7 +106,7 @@ def test_an_open_block_written_in_chunks_before_the_derate_column_reads_as_not_c
     np.testing.assert_array_equal(back["gain"].view(np.int64), cols["gain"].view(np.int64))
     assert events == [(4, "refine", True)]
     # and one this code writes keeps the values
-    b = recording.BlockBuilder()
+    b = BlockBuilder()
     cols["derate"][5] = 0.75
     b.add(cols)
     part = b.partial()

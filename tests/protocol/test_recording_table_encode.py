@@ -8,6 +8,7 @@ import pytest
 
 import protocol.recording.codec as recording
 from protocol.recording import COLUMNS, decode_block, encode_block, kept_records
+from protocol.recording.open_block import _encode_raw
 from protocol.recording.table_encode import column_words, record_words
 
 SCALE = 1_000_000  # counts per unit (an int, as a recording's JSON may hold it: written to the header as it is)
@@ -99,7 +100,7 @@ def test_a_chunk_keeps_each_byte_plane_that_changes_and_one_byte_of_each_other(n
     cols = _records(max(n, 1), seed=n)
     cols["gain"][:] = 1.0  # a column of one value: every plane one byte
     raw = np.ndarray((max(n, 1), 200), np.uint8, kept_records(cols))[:n]
-    blob = recording._encode_raw(raw, kept_records(cols).dtype, [], [])
+    blob = _encode_raw(raw, kept_records(cols).dtype, [], [])
     planes = raw.T  # the definition: every record's byte b, for each b
     same = np.array([len(set(p.tolist())) <= 1 for p in planes], bool)
     tail = np.packbits(same).tobytes() + (planes[:, 0].tobytes() if n else bytes(200)) + planes[~same].tobytes()

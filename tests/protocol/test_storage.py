@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from protocol.metrics import stored
 from protocol.storage import (
     SAMPLE_COLUMNS,
     SCHEMA_VERSION,
@@ -92,7 +93,9 @@ def _trial_row(session_id: int, index: int, outcome: str = "success", tct_s: flo
     return {
         "trial_id": trial_id_of(session_id, index), "session_id": session_id, "trial_index": index,
         "target_label": "GENTLE", "target_force_n": 0.6, "haptic_mode": "on", "outcome": outcome,
-        "started_at_s": 10.25, "ended_at_s": 11.75, "tct_s": tct_s, "rmse_n": 0.125, "max_ae_n": 0.5,
+        "started_at_s": 10.25, "ended_at_s": 11.75,
+        **dict.fromkeys((m.name for m in stored()), 0.25),  # every stored metric (those named below, and any other)
+        "tct_s": tct_s, "rmse_n": 0.125, "max_ae_n": 0.5,
         "time_in_band_s": 1.001, "peak_force_n": 0.66, "n_samples": 1501, "abort_reason": None, "repeat_of": None,
         "abort_cause": None, "period_p50_ms": 1.0, "period_p99_ms": 1.004, "period_max_ms": 1.25,
         "periods_over_2ms": 0, "sensor_age_max_ms": 1.0, "pose_age_max_ms": 8.0, "latency_p50_ms": 0.5,
@@ -125,7 +128,9 @@ def test_new_database_gets_the_schema(db, db_path):
         tables = {r[0] for r in other.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
         assert tables == set(COLUMNS)
         for table, columns in COLUMNS.items():
-            assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns
+            # (the trials table: the schema's columns, then one per metric defined after it, protocol.metrics)
+            later = [m.name for m in stored() if m.name not in columns] if table == "trials" else []
+            assert [r[1] for r in other.execute(f"PRAGMA table_info({table})")] == columns + later
         assert other.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
         assert other.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
         named = other.execute("SELECT name FROM sqlite_master WHERE type = 'index' AND sql IS NOT NULL")

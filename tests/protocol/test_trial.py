@@ -94,7 +94,7 @@ def test_success_event_sequence():
         PhaseChanged(end, 3, ACTIVE, PAUSE),
         PhaseChanged(end + 2 * S, 3, PAUSE, IDLE),
     ]
-    assert expected_metrics.success and expected_metrics.tct_s == 1.5 and expected_metrics.n_samples == 1501
+    assert expected_metrics.success and expected_metrics["tct_s"] == 1.5 and expected_metrics.n_samples == 1501
     assert m.phase is IDLE and m.spec is None
 
 
@@ -139,7 +139,7 @@ def test_timeout_at_exactly_cue_plus_12_s():
         PhaseChanged(end, 3, ACTIVE, PAUSE),
         PhaseChanged(end + 2 * S, 3, PAUSE, IDLE),
     ]
-    assert (metrics.success, metrics.tct_s, metrics.n_samples, metrics.end_s) == (False, None, 12001, 12.0)
+    assert (metrics.success, metrics["tct_s"], metrics.n_samples, metrics.end_s) == (False, None, 12001, 12.0)
 
 
 def test_timeout_is_at_cue_plus_12_s_when_no_sample_lands_on_it():
@@ -157,7 +157,7 @@ def test_timeout_is_at_cue_plus_12_s_when_no_sample_lands_on_it():
 def test_a_late_hold_completing_on_the_last_sample_is_a_success():
     cue, samples = _samples(lambda k: 0.6 if k >= 11000 else 0.0, 13000)
     finished = [e for e in _run(samples) if isinstance(e, TrialFinished)]
-    assert [(f.outcome, f.end_ns, f.metrics.tct_s) for f in finished] == [("success", cue + 12 * S, 12.0)]
+    assert [(f.outcome, f.end_ns, f.metrics["tct_s"]) for f in finished] == [("success", cue + 12 * S, 12.0)]
 
 
 def test_a_gap_over_the_whole_pause_goes_straight_to_idle():
@@ -231,7 +231,7 @@ def test_decisions_do_not_depend_on_block_size(trace):
 def test_interrupted_hold_tct_in_the_machine():
     _, samples = _samples(lambda k: math.nan if k == 2222 else (1.0 if k < 1800 else 0.63), 5000)
     finished = [e for e in _run(samples, block=7) if isinstance(e, TrialFinished)]
-    assert [(f.outcome, f.end_ns - f.cue_ns, f.metrics.tct_s) for f in finished] == [("success", 3223 * MS, 3.223)]
+    assert [(f.outcome, f.end_ns - f.cue_ns, f.metrics["tct_s"]) for f in finished] == [("success", 3223 * MS, 3.223)]
 
 
 # -- abort ----------------------------------------------------------------------------------------

@@ -1,0 +1,101 @@
+"""The trial metrics, each defined once: what it is, how it is computed, how it is reported.
+
+The order of :data:`METRICS` is the order of the columns of every table and file that lists metrics (the
+``trials`` table's columns, ``trials.csv``, ``participants.csv``, the tests, power).  To add a metric, define its
+function and its :class:`~protocol.metrics.metric.Metric` here and append it to :data:`METRICS`: the database gains
+its column, and the CSV files, the codebook, the report and power gain it, without another edit
+(docs/architecture.md, "Where to add …").
+
+Definitions (the paper, §V-B, made exact where it is silent; the window is :class:`TrialWindow`'s):
+
+* **success** -- the task's success rule held within the trial window (the force-regulation task: the hold
+  completed); **TCT** -- the time from the cue to the end of the window on success;
+* **RMSE** and **Max AE** -- ``√mean((F − F*)²)`` and ``max |F − F*|`` over the finite errors of the error window
+  (from the cue, the approach before contact at F = 0 included; or from first contact);
+* **time in band** -- samples on target × the sample period; **peak force** -- the largest task force of the
+  trial window;
+* **error impulse** -- ``∫|F − F*| dt`` over the error window, the same samples as RMSE and Max AE (the trapezoid
+  rule on their times; a non-finite sample is left out and bridged): a secondary measure, tested outside the
+  primary family.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
+
+__all__ = ["ABS_IMPULSE", "MAX_AE", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS", "TCT", "TIME_IN_BAND"]
+
+#: Forces to 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
+_FORCE_DECIMALS = 4
+#: Times to the 1 ms sample period.
+_TIME_DECIMALS = 3
+
+
+def _success(w: TrialWindow) -> MetricValue:
+    return w.completed
+
+
+def _tct_s(w: TrialWindow) -> MetricValue:
+    return w.end_s if w.completed else None
+
+
+def _rmse_n(w: TrialWindow) -> MetricValue:
+    e = w.error_n
+    return float(np.sqrt(np.mean(e * e))) if len(e) else math.nan
+
+
+def _max_ae_n(w: TrialWindow) -> MetricValue:
+    e = w.error_n
+    return float(np.max(np.abs(e))) if len(e) else math.nan
+
+
+def _time_in_band_s(w: TrialWindow) -> MetricValue:
+    return float(np.count_nonzero(w.on_target)) * w.sample_period_s
+
+
+def _abs_impulse_n_s(w: TrialWindow) -> MetricValue:
+    # ∫|F − F*| dt by the trapezoid rule on the samples' own times: exact for the piecewise-linear trace the samples
+    # describe, and right on a clock whose periods vary (the rectangle sum, samples × 1 ms, would assume 1 kHz)
+    e = np.abs(w.error_n)
+    return float(np.sum((e[1:] + e[:-1]) * np.diff(w.error_t_s)) / 2.0) if len(e) else math.nan
+
+
+def _peak_force_n(w: TrialWindow) -> MetricValue:
+    f = w.force_n
+    return float(np.nanmax(f)) if len(f) and np.isfinite(f).any() else math.nan
+
+
+SUCCESS = Metric(
+    "success", "", "success rate", "true when outcome is success", _success, "higher", Role.PRIMARY, 4,
+    boolean=True, figure="success_rate", mean_description="successful trials / analysed trials",
+    count_description="successful trials", count_label="successes", values=(0.0, 1.0))
+TCT = Metric(
+    "tct_s", "s", "TCT (s)", "task completion time: cue to the end of the successful hold; empty unless success",
+    _tct_s, "lower", Role.PRIMARY, _TIME_DECIMALS, success_only=True, figure="tct",
+    mean_description="mean TCT over the trials in n_tct (successful trials only, or with failures censored at the "
+                     "cap: see the report's methods); empty when no trial counts")
+RMSE = Metric(
+    "rmse_n", "N", "RMSE (N)", "root-mean-square error of the task force against F* over the error window",
+    _rmse_n, "lower", Role.PRIMARY, _FORCE_DECIMALS, windowed=True, figure="errors")
+MAX_AE = Metric(
+    "max_ae_n", "N", "Max AE (N)", "largest absolute error of the task force against F* over the error window",
+    _max_ae_n, "lower", Role.PRIMARY, _FORCE_DECIMALS, windowed=True, figure="errors")
+TIME_IN_BAND = Metric(
+    "time_in_band_s", "s", "time in band (s)", "in-band samples × 1 ms over the trial window", _time_in_band_s,
+    "higher", Role.DESCRIPTIVE, _TIME_DECIMALS)
+PEAK_FORCE = Metric(
+    "peak_force_n", "N", "peak force (N)", "largest task force over the error window", _peak_force_n, "lower",
+    Role.DESCRIPTIVE, _FORCE_DECIMALS)
+ABS_IMPULSE = Metric(
+    "abs_impulse_n_s", "N·s", "error impulse (N·s)",
+    "time integral of the absolute error of the task force against F* over the error window, ∫|F − F*| dt "
+    "(trapezoid rule on the samples' times; from the cue to the trial end, or from first contact)",
+    _abs_impulse_n_s, "lower", Role.SECONDARY, _FORCE_DECIMALS, windowed=True, figure="errors")
+
+#: Every metric, in the order of every table's columns.  The primary ones are the paper's outcome measures, the
+#: family of Holm's correction: exactly these four, so the paper's numbers do not move when a metric is added.
+METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE)
