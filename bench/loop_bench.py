@@ -8,7 +8,9 @@ process), in turn, ``--rounds`` times.  By default each measurement is a whole e
 protocol (20 trials, the simulated participant, training not required) and its loop's every period; with
 ``--no-session``, ``--seconds`` of the loop alone.  Printed: the period distribution, periods over 2 ms, missed
 slots, the periods over the 5 ms gap limit (each aborts the trial it falls in), the session's gap aborts, the
-load average and the CPU time the hypervisor stole, and each figure against the issue's target.
+load average and the CPU time the hypervisor stole, and each figure against the issue's target.  Beside each
+measurement a bare 1 ms timer runs on the loop's CPU (:mod:`bench.loop_floor`): its late periods are the
+machine's (a kernel or hypervisor that takes the CPU away), which no design of the loop's process avoids.
 """
 
 from __future__ import annotations
@@ -23,10 +25,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from bench.loop_floor import Floor
 from bench.loop_load import Load, LoadSpec
 from bench.machine import cpu_times, load_average, steal_percent
 from bench.source_trees import check_tree, source_env
-from foundation.platform_support.threads import usable_cpu_count
+from foundation.platform_support.threads import usable_cpu_count, usable_cpus
+from pipeline.core.clock import LOOP_CPU_ENV
 
 __all__ = ["PROTOCOL", "format_loop_bench", "run_loop_bench"]
 
@@ -67,7 +71,9 @@ def _probe(tree: str | None, seconds: float, protocol: str | None, work: str, pl
     if protocol is not None:
         args += ["--protocol", protocol]
     gui = Load(LoadSpec(0, False, plot), None, work)
+    floor = Floor(_loop_cpu(), os.path.join(work, f"{tag}.floor.json"))
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, text=True, env=source_env(tree), cwd=work)
+    floor_figures = None
     try:
         end = time.monotonic() + 240.0
         while not os.path.exists(ready) and proc.poll() is None and time.monotonic() < end:
@@ -77,6 +83,7 @@ def _probe(tree: str | None, seconds: float, protocol: str | None, work: str, pl
                 gui.plot(fh.read().strip())
         out, _ = proc.communicate()
     finally:
+        floor_figures = floor.stop()
         gui.stop()
         if proc.poll() is None:
             proc.kill()
@@ -84,7 +91,15 @@ def _probe(tree: str | None, seconds: float, protocol: str | None, work: str, pl
         raise RuntimeError(f"bench loop: the measurement of {tree or 'our tree'} failed (exit {proc.returncode})")
     result: dict[str, Any] = json.loads(out)
     result["load_average"] = load_average()
+    result["floor"] = floor_figures
     return result
+
+
+def _loop_cpu() -> int:
+    """The CPU our loop's process runs on (:func:`pipeline.core.clock.pin_loop_process`): where the floor is."""
+    raw = os.environ.get(LOOP_CPU_ENV, "").strip()
+    cpus = usable_cpus()
+    return int(raw) if raw.isdigit() and int(raw) in cpus else cpus[-1]
 
 
 def run_loop_bench(*, seconds: float, load: LoadSpec, session: bool, reference_tree: str | None = None,
@@ -171,9 +186,19 @@ def _rows(r: dict[str, Any]) -> list[tuple[str, str]]:
         ("session: completed trials", done),
         ("session: gap aborts", f"{gaps}   (target {TARGETS['gap_aborts']})"),
         ("session: held, then resumed / reset", _held(r)),
+        ("the machine's floor, same CPU and time", _floor(r)),
         ("LOOP_STALLED (a tick over 50 ms)", str(r.get("loop_stalled", 0))),
         ("records the reader lost", str(r["records_lost"])),
     ]
+
+
+def _floor(r: dict[str, Any]) -> str:
+    """What a bare 1 ms timer suffered beside the loop (:mod:`bench.loop_floor`): the periods no code avoids."""
+    f = r.get("floor")
+    if not f:
+        return "not measured (the bare timer left no figures)"
+    return (f"a bare 1 ms timer ({f['scheduling']}): {f['over_2ms']} periods over 2 ms, {f['over_5ms']} over 5 ms, "
+            f"max {f['max_ms']:.1f} ms, of {f['periods']:,}")
 
 
 def _histogram(r: dict[str, Any]) -> str:

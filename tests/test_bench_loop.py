@@ -45,7 +45,7 @@ def test_the_figures_of_a_measurement_count_periods_over_the_gap_limit() -> None
               {"index": 1, "outcome": "aborted", "abort_cause": "fault", "abort_reason": "SENSOR_STALE"}]
     r = _figures(p_us, 0, 1.0, _Health(3), _Health(10), trials, True)
     assert r["ticks"] == 100 and r["over_2ms"] == 3 and r["over_gap_5ms"] == 2 and r["missed_slots"] == 7
-    assert r["histogram_us"]["counts"] == [96, 0, 1, 0, 1, 1, 1, 0]
+    assert r["histogram_us"]["counts"] == [96, 0, 0, 1, 1, 1, 1, 0]  # 1500 µs is in 1.5–2 ms (bins: [a, b))
     assert r["session"] == {"ended": True, "attempts": 3, "completed": 1, "aborted": {"fault": 1, "gap": 1},
                             "gap_aborts": 1, "gap_reasons": ["gap: no loop record for 6.0 ms"]}
     assert r["period_us"]["max"] == 12000.0 and r["abs_dev_p99_us"] > 5000.0
@@ -56,6 +56,9 @@ def test_a_short_quiet_run_of_our_tree_reads_every_period_and_says_where_the_loo
     (run,) = r["runs"]["ours"]
     assert run["ticks"] > 500 and run["records_lost"] == 0 and run["session"] is None
     assert (run["loop_pid"] > 0 and "SCHED_FIFO" in run["scheduling"]) or "normal" in run["scheduling"]
+    floor = run["floor"]  # the bare timer ran beside it, for as long, and counted its periods as the loop's are
+    assert floor["periods"] > 500 and 0 <= floor["over_5ms"] <= floor["over_2ms"] < floor["periods"]
     text = format_loop_bench(r)
     assert "a GUI plotting the live ring at 30 Hz" in text and "the loop in its own process (pid" in text
     assert "p99 |period - 1 ms|" in text and "Rerun on a quiet machine" in text
+    assert "the machine's floor, same CPU and time" in text and "a bare 1 ms timer (" in text
