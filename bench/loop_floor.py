@@ -26,9 +26,10 @@ from typing import Any
 __all__ = ["FLOOR_PRIORITY", "Floor"]
 
 _HERE = os.path.abspath(__file__)
-#: SCHED_FIFO priority of the bare timer: below the loop's (pipeline.core.clock.REALTIME_PRIORITY, 20) so that it
-#: never delays the loop, above every normal process so that the load does not delay it.
-FLOOR_PRIORITY = 10
+#: SCHED_FIFO priority of the bare timer: just below the loop's (pipeline.core.clock.REALTIME_PRIORITY, 20) so that
+#: it never delays the loop, above every normal process and the loop process's helpers (10) -- and another engine's
+#: on a shared machine -- so that only the kernel, the hypervisor or a loop delays it.
+FLOOR_PRIORITY = 19
 _PERIOD_NS = 1_000_000
 
 
