@@ -28,7 +28,15 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
-from analysis.reading.codebook_columns import _STATS, COLUMNS, STATS_CSV_COLUMNS, Column, participant_measures
+from analysis.reading.codebook_columns import (
+    _STATS,
+    COLUMNS,
+    STATS_CSV_COLUMNS,
+    Column,
+    participant_measures,
+    task_column,
+)
+from protocol.tasks.registry import TASKS
 
 __all__ = [
     "COLUMNS",
@@ -93,6 +101,8 @@ def lookup(file: str, column: str) -> Column | None:
                 return c
             if not c.files and general is None:
                 general = c
+    if general is None:  # a task registered at run time (a lab's own) describes its parameters itself
+        general = next((task_column(p) for cls in TASKS.values() for p in cls.described if p.name == column), None)
     return general
 
 

@@ -12,8 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, tested
+from protocol.tasks.base import Parameter
+from protocol.tasks.registry import TASKS
 
-__all__ = ["COLUMNS", "STATS_CSV_COLUMNS", "Column", "participant_measures"]
+__all__ = ["COLUMNS", "STATS_CSV_COLUMNS", "Column", "participant_measures", "task_column"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -72,6 +74,11 @@ _FAMILY = family_word()
 _SECONDARIES = [m.participant_exported for m in METRICS if m.role is Role.SECONDARY]
 _SECONDARY = (f"; empty for a secondary measure ({', '.join(_SECONDARIES)}), tested on its own, outside the family"
               if _SECONDARIES else "")
+
+
+def task_column(p: Parameter) -> Column:
+    """A task's parameter as a column of the sessions and trials tables (:attr:`protocol.tasks.base.Task.described`)."""
+    return Column(p.name, p.description, p.unit, label=p.label, decimals=p.decimals)
 
 
 def _tested_words() -> str:
@@ -320,9 +327,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("software_version", "haptic-study version that recorded the session", type="text", label="software"),
     Column("rig", "sim (simulated rig: simulated data) or real (the hardware)", type="text"),
     Column("protocol_name", "name of the protocol the session ran", type="text", label="protocol"),
-    Column("tolerance_fraction", "half-width of the target band as a fraction of F*", "fraction (0–1)",
-           label="tolerance", decimals=4),
-    Column("hold_s", "time the force must stay in the band for success", "s", label="hold (s)", decimals=_T),
+    *(task_column(p) for cls in TASKS.values() for p in cls.described),  # each task's parameters: the task's words
     Column("max_trial_s", "trial cap: a trial not completed by then is a timeout", "s", label="trial cap (s)",
            decimals=_T),
     # -- what was delivered: aborted trials and the loop's health per trial ----------------------------

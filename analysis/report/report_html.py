@@ -32,7 +32,7 @@ from analysis.stats.wilcoxon import methods_text
 from foundation.version import software_provenance
 from protocol.metrics import family_word
 from protocol.runner.study_rules import FAULT_REHEARSAL_EVENT
-from protocol.study.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
+from protocol.tasks.window import CONTACT_THRESHOLD_N
 
 __all__ = ["DAMAGED_TEXT", "page", "plural", "power_html"]
 
@@ -253,11 +253,17 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
             f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
 
+def _task_methods(study: StudyData, caps: list[float]) -> str:
+    """The analysed sessions' tasks' own definitions (their rules, with their parameters), each kind once."""
+    keys = study.included[["database", "session_id"]].drop_duplicates()
+    tasks = [study.task_of(db, sid) for db, sid in zip(keys["database"], keys["session_id"], strict=True)]
+    return " ".join(kind.methods([t for t in tasks if type(t) is kind], caps)
+                    for kind in dict.fromkeys(type(t) for t in tasks))
+
+
 def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
              excluded: dict[str, int], n_participants: int, within: Any) -> str:
     trials = study.included
-    tol = sorted(set(trials["tolerance_fraction"]))
-    hold = sorted(set(trials["hold_s"]))
     cap = sorted(set(trials["max_trial_s"]))
     targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
     target_txt = ", ".join(f"{lab} {f:g} N"
@@ -278,10 +284,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     return (
         _data_methods(study, table, excluded, n_participants, within)
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
-        f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
-        f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
-        f"when the force stays in the band continuously for {one(hold, ' s')} (leaving the band restarts the hold) "
-        f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. {windowed_words()} "
+        f"filtered, gravity- and bias-compensated contact force. {html.escape(_task_methods(study, cap))} "
+        f"{windowed_words()} "
         f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
         f"is the largest task force in the window.{_secondary_definitions()} These are the definitions of "
         "protocol.metrics, the same code that judged the trials live. "

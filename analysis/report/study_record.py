@@ -300,8 +300,8 @@ def condition_warnings(study: StudyData) -> list[str]:
         return []
     targets = _targets_by_session(study)  # once: it groups every trial of the study
     s["targets"] = [targets.get((db, sid), "") for db, sid in zip(s["database"], s["session_id"], strict=True)]
-    s["rules"] = [f"band ±{tol:.0%}, hold {hold:g} s, cap {cap:g} s" for tol, hold, cap in
-                  zip(s["tolerance_fraction"], s["hold_s"], s["max_trial_s"], strict=True)]
+    s["rules"] = [f"{study.task_of(db, sid).rule_words()}, cap {cap:g} s" for db, sid, cap in
+                  zip(s["database"], s["session_id"], s["max_trial_s"], strict=True)]
     settings = s.get("pipeline_settings", pd.Series("", index=s.index))
     s["settings"] = [str(v) if isinstance(v, str) and v else "the paper's" for v in settings]
     out = []

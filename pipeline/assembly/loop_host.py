@@ -79,11 +79,8 @@ class _Participant:
     def set_manual_y(self, y_m: float) -> None:
         self.rig.driver.set_manual_y(y_m)
 
-    def begin_trial(self, target_force_n: float, haptic_on: bool) -> None:
-        self.rig.driver.begin_trial(target_force_n, haptic_on, self.rig.sim_time_s)
-
-    def practice(self, target_force_n: float, haptic_on: bool, live_force_n_visible: bool) -> None:
-        self.rig.driver.practice(target_force_n, haptic_on, self.rig.sim_time_s, live_force_n_visible)
+    def begin_trial(self, aim: Any) -> None:
+        self.rig.driver.begin_trial(aim, self.rig.sim_time_s)
 
     def end_trial(self) -> None:
         self.rig.driver.end_trial(self.rig.sim_time_s)

@@ -24,6 +24,7 @@ from pipeline.assembly.engine import arm_devices
 from pipeline.assembly.loop_client import LoopLink
 from pipeline.assembly.loop_host import DRIVER, TRACER, LoopHost
 from pipeline.assembly.remote_engine import RemoteEngine, connect
+from pipeline.core.aim import TrialAim
 from pipeline.core.clock import (
     MonotonicClock,
     manual_garbage_collection,
@@ -72,13 +73,9 @@ class RemoteDriver:
         """Hand the stylus's autopilot to a new simulated participant (it travels to the loop's process)."""
         self.link.notify(DRIVER, "install", participant)
 
-    def begin_trial(self, target_force_n: float, haptic_on: bool, t_s: float) -> None:
-        """Forward the cue (``t_s`` is the loop's process's to say)."""
-        self.link.notify(DRIVER, "begin_trial", target_force_n, haptic_on)
-
-    def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
-        """Forward a training trial."""
-        self.link.notify(DRIVER, "practice", target_force_n, haptic_on, live_force_n_visible)
+    def begin_trial(self, aim: TrialAim, t_s: float) -> None:
+        """Forward the cue, what the trial's task asks (``t_s`` is the loop's process's to say)."""
+        self.link.notify(DRIVER, "begin_trial", aim)
 
     def end_trial(self, t_s: float) -> None:
         """Forward the end of a trial."""

@@ -189,7 +189,7 @@ class EngineSessions:
         tr = opened.protocol.trial
         self.engine.publish(m.SessionStarted(
             session_id=opened.session_id, code=opened.code, kind=opened.kind, trials_total=len(opened.schedule),
-            start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
+            start_position=opened.start_position, task=opened.protocol.task,
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
             participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,

@@ -335,24 +335,20 @@ class SessionModel:
         tr = self.last_trial
         if tr is None or self.session is None:
             return None
-        f, tol = tr.target_force_n, self.session.tolerance_fraction
-        return (f * (1 - tol), f * (1 + tol))
+        return self.session.task.screen(tr).band_n
 
     def band_label(self) -> str:
-        """The live plot's label of the band: ``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)`` ("" without a band)."""
-        band = self.band()
-        if band is None or self.trial is None or self.session is None:
+        """The live plot's words for the band, the task's (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``; "" without
+        a band)."""
+        if self.band() is None or self.trial is None or self.session is None:
             return ""
-        tol_pct = round(100 * self.session.tolerance_fraction, 1)
-        return (f"{self.trial.target_label}: target {self.trial.target_force_n:g} N ± {tol_pct:g} % "
-                f"({band[0]:.3g}–{band[1]:.3g} N)")
+        return self.session.task.screen(self.trial).band_label
 
     def band(self) -> tuple[float, float] | None:
-        """The current target band (N) while a trial is active, else None."""
+        """The current trial's band as its task draws it (N) while a trial is active, else None."""
         if self.trial is None or self.session is None or self.phase != "active":
             return None
-        f, tol = self.trial.target_force_n, self.session.tolerance_fraction
-        return (f * (1 - tol), f * (1 + tol))
+        return self.session.task.screen(self.trial).band_n
 
 
 def _not_run(n: int, other: str = "") -> str:

@@ -11,6 +11,7 @@ from PySide6.QtCore import QRect, QSize
 from PySide6.QtWidgets import QApplication
 
 from protocol.study.records import AbortCause
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.participant_window import HEADLINE_MAX_PX, ParticipantWindow
@@ -47,7 +48,7 @@ def test_the_participant_screen_keeps_the_size_given_and_scales_the_cue(qtbot):
     w.resize(400, 260)
     w.show()
     qtbot.waitExposed(w)
-    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     p.apply(m.TrialStarted(1.0, 0, 1, 2, "VERYLONGTARGET", 0.6, "off"))  # a protocol's own, long target word
     p.update(1.2, 0.0)
     p.apply(m.SessionEnded(1, "completed", "", 2, 0, 0))
@@ -104,7 +105,7 @@ def test_the_fault_log_reads_oldest_first_and_keeps_the_newest_in_view(qtbot):
 
 def test_a_computer_too_busy_for_the_loop_is_said_in_words():
     h = HealthModel()
-    h.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
+    h.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     assert h.machine_notice() == ""
     h.apply(m.Health(990.0, 1000.0, 2000.0, 900.0, 30, 5, 20_000, 0, True, "autopilot", True, False,
                      scheduling="normal (Operation not permitted)"))
@@ -140,7 +141,7 @@ def test_the_fault_log_names_an_aborted_trial_s_cause_once():
 def test_notices_go_with_their_cause_and_the_form_speaks_plainly(tmp_path):
     app = AppModel()
     app.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
-    app.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    app.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     assert app.actions.calibration_refusal().startswith("not during a session")
     app.apply(m.CommandRefused("CalibrateTcp", "a session is running"))
     assert app.notices.notice is not None and app.notices.notice.text == "TCP calibration refused: a session is running"

@@ -15,6 +15,7 @@ from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.runtime.loop_messages import RECORD_FIELDS
 from pipeline.runtime.ring import RingBuffer
 from protocol.study.records import TrialRecord
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.models.app import AppModel
 from study_app.models.calibration import CalibrationModel
@@ -29,7 +30,7 @@ from study_app.models.setup import SetupModel
 
 def started(kind: str = "experiment", aid: bool = False, total: int = 2) -> m.SessionStarted:
     return m.SessionStarted(session_id=3, code="P01", kind=kind, trials_total=total, start_position=0,
-                            tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
+                            task=ForceRegulation(), max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
 
 
 def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2,
@@ -238,7 +239,7 @@ def test_a_resumed_session_restores_its_table_and_progress():
     s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     stored = [row(0), row(1, "aborted"), row(2, "timeout")]
     schedule = [{"index": i, "repeat_of": None} for i in range(20)] + [{"index": 20, "repeat_of": 1}]
-    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, schedule=schedule,
+    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, ForceRegulation(), 12.0, 2.0, 1.0, False, schedule=schedule,
                              participant_number=4, stored_trials=stored))
     assert len(s.table.rows) == 3 and (s.completed, s.aborted) == (2, 1)
     assert s.count.text() == "2 of 20 trials done · 1 aborted · 1 re-run left"
@@ -326,7 +327,7 @@ _EVENTS = st.one_of(
 @given(aid=st.booleans(), events=st.lists(_EVENTS, max_size=40))
 def test_participant_screen_never_carries_force_in_an_experiment(aid, events):
     p = ParticipantScreenModel()
-    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, live_force_aid=aid))
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, live_force_aid=aid))
     for ev in events:
         if isinstance(ev, tuple):
             p.update(ev[1], ev[2])

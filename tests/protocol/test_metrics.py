@@ -13,16 +13,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.metrics import names
-from protocol.study.metrics import (
+from protocol.tasks.force_regulation import (
     BAND_SLACK,
-    CONTACT_THRESHOLD_N,
     HoldDetector,
-    TrialMetrics,
     band_halfwidth_n,
     hold_completion_index,
     in_band,
     trial_metrics,
 )
+from protocol.tasks.window import CONTACT_THRESHOLD_N, TrialMetrics
 
 MS = 1_000_000  # ns
 S = 1_000_000_000  # ns

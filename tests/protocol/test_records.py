@@ -12,8 +12,8 @@ from protocol.storage import HEALTH_COLUMNS, StudyDatabase, trial_id_of
 from protocol.study.clock import SessionClock
 from protocol.study.config import default_protocol
 from protocol.study.design import HapticMode, TrialSpec, build_schedule, schedule_to_json
-from protocol.study.metrics import trial_metrics
 from protocol.study.records import AbortCause, LoopHealth, Outcome, TrialRecord, trial_health
+from protocol.tasks.force_regulation import trial_metrics
 
 SPEC = TrialSpec(3, "FIRM", 1.2, "off", repeat_of=1)
 

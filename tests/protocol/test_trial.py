@@ -11,7 +11,6 @@ import pytest
 
 from protocol.study.config import TrialTiming
 from protocol.study.design import TrialSpec
-from protocol.study.metrics import trial_metrics
 from protocol.study.trial import (
     PHASE_CODES,
     TRANSITIONS,
@@ -21,6 +20,7 @@ from protocol.study.trial import (
     TrialMachineError,
     TrialPhase,
 )
+from protocol.tasks.force_regulation import trial_metrics
 
 MS = 1_000_000
 S = 1_000_000_000

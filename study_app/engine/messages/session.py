@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.study.records import TrialRecord
+from protocol.tasks.base import Task
 
 __all__ = [
     "AbortSession",
@@ -119,14 +120,15 @@ class SessionsListed:
 
 @dataclass(frozen=True, slots=True)
 class SessionStarted:
-    """A session is stored and running."""
+    """A session is stored and running; ``task`` is its protocol's task, which the views ask what a trial shows
+    (:meth:`protocol.tasks.base.Task.screen`: the cue word, the band)."""
 
     session_id: int
     code: str
     kind: str
     trials_total: int
     start_position: int
-    tolerance_fraction: float
+    task: Task
     max_trial_s: float
     pause_s: float
     cue_s: float
