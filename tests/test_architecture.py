@@ -79,6 +79,7 @@ SIM_IMPORTERS = (
     "pipeline.sim",
     "pipeline.assembly.engine",
     "pipeline.assembly.loop_jobs",
+    "pipeline.assembly.latency",  # the latency's twin of the simulated rig
     "pipeline.assembly.sim_config",
     "study_app.engine.setup",
     "study_app.engine.loop_process",
