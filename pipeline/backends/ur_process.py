@@ -28,10 +28,10 @@ import numpy as np
 from foundation.platform_support.processes import die_with
 from pipeline.backends.ur import RtdeLink, UrRtdeRobot
 from pipeline.core.clock import Clock, MonotonicClock
+from pipeline.core.ring import RingBuffer
 from pipeline.devices.interfaces import DeviceError, PoseSample
 from pipeline.devices.registry import robot_model
 from pipeline.force.frames import Vec3
-from pipeline.runtime.ring import RingBuffer
 
 __all__ = ["POSE_DTYPE", "STATES", "UrPoseProcess"]
 
