@@ -22,11 +22,13 @@ import numpy as np
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.recording.integrity import WHOLE_BLOCK, place_crc32
 from protocol.storage import crashpoint
+from protocol.storage.annotations import insert_covariates
 from protocol.storage.codes import CODE_PATTERN, stored_clash, validate_code
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
 from protocol.storage.withdrawal import withdrawal_of
+from protocol.study.covariates import Covariate, CovariateValue
 
 __all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
 
@@ -196,8 +198,13 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
         rules: Callable[[StudyDatabase], Sequence[tuple[str, str]]] | None = None,
         software_commit: str | None = None, software_dirty: bool | None = None,
+        covariates: Mapping[str, CovariateValue] | None = None, declared: Sequence[Covariate] = (),
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
+
+        ``covariates`` (checked against the protocol's ``declared`` ones) are stored with a participant this
+        session registers, in the same transaction; a participant registered before keeps those of their first
+        session (:func:`protocol.storage.annotations.insert_covariates`).
 
         ``software_commit`` and ``software_dirty`` say which code ran it (the git commit of the checkout and
         whether it had uncommitted changes; None when not known, e.g. installed from a wheel).
@@ -243,7 +250,10 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
             extra_events = rules(self) if rules is not None else ()
-            pid = self.participant_id(code, create=True)
+            known = self.participant_id(code, create=False)
+            pid = known if known is not None else self.participant_id(code, create=True)
+            assert pid is not None
+            insert_covariates(self.conn, pid, code, declared, covariates or {}, new=known is None)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
                 "status, started_at, software_version, rig, config_json, calibration_json, software_commit, "
