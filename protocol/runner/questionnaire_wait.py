@@ -23,10 +23,13 @@ __all__ = ["QuestionnaireWait", "prompt_words"]
 
 
 def prompt_words(prompt: Prompt) -> str:
-    """How the record and the displays name a prompt: *workload (nasa_tlx) after the haptics ON block*."""
+    """How the record and the displays name a prompt: *workload (NASA-TLX) after the haptics ON block*."""
     q = prompt.questionnaire
     after = "the session" if prompt.block == SESSION else f"the haptics {prompt.block.upper()} block"
-    return f"{q.name} ({q.kind}) after {after}"
+    return f"{q.name} ({_KIND_WORDS.get(q.kind, q.kind)}) after {after}"
+
+
+_KIND_WORDS = {"nasa_tlx": "NASA-TLX", "likert": "Likert items"}
 
 
 class QuestionnaireWait:

@@ -101,8 +101,8 @@ class Covariate:
 
     @property
     def question(self) -> str:
-        """What the form asks (the label, else the name)."""
-        return self.label or self.name
+        """What the form asks (the label, else the name in words: ``age_band`` → *Age band*)."""
+        return self.label or self.name.replace("_", " ").capitalize()
 
     def allowed(self) -> str:
         """What a value may be, in words (the end of every refusal)."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QLabel, QLineEdit, QWidget
+from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QLabel, QLineEdit, QVBoxLayout, QWidget
 
 from study_app.models.covariate_form import CovariateForm
 
@@ -28,7 +28,16 @@ class QtCovariateFields(QGroupBox):
         super().__init__("About the participant (pseudonymous)", parent)
         self.form = form
         self.on_answer = changed
-        self.layout_ = QFormLayout(self)
+        outer = QVBoxLayout(self)
+        self.layout_ = QFormLayout()
+        # the column is narrow: a field keeps the width it needs, a long question goes above its field
+        self.layout_.setFieldGrowthPolicy(QFormLayout.FieldGrowthPolicy.AllNonFixedFieldsGrow)
+        self.layout_.setRowWrapPolicy(QFormLayout.RowWrapPolicy.WrapLongRows)
+        self.note = QLabel()
+        self.note.setWordWrap(True)
+        self.note.setStyleSheet("color: #555555;")
+        outer.addLayout(self.layout_)
+        outer.addWidget(self.note)
         self.fields: dict[str, QComboBox | QLineEdit] = {}
         form.changed.connect(self._build)
         self._build()
@@ -44,11 +53,8 @@ class QtCovariateFields(QGroupBox):
             return
         if not form.asking:
             stored = form.registered_text()
-            note = QLabel(f"Registered with their first session: {stored}" if stored else
-                          "Registered before: no covariates were recorded then (they are not asked again)")
-            note.setWordWrap(True)
-            note.setStyleSheet("color: #555555;")
-            self.layout_.addRow(note)
+            self.note.setText(f"Registered with their first session: {stored}" if stored else
+                              "Registered before: no covariates were recorded then (they are not asked again)")
             return
         for c in form.declared:
             text = form.texts.get(c.name, "")
@@ -62,15 +68,12 @@ class QtCovariateFields(QGroupBox):
                 self.fields[c.name] = box
             else:
                 line = QLineEdit(text)
-                line.setPlaceholderText(c.allowed().removeprefix("a ") + ("" if c.required else " (optional)"))
+                line.setPlaceholderText(f"{c.lo:g}–{c.hi:g}{' ' + c.unit if c.unit else ''}")  # its range
                 line.textChanged.connect(lambda t, n=c.name: self._answer(n, t))
                 self.fields[c.name] = line
             self.fields[c.name].setToolTip(c.described())
             self.layout_.addRow(c.question + (" *" if c.required else ""), self.fields[c.name])
-        hint = QLabel("Nothing identifying: no names or dates of birth. * required by the protocol.")
-        hint.setWordWrap(True)
-        hint.setStyleSheet("color: #555555;")
-        self.layout_.addRow(hint)
+        self.note.setText("Nothing identifying: no names or dates of birth. * required by the protocol.")
 
     def _answer(self, name: str, text: str) -> None:
         self.form.set_text(name, text)

@@ -9,13 +9,22 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSizePolicy, QVB
 
 from study_app.models.questionnaire import QuestionnaireModel
 
-__all__ = ["QuestionnaireView", "ScaleWidget"]
+__all__ = ["QuestionnaireView", "ScaleWidget", "text_unit_px"]
 
-_BUTTON = ("QPushButton { background: #2b2b33; color: #f2f2f2; border: 1px solid #55555f; border-radius: 6px; "
-           "padding: 10px 22px; font-size: 18px; } QPushButton:disabled { color: #66666e; border-color: #3a3a42; } "
-           "QPushButton:focus { border: 2px solid #7fb0ff; }")
-_CHOICE = ("QPushButton { background: #24324a; color: #f2f2f2; border: 2px solid #4a6a9a; border-radius: 10px; "
-           "padding: 26px 18px; font-size: 24px; font-weight: 600; } QPushButton:hover { background: #2e4466; }")
+_BUTTON = ("QPushButton {{ background: #2b2b33; color: #f2f2f2; border: 1px solid #55555f; border-radius: 6px; "
+           "padding: {pad}px {wide}px; font-size: {px}px; }} "
+           "QPushButton:disabled {{ color: #66666e; border-color: #3a3a42; }}")
+_CHOICE = ("QPushButton {{ background: #24324a; color: #f2f2f2; border: 2px solid #4a6a9a; border-radius: 10px; "
+           "padding: {pad}px 12px; font-size: {px}px; font-weight: 600; }} "
+           "QPushButton:hover {{ background: #2e4466; }}")
+#: The text's unit, px: a fortieth of the page's width or a twentieth of its height, whichever is less (the page is
+#: a whole monitor in a study, a small window beside the experimenter's in a rehearsal), at least 9 px.
+_UNIT_MIN_PX = 9.0
+
+
+def text_unit_px(width: int, height: int) -> float:
+    """The questionnaire's text unit for a page of this size (its sizes are multiples of it)."""
+    return max(_UNIT_MIN_PX, min(width / 40.0, height / 20.0))
 
 
 class ScaleWidget(QWidget):
@@ -26,11 +35,22 @@ class ScaleWidget(QWidget):
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
-        self.setMinimumHeight(110)
         self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Fixed)
         self.setCursor(Qt.CursorShape.PointingHandCursor)
         self.lo, self.hi, self.step, self.low, self.high = 0, 100, 5, "", ""
         self.value: float | None = None
+        self.unit = 18.0
+        self.set_unit(self.unit)
+
+    def set_unit(self, unit: float) -> None:
+        """The text unit (px): the scale's height and its words follow it."""
+        self.unit = unit
+        self.setFixedHeight(int(unit * 5.2))
+        self.update()
+
+    def mark_y(self) -> float:
+        """Where the scale's line runs (px from the top)."""
+        return self.unit * 1.6
 
     def set_scale(self, lo: int, hi: int, step: int, low: str, high: str, value: float | None) -> None:
         self.lo, self.hi, self.step, self.low, self.high, self.value = lo, hi, step, low, high, value
@@ -40,7 +60,7 @@ class ScaleWidget(QWidget):
         return [float(v) for v in range(self.lo, self.hi + 1, self.step)]
 
     def _x(self, v: float) -> float:
-        x0, x1 = 40.0, self.width() - 40.0
+        x0, x1 = 1.5 * self.unit, self.width() - 1.5 * self.unit
         return x0 + (v - self.lo) / max(self.hi - self.lo, 1) * (x1 - x0)
 
     def mousePressEvent(self, event: QMouseEvent) -> None:  # Qt's name
@@ -51,28 +71,32 @@ class ScaleWidget(QWidget):
     def paintEvent(self, event) -> None:  # Qt's name
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing)
-        y = 40.0
+        u, y = self.unit, self.mark_y()
         p.setPen(QPen(QColor(200, 200, 210), 2))
         p.drawLine(int(self._x(self.lo)), int(y), int(self._x(self.hi)), int(y))
         marks = self._marks()
         few = len(marks) <= 11  # a Likert scale: every point numbered
-        p.setFont(QFont("Sans", 12))
+        font = QFont(self.font())
+        font.setPixelSize(max(8, int(u * 0.75)))
+        p.setFont(font)
         for i, v in enumerate(marks):
             x = self._x(v)
-            tall = few or i % 2 == 0 or i in (0, len(marks) - 1)
-            p.drawLine(int(x), int(y - (14 if tall else 8)), int(x), int(y + (14 if tall else 8)))
+            half = u * (0.7 if few or i % 2 == 0 else 0.4)  # NASA-TLX: every other mark long, as on the sheet
+            p.drawLine(int(x), int(y - half), int(x), int(y + half))
             if few:
-                p.drawText(QRectF(x - 20, y + 16, 40, 20), Qt.AlignmentFlag.AlignHCenter, f"{v:g}")
+                p.drawText(QRectF(x - u, y + u * 0.8, 2 * u, u), Qt.AlignmentFlag.AlignHCenter, f"{v:g}")
         if self.value is not None:
+            r = u * 0.6
             p.setBrush(QColor(127, 176, 255))
             p.setPen(QPen(QColor(240, 240, 255), 2))
-            p.drawEllipse(QRectF(self._x(self.value) - 11, y - 11, 22, 22))
+            p.drawEllipse(QRectF(self._x(self.value) - r, y - r, 2 * r, 2 * r))
         p.setPen(QPen(QColor(190, 190, 200)))
-        p.setFont(QFont("Sans", 14))
-        bottom = y + (40 if few else 22)
-        p.drawText(QRectF(0, bottom, self.width() / 2, 30), Qt.AlignmentFlag.AlignLeft, f"  {self.low}")
-        p.drawText(QRectF(self.width() / 2, bottom, self.width() / 2, 30), Qt.AlignmentFlag.AlignRight,
-                   f"{self.high}  ")
+        font.setPixelSize(max(9, int(u * 0.9)))
+        p.setFont(font)
+        top = y + u * (2.0 if few else 1.1)
+        p.drawText(QRectF(0, top, self.width() / 2, 1.6 * u), Qt.AlignmentFlag.AlignLeft, f" {self.low}")
+        p.drawText(QRectF(self.width() / 2, top, self.width() / 2, 1.6 * u), Qt.AlignmentFlag.AlignRight,
+                   f"{self.high} ")
         p.end()
 
 
@@ -83,30 +107,29 @@ class QuestionnaireView(QWidget):
     def __init__(self, model: QuestionnaireModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model = model
+        self._room = True  # for the how-to line (set by _fit)
         self.setFocusPolicy(Qt.FocusPolicy.StrongFocus)
-        self.heading = self._label(18, "#b8b8c0")
-        self.position = self._label(14, "#8a8a94")
-        self.title = self._label(30, "#f2f2f2", bold=True)
-        self.question = self._label(24, "#f2f2f2")
+        self.heading = self._label()
+        self.position = self._label()
+        self.title = self._label()
+        self.question = self._label()
         self.scale = ScaleWidget()
         self.scale.picked.connect(model.set_value)
         self.left, self.right = QPushButton(), QPushButton()
         for side, b in ((-1, self.left), (1, self.right)):
-            b.setStyleSheet(_CHOICE)
             b.setFocusPolicy(Qt.FocusPolicy.NoFocus)
             b.clicked.connect(lambda _=False, d=side: model.step(d))
         choices = QHBoxLayout()
         choices.addWidget(self.left)
-        choices.addSpacing(30)
+        choices.setContentsMargins(0, 0, 0, 0)
         choices.addWidget(self.right)
         self.choices = QWidget()
         self.choices.setLayout(choices)
-        self.instruction = self._label(14, "#9a9aa4")
+        self.instruction = self._label()
         self.back_button, self.next_button, self.submit_button = (QPushButton("Back"), QPushButton("Next"),
                                                                  QPushButton("Submit"))
         for b, slot in ((self.back_button, model.back), (self.next_button, model.next),
                         (self.submit_button, model.submit)):
-            b.setStyleSheet(_BUTTON)
             b.setFocusPolicy(Qt.FocusPolicy.NoFocus)  # the keys are the view's
             b.clicked.connect(lambda _=False, s=slot: s())
         nav = QHBoxLayout()
@@ -114,8 +137,7 @@ class QuestionnaireView(QWidget):
         nav.addStretch(1)
         nav.addWidget(self.next_button)
         nav.addWidget(self.submit_button)
-        lay = QVBoxLayout(self)
-        lay.setContentsMargins(40, 24, 40, 24)
+        lay = self.page_layout = QVBoxLayout(self)
         for part in (self.heading, self.position, None, self.title, self.question, self.scale, self.choices,
                      self.instruction):
             if part is None:
@@ -125,16 +147,41 @@ class QuestionnaireView(QWidget):
         lay.addStretch(1)
         lay.addLayout(nav)
         model.changed.connect(self._on_changed)
+        self._fit()
         self._on_changed()
 
     @staticmethod
-    def _label(px: int, colour: str, bold: bool = False) -> QLabel:
+    def _label() -> QLabel:
         label = QLabel()
         label.setWordWrap(True)
         label.setAlignment(Qt.AlignmentFlag.AlignCenter)
-        label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        label.setStyleSheet(f"font-size: {px}px; color: {colour};" + (" font-weight: 700;" if bold else ""))
+        label.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Minimum)
         return label
+
+    def resizeEvent(self, event) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._fit()
+
+    def _fit(self) -> None:
+        """Every size a multiple of the text unit (:func:`text_unit_px`): legible on a whole monitor and in a small
+        window beside the experimenter's; the how-to line only where there is room for it."""
+        u = text_unit_px(self.width(), self.height())
+        styles = ((self.heading, 0.8, "#b8b8c0", False), (self.position, 0.7, "#8a8a94", False),
+                  (self.title, 1.5, "#f2f2f2", True), (self.question, 1.1, "#f2f2f2", False),
+                  (self.instruction, 0.7, "#9a9aa4", False))
+        for label, scale, colour, bold in styles:
+            label.setStyleSheet(f"font-size: {max(9, int(u * scale))}px; color: {colour};"
+                                + (" font-weight: 700;" if bold else ""))
+        for b in (self.back_button, self.next_button, self.submit_button):
+            b.setStyleSheet(_BUTTON.format(pad=int(u * 0.35), wide=int(u * 0.9), px=max(9, int(u * 0.9))))
+        for b in (self.left, self.right):
+            b.setStyleSheet(_CHOICE.format(pad=int(u * 0.8), px=max(10, int(u * 1.1))))
+        self.scale.set_unit(u)
+        margin = int(u * 1.2)
+        self.page_layout.setContentsMargins(margin, int(u * 0.6), margin, int(u * 0.6))
+        self.page_layout.setSpacing(max(2, int(u * 0.3)))
+        self._room = self.height() >= 22 * u  # the how-to line too
+        self._on_changed()
 
     def _on_changed(self) -> None:
         md = self.model
@@ -161,6 +208,7 @@ class QuestionnaireView(QWidget):
             self.left.setText(f"1  {a}")
             self.right.setText(f"2  {b}")
         self.instruction.setText(md.instruction() if not md.sent else "Please wait.")
+        self.instruction.setVisible(self._room or md.sent)
         self.back_button.setEnabled(md.page > 0 and not md.sent)
         self.next_button.setVisible(item is not None)
         self.next_button.setEnabled(md.value() is not None)

@@ -60,14 +60,24 @@ class CovariateForm:
         return bool(self.declared) and self.registered is None
 
     def error(self) -> str:
-        """Why the answers cannot be stored ("" when they can, or nothing is asked): one line."""
+        """Why the answers cannot be stored ("" when they can, or nothing is asked): a line for each covariate
+        whose answer the engine would refuse, naming it, the value and what is allowed."""
         if not self.asking:
             return ""
+        lines = []
+        for c in self.declared:  # each alone: every wrong answer is said at once, not the first only
+            try:
+                checked_values((c,), {c.name: self.texts.get(c.name, "")})
+            except CovariateError as exc:
+                lines.append(str(exc))
+        return "\n".join(lines)
+
+    def typed(self) -> dict[str, Any]:
+        """The answers as stored (typed), when they are valid ({} else)."""
         try:
-            checked_values(self.declared, self.texts)
-        except CovariateError as exc:
-            return str(exc)
-        return ""
+            return dict(checked_values(self.declared, self.values()))
+        except CovariateError:
+            return {}
 
     def values(self) -> dict[str, str]:
         """What a start sends: the answers given (none for a registered participant)."""

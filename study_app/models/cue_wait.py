@@ -41,6 +41,8 @@ class CueWait:
 
 #: How the runner's wait for a questionnaire begins (:mod:`protocol.runner.questionnaire_wait`).
 QUESTIONNAIRE_WAIT = "questionnaire: "
+#: How the banner and the progress line name that wait.
+QUESTIONNAIRE_REASON = "the participant answers the questionnaire "
 #: A wait with nothing named to end it, after this long (s), says where to look.
 CUE_STUCK_S = 5.0
 #: What ends each wait, as the button reads.
@@ -74,8 +76,7 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
                                  help="Resume (Space) to continue with the next trial.")
     if waiting.startswith(QUESTIONNAIRE_WAIT):  # the participant answers on their screen: it ends by itself
         return "questionnaire", CueWait(
-            "info", f"the participant answers the questionnaire {waiting.removeprefix(QUESTIONNAIRE_WAIT)} on the "
-                    "participant screen",
+            "info", f"{QUESTIONNAIRE_REASON}{waiting.removeprefix(QUESTIONNAIRE_WAIT)} on their screen",
             help="The next trial comes the protocol's pause after the participant sends the answers (Submit on "
                  "their screen); the answers are stored with the session.")
     if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
@@ -103,6 +104,8 @@ def headline(session: SessionModel, wait: CueWait | None) -> str:
     that must be put right (a latched fault, a dead engine), ``Next trial waits: fault latched (SENSOR_STALE) ·
     Reset faults`` -- never "The next trial is due" above a red "Next cue waits".  Otherwise
     :meth:`SessionModel.progress_text` (a pause, the experimenter's or the session's, has its own words there)."""
+    if wait is not None and wait.reason.startswith(QUESTIONNAIRE_REASON):
+        return f"Next trial waits: {wait.reason}"
     if wait is None or wait.level != "error" or session.state == "paused" or session.phase in ("active", "cued"):
         return session.progress_text()
     action = CUE_ACTIONS.get(wait.action, "")

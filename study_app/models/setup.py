@@ -370,6 +370,8 @@ class SetupModel:
         """A session started or resumed: the form shows whose it is (and knows it is stored: the study's seed
         is fixed from now on, before the database is listed again)."""
         self.running_session = session_id
+        if self.covariates.asking and code == self.values.code and code not in self.registered:
+            self.registered[code] = self.covariates.typed()  # stored with this session (until listed again)
         if session_id == self.preferred_resume:
             self.preferred_resume = None
         if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):

@@ -54,7 +54,7 @@ def _answer_by_keyboard(qtbot, w, mouse_first: bool) -> None:
     for i in range(6):
         if i == 0 and mouse_first:
             scale = view.scale
-            qtbot.mouseClick(scale, Qt.MouseButton.LeftButton, pos=QPoint(int(scale._x(20.0)), 40))
+            qtbot.mouseClick(scale, Qt.MouseButton.LeftButton, pos=QPoint(int(scale._x(20.0)), int(scale.mark_y())))
             assert md.value() == 20.0
         else:
             qtbot.keyClick(view, Qt.Key.Key_Right)
