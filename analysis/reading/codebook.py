@@ -28,6 +28,7 @@ from collections.abc import Iterable, Mapping
 import numpy as np
 import pandas as pd
 
+from analysis.reading.codebook_annotations import ANNOTATION_COLUMNS
 from analysis.reading.codebook_columns import (
     _STATS,
     COLUMNS,
@@ -82,7 +83,7 @@ def _wide_columns() -> tuple[Column, ...]:
     return tuple(out)
 
 
-_ALL = COLUMNS + _wide_columns()
+_ALL = COLUMNS + _wide_columns() + ANNOTATION_COLUMNS
 #: analysis name -> exported name
 _RENAMED: dict[str, str] = {c.source: c.name for c in COLUMNS if c.source}
 
@@ -149,14 +150,21 @@ def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFr
     return out
 
 
-def codebook_frame(files: Mapping[str, Iterable[str]]) -> pd.DataFrame:
+def codebook_frame(files: Mapping[str, Iterable[str]],
+                   described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> pd.DataFrame:
     """``codebook.csv``: one row per (file, column) of the files written, in file and column order.
 
-    A column without an entry in :data:`COLUMNS` gets an empty description (the report's test refuses that).
+    A column without an entry in :data:`COLUMNS` gets an empty description (the report's test refuses that), unless
+    ``described`` -- (file, column) → (type, unit, description), a study's own columns such as its covariates --
+    describes it.
     """
     rows = []
     for file, columns in files.items():
         for name in columns:
+            own = (described or {}).get((file, name))
+            if own is not None:
+                rows.append({"file": file, "column": name, "type": own[0], "unit": own[1], "description": own[2]})
+                continue
             c = lookup(file, name)
             rows.append({"file": file, "column": name, "type": c.type if c else "",
                          "unit": c.unit if c else "", "description": c.description if c else ""})

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -141,7 +141,8 @@ _WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by
                    "speed_accuracy_slopes.csv", "learning_models.csv", "order_check.csv")
 
 
-def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = (),
+                 described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> None:
     """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
 
     Parameters
@@ -152,6 +153,9 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
         :func:`export_tables`' result.
     written_too : sequence of str
         CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    described : mapping, optional
+        (file, column) → (type, unit, description) of columns the study's own declarations describe (a covariate's
+        column in the participants' tables).
     """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)
@@ -159,5 +163,5 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
     for name in written_too:
         columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
-    codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
+    codebook.codebook_frame(columns, described).to_csv(folder / "codebook.csv", index=False)
 
