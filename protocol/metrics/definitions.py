@@ -16,7 +16,13 @@ Definitions (the paper, §V-B, made exact where it is silent; the window is :cla
   trial window;
 * **error impulse** -- ``∫|F − F*| dt`` over the error window, the same samples as RMSE and Max AE (the trapezoid
   rule on their times; a non-finite sample is left out and bridged): a secondary measure, tested outside the
-  primary family.
+  primary family;
+* **lag** and **gain** (force tracking's: a target that moves) -- over the moving part of the trial window (from the
+  first sample whose target differs from the first one; the lead-in's steady target and the approach left out),
+  target and force demeaned: the lag is the shift of the force that maximises their cross-correlation, within
+  ±:data:`MAX_LAG_S` (positive: the force follows the target), the gain the least-squares slope of the force on
+  the target (1: the right size; below 1: the excursions fall short).  Both are NaN where the target does not move
+  or a non-finite force leaves too few samples.
 """
 
 from __future__ import annotations
@@ -24,10 +30,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
 
-__all__ = ["ABS_IMPULSE", "MAX_AE", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS", "TCT", "TIME_IN_BAND"]
+__all__ = ["ABS_IMPULSE", "GAIN", "LAG", "MAX_AE", "MAX_LAG_S", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS",
+           "TASK_METRICS", "TCT", "TIME_IN_BAND"]
 
 #: Forces to 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _FORCE_DECIMALS = 4
@@ -62,6 +70,44 @@ def _abs_impulse_n_s(w: TrialWindow) -> MetricValue:
     # describe, and right on a clock whose periods vary (the rectangle sum, samples × 1 ms, would assume 1 kHz)
     e = np.abs(w.error_n)
     return float(np.sum((e[1:] + e[:-1]) * np.diff(w.error_t_s)) / 2.0) if len(e) else math.nan
+
+
+#: The largest lag searched, s: beyond a human visuomotor delay (0.15–0.35 s) with room for a slow hand.
+MAX_LAG_S = 1.0
+
+
+def _moving(w: TrialWindow) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+    """The target and the force over the moving part, demeaned; None where the target does not move."""
+    moved = np.flatnonzero(w.target_n != w.target_n[0]) if len(w.target_n) else np.array([], dtype=np.int64)
+    if len(moved) == 0:
+        return None
+    target, force = w.target_n[moved[0]:], w.force_n[moved[0]:]
+    finite = np.isfinite(force)
+    if np.count_nonzero(finite) < 10 or np.ptp(target[finite]) == 0.0:
+        return None
+    # a non-finite force is bridged by the mean (it adds nothing to the correlation) where the lag needs the grid
+    f = np.where(finite, force, np.mean(force[finite]))
+    return target - np.mean(target), f - np.mean(f)
+
+
+def _lag_s(w: TrialWindow) -> MetricValue:
+    moving = _moving(w)
+    if moving is None:
+        return math.nan
+    target, force = moving
+    n, k_max = len(target), min(len(target) - 1, int(round(MAX_LAG_S / w.sample_period_s)))
+    size = 1 << (2 * n - 1).bit_length()  # zero-padded FFT: the linear (not circular) cross-correlation
+    c = np.fft.irfft(np.fft.rfft(force, size) * np.conj(np.fft.rfft(target, size)), size)
+    lags = np.arange(-k_max, k_max + 1)
+    return float(lags[int(np.argmax(c[lags]))] * w.sample_period_s)  # c[k] = Σ force[i + k]·target[i]
+
+
+def _gain(w: TrialWindow) -> MetricValue:
+    moving = _moving(w)
+    if moving is None:
+        return math.nan
+    target, force = moving
+    return float(np.dot(target, force) / np.dot(target, target))
 
 
 def _peak_force_n(w: TrialWindow) -> MetricValue:
@@ -99,3 +145,17 @@ ABS_IMPULSE = Metric(
 #: Every metric, in the order of every table's columns.  The primary ones are the paper's outcome measures, the
 #: family of Holm's correction: exactly these four, so the paper's numbers do not move when a metric is added.
 METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE)
+
+LAG = Metric(
+    "lag_s", "s", "lag (s)", "shift of the task force that maximises its cross-correlation with the moving target "
+    "(positive: the force follows), over the moving part of the trial", _lag_s, "lower", Role.DESCRIPTIVE,
+    _TIME_DECIMALS, values=(-MAX_LAG_S, MAX_LAG_S))
+GAIN = Metric(
+    "gain", "", "gain", "least-squares slope of the task force on the moving target, over the moving part of the "
+    "trial (1: excursions of the right size)", _gain, "higher", Role.DESCRIPTIVE, 4, values=(-math.inf, math.inf))
+
+#: The metrics of tasks other than the paper's (force tracking's lag and gain): in the registry -- a task names
+#: them, the live machine and the recompute compute them by the one definition -- but not yet columns of the
+#: ``trials`` table or the report's tables, which list :data:`METRICS`: a column there would change every
+#: force-regulation study's files (docs/tracking.md, "What is not yet done").
+TASK_METRICS: tuple[Metric, ...] = (LAG, GAIN)

@@ -10,15 +10,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 
-from protocol.metrics.definitions import METRICS
+from protocol.metrics.definitions import METRICS, TASK_METRICS
 from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
 
 __all__ = ["METRICS", "by_participant_name", "compute", "family_word", "get", "names", "primary", "select",
            "stored", "tested", "values_of", "windowed"]
 
-_BY_NAME: dict[str, Metric] = {m.name: m for m in METRICS}
+_BY_NAME: dict[str, Metric] = {m.name: m for m in (*METRICS, *TASK_METRICS)}
 _BY_PARTICIPANT: dict[str, Metric] = {m.participant: m for m in METRICS}
-if len(_BY_NAME) != len(METRICS):  # pragma: no cover - a definition error, caught on import
+if len(_BY_NAME) != len(METRICS) + len(TASK_METRICS):  # pragma: no cover - a definition error, caught on import
     raise ValueError("two metrics of protocol.metrics.definitions share a name")
 
 
@@ -46,7 +46,7 @@ def select(wanted: Iterable[str]) -> tuple[Metric, ...]:
     unknown = keep - set(_BY_NAME)
     if unknown:
         raise KeyError(f"no metric {', '.join(sorted(unknown))}: the metrics are {', '.join(_BY_NAME)}")
-    return tuple(m for m in METRICS if m.name in keep)
+    return tuple(m for m in (*METRICS, *TASK_METRICS) if m.name in keep)
 
 
 def primary() -> tuple[Metric, ...]:
