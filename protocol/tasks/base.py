@@ -24,7 +24,7 @@ is what a task's checks see of them).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -91,12 +91,17 @@ class TrialScreen:
         The live plot's words for it (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``).
     band_legend
         A figure's legend for it (``target band 0.6 N ± 10%``).
+    band_at
+        A band that moves: the band at trial time ``t_s`` (s since the cue), N -- what the participant screen shows
+        at present (the force-tracking task's); None: :attr:`band_n` holds all trial (``band_n`` is then the band at
+        the cue, for the views that draw one band).
     """
 
     cue_word: str
     band_n: tuple[float, float] | None
     band_label: str
     band_legend: str
+    band_at: Callable[[float], tuple[float, float]] | None = None
 
 
 @dataclass(frozen=True, slots=True)
