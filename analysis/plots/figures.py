@@ -305,7 +305,11 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
             for axis in (ax, ax_raw):
                 axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
                              label="in contact" if (a == edges[0] and axis is ax) else None)
-    if band is not None and band.band_n is not None:
+    if band is not None and band.band_at is not None:  # a band that moves (a tracked target): drawn as it moved
+        edges_n = np.array([band.band_at(float(x)) for x in t[::10]]).reshape(-1, 2)
+        ax.fill_between(t[::10], edges_n[:, 0], edges_n[:, 1], color="#0072B2", alpha=0.18, linewidth=0,
+                        label=band.band_legend)
+    elif band is not None and band.band_n is not None:
         lo, hi = band.band_n
         ax.axhspan(lo, hi, color="#0072B2", alpha=0.18, linewidth=0, label=band.band_legend)
         for edge in (lo, hi):
