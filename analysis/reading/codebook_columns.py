@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, tested
+from protocol.metrics.definitions import TASK_METRICS
 from protocol.tasks.base import Parameter
 from protocol.tasks.registry import TASKS
 
@@ -94,7 +95,7 @@ def _trial_metric_columns() -> tuple[Column, ...]:
     """One trial's value of every metric (trials.csv)."""
     return tuple(Column(m.name, m.description, type="boolean") if m.boolean else
                  Column(m.exported, m.description, m.unit, label=m.label, source=_source(m), decimals=m.decimals)
-                 for m in METRICS)
+                 for m in (*METRICS, *TASK_METRICS))  # a task's own (lag, gain): in the files of its trials
 
 
 def _censored_columns() -> tuple[Column, ...]:

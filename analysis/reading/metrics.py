@@ -17,6 +17,7 @@ from analysis.reading.load import Progress, StudyData, connect_readonly, recorde
 from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
 from protocol.metrics import METRICS, MetricValue, stored, windowed
+from protocol.metrics.definitions import TASK_METRICS
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import Task
 from protocol.tasks.window import ERROR_WINDOWS, TrialMetrics
@@ -221,6 +222,15 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                     column[r.row] = _nan(m.values.get(name))
                 first_contact[r.row] = _nan(m.first_contact_s)
                 disagree += not r.agrees
+    # a task's own metrics (force tracking's lag and gain: not stored live) are columns where a trial produced them
+    own = [m for m in TASK_METRICS if any(r.metrics is not None and m.name in r.metrics.values
+                                          for chunk in results for r in chunk)]
+    for m in own:
+        values[m.name] = np.full(n, np.nan)
+        for chunk in results:
+            for r in chunk:
+                if r.metrics is not None:
+                    values[m.name][r.row] = _nan(r.metrics.values.get(m.name))
     # trials without samples keep the metrics stored live (cue window only)
     missing = ~from_samples
     for metric in stored():
@@ -239,7 +249,7 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "haptic_mode": inc["haptic_mode"],
             "outcome": np.where(success, Outcome.SUCCESS.value, Outcome.TIMEOUT.value),
             # a yes/no metric is the task's verdict; the others by name, in the registry's order
-            **{m.name: success if m.boolean else values[m.name] for m in METRICS},
+            **{m.name: success if m.boolean else values[m.name] for m in (*METRICS, *own)},
             "first_contact_s": first_contact,
             **{m.censored: np.where(success, values[m.name], cap) for m in METRICS if m.censored},
             "database": inc["database"],

@@ -19,7 +19,8 @@ Definitions (the paper, §V-B, made exact where it is silent; the window is :cla
   primary family;
 * **lag** and **gain** (force tracking's: a target that moves) -- over the moving part of the trial window (from the
   first sample whose target differs from the first one; the lead-in's steady target and the approach left out),
-  target and force demeaned: the lag is the shift of the force that maximises their cross-correlation, within
+  the lag is the shift of the force that maximises its cross-correlation with the target (the correlation
+  coefficient over each shift's overlapping samples), within
   ±:data:`MAX_LAG_S` (positive: the force follows the target), the gain the least-squares slope of the force on
   the target (1: the right size; below 1: the excursions fall short).  Both are NaN where the target does not move
   or a non-finite force leaves too few samples.
@@ -95,11 +96,24 @@ def _lag_s(w: TrialWindow) -> MetricValue:
     if moving is None:
         return math.nan
     target, force = moving
-    n, k_max = len(target), min(len(target) - 1, int(round(MAX_LAG_S / w.sample_period_s)))
+    n, k_max = len(target), min(len(target) - 2, int(round(MAX_LAG_S / w.sample_period_s)))
     size = 1 << (2 * n - 1).bit_length()  # zero-padded FFT: the linear (not circular) cross-correlation
-    c = np.fft.irfft(np.fft.rfft(force, size) * np.conj(np.fft.rfft(target, size)), size)
+    sxy = np.fft.irfft(np.fft.rfft(force, size) * np.conj(np.fft.rfft(target, size)), size)
     lags = np.arange(-k_max, k_max + 1)
-    return float(lags[int(np.argmax(c[lags]))] * w.sample_period_s)  # c[k] = Σ force[i + k]·target[i]
+    # at shift k the pairs (force[i + k], target[i]) that overlap, each side's sums from cumulative sums: the
+    # correlation coefficient of each shift's own overlap (a raw sum would favour the longer overlaps near 0)
+    cf, cf2 = np.concatenate(([0.0], np.cumsum(force))), np.concatenate(([0.0], np.cumsum(force * force)))
+    ct, ct2 = np.concatenate(([0.0], np.cumsum(target))), np.concatenate(([0.0], np.cumsum(target * target)))
+    f_lo, f_hi = np.maximum(lags, 0), n + np.minimum(lags, 0)  # force[f_lo:f_hi] meets target[t_lo:t_hi]
+    t_lo, t_hi = np.maximum(-lags, 0), n - np.maximum(lags, 0)
+    m = (n - np.abs(lags)).astype(np.float64)
+    sf, sf2, st, st2 = cf[f_hi] - cf[f_lo], cf2[f_hi] - cf2[f_lo], ct[t_hi] - ct[t_lo], ct2[t_hi] - ct2[t_lo]
+    cov = sxy[lags] - sf * st / m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = cov / np.sqrt(np.maximum(sf2 - sf * sf / m, 0.0) * np.maximum(st2 - st * st / m, 0.0))
+    if not np.isfinite(r).any():
+        return math.nan
+    return float(lags[int(np.nanargmax(r))] * w.sample_period_s)
 
 
 def _gain(w: TrialWindow) -> MetricValue:
