@@ -223,14 +223,14 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                 first_contact[r.row] = _nan(m.first_contact_s)
                 disagree += not r.agrees
     # a task's own metrics (force tracking's lag and gain: not stored live) are columns where a trial produced them
-    own = [m for m in TASK_METRICS if any(r.metrics is not None and m.name in r.metrics.values
+    own = [t for t in TASK_METRICS if any(r.metrics is not None and t.name in r.metrics.values
                                           for chunk in results for r in chunk)]
-    for m in own:
-        values[m.name] = np.full(n, np.nan)
+    for t in own:
+        values[t.name] = np.full(n, np.nan)
         for chunk in results:
             for r in chunk:
                 if r.metrics is not None:
-                    values[m.name][r.row] = _nan(r.metrics.values.get(m.name))
+                    values[t.name][r.row] = _nan(r.metrics.values.get(t.name))
     # trials without samples keep the metrics stored live (cue window only)
     missing = ~from_samples
     for metric in stored():
