@@ -20,11 +20,18 @@ Model: continuous pursuit tracking (McRuer's crossover model: the human adapts t
   ``τ_v`` 0.18–0.26 s plus the camera's 0.05–0.10 s); ON the felt force arrives after ``τ_h`` 0.10–0.14 s (the
   haptic loop is faster than the visuomotor one: science.md §4.1), so ``ω_c`` is higher and the stiffness belief's
   error -- which the visual percept cannot see, being judged through the same belief -- is corrected by the felt
-  force.  **Hence haptics ON shortens the lag and lowers the error** (the documented mechanism the tracking study
-  checks: docs/tracking.md);
+  force;
+* **the reflex** (haptics ON only): the force felt 60 ms ago (the long-latency stretch reflex: Matthews 1991;
+  Pruszynski & Scott 2012) against the force meant then, corrected in proportion -- a fast loop closed around the
+  hand's own low-pass, so the force follows its command sooner (a shorter lag) and at the felt, not the believed,
+  size (a gain nearer 1).  Vision has no such loop: its percept is ``τ_v + camera`` old and judged through ``k̂``;
 * **the hand's bandwidth**: the commanded equilibrium passes a first-order low-pass of 2.5 Hz (voluntary force
   modulation follows up to about 2–3 Hz and fades above: Neilson 1972; Sosnoff & Newell 2005), with additive motor
   noise of σ 0.1 mm per control step (the regulation model's ``motor_noise_abs_m``).
+
+**Hence haptics ON lowers the error and shortens the lag**: the felt force is the true one (the error of the
+stiffness belief, which vision cannot see, is corrected), its voluntary loop runs at a higher crossover, and the
+reflex speeds the force's response to the command (the mechanism the tracking study checks: docs/tracking.md).
 
 Safety: the output is clamped to the participant's safe range by the caller, and a non-finite percept is no look.
 """
@@ -40,7 +47,7 @@ from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant_params import ParticipantParams
 
-__all__ = ["CONTROL_S", "CROSSOVER_PHASE_RAD", "HAND_BANDWIDTH_HZ", "TrackingHand"]
+__all__ = ["CONTROL_S", "CROSSOVER_PHASE_RAD", "HAND_BANDWIDTH_HZ", "REFLEX_GAIN", "REFLEX_S", "TrackingHand"]
 
 #: The control step: a percept and an integrator update every 10 ms (far shorter than any delay of the loop).
 CONTROL_S = 0.01
@@ -48,6 +55,14 @@ CONTROL_S = 0.01
 CROSSOVER_PHASE_RAD = 0.5
 #: The hand's first-order bandwidth, Hz (voluntary force modulation follows to ~2–3 Hz: Neilson 1972).
 HAND_BANDWIDTH_HZ = 2.5
+#: The long-latency stretch reflex's delay, s: 50–80 ms (Matthews 1991; Pruszynski & Scott 2012), well under the
+#: voluntary haptic reaction (τ_h 0.10–0.14 s) and the visuomotor delay (τ_v + camera 0.23–0.36 s).
+REFLEX_S = 0.06
+#: The reflex's proportional gain on the felt force's error (believed depth per believed depth).  Around the hand's
+#: 2.5 Hz low-pass and the 60 ms delay alone a gain of 1 would keep a margin of about 2 (the phase reaches −180°
+#: near 33 rad/s, where the low-pass passes 0.43); on the simulated rig the pipeline's filter, the rendering and the
+#: arm add delay, and 1 oscillated: 0.4 is stable there (an assumption, chosen, not fitted to a result).
+REFLEX_GAIN = 0.4
 _HIST = 1024  # ticks of observation history (≥ the longest delay, 0.36 s, at 1 kHz)
 _MASK = _HIST - 1
 
@@ -158,11 +173,24 @@ class TrackingHand:
         push = 0.0
         if self._haptic:  # the felt push-back the participant expects at the target, pre-compensated (regulation's)
             push = self.params.pushback_comp * scale_magnitude(seen, self._fmax, self._fscale) / self._arm_k
+        if self._haptic and f_hat is not None:  # the reflex: the felt force against the force meant then
+            push += self._reflex_m(t)
         noise = self.params.motor_noise_abs_m * self._rng.standard_normal()
         cmd = self._surface - (self._depth(seen) + self._u) / self._s - push + noise
         # the first reach to the tissue is a feed-forward minimum-jerk approach, as in regulation (1.1–1.7 s)
         blend = 1.0 if x >= 1.0 else x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
         self._cmd = self._y0 + blend * (cmd - self._y0)
+
+    def _reflex_m(self, t: float) -> float:
+        """The long-latency reflex's correction, m of believed depth: the force felt ``REFLEX_S`` ago against the
+        force meant then (the target seen then), in proportion (:data:`REFLEX_GAIN`)."""
+        felt = self._hf[self._at(t - REFLEX_S)]
+        if not -10.0 <= felt <= 10.0:
+            return 0.0
+        x = min(felt / self._fmax, 0.999)
+        f_felt = self._fscale * math.atanh(x) if x > 0.0 else 0.0
+        meant = self.aim.force_n(t - REFLEX_S - self._t0 - self._tau_v)
+        return REFLEX_GAIN * (self._depth(f_felt) - self._depth(meant)) / self._s
 
     def value(self) -> float:
         """The equilibrium last returned (where a retraction starts)."""
