@@ -336,7 +336,8 @@ COLUMNS: tuple[Column, ...] = (
            files=("loop_health.csv",)),
     Column("abort_cause", "why an aborted trial did not count: experimenter, fault (a watchdog fault latched, "
            "LOOP_STALLED included), feedback (haptics not as designed, thermal derating included), gap (loop "
-           "records missing) or interrupted (the program ended); empty for a counted trial or when not recorded "
+           "records missing), interrupted (the program ended) or participant_screen (the participant screen "
+           "closed, so the cue was not seen); empty for a counted trial or when not recorded "
            "(schema version 1)", type="text", label="abort cause"),
     Column("period_p50_ms", "median haptic-loop tick period over the trial's samples", "ms",
            label="period p50 (ms)", decimals=3),

@@ -23,6 +23,7 @@ import pandas as pd
 
 from analysis.reading.errors import AnalysisError
 from analysis.reading.inputs import check_databases
+from analysis.reading.session_config import config_fields
 from protocol.metrics import stored
 from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
@@ -170,22 +171,6 @@ def _protocol_fields(protocol_json: str, where: str) -> tuple[dict[str, object],
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
 
 
-def _watchdog_limits(config_json: object) -> dict[str, float | str]:
-    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say), and its pipeline
-    settings that are not the paper's (``""``: the paper's, or not stored)."""
-    try:
-        wd = json.loads(str(config_json)).get("watchdog", {})
-        sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
-    except (ValueError, KeyError, TypeError, AttributeError):
-        sensor = pose = math.nan
-    try:
-        chosen = json.loads(str(config_json)).get("pipeline_settings") or {}
-        settings = ", ".join(f"{k}={float(v):g}" for k, v in chosen.items())
-    except (ValueError, TypeError, AttributeError):
-        settings = ""
-    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose, "pipeline_settings": settings}
-
-
 #: What analysis decodes of a recorded block (a block written before version 4 has no checksum: these are tried).
 _ANALYSED_COLUMNS = ("t_ns", "force_n", "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
                      "render_fx", "render_fy", "render_fz")
@@ -240,7 +225,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
             for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
     proto = pd.DataFrame([fields for fields, _ in read], index=sessions.index)
     tasks = {(path, int(sid)): task for sid, (_, task) in zip(sessions["session_id"], read, strict=True)}
-    watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
+    watchdog = pd.DataFrame([config_fields(cj) for cj in sessions["config_json"]], index=sessions.index)
     design = pd.DataFrame([_schedule_fields(sj) for sj in sessions["schedule_json"]], index=sessions.index)
     sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
                           design], axis=1)

@@ -423,9 +423,12 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
                    f'<p class="warn">{plural(len(outside), "trial")} of {len(recorded)} left the bounds:</p>'
                    f"<ul>{listed}{more}</ul>")
         loop = (_html_table(tables["loop_health_by_participant.csv"], "loop_health_by_participant.csv") + verdict)
-    clock = ("" if not (study.sessions["rig"] == "sim").any() else
-             "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
-             "the latency is the sample's age. A real-clock session measures them in real time.</p>")
+    sessions = study.sessions
+    virtual = int(((sessions["rig"] == "sim") & (sessions.get("clock", "") == "virtual")).sum())
+    clock = ("" if not virtual else
+             f"<p>On the virtual clock ({plural(virtual, 'session')} of the simulated rig run headless) computing "
+             "takes no time: every period is exactly 1 ms and the latency is the sample's age. A session on the real "
+             "clock (the GUI's, the real rig's) measures them in real time.</p>")
     return (f"<h2>What was delivered</h2>{report_sections.incomplete_html(within, study.include_incomplete)}"
             f"{report_sections.resumed_html(within)}{report_sections.deviations_html(within)}"
             f"<h3>Trials that did not count</h3>{aborted}"

@@ -64,7 +64,7 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     wide = _wide(per, by_participant)
     st = exp(stats, "stats.csv")
     st_t = exp(stats_by_target, "stats_by_target.csv")
-    sess = study.sessions.copy()
+    sess = study.sessions.drop(columns=["clock"], errors="ignore")  # (the page says what the clock means)
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)
     health["database"] = health["database"].map(os.path.basename)

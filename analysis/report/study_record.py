@@ -109,9 +109,10 @@ def damaged_trials(study: StudyData) -> pd.DataFrame:
 
 def _wall_break_s(session: pd.Series, runs: pd.DataFrame) -> float:
     """The real time a session spent between its runs, s: its wall-clock span less its session-clock span -- on
-    the real rig, whose session clock runs in real time and steps over a break; NaN on the simulated rig (a
-    virtual clock) or when the session has not ended."""
-    if session["rig"] != "real" or not isinstance(session["ended_at"], str) or runs["last_record_s"].isna().all():
+    the real clock (the real rig, or the simulated rig in the GUI), whose session clock runs in real time and steps
+    over a break; NaN on the virtual clock (the headless runner's) or when the session has not ended."""
+    clock = session.get("clock") or ("real" if session["rig"] == "real" else "")  # (not stored: the rig says)
+    if clock != "real" or not isinstance(session["ended_at"], str) or runs["last_record_s"].isna().all():
         return math.nan
     try:
         wall = (dt.datetime.fromisoformat(session["ended_at"])
@@ -161,7 +162,7 @@ def resumed_sessions(study: StudyData) -> pd.DataFrame:
         brk = (f"the real-time break between the runs was {wall / 60:.1f} min{' in all' if len(g) > 1 else ''} "
                "(the session's wall-clock span less its session-clock span)" if math.isfinite(wall) else
                "the real-time break between the runs is not derivable (no wall-clock time of a run's start is "
-               "stored" + (", and the simulated rig's session clock is virtual)" if session["rig"] == "sim" else ")"))
+               "stored" + (", and the session clock was virtual)" if session.get("clock") == "virtual" else ")"))
         previous = -math.inf
         for k, r in enumerate(g.itertuples(), start=2):
             before = runs[runs["started_at_s"] < float(r.t_s)]["last_record_s"].dropna()

@@ -284,7 +284,19 @@ def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
     else:
         source = str(Path(path))
         data = read_toml(Path(path), ProtocolError, "protocol file")
-    return protocol_from_dict(data, source)
+    protocol = protocol_from_dict(data, source)
+    _check_cue(Fields(source, ProtocolError), protocol.trial)
+    return protocol
+
+
+def _check_cue(f: Fields, timing: TrialTiming) -> None:
+    """A protocol file's cue must end before its trial's cap: a cue as long as the trial shows the target word
+    throughout, another condition than the design's brief cue (``cue_s = 30`` with a 12 s cap ran a whole study).
+    Checked where a file is loaded for new sessions, not where a stored session's protocol is read back, so a
+    session stored before the check can still be resumed, checked and analysed as it ran."""
+    if timing.cue_s >= timing.max_trial_s:
+        raise f.fail("trial.cue_s", timing.cue_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g} "
+                     "(the cue word is shown at the start of each trial, then the screen goes blank)")
 
 
 def default_protocol() -> ProtocolConfig:

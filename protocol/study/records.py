@@ -54,6 +54,9 @@ class AbortCause(StrEnum):
     FEEDBACK = "feedback"
     GAP = "gap"
     INTERRUPTED = "interrupted"
+    #: The participant screen closed (or was minimised, or left every monitor) during the trial: the participant
+    #: could not see the cue.  Added after schema version 4's files existed: a writer widens an older file's list.
+    PARTICIPANT_SCREEN = "participant_screen"
 
     @property
     def undelivered(self) -> bool:

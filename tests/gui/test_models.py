@@ -212,10 +212,10 @@ def test_session_progress_follows_events_and_sample_time():
     assert s.state == "ready" and not s.running
     s.apply(started())
     assert s.running and s.progress_text() == "Session started: the first trial is due"
-    assert s.count_text() == "0 of 2 trials done · at most 30 s left"  # 2 × (12 s cap + 2 s pause), rounded up
+    assert s.count_text() == "0 of 2 trials done · at most 30 s left"  # 2 × 12 s cap + one 2 s pause, rounded up
     s.apply(trial(t_s=5.0))
     s.set_time(7.5)
-    assert s.progress_text() == "Trial 1 · FIRM · haptics ON ·  9.5 s left"
+    assert s.progress_text() == "Trial 1 · FIRM · haptics ON · times out in 9.5 s"
     assert s.band() == pytest.approx((1.08, 1.32))
     s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
                                            outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2,
@@ -223,7 +223,7 @@ def test_session_progress_follows_events_and_sample_time():
     s.apply(m.PhaseEntered(9.0, 0, "pause"))
     s.set_time(9.5)
     assert s.progress_text() == "Next trial in 1.5 s"
-    assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: 4 + 2 s pause
+    assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: one more, no pause after
     assert s.band() is None and s.fraction_done() == 0.5
     s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
@@ -389,7 +389,7 @@ def test_health_rates_from_records():
         ("F/T sensor", "ok", 1000), ("Robot (pose)", "ok", 125), ("Haptic device", "ok", 1000)]
     h.apply(m.EngineFault(1.0, "fault", 2, "POSE_STALE"))
     assert h.devices[1].state == "FAULT: POSE_STALE" and h.devices[0].state == "ok"
-    assert h.faults_text() == "POSE_STALE" and h.fault_log == ["t =    1.000 s  fault: POSE_STALE"]
+    assert h.faults_text() == "POSE_STALE" and h.fault_log == ["no session, engine clock 1.000 s  fault: POSE_STALE"]
 
 
 def test_loop_health_is_judged_against_its_limits():
@@ -563,15 +563,16 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
     h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
     h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
     assert len(h.fault_log) == 4
-    assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
-                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to "
-                              "zero; feedback ramps in again from zero")
+    assert h.fault_log[1] == ("session clock, 1.000 s  output restarted ×30 (the last at session clock, 30.000 s): "
+                              "no loop tick for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the "
+                              "force to zero; feedback ramps in again from zero")
     assert h.fault_log[2].endswith("reset: SENSOR_STALE")
-    assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
+    assert h.fault_log[3] == "session clock, 40.000 s  output restarted: no loop tick for 10.5 ms: …"
     # a restart is a line of its own: the same event after it starts a new run; the log keeps the newest 50 lines
     h.engine_restarted()
     h.apply(m.EngineFault(1.0, "output_restarted", 0, "no loop tick for 10.7 ms: …", session_t_s=1.0))
-    assert h.fault_log[-2:] == ["engine restarted", "session    1.000 s  output restarted: no loop tick for 10.7 ms: …"]
+    assert h.fault_log[-2:] == ["— engine restarted —",
+                                "session clock, 1.000 s  output restarted: no loop tick for 10.7 ms: …"]
     for k in range(60):
         h.apply(m.EngineFault(2.0 + k, "fault" if k % 2 else "fault_cleared", 1, "SENSOR_STALE"))
     assert len(h.fault_log) == 50 and h.fault_log[-1].endswith("fault: SENSOR_STALE")

@@ -50,7 +50,7 @@ def test_progress_view_follows_the_session(qtbot):
     s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 20, "GENTLE", 0.6, "off"))
     s.set_time(4.0)
-    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF ·  9.0 s left"
+    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF · times out in 9.0 s"
     assert view.count.full_text() == "0 of 20 trials done · at most 5 min left"
 
 
@@ -341,9 +341,10 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     assert app.notices.notice is not None and app.notices.notice.level == "info"
     assert app.notices.notice.text == (
         "Rehearsal planned: robot pose stops (100 ms), 1.5 s after the cue of trial 3 (if trial 3 ends sooner, nothing "
-        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault — "
-        "nothing in the record marks it as rehearsed: trial 3 is stored as aborted (cause: fault), does not count, "
-        "and is run again later. The fault latches: the next cue waits for Reset faults.")
+        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault, and "
+        "the record says it was rehearsed (a fault_rehearsal event, listed among the report's deviations): trial 3 "
+        "is stored as aborted (cause: fault), does not count, and is run again later. The fault latches: the next "
+        "cue waits for Reset faults.")
     app.apply(m.FaultInjected("nan-burst", "now"))
     assert "Rehearsal: F/T sensor sends NaN (5 ms), now: a real fault of the simulated rig. It is stored with the " \
         "running session" in app.notices.notice.text

@@ -226,8 +226,8 @@ def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(
     path.write_text(text, encoding="utf-8")
     assert _error_of(path).startswith(f"{path}: trial.max_trial_s = 0.002: must be at least trial.hold_s = 0.001 + "
                                       "the feedback's 0.5 s ramp-in (safety.ramp_in_s) = 0.501 s")
-    off_only = text.replace('modes = ["on", "off"]', 'modes = ["off"]')
-    path.write_text(off_only, encoding="utf-8")
+    off_only = text.replace('modes = ["on", "off"]', 'modes = ["off"]').replace("cue_s = 1.0 ", "cue_s = 0.001 ")
+    path.write_text(off_only, encoding="utf-8")  # (a cue shorter than the 2 ms cap, as every cue must be)
     assert load_protocol(path).trial.max_trial_s == 0.002  # no feedback, no ramp: only the hold must fit
 
 

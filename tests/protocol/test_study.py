@@ -176,7 +176,7 @@ def test_bad_input_is_refused_before_anything_is_stored(tmp_path: Path) -> None:
     r = _run_cli(["run", "--participants", "1", "--db", str(tmp_path / "nowhere" / "x.db")], timeout=60)
     assert r.returncode == 2 and "does not exist" in r.stderr
     r = _run_cli(["run", "--db", str(db), "--resume", "bad code!"], timeout=60)
-    assert r.returncode == 2 and "participant code = 'bad code!'" in r.stderr
+    assert r.returncode == 2 and "--resume: 'bad code!': must be 1–32 characters" in r.stderr  # parsed as a code
     newer = tmp_path / "newer.db"
     StudyDatabase(newer).close()
     c = sqlite3.connect(newer)

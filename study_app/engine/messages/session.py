@@ -16,6 +16,7 @@ __all__ = [
     "AbortSession",
     "AbortTrial",
     "ListSessions",
+    "ParticipantScreenState",
     "Pause",
     "PhaseEntered",
     "Resume",
@@ -98,6 +99,20 @@ class AbortSession:
 
     reason: str = "aborted by the experimenter"
     session_id: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class ParticipantScreenState:
+    """Whether the participant screen is open where the participant sees it (shown, not minimised, on a monitor).
+
+    The GUI sends it whenever that changes.  While it is closed no session starts or resumes and no trial is
+    cued; closed during a session, the running trial is aborted (cause ``participant_screen``, stored) and the
+    session pauses.  ``detail`` says how it closed (``closed``, ``minimised``, ``off every monitor``).  An engine
+    whose client never sent one (a script, a test) has no participant screen to check.
+    """
+
+    open: bool
+    detail: str = ""
 
 
 # -- events (engine → GUI) ----------------------------------------------------------------------
