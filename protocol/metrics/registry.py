@@ -36,8 +36,9 @@ def by_participant_name(name: str) -> Metric | None:
 
 
 def names() -> tuple[str, ...]:
-    """Every metric's name, in order."""
-    return tuple(_BY_NAME)
+    """Every metric's name, in order: the metrics of every study (:data:`METRICS`; a task's own, such as force
+    tracking's lag and gain, are :data:`protocol.metrics.definitions.TASK_METRICS`)."""
+    return tuple(m.name for m in METRICS)
 
 
 def select(wanted: Iterable[str]) -> tuple[Metric, ...]:
