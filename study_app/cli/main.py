@@ -118,9 +118,9 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
     environment: one line (a missing file is each command's to say)."""
     from foundation.oserrors import kind_of
     from foundation.parallel import workers_env_problem
-    from pipeline.core.clock import realtime_env_problem
+    from pipeline.core.clock import loop_cpu_problem, realtime_env_problem
 
-    for problem in (workers_env_problem(), realtime_env_problem()):
+    for problem in (workers_env_problem(), realtime_env_problem(), loop_cpu_problem()):
         if problem is not None:
             raise CliError(problem)
 
