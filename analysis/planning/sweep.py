@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from analysis.planning.setting_labels import setting_formats
 from analysis.planning.sim_study import SIM_METRICS, TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
 from foundation.platform_support.files import O_NOFOLLOW
 from protocol.metrics import get
@@ -188,9 +189,10 @@ def summary_lines(summary: pd.DataFrame, swept: Sequence[str]) -> list[str]:
     """The summary as a Markdown table: one row per setting and measure (mean [95 % CI] over studies)."""
     head = [*swept, "measure", "OFF", "ON", "change ON/OFF", "studies"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    fmts = setting_formats(summary, swept)
     for r in summary.to_dict("records"):
         mark = " (paper)" if r["paper"] else ""
-        cells = [f"{float(r[k]):g}{mark if i == 0 else ''}" for i, k in enumerate(swept)]
+        cells = [f"{fmts[k](r[k])}{mark if i == 0 else ''}" for i, k in enumerate(swept)]
         cells += [METRICS[r["metric"]], _ci(r, "off", r["metric"]), _ci(r, "on", r["metric"]),
                   _ci(r, "change", r["metric"]), str(r["n_studies"])]
         lines.append("| " + " | ".join(cells) + " |")
