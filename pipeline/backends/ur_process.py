@@ -165,7 +165,6 @@ def _serve(parent_pid: int, ring_name: str, args: list[str]) -> int:
     except DeviceError as exc:
         print(f"ERROR {exc}", flush=True)
         return 1
-    print("READY", flush=True)
     seen, state = -1, ""
     while True:
         robot.wait_for_samples(max(1, seen + 1), 0.05)
@@ -175,11 +174,14 @@ def _serve(parent_pid: int, ring_name: str, args: list[str]) -> int:
                 robot.close()
                 return 0
             continue
+        first = seen < 0
         seen, state = n, robot.state
         p = robot.read_pose()
         q = robot.q_rad
         ring.write((p.t_ns, *p.position_m, *p.rot_base_tip, p.controller_time_s, *q, STATES.index(state)
                     if state in STATES else 0, robot.reconnects, n))
+        if first:  # READY only once a pose is in the ring: the opener's first read is never an empty one
+            print("READY", flush=True)
 
 
 if __name__ == "__main__":

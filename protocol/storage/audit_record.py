@@ -30,6 +30,8 @@ from protocol.storage.damage import block_rows
 from protocol.storage.recordings import read_ticks
 from protocol.study.config import ProtocolConfig, ProtocolError, protocol_from_dict
 from protocol.study.records import TrialRecord, disagreement
+from protocol.tasks.base import TrialTarget
+from protocol.tasks.force_regulation import ForceRegulation
 
 __all__ = ["CUE_TOLERANCE_S", "check_record"]
 
@@ -49,21 +51,26 @@ def check_record(conn: sqlite3.Connection, problem: Callable[[str], None]) -> No
     _metrics_against_records(conn, problem)
 
 
+def _protocols(conn: sqlite3.Connection) -> dict[int, ProtocolConfig | None]:
+    """Every session's protocol as it ran (None: unreadable, which the design check says)."""
+    out: dict[int, ProtocolConfig | None] = {}
+    for sid, pj in conn.execute("SELECT session_id, protocol_json FROM sessions"):
+        try:
+            out[int(sid)] = protocol_from_dict(json.loads(pj), f"session {sid} protocol")
+        except (ProtocolError, ValueError, TypeError):
+            out[int(sid)] = None
+    return out
+
+
 def _metrics_against_records(conn: sqlite3.Connection, problem: Callable[[str], None]) -> None:
-    protocols = {int(sid): pj for sid, pj in conn.execute("SELECT session_id, protocol_json FROM sessions")}
+    protocols = _protocols(conn)
     cur = conn.execute("SELECT * FROM trials WHERE segment IS NOT NULL AND first_tick IS NOT NULL "
                        "AND outcome != 'aborted' ORDER BY session_id, trial_index")
     names = [d[0] for d in cur.description]
-    read: dict[int, ProtocolConfig | None] = {}
     for values in cur.fetchall():
         row = dict(zip(names, values, strict=True))
         sid = int(row["session_id"])
-        if sid not in read:
-            try:
-                read[sid] = protocol_from_dict(json.loads(protocols[sid]), f"session {sid} protocol")
-            except (KeyError, ProtocolError, ValueError, TypeError):
-                read[sid] = None  # no such session, or its protocol unreadable: said by the other checks
-        protocol = read[sid]
+        protocol = protocols.get(sid)  # None: no such session, or its protocol unreadable (the other checks say)
         if protocol is None:
             continue
         try:
@@ -96,11 +103,15 @@ def _trials_against_events(conn: sqlite3.Connection, problem: Callable[[str], No
                     f"({str(detail)[:60]!r})")
             continue
         cues.setdefault((int(sid), int(m.group(2))), []).append((float(t_s), m.group(3) + ", haptics " + m.group(4)))
+    protocols = _protocols(conn)
     for sid, idx, label, force_n, mode, start_s in conn.execute(
             "SELECT session_id, trial_index, target_label, target_force_n, haptic_mode, started_at_s FROM trials "
             "ORDER BY session_id, trial_index"):
         where = f"trial {int(idx) + 1} of session {sid}"
-        said = f"{label} {float(force_n):g} N, haptics {mode}"
+        protocol = protocols.get(int(sid))
+        task = protocol.task if protocol is not None else ForceRegulation()  # the task of a file without [task]
+        # the cue's words are the session's task's (protocol.tasks: cue_text), as the runner wrote them
+        said = f"{task.cue_text(TrialTarget(str(label), float(force_n), str(mode)))}, haptics {mode}"
         near = [(t, text) for t, text in cues.get((int(sid), int(idx)), [])
                 if -CUE_TOLERANCE_S <= float(start_s) - t <= CUE_TOLERANCE_S]
         if not near:

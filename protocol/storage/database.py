@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import sqlite3
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -302,8 +303,9 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         """Write a recorded block with its checksum, in place of the chunks it was written in so far (the recorder's
         own rows; :meth:`write_chunk`)."""
         runs, blocks, chunks = recording_tables(arm)
-        crc = place_crc32(data, arm=arm, session_id=session_id, segment=segment, block=block, chunk=WHOLE_BLOCK,
-                          first_tick=int(first_tick), last_tick=int(last_tick), n_records=int(n_records))
+        crc = (place_crc32(data, arm=arm, session_id=session_id, segment=segment, block=block, chunk=WHOLE_BLOCK,
+                           first_tick=int(first_tick), last_tick=int(last_tick), n_records=int(n_records))
+               if self._binds(session_id, segment, arm) else zlib.crc32(data))
         self._insert(blocks, arm, "session_id, segment, block, first_tick, last_tick, n_records, t_first_s, t_last_s, "
                      "data, crc32", (session_id, segment, block, int(first_tick), int(last_tick), int(n_records),
                                      t_first_s, t_last_s, data, crc), replace=True)
@@ -323,7 +325,16 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                      (session_id, segment, block, chunk, int(first_tick), int(last_tick), int(n_records), t_first_s,
                       t_last_s, data, place_crc32(data, arm=arm, session_id=session_id, segment=segment, block=block,
                                                   chunk=chunk, first_tick=int(first_tick), last_tick=int(last_tick),
-                                                  n_records=int(n_records))))
+                                                  n_records=int(n_records))
+                      if self._binds(session_id, segment, arm) else zlib.crc32(data)))
+
+    def _binds(self, session_id: int, segment: int, arm: str) -> bool:
+        """Whether a run binds its blocks' checksums to their place: it counts its blocks (``n_blocks`` not NULL),
+        as every run this writer opens does; a run recorded before keeps checksums of the bytes alone."""
+        row = self.conn.execute(f"SELECT n_blocks IS NOT NULL FROM {recording_tables(arm)[0]} WHERE session_id = ? "
+                                f"AND segment = ?{' AND arm = ?' if arm else ''}",
+                                (session_id, segment, *((arm,) if arm else ()))).fetchone()
+        return bool(row and row[0])
 
     def _insert(self, table: str, arm: str, columns: str, values: tuple[Any, ...], replace: bool = False) -> None:
         """One row of a recording's table (with ``arm`` in another arm's)."""

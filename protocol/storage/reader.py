@@ -419,7 +419,8 @@ class StudyReader:
         """The SQL of whether a block's (or chunk's) run binds its checksums to their place: its run counts its
         blocks (``n_blocks`` not NULL; a file without the column: none does)."""
         runs = recording_tables(arm)[0]
-        if "n_blocks" not in {d[0] for d in self.conn.execute(f"SELECT * FROM {runs} LIMIT 0").description}:
+        if not has_table(self.conn, runs) or "n_blocks" not in {
+                d[0] for d in self.conn.execute(f"SELECT * FROM {runs} LIMIT 0").description}:
             return "0"
         same_arm = f" AND r.arm = {alias}.arm" if arm else ""
         return (f"(SELECT r.n_blocks IS NOT NULL FROM {runs} r WHERE r.session_id = {alias}.session_id "

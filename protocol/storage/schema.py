@@ -319,8 +319,17 @@ class SchemaFile:
 
     def _prepare(self, readonly: bool, upgrade: bool) -> None:
         c = self.conn
-        version = c.execute("PRAGMA user_version").fetchone()[0]
-        tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        # the version and the tables of one snapshot: read apart, a file being created between them looked like
+        # version 0 with tables ("not a haptic-study database") to a reader such as a live check
+        own = not c.in_transaction
+        if own:
+            c.execute("BEGIN")
+        try:
+            version = c.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        finally:
+            if own:
+                c.execute("ROLLBACK")
         if version > SCHEMA_VERSION:
             raise StorageError(
                 f"{self.path}: database schema version {version} is newer than this software supports "

@@ -186,11 +186,14 @@ def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[s
 def _say_the_size(req: _PowerRequest) -> None:
     """Before a long request's work: how much it is and the memory it may take (its bars then say the time left)."""
     from analysis.planning.power import memory_needed
+    from foundation.resources import available_memory_bytes
 
     draws = req.resamples * sum(req.n_values)
-    if draws < _BAR_DRAWS:
-        return
-    mib = memory_needed(req.n_values, req.resamples, req.pool_size) / 2**20
+    need = memory_needed(req.n_values, req.resamples, req.pool_size)
+    have = available_memory_bytes()
+    if draws < _BAR_DRAWS or (have is not None and need > have):
+        return  # seconds of work; or a request the memory cannot hold, refused in one line later
+    mib = need / 2**20
     print(f"power: {req.resamples:,} resampled studies for each of {len(req.n_values)} sizes ({draws:,} participants "
           f"drawn; at most {mib:,.0f} MiB at once): a long run; the bar says how long is left, Ctrl-C stops it with "
           "nothing written", file=sys.stderr)
