@@ -94,7 +94,7 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
         sel = mine[mine["haptic_mode"] == mode]
         if sel.empty:
             continue
-        ok = sel[sel["success"]]
+        ok = sel[sel["outcome"] == "success"]
         picks.append((ok if not ok.empty else sel).iloc[0])
     return picks
 
@@ -224,7 +224,8 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
     """The caveats printed on the figures they qualify."""
     window = ("from the cue, the approach from 0 N included" if options.error_window == "cue" else
               "from first contact")
-    no_tct = int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+    no_tct = (int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+              if "tct_s" in a.overall.columns else 0)  # (a study whose tasks have no TCT: none)
     tct = ("TCT over successful trials only" + (f"; {plural(no_tct, 'participant')} without a success in a mode "
                                                  "have no TCT there" if no_tct else "")
            if options.tct_policy == "successful" else "TCT with failed trials counted at the trial cap")
@@ -232,12 +233,13 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
-    notes = {"tct": tct + ".", "errors": f"{windowed_words()}: error window {window}.",
+    metrics = a.study.metrics
+    notes = {"tct": tct + ".", "errors": f"{windowed_words(metrics)}: error window {window}.",
              "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
              "learning": learning}
-    for group in figure_groups():  # a figure with a secondary measure says whose marks are not Holm's
+    for group in figure_groups(metrics):  # a figure with a secondary measure says whose marks are not Holm's
         if any(m.role is Role.SECONDARY for m in group.metrics):
-            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note())))
+            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note(metrics))))
     return notes
 
 
@@ -271,8 +273,10 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         *(("mode_bars", ([m.participant for m in g.metrics], overall, by_target, marks),
-           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key) for g in figure_groups()),
-        ("paired_lines", (overall, TESTED_METRICS, marks_overall), {}, "paired", "paired"),
+           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key)
+          for g in figure_groups(a.study.metrics)),
+        ("paired_lines", (overall, [m for m in TESTED_METRICS if m in overall.columns], marks_overall), {}, "paired",
+         "paired"),
         ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
@@ -311,8 +315,9 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
     if power:
         from analysis.planning.power_outputs import report_section
 
-        section += power_html(report_section(a.trials, options, zero_method, tmp))
-    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
+        section += power_html(report_section(a.trials, options, zero_method, tmp), a.study.metrics)
+    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
+                               metrics=a.study.metrics)
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,

@@ -1,10 +1,11 @@
 """The trial metrics, each defined once: what it is, how it is computed, how it is reported.
 
-The order of :data:`METRICS` is the order of the columns of every table and file that lists metrics (the
-``trials`` table's columns, ``trials.csv``, ``participants.csv``, the tests, power).  To add a metric, define its
-function and its :class:`~protocol.metrics.metric.Metric` here and append it to :data:`METRICS`: the database gains
-its column, and the CSV files, the codebook, the report and power gain it, without another edit
-(docs/architecture.md, "Where to add …").
+:data:`METRICS` is every metric defined; a study's are the ones its tasks produce (each task names its own,
+:attr:`protocol.tasks.base.Task.metric_names`), in this order -- the order of the columns of every table and file
+that lists metrics (the ``trials`` table's columns, ``trials.csv``, ``participants.csv``, the tests, power).  To add
+a metric, define its function and its :class:`~protocol.metrics.metric.Metric` here, append it to :data:`METRICS`
+and name it in the tasks that produce it: a study of those tasks gains its database column, and its CSV files,
+codebook, report and power gain it, without another edit (docs/architecture.md, "Where to add …").
 
 Definitions (the paper, §V-B, made exact where it is silent; the window is :class:`TrialWindow`'s):
 
@@ -35,8 +36,8 @@ import numpy.typing as npt
 
 from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
 
-__all__ = ["ABS_IMPULSE", "GAIN", "LAG", "MAX_AE", "MAX_LAG_S", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS",
-           "TASK_METRICS", "TCT", "TIME_IN_BAND"]
+__all__ = ["ABS_IMPULSE", "GAIN", "LAG", "MAX_AE", "MAX_LAG_S", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS", "TCT",
+           "TIME_IN_BAND"]
 
 #: Forces to 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _FORCE_DECIMALS = 4
@@ -156,20 +157,17 @@ ABS_IMPULSE = Metric(
     "(trapezoid rule on the samples' times; from the cue to the trial end, or from first contact)",
     _abs_impulse_n_s, "lower", Role.SECONDARY, _FORCE_DECIMALS, windowed=True, figure="errors")
 
-#: Every metric, in the order of every table's columns.  The primary ones are the paper's outcome measures, the
-#: family of Holm's correction: exactly these four, so the paper's numbers do not move when a metric is added.
-METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE)
-
 LAG = Metric(
     "lag_s", "s", "lag (s)", "shift of the task force that maximises its cross-correlation with the moving target "
-    "(positive: the force follows), over the moving part of the trial", _lag_s, "lower", Role.DESCRIPTIVE,
-    _TIME_DECIMALS, values=(-MAX_LAG_S, MAX_LAG_S))
+    "(positive: the force follows), over the moving part of the trial", _lag_s, "lower", Role.SECONDARY,
+    _TIME_DECIMALS, values=(-MAX_LAG_S, MAX_LAG_S), figure="tracking")
 GAIN = Metric(
     "gain", "", "gain", "least-squares slope of the task force on the moving target, over the moving part of the "
-    "trial (1: excursions of the right size)", _gain, "higher", Role.DESCRIPTIVE, 4, values=(-math.inf, math.inf))
+    "trial (1: excursions of the right size)", _gain, "one", Role.SECONDARY, 4, values=(-math.inf, math.inf),
+    figure="tracking")
 
-#: The metrics of tasks other than the paper's (force tracking's lag and gain): in the registry -- a task names
-#: them, the live machine and the recompute compute them by the one definition -- but not yet columns of the
-#: ``trials`` table or the report's tables, which list :data:`METRICS`: a column there would change every
-#: force-regulation study's files (docs/tracking.md, "What is not yet done").
-TASK_METRICS: tuple[Metric, ...] = (LAG, GAIN)
+#: Every metric, in the order of every table's columns (a study's are those of its tasks, in this order).  The
+#: primary ones are the outcome measures, the family of Holm's correction: the paper's four (a study of force
+#: regulation), or those of the study's tasks (force tracking's RMSE and Max AE; its lag and gain are secondary,
+#: each tested with its own p), so the paper's numbers do not move when a metric or a task is added.
+METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE, LAG, GAIN)

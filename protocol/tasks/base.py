@@ -24,7 +24,7 @@ is what a task's checks see of them).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -38,7 +38,7 @@ from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics
 
 __all__ = ["Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule", "TrialScreen", "TrialTarget",
-           "listed"]
+           "listed", "metrics_of"]
 
 
 class TrialCondition(Protocol):
@@ -221,6 +221,12 @@ class Task(ABC):
     def methods(cls, tasks: Sequence[Task], caps: Sequence[float]) -> str:
         """The report's sentences defining its rule, over the analysed sessions' tasks of this kind and their trial
         caps (sorted, distinct: several values are listed with ``/``)."""
+
+
+def metrics_of(tasks: Iterable[Task]) -> tuple[Metric, ...]:
+    """A study's metrics: those its tasks produce, in the registry's order (what its database, files, codebook,
+    tests and report list; a study of the paper's task has the paper's)."""
+    return select(name for task in tasks for name in task.metric_names)
 
 
 def listed(values: Sequence[float], unit: str) -> str:
