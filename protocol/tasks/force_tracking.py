@@ -218,17 +218,16 @@ class ForceTracking(Task):
         return f"steps {'/'.join(f'{v:g}' for v in self.levels_n)} N, {self.duration_s / len(self.levels_n):g} s each"
 
     def screen(self, trial: TrialCondition) -> TrialScreen:
-        first = float(self.profile_n(np.zeros(1))[0])
         return TrialScreen(
-            cue_word=trial.target_label, band_n=(first - self.band_n, first + self.band_n),
+            cue_word=trial.target_label, band=self.band_edges,
             band_label=f"{trial.target_label}: track {self.profile_words()} ± {self.band_n:g} N",
             band_legend=f"target ± {self.band_n:g} N ({self.profile})",
-            band_at=self.band_at,
+            follow="Follow the target",
         )
 
-    def band_at(self, t_s: float) -> tuple[float, float]:
-        """The band at trial time ``t_s`` (s since the cue), N: it moves with the profile."""
-        f = float(self.profile_n(np.array([t_s]))[0])
+    def band_edges(self, t_s: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        """The band at trial times ``t_s`` (s since the cue), N: it moves with the profile."""
+        f = self.profile_n(t_s)
         return f - self.band_n, f + self.band_n
 
     def aim(self, trial: TrialCondition, aid: bool) -> TrialAim:

@@ -90,14 +90,15 @@ class ParticipantScreenModel:
             return ParticipantScreen("Rest", "Let go of the tissue. The next trial starts soon.", False, None, None)
         if tr is None or self.task is None or self.phase not in ("active", "cued"):
             return ParticipantScreen("", "Please wait", False, None, None)
-        shown = self.task.screen(tr)  # the task's cue word and band
-        if shown.band_at is not None:  # a target that moves: its band is shown moving, the force only in training
+        shown = self.task.screen(tr)  # the task's cue word, and its band asked at this trial time
+        band = shown.band_at(self.t_s - tr.t_s)
+        if shown.follow:  # a target that moves: its band is shown all trial, moving; the force only in training
             word = shown.cue_word if self.gauge_allowed or self.t_s - tr.t_s < self.cue_s else ""
             force = self.force_n if self.gauge_allowed else None
-            return ParticipantScreen(word, "Follow the target", True, force, shown.band_at(self.t_s - tr.t_s))
+            return ParticipantScreen(word, shown.follow, True, force, band)
         if self.gauge_allowed:
             return ParticipantScreen(shown.cue_word, f"Practice · haptics {tr.haptic_mode.upper()}", True,
-                                     self.force_n, shown.band_n)
+                                     self.force_n, band)
         if self.t_s - tr.t_s < self.cue_s:
             return ParticipantScreen(shown.cue_word, "", False, None, None)
         return ParticipantScreen("", "", False, None, None)

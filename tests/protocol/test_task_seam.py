@@ -106,7 +106,7 @@ class Press(Task):
         return f"press {trial.target_label} ≥ {self.floor_fraction * trial.target_force_n:g} N"
 
     def screen(self, trial: TrialCondition) -> TrialScreen:
-        return TrialScreen(cue_word=f"PRESS {trial.target_label}", band_n=None, band_label="", band_legend="")
+        return TrialScreen(cue_word=f"PRESS {trial.target_label}", band=None, band_label="", band_legend="")
 
     def aim(self, trial: TrialCondition, aid: bool) -> TrialAim:
         return TrialAim.constant(trial.target_force_n, trial.haptic_mode == "on", gauge=aid, practice=aid)
