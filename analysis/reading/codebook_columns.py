@@ -63,7 +63,7 @@ class Column:
         return text
 
 
-_STATS = ("stats.csv", "stats_by_target.csv")
+_STATS = ("stats.csv", "stats_by_target.csv", "target_speed_test.csv")
 #: The tests' files (:data:`_STATS`): the columns every consumer may rely on, first and in this order (more follow).
 STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
                      "zero_method", "rank_biserial", "p_holm")
@@ -73,6 +73,7 @@ _MODELS = ("speed_accuracy_model.csv", "learning_models.csv")
 _ORDER = ("order_check.csv",)
 _SENS = ("sensitivity.csv",)
 _PER = ("participants.csv", "participants_by_target.csv")
+_SPEED, _SPEED_SLOPES = ("target_speed.csv",), ("target_speed_slopes.csv",)
 _MU = "unit of the measure (see metric)"
 #: Force: 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _F = 4
@@ -254,6 +255,24 @@ COLUMNS: tuple[Column, ...] = (
            decimals=_T),
     Column("rmse_min_N", "the participant's smallest RMSE in this mode", "N", source="rmse_min_n", decimals=_F),
     Column("rmse_max_N", "the participant's largest RMSE in this mode", "N", source="rmse_max_n", decimals=_F),
+    # -- a moving target: tracking error against the target's speed (analysis.stats.target_speed) --------
+    Column("target_speed_N_per_s", "speed of the target: mean |dF*/dt| over the part of the trial where it moves",
+           "N/s", label="target speed (N/s)", source="target_speed_n_per_s", decimals=_F),
+    Column("rmse_N", "mean RMSE of the participant's trials of this target in this mode", "N", label="RMSE (N)",
+           files=_SPEED, decimals=_F),
+    Column("n_trials", "the participant's trials of this target in this mode", "count", "integer", label="trials",
+           files=_SPEED),
+    Column("n_targets", "targets with a mean RMSE in this mode (the points of the line)", "count", "integer",
+           label="targets", files=_SPEED_SLOPES),
+    Column("rmse_per_speed_s", "least-squares slope of the participant's mean RMSE per target on the targets' "
+           "speeds in this mode: N of error per N/s of speed; empty with fewer than two speeds", "s",
+           label="RMSE per speed (s)", decimals=4),
+    Column("intercept_N", "RMSE at speed 0 of that line", "N", label="intercept (N)", source="intercept_n",
+           decimals=_F),
+    Column("metric", "the measure tested: rmse_per_speed_s (target_speed_slopes.csv), one value per participant "
+           "per mode", type="text", label="measure", files=("target_speed_test.csv",)),
+    Column("p_holm", "empty: the slope is tested on its own, outside Holm's family", "probability",
+           label="p (Holm)", files=("target_speed_test.csv",), significant=4),
     # -- trial-level models (speed_accuracy_model.csv, learning_models.csv) ------------------------------
     Column("model", "speed-accuracy (TCT ~ RMSE × mode + (1 | participant)) or learning (outcome ~ mode × "
            "target + trial number, participant as the unit)", type="text", files=_MODELS),

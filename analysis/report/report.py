@@ -40,6 +40,7 @@ from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
+from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
 from analysis.report.study_record import (
     aborted_reruns,
     condition_warnings,
@@ -54,6 +55,7 @@ from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
+from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
 from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
@@ -125,6 +127,8 @@ class _Analysis:
     n_participants: int
     within: _Within
     confidence: float = 0.95
+    #: A moving target's trade of tracking error against its speed (None: the study's target does not move).
+    speed: TargetSpeedTrade | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,10 +182,12 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     within = _within(study, table, overall, target_order, options, zero_method, confidence)
+    speed = target_speed_trade(trials.assign(max_trial_s=study.included["max_trial_s"].to_numpy(dtype=float)),
+                               study.task_of, zero_method=zero_method, confidence=confidence)
     return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
                      pd.concat(per_target, ignore_index=True), excluded,
                      int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
-                     confidence)
+                     confidence, speed)
 
 
 def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
@@ -316,13 +322,18 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
         from analysis.planning.power_outputs import report_section
 
         section += power_html(report_section(a.trials, options, zero_method, tmp), a.study.metrics)
+    if a.speed is not None:  # a moving target: the trade of its error against its speed
+        tables.update(tracking_tables(a.speed))
+        shown.update(tracking_tables(a.speed, rounded=False))
+    moving = tracking_html(a.speed, shown["stats.csv"], a.study.metrics,
+                           speed_figure(a.speed, tmp / "figures") if a.speed is not None else None)
     report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
                                metrics=a.study.metrics)
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
         marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-        target_order=a.target_order,
+        target_order=a.target_order, tracking_html=moving,
     )
     (tmp / "report.html").write_text(html, encoding="utf-8")
     results.update(tables)

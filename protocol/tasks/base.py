@@ -153,12 +153,14 @@ class TrialScreen:
 @dataclass(frozen=True, slots=True)
 class Timing:
     """What a task's checks see of the protocol's timing: the trial cap, each training trial's length, whether
-    haptics ON is in the design, and the feedback's ramps (the safety stage's, :class:`SafetyConfig`)."""
+    haptics ON is in the design, the feedback's ramps (the safety stage's, :class:`SafetyConfig`) and the targets'
+    labels (empty: not known to the check)."""
 
     max_trial_s: float
     training_s: float
     haptics_on: bool
     ramps: SafetyConfig
+    targets: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

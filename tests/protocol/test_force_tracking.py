@@ -45,11 +45,32 @@ def _protocol(edit: str = "", task: dict | None = None) -> dict:
 def test_the_example_protocol_reads_as_a_sine_and_is_stored_and_read_back() -> None:
     task = protocol_from_dict(_protocol(), "tracking.toml").task
     assert task == ForceTracking(profile="sine", offset_n=0.8, amplitude_n=0.4, frequency_hz=0.25, duration_s=8.0,
-                                 lead_in_s=4.0, band_n=0.1)
+                                 lead_in_s=4.0, band_n=0.1, targets=(("FAST", (("frequency_hz", 0.5),)),))
     stored, trial = task_tables(task)
     assert stored is not None and stored["kind"] == "force_tracking" and trial == {}
+    assert stored["targets"] == {"FAST": {"frequency_hz": 0.5}}
     again = protocol_from_dict({**_protocol(), "task": stored}, "stored")
     assert again.task == task
+    # the protocol's profiles: a target's own fields over the task's (SLOW tracks the task's, FAST twice as fast)
+    slow, fast = (TrialTarget(label, 0.8, "on") for label in ("SLOW", "FAST"))
+    t = np.array([4.5, 5.0])
+    assert list(task.target_n(slow, t)) == pytest.approx(list(0.8 + 0.4 * np.sin(2 * np.pi * 0.25 * (t - 4.0))))
+    assert list(task.target_n(fast, t)) == pytest.approx(list(0.8 + 0.4 * np.sin(2 * np.pi * 0.5 * (t - 4.0))))
+    assert task.cue_text(fast) == "FAST track sine 0.8 ± 0.4 N at 0.5 Hz"
+    assert task.screen(fast).band_at(4.5) == pytest.approx((1.1, 1.3))  # the band of the trial's own profile
+
+
+@pytest.mark.parametrize(("targets", "field", "allowed"), [
+    ({"FAST": {"frequency_hz": 3.0}}, "task.targets.FAST.frequency_hz = 3.0", r"≤ 2 Hz"),
+    ({"MEDIUM": {"frequency_hz": 0.3}}, "task.targets.MEDIUM = 'MEDIUM'", "one of the .*: SLOW, FAST"),
+    ({"FAST": {"kind": "sine"}}, "task.targets.FAST.kind = 'sine'", "unknown field; allowed: amplitude_n"),
+    ({"FAST": {"amplitude_n": 2.5}}, "task.targets.FAST.amplitude_n = 2.5", "spans -1.7–3.3 N"),
+])
+def test_a_bad_profile_of_a_target_is_refused_in_one_line_naming_it(targets, field, allowed) -> None:
+    raw = _protocol()
+    raw["task"]["targets"] = targets
+    with pytest.raises(ProtocolError, match=rf"^t\.toml: {field}: .*{allowed}"):
+        protocol_from_dict(raw, "t.toml")
 
 
 @pytest.mark.parametrize(("task", "field", "allowed"), [
@@ -169,10 +190,10 @@ def test_the_tracking_hand_sets_its_loop_gain_by_its_feedback_delay() -> None:
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:
-    """A small simulated tracking study (3 participants, 3 trials per mode) and its report."""
+    """A small simulated tracking study (3 participants, 2 trials per target and mode) and its report."""
     d = tmp_path_factory.mktemp("tracking")
     raw = _protocol()
-    raw["design"]["trials_per_cell"] = 3
+    raw["design"]["trials_per_cell"] = 2  # per target (SLOW, FAST) and mode
     raw["training"]["enabled"] = False
     raw["training"]["required"] = False
     run_study(str(d / "t.db"), participants=3, seed=0, protocol=protocol_from_dict(raw, "t.toml"), jobs=1)
@@ -182,7 +203,7 @@ def study(tmp_path_factory) -> Path:
 
 def test_a_simulated_study_tracks_and_haptics_on_shortens_the_lag_and_lowers_the_error(study: Path) -> None:
     trials = pd.read_csv(study / "trials.csv")
-    assert len(trials) == 18 and (trials["outcome"] == "success").all()  # every trial ran its whole profile
+    assert len(trials) == 24 and (trials["outcome"] == "success").all()  # every trial ran its whole profile
     assert trials["lag_s"].between(0.0, 1.0).all() and trials["gain"].notna().all()
     per = trials.groupby(["participant_code", "haptic_mode"])[["lag_s", "rmse_N", "gain"]].mean().unstack()
     # the documented mechanism, per participant: the felt force arrives after τ_h, not τ_v + camera, and is the true
@@ -193,7 +214,40 @@ def test_a_simulated_study_tracks_and_haptics_on_shortens_the_lag_and_lowers_the
     assert (per[("lag_s", "on")] < per[("lag_s", "off")]).mean() >= 2 / 3
     assert (abs(per[("gain", "on")] - 1) < abs(per[("gain", "off")] - 1)).mean() >= 2 / 3
     page = (study / "report.html").read_text(encoding="utf-8")
-    assert "The target force follows a profile (sine 0.8 ± 0.4 N at 0.25 Hz)" in page
+    assert "The target force follows a profile (sine 0.8 ± 0.4 N at 0.25 Hz; sine 0.8 ± 0.4 N at 0.5 Hz)" in page
     assert "disagree" not in page
     sessions = pd.read_csv(study / "sessions.csv")
     assert set(sessions["profile"]) == {"sine"} and set(sessions["frequency_hz"]) == {0.25}
+
+
+def test_the_report_lists_the_tasks_metrics_tests_lag_and_gain_and_trades_error_against_speed(study: Path) -> None:
+    import scipy.stats
+
+    # the study's metrics are its task's: lag and gain in every per-participant table, force regulation's not
+    per = pd.read_csv(study / "participants.csv")
+    assert len(per) == 6 and {"rmse_N", "max_ae_N", "time_in_band_s", "lag_s", "gain"} <= set(per.columns)
+    assert not {"n_success", "success_rate", "tct_s", "peak_force_N", "abs_impulse_N_s"} & set(per.columns)
+    wide = pd.read_csv(study / "participants_wide.csv")
+    assert {"lag_off_s", "lag_on_s", "gain_off", "gain_on"} <= set(wide.columns)
+    # tested ON vs OFF: RMSE and Max AE in Holm's family of two, lag and gain each with its own p
+    stats = pd.read_csv(study / "stats.csv").set_index("metric")
+    assert list(stats.index) == ["rmse_N", "max_ae_N", "lag_s", "gain"]
+    assert stats.loc[["lag_s", "gain"], "p_holm"].isna().all()
+    assert stats.loc[["rmse_N", "max_ae_N"], "p_holm"].notna().all()
+    for name, on, off in (("lag_s", "lag_on_s", "lag_off_s"), ("gain", "gain_on", "gain_off")):
+        d = wide[on] - wide[off]  # one value per participant per mode, the mean of their trials: SciPy's test
+        assert stats.at[name, "p_value"] == pytest.approx(scipy.stats.wilcoxon(d).pvalue, rel=1e-3)
+    book = pd.read_csv(study / "codebook.csv").set_index(["file", "column"])
+    assert (book["description"].fillna("") != "").all()  # every column described, lag and gain included
+    holm = book.loc[("stats.csv", "p_holm"), "description"]
+    assert "across the two measures" in holm and "(lag_s, gain)" in holm
+    # the trade across the protocol's profiles: SLOW's 0.4 N/s and FAST's 0.8 N/s (4·A·f), a slope per participant
+    speeds = pd.read_csv(study / "target_speed.csv")
+    assert sorted(set(speeds["target_speed_N_per_s"].round(3))) == [0.4, 0.8]
+    slopes = pd.read_csv(study / "target_speed_slopes.csv")
+    assert len(slopes) == 6 and slopes["rmse_per_speed_s"].notna().all()
+    test = pd.read_csv(study / "target_speed_test.csv")
+    assert list(test["metric"]) == ["rmse_per_speed_s"] and test["p_holm"].isna().all()
+    page = (study / "report.html").read_text(encoding="utf-8")
+    assert "Tracking a moving target" in page and "Tracking error against the target" in page
+    assert "Speed against accuracy" not in page  # force regulation's TCT–RMSE trade: no TCT here
