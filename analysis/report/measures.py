@@ -16,8 +16,7 @@ from protocol.metrics import Metric, Role, family_word, primary, split_unit, win
 __all__ = ["FigureGroup", "figure_groups", "listed", "mean_words", "secondary", "secondary_note", "windowed_words"]
 
 #: The headings of the report's bar figures, by figure key (another figure is headed by its measures).
-_HEADINGS = {"success_rate": "Success rate", "tct": "Task completion time", "errors": "Force errors",
-             "tracking": "Lag and gain"}
+_HEADINGS = {"success_rate": "Success rate", "tct": "Task completion time", "errors": "Force errors"}
 
 
 class FigureGroup(NamedTuple):
@@ -30,7 +29,8 @@ class FigureGroup(NamedTuple):
     @property
     def heading(self) -> str:
         """The figure's heading on the page."""
-        return _HEADINGS.get(self.key) or listed([m.short for m in self.metrics])
+        said = listed([m.short for m in self.metrics])
+        return _HEADINGS.get(self.key) or said[:1].upper() + said[1:]
 
     @property
     def alt(self) -> str:

@@ -38,8 +38,8 @@ from pipeline.settings.tomlfields import Fields
 from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics
 
-__all__ = ["BandEdges", "ConstantBand", "Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule", "TrialScreen",
-           "TrialTarget", "constant_band", "listed", "metrics_of"]
+__all__ = ["BandEdges", "ConstantBand", "Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule",
+           "TrialScreen", "TrialTarget", "constant_band", "listed", "metrics_of"]
 
 
 class TrialCondition(Protocol):

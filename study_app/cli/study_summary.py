@@ -20,7 +20,7 @@ from protocol.storage import StudyReader
 from protocol.study.labels import plural
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import metrics_of
-from protocol.tasks.registry import stored_task
+from protocol.tasks.registry import DEFAULT_KIND, stored_task
 
 __all__ = ["format_study_summary"]
 
@@ -100,15 +100,16 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
-    metrics = metrics_of(stored_task(json.loads(info.protocol_json), f"session {info.session_id}")
-                         for info in sessions.values())
+    tasks = [stored_task(json.loads(info.protocol_json), f"session {info.session_id}") for info in sessions.values()]
+    metrics = metrics_of(tasks)
+    papers = all(t.kind == DEFAULT_KIND for t in tasks)  # the paper's numbers compare with the paper's task only
     frame = _trials_frame(exp, metrics) if exp else None
     overall = None if frame is None else per_participant(frame)
     for m in tested(metrics):  # the rows: the study's metrics the report tests, in order
         off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
         finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
         change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
-        quoted = PAPER.get(m.name, "")  # a metric the paper did not report: no comparison
+        quoted = PAPER.get(m.name, "") if papers else ""  # a metric or task the paper did not report: no comparison
         paper = quoted if isinstance(quoted, str) else f"{quoted[0]:g} → {quoted[1]:g}"
         name = m.summary_label
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
