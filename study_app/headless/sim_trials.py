@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from analysis.planning.sim_study import SIM_METRICS, TrialRow
+from analysis.planning.sim_study import TrialRow, sim_metrics
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.force.framework import FrameworkConfig
@@ -67,6 +67,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
                              motion_scale=eng.rig.config.motion_scale)
     eng.rig.set_driver(p)
     task = proto.task
+    carried = sim_metrics(task)
     machine = TrialMachine(proto.trial, task)
     loop.submit(SetHaptics(False))
     loop.run_ticks(200)  # settle on the start pose
@@ -90,7 +91,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
             for ev in machine.feed(samples):
                 if isinstance(ev, TrialFinished):
                     rows.append(TrialRow(study, participant, spec.index, spec.target_label, spec.haptic_mode,
-                                         {m.name: ev.metrics[m.name] for m in SIM_METRICS}))
+                                         {m.name: ev.metrics[m.name] for m in carried}))
                     p.end_trial(eng.rig.sim_time_s)
                     loop.submit(Mark(-1, _PHASE_PAUSE))
                     loop.submit(SetHaptics(False))

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from analysis.planning.sim_study import TrialRow
+from analysis.planning.sim_study import TrialRow, sim_metrics
 from analysis.planning.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
 from pipeline.force.pipeline_settings import framework_with
 from protocol.study.config import ProtocolConfig, default_protocol
@@ -91,7 +91,7 @@ def run_sweep(
     digest = protocol_digest(proto.to_json())
     keys = [(dict(s), k, cell_key(s, k, participants, seed, MODEL_VERSION, digest))
             for s in grid for k in range(studies)]
-    have = read_cache(cache)
+    have = read_cache(cache, sim_metrics(proto.task))
     todo = [i for i, (_, _, key) in enumerate(keys) if key not in have]
     progress = SweepProgress(cells_total=len(keys), cells_cached=len(keys) - len(todo),
                              runs_total=len(todo) * participants)
