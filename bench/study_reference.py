@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from bench.source_trees import check_tree, source_env
+from foundation.platform_support.machine import load_average
 
 __all__ = ["format_study_reference", "run_study_reference"]
 
@@ -42,6 +43,12 @@ print(json.dumps({"wall_s": wall, "study_time_s": p.study_time_s}))
 """
 
 
+def _load() -> float:
+    """The 1-minute load average (NaN where the OS has none: Windows)."""
+    la = load_average()
+    return la[0] if la is not None else float("nan")
+
+
 def _one(tree: str | None, participants: int, seed: int, cwd: str) -> dict[str, float]:
     out = subprocess.run([sys.executable, "-c", _ONE_STUDY, str(participants), str(seed)], check=True,
                          capture_output=True, text=True, env=source_env(tree), cwd=cwd)
@@ -56,7 +63,7 @@ def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rou
     with tempfile.TemporaryDirectory() as cwd:
         check_tree(tree, cwd, "--reference-tree")
         check_tree(ours_root, cwd, "(ours)")
-        load0 = os.getloadavg()[0]
+        load0 = _load()
         ours: list[float] = []
         theirs: list[float] = []
         study_s: dict[str, float] = {}
@@ -67,7 +74,7 @@ def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rou
                 got = _one(root, participants, seed, cwd)
                 into.append(got["wall_s"])
                 study_s[name] = got["study_time_s"]
-        load1 = os.getloadavg()[0]
+        load1 = _load()
     mo, mr = statistics.median(ours), statistics.median(theirs)
     return {"participants": participants, "seed": seed, "rounds": rounds, "reference_tree": os.path.abspath(tree),
             "ours_wall_s": [round(x, 2) for x in ours], "reference_wall_s": [round(x, 2) for x in theirs],
