@@ -29,9 +29,10 @@ import numpy as np
 import pandas as pd
 
 from analysis.planning.setting_labels import setting_formats
-from analysis.planning.sim_study import SIM_METRICS, TrialRow, summarise_study, trial_row_from_dict, trial_row_to_dict
+from analysis.planning.sim_study import TrialRow, row_metrics, summarise_study, trial_row_from_dict, trial_row_to_dict
 from foundation.platform_support.files import O_NOFOLLOW
-from protocol.metrics import get
+from protocol.metrics import METRICS as ALL_METRICS
+from protocol.metrics import Metric, get, tested
 
 __all__ = [
     "CACHE_FILE", "FILTER_NOTE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key",
@@ -43,8 +44,9 @@ __all__ = [
 SWEEP_MARKER = ".haptic-study-sweep"
 #: The cache of finished cells, kept in the output folder (never replaced by ``--force``).
 CACHE_FILE = "cells.jsonl"
-#: The measures a sweep reports (the simulated trials' metrics, the ones the report tests), in order, with their labels.
-METRICS: dict[str, str] = {m.name: m.summary_label for m in SIM_METRICS}
+#: The measures a sweep may report (the ones the report tests), in order, with their labels: a sweep reports those its
+#: protocol's task produces (the simulated trials' metrics, :func:`analysis.planning.sim_study.sim_metrics`).
+METRICS: dict[str, str] = {m.name: m.summary_label for m in tested(ALL_METRICS)}
 
 
 @dataclass(frozen=True)
@@ -76,9 +78,10 @@ def cell_key(settings: Mapping[str, float], study: int, participants: int, seed:
                        "protocol": protocol}, sort_keys=True)
 
 
-def read_cache(path: str | os.PathLike[str]) -> dict[str, list[TrialRow]]:
-    """The cells in a cache file by key (none when there is no file); a line cut short by a killed run is skipped
-    (its cell runs again)."""
+def read_cache(path: str | os.PathLike[str], metrics: Sequence[Metric]) -> dict[str, list[TrialRow]]:
+    """The cells in a cache file by key (none when there is no file), their rows with these ``metrics`` (the
+    protocol's task's, :func:`analysis.planning.sim_study.sim_metrics`); a line cut short by a killed run is
+    skipped (its cell runs again), and so is one without a metric (written before it existed)."""
     out: dict[str, list[TrialRow]] = {}
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -87,7 +90,7 @@ def read_cache(path: str | os.PathLike[str]) -> dict[str, list[TrialRow]]:
     for line in text.splitlines():
         try:
             record = json.loads(line)
-            out[str(record["key"])] = [trial_row_from_dict(r) for r in record["rows"]]
+            out[str(record["key"])] = [trial_row_from_dict(r, metrics) for r in record["rows"]]
         except (ValueError, KeyError, TypeError):
             continue
     return out
@@ -113,7 +116,7 @@ def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]
 
 #: What each measure can be (success a rate, the rest ≥ 0; the change ON/OFF − 1 of a measure ≥ 0 is ≥ −1): the
 #: ends of a t-interval over a few studies can pass these, and are clipped to them (``sweep.md`` says so).
-_BOUNDS: dict[str, tuple[float, float]] = {m.name: m.values for m in SIM_METRICS}
+_BOUNDS: dict[str, tuple[float, float]] = {m.name: m.values for m in ALL_METRICS}
 _CHANGE_BOUNDS = (-1.0, math.inf)
 
 
@@ -138,7 +141,7 @@ def sweep_frame(cells: Sequence[SweepCell], swept: Sequence[str], max_trial_s: f
     records = []
     for cell in cells:
         s = summarise_study(cell.rows, max_trial_s)
-        for metric in METRICS:
+        for metric in (m.name for m in row_metrics(cell.rows)):
             records.append({**{k: cell.settings[k] for k in swept}, "study": cell.study, "metric": metric,
                             "off": s[metric]["off"], "on": s[metric]["on"], "change": s[metric]["change"]})
     return pd.DataFrame.from_records(records, columns=[*swept, "study", "metric", "off", "on", "change"])
@@ -206,7 +209,7 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     from analysis.plots.figures import save_one
 
     # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
-    named = {m.name: m.participant_exported for m in SIM_METRICS}
+    named = {m.name: m.participant_exported for m in ALL_METRICS}
     tidy.replace({"metric": named}).to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
     summary.replace({"metric": named}).to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")

@@ -22,14 +22,14 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.planning.setting_labels import setting_formats
-from analysis.planning.sim_study import SIM_METRICS
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
+from protocol.metrics import METRICS, tested
 
 __all__ = ["front_figure", "metrics_figure"]
 
-#: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`), two to
-#: a row.
-_PANELS = tuple((m.name, m.summary_label) for m in SIM_METRICS)
+#: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`: those
+#: of them the summary has), two to a row.
+_PANELS = tuple((m.name, m.summary_label) for m in tested(METRICS))
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 _DASHES = ("-", "--", ":", "-.")
 
@@ -58,15 +58,16 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
     x_name, others = swept[0], list(swept[1:])
     xs = sorted({float(v) for v in summary[x_name]})
     lines = note_lines(note, PAGE_IN)
-    rows = math.ceil(len(_PANELS) / 2)
+    panels = [p for p in _PANELS if p[0] in set(summary["metric"])]  # the protocol's task's measures
+    rows = math.ceil(len(panels) / 2)
     fig = Figure(figsize=(PAGE_IN, 2.6 * rows + 0.11 * lines))
     margins(fig, 0.6, 0.15, 0.55 + 0.11 * lines, 0.3, wspace=0.3, hspace=0.45)
     axes = fig.subplots(rows, 2, squeeze=False)
-    for spare in axes.flat[len(_PANELS):]:  # an odd number of measures: the last row's second panel is empty
+    for spare in axes.flat[len(panels):]:  # an odd number of measures: the last row's second panel is empty
         spare.set_visible(False)
     groups = (list(summary.groupby(others, sort=True)) if others else [((), summary)])
     fmts = setting_formats(summary, swept)
-    for ax, (metric, label) in zip(axes.flat, _PANELS, strict=False):
+    for ax, (metric, label) in zip(axes.flat, panels, strict=False):
         for g_i, (g_key, grp) in enumerate(groups):
             sel = grp[grp["metric"] == metric].sort_values(x_name)
             tag = "" if not others else " · " + _label(
@@ -110,6 +111,8 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     ax = fig.add_subplot()
     tct = summary[summary["metric"] == "tct_s"].reset_index(drop=True)
     rmse = summary[summary["metric"] == "rmse_n"].reset_index(drop=True)
+    if tct.empty:  # a protocol whose task has no TCT (force tracking): no front to draw
+        rmse = tct
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
     fmts = setting_formats(summary, swept)

@@ -23,7 +23,7 @@ Conventions of the exported files
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -34,9 +34,11 @@ from analysis.reading.codebook_columns import (
     COLUMNS,
     STATS_CSV_COLUMNS,
     Column,
+    metric_words,
     participant_measures,
     task_column,
 )
+from protocol.metrics import Metric
 from protocol.tasks.registry import TASKS
 
 __all__ = [
@@ -49,6 +51,7 @@ __all__ = [
     "exported_name",
     "label",
     "lookup",
+    "metric_words",
     "p_text",
     "wide_name",
 ]
@@ -150,14 +153,16 @@ def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFr
     return out
 
 
-def codebook_frame(files: Mapping[str, Iterable[str]],
+def codebook_frame(files: Mapping[str, Iterable[str]], metrics: Sequence[Metric] | None = None,
                    described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> pd.DataFrame:
     """``codebook.csv``: one row per (file, column) of the files written, in file and column order.
 
-    A column without an entry in :data:`COLUMNS` gets an empty description (the report's test refuses that), unless
-    ``described`` -- (file, column) → (type, unit, description), a study's own columns such as its covariates --
-    describes it.
+    ``metrics`` are the study's (its tasks'), which the descriptions of the tests' columns name (the measures
+    tested, Holm's family: :func:`metric_words`; None: in general words).  A column without an entry in
+    :data:`COLUMNS` gets an empty description (the report's test refuses that), unless ``described`` -- (file,
+    column) → (type, unit, description), a study's own columns such as its covariates -- describes it.
     """
+    words = metric_words(metrics)
     rows = []
     for file, columns in files.items():
         for name in columns:
@@ -167,7 +172,7 @@ def codebook_frame(files: Mapping[str, Iterable[str]],
                 continue
             c = lookup(file, name)
             rows.append({"file": file, "column": name, "type": c.type if c else "",
-                         "unit": c.unit if c else "", "description": c.description if c else ""})
+                         "unit": c.unit if c else "", "description": c.described(words) if c else ""})
     return pd.DataFrame(rows, columns=["file", "column", "type", "unit", "description"])
 
 

@@ -4,18 +4,21 @@ Each :class:`Column` names a column as it appears in the CSV files, what it mean
 it is rounded.  The metrics' own columns -- one trial's value, the per-participant means, rates and counts -- are
 made from the metric registry (:mod:`protocol.metrics`), so a metric defined there is described here without an
 edit; every other column has its line in :data:`COLUMNS`.  :mod:`analysis.reading.codebook` turns an analysis
-table into a file's form with them.
+table into a file's form with them.  A few descriptions name the study's measures -- the ones tested, Holm's family,
+the secondary ones -- which are its tasks' (:attr:`analysis.reading.load.StudyData.metrics`): they hold the
+placeholders of :func:`metric_words`, filled in for the study's files (:meth:`Column.described`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, tested
 from protocol.tasks.base import Parameter
 from protocol.tasks.registry import TASKS
 
-__all__ = ["COLUMNS", "STATS_CSV_COLUMNS", "Column", "participant_measures", "task_column"]
+__all__ = ["COLUMNS", "STATS_CSV_COLUMNS", "Column", "metric_words", "participant_measures", "task_column"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,8 +55,15 @@ class Column:
     decimals: int | None = None
     significant: int | None = None
 
+    def described(self, words: Mapping[str, str]) -> str:
+        """Its description with the study's measures named (:func:`metric_words`)."""
+        text = self.description
+        for key, value in words.items():
+            text = text.replace(f"{{{key}}}", value)
+        return text
 
-_STATS = ("stats.csv", "stats_by_target.csv")
+
+_STATS = ("stats.csv", "stats_by_target.csv", "target_speed_test.csv")
 #: The tests' files (:data:`_STATS`): the columns every consumer may rely on, first and in this order (more follow).
 STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
                      "zero_method", "rank_biserial", "p_holm")
@@ -63,17 +73,15 @@ _MODELS = ("speed_accuracy_model.csv", "learning_models.csv")
 _ORDER = ("order_check.csv",)
 _SENS = ("sensitivity.csv",)
 _PER = ("participants.csv", "participants_by_target.csv")
+_SPEED, _SPEED_SLOPES = ("target_speed.csv",), ("target_speed_slopes.csv",)
 _MU = "unit of the measure (see metric)"
 #: Force: 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _F = 4
 #: Time: the 1 ms sample period.
 _T = 3
 
-#: How many measures Holm's family has, in a word ("four"), and what the files say of a secondary measure.
-_FAMILY = family_word()
-_SECONDARIES = [m.participant_exported for m in METRICS if m.role is Role.SECONDARY]
-_SECONDARY = (f"; empty for a secondary measure ({', '.join(_SECONDARIES)}), tested on its own, outside the family"
-              if _SECONDARIES else "")
+#: The placeholders of the descriptions that name the study's measures (:func:`metric_words`).
+_FAMILY, _TESTED, _SECONDARY = "{family}", "{tested}", "{secondary}"
 
 
 def task_column(p: Parameter) -> Column:
@@ -81,9 +89,21 @@ def task_column(p: Parameter) -> Column:
     return Column(p.name, p.description, p.unit, label=p.label, decimals=p.decimals)
 
 
-def _tested_words() -> str:
-    names = [m.participant_exported for m in tested()]
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+def metric_words(metrics: Sequence[Metric] | None) -> dict[str, str]:
+    """What the descriptions say of a study's measures (its ``metrics``): how many Holm's family has, in a word
+    (``four``), the ones tested, and what a secondary one's ``p_holm`` is; None: in general words (a heading's
+    hover text, made without a study)."""
+    if metrics is None:
+        return {"family": "primary", "tested": "one of the tested measures",
+                "secondary": "; empty for a secondary measure, tested on its own, outside the family"}
+    names = [m.participant_exported for m in tested(metrics)]
+    secondaries = [m.participant_exported for m in metrics if m.role is Role.SECONDARY]
+    return {
+        "family": family_word(metrics),
+        "tested": names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}" if names else "none",
+        "secondary": (f"; empty for a secondary measure ({', '.join(secondaries)}), tested on its own, outside the "
+                      "family" if secondaries else ""),
+    }
 
 
 def _source(m: Metric) -> str:
@@ -91,7 +111,7 @@ def _source(m: Metric) -> str:
 
 
 def _trial_metric_columns() -> tuple[Column, ...]:
-    """One trial's value of every metric (trials.csv)."""
+    """One trial's value of every metric (trials.csv: a study's are its tasks')."""
     return tuple(Column(m.name, m.description, type="boolean") if m.boolean else
                  Column(m.exported, m.description, m.unit, label=m.label, source=_source(m), decimals=m.decimals)
                  for m in METRICS)
@@ -123,7 +143,8 @@ def _participant_metric_columns() -> tuple[Column, ...]:
 
 def participant_measures() -> tuple[str, ...]:
     """The per-participant measure columns as the files name them, in order (``n_success, success_rate, tct_s,
-    n_tct, rmse_N``, ...; participants.csv has ``n_trials`` before them)."""
+    n_tct, rmse_N``, ...; participants.csv has ``n_trials`` before them): every metric's, of which a study's
+    participants.csv has its tasks'."""
     out: list[str] = []
     for m in METRICS:
         out += ([str(m.count), m.participant] if m.boolean else
@@ -161,7 +182,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("n_trials", "analysed trials", "count", "integer", label="trials", files=_PER),
     *_participant_metric_columns(),
     # -- paired Wilcoxon tests, ON vs OFF -------------------------------------------------------------
-    Column("metric", f"the measure tested: {_tested_words()} (participants.csv columns)", type="text",
+    Column("metric", f"the measure tested: {_TESTED} (participants.csv columns)", type="text",
            label="measure"),
     Column("n", "pairs that entered the ranking (n_used)", "count", "integer", label="n", files=_STATS),
     Column("median_off", "median over participants of the OFF values (complete pairs)", _MU,
@@ -234,6 +255,24 @@ COLUMNS: tuple[Column, ...] = (
            decimals=_T),
     Column("rmse_min_N", "the participant's smallest RMSE in this mode", "N", source="rmse_min_n", decimals=_F),
     Column("rmse_max_N", "the participant's largest RMSE in this mode", "N", source="rmse_max_n", decimals=_F),
+    # -- a moving target: tracking error against the target's speed (analysis.stats.target_speed) --------
+    Column("target_speed_N_per_s", "speed of the target: mean |dF*/dt| over the part of the trial where it moves",
+           "N/s", label="target speed (N/s)", source="target_speed_n_per_s", decimals=_F),
+    Column("rmse_N", "mean RMSE of the participant's trials of this target in this mode", "N", label="RMSE (N)",
+           files=_SPEED, decimals=_F),
+    Column("n_trials", "the participant's trials of this target in this mode", "count", "integer", label="trials",
+           files=_SPEED),
+    Column("n_targets", "targets with a mean RMSE in this mode (the points of the line)", "count", "integer",
+           label="targets", files=_SPEED_SLOPES),
+    Column("rmse_per_speed_s", "least-squares slope of the participant's mean RMSE per target on the targets' "
+           "speeds in this mode: N of error per N/s of speed; empty with fewer than two speeds", "s",
+           label="RMSE per speed (s)", decimals=4),
+    Column("intercept_N", "RMSE at speed 0 of that line", "N", label="intercept (N)", source="intercept_n",
+           decimals=_F),
+    Column("metric", "the measure tested: rmse_per_speed_s (target_speed_slopes.csv), one value per participant "
+           "per mode", type="text", label="measure", files=("target_speed_test.csv",)),
+    Column("p_holm", "empty: the slope is tested on its own, outside Holm's family", "probability",
+           label="p (Holm)", files=("target_speed_test.csv",), significant=4),
     # -- trial-level models (speed_accuracy_model.csv, learning_models.csv) ------------------------------
     Column("model", "speed-accuracy (TCT ~ RMSE × mode + (1 | participant)) or learning (outcome ~ mode × "
            "target + trial number, participant as the unit)", type="text", files=_MODELS),
@@ -368,7 +407,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("n_outside_bounds", "of those, trials outside the bounds", "count", "integer", label="outside bounds"),
     # -- power.csv (report --power): the power of each test against the number of participants ----------
     Column("scope", "overall, or the target level the tests were restricted to", type="text", files=("power.csv",)),
-    Column("metric", "the measure tested (participants.csv column), or all_four_holm / any_holm: Holm across the "
+    Column("metric", f"the measure tested (participants.csv column), or all_{_FAMILY}_holm / any_holm: Holm across the "
            f"{_FAMILY} measures rejects all of them / at least one", type="text", files=("power.csv",)),
     Column("direction", "the direction of effect the resampled pool shows (its signed-rank statistic W+ above or "
            "below its null mean): on_higher (ON > OFF), on_lower (ON < OFF) or none; a rejection counts towards "

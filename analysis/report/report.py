@@ -48,6 +48,7 @@ from analysis.report.annotations_report import (
 )
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
+from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
 from analysis.report.study_record import (
     aborted_reruns,
     condition_warnings,
@@ -62,6 +63,7 @@ from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
+from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
 from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
 from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
@@ -102,7 +104,7 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
         sel = mine[mine["haptic_mode"] == mode]
         if sel.empty:
             continue
-        ok = sel[sel["success"]]
+        ok = sel[sel["outcome"] == "success"]
         picks.append((ok if not ok.empty else sel).iloc[0])
     return picks
 
@@ -133,6 +135,8 @@ class _Analysis:
     n_participants: int
     within: _Within
     confidence: float = 0.95
+    #: A moving target's trade of tracking error against its speed (None: the study's target does not move).
+    speed: TargetSpeedTrade | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -186,10 +190,12 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     within = _within(study, table, overall, target_order, options, zero_method, confidence)
+    speed = target_speed_trade(trials.assign(max_trial_s=study.included["max_trial_s"].to_numpy(dtype=float)),
+                               study.task_of, zero_method=zero_method, confidence=confidence)
     return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
                      pd.concat(per_target, ignore_index=True), excluded,
                      int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
-                     confidence)
+                     confidence, speed)
 
 
 def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
@@ -232,7 +238,8 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
     """The caveats printed on the figures they qualify."""
     window = ("from the cue, the approach from 0 N included" if options.error_window == "cue" else
               "from first contact")
-    no_tct = int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+    no_tct = (int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+              if "tct_s" in a.overall.columns else 0)  # (a study whose tasks have no TCT: none)
     tct = ("TCT over successful trials only" + (f"; {plural(no_tct, 'participant')} without a success in a mode "
                                                  "have no TCT there" if no_tct else "")
            if options.tct_policy == "successful" else "TCT with failed trials counted at the trial cap")
@@ -240,12 +247,13 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
-    notes = {"tct": tct + ".", "errors": f"{windowed_words()}: error window {window}.",
+    metrics = a.study.metrics
+    notes = {"tct": tct + ".", "errors": f"{windowed_words(metrics)}: error window {window}.",
              "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
              "learning": learning}
-    for group in figure_groups():  # a figure with a secondary measure says whose marks are not Holm's
+    for group in figure_groups(metrics):  # a figure with a secondary measure says whose marks are not Holm's
         if any(m.role is Role.SECONDARY for m in group.metrics):
-            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note())))
+            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note(metrics))))
     return notes
 
 
@@ -279,8 +287,10 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         *(("mode_bars", ([m.participant for m in g.metrics], overall, by_target, marks),
-           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key) for g in figure_groups()),
-        ("paired_lines", (overall, TESTED_METRICS, marks_overall), {}, "paired", "paired"),
+           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key)
+          for g in figure_groups(a.study.metrics)),
+        ("paired_lines", (overall, [m for m in TESTED_METRICS if m in overall.columns], marks_overall), {}, "paired",
+         "paired"),
         ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
@@ -325,14 +335,19 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
     if power:
         from analysis.planning.power_outputs import report_section
 
-        section += power_html(report_section(a.trials, options, zero_method, tmp))
+        section += power_html(report_section(a.trials, options, zero_method, tmp), a.study.metrics)
+    if a.speed is not None:  # a moving target: the trade of its error against its speed
+        tables.update(tracking_tables(a.speed))
+        shown.update(tracking_tables(a.speed, rounded=False))
+    moving = tracking_html(a.speed, shown["stats.csv"], a.study.metrics,
+                           speed_figure(a.speed, tmp / "figures") if a.speed is not None else None)
     report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
-                               described=covariate_codebook(ann.declared))
+                               metrics=a.study.metrics, described=covariate_codebook(ann.declared))
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
         marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-        target_order=a.target_order,
+        target_order=a.target_order, tracking_html=moving,
     )
     (tmp / "report.html").write_text(html, encoding="utf-8")
     results.update(tables)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import html
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import pandas as pd
@@ -27,7 +28,7 @@ from analysis.stats.learning import MIN_ORDER_GROUP
 from analysis.stats.models import MIN_PARTICIPANTS
 from analysis.stats.sensitivity import ALPHA
 from analysis.stats.trade import TRADE_MODEL_TERMS
-from protocol.metrics import family_word, tested
+from protocol.metrics import Metric, family_word, tested
 
 __all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
@@ -114,7 +115,7 @@ def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOpti
             "speed_accuracy_slopes.csv have every number.</p>")
 
 
-def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.95) -> str:
+def sensitivity_html(within: Any, options: MetricOptions, metrics: Sequence[Metric], confidence: float = 0.95) -> str:
     """The headline results under both error windows side by side; a differing conclusion is flagged."""
     sens = within.sensitivity
     windows = list(dict.fromkeys(sens["error_window"]))
@@ -140,11 +141,11 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
     verdict = (f'<p class="warn">{plural(int(n_diff), "conclusion")} {"differs" if n_diff == 1 else "differ"} '
                "between the error windows (flagged): report the window with the result.</p>" if n_diff else
                "<p>Every conclusion is the same in both windows.</p>")
-    return (f"<h3>Does the error window change the answer?</h3><p>{windowed_words()} depend on the window they are "
-            f"taken over. {window_fact(within, options)} The same tests of the primary measures (Holm across the "
-            f"{family_word()} in each window) and the speed–accuracy correlations, in both windows; conclusions at "
-            f"p &lt; {ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) [{_ci_heading(confidence)}]."
-            f"</p>{verdict}"
+    return (f"<h3>Does the error window change the answer?</h3><p>{windowed_words(metrics)} depend on the window "
+            f"they are taken over. {window_fact(within, options)} The same tests of the primary measures (Holm across "
+            f"the {family_word(metrics)} in each window) and the speed–accuracy correlations, in both windows; "
+            f"conclusions at p &lt; {ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) "
+            f"[{_ci_heading(confidence)}].</p>{verdict}"
             f'<div class="scroll"><table class="within sens"><caption>Sensitivity to the error window '
             f"(sensitivity.csv)</caption><thead><tr><th>analysis</th><th>measure</th>{head}<th>conclusion</th></tr>"
             f'</thead><tbody>{"".join(body)}</tbody></table></div>')
@@ -267,7 +268,14 @@ def top_warnings(within: Any, included: bool) -> str:
     return "".join(f'<p class="warn">{html.escape(w)}</p>' for w in out)
 
 
-def methods_within(within: Any, options: MetricOptions, confidence: float) -> str:
+def _gee_words(metrics: Sequence[Metric]) -> str:
+    """The learning models' words for a yes/no outcome of the study, if it has one ("" otherwise)."""
+    yes_no = [m.name for m in tested(metrics) if m.boolean]
+    return (", a logistic GEE with an exchangeable working correlation within a participant and robust standard "
+            f"errors for {listed(yes_no)}" if yes_no else "")
+
+
+def methods_within(within: Any, options: MetricOptions, confidence: float, metrics: Sequence[Metric]) -> str:
     """The methods sentences of the within-participant analyses (the trade, the windows, learning and order)."""
     tct = "successful trials" if options.tct_policy == "successful" else "trials (failures at the trial cap)"
     fitted = all(f.fitted for f in within.learning)
@@ -286,14 +294,13 @@ def methods_within(within: Any, options: MetricOptions, confidence: float) -> st
         "difference, with Wald "
         "intervals. Each participant's own least-squares line is drawn; no pooled-trial p-value is computed.</p>"
         "<p><b>Error windows.</b> Every analysis uses the window named in the header; the sensitivity table repeats "
-        f"the primary ON-vs-OFF tests (Holm within each window) and r_rm with {windowed_words()} from the cue and "
-        f"from first contact, and flags each conclusion (at p &lt; {ALPHA:g}) that differs between them.</p>"
+        f"the primary ON-vs-OFF tests (Holm within each window) and r_rm with {windowed_words(metrics)} from the cue "
+        f"and from first contact, and flags each conclusion (at p &lt; {ALPHA:g}) that differs between them.</p>"
         "<p><b>Secondary analysis: learning and order.</b> Per outcome, a trial-level model with haptic mode, "
         "target, their interaction and the trial's number in the session (its position, aborted trials counted) "
         "as fixed effects and participant as the unit: linear mixed models with a random intercept (REML) for "
-        f"{listed([m.short for m in tested() if not m.boolean])}, a logistic GEE with an exchangeable working "
-        f"correlation within a participant and robust standard errors for "
-        f"{listed([m.name for m in tested() if m.boolean])} (statsmodels); the trial-number coefficient is the "
+        f"{listed([m.short for m in tested(metrics) if not m.boolean])}{_gee_words(metrics)} (statsmodels); the "
+        "trial-number coefficient is the "
         "change per trial. "
         "Order: each participant's ON − OFF difference compared between participants whose stored schedule "
         "began with an ON trial and those whose began with an OFF trial (two-sided Mann–Whitney U; not tested "

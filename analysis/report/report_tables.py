@@ -19,16 +19,17 @@ from analysis.reading import codebook
 from analysis.reading.load import StudyData
 from analysis.stats.loop_health import health_summary, health_table
 from analysis.stats.models import fixed_effects
-from protocol.metrics import primary
+from protocol.metrics import METRICS, Metric, primary
 
 __all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
 #: trials.csv: the columns every consumer may rely on, in this order (more follow: the other metrics, in the
-#: registry's order).  The primary metrics' are among them.  Sorted by participant number, participant code, session
-#: and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
+#: registry's order).  The primary metrics' are among them (those of the study's: the paper's four for force
+#: regulation).  Sorted by participant number, participant code, session and trial.  Names and rounding:
+#: :mod:`analysis.reading.codebook`.
 TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
                       "target_force_N", "haptic_mode", "outcome",
-                      *(m.name if m.boolean else m.exported for m in primary()), "cue_at_s")
+                      *(m.name if m.boolean else m.exported for m in primary(METRICS)), "cue_at_s")
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
@@ -113,10 +114,10 @@ class _ByParticipant:
 
 def _wide(per: pd.DataFrame, by_participant: _ByParticipant) -> pd.DataFrame:
     """participants_wide.csv's rows (before export): each measure of participants.csv as an OFF and an ON column."""
-    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
-                     values=list(codebook.WIDE_MEASURES))
+    measures = [m for m in codebook.WIDE_MEASURES if m in per.columns]  # the study's
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode", values=measures)
     wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
-    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in measures for mode in ("off", "on")]
     wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
     for c in wide_cols:
         if c.startswith("n_"):
@@ -130,7 +131,8 @@ def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) ->
     t = trials.copy()
     t["database"] = t["database"].map(os.path.basename)
     t = codebook.export(t, "trials.csv", rounded=rounded)
-    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    first = [c for c in TRIALS_CSV_COLUMNS if c in t.columns]  # (a study's metrics: its tasks')
+    t = t[first + [c for c in t.columns if c not in first]]
     t["error_window"] = error_window
     return t.reset_index(drop=True)
 
@@ -142,6 +144,7 @@ _WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by
 
 
 def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = (),
+                 metrics: Sequence[Metric] | None = None,
                  described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> None:
     """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
 
@@ -153,6 +156,8 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
         :func:`export_tables`' result.
     written_too : sequence of str
         CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    metrics : sequence of Metric
+        The study's metrics, which the codebook's descriptions of the tests name (:func:`codebook.metric_words`).
     described : mapping, optional
         (file, column) → (type, unit, description) of columns the study's own declarations describe (a covariate's
         column in the participants' tables).
@@ -163,5 +168,5 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
     for name in written_too:
         columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
-    codebook.codebook_frame(columns, described).to_csv(folder / "codebook.csv", index=False)
+    codebook.codebook_frame(columns, metrics, described).to_csv(folder / "codebook.csv", index=False)
 

@@ -70,7 +70,8 @@ def window_sensitivity(table: TrialTable, options: MetricOptions, *, zero_method
     for window in ERROR_WINDOWS:
         trials = table.in_window(window)
         per = per_participant(trials, options)
-        _, frame = mode_tests(per, PRIMARY_METRICS, zero_method=zero_method, confidence=confidence)
+        family = [m for m in PRIMARY_METRICS if m in per.columns]  # the study's primary measures
+        _, frame = mode_tests(per, family, zero_method=zero_method, confidence=confidence)
         for r in frame.itertuples():
             rows.append({"analysis": "ON vs OFF", "measure": r.metric, "error_window": window, "n": r.n_used,
                          "estimate": r.hl_estimate, "ci_low": r.hl_ci_low, "ci_high": r.hl_ci_high,
@@ -93,6 +94,8 @@ def max_ae_from_approach(table: TrialTable) -> tuple[int, int]:
     Such a trial's largest error is the approach (the error at the cue's 0 N is the target force itself), not a
     peak force excursion: its Max AE from the cue exceeds its Max AE from first contact, or it never touched.
     """
+    if "max_ae_n" not in table.trials.columns:  # a study whose tasks have no Max AE
+        return 0, 0
     cue = table.in_window("cue")["max_ae_n"].to_numpy(float)
     contact = table.in_window("first_contact")["max_ae_n"].to_numpy(float)
     has = np.isfinite(cue)

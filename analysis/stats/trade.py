@@ -47,7 +47,9 @@ def tct_column(options: MetricOptions) -> str:
 
 def trade_pairs(trials: pd.DataFrame, options: MetricOptions) -> pd.DataFrame:
     """Trials with both a TCT (under the policy) and an RMSE, as columns ``tct`` (s) and ``rmse`` (N) too."""
-    t = trials.assign(tct=trials[tct_column(options)].astype(float), rmse=trials["rmse_n"].astype(float))
+    # (a study whose tasks have no TCT or RMSE -- force tracking has no TCT -- has no such trial)
+    tct, rmse = (trials[c].astype(float) if c in trials.columns else np.nan for c in (tct_column(options), "rmse_n"))
+    t = trials.assign(tct=tct, rmse=rmse)
     return t[np.isfinite(t["tct"]) & np.isfinite(t["rmse"])]
 
 
