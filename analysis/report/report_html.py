@@ -18,7 +18,7 @@ import pandas as pd
 from analysis.reading import codebook
 from analysis.reading.load import StudyData
 from analysis.reading.metrics import MetricOptions, TrialTable
-from analysis.report import report_sections
+from analysis.report import report_design, report_sections, report_tct
 from analysis.report.html_parts import fmt as _fmt
 from analysis.report.html_parts import fmt_p, fmt_w, plural
 from analysis.report.html_parts import html_table as _html_table
@@ -71,7 +71,9 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), captio
                 label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
+        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p, "rank_biserial": lambda v, r=row: (
+            _fmt(v) + (f" [{_fmt(r['rank_biserial_ci_low'])}, {_fmt(r['rank_biserial_ci_high'])}]"
+                       if np.isfinite(r.get("rank_biserial_ci_low", np.nan)) else ""))}
         cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl}</td>" if c == "hl" else
                         f"<td>{special[c](row.get(c)) if c in special else _fmt(row[c])}</td>" for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
@@ -148,8 +150,9 @@ def power_html(section: Any) -> str:
 
 def _bar_figures(pngs: dict[str, bytes]) -> str:
     """The bar figures, one per figure of the registry's metrics (:func:`analysis.report.measures.figure_groups`)."""
-    caption = ('<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after '
-               "Holm's correction (n.s. not significant, n/c not computable).</p>")
+    caption = ('<p class="caption">Bars: median across participants, whiskers: interquartile range (the tests are '
+               "on medians; the data are skewed); dots: participants; n under each bar: participants with a value; "
+               "marks: Wilcoxon p after Holm's correction (n.s. not significant, n/c not computable).</p>")
     return "\n".join(f"<figure><h2>{html.escape(g.heading)}</h2>{caption if i == 0 else ''}"
                      f"{_img(pngs[g.key], g.alt)}</figure>" for i, g in enumerate(figure_groups()))
 
@@ -274,8 +277,9 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
            "(that participant's pair is left out of the TCT test and counted)"
            if options.tct_policy == "successful" else
            f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
+    design = report_design.training_methods(study) + report_design.sites_methods(study)
     return (
-        _data_methods(study, table, excluded, n_participants, within)
+        _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
         f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
         f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
@@ -286,9 +290,11 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         "protocol.metrics, the same code that judged the trials live. "
         f"{report_sections.window_fact(within, options)}</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
-        f"{mean_words()} are means over trials; TCT is {tct}. Across participants, the "
-        f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
-        f"and the dots are participants; the test tables give medians, the summary the Wilcoxon test is about. "
+        f"{mean_words()} are means over trials; TCT is {tct}. A participant × mode whose trials are not spread "
+        f"equally over the targets (an incomplete session analysed) has the mean of its per-target values, each "
+        f"target weighing the same. Across participants, the bars and the headline show the median with its "
+        f"interquartile range, the summary the Wilcoxon test is about (the headline gives the mean ± SD (n − 1) "
+        f"beside it, as <code>haptic-study run</code> prints it), and the dots are participants. "
         f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
         f"every CSV file is described, with its unit, in codebook.csv.</p>"
         f"<p><b>Tests.</b> {html.escape(methods_text(zero_method, confidence))} Holm's step-down correction is "
@@ -298,6 +304,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). "
         f"{html.escape(secondary_note())}{' Its mark uses its own p. ' if secondary() else ''}"
         "No p-value in this report comes from trials pooled as if independent.</p>"
+        + report_tct.tct_methods(within, options, confidence)
         + report_sections.methods_within(within, options, confidence)
     )
 
@@ -360,24 +367,29 @@ def _origin(study: StudyData) -> tuple[str, str]:
 
 
 def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> str:
-    """One card per measure: mean ± SD across participants OFF → ON, and the Holm-adjusted test."""
+    """One card per measure: the median [IQR] across participants OFF → ON (what the test is about), the mean ± SD
+    beside it (what the paper's figures show), and the Holm-adjusted test."""
     by_metric = stats.set_index("metric")
     cards = []
     for m in PRIMARY_METRICS:
         name = codebook.exported_name(m)
-        parts, ns = [], []
+        parts, means, ns = [], [], []
         for mode in ("off", "on"):
-            mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
-            parts.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
+            v = per.loc[per["haptic_mode"] == mode, name].to_numpy(dtype=float)
+            v = v[np.isfinite(v)]
+            mean, sd, n = mean_sd(v)
+            q1, med, q3 = (np.percentile(v, (25, 50, 75)) if n else (np.nan,) * 3)
+            parts.append(_fmt(med) + (f" [{_fmt(q1)}, {_fmt(q3)}]" if n > 1 else ""))
+            means.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
             ns.append(n)
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
-        what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
         n_test = by_metric.at[name, "n"]  # the ranked pairs: zero differences and missing sides left out
         test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
                 if np.isfinite(p_holm) else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, {what} across {who}; {test}</small></div>")  # fmt_p escapes
+                     f"<small>OFF → ON, median [IQR] across {who} (mean ± SD {means[0]} → {means[1]}); "
+                     f"{test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 
@@ -512,8 +524,10 @@ Medians are across participants; the HL shift is the Hodges–Lehmann estimate o
 <h3>Within each target</h3>
 {_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
              caption=f"ON vs OFF within each target; {windowed_words()} {win}")}
+{report_design.sites_html(within, tables, study)}
 {report_sections.sensitivity_html(within, options, confidence)}
 {_bar_figures(pngs)}
+{report_tct.tct_html(within, tables, options, pngs["tct_survival"], confidence)}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
 <p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
 across participants.</p></figure>

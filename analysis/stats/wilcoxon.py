@@ -35,6 +35,7 @@ import numpy.typing as npt
 import scipy
 from scipy import stats as sps
 
+from analysis.reading.codebook_columns import DIFFERENCE_DECIMALS
 from analysis.stats.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
 from analysis.stats.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, auto_method
 
@@ -56,8 +57,9 @@ ALTERNATIVES = ("two-sided", "less", "greater")
 METHODS = ("auto", "exact", "permutation", "approx", "asymptotic")
 #: Largest n for an explicitly requested exact test (beyond, the normal approximation is exact enough).
 EXPLICIT_EXACT_MAX_N = 400
-#: Differences are rounded to this many decimals before testing (see :func:`paired_wilcoxon`).
-DEFAULT_DECIMALS = 10
+#: Differences are rounded to this many decimals before testing (see :func:`paired_wilcoxon`; participants_wide.csv
+#: writes its differences so: one definition, in the codebook).
+DEFAULT_DECIMALS = DIFFERENCE_DECIMALS
 
 _SCIPY_NAME = {"exact": "exact", "approx": "asymptotic"}
 
@@ -238,7 +240,9 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     positive flips (plus half the zero ranks under "zsplit"), the very values
     SciPy's statistic takes.  tests/analysis/test_stats.py checks the p-values equal.
     """
-    ranked = d != 0 if zero_method == "wilcox" else np.ones(d.size, dtype=bool)
+    if zero_method == "wilcox":  # a zero's sign flip changes nothing: the 2ⁿ flips of the ranked ones, enumerated
+        d = d[d != 0]
+    ranked = np.ones(d.size, dtype=bool)
     ranks = np.zeros(d.size)
     ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
     half_zero = float(ranks[d == 0].sum()) / 2.0 if zero_method == "zsplit" else 0.0
@@ -416,6 +420,8 @@ def paired_wilcoxon(
     if d is None or why:
         return _not_computable(base, "; ".join([*lead, why]))
     used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
+    if requested == "auto" and used == "approx" and base["n_used"] <= PERMUTATION_AUTO_MAX_N:
+        used = "permutation"  # exact: SciPy's rule counts the zero differences its permutation need not flip
     _check_size(used, base["n_used"] if used == "exact" else d.size)
     notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
     return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
@@ -481,11 +487,14 @@ def methods_text(zero_method: str = "wilcox", confidence: float = 0.95) -> str:
         f"{SCIPY_AUTO_RANGE[0]} – {SCIPY_AUTO_RANGE[1]}) and reported per metric: the exact null distribution "
         f"when there were at most {EXACT_MAX_N} pairs (zero differences counted) and no ties or zeros; "
         f"otherwise, with at most {PERMUTATION_AUTO_MAX_N} pairs, an exact permutation test over all 2ⁿ sign "
-        "flips of the observed ranks; otherwise the normal approximation with "
+        f"flips of the observed ranks -- also where SciPy's rule, which counts zero differences, would approximate "
+        f"though at most {PERMUTATION_AUTO_MAX_N} pairs are ranked; otherwise the normal approximation with "
         "tie (and zero) corrections and no continuity correction. The statistic is the smaller of the two rank "
         "sums. Effect sizes are the matched-pairs rank-biserial correlation (W⁺ − W⁻)/(W⁺ + W⁻) and "
         "r = z/√n, where n is the number of ranked pairs and z the tie-corrected normal statistic; both are "
-        "positive when ON exceeds OFF. The shift ON − OFF was estimated by the Hodges–Lehmann estimator (the "
+        "positive when ON exceeds OFF; the rank-biserial correlation has a bootstrap interval (participants "
+        "resampled, BCa, scipy.stats.bootstrap, a fixed seed). The shift ON − OFF was estimated by the "
+        "Hodges–Lehmann estimator (the "
         "median of all pairwise Walsh averages of the differences, zeros included) with a "
         f"{confidence:.0%} confidence interval from the signed-rank distribution (exact critical values up to "
         f"{HL_EXACT_MAX_N} pairs, normal approximation beyond; the achieved level is reported). p-values were "

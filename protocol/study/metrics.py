@@ -232,7 +232,9 @@ def trial_metrics(
     err = f[start:] - target[start:]
     finite = np.isfinite(err)
     half = band_halfwidth_n(target_force_n, tolerance_fraction)
+    reached = np.flatnonzero(f >= target_force_n - half)  # into the band, or through it between two samples
     trial = TrialWindow(t_ns=t, force_n=f, target_n=target, on_target=np.abs(f - target_force_n) <= half,
                         completed=success, end_s=float(end_s), error_n=err[finite],
-                        error_t_s=t[start:][finite] / 1e9, sample_period_s=sample_period_s)
+                        error_t_s=t[start:][finite] / 1e9, sample_period_s=sample_period_s, contact_s=first_contact_s,
+                        reached_s=float(t[reached[0]] / 1e9) if len(reached) else None)
     return TrialMetrics(compute(trial, metrics), success, len(f), float(end_s), first_contact_s)
