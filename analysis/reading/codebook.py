@@ -41,6 +41,7 @@ from protocol.metrics import tested
 
 __all__ = [
     "COLUMNS",
+    "DIFFERENCE_DECIMALS",
     "DIFF_MEASURES",
     "STATS_CSV_COLUMNS",
     "WIDE_MEASURES",

@@ -24,6 +24,7 @@ variance estimated from fewer people is little more than a guess.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Sequence
@@ -168,14 +169,17 @@ def fit_mixed(model: str, outcome: str, scale: str, y: pd.Series, exog: pd.DataF
     if slope is not None:
         fit = _fit_mixed(y, exog, groups, method + " and random slope of haptic mode", confidence,
                          slope[keep].to_numpy(float))
-        if not isinstance(fit, str):
+        # a fit that warned (a Hessian not positive definite, an invalid value) or whose errors are not finite
+        # is not trusted: the intercept alone, said in the note
+        if not isinstance(fit, str) and fit[9] and np.isfinite(np.asarray(fit[2], float)).all():
             return ModelFit(model, outcome, scale, *fit)
-        fallback = f"the random slope of haptic mode could not be fitted ({fit}): random intercept only"
+        why = fit if isinstance(fit, str) else (fit[10] or "it did not converge")
+        fallback = f"the random slope of haptic mode could not be fitted ({why}): random intercept only"
     fit = _fit_mixed(y, exog, groups, method, confidence, None)
     if isinstance(fit, str):
         return _unfitted(model, outcome, scale, method, int(keep.sum()), int(groups.nunique()), fit)
-    method_, *rest, note, extra = fit
-    return ModelFit(model, outcome, scale, method_, *rest, "; ".join(filter(None, (fallback, note))), extra)
+    plain = ModelFit(model, outcome, scale, *fit)
+    return dataclasses.replace(plain, note="; ".join(filter(None, (fallback, plain.note))))
 
 
 def _fit_mixed(y: pd.Series, exog: pd.DataFrame, groups: pd.Series, method: str, confidence: float,
