@@ -20,17 +20,19 @@ from typing import Any
 
 import numpy as np
 
-from protocol.metrics import Metric, MetricValue, split_unit, tested
+from protocol.metrics import TRADE_PHASES, Metric, MetricValue, split_unit, tested
 
-__all__ = ["SIM_METRICS", "SUMMARY_KEYS", "TrialRow", "summarise_study", "trial_row_from_dict", "trial_row_to_dict"]
+__all__ = ["SIM_METRICS", "SUMMARY_KEYS", "TrialRow", "censored_key", "summarise_study", "trial_row_from_dict",
+           "trial_row_to_dict"]
 
-#: The metrics a simulated trial carries: the ones the report tests (:func:`protocol.metrics.tested`), in order.
-SIM_METRICS: tuple[Metric, ...] = tested()
+#: The metrics a simulated trial carries: the ones the report tests (:func:`protocol.metrics.tested`), in order, and the
+#: speed–accuracy trade's phases (:data:`protocol.metrics.TRADE_PHASES`: the sweep's front).
+SIM_METRICS: tuple[Metric, ...] = (*tested(), *TRADE_PHASES)
 #: The yes/no outcome among them (the task's verdict): whose mean is a participant's success rate.
 _VERDICT = next(m.name for m in SIM_METRICS if m.boolean)
 
 
-def _censored_key(m: Metric) -> str:
+def censored_key(m: Metric) -> str:
     """A success-only metric with failures counted at the trial cap, as the summary names it (``tct_cens_s``)."""
     stem, units = split_unit(m.name)
     return "_".join((stem, "cens", *units))
@@ -38,7 +40,7 @@ def _censored_key(m: Metric) -> str:
 
 #: What :func:`summarise_study` gives per key: ``off``, ``on``, ``change`` (ON/OFF − 1), ``p``, ``n_pairs``: each
 #: metric of :data:`SIM_METRICS`, a success-only one also censored at the cap, and the success rate per target.
-SUMMARY_KEYS = (*(m.name for m in SIM_METRICS), *(_censored_key(m) for m in SIM_METRICS if m.success_only),
+SUMMARY_KEYS = (*(m.name for m in SIM_METRICS), *(censored_key(m) for m in SIM_METRICS if m.success_only),
                 "success_GENTLE", "success_FIRM")
 
 
@@ -102,10 +104,11 @@ def _participant_values(mine: Sequence[TrialRow], max_trial_s: float) -> dict[st
         elif m.success_only:
             kept = [float(v) for r in mine if r.success and (v := r.values.get(m.name)) is not None]
             out[m.name] = statistics.fmean(kept) if kept else math.nan
-            out[_censored_key(m)] = statistics.fmean(
+            out[censored_key(m)] = statistics.fmean(
                 float(v) if r.success and (v := r.values.get(m.name)) is not None else max_trial_s for r in mine)
-        else:  # (a row made without it, by hand: NaN)
-            out[m.name] = statistics.fmean(_number(r.values.get(m.name)) for r in mine)
+        else:  # over the trials that have it (the trade's phases are undefined for a trial that never reached the band)
+            have = [v for r in mine if math.isfinite(v := _number(r.values.get(m.name)))]
+            out[m.name] = statistics.fmean(have) if have else math.nan
     for lab in ("GENTLE", "FIRM"):
         sub = [r for r in mine if r.target == lab]
         out[f"success_{lab}"] = sum(r.success for r in sub) / len(sub) if sub else math.nan

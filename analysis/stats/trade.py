@@ -34,7 +34,7 @@ from analysis.reading.codebook import p_text
 from analysis.reading.metrics import MetricOptions, TrialTable
 from analysis.stats.models import ModelFit, design, fit_mixed, site_terms
 from analysis.stats.rmcorr import rmcorr
-from protocol.metrics import get
+from protocol.metrics import TRADE_PHASES, get
 
 __all__ = ["DEFAULT_READING", "READINGS", "TRADE_MODEL_TERMS", "TradeReading", "participant_slopes", "rm_caption",
            "speed_accuracy", "tct_column", "trade_conclusion", "trade_model", "trade_pairs", "trade_readings"]
@@ -75,7 +75,7 @@ class TradeReading:
 
 #: The readings: the default first.
 READINGS = (
-    TradeReading("phases", "rise_time_s", "reach_rmse_n", None,
+    TradeReading("phases", TRADE_PHASES[0].name, TRADE_PHASES[1].name, None,
                  "rise time against RMSE after reaching the band (phases apart)"),
     TradeReading("cue", "tct_s", "rmse_n", "cue", "TCT against RMSE from the cue (successful trials)"),
     TradeReading("first_contact", "tct_s", "rmse_n", "first_contact",
@@ -135,7 +135,8 @@ def speed_accuracy(trials: pd.DataFrame, reading: TradeReading = DEFAULT_READING
         groups, sizes = np.unique(who, return_counts=True)  # a group with one trial contributes nothing
         contributing = sel["participant_code"][np.isin(who, groups[sizes >= 2])].nunique()
         rows.append({
-            "reading": reading.key, "haptic_mode": mode, "speed": reading.speed, "accuracy": reading.accuracy,
+            "reading": reading.key, "haptic_mode": mode, "speed": get(reading.speed).exported,
+            "accuracy": get(reading.accuracy).exported,
             "n_trials": c.n_obs, "n_participants": int(contributing),
             "r_rm": c.r, "df": c.df, "p_value": c.p_value, "ci_low": c.ci_low, "ci_high": c.ci_high,
             "slope_s_per_n": c.slope, "computable": c.computable, "note": c.note,

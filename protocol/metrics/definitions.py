@@ -44,6 +44,7 @@ __all__ = [
     "SUCCESS",
     "TCT",
     "TIME_IN_BAND",
+    "TRADE_PHASES",
 ]
 
 #: Forces to 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
@@ -154,6 +155,9 @@ REACH_RMSE = Metric(
     Role.DESCRIPTIVE, _FORCE_DECIMALS,
     mean_description=f"mean RMSE over the {REACH_WINDOW_S:g} s after reaching the band, over the trials that have it",
     in_database=False)
+
+#: The speed–accuracy trade's measures, (speed, accuracy): on parts of the trial apart (docs/science.md §6.1).
+TRADE_PHASES: tuple[Metric, Metric] = (RISE_TIME, REACH_RMSE)
 
 #: Every metric, in the order of every table's columns.  The primary ones are the paper's outcome measures, the
 #: family of Holm's correction: exactly these four, so the paper's numbers do not move when a metric is added.
