@@ -156,7 +156,7 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             q1, med, q3 = np.percentile(vals, (25, 50, 75)) if len(vals) else (math.nan,) * 3
             ax.bar(x, med if math.isfinite(med) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
                    label=_MODE_NAMES[mode] if gi == 0 else None, zorder=2)
-            ax.annotate(f"n={len(vals)}", (x, 0.0), xytext=(0, -1), textcoords="offset points", ha="center",
+            ax.annotate(str(len(vals)), (x, 0.0), xytext=(0, -1), textcoords="offset points", ha="center",
                         va="top", fontsize=5.5, color="#333333", annotation_clip=False)
             if len(vals):
                 if len(vals) > 1:  # one participant has no spread: no whisker (not one of length 0)
@@ -227,7 +227,7 @@ def mode_bars(
         _bars_panel(ax, groups, metric, rng)
     # the legend says what the bars are: a figure is also read apart from the report
     axes[0].legend(frameon=False, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.01),
-                   title="bars: median, whiskers: IQR across participants; dots: participants", alignment="left")
+                   title="median [IQR]; dots: participants; n below", alignment="left")
     add_note(fig, note)
     if title:
         fig.suptitle(title)

@@ -7,9 +7,10 @@
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import html
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -49,6 +50,12 @@ def _measure_label(metric: str) -> str:
     return codebook.label("participants.csv", metric)
 
 
+def _with_interval(v: float, row: pd.Series) -> str:
+    """A rank-biserial r with its interval where the row has one."""
+    lo, hi = row.get("rank_biserial_ci_low", np.nan), row.get("rank_biserial_ci_high", np.nan)
+    return _fmt(v) + (f" [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(lo) else "")
+
+
 def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), caption: str = "") -> str:
     """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered.
 
@@ -71,9 +78,8 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), captio
                 label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p, "rank_biserial": lambda v, r=row: (
-            _fmt(v) + (f" [{_fmt(r['rank_biserial_ci_low'])}, {_fmt(r['rank_biserial_ci_high'])}]"
-                       if np.isfinite(r.get("rank_biserial_ci_low", np.nan)) else ""))}
+        special: dict[str, Callable[[Any], str]] = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p,
+                   "rank_biserial": functools.partial(_with_interval, row=row)}
         cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl}</td>" if c == "hl" else
                         f"<td>{special[c](row.get(c)) if c in special else _fmt(row[c])}</td>" for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
@@ -373,13 +379,14 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
     cards = []
     for m in PRIMARY_METRICS:
         name = codebook.exported_name(m)
-        parts, means, ns = [], [], []
+        parts, iqr, means, ns = [], [], [], []
         for mode in ("off", "on"):
             v = per.loc[per["haptic_mode"] == mode, name].to_numpy(dtype=float)
             v = v[np.isfinite(v)]
             mean, sd, n = mean_sd(v)
             q1, med, q3 = (np.percentile(v, (25, 50, 75)) if n else (np.nan,) * 3)
-            parts.append(_fmt(med) + (f" [{_fmt(q1)}, {_fmt(q3)}]" if n > 1 else ""))
+            parts.append(_fmt(med))
+            iqr.append(f"[{_fmt(q1)}, {_fmt(q3)}]" if n > 1 else "[one value]")
             means.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
             ns.append(n)
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
@@ -388,8 +395,8 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
                 if np.isfinite(p_holm) else "Wilcoxon test not computable")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, median [IQR] across {who} (mean ± SD {means[0]} → {means[1]}); "
-                     f"{test}</small></div>")  # fmt_p escapes
+                     f"<small>OFF → ON, median across {who}, IQR {iqr[0]} → {iqr[1]} (mean ± SD {means[0]} → "
+                     f"{means[1]}); {test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 
@@ -477,8 +484,10 @@ def _head_html(study: StudyData, table: TrialTable, options: MetricOptions, n_pa
 def _sessions_html(sess: pd.DataFrame, within: Any) -> str:
     """The sessions read: which code ran each, and the table of sessions.csv's main columns."""
     sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
-                 "analysed"]
+                 "started_at", "n_runs", "n_trials", "trial_time_s", "live_force_aid", "software_version",
+                 "software_commit", "software_dirty", "analysed"]
+    if sess["site"].astype(str).str.len().any():
+        sess_cols.insert(1, "site")
     short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return (f"<h2>Sessions</h2>\n{report_sections.provenance_html(within)}\n"
             f"{_html_table(sess, 'sessions.csv', sess_cols, cell=short)}")

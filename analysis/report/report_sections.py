@@ -125,6 +125,8 @@ def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOpti
 _READING = {"phases": "rise time / RMSE after reach", "cue": "TCT / RMSE from the cue",
             "first_contact": "TCT / RMSE from first contact", "censored": "every trial, failure at the cap",
             "successful": "successful trials only", "time_to_event": "time to event (Cox HR ON : OFF)"}
+#: The error window's readings (the same keys as two of the trade's).
+_WINDOW = {"cue": "from the cue", "first_contact": "from first contact"}
 _BLOCKS = {"error window": "The error window of RMSE and Max AE (Hodges–Lehmann shift ON − OFF [CI], Holm within "
                            "the window)",
            "TCT reading": "The reading of TCT (HL shift ON − OFF [CI] with Holm's p in the reading's family; the "
@@ -140,7 +142,8 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
     for analysis, block in sens.groupby("analysis", sort=False):
         readings = list(dict.fromkeys(block["reading"]))
         mine = {w for w in readings if block.loc[block["reading"] == w, "default"].any()}
-        head = "".join(f"<th>{html.escape(_READING.get(w, w))}{' (this report)' if w in mine else ''}</th>"
+        names = _WINDOW if analysis == "error window" else _READING
+        head = "".join(f"<th>{html.escape(names.get(w, w))}{' (this report)' if w in mine else ''}</th>"
                        for w in readings)
         body = []
         for measure, g in block.groupby("measure", sort=False):

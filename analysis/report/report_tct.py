@@ -18,6 +18,12 @@ from analysis.report.html_parts import fmt, fmt_p, img, plural
 __all__ = ["tct_html", "tct_methods"]
 
 
+def _p(p: float) -> str:
+    """``= 0.0123`` or ``< 0.0001``: a p-value after its symbol."""
+    text = fmt_p(p)
+    return text if text.startswith("&lt;") else f"= {text}"
+
+
 def _reading_rows(within: Any, options: MetricOptions) -> str:
     """One row per mode: trials, successes, the restricted mean (every trial) and the successful-trials mean, each
     with its n, and the Kaplan–Meier median."""
@@ -53,11 +59,11 @@ def tct_html(within: Any, tables: dict[str, Any], options: MetricOptions, png: b
         hr = float(on["hazard_ratio"])
         how = "sooner" if hr > 1 else "later"
         model = (f"<p><b>Hazard ratio, haptics ON : OFF = {fmt(hr, 2)} [{fmt(float(on['ci_low']), 2)}, "
-                 f"{fmt(float(on['ci_high']), 2)}]</b> ({confidence:.0%} interval), p = {fmt_p(float(on['p_value']))}: "
+                 f"{fmt(float(on['ci_high']), 2)}]</b> ({confidence:.0%} interval), p {_p(float(on['p_value']))}: "
                  f"at any moment, a trial not yet successful reached success {fmt(hr, 2)} times as often with "
                  f"feedback ({how}), at a fixed target, within participants. Cox model stratified by participant "
                  f"(each their own baseline), standard errors clustered on the participant; "
-                 f"{plural(cox.n_trials, 'trial')}, {plural(cox.n_events, 'success')}, "
+                 f"{plural(cox.n_trials, 'trial')} ({cox.n_events} successful), "
                  f"{plural(cox.n_participants, 'participant')} (survival_model.csv).</p>")
     else:
         model = f'<p class="warn">Cox model {html.escape(cox.note)}.</p>'
