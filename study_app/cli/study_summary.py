@@ -11,6 +11,7 @@ from collections import Counter
 
 import pandas as pd
 
+from analysis.reading.metrics import MetricOptions
 from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.metrics import METRICS, tested
@@ -103,7 +104,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
     frame = _trials_frame(exp) if exp else None
-    overall = None if frame is None else per_participant(frame)
+    # TCT as this summary labels it, over successful trials (the report's default counts a failure at the cap)
+    successful = MetricOptions(tct_policy="successful")
+    overall = None if frame is None else per_participant(frame, successful)
     for m in _ROWS:
         off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
         finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
@@ -119,7 +122,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         if min(n_off, n_on) < len(codes):
             lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
                          "with no success in a mode has no TCT there)")
-    targets = None if frame is None else per_participant(frame, by_target=True)
+    targets = None if frame is None else per_participant(frame, successful, by_target=True)
     for label in sorted({t.target_label for _, t in exp}):
         part = None if targets is None else targets[targets["target_label"] == label]
         off, on = _across(part, "success_rate", "off"), _across(part, "success_rate", "on")
