@@ -52,6 +52,7 @@ import os
 import stat
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TypedDict, Unpack
 
 from foundation.outfs import (
     Folder,
@@ -82,7 +83,8 @@ from foundation.outfs import (
 from foundation.outmarker import marker_bytes, read_marker_at
 from foundation.platform_support.processes import process_exists
 
-__all__ = ["REPORT_MARKER", "OutputError", "check_output_folder", "ensure_output_folder", "write_output_folder"]
+__all__ = ["REPORT_MARKER", "FolderRules", "OutputError", "check_output_folder", "ensure_output_folder",
+           "write_output_folder"]
 
 #: The marker of ``report``'s output folder (here, so that the command line checks ``--out`` before it imports
 #: the analysis).
@@ -155,17 +157,34 @@ def _judge(out: Path, dir_fd: Folder, *, command: str, marker: str, force: bool,
                           "elsewhere or choose another folder (nothing was deleted)")
 
 
-def check_output_folder(
-    out_dir: str | os.PathLike[str],
-    *,
-    command: str,
-    marker: str,
-    inputs: Sequence[str | os.PathLike[str]] = (),
-    force: bool = False,
-    keep: Keep = _keep_nothing,
-    need_bytes: int = 0,
-    option: str = "--out",
-) -> Path:
+class FolderRules(TypedDict, total=False):
+    """What a command allows of its output folder, beside its name and marker: the keywords
+    :func:`check_output_folder` and :func:`write_output_folder` share (each optional, with the default named).
+
+    Attributes
+    ----------
+    inputs
+        Input databases: none may lie inside the folder (default: none).
+    force
+        Allow replacing the command's own, unedited files (default False).
+    keep
+        Files (relative paths) the command keeps and reuses: never replaced, never deleted, and they alone do not
+        make the folder non-empty (default: none).
+    need_bytes
+        Free space the outputs need, roughly (default 0: only that the disk is not full).
+    option
+        The option that named the folder, for the messages (default ``--out``; ``--screenshot``).
+    """
+
+    inputs: Sequence[str | os.PathLike[str]]
+    force: bool
+    keep: Keep
+    need_bytes: int
+    option: str
+
+
+def check_output_folder(out_dir: str | os.PathLike[str], *, command: str, marker: str,
+                        **rules: Unpack[FolderRules]) -> Path:
     """Refuse an output folder the command must not write (before any work is done).
 
     Parameters
@@ -176,17 +195,8 @@ def check_output_folder(
         The command's name, for the messages (``"report"``, ``"power"``).
     marker
         The marker file's name.
-    inputs
-        Input databases: none may lie inside the folder.
-    force
-        Allow replacing the command's own, unedited files.
-    keep
-        Files (relative paths) the command keeps and reuses: never replaced,
-        never deleted, and they alone do not make the folder non-empty.
-    need_bytes
-        Free space the outputs need, roughly (0: only that the disk is not full).
-    option
-        The option that named the folder, for the messages (``--out``, ``--screenshot``).
+    **rules
+        What the command allows of the folder (:class:`FolderRules`).
 
     Returns
     -------
@@ -198,6 +208,8 @@ def check_output_folder(
     OutputError
         One line naming the folder and what is wrong; nothing was touched.
     """
+    inputs, force, keep = rules.get("inputs", ()), rules.get("force", False), rules.get("keep", _keep_nothing)
+    need_bytes, option = rules.get("need_bytes", 0), rules.get("option", "--out")
     out = Path(out_dir)
     try:
         st = os.stat(out)  # the folder the user named may be a link to a folder
@@ -316,18 +328,8 @@ def _remove_stale_temporaries(out_fd: Folder, marker: str) -> None:
             rmtree_at(out_fd, name)
 
 
-def write_output_folder(
-    out_dir: str | os.PathLike[str],
-    fill: Callable[[Path], object],
-    *,
-    command: str,
-    marker: str,
-    inputs: Sequence[str | os.PathLike[str]] = (),
-    force: bool = False,
-    keep: Keep = _keep_nothing,
-    need_bytes: int = 0,
-    option: str = "--out",
-) -> list[str]:
+def write_output_folder(out_dir: str | os.PathLike[str], fill: Callable[[Path], object], *, command: str, marker: str,
+                        **rules: Unpack[FolderRules]) -> list[str]:
     """Write a command's outputs into ``out_dir`` by the policy of this module.
 
     Parameters
@@ -336,9 +338,9 @@ def write_output_folder(
         The ``--out`` folder.
     fill
         ``fill(folder)`` writes every output into the (temporary, private) folder it is given.
-    command, marker, inputs, force, keep, need_bytes, option
-        As in :func:`check_output_folder` (which runs again here, and once
-        more when the outputs are ready, so the folder is judged as it is then).
+    command, marker, **rules
+        As in :func:`check_output_folder` (which runs here, and once more when the outputs are ready, so the
+        folder is judged as it is then).
 
     Returns
     -------
@@ -351,8 +353,8 @@ def write_output_folder(
         The folder must not be written, or writing failed (one line; the
         folder is as it was, and a folder this call created is removed again).
     """
-    out = check_output_folder(out_dir, command=command, marker=marker, inputs=inputs, force=force, keep=keep,
-                              need_bytes=need_bytes, option=option)
+    out = check_output_folder(out_dir, command=command, marker=marker, **rules)
+    force, keep, option = rules.get("force", False), rules.get("keep", _keep_nothing), rules.get("option", "--out")
     created = ensure_output_folder(out, option)
     tmp_name = f"{marker}.tmp-{os.getpid()}-{os.urandom(4).hex()}"
     out_fd: Folder | None = None
