@@ -240,12 +240,17 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     positive flips (plus half the zero ranks under "zsplit"), the very values
     SciPy's statistic takes.  tests/analysis/test_stats.py checks the p-values equal.
     """
-    if zero_method == "wilcox":  # a zero's sign flip changes nothing: the 2ⁿ flips of the ranked ones, enumerated
-        d = d[d != 0]
-    ranked = np.ones(d.size, dtype=bool)
-    ranks = np.zeros(d.size)
-    ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
-    half_zero = float(ranks[d == 0].sum()) / 2.0 if zero_method == "zsplit" else 0.0
+    # A zero's sign flip changes no statistic (its rank, where it has one, is dropped or split whatever its sign):
+    # the 2ⁿ flips of the non-zero differences are enumerated, each of SciPy's 2ⁿ⁺ᶻ flips' values once per zero
+    # pattern, so the same p-value -- and exact up to 13 non-zero differences wherever the zeros are.
+    # (SciPy's permutation_test needs two values: with one non-zero difference the zeros stay, changing nothing.)
+    nonzero = d != 0
+    ranked = nonzero if zero_method == "wilcox" else np.ones(d.size, dtype=bool)
+    all_ranks = np.zeros(d.size)
+    all_ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
+    half_zero = float(all_ranks[~nonzero].sum()) / 2.0 if zero_method == "zsplit" else 0.0
+    flipped = nonzero if np.count_nonzero(nonzero) >= 2 else np.ones(d.size, dtype=bool)
+    ranks, d = all_ranks[flipped], d[flipped]
 
     def w_plus(x: np.ndarray, axis: int) -> np.ndarray:
         w: np.ndarray = np.sum((x > 0) * ranks, axis=axis) + half_zero
@@ -385,7 +390,7 @@ def paired_wilcoxon(
         ``"auto"`` applies SciPy's rule (:func:`analysis.stats.signed_rank.auto_method`); the result's ``method``
         says what was used. ``"exact"``: SciPy's untied null distribution of ``n_used`` ranks (with ties or
         zeros it rounds a fractional W⁺ conservatively); ``"permutation"``: SciPy's ``PermutationMethod()``,
-        all 2ⁿ sign flips, up to 13 pairs; ``"asymptotic"`` is accepted for ``"approx"``.
+        all 2ⁿ sign flips of the non-zero differences, up to 13 of them; ``"asymptotic"`` is accepted for ``"approx"``.
     confidence : float
         Requested level of the Hodges–Lehmann interval (see :func:`hodges_lehmann`).
     correction : bool
@@ -408,7 +413,7 @@ def paired_wilcoxon(
     ValueError
         On malformed arguments: unequal lengths, non-1-D input, an unknown ``zero_method``/``alternative``/
         ``method``, a confidence outside (0, 1), an explicit exact test with more than
-        ``EXPLICIT_EXACT_MAX_N`` pairs or an explicit permutation test with more than 13.
+        ``EXPLICIT_EXACT_MAX_N`` pairs or an explicit permutation test with more than 13 non-zero differences.
     """
     zero_method, alternative, requested = _check_arguments(zero_method, alternative, method, confidence)
     x_off, x_on, keep = _complete_pairs(off, on)
@@ -420,9 +425,10 @@ def paired_wilcoxon(
     if d is None or why:
         return _not_computable(base, "; ".join([*lead, why]))
     used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
-    if requested == "auto" and used == "approx" and base["n_used"] <= PERMUTATION_AUTO_MAX_N:
+    n_flipped = d.size - base["n_zero"]  # the signs a permutation test enumerates (:func:`_permutation_p`)
+    if requested == "auto" and used == "approx" and n_flipped <= PERMUTATION_AUTO_MAX_N:
         used = "permutation"  # exact: SciPy's rule counts the zero differences its permutation need not flip
-    _check_size(used, base["n_used"] if used == "exact" else d.size)
+    _check_size(used, base["n_used"] if used == "exact" else n_flipped)
     notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
     return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
                           **_tested(d, zero_method, alternative, used, correction, base["n_used"]), **base)
