@@ -22,8 +22,8 @@ import numpy as np
 
 from protocol.metrics import TRADE_PHASES, Metric, MetricValue, split_unit, tested
 
-__all__ = ["SIM_METRICS", "SUMMARY_KEYS", "TrialRow", "censored_key", "summarise_study", "trial_row_from_dict",
-           "trial_row_to_dict"]
+__all__ = ["MEASURE_LABELS", "SIM_METRICS", "SUMMARY_KEYS", "TrialRow", "censored_key", "summarise_study",
+           "trial_row_from_dict", "trial_row_to_dict"]
 
 #: The metrics a simulated trial carries: the ones the report tests (:func:`protocol.metrics.tested`), in order, and the
 #: speed–accuracy trade's phases (:data:`protocol.metrics.TRADE_PHASES`: the sweep's front).
@@ -37,6 +37,13 @@ def censored_key(m: Metric) -> str:
     stem, units = split_unit(m.name)
     return "_".join((stem, "cens", *units))
 
+
+#: The measures a sweep reports (:data:`analysis.planning.sweep.METRICS`, here so that the sweep's figures read them
+#: without importing the sweep): each simulated metric with its label, a success-only one (TCT) also with failures
+#: at the cap.
+MEASURE_LABELS: dict[str, str] = {k: v for m in SIM_METRICS for k, v in (
+    ((m.name, m.summary_label), (censored_key(m), f"{m.short}, every trial, failure at the cap ({m.unit})"))
+    if m.success_only else ((m.name, m.summary_label),))}
 
 #: What :func:`summarise_study` gives per key: ``off``, ``on``, ``change`` (ON/OFF − 1), ``p``, ``n_pairs``: each
 #: metric of :data:`SIM_METRICS`, a success-only one also censored at the cap, and the success rate per target.

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.planning.sim_study import (
+    MEASURE_LABELS,
     SIM_METRICS,
     TrialRow,
     censored_key,
@@ -51,9 +52,7 @@ CACHE_FILE = "cells.jsonl"
 #: The measures a sweep reports (the simulated trials' metrics: the ones the report tests, and the trade's phases), in
 #: order, with their labels; a success-only one (TCT) in both readings: over successful trials (with their count,
 #: ``n_trials_*``) and over every trial, a failure at the cap (the report's default).
-METRICS: dict[str, str] = {k: v for m in SIM_METRICS for k, v in (
-    ((m.name, m.summary_label), (censored_key(m), f"{m.short}, every trial, failure at the cap ({m.unit})"))
-    if m.success_only else ((m.name, m.summary_label),))}
+METRICS: dict[str, str] = MEASURE_LABELS
 
 
 @dataclass(frozen=True)

@@ -23,8 +23,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from analysis.planning.sim_study import SIM_METRICS
-from analysis.planning.sweep import METRICS
+from analysis.planning.sim_study import MEASURE_LABELS, SIM_METRICS
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
 from protocol.metrics import TRADE_PHASES
 
@@ -32,7 +31,7 @@ __all__ = ["front_figure", "metrics_figure"]
 
 #: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`), two to
 #: a row.
-_PANELS = tuple(METRICS.items())
+_PANELS = tuple(MEASURE_LABELS.items())
 #: The yes/no outcome (the front's success rate) and which panels are means over successful trials only.
 SIM_METRICS_BOOLEAN = tuple(m for m in SIM_METRICS if m.boolean)
 _SUCCESS_ONLY = {m.name: m.success_only for m in SIM_METRICS}

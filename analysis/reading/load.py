@@ -270,6 +270,20 @@ def _read_all(
     return all_sessions, all_trials, all_events, damage, all_runs
 
 
+def _recode_sites(all_sessions: list[pd.DataFrame], sites: Sequence[str] | None) -> tuple[str, ...]:
+    """Each database's site in a ``site`` column of its sessions, its participant codes re-coded ``SITE:CODE`` (in
+    memory: the file is not touched); the sites, one per database (``""`` each when none was named)."""
+    named = tuple(str(x) for x in sites) if sites else ("",) * len(all_sessions)
+    if len(named) != len(all_sessions):
+        raise AnalysisError(f"--site: {len(named)} sites for {len(all_sessions)} databases; give one --site after "
+                            "each --db (report --db a.db --site A --db b.db --site B)")
+    for frame, site in zip(all_sessions, named, strict=True):
+        frame.insert(1, "site", site)
+        if site:
+            frame["participant_code"] = site + ":" + frame["participant_code"].astype(str)
+    return named
+
+
 def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False,
                sites: Sequence[str] | None = None) -> StudyData:
     """Read and merge study databases.
@@ -300,14 +314,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         no experiment trial to analyse.
     """
     all_sessions, all_trials, all_events, damage, all_runs = _read_all(paths)
-    named = tuple(str(x) for x in sites) if sites else ("",) * len(all_sessions)
-    if len(named) != len(all_sessions):
-        raise AnalysisError(f"--site: {len(named)} sites for {len(all_sessions)} databases; give one --site after "
-                            "each --db (report --db a.db --site A --db b.db --site B)")
-    for frame, site in zip(all_sessions, named, strict=True):
-        frame.insert(1, "site", site)
-        if site:  # re-coded on the fly: the file is not touched
-            frame["participant_code"] = site + ":" + frame["participant_code"].astype(str)
+    named = _recode_sites(all_sessions, sites)
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():

@@ -19,7 +19,10 @@ with more than 50 pairs → the normal approximation; otherwise no ties and no
 zeros → the exact distribution; otherwise at most 13 pairs → the permutation
 test over all 2ⁿ sign flips; otherwise → the normal approximation; "pairs"
 counts zero differences too -- the rule of SciPy 1.15 – 1.17, the range
-``pyproject.toml`` pins); both rank sums, the rank-biserial correlation and
+``pyproject.toml`` pins; the report departs from it in one place, exactly:
+where SciPy would approximate though at most 13 differences are non-zero it
+enumerates their sign flips, :func:`analysis.stats.signed_rank.report_method`);
+both rank sums, the rank-biserial correlation and
 r = z/√n; and the Hodges–Lehmann shift with its interval
 (:mod:`analysis.stats.hodges_lehmann`).
 """
@@ -37,7 +40,7 @@ from scipy import stats as sps
 
 from analysis.reading.codebook_columns import DIFFERENCE_DECIMALS
 from analysis.stats.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
-from analysis.stats.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, auto_method
+from analysis.stats.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, report_method
 
 __all__ = [
     "ALTERNATIVES",
@@ -243,13 +246,15 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     # A zero's sign flip changes no statistic (its rank, where it has one, is dropped or split whatever its sign):
     # the 2ⁿ flips of the non-zero differences are enumerated, each of SciPy's 2ⁿ⁺ᶻ flips' values once per zero
     # pattern, so the same p-value -- and exact up to 13 non-zero differences wherever the zeros are.
-    # (SciPy's permutation_test needs two values: with one non-zero difference the zeros stay, changing nothing.)
+    # (SciPy's permutation_test needs two values: with one non-zero difference one zero stays, changing nothing.)
     nonzero = d != 0
     ranked = nonzero if zero_method == "wilcox" else np.ones(d.size, dtype=bool)
     all_ranks = np.zeros(d.size)
     all_ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
     half_zero = float(all_ranks[~nonzero].sum()) / 2.0 if zero_method == "zsplit" else 0.0
-    flipped = nonzero if np.count_nonzero(nonzero) >= 2 else np.ones(d.size, dtype=bool)
+    flipped = nonzero.copy()
+    if np.count_nonzero(nonzero) < 2:
+        flipped[np.flatnonzero(~nonzero)[:1]] = True
     ranks, d = all_ranks[flipped], d[flipped]
 
     def w_plus(x: np.ndarray, axis: int) -> np.ndarray:
@@ -387,7 +392,8 @@ def paired_wilcoxon(
     alternative : {"two-sided", "greater", "less"}
         "greater": ON tends to exceed OFF (d = ON − OFF > 0).
     method : {"auto", "exact", "permutation", "approx"}
-        ``"auto"`` applies SciPy's rule (:func:`analysis.stats.signed_rank.auto_method`); the result's ``method``
+        ``"auto"`` applies the report's rule (:func:`analysis.stats.signed_rank.report_method`: SciPy's, but an exact
+        permutation test wherever at most 13 differences are non-zero); the result's ``method``
         says what was used. ``"exact"``: SciPy's untied null distribution of ``n_used`` ranks (with ties or
         zeros it rounds a fractional W⁺ conservatively); ``"permutation"``: SciPy's ``PermutationMethod()``,
         all 2ⁿ sign flips of the non-zero differences, up to 13 of them; ``"asymptotic"`` is accepted for ``"approx"``.
@@ -424,11 +430,9 @@ def paired_wilcoxon(
         why = _untestable(d)
     if d is None or why:
         return _not_computable(base, "; ".join([*lead, why]))
-    used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
-    n_flipped = d.size - base["n_zero"]  # the signs a permutation test enumerates (:func:`_permutation_p`)
-    if requested == "auto" and used == "approx" and n_flipped <= PERMUTATION_AUTO_MAX_N:
-        used = "permutation"  # exact: SciPy's rule counts the zero differences its permutation need not flip
-    _check_size(used, base["n_used"] if used == "exact" else n_flipped)
+    used = report_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
+    # a permutation test enumerates the signs of the non-zero differences (:func:`_permutation_p`)
+    _check_size(used, base["n_used"] if used == "exact" else d.size - base["n_zero"])
     notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
     return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
                           **_tested(d, zero_method, alternative, used, correction, base["n_used"]), **base)

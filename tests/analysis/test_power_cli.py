@@ -71,8 +71,9 @@ def _run(capsys, *argv):
 
 def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, capsys):
     out = tmp_path / "plan"
+    # TCT over successful trials (the paper's text), where a participant with no success in a mode has none
     code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400",
-                                "--n", "6,10,16")
+                                "--n", "6,10,16", "--tct", "successful")
     assert code == 0, stderr
     assert "Source: the pilot study pilot.db; 6 participants with both haptic modes" in stdout
     assert "TCT (s) is undefined for 2 of 6 participants (no successful trial in a mode)" in stdout
@@ -256,7 +257,7 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     out = tmp_path / "rep"
-    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
+    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power", "--tct", "successful")
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page
