@@ -249,6 +249,10 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "first_contact_s": first_contact,
             **{m.censored: np.where(success, values[m.name], cap) for m in METRICS if m.censored},
             "database": inc["database"],
+            # a study pooled from named sites (report --site): each trial's, for the models' site terms and the
+            # tables per site; none otherwise, so a one-site study's tables are as they were
+            **({"site": inc["site"].astype(str)} if "site" in inc and inc["site"].astype(str).str.len().any()
+               else {}),
         }
     )
     return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree, _by_window(inc, results),

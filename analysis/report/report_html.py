@@ -394,9 +394,10 @@ def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> 
         n_test = by_metric.at[name, "n"]  # the ranked pairs: zero differences and missing sides left out
         test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
                 if np.isfinite(p_holm) else "Wilcoxon test not computable")
+        spread = (f"median across {who}, IQR {iqr[0]} → {iqr[1]} (mean ± SD {means[0]} → {means[1]})"
+                  if max(ns) > 1 else f"{who}: one value per mode, no spread")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, median across {who}, IQR {iqr[0]} → {iqr[1]} (mean ± SD {means[0]} → "
-                     f"{means[1]}); {test}</small></div>")  # fmt_p escapes
+                     f"<small>OFF → ON, {spread}; {test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 

@@ -164,7 +164,9 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
             flag = '<td class="flag">differs</td>' if differs else "<td>same</td>"
             cls = ' class="differs"' if differs else ""
             body.append(f'<tr{cls}><td class="m">{html.escape(label)}</td>{"".join(cells)}{flag}</tr>')
-        tables.append(f'<div class="scroll"><table class="within sens"><caption>{html.escape(_BLOCKS[analysis])}'
+        level = f"[{confidence * 100:g} % CI]"  # the level the intervals were computed at
+        caption = html.escape(_BLOCKS[analysis].replace("[CI]", level))
+        tables.append(f'<div class="scroll"><table class="within sens"><caption>{caption}'
                       f"</caption><thead><tr><th>measure</th>{head}<th>conclusion</th></tr></thead>"
                       f'<tbody>{"".join(body)}</tbody></table></div>')
     n_diff = sens.drop_duplicates(["analysis", "measure"])["differs"].sum()
