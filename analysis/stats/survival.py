@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,15 @@ def time_to_event(trials: pd.DataFrame) -> pd.DataFrame:
                          "event": trials["success"].astype(bool).to_numpy()}, index=trials.index)
 
 
+def _modes(trials: pd.DataFrame) -> Iterator[tuple[str, pd.DataFrame]]:
+    """Each haptic mode that has trials (OFF, then ON) with its trials' times to event."""
+    tte = time_to_event(trials)
+    for mode in ("off", "on"):
+        sel = tte[tte["haptic_mode"] == mode]
+        if not sel.empty:
+            yield mode, sel
+
+
 def kaplan_meier(trials: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame:
     """The Kaplan–Meier curve of P(no success yet) per haptic mode.
 
@@ -57,12 +67,8 @@ def kaplan_meier(trials: pd.DataFrame, confidence: float = 0.95) -> pd.DataFrame
     """
     from scipy.stats import CensoredData, ecdf
 
-    tte = time_to_event(trials)
     rows = []
-    for mode in ("off", "on"):
-        sel = tte[tte["haptic_mode"] == mode]
-        if sel.empty:
-            continue
+    for mode, sel in _modes(trials):
         t, e = sel["time_s"].to_numpy(float), sel["event"].to_numpy(bool)
         rows.append({"haptic_mode": mode, "time_s": 0.0, "n_at_risk": len(t), "n_events": 0, "survival": 1.0,
                      "ci_low": 1.0, "ci_high": 1.0})
@@ -88,12 +94,8 @@ def time_to_event_summary(trials: pd.DataFrame, km: pd.DataFrame) -> pd.DataFram
     or below 0.5; empty when it stays above: fewer than half the trials succeeded), ``restricted_mean_s`` (the
     mean of min(TCT, cap) over every trial, the figure's reading) and ``successful_mean_s`` with ``n_successes``
     (the text's reading, successful trials only)."""
-    tte = time_to_event(trials)
     rows = []
-    for mode in ("off", "on"):
-        sel = tte[tte["haptic_mode"] == mode]
-        if sel.empty:
-            continue
+    for mode, sel in _modes(trials):
         curve = km[km["haptic_mode"] == mode]
         below = curve[curve["survival"] <= 0.5]
         ok = sel["event"].to_numpy(bool)
