@@ -156,8 +156,9 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
                     cells.append("<td></td>")
                     continue
                 r = g.loc[w]
-                p = (f"p (Holm) = {fmt_p(r['p_holm'])}" if math.isfinite(float(r["p_holm"])) else
-                     f"p = {fmt_p(r['p_value'])}")
+                holm = math.isfinite(float(r["p_holm"]))
+                shown = fmt_p(r["p_holm"] if holm else r["p_value"])  # "&lt; 0.0001" carries its own sign
+                p = f"p{' (Holm)' if holm else ''} {shown if shown.startswith('&lt;') else '= ' + shown}"
                 cells.append(f"<td class=\"wrap\">{fmt(r['estimate'])} {_ci(r['ci_low'], r['ci_high'])}, {p}, "
                              f"n = {int(r['n'])}<br><i>{html.escape(str(r['conclusion']))}</i></td>")
             differs = bool(g["differs"].any())
