@@ -91,7 +91,7 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
     marker = json.loads((out / ".haptic-study-power").read_text())
     assert sorted(marker["files"]) == ["power.csv", "power.pdf", "power.png", "power.svg", "power.txt"]
-    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16", "--tct", "successful")
     # a second run needs --force; it replaces its own files and gives the same numbers for the same seed
     code, _, stderr = _run(capsys, *argv)
     assert code == 2 and "the folder exists and holds power.csv and 4 more" in stderr and "pass --force" in stderr
