@@ -6,7 +6,7 @@ For every participant of every study this builds the simulated rig on a
 virtual clock, hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`
 and walks the paper's 20-trial random schedule through the real
 :class:`protocol.study.trial.TrialMachine` (so success, TCT, RMSE and Max AE come from
-the one definition in :mod:`protocol.study.metrics`).  Per participant × mode it
+the one definition of the task, :mod:`protocol.tasks.force_regulation`).  Per participant × mode it
 aggregates like science.md §6 (success over 10 trials, mean RMSE and Max AE
 over trials, mean TCT over successful trials) and prints, per study and as the
 mean over studies, the OFF/ON values, the change, the paper's values and the
@@ -218,12 +218,13 @@ def driver_cost_us(seconds: float = 12.0, repeats: int = 5) -> float:
     (tip lag 30 ms, Hunt–Crossley tissue, scaled felt force) and replayed to a fresh
     participant with the same seed, so the replay takes the same decisions.
     """
+    from pipeline.core.aim import TrialAim
     from pipeline.force.scaling import scale_magnitude
     from pipeline.sim.hand import HandObservation
 
     def fresh() -> SimulatedParticipant:
         q = SimulatedParticipant(seed=1)
-        q.begin_trial(1.2, True, 0.0)
+        q.begin_trial(TrialAim.constant(1.2, True), 0.0)
         return q
 
     p = fresh()

@@ -67,7 +67,7 @@ CREATE TABLE IF NOT EXISTS trials (
     repeat_of       INTEGER,                    -- trial_index of the aborted trial this one re-runs
     -- version 2: why an aborted trial was aborted, and how the 1 kHz loop ran during the trial
     abort_cause     TEXT CHECK (abort_cause IS NULL OR abort_cause IN
-                                ('experimenter', 'fault', 'feedback', 'gap', 'interrupted')),
+                                ('experimenter', 'fault', 'feedback', 'gap', 'interrupted', 'participant_screen')),
     period_p50_ms     REAL,                     -- loop tick period over the trial's samples
     period_p99_ms     REAL,
     period_max_ms     REAL,

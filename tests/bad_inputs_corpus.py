@@ -408,7 +408,7 @@ CASES: list[Case] = [
     Case("no command", (), "the following arguments are required: COMMAND"),
     Case("a choice with a line break", ("sim", "--clock", "real\nvirtual"), "invalid choice: 'real\\nvirtual'"),
     Case("--resume with a bad participant code", ("run", "--db", "{d}/good.db", "--resume", "P01; DROP TABLE trials"),
-         "participant code = 'P01; DROP TABLE trials': must be 1–32 characters", {"good.db": good_db}),
+         "--resume: 'P01; DROP TABLE trials': must be 1–32 characters", {"good.db": good_db}),
     # -- study databases ----------------------------------------------------------------------------------------
     Case("database: participant already has a session",
          ("run", "--participants", "1", "--seed", "0", "--protocol", "{d}/tiny.toml", "--db", "{d}/good.db"),
@@ -502,6 +502,9 @@ CASES += [
          {"p.toml": protocol("tolerance_fraction = 0.10 ", "tolerance_fraction = 0.0 ")}),
     Case("protocol: a negative cue", RUN_NEW, "p.toml: trial.cue_s = -1.0: must be a number from 0 to 60",
          {"p.toml": protocol("cue_s = 1.0 ", "cue_s = -1.0 ")}),
+    Case("protocol: a cue longer than the trial cap (issue 40, item 9)", RUN_NEW,
+         "p.toml: trial.cue_s = 30.0: must be shorter than trial.max_trial_s = 12",
+         {"p.toml": protocol("cue_s = 1.0 ", "cue_s = 30.0 ")}),
     Case("protocol: a mode twice", RUN_NEW, "p.toml: design.modes = ['on', 'on']: must be a non-empty list of distinct",
          {"p.toml": protocol('modes = ["on", "off"]', 'modes = ["on", "on"]')}),
     Case("protocol: version 2", RUN_NEW, "p.toml: version = 2: this software reads protocol version 1",

@@ -263,9 +263,11 @@ def participant_export(database: str | os.PathLike[str], code: str,
     except StorageError as exc:
         raise AnalysisError(str(exc)) from None
     try:
-        rows = db.participant_data(code)
+        rows = db.participant_data(code)  # p01 for a stored P01: refused, naming it
         gone = db.withdrawal(code) if rows is None else None
         codes = db.participant_codes(limit=11)
+    except StorageError as exc:
+        raise AnalysisError(str(exc)) from None
     finally:
         db.close()
     if gone is not None:

@@ -186,8 +186,8 @@ def summary_frame(tidy: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, 
 
 #: What a sweep of the filter window changes besides what the participant feels (docs/science.md §4.3).
 FILTER_NOTE = ("The filter window also changes the task force every trial is judged on (success, TCT, RMSE and "
-               "Max AE are computed from the filtered force, protocol/study/metrics.py), for haptics-OFF trials too: a "
-               "change with the window is partly the measurement's, not only the participants'.")
+               "Max AE are computed from the filtered force, protocol/tasks/force_regulation.py), for haptics-OFF "
+               "trials too: a change with the window is partly the measurement's, not only the participants'.")
 
 
 def caveat(model_version: str, model_fit: str) -> str:

@@ -38,7 +38,8 @@ from analysis.stats.wilcoxon import WilcoxonResult
 from protocol.metrics import by_participant_name
 from protocol.study.display import task_axis_top_n
 from protocol.study.labels import fault_names
-from protocol.study.metrics import CONTACT_THRESHOLD_N, band_halfwidth_n
+from protocol.tasks.base import Task, TrialScreen, TrialTarget
+from protocol.tasks.window import CONTACT_THRESHOLD_N
 
 __all__ = [
     "COLUMN_IN",
@@ -263,7 +264,7 @@ def paired_lines(per_part: pd.DataFrame, metrics: Sequence[str], marks: Mapping[
 
 
 @styled
-def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None, tolerance_fraction: float = 0.10,
+def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None, band: TrialScreen | None = None,
                    title: str = "", error_window: str | None = None, abort: tuple[float, str] | None = None) -> Figure:
     """One trial's force through the pipeline (the paper's Fig. 6), drawn for judging the task.
 
@@ -272,7 +273,7 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     the haptic device (green) and the target band; its axis is set by the
     target (:func:`protocol.study.display.task_axis_top_n`).  Bottom panel, on its own axis: the raw
     sensor force (red), dominated by the tool's weight.  Intervals in contact
-    (task force above :data:`protocol.study.metrics.CONTACT_THRESHOLD_N`) are shaded
+    (task force above :data:`protocol.tasks.window.CONTACT_THRESHOLD_N`) are shaded
     in both.  Legends sit above the data.
 
     Parameters
@@ -280,8 +281,10 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
     samples
         :func:`analysis.reading.recorded.read_trial_samples` output (its ``faults`` column, where recorded, marks when a
         watchdog fault latched).
-    target_force_n, tolerance_fraction
-        The trial's band, drawn when ``target_force_n`` is given.
+    target_force_n
+        The trial's target force (it scales the axis).
+    band
+        What the trial's task shows of it (:meth:`protocol.tasks.base.Task.screen`): its band, drawn with its legend.
     title
         Figure title.
     error_window
@@ -306,11 +309,9 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
             for axis in (ax, ax_raw):
                 axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
                              label="in contact" if (a == edges[0] and axis is ax) else None)
-    if target_force_n is not None:
-        half = band_halfwidth_n(target_force_n, tolerance_fraction)
-        lo, hi = target_force_n - half, target_force_n + half
-        ax.axhspan(lo, hi, color="#0072B2", alpha=0.18, linewidth=0,
-                   label=f"target band {target_force_n:g} N ± {tolerance_fraction:.0%}")
+    if band is not None and band.band_n is not None:
+        lo, hi = band.band_n
+        ax.axhspan(lo, hi, color="#0072B2", alpha=0.18, linewidth=0, label=band.band_legend)
         for edge in (lo, hi):
             ax.axhline(edge, color="#0072B2", linewidth=0.6, linestyle="--")
     ax.plot(*peak_downsample(t, task), color="#1f4e9c", linewidth=0.9, label="task force |F| (compensated, filtered)")
@@ -434,7 +435,7 @@ def trial_trace(database: str, session_id: int, trial_index: int, **kwargs: Any)
     return pipeline_trace(read_trial_samples(database, session_id, trial_index), **kwargs)
 
 
-def stored_trial_figure(database: str, trial: Mapping[str, Any], samples: pd.DataFrame,
+def stored_trial_figure(database: str, trial: Mapping[str, Any], samples: pd.DataFrame, task: Task,
                         error_window: str = "cue") -> Figure:
     """``plot-trial``'s figure of one stored trial (a row of :attr:`analysis.reading.load.StudyData.trials`).
 
@@ -455,7 +456,7 @@ def stored_trial_figure(database: str, trial: Mapping[str, Any], samples: pd.Dat
         at = float(trial["ended_at_s"]) - float(trial["started_at_s"])
         abort = (at, str(reason) if isinstance(reason, str) and reason else "cause not recorded")
     return pipeline_trace(samples, target_force_n=float(trial["target_force_n"]),
-                          tolerance_fraction=float(trial["tolerance_fraction"]), title=title,
+                          band=task.screen(TrialTarget.of(trial)), title=title,
                           error_window=error_window if outcome != "aborted" else None, abort=abort)
 
 

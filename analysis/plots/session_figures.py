@@ -16,7 +16,7 @@ import numpy.typing as npt
 from matplotlib.figure import Figure
 
 from analysis.plots.figures import peak_downsample, styled
-from protocol.study.metrics import CONTACT_THRESHOLD_N
+from protocol.tasks.window import CONTACT_THRESHOLD_N
 
 __all__ = ["SessionMarks", "contact_mask", "replay_figure", "session_trace"]
 

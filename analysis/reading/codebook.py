@@ -34,10 +34,12 @@ from analysis.reading.codebook_columns import (
     STATS_CSV_COLUMNS,
     Column,
     participant_measures,
+    task_column,
 )
 from analysis.reading.codebook_columns import COLUMNS as _TABLE_COLUMNS
 from analysis.reading.codebook_within import WITHIN_COLUMNS
 from protocol.metrics import tested
+from protocol.tasks.registry import TASKS
 
 __all__ = [
     "COLUMNS",
@@ -116,6 +118,8 @@ def lookup(file: str, column: str) -> Column | None:
                 return c
             if not c.files and general is None:
                 general = c
+    if general is None:  # a task registered at run time (a lab's own) describes its parameters itself
+        general = next((task_column(p) for cls in TASKS.values() for p in cls.described if p.name == column), None)
     return general
 
 

@@ -12,8 +12,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, tested
+from protocol.tasks.base import Parameter
+from protocol.tasks.registry import TASKS
 
-__all__ = ["COLUMNS", "DIFFERENCE_DECIMALS", "STATS_CSV_COLUMNS", "Column", "participant_measures"]
+__all__ = ["COLUMNS", "DIFFERENCE_DECIMALS", "STATS_CSV_COLUMNS", "Column", "participant_measures", "task_column"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,6 +79,11 @@ _FAMILY = family_word()
 _SECONDARIES = [m.participant_exported for m in METRICS if m.role is Role.SECONDARY]
 _SECONDARY = (f"; empty for a secondary measure ({', '.join(_SECONDARIES)}), tested on its own, outside the family"
               if _SECONDARIES else "")
+
+
+def task_column(p: Parameter) -> Column:
+    """A task's parameter as a column of the sessions and trials tables (:attr:`protocol.tasks.base.Task.described`)."""
+    return Column(p.name, p.description, p.unit, label=p.label, decimals=p.decimals)
 
 
 def _tested_words() -> str:
@@ -266,9 +273,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("software_version", "haptic-study version that recorded the session", type="text", label="software"),
     Column("rig", "sim (simulated rig: simulated data) or real (the hardware)", type="text"),
     Column("protocol_name", "name of the protocol the session ran", type="text", label="protocol"),
-    Column("tolerance_fraction", "half-width of the target band as a fraction of F*", "fraction (0–1)",
-           label="tolerance", decimals=4),
-    Column("hold_s", "time the force must stay in the band for success", "s", label="hold (s)", decimals=_T),
+    *(task_column(p) for cls in TASKS.values() for p in cls.described),  # each task's parameters: the task's words
     Column("max_trial_s", "trial cap: a trial not completed by then is a timeout", "s", label="trial cap (s)",
            decimals=_T),
     # -- what was delivered: aborted trials and the loop's health per trial ----------------------------
@@ -276,7 +281,8 @@ COLUMNS: tuple[Column, ...] = (
            files=("loop_health.csv",)),
     Column("abort_cause", "why an aborted trial did not count: experimenter, fault (a watchdog fault latched, "
            "LOOP_STALLED included), feedback (haptics not as designed, thermal derating included), gap (loop "
-           "records missing) or interrupted (the program ended); empty for a counted trial or when not recorded "
+           "records missing), interrupted (the program ended) or participant_screen (the participant screen "
+           "closed, so the cue was not seen); empty for a counted trial or when not recorded "
            "(schema version 1)", type="text", label="abort cause"),
     Column("period_p50_ms", "median haptic-loop tick period over the trial's samples", "ms",
            label="period p50 (ms)", decimals=3),

@@ -14,7 +14,7 @@ import json
 import math
 import os
 import sqlite3
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import SupportsInt
 
@@ -23,12 +23,15 @@ import pandas as pd
 
 from analysis.reading.errors import AnalysisError
 from analysis.reading.inputs import check_databases
+from analysis.reading.session_config import config_fields
 from protocol.metrics import stored
 from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.storage.damage import recording_damage
 from protocol.study.records import Outcome, TrialRecord
+from protocol.tasks.base import Task
+from protocol.tasks.registry import stored_task
 
 #: Where a trial's records are in its session's recording (schema version 3).
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
@@ -74,16 +77,17 @@ class StudyData:
         (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
         databases), where its records are in the session's recording
         (``segment``, ``first_tick``, ``last_tick``; empty before version 3, whose
-        trials' samples are in the ``samples`` table), the session's ``tolerance_fraction``, ``hold_s`` and
-        ``max_trial_s``, ``repeat_of`` (the trial index an aborted trial's re-run repeats), ``excluded``
+        trials' samples are in the ``samples`` table), the session's task's parameters (the paper's:
+        ``tolerance_fraction``, ``hold_s``) and ``max_trial_s``, ``repeat_of`` (the trial index an aborted
+        trial's re-run repeats), ``excluded``
         (``""`` when analysed, else ``"training session"``, ``"incomplete session"``, ``"aborted trial"`` or
         ``"recording damaged"``) and ``damage`` (for a trial whose records touch a damaged block of the
         recording: the line of :attr:`damage` naming it, else ``""``).
     sessions
         One row per session: ``database``, ``session_id``, ``participant_code``,
         ``participant_number``, ``kind``, ``status``, ``seed``, ``started_at``, ``ended_at``,
-        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's
-        ``tolerance_fraction``, ``hold_s`` and ``max_trial_s``, and the watchdog limits the session
+        ``end_reason``, ``software_version``, ``rig``, ``protocol_name``, the protocol's task's parameters (the
+        paper's: ``tolerance_fraction``, ``hold_s``) and ``max_trial_s``, and the watchdog limits the session
         ran with (``watchdog_sensor_max_age_ms``, ``watchdog_pose_max_age_ms``; NaN if not stored),
         ``pipeline_settings`` (the pipeline settings it ran with that are not the paper's, ``run --set``, as
         ``filter_window=50, f_scale_n=3``; ``""`` for the paper's or when not stored), which code
@@ -109,6 +113,8 @@ class StudyData:
     sites
         Each database's site (``report --site``), in the order of :attr:`databases`; ``""`` for every one when no
         site was named.  A named site's participant codes are re-coded ``SITE:CODE`` in every table.
+    tasks
+        Each session's task (:mod:`protocol.tasks`), by database and session id (:meth:`task_of`).
     """
 
     trials: pd.DataFrame
@@ -119,6 +125,11 @@ class StudyData:
     include_incomplete: bool = False
     runs: pd.DataFrame = field(default_factory=pd.DataFrame)
     sites: tuple[str, ...] = ()
+    tasks: Mapping[tuple[str, int], Task] = field(default_factory=dict)
+
+    def task_of(self, database: str, session_id: int) -> Task:
+        """The task a session ran (its protocol's), which judges, measures and draws its trials."""
+        return self.tasks[(database, int(session_id))]
 
     @property
     def included(self) -> pd.DataFrame:
@@ -148,41 +159,27 @@ def _query(db: StudyReader, read: Callable[[], Rows]) -> pd.DataFrame:
         raise AnalysisError(f"{db.path}: cannot read the study tables ({exc})") from None
 
 
-def _protocol_fields(protocol_json: str, where: str) -> dict[str, object]:
+def _protocol_fields(protocol_json: str, where: str) -> tuple[dict[str, object], Task]:
+    """A session's protocol name, its task's parameters (columns by name) and its trial cap, and its task."""
     try:
         proto = json.loads(protocol_json)
-        trial = proto["trial"]
+        task = stored_task(proto, where, AnalysisError)
         training = proto.get("training") or {}
         return {
             "protocol_name": str(proto.get("name", "")),
             "protocol_version": proto.get("version", np.nan),
-            "tolerance_fraction": float(trial["tolerance_fraction"]),
-            "hold_s": float(trial["hold_s"]),
-            "max_trial_s": float(trial["max_trial_s"]),
+            **task.parameters(),
+            "max_trial_s": float(proto["trial"]["max_trial_s"]),
             # the training the protocol asked for (a training session runs its trials with this cap)
             "training_enabled": bool(training.get("enabled", False)),
             "training_cap_s": float(training.get("seconds_per_target_per_mode", np.nan)),
             "training_live_aid": bool(training.get("live_force_aid", False)),
             "training_required": bool(training.get("required", False)),
-        }
+        }, task
+    except AnalysisError:
+        raise
     except (ValueError, KeyError, TypeError) as exc:
         raise AnalysisError(f"{where}: protocol_json is unreadable ({exc!r})") from None
-
-
-def _watchdog_limits(config_json: object) -> dict[str, float | str]:
-    """The watchdog's age limits a session ran with, ms (NaN where its configuration does not say), and its pipeline
-    settings that are not the paper's (``""``: the paper's, or not stored)."""
-    try:
-        wd = json.loads(str(config_json)).get("watchdog", {})
-        sensor, pose = float(wd["sensor_max_age_s"]) * 1e3, float(wd["pose_max_age_s"]) * 1e3
-    except (ValueError, KeyError, TypeError, AttributeError):
-        sensor = pose = math.nan
-    try:
-        chosen = json.loads(str(config_json)).get("pipeline_settings") or {}
-        settings = ", ".join(f"{k}={float(v):g}" for k, v in chosen.items())
-    except (ValueError, TypeError, AttributeError):
-        settings = ""
-    return {"watchdog_sensor_max_age_ms": sensor, "watchdog_pose_max_age_ms": pose, "pipeline_settings": settings}
 
 
 #: What analysis decodes of a recorded block (a block written before version 4 has no checksum: these are tried).
@@ -219,7 +216,8 @@ def _schedule_fields(schedule_json: object) -> dict[str, object]:
         return {"n_designed": np.nan, "first_mode": ""}
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str], pd.DataFrame]:
+def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str], pd.DataFrame,
+                                  dict[tuple[str, int], Task]]:
     db = _open(path)
     try:
         # schema version 4 records which code ran a session; earlier files do not (NULL)
@@ -234,12 +232,11 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
         db.close()
     if sessions.empty:
         raise AnalysisError(f"{path}: empty study database (no sessions)")
-    proto = pd.DataFrame(
-        [_protocol_fields(pj, f"{path}: session {sid}")
-         for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)],
-        index=sessions.index,
-    )
-    watchdog = pd.DataFrame([_watchdog_limits(cj) for cj in sessions["config_json"]], index=sessions.index)
+    read = [_protocol_fields(pj, f"{path}: session {sid}")
+            for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
+    proto = pd.DataFrame([fields for fields, _ in read], index=sessions.index)
+    tasks = {(path, int(sid)): task for sid, (_, task) in zip(sessions["session_id"], read, strict=True)}
+    watchdog = pd.DataFrame([config_fields(cj) for cj in sessions["config_json"]], index=sessions.index)
     design = pd.DataFrame([_schedule_fields(sj) for sj in sessions["schedule_json"]], index=sessions.index)
     sessions = pd.concat([sessions.drop(columns=["protocol_json", "config_json", "schedule_json"]), proto, watchdog,
                           design], axis=1)
@@ -247,27 +244,30 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     sessions["writer"] = [writers.get(int(sid), "") for sid in sessions["session_id"]]
     for frame in (sessions, trials, events, runs):
         frame.insert(0, "database", path)
-    return sessions, trials, events, damage, runs
+    return sessions, trials, events, damage, runs, tasks
 
 
 def _read_all(
     paths: Sequence[str | os.PathLike[str]],
-) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str], list[pd.DataFrame]]:
-    """Each database's sessions, trials and events (and the damage found, and its recorded runs), in order; a
-    refusal for a path that is missing or names a database given already."""
+) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str], list[pd.DataFrame],
+           dict[tuple[str, int], Task]]:
+    """Each database's sessions, trials and events (and the damage found, its recorded runs and each session's
+    task), in order; a refusal for a path that is missing or names a database given already."""
     all_sessions: list[pd.DataFrame] = []
     all_trials: list[pd.DataFrame] = []
     all_events: list[pd.DataFrame] = []
     all_runs: list[pd.DataFrame] = []
     damage: list[str] = []
+    tasks: dict[tuple[str, int], Task] = {}
     for path in check_databases(paths, open_each=False):  # (each is opened, checked, just below)
-        s, t, e, d, r = _read_one(path)
+        s, t, e, d, r, k = _read_one(path)
+        tasks.update(k)
         all_sessions.append(s)
         all_trials.append(t)
         all_events.append(e)
         damage.extend(d)
         all_runs.append(r)
-    return all_sessions, all_trials, all_events, damage, all_runs
+    return all_sessions, all_trials, all_events, damage, all_runs, tasks
 
 
 def _recode_sites(all_sessions: list[pd.DataFrame], sites: Sequence[str] | None) -> tuple[str, ...]:
@@ -313,8 +313,10 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         merge refuses to guess whether they are one person), or a study with
         no experiment trial to analyse.
     """
-    all_sessions, all_trials, all_events, damage, all_runs = _read_all(paths)
+    all_sessions, all_trials, all_events, damage, all_runs, tasks = _read_all(paths)
     named = _recode_sites(all_sessions, sites)
+    # each task's parameters are columns of the sessions and trials tables (the paper's: tolerance_fraction, hold_s)
+    params = list(dict.fromkeys(name for task in tasks.values() for name in task.parameters()))
     sessions = pd.concat(all_sessions, ignore_index=True)
     owners = sessions.groupby("participant_code")["database"].unique()
     for code, dbs in owners.items():
@@ -331,7 +333,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     sessions["n_runs"] = _run_counts(sessions, events, runs)
     trials = pd.concat(all_trials, ignore_index=True)
     meta = sessions[["database", "site", "session_id", "participant_code", "participant_number", "kind", "status",
-                     "tolerance_fraction", "hold_s", "max_trial_s", "analysed"]].rename(
+                     *params, "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
     )
     trials = trials.merge(meta, on=["database", "session_id"], how="left", validate="many_to_one")
@@ -347,7 +349,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", *STORED_METRIC_COLUMNS, "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
              *RECORD_COLUMNS,
-             "tolerance_fraction", "hold_s", "max_trial_s", "repeat_of", "excluded", "damage"]
+             *params, "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]
     names = ", ".join(str(p) for p in paths)
     if not experiment.any():
@@ -358,7 +360,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                                 "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named)
+                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
 
 
 def _run_counts(sessions: pd.DataFrame, events: pd.DataFrame, runs: pd.DataFrame) -> pd.Series:

@@ -1,9 +1,8 @@
 """Per-trial metrics recomputed from the stored samples.
 
-The definition is :func:`protocol.study.metrics.trial_metrics`, the very function
-the live trial machine used; analysis adds only the choices the paper leaves
-open (:class:`MetricOptions`) and a check that the recomputed numbers equal
-the ones stored during the session.
+The definition is each session's task's offline form (:meth:`protocol.tasks.base.Task.judge`), the very code the
+live trial machine used; analysis adds only the choices the paper leaves open (:class:`MetricOptions`) and a check
+that the recomputed numbers equal the ones stored during the session.
 """
 
 from __future__ import annotations
@@ -18,14 +17,13 @@ from analysis.reading.load import Progress, StudyData, connect_readonly, recorde
 from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
 from protocol.metrics import METRICS, MetricValue, stored, windowed
-from protocol.study.metrics import TrialMetrics, trial_metrics
 from protocol.study.records import Outcome, TrialRecord
+from protocol.tasks.base import Task
+from protocol.tasks.window import ERROR_WINDOWS, TrialMetrics
 
 __all__ = ["ERROR_WINDOWS", "TCT_POLICIES", "MetricOptions", "TrialTable", "compute_trials"]
 
-#: RMSE / Max AE windows: from the cue (default) or from first contact.
-ERROR_WINDOWS = ("cue", "first_contact")
-#: How a failed trial enters TCT: left out (default) or censored at the trial cap.
+#: How a failed trial enters TCT: left out, or censored at the trial cap (the default, :class:`MetricOptions`).
 TCT_POLICIES = ("successful", "censored")
 
 #: Relative agreement required between recomputed and stored metrics (summation order only).
@@ -42,7 +40,7 @@ class MetricOptions:
         ``"cue"`` (default): RMSE and Max AE over the whole trial window, from
         the cue to the trial end, approach included (what the participant was
         asked to do from the cue on); ``"first_contact"``: from the first
-        sample above :data:`protocol.study.metrics.CONTACT_THRESHOLD_N`.
+        sample above :data:`protocol.tasks.window.CONTACT_THRESHOLD_N`.
     tct_policy
         ``"censored"`` (default: the paper's figure's reading, "across all targets and trials"): a failed trial
         counts as the trial cap (12 s), so every trial contributes, slow failures are not rewarded and the mean is
@@ -116,12 +114,11 @@ def _close(a: float, b: float) -> bool:
 
 @dataclass(frozen=True, slots=True)
 class _Check:
-    """One analysed trial to recompute: its stored record, its protocol's criterion and where its samples are."""
+    """One analysed trial to recompute: its stored record, its session's task and trial cap, where its samples are."""
 
     row: int
     stored: TrialRecord
-    tolerance_fraction: float
-    hold_s: float
+    task: Task
     max_trial_s: float
     where: tuple[int, int, int, int] | None
 
@@ -149,7 +146,7 @@ def _agrees(live: TrialMetrics, stored_live: TrialRecord) -> bool:
         return False
     for m in stored():
         kept = stored_live.metrics.get(m.name)
-        if kept is not None and not _close(_nan(live[m.name]), float(kept)):
+        if kept is not None and not _close(_nan(live.values.get(m.name)), float(kept)):
             return False
     return True
 
@@ -165,8 +162,7 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
                 out.append(_Recomputed(c.row, None, True))
                 continue
             # every window, for the report's sensitivity table; the live metrics are the cue window's
-            every = {w: trial_metrics(t_ns, force, c.stored.target_force_n, window=w, hold_s=c.hold_s,
-                                      tolerance_fraction=c.tolerance_fraction, max_trial_s=c.max_trial_s)
+            every = {w: c.task.judge(t_ns, force, c.stored, max_trial_s=c.max_trial_s, window=w)
                      for w in ERROR_WINDOWS}
             out.append(_Recomputed(c.row, every[window], _agrees(every["cue"], c.stored), every))
     finally:
@@ -174,13 +170,13 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
     return out
 
 
-def _checks(inc: pd.DataFrame) -> list[_Check]:
+def _checks(study: StudyData, inc: pd.DataFrame) -> list[_Check]:
     """What each analysed trial's worker needs, in row order."""
-    crit = {c: inc[c].to_numpy(dtype=float) for c in ("tolerance_fraction", "hold_s", "max_trial_s")}
+    cap = inc["max_trial_s"].to_numpy(dtype=float)
+    tasks = [study.task_of(db, sid) for db, sid in zip(inc["database"], inc["session_id"], strict=True)]
     wheres = [recorded_where(*r) for r in zip(inc["session_id"], inc["segment"], inc["first_tick"], inc["last_tick"],
                                               strict=True)]
-    return [_Check(i, rec, crit["tolerance_fraction"][i], crit["hold_s"][i], crit["max_trial_s"][i], wheres[i])
-            for i, rec in enumerate(stored_records(inc))]
+    return [_Check(i, rec, tasks[i], cap[i], wheres[i]) for i, rec in enumerate(stored_records(inc))]
 
 
 def _tasks(inc: pd.DataFrame, checks: list[_Check], workers: int, window: str,
@@ -223,8 +219,8 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                 m = r.metrics
                 from_samples[r.row] = True
                 success[r.row] = m.success
-                for name, column in values.items():
-                    column[r.row] = _nan(m[name])
+                for name, column in values.items():  # (a metric its task does not produce: NaN)
+                    column[r.row] = _nan(m.values.get(name))
                 first_contact[r.row] = _nan(m.first_contact_s)
                 disagree += not r.agrees
     # trials without samples keep the metrics stored live (cue window only)
@@ -269,7 +265,7 @@ def _by_window(inc: pd.DataFrame, results: list[list[_Recomputed]]) -> dict[str,
         for r in chunk:
             if r.by_window is not None:
                 for w, m in r.by_window.items():
-                    out[w][r.row] = [_nan(m[name]) for name in names]
+                    out[w][r.row] = [_nan(m.values.get(name)) for name in names]
     return {w: pd.DataFrame(v, columns=names, index=inc.index) for w, v in out.items()}
 
 
@@ -299,7 +295,7 @@ def compute_trials(
     """
     inc = study.included.reset_index(drop=True)
     workers = default_workers() if workers is None else max(1, int(workers))
-    tasks, chunk_weight, total = _tasks(inc, _checks(inc), workers, options.error_window)
+    tasks, chunk_weight, total = _tasks(inc, _checks(study, inc), workers, options.error_window)
     done = [0.0]
 
     def tick(i: int, _: object) -> None:

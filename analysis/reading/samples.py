@@ -19,6 +19,7 @@ import pandas as pd
 from analysis.reading.load import _open
 from analysis.reading.recorded import recorded_samples
 from protocol.study.labels import FAULT_BITS, PHASE_NAMES, fault_names
+from protocol.study.trial import PHASE_CODES, TrialPhase
 
 __all__ = ["SAMPLES_COLUMNS", "codebook_frame", "samples_frame"]
 
@@ -36,10 +37,13 @@ SAMPLES_COLUMNS: tuple[tuple[str, str, str, str], ...] = (
     ("tick", "integer", "count", "the 1 kHz loop's tick number within its run"),
     ("session_time_s", "number", "s", "time since the session started (session clock)"),
     ("trial_number", "integer", "", ("trial within its session, numbered from 1 as the report and the GUI number "
-     "them; empty between trials")),
+     "them: the records from its cue to its last record (trials.first_tick to last_tick), exactly those its "
+     "metrics are computed from; empty between trials, also for the up to ~50 records after a trial's last record "
+     "that the loop still marked with it (the runner's mark of the pause reaches the loop one block late)")),
     ("t_since_cue_s", "number", "s", "time since the trial's cue; empty between trials"),
-    ("phase", "text", "", "the trial machine's phase: idle, cued (cue given, not yet in contact), active, pause"),
-    ("phase_code", "integer", "", f"the phase as recorded ({_PHASES})"),
+    ("phase", "text", "", ("the trial machine's phase: idle, cued (cue given, not yet in contact), active, pause; "
+     "the records after a trial's last record that the loop still marked active are pause, as the machine was")),
+    ("phase_code", "integer", "", f"the phase as a code ({_PHASES}), as recorded except as phase says"),
     ("force_N", "number", "N", ("task force: magnitude of the filtered, compensated contact force (what the trial "
      "was judged on)")),
     *((f"raw_f{a}_N", "number", "N", (f"raw F/T sensor force, {a} axis of the sensor frame (tool weight and bias "
@@ -67,12 +71,35 @@ _RENAME = {"force_n": "force_N", "phase": "phase_code",
            **{f"render_f{a}": f"render_f{a}_N" for a in "xyz"}, **{f"comp_f{a}": f"comp_f{a}_N" for a in "xyz"}}
 
 
-def _codes(database: str | os.PathLike[str]) -> dict[int, str]:
+def _codes_and_ends(database: str | os.PathLike[str], ids: list[int]) -> tuple[dict[int, str], pd.DataFrame]:
+    """Each session's participant code, and each recorded trial's end (``session_id, segment, trial_number,
+    last_tick``) of the sessions ``ids``."""
     db = _open(str(database))
     try:
-        return db.session_codes()
+        ends = [(sid, seg, idx + 1, last) for sid in ids for idx, (seg, last) in db.trial_ends(sid).items()]
+        return db.session_codes(), pd.DataFrame(ends, columns=["session_id", "segment", "trial_number", "last_tick"])
     finally:
         db.close()
+
+
+def _between_trials(out: pd.DataFrame, ends: pd.DataFrame) -> pd.DataFrame:
+    """The records after a trial's last tick, which the loop still marked with it, labelled between trials.
+
+    The runner's mark of the pause that follows a trial reaches the loop up to one block of records (~50 ms) after
+    the trial's last record, so those records carry the trial's number and ``active``: they are not the trial's (its
+    metrics end on its last tick) and are labelled as the trial machine was then -- no trial, ``pause``.
+    """
+    if out.empty or ends.empty or not {"segment", "tick", "trial_number"} <= set(out.columns):
+        return out
+    keys = out[["session_id", "segment", "trial_number"]].astype("Int64")
+    last = keys.merge(ends.astype("Int64"), how="left", on=["session_id", "segment", "trial_number"])["last_tick"]
+    after = (out["tick"].to_numpy() > last.to_numpy(dtype=float, na_value=np.inf))
+    if after.any():
+        out = out.copy()
+        out.loc[after, "trial_number"] = pd.NA
+        out.loc[after, "t_since_cue_s"] = np.nan
+        out.loc[after, "phase"] = PHASE_CODES[TrialPhase.PAUSE]
+    return out
 
 
 def samples_frame(database: str | os.PathLike[str], session_id: int | None = None,
@@ -94,8 +121,9 @@ def samples_frame(database: str | os.PathLike[str], session_id: int | None = Non
         Not a study database, or no such session.
     """
     raw = recorded_samples(database, session_id, arm)
-    out = raw.rename(columns=_RENAME)
-    codes = _codes(database)
+    ids = [int(x) for x in pd.unique(raw["session_id"])] if len(raw) else []
+    codes, ends = _codes_and_ends(database, ids)
+    out = _between_trials(raw, ends).rename(columns=_RENAME)
     out.insert(0, "participant_code", out["session_id"].map(lambda s: codes.get(int(s), "")).astype(str))
     if arm is not None:
         out.insert(2, "arm", arm)

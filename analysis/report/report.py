@@ -70,6 +70,7 @@ from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from foundation.parallel import default_workers, run_tasks
 from protocol.metrics import Role
+from protocol.tasks.base import TrialTarget
 
 __all__ = [
     "ReportSummary",
@@ -307,17 +308,15 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
     ]
     titles = []
-    included = a.study.included
     for ex in _example_trials(trials):
         number = int(ex["trial_index"]) + 1  # trials are numbered from 1 for people (see analysis.reading.codebook)
         code = str(ex["participant_code"]).replace(":", "-")  # a site's code, A:P01, in a file name
         name = f"pipeline_{code}_s{int(ex['session_id'])}_trial{number}"
         title = (f"{ex['participant_code']}, session {int(ex['session_id'])}, trial {number}: {ex['target_label']} "
                  f"{ex['target_force_n']:g} N, haptics {str(ex['haptic_mode']).upper()}, {ex['outcome']}")
-        tol = float(included.loc[(included["database"] == ex["database"]) &
-                                 (included["session_id"] == ex["session_id"]), "tolerance_fraction"].iloc[0])
+        band = a.study.task_of(ex["database"], ex["session_id"]).screen(TrialTarget.of(ex))
         tasks.append(("trial_trace", (str(ex["database"]), int(ex["session_id"]), int(ex["trial_index"])),
-                      dict(target_force_n=float(ex["target_force_n"]), tolerance_fraction=tol, title=title,
+                      dict(target_force_n=float(ex["target_force_n"]), band=band, title=title,
                            error_window=options.error_window), name, name))
         titles.append((name, title))
     drawn = run_tasks(_work, [(b, args, k, str(fig_dir), f) for b, args, k, f, _ in tasks],

@@ -32,7 +32,7 @@ from analysis.stats.wilcoxon import methods_text
 from foundation.version import software_provenance
 from protocol.metrics import family_word
 from protocol.runner.study_rules import FAULT_REHEARSAL_EVENT
-from protocol.study.metrics import BAND_SLACK, CONTACT_THRESHOLD_N
+from protocol.tasks.window import CONTACT_THRESHOLD_N
 
 __all__ = ["DAMAGED_TEXT", "page", "plural", "power_html"]
 
@@ -261,11 +261,17 @@ def _data_methods(study: StudyData, table: TrialTable, excluded: dict[str, int],
             f"analysed with haptic-study {html.escape(software_provenance().describe())}. {check}</p>")
 
 
+def _task_methods(study: StudyData, caps: list[float]) -> str:
+    """The analysed sessions' tasks' own definitions (their rules, with their parameters), each kind once."""
+    keys = study.included[["database", "session_id"]].drop_duplicates()
+    tasks = [study.task_of(db, sid) for db, sid in zip(keys["database"], keys["session_id"], strict=True)]
+    return " ".join(kind.methods([t for t in tasks if type(t) is kind], caps)
+                    for kind in dict.fromkeys(type(t) for t in tasks))
+
+
 def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
              excluded: dict[str, int], n_participants: int, within: Any) -> str:
     trials = study.included
-    tol = sorted(set(trials["tolerance_fraction"]))
-    hold = sorted(set(trials["hold_s"]))
     cap = sorted(set(trials["max_trial_s"]))
     targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
     target_txt = ", ".join(f"{lab} {f:g} N"
@@ -287,10 +293,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
     return (
         _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
-        f"filtered, gravity- and bias-compensated contact force. A sample is in the band when |F − F*| ≤ "
-        f"{one([100 * t for t in tol], ' %')} of F* (edges included, relative slack {BAND_SLACK:g}). A trial succeeds "
-        f"when the force stays in the band continuously for {one(hold, ' s')} (leaving the band restarts the hold) "
-        f"within {one(cap, ' s')} of the cue; TCT is the time from the cue to the end of that hold. {windowed_words()} "
+        f"filtered, gravity- and bias-compensated contact force. {html.escape(_task_methods(study, cap))} "
+        f"{windowed_words()} "
         f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
         f"is the largest task force in the window.{_secondary_definitions()} These are the definitions of "
         "protocol.metrics, the same code that judged the trials live. "
@@ -439,9 +443,12 @@ def _record_html(study: StudyData, tables: dict[str, pd.DataFrame], within: Any)
                    f'<p class="warn">{plural(len(outside), "trial")} of {len(recorded)} left the bounds:</p>'
                    f"<ul>{listed}{more}</ul>")
         loop = (_html_table(tables["loop_health_by_participant.csv"], "loop_health_by_participant.csv") + verdict)
-    clock = ("" if not (study.sessions["rig"] == "sim").any() else
-             "<p>On the simulated rig's virtual clock computing takes no time: every period is exactly 1 ms and "
-             "the latency is the sample's age. A real-clock session measures them in real time.</p>")
+    sessions = study.sessions
+    virtual = int(((sessions["rig"] == "sim") & (sessions.get("clock", "") == "virtual")).sum())
+    clock = ("" if not virtual else
+             f"<p>On the virtual clock ({plural(virtual, 'session')} of the simulated rig run headless) computing "
+             "takes no time: every period is exactly 1 ms and the latency is the sample's age. A session on the real "
+             "clock (the GUI's, the real rig's) measures them in real time.</p>")
     return (f"<h2>What was delivered</h2>{report_sections.incomplete_html(within, study.include_incomplete)}"
             f"{report_sections.resumed_html(within)}{report_sections.deviations_html(within)}"
             f"<h3>Trials that did not count</h3>{aborted}"

@@ -69,7 +69,8 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     wide = _wide(per, overall, by_participant)
     st = exp(stats, "stats.csv")
     st_t = exp(stats_by_target, "stats_by_target.csv")
-    sess = study.sessions.merge(session_activity(study), on=["database", "session_id"], how="left")
+    sess = study.sessions.drop(columns=["clock"], errors="ignore")  # (the page says what the clock means)
+    sess = sess.merge(session_activity(study), on=["database", "session_id"], how="left")
     sess["status"] = [status_words(st_, w) for st_, w in zip(sess["status"], sess["writer"], strict=True)]
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)

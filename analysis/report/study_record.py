@@ -134,9 +134,10 @@ def damaged_trials(study: StudyData) -> pd.DataFrame:
 
 def _wall_break_s(session: pd.Series, runs: pd.DataFrame) -> float:
     """The real time a session spent between its runs, s: its wall-clock span less its session-clock span -- on
-    the real rig, whose session clock runs in real time and steps over a break; NaN on the simulated rig (a
-    virtual clock) or when the session has not ended."""
-    if session["rig"] != "real" or not isinstance(session["ended_at"], str) or runs["last_record_s"].isna().all():
+    the real clock (the real rig, or the simulated rig in the GUI), whose session clock runs in real time and steps
+    over a break; NaN on the virtual clock (the headless runner's) or when the session has not ended."""
+    clock = session.get("clock") or ("real" if session["rig"] == "real" else "")  # (not stored: the rig says)
+    if clock != "real" or not isinstance(session["ended_at"], str) or runs["last_record_s"].isna().all():
         return math.nan
     try:
         wall = (dt.datetime.fromisoformat(session["ended_at"])
@@ -186,7 +187,7 @@ def resumed_sessions(study: StudyData) -> pd.DataFrame:
         brk = (f"the real-time break between the runs was {wall / 60:.1f} min{' in all' if len(g) > 1 else ''} "
                "(the session's wall-clock span less its session-clock span)" if math.isfinite(wall) else
                "the real-time break between the runs is not derivable (no wall-clock time of a run's start is "
-               "stored" + (", and the simulated rig's session clock is virtual)" if session["rig"] == "sim" else ")"))
+               "stored" + (", and the session clock was virtual)" if session.get("clock") == "virtual" else ")"))
         previous = -math.inf
         for k, r in enumerate(g.itertuples(), start=2):
             before = runs[runs["started_at_s"] < float(r.t_s)]["last_record_s"].dropna()
@@ -325,8 +326,8 @@ def condition_warnings(study: StudyData) -> list[str]:
         return []
     targets = _targets_by_session(study)  # once: it groups every trial of the study
     s["targets"] = [targets.get((db, sid), "") for db, sid in zip(s["database"], s["session_id"], strict=True)]
-    s["rules"] = [f"band ±{tol:.0%}, hold {hold:g} s, cap {cap:g} s" for tol, hold, cap in
-                  zip(s["tolerance_fraction"], s["hold_s"], s["max_trial_s"], strict=True)]
+    s["rules"] = [f"{study.task_of(db, sid).rule_words()}, cap {cap:g} s" for db, sid, cap in
+                  zip(s["database"], s["session_id"], s["max_trial_s"], strict=True)]
     settings = s.get("pipeline_settings", pd.Series("", index=s.index))
     s["settings"] = [str(v) if isinstance(v, str) and v else "the paper's" for v in settings]
     out = []

@@ -10,7 +10,18 @@ import numpy.typing as npt
 from scipy import special
 from scipy import stats as sps
 
-__all__ = ["CorrelationResult", "correlation"]
+__all__ = ["UNIT_R_TOLERANCE", "CorrelationResult", "correlation", "unit_snapped"]
+
+#: A correlation this close to ±1 is ±1.  A perfect line's r is a ratio of dot products whose last bit depends on the
+#: CPU's arithmetic (the BLAS kernel: AVX-512 gives -0.9999999999999999 where Haswell gives -1.0), and a product
+#: that treats ±1 apart (its p is 0, its interval a point) must do so on every CPU: 1e-12 is far above that rounding
+#: (a few ulps, 2.2e-16 each) and far below any correlation a study reports to four decimals.
+UNIT_R_TOLERANCE = 1e-12
+
+
+def unit_snapped(r: float) -> float:
+    """``r`` made ±1 when it is within :data:`UNIT_R_TOLERANCE` of it (and so never beyond ±1 by rounding)."""
+    return math.copysign(1.0, r) if abs(r) >= 1.0 - UNIT_R_TOLERANCE else r
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,21 +115,19 @@ def correlation(
     for name, arr in (("x", xa), ("y", ya)):
         if np.ptp(arr) == 0:
             return fail(f"{name} is constant ({arr[0]:g}): the correlation is undefined")
-    if meth == "spearman":
-        res = sps.spearmanr(xa, ya)
-        r, p = float(res.statistic), float(res.pvalue)
-    else:
-        res = sps.pearsonr(xa, ya)
-        r, p = float(res.statistic), float(res.pvalue)
+    res = sps.spearmanr(xa, ya) if meth == "spearman" else sps.pearsonr(xa, ya)
+    # a perfect association is ±1 with p 0 on every CPU (UNIT_R_TOLERANCE), not ±0.9999999999999999 on some
+    r = unit_snapped(float(res.statistic))
+    p = 0.0 if abs(r) == 1.0 else float(res.pvalue)
     notes = [f"{dropped} pairs dropped because a value was NaN"] if dropped else []
     lo = hi = nan
     if n >= 4:
         se = math.sqrt((1.0 + r * r / 2.0) / (n - 3)) if meth == "spearman" else 1.0 / math.sqrt(n - 3)
         zq = float(special.ndtri(0.5 + confidence / 2.0))
-        rc = min(max(r, -1.0), 1.0)
         with np.errstate(divide="ignore"):
-            zr = float(np.arctanh(rc))
+            zr = float(np.arctanh(r))  # ±inf at ±1 (snapped): the interval is the point ±1
         lo, hi = math.tanh(zr - zq * se), math.tanh(zr + zq * se)
     else:
         notes.append("n = 3: no Fisher-z interval (needs n ≥ 4)")
+    # p clipped into [0, 1] (a doubled tail can round past 1)
     return CorrelationResult(meth, n, dropped, r, min(max(p, 0.0), 1.0), lo, hi, confidence, True, "; ".join(notes))

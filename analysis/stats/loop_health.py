@@ -53,6 +53,7 @@ ABORT_CAUSE_TEXT: dict[str, str] = {
     "feedback": "feedback not as designed (switch, gain, or the device's thermal derating)",
     "gap": "loop records missing",
     "interrupted": "the program ended during the trial",
+    "participant_screen": "the participant screen closed during the trial (the cue was not seen)",
     "": "cause not recorded (schema version 1)",
 }
 

@@ -27,6 +27,7 @@ import numpy.typing as npt
 from scipy import special
 from scipy import stats as sps
 
+from analysis.stats.correlation import unit_snapped
 from protocol.study.labels import plural
 
 __all__ = ["RmCorrResult", "rmcorr"]
@@ -156,12 +157,16 @@ def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
     if flat(syy, ys):
         return fail("y does not vary within any participant: there is no within-participant association")
     b = sxy / sxx
-    r = min(max(sxy / math.sqrt(sxx * syy), -1.0), 1.0)
+    # a perfect line is r_rm = ±1 with p 0 on every CPU: within UNIT_R_TOLERANCE of ±1 (its dot products' last bit
+    # depends on the BLAS kernel) it is made ±1, and a ratio rounded beyond ±1 is clipped
+    r = unit_snapped(sxy / math.sqrt(sxx * syy))
     ss_res = max(syy - b * sxy, 0.0)
     se_b = math.sqrt(ss_res / df / sxx)
+    # a perfect line's t is infinite: its p is 0 (so on every CPU, r being snapped above)
     p = 0.0 if abs(r) == 1.0 else float(2.0 * sps.t.sf(abs(r) * math.sqrt(df / (1.0 - r * r)), df))
     lo, hi = _interval(r, df, confidence)
     if df <= 3:
         note = "; ".join(part for part in (note, f"df = {df}: no interval (needs df > 3)") if part)
+    # p clipped into [0, 1] (a doubled tail can round past 1)
     return RmCorrResult(float(r), df, min(max(float(p), 0.0), 1.0), lo, hi, confidence, b, se_b, n, k, dropped,
                         True, note)

@@ -286,6 +286,7 @@ def _scipy_test(d: np.ndarray, zero_method: str, alternative: str, method: str,
         res = sps.wilcoxon(d, zero_method=zero_method, alternative=alternative, method=_SCIPY_NAME[method],
                            correction=correction)
         statistic, p = res.statistic, res.pvalue
+    # p clipped into [0, 1]: an exact tail sum doubled for two sides can round a hair above 1
     return float(statistic), min(max(float(p), 0.0), 1.0), float(signed.zstatistic)
 
 

@@ -49,17 +49,52 @@ from pipeline.force.frames import Vec3
 
 __all__ = [
     "DEFAULT_COMMAND_TIMEOUT_S",
+    "HD_ERRORS",
     "HD_EXCEEDED_MAX_FORCE",
     "HD_WARM_MOTORS",
     "HapticLimits",
     "MotorHeat",
     "TouchOutput",
+    "hd_error_text",
 ]
 
 #: OpenHaptics ``HD_WARM_MOTORS`` (hdDefines.h).
 HD_WARM_MOTORS = 0x0200
 #: OpenHaptics ``HD_EXCEEDED_MAX_FORCE``.
 HD_EXCEEDED_MAX_FORCE = 0x0201
+#: OpenHaptics' HD error codes (hdDefines.h) by name, with what each means at the bench: a fault's line names the
+#: code, not only its number.
+HD_ERRORS: dict[int, tuple[str, str]] = {
+    0x0100: ("HD_INVALID_ENUM", "the driver was called with an unknown parameter"),
+    0x0101: ("HD_INVALID_VALUE", "the driver was given a value out of range"),
+    0x0102: ("HD_INVALID_OPERATION", "the driver refused the operation in its current state"),
+    0x0104: ("HD_BAD_HANDLE", "the device handle is no longer valid (the device was closed or unplugged)"),
+    HD_WARM_MOTORS: ("HD_WARM_MOTORS", "the motors are too warm: the device limits its force until they cool"),
+    HD_EXCEEDED_MAX_FORCE: ("HD_EXCEEDED_MAX_FORCE", "a force above the device's maximum was commanded"),
+    0x0202: ("HD_EXCEEDED_MAX_FORCE_IMPULSE", "the force changed faster than the device allows"),
+    0x0203: ("HD_EXCEEDED_MAX_VELOCITY", "the stylus moved faster than the device allows"),
+    0x0204: ("HD_FORCE_ERROR", "the device could not render the commanded force"),
+    0x0300: ("HD_DEVICE_FAULT", "the device reports a hardware fault (check its cable and power, then reset)"),
+    0x0301: ("HD_DEVICE_ALREADY_INITIATED", "the device is already opened by another program"),
+    0x0302: ("HD_COMM_ERROR", "communication with the device failed (its cable, or its USB/Ethernet link)"),
+    0x0303: ("HD_COMM_CONFIG_ERROR", "the device's communication is not configured (Touch Setup)"),
+    0x0304: ("HD_TIMER_ERROR", "the servo loop's timer failed"),
+    0x0400: ("HD_ILLEGAL_BEGIN", "a haptic frame was begun inside another"),
+    0x0401: ("HD_ILLEGAL_END", "a haptic frame was ended without a begin"),
+    0x0402: ("HD_FRAME_ERROR", "a haptic frame failed"),
+    0x0500: ("HD_INVALID_PRIORITY", "the scheduler was given an invalid priority"),
+    0x0501: ("HD_SCHEDULER_FULL", "the servo scheduler has no room for another callback"),
+    0x0600: ("HD_INVALID_LICENSE", "the OpenHaptics licence is not valid"),
+}
+
+
+def hd_error_text(code: int) -> str:
+    """``0x0300 (HD_DEVICE_FAULT: the device reports a hardware fault …)``; an unknown code as its number alone."""
+    name = HD_ERRORS.get(int(code))
+    return f"0x{int(code):04X}" + (f" ({name[0]}: {name[1]})" if name is not None else " (not an OpenHaptics code "
+                                                                                         "this software knows)")
+
+
 #: A command this old renders as zero (device-side watchdog), s.
 DEFAULT_COMMAND_TIMEOUT_S = 0.010
 #: Longest servo interval the heat model integrates in one step, s (a stalled servo thread is not an eternity).

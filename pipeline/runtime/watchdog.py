@@ -14,12 +14,14 @@ import math
 from dataclasses import dataclass
 
 from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
+from pipeline.devices.touch_output import hd_error_text
 
 __all__ = [
     "WatchdogConfig",
     "derating_detail",
     "derating_ended_detail",
     "fault_detail",
+    "ms_beyond",
     "output_restarted_detail",
     "stall_detail",
 ]
@@ -43,6 +45,16 @@ class WatchdogConfig:
                 raise ValueError(f"watchdog.{name} = {v!r}: must be a finite number > 0")
         if self.saturation_fraction > 1:
             raise ValueError(f"watchdog.saturation_fraction = {self.saturation_fraction!r}: must be ≤ 1")
+
+
+def ms_beyond(value_ms: float, limit_ms: float) -> str:
+    """``value_ms`` beyond ``limit_ms``, in as few decimals (one at least) as show it beyond: ``5.03`` for 5.03 ms
+    against a 5 ms limit, where one decimal read ``5.0 ms (limit 5 ms)``, as if within it."""
+    for decimals in range(1, 4):
+        text = f"{value_ms:.{decimals}f}"
+        if float(text) > limit_ms:
+            return text
+    return f"{value_ms:.4f}"  # (above the limit by less than 0.5 µs)
 
 
 def fault_detail(
@@ -80,8 +92,8 @@ def fault_detail(
     wd = watchdog
     parts = []
     if new & Fault.SENSOR_STALE:
-        parts.append(f"SENSOR_STALE: newest F/T sample {sensor_age_ns * 1e-6:.1f} ms old "
-                     f"(limit {wd.sensor_max_age_s * 1e3:g} ms)")
+        age = ms_beyond(sensor_age_ns * 1e-6, wd.sensor_max_age_s * 1e3)
+        parts.append(f"SENSOR_STALE: newest F/T sample {age} ms old (limit {wd.sensor_max_age_s * 1e3:g} ms)")
     if new & Fault.SENSOR_STATUS:
         parts.append(f"SENSOR_STATUS: status word 0x{int(w.status):08X}")
     if new & Fault.NON_FINITE:
@@ -97,16 +109,16 @@ def fault_detail(
         parts.append(f"SENSOR_SATURATION: {n} = {v:.2f} {u} beyond {wd.saturation_fraction:.0%} of its range "
                      f"(±{r:.3g} {u})")
     if new & Fault.POSE_STALE:
-        parts.append(f"POSE_STALE: newest robot pose {pose_age_ns * 1e-6:.1f} ms old "
+        parts.append(f"POSE_STALE: newest robot pose {ms_beyond(pose_age_ns * 1e-6, wd.pose_max_age_s * 1e3)} ms old "
                      f"(limit {wd.pose_max_age_s * 1e3:g} ms)")
     if new & Fault.HAPTIC_DEVICE:
-        parts.append(f"HAPTIC_DEVICE: device error 0x{int(hs.error_code):04X}")
+        parts.append(f"HAPTIC_DEVICE: device error {hd_error_text(hs.error_code)}")
     return "; ".join(parts) or Fault(new).describe()
 
 
 def stall_detail(period_ns: int, watchdog: WatchdogConfig, command_timeout_ns: int) -> str:
     """The ``LOOP_STALLED`` line for a tick ``period_ns`` after the previous one (beyond ``watchdog.loop_stall_s``)."""
-    return (f"LOOP_STALLED: no loop tick for {period_ns * 1e-6:.1f} ms (limit "
+    return (f"LOOP_STALLED: no loop tick for {ms_beyond(period_ns * 1e-6, watchdog.loop_stall_s * 1e3)} ms (limit "
             f"{watchdog.loop_stall_s * 1e3:g} ms); the haptic device's command watchdog "
             f"had dropped the force to zero after {command_timeout_ns * 1e-6:g} ms")
 

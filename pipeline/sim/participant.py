@@ -41,20 +41,23 @@ driven by delayed, biased, noisy force percepts):
   feedback), times ``e^{N(0,0.15)}`` plus ``N(0, 0.1 mm)``.  Postural drift: a random
   walk of the equilibrium (knots every 20 ms, linearly interpolated) during trials.
 
-Trial interface (the session runner's)::
+Trial interface (the session runner's, :class:`pipeline.core.aim.TrialParticipant`; what a trial asks is the
+task's :class:`pipeline.core.aim.TrialAim`)::
 
     p = SimulatedParticipant(seed=7)                      # or params=ParticipantParams.draw(rng)
     rig.set_driver(p)
-    p.begin_trial(target_force_n, haptic_on, t_s)         # cue shown
+    p.begin_trial(TrialAim.constant(target_force_n, haptic_on), t_s)   # cue shown
     p.end_trial(t_s)                                      # 0.4 s min-jerk back to y_c = 0, then idle
-    p.practice(target_force_n, haptic_on, t_s, live_force_n_visible)  # training trial
+    p.begin_trial(TrialAim.constant(target_force_n, haptic_on, gauge=True, practice=True), t_s)  # training trial
 
-``begin_trial``/``practice``/``end_trial`` only stage the command; it takes
+``begin_trial``/``end_trial`` only stage the command; it takes
 effect at the next observation (the tick at which the loop applies the
 trial's ``Mark``), so the participant's clock cannot drift from the trial's
-even if ``t_s`` is on another time base.  With a live gauge (practice) the
+even if ``t_s`` is on another time base.  With a live gauge (``aim.gauge``) the
 visual percept is the displayed force ``k·δⁿ`` with log noise 0.03 and the
-target is the displayed one (no memory noise).
+target is the displayed one (no memory noise).  This is a model of force
+*regulation*: it aims at a force that does not move over the trial (an aim whose
+target moves is refused: another task's hand is another model).
 
 Determinism: all randomness comes from ``numpy.random.default_rng`` seeded
 from ``seed`` (no global state).  Parameters come from one stream; every trial
@@ -84,6 +87,7 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.core.aim import TrialAim
 from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
@@ -218,31 +222,28 @@ class SimulatedParticipant:
         self._zi = i + 1
         return self._z[i]
 
-    # -- the session runner's interface -------------------------------------------------------
-    def begin_trial(self, target_force_n: float, haptic_on: bool, t_s: float) -> None:
-        """The target word is shown at ``t_s``: plan the trial.
+    # -- the session runner's interface (pipeline.core.aim.TrialParticipant) --------------------
+    def begin_trial(self, aim: TrialAim, t_s: float) -> None:
+        """The target word is shown at ``t_s``: plan the trial ``aim`` asks for.
 
         The participant's clock for the trial starts at the first observation
         after this call (the tick at which the loop applies the trial's mark),
         so a runner whose ``t_s`` is on another time base cannot desynchronise it.
+        A training trial (``aim.practice``) draws from its own stream; with a live
+        force gauge (``aim.gauge``) the visual percept is the displayed force with
+        small noise instead of an indentation judged through the stiffness belief.
         """
-        self._stage_trial(target_force_n, haptic_on, t_s, gauge=False, practice=False)
-
-    def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
-        """A training trial: like :meth:`begin_trial`; with a live force gauge the visual
-        percept is the displayed force with small noise instead of an indentation judged
-        through the stiffness belief."""
-        self._stage_trial(target_force_n, haptic_on, t_s, gauge=bool(live_force_n_visible), practice=True)
+        f = aim.steady_n
+        if f is None:
+            raise ValueError(f"aim = {aim.knots!r}: this participant regulates a force that does not move over the "
+                             "trial (a target that moves needs a tracking model of its own)")
+        if not (math.isfinite(f) and f > 0):
+            raise ValueError(f"target_force_n = {f!r}: must be a finite force > 0")
+        self._pending = ("begin", f, aim.haptic_on, float(t_s), aim.gauge, aim.practice)
 
     def end_trial(self, t_s: float) -> None:
         """Retract to the start pose (y_c = 0) with a 0.4 s minimum-jerk move, then idle."""
         self._pending = ("end", float(t_s))
-
-    def _stage_trial(self, target_force_n: float, haptic_on: bool, t_s: float, gauge: bool, practice: bool) -> None:
-        f = float(target_force_n)
-        if not (math.isfinite(f) and f > 0):
-            raise ValueError(f"target_force_n = {target_force_n!r}: must be a finite force > 0")
-        self._pending = ("begin", f, bool(haptic_on), float(t_s), gauge, practice)
 
     @property
     def in_trial(self) -> bool:

@@ -212,7 +212,7 @@ Deviations from science.md §4.2 and from model v1, and why:
 
 Calibration (validation on held-out seeds: ``python -m bench.participant_calibration
 --studies 10 --jobs 2``; real rig + loop + :class:`protocol.study.trial.TrialMachine` +
-:mod:`protocol.study.metrics`, the paper's random 20-trial schedule; 10 studies × 10
+:mod:`protocol.tasks.force_regulation`, the paper's random 20-trial schedule; 10 studies × 10
 participants, seeds 0–9; per participant × mode as science.md §6; mean ± SD
 [min–max] over the 10 studies; Wilcoxon signed-rank on the 10 paired differences;
 the table as the bench printed it, 190 s wall):

@@ -62,7 +62,7 @@ class Role(StrEnum):
 @dataclass(frozen=True, slots=True)
 class TrialWindow:
     """One trial as its metrics see it: the samples of its window and what the task made of them (a plain record,
-    filled by the task's window, :func:`protocol.study.metrics.trial_metrics`, live and offline alike).
+    filled by the task's window, :func:`protocol.tasks.window.judged`, live and offline alike).
 
     Attributes
     ----------

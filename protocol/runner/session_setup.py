@@ -32,9 +32,11 @@ from typing import Any
 import numpy as np
 
 from foundation.version import software_provenance
+from pipeline.core.aim import TrialParticipant
 from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import Command
-from protocol.runner.session import SessionRunner, TrialParticipant, first_unfinished, trial_words
+from protocol.runner.session import SessionRunner, first_unfinished
+from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
 from protocol.storage.damage import recording_damage
@@ -50,7 +52,6 @@ from protocol.study.design import (
     schedule_from_json,
     schedule_to_json,
 )
-from protocol.study.metrics import trial_metrics
 from protocol.study.records import AbortCause, Outcome, TrialRecord, trial_id_of
 
 __all__ = [
@@ -150,6 +151,15 @@ class OpenedSession:
     def participant_seed(self) -> int:
         """Seed of the simulated participant of this session's participant number."""
         return participant_seeds(self.seed, self.participant_number)[1]
+
+    def plan(self, arms: tuple[str, ...] = ()) -> SessionPlan:
+        """What the session runner follows in this run, on a rig whose arms are ``arms``."""
+        return SessionPlan(
+            session_id=self.session_id, protocol=self.protocol, schedule=self.schedule,
+            start_position=self.start_position, clock_offset_s=self.clock_offset_s,
+            initial_pause_s=self.initial_pause_s, segment=self.segment, seed=self.seed,
+            live_force_aid=self.live_force_aid, arms=arms,
+        )
 
 
 def open_new_session(
@@ -345,9 +355,7 @@ def _interrupted_trial(
         # t_s was stored as ns / 1e9 since the cue: rounding recovers the integer ns exactly
         t_ns = np.rint(np.array([r[0] for r in samples], dtype=np.float64) * 1e9).astype(np.int64)
         force = np.array([np.nan if r[1] is None else r[1] for r in samples], dtype=np.float64)
-    tr = protocol.trial
-    met = trial_metrics(t_ns - origin_ns, force, spec.target_force_n,
-                        tolerance_fraction=tr.tolerance_fraction, hold_s=tr.hold_s, max_trial_s=tr.max_trial_s)
+    met = protocol.task.judge(t_ns - origin_ns, force, spec, max_trial_s=protocol.trial.max_trial_s)
     record = TrialRecord.finished(
         session_id=sid, spec=spec, outcome=Outcome.ABORTED, clock=SessionClock(cue_s, origin_ns),
         cue_ns=origin_ns, end_ns=int(t_ns[-1]) if len(t_ns) else origin_ns, metrics=met,
@@ -421,14 +429,9 @@ def start_runner(
     """
     recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
                         **({} if commit_clock is None else {"clock": commit_clock}))
-    runner = SessionRunner(
-        protocol=opened.protocol, schedule=opened.schedule, session_id=opened.session_id, recorder=recorder,
-        submit=submit, start_position=opened.start_position, session_clock_offset_s=opened.clock_offset_s,
-        participant=participant, participant_time=participant_time, seed=opened.seed, limits=limits,
-        initial_pause_s=opened.initial_pause_s, auto_reset_faults=auto_reset_faults, segment=opened.segment,
-        scales=scales, arms=arms,
-    )
-    runner.live_force_aid = opened.live_force_aid
+    runner = SessionRunner(opened.plan(arms), recorder, submit, participant=participant,
+                           participant_time=participant_time, limits=limits, auto_reset_faults=auto_reset_faults,
+                           scales=scales)
     return recorder, runner
 
 

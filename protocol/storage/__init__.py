@@ -25,6 +25,7 @@ What protects the record:
   SQLite creates with the database's permissions) are readable by their owner only.
 """
 
+from protocol.storage.codes import clash_of, code_key, near_duplicate, normalise_code
 from protocol.storage.common import EmptyDatabase, LeaseHeld, StorageError
 from protocol.storage.database import CODE_PATTERN, SessionInfo, StudyDatabase, validate_code
 from protocol.storage.leases import LEASE_HEARTBEAT_S, LEASE_STALE_S, new_owner_token, process_identity, session_scope
@@ -56,8 +57,12 @@ __all__ = [
     "StorageError",
     "StudyDatabase",
     "StudyReader",
+    "clash_of",
+    "code_key",
     "connect_readonly",
+    "near_duplicate",
     "new_owner_token",
+    "normalise_code",
     "process_identity",
     "schema_path",
     "session_scope",

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import sqlite3
 import zlib
 from collections.abc import Callable, Mapping, Sequence
@@ -22,6 +21,7 @@ import numpy as np
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.storage import crashpoint
+from protocol.storage.codes import CODE_PATTERN, stored_clash, validate_code
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
@@ -29,15 +29,7 @@ from protocol.storage.withdrawal import withdrawal_of
 
 __all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
 
-CODE_PATTERN = re.compile(r"^[A-Za-z0-9_-]{1,32}\Z")  # \Z, not $: "$" also matches before a final newline
 _INSERT_SAMPLES = f"INSERT INTO samples ({', '.join(SAMPLE_COLUMNS)}) VALUES ({', '.join('?' * len(SAMPLE_COLUMNS))})"
-
-
-def validate_code(code: str) -> str:
-    """Check a participant code: 1–32 of ``A–Z a–z 0–9 _ -`` (pseudonymous, no personal data)."""
-    if not isinstance(code, str) or not CODE_PATTERN.match(code):
-        raise StorageError(f"participant code = {code!r}: must be 1–32 characters from A–Z, a–z, 0–9, '_' and '-'")
-    return code
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,8 +152,12 @@ class StudyDatabase(SchemaFile, LeaseHolder):
 
     # -- participants and sessions ------------------------------------------------------------------
     def participant_id(self, code: str, *, create: bool) -> int | None:
-        """The id of a participant code, optionally creating it."""
-        validate_code(code)
+        """The id of a participant code, optionally creating it.  A code that reads as another participant's
+        without being it (``p01`` beside ``P01``, :mod:`protocol.storage.codes`) is refused naming that one."""
+        if code != validate_code(code):
+            raise StorageError(f"participant code = {code!r}: give it without surrounding spaces or look-alike "
+                               f"characters ({validate_code(code)!r})")
+        stored_clash(self.conn, code, str(self.path))
         row = self.conn.execute("SELECT participant_id FROM participants WHERE code = ?", (code,)).fetchone()
         if row is not None:
             return int(row[0])
@@ -222,6 +218,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             If another live process runs the whole study (a headless ``run``).
         """
         with self.transaction():
+            stored_clash(self.conn, validate_code(code), str(self.path))  # p01 beside P01 is refused, named
             gone = withdrawal_of(self.conn, code)
             if gone is not None:
                 raise StorageError(f"participant {code} withdrew from the study in {self.path} "

@@ -28,6 +28,7 @@ from typing import Any
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.metrics import stored
 from protocol.recording.codec import BlockRow, join_chunks
+from protocol.storage.codes import stored_clash
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
 from protocol.storage.participant_data import ParticipantRows, participant_rows
@@ -175,7 +176,9 @@ class StudyReader:
             "SELECT s.session_id, p.code FROM sessions s JOIN participants p USING (participant_id)")}
 
     def participant_data(self, code: str) -> ParticipantRows | None:
-        """Everything stored of one participant, table by table (None when the code is not stored)."""
+        """Everything stored of one participant, table by table (None when the code is not stored; a code that reads
+        as a stored one without being it, ``p01`` for ``P01``, is refused naming it: :mod:`protocol.storage.codes`)."""
+        stored_clash(self.conn, code, str(self.path))
         return participant_rows(self.conn, code)
 
     def withdrawals(self) -> list[Withdrawal]:
@@ -286,6 +289,15 @@ class StudyReader:
         """Each recorded trial's cue: ``{trial_index: (first_tick, started_at_s)}``."""
         return {int(i): (int(f), float(c)) for i, f, c in self.conn.execute(
             "SELECT trial_index, first_tick, started_at_s FROM trials WHERE session_id = ? AND first_tick IS NOT NULL",
+            (int(session_id),))}
+
+    def trial_ends(self, session_id: int) -> dict[int, tuple[int, int]]:
+        """Each recorded trial's end: ``{trial_index: (segment, last_tick)}`` (its last record, the one its metrics
+        end on)."""
+        if "last_tick" not in self._has_columns("trials"):
+            return {}  # a file of schema version 1 or 2: no recording, no ticks
+        return {int(i): (int(s), int(t)) for i, s, t in self.conn.execute(
+            "SELECT trial_index, segment, last_tick FROM trials WHERE session_id = ? AND last_tick IS NOT NULL",
             (int(session_id),))}
 
     def trials_touching(self, session_id: int, segment: int, first_tick: int, last_tick: int) -> tuple[int, ...]:

@@ -33,10 +33,13 @@ SCHEMA_VERSION = 4
 ABORT_CAUSES = tuple(c.value for c in AbortCause)
 #: Per-trial loop health columns (schema version 2), in table order (the fields of the record's health).
 HEALTH_COLUMNS = tuple(f.name for f in fields(LoopHealth))
+#: The causes a file of schema version 2 to 4 allowed before ``participant_screen`` was added (its CHECK's list).
+_CAUSES_BEFORE = "('experimenter', 'fault', 'feedback', 'gap', 'interrupted')"
+#: The causes allowed now, as the CHECK lists them (``data/schema.sql`` has the same list).
+_CAUSES_NOW = "(" + ", ".join(f"'{c}'" for c in ABORT_CAUSES) + ")"
 #: What upgrades a version-1 database to version 2 (the same tables as a new one; tested).
 _UPGRADE_1_TO_2 = (
-    "ALTER TABLE trials ADD COLUMN abort_cause TEXT CHECK (abort_cause IS NULL OR abort_cause IN "
-    "('experimenter', 'fault', 'feedback', 'gap', 'interrupted'))",
+    f"ALTER TABLE trials ADD COLUMN abort_cause TEXT CHECK (abort_cause IS NULL OR abort_cause IN {_CAUSES_NOW})",
     *(f"ALTER TABLE trials ADD COLUMN {c} {'INTEGER' if c == 'periods_over_2ms' else 'REAL'}" for c in HEALTH_COLUMNS),
     "CREATE TABLE leases (scope TEXT PRIMARY KEY, owner TEXT NOT NULL, pid INTEGER NOT NULL, host TEXT NOT NULL, "
     "process_start TEXT NOT NULL, command TEXT NOT NULL, acquired_at TEXT NOT NULL, heartbeat_at TEXT NOT NULL)",
@@ -312,6 +315,8 @@ class SchemaFile:
         elif not readonly and not {"withdrawals", "session_chunks", "arm_chunks"} <= tables:  # a v4 file before them
             for statement in (_WITHDRAWALS, _CHUNKS, *_ARMS):
                 c.execute(statement)
+        if not readonly and version:
+            _widen_abort_causes(c)
         if not readonly:
             add_metric_columns(c)
             c.execute("PRAGMA journal_mode = WAL")
@@ -391,3 +396,31 @@ class SchemaFile:
             c.execute("ROLLBACK")
             raise
         self.upgraded_from, self.backup_path = version, backup
+
+
+def _widen_abort_causes(conn: sqlite3.Connection) -> None:
+    """A file made before an abort cause was added (``participant_screen``): its ``trials`` CHECK lists the causes
+    of its time, and a trial aborted for the new cause would be refused at its insert.  A writer widens the list.
+
+    SQLite keeps a CHECK only in the table's SQL text, so widening it changes no stored row and no page of data:
+    the text is replaced in the schema table, as SQLite documents for changes that do not alter the stored content
+    (``PRAGMA writable_schema``, the schema version bumped so every connection reads the new text), in one
+    transaction; every row already stored satisfies the wider list.
+    """
+    row = conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' AND name = 'trials'").fetchone()
+    if row is None or _CAUSES_BEFORE not in str(row[0]):
+        return  # made or widened with the list of now
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        row = conn.execute("SELECT sql FROM sqlite_master WHERE type = 'table' AND name = 'trials'").fetchone()
+        if _CAUSES_BEFORE in str(row[0]):  # not widened by another writer meanwhile
+            version = int(conn.execute("PRAGMA schema_version").fetchone()[0])
+            conn.execute("PRAGMA writable_schema = ON")
+            conn.execute("UPDATE sqlite_master SET sql = ? WHERE type = 'table' AND name = 'trials'",
+                         (str(row[0]).replace(_CAUSES_BEFORE, _CAUSES_NOW),))
+            conn.execute(f"PRAGMA schema_version = {version + 1}")
+            conn.execute("PRAGMA writable_schema = OFF")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise

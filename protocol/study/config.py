@@ -1,7 +1,7 @@
 """The study protocol as data: load and validate a protocol TOML file.
 
-A protocol names the targets, the haptic modes, the trial counts and timing,
-the ordering method and the training block.  :func:`load_protocol` checks
+A protocol names the task (``[task]``, :mod:`protocol.tasks`; none: the paper's force regulation), the targets,
+the haptic modes, the trial counts and timing, the ordering method and the training block.  :func:`load_protocol` checks
 every field and raises one :class:`ProtocolError` that names the field, the
 offending value and what is allowed -- nothing starts with a bad file.
 """
@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -19,6 +19,9 @@ from typing import Any
 from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
+from protocol.tasks.base import Task, Timing
+from protocol.tasks.force_regulation import ForceRegulation
+from protocol.tasks.registry import named, task_tables
 
 __all__ = [
     "ABORT_POLICIES",
@@ -57,10 +60,11 @@ class Target:
 
 @dataclass(frozen=True, slots=True)
 class TrialTiming:
-    """Success criterion and timing of each trial (paper §V-B)."""
+    """The timing of each trial, whatever its task (paper §V-B): its cap, the pause after it, how long its cue shows.
 
-    tolerance_fraction: float = 0.10
-    hold_s: float = 1.0
+    The task's own parameters (the paper's band and hold) are the task's (:attr:`ProtocolConfig.task`).
+    """
+
     max_trial_s: float = 12.0
     pause_s: float = 2.0
     cue_s: float = 1.0
@@ -98,6 +102,10 @@ class ProtocolConfig:
     #: The rig's arm whose instrument does the task (its force is the trial's task force; the other arms are
     #: recorded too).  "" (the default): the rig's only arm, or ``right`` on a rig of several (:meth:`task_arm_of`).
     task_arm: str = ""
+    #: What each trial asks and how it is judged, with its parameters (:mod:`protocol.tasks`): the file's ``[task]``
+    #: table; none is the paper's force regulation, whose band and hold are ``trial.tolerance_fraction`` and
+    #: ``trial.hold_s``.
+    task: Task = field(default_factory=ForceRegulation)
 
     @property
     def trials_per_participant(self) -> int:
@@ -136,11 +144,13 @@ class ProtocolConfig:
         """This protocol run by a pipeline whose ramps are ``safety``'s (``run --set ramp_in_s=…``): refused in one
         :class:`ProtocolError` line where an ON trial could not hold the ramp-in, or a pause the ramp-out (the
         checks the file had with the paper's ramps, :func:`_check_together`)."""
-        _check_together(Fields(source, ProtocolError), self.trial, self.training, self.modes, safety)
+        _check_together(Fields(source, ProtocolError), self.task, self.trial, self.training, self.modes, safety)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set, so a
-        protocol of before the arms stores what it always stored)."""
+        """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set and
+        ``task`` only for another task than the paper's, so a protocol of before the arms and the tasks stores what it
+        always stored)."""
+        task, task_trial = task_tables(self.task)
         return {
             "name": self.name,
             "version": self.version,
@@ -152,8 +162,9 @@ class ProtocolConfig:
                 "abort_policy": self.abort_policy,
                 **({"task_arm": self.task_arm} if self.task_arm else {}),
             },
-            "trial": asdict(self.trial),
+            "trial": {**task_trial, **asdict(self.trial)},
             "training": asdict(self.training),
+            **({"task": task} if task is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -175,7 +186,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         One line naming ``source``, the field, the value and what is allowed.
     """
     f = Fields(source, ProtocolError)
-    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training"})
+    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -204,10 +215,10 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     task_arm = f.string("design.task_arm", design["task_arm"], pattern=ARM_NAME, what=ARM_NAME_WHAT) \
         if "task_arm" in design else ""
 
-    tr = f.section(top, "trial", {"tolerance_fraction", "hold_s", "max_trial_s", "pause_s", "cue_s"})
+    kind, own = named(f, top)
+    tr = f.section(top, "trial", {"max_trial_s", "pause_s", "cue_s", *kind.trial_fields})
+    task = kind.from_tables(f, own, tr)
     timing = TrialTiming(
-        tolerance_fraction=f.number("trial.tolerance_fraction", tr.get("tolerance_fraction", 0.10), lo=0.0, hi=0.5),
-        hold_s=f.number("trial.hold_s", tr.get("hold_s", 1.0), lo=0.0, hi=60.0),
         max_trial_s=f.number("trial.max_trial_s", tr.get("max_trial_s", 12.0), lo=0.0, hi=MAX_TRIAL_S),
         pause_s=f.number("trial.pause_s", tr.get("pause_s", 2.0), lo=0.0, hi=600.0, lo_open=False),
         cue_s=f.number("trial.cue_s", tr.get("cue_s", 1.0), lo=0.0, hi=60.0, lo_open=False),
@@ -222,10 +233,11 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
         required=_training_required(f, trn),
     )
-    _check_together(f, timing, training, tuple(modes))
+    _check_together(f, task, timing, training, tuple(modes))
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
+        task=task,
     )
 
 
@@ -239,21 +251,16 @@ def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
     return required
 
 
-def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...],
+def _check_together(f: Fields, task: Task, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...],
                     ramps: SafetyConfig | None = None) -> None:
     """Values valid alone but not together: one line naming both fields.
 
-    * ``trial.hold_s`` < ``trial.max_trial_s``, and with haptics ON in the
-      design the trial must also hold the feedback's ramp-in: an ON trial
-      shorter than ramp-in + hold could only succeed (or be counted) at a gain
-      below 1 -- feedback weaker than designed.
+    * The task's parameters against the trial's cap, each training trial's length and the feedback's ramps
+      (:meth:`protocol.tasks.base.Task.check_timing`: the paper's hold must fit a trial, and its ramp-in too when
+      haptics ON is in the design).
     * ``trial.pause_s`` ≥ the feedback's ramp-out when haptics ON is in the
       design: otherwise the next trial is cued while the last one's force is
       still fading out (an OFF trial would start with feedback).
-    * ``training.seconds_per_target_per_mode``: the training session runs,
-      stores and on resume re-reads this protocol with its trials capped at
-      this value (the headless study runner), so it must fit a hold (and the
-      ramp-in) too.
 
     The ramps are the safety stage's own (:class:`pipeline.force.safety.SafetyConfig`, their one definition):
     the paper's pipeline when the file is loaded, the pipeline a study runs with (``run --set``) at its start
@@ -261,19 +268,7 @@ def _check_together(f: Fields, timing: TrialTiming, training: TrainingConfig, mo
     """
     ramps = ramps or SafetyConfig()
     on = "on" in modes
-    if timing.hold_s >= timing.max_trial_s:
-        raise f.fail("trial.hold_s", timing.hold_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g}")
-    if not timing.hold_s < training.seconds_per_target_per_mode:
-        raise f.fail("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode,
-                     f"must be longer than trial.hold_s = {timing.hold_s:g} (each training trial lasts this long "
-                     f"and must leave time to complete a hold)")
-    for field, cap in (("trial.max_trial_s", timing.max_trial_s),
-                       ("training.seconds_per_target_per_mode", training.seconds_per_target_per_mode)):
-        if on and cap < ramps.ramp_in_s + timing.hold_s:
-            raise f.fail(field, cap, f"must be at least trial.hold_s = {timing.hold_s:g} + the feedback's "
-                         f"{ramps.ramp_in_s:g} s ramp-in (safety.ramp_in_s) = {ramps.ramp_in_s + timing.hold_s:g} s "
-                         "when design.modes has 'on': a shorter haptics-ON trial would be judged at a feedback gain "
-                         "below 1")
+    task.check_timing(f, Timing(timing.max_trial_s, training.seconds_per_target_per_mode, on, ramps))
     if on and timing.pause_s < ramps.fault_ramp_s:
         raise f.fail("trial.pause_s", timing.pause_s,
                      f"must be at least the feedback's {ramps.fault_ramp_s:g} s ramp-out (safety.fault_ramp_s) when "
@@ -289,7 +284,19 @@ def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
     else:
         source = str(Path(path))
         data = read_toml(Path(path), ProtocolError, "protocol file")
-    return protocol_from_dict(data, source)
+    protocol = protocol_from_dict(data, source)
+    _check_cue(Fields(source, ProtocolError), protocol.trial)
+    return protocol
+
+
+def _check_cue(f: Fields, timing: TrialTiming) -> None:
+    """A protocol file's cue must end before its trial's cap: a cue as long as the trial shows the target word
+    throughout, another condition than the design's brief cue (``cue_s = 30`` with a 12 s cap ran a whole study).
+    Checked where a file is loaded for new sessions, not where a stored session's protocol is read back, so a
+    session stored before the check can still be resumed, checked and analysed as it ran."""
+    if timing.cue_s >= timing.max_trial_s:
+        raise f.fail("trial.cue_s", timing.cue_s, f"must be shorter than trial.max_trial_s = {timing.max_trial_s:g} "
+                     "(the cue word is shown at the start of each trial, then the screen goes blank)")
 
 
 def default_protocol() -> ProtocolConfig:

@@ -31,7 +31,7 @@ import numpy as np
 
 from pipeline.devices.interfaces import Fault
 from pipeline.force.safety import SafetyConfig
-from pipeline.runtime.watchdog import WatchdogConfig
+from pipeline.runtime.watchdog import WatchdogConfig, ms_beyond
 from protocol.study.design import HapticMode, TrialSpec
 from protocol.study.records import AbortCause, LoopHealth, trial_health
 from protocol.study.trial import TrialFinished
@@ -104,7 +104,8 @@ def _gap(marked: np.ndarray, t: np.ndarray, prev_ns: int | None, limits: Deliver
         return []
     k = int(gaps[0])
     return [(int(marked[k]), 1, AbortCause.GAP,
-             f"gap: no loop record for {(t[k] - prev[k]) * 1e-6:.1f} ms (limit {limits.max_gap_s * 1e3:g} ms)")]
+             f"gap: no loop record for {ms_beyond((t[k] - prev[k]) * 1e-6, limits.max_gap_s * 1e3)} ms "
+             f"(limit {limits.max_gap_s * 1e3:g} ms)")]
 
 
 def _feedback(rows: np.ndarray, marked: np.ndarray, rel_ns: np.ndarray, spec: TrialSpec,

@@ -26,7 +26,7 @@ import numpy.typing as npt
 from protocol.metrics import MetricValue, get, stored, values_of
 from protocol.study.clock import SessionClock
 from protocol.study.design import HapticMode, TrialSpec
-from protocol.study.metrics import TrialMetrics
+from protocol.tasks.window import TrialMetrics
 
 __all__ = [
     "AbortCause",
@@ -54,6 +54,9 @@ class AbortCause(StrEnum):
     FEEDBACK = "feedback"
     GAP = "gap"
     INTERRUPTED = "interrupted"
+    #: The participant screen closed (or was minimised, or left every monitor) during the trial: the participant
+    #: could not see the cue.  Added after schema version 4's files existed: a writer widens an older file's list.
+    PARTICIPANT_SCREEN = "participant_screen"
 
     @property
     def undelivered(self) -> bool:
@@ -134,9 +137,10 @@ class TrialRecord:
     cue_ns, end_ns
         The trial's time origin (its first record under its condition) and its end, loop clock, ns.
     metrics
-        Its metrics as stored (:func:`protocol.study.metrics.trial_metrics`), by name: every metric with a
-        ``trials`` column (:func:`protocol.metrics.stored`; a success-only one, TCT, only for a success; a metric
-        an older file has no column for is None).  :meth:`metric` reads one.
+        Its metrics as stored (its task's judgement, :meth:`protocol.tasks.base.Task.judge`), by name: every
+        metric with a ``trials`` column (:func:`protocol.metrics.stored`; a success-only one, TCT, only for a
+        success; a metric its task does not produce, or an older file has no column for, is None).
+        :meth:`metric` reads one.
     n_samples
         The samples of its trial window.
     abort_reason, abort_cause

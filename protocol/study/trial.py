@@ -14,6 +14,10 @@ The cue (the target word) is shown when the trial starts, and only then.  The
 trial's time origin is the first sample the loop marked with the trial's
 index: the loop applies the runner's mark command and the haptic mode at the
 same tick, so t = 0 is the first sample recorded under the trial's condition.
+
+What ends a trial early as a success is its task's rule (:meth:`protocol.tasks.base.Task.rule`, fed every sample);
+the finished trial is judged again by the task's offline form (:meth:`protocol.tasks.base.Task.judge`), which
+computes its metrics, and the two verdicts must agree.
 """
 
 from __future__ import annotations
@@ -25,8 +29,10 @@ from typing import Final
 
 from protocol.study.config import TrialTiming
 from protocol.study.design import TrialSpec
-from protocol.study.metrics import HoldDetector, TrialMetrics, trial_metrics
 from protocol.study.records import Outcome
+from protocol.tasks.base import Task, TrialRule
+from protocol.tasks.force_regulation import ForceRegulation
+from protocol.tasks.window import TrialMetrics
 
 __all__ = ["TRANSITIONS", "PhaseChanged", "TrialFinished", "TrialMachine", "TrialMachineError", "TrialPhase"]
 
@@ -85,23 +91,25 @@ class TrialMachine:
     Parameters
     ----------
     timing
-        Band, hold, cap and pause.
+        The trial's cap and the pause after it.
+    task
+        What each trial asks and how it is judged (default: the paper's force regulation).
     sample_period_s
         Nominal sample period (for time in band).
     """
 
-    def __init__(self, timing: TrialTiming, sample_period_s: float = 0.001) -> None:
+    def __init__(self, timing: TrialTiming, task: Task | None = None, sample_period_s: float = 0.001) -> None:
         self.timing = timing
+        self.task: Task = task if task is not None else ForceRegulation()
         self.sample_period_s = sample_period_s
         self.phase = TrialPhase.IDLE
         self.spec: TrialSpec | None = None
         self.cue_ns: int | None = None
         self.pause_until_ns: int | None = None
-        self._hold: HoldDetector | None = None
+        self._rule: TrialRule | None = None
         self._t: list[int] = []
         self._f: list[float] = []
         self._cap_ns = int(round(timing.max_trial_s * 1e9))
-        self._hold_ns = int(round(timing.hold_s * 1e9))
         self._pause_ns = int(round(timing.pause_s * 1e9))
 
     def _go(self, new: TrialPhase, t_ns: int) -> PhaseChanged:
@@ -123,7 +131,7 @@ class TrialMachine:
         self.spec = spec
         ev = self._go(TrialPhase.CUED, t_ns)
         self.cue_ns = None
-        self._hold = HoldDetector(spec.target_force_n, self.timing.tolerance_fraction, self._hold_ns)
+        self._rule = self.task.rule(spec)
         self._t = []
         self._f = []
         return [ev]
@@ -155,7 +163,7 @@ class TrialMachine:
                     continue
                 self._t.append(rel)
                 self._f.append(force)
-                if self._hold.feed(rel, force):  # type: ignore[union-attr]  # set from CUE on (no assert on the per-tick path)
+                if self._rule.feed(rel, force):  # type: ignore[union-attr]  # set from CUE on (no assert on the per-tick path)
                     events.extend(self._finish(Outcome.SUCCESS, t_ns))
                 elif rel == self._cap_ns:
                     events.extend(self._finish(Outcome.TIMEOUT, t_ns))
@@ -172,14 +180,11 @@ class TrialMachine:
     def _finish(self, outcome: Outcome, end_ns: int, reason: str = "") -> list[PhaseChanged | TrialFinished]:
         spec = self.spec
         assert spec is not None and self.cue_ns is not None
-        m = trial_metrics(
-            self._t, self._f, spec.target_force_n,
-            tolerance_fraction=self.timing.tolerance_fraction, hold_s=self.timing.hold_s,
-            max_trial_s=self.timing.max_trial_s, sample_period_s=self.sample_period_s,
-        )
+        m = self.task.judge(self._t, self._f, spec, max_trial_s=self.timing.max_trial_s,
+                            sample_period_s=self.sample_period_s)
         disagree = outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS)
         if disagree:  # pragma: no cover - one definition
-            raise TrialMachineError("live hold decision disagrees with trial_metrics")
+            raise TrialMachineError("the task's live rule disagrees with its offline judgement")
         done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason)
         self.pause_until_ns = end_ns + self._pause_ns
         ev = self._go(TrialPhase.PAUSE, end_ns)

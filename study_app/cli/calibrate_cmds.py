@@ -406,9 +406,9 @@ def _real_payload(hw: Any, clock: Any, ask: Callable[[str], str], name: str, not
     try:
         k = 0
         while k < len(rots):
-            label = f"P{k + 1:02d}"
+            label = f"pose {k + 1}"  # never "P01", a participant's code
             rv = matrix_to_rotvec(tcp_target(rots[k], rts))
-            line = ask(f"pose {label} of {len(rots)}: TCP rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
+            line = ask(f"{label} of {len(rots)}: TCP rotation vector ({rv[0]:+.3f}, {rv[1]:+.3f}, "
                        f"{rv[2]:+.3f}) rad -- Enter = record, s = skip, c = identify now, q = quit: ").strip().lower()
             if line == "q":
                 raise EOFError

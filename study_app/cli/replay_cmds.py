@@ -251,8 +251,8 @@ def _filter_trade(outputs: list[Any], segments: list[Any]) -> Any:
     import numpy as np
 
     from analysis.stats.replay_compare import filter_trade
-    from protocol.study.metrics import CONTACT_THRESHOLD_N
     from protocol.study.trial import PHASE_CODES, TrialPhase
+    from protocol.tasks.window import CONTACT_THRESHOLD_N
 
     # the compensated force replay recomputed, at rest and in contact
     comp = np.concatenate([o.stage_force("comp") for o in outputs])
@@ -374,7 +374,8 @@ def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: A
 
     from analysis.plots.session_figures import SessionMarks
     from protocol.storage import StorageError, StudyReader
-    from protocol.study.metrics import band_halfwidth_n
+    from protocol.tasks.base import TrialTarget
+    from protocol.tasks.registry import stored_task
 
     try:
         db = StudyReader(db_path, check=False)  # (checked by _session, which read the segments)
@@ -384,9 +385,13 @@ def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: A
         stored = db.session(session_id)
         protocol_json = "{}" if stored is None else stored.protocol_json
         events = db.session_events(session_id, "experimenter", ("pause", "resume"))
-    tol = float(json.loads(protocol_json)["trial"]["tolerance_fraction"])
-    bands = [(float(r.started_at_s), float(r.ended_at_s), r.target_force_n - band_halfwidth_n(r.target_force_n, tol),
-              r.target_force_n + band_halfwidth_n(r.target_force_n, tol)) for r in trials.itertuples()]
+    try:
+        task = stored_task(json.loads(protocol_json), f"session {session_id} protocol")
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    drawn = [(float(r.started_at_s), float(r.ended_at_s), task.screen(TrialTarget.of(r._asdict())).band_n)
+             for r in trials.itertuples()]
+    bands = [(t0, t1, *band) for t0, t1, band in drawn if band is not None]
     aborted = [(float(r.started_at_s), float(r.ended_at_s), f"trial {r.trial_index + 1} aborted: {r.abort_reason}")
                for r in trials.itertuples() if r.outcome == "aborted"]
     pauses, since = [], None

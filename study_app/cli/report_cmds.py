@@ -208,7 +208,8 @@ def cmd_plot_trial(args: argparse.Namespace) -> int:
     # matplotlib: once the trial is known to be there
     from analysis.plots.figures import save_one, stored_trial_figure
 
-    fig = stored_trial_figure(args.db, row, samples)  # an aborted trial: its abort, time and cause marked
+    task = study.task_of(row["database"], row["session_id"])  # the session's task draws its band
+    fig = stored_trial_figure(args.db, row, samples, task)  # an aborted trial: its abort, time and cause marked
     try:
         write_output_file(out, lambda path: save_one(fig, path), command="plot-trial")
     except InputRefused as exc:

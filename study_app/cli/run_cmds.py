@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from study_app.cli.argtypes import SEED, add_command, arm_names, positive_seconds, setting, whole_number
 from study_app.cli.error import CliError
+from study_app.cli.withdraw_cmds import participant_code_arg
 
 if TYPE_CHECKING:
     from protocol.study.config import ProtocolConfig
@@ -65,7 +66,7 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help="participants run at once, each in its own process (default: the usable cores; 1: one after "
                         "the other)")
     after = r.add_mutually_exclusive_group()
-    after.add_argument("--resume", metavar="CODE", default=None,
+    after.add_argument("--resume", metavar="CODE", default=None, type=participant_code_arg,
                        help="continue this participant's interrupted session (training or experiment) "
                             "at its first unfinished trial")
     after.add_argument("--continue", dest="continue_study", action="store_true",

@@ -33,7 +33,7 @@ REASON_MAX = 500
 
 
 def participant_code_arg(text: str) -> str:
-    """An argument type: a participant code (:func:`protocol.storage.validate_code`)."""
+    """An argument type: a participant code (:func:`protocol.storage.validate_code`: NFKC, stripped)."""
     from protocol.storage import StorageError, validate_code
 
     try:
@@ -96,6 +96,7 @@ def _look(path: str, code: str) -> Any:
     finishes it.
     """
     from protocol.storage import StorageError, StudyDatabase, StudyReader
+    from protocol.storage.codes import stored_clash
     from protocol.storage.withdrawal import footprint, rewrite_pending, withdrawal_of
 
     if not Path(path).exists():
@@ -105,6 +106,7 @@ def _look(path: str, code: str) -> Any:
     except StorageError as exc:
         raise CliError(str(exc)) from None
     try:
+        stored_clash(db.conn, code, path)  # p01 for a stored P01: refused, naming it (never a guess)
         done = withdrawal_of(db.conn, code)
         if done is not None and rewrite_pending(db, done.withdrawn_at):
             _refuse_live_writers(db, path)

@@ -133,7 +133,7 @@ class Commissioning:
         e.require_idle("record pose")
         busy = self.windows.busy("RecordPose")
         if busy is not None:
-            raise RuntimeError(f"record pose: pose {busy.label} is still being recorded")
+            raise RuntimeError(f"record pose: {_pose(busy.label)} is still being recorded")
         if not cmd.label.strip():
             raise ValueError("pose label = '': must name the pose")
         _check_seconds("RecordPose", cmd.seconds)
@@ -151,14 +151,14 @@ class Commissioning:
             w = np.stack([cols[c] for c in _RAW_WRENCH], axis=1)
             rp = record_pose(label, w, pose0, robot.read_pose(), rot_tip_sensor, target)
             if not rp.accepted:
-                e.publish(m.CommandRefused("RecordPose", f"pose {label}: {rp.reason}"))
+                e.publish(m.CommandRefused("RecordPose", f"{_pose(label)}: {rp.reason}"))
                 return
             e.publish(m.PoseRecorded(label, rp.samples, rp.wrench, rp.rot_base_sensor, rp.tcp_position_m,
                                      rp.off_target_deg, rp.force_std_n))
 
         # average only records written after this command (the window drains everything up to now first)
         self.windows.open("RecordPose", cmd.seconds, _RAW_WRENCH, done, label=label, arm=arm,
-                          stalled=f"pose {label}: the force sensor stalled while recording (check the Devices tab) "
+                          stalled=f"{_pose(label)}: the force sensor stalled while recording (check the Devices tab) "
                                   "— record it again")
 
     def identify(self, cmd: m.IdentifyPoses) -> None:
@@ -209,7 +209,7 @@ class Commissioning:
             assert self.engine.eng.simulated
             poses = measure_poses(
                 self.arms.devices(arm), clock, rots,
-                progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"P{done:02d}")),
+                progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"pose {done}")),
             )
             result = self._installed(arm, payload_step(poses, name))
         finally:
@@ -336,3 +336,8 @@ class Commissioning:
                 self._frames_done(arm, check)
 
         self.windows.open("RecordFrameAxis", cmd.seconds, _BASE_SCALED, done, arm=arm)
+
+
+def _pose(label: str) -> str:
+    """A recorded pose named in a refusal: ``pose 3`` (a label that is not one already: ``pose P03``)."""
+    return label if label.startswith("pose") else f"pose {label}"

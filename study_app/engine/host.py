@@ -297,7 +297,7 @@ class StudyEngine:
         s, c = self.sessions, self.commissioning
         return {
             m.StartSession: s.start, m.ResumeSession: s.resume, m.InjectFault: s.inject_fault,
-            m.ListSessions: s.list_sessions,
+            m.ListSessions: s.list_sessions, m.ParticipantScreenState: s.participant_screen,
             m.Pause: s.control, m.Resume: s.control, m.AbortTrial: s.control, m.AbortSession: s.control,
             m.ResetFaults: self._reset_faults,
             m.OperatorStop: lambda cmd: self.loop.submit(LoopOperatorStop()),

@@ -68,6 +68,10 @@ class EngineSessions:
         self.opened: OpenedSession | None = None
         self.trigger: RehearsalTrigger | None = None
         self.session_code = ""
+        #: Whether the participant screen is open where the participant sees it, as the GUI last said (None: its
+        #: client never said; a script or a test has no participant screen).
+        self.screen_open: bool | None = None
+        self.screen_detail = ""
 
     @property
     def running(self) -> bool:
@@ -76,6 +80,7 @@ class EngineSessions:
 
     def start(self, cmd: m.StartSession) -> None:
         self.engine.require_idle("start")
+        self._require_screen("start")
         validate_code(cmd.code)
         if cmd.kind not in ("training", "experiment"):
             raise ValueError(f"session kind = {cmd.kind!r}: allowed values are 'training' and 'experiment'")
@@ -134,6 +139,7 @@ class EngineSessions:
 
     def resume(self, cmd: m.ResumeSession) -> None:
         self.engine.require_idle("resume")
+        self._require_screen("resume")
         if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -184,7 +190,7 @@ class EngineSessions:
         tr = opened.protocol.trial
         self.engine.publish(m.SessionStarted(
             session_id=opened.session_id, code=opened.code, kind=opened.kind, trials_total=len(opened.schedule),
-            start_position=opened.start_position, tolerance_fraction=tr.tolerance_fraction,
+            start_position=opened.start_position, task=opened.protocol.task,
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
             participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
@@ -198,6 +204,7 @@ class EngineSessions:
         if isinstance(cmd, m.Pause):
             runner.pause()
         elif isinstance(cmd, m.Resume):
+            self._require_screen("resume")
             runner.resume()
         elif isinstance(cmd, m.AbortTrial):
             if cmd.trial_index is not None and runner.trial_ended(cmd.trial_index):
@@ -210,6 +217,32 @@ class EngineSessions:
             if cmd.session_id is not None and cmd.session_id != runner.session_id:
                 raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
             runner.abort_session(cmd.reason)
+
+    def _require_screen(self, what: str) -> None:
+        """No trial is cued to a participant screen that is closed: a start or resume is refused, saying why."""
+        if self.screen_open is False:
+            raise RuntimeError(f"{what}: the participant screen is {self.screen_detail or 'closed'}, so the "
+                               "participant would not see the cue; open it (View → Participant screen, Ctrl+P)")
+
+    def participant_screen(self, cmd: m.ParticipantScreenState) -> None:
+        """The participant screen opened or closed.  Closed during a session: the running trial is aborted (cause
+        ``participant_screen``, stored and run again later, as a trial a closed GUI cut is stored) and the session
+        pauses, so no cue goes to a screen nobody sees; the event is stored."""
+        was, self.screen_open, self.screen_detail = self.screen_open, cmd.open, cmd.detail
+        runner, recorder = self.runner, self.recorder
+        if cmd.open or was is False or runner is None or runner.done or recorder is None:
+            return
+        how = cmd.detail or "closed"
+        spec = runner.running_trial
+        if spec is not None:
+            runner.abort_trial(f"the participant screen was {how} during the trial: the participant could not see "
+                               "the cue", cause=AbortCause.PARTICIPANT_SCREEN, trial_index=spec.index)
+        runner.pause()
+        cut = f"trial {spec.index + 1} is stored as aborted and run again later" if spec is not None else \
+            "no trial was running"
+        recorder.event(runner.session_id, runner.session_time_s(self.engine.last_t_ns), "participant_screen",
+                       f"the participant screen was {how}: {cut}; the session pauses until the screen is open "
+                       "and the experimenter resumes")
 
     def list_sessions(self, cmd: m.ListSessions) -> None:
         """Publish a database's interrupted sessions, every session it holds and who withdrew (read-only)."""
@@ -230,9 +263,8 @@ class EngineSessions:
             now_ns = loop.clock.now_ns()
             live = self.runner if self.runner is not None and not self.runner.done else None
             if cmd.kind == "kill":
-                if live is not None:  # the record says the engine's death was a rehearsal
-                    store_rehearsal_plan(live, "kill now", now_ns - loop.t0_ns)
-                    live.recorder.flush()
+                if live is not None:  # the record says the engine's death was a rehearsal, and when it came
+                    _store_kill(live, "kill now", now_ns - loop.t0_ns)
                 kill_hard(os.getpid())  # as a crash would: the GUI sees the engine die
             rig.inject_fault(cmd.kind, now_ns)
             if live is not None:  # in a session: its record says it was rehearsed
@@ -258,6 +290,7 @@ class EngineSessions:
             eng.rig.inject_fault(kind, eng.loop.t0_ns + at_ns)
 
         def kill() -> None:
+            _store_kill(runner, str(plan), eng.loop.clock.now_ns() - eng.loop.t0_ns)
             kill_hard(os.getpid())
 
         def cancel(kind: str, at_ns: int) -> None:
@@ -320,6 +353,15 @@ class EngineSessions:
         if not path:
             raise StorageError("study database: no file given")
         return StudyDatabase(path)
+
+
+def _store_kill(runner: SessionRunner, what: str, t_ns: int) -> None:
+    """The record says, committed before the engine dies, that its death is the rehearsal ``what`` and when it came
+    (the plan stored earlier says only that it was planned)."""
+    rehearsal_note(runner)(t_ns, f"{what}: the engine process is killed now, as a crash would kill it -- a rehearsal "
+                                 "on the simulated rig, not a crash or a device failure; the session is left "
+                                 "interrupted here, to be resumed")
+    runner.recorder.flush()
 
 
 def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig) -> None:

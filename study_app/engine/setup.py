@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from pipeline.assembly.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.commissioning.rig_calibration import CalibrationFileError
+from pipeline.core.aim import TrialAim
 from pipeline.devices.interfaces import DeviceError
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.settings.hardware import HardwareConfig, HardwareError, load_hardware
@@ -133,15 +134,10 @@ class SwitchableDriver:
         y = p.equilibrium_y(obs) if p is not None else 0.0
         return self.manual_y_m if self.mode == "manual" else y
 
-    def begin_trial(self, target_force_n: float, haptic_on: bool, t_s: float) -> None:
-        """Forward the cue to the simulated participant."""
+    def begin_trial(self, aim: TrialAim, t_s: float) -> None:
+        """Forward the cue (what the trial's task asks) to the simulated participant."""
         if self.participant is not None:
-            self.participant.begin_trial(target_force_n, haptic_on, t_s)
-
-    def practice(self, target_force_n: float, haptic_on: bool, t_s: float, live_force_n_visible: bool) -> None:
-        """Forward a training trial to the simulated participant."""
-        if self.participant is not None:
-            self.participant.practice(target_force_n, haptic_on, t_s, live_force_n_visible)
+            self.participant.begin_trial(aim, t_s)
 
     def end_trial(self, t_s: float) -> None:
         """Forward the end of a trial."""

@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (
 )
 
 from study_app.engine import messages as m
-from study_app.models.calibration import CalibrationModel
+from study_app.models.calibration import CalibrationModel, pose_name
 from study_app.models.commissioning import AXIS_WORDS, CommissioningModel
 from study_app.models.real_calibration import REAL_POSE_SETS, RealCalibrationModel
 
@@ -288,7 +288,8 @@ class RealPosePanel(QWidget):
             r = step.recorded
             assert r is not None
             f_n = (r.wrench[0] ** 2 + r.wrench[1] ** 2 + r.wrench[2] ** 2) ** 0.5
-            for j, text in enumerate((step.label, f"{r.off_target_deg:.1f}", f"{f_n:.3f}", f"{r.force_std_n:.4f}")):
+            for j, text in enumerate((pose_name(step.label), f"{r.off_target_deg:.1f}", f"{f_n:.3f}",
+                                      f"{r.force_std_n:.4f}")):
                 item = self.poses.item(i, j)
                 if item is None:
                     item = QTableWidgetItem()
@@ -420,5 +421,5 @@ class CalibrationWizard(QWidget):
         res = mdl.result.residuals if mdl.result is not None else []
         self.residuals.setRowCount(len(res))
         for i, (label, f_n, t_nm) in enumerate(res):
-            for j, text in enumerate((label, f"{f_n:.4f}", f"{t_nm:.5f}")):
+            for j, text in enumerate((pose_name(label), f"{f_n:.4f}", f"{t_nm:.5f}")):
                 self.residuals.setItem(i, j, QTableWidgetItem(text))

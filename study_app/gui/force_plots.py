@@ -14,16 +14,18 @@ judged on the samples since the cue (:attr:`study_app.models.session.SessionMode
 from __future__ import annotations
 
 import html
+import math
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QSize, Qt
+from PySide6.QtGui import QResizeEvent
 from PySide6.QtWidgets import QComboBox, QGraphicsRectItem, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import SessionModel
 
-__all__ = ["LOWER_CHOICES", "QtForcePlots"]
+__all__ = ["LOWER_CHOICES", "LOWER_PLOT_MIN_PX", "UPPER_PLOT_MIN_PX", "QtForcePlots"]
 
 # Cosmetic 1-px pens: wider ones are stroked as polygons by Qt's raster engine, ~3x the cost per frame.
 RAW_COLOUR, RENDER_COLOUR, TASK_COLOUR = "#dc2828", "#14a03c", "#1f4e9c"
@@ -60,6 +62,12 @@ def _swatch(colour: str, text: str, *, block: bool = False) -> str:
     return f"{mark}&nbsp;{html.escape(text)}"
 
 
+#: The least height of each plot's data area, px: the splitter above the trial table never squashes a plot past
+#: reading (its axis title would run into the other plot's, or be cut: "raw |F| (N)" takes 75 px).
+UPPER_PLOT_MIN_PX = 100
+LOWER_PLOT_MIN_PX = 80
+
+
 class QtForcePlots(QWidget):
     """The live force view, built for the task: is the force in the band?
 
@@ -77,6 +85,7 @@ class QtForcePlots(QWidget):
         self.plots, self.session = plots, session
         self.legend = QLabel()
         self.legend.setWordWrap(True)
+        self._legend_height = -1  # as last wrapped (minimumSizeHint)
         #: A rig of several arms: each other arm's force curve in the upper plot (name → curve).
         self.arm_curves: dict[str, pg.PlotDataItem] = {}
         self._arms_shown: tuple[str, ...] | None = None
@@ -114,6 +123,7 @@ class QtForcePlots(QWidget):
         self.lower_plot.setXLink(self.task)
         self.view.ci.layout.setRowStretchFactor(0, 3)
         self.view.ci.layout.setRowStretchFactor(1, 1)
+        self.task.getViewBox().setMinimumHeight(UPPER_PLOT_MIN_PX)
         self.lower_curves: dict[str, pg.PlotDataItem] = {}
         # No grid and no auto-range: a translucent grid over the whole view and axes re-rendered every frame
         # made each refresh cost 40-60 ms on a loaded 2-core machine (bench gui); the y ranges come from the
@@ -134,6 +144,24 @@ class QtForcePlots(QWidget):
         self.lower_choice.currentTextChanged.connect(self._set_lower)
         self._set_arms()
         self._set_lower(self.lower_choice.currentText())
+
+    def minimumSizeHint(self) -> QSize:  # Qt's name
+        """The layout's least size with the legend as tall as it wraps at its width: the layout counts a wrapped
+        label as one line, so a splitter dragged to the top ran the plots' time axis past this widget's bottom."""
+        hint = super().minimumSizeHint()
+        wrapped = self.legend.heightForWidth(self.legend.width()) if self.legend.width() > 0 else -1
+        return QSize(hint.width(), hint.height() + max(0, wrapped - self.legend.minimumSizeHint().height()))
+
+    def resizeEvent(self, event: QResizeEvent) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._legend_wrapped()
+
+    def _legend_wrapped(self) -> None:
+        """Tell the layouts above when the legend's wrapped height changed (a new width or new words)."""
+        height = self.legend.heightForWidth(self.legend.width())
+        if height != self._legend_height:
+            self._legend_height = height
+            self.updateGeometry()
 
     def legend_entries(self) -> list[str]:
         """The upper plot's legend, in words; on a rig of several arms a second line names each arm's curve, the one
@@ -162,6 +190,7 @@ class QtForcePlots(QWidget):
             marks = [TASK_COLOUR, *(colours.get(n, "#555") for n in names)]
             text += "<br>each arm's |F|: " + "  ".join(_swatch(c, w) for c, w in zip(marks, words[4:], strict=True))
         self.legend.setText(text)
+        self._legend_wrapped()
 
     @property
     def lower_series(self) -> tuple[str, ...]:
@@ -185,6 +214,10 @@ class QtForcePlots(QWidget):
                             size="9pt")
         self.task.setLabel("bottom", "" if names else "time (s)")
         self.task.getAxis("bottom").setStyle(showValues=not names)  # the time axis is read on the lower plot
+        self.lower_plot.getViewBox().setMinimumHeight(LOWER_PLOT_MIN_PX if names else 0)
+        # the widget asks for what its plots need now (the data areas with their titles and axes), so no splitter
+        # or layout gives it less
+        self.view.setMinimumHeight(math.ceil(self.view.ci.effectiveSizeHint(Qt.SizeHint.MinimumSize).height()))
         self._y.pop("lower", None)
         self.refresh()
 

@@ -6,7 +6,6 @@ from collections.abc import Callable
 
 from PySide6.QtWidgets import QGroupBox, QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
-from study_app.gui.widgets import ElidedLabel
 from study_app.models.commissioning import JawModel
 
 __all__ = ["QtJawBox"]
@@ -35,8 +34,10 @@ class QtJawBox(QGroupBox):
             self.buttons[action] = b
         self.label = QLabel()
         self.label.setWordWrap(True)  # (a fault's text may take two lines)
-        # the last command on one line: the left column has no height to spare on a 768-px screen
-        self.last = ElidedLabel()
+        # the last command, all of it: wrapped (an elided "last: step_close: 1 mm tow…" said nothing); the left
+        # column scrolls on a short screen rather than cut a line
+        self.last = QLabel()
+        self.last.setWordWrap(True)
         lay.addLayout(row)
         lay.addWidget(self.label)
         lay.addWidget(self.last)
@@ -48,7 +49,7 @@ class QtJawBox(QGroupBox):
         jaw = self.jaw
         self.setVisible(jaw.available)
         self.label.setText(jaw.text())
-        self.last.set_full_text(f"last: {jaw.log[-1]}" if jaw.log else "")
+        self.last.setText(f"last: {jaw.log[-1]}" if jaw.log else "")
         self.last.setVisible(bool(jaw.log))
         fault = jaw.state is not None and bool(jaw.state.fault)
         self.label.setStyleSheet("color: #c81e1e; font-weight: 600;" if fault else "color: #333;")

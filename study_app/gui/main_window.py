@@ -7,12 +7,16 @@ import os
 from PySide6.QtCore import QSettings, QSize, Qt, Slot
 from PySide6.QtGui import QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (
+    QAbstractSpinBox,
     QApplication,
     QFrame,
+    QLineEdit,
     QMainWindow,
+    QPlainTextEdit,
     QScrollArea,
     QSplitter,
     QTabWidget,
+    QTextEdit,
     QVBoxLayout,
     QWidget,
 )
@@ -32,7 +36,7 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.session_actions import SessionActions
 from study_app.gui.session_views import QtCueWait, QtProgress, QtTrialTable
-from study_app.gui.setup_panel import QtSetupPanel
+from study_app.gui.setup_panel import SPACE_IN_A_FIELD, QtSetupPanel
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import ElidedLabel
 from study_app.models.app import AppModel
@@ -48,6 +52,8 @@ PARTICIPANT_SIZE = QSize(900, 560)
 #: The participant screen beside this window on a one-monitor machine (a rehearsal): small enough to leave room.
 PARTICIPANT_BESIDE_SIZE = QSize(640, 400)
 RIG_SIZE = QSize(760, 480)
+#: The least the plot/table splitter leaves the trial table's tabs, px (the plots ask for their own least).
+TABLE_MIN_HEIGHT = 120
 WIZARD_SIZE = QSize(720, 640)
 
 
@@ -85,6 +91,7 @@ class ExperimenterWindow(QMainWindow):
         split.addWidget(left)
         split.addWidget(right)
         split.setStretchFactor(1, 1)
+        split.setChildrenCollapsible(False)  # neither the controls nor the plots can be dragged away to nothing
         self.setCentralWidget(split)
         self.status = ElidedLabel()
         self.statusBar().addWidget(self.status, 1)
@@ -97,6 +104,7 @@ class ExperimenterWindow(QMainWindow):
         self._on_session_changed()
         if not placement.restore(self, self.settings, "experimenter"):
             placement.place(self, MAIN_SIZE, QGuiApplication.primaryScreen())
+            placement.leave_room_beside(self, PARTICIPANT_BESIDE_SIZE)  # one monitor: the participant screen's room
         self.bridge.start()
         self.plot_timer.start()
 
@@ -166,6 +174,10 @@ class ExperimenterWindow(QMainWindow):
         tl.addWidget(self.plots, 1)
         right.addWidget(top)
         right.addWidget(self.tabs)
+        # the splitter's handle never squashes the plots (or the table) to nothing: each keeps room to be read (the
+        # plots: what their layout asks for, each plot's data area readable -- QtForcePlots)
+        right.setChildrenCollapsible(False)
+        self.tabs.setMinimumHeight(TABLE_MIN_HEIGHT)
         right.setSizes([520, 220])
         right.setStretchFactor(0, 3)  # a taller window gives the plots the room
         right.setStretchFactor(1, 1)
@@ -183,6 +195,13 @@ class ExperimenterWindow(QMainWindow):
             on_frames=steps.check_frames, on_arm=steps.select_arm,
         )
         self.calibration_wizard.hidden.connect(lambda: self.model.notices.clear(CALIBRATION_COMMANDS))
+        # no trial is cued to a participant screen nobody sees: the engine hears each change, a start opens it
+        self.participant_window.seen_changed.connect(self.model.screen.shown)
+        self.model.screen.opener = self.open_participant_screen
+        app = QGuiApplication.instance()
+        if isinstance(app, QGuiApplication):  # a monitor unplugged or added: is the participant screen still seen?
+            app.screenAdded.connect(lambda _s: self.participant_window.report_soon())
+            app.screenRemoved.connect(lambda _s: self.participant_window.report_soon())
         self.menus = WindowMenus(self)
         self.view_actions = self.menus.windows
 
@@ -210,7 +229,7 @@ class ExperimenterWindow(QMainWindow):
         self.setup_panel.resume_button.clicked.connect(act.resume_selected)
         self.setup_panel.db.editingFinished.connect(self.model.control.list_sessions)
         # application-wide: the experimenter may have the rig view or the participant screen focused
-        for key, slot in ((Qt.Key.Key_Space, act.start_session), (Qt.Key.Key_Escape, act.abort_trial)):
+        for key, slot in ((Qt.Key.Key_Space, self._on_space), (Qt.Key.Key_Escape, act.abort_trial)):
             sc = QShortcut(QKeySequence(key), self)
             sc.setContext(Qt.ShortcutContext.ApplicationShortcut)
             sc.activated.connect(slot)
@@ -243,6 +262,20 @@ class ExperimenterWindow(QMainWindow):
         if real:
             self.rig_window.hide()
 
+    def _on_space(self) -> None:
+        """Space: Start (or Resume) -- but not from a text field.  An editable field takes its Space as a character
+        (the setup form's code, number and seed refuse it, saying how to start); a read-only one (the study's seed
+        once fixed, the fault log, a calibration result) would pass it on to this shortcut, and a Space meant for the
+        field would start a session: it is refused with the same line."""
+        focus = QApplication.focusWidget()
+        if isinstance(focus, (QLineEdit, QAbstractSpinBox, QPlainTextEdit, QTextEdit)):
+            if self.setup_panel.isAncestorOf(focus):
+                self.setup_panel.refuse_space()
+            else:
+                self.model.notices.notify("info", SPACE_IN_A_FIELD)
+            return
+        self.session_actions.start_session()
+
     def _on_plot_timer(self) -> None:
         if self.model.tick():  # nothing new (engine paused or gone): nothing to redraw
             self.plots.refresh()
@@ -258,8 +291,19 @@ class ExperimenterWindow(QMainWindow):
             return active  # one monitor: the experimenter sees the participant view too
         return self
 
-    def open_window(self, w: QWidget) -> None:
-        """Show one of the extra windows: where it was last, else at a size that fits, on the right screen."""
+    def open_participant_screen(self) -> str:
+        """Open the participant screen where it was (first: beside this window, or on its own monitor), brought
+        onto a monitor and out of its minimised state; returns how the participant still cannot see it ("")."""
+        w, before = self.participant_window, QApplication.activeWindow()
+        self.open_window(w, activate=False)
+        if before is not None and before is not w and QApplication.activeWindow() is not before:
+            before.activateWindow()  # the experimenter's keys stay where they were (a platform may have moved them)
+        w.report()  # at once: the engine hears it is open before the start that follows
+        return w.unseen()
+
+    def open_window(self, w: QWidget, activate: bool = True) -> None:
+        """Show one of the extra windows: where it was last (brought onto a monitor if it is off every one), else at
+        a size that fits, on the right screen; in front, and with the keyboard if ``activate``."""
         if not w.property("placed"):
             w.setProperty("placed", True)
             key, size = {id(self.participant_window): ("participant", PARTICIPANT_SIZE),
@@ -272,10 +316,11 @@ class ExperimenterWindow(QMainWindow):
                 elif w is self.participant_window:  # one monitor: beside this window, never over its controls
                     placement.place_beside(w, self, self.left_column, PARTICIPANT_BESIDE_SIZE)
                 else:
-                    placement.place(w, size, self.screen())
+                    placement.place_over(w, size, self)  # over this window, not the participant screen beside
         if w is self.participant_window:
             placement.keep_above(w, self)
-        _show(w)
+        _show(w, activate)
+        placement.onto_a_screen(w)
 
     # -- views of state ------------------------------------------------------------------------------------
     def _on_actions_changed(self) -> None:
@@ -367,6 +412,8 @@ class ExperimenterWindow(QMainWindow):
         if self._shut_down:
             return
         self._shut_down = True
+        self.model.screen.opener = None
+        self.participant_window.seen_changed.disconnect(self.model.screen.shown)  # closing it is no news to the engine
         self.plot_timer.stop()
         self.model.plots.detach()
         self.bridge.shutdown()
@@ -384,7 +431,13 @@ class ExperimenterWindow(QMainWindow):
         event.accept()
 
 
-def _show(w: QWidget) -> None:
+def _show(w: QWidget, activate: bool = True) -> None:
+    """Show ``w`` in front -- also out of its minimised state (``show`` alone leaves a minimised window an icon),
+    keeping full screen or maximised as it was -- with the keyboard if ``activate``."""
+    if w.isMinimized():
+        w.setWindowState(w.windowState() & ~Qt.WindowState.WindowMinimized)
+    w.setAttribute(Qt.WidgetAttribute.WA_ShowWithoutActivating, not activate)
     w.show()
     w.raise_()
-    w.activateWindow()
+    if activate:
+        w.activateWindow()

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from PySide6.QtCore import QRectF, Qt
+from PySide6.QtCore import QEvent, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
 from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
 
+from study_app.gui.placement import centre_on_a_screen
 from study_app.models.participant import ParticipantScreen, ParticipantScreenModel
 
 __all__ = ["ForceGauge", "ParticipantWindow"]
@@ -59,7 +60,14 @@ class ParticipantWindow(QWidget):
 
     The window keeps the size the experimenter gives it: its text never asks for more room (the labels
     ignore their text's width), and the cue word is scaled to the window instead.
+
+    ``seen_changed`` says whether the participant can see it -- shown, not minimised, its middle on a monitor --
+    each time that changes (:meth:`unseen` says how it is not): no trial is cued to a screen nobody sees
+    (:class:`study_app.models.screen_guard.ScreenGuard`).
     """
+
+    #: (seen, how it is not: "closed", "minimised" or "off every monitor"; "" when seen).
+    seen_changed = Signal(bool, str)
 
     def __init__(self, model: ParticipantScreenModel, parent: QWidget | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
@@ -88,6 +96,46 @@ class ParticipantWindow(QWidget):
         QShortcut(QKeySequence(Qt.Key.Key_F11), self).activated.connect(self.toggle_fullscreen)
         model.changed.connect(self._on_changed)
         self._on_changed()
+        self._reported: str | None = None  # what was last said (None: nothing yet)
+
+    # -- whether the participant sees it ---------------------------------------------------------------
+    def unseen(self) -> str:
+        """How the participant cannot see this window now: closed, minimised, off every monitor ("" when they can)."""
+        if not self.isVisible():
+            return "closed"
+        if self.isMinimized():
+            return "minimised"
+        if not centre_on_a_screen(self):
+            return "off every monitor"
+        return ""
+
+    def report(self) -> None:
+        """Say whether it is seen, if that changed since it was last said (at once: before a start is sent)."""
+        why = self.unseen()
+        if why != self._reported:
+            self._reported = why
+            self.seen_changed.emit(not why, why)
+
+    def report_soon(self) -> None:
+        """:meth:`report` once the event loop has settled (a change of window flags hides and shows it again)."""
+        QTimer.singleShot(0, self, self.report)
+
+    def showEvent(self, event) -> None:  # Qt's name
+        super().showEvent(event)
+        self.report_soon()
+
+    def hideEvent(self, event) -> None:  # Qt's name
+        super().hideEvent(event)
+        self.report_soon()
+
+    def moveEvent(self, event) -> None:  # Qt's name
+        super().moveEvent(event)
+        self.report_soon()
+
+    def changeEvent(self, event) -> None:  # Qt's name
+        super().changeEvent(event)
+        if event.type() == QEvent.Type.WindowStateChange:
+            self.report_soon()
 
     def headline_size_px(self, width: int, height: int) -> int:
         """The cue word's size for a window of this size: the longest word fits 85 % of the width, and the word

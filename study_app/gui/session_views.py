@@ -56,7 +56,8 @@ class QtTrialTable(QTableWidget):
         row = self.table.rows[i]
         self.insertRow(i)
         colour = _OUTCOME_COLOURS.get(str(row.outcome))
-        for j, text in enumerate(TrialTable.cells(row)):
+        designed = None if row.repeat_of is None else self.table.designed_of(row.repeat_of)
+        for j, text in enumerate(TrialTable.cells(row, designed)):
             item = QTableWidgetItem(text)
             item.setToolTip(text)  # an abort's reason may be longer than its column
             if j != 3:
@@ -109,6 +110,19 @@ class QtCueWait(QWidget):
         self.help.setVisible(bool(w.help))
         self.button.setText(self._actions.get(w.action, ""))
         self.button.setVisible(bool(w.action))
+        self._fit()
+
+    def resizeEvent(self, event) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._fit()
+
+    def _fit(self) -> None:
+        """Each wrapped line as tall as its text at its width: a nested layout sized a long reason for a wider
+        label and cut its last line ("… check the machine's load and the" without "devices, then Resume")."""
+        for label in (self.label, self.help):
+            height = label.heightForWidth(label.width()) if label.isVisibleTo(self) and label.width() > 0 else 0
+            if height != label.minimumHeight():
+                label.setMinimumHeight(max(0, height))
 
 
 class QtProgress(QWidget):

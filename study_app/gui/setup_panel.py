@@ -23,10 +23,12 @@ from PySide6.QtWidgets import (
 from study_app.gui.widgets import LEVEL_COLOURS
 from study_app.models.setup import KINDS, SetupModel, breakable
 
-__all__ = ["SPACE_WHILE_TYPING", "QtSetupPanel"]
+__all__ = ["SPACE_IN_A_FIELD", "SPACE_WHILE_TYPING", "QtSetupPanel"]
 
 #: The line a Space typed into a setup field shows instead of starting (or becoming part of the code).
 SPACE_WHILE_TYPING = "A code or number has no spaces: press Enter to start (Space starts once you leave the field)."
+#: The line a Space pressed in another text field (read-only: a log, a result) shows instead of starting.
+SPACE_IN_A_FIELD = "Space in a text field does not start: click outside the field (or press Start) to start."
 
 
 class QtSetupPanel(QGroupBox):
@@ -188,10 +190,15 @@ class QtSetupPanel(QGroupBox):
             self.start_requested.emit()
             return True
         if key == Qt.Key.Key_Space:  # typing: not part of a code or a number, and not Start either
-            self.hint.setText(SPACE_WHILE_TYPING)
-            self.hint.setVisible(True)
+            self.refuse_space()
             return True
         return super().eventFilter(obj, event)
+
+    def refuse_space(self) -> None:
+        """A Space typed into a field of the form (the seed too, read-only once the study has one) neither becomes
+        part of it nor starts: the line under the form says how to start."""
+        self.hint.setText(SPACE_WHILE_TYPING)
+        self.hint.setVisible(True)
 
     def _check_entry(self, name: str, spin: QSpinBox) -> None:
         """Tell the form when a number field's text is no value it takes (Qt would keep the last one that was)."""

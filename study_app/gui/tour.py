@@ -26,6 +26,7 @@ from PySide6.QtWidgets import QApplication, QMenu, QMessageBox, QWidget
 from protocol.study.clock import SessionClock
 from protocol.study.design import HapticMode
 from protocol.study.records import AbortCause, Outcome, TrialRecord
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.gui.timers import tracked_timer
 
@@ -212,7 +213,8 @@ class ScreenshotTour:
     def _busy_machine(self) -> None:
         """The health panel's notice when the loop's falling behind cost trials (see the module docstring)."""
         w, model = self.win, self.win.model
-        session = m.SessionStarted(99, self.code + "C", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False, seed=0)
+        session = m.SessionStarted(99, self.code + "C", "experiment", 20, 0, ForceRegulation(), 12.0, 2.0, 1.0, False,
+                                   seed=0)
         model.health.apply(session)
         model.health.apply(m.Health(998.0, 1000.0, 2800.0, 1900.0, 41, 12, 60_000, 0, False, "autopilot", True,
                                     False, scheduling="normal (Operation not permitted)"))
@@ -226,7 +228,7 @@ class ScreenshotTour:
             model.health.apply(m.TrialEnded(k * 15.0, record, 23))
         w.tabs.setCurrentWidget(w.health_panel)
         self._save(w, "busy-machine")
-        model.health.apply(m.SessionStarted(100, "RESET", "training", 1, 0, 0.1, 12.0, 2.0, 1.0, False))
+        model.health.apply(m.SessionStarted(100, "RESET", "training", 1, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
         model.health.apply(m.Health(1000.0, 1000.0, 1003.0, 3.0, 0, 0, 60_000, 0, False, "autopilot", False, False))
         w.tabs.setCurrentWidget(w.trials_tab)
 

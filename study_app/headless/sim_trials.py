@@ -3,9 +3,9 @@
 :func:`run_participant` builds the simulated rig on the virtual clock with the
 given pipeline configuration, hands the stylus to a
 :class:`pipeline.sim.participant.SimulatedParticipant` and walks the protocol's
-experiment schedule through the real :class:`protocol.study.trial.TrialMachine`, so
-success, TCT, RMSE and Max AE come from the one definition in
-:mod:`protocol.study.metrics`.  Nothing is stored: it is ``haptic-study run``'s
+experiment schedule through the real :class:`protocol.study.trial.TrialMachine` over the protocol's task
+(:mod:`protocol.tasks`), so success, TCT, RMSE and Max AE come from the one definition, and the participant aims at
+what the task says.  Nothing is stored: it is ``haptic-study run``'s
 experiment session less the recording, training and resumption, about 2 s of
 wall clock per participant.
 
@@ -66,7 +66,8 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
     p = SimulatedParticipant(seed=p_seed, tissue=eng.rig.config.tissue, arm=eng.rig.config.arm,
                              motion_scale=eng.rig.config.motion_scale)
     eng.rig.set_driver(p)
-    machine = TrialMachine(proto.trial)
+    task = proto.task
+    machine = TrialMachine(proto.trial, task)
     loop.submit(SetHaptics(False))
     loop.run_ticks(200)  # settle on the start pose
     cursor = ring.write_count
@@ -77,7 +78,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
         loop.submit(AllowBiasRefinement(False))
         loop.submit(SetHaptics(on))
         loop.submit(Mark(spec.index, _PHASE_ACTIVE))
-        p.begin_trial(spec.target_force_n, on, eng.rig.sim_time_s)
+        p.begin_trial(task.aim(spec, aid=False), eng.rig.sim_time_s)
         idle = False
         while not idle:
             loop.run_ticks(_BLOCK_TICKS)

@@ -31,6 +31,7 @@ from study_app.models.plots import PlotModel
 from study_app.models.real_calibration import RealCalibrationModel
 from study_app.models.rig import RigViewModel
 from study_app.models.rig_control import RigControl
+from study_app.models.screen_guard import ScreenGuard
 from study_app.models.session import SessionModel
 from study_app.models.session_control import SessionControl
 from study_app.models.setup import SetupModel
@@ -68,14 +69,16 @@ class AppModel:
         self.engine = EngineModel(self.commands, self.session, self.setup, self.health, self.plots, self.notices)
         self.actions = Actions(self.session, self.setup, self.calibration, self.real_calibration, self.commissioning,
                                self.engine)
+        self.screen = ScreenGuard(self.commands, self.session, self.notices)
         self.control = SessionControl(self.commands, self.setup, self.session, self.commissioning, self.engine,
-                                      self.actions, self.notices)
+                                      self.actions, self.notices, self.screen)
         self.steps = CalibrationSteps(self.commands, self.calibration, self.real_calibration, self.commissioning,
                                       self.actions, self.notices)
         self.rig_control = RigControl(self.commands, self.rig, self.jaw, self.session, self.engine, self.notices)
         self.cue = CueWaitModel(self.session, self.health, self.engine, {
             "reset_faults": self.control.reset_faults, "resume": self.control.resume,
-            "restart_engine": self.engine.restart})
+            "restart_engine": self.engine.restart}, screen=self.screen)
+        self.screen.changed.connect(self.cue.refresh)
         self.engine.restarted.connect(self.cue.refresh)
         # the form changed: a refusal of Start was about what it said before
         self.setup.changed.connect(lambda: self.notices.clear(("StartSession",)))
@@ -86,7 +89,7 @@ class AppModel:
         was_stalled = self.engine.loop_stalled
         self.engine.watch(ev)
         for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
-                     self.commissioning, self.jaw):
+                     self.commissioning, self.jaw, self.screen):
             part.apply(ev)
         self.notices.apply(ev)
         self.control.apply(ev)

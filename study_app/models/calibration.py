@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 from study_app.engine import messages as m
 from study_app.models import Emitter
 
-__all__ = ["CalibrationModel"]
+__all__ = ["CalibrationModel", "pose_name"]
 
 _DESCRIPTIONS = {
     "recommended": "24 poses tilted up to 60° in every direction, so gravity turns in the sensor frame and the "
@@ -112,6 +113,12 @@ class CalibrationModel:
             out.append(("Payload mass", f"{float(cal['mass_kg']):.4f} kg"))
             out.append(("Model", str(cal["model"])))
         return out
+
+
+def pose_name(label: str) -> str:
+    """A calibration pose as people call it: ``pose 7`` (a pose set's ``P07`` reads like a participant's code)."""
+    hit = re.fullmatch(r"P(\d+)", label)
+    return f"pose {int(hit.group(1))}" if hit else label
 
 
 def _fmt(v: float, f: str) -> str:

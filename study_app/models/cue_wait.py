@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from study_app.models import Emitter
 from study_app.models.engine import EngineModel
 from study_app.models.health import HealthModel
+from study_app.models.screen_guard import ScreenGuard
 from study_app.models.session import SessionModel
 
 __all__ = ["CUE_ACTIONS", "CUE_STUCK_S", "CueWait", "CueWaitModel", "cue_wait_now", "headline"]
@@ -45,8 +46,9 @@ CUE_ACTIONS = {"reset_faults": "Reset faults", "resume": "Resume", "restart_engi
 
 
 def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str,
-                 interrupted: int | None) -> tuple[str, CueWait | None]:
-    """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble."""
+                 interrupted: int | None, screen_closed: str = "") -> tuple[str, CueWait | None]:
+    """(kind of wait, the wait without its duration) from the session, the engine's Health and the trouble;
+    ``screen_closed`` says why the session paused for the participant screen ("" when it did not)."""
     s = session
     if engine_trouble:
         if interrupted is None and not s.running:  # no session was cut short: there is no cue to wait for
@@ -58,6 +60,10 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
     h = health.loop
     waiting = h.waiting if h is not None and h.session_running else ""
     if s.state == "paused":
+        if screen_closed:  # the engine paused the session: no cue goes to a screen nobody sees
+            return "paused-screen", CueWait("error", f"{screen_closed}; the session paused", action="resume",
+                                            help="Resume (Space) opens the participant screen and continues with "
+                                                 "the next trial.")
         if waiting and waiting != "pause" and "paused" in waiting:  # the runner paused itself, and says why
             return "paused-runner", CueWait("error", waiting, action="resume",
                                             help="Resume (Space) once the cause is dealt with; Devices & health "
@@ -103,13 +109,16 @@ class CueWaitModel:
     ----------
     session, health, engine
         What the wait is read from (:func:`cue_wait_now`).
+    screen
+        The participant screen (a session paused because it closed says so).
     actions
         What ends each wait, by its action's name (:data:`CUE_ACTIONS`).
     """
 
     def __init__(self, session: SessionModel, health: HealthModel, engine: EngineModel,
-                 actions: Mapping[str, Callable[[], object]]) -> None:
+                 actions: Mapping[str, Callable[[], object]], screen: ScreenGuard | None = None) -> None:
         self.session = session
+        self.screen = screen
         self.health = health
         self.engine = engine
         self.actions = actions
@@ -120,7 +129,8 @@ class CueWaitModel:
 
     def refresh(self) -> None:
         """Read the wait afresh: its kind, how long it has lasted, and -- stuck -- where to look."""
-        key, wait = cue_wait_now(self.session, self.health, self.engine.trouble, self.engine.interrupted)
+        key, wait = cue_wait_now(self.session, self.health, self.engine.trouble, self.engine.interrupted,
+                                 self.screen.closed_in_session if self.screen is not None else "")
         if key != self._key:
             s = self.session
             since = s.latest_t_s

@@ -141,6 +141,8 @@ class HealthModel:
     #: The newest records not yet measured for the device rates, and the sample time they span, s.
     _rate_rows: list[np.ndarray] = field(default_factory=list, repr=False)
     _rate_span_s: float = 0.0
+    #: The running session's id (None between sessions): the fault log names it.
+    _session: int | None = field(default=None, repr=False)
 
     @property
     def fault_log(self) -> list[str]:
@@ -162,9 +164,18 @@ class HealthModel:
         elif isinstance(ev, m.CalibrationStatus):
             self.uncompensated = ev.rig == "real" and not any(done for name, done, _ in ev.steps if name == "payload")
         elif isinstance(ev, m.EngineStopped):
-            self.connected = False
+            self._session = None
+            # what the dead engine measured and latched goes with it: no 1000 Hz, no 0.0 ms sample age, no "next cue
+            # waits … Resume" beside "disconnected" (the fault log keeps what happened)
+            self.connected, self.loop, self.faults = False, None, 0
         elif isinstance(ev, m.SessionStarted):
             self.busy_trials = [r.trial_index + 1 for r in ev.stored_trials if lost_to_the_machine(r)]
+            self._session = ev.session_id  # the log's lines name it: earlier sessions' lines stay told apart
+            began = "resumed" if ev.stored_trials else "started"
+            self._log_line(f"— session {ev.session_id} ({ev.code} {ev.kind}) {began} —")
+        elif isinstance(ev, m.SessionEnded):
+            self._session = None
+            return
         elif isinstance(ev, m.TrialEnded):
             if not lost_to_the_machine(ev.record):
                 return
@@ -200,8 +211,13 @@ class HealthModel:
         Only the view coalesces: the engine stores every event in the database.
         """
         verb = _VERBS.get(ev.kind, ev.kind)
-        # the session's clock when a session runs: the time the database stores the event at
-        when = f"session {ev.session_t_s:8.3f} s" if math.isfinite(ev.session_t_s) else f"t = {ev.t_s:8.3f} s"
+        # one way of saying when: in a session, which one and its clock (the time the database stores the event at);
+        # else the engine's clock, said to be that
+        if math.isfinite(ev.session_t_s):
+            which = f"session {self._session}" if self._session is not None else "session clock"
+            when = f"{which}, {ev.session_t_s:.3f} s"
+        else:
+            when = f"no session, engine clock {ev.t_s:.3f} s"
         # an aborted trial's reason names its cause already ("gap: no loop record …"): say it once
         detail = ev.detail.removeprefix(f"{verb}: ")
         key = (verb, _NUMBER.sub("#", detail))
@@ -217,9 +233,14 @@ class HealthModel:
         self.connected, self.loop, self.faults, self.devices = False, None, 0, []
         self.busy_trials = []
         self._rate_rows, self._rate_span_s = [], 0.0
-        self._log_runs.append(_LogRun(("engine restarted", ""), "", "", ""))
-        del self._log_runs[:-_LOG_LINES]
+        self._session = None
+        self._log_line("— engine restarted —")
         self.changed.emit()
+
+    def _log_line(self, text: str) -> None:
+        """A line of the fault log that is no event (a session began, the engine restarted)."""
+        self._log_runs.append(_LogRun((text, ""), "", "", ""))
+        del self._log_runs[:-_LOG_LINES]
 
     def add_rows(self, rows: np.ndarray) -> None:
         """The newest records: the device rates are measured over every ``RATE_WINDOW_S`` of them."""
@@ -255,7 +276,10 @@ class HealthModel:
             if d.name == "Jaw actuator":
                 continue
             bits = Fault(self.faults & _DEVICE_FAULTS.get(d.name, 0))
-            state = "disconnected" if not self.connected else ("FAULT: " + bits.describe() if bits else "ok")
+            if not self.connected:  # no figures of a device nobody reads
+                out.append(DeviceStatus(d.name, "disconnected", math.nan, math.nan))
+                continue
+            state = "FAULT: " + bits.describe() if bits else "ok"
             if state == "ok" and d.name == "Haptic device" and self.derating():
                 state = f"ok, derating: at most {self.loop.haptic_force_limit_n:.2f} N"  # type: ignore[union-attr]  # derating() is True only with a loop
             out.append(DeviceStatus(d.name, state, d.rate_hz, d.age_ms))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from protocol.tasks.base import Task
 from study_app.engine import messages as m
 from study_app.models import Emitter
 
@@ -37,7 +38,7 @@ class ParticipantScreenModel:
     kind: str = ""
     live_aid: bool = False
     cue_s: float = 1.0
-    tolerance: float = 0.1
+    task: Task | None = None  # the session's (what a trial shows is its task's)
     trial: m.TrialStarted | None = None
     phase: str = "idle"
     ended: bool = False
@@ -55,7 +56,7 @@ class ParticipantScreenModel:
         """Update from an engine event."""
         if isinstance(ev, m.SessionStarted):
             self.kind, self.live_aid, self.cue_s = ev.kind, ev.live_force_aid, ev.cue_s
-            self.tolerance, self.trial, self.phase, self.ended = ev.tolerance_fraction, None, "idle", False
+            self.task, self.trial, self.phase, self.ended = ev.task, None, "idle", False
         elif isinstance(ev, m.TrialStarted):
             self.trial, self.phase = ev, "active"
         elif isinstance(ev, m.PhaseEntered):
@@ -84,12 +85,12 @@ class ParticipantScreenModel:
         tr = self.trial
         if self.phase == "pause":
             return ParticipantScreen("Rest", "Let go of the tissue. The next trial starts soon.", False, None, None)
-        if tr is None or self.phase not in ("active", "cued"):
+        if tr is None or self.task is None or self.phase not in ("active", "cued"):
             return ParticipantScreen("", "Please wait", False, None, None)
+        shown = self.task.screen(tr)  # the task's cue word and band
         if self.gauge_allowed:
-            f, tol = tr.target_force_n, self.tolerance
-            return ParticipantScreen(tr.target_label, f"Practice · haptics {tr.haptic_mode.upper()}", True,
-                                     self.force_n, (f * (1 - tol), f * (1 + tol)))
+            return ParticipantScreen(shown.cue_word, f"Practice · haptics {tr.haptic_mode.upper()}", True,
+                                     self.force_n, shown.band_n)
         if self.t_s - tr.t_s < self.cue_s:
-            return ParticipantScreen(tr.target_label, "", False, None, None)
+            return ParticipantScreen(shown.cue_word, "", False, None, None)
         return ParticipantScreen("", "", False, None, None)

@@ -80,7 +80,7 @@ class RealCalibrationModel:
             raise ValueError(f"pose set = {pose_set!r}: allowed values are {', '.join(REAL_POSE_SETS)}")
         self.pose_set = pose_set
         rots = recommended_pose_set(REAL_POSE_SETS[pose_set])
-        self.steps = [PoseStep(f"P{k + 1:02d}", r) for k, r in enumerate(rots)]
+        self.steps = [PoseStep(f"pose {k + 1}", r) for k, r in enumerate(rots)]  # never "P01": a participant's code
         self.index, self.state, self.message = 0, "at_pose", ""
         self.changed.emit()
 
@@ -167,8 +167,8 @@ class RealCalibrationModel:
                 return
             step.recorded = ev
             far = ev.off_target_deg > OFF_TARGET_WARN_DEG
-            self.message = (f"{ev.label} is {ev.off_target_deg:.0f}° from its target — kept (the fit uses the measured "
-                            "orientation), but the set may be less well spread" if far else "")
+            self.message = (f"{ev.label.capitalize()} is {ev.off_target_deg:.0f}° from its target — kept (the fit uses "
+                            "the measured orientation), but the set may be less well spread" if far else "")
             nxt = self._next_unrecorded(self.steps.index(step) + 1)
             self.state = "at_pose"
             if nxt is not None:
@@ -212,7 +212,7 @@ class RealCalibrationModel:
                     "again).")
         (rx, ry, rz), tilt = self.target_tcp(step)
         k = self.steps.index(step) + 1
-        head = f"Pose {step.label} ({k} of {len(self.steps)}): "
+        head = f"{step.label.capitalize()} ({k} of {len(self.steps)}): "
         if self.state == "recording":
             return head + f"recording {self.seconds:g} s — keep the robot still and the tool clear of everything"
         return (head + f"move the TCP to rotation vector ({rx:+.3f}, {ry:+.3f}, {rz:+.3f}) rad — sensor tilted "

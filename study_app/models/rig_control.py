@@ -102,18 +102,21 @@ class RigControl:
         running = self.session.running
         if ev.kind == "kill":
             return (f"Rehearsal: {what}, {when}. The engine process is killed as a crash would kill it: "
-                    + ("the session is left interrupted — its stored trials are kept, the trial under way is not "
-                       "stored and runs again on resume. " if running else "")
+                    + ("the session is left interrupted — its stored trials are kept, the trial under way is stored "
+                       "as aborted (interrupted) on resume and runs again; the record says the kill was rehearsed. "
+                       if running else "")
                     + "The window then offers Restart engine" + (", then Resume selected." if running else "."))
         if planned is not None:
             k = planned[0]
             return (f"Rehearsal planned: {what}, {when} (if trial {k} ends sooner, nothing is injected). It is a real "
-                    f"fault of the simulated rig in this session, stored with it like any fault — nothing in the "
-                    f"record marks it as rehearsed: trial {k} is stored as aborted (cause: fault), does not count, "
-                    "and is run again later. The fault latches: the next cue waits for Reset faults.")
-        stored = ("It is stored with the running session like any fault — nothing in the record marks it as "
-                  "rehearsed; a trial it hits is stored as aborted (cause: fault), does not count, and is run again "
-                  "later. " if running else "No session is running: nothing is stored. ")
+                    f"fault of the simulated rig in this session, stored with it like any fault, and the record says "
+                    f"it was rehearsed (a fault_rehearsal event, listed among the report's deviations): trial {k} is "
+                    "stored as aborted (cause: fault), does not count, and is run again later. The fault latches: "
+                    "the next cue waits for Reset faults.")
+        stored = ("It is stored with the running session like any fault, and the record says it was rehearsed (a "
+                  "fault_rehearsal event, listed among the report's deviations); a trial it hits is stored as aborted "
+                  "(cause: fault), does not count, and is run again later. " if running else
+                  "No session is running: nothing is stored. ")
         return (f"Rehearsal: {what}, now: a real fault of the simulated rig. {stored}The fault latches"
                 + (": the next cue waits for Reset faults." if running else " until Reset faults."))
 

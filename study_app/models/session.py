@@ -70,8 +70,9 @@ def time_left_text(seconds: float, *, bound: bool = False) -> str:
     """An estimate of the time left, rounded as people say it: ``about 40 s left``, ``about 4 min left``
     (``at most …`` when ``bound``: no trial has ended yet, so every trial is counted at its cap)."""
     word = "at most" if bound else "about"
-    if seconds < 60.0:
-        return f"{word} {max(10, 10 * math.ceil(seconds / 10.0)):.0f} s left"
+    if seconds < 60.0:  # a bound rounds up; an estimate to the nearest 10 s (12.3 s is "about 10 s", not 20)
+        tens = math.ceil(seconds / 10.0) if bound else math.floor(seconds / 10.0 + 0.5)
+        return f"{word} {max(10, 10 * tens):.0f} s left"
     return f"{word} {math.ceil(seconds / 60.0) if bound else max(1, round(seconds / 60.0)):d} min left"
 
 
@@ -93,14 +94,27 @@ class TrialTable:
         self.rows.clear()
         self.cleared.emit()
 
+    def designed_of(self, index: int) -> int:
+        """The designed trial an attempt is of: a re-run of a re-run (57 re-runs 48, which re-ran 12) is trial 12's,
+        followed back through the rows' ``repeat_of``."""
+        repeats = {r.trial_index: r.repeat_of for r in self.rows}
+        seen, earlier = {index}, repeats.get(index)
+        while earlier is not None and earlier not in seen:
+            index = earlier
+            seen.add(index)
+            earlier = repeats.get(index)
+        return index
+
     @staticmethod
-    def cells(row: TrialRecord) -> tuple[str, ...]:
-        """The displayed text of a row, in :data:`TRIAL_COLUMNS` order."""
+    def cells(row: TrialRecord, designed: int | None = None) -> tuple[str, ...]:
+        """The displayed text of a row, in :data:`TRIAL_COLUMNS` order (``designed``: the designed trial a re-run
+        repeats, :meth:`designed_of`; its ``repeat_of`` when not given)."""
         outcome = str(row.outcome)
         if row.abort_reason:
             outcome += f" ({row.abort_reason})"
+        of = row.repeat_of if designed is None else designed
         return (
-            str(row.trial_index + 1) + ("" if row.repeat_of is None else f" (re-run of {row.repeat_of + 1})"),
+            str(row.trial_index + 1) + ("" if of is None else f" (re-run of {of + 1})"),
             f"{row.target_label} {row.target_force_n:g} N",
             "haptics ON" if row.haptic_mode is HapticMode.ON else "haptics OFF",
             outcome,
@@ -260,9 +274,10 @@ class SessionModel:
         tr = self.trial
         if self.phase in ("active", "cued") and tr is not None:
             left = max(0.0, s.max_trial_s - (self.latest_t_s - tr.t_s))
-            again = "" if tr.repeat_of is None else f" (re-run of trial {tr.repeat_of + 1})"
+            again = "" if tr.repeat_of is None else f" (re-run of trial {self.table.designed_of(tr.repeat_of) + 1})"
+            # when it times out (its cap), not "s left": beside the session's estimate, two "left"s read as one
             return (f"Trial {tr.trial_index + 1}{again} · {tr.target_label} · haptics {tr.haptic_mode.upper()} · "
-                    f"{left:4.1f} s left{pending}")
+                    f"times out in {left:.1f} s{pending}")
         if self.phase == "pause" and self.pause_until_s is not None:
             left = max(0.0, self.pause_until_s - self.latest_t_s)
             return "Pausing before the next trial" if pending else f"Next trial in {left:3.1f} s"
@@ -283,7 +298,7 @@ class SessionModel:
         left = max(0, self.count.designed - self.count.done)
         head = f"Abort session {s.session_id} ({s.code}, {s.kind})?"
         if tr is not None:
-            again = "" if tr.repeat_of is None else f" (re-run of trial {tr.repeat_of + 1})"
+            again = "" if tr.repeat_of is None else f" (re-run of trial {self.table.designed_of(tr.repeat_of) + 1})"
             now = (f"Trial {tr.trial_index + 1}{again} ({tr.target_label}, haptics {tr.haptic_mode.upper()}) is "
                    "running: it is stored as aborted (unless it ends before you answer) and not run again.")
             rest = _not_run(left - 1, "other ")
@@ -310,9 +325,9 @@ class SessionModel:
         """(estimated seconds until the last designed trial is done, whether it is an upper bound), or None.
 
         Every designed trial not yet done takes one more attempt (a re-run left is one of them): the mean
-        length of the trials that ended so far (a success or a timeout: an aborted one was cut short) plus the
-        protocol's pause, or the trial cap before any ended (then it is an upper bound).  The running trial
-        counts what it has left of that.
+        length of the trials that ended so far (a success or a timeout: an aborted one was cut short), or the trial
+        cap before any ended (then it is an upper bound), with the protocol's pause between two of them (none after
+        the last).  The running trial counts what it has left of that.
         """
         s = self.session
         if s is None:
@@ -321,7 +336,7 @@ class SessionModel:
         remaining = max(0, c.designed - c.done)
         bound = not self._durations_s
         per = s.max_trial_s if bound else min(s.max_trial_s, sum(self._durations_s) / len(self._durations_s))
-        total = remaining * (per + s.pause_s)
+        total = remaining * per + max(0, remaining - 1) * s.pause_s  # no pause after the last trial
         if self.phase in ("active", "cued") and self.trial is not None and remaining:
             total -= min(per, max(0.0, self.latest_t_s - self.trial.t_s))
         return max(0.0, total), bound
@@ -335,24 +350,20 @@ class SessionModel:
         tr = self.last_trial
         if tr is None or self.session is None:
             return None
-        f, tol = tr.target_force_n, self.session.tolerance_fraction
-        return (f * (1 - tol), f * (1 + tol))
+        return self.session.task.screen(tr).band_n
 
     def band_label(self) -> str:
-        """The live plot's label of the band: ``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)`` ("" without a band)."""
-        band = self.band()
-        if band is None or self.trial is None or self.session is None:
+        """The live plot's words for the band, the task's (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``; "" without
+        a band)."""
+        if self.band() is None or self.trial is None or self.session is None:
             return ""
-        tol_pct = round(100 * self.session.tolerance_fraction, 1)
-        return (f"{self.trial.target_label}: target {self.trial.target_force_n:g} N ± {tol_pct:g} % "
-                f"({band[0]:.3g}–{band[1]:.3g} N)")
+        return self.session.task.screen(self.trial).band_label
 
     def band(self) -> tuple[float, float] | None:
-        """The current target band (N) while a trial is active, else None."""
+        """The current trial's band as its task draws it (N) while a trial is active, else None."""
         if self.trial is None or self.session is None or self.phase != "active":
             return None
-        f, tol = self.trial.target_force_n, self.session.tolerance_fraction
-        return (f * (1 - tol), f * (1 + tol))
+        return self.session.task.screen(self.trial).band_n
 
 
 def _not_run(n: int, other: str = "") -> str:

@@ -12,10 +12,24 @@ from study_app.models.arms import stored_arm_order, task_arm_first
 from study_app.models.commissioning import CommissioningModel
 from study_app.models.engine import EngineModel
 from study_app.models.notices import Commands, Notices
+from study_app.models.screen_guard import ScreenGuard
 from study_app.models.session import SessionModel
 from study_app.models.setup import SetupModel
 
-__all__ = ["SessionControl"]
+__all__ = ["REASON_MIN_CHARS", "SessionControl", "reason_refusal"]
+
+#: The shortest reason a start that deviates from the protocol (without training, without calibration) is given:
+#: a few words -- "x" tells whoever reads the report nothing.
+REASON_MIN_CHARS = 8
+
+
+def reason_refusal(reason: str) -> str:
+    """Why a deviation's reason is refused ("" when it is taken): it must say why in a few words."""
+    text = reason.strip()
+    if len(text) >= REASON_MIN_CHARS:
+        return ""
+    return (f"reason = {text!r}: say why in a few words (at least {REASON_MIN_CHARS} characters): it is stored with "
+            "the session and the study report lists it")
 
 
 class SessionControl:
@@ -35,10 +49,13 @@ class SessionControl:
         What may be done now.
     notices
         Where a start that cannot be sent says why.
+    screen
+        The participant screen: opened before every start and resume, which are refused while it cannot be seen.
     """
 
     def __init__(self, commands: Commands, setup: SetupModel, session: SessionModel,
-                 commissioning: CommissioningModel, engine: EngineModel, actions: Actions, notices: Notices) -> None:
+                 commissioning: CommissioningModel, engine: EngineModel, actions: Actions, notices: Notices,
+                 screen: ScreenGuard) -> None:
         self.commands = commands
         self.setup = setup
         self.session = session
@@ -46,6 +63,7 @@ class SessionControl:
         self.engine = engine
         self.actions = actions
         self.notices = notices
+        self.screen = screen
         #: The reason of a start without training, until the session it was given for has started.
         self._training_override = ""
 
@@ -79,12 +97,19 @@ class SessionControl:
         engine stores the reason as a ``deviation`` event (:mod:`protocol.runner.study_rules`).
         """
         can = self.actions.can
+        for given in (training_override, override_reason):
+            why = reason_refusal(given) if given.strip() else ""
+            if why:
+                self.notices.notify("error", f"Nothing was started: {why}.", "StartSession")
+                return False
         skip_training = bool(training_override.strip()) and can("start_without_training")
         if not (can("start") or skip_training):
             errors = self.setup.validate()
             if errors or self.setup.hint:
                 self.notices.notify("error", "Cannot start: " + " ".join(list(errors.values()) or [self.setup.hint]),
                                     "StartSession")
+            return False
+        if not self.screen.ready("Start", "StartSession"):  # no cue to a screen nobody sees
             return False
         cmd = self.setup.start_command(training_override if skip_training else "")
         if override_reason.strip():
@@ -95,7 +120,9 @@ class SessionControl:
                                                       cmd.protocol_path or ""))
 
     def resume_session(self, session_id: int) -> None:
-        """Continue an interrupted session."""
+        """Continue an interrupted session (the participant screen opened first)."""
+        if not self.screen.ready("Resume", "ResumeSession"):
+            return
         stored = next((r.get("arms", []) for r in self.setup.resumable if r["session_id"] == session_id), [])
         self._send_on_arms(m.ResumeSession(os.path.abspath(self.setup.values.db_path), int(session_id)),
                            stored_arm_order(self.commissioning.arms, self.engine.rig_kind, stored))
@@ -117,7 +144,9 @@ class SessionControl:
         self.session.changed.emit()
 
     def resume(self) -> None:
-        """Continue after a pause, or cancel a pending one."""
+        """Continue after a pause (the participant screen opened first), or cancel a pending one."""
+        if not self.screen.ready("Resume", "Resume"):
+            return
         self.session.paused_requested = False
         self.commands(m.Resume())
         self.session.changed.emit()

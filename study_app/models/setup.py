@@ -35,14 +35,14 @@ from protocol.runner.study_rules import (
     training_refusal,
     training_state,
 )
-from protocol.storage import StorageError, validate_code
+from protocol.storage import StorageError, clash_of, near_duplicate, normalise_code, validate_code
 from protocol.study.config import ProtocolConfig, ProtocolError, load_protocol
 from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.session import TrialCount
 
-__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable"]
+__all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable", "with_db_suffix"]
 
 KINDS = ("training", "experiment")
 _FIELD_NAMES = {"participant_number": "participant number", "seed": "seed"}
@@ -58,6 +58,15 @@ def breakable(text: str, run: int = 16) -> str:
     label wraps only between words, and a long pasted code in a message ran past the form's narrow column and
     pushed the lines above it out of view."""
     return re.sub(rf"\S{{{run}}}(?=\S)", lambda m: m.group(0) + "\u200b", text)
+
+
+def with_db_suffix(path: str) -> str:
+    """A new study database typed without a file type (``study``) is ``study.db``: a file no program knows what to
+    open with is no study record.  A file that exists (or a folder, refused later) keeps its name."""
+    text = path.strip()
+    if not text or os.path.exists(text) or os.path.splitext(text)[1] or text.endswith(os.sep):
+        return path
+    return text + ".db"
 
 
 def article(word: str) -> str:
@@ -114,9 +123,11 @@ class SetupModel:
     resumable_changed: Emitter = field(default_factory=Emitter)
 
     def update(self, **kwargs: object) -> None:
-        """Change fields and re-validate (codes are trimmed: a pasted ' P07 ' is P07)."""
+        """Change fields and re-validate (codes are normalised as storage stores them: a pasted ' P07 ' is P07)."""
         if isinstance(kwargs.get("code"), str):
-            kwargs["code"] = str(kwargs["code"]).strip()
+            kwargs["code"] = normalise_code(str(kwargs["code"]))
+        if isinstance(kwargs.get("db_path"), str):
+            kwargs["db_path"] = with_db_suffix(str(kwargs["db_path"]))
         if "participant_number" in kwargs:
             self.number_suggested = False
         if "kind" in kwargs:
@@ -223,6 +234,10 @@ class SetupModel:
 
     def _check_against_database(self, errors: dict[str, str], warnings: dict[str, str]) -> None:
         v = self.values
+        other = near_duplicate(v.code, [str(s["code"]) for s in self.known] + [w["code"] for w in self.withdrawn])
+        if other is not None:  # p01 beside P01: one participant as a person reads them (protocol.storage.codes)
+            errors["code"] = clash_of(v.code, other, "this study")
+            return
         gone = next((w for w in self.withdrawn if w["code"] == v.code), None)
         if gone is not None:
             errors["code"] = (f"{v.code} withdrew from the study ({gone['withdrawn_at'][:16].replace('T', ' ')} UTC) "

@@ -2,7 +2,7 @@
 
 Each trial's task force is piecewise constant at 1 kHz: ``(level_n, until_ms)``
 segments after the cue.  The stored summary is computed by the live definition
-(``protocol.study.metrics.trial_metrics``) exactly as the session runner stores it, so
+(``protocol.tasks.force_regulation.trial_metrics``) exactly as the session runner stores it, so
 analysis must reproduce it, and tests can compute every expectation by hand.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 from protocol.metrics import stored
 from protocol.storage import StudyDatabase, trial_id_of
 from protocol.study.config import default_protocol
-from protocol.study.metrics import trial_metrics
+from protocol.tasks.force_regulation import trial_metrics
 
 MS = 1_000_000
 

@@ -20,7 +20,7 @@ from cli_subprocess import tiny_protocol
 from analysis.stats.holm import holm
 from protocol.metrics import Role, get
 from protocol.study.config import protocol_from_dict
-from protocol.study.metrics import trial_metrics
+from protocol.tasks.force_regulation import trial_metrics
 from study_app.cli.main import main
 from study_app.headless import run_study
 

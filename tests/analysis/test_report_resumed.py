@@ -65,3 +65,29 @@ def test_sessions_csv_counts_each_sessions_runs(report: Path) -> None:
     assert runs == {"P01": 1, "P02": 2}
     with open(report / "codebook.csv", newline="", encoding="utf-8") as f:
         assert any(r["file"] == "sessions.csv" and r["column"] == "n_runs" for r in csv.DictReader(f))
+
+
+def test_a_session_on_the_real_clock_is_not_said_to_run_on_a_virtual_one(report: Path, tmp_path: Path) -> None:
+    """Issue 40, item 6: the GUI runs the simulated rig on the real clock; its periods are measured in real time and
+    its session clock steps over a break like the real rig's, so the report says neither "exactly 1 ms" nor "the
+    session clock is virtual" of it."""
+    import json
+    import shutil
+    import sqlite3
+
+    from analysis.report.report import build_report
+
+    db = tmp_path / "gui.db"
+    shutil.copy(report.parent / "study.db", db)
+    c = sqlite3.connect(db)  # P02's session as the GUI's engine stores it: the simulated rig on the real clock
+    (cfg,), = c.execute("SELECT config_json FROM sessions WHERE session_id = 2").fetchall()
+    c.execute("UPDATE sessions SET config_json = ? WHERE session_id = 2", (json.dumps({**json.loads(cfg),
+                                                                                       "clock": "real"}),))
+    c.commit()
+    c.close()
+    build_report([db], tmp_path / "rep")
+    page = (tmp_path / "rep" / "report.html").read_text(encoding="utf-8")
+    assert "On the virtual clock (1 session of the simulated rig run headless) computing takes no time" in page
+    item = page.split("<h2>What was delivered</h2>")[1].split("<li>")[1].split("</li>")[0]
+    assert item.startswith("P02, experiment session 2") and "the real-time break between the runs was " in item
+    assert "virtual" not in item

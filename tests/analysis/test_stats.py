@@ -54,6 +54,8 @@ def pairs(draw, min_n: int = 2, max_n: int = 60):
 
 # -- the exact test: hand-computed n = 10 table ----------------------------------------------------
 def test_exact_p_for_n10_t0_is_2_over_1024():
+    # exact equality on purpose, in this and the other exact tests: an exact p is a count of sign patterns over 2^n
+    # (2/1024 here), a dyadic fraction every float holds exactly; rank sums are whole or half numbers
     res = paired_wilcoxon(np.zeros(10), np.arange(1.0, 11.0), metric="rmse_n")
     assert res.method == "exact"
     assert res.statistic == 0.0
@@ -532,8 +534,14 @@ def test_correlation_degenerate():
     assert not c.computable and "x is constant" in c.note and math.isnan(c.r)
     c = correlation([1, 2, np.nan, 4, 5], [2, 1, 3, np.nan, 6])
     assert c.computable and c.n == 3 and c.n_dropped_nan == 2 and math.isnan(c.ci_low)
-    c = correlation([1, 2, 3, 4], [1, 2, 3, 4])
-    assert c.r == 1.0 and (c.ci_low, c.ci_high) == (1.0, 1.0)
+    c = correlation([1, 2, 3, 4], [1, 2, 3, 4])  # a perfect association: ±1 exactly on every CPU (UNIT_R_TOLERANCE)
+    assert c.r == 1.0 and c.p_value == 0.0 and (c.ci_low, c.ci_high) == (1.0, 1.0)
+    c = correlation([1, 2, 3, 4, 5], [-2.0, -4.0, -6.0, -8.0, -10.0], method="pearson")
+    assert c.r == -1.0 and c.p_value == 0.0
+    from analysis.stats.correlation import unit_snapped  # what the AVX-512 kernel gave for a perfect line
+
+    assert unit_snapped(-0.9999999999999999) == -1.0 and unit_snapped(1.0000000000000002) == 1.0
+    assert unit_snapped(0.9999) == 0.9999 and math.isnan(unit_snapped(math.nan))
     assert not correlation([1, 2, np.inf, 4], [1, 2, 3, 4]).computable
     with pytest.raises(ValueError, match="method = 'kendall'"):
         correlation([1, 2, 3], [1, 2, 3], method="kendall")

@@ -5,7 +5,7 @@ Each simulated trial is a force trace from the cue: an approach through the air 
 trial), a rise from contact to the band's lower edge (its length, the participant's *speed*, drawn per trial), then
 a trajectory about the target whose error -- its settling, its noise, a spell off target before the hold -- is drawn
 independently of the rise (the participant's *accuracy*).  The metrics are computed by the one definition
-(:func:`protocol.study.metrics.trial_metrics`), the correlation by the report's own :func:`speed_accuracy`.
+(:func:`protocol.tasks.force_regulation.trial_metrics`), the correlation by the report's own :func:`speed_accuracy`.
 
 * the default reading (rise time against RMSE after reach, phases apart) calls no trade more often than its
   nominal level: the rate of intervals below zero stays near the 2.5 % a 95 % interval gives by chance;
@@ -22,7 +22,7 @@ import pandas as pd
 import pytest
 
 from analysis.stats.trade import READINGS, speed_accuracy, trade_conclusion
-from protocol.study.metrics import trial_metrics
+from protocol.tasks.force_regulation import trial_metrics
 
 _TARGET_N = 1.2
 _TOL = 0.10

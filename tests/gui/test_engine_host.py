@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 import time
 
@@ -291,3 +292,41 @@ def test_fault_rehearsal_now_and_its_refusals(engine, tmp_path, short_protocol):
     run_until(e, lambda: e.runner is None)
     assert db_rows(str(tmp_path / "r.db"), "SELECT detail FROM events WHERE kind = 'fault_rehearsal'") == [
         ("nan-burst: rehearsed on the simulated rig (not a device failure), now",)]
+
+
+def test_no_trial_is_cued_to_a_participant_screen_that_is_closed(engine, tmp_path, short_protocol):
+    """Issue 40, item 1: Start and Resume are refused while the GUI says the participant screen is closed; one that
+    closes mid-trial aborts that trial (cause participant_screen, stored, run again later, as a trial a closed GUI
+    cut is stored) and pauses the session, so no cue comes until it is open and the experimenter resumes."""
+    from protocol.study.records import AbortCause, Outcome
+
+    e, events = engine
+    db = str(tmp_path / "s.db")
+    e.handle(m.ParticipantScreenState(False, "closed"))
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+    refused = of(events, m.CommandRefused)
+    assert len(refused) == 1 and "the participant screen is closed" in refused[0].message
+    assert e.runner is None and (not os.path.exists(db) or not db_rows(db, "SELECT * FROM sessions"))
+    e.handle(m.ParticipantScreenState(True))
+    e.handle(m.StartSession(db, "P01", "experiment", short_protocol, 3, 1))
+    run_until(e, lambda: any(p.phase == "active" for p in of(events, m.PhaseEntered)))
+    e.handle(m.ParticipantScreenState(False, "minimised"))  # mid-trial
+    run_until(e, lambda: of(events, m.TrialEnded))
+    rec = of(events, m.TrialEnded)[0].record
+    assert rec.outcome is Outcome.ABORTED and rec.abort_cause is AbortCause.PARTICIPANT_SCREEN
+    assert "participant screen was minimised" in (rec.abort_reason or "")
+    cued = len(of(events, m.TrialStarted))
+    for _ in range(200):  # 10 s of loop time, far past the protocol's 0.3 s pause: no cue while it is closed
+        e.step()
+    assert len(of(events, m.TrialStarted)) == cued and e.health().paused
+    e.handle(m.Resume())
+    assert "participant screen is minimised" in of(events, m.CommandRefused)[-1].message
+    e.handle(m.ParticipantScreenState(True))
+    e.handle(m.Resume())
+    run_until(e, lambda: e.runner is None)
+    assert of(events, m.SessionEnded)[-1].status == "completed"
+    stored = db_rows(db, "SELECT trial_index, outcome, abort_cause, repeat_of FROM trials ORDER BY trial_index")
+    assert stored == [(0, "aborted", "participant_screen", None), (1, stored[1][1], None, None),
+                      (2, stored[2][1], None, 0)]  # the aborted trial run again at the end
+    (detail,), = db_rows(db, "SELECT detail FROM events WHERE kind = 'participant_screen'")
+    assert "minimised: trial 1 is stored as aborted and run again later" in detail

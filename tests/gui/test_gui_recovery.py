@@ -118,3 +118,31 @@ def test_a_stalled_loop_offers_reset_and_a_restart_that_asks_first(qtbot, window
     qtbot.waitUntil(lambda: w.model.session.state == "ready", timeout=TIMEOUT_MS)
     assert not w.engine_row.isVisible()
     qtbot.waitUntil(lambda: w.setup_panel.selected_session() == sid, timeout=TIMEOUT_MS)
+
+
+def test_a_rehearsed_kill_is_on_record_as_one_and_no_dead_engine_figure_stays(qtbot, window, tmp_path) -> None:
+    """Issue 40, items 6 and 7: the record says the engine's death was a rehearsed kill, stamped when it came (not
+    only "planned"); and after it the health panel shows no rate, sample age, loop figure or "next cue waits" of the
+    dead engine beside "disconnected"."""
+    import sqlite3
+
+    w = window
+    sid = start_session(qtbot, w, "P01")
+    qtbot.waitUntil(lambda: w.model.health.devices and w.model.health.loop is not None, timeout=TIMEOUT_MS)
+    t_cue = w.model.session.trial.t_s
+    w.model.rig_control.inject_fault("kill", None, 0.0)
+    qtbot.waitUntil(lambda: w.engine_row.isVisible(), timeout=TIMEOUT_MS)
+    h = w.model.health
+    assert len(h.devices) >= 3 and {d.state for d in h.devices} == {"disconnected"}
+    assert all(math.isnan(d.rate_hz) and math.isnan(d.age_ms) for d in h.devices)
+    assert h.loop_text() == "loop: –" and h.waiting_text() == "" and not h.faults
+    table = w.health_panel.devices
+    assert {table.item(i, 2).text() for i in range(table.rowCount())} == {"–"}
+    c = sqlite3.connect(tmp_path / "study.db")
+    try:
+        (t_s, detail), = c.execute("SELECT t_s, detail FROM events WHERE kind = 'fault_rehearsal'").fetchall()
+    finally:
+        c.close()
+    assert detail.startswith("kill now: the engine process is killed now, as a crash would kill it -- a rehearsal")
+    assert t_s >= t_cue  # when it came, during the trial
+    restart_and_find(qtbot, w, sid)

@@ -102,6 +102,9 @@ def test_keyboard_late_yes_pause_and_resume_as_a_user_meets_them(qtbot, setup):
     qtbot.waitUntil(lambda: w.notice.text() == "trial 1 had already ended: nothing was aborted", timeout=TIMEOUT_MS)
 
     # Esc during trial 2 and Yes in time: trial 2, and only trial 2, is aborted
+    # (a click back into the window: offscreen, a closing question gives the keyboard to the window shown last, the
+    # participant screen Start opened; a window manager gives it back to the question's parent, this window)
+    w.activateWindow()
     qtbot.waitUntil(lambda: QApplication.activeWindow() is w, timeout=TIMEOUT_MS)
     qtbot.keyClick(w.plots, Qt.Key.Key_Escape)
     box = question(w, "abort_trial")

@@ -15,6 +15,7 @@ from pipeline.core.tick_record import TICK_DTYPE
 from pipeline.runtime.loop_messages import RECORD_FIELDS
 from pipeline.runtime.ring import RingBuffer
 from protocol.study.records import TrialRecord
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.models.app import AppModel
 from study_app.models.calibration import CalibrationModel
@@ -29,7 +30,7 @@ from study_app.models.setup import SetupModel
 
 def started(kind: str = "experiment", aid: bool = False, total: int = 2) -> m.SessionStarted:
     return m.SessionStarted(session_id=3, code="P01", kind=kind, trials_total=total, start_position=0,
-                            tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
+                            task=ForceRegulation(), max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=aid)
 
 
 def trial(t_s: float = 5.0, position: int = 1, label: str = "FIRM", force: float = 1.2,
@@ -211,10 +212,10 @@ def test_session_progress_follows_events_and_sample_time():
     assert s.state == "ready" and not s.running
     s.apply(started())
     assert s.running and s.progress_text() == "Session started: the first trial is due"
-    assert s.count_text() == "0 of 2 trials done · at most 30 s left"  # 2 × (12 s cap + 2 s pause), rounded up
+    assert s.count_text() == "0 of 2 trials done · at most 30 s left"  # 2 × 12 s cap + one 2 s pause, rounded up
     s.apply(trial(t_s=5.0))
     s.set_time(7.5)
-    assert s.progress_text() == "Trial 1 · FIRM · haptics ON ·  9.5 s left"
+    assert s.progress_text() == "Trial 1 · FIRM · haptics ON · times out in 9.5 s"
     assert s.band() == pytest.approx((1.08, 1.32))
     s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
                                            outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2,
@@ -222,7 +223,7 @@ def test_session_progress_follows_events_and_sample_time():
     s.apply(m.PhaseEntered(9.0, 0, "pause"))
     s.set_time(9.5)
     assert s.progress_text() == "Next trial in 1.5 s"
-    assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: 4 + 2 s pause
+    assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: one more, no pause after
     assert s.band() is None and s.fraction_done() == 0.5
     s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
@@ -238,7 +239,7 @@ def test_a_resumed_session_restores_its_table_and_progress():
     s.apply(m.EngineReady("", "sim", "virtual", {}, 0.1, (0.3, 0.0, 0.115), "autopilot"))
     stored = [row(0), row(1, "aborted"), row(2, "timeout")]
     schedule = [{"index": i, "repeat_of": None} for i in range(20)] + [{"index": 20, "repeat_of": 1}]
-    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, 0.1, 12.0, 2.0, 1.0, False, schedule=schedule,
+    s.apply(m.SessionStarted(3, "P01", "experiment", 21, 3, ForceRegulation(), 12.0, 2.0, 1.0, False, schedule=schedule,
                              participant_number=4, stored_trials=stored))
     assert len(s.table.rows) == 3 and (s.completed, s.aborted) == (2, 1)
     assert s.count.text() == "2 of 20 trials done · 1 aborted · 1 re-run left"
@@ -326,7 +327,7 @@ _EVENTS = st.one_of(
 @given(aid=st.booleans(), events=st.lists(_EVENTS, max_size=40))
 def test_participant_screen_never_carries_force_in_an_experiment(aid, events):
     p = ParticipantScreenModel()
-    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, live_force_aid=aid))
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, live_force_aid=aid))
     for ev in events:
         if isinstance(ev, tuple):
             p.update(ev[1], ev[2])
@@ -388,7 +389,7 @@ def test_health_rates_from_records():
         ("F/T sensor", "ok", 1000), ("Robot (pose)", "ok", 125), ("Haptic device", "ok", 1000)]
     h.apply(m.EngineFault(1.0, "fault", 2, "POSE_STALE"))
     assert h.devices[1].state == "FAULT: POSE_STALE" and h.devices[0].state == "ok"
-    assert h.faults_text() == "POSE_STALE" and h.fault_log == ["t =    1.000 s  fault: POSE_STALE"]
+    assert h.faults_text() == "POSE_STALE" and h.fault_log == ["no session, engine clock 1.000 s  fault: POSE_STALE"]
 
 
 def test_loop_health_is_judged_against_its_limits():
@@ -562,15 +563,16 @@ def test_a_run_of_the_same_event_is_one_log_line_counted():
     h.apply(m.EngineFault(40.0, "faults_reset", 0, "SENSOR_STALE"))
     h.apply(m.EngineFault(41.0, "output_restarted", 0, "no loop tick for 10.5 ms: …", session_t_s=40.0))
     assert len(h.fault_log) == 4
-    assert h.fault_log[1] == ("session    1.000 s  output restarted ×30 (the last at session 30.000 s): no loop tick "
-                              "for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the force to "
-                              "zero; feedback ramps in again from zero")
+    assert h.fault_log[1] == ("session clock, 1.000 s  output restarted ×30 (the last at session clock, 30.000 s): "
+                              "no loop tick for 13.9 ms: the haptic device's command watchdog (10 ms) had dropped the "
+                              "force to zero; feedback ramps in again from zero")
     assert h.fault_log[2].endswith("reset: SENSOR_STALE")
-    assert h.fault_log[3] == "session   40.000 s  output restarted: no loop tick for 10.5 ms: …"
+    assert h.fault_log[3] == "session clock, 40.000 s  output restarted: no loop tick for 10.5 ms: …"
     # a restart is a line of its own: the same event after it starts a new run; the log keeps the newest 50 lines
     h.engine_restarted()
     h.apply(m.EngineFault(1.0, "output_restarted", 0, "no loop tick for 10.7 ms: …", session_t_s=1.0))
-    assert h.fault_log[-2:] == ["engine restarted", "session    1.000 s  output restarted: no loop tick for 10.7 ms: …"]
+    assert h.fault_log[-2:] == ["— engine restarted —",
+                                "session clock, 1.000 s  output restarted: no loop tick for 10.7 ms: …"]
     for k in range(60):
         h.apply(m.EngineFault(2.0 + k, "fault" if k % 2 else "fault_cleared", 1, "SENSOR_STALE"))
     assert len(h.fault_log) == 50 and h.fault_log[-1].endswith("fault: SENSOR_STALE")

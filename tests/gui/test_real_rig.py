@@ -350,7 +350,7 @@ def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_p
     assert panel is not None and not panel.isHidden() and wiz.sim_controls.isHidden()
     panel.pose_set.setCurrentText("quick")
     panel.start_button.click()
-    assert panel.instruction.text().startswith("Pose P01 (1 of 6): move the TCP to rotation vector (")
+    assert panel.instruction.text().startswith("Pose 1 (1 of 6): move the TCP to rotation vector (")
     assert panel.record_button.isEnabled() and not panel.identify_button.isEnabled()
     assert panel.identify_button.toolTip() == "record at least 6 poses first (0 so far)"
     cal = w.model.real_calibration
@@ -359,4 +359,4 @@ def test_real_rig_window_disables_the_sim_views_and_walks_the_poses(qtbot, tmp_p
                                           step.target_rot_base_sensor, (0.3, -0.1, 0.2), 20.0, 0.001))
     assert panel.poses.rowCount() == 6 and panel.poses.item(0, 1).text() == "20.0"
     assert panel.poses.item(5, 2).text() == "2.000" and panel.identify_button.isEnabled()
-    assert panel.message.text().startswith("P06 is 20° from its target — kept")
+    assert panel.message.text().startswith("Pose 6 is 20° from its target — kept")

@@ -3,7 +3,9 @@
 TCP (orientations recorded about a divot, then Compute), payload (poses identified), frames (a push along
 each axis): each is saved for the mounted tool; only then does Start measure the force at rest for 2 s and
 open the session -- or refuse it, in one line, when the tool touches something or its payload is wrong.
-Hardware runs on the wall clock: the engine is stepped while waiting for conditions (bounded).
+Hardware runs on the wall clock: the engine is stepped while waiting for conditions (bounded). A recording's
+sensor stall is judged only where the fake box is made to stop streaming (see ``steady_stream``): elsewhere the
+only stall is the machine's load, and a test must not fail by it.
 """
 
 from __future__ import annotations
@@ -19,12 +21,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "backends"))
 
 from fake_netft import FakeNetFT
 from fake_rtde import FakeRtde
-from test_real_rig import CPF, FAKE_TOUCH, STALL_RETRIES, G, hardware_file, wait_for
+from test_real_rig import CPF, FAKE_TOUCH, G, hardware_file, wait_for
 
+from pipeline.commissioning import steps
 from pipeline.commissioning.tcp import pivot_orientations
 from pipeline.force.frames import matrix_to_rotvec
 from pipeline.sim.robot import TOOL_DOWN
 from study_app.engine import messages as m
+from study_app.engine import ring_windows
 from study_app.engine.commissioning import pose_set
 from study_app.engine.host import StudyEngine
 from study_app.engine.setup import HostConfig
@@ -58,20 +62,31 @@ def answered(e: StudyEngine, events: list, kinds: tuple, n_before: int, timeout_
     return [ev for ev in events[n_before:] if isinstance(ev, kinds)]
 
 
+def first_answer(events: list, n_before: int) -> object:
+    """The engine's first answer to a start pressed after ``events[n_before - 1]``: its rest check's notice or a
+    refusal (a fault the loop latched meanwhile on a busy machine, a health report, may come before it)."""
+    return next(ev for ev in events[n_before:] if isinstance(ev, (m.StartChecking, m.CommandRefused)))
+
+
 def start_answered(e: StudyEngine, events: list, cmd: m.StartSession) -> tuple[m.StartChecking, object]:
-    """Press Start and wait for the gate's answer after its 2 s rest check: (the check's notice, the answer). On a
-    busy machine the fake sensor's thread may stall during the check: the start is refused so and the experimenter
-    presses Start again (up to STALL_RETRIES times)."""
-    for _attempt in range(STALL_RETRIES):
-        n = len(events)
-        e.handle(cmd)
-        checking = events[n]
-        assert isinstance(checking, m.StartChecking), events[n:]
-        (answer,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
-        if not (isinstance(answer, m.CommandRefused) and answer.message.startswith(
-                "the force sensor stalled while measuring the force at rest")):
-            return checking, answer
-    raise AssertionError("the sensor stalled in every rest check")
+    """Press Start and wait for the gate's answer after its 2 s rest check: (the check's notice, the answer)."""
+    n = len(events)
+    e.handle(cmd)
+    checking = first_answer(events, n)
+    assert isinstance(checking, m.StartChecking), events[n:]
+    (answer,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
+    return checking, answer
+
+
+@pytest.fixture
+def steady_stream(monkeypatch) -> None:
+    """The fake box streams without a pause: a recording's stall can then only be the machine's load (this process's
+    threads or the fake's descheduled past the 50 ms limit), and is not judged -- what these tests prove holds on
+    every record a window averages, stale or not, since the counts never change during a window (each test waits for
+    the loop to read new counts before it records). The stall's refusal itself is proven where the box stops
+    streaming (test_a_rest_check_the_sensor_stalled_in_...), at the product's limit: a stall load can only bring
+    sooner."""
+    monkeypatch.setattr(ring_windows, "sensor_stalled", lambda sensor_age_ns: False)
 
 
 @pytest.fixture
@@ -88,6 +103,7 @@ def engine(tmp_path):
             e.release_ring()
 
 
+@pytest.mark.usefixtures("steady_stream")
 def test_the_chain_in_order_then_the_gate_measures_the_force_at_rest(engine, tmp_path, short_protocol) -> None:
     e, events, netft, rtde = engine
     # -- TCP: four orientations about the divot; the pendant's TCP is the flange (tcp_offset_m defaults to 0)
@@ -153,6 +169,7 @@ def test_the_chain_in_order_then_the_gate_measures_the_force_at_rest(engine, tmp
     wait_for(e, lambda: any(isinstance(ev, m.SessionEnded) for ev in events))
 
 
+@pytest.mark.usefixtures("steady_stream")
 def test_nothing_on_record_is_refused_in_one_line_and_an_override_does_not_waive_the_force_at_rest(
         engine, tmp_path, short_protocol) -> None:
     e, events, netft, rtde = engine
@@ -190,7 +207,7 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
                            override_reason="rehearsal")
     n = len(events)
     e.handle(start)
-    assert isinstance(events[n], m.StartChecking)
+    assert isinstance(first_answer(events, n), m.StartChecking), events[n:]
     netft.streaming.clear()  # the box stops streaming during the 2 s measurement
     try:
         (refused,) = answered(e, events, (m.CommandRefused, m.SessionStarted), n)
@@ -198,12 +215,15 @@ def test_a_rest_check_the_sensor_stalled_in_is_refused_and_start_may_be_pressed_
         netft.streaming.set()
     assert refused.message == ("the force sensor stalled while measuring the force at rest (check the Devices tab) "
                                "— press Start again")
-    wait_for(e, lambda: (r := e.loop.last_record) is not None and r["sensor_age_ns"] < 2_000_000)
+    # streaming again: a fresh sample by the product's own measure (not a load-bound 2 ms)
+    wait_for(e, lambda: (r := e.loop.last_record) is not None
+             and r["sensor_age_ns"] * 1e-9 < steps.POSE_MAX_SENSOR_AGE_S)
     n = len(events)
     e.handle(start)  # pressed again: measured again (it was refused with "being measured; wait for it")
-    assert isinstance(events[n], m.StartChecking), events[n:]
+    assert isinstance(first_answer(events, n), m.StartChecking), events[n:]
 
 
+@pytest.mark.usefixtures("steady_stream")
 def test_one_axis_pushed_again_after_a_failed_check_completes_a_new_check(engine, tmp_path) -> None:
     """The window keeps every axis's newest push and says nothing is left to do after a check: pushing the failed
     axis again must judge the three newest pushes and put that verdict on record (it was kept as the old FAIL, the
@@ -223,14 +243,10 @@ def test_one_axis_pushed_again_after_a_failed_check_completes_a_new_check(engine
     def push(axis: str, force: tuple[float, float, float]) -> None:
         netft.counts = counts(TOOL_DOWN, np.asarray(force))
         wait_for(e, lambda: (r := e.loop.last_record) is not None and abs(r["raw_fz"] - netft.counts[2] / CPF) < 1e-9)
-        for _attempt in range(STALL_RETRIES):
-            n = len(events)
-            e.handle(m.RecordFrameAxis(axis, 0.6))
-            (res,) = answered(e, events, (m.FrameAxisChecked, m.CommandRefused), n)
-            if isinstance(res, m.FrameAxisChecked):
-                return
-            assert "stalled" in res.message, res  # a busy machine: the experimenter records it again
-        raise AssertionError(f"{axis}: the sensor stalled on every try")
+        n = len(events)
+        e.handle(m.RecordFrameAxis(axis, 0.6))
+        (res,) = answered(e, events, (m.FrameAxisChecked, m.CommandRefused), n)
+        assert isinstance(res, m.FrameAxisChecked), res
 
     push("+x", (1.0, 0, 0))
     push("+y", (0, 1.0, 0))

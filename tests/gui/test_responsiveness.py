@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from gui_trials import trial_record
 
 from pipeline.core.tick_record import TICK_DTYPE
@@ -41,7 +42,9 @@ def test_a_pull_far_behind_reads_at_most_one_window():
     assert plots.pull() == 10_000
     assert len(plots.new_rows) == 10_000 and plots.skipped == 15_000 and plots.lost == 0
     assert plots.cursor == 25_000
-    assert float(plots.new_rows["t_s"][0]) == 15.0 and plots.latest_t_s == 24.999
+    # sample times are ticks × 1 ms: up to that product's rounding
+    assert float(plots.new_rows["t_s"][0]) == pytest.approx(15.0, abs=1e-9)
+    assert plots.latest_t_s == pytest.approx(24.999, abs=1e-9)
     assert len(plots.t) == 10_000
     # caught up: the next pull copies only what is new
     row = _zero_row()

@@ -9,6 +9,7 @@ import pytest
 from gui_trials import trial_record
 from PySide6.QtCore import QPoint, Qt
 
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.gui.calibration_wizard import CalibrationWizard
 from study_app.gui.force_plots import QtForcePlots
@@ -46,10 +47,10 @@ def test_progress_view_follows_the_session(qtbot):
     view = QtProgress(s)
     qtbot.addWidget(view)
     s.apply(READY)
-    s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.SessionStarted(1, "P01", "experiment", 20, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 20, "GENTLE", 0.6, "off"))
     s.set_time(4.0)
-    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF ·  9.0 s left"
+    assert view.label.full_text() == "Trial 1 · GENTLE · haptics OFF · times out in 9.0 s"
     assert view.count.full_text() == "0 of 20 trials done · at most 5 min left"
 
 
@@ -126,7 +127,7 @@ def test_participant_window_experiment_word_then_blank_never_a_gauge(qtbot):
     p = ParticipantScreenModel()
     view = ParticipantWindow(p)
     qtbot.addWidget(view)
-    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, True))
+    p.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, True))
     p.apply(m.TrialStarted(1.0, 0, 1, 2, "FIRM", 1.2, "on"))
     p.update(1.2, 1.1)
     assert view.headline.text() == "FIRM" and view.gauge.isHidden()
@@ -140,11 +141,13 @@ def test_participant_window_training_gauge(qtbot):
     p = ParticipantScreenModel()
     view = ParticipantWindow(p)
     qtbot.addWidget(view)
-    p.apply(m.SessionStarted(1, "P01", "training", 4, 0, 0.1, 20.0, 2.0, 1.0, True))
+    p.apply(m.SessionStarted(1, "P01", "training", 4, 0, ForceRegulation(), 20.0, 2.0, 1.0, True))
     p.apply(m.TrialStarted(1.0, 0, 1, 4, "GENTLE", 0.6, "off"))
     p.update(3.0, 0.55)
     assert not view.gauge.isHidden()
-    assert view.gauge.force_n == 0.55 and view.gauge.band[0] == 0.54 and math.isclose(view.gauge.band[1], 0.66)
+    # the band the task judges: its edges carry the 1e-9 relative slack that makes them inclusive
+    assert view.gauge.force_n == 0.55 and math.isclose(view.gauge.band[0], 0.54, rel_tol=1e-8) \
+        and math.isclose(view.gauge.band[1], 0.66, rel_tol=1e-8)
 
 
 def test_calibration_wizard_shows_refusal_and_figures(qtbot):
@@ -212,7 +215,7 @@ def _live_view_in_trial_1(qtbot, t_s: np.ndarray) -> tuple[SessionModel, PlotMod
     view = QtForcePlots(plots, s)
     qtbot.addWidget(view)
     s.apply(READY)
-    s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, 0.1, 12.0, 2.0, 1.0, False))
+    s.apply(m.SessionStarted(1, "P01", "experiment", 2, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
     s.apply(m.TrialStarted(1.0, 0, 1, 2, "GENTLE", 0.6, "off"))
     plots.t = t_s
     for k in plots.data:
@@ -323,7 +326,7 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     assert not sent and app.notices.notice.text == ("Fault rehearsal refused: a fault at trial 3 needs a running "
                                                     "session: start or resume one, or inject it now.")
     app.apply(m.SessionStarted(session_id=3, code="P01", kind="experiment", trials_total=8, start_position=0,
-                               tolerance_fraction=0.1, max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=False))
+                               task=ForceRegulation(), max_trial_s=12.0, pause_s=2.0, cue_s=1.0, live_force_aid=False))
     app.apply(m.TrialStarted(1.0, 0, 1, 8, "FIRM", 1.2, "on"))
     assert app.rig_control.rehearsal_trials() == range(2, 9)
     app.apply(m.TrialStarted(9.0, 1, 2, 8, "FIRM", 1.2, "on"))
@@ -338,9 +341,10 @@ def test_the_app_model_sends_the_rehearsal_and_says_what_will_happen():
     assert app.notices.notice is not None and app.notices.notice.level == "info"
     assert app.notices.notice.text == (
         "Rehearsal planned: robot pose stops (100 ms), 1.5 s after the cue of trial 3 (if trial 3 ends sooner, nothing "
-        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault — "
-        "nothing in the record marks it as rehearsed: trial 3 is stored as aborted (cause: fault), does not count, "
-        "and is run again later. The fault latches: the next cue waits for Reset faults.")
+        "is injected). It is a real fault of the simulated rig in this session, stored with it like any fault, and "
+        "the record says it was rehearsed (a fault_rehearsal event, listed among the report's deviations): trial 3 "
+        "is stored as aborted (cause: fault), does not count, and is run again later. The fault latches: the next "
+        "cue waits for Reset faults.")
     app.apply(m.FaultInjected("nan-burst", "now"))
     assert "Rehearsal: F/T sensor sends NaN (5 ms), now: a real fault of the simulated rig. It is stored with the " \
         "running session" in app.notices.notice.text

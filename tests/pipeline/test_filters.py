@@ -233,10 +233,11 @@ def test_invalid_windows_are_rejected(bad):
 
 
 def test_group_delay():
-    assert group_delay_s(10) == 0.0045
-    assert group_delay_s(20) == 0.0095
-    assert group_delay_s(1) == 0.0
-    assert group_delay_s(10, rate_hz=500.0) == 0.009
+    # (n − 1)/2 ticks at the rate: equal to the printed seconds up to the division's rounding
+    assert group_delay_s(10) == pytest.approx(0.0045, rel=1e-15)
+    assert group_delay_s(20) == pytest.approx(0.0095, rel=1e-15)
+    assert group_delay_s(1) == 0.0  # exactly: no delay at all
+    assert group_delay_s(10, rate_hz=500.0) == pytest.approx(0.009, rel=1e-15)
 
 
 def test_largest_window_is_accepted():

@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.core.aim import TrialAim
 from pipeline.force.scaling import scale_magnitude
 from pipeline.runtime.loop_messages import Mark, SetHaptics
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams
 from pipeline.sim.rig import SimRigConfig
-from protocol.study.metrics import trial_metrics
+from protocol.tasks.force_regulation import trial_metrics
 
 K_TISSUE = 1.1e4
 GAP_M = 0.015
@@ -26,7 +27,7 @@ def _scripted_run(p: SimulatedParticipant, seconds: float = 6.0, haptic: bool = 
     surface; the felt force is the scaled tissue force.  Returns every commanded y_c."""
     out = []
     tip = 0.0
-    p.begin_trial(1.2, haptic, 0.0)
+    p.begin_trial(TrialAim.constant(1.2, haptic), 0.0)
     n = int(seconds * 1000)
     y_c = 0.0
     for i in range(n):
@@ -70,9 +71,19 @@ def test_seed_must_be_a_non_negative_integer() -> None:
 
 def test_bad_target_is_rejected() -> None:
     p = SimulatedParticipant(seed=0)
-    for bad in (0.0, -1.0, math.nan, math.inf):
-        with pytest.raises(ValueError):
-            p.begin_trial(bad, True, 0.0)
+    for bad in (0.0, -1.0):
+        with pytest.raises(ValueError, match="must be a finite force > 0"):
+            p.begin_trial(TrialAim.constant(bad, True), 0.0)
+    for bad in (math.nan, math.inf):  # not even an aim
+        with pytest.raises(ValueError, match="must be finite"):
+            TrialAim.constant(bad, True)
+
+
+def test_a_target_that_moves_is_refused_by_the_force_regulation_participant() -> None:
+    ramp = TrialAim(((0.0, 0.3), (2.0, 1.2)), haptic_on=True)
+    assert ramp.steady_n is None and ramp.force_n(1.0) == pytest.approx(0.75, rel=1e-12)  # linear between knots
+    with pytest.raises(ValueError, match="does not move over the trial"):
+        SimulatedParticipant(seed=0).begin_trial(ramp, 0.0)
 
 
 # -- parameters -------------------------------------------------------------------------------
@@ -107,8 +118,8 @@ def test_haptic_percept_inverts_the_pipeline_scaling_law() -> None:
 def test_without_feedback_the_approach_and_the_checks_are_slower() -> None:
     # same seed, same first trial: the same drawn approach and interval, scaled only by the mode
     on, off = SimulatedParticipant(seed=5), SimulatedParticipant(seed=5)
-    on.begin_trial(0.6, True, 0.0)
-    off.begin_trial(0.6, False, 0.0)
+    on.begin_trial(TrialAim.constant(0.6, True), 0.0)
+    off.begin_trial(TrialAim.constant(0.6, False), 0.0)
     for p in (on, off):
         p.equilibrium_y(HandObservation(0.0, 0.0, 0.0, 0.0, GAP_M))  # the staged trial starts here
     assert off.params.off_approach_factor > 1.0 and off.params.off_interval_factor > 1.0
@@ -152,7 +163,7 @@ def test_non_finite_observations_never_give_a_non_finite_or_unsafe_command(hapti
     lo, hi = SAFE_Y_RANGE_M
     for seed in range(3):
         p = SimulatedParticipant(seed=seed)
-        p.begin_trial(0.6, haptic, 0.0)
+        p.begin_trial(TrialAim.constant(0.6, haptic), 0.0)
         for k, ob in enumerate(_bad_obs_stream(rng, 8000, 0.0)):
             if k == 6000:
                 p.end_trial(ob.t_s)
@@ -160,7 +171,7 @@ def test_non_finite_observations_never_give_a_non_finite_or_unsafe_command(hapti
             assert math.isfinite(y) and lo <= y <= hi
     # all-NaN observations from the start
     p = SimulatedParticipant(seed=9)
-    p.begin_trial(1.2, haptic, 0.0)
+    p.begin_trial(TrialAim.constant(1.2, haptic), 0.0)
     nan = math.nan
     for i in range(3000):
         y = p.equilibrium_y(HandObservation(nan if i % 2 else i * 1e-3, nan, nan, nan, nan))
@@ -169,7 +180,7 @@ def test_non_finite_observations_never_give_a_non_finite_or_unsafe_command(hapti
 
 def test_a_participant_who_never_finds_the_surface_stops_at_the_safe_limit() -> None:
     p = SimulatedParticipant(seed=4)
-    p.begin_trial(1.2, False, 0.0)
+    p.begin_trial(TrialAim.constant(1.2, False), 0.0)
     ys = [p.equilibrium_y(HandObservation(i * 1e-3, 0.0, 0.0, 0.0, GAP_M)) for i in range(30_000)]
     assert p._p_y1 == SAFE_Y_RANGE_M[0]  # the planned equilibrium stops at the limit ...
     assert min(ys) < SAFE_Y_RANGE_M[0] + 0.5e-3  # ... and the command stays there, give or take postural drift
@@ -191,9 +202,9 @@ def _rig_trials(seed: int, rig_seed: int, targets: list[float], haptic: bool, tr
         eng.loop.submit(SetHaptics(haptic))
         eng.loop.submit(Mark(k, 2))
         if practice:
-            p.practice(target, haptic, eng.rig.sim_time_s, live_force_n_visible=True)
+            p.begin_trial(TrialAim.constant(target, haptic, gauge=True, practice=True), eng.rig.sim_time_s)
         else:
-            p.begin_trial(target, haptic, eng.rig.sim_time_s)
+            p.begin_trial(TrialAim.constant(target, haptic), eng.rig.sim_time_s)
         cursor = eng.ring.write_count
         n = int(trial_s * 1000)
         eng.loop.run_ticks(n)

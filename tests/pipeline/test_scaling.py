@@ -264,8 +264,8 @@ def test_near_zero_the_law_is_linear_with_gain_f_max_over_f_scale(norm, d):
 
 
 def test_small_signal_gain():
-    assert small_signal_gain() == 3.0 / 7.0
-    assert small_signal_gain(2.0, 4.0) == 0.5
+    assert small_signal_gain() == pytest.approx(3.0 / 7.0, rel=1e-15)  # f_max / f_scale, up to the division's rounding
+    assert small_signal_gain(2.0, 4.0) == 0.5  # exactly: a power of two
     assert small_signal_gain(3.0, 7.0) == pytest.approx(0.4286, abs=5e-5)
 
 

@@ -353,7 +353,7 @@ def test_warm_motors_past_the_budget_latch_haptic_device_and_reset_waits_for_coo
     recs = ticks(e, 1)
     assert recs[0]["faults"] == float(Fault.HAPTIC_DEVICE) and touch.error_code == HD_WARM_MOTORS
     ev = [ev for ev in fault_events(e) if ev.faults == Fault.HAPTIC_DEVICE][-1]
-    assert ev.detail == "HAPTIC_DEVICE: device error 0x0200"
+    assert ev.detail.startswith("HAPTIC_DEVICE: device error 0x0200 (HD_WARM_MOTORS: the motors are too warm")
 
     rearms: list[tuple[bool, float]] = []
     real_rearm = touch.rearm
@@ -382,3 +382,11 @@ def test_warm_motors_past_the_budget_latch_haptic_device_and_reset_waits_for_coo
         assert touch.applied_force_n == (0.0, 0.0, 0.0) or ok
     assert attempts > 10  # it really had to cool first
 
+
+
+def test_a_value_beyond_its_limit_is_never_shown_as_within_it():
+    """Issue 40, item 6: a 5.03 ms gap read "5.0 ms (limit 5 ms)"; as many decimals as show it beyond the limit."""
+    from pipeline.runtime.watchdog import ms_beyond
+
+    assert ms_beyond(5.03, 5.0) == "5.03" and ms_beyond(7.0, 5.0) == "7.0" and ms_beyond(5.0004, 5.0) == "5.0004"
+    assert ms_beyond(50.2, 50.0) == "50.2" and ms_beyond(5.0006, 5.0) == "5.001"

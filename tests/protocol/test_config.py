@@ -25,6 +25,7 @@ from protocol.study.config import (
     load_protocol,
     protocol_from_dict,
 )
+from protocol.tasks.force_regulation import ForceRegulation
 
 DEFAULT_TEXT = resources.files("protocol.study").joinpath("default.toml").read_text(encoding="utf-8")
 
@@ -55,7 +56,8 @@ def test_default_protocol_has_the_papers_values():
     assert p.trials_per_participant == 20
     assert p.ordering == "random"
     assert p.abort_policy == "append"
-    assert p.trial == TrialTiming(tolerance_fraction=0.10, hold_s=1.0, max_trial_s=12.0, pause_s=2.0, cue_s=1.0)
+    assert p.trial == TrialTiming(max_trial_s=12.0, pause_s=2.0, cue_s=1.0)
+    assert p.task == ForceRegulation(tolerance_fraction=0.10, hold_s=1.0)  # no [task] table: the paper's task
     assert p.training == TrainingConfig(enabled=True, seconds_per_target_per_mode=20.0, live_force_aid=True)
     assert p.version == 1
     assert p.name == "Shaker & Erden force regulation"
@@ -65,7 +67,8 @@ def test_default_protocol_fields_have_exact_types():
     p = default_protocol()
     assert type(p.trials_per_cell) is int
     assert all(type(t.force_n) is float for t in p.targets)
-    assert type(p.trial.hold_s) is float and type(p.trial.max_trial_s) is float
+    assert isinstance(p.task, ForceRegulation)
+    assert type(p.task.hold_s) is float and type(p.trial.max_trial_s) is float
     assert type(p.training.enabled) is bool
 
 
@@ -157,7 +160,7 @@ BAD_FIELDS = [
      "design.trials_per_cell = true: must be a whole number from 1 to 100"),
     ("unknown top-level key", 'name = "Shaker & Erden force regulation"',
      'name = "Shaker & Erden force regulation"\ncolour = "red"',
-     "colour = 'red': unknown field; allowed: design, name, targets, training, trial, version"),
+     "colour = 'red': unknown field; allowed: design, name, targets, task, training, trial, version"),
     ("typo inside [trial]", "hold_s = 1.0 ", "hold_sec = 1.0 ",
      "trial.hold_sec = 1.0: unknown field; allowed: cue_s, hold_s, max_trial_s, pause_s, tolerance_fraction"),
     ("typo inside [design]", "trials_per_cell = 5 ", "trials_per_cel = 5 ",
@@ -223,8 +226,8 @@ def test_the_issue_s_2_ms_trial_is_refused_and_an_off_only_design_needs_no_ramp(
     path.write_text(text, encoding="utf-8")
     assert _error_of(path).startswith(f"{path}: trial.max_trial_s = 0.002: must be at least trial.hold_s = 0.001 + "
                                       "the feedback's 0.5 s ramp-in (safety.ramp_in_s) = 0.501 s")
-    off_only = text.replace('modes = ["on", "off"]', 'modes = ["off"]')
-    path.write_text(off_only, encoding="utf-8")
+    off_only = text.replace('modes = ["on", "off"]', 'modes = ["off"]').replace("cue_s = 1.0 ", "cue_s = 0.001 ")
+    path.write_text(off_only, encoding="utf-8")  # (a cue shorter than the 2 ms cap, as every cue must be)
     assert load_protocol(path).trial.max_trial_s == 0.002  # no feedback, no ramp: only the hold must fit
 
 
@@ -296,7 +299,8 @@ def test_tolerance_half_is_allowed_and_pause_zero_is_allowed_without_feedback(tm
     path = tmp_path / "edges.toml"
     path.write_text(text, encoding="utf-8")
     p = load_protocol(path)
-    assert (p.trial.tolerance_fraction, p.trial.pause_s) == (0.5, 0.0)
+    assert isinstance(p.task, ForceRegulation)
+    assert (p.task.tolerance_fraction, p.trial.pause_s) == (0.5, 0.0)
     assert type(p.trial.pause_s) is float
 
 
@@ -314,8 +318,9 @@ def test_to_dict_round_trips_a_non_default_protocol():
         trials_per_cell=3,
         ordering="counterbalanced",
         abort_policy="reinsert",
-        trial=TrialTiming(tolerance_fraction=0.2, hold_s=0.5, max_trial_s=8.0, pause_s=0.0, cue_s=0.0),
+        trial=TrialTiming(max_trial_s=8.0, pause_s=0.0, cue_s=0.0),
         training=TrainingConfig(enabled=False, seconds_per_target_per_mode=5.0, live_force_aid=False),
+        task=ForceRegulation(tolerance_fraction=0.2, hold_s=0.5),
     )
     d = p.to_dict()
     assert d == {
@@ -356,7 +361,8 @@ def _assert_well_typed(p: ProtocolConfig) -> None:
     assert all(type(t.label) is str and type(t.force_n) is float for t in p.targets)
     assert type(p.modes) is tuple and all(m in MODES for m in p.modes)
     assert type(p.trials_per_cell) is int and p.ordering in ORDERINGS and p.abort_policy in ABORT_POLICIES
-    assert all(type(getattr(p.trial, k)) is float for k in _DEFAULT_DICT["trial"])
+    own = set(p.task.trial_fields)  # the task's fields of [trial] are its own (the paper's band and hold)
+    assert all(type(getattr(p.task if k in own else p.trial, k)) is float for k in _DEFAULT_DICT["trial"])
     assert type(p.training.enabled) is bool and type(p.training.live_force_aid) is bool
     assert type(p.training.seconds_per_target_per_mode) is float
 

@@ -31,9 +31,9 @@ from protocol.storage import StudyDatabase, StudyReader, trial_id_of
 from protocol.study.clock import SessionClock
 from protocol.study.config import TrialTiming
 from protocol.study.design import TrialSpec
-from protocol.study.metrics import trial_metrics
 from protocol.study.records import Outcome, TrialRecord
 from protocol.study.trial import TrialFinished, TrialMachine
+from protocol.tasks.force_regulation import ForceRegulation, trial_metrics
 
 MS = 1_000_000  # ns
 
@@ -71,8 +71,8 @@ def test_the_live_trial_machine_and_the_offline_recompute_give_every_metric_the_
     rng = np.random.default_rng(3)
     force = np.clip(np.linspace(0.0, 0.9, 12001) + rng.normal(0.0, 0.003, 12001), 0.0, None)  # a ramp through F*
     force[700] = math.nan  # a sample the sensor did not give: left out of the errors, out of band
-    timing = TrialTiming(tolerance_fraction=0.10, hold_s=1.0, max_trial_s=12.0, pause_s=2.0)
-    machine = TrialMachine(timing)
+    timing = TrialTiming(max_trial_s=12.0, pause_s=2.0)
+    machine = TrialMachine(timing, ForceRegulation(tolerance_fraction=0.10, hold_s=1.0))
     spec = TrialSpec(index=0, target_label="GENTLE", target_force_n=0.6, haptic_mode="on")
     cue = 5_000 * MS
     machine.start(spec, cue - MS)

@@ -13,16 +13,15 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from protocol.metrics import names
-from protocol.study.metrics import (
+from protocol.tasks.force_regulation import (
     BAND_SLACK,
-    CONTACT_THRESHOLD_N,
     HoldDetector,
-    TrialMetrics,
     band_halfwidth_n,
     hold_completion_index,
     in_band,
     trial_metrics,
 )
+from protocol.tasks.window import CONTACT_THRESHOLD_N, TrialMetrics
 
 MS = 1_000_000  # ns
 S = 1_000_000_000  # ns
@@ -135,8 +134,9 @@ def test_ramp_then_plateau_succeeds_one_second_after_the_plateau_starts():
     t, f = _full_window(lambda k: k / 1000 if k < 500 else 0.6)
     m = trial_metrics(t, f, 0.6)
     assert m.success is True
-    assert m["tct_s"] == 1.5
-    assert m.end_s == 1.5
+    # times are tick counts × 1 ms: equal to the printed value up to that product's rounding
+    assert m["tct_s"] == pytest.approx(1.5, **EXACT)
+    assert m.end_s == pytest.approx(1.5, **EXACT)
     assert m.n_samples == 1501  # 0 … 1500 ms inclusive
     # errors: 0.6 − k/1000 for k < 500, i.e. j/1000 for j = 101 … 600; 0 on the plateau
     sum_sq = (600 * 601 * 1201 - 100 * 101 * 201) / 6 / 1e6  # Σ j² / 10⁶ = 71.84175
@@ -144,7 +144,7 @@ def test_ramp_then_plateau_succeeds_one_second_after_the_plateau_starts():
     assert m["max_ae_n"] == pytest.approx(0.6, **EXACT)
     assert m["time_in_band_s"] == pytest.approx(1.001, **EXACT)  # 1001 samples, 500 … 1500 ms
     assert m["peak_force_n"] == 0.6
-    assert m.first_contact_s == 0.051  # 0.050 N is not above the 0.05 N threshold; 0.051 N is
+    assert m.first_contact_s == pytest.approx(0.051, **EXACT)  # 0.050 N is not above the 0.05 N threshold; 0.051 N is
     assert CONTACT_THRESHOLD_N == 0.05
 
 

@@ -12,8 +12,8 @@ from protocol.storage import HEALTH_COLUMNS, StudyDatabase, trial_id_of
 from protocol.study.clock import SessionClock
 from protocol.study.config import default_protocol
 from protocol.study.design import HapticMode, TrialSpec, build_schedule, schedule_to_json
-from protocol.study.metrics import trial_metrics
 from protocol.study.records import AbortCause, LoopHealth, Outcome, TrialRecord, trial_health
+from protocol.tasks.force_regulation import trial_metrics
 
 SPEC = TrialSpec(3, "FIRM", 1.2, "off", repeat_of=1)
 
@@ -55,7 +55,9 @@ def test_a_finished_record_stores_seconds_and_text_and_reads_back(tmp_path: Path
     )
     row = rec.to_row()
     # the session clock is the recordings' formula; the enums are stored as plain TEXT
-    assert row["started_at_s"] == 2.5 + 1_234_567_891 / 1e9 and row["ended_at_s"] == 2.5 + 3.0
+    # (ns to s: equal up to the last bit of that conversion, however the product orders its operations)
+    assert row["started_at_s"] == pytest.approx(2.5 + 1_234_567_891 / 1e9, rel=1e-15)
+    assert row["ended_at_s"] == pytest.approx(2.5 + 3.0, rel=1e-15)
     assert (row["trial_id"], row["haptic_mode"], row["outcome"], row["abort_cause"]) == (
         trial_id_of(sid, 3), "off", "aborted", "gap")
     assert all(type(row[k]) is str for k in ("haptic_mode", "outcome", "abort_cause"))
@@ -97,4 +99,4 @@ def test_the_session_clock_is_one_formula_for_scalars_and_arrays() -> None:
     clock = SessionClock(123.456, 10**12 + 7)
     t = np.array([10**12 + 7, 10**12 + 1_000_008, 10**12 + 987_654_321_000], dtype=np.int64)
     assert clock.seconds_of(t).tolist() == [clock.seconds(int(v)) for v in t]
-    assert clock.seconds(10**12 + 7) == 123.456
+    assert clock.seconds(10**12 + 7) == pytest.approx(123.456, rel=1e-15)  # the offset, up to a rounding

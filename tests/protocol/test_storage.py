@@ -23,6 +23,7 @@ from protocol.storage import (
     StorageError,
     StudyDatabase,
     connect_readonly,
+    schema_path,
     trial_id_of,
     validate_code,
 )
@@ -272,7 +273,12 @@ def test_valid_codes(code):
     assert validate_code(code) == code
 
 
-@pytest.mark.parametrize("code", ["", "Q" * 33, "P 01", "P01;DROP", "P01\n", "Pé", None, 1])
+def test_a_code_is_normalised_before_it_is_checked():
+    # a pasted code's line end and spaces go, and a full-width P01 reads as P01 (protocol.storage.codes)
+    assert validate_code("P01\n") == validate_code(" Ｐ０１ ") == "P01"
+
+
+@pytest.mark.parametrize("code", ["", "Q" * 33, "P 01", "P01;DROP", "P0\n1", "Pé", None, 1])
 def test_invalid_codes_are_refused(code):
     with pytest.raises(StorageError) as info:
         validate_code(code)
@@ -621,3 +627,33 @@ def test_a_file_and_folder_without_write_bits_are_not_written_even_by_root(tmp_p
         folder.chmod(0o755)
         path.chmod(0o644)
     assert may_write(path) and may_write(folder, os.W_OK | os.X_OK)
+
+
+def test_a_file_from_before_the_participant_screen_cause_is_widened_by_a_writer(tmp_path):
+    """Issue 40, item 1: a trial aborted because the participant screen closed is stored with its own cause; a file
+    made before that cause existed lists the older causes in its CHECK and is widened by the first writer (no row
+    changes; a reader leaves it as it is)."""
+    from protocol.storage.schema import _CAUSES_BEFORE, _CAUSES_NOW
+
+    path = tmp_path / "before.db"
+    c = sqlite3.connect(path)  # a version-4 file as the schema made it before the cause was added
+    c.executescript(schema_path().read_text(encoding="utf-8").replace(_CAUSES_NOW, _CAUSES_BEFORE)
+                    + "\nPRAGMA user_version = 4;")
+    c.close()
+    row = {**_trial_row(1, 0, outcome="aborted", tct_s=None), "abort_cause": "participant_screen",
+           "abort_reason": "the participant screen was closed during the trial"}
+    r = StudyDatabase(path, readonly=True)
+    r.close()
+    assert _CAUSES_BEFORE in sqlite3.connect(path).execute("SELECT sql FROM sqlite_master WHERE name = 'trials'"
+                                                           ).fetchone()[0]  # a reader changes nothing
+    db = StudyDatabase(path)
+    try:
+        sid = db.create_session(**_session_args())
+        db.insert_trial({**row, "trial_id": trial_id_of(sid, 0), "session_id": sid})
+        assert db.conn.execute("SELECT abort_cause FROM trials").fetchall() == [("participant_screen",)]
+        assert db.conn.execute("PRAGMA integrity_check").fetchone() == ("ok",)
+        with pytest.raises(sqlite3.IntegrityError):  # the CHECK still holds for anything else
+            db.insert_trial({**row, "trial_id": trial_id_of(sid, 1), "session_id": sid, "trial_index": 1,
+                             "abort_cause": "bored"})
+    finally:
+        db.close()

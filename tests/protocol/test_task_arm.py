@@ -15,6 +15,7 @@ from analysis.reading.load import load_study
 from analysis.reading.metrics import compute_trials
 from pipeline.runtime.loop_messages import LoopEvent
 from protocol.runner.session import SessionRunner
+from protocol.runner.session_desk import SessionPlan
 from protocol.storage.audit import audit_database
 from protocol.study.config import ProtocolError, default_protocol, protocol_from_dict
 from protocol.study.design import build_schedule
@@ -72,23 +73,23 @@ def _runner(arms: tuple[str, ...]) -> tuple[SessionRunner, list[tuple[str, str]]
             stored.append((kind, detail or ""))
 
     proto = short_protocol("left")
-    runner = SessionRunner(protocol=proto, schedule=build_schedule(proto, 1, 1), session_id=1,
-                           recorder=Recorder(), submit=lambda cmd: None, arms=arms)  # type: ignore[arg-type]
+    plan = SessionPlan(session_id=1, protocol=proto, schedule=build_schedule(proto, 1, 1), arms=arms)  # type: ignore[arg-type]
+    runner = SessionRunner(plan, Recorder(), lambda cmd: None)  # type: ignore[arg-type]
     return runner, stored
 
 
 def test_another_arms_fault_is_stored_with_its_arm_and_does_not_name_the_task_trials_fault() -> None:
     runner, stored = _runner(("left", "right"))
-    runner._store_loop_event(LoopEvent(5, "fault", 64, "NON_FINITE: force x = nan", "right"))
-    runner._store_loop_event(LoopEvent(6, "fault", 512, "OTHER_ARM: arm right faulted", "left"))
+    runner.faults.store(LoopEvent(5, "fault", 64, "NON_FINITE: force x = nan", "right"))
+    runner.faults.store(LoopEvent(6, "fault", 512, "OTHER_ARM: arm right faulted", "left"))
     assert stored == [("fault", "arm right: NON_FINITE: force x = nan"),
                       ("fault", "arm left: OTHER_ARM: arm right faulted")]
-    assert runner._fault_detail == "OTHER_ARM: arm right faulted"  # the task arm's own fault names the trial's
+    assert runner.faults.detail == "OTHER_ARM: arm right faulted"  # the task arm's own fault names the trial's
 
 
 def test_a_one_arm_rig_stores_its_events_as_before() -> None:
     runner, stored = _runner(("left",))
-    runner._store_loop_event(LoopEvent(5, "fault", 64, "NON_FINITE: force x = nan", "left"))
+    runner.faults.store(LoopEvent(5, "fault", 64, "NON_FINITE: force x = nan", "left"))
     assert stored == [("fault", "NON_FINITE: force x = nan")]
 
 

@@ -10,11 +10,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from protocol.study.records import TrialRecord
+from protocol.tasks.base import Task
 
 __all__ = [
     "AbortSession",
     "AbortTrial",
     "ListSessions",
+    "ParticipantScreenState",
     "Pause",
     "PhaseEntered",
     "Resume",
@@ -99,6 +101,20 @@ class AbortSession:
     session_id: int | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class ParticipantScreenState:
+    """Whether the participant screen is open where the participant sees it (shown, not minimised, on a monitor).
+
+    The GUI sends it whenever that changes.  While it is closed no session starts or resumes and no trial is
+    cued; closed during a session, the running trial is aborted (cause ``participant_screen``, stored) and the
+    session pauses.  ``detail`` says how it closed (``closed``, ``minimised``, ``off every monitor``).  An engine
+    whose client never sent one (a script, a test) has no participant screen to check.
+    """
+
+    open: bool
+    detail: str = ""
+
+
 # -- events (engine → GUI) ----------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class SessionsListed:
@@ -119,14 +135,15 @@ class SessionsListed:
 
 @dataclass(frozen=True, slots=True)
 class SessionStarted:
-    """A session is stored and running."""
+    """A session is stored and running; ``task`` is its protocol's task, which the views ask what a trial shows
+    (:meth:`protocol.tasks.base.Task.screen`: the cue word, the band)."""
 
     session_id: int
     code: str
     kind: str
     trials_total: int
     start_position: int
-    tolerance_fraction: float
+    task: Task
     max_trial_s: float
     pause_s: float
     cue_s: float

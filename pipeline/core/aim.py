@@ -1,0 +1,91 @@
+"""What a trial asks of the hand on the stylus: the hook a simulated participant is driven through.
+
+The study (``protocol``, a floor above) decides what each trial asks -- its task says what to aim at, and when
+(:meth:`protocol.tasks.base.Task.aim`); the simulated participant (:mod:`pipeline.sim.participant`, beside the rig)
+decides how a hand would do it.  Neither may import the other's floor, so the pipeline owns the vocabulary between
+them: a :class:`TrialAim` is plain data (it crosses a process boundary where the loop runs in a process of its own),
+and a :class:`TrialParticipant` is what the session runner tells at each cue and each trial's end.
+
+An aim's target is a function of trial time (s since the cue) given by knots, linear between them and held after
+the last: the force-regulation task's is one knot, a constant force; a task whose target moves (a ramp, a sine
+sampled finely enough) gives more.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from bisect import bisect_right
+from dataclasses import dataclass
+from typing import Protocol
+
+__all__ = ["TrialAim", "TrialParticipant"]
+
+
+@dataclass(frozen=True, slots=True)
+class TrialAim:
+    """What one trial asks of the participant, told at its cue.
+
+    Attributes
+    ----------
+    knots
+        ``(t_s, force_n)`` pairs: the target force (N) at trial time ``t_s`` (s since the cue), from 0 on in
+        increasing time; linear between knots, the last one held.  One knot: a constant target.
+    haptic_on
+        Haptic feedback renders the contact force in this trial.
+    gauge
+        A live force gauge with the target band is in view (the training aid): the force is seen, not judged.
+    practice
+        A training trial (the participant draws its beliefs and noise from the training trials' own stream).
+    """
+
+    knots: tuple[tuple[float, float], ...]
+    haptic_on: bool
+    gauge: bool = False
+    practice: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.knots:
+            raise ValueError("TrialAim.knots is empty: a trial's target needs at least one (t_s, force_n) knot")
+        times = [t for t, _ in self.knots]
+        if times[0] != 0.0 or any(not b > a for a, b in itertools.pairwise(times)):
+            raise ValueError(f"TrialAim.knots times = {times!r}: must start at 0 s and increase")
+        if not all(math.isfinite(f) for _, f in self.knots):
+            raise ValueError(f"TrialAim.knots forces = {[f for _, f in self.knots]!r}: must be finite")
+
+    @classmethod
+    def constant(cls, force_n: float, haptic_on: bool, *, gauge: bool = False, practice: bool = False) -> TrialAim:
+        """A target that does not move (the force-regulation task's)."""
+        return cls(((0.0, float(force_n)),), bool(haptic_on), bool(gauge), bool(practice))
+
+    @property
+    def steady_n(self) -> float | None:
+        """The target when it does not move over the trial, N (None: it moves)."""
+        first = self.knots[0][1]
+        return first if all(f == first for _, f in self.knots) else None
+
+    def force_n(self, t_s: float) -> float:
+        """The target at trial time ``t_s`` (s since the cue; before 0: the first knot's)."""
+        k = bisect_right(self.knots, t_s, key=lambda knot: knot[0])
+        if k == 0:
+            return self.knots[0][1]
+        if k == len(self.knots):
+            return self.knots[-1][1]
+        (t0, f0), (t1, f1) = self.knots[k - 1], self.knots[k]
+        return f0 + (f1 - f0) * (t_s - t0) / (t1 - t0)
+
+
+class TrialParticipant(Protocol):
+    """Whom the session runner tells what a trial asks: a simulated participant (or a driver forwarding to one).
+
+    Both calls only stage the news: it takes effect at the participant's next observation of the rig (the tick at
+    which the loop applies the trial's mark), so ``t_s`` -- the participant's clock when told -- may lag it.
+    """
+
+    def begin_trial(self, aim: TrialAim, t_s: float) -> None:
+        """The cue appeared: aim as ``aim`` says."""
+        ...
+
+    def end_trial(self, t_s: float) -> None:
+        """The trial ended: rest until the next cue."""
+        ...

@@ -1,0 +1,223 @@
+"""The task seam: what a trial asks of the participant, how it is judged, what the screens show, what it measures.
+
+A task is one module of :mod:`protocol.tasks` defining one :class:`Task` (the paper's is
+:class:`protocol.tasks.force_regulation.ForceRegulation`) and its line in :data:`protocol.tasks.registry.TASKS`.  An
+instance holds the task's parameters as the protocol file set them (validated there: one line naming the field, its
+value and what is allowed); everything that runs, shows or analyses a trial asks it:
+
+* **its target over trial time** (:meth:`Task.target_n`) and **its rule**: the streaming form the live trial machine
+  feeds sample by sample (:meth:`Task.rule`, exact on integer-ns times) and the offline form that judges a whole
+  trial and computes its metrics (:meth:`Task.judge`), one definition: the live machine checks that both agree;
+* **the metrics it produces**, by name in the metric registry (:attr:`Task.metric_names`, :mod:`protocol.metrics`);
+* **what the screens show** of a trial (:meth:`Task.screen`: the cue word, the band the experimenter's plot and the
+  training gauge draw, their words) and the cue event's text (:meth:`Task.cue_text`);
+* **what a simulated participant is told** at the cue (:meth:`Task.aim`, the pipeline's
+  :class:`pipeline.core.aim.TrialAim`: what to aim at, when, and with which aid);
+* **its words in the report** (:meth:`Task.rule_words`, :meth:`Task.methods`).
+
+A trial reaches the task as a :class:`TrialCondition`: its target (label and reference force, as the schedule and
+the ``trials`` table store them) and its haptic mode -- a schedule entry, a stored record, the engine's message and
+an analysis row all are one.  The trial's cap, pause and cue are the protocol's (:class:`protocol.tasks.base.Timing`
+is what a task's checks see of them).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from pipeline.core.aim import TrialAim
+from pipeline.force.safety import SafetyConfig
+from pipeline.settings.tomlfields import Fields
+from protocol.metrics import Metric, select
+from protocol.tasks.window import TrialMetrics
+
+__all__ = ["Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule", "TrialScreen", "TrialTarget",
+           "listed"]
+
+
+class TrialCondition(Protocol):
+    """A trial as every floor has it: its target by label and reference force, and its haptic mode (``on``/``off``)."""
+
+    @property
+    def target_label(self) -> str: ...
+
+    @property
+    def target_force_n(self) -> float: ...
+
+    @property
+    def haptic_mode(self) -> str: ...
+
+
+@dataclass(frozen=True, slots=True)
+class TrialTarget:
+    """A trial's condition as plain data (a :class:`TrialCondition`): what a table row read back gives a task."""
+
+    target_label: str
+    target_force_n: float
+    haptic_mode: str
+
+    @classmethod
+    def of(cls, row: Mapping[str, Any]) -> TrialTarget:
+        """From a row with the ``trials`` table's ``target_label``, ``target_force_n`` and ``haptic_mode``."""
+        return cls(str(row["target_label"]), float(row["target_force_n"]), str(row["haptic_mode"]))
+
+
+class TrialRule(Protocol):
+    """A task's success rule in its streaming form: fed a trial's samples in time order, from its cue on."""
+
+    def feed(self, t_ns: int, force_n: float) -> bool:
+        """One sample (``t_ns`` since the cue, integer ns); True at the sample that completes the task (once)."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class TrialScreen:
+    """What the screens show of one trial (the phases around it -- rest, wait, thanks -- are the session's).
+
+    Attributes
+    ----------
+    cue_word
+        The participant screen's word at the cue (``GENTLE``).
+    band_n
+        The success region the experimenter's live plot draws from the cue on and the training gauge shows, N
+        (None: the task has none).
+    band_label
+        The live plot's words for it (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``).
+    band_legend
+        A figure's legend for it (``target band 0.6 N ± 10%``).
+    """
+
+    cue_word: str
+    band_n: tuple[float, float] | None
+    band_label: str
+    band_legend: str
+
+
+@dataclass(frozen=True, slots=True)
+class Timing:
+    """What a task's checks see of the protocol's timing: the trial cap, each training trial's length, whether
+    haptics ON is in the design, and the feedback's ramps (the safety stage's, :class:`SafetyConfig`)."""
+
+    max_trial_s: float
+    training_s: float
+    haptics_on: bool
+    ramps: SafetyConfig
+
+
+@dataclass(frozen=True, slots=True)
+class Parameter:
+    """One of a task's parameters as the exported tables describe it: the codebook's entry for its column (the
+    sessions and trials tables carry each session's task parameters, :meth:`Task.parameters`).
+
+    Attributes
+    ----------
+    name, description, unit, label
+        Its column's name, what it means, its unit and its short heading in the report's tables.
+    decimals
+        How far the files round it.
+    """
+
+    name: str
+    description: str
+    unit: str
+    label: str
+    decimals: int
+
+
+#: A task's parameters as the protocol file has them: its ``[task]`` table's fields (``kind`` aside) and the
+#: ``[trial]`` table's fields that are its own.
+TaskTables = tuple[dict[str, Any], dict[str, Any]]
+
+
+class Task(ABC):
+    """One kind of trial: its parameters (an instance's fields) and everything asked of it (module docstring)."""
+
+    #: Its name in the protocol file (``[task] kind = "…"``) and in the stored protocol.
+    kind: ClassVar[str]
+    #: Its name in words (``force regulation``).
+    title: ClassVar[str]
+    #: The metrics it produces, by name in the registry (:mod:`protocol.metrics`).
+    metric_names: ClassVar[tuple[str, ...]]
+    #: The fields of the file's ``[task]`` table it reads, ``kind`` aside.
+    task_fields: ClassVar[frozenset[str]] = frozenset()
+    #: The fields of the file's ``[trial]`` table that are its parameters (beside the cap, pause and cue).
+    trial_fields: ClassVar[frozenset[str]] = frozenset()
+    #: Its parameters' columns as the codebook describes them (one per name of :meth:`parameters`).
+    described: ClassVar[tuple[Parameter, ...]] = ()
+
+    # -- its parameters ------------------------------------------------------------------------------------------
+    @classmethod
+    @abstractmethod
+    def from_tables(cls, f: Fields, task: Mapping[str, Any], trial: Mapping[str, Any]) -> Task:
+        """Its parameters from the file's ``[task]`` and ``[trial]`` tables (their keys already checked against
+        :attr:`task_fields` and :attr:`trial_fields`); a bad value is ``f.fail`` naming the field."""
+
+    @abstractmethod
+    def tables(self) -> TaskTables:
+        """Its parameters as the file has them (stored with every session), :data:`TaskTables`."""
+
+    def parameters(self) -> dict[str, Any]:
+        """Its parameters by name, as the report's tables have them (columns of the sessions and trials tables)."""
+        own, trial = self.tables()
+        return {**own, **trial}
+
+    def check_timing(self, f: Fields, timing: Timing) -> None:  # noqa: B027  # a task may have nothing to check
+        """Refuse, in one ``f.fail`` line naming both fields, parameters that do not fit the protocol's timing."""
+
+    @property
+    def metrics(self) -> tuple[Metric, ...]:
+        """The metrics it produces, in the registry's order."""
+        return select(self.metric_names)
+
+    # -- its target and its rule ---------------------------------------------------------------------------------
+    @abstractmethod
+    def target_n(self, trial: TrialCondition, t_s: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+        """The target force at trial times ``t_s`` (s since the cue), N."""
+
+    @abstractmethod
+    def rule(self, trial: TrialCondition) -> TrialRule:
+        """A fresh streaming rule for one trial (the live trial machine feeds it every sample)."""
+
+    @abstractmethod
+    def judge(self, t_ns: npt.ArrayLike, force_n: npt.ArrayLike, trial: TrialCondition, *, max_trial_s: float,
+              window: str = "cue", sample_period_s: float = 0.001) -> TrialMetrics:
+        """The offline form: a whole trial's samples (``t_ns`` since the cue) judged and measured.
+
+        ``window`` is the error window (``"cue"`` or ``"first_contact"``, :mod:`protocol.tasks.window`); the
+        verdict must be the streaming rule's on the same samples.
+        """
+
+    # -- what it shows and tells ---------------------------------------------------------------------------------
+    @abstractmethod
+    def cue_text(self, trial: TrialCondition) -> str:
+        """The trial's target in the cue event's words (``GENTLE 0.6 N``)."""
+
+    @abstractmethod
+    def screen(self, trial: TrialCondition) -> TrialScreen:
+        """What the participant screen and the experimenter's plot show of the trial."""
+
+    @abstractmethod
+    def aim(self, trial: TrialCondition, aid: bool) -> TrialAim:
+        """What a simulated participant is told at the cue (``aid``: a training trial with the live force aid)."""
+
+    # -- its words in the report ---------------------------------------------------------------------------------
+    @abstractmethod
+    def rule_words(self) -> str:
+        """Its success rule in a few words, one session's (``band ±10%, hold 1 s``)."""
+
+    @classmethod
+    @abstractmethod
+    def methods(cls, tasks: Sequence[Task], caps: Sequence[float]) -> str:
+        """The report's sentences defining its rule, over the analysed sessions' tasks of this kind and their trial
+        caps (sorted, distinct: several values are listed with ``/``)."""
+
+
+def listed(values: Sequence[float], unit: str) -> str:
+    """Distinct values as the report lists them: ``10 % / 15 %``."""
+    return " / ".join(f"{v:g}{unit}" for v in sorted(set(values)))
