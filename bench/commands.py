@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
-    for add in (_add_pipeline, _add_study, _add_report, _add_power, _add_stats, _add_gui):
+    for add in (_add_pipeline, _add_loop, _add_study, _add_report, _add_power, _add_stats, _add_gui):
         add(bsub)
 
 
@@ -91,6 +91,52 @@ def _pipeline_against(args: argparse.Namespace, say: Callable[[str], None]) -> i
     result = run_reference(tree, rounds=args.rounds, loop_seconds=args.loop_seconds or 0.0, ticks=args.ticks,
                            progress=say)
     print(json.dumps(result) if args.json else format_reference(result))
+    return 0
+
+
+# -- bench loop -----------------------------------------------------------------------------------------
+def _add_loop(bsub: argparse._SubParsersAction) -> None:
+    bl = add_command(bsub, "loop", "the 1 kHz loop beside a load (busy processes, a report, a GUI plotting): period "
+                     "distribution, missed slots, gap aborts; another version in the same run",
+                     "haptic-study bench loop --load busy=2,report,gui --reference-tree ../ref-loop\n"
+                     "haptic-study bench loop --load none --no-session --seconds 30")
+    bl.add_argument("--load", default="busy=2,report,gui", metavar="SPEC",
+                    help="the load beside the loop: busy=N (busy processes per CPU), report (a 10-participant "
+                         "study's report over and over), gui (the live ring plotted at 30 Hz), or none "
+                         "(default busy=2,report,gui)")
+    bl.add_argument("--no-session", action="store_true",
+                    help="measure --seconds of the loop alone (default: an experiment session of 20 trials)")
+    bl.add_argument("--seconds", type=positive_seconds("--seconds", 3600.0), default=None,
+                    help="with --no-session: how long each measurement (default 30); with a session: its cap "
+                         "(default 900)")
+    bl.add_argument("--reference-tree", default=None, metavar="TREE",
+                    help="a source tree of another version (e.g. a git worktree of main): measured in turn with ours, "
+                         "under the same load, in the same run")
+    bl.add_argument("--rounds", type=whole_number("--rounds", 1, 20), default=1,
+                    help="rounds of ours and the reference in turn (default 1)")
+    bl.add_argument("--study-db", default=None, metavar="PATH",
+                    help="the study the report load reports on (default: simulate a 10-participant study first)")
+    bl.add_argument("--json", action="store_true", help="print one JSON object")
+    bl.set_defaults(handler=_cmd_loop)
+
+
+def _cmd_loop(args: argparse.Namespace) -> int:
+    from bench.loop_bench import format_loop_bench, run_loop_bench
+    from bench.loop_load import parse_load
+
+    try:
+        load = parse_load(args.load)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    tree = args.reference_tree
+    if tree is not None and not os.path.isfile(os.path.join(tree, "study_app", "engine", "client.py")):
+        raise CliError(f"--reference-tree = {tree!r}: not a haptic-study source tree (no study_app/engine/client.py)")
+    if args.study_db is not None and not os.path.isfile(args.study_db):
+        raise CliError(f"--study-db = {args.study_db!r}: no such file")
+    seconds = args.seconds if args.seconds is not None else (30.0 if args.no_session else 900.0)
+    result = run_loop_bench(seconds=seconds, load=load, session=not args.no_session, reference_tree=tree,
+                            rounds=args.rounds, study_db=args.study_db, progress=lambda line: _say(f"{line} ..."))
+    print(json.dumps(result) if args.json else format_loop_bench(result))
     return 0
 
 

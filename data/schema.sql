@@ -129,6 +129,11 @@ CREATE TABLE IF NOT EXISTS recordings (
     t0_ns         INTEGER NOT NULL,             -- loop time of that record: session time = started_at_s + (t_ns - t0_ns) / 1e9
     snapshot_json TEXT NOT NULL,                -- the framework's state before its first record, and the loop's
     scales_json   TEXT NOT NULL,                -- counts per unit of the raw wrench columns (the codec's hint)
+    -- the run's blocks written whole so far, updated with each (a deleted last block is missing); not NULL: every
+    -- block's and chunk's crc32 covers its place (arm, session, run, block, chunk, ticks, records) then its data
+    -- (protocol/recording/integrity.py place_crc32).  NULL: a run recorded before the count (crc32 of data only);
+    -- a writer adds the column to an older file
+    n_blocks      INTEGER,
     PRIMARY KEY (session_id, segment)
 );
 
@@ -142,7 +147,8 @@ CREATE TABLE IF NOT EXISTS session_blocks (
     t_first_s   REAL NOT NULL,                  -- session clock of its first and last record
     t_last_s    REAL NOT NULL,
     data        BLOB NOT NULL,                  -- the records' columns, the poses and the replay log
-    crc32       INTEGER,                        -- version 4: zlib.crc32 of data (NULL: written before version 4)
+    crc32       INTEGER,                        -- version 4: zlib.crc32 of data (NULL: written before version 4), of its
+                                                -- place then its data in a run that counts its blocks (n_blocks)
     PRIMARY KEY (session_id, segment, block),
     FOREIGN KEY (session_id, segment) REFERENCES recordings (session_id, segment)
 );
@@ -177,6 +183,7 @@ CREATE TABLE IF NOT EXISTS arm_recordings (
     t0_ns         INTEGER NOT NULL,
     snapshot_json TEXT NOT NULL,
     scales_json   TEXT NOT NULL,
+    n_blocks      INTEGER,                      -- as recordings.n_blocks
     PRIMARY KEY (session_id, arm, segment)
 );
 CREATE TABLE IF NOT EXISTS arm_blocks (
@@ -223,5 +230,7 @@ CREATE TABLE IF NOT EXISTS withdrawals (
     removed_events   INTEGER NOT NULL,
     removed_blocks   INTEGER NOT NULL,          -- recorded blocks, and the 1 kHz records they held
     removed_records  INTEGER NOT NULL,
-    removed_samples  INTEGER NOT NULL           -- samples rows (what versions 1 and 2 recorded)
+    removed_samples  INTEGER NOT NULL,          -- samples rows (what versions 1 and 2 recorded)
+    rewritten        INTEGER                    -- 1 once the file's rewrite finished, 0 until then (withdraw again
+                                                -- finishes it; check says so); NULL: recorded before this column
 );

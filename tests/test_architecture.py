@@ -78,8 +78,11 @@ SIM = "pipeline.sim"
 SIM_IMPORTERS = (
     "pipeline.sim",
     "pipeline.assembly.engine",
+    "pipeline.assembly.loop_jobs",
+    "pipeline.assembly.latency",  # the latency's twin of the simulated rig
     "pipeline.assembly.sim_config",
     "study_app.engine.setup",
+    "study_app.engine.loop_process",
     "study_app.engine.sessions",
     "study_app.engine.commissioning",
     "study_app.cli.calibrate_cmds",

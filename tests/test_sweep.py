@@ -12,7 +12,10 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
+from analysis.planning.setting_labels import value_format
 from analysis.planning.sim_study import TrialRow
 from analysis.planning.sweep import (
     CACHE_FILE,
@@ -25,7 +28,8 @@ from analysis.planning.sweep import (
     t_interval,
 )
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
-from protocol.metrics import TRADE_PHASES, tested
+from protocol.metrics import TRADE_PHASES
+from protocol.metrics import tested as tested_metrics
 from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import sweep_run
@@ -168,7 +172,7 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]
     for name in ("sweep.csv", "sweep_summary.csv"):  # the report's names (they said success, rmse_n, max_ae_n)
         # the tested measures, TCT also censored at the cap, and the trade's phases (the front)
-        expected = {m.participant_exported for m in (*tested(), *TRADE_PHASES)} | {"tct_censored_s"}
+        expected = {m.participant_exported for m in (*tested_metrics(), *TRADE_PHASES)} | {"tct_censored_s"}
         assert set(pd.read_csv(out / name)["metric"]) == expected, name
     # the same command again: refused (the outputs are there) unless --force, which computes nothing new
     assert main(args) == 2
@@ -198,3 +202,27 @@ def test_run_set_is_stored_and_continue_with_other_settings_is_refused(tmp_path:
     assert main(["sessions", "--db", str(db)]) == 0
     assert "pipeline settings not the paper's (run --set): filter_window=20, slew_n_per_s=30 (session 1)" \
         in capsys.readouterr().out
+
+
+@given(st.lists(st.floats(min_value=1e-6, max_value=1e6), min_size=1, max_size=8))
+def test_labels_tell_apart_every_setting_and_keep_g_where_it_does(values: list[float]) -> None:
+    fmt = value_format(values)
+    assert len({fmt(v) for v in values}) == len(set(values))
+    if len({f"{v:g}" for v in values}) == len(set(values)):
+        assert [fmt(v) for v in values] == [f"{v:g}" for v in values]
+
+
+@pytest.mark.parametrize(("grid", "shown"), [("f_scale=7,7.0000001", ("| 7 (paper) |", "| 7.0000001 |")),
+                                             ("slew=123456,123456.5", ("| 123456 |", "| 123456.5 |"))])
+def test_settings_below_the_printed_precision_or_far_from_the_paper(tmp_path: Path, capsys, grid: str,
+                                                                    shown: tuple[str, str]) -> None:
+    # 7.0000001 read '7' beside 7 in every table; a slew near 123456 N/s put the figure's 'paper' label (50 N/s)
+    # millions of pixels away, and the renderer failed after the cells were run
+    (tmp_path / "short.toml").write_text(SHORT)
+    out = tmp_path / "out"
+    assert main(["sweep", "--set", grid, "--participants", "1", "--studies", "1", "--jobs", "1",
+                 "--protocol", str(tmp_path / "short.toml"), "--out", str(out)]) == 0
+    said = capsys.readouterr().out
+    for cell in shown:
+        assert cell in said and cell in (out / "sweep.md").read_text(encoding="utf-8")
+    assert (out / "sweep.png").is_file() and (out / "sweep_front.png").is_file()

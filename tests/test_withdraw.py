@@ -173,8 +173,8 @@ def test_the_record_keeps_only_the_code_time_reason_and_counts(withdrawn) -> Non
     finally:
         c.close()
     assert cols == ["code", "withdrawn_at", "reason", "removed_sessions", "removed_trials", "removed_events",
-                    "removed_blocks", "removed_records", "removed_samples"]
-    assert (w.code, w.reason) == (GONE, "withdrew consent by e-mail")
+                    "removed_blocks", "removed_records", "removed_samples", "rewritten"]
+    assert (w.code, w.reason, w.rewritten) == (GONE, "withdrew consent by e-mail", 1)  # the rewrite finished
     assert (w.removed_sessions, w.removed_trials, w.removed_events, w.removed_blocks, w.removed_records) == (
         len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records) and fp.trials == 4 and fp.records > 1000
     out = withdrawn["out"]
@@ -457,6 +457,10 @@ def test_a_withdrawal_killed_between_the_removal_and_the_rewrite_is_finished_by_
     assert [r[0] for r in _rows(copy, "SELECT code FROM withdrawals")] == [GONE]  # the removal was committed
     assert _rows(copy, "SELECT COUNT(*) FROM participants WHERE code = ?", GONE) == [(0,)]
     assert _rows(copy, "PRAGMA freelist_count")[0][0] > 0  # ... and the file not rewritten
+    # check does not call it done (it said "erased ... No problem found" while their bytes were in the file)
+    assert main(["check", "--db", str(copy)]) == 1
+    said = capsys.readouterr().out
+    assert f"withdrawal of {GONE} incomplete" in said and "run withdraw again" in said, said
     assert main(["withdraw", "--db", str(copy), "--participant", GONE, "--reason", "x", "--yes", GONE]) == 0
     out = capsys.readouterr().out
     assert "still held pages the withdrawal's rewrite drops" in out and "the rewrite is finished now" in out, out
@@ -467,3 +471,26 @@ def test_a_withdrawal_killed_between_the_removal_and_the_rewrite_is_finished_by_
     capsys.readouterr()
     _refused(capsys, copy, "withdraw", "--db", str(copy), "--participant", GONE, "--reason", "again", "--yes", GONE,
              expect="already withdrew")  # finished: a third run has nothing to do
+
+
+def test_a_finished_withdrawal_is_done_whatever_the_clocks_said(withdrawn, tmp_path, capsys) -> None:
+    """Sessions added while the wall clock ran behind (started before the withdrawal's time) and free pages of
+    their own: a second withdraw rewrote the file and said the rewrite had been unfinished; the file's own mark
+    says it finished."""
+    db = tmp_path / "later.db"
+    shutil.copy(withdrawn["db"], db)
+    c = sqlite3.connect(db)
+    try:
+        assert c.execute("SELECT rewritten FROM withdrawals WHERE code = ?", (GONE,)).fetchone() == (1,)
+        c.execute("UPDATE withdrawals SET withdrawn_at = '2999-01-01T00:00:00+00:00'")  # every session "before" it
+        c.execute("CREATE TABLE scratch (x BLOB)")  # a later writer's free pages
+        c.executemany("INSERT INTO scratch VALUES (?)", [(bytes(4096),)] * 20)
+        c.commit()
+        c.execute("DROP TABLE scratch")
+        c.commit()
+        c.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        assert c.execute("PRAGMA freelist_count").fetchone()[0] > 0
+    finally:
+        c.close()
+    _refused(capsys, db, "withdraw", "--db", str(db), "--participant", GONE, "--reason", "again", "--yes", GONE,
+             expect="already withdrew")

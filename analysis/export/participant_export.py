@@ -85,7 +85,10 @@ _DESCRIBED: dict[str, tuple[str, str, str]] = {  # column -> (description, unit,
     "n_records": ("1 kHz records the block holds", "count", "integer"),
     "t_first_s": ("session-clock time of the block's first record", "s", "number"),
     "t_last_s": ("session-clock time of the block's last record", "s", "number"),
-    "crc32": ("CRC-32 of the block's bytes (empty: written before schema version 4)", "", "integer"),
+    "crc32": ("CRC-32 of the block's place (arm, session, run, block, chunk, ticks, records) then its bytes in a run "
+              "that counts its blocks, else of its bytes (empty: written before schema version 4)", "", "integer"),
+    "n_blocks": ("blocks the run wrote whole (empty: a run recorded before the count, whose checksums cover the "
+                 "blocks' bytes only)", "count", "integer"),
     "scope": ("what the lease covers ('session N')", "", "text"),
     "owner": ("random token of the command holding the lease", "", "text"),
     "pid": ("process holding the lease", "", "integer"),

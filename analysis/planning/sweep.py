@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from analysis.planning.setting_labels import setting_formats
 from analysis.planning.sim_study import (
     MEASURE_LABELS,
     SIM_METRICS,
@@ -214,9 +215,10 @@ def summary_lines(summary: pd.DataFrame, swept: Sequence[str]) -> list[str]:
     """The summary as a Markdown table: one row per setting and measure (mean [95 % CI] over studies)."""
     head = [*swept, "measure", "OFF", "ON", "change ON/OFF", "studies", "trials OFF / ON"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    fmts = setting_formats(summary, swept)
     for r in summary.to_dict("records"):
         mark = " (paper)" if r["paper"] else ""
-        cells = [f"{float(r[k]):g}{mark if i == 0 else ''}" for i, k in enumerate(swept)]
+        cells = [f"{fmts[k](r[k])}{mark if i == 0 else ''}" for i, k in enumerate(swept)]
         cells += [METRICS[r["metric"]], _ci(r, "off", r["metric"]), _ci(r, "on", r["metric"]),
                   _ci(r, "change", r["metric"]), str(r["n_studies"]), f"{r['n_trials_off']} / {r['n_trials_on']}"]
         lines.append("| " + " | ".join(cells) + " |")

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import matplotlib
@@ -23,6 +23,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
+from analysis.planning.setting_labels import setting_formats
 from analysis.planning.sim_study import MEASURE_LABELS, SIM_METRICS
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
 from protocol.metrics import TRADE_PHASES
@@ -44,8 +45,8 @@ def _log_x(values: Sequence[float]) -> bool:
     return min(values) > 0 and max(values) / min(values) >= 10
 
 
-def _label(settings: Mapping[str, Any], names: Sequence[str]) -> str:
-    return ", ".join(f"{k}={float(settings[k]):g}" for k in names)
+def _label(settings: Mapping[str, Any], names: Sequence[str], fmts: Mapping[str, Callable[[Any], str]]) -> str:
+    return ", ".join(f"{k}={fmts[k](settings[k])}" for k in names)
 
 
 def _errorbar(ax: Any, x: Sequence[float], sel: pd.DataFrame, col: str, **kw: Any) -> None:
@@ -70,11 +71,12 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
     for spare in axes.flat[len(_PANELS):]:  # an odd number of measures: the last row's second panel is empty
         spare.set_visible(False)
     groups = (list(summary.groupby(others, sort=True)) if others else [((), summary)])
+    fmts = setting_formats(summary, swept)
     for ax, (metric, label) in zip(axes.flat, _PANELS, strict=False):
         for g_i, (g_key, grp) in enumerate(groups):
             sel = grp[grp["metric"] == metric].sort_values(x_name)
             tag = "" if not others else " · " + _label(
-                dict(zip(others, g_key if isinstance(g_key, tuple) else (g_key,), strict=True)), others)
+                dict(zip(others, g_key if isinstance(g_key, tuple) else (g_key,), strict=True)), others, fmts)
             for mode, dx in (("off", 0.985), ("on", 1.015)):
                 x = [float(v) * (dx if _log_x(xs) else 1.0) for v in sel[x_name]]
                 _errorbar(ax, x, sel, mode, color=MODE_COLORS[mode], marker=MODE_MARKERS[mode],
@@ -84,17 +86,20 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
                         if math.isfinite(float(yi)):
                             ax.annotate(f"n={int(n)}", (xi, float(yi)), xytext=(3, 3 if mode == "on" else -8),
                                         textcoords="offset points", fontsize=5.5, color=MODE_COLORS[mode])
-        if x_name in paper:
-            ax.axvline(float(paper[x_name]), color="#777777", linewidth=0.8, linestyle=(0, (2, 2)), zorder=0)
-            ax.annotate("paper", (float(paper[x_name]), 1.0), xycoords=("data", "axes fraction"), fontsize=6.5,
-                        color="#555555", ha="left", va="top", xytext=(2, -1), textcoords="offset points")
         if _log_x(xs):
             ax.set_xscale("log")
             ax.set_xlim(xs[0] / 1.5, xs[-1] * 1.5)
         elif len(xs) > 1:
             pad = (xs[-1] - xs[0]) * 0.08
             ax.set_xlim(xs[0] - pad, xs[-1] + pad)
-        ax.set_xticks(xs, [f"{v:g}" for v in xs])
+        x_lo, x_hi = ax.get_xlim()
+        # the paper's setting is marked only inside the axis: a grid far from it (slew near 123456 N/s) would put
+        # its label millions of pixels away, beyond what the renderer can draw
+        if x_name in paper and x_lo <= float(paper[x_name]) <= x_hi:
+            ax.axvline(float(paper[x_name]), color="#777777", linewidth=0.8, linestyle=(0, (2, 2)), zorder=0)
+            ax.annotate("paper", (float(paper[x_name]), 1.0), xycoords=("data", "axes fraction"), fontsize=6.5,
+                        color="#555555", ha="left", va="top", xytext=(2, -1), textcoords="offset points")
+        ax.set_xticks(xs, [fmts[x_name](v) for v in xs])
         ax.minorticks_off()
         ax.set_xlabel(x_name)
         ax.set_ylabel(label)
@@ -124,6 +129,7 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     ok = summary[summary["metric"] == verdict].reset_index(drop=True)
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
+    fmts = setting_formats(summary, swept)
     # each setting its own colour, named in the legend: labels beside points collide where the points crowd
     colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, max(len(y_rows), 1)))
     for i, ((_, t), (_, r), (_, s)) in enumerate(zip(y_rows.iterrows(), x_rows.iterrows(), ok.iterrows(),
@@ -133,7 +139,7 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
         yerr = [[_half(t, "low")], [_half(t, "high")]]
         star = bool(t["paper"])
         success = f", success {float(s['on']):.0%}" if math.isfinite(float(s["on"])) else ""
-        text = (f"{float(t[swept[0]]):g}" if one else _label(t, swept)) + (" (paper)" if star else "") + success
+        text = (fmts[swept[0]](t[swept[0]]) if one else _label(t, swept, fmts)) + (" (paper)" if star else "") + success
         ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=colours[i], marker="*" if star else "o",
                     markersize=9 if star else 5, capsize=2, linewidth=0.8, label=text)
         pts.append((x, y))

@@ -17,7 +17,7 @@ from analysis.reading.load import Progress, StudyData, connect_readonly, recorde
 from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
 from protocol.metrics import METRICS, MetricValue, stored, windowed
-from protocol.study.records import Outcome, TrialRecord
+from protocol.study.records import Outcome, TrialRecord, disagreement
 from protocol.tasks.base import Task
 from protocol.tasks.window import ERROR_WINDOWS, TrialMetrics
 
@@ -25,10 +25,6 @@ __all__ = ["ERROR_WINDOWS", "TCT_POLICIES", "MetricOptions", "TrialTable", "comp
 
 #: How a failed trial enters TCT: left out, or censored at the trial cap (the default, :class:`MetricOptions`).
 TCT_POLICIES = ("successful", "censored")
-
-#: Relative agreement required between recomputed and stored metrics (summation order only).
-_AGREE_REL = 1e-9
-
 
 @dataclass(frozen=True, slots=True)
 class MetricOptions:
@@ -106,12 +102,6 @@ class TrialTable:
         return out
 
 
-def _close(a: float, b: float) -> bool:
-    if math.isnan(a) and math.isnan(b):
-        return True
-    return abs(a - b) <= _AGREE_REL * max(abs(a), abs(b), 1e-12)
-
-
 @dataclass(frozen=True, slots=True)
 class _Check:
     """One analysed trial to recompute: its stored record, its session's task and trial cap, where its samples are."""
@@ -138,19 +128,6 @@ def _nan(v: MetricValue) -> float:
     return math.nan if v is None else float(v)
 
 
-def _agrees(live: TrialMetrics, stored_live: TrialRecord) -> bool:
-    """The metrics recomputed over the cue window are the ones stored during the session: the outcome, and every
-    stored metric the file has a value for (a metric defined after the file was written has none; NaN is stored
-    as NULL, and an undefined TCT is None on both sides)."""
-    if live.success != stored_live.success:
-        return False
-    for m in stored():
-        kept = stored_live.metrics.get(m.name)
-        if kept is not None and not _close(_nan(live.values.get(m.name)), float(kept)):
-            return False
-    return True
-
-
 def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed]:
     """Recompute the metrics of some trials of one database (runs in a worker process)."""
     out: list[_Recomputed] = []
@@ -164,7 +141,7 @@ def _chunk(database: str, checks: list[_Check], window: str) -> list[_Recomputed
             # every window, for the report's sensitivity table; the live metrics are the cue window's
             every = {w: c.task.judge(t_ns, force, c.stored, max_trial_s=c.max_trial_s, window=w)
                      for w in ERROR_WINDOWS}
-            out.append(_Recomputed(c.row, every[window], _agrees(every["cue"], c.stored), every))
+            out.append(_Recomputed(c.row, every[window], not disagreement(every["cue"], c.stored), every))
     finally:
         conn.close()
     return out

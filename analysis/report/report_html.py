@@ -25,6 +25,7 @@ from analysis.report.html_parts import fmt_p, fmt_w, plural
 from analysis.report.html_parts import html_table as _html_table
 from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
+from analysis.report.latency_methods import latency_paragraph
 from analysis.report.measures import figure_groups, mean_words, secondary, secondary_note, windowed_words
 from analysis.stats.aggregate import PRIMARY_METRICS, mean_sd
 from analysis.stats.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
@@ -316,6 +317,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         "No p-value in this report comes from trials pooled as if independent.</p>"
         + report_tct.tct_methods(within, options, confidence)
         + report_sections.methods_within(within, options, confidence)
+        + latency_paragraph(study)
     )
 
 

@@ -18,6 +18,11 @@ timer slack (``prctl``)     nothing                        about 50 µs more med
 ``SCHED_FIFO`` (loop and    normal priority; the loop's    the loop can be preempted by any process: a busy
 helper threads)             ``scheduling`` says why (GUI)  machine shows in the loop's jitter figures
 usable CPUs (affinity)      ``os.cpu_count()``             a CPU mask (``taskset``) is not honoured
+the loop's process pinned   nothing                        the scheduler places the loop on any CPU (it may
+to one CPU                                                  migrate; the health panel says "any CPU")
+a process started with a    Windows: not done (None)       the 1 kHz loop runs in a thread of the study
+socket open in it                                           engine's process and shares its interpreter lock
+(``pass_fds``)                                              with the engine's other work, as before
 worker processes            ``spawn``                      each worker imports the product afresh (slower
 (``fork``)                                                  start of a parallel study)
 die with the parent         nothing                        a killed command leaves its worker processes to

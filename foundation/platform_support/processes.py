@@ -8,14 +8,19 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
+import subprocess
 import sys
 import threading
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from foundation.platform_support.system import c_library, on_linux
 
-__all__ = ["boot_id", "die_with", "die_with_parent", "kill_hard", "process_exists", "process_stat_fields",
-           "signal_name", "worker_context", "worker_pool"]
+__all__ = ["boot_id", "die_with", "die_with_parent", "exit_description", "ignore_interrupts", "kill_hard",
+           "process_exists",
+           "process_stat_fields", "signal_name", "socket_handover", "spawn_with_socket", "worker_context",
+           "worker_pool"]
 
 
 if sys.platform != "win32":
@@ -40,13 +45,14 @@ else:
         return mp.get_context("spawn")
 
 
-def die_with_parent() -> bool:
-    """Linux: the kernel SIGKILLs this process when its parent dies (``PR_SET_PDEATHSIG``); False elsewhere."""
+def die_with_parent(on: bool = True) -> bool:
+    """Linux: the kernel SIGKILLs this process when its parent dies (``PR_SET_PDEATHSIG``; ``on=False`` withdraws
+    it); False elsewhere."""
     if sys.platform == "win32" or not on_linux():
         return False
     try:
         PR_SET_PDEATHSIG = 1
-        return bool(c_library().prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0)
+        return bool(c_library().prctl(PR_SET_PDEATHSIG, signal.SIGKILL if on else 0, 0, 0, 0) == 0)
     except (OSError, AttributeError):  # pragma: no cover - no libc
         return False
 
@@ -73,6 +79,30 @@ def worker_pool(processes: int, context: Any = None) -> Any:
     return ctx.Pool(processes, initializer=die_with, initargs=(os.getpid(),))
 
 
+def socket_handover() -> bool:
+    """Whether :func:`spawn_with_socket` can start a process with a socket open in it (POSIX: yes; Windows: no)."""
+    return sys.platform != "win32"
+
+
+def spawn_with_socket(argv: Sequence[str], sock: socket.socket,
+                      env: dict[str, str] | None = None) -> subprocess.Popen[bytes] | None:
+    """Start ``argv`` with ``sock`` open in it; None where a socket cannot be handed to a new process this way.
+
+    POSIX: the socket's descriptor stays open in the child under the same number (``pass_fds``); the child
+    adopts it with ``socket.socket(fileno=N)`` (append N to ``argv`` yourself).  Windows hands sockets over
+    differently (``socket.share`` with the child's id): not done, so the caller keeps the work in its own process.
+    """
+    if sys.platform == "win32" or not socket_handover():
+        return None
+    return subprocess.Popen(list(argv), pass_fds=(sock.fileno(),), env=env)
+
+
+def ignore_interrupts() -> None:
+    """Ignore Ctrl-C (``SIGINT``) in this process: it ends when the process that drives it says so, or goes away
+    (a terminal's Ctrl-C reaches every process of its group at once)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def kill_hard(pid: int) -> None:
     """End process ``pid`` at once, with no clean-up -- as ``kill -9`` or a crash would."""
     if sys.platform == "win32":
@@ -88,6 +118,15 @@ def signal_name(signum: int) -> str:
         return signal.Signals(signum).name
     except ValueError:
         return "an unknown signal"
+
+
+def exit_description(exitcode: int | None) -> str:
+    """How a process ended, for a lab's bug report: ``killed by SIGSEGV (signal 11)``, ``exit status 1``."""
+    if exitcode is None:
+        return "still running"
+    if exitcode < 0:
+        return f"killed by {signal_name(-exitcode)} (signal {-exitcode})"
+    return f"exit status {exitcode}"
 
 
 def process_exists(pid: int) -> bool:

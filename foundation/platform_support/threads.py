@@ -12,8 +12,8 @@ from collections.abc import Callable
 
 from foundation.platform_support.system import c_library, on_linux
 
-__all__ = ["gil_keeping_pread", "open_schedstat", "set_fifo_priority", "set_timer_slack_ns", "thread_ids",
-           "usable_cpu_count"]
+__all__ = ["gil_keeping_pread", "open_schedstat", "pin_to_cpu", "set_fifo_priority", "set_timer_slack_ns",
+           "thread_ids", "usable_cpu_count", "usable_cpus"]
 
 
 def set_timer_slack_ns(slack_ns: int = 1) -> bool:
@@ -49,6 +49,28 @@ def usable_cpu_count() -> int:
     if sys.platform != "win32" and hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
+
+
+def usable_cpus() -> list[int]:
+    """The CPUs this process may run on, in order: its affinity mask (Linux), else ``0 .. cpu_count - 1``."""
+    if sys.platform != "win32" and hasattr(os, "sched_getaffinity"):
+        return sorted(os.sched_getaffinity(0))
+    return list(range(os.cpu_count() or 1))
+
+
+def pin_to_cpu(cpu: int) -> str:
+    """Run the calling process (every thread it starts afterwards too) on CPU ``cpu`` only; what it got.
+
+    Returns ``"CPU <n>"``, or ``"any CPU (…why…)"`` where the OS has no affinity call (Windows, macOS: the
+    scheduler places the loop as it likes) or refuses the mask.
+    """
+    if sys.platform == "win32" or not hasattr(os, "sched_setaffinity"):
+        return "any CPU (no CPU affinity on this platform)"
+    try:
+        os.sched_setaffinity(0, {int(cpu)})
+    except (OSError, ValueError) as exc:
+        return f"any CPU ({getattr(exc, 'strerror', None) or exc})"
+    return f"CPU {int(cpu)}"
 
 
 def gil_keeping_pread(size: int = 128) -> Callable[[int], bytes] | None:

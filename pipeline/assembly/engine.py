@@ -30,7 +30,7 @@ from pipeline.runtime.watchdog import WatchdogConfig
 if TYPE_CHECKING:
     from pipeline.sim.rig import SimRigConfig
 
-__all__ = ["Engine", "EngineConfig", "build_hardware_engine", "build_sim_engine"]
+__all__ = ["Engine", "EngineConfig", "arm_devices", "build_hardware_engine", "build_sim_engine"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +131,15 @@ class Engine:
             self.calibrations = {name: self.calibration}
 
 
+def arm_devices(eng: Any, arm: str) -> Any:
+    """An arm's devices by name ("": the first) of an assembled engine (this process's :class:`Engine`, or the
+    stand-in for one in the loop's own process, :class:`pipeline.assembly.remote_engine.RemoteEngine`): the rig itself
+    for the first arm (it forwards to it), else the simulated rig's own rig of that arm or the real rig's arm."""
+    if not arm or arm == next(iter(eng.frameworks)):
+        return eng.rig
+    return eng.rig.rig(arm) if eng.simulated else eng.rig.arm(arm)
+
+
 def build_sim_engine(
     config: EngineConfig,
     *,
@@ -210,6 +219,7 @@ def build_hardware_engine(
     ring_seconds: float = 30.0,
     on_open: Any = None,
     open_haptic: Any = None,
+    jaws: bool = True,
 ) -> Engine:
     """Open the real rig of a :class:`pipeline.settings.hardware.HardwareConfig` and assemble framework and loop.
 
@@ -222,7 +232,9 @@ def build_hardware_engine(
     calibration file and tool, and has its own framework and ring; the loop follows the file's ``fault_policy``.
     Feedback starts off: the experimenter turns it on.  ``on_open(name)`` is
     called before each device is opened, and ``open_haptic(settings, clock)``, if given, opens every arm's haptic
-    device in place of its model's backend (see :func:`pipeline.assembly.real_rig.build_real_rig`).
+    device in place of its model's backend (see :func:`pipeline.assembly.real_rig.build_real_rig`).  ``jaws=False``
+    leaves the jaw actuators to whoever drives the loop (the study engine's process opens them when the loop runs
+    in a process of its own: the loop needs only the stylus buttons).
 
     Raises
     ------
@@ -238,7 +250,7 @@ def build_hardware_engine(
     records = [f.tool(a.calibration_tool) if f is not None else None for a, f in zip(arms, files, strict=True)]
     tips = {a.name: r.tcp.tip_in_flange_m if r is not None and r.tcp is not None else None
             for a, r in zip(arms, records, strict=True)}
-    rig = build_real_rig(hardware, clk, on_open=on_open, arm_tips_m=tips, open_haptic=open_haptic)
+    rig = build_real_rig(hardware, clk, on_open=on_open, arm_tips_m=tips, open_haptic=open_haptic, with_jaw=jaws)
     pipelines: list[tuple[HapticFramework, RingBuffer]] = []
     calibrations: list[PayloadCalibration] = []
     for a, r, dev in zip(arms, records, rig.real_arms, strict=True):

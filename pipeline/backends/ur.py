@@ -10,8 +10,11 @@ silent the sample simply stops being refreshed, so the loop's watchdog latches
 exponential backoff.
 
 Why every connection attempt is preceded by a plain TCP probe: ur_rtde holds
-the GIL while it connects, so dialling a dead address from ur_rtde would
-freeze every Python thread, the 1 kHz loop included, until the TCP timeout.
+the GIL while it connects (40 ms on loopback, half a second against a slow
+controller), so dialling a dead address from ur_rtde would freeze every
+Python thread of its process until the TCP timeout.  (The rig runs this
+monitor in a process of its own, :mod:`pipeline.backends.ur_process`, so its
+connects never stall the 1 kHz loop.)
 The probe (``socket.create_connection`` with a timeout releases the GIL) makes
 sure the controller answers before ur_rtde is asked to.  Reconnects also wait
 at least ``min_backoff_s`` (200 ms) after the loss, by which time the watchdog

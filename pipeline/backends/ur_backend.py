@@ -3,8 +3,10 @@
 Every UR model (:mod:`pipeline.devices.registry`: the UR3 on a CB3 controller, the UR3e) is opened the same way,
 over RTDE with ur_rtde; what differs is the controller's own rate, which the model gives and
 :class:`pipeline.backends.ur.RtdeLink` applies (``frequency_hz = -1``).  The pose stream is
-:class:`pipeline.backends.ur.UrRtdeRobot` (read only); the servo, :class:`pipeline.backends.ur_control.UrRtdeServo`,
-is imported only when teleoperation takes control of the robot.
+:class:`pipeline.backends.ur.UrRtdeRobot` (read only), run in a process of its own
+(:class:`pipeline.backends.ur_process.UrPoseProcess`: ur_rtde holds the interpreter lock while it connects, which
+must not stall the loop); the servo, :class:`pipeline.backends.ur_control.UrRtdeServo`, is imported only when
+teleoperation takes control of the robot.
 """
 
 from __future__ import annotations
@@ -12,7 +14,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.backends.ur import RtdeLink, UrRtdeRobot
+from pipeline.backends.ur import RtdeLink
+from pipeline.backends.ur_process import UrPoseProcess
 from pipeline.core.clock import Clock
 from pipeline.devices.interfaces import Robot, TcpServo
 from pipeline.devices.registry import RobotConnection, RobotModel, ServoConnection
@@ -32,8 +35,9 @@ class UrBackend:
         return RtdeLink(settings.host, settings.frequency_hz, self.model, clock, settings.connect_timeout_s)
 
     def open_robot(self, settings: RobotConnection, clock: Clock, tcp_correction_m: Vec3) -> Robot:
-        """Connect read-only (the robot runs its own program); poses at the calibrated tip."""
-        return UrRtdeRobot(self.link(settings, clock), tcp_correction_m=tcp_correction_m)
+        """Connect read-only (the robot runs its own program), from a process of its own; poses at the calibrated
+        tip."""
+        return UrPoseProcess(self.link(settings, clock), tcp_correction_m=tcp_correction_m)
 
     def open_servo(self, settings: RobotConnection, servo: ServoConnection, clock: Clock,
                    control_factory: Callable[[str, float], Any] | None) -> TcpServo:

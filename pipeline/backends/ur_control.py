@@ -52,7 +52,8 @@ class UrRtdeServo:
     control_timeout_s
         Bound of ``RTDEControlInterface`` construction (it uploads and starts a script).
     lookahead_s, gain
-        ``servoL`` look-ahead time (0.03–0.2 s) and proportional gain (100–2000).
+        ``servoL`` look-ahead time (0.03–0.2 s; its lag is about its own length, so the smallest by default: the
+        robot's share of the latency a participant feels, docs/hardware-setup.md) and proportional gain (100–2000).
     target_timeout_s
         No new target for this long while servoing → ``servoStop`` and an error.
     stop_deceleration_m_s2
@@ -67,7 +68,7 @@ class UrRtdeServo:
         link: RtdeLink,
         *,
         control_timeout_s: float = 5.0,
-        lookahead_s: float = 0.1,
+        lookahead_s: float = 0.03,
         gain: float = 300.0,
         target_timeout_s: float = 0.05,
         stop_deceleration_m_s2: float = 10.0,

@@ -13,11 +13,12 @@ import os
 import time
 from typing import Protocol, runtime_checkable
 
-from foundation.platform_support.threads import set_fifo_priority, set_timer_slack_ns
+from foundation.platform_support.threads import pin_to_cpu, set_fifo_priority, set_timer_slack_ns, usable_cpus
 
 __all__ = [
-    "Clock", "MonotonicClock", "VirtualClock", "collect_garbage", "manual_garbage_collection",
-    "prepare_helper_thread", "prepare_realtime_thread", "realtime_env_problem", "set_timer_slack_ns",
+    "Clock", "MonotonicClock", "VirtualClock", "collect_garbage", "loop_cpu_problem", "manual_garbage_collection",
+    "pin_loop_process", "prepare_helper_thread", "prepare_realtime_thread", "realtime_env_problem",
+    "set_timer_slack_ns",
 ]
 
 
@@ -108,6 +109,47 @@ def realtime_env_problem() -> str | None:
         return None
     return (f"{REALTIME_ENV} = {raw!r}: must be 0 (the loop at normal priority) or 1 (SCHED_FIFO, the default; "
             "also when unset)")
+
+
+#: The CPU the loop's own process runs on (a number), or ``none`` for any; unset: the last CPU this process may use.
+LOOP_CPU_ENV = "HAPTIC_STUDY_LOOP_CPU"
+
+
+def loop_cpu_problem() -> str | None:
+    """What is wrong with :data:`LOOP_CPU_ENV` in one line, or None (unset, empty, ``none`` or a CPU we may use)."""
+    raw = os.environ.get(LOOP_CPU_ENV, "").strip()
+    if raw in ("", "none"):
+        return None
+    cpus = usable_cpus()
+    if not raw.isdigit() or int(raw) not in cpus:
+        return f"{LOOP_CPU_ENV} = {raw!r}: must be 'none' or one of the CPUs this process may use ({_cpu_list(cpus)})"
+    return None
+
+
+def _cpu_list(cpus: list[int]) -> str:
+    return f"{cpus[0]}-{cpus[-1]}" if len(cpus) > 1 and cpus == list(range(cpus[0], cpus[-1] + 1)) else \
+        ", ".join(str(c) for c in cpus)
+
+
+def pin_loop_process() -> str:
+    """Run the loop's own process on one CPU; say which, among which (``"CPU 1 of 0-1"``), or why not.
+
+    The choice: :data:`LOOP_CPU_ENV` if set, else the last CPU this process may use -- on Linux CPU 0 serves most
+    interrupts and housekeeping.  Pinned, the loop keeps its caches and never migrates; under ``SCHED_FIFO`` it
+    preempts whatever else runs on that CPU the moment its sleep ends.  With one CPU there is nothing to choose.
+    Other programs still run on that CPU (only the kernel's ``isolcpus`` keeps them off).
+    """
+    cpus = usable_cpus()
+    raw = os.environ.get(LOOP_CPU_ENV, "").strip()
+    if raw == "none":
+        return f"any CPU ({LOOP_CPU_ENV}=none)"
+    if len(cpus) < 2 and not raw:
+        return "any CPU (this process may use one only)"
+    cpu = int(raw) if raw.isdigit() and int(raw) in cpus else cpus[-1]
+    got = pin_to_cpu(cpu)
+    return f"{got} of {_cpu_list(cpus)}" if got.startswith("CPU") else got
+
+
 #: SCHED_FIFO priority of the loop thread: above every normal thread, far below the kernel's own (50+).
 REALTIME_PRIORITY = 20
 #: SCHED_FIFO priority of the other threads of the loop's process (:func:`prepare_helper_thread`): below the loop.

@@ -121,6 +121,9 @@ class HapticLoop(PacedTicks):
         ``"both"`` or ``"independent"`` (:data:`FAULT_POLICIES`).
     """
 
+    #: Where the loop runs, as :class:`pipeline.runtime.loop_view.LoopView` says it: a thread of its driver's process.
+    runs_in = "thread"
+
     def __init__(
         self,
         rig: Rig,

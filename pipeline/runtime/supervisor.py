@@ -1,6 +1,7 @@
-"""Watching the haptic loop from outside: a dead loop thread or a tick counter that stops is a latched fault.
+"""Watching the haptic loop from outside: a dead loop (thread or process) or a tick counter that stops is a latched
+fault.
 
-The loop cannot report its own death: a thread killed by an exception emits
+The loop cannot report its own death: a thread killed by an exception (or a process killed by a signal) emits
 nothing, and a frozen one nothing until it runs again.  Whoever drives it
 (the study engine's driver thread, every ~10 ms) calls
 :meth:`LoopSupervisor.check`; when the loop thread has died, or has not
@@ -17,24 +18,25 @@ stops the arm when no target has come for 50 ms (:mod:`pipeline.backends.ur_cont
 from __future__ import annotations
 
 from pipeline.core.clock import Clock, MonotonicClock
-from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import LoopEvent
+from pipeline.runtime.loop_view import LoopView
 
 __all__ = ["LoopSupervisor"]
 
 
 class LoopSupervisor:
-    """Checks a loop that runs in its own thread (:meth:`pipeline.runtime.loop.HapticLoop.start`).
+    """Checks a loop that runs in its own thread (:meth:`pipeline.runtime.loop.HapticLoop.start`) or process
+    (:class:`pipeline.assembly.loop_client.RemoteLoop`).
 
     Parameters
     ----------
     loop
-        The loop.
+        The loop (its ``runs_in`` names what died in the report: its thread or its process).
     clock
         Wall clock to time the tick counter by (the loop's own clock stops with it).
     """
 
-    def __init__(self, loop: HapticLoop, clock: Clock | None = None) -> None:
+    def __init__(self, loop: LoopView, clock: Clock | None = None) -> None:
         self.loop = loop
         self.clock: Clock = clock or MonotonicClock()
         self._stall_ns = int(loop.watchdog.loop_stall_s * 1e9)
@@ -58,9 +60,9 @@ class LoopSupervisor:
             self._seen_ns = now
             return None
         if not alive:
-            self.dead = loop.crash or "the loop thread ended"
-            return loop.fail_safe(f"the haptic loop thread died ({self.dead}); the haptic device's command watchdog "
-                                  "dropped the force to zero", thread_dead=True)
+            self.dead = loop.crash or f"the loop {loop.runs_in} ended"
+            return loop.fail_safe(f"the haptic loop {loop.runs_in} died ({self.dead}); the haptic device's command "
+                                  "watchdog dropped the force to zero", thread_dead=True)
         quiet = now - self._seen_ns
         if quiet > self._stall_ns and not self._stall_reported:
             self._stall_reported = True

@@ -108,7 +108,9 @@ class TeleopSettings:
     stylus_max_age_s: float = 0.02
     pose_max_age_s: float = 0.05
     max_tracking_error_m: float = 0.05
-    lookahead_s: float = 0.1
+    #: servoL's look-ahead: its lag is about its own length (UR client library #86: ~34 ms at 0.03 s), the robot's
+    #: share of the hand → tip latency (docs/hardware-setup.md, "End-to-end latency"): the smallest allowed.
+    lookahead_s: float = 0.03
     gain: float = 300.0
     control_timeout_s: float = 5.0
 
@@ -490,7 +492,7 @@ def _teleop(f: Fields, v: Any) -> TeleopSettings:
         pose_max_age_s=f.number("teleop.pose_max_age_s", t.get("pose_max_age_s", 0.05), lo=0.0, hi=1.0),
         max_tracking_error_m=f.number("teleop.max_tracking_error_m", t.get("max_tracking_error_m", 0.05), lo=0.0,
                                       hi=0.2),
-        lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.1), lo=0.03, hi=0.2, lo_open=False,
+        lookahead_s=f.number("teleop.lookahead_s", t.get("lookahead_s", 0.03), lo=0.03, hi=0.2, lo_open=False,
                              note="s (servoL's look-ahead time)"),
         gain=f.number("teleop.gain", t.get("gain", 300.0), lo=100.0, hi=2000.0, lo_open=False,
                       note="(servoL's proportional gain)"),

@@ -347,7 +347,9 @@ def _chunks(blob: bytes) -> list[bytes]:
 @dataclass(frozen=True, slots=True)
 class BlockRow:
     """One ``session_blocks`` row as read (:meth:`protocol.storage.StudyReader.blocks`; ``crc32`` None: written
-    before schema version 4, not verifiable)."""
+    before schema version 4, not verifiable).  ``bound``: its checksum covers its place too (``arm`` -- "" for the
+    task arm --, session, run, block, ticks, records: :func:`protocol.recording.integrity.place_crc32`), as every
+    block of a run recorded since the runs count their blocks."""
 
     session_id: int
     segment: int
@@ -359,6 +361,8 @@ class BlockRow:
     t_last_s: float
     data: bytes
     crc32: int | None
+    arm: str = ""
+    bound: bool = False
 
 
 def _pose_columns(poses: Sequence[tuple[int, tuple[float, ...], tuple[float, ...], int]]) -> dict[str, np.ndarray]:

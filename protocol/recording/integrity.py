@@ -11,6 +11,12 @@ can still fail to decode), is **damaged**, and the reader raises
 of damaged blocks naming the session, the session-time range and the trials it
 touches (:meth:`BlockDamage.describe`).
 
+A checksum of the bytes alone cannot tell a block that is intact but in the wrong place -- swapped with another
+session's block of the same ticks, one arm's copied over the other's.  So a block of a run recorded since the runs
+count their blocks (``recordings.n_blocks`` not NULL) carries a checksum of its *place* and its bytes
+(:func:`place_crc32`): the arm, session, run, block (and chunk) numbers, ticks and record count it was written
+under, then its data.  Moved, it no longer matches where it is.
+
 What a block's checksum and decoding say is here, pure; scanning a database for damage, which needs its
 reader, is :mod:`protocol.storage.damage` (``haptic-study check``, the report, and a resume, which refuses to
 append to a damaged session).
@@ -27,13 +33,35 @@ import numpy as np
 from protocol.recording.codec import COLUMNS, BlockRow, decode_block, decode_columns
 
 __all__ = [
+    "WHOLE_BLOCK",
     "BlockDamage",
     "BlockRow",
     "RecordingDamaged",
+    "block_crc32",
     "block_problem",
     "columns_problem",
     "decode_failure",
+    "place_crc32",
 ]
+
+#: The chunk number of a whole block in its place (chunks are numbered from 0).
+WHOLE_BLOCK = -1
+
+
+def place_crc32(data: bytes, *, arm: str, session_id: int, segment: int, block: int, chunk: int, first_tick: int,
+                last_tick: int, n_records: int) -> int:
+    """The CRC-32 of a block's (or chunk's) place, then its bytes: moved to another place, it no longer matches."""
+    place = (f"haptic-study block\x00{arm}\x00{session_id}\x00{segment}\x00{block}\x00{chunk}\x00{first_tick}\x00"
+             f"{last_tick}\x00{n_records}\x00").encode()
+    return zlib.crc32(data, zlib.crc32(place))
+
+
+def block_crc32(row: BlockRow) -> int:
+    """The checksum ``row`` must carry: of its place and bytes when it is bound, else of its bytes."""
+    if not row.bound:
+        return zlib.crc32(row.data)
+    return place_crc32(row.data, arm=row.arm, session_id=row.session_id, segment=row.segment, block=row.block,
+                       chunk=WHOLE_BLOCK, first_tick=row.first_tick, last_tick=row.last_tick, n_records=row.n_records)
 
 
 @dataclass(frozen=True, slots=True)
@@ -92,8 +120,10 @@ def block_problem(row: BlockRow, columns: Iterable[str] | None = (), *, whole: b
     whole
         Decode every block in full, checksum or not, and check its records against the row (``haptic-study check``).
     """
-    if row.crc32 is not None and zlib.crc32(row.data) != row.crc32:
-        return "checksum mismatch (the block's bytes changed since they were written)"
+    if row.crc32 is not None and block_crc32(row) != row.crc32:
+        return ("checksum mismatch (the block's bytes changed since they were written)" if not row.bound else
+                "checksum mismatch (the block's bytes, or the place it is stored at -- session, arm, run, block, "
+                "ticks -- changed since it was written)")
     if not whole and (row.crc32 is not None or columns == ()):
         return ""
     names = [c.name for c in COLUMNS] if whole or columns is None else list(dict.fromkeys(["tick", *columns]))

@@ -33,8 +33,8 @@ import numpy as np
 
 from foundation.version import software_provenance
 from pipeline.core.aim import TrialParticipant
-from pipeline.runtime.loop import HapticLoop
 from pipeline.runtime.loop_messages import Command
+from pipeline.runtime.loop_view import LoopView
 from protocol.runner.session import SessionRunner, first_unfinished
 from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
@@ -377,7 +377,7 @@ def _cue_time_s(db: StudyDatabase, session_id: int, trial_index: int) -> float |
     return None if t is None else float(t)
 
 
-def delivery_limits(loop: HapticLoop) -> DeliveryLimits:
+def delivery_limits(loop: LoopView) -> DeliveryLimits:
     """What a trial on this loop must get: its safety stage's ramps and its watchdog's sensor-age limit."""
     safety = loop.framework.config.safety
     return DeliveryLimits(feedback_ramp_in_s=safety.ramp_in_s, feedback_ramp_out_s=safety.fault_ramp_s,

@@ -34,7 +34,7 @@ from protocol.study.config import ProtocolConfig
 __all__ = [
     "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "FAULT_REHEARSAL_EVENT", "TRAINING_SKIPPED",
     "StoredSession",
-    "StudyRuleError", "check_new_session", "check_settings", "next_kind",
+    "StudyRuleError", "check_arms", "check_new_session", "check_settings", "next_kind",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
 
@@ -162,6 +162,22 @@ def check_new_session(
         raise StudyRuleError(why)
     return f"{TRAINING_SKIPPED}: {code}'s experiment started without a completed training session ({why}). " \
            f"Reason given: {reason}"
+
+
+def check_arms(sessions: Sequence[SessionInfo], db_path: str, arms: Sequence[str]) -> None:
+    """One rig per study: refuse (:class:`StorageError`) arms other than those the stored sessions ran on.
+
+    ``arms`` is the rig's arms, the task arm first, as :attr:`SessionInfo.arms` reads them: a study started on two
+    simulated arms and continued on one would give its next participants another rig (and a one-arm study, arms it
+    never had), although continuing promises the sessions an uninterrupted study would have had.
+    """
+    for info in sessions:
+        if tuple(info.arms) != tuple(arms):
+            raise StorageError(
+                f"{db_path}: {info.code}'s {info.kind} session {info.session_id} ran on the arms "
+                f"{','.join(info.arms)} (the task arm first); this command's: {','.join(arms)}; one study runs on one "
+                "rig, nothing was changed (give the --sim-arms the study was started with, or use a new database)"
+            )
 
 
 def check_settings(sessions: Sequence[SessionInfo], db_path: str, framework: FrameworkConfig | None) -> None:

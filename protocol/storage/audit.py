@@ -1,6 +1,6 @@
 """Verifying a whole study database: what ``haptic-study check`` finds.
 
-Four checks, each reported with what it found:
+Five checks, each reported with what it found:
 
 1. **SQLite's own** -- ``PRAGMA integrity_check``: the file's pages, indexes and
    constraints.  It cannot see a flipped bit inside a value;
@@ -11,7 +11,9 @@ Four checks, each reported with what it found:
 3. **trials against the recording** -- every trial's first and last records
    (``first_tick``, ``last_tick``) lie in its recorded run, in readable blocks
    with no damaged block between them;
-4. **the design** -- per experiment session, every trial row is a trial of the
+4. **the record against itself** -- references, every trial against its cue event and its first record
+   (:mod:`protocol.storage.audit_record`);
+5. **the design** -- per experiment session, every trial row is a trial of the
    stored schedule, every aborted trial has exactly one re-run in it, the
    designed trials are the protocol's, and the trials that count fill each
    target × mode cell: exactly for a completed session, at most for one
@@ -31,6 +33,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from protocol.recording.integrity import BlockDamage, BlockRow, block_problem
+from protocol.storage.audit_record import check_record
 from protocol.storage.damage import block_rows, describe_damage
 from protocol.storage.reader import StudyReader
 from protocol.study.config import ProtocolError, protocol_from_dict
@@ -125,6 +128,7 @@ def _blocks(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int
         runs.setdefault(key, []).append((row.first_tick, row.last_tick, not why))
         if progress is not None and (i % 200 == 0 or i + 1 == total):
             progress(i + 1, total)
+    _runs_complete(conn, audit, last)
     audit.damage = describe_damage(conn, bad)
     audit.problems.extend(f"recording damaged: {d.describe()}" for d in audit.damage)
     if audit.blocks_unverifiable:
@@ -152,6 +156,19 @@ def _other_arms(conn: sqlite3.Connection, audit: Audit) -> None:
             else:
                 audit.blocks_verified += 1
             last[key] = row.block
+        _runs_complete(conn, audit, last, arm)
+
+
+def _runs_complete(conn: sqlite3.Connection, audit: Audit, last: Mapping[tuple[int, int], int], arm: str = "") -> None:
+    """Every run that counts its blocks holds them all, its last ones too (a block deleted from the end leaves no
+    gap to see): ``last`` is each run's last block found (an open one, in chunks, may follow the count)."""
+    where = f"arm {arm}, " if arm else ""
+    for sid, seg, n_blocks in StudyReader.over(conn).block_counts(arm):
+        found = last.get((sid, seg), -1)
+        if found < n_blocks - 1:
+            missing = f"block {n_blocks - 1}" if found == n_blocks - 2 else f"blocks {found + 1}–{n_blocks - 1}"
+            audit.problems.append(f"{where}session {sid}, recorded run {seg}: {n_blocks} blocks were written, "
+                                  f"{missing} missing from the recording")
 
 
 def _readable(runs: list[tuple[int, int, bool]], first: int, last: int) -> bool:
@@ -162,15 +179,27 @@ def _readable(runs: list[tuple[int, int, bool]], first: int, last: int) -> bool:
 
 
 def _trials_against_recording(conn: sqlite3.Connection, audit: Audit,
-                              runs: dict[tuple[int, int], list[tuple[int, int, bool]]]) -> None:
+                              runs: dict[tuple[int, int], list[tuple[int, int, bool]]],
+                              writers: Mapping[int, str]) -> None:
+    pending: Counter[int] = Counter()
     for sid, idx, seg, first, last in StudyReader.over(conn).trial_places():
-        if _readable(runs.get((sid, seg), []), first, last):
+        blocks = runs.get((sid, seg), [])
+        if _readable(blocks, first, last):
             audit.trials_in_recording += 1
+            continue
+        written = max((b[1] for b in blocks), default=-1)  # the segment's newest committed tick
+        if sid in writers and last > written and (first > written or _readable(blocks, first, written)):
+            # a session written now: its newest records are still in the recorder's buffer (a trial is stored when
+            # it ends, its last records with the next block); they are not missing
+            pending[sid] += 1
             continue
         line = (f"trial {idx + 1} of session {sid}: its records (run {seg}, ticks {first}–{last}) are not all in "
                 "readable blocks of the recording")
         audit.trials_not_in_recording.append(line)
         audit.problems.append(line)
+    for sid, n in sorted(pending.items()):
+        audit.notes.append(f"session {sid} in progress: the newest records of {n} trial{'s' if n > 1 else ''} are not "
+                           "written yet (the recorder writes them with its next block)")
 
 
 def _where(sid: int, code: str, status: str, writer: str | None) -> str:
@@ -247,6 +276,18 @@ def audit_database(conn: sqlite3.Connection, path: str,
         in progress, by whom, with no advice to resume it; a running session without one was interrupted.
     """
     audit = Audit(path=path)
+    # one read transaction: every finding is of one snapshot of the file, whatever a live writer commits meanwhile
+    # (read in separate statements, a trial stored after the blocks were scanned looked unrecorded)
+    conn.execute("BEGIN")
+    try:
+        return _audit(conn, audit, progress, writers or {})
+    finally:
+        conn.execute("ROLLBACK")
+
+
+def _audit(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int], None] | None,
+           writers: Mapping[int, str]) -> Audit:
+    """:func:`audit_database` in its read transaction."""
     audit.schema_version = StudyReader.over(conn).schema_version
     if not _integrity(conn, audit):
         return audit
@@ -256,12 +297,18 @@ def audit_database(conn: sqlite3.Connection, path: str,
         if audit.schema_version >= 3:
             runs = _blocks(conn, audit, progress)
             _other_arms(conn, audit)
-            _trials_against_recording(conn, audit, runs)
+            _trials_against_recording(conn, audit, runs, writers)
         else:
             audit.notes.append(f"schema version {audit.schema_version}: sessions were not recorded whole "
                                "(trial windows in the samples table), so there are no blocks to verify")
-        _cells(conn, audit, writers or {})
+        _cells(conn, audit, writers)
+        check_record(conn, audit.problems.append)
         for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
+            if w.rewritten == 0:  # their rows are gone, their bytes may not be: the rewrite did not finish
+                audit.problems.append(f"withdrawal of {w.code} incomplete: their rows were removed but the file was "
+                                      "not rewritten, so their bytes may still be read back from it; run withdraw "
+                                      f"again (haptic-study withdraw --db {audit.path} --participant {w.code})")
+                continue
             audit.notes.append(f"participant {w.code} withdrew ({w.withdrawn_at[:16].replace('T', ' ')} UTC): "
                                f"{w.counts()} erased; their number stays vacant")
     except sqlite3.DatabaseError as exc:

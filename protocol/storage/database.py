@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
+from protocol.recording.integrity import WHOLE_BLOCK, place_crc32
 from protocol.storage import crashpoint
 from protocol.storage.codes import CODE_PATTERN, stored_clash, validate_code
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
@@ -292,20 +293,28 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                          snapshot: dict[str, Any], scales: dict[str, float], arm: str = "") -> None:
         """Open a segment of a session's recording (version 3): where it starts, and the framework's state then
         (``arm``: another arm's than the task arm's, :func:`protocol.storage.common.recording_tables`)."""
+        # n_blocks 0: this run counts its blocks and binds each to its place (place_crc32)
         self._insert(recording_tables(arm)[0], arm, "session_id, segment, started_at_s, t0_ns, snapshot_json, "
-                     "scales_json", (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot),
-                                     json.dumps(scales)))
+                     "scales_json, n_blocks", (session_id, segment, started_at_s, int(t0_ns), json.dumps(snapshot),
+                                               json.dumps(scales), 0))
 
     def write_block(self, session_id: int, segment: int, block: int, first_tick: int, last_tick: int,
                     n_records: int, t_first_s: float, t_last_s: float, data: bytes, arm: str = "") -> None:
         """Write a recorded block with its checksum, in place of the chunks it was written in so far (the recorder's
         own rows; :meth:`write_chunk`)."""
-        _, blocks, chunks = recording_tables(arm)
+        runs, blocks, chunks = recording_tables(arm)
+        crc = (place_crc32(data, arm=arm, session_id=session_id, segment=segment, block=block, chunk=WHOLE_BLOCK,
+                           first_tick=int(first_tick), last_tick=int(last_tick), n_records=int(n_records))
+               if self._binds(session_id, segment, arm) else zlib.crc32(data))
         self._insert(blocks, arm, "session_id, segment, block, first_tick, last_tick, n_records, t_first_s, t_last_s, "
                      "data, crc32", (session_id, segment, block, int(first_tick), int(last_tick), int(n_records),
-                                     t_first_s, t_last_s, data, zlib.crc32(data)), replace=True)
-        self.conn.execute(f"DELETE FROM {chunks} WHERE session_id = ? AND segment = ? AND block = ?"
-                          + (" AND arm = ?" if arm else ""), (session_id, segment, block, *((arm,) if arm else ())))
+                                     t_first_s, t_last_s, data, crc), replace=True)
+        same = " AND arm = ?" if arm else ""
+        place = (session_id, segment, block, *((arm,) if arm else ()))
+        self.conn.execute(f"DELETE FROM {chunks} WHERE session_id = ? AND segment = ? AND block = ?{same}", place)
+        # the run's count, in the block's transaction: a block deleted later (the last one too) is missing
+        self.conn.execute(f"UPDATE {runs} SET n_blocks = MAX(n_blocks, ? + 1) WHERE session_id = ? AND segment = ?"
+                          f"{same}", (block, session_id, segment, *((arm,) if arm else ())))
 
     def write_chunk(self, session_id: int, segment: int, block: int, chunk: int, first_tick: int, last_tick: int,
                     n_records: int, t_first_s: float, t_last_s: float, data: bytes, arm: str = "") -> None:
@@ -314,7 +323,18 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self._insert(recording_tables(arm)[2], arm, "session_id, segment, block, chunk, first_tick, last_tick, "
                      "n_records, t_first_s, t_last_s, data, crc32",
                      (session_id, segment, block, chunk, int(first_tick), int(last_tick), int(n_records), t_first_s,
-                      t_last_s, data, zlib.crc32(data)))
+                      t_last_s, data, place_crc32(data, arm=arm, session_id=session_id, segment=segment, block=block,
+                                                  chunk=chunk, first_tick=int(first_tick), last_tick=int(last_tick),
+                                                  n_records=int(n_records))
+                      if self._binds(session_id, segment, arm) else zlib.crc32(data)))
+
+    def _binds(self, session_id: int, segment: int, arm: str) -> bool:
+        """Whether a run binds its blocks' checksums to their place: it counts its blocks (``n_blocks`` not NULL),
+        as every run this writer opens does; a run recorded before keeps checksums of the bytes alone."""
+        row = self.conn.execute(f"SELECT n_blocks IS NOT NULL FROM {recording_tables(arm)[0]} WHERE session_id = ? "
+                                f"AND segment = ?{' AND arm = ?' if arm else ''}",
+                                (session_id, segment, *((arm,) if arm else ()))).fetchone()
+        return bool(row and row[0])
 
     def _insert(self, table: str, arm: str, columns: str, values: tuple[Any, ...], replace: bool = False) -> None:
         """One row of a recording's table (with ``arm`` in another arm's)."""

@@ -28,6 +28,7 @@ from typing import Any
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.metrics import stored
 from protocol.recording.codec import BlockRow, join_chunks
+from protocol.recording.integrity import block_crc32, place_crc32
 from protocol.storage.codes import stored_clash
 from protocol.storage.common import has_table, recording_tables
 from protocol.storage.database import SessionInfo, StudyDatabase
@@ -400,18 +401,30 @@ class StudyReader:
             return
         table = recording_tables(arm)[1]
         have = {d[0] for d in self.conn.execute(f"SELECT * FROM {table} LIMIT 0").description}
-        cols = ", ".join(c if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
-        where, args = _block_filter(session_id, segment, ticks, arm=arm)
+        cols = ", ".join(f"b.{c}" if c in have else "NULL" for c in ("t_first_s", "t_last_s", "crc32"))
+        where, args = _block_filter(session_id, segment, ticks, "b.", arm)
         rows = self.conn.execute(
             # CAST: a block whose value was changed to TEXT is bytes to check, not a UTF-8 error for every reader
-            f"SELECT session_id, segment, block, first_tick, last_tick, n_records, CAST(data AS BLOB), {cols} "
-            f"FROM {table} "
-            f"{where} ORDER BY session_id, segment, block", args)
+            f"SELECT b.session_id, b.segment, b.block, b.first_tick, b.last_tick, b.n_records, CAST(b.data AS BLOB), "
+            f"{cols}, {self._bound(arm)} "
+            f"FROM {table} b "
+            f"{where} ORDER BY b.session_id, b.segment, b.block", args)
         open_blocks = self._open_blocks(session_id, segment, ticks, arm)
         for r in heapq.merge(rows, open_blocks, key=lambda r: (r[0], r[1], r[2])) if open_blocks else rows:
             yield BlockRow(int(r[0]), int(r[1]), int(r[2]), int(r[3]), int(r[4]), int(r[5]),
                            math.nan if r[7] is None else float(r[7]), math.nan if r[8] is None else float(r[8]),
-                           bytes(r[6]), None if r[9] is None else int(r[9]))
+                           bytes(r[6]), None if r[9] is None else int(r[9]), arm, bool(r[10]))
+
+    def _bound(self, arm: str, alias: str = "b") -> str:
+        """The SQL of whether a block's (or chunk's) run binds its checksums to their place: its run counts its
+        blocks (``n_blocks`` not NULL; a file without the column: none does)."""
+        runs = recording_tables(arm)[0]
+        if not has_table(self.conn, runs) or "n_blocks" not in {
+                d[0] for d in self.conn.execute(f"SELECT * FROM {runs} LIMIT 0").description}:
+            return "0"
+        same_arm = f" AND r.arm = {alias}.arm" if arm else ""
+        return (f"(SELECT r.n_blocks IS NOT NULL FROM {runs} r WHERE r.session_id = {alias}.session_id "
+                f"AND r.segment = {alias}.segment{same_arm})")
 
     def _open_blocks(self, session_id: int | None, segment: int | None,
                      ticks: tuple[int, int] | None, arm: str = "") -> list[tuple[Any, ...]]:
@@ -428,17 +441,34 @@ class StudyReader:
         chunks = self.conn.execute(
             "SELECT c.session_id, c.segment, c.block, c.first_tick, c.last_tick, c.n_records, CAST(c.data AS BLOB), "
             "c.t_first_s, "
-            f"c.t_last_s, c.crc32 FROM {table} c {where} ORDER BY c.session_id, c.segment, c.block, c.chunk",
-            args)
+            f"c.t_last_s, c.crc32, c.chunk, {self._bound(arm, 'c')} FROM {table} c {where} "
+            "ORDER BY c.session_id, c.segment, c.block, c.chunk", args)
         out = []
         for key, group in itertools.groupby(chunks, key=lambda r: (r[0], r[1], r[2])):
             parts = list(group)
             data = join_chunks(bytes(r[6]) for r in parts)
-            intact = all(zlib.crc32(r[6]) == r[9] for r in parts)
-            crc = zlib.crc32(data) if intact else zlib.crc32(data) ^ 1
-            out.append((*key, min(r[3] for r in parts), max(r[4] for r in parts), sum(r[5] for r in parts), data,
-                        min(r[7] for r in parts), max(r[8] for r in parts), crc))
+            bound = bool(parts[0][11])
+            intact = all(r[9] == (place_crc32(bytes(r[6]), arm=arm, session_id=r[0], segment=r[1], block=r[2],
+                                              chunk=r[10], first_tick=r[3], last_tick=r[4], n_records=r[5])
+                                  if bound else zlib.crc32(r[6])) for r in parts)
+            joined = BlockRow(*key, min(r[3] for r in parts), max(r[4] for r in parts), sum(r[5] for r in parts),
+                              min(r[7] for r in parts), max(r[8] for r in parts), data, None, arm, bound)
+            crc = block_crc32(joined) ^ (0 if intact else 1)  # a damaged chunk: a checksum that cannot match
+            out.append((*key, joined.first_tick, joined.last_tick, joined.n_records, data, joined.t_first_s,
+                        joined.t_last_s, crc, bound))
         return out
+
+    def block_counts(self, arm: str = "") -> list[tuple[int, int, int]]:
+        """``(session_id, segment, n_blocks)`` of every run that counts its blocks (an arm's: ``arm``); none in a
+        file from before the count."""
+        runs = recording_tables(arm)[0]
+        if not has_table(self.conn, runs) or "n_blocks" not in {
+                d[0] for d in self.conn.execute(f"SELECT * FROM {runs} LIMIT 0").description}:
+            return []
+        where, args = _block_filter(None, None, None, arm=arm)
+        cond = f"{where} AND n_blocks IS NOT NULL" if where else "WHERE n_blocks IS NOT NULL"
+        return [(int(a), int(b), int(c)) for a, b, c in self.conn.execute(
+            f"SELECT session_id, segment, n_blocks FROM {runs} {cond} ORDER BY session_id, segment", args)]
 
     def block_count(self) -> int:
         """How many recorded blocks the file holds (a block left open by a killed run counts once)."""

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from foundation.platform_support.files import may_write, owner_only
 from protocol.metrics import stored
-from protocol.storage.common import EmptyDatabase, StorageError
+from protocol.storage.common import EmptyDatabase, StorageError, has_table
 from protocol.study.records import AbortCause, LoopHealth
 
 __all__ = ["ABORT_CAUSES", "HEALTH_COLUMNS", "SAMPLE_COLUMNS", "SCHEMA_VERSION", "SchemaFile", "connect_readonly",
@@ -131,6 +131,37 @@ def add_metric_columns(conn: sqlite3.Connection) -> list[str]:
         conn.execute("ROLLBACK")
         raise
     return missing
+
+
+#: Columns added to version 4 after files of version 4 existed, NULL in the rows stored before (table, column):
+#: a run's count of its blocks (``n_blocks``: not NULL, its blocks' checksums bind their place; NULL, a run recorded
+#: before, whose checksums cover their bytes alone), and whether a withdrawal's rewrite of the file finished.
+_LATER_COLUMNS = (("recordings", "n_blocks"), ("arm_recordings", "n_blocks"), ("withdrawals", "rewritten"))
+
+
+def add_later_columns(conn: sqlite3.Connection) -> list[str]:
+    """Give a file made before them the columns of :data:`_LATER_COLUMNS` (INTEGER, NULL in every row before).
+
+    As :func:`add_metric_columns`: only a writer, in its own transaction, no row changed, the schema version kept
+    (an older haptic-study writes rows without them -- NULL -- and never appends to a run it did not start).
+    Returns the ``table.column`` added.
+    """
+    def missing() -> list[tuple[str, str]]:
+        return [(t, col) for t, col in _LATER_COLUMNS if has_table(conn, t)
+                and col not in {r[1] for r in conn.execute(f"PRAGMA table_info({t})")}]
+
+    if not missing():
+        return []
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        added = missing()
+        for table, column in added:
+            conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} INTEGER")
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    return [f"{t}.{c}" for t, c in added]
 
 
 SAMPLE_COLUMNS = (
@@ -288,8 +319,17 @@ class SchemaFile:
 
     def _prepare(self, readonly: bool, upgrade: bool) -> None:
         c = self.conn
-        version = c.execute("PRAGMA user_version").fetchone()[0]
-        tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        # the version and the tables of one snapshot: read apart, a file being created between them looked like
+        # version 0 with tables ("not a haptic-study database") to a reader such as a live check
+        own = not c.in_transaction
+        if own:
+            c.execute("BEGIN")
+        try:
+            version = c.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in c.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+        finally:
+            if own:
+                c.execute("ROLLBACK")
         if version > SCHEMA_VERSION:
             raise StorageError(
                 f"{self.path}: database schema version {version} is newer than this software supports "
@@ -319,6 +359,7 @@ class SchemaFile:
             _widen_abort_causes(c)
         if not readonly:
             add_metric_columns(c)
+            add_later_columns(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.

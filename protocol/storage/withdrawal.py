@@ -29,8 +29,8 @@ from protocol.storage.leases import session_scope
 from protocol.study.labels import plural
 from protocol.study.records import trial_id_of
 
-__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "nobody_reading", "rewrite_file",
-           "rewrite_pending", "withdrawal_of", "withdrawals"]
+__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "mark_rewritten", "nobody_reading",
+           "rewrite_file", "rewrite_pending", "withdrawal_of", "withdrawals"]
 
 
 class StudyDatabase(Protocol):
@@ -85,6 +85,9 @@ class Withdrawal:
     removed_blocks: int
     removed_records: int
     removed_samples: int
+    #: 1 once the file's rewrite after the removal finished; 0 until then (a reader held it up, or the command was
+    #: stopped between the removal and the rewrite); None in a record made before this mark
+    rewritten: int | None = None
 
     def counts(self) -> str:
         """What was removed, in words."""
@@ -97,19 +100,32 @@ class Withdrawal:
 _COLUMNS = ", ".join(f.name for f in fields(Withdrawal))
 
 
+def _read_columns(conn: sqlite3.Connection) -> str:
+    """The record's columns as a file holds them (``rewritten`` NULL in a file from before the mark)."""
+    have = {r[1] for r in conn.execute("PRAGMA table_info(withdrawals)")}
+    return ", ".join(f.name if f.name in have else "NULL" for f in fields(Withdrawal))
+
+
 def withdrawals(conn: sqlite3.Connection) -> list[Withdrawal]:
     """Every withdrawal recorded in a database, oldest first (none in a file from before withdrawals)."""
     if not has_table(conn, "withdrawals"):
         return []
-    return [Withdrawal(*r) for r in conn.execute(f"SELECT {_COLUMNS} FROM withdrawals ORDER BY withdrawn_at, code")]
+    return [Withdrawal(*r) for r in conn.execute(
+        f"SELECT {_read_columns(conn)} FROM withdrawals ORDER BY withdrawn_at, code")]
 
 
 def withdrawal_of(conn: sqlite3.Connection, code: str) -> Withdrawal | None:
     """The withdrawal of one participant code, or None."""
     if not has_table(conn, "withdrawals"):
         return None
-    row = conn.execute(f"SELECT {_COLUMNS} FROM withdrawals WHERE code = ?", (code,)).fetchone()
+    row = conn.execute(f"SELECT {_read_columns(conn)} FROM withdrawals WHERE code = ?", (code,)).fetchone()
     return None if row is None else Withdrawal(*row)
+
+
+def mark_rewritten(db: StudyDatabase, code: str) -> None:
+    """Record that the file's rewrite after ``code``'s removal finished (what :func:`rewrite_pending` reads)."""
+    with db.transaction():
+        db.conn.execute("UPDATE withdrawals SET rewritten = 1 WHERE code = ?", (code,))
 
 
 def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
@@ -183,7 +199,7 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
             c.execute("DELETE FROM sessions WHERE session_id = ?", (sid,))
         c.execute("DELETE FROM participants WHERE participant_id = ?", (fp.participant_id,))
         record = Withdrawal(code, now_iso(), reason, len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records,
-                            fp.samples)
+                            fp.samples, rewritten=0)
         c.execute(f"INSERT INTO withdrawals ({_COLUMNS}) VALUES ({', '.join('?' * len(fields(Withdrawal)))})",
                   astuple(record))
         _scrub_free_pages(c)
@@ -232,16 +248,19 @@ def _log_holds_pages(path: str) -> bool:
         return False
 
 
-def rewrite_pending(db: StudyDatabase, withdrawn_at: str) -> bool:
-    """The file still needs the rewrite of the withdrawal made at ``withdrawn_at``: its write-ahead log holds pages
-    (a reader held the rewrite up), or it has free pages (the command was stopped -- killed, a power cut -- after
-    the rows were removed and their freed pages zeroed, and before ``VACUUM`` finished: only the rewrite drops
-    them) while no session began after the withdrawal (a later session's writes leave free pages of their own, not
-    the withdrawal's: then nothing is pending and the withdrawal is not run again).
+def rewrite_pending(db: StudyDatabase, done: Withdrawal) -> bool:
+    """The file still needs the rewrite of the withdrawal ``done``: its record says the rewrite did not finish (a
+    reader held it up, or the command was stopped -- killed, a power cut -- between the removal and the rewrite),
+    or its write-ahead log holds pages.  Decided by what is in the file, never by clock order.
+
+    A record made before the mark (``rewritten`` None) is judged as then: pending when the file has free pages and
+    no session began after the withdrawal (a later session's writes leave free pages of their own).
     """
     if _log_holds_pages(str(db.path)):
         return True
-    later = db.conn.execute("SELECT COUNT(*) FROM sessions WHERE started_at > ?", (withdrawn_at,)).fetchone()[0]
+    if done.rewritten is not None:
+        return not done.rewritten
+    later = db.conn.execute("SELECT COUNT(*) FROM sessions WHERE started_at > ?", (done.withdrawn_at,)).fetchone()[0]
     return int(later) == 0 and int(db.conn.execute("PRAGMA freelist_count").fetchone()[0]) > 0
 
 

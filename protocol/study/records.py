@@ -29,10 +29,12 @@ from protocol.study.design import HapticMode, TrialSpec
 from protocol.tasks.window import TrialMetrics
 
 __all__ = [
+    "AGREE_REL",
     "AbortCause",
     "LoopHealth",
     "Outcome",
     "TrialRecord",
+    "disagreement",
     "trial_health",
     "trial_id_of",
 ]
@@ -259,3 +261,32 @@ class TrialRecord:
             health=LoopHealth(**{k: row.get(k) for k in names}),
             segment=row.get("segment"), first_tick=row.get("first_tick"), last_tick=row.get("last_tick"),
         )
+
+
+#: Relative agreement required between a trial's metrics recomputed from its recording and those stored live: the
+#: same samples and the same definitions, so only the summation's order may differ (a few ulps of a sum of
+#: thousands of terms).
+AGREE_REL = 1e-9
+
+
+def _close(a: float, b: float) -> bool:
+    if a != a and b != b:  # both NaN (stored NULL)
+        return True
+    return abs(a - b) <= AGREE_REL * max(abs(a), abs(b), 1e-12)
+
+
+def disagreement(recomputed: TrialMetrics, record: TrialRecord) -> str:
+    """What differs between a trial's metrics recomputed over the cue window and the ones stored during its
+    session ("" when nothing does): the outcome, and every stored metric the record has a value for (a metric
+    defined after the file was written has none; NaN is stored as NULL, and an undefined TCT is None on both
+    sides).  The report uses the recomputed values either way; ``check`` calls a difference a problem."""
+    if recomputed.success != record.success:
+        return (f"its outcome recomputed from the recording is {'success' if recomputed.success else 'no success'}, "
+                f"stored {record.outcome.value}")
+    for m in stored():
+        kept = record.metrics.get(m.name)
+        value = recomputed.values.get(m.name)
+        again = float("nan") if value is None else float(value)
+        if kept is not None and not _close(again, float(kept)):
+            return f"its {m.name} recomputed from the recording is {again:.6g}, stored {float(kept):.6g}"
+    return ""

@@ -28,6 +28,7 @@ from study_app.cli.replay_cmds import add_replay_parsers
 from study_app.cli.report_cmds import add_report_parsers
 from study_app.cli.run_cmds import add_run_parser, add_sessions_parser, add_sim_parser
 from study_app.cli.sweep_cmds import add_sweep_parser
+from study_app.cli.terminal import safe_standard_streams
 from study_app.cli.withdraw_cmds import add_withdraw_parser
 from study_app.version_info import version_text
 
@@ -118,9 +119,9 @@ def _refuse_special_inputs(args: argparse.Namespace) -> None:
     environment: one line (a missing file is each command's to say)."""
     from foundation.oserrors import kind_of
     from foundation.parallel import workers_env_problem
-    from pipeline.core.clock import realtime_env_problem
+    from pipeline.core.clock import loop_cpu_problem, realtime_env_problem
 
-    for problem in (workers_env_problem(), realtime_env_problem()):
+    for problem in (workers_env_problem(), realtime_env_problem(), loop_cpu_problem()):
         if problem is not None:
             raise CliError(problem)
 
@@ -174,6 +175,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``haptic-study`` console script."""
     import sqlite3
 
+    safe_standard_streams()  # before anything is printed, --help included
     args = build_parser().parse_args(argv)
     try:
         _refuse_special_inputs(args)

@@ -183,6 +183,22 @@ def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[s
     return [str(path)], pool_db.participants, source
 
 
+def _say_the_size(req: _PowerRequest) -> None:
+    """Before a long request's work: how much it is and the memory it may take (its bars then say the time left)."""
+    from analysis.planning.power import memory_needed
+    from foundation.resources import available_memory_bytes
+
+    draws = req.resamples * sum(req.n_values)
+    need = memory_needed(req.n_values, req.resamples, req.pool_size)
+    have = available_memory_bytes()
+    if draws < _BAR_DRAWS or (have is not None and need > have):
+        return  # seconds of work; or a request the memory cannot hold, refused in one line later
+    mib = need / 2**20
+    print(f"power: {req.resamples:,} resampled studies for each of {len(req.n_values)} sizes ({draws:,} participants "
+          f"drawn; at most {mib:,.0f} MiB at once): a long run; the bar says how long is left, Ctrl-C stops it with "
+          "nothing written", file=sys.stderr)
+
+
 def cmd_power(args: argparse.Namespace) -> int:
     """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
     req = _request(args)
@@ -207,6 +223,7 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.reading.metrics import MetricOptions
 
     options = MetricOptions(args.error_window, args.tct)
+    _say_the_size(req)
     bars = _Bars()
     try:
         participants = None

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from foundation.errors import InputRefused
+from pipeline.force.scaling import LIMIT_RANGE_N
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
 from study_app.cli.argtypes import add_command, arm_name, real_number, whole_number
 from study_app.cli.error import CliError
@@ -55,9 +56,10 @@ def _add_replay_parser(sub: argparse._SubParsersAction) -> None:
                    help="session id (haptic-study sessions --db PATH lists them)")
     r.add_argument("--filter-window", type=whole_number("--filter-window", 1, 1000), default=None, metavar="N",
                    help="moving-average window to try, samples")
-    r.add_argument("--f-scale", type=real_number("--f-scale", 0.0, 1000.0, lo_open=True), default=None,
+    # the scaling law's own lower bound (LIMIT_RANGE_N), checked here in the option's name before any work
+    r.add_argument("--f-scale", type=real_number("--f-scale", LIMIT_RANGE_N[0], 1000.0), default=None,
                    metavar="N", help="tanh scaling f_scale to try, N")
-    r.add_argument("--f-max", type=real_number("--f-max", 0.0, 100.0, lo_open=True), default=None, metavar="N",
+    r.add_argument("--f-max", type=real_number("--f-max", LIMIT_RANGE_N[0], 100.0), default=None, metavar="N",
                    help="tanh scaling f_max to try, N (the device's own peak still clamps)")
     r.add_argument("--out", default=None, metavar="DIR",
                    help="write replay_trials.csv, filter_trade.csv and replay.png/.pdf/.svg here (a new or empty "

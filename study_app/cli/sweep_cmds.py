@@ -99,6 +99,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
                                  f"protocol with --set {describe(non_default_settings(setting))}")
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
+    from analysis.planning.setting_labels import value_format
     from analysis.planning.sweep import FILTER_NOTE, caveat, summary_frame, summary_lines, sweep_frame, write_sweep
     from pipeline.force.pipeline_settings import paper_settings
     from study_app.cli.progress import ProgressBar
@@ -134,9 +135,10 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     paper = paper_settings()
     tidy = sweep_frame(cells, swept, protocol.trial.max_trial_s)
     summary = summary_frame(tidy, swept, paper)
+    studies = f"{args.studies} stud{'y' if args.studies == 1 else 'ies'}"
     header = [f"Grid: {', '.join(swept)} = " + " x ".join(
-        ",".join(f"{v:g}" for v in vals) for _, vals in args.grid) + f" ({len(grid)} settings; the others the "
-              f"paper's); {args.studies} studies per setting of {args.participants} simulated participants "
+        ",".join(map(value_format(vals), vals)) for _, vals in args.grid) + f" ({len(grid)} settings; the others the "
+              f"paper's); {studies} per setting of {args.participants} simulated participants "
               f"(seed {args.seed}, the same participants for every setting); protocol {protocol.name!r}."]
     try:
         files = write_output_folder(out, lambda tmp: write_sweep(
@@ -151,6 +153,6 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if "filter_window" in swept:
         print(FILTER_NOTE)
     print("\n".join(summary_lines(summary, swept)))
-    print(f"Sweep: {len(cells)} cells ({len(grid)} settings x {args.studies} studies) in {wall:.1f} s wall "
+    print(f"Sweep: {len(cells)} cells ({len(grid)} settings x {studies}) in {wall:.1f} s wall "
           f"(jobs {jobs}). Written in {out}/: {', '.join(files)} (and {CACHE_FILE}, the cache)")
     return 0

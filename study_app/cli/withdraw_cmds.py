@@ -108,7 +108,7 @@ def _look(path: str, code: str) -> Any:
     try:
         stored_clash(db.conn, code, path)  # p01 for a stored P01: refused, naming it (never a guess)
         done = withdrawal_of(db.conn, code)
-        if done is not None and rewrite_pending(db, done.withdrawn_at):
+        if done is not None and rewrite_pending(db, done):
             _refuse_live_writers(db, path)
             return done  # withdrawn, but the file's rewrite did not finish: this command finishes it
         if done is not None:
@@ -187,7 +187,7 @@ def _reader_line(db_path: str, code: str, removed: bool) -> str:
 def _erase(db: Any, args: argparse.Namespace, finishing: Any) -> tuple[Any, bool]:
     """Under the study's lease: the participant's rows removed (unless ``finishing``), the file rewritten."""
     from protocol.storage import new_owner_token
-    from protocol.storage.withdrawal import erase_participant, nobody_reading, rewrite_file
+    from protocol.storage.withdrawal import erase_participant, mark_rewritten, nobody_reading, rewrite_file
 
     owner = new_owner_token()
     db.acquire_lease("study", owner, command="haptic-study withdraw")  # no participant code in the lease
@@ -201,6 +201,8 @@ def _erase(db: Any, args: argparse.Namespace, finishing: Any) -> tuple[Any, bool
         else:
             record = finishing
         clean = rewrite_file(db)
+        if clean:  # the mark is a changed value in place: it frees no page and holds nothing of theirs
+            mark_rewritten(db, record.code)
     finally:
         db.release_lease("study", owner)
     return record, clean and nobody_reading(db)  # the lease's release out of the log too

@@ -13,7 +13,7 @@ import queue
 import time
 from typing import Any
 
-from foundation.platform_support.processes import signal_name
+from foundation.platform_support.processes import exit_description
 from pipeline.runtime.ring import RingBuffer
 from study_app.engine import messages as m
 from study_app.engine.process import host_main
@@ -22,13 +22,8 @@ from study_app.engine.setup import HostConfig
 __all__ = ["EngineClient", "EngineStartError", "describe_exit"]
 
 
-def describe_exit(exitcode: int | None) -> str:
-    """How a process ended, for a lab's bug report: ``killed by SIGSEGV (signal 11)``, ``exit status 1``."""
-    if exitcode is None:
-        return "still running"
-    if exitcode < 0:
-        return f"killed by {signal_name(-exitcode)} (signal {-exitcode})"
-    return f"exit status {exitcode}"
+#: How a process ended, for a lab's bug report (:func:`foundation.platform_support.processes.exit_description`).
+describe_exit = exit_description
 
 
 class EngineStartError(RuntimeError):

@@ -42,7 +42,6 @@ from pipeline.commissioning.steps import (
     tcp_step,
 )
 from pipeline.commissioning.tcp import PivotPose, pivot_orientations
-from pipeline.core.clock import MonotonicClock
 from pipeline.force.frames import Mat3, check_rotation
 from pipeline.runtime.loop_messages import SetCalibration
 from study_app.engine import messages as m
@@ -189,32 +188,15 @@ class Commissioning:
 
     def calibrate(self, cmd: m.Calibrate) -> None:
         """Simulated rig: run the pose set automatically on an arm (the loop paused), identify, judge, install."""
-        from pipeline.sim.calibration import measure_poses
-
         if self.engine.real:
             raise RuntimeError("real rig: the poses are recorded one at a time in the calibration wizard "
                                "(move the robot, then Record pose)")
         self.engine.require_idle("calibrate")
         name, arm = cmd.pose_set, self.arms.of(cmd.arm)
-        rots = pose_set(name)
-        real = self.engine.config.clock == "real"
-        if real:
-            self.engine.loop.stop(timeout_s=5.0)  # ramps the force to zero first
-            clock: Any = MonotonicClock()
-        else:
-            self.engine.loop.ramp_down()
-            clock = self.engine.loop.clock
-        self.engine.drain_ring()
-        try:
-            assert self.engine.eng.simulated
-            poses = measure_poses(
-                self.arms.devices(arm), clock, rots,
-                progress=lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"pose {done}")),
-            )
-            result = self._installed(arm, payload_step(poses, name))
-        finally:
-            self.engine.after_loop_pause(real)
-        self.engine.publish(result)
+        poses = self.engine.run_paused(
+            "measure_poses", lambda done, n: self.engine.publish(m.CalibrationProgress(done, n, f"pose {done}")),
+            arm=arm, rotations=pose_set(name))
+        self.engine.publish(self._installed(arm, payload_step(poses, name)))
 
     # -- TCP ----------------------------------------------------------------------------------------------------
     def calibrate_tcp(self, cmd: m.CalibrateTcp) -> None:
@@ -279,24 +261,13 @@ class Commissioning:
 
     # -- frames -------------------------------------------------------------------------------------------------
     def check_frames(self, cmd: m.CheckFrames) -> None:
-        """Simulated rig: the simulated experimenter pushes the free tip along each axis (the loop runs)."""
-        from pipeline.sim.commissioning import push_axes
-
+        """Simulated rig: the simulated experimenter pushes the free tip along each axis (the loop runs ticks
+        itself, paced on its clock, between its own runs)."""
         if not self.engine.eng.simulated:
             raise RuntimeError("real rig: push the free tip along each axis in turn (Record +x, +y, +z)")
         self.engine.require_idle("frame check")
         arm = self.arms.of(cmd.arm)
-        ring = self.engine.eng.rings[arm]
-        real = self.engine.config.clock == "real"
-        if real:
-            self.engine.loop.stop(timeout_s=5.0)  # the check runs the loop itself, paced on the same clock
-        self.engine.drain_ring()
-        try:
-            assert ring is not None
-            check = push_axes(self.arms.devices(arm), self.engine.loop, ring, framework=self.engine.eng.frameworks[arm])
-        finally:
-            self.engine.cursor = self.engine.ring.write_count  # the check's own records are not the loop's timing
-            self.engine.after_loop_pause(real)
+        check: FrameCheck = self.engine.run_paused("push_axes", arm=arm)
         for a in check.axes:
             self.engine.publish(m.FrameAxisChecked(a.axis, a.passed, a.describe(), a.to_dict()))
         self._frames_done(arm, check)

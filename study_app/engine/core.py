@@ -10,14 +10,15 @@ typing).
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
 from pipeline.force.payload_compensator import PayloadCalibration
-from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_view import LoopView
 from pipeline.runtime.ring import RingBuffer
 from pipeline.settings.hardware import HardwareConfig
-from study_app.engine.setup import HostConfig, SwitchableDriver
+from study_app.engine.latency_report import LatencyReport
+from study_app.engine.setup import HostConfig, StylusControl
 
 __all__ = ["EngineCore"]
 
@@ -26,8 +27,8 @@ class EngineCore(Protocol):
     """The study engine as its rooms see it (driver thread only)."""
 
     config: HostConfig
-    eng: Engine
-    loop: HapticLoop
+    eng: EngineView
+    loop: LoopView
     ring: RingBuffer
     #: The ring's read cursor (a room that ran the loop itself moves it past its own records).
     cursor: int
@@ -36,7 +37,10 @@ class EngineCore(Protocol):
     hardware_text: str
     #: The payload calibration in use (a room that identifies a new one installs it here).
     calibration: PayloadCalibration
-    driver: SwitchableDriver
+    #: The simulated stylus's driver (the session's simulated participant is installed in it).
+    driver: StylusControl
+    #: The end-to-end latency's breakdown (real clock), stored with each session; None on the virtual clock.
+    latency: LatencyReport | None
     lease_owner: str
     #: Loop time of the newest record the driver has read, ns.
     last_t_ns: int
@@ -53,3 +57,7 @@ class EngineCore(Protocol):
 
     def after_loop_pause(self, restart: bool) -> None:
         """The loop ran the rig for a step of its own: restart the timing statistics (and the loop thread)."""
+
+    def run_paused(self, job: str, progress: Callable[[int, int], None] | None = None, **kwargs: Any) -> Any:
+        """Run a calibration step that drives the rig itself (:data:`pipeline.assembly.loop_jobs.JOBS`) with the
+        loop paused, wherever the loop runs; return its result."""

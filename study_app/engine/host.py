@@ -2,7 +2,12 @@
 
 Why a separate process: a Qt window painting curves in the loop's process
 holds the GIL for milliseconds per curve and breaks the 1 kHz loop
-(science.md §7).  The GUI therefore only talks to this process:
+(science.md §7).  For the same reason, on the real clock the loop does not run here either: it runs alone in a
+process of its own (:mod:`study_app.engine.loop_process`, :mod:`pipeline.assembly.loop_host`), and this process
+drives it through the stand-ins of :mod:`pipeline.assembly.loop_client` -- the session runner, the recorder's
+commits and this process's messages never hold the lock the loop needs.  (Where the OS cannot start that process,
+Windows, and in-process tests without shared memory, the loop runs in a thread of this process, as on the virtual
+clock in :meth:`StudyEngine.step`.)  The GUI only talks to this process:
 
 * commands (:mod:`study_app.engine.messages`) arrive over a pipe and are applied by
   one driver thread, so session state has a single owner;
@@ -27,6 +32,9 @@ from collections.abc import Callable
 from typing import Any
 
 from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
+from pipeline.assembly.loop_jobs import JOBS
+from pipeline.assembly.remote_engine import RemoteEngine
 from pipeline.core.clock import MonotonicClock
 from pipeline.devices.interfaces import DeviceError
 from pipeline.force.payload_compensator import PayloadCalibration
@@ -34,6 +42,7 @@ from pipeline.runtime.jitter_trace import LateTickTracer
 from pipeline.runtime.loop_messages import ControllerDetached, LoopEvent
 from pipeline.runtime.loop_messages import OperatorStop as LoopOperatorStop
 from pipeline.runtime.loop_messages import ResetFaults as LoopResetFaults
+from pipeline.runtime.loop_view import LoopView
 from pipeline.runtime.supervisor import LoopSupervisor
 from pipeline.settings.hardware import HardwareConfig
 from protocol.runner.session import SessionRunner
@@ -43,12 +52,14 @@ from protocol.study.trial import TrialPhase
 from study_app.engine import messages as m
 from study_app.engine.commissioning import Commissioning
 from study_app.engine.jaws import EngineJaws
+from study_app.engine.latency_report import LatencyReport
+from study_app.engine.loop_process import RemoteTracer, loop_runs_alone, start_remote_engine
 from study_app.engine.pacing import QUIET_OFFSET_NS, LoopPacer
 from study_app.engine.reports import HealthReport, engine_ready, fault_event
 from study_app.engine.rig_arms import RigArms
 from study_app.engine.ring_reader import RingReader
 from study_app.engine.sessions import EngineSessions
-from study_app.engine.setup import HostConfig, SwitchableDriver, build_engine
+from study_app.engine.setup import HostConfig, StylusControl, SwitchableDriver, build_engine
 
 __all__ = ["QUIET_OFFSET_NS", "StudyEngine"]
 
@@ -70,20 +81,39 @@ class StudyEngine:
         self.config = config
         self.publish = publish
         self.real = config.rig == "real"
-        self.driver = SwitchableDriver()
-        self.eng: Engine
+        self.eng: EngineView
         self.hardware: HardwareConfig | None
-        self.eng, self.hardware, self.hardware_text = build_engine(
-            config, self.driver, shared_ring=shared_ring, on_open=lambda device: publish(m.EngineOpening(device)))
+        self.driver: StylusControl
+        #: The assembled engine when the loop runs in this process (None: it runs in a process of its own).
+        self.local: Engine | None = None
+        #: The loop's own process's stand-in for the engine (None: the loop runs here).
+        self.remote: RemoteEngine | None = None
+
+        def opening(device: str) -> None:
+            publish(m.EngineOpening(device))
+
+        own = start_remote_engine(config, opening) if loop_runs_alone(config) and shared_ring else None
+        if own is not None:
+            self.remote, self.hardware, self.hardware_text, self.driver = own
+            self.eng = self.remote
+        else:
+            self.driver = SwitchableDriver()
+            self.local, self.hardware, self.hardware_text = build_engine(config, self.driver, shared_ring=shared_ring,
+                                                                         on_open=opening)
+            self.eng = self.local
         self.calibration: PayloadCalibration = self.eng.calibration
         assert self.eng.ring is not None
         self.ring = self.eng.ring
-        self.loop = self.eng.loop
+        self.loop: LoopView = self.eng.loop
         self.loop.on_event = self._on_loop_event
-        self.tracer: LateTickTracer | None = None
+        self.tracer: LateTickTracer | RemoteTracer | None = None
         if config.trace_jitter and config.clock == "real":
-            self.tracer = LateTickTracer(MonotonicClock())
-            self.loop.clock = self.tracer
+            if self.remote is not None:
+                self.tracer = RemoteTracer(self.remote.loop.link)
+            else:
+                assert self.local is not None
+                self.tracer = LateTickTracer(MonotonicClock())
+                self.local.loop.clock = self.tracer
         #: This engine's lease token (one per engine process).
         self.lease_owner = new_owner_token()
         self._last_health = 0.0
@@ -99,7 +129,12 @@ class StudyEngine:
         #: Reads the ring from here on: the timing statistics, the commissioning chain, the running session.
         self.reader = RingReader(self.eng, self.commissioning, self.sessions)
         self.pacer = LoopPacer(self.loop, config.speed)
-        self.reports = HealthReport(self.eng, config.clock, self.reader.stats, self.tracer)
+        #: The end-to-end latency's breakdown (real clock: nobody feels a force on the virtual one).
+        self.latency = LatencyReport(self.eng, self.hardware) if config.clock == "real" else None
+        if self.latency is not None:
+            self.latency.measure()
+        self.reports = HealthReport(self.eng, config.clock, self.reader.stats, self.tracer,
+                                    self.remote.loop.pid if self.remote is not None else 0, self.latency)
         self.jaws = EngineJaws(self.eng, self.hardware, self.arms.devices, self.arms.first, publish)
         self._commands = self._command_table()
 
@@ -172,11 +207,17 @@ class StudyEngine:
             self.eng.rig.close()
         except DeviceError as exc:  # the force is already zero; say what did not close cleanly
             reason = f"{reason}; {exc}"
+        if self.remote is not None and self.remote.loop.link.closed is not None:
+            error = self.remote.loop.link.closed.error  # what the loop's process could not close cleanly
+            reason = f"{reason}; {error}" if error else reason
         self.closed = True
         self.publish(m.EngineStopped(reason, self.reader.stats.summary()))
 
     def release_ring(self) -> None:
         """Free the shared rings, every arm's (after the GUI had a chance to copy the last records)."""
+        if self.remote is not None:  # the loop's process owns them: close ours, free a dead process's
+            self.remote.release()
+            return
         for ring in {id(r): r for r in (self.ring, *self.eng.rings.values()) if r is not None}.values():
             ring.close()
 
@@ -194,8 +235,9 @@ class StudyEngine:
             return
         if self.config.clock == "virtual":
             n = self.config.block_ticks
+            assert self.local is not None  # the virtual clock's loop runs here, in this thread
             try:
-                self.loop.run_ticks(n)
+                self.local.loop.run_ticks(n)
             except Exception as exc:  # the loop died in this thread: make safe, report, store
                 self.loop.fail_safe(f"the haptic loop died ({exc!r}); the haptic device's command watchdog dropped "
                                     "the force to zero", thread_dead=True)
@@ -243,6 +285,32 @@ class StudyEngine:
         if self.sessions.running:
             raise RuntimeError(f"{what}: a session is running (end or abort it first)")
 
+    def run_paused(self, job: str, progress: Callable[[int, int], None] | None = None, **kwargs: Any) -> Any:
+        """Run a calibration step that drives the rig itself (:data:`pipeline.assembly.loop_jobs.JOBS`) with the
+        loop paused, where the loop runs; its records (a frame check's) are not read as the loop's."""
+        real = self.config.clock == "real"
+        if self.remote is not None:
+            loop = self.remote.loop
+            loop.progress = progress
+            try:
+                return loop.link.job(job, kwargs, timeout_s=600.0)
+            finally:
+                loop.progress = None
+                loop.pump()  # the status after the job: its ticks and records
+                self.cursor = self.ring.write_count
+                self.after_loop_pause(False)
+        assert self.local is not None
+        if real:
+            self.loop.stop(timeout_s=5.0)  # ramps the force to zero first
+        elif not JOBS[job].ticks_the_loop:
+            self.loop.ramp_down()
+        self.drain_ring()
+        try:
+            return JOBS[job].run(self.local, progress or (lambda done, total: None), **kwargs)
+        finally:
+            self.cursor = self.ring.write_count
+            self.after_loop_pause(real)
+
     def after_loop_pause(self, restart: bool) -> None:
         """The loop ran the rig for a calibration step: restart its timing statistics (and its thread)."""
         self.reader.restart_stats(self.loop.tick_count + 1)
@@ -259,6 +327,8 @@ class StudyEngine:
 
     def drain_ring(self) -> None:
         """Read the loop's new records: the timing statistics, the commissioning chain, the running session."""
+        if self.remote is not None:
+            self.remote.loop.pump()  # the loop's events and replay log first: then its records up to them
         self.reader.drain()
 
     def health(self) -> m.Health:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
 from pipeline.devices.jaw_control import JawController
 from pipeline.settings.hardware import HardwareConfig
 from study_app.engine import messages as m
@@ -21,7 +21,8 @@ from study_app.engine import messages as m
 __all__ = ["EngineJaws", "arm_jaws", "other_arm_jaw_events"]
 
 
-def arm_jaws(eng: Engine, hardware: HardwareConfig | None, devices: Callable[[str], Any]) -> dict[str, JawController]:
+def arm_jaws(eng: EngineView, hardware: HardwareConfig | None,
+             devices: Callable[[str], Any]) -> dict[str, JawController]:
     """A jaw controller per arm that has a jaw, by arm name, the first arm first; each arm's stylus buttons are
     hooked to its own.
 
@@ -75,7 +76,7 @@ class EngineJaws:
         Called with each :class:`study_app.engine.messages.JawState` of the first arm's jaw.
     """
 
-    def __init__(self, eng: Engine, hardware: HardwareConfig | None, devices: Callable[[str], Any], first_arm: str,
+    def __init__(self, eng: EngineView, hardware: HardwareConfig | None, devices: Callable[[str], Any], first_arm: str,
                  publish: Callable[[object], None]) -> None:
         jaws = arm_jaws(eng, hardware, devices)
         #: The first arm's jaw (the simulated one, or the Arduino of the hardware file); None: there is none.

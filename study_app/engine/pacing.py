@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from pipeline.runtime.loop import HapticLoop
+from pipeline.runtime.loop_view import LoopView
 
 __all__ = ["QUIET_OFFSET_NS", "LoopPacer"]
 
@@ -24,7 +24,7 @@ class LoopPacer:
         Virtual clock: simulated seconds per wall second (0 = as fast as the CPU allows).
     """
 
-    def __init__(self, loop: HapticLoop, speed: float) -> None:
+    def __init__(self, loop: LoopView, speed: float) -> None:
         self.loop = loop
         self.speed = speed
         self._anchor_wall = time.monotonic()

@@ -18,6 +18,7 @@ from typing import Any
 from pipeline.core.clock import collect_garbage, manual_garbage_collection, prepare_helper_thread
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
+from study_app.engine.loop_process import loop_runs_alone
 from study_app.engine.setup import HostConfig
 
 __all__ = ["host_main"]
@@ -29,12 +30,13 @@ class _Detached:
 
 def host_main(config: HostConfig, conn: Any, events: Any) -> None:
     """Entry point of the study engine process."""
-    # A pure-Python driver thread must not hold the GIL for the default 5 ms
-    # while the 1 kHz loop thread waits for it.
-    sys.setswitchinterval(0.0002)
-    if config.clock == "real":
-        # every thread started from here on (device receivers of the real rig, command receiver, recorder,
-        # event feeder, loop) inherits this: none can hold the GIL while preempted by another process
+    loop_here = config.clock == "real" and not loop_runs_alone(config)
+    if loop_here:
+        # The loop is a thread of this process (where it cannot have its own: study_app.engine.loop_process).
+        # A pure-Python driver thread must not hold the GIL for the default 5 ms while the loop thread waits for
+        # it; and every thread started from here on (device receivers of the real rig, command receiver, recorder,
+        # event feeder, loop) inherits FIFO: none can hold the GIL while preempted by another process.
+        sys.setswitchinterval(0.0002)
         prepare_helper_thread()
     publish = events.put
     try:
@@ -58,7 +60,7 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
 
     threading.Thread(target=receive, name="engine-commands", daemon=True).start()
     real = config.clock == "real"
-    if real:
+    if loop_here:
         # freeze what exists now and let the collector run only in the driver's quiet window after a tick
         manual_garbage_collection()
     engine.start()
@@ -86,7 +88,8 @@ def host_main(config: HostConfig, conn: Any, events: Any) -> None:
                 engine.step()
             elif time.perf_counter_ns() >= step_at_ns:
                 engine.step()
-                collect_garbage()
+                if loop_here:
+                    collect_garbage()
                 step_at_ns = time.perf_counter_ns() + int(engine.quiet_wait_s(0.01) * 1e9)
     finally:
         reason = "the experimenter GUI went away (closed or crashed)" if detached else "the experimenter GUI closed"

@@ -8,21 +8,21 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
 from pipeline.force.frames import as_mat3
 from pipeline.force.payload_compensator import PayloadCalibration
-from pipeline.runtime.jitter_trace import LateTickTracer
 from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.settings.hardware import HardwareConfig
 from protocol.runner.session import SessionRunner
 from study_app.engine import messages as m
+from study_app.engine.latency_report import LatencyReport
 from study_app.engine.period_stats import PeriodStats
 from study_app.engine.setup import HostConfig
 
 __all__ = ["HealthReport", "device_summary", "engine_ready", "fault_event"]
 
 
-def engine_ready(eng: Engine, config: HostConfig, driver: str, calibration: PayloadCalibration,
+def engine_ready(eng: EngineView, config: HostConfig, driver: str, calibration: PayloadCalibration,
                  hardware: HardwareConfig | None) -> m.EngineReady:
     """The engine's announcement: its rings, rig and clock, the calibration in use, where the simulated rig's
     surface and tip are, the sensor mounts and the devices opened."""
@@ -34,12 +34,12 @@ def engine_ready(eng: Engine, config: HostConfig, driver: str, calibration: Payl
         surface_z_m, tip_home_m = math.nan, (math.nan, math.nan, math.nan)
         rot_tip_sensor = eng.framework.config.rot_tip_sensor
     return m.EngineReady(
-        ring_name=eng.ring.name or "", rig=config.rig, clock=config.clock,
+        ring_name=eng.ring.segment, rig=config.rig, clock=config.clock,
         calibration=calibration.to_dict(), surface_z_m=surface_z_m,
         tip_home_m=tip_home_m, driver=driver,
         rot_tip_sensor=as_mat3(rot_tip_sensor),
         devices=device_summary(hardware),
-        arm_rings=tuple((n, r.name or "") for n, r in eng.rings.items() if r is not None)
+        arm_rings=tuple((n, r.segment) for n, r in eng.rings.items() if r is not None)
         if len(eng.rings) > 1 else (),
         arm_mounts=tuple((n, as_mat3(fw.config.rot_tip_sensor)) for n, fw in eng.frameworks.items())
         if len(eng.frameworks) > 1 else (),
@@ -83,14 +83,22 @@ class HealthReport:
     stats
         The loop's timing, as the engine reads it from the ring.
     tracer
-        Explains the late periods (real clock, ``trace_jitter``), or None.
+        Explains the late periods (real clock, ``trace_jitter``): a
+        :class:`pipeline.runtime.jitter_trace.LateTickTracer` or its stand-in in the loop's own process; or None.
+    loop_pid
+        The loop's own process's id (0: the loop is a thread of the engine's process).
+    latency
+        The end-to-end latency's breakdown (real clock), or None.
     """
 
-    def __init__(self, eng: Engine, clock: str, stats: PeriodStats, tracer: LateTickTracer | None) -> None:
+    def __init__(self, eng: EngineView, clock: str, stats: PeriodStats, tracer: Any, loop_pid: int = 0,
+                 latency: LatencyReport | None = None) -> None:
         self.eng = eng
         self.clock = clock
         self.stats = stats
         self.tracer = tracer
+        self.loop_pid = loop_pid
+        self.latency = latency
 
     def health(self, runner: SessionRunner | None, *, driver: str, loop_dead: str) -> m.Health:
         """The engine's state and loop timing since the last stats reset."""
@@ -106,7 +114,8 @@ class HealthReport:
             late_periods=None if self.tracer is None else self.tracer.summary(),
             waiting=runner.state.waiting if runner is not None and not runner.done else "",
             scheduling=loop.scheduling if self.clock == "real" else "virtual clock",
-            loop_dead=loop_dead, **self._haptic(), arms=self._arms(),
+            loop_dead=loop_dead, **self._haptic(), arms=self._arms(), loop_pid=self.loop_pid,
+            latency=self.latency.latency().to_dict() if self.latency is not None else None,
         )
 
     def _haptic(self) -> dict[str, Any]:

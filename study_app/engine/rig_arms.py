@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine import arm_devices
+from pipeline.assembly.engine_view import EngineView
 from pipeline.settings.hardware import HardwareConfig
 
 __all__ = ["RigArms"]
@@ -21,7 +22,7 @@ class RigArms:
         The real rig's hardware file, None on the simulated rig.
     """
 
-    def __init__(self, eng: Engine, hardware: HardwareConfig | None) -> None:
+    def __init__(self, eng: EngineView, hardware: HardwareConfig | None) -> None:
         self.eng = eng
         self.hardware = hardware
         self.names: tuple[str, ...] = tuple(eng.frameworks)
@@ -42,10 +43,7 @@ class RigArms:
     def devices(self, arm: str) -> Any:
         """An arm's devices (``sensor``, ``robot``; simulated: its whole rig): the rig itself for the first arm,
         whose calls it forwards, else the arm's own."""
-        rig = self.eng.rig
-        if arm == self.first:
-            return rig
-        return rig.rig(arm) if self.eng.simulated else rig.arm(arm)
+        return arm_devices(self.eng, arm)
 
     def hardware_arm(self, arm: str) -> Any:
         """The hardware file's table of an arm (real rig), None on the simulated rig."""

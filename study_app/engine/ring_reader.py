@@ -6,7 +6,7 @@ ring is read from one place, so every record reaches each of its readers once an
 
 from __future__ import annotations
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
 from protocol.runner.session_driver import SessionDriver
 from study_app.engine.commissioning import Commissioning
 from study_app.engine.period_stats import PeriodStats
@@ -28,7 +28,7 @@ class RingReader:
         Its running session is fed the records, the loop's events and its replay log.
     """
 
-    def __init__(self, eng: Engine, commissioning: Commissioning, sessions: EngineSessions) -> None:
+    def __init__(self, eng: EngineView, commissioning: Commissioning, sessions: EngineSessions) -> None:
         assert eng.ring is not None
         others = tuple((name, rg, eng.loop.arm(name).replay_log) for name, rg in eng.rings.items()
                        if rg is not None and rg is not eng.ring)

@@ -5,14 +5,14 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from pipeline.assembly.engine import Engine
+from pipeline.assembly.engine_view import EngineView
 from pipeline.force.pipeline_settings import non_default_settings, settings_of
 from pipeline.settings.hardware import HardwareConfig
 
 __all__ = ["config_record", "real_config_record"]
 
 
-def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
+def config_record(eng: EngineView, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
     """The ``config_json`` of a simulated-rig session: rig, framework and watchdog settings, seeds; on a rig of
     several arms also ``arms``: their names (the task arm, whose records the session holds, first), and each arm's
     calibration (the session's ``calibration_json`` is the task arm's).
@@ -37,7 +37,7 @@ def config_record(eng: Engine, clock: str, rig_seed: int, participant_seed: int)
     }
 
 
-def real_config_record(hw: HardwareConfig, hardware_text: str, eng: Engine) -> dict[str, Any]:
+def real_config_record(hw: HardwareConfig, hardware_text: str, eng: EngineView) -> dict[str, Any]:
     """The ``config_json`` of a real-rig session: the hardware file as written and as validated, framework, watchdog."""
     return {
         "rig": "real",

@@ -43,7 +43,7 @@ from study_app.engine import session_list
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
 from study_app.engine.session_config import config_record, real_config_record
-from study_app.engine.setup import SwitchableDriver
+from study_app.engine.setup import StylusControl
 
 __all__ = ["EngineSessions", "list_resumable"]
 
@@ -132,10 +132,14 @@ class EngineSessions:
 
     def _config_record(self, participant_seed: int) -> dict[str, Any]:
         if self.engine.eng.simulated:
-            return config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
-                                 participant_seed)
-        assert self.engine.hardware is not None
-        return real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
+            record = config_record(self.engine.eng, self.engine.config.clock, self.engine.config.rig_seed,
+                                   participant_seed)
+        else:
+            assert self.engine.hardware is not None
+            record = real_config_record(self.engine.hardware, self.engine.hardware_text, self.engine.eng)
+        if self.engine.latency is not None:  # the real clock: the delay a participant feels, as it was at the start
+            record["latency"] = self.engine.latency.latency().to_dict()
+        return record
 
     def resume(self, cmd: m.ResumeSession) -> None:
         self.engine.require_idle("resume")
@@ -158,14 +162,15 @@ class EngineSessions:
         if self.engine.eng.simulated:
             from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
 
-            self.engine.driver.participant = SimulatedParticipant(seed=opened.participant_seed)
+            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed))
             sim_rig = self.engine.eng.rig
-            participant: SwitchableDriver | None = self.engine.driver
+            participant: StylusControl | None = self.engine.driver
 
             def sim_time_s() -> float:
-                return sim_rig.sim_time_s
+                return float(sim_rig.sim_time_s)
 
-            participant_time: Callable[[], float] | None = sim_time_s
+            # the cues' time is the rig's own; in the loop's own process it is stamped there (RemoteDriver)
+            participant_time: Callable[[], float] | None = sim_time_s if hasattr(sim_rig, "sim_time_s") else None
         else:  # a person holds the Touch: nothing to notify, nothing simulated
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)
@@ -337,7 +342,7 @@ class EngineSessions:
         assert runner is not None and recorder is not None and db is not None and opened is not None
         self.runner = self.recorder = self.db = self.opened = None
         self.trigger = None
-        self.engine.driver.participant = None
+        self.engine.driver.install(None)
         error = ""
         try:
             finish_session(db, recorder, opened)

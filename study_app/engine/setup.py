@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from pipeline.assembly.engine import Engine, EngineConfig, build_hardware_engine, build_sim_engine
 from pipeline.commissioning.rig_calibration import CalibrationFileError
@@ -25,7 +25,8 @@ if TYPE_CHECKING:  # the simulated rig's types: a real rig's engine process neve
     from pipeline.sim.hand import HandObservation
     from pipeline.sim.participant import SimulatedParticipant
 
-__all__ = ["MANUAL_Y_RANGE_M", "HostConfig", "SwitchableDriver", "build_engine", "build_real_engine"]
+__all__ = ["MANUAL_Y_RANGE_M", "HostConfig", "StylusControl", "SwitchableDriver", "build_engine", "build_real_engine",
+           "hardware_of"]
 
 #: Lowest / highest equilibrium a person may command with the mouse, m along the Touch's +y.
 MANUAL_Y_RANGE_M = (-0.030, 0.005)
@@ -45,8 +46,7 @@ class HostConfig:
         Real rig, tests only: ``"module:function"`` opening the haptic device instead of the Touch
         (called as ``open_haptic(HapticSettings, clock)``; no Touch on CI machines).
     clock
-        ``"real"`` (1 kHz on the monotonic clock, loop in its own thread) or
-        ``"virtual"`` (rehearsals, screenshots, tests).
+        ``"real"`` (1 kHz on the monotonic clock) or ``"virtual"`` (rehearsals, screenshots, tests).
     speed
         Virtual clock only: simulated seconds per wall second (0 = as fast as the CPU allows).
     rig_seed
@@ -68,6 +68,9 @@ class HostConfig:
         Simulated rig: its arms by name, the one the participant holds first; a session's protocol must name that
         one its task arm (``design.task_arm``; the window restarts the engine with the task arm first when it is not,
         :mod:`study_app.models.arms`), and records every arm (docs/architecture.md, "Every arm recorded").
+    loop_process
+        Real clock: the loop runs alone in a process of its own (:mod:`study_app.engine.loop_process`); False: in
+        a thread of the engine's process (so it does anyway where the OS cannot start that process: Windows).
     """
 
     rig: str = "sim"
@@ -82,6 +85,7 @@ class HostConfig:
     sim_mount_error_deg: float = 0.0
     sim_settings: tuple[tuple[str, float], ...] = ()
     sim_arms: tuple[str, ...] = (SINGLE_ARM_NAME,)
+    loop_process: bool = True
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):
@@ -102,6 +106,24 @@ class HostConfig:
             raise ValueError("sim_arms: the real rig's arms are its hardware file's")
 
 
+class StylusControl(Protocol):
+    """The simulated stylus's driver as the engine drives it: who drives, the mouse's target, the simulated
+    participant and its cues (:class:`SwitchableDriver` here, or its stand-in for the loop's own process,
+    :class:`study_app.engine.loop_process.RemoteDriver`)."""
+
+    mode: str
+
+    def set_mode(self, mode: str) -> None: ...
+
+    def set_manual_y(self, y_m: float) -> None: ...
+
+    def install(self, participant: SimulatedParticipant | None) -> None: ...
+
+    def begin_trial(self, aim: TrialAim, t_s: float) -> None: ...
+
+    def end_trial(self, t_s: float) -> None: ...
+
+
 class SwitchableDriver:
     """The simulated stylus's driver: the simulated participant (autopilot) or a person (manual).
 
@@ -114,6 +136,10 @@ class SwitchableDriver:
         self.mode = "autopilot"
         self.participant: SimulatedParticipant | None = None
         self.manual_y_m = 0.0
+
+    def install(self, participant: SimulatedParticipant | None) -> None:
+        """Hand the autopilot to a new simulated participant (None: none, the session ended)."""
+        self.participant = participant
 
     def set_mode(self, mode: str) -> None:
         """Switch who drives (one of :data:`study_app.engine.messages.DRIVER_MODES`)."""
@@ -156,47 +182,61 @@ def _import_factory(spec: str) -> Callable[..., Any]:
 
 
 def build_real_engine(
-    config: HostConfig, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
+    config: HostConfig, *, shared_ring: bool, on_open: Callable[[str], None] | None = None, jaws: bool = True,
 ) -> tuple[Engine, HardwareConfig, str]:
     """Load the hardware file, open the devices and assemble the loop
     (:func:`pipeline.assembly.engine.build_hardware_engine`).
 
     Returns the engine, the validated hardware config and the file's text (stored with each session).
-    ``on_open(device)`` is called before each device is opened.
+    ``on_open(device)`` is called before each device is opened; ``jaws=False`` leaves the jaw actuators closed (the
+    study engine opens them itself when the loop runs in a process of its own).
 
     Raises
     ------
     RuntimeError
         One line: the file is missing or invalid (naming the field), or a device cannot be opened (naming it).
     """
-    if not config.hardware_path:
-        raise RuntimeError(f"real rig: no hardware file given; pass --hardware FILE (see {hardware_template()})")
-    try:
-        hw = load_hardware(config.hardware_path)
-        with open(config.hardware_path, encoding="utf-8") as fh:
-            text = fh.read()
-    except HardwareError as exc:
-        raise RuntimeError(f"real rig: {exc}") from None
+    hw, text = hardware_of(config)
     # The rig-construction seam: haptic_factory opens every arm's haptic device in place of its model's backend
     # (tests, with no Touch on CI, open one that speaks the HDAPI through the real Touch backend).
     open_haptic = None if config.haptic_factory is None else _import_factory(config.haptic_factory)
     try:
         eng = build_hardware_engine(hw, shared_ring=shared_ring, ring_seconds=30.0, on_open=on_open,
-                                    open_haptic=open_haptic)
+                                    open_haptic=open_haptic, jaws=jaws)
     except (DeviceError, CalibrationFileError) as exc:
         raise RuntimeError(f"real rig: {exc}") from None
     return eng, hw, text
 
 
+def hardware_of(config: HostConfig) -> tuple[HardwareConfig, str]:
+    """The real rig's hardware file: validated, and as written (stored with each session).
+
+    Raises
+    ------
+    RuntimeError
+        One line: no file given, or the file is missing or invalid (naming the field).
+    """
+    if not config.hardware_path:
+        raise RuntimeError(f"real rig: no hardware file given; pass --hardware FILE (see {hardware_template()})")
+    try:
+        hw = load_hardware(config.hardware_path)
+        with open(config.hardware_path, encoding="utf-8") as fh:
+            return hw, fh.read()
+    except HardwareError as exc:
+        raise RuntimeError(f"real rig: {exc}") from None
+
+
 def build_engine(
     config: HostConfig, driver: SwitchableDriver, *, shared_ring: bool, on_open: Callable[[str], None] | None = None,
+    jaws: bool = True,
 ) -> tuple[Engine, HardwareConfig | None, str]:
-    """The engine ``config`` asks for: the simulated rig driven by ``driver``, or the real rig of its hardware file.
+    """The engine ``config`` asks for: the simulated rig driven by ``driver``, or the real rig of its hardware file
+    (``jaws=False``: its jaw actuators left closed).
 
     Returns the engine, the validated hardware config and the file's text (None and "" for the simulated rig).
     """
     if config.rig == "real":
-        return build_real_engine(config, shared_ring=shared_ring, on_open=on_open)
+        return build_real_engine(config, shared_ring=shared_ring, on_open=on_open, jaws=jaws)
     from pipeline.assembly.sim_config import sim_rig_config
     from pipeline.force.pipeline_settings import framework_with
 

@@ -8,6 +8,7 @@ weight would be rendered as feedback.  What the gate decides is :mod:`pipeline.c
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -114,7 +115,7 @@ class StartGate:
         return True
 
 
-def other_arms_missing(hardware: HardwareConfig, frameworks: dict[str, Any]) -> str:
+def other_arms_missing(hardware: HardwareConfig, frameworks: Mapping[str, Any]) -> str:
     """The real rig's arms after the first: "" when each has its calibration chain (TCP, payload, frame check) on
     record in its own calibration file for its tool, else one line naming the arm and its first missing step.
 

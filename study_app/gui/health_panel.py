@@ -3,6 +3,8 @@ the next cue waits, the machine's health in words, the loop's timing judged agai
 
 from __future__ import annotations
 
+import html
+
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (
@@ -61,6 +63,11 @@ class QtHealthPanel(QWidget):
         self.loop.setWordWrap(True)
         self.thermal = QLabel()
         self.thermal.setWordWrap(True)
+        self.placement = QLabel()  # where the loop runs: its own process, its CPU, its priority
+        self.placement.setWordWrap(True)
+        self.latency = QLabel()  # the end-to-end latency: its totals, then its stages one a line
+        self.latency.setWordWrap(True)
+        self.latency.setTextFormat(Qt.TextFormat.RichText)
         self.force = QLabel()
         self.force.setWordWrap(True)
         self.force.hide()
@@ -83,6 +90,8 @@ class QtHealthPanel(QWidget):
         lay.addWidget(self.arms)
         lay.addWidget(self.waiting)
         lay.addWidget(self.loop)
+        lay.addWidget(self.placement)
+        lay.addWidget(self.latency)
         lay.addWidget(self.thermal)
         lay.addWidget(self.force)
         lay.addWidget(self.log_label)
@@ -98,6 +107,15 @@ class QtHealthPanel(QWidget):
         outer.addWidget(scroll)
         health.changed.connect(self._on_changed)
         self._on_changed()
+
+    def latency_html(self) -> str:
+        """The end-to-end latency: its totals, and below them its breakdown by stage in small type ("" when the
+        engine does not say)."""
+        total = self.health.latency_text()
+        if not total:
+            return ""
+        stages = "<br>".join(html.escape(line) for line in self.health.latency_stages())
+        return f"{html.escape(total)}<br><small>{stages}</small>"
 
     def loop_html(self) -> str:
         """The loop's figures, each coloured against its limit, and what the colours mean."""
@@ -150,6 +168,10 @@ class QtHealthPanel(QWidget):
         loop = self.loop_html()
         if self.loop.text() != loop:
             self.loop.setText(loop)
+        self.placement.setText(h.placement_text())
+        latency = self.latency_html()
+        if latency != self.latency.text():
+            self.latency.setText(latency)
         th = h.thermal_figure()
         self.thermal.setText(th.text if th is not None else "")
         if th is not None:

@@ -11,6 +11,7 @@ import os
 from collections.abc import Sequence
 from typing import Any
 
+from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session import first_unfinished
@@ -20,7 +21,14 @@ from protocol.runner.session_setup import (
     training_protocol,
     training_schedule,
 )
-from protocol.runner.study_rules import StudyRuleError, check_settings, seed_refusal, stored_sessions, training_refusal
+from protocol.runner.study_rules import (
+    StudyRuleError,
+    check_arms,
+    check_settings,
+    seed_refusal,
+    stored_sessions,
+    training_refusal,
+)
 from protocol.storage import EmptyDatabase, SessionInfo, StorageError, StudyDatabase
 from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import withdrawals
@@ -160,12 +168,13 @@ def peek(db_path: str) -> StudyDatabase | None:
 
 def plan_study(
     db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
-    continue_study: bool, framework: FrameworkConfig | None = None,
+    continue_study: bool, framework: FrameworkConfig | None = None, arms: Sequence[str] = (SINGLE_ARM_NAME,),
 ) -> tuple[dict[int, list[Step]], int, list[int]]:
     """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
 
     ``db`` None: a new database.  A read-only ``db`` is closed afterwards.  ``framework`` (default: the paper's)
-    must be the pipeline configuration every stored session of the study ran with (:func:`check_settings`).
+    must be the pipeline configuration every stored session of the study ran with (:func:`check_settings`), and
+    ``arms`` (the task arm first) the rig's arms they ran on (:func:`check_arms`).
     """
     try:
         if continue_study:
@@ -176,7 +185,7 @@ def plan_study(
             if db is not None:
                 planned = _plan_continue(db, db_path, participants, seed, protocol)
                 _check_seed(db, db_path, seed)
-                check_settings(StudyReader.over(db).sessions(), db_path, framework)
+                _check_rig(db, db_path, framework, arms)
                 return planned
         if db is not None:
             for n in range(1, participants + 1):
@@ -187,13 +196,20 @@ def plan_study(
                         f"(use a new database, or the same command with --continue to complete the study)"
                     )
             _check_seed(db, db_path, seed)
-            check_settings(StudyReader.over(db).sessions(), db_path, framework)
+            _check_rig(db, db_path, framework, arms)
         plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
         return plan, per * participants, []
     finally:
         if db is not None and db.readonly:
             db.close()
+
+
+def _check_rig(db: StudyDatabase, db_path: str, framework: FrameworkConfig | None, arms: Sequence[str]) -> None:
+    """One pipeline and one rig per study, as one seed: the stored sessions' settings and arms."""
+    sessions = StudyReader.over(db).sessions()
+    check_settings(sessions, db_path, framework)
+    check_arms(sessions, db_path, arms)
 
 
 def _check_seed(db: StudyDatabase, db_path: str, seed: int) -> None:

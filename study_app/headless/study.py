@@ -116,12 +116,14 @@ def run_study(
     n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol)
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
     protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
-    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw)
+    arms = sim_arms_of(protocol, sim_arms)  # a bad task arm: refused before anything is stored
+    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw,
+                                           arms)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
-                            sim_arms=sim_arms_of(protocol, sim_arms), framework=fw)  # refused before anything is stored
+                            sim_arms=arms, framework=fw)
 
 
 def _checked_request(db_path: str, participants: int, jobs: int | None, continue_study: bool,
@@ -154,7 +156,7 @@ def _run_under_lease(
         progress.notes.extend(open_notes(db, taken))
         # again under the lease: what another process did in between counts
         plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study,
-                                                             framework)
+                                                             framework, sim_arms)
         progress.sessions.extend(kept)
         jobs_used = min(jobs, len(plan))
         if jobs_used > 1:

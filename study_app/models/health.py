@@ -363,6 +363,40 @@ class HealthModel:
                        _level(missed, lim["missed_fraction"]), f"≤ {100 * lim['missed_fraction'][0]:g} %"),
         ]
 
+    def placement_text(self) -> str:
+        """Where the 1 kHz loop runs and how it is scheduled: its own process and CPU, or why not ("" before the
+        first Health event)."""
+        h = self.loop
+        if h is None or not h.scheduling:
+            return ""
+        if h.scheduling == "virtual clock":
+            return "The 1 kHz loop: on the virtual clock (simulated time), in the engine's process"
+        where = (f"alone in its own process (pid {h.loop_pid})" if h.loop_pid
+                 else "a thread of the engine's process")
+        return f"The 1 kHz loop: {where}, {h.scheduling}"
+
+    def latency_text(self) -> str:
+        """The end-to-end latency a participant feels, in one line ("" when the engine does not say: virtual clock)."""
+        lat = self.loop.latency if self.loop is not None else None
+        if not lat:
+            return ""
+
+        def ms(key: str) -> str:
+            v = lat.get(key)
+            return "not measured" if v is None else f"{v:.1f} ms"
+
+        return (f"End-to-end latency: tip → hand {ms('force_ms')} · hand → tip {ms('motion_ms')} · "
+                f"round trip {ms('total_ms')} (a {lat.get('step_n', 1.0):g} N step of tip force)")
+
+    def latency_stages(self) -> list[str]:
+        """The latency's stages, one line each (empty when the engine does not say)."""
+        lat = self.loop.latency if self.loop is not None else None
+        out = []
+        for s in (lat or {}).get("stages", []):
+            ms = "–" if s["ms"] is None else f"{s['ms']:.1f} ms"
+            out.append(f"{'tip → hand' if s['path'] == 'force' else 'hand → tip'}: {ms}  {s['name']} ({s['source']})")
+        return out
+
     def update_force(self, max_force_n: float, in_trial: bool) -> None:
         """The largest task force of the newest records, and whether a trial was running."""
         f = max_force_n if math.isfinite(max_force_n) else 0.0

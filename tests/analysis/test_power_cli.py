@@ -363,3 +363,14 @@ def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import()
                           capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "[]"
 
+
+
+def test_a_long_request_says_its_size_and_memory_before_its_work(capsys: pytest.CaptureFixture[str]) -> None:
+    from study_app.cli.power_cmds import _PowerRequest, _say_the_size
+
+    _say_the_size(_PowerRequest((6, 8), 1_000_000, 0.05, 0, 100))
+    said = capsys.readouterr().err
+    assert "1,000,000 resampled studies for each of 2 sizes (14,000,000 participants drawn; at most" in said
+    assert "MiB at once" in said and "how long is left" in said
+    _say_the_size(_PowerRequest((6, 8), 2000, 0.05, 0, 100))  # seconds of work: nothing to say
+    assert capsys.readouterr().err == ""

@@ -18,7 +18,7 @@ from pipeline.assembly.engine import build_hardware_engine
 from pipeline.assembly.real_rig import RealRig, build_real_rig
 from pipeline.backends.jaw import SerialJawActuator
 from pipeline.backends.netft import NetFTForceSensor
-from pipeline.backends.ur import UrRtdeRobot
+from pipeline.backends.ur_process import UrPoseProcess
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import DeviceError, HapticState
 from pipeline.devices.registry import haptic_model
@@ -274,7 +274,7 @@ def test_build_real_rig_opens_every_device_and_closes_them(tmp_path: Path) -> No
             assert isinstance(rig,
                               RealRig) and all(hasattr(rig, a) for a in ("sensor", "robot", "haptic", "advance",
                                                                          "true_contact_force", "close"))
-            assert isinstance(rig.sensor, NetFTForceSensor) and isinstance(rig.robot, UrRtdeRobot)
+            assert isinstance(rig.sensor, NetFTForceSensor) and isinstance(rig.robot, UrPoseProcess)
             assert isinstance(rig.jaw, SerialJawActuator) and rig.true_contact_force() is None
             assert eng.calibration == NO_PAYLOAD and eng.framework.safety.config.f_max_n == 3.0
             eng.loop.run_ticks(3)

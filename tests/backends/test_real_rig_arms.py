@@ -23,7 +23,7 @@ from pipeline.assembly.engine import build_hardware_engine
 from pipeline.assembly.real_rig import RealRig, build_real_rig
 from pipeline.backends.netft import NetFTForceSensor
 from pipeline.backends.touch import TouchHapticDevice, TouchScheduler
-from pipeline.backends.ur import UrRtdeRobot
+from pipeline.backends.ur_process import UrPoseProcess
 from pipeline.core.clock import VirtualClock
 from pipeline.core.tick_record import RECORD_FIELDS
 from pipeline.devices.interfaces import DeviceError, Fault
@@ -69,7 +69,7 @@ def test_two_arms_open_by_name_into_one_scheduler_and_close(fakes: Any, touches:
         right, left = rig.real_arms
         assert rig.haptic is right.haptic and rig.sensor is right.sensor  # the one-arm fields: the first arm's
         for arm in rig.real_arms:
-            assert isinstance(arm.sensor, NetFTForceSensor) and isinstance(arm.robot, UrRtdeRobot)
+            assert isinstance(arm.sensor, NetFTForceSensor) and isinstance(arm.robot, UrPoseProcess)
             assert isinstance(arm.haptic, TouchHapticDevice)
         assert right.sensor.read_wrench()[3] == 1.0 and left.sensor.read_wrench()[3] == 2.0  # each its own box
         assert (right.haptic.device_name, left.haptic.device_name) == ("Right Touch", "Left Touch")

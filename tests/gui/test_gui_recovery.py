@@ -128,7 +128,7 @@ def test_a_rehearsed_kill_is_on_record_as_one_and_no_dead_engine_figure_stays(qt
 
     w = window
     sid = start_session(qtbot, w, "P01")
-    qtbot.waitUntil(lambda: w.model.health.devices and w.model.health.loop is not None, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: len(w.model.health.devices) >= 3 and w.model.health.loop is not None, timeout=TIMEOUT_MS)
     t_cue = w.model.session.trial.t_s
     w.model.rig_control.inject_fault("kill", None, 0.0)
     qtbot.waitUntil(lambda: w.engine_row.isVisible(), timeout=TIMEOUT_MS)

@@ -73,6 +73,28 @@ def test_health_panel_shows_faults_and_enables_reset(qtbot):
     assert not view.reset_button.isEnabled()
 
 
+def test_health_panel_says_where_the_loop_runs_and_the_latency_stage_by_stage(qtbot):
+    from pipeline.assembly.latency import Latency, Stage
+
+    h = HealthModel()
+    view = QtHealthPanel(h)
+    qtbot.addWidget(view)
+    h.apply(READY)
+    assert view.placement.text() == "" and view.latency.text() == ""  # nothing said before the engine says it
+    lat = Latency((Stage("force", "moving average (10 samples)", 4.0, "measured on the simulated rig"),
+                   Stage("force", "F/T sensor: sampling and transport", float("nan"), "a tap test"),
+                   Stage("motion", "robot: servoL look-ahead 0.03 s", 34.0, "UR client library #86")))
+    h.apply(m.Health(1000.0, 1000.0, 1003.0, 12.0, 1, 0, 5000, 0, True, "autopilot", True, False,
+                     scheduling="SCHED_FIFO/20 on CPU 1 of 0-1", loop_pid=4242, latency=lat.to_dict()))
+    assert view.placement.text() == "The 1 kHz loop: alone in its own process (pid 4242), SCHED_FIFO/20 on CPU 1 of 0-1"
+    text = view.latency.text()
+    assert text.startswith("End-to-end latency: tip → hand 4.0 ms · hand → tip 34.0 ms · round trip 38.0 ms")
+    # every stage on a line of its own, the one not measured said so (not a zero)
+    assert "tip → hand: 4.0 ms  moving average (10 samples) (measured on the simulated rig)" in text
+    assert "tip → hand: –  F/T sensor: sampling and transport (a tap test)" in text
+    assert "hand → tip: 34.0 ms  robot: servoL look-ahead 0.03 s (UR client library #86)" in text
+
+
 def test_setup_panel_shows_validation_errors(qtbot, tmp_path):
     s = SetupModel()
     view = QtSetupPanel(s)

@@ -16,6 +16,7 @@ import ctypes
 import os
 import shutil
 import signal
+import socket
 import sys
 import threading
 from pathlib import Path
@@ -160,6 +161,41 @@ def test_the_pread_reader_reads_a_file_on_linux(tmp_path: Path) -> None:
 
 def test_cpu_count_without_an_affinity_mask(windows: None) -> None:
     assert threads.usable_cpu_count() == (os.cpu_count() or 1)
+    assert threads.usable_cpus() == list(range(os.cpu_count() or 1))
+
+
+def test_without_affinity_the_loop_runs_on_any_cpu_and_without_a_socket_handover_in_the_engine(
+        windows: None, monkeypatch) -> None:
+    monkeypatch.setattr(os, "sched_setaffinity", _never, raising=False)
+    assert threads.pin_to_cpu(1) == "any CPU (no CPU affinity on this platform)"
+    assert processes.socket_handover() is False
+    a, b = socket.socketpair()
+    try:
+        assert processes.spawn_with_socket([sys.executable, "-c", "pass"], a) is None  # the loop stays in the engine
+    finally:
+        a.close()
+        b.close()
+
+
+def test_the_loop_process_is_pinned_to_the_last_cpu_it_may_use_unless_told(monkeypatch) -> None:
+    from pipeline.core.clock import loop_cpu_problem, pin_loop_process
+
+    pinned: list[int] = []
+    monkeypatch.setattr(threads, "pin_to_cpu", lambda cpu: pinned.append(cpu) or f"CPU {cpu}")
+    monkeypatch.setattr("pipeline.core.clock.pin_to_cpu", threads.pin_to_cpu)
+    monkeypatch.setattr("pipeline.core.clock.usable_cpus", lambda: [0, 1, 2, 3])
+    monkeypatch.delenv("HAPTIC_STUDY_LOOP_CPU", raising=False)
+    assert pin_loop_process() == "CPU 3 of 0-3" and pinned == [3]
+    monkeypatch.setenv("HAPTIC_STUDY_LOOP_CPU", "1")
+    assert pin_loop_process() == "CPU 1 of 0-3" and loop_cpu_problem() is None
+    monkeypatch.setenv("HAPTIC_STUDY_LOOP_CPU", "none")
+    assert pin_loop_process() == "any CPU (HAPTIC_STUDY_LOOP_CPU=none)" and pinned == [3, 1]
+    monkeypatch.setenv("HAPTIC_STUDY_LOOP_CPU", "7")
+    assert loop_cpu_problem() == ("HAPTIC_STUDY_LOOP_CPU = '7': must be 'none' or one of the CPUs this process may "
+                                  "use (0-3)")
+    monkeypatch.setattr("pipeline.core.clock.usable_cpus", lambda: [0])
+    monkeypatch.delenv("HAPTIC_STUDY_LOOP_CPU")
+    assert pin_loop_process() == "any CPU (this process may use one only)"
 
 
 @pytest.mark.parametrize("threads, method", [(1, "fork"), (2, "spawn")])

@@ -33,6 +33,7 @@ from cli_subprocess import tiny_protocol
 
 from analysis.reading.load import load_study
 from protocol.recording import RecordingDamaged
+from protocol.recording.integrity import WHOLE_BLOCK, place_crc32
 from protocol.runner.session_setup import open_resumed_session
 from protocol.storage import StorageError, StudyDatabase
 from protocol.storage.damage import recording_damage
@@ -227,8 +228,8 @@ def test_one_flipped_bit_passes_sqlites_check_and_is_found_by_check(study: Path,
     found = json.loads(r.stdout)
     assert found["integrity"] == ["ok"]
     assert [d["line"] for d in found["damage"]] == [
-        ("session 3, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes changed since they "
-         "were written); touches trial 2")]
+        ("session 3, recorded run 0, 2.000–2.999 s (block 2): checksum mismatch (the block's bytes, or the place it "
+         "is stored at -- session, arm, run, block, ticks -- changed since it was written); touches trial 2")]
     assert found["trials_not_in_recording"] and "trial 2 of session 3" in found["trials_not_in_recording"][0]
     clean = _cli(["check", "--db", str(study)], tmp_path)
     assert clean.returncode == 0 and "No problem found." in clean.stdout, clean.stdout + clean.stderr
@@ -392,12 +393,16 @@ def test_the_engines_resume_refuses_a_damaged_session_and_changes_nothing(study:
 
 
 def test_checksums_are_the_blocks_own(study: Path) -> None:
+    # a run recorded now binds each block's checksum to its place, then its bytes (place_crc32)
     c = sqlite3.connect(study)
     try:
-        rows = c.execute("SELECT data, crc32 FROM session_blocks").fetchall()
+        rows = c.execute("SELECT session_id, segment, block, first_tick, last_tick, n_records, data, crc32 "
+                         "FROM session_blocks").fetchall()
     finally:
         c.close()
-    assert rows and all(zlib.crc32(d) == crc for d, crc in rows)
+    assert rows and all(place_crc32(d, arm="", session_id=s, segment=g, block=b, chunk=WHOLE_BLOCK, first_tick=f,
+                                    last_tick=t, n_records=n) == crc for s, g, b, f, t, n, d, crc in rows)
+    assert not any(zlib.crc32(d) == crc for *_, d, crc in rows)  # not the bytes' alone
 
 
 def test_a_killed_runs_open_block_reads_from_its_chunks_and_a_damaged_chunk_is_named_as_its_block(

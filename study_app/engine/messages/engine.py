@@ -170,6 +170,11 @@ class Health:
     #: A rig of several arms: per arm, the task arm first, (name, largest task force of its newest records in N,
     #: latched faults); empty on a rig of one arm.
     arms: tuple[tuple[str, float, int], ...] = ()
+    #: The process id of the loop's own process (real clock, :mod:`study_app.engine.loop_process`); 0 when the loop
+    #: is a thread of the engine's process.
+    loop_pid: int = 0
+    #: The end-to-end latency, stage by stage (:meth:`pipeline.assembly.latency.Latency.to_dict`); real clock only.
+    latency: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True, slots=True)
