@@ -39,8 +39,9 @@ WITHIN_COLUMNS: tuple[Column, ...] = (
            "integer", files=_SA),
     Column("p_value", "p-value of r_rm (t test of the common within-participant slope, df as given)",
            "probability", label="p", files=_SA, significant=4),
-    Column("ci_low", "lower end of the confidence interval of r_rm (Fisher z, SE = 1/√(df − 3), as the rmcorr R "
-           "package; empty for df ≤ 3)", "−1 to 1", label="CI low", files=_SA, decimals=4),
+    Column("ci_low", "lower end of the confidence interval of r_rm (Fisher z of a partial correlation, "
+           "SE = 1/√(df − 1), as pingouin's rm_corr; empty for df < 2)", "−1 to 1", label="CI low", files=_SA,
+           decimals=4),
     Column("ci_high", "upper end of the confidence interval of r_rm", "−1 to 1", label="CI high", files=_SA,
            decimals=4),
     Column("slope_s_per_N", "common within-participant slope of speed on accuracy", "s per N", label="slope (s/N)",

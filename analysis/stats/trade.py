@@ -158,7 +158,9 @@ def trade_conclusion(row: Any, sensitivity: Any | None) -> str:
     """What a row of the default reading concludes, given the cue reading's row of the same mode (``sensitivity``).
 
     "a trade" only where the default's interval excludes zero on the negative side **and** the cue reading's does
-    too; a reading that cannot say (no interval) or an interval that holds zero is no trade.
+    too; a reading that cannot say (no interval) or an interval that holds zero is no trade.  The cue reading can
+    only withhold the label, never grant it (it is built to find a trade: docs/science.md §6.1), and where it does
+    the conclusion says what it showed.
     """
     own = _direction(row)
     if own == "n/c":
@@ -167,9 +169,11 @@ def trade_conclusion(row: Any, sensitivity: Any | None) -> str:
         return "no association shown (the interval holds 0)"
     if own == "positive":
         return "positive: slower trials also less accurate (no trade)"
-    if sensitivity is not None and _direction(sensitivity) == "negative":
+    cue = "n/c" if sensitivity is None else _direction(sensitivity)
+    if cue == "negative":
         return "negative: faster trials less accurate (a trade)"
-    return "negative, but the cue-window reading does not agree: not called a trade"
+    shown = {"n/c": "is not computable", "none": "holds 0 in its interval", "positive": "is positive"}[cue]
+    return f"negative, but the cue-window reading {shown}: not called a trade"
 
 
 def _reading_conclusion(row: Any) -> str:

@@ -96,7 +96,12 @@ def test_the_label_trade_needs_the_interval_below_zero_and_the_cue_reading_to_ag
 
     neg, cue_neg, cue_none = row(-0.4, -0.6, -0.2), row(-0.3, -0.5, -0.1), row(-0.1, -0.4, 0.2)
     assert trade_conclusion(neg, cue_neg) == "negative: faster trials less accurate (a trade)"
-    assert "not called a trade" in trade_conclusion(neg, cue_none)
+    # the cue reading only withholds the label, and the conclusion says what it showed
+    assert trade_conclusion(neg, cue_none) == ("negative, but the cue-window reading holds 0 in its interval: "
+                                               "not called a trade")
+    assert trade_conclusion(neg, row(0.3, 0.1, 0.5)).startswith("negative, but the cue-window reading is positive")
+    assert "cue-window reading is not computable" in trade_conclusion(neg, row(np.nan, np.nan, np.nan, ok=False))
+    assert "cue-window reading is not computable" in trade_conclusion(neg, None)
     # one participant: r_rm -0.921 [-0.998, 0.348] is no trade (its interval holds zero)
     assert trade_conclusion(row(-0.921, -0.998, 0.348), cue_neg).startswith("no association shown")
     assert trade_conclusion(row(-0.9, np.nan, np.nan), cue_neg).startswith("not computable")
