@@ -101,6 +101,14 @@ def _interval(r: float, df: int, confidence: float) -> tuple[float, float]:
     return math.tanh(z - zq * se), math.tanh(z + zq * se)
 
 
+def _left_out(n_nan: int, n_single: int) -> str:
+    """The note of what was left out: observations with a NaN, participants with a single observation."""
+    return "; ".join(part for part in (
+        f"{n_nan} observations with a NaN left out" if n_nan else "",
+        f"{plural(n_single, 'participant')} with a single observation left out (no within-participant information)"
+        if n_single else "") if part)
+
+
 def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
            confidence: float = 0.95) -> RmCorrResult:
     """The repeated-measures correlation of ``x`` and ``y`` observed repeatedly within participants.
@@ -138,11 +146,7 @@ def rmcorr(participant: npt.ArrayLike, x: npt.ArrayLike, y: npt.ArrayLike, *,
     n, k = len(idx), len(groups)
     dropped = len(xa) - n
     nan = math.nan
-    n_nan, n_single = int((~keep).sum()), int((~several).sum())
-    note = "; ".join(part for part in (
-        f"{n_nan} observations with a NaN left out" if n_nan else "",
-        f"{plural(n_single, 'participant')} with a single observation left out (no within-participant information)"
-        if n_single else "") if part)
+    note = _left_out(int((~keep).sum()), int((~several).sum()))
 
     def fail(why: str) -> RmCorrResult:
         return RmCorrResult(nan, max(n - k - 1, 0), nan, nan, nan, confidence, nan, nan, n, k, dropped, False,
