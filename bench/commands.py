@@ -144,9 +144,15 @@ def _cmd_loop(args: argparse.Namespace) -> int:
 def _add_study(bsub: argparse._SubParsersAction) -> None:
     bs = add_command(bsub, "study", "wall time of a complete simulated study on the virtual clock, and its storage as "
                      "blocks and as rows",
-                     "haptic-study bench study --participants 4")
+                     "haptic-study bench study --participants 4\n"
+                     "haptic-study bench study --reference-tree ../base --rounds 3")
     bs.add_argument("--participants", type=whole_number("--participants", 1, 1000), default=10,
                     help="participants (default 10)")
+    bs.add_argument("--reference-tree", default=None, metavar="TREE",
+                    help="a source tree of another version: the same seeded study's wall time, ours and its in "
+                         "turn, in fresh processes, in the same run (no storage comparison)")
+    bs.add_argument("--rounds", type=whole_number("--rounds", 1, 100), default=3,
+                    help="with --reference-tree: rounds of ours and theirs in turn (default 3)")
     bs.add_argument("--json", action="store_true", help="print one JSON object")
     bs.set_defaults(handler=_cmd_study)
 
@@ -154,6 +160,16 @@ def _add_study(bsub: argparse._SubParsersAction) -> None:
 def _cmd_study(args: argparse.Namespace) -> int:
     from bench.study_bench import format_study_bench, run_study_bench
 
+    tree = args.reference_tree
+    if tree is not None:
+        if not os.path.isfile(os.path.join(tree, "study_app", "headless", "study.py")):
+            raise CliError(f"--reference-tree = {tree!r}: not a haptic-study source tree "
+                           "(no study_app/headless/study.py)")
+        from bench.study_reference import format_study_reference, run_study_reference
+
+        ref = run_study_reference(tree, participants=args.participants, rounds=args.rounds, log=_say)
+        print(json.dumps(ref) if args.json else format_study_reference(ref))
+        return 0
     result = run_study_bench(args.participants, log=_say)
     print(json.dumps(result) if args.json else format_study_bench(result))
     return 0

@@ -272,6 +272,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--participants", type=int, default=10, help="participants per study")
     ap.add_argument("--first-study", type=int, default=0, help="seed index of the first study")
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (participants in parallel)")
+    ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                    help="run the participants on a Dask cluster (default: $HAPTIC_STUDY_SCHEDULER, else here)")
     ap.add_argument("--quiet", action="store_true", help="only the final table")
     ap.add_argument("--power", type=int, default=0, metavar="DRAWS",
                     help="also each effect's power: DRAWS studies drawn from every participant run (e.g. 2000)")
@@ -283,12 +285,20 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--power: {args.power} is not allowed; give the number of studies to draw (0: no power table)")
     if args.tct_spread is not None:
         return _print_spread(ap, args.tct_spread, args.participants)
+    from foundation.errors import InputRefused
+    from study_app.headless.fanout import connect, scheduler_address
+
+    try:
+        address = scheduler_address(args.scheduler)
+        client = connect(address) if address else None
+    except InputRefused as exc:
+        ap.error(str(exc))
     summaries = []
     every: list[TrialRow] = []
     t_total = time.perf_counter()
     for k in range(args.first_study, args.first_study + args.studies):
         t0 = time.perf_counter()
-        rows = run_study(k, args.participants, args.jobs)
+        rows = run_study(k, args.participants, args.jobs, client)
         wall = time.perf_counter() - t0
         s = summarise_study(rows)
         summaries.append(s)

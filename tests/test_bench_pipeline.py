@@ -78,3 +78,23 @@ def test_the_reference_tree_runs_its_own_code_in_turn_with_ours(tmp_path) -> Non
     ours = f["ours_us_per_tick"]
     assert len(ours["ours_rounds"]) == 2 and 0 < ours["ours"] < 99.0 and ours["ratio"] == round(ours["ours"] / 99.0, 3)
     assert "ours against" in format_reference(r).lower()
+
+
+def test_bench_study_times_the_reference_trees_own_study_in_turn_with_ours(tmp_path) -> None:
+    """``bench study --reference-tree``: a stand-in tree's "study" runs its own code (it reports its own wall
+    time), ours runs a real one-participant study, and the ratio is of the two sides' medians."""
+    from bench.study_reference import format_study_reference, run_study_reference
+
+    tree = tmp_path / "ref"
+    for pkg in ("protocol", "protocol/study", "study_app", "study_app/headless"):
+        (tree / pkg).mkdir(parents=True)
+        (tree / pkg / "__init__.py").write_text("")
+    (tree / "protocol" / "study" / "config.py").write_text("def default_protocol():\n    return None\n")
+    (tree / "study_app" / "headless" / "__init__.py").write_text(
+        "import time\nclass P:\n    study_time_s = 1.0\n"
+        "def run_study(db, participants, seed, protocol):\n    return P()\n")
+    r = run_study_reference(str(tree), participants=1, rounds=1)
+    assert r["reference_wall_s"][0] < 0.01  # the stand-in's own nothing, not our study
+    assert r["ours_wall_s"][0] > r["reference_wall_s"][0] and r["study_time_s"]["ours"] > 60.0
+    assert r["ratio"] > 10.0  # of the unrounded medians: a real study against the stand-in's nothing
+    assert "DIFFERENT" in format_study_reference(r)  # 1 s of stand-in study against ours

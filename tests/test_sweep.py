@@ -16,7 +16,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from analysis.planning.setting_labels import value_format
-from analysis.planning.sim_study import TrialRow
+from analysis.planning.sim_study import TrialRow, sim_metrics
 from analysis.planning.sweep import (
     CACHE_FILE,
     FILTER_NOTE,
@@ -29,12 +29,15 @@ from analysis.planning.sweep import (
 )
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
 from protocol.metrics import TRADE_PHASES
-from protocol.metrics import tested as tested_metrics
 from protocol.study.config import protocol_from_dict
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.cli.main import main
 from study_app.headless import sweep_run
 from study_app.headless.sim_trials import MODEL_VERSION
 from study_app.headless.sweep_run import run_sweep
+
+#: The paper's study's measures: its task's the report tests (what a sweep of the paper's protocol reports).
+PAPER = sim_metrics(ForceRegulation())
 
 SHORT = """name = "short"
 [[targets]]
@@ -101,7 +104,7 @@ def test_a_second_run_computes_nothing_and_a_cut_line_is_run_again(tmp_path: Pat
     monkeypatch.undo()
     third = run_sweep(_grid(10), studies=2, participants=1, seed=0, cache=cache, protocol=short_protocol)
     assert [c.rows for c in third] == [c.rows for c in first]
-    assert len(read_cache(cache)) == 2
+    assert len(read_cache(cache, sim_metrics(short_protocol.task))) == 2
 
 
 def test_the_cache_key_names_what_decides_the_rows() -> None:
@@ -139,7 +142,8 @@ def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
     tidy = sweep_frame(cells, ["filter_window"], 12.0)
     assert list(tidy.columns) == ["filter_window", "study", "metric", "off", "on", "change", "n_trials_off",
                                   "n_trials_on"]
-    assert len(tidy) == 4 * len(METRICS)  # 2 settings × 2 studies, a row per measure
+    assert len(tidy) == 4 * 5  # 2 settings × 2 studies, a row per measure the trials carry (their task's)
+    assert set(tidy["metric"]) == {"success", "tct_s", "tct_cens_s", "rmse_n", "max_ae_n"} <= set(METRICS)
     # TCT in both readings: over successful trials (n: the successes, none OFF here) and with failures at the cap
     tct = tidy[(tidy["metric"] == "tct_s") & (tidy["filter_window"] == 10)].iloc[0]
     cens = tidy[(tidy["metric"] == "tct_cens_s") & (tidy["filter_window"] == 10)].iloc[0]
@@ -172,7 +176,8 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]
     for name in ("sweep.csv", "sweep_summary.csv"):  # the report's names (they said success, rmse_n, max_ae_n)
         # the tested measures, TCT also censored at the cap, and the trade's phases (the front)
-        expected = {m.participant_exported for m in (*tested_metrics(), *TRADE_PHASES)} | {"tct_censored_s"}
+        expected = {m.participant_exported for m in PAPER} | {"tct_censored_s"}
+        assert {m.name for m in TRADE_PHASES} <= {m.name for m in PAPER}
         assert set(pd.read_csv(out / name)["metric"]) == expected, name
     # the same command again: refused (the outputs are there) unless --force, which computes nothing new
     assert main(args) == 2

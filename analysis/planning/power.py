@@ -70,14 +70,15 @@ __all__ = [
     "DEFAULT_N_VALUES",
     "DIRECTION_NAMES",
     "DIRECTION_TEXT",
-    "FAMILY_ALL",
     "FAMILY_ANY",
     "MIN_PILOT",
     "POWER_CSV_COLUMNS",
     "PowerError",
     "PowerResult",
     "estimate_power",
+    "family_all",
     "holm_applies",
+    "is_family_row",
     "metric_label",
     "monte_carlo_interval",
     "resample_indices",
@@ -87,10 +88,20 @@ __all__ = [
 DEFAULT_N_VALUES: tuple[int, ...] = (6, 8, 10, 12, 16, 20, 30)
 #: A pilot needs at least this many participants with both modes to be resampled.
 MIN_PILOT = 4
-#: Pseudo-metrics of the family rows: Holm across the primary metrics rejects all of them / at least one.
-FAMILY_ALL = f"all_{family_word()}_holm"
+#: Pseudo-metric of a family row: Holm across the primary metrics rejects at least one (the other family row, all
+#: of them, is named by their number: :func:`family_all`).
 FAMILY_ANY = "any_holm"
-FAMILY_LABELS = {FAMILY_ALL: f"all {family_word()} (Holm)", FAMILY_ANY: "at least one (Holm)"}
+
+
+def family_all(family: Sequence[str]) -> str:
+    """The family row whose Holm correction across these primary metrics (per-participant columns; the study's, its
+    tasks': the paper's four for force regulation) rejects all of them: ``all_four_holm``."""
+    return f"all_{family_word([m for name in family if (m := by_participant_name(name)) is not None])}_holm"
+
+
+def is_family_row(metric: str) -> bool:
+    """Whether a row of power.csv is a family row (:func:`family_all`, :data:`FAMILY_ANY`), not a metric's."""
+    return metric == FAMILY_ANY or (metric.startswith("all_") and metric.endswith("_holm"))
 #: power.csv: its columns, in this order.
 POWER_CSV_COLUMNS = (
     "scope", "metric", "direction", "n", "resamples", "alpha", "rejections", "power", "ci_low", "ci_high",
@@ -137,7 +148,7 @@ class PowerResult:
     ----------
     frame
         One row per scope × metric × n (columns :data:`POWER_CSV_COLUMNS`, then
-        ``source``); ``metric`` is a metric name or :data:`FAMILY_ALL` /
+        ``source``); ``metric`` is a metric name or a family row, :func:`family_all` /
         :data:`FAMILY_ANY` (their ``power`` is the Holm family-wise figure);
         ``power`` counts rejections in the pool's ``direction`` only,
         ``power_two_sided`` every rejection (empty on the family rows).
@@ -293,7 +304,8 @@ class _Counts:
                              mean_pairs=float(self.pairs[m]) / R,
                              not_computable=int(counts[0]), exact=int(counts[1]), permutation=int(counts[2]),
                              approx=int(counts[3])))
-        for fam, k in ((FAMILY_ALL, int(self.family_rows[0])), (FAMILY_ANY, int(self.family_rows[1]))):
+        every = family_all([m for m, inside in zip(metrics, self.family, strict=True) if inside])
+        for fam, k in ((every, int(self.family_rows[0])), (FAMILY_ANY, int(self.family_rows[1]))):
             rows.append(dict(scope=scope, metric=fam, direction="", n=n, rejections=k,
                              rejections_two_sided=np.nan, rejections_holm=k, mean_pairs=np.nan,
                              not_computable=0, exact=0, permutation=0, approx=0))
@@ -457,9 +469,13 @@ def estimate_power(
 # Names (the plan in words and tables: :mod:`analysis.planning.power_plan`)
 # ------------------------------------------------------------------------------------------------
 def metric_label(metric: str) -> str:
-    return FAMILY_LABELS.get(metric, METRIC_LABELS.get(metric, metric))
+    if metric == FAMILY_ANY:
+        return "at least one (Holm)"
+    if is_family_row(metric):
+        return f"all {metric.removeprefix('all_').removesuffix('_holm')} (Holm)"
+    return METRIC_LABELS.get(metric, metric)
 
 
 def holm_applies(metric: str) -> bool:
     """Whether a row of power.csv has a power with Holm's correction: a primary metric's and the family rows'."""
-    return metric in FAMILY_LABELS or metric in PRIMARY_METRICS
+    return is_family_row(metric) or metric in PRIMARY_METRICS

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import NullLocator, PercentFormatter
 
-from analysis.planning.power import FAMILY_ALL, FAMILY_LABELS, PowerResult, metric_label
+from analysis.planning.power import FAMILY_ANY, PowerResult, is_family_row, metric_label
 from analysis.plots.figures import _style
 from analysis.stats.aggregate import TESTED_METRICS
 
@@ -56,12 +56,12 @@ def power_curves(result: PowerResult) -> Figure:
         span = math.log(ns[-1] / ns[0]) if log else float(max(ns[-1] - ns[0], 4))
         # curves that coincide (e.g. several at 100 %) stay visible: each metric is shifted a hair sideways
         dodge = 0.007 * span
-        shown = [m for m in dict.fromkeys(sel["metric"]) if m not in FAMILY_LABELS or m == FAMILY_ALL]
+        shown = [m for m in dict.fromkeys(sel["metric"]) if m != FAMILY_ANY]  # the family row: Holm rejects all
         for k, metric in enumerate(shown):
             m = sel[sel["metric"] == metric].sort_values("n")
             shift = (k - (len(shown) - 1) / 2) * dodge
             x = m["n"] * math.exp(shift) if log else m["n"] + shift
-            family = metric == FAMILY_ALL
+            family = is_family_row(metric)
             color = "#000000" if family else METRIC_COLORS.get(metric, "#666666")
             col, lo, hi = ("power_holm", "holm_ci_low", "holm_ci_high") if family else ("power", "ci_low", "ci_high")
             ax.fill_between(x, m[lo], m[hi], color=color, alpha=0.15, linewidth=0, zorder=2)

@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, PowerResult, holm_applies, metric_label
-from protocol.metrics import family_word
+from analysis.planning.power import DIRECTION_TEXT, FAMILY_ANY, PowerResult, holm_applies, is_family_row, metric_label
 
 __all__ = ["plan_table", "smallest_n", "summary_text"]
 
@@ -61,7 +60,7 @@ def summary_text(result: PowerResult) -> str:
         f"resampling only, not the uncertainty of the {result.n_pool} participants' own effects: a plan from a "
         "small pilot is itself uncertain.",
         f"Participants needed: the smallest n of {', '.join(str(n) for n in result.n_values)} from which on power "
-        f"stays at or above the target, for the test alone and with Holm across the {family_word()} primary metrics "
+        f"stays at or above the target, for the test alone and with Holm across the {_family_word(f)} primary metrics "
         "(as the report's "
         "significance marks); '> N (x %)': not reached, x = power at the largest n tried.",
         f"  {'':<21s}{'80 % power':<28s}90 % power",
@@ -71,7 +70,7 @@ def summary_text(result: PowerResult) -> str:
         if scope != "overall":
             lines.append(f"  within {scope}:")
         for metric in dict.fromkeys(f["metric"]):
-            family = metric in FAMILY_LABELS
+            family = is_family_row(metric)
             cells = []
             for target in (0.8, 0.9):
                 cells.append("" if family else _reach(f, scope, metric, target, False))
@@ -83,7 +82,7 @@ def summary_text(result: PowerResult) -> str:
     lines.append(f"  {'':<21s}{'pool shows':<12s}" + "".join(f"{'n = ' + str(n):<14s}" for n in ns).rstrip())
     overall = f[f["scope"] == "overall"]
     for metric in dict.fromkeys(overall["metric"]):
-        if metric in FAMILY_LABELS:
+        if is_family_row(metric):
             continue
         sel = overall[overall["metric"] == metric].set_index("n")
         direction = DIRECTION_TEXT[str(sel["direction"].iloc[0])]
@@ -91,7 +90,7 @@ def summary_text(result: PowerResult) -> str:
         lines.append(f"  {metric_label(metric):<21s}{direction:<12s}" + "".join(f"{c:<14s}" for c in cells).rstrip())
     last = max(result.n_values)
     under = [metric_label(m) for m in dict.fromkeys(f["metric"])
-             if m not in FAMILY_LABELS and smallest_n(f, "overall", m, 0.8) is None]
+             if not is_family_row(m) and smallest_n(f, "overall", m, 0.8) is None]
     if under:
         lines.append(f"Under-powered: {', '.join(under)} do{'es' if len(under) == 1 else ''} not reach 80 % power "
                      f"by n = {last}: a study testing {'it' if len(under) == 1 else 'them'} needs more participants "
@@ -100,6 +99,12 @@ def summary_text(result: PowerResult) -> str:
         lines.append("Notes:")
         lines.extend(f"  - {n}" for n in result.notes)
     return "\n".join(lines)
+
+
+def _family_word(frame: pd.DataFrame) -> str:
+    """How many primary metrics the pool's Holm family has, in a word, as its family row names it (``four``)."""
+    row = next((m for m in frame["metric"] if is_family_row(m) and m != FAMILY_ANY), "all_no_holm")
+    return str(row).removeprefix("all_").removesuffix("_holm")
 
 
 def plan_table(result: PowerResult) -> pd.DataFrame:
@@ -114,7 +119,7 @@ def plan_table(result: PowerResult) -> pd.DataFrame:
     rows = []
     for scope in dict.fromkeys(f["scope"]):
         for metric in dict.fromkeys(f[f["scope"] == scope]["metric"]):
-            family = metric in FAMILY_LABELS
+            family = is_family_row(metric)
             sel = f[(f["scope"] == scope) & (f["metric"] == metric)].set_index("n")
             row: dict[str, object] = {"scope": scope, "metric": metric, "direction": str(sel["direction"].iloc[0])}
             for target in (0.8, 0.9):

@@ -30,15 +30,18 @@ import pandas as pd
 
 from analysis.planning.setting_labels import setting_formats
 from analysis.planning.sim_study import (
-    MEASURE_LABELS,
-    SIM_METRICS,
+    SIMULATED,
     TrialRow,
     censored_key,
+    measure_labels,
+    row_metrics,
     summarise_study,
     trial_row_from_dict,
     trial_row_to_dict,
 )
 from foundation.platform_support.files import O_NOFOLLOW
+from protocol.metrics import METRICS as ALL_METRICS
+from protocol.metrics import Metric
 
 __all__ = [
     "CACHE_FILE", "FILTER_NOTE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key",
@@ -50,10 +53,11 @@ __all__ = [
 SWEEP_MARKER = ".haptic-study-sweep"
 #: The cache of finished cells, kept in the output folder (never replaced by ``--force``).
 CACHE_FILE = "cells.jsonl"
-#: The measures a sweep reports (the simulated trials' metrics: the ones the report tests, and the trade's phases), in
-#: order, with their labels; a success-only one (TCT) in both readings: over successful trials (with their count,
-#: ``n_trials_*``) and over every trial, a failure at the cap (the report's default).
-METRICS: dict[str, str] = MEASURE_LABELS
+#: The measures a sweep may report (:data:`analysis.planning.sim_study.SIMULATED`: a sweep reports those its
+#: protocol's task produces), in order, with their labels; a success-only one (TCT) in both readings: over
+#: successful trials (with their count, ``n_trials_*``) and over every trial, a failure at the cap (the report's
+#: default).
+METRICS: dict[str, str] = measure_labels(SIMULATED)
 
 
 @dataclass(frozen=True)
@@ -85,9 +89,10 @@ def cell_key(settings: Mapping[str, float], study: int, participants: int, seed:
                        "protocol": protocol}, sort_keys=True)
 
 
-def read_cache(path: str | os.PathLike[str]) -> dict[str, list[TrialRow]]:
-    """The cells in a cache file by key (none when there is no file); a line cut short by a killed run is skipped
-    (its cell runs again)."""
+def read_cache(path: str | os.PathLike[str], metrics: Sequence[Metric]) -> dict[str, list[TrialRow]]:
+    """The cells in a cache file by key (none when there is no file), their rows with these ``metrics`` (the
+    protocol's task's, :func:`analysis.planning.sim_study.sim_metrics`); a line cut short by a killed run is
+    skipped (its cell runs again), and so is one without a metric (written before it existed)."""
     out: dict[str, list[TrialRow]] = {}
     try:
         text = Path(path).read_text(encoding="utf-8")
@@ -96,7 +101,7 @@ def read_cache(path: str | os.PathLike[str]) -> dict[str, list[TrialRow]]:
     for line in text.splitlines():
         try:
             record = json.loads(line)
-            out[str(record["key"])] = [trial_row_from_dict(r) for r in record["rows"]]
+            out[str(record["key"])] = [trial_row_from_dict(r, metrics) for r in record["rows"]]
         except (ValueError, KeyError, TypeError):
             continue
     return out
@@ -123,10 +128,10 @@ def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]
 #: What each measure can be (success a rate, the rest ≥ 0; the change ON/OFF − 1 of a measure ≥ 0 is ≥ −1): the
 #: ends of a t-interval over a few studies can pass these, and are clipped to them (``sweep.md`` says so).
 _BOUNDS: dict[str, tuple[float, float]] = {
-    **{m.name: m.values for m in SIM_METRICS}, **{censored_key(m): m.values for m in SIM_METRICS if m.success_only}}
+    **{m.name: m.values for m in ALL_METRICS}, **{censored_key(m): m.values for m in ALL_METRICS if m.success_only}}
 _CHANGE_BOUNDS = (-1.0, math.inf)
 #: The yes/no outcomes, whose means are rates.
-_RATES = {m.name for m in SIM_METRICS if m.boolean}
+_RATES = {m.name for m in ALL_METRICS if m.boolean}
 
 
 def t_interval(values: Sequence[float], level: float = 0.95,
@@ -148,7 +153,7 @@ def t_interval(values: Sequence[float], level: float = 0.95,
 def _entered(rows: Sequence[TrialRow], metric: str, mode: str) -> int:
     """The trials of ``mode`` whose value entered ``metric``'s means (TCT over successful trials: the successes)."""
     mine = [r for r in rows if r.mode == mode]
-    if metric not in {m.name for m in SIM_METRICS}:  # a censored reading: every trial
+    if metric not in {m.name for m in row_metrics(rows)}:  # a censored reading: every trial
         return len(mine)
     return sum(1 for r in mine if (v := r.values.get(metric)) is not None and math.isfinite(float(v)))
 
@@ -159,7 +164,7 @@ def sweep_frame(cells: Sequence[SweepCell], swept: Sequence[str], max_trial_s: f
     records = []
     for cell in cells:
         s = summarise_study(cell.rows, max_trial_s)
-        for metric in METRICS:
+        for metric in measure_labels(row_metrics(cell.rows)):  # the measures of the protocol's task
             records.append({**{k: cell.settings[k] for k in swept}, "study": cell.study, "metric": metric,
                             "off": s[metric]["off"], "on": s[metric]["on"], "change": s[metric]["change"],
                             "n_trials_off": _entered(cell.rows, metric, "off"),
@@ -232,8 +237,8 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     from analysis.plots.figures import save_one
 
     # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
-    named = {m.name: m.participant_exported for m in SIM_METRICS}
-    named.update({censored_key(m): str(m.censored) for m in SIM_METRICS if m.success_only})
+    named = {m.name: m.participant_exported for m in ALL_METRICS}
+    named.update({censored_key(m): str(m.censored) for m in ALL_METRICS if m.success_only})
     tidy.replace({"metric": named}).to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
     summary.replace({"metric": named}).to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")

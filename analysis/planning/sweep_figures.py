@@ -24,18 +24,18 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.planning.setting_labels import setting_formats
-from analysis.planning.sim_study import MEASURE_LABELS, SIM_METRICS
+from analysis.planning.sim_study import SIMULATED, measure_labels
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
-from protocol.metrics import TRADE_PHASES
+from protocol.metrics import METRICS, TRADE_PHASES
 
 __all__ = ["front_figure", "metrics_figure"]
 
-#: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`), two to
-#: a row.
-_PANELS = tuple(MEASURE_LABELS.items())
+#: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`: those
+#: of them the summary has), two to a row.
+_PANELS = tuple(measure_labels(SIMULATED).items())
 #: The yes/no outcome (the front's success rate) and which panels are means over successful trials only.
-SIM_METRICS_BOOLEAN = tuple(m for m in SIM_METRICS if m.boolean)
-_SUCCESS_ONLY = {m.name: m.success_only for m in SIM_METRICS}
+_VERDICT = next(m.name for m in METRICS if m.boolean)
+_SUCCESS_ONLY = {m.name: m.success_only for m in METRICS}
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 _DASHES = ("-", "--", ":", "-.")
 
@@ -64,15 +64,16 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
     x_name, others = swept[0], list(swept[1:])
     xs = sorted({float(v) for v in summary[x_name]})
     lines = note_lines(note, PAGE_IN)
-    rows = math.ceil(len(_PANELS) / 2)
+    panels = [p for p in _PANELS if p[0] in set(summary["metric"])]  # the protocol's task's measures
+    rows = math.ceil(len(panels) / 2)
     fig = Figure(figsize=(PAGE_IN, 2.6 * rows + 0.11 * lines))
     margins(fig, 0.6, 0.15, 0.55 + 0.11 * lines, 0.3, wspace=0.3, hspace=0.45)
     axes = fig.subplots(rows, 2, squeeze=False)
-    for spare in axes.flat[len(_PANELS):]:  # an odd number of measures: the last row's second panel is empty
+    for spare in axes.flat[len(panels):]:  # an odd number of measures: the last row's second panel is empty
         spare.set_visible(False)
     groups = (list(summary.groupby(others, sort=True)) if others else [((), summary)])
     fmts = setting_formats(summary, swept)
-    for ax, (metric, label) in zip(axes.flat, _PANELS, strict=False):
+    for ax, (metric, label) in zip(axes.flat, panels, strict=False):
         for g_i, (g_key, grp) in enumerate(groups):
             sel = grp[grp["metric"] == metric].sort_values(x_name)
             tag = "" if not others else " · " + _label(
@@ -119,7 +120,7 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
 def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figure:
     """Rise time against RMSE after reach with haptics ON, one labelled point per setting (module docstring)."""
     speed, accuracy = TRADE_PHASES
-    verdict = next(m.name for m in SIM_METRICS_BOOLEAN)
+    verdict = _VERDICT
     lines = note_lines(note, PAGE_IN * 0.62)
     fig = Figure(figsize=(PAGE_IN * 0.62, 3.6 + 0.11 * lines))
     margins(fig, 0.6, 0.2, 0.5 + 0.11 * lines, 0.3)
@@ -127,6 +128,8 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     y_rows = summary[summary["metric"] == speed.name].reset_index(drop=True)
     x_rows = summary[summary["metric"] == accuracy.name].reset_index(drop=True)
     ok = summary[summary["metric"] == verdict].reset_index(drop=True)
+    if y_rows.empty or x_rows.empty or ok.empty:  # a protocol whose task lacks the trade's phases: no front to draw
+        y_rows, x_rows, ok = y_rows.iloc[:0], x_rows.iloc[:0], ok.iloc[:0]
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
     fmts = setting_formats(summary, swept)

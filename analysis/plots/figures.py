@@ -309,11 +309,12 @@ def pipeline_trace(samples: pd.DataFrame, *, target_force_n: float | None = None
             for axis in (ax, ax_raw):
                 axis.axvspan(t[a], t[b - 1], color="#bbbbbb", alpha=0.22, linewidth=0,
                              label="in contact" if (a == edges[0] and axis is ax) else None)
-    if band is not None and band.band_n is not None:
-        lo, hi = band.band_n
-        ax.axhspan(lo, hi, color="#0072B2", alpha=0.18, linewidth=0, label=band.band_legend)
-        for edge in (lo, hi):
-            ax.axhline(edge, color="#0072B2", linewidth=0.6, linestyle="--")
+    drawn = None if band is None else band.band_over(t[::10])  # the band where it was (a tracked target's moves)
+    if band is not None and drawn is not None:
+        ax.fill_between(t[::10], drawn[0], drawn[1], color="#0072B2", alpha=0.18, linewidth=0,
+                        label=band.band_legend)
+        for edge in drawn:
+            ax.plot(t[::10], edge, color="#0072B2", linewidth=0.6, linestyle="--")
     ax.plot(*peak_downsample(t, task), color="#1f4e9c", linewidth=0.9, label="task force |F| (compensated, filtered)")
     ax.plot(*peak_downsample(t, mag("render")), color="#2ca02c", linewidth=0.8, linestyle=(0, (4, 1.5)),
             label="rendered on the haptic device")

@@ -102,7 +102,8 @@ def learning_curves(curve: pd.DataFrame, note: str = "") -> Figure:
     note
         A caveat printed under the panels (what the points are, what the models say).
     """
-    metrics = list(TESTED_METRICS)  # every tested metric, a panel each (learning_curve computes each)
+    drawn = set(curve["metric"])  # every tested metric of the study, a panel each (learning_curve computes each)
+    metrics = [m for m in TESTED_METRICS if m in drawn]
     extra = 0.12 * note_lines(note, PAGE_IN)
     fig = Figure(figsize=(PAGE_IN, 2.4 + extra), dpi=_DPI)
     margins(fig, 0.45, 0.08, 0.42 + extra, 0.72, wspace=0.5)

@@ -51,7 +51,8 @@ class SessionMarks:
     Attributes
     ----------
     bands
-        (cue time, trial end, band low, band high) of every trial, N: its target band, shaded over the trial.
+        (session times from the cue to the trial end, band low, band high at them) of every trial, s and N: its
+        target band where it was over the trial (a tracked target's moves), shaded.
     aborted
         (cue time, end time, "trial 4: fault: SENSOR_STALE ...") of every aborted trial.
     pauses
@@ -60,7 +61,7 @@ class SessionMarks:
         Session times at which a resumed run of the session began.
     """
 
-    bands: Sequence[tuple[float, float, float, float]] = ()
+    bands: Sequence[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]] = ()
     aborted: Sequence[tuple[float, float, str]] = ()
     pauses: Sequence[tuple[float, float]] = ()
     resumes: Sequence[float] = ()
@@ -111,8 +112,8 @@ def session_trace(
     _spans(top, t_s, np.asarray(in_trial, bool), color="#eeeeee", zorder=0, label="trial")
     _spans(top, t_s, contact_mask(compensated_n), color="#cfe2f3", alpha=0.6, zorder=0,
            label=f"contact (> {CONTACT_THRESHOLD_N:g} N)")
-    for k, (a, b, lo, hi) in enumerate(marks.bands):
-        top.fill_between([a, b], lo, hi, color="#0072B2", alpha=0.25, linewidth=0, zorder=1,
+    for k, (times, lo, hi) in enumerate(marks.bands):
+        top.fill_between(times, lo, hi, color="#0072B2", alpha=0.25, linewidth=0, zorder=1,
                          label="target band" if k == 0 else None)
     top.axhline(0.0, color="#555555", linewidth=0.6, zorder=1)
     top.plot(*peak_downsample(t_s, np.asarray(compensated_n), 4000), color=_COMP, linewidth=0.7,

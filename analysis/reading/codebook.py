@@ -23,7 +23,7 @@ Conventions of the exported files
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -33,12 +33,13 @@ from analysis.reading.codebook_columns import (
     DIFFERENCE_DECIMALS,
     STATS_CSV_COLUMNS,
     Column,
+    metric_words,
     participant_measures,
     task_column,
 )
 from analysis.reading.codebook_columns import COLUMNS as _TABLE_COLUMNS
 from analysis.reading.codebook_within import WITHIN_COLUMNS
-from protocol.metrics import tested
+from protocol.metrics import METRICS, Metric, tested
 from protocol.tasks.registry import TASKS
 
 __all__ = [
@@ -53,6 +54,7 @@ __all__ = [
     "exported_name",
     "label",
     "lookup",
+    "metric_words",
     "p_text",
     "wide_name",
 ]
@@ -63,7 +65,7 @@ COLUMNS: tuple[Column, ...] = _TABLE_COLUMNS + WITHIN_COLUMNS
 #: The long-format measures that participants_wide.csv spreads into an OFF and an ON column.
 WIDE_MEASURES: tuple[str, ...] = ("n_trials", *participant_measures())
 #: The tested measures (participants.csv columns): participants_wide.csv has each one's ON − OFF difference too.
-DIFF_MEASURES: tuple[str, ...] = tuple(m.participant_exported for m in tested())
+DIFF_MEASURES: tuple[str, ...] = tuple(m.participant_exported for m in tested(METRICS))
 #: The unit parts of an exported name (its last parts).
 _UNITS = {"s", "N", "ms"}
 
@@ -166,17 +168,20 @@ def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFr
     return out
 
 
-def codebook_frame(files: Mapping[str, Iterable[str]]) -> pd.DataFrame:
+def codebook_frame(files: Mapping[str, Iterable[str]], metrics: Sequence[Metric] | None = None) -> pd.DataFrame:
     """``codebook.csv``: one row per (file, column) of the files written, in file and column order.
 
-    A column without an entry in :data:`COLUMNS` gets an empty description (the report's test refuses that).
+    ``metrics`` are the study's (its tasks'), which the descriptions of the tests' columns name (the measures
+    tested, Holm's family: :func:`metric_words`; None: in general words).  A column without an entry in
+    :data:`COLUMNS` gets an empty description (the report's test refuses that).
     """
+    words = metric_words(metrics)
     rows = []
     for file, columns in files.items():
         for name in columns:
             c = lookup(file, name)
             rows.append({"file": file, "column": name, "type": c.type if c else "",
-                         "unit": c.unit if c else "", "description": c.description if c else ""})
+                         "unit": c.unit if c else "", "description": c.described(words) if c else ""})
     return pd.DataFrame(rows, columns=["file", "column", "type", "unit", "description"])
 
 

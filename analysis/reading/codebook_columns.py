@@ -4,18 +4,22 @@ Each :class:`Column` names a column as it appears in the CSV files, what it mean
 it is rounded.  The metrics' own columns -- one trial's value, the per-participant means, rates and counts -- are
 made from the metric registry (:mod:`protocol.metrics`), so a metric defined there is described here without an
 edit; every other column has its line in :data:`COLUMNS`.  :mod:`analysis.reading.codebook` turns an analysis
-table into a file's form with them.
+table into a file's form with them.  A few descriptions name the study's measures -- the ones tested, Holm's family,
+the secondary ones -- which are its tasks' (:attr:`analysis.reading.load.StudyData.metrics`): they hold the
+placeholders of :func:`metric_words`, filled in for the study's files (:meth:`Column.described`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, tested
 from protocol.tasks.base import Parameter
 from protocol.tasks.registry import TASKS
 
-__all__ = ["COLUMNS", "DIFFERENCE_DECIMALS", "STATS_CSV_COLUMNS", "Column", "participant_measures", "task_column"]
+__all__ = ["COLUMNS", "DIFFERENCE_DECIMALS", "STATS_CSV_COLUMNS", "Column", "metric_words", "participant_measures",
+           "task_column"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,13 +56,20 @@ class Column:
     decimals: int | None = None
     significant: int | None = None
 
+    def described(self, words: Mapping[str, str]) -> str:
+        """Its description with the study's measures named (:func:`metric_words`)."""
+        text = self.description
+        for key, value in words.items():
+            text = text.replace(f"{{{key}}}", value)
+        return text
+
 
 #: The decimals a paired test rounds its differences ON − OFF to before ranking, so that differences equal in exact
 #: arithmetic tie in floating point (:func:`analysis.stats.wilcoxon.paired_wilcoxon`); participants_wide.csv's
 #: differences are written so, for a test of them elsewhere to rank as the report's does.
 DIFFERENCE_DECIMALS = 10
 
-_STATS = ("stats.csv", "stats_by_target.csv", "stats_by_site.csv")
+_STATS = ("stats.csv", "stats_by_target.csv", "stats_by_site.csv", "target_speed_test.csv")
 #: The tests' files (:data:`_STATS`): the columns every consumer may rely on, first and in this order (more follow).
 STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
                      "zero_method", "rank_biserial", "p_holm")
@@ -74,11 +85,8 @@ _F = 4
 #: Time: the 1 ms sample period.
 _T = 3
 
-#: How many measures Holm's family has, in a word ("four"), and what the files say of a secondary measure.
-_FAMILY = family_word()
-_SECONDARIES = [m.participant_exported for m in METRICS if m.role is Role.SECONDARY]
-_SECONDARY = (f"; empty for a secondary measure ({', '.join(_SECONDARIES)}), tested on its own, outside the family"
-              if _SECONDARIES else "")
+#: The placeholders of the descriptions that name the study's measures (:func:`metric_words`).
+_FAMILY, _TESTED, _SECONDARY = "{family}", "{tested}", "{secondary}"
 
 
 def task_column(p: Parameter) -> Column:
@@ -86,9 +94,21 @@ def task_column(p: Parameter) -> Column:
     return Column(p.name, p.description, p.unit, label=p.label, decimals=p.decimals)
 
 
-def _tested_words() -> str:
-    names = [m.participant_exported for m in tested()]
-    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}"
+def metric_words(metrics: Sequence[Metric] | None) -> dict[str, str]:
+    """What the descriptions say of a study's measures (its ``metrics``): how many Holm's family has, in a word
+    (``four``), the ones tested, and what a secondary one's ``p_holm`` is; None: in general words (a heading's
+    hover text, made without a study)."""
+    if metrics is None:
+        return {"family": "primary", "tested": "one of the tested measures",
+                "secondary": "; empty for a secondary measure, tested on its own, outside the family"}
+    names = [m.participant_exported for m in tested(metrics)]
+    secondaries = [m.participant_exported for m in metrics if m.role is Role.SECONDARY]
+    return {
+        "family": family_word(metrics),
+        "tested": names[0] if len(names) == 1 else f"{', '.join(names[:-1])} or {names[-1]}" if names else "none",
+        "secondary": (f"; empty for a secondary measure ({', '.join(secondaries)}), tested on its own, outside the "
+                      "family" if secondaries else ""),
+    }
 
 
 def _source(m: Metric) -> str:
@@ -96,7 +116,7 @@ def _source(m: Metric) -> str:
 
 
 def _trial_metric_columns() -> tuple[Column, ...]:
-    """One trial's value of every metric (trials.csv)."""
+    """One trial's value of every metric (trials.csv: a study's are its tasks')."""
     return tuple(Column(m.name, m.description, type="boolean") if m.boolean else
                  Column(m.exported, m.description, m.unit, label=m.label, source=_source(m), decimals=m.decimals)
                  for m in METRICS)
@@ -128,7 +148,8 @@ def _participant_metric_columns() -> tuple[Column, ...]:
 
 def participant_measures() -> tuple[str, ...]:
     """The per-participant measure columns as the files name them, in order (``n_success, success_rate, tct_s,
-    n_tct, rmse_N``, ...; participants.csv has ``n_trials`` before them)."""
+    n_tct, rmse_N``, ...; participants.csv has ``n_trials`` before them): every metric's, of which a study's
+    participants.csv has its tasks'."""
     out: list[str] = []
     for m in METRICS:
         out += ([str(m.count), m.participant] if m.boolean else
@@ -170,7 +191,7 @@ COLUMNS: tuple[Column, ...] = (
            files=("participants.csv",)),
     *_participant_metric_columns(),
     # -- paired Wilcoxon tests, ON vs OFF -------------------------------------------------------------
-    Column("metric", f"the measure tested: {_tested_words()} (participants.csv columns)", type="text",
+    Column("metric", f"the measure tested: {_TESTED} (participants.csv columns)", type="text",
            label="measure"),
     Column("n", "pairs that entered the ranking (n_used)", "count", "integer", label="n", files=_STATS),
     Column("median_off", "median over participants of the OFF values (complete pairs)", _MU,
@@ -314,7 +335,7 @@ COLUMNS: tuple[Column, ...] = (
     Column("n_outside_bounds", "of those, trials outside the bounds", "count", "integer", label="outside bounds"),
     # -- power.csv (report --power): the power of each test against the number of participants ----------
     Column("scope", "overall, or the target level the tests were restricted to", type="text", files=("power.csv",)),
-    Column("metric", "the measure tested (participants.csv column), or all_four_holm / any_holm: Holm across the "
+    Column("metric", f"the measure tested (participants.csv column), or all_{_FAMILY}_holm / any_holm: Holm across the "
            f"{_FAMILY} measures rejects all of them / at least one", type="text", files=("power.csv",)),
     Column("direction", "the direction of effect the resampled pool shows (its signed-rank statistic W+ above or "
            "below its null mean): on_higher (ON > OFF), on_lower (ON < OFF) or none; a rejection counts towards "

@@ -1,6 +1,7 @@
 """The codebook's entries of the analyses beyond the ON-vs-OFF tests: the speed–accuracy trade, the models, the order
-check, the sensitivity table, TCT as a time to event and the sites (:mod:`analysis.reading.codebook_columns` has the
-trials, the participants, the tests and the record; :mod:`analysis.reading.codebook` reads both).
+check, the sensitivity table, TCT as a time to event, a moving target's speed and the sites
+(:mod:`analysis.reading.codebook_columns` has the trials, the participants, the tests and the record;
+:mod:`analysis.reading.codebook` reads both).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ _TTE = ("time_to_event.csv",)
 _KM = ("kaplan_meier.csv",)
 _COX = ("survival_model.csv",)
 _SITE = ("site_differences.csv",)
+_SPEED, _SPEED_SLOPES = ("target_speed.csv",), ("target_speed_slopes.csv",)
 
 WITHIN_COLUMNS: tuple[Column, ...] = (
     # -- speed against accuracy, within participants --------------------------------------------------
@@ -166,6 +168,24 @@ WITHIN_COLUMNS: tuple[Column, ...] = (
     Column("n_participants", "participants (strata and clusters)", "count", "integer", files=_COX),
     Column("method", "how the model was fitted", type="text", files=_COX),
     Column("note", "why it was not fitted, or statsmodels' warnings; empty otherwise", type="text", files=_COX),
+    # -- a moving target: tracking error against the target's speed (analysis.stats.target_speed) --------
+    Column("target_speed_N_per_s", "speed of the target: mean |dF*/dt| over the part of the trial where it moves",
+           "N/s", label="target speed (N/s)", source="target_speed_n_per_s", decimals=_F),
+    Column("rmse_N", "mean RMSE of the participant's trials of this target in this mode", "N", label="RMSE (N)",
+           files=_SPEED, decimals=_F),
+    Column("n_trials", "the participant's trials of this target in this mode", "count", "integer", label="trials",
+           files=_SPEED),
+    Column("n_targets", "targets with a mean RMSE in this mode (the points of the line)", "count", "integer",
+           label="targets", files=_SPEED_SLOPES),
+    Column("rmse_per_speed_s", "least-squares slope of the participant's mean RMSE per target on the targets' "
+           "speeds in this mode: N of error per N/s of speed; empty with fewer than two speeds", "s",
+           label="RMSE per speed (s)", decimals=4),
+    Column("intercept_N", "RMSE at speed 0 of that line", "N", label="intercept (N)", source="intercept_n",
+           decimals=_F),
+    Column("metric", "the measure tested: rmse_per_speed_s (target_speed_slopes.csv), one value per participant "
+           "per mode", type="text", label="measure", files=("target_speed_test.csv",)),
+    Column("p_holm", "empty: the slope is tested on its own, outside Holm's family", "probability",
+           label="p (Holm)", files=("target_speed_test.csv",), significant=4),
     # -- sites ---------------------------------------------------------------------------------------
     Column("site", "the site of the row (report --site); empty when no site was named", type="text"),
     Column("metric", "the measure whose ON − OFF differences are compared between the sites", type="text",

@@ -24,19 +24,17 @@ import pandas as pd
 from analysis.reading.errors import AnalysisError
 from analysis.reading.inputs import check_databases
 from analysis.reading.session_config import config_fields
-from protocol.metrics import stored
+from protocol.metrics import Metric, stored
 from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.storage.damage import recording_damage
 from protocol.study.records import Outcome, TrialRecord
-from protocol.tasks.base import Task
+from protocol.tasks.base import Task, metrics_of
 from protocol.tasks.registry import stored_task
 
 #: Where a trial's records are in its session's recording (schema version 3).
 RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
-#: The metrics stored live, one column per stored metric of the registry (:func:`protocol.metrics.stored`).
-STORED_METRIC_COLUMNS = tuple(f"stored_{m.name}" for m in stored())
 #: Events the report lists: deviations from the protocol ("deviation": any recorded departure from the
 #: design, e.g. an experiment started without a completed training; "calibration_override": a session started
 #: without a calibration step on record), which code ran each resumed part of a session ("software") and each resume
@@ -70,9 +68,9 @@ class StudyData:
         One row per stored trial.  Columns: ``database``, ``participant_code``,
         ``participant_number``, ``session_id``, ``session_kind``, ``session_status``, ``trial_id``,
         ``trial_index``, ``target_label``, ``target_force_n``, ``haptic_mode``,
-        ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live
-        (:data:`STORED_METRIC_COLUMNS`: ``stored_tct_s``, ``stored_rmse_n``, … one per stored metric of
-        :mod:`protocol.metrics`; empty in a file from before a metric existed), ``n_samples``,
+        ``outcome``, ``started_at_s``, ``ended_at_s``, the metrics stored live (``stored_tct_s``,
+        ``stored_rmse_n``, … one per stored metric of the study's, :attr:`metrics`; empty in a file from before a
+        metric existed, or for a session whose task does not produce it), ``n_samples``,
         ``abort_reason``, ``abort_cause`` and the loop-health columns
         (:data:`protocol.storage.HEALTH_COLUMNS`; empty in version-1
         databases), where its records are in the session's recording
@@ -115,6 +113,9 @@ class StudyData:
         site was named.  A named site's participant codes are re-coded ``SITE:CODE`` in every table.
     tasks
         Each session's task (:mod:`protocol.tasks`), by database and session id (:meth:`task_of`).
+    metrics
+        The study's metrics: those its sessions' tasks produce (:func:`protocol.tasks.base.metrics_of`), which every
+        table, test, file and figure of the analysis lists.
     """
 
     trials: pd.DataFrame
@@ -126,6 +127,11 @@ class StudyData:
     runs: pd.DataFrame = field(default_factory=pd.DataFrame)
     sites: tuple[str, ...] = ()
     tasks: Mapping[tuple[str, int], Task] = field(default_factory=dict)
+
+    @property
+    def metrics(self) -> tuple[Metric, ...]:
+        """The study's metrics (its tasks'), in the registry's order."""
+        return metrics_of(self.tasks.values())
 
     def task_of(self, database: str, session_id: int) -> Task:
         """The task a session ran (its protocol's), which judges, measures and draws its trials."""
@@ -222,8 +228,12 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     try:
         # schema version 4 records which code ran a session; earlier files do not (NULL)
         sessions = _query(db, db.session_table)
-        # schema version 2 records why a trial was aborted and how the loop ran; a version-1 file has neither
-        trials = _query(db, lambda: db.trial_table(("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS)))
+        read = [_protocol_fields(pj, f"{path}: session {sid}")
+                for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
+        # the stored metrics of this file's tasks; schema version 2 records why a trial was aborted and how the
+        # loop ran, a version-1 file has neither
+        kept = [m.name for m in stored(metrics_of(task for _, task in read))]
+        trials = _query(db, lambda: db.trial_table(("abort_cause", *HEALTH_COLUMNS, *RECORD_COLUMNS), kept))
         damage = _mark_damage(db, path, trials)
         events = _query(db, lambda: db.events(LISTED_EVENTS))
         runs = _query(db, db.recorded_runs)
@@ -232,8 +242,6 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
         db.close()
     if sessions.empty:
         raise AnalysisError(f"{path}: empty study database (no sessions)")
-    read = [_protocol_fields(pj, f"{path}: session {sid}")
-            for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
     proto = pd.DataFrame([fields for fields, _ in read], index=sessions.index)
     tasks = {(path, int(sid)): task for sid, (_, task) in zip(sessions["session_id"], read, strict=True)}
     watchdog = pd.DataFrame([config_fields(cj) for cj in sessions["config_json"]], index=sessions.index)
@@ -344,10 +352,12 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                           np.where(trials["damage"] != "", "recording damaged", ""))),
     )
     trials["excluded"] = excluded
+    # the study's stored metrics (a database whose tasks do not produce one has it empty)
+    kept = [f"stored_{m.name}" for m in stored(metrics_of(tasks.values()))]
     order = ["database", "site", "participant_code", "participant_number", "session_id", "session_kind",
              "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
-             "ended_at_s", *STORED_METRIC_COLUMNS, "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
+             "ended_at_s", *kept, "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
              *RECORD_COLUMNS,
              *params, "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]

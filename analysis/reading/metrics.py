@@ -16,7 +16,7 @@ import pandas as pd
 from analysis.reading.load import Progress, StudyData, connect_readonly, recorded_where, stored_records
 from analysis.reading.recorded import read_task_force
 from foundation.parallel import default_workers, run_tasks
-from protocol.metrics import METRICS, MetricValue, stored, windowed
+from protocol.metrics import Metric, MetricValue, stored, windowed
 from protocol.study.records import Outcome, TrialRecord, disagreement
 from protocol.tasks.base import Task
 from protocol.tasks.window import ERROR_WINDOWS, TrialMetrics
@@ -65,10 +65,11 @@ class TrialTable:
     trials
         One row per analysed trial: ``participant_code, participant_number,
         session_id, trial_index, started_at_s`` (the cue, session clock),
-        ``target_label, target_force_n, haptic_mode, outcome``, every metric of :mod:`protocol.metrics` in its
-        order (``success, tct_s, rmse_n, max_ae_n, time_in_band_s, peak_force_n``, ...), ``first_contact_s``, each
-        success-only metric censored at the trial cap (``tct_censored_s``) and ``database``.  ``tct_s`` is NaN
-        unless the trial succeeded; ``tct_censored_s`` is ``tct_s`` or the trial cap.
+        ``target_label, target_force_n, haptic_mode, outcome``, every metric of the study (:attr:`metrics`) in
+        the registry's order (force regulation's ``success, tct_s, rmse_n, max_ae_n, time_in_band_s,
+        peak_force_n``, ...), ``first_contact_s``, each success-only metric censored at the trial cap
+        (``tct_censored_s``) and ``database``.  ``tct_s`` is NaN unless the trial succeeded; ``tct_censored_s`` is
+        ``tct_s`` or the trial cap.  A metric a trial's task does not produce (a study of several tasks) is NaN.
     n_from_samples
         Trials whose metrics were recomputed from samples.
     n_stored_only
@@ -77,12 +78,14 @@ class TrialTable:
         Trials whose recomputed outcome or stored metrics (cue window) differ from the ones stored live (should be
         0; a non-zero count is reported).
     by_window
-        The window-dependent metrics (:func:`protocol.metrics.windowed`: ``rmse_n``, ``max_ae_n``, ...) of every
-        trial in each error window (:data:`ERROR_WINDOWS`), row for row with ``trials``: what the sensitivity
+        The study's window-dependent metrics (:func:`protocol.metrics.windowed`: ``rmse_n``, ``max_ae_n``, ...) of
+        every trial in each error window (:data:`ERROR_WINDOWS`), row for row with ``trials``: what the sensitivity
         analysis compares.  A trial without samples has its stored (cue-window) values in the cue window, NaN in
         the other.
     error_window
         The window of ``trials``' own window-dependent metrics.
+    metrics
+        The study's metrics (:attr:`analysis.reading.load.StudyData.metrics`): the columns of ``trials`` they name.
     """
 
     trials: pd.DataFrame
@@ -91,6 +94,7 @@ class TrialTable:
     n_disagree: int
     by_window: dict[str, pd.DataFrame] = field(default_factory=dict)
     error_window: str = "cue"
+    metrics: tuple[Metric, ...] = ()
 
     def in_window(self, window: str) -> pd.DataFrame:
         """``trials`` with the window-dependent metrics of ``window`` (one of :data:`ERROR_WINDOWS`)."""
@@ -182,10 +186,11 @@ def _tasks(inc: pd.DataFrame, checks: list[_Check], workers: int, window: str,
     return tasks, chunk_weight, float(weights.sum())
 
 
-def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricOptions) -> TrialTable:
-    """The analysed trials: recomputed metrics where there were samples, the stored ones elsewhere."""
+def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricOptions,
+           metrics: tuple[Metric, ...]) -> TrialTable:
+    """The analysed trials: recomputed metrics (the study's) where there were samples, the stored ones elsewhere."""
     n = len(inc)
-    values = {m.name: np.full(n, np.nan) for m in METRICS if not m.boolean}
+    values = {m.name: np.full(n, np.nan) for m in metrics if not m.boolean}
     first_contact = np.full(n, np.nan)
     success = (inc["outcome"] == Outcome.SUCCESS).to_numpy().copy()
     from_samples = np.zeros(n, dtype=bool)
@@ -202,7 +207,7 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                 disagree += not r.agrees
     # trials without samples keep the metrics stored live (cue window only)
     missing = ~from_samples
-    for metric in stored():
+    for metric in stored(metrics):
         if options.error_window == "cue" or not metric.windowed:
             values[metric.name][missing] = inc.loc[missing, f"stored_{metric.name}"].to_numpy(dtype=float)
     cap = inc["max_trial_s"].to_numpy(dtype=float)
@@ -218,9 +223,9 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "haptic_mode": inc["haptic_mode"],
             "outcome": np.where(success, Outcome.SUCCESS.value, Outcome.TIMEOUT.value),
             # a yes/no metric is the task's verdict; the others by name, in the registry's order
-            **{m.name: success if m.boolean else values[m.name] for m in METRICS},
+            **{m.name: success if m.boolean else values[m.name] for m in metrics},
             "first_contact_s": first_contact,
-            **{m.censored: np.where(success, values[m.name], cap) for m in METRICS if m.censored},
+            **{m.censored: np.where(success, values[m.name], cap) for m in metrics if m.censored},
             "database": inc["database"],
             # a study pooled from named sites (report --site): each trial's, for the models' site terms and the
             # tables per site; none otherwise, so a one-site study's tables are as they were
@@ -228,14 +233,15 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
                else {}),
         }
     )
-    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree, _by_window(inc, results),
-                      options.error_window)
+    return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree,
+                      _by_window(inc, results, metrics), options.error_window, metrics)
 
 
-def _by_window(inc: pd.DataFrame, results: list[list[_Recomputed]]) -> dict[str, pd.DataFrame]:
+def _by_window(inc: pd.DataFrame, results: list[list[_Recomputed]],
+               metrics: tuple[Metric, ...]) -> dict[str, pd.DataFrame]:
     """Every trial's window-dependent metrics in each window (stored cue values where there are no samples)."""
     n = len(inc)
-    names = [m.name for m in windowed()]
+    names = [m.name for m in windowed(metrics)]
     out = {w: np.full((n, len(names)), np.nan) for w in ERROR_WINDOWS}
     out["cue"][:] = inc[[f"stored_{m}" for m in names]].to_numpy(dtype=float)
     for chunk in results:
@@ -282,4 +288,4 @@ def compute_trials(
 
     if progress is not None:
         progress(0.0, total)
-    return _table(inc, run_tasks(_chunk, tasks, workers=workers, on_done=tick), options)
+    return _table(inc, run_tasks(_chunk, tasks, workers=workers, on_done=tick), options, study.metrics)

@@ -60,7 +60,7 @@ def fmt_p(v: object) -> str:
 def th(file: str, column: str) -> str:
     """A table heading: the codebook's short label, its description on hover."""
     entry = codebook.lookup(file, column)
-    tip = f' title="{html.escape(entry.description)}"' if entry is not None else ""
+    tip = f' title="{html.escape(entry.described(codebook.metric_words(None)))}"' if entry is not None else ""
     return f"<th{tip}>{html.escape(codebook.label(file, column))}</th>"
 
 

@@ -41,6 +41,7 @@ from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
+from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
 from analysis.report.study_record import (
     aborted_reruns,
     condition_warnings,
@@ -57,6 +58,7 @@ from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, sensitivity
 from analysis.stats.sites import site_differences, site_tests, sites_in
 from analysis.stats.survival import CoxFit, cox_model, kaplan_meier, time_to_event_summary
+from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
 from analysis.stats.trade import (
     DEFAULT_READING,
     participant_slopes,
@@ -105,7 +107,7 @@ def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
         sel = mine[mine["haptic_mode"] == mode]
         if sel.empty:
             continue
-        ok = sel[sel["success"]]
+        ok = sel[sel["outcome"] == "success"]
         picks.append((ok if not ok.empty else sel).iloc[0])
     return picks
 
@@ -136,6 +138,8 @@ class _Analysis:
     n_participants: int
     within: _Within
     confidence: float = 0.95
+    #: A moving target's trade of tracking error against its speed (None: the study's target does not move).
+    speed: TargetSpeedTrade | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -196,10 +200,12 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
     }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     within = _within(study, table, overall, target_order, options, zero_method, confidence)
+    speed = target_speed_trade(trials.assign(max_trial_s=study.included["max_trial_s"].to_numpy(dtype=float)),
+                               study.task_of, zero_method=zero_method, confidence=confidence)
     return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
                      pd.concat(per_target, ignore_index=True), excluded,
                      int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
-                     confidence)
+                     confidence, speed)
 
 
 def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
@@ -250,7 +256,8 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
     """The caveats printed on the figures they qualify."""
     window = ("from the cue, the approach from 0 N included" if options.error_window == "cue" else
               "from first contact")
-    no_tct = int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+    no_tct = (int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
+              if "tct_s" in a.overall.columns else 0)  # (a study whose tasks have no TCT: none)
     tct = ("TCT over successful trials only, conditioned on success" + (
         f"; {plural(no_tct, 'participant')} without a success in a mode have no TCT there" if no_tct else "")
            if options.tct_policy == "successful" else
@@ -260,13 +267,14 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
-    notes = {"tct": tct + ".", "errors": f"{windowed_words()}: error window {window}.",
+    metrics = a.study.metrics
+    notes = {"tct": tct + ".", "errors": f"{windowed_words(metrics)}: error window {window}.",
              "trade": "Every trial that reached the band, failed or not: rise time from first contact to the band, "
                       "RMSE over the 1 s after; lines: each participant's own least-squares fit.",
              "learning": learning}
-    for group in figure_groups():  # a figure with a secondary measure says whose marks are not Holm's
+    for group in figure_groups(metrics):  # a figure with a secondary measure says whose marks are not Holm's
         if any(m.role is Role.SECONDARY for m in group.metrics):
-            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note())))
+            notes[group.key] = " ".join(filter(None, (notes.get(group.key, ""), secondary_note(metrics))))
     return notes
 
 
@@ -299,12 +307,15 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
         *(("mode_bars", ([m.participant for m in g.metrics], overall, by_target, marks),
-           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key) for g in figure_groups()),
-        ("paired_lines", (overall, TESTED_METRICS, marks_overall), {}, "paired", "paired"),
+           {**bars, **({"note": notes[g.key]} if g.key in notes else {})}, g.file, g.key)
+          for g in figure_groups(a.study.metrics)),
+        ("paired_lines", (overall, [m for m in TESTED_METRICS if m in overall.columns], marks_overall), {}, "paired",
+         "paired"),
         ("trade_slopes", (trade_pairs(trials), a.within.slopes, common, DEFAULT_READING.speed_label,
                           DEFAULT_READING.accuracy_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
-        ("km_curves", (a.within.km, a.within.tte, a.within.cox), {}, "tct_survival", "tct_survival"),
+        *((("km_curves", (a.within.km, a.within.tte, a.within.cox), {}, "tct_survival", "tct_survival"),)
+          if any(m.success_only for m in a.study.metrics) else ()),  # (a task with a TCT: its time to event)
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
     ]
     titles = []
@@ -342,13 +353,19 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
     if power:
         from analysis.planning.power_outputs import report_section
 
-        section += power_html(report_section(a.trials, options, zero_method, tmp))
-    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")])
+        section += power_html(report_section(a.trials, options, zero_method, tmp), a.study.metrics)
+    if a.speed is not None:  # a moving target: the trade of its error against its speed
+        tables.update(tracking_tables(a.speed))
+        shown.update(tracking_tables(a.speed, rounded=False))
+    moving = tracking_html(a.speed, shown["stats.csv"], a.study.metrics,
+                           speed_figure(a.speed, tmp / "figures") if a.speed is not None else None)
+    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
+                               metrics=a.study.metrics)
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
         marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-        target_order=a.target_order,
+        target_order=a.target_order, tracking_html=moving,
     )
     (tmp / "report.html").write_text(html, encoding="utf-8")
     results.update(tables)

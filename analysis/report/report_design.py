@@ -56,11 +56,14 @@ def training_methods(study: StudyData) -> str:
     per = training["participant_code"].nunique()
     required = "required before the experiment" if bool(exp.get("training_required", pd.Series(dtype=bool)).all()) \
         else "not required before the experiment"
+    held = "hold_s" in training.columns  # a task whose trial ends at a completed hold (force regulation's)
     spread = (f"; a training trial lasted {np.median(length):.1f} s in the median ({length.min():.1f}–"
-              f"{length.max():.1f} s), {ok} of {len(t)} ended in a completed hold") if len(t) else ""
+              f"{length.max():.1f} s)" + (f", {ok} of {len(t)} ended in a completed hold" if held else "")
+              if len(t) else "")
+    end = f"a completed {_one(training['hold_s'], ' s')} hold" if held else "the end of its target's course"
     return (f"<p><b>Training.</b> {_PAPER} This study's training (this tool's choices, from the stored protocol): "
             f"one training session per participant, {required}: each haptic mode in turn, each target once, a "
-            f"trial ending at a completed {_one(training['hold_s'], ' s')} hold or at a cap of "
+            f"trial ending at {end} or at a cap of "
             f"{_one(training['max_trial_s'], ' s')} per target and mode, {aid}. "
             f"{plural(len(training), 'training session')} of {plural(per, 'participant')} were run "
             f"({plural(len(t), 'trial')}{spread}); they are not analysed (sessions.csv lists each, with its trials, "
@@ -76,8 +79,10 @@ def _site_rows(study: StudyData) -> list[str]:
         seeds = ", ".join(str(int(v)) for v in sorted(set(mine["seed"])))
         protos = "; ".join(sorted({f"{n} v{v:g}" if pd.notna(v) else str(n) for n, v in
                                    zip(mine["protocol_name"], mine.get("protocol_version", np.nan), strict=True)}))
+        held = {"tolerance_fraction", "hold_s"} <= set(mine.columns)  # force regulation's rule
         rules = "; ".join(sorted({f"band ±{a:.0%}, hold {b:g} s, cap {c:g} s" for a, b, c in
-                                  zip(mine["tolerance_fraction"], mine["hold_s"], mine["max_trial_s"], strict=True)}))
+                                  zip(mine["tolerance_fraction"], mine["hold_s"], mine["max_trial_s"], strict=True)}
+                                 if held else {f"cap {c:g} s" for c in mine["max_trial_s"]}))
         who = plural(mine["participant_code"].nunique(), "participant")
         out.append(f"{html.escape(site)} ({html.escape(dbs)}: {who}"
                    f", seed {html.escape(seeds or 'none')}, protocol {html.escape(protos)}, {html.escape(rules)})")

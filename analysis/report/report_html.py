@@ -27,11 +27,11 @@ from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
 from analysis.report.latency_methods import latency_paragraph
 from analysis.report.measures import figure_groups, mean_words, secondary, secondary_note, windowed_words
-from analysis.stats.aggregate import PRIMARY_METRICS, mean_sd
+from analysis.stats.aggregate import mean_sd
 from analysis.stats.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
 from analysis.stats.wilcoxon import methods_text
 from foundation.version import software_provenance
-from protocol.metrics import family_word
+from protocol.metrics import Metric, family_word, primary
 from protocol.runner.study_rules import FAULT_REHEARSAL_EVENT
 from protocol.tasks.window import CONTACT_THRESHOLD_N
 
@@ -57,7 +57,8 @@ def _with_interval(v: float, row: pd.Series) -> str:
     return _fmt(v) + (f" [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(lo) else "")
 
 
-def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), caption: str = "") -> str:
+def _stats_html(frame: pd.DataFrame, file: str, metrics: Sequence[Metric], lead: Sequence[str] = (),
+                caption: str = "") -> str:
     """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered.
 
     W is shown with the precision it has (a rank sum: whole or half), p-values to 3 significant digits; each
@@ -70,10 +71,10 @@ def _stats_html(frame: pd.DataFrame, file: str, lead: Sequence[str] = (), captio
         "[CI]</th>" if c == "hl" else _th(file, c) for c in cols
     )
     body = []
-    secondaries = {m.participant_exported for m in secondary()}
+    secondaries = {m.participant_exported for m in secondary(metrics)}
     for _, row in frame.iterrows():
         label = html.escape(_measure_label(str(row["metric"])))
-        for note in (row.get("note"), secondary_note() if row["metric"] in secondaries else ""):
+        for note in (row.get("note"), secondary_note(metrics) if row["metric"] in secondaries else ""):
             if isinstance(note, str) and note:  # the row's own note; a secondary measure's why, beside its p
                 k = notes.setdefault(note, len(notes) + 1)
                 label += f" <sup>{k}</sup>"
@@ -96,15 +97,16 @@ _POWER_HEADINGS = {"scope": "target", "metric": "measure", "direction": "pilot s
                    "n80_holm": "n for 80 % (Holm)", "n90": "n for 90 %", "n90_holm": "n for 90 % (Holm)"}
 
 
-def power_html(section: Any) -> str:
+def power_html(section: Any, metrics: Sequence[Metric]) -> str:
     """The "what n would a study need?" section: a notice when it could not be estimated, else a real table.
 
-    ``section`` is an :class:`analysis.planning.power.ReportPower`.  The table is built
+    ``section`` is an :class:`analysis.planning.power.ReportPower`, of a study with these ``metrics`` (its tasks':
+    Holm's family is theirs).  The table is built
     from the structured result (:func:`analysis.planning.power_plan.plan_table`); columns
     with no value in any row are left out.  In print, its rows never split,
     its head repeats on every page and the heading stays with it (``_CSS``).
     """
-    from analysis.planning.power import DIRECTION_TEXT, FAMILY_LABELS, metric_label
+    from analysis.planning.power import DIRECTION_TEXT, is_family_row, metric_label
     from analysis.planning.power_plan import plan_table
 
     head = "<h2>What n would a study need?</h2>"
@@ -130,7 +132,7 @@ def power_html(section: Any) -> str:
                     for c in shown)
     body = []
     for i, metric in enumerate(table["metric"]):
-        cls = ' class="family"' if metric in FAMILY_LABELS else ""
+        cls = ' class="family"' if is_family_row(metric) else ""
         tds = "".join(f'<td class="m">{cells[c][i]}</td>' if c in ("scope", "metric") else f"<td>{cells[c][i]}</td>"
                       for c in shown)
         body.append(f"<tr{cls}>{tds}</tr>")
@@ -140,7 +142,7 @@ def power_html(section: Any) -> str:
             f"{r.alpha:g}; TCT {tct}) to detect the effect <b>in the direction this study shows</b>"
             f"{' (pilot shows)' if 'direction' in shown else ''}. "
             "n for 80 %: the smallest n tried from which on power stays at or above 80 %; '&gt; N (x %)': not "
-            f"reached by the largest n tried. Holm: with Holm's correction across the {family_word()} primary "
+            f"reached by the largest n tried. Holm: with Holm's correction across the {family_word(metrics)} primary "
             "measures, as the significance marks above (a secondary measure has none). power.csv has every number, "
             "with the two-sided rejection rate "
             "(power_two_sided) and the Monte Carlo intervals.</p>")
@@ -155,19 +157,19 @@ def power_html(section: Any) -> str:
                if section.png else "") + "</section>")
 
 
-def _bar_figures(pngs: dict[str, bytes]) -> str:
-    """The bar figures, one per figure of the registry's metrics (:func:`analysis.report.measures.figure_groups`)."""
+def _bar_figures(pngs: dict[str, bytes], metrics: Sequence[Metric]) -> str:
+    """The bar figures, one per figure of the study's metrics (:func:`analysis.report.measures.figure_groups`)."""
     caption = ('<p class="caption">Bars: median across participants, whiskers: interquartile range (the tests are '
                "on medians; the data are skewed); dots: participants; n under each bar: participants with a value; "
                "marks: Wilcoxon p after Holm's correction (n.s. not significant, n/c not computable).</p>")
     return "\n".join(f"<figure><h2>{html.escape(g.heading)}</h2>{caption if i == 0 else ''}"
-                     f"{_img(pngs[g.key], g.alt)}</figure>" for i, g in enumerate(figure_groups()))
+                     f"{_img(pngs[g.key], g.alt)}</figure>" for i, g in enumerate(figure_groups(metrics)))
 
 
-def _secondary_definitions() -> str:
+def _secondary_definitions(metrics: Sequence[Metric]) -> str:
     """The secondary measures' definitions, for the methods ("" when there is none)."""
     return "".join(f" {html.escape(m.short[:1].upper() + m.short[1:])} ({html.escape(m.unit)}) is the "
-                   f"{html.escape(m.description)}." for m in secondary())
+                   f"{html.escape(m.description)}." for m in secondary(metrics))
 
 
 def _deviations_methods(within: Any) -> str:
@@ -273,6 +275,8 @@ def _task_methods(study: StudyData, caps: list[float]) -> str:
 def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
              excluded: dict[str, int], n_participants: int, within: Any) -> str:
     trials = study.included
+    metrics = study.metrics
+    family = [m.participant for m in primary(metrics)]
     cap = sorted(set(trials["max_trial_s"]))
     targets = (trials.drop_duplicates("target_label").sort_values("target_force_n")[["target_label", "target_force_n"]])
     target_txt = ", ".join(f"{lab} {f:g} N"
@@ -295,13 +299,13 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
         f"filtered, gravity- and bias-compensated contact force. {html.escape(_task_methods(study, cap))} "
-        f"{windowed_words()} "
+        f"{windowed_words(metrics)} "
         f"of F against F* are taken {window}. Time in band is the number of in-band samples times 1 ms; peak force "
-        f"is the largest task force in the window.{_secondary_definitions()} These are the definitions of "
+        f"is the largest task force in the window.{_secondary_definitions(metrics)} These are the definitions of "
         "protocol.metrics, the same code that judged the trials live. "
         f"{report_sections.window_fact(within, options)}</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
-        f"{mean_words()} are means over trials; TCT is {tct}. A participant × mode whose trials are not spread "
+        f"{mean_words(metrics)} are means over trials; TCT is {tct}. A participant × mode whose trials are not spread "
         f"equally over the targets (an incomplete session analysed) has the mean of its per-target values, each "
         f"target weighing the same. Across participants, the bars and the headline show the median with its "
         f"interquartile range, the summary the Wilcoxon test is about (the headline gives the mean ± SD (n − 1) "
@@ -309,14 +313,14 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
         f"every CSV file is described, with its unit, in codebook.csv.</p>"
         f"<p><b>Tests.</b> {html.escape(methods_text(zero_method, confidence))} Holm's step-down correction is "
-        f"applied across the {len(PRIMARY_METRICS)} outcome measures "
-        f"({', '.join(codebook.exported_name(m) for m in PRIMARY_METRICS)}), and separately "
+        f"applied across the {len(family)} outcome measures "
+        f"({', '.join(codebook.exported_name(m) for m in family)}), and separately "
         f"within each target; significance marks in the figures use the Holm-adjusted p-values "
         f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). "
-        f"{html.escape(secondary_note())}{' Its mark uses its own p. ' if secondary() else ''}"
+        f"{html.escape(secondary_note(metrics))}{' Its mark uses its own p. ' if secondary(metrics) else ''}"
         "No p-value in this report comes from trials pooled as if independent.</p>"
-        + report_tct.tct_methods(within, options, confidence)
-        + report_sections.methods_within(within, options, confidence)
+        + (report_tct.tct_methods(within, options, confidence) if any(m.success_only for m in metrics) else "")
+        + report_sections.methods_within(within, options, confidence, metrics)
         + latency_paragraph(study)
     )
 
@@ -378,12 +382,12 @@ def _origin(study: StudyData) -> tuple[str, str]:
                      f"{n_real} on the real rig (rig = real); see the sessions table." + settings)
 
 
-def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str]) -> str:
-    """One card per measure: the median [IQR] across participants OFF → ON (what the test is about), the mean ± SD
-    beside it (what the paper's figures show), and the Holm-adjusted test."""
+def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str], metrics: Sequence[Metric]) -> str:
+    """One card per primary measure of the study: the median [IQR] across participants OFF → ON (what the test is
+    about), the mean ± SD beside it (what the paper's figures show), and the Holm-adjusted test."""
     by_metric = stats.set_index("metric")
     cards = []
-    for m in PRIMARY_METRICS:
+    for m in (p.participant for p in primary(metrics)):
         name = codebook.exported_name(m)
         parts, iqr, means, ns = [], [], [], []
         for mode in ("off", "on"):
@@ -503,10 +507,14 @@ def _sessions_html(sess: pd.DataFrame, within: Any) -> str:
             f"{_html_table(sess, 'sessions.csv', sess_cols, cell=short)}")
 
 
+#: The test table's lead, where the study has a secondary measure.
+_SECONDARY_OWN = " (a secondary measure is tested on its own: see its note)"
+
+
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
-         power_html: str = "", within: Any = None, target_order: Sequence[str] = ()) -> str:
+         power_html: str = "", within: Any = None, target_order: Sequence[str] = (), tracking_html: str = "") -> str:
     """report.html: self-contained (figures embedded), readable on screen and on paper.
 
     Parameters
@@ -519,6 +527,8 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
         :func:`analysis.report.report_tables.export_tables`' result: the page shows the CSVs' rows.
     marks_overall, pngs, examples, power_html
         Significance marks, the figures (PNG bytes), the example trials' figures and the power section.
+    tracking_html
+        The section on a moving target (:mod:`analysis.report.report_tracking`; "" when the target holds).
     within, target_order
         The within-participant analyses (``analysis.report.report._Within``) and the targets in order.
 
@@ -529,29 +539,33 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     """
     stats, per = tables["stats.csv"], tables["participants.csv"]
     win = report_sections.window_words(options.error_window)
-    per_cols = ["participant_code", "participant_number", "haptic_mode", *codebook.WIDE_MEASURES]
+    metrics = study.metrics
+    timed = any(m.success_only for m in metrics)  # a task with a completion time: its TCT sections and the trade
+    per_cols = ["participant_code", "participant_number", "haptic_mode",
+                *(c for c in codebook.WIDE_MEASURES if c in per.columns)]  # the study's measures
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
 {_head_html(study, table, options, n_participants, tables, within)}
-{_headline(per, stats, marks_overall)}
+{_headline(per, stats, marks_overall, metrics)}
 <h2>Haptics ON vs OFF</h2>
 <p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the
-{family_word()} primary measures{" (a secondary measure is tested on its own: see its note)" if secondary() else ""}.
+{family_word(metrics)} primary measures{_SECONDARY_OWN if secondary(metrics) else ""}.
 Medians are across participants; the HL shift is the Hodges–Lehmann estimate of ON − OFF with its
 {confidence:.0%} confidence interval. Hover over a heading for its definition; codebook.csv has them all.</p>
-{_stats_html(stats, "stats.csv", caption=f"ON vs OFF, all targets; {windowed_words()} {win}")}
+{_stats_html(stats, "stats.csv", metrics, caption=f"ON vs OFF, all targets; {windowed_words(metrics)} {win}")}
 <h3>Within each target</h3>
-{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", lead=["target_label"],
-             caption=f"ON vs OFF within each target; {windowed_words()} {win}")}
+{_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", metrics, lead=["target_label"],
+             caption=f"ON vs OFF within each target; {windowed_words(metrics)} {win}")}
 {report_design.sites_html(within, tables, study)}
-{report_sections.sensitivity_html(within, options, confidence)}
-{_bar_figures(pngs)}
-{report_tct.tct_html(within, tables, options, pngs["tct_survival"], confidence)}
+{report_sections.sensitivity_html(within, options, metrics, confidence)}
+{_bar_figures(pngs, metrics)}
+{report_tct.tct_html(within, tables, options, pngs["tct_survival"], confidence) if timed else ""}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
 <p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
 across participants.</p></figure>
-{_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; {windowed_words()} {win}")}
-{report_sections.trade_html(within, tables, options, pngs["speed_accuracy"], confidence)}
+{_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; {windowed_words(metrics)} {win}")}
+{report_sections.trade_html(within, tables, options, pngs["speed_accuracy"], confidence) if timed else ""}
+{tracking_html}
 <h2>Force through the pipeline</h2>
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device, the target
 band and the error window; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>

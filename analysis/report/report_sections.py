@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import html
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import pandas as pd
@@ -27,7 +28,7 @@ from analysis.stats.learning import MIN_ORDER_GROUP
 from analysis.stats.models import MIN_PARTICIPANTS
 from analysis.stats.sensitivity import ALPHA
 from analysis.stats.trade import TRADE_MODEL_TERMS
-from protocol.metrics import tested
+from protocol.metrics import Metric, tested
 
 __all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
@@ -135,7 +136,7 @@ _BLOCKS = {"error window": "The error window of RMSE and Max AE (Hodges–Lehman
                              "reading agrees)"}
 
 
-def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.95) -> str:
+def sensitivity_html(within: Any, options: MetricOptions, metrics: Sequence[Metric], confidence: float = 0.95) -> str:
     """The headline results under every reading side by side, a block per choice; a differing conclusion flagged."""
     sens = within.sensitivity
     tables = []
@@ -174,9 +175,9 @@ def sensitivity_html(within: Any, options: MetricOptions, confidence: float = 0.
     verdict = (f'<p class="warn">{plural(int(n_diff), "conclusion")} {"differs" if n_diff == 1 else "differ"} '
                "between the readings (flagged): report the reading with the result.</p>" if n_diff else
                "<p>Every conclusion is the same under every reading.</p>")
-    return (f"<h3>Does a choice of the analysis change the answer?</h3><p>{windowed_words()} depend on the window "
-            f"they are taken over, TCT on how a failed trial enters it, and the speed–accuracy association on how "
-            f"speed and accuracy are measured. {window_fact(within, options)} Each choice's readings side by side "
+    return (f"<h3>Does a choice of the analysis change the answer?</h3><p>{windowed_words(metrics)} depend on the "
+            f"window they are taken over, TCT on how a failed trial enters it, and the speed–accuracy association on "
+            f"how speed and accuracy are measured. {window_fact(within, options)} Each choice's readings side by side "
             f"(sensitivity.csv), conclusions at p &lt; {ALPHA:g}; the report's own reading is marked.</p>{verdict}"
             + "".join(tables))
 
@@ -305,7 +306,15 @@ def top_warnings(within: Any, included: bool) -> str:
     return "".join(f'<p class="warn">{html.escape(w)}</p>' for w in out)
 
 
-def methods_within(within: Any, options: MetricOptions, confidence: float) -> str:
+def _gee_words(metrics: Sequence[Metric]) -> str:
+    """The learning models' words for a yes/no outcome of the study, if it has one ("" otherwise)."""
+    yes_no = [m.name for m in tested(metrics) if m.boolean]
+    return (", a logistic GEE with an exchangeable working correlation within a participant and Mancl and DeRouen's "
+            "bias-reduced sandwich standard errors (the plain sandwich is too small with few clusters) for "
+            f"{listed(yes_no)}" if yes_no else "")
+
+
+def methods_within(within: Any, options: MetricOptions, confidence: float, metrics: Sequence[Metric]) -> str:
     """The methods sentences of the within-participant analyses (the trade, the windows, learning and order)."""
     fitted = all(f.fitted for f in within.learning)
     learning_n = ("" if fitted else f" With fewer than {MIN_PARTICIPANTS} participants the models are not fitted "
@@ -320,8 +329,9 @@ def methods_within(within: Any, options: MetricOptions, confidence: float) -> st
         "within-participant association is the repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017), "
         "per mode and over both modes with each participant × mode as its own group: the correlation of the "
         "participant-centred values, with N − k − 1 degrees of freedom (N trials, k groups), the p-value of the "
-        f"common slope's t test and a {confidence:.0%} Fisher-z interval with SE = 1/√(df − 3), as the rmcorr R "
-        "package computes them; an r_rm within 10<sup>−12</sup> of ±1 (a perfect line, whose last digit depends on "
+        "common slope's t test, as the rmcorr R package computes them, and a "
+        f"{confidence:.0%} Fisher-z interval of r_rm as a partial correlation, SE = 1/√(df − 1), as pingouin's rm_corr "
+        "computes it; an r_rm within 10<sup>−12</sup> of ±1 (a perfect line, whose last digit depends on "
         "the computer's arithmetic) is reported as ±1 with p = 0 on every computer. It is called a trade only where "
         "that interval lies below zero and the cue reading "
         "(TCT of the successful trials against RMSE from the cue, the report's reading before this one, kept as a "
@@ -331,18 +341,16 @@ def methods_within(within: Any, options: MetricOptions, confidence: float) -> st
         "ON − OFF difference, with Wald intervals. Each participant's own least-squares line is drawn; no "
         "pooled-trial p-value is computed.</p>"
         "<p><b>Sensitivity.</b> Every analysis uses the window and TCT reading named in the header; the "
-        f"sensitivity table repeats the primary ON-vs-OFF tests with {windowed_words()} from the cue and from first "
-        "contact (Holm within each window), TCT's test in both readings with the Cox model's hazard ratio, and r_rm "
-        f"in every speed–accuracy reading, and flags each conclusion (at p &lt; {ALPHA:g}) that differs.</p>"
+        f"sensitivity table repeats the primary ON-vs-OFF tests with {windowed_words(metrics)} from the cue and from "
+        "first contact (Holm within each window), TCT's test in both readings with the Cox model's hazard ratio, and "
+        f"r_rm in every speed–accuracy reading, and flags each conclusion (at p &lt; {ALPHA:g}) that differs.</p>"
         "<p><b>Secondary analysis: learning and order.</b> Per outcome, a trial-level model with haptic mode, "
         "target, their interaction and the trial's number in the session (its position, aborted trials counted) "
         "(and a site term where sites were pooled) as fixed effects and participant as the unit: linear mixed "
         "models with a random intercept and a random slope of mode per participant (REML; the intercept alone, "
         "said in the note, where the slope cannot be fitted) for "
-        f"{listed([m.short for m in tested() if not m.boolean])}, a logistic GEE with an exchangeable working "
-        "correlation within a participant and Mancl and DeRouen's "
-        "bias-reduced sandwich standard errors (the plain sandwich is too small with few clusters) for "
-        f"{listed([m.name for m in tested() if m.boolean])} (statsmodels); the trial-number coefficient is the "
+        f"{listed([m.short for m in tested(metrics) if not m.boolean])}{_gee_words(metrics)} (statsmodels); the "
+        "trial-number coefficient is the "
         "change per trial. "
         "Order: each participant's ON − OFF difference compared between participants whose stored schedule "
         "began with an ON trial and those whose began with an OFF trial (two-sided Mann–Whitney U; not tested "

@@ -21,16 +21,17 @@ from analysis.report.study_record import session_activity, status_words
 from analysis.stats.aggregate import by_mode
 from analysis.stats.loop_health import health_summary, health_table
 from analysis.stats.models import fixed_effects
-from protocol.metrics import primary
+from protocol.metrics import METRICS, Metric, primary
 
 __all__ = ["TRIALS_CSV_COLUMNS", "export_tables", "write_tables"]
 
 #: trials.csv: the columns every consumer may rely on, in this order (more follow: the other metrics, in the
-#: registry's order).  The primary metrics' are among them.  Sorted by participant number, participant code, session
-#: and trial.  Names and rounding: :mod:`analysis.reading.codebook`.
+#: registry's order).  The primary metrics' are among them (those of the study's: the paper's four for force
+#: regulation).  Sorted by participant number, participant code, session and trial.  Names and rounding:
+#: :mod:`analysis.reading.codebook`.
 TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "trial_number", "target_label",
                       "target_force_N", "haptic_mode", "outcome",
-                      *(m.name if m.boolean else m.exported for m in primary()), "cue_at_s")
+                      *(m.name if m.boolean else m.exported for m in primary(METRICS)), "cue_at_s")
 
 
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
@@ -129,16 +130,17 @@ def _wide(per: pd.DataFrame, overall: pd.DataFrame, by_participant: _ByParticipa
     """participants_wide.csv's rows (before export): each measure of participants.csv as an OFF and an ON column, and
     each tested measure's ON − OFF difference as the test ranks it (from the unrounded values, rounded to
     :data:`analysis.reading.codebook.DIFFERENCE_DECIMALS`)."""
-    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode",
-                     values=list(codebook.WIDE_MEASURES))
+    measures = [m for m in codebook.WIDE_MEASURES if m in per.columns]  # the study's
+    wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode", values=measures)
     wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
-    wide_cols = [codebook.wide_name(measure, mode) for measure in codebook.WIDE_MEASURES for mode in ("off", "on")]
+    wide_cols = [codebook.wide_name(measure, mode) for measure in measures for mode in ("off", "on")]
     wide = by_participant(wide.reindex(columns=wide_cols).reset_index())
     for c in wide_cols:
         if c.startswith("n_"):
             wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
-    for name in codebook.DIFF_MEASURES:
-        source = next(k for k, v in {c: codebook.exported_name(c) for c in overall.columns}.items() if v == name)
+    sources = {codebook.exported_name(c): c for c in overall.columns}
+    for name in (n for n in codebook.DIFF_MEASURES if n in sources):  # the study's tested measures
+        source = sources[name]
         both = by_mode(overall, source)
         diff = np.round(both["on"] - both["off"], codebook.DIFFERENCE_DECIMALS)
         wide[codebook.wide_name(name, "diff")] = wide["participant_code"].map(diff).to_numpy(float)
@@ -151,7 +153,8 @@ def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) ->
     t = trials.copy()
     t["database"] = t["database"].map(os.path.basename)
     t = codebook.export(t, "trials.csv", rounded=rounded)
-    t = t[list(TRIALS_CSV_COLUMNS) + [c for c in t.columns if c not in TRIALS_CSV_COLUMNS]]
+    first = [c for c in TRIALS_CSV_COLUMNS if c in t.columns]  # (a study's metrics: its tasks')
+    t = t[first + [c for c in t.columns if c not in first]]
     t["error_window"] = error_window
     return t.reset_index(drop=True)
 
@@ -162,7 +165,8 @@ _WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by
                    "learning_models.csv", "order_check.csv")
 
 
-def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = ()) -> None:
+def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = (),
+                 metrics: Sequence[Metric] | None = None) -> None:
     """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
 
     Parameters
@@ -173,6 +177,8 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
         :func:`export_tables`' result.
     written_too : sequence of str
         CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
+    metrics : sequence of Metric
+        The study's metrics, which the codebook's descriptions of the tests name (:func:`codebook.metric_words`).
     """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)
@@ -180,5 +186,5 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
     for name in written_too:
         columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
-    codebook.codebook_frame(columns).to_csv(folder / "codebook.csv", index=False)
+    codebook.codebook_frame(columns, metrics).to_csv(folder / "codebook.csv", index=False)
 

@@ -296,7 +296,10 @@ def provenance(study: StudyData) -> tuple[pd.DataFrame, list[str]]:
 
 def _targets_by_session(study: StudyData) -> pd.Series:
     """Each analysed session's targets as the trials name them (``GENTLE 0.6 N, FIRM 1.2 N``), by ``(db, id)``."""
-    t = study.trials.drop_duplicates(["database", "session_id", "target_label"]).sort_values("target_force_n")
+    # by force, then label: two targets of one force (a slow and a fast tracked profile) in one order for every
+    # session, not in the order its schedule met them
+    t = study.trials.drop_duplicates(["database", "session_id", "target_label"]).sort_values(
+        ["target_force_n", "target_label"], kind="stable")
     return t.groupby(["database", "session_id"], sort=False).apply(
         lambda g: ", ".join(f"{lab} {f:g} N" for lab, f in zip(g["target_label"], g["target_force_n"], strict=True)),
         include_groups=False)

@@ -31,18 +31,20 @@ __all__ = [
     "unbalanced_cells",
 ]
 
-#: The paper's outcome measures (per-participant columns), in report order; Holm's correction runs across them.
-PRIMARY_METRICS: tuple[str, ...] = tuple(m.participant for m in primary())
-#: Every measure the report tests ON vs OFF: the primary ones, then the secondary ones (each with its own p).
-TESTED_METRICS: tuple[str, ...] = tuple(m.participant for m in tested())
+#: Every primary measure of the registry (per-participant columns), in report order: a study's are those of them its
+#: tables have (its tasks' metrics: the paper's four for force regulation), and Holm's correction runs across them.
+PRIMARY_METRICS: tuple[str, ...] = tuple(m.participant for m in primary(METRICS))
+#: Every measure of the registry the report tests ON vs OFF: the primary ones, then the secondary ones (each with its
+#: own p); a study tests those of them its tables have.
+TESTED_METRICS: tuple[str, ...] = tuple(m.participant for m in tested(METRICS))
 
 #: Human labels with units, for tables and figures, by per-participant column.
 METRIC_LABELS: dict[str, str] = {m.participant: m.label for m in METRICS}
 
 
 def metrics_in(trials: pd.DataFrame) -> tuple[Metric, ...]:
-    """The registry's metrics a trials table has a column for, in order (every one, in a table the analysis made;
-    a table of trials built by hand, or by an older version, may lack one)."""
+    """The registry's metrics a trials table has a column for, in order (the study's, in a table the analysis made:
+    :attr:`analysis.reading.metrics.TrialTable.metrics`; a table of trials built by hand may lack one)."""
     return tuple(m for m in METRICS if m.name in trials.columns)
 
 

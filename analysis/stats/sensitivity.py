@@ -52,7 +52,8 @@ def _test_rows(table: TrialTable, options: MetricOptions, window: str, tct_polic
                confidence: float) -> list[Any]:
     """The primary measures' ON-vs-OFF tests with this window and TCT policy (Holm across them)."""
     per = per_participant(table.in_window(window), MetricOptions(window, tct_policy))
-    _, frame = mode_tests(per, PRIMARY_METRICS, zero_method=zero_method, confidence=confidence)
+    family = [m for m in PRIMARY_METRICS if m in per.columns]  # the study's primary measures
+    _, frame = mode_tests(per, family, zero_method=zero_method, confidence=confidence)
     return list(frame.itertuples())
 
 
@@ -112,7 +113,8 @@ def sensitivity(table: TrialTable, options: MetricOptions, trade: pd.DataFrame, 
         for r in _test_rows(table, options, options.error_window, policy, zero_method, confidence):
             if r.metric == _TCT:
                 rows.append(_test_row("TCT reading", r, policy, policy == options.tct_policy))
-    rows.append(_cox_row(cox))
+    if _TCT in table.trials.columns:  # a study whose tasks have a TCT (force tracking has none)
+        rows.append(_cox_row(cox))
     for r in trade.itertuples():
         rows.append({"analysis": "speed-accuracy", "measure": f"r_rm {r.haptic_mode}", "reading": r.reading,
                      "default": r.reading == "phases", "n": r.n_trials, "estimate": r.r_rm, "ci_low": r.ci_low,
@@ -130,6 +132,8 @@ def max_ae_from_approach(table: TrialTable) -> tuple[int, int]:
     Such a trial's largest error is the approach (the error at the cue's 0 N is the target force itself), not a
     peak force excursion: its Max AE from the cue exceeds its Max AE from first contact, or it never touched.
     """
+    if "max_ae_n" not in table.trials.columns:  # a study whose tasks have no Max AE
+        return 0, 0
     cue = table.in_window("cue")["max_ae_n"].to_numpy(float)
     contact = table.in_window("first_contact")["max_ae_n"].to_numpy(float)
     has = np.isfinite(cue)

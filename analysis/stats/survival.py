@@ -39,7 +39,11 @@ COX_COLUMNS = ("term", "hazard_ratio", "ci_low", "ci_high", "coef", "std_error",
 
 
 def time_to_event(trials: pd.DataFrame) -> pd.DataFrame:
-    """Each analysed trial's time to success (s, the cap for a failure) and whether it succeeded (``event``)."""
+    """Each analysed trial's time to success (s, the cap for a failure) and whether it succeeded (``event``); none
+    in a study whose tasks have no TCT (force tracking: a trial runs its course, no success to wait for)."""
+    if "tct_censored_s" not in trials.columns or "success" not in trials.columns:
+        trials = pd.DataFrame({c: pd.Series(dtype=float) for c in ("participant_code", "haptic_mode", "target_label",
+                                                                   "tct_censored_s", "success")})
     return pd.DataFrame({"participant_code": trials["participant_code"], "haptic_mode": trials["haptic_mode"],
                          "target_label": trials["target_label"],
                          "time_s": trials["tct_censored_s"].to_numpy(float),

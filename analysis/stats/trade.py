@@ -100,7 +100,10 @@ def tct_column(options: MetricOptions) -> str:
 
 def trade_pairs(trials: pd.DataFrame, reading: TradeReading = DEFAULT_READING) -> pd.DataFrame:
     """Trials with both a speed and an accuracy under ``reading``, as columns ``speed`` (s) and ``accuracy`` (N)."""
-    t = trials.assign(speed=trials[reading.speed].astype(float), accuracy=trials[reading.accuracy].astype(float))
+    # (a study whose tasks lack either measure -- force tracking has no TCT, no rise time -- has no such trial)
+    speed, accuracy = (trials[c].astype(float) if c in trials.columns else np.nan
+                       for c in (reading.speed, reading.accuracy))
+    t = trials.assign(speed=speed, accuracy=accuracy)
     return t[np.isfinite(t["speed"]) & np.isfinite(t["accuracy"])]
 
 

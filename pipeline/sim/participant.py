@@ -56,8 +56,9 @@ trial's ``Mark``), so the participant's clock cannot drift from the trial's
 even if ``t_s`` is on another time base.  With a live gauge (``aim.gauge``) the
 visual percept is the displayed force ``k·δⁿ`` with log noise 0.03 and the
 target is the displayed one (no memory noise).  This is a model of force
-*regulation*: it aims at a force that does not move over the trial (an aim whose
-target moves is refused: another task's hand is another model).
+*regulation*: it aims at a force that does not move over the trial; an aim whose
+target moves is a tracking trial, handed to the tracking hand of :mod:`pipeline.sim.tracking_hand` (the same
+person's constants, its own model) until the trial ends.
 
 Determinism: all randomness comes from ``numpy.random.default_rng`` seeded
 from ``seed`` (no global state).  Parameters come from one stream; every trial
@@ -92,6 +93,7 @@ from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.tissue import TissueParams
+from pipeline.sim.tracking_hand import TrackingHand
 
 __all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant"]
 
@@ -197,6 +199,7 @@ class SimulatedParticipant:
         self._out = 0.0
         # trial state
         self._pending: tuple[Any, ...] | None = None
+        self._tracking: TrackingHand | None = None  # the hand of a tracking trial (a target that moves)
         self._stage = _IDLE
         self._next = math.inf
         self._cue_t = 0.0
@@ -234,9 +237,9 @@ class SimulatedParticipant:
         small noise instead of an indentation judged through the stiffness belief.
         """
         f = aim.steady_n
-        if f is None:
-            raise ValueError(f"aim = {aim.knots!r}: this participant regulates a force that does not move over the "
-                             "trial (a target that moves needs a tracking model of its own)")
+        if f is None:  # a target that moves: the tracking hand's trial
+            self._pending = ("track", aim)
+            return
         if not (math.isfinite(f) and f > 0):
             raise ValueError(f"target_force_n = {f!r}: must be a finite force > 0")
         self._pending = ("begin", f, aim.haptic_on, float(t_s), aim.gauge, aim.practice)
@@ -273,6 +276,9 @@ class SimulatedParticipant:
         self._hg[i] = gap
         if self._pending is not None:
             self._apply_pending(t)
+        if self._tracking is not None:
+            y = self._out = min(max(self._tracking.equilibrium_y(obs._replace(t_s=t)), -0.030), 0.005)
+            return y
         if t >= self._next:
             self._event(t)
         # the current plan
@@ -353,6 +359,13 @@ class SimulatedParticipant:
         cmd, self._pending = self._pending, None
         assert cmd is not None
         self._fold_drift(t)
+        if self._tracking is not None:  # the tracking trial ends: the plan starts where its hand is
+            self._plan(t, 1e-3, self._tracking.value())
+            self._p_y0 = self._p_y1 = self._out
+            self._tracking = None
+        if cmd[0] == "track":
+            self._start_tracking(cmd[1], t)
+            return
         if cmd[0] == "end":
             self._plan(t, _RETRACT_S, 0.0)
             self._stage = _IDLE
@@ -398,6 +411,21 @@ class SimulatedParticipant:
         self._plan(t, 1e-3, self._plan_value(t))
         self._stage = _WAIT
         self._next = t + rt
+
+    def _start_tracking(self, aim: TrialAim, t: float) -> None:
+        """A tracking trial: its own random stream (the trial's, as a regulation trial's) and the tracking hand."""
+        if aim.practice:
+            self._n_practice += 1
+            key: tuple[int, ...] = (2, self._n_practice)
+        else:
+            self._n_trials += 1
+            key = (1, self._n_trials)
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
+        self._cue_t, self._haptic, self._gauge = t, aim.haptic_on, aim.gauge
+        self._stage, self._next = _CONTROL, math.inf
+        self._tracking = TrackingHand(aim, self.params, rng, t, self._plan_value(t), stiffness=self._k,
+                                      exponent=self._n, arm_k=self._arm_k, motion_scale=self._s,
+                                      f_max_n=self._fmax, f_scale_n=self._fscale)
 
     def _lookup(self, tq: float) -> int:
         """Index of the newest history sample at or before ``tq`` (not before the cue)."""

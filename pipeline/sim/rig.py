@@ -194,7 +194,12 @@ class SimRig:
         cfg = self.config
         touch = self.haptic
         touch.advance(now_ns, dt)
-        felt = self._felt(touch.applied_force_n)
+        # the hand's axis written out here, not called: this runs every tick of every simulated study
+        ax, ay, az = self.hand_axis
+        one = self._hand_one_axis
+        applied = touch.applied_force_n
+        felt = (applied[one[0]] * one[1] if one is not None  # one device axis: that component, exactly
+                else applied[0] * ax + applied[1] * ay + applied[2] * az)
 
         robot = self.robot
         tip_z = robot.position_m[2]
@@ -203,9 +208,11 @@ class SimRig:
                               -depth if depth < 0 else 0.0)
         self.last_observation = obs
         y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
-        touch.stylus_m = self._along(y)
+        # a displacement along the hand's axis, device frame (off-axis components exactly zero)
+        touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
         if self.teleop is None:
-            d = mat_vec(self._rot_base_haptic, self._along(y * cfg.motion_scale))
+            ym = y * cfg.motion_scale
+            d = mat_vec(self._rot_base_haptic, (ax * ym if ax else 0.0, ay * ym if ay else 0.0, az * ym if az else 0.0))
             home = cfg.tip_home_m
             robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
         else:
@@ -224,19 +231,6 @@ class SimRig:
             self._orient = robot.orientation
             self._rot_sensor_base = transpose(mat_mul(robot.orientation, self.true_rot_tip_sensor))
         self.sensor.sample(now_ns, self._rot_sensor_base, self._truth, dt)
-
-    def _felt(self, force_n: Vec3) -> float:
-        """The component of a rendered force (device frame) along the hand's axis, N."""
-        one = self._hand_one_axis
-        if one is not None:
-            return force_n[one[0]] * one[1]
-        a = self.hand_axis
-        return force_n[0] * a[0] + force_n[1] * a[1] + force_n[2] * a[2]
-
-    def _along(self, y: float) -> Vec3:
-        """A displacement ``y`` along the hand's axis, device frame, m (off-axis components exactly zero)."""
-        ax, ay, az = self.hand_axis
-        return (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
 
     def true_contact_force(self) -> Vec3:
         """Contact force on the tool tip in the base frame, N (ground truth)."""

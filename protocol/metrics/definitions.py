@@ -1,10 +1,11 @@
 """The trial metrics, each defined once: what it is, how it is computed, how it is reported.
 
-The order of :data:`METRICS` is the order of the columns of every table and file that lists metrics (the
-``trials`` table's columns, ``trials.csv``, ``participants.csv``, the tests, power).  To add a metric, define its
-function and its :class:`~protocol.metrics.metric.Metric` here and append it to :data:`METRICS`: the database gains
-its column, and the CSV files, the codebook, the report and power gain it, without another edit
-(docs/architecture.md, "Where to add …").
+:data:`METRICS` is every metric defined; a study's are the ones its tasks produce (each task names its own,
+:attr:`protocol.tasks.base.Task.metric_names`), in this order -- the order of the columns of every table and file
+that lists metrics (the ``trials`` table's columns, ``trials.csv``, ``participants.csv``, the tests, power).  To add
+a metric, define its function and its :class:`~protocol.metrics.metric.Metric` here, append it to :data:`METRICS`
+and name it in the tasks that produce it: a study of those tasks gains its database column, and its CSV files,
+codebook, report and power gain it, without another edit (docs/architecture.md, "Where to add …").
 
 Definitions (the paper, §V-B, made exact where it is silent; the window is :class:`TrialWindow`'s):
 
@@ -22,6 +23,13 @@ Definitions (the paper, §V-B, made exact where it is silent; the window is :cla
   first sample at or above the band's lower edge (the band reached); and the accuracy from there, RMSE over the
   fixed :data:`REACH_WINDOW_S` that follows.  Analysis measures: computed from the recording, no column in a study
   database.
+* **lag** and **gain** (force tracking's: a target that moves) -- over the moving part of the trial window (from the
+  first sample whose target differs from the first one; the lead-in's steady target and the approach left out),
+  the lag is the shift of the force that maximises its cross-correlation with the target (the correlation
+  coefficient over each shift's overlapping samples), within
+  ±:data:`MAX_LAG_S` (positive: the force follows the target), the gain the least-squares slope of the force on
+  the target (1: the right size; below 1: the excursions fall short).  Both are NaN where the target does not move
+  or a non-finite force leaves too few samples.
 """
 
 from __future__ import annotations
@@ -29,12 +37,16 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 
 from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
 
 __all__ = [
     "ABS_IMPULSE",
+    "GAIN",
+    "LAG",
     "MAX_AE",
+    "MAX_LAG_S",
     "METRICS",
     "PEAK_FORCE",
     "REACH_RMSE",
@@ -109,6 +121,57 @@ def _reach_rmse_n(w: TrialWindow) -> MetricValue:
     return float(np.sqrt(np.mean(e * e))) if len(e) else None
 
 
+#: The largest lag searched, s: beyond a human visuomotor delay (0.15–0.35 s) with room for a slow hand.
+MAX_LAG_S = 1.0
+
+
+def _moving(w: TrialWindow) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+    """The target and the force over the moving part, demeaned; None where the target does not move."""
+    moved = np.flatnonzero(w.target_n != w.target_n[0]) if len(w.target_n) else np.array([], dtype=np.int64)
+    if len(moved) == 0:
+        return None
+    target, force = w.target_n[moved[0]:], w.force_n[moved[0]:]
+    finite = np.isfinite(force)
+    if np.count_nonzero(finite) < 10 or np.ptp(target[finite]) == 0.0:
+        return None
+    # a non-finite force is bridged by the mean (it adds nothing to the correlation) where the lag needs the grid
+    f = np.where(finite, force, np.mean(force[finite]))
+    return target - np.mean(target), f - np.mean(f)
+
+
+def _lag_s(w: TrialWindow) -> MetricValue:
+    moving = _moving(w)
+    if moving is None:
+        return math.nan
+    target, force = moving
+    n, k_max = len(target), min(len(target) - 2, int(round(MAX_LAG_S / w.sample_period_s)))
+    size = 1 << (2 * n - 1).bit_length()  # zero-padded FFT: the linear (not circular) cross-correlation
+    sxy = np.fft.irfft(np.fft.rfft(force, size) * np.conj(np.fft.rfft(target, size)), size)
+    lags = np.arange(-k_max, k_max + 1)
+    # at shift k the pairs (force[i + k], target[i]) that overlap, each side's sums from cumulative sums: the
+    # correlation coefficient of each shift's own overlap (a raw sum would favour the longer overlaps near 0)
+    cf, cf2 = np.concatenate(([0.0], np.cumsum(force))), np.concatenate(([0.0], np.cumsum(force * force)))
+    ct, ct2 = np.concatenate(([0.0], np.cumsum(target))), np.concatenate(([0.0], np.cumsum(target * target)))
+    f_lo, f_hi = np.maximum(lags, 0), n + np.minimum(lags, 0)  # force[f_lo:f_hi] meets target[t_lo:t_hi]
+    t_lo, t_hi = np.maximum(-lags, 0), n - np.maximum(lags, 0)
+    m = (n - np.abs(lags)).astype(np.float64)
+    sf, sf2, st, st2 = cf[f_hi] - cf[f_lo], cf2[f_hi] - cf2[f_lo], ct[t_hi] - ct[t_lo], ct2[t_hi] - ct2[t_lo]
+    cov = sxy[lags] - sf * st / m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = cov / np.sqrt(np.maximum(sf2 - sf * sf / m, 0.0) * np.maximum(st2 - st * st / m, 0.0))
+    if not np.isfinite(r).any():
+        return math.nan
+    return float(lags[int(np.nanargmax(r))] * w.sample_period_s)
+
+
+def _gain(w: TrialWindow) -> MetricValue:
+    moving = _moving(w)
+    if moving is None:
+        return math.nan
+    target, force = moving
+    return float(np.dot(target, force) / np.dot(target, target))
+
+
 def _peak_force_n(w: TrialWindow) -> MetricValue:
     f = w.force_n
     return float(np.nanmax(f)) if len(f) and np.isfinite(f).any() else math.nan
@@ -159,7 +222,18 @@ REACH_RMSE = Metric(
 #: The speed–accuracy trade's measures, (speed, accuracy): on parts of the trial apart (docs/science.md §6.1).
 TRADE_PHASES: tuple[Metric, Metric] = (RISE_TIME, REACH_RMSE)
 
-#: Every metric, in the order of every table's columns.  The primary ones are the paper's outcome measures, the
-#: family of Holm's correction: exactly these four, so the paper's numbers do not move when a metric is added.
+LAG = Metric(
+    "lag_s", "s", "lag (s)", "shift of the task force that maximises its cross-correlation with the moving target "
+    "(positive: the force follows), over the moving part of the trial", _lag_s, "lower", Role.SECONDARY,
+    _TIME_DECIMALS, values=(-MAX_LAG_S, MAX_LAG_S), figure="tracking")
+GAIN = Metric(
+    "gain", "", "gain", "least-squares slope of the task force on the moving target, over the moving part of the "
+    "trial (1: excursions of the right size)", _gain, "one", Role.SECONDARY, 4, values=(-math.inf, math.inf),
+    figure="tracking")
+
+#: Every metric, in the order of every table's columns (a study's are those of its tasks, in this order).  The
+#: primary ones are the outcome measures, the family of Holm's correction: the paper's four (a study of force
+#: regulation), or those of the study's tasks (force tracking's RMSE and Max AE; its lag and gain are secondary,
+#: each tested with its own p), so the paper's numbers do not move when a metric or a task is added.
 METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE, RISE_TIME,
-                               REACH_RMSE)
+                               REACH_RMSE, LAG, GAIN)

@@ -124,7 +124,7 @@ class Metric:
     compute
         Its value from a trial's window (:class:`TrialWindow`): the one definition, live and offline.
     better
-        Which way is better: ``"higher"`` or ``"lower"``.
+        Which way is better: ``"higher"``, ``"lower"`` or ``"one"`` (nearer 1: a gain).
     role
         Whether the report tests it, and in which family (:class:`Role`).
     decimals
@@ -157,7 +157,7 @@ class Metric:
     label: str
     description: str
     compute: Callable[[TrialWindow], MetricValue]
-    better: Literal["higher", "lower"]
+    better: Literal["higher", "lower", "one"]
     role: Role
     decimals: int
     windowed: bool = False
@@ -171,8 +171,8 @@ class Metric:
     in_database: bool = True
 
     def __post_init__(self) -> None:
-        if self.better not in ("higher", "lower"):
-            raise ValueError(f"{self.name}: better = {self.better!r}: allowed are 'higher' and 'lower'")
+        if self.better not in ("higher", "lower", "one"):
+            raise ValueError(f"{self.name}: better = {self.better!r}: allowed are 'higher', 'lower' and 'one'")
         if self.boolean and self.success_only:
             raise ValueError(f"{self.name}: a yes/no outcome is defined for every trial (success_only is for TCT)")
 

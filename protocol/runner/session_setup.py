@@ -35,6 +35,7 @@ from foundation.version import software_provenance
 from pipeline.core.aim import TrialParticipant
 from pipeline.runtime.loop_messages import Command
 from pipeline.runtime.loop_view import LoopView
+from protocol.metrics import stored
 from protocol.runner.session import SessionRunner, first_unfinished
 from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
@@ -223,6 +224,7 @@ def open_new_session(
         start_event=note or f"{kind} session for {code}, seed {seed}",  # in the same transaction
         rules=rules,
         software_commit=code_ran.commit, software_dirty=code_ran.dirty,
+        metric_columns=[m.name for m in stored(run_protocol.task.metrics)],  # its task's trials columns
     )
     return OpenedSession(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,

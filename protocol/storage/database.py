@@ -20,15 +20,20 @@ from typing import Any
 import numpy as np
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
+from protocol.metrics import METRICS
 from protocol.recording.integrity import WHOLE_BLOCK, place_crc32
 from protocol.storage import crashpoint
 from protocol.storage.codes import CODE_PATTERN, stored_clash, validate_code
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
-from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, connect_readonly
+from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, add_metric_columns, connect_readonly
 from protocol.storage.withdrawal import withdrawal_of
 
 __all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
+
+#: The ``trials`` columns that are metrics' (the registry's with a column of their own): a writer adds one a file
+#: lacks when a session's trial has it.
+_METRIC_COLUMNS = frozenset(m.name for m in METRICS if m.stored)
 
 _INSERT_SAMPLES = f"INSERT INTO samples ({', '.join(SAMPLE_COLUMNS)}) VALUES ({', '.join('?' * len(SAMPLE_COLUMNS))})"
 
@@ -110,6 +115,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         self.backup_path: Path | None = None
         self._last_heartbeat = 0.0
         self._owners: set[str] = set()
+        self._trial_columns: set[str] = set()  # the trials table's columns, as far as insert_trial has seen them
         # a planned crash (tests): nothing unless HAPTIC_STUDY_CRASH_AT
         crash = None if readonly else crashpoint.planned()
         created = self._check_path(readonly)
@@ -195,9 +201,13 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         software_version: str, rig: str, config: dict[str, Any], calibration: dict[str, Any] | None,
         lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
         rules: Callable[[StudyDatabase], Sequence[tuple[str, str]]] | None = None,
-        software_commit: str | None = None, software_dirty: bool | None = None,
+        software_commit: str | None = None, software_dirty: bool | None = None, metric_columns: Sequence[str] = (),
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
+
+        ``metric_columns`` are the stored metrics of its task (:func:`protocol.metrics.stored` of the task's
+        metrics): the ``trials`` table gets a column for each it lacks, in the same transaction
+        (:func:`protocol.storage.schema.add_metric_columns`).
 
         ``software_commit`` and ``software_dirty`` say which code ran it (the git commit of the checkout and
         whether it had uncommitted changes; None when not known, e.g. installed from a wheel).
@@ -243,6 +253,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
             extra_events = rules(self) if rules is not None else ()
+            add_metric_columns(self.conn, metric_columns)
             pid = self.participant_id(code, create=True)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
@@ -285,7 +296,14 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             self.conn.executemany(_INSERT_SAMPLES, rows.tolist() if isinstance(rows, np.ndarray) else rows)
 
     def insert_trial(self, row: Mapping[str, Any]) -> None:
-        """Insert one ``trials`` row (:meth:`protocol.study.records.TrialRecord.to_row`; atomic: its own statement)."""
+        """Insert one ``trials`` row (:meth:`protocol.study.records.TrialRecord.to_row`; atomic: its own statement).
+
+        A metric of the row the file has no column for (a session started before its task's column was added, by an
+        older haptic-study) gets its column first (:func:`protocol.storage.schema.add_metric_columns`).
+        """
+        if any(c not in self._trial_columns for c in row):
+            add_metric_columns(self.conn, [c for c in row if c in _METRIC_COLUMNS])
+            self._trial_columns = {r[1] for r in self.conn.execute("PRAGMA table_info(trials)")}
         cols = ", ".join(row)
         self.conn.execute(f"INSERT INTO trials ({cols}) VALUES ({', '.join('?' * len(row))})", tuple(row.values()))
 

@@ -26,7 +26,7 @@ from types import TracebackType
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from protocol.metrics import stored
+from protocol.metrics import get
 from protocol.recording.codec import BlockRow, join_chunks
 from protocol.recording.integrity import block_crc32, place_crc32
 from protocol.storage.codes import stored_clash
@@ -248,21 +248,23 @@ class StudyReader:
             "ORDER BY s.session_id")
 
     # -- trials -------------------------------------------------------------------------------------------------
-    def trial_table(self, later_columns: Sequence[str]) -> Rows:
-        """Every stored trial, by session and index, its stored metrics (:func:`protocol.metrics.stored`) prefixed
-        ``stored_``.
+    def trial_table(self, later_columns: Sequence[str], metrics: Sequence[str]) -> Rows:
+        """Every stored trial, by session and index, the stored metrics ``metrics`` (the study's:
+        :func:`protocol.metrics.stored` of its tasks' metrics) prefixed ``stored_``.
 
         ``later_columns`` (added by later schema versions: the abort cause, the loop's health, where the
-        trial is in the recording) read as NULL where the file lacks them.
+        trial is in the recording) read as NULL where the file lacks them, and so does a metric (defined after the
+        file was written).
         """
         has = self._has_columns("trials")
         later = ", ".join(c if c in has else f"NULL AS {c}" for c in later_columns)
-        # every stored metric of the registry; one the file has no column for (defined after it was written) is NULL
-        stored_metrics = ", ".join(f"{m.name} AS stored_{m.name}" if m.name in has else f"NULL AS stored_{m.name}"
-                                   for m in stored())
+        for name in metrics:  # a name goes into SQL text: only the registry's stored metrics
+            if not get(name).stored:
+                raise ValueError(f"{name}: not a metric with a trials column")
+        stored_metrics = "".join(f"{m} AS stored_{m}, " if m in has else f"NULL AS stored_{m}, " for m in metrics)
         return self._rows(
             "SELECT trial_id, session_id, trial_index, target_label, target_force_n, haptic_mode, outcome, "
-            f"started_at_s, ended_at_s, {stored_metrics}, n_samples, abort_reason, repeat_of, {later} "
+            f"started_at_s, ended_at_s, {stored_metrics}n_samples, abort_reason, repeat_of, {later} "
             "FROM trials ORDER BY session_id, trial_index")
 
     def trial_records(self, session_ids: Sequence[int] | None = None) -> list[TrialRecord]:

@@ -17,11 +17,12 @@ import contextlib
 import datetime as _dt
 import os
 import sqlite3
+from collections.abc import Iterable
 from dataclasses import fields
 from pathlib import Path
 
 from foundation.platform_support.files import may_write, owner_only
-from protocol.metrics import stored
+from protocol.metrics import get
 from protocol.storage.common import EmptyDatabase, StorageError, has_table
 from protocol.study.records import AbortCause, LoopHealth
 
@@ -104,31 +105,42 @@ _UPGRADE_3_TO_4 = (
 )
 
 
-def metric_columns_missing(conn: sqlite3.Connection) -> list[str]:
-    """The registry's stored metrics (:func:`protocol.metrics.stored`) the file's ``trials`` table has no column for."""
+def metric_columns_missing(conn: sqlite3.Connection, names: Iterable[str]) -> list[str]:
+    """Those of the metrics ``names`` (stored ones of the registry, :func:`protocol.metrics.stored`) the file's
+    ``trials`` table has no column for."""
     has = {r[1] for r in conn.execute("PRAGMA table_info(trials)")}
-    return [m.name for m in stored() if m.name not in has]
+    return [n for n in dict.fromkeys(names) if n not in has]
 
 
-def add_metric_columns(conn: sqlite3.Connection) -> list[str]:
-    """Give the ``trials`` table a column for every stored metric it lacks (a metric defined after the file was made).
+def add_metric_columns(conn: sqlite3.Connection, names: Iterable[str]) -> list[str]:
+    """Give the ``trials`` table a column for each of the metrics ``names`` it lacks: a metric of a session's task
+    that the file's earlier sessions did not produce (another task's, or one defined after the file was made).
 
-    Only a writer calls this, on a file it is about to write to: the column is added empty (NULL in every trial
-    stored before: that metric was not computed live then), no row is changed, and the schema version stays (an
-    older haptic-study reads and writes the file as before: it names the columns it knows).  In its own transaction,
-    the columns checked again under the write lock, so two writers opening the file at once add each column once.
-    Returns the columns added.
+    Only a writer calls this, on a file it is about to write a session's trials to (a file's metric columns are
+    its sessions' tasks', :func:`protocol.tasks.base.metrics_of`: a force-regulation study's are the paper's): the
+    column is added empty (NULL in every trial stored before: that metric was not computed for it), no row is
+    changed, and the schema version stays (an older haptic-study reads and writes the file as before: it names the
+    columns it knows).  Inside the caller's transaction, or in its own; either way the columns are checked again
+    under the write lock, so two writers opening the file at once add each column once.  Returns the columns added.
     """
-    if not metric_columns_missing(conn):  # the common case: no lock taken
+    wanted = list(names)
+    for name in wanted:  # a name goes into SQL text: only the registry's stored metrics
+        if not get(name).stored:
+            raise ValueError(f"{name}: not a metric with a trials column")
+    if not metric_columns_missing(conn, wanted):  # the common case: no lock taken
         return []
-    conn.execute("BEGIN IMMEDIATE")
+    own = not conn.in_transaction
+    if own:
+        conn.execute("BEGIN IMMEDIATE")
     try:
-        missing = metric_columns_missing(conn)
+        missing = metric_columns_missing(conn, wanted)
         for name in missing:
             conn.execute(f"ALTER TABLE trials ADD COLUMN {name} REAL")
-        conn.execute("COMMIT")
+        if own:
+            conn.execute("COMMIT")
     except BaseException:
-        conn.execute("ROLLBACK")
+        if own:
+            conn.execute("ROLLBACK")
         raise
     return missing
 
@@ -358,7 +370,6 @@ class SchemaFile:
         if not readonly and version:
             _widen_abort_causes(c)
         if not readonly:
-            add_metric_columns(c)
             add_later_columns(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process

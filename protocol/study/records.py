@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from protocol.metrics import MetricValue, get, stored, values_of
+from protocol.metrics import MetricValue, get, values_of
 from protocol.study.clock import SessionClock
 from protocol.study.design import HapticMode, TrialSpec
 from protocol.tasks.window import TrialMetrics
@@ -139,10 +139,10 @@ class TrialRecord:
     cue_ns, end_ns
         The trial's time origin (its first record under its condition) and its end, loop clock, ns.
     metrics
-        Its metrics as stored (its task's judgement, :meth:`protocol.tasks.base.Task.judge`), by name: every
-        metric with a ``trials`` column (:func:`protocol.metrics.stored`; a success-only one, TCT, only for a
-        success; a metric its task does not produce, or an older file has no column for, is None).
-        :meth:`metric` reads one.
+        Its metrics as stored (its task's judgement, :meth:`protocol.tasks.base.Task.judge`), by name: each
+        metric of its task with a ``trials`` column (:func:`protocol.metrics.stored`; a success-only one, TCT, None
+        unless a success).  A metric its task does not produce is not among them (read back from a file that has
+        its column, for another task's sessions: None); :meth:`metric` reads one.
     n_samples
         The samples of its trial window.
     abort_reason, abort_cause
@@ -191,8 +191,8 @@ class TrialRecord:
 
         ``ticks`` are its first and last record's loop ticks in recording ``segment`` (None: it has no records).
         """
-        kept = {m.name: (None if m.success_only and outcome is not Outcome.SUCCESS else metrics.values.get(m.name))
-                for m in stored()}
+        kept = {name: (None if m.success_only and outcome is not Outcome.SUCCESS else value)
+                for name, value in metrics.values.items() if (m := get(name)).stored}
         return cls(
             session_id=session_id, trial_index=spec.index, target_label=spec.target_label,
             target_force_n=spec.target_force_n, haptic_mode=spec.haptic_mode, outcome=outcome, clock=clock,
@@ -223,17 +223,19 @@ class TrialRecord:
         return self.outcome is Outcome.SUCCESS
 
     def metric(self, name: str) -> MetricValue:
-        """One stored metric by name (``record.metric("rmse_n")``; None: not stored, or undefined for this trial)."""
+        """One stored metric by name (``record.metric("rmse_n")``; None: not stored, not its task's, or undefined for
+        this trial)."""
         return self.success if get(name).boolean else self.metrics.get(name)
 
     def to_row(self) -> dict[str, Any]:
-        """The ``trials`` row: times in session seconds, the enums as their TEXT."""
+        """The ``trials`` row: times in session seconds, the enums as their TEXT, a column per metric of its task (the
+        writer adds one the file lacks: :meth:`protocol.storage.StudyDatabase.insert_trial`)."""
         return {
             "trial_id": self.trial_id, "session_id": self.session_id, "trial_index": self.trial_index,
             "target_label": self.target_label, "target_force_n": self.target_force_n,
             "haptic_mode": self.haptic_mode.value, "outcome": self.outcome.value,
             "started_at_s": self.started_at_s, "ended_at_s": self.ended_at_s,
-            **{m.name: self.metrics.get(m.name) for m in stored()}, "n_samples": self.n_samples,
+            **self.metrics, "n_samples": self.n_samples,
             "abort_reason": self.abort_reason, "repeat_of": self.repeat_of,
             "abort_cause": None if self.abort_cause is None else self.abort_cause.value,
             **self.health.columns(),
@@ -256,7 +258,7 @@ class TrialRecord:
             target_label=str(row["target_label"]), target_force_n=float(row["target_force_n"]),
             haptic_mode=HapticMode(row["haptic_mode"]), outcome=Outcome(row["outcome"]),
             clock=SessionClock(started, 0), cue_ns=0, end_ns=round((ended - started) * 1e9),
-            metrics=values_of(row, stored()), n_samples=row.get("n_samples"), abort_reason=row.get("abort_reason"),
+            metrics=values_of(row), n_samples=row.get("n_samples"), abort_reason=row.get("abort_reason"),
             abort_cause=row.get("abort_cause"), repeat_of=row.get("repeat_of"),
             health=LoopHealth(**{k: row.get(k) for k in names}),
             segment=row.get("segment"), first_tick=row.get("first_tick"), last_tick=row.get("last_tick"),
@@ -283,10 +285,9 @@ def disagreement(recomputed: TrialMetrics, record: TrialRecord) -> str:
     if recomputed.success != record.success:
         return (f"its outcome recomputed from the recording is {'success' if recomputed.success else 'no success'}, "
                 f"stored {record.outcome.value}")
-    for m in stored():
-        kept = record.metrics.get(m.name)
-        value = recomputed.values.get(m.name)
+    for name, kept in record.metrics.items():
+        value = recomputed.values.get(name)
         again = float("nan") if value is None else float(value)
         if kept is not None and not _close(again, float(kept)):
-            return f"its {m.name} recomputed from the recording is {again:.6g}, stored {float(kept):.6g}"
+            return f"its {name} recomputed from the recording is {again:.6g}, stored {float(kept):.6g}"
     return ""

@@ -9,8 +9,9 @@ value and what is allowed); everything that runs, shows or analyses a trial asks
   feeds sample by sample (:meth:`Task.rule`, exact on integer-ns times) and the offline form that judges a whole
   trial and computes its metrics (:meth:`Task.judge`), one definition: the live machine checks that both agree;
 * **the metrics it produces**, by name in the metric registry (:attr:`Task.metric_names`, :mod:`protocol.metrics`);
-* **what the screens show** of a trial (:meth:`Task.screen`: the cue word, the band the experimenter's plot and the
-  training gauge draw, their words) and the cue event's text (:meth:`Task.cue_text`);
+* **what the screens show** of a trial (:meth:`Task.screen`: the cue word, the band over trial time that every view
+  asks at its time -- the participant screen, the experimenter's live plot, the training gauge, replay and the
+  report's figures -- and their words) and the cue event's text (:meth:`Task.cue_text`);
 * **what a simulated participant is told** at the cue (:meth:`Task.aim`, the pipeline's
   :class:`pipeline.core.aim.TrialAim`: what to aim at, when, and with which aid);
 * **its words in the report** (:meth:`Task.rule_words`, :meth:`Task.methods`).
@@ -24,7 +25,7 @@ is what a task's checks see of them).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Protocol
 
@@ -37,8 +38,8 @@ from pipeline.settings.tomlfields import Fields
 from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics
 
-__all__ = ["Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule", "TrialScreen", "TrialTarget",
-           "listed"]
+__all__ = ["BandEdges", "ConstantBand", "Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule",
+           "TrialScreen", "TrialTarget", "constant_band", "listed", "metrics_of"]
 
 
 class TrialCondition(Protocol):
@@ -76,38 +77,90 @@ class TrialRule(Protocol):
         ...
 
 
+#: A band over trial time: its lower and upper edge at trial times ``t_s`` (s since the cue), N.
+BandEdges = Callable[[npt.NDArray[np.float64]], tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]
+
+#: Points a band is sampled at to find its extent over a span of trial time (:meth:`TrialScreen.band_extent`).
+_EXTENT_POINTS = 256
+
+
+@dataclass(frozen=True, slots=True)
+class ConstantBand:
+    """A band that holds all trial (the force-regulation task's), as :data:`BandEdges` (a value, not a closure: a
+    screen travels to the report's figure workers and across the engine's pipe)."""
+
+    lo_n: float
+    hi_n: float
+
+    def __call__(self, t_s: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+        n = len(t_s)
+        return np.full(n, self.lo_n), np.full(n, self.hi_n)
+
+
+def constant_band(lo_n: float, hi_n: float) -> BandEdges:
+    """A band that holds all trial (:class:`ConstantBand`)."""
+    return ConstantBand(lo_n, hi_n)
+
+
 @dataclass(frozen=True, slots=True)
 class TrialScreen:
     """What the screens show of one trial (the phases around it -- rest, wait, thanks -- are the session's).
+
+    Every view asks it for the band *at a time* (:meth:`band_at`, :meth:`band_over`): the participant screen and the
+    training gauge at present, the experimenter's live plot from the cue to now, replay's session figure and the
+    report's trace figures over the trial -- so a band that moves (a tracked target) is drawn where it was.
 
     Attributes
     ----------
     cue_word
         The participant screen's word at the cue (``GENTLE``).
-    band_n
-        The success region the experimenter's live plot draws from the cue on and the training gauge shows, N
-        (None: the task has none).
+    band
+        The success region over trial time, :data:`BandEdges` (None: the task has none).
     band_label
         The live plot's words for it (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``).
     band_legend
         A figure's legend for it (``target band 0.6 N ± 10%``).
+    follow
+        What the participant screen says while it shows the band all trial, without the force (a target that
+        moves, which the participant follows: ``Follow the target``); "" -- the participant screen shows the band
+        only on the training gauge, with the force (the paper's).
     """
 
     cue_word: str
-    band_n: tuple[float, float] | None
+    band: BandEdges | None
     band_label: str
     band_legend: str
+    follow: str = ""
+
+    def band_over(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+        """The band's lower and upper edge at trial times ``t_s`` (s since the cue), N; None without a band."""
+        if self.band is None:
+            return None
+        lo, hi = self.band(np.atleast_1d(np.asarray(t_s, dtype=np.float64)))
+        return np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+
+    def band_at(self, t_s: float) -> tuple[float, float] | None:
+        """The band at trial time ``t_s`` (s since the cue), N; None without a band."""
+        edges = self.band_over([t_s])
+        return None if edges is None else (float(edges[0][0]), float(edges[1][0]))
+
+    def band_extent(self, t0_s: float, t1_s: float) -> tuple[float, float] | None:
+        """The lowest and highest edge of the band between two trial times (an axis that holds it all), N."""
+        edges = self.band_over(np.linspace(t0_s, max(t0_s, t1_s), _EXTENT_POINTS))
+        return None if edges is None else (float(np.min(edges[0])), float(np.max(edges[1])))
 
 
 @dataclass(frozen=True, slots=True)
 class Timing:
     """What a task's checks see of the protocol's timing: the trial cap, each training trial's length, whether
-    haptics ON is in the design, and the feedback's ramps (the safety stage's, :class:`SafetyConfig`)."""
+    haptics ON is in the design, the feedback's ramps (the safety stage's, :class:`SafetyConfig`) and the targets'
+    labels (empty: not known to the check)."""
 
     max_trial_s: float
     training_s: float
     haptics_on: bool
     ramps: SafetyConfig
+    targets: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -216,6 +269,12 @@ class Task(ABC):
     def methods(cls, tasks: Sequence[Task], caps: Sequence[float]) -> str:
         """The report's sentences defining its rule, over the analysed sessions' tasks of this kind and their trial
         caps (sorted, distinct: several values are listed with ``/``)."""
+
+
+def metrics_of(tasks: Iterable[Task]) -> tuple[Metric, ...]:
+    """A study's metrics: those its tasks produce, in the registry's order (what its database, files, codebook,
+    tests and report list; a study of the paper's task has the paper's)."""
+    return select(name for task in tasks for name in task.metric_names)
 
 
 def listed(values: Sequence[float], unit: str) -> str:

@@ -32,7 +32,17 @@ import numpy.typing as npt
 from pipeline.core.aim import TrialAim
 from pipeline.settings.tomlfields import Fields
 from protocol.metrics import select
-from protocol.tasks.base import Parameter, Task, TaskTables, Timing, TrialCondition, TrialScreen, TrialTarget, listed
+from protocol.tasks.base import (
+    Parameter,
+    Task,
+    TaskTables,
+    Timing,
+    TrialCondition,
+    TrialScreen,
+    TrialTarget,
+    constant_band,
+    listed,
+)
 from protocol.tasks.window import TrialMetrics, capped, judged
 
 __all__ = [
@@ -279,7 +289,7 @@ class ForceRegulation(Task):
         lo, hi = band = self.band_n(trial)
         f, tol = trial.target_force_n, self.tolerance_fraction
         return TrialScreen(
-            cue_word=trial.target_label, band_n=band,
+            cue_word=trial.target_label, band=constant_band(*band),
             band_label=f"{trial.target_label}: target {f:g} N ± {round(100 * tol, 1):g} % ({lo:.3g}–{hi:.3g} N)",
             band_legend=f"target band {f:g} N ± {tol:.0%}",
         )

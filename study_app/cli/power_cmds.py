@@ -217,7 +217,7 @@ def cmd_power(args: argparse.Namespace) -> int:
         raise CliError(str(exc)) from None
 
     from analysis.planning.paired_pool import load_pool
-    from analysis.planning.power import FAMILY_LABELS, estimate_power
+    from analysis.planning.power import estimate_power, is_family_row
     from analysis.planning.power_outputs import write_power
     from analysis.planning.power_plan import summary_text
     from analysis.reading.metrics import MetricOptions
@@ -242,7 +242,7 @@ def cmd_power(args: argparse.Namespace) -> int:
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
     except InputRefused as exc:  # PowerError, PoolError, OutputError included
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
-    tests = int((~result.frame["metric"].isin(FAMILY_LABELS)).sum()) * req.resamples
+    tests = int((~result.frame["metric"].map(is_family_row)).sum()) * req.resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))
     print(f"Written in {args.out}/: {', '.join(files)}")

@@ -370,9 +370,15 @@ def cmd_plot_session(args: argparse.Namespace) -> int:
     return 1 if damaged else 0
 
 
+#: The step at which plot-session draws a trial's band (it asks the task for the band at each).
+_BAND_STEP_S = 0.05
+
+
 def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: Any, t_end: float) -> Any:
     """What plot-session marks besides the force: target bands, aborted trials, pauses, resumes."""
     import json
+
+    import numpy as np
 
     from analysis.plots.session_figures import SessionMarks
     from protocol.storage import StorageError, StudyReader
@@ -391,9 +397,13 @@ def _session_marks(db_path: str, session_id: int, segments: list[Any], trials: A
         task = stored_task(json.loads(protocol_json), f"session {session_id} protocol")
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    drawn = [(float(r.started_at_s), float(r.ended_at_s), task.screen(TrialTarget.of(r._asdict())).band_n)
-             for r in trials.itertuples()]
-    bands = [(t0, t1, *band) for t0, t1, band in drawn if band is not None]
+    bands = []
+    for r in trials.itertuples():  # each trial's band asked of its task over the trial (a tracked target's moves)
+        t0, t1 = float(r.started_at_s), float(r.ended_at_s)
+        times = np.linspace(t0, max(t0, t1), max(2, int((t1 - t0) / _BAND_STEP_S) + 1))
+        edges = task.screen(TrialTarget.of(r._asdict())).band_over(times - t0)
+        if edges is not None:
+            bands.append((times, *edges))
     aborted = [(float(r.started_at_s), float(r.ended_at_s), f"trial {r.trial_index + 1} aborted: {r.abort_reason}")
                for r in trials.itertuples() if r.outcome == "aborted"]
     pauses, since = [], None

@@ -1,11 +1,13 @@
 """The one-screen summary printed after ``haptic-study run``.
 
 Its per-mode mean ± SD across participants is the report's (:func:`analysis.stats.aggregate.per_participant`, then
-:func:`analysis.stats.aggregate.mean_sd` across participants), computed from the metrics each trial stored live.
+:func:`analysis.stats.aggregate.mean_sd` across participants), computed from the metrics each trial stored live: its
+rows are the study's metrics the report tests (its sessions' tasks', :func:`protocol.tasks.base.metrics_of`).
 """
 
 from __future__ import annotations
 
+import json
 import math
 from collections import Counter
 
@@ -14,10 +16,12 @@ import pandas as pd
 from analysis.reading.metrics import MetricOptions
 from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
-from protocol.metrics import METRICS, tested
+from protocol.metrics import Metric, tested
 from protocol.storage import StudyReader
 from protocol.study.labels import plural
 from protocol.study.records import Outcome, TrialRecord
+from protocol.tasks.base import metrics_of
+from protocol.tasks.registry import DEFAULT_KIND, stored_task
 
 __all__ = ["format_study_summary"]
 
@@ -25,15 +29,11 @@ __all__ = ["format_study_summary"]
 PAPER: dict[str, tuple[float, float] | str] = {"success": (0.27, 0.54), "tct_s": "−16 %", "rmse_n": (1.35, 0.86),
                                                "max_ae_n": (2.12, 1.46)}
 
-#: The summary's rows: the metrics the report tests (:func:`protocol.metrics.tested`), in order.
-_ROWS = tested()
-
-
 def _value(v: float | None) -> float:
     return math.nan if v is None else float(v)
 
 
-def _trials_frame(exp: list[tuple[str, TrialRecord]]) -> pd.DataFrame:
+def _trials_frame(exp: list[tuple[str, TrialRecord]], metrics: tuple[Metric, ...]) -> pd.DataFrame:
     """The analysed trials as :func:`analysis.stats.aggregate.per_participant` takes them, with their stored metrics."""
     ok = [t.outcome is Outcome.SUCCESS for _, t in exp]
     return pd.DataFrame({
@@ -41,7 +41,7 @@ def _trials_frame(exp: list[tuple[str, TrialRecord]]) -> pd.DataFrame:
         "target_label": [t.target_label for _, t in exp],
         # every metric as stored; a success-only one (TCT) only where the trial succeeded
         **{m.name: ok if m.boolean else [_value(t.metric(m.name)) if s or not m.success_only else math.nan
-                                         for (_, t), s in zip(exp, ok, strict=True)] for m in METRICS},
+                                         for (_, t), s in zip(exp, ok, strict=True)] for m in metrics},
     })
 
 
@@ -61,8 +61,6 @@ def _cell(v: tuple[float, float]) -> str:
 
 def _settings_line(config_jsons: list[str]) -> str:
     """The pipeline settings the sessions ran with (``run --set``), as far as they are not the paper's."""
-    import json
-
     found = set()
     for cj in config_jsons:
         try:
@@ -103,27 +101,32 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
-    frame = _trials_frame(exp) if exp else None
+    tasks = [stored_task(json.loads(info.protocol_json), f"session {info.session_id}") for info in sessions.values()]
+    metrics = metrics_of(tasks)
+    papers = all(t.kind == DEFAULT_KIND for t in tasks)  # the paper's numbers compare with the paper's task only
+    frame = _trials_frame(exp, metrics) if exp else None
     # TCT as this summary labels it, over successful trials (the report's default counts a failure at the cap)
     successful = MetricOptions(tct_policy="successful")
     overall = None if frame is None else per_participant(frame, successful)
-    for m in _ROWS:
+    for m in tested(metrics):  # the rows: the study's metrics the report tests, in order
         off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
         finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
         change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
-        quoted = PAPER.get(m.name, "")  # a metric the paper did not report: no comparison
+        quoted = PAPER.get(m.name, "") if papers else ""  # a metric or task the paper did not report: no comparison
         paper = quoted if isinstance(quoted, str) else f"{quoted[0]:g} → {quoted[1]:g}"
         name = m.summary_label
         change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
         lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
-    if overall is not None and not overall.empty:  # TCT's mean is over fewer people where some never succeeded
+    # TCT's mean is over fewer people where some never succeeded (a study of a task with a TCT)
+    if overall is not None and not overall.empty and "tct_s" in overall.columns:
         tct = by_mode(overall, "tct_s")
         n_off, n_on = (int(tct[mode].notna().sum()) if mode in tct else 0 for mode in ("off", "on"))
         if min(n_off, n_on) < len(codes):
             lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
                          "with no success in a mode has no TCT there)")
     targets = None if frame is None else per_participant(frame, successful, by_target=True)
-    for label in sorted({t.target_label for _, t in exp}):
+    rates = overall is not None and "success_rate" in overall.columns  # (a task with a success rule)
+    for label in sorted({t.target_label for _, t in exp}) if rates else ():
         part = None if targets is None else targets[targets["target_label"] == label]
         off, on = _across(part, "success_rate", "off"), _across(part, "success_rate", "on")
         lines.append(f"  {'success, ' + label:<30}{_cell(off):>16}{_cell(on):>16}")

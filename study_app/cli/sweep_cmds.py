@@ -12,6 +12,8 @@ import itertools
 import math
 import sys
 import time
+from pathlib import Path
+from typing import Any
 
 from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, setting_list, whole_number
@@ -49,6 +51,10 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:
                    help="protocol file (default: the paper's study); its experiment schedule is run")
     s.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
                    help="participants run at once, each in its own process (default: the usable cores)")
+    s.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the participants on a Dask cluster (`dask scheduler` prints its address; default: "
+                        "the HAPTIC_STUDY_SCHEDULER environment variable, else this machine); the same table "
+                        "whichever runs it (docs/cluster.md)")
     s.add_argument("--force", action="store_true", help="replace the outputs of an earlier sweep in --out")
     s.set_defaults(handler=cmd_sweep)
 
@@ -82,11 +88,13 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     """Run ``haptic-study sweep``; errors raise :class:`CliError`."""
     from analysis.planning.sweep import CACHE_FILE, SWEEP_MARKER, is_cache_file
     from foundation.outdir import check_output_folder, ensure_output_folder, write_output_folder
+    from study_app.headless.fanout import scheduler_address
 
     swept, grid = grid_of(args.grid)
     folder = dict(command="sweep", marker=SWEEP_MARKER, force=args.force, keep=is_cache_file)
     try:
         out = check_output_folder(args.out, **folder)  # before any work
+        address = scheduler_address(args.scheduler)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
     from pipeline.force.pipeline_settings import describe, framework_with, non_default_settings
@@ -102,35 +110,23 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from analysis.planning.setting_labels import value_format
     from analysis.planning.sweep import FILTER_NOTE, caveat, summary_frame, summary_lines, sweep_frame, write_sweep
     from pipeline.force.pipeline_settings import paper_settings
-    from study_app.cli.progress import ProgressBar
     from study_app.headless.pool import default_jobs
     from study_app.headless.sim_trials import MODEL_FIT, MODEL_VERSION
-    from study_app.headless.sweep_run import run_sweep
 
     jobs = args.jobs or default_jobs(len(grid) * args.studies * args.participants)
+    client = None
     try:
+        if address is not None:
+            from study_app.headless.fanout import connect
+
+            client = connect(address)  # reached, with workers running this software, before the folder is made
         ensure_output_folder(out)
     except InputRefused as exc:
+        if client is not None:
+            client.close()
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
-    bar: ProgressBar | None = None
-
-    def show(p) -> None:
-        nonlocal bar
-        if bar is None:
-            if p.cells_cached:
-                print(f"sweep: {p.cells_cached} of {p.cells_total} cells from {out / CACHE_FILE}", file=sys.stderr)
-            if not p.runs_total:
-                return  # every cell cached: nothing to show progress of
-            bar = ProgressBar(p.runs_total, "sweep", "participants", decimals=0)
-        eta = "" if math.isnan(p.eta_s) else f", ETA {p.eta_s:.0f} s"
-        bar.label = f"sweep: cells {p.cells_cached + p.cells_done}/{p.cells_total}{eta}"
-        bar.update(p.runs_done)
-
     t0 = time.perf_counter()
-    cells = run_sweep(grid, studies=args.studies, participants=args.participants, seed=args.seed,
-                      cache=out / CACHE_FILE, jobs=jobs, protocol=protocol, on_progress=show)
-    if bar is not None:
-        bar.close()
+    cells = _run_cells(args, grid, protocol, out / CACHE_FILE, jobs, client)
     wall = time.perf_counter() - t0
     paper = paper_settings()
     tidy = sweep_frame(cells, swept, protocol.trial.max_trial_s)
@@ -153,6 +149,41 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     if "filter_window" in swept:
         print(FILTER_NOTE)
     print("\n".join(summary_lines(summary, swept)))
+    where = f"on the Dask cluster at {address}" if address else f"jobs {jobs}"
     print(f"Sweep: {len(cells)} cells ({len(grid)} settings x {studies}) in {wall:.1f} s wall "
-          f"(jobs {jobs}). Written in {out}/: {', '.join(files)} (and {CACHE_FILE}, the cache)")
+          f"({where}). Written in {out}/: {', '.join(files)} (and {CACHE_FILE}, the cache)")
     return 0
+
+
+def _run_cells(args: argparse.Namespace, grid: list[dict[str, float]], protocol: Any, cache: Path, jobs: int,
+               client: Any) -> list[Any]:
+    """The sweep's cells, from the cache or run (here or on ``client``'s cluster, closed after), with progress."""
+    from study_app.cli.progress import ProgressBar
+    from study_app.headless.fanout import ClusterError
+    from study_app.headless.sweep_run import run_sweep
+
+    bar: ProgressBar | None = None
+
+    def show(p) -> None:
+        nonlocal bar
+        if bar is None:
+            if p.cells_cached:
+                print(f"sweep: {p.cells_cached} of {p.cells_total} cells from {cache}", file=sys.stderr)
+            if not p.runs_total:
+                return  # every cell cached: nothing to show progress of
+            bar = ProgressBar(p.runs_total, "sweep", "participants", decimals=0)
+        eta = "" if math.isnan(p.eta_s) else f", ETA {p.eta_s:.0f} s"
+        bar.label = f"sweep: cells {p.cells_cached + p.cells_done}/{p.cells_total}{eta}"
+        bar.update(p.runs_done)
+
+    try:
+        cells = run_sweep(grid, studies=args.studies, participants=args.participants, seed=args.seed,
+                          cache=cache, jobs=jobs, protocol=protocol, on_progress=show, client=client)
+    except ClusterError as exc:
+        raise CliError(f"sweep: {exc}", 1) from None
+    finally:
+        if client is not None:
+            client.close()
+    if bar is not None:
+        bar.close()
+    return cells

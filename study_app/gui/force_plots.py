@@ -20,7 +20,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import QSize, Qt
 from PySide6.QtGui import QResizeEvent
-from PySide6.QtWidgets import QComboBox, QGraphicsRectItem, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from study_app.models.plots import TASK_SERIES, PlotModel
 from study_app.models.session import SessionModel
@@ -49,6 +49,8 @@ LOWER_CHOICES: dict[str, tuple[tuple[str, ...], tuple[object, ...], tuple[tuple[
 BAND_RGB = (0, 114, 178)
 BAND_BRUSH = pg.mkBrush(*BAND_RGB, 60)
 BAND_PEN = pg.mkPen(BAND_RGB, width=1, style=Qt.PenStyle.DashLine)
+#: Points the band is drawn through from the cue to now (a band that moves is asked of its task at each).
+_BAND_POINTS = 121
 CUE_COLOUR = "#444444"
 #: Dashed: a solid dark line looked like the task force's steep edges.
 CUE_PEN = pg.mkPen(CUE_COLOUR, width=1, style=Qt.PenStyle.DashLine)
@@ -107,13 +109,13 @@ class QtForcePlots(QWidget):
 
         self.task: pg.PlotItem = self.view.addPlot(row=0, col=0)
         self.task.setLabel("left", "force (N)")
-        # the band from the current trial's cue to now (not across the window: its left part is the last trial)
-        self.band = QGraphicsRectItem()
-        self.band.setBrush(BAND_BRUSH)
-        self.band.setPen(pg.mkPen(None))
-        self.band_edges = pg.PlotDataItem(pen=BAND_PEN, connect="pairs")  # its lower and upper edge, dashed
+        # the band from the current trial's cue to now, where it was at each moment (a tracked target's moves; not
+        # across the window: its left part is the last trial): its lower and upper edge, dashed, filled between
+        self.band_lo = pg.PlotDataItem(pen=BAND_PEN)
+        self.band_hi = pg.PlotDataItem(pen=BAND_PEN)
+        self.band = pg.FillBetweenItem(self.band_lo, self.band_hi, brush=BAND_BRUSH)
         self.cue_line = pg.InfiniteLine(angle=90, movable=False, pen=CUE_PEN)
-        for item in (self.band, self.band_edges, self.cue_line):
+        for item in (self.band, self.band_lo, self.band_hi, self.cue_line):
             item.setZValue(-10)
             item.setVisible(False)
             self.task.addItem(item)
@@ -262,25 +264,26 @@ class QtForcePlots(QWidget):
         if abs(x0 + self.plots.window_s) > 1e-6:  # the x link re-scales the range while the layout settles
             self.task.setXRange(-self.plots.window_s, 0.0, padding=0)
         over = self._set_y_ranges()
-        band = self._set_cue_and_band()
-        self._set_title(self.session.band_label() if band is not None else "", over)
+        banded = self._set_cue_and_band()
+        self._set_title(self.session.band_label() if banded else "", over)
 
-    def _set_cue_and_band(self) -> tuple[float, float] | None:
-        """The cue's line where it is in the window, and the band from it to now; returns the band (None: none)."""
+    def _set_cue_and_band(self) -> bool:
+        """The cue's line where it is in the window, and the band from it to now, asked of the task at each moment
+        drawn; returns whether a band is drawn."""
         cue_x = self.plots.x_of(self.session.cue_t_s)
         self.cue_line.setVisible(cue_x is not None)
         if cue_x is not None:
             self.cue_line.setValue(cue_x)
-        band = self.session.band()
-        shown = band is not None and len(self.plots.t) > 0
-        self.band.setVisible(shown)
-        self.band_edges.setVisible(shown)
-        if band is not None and shown:
-            x0 = -self.plots.window_s if cue_x is None else cue_x  # a cue scrolled out: the whole window is its
-            lo, hi = band
-            self.band.setRect(x0, lo, -x0, hi - lo)
-            self.band_edges.setData([x0, 0.0, x0, 0.0], [lo, lo, hi, hi])
-        return band
+        x0 = -self.plots.window_s if cue_x is None else cue_x  # a cue scrolled out: the whole window is its
+        x = np.linspace(x0, 0.0, _BAND_POINTS)
+        band = self.session.band(float(self.plots.t[-1]) + x) if len(self.plots.t) else None
+        shown = band is not None
+        for item in (self.band, self.band_lo, self.band_hi):
+            item.setVisible(shown)
+        if band is not None:
+            self.band_lo.setData(x, band[0])
+            self.band_hi.setData(x, band[1])
+        return shown
 
     def _set_title(self, band_words: str, over: str) -> None:
         """The upper plot's title line: the band in its colour, a force above the axis in red (set on change only:

@@ -13,16 +13,18 @@ __all__ = ["ForceGauge", "ParticipantWindow"]
 
 
 class ForceGauge(QWidget):
-    """A horizontal bar 0–3 N with the target band; only ever shown in training sessions."""
+    """A horizontal bar 0–3 N with the target band; the force only ever shown in training sessions (a moving
+    target's band alone in experiments)."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setMinimumHeight(90)
-        self.force_n = 0.0
+        self.force_n: float | None = 0.0
         self.band: tuple[float, float] | None = None
         self.max_n = 3.0
 
-    def set_state(self, force_n: float, band: tuple[float, float] | None, max_n: float) -> None:
+    def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float) -> None:
+        """The force (None: not shown, the band alone), the band and the scale."""
         self.force_n, self.band, self.max_n = force_n, band, max_n
         self.update()
 
@@ -36,10 +38,11 @@ class ForceGauge(QWidget):
         if self.band is not None:
             lo, hi = self.band
             p.fillRect(QRectF(x0 + lo * scale, y0, (hi - lo) * scale, bar_h), QColor(60, 170, 90))
-        f = min(max(self.force_n, 0.0), self.max_n)
-        inside = self.band is not None and self.band[0] <= self.force_n <= self.band[1]
-        p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4),
-                   QColor(250, 250, 250) if inside else QColor(240, 180, 40))
+        if self.force_n is not None:
+            f = min(max(self.force_n, 0.0), self.max_n)
+            inside = self.band is not None and self.band[0] <= self.force_n <= self.band[1]
+            p.fillRect(QRectF(x0, y0 + bar_h * 0.3, f * scale, bar_h * 0.4),
+                       QColor(250, 250, 250) if inside else QColor(240, 180, 40))
         p.setPen(QPen(QColor(200, 200, 200), 1))
         p.setFont(QFont("Sans", 11))
         for k in range(int(self.max_n) + 1):
@@ -174,7 +177,9 @@ class ParticipantWindow(QWidget):
             self._scale_text()
         self.headline.setText(s.headline)
         self.subline.setText(s.subline)
-        show = s.show_gauge and s.gauge_force_n is not None and self.model.gauge_allowed
+        # the force only where a gauge is allowed; the band alone where the target moves (force tracking)
+        force = s.gauge_force_n if self.model.gauge_allowed else None
+        show = s.show_gauge and (force is not None or s.band_n is not None)
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(s.gauge_force_n, s.band_n, s.gauge_max_n)  # type: ignore[arg-type]  # not None when show is True
+            self.gauge.set_state(force, s.band_n, s.gauge_max_n)

@@ -16,10 +16,9 @@ participants meet every setting of a sweep, so the comparison is paired.
 
 from __future__ import annotations
 
-import multiprocessing as mp
+from typing import Any
 
-from analysis.planning.sim_study import SIM_METRICS, TrialRow
-from foundation.platform_support.processes import worker_pool
+from analysis.planning.sim_study import TrialRow, sim_metrics
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.force.framework import FrameworkConfig
@@ -29,6 +28,7 @@ from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
 from protocol.study.config import ProtocolConfig, default_protocol
 from protocol.study.design import build_schedule
 from protocol.study.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
+from study_app.headless.fanout import run_tasks
 
 __all__ = ["MODEL_FIT", "MODEL_VERSION", "participant_seeds", "run_participant", "run_study"]
 
@@ -67,6 +67,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
                              motion_scale=eng.rig.config.motion_scale)
     eng.rig.set_driver(p)
     task = proto.task
+    carried = sim_metrics(task)
     machine = TrialMachine(proto.trial, task)
     loop.submit(SetHaptics(False))
     loop.run_ticks(200)  # settle on the start pose
@@ -90,7 +91,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
             for ev in machine.feed(samples):
                 if isinstance(ev, TrialFinished):
                     rows.append(TrialRow(study, participant, spec.index, spec.target_label, spec.haptic_mode,
-                                         {m.name: ev.metrics[m.name] for m in SIM_METRICS}))
+                                         {m.name: ev.metrics[m.name] for m in carried}))
                     p.end_trial(eng.rig.sim_time_s)
                     loop.submit(Mark(-1, _PHASE_PAUSE))
                     loop.submit(SetHaptics(False))
@@ -106,12 +107,15 @@ def _run_participant_args(args: tuple[int, int]) -> list[TrialRow]:
     return run_participant(*args)
 
 
-def run_study(study: int, participants: int = 10, jobs: int = 1) -> list[TrialRow]:
-    """All participants of one study at the paper's settings (``jobs`` > 1: a process per participant)."""
-    work = [(study, j) for j in range(1, participants + 1)]
-    if jobs > 1:
-        with worker_pool(jobs, mp.get_context("spawn")) as pool:  # its workers die with this process
-            parts = pool.map(_run_participant_args, work)
-    else:
-        parts = [_run_participant_args(w) for w in work]
-    return [r for part in parts for r in part]
+def run_study(study: int, participants: int = 10, jobs: int = 1, client: Any = None) -> list[TrialRow]:
+    """All participants of one study at the paper's settings, in participant order (``jobs`` > 1: a process per
+    participant; ``client``: on its Dask cluster, :mod:`study_app.headless.fanout`)."""
+    parts: dict[int, list[TrialRow]] = {}
+
+    def keep(rows: list[TrialRow]) -> None:
+        if rows:
+            parts[rows[0].participant] = rows
+
+    run_tasks(_run_participant_args, [(study, j) for j in range(1, participants + 1)], keep, jobs=jobs,
+              client=client, name="haptic-study-calibration")
+    return [r for j in sorted(parts) for r in parts[j]]

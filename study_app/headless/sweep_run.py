@@ -16,12 +16,13 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-from analysis.planning.sim_study import TrialRow
+from analysis.planning.sim_study import TrialRow, sim_metrics
 from analysis.planning.sweep import SweepCell, append_cell, cell_key, protocol_digest, read_cache
-from foundation.platform_support.processes import worker_pool
 from pipeline.force.pipeline_settings import framework_with
 from protocol.study.config import ProtocolConfig, default_protocol
+from study_app.headless.fanout import run_tasks
 from study_app.headless.sim_trials import MODEL_VERSION, run_participant
 
 __all__ = ["SweepProgress", "run_sweep", "study_number"]
@@ -61,7 +62,7 @@ def _task(args: tuple[int, int, int, dict[str, float], ProtocolConfig]) -> tuple
 def run_sweep(
     grid: Sequence[Mapping[str, float]], *, studies: int, participants: int, seed: int, cache: Path,
     jobs: int = 1, protocol: ProtocolConfig | None = None,
-    on_progress: Callable[[SweepProgress], None] | None = None,
+    on_progress: Callable[[SweepProgress], None] | None = None, client: Any = None,
 ) -> list[SweepCell]:
     """Every cell of ``grid`` × ``studies``: from the cache, or run (and appended to it).
 
@@ -75,6 +76,9 @@ def run_sweep(
         The cache file (``cells.jsonl`` in the output folder).
     jobs
         Participants run at once, each in a worker process (1: one after the other in this process).
+    client
+        A Dask client (:func:`study_app.headless.fanout.connect`): the participants run on its cluster instead
+        (``jobs`` is then the cluster's business); the cells are cached here as they complete.
     protocol
         The protocol (default: the paper's); its experiment schedule is run.
 
@@ -87,7 +91,7 @@ def run_sweep(
     digest = protocol_digest(proto.to_json())
     keys = [(dict(s), k, cell_key(s, k, participants, seed, MODEL_VERSION, digest))
             for s in grid for k in range(studies)]
-    have = read_cache(cache)
+    have = read_cache(cache, sim_metrics(proto.task))
     todo = [i for i, (_, _, key) in enumerate(keys) if key not in have]
     progress = SweepProgress(cells_total=len(keys), cells_cached=len(keys) - len(todo),
                              runs_total=len(todo) * participants)
@@ -111,11 +115,5 @@ def run_sweep(
 
     if on_progress is not None:
         on_progress(progress)
-    if jobs > 1 and len(tasks) > 1:
-        with worker_pool(min(jobs, len(tasks))) as pool:  # its workers die with this process
-            for result in pool.imap_unordered(_task, tasks):
-                done(result)
-    else:
-        for task in tasks:
-            done(_task(task))
+    run_tasks(_task, tasks, done, jobs=jobs, client=client, name="haptic-study-sweep")
     return [SweepCell(s, k, have[key]) for s, k, key in keys]

@@ -5,7 +5,9 @@ protocol's ``cue_s``), a neutral screen for the rest of the trial, a rest
 screen between trials.  Never any live force: the participant's only cues
 are the camera (haptics OFF) and the haptic device (ON), as in the paper.
 Training sessions with the live force aid: the word stays, with a force gauge
-and the target band, so participants learn how each force feels.
+and the target band, so participants learn how each force feels.  A task whose target moves (force tracking) shows
+its band moving on the gauge in every session -- the target is what the participant follows -- and the force
+still only in training.
 """
 
 from __future__ import annotations
@@ -21,7 +23,8 @@ __all__ = ["ParticipantScreen", "ParticipantScreenModel"]
 
 @dataclass(frozen=True, slots=True)
 class ParticipantScreen:
-    """One frame of the participant screen.  ``gauge_force_n`` is None unless a gauge is allowed."""
+    """One frame of the participant screen.  ``gauge_force_n`` is None unless a gauge is allowed; ``show_gauge``
+    with no force: the target band alone (a target that moves)."""
 
     headline: str
     subline: str
@@ -87,10 +90,15 @@ class ParticipantScreenModel:
             return ParticipantScreen("Rest", "Let go of the tissue. The next trial starts soon.", False, None, None)
         if tr is None or self.task is None or self.phase not in ("active", "cued"):
             return ParticipantScreen("", "Please wait", False, None, None)
-        shown = self.task.screen(tr)  # the task's cue word and band
+        shown = self.task.screen(tr)  # the task's cue word, and its band asked at this trial time
+        band = shown.band_at(self.t_s - tr.t_s)
+        if shown.follow:  # a target that moves: its band is shown all trial, moving; the force only in training
+            word = shown.cue_word if self.gauge_allowed or self.t_s - tr.t_s < self.cue_s else ""
+            force = self.force_n if self.gauge_allowed else None
+            return ParticipantScreen(word, shown.follow, True, force, band)
         if self.gauge_allowed:
             return ParticipantScreen(shown.cue_word, f"Practice · haptics {tr.haptic_mode.upper()}", True,
-                                     self.force_n, shown.band_n)
+                                     self.force_n, band)
         if self.t_s - tr.t_s < self.cue_s:
             return ParticipantScreen(shown.cue_word, "", False, None, None)
         return ParticipantScreen("", "", False, None, None)

@@ -7,6 +7,9 @@ import os
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
+
 from protocol.study.design import HapticMode
 from protocol.study.records import Outcome, TrialRecord
 from study_app.engine import messages as m
@@ -346,24 +349,26 @@ class SessionModel:
         return self.count.fraction if self.session is not None else 0.0
 
     def band_for_axis(self) -> tuple[float, float] | None:
-        """The band of the current trial, or of the last one between trials (the live axis keeps its scale)."""
+        """The extent of the current trial's band over the trial (its lowest and highest edge: a band that moves
+        stays on the axis), or of the last one between trials (the live axis keeps its scale)."""
         tr = self.last_trial
         if tr is None or self.session is None:
             return None
-        return self.session.task.screen(tr).band_n
+        return self.session.task.screen(tr).band_extent(0.0, self.session.max_trial_s)
 
     def band_label(self) -> str:
         """The live plot's words for the band, the task's (``GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)``; "" without
         a band)."""
-        if self.band() is None or self.trial is None or self.session is None:
+        if self.trial is None or self.session is None or self.phase != "active":
             return ""
         return self.session.task.screen(self.trial).band_label
 
-    def band(self) -> tuple[float, float] | None:
-        """The current trial's band as its task draws it (N) while a trial is active, else None."""
+    def band(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
+        """The current trial's band at session times ``t_s`` as its task draws it (its lower and upper edge, N)
+        while a trial is active, else None."""
         if self.trial is None or self.session is None or self.phase != "active":
             return None
-        return self.session.task.screen(self.trial).band_n
+        return self.session.task.screen(self.trial).band_over(np.asarray(t_s, dtype=np.float64) - self.trial.t_s)
 
 
 def _not_run(n: int, other: str = "") -> str:

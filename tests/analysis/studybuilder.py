@@ -103,8 +103,9 @@ def build(path: Path, sessions: list[SessionDef]) -> Path:
                     "trial_id": tid, "session_id": sid, "trial_index": idx, "target_label": tdef.label,
                     "target_force_n": target, "haptic_mode": tdef.mode, "outcome": outcome,
                     "started_at_s": 20.0 * idx, "ended_at_s": 20.0 * idx + m.end_s,
-                    # every stored metric, as the runner stores it (TCT only with a success)
-                    **{x.name: None if x.success_only and outcome != "success" else m[x.name] for x in stored()},
+                    # every stored metric of the task's, as the runner stores it (TCT only with a success)
+                    **{x.name: None if x.success_only and outcome != "success" else m[x.name]
+                       for x in stored(proto.task.metrics)},
                     "n_samples": m.n_samples,
                     "abort_reason": "test abort" if outcome == "aborted" else None, "repeat_of": tdef.repeat_of,
                 })

@@ -61,7 +61,9 @@ def test_by_target_split(study):
 def test_mode_tests_equal_scipy_on_the_participant_differences(study):
     pp = per_participant(study, SUCCESSFUL)
     results, frame = mode_tests(pp)
-    assert list(frame["metric"]) == list(TESTED_METRICS) and list(TESTED_METRICS[:4]) == list(PRIMARY_METRICS)
+    # the measures the table has (the paper's task's: not force tracking's lag and gain) that the report tests
+    paper = [m for m in TESTED_METRICS if m in pp.columns]
+    assert list(frame["metric"]) == paper and paper[:4] == list(PRIMARY_METRICS)
     wide = pp.pivot(index="participant_code", columns="haptic_mode")
     for r in results:
         d = (wide[(r.metric, "on")] - wide[(r.metric, "off")]).to_numpy()

@@ -14,8 +14,11 @@ import pytest
 from studybuilder import SessionDef, build, success_trial, timeout_trial
 
 from analysis.planning.power import POWER_CSV_COLUMNS
-from protocol.metrics import tested
+from protocol.metrics import tested as which_tested  # (not `tested`: pytest would collect it)
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.cli.main import main
+
+PAPER = ForceRegulation().metrics  # the paper's study's metrics (its task's)
 
 
 def _participant(code: str, i: int) -> SessionDef:
@@ -85,7 +88,7 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert list(frame.columns[: len(POWER_CSV_COLUMNS)]) == list(POWER_CSV_COLUMNS)
     assert sorted(set(frame["n"])) == [6, 10, 16] and set(frame["resamples"]) == {400}
     assert set(frame["scope"]) == {"overall", "GENTLE", "FIRM"}
-    assert set(frame["metric"]) == {*(m.participant_exported for m in tested()), "all_four_holm", "any_holm"}
+    assert set(frame["metric"]) == {*(m.participant_exported for m in which_tested(PAPER)), "all_four_holm", "any_holm"}
     shown = frame[["power", "ci_low", "ci_high", "two_sided_ci_high"]].to_numpy().ravel()
     assert all(v != v or v == round(v, 4) for v in shown)  # rounded as the codebook says (NaN: a family row)
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
@@ -270,11 +273,11 @@ def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     assert list(table.columns[:7]) == ["target", "measure", "pilot shows", "n for 80 %", "n for 80 % (Holm)",
                                        "n for 90 %", "n for 90 % (Holm)"]
     assert list(table.columns[7:]) == [f"n = {n}" for n in (6, 8, 10, 12, 16, 20, 30)]
-    assert len(table) == 3 * (len(tested()) + 2) and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
+    assert len(table) == 3 * (len(which_tested(PAPER)) + 2) and set(table["target"]) == {"overall", "GENTLE", "FIRM"}
     frame = pd.read_csv(out / "power.csv")
     # the measures by the names every CSV and the codebook use (power.csv said rmse_n), numbers rounded as the
     # codebook says (ci_low was 0.01827534035513624)
-    assert set(frame["metric"]) == {*(m.participant_exported for m in tested()), "all_four_holm", "any_holm"}
+    assert set(frame["metric"]) == {*(m.participant_exported for m in which_tested(PAPER)), "all_four_holm", "any_holm"}
     shown = frame[["power", "ci_low", "ci_high", "holm_ci_low"]].to_numpy().ravel()
     assert all(v != v or v == round(v, 4) for v in shown)
     rmse = frame[(frame["scope"] == "overall") & (frame["metric"] == "rmse_N")].set_index("n")
@@ -327,7 +330,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
                                 max_ae_n=2.0, time_in_band_s=1.0, peak_force_n=1.0, tct_censored_s=3.0)
                            for p in range(6) for m in ("off", "on")])
     result = estimate_power(pool_from_trials(trials), (6, 10), resamples=50)
-    full = _power_html(ReportPower(result, "", None))
+    full = _power_html(ReportPower(result, "", None), PAPER)
     assert "<th>pilot shows</th>" in full and "<th>n for 80 %</th>" in full
 
     def without_direction(r):
@@ -336,7 +339,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
         return t
 
     monkeypatch.setattr(analysis.planning.power_plan, "plan_table", without_direction)
-    page = _power_html(ReportPower(result, "", None))
+    page = _power_html(ReportPower(result, "", None), PAPER)
     assert "pilot shows" not in page and "<th>n for 80 %</th>" in page  # the column and the words naming it
     assert page.count("<td") == full.count("<td") - len(plan_table(result))
 

@@ -23,6 +23,7 @@ from analysis.plots.figures import peak_downsample, significance_mark
 from analysis.reading.codebook import STATS_CSV_COLUMNS
 from analysis.report.measures import figure_groups
 from analysis.report.report_tables import TRIALS_CSV_COLUMNS
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -66,7 +67,8 @@ def test_report_writes_every_file_with_the_promised_columns(report):
     for name in ("report.html", "trials.csv", "participants.csv", "participants_wide.csv", "stats.csv",
                  "stats_by_target.csv", "speed_accuracy.csv", "sessions.csv", "codebook.csv"):
         assert (out / name).is_file(), name
-    for stem in (*(g.file for g in figure_groups()), "paired", "speed_accuracy"):  # success_rate, tct, rmse_max_ae…
+    # success_rate, tct, rmse_max_ae…: the paper's task's figures
+    for stem in (*(g.file for g in figure_groups(ForceRegulation().metrics)), "paired", "speed_accuracy"):
         png = (out / "figures" / f"{stem}.png").read_bytes()
         # 300 dpi at a journal's width: one column (3.5 in, 1050 px) or the page (7.2 in)
         assert png[:8] == b"\x89PNG\r\n\x1a\n" and int.from_bytes(png[16:20], "big") in (1050, 2160)
@@ -228,7 +230,7 @@ def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, report,
     shutil.copytree(report, out)  # a folder report wrote (the module's report, copied: bytes, modes and marker)
     before = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    def crash(folder, tables, written_too=()):
+    def crash(folder, tables, written_too=(), metrics=None):
         (folder / "stats.csv").write_text("half")
         raise RuntimeError("disk trouble")
 

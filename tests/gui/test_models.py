@@ -216,7 +216,9 @@ def test_session_progress_follows_events_and_sample_time():
     s.apply(trial(t_s=5.0))
     s.set_time(7.5)
     assert s.progress_text() == "Trial 1 · FIRM · haptics ON · times out in 9.5 s"
-    assert s.band() == pytest.approx((1.08, 1.32))
+    lo, hi = s.band([5.0, 7.5])  # asked at two moments of the trial: the paper's band holds
+    assert list(lo) == pytest.approx([1.08, 1.08]) and list(hi) == pytest.approx([1.32, 1.32])
+    assert s.band_for_axis() == pytest.approx((1.08, 1.32))
     s.apply(m.TrialEnded(9.0, trial_record(trial_index=0, target_label="FIRM", target_force_n=1.2, haptic_mode="on",
                                            outcome="success", tct_s=4.0, rmse_n=0.1, max_ae_n=0.2,
                                            cue_ns=5_000_000_000, end_ns=9_000_000_000), 2))
@@ -224,7 +226,7 @@ def test_session_progress_follows_events_and_sample_time():
     s.set_time(9.5)
     assert s.progress_text() == "Next trial in 1.5 s"
     assert s.count_text() == "1 of 2 trials done · about 10 s left"  # the first took 4 s: one more, no pause after
-    assert s.band() is None and s.fraction_done() == 0.5
+    assert s.band([9.5]) is None and s.fraction_done() == 0.5
     s.apply(m.SessionEnded(3, "completed", "", 2, 0, 1))
     assert s.state == "ended" and s.progress_text() == "session 3 completed"
 

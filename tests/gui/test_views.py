@@ -251,8 +251,10 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
     plots.data["force_n"][:] = 0.6
     view.refresh()
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
-    r = view.band.rect()  # from the cue (t = 1 s, 4 s before the newest sample) to now
-    assert (r.left(), r.right(), r.top(), r.bottom()) == pytest.approx((-4.0, 0.0, 0.54, 0.66))
+    x, lo = view.band_lo.getData()  # from the cue (t = 1 s, 4 s before the newest sample) to now
+    _, hi = view.band_hi.getData()
+    assert (x[0], x[-1]) == pytest.approx((-4.0, 0.0))
+    assert list(lo) == pytest.approx([0.54] * len(x)) and list(hi) == pytest.approx([0.66] * len(x))
     assert view.cue_line.isVisible() and view.cue_line.value() == pytest.approx(-4.0)
     # the band's words in the title line, outside the data area: nothing is drawn over the trace
     assert view.title_text == "GENTLE: target 0.6 N ± 10 % (0.54–0.66 N)"
@@ -260,7 +262,7 @@ def test_the_live_view_scales_to_the_target_and_names_a_force_above_it(qtbot):
         view.task.titleLabel.sceneBoundingRect())
     in_data = [i for i in view.task.vb.addedItems if i.isVisible()]
     # curves, the band and the cue's line only
-    assert set(map(type, in_data)) <= {type(view.band), type(view.band_edges), type(view.cue_line),
+    assert set(map(type, in_data)) <= {type(view.band), type(view.band_lo), type(view.cue_line),
                                        type(view.curves["force_n"])}
     assert view.lower_plot.viewRange()[1][1] >= 7.6
     assert view.lower_legend() == ["raw sensor |F| (the tool's weight included)"]
@@ -300,14 +302,14 @@ def test_after_a_cue_the_live_view_marks_it_and_leaves_the_last_trials_force_alo
     assert "above the axis" not in view.title_text  # the previous trial's force is not this trial's
     assert view.task.viewRange()[1] == pytest.approx([0.0, 1.5])
     assert view.cue_line.isVisible() and view.cue_line.value() == pytest.approx(-1.0)
-    r = view.band.rect()
-    assert view.band.isVisible() and (r.left(), r.right()) == pytest.approx((-1.0, 0.0))
+    x, _ = view.band_lo.getData()
+    assert view.band.isVisible() and (x[0], x[-1]) == pytest.approx((-1.0, 0.0))
     plots.data["force_n"][-1] = 2.7  # this trial overshoots: said at once
     view.refresh()
     assert view.title_text.endswith("peak 2.7 N: above the axis")
     plots.t = plots.t + 20.0  # the cue has scrolled out: the band spans the whole window, no line
     view.refresh()
-    assert not view.cue_line.isVisible() and view.band.rect().left() == pytest.approx(-10.0)
+    assert not view.cue_line.isVisible() and view.band_lo.getData()[0][0] == pytest.approx(-10.0)
 
 
 def test_rig_view_rehearses_a_fault_now_or_at_a_trial(qtbot):

@@ -79,11 +79,20 @@ def test_bad_target_is_rejected() -> None:
             TrialAim.constant(bad, True)
 
 
-def test_a_target_that_moves_is_refused_by_the_force_regulation_participant() -> None:
+def test_a_target_that_moves_is_handed_to_the_tracking_hand_until_the_trial_ends() -> None:
     ramp = TrialAim(((0.0, 0.3), (2.0, 1.2)), haptic_on=True)
     assert ramp.steady_n is None and ramp.force_n(1.0) == pytest.approx(0.75, rel=1e-12)  # linear between knots
-    with pytest.raises(ValueError, match="does not move over the trial"):
-        SimulatedParticipant(seed=0).begin_trial(ramp, 0.0)
+    p = SimulatedParticipant(seed=0)
+    p.begin_trial(ramp, 0.0)
+    obs = HandObservation(0.0, 0.0, 0.0, 0.0, 0.015)
+    p.equilibrium_y(obs)
+    assert p._tracking is not None and p.in_trial  # the tracking hand has the trial
+    ys = [p.equilibrium_y(obs._replace(t_s=k * 1e-3)) for k in range(1, 3000)]
+    assert all(math.isfinite(y) and SAFE_Y_RANGE_M[0] <= y <= SAFE_Y_RANGE_M[1] for y in ys)
+    assert min(ys) < -0.005  # it reached down towards the tissue it sees 15 mm below
+    p.end_trial(3.0)
+    y_end = p.equilibrium_y(obs._replace(t_s=3.0))
+    assert p._tracking is None and abs(y_end - ys[-1]) < 1e-4  # the retraction starts where the hand was
 
 
 # -- parameters -------------------------------------------------------------------------------

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from protocol.metrics import names
 from protocol.tasks.force_regulation import (
     BAND_SLACK,
+    ForceRegulation,
     HoldDetector,
     band_halfwidth_n,
     hold_completion_index,
@@ -374,7 +375,7 @@ def test_no_samples():
 def test_values_are_every_registry_metric_by_name_in_order():
     t, f = _full_window(lambda k: 0.6)
     m = trial_metrics(t, f, 0.6)
-    assert tuple(m.values) == names()
+    assert tuple(m.values) == names(ForceRegulation().metrics)
     assert {k: m[k] for k in ("success", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n")} == {
         "success": True, "tct_s": 1.0, "rmse_n": 0.0, "max_ae_n": 0.0, "time_in_band_s": pytest.approx(1.001, **EXACT),
         "peak_force_n": 0.6}
