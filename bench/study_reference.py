@@ -20,6 +20,7 @@ from collections.abc import Callable
 from typing import Any
 
 from bench.source_trees import check_tree, source_env
+from foundation.platform_support.machine import load_average
 
 __all__ = ["format_study_reference", "run_study_reference"]
 
@@ -51,9 +52,8 @@ def _one(tree: str | None, participants: int, seed: int, cwd: str) -> dict[str, 
 
 def _load_average() -> float:
     """The 1-minute load average (NaN on Windows, which has none)."""
-    if sys.platform == "win32":
-        return math.nan
-    return os.getloadavg()[0]
+    load = load_average()
+    return math.nan if load is None else load[0]
 
 
 def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rounds: int = 3,
