@@ -9,6 +9,7 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from analysis.stats.psychometric import LAPSE_MAX, fit_psychometric, p_correct
@@ -17,6 +18,7 @@ from pipeline.sim.discrimination_observer import LAPSE_RANGE, WEBER_RANGE, Discr
 from protocol.study.config import ProtocolError, protocol_from_dict
 from protocol.tasks.force_discrimination import ForceDiscrimination, comparison_first, interval_means
 from protocol.tasks.registry import task_tables
+from study_app.cli.main import main
 from study_app.headless.discrimination_run import render, run_participants
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "docs" / "examples" / "discrimination.toml"
@@ -115,3 +117,26 @@ def test_a_simulated_study_recovers_each_participants_weber_fraction() -> None:
         ratio = math.exp(float(np.mean([math.log(f.weber / w) for w, f in fits])))
         assert 0.8 < ratio < 1.25, (label, ratio)
     assert all(t.peak_n <= 3.0 for r in results for t in r.trials)
+
+
+def test_the_command_writes_the_fits_tables_and_figures_and_run_refuses_the_protocol(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "disc"
+    small = tmp_path / "small.toml"
+    small.write_text(EXAMPLE.read_text(encoding="utf-8").replace("trials = 60", "trials = 20"), encoding="utf-8")
+    assert main(["discrimination", "--protocol", str(small), "--participants", "2", "--seed", "0",
+                 "--out", str(out)]) == 0
+    fits = pd.read_csv(out / "discrimination_fits.csv")
+    assert len(fits) == 4 and set(fits["target_label"]) == {"GENTLE", "FIRM"}  # one row per participant per reference
+    # the CSV's 6 significant digits (float_format %.6g): the quotient of two rounded values within 2e-6 relative
+    assert np.allclose(fits["weber"], fits["jnd_n"] / fits["reference_n"], rtol=2e-6, atol=0)
+    trials = pd.read_csv(out / "discrimination_trials.csv")
+    assert len(trials) == 2 * 2 * 20 and trials["peak_n"].max() <= 3.0
+    codebook = pd.read_csv(out / "discrimination_codebook.csv")
+    for name, frame in (("discrimination_fits.csv", fits), ("discrimination_trials.csv", trials)):
+        assert list(codebook[codebook["file"] == name]["column"]) == list(frame.columns)  # every column described
+    assert sorted(p.name for p in (out / "figures").iterdir()) == ["psychometric_P01.png", "psychometric_P02.png"]
+    capsys.readouterr()
+    assert main(["run", "--protocol", str(small), "--db", str(tmp_path / "d.db")]) == 2
+    err = capsys.readouterr().err
+    assert "task.kind = 'force_discrimination' does not run into a study database yet" in err and err.count("\n") == 1
+    assert not (tmp_path / "d.db").exists()  # refused before any work
