@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from matplotlib.ticker import FuncFormatter, NullFormatter
+from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from analysis.stats.psychometric import PsychometricFit
 
@@ -122,6 +122,7 @@ def psychometric_figure(r: BlockResult) -> Figure:
         if r.true_weber is not None:
             ax.axvline(r.true_weber * f.reference_n, color="C3", lw=1.0, label=f"true JND (W {r.true_weber:.3f})")
         ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))  # (a decade holds one label alone)
         ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v * 1000:g}"))
         ax.xaxis.set_minor_formatter(NullFormatter())  # (log minor labels overlap at this width)
         ax.set_ylim(0.4, 1.02)
