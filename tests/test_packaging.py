@@ -42,8 +42,9 @@ def test_the_data_files_read_at_run_time_are_shipped() -> None:
 
 
 #: The distribution that provides each third-party module the product imports, where the names differ.
-_DISTRIBUTION_OF = {"PySide6": "PySide6-Essentials", "distributed": "dask", "serial": "pyserial", "pyOpenHaptics": "pyopenhaptics",
-                    "rtde_receive": "ur-rtde", "rtde_control": "ur-rtde"}
+_DISTRIBUTION_OF = {"PySide6": "PySide6-Essentials", "serial": "pyserial", "pyOpenHaptics": "pyopenhaptics",
+                    "rtde_receive": "ur-rtde", "rtde_control": "ur-rtde",
+                    "distributed": "dask"}  # the cluster extra's dask[distributed]
 
 
 def _third_party_imports() -> dict[str, str]:
