@@ -10,7 +10,6 @@ measured on a busy machine says so.
 from __future__ import annotations
 
 import json
-import math
 import os
 import statistics
 import subprocess
@@ -44,16 +43,16 @@ print(json.dumps({"wall_s": wall, "study_time_s": p.study_time_s}))
 """
 
 
+def _load() -> float:
+    """The 1-minute load average (NaN where the OS has none: Windows)."""
+    la = load_average()
+    return la[0] if la is not None else float("nan")
+
+
 def _one(tree: str | None, participants: int, seed: int, cwd: str) -> dict[str, float]:
     out = subprocess.run([sys.executable, "-c", _ONE_STUDY, str(participants), str(seed)], check=True,
                          capture_output=True, text=True, env=source_env(tree), cwd=cwd)
     return dict(json.loads(out.stdout.strip().splitlines()[-1]))
-
-
-def _load_average() -> float:
-    """The 1-minute load average (NaN on Windows, which has none)."""
-    load = load_average()
-    return math.nan if load is None else load[0]
 
 
 def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rounds: int = 3,
@@ -64,7 +63,7 @@ def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rou
     with tempfile.TemporaryDirectory() as cwd:
         check_tree(tree, cwd, "--reference-tree")
         check_tree(ours_root, cwd, "(ours)")
-        load0 = _load_average()
+        load0 = _load()
         ours: list[float] = []
         theirs: list[float] = []
         study_s: dict[str, float] = {}
@@ -75,7 +74,7 @@ def run_study_reference(tree: str, *, participants: int = 10, seed: int = 0, rou
                 got = _one(root, participants, seed, cwd)
                 into.append(got["wall_s"])
                 study_s[name] = got["study_time_s"]
-        load1 = _load_average()
+        load1 = _load()
     mo, mr = statistics.median(ours), statistics.median(theirs)
     return {"participants": participants, "seed": seed, "rounds": rounds, "reference_tree": os.path.abspath(tree),
             "ours_wall_s": [round(x, 2) for x in ours], "reference_wall_s": [round(x, 2) for x in theirs],
