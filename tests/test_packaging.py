@@ -43,7 +43,8 @@ def test_the_data_files_read_at_run_time_are_shipped() -> None:
 
 #: The distribution that provides each third-party module the product imports, where the names differ.
 _DISTRIBUTION_OF = {"PySide6": "PySide6-Essentials", "serial": "pyserial", "pyOpenHaptics": "pyopenhaptics",
-                    "rtde_receive": "ur-rtde", "rtde_control": "ur-rtde"}
+                    "rtde_receive": "ur-rtde", "rtde_control": "ur-rtde",
+                    "distributed": "dask"}  # the cluster extra's dask[distributed]
 
 
 def _third_party_imports() -> dict[str, str]:
@@ -71,7 +72,8 @@ def test_every_library_the_product_imports_is_a_declared_dependency() -> None:
     from packaging.requirements import Requirement
 
     declared = {Requirement(r).name.lower() for r in project["dependencies"]}
-    optional = {Requirement(r).name.lower() for r in project["optional-dependencies"]["touch"]}
+    optional = {Requirement(r).name.lower() for extra in ("touch", "cluster")
+                for r in project["optional-dependencies"][extra]}
     imports = _third_party_imports()
     assert {"numpy", "PySide6", "scipy"} <= set(imports), imports  # the scan sees the product's imports
     missing = {m: where for m, where in imports.items()

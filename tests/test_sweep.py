@@ -28,6 +28,7 @@ from analysis.planning.sweep import (
     t_interval,
 )
 from pipeline.force.pipeline_settings import framework_with, paper_settings, settings_of
+from protocol.metrics import TRADE_PHASES
 from protocol.study.config import protocol_from_dict
 from protocol.tasks.force_regulation import ForceRegulation
 from study_app.cli.main import main
@@ -139,9 +140,15 @@ def test_the_tables_per_study_and_per_setting(tmp_path: Path) -> None:
                        [_row(k, 1, "off", False, 1.0 + k), _row(k, 1, "on", True, 0.5 * w / 10)])
              for w in (10, 20) for k in range(2)]
     tidy = sweep_frame(cells, ["filter_window"], 12.0)
-    assert list(tidy.columns) == ["filter_window", "study", "metric", "off", "on", "change"]
-    assert len(tidy) == 4 * 4  # 2 settings × 2 studies, a row per measure the trials carry (their task's)
-    assert set(tidy["metric"]) == {"success", "tct_s", "rmse_n", "max_ae_n"} <= set(METRICS)
+    assert list(tidy.columns) == ["filter_window", "study", "metric", "off", "on", "change", "n_trials_off",
+                                  "n_trials_on"]
+    assert len(tidy) == 4 * 5  # 2 settings × 2 studies, a row per measure the trials carry (their task's)
+    assert set(tidy["metric"]) == {"success", "tct_s", "tct_cens_s", "rmse_n", "max_ae_n"} <= set(METRICS)
+    # TCT in both readings: over successful trials (n: the successes, none OFF here) and with failures at the cap
+    tct = tidy[(tidy["metric"] == "tct_s") & (tidy["filter_window"] == 10)].iloc[0]
+    cens = tidy[(tidy["metric"] == "tct_cens_s") & (tidy["filter_window"] == 10)].iloc[0]
+    assert (tct["n_trials_off"], tct["n_trials_on"], math.isnan(tct["off"]), tct["on"]) == (0, 1, True, 1.5)
+    assert (cens["n_trials_off"], cens["off"], cens["on"]) == (1, 12.0, 1.5)
     rm = tidy[(tidy["metric"] == "rmse_n") & (tidy["filter_window"] == 20)]
     assert rm["on"].tolist() == [1.0, 1.0] and rm["off"].tolist() == [1.0, 2.0]
     summary = summary_frame(tidy, ["filter_window"], paper_settings())
@@ -168,7 +175,10 @@ def test_sweep_command_writes_its_outputs_with_the_caveat(tmp_path: Path, capsys
         assert (out / name).is_file(), name
     assert "a prediction of simulated participant model" in (out / "sweep.md").read_text().splitlines()[2]
     for name in ("sweep.csv", "sweep_summary.csv"):  # the report's names (they said success, rmse_n, max_ae_n)
-        assert set(pd.read_csv(out / name)["metric"]) == {m.participant_exported for m in PAPER}, name
+        # the tested measures, TCT also censored at the cap, and the trade's phases (the front)
+        expected = {m.participant_exported for m in PAPER} | {"tct_censored_s"}
+        assert {m.name for m in TRADE_PHASES} <= {m.name for m in PAPER}
+        assert set(pd.read_csv(out / name)["metric"]) == expected, name
     # the same command again: refused (the outputs are there) unless --force, which computes nothing new
     assert main(args) == 2
     before = (out / CACHE_FILE).read_bytes()

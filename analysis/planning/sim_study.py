@@ -20,17 +20,24 @@ from typing import Any
 
 import numpy as np
 
-from protocol.metrics import Metric, MetricValue, get, select, split_unit, tested
+from protocol.metrics import METRICS, TRADE_PHASES, Metric, MetricValue, get, select, split_unit, tested
 from protocol.tasks.base import Task
 
-__all__ = ["TrialRow", "row_metrics", "sim_metrics", "summarise_study", "summary_keys", "trial_row_from_dict",
-           "trial_row_to_dict"]
+__all__ = ["SIMULATED", "TrialRow", "censored_key", "measure_labels", "row_metrics", "sim_metrics", "summarise_study",
+           "summary_keys", "trial_row_from_dict", "trial_row_to_dict"]
 
 
 def sim_metrics(task: Task) -> tuple[Metric, ...]:
     """The metrics a simulated trial of ``task`` carries: the ones of the task's the report tests
-    (:func:`protocol.metrics.tested`), in order (the paper's task: success, TCT, RMSE, Max AE, ...)."""
-    return tested(task.metrics)
+    (:func:`protocol.metrics.tested`) and the speed–accuracy trade's phases it has
+    (:data:`protocol.metrics.TRADE_PHASES`: the sweep's front), in the registry's order (the paper's task: success,
+    TCT, RMSE, Max AE, ..., rise time, RMSE after reach)."""
+    phases = [m.name for m in TRADE_PHASES if m.name in task.metric_names]
+    return select([*(m.name for m in tested(task.metrics)), *phases])
+
+
+#: What a simulated trial of any task may carry (:func:`sim_metrics`), in the registry's order: what a sweep may report.
+SIMULATED: tuple[Metric, ...] = select([*(m.name for m in tested(METRICS)), *(m.name for m in TRADE_PHASES)])
 
 
 def row_metrics(rows: Sequence[TrialRow]) -> tuple[Metric, ...]:
@@ -38,17 +45,26 @@ def row_metrics(rows: Sequence[TrialRow]) -> tuple[Metric, ...]:
     return select(rows[0].values) if rows else ()
 
 
-def _censored_key(m: Metric) -> str:
+def censored_key(m: Metric) -> str:
     """A success-only metric with failures counted at the trial cap, as the summary names it (``tct_cens_s``)."""
     stem, units = split_unit(m.name)
     return "_".join((stem, "cens", *units))
+
+
+def measure_labels(metrics: Sequence[Metric]) -> dict[str, str]:
+    """The measures a sweep reports of these simulated ``metrics`` (:data:`analysis.planning.sweep.METRICS`, here so
+    that the sweep's figures read them without importing the sweep): each with its label, a success-only one (TCT)
+    also with failures at the cap."""
+    return {k: v for m in metrics for k, v in (
+        ((m.name, m.summary_label), (censored_key(m), f"{m.short}, every trial, failure at the cap ({m.unit})"))
+        if m.success_only else ((m.name, m.summary_label),))}
 
 
 def summary_keys(metrics: Sequence[Metric]) -> tuple[str, ...]:
     """What :func:`summarise_study` gives per key: ``off``, ``on``, ``change`` (ON/OFF − 1), ``p``, ``n_pairs``:
     each metric of ``metrics`` (the rows'), a success-only one also censored at the cap, and with a yes/no outcome
     the success rate per target of the paper's protocol."""
-    return (*(m.name for m in metrics), *(_censored_key(m) for m in metrics if m.success_only),
+    return (*(m.name for m in metrics), *(censored_key(m) for m in metrics if m.success_only),
             *(("success_GENTLE", "success_FIRM") if any(m.boolean for m in metrics) else ()))
 
 
@@ -116,10 +132,11 @@ def _participant_values(mine: Sequence[TrialRow], max_trial_s: float,
         elif m.success_only:
             kept = [float(v) for r in mine if r.success and (v := r.values.get(m.name)) is not None]
             out[m.name] = statistics.fmean(kept) if kept else math.nan
-            out[_censored_key(m)] = statistics.fmean(
+            out[censored_key(m)] = statistics.fmean(
                 float(v) if r.success and (v := r.values.get(m.name)) is not None else max_trial_s for r in mine)
-        else:  # (a row made without it, by hand: NaN)
-            out[m.name] = statistics.fmean(_number(r.values.get(m.name)) for r in mine)
+        else:  # over the trials that have it (the trade's phases are undefined for a trial that never reached the band)
+            have = [v for r in mine if math.isfinite(v := _number(r.values.get(m.name)))]
+            out[m.name] = statistics.fmean(have) if have else math.nan
     for lab in ("GENTLE", "FIRM") if any(m.boolean for m in metrics) else ():
         sub = [r for r in mine if r.target == lab]
         out[f"success_{lab}"] = sum(r.success for r in sub) / len(sub) if sub else math.nan

@@ -29,10 +29,19 @@ import numpy as np
 import pandas as pd
 
 from analysis.planning.setting_labels import setting_formats
-from analysis.planning.sim_study import TrialRow, row_metrics, summarise_study, trial_row_from_dict, trial_row_to_dict
+from analysis.planning.sim_study import (
+    SIMULATED,
+    TrialRow,
+    censored_key,
+    measure_labels,
+    row_metrics,
+    summarise_study,
+    trial_row_from_dict,
+    trial_row_to_dict,
+)
 from foundation.platform_support.files import O_NOFOLLOW
 from protocol.metrics import METRICS as ALL_METRICS
-from protocol.metrics import Metric, get, tested
+from protocol.metrics import Metric
 
 __all__ = [
     "CACHE_FILE", "FILTER_NOTE", "METRICS", "SWEEP_MARKER", "SweepCell", "append_cell", "caveat", "cell_key",
@@ -44,9 +53,11 @@ __all__ = [
 SWEEP_MARKER = ".haptic-study-sweep"
 #: The cache of finished cells, kept in the output folder (never replaced by ``--force``).
 CACHE_FILE = "cells.jsonl"
-#: The measures a sweep may report (the ones the report tests), in order, with their labels: a sweep reports those its
-#: protocol's task produces (the simulated trials' metrics, :func:`analysis.planning.sim_study.sim_metrics`).
-METRICS: dict[str, str] = {m.name: m.summary_label for m in tested(ALL_METRICS)}
+#: The measures a sweep may report (:data:`analysis.planning.sim_study.SIMULATED`: a sweep reports those its
+#: protocol's task produces), in order, with their labels; a success-only one (TCT) in both readings: over
+#: successful trials (with their count, ``n_trials_*``) and over every trial, a failure at the cap (the report's
+#: default).
+METRICS: dict[str, str] = measure_labels(SIMULATED)
 
 
 @dataclass(frozen=True)
@@ -116,8 +127,11 @@ def append_cell(path: str | os.PathLike[str], key: str, rows: Sequence[TrialRow]
 
 #: What each measure can be (success a rate, the rest ≥ 0; the change ON/OFF − 1 of a measure ≥ 0 is ≥ −1): the
 #: ends of a t-interval over a few studies can pass these, and are clipped to them (``sweep.md`` says so).
-_BOUNDS: dict[str, tuple[float, float]] = {m.name: m.values for m in ALL_METRICS}
+_BOUNDS: dict[str, tuple[float, float]] = {
+    **{m.name: m.values for m in ALL_METRICS}, **{censored_key(m): m.values for m in ALL_METRICS if m.success_only}}
 _CHANGE_BOUNDS = (-1.0, math.inf)
+#: The yes/no outcomes, whose means are rates.
+_RATES = {m.name for m in ALL_METRICS if m.boolean}
 
 
 def t_interval(values: Sequence[float], level: float = 0.95,
@@ -136,15 +150,27 @@ def t_interval(values: Sequence[float], level: float = 0.95,
     return mean, max(bounds[0], mean - half), min(bounds[1], mean + half)
 
 
+def _entered(rows: Sequence[TrialRow], metric: str, mode: str) -> int:
+    """The trials of ``mode`` whose value entered ``metric``'s means (TCT over successful trials: the successes)."""
+    mine = [r for r in rows if r.mode == mode]
+    if metric not in {m.name for m in row_metrics(rows)}:  # a censored reading: every trial
+        return len(mine)
+    return sum(1 for r in mine if (v := r.values.get(metric)) is not None and math.isfinite(float(v)))
+
+
 def sweep_frame(cells: Sequence[SweepCell], swept: Sequence[str], max_trial_s: float) -> pd.DataFrame:
-    """sweep.csv: per cell and measure the study's OFF and ON group means and the change ON/OFF − 1."""
+    """sweep.csv: per cell and measure the study's OFF and ON group means, the change ON/OFF − 1 and the trials that
+    entered each mode's means (``n_trials_off``, ``n_trials_on``: TCT over successful trials has the successes)."""
     records = []
     for cell in cells:
         s = summarise_study(cell.rows, max_trial_s)
-        for metric in (m.name for m in row_metrics(cell.rows)):
+        for metric in measure_labels(row_metrics(cell.rows)):  # the measures of the protocol's task
             records.append({**{k: cell.settings[k] for k in swept}, "study": cell.study, "metric": metric,
-                            "off": s[metric]["off"], "on": s[metric]["on"], "change": s[metric]["change"]})
-    return pd.DataFrame.from_records(records, columns=[*swept, "study", "metric", "off", "on", "change"])
+                            "off": s[metric]["off"], "on": s[metric]["on"], "change": s[metric]["change"],
+                            "n_trials_off": _entered(cell.rows, metric, "off"),
+                            "n_trials_on": _entered(cell.rows, metric, "on")})
+    return pd.DataFrame.from_records(records, columns=[*swept, "study", "metric", "off", "on", "change",
+                                                       "n_trials_off", "n_trials_on"])
 
 
 def summary_frame(tidy: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, float]) -> pd.DataFrame:
@@ -154,6 +180,8 @@ def summary_frame(tidy: pd.DataFrame, swept: Sequence[str], paper: Mapping[str, 
     for key, grp in tidy.groupby([*swept, "metric"], sort=False):
         values = dict(zip([*swept, "metric"], key if isinstance(key, tuple) else (key,), strict=True))
         row: dict[str, Any] = {**values, "n_studies": int(grp["study"].nunique())}
+        for mode in ("off", "on"):  # every study's trials that entered the means
+            row[f"n_trials_{mode}"] = int(grp[f"n_trials_{mode}"].sum()) if f"n_trials_{mode}" in grp else 0
         for col in ("off", "on", "change"):
             bounds = _CHANGE_BOUNDS if col == "change" else _BOUNDS[str(values["metric"])]
             row[col], row[f"{col}_ci_low"], row[f"{col}_ci_high"] = t_interval(grp[col].tolist(), bounds=bounds)
@@ -177,7 +205,7 @@ def caveat(model_version: str, model_fit: str) -> str:
 def _fmt(v: float, metric: str) -> str:
     if not math.isfinite(v):
         return "–"
-    return f"{v:.2f}" if get(metric).boolean else f"{v:.3f}"  # a rate, or a mean
+    return f"{v:.2f}" if metric in _RATES else f"{v:.3f}"  # a rate, or a mean
 
 
 def _ci(row: Mapping[str, Any], col: str, metric: str) -> str:
@@ -190,14 +218,14 @@ def _ci(row: Mapping[str, Any], col: str, metric: str) -> str:
 
 def summary_lines(summary: pd.DataFrame, swept: Sequence[str]) -> list[str]:
     """The summary as a Markdown table: one row per setting and measure (mean [95 % CI] over studies)."""
-    head = [*swept, "measure", "OFF", "ON", "change ON/OFF", "studies"]
+    head = [*swept, "measure", "OFF", "ON", "change ON/OFF", "studies", "trials OFF / ON"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     fmts = setting_formats(summary, swept)
     for r in summary.to_dict("records"):
         mark = " (paper)" if r["paper"] else ""
         cells = [f"{fmts[k](r[k])}{mark if i == 0 else ''}" for i, k in enumerate(swept)]
         cells += [METRICS[r["metric"]], _ci(r, "off", r["metric"]), _ci(r, "on", r["metric"]),
-                  _ci(r, "change", r["metric"]), str(r["n_studies"])]
+                  _ci(r, "change", r["metric"]), str(r["n_studies"]), f"{r['n_trials_off']} / {r['n_trials_on']}"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
 
@@ -210,6 +238,7 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
 
     # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
     named = {m.name: m.participant_exported for m in ALL_METRICS}
+    named.update({censored_key(m): str(m.censored) for m in ALL_METRICS if m.success_only})
     tidy.replace({"metric": named}).to_csv(folder / "sweep.csv", index=False, float_format="%.6g")
     summary.replace({"metric": named}).to_csv(folder / "sweep_summary.csv", index=False, float_format="%.6g")
     save_one(metrics_figure(summary, swept, paper, caveat(model_version, model_fit)), folder / "sweep.png")
@@ -217,10 +246,12 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
     md = ["# Pipeline settings sweep", "", f"**{caveat(model_version, model_fit)}**", "", *header, "",
           "Mean over studies [95 % t-interval over the study means, its ends clipped to what the measure can be: "
           "a rate 0–1, the rest ≥ 0, a change ≥ −100 %; with few studies the interval is wide]; each study's value "
-          "is the mean over its participants of their own means (success: their success rate; TCT: their "
-          "successful trials only). Change: ON/OFF − 1.  The paper's setting is marked (paper).",
+          "is the mean over its participants of their own means (success: their success rate; TCT: over their "
+          "successful trials only, n the successful trials of every study, and over every trial with a failure at "
+          "the cap, the report's default). Change: ON/OFF − 1.  The paper's setting is marked (paper).",
           *(["", FILTER_NOTE] if "filter_window" in swept else []), "", *summary_lines(summary, swept), "",
           "Files: sweep.csv (per study), sweep_summary.csv (this table), sweep.png (the measures against the "
-          "setting), sweep_front.png (TCT against RMSE, haptics ON), cells.jsonl (the cache of finished cells).", ""]
+          "setting), sweep_front.png (the speed–accuracy front: rise time against RMSE after reach, haptics ON, each "
+          "setting's success rate beside it), cells.jsonl (the cache of finished cells).", ""]
     (folder / "sweep.md").write_text("\n".join(md), encoding="utf-8")
     return ["sweep.csv", "sweep_summary.csv", "sweep.png", "sweep_front.png", "sweep.md"]

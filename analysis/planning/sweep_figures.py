@@ -1,10 +1,12 @@
 """The figures of a pipeline settings sweep (``haptic-study sweep``, :mod:`analysis.planning.sweep`).
 
-* :func:`metrics_figure` -- each measure of the sweep (success rate, TCT over successful trials, RMSE, Max AE, ...)
-  against the first swept setting, haptics OFF and ON, each point the mean over studies with its 95 % t-interval,
-  the paper's value of the setting marked; a second swept setting is a line per value (its own line style);
-* :func:`front_figure` -- the speed–accuracy front: TCT against RMSE with haptics ON, one point per setting
-  (both intervals drawn), each labelled, the paper's setting starred.
+* :func:`metrics_figure` -- each measure of the sweep (success rate, TCT in both readings, RMSE, Max AE, the trade's
+  phases, ...) against the first swept setting, haptics OFF and ON, each point the mean over studies with its 95 %
+  t-interval (none over one study, and the title says so), TCT over successful trials with the successes it rests
+  on, the paper's value of the setting marked; a second swept setting is a line per value (its own line style);
+* :func:`front_figure` -- the speed–accuracy front in the report's reading: rise time against RMSE after reach with
+  haptics ON (parts of the trial apart: docs/science.md §6.1), one point per setting (both intervals drawn), each
+  labelled with its success rate, the paper's setting starred.
 
 Both carry the sweep's caveat (a model's prediction) along the bottom.
 """
@@ -22,14 +24,18 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.planning.setting_labels import setting_formats
+from analysis.planning.sim_study import SIMULATED, measure_labels
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
-from protocol.metrics import METRICS, tested
+from protocol.metrics import METRICS, TRADE_PHASES
 
 __all__ = ["front_figure", "metrics_figure"]
 
 #: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`: those
 #: of them the summary has), two to a row.
-_PANELS = tuple((m.name, m.summary_label) for m in tested(METRICS))
+_PANELS = tuple(measure_labels(SIMULATED).items())
+#: The yes/no outcome (the front's success rate) and which panels are means over successful trials only.
+_VERDICT = next(m.name for m in METRICS if m.boolean)
+_SUCCESS_ONLY = {m.name: m.success_only for m in METRICS}
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 _DASHES = ("-", "--", ":", "-.")
 
@@ -76,6 +82,11 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
                 x = [float(v) * (dx if _log_x(xs) else 1.0) for v in sel[x_name]]
                 _errorbar(ax, x, sel, mode, color=MODE_COLORS[mode], marker=MODE_MARKERS[mode],
                           linestyle=_DASHES[g_i % len(_DASHES)], label=_MODE_NAMES[mode] + tag)
+                if _SUCCESS_ONLY.get(metric) and f"n_trials_{mode}" in sel:  # what a mean of successes rests on
+                    for xi, yi, n in zip(x, sel[mode], sel[f"n_trials_{mode}"], strict=True):
+                        if math.isfinite(float(yi)):
+                            ax.annotate(f"n={int(n)}", (xi, float(yi)), xytext=(3, 3 if mode == "on" else -8),
+                                        textcoords="offset points", fontsize=5.5, color=MODE_COLORS[mode])
         if _log_x(xs):
             ax.set_xscale("log")
             ax.set_xlim(xs[0] / 1.5, xs[-1] * 1.5)
@@ -97,45 +108,54 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
         ax.spines["right"].set_visible(False)
         ax.grid(axis="y", color="#dddddd", linewidth=0.6)
     axes.flat[0].legend(frameon=False, loc="best")
-    fig.suptitle("Pipeline settings sweep: mean over studies, 95 % t-interval")
+    one = int(summary["n_studies"].max()) < 2 if len(summary) else True
+    fig.suptitle("Pipeline settings sweep: " + ("one study, so no interval (--studies 2 or more gives 95 % "
+                                                "t-intervals over the study means)" if one else
+                                                "mean over studies, 95 % t-interval over the study means"))
     add_note(fig, note)
     return fig
 
 
 @styled
 def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figure:
-    """TCT against RMSE with haptics ON, one labelled point per setting (see the module docstring)."""
+    """Rise time against RMSE after reach with haptics ON, one labelled point per setting (module docstring)."""
+    speed, accuracy = TRADE_PHASES
+    verdict = _VERDICT
     lines = note_lines(note, PAGE_IN * 0.62)
     fig = Figure(figsize=(PAGE_IN * 0.62, 3.6 + 0.11 * lines))
     margins(fig, 0.6, 0.2, 0.5 + 0.11 * lines, 0.3)
     ax = fig.add_subplot()
-    tct = summary[summary["metric"] == "tct_s"].reset_index(drop=True)
-    rmse = summary[summary["metric"] == "rmse_n"].reset_index(drop=True)
-    if tct.empty:  # a protocol whose task has no TCT (force tracking): no front to draw
-        rmse = tct
+    y_rows = summary[summary["metric"] == speed.name].reset_index(drop=True)
+    x_rows = summary[summary["metric"] == accuracy.name].reset_index(drop=True)
+    ok = summary[summary["metric"] == verdict].reset_index(drop=True)
+    if y_rows.empty or x_rows.empty or ok.empty:  # a protocol whose task lacks the trade's phases: no front to draw
+        y_rows, x_rows, ok = y_rows.iloc[:0], x_rows.iloc[:0], ok.iloc[:0]
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
     fmts = setting_formats(summary, swept)
     # each setting its own colour, named in the legend: labels beside points collide where the points crowd
-    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, max(len(tct), 1)))
-    for i, ((_, t), (_, r)) in enumerate(zip(tct.iterrows(), rmse.iterrows(), strict=True)):
+    colours = matplotlib.colormaps["viridis"](np.linspace(0.0, 0.9, max(len(y_rows), 1)))
+    for i, ((_, t), (_, r), (_, s)) in enumerate(zip(y_rows.iterrows(), x_rows.iterrows(), ok.iterrows(),
+                                                       strict=True)):
         x, y = float(r["on"]), float(t["on"])
         xerr = [[_half(r, "low")], [_half(r, "high")]]
         yerr = [[_half(t, "low")], [_half(t, "high")]]
         star = bool(t["paper"])
-        text = (fmts[swept[0]](t[swept[0]]) if one else _label(t, swept, fmts)) + (" (paper)" if star else "")
+        success = f", success {float(s['on']):.0%}" if math.isfinite(float(s["on"])) else ""
+        text = (fmts[swept[0]](t[swept[0]]) if one else _label(t, swept, fmts)) + (" (paper)" if star else "") + success
         ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=colours[i], marker="*" if star else "o",
                     markersize=9 if star else 5, capsize=2, linewidth=0.8, label=text)
         pts.append((x, y))
     for (x0, y0), (x1, y1) in itertools.pairwise(pts) if one else ():
         ax.plot([x0, x1], [y0, y1], color="#bbbbbb", linewidth=0.6, zorder=0)
     ax.margins(x=0.2, y=0.1)
-    ax.set_xlabel("RMSE (N), haptics ON")
-    ax.set_ylabel("TCT, successful trials (s), haptics ON")
+    ax.set_xlabel(f"{accuracy.label}, haptics ON")
+    ax.set_ylabel(f"{speed.label}, haptics ON")
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
     ax.set_title(("Speed–accuracy front across " + (swept[0] if one else "settings")) + " (lower left is better)")
-    ax.legend(title=swept[0] if one else "setting", frameon=False, fontsize=6.5, title_fontsize=7, loc="best")
+    ax.legend(title=(swept[0] if one else "setting") + ": ON success rate", frameon=False, fontsize=6.5,
+              title_fontsize=7, loc="best")
     add_note(fig, note)
     return fig
 

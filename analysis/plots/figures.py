@@ -1,8 +1,9 @@
 """The paper's figures, drawn with matplotlib's object API (no pyplot state, no display).
 
 * :func:`mode_bars` -- a metric per target and overall, haptics OFF vs ON,
-  mean with SD bars across participants, each participant a dot, and the
-  test's significance mark (the paper's Figs. 8 and 9);
+  the median across participants with its interquartile range (the summary the signed-rank test is about; the
+  paper's figures show mean ± SD, which skewed per-participant values misrepresent), each participant a dot, the
+  number of participants under each bar and the test's significance mark (the paper's Figs. 8 and 9);
 * :func:`paired_lines` -- every participant's OFF → ON change per metric;
 * :func:`pipeline_trace` -- one trial's task force (blue) against its target
   band with the rendered force (green), and the raw sensor force (red) on an
@@ -32,7 +33,7 @@ import pandas as pd
 from matplotlib.figure import Figure
 
 from analysis.reading.recorded import read_trial_samples
-from analysis.stats.aggregate import METRIC_LABELS, by_mode, mean_sd
+from analysis.stats.aggregate import METRIC_LABELS, by_mode
 from analysis.stats.wilcoxon import WilcoxonResult
 from protocol.metrics import by_participant_name
 from protocol.study.display import task_axis_top_n
@@ -153,16 +154,18 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             vals = frame.loc[frame["haptic_mode"] == mode, metric].to_numpy(dtype=float)
             vals = vals[np.isfinite(vals)]
             x = gi + (k - 0.5) * width
-            mean, sd, _ = mean_sd(vals)
-            sd = sd if math.isfinite(sd) else 0.0
-            ax.bar(x, mean if math.isfinite(mean) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
+            q1, med, q3 = np.percentile(vals, (25, 50, 75)) if len(vals) else (math.nan,) * 3
+            ax.bar(x, med if math.isfinite(med) else 0.0, width * 0.92, color=MODE_COLORS[mode], alpha=0.85,
                    label=_MODE_NAMES[mode] if gi == 0 else None, zorder=2)
+            ax.annotate(str(len(vals)), (x, 0.0), xytext=(0, -1), textcoords="offset points", ha="center",
+                        va="top", fontsize=5.5, color="#333333", annotation_clip=False)
             if len(vals):
-                if len(vals) > 1:  # one participant has no spread: no error bar (not one of length 0)
-                    ax.errorbar(x, mean, yerr=sd, color="#333333", capsize=3, linewidth=0.9, zorder=3)
+                if len(vals) > 1:  # one participant has no spread: no whisker (not one of length 0)
+                    ax.errorbar(x, med, yerr=[[med - q1], [q3 - med]], color="#333333", capsize=3, linewidth=0.9,
+                                zorder=3)
                 ax.scatter(x + rng.uniform(-0.08, 0.08, len(vals)), vals, s=6, color="#222222", alpha=0.55,
                            zorder=4, linewidths=0)
-                heights[mode] = max(mean + sd, float(vals.max()))
+                heights[mode] = max(q3, float(vals.max()))
             else:
                 ax.text(x, 0, "no data", ha="center", va="bottom", fontsize=6, rotation=90)
         if heights:
@@ -173,6 +176,7 @@ def _bars_panel(ax, groups: Sequence[tuple[str, pd.DataFrame, str]], metric: str
             ax.text(gi, y, mark, ha="center", va="bottom")
             top = max(top, y * 1.15)
     ax.set_xticks(range(len(groups)), [g[0] for g in groups])
+    ax.tick_params(axis="x", pad=8)  # room for the n under the bars
     ax.set_ylabel(METRIC_LABELS.get(metric, metric))
     if (known := by_participant_name(metric)) is not None and known.boolean:
         top = 1.15  # a rate: room for the marks above 1, nothing more
@@ -224,7 +228,7 @@ def mode_bars(
         _bars_panel(ax, groups, metric, rng)
     # the legend says what the bars are: a figure is also read apart from the report
     axes[0].legend(frameon=False, ncols=2, loc="lower left", bbox_to_anchor=(0.0, 1.01),
-                   title="bars: mean ± SD across participants; dots: participants", alignment="left")
+                   title="median [IQR]; dots: participants; n below", alignment="left")
     add_note(fig, note)
     if title:
         fig.suptitle(title)

@@ -31,18 +31,22 @@ import pandas as pd
 from analysis.reading.codebook_annotations import ANNOTATION_COLUMNS
 from analysis.reading.codebook_columns import (
     _STATS,
-    COLUMNS,
+    DIFFERENCE_DECIMALS,
     STATS_CSV_COLUMNS,
     Column,
     metric_words,
     participant_measures,
     task_column,
 )
-from protocol.metrics import Metric
+from analysis.reading.codebook_columns import COLUMNS as _TABLE_COLUMNS
+from analysis.reading.codebook_within import WITHIN_COLUMNS
+from protocol.metrics import METRICS, Metric, tested
 from protocol.tasks.registry import TASKS
 
 __all__ = [
     "COLUMNS",
+    "DIFFERENCE_DECIMALS",
+    "DIFF_MEASURES",
     "STATS_CSV_COLUMNS",
     "WIDE_MEASURES",
     "Column",
@@ -57,8 +61,12 @@ __all__ = [
 ]
 
 
+#: Every entry: the trials, participants, tests and record's, then the within-participant analyses'.
+COLUMNS: tuple[Column, ...] = _TABLE_COLUMNS + WITHIN_COLUMNS
 #: The long-format measures that participants_wide.csv spreads into an OFF and an ON column.
 WIDE_MEASURES: tuple[str, ...] = ("n_trials", *participant_measures())
+#: The tested measures (participants.csv columns): participants_wide.csv has each one's ON − OFF difference too.
+DIFF_MEASURES: tuple[str, ...] = tuple(m.participant_exported for m in tested(METRICS))
 #: The unit parts of an exported name (its last parts).
 _UNITS = {"s", "N", "ms"}
 
@@ -83,6 +91,14 @@ def _wide_columns() -> tuple[Column, ...]:
             out.append(Column(wide_name(name, mode), f"haptics {mode.upper()}: {base.description}", base.unit,
                               base.type, f"{base.label or name} {mode.upper()}", ("participants_wide.csv",), "",
                               base.decimals, base.significant))
+    for name in DIFF_MEASURES:
+        base = next(c for c in COLUMNS if c.name == name and (not c.files or "participants.csv" in c.files))
+        out.append(Column(wide_name(name, "diff"), f"ON − OFF of {name}, rounded to {DIFFERENCE_DECIMALS} decimals as "
+                          "the report's test rounds the differences before ranking: a one-sample Wilcoxon "
+                          "signed-rank test of this column (JASP, SPSS) gives stats.csv's statistic and p; ON − OFF "
+                          "computed from the rounded OFF and ON columns may not (0.6 − 0.4 ≠ 0.4 − 0.2 in floating "
+                          "point, so equal differences stop tying)", base.unit, "number", f"{base.label or name} "
+                          "ON − OFF", ("participants_wide.csv",), "", DIFFERENCE_DECIMALS))
     return tuple(out)
 
 

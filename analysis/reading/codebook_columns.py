@@ -18,7 +18,8 @@ from protocol.metrics import METRICS, Metric, Role, exported_name, family_word, 
 from protocol.tasks.base import Parameter
 from protocol.tasks.registry import TASKS
 
-__all__ = ["COLUMNS", "STATS_CSV_COLUMNS", "Column", "metric_words", "participant_measures", "task_column"]
+__all__ = ["COLUMNS", "DIFFERENCE_DECIMALS", "STATS_CSV_COLUMNS", "Column", "metric_words", "participant_measures",
+           "task_column"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,7 +64,12 @@ class Column:
         return text
 
 
-_STATS = ("stats.csv", "stats_by_target.csv", "target_speed_test.csv")
+#: The decimals a paired test rounds its differences ON − OFF to before ranking, so that differences equal in exact
+#: arithmetic tie in floating point (:func:`analysis.stats.wilcoxon.paired_wilcoxon`); participants_wide.csv's
+#: differences are written so, for a test of them elsewhere to rank as the report's does.
+DIFFERENCE_DECIMALS = 10
+
+_STATS = ("stats.csv", "stats_by_target.csv", "stats_by_site.csv", "target_speed_test.csv")
 #: The tests' files (:data:`_STATS`): the columns every consumer may rely on, first and in this order (more follow).
 STATS_CSV_COLUMNS = ("metric", "n", "median_off", "median_on", "statistic", "p_value", "method",
                      "zero_method", "rank_biserial", "p_holm")
@@ -73,7 +79,6 @@ _MODELS = ("speed_accuracy_model.csv", "learning_models.csv")
 _ORDER = ("order_check.csv",)
 _SENS = ("sensitivity.csv",)
 _PER = ("participants.csv", "participants_by_target.csv")
-_SPEED, _SPEED_SLOPES = ("target_speed.csv",), ("target_speed_slopes.csv",)
 _MU = "unit of the measure (see metric)"
 #: Force: 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _F = 4
@@ -180,6 +185,10 @@ COLUMNS: tuple[Column, ...] = (
     *_censored_columns(),
     # -- per participant × mode (× target) ----------------------------------------------------------
     Column("n_trials", "analysed trials", "count", "integer", label="trials", files=_PER),
+    Column("targets_balanced", "false where the participant's trials in this mode are not spread equally over the "
+           "targets (an incomplete session analysed, --include-incomplete): the mode's values are then the mean of "
+           "the per-target values, each target weighing the same as in the design", type="boolean",
+           files=("participants.csv",)),
     *_participant_metric_columns(),
     # -- paired Wilcoxon tests, ON vs OFF -------------------------------------------------------------
     Column("metric", f"the measure tested: {_TESTED} (participants.csv columns)", type="text",
@@ -199,6 +208,11 @@ COLUMNS: tuple[Column, ...] = (
            label="zeros"),
     Column("rank_biserial", "matched-pairs rank-biserial correlation (W+ − W−)/(W+ + W−); positive: ON > OFF",
            "−1 to 1", label="rank-biserial", decimals=4),
+    Column("rank_biserial_ci_low", "lower end of the bootstrap interval of the rank-biserial correlation "
+           "(participants resampled, 9999 times, fixed seed; see rank_biserial_ci_method)", "−1 to 1", decimals=4),
+    Column("rank_biserial_ci_high", "upper end of that interval", "−1 to 1", decimals=4),
+    Column("rank_biserial_ci_method", "BCa (bias-corrected and accelerated), or percentile where every resample "
+           "gives the same value (BCa undefined); empty when not computable", type="text"),
     Column("p_holm", f"p-value after Holm's step-down correction across the {_FAMILY} measures (within the "
            f"target in stats_by_target.csv){_SECONDARY}", "probability", label="p (Holm)", significant=4),
     Column("n_pairs", "participants with a value in both modes", "count", "integer", label="pairs"),
@@ -225,111 +239,6 @@ COLUMNS: tuple[Column, ...] = (
     Column("w_minus", "rank sum of the pairs with ON < OFF", "rank sum", label="W−", decimals=4),
     Column("n_positive", "pairs with ON > OFF", "count", "integer", label="ON > OFF"),
     Column("n_negative", "pairs with ON < OFF", "count", "integer", label="ON < OFF"),
-    # -- speed against accuracy, within participants --------------------------------------------------
-    Column("n_trials", "trials with both a TCT and an RMSE (participants' only such trial left out: it has no "
-           "within-participant information)", "count", "integer", label="trials", files=_SA),
-    Column("n_participants", "participants contributing (at least two such trials in a mode)", "count", "integer",
-           label="participants", files=_SA),
-    Column("r_rm", "repeated-measures correlation of TCT with RMSE (Bakdash & Marusich 2017): the common "
-           "within-participant association; negative: a participant's faster trials were the less accurate ones "
-           "(a trade)", "−1 to 1", label="r_rm", decimals=4),
-    Column("df", "degrees of freedom of r_rm: trials − participants (− mode cells for 'all') − 1", "count",
-           "integer", files=_SA),
-    Column("p_value", "p-value of r_rm (t test of the common within-participant slope, df as given)",
-           "probability", label="p", files=_SA, significant=4),
-    Column("ci_low", "lower end of the confidence interval of r_rm (Fisher z, SE = 1/√(df − 3), as the rmcorr R "
-           "package)", "−1 to 1", label="CI low", files=_SA, decimals=4),
-    Column("ci_high", "upper end of the confidence interval of r_rm", "−1 to 1", label="CI high", files=_SA,
-           decimals=4),
-    Column("slope_s_per_N", "common within-participant slope of TCT on RMSE", "s per N", label="slope (s/N)",
-           source="slope_s_per_n", decimals=4),
-    Column("computable", "false when r_rm could not be computed (see note)", type="boolean", files=_SA),
-    Column("note", "why r_rm was not computable, or what was left out; empty otherwise", type="text", files=_SA),
-    Column("median_tct_s", "median TCT of the correlated trials", "s", label="median TCT (s)", decimals=_T),
-    Column("median_rmse_N", "median RMSE of the correlated trials", "N", label="median RMSE (N)",
-           source="median_rmse_n", decimals=_F),
-    Column("participant_code", "pseudonymous participant code", type="text", label="participant", files=_SLOPES),
-    Column("n_trials", "the participant's trials in this mode with both a TCT and an RMSE", "count", "integer",
-           label="trials", files=_SLOPES),
-    Column("intercept_s", "TCT at RMSE = 0 of the participant's own least-squares line", "s", label="intercept (s)",
-           decimals=_T),
-    Column("rmse_min_N", "the participant's smallest RMSE in this mode", "N", source="rmse_min_n", decimals=_F),
-    Column("rmse_max_N", "the participant's largest RMSE in this mode", "N", source="rmse_max_n", decimals=_F),
-    # -- a moving target: tracking error against the target's speed (analysis.stats.target_speed) --------
-    Column("target_speed_N_per_s", "speed of the target: mean |dF*/dt| over the part of the trial where it moves",
-           "N/s", label="target speed (N/s)", source="target_speed_n_per_s", decimals=_F),
-    Column("rmse_N", "mean RMSE of the participant's trials of this target in this mode", "N", label="RMSE (N)",
-           files=_SPEED, decimals=_F),
-    Column("n_trials", "the participant's trials of this target in this mode", "count", "integer", label="trials",
-           files=_SPEED),
-    Column("n_targets", "targets with a mean RMSE in this mode (the points of the line)", "count", "integer",
-           label="targets", files=_SPEED_SLOPES),
-    Column("rmse_per_speed_s", "least-squares slope of the participant's mean RMSE per target on the targets' "
-           "speeds in this mode: N of error per N/s of speed; empty with fewer than two speeds", "s",
-           label="RMSE per speed (s)", decimals=4),
-    Column("intercept_N", "RMSE at speed 0 of that line", "N", label="intercept (N)", source="intercept_n",
-           decimals=_F),
-    Column("metric", "the measure tested: rmse_per_speed_s (target_speed_slopes.csv), one value per participant "
-           "per mode", type="text", label="measure", files=("target_speed_test.csv",)),
-    Column("p_holm", "empty: the slope is tested on its own, outside Holm's family", "probability",
-           label="p (Holm)", files=("target_speed_test.csv",), significant=4),
-    # -- trial-level models (speed_accuracy_model.csv, learning_models.csv) ------------------------------
-    Column("model", "speed-accuracy (TCT ~ RMSE × mode + (1 | participant)) or learning (outcome ~ mode × "
-           "target + trial number, participant as the unit)", type="text", files=_MODELS),
-    Column("outcome", "the modelled outcome and its unit", type="text", files=_MODELS),
-    Column("term", "fixed effect: intercept, haptics_on (ON − OFF), target_<label> (that target − the lowest), "
-           "haptics_on_x_target_<label> (interaction), trial_number (per trial), rmse (slope of TCT on RMSE, "
-           "OFF), rmse_x_on (ON − OFF difference of that slope); empty when the model was not fitted",
-           type="text", files=_MODELS),
-    Column("estimate", "the fixed effect's estimate, in the unit given by scale", "see scale", files=_MODELS,
-           decimals=6),
-    Column("std_error", "its standard error (GEE: robust)", "see scale", files=_MODELS, decimals=6),
-    Column("ci_low", "lower end of its Wald confidence interval", "see scale", files=_MODELS, decimals=6),
-    Column("ci_high", "upper end of its Wald confidence interval", "see scale", files=_MODELS, decimals=6),
-    Column("z", "estimate / standard error", "standard normal", files=_MODELS, decimals=4),
-    Column("p_value", "two-sided Wald p-value of the fixed effect", "probability", files=_MODELS, significant=4),
-    Column("scale", "unit of the estimates: s, N, log-odds (success; exp(estimate) is an odds ratio)",
-           type="text", files=_MODELS),
-    Column("n_obs", "trials in the model", "count", "integer", files=_MODELS),
-    Column("n_participants", "participants in the model", "count", "integer", files=_MODELS),
-    Column("method", "how the model was fitted", type="text", files=_MODELS),
-    Column("converged", "false when the fit did not converge or statsmodels warned (see note)", type="boolean",
-           files=_MODELS),
-    Column("note", "why the model was not fitted, or statsmodels' warnings; empty otherwise", type="text",
-           files=_MODELS),
-    # -- order check ---------------------------------------------------------------------------------
-    Column("n_on_first", "participants whose stored schedule begins with a haptics-ON trial", "count", "integer",
-           files=_ORDER),
-    Column("n_off_first", "participants whose stored schedule begins with a haptics-OFF trial", "count",
-           "integer", files=_ORDER),
-    Column("median_diff_on_first", "median ON − OFF difference of the ON-first participants", _MU, decimals=4),
-    Column("median_diff_off_first", "median ON − OFF difference of the OFF-first participants", _MU, decimals=4),
-    Column("u_statistic", "Mann–Whitney U of the ON-first against the OFF-first differences", "rank count",
-           decimals=1),
-    Column("p_value", "two-sided p-value of the Mann–Whitney U test (scipy.stats.mannwhitneyu)", "probability",
-           files=_ORDER, significant=4),
-    Column("computable", "false when the groups are too small to test (see note)", type="boolean", files=_ORDER),
-    Column("note", "why not tested; empty otherwise", type="text", files=_ORDER),
-    # -- error-window sensitivity --------------------------------------------------------------------
-    Column("analysis", f"ON vs OFF (the Wilcoxon tests, Holm across the {_FAMILY} measures) or speed-accuracy "
-           "(r_rm)",
-           type="text", files=_SENS),
-    Column("measure", "the measure tested, or r_rm off / on / all", type="text", files=_SENS),
-    Column("error_window", "the error window of this row: cue (from the cue, the approach included) or "
-           "first_contact", type="text", files=_SENS),
-    Column("n", "pairs ranked (ON vs OFF) or trials correlated (r_rm)", "count", "integer", files=_SENS),
-    Column("estimate", "Hodges–Lehmann shift ON − OFF (unit of the measure), or r_rm", "see analysis",
-           files=_SENS, decimals=4),
-    Column("ci_low", "lower end of its confidence interval", "see analysis", files=_SENS, decimals=4),
-    Column("ci_high", "upper end of its confidence interval", "see analysis", files=_SENS, decimals=4),
-    Column("p_value", "p-value (Wilcoxon signed-rank test, or the t test of r_rm)", "probability", files=_SENS,
-           significant=4),
-    Column("p_holm", f"Holm-adjusted p across the {_FAMILY} measures in this window (ON vs OFF only)",
-           "probability",
-           files=_SENS, significant=4),
-    Column("conclusion", "what the row concludes at p < 0.05 (Holm's p for the tests)", type="text", files=_SENS),
-    Column("differs", "true when this measure's conclusion is not the same in every error window", type="boolean",
-           files=_SENS),
     Column("error_window", "the error window of RMSE, Max AE and peak force in this file: cue (from the cue, the "
            "approach from 0 N included: the paper's 'during the trial') or first_contact", type="text"),
     # -- incomplete sessions, deviations, provenance --------------------------------------------------
@@ -358,7 +267,26 @@ COLUMNS: tuple[Column, ...] = (
            "grouping)", type="text", label="first mode"),
     # -- sessions -----------------------------------------------------------------------------------
     Column("kind", "training or experiment (training sessions are not analysed)", type="text"),
-    Column("status", "running (interrupted, resumable), completed or aborted", type="text"),
+    Column("status", "completed, aborted (by the experimenter), interrupted (the program ended during it: stored as "
+           "running, resumable, as haptic-study sessions says) or in progress (a live process runs it)",
+           type="text"),
+    Column("site", "the site of the session's database (report --site); empty when none was named; its participant "
+           "codes are then SITE:CODE", type="text", files=("sessions.csv",)),
+    Column("protocol_version", "version of the protocol the session ran", type="integer", files=("sessions.csv",)),
+    Column("training_enabled", "the protocol has a training session before the experiment", type="boolean"),
+    Column("training_cap_s", "the protocol's training trial cap (training.seconds_per_target_per_mode): each "
+           "training trial ends at a completed hold or after this long", "s", decimals=_T),
+    Column("training_live_aid", "the protocol shows a live force gauge and the target band in training "
+           "(training.live_force_aid)", type="boolean"),
+    Column("training_required", "an experiment session needed a completed training session "
+           "(training.required)", type="boolean"),
+    Column("n_trials", "trials the session stored (aborted ones included)", "count", "integer",
+           files=("sessions.csv",)),
+    Column("n_success", "of them, successful", "count", "integer", files=("sessions.csv",)),
+    Column("trial_time_s", "the session's trials' summed length, cue to end (a training session: the time "
+           "trained)", "s", files=("sessions.csv",), decimals=_T),
+    Column("live_force_aid", "the session showed the live force gauge and band (a training session whose protocol "
+           "asks for it; never an experiment session)", type="boolean", files=("sessions.csv",)),
     Column("seed", "study seed the session's schedule was drawn with", type="integer"),
     Column("started_at", "when the session started, ISO 8601 UTC", type="text", label="started"),
     Column("ended_at", "when the session ended, ISO 8601 UTC; empty if interrupted", type="text", label="ended"),

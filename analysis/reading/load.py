@@ -108,6 +108,9 @@ class StudyData:
         started_at_s, last_record_s`` (session clock; empty before schema version 3).
     include_incomplete
         Whether experiment sessions that did not complete are analysed.
+    sites
+        Each database's site (``report --site``), in the order of :attr:`databases`; ``""`` for every one when no
+        site was named.  A named site's participant codes are re-coded ``SITE:CODE`` in every table.
     tasks
         Each session's task (:mod:`protocol.tasks`), by database and session id (:meth:`task_of`).
     metrics
@@ -122,6 +125,7 @@ class StudyData:
     events: pd.DataFrame = field(default_factory=pd.DataFrame)
     include_incomplete: bool = False
     runs: pd.DataFrame = field(default_factory=pd.DataFrame)
+    sites: tuple[str, ...] = ()
     tasks: Mapping[tuple[str, int], Task] = field(default_factory=dict)
 
     @property
@@ -166,10 +170,17 @@ def _protocol_fields(protocol_json: str, where: str) -> tuple[dict[str, object],
     try:
         proto = json.loads(protocol_json)
         task = stored_task(proto, where, AnalysisError)
+        training = proto.get("training") or {}
         return {
             "protocol_name": str(proto.get("name", "")),
+            "protocol_version": proto.get("version", np.nan),
             **task.parameters(),
             "max_trial_s": float(proto["trial"]["max_trial_s"]),
+            # the training the protocol asked for (a training session runs its trials with this cap)
+            "training_enabled": bool(training.get("enabled", False)),
+            "training_cap_s": float(training.get("seconds_per_target_per_mode", np.nan)),
+            "training_live_aid": bool(training.get("live_force_aid", False)),
+            "training_required": bool(training.get("required", False)),
         }, task
     except AnalysisError:
         raise
@@ -267,7 +278,22 @@ def _read_all(
     return all_sessions, all_trials, all_events, damage, all_runs, tasks
 
 
-def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False) -> StudyData:
+def _recode_sites(all_sessions: list[pd.DataFrame], sites: Sequence[str] | None) -> tuple[str, ...]:
+    """Each database's site in a ``site`` column of its sessions, its participant codes re-coded ``SITE:CODE`` (in
+    memory: the file is not touched); the sites, one per database (``""`` each when none was named)."""
+    named = tuple(str(x) for x in sites) if sites else ("",) * len(all_sessions)
+    if len(named) != len(all_sessions):
+        raise AnalysisError(f"--site: {len(named)} sites for {len(all_sessions)} databases; give one --site after "
+                            "each --db (report --db a.db --site A --db b.db --site B)")
+    for frame, site in zip(all_sessions, named, strict=True):
+        frame.insert(1, "site", site)
+        if site:
+            frame["participant_code"] = site + ":" + frame["participant_code"].astype(str)
+    return named
+
+
+def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False,
+               sites: Sequence[str] | None = None) -> StudyData:
     """Read and merge study databases.
 
     Parameters
@@ -278,6 +304,10 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         Analyse the finished trials of experiment sessions that did not complete (ended by the experimenter,
         or interrupted and not resumed).  By default they are left out (``excluded = "incomplete session"``)
         and the report lists them with the reason.
+    sites
+        One site per database (``report --db A.db --site A --db B.db --site B``): each database's participant codes
+        are re-coded ``SITE:CODE`` as they are read (so two sites' ``P01`` are two participants) and every session
+        and trial carries its ``site``.  None: no sites (``site`` empty).
 
     Returns
     -------
@@ -292,6 +322,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         no experiment trial to analyse.
     """
     all_sessions, all_trials, all_events, damage, all_runs, tasks = _read_all(paths)
+    named = _recode_sites(all_sessions, sites)
     # each task's parameters are columns of the sessions and trials tables (the paper's: tolerance_fraction, hold_s)
     params = list(dict.fromkeys(name for task in tasks.values() for name in task.parameters()))
     sessions = pd.concat(all_sessions, ignore_index=True)
@@ -300,7 +331,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         if len(dbs) > 1:
             raise AnalysisError(
                 f"participant code {code!r} appears in {dbs[0]} and {dbs[1]}; the merge refuses to guess "
-                "whether they are one person (analyse the databases separately or re-code one)"
+                "whether they are one person (name each database's site, report --db A.db --site A --db B.db "
+                "--site B, which re-codes them A:P01 and B:P01; or analyse the databases separately)"
             )
     experiment = sessions["kind"] == "experiment"
     sessions["analysed"] = experiment & ((sessions["status"] == "completed") | include_incomplete)
@@ -308,7 +340,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     runs = pd.concat(all_runs, ignore_index=True)
     sessions["n_runs"] = _run_counts(sessions, events, runs)
     trials = pd.concat(all_trials, ignore_index=True)
-    meta = sessions[["database", "session_id", "participant_code", "participant_number", "kind", "status",
+    meta = sessions[["database", "site", "session_id", "participant_code", "participant_number", "kind", "status",
                      *params, "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
     )
@@ -322,7 +354,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     trials["excluded"] = excluded
     # the study's stored metrics (a database whose tasks do not produce one has it empty)
     kept = [f"stored_{m.name}" for m in stored(metrics_of(tasks.values()))]
-    order = ["database", "participant_code", "participant_number", "session_id", "session_kind", "session_status",
+    order = ["database", "site", "participant_code", "participant_number", "session_id", "session_kind",
+             "session_status",
              "trial_id", "trial_index", "target_label", "target_force_n", "haptic_mode", "outcome", "started_at_s",
              "ended_at_s", *kept, "n_samples", "abort_reason", "abort_cause", *HEALTH_COLUMNS,
              *RECORD_COLUMNS,
@@ -337,7 +370,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                                 "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=events, include_incomplete=include_incomplete, runs=runs, tasks=tasks)
+                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
 
 
 def _run_counts(sessions: pd.DataFrame, events: pd.DataFrame, runs: pd.DataFrame) -> pd.Series:

@@ -23,7 +23,7 @@ from protocol.tasks.window import ERROR_WINDOWS, TrialMetrics
 
 __all__ = ["ERROR_WINDOWS", "TCT_POLICIES", "MetricOptions", "TrialTable", "compute_trials"]
 
-#: How a failed trial enters TCT: left out (default) or censored at the trial cap.
+#: How a failed trial enters TCT: left out, or censored at the trial cap (the default, :class:`MetricOptions`).
 TCT_POLICIES = ("successful", "censored")
 
 @dataclass(frozen=True, slots=True)
@@ -38,14 +38,16 @@ class MetricOptions:
         asked to do from the cue on); ``"first_contact"``: from the first
         sample above :data:`protocol.tasks.window.CONTACT_THRESHOLD_N`.
     tct_policy
-        ``"successful"`` (default): TCT is averaged over successful trials
-        only, and is undefined for a participant with no success in a mode;
-        ``"censored"``: a failed trial counts as the trial cap (12 s), so
-        every trial contributes and slow failures are not rewarded.
+        ``"censored"`` (default: the paper's figure's reading, "across all targets and trials"): a failed trial
+        counts as the trial cap (12 s), so every trial contributes, slow failures are not rewarded and the mean is
+        the restricted mean time to success; ``"successful"`` (the paper's text's definition): TCT is averaged
+        over successful trials only, conditioned on success, and undefined for a participant with no success in a
+        mode.  The report shows both readings with their n, and TCT as a time to event
+        (:mod:`analysis.stats.survival`).
     """
 
     error_window: str = "cue"
-    tct_policy: str = "successful"
+    tct_policy: str = "censored"
 
     def __post_init__(self) -> None:
         if self.error_window not in ERROR_WINDOWS:
@@ -225,6 +227,10 @@ def _table(inc: pd.DataFrame, results: list[list[_Recomputed]], options: MetricO
             "first_contact_s": first_contact,
             **{m.censored: np.where(success, values[m.name], cap) for m in metrics if m.censored},
             "database": inc["database"],
+            # a study pooled from named sites (report --site): each trial's, for the models' site terms and the
+            # tables per site; none otherwise, so a one-site study's tables are as they were
+            **({"site": inc["site"].astype(str)} if "site" in inc and inc["site"].astype(str).str.len().any()
+               else {}),
         }
     )
     return TrialTable(out, int(from_samples.sum()), int(missing.sum()), disagree,

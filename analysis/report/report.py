@@ -11,7 +11,8 @@ ON vs OFF, draws the paper's figures and writes::
     DIR/participants_by_target.csv
     DIR/stats.csv              one row per metric (paired Wilcoxon ON vs OFF, Holm across metrics)
     DIR/stats_by_target.csv    the same within each target
-    DIR/speed_accuracy.csv     TCT–RMSE rank correlation per mode
+    DIR/speed_accuracy.csv     speed against accuracy (r_rm) per mode, every reading
+    DIR/time_to_event.csv, kaplan_meier.csv, survival_model.csv   TCT as a time to event
     DIR/sessions.csv           every session read, with what was excluded
     DIR/codebook.csv           every column of every CSV: meaning, unit, type
     DIR/figures/*.png, *.pdf, *.svg
@@ -59,12 +60,22 @@ from analysis.report.study_record import (
     resumed_sessions,
 )
 from analysis.report.withdrawals import study_withdrawals, withdrawals_html
-from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests, per_participant
+from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests, per_participant, unbalanced_cells
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
 from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
-from analysis.stats.sensitivity import max_ae_from_approach, window_sensitivity
+from analysis.stats.sensitivity import max_ae_from_approach, sensitivity
+from analysis.stats.sites import site_differences, site_tests, sites_in
+from analysis.stats.survival import CoxFit, cox_model, kaplan_meier, time_to_event_summary
 from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
-from analysis.stats.trade import participant_slopes, rm_caption, speed_accuracy, tct_column, trade_model, trade_pairs
+from analysis.stats.trade import (
+    DEFAULT_READING,
+    participant_slopes,
+    rm_caption,
+    tct_column,
+    trade_model,
+    trade_pairs,
+    trade_readings,
+)
 from analysis.stats.wilcoxon import WilcoxonResult
 from foundation.outdir import REPORT_MARKER, check_output_folder, write_output_folder
 from foundation.parallel import default_workers, run_tasks
@@ -144,6 +155,7 @@ class _Within:
     """The within-participant analyses: the trade, the error-window sensitivity, learning and order, the record."""
 
     sa: pd.DataFrame
+    trade: pd.DataFrame
     trade_fit: ModelFit | None
     slopes: pd.DataFrame
     sensitivity: pd.DataFrame
@@ -158,13 +170,19 @@ class _Within:
     reruns: tuple[int, int]
     damaged: pd.DataFrame
     resumed: pd.DataFrame
+    km: pd.DataFrame
+    tte: pd.DataFrame
+    cox: CoxFit
+    unbalanced: pd.DataFrame
+    site_stats: pd.DataFrame
+    site_diff: pd.DataFrame
 
 
 def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
              confidence: float, progress: Progress | None, workers: int | None,
-             include_incomplete: bool = False) -> _Analysis:
+             include_incomplete: bool = False, sites: Sequence[str] | None = None) -> _Analysis:
     """Read the study, recompute every trial, aggregate per participant and test ON vs OFF (overall, per target)."""
-    study = load_study(databases, include_incomplete=include_incomplete)
+    study = load_study(databases, include_incomplete=include_incomplete, sites=sites)
     table = compute_trials(study, options, progress=progress, workers=workers)
     trials = table.trials
     overall = per_participant(trials, options)
@@ -208,18 +226,26 @@ def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_o
     trials = table.trials
     prov, warn = provenance(study)
     warn = condition_warnings(study) + warn  # pooled conditions first: they qualify every test
+    trade = trade_readings(table, confidence=confidence)
+    cox = cox_model(trials, target_order, confidence)
+    km = kaplan_meier(trials, confidence)
+    several = len(sites_in(trials)) > 1
     return _Within(
-        sa=speed_accuracy(trials, options, confidence=confidence),
+        sa=trade[trade["reading"] == DEFAULT_READING.key].reset_index(drop=True), trade=trade,
         trade_fit=None,
-        slopes=participant_slopes(trials, options),
-        sensitivity=window_sensitivity(table, options, zero_method=zero_method, confidence=confidence),
+        slopes=participant_slopes(trials),
+        sensitivity=sensitivity(table, options, trade, cox, zero_method=zero_method, confidence=confidence),
         max_ae_approach=max_ae_from_approach(table),
         learning=[],
         order=order_check(overall, first_modes(study.sessions)),
         curve=learning_curve(trials, tct_column(options)),
         incomplete=incomplete_sessions(study), deviations=deviations(study), provenance=prov,
         provenance_warnings=warn, reruns=aborted_reruns(study), damaged=damaged_trials(study),
-        resumed=resumed_sessions(study),
+        resumed=resumed_sessions(study), km=km, tte=time_to_event_summary(trials, km), cox=cox,
+        unbalanced=unbalanced_cells(trials),
+        site_stats=site_tests(overall, trials, zero_method=zero_method, confidence=confidence) if several
+        else pd.DataFrame(),
+        site_diff=site_differences(overall, trials) if several else pd.DataFrame(),
     )
 
 
@@ -240,16 +266,19 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
               "from first contact")
     no_tct = (int(a.overall.groupby("participant_code")["tct_s"].apply(lambda v: v.isna().any()).sum())
               if "tct_s" in a.overall.columns else 0)  # (a study whose tasks have no TCT: none)
-    tct = ("TCT over successful trials only" + (f"; {plural(no_tct, 'participant')} without a success in a mode "
-                                                 "have no TCT there" if no_tct else "")
-           if options.tct_policy == "successful" else "TCT with failed trials counted at the trial cap")
+    tct = ("TCT over successful trials only, conditioned on success" + (
+        f"; {plural(no_tct, 'participant')} without a success in a mode have no TCT there" if no_tct else "")
+           if options.tct_policy == "successful" else
+           "TCT over every trial, a failure counted at the trial cap (the paper's figure); over successful trials "
+           "only and as a time to event: see Task completion time")
     learning = ("Descriptive; the trial-number effects at fixed mode and target are the models' (report table)."
                 if a.n_participants >= MIN_PARTICIPANTS else
                 f"Descriptive only: {plural(a.n_participants, 'participant')}, too few for the learning models "
                 f"(at least {MIN_PARTICIPANTS}).")
     metrics = a.study.metrics
     notes = {"tct": tct + ".", "errors": f"{windowed_words(metrics)}: error window {window}.",
-             "trade": f"{tct}; RMSE: error window {window}. Lines: each participant's own least-squares fit.",
+             "trade": "Every trial that reached the band, failed or not: rise time from first contact to the band, "
+                      "RMSE over the 1 s after; lines: each participant's own least-squares fit.",
              "learning": learning}
     for group in figure_groups(metrics):  # a figure with a secondary measure says whose marks are not Holm's
         if any(m.role is Role.SECONDARY for m in group.metrics):
@@ -260,7 +289,7 @@ def _notes(a: _Analysis, options: MetricOptions) -> dict[str, str]:
 def _fit_models(trials: pd.DataFrame, target_order: list[str], options: MetricOptions,
                 confidence: float) -> tuple[ModelFit, list[ModelFit]]:
     """Every model of the report, each fitted once: the trade's mixed model and one learning model per outcome."""
-    return (trade_model(trials, options, confidence=confidence),
+    return (trade_model(trials, confidence=confidence),
             learning_models(trials, target_order, tct_column(options), confidence))
 
 
@@ -269,7 +298,7 @@ def _work(kind: str, args: tuple[Any, ...], kwargs: dict[str, Any], folder: str,
     :mod:`analysis.plots.model_figures`) or fit the models."""
     if kind == "models":
         return _fit_models(*args)
-    if kind in ("trade_slopes", "learning_curves"):
+    if kind in ("trade_slopes", "learning_curves", "km_curves"):
         return figures.save(getattr(model_figures, kind)(*args, **kwargs), folder, name)
     return figures.render(kind, args, kwargs, folder, name)
 
@@ -282,7 +311,6 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
     overall, by_target, trials = a.overall, a.by_target, a.trials
     notes = _notes(a, options)
     common = {str(r.haptic_mode): (float(r.slope_s_per_n), rm_caption(r)) for r in a.within.sa.itertuples()}
-    tct_label = "TCT (s), successful trials" if options.tct_policy == "successful" else "TCT (s), failures at the cap"
     bars = dict(target_order=a.target_order)
     tasks: list[tuple[str, tuple[Any, ...], dict[str, Any], str, str]] = [
         ("models", (trials, a.target_order, options, a.confidence), {}, "", "models"),  # the longest task first
@@ -291,14 +319,18 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
           for g in figure_groups(a.study.metrics)),
         ("paired_lines", (overall, [m for m in TESTED_METRICS if m in overall.columns], marks_overall), {}, "paired",
          "paired"),
-        ("trade_slopes", (trade_pairs(trials, options), a.within.slopes, common, tct_label),
+        ("trade_slopes", (trade_pairs(trials), a.within.slopes, common, DEFAULT_READING.speed_label,
+                          DEFAULT_READING.accuracy_label),
          {"note": notes["trade"]}, "speed_accuracy", "speed_accuracy"),
+        *((("km_curves", (a.within.km, a.within.tte, a.within.cox), {}, "tct_survival", "tct_survival"),)
+          if any(m.success_only for m in a.study.metrics) else ()),  # (a task with a TCT: its time to event)
         ("learning_curves", (a.within.curve,), {"note": notes["learning"]}, "learning", "learning"),
     ]
     titles = []
     for ex in _example_trials(trials):
         number = int(ex["trial_index"]) + 1  # trials are numbered from 1 for people (see analysis.reading.codebook)
-        name = f"pipeline_{ex['participant_code']}_s{int(ex['session_id'])}_trial{number}"
+        code = str(ex["participant_code"]).replace(":", "-")  # a site's code, A:P01, in a file name
+        name = f"pipeline_{code}_s{int(ex['session_id'])}_trial{number}"
         title = (f"{ex['participant_code']}, session {int(ex['session_id'])}, trial {number}: {ex['target_label']} "
                  f"{ex['target_force_n']:g} N, haptics {str(ex['haptic_mode']).upper()}, {ex['outcome']}")
         band = a.study.task_of(ex["database"], ex["session_id"]).screen(TrialTarget.of(ex))
@@ -365,6 +397,7 @@ def build_report(
     workers: int | None = None,
     power: bool = False,
     include_incomplete: bool = False,
+    sites: Sequence[str] | None = None,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -392,6 +425,9 @@ def build_report(
     include_incomplete
         Analyse the finished trials of experiment sessions that did not complete (by default they are left
         out; either way the report lists them with the reason).
+    sites
+        One site per database (``report --site``): codes re-coded ``SITE:CODE``, a site term in the models, the
+        tests within each site and each site's seed and protocol in the methods (:func:`load_study`).
 
     Returns
     -------
@@ -403,7 +439,7 @@ def build_report(
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete)
+    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete, sites)
     results: dict[str, pd.DataFrame] = {}
     fill = functools.partial(_write, a=a, databases=databases, options=options, zero_method=zero_method,
                              confidence=confidence, power=power, workers=workers, results=results)

@@ -7,9 +7,10 @@
 from __future__ import annotations
 
 import datetime as dt
+import functools
 import html
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,7 @@ import pandas as pd
 from analysis.reading import codebook
 from analysis.reading.load import StudyData
 from analysis.reading.metrics import MetricOptions, TrialTable
-from analysis.report import report_sections
+from analysis.report import report_design, report_sections, report_tct
 from analysis.report.html_parts import fmt as _fmt
 from analysis.report.html_parts import fmt_p, fmt_w, plural
 from analysis.report.html_parts import html_table as _html_table
@@ -50,6 +51,12 @@ def _measure_label(metric: str) -> str:
     return codebook.label("participants.csv", metric)
 
 
+def _with_interval(v: float, row: pd.Series) -> str:
+    """A rank-biserial r with its interval where the row has one."""
+    lo, hi = row.get("rank_biserial_ci_low", np.nan), row.get("rank_biserial_ci_high", np.nan)
+    return _fmt(v) + (f" [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(lo) else "")
+
+
 def _stats_html(frame: pd.DataFrame, file: str, metrics: Sequence[Metric], lead: Sequence[str] = (),
                 caption: str = "") -> str:
     """A test table for the page: the HL estimate and interval in one column; each distinct note once, numbered.
@@ -73,7 +80,8 @@ def _stats_html(frame: pd.DataFrame, file: str, metrics: Sequence[Metric], lead:
                 label += f" <sup>{k}</sup>"
         e, lo, hi = row["hl_estimate"], row["hl_ci_low"], row["hl_ci_high"]
         hl = f"{_fmt(e)} [{_fmt(lo)}, {_fmt(hi)}]" if np.isfinite(e) else "–"
-        special = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p}
+        special: dict[str, Callable[[Any], str]] = {"statistic": fmt_w, "p_value": fmt_p, "p_holm": fmt_p,
+                   "rank_biserial": functools.partial(_with_interval, row=row)}
         cells = "".join(f"<td class=\"m\">{label}</td>" if c == "metric" else f"<td>{hl}</td>" if c == "hl" else
                         f"<td>{special[c](row.get(c)) if c in special else _fmt(row[c])}</td>" for c in cols)
         cls = ' class="nc"' if not bool(row["computable"]) else ""
@@ -151,8 +159,9 @@ def power_html(section: Any, metrics: Sequence[Metric]) -> str:
 
 def _bar_figures(pngs: dict[str, bytes], metrics: Sequence[Metric]) -> str:
     """The bar figures, one per figure of the study's metrics (:func:`analysis.report.measures.figure_groups`)."""
-    caption = ('<p class="caption">Bars: mean ± SD across participants; dots: participants; marks: Wilcoxon p after '
-               "Holm's correction (n.s. not significant, n/c not computable).</p>")
+    caption = ('<p class="caption">Bars: median across participants, whiskers: interquartile range (the tests are '
+               "on medians; the data are skewed); dots: participants; n under each bar: participants with a value; "
+               "marks: Wilcoxon p after Holm's correction (n.s. not significant, n/c not computable).</p>")
     return "\n".join(f"<figure><h2>{html.escape(g.heading)}</h2>{caption if i == 0 else ''}"
                      f"{_img(pngs[g.key], g.alt)}</figure>" for i, g in enumerate(figure_groups(metrics)))
 
@@ -285,8 +294,9 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
            "(that participant's pair is left out of the TCT test and counted)"
            if options.tct_policy == "successful" else
            f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
+    design = report_design.training_methods(study) + report_design.sites_methods(study)
     return (
-        _data_methods(study, table, excluded, n_participants, within)
+        _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
         f"filtered, gravity- and bias-compensated contact force. {html.escape(_task_methods(study, cap))} "
         f"{windowed_words(metrics)} "
@@ -295,9 +305,11 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         "protocol.metrics, the same code that judged the trials live. "
         f"{report_sections.window_fact(within, options)}</p>"
         f"<p><b>Aggregation.</b> For each participant and haptic mode, the success rate is successes / trials and "
-        f"{mean_words(metrics)} are means over trials; TCT is {tct}. Across participants, the "
-        f"headline figures and the bars show the mean ± SD (n − 1), as <code>haptic-study run</code> prints them, "
-        f"and the dots are participants; the test tables give medians, the summary the Wilcoxon test is about. "
+        f"{mean_words(metrics)} are means over trials; TCT is {tct}. A participant × mode whose trials are not spread "
+        f"equally over the targets (an incomplete session analysed) has the mean of its per-target values, each "
+        f"target weighing the same. Across participants, the bars and the headline show the median with its "
+        f"interquartile range, the summary the Wilcoxon test is about (the headline gives the mean ± SD (n − 1) "
+        f"beside it, as <code>haptic-study run</code> prints it), and the dots are participants. "
         f"Trials are numbered from 1 in every table and figure (the database's trial_index + 1); every column of "
         f"every CSV file is described, with its unit, in codebook.csv.</p>"
         f"<p><b>Tests.</b> {html.escape(methods_text(zero_method, confidence))} Holm's step-down correction is "
@@ -307,6 +319,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         f"(* p &lt; 0.05, ** p &lt; 0.01, *** p &lt; 0.001, n/c not computable). "
         f"{html.escape(secondary_note(metrics))}{' Its mark uses its own p. ' if secondary(metrics) else ''}"
         "No p-value in this report comes from trials pooled as if independent.</p>"
+        + (report_tct.tct_methods(within, options, confidence) if any(m.success_only for m in metrics) else "")
         + report_sections.methods_within(within, options, confidence, metrics)
         + latency_paragraph(study)
     )
@@ -370,25 +383,31 @@ def _origin(study: StudyData) -> tuple[str, str]:
 
 
 def _headline(per: pd.DataFrame, stats: pd.DataFrame, marks: dict[str, str], metrics: Sequence[Metric]) -> str:
-    """One card per primary measure of the study: mean ± SD across participants OFF → ON, and the Holm-adjusted
-    test."""
+    """One card per primary measure of the study: the median [IQR] across participants OFF → ON (what the test is
+    about), the mean ± SD beside it (what the paper's figures show), and the Holm-adjusted test."""
     by_metric = stats.set_index("metric")
     cards = []
     for m in (p.participant for p in primary(metrics)):
         name = codebook.exported_name(m)
-        parts, ns = [], []
+        parts, iqr, means, ns = [], [], [], []
         for mode in ("off", "on"):
-            mean, sd, n = mean_sd(per.loc[per["haptic_mode"] == mode, name])
-            parts.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
+            v = per.loc[per["haptic_mode"] == mode, name].to_numpy(dtype=float)
+            v = v[np.isfinite(v)]
+            mean, sd, n = mean_sd(v)
+            q1, med, q3 = (np.percentile(v, (25, 50, 75)) if n else (np.nan,) * 3)
+            parts.append(_fmt(med))
+            iqr.append(f"[{_fmt(q1)}, {_fmt(q3)}]" if n > 1 else "[one value]")
+            means.append(_fmt(mean) + (f" ± {_fmt(sd)}" if n > 1 else ""))  # one participant: no spread, no ±
             ns.append(n)
         who = plural(ns[0], "participant") if ns[0] == ns[1] else f"{ns[0]} (OFF) / {ns[1]} (ON) participants"
-        what = "mean ± SD" if min(ns) > 1 else "mean ± SD (no SD of one participant)" if max(ns) > 1 else "mean"
         p_holm = by_metric.at[name, "p_holm"]
         n_test = by_metric.at[name, "n"]  # the ranked pairs: zero differences and missing sides left out
         test = (f"Wilcoxon n = {int(n_test)}, p (Holm) = {fmt_p(p_holm)}, {html.escape(marks.get(m, ''))}"
                 if np.isfinite(p_holm) else "Wilcoxon test not computable")
+        spread = (f"median across {who}, IQR {iqr[0]} → {iqr[1]} (mean ± SD {means[0]} → {means[1]})"
+                  if max(ns) > 1 else f"{who}: one value per mode, no spread")
         cards.append(f"<div>{html.escape(_measure_label(name))}<b>{parts[0]} → {parts[1]}</b>"
-                     f"<small>OFF → ON, {what} across {who}; {test}</small></div>")  # fmt_p escapes
+                     f"<small>OFF → ON, {spread}; {test}</small></div>")  # fmt_p escapes
     return f'<div class="key">{"".join(cards)}</div>'
 
 
@@ -479,8 +498,10 @@ def _head_html(study: StudyData, table: TrialTable, options: MetricOptions, n_pa
 def _sessions_html(sess: pd.DataFrame, within: Any) -> str:
     """The sessions read: which code ran each, and the table of sessions.csv's main columns."""
     sess_cols = ["database", "session_id", "participant_code", "participant_number", "kind", "status", "rig", "seed",
-                 "started_at", "ended_at", "n_runs", "software_version", "software_commit", "software_dirty",
-                 "analysed"]
+                 "started_at", "n_runs", "n_trials", "trial_time_s", "live_force_aid", "software_version",
+                 "software_commit", "software_dirty", "analysed"]
+    if sess["site"].astype(str).str.len().any():
+        sess_cols.insert(1, "site")
     short = {"started_at": _when, "ended_at": _when, "software_commit": report_sections.short_commit}
     return (f"<h2>Sessions</h2>\n{report_sections.provenance_html(within)}\n"
             f"{_html_table(sess, 'sessions.csv', sess_cols, cell=short)}")
@@ -519,7 +540,7 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     stats, per = tables["stats.csv"], tables["participants.csv"]
     win = report_sections.window_words(options.error_window)
     metrics = study.metrics
-    timed = any(m.success_only for m in metrics)  # a task with a completion time: the trade of TCT against RMSE
+    timed = any(m.success_only for m in metrics)  # a task with a completion time: its TCT sections and the trade
     per_cols = ["participant_code", "participant_number", "haptic_mode",
                 *(c for c in codebook.WIDE_MEASURES if c in per.columns)]  # the study's measures
     return f"""<!DOCTYPE html>
@@ -535,8 +556,10 @@ Medians are across participants; the HL shift is the Hodges–Lehmann estimate o
 <h3>Within each target</h3>
 {_stats_html(tables["stats_by_target.csv"], "stats_by_target.csv", metrics, lead=["target_label"],
              caption=f"ON vs OFF within each target; {windowed_words(metrics)} {win}")}
+{report_design.sites_html(within, tables, study)}
 {report_sections.sensitivity_html(within, options, metrics, confidence)}
 {_bar_figures(pngs, metrics)}
+{report_tct.tct_html(within, tables, options, pngs["tct_survival"], confidence) if timed else ""}
 <figure><h2>Per participant</h2>{_img(pngs["paired"], "paired per-participant changes")}
 <p class="caption">Grey lines: participants (spread a little sideways so equal values stay apart); black: the median
 across participants.</p></figure>

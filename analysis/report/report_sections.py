@@ -28,7 +28,7 @@ from analysis.stats.learning import MIN_ORDER_GROUP
 from analysis.stats.models import MIN_PARTICIPANTS
 from analysis.stats.sensitivity import ALPHA
 from analysis.stats.trade import TRADE_MODEL_TERMS
-from protocol.metrics import Metric, family_word, tested
+from protocol.metrics import Metric, tested
 
 __all__ = ["deviations_html", "incomplete_html", "methods_within", "provenance_html", "resumed_html", "secondary_html",
            "sensitivity_html", "short_commit", "top_warnings", "trade_html", "window_fact", "window_words"]
@@ -85,70 +85,101 @@ def _model_table(fe: pd.DataFrame, labels: dict[str, str], caption: str, confide
 
 def trade_html(within: Any, tables: dict[str, pd.DataFrame], options: MetricOptions, png: bytes,
                confidence: float = 0.95) -> str:
-    """The speed–accuracy section: r_rm per mode, the mixed model's fixed effects, the slopes figure."""
+    """The speed–accuracy section: r_rm per mode under the default reading with its conclusion, the sensitivity
+    readings beside it, the mixed model's fixed effects and the slopes figure."""
     from analysis.stats.models import fixed_effects
 
-    win = window_words(options.error_window)
     rows = "".join(
-        f"<tr><td class=\"m\">{_MODE[r.haptic_mode]}</td><td>{int(r.n_trials)}</td><td>{int(r.n_participants)}</td>"
-        f"<td>{fmt(r.r_rm)}</td><td>{_ci(r.ci_low, r.ci_high)}</td><td>{int(r.df)}</td><td>{fmt_p(r.p_value)}</td>"
-        f"<td>{fmt(r.slope_s_per_n)}</td><td class=\"wrap\">{html.escape(str(r.note))}</td></tr>"
-        for r in within.sa.itertuples())
-    sa = (f'<div class="scroll"><table class="within"><caption>Repeated-measures correlation of TCT with RMSE; RMSE '
-          f"{win}</caption><thead><tr><th>trials of</th><th>trials</th><th>participants</th><th>r_rm</th>"
-          f"<th>{_ci_heading(confidence)}</th><th>df</th><th>p</th><th>slope (s/N)</th><th>note</th></tr></thead>"
-          f"<tbody>{rows}</tbody></table></div>")
-    labels = {k: v for k, v in TRADE_MODEL_TERMS.items()}
+        f"<tr><td class=\"m\">{html.escape(_READING[r.reading])}</td><td class=\"m\">{_MODE[r.haptic_mode]}</td>"
+        f"<td>{int(r.n_trials)}</td><td>{int(r.n_participants)}</td><td>{fmt(r.r_rm)}</td>"
+        f"<td>{_ci(r.ci_low, r.ci_high)}</td><td>{int(r.df)}</td><td>{fmt_p(r.p_value)}</td>"
+        f"<td class=\"wrap\"><i>{html.escape(str(r.conclusion))}</i>"
+        f"{'<br>' + html.escape(str(r.note)) if str(r.note) else ''}</td></tr>"
+        for r in within.trade.itertuples())
+    sa = (f'<div class="scroll"><table class="within"><caption>Repeated-measures correlation of speed with accuracy, '
+          f"every reading (speed_accuracy.csv); the first is the report's</caption><thead><tr><th>reading</th>"
+          f"<th>trials of</th><th>trials</th><th>participants</th><th>r_rm</th><th>{_ci_heading(confidence)}</th>"
+          f"<th>df</th><th>p</th><th>conclusion</th></tr></thead><tbody>{rows}</tbody></table></div>")
+    labels = {**TRADE_MODEL_TERMS, **{t: f"{t.removeprefix('site_')} − the first site (s)"
+                                      for t in fixed_effects([within.trade_fit])["term"] if str(t).startswith("site_")}}
     model = _model_table(fixed_effects([within.trade_fit]), labels,
-                         f"Linear mixed model TCT ~ RMSE × mode + (1 | participant), REML; RMSE {win}", confidence)
-    tct = "successful trials" if options.tct_policy == "successful" else "every trial, failures at the trial cap"
-    return (f"<h2>Speed against accuracy</h2><p>Is a participant's faster trial a less accurate one? Asked within "
-            f"participants ({tct}): the repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017) is the "
-            "common within-participant association of TCT with RMSE, free of the differences between people that "
-            "a correlation over pooled trials mixes in. A negative r_rm: faster trials had larger errors (a trade); "
-            "positive: slow trials were also the inaccurate ones. The mixed model gives the slope of TCT on RMSE "
-            "with haptics OFF and how it differs ON, with participant as a random intercept. No p-value here "
+                         "Linear mixed model rise time ~ RMSE after reach × mode (+ site) + (1 + mode | "
+                         "participant), REML", confidence)
+    return ("<h2>Speed against accuracy</h2><p>Is a participant's faster trial a less accurate one? Speed and "
+            "accuracy are measured on parts of the trial that do not contain each other: the <b>rise time</b>, from "
+            "first contact to the force first reaching the band, and the <b>RMSE over the 1 s after</b> it reached "
+            "the band, a window of the same length in every trial (docs/science.md §6.1). Every trial that reached "
+            "the band counts, failed or not. The repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017) is "
+            "the common within-participant association, free of the differences between people. A negative r_rm: a "
+            "participant's faster rises were followed by larger errors. It is called a trade only where its interval "
+            "lies below zero <i>and</i> the cue reading agrees. The cue and first-contact readings (TCT of the "
+            "successful trials against RMSE from the cue or from first contact) are kept as sensitivity readings: "
+            "from the cue, the approach at 0 N is in both TCT and RMSE, so a trial whose hold came quickly has a "
+            "larger share of approach in its RMSE -- a negative correlation the window builds. No p-value here "
             f"treats trials as independent.</p>{sa}{model}"
-            f"<figure>{img(png, 'TCT against RMSE per mode, each participant line and the common slope')}</figure>"
-            "<p class=\"caption\">Dots: trials; thin lines: each participant's own least-squares line; dashed: the "
-            "common within-participant slope (r_rm). speed_accuracy.csv, speed_accuracy_model.csv and "
+            f"<figure>{img(png, 'rise time against RMSE after reach per mode, participant lines, the common slope')}"
+            "</figure><p class=\"caption\">Dots: trials; thin lines: each participant's own least-squares line; "
+            "dashed: the common within-participant slope (r_rm). speed_accuracy.csv, speed_accuracy_model.csv and "
             "speed_accuracy_slopes.csv have every number.</p>")
 
 
+_READING = {"phases": "rise time / RMSE after reach", "cue": "TCT / RMSE from the cue",
+            "first_contact": "TCT / RMSE from first contact", "censored": "every trial, failure at the cap",
+            "successful": "successful trials only", "time_to_event": "time to event (Cox HR ON : OFF)"}
+#: The error window's readings (the same keys as two of the trade's).
+_WINDOW = {"cue": "from the cue", "first_contact": "from first contact"}
+_BLOCKS = {"error window": "The error window of RMSE and Max AE (Hodges–Lehmann shift ON − OFF [CI], Holm within "
+                           "the window)",
+           "TCT reading": "The reading of TCT (HL shift ON − OFF [CI] with Holm's p in the reading's family; the "
+                          "hazard ratio of success ON : OFF [CI])",
+           "speed-accuracy": "The speed–accuracy reading (r_rm [CI]; a trade only under the first, where the cue "
+                             "reading agrees)"}
+
+
 def sensitivity_html(within: Any, options: MetricOptions, metrics: Sequence[Metric], confidence: float = 0.95) -> str:
-    """The headline results under both error windows side by side; a differing conclusion is flagged."""
+    """The headline results under every reading side by side, a block per choice; a differing conclusion flagged."""
     sens = within.sensitivity
-    windows = list(dict.fromkeys(sens["error_window"]))
-    head = "".join(f"<th>{html.escape(w)}{' (this report)' if w == options.error_window else ''}</th>"
-                   for w in windows)
-    body = []
-    for (analysis, measure), g in sens.groupby(["analysis", "measure"], sort=False):
-        g = g.set_index("error_window")
-        label = (codebook.label("participants.csv", codebook.exported_name(measure)) if analysis == "ON vs OFF"
-                 else f"r_rm, {_MODE[measure.split()[-1]]}")
-        cells = []
-        for w in windows:
-            r = g.loc[w]
-            p = f"p (Holm) = {fmt_p(r['p_holm'])}" if analysis == "ON vs OFF" else f"p = {fmt_p(r['p_value'])}"
-            cells.append(f"<td class=\"wrap\">{fmt(r['estimate'])} {_ci(r['ci_low'], r['ci_high'])}, {p}<br>"
-                         f"<i>{html.escape(str(r['conclusion']))}</i></td>")
-        differs = bool(g["differs"].any())
-        flag = '<td class="flag">differs</td>' if differs else "<td>same</td>"
-        cls = ' class="differs"' if differs else ""
-        body.append(f'<tr{cls}><td class="m">{html.escape(analysis)}</td>'
-                    f'<td class="m">{html.escape(label)}</td>{"".join(cells)}{flag}</tr>')
+    tables = []
+    for analysis, block in sens.groupby("analysis", sort=False):
+        readings = list(dict.fromkeys(block["reading"]))
+        mine = {w for w in readings if block.loc[block["reading"] == w, "default"].any()}
+        names = _WINDOW if analysis == "error window" else _READING
+        head = "".join(f"<th>{html.escape(names.get(w, w))}{' (this report)' if w in mine else ''}</th>"
+                       for w in readings)
+        body = []
+        for measure, g in block.groupby("measure", sort=False):
+            g = g.set_index("reading")
+            label = (codebook.label("participants.csv", codebook.exported_name(measure)) if analysis != "speed-accuracy"
+                     else f"r_rm, {_MODE[measure.split()[-1]]}")
+            cells = []
+            for w in readings:
+                if w not in g.index:
+                    cells.append("<td></td>")
+                    continue
+                r = g.loc[w]
+                holm = math.isfinite(float(r["p_holm"]))
+                shown = fmt_p(r["p_holm"] if holm else r["p_value"])  # "&lt; 0.0001" carries its own sign
+                p = f"p{' (Holm)' if holm else ''} {shown if shown.startswith('&lt;') else '= ' + shown}"
+                cells.append(f"<td class=\"wrap\">{fmt(r['estimate'])} {_ci(r['ci_low'], r['ci_high'])}, {p}, "
+                             f"n = {int(r['n'])}<br><i>{html.escape(str(r['conclusion']))}</i></td>")
+            differs = bool(g["differs"].any())
+            flag = '<td class="flag">differs</td>' if differs else "<td>same</td>"
+            cls = ' class="differs"' if differs else ""
+            body.append(f'<tr{cls}><td class="m">{html.escape(label)}</td>{"".join(cells)}{flag}</tr>')
+        level = f"[{confidence * 100:g} % CI]"  # the level the intervals were computed at
+        caption = html.escape(_BLOCKS[analysis].replace("[CI]", level))
+        tables.append(f'<div class="scroll"><table class="within sens"><caption>{caption}'
+                      f"</caption><thead><tr><th>measure</th>{head}<th>conclusion</th></tr></thead>"
+                      f'<tbody>{"".join(body)}</tbody></table></div>')
     n_diff = sens.drop_duplicates(["analysis", "measure"])["differs"].sum()
     verdict = (f'<p class="warn">{plural(int(n_diff), "conclusion")} {"differs" if n_diff == 1 else "differ"} '
-               "between the error windows (flagged): report the window with the result.</p>" if n_diff else
-               "<p>Every conclusion is the same in both windows.</p>")
-    return (f"<h3>Does the error window change the answer?</h3><p>{windowed_words(metrics)} depend on the window "
-            f"they are taken over. {window_fact(within, options)} The same tests of the primary measures (Holm across "
-            f"the {family_word(metrics)} in each window) and the speed–accuracy correlations, in both windows; "
-            f"conclusions at p &lt; {ALPHA:g}. Cells: the Hodges–Lehmann shift ON − OFF (or r_rm) "
-            f"[{_ci_heading(confidence)}].</p>{verdict}"
-            f'<div class="scroll"><table class="within sens"><caption>Sensitivity to the error window '
-            f"(sensitivity.csv)</caption><thead><tr><th>analysis</th><th>measure</th>{head}<th>conclusion</th></tr>"
-            f'</thead><tbody>{"".join(body)}</tbody></table></div>')
+               "between the readings (flagged): report the reading with the result.</p>" if n_diff else
+               "<p>Every conclusion is the same under every reading.</p>")
+    return (f"<h3>Does a choice of the analysis change the answer?</h3><p>{windowed_words(metrics)} depend on the "
+            f"window they are taken over, TCT on how a failed trial enters it, and the speed–accuracy association on "
+            f"how speed and accuracy are measured. {window_fact(within, options)} Each choice's readings side by side "
+            f"(sensitivity.csv), conclusions at p &lt; {ALPHA:g}; the report's own reading is marked.</p>{verdict}"
+            + "".join(tables))
 
 
 def window_fact(within: Any, options: MetricOptions) -> str:
@@ -263,42 +294,61 @@ def top_warnings(within: Any, included: bool) -> str:
                    "see Trials that did not count.")
     n_diff = int(within.sensitivity.drop_duplicates(["analysis", "measure"])["differs"].sum())
     if n_diff:
-        out.append(f"{plural(n_diff, 'conclusion')} depend{'s' if n_diff == 1 else ''} on the error window; see "
-                   "the sensitivity table.")
+        out.append(f"{plural(n_diff, 'conclusion')} depend{'s' if n_diff == 1 else ''} on a choice of the analysis "
+                   "(the error window, the TCT reading or the speed–accuracy reading); see the sensitivity table.")
+    uneven = within.unbalanced
+    if len(uneven):
+        out.append(f"{plural(len(uneven), 'participant × mode')} {'has' if len(uneven) == 1 else 'have'} trials "
+                   "spread unequally over the targets (" + "; ".join(
+                       f"{r.participant_code} {str(r.haptic_mode).upper()}: {r.counts}" for r in uneven.itertuples())
+                   + "): each such mode's values are the mean of the per-target values, every target weighing the "
+                   "same (participants.csv, targets_balanced).")
     return "".join(f'<p class="warn">{html.escape(w)}</p>' for w in out)
 
 
 def _gee_words(metrics: Sequence[Metric]) -> str:
     """The learning models' words for a yes/no outcome of the study, if it has one ("" otherwise)."""
     yes_no = [m.name for m in tested(metrics) if m.boolean]
-    return (", a logistic GEE with an exchangeable working correlation within a participant and robust standard "
-            f"errors for {listed(yes_no)}" if yes_no else "")
+    return (", a logistic GEE with an exchangeable working correlation within a participant and Mancl and DeRouen's "
+            "bias-reduced sandwich standard errors (the plain sandwich is too small with few clusters) for "
+            f"{listed(yes_no)}" if yes_no else "")
 
 
 def methods_within(within: Any, options: MetricOptions, confidence: float, metrics: Sequence[Metric]) -> str:
     """The methods sentences of the within-participant analyses (the trade, the windows, learning and order)."""
-    tct = "successful trials" if options.tct_policy == "successful" else "trials (failures at the trial cap)"
     fitted = all(f.fitted for f in within.learning)
     learning_n = ("" if fitted else f" With fewer than {MIN_PARTICIPANTS} participants the models are not fitted "
                   "and the section says so.")
     return (
-        f"<p><b>Speed–accuracy trade.</b> Over the {tct} with a TCT and an RMSE, the within-participant "
-        "association of TCT with RMSE is the repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017), per "
-        "mode and over both modes with each participant × mode as its own group: the correlation of the "
+        "<p><b>Speed–accuracy trade.</b> Speed is each trial's rise time, from first contact (task force above "
+        "the contact threshold) to the first sample at or above the band's lower edge; accuracy is the RMSE of the "
+        "task force against F* over the fixed 1 s from that sample (registry metrics rise_time_s and reach_rmse_n). "
+        "The two windows do not overlap and the accuracy window has the same length in every trial, so neither "
+        "measure holds the other (docs/science.md §6.1; a null model of participants whose accuracy is independent "
+        "of their speed shows no trade in the tests). Every trial with both counts, failed or not. Their "
+        "within-participant association is the repeated-measures correlation r_rm (Bakdash &amp; Marusich 2017), "
+        "per mode and over both modes with each participant × mode as its own group: the correlation of the "
         "participant-centred values, with N − k − 1 degrees of freedom (N trials, k groups), the p-value of the "
-        f"common slope's t test and a {confidence:.0%} Fisher-z interval with SE = 1/√(df − 3), as the rmcorr R "
-        "package computes them; an r_rm within 10<sup>−12</sup> of ±1 (a perfect line, whose last digit depends on "
-        "the computer's arithmetic) is reported as ±1 with p = 0 on every computer. A linear mixed model "
-        "TCT ~ RMSE × mode with a random intercept per participant "
-        "(statsmodels MixedLM, REML; Powell's method, then L-BFGS) gives the slope with haptics OFF and its ON − OFF "
-        "difference, with Wald "
-        "intervals. Each participant's own least-squares line is drawn; no pooled-trial p-value is computed.</p>"
-        "<p><b>Error windows.</b> Every analysis uses the window named in the header; the sensitivity table repeats "
-        f"the primary ON-vs-OFF tests (Holm within each window) and r_rm with {windowed_words(metrics)} from the cue "
-        f"and from first contact, and flags each conclusion (at p &lt; {ALPHA:g}) that differs between them.</p>"
+        "common slope's t test, as the rmcorr R package computes them, and a "
+        f"{confidence:.0%} Fisher-z interval of r_rm as a partial correlation, SE = 1/√(df − 1), as pingouin's rm_corr "
+        "computes it; an r_rm within 10<sup>−12</sup> of ±1 (a perfect line, whose last digit depends on "
+        "the computer's arithmetic) is reported as ±1 with p = 0 on every computer. It is called a trade only where "
+        "that interval lies below zero and the cue reading "
+        "(TCT of the successful trials against RMSE from the cue, the report's reading before this one, kept as a "
+        "sensitivity with the first-contact one) also does. A linear mixed model rise time ~ RMSE after reach × mode "
+        "with a random intercept and a random slope of mode per participant (and a fixed effect per site) "
+        "(statsmodels MixedLM, REML; Powell's method, then L-BFGS) gives the slope with haptics OFF and its "
+        "ON − OFF difference, with Wald intervals. Each participant's own least-squares line is drawn; no "
+        "pooled-trial p-value is computed.</p>"
+        "<p><b>Sensitivity.</b> Every analysis uses the window and TCT reading named in the header; the "
+        f"sensitivity table repeats the primary ON-vs-OFF tests with {windowed_words(metrics)} from the cue and from "
+        "first contact (Holm within each window), TCT's test in both readings with the Cox model's hazard ratio, and "
+        f"r_rm in every speed–accuracy reading, and flags each conclusion (at p &lt; {ALPHA:g}) that differs.</p>"
         "<p><b>Secondary analysis: learning and order.</b> Per outcome, a trial-level model with haptic mode, "
         "target, their interaction and the trial's number in the session (its position, aborted trials counted) "
-        "as fixed effects and participant as the unit: linear mixed models with a random intercept (REML) for "
+        "(and a site term where sites were pooled) as fixed effects and participant as the unit: linear mixed "
+        "models with a random intercept and a random slope of mode per participant (REML; the intercept alone, "
+        "said in the note, where the slope cannot be fitted) for "
         f"{listed([m.short for m in tested(metrics) if not m.boolean])}{_gee_words(metrics)} (statsmodels); the "
         "trial-number coefficient is the "
         "change per trial. "

@@ -17,6 +17,8 @@ import pandas as pd
 
 from analysis.reading import codebook
 from analysis.reading.load import StudyData
+from analysis.report.study_record import session_activity, status_words
+from analysis.stats.aggregate import by_mode
 from analysis.stats.loop_health import health_summary, health_table
 from analysis.stats.models import fixed_effects
 from protocol.metrics import METRICS, Metric, primary
@@ -60,12 +62,17 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
     exp = functools.partial(codebook.export, rounded=rounded)
     by_participant = _ByParticipant(trials)
     t = trials_csv(by_participant(trials, "session_id", "trial_index"), error_window, rounded)
-    per = exp(by_participant(overall, "haptic_mode"), "participants.csv")
+    uneven = set(zip(within.unbalanced["participant_code"], within.unbalanced["haptic_mode"], strict=True))
+    balanced = overall.assign(targets_balanced=[(c, m) not in uneven for c, m in
+                                                zip(overall["participant_code"], overall["haptic_mode"], strict=True)])
+    per = exp(by_participant(balanced, "haptic_mode"), "participants.csv")
     per_t = exp(by_participant(by_target, "haptic_mode", "target_label"), "participants_by_target.csv")
-    wide = _wide(per, by_participant)
+    wide = _wide(per, overall, by_participant)
     st = exp(stats, "stats.csv")
     st_t = exp(stats_by_target, "stats_by_target.csv")
     sess = study.sessions.drop(columns=["clock"], errors="ignore")  # (the page says what the clock means)
+    sess = sess.merge(session_activity(study), on=["database", "session_id"], how="left")
+    sess["status"] = [status_words(st_, w) for st_, w in zip(sess["status"], sess["writer"], strict=True)]
     sess["database"] = sess["database"].map(os.path.basename)
     health = health_table(study)
     health["database"] = health["database"].map(os.path.basename)
@@ -78,12 +85,15 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         "stats_by_target.csv": st_t,
         "sensitivity.csv": exp(within.sensitivity.assign(
             measure=within.sensitivity["measure"].map(codebook.exported_name)), "sensitivity.csv"),
-        "speed_accuracy.csv": exp(within.sa, "speed_accuracy.csv"),
+        "speed_accuracy.csv": exp(within.trade, "speed_accuracy.csv"),
         "speed_accuracy_model.csv": exp(fixed_effects([within.trade_fit]), "speed_accuracy_model.csv"),
         "speed_accuracy_slopes.csv": exp(by_participant(within.slopes, "haptic_mode"),
                                                      "speed_accuracy_slopes.csv"),
         "learning_models.csv": exp(fixed_effects(within.learning), "learning_models.csv"),
         "order_check.csv": exp(within.order, "order_check.csv"),
+        "time_to_event.csv": exp(within.tte, "time_to_event.csv"),
+        "kaplan_meier.csv": exp(within.km, "kaplan_meier.csv"),
+        "survival_model.csv": exp(within.cox.table(), "survival_model.csv"),
         "sessions.csv": exp(sess, "sessions.csv"),
         "incomplete_sessions.csv": exp(within.incomplete, "incomplete_sessions.csv"),
         "deviations.csv": exp(within.deviations, "deviations.csv"),
@@ -91,8 +101,12 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         "loop_health_by_participant.csv": exp(by_participant(health_summary(health)),
                                                           "loop_health_by_participant.csv"),
     }
+    if len(within.site_stats):  # sites named: the tests within each site, and the sites compared
+        tables["stats_by_site.csv"] = exp(within.site_stats, "stats_by_site.csv")
+        tables["site_differences.csv"] = exp(within.site_diff, "site_differences.csv")
     for name in _WINDOWED_FILES:  # every table with an RMSE or Max AE names the window it was taken over
-        tables[name]["error_window"] = error_window
+        if name in tables:
+            tables[name]["error_window"] = error_window
     return tables
 
 
@@ -112,8 +126,10 @@ class _ByParticipant:
         return out.sort_values(["_rank", *keys], kind="stable").drop(columns="_rank").reset_index(drop=True)
 
 
-def _wide(per: pd.DataFrame, by_participant: _ByParticipant) -> pd.DataFrame:
-    """participants_wide.csv's rows (before export): each measure of participants.csv as an OFF and an ON column."""
+def _wide(per: pd.DataFrame, overall: pd.DataFrame, by_participant: _ByParticipant) -> pd.DataFrame:
+    """participants_wide.csv's rows (before export): each measure of participants.csv as an OFF and an ON column, and
+    each tested measure's ON − OFF difference as the test ranks it (from the unrounded values, rounded to
+    :data:`analysis.reading.codebook.DIFFERENCE_DECIMALS`)."""
     measures = [m for m in codebook.WIDE_MEASURES if m in per.columns]  # the study's
     wide = per.pivot(index=["participant_code", "participant_number"], columns="haptic_mode", values=measures)
     wide.columns = [codebook.wide_name(measure, mode) for measure, mode in wide.columns]
@@ -122,6 +138,12 @@ def _wide(per: pd.DataFrame, by_participant: _ByParticipant) -> pd.DataFrame:
     for c in wide_cols:
         if c.startswith("n_"):
             wide[c] = wide[c].astype("Int64")  # a participant without trials in a mode: empty, not 0.0
+    sources = {codebook.exported_name(c): c for c in overall.columns}
+    for name in (n for n in codebook.DIFF_MEASURES if n in sources):  # the study's tested measures
+        source = sources[name]
+        both = by_mode(overall, source)
+        diff = np.round(both["on"] - both["off"], codebook.DIFFERENCE_DECIMALS)
+        wide[codebook.wide_name(name, "diff")] = wide["participant_code"].map(diff).to_numpy(float)
     return wide
 
 
@@ -139,8 +161,8 @@ def trials_csv(trials: pd.DataFrame, error_window: str, rounded: bool = True) ->
 
 #: The files whose numbers depend on the error window (sensitivity.csv names it per row).
 _WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by_target.csv",
-                   "stats.csv", "stats_by_target.csv", "speed_accuracy.csv", "speed_accuracy_model.csv",
-                   "speed_accuracy_slopes.csv", "learning_models.csv", "order_check.csv")
+                   "stats.csv", "stats_by_target.csv", "stats_by_site.csv", "site_differences.csv",
+                   "learning_models.csv", "order_check.csv")
 
 
 def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = (),

@@ -35,11 +35,35 @@ from protocol.study.labels import plural
 COMMIT_UNKNOWN = "not known (installed from a wheel, or recorded before commits were stored)"
 
 __all__ = ["COMMIT_UNKNOWN", "aborted_reruns", "code_label", "condition_warnings", "damaged_trials", "deviations",
-           "incomplete_sessions", "provenance", "resumed_sessions"]
+           "incomplete_sessions", "provenance", "resumed_sessions", "session_activity", "status_words"]
 
 #: The columns of :func:`resumed_sessions`.
 RESUMED_COLUMNS = ("database", "participant_code", "session_id", "kind", "run", "n_runs", "interrupted_at_s",
                    "resumed_at_s", "cut_trial", "break_s", "reason")
+
+
+def status_words(status: object, writer: object = "") -> str:
+    """A session's status as ``haptic-study sessions`` says it: a stored ``running`` is ``interrupted`` (nothing
+    runs it: resumable) or ``in progress`` (a live writer holds it); completed and aborted as stored."""
+    if status != "running":
+        return str(status)
+    return "in progress" if isinstance(writer, str) and writer else "interrupted"
+
+
+def session_activity(study: StudyData) -> pd.DataFrame:
+    """What each session ran, by ``(database, session_id)``: ``n_trials`` (trials stored, aborted included),
+    ``n_success``, ``trial_time_s`` (the trials' summed length, cue to end) and ``live_force_aid`` (a training session
+    run with the live force gauge and band on the participant's screen)."""
+    t = study.trials
+    per = t.assign(length_s=t["ended_at_s"] - t["started_at_s"], ok=t["outcome"] == "success").groupby(
+        ["database", "session_id"]).agg(n_trials=("trial_id", "size"), n_success=("ok", "sum"),
+                                        trial_time_s=("length_s", "sum"))
+    s = study.sessions[["database", "session_id", "kind"]].join(per, on=["database", "session_id"])
+    s["n_trials"] = s["n_trials"].fillna(0).astype("int64")
+    s["n_success"] = s["n_success"].fillna(0).astype("int64")
+    aid = study.sessions.get("training_live_aid", pd.Series(False, index=study.sessions.index)).astype(bool)
+    s["live_force_aid"] = (s["kind"] == "training") & aid
+    return s.drop(columns="kind")
 
 
 def incomplete_sessions(study: StudyData) -> pd.DataFrame:
@@ -73,7 +97,8 @@ def incomplete_sessions(study: StudyData) -> pd.DataFrame:
             why = (f"interrupted after {finished} of {designed} trials and not resumed (haptic-study run --resume "
                    f"{r.participant_code} continues it)")
         rows.append({"database": os.path.basename(str(r.database)), "participant_code": r.participant_code,
-                     "session_id": int(r.session_id), "status": r.status, "n_finished": finished,
+                     "session_id": int(r.session_id), "status": status_words(r.status, getattr(r, "writer", "")),
+                     "n_finished": finished,
                      "n_designed": r.n_designed, "n_aborted": aborted, "analysed": bool(r.analysed),
                      "reason": f"{r.participant_code}, session {int(r.session_id)}: {why}"})
     return pd.DataFrame(rows, columns=["database", "participant_code", "session_id", "status", "n_finished",

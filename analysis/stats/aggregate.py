@@ -14,8 +14,9 @@ import numpy as np
 import pandas as pd
 
 from analysis.reading.metrics import MetricOptions
+from analysis.stats.effect_interval import rank_biserial_interval
 from analysis.stats.holm import results_frame
-from analysis.stats.wilcoxon import WilcoxonResult, paired_wilcoxon
+from analysis.stats.wilcoxon import DEFAULT_DECIMALS, WilcoxonResult, paired_wilcoxon
 from protocol.metrics import METRICS, Metric, primary, tested
 
 __all__ = [
@@ -27,6 +28,7 @@ __all__ = [
     "metrics_in",
     "mode_tests",
     "per_participant",
+    "unbalanced_cells",
 ]
 
 #: Every primary measure of the registry (per-participant columns), in report order: a study's are those of them its
@@ -67,8 +69,15 @@ def per_participant(
         Columns ``participant_code, haptic_mode, [target_label,] n_trials``, then per metric of the registry
         that ``trials`` has (:func:`metrics_in`), in order: a yes/no outcome's count and rate (``n_success,
         success_rate``), a success-only metric's mean and the trials that entered it (``tct_s, n_tct``), every other
-        metric's mean (``rmse_n, max_ae_n, time_in_band_s, peak_force_n``, ...).
+        metric's mean (``rmse_n, max_ae_n, time_in_band_s, peak_force_n``, ...).  Without the target split, a
+        participant × mode whose trials are not spread equally over the targets (:func:`unbalanced_cells`: an
+        incomplete session analysed) has each value the mean of its per-target values, so every target weighs the
+        same as in the design; counts stay counts.
     """
+    if not by_target and "target_label" in trials.columns:
+        cells = unbalanced_cells(trials)
+        if len(cells):
+            return _balanced(trials, options, cells)
     keys = ["participant_code", "haptic_mode"] + (["target_label"] if by_target else [])
     metrics = metrics_in(trials)
     t = trials.copy()
@@ -87,6 +96,39 @@ def per_participant(
         else:
             columns[m.name] = g[m.name].mean()
     return pd.DataFrame(columns).reset_index()
+
+
+def unbalanced_cells(trials: pd.DataFrame) -> pd.DataFrame:
+    """The participant × mode cells whose analysed trials are not spread equally over the study's targets.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``participant_code, haptic_mode, counts`` (``GENTLE 2, FIRM 3``, the targets in order of force): empty for a
+        design whose sessions all completed.
+    """
+    targets = list(trials.drop_duplicates("target_label").sort_values("target_force_n")["target_label"]) \
+        if "target_force_n" in trials.columns else sorted(trials["target_label"].unique())
+    counts = trials.groupby(["participant_code", "haptic_mode", "target_label"], observed=True).size().unstack(
+        "target_label").reindex(columns=targets).fillna(0).astype(np.int64)
+    uneven = counts[counts.nunique(axis=1) > 1]
+    return pd.DataFrame({"participant_code": [c for c, _ in uneven.index], "haptic_mode": [m for _, m in uneven.index],
+                         "counts": [", ".join(f"{t} {int(n)}" for t, n in row.items())
+                                    for _, row in uneven.iterrows()]},
+                        columns=["participant_code", "haptic_mode", "counts"])
+
+
+def _balanced(trials: pd.DataFrame, options: MetricOptions, cells: pd.DataFrame) -> pd.DataFrame:
+    """:func:`per_participant` with each unbalanced cell's values the mean of its per-target values."""
+    plain = per_participant(trials.drop(columns="target_label"), options)
+    per_t = per_participant(trials, options, by_target=True)
+    value_cols = [c for c in plain.columns if c not in ("participant_code", "haptic_mode", "n_trials")
+                  and not c.startswith("n_")]
+    means = per_t.groupby(["participant_code", "haptic_mode"], sort=True)[value_cols].mean()
+    out = plain.set_index(["participant_code", "haptic_mode"])
+    for key in zip(cells["participant_code"], cells["haptic_mode"], strict=True):
+        out.loc[key, value_cols] = means.loc[key, value_cols].to_numpy(float)
+    return out.reset_index()
 
 
 def mean_sd(values: np.ndarray | pd.Series) -> tuple[float, float, int]:
@@ -152,9 +194,18 @@ def mode_tests(
     """
     if metrics is None:
         metrics = [m for m in TESTED_METRICS if m in per_part.columns]
-    results = []
+    results, intervals = [], []
     for m in metrics:
         wide = by_mode(per_part, m)
         off, on = wide["off"].to_numpy(dtype=float), wide["on"].to_numpy(dtype=float)
-        results.append(paired_wilcoxon(off, on, metric=m, zero_method=zero_method, confidence=confidence))
-    return results, results_frame(results, family=PRIMARY_METRICS)
+        res = paired_wilcoxon(off, on, metric=m, zero_method=zero_method, confidence=confidence)
+        results.append(res)
+        # the effect size's interval, on the differences the test ranked (rounded as it rounds them)
+        d = np.round(on - off, DEFAULT_DECIMALS)
+        intervals.append(rank_biserial_interval(d, zero_method, confidence) if res.computable else
+                         (np.nan, np.nan, ""))
+    frame = results_frame(results, family=PRIMARY_METRICS)
+    frame["rank_biserial_ci_low"] = [lo for lo, _, _ in intervals]
+    frame["rank_biserial_ci_high"] = [hi for _, hi, _ in intervals]
+    frame["rank_biserial_ci_method"] = [how for _, _, how in intervals]
+    return results, frame

@@ -5,8 +5,9 @@ reviewer reads the ON-vs-OFF tests: did participants improve over the session (l
 effect of feedback depend on which mode a participant met first (order, carry-over)?
 
 * :func:`learning_models` -- per tested metric (:mod:`protocol.metrics`), one trial-level model
-  ``metric ~ haptic mode × target + trial number + (1 | participant)``: a linear mixed model for TCT, RMSE
-  and Max AE, a logistic GEE (exchangeable within a participant) for success
+  ``metric ~ haptic mode × target + trial number (+ site) + (1 + mode | participant)``: a linear mixed model with a
+  random slope of mode for TCT, RMSE and Max AE, a logistic GEE (exchangeable within a participant, Mancl–DeRouen
+  standard errors) for success
   (:mod:`analysis.stats.models`).  The trial-number coefficient is the change per trial, at fixed mode and target.
 * :func:`order_check` -- each participant's ON − OFF difference (their per-mode means) compared between
   participants whose stored schedule began with an ON trial and those whose began with an OFF trial
@@ -25,7 +26,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.stats.aggregate import TESTED_METRICS, by_mode, metrics_in
-from analysis.stats.models import ModelFit, design, fit_gee_logistic, fit_mixed
+from analysis.stats.models import ModelFit, design, fit_gee_logistic, fit_mixed, site_terms
 from protocol.metrics import Metric
 
 __all__ = ["MIN_ORDER_GROUP", "first_modes", "learning_curve", "learning_models", "order_check", "trial_terms"]
@@ -50,6 +51,7 @@ def trial_terms(trials: pd.DataFrame, target_order: list[str]) -> dict[str, pd.S
         terms[f"target_{label}"] = is_t
         terms[f"haptics_on_x_target_{label}"] = on * is_t
     terms["trial_number"] = trials["trial_index"].astype(float) + 1.0
+    terms.update(site_terms(trials))  # a study of several sites: a fixed effect per site after the first
     return terms
 
 
@@ -77,7 +79,8 @@ def learning_models(trials: pd.DataFrame, target_order: list[str], tct_column: s
             fits.append(fit_gee_logistic("learning", m.name, trials[m.name].astype(float), exog, groups, confidence))
         else:
             y = trials[tct_column if m.success_only else m.name].astype(float)
-            fits.append(fit_mixed("learning", m.label, m.unit, y, exog, groups, confidence))
+            fits.append(fit_mixed("learning", m.label, m.unit, y, exog, groups, confidence,
+                                  slope=(trials["haptic_mode"] == "on").astype(float)))
     return fits
 
 

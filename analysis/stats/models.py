@@ -3,11 +3,18 @@
 Two kinds, each fitted once per outcome:
 
 * a **linear mixed model** (:class:`statsmodels.regression.mixed_linear_model.MixedLM`, REML, a random
-  intercept per participant; optimisers :data:`MIXED_METHODS`) for continuous outcomes (TCT, RMSE, Max AE);
+  intercept per participant and, where the design has one, a random slope of haptic mode -- each participant their
+  own effect of feedback, so the fixed effect of mode is judged against how much that effect varies between people;
+  optimisers :data:`MIXED_METHODS`) for continuous outcomes (TCT, RMSE, Max AE);
 * **generalised estimating equations** (:class:`statsmodels.genmod.generalized_estimating_equations.GEE`,
-  binomial, logit link, exchangeable working correlation within a participant, robust standard errors) for
-  success, a binary outcome -- the population-averaged logistic model, which does not need the numerical
-  integration a logistic mixed model does and is stable with few participants.
+  binomial, logit link, exchangeable working correlation within a participant) for success, a binary outcome --
+  the population-averaged logistic model, which does not need the numerical integration a logistic mixed model
+  does and is stable with few participants.  Its sandwich standard errors are Mancl and DeRouen's (2001)
+  bias-reduced ones (statsmodels' ``cov_type="bias_reduced"``): the plain sandwich is too small with the 10-20
+  clusters a study like this has.
+
+A study pooled from several sites has a fixed effect per site after the first in every model
+(:func:`site_terms`).
 
 The design matrix is built here from named columns (:func:`design`), so each coefficient has a readable
 term name and no formula parser is loaded; :func:`fixed_effects` turns a fit into one tidy table.  Below
@@ -17,10 +24,12 @@ variance estimated from fewer people is little more than a guess.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -28,7 +37,7 @@ import pandas as pd
 from protocol.study.labels import plural
 
 __all__ = ["FIXED_EFFECT_COLUMNS", "MIN_PARTICIPANTS", "MIXED_METHODS", "ModelFit", "design", "fit_gee_logistic",
-           "fit_mixed", "fixed_effects"]
+           "fit_mixed", "fixed_effects", "site_terms"]
 
 #: Fewest participants for which a model with a participant effect is fitted.
 MIN_PARTICIPANTS = 6
@@ -88,6 +97,15 @@ def design(frame: pd.DataFrame, columns: dict[str, pd.Series | np.ndarray | floa
     return out
 
 
+def site_terms(frame: pd.DataFrame) -> dict[str, pd.Series | np.ndarray | float]:
+    """A fixed effect per site after the first (``site_B``: 1 for site B's rows), where ``frame`` has a ``site``
+    column naming more than one site; none otherwise."""
+    if "site" not in frame.columns:
+        return {}
+    sites = sorted({str(s) for s in frame["site"] if isinstance(s, str) and s})
+    return {f"site_{s}": (frame["site"] == s).astype(float) for s in sites[1:]}
+
+
 def _unfitted(model: str, outcome: str, scale: str, method: str, n: int, k: int, note: str) -> ModelFit:
     empty = pd.Series(dtype=float)
     return ModelFit(model, outcome, scale, method, empty, empty, empty, empty, empty, empty, n, k, False, note, {})
@@ -120,8 +138,8 @@ MIXED_METHODS = ["powell", "lbfgs"]
 
 
 def fit_mixed(model: str, outcome: str, scale: str, y: pd.Series, exog: pd.DataFrame, groups: pd.Series,
-              confidence: float = 0.95) -> ModelFit:
-    """A linear mixed model ``y ~ exog + (1 | groups)``, REML, statsmodels' default optimisers.
+              confidence: float = 0.95, slope: pd.Series | None = None) -> ModelFit:
+    """A linear mixed model ``y ~ exog + (1 [+ slope] | groups)``, REML, the optimisers of :data:`MIXED_METHODS`.
 
     Parameters
     ----------
@@ -132,26 +150,51 @@ def fit_mixed(model: str, outcome: str, scale: str, y: pd.Series, exog: pd.DataF
         left out.
     confidence
         Level of the Wald intervals.
+    slope
+        A random slope of this column per participant beside the random intercept (the haptic mode, 0/1), with
+        their covariance; None: a random intercept only.  Where the slope's variance cannot be estimated (the fit
+        fails) the model is fitted with the intercept alone and says so in its note.
 
     Returns
     -------
     ModelFit
     """
-    from statsmodels.regression.mixed_linear_model import MixedLM
-
     method = "linear mixed model, REML (statsmodels MixedLM), random intercept per participant"
     keep = np.isfinite(y.to_numpy(float)) & np.isfinite(exog.to_numpy(float)).all(axis=1)
     y, exog, groups = y[keep], exog[keep], groups[keep]
     why = _too_few(groups.to_numpy(), exog.shape[1])
     if why:
         return _unfitted(model, outcome, scale, method, int(keep.sum()), int(groups.nunique()), why)
+    fallback = ""
+    if slope is not None:
+        fit = _fit_mixed(y, exog, groups, method + " and random slope of haptic mode", confidence,
+                         slope[keep].to_numpy(float))
+        # a fit that warned (a Hessian not positive definite, an invalid value) or whose errors are not finite
+        # is not trusted: the intercept alone, said in the note
+        if not isinstance(fit, str) and fit[9] and np.isfinite(np.asarray(fit[2], float)).all():
+            return ModelFit(model, outcome, scale, *fit)
+        why = fit if isinstance(fit, str) else (fit[10] or "it did not converge")
+        fallback = f"the random slope of haptic mode could not be fitted ({why}): random intercept only"
+    fit = _fit_mixed(y, exog, groups, method, confidence, None)
+    if isinstance(fit, str):
+        return _unfitted(model, outcome, scale, method, int(keep.sum()), int(groups.nunique()), fit)
+    plain = ModelFit(model, outcome, scale, *fit)
+    return dataclasses.replace(plain, note="; ".join(filter(None, (fallback, plain.note))))
+
+
+def _fit_mixed(y: pd.Series, exog: pd.DataFrame, groups: pd.Series, method: str, confidence: float,
+               slope: np.ndarray | None) -> tuple[Any, ...] | str:
+    """One MixedLM fit: the fields of :class:`ModelFit` after ``scale``, or why it failed."""
+    from statsmodels.regression.mixed_linear_model import MixedLM
+
+    exog_re = None if slope is None else np.column_stack([np.ones(len(slope)), slope])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            res = MixedLM(y.to_numpy(float), exog, groups=groups.to_numpy()).fit(reml=True, method=MIXED_METHODS)
+            res = MixedLM(y.to_numpy(float), exog, groups=groups.to_numpy(), exog_re=exog_re).fit(
+                reml=True, method=MIXED_METHODS)
         except (np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
-            return _unfitted(model, outcome, scale, method, int(keep.sum()), int(groups.nunique()),
-                             f"the fit failed: {exc}")
+            return f"the fit failed: {exc}"
     names = list(exog.columns)
     ci = res.conf_int(alpha=1.0 - confidence).loc[names]
     participant_var = float(np.asarray(res.cov_re)[0, 0])
@@ -164,9 +207,10 @@ def fit_mixed(model: str, outcome: str, scale: str, y: pd.Series, exog: pd.DataF
         notes.append("the participant variance is estimated at zero (participants differ no more than their trials "
                      "do): the fixed effects are those of ordinary least squares")
     extra = {"participant_var": participant_var, "residual_var": float(res.scale)}
-    return ModelFit(model, outcome, scale, method, res.fe_params[names], res.bse_fe[names], res.tvalues[names],
-                    res.pvalues[names], ci[0], ci[1], int(res.nobs), int(groups.nunique()), converged,
-                    "; ".join(notes), extra)
+    if slope is not None:
+        extra["mode_slope_var"] = float(np.asarray(res.cov_re)[1, 1])
+    return (method, res.fe_params[names], res.bse_fe[names], res.tvalues[names], res.pvalues[names], ci[0], ci[1],
+            int(res.nobs), int(groups.nunique()), converged, "; ".join(notes), extra)
 
 
 def fit_gee_logistic(model: str, outcome: str, y: pd.Series, exog: pd.DataFrame, groups: pd.Series,
@@ -179,7 +223,8 @@ def fit_gee_logistic(model: str, outcome: str, y: pd.Series, exog: pd.DataFrame,
     from statsmodels.genmod.cov_struct import Exchangeable
     from statsmodels.genmod.generalized_estimating_equations import GEE
 
-    method = "logistic GEE (statsmodels), exchangeable correlation within a participant, robust SEs"
+    method = ("logistic GEE (statsmodels), exchangeable correlation within a participant, bias-reduced "
+              "(Mancl–DeRouen) sandwich SEs")
     yv = y.to_numpy(float)
     keep = np.isfinite(yv) & np.isfinite(exog.to_numpy(float)).all(axis=1)
     y, exog, groups = y[keep], exog[keep], groups[keep]
@@ -192,7 +237,7 @@ def fit_gee_logistic(model: str, outcome: str, y: pd.Series, exog: pd.DataFrame,
         warnings.simplefilter("always")
         try:
             res = GEE(y.to_numpy(float), exog, groups=groups.to_numpy(), family=families.Binomial(),
-                      cov_struct=Exchangeable()).fit()
+                      cov_struct=Exchangeable()).fit(cov_type="bias_reduced")
         except (np.linalg.LinAlgError, ValueError, ZeroDivisionError) as exc:
             return _unfitted(model, outcome, "log-odds", method, int(keep.sum()), int(groups.nunique()),
                              f"the fit failed: {exc}")

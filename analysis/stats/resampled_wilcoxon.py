@@ -6,8 +6,8 @@ tie groups of every resample come from one sort of the whole R × n block of
 codes; the exact null distribution of each n and the sign-flip distribution of
 each tie structure (:mod:`analysis.stats.signed_rank`) are computed once and cached;
 the normal approximation is vectorised.  The method of each study is the one
-SciPy's ``method="auto"`` chooses (:func:`analysis.stats.signed_rank.auto_method`,
-as ``paired_wilcoxon`` names it).  The p-values are bit-for-bit those of
+the report's ``method="auto"`` chooses (:func:`analysis.stats.signed_rank.report_method`: SciPy's rule, but exact
+wherever at most 13 differences are non-zero, as ``paired_wilcoxon`` names it).  The p-values are bit-for-bit those of
 :func:`~analysis.stats.wilcoxon.paired_wilcoxon`, that is of :func:`scipy.stats.wilcoxon`
 (tests/analysis/test_power.py proves it on random samples with ties, zeros and
 missing values).
@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import special
 
-from analysis.stats.signed_rank import auto_method, sign_flip_distribution, signed_rank_null_counts
+from analysis.stats.signed_rank import report_method, sign_flip_distribution, signed_rank_null_counts
 from analysis.stats.wilcoxon import DEFAULT_DECIMALS, check_zero_method
 
 __all__ = ["METHOD_NAMES", "PreparedMetric", "prepare_metric", "resampled_p_values", "study_tests"]
@@ -165,14 +165,17 @@ def _rank_rows(pm: PreparedMetric, idx: np.ndarray, zero_method: str) -> _Rows:
 
 
 def _methods(rows: _Rows, pm: PreparedMetric, idx: np.ndarray) -> np.ndarray:
-    """SciPy's automatic choice per study (0 where no test is possible), asked once per distinct case."""
+    """The report's automatic choice per study (0 where no test is possible), asked once per distinct case."""
     computable = (rows.n_pairs >= 2) & (rows.n_zero < rows.n_pairs)
     if pm.any_bad:
         computable &= ~pm.bad[idx].any(axis=1)
-    keys = 4 * rows.n_pairs + 2 * (rows.n_zero > 0) + rows.tie_groups.any(axis=1)
+    # the method depends on the pairs, the zeros among them (how many: the non-zero ones a permutation flips) and
+    # whether |d| ties
+    keys = (rows.n_pairs.astype(np.int64) * (idx.shape[1] + 1) + rows.n_zero) * 2 + rows.tie_groups.any(axis=1)
     uniq, inverse = np.unique(keys, return_inverse=True)
-    chosen = np.array([_METHOD_CODE[auto_method(int(k) // 4, int(k) // 2 % 2, int(k) % 2)] for k in uniq],
-                      dtype=np.int8)
+    width = idx.shape[1] + 1
+    chosen = np.array([_METHOD_CODE[report_method(int(k) // 2 // width, int(k) // 2 % width, int(k) % 2)]
+                       for k in uniq], dtype=np.int8)
     return np.where(computable, chosen[inverse.ravel()], 0).astype(np.int8)
 
 
@@ -192,7 +195,8 @@ def _permutation_rows(rows: _Rows, sel: np.ndarray, zero_method: str, p: np.ndar
     bit = np.left_shift(np.int64(1), np.clip(rows.pos[sel] - n_zero[:, None], 0, 62))
     shape = np.where(begins, bit, 0).sum(axis=1)
     below = n_zero if zero_method != "wilcox" else np.zeros(sel.size, dtype=np.int64)
-    key = (shape * 64 + below) * 64 + rows.count[sel] - (n_zero if zero_method != "wilcox" else 0)
+    # (the zeros below can be many now that a study of any size with at most 13 non-zero differences is permuted)
+    key = (shape * (1 << 24) + below) * 64 + rows.count[sel] - (n_zero if zero_method != "wilcox" else 0)
     kinds, first, which = np.unique(key, return_index=True, return_inverse=True)
     tables = []
     for kk, i in zip(kinds.tolist(), first.tolist(), strict=True):

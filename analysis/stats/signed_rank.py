@@ -20,6 +20,9 @@ a public function and two other rooms need:
   otherwise at most :data:`PERMUTATION_AUTO_MAX_N` pairs → the permutation test
   (all 2ⁿ sign flips); otherwise → the normal approximation.  "Pairs" counts
   zero differences too.
+* :func:`report_method` -- the report's rule: SciPy's, except that where SciPy would approximate though at most
+  :data:`PERMUTATION_AUTO_MAX_N` differences are non-zero (a zero's sign changes no statistic), the permutation
+  test enumerates their flips exactly (issue 41: the pooled success test).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ __all__ = [
     "PERMUTATION_AUTO_MAX_N",
     "SCIPY_AUTO_RANGE",
     "auto_method",
+    "report_method",
     "sign_flip_distribution",
     "signed_rank_null_counts",
 ]
@@ -137,3 +141,13 @@ def auto_method(n_total: int, n_zero: int, n_ties: int) -> str:
     if n_total <= PERMUTATION_AUTO_MAX_N:
         return "permutation"
     return "approx"
+
+
+def report_method(n_total: int, n_zero: int, n_ties: int) -> str:
+    """The method the report's ``"auto"`` uses: :func:`auto_method`'s, but the exact permutation test wherever
+    SciPy would approximate and at most :data:`PERMUTATION_AUTO_MAX_N` differences are non-zero (module docstring).
+    """
+    used = auto_method(n_total, n_zero, n_ties)
+    if used == "approx" and n_total - n_zero <= PERMUTATION_AUTO_MAX_N:
+        return "permutation"
+    return used

@@ -19,7 +19,10 @@ with more than 50 pairs → the normal approximation; otherwise no ties and no
 zeros → the exact distribution; otherwise at most 13 pairs → the permutation
 test over all 2ⁿ sign flips; otherwise → the normal approximation; "pairs"
 counts zero differences too -- the rule of SciPy 1.15 – 1.17, the range
-``pyproject.toml`` pins); both rank sums, the rank-biserial correlation and
+``pyproject.toml`` pins; the report departs from it in one place, exactly:
+where SciPy would approximate though at most 13 differences are non-zero it
+enumerates their sign flips, :func:`analysis.stats.signed_rank.report_method`);
+both rank sums, the rank-biserial correlation and
 r = z/√n; and the Hodges–Lehmann shift with its interval
 (:mod:`analysis.stats.hodges_lehmann`).
 """
@@ -35,8 +38,9 @@ import numpy.typing as npt
 import scipy
 from scipy import stats as sps
 
+from analysis.reading.codebook_columns import DIFFERENCE_DECIMALS
 from analysis.stats.hodges_lehmann import HL_EXACT_MAX_N, hodges_lehmann
-from analysis.stats.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, auto_method
+from analysis.stats.signed_rank import EXACT_MAX_N, PERMUTATION_AUTO_MAX_N, SCIPY_AUTO_RANGE, report_method
 
 __all__ = [
     "ALTERNATIVES",
@@ -56,8 +60,9 @@ ALTERNATIVES = ("two-sided", "less", "greater")
 METHODS = ("auto", "exact", "permutation", "approx", "asymptotic")
 #: Largest n for an explicitly requested exact test (beyond, the normal approximation is exact enough).
 EXPLICIT_EXACT_MAX_N = 400
-#: Differences are rounded to this many decimals before testing (see :func:`paired_wilcoxon`).
-DEFAULT_DECIMALS = 10
+#: Differences are rounded to this many decimals before testing (see :func:`paired_wilcoxon`; participants_wide.csv
+#: writes its differences so: one definition, in the codebook).
+DEFAULT_DECIMALS = DIFFERENCE_DECIMALS
 
 _SCIPY_NAME = {"exact": "exact", "approx": "asymptotic"}
 
@@ -238,10 +243,19 @@ def _permutation_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
     positive flips (plus half the zero ranks under "zsplit"), the very values
     SciPy's statistic takes.  tests/analysis/test_stats.py checks the p-values equal.
     """
-    ranked = d != 0 if zero_method == "wilcox" else np.ones(d.size, dtype=bool)
-    ranks = np.zeros(d.size)
-    ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
-    half_zero = float(ranks[d == 0].sum()) / 2.0 if zero_method == "zsplit" else 0.0
+    # A zero's sign flip changes no statistic (its rank, where it has one, is dropped or split whatever its sign):
+    # the 2ⁿ flips of the non-zero differences are enumerated, each of SciPy's 2ⁿ⁺ᶻ flips' values once per zero
+    # pattern, so the same p-value -- and exact up to 13 non-zero differences wherever the zeros are.
+    # (SciPy's permutation_test needs two values: with one non-zero difference one zero stays, changing nothing.)
+    nonzero = d != 0
+    ranked = nonzero if zero_method == "wilcox" else np.ones(d.size, dtype=bool)
+    all_ranks = np.zeros(d.size)
+    all_ranks[ranked] = sps.rankdata(np.abs(d[ranked]), method="average")
+    half_zero = float(all_ranks[~nonzero].sum()) / 2.0 if zero_method == "zsplit" else 0.0
+    flipped = nonzero.copy()
+    if np.count_nonzero(nonzero) < 2:
+        flipped[np.flatnonzero(~nonzero)[:1]] = True
+    ranks, d = all_ranks[flipped], d[flipped]
 
     def w_plus(x: np.ndarray, axis: int) -> np.ndarray:
         w: np.ndarray = np.sum((x > 0) * ranks, axis=axis) + half_zero
@@ -379,10 +393,11 @@ def paired_wilcoxon(
     alternative : {"two-sided", "greater", "less"}
         "greater": ON tends to exceed OFF (d = ON − OFF > 0).
     method : {"auto", "exact", "permutation", "approx"}
-        ``"auto"`` applies SciPy's rule (:func:`analysis.stats.signed_rank.auto_method`); the result's ``method``
+        ``"auto"`` applies the report's rule (:func:`analysis.stats.signed_rank.report_method`: SciPy's, but an exact
+        permutation test wherever at most 13 differences are non-zero); the result's ``method``
         says what was used. ``"exact"``: SciPy's untied null distribution of ``n_used`` ranks (with ties or
         zeros it rounds a fractional W⁺ conservatively); ``"permutation"``: SciPy's ``PermutationMethod()``,
-        all 2ⁿ sign flips, up to 13 pairs; ``"asymptotic"`` is accepted for ``"approx"``.
+        all 2ⁿ sign flips of the non-zero differences, up to 13 of them; ``"asymptotic"`` is accepted for ``"approx"``.
     confidence : float
         Requested level of the Hodges–Lehmann interval (see :func:`hodges_lehmann`).
     correction : bool
@@ -405,7 +420,7 @@ def paired_wilcoxon(
     ValueError
         On malformed arguments: unequal lengths, non-1-D input, an unknown ``zero_method``/``alternative``/
         ``method``, a confidence outside (0, 1), an explicit exact test with more than
-        ``EXPLICIT_EXACT_MAX_N`` pairs or an explicit permutation test with more than 13.
+        ``EXPLICIT_EXACT_MAX_N`` pairs or an explicit permutation test with more than 13 non-zero differences.
     """
     zero_method, alternative, requested = _check_arguments(zero_method, alternative, method, confidence)
     x_off, x_on, keep = _complete_pairs(off, on)
@@ -416,8 +431,9 @@ def paired_wilcoxon(
         why = _untestable(d)
     if d is None or why:
         return _not_computable(base, "; ".join([*lead, why]))
-    used = auto_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
-    _check_size(used, base["n_used"] if used == "exact" else d.size)
+    used = report_method(d.size, base["n_zero"], base["n_ties"]) if requested == "auto" else requested
+    # a permutation test enumerates the signs of the non-zero differences (:func:`_permutation_p`)
+    _check_size(used, base["n_used"] if used == "exact" else d.size - base["n_zero"])
     notes = _notes(d, base["n_used"], used, base["ci_level"], confidence)
     return WilcoxonResult(method=used, computable=True, note="; ".join([*lead, *notes]),
                           **_tested(d, zero_method, alternative, used, correction, base["n_used"]), **base)
@@ -482,11 +498,14 @@ def methods_text(zero_method: str = "wilcox", confidence: float = 0.95) -> str:
         f"{SCIPY_AUTO_RANGE[0]} – {SCIPY_AUTO_RANGE[1]}) and reported per metric: the exact null distribution "
         f"when there were at most {EXACT_MAX_N} pairs (zero differences counted) and no ties or zeros; "
         f"otherwise, with at most {PERMUTATION_AUTO_MAX_N} pairs, an exact permutation test over all 2ⁿ sign "
-        "flips of the observed ranks; otherwise the normal approximation with "
+        f"flips of the observed ranks -- also where SciPy's rule, which counts zero differences, would approximate "
+        f"though at most {PERMUTATION_AUTO_MAX_N} pairs are ranked; otherwise the normal approximation with "
         "tie (and zero) corrections and no continuity correction. The statistic is the smaller of the two rank "
         "sums. Effect sizes are the matched-pairs rank-biserial correlation (W⁺ − W⁻)/(W⁺ + W⁻) and "
         "r = z/√n, where n is the number of ranked pairs and z the tie-corrected normal statistic; both are "
-        "positive when ON exceeds OFF. The shift ON − OFF was estimated by the Hodges–Lehmann estimator (the "
+        "positive when ON exceeds OFF; the rank-biserial correlation has a bootstrap interval (participants "
+        "resampled, BCa, scipy.stats.bootstrap, a fixed seed). The shift ON − OFF was estimated by the "
+        "Hodges–Lehmann estimator (the "
         "median of all pairwise Walsh averages of the differences, zeros included) with a "
         f"{confidence:.0%} confidence interval from the signed-rank distribution (exact critical values up to "
         f"{HL_EXACT_MAX_N} pairs, normal approximation beyond; the achieved level is reported). p-values were "

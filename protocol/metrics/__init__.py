@@ -6,6 +6,7 @@ test and show it (:class:`Metric`).  It knows no task, no schedule and no storag
 the storage and the analysis above read it.
 """
 
+from protocol.metrics.definitions import TRADE_PHASES
 from protocol.metrics.metric import UNIT_TOKENS, Metric, MetricValue, Role, TrialWindow, exported_name, split_unit
 from protocol.metrics.registry import (
     METRICS,
@@ -24,6 +25,7 @@ from protocol.metrics.registry import (
 
 __all__ = [
     "METRICS",
+    "TRADE_PHASES",
     "UNIT_TOKENS",
     "Metric",
     "MetricValue",

@@ -18,6 +18,11 @@ Definitions (the paper, §V-B, made exact where it is silent; the window is :cla
 * **error impulse** -- ``∫|F − F*| dt`` over the error window, the same samples as RMSE and Max AE (the trapezoid
   rule on their times; a non-finite sample is left out and bridged): a secondary measure, tested outside the
   primary family;
+* **rise time** and **RMSE after reach** -- the two phases of the speed–accuracy trade, on parts of the trial that
+  do not overlap (docs/science.md §6.1): the speed of getting the force to the target, from first contact to the
+  first sample at or above the band's lower edge (the band reached); and the accuracy from there, RMSE over the
+  fixed :data:`REACH_WINDOW_S` that follows.  Analysis measures: computed from the recording, no column in a study
+  database.
 * **lag** and **gain** (force tracking's: a target that moves) -- over the moving part of the trial window (from the
   first sample whose target differs from the first one; the lead-in's steady target and the approach left out),
   the lag is the shift of the force that maximises its cross-correlation with the target (the correlation
@@ -36,13 +41,31 @@ import numpy.typing as npt
 
 from protocol.metrics.metric import Metric, MetricValue, Role, TrialWindow
 
-__all__ = ["ABS_IMPULSE", "GAIN", "LAG", "MAX_AE", "MAX_LAG_S", "METRICS", "PEAK_FORCE", "RMSE", "SUCCESS", "TCT",
-           "TIME_IN_BAND"]
+__all__ = [
+    "ABS_IMPULSE",
+    "GAIN",
+    "LAG",
+    "MAX_AE",
+    "MAX_LAG_S",
+    "METRICS",
+    "PEAK_FORCE",
+    "REACH_RMSE",
+    "REACH_WINDOW_S",
+    "RISE_TIME",
+    "RMSE",
+    "SUCCESS",
+    "TCT",
+    "TIME_IN_BAND",
+    "TRADE_PHASES",
+]
 
 #: Forces to 0.1 mN, far finer than the F/T sensor resolves in one sample (means over 1 kHz trials resolve more).
 _FORCE_DECIMALS = 4
 #: Times to the 1 ms sample period.
 _TIME_DECIMALS = 3
+#: The accuracy window after band entry, s: the paper's 1 s hold, the same length for every trial, so a trial's
+#: accuracy is not taken over more or less time because it was slower or faster (as RMSE from the cue is).
+REACH_WINDOW_S = 1.0
 
 
 def _success(w: TrialWindow) -> MetricValue:
@@ -72,6 +95,30 @@ def _abs_impulse_n_s(w: TrialWindow) -> MetricValue:
     # describe, and right on a clock whose periods vary (the rectangle sum, samples × 1 ms, would assume 1 kHz)
     e = np.abs(w.error_n)
     return float(np.sum((e[1:] + e[:-1]) * np.diff(w.error_t_s)) / 2.0) if len(e) else math.nan
+
+
+def _rise_time_s(w: TrialWindow) -> MetricValue:
+    # first contact to reaching the band: the force's rise, the approach through the air (cue to contact) left out;
+    # reaching is at or above the band's lower edge, so a rise that shoots through the band between two samples
+    # is as fast as it was (not timed to its return from above); at least 0 (a band below the contact threshold)
+    if w.reached_s is None or w.contact_s is None:
+        return None
+    return max(0.0, w.reached_s - w.contact_s)
+
+
+def _reach_rmse_n(w: TrialWindow) -> MetricValue:
+    # the fixed window from reaching the band: undefined when the trial ended before the window did (a failure that
+    # reached the band in its last second; a success's hold starts at or after the reach and lasts 1 s, so it has it)
+    if w.reached_s is None:
+        return None
+    t0 = round(w.reached_s * 1e9)
+    stop = t0 + round(REACH_WINDOW_S * 1e9)
+    if len(w.t_ns) == 0 or int(w.t_ns[-1]) < stop:
+        return None
+    part = slice(int(np.searchsorted(w.t_ns, t0)), int(np.searchsorted(w.t_ns, stop, side="right")))
+    e = w.force_n[part] - w.target_n[part]
+    e = e[np.isfinite(e)]
+    return float(np.sqrt(np.mean(e * e))) if len(e) else None
 
 
 #: The largest lag searched, s: beyond a human visuomotor delay (0.15–0.35 s) with room for a slow hand.
@@ -157,6 +204,24 @@ ABS_IMPULSE = Metric(
     "(trapezoid rule on the samples' times; from the cue to the trial end, or from first contact)",
     _abs_impulse_n_s, "lower", Role.SECONDARY, _FORCE_DECIMALS, windowed=True, figure="errors")
 
+RISE_TIME = Metric(
+    "rise_time_s", "s", "rise time (s)",
+    "the force's rise: from first contact (task force above the contact threshold) to the first sample at or above "
+    "the band's lower edge; empty without contact or without reaching the band", _rise_time_s, "lower",
+    Role.DESCRIPTIVE, _TIME_DECIMALS,
+    mean_description="mean rise time over the trials that reached the band", in_database=False)
+REACH_RMSE = Metric(
+    "reach_rmse_n", "N", "RMSE after reach (N)",
+    f"root-mean-square error of the task force against F* over the {REACH_WINDOW_S:g} s from the first sample at or "
+    "above the band's lower edge (a window of its own, after the rise time's); empty when the force never reached "
+    f"the band or the trial ended less than {REACH_WINDOW_S:g} s after it did", _reach_rmse_n, "lower",
+    Role.DESCRIPTIVE, _FORCE_DECIMALS,
+    mean_description=f"mean RMSE over the {REACH_WINDOW_S:g} s after reaching the band, over the trials that have it",
+    in_database=False)
+
+#: The speed–accuracy trade's measures, (speed, accuracy): on parts of the trial apart (docs/science.md §6.1).
+TRADE_PHASES: tuple[Metric, Metric] = (RISE_TIME, REACH_RMSE)
+
 LAG = Metric(
     "lag_s", "s", "lag (s)", "shift of the task force that maximises its cross-correlation with the moving target "
     "(positive: the force follows), over the moving part of the trial", _lag_s, "lower", Role.SECONDARY,
@@ -170,4 +235,5 @@ GAIN = Metric(
 #: primary ones are the outcome measures, the family of Holm's correction: the paper's four (a study of force
 #: regulation), or those of the study's tasks (force tracking's RMSE and Max AE; its lag and gain are secondary,
 #: each tested with its own p), so the paper's numbers do not move when a metric or a task is added.
-METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE, LAG, GAIN)
+METRICS: tuple[Metric, ...] = (SUCCESS, TCT, RMSE, MAX_AE, TIME_IN_BAND, PEAK_FORCE, ABS_IMPULSE, RISE_TIME,
+                               REACH_RMSE, LAG, GAIN)

@@ -85,6 +85,12 @@ class TrialWindow:
         The times of :attr:`error_n`, s since the cue (ns / 1e9: the double nearest the exact time).
     sample_period_s
         The nominal sample period, s.
+    contact_s
+        The first sample in contact (task force above the task's contact threshold), s since the cue; None
+        without contact.
+    reached_s
+        The first sample at which the force reached the task's band from below (at or above its lower edge: in the
+        band, or through it in one sample), s since the cue; None when it never did.
     """
 
     t_ns: npt.NDArray[np.int64]
@@ -96,6 +102,8 @@ class TrialWindow:
     error_n: npt.NDArray[np.float64]
     error_t_s: npt.NDArray[np.float64]
     sample_period_s: float = 0.001
+    contact_s: float | None = None
+    reached_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -138,6 +146,10 @@ class Metric:
         A yes/no outcome's count of successes, in the codebook's words and as a heading.
     values
         The range the per-participant value can take (a sweep's intervals are clipped to it).
+    in_database
+        Computed live and kept in the ``trials`` table (the default); False: a measure the analysis computes from
+        the recording (and the database-less simulated runner from its trials), which adds no column to a study
+        database -- the phases of the speed–accuracy trade (rise time, RMSE after band entry).
     """
 
     name: str
@@ -156,6 +168,7 @@ class Metric:
     count_description: str = ""
     count_label: str = ""
     values: tuple[float, float] = (0.0, math.inf)
+    in_database: bool = True
 
     def __post_init__(self) -> None:
         if self.better not in ("higher", "lower", "one"):
@@ -223,5 +236,6 @@ class Metric:
 
     @property
     def stored(self) -> bool:
-        """It has a column of its own in the ``trials`` table (a yes/no outcome is the trial's ``outcome``)."""
-        return not self.boolean
+        """It has a column of its own in the ``trials`` table (a yes/no outcome is the trial's ``outcome``; an
+        analysis measure, :attr:`in_database` False, has none)."""
+        return not self.boolean and self.in_database

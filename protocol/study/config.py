@@ -153,7 +153,7 @@ class ProtocolConfig:
         :class:`ProtocolError` line where an ON trial could not hold the ramp-in, or a pause the ramp-out (the
         checks the file had with the paper's ramps, :func:`_check_together`)."""
         _check_together(Fields(source, ProtocolError), self.task, self.trial, self.training, self.modes, safety,
-                        tuple(t.label for t in self.targets))
+                        tuple(t.label for t in self.targets), tuple(t.force_n for t in self.targets))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set and
@@ -245,7 +245,8 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         live_force_aid=f.boolean("training.live_force_aid", trn.get("live_force_aid", True)),
         required=_training_required(f, trn),
     )
-    _check_together(f, task, timing, training, tuple(modes), targets=tuple(labels))
+    _check_together(f, task, timing, training, tuple(modes), targets=tuple(labels),
+                    forces=tuple(t.force_n for t in targets))
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
@@ -265,7 +266,8 @@ def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
 
 
 def _check_together(f: Fields, task: Task, timing: TrialTiming, training: TrainingConfig, modes: tuple[str, ...],
-                    ramps: SafetyConfig | None = None, targets: tuple[str, ...] = ()) -> None:
+                    ramps: SafetyConfig | None = None, targets: tuple[str, ...] = (),
+                    forces: tuple[float, ...] = ()) -> None:
     """Values valid alone but not together: one line naming both fields.
 
     * The task's parameters against the trial's cap, each training trial's length and the feedback's ramps
@@ -281,7 +283,7 @@ def _check_together(f: Fields, task: Task, timing: TrialTiming, training: Traini
     """
     ramps = ramps or SafetyConfig()
     on = "on" in modes
-    task.check_timing(f, Timing(timing.max_trial_s, training.seconds_per_target_per_mode, on, ramps, targets))
+    task.check_timing(f, Timing(timing.max_trial_s, training.seconds_per_target_per_mode, on, ramps, targets, forces))
     if on and timing.pause_s < ramps.fault_ramp_s:
         raise f.fail("trial.pause_s", timing.pause_s,
                      f"must be at least the feedback's {ramps.fault_ramp_s:g} s ramp-out (safety.fault_ramp_s) when "

@@ -153,14 +153,15 @@ class TrialScreen:
 @dataclass(frozen=True, slots=True)
 class Timing:
     """What a task's checks see of the protocol's timing: the trial cap, each training trial's length, whether
-    haptics ON is in the design, the feedback's ramps (the safety stage's, :class:`SafetyConfig`) and the targets'
-    labels (empty: not known to the check)."""
+    haptics ON is in the design, the feedback's ramps (the safety stage's, :class:`SafetyConfig`), the targets'
+    labels and their forces, N (empty: not known to the check)."""
 
     max_trial_s: float
     training_s: float
     haptics_on: bool
     ramps: SafetyConfig
     targets: tuple[str, ...] = ()
+    target_forces_n: tuple[float, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)

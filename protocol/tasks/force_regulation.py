@@ -58,8 +58,10 @@ __all__ = [
 
 #: Relative slack that makes the nominal band edges inclusive despite rounding.
 BAND_SLACK = 1e-9
-#: The metrics the task produces (:mod:`protocol.metrics`): the paper's four, time in band, peak force, the impulse.
-METRIC_NAMES = ("success", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n", "abs_impulse_n_s")
+#: The metrics the task produces (:mod:`protocol.metrics`): the paper's four, time in band, peak force, the impulse,
+#: and the speed–accuracy trade's phases (rise time to the band, RMSE after reaching it: analysis measures).
+METRIC_NAMES = ("success", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n", "abs_impulse_n_s",
+                "rise_time_s", "reach_rmse_n")
 _METRICS = select(METRIC_NAMES)
 
 
@@ -272,8 +274,12 @@ class ForceRegulation(Task):
         def on_target(force: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
             return np.abs(force - target) <= half
 
+        def reached(force: npt.NDArray[np.float64]) -> npt.NDArray[np.bool_]:
+            return force >= target - half  # into the band, or through it between two samples
+
         return judged(t, f, done, target_n=lambda times: np.full(len(times), target), on_target=on_target,
-                      max_trial_s=max_trial_s, window=window, sample_period_s=sample_period_s, metrics=_METRICS)
+                      max_trial_s=max_trial_s, window=window, sample_period_s=sample_period_s, metrics=_METRICS,
+                      reached=reached)
 
     # -- what it shows and tells ---------------------------------------------------------------------------------
     def cue_text(self, trial: TrialCondition) -> str:

@@ -14,6 +14,7 @@ from typing import Any
 
 from pipeline.settings.tomlfields import Fields
 from protocol.tasks.base import Task
+from protocol.tasks.force_discrimination import ForceDiscrimination
 from protocol.tasks.force_regulation import ForceRegulation
 from protocol.tasks.force_tracking import ForceTracking
 
@@ -24,7 +25,7 @@ __all__ = ["DEFAULT_KIND", "TASKS", "kinds", "named", "read_task", "register", "
 DEFAULT_KIND = ForceRegulation.kind
 
 #: Every task by its kind.
-TASKS: dict[str, type[Task]] = {cls.kind: cls for cls in (ForceRegulation, ForceTracking)}
+TASKS: dict[str, type[Task]] = {cls.kind: cls for cls in (ForceRegulation, ForceTracking, ForceDiscrimination)}
 
 
 def kinds() -> tuple[str, ...]:

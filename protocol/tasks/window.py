@@ -9,6 +9,10 @@ disagree.
 * **error window** -- the samples RMSE, Max AE (and every metric taken over the error window) see: the trial
   window, *including* the approach before contact (F = 0); analysis may instead start at first contact
   (:data:`CONTACT_THRESHOLD_N`).
+* **first contact** and **reaching the target** -- where the force's rise starts (the first sample above
+  :data:`CONTACT_THRESHOLD_N`) and where it first gets to the task's success region from below (the task's
+  ``reached`` rule: the force-regulation task's band's lower edge): the speed–accuracy trade's phases are measured
+  on either side of the second (:data:`protocol.metrics.TRADE_PHASES`).
 
 Decisions use integer-nanosecond sample timestamps, so they are exact however late the caller processes the samples.
 """
@@ -90,6 +94,7 @@ def judged(
     window: str,
     sample_period_s: float,
     metrics: Sequence[Metric],
+    reached: Callable[[npt.NDArray[np.float64]], npt.NDArray[np.bool_]] | None = None,
 ) -> TrialMetrics:
     """The metrics of a trial whose rule completed at sample ``done`` (None: it did not) of ``t``, ``f``.
 
@@ -104,6 +109,9 @@ def judged(
         within its success region.
     max_trial_s, window, sample_period_s, metrics
         The cap, the error window (:data:`ERROR_WINDOWS`), the nominal sample period and the task's metrics.
+    reached
+        Whether each force of the window has got to the task's success region from below (in it, or through it
+        between two samples); None: the task has no such edge, and the window's ``reached_s`` is None.
     """
     success = done is not None
     end = done + 1 if done is not None else len(t)
@@ -118,7 +126,9 @@ def judged(
     start = 0 if window == "cue" else (int(contact[0]) if len(contact) else len(f))
     err = f[start:] - target[start:]
     finite = np.isfinite(err)
+    hit = np.flatnonzero(reached(f)) if reached is not None else np.empty(0, dtype=np.intp)
     trial = TrialWindow(t_ns=t, force_n=f, target_n=target, on_target=on_target(f), completed=success,
                         end_s=float(end_s), error_n=err[finite], error_t_s=t[start:][finite] / 1e9,
-                        sample_period_s=sample_period_s)
+                        sample_period_s=sample_period_s, contact_s=first_contact_s,
+                        reached_s=float(t[hit[0]] / 1e9) if len(hit) else None)
     return TrialMetrics(compute(trial, metrics), success, len(f), float(end_s), first_contact_s)

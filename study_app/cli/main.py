@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from study_app.cli.argtypes import OneLineParser, one_line
 from study_app.cli.calibrate_cmds import add_calibrate_command
 from study_app.cli.check_cmds import add_check_parser
+from study_app.cli.discrimination_cmds import add_discrimination_parser
 from study_app.cli.error import CliError
 from study_app.cli.gui_cmds import add_gui_parser
 from study_app.cli.hardware_cmds import add_check_hardware_parser, add_probe_parser
@@ -72,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub.required = True
     for add in (add_sim_parser, add_run_parser, add_report_parsers, add_replay_parsers, add_sessions_parser,
                 add_check_parser, add_withdraw_parser, add_note_parser, add_power_parser, add_sweep_parser,
+                add_discrimination_parser,
                 _add_installed_commands, add_probe_parser, add_check_hardware_parser, add_calibrate_command,
                 add_gui_parser):
         add(sub)

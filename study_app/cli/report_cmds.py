@@ -24,12 +24,24 @@ def _confidence(text: str) -> float:
     return v
 
 
+def site_name(text: str) -> str:
+    """A site's name: letters, digits, ``-`` and ``_`` (it prefixes participant codes as ``NAME:CODE``)."""
+    import re
+
+    if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9_-]{0,31}", text):
+        raise argparse.ArgumentTypeError(f"--site = {text!r}: allowed are 1-32 letters, digits, '-' and '_', "
+                                         "beginning with a letter or digit (it prefixes codes as NAME:CODE)")
+    return text
+
+
 def add_analysis_options(parser: argparse.ArgumentParser) -> None:
     """The aggregation and test choices a report is made with (``report`` and ``power`` share them)."""
     parser.add_argument("--error-window", choices=("cue", "first_contact"), default="cue",
                         help="RMSE / Max AE from the cue (default) or from first contact")
-    parser.add_argument("--tct", choices=("successful", "censored"), default="successful",
-                        help="TCT over successful trials only (default) or failures censored at the trial cap")
+    parser.add_argument("--tct", choices=("censored", "successful"), default="censored",
+                        help="TCT with a failed trial at the trial cap (default: the paper's figure, every trial) or "
+                             "over successful trials only (the paper's text); the report shows both, and TCT as a "
+                             "time to event")
     parser.add_argument("--zero-method", choices=("wilcox", "pratt", "zsplit"), default="wilcox",
                         help="Wilcoxon handling of zero differences (default wilcox: dropped, as scipy and SPSS do)")
 
@@ -40,13 +52,19 @@ def add_report_parsers(sub: argparse._SubParsersAction) -> None:
         sub, "report",
         "analyse study databases: Wilcoxon tests, the paper's figures, report.html and tidy CSV tables",
         "haptic-study report --db study.db --out report\n"
-        "haptic-study report --db day1.db --db day2.db --out report --force   # two databases, one study",
+        "haptic-study report --db day1.db --db day2.db --out report --force   # two databases, one study\n"
+        "haptic-study report --db a.db --site A --db b.db --site B --out pooled   # two sites: A:P01, B:P01",
         "Analyse one study (one or more databases): recompute every trial from its samples, test haptics ON "
         "against OFF per participant (paired Wilcoxon), draw the paper's figures, and write report.html, tidy "
         "CSV tables (trials, participants long and wide, tests) and codebook.csv describing every column",
     )
     r.add_argument("--db", action="append", required=True, metavar="PATH",
                    help="study database; repeat to merge several into one study")
+    r.add_argument("--site", action="append", type=site_name, metavar="NAME",
+                   help="the site of the --db before it (once after each --db): the sites are pooled, each "
+                        "database's participant codes re-coded NAME:CODE on the fly (the files are not touched), "
+                        "with a site term in the models, a table per site and each site's seed and protocol in "
+                        "the methods")
     r.add_argument("--out", required=True, metavar="DIR", help="output folder (report.html, *.csv, figures/)")
     r.add_argument("--force", action="store_true",
                    help="replace the files an earlier report wrote in DIR, if unedited (the marker "
@@ -89,6 +107,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     from analysis.reading.inputs import check_databases
     from foundation.outdir import REPORT_MARKER, check_output_folder
 
+    if args.site is not None and len(args.site) != len(args.db):
+        raise CliError(f"--site: {len(args.site)} given for {len(args.db)} --db; give one --site after each --db "
+                       "(report --db a.db --site A --db b.db --site B)")
     try:  # before the analysis is imported (seconds): a refused folder or database is said at once
         check_output_folder(args.out, command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
         check_databases(args.db)
@@ -110,7 +131,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         summary = build_report(
             args.db, args.out, options=MetricOptions(args.error_window, args.tct),
             zero_method=args.zero_method, confidence=args.confidence, force=args.force, progress=show,
-            power=args.power, include_incomplete=args.include_incomplete,
+            power=args.power, include_incomplete=args.include_incomplete, sites=args.site,
         )
     except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None

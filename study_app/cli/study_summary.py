@@ -13,6 +13,7 @@ from collections import Counter
 
 import pandas as pd
 
+from analysis.reading.metrics import MetricOptions
 from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.metrics import Metric, tested
@@ -104,7 +105,9 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
     metrics = metrics_of(tasks)
     papers = all(t.kind == DEFAULT_KIND for t in tasks)  # the paper's numbers compare with the paper's task only
     frame = _trials_frame(exp, metrics) if exp else None
-    overall = None if frame is None else per_participant(frame)
+    # TCT as this summary labels it, over successful trials (the report's default counts a failure at the cap)
+    successful = MetricOptions(tct_policy="successful")
+    overall = None if frame is None else per_participant(frame, successful)
     for m in tested(metrics):  # the rows: the study's metrics the report tests, in order
         off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
         finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
@@ -121,7 +124,7 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         if min(n_off, n_on) < len(codes):
             lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
                          "with no success in a mode has no TCT there)")
-    targets = None if frame is None else per_participant(frame, by_target=True)
+    targets = None if frame is None else per_participant(frame, successful, by_target=True)
     rates = overall is not None and "success_rate" in overall.columns  # (a task with a success rule)
     for label in sorted({t.target_label for _, t in exp}) if rates else ():
         part = None if targets is None else targets[targets["target_label"] == label]

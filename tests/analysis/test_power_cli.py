@@ -74,8 +74,9 @@ def _run(capsys, *argv):
 
 def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, capsys):
     out = tmp_path / "plan"
+    # TCT over successful trials (the paper's text), where a participant with no success in a mode has none
     code, stdout, stderr = _run(capsys, "power", "--db", pilots[0], "--out", out, "--resamples", "400",
-                                "--n", "6,10,16")
+                                "--n", "6,10,16", "--tct", "successful")
     assert code == 0, stderr
     assert "Source: the pilot study pilot.db; 6 participants with both haptic modes" in stdout
     assert "TCT (s) is undefined for 2 of 6 participants (no successful trial in a mode)" in stdout
@@ -93,7 +94,7 @@ def test_power_from_a_pilot_writes_table_words_and_figure(pilots, tmp_path, caps
     assert (out / "power.txt").read_text().strip() == stdout.split("\nWritten in")[0].strip()
     marker = json.loads((out / ".haptic-study-power").read_text())
     assert sorted(marker["files"]) == ["power.csv", "power.pdf", "power.png", "power.svg", "power.txt"]
-    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16")
+    argv = ("power", "--db", pilots[0], "--out", out, "--resamples", "400", "--n", "6,10,16", "--tct", "successful")
     # a second run needs --force; it replaces its own files and gives the same numbers for the same seed
     code, _, stderr = _run(capsys, *argv)
     assert code == 2 and "the folder exists and holds power.csv and 4 more" in stderr and "pass --force" in stderr
@@ -259,7 +260,7 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
 
 def test_report_power_adds_the_section(pilots, tmp_path, capsys):
     out = tmp_path / "rep"
-    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power")
+    code, _, stderr = _run(capsys, "report", "--db", pilots[0], "--out", out, "--power", "--tct", "successful")
     assert code == 0, stderr
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "<h2>What n would a study need?</h2>" in page

@@ -61,7 +61,7 @@ def test_one_participant_has_no_sd(one_participant: tuple[Path, str], capsys: py
     page = Path(out, "report.html").read_text(encoding="utf-8")
     head = _headline(page)
     assert "±" not in head and "0.000 ±" not in head, head
-    assert "OFF → ON, mean across 1 participant;" in head
+    assert "OFF → ON, 1 participant: one value per mode, no spread;" in head
     mean, sd, n = mean_sd(pd.Series([0.4]))
     assert (mean, n) == (0.4, 1) and math.isnan(sd)
     # -- and the counts read as English
@@ -119,8 +119,8 @@ def test_a_p_value_reads_the_same_on_the_page_in_the_csv_and_on_the_terminal(
     out = tmp_path / "rep"
     assert main(["report", "--db", str(three), "--out", str(out)]) == 0
     printed = capsys.readouterr().out
-    # the choices that change the numbers, as the page's header names them
-    assert "Holm-adjusted; error window: cue, TCT: successful, zero differences: wilcox):" in printed, printed
+    # the choices that change the numbers, as the page's header names them (TCT: the figure's reading by default)
+    assert "Holm-adjusted; error window: cue, TCT: censored, zero differences: wilcox):" in printed, printed
     rmse_line = next(line for line in printed.splitlines() if line.strip().startswith("rmse_N"))
     assert rmse_line.split()[4:6] == ["0.03125", "0.03125"], rmse_line
     stats = pd.read_csv(out / "stats.csv").set_index("metric")
@@ -176,5 +176,5 @@ def test_every_interval_is_headed_with_the_level_it_was_computed_at(three: Path,
     assert main(["report", "--db", str(three), "--out", str(out), "--confidence", "0.9", "--tct", "censored"]) == 0
     page = (out / "report.html").read_text(encoding="utf-8")
     assert "95 % CI" not in page and "95%" not in page, re.findall(r".{60}95 ?%.{20}", page)
-    assert "<th>90 % CI</th>" in page and "(or r_rm) [90 % CI]" in page
-    assert "Over the all trials" not in page and "Over the trials (failures at the trial cap) with a TCT" in page
+    assert "<th>90 % CI</th>" in page and "r_rm [90 % CI]" in page and "shift ON − OFF [90 % CI]" in page
+    assert "Over the all trials" not in page and "every trial, a failed trial counted at the trial cap" in page

@@ -126,8 +126,28 @@ def _check_against_scipy(off, on, zero_method, alternative):
 @given(st.one_of(pairs(min_n=14, max_n=60), distinct_pairs()), zero_methods, alternatives)
 def test_auto_equals_scipy_exact_and_normal(data, zero_method, alternative):
     off, on = data
+    d = on - off
+    if d.size > 13 and 0 < np.count_nonzero(d) <= 13:  # SciPy approximates; the report enumerates (see below)
+        res = paired_wilcoxon(off, on, zero_method=zero_method, alternative=alternative, decimals=None)
+        assert res.method == "permutation"
+        assert res.p_value == pytest.approx(_enumerated_p(d, zero_method, alternative), rel=1e-9)
+        return
     res = _check_against_scipy(off, on, zero_method, alternative)
     assert res.method in ("exact", "approx") or not res.computable
+
+
+def _enumerated_p(d: np.ndarray, zero_method: str, alternative: str) -> float:
+    """The exact sign-flip p-value of W⁺, every flip of the non-zero differences listed by numpy (the reference for
+    an n that SciPy's permutation test would only sample: zeros counted in n, at most 13 non-zero)."""
+    ranks = sps.rankdata(np.abs(d[d != 0] if zero_method == "wilcox" else d))
+    half = ranks[d == 0].sum() / 2 if zero_method == "zsplit" else 0.0
+    r = ranks if zero_method == "wilcox" else ranks[d != 0]
+    flips = (np.arange(2 ** r.size)[:, None] >> np.arange(r.size)) & 1  # 1: positive
+    w = flips @ r + half
+    observed = float(np.sum(r[d[d != 0] > 0]) + half)
+    eps = 1e-9 * max(1.0, observed)
+    greater, less = np.mean(w >= observed - eps), np.mean(w <= observed + eps)
+    return float({"greater": greater, "less": less}.get(alternative, min(1.0, 2 * min(greater, less))))
 
 
 @settings(max_examples=40)
@@ -173,7 +193,7 @@ def test_z_equals_scipy_asymptotic_zstatistic(data, zero_method):
     [
         ([1, 2, 3, 4, 5, 6, 7, 8, 9, -10], "exact"),  # n ≤ 50, no ties, no zeros
         ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, -12], "permutation"),  # a zero, 13 pairs
-        ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13], "approx"),  # a zero, 14 pairs
+        ([0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14], "approx"),  # a zero, 15 pairs: 14 to flip
         ([1, 1, 2, 3, 4, -5], "permutation"),  # a tie
         ([1, -1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13], "approx"),  # |d| tie, 14 pairs
         (list(range(1, 51)), "exact"),
@@ -188,6 +208,19 @@ def test_auto_rule_boundaries(d, method):
     assert res.p_value == ref
     if on.size < 13:  # at 13 SciPy's auto *is* PermutationMethod(); one 3 s enumeration is enough
         assert _scipy(on, np.zeros(on.size), method).pvalue == ref
+
+
+@pytest.mark.parametrize("zero_method", ["wilcox", "pratt", "zsplit"])
+def test_zeros_beyond_scipys_permutation_limit_are_enumerated(zero_method):
+    # 14 pairs, one a zero: SciPy's auto approximates (it counts the zero in n), though only 13 signs can flip;
+    # the report's test is the exact one (issue 41: the pooled success test, 0.0002 exact against 0.00142 normal)
+    d = np.array([0.0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, -13])
+    res = paired_wilcoxon(np.zeros(d.size), d, zero_method=zero_method)
+    assert res.method == "permutation" and res.n_zero == 1
+    assert res.p_value == pytest.approx(_enumerated_p(d, zero_method, "two-sided"), rel=1e-9)
+    if zero_method == "wilcox":  # no ties among the 13: SciPy's exact distribution of the non-zero ones
+        assert res.p_value == pytest.approx(sps.wilcoxon(d[d != 0], method="exact").pvalue, rel=1e-9)
+    assert res.p_value < sps.wilcoxon(d, zero_method=zero_method).pvalue  # what the normal approximation gave
 
 
 def test_pratt_zeros_count_towards_permutation_limit_and_n_used():

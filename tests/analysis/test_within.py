@@ -1,8 +1,9 @@
 """Within-participant statistics: the repeated-measures correlation and the report's models, checked independently.
 
-* rmcorr against the rmcorr R package's own example (Bland & Altman 1995, ``bland1995``: the values its README
-  prints), against the ANCOVA fitted by statsmodels' OLS, and on synthetic data whose within-participant slope
-  is known (and whose pooled correlation has the opposite sign);
+* rmcorr against the rmcorr R package's own example (Bland & Altman 1995, ``bland1995``: the r, df and p its
+  README prints; the interval is pingouin's, not the R package's wider one: see analysis/stats/rmcorr.py), against
+  pingouin's ``rm_corr`` down to df = 2, against the ANCOVA fitted by statsmodels' OLS, and on synthetic data whose
+  within-participant slope is known (and whose pooled correlation has the opposite sign);
 * the trade's mixed model and the learning models against statsmodels called directly, from a formula.
 """
 
@@ -39,7 +40,39 @@ def test_rmcorr_reproduces_the_r_packages_published_example():
     # the R package's values as it prints them: to their last printed digit (rounding, not equality, at that digit)
     assert res.r == pytest.approx(-0.5067697, abs=5e-8)
     assert res.p_value == pytest.approx(0.0008471081, abs=5e-11)
-    assert (round(res.ci_low, 7), round(res.ci_high, 6)) == (-0.7112297, -0.223255)
+    # the interval: pingouin's (rm_corr prints [-0.71, -0.23]; its compute_esci at n = df + 2 to 12 decimals), not
+    # the R package's (-0.7112297, -0.223255), whose SE 1/sqrt(df - 3) takes df for the number of observations
+    assert (res.ci_low, res.ci_high) == pytest.approx((-0.706714636386, -0.231863119757), abs=5e-13)
+
+
+@pytest.mark.parametrize(("k", "m", "seed"), [(3, 2, 0), (3, 2, 1), (3, 3, 2), (4, 2, 3), (3, 4, 4), (5, 3, 5),
+                                              (8, 6, 6), (10, 10, 7)])
+@pytest.mark.filterwarnings("ignore:Sample size is too small to estimate power:UserWarning")  # its power column
+def test_rmcorr_equals_pingouin_down_to_two_degrees_of_freedom(k: int, m: int, seed: int):
+    """r, df, p and the interval of pingouin's rm_corr (at least 3 participants, as it requires), df from 2: the
+    interval to pingouin's printed 2 decimals and, at full precision, to its Fisher interval at n = df + 2 (what
+    rm_corr rounds)."""
+    pg = pytest.importorskip("pingouin")
+    rng = np.random.default_rng(seed)
+    who = np.repeat(np.arange(k), m)
+    x = rng.normal(0, 1, k * m) + 3 * who
+    y = 0.6 * x + rng.normal(0, 1, k * m) - 2 * who
+    res = rmcorr(who, x, y)
+    ref = pg.rm_corr(pd.DataFrame({"s": who, "x": x, "y": y}), x="x", y="y", subject="s")
+    assert res.df == int(ref["dof"].iloc[0]) == k * m - k - 1 >= 2
+    assert res.r == pytest.approx(float(ref["r"].iloc[0]), rel=1e-9)  # summation order only
+    assert res.p_value == pytest.approx(float(ref["pval"].iloc[0]), rel=1e-7)  # t against F: their tails' digits
+    lo, hi = ref["CI95"].iloc[0]
+    assert abs(res.ci_low - lo) <= 0.005 + 1e-12 and abs(res.ci_high - hi) <= 0.005 + 1e-12  # printed to 2 decimals
+    full = pg.compute_esci(stat=res.r, nx=res.df + 2, eftype="pearson", decimals=14)
+    assert (res.ci_low, res.ci_high) == pytest.approx((float(full[0]), float(full[1])), abs=1e-12)
+
+
+def test_rmcorr_has_no_interval_below_two_degrees_of_freedom():
+    """df = 1 (two participants with two trials, or one with three): r and p, but no interval to print."""
+    res = rmcorr([1, 1, 1], [0.0, 1.0, 2.0], [0.1, 0.9, 2.3])
+    assert res.computable and res.df == 1 and math.isnan(res.ci_low) and math.isnan(res.ci_high)
+    assert "df = 1: no interval (needs df ≥ 2)" in res.note
 
 
 def test_rmcorr_equals_the_ancova_fitted_by_statsmodels():
@@ -99,6 +132,13 @@ def test_rmcorr_is_bounded_and_never_crashes(rows):
         assert math.isnan(res.r) and res.note
 
 
+def test_rmcorr_of_tiny_values_does_not_underflow():
+    """Found by the property above: x near 1e-133 and y near 1e-38 have sums of squares whose product underflows
+    to 0 (a division by zero) although each is a positive number."""
+    res = rmcorr([0, 0, 0], [0.0, 0.0, 6.18408633407145e-133], [0.0, 7.101361545095521e-38, 0.0])
+    assert res.computable and -1.0 <= res.r <= 1.0 and 0.0 <= res.p_value <= 1.0
+
+
 def _trials(n_participants: int, seed: int = 0) -> pd.DataFrame:
     """A synthetic trial table: 2 modes × 2 targets × 5 trials per participant, a random intercept per person."""
     rng = np.random.default_rng(seed)
@@ -110,10 +150,13 @@ def _trials(n_participants: int, seed: int = 0) -> pd.DataFrame:
             rmse = abs(rng.normal(0.8 if mode == "off" else 0.55, 0.2))
             tct = 7 + person - 1.5 * rmse - 0.05 * i + rng.normal(0, 0.7)
             success = rng.random() < (0.6 if mode == "on" else 0.3)
+            reach = abs(rng.normal(0.15 if mode == "off" else 0.1, 0.05))  # the trade's phases: a real trade
+            rise = 0.9 + 0.3 * person - 2.0 * reach + rng.normal(0, 0.1)
             rows.append({"participant_code": f"P{p:02d}", "trial_index": i, "haptic_mode": mode,
                          "target_label": target, "rmse_n": rmse, "max_ae_n": rmse * 2.2 + rng.normal(0, 0.1),
                          "tct_s": tct if success else math.nan, "tct_censored_s": tct if success else 12.0,
-                         "success": success, "time_in_band_s": rng.uniform(0, 3), "peak_force_n": rmse + 1.0})
+                         "success": success, "time_in_band_s": rng.uniform(0, 3), "peak_force_n": rmse + 1.0,
+                         "rise_time_s": rise, "reach_rmse_n": reach})
     return pd.DataFrame(rows)
 
 
@@ -121,15 +164,16 @@ def test_the_trade_models_fixed_effects_equal_statsmodels_called_directly():
     import statsmodels.formula.api as smf
 
     trials = _trials(8)
-    fit = trade_model(trials)
-    data = trials.dropna(subset=["tct_s"])
-    direct = smf.mixedlm("tct_s ~ rmse_n * C(haptic_mode, Treatment('off'))", data,
-                         groups=data["participant_code"]).fit(reml=True, method=MIXED_METHODS)
-    names = {"intercept": "Intercept", "haptics_on": "C(haptic_mode, Treatment('off'))[T.on]", "rmse": "rmse_n",
-             "rmse_x_on": "rmse_n:C(haptic_mode, Treatment('off'))[T.on]"}
+    fit = trade_model(trials)  # rise time on RMSE after reach, a random intercept and slope of mode per participant
+    data = trials.assign(on=(trials["haptic_mode"] == "on").astype(float))
+    slope = "random slope of haptic mode" in fit.method
+    direct = smf.mixedlm("rise_time_s ~ reach_rmse_n * on", data, groups=data["participant_code"],
+                         re_formula="~on" if slope else None).fit(reml=True, method=MIXED_METHODS)
+    names = {"intercept": "Intercept", "haptics_on": "on", "accuracy": "reach_rmse_n",
+             "accuracy_x_on": "reach_rmse_n:on"}
     for ours, theirs in names.items():
-        assert fit.params[ours] == pytest.approx(direct.fe_params[theirs], rel=1e-6, abs=1e-9)
-        assert fit.std_errors[ours] == pytest.approx(direct.bse_fe[theirs], rel=1e-4)
+        assert fit.params[ours] == pytest.approx(direct.fe_params[theirs], rel=1e-4, abs=1e-6)
+        assert fit.std_errors[ours] == pytest.approx(direct.bse_fe[theirs], rel=1e-3)
     assert fit.n_obs == len(data) and fit.n_participants == 8
 
 
@@ -143,22 +187,22 @@ def test_the_learning_models_equal_statsmodels_called_directly():
     data = trials.assign(on=(trials["haptic_mode"] == "on").astype(float),
                          firm=(trials["target_label"] == "FIRM").astype(float),
                          trial_number=trials["trial_index"] + 1.0, y=trials["success"].astype(float))
-    rmse = smf.mixedlm("rmse_n ~ on * firm + trial_number", data, groups=data["participant_code"]).fit(
-        reml=True, method=MIXED_METHODS)
+    slope = "random slope of haptic mode" in fits["RMSE (N)"].method  # else its note says why not
+    rmse = smf.mixedlm("rmse_n ~ on * firm + trial_number", data, groups=data["participant_code"],
+                       re_formula="~on" if slope else None).fit(reml=True, method=MIXED_METHODS)
     assert fits["RMSE (N)"].params["trial_number"] == pytest.approx(rmse.fe_params["trial_number"], rel=1e-6)
     assert fits["RMSE (N)"].params["haptics_on_x_target_FIRM"] == pytest.approx(rmse.fe_params["on:firm"], rel=1e-6)
     gee = smf.gee("y ~ on * firm + trial_number", "participant_code", data, family=families.Binomial(),
-                  cov_struct=Exchangeable()).fit()
+                  cov_struct=Exchangeable()).fit(cov_type="bias_reduced")  # Mancl–DeRouen
     assert fits["success"].params["trial_number"] == pytest.approx(gee.params["trial_number"], rel=1e-8)
     assert fits["success"].std_errors["haptics_on"] == pytest.approx(gee.bse["on"], rel=1e-8)
 
 
 def test_the_trade_counts_only_the_participants_who_contribute():
     trials = _trials(8)
-    trials = trials.assign(success=True, tct_s=trials["tct_censored_s"])  # every trial has a TCT, but:
     p00_off = (trials["participant_code"] == "P00") & (trials["haptic_mode"] == "off")
     first = p00_off.idxmax()
-    trials.loc[p00_off & (trials.index != first), "tct_s"] = math.nan  # P00: one successful OFF trial left
+    trials.loc[p00_off & (trials.index != first), "rise_time_s"] = math.nan  # P00: one OFF trial reached the band
     rows = speed_accuracy(trials).set_index("haptic_mode")
     assert rows.at["off", "n_participants"] == 7 and rows.at["on", "n_participants"] == 8
     assert rows.at["off", "df"] == rows.at["off", "n_trials"] - 7 - 1  # N − k − 1 over the 7 who contribute

@@ -37,9 +37,9 @@ def test_the_primary_family_is_the_papers_four_outcomes() -> None:
     assert [m.name for m in which_tested(PAPER)][:4] == ["success", "tct_s", "rmse_n", "max_ae_n"]
     assert all(m.role is not Role.PRIMARY for m in which_tested(PAPER)[4:])
     # the registry holds every task's metrics; a study lists its tasks' (force tracking's lag and gain are not the
-    # paper's), so the paper's study is the paper's four and its three others, in order
+    # paper's), so the paper's study is the paper's four and its five others (the trade's phases last), in order
     assert [m.name for m in PAPER] == ["success", "tct_s", "rmse_n", "max_ae_n", "time_in_band_s", "peak_force_n",
-                                       "abs_impulse_n_s"]
+                                       "abs_impulse_n_s", "rise_time_s", "reach_rmse_n"]
     assert {"lag_s", "gain"} <= set(names()) and not {"lag_s", "gain"} & set(names(PAPER))
 
 

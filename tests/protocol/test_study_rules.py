@@ -45,7 +45,7 @@ def test_the_protocol_field_defaults_to_training_enabled_and_cannot_require_what
     assert not protocol_from_dict(d).training.required  # no training block: nothing to require
     assert not NO_TRAINING.training.required and not requires_training(NO_TRAINING)
     d["training"].update(enabled=True, required=False)
-    assert not requires_training(protocol_from_dict(d))  # the paper's study exactly: no practice phase
+    assert not requires_training(protocol_from_dict(d))  # training offered, not required
     d["training"].update(enabled=False, required=True)
     with pytest.raises(ProtocolError, match=r"^protocol: training.required = true: must be false when "
                                             r"training.enabled = false"):

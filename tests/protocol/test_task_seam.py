@@ -181,7 +181,8 @@ def test_the_protocol_file_names_the_task_and_its_parameters_are_validated_in_on
                            "p.toml")
     with pytest.raises(ProtocolError, match=r"task\.dwell_s = 5\.0: must be shorter than trial\.max_trial_s = 4"):
         protocol_from_dict(tomllib.loads(_protocol_text(TOY.replace("0.25", "5"))), "p.toml")
-    with pytest.raises(ProtocolError, match=r"task\.kind = 'toy_pull'.*force_regulation, force_tracking, toy_press"):
+    kinds = "force_regulation, force_tracking, force_discrimination, toy_press"
+    with pytest.raises(ProtocolError, match=rf"task\.kind = 'toy_pull'.*{kinds}"):
         protocol_from_dict(tomllib.loads(_protocol_text(TOY.replace("toy_press", "toy_pull"))), "p.toml")
     # without a [task] table a file is the paper's task, as every file written before the tasks
     assert protocol_from_dict(tomllib.loads(_protocol_text("")), "p.toml").task.kind == "force_regulation"
