@@ -234,3 +234,40 @@ CREATE TABLE IF NOT EXISTS withdrawals (
     rewritten        INTEGER                    -- 1 once the file's rewrite finished, 0 until then (withdraw again
                                                 -- finishes it; check says so); NULL: recorded before this column
 );
+
+-- Version 4, added later (issue 44; a writer adds these tables to a file made before them).
+-- What a protocol's [[covariates]] collected about a participant (protocol/study/covariates.py), given when they were
+-- registered and stored with their first session, never changed; pseudonymous values only (a group, a number of
+-- years, an age band), removed with the participant when they withdraw.
+CREATE TABLE IF NOT EXISTS covariates (
+    participant_id INTEGER NOT NULL REFERENCES participants(participant_id),
+    name           TEXT NOT NULL,               -- the protocol's covariates[].name
+    kind           TEXT NOT NULL CHECK (kind IN ('category', 'integer', 'float')),
+    value          TEXT NOT NULL,               -- a category's level, or the number as written (int / float text)
+    PRIMARY KEY (participant_id, name)
+);
+
+-- The experimenter's notes on a session or one of its trials: written during the session (t_s on the session clock)
+-- or added afterwards (haptic-study note: t_s NULL).  Appended only, never changed.
+CREATE TABLE IF NOT EXISTS notes (
+    session_id  INTEGER NOT NULL REFERENCES sessions(session_id),
+    t_s         REAL,                           -- session clock when written; NULL: added after the session
+    trial_index INTEGER,                        -- the trial it is about (trials.trial_index); NULL: the session
+    text        TEXT NOT NULL,
+    deviation   INTEGER NOT NULL CHECK (deviation IN (0, 1)),  -- 1: marked a deviation (the report lists it)
+    written_at  TEXT NOT NULL                   -- wall clock, ISO 8601 UTC
+);
+
+-- A questionnaire's answers (protocol/study/questionnaires.py), given on the participant screen (or by the simulated
+-- participant's rule) between two trials, stored in one transaction.
+CREATE TABLE IF NOT EXISTS questionnaire_answers (
+    session_id    INTEGER NOT NULL REFERENCES sessions(session_id),
+    questionnaire TEXT NOT NULL,                -- the protocol's questionnaires[].name
+    block         TEXT NOT NULL,                -- the haptic mode of the block it followed ('on', 'off'), or 'session'
+    item          TEXT NOT NULL,                -- a NASA-TLX subscale or pair ('mental|physical'), a Likert item's id
+    rating        REAL,                         -- a rating: NASA-TLX 0-100 in steps of 5, a Likert item on its scale
+    choice        TEXT,                         -- a NASA-TLX pair: the subscale chosen
+    answered_at_s REAL NOT NULL,                -- session clock
+    CHECK ((rating IS NULL) != (choice IS NULL)),
+    PRIMARY KEY (session_id, questionnaire, block, item)
+);

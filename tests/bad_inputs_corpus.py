@@ -303,6 +303,26 @@ CASES: list[Case] = [
          "--sim-arms applies to the simulated rig only", TWO_ARMS),
     Case("check-hardware: --arm not in the file", (*CHECK, "--arm", "middle"),
          "hw.toml has no such arm; its arms: right, left", TWO_ARMS),
+    # -- participants described, questionnaires, notes (issue 44) -----------------------------------------------
+    Case("protocol: a Likert item without a scale", RUN_NEW,
+         "p.toml: questionnaires[0].items[0].scale = None: every Likert item needs its scale",
+         {"p.toml": _text(DEFAULT_PROTOCOL + '\n[[questionnaires]]\nname = "q"\nkind = "likert"\nafter = "session"\n'
+                          '[[questionnaires.items]]\nid = "a"\ntext = "A?"\n')}),
+    Case("protocol: a covariate's range backwards", RUN_NEW,
+         "p.toml: covariates[0].max = 0: must be greater than covariates[0].min = 50",
+         {"p.toml": _text(DEFAULT_PROTOCOL + '\n[[covariates]]\nname = "years"\nkind = "integer"\nmin = 50\n'
+                          'max = 0\n')}),
+    Case("run --covariate outside its range", (*RUN_NEW, "--covariate", "years=-3"),
+         "covariate years = '-3': must be a whole number from 0 to 50",
+         {"p.toml": _text(DEFAULT_PROTOCOL + '\n[[covariates]]\nname = "years"\nkind = "integer"\nmin = 0\n'
+                          'max = 50\n')}),
+    Case("run --covariate the protocol does not declare", ("run", "--db", "{d}/new.db", "--covariate", "group=novice"),
+         "covariate group = 'novice': the protocol declares no such covariate (it declares none)"),
+    Case("note on a trial the session does not have", ("note", "--db", "{d}/good.db", "--session", "1", "--trial",
+                                                       "99", "text"),
+         "--trial 99: session 1 has trials 1 to 1; nothing was changed", {"good.db": good_db}),
+    Case("note on no such session", ("note", "--db", "{d}/good.db", "--session", "7", "text"),
+         "--session 7: no such session in", {"good.db": good_db}),
     # -- command-line arguments ---------------------------------------------------------------------------------
     Case("--seed beyond SQLite's INTEGER (no database created)",
          ("run", "--seed", "99999999999999999999", "--db", "{d}/new.db"),

@@ -3,12 +3,15 @@
 ``haptic-study export participant`` writes, into a new folder (the output policy of :mod:`foundation.outdir`)::
 
     participant.csv     their participants row (the pseudonymous code, when it was first stored)
+    covariates.csv      what the protocol collected about them (its [[covariates]]), given when they were registered
     sessions.csv        their sessions (the settings of each are in sessions.json)
     sessions.json       each session's protocol, schedule, rig and pipeline configuration, calibration, and each
                         recorded run's starting state
     stored_trials.csv   their trials as stored live, every column
     trials.csv          their trials as the report analyses them (the report's trials.csv, their rows only)
     events.csv          every event of their sessions (phases, cues, faults, experimenter actions)
+    notes.csv           the experimenter's notes on their sessions and trials
+    answers.csv         their answers to the protocol's questionnaires (NASA-TLX, Likert items)
     samples.csv         every recorded 1 kHz record of their sessions (analysis.samples_frame)
     poses.csv           the robot poses the pipeline took (125 Hz), per recorded run
     recording_log.csv   the recording's log: commands and events the pipeline applied, by tick
@@ -116,6 +119,16 @@ _DESCRIBED: dict[str, tuple[str, str, str]] = {  # column -> (description, unit,
     "z_m": ("robot tool position z, base frame", "m", "number"),
     "payload": ("what was applied, as JSON", "", "text"),
     "file": ("file of the export folder", "", "text"),
+    "name": ("the covariate's name, as the protocol declares it", "", "text"),
+    "value": ("its value: a category's level, or a number as written", "", "text"),
+    "text": ("the note, as the experimenter wrote it", "", "text"),
+    "deviation": ("1: the experimenter marked the note a deviation from the protocol", "", "integer"),
+    "written_at": ("when the note was written, ISO 8601 UTC", "", "text"),
+    "questionnaire": ("the questionnaire's name, as the protocol declares it", "", "text"),
+    "item": ("the question: a NASA-TLX subscale or pair (mental|physical), a Likert item's id", "", "text"),
+    "rating": ("the rating given (NASA-TLX 0–100, a Likert item on its scale)", "", "number"),
+    "choice": ("a NASA-TLX pair: the subscale chosen as contributing more to the workload", "", "text"),
+    "answered_at_s": ("session-clock time the answers were stored", "s", "number"),
 }
 for _axis in ("x", "y", "z"):
     _DESCRIBED[f"stylus_{_axis}_m"] = (f"haptic stylus position {_axis}", "m", "number")
@@ -128,18 +141,28 @@ for _i in range(9):
     _DESCRIBED[f"r{_i}"] = (f"robot tool rotation matrix, element {_i // 3 + 1},{_i % 3 + 1} (row-major)", "",
                             "number")
 _FILE_DESCRIBED = {("events.csv", "kind"): ("what happened: phase, cue, fault, reset, session_start, ...", "", "text"),
+                   ("covariates.csv", "kind"): ("the covariate's kind: category, integer or float", "", "text"),
+                   ("notes.csv", "t_s"): ("session-clock time the note was written (empty: added after the session)",
+                                          "s", "number"),
+                   ("notes.csv", "trial_index"): ("the trial the note is about, numbered from 0 (empty: the session)",
+                                                  "", "integer"),
+                   ("answers.csv", "block"): ("the block the questionnaire followed: its haptic mode (on, off), or "
+                                              "session", "", "text"),
                    ("recording_log.csv", "kind"): ("what the pipeline applied at that tick", "", "text")}
 
 
 #: What each file of an export holds (written into sessions.json, so the folder explains itself).
 FILES = {
     "participant": "their participants row: the pseudonymous code and when it was first stored",
+    "covariates": "what the protocol collected about them (its [[covariates]]), given when they were registered",
     "sessions": "their sessions (the settings of each are in sessions.json)",
     "sessions.json": "each session's protocol, schedule, rig and pipeline configuration, calibration, and each "
                      "recorded run's starting state",
     "stored_trials": "their trials as stored live, every column",
     "trials": "their trials as the report analyses them (the report's trials.csv, their rows only)",
     "events": "every event of their sessions (phases, cues, faults, experimenter actions)",
+    "notes": "the experimenter's notes on their sessions and trials",
+    "answers": "their answers to the protocol's questionnaires (NASA-TLX, Likert items)",
     "samples": "every recorded 1 kHz record of their sessions",
     "poses": "the robot poses the pipeline took (125 Hz), per recorded run",
     "recording_log": "the recording's log: what the pipeline applied, by loop tick",
@@ -289,6 +312,9 @@ def participant_export(database: str | os.PathLike[str], code: str,
         "stored_trials": _frame(rows, "trials"),
         "trials": _analysed(path, code, options or MetricOptions()),
         "events": _frame(rows, "events"),
+        **({"covariates": _frame(rows, "covariates")} if "covariates" in rows.tables else {}),
+        **({"notes": _frame(rows, "notes")} if "notes" in rows.tables else {}),
+        **({"answers": _frame(rows, "questionnaire_answers")} if "questionnaire_answers" in rows.tables else {}),
         "samples": samples,
         "poses": poses,
         "recording_log": log,

@@ -28,6 +28,7 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from analysis.reading.codebook_annotations import ANNOTATION_COLUMNS
 from analysis.reading.codebook_columns import (
     _STATS,
     DIFFERENCE_DECIMALS,
@@ -101,7 +102,7 @@ def _wide_columns() -> tuple[Column, ...]:
     return tuple(out)
 
 
-_ALL = COLUMNS + _wide_columns()
+_ALL = COLUMNS + _wide_columns() + ANNOTATION_COLUMNS
 #: analysis name -> exported name
 _RENAMED: dict[str, str] = {c.source: c.name for c in COLUMNS if c.source}
 
@@ -168,17 +169,23 @@ def export(frame: pd.DataFrame, file: str, *, rounded: bool = True) -> pd.DataFr
     return out
 
 
-def codebook_frame(files: Mapping[str, Iterable[str]], metrics: Sequence[Metric] | None = None) -> pd.DataFrame:
+def codebook_frame(files: Mapping[str, Iterable[str]], metrics: Sequence[Metric] | None = None,
+                   described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> pd.DataFrame:
     """``codebook.csv``: one row per (file, column) of the files written, in file and column order.
 
     ``metrics`` are the study's (its tasks'), which the descriptions of the tests' columns name (the measures
     tested, Holm's family: :func:`metric_words`; None: in general words).  A column without an entry in
-    :data:`COLUMNS` gets an empty description (the report's test refuses that).
+    :data:`COLUMNS` gets an empty description (the report's test refuses that), unless ``described`` -- (file,
+    column) → (type, unit, description), a study's own columns such as its covariates -- describes it.
     """
     words = metric_words(metrics)
     rows = []
     for file, columns in files.items():
         for name in columns:
+            own = (described or {}).get((file, name))
+            if own is not None:
+                rows.append({"file": file, "column": name, "type": own[0], "unit": own[1], "description": own[2]})
+                continue
             c = lookup(file, name)
             rows.append({"file": file, "column": name, "type": c.type if c else "",
                          "unit": c.unit if c else "", "description": c.described(words) if c else ""})

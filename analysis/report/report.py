@@ -36,9 +36,17 @@ from typing import Any
 import pandas as pd
 
 from analysis.plots import figures, model_figures
+from analysis.reading.annotations import read_annotations
 from analysis.reading.load import Progress, StudyData, load_study
 from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
+from analysis.report.annotations_report import (
+    annotate,
+    annotations_html,
+    covariate_codebook,
+    noted_deviations,
+    questionnaire_results,
+)
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
 from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
@@ -344,12 +352,18 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
     CSVs with their codebook (and ``power.csv``) and report.html; the CSVs' tables as written into ``results``."""
     marks_overall, marks = _all_marks(a)
     pngs, examples, (trade_fit, learning) = _draw(a, options, marks_overall, marks, tmp / "figures", workers)
-    within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning)
+    # who the participants are, what they answered, what the experimenter noted (nothing, in the paper's study)
+    ann = read_annotations(databases)
+    answered = questionnaire_results(ann, a.trials)
+    within = dataclasses.replace(a.within, trade_fit=trade_fit, learning=learning,
+                                 deviations=noted_deviations(ann, a.within.deviations))
     # the files' tables, rounded; the page's, unrounded: it rounds each number once, as it shows it
-    tables, shown = (report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
-                                                 a.stats_by_target, within, options.error_window, rounded=r)
+    tables, shown = (annotate(report_tables.export_tables(a.study, a.trials, a.overall, a.by_target, a.stats,
+                                                          a.stats_by_target, within, options.error_window, rounded=r),
+                              ann, answered, rounded=r)
                      for r in (True, False))
     section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
+    section += annotations_html(ann, answered, dict.fromkeys(a.trials["participant_code"]))
     if power:
         from analysis.planning.power_outputs import report_section
 
@@ -360,7 +374,7 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
     moving = tracking_html(a.speed, shown["stats.csv"], a.study.metrics,
                            speed_figure(a.speed, tmp / "figures") if a.speed is not None else None)
     report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
-                               metrics=a.study.metrics)
+                               metrics=a.study.metrics, described=covariate_codebook(ann.declared))
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,

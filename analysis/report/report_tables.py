@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -166,7 +166,8 @@ _WINDOWED_FILES = ("participants.csv", "participants_wide.csv", "participants_by
 
 
 def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Sequence[str] = (),
-                 metrics: Sequence[Metric] | None = None) -> None:
+                 metrics: Sequence[Metric] | None = None,
+                 described: Mapping[tuple[str, str], tuple[str, str, str]] | None = None) -> None:
     """Write the CSVs and ``codebook.csv``, which describes every column of every one (itself included).
 
     Parameters
@@ -179,6 +180,9 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
         CSV files already in ``folder`` (``power.csv``) that the codebook describes as well.
     metrics : sequence of Metric
         The study's metrics, which the codebook's descriptions of the tests name (:func:`codebook.metric_words`).
+    described : mapping, optional
+        (file, column) → (type, unit, description) of columns the study's own declarations describe (a covariate's
+        column in the participants' tables).
     """
     for name, frame in tables.items():
         frame.to_csv(folder / name, index=False)
@@ -186,5 +190,5 @@ def write_tables(folder: Path, tables: dict[str, pd.DataFrame], written_too: Seq
     for name in written_too:
         columns[name] = list(pd.read_csv(folder / name, nrows=0).columns)
     columns["codebook.csv"] = ["file", "column", "type", "unit", "description"]
-    codebook.codebook_frame(columns, metrics).to_csv(folder / "codebook.csv", index=False)
+    codebook.codebook_frame(columns, metrics, described).to_csv(folder / "codebook.csv", index=False)
 

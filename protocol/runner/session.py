@@ -47,11 +47,13 @@ from pipeline.devices.interfaces import Fault
 from pipeline.runtime.loop_messages import Command, LoopEvent, StartRecording
 from protocol.runner.deliveries import Deliveries
 from protocol.runner.fault_wait import FaultWait
+from protocol.runner.questionnaire_wait import QuestionnaireWait
 from protocol.runner.requests import Request, Requests
 from protocol.runner.session_desk import SessionDesk, SessionPlan, SessionState, trial_words
 from protocol.runner.session_recording import OtherArms, SessionRecording
 from protocol.runner.trial_loop import TrialLoop
 from protocol.storage import Recorder
+from protocol.storage.annotations import Note, insert_note
 from protocol.study.clock import SessionClock
 from protocol.study.delivery import DeliveryLimits
 from protocol.study.design import TrialSpec
@@ -102,6 +104,7 @@ class SessionRunner:
         self.trials = TrialLoop(plan, self.desk, self.deliveries, participant, participant_time)
         self.machine: TrialMachine = self.trials.machine
         self.faults = FaultWait(self.desk, plan.protocol.trial.pause_s, auto_reset_faults, plan.arms, self.task_arm)
+        self.questions = QuestionnaireWait(self.desk, plan)
         self.requests = Requests()
         self._initial_pause_ns = int(round(plan.initial_pause_s * 1e9))
         self._ready_ns: int | None = None  # no cue before this loop time
@@ -190,6 +193,22 @@ class SessionRunner:
     def abort_session(self, reason: str = "aborted by the experimenter") -> None:
         """Abort the running trial (not re-queued) and end the session."""
         self.requests.put(Request("abort_session", reason))
+
+    def note(self, text: str, trial_index: int | None = None, deviation: bool = False) -> None:
+        """Store the experimenter's note on the session (``trial_index`` None) or one of its trials, timestamped on
+        the session clock when the next block is processed; ``deviation`` marks it one for the report.
+
+        Raises ``ValueError`` (one line) for a note without text or a trial the session does not have.
+        """
+        if not text.strip():
+            raise ValueError("note = '': a note needs its text")
+        if trial_index is not None and not 0 <= trial_index < len(self.schedule):
+            raise ValueError(f"note: trial {trial_index + 1}: the session has trials 1 to {len(self.schedule)}")
+        self.requests.put(Request("note", text, trial_index=trial_index, deviation=deviation))
+
+    def answer(self, questionnaire: str, block: str, answers: dict[str, float | str]) -> None:
+        """The participant's answers to the questionnaire shown (:mod:`protocol.runner.questionnaire_wait`)."""
+        self.requests.put(Request("answer", questionnaire, block, answers=tuple(answers.items())))
 
     def records_lost(self, count: int) -> None:
         """The caller could not read ``count`` records (the ring lapped it): the running trial has a gap."""
@@ -281,6 +300,8 @@ class SessionRunner:
         if self._ready_ns is not None and t_ns < self._ready_ns:
             state.waiting = "pause"
             return
+        if self.questions.holds(t_ns, self.trials.position, self.trials.schedule):
+            return  # (the wait's words are the questionnaire's)
         state.waiting = ""
         if self.trials.position >= len(self.trials.schedule):
             self.desk.end("completed", "all trials done", t_ns)
@@ -307,6 +328,9 @@ class SessionRunner:
         requests = self.requests.take()
         with self.recorder.atomic():
             for r in requests:
+                if r.kind in ("note", "answer"):
+                    self._annotate(t_ns, r)
+                    continue
                 if r.kind in ("pause", "resume"):
                     self.desk.set_paused(r.kind == "pause")
                     self.desk.event(t_ns, "experimenter", r.kind)
@@ -320,6 +344,19 @@ class SessionRunner:
                 if r.kind == "abort_session":
                     self.desk.end("aborted", r.detail, t_ns)
                     return
+
+
+    def _annotate(self, t_ns: int, r: Request) -> None:
+        """A note stored, or a questionnaire's answers (the next cue after the protocol's pause)."""
+        if r.kind == "note":
+            note = Note(self.session_id, self.desk.time_s(t_ns), r.trial_index, r.detail, r.deviation, "")
+            self.recorder.call(lambda db: insert_note(db.conn, note))
+            return
+        why = self.questions.answer(t_ns, r.detail, r.cause, dict(r.answers))
+        if why:
+            self.desk.event(t_ns, "questionnaire", why)
+            return
+        self._ready_ns = max(self._ready_ns or 0, t_ns + int(round(self.plan.protocol.trial.pause_s * 1e9)))
 
 
 def first_unfinished(schedule: list[TrialSpec], trial_rows: list[dict[str, Any]]) -> int:

@@ -57,6 +57,11 @@ class SessionPlan:
         Training with the participant's live force gauge (the task's training aid).
     arms
         The rig's arms by name (() or one: events stored as ever); the task arm's records are the runner's.
+    answered
+        The questionnaires (name, block) the session has answers of (a resume asks them not again).
+    answers_seed
+        Who answers the questionnaires: the simulated participant with this seed, by its rule
+        (:mod:`protocol.study.sim_answers`), or a person on the participant screen (None).
     """
 
     session_id: int
@@ -69,6 +74,8 @@ class SessionPlan:
     seed: int = 0
     live_force_aid: bool = False
     arms: tuple[str, ...] = ()
+    answered: tuple[tuple[str, str], ...] = ()
+    answers_seed: int | None = None
 
 
 @dataclass

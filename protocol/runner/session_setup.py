@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,10 +40,12 @@ from protocol.runner.session import SessionRunner, first_unfinished
 from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
+from protocol.storage.annotations import answered_blocks
 from protocol.storage.damage import recording_damage
 from protocol.storage.recordings import marked_records
 from protocol.study.clock import SessionClock
 from protocol.study.config import ProtocolConfig, protocol_from_dict
+from protocol.study.covariates import checked_values
 from protocol.study.delivery import DeliveryLimits
 from protocol.study.design import (
     HapticMode,
@@ -96,9 +98,11 @@ def training_schedule(protocol: ProtocolConfig) -> list[TrialSpec]:
 
 
 def training_protocol(protocol: ProtocolConfig) -> ProtocolConfig:
-    """The protocol a training session runs (and stores): trials last the training's time per target and mode."""
+    """The protocol a training session runs (and stores): trials last the training's time per target and mode, and
+    no questionnaire is asked (they ask about the experiment's conditions)."""
     return dataclasses.replace(
-        protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode)
+        protocol, trial=dataclasses.replace(protocol.trial, max_trial_s=protocol.training.seconds_per_target_per_mode),
+        questionnaires=(),
     )
 
 
@@ -147,26 +151,30 @@ class OpenedSession:
     resumed: bool
     notes: list[str] = field(default_factory=list)
     segment: int = 0
+    #: The questionnaires (name, block) the session has answers of (a resume asks them not again).
+    answered: tuple[tuple[str, str], ...] = ()
 
     @property
     def participant_seed(self) -> int:
         """Seed of the simulated participant of this session's participant number."""
         return participant_seeds(self.seed, self.participant_number)[1]
 
-    def plan(self, arms: tuple[str, ...] = ()) -> SessionPlan:
-        """What the session runner follows in this run, on a rig whose arms are ``arms``."""
+    def plan(self, arms: tuple[str, ...] = (), simulated_answers: bool = False) -> SessionPlan:
+        """What the session runner follows in this run, on a rig whose arms are ``arms``; the questionnaires
+        answered by the simulated participant of this number (``simulated_answers``), or by a person."""
         return SessionPlan(
             session_id=self.session_id, protocol=self.protocol, schedule=self.schedule,
             start_position=self.start_position, clock_offset_s=self.clock_offset_s,
             initial_pause_s=self.initial_pause_s, segment=self.segment, seed=self.seed,
-            live_force_aid=self.live_force_aid, arms=arms,
+            live_force_aid=self.live_force_aid, arms=arms, answered=self.answered,
+            answers_seed=self.participant_seed if simulated_answers else None,
         )
 
 
 def open_new_session(
     db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, seed: int, rig: str,
     config: dict[str, Any], calibration: dict[str, Any] | None, lease_owner: str, study_owner: str | None = None,
-    note: str = "", training_override: str = "",
+    note: str = "", training_override: str = "", covariates: Mapping[str, Any] | None = None,
 ) -> OpenedSession:
     """Store a new session (whole schedule, provenance) and take its lease, before its first trial.
 
@@ -191,9 +199,14 @@ def open_new_session(
     training_override
         The experimenter's reason for an experiment without the completed training session the protocol
         requires: the session starts, and a ``deviation`` event stores the reason (:mod:`protocol.runner.study_rules`).
+    covariates
+        Who the participant is (by name; text or typed), as the protocol's ``[[covariates]]`` declare: checked
+        before anything is stored, and stored with a participant this session registers.
 
     Raises
     ------
+    CovariateError
+        A covariate outside its declaration, or a required one missing (one line; nothing stored).
     StorageError
         The participant already has a session of this kind, or another process runs the study.
     StudyRuleError
@@ -216,6 +229,7 @@ def open_new_session(
                                       training_override=training_override)
         return [(DEVIATION_EVENT, deviation)] if deviation else []
 
+    described = checked_values(protocol.covariates, covariates or {})  # before anything is stored
     code_ran = software_provenance()  # which code runs the session: version, commit, uncommitted changes
     session_id = db.create_session(
         code=code, kind=kind, seed=seed, participant_number=number, protocol_json=run_protocol.to_json(),
@@ -224,6 +238,7 @@ def open_new_session(
         start_event=note or f"{kind} session for {code}, seed {seed}",  # in the same transaction
         rules=rules,
         software_commit=code_ran.commit, software_dirty=code_ran.dirty,
+        covariates=described, declared=protocol.covariates,
         metric_columns=[m.name for m in stored(run_protocol.task.metrics)],  # its task's trials columns
     )
     return OpenedSession(
@@ -303,7 +318,7 @@ def open_resumed_session(
         participant_number=info.participant_number, protocol=protocol, schedule=schedule, start_position=pos,
         clock_offset_s=offset_s, initial_pause_s=protocol.trial.pause_s,
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
-        resumed=True, notes=notes, segment=segment,
+        resumed=True, notes=notes, segment=segment, answered=tuple(answered_blocks(db.conn, session_id)),
     )
 
 
@@ -400,6 +415,7 @@ def start_runner(
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
     commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1, arms: tuple[str, ...] = (),
+    simulated_answers: bool = False,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -428,10 +444,13 @@ def start_runner(
     arms
         The rig's arms by name (:attr:`protocol.runner.session.SessionRunner.arms`; the task arm's records are the
         runner's).
+    simulated_answers
+        The simulated participant answers the questionnaires by its rule (headless); else a person answers them
+        on the participant screen (the GUI, on either rig).
     """
     recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
                         **({} if commit_clock is None else {"clock": commit_clock}))
-    runner = SessionRunner(opened.plan(arms), recorder, submit, participant=participant,
+    runner = SessionRunner(opened.plan(arms, simulated_answers), recorder, submit, participant=participant,
                            participant_time=participant_time, limits=limits, auto_reset_faults=auto_reset_faults,
                            scales=scales)
     return recorder, runner

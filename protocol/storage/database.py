@@ -23,11 +23,13 @@ from pipeline.devices.rig import SINGLE_ARM_NAME
 from protocol.metrics import METRICS
 from protocol.recording.integrity import WHOLE_BLOCK, place_crc32
 from protocol.storage import crashpoint
+from protocol.storage.annotations import insert_covariates
 from protocol.storage.codes import CODE_PATTERN, stored_clash, validate_code
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import LeaseHolder, session_scope
 from protocol.storage.schema import SAMPLE_COLUMNS, SchemaFile, add_metric_columns, connect_readonly
 from protocol.storage.withdrawal import withdrawal_of
+from protocol.study.covariates import Covariate, CovariateValue
 
 __all__ = ["CODE_PATTERN", "SessionInfo", "StudyDatabase", "validate_code"]
 
@@ -202,12 +204,17 @@ class StudyDatabase(SchemaFile, LeaseHolder):
         lease_owner: str | None = None, command: str = "", study_owner: str | None = None, start_event: str = "",
         rules: Callable[[StudyDatabase], Sequence[tuple[str, str]]] | None = None,
         software_commit: str | None = None, software_dirty: bool | None = None, metric_columns: Sequence[str] = (),
+        covariates: Mapping[str, CovariateValue] | None = None, declared: Sequence[Covariate] = (),
     ) -> int:
         """Insert a session with its whole schedule and provenance, committed before trial 1.
 
         ``metric_columns`` are the stored metrics of its task (:func:`protocol.metrics.stored` of the task's
         metrics): the ``trials`` table gets a column for each it lacks, in the same transaction
         (:func:`protocol.storage.schema.add_metric_columns`).
+
+        ``covariates`` (checked against the protocol's ``declared`` ones) are stored with a participant this
+        session registers, in the same transaction; a participant registered before keeps those of their first
+        session (:func:`protocol.storage.annotations.insert_covariates`).
 
         ``software_commit`` and ``software_dirty`` say which code ran it (the git commit of the checkout and
         whether it had uncommitted changes; None when not known, e.g. installed from a wheel).
@@ -229,32 +236,15 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             If another live process runs the whole study (a headless ``run``).
         """
         with self.transaction():
-            stored_clash(self.conn, validate_code(code), str(self.path))  # p01 beside P01 is refused, named
-            gone = withdrawal_of(self.conn, code)
-            if gone is not None:
-                raise StorageError(f"participant {code} withdrew from the study in {self.path} "
-                                   f"({gone.withdrawn_at[:16].replace('T', ' ')} UTC) and their data were erased; "
-                                   "a withdrawn code is not used again (give a new participant code)")
-            existing = self.sessions_of(code, kind)
-            if existing:
-                s = existing[-1]
-                writer = self.sessions_being_written().get(s.session_id) if s.status == "running" else None
-                if writer is not None:  # live in another window or process: one writer per session
-                    hint = f"it is being run right now by {writer}; wait for it to end there"
-                elif s.status == "running":
-                    hint = (f"it was interrupted: resume it (haptic-study run --resume {code}, or Resume selected in "
-                            "the GUI)")
-                else:
-                    hint = "use a new participant code"
-                raise StorageError(
-                    f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
-                    f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
-                )
+            self._refuse_new_session(code, kind)
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
             extra_events = rules(self) if rules is not None else ()
             add_metric_columns(self.conn, metric_columns)
-            pid = self.participant_id(code, create=True)
+            known = self.participant_id(code, create=False)
+            pid = known if known is not None else self.participant_id(code, create=True)
+            assert pid is not None
+            insert_covariates(self.conn, pid, code, declared, covariates or {}, new=known is None)
             cur = self.conn.execute(
                 "INSERT INTO sessions (participant_id, kind, seed, participant_number, protocol_json, schedule_json, "
                 "status, started_at, software_version, rig, config_json, calibration_json, software_commit, "
@@ -273,6 +263,31 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             for event_kind, detail in extra_events:
                 self.insert_event(session_id, 0.0, event_kind, detail)
         return session_id
+
+    def _refuse_new_session(self, code: str, kind: str) -> None:
+        """Refuse (one :class:`StorageError` line) a new session of ``kind`` for ``code``: a code that reads as
+        another's, a participant who withdrew, or one who has a session of this kind (running, interrupted or ended)."""
+        stored_clash(self.conn, validate_code(code), str(self.path))  # p01 beside P01 is refused, named
+        gone = withdrawal_of(self.conn, code)
+        if gone is not None:
+            raise StorageError(f"participant {code} withdrew from the study in {self.path} "
+                               f"({gone.withdrawn_at[:16].replace('T', ' ')} UTC) and their data were erased; "
+                               "a withdrawn code is not used again (give a new participant code)")
+        existing = self.sessions_of(code, kind)
+        if existing:
+            s = existing[-1]
+            writer = self.sessions_being_written().get(s.session_id) if s.status == "running" else None
+            if writer is not None:  # live in another window or process: one writer per session
+                hint = f"it is being run right now by {writer}; wait for it to end there"
+            elif s.status == "running":
+                hint = (f"it was interrupted: resume it (haptic-study run --resume {code}, or Resume selected in "
+                        "the GUI)")
+            else:
+                hint = "use a new participant code"
+            raise StorageError(
+                f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
+                f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
+            )
 
     def update_schedule(self, session_id: int, schedule_json: str) -> None:
         """Store the schedule after an aborted trial was re-queued (the only schedule change)."""

@@ -1,7 +1,8 @@
 """Every stored row about one participant, table by table: what a subject-access request is answered from.
 
 :func:`participant_rows` reads, for one participant code, their ``participants`` row and every row that refers to
-them -- their sessions, trials, events, recorded runs (``recordings``), the recorded blocks' descriptions (the
+them -- their covariates, sessions, trials, events, the experimenter's notes, the questionnaires' answers, recorded
+runs (``recordings``), the recorded blocks' descriptions (the
 blocks' bytes are decoded by :mod:`protocol.recording`), the ``samples`` rows of older versions and the leases of
 their sessions -- as plain column names and value tuples.  ``haptic-study export participant`` writes them out
 (:mod:`analysis.export.participant_export`); ``withdraw`` removes the same rows (:mod:`protocol.storage.withdrawal`).
@@ -66,6 +67,9 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
     queries: dict[str, tuple[str, bool]] = {
         "trials": ("SELECT * FROM trials WHERE session_id = ? ORDER BY trial_index", True),
         "events": ("SELECT * FROM events WHERE session_id = ? ORDER BY t_s, rowid", True),
+        "notes": ("SELECT * FROM notes WHERE session_id = ? ORDER BY rowid", has_table(conn, "notes")),
+        "questionnaire_answers": ("SELECT * FROM questionnaire_answers WHERE session_id = ? ORDER BY rowid",
+                                  has_table(conn, "questionnaire_answers")),
         "recordings": ("SELECT * FROM recordings WHERE session_id = ? ORDER BY segment", has_table(conn, "recordings")),
         "session_blocks": (f"SELECT {blocks_cols} FROM session_blocks WHERE session_id = ? ORDER BY segment, block",
                            has_table(conn, "session_blocks")),
@@ -82,7 +86,10 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
                        "t_last_s, crc32 FROM arm_chunks WHERE session_id = ? ORDER BY arm, segment, block, chunk",
                        has_table(conn, "arm_chunks")),
     }
-    tables = {"participants": person, "sessions": sessions}
+    tables = {"participants": person}
+    if has_table(conn, "covariates"):
+        tables["covariates"] = _table(conn, "SELECT * FROM covariates WHERE participant_id = ? ORDER BY rowid", (pid,))
+    tables["sessions"] = sessions
     for name, (sql, present) in queries.items():
         if present:
             tables[name] = _per_session(conn, sql, [(sid,) for sid in sids])

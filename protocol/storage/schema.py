@@ -176,6 +176,41 @@ def add_later_columns(conn: sqlite3.Connection) -> list[str]:
     return [f"{t}.{c}" for t, c in added]
 
 
+#: Tables added to version 4 after files of version 4 existed (issue 44: who the participants are, the
+#: experimenter's notes, the questionnaires' answers), defined once in ``data/schema.sql``: a writer that opens a
+#: file without them adds them, empty.
+LATER_TABLES = ("covariates", "notes", "questionnaire_answers")
+
+
+def _later_table_sql(name: str) -> str:
+    """The ``CREATE TABLE`` statement of ``name`` as ``data/schema.sql`` writes it (comments left out)."""
+    text = "\n".join(line.split("--", 1)[0] for line in schema_path().read_text(encoding="utf-8").splitlines())
+    for statement in text.split(";"):
+        if statement.split()[:6] == ["CREATE", "TABLE", "IF", "NOT", "EXISTS", name]:
+            return statement.strip()
+    raise StorageError(f"{schema_path()}: no table {name}")  # (a broken install)
+
+
+def add_later_tables(conn: sqlite3.Connection) -> list[str]:
+    """Give a file made before them the tables of :data:`LATER_TABLES` (empty), as :func:`add_later_columns` adds
+    columns: only a writer, in its own transaction, no row changed, the schema version kept.  Returns those added."""
+    def missing() -> list[str]:
+        return [t for t in LATER_TABLES if not has_table(conn, t)]
+
+    if not missing():
+        return []
+    conn.execute("BEGIN IMMEDIATE")
+    try:
+        added = missing()
+        for table in added:
+            conn.execute(_later_table_sql(table))
+        conn.execute("COMMIT")
+    except BaseException:
+        conn.execute("ROLLBACK")
+        raise
+    return added
+
+
 SAMPLE_COLUMNS = (
     "trial_id", "t_s", "force_n",
     "raw_fx", "raw_fy", "raw_fz", "raw_tx", "raw_ty", "raw_tz",
@@ -371,6 +406,7 @@ class SchemaFile:
             _widen_abort_causes(c)
         if not readonly:
             add_later_columns(c)
+            add_later_tables(c)
             c.execute("PRAGMA journal_mode = WAL")
             # NORMAL in WAL mode: a committed transaction survives a process
             # crash (SIGKILL); only a power cut can lose the last commits.

@@ -1,8 +1,9 @@
 """A participant's withdrawal: every row of theirs removed, the file rewritten, a record of it kept.
 
 An ethics approval lets a participant withdraw and have their data erased.  :func:`erase_participant` removes,
-in one transaction, the participant row and everything that refers to it -- their sessions, trials, events,
-recorded runs and blocks, the samples rows of older versions and the leases of their sessions -- with SQLite's
+in one transaction, the participant row and everything that refers to it -- their covariates, sessions, trials,
+events, notes, questionnaires' answers, recorded runs and blocks, the samples rows of older versions and the leases
+of their sessions -- with SQLite's
 ``secure_delete`` on, so the freed bytes are overwritten with zeros rather than left in free pages (and every page
 that was already free, which a writer's ``secure_delete = FAST`` may have left with old bytes, zeroed too), and stores a
 :class:`Withdrawal` record that keeps only the pseudonymous code, the time, the reason and how many rows of each kind
@@ -193,10 +194,15 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
                 for table in reversed(recording_tables(arm)):
                     if has_table(c, table):
                         c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
+            for table in ("notes", "questionnaire_answers"):  # (a file made before them has none)
+                if has_table(c, table):
+                    c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM events WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM leases WHERE scope = ?", (session_scope(sid),))
             c.execute("DELETE FROM sessions WHERE session_id = ?", (sid,))
+        if has_table(c, "covariates"):  # who they are goes with them
+            c.execute("DELETE FROM covariates WHERE participant_id = ?", (fp.participant_id,))
         c.execute("DELETE FROM participants WHERE participant_id = ?", (fp.participant_id,))
         record = Withdrawal(code, now_iso(), reason, len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records,
                             fp.samples, rewritten=0)

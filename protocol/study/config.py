@@ -19,6 +19,8 @@ from typing import Any
 from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
+from protocol.study.covariates import Covariate, covariates_from_tables
+from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
 from protocol.tasks.registry import named, task_tables
@@ -106,6 +108,12 @@ class ProtocolConfig:
     #: table; none is the paper's force regulation, whose band and hold are ``trial.tolerance_fraction`` and
     #: ``trial.hold_s``.
     task: Task = field(default_factory=ForceRegulation)
+    #: What the study collects about each participant (:mod:`protocol.study.covariates`; the file's
+    #: ``[[covariates]]``): none by default.
+    covariates: tuple[Covariate, ...] = ()
+    #: The questionnaires asked on the participant screen (:mod:`protocol.study.questionnaires`; the file's
+    #: ``[[questionnaires]]``): none by default.
+    questionnaires: tuple[Questionnaire, ...] = ()
 
     @property
     def trials_per_participant(self) -> int:
@@ -166,6 +174,8 @@ class ProtocolConfig:
             "trial": {**task_trial, **asdict(self.trial)},
             "training": asdict(self.training),
             **({"task": task} if task is not None else {}),
+            **({"covariates": [c.to_dict() for c in self.covariates]} if self.covariates else {}),
+            **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
         }
 
     def to_json(self) -> str:
@@ -187,7 +197,8 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         One line naming ``source``, the field, the value and what is allowed.
     """
     f = Fields(source, ProtocolError)
-    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task"})
+    top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
+                          "questionnaires"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -239,7 +250,8 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
-        task=task,
+        task=task, covariates=covariates_from_tables(f, top.get("covariates")),
+        questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
     )
 
 

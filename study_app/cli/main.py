@@ -24,6 +24,7 @@ from study_app.cli.discrimination_cmds import add_discrimination_parser
 from study_app.cli.error import CliError
 from study_app.cli.gui_cmds import add_gui_parser
 from study_app.cli.hardware_cmds import add_check_hardware_parser, add_probe_parser
+from study_app.cli.note_cmds import add_note_parser
 from study_app.cli.power_cmds import add_power_parser
 from study_app.cli.replay_cmds import add_replay_parsers
 from study_app.cli.report_cmds import add_report_parsers
@@ -71,7 +72,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for add in (add_sim_parser, add_run_parser, add_report_parsers, add_replay_parsers, add_sessions_parser,
-                add_check_parser, add_withdraw_parser, add_power_parser, add_sweep_parser, add_discrimination_parser,
+                add_check_parser, add_withdraw_parser, add_note_parser, add_power_parser, add_sweep_parser,
+                add_discrimination_parser,
                 _add_installed_commands, add_probe_parser, add_check_hardware_parser, add_calibrate_command,
                 add_gui_parser):
         add(sub)

@@ -86,7 +86,22 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"the simulated rig's arms, comma-separated (default: one arm, {SINGLE_ARM_NAME}); the "
                         "protocol's design.task_arm names the one that does the task, the others are rigged alike and "
                         "held still (e.g. --sim-arms left,right with task_arm = \"left\")")
+    r.add_argument("--covariate", dest="covariates", action="append", default=[], type=_covariate,
+                   metavar="NAME=VALUE",
+                   help="a value every participant this run registers is given for one of the protocol's "
+                        "[[covariates]] (e.g. group=surgeon; the others are drawn by the simulated participant's "
+                        "rule); repeatable")
     r.set_defaults(handler=cmd_run)
+
+
+def _covariate(text: str) -> tuple[str, str]:
+    """An argument type: one ``--covariate NAME=VALUE`` (checked against the protocol when the run starts)."""
+    from protocol.study.covariates import CovariateError, parse_assignment
+
+    try:
+        return parse_assignment(text)
+    except CovariateError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def add_sessions_parser(sub: argparse._SubParsersAction) -> None:
@@ -136,6 +151,9 @@ def cmd_run(args: argparse.Namespace) -> int:
     from study_app.cli.progress import ProgressBar
     from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
 
+    if args.resume is not None and args.covariates:
+        raise CliError(f"--covariate {args.covariates[0][0]}={args.covariates[0][1]}: a resumed participant was "
+                       "registered with their first session, and their covariates are not changed")
     if args.resume is not None:
         for f in args.inject_fault:
             if f.code != args.resume:
@@ -166,7 +184,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
                 on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
-                sim_arms=args.sim_arms, framework=framework,
+                sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates),
             )
         wall = _time.perf_counter() - t0
         if bar is not None:

@@ -14,10 +14,22 @@ from typing import Any
 
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.storage import StorageError, StudyDatabase, StudyReader
+from protocol.storage.annotations import covariates_by_code
 from protocol.storage.withdrawal import withdrawals
 from protocol.study.labels import plural
 
-__all__ = ["format_sessions", "list_sessions", "list_withdrawn", "next_participant_number"]
+__all__ = ["format_sessions", "list_covariates", "list_sessions", "list_withdrawn", "next_participant_number"]
+
+def list_covariates(db_path: str | os.PathLike[str]) -> dict[str, dict[str, Any]]:
+    """Each registered participant's covariates by code (read-only; {} when the file does not exist yet)."""
+    if not os.path.exists(db_path):
+        return {}
+    db = StudyDatabase(db_path, readonly=True, check=False)
+    try:
+        return {code: dict(v) for code, v in covariates_by_code(db.conn).items()}
+    finally:
+        db.close()
+
 
 def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> list[dict[str, Any]]:
     """Every session of a study database, oldest first; empty when the file does not exist yet.

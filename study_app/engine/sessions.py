@@ -35,7 +35,9 @@ from protocol.runner.session_setup import (
 )
 from protocol.runner.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
+from protocol.storage.annotations import notes
 from protocol.study.config import ProtocolConfig, load_protocol
+from protocol.study.questionnaires import checked_answers
 from protocol.study.records import AbortCause, TrialRecord
 from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
@@ -102,7 +104,7 @@ class EngineSessions:
                         **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
-                training_override=cmd.training_override,
+                training_override=cmd.training_override, covariates=cmd.covariates,
             )
         except BaseException:
             db.close()
@@ -175,6 +177,7 @@ class EngineSessions:
             participant, participant_time = None, None
         # a resumed session's table and progress start from what is stored (read before the recorder writes)
         stored = [TrialRecord.from_row(r) for r in db.trial_rows(opened.session_id)] if opened.resumed else []
+        noted = [(n.trial_index, n.text, n.deviation) for n in notes(db.conn, [opened.session_id])]
         recorder, runner = start_runner(
             db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
@@ -199,6 +202,7 @@ class EngineSessions:
             max_trial_s=tr.max_trial_s, pause_s=tr.pause_s, cue_s=tr.cue_s, live_force_aid=opened.live_force_aid,
             schedule=[dataclasses.asdict(sp) for sp in opened.schedule],
             participant_number=opened.participant_number, stored_trials=stored, seed=opened.seed,
+            stored_notes=noted,
         ))
 
     def control(self, cmd: m.Pause | m.Resume | m.AbortTrial | m.AbortSession) -> None:
@@ -217,11 +221,35 @@ class EngineSessions:
                 raise RuntimeError(f"trial {cmd.trial_index + 1} had already ended: nothing was aborted")
             if runner.running_trial is None:
                 raise RuntimeError("no trial is running (between trials or paused)")
+            if cmd.note.strip():  # the experimenter's words: a note on the trial, in the abort's transaction
+                self.note(m.Note(f"reason for the abort: {cmd.note.strip()}", runner.running_trial.index))
             runner.abort_trial(cmd.reason, trial_index=cmd.trial_index)
         else:
             if cmd.session_id is not None and cmd.session_id != runner.session_id:
                 raise RuntimeError(f"session {cmd.session_id} had already ended: nothing was aborted")
             runner.abort_session(cmd.reason)
+
+    def note(self, cmd: m.Note) -> None:
+        """The experimenter's note on the running session or one of its trials (stored at the next block)."""
+        runner = self.runner
+        if runner is None or runner.done:
+            raise RuntimeError("note: no session is running (haptic-study note adds one to a stored session)")
+        runner.note(cmd.text, cmd.trial_index, cmd.deviation)
+        self.engine.publish(m.NoteStored(self.engine.last_t_ns * 1e-9, cmd.text.strip(), cmd.trial_index,
+                                         cmd.deviation))
+
+    def answer(self, cmd: m.AnswerQuestionnaire) -> None:
+        """The participant's answers to the questionnaire on their screen: checked here (a refusal names the item),
+        stored by the runner with the next block."""
+        runner = self.runner
+        if runner is None or runner.done or runner.session_id != cmd.session_id:
+            raise RuntimeError(f"answers to {cmd.questionnaire}: session {cmd.session_id} is not running")
+        asked = runner.questions.asked
+        if asked is None or asked.key != (cmd.questionnaire, cmd.block):
+            raise RuntimeError(f"answers to {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one "
+                               "waiting for answers")
+        checked_answers(asked.questionnaire, cmd.answers)  # a ValueError: one line naming the item
+        runner.answer(cmd.questionnaire, cmd.block, dict(cmd.answers))
 
     def _require_screen(self, what: str) -> None:
         """No trial is cued to a participant screen that is closed: a start or resume is refused, saying why."""
@@ -253,7 +281,8 @@ class EngineSessions:
         """Publish a database's interrupted sessions, every session it holds and who withdrew (read-only)."""
         self.engine.publish(m.SessionsListed(cmd.db_path, list_resumable(cmd.db_path),
                                              session_list.list_sessions(cmd.db_path, check=False),
-                                             session_list.list_withdrawn(cmd.db_path)))
+                                             session_list.list_withdrawn(cmd.db_path),
+                                             session_list.list_covariates(cmd.db_path)))
 
     def inject_fault(self, cmd: m.InjectFault) -> None:
         if not self.engine.eng.simulated:
@@ -330,6 +359,11 @@ class EngineSessions:
                     spec.target_force_n, spec.haptic_mode, spec.repeat_of,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
+        elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",)):
+            prompt = ev[1]
+            self.engine.publish(m.QuestionnaireShown(runner.session_id, prompt.questionnaire, prompt.block)
+                                if ev[0] == "questionnaire" else
+                                m.QuestionnaireAnswered(runner.session_id, *prompt.key))
         elif isinstance(ev, TrialRecord):
             cause = ev.abort_cause
             if cause in (AbortCause.GAP, AbortCause.FEEDBACK):  # not a watchdog fault, so the loop said nothing

@@ -1,8 +1,8 @@
 """The experimenter window's "Control" box: the session's buttons, and the two rows that say what went wrong.
 
 Layout only (the window wires the buttons to the model, :mod:`study_app.gui.main_window`): start (and the two
-starts that need a typed reason, hidden until they apply), pause/resume, abort, calibration, the extra windows'
-buttons; above them the dead-engine row (what happened and *Restart engine*) and the notices' row (a refusal, a
+starts that need a typed reason, hidden until they apply), pause/resume, abort, a note, calibration, the extra
+windows' buttons; above them the dead-engine row (what happened and *Restart engine*) and the notices' row (a refusal, a
 question that became moot), each hidden until there is something to say.
 """
 
@@ -27,6 +27,9 @@ class ControlBox(QGroupBox):
         self.resume_button = QPushButton("Resume")
         self.abort_trial_button = QPushButton("Abort trial  [Esc]")
         self.abort_session_button = QPushButton("Abort session")
+        self.note_button = QPushButton("Note…  [Ctrl+N]")
+        self.note_button.setToolTip("A note on the session or one of its trials, stored on the session clock (mark "
+                                    "it a deviation and the study report lists it)")
         self.calibrate_button = QPushButton("Calibration…")
         self.participant_button = QPushButton("Participant screen")
         self.rig_button = QPushButton("Simulated rig view")
@@ -47,6 +50,7 @@ class ControlBox(QGroupBox):
         ab.addWidget(self.abort_trial_button)
         ab.addWidget(self.abort_session_button)
         grid.addLayout(ab)
+        grid.addWidget(self.note_button)
         grid.addWidget(self.calibrate_button)
         # real rig: start although the calibration chain is incomplete -- only with a reason, which is stored
         self.override_button = QPushButton("Start without calibration…")

@@ -35,7 +35,7 @@ from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.session_actions import SessionActions
-from study_app.gui.session_views import QtCueWait, QtProgress, QtTrialTable
+from study_app.gui.session_views import QtCueWait, QtProgress, QtSessionNotes, QtTrialTable
 from study_app.gui.setup_panel import SPACE_IN_A_FIELD, QtSetupPanel
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import ElidedLabel
@@ -140,6 +140,7 @@ class ExperimenterWindow(QMainWindow):
             c.override_button
         self.pause_button, self.resume_button = c.pause_button, c.resume_button
         self.abort_trial_button, self.abort_session_button = c.abort_trial_button, c.abort_session_button
+        self.note_button = c.note_button
         self.calibrate_button, self.participant_button, self.rig_button = c.calibrate_button, c.participant_button, \
             c.rig_button
         self.engine_row, self.engine_label, self.restart_button = c.engine_row, c.engine_label, c.restart_button
@@ -151,6 +152,7 @@ class ExperimenterWindow(QMainWindow):
         self.progress = QtProgress(self.model.session, self.model.health, cue=self.model.cue)
         self.plots = QtForcePlots(self.model.plots, self.model.session)
         self.trial_table = QtTrialTable(self.model.session.table)
+        self.session_notes = QtSessionNotes(self.model.session.table)
         self.cue_wait = QtCueWait(self.model.cue)
         self.trials_tab = QWidget()
         self.trials_count = ElidedLabel()  # the session's count, as the progress line above reads it
@@ -161,6 +163,7 @@ class ExperimenterWindow(QMainWindow):
         tt.setSpacing(2)
         tt.addWidget(self.trials_count)
         tt.addWidget(self.cue_wait)
+        tt.addWidget(self.session_notes)
         tt.addWidget(self.trial_table, 1)
         self.health_panel = QtHealthPanel(self.model.health)
         self.tabs = QTabWidget()
@@ -185,7 +188,7 @@ class ExperimenterWindow(QMainWindow):
 
     def _build_windows(self) -> None:
         """The participant screen, the simulated rig view, the calibration wizard and the menu."""
-        self.participant_window = ParticipantWindow(self.model.participant)
+        self.participant_window = ParticipantWindow(self.model.participant, questionnaire=self.model.questionnaire)
         rig, steps = self.model.rig_control, self.model.steps
         self.rig_window = RigWindow(self.model.rig, rig.set_driver, rig.inject_fault)
         self.calibration_wizard = CalibrationWizard(
@@ -213,6 +216,7 @@ class ExperimenterWindow(QMainWindow):
         self.resume_button.clicked.connect(self.model.control.resume)
         self.abort_trial_button.clicked.connect(act.abort_trial)
         self.abort_session_button.clicked.connect(act.abort_session)
+        self.note_button.clicked.connect(self.note)
         self.calibrate_button.clicked.connect(lambda: self.open_window(self.calibration_wizard))
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
@@ -249,6 +253,12 @@ class ExperimenterWindow(QMainWindow):
         self.session_actions.event(ev)
         if isinstance(ev, m.EngineReady):
             self._on_rig_known(ev.rig)
+
+    def note(self) -> None:
+        """The Note dialog, the trial selected in the table proposed when none runs."""
+        row = self.trial_table.currentRow()
+        rows = self.model.session.table.rows
+        self.session_actions.note(rows[row].trial_index if 0 <= row < len(rows) else None)
 
     def _on_rig_known(self, rig: str) -> None:
         """On the real rig a person holds the stylus: no simulated rig view, no autopilot, pose-by-pose calibration."""
@@ -349,6 +359,7 @@ class ExperimenterWindow(QMainWindow):
         self.resume_button.setEnabled(can("resume"))
         self.abort_trial_button.setEnabled(can("abort_trial"))
         self.abort_session_button.setEnabled(can("abort_session"))
+        self.note_button.setEnabled(can("note"))
         self.setup_panel.resume_button.setEnabled(can("resume_session"))
         self.setup_panel.setEnabled(not self.model.session.running)
         missing = self.model.actions.calibration_missing()

@@ -69,6 +69,7 @@ class WindowMenus:
         self.resume = self._add(self.session, "&Resume\tSpace", control.resume)
         self.abort_trial = self._add(self.session, "Abort &trial…\tEsc", act.abort_trial)
         self.abort_session = self._add(self.session, "Abort s&ession…", act.abort_session)
+        self.note = self._add(self.session, "&Note…", win.note, "Ctrl+N")
         self.session.addSeparator()
         self.reset = self._add(self.session, "Reset &faults", control.reset_faults, "Ctrl+Shift+F")
         self.restart = self._add(self.session, "Restart &engine", act.restart_engine)
@@ -157,6 +158,7 @@ class WindowMenus:
             (self.resume, can("resume"), "the session is not paused"),
             (self.abort_trial, can("abort_trial"), "no trial is running"),
             (self.abort_session, can("abort_session"), no_session),
+            (self.note, can("note"), f"{no_session} (haptic-study note adds one to a stored session)"),
             (self.reset, bool(model.health.faults), "no fault is latched"),
             (self.restart, can("restart_engine"), "the study engine runs"),
             (self.open_db, not s.running, running),

@@ -1,13 +1,16 @@
-"""The participant's screen (a second monitor): target word, rest screen, and in training a force gauge."""
+"""The participant's screen (a second monitor): target word, rest screen, in training a force gauge, and between two
+trials the protocol's questionnaires (:mod:`study_app.gui.questionnaire_view`)."""
 
 from __future__ import annotations
 
 from PySide6.QtCore import QEvent, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
-from PySide6.QtWidgets import QLabel, QSizePolicy, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QLabel, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
 
 from study_app.gui.placement import centre_on_a_screen
+from study_app.gui.questionnaire_view import QuestionnaireView
 from study_app.models.participant import ParticipantScreen, ParticipantScreenModel
+from study_app.models.questionnaire import QuestionnaireModel
 
 __all__ = ["ForceGauge", "ParticipantWindow"]
 
@@ -72,9 +75,11 @@ class ParticipantWindow(QWidget):
     #: (seen, how it is not: "closed", "minimised" or "off every monitor"; "" when seen).
     seen_changed = Signal(bool, str)
 
-    def __init__(self, model: ParticipantScreenModel, parent: QWidget | None = None) -> None:
+    def __init__(self, model: ParticipantScreenModel, parent: QWidget | None = None,
+                 questionnaire: QuestionnaireModel | None = None) -> None:
         super().__init__(parent, Qt.WindowType.Window)
         self.model = model
+        self.questionnaire = questionnaire or QuestionnaireModel()
         self.setWindowTitle("Participant")
         self.setStyleSheet("background-color: #16161a; color: #f2f2f2;")
         self.setMinimumSize(320, 240)
@@ -89,15 +94,22 @@ class ParticipantWindow(QWidget):
         self.headline_px = HEADLINE_MAX_PX
         self._scale_text()
         self.gauge = ForceGauge()
-        lay = QVBoxLayout(self)
+        cue = self.cue_page = QWidget()
+        lay = QVBoxLayout(cue)
         lay.addStretch(2)
         lay.addWidget(self.headline)
         lay.addWidget(self.subline)
         lay.addStretch(1)
         lay.addWidget(self.gauge)
         lay.addStretch(1)
+        # the cue (and rest) screen, or a questionnaire between two trials
+        self.questions = QuestionnaireView(self.questionnaire)
+        self.pages = QStackedLayout(self)
+        self.pages.addWidget(cue)
+        self.pages.addWidget(self.questions)
         QShortcut(QKeySequence(Qt.Key.Key_F11), self).activated.connect(self.toggle_fullscreen)
         model.changed.connect(self._on_changed)
+        self.questionnaire.changed.connect(self._on_questionnaire)
         self._on_changed()
         self._reported: str | None = None  # what was last said (None: nothing yet)
 
@@ -169,6 +181,14 @@ class ParticipantWindow(QWidget):
 
     def mouseDoubleClickEvent(self, event) -> None:  # Qt's name
         self.toggle_fullscreen()
+
+    def _on_questionnaire(self) -> None:
+        """A questionnaire due: its pages (the keyboard theirs); answered: the cue screen again."""
+        page = self.questions if self.questionnaire.active else self.cue_page
+        if self.pages.currentWidget() is not page:
+            self.pages.setCurrentWidget(page)
+            if page is self.questions:
+                self.questions.setFocus()
 
     def _on_changed(self) -> None:
         s: ParticipantScreen = self.model.screen

@@ -1,6 +1,7 @@
 """The session's actions as the experimenter window's buttons, keys and menu trigger them, each destructive one
 asked first: start (from the form; without training or without the calibration chain, each with a typed reason),
-resume an interrupted session, abort the trial or the session, restart the engine, quit during a session."""
+resume an interrupted session, abort the trial (with an optional reason) or the session, note, restart the engine, quit
+during a session."""
 
 from __future__ import annotations
 
@@ -10,8 +11,10 @@ from PySide6.QtWidgets import QInputDialog, QWidget
 
 from study_app.engine import messages as m
 from study_app.gui.confirm import Confirmation
+from study_app.gui.note_dialog import NoteDialog
 from study_app.gui.setup_panel import QtSetupPanel
 from study_app.models.app import AppModel
+from study_app.models.notes import note_subjects
 
 __all__ = ["SessionActions"]
 
@@ -44,12 +47,18 @@ class SessionActions:
         #: (the screenshot tour, benchmarks, tests) set a function that answers at once instead.
         self.confirm: Callable[[str, str], bool] | None = None
         self.questions: dict[str, Confirmation] = {}
+        #: The reason a scripted run gives an abort (the dialog's field, when a person answers).
+        self.scripted_reason = ""
+        #: The Note dialog while it is open.
+        self.note_dialog: NoteDialog | None = None
         self._quit_confirmed = False
 
     # -- questions -----------------------------------------------------------------------------------------
     def ask(self, key: str, title: str, text: str, on_yes: Callable[[], object], *,
-            moot_when: Callable[[object], bool] | None = None, moot_text: str = "") -> None:
-        """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event."""
+            moot_when: Callable[[object], bool] | None = None, moot_text: str = "", reason: str = "") -> None:
+        """Ask before a destructive action: default No, closed as No when ``moot_when`` an engine event; with
+        ``reason`` (its field's placeholder) the question offers a field for an optional typed reason, which
+        :attr:`Confirmation.reason` holds when ``on_yes`` runs (a scripted run: :attr:`scripted_reason`)."""
         if self.confirm is not None:
             if self.confirm(title, text):
                 on_yes()
@@ -59,7 +68,7 @@ class SessionActions:
             old.dismiss()
             old.box.deleteLater()
         say = (lambda: self.model.notices.notify("info", moot_text)) if moot_text else None
-        q = Confirmation(self.question_parent(), title, text, on_yes, moot_when=moot_when, on_moot=say)
+        q = Confirmation(self.question_parent(), title, text, on_yes, moot_when=moot_when, on_moot=say, reason=reason)
         self.questions[key] = q
         q.show()
 
@@ -149,11 +158,30 @@ class SessionActions:
                     or (isinstance(ev, m.TrialStarted) and ev.trial_index != k)
                     or isinstance(ev, (m.SessionEnded, m.EngineStopped)))
 
+        def abort() -> None:
+            q = self.questions.get("abort_trial")
+            why = q.reason if q is not None and self.confirm is None else self.scripted_reason
+            self.model.control.abort_trial(k, why)
+
         self.ask("abort_trial", "Abort trial",
                  f"Abort trial {k + 1} ({tr.target_label}, haptics {tr.haptic_mode.upper()})? It is stored as aborted "
                  "and run again later.\n\nIf the trial ends before you answer, this question closes and nothing is "
-                 "aborted.", lambda: self.model.control.abort_trial(k), moot_when=moot,
-                 moot_text=f"Trial {k + 1} ended before you answered: nothing was aborted.")
+                 "aborted.", abort, moot_when=moot,
+                 moot_text=f"Trial {k + 1} ended before you answered: nothing was aborted.",
+                 reason="Reason (optional, stored with the trial as a note), then Yes")
+
+    def note(self, selected: int | None = None) -> None:
+        """The Note dialog: a note on the session or one of its trials (the running one proposed), stored on the
+        session clock; ``selected``: the trial selected in the table (its index)."""
+        if not self.model.actions.can("note"):
+            return
+        if self.note_dialog is not None:
+            self.note_dialog.raise_()
+            return
+        dlg = self.note_dialog = NoteDialog(self.question_parent(), note_subjects(self.model.session, selected),
+                                            self.model.control.note)
+        dlg.finished.connect(lambda _r: setattr(self, "note_dialog", None))
+        dlg.open()
 
     def abort_session(self) -> None:
         """Abort the session after confirmation (that session only)."""

@@ -23,8 +23,10 @@ from study_app.models.cue_wait import CUE_ACTIONS, CueWaitModel, headline
 from study_app.models.health import HealthModel
 from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 
-__all__ = ["QtCueWait", "QtProgress", "QtTrialTable"]
+__all__ = ["QtCueWait", "QtProgress", "QtSessionNotes", "QtTrialTable"]
 
+#: The trial table's column of the experimenter's notes.
+NOTE_COLUMN = TRIAL_COLUMNS.index("Note")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
                     "aborted": QColor(235, 235, 235)}
 
@@ -44,9 +46,11 @@ class QtTrialTable(QTableWidget):
         header = self.horizontalHeader()
         header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
         header.setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
+        header.setSectionResizeMode(NOTE_COLUMN, QHeaderView.ResizeMode.Stretch)
         self.follow = FollowNewest(self)
         table.row_added.connect(self._on_row_added)
         table.cleared.connect(self._on_cleared)
+        table.note_added.connect(self._on_note_added)
 
     def _on_cleared(self) -> None:
         self.setRowCount(0)
@@ -57,15 +61,44 @@ class QtTrialTable(QTableWidget):
         self.insertRow(i)
         colour = _OUTCOME_COLOURS.get(str(row.outcome))
         designed = None if row.repeat_of is None else self.table.designed_of(row.repeat_of)
-        for j, text in enumerate(TrialTable.cells(row, designed)):
+        for j, text in enumerate(self.table.cells(row, designed)):
             item = QTableWidgetItem(text)
             item.setToolTip(text)  # an abort's reason may be longer than its column
-            if j != 3:
+            if j not in (3, NOTE_COLUMN):
                 item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
             if colour is not None:
                 item.setBackground(colour)
             self.setItem(i, j, item)
         self.follow.to_end()
+
+    def _on_note_added(self, i: int | None) -> None:
+        """A note on a trial that has its row: the row's Note shows it (a session's notes are above the table)."""
+        if i is None or i >= self.rowCount():
+            return
+        item = self.item(i, NOTE_COLUMN)
+        text = self.table.note_text(self.table.rows[i].trial_index)
+        if item is not None:
+            item.setText(text)
+            item.setToolTip(text)
+
+
+class QtSessionNotes(QLabel):
+    """Above the trial table: the experimenter's notes on the session itself (hidden while there is none)."""
+
+    def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
+        super().__init__(parent)
+        self.table = table
+        self.setWordWrap(True)
+        self.setContentsMargins(6, 0, 6, 0)
+        self.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        table.note_added.connect(lambda _i: self._show())
+        table.cleared.connect(self._show)
+        self._show()
+
+    def _show(self) -> None:
+        text = self.table.note_text(None)
+        self.setText(f"Notes on the session: {text}" if text else "")
+        self.setVisible(bool(text))
 
 
 class QtCueWait(QWidget):

@@ -1,5 +1,5 @@
 """The Session box of the experimenter window: the setup form (database, participant, number, kind, protocol,
-seed) and the interrupted sessions to resume."""
+seed, and what the protocol asks about a new participant) and the interrupted sessions to resume."""
 
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from study_app.gui.covariate_fields import QtCovariateFields
 from study_app.gui.widgets import LEVEL_COLOURS
 from study_app.models.setup import KINDS, SetupModel, breakable
 
@@ -71,6 +72,7 @@ class QtSetupPanel(QGroupBox):
         self.seed = QSpinBox()
         self.seed.setRange(0, 2**31 - 1)
         self.seed.setValue(v.seed)
+        self.covariate_fields = QtCovariateFields(self.setup.covariates, self.setup.validate)
         self.errors = QLabel()
         self.errors.setWordWrap(True)
         self.errors.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]};")
@@ -101,6 +103,7 @@ class QtSetupPanel(QGroupBox):
         self.resume_button = QPushButton("Resume selected")
         lay = QVBoxLayout(self)
         lay.addLayout(form)
+        lay.addWidget(self.covariate_fields)
         lay.addWidget(self.errors)
         lay.addWidget(self.warnings)
         lay.addWidget(self.hint)

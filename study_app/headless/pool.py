@@ -39,7 +39,7 @@ def default_jobs(participants: int) -> int:
 def _participant_worker(
     db_path: str, number: int, steps: list[Step], seed: int, protocol: ProtocolConfig, clock: str, parent_pid: int,
     messages: Any, study_owner: str, faults: Sequence[FaultPlan], sim_arms: tuple[str, ...],
-    framework: FrameworkConfig,
+    framework: FrameworkConfig, covariates: dict[str, str],
 ) -> None:
     """One participant's steps (training, then experiment; or what is left of them) in a worker process.
 
@@ -63,7 +63,7 @@ def _participant_worker(
         try:
             run_steps(db, number, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
                        on_progress=report, study_owner=study_owner, faults=faults, short_transactions=True,
-                       sim_arms=sim_arms, framework=framework)
+                       sim_arms=sim_arms, framework=framework, covariates=covariates)
         finally:
             db.close()
     except BaseException as exc:  # reported to the parent, which stops the study
@@ -103,6 +103,7 @@ def run_parallel(
     db_path: str, *, plan: dict[int, list[Step]], seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, progress: StudyProgress, study_owner: str,
     faults: Sequence[FaultPlan], sim_arms: tuple[str, ...], framework: FrameworkConfig,
+    covariates: dict[str, str] | None = None,
 ) -> StudyProgress:
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
@@ -137,7 +138,7 @@ def run_parallel(
                 n = waiting.pop(0)
                 p = ctx.Process(target=_participant_worker, name=f"study-{participant_code(n)}",
                                 args=(db_path, n, plan[n], seed, protocol, clock, os.getpid(), messages, study_owner,
-                                      faults, sim_arms, framework), daemon=True)
+                                      faults, sim_arms, framework, dict(covariates or {})), daemon=True)
                 p.start()
                 running[n] = p
             try:

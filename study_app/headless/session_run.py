@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,6 +42,7 @@ from protocol.runner.session_setup import (
 )
 from protocol.storage import StudyDatabase, new_owner_token
 from protocol.study.config import ProtocolConfig
+from protocol.study.covariates import simulated_values
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
@@ -172,12 +173,15 @@ def run_session(
     clock: str, progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None,
     short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
-    framework: FrameworkConfig | None = None,
+    framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
 ) -> int:
     """Run one session to its end on a fresh simulated rig with ``sim_arms``: a new one of ``kind``, or the
     interrupted ``resume_id`` (on the arms it ran on).
 
     ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
+    The simulated participant is described by the protocol's covariates as its rule draws them
+    (:func:`protocol.study.covariates.simulated_values`), ``covariates`` (text by name) given instead where named,
+    and answers the questionnaires by its rule (:mod:`protocol.study.sim_answers`).
     """
     fw = framework or FrameworkConfig()
     rig_seed, p_seed = participant_seeds(study_seed, number)
@@ -190,6 +194,7 @@ def run_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
             lease_owner=lease_owner, study_owner=study_owner,
+            covariates={**simulated_values(protocol.covariates, study_seed, number), **(covariates or {})},
         )
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
@@ -206,7 +211,7 @@ def run_session(
         db, opened, submit=eng.loop.submit, participant=participant, participant_time=lambda: eng.rig.sim_time_s,
         limits=delivery_limits(eng.loop), auto_reset_faults=True, threaded=(clock == "real"),
         short_transactions=short_transactions, scales=raw_wrench_scales(eng.rig.sensor), arms=arms,
-        **_commit_deadline(eng, clock, faults, opened),
+        simulated_answers=True, **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng, runner)
     try:
@@ -275,7 +280,7 @@ def run_steps(
     db: StudyDatabase, number: int, steps: list[Step], *, protocol: ProtocolConfig, seed: int, clock: str,
     progress: StudyProgress, on_progress: Callable[[StudyProgress], None] | None, study_owner: str,
     faults: Sequence[FaultPlan] = (), short_transactions: bool = False, sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
-    framework: FrameworkConfig | None = None,
+    framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
 ) -> None:
     """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
     code = participant_code(number)
@@ -284,4 +289,4 @@ def run_steps(
                      study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
                      short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
                      lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
-                     framework=framework)
+                     framework=framework, covariates=covariates)

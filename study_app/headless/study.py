@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
@@ -34,6 +34,7 @@ from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.study.config import ProtocolConfig, protocol_from_dict
+from protocol.study.covariates import checked_values, simulated_values
 from study_app.headless.plan import (
     check_fault_plans,
     check_settings,
@@ -53,7 +54,7 @@ def run_study(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None, continue_study: bool = False,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
-    framework: FrameworkConfig | None = None,
+    framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -90,6 +91,10 @@ def run_study(
         The simulated rig's arms (one: ``right``), among them the protocol's task arm (a resume: the stored ones).
     framework
         Every session's pipeline configuration (default: the paper's; stored sessions must have the same).
+    covariates
+        Values (by name, as text) every participant this call registers is given for the protocol's covariates
+        (``run --covariate``): the others are drawn by the simulated participants' rule
+        (:func:`protocol.study.covariates.simulated_values`).  Checked before anything is stored.
 
     Returns
     -------
@@ -113,7 +118,8 @@ def run_study(
         A fault did not clear (one participant at a time; in parallel it is a
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
-    n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol)
+    given = {name: str(v) for name, v in (covariates or {}).items()}
+    n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol, given)
     # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
     protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
     arms = sim_arms_of(protocol, sim_arms)  # a bad task arm: refused before anything is stored
@@ -123,12 +129,14 @@ def run_study(
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
-                            sim_arms=arms, framework=fw)
+                            sim_arms=arms, framework=fw, covariates=given)
 
 
 def _checked_request(db_path: str, participants: int, jobs: int | None, continue_study: bool,
-                     faults: Sequence[FaultPlan], protocol: ProtocolConfig) -> int:
+                     faults: Sequence[FaultPlan], protocol: ProtocolConfig, covariates: dict[str, str]) -> int:
     """Refuse a request :func:`run_study` cannot run (before anything is opened); the workers it runs at once."""
+    # a value given for every participant: outside its declaration, one line (the drawn ones fit by their rule)
+    checked_values(protocol.covariates, {**simulated_values(protocol.covariates, 0, 1), **covariates})
     if participants < 1:
         raise ValueError(f"participants = {participants}: must be ≥ 1")
     if jobs is not None and jobs < 1:
@@ -142,7 +150,7 @@ def _checked_request(db_path: str, participants: int, jobs: int | None, continue
 def _run_under_lease(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
-    sim_arms: tuple[str, ...], framework: FrameworkConfig,
+    sim_arms: tuple[str, ...], framework: FrameworkConfig, covariates: dict[str, str],
 ) -> StudyProgress:
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
@@ -164,11 +172,12 @@ def _run_under_lease(
             held = None
             return run_parallel(db_path, plan=plan, seed=seed, protocol=protocol, clock=clock,
                                 on_progress=on_progress, jobs=jobs_used, progress=progress, study_owner=owner,
-                                faults=faults, sim_arms=sim_arms, framework=framework)
+                                faults=faults, sim_arms=sim_arms, framework=framework, covariates=covariates)
         for n, steps in plan.items():
             progress.participant, progress.code = n, participant_code(n)
             run_steps(db, n, steps, protocol=protocol, seed=seed, clock=clock, progress=progress,
-                      on_progress=on_progress, study_owner=owner, faults=faults, sim_arms=sim_arms, framework=framework)
+                      on_progress=on_progress, study_owner=owner, faults=faults, sim_arms=sim_arms, framework=framework,
+                      covariates=covariates)
         return progress
     finally:
         _release_study(held, db_path, owner)

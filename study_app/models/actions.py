@@ -47,7 +47,7 @@ class Actions:
 
     def can(self, action: str) -> bool:
         """Whether an action is available: start, start_without_training, resume_session, calibrate, record_pose,
-        identify, restart_engine, sim_rig_view, pause, resume, abort_trial, abort_session."""
+        identify, restart_engine, sim_rig_view, pause, resume, abort_trial, abort_session, note."""
         s, rig = self.session, self.engine.rig_kind
         if action == "start":
             return self.ready and not s.running and self.setup.valid
@@ -71,7 +71,7 @@ class Actions:
             return s.state == "paused" or (s.running and s.paused_requested)
         if action == "abort_trial":
             return s.running and s.phase in ("active", "cued")
-        if action == "abort_session":
+        if action in ("abort_session", "note"):
             return s.running
         raise ValueError(f"unknown action {action!r}")
 

@@ -28,6 +28,7 @@ from study_app.models.health import HealthModel
 from study_app.models.notices import Commands, Notices
 from study_app.models.participant import ParticipantScreenModel
 from study_app.models.plots import PlotModel
+from study_app.models.questionnaire import QuestionnaireModel
 from study_app.models.real_calibration import RealCalibrationModel
 from study_app.models.rig import RigViewModel
 from study_app.models.rig_control import RigControl
@@ -65,6 +66,7 @@ class AppModel:
         self.rig = RigViewModel()
         self.notices = Notices()
         self.commands = Commands(send or (lambda cmd: False), self.notices)
+        self.questionnaire = QuestionnaireModel(send=lambda cmd: self.commands(cmd, clear=False))
         # the engine, what may be done, and the controls
         self.engine = EngineModel(self.commands, self.session, self.setup, self.health, self.plots, self.notices)
         self.actions = Actions(self.session, self.setup, self.calibration, self.real_calibration, self.commissioning,
@@ -89,7 +91,7 @@ class AppModel:
         was_stalled = self.engine.loop_stalled
         self.engine.watch(ev)
         for part in (self.session, self.health, self.participant, self.calibration, self.real_calibration, self.rig,
-                     self.commissioning, self.jaw, self.screen):
+                     self.commissioning, self.jaw, self.screen, self.questionnaire):
             part.apply(ev)
         self.notices.apply(ev)
         self.control.apply(ev)

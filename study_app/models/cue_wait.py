@@ -39,6 +39,10 @@ class CueWait:
         return f"Next cue waits: {self.reason}{when}"
 
 
+#: How the runner's wait for a questionnaire begins (:mod:`protocol.runner.questionnaire_wait`).
+QUESTIONNAIRE_WAIT = "questionnaire: "
+#: How the banner and the progress line name that wait.
+QUESTIONNAIRE_REASON = "the participant answers the questionnaire "
 #: A wait with nothing named to end it, after this long (s), says where to look.
 CUE_STUCK_S = 5.0
 #: What ends each wait, as the button reads.
@@ -70,6 +74,11 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
                                                  "says whether this computer is too busy for the loop.")
         return "paused", CueWait("warning", "the session is paused", action="resume",
                                  help="Resume (Space) to continue with the next trial.")
+    if waiting.startswith(QUESTIONNAIRE_WAIT):  # the participant answers on their screen: it ends by itself
+        return "questionnaire", CueWait(
+            "info", f"{QUESTIONNAIRE_REASON}{waiting.removeprefix(QUESTIONNAIRE_WAIT)} on their screen",
+            help="The next trial comes the protocol's pause after the participant sends the answers (Submit on "
+                 "their screen); the answers are stored with the session.")
     if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
         return "fault", CueWait(
             "error", waiting.replace(": reset to continue", ""), action="reset_faults",
@@ -95,6 +104,8 @@ def headline(session: SessionModel, wait: CueWait | None) -> str:
     that must be put right (a latched fault, a dead engine), ``Next trial waits: fault latched (SENSOR_STALE) ·
     Reset faults`` -- never "The next trial is due" above a red "Next cue waits".  Otherwise
     :meth:`SessionModel.progress_text` (a pause, the experimenter's or the session's, has its own words there)."""
+    if wait is not None and wait.reason.startswith(QUESTIONNAIRE_REASON):
+        return f"Next trial waits: {wait.reason}"
     if wait is None or wait.level != "error" or session.state == "paused" or session.phase in ("active", "cued"):
         return session.progress_text()
     action = CUE_ACTIONS.get(wait.action, "")
@@ -142,7 +153,7 @@ class CueWaitModel:
             help_ = wait.help
             # a wait that should end by itself but has not: say where to look, and the way out
             expected = self.session.session.pause_s if key in ("pause", "pause-again") and self.session.session else 0.0
-            if not wait.action and waited >= expected + CUE_STUCK_S:
+            if not wait.action and key != "questionnaire" and waited >= expected + CUE_STUCK_S:
                 help_ = (f"No cue for {waited:.0f} s and nothing to reset: look under Devices & health (the loop's "
                          "figures, the fault log). If it stays stuck, Quit: the running trial is stored as aborted and "
                          "the session can be resumed after a restart.")

@@ -18,7 +18,9 @@ from study_app.models import Emitter
 __all__ = ["TRIAL_COLUMNS", "SessionModel", "TrialCount", "TrialTable", "time_left_text"]
 
 #: Columns of the live trial table.
-TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)")
+TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)", "Note")
+#: How the table marks a note the experimenter marked a deviation from the protocol.
+DEVIATION_MARK = "⚑ "
 
 
 def _num(v: Any, fmt: str = "{:.2f}") -> str:
@@ -81,11 +83,16 @@ def time_left_text(seconds: float, *, bound: bool = False) -> str:
 
 @dataclass
 class TrialTable:
-    """Finished trials, filled live from :class:`study_app.engine.messages.TrialEnded` records."""
+    """Finished trials, filled live from :class:`study_app.engine.messages.TrialEnded` records, and the
+    experimenter's notes: on a trial (its row's *Note*, also before the trial has ended) or on the session
+    (``notes[None]``)."""
 
     rows: list[TrialRecord] = field(default_factory=list)
+    notes: dict[int | None, list[str]] = field(default_factory=dict)
     row_added: Emitter = field(default_factory=Emitter)
     cleared: Emitter = field(default_factory=Emitter)
+    #: A note was added: the row index it shows in (None: a session note, or a trial with no row yet).
+    note_added: Emitter = field(default_factory=Emitter)
 
     def add(self, row: TrialRecord) -> None:
         """Append a finished trial."""
@@ -93,9 +100,21 @@ class TrialTable:
         self.row_added.emit(len(self.rows) - 1)
 
     def clear(self) -> None:
-        """Forget all rows (a new session)."""
+        """Forget all rows and notes (a new session)."""
         self.rows.clear()
+        self.notes.clear()
         self.cleared.emit()
+
+    def add_note(self, trial_index: int | None, text: str, deviation: bool) -> None:
+        """A note on trial ``trial_index`` (None: the session)."""
+        self.notes.setdefault(trial_index, []).append((DEVIATION_MARK if deviation else "") + text)
+        row = next((i for i, r in enumerate(self.rows) if trial_index is not None and r.trial_index == trial_index),
+                   None)
+        self.note_added.emit(row)
+
+    def note_text(self, trial_index: int | None) -> str:
+        """A trial's notes (or the session's), oldest first, in one line."""
+        return " · ".join(self.notes.get(trial_index, []))
 
     def designed_of(self, index: int) -> int:
         """The designed trial an attempt is of: a re-run of a re-run (57 re-runs 48, which re-ran 12) is trial 12's,
@@ -108,8 +127,7 @@ class TrialTable:
             earlier = repeats.get(index)
         return index
 
-    @staticmethod
-    def cells(row: TrialRecord, designed: int | None = None) -> tuple[str, ...]:
+    def cells(self, row: TrialRecord, designed: int | None = None) -> tuple[str, ...]:
         """The displayed text of a row, in :data:`TRIAL_COLUMNS` order (``designed``: the designed trial a re-run
         repeats, :meth:`designed_of`; its ``repeat_of`` when not given)."""
         outcome = str(row.outcome)
@@ -124,6 +142,7 @@ class TrialTable:
             _num(row.metric("tct_s")),
             _num(row.metric("rmse_n"), "{:.3f}"),
             _num(row.metric("max_ae_n"), "{:.3f}"),
+            self.note_text(row.trial_index),
         )
 
 
@@ -179,7 +198,9 @@ class SessionModel:
             self.paused_requested = False
             self.pause_until_s = None
             self.table.clear()
-            for row in ev.stored_trials:  # a resumed session: its table and progress as they were
+            for index, text, deviation in ev.stored_notes:  # a resumed session: its notes, table and progress
+                self.table.add_note(index, text, deviation)
+            for row in ev.stored_trials:
                 self._count(row)
         elif isinstance(ev, m.TrialStarted):
             self.trial, self.phase, self.pause_until_s = ev, "active", None
@@ -206,6 +227,8 @@ class SessionModel:
                 self.paused_requested = ev.paused and not holding
                 self.state = "paused" if holding else "running"
                 self.paused_by_runner = ev.waiting if holding and ev.waiting not in ("", "pause") else ""
+        elif isinstance(ev, m.NoteStored):
+            self.table.add_note(ev.trial_index, ev.text, ev.deviation)
         elif isinstance(ev, m.EngineStopped):
             self.state, self.message = "stopped", f"engine stopped: {ev.reason}"
         elif isinstance(ev, m.CommandRefused) and ev.command == "connect":

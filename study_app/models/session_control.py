@@ -71,7 +71,7 @@ class SessionControl:
         """The database's sessions as the engine lists them; a session that started or ended."""
         if isinstance(ev, m.SessionsListed):
             self.setup.set_resumable(ev.sessions)
-            self.setup.set_known(ev.known, ev.withdrawn)
+            self.setup.set_known(ev.known, ev.withdrawn, ev.covariates)
             self.session.listed(ev.db_path, ev.known)
         elif isinstance(ev, m.SessionStarted):
             self.session.db_path = os.path.abspath(self.setup.values.db_path)
@@ -151,10 +151,21 @@ class SessionControl:
         self.commands(m.Resume())
         self.session.changed.emit()
 
-    def abort_trial(self, trial_index: int | None = None) -> None:
+    def abort_trial(self, trial_index: int | None = None, reason: str = "") -> None:
         """Abort the running trial (stored as aborted, re-run later); the engine refuses if ``trial_index`` has
-        ended."""
-        self.commands(m.AbortTrial(trial_index=trial_index))
+        ended.  ``reason``: the experimenter's words, if any, stored with the trial and as a note on it."""
+        why = " ".join(reason.split())
+        self.commands(m.AbortTrial(f"aborted by the experimenter: {why}" if why else "aborted by the experimenter",
+                                   trial_index=trial_index, note=why))
+
+    def note(self, text: str, trial_index: int | None, deviation: bool) -> bool:
+        """The experimenter's note on the running session (``trial_index`` None) or one of its trials (False: not
+        sent, and the line under Start says why)."""
+        words = " ".join(text.split())
+        if not words:
+            self.notices.notify("info", "Nothing was noted: a note needs its words.", "Note")
+            return False
+        return self.commands(m.Note(words, trial_index, deviation))
 
     def abort_session(self, session_id: int | None = None) -> None:
         """Abort the session (refused by the engine if ``session_id`` is no longer the running one)."""

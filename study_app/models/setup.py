@@ -40,6 +40,7 @@ from protocol.study.config import ProtocolConfig, ProtocolError, load_protocol
 from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
+from study_app.models.covariate_form import CovariateForm
 from study_app.models.session import TrialCount
 
 __all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable", "with_db_suffix"]
@@ -119,6 +120,10 @@ class SetupModel:
     running_session: int | None = None
     #: The session to select in the resume list when it is listed (the one an engine failure interrupted).
     preferred_resume: int | None = None
+    #: What the form asks about a new participant (the protocol's covariates), and each registered participant's
+    #: stored covariates by code (as the engine listed them).
+    covariates: CovariateForm = field(default_factory=CovariateForm)
+    registered: dict[str, dict[str, Any]] = field(default_factory=dict)
     changed: Emitter = field(default_factory=Emitter)
     resumable_changed: Emitter = field(default_factory=Emitter)
 
@@ -206,6 +211,7 @@ class SetupModel:
             except ProtocolError as exc:
                 errors["protocol_path"] = str(exc)
         self._load_protocol()
+        self._ask_covariates(errors)
         if not (isinstance(v.seed, int) and v.seed >= 0):
             errors["seed"] = f"seed = {v.seed!r}: must be a whole number ≥ 0"
         if not (isinstance(v.participant_number, int) and v.participant_number >= 1):
@@ -221,6 +227,18 @@ class SetupModel:
         self.errors, self.warnings = errors, warnings
         self.changed.emit()
         return errors
+
+    def _ask_covariates(self, errors: dict[str, str]) -> None:
+        """The protocol's covariates: asked of a participant not registered yet (their answers checked), shown for
+        one who is (a participant with a session is registered, with the values stored then, perhaps none)."""
+        code = self.values.code
+        stored = self.registered.get(code)
+        if stored is None and code and any(s["code"] == code for s in self.known):
+            stored = {}
+        self.covariates.set_questions(self.protocol.covariates if self.protocol is not None else (), stored)
+        why = self.covariates.error() if code else ""
+        if why:
+            errors["covariates"] = why
 
     def set_entry_problem(self, name: str, text: str, message: str | None) -> None:
         """The view's field ``name`` shows ``text``, which is no value it takes (``message`` says what is allowed);
@@ -317,7 +335,8 @@ class SetupModel:
             raise ValueError("; ".join(errors.values()) or self.hint)
         v = self.values
         return m.StartSession(os.path.abspath(v.db_path), v.code, v.kind, v.protocol_path.strip() or None, v.seed,
-                              v.participant_number, training_override=training_override.strip())
+                              v.participant_number, training_override=training_override.strip(),
+                              covariates=self.covariates.values())
 
     def set_resumable(self, sessions: list[dict[str, object]]) -> None:
         """Interrupted sessions listed by the engine."""
@@ -331,11 +350,14 @@ class SetupModel:
             return self.preferred_resume
         return ids[0] if ids else None
 
-    def set_known(self, sessions: list[dict[str, Any]], withdrawn: list[dict[str, str]] | None = None) -> None:
-        """Every session of the database and who withdrew (listed by the engine): suggestions and checks follow
-        them; a database with sessions has its seed, and the form takes it (the view shows it read-only)."""
+    def set_known(self, sessions: list[dict[str, Any]], withdrawn: list[dict[str, str]] | None = None,
+                  covariates: dict[str, dict[str, Any]] | None = None) -> None:
+        """Every session of the database, who withdrew and the registered participants' covariates (listed by the
+        engine): suggestions and checks follow them; a database with sessions has its seed, and the form takes it
+        (the view shows it read-only)."""
         self.known = list(sessions)
         self.withdrawn = list(withdrawn or [])
+        self.registered = dict(covariates or {})
         first = study_seed(self._stored())
         if first is not None and self.values.seed != first.seed:
             self.values = replace(self.values, seed=first.seed)
@@ -348,6 +370,8 @@ class SetupModel:
         """A session started or resumed: the form shows whose it is (and knows it is stored: the study's seed
         is fixed from now on, before the database is listed again)."""
         self.running_session = session_id
+        if self.covariates.asking and code == self.values.code and code not in self.registered:
+            self.registered[code] = self.covariates.typed()  # stored with this session (until listed again)
         if session_id == self.preferred_resume:
             self.preferred_resume = None
         if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):
@@ -377,6 +401,7 @@ class SetupModel:
             self.values = replace(self.values, kind="experiment")
         else:
             self.values = replace(self.values, code="")
+            self.covariates.clear()
             self.number_suggested = True
             self.kind_suggested = True
             self._suggest_number()

@@ -230,7 +230,7 @@ def test_a_report_crashing_half_way_leaves_the_old_report_as_it_was(dbs, report,
     shutil.copytree(report, out)  # a folder report wrote (the module's report, copied: bytes, modes and marker)
     before = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    def crash(folder, tables, written_too=(), metrics=None):
+    def crash(folder, tables, written_too=(), metrics=None, described=None):
         (folder / "stats.csv").write_text("half")
         raise RuntimeError("disk trouble")
 

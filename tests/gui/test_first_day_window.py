@@ -122,7 +122,7 @@ def test_a_re_run_of_a_re_run_names_the_designed_trial():
     from gui_trials import trial_record
 
     from protocol.study.records import AbortCause
-    from study_app.models.session import SessionModel, TrialTable
+    from study_app.models.session import SessionModel
 
     s = SessionModel()
     s.apply(m.SessionStarted(1, "P01", "experiment", 60, 0, ForceRegulation(), 12.0, 2.0, 1.0, False))
@@ -131,7 +131,7 @@ def test_a_re_run_of_a_re_run_names_the_designed_trial():
                                                abort_reason="operator", abort_cause=AbortCause.EXPERIMENTER), 60))
     assert s.table.designed_of(47) == 11 and s.table.designed_of(11) == 11
     last = trial_record(trial_index=56, repeat_of=47)
-    assert TrialTable.cells(last, s.table.designed_of(47))[0] == "57 (re-run of 12)"
+    assert s.table.cells(last, s.table.designed_of(47))[0] == "57 (re-run of 12)"
     s.apply(m.TrialStarted(5.0, 56, 58, 60, "FIRM", 1.2, "on", repeat_of=47))
     s.set_time(6.0)
     assert s.progress_text().startswith("Trial 57 (re-run of trial 12) · FIRM · haptics ON · times out in 11.0 s")

@@ -65,6 +65,9 @@ COLUMNS = {
                    "t_last_s", "data", "crc32"],
     "arm_chunks": ["session_id", "arm", "segment", "block", "chunk", "first_tick", "last_tick", "n_records",
                    "t_first_s", "t_last_s", "data", "crc32"],
+    "covariates": ["participant_id", "name", "kind", "value"],
+    "notes": ["session_id", "t_s", "trial_index", "text", "deviation", "written_at"],
+    "questionnaire_answers": ["session_id", "questionnaire", "block", "item", "rating", "choice", "answered_at_s"],
 }
 
 

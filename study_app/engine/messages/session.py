@@ -9,16 +9,22 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+from protocol.study.questionnaires import Questionnaire
 from protocol.study.records import TrialRecord
 from protocol.tasks.base import Task
 
 __all__ = [
     "AbortSession",
     "AbortTrial",
+    "AnswerQuestionnaire",
     "ListSessions",
+    "Note",
+    "NoteStored",
     "ParticipantScreenState",
     "Pause",
     "PhaseEntered",
+    "QuestionnaireAnswered",
+    "QuestionnaireShown",
     "Resume",
     "ResumeSession",
     "SessionEnded",
@@ -52,6 +58,9 @@ class StartSession:
     participant_number: int
     override_reason: str = ""
     training_override: str = ""
+    #: Who the participant is, by covariate name (the protocol's ``[[covariates]]``; text as the form has it):
+    #: stored with a participant this session registers (:mod:`protocol.study.covariates`).
+    covariates: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -91,6 +100,8 @@ class AbortTrial:
 
     reason: str = "aborted by the experimenter"
     trial_index: int | None = None
+    #: The experimenter's reason in their words ("" none given): stored as a note on the trial too.
+    note: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,6 +110,26 @@ class AbortSession:
 
     reason: str = "aborted by the experimenter"
     session_id: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Note:
+    """The experimenter's note on the running session (``trial_index`` None) or one of its trials, stored on the
+    session clock; ``deviation`` lists it among the report's deviations from the protocol."""
+
+    text: str
+    trial_index: int | None = None
+    deviation: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class AnswerQuestionnaire:
+    """The participant's answers to the questionnaire on their screen (item id → rating, or a pair's choice)."""
+
+    session_id: int
+    questionnaire: str
+    block: str
+    answers: dict[str, float | str]
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,6 +162,8 @@ class SessionsListed:
     sessions: list[dict[str, Any]]
     known: list[dict[str, Any]] = field(default_factory=list)
     withdrawn: list[dict[str, str]] = field(default_factory=list)
+    #: Each registered participant's covariates, by code (:func:`study_app.engine.session_list.list_covariates`).
+    covariates: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
@@ -154,6 +187,8 @@ class SessionStarted:
     stored_trials: list[TrialRecord] = field(default_factory=list)
     #: The session's (so the study's) seed.
     seed: int = 0
+    #: A resumed session's notes stored before: (trial index or None for the session, text, a deviation).
+    stored_notes: list[tuple[int | None, str, bool]] = field(default_factory=list)
 
 
 @dataclass(frozen=True, slots=True)
@@ -199,6 +234,34 @@ class SessionEnded:
     completed: int
     aborted: int
     successes: int
+
+
+@dataclass(frozen=True, slots=True)
+class NoteStored:
+    """A note was taken (stored at the next block of records); ``t_s`` is the sample time it was taken at."""
+
+    t_s: float
+    text: str
+    trial_index: int | None
+    deviation: bool
+
+
+@dataclass(frozen=True, slots=True)
+class QuestionnaireShown:
+    """A questionnaire is due: the participant screen shows it, and the next cue waits for its answers."""
+
+    session_id: int
+    questionnaire: Questionnaire
+    block: str
+
+
+@dataclass(frozen=True, slots=True)
+class QuestionnaireAnswered:
+    """A questionnaire's answers were stored (the participant's, or the simulated participant's)."""
+
+    session_id: int
+    questionnaire: str
+    block: str
 
 
 @dataclass(frozen=True, slots=True)
