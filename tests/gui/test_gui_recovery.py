@@ -129,7 +129,6 @@ def test_a_rehearsed_kill_is_on_record_as_one_and_no_dead_engine_figure_stays(qt
     w = window
     sid = start_session(qtbot, w, "P01")
     qtbot.waitUntil(lambda: len(w.model.health.devices) >= 3 and w.model.health.loop is not None, timeout=TIMEOUT_MS)
-    t_cue = w.model.session.trial.t_s
     w.model.rig_control.inject_fault("kill", None, 0.0)
     qtbot.waitUntil(lambda: w.engine_row.isVisible(), timeout=TIMEOUT_MS)
     h = w.model.health
@@ -141,6 +140,8 @@ def test_a_rehearsed_kill_is_on_record_as_one_and_no_dead_engine_figure_stays(qt
     c = sqlite3.connect(tmp_path / "study.db")
     try:
         (t_s, detail), = c.execute("SELECT t_s, detail FROM events WHERE kind = 'fault_rehearsal'").fetchall()
+        # the first cue as stored: the same session clock as the kill's time (the GUI's trial time is the loop's)
+        (t_cue,), = c.execute("SELECT MIN(t_s) FROM events WHERE kind = 'cue' AND session_id = ?", (sid,)).fetchall()
     finally:
         c.close()
     assert detail.startswith("kill now: the engine process is killed now, as a crash would kill it -- a rehearsal")
