@@ -33,7 +33,13 @@ from protocol.runner.session_setup import (
     start_runner,
     store_rehearsal_plan,
 )
-from protocol.runner.study_rules import CALIBRATION_OVERRIDE_EVENT, check_new_session, check_settings, stored_sessions
+from protocol.runner.study_rules import (
+    CALIBRATION_OVERRIDE_EVENT,
+    check_arms,
+    check_new_session,
+    check_settings,
+    stored_sessions,
+)
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
 from protocol.storage.annotations import notes
 from protocol.study.config import ProtocolConfig, load_protocol
@@ -92,7 +98,7 @@ class EngineSessions:
         protocol = load_protocol(cmd.protocol_path or None)
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
-        _check_rules_first(cmd, protocol, self.engine.eng.framework.config)
+        _check_rules_first(cmd, protocol, self.engine.eng.framework.config, self._arms())
         if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -403,15 +409,19 @@ def _store_kill(runner: SessionRunner, what: str, t_ns: int) -> None:
     runner.recorder.flush()
 
 
-def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig) -> None:
+def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig,
+                       arms: tuple[str, ...]) -> None:
     """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
-    where the session is stored, by :func:`protocol.runner.session_setup.open_new_session`), and one pipeline per study
-    (``gui --set``: the settings every stored session ran with)."""
+    where the session is stored, by :func:`protocol.runner.session_setup.open_new_session`), one pipeline per study
+    (``gui --set``: the settings every stored session ran with) and one rig per study (``arms``, the task arm
+    first: the arms every stored session ran on, as ``run`` requires)."""
     if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
         return
     db = StudyDatabase(cmd.db_path, readonly=True)
     try:
-        check_settings(StudyReader.over(db).sessions(), cmd.db_path, framework)
+        sessions = StudyReader.over(db).sessions()
+        check_settings(sessions, cmd.db_path, framework)
+        check_arms(sessions, cmd.db_path, arms)
         if not db.sessions_of(cmd.code, cmd.kind):
             check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
                               training_override=cmd.training_override)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+from pathlib import Path
 
 import pytest
 
@@ -154,6 +155,39 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
     finally:
         e2.close("test over")
         e2.release_ring()
+
+
+def test_a_new_participant_of_a_two_arm_study_is_refused_on_a_one_arm_gui(tmp_path):
+    """Issue 42, class 5, in the GUI: ``run`` refused it, the GUI's engine gave the next participant a one-arm rig."""
+    db = str(tmp_path / "s.db")
+    events: list[object] = []
+    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
+                    shared_ring=False)
+    e.start()
+    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
+    for _ in range(50):
+        e.step()
+    e.close("interrupted")
+    e.release_ring()
+    before = Path(db).read_bytes()
+    one: list[object] = []
+    e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
+    e1.start()
+    try:
+        e1.handle(m.StartSession(db, "P02", "experiment", _one_arm_protocol(tmp_path), 3, 2))
+        refused = [ev for ev in one if isinstance(ev, m.CommandRefused)]
+        assert len(refused) == 1 and "ran on the arms left,right" in refused[0].message, refused
+        assert "one study runs on one rig" in refused[0].message and e1.sessions.runner is None
+    finally:
+        e1.close("test over")
+        e1.release_ring()
+    assert Path(db).read_bytes() == before  # refused on the read-only look: nothing stored touched
+
+
+def _one_arm_protocol(tmp_path) -> str:
+    p = tmp_path / "one_arm.toml"
+    p.write_text(SHORT_PROTOCOL, encoding="utf-8")
+    return str(p)
 
 
 def test_a_gui_session_with_other_pipeline_settings_than_the_studys_is_refused(tmp_path):
