@@ -415,7 +415,7 @@ def start_runner(
     participant: TrialParticipant | None, participant_time: Callable[[], float] | None, limits: DeliveryLimits,
     auto_reset_faults: bool, threaded: bool, short_transactions: bool = False, scales: dict[str, float] | None = None,
     commit_clock: Callable[[], float] | None = None, commit_interval_s: float = 0.1, arms: tuple[str, ...] = (),
-    simulated_answers: bool = False,
+    simulated_answers: bool = False, dated: bool = False,
 ) -> tuple[Recorder, SessionRunner]:
     """The writer and the runner of an opened session.
 
@@ -441,6 +441,10 @@ def start_runner(
         The recorder's commit deadline: its clock, s (None: the wall clock), and the longest time a record waits
         for its commit (100 ms).  A run on the virtual clock passes the loop's time, so its commits fall on the
         same records every time (see :mod:`study_app.headless.session_run`).
+    dated
+        The records' tick times are on ``commit_clock`` (the loop's own clock, on the real clock): their deadline
+        counts from their tick, so a crash loses at most ``commit_interval_s`` of them however late the driver
+        handed them over (:class:`protocol.storage.recorder.Recorder`).
     arms
         The rig's arms by name (:attr:`protocol.runner.session.SessionRunner.arms`; the task arm's records are the
         runner's).
@@ -449,7 +453,7 @@ def start_runner(
         on the participant screen (the GUI, on either rig).
     """
     recorder = Recorder(db, threaded=threaded, short_transactions=short_transactions, max_latency_s=commit_interval_s,
-                        **({} if commit_clock is None else {"clock": commit_clock}))
+                        dated=dated, **({} if commit_clock is None else {"clock": commit_clock}))
     runner = SessionRunner(opened.plan(arms, simulated_answers), recorder, submit, participant=participant,
                            participant_time=participant_time, limits=limits, auto_reset_faults=auto_reset_faults,
                            scales=scales)

@@ -14,6 +14,7 @@ import gc
 import json
 import math
 import os
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -117,6 +118,14 @@ class EngineSessions:
             raise
         self._run(db, opened)
 
+    def _commit_deadline(self) -> dict[str, Any]:
+        """On the real clock, the recorder's deadline counts from the records' own ticks (the loop's clock, its
+        ``perf_counter`` scale in this process too): a crash loses 100 ms of them at most, however late the ring was
+        read.  On the virtual clock, the wall clock's 100 ms as before (the ticks run on another time)."""
+        if self.engine.config.clock != "real":
+            return {}
+        return {"commit_clock": time.perf_counter, "dated": True}
+
     def _arms(self) -> tuple[str, ...]:
         """The rig's arms by name, the one whose ring is the session's (the task arm's) first."""
         return tuple(self.engine.eng.calibrations)
@@ -187,7 +196,7 @@ class EngineSessions:
         recorder, runner = start_runner(
             db, opened, submit=self.engine.loop.submit, participant=participant, participant_time=participant_time,
             limits=delivery_limits(self.engine.loop), auto_reset_faults=False, threaded=True,
-            scales=raw_wrench_scales(self.engine.eng.rig.sensor), arms=self._arms(),
+            scales=raw_wrench_scales(self.engine.eng.rig.sensor), arms=self._arms(), **self._commit_deadline(),
         )
         runner.listeners.append(self._on_runner_event)
         self.trigger = None

@@ -71,6 +71,24 @@ def test_a_planned_kill_loses_at_most_100_ms_and_its_trial_is_stored_as_interrup
     assert rows(db, "SELECT COUNT(*) FROM trials WHERE outcome != 'aborted'") == [(4,)]  # every cell full
 
 
+def test_a_planned_kill_in_a_parallel_study_stores_nothing_past_its_moment(tmp_path: Path) -> None:
+    """Issue 42, class 8: the worker that planned the kill killed the study's main process and was left to die by
+    PR_SET_PDEATHSIG; it ran on and committed up to 0.35 s of records past the kill's moment."""
+    (tmp_path / "p.toml").write_text(protocol_text(), encoding="utf-8")
+    db = tmp_path / "study.db"
+    killed = cli(["run", "--participants", "2", "--jobs", "2", "--seed", "2", "--db", str(db), "--protocol", "p.toml",
+                  "--inject-fault", "kill@P02:2+0.5"], tmp_path)
+    assert killed.returncode == -9, killed.stderr
+    ((sid,),) = rows(db, "SELECT s.session_id FROM sessions s JOIN participants p USING (participant_id) "
+                         "WHERE p.code = 'P02'")
+    ((cue_s,),) = rows(db, "SELECT t_s FROM events WHERE session_id = ? AND kind = 'phase' "
+                           "AND detail = 'trial 2 (index 1): cued -> active'", sid)
+    ((last_s,),) = rows(db, "SELECT MAX(t_last_s) FROM (SELECT t_last_s FROM session_chunks WHERE session_id = ? "
+                            "UNION ALL SELECT t_last_s FROM session_blocks WHERE session_id = ?)", sid, sid)
+    kill_s = cue_s + 0.5
+    assert kill_s - 0.100 - 1e-9 <= last_s <= kill_s + 1e-9  # nothing past the kill, one commit interval lost at most
+
+
 # 0.04 s: the shortest pause the protocol allows with haptics ON (the feedback's ramp-out), shorter than a stale
 # pose's latch: a fault latched after its trial would hit the next one
 @pytest.mark.parametrize("kind,pause_s", [("sensor-stall", 0.5), ("sensor-stall", 0.04), ("stale-pose", 0.04)])
