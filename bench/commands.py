@@ -18,7 +18,7 @@ import os
 import sys
 from collections.abc import Callable
 
-from study_app.cli.argtypes import add_command, positive_seconds, real_number, whole_number
+from study_app.cli.argtypes import add_command, positive_seconds, seconds_or_zero, whole_number
 from study_app.cli.error import CliError
 from study_app.cli.power_cmds import whole_option
 
@@ -44,7 +44,7 @@ def _add_pipeline(bsub: argparse._SubParsersAction) -> None:
     bp = add_command(bsub, "pipeline", "per-tick cost vs NumPy, 1 kHz loop timing, filter trade table",
                      "haptic-study bench pipeline --loop-seconds 15 --explain")
     bp.add_argument("--json", action="store_true", help="print one JSON object")
-    bp.add_argument("--loop-seconds", type=real_number("--loop-seconds", 0.0, 3600.0, note=" (0 skips the loop)"),
+    bp.add_argument("--loop-seconds", type=seconds_or_zero("--loop-seconds", 3600.0, "skips the loop"),
                     default=None,
                     help="real time to run the loop (default 30, with --reference-tree 0; 0 skips)")
     bp.add_argument("--explain", action="store_true",

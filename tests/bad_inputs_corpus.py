@@ -18,6 +18,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+#: What a --seconds option allows (one tick at least: issue 42)
+SIM_SECONDS = "must be a number from 0.001 to 86400 (one tick of the 1 kHz loop at least)"
+BENCH_SECONDS = "must be a number from 0.001 to 3600 (one tick of the 1 kHz loop at least)"
+
 ROOT = Path(__file__).resolve().parent.parent
 DEFAULT_PROTOCOL = (ROOT / "protocol" / "study" / "default.toml").read_text(encoding="utf-8")
 EXAMPLE_HARDWARE = (ROOT / "hardware.example.toml").read_text(encoding="utf-8")
@@ -391,18 +395,24 @@ CASES: list[Case] = [
          "--studies = '0': must be a whole number from 1 to 50"),
     Case("sweep --participants 201", ("sweep", "--set", "filter_window=1,10", "--participants", "201"),
          "--participants = '201': must be a whole number from 1 to 200"),
-    Case("--seconds nan", ("sim", "--seconds", "nan"), "--seconds = 'nan': must be a number > 0 and ≤ 86400"),
-    Case("--seconds 1e400", ("sim", "--seconds", "1e400"), "--seconds = '1e400': must be a number > 0 and ≤ 86400"),
+    Case("--seconds nan", ("sim", "--seconds", "nan"), "--seconds = 'nan': " + SIM_SECONDS),
+    Case("--seconds below one tick", ("sim", "--seconds", "1e-300"),  # (issue 42: a traceback after the run)
+         "--seconds = '1e-300': " + SIM_SECONDS),
+    Case("bench --loop-seconds below one tick", ("bench", "pipeline", "--loop-seconds", "1e-300"),
+         "--loop-seconds = '1e-300': must be 0 (skips the loop) or a number from 0.001 to 3600 (one tick of the 1 kHz "
+         "loop at least)"),
+    Case("--seconds 1e400", ("sim", "--seconds", "1e400"), "--seconds = '1e400': " + SIM_SECONDS),
     Case("bench pipeline --ticks 10**30", ("bench", "pipeline", "--ticks", str(10**30)),
          "--ticks = '1000000000000000000000000000000': must be a whole number from 2000 to 10000000"),
     Case("bench pipeline --loop-seconds inf", ("bench", "pipeline", "--loop-seconds", "inf"),
-         "--loop-seconds = 'inf': must be a number from 0 to 3600"),
+         "--loop-seconds = 'inf': must be 0 (skips the loop) or a number from 0.001 to 3600 (one tick of "
+         "the 1 kHz loop at least)"),
     Case("bench report --stats-participants 1", ("bench", "report", "--stats-participants", "1"),
          "--stats-participants = '1': must be a whole number from 2"),
     Case("bench study --participants 0", ("bench", "study", "--participants", "0"),
          "--participants = '0': must be a whole number from 1 to 1000"),
     Case("bench gui --seconds 0", ("bench", "gui", "--seconds", "0"),
-         "--seconds = '0': must be a number > 0 and ≤ 3600"),
+         "--seconds = '0': " + BENCH_SECONDS),
     Case("probe netft --host with a shell character", ("probe", "netft", "--host", "10.0.0.1;reboot"),
          "--host = '10.0.0.1;reboot': must be an IPv4 address"),
     Case("probe netft --port 65536", ("probe", "netft", "--host", "10.0.0.1", "--port", "65536"),

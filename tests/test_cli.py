@@ -11,6 +11,20 @@ import pytest
 
 from study_app.cli.main import main
 
+#: What a --seconds option allows (one tick at least: issue 42)
+SIM_SECONDS = "must be a number from 0.001 to 86400 (one tick of the 1 kHz loop at least)"
+LOOP_SECONDS = "must be 0 (skips the loop) or a number from 0.001 to 3600 (one tick of the 1 kHz loop at least)"
+
+
+@pytest.mark.parametrize("seconds", ["0.001", "0.05"])
+def test_a_sim_shorter_than_the_rest_window_is_summarised_in_strict_json(capsys: pytest.CaptureFixture[str],
+                                                                         seconds: str) -> None:
+    """Issue 42: under 0.2 s (the rest window) the summary's convolution was longer than the run: a traceback."""
+    assert main(["sim", "--seconds", seconds, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out, parse_constant=lambda c: pytest.fail(f"not strict JSON: {c}"))
+    assert summary["contacts"] == 0 and summary["contact_rms_error_n"] is None  # nothing to measure: null, not NaN
+    assert summary["ticks"] >= 2
+
 
 def test_sim_json_summary(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["sim", "--seconds", "6", "--seed", "3", "--json"]) == 0
@@ -34,18 +48,18 @@ def test_sim_text_summary_and_progress(capsys: pytest.CaptureFixture[str]) -> No
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["sim", "--seconds", "-1"], "--seconds = '-1': must be a number > 0 and ≤ 86400"),
-        (["sim", "--seconds", "abc"], "--seconds = 'abc': must be a number > 0 and ≤ 86400"),
+        (["sim", "--seconds", "-1"], "--seconds = '-1': " + SIM_SECONDS),
+        (["sim", "--seconds", "abc"], "--seconds = 'abc': " + SIM_SECONDS),
         (["sim", "--seed", "-3"],
          "--seed = '-3': must be a whole number from 0 to 9223372036854775807 (the largest integer SQLite stores)"),
         (["sim", "--clock", "wall"], "invalid choice: 'wall'"),
         (["bench", "nothing"], "invalid choice: 'nothing'"),
         (["bench", "pipeline", "--loop-seconds", "-1"],
-         "--loop-seconds = '-1': must be a number from 0 to 3600 (0 skips the loop)"),
+         "--loop-seconds = '-1': " + LOOP_SECONDS),
         (["report", "--db", "/nonexistent/study.db", "--out", "/nonexistent/out"],
          "the folder /nonexistent does not exist"),
         (["bench", "pipeline", "--loop-seconds", "nan"],
-         "--loop-seconds = 'nan': must be a number from 0 to 3600 (0 skips the loop)"),
+         "--loop-seconds = 'nan': " + LOOP_SECONDS),
     ],
 )
 def test_bad_input_is_one_clear_error(args: list[str], message: str) -> None:

@@ -137,10 +137,34 @@ def add_command(sub: argparse._SubParsersAction, name: str, help: str, example: 
     )
 
 
-def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
-    """An argument type: a finite number of seconds > 0 and ≤ ``hi`` (default one day)."""
-    return real_number(name, 0.0, hi, lo_open=True)
+#: The shortest simulated or measured time an option may ask for: one tick of the 1 kHz loop, s (less records
+#: nothing, and ``sim --seconds 1e-300`` ended in a traceback where the summary found no record: issue 42).
+ONE_TICK_S = 0.001
 
+
+def positive_seconds(name: str, hi: float = 86_400.0) -> Callable[[str], float]:
+    """An argument type: a finite number of seconds from one tick (0.001) to ``hi`` (default one day)."""
+    return real_number(name, ONE_TICK_S, hi, note=" (one tick of the 1 kHz loop at least)")
+
+
+
+def seconds_or_zero(name: str, hi: float, zero: str) -> Callable[[str], float]:
+    """An argument type: 0 (``zero`` says what it means) or seconds from one tick (0.001) to ``hi``."""
+    seconds = positive_seconds(name, hi)
+
+    def parse(text: str) -> float:
+        try:
+            if float(text) == 0.0:  # (exactly zero, as typed: "0", "0.0", "-0")
+                return 0.0
+        except ValueError:
+            pass
+        try:
+            return seconds(text)
+        except argparse.ArgumentTypeError:
+            allowed = f"0 ({zero}) or a number from {ONE_TICK_S:g} to {hi:g} (one tick of the 1 kHz loop at least)"
+            raise argparse.ArgumentTypeError(f"{name} = {text!r}: must be {allowed}") from None
+
+    return parse
 
 #: Seeds are stored in the study database: at most SQLite's largest INTEGER.
 SEED = whole_number("--seed", 0, SQLITE_INTEGER_MAX, " (the largest integer SQLite stores)")

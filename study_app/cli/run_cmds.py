@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sqlite3
 import sys
@@ -136,7 +137,9 @@ def cmd_sim(args: argparse.Namespace) -> int:
     if bar is not None:
         bar.close()
     if args.json:
-        print(json.dumps(summary, indent=None))
+        # strict JSON: a measure with nothing to measure (no contact in a short run) is null, not NaN
+        print(json.dumps({k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+                          for k, v in summary.items()}, indent=None, allow_nan=False))
     else:
         from study_app.cli.sim_summary import format_summary
 

@@ -108,7 +108,8 @@ def _summarise(
     contacts = _contacts(true_f)
     in_contact = true_f > _CONTACT_N
     # rest: well away from any contact (the filter's memory and the tissue's release)
-    far = np.convolve(in_contact.astype(float), np.ones(201), mode="same") == 0
+    # (the centre of the full convolution, as mode="same" gives it for runs longer than the window: shorter ones too)
+    far = np.convolve(in_contact.astype(float), np.ones(201), mode="full")[100:100 + len(in_contact)] == 0
     peaks = [(float(true_f[a:b].max()), float(force[a:b].max())) for a, b in contacts]
     faults = int(np.bitwise_or.reduce(d["faults"])) if len(d["faults"]) else 0
     out: dict[str, Any] = {
