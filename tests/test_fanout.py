@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import signal
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -19,6 +20,7 @@ from pipeline.force.pipeline_settings import paper_settings
 from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import fanout
+from study_app.headless.cluster_study import SCRATCH_PREFIX
 from study_app.headless.sweep_run import run_sweep
 
 distributed = pytest.importorskip("distributed")
@@ -129,3 +131,81 @@ def test_the_workers_run_this_software(cluster) -> None:
         assert set(client.run(fanout.software_identity).values()) == {fanout.software_identity()}
     finally:
         client.close()
+
+
+def _same_study():
+    """scripts/same_study.py: a study's tables compared row for row, its sessions matched by participant and kind."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("same_study", Path(__file__).resolve().parents[1] / "scripts"
+                                                  / "same_study.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_study_run_on_a_cluster_with_a_worker_killed_is_the_local_one_row_for_row(tmp_path: Path, short_protocol,
+                                                                                     cluster, capsys) -> None:
+    """Issue 47: `run --scheduler`: each participant into a worker's scratch database, merged here as it comes back;
+    a worker lost mid-run is retried.  The merged study equals the one run here (session ids aside) and `check`
+    verifies every block's checksum, bound anew to its merged session."""
+    from study_app.headless import run_study
+
+    here, there = tmp_path / "here.db", tmp_path / "there.db"
+    scratch_before = set(Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*"))
+    run_study(str(here), participants=3, seed=5, protocol=short_protocol, jobs=1)
+    with distributed.Client(cluster, set_as_default=False) as client:
+        killed: list[str] = []
+        stop = threading.Event()
+        killer = threading.Thread(target=_kill_a_busy_worker, args=(client, killed, stop), daemon=True)
+        killer.start()
+        try:
+            progress = run_study(str(there), participants=3, seed=5, protocol=short_protocol, client=client)
+        finally:
+            stop.set()
+            killer.join(5.0)
+    assert sorted(progress.sessions) == [1, 2, 3] and progress.study_trials_done == 3 * 4
+    assert _same_study().compare(str(here), str(there))
+    assert main(["check", "--db", str(there)]) == 0
+    assert "No problem found." in capsys.readouterr().out
+    # the workers wrote in their own Dask directories only, and removed what they wrote (a killed one: Dask will)
+    assert set(Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*")) <= scratch_before
+    with distributed.Client(cluster, set_as_default=False) as client:
+        dirs = client.run(lambda dask_worker: dask_worker.local_directory)
+    assert not [p for d in dirs.values() for p in Path(d).glob(f"{SCRATCH_PREFIX}*")]
+
+
+@pytest.mark.parametrize("given,why", [(["--clock", "real"], "--clock real"), (["--jobs", "2"], "--jobs"),
+                                       (["--inject-fault", "kill@P01:1"], "--inject-fault")])
+def test_a_run_on_a_cluster_refuses_what_it_cannot_do_before_any_work(tmp_path: Path, capsys, given, why) -> None:
+    db = tmp_path / "s.db"
+    rc = main(["run", "--participants", "2", "--db", str(db), "--scheduler", "tcp://127.0.0.1:9", *given])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and f"--scheduler = tcp://127.0.0.1:9: {why} does not apply" in err[0], err
+    assert not db.exists()
+
+
+def test_a_simulated_power_pool_on_a_cluster_is_the_local_one(tmp_path: Path, short_protocol, cluster) -> None:
+    """Issue 47: `power --simulated --scheduler`: the pool's participants run on the cluster, the pool is the same."""
+    import functools
+
+    from analysis.planning.power_pool import simulated_pool
+    from study_app.headless import run_study
+    from study_app.headless.sim_trials import MODEL_VERSION
+
+    here = simulated_pool(tmp_path / "here", 4, 7, simulate=run_study, participant_model=MODEL_VERSION,
+                          protocol=short_protocol, jobs=1)
+    with distributed.Client(cluster, set_as_default=False) as client:
+        there = simulated_pool(tmp_path / "there", 4, 7, simulate=functools.partial(run_study, client=client),
+                               participant_model=MODEL_VERSION, protocol=short_protocol)
+    assert (here.status, there.status) == ("simulated", "simulated") and here.participants == there.participants
+    assert _same_study().compare(str(here.path), str(there.path))
+
+
+def test_power_runs_on_a_cluster_only_what_it_simulates(tmp_path: Path, capsys) -> None:
+    rc = main(["power", "--db", str(tmp_path / "pilot.db"), "--scheduler", "tcp://127.0.0.1:9", "--out",
+               str(tmp_path / "p")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and err == ["haptic-study: error: --scheduler = tcp://127.0.0.1:9: only with --simulated (a pilot "
+                               "study is read here)"]

@@ -49,6 +49,9 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"planned study sizes, comma-separated (default {DEFAULT_N_TEXT})")
     p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
     p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
+    p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="with --simulated: run the pool's participants on a Dask cluster (`dask scheduler` prints its "
+                        "address; default: the HAPTIC_STUDY_SCHEDULER environment variable, else this machine)")
     p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool); it must "
@@ -107,6 +110,7 @@ class _PowerRequest:
     alpha: float
     seed: int
     pool_size: int
+    scheduler: str | None = None  # a Dask scheduler's address: the simulated pool's participants run there
 
 
 def _request(args: argparse.Namespace) -> _PowerRequest:
@@ -124,7 +128,16 @@ def _request(args: argparse.Namespace) -> _PowerRequest:
     pool_size = whole_option("--pool", args.pool, 4, _N_MAX) if args.pool is not None else _POOL_DEFAULT
     if args.out is None:
         raise CliError("--out: give the output folder (DIR) for power.csv, power.txt and the figure")
-    return _PowerRequest(n_values, resamples, alpha, seed, pool_size)
+    if args.scheduler is not None and not args.simulated:
+        raise CliError(f"--scheduler = {args.scheduler}: only with --simulated (a pilot study is read here)")
+    from foundation.errors import InputRefused
+    from study_app.headless.fanout import scheduler_address
+
+    try:
+        address = scheduler_address(args.scheduler) if args.simulated else None
+    except InputRefused as exc:
+        raise CliError(str(exc)) from None
+    return _PowerRequest(n_values, resamples, alpha, seed, pool_size, address)
 
 
 class _Bars:
@@ -159,15 +172,19 @@ class _Bars:
             bar.close()
 
 
-def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[str], Any, str]:
-    """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it."""
+def _simulated_source(out: str, req: _PowerRequest, bars: _Bars, client: Any) -> tuple[list[str], Any, str]:
+    """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it;
+    with ``client``, its participants on that Dask cluster."""
+    import functools
+
     from analysis.planning.power_pool import simulated_pool
     from study_app.headless import run_study
     from study_app.headless.sim_trials import MODEL_VERSION
 
     pool_size, seed = req.pool_size, req.seed
     t0 = time.perf_counter()
-    pool_db = simulated_pool(out, pool_size, seed, simulate=run_study, participant_model=MODEL_VERSION,
+    simulate = run_study if client is None else functools.partial(run_study, client=client)
+    pool_db = simulated_pool(out, pool_size, seed, simulate=simulate, participant_model=MODEL_VERSION,
                              on_progress=bars.simulating)
     bars.close()
     path = pool_db.path
@@ -225,12 +242,17 @@ def cmd_power(args: argparse.Namespace) -> int:
     options = MetricOptions(args.error_window, args.tct)
     _say_the_size(req)
     bars = _Bars()
+    client = None
     try:
+        if req.scheduler is not None and args.simulated:
+            from study_app.headless.fanout import connect
+
+            client = connect(req.scheduler)  # reached, its workers running this software, before the pool is made
         participants = None
         source = None
         databases = list(args.db or [])
         if args.simulated:
-            databases, participants, source = _simulated_source(args.out, req, bars)
+            databases, participants, source = _simulated_source(args.out, req, bars, client)
         pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants)
         bars.close()
         t0 = time.perf_counter()
@@ -242,6 +264,9 @@ def cmd_power(args: argparse.Namespace) -> int:
         files = write_output_folder(args.out, lambda tmp: write_power(result, tmp), **folder)
     except InputRefused as exc:  # PowerError, PoolError, OutputError included
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    finally:
+        if client is not None:
+            client.close()
     tests = int((~result.frame["metric"].map(is_family_row)).sum()) * req.resamples
     print(f"power: {tests:,} resampled Wilcoxon tests (and Holm) in {wall:.2f} s", file=sys.stderr)
     print(summary_text(result))

@@ -12,7 +12,7 @@ import math
 import os
 import sqlite3
 import sys
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from study_app.cli.argtypes import SEED, add_command, arm_names, positive_seconds, setting, whole_number
@@ -92,6 +92,10 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help="a value every participant this run registers is given for one of the protocol's "
                         "[[covariates]] (e.g. group=surgeon; the others are drawn by the simulated participant's "
                         "rule); repeatable")
+    r.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
+                   help="run the participants on a Dask cluster, each merged into --db as it comes back "
+                        "(`dask scheduler` prints its address; default: the HAPTIC_STUDY_SCHEDULER environment "
+                        "variable, else this machine; docs/cluster.md)")
     r.set_defaults(handler=cmd_run)
 
 
@@ -153,17 +157,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     from protocol.study.config import ProtocolError, load_protocol
     from study_app.cli.progress import ProgressBar
     from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
+    from study_app.headless.fanout import ClusterError
 
-    if args.resume is not None and args.covariates:
-        raise CliError(f"--covariate {args.covariates[0][0]}={args.covariates[0][1]}: a resumed participant was "
-                       "registered with their first session, and their covariates are not changed")
-    if args.resume is not None:
-        for f in args.inject_fault:
-            if f.code != args.resume:
-                raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+    _check_resume_options(args)
     framework = framework_of(args.settings)
+    address = _scheduler_of(args)
     _refuse_a_full_disk(args.db)
     bar: ProgressBar | None = None
+    client = None
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
@@ -179,6 +180,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         import time as _time
 
+        client = _connect(address)
         t0 = _time.perf_counter()
         if args.resume is not None:
             progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
@@ -187,7 +189,7 @@ def cmd_run(args: argparse.Namespace) -> int:
             progress = run_study(
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
                 on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
-                sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates),
+                sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
@@ -202,10 +204,17 @@ def cmd_run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
         raise CliError(str(exc)) from None
+    except ClusterError as exc:  # the participants merged so far are kept: --continue runs the others
+        if bar is not None:
+            bar.close()
+        raise CliError(f"{exc} (with --continue)", 1) from None
     except (OSError, sqlite3.Error):  # the machine failed (a full disk): one line from the CLI's error path
         if bar is not None:
             bar.close()
         raise
+    finally:
+        if client is not None:
+            client.close()
     for note in progress.notes:
         print(f"haptic-study: {note}", file=sys.stderr)
     if args.continue_study and progress.study_trials_total == 0:
@@ -218,6 +227,50 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
+
+
+def _check_resume_options(args: argparse.Namespace) -> None:
+    """What a resume cannot be given: covariates (set at registration), faults of another participant."""
+    if args.resume is not None and args.covariates:
+        raise CliError(f"--covariate {args.covariates[0][0]}={args.covariates[0][1]}: a resumed participant was "
+                       "registered with their first session, and their covariates are not changed")
+    if args.resume is not None:
+        for f in args.inject_fault:
+            if f.code != args.resume:
+                raise CliError(f"--inject-fault = {f}: participant {f.code} is not the one resumed ({args.resume})")
+
+
+def _scheduler_of(args: argparse.Namespace) -> str | None:
+    """The Dask scheduler's address (checked before any work), refused with the options it cannot go with."""
+    from foundation.errors import InputRefused
+    from study_app.headless.fanout import scheduler_address
+
+    try:
+        address = scheduler_address(args.scheduler)
+    except InputRefused as exc:
+        raise CliError(str(exc)) from None
+    if address is None:
+        return None
+    for given, why in ((args.resume, "--resume"), (args.clock != "virtual", "--clock real"),
+                       (args.inject_fault, "--inject-fault"), (args.jobs, "--jobs")):
+        if given:
+            raise CliError(f"--scheduler = {address}: {why} does not apply to a study on a Dask cluster (it runs on "
+                           "the virtual clock, its workers' processes; no planned faults; a resume runs here); "
+                           "leave out one or the other")
+    return address
+
+
+def _connect(address: str | None) -> Any:
+    """A client of the cluster at ``address`` (its workers checked to run this software), or None."""
+    if address is None:
+        return None
+    from foundation.errors import InputRefused
+    from study_app.headless.fanout import connect
+
+    try:
+        return connect(address)
+    except InputRefused as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
 
 
 def _refuse_a_block_without_sessions(protocol: ProtocolConfig, path: str | None) -> None:

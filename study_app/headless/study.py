@@ -27,6 +27,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
@@ -35,7 +36,9 @@ from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code
 from protocol.study.config import ProtocolConfig, protocol_from_dict
 from protocol.study.covariates import checked_values, simulated_values
+from study_app.headless.cluster_study import run_on_cluster
 from study_app.headless.plan import (
+    Step,
     check_fault_plans,
     check_settings,
     interrupted_session_of,
@@ -54,7 +57,7 @@ def run_study(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str = "virtual",
     on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None, continue_study: bool = False,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
-    framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
+    framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None, client: Any = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -95,6 +98,9 @@ def run_study(
         Values (by name, as text) every participant this call registers is given for the protocol's covariates
         (``run --covariate``): the others are drawn by the simulated participants' rule
         (:func:`protocol.study.covariates.simulated_values`).  Checked before anything is stored.
+    client
+        A ``distributed.Client``: the participants run on its Dask cluster (the virtual clock, no faults; ``jobs``
+        unused), each merged here as it comes back (:mod:`study_app.headless.cluster_study`).
 
     Returns
     -------
@@ -119,22 +125,40 @@ def run_study(
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
     given = {name: str(v) for name, v in (covariates or {}).items()}
-    n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol, given)
-    # every refusal is decided on a read-only look first: a refused command leaves the file byte-identical
-    protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
-    arms = sim_arms_of(protocol, sim_arms)  # a bad task arm: refused before anything is stored
-    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw,
-                                           arms)
+    n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol, given, (client, clock))
+    fw, arms, first_plan, first_kept = _first_look(db_path, participants, seed, protocol, continue_study, framework,
+                                                   sim_arms)
     if continue_study and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
-                            sim_arms=arms, framework=fw, covariates=given)
+                            sim_arms=arms, framework=fw, covariates=given, client=client)
+
+
+def _first_look(db_path: str, participants: int, seed: int, protocol: ProtocolConfig, continue_study: bool,
+                framework: FrameworkConfig | None, sim_arms: Sequence[str],
+                ) -> tuple[FrameworkConfig, tuple[str, ...], dict[int, list[Step]], list[int]]:
+    """Every refusal decided on a read-only look first (a refused command leaves the file byte-identical): the
+    pipeline, the arms, and the plan with the sessions kept from before."""
+    protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
+    arms = sim_arms_of(protocol, sim_arms)  # a bad task arm: refused before anything is stored
+    first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw,
+                                           arms)
+    return fw, arms, first_plan, first_kept
+
+
+def _check_cluster_request(client: Any, clock: str, faults: Sequence[FaultPlan]) -> None:
+    """A study on a Dask cluster runs on the virtual clock, without planned faults (their kill is this process's)."""
+    if client is not None and (clock != "virtual" or faults):
+        raise ValueError("--scheduler: a study on a Dask cluster runs on the virtual clock without planned faults "
+                         f"(given: --clock {clock}{', --inject-fault' if faults else ''}); run it on this machine")
 
 
 def _checked_request(db_path: str, participants: int, jobs: int | None, continue_study: bool,
-                     faults: Sequence[FaultPlan], protocol: ProtocolConfig, covariates: dict[str, str]) -> int:
-    """Refuse a request :func:`run_study` cannot run (before anything is opened); the workers it runs at once."""
+                     faults: Sequence[FaultPlan], protocol: ProtocolConfig, covariates: dict[str, str],
+                     cluster: tuple[Any, str] = (None, "virtual")) -> int:
+    """Refuse a request :func:`run_study` cannot run (before anything is opened; ``cluster``: its Dask client and
+    clock, :func:`_check_cluster_request`); the workers it runs at once."""
     # a value given for every participant: outside its declaration, one line (the drawn ones fit by their rule)
     checked_values(protocol.covariates, {**simulated_values(protocol.covariates, 0, 1), **covariates})
     if participants < 1:
@@ -142,6 +166,7 @@ def _checked_request(db_path: str, participants: int, jobs: int | None, continue
     if jobs is not None and jobs < 1:
         raise ValueError(f"jobs = {jobs}: must be ≥ 1 (or None for the usable cores)")
     check_fault_plans(faults, protocol, [participant_code(n) for n in range(1, participants + 1)])
+    _check_cluster_request(*cluster, faults)
     if continue_study and not os.path.exists(db_path):
         raise StorageError(f"cannot continue a study: no database at {db_path}")
     return default_jobs(participants) if jobs is None else min(jobs, participants)
@@ -150,7 +175,7 @@ def _checked_request(db_path: str, participants: int, jobs: int | None, continue
 def _run_under_lease(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
-    sim_arms: tuple[str, ...], framework: FrameworkConfig, covariates: dict[str, str],
+    sim_arms: tuple[str, ...], framework: FrameworkConfig, covariates: dict[str, str], client: Any = None,
 ) -> StudyProgress:
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
@@ -167,6 +192,10 @@ def _run_under_lease(
                                                              framework, sim_arms)
         progress.sessions.extend(kept)
         jobs_used = min(jobs, len(plan))
+        if client is not None:
+            return run_on_cluster(db, plan=plan, seed=seed, protocol=protocol, on_progress=on_progress,
+                                  progress=progress, study_owner=owner, sim_arms=sim_arms, framework=framework,
+                                  covariates=covariates, client=client)
         if jobs_used > 1:
             db.close()  # the workers open their own connections; none is carried across fork
             held = None
