@@ -112,7 +112,8 @@ def run_on_cluster(
         finally:
             src.close()
         sessions[n] = sorted(mapping.values())
-        progress.participant, progress.code = n, participant_code(n)
+        progress.participant, progress.code, progress.kind = n, participant_code(n), "merged"
+        progress.trials_done = progress.trials_total = trials  # (the participant's, as a bar's label shows them)
         progress.study_trials_done += trials
         progress.study_time_s += time_s
         if on_progress is not None:
