@@ -25,7 +25,7 @@ from protocol.storage.database import StudyDatabase
 from protocol.storage.schema import add_later_columns, add_metric_columns
 from protocol.study.records import trial_id_of
 
-__all__ = ["merge_participants"]
+__all__ = ["database_bytes", "merge_database_bytes", "merge_participants"]
 
 #: The tables keyed by a session, in the order a merge fills them (a run before its blocks and chunks).
 SESSION_TABLES = ("trials", "events", "notes", "questionnaire_answers", "recordings", "session_blocks",
@@ -155,3 +155,21 @@ def _rebound(row: dict[str, Any], table: str, new_session: int, source: str) -> 
 
 def _columns(conn: sqlite3.Connection, table: str) -> list[str]:
     return [r[1] for r in conn.execute(f"PRAGMA table_info({table})")]
+
+
+def database_bytes(db: StudyDatabase) -> bytes:
+    """The whole database as one file's bytes, to send to another machine: taken out of WAL mode first (its log
+    checkpointed into the file), since a WAL database's bytes open nowhere but beside their log, and deserialized
+    in memory not at all.  For a database this process made and is done with (a worker's scratch database)."""
+    db.conn.execute("PRAGMA journal_mode=DELETE")
+    return db.conn.serialize()
+
+
+def merge_database_bytes(db: StudyDatabase, data: bytes, source: str) -> dict[int, int]:
+    """:func:`merge_participants` from a database's bytes (:func:`database_bytes`), opened in memory."""
+    src = sqlite3.connect(":memory:")
+    try:
+        src.deserialize(data)
+        return merge_participants(db, src, source)
+    finally:
+        src.close()

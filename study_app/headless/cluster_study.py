@@ -21,7 +21,6 @@ Ctrl-C cancels the rest (:func:`study_app.headless.fanout.run_tasks`).
 from __future__ import annotations
 
 import shutil
-import sqlite3
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -30,7 +29,7 @@ from typing import Any
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StudyDatabase, new_owner_token
-from protocol.storage.merge import merge_participants
+from protocol.storage.merge import database_bytes, merge_database_bytes
 from protocol.study.config import ProtocolConfig
 from study_app.headless.fanout import run_tasks
 from study_app.headless.plan import Step
@@ -60,10 +59,7 @@ def participant_on_worker(task: Task) -> tuple[int, bytes, int, float]:
                       on_progress=None, study_owner=owner, sim_arms=sim_arms, framework=framework,
                       covariates=covariates)
             db.release_lease("study", owner)
-            # out of WAL mode (its log checkpointed into the file): a WAL database's bytes open nowhere but beside
-            # their log, and deserialized in memory they would not open at all
-            db.conn.execute("PRAGMA journal_mode=DELETE")
-            data = db.conn.serialize()
+            data = database_bytes(db)
         finally:
             db.close()
     finally:
@@ -105,12 +101,7 @@ def run_on_cluster(
 
     def merge(result: tuple[int, bytes, int, float]) -> None:
         n, data, trials, time_s = result
-        src = sqlite3.connect(":memory:")
-        try:
-            src.deserialize(data)
-            mapping = merge_participants(db, src, f"{participant_code(n)} from the cluster")
-        finally:
-            src.close()
+        mapping = merge_database_bytes(db, data, f"{participant_code(n)} from the cluster")
         sessions[n] = sorted(mapping.values())
         progress.participant, progress.code, progress.kind = n, participant_code(n), "merged"
         progress.trials_done = progress.trials_total = trials  # (the participant's, as a bar's label shows them)
