@@ -42,7 +42,8 @@ from protocol.runner.session_setup import (
 )
 from protocol.storage import StudyDatabase, new_owner_token
 from protocol.study.config import ProtocolConfig
-from protocol.study.covariates import simulated_values
+from protocol.storage.annotations import covariates_by_code
+from protocol.study.groups import simulated_covariates, simulated_profile
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
@@ -180,7 +181,8 @@ def run_session(
 
     ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
     The simulated participant is described by the protocol's covariates as its rule draws them
-    (:func:`protocol.study.covariates.simulated_values`), ``covariates`` (text by name) given instead where named,
+    (:func:`protocol.study.groups.simulated_covariates`: a grouping covariate placed in turn), ``covariates`` (text
+    by name) given instead where named; its group (``[groups]``) decides its profile (:mod:`pipeline.sim.experience`),
     and answers the questionnaires by its rule (:mod:`protocol.study.sim_answers`).
     """
     fw = framework or FrameworkConfig()
@@ -194,7 +196,8 @@ def run_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
             lease_owner=lease_owner, study_owner=study_owner,
-            covariates={**simulated_values(protocol.covariates, study_seed, number), **(covariates or {})},
+            covariates={**simulated_covariates(protocol.covariates, protocol.groups, study_seed, number),
+                        **(covariates or {})},
         )
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
@@ -203,7 +206,10 @@ def run_session(
         eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
-    participant = SimulatedParticipant(seed=opened.participant_seed)
+    # the participant's group, as stored, decides the simulated profile (:mod:`protocol.study.groups`)
+    stored = covariates_by_code(db.conn).get(opened.code, {})
+    participant = SimulatedParticipant(seed=opened.participant_seed,
+                                       profile=simulated_profile(opened.protocol.groups, stored))
     eng.rig.set_driver(participant)
     progress.sessions.append(opened.session_id)
     progress.kind = opened.kind
