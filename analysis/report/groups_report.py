@@ -16,8 +16,8 @@ import html
 
 import pandas as pd
 
-from analysis.reading.annotations import Annotations
 from analysis.reading import codebook
+from analysis.reading.annotations import Annotations
 from analysis.reading.codebook import export, exported_name
 from analysis.reading.metrics import MetricOptions
 from analysis.report.html_parts import fmt, fmt_p, html_table
@@ -47,10 +47,10 @@ def group_tables(g: GroupAnalysis | None, *, rounded: bool = True) -> dict[str, 
         effects = pd.concat([effects[["group", "n_participants"]], stats], axis=1)
     else:
         effects = export(effects, "groups.csv", rounded=rounded)
-    between = export(g.between, "group_tests.csv", rounded=rounded)
-    return {name: _whole(frame, name) for name, frame in {"groups.csv": effects, "group_interaction.csv": export(g.interaction, "group_interaction.csv",
-                                                                   rounded=rounded),
-            "group_tests.csv": between}.items()}
+    tables = {"groups.csv": effects,
+              "group_interaction.csv": export(g.interaction, "group_interaction.csv", rounded=rounded),
+              "group_tests.csv": export(g.between, "group_tests.csv", rounded=rounded)}
+    return {name: _whole(frame, name) for name, frame in tables.items()}
 
 
 def _whole(frame: pd.DataFrame, file: str) -> pd.DataFrame:

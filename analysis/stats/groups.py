@@ -36,12 +36,20 @@ import pandas as pd
 
 from analysis.reading.metrics import MetricOptions
 from analysis.stats.aggregate import TESTED_METRICS, by_mode, metrics_in, mode_tests
-from analysis.stats.models import FIXED_EFFECT_COLUMNS, ModelFit, design, fit_gee_logistic, fit_mixed, fixed_effects, site_terms
+from analysis.stats.models import (
+    FIXED_EFFECT_COLUMNS,
+    ModelFit,
+    design,
+    fit_gee_logistic,
+    fit_mixed,
+    fixed_effects,
+    site_terms,
+)
 from analysis.stats.trade import tct_column
 from protocol.study.labels import plural
 
-__all__ = ["BETWEEN_COLUMNS", "EXACT_MAX", "MIN_GROUP", "GroupAnalysis", "analyse_groups", "between_tests", "group_effects",
-           "group_terms", "groups_of", "interaction_models"]
+__all__ = ["BETWEEN_COLUMNS", "EXACT_MAX", "FORMULA", "FORMULA_GEE", "MIN_GROUP", "GroupAnalysis", "analyse_groups",
+           "between_tests", "group_effects", "group_terms", "groups_of", "interaction_models"]
 
 #: Fewest participants for a group to be tested (a paired test of one participant is no test).
 MIN_GROUP = 2

@@ -76,8 +76,9 @@ def groups_from_table(f: Fields, v: Any, covariates: Sequence[Covariate]) -> Gro
                                       f"{names})")
     cov = declared[by]
     if cov.kind != "category":
-        raise f.fail("groups.by", by, f"is a {cov.kind} covariate: groups need a category (declared categories: "
-                                      f"{names})")
+        article = "an" if cov.kind == "integer" else "a"
+        raise f.fail("groups.by", by, f"is {article} {cov.kind} covariate: groups need a category (declared "
+                                      f"categories: {names})")
 
     def level_list(field: str, default: Sequence[str], min_len: int) -> tuple[str, ...]:
         if field not in t:

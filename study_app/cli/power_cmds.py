@@ -57,6 +57,14 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
                    help="replace the files an earlier power run wrote in DIR, if unedited (the marker "
                         ".haptic-study-power lists them with their SHA-256); any other file, or an edited one, is "
                         "a refusal; the simulated pool is never deleted")
+    p.add_argument("--groups", action="store_true",
+                   help="plan a two-group study: the power of the group x haptics interaction (the report's "
+                        "Mann-Whitney U test of the per-participant ON - OFF effects between groups) against "
+                        "participants per group (--n), from a pilot whose protocol declares [groups] or from "
+                        "simulated novices and experienced surgeons (docs/groups.md)")
+    p.add_argument("--protocol", default=None, metavar="FILE",
+                   help="with --groups --simulated: the protocol to simulate (it must declare [groups]; default: the "
+                        "paper's with a group covariate of novices and surgeons, half and half)")
     add_analysis_options(p)
     p.set_defaults(handler=cmd_power)
 
@@ -154,13 +162,19 @@ class _Bars:
         self.bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
         self.bars[-1].update(p.study_trials_done)
 
+    def measures(self, done: int, total: int) -> None:
+        if not self.bars or self.bars[-1].unit != "measures x sizes":
+            self.bars.append(self._bar(total, "resampling two-group studies", "measures x sizes", decimals=0))
+        self.bars[-1].update(done)
+
     def close(self) -> None:
         for bar in self.bars:
             bar.close()
 
 
-def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[str], Any, str]:
-    """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it."""
+def simulated_source(out: str, req: Any, bars: _Bars, protocol: Any = None) -> tuple[list[str], Any, str]:
+    """Simulate the pool of ``protocol`` (default: the paper's), or reuse or complete it: its database, its
+    participants and how the report names it."""
     from analysis.planning.power_pool import simulated_pool
     from study_app.headless import run_study
     from study_app.headless.sim_trials import MODEL_VERSION
@@ -168,7 +182,7 @@ def _simulated_source(out: str, req: _PowerRequest, bars: _Bars) -> tuple[list[s
     pool_size, seed = req.pool_size, req.seed
     t0 = time.perf_counter()
     pool_db = simulated_pool(out, pool_size, seed, simulate=run_study, participant_model=MODEL_VERSION,
-                             on_progress=bars.simulating)
+                             protocol=protocol, on_progress=bars.simulating)
     bars.close()
     path = pool_db.path
     said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
@@ -202,6 +216,11 @@ def _say_the_size(req: _PowerRequest) -> None:
 def cmd_power(args: argparse.Namespace) -> int:
     """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
     req = _request(args)
+    if args.protocol is not None and not args.groups:
+        raise CliError(f"--protocol = {args.protocol!r}: only with --groups --simulated")
+    from study_app.cli.group_power_cmds import check_group_request, run_group_power
+
+    protocol = check_group_request(args) if args.groups else None
 
     from analysis.planning.power_pool import is_pool_file
     from analysis.reading.inputs import check_databases
@@ -223,14 +242,21 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.reading.metrics import MetricOptions
 
     options = MetricOptions(args.error_window, args.tct)
-    _say_the_size(req)
     bars = _Bars()
+    if args.groups:
+        try:
+            return run_group_power(args, req, protocol, folder, bars)
+        except InputRefused as exc:
+            raise CliError(str(exc), getattr(exc, "status", 2)) from None
+        finally:
+            bars.close()
+    _say_the_size(req)
     try:
         participants = None
         source = None
         databases = list(args.db or [])
         if args.simulated:
-            databases, participants, source = _simulated_source(args.out, req, bars)
+            databases, participants, source = simulated_source(args.out, req, bars)
         pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants)
         bars.close()
         t0 = time.perf_counter()
