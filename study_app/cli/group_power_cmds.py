@@ -13,6 +13,7 @@ import argparse
 import dataclasses
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 from study_app.cli.error import CliError
@@ -67,8 +68,10 @@ def _say_the_size(n_values: tuple[int, ...], resamples: int) -> None:
               file=sys.stderr)
 
 
-def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: dict[str, Any], bars: Any) -> int:
-    """Build the pool (simulate it or read the pilot), estimate the power and write the files."""
+def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: dict[str, Any], bars: Any,
+                    simulated_source: Callable[..., tuple[list[str], Any, str]]) -> int:
+    """Build the pool (simulate it by ``simulated_source``, ``power``'s own, or read the pilot), estimate the power
+    and write the files."""
     from analysis.planning.group_power import estimate_group_power, group_pool, group_power_text
     from analysis.reading.annotations import read_annotations
     from analysis.reading.load import load_study
@@ -78,8 +81,6 @@ def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: d
     options = MetricOptions(args.error_window, args.tct)
     databases, participants, source = list(args.db or []), None, None
     if args.simulated:
-        from study_app.cli.power_cmds import simulated_source
-
         databases, participants, source = simulated_source(args.out, req, bars,
                                                            protocol or default_two_group_protocol())
     study = load_study(databases)

@@ -245,7 +245,7 @@ def cmd_power(args: argparse.Namespace) -> int:
     bars = _Bars()
     if args.groups:
         try:
-            return run_group_power(args, req, protocol, folder, bars)
+            return run_group_power(args, req, protocol, folder, bars, simulated_source)
         except InputRefused as exc:
             raise CliError(str(exc), getattr(exc, "status", 2)) from None
         finally:
