@@ -30,6 +30,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import cast
 
 import numpy as np
 import pandas as pd
@@ -49,7 +50,7 @@ from analysis.stats.trade import tct_column
 from protocol.study.labels import plural
 
 __all__ = ["BETWEEN_COLUMNS", "EXACT_MAX", "FORMULA", "FORMULA_GEE", "MIN_GROUP", "GroupAnalysis", "analyse_groups",
-           "between_tests", "group_effects", "group_terms", "groups_of", "interaction_models"]
+           "between_tests", "compare_effects", "group_effects", "group_terms", "groups_of", "interaction_models"]
 
 #: Fewest participants for a group to be tested (a paired test of one participant is no test).
 MIN_GROUP = 2
@@ -157,15 +158,38 @@ def interaction_models(trials: pd.DataFrame, group: pd.Series, tested: Sequence[
     return fits
 
 
-def _mann_whitney(a: np.ndarray, b: np.ndarray) -> tuple[float, float, str]:
-    """U of ``a``, two-sided p and the method's name."""
+def compare_effects(a: np.ndarray, b: np.ndarray, min_n: int, who: str, method: str = "exact-without-ties"
+                    ) -> dict[str, object]:
+    """Two sets of per-participant ON − OFF effects by the two-sided Mann–Whitney U test (U of ``a``), or why not.
+
+    Not tested where a set has fewer than ``min_n`` (``who``: the sets in words, for the note) or every effect is
+    the same.  ``method``: ``exact-without-ties`` (exact where nothing ties and there are at most :data:`EXACT_MAX`
+    together, otherwise the normal approximation with the tie and continuity corrections: the between-group test)
+    or SciPy's ``auto`` (the order check's, as it always was).
+
+    Returns
+    -------
+    dict
+        ``u_statistic, p_value, method, computable, note``.
+    """
     from scipy.stats import mannwhitneyu
 
+    out: dict[str, object] = {"u_statistic": math.nan, "p_value": math.nan, "method": "", "computable": False,
+                              "note": ""}
     both = np.concatenate([a, b])
-    exact = len(np.unique(both)) == len(both) and len(both) <= EXACT_MAX
-    res = mannwhitneyu(a, b, alternative="two-sided", method="exact" if exact else "asymptotic")
-    how = "exact" if exact else "normal approximation, tie-corrected, continuity-corrected"
-    return float(res.statistic), float(res.pvalue), how
+    if min(len(a), len(b)) < min_n:
+        out["note"] = f"not tested: {len(a)} {who}; each group needs at least {min_n}"
+    elif np.ptp(both) == 0:
+        out["note"] = "not tested: every participant has the same ON − OFF difference"
+    elif method == "auto":
+        res = mannwhitneyu(a, b, alternative="two-sided")
+        out.update(u_statistic=float(res.statistic), p_value=float(res.pvalue), computable=True)
+    else:
+        exact = len(np.unique(both)) == len(both) and len(both) <= EXACT_MAX
+        res = mannwhitneyu(a, b, alternative="two-sided", method="exact" if exact else "asymptotic")
+        out.update(u_statistic=float(res.statistic), p_value=float(res.pvalue), computable=True,
+                   method="exact" if exact else "normal approximation, tie-corrected, continuity-corrected")
+    return out
 
 
 def between_tests(overall: pd.DataFrame, group: pd.Series, tested: Sequence[str]) -> pd.DataFrame:
@@ -179,20 +203,15 @@ def between_tests(overall: pd.DataFrame, group: pd.Series, tested: Sequence[str]
         ref = diff[g == tested[0]].to_numpy(float)
         for level in tested[1:]:
             x = diff[g == level].to_numpy(float)
+            test = compare_effects(x, ref, MIN_GROUP, f"and {len(ref)} participants with an effect")
             row = {"metric": m, "group": level, "reference": tested[0], "n_group": len(x), "n_reference": len(ref),
                    "median_effect_group": float(np.median(x)) if len(x) else math.nan,
                    "median_effect_reference": float(np.median(ref)) if len(ref) else math.nan,
-                   "u_statistic": math.nan, "p_value": math.nan, "rank_biserial": math.nan,
-                   "test": "Mann–Whitney U, two-sided", "method": "", "computable": False, "note": ""}
-            if min(len(x), len(ref)) < MIN_GROUP:
-                row["note"] = (f"not tested: {len(x)} and {len(ref)} participants with an effect; each group needs "
-                               f"at least {MIN_GROUP}")
-            elif np.ptp(np.concatenate([x, ref])) == 0:
-                row["note"] = "not tested: every participant has the same ON − OFF difference"
-            else:
-                u, p, how = _mann_whitney(x, ref)
-                row.update(u_statistic=u, p_value=p, rank_biserial=2.0 * u / (len(x) * len(ref)) - 1.0,
-                           method=how, computable=True)
+                   "u_statistic": test["u_statistic"], "p_value": test["p_value"],
+                   "rank_biserial": (2.0 * cast(float, test["u_statistic"]) / (len(x) * len(ref)) - 1.0
+                                     if test["computable"] else math.nan),
+                   "test": "Mann–Whitney U, two-sided", "method": test["method"], "computable": test["computable"],
+                   "note": test["note"]}
             rows.append(row)
     return pd.DataFrame(rows, columns=list(BETWEEN_COLUMNS))
 
