@@ -18,6 +18,7 @@ from protocol.storage import StorageError, StudyReader
 from protocol.storage.annotations import answers, covariates_by_code, notes
 from protocol.study.config import protocol_from_dict
 from protocol.study.covariates import Covariate
+from protocol.study.groups import GroupDesign
 from protocol.study.questionnaires import Questionnaire
 
 __all__ = ["ANSWER_COLUMNS", "NOTE_COLUMNS", "Annotations", "read_annotations"]
@@ -41,11 +42,14 @@ class Annotations:
     answers: pd.DataFrame
     declared: tuple[Covariate, ...]
     questionnaires: tuple[Questionnaire, ...]
+    #: The between-group design of the studies' protocols (the first declared; None: no ``[groups]``).
+    groups: GroupDesign | None = None
 
 
-def _declarations(db: StudyReader) -> tuple[list[Covariate], list[Questionnaire]]:
+def _declarations(db: StudyReader) -> tuple[list[Covariate], list[Questionnaire], GroupDesign | None]:
     covs: dict[str, Covariate] = {}
     qs: dict[str, Questionnaire] = {}
+    groups: GroupDesign | None = None
     for s in db.sessions():
         try:
             p = protocol_from_dict(json.loads(s.protocol_json), f"session {s.session_id} protocol")
@@ -55,7 +59,8 @@ def _declarations(db: StudyReader) -> tuple[list[Covariate], list[Questionnaire]
             covs.setdefault(c.name, c)
         for q in p.questionnaires:
             qs.setdefault(q.name, q)
-    return list(covs.values()), list(qs.values())
+        groups = groups or p.groups
+    return list(covs.values()), list(qs.values()), groups
 
 
 def read_annotations(paths: Sequence[str | os.PathLike[str]]) -> Annotations:
@@ -65,6 +70,7 @@ def read_annotations(paths: Sequence[str | os.PathLike[str]]) -> Annotations:
     answer_rows: list[tuple[object, ...]] = []
     declared: dict[str, Covariate] = {}
     kinds: dict[str, Questionnaire] = {}
+    grouping: GroupDesign | None = None
     for path in paths:
         try:
             db = StudyReader(path, check=False)
@@ -72,7 +78,8 @@ def read_annotations(paths: Sequence[str | os.PathLike[str]]) -> Annotations:
             continue  # (load_study names it)
         try:
             base = os.path.basename(str(path))
-            covs, qs = _declarations(db)
+            covs, qs, groups = _declarations(db)
+            grouping = grouping or groups
             for c in covs:
                 declared.setdefault(c.name, c)
             for declared_q in qs:
@@ -99,4 +106,4 @@ def read_annotations(paths: Sequence[str | os.PathLike[str]]) -> Annotations:
     return Annotations(covariates.drop_duplicates("participant_code"),
                        pd.DataFrame(note_rows, columns=list(NOTE_COLUMNS)),
                        pd.DataFrame(answer_rows, columns=list(ANSWER_COLUMNS)),
-                       tuple(declared.values()), tuple(kinds.values()))
+                       tuple(declared.values()), tuple(kinds.values()), grouping)

@@ -39,6 +39,7 @@ from analysis.reading.codebook_columns import (
     task_column,
 )
 from analysis.reading.codebook_columns import COLUMNS as _TABLE_COLUMNS
+from analysis.reading.codebook_groups import GROUP_COLUMNS
 from analysis.reading.codebook_within import WITHIN_COLUMNS
 from protocol.metrics import METRICS, Metric, tested
 from protocol.tasks.registry import TASKS
@@ -102,7 +103,7 @@ def _wide_columns() -> tuple[Column, ...]:
     return tuple(out)
 
 
-_ALL = COLUMNS + _wide_columns() + ANNOTATION_COLUMNS
+_ALL = COLUMNS + _wide_columns() + ANNOTATION_COLUMNS + GROUP_COLUMNS
 #: analysis name -> exported name
 _RENAMED: dict[str, str] = {c.source: c.name for c in COLUMNS if c.source}
 

@@ -47,6 +47,7 @@ from analysis.report.annotations_report import (
     noted_deviations,
     questionnaire_results,
 )
+from analysis.report.groups_report import group_analysis, group_tables, groups_html
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.report_html import page, plural, power_html
 from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
@@ -362,8 +363,10 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
                                                           a.stats_by_target, within, options.error_window, rounded=r),
                               ann, answered, rounded=r)
                      for r in (True, False))
+    grouped = group_analysis(ann, a.trials, a.overall, a.target_order, options, zero_method, confidence)
+    tables.update(group_tables(grouped))  # (no [groups] in the protocol: nothing)
     section = withdrawals_html(study_withdrawals(databases), a.study)  # "" when nobody withdrew
-    section += annotations_html(ann, answered, dict.fromkeys(a.trials["participant_code"]))
+    section += annotations_html(ann, answered, dict.fromkeys(a.trials["participant_code"])) + groups_html(grouped)
     if power:
         from analysis.planning.power_outputs import report_section
 

@@ -100,7 +100,7 @@ def order_check(per_part: pd.DataFrame, first_mode: pd.Series) -> pd.DataFrame:
         ``metric, n_on_first, n_off_first, median_diff_on_first, median_diff_off_first, u_statistic, p_value,
         computable, note`` (differences are ON − OFF in the metric's unit).
     """
-    from scipy.stats import mannwhitneyu
+    from analysis.stats.groups import compare_effects  # (groups builds on this floor's aggregation too)
 
     rows = []
     for m in (name for name in TESTED_METRICS if name in per_part.columns):
@@ -108,19 +108,11 @@ def order_check(per_part: pd.DataFrame, first_mode: pd.Series) -> pd.DataFrame:
         diff = (wide["on"] - wide["off"]).dropna()
         order = first_mode.reindex(diff.index)
         a, b = diff[order == "on"].to_numpy(), diff[order == "off"].to_numpy()
-        row = {"metric": m, "n_on_first": len(a), "n_off_first": len(b),
-               "median_diff_on_first": float(np.median(a)) if len(a) else math.nan,
-               "median_diff_off_first": float(np.median(b)) if len(b) else math.nan,
-               "u_statistic": math.nan, "p_value": math.nan, "computable": False, "note": ""}
-        if min(len(a), len(b)) < MIN_ORDER_GROUP:
-            row["note"] = (f"not tested: {len(a)} ON-first and {len(b)} OFF-first participants; each group needs "
-                           f"at least {MIN_ORDER_GROUP}")
-        elif np.ptp(np.concatenate([a, b])) == 0:
-            row["note"] = "not tested: every participant has the same ON − OFF difference"
-        else:
-            res = mannwhitneyu(a, b, alternative="two-sided")
-            row.update(u_statistic=float(res.statistic), p_value=float(res.pvalue), computable=True)
-        rows.append(row)
+        test = compare_effects(a, b, MIN_ORDER_GROUP, f"ON-first and {len(b)} OFF-first participants", "auto")
+        rows.append({"metric": m, "n_on_first": len(a), "n_off_first": len(b),
+                     "median_diff_on_first": float(np.median(a)) if len(a) else math.nan,
+                     "median_diff_off_first": float(np.median(b)) if len(b) else math.nan,
+                     **{k: test[k] for k in ("u_statistic", "p_value", "computable", "note")}})
     return pd.DataFrame(rows)
 
 

@@ -90,6 +90,7 @@ import numpy as np
 
 from pipeline.core.aim import TrialAim
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.tissue import TissueParams
@@ -142,6 +143,9 @@ class SimulatedParticipant:
     f_max_n, f_scale_n
         Parameters of the haptic scaling law (the pipeline's), used to invert
         the felt force into a tissue-force percept.
+    profile
+        ``novice`` (the calibrated participant) or ``experienced`` (the same draws, its OFF handicaps reduced as
+        :mod:`pipeline.sim.experience` documents).
     """
 
     def __init__(
@@ -154,6 +158,7 @@ class SimulatedParticipant:
         motion_scale: float = 1.0,
         f_max_n: float = 3.0,
         f_scale_n: float = 7.0,
+        profile: str = "novice",
     ) -> None:
         if not (math.isfinite(motion_scale) and motion_scale > 0):
             raise ValueError(f"motion_scale = {motion_scale!r}: must be a finite number > 0")
@@ -161,7 +166,8 @@ class SimulatedParticipant:
             raise ValueError(f"seed = {seed!r}: must be a whole number ≥ 0")
         self.seed = int(seed)
         self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(0,)))
-        self.params = params if params is not None else ParticipantParams.draw(self._rng)
+        self.params = with_profile(params if params is not None else ParticipantParams.draw(self._rng), profile)
+        self.profile = profile
         self._n_trials = 0
         self._n_practice = 0
         tp = tissue or TissueParams()

@@ -20,6 +20,7 @@ from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
+from protocol.study.groups import GroupDesign, groups_from_table
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
@@ -114,6 +115,8 @@ class ProtocolConfig:
     #: The questionnaires asked on the participant screen (:mod:`protocol.study.questionnaires`; the file's
     #: ``[[questionnaires]]``): none by default.
     questionnaires: tuple[Questionnaire, ...] = ()
+    #: The between-group design (:mod:`protocol.study.groups`; the file's ``[groups]``): None, no groups.
+    groups: GroupDesign | None = None
 
     @property
     def trials_per_participant(self) -> int:
@@ -176,6 +179,7 @@ class ProtocolConfig:
             **({"task": task} if task is not None else {}),
             **({"covariates": [c.to_dict() for c in self.covariates]} if self.covariates else {}),
             **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
+            **({"groups": self.groups.to_dict()} if self.groups is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -198,7 +202,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires"})
+                          "questionnaires", "groups"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -247,11 +251,13 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     )
     _check_together(f, task, timing, training, tuple(modes), targets=tuple(labels),
                     forces=tuple(t.force_n for t in targets))
+    covariates = covariates_from_tables(f, top.get("covariates"))
     return ProtocolConfig(
         name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
-        task=task, covariates=covariates_from_tables(f, top.get("covariates")),
+        task=task, covariates=covariates,
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
+        groups=groups_from_table(f, top.get("groups"), covariates),
     )
 
 

@@ -60,6 +60,14 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
                    help="replace the files an earlier power run wrote in DIR, if unedited (the marker "
                         ".haptic-study-power lists them with their SHA-256); any other file, or an edited one, is "
                         "a refusal; the simulated pool is never deleted")
+    p.add_argument("--groups", action="store_true",
+                   help="plan a two-group study: the power of the group x haptics interaction (the report's "
+                        "Mann-Whitney U test of the per-participant ON - OFF effects between groups) against "
+                        "participants per group (--n), from a pilot whose protocol declares [groups] or from "
+                        "simulated novices and experienced surgeons (docs/groups.md)")
+    p.add_argument("--protocol", default=None, metavar="FILE",
+                   help="with --groups --simulated: the protocol to simulate (it must declare [groups]; default: the "
+                        "paper's with a group covariate of novices and surgeons, half and half)")
     add_analysis_options(p)
     p.set_defaults(handler=cmd_power)
 
@@ -167,14 +175,20 @@ class _Bars:
         self.bars[-1].label = f"simulating pool: {p.code} {p.kind:<10}"
         self.bars[-1].update(p.study_trials_done)
 
+    def measures(self, done: int, total: int) -> None:
+        if not self.bars or self.bars[-1].unit != "measures x sizes":
+            self.bars.append(self._bar(total, "resampling two-group studies", "measures x sizes", decimals=0))
+        self.bars[-1].update(done)
+
     def close(self) -> None:
         for bar in self.bars:
             bar.close()
 
 
-def _simulated_source(out: str, req: _PowerRequest, bars: _Bars, client: Any) -> tuple[list[str], Any, str]:
-    """Simulate the pool (or reuse or complete it): its database, its participants and how the report names it;
-    with ``client``, its participants on that Dask cluster."""
+def simulated_source(out: str, req: Any, bars: _Bars, protocol: Any = None, client: Any = None
+                     ) -> tuple[list[str], Any, str]:
+    """Simulate the pool of ``protocol`` (default: the paper's), or reuse or complete it: its database, its
+    participants and how the report names it; with ``client``, its participants on that Dask cluster."""
     import functools
 
     from analysis.planning.power_pool import simulated_pool
@@ -185,7 +199,7 @@ def _simulated_source(out: str, req: _PowerRequest, bars: _Bars, client: Any) ->
     t0 = time.perf_counter()
     simulate = run_study if client is None else functools.partial(run_study, client=client)
     pool_db = simulated_pool(out, pool_size, seed, simulate=simulate, participant_model=MODEL_VERSION,
-                             on_progress=bars.simulating)
+                             protocol=protocol, on_progress=bars.simulating)
     bars.close()
     path = pool_db.path
     said = {"reused": f"reusing the simulated pool {path} (SHA-256 checked)",
@@ -219,6 +233,14 @@ def _say_the_size(req: _PowerRequest) -> None:
 def cmd_power(args: argparse.Namespace) -> int:
     """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
     req = _request(args)
+    if args.protocol is not None and not args.groups:
+        raise CliError(f"--protocol = {args.protocol!r}: only with --groups --simulated")
+    if args.groups and args.scheduler is not None:
+        raise CliError(f"--scheduler = {args.scheduler}: not with --groups yet (its two-group pool is simulated on "
+                       "this machine)")
+    from study_app.cli.group_power_cmds import check_group_request, run_group_power
+
+    protocol = check_group_request(args) if args.groups else None
 
     from analysis.planning.power_pool import is_pool_file
     from analysis.reading.inputs import check_databases
@@ -240,9 +262,16 @@ def cmd_power(args: argparse.Namespace) -> int:
     from analysis.reading.metrics import MetricOptions
 
     options = MetricOptions(args.error_window, args.tct)
-    _say_the_size(req)
     bars = _Bars()
     client = None
+    if args.groups:
+        try:
+            return run_group_power(args, req, protocol, folder, bars, simulated_source)
+        except InputRefused as exc:
+            raise CliError(str(exc), getattr(exc, "status", 2)) from None
+        finally:
+            bars.close()
+    _say_the_size(req)
     try:
         if req.scheduler is not None and args.simulated:
             from study_app.headless.fanout import connect
@@ -252,7 +281,7 @@ def cmd_power(args: argparse.Namespace) -> int:
         source = None
         databases = list(args.db or [])
         if args.simulated:
-            databases, participants, source = _simulated_source(args.out, req, bars, client)
+            databases, participants, source = simulated_source(args.out, req, bars, client=client)
         pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants)
         bars.close()
         t0 = time.perf_counter()

@@ -178,8 +178,12 @@ class EngineSessions:
     def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
         if self.engine.eng.simulated:
             from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
+            from protocol.storage.annotations import covariates_by_code
+            from protocol.study.groups import simulated_profile
 
-            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed))
+            # the participant's stored group decides the simulated profile, as in the headless runner
+            profile = simulated_profile(opened.protocol.groups, covariates_by_code(db.conn).get(opened.code, {}))
+            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed, profile=profile))
             sim_rig = self.engine.eng.rig
             participant: StylusControl | None = self.engine.driver
 

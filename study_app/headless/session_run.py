@@ -41,8 +41,9 @@ from protocol.runner.session_setup import (
     training_schedule,
 )
 from protocol.storage import StudyDatabase, new_owner_token
+from protocol.storage.annotations import covariates_by_code
 from protocol.study.config import ProtocolConfig
-from protocol.study.covariates import simulated_values
+from protocol.study.groups import simulated_covariates, simulated_profile
 from study_app.engine.session_config import config_record
 from study_app.headless.plan import Step
 
@@ -180,7 +181,8 @@ def run_session(
 
     ``framework`` is the pipeline's configuration (default: the paper's), stored in the session's ``config_json``.
     The simulated participant is described by the protocol's covariates as its rule draws them
-    (:func:`protocol.study.covariates.simulated_values`), ``covariates`` (text by name) given instead where named,
+    (:func:`protocol.study.groups.simulated_covariates`: a grouping covariate placed in turn), ``covariates`` (text
+    by name) given instead where named; its group (``[groups]``) decides its profile (:mod:`pipeline.sim.experience`),
     and answers the questionnaires by its rule (:mod:`protocol.study.sim_answers`).
     """
     fw = framework or FrameworkConfig()
@@ -190,11 +192,13 @@ def run_session(
         arms = sim_arms_of(protocol, sim_arms)
         # training and experiment each get their own rig: the same seed gives the same study whatever ran before
         eng = _engine(rig_seed + (1 if kind == "training" else 0), clock, arms, fw)
+        given = {**simulated_covariates(protocol.covariates, protocol.groups, study_seed, number),
+                 **(covariates or {})}
         opened = open_new_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
-            config=config_record(eng, clock, rig_seed, p_seed), calibration=eng.calibration.to_dict(),
-            lease_owner=lease_owner, study_owner=study_owner,
-            covariates={**simulated_values(protocol.covariates, study_seed, number), **(covariates or {})},
+            config=_with_profile(config_record(eng, clock, rig_seed, p_seed), protocol, given),
+            calibration=eng.calibration.to_dict(), lease_owner=lease_owner, study_owner=study_owner,
+            covariates=given,
         )
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
@@ -203,7 +207,10 @@ def run_session(
         eng = _engine(rig_seed + (3 if info.kind == "training" else 2), clock, arms, fw)
         opened = open_resumed_session(db, resume_id, lease_owner=lease_owner, study_owner=study_owner,
                                       calibration=eng.calibration.to_dict())
-    participant = SimulatedParticipant(seed=opened.participant_seed)
+    # the participant's group, as stored, decides the simulated profile (:mod:`protocol.study.groups`)
+    stored = covariates_by_code(db.conn).get(opened.code, {})
+    participant = SimulatedParticipant(seed=opened.participant_seed,
+                                       profile=simulated_profile(opened.protocol.groups, stored))
     eng.rig.set_driver(participant)
     progress.sessions.append(opened.session_id)
     progress.kind = opened.kind
@@ -221,6 +228,13 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
+
+
+def _with_profile(config: dict[str, Any], protocol: ProtocolConfig, given: Mapping[str, object]) -> dict[str, Any]:
+    """The session's config record, naming the simulated participant's profile where it is not the calibrated one
+    (``participant_profile``; :mod:`pipeline.sim.experience`): the record of a study without groups is as before."""
+    profile = simulated_profile(protocol.groups, given)
+    return config if profile == "novice" else {**config, "participant_profile": profile}
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:

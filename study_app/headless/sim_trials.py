@@ -45,7 +45,7 @@ def participant_seeds(study: int, participant: int) -> tuple[int, int, int]:
 
 
 def run_participant(study: int, participant: int, protocol: ProtocolConfig | None = None,
-                    framework: FrameworkConfig | None = None) -> list[TrialRow]:
+                    framework: FrameworkConfig | None = None, profile: str = "novice") -> list[TrialRow]:
     """Run one simulated participant through the experiment's schedule; return the trial rows.
 
     Parameters
@@ -56,6 +56,8 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
         The protocol (default: the paper's); its experiment schedule is run, no training.
     framework
         The pipeline's configuration (default: the paper's).
+    profile
+        The simulated participant's profile (:mod:`pipeline.sim.experience`): ``novice`` or ``experienced``.
     """
     proto = protocol or default_protocol()
     rig_seed, p_seed, sched_seed = participant_seeds(study, participant)
@@ -64,7 +66,7 @@ def run_participant(study: int, participant: int, protocol: ProtocolConfig | Non
     loop, ring = eng.loop, eng.ring
     assert ring is not None
     p = SimulatedParticipant(seed=p_seed, tissue=eng.rig.config.tissue, arm=eng.rig.config.arm,
-                             motion_scale=eng.rig.config.motion_scale)
+                             motion_scale=eng.rig.config.motion_scale, profile=profile)
     eng.rig.set_driver(p)
     task = proto.task
     carried = sim_metrics(task)
