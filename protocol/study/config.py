@@ -20,6 +20,7 @@ from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
+from protocol.study.lsl_settings import LslSettings, lsl_from_table
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
@@ -114,6 +115,9 @@ class ProtocolConfig:
     #: The questionnaires asked on the participant screen (:mod:`protocol.study.questionnaires`; the file's
     #: ``[[questionnaires]]``): none by default.
     questionnaires: tuple[Questionnaire, ...] = ()
+    #: What the session publishes and records on the Lab Streaming Layer (:mod:`protocol.study.lsl_settings`; the
+    #: file's ``[lsl]``): nothing by default.
+    lsl: LslSettings = field(default_factory=LslSettings)
 
     @property
     def trials_per_participant(self) -> int:
@@ -176,6 +180,7 @@ class ProtocolConfig:
             **({"task": task} if task is not None else {}),
             **({"covariates": [c.to_dict() for c in self.covariates]} if self.covariates else {}),
             **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
+            **({"lsl": lsl} if (lsl := self.lsl.to_dict()) is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -198,7 +203,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires"})
+                          "questionnaires", "lsl"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -252,6 +257,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
         task=task, covariates=covariates_from_tables(f, top.get("covariates")),
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
+        lsl=lsl_from_table(f, top),
     )
 
 
