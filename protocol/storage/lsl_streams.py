@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -29,9 +29,10 @@ import numpy as np
 import numpy.typing as npt
 
 from protocol.storage.common import has_table
+from protocol.study.labels import plural
 
-__all__ = ["ALIGNED_COLUMNS", "LSL_TABLES", "LslChunk", "LslStream", "aligned_samples", "ensure_lsl_tables",
-           "erase_lsl_rows", "insert_chunk", "insert_run", "insert_stream"]
+__all__ = ["ALIGNED_COLUMNS", "LSL_TABLES", "LslChunk", "LslStream", "aligned_samples", "audit_lsl",
+           "ensure_lsl_tables", "erase_lsl_rows", "insert_chunk", "insert_run", "insert_stream"]
 
 #: The tables, children first (the order a withdrawal deletes in).
 LSL_TABLES = ("lsl_chunks", "lsl_streams", "lsl_runs")
@@ -176,3 +177,32 @@ def erase_lsl_rows(conn: sqlite3.Connection, session_id: int) -> None:
     for table in LSL_TABLES:
         if has_table(conn, table):
             conn.execute(f"DELETE FROM {table} WHERE session_id = ?", (session_id,))
+
+
+def audit_lsl(conn: sqlite3.Connection, note: Callable[[str], None], problem: Callable[[str], None]) -> None:
+    """``check``'s look at the LSL tables (none: nothing to say): every chunk's bytes hold as many samples as its row
+    says, every row belongs to a stored session; one note counting what is recorded."""
+    if not has_table(conn, "lsl_chunks"):
+        return
+    formats = {(int(r[0]), int(r[1]), int(r[2])): (str(r[3]), str(r[4]), int(r[5])) for r in conn.execute(
+        "SELECT session_id, segment, stream, name, channel_format, channel_count FROM lsl_streams")}
+    samples = 0
+    for sid, seg, stream, chunk, n, t_blob, data in conn.execute(
+            "SELECT session_id, segment, stream, chunk, n_samples, lsl_t, data FROM lsl_chunks"):
+        where = f"session {sid}, recorded run {seg}, LSL stream {stream}, chunk {chunk}"
+        known = formats.get((int(sid), int(seg), int(stream)))
+        if known is None:
+            problem(f"{where}: its stream has no lsl_streams row")
+            continue
+        samples += int(n)
+        fmt, channels = known[1], known[2]
+        held = (len(json.loads(bytes(data).decode("utf-8"))) if fmt == "string"
+                else len(bytes(data)) // (8 * max(channels, 1)))
+        if len(bytes(t_blob)) != 8 * int(n) or held != int(n):
+            problem(f"{where} ({known[0]!r}): holds {len(bytes(t_blob)) // 8} timestamps and {held} samples, its row "
+                    f"says {n}")
+    orphans = conn.execute("SELECT COUNT(*) FROM lsl_streams WHERE session_id NOT IN (SELECT session_id FROM "
+                           "sessions)").fetchone()[0]
+    if orphans:
+        problem(f"{orphans} recorded LSL streams belong to no stored session")
+    note(f"LSL: {plural(len(formats), 'external stream')} recorded, {plural(samples, 'sample')}")

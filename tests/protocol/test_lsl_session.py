@@ -188,6 +188,20 @@ def test_an_external_stream_is_recorded_aligned_and_its_loss_is_an_event(lsl_ses
     assert export.tables["lsl_streams"]["type"].tolist() == ["EMG"]
 
 
+def test_check_counts_the_streams_and_finds_a_chunk_that_lost_samples(lsl_session, tmp_path, capsys):
+    assert main(["check", "--db", str(lsl_session["db"])]) == 0
+    assert "LSL: 1 external stream recorded" in capsys.readouterr().out
+    copy = tmp_path / "bad.db"
+    src = sqlite3.connect(lsl_session["db"])
+    src.backup(bad := sqlite3.connect(copy))
+    src.close()
+    bad.execute("UPDATE lsl_chunks SET n_samples = n_samples + 1 WHERE chunk = 0")
+    bad.commit()
+    bad.close()
+    assert main(["check", "--db", str(copy)]) != 0
+    assert "LSL stream 0, chunk 0" in capsys.readouterr().out
+
+
 def test_a_withdrawal_leaves_nothing_of_the_streams(lsl_session, tmp_path):
     copy = tmp_path / "copy.db"
     src = sqlite3.connect(lsl_session["db"])
