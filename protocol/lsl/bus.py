@@ -14,9 +14,11 @@ own time, never the time it was sent.
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from types import ModuleType
 from typing import Any, cast
 
@@ -46,7 +48,27 @@ def pylsl() -> ModuleType:
                              f"{INSTALL_HINT}") from None
     except RuntimeError as exc:  # pylsl found no liblsl it can load
         raise LslUnavailable(f"LSL: liblsl could not be loaded ({exc}); {INSTALL_HINT}") from None
+    global _configured
+    if not _configured:
+        _configured = True
+        if not any(p.is_file() for p in _config_files()):
+            # liblsl's own INFO lines would interleave with the command's output: errors only, unless the lab's
+            # lsl_api.cfg says otherwise (its settings are then LSL's, untouched)
+            lib.set_config_content(_QUIET_CONFIG)
     return cast(ModuleType, lib)  # (pylsl ships no types)
+
+
+#: The configuration given to liblsl where the lab has none: its log at warnings and errors only.
+_QUIET_CONFIG = "[log]\nlevel = -1\n"
+_configured = False
+
+
+def _config_files() -> list[Path]:
+    """Where liblsl looks for its configuration (docs/lsl.md §6): LSLAPICFG, then the working directory, the user's
+    and the system's folder."""
+    env = os.environ.get("LSLAPICFG")
+    return [*([Path(env)] if env else []), Path("lsl_api.cfg"), Path.home() / "lsl_api" / "lsl_api.cfg",
+            Path("/etc/lsl_api/lsl_api.cfg")]
 
 
 @dataclass(frozen=True, slots=True)
