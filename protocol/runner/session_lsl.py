@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from foundation.errors import InputRefused
 from protocol.lsl.bus import pylsl, resolve_streams
 from protocol.lsl.outlets import SessionIds
 from protocol.lsl.streams import open_session_streams
@@ -18,7 +19,7 @@ from protocol.runner.session import SessionRunner
 from protocol.runner.session_setup import OpenedSession
 from protocol.study.lsl_settings import LslSettings
 
-__all__ = ["attach_lsl", "detach_lsl", "lsl_streams_of"]
+__all__ = ["attach_lsl", "detach_lsl", "lsl_skipped", "lsl_streams_of"]
 
 
 def lsl_streams_of(settings: LslSettings) -> list[Any]:
@@ -48,10 +49,25 @@ def attach_lsl(runner: SessionRunner, opened: OpenedSession, loop_t0_ns: int, in
         t_ns = int(streams.link.records_ns(float(pylsl().local_clock())))
         event(t_ns, kind, detail)
 
-    streams = open_session_streams(settings, ids, opened.protocol.task, recorder=runner.recorder,
-                                   segment=opened.segment, loop_t0_ns=loop_t0_ns, infos=infos, event=event,
-                                   now_event=now_event)
+    try:
+        streams = open_session_streams(settings, ids, opened.protocol.task, recorder=runner.recorder,
+                                       segment=opened.segment, loop_t0_ns=loop_t0_ns, infos=infos, event=event,
+                                       now_event=now_event)
+    except InputRefused:
+        raise
+    except Exception as exc:  # LSL that cannot open is an event of the session, which runs without it
+        runner.recorder.event(runner.session_id, opened.clock_offset_s, "lsl",
+                              f"LSL not opened: {type(exc).__name__}: {exc}; the session runs without it")
+        return
     runner.attach_lsl(streams)
+
+
+def lsl_skipped(runner: SessionRunner, opened: OpenedSession) -> None:
+    """A run on the virtual clock of a session whose protocol asks for LSL (a headless resume): nothing is published
+    or recorded, and the session says so."""
+    runner.recorder.event(runner.session_id, opened.clock_offset_s, "lsl",
+                          "not on LSL: a virtual-clock run's times are on no clock LSL shares (run it with --clock "
+                          "real to publish and record)")
 
 
 def detach_lsl(runner: SessionRunner) -> None:

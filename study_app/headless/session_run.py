@@ -26,7 +26,7 @@ from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
 from protocol.runner.session_driver import SessionDriver
-from protocol.runner.session_lsl import attach_lsl, detach_lsl
+from protocol.runner.session_lsl import attach_lsl, detach_lsl, lsl_skipped
 from protocol.runner.session_setup import (
     OpenedSession,
     delivery_limits,
@@ -226,7 +226,11 @@ def run_session(
         simulated_answers=True, **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng, runner)
-    lsl = (lambda: attach_lsl(runner, opened, eng.loop.t0_ns)) if opened.protocol.lsl.on else None
+    lsl = None
+    if opened.protocol.lsl.on and clock == "real":
+        lsl = lambda: attach_lsl(runner, opened, eng.loop.t0_ns)  # noqa: E731  (once the loop has ticked)
+    elif opened.protocol.lsl.on:
+        lsl_skipped(runner, opened)
     try:
         _drive(eng, runner, clock, progress, on_progress, trigger, on_first_tick=lsl)
     finally:
