@@ -27,7 +27,7 @@ import pylsl
 import pytest
 
 import protocol.runner.session_lsl as session_lsl
-from analysis.export.participant_export import participant_export
+from analysis.export.participant_export import export_codebook, participant_export
 from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import SessionInterrupted, run_study
@@ -186,6 +186,9 @@ def test_an_external_stream_is_recorded_aligned_and_its_loss_is_an_event(lsl_ses
     lost = export.tables["events"].query("kind == 'lsl'")["detail"].tolist()
     assert len(lost) == 1 and "lost" in lost[0] and f"emg-{lsl_session['tag']}" in lost[0]
     assert export.tables["lsl_streams"]["type"].tolist() == ["EMG"]
+    book = export_codebook({f"{name}.csv": list(export.tables[name].columns)
+                            for name in ("lsl_runs", "lsl_streams", "lsl_samples")})
+    assert book["description"].str.len().min() > 0, book[book["description"] == ""]  # every column said in words
 
 
 def test_check_counts_the_streams_and_finds_a_chunk_that_lost_samples(lsl_session, tmp_path, capsys):
