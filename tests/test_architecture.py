@@ -60,7 +60,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("pipeline", "pipeline.core"), ("pipeline.force",), ("pipeline.devices",), ("pipeline.commissioning",),
     ("pipeline.backends",), ("pipeline.runtime",), ("pipeline.sim", "pipeline.settings"), ("pipeline.assembly",),
     ("protocol", "protocol.metrics"), ("protocol.tasks",), ("protocol.study",), ("protocol.recording",),
-    ("protocol.storage",), ("protocol.runner",),
+    ("protocol.storage",), ("protocol.lsl",), ("protocol.runner",),
     ("analysis.reading",), ("analysis.stats",), ("analysis.plots",), ("analysis.planning",), ("analysis.report",),
     ("analysis.export",), ("analysis",),
     ("study_app",), ("study_app.engine.messages",), ("study_app.engine",), ("study_app.headless",),

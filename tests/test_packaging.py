@@ -72,7 +72,7 @@ def test_every_library_the_product_imports_is_a_declared_dependency() -> None:
     from packaging.requirements import Requirement
 
     declared = {Requirement(r).name.lower() for r in project["dependencies"]}
-    optional = {Requirement(r).name.lower() for extra in ("touch", "cluster")
+    optional = {Requirement(r).name.lower() for extra in ("touch", "cluster", "lsl")
                 for r in project["optional-dependencies"][extra]}
     imports = _third_party_imports()
     assert {"numpy", "PySide6", "scipy"} <= set(imports), imports  # the scan sees the product's imports

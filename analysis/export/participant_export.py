@@ -19,6 +19,9 @@
                         chunks.csv the last block of a run that was killed, as its commits wrote it
     arm_samples.csv     a rig of several arms: the other arms' 1 kHz records (as samples.csv, with the arm);
                         arm_recordings.csv, arm_blocks.csv, arm_chunks.csv their runs and blocks (only when stored)
+    lsl_samples.csv     sessions on the Lab Streaming Layer: the external streams' samples, each with its LSL
+                        timestamp and its session-clock time; lsl_streams.csv what each stream is, lsl_runs.csv each
+                        run's clock link (only when stored; docs/lsl.md)
     leases.csv          writers' leases on their sessions (normally none: a lease lives while a session runs)
     codebook.csv        every column of every table: what it holds, its unit and type
 
@@ -129,6 +132,23 @@ _DESCRIBED: dict[str, tuple[str, str, str]] = {  # column -> (description, unit,
     "rating": ("the rating given (NASA-TLX 0–100, a Likert item on its scale)", "", "number"),
     "choice": ("a NASA-TLX pair: the subscale chosen as contributing more to the workload", "", "text"),
     "answered_at_s": ("session-clock time the answers were stored", "s", "number"),
+    "records_to_lsl_s": ("the run's clock link: a record's LSL time = t_ns × 1e-9 + this", "s", "number"),
+    "uncertainty_s": ("bound of the clock link's measurement (half the narrowest bracket of the readings)", "s",
+                      "number"),
+    "outlets": ("the LSL outlets the run published (name, type, source_id), as JSON", "", "text"),
+    "selector": ("how the protocol named the stream: name = '…' or type = '…'", "", "text"),
+    "source_id": ("the stream's LSL source id", "", "text"),
+    "hostname": ("the computer the stream came from", "", "text"),
+    "channel_count": ("channels of the stream", "count", "integer"),
+    "nominal_srate": ("the stream's nominal rate (0: irregular)", "Hz", "number"),
+    "channel_format": ("the stream's value type (float32, double64, string, ...)", "", "text"),
+    "info_xml": ("the stream's full LSL description, as XML", "", "text"),
+    "lsl_t_s": ("the sample's LSL timestamp, on its source's clock", "s", "number"),
+    "time_correction_s": ("the source's clock to ours, measured when the sample was taken (LSL time_correction)", "s",
+                          "number"),
+    "session_t_s": ("the sample's session-clock time: started_at_s + (lsl_t_s + time_correction_s − "
+                    "records_to_lsl_s) − t0_ns / 1e9", "s", "number"),
+    "values": ("the sample's channels, as a JSON list", "", "text"),
 }
 for _axis in ("x", "y", "z"):
     _DESCRIBED[f"stylus_{_axis}_m"] = (f"haptic stylus position {_axis}", "m", "number")
@@ -148,7 +168,12 @@ _FILE_DESCRIBED = {("events.csv", "kind"): ("what happened: phase, cue, fault, r
                                                   "", "integer"),
                    ("answers.csv", "block"): ("the block the questionnaire followed: its haptic mode (on, off), or "
                                               "session", "", "text"),
-                   ("recording_log.csv", "kind"): ("what the pipeline applied at that tick", "", "text")}
+                   ("recording_log.csv", "kind"): ("what the pipeline applied at that tick", "", "text"),
+                   ("lsl_streams.csv", "stream"): ("the stream's place in the protocol's lsl.record list", "",
+                                                   "integer"),
+                   ("lsl_streams.csv", "name"): ("the stream's LSL name", "", "text"),
+                   ("lsl_streams.csv", "type"): ("the stream's LSL content type (EEG, EMG, Markers, ...)", "", "text"),
+                   ("lsl_samples.csv", "stream"): ("the stream's LSL name", "", "text")}
 
 
 #: What each file of an export holds (written into sessions.json, so the folder explains itself).
@@ -174,6 +199,9 @@ FILES = {
     "arm_recordings": "a rig of several arms: the other arms' recorded runs",
     "arm_blocks": "a rig of several arms: the other arms' recorded blocks",
     "arm_chunks": "a rig of several arms: the other arms' last blocks of a run that was killed, in their chunks",
+    "lsl_runs": "sessions on the Lab Streaming Layer: each recorded run's clock link to LSL and its outlets",
+    "lsl_streams": "the external LSL streams recorded with their sessions (EMG, eye tracking, ...): what each is",
+    "lsl_samples": "every sample of those streams, with its LSL timestamp and its session-clock time",
     "leases": "writers' leases on their sessions (normally none)",
     "codebook.csv": "every column of every table: what it holds, its unit and type",
 }
@@ -306,7 +334,7 @@ def participant_export(database: str | os.PathLike[str], code: str,
     samples = (pd.concat(parts, ignore_index=True) if parts else pd.DataFrame())
     damage = [line for p in parts for line in p.attrs.get("damage", [])]
     poses, log = _recording_extras(path, rows.session_ids)
-    tables = {
+    tables: dict[str, pd.DataFrame] = {
         "participant": _frame(rows, "participants"),
         "sessions": _frame(rows, "sessions", tuple(_SESSION_JSON)),
         "stored_trials": _frame(rows, "trials"),
@@ -322,6 +350,7 @@ def participant_export(database: str | os.PathLike[str], code: str,
         "blocks": _frame(rows, "session_blocks"),
         "chunks": _frame(rows, "session_chunks"),
         **_other_arms(path, rows),
+        **{name: _frame(rows, name) for name in ("lsl_runs", "lsl_streams", "lsl_samples") if name in rows.tables},
         "leases": _frame(rows, "leases"),
     }
     return ParticipantExport(code, tables, _settings(rows, path), damage)

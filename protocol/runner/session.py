@@ -45,6 +45,7 @@ import numpy as np
 from pipeline.core.aim import TrialParticipant
 from pipeline.devices.interfaces import Fault
 from pipeline.runtime.loop_messages import Command, LoopEvent, StartRecording
+from protocol.lsl.streams import SessionStreams
 from protocol.runner.deliveries import Deliveries
 from protocol.runner.fault_wait import FaultWait
 from protocol.runner.questionnaire_wait import QuestionnaireWait
@@ -111,9 +112,16 @@ class SessionRunner:
         self.segment = plan.segment
         self._recording = SessionRecording(recorder, plan.session_id, plan.segment, scales)
         self.other_arms = OtherArms(self._recording)  # a rig of several arms: the others' records (session_driver)
+        #: The run's LSL outlets and stream taps (None: the session publishes and records no stream).
+        self.lsl: SessionStreams | None = None
         self.desk.rest()
         # after the pause commands: the snapshot is taken once they are applied, in the same tick
         self.submit(StartRecording(self._recording.token))
+
+    def attach_lsl(self, streams: SessionStreams) -> None:
+        """Publish this run's records and markers on ``streams`` (before its first record)."""
+        self.lsl = streams
+        self.desk.on_mark = streams.mark
 
     # -- what the displays and the drivers read ------------------------------------------------------------------
     @property
@@ -240,6 +248,8 @@ class SessionRunner:
         if len(rows) == 0:
             return
         self._recording.record(rows)
+        if self.lsl is not None:
+            self.lsl.samples(rows)
         self._apply_requests(int(rows["t_ns"][0]))
         if self.done:
             return
@@ -253,6 +263,7 @@ class SessionRunner:
         clock = self.desk.clock = SessionClock(self.desk.clock_offset_s, t0)
         self._recording.open_segment(self.desk.clock_offset_s, t0)
         self._ready_ns = t0 + self._initial_pause_ns
+        self.desk.mark(t0, "session_start", f"session {self.session_id}, segment {self.segment}")
         first_faults = int(rows["faults"][0])
         if first_faults and not any(ev.t_ns >= t0 for ev in loop_events):
             self.desk.event(t0, "fault", f"{Fault(first_faults).describe()}: latched before the session started")

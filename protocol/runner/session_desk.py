@@ -129,6 +129,9 @@ class SessionDesk:
     status: str = field(default="running", init=False)
     #: Why the session stopped early as interrupted (headless fault timeout, trials not delivered), else "".
     stop_reason: str = field(default="", init=False)
+    #: Told every marker of the session -- each stored event and each trial's outcome, at its records' time, with
+    #: the trial it falls in -- when the session publishes them (:mod:`protocol.lsl`); None: nobody listens.
+    on_mark: Callable[[int, str, str, TrialSpec | None], None] | None = field(default=None, init=False)
 
     def time_s(self, t_ns: int) -> float:
         """Session-clock time of a loop timestamp."""
@@ -138,6 +141,17 @@ class SessionDesk:
     def event(self, t_ns: int, kind: str, detail: str = "") -> None:
         """Store an event at loop time ``t_ns``."""
         self.recorder.event(self.session_id, self.time_s(t_ns), kind, detail)
+        if self.on_mark is not None:
+            running = self.state.phase in ("cued", "active") or kind == "cue"
+            self.mark(t_ns, kind, detail, self.state.current if running else None)
+
+    def mark(self, t_ns: int, kind: str, detail: str = "", spec: TrialSpec | None = None) -> None:
+        """Tell :attr:`on_mark` of a marker that is not a stored event (the session's start, a trial's outcome)."""
+        if self.on_mark is not None:
+            try:
+                self.on_mark(t_ns, kind, detail, spec)
+            except Exception:  # a publisher never stops the session (its own failures are its events)
+                pass
 
     def emit(self, ev: object) -> None:
         """Tell the listeners."""

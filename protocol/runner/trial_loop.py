@@ -152,6 +152,7 @@ class TrialLoop:
             segment=self.segment, ticks=ticks,
         )
         desk.recorder.trial(record)
+        desk.mark(ev.end_ns, ev.outcome.value, ev.reason, spec)
         self.finished.append(record)
         st = desk.state
         if aborted:

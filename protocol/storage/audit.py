@@ -35,6 +35,7 @@ from typing import Any
 from protocol.recording.integrity import BlockDamage, BlockRow, block_problem
 from protocol.storage.audit_record import check_record
 from protocol.storage.damage import block_rows, describe_damage
+from protocol.storage.lsl_streams import audit_lsl
 from protocol.storage.reader import StudyReader
 from protocol.study.config import ProtocolError, protocol_from_dict
 from protocol.study.design import schedule_from_json
@@ -303,6 +304,7 @@ def _audit(conn: sqlite3.Connection, audit: Audit, progress: Callable[[int, int]
                                "(trial windows in the samples table), so there are no blocks to verify")
         _cells(conn, audit, writers)
         check_record(conn, audit.problems.append)
+        audit_lsl(conn, audit.notes.append, audit.problems.append)  # (a study that never used LSL: nothing)
         for w in StudyReader.over(conn).withdrawals():  # not a problem: what the study no longer holds, and why
             if w.rewritten == 0:  # their rows are gone, their bytes may not be: the rewrite did not finish
                 audit.problems.append(f"withdrawal of {w.code} incomplete: their rows were removed but the file was "

@@ -16,6 +16,7 @@ from typing import Any
 
 from protocol.storage.common import has_table
 from protocol.storage.leases import session_scope
+from protocol.storage.lsl_streams import ALIGNED_COLUMNS, aligned_samples
 from protocol.study.records import trial_id_of
 
 __all__ = ["ParticipantRows", "Table", "participant_rows"]
@@ -85,6 +86,10 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
         "arm_chunks": ("SELECT session_id, arm, segment, block, chunk, first_tick, last_tick, n_records, t_first_s, "
                        "t_last_s, crc32 FROM arm_chunks WHERE session_id = ? ORDER BY arm, segment, block, chunk",
                        has_table(conn, "arm_chunks")),
+        # the Lab Streaming Layer: each run's clock link and outlets, the external streams recorded with it
+        "lsl_runs": ("SELECT * FROM lsl_runs WHERE session_id = ? ORDER BY segment", has_table(conn, "lsl_runs")),
+        "lsl_streams": ("SELECT * FROM lsl_streams WHERE session_id = ? ORDER BY segment, stream",
+                        has_table(conn, "lsl_streams")),
     }
     tables = {"participants": person}
     if has_table(conn, "covariates"):
@@ -96,6 +101,8 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
     tables["samples"] = _per_session(conn, "SELECT * FROM samples WHERE trial_id >= ? AND trial_id < ? "
                                      "ORDER BY trial_id, t_s",
                                      [(trial_id_of(sid, 0), trial_id_of(sid + 1, 0)) for sid in sids])
+    if has_table(conn, "lsl_chunks"):  # their samples, each on the session clock beside its LSL timestamp
+        tables["lsl_samples"] = Table(ALIGNED_COLUMNS, tuple(r for sid in sids for r in aligned_samples(conn, sid)))
     if has_table(conn, "leases"):
         tables["leases"] = _per_session(conn, "SELECT * FROM leases WHERE scope = ?",
                                         [(session_scope(sid),) for sid in sids])

@@ -27,6 +27,7 @@ from typing import Protocol
 
 from protocol.storage.common import StorageError, has_table, now_iso, recording_tables
 from protocol.storage.leases import session_scope
+from protocol.storage.lsl_streams import erase_lsl_rows
 from protocol.study.labels import plural
 from protocol.study.records import trial_id_of
 
@@ -194,6 +195,7 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
                 for table in reversed(recording_tables(arm)):
                     if has_table(c, table):
                         c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
+            erase_lsl_rows(c, sid)  # the external streams recorded with it, and its runs' clock links
             for table in ("notes", "questionnaire_answers"):  # (a file made before them has none)
                 if has_table(c, table):
                     c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))

@@ -21,6 +21,7 @@ from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
 from protocol.study.groups import GroupDesign, groups_from_table
+from protocol.study.lsl_settings import LslSettings, lsl_from_table
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
@@ -117,6 +118,9 @@ class ProtocolConfig:
     questionnaires: tuple[Questionnaire, ...] = ()
     #: The between-group design (:mod:`protocol.study.groups`; the file's ``[groups]``): None, no groups.
     groups: GroupDesign | None = None
+    #: What the session publishes and records on the Lab Streaming Layer (:mod:`protocol.study.lsl_settings`; the
+    #: file's ``[lsl]``): nothing by default.
+    lsl: LslSettings = field(default_factory=LslSettings)
 
     @property
     def trials_per_participant(self) -> int:
@@ -180,6 +184,7 @@ class ProtocolConfig:
             **({"covariates": [c.to_dict() for c in self.covariates]} if self.covariates else {}),
             **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
             **({"groups": self.groups.to_dict()} if self.groups is not None else {}),
+            **({"lsl": lsl} if (lsl := self.lsl.to_dict()) is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -202,7 +207,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires", "groups"})
+                          "questionnaires", "groups", "lsl"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -258,6 +263,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         task=task, covariates=covariates,
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
         groups=groups_from_table(f, top.get("groups"), covariates),
+        lsl=lsl_from_table(f, top),
     )
 
 

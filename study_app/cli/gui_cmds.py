@@ -51,6 +51,9 @@ def add_gui_parser(sub: argparse._SubParsersAction) -> None:
                    help=f"simulated rig: its arms, comma-separated, in any order (default: one arm, "
                         f"{SINGLE_ARM_NAME}); Start puts the protocol's task arm (design.task_arm) first, restarting "
                         "the simulated rig if needed, as run --sim-arms does; a session records every arm")
+    g.add_argument("--lsl", action="store_true",
+                   help="publish every session's force streams and trial markers on the Lab Streaming Layer (as the "
+                        "protocol's [lsl] outlets = true; needs pylsl: docs/lsl.md)")
     g.set_defaults(handler=cmd_gui)
 
 
@@ -97,7 +100,11 @@ def cmd_gui(args: argparse.Namespace) -> int:
 
     host = HostConfig(rig=args.rig, hardware_path=args.hardware, clock="real",
                       sim_mount_error_deg=args.sim_mount_error_deg, sim_settings=sim_settings,
-                      sim_arms=args.sim_arms)
+                      sim_arms=args.sim_arms, lsl=args.lsl)
+    if args.lsl:
+        from protocol.lsl.bus import pylsl
+
+        pylsl()  # (missing: one line saying how to install it, before the window opens)
     try:
         return run_gui(host, db_path=args.db)
     except RuntimeError as exc:

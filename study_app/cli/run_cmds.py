@@ -96,6 +96,9 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
                    help="run the participants on a Dask cluster, each merged into --db as it comes back "
                         "(`dask scheduler` prints its address; default: the HAPTIC_STUDY_SCHEDULER environment "
                         "variable, else this machine; docs/cluster.md)")
+    r.add_argument("--lsl", action="store_true",
+                   help="publish every session's force streams and trial markers on the Lab Streaming Layer (as the "
+                        "protocol's [lsl] outlets = true; needs --clock real and pylsl: docs/lsl.md)")
     r.set_defaults(handler=cmd_run)
 
 
@@ -170,6 +173,10 @@ def cmd_run(args: argparse.Namespace) -> int:
             protocol = load_protocol(args.protocol)
             _refuse_a_block_without_sessions(protocol, args.protocol)
             _check_task_arm(protocol, args)
+            protocol = _lsl_checked(protocol, args)
+        elif args.lsl:
+            raise CliError(f"--lsl with --resume {args.resume}: a resumed session publishes what its stored protocol "
+                           "says ([lsl]); run it without --lsl")
 
         def show(p):
             nonlocal bar
@@ -279,6 +286,33 @@ def _refuse_a_block_without_sessions(protocol: ProtocolConfig, path: str | None)
     if protocol.task.kind == "force_discrimination":
         raise CliError(f"--protocol = {path!r}: task.kind = 'force_discrimination' does not run into a study "
                        "database yet; run it with: haptic-study discrimination --protocol FILE --out DIR")
+
+
+def _lsl_checked(protocol: ProtocolConfig, args: argparse.Namespace) -> ProtocolConfig:
+    """The protocol a run uses with ``--lsl`` (its outlets on), checked before anything is stored: LSL on needs the
+    real clock (the virtual clock's times are on no clock another machine shares), one session at a time (each
+    publishes its own streams), pylsl, and every stream the protocol records found (one line naming what is not)."""
+    import dataclasses
+
+    from protocol.runner.session_lsl import lsl_streams_of
+
+    if args.lsl:
+        protocol = dataclasses.replace(protocol, lsl=protocol.lsl.with_outlets())
+    if not protocol.lsl.on:
+        return protocol
+    what = "--lsl" if args.lsl else f"{args.protocol}: [lsl]"
+    if args.clock != "real":
+        raise CliError(f"{what} needs --clock real: a virtual-clock run's times are on no clock LSL shares "
+                       f"(--clock = {args.clock!r})")
+    if args.jobs not in (None, 1):
+        raise CliError(f"--jobs = {args.jobs} with {what}: sessions on LSL run one at a time (each publishes its "
+                       "own streams); give --jobs 1 or leave it out")
+    args.jobs = 1
+    lsl_streams_of(protocol.lsl)  # (pylsl missing, or a named stream not found: one line, nothing stored)
+    from protocol.lsl.bus import pylsl
+
+    pylsl()
+    return protocol
 
 
 def _check_task_arm(protocol: ProtocolConfig, args: argparse.Namespace) -> None:

@@ -22,6 +22,7 @@ from foundation.platform_support.processes import kill_hard
 from pipeline.force.framework import FrameworkConfig
 from protocol.runner.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
+from protocol.runner.session_lsl import attach_lsl, detach_lsl, lsl_streams_of
 from protocol.runner.session_setup import (
     OpenedSession,
     delivery_limits,
@@ -100,6 +101,7 @@ class EngineSessions:
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol, self.engine.eng.framework.config, self._arms())
+        protocol, infos = self._lsl_of(protocol)
         if self.commissioning.gate.check(cmd):
             return
         db = self._open_db(cmd.db_path)
@@ -116,7 +118,19 @@ class EngineSessions:
         except BaseException:
             db.close()
             raise
-        self._run(db, opened)
+        self._run(db, opened, infos)
+
+    def _lsl_of(self, protocol: ProtocolConfig) -> tuple[ProtocolConfig, list[Any] | None]:
+        """The protocol with the outlets on where the engine publishes (``gui --lsl``), and the external streams it
+        records, found before anything is stored (one line naming a stream not found, or pylsl missing)."""
+        if self.engine.config.lsl:
+            protocol = dataclasses.replace(protocol, lsl=protocol.lsl.with_outlets())
+        if not protocol.lsl.on:
+            return protocol, None
+        if self.engine.config.clock != "real":
+            raise ValueError("[lsl]: a session on the Lab Streaming Layer needs the real clock (the virtual clock's "
+                             "times are on no clock LSL shares)")
+        return protocol, lsl_streams_of(protocol.lsl)
 
     def _commit_deadline(self) -> dict[str, Any]:
         """On the real clock, the recorder's deadline counts from the records' own ticks (the loop's clock, its
@@ -175,7 +189,7 @@ class EngineSessions:
             raise
         self._run(db, opened)
 
-    def _run(self, db: StudyDatabase, opened: OpenedSession) -> None:
+    def _run(self, db: StudyDatabase, opened: OpenedSession, lsl_infos: list[Any] | None = None) -> None:
         if self.engine.eng.simulated:
             from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
             from protocol.storage.annotations import covariates_by_code
@@ -203,6 +217,13 @@ class EngineSessions:
             scales=raw_wrench_scales(self.engine.eng.rig.sensor), arms=self._arms(), **self._commit_deadline(),
         )
         runner.listeners.append(self._on_runner_event)
+        if opened.protocol.lsl.on:  # (a resumed session finds its streams now)
+            try:
+                attach_lsl(runner, opened, self.engine.loop.t0_ns, lsl_infos)
+            except BaseException:
+                finish_session(db, recorder, opened)
+                db.close()
+                raise
         self.trigger = None
         self.db, self.recorder, self.runner, self.opened, self.session_code = db, recorder, runner, opened, opened.code
         override = self.commissioning.gate.take_override()
@@ -398,6 +419,7 @@ class EngineSessions:
         self.engine.driver.install(None)
         error = ""
         try:
+            detach_lsl(runner)
             finish_session(db, recorder, opened)
         except StorageError as exc:
             error = str(exc)

@@ -71,6 +71,9 @@ class HostConfig:
     loop_process
         Real clock: the loop runs alone in a process of its own (:mod:`study_app.engine.loop_process`); False: in
         a thread of the engine's process (so it does anyway where the OS cannot start that process: Windows).
+    lsl
+        Every session publishes its force streams and trial markers on the Lab Streaming Layer (``gui --lsl``, as a
+        protocol's ``[lsl] outlets = true``: docs/lsl.md).
     """
 
     rig: str = "sim"
@@ -86,6 +89,7 @@ class HostConfig:
     sim_settings: tuple[tuple[str, float], ...] = ()
     sim_arms: tuple[str, ...] = (SINGLE_ARM_NAME,)
     loop_process: bool = True
+    lsl: bool = False
 
     def __post_init__(self) -> None:
         if self.rig not in ("sim", "real"):

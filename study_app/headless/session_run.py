@@ -26,6 +26,7 @@ from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
 from protocol.runner.session_driver import SessionDriver
+from protocol.runner.session_lsl import attach_lsl, detach_lsl, lsl_skipped
 from protocol.runner.session_setup import (
     OpenedSession,
     delivery_limits,
@@ -122,9 +123,10 @@ def sim_arms_of(protocol: ProtocolConfig, arms: Sequence[str]) -> tuple[str, ...
 def _drive(
     eng: Engine, runner: SessionRunner, clock: str, progress: StudyProgress,
     on_progress: Callable[[StudyProgress], None] | None,
-    trigger: RehearsalTrigger | None = None,
+    trigger: RehearsalTrigger | None = None, on_first_tick: Callable[[], None] | None = None,
 ) -> None:
-    """Alternate loop ticks and runner blocks until the session ends."""
+    """Alternate loop ticks and runner blocks until the session ends (``on_first_tick``: called once the real-clock
+    loop has ticked, before the runner's first block: the run's LSL is opened there, on the loop's clock)."""
     ring = eng.ring
     assert ring is not None
     loop = eng.loop
@@ -140,6 +142,9 @@ def _drive(
     if clock == "real":
         loop.start()
     try:
+        if on_first_tick is not None:
+            _await_first_tick(ring)
+            on_first_tick()
         while not runner.done:
             if clock == "virtual":
                 loop.run_ticks(BLOCK_TICKS)
@@ -167,6 +172,13 @@ def _drive(
         eng.rig.close()
         if trigger is not None:
             progress.rehearsals.extend(trigger.report)
+
+
+def _await_first_tick(ring: Any, wait_s: float = 5.0) -> None:
+    """Wait (bounded) until the real-clock loop has written its first record (its clock's zero, ``t0_ns``, is set)."""
+    deadline = time.monotonic() + wait_s
+    while ring.write_count == 0 and time.monotonic() < deadline:
+        time.sleep(0.001)
 
 
 def run_session(
@@ -221,10 +233,18 @@ def run_session(
         simulated_answers=True, **_commit_deadline(eng, clock, faults, opened),
     )
     trigger = _trigger(faults, opened, eng, runner)
+    lsl = None
+    if opened.protocol.lsl.on and clock == "real":
+        lsl = lambda: attach_lsl(runner, opened, eng.loop.t0_ns)  # noqa: E731  (once the loop has ticked)
+    elif opened.protocol.lsl.on:
+        lsl_skipped(runner, opened)
     try:
-        _drive(eng, runner, clock, progress, on_progress, trigger)
+        _drive(eng, runner, clock, progress, on_progress, trigger, on_first_tick=lsl)
     finally:
-        finish_session(db, recorder, opened)
+        try:
+            detach_lsl(runner)
+        finally:
+            finish_session(db, recorder, opened)
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
