@@ -1,6 +1,11 @@
-"""Calibrate the simulated participant: whole simulated 10-participant studies, no database.
+"""Calibrate the simulated participant: whole simulated 10-participant studies.
 
 ``python -m bench.participant_calibration --studies 5``
+
+By default (``--path run``) each study is the one users run -- ``haptic-study run`` with the protocol, its
+training block included, into a scratch study database, read as ``report`` reads it
+(:mod:`bench.calibration_run`, issue 48) -- and the effect sizes are printed beside Bergholz et al.'s.  With
+``--path schedule``, the quicker path of the sweep, described next (no training, no database):
 
 For every participant of every study this builds the simulated rig on a
 virtual clock, hands the stylus to a :class:`pipeline.sim.participant.SimulatedParticipant`
@@ -274,6 +279,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="worker processes (participants in parallel)")
     ap.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
                     help="run the participants on a Dask cluster (default: $HAPTIC_STUDY_SCHEDULER, else here)")
+    ap.add_argument("--path", choices=("run", "schedule"), default="run",
+                    help="run (default): each study as `haptic-study run --seed K` runs it (the protocol file, its "
+                         "training block, the runner, a study database), read as `report` reads it (issue 48); "
+                         "schedule: the experiment schedule alone through the trial machine, no training, no "
+                         "database (faster; the sweep's path; not the study users run)")
     ap.add_argument("--quiet", action="store_true", help="only the final table")
     ap.add_argument("--power", type=int, default=0, metavar="DRAWS",
                     help="also each effect's power: DRAWS studies drawn from every participant run (e.g. 2000)")
@@ -296,22 +306,36 @@ def main(argv: list[str] | None = None) -> int:
     summaries = []
     every: list[TrialRow] = []
     t_total = time.perf_counter()
+    if args.path == "run" and args.power:
+        ap.error("--power draws from the schedule path's trial rows: give --path schedule with it")
     for k in range(args.first_study, args.first_study + args.studies):
         t0 = time.perf_counter()
-        rows = run_study(k, args.participants, args.jobs, client)
+        if args.path == "run":
+            from bench.calibration_run import run_and_read
+
+            s = run_and_read(k, args.participants, jobs=args.jobs, client=client)
+            what = "run as `haptic-study run` runs it, read as `report` reads it"
+        else:
+            rows = run_study(k, args.participants, args.jobs, client)
+            s = summarise_study(rows)
+            every.extend(rows)
+            what = f"{len(rows)} trials of the experiment schedule alone"
         wall = time.perf_counter() - t0
-        s = summarise_study(rows)
         summaries.append(s)
-        every.extend(rows)
         if not args.quiet:
-            print(f"\n== study {k}: {args.participants} participants, {len(rows)} trials, {wall:.1f} s wall ==")
+            print(f"\n== study {k}: {args.participants} participants, {what}, {wall:.1f} s wall ==")
             print(format_table([s]))
             sys.stdout.flush()
-    print(f"\n== mean ± SD [min–max] over {len(summaries)} studies "
+    print(f"\n== mean ± SD [min–max] over {len(summaries)} studies, path {args.path} "
           f"({time.perf_counter() - t_total:.0f} s wall, jobs={args.jobs}) ==")
     print(format_table(summaries))
     print()
     print(format_verdict(summaries))
+    if args.path == "run":
+        from bench.calibration_run import format_effect_sizes
+
+        print()
+        print(format_effect_sizes(summaries))
     if args.power:
         power = resampled_power(every, args.participants, args.power)
         print()
