@@ -11,7 +11,9 @@ import signal
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any, TypeVar
 
 import pytest
 
@@ -24,6 +26,8 @@ from study_app.headless.cluster_study import SCRATCH_PREFIX
 from study_app.headless.sweep_run import run_sweep
 
 distributed = pytest.importorskip("distributed")
+
+T = TypeVar("T")
 
 SHORT = """name = "short"
 [[targets]]
@@ -70,23 +74,30 @@ def _kill_a_busy_worker(client, killed: list[str], stop: threading.Event) -> Non
         time.sleep(0.005)  # polling a real cluster's state (no virtual clock exists across processes)
 
 
-def test_a_sweep_on_a_cluster_with_a_worker_killed_mid_run_equals_the_local_one(tmp_path: Path, short_protocol,
-                                                                                cluster) -> None:
-    (tmp_path / "a").mkdir()
-    local = run_sweep(_grid(), studies=1, participants=3, seed=5, cache=tmp_path / "a" / CACHE_FILE,
-                      protocol=short_protocol)
-    (tmp_path / "b").mkdir()
+def _with_a_worker_killed(cluster, run: Callable[[Any], T]) -> tuple[T, list[str]]:
+    """``run(client)`` on the cluster while a thread kills the first worker seen running a task; its result and the
+    workers killed."""
     with distributed.Client(cluster, set_as_default=False) as client:
         killed: list[str] = []
         stop = threading.Event()
         killer = threading.Thread(target=_kill_a_busy_worker, args=(client, killed, stop), daemon=True)
         killer.start()
         try:
-            remote = run_sweep(_grid(), studies=1, participants=3, seed=5, cache=tmp_path / "b" / CACHE_FILE,
-                               protocol=short_protocol, client=client)
+            return run(client), killed
         finally:
             stop.set()
             killer.join(5.0)
+
+
+def test_a_sweep_on_a_cluster_with_a_worker_killed_mid_run_equals_the_local_one(tmp_path: Path, short_protocol,
+                                                                                cluster) -> None:
+    (tmp_path / "a").mkdir()
+    local = run_sweep(_grid(), studies=1, participants=3, seed=5, cache=tmp_path / "a" / CACHE_FILE,
+                      protocol=short_protocol)
+    (tmp_path / "b").mkdir()
+    remote, killed = _with_a_worker_killed(cluster, lambda client: run_sweep(
+        _grid(), studies=1, participants=3, seed=5, cache=tmp_path / "b" / CACHE_FILE, protocol=short_protocol,
+        client=client))
     assert killed, "no worker was seen running a task"
     # every participant of every cell, each value to the last bit, in the same order
     assert [(c.settings, c.study, c.rows) for c in remote] == [(c.settings, c.study, c.rows) for c in local]
@@ -155,16 +166,8 @@ def test_a_study_run_on_a_cluster_with_a_worker_killed_is_the_local_one_row_for_
     here, there = tmp_path / "here.db", tmp_path / "there.db"
     scratch_before = set(Path(tempfile.gettempdir()).glob(f"{SCRATCH_PREFIX}*"))
     run_study(str(here), participants=3, seed=5, protocol=short_protocol, jobs=1)
-    with distributed.Client(cluster, set_as_default=False) as client:
-        killed: list[str] = []
-        stop = threading.Event()
-        killer = threading.Thread(target=_kill_a_busy_worker, args=(client, killed, stop), daemon=True)
-        killer.start()
-        try:
-            progress = run_study(str(there), participants=3, seed=5, protocol=short_protocol, client=client)
-        finally:
-            stop.set()
-            killer.join(5.0)
+    progress, _ = _with_a_worker_killed(cluster, lambda client: run_study(
+        str(there), participants=3, seed=5, protocol=short_protocol, client=client))
     assert sorted(progress.sessions) == [1, 2, 3] and progress.study_trials_done == 3 * 4
     assert _same_study().compare(str(here), str(there))
     assert main(["check", "--db", str(there)]) == 0

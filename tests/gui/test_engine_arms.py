@@ -119,8 +119,8 @@ def test_the_real_rigs_gate_needs_every_arms_chain(tmp_path):
     assert other_arms_missing(SimpleNamespace(arms=(first, arm("left", str(bad)))), frameworks).startswith("arm left: ")
 
 
-def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
-    db = str(tmp_path / "s.db")
+def _interrupted_two_arm_session(tmp_path, db: str) -> int:
+    """P01's experiment session on a two-arm GUI engine, 50 steps in, then the engine closed: its session id."""
     events: list[object] = []
     e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
                     shared_ring=False)
@@ -131,6 +131,12 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
     sid = e.sessions.opened.session_id
     e.close("interrupted")
     e.release_ring()
+    return sid
+
+
+def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
+    db = str(tmp_path / "s.db")
+    sid = _interrupted_two_arm_session(tmp_path, db)
     from study_app.engine.sessions import list_resumable
 
     assert [r["arms"] for r in list_resumable(db)] == [["left", "right"]]  # the window rearranges a rig by it
@@ -160,15 +166,7 @@ def test_a_two_arm_session_resumes_on_two_arms_only(tmp_path):
 def test_a_new_participant_of_a_two_arm_study_is_refused_on_a_one_arm_gui(tmp_path):
     """Issue 42, class 5, in the GUI: ``run`` refused it, the GUI's engine gave the next participant a one-arm rig."""
     db = str(tmp_path / "s.db")
-    events: list[object] = []
-    e = StudyEngine(HostConfig(clock="virtual", speed=0, sim_arms=("left", "right")), events.append,
-                    shared_ring=False)
-    e.start()
-    e.handle(m.StartSession(db, "P01", "experiment", _protocol(tmp_path, "left"), 3, 1))
-    for _ in range(50):
-        e.step()
-    e.close("interrupted")
-    e.release_ring()
+    _interrupted_two_arm_session(tmp_path, db)
     before = Path(db).read_bytes()
     one: list[object] = []
     e1 = StudyEngine(HostConfig(clock="virtual", speed=0), one.append, shared_ring=False)
