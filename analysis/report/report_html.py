@@ -487,9 +487,10 @@ def _head_html(study: StudyData, table: TrialTable, options: MetricOptions, n_pa
     origin_class, origin_text = _origin(study)
     now = dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC")
     n_trials = len(tables["trials.csv"])
+    tct = f" · TCT: {options.tct_policy}" if "time_to_event.csv" in tables else ""  # (a task that times no success)
     return f"""<h1>Haptic feedback study: report</h1>
 <p class="meta">{plural(n_participants, 'participant')} · {plural(n_trials, 'trial')} · generated {now} by haptic-study
-{html.escape(software_provenance().describe())} · error window: {options.error_window} · TCT: {options.tct_policy}
+{html.escape(software_provenance().describe())} · error window: {options.error_window}{tct}
 {'· incomplete sessions included' if study.include_incomplete else ''}</p>
 <p class="origin {origin_class}">{html.escape(origin_text)}</p>
 {_warnings(study, table, tables["stats.csv"], within)}"""

@@ -34,6 +34,16 @@ TRIALS_CSV_COLUMNS = ("participant_code", "participant_number", "session_id", "t
                       *(m.name if m.boolean else m.exported for m in primary(METRICS)), "cue_at_s")
 
 
+#: The files of TCT as a time to event (the Kaplan-Meier curves and the Cox model).
+TIME_TO_EVENT_FILES = ("time_to_event.csv", "kaplan_meier.csv", "survival_model.csv")
+
+
+def has_time_to_event(trials: pd.DataFrame) -> bool:
+    """Whether the study's tasks time their trials to success (a success-only metric: force regulation's TCT); a
+    tracking study has none, and no time-to-event analysis to show."""
+    return any(m.success_only and m.name in trials.columns for m in METRICS)
+
+
 def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame, by_target: pd.DataFrame,
                   stats: pd.DataFrame, stats_by_target: pd.DataFrame, within: Any,
                   error_window: str, rounded: bool = True) -> dict[str, pd.DataFrame]:
@@ -101,6 +111,9 @@ def export_tables(study: StudyData, trials: pd.DataFrame, overall: pd.DataFrame,
         "loop_health_by_participant.csv": exp(by_participant(health_summary(health)),
                                                           "loop_health_by_participant.csv"),
     }
+    if not has_time_to_event(trials):  # a task without a completion time (tracking): no empty files claiming one
+        for name in TIME_TO_EVENT_FILES:
+            del tables[name]
     if len(within.site_stats):  # sites named: the tests within each site, and the sites compared
         tables["stats_by_site.csv"] = exp(within.site_stats, "stats_by_site.csv")
         tables["site_differences.csv"] = exp(within.site_diff, "site_differences.csv")

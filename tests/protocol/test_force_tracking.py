@@ -220,6 +220,14 @@ def test_a_simulated_study_tracks_and_haptics_on_shortens_the_lag_and_lowers_the
     assert set(sessions["profile"]) == {"sine"} and set(sessions["frequency_hz"]) == {0.25}
 
 
+def test_a_tracking_report_claims_no_completion_time(study: Path) -> None:
+    """Review: a tracking study's report wrote empty time-to-event files and "TCT: censored" in its head, though
+    tracking times no success."""
+    assert not [f for f in ("time_to_event.csv", "kaplan_meier.csv", "survival_model.csv") if (study / f).exists()]
+    page = (study / "report.html").read_text(encoding="utf-8")
+    assert "TCT:" not in page and "error window: cue" in page
+
+
 def test_the_report_lists_the_tasks_metrics_tests_lag_and_gain_and_trades_error_against_speed(study: Path) -> None:
     import scipy.stats
 
