@@ -87,7 +87,8 @@ def _write_atomically(path: Path, text: str) -> None:
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        raise CliError(f"{path}: the qualification record cannot be written ({exc.strerror or exc})") from None
+        raise CliError(f"{path}: the qualification record cannot be written ({exc.strerror or exc})",
+                       status=1) from None
 
 
 def format_record(record: dict[str, Any]) -> str:
@@ -136,8 +137,6 @@ def cmd_qualify(args: argparse.Namespace) -> int:
     """Run ``haptic-study qualify``: 0 when no check failed (a check not done is shown, never passed), 1 when one
     failed."""
     checks = parse_checks(args.checks)
-    if not Path(args.hardware).is_file():
-        raise CliError(f"--hardware = {args.hardware!r}: no such hardware file")
     record, path = qualify(args.hardware, args.arm, checks)
     print(json.dumps(record) if args.json else format_record(record) + f"\nrecord: {path}")
     return 1 if record["verdict"] == "FAIL" else 0

@@ -94,7 +94,8 @@ def test_a_device_that_cannot_be_opened_is_not_checked_never_passed(tmp_path: Pa
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--hardware", "/nonexistent/hw.toml"], "--hardware = '/nonexistent/hw.toml': no such hardware file"),
+        (["--hardware", "/nonexistent/hw.toml"], "/nonexistent/hw.toml: no such hardware file"),
+        (["--arm", "left"], "--arm = 'left': hardware.toml has no such arm; its arms: right"),
         (["--checks", "process-death,warp"], "--checks = 'process-death,warp': must name one or more of "
                                              "process-death, thermal-budget, latency"),
     ],
