@@ -1,8 +1,9 @@
 """``haptic-study qualify``: qualify one arm of the real rig, and keep the record beside its calibration file.
 
 The checks are :mod:`study_app.cli.qualify_checks`'s (docs/qualify.md: what each does, its bound and its source).
-The record (:func:`record_path`: ``calibration.json`` → ``calibration.qualification.json``) is JSON: the software
-version, the date, the hardware file and arm, and each check's measured value, bound and verdict.
+The record (:mod:`pipeline.commissioning.qualification`: ``calibration.json`` → ``calibration.qualification.json``)
+is JSON: the software version, the date, the hardware file and arm, and each check's measured value, bound and
+verdict.
 ``check-hardware`` shows it (:func:`describe_record`).  A check not done is ``NOT CHECKED`` with why, never a pass.
 """
 
@@ -15,6 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from pipeline.commissioning.qualification import read_record, record_path
 from study_app.cli.argtypes import add_command, arm_name
 from study_app.cli.error import CliError
 from study_app.guide_paths import hardware_template
@@ -34,12 +36,6 @@ def parse_checks(text: str) -> tuple[str, ...]:
     if unknown or not names:
         raise CliError(f"--checks = {text!r}: must name one or more of {', '.join(CHECKS)} (comma-separated)")
     return tuple(c for c in CHECKS if c in names)
-
-
-def record_path(calibration_file: str) -> Path:
-    """Where an arm's qualification record lies: beside its calibration file, named after it."""
-    cal = Path(calibration_file)
-    return cal.with_name(cal.stem + ".qualification.json")
 
 
 def qualify(hardware: str, arm: str | None, checks: tuple[str, ...]) -> tuple[dict[str, Any], Path]:
@@ -74,7 +70,7 @@ def qualify(hardware: str, arm: str | None, checks: tuple[str, ...]) -> tuple[di
         "verdict": "FAIL" if "FAIL" in verdicts else "PASS" if verdicts == {"PASS"} else "PARTIAL",
         "checks": [r.as_dict() for r in results],
     }
-    path = record_path(settings.calibration_file or "calibration.json")
+    path = record_path(settings.calibration_file)
     _write_atomically(path, json.dumps(record, indent=2) + "\n")
     return record, path
 
@@ -108,15 +104,14 @@ def format_record(record: dict[str, Any]) -> str:
 
 def describe_record(calibration_file: str | None) -> str | None:
     """The arm's qualification in one line for ``check-hardware`` (None when it was never qualified)."""
-    path = record_path(calibration_file or "calibration.json")
     try:
-        record = json.loads(path.read_text(encoding="utf-8"))
+        record = read_record(calibration_file)
+        if record is None:
+            return None
         checks = ", ".join(f"{c['name']} {c['verdict']}" for c in record["checks"])
         return f"{record['verdict']} on {record['date']} (software {record['software_version']}): {checks}"
-    except FileNotFoundError:
-        return None
     except (OSError, ValueError, KeyError, TypeError) as exc:
-        return f"{path}: unreadable qualification record ({exc})"
+        return f"unreadable qualification record ({exc})"
 
 
 def add_qualify_parser(sub: argparse._SubParsersAction) -> None:

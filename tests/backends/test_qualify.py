@@ -13,10 +13,13 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.commissioning.qualification import record_path
 from pipeline.devices.registry import haptic_model
 from pipeline.devices.touch_output import HapticLimits
+from pipeline.settings.hardware import load_hardware
 from study_app.cli.qualify_checks import run_thermal
-from study_app.cli.qualify_cmds import describe_record, record_path
+from study_app.cli.qualify_cmds import describe_record
+from study_app.engine.session_config import qualification_record
 
 ROOT = Path(__file__).resolve().parents[2]
 FAKE_OPENHAPTICS = Path(__file__).resolve().parent / "fake_openhaptics"
@@ -71,6 +74,8 @@ def test_a_correct_device_passes_and_the_record_is_kept_beside_the_calibration(t
     assert json.loads(path.read_text(encoding="utf-8")) == record
     shown = describe_record(str(tmp_path / "calibration.json"))
     assert shown is not None and shown.startswith("PARTIAL on ") and "process-death PASS" in shown
+    # a real-rig session stores it with its config_json, for the report's methods
+    assert qualification_record(load_hardware(str(hardware))) == {"qualification": {"right": record}}
 
 
 def test_a_device_that_keeps_its_force_after_its_process_died_fails_naming_the_check(tmp_path: Path,
@@ -95,7 +100,7 @@ def test_a_device_that_cannot_be_opened_is_not_checked_never_passed(tmp_path: Pa
     ("args", "message"),
     [
         (["--hardware", "/nonexistent/hw.toml"], "/nonexistent/hw.toml: no such hardware file"),
-        (["--arm", "left"], "--arm = 'left': hardware.toml has no such arm; its arms: right"),
+        (["--arm", "left"], "hardware.toml has no such arm; its arms: right"),
         (["--checks", "process-death,warp"], "--checks = 'process-death,warp': must name one or more of "
                                              "process-death, thermal-budget, latency"),
     ],
