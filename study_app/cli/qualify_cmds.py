@@ -25,8 +25,8 @@ from study_app.guide_paths import hardware_template
 CHECKS = ("process-death", "thermal-budget", "latency")
 
 #: Why the latency is not a check of this command (yet): said in its record, never passed.
-_LATENCY_WHY = ("not measured by qualify in this version: `haptic-study bench loop` measures the loop's "
-                "latency on this machine")
+_LATENCY_WHY = ("not measured by qualify in this version: a real-rig session measures and stores it when it "
+                "starts, and the report's methods give it")
 
 
 def parse_checks(text: str) -> tuple[str, ...]:
