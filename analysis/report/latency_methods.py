@@ -1,10 +1,12 @@
-"""The methods' paragraph on the end-to-end latency: how long a force at the tip took to reach the participant's hand,
-and the hand's motion to reach the tip (measured by :mod:`pipeline.assembly.latency`).
+"""The methods' paragraphs on the rig: the end-to-end latency -- how long a force at the tip took to reach the
+participant's hand, and the hand's motion to reach the tip (measured by :mod:`pipeline.assembly.latency`).
 
 A session on the real clock stores its breakdown, measured when it started (``config_json``'s ``latency``): the
 paragraph states what is stored, and reads it as plain data (the analysis imports nothing of the pipeline).  A
 simulated session on the virtual clock stores none -- computing takes no time there -- and the paragraph says so
-and where the simulated rig's breakdown is measured (``haptic-study bench loop``, docs/science.md §8).
+and where the simulated rig's breakdown is measured (``haptic-study bench loop``, docs/science.md §8) -- and the
+rig's qualification (``haptic-study qualify``, docs/qualify.md), named when a session stored one (``config_json``'s
+``qualification``: each arm's record as it stood when the session started).
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from typing import Any
 from analysis.reading.load import StudyData
 from protocol.storage import StorageError, StudyReader
 
-__all__ = ["latency_paragraph"]
+__all__ = ["latency_paragraph", "qualification_paragraph"]
 
 
 def _stored(study: StudyData) -> dict[tuple[str, int], dict[str, Any]]:
@@ -34,7 +36,8 @@ def _stored(study: StudyData) -> dict[tuple[str, int], dict[str, Any]]:
                     config = json.loads(info.config_json)
                 except (TypeError, ValueError):
                     config = {}
-                out[(str(path), int(info.session_id))] = {"latency": config.get("latency")}
+                out[(str(path), int(info.session_id))] = {"latency": config.get("latency"),
+                                                          "qualification": config.get("qualification")}
         finally:
             reader.close()
     return out
@@ -93,3 +96,37 @@ def latency_paragraph(study: StudyData) -> str:
     return (f"<p><b>End-to-end latency</b> (measured by pipeline/assembly/latency.py): the delay from a force at the "
             f"instrument's tip to the force at the participant's hand, and from the hand's motion to the tip's. "
             f"{' '.join(said)} Peak forces suffer from delays of the order of 100 ms.</p>")
+
+
+def _record_text(arm: str, rec: dict[str, Any]) -> str:
+    """One arm's record in words: ``arm right: PARTIAL on DATE (software V): process-death PASS (…), …``."""
+    checks = "; ".join(f"{c.get('name')} {c.get('verdict')}"
+                       + (f" ({c.get('measured') or c.get('why')})" if c.get("measured") or c.get("why") else "")
+                       for c in rec.get("checks", ()))
+    return (f"arm {arm}: {rec.get('verdict')} on {rec.get('date', 'an unknown date')} (software "
+            f"{rec.get('software_version', 'unknown')})" + (f": {checks}" if checks else f": {rec.get('why', '')}"))
+
+
+def qualification_paragraph(study: StudyData) -> str:
+    """The methods' paragraph on the rig's qualification ("" when no analysed session stored one)."""
+    s = study.sessions
+    analysed = s[s["analysed"].astype(bool)] if "analysed" in s else s
+    stored = _stored(study)
+    records: dict[str, str] = {}
+    without = 0
+    for db, sid in zip(analysed["database"], analysed["session_id"], strict=True):
+        got = stored.get((str(db), int(sid)), {}).get("qualification")
+        if not got:
+            without += 1
+            continue
+        for arm, rec in got.items():
+            text = _record_text(str(arm), rec)
+            records[text] = text  # the distinct records, in the order first met
+    if not records:
+        return ""
+    n = len(analysed) - without
+    return (f"<p><b>Rig qualification</b> (haptic-study qualify, docs/qualify.md): the record stored with "
+            f"{n} session{'s' if n > 1 else ''} when {'they' if n > 1 else 'it'} started: "
+            f"{html.escape(' | '.join(records))}."
+            + (f" {without} session{'s' if without > 1 else ''} stored no qualification." if without else "")
+            + "</p>")

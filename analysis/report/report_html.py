@@ -25,7 +25,7 @@ from analysis.report.html_parts import fmt_p, fmt_w, plural
 from analysis.report.html_parts import html_table as _html_table
 from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
-from analysis.report.latency_methods import latency_paragraph
+from analysis.report.latency_methods import latency_paragraph, qualification_paragraph
 from analysis.report.measures import figure_groups, mean_words, secondary, secondary_note, windowed_words
 from analysis.stats.aggregate import mean_sd
 from analysis.stats.loop_health import ABORT_CAUSE_TEXT, LOOP_BOUNDS, abort_counts
@@ -322,6 +322,7 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
         + (report_tct.tct_methods(within, options, confidence) if any(m.success_only for m in metrics) else "")
         + report_sections.methods_within(within, options, confidence, metrics)
         + latency_paragraph(study)
+        + qualification_paragraph(study)
     )
 
 

@@ -24,6 +24,7 @@ from pipeline.force.frames import Vec3
 
 __all__ = [
     "HD_CALLBACK_CONTINUE",
+    "HD_CURRENT_FORCE",
     "HD_DEVICE_FAULT",
     "HD_FORCE_OUTPUT",
     "HD_MAX_FORCE_CLAMPING",
@@ -42,6 +43,8 @@ HD_FORCE_OUTPUT = 0x4000
 HD_MAX_FORCE_CLAMPING = 0x4001
 HD_NOMINAL_MAX_FORCE = 0x2603
 HD_NOMINAL_MAX_CONTINUOUS_FORCE = 0x2604
+#: ``HD_CURRENT_FORCE`` (hdDefines.h): the force the device renders now, N, three doubles.
+HD_CURRENT_FORCE = 0x2700
 HD_DEVICE_FAULT = 0x0300
 HD_CALLBACK_DONE = 0
 HD_CALLBACK_CONTINUE = 1
@@ -224,6 +227,17 @@ class PyOpenHapticsApi:
         import ctypes
 
         return float(self._hd._get_doublev(code, ctypes.c_double).value)
+
+    def current_force(self) -> Vec3:
+        """The force the current device renders now (``hdGetDoublev(HD_CURRENT_FORCE)``), N, device frame."""
+        import ctypes
+
+        lib = self._cb._lib_hd
+        out = (ctypes.c_double * 3)()
+        lib.hdGetDoublev.argtypes = [self._def.HDenum, ctypes.POINTER(ctypes.c_double)]
+        lib.hdGetDoublev.restype = None
+        lib.hdGetDoublev(HD_CURRENT_FORCE, out)
+        return (float(out[0]), float(out[1]), float(out[2]))
 
     def enable(self, code: int) -> None:
         lib = self._cb._lib_hd

@@ -54,7 +54,7 @@ from pipeline.devices.interfaces import DeviceError, HapticDevice, HapticState
 from pipeline.devices.registry import HapticConnection, HapticModel, haptic_model
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, HapticLimits, TouchOutput
 
-__all__ = ["TouchBackend", "TouchHapticDevice", "TouchScheduler"]
+__all__ = ["TouchBackend", "TouchHapticDevice", "TouchScheduler", "read_back_force"]
 
 #: The motors' thermal budget of a Touch opened without its model (the peak and continuous rating are the device's
 #: own report; the budget is not a device property OpenHaptics reports).
@@ -227,6 +227,17 @@ class TouchHapticDevice:
         finally:
             self._own.close_device()
 
+
+
+def read_back_force(device_name: str, dll_dir: str | None = None) -> tuple[float, float, float]:
+    """What the Touch renders now (``HD_CURRENT_FORCE``), N, read by opening it without starting a servo scheduler:
+    a scheduler of ours would write a force itself (``haptic-study qualify`` reads what the device does alone)."""
+    api = PyOpenHapticsApi(dll_dir)
+    api.init_device(device_name)
+    try:
+        return api.current_force()
+    finally:
+        api.close_device()
 
 
 class TouchScheduler:

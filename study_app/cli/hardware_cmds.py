@@ -160,6 +160,12 @@ def _check_arm(hw: Any, clock: Any, rows: list[tuple[str, bool, str]], prefix: s
     if hw.jaw is not None:
         jaw_cfg = hw.jaw
         attempt("jaw actuator", lambda: open_jaw(jaw_cfg), describe_jaw)
+    from study_app.cli.qualify_cmds import describe_record
+
+    # the record is shown, not judged here: only a failed qualification or an unreadable record makes the row FAIL
+    qualified = describe_record(hw.calibration_file)
+    rows.append((prefix + "qualification", qualified is None or qualified.startswith(("PASS", "PARTIAL")),
+                 qualified or "never qualified (haptic-study qualify)"))
 
 
 def format_check(rows: list[tuple[str, bool, str]]) -> str:

@@ -26,6 +26,7 @@ from study_app.cli.gui_cmds import add_gui_parser
 from study_app.cli.hardware_cmds import add_check_hardware_parser, add_probe_parser
 from study_app.cli.note_cmds import add_note_parser
 from study_app.cli.power_cmds import add_power_parser
+from study_app.cli.qualify_cmds import add_qualify_parser
 from study_app.cli.replay_cmds import add_replay_parsers
 from study_app.cli.report_cmds import add_report_parsers
 from study_app.cli.run_cmds import add_run_parser, add_sessions_parser, add_sim_parser
@@ -74,7 +75,8 @@ def build_parser() -> argparse.ArgumentParser:
     for add in (add_sim_parser, add_run_parser, add_report_parsers, add_replay_parsers, add_sessions_parser,
                 add_check_parser, add_withdraw_parser, add_note_parser, add_power_parser, add_sweep_parser,
                 add_discrimination_parser,
-                _add_installed_commands, add_probe_parser, add_check_hardware_parser, add_calibrate_command,
+                _add_installed_commands, add_probe_parser, add_check_hardware_parser,
+                add_qualify_parser, add_calibrate_command,
                 add_gui_parser):
         add(sub)
     return p

@@ -6,10 +6,11 @@ import dataclasses
 from typing import Any
 
 from pipeline.assembly.engine_view import EngineView
+from pipeline.commissioning.qualification import read_record
 from pipeline.force.pipeline_settings import non_default_settings, settings_of
 from pipeline.settings.hardware import HardwareConfig
 
-__all__ = ["config_record", "real_config_record"]
+__all__ = ["config_record", "qualification_record", "real_config_record"]
 
 
 def config_record(eng: EngineView, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
@@ -49,7 +50,22 @@ def real_config_record(hw: HardwareConfig, hardware_text: str, eng: EngineView) 
         "framework": _plain(dataclasses.asdict(eng.framework.config)),
         "pipeline_settings": non_default_settings(settings_of(eng.framework.config)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
+        **qualification_record(hw),
     }
+
+
+def qualification_record(hw: HardwareConfig) -> dict[str, Any]:
+    """``qualification``: each arm's record of ``haptic-study qualify`` as it stood when the session started (an
+    unreadable one as its reason); nothing when no arm was ever qualified (docs/qualify.md)."""
+    out: dict[str, Any] = {}
+    for arm in hw.arms:
+        try:
+            record = read_record(arm.calibration_file)
+        except (OSError, ValueError) as exc:
+            record = {"verdict": "UNREADABLE", "why": str(exc)}
+        if record is not None:
+            out[arm.name] = record
+    return {"qualification": out} if out else {}
 
 
 def _plain(d: Any) -> Any:

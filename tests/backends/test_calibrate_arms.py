@@ -130,7 +130,8 @@ def test_real_calibrate_tcp_of_the_left_arm_reads_its_robot_and_saves_to_its_fil
 def test_check_hardware_checks_every_arm_in_turn_or_the_named_one(fakes, tmp_path) -> None:
     hw = str(_two_arm_file(tmp_path, fakes))
     rows, ok = check_hardware(hw)
-    assert [n for n, _, _ in rows] == [f"{a}: {d}" for a in ARMS for d in ("force sensor", "robot", "haptic device")]
+    assert [n for n, _, _ in rows] == [f"{a}: {d}" for a in ARMS
+                                       for d in ("force sensor", "robot", "haptic device", "qualification")]
     by_name = {n: (good, text) for n, good, text in rows}
     for arm, (box, ur) in fakes.items():  # each arm's row names its own box and controller
         assert by_name[f"{arm}: force sensor"][0] and by_name[f"{arm}: force sensor"][1].startswith(box.host)
@@ -140,6 +141,8 @@ def test_check_hardware_checks_every_arm_in_turn_or_the_named_one(fakes, tmp_pat
     assert lines[0].startswith("right: force sensor  OK   127.0.0.2: ")
     assert lines[2].startswith("right: haptic device FAIL")
     rows, _ = check_hardware(hw, "left")
-    assert [n for n, _, _ in rows] == ["left: force sensor", "left: robot", "left: haptic device"]
+    assert [n for n, _, _ in rows] == ["left: force sensor", "left: robot", "left: haptic device",
+                                       "left: qualification"]
+    assert rows[-1][1:] == (True, "never qualified (haptic-study qualify)")  # each arm's own record, none yet
     with pytest.raises(CliError, match=r"^--arm = 'middle': .*hardware.toml has no such arm; its arms: right, left$"):
         check_hardware(hw, "middle")

@@ -80,3 +80,4 @@ def test_check_hardware_reports_each_device(tmp_path: Path, capsys: pytest.Captu
     assert out[1].startswith(f"robot          OK   {rtde.host}: connected, TCP (+0.3000, -0.1000, +0.2000) m")
     assert out[2].startswith("haptic device  FAIL the 3D Systems Touch needs OpenHaptics")
     assert out[3] == f"jaw actuator   OK   {jaw.path}: READY, limits 1100-1900 µs, at 1100 µs (0% open)"
+    assert out[4] == "qualification  OK   never qualified (haptic-study qualify)"

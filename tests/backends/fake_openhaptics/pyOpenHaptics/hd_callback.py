@@ -26,8 +26,18 @@ def _make_current(handle):
     hd.STATE["current"] = handle
 
 
+def _get_doublev(code, out):
+    from pyOpenHaptics import hd
+
+    if code == 0x2700:  # HD_CURRENT_FORCE
+        out[0], out[1], out[2] = hd.current_force()
+    else:
+        out[0] = {0x2603: 3.3, 0x2604: 0.88}[code]
+
+
 class _Lib:
     def __init__(self):
+        self.hdGetDoublev = _Fn(_get_doublev)
         self.hdInitDevice = _Fn(_init_device)
         self.hdEnable = _Fn(lambda code: None)
         self.hdMakeCurrentDevice = _Fn(_make_current)
