@@ -17,9 +17,9 @@ import itertools
 import math
 from bisect import bisect_right
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
-__all__ = ["TrialAim", "TrialParticipant"]
+__all__ = ["AnsweringParticipant", "TrialAim", "TrialParticipant", "TrialQuestion"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,4 +88,23 @@ class TrialParticipant(Protocol):
 
     def end_trial(self, t_s: float) -> None:
         """The trial ended: rest until the next cue."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class TrialQuestion:
+    """A trial's question, as a simulated participant is asked it: the force the device rendered in each of the
+    trial's intervals (N, what the hand felt), the answers allowed, and the trial's index in its block."""
+
+    felt_n: tuple[float, ...]
+    keys: tuple[str, ...]
+    trial_index: int
+
+
+@runtime_checkable
+class AnsweringParticipant(Protocol):
+    """A simulated participant that answers a trial's question (a task that asks one: force discrimination)."""
+
+    def answer(self, question: TrialQuestion) -> str:
+        """One of ``question.keys``."""
         ...

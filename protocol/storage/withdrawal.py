@@ -194,7 +194,7 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
                 for table in reversed(recording_tables(arm)):
                     if has_table(c, table):
                         c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
-            for table in ("notes", "questionnaire_answers"):  # (a file made before them has none)
+            for table in ("notes", "questionnaire_answers", "trial_answers"):  # (a file made before them has none)
                 if has_table(c, table):
                     c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))

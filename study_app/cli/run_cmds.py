@@ -164,7 +164,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
-            _refuse_a_block_without_sessions(protocol, args.protocol)
             _check_task_arm(protocol, args)
 
         def show(p):
@@ -215,14 +214,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
-
-
-def _refuse_a_block_without_sessions(protocol: ProtocolConfig, path: str | None) -> None:
-    """A force-discrimination protocol does not run into a study database yet (the session runner renders contact
-    forces, not commanded ones, and takes no answers): one line naming the command that runs it."""
-    if protocol.task.kind == "force_discrimination":
-        raise CliError(f"--protocol = {path!r}: task.kind = 'force_discrimination' does not run into a study "
-                       "database yet; run it with: haptic-study discrimination --protocol FILE --out DIR")
 
 
 def _check_task_arm(protocol: ProtocolConfig, args: argparse.Namespace) -> None:
