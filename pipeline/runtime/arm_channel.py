@@ -159,15 +159,10 @@ class ArmChannel:
         on = loop.haptic_on
         enabled = on and not faults
         # the stages by their names in pipeline.core.tick_record.STEP_FIELDS (the step's one definition of its output)
-        program = self.program
-        if program is None:  # Algorithm 1: the sensor's force, scaled
-            stages = fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s)
-        else:  # a commanded force (a psychophysics trial's), through the same safety stage
-            stages = fw.step_commanded(raw_fx, raw_fy, raw_fz, program.force_n(now - self.program_t0_ns), enabled,
-                                       dt_s)
         (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
          haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = stages
+         ) = (fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s) if self.program is None
+              else self._commanded(raw_fx, raw_fy, raw_fz, enabled, dt_s, now))
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         self.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
@@ -322,6 +317,12 @@ class ArmChannel:
         ev = LoopEvent(t_ns, kind, self.faults if faults is None else faults, detail, self.name)
         self.loop.emit(ev)
         return ev
+
+    def _commanded(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float, now: int) -> tuple[float, ...]:
+        """The tick's stages with the program's force at ``now`` rendered (:meth:`HapticFramework.step_commanded`)."""
+        program = self.program
+        assert program is not None  # (asked only while one runs)
+        return self.framework.step_commanded(fx, fy, fz, program.force_n(now - self.program_t0_ns), enabled, dt_s)
 
     def command(self, program: ForceProgram | None, now: int) -> None:
         """Render ``program`` from this tick on (None: the sensor's force again); logged for replay."""

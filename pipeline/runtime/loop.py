@@ -65,6 +65,7 @@ from pipeline.runtime.loop_messages import (
     RECORD_FIELDS,
     AllowBiasRefinement,
     Command,
+    CommandForce,
     ControllerDetached,
     LatchFault,
     LoopEvent,
@@ -74,7 +75,6 @@ from pipeline.runtime.loop_messages import (
     SetCalibration,
     SetHaptics,
     StartRecording,
-    CommandForce,
     StopRecording,
 )
 from pipeline.runtime.loop_stats import LoopStats

@@ -90,10 +90,10 @@ import numpy as np
 
 from pipeline.core.aim import TrialAim, TrialQuestion
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.tissue import TissueParams
-from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.tracking_hand import TrackingHand
 
 __all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant"]

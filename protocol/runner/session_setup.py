@@ -41,9 +41,9 @@ from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
 from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase, StudyReader, session_scope
 from protocol.storage.annotations import answered_blocks
-from protocol.storage.trial_answers import trial_answers
 from protocol.storage.damage import recording_damage
 from protocol.storage.recordings import marked_records
+from protocol.storage.trial_answers import trial_answers
 from protocol.study.clock import SessionClock
 from protocol.study.config import ProtocolConfig, protocol_from_dict
 from protocol.study.covariates import checked_values

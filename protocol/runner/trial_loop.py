@@ -29,9 +29,9 @@ from protocol.runner.deliveries import Deliveries
 from protocol.runner.session_desk import SessionDesk, SessionPlan, trial_words
 from protocol.runner.trial_stimuli import TrialStimuli
 from protocol.storage import StudyDatabase
+from protocol.storage.trial_answers import insert_answer
 from protocol.study.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.study.records import AbortCause, Outcome, TrialRecord
-from protocol.storage.trial_answers import insert_answer
 from protocol.study.trial import PHASE_CODES, RUNNING, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = ["TrialLoop"]

@@ -17,8 +17,8 @@ value and what is allowed); everything that runs, shows or analyses a trial asks
 * **its words in the report** (:meth:`Task.rule_words`, :meth:`Task.methods`);
 * for a task that *presents* a force and *asks* about it (force discrimination): **the question's answers**
   (:attr:`Task.answer_keys`, asked when the rule completes, until :meth:`Task.answer_by_s`) and **its procedure**
-  (:meth:`Task.stimulus_procedure`: each trial's :class:`Stimulus` -- the commanded force the loop renders and the values
-  that define it -- chosen from the answers so far, and each answer scored), rebuilt from the stored answers.
+  (:meth:`Task.stimulus_procedure`: each trial's :class:`Stimulus` -- the commanded force the loop renders and the
+  values that define it -- chosen from the answers so far, and each answer scored), rebuilt from the stored answers.
 
 A trial reaches the task as a :class:`TrialCondition`: its target (label and reference force, as the schedule and
 the ``trials`` table store them) and its haptic mode -- a schedule entry, a stored record, the engine's message and
@@ -43,8 +43,9 @@ from pipeline.settings.tomlfields import Fields
 from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics
 
-__all__ = ["Answered", "BandEdges", "ConstantBand", "Parameter", "Procedure", "Stimulus", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule",
-           "TrialScreen", "TrialTarget", "constant_band", "listed", "metrics_of"]
+__all__ = ["Answered", "BandEdges", "ConstantBand", "Parameter", "Procedure", "Stimulus", "Task", "TaskTables",
+           "Timing", "TrialCondition", "TrialRule", "TrialScreen", "TrialTarget", "constant_band", "listed",
+           "metrics_of"]
 
 
 class TrialCondition(Protocol):

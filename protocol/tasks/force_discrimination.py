@@ -19,9 +19,9 @@ training can reach (docs/discrimination.md).  Definitions:
   least expected posterior entropy; its state is a function of the block's (Δ, answer) history only, so a resumed
   block rebuilds it from the stored trials;
 * **the block ends** after ``trials`` trials per reference (the schedule's cells: references shuffled by the seed);
-* **in a study** (``haptic-study run``, the GUI) the block is a session: at each cue its :class:`Procedure` (the
-  seam's :meth:`~protocol.tasks.base.Task.stimulus_procedure`, rebuilt from the session's stored answers) gives the trial's
-  :class:`~protocol.tasks.base.Stimulus` -- the two-interval command as a
+* **in a study** (``haptic-study run``, the GUI) the block is a session: at each cue its procedure (the seam's
+  :meth:`~protocol.tasks.base.Task.stimulus_procedure`, rebuilt from the session's stored answers) gives the
+  trial's :class:`~protocol.tasks.base.Stimulus` -- the two-interval command as a
   :class:`pipeline.core.force_program.ForceProgram` the loop renders through its safety stage -- and after the answer
   (key ``1`` or ``2``) scores it from the force the loop rendered over each plateau.
 
