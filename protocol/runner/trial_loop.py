@@ -18,7 +18,9 @@ appended at the end of the schedule (``append``, the default) or re-inserted at 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -177,8 +179,11 @@ class TrialLoop:
         )
         desk.recorder.trial(record)
         answer = self.stimuli.finished(ev, desk.time_s(ev.end_ns))
-        if answer is not None:  # in the trial's transaction
+        if answer is not None:  # in the trial's transaction; the listeners see it on the record
             desk.recorder.call(lambda db: insert_answer(db.conn, answer))
+            correct = answer.values.get("correct", math.nan)
+            record = dataclasses.replace(record, answer=answer.answer,
+                                         answer_correct=correct == 1.0 if math.isfinite(correct) else None)
         self.finished.append(record)
         st = desk.state
         if aborted:

@@ -130,6 +130,12 @@ class TrialScreen:
         What the participant screen says while it shows the band all trial, without the force (a target that
         moves, which the participant follows: ``Follow the target``); "" -- the participant screen shows the band
         only on the training gauge, with the force (the paper's).
+    spans
+        Words the participant screen shows over spans of trial time ``(t0_s, t1_s, word)``: force discrimination's
+        ``first`` and ``second`` while each force is presented.
+    question, answers
+        What the participant screen asks once the trial's question is open (:attr:`Task.answer_keys`), and each
+        answer's key with its words (``("1", "first")``): its buttons, and the keys that give them.
     """
 
     cue_word: str
@@ -137,6 +143,13 @@ class TrialScreen:
     band_label: str
     band_legend: str
     follow: str = ""
+    spans: tuple[tuple[float, float, str], ...] = ()
+    question: str = ""
+    answers: tuple[tuple[str, str], ...] = ()
+
+    def word_at(self, t_s: float) -> str:
+        """The word of the span holding trial time ``t_s`` ("" outside them)."""
+        return next((w for a, b, w in self.spans if a <= t_s < b), "")
 
     def band_over(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
         """The band's lower and upper edge at trial times ``t_s`` (s since the cue), N; None without a band."""

@@ -293,8 +293,12 @@ class ForceDiscrimination(Task):
 
     def screen(self, trial: TrialCondition) -> TrialScreen:
         ref = self.reference_n(trial.target_force_n)
-        return TrialScreen(cue_word="Which was stronger? 1 or 2", band=None, band_label=f"{trial.target_label}: "
-                           f"reference {ref:.3f} N at the hand", band_legend="")
+        (a1, b1), (a2, b2) = self.plateaus()
+        r = self.ramp_s
+        return TrialScreen(cue_word="Feel the two forces", band=None, band_label=f"{trial.target_label}: "
+                           f"reference {ref:.3f} N at the hand", band_legend="",
+                           spans=((a1 - r, b1 + r, "first"), (a2 - r, b2 + r, "second")),
+                           question="Which was stronger?", answers=(("1", "first"), ("2", "second")))
 
     def aim(self, trial: TrialCondition, aid: bool) -> TrialAim:
         """The stylus held still (the device moves the hand): a zero target; the answer is the observer's."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from PySide6.QtCore import QEvent, QRectF, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
-from PySide6.QtWidgets import QLabel, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
 
 from study_app.gui.placement import centre_on_a_screen
 from study_app.gui.questionnaire_view import QuestionnaireView
@@ -101,7 +101,18 @@ class ParticipantWindow(QWidget):
         lay.addWidget(self.subline)
         lay.addStretch(1)
         lay.addWidget(self.gauge)
+        # a trial's question (force discrimination): a button per answer, and the keys that give them
+        self.answer_box = QWidget()
+        self.answer_row = QHBoxLayout(self.answer_box)
+        self.answer_row.addStretch(1)
+        self.answer_row.addStretch(1)  # the buttons go between the two: centred
+        self.answer_buttons: list[QPushButton] = []
+        self.answer_box.setVisible(False)
+        lay.addWidget(self.answer_box)
         lay.addStretch(1)
+        for key in (Qt.Key.Key_1, Qt.Key.Key_2, Qt.Key.Key_Left, Qt.Key.Key_Right):
+            name = {Qt.Key.Key_1: "1", Qt.Key.Key_2: "2", Qt.Key.Key_Left: "Left", Qt.Key.Key_Right: "Right"}[key]
+            QShortcut(QKeySequence(key), self).activated.connect(lambda n=name: self.model.answer(n))
         # the cue (and rest) screen, or a questionnaire between two trials
         self.questions = QuestionnaireView(self.questionnaire)
         self.pages = QStackedLayout(self)
@@ -203,3 +214,23 @@ class ParticipantWindow(QWidget):
         self.gauge.setVisible(show)
         if show:
             self.gauge.set_state(force, s.band_n, s.gauge_max_n)
+        self._show_answers(s.answers)
+
+    def _show_answers(self, answers: tuple[tuple[str, str], ...]) -> None:
+        """A button per answer of the open question (none: the row empty)."""
+        if [b.property("key") for b in self.answer_buttons] == [k for k, _ in answers]:
+            return
+        for b in self.answer_buttons:
+            self.answer_row.removeWidget(b)
+            b.deleteLater()
+        self.answer_buttons = []
+        self.answer_box.setVisible(bool(answers))
+        for i, (key, words) in enumerate(answers):
+            b = QPushButton(f"{words}  ({key})")
+            b.setProperty("key", key)
+            b.setMinimumSize(220, 72)
+            b.setStyleSheet("font-size: 26px; background-color: #2c2c36; border: 2px solid #8a8aa0; "
+                            "border-radius: 8px; padding: 8px 24px;")
+            b.clicked.connect(lambda _=False, k=key: self.model.answer(k))
+            self.answer_row.insertWidget(1 + i, b)
+            self.answer_buttons.append(b)
