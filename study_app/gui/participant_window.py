@@ -61,6 +61,10 @@ HEADLINE_MAX_PX = 96
 _HEADLINE_WORDS = ("Thank you", "GENTLE", "FIRM", "Rest")
 
 
+#: The keys that answer a trial's question, by the name the model takes (``Left``/``Right``: the first/second answer).
+_ANSWER_KEYS = {Qt.Key.Key_1: "1", Qt.Key.Key_2: "2", Qt.Key.Key_Left: "Left", Qt.Key.Key_Right: "Right"}
+
+
 class ParticipantWindow(QWidget):
     """Layout of the participant screen; F11 or double-click toggles full screen.
 
@@ -110,9 +114,7 @@ class ParticipantWindow(QWidget):
         self.answer_box.setVisible(False)
         lay.addWidget(self.answer_box)
         lay.addStretch(1)
-        for key in (Qt.Key.Key_1, Qt.Key.Key_2, Qt.Key.Key_Left, Qt.Key.Key_Right):
-            name = {Qt.Key.Key_1: "1", Qt.Key.Key_2: "2", Qt.Key.Key_Left: "Left", Qt.Key.Key_Right: "Right"}[key]
-            QShortcut(QKeySequence(key), self).activated.connect(lambda n=name: self.model.answer(n))
+
         # the cue (and rest) screen, or a questionnaire between two trials
         self.questions = QuestionnaireView(self.questionnaire)
         self.pages = QStackedLayout(self)
@@ -189,6 +191,12 @@ class ParticipantWindow(QWidget):
     def toggle_fullscreen(self) -> None:
         """Full screen on the participant's monitor, or back."""
         self.showNormal() if self.isFullScreen() else self.showFullScreen()
+
+    def keyPressEvent(self, event) -> None:  # Qt's name
+        """An answer's key (1, 2) or ←/→ (the first, the second) answers the open question; any other key is Qt's."""
+        name = _ANSWER_KEYS.get(Qt.Key(event.key()))
+        if name is None or not self.model.answer(name):
+            super().keyPressEvent(event)
 
     def mouseDoubleClickEvent(self, event) -> None:  # Qt's name
         self.toggle_fullscreen()
