@@ -130,6 +130,9 @@ class TrialScreen:
         What the participant screen says while it shows the band all trial, without the force (a target that
         moves, which the participant follows: ``Follow the target``); "" -- the participant screen shows the band
         only on the training gauge, with the force (the paper's).
+    show_band, ahead_s
+        Whether the participant screen shows the band (False: a task's display of the word only), and how far
+        ahead in trial time it draws the band's course above it (0: the band at present only), s.
     spans
         Words the participant screen shows over spans of trial time ``(t0_s, t1_s, word)``: force discrimination's
         ``first`` and ``second`` while each force is presented.
@@ -143,6 +146,8 @@ class TrialScreen:
     band_label: str
     band_legend: str
     follow: str = ""
+    show_band: bool = True
+    ahead_s: float = 0.0
     spans: tuple[tuple[float, float, str], ...] = ()
     question: str = ""
     answers: tuple[tuple[str, str], ...] = ()

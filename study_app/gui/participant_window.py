@@ -3,8 +3,8 @@ trials the protocol's questionnaires (:mod:`study_app.gui.questionnaire_view`)."
 
 from __future__ import annotations
 
-from PySide6.QtCore import QEvent, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
+from PySide6.QtCore import QEvent, QPointF, QRectF, Qt, QTimer, Signal
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QPolygonF, QShortcut
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
 
 from study_app.gui.placement import centre_on_a_screen
@@ -17,18 +17,24 @@ __all__ = ["ForceGauge", "ParticipantWindow"]
 
 class ForceGauge(QWidget):
     """A horizontal bar 0–3 N with the target band; the force only ever shown in training sessions (a moving
-    target's band alone in experiments)."""
+    target's band alone in experiments).  A trace ahead (force tracking's ``display = "trace_ahead"``) is drawn above
+    the bar: the band's course over the next seconds rising from the bar (now) to the top (the trace's end), as a
+    road seen ahead."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setMinimumHeight(90)
         self.force_n: float | None = 0.0
         self.band: tuple[float, float] | None = None
+        self.trace: tuple[tuple[float, float, float], ...] = ()
         self.max_n = 3.0
 
-    def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float) -> None:
-        """The force (None: not shown, the band alone), the band and the scale."""
-        self.force_n, self.band, self.max_n = force_n, band, max_n
+    def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float,
+                  trace: tuple[tuple[float, float, float], ...] = ()) -> None:
+        """The force (None: not shown, the band alone), the band, the scale and the trace ahead (() none)."""
+        if bool(trace) != bool(self.trace):
+            self.setMinimumHeight(260 if trace else 90)
+        self.force_n, self.band, self.max_n, self.trace = force_n, band, max_n, trace
         self.update()
 
     def paintEvent(self, event) -> None:  # Qt's name
@@ -37,6 +43,10 @@ class ForceGauge(QWidget):
         w, h = self.width(), self.height()
         x0, x1, y0, bar_h = 40.0, w - 40.0, 20.0, h - 50.0
         scale = (x1 - x0) / self.max_n
+        if self.trace:  # the road ahead over the upper part, the bar (now) below it
+            bar_h = min(70.0, 0.3 * (h - 30.0))
+            y0 = h - 30.0 - bar_h
+            self._paint_trace(p, x0, x1, scale, 10.0, y0)
         p.fillRect(QRectF(x0, y0, x1 - x0, bar_h), QColor(45, 45, 52))
         if self.band is not None:
             lo, hi = self.band
@@ -53,6 +63,17 @@ class ForceGauge(QWidget):
             p.drawLine(int(x), int(y0 + bar_h), int(x), int(y0 + bar_h + 6))
             p.drawText(int(x - 15), int(y0 + bar_h + 8), 30, 20, Qt.AlignmentFlag.AlignHCenter, f"{k} N")
         p.end()
+
+
+    def _paint_trace(self, p: QPainter, x0: float, x1: float, scale: float, top: float, bottom: float) -> None:
+        """The band's course ahead: its edges from ``bottom`` (now) up to ``top`` (the trace's end), filled."""
+        p.fillRect(QRectF(x0, top, x1 - x0, bottom - top), QColor(30, 30, 38))
+        left = [QPointF(x0 + lo * scale, bottom - a * (bottom - top)) for a, lo, _ in self.trace]
+        right = [QPointF(x0 + hi * scale, bottom - a * (bottom - top)) for a, _, hi in reversed(self.trace)]
+        p.setPen(QPen(QColor(60, 170, 90), 1.5))
+        p.setBrush(QColor(60, 170, 90, 110))
+        p.drawPolygon(QPolygonF(left + right))
+        p.setBrush(Qt.BrushStyle.NoBrush)
 
 
 #: The cue word's largest size, px (a full HD monitor); it shrinks with the window, never the other way round.
@@ -221,7 +242,7 @@ class ParticipantWindow(QWidget):
         show = s.show_gauge and (force is not None or s.band_n is not None)
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(force, s.band_n, s.gauge_max_n)
+            self.gauge.set_state(force, s.band_n, s.gauge_max_n, s.trace)
         self._show_answers(s.answers)
 
     def _show_answers(self, answers: tuple[tuple[str, str], ...]) -> None:

@@ -18,7 +18,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from protocol.tasks.base import Task
+import numpy as np
+
+from protocol.tasks.base import Task, TrialScreen
 from study_app.engine import messages as m
 from study_app.models import Emitter
 
@@ -38,6 +40,24 @@ class ParticipantScreen:
     gauge_max_n: float = 3.0
     #: The open question's answers, (key, words): a button each ("": none open).
     answers: tuple[tuple[str, str], ...] = ()
+    #: The target's course ahead (a tracking task's trace): ``(fraction of the trace's span ahead, lo, hi)`` from
+    #: now (0) to ``ahead_s`` later (1), N; () -- none drawn.
+    trace: tuple[tuple[float, float, float], ...] = ()
+
+
+#: Points a trace ahead is drawn through (a 2 Hz sine over 2 s: 30 points a cycle).
+_TRACE_POINTS = 61
+
+
+def _trace(shown: TrialScreen, t_s: float) -> tuple[tuple[float, float, float], ...]:
+    """The band's course from trial time ``t_s`` to ``shown.ahead_s`` later (() when the screen draws none)."""
+    if shown.ahead_s <= 0.0:
+        return ()
+    frac = np.linspace(0.0, 1.0, _TRACE_POINTS)
+    edges = shown.band_over(t_s + frac * shown.ahead_s)
+    if edges is None:
+        return ()
+    return tuple((float(a), float(lo), float(hi)) for a, lo, hi in zip(frac, edges[0], edges[1], strict=True))
 
 
 @dataclass
@@ -129,9 +149,11 @@ class ParticipantScreenModel:
             return ParticipantScreen(word or cue, "" if word else "Hold the stylus still", False, None, None)
         band = shown.band_at(self.t_s - tr.t_s)
         if shown.follow:  # a target that moves: its band is shown all trial, moving; the force only in training
-            word = shown.cue_word if self.gauge_allowed or self.t_s - tr.t_s < self.cue_s else ""
             force = self.force_n if self.gauge_allowed else None
-            return ParticipantScreen(word, shown.follow, True, force, band)
+            if not shown.show_band:  # the word only: the target is felt, not seen
+                return ParticipantScreen(shown.cue_word, shown.follow, force is not None, force, None)
+            word = shown.cue_word if self.gauge_allowed or self.t_s - tr.t_s < self.cue_s else ""
+            return ParticipantScreen(word, shown.follow, True, force, band, trace=_trace(shown, self.t_s - tr.t_s))
         if self.gauge_allowed:
             return ParticipantScreen(shown.cue_word, f"Practice · haptics {tr.haptic_mode.upper()}", True,
                                      self.force_n, band)
