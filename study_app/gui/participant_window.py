@@ -27,14 +27,14 @@ class ForceGauge(QWidget):
         self.force_n: float | None = 0.0
         self.band: tuple[float, float] | None = None
         self.trace: tuple[tuple[float, float, float], ...] = ()
+        self.ahead_s = 0.0
         self.max_n = 3.0
 
     def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float,
-                  trace: tuple[tuple[float, float, float], ...] = ()) -> None:
-        """The force (None: not shown, the band alone), the band, the scale and the trace ahead (() none)."""
-        if bool(trace) != bool(self.trace):
-            self.setMinimumHeight(260 if trace else 90)
-        self.force_n, self.band, self.max_n, self.trace = force_n, band, max_n, trace
+                  trace: tuple[tuple[float, float, float], ...] = (), ahead_s: float = 0.0) -> None:
+        """The force (None: not shown, the band alone), the band, the scale and the trace ahead (() none) with
+        how far ahead it reaches, s."""
+        self.force_n, self.band, self.max_n, self.trace, self.ahead_s = force_n, band, max_n, trace, ahead_s
         self.update()
 
     def paintEvent(self, event) -> None:  # Qt's name
@@ -74,6 +74,10 @@ class ForceGauge(QWidget):
         p.setBrush(QColor(60, 170, 90, 110))
         p.drawPolygon(QPolygonF(left + right))
         p.setBrush(Qt.BrushStyle.NoBrush)
+        p.setPen(QPen(QColor(170, 170, 180), 1))  # the time axis of the trace: now at the bar, later above
+        p.setFont(QFont("Sans", 11))
+        p.drawText(QRectF(x0 + 6, top + 4, 200, 20), Qt.AlignmentFlag.AlignLeft, f"in {self.ahead_s:g} s")
+        p.drawText(QRectF(x0 + 6, bottom - 22, 200, 20), Qt.AlignmentFlag.AlignLeft, "now")
 
 
 #: The cue word's largest size, px (a full HD monitor); it shrinks with the window, never the other way round.
@@ -117,8 +121,8 @@ class ParticipantWindow(QWidget):
         self.subline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self._words: tuple[str, ...] = _HEADLINE_WORDS
         self.headline_px = HEADLINE_MAX_PX
-        self._scale_text()
         self.gauge = ForceGauge()
+        self._scale_text()
         cue = self.cue_page = QWidget()
         lay = QVBoxLayout(cue)
         lay.addStretch(2)
@@ -129,6 +133,7 @@ class ParticipantWindow(QWidget):
         # a trial's question (force discrimination): a button per answer, and the keys that give them
         self.answer_box = QWidget()
         self.answer_row = QHBoxLayout(self.answer_box)
+        self.answer_row.setSpacing(48)  # two answers far enough apart not to be pressed one for the other
         self.answer_row.addStretch(1)
         self.answer_row.addStretch(1)  # the buttons go between the two: centred
         self.answer_buttons: list[QPushButton] = []
@@ -204,6 +209,11 @@ class ParticipantWindow(QWidget):
         self.headline.setStyleSheet(f"font-size: {px}px; font-weight: 700; letter-spacing: 6px;")
         sub = max(12, min(22, px // 4))
         self.subline.setStyleSheet(f"font-size: {sub}px; color: #b8b8c0;")
+        self._size_gauge()
+
+    def _size_gauge(self) -> None:
+        """A gauge with a trace ahead takes half the window's height (the road ahead readable); else its own."""
+        self.gauge.setMinimumHeight(max(260, self.height() // 2) if self.gauge.trace else 90)
 
     def resizeEvent(self, event) -> None:  # Qt's name
         super().resizeEvent(event)
@@ -242,7 +252,10 @@ class ParticipantWindow(QWidget):
         show = s.show_gauge and (force is not None or s.band_n is not None)
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(force, s.band_n, s.gauge_max_n, s.trace)
+            had = bool(self.gauge.trace)
+            self.gauge.set_state(force, s.band_n, s.gauge_max_n, s.trace, s.ahead_s)
+            if had != bool(s.trace):
+                self._size_gauge()
         self._show_answers(s.answers)
 
     def _show_answers(self, answers: tuple[tuple[str, str], ...]) -> None:

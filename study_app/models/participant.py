@@ -43,6 +43,8 @@ class ParticipantScreen:
     #: The target's course ahead (a tracking task's trace): ``(fraction of the trace's span ahead, lo, hi)`` from
     #: now (0) to ``ahead_s`` later (1), N; () -- none drawn.
     trace: tuple[tuple[float, float, float], ...] = ()
+    #: How far ahead the trace reaches, s.
+    ahead_s: float = 0.0
 
 
 #: Points a trace ahead is drawn through (a 2 Hz sine over 2 s: 30 points a cycle).
@@ -153,7 +155,8 @@ class ParticipantScreenModel:
             if not shown.show_band:  # the word only: the target is felt, not seen
                 return ParticipantScreen(shown.cue_word, shown.follow, force is not None, force, None)
             word = shown.cue_word if self.gauge_allowed or self.t_s - tr.t_s < self.cue_s else ""
-            return ParticipantScreen(word, shown.follow, True, force, band, trace=_trace(shown, self.t_s - tr.t_s))
+            return ParticipantScreen(word, shown.follow, True, force, band, trace=_trace(shown, self.t_s - tr.t_s),
+                                     ahead_s=shown.ahead_s)
         if self.gauge_allowed:
             return ParticipantScreen(shown.cue_word, f"Practice · haptics {tr.haptic_mode.upper()}", True,
                                      self.force_n, band)
