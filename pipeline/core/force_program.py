@@ -18,7 +18,31 @@ from bisect import bisect_right
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-__all__ = ["ForceProgram"]
+__all__ = ["ForceProgram", "check_knots", "knot_value"]
+
+Knots = tuple[tuple[float, float], ...]
+
+
+def check_knots(knots: Knots, owner: str, what: str) -> None:
+    """Refuse knots that do not start at 0 s, increase and hold finite forces (``ValueError`` naming ``owner``)."""
+    if not knots:
+        raise ValueError(f"{owner}.knots is empty: {what} needs at least one (t_s, force_n) knot")
+    times = [t for t, _ in knots]
+    if times[0] != 0.0 or any(not b > a for a, b in itertools.pairwise(times)):
+        raise ValueError(f"{owner}.knots times = {times!r}: must start at 0 s and increase")
+    if not all(math.isfinite(f) for _, f in knots):
+        raise ValueError(f"{owner}.knots forces = {[f for _, f in knots]!r}: must be finite")
+
+
+def knot_value(knots: Knots, t_s: float) -> float:
+    """The force at ``t_s``: linear between knots, the first one's before them and the last one's after."""
+    k = bisect_right(knots, t_s, key=lambda knot: knot[0])
+    if k == 0:
+        return knots[0][1]
+    if k == len(knots):
+        return knots[-1][1]
+    (t0, f0), (t1, f1) = knots[k - 1], knots[k]
+    return f0 + (f1 - f0) * (t_s - t0) / (t1 - t0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,25 +59,11 @@ class ForceProgram:
     knots: tuple[tuple[float, float], ...]
 
     def __post_init__(self) -> None:
-        if not self.knots:
-            raise ValueError("ForceProgram.knots is empty: a program needs at least one (t_s, force_n) knot")
-        times = [t for t, _ in self.knots]
-        if times[0] != 0.0 or any(not b > a for a, b in itertools.pairwise(times)):
-            raise ValueError(f"ForceProgram.knots times = {times!r}: must start at 0 s and increase")
-        if not all(math.isfinite(f) for _, f in self.knots):
-            raise ValueError(f"ForceProgram.knots forces = {[f for _, f in self.knots]!r}: must be finite")
+        check_knots(self.knots, "ForceProgram", "a program")
 
     def force_n(self, elapsed_ns: int) -> float:
         """The commanded force ``elapsed_ns`` after the program was applied, N."""
-        t_s = elapsed_ns / 1e9
-        knots = self.knots
-        k = bisect_right(knots, t_s, key=lambda knot: knot[0])
-        if k == 0:
-            return knots[0][1]
-        if k == len(knots):
-            return knots[-1][1]
-        (t0, f0), (t1, f1) = knots[k - 1], knots[k]
-        return f0 + (f1 - f0) * (t_s - t0) / (t1 - t0)
+        return knot_value(self.knots, elapsed_ns / 1e9)
 
     def to_json(self) -> list[list[float]]:
         """As the replay log stores it."""
