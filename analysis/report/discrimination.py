@@ -145,17 +145,15 @@ def discrimination_study(databases: Sequence[str]) -> bool:
     """Whether the study's experiment sessions are of a task that asks (force discrimination): its report is the
     discrimination section (:func:`write_discrimination_report`)."""
     from protocol.storage.schema import connect_readonly
-    from protocol.storage.trial_answers import TABLE
+    from protocol.storage.trial_answers import asks_questions
 
     for db in databases:
         conn = connect_readonly(db)
         try:
-            row = conn.execute("SELECT protocol_json FROM sessions WHERE kind = 'experiment' LIMIT 1").fetchone()
-            has = conn.execute("SELECT 1 FROM sqlite_master WHERE name = ?", (TABLE,)).fetchone() is not None
+            if not asks_questions(conn, "force_discrimination"):
+                return False
         finally:
             conn.close()
-        if row is None or '"force_discrimination"' not in str(row[0]) or not has:
-            return False
     return True
 
 
@@ -164,28 +162,25 @@ def study_blocks(databases: Sequence[str]) -> list[BlockResult]:
     ``trials``: aborted trials and trials without an answer left out) and fitted per reference."""
     from analysis.stats.psychometric import fit_psychometric
     from protocol.storage.schema import connect_readonly
-    from protocol.storage.trial_answers import trial_answers
+    from protocol.storage.trial_answers import answered_sessions
 
     out: list[BlockResult] = []
     for db in databases:
         conn = connect_readonly(db)
         try:
-            sessions = conn.execute("SELECT s.session_id, s.participant_number FROM sessions s WHERE s.kind = "
-                                    "'experiment' ORDER BY s.participant_number, s.session_id").fetchall()
-            labels = {(int(a), int(b)): str(c) for a, b, c in conn.execute(
-                "SELECT session_id, trial_index, target_label FROM trials WHERE outcome != 'aborted'")}
-            answers = trial_answers(conn)
+            sessions = answered_sessions(conn)
         finally:
             conn.close()
-        for sid, number in sessions:
-            rows = [_answer_row(int(number), labels[(a.session_id, a.trial_index)], a) for a in answers
-                    if a.session_id == sid and a.answer is not None and (a.session_id, a.trial_index) in labels]
+        for session in sessions:
+            rows = [_answer_row(session.participant_number, label, a) for label, a in session.answers
+                    if a.answer is not None]
             refs = dict.fromkeys((str(r["target_label"]), float(r["reference_n"])) for r in rows)
             fits = [(label, fit_psychometric(ref, [float(r["delta_n"]) for r in rows if r["target_label"] == label],
                                              [bool(r["correct"]) for r in rows if r["target_label"] == label]))
                     for label, ref in refs]
+            fits.sort(key=lambda lf: lf[1].reference_n)  # the references from the lightest
             if fits:
-                out.append(BlockResult(int(number), rows, sorted(fits, key=lambda lf: lf[1].reference_n)))
+                out.append(BlockResult(session.participant_number, rows, fits))
     return out
 
 

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 from protocol.storage.common import has_table
 
-__all__ = ["TABLE", "TrialAnswer", "insert_answer", "trial_answers"]
+__all__ = ["TABLE", "AnsweredSession", "TrialAnswer", "answered_sessions", "asks_questions", "insert_answer",
+           "trial_answers"]
 
 #: The table's name.
 TABLE = "trial_answers"
@@ -60,3 +61,33 @@ def trial_answers(conn: sqlite3.Connection, session_id: int | None = None) -> li
     return [TrialAnswer(int(s), int(i), None if k is None else str(k), None if t is None else float(t),
                         {n: (math.nan if v is None else float(v)) for n, v in json.loads(j).items()})
             for s, i, k, t, j in rows]
+
+
+@dataclass(frozen=True, slots=True)
+class AnsweredSession:
+    """An experiment session's answered trials, for analysis: its participant's number and each answer with its
+    trial's target label (aborted trials left out)."""
+
+    session_id: int
+    participant_number: int
+    answers: tuple[tuple[str, TrialAnswer], ...]
+
+
+def asks_questions(conn: sqlite3.Connection, kind: str) -> bool:
+    """Whether the file's experiment sessions are of the task ``kind`` and it has answers (a study of a task that
+    asks: its report reads them)."""
+    row = conn.execute("SELECT protocol_json FROM sessions WHERE kind = 'experiment' LIMIT 1").fetchone()
+    return row is not None and f'"{kind}"' in str(row[0]) and has_table(conn, TABLE)
+
+
+def answered_sessions(conn: sqlite3.Connection) -> list[AnsweredSession]:
+    """Every experiment session with its answered trials, by participant number."""
+    sessions = conn.execute("SELECT session_id, participant_number FROM sessions WHERE kind = 'experiment' "
+                            "ORDER BY participant_number, session_id").fetchall()
+    labels = {(int(a), int(b)): str(c) for a, b, c in conn.execute(
+        "SELECT session_id, trial_index, target_label FROM trials WHERE outcome != 'aborted'")}
+    answers = trial_answers(conn)
+    return [AnsweredSession(int(sid), int(number), tuple(
+        (labels[(a.session_id, a.trial_index)], a) for a in answers
+        if a.session_id == sid and (a.session_id, a.trial_index) in labels))
+        for sid, number in sessions]
