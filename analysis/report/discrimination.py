@@ -12,7 +12,7 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -21,7 +21,11 @@ from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
 from analysis.stats.psychometric import PsychometricFit
 
-__all__ = ["CODEBOOK", "BlockResult", "write_discrimination"]
+if TYPE_CHECKING:
+    from protocol.storage.trial_answers import TrialAnswer
+
+__all__ = ["CODEBOOK", "BlockResult", "discrimination_study", "study_blocks", "write_discrimination",
+           "write_discrimination_report"]
 
 #: Every column of the two tables: (file, column, unit, meaning).
 CODEBOOK: tuple[tuple[str, str, str, str], ...] = (
@@ -88,8 +92,10 @@ def write_discrimination(results: Sequence[BlockResult], folder: Path) -> list[s
     fits = pd.DataFrame([_fit_row(r, label, f) for r in results for label, f in r.fits])
     trials.to_csv(folder / "discrimination_trials.csv", index=False, float_format="%.6g")
     fits.to_csv(folder / "discrimination_fits.csv", index=False, float_format="%.6g")
-    pd.DataFrame(CODEBOOK, columns=["file", "column", "unit", "meaning"]).to_csv(
-        folder / "discrimination_codebook.csv", index=False)
+    present = {("discrimination_trials.csv", c) for c in trials.columns} | {("discrimination_fits.csv", c)
+                                                                          for c in fits.columns}
+    pd.DataFrame([e for e in CODEBOOK if (e[0], e[1]) in present], columns=["file", "column", "unit", "meaning"]
+                 ).to_csv(folder / "discrimination_codebook.csv", index=False)
     files = ["discrimination_trials.csv", "discrimination_fits.csv", "discrimination_codebook.csv"]
     (folder / "figures").mkdir()
     for r in results:
@@ -133,3 +139,87 @@ def psychometric_figure(r: BlockResult) -> Figure:
         ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     return fig
+
+
+def discrimination_study(databases: Sequence[str]) -> bool:
+    """Whether the study's experiment sessions are of a task that asks (force discrimination): its report is the
+    discrimination section (:func:`write_discrimination_report`)."""
+    from protocol.storage.schema import connect_readonly
+    from protocol.storage.trial_answers import asks_questions
+
+    for db in databases:
+        conn = connect_readonly(db)
+        try:
+            if not asks_questions(conn, "force_discrimination"):
+                return False
+        finally:
+            conn.close()
+    return True
+
+
+def study_blocks(databases: Sequence[str]) -> list[BlockResult]:
+    """Each participant's answered experiment trials read from the study databases (``trial_answers`` beside
+    ``trials``: aborted trials and trials without an answer left out) and fitted per reference."""
+    from analysis.stats.psychometric import fit_psychometric
+    from protocol.storage.schema import connect_readonly
+    from protocol.storage.trial_answers import answered_sessions
+
+    out: list[BlockResult] = []
+    for db in databases:
+        conn = connect_readonly(db)
+        try:
+            sessions = answered_sessions(conn)
+        finally:
+            conn.close()
+        for session in sessions:
+            rows = [_answer_row(session.participant_number, label, a) for label, a in session.answers
+                    if a.answer is not None]
+            refs = dict.fromkeys((str(r["target_label"]), float(r["reference_n"])) for r in rows)
+            fits = [(label, fit_psychometric(ref, [float(r["delta_n"]) for r in rows if r["target_label"] == label],
+                                             [bool(r["correct"]) for r in rows if r["target_label"] == label]))
+                    for label, ref in refs]
+            fits.sort(key=lambda lf: lf[1].reference_n)  # the references from the lightest
+            if fits:
+                out.append(BlockResult(session.participant_number, rows, fits))
+    return out
+
+
+def _answer_row(participant: int, label: str, a: TrialAnswer) -> dict[str, Any]:
+    """One answered trial as a row of ``discrimination_trials.csv`` (from a study database: no ``peak_n``)."""
+    v = a.values
+    return {"participant": participant, "target_label": label, "reference_n": v["reference_n"],
+            "trial": a.trial_index, "delta_n": v["delta_n"], "comparison_first": int(v["comparison_first"]),
+            "first_n": v["felt_first_n"], "second_n": v["felt_second_n"], "answer": int(str(a.answer)),
+            "correct": int(v["correct"])}
+
+
+def write_discrimination_report(results: Sequence[BlockResult], folder: Path, methods: str) -> list[str]:
+    """The study's discrimination report into ``folder``: the tables, codebook and figures
+    (:func:`write_discrimination`) and ``report.html``, a row per participant and reference (JND and Weber
+    fraction with their 95 % intervals) and each participant's psychometric figure."""
+    import html
+
+    files = write_discrimination(results, folder)
+
+    def cell(v: float, fmt: str) -> str:
+        return format(v, fmt) if math.isfinite(v) else "open"
+
+    rows = "".join(
+        f"<tr><td>P{r.participant:02d}</td><td>{html.escape(label)}</td><td>{f.reference_n:.3f}</td>"
+        f"<td>{f.n_trials}</td><td>{f.jnd_n * 1000:.1f} [{cell(f.jnd_lo_n * 1000, '.1f')}, "
+        f"{cell(f.jnd_hi_n * 1000, '.1f')}]</td><td>{f.weber:.3f} [{cell(f.weber_lo, '.3f')}, "
+        f"{cell(f.weber_hi, '.3f')}]</td><td>{f.lapse:.3f}</td></tr>"
+        for r in results for label, f in r.fits)
+    figures = "".join(f'<figure><img src="{n}" alt="psychometric curves, {n[-7:-4]}"></figure>'
+                      for n in files if n.startswith("figures/"))
+    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>Force discrimination</title></head><body>"
+            f"<h1>Force discrimination</h1><p>{html.escape(methods)}</p>"
+            "<p>One row per participant and reference, from that participant's answered trials only (no pooling "
+            "across participants); trials without an answer and aborted trials are left out.</p>"
+            "<table border='1' cellspacing='0' cellpadding='3'><tr><th>participant</th><th>reference</th>"
+            "<th>reference (N)</th><th>trials</th><th>JND (mN) [95 %]</th><th>Weber fraction [95 %]</th>"
+            f"<th>lapse</th></tr>{rows}</table><h2>Psychometric curves</h2>{figures}"
+            "<p>Files: discrimination_trials.csv, discrimination_fits.csv, discrimination_codebook.csv.</p>"
+            "</body></html>")
+    (folder / "report.html").write_text(page, encoding="utf-8")
+    return [*files, "report.html"]

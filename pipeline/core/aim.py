@@ -13,13 +13,12 @@ sampled finely enough) gives more.
 
 from __future__ import annotations
 
-import itertools
-import math
-from bisect import bisect_right
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
-__all__ = ["TrialAim", "TrialParticipant"]
+from pipeline.core.force_program import check_knots, knot_value
+
+__all__ = ["AnsweringParticipant", "TrialAim", "TrialParticipant", "TrialQuestion"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,13 +44,7 @@ class TrialAim:
     practice: bool = False
 
     def __post_init__(self) -> None:
-        if not self.knots:
-            raise ValueError("TrialAim.knots is empty: a trial's target needs at least one (t_s, force_n) knot")
-        times = [t for t, _ in self.knots]
-        if times[0] != 0.0 or any(not b > a for a, b in itertools.pairwise(times)):
-            raise ValueError(f"TrialAim.knots times = {times!r}: must start at 0 s and increase")
-        if not all(math.isfinite(f) for _, f in self.knots):
-            raise ValueError(f"TrialAim.knots forces = {[f for _, f in self.knots]!r}: must be finite")
+        check_knots(self.knots, "TrialAim", "a trial's target")
 
     @classmethod
     def constant(cls, force_n: float, haptic_on: bool, *, gauge: bool = False, practice: bool = False) -> TrialAim:
@@ -66,13 +59,7 @@ class TrialAim:
 
     def force_n(self, t_s: float) -> float:
         """The target at trial time ``t_s`` (s since the cue; before 0: the first knot's)."""
-        k = bisect_right(self.knots, t_s, key=lambda knot: knot[0])
-        if k == 0:
-            return self.knots[0][1]
-        if k == len(self.knots):
-            return self.knots[-1][1]
-        (t0, f0), (t1, f1) = self.knots[k - 1], self.knots[k]
-        return f0 + (f1 - f0) * (t_s - t0) / (t1 - t0)
+        return knot_value(self.knots, t_s)
 
 
 class TrialParticipant(Protocol):
@@ -88,4 +75,23 @@ class TrialParticipant(Protocol):
 
     def end_trial(self, t_s: float) -> None:
         """The trial ended: rest until the next cue."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class TrialQuestion:
+    """A trial's question, as a simulated participant is asked it: the force the device rendered in each of the
+    trial's intervals (N, what the hand felt), the answers allowed, and the trial's index in its block."""
+
+    felt_n: tuple[float, ...]
+    keys: tuple[str, ...]
+    trial_index: int
+
+
+@runtime_checkable
+class AnsweringParticipant(Protocol):
+    """A simulated participant that answers a trial's question (a task that asks one: force discrimination)."""
+
+    def answer(self, question: TrialQuestion) -> str:
+        """One of ``question.keys``."""
         ...

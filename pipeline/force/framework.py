@@ -435,6 +435,23 @@ class HapticFramework:
             qx, qy, qz, ox, oy, oz,
         )
 
+    def step_commanded(self, fx: float, fy: float, fz: float, command_n: float, enabled: bool,
+                       dt_s: float) -> tuple[float, ...]:
+        """One tick that renders a commanded force (:class:`pipeline.core.force_program.ForceProgram`) instead of the
+        scaled sensor force: the stages up to the scaled force as :meth:`step` computes them (the record keeps what
+        the sensor measured), the rendered force the safety stage's output for ``command_n`` along the haptic
+        frame's ``z`` -- clamped, slew-limited, faded in and out, ramped to zero by a fault, as any force.
+
+        :meth:`step` runs as ever and its safety stage's state is put back before the command takes its place, so
+        the stage advances once per tick (the fused step's state is the governor's own: :meth:`SafetyGovernor.state`).
+        """
+        g = self.safety
+        before = g.state()
+        stages = self.step(fx, fy, fz, enabled, dt_s)
+        g.load_state(before)
+        ox, oy, oz = g.step(0.0, 0.0, command_n, enabled, dt_s)
+        return (*stages[:-3], ox, oy, oz)
+
 
 #: Version of :meth:`HapticFramework.snapshot`'s layout.
 SNAPSHOT_VERSION = 1

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.core.force_program import ForceProgram
 from pipeline.force.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
 from pipeline.force.payload_compensator import PayloadCalibration
 
@@ -94,7 +95,7 @@ class ReplayOutputs:
 
 
 #: The log entries :func:`replay` applies, as the loop writes them (``pipeline.runtime.loop``); any other is refused.
-REPLAY_LOG_KINDS: tuple[str, ...] = ("pose", "refine", "reset", "calibration", "device_limit", "zero")
+REPLAY_LOG_KINDS: tuple[str, ...] = ("pose", "refine", "reset", "calibration", "device_limit", "zero", "program")
 
 
 def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> ReplayOutputs:
@@ -139,6 +140,9 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
     refine_bias = fw.refine_bias
     safety = fw.safety
     keep, keep_gain = outs.append, gains.append
+    periods = inputs.period_ns.tolist()
+    program: ForceProgram | None = None
+    elapsed_ns = 0
     for k in range(n):
         evs = by_tick.get(ticks[k])
         if evs is not None:
@@ -155,10 +159,17 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
                     fw.set_device_limit(float(payload))  # type: ignore[arg-type]  # as above
                 elif kind == "zero":
                     safety.force_zero()
+                elif kind == "program":  # a commanded force from this tick on (its time from 0 here)
+                    program = None if payload is None else ForceProgram.from_json(payload)  # type: ignore[arg-type]  # as above
+                    elapsed_ns = -periods[k]
         fx, fy, fz, tx, ty, tz = raw[k]
         if refine and not latched[k]:
             refine_bias(fx, fy, fz, tx, ty, tz)
-        keep(step(fx, fy, fz, enabled[k], dts[k]))
+        if program is None:
+            keep(step(fx, fy, fz, enabled[k], dts[k]))
+        else:  # the loop's clock advanced by each tick's period since the program's tick
+            elapsed_ns += periods[k]
+            keep(fw.step_commanded(fx, fy, fz, program.force_n(elapsed_ns), enabled[k], dts[k]))
         keep_gain(safety.gain)
     stages = np.array(outs, dtype=np.float64).reshape(n, len(STEP_FIELDS))
     # |filtered|, as the loop forms it: math.hypot per record (numpy's hypot may round differently)

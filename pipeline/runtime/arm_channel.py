@@ -21,6 +21,7 @@ from collections import deque
 from typing import TYPE_CHECKING, Protocol
 
 from pipeline.core.clock import Clock
+from pipeline.core.force_program import ForceProgram
 from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
 from pipeline.devices.rig import RigArm
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
@@ -103,6 +104,10 @@ class ArmChannel:
         self._device_limit_n = math.inf  # the device's derated force limit as last seen
         self._derating = False
         self._derate_check = False  # the thermal limit is below the safety stage's own: measure what it cuts
+        #: The commanded force rendered instead of the sensor's (None: Algorithm 1's) and the clock reading of the
+        #: tick that applied it (:class:`pipeline.runtime.loop_messages.CommandForce`).
+        self.program: ForceProgram | None = None
+        self.program_t0_ns = 0
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self, now: int, period_ns: int, dt_s: float) -> None:
@@ -156,7 +161,8 @@ class ArmChannel:
         # the stages by their names in pipeline.core.tick_record.STEP_FIELDS (the step's one definition of its output)
         (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
          haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s)
+         ) = (fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s) if self.program is None
+              else self._commanded(raw_fx, raw_fy, raw_fz, enabled, dt_s, now))
         # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
         self.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
@@ -311,6 +317,18 @@ class ArmChannel:
         ev = LoopEvent(t_ns, kind, self.faults if faults is None else faults, detail, self.name)
         self.loop.emit(ev)
         return ev
+
+    def _commanded(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float, now: int) -> tuple[float, ...]:
+        """The tick's stages with the program's force at ``now`` rendered (:meth:`HapticFramework.step_commanded`)."""
+        program = self.program
+        assert program is not None  # (asked only while one runs)
+        return self.framework.step_commanded(fx, fy, fz, program.force_n(now - self.program_t0_ns), enabled, dt_s)
+
+    def command(self, program: ForceProgram | None, now: int) -> None:
+        """Render ``program`` from this tick on (None: the sensor's force again); logged for replay."""
+        self.program, self.program_t0_ns = program, now
+        if self.loop.recording:
+            self.log("program", None if program is None else program.to_json())
 
     def log(self, what: str, value: object) -> None:
         """Append to the arm's replay log, at the loop's current tick."""

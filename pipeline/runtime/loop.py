@@ -65,6 +65,7 @@ from pipeline.runtime.loop_messages import (
     RECORD_FIELDS,
     AllowBiasRefinement,
     Command,
+    CommandForce,
     ControllerDetached,
     LatchFault,
     LoopEvent,
@@ -323,6 +324,8 @@ class HapticLoop(PacedTicks):
             self._snapshot_due = int(cmd.token)  # taken once this tick's commands are all applied
         elif isinstance(cmd, StopRecording):
             self.recording = False
+        elif isinstance(cmd, CommandForce):  # the first arm's device: the one the participant holds
+            self._first.command(cmd.program, now)
         else:  # pragma: no cover - typed callers cannot get here
             raise TypeError(f"unknown loop command {cmd!r}")
 

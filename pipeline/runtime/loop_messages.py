@@ -15,12 +15,14 @@ from typing import TYPE_CHECKING, NamedTuple
 from pipeline.core import tick_record
 
 if TYPE_CHECKING:
+    from pipeline.core.force_program import ForceProgram
     from pipeline.force.payload_compensator import PayloadCalibration
 
 __all__ = [
     "RECORD_FIELDS",
     "AllowBiasRefinement",
     "Command",
+    "CommandForce",
     "ControllerDetached",
     "LatchFault",
     "LoopEvent",
@@ -115,12 +117,24 @@ class StartRecording:
 
 
 @dataclass(frozen=True, slots=True)
+class CommandForce:
+    """Render ``program`` from this tick on instead of the sensor's force (None: the sensor's again, Algorithm 1).
+
+    The program's time starts at the tick that applies the command; its force passes the safety stage as every
+    rendered force does (:meth:`pipeline.force.framework.HapticFramework.step_commanded`).  Logged for replay as
+    ``(tick, "program", knots or None)``.
+    """
+
+    program: ForceProgram | None
+
+
+@dataclass(frozen=True, slots=True)
 class StopRecording:
     """Stop logging for replay (the log is left for its reader to drain)."""
 
 
 Command = (SetHaptics | Mark | ResetFaults | OperatorStop | ControllerDetached | AllowBiasRefinement | SetCalibration
-           | LatchFault | StartRecording | StopRecording)
+           | LatchFault | StartRecording | StopRecording | CommandForce)
 
 
 class LoopEvent(NamedTuple):

@@ -88,8 +88,9 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.core.aim import TrialAim
+from pipeline.core.aim import TrialAim, TrialQuestion
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.participant_params import ParticipantParams
@@ -246,9 +247,24 @@ class SimulatedParticipant:
         if f is None:  # a target that moves: the tracking hand's trial
             self._pending = ("track", aim)
             return
+        if f == 0.0:  # the stylus held still while the device presents a force (discrimination): at rest
+            self._pending = ("end", float(t_s))
+            return
         if not (math.isfinite(f) and f > 0):
             raise ValueError(f"target_force_n = {f!r}: must be a finite force > 0")
         self._pending = ("begin", f, aim.haptic_on, float(t_s), aim.gauge, aim.practice)
+
+    def answer(self, question: TrialQuestion) -> str:
+        """A two-interval question (force discrimination): which felt stronger, ``"1"`` or ``"2"``, by this
+        participant's own perception (:class:`pipeline.sim.discrimination_observer.DiscriminationObserver`, drawn
+        from its seed: its Weber fraction and lapse rate)."""
+        first, second = question.felt_n
+        return str(self.observer.answer(first, second, 0, question.trial_index))
+
+    @property
+    def observer(self) -> DiscriminationObserver:
+        """This participant's force perception (its own draws, apart from its hand's)."""
+        return DiscriminationObserver.drawn(self.seed, 0)
 
     def end_trial(self, t_s: float) -> None:
         """Retract to the start pose (y_c = 0) with a 0.4 s minimum-jerk move, then idle."""

@@ -1,9 +1,10 @@
 """The experimenter's requests to a running session, from any thread: queued here, applied by the session runner.
 
-:meth:`protocol.runner.session.SessionRunner.pause`, ``resume``, ``abort_trial``, ``abort_session``, ``note`` and
-``answer`` may be called from any thread (the GUI's engine, a headless driver's signal handler); each only queues a
-:class:`Request`.  The runner takes the queue at the next block of records it processes and applies each request at
-that block's first sample time, so a request has one moment on the session clock and never races the trial machine.
+:meth:`protocol.runner.session.SessionRunner.pause`, ``resume``, ``abort_trial``, ``abort_session``, ``note``,
+``answer`` and ``answer_trial`` may be called from any thread (the GUI's engine, a headless driver's signal
+handler); each only queues a :class:`Request`.  The runner takes the queue at the next block of records it
+processes and applies each request at that block's first sample time, so a request has one moment on the session
+clock and never races the trial machine.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 __all__ = ["REQUEST_KINDS", "Request", "Requests"]
 
 #: What the experimenter may ask of a running session.
-REQUEST_KINDS = ("pause", "resume", "abort_trial", "abort_session", "note", "answer")
+REQUEST_KINDS = ("pause", "resume", "abort_trial", "abort_session", "note", "answer", "trial_answer")
 
 
 @dataclass(frozen=True, slots=True)

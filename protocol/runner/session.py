@@ -218,6 +218,15 @@ class SessionRunner:
         """The participant's answers to the questionnaire shown (:mod:`protocol.runner.questionnaire_wait`)."""
         self.requests.put(Request("answer", questionnaire, block, answers=tuple(answers.items())))
 
+    def answer_trial(self, key: str) -> None:
+        """The participant's answer to the running trial's question (a task that asks one: force discrimination's
+        ``"1"``/``"2"``), taken at the next block; ``ValueError`` (one line) for a key the task does not allow."""
+        keys = self.plan.protocol.task.answer_keys
+        if key not in keys:
+            raise ValueError(f"answer = {key!r}: the {self.plan.protocol.task.title} task's answers are "
+                             f"{', '.join(repr(k) for k in keys) or 'none (it asks no question)'}")
+        self.requests.put(Request("trial_answer", key))
+
     def records_lost(self, count: int) -> None:
         """The caller could not read ``count`` records (the ring lapped it): the running trial has a gap."""
         self.deliveries.lost(count)
@@ -341,6 +350,10 @@ class SessionRunner:
             for r in requests:
                 if r.kind in ("note", "answer"):
                     self._annotate(t_ns, r)
+                    continue
+                if r.kind == "trial_answer":
+                    if why := self.trials.answer(t_ns, r.detail):
+                        self.desk.event(t_ns, "answer", why)
                     continue
                 if r.kind in ("pause", "resume"):
                     self.desk.set_paused(r.kind == "pause")

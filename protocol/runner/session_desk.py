@@ -19,6 +19,7 @@ from protocol.study.clock import SessionClock
 from protocol.study.config import ProtocolConfig
 from protocol.study.design import TrialSpec
 from protocol.study.trial import PHASE_CODES, TrialPhase
+from protocol.tasks.base import Answered
 
 __all__ = ["SessionDesk", "SessionPlan", "SessionState", "trial_words"]
 
@@ -59,6 +60,8 @@ class SessionPlan:
         The rig's arms by name (() or one: events stored as ever); the task arm's records are the runner's.
     answered
         The questionnaires (name, block) the session has answers of (a resume asks them not again).
+    trial_answers
+        The trials answered so far, for a task that asks (its procedure continues from them on resume).
     answers_seed
         Who answers the questionnaires: the simulated participant with this seed, by its rule
         (:mod:`protocol.study.sim_answers`), or a person on the participant screen (None).
@@ -76,6 +79,8 @@ class SessionPlan:
     arms: tuple[str, ...] = ()
     answered: tuple[tuple[str, str], ...] = ()
     answers_seed: int | None = None
+    #: The session's answered trials so far (a task that asks: its procedure is rebuilt from them on resume).
+    trial_answers: tuple[Answered, ...] = ()
 
 
 @dataclass

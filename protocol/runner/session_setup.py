@@ -43,6 +43,7 @@ from protocol.storage import Recorder, SessionInfo, StorageError, StudyDatabase,
 from protocol.storage.annotations import answered_blocks
 from protocol.storage.damage import recording_damage
 from protocol.storage.recordings import marked_records
+from protocol.storage.trial_answers import trial_answers
 from protocol.study.clock import SessionClock
 from protocol.study.config import ProtocolConfig, protocol_from_dict
 from protocol.study.covariates import checked_values
@@ -56,6 +57,7 @@ from protocol.study.design import (
     schedule_to_json,
 )
 from protocol.study.records import AbortCause, Outcome, TrialRecord, trial_id_of
+from protocol.tasks.base import Answered
 
 __all__ = [
     "OpenedSession",
@@ -153,6 +155,8 @@ class OpenedSession:
     segment: int = 0
     #: The questionnaires (name, block) the session has answers of (a resume asks them not again).
     answered: tuple[tuple[str, str], ...] = ()
+    #: The trials answered so far (a task that asks: its procedure continues from them).
+    trial_answers: tuple[Answered, ...] = ()
 
     @property
     def participant_seed(self) -> int:
@@ -167,7 +171,7 @@ class OpenedSession:
             start_position=self.start_position, clock_offset_s=self.clock_offset_s,
             initial_pause_s=self.initial_pause_s, segment=self.segment, seed=self.seed,
             live_force_aid=self.live_force_aid, arms=arms, answered=self.answered,
-            answers_seed=self.participant_seed if simulated_answers else None,
+            answers_seed=self.participant_seed if simulated_answers else None, trial_answers=self.trial_answers,
         )
 
 
@@ -319,6 +323,7 @@ def open_resumed_session(
         clock_offset_s=offset_s, initial_pause_s=protocol.trial.pause_s,
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
         resumed=True, notes=notes, segment=segment, answered=tuple(answered_blocks(db.conn, session_id)),
+        trial_answers=stored_answers(db, session_id),
     )
 
 
@@ -489,3 +494,10 @@ def store_rehearsal_plan(runner: SessionRunner, plan: object, t_ns: int = 0) -> 
     t_s = runner.session_time_s(t_ns)
     text = f"{plan}: planned, to be rehearsed on the simulated rig (not a device failure)"
     runner.recorder.call(lambda db: db.insert_event(runner.session_id, t_s, FAULT_REHEARSAL_EVENT, text))
+
+
+def stored_answers(db: StudyDatabase, session_id: int) -> tuple[Answered, ...]:
+    """A session's answered trials, as its task's procedure rebuilds from them (a resume continues the block)."""
+    labels = {int(r["trial_index"]): str(r["target_label"]) for r in db.trial_rows(session_id)}
+    return tuple(Answered(labels.get(a.trial_index, ""), a.values, a.answer)
+                 for a in trial_answers(db.conn, session_id))

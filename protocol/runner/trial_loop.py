@@ -18,7 +18,9 @@ appended at the end of the schedule (``append``, the default) or re-inserted at 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
+import math
 from collections.abc import Callable
 
 import numpy as np
@@ -27,10 +29,12 @@ from pipeline.core.aim import TrialParticipant
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from protocol.runner.deliveries import Deliveries
 from protocol.runner.session_desk import SessionDesk, SessionPlan, trial_words
+from protocol.runner.trial_stimuli import TrialStimuli
 from protocol.storage import StudyDatabase
+from protocol.storage.trial_answers import insert_answer
 from protocol.study.design import HapticMode, TrialSpec, requeue_aborted, schedule_to_json
 from protocol.study.records import AbortCause, Outcome, TrialRecord
-from protocol.study.trial import PHASE_CODES, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
+from protocol.study.trial import PHASE_CODES, RUNNING, PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 
 __all__ = ["TrialLoop"]
 
@@ -68,20 +72,30 @@ class TrialLoop:
         #: The trials finished in this run, in order.
         self.finished: list[TrialRecord] = []
         self._rng = np.random.default_rng([plan.seed, plan.session_id, 7])
+        #: A task that presents a force and asks about it: each trial's stimulus and answer.
+        self.stimuli = TrialStimuli(protocol.task, plan.seed, plan.session_id, plan.trial_answers, desk.submit,
+                                    participant)
 
     @property
     def running(self) -> TrialSpec | None:
         """The trial that is cued or running (None between trials)."""
         m = self.machine
-        return m.spec if m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE) else None
+        return m.spec if m.phase in RUNNING else None
 
     def feed(self, rows: np.ndarray) -> None:
         """The trial machine over records that need no abort; each trial's end is committed as one transaction."""
         m = self.machine
         spec = m.spec
-        running = m.phase in (TrialPhase.CUED, TrialPhase.ACTIVE)
+        running = m.phase in RUNNING
         t_ns_all = rows["t_ns"]
-        events = m.feed(zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist(), strict=True))
+        if spec is not None and running:
+            self.stimuli.note(rows, spec.index)
+        events: list[PhaseChanged | TrialFinished] = m.feed(
+            zip(t_ns_all.tolist(), rows["force_n"].tolist(), rows["trial_index"].tolist(), strict=True))
+        if spec is not None and m.phase is TrialPhase.ANSWER and m.cue_ns is not None:
+            key = self.stimuli.simulated_answer(spec, m.cue_ns)  # a simulated participant answers at once
+            if key is not None:
+                events.extend(m.answer(int(t_ns_all[-1]), key))
         if spec is not None and running:
             # only a running trial's records are its samples (records after an abort still carry its mark)
             ended = next((e for e in events if isinstance(e, TrialFinished)), None)
@@ -107,13 +121,25 @@ class TrialLoop:
         submit(AllowBiasRefinement(False))
         submit(SetHaptics(spec.haptic_mode is HapticMode.ON))
         submit(Mark(spec.index, PHASE_CODES[TrialPhase.ACTIVE]))
+        self.stimuli.cue(spec)  # (after the mark: the same tick applies both)
         if self.participant is not None:
             self.participant.begin_trial(self.task.aim(spec, self.live_force_aid), self.participant_time())
+
+    def answer(self, t_ns: int, key: str) -> str:
+        """A person's answer to the running trial's question, at ``t_ns``; "" when taken, else why not (no
+        question open: the answer came before it was asked, or after the trial ended)."""
+        m = self.machine
+        if m.phase is not TrialPhase.ANSWER:
+            return f"answer {key!r} ignored: no question is open ({m.phase})"
+        with self.desk.recorder.atomic():
+            for ev in m.answer(t_ns, key):
+                self._on_event(ev)
+        return ""
 
     def abort(self, t_ns: int, reason: str, cause: AbortCause | str, requeue: bool = True) -> None:
         """Abort the trial that is cued or running (if any), storing its cause; re-queue it per the policy."""
         m = self.machine
-        if m.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+        if m.phase not in RUNNING:
             return
         spec = m.spec
         assert spec is not None
@@ -152,6 +178,12 @@ class TrialLoop:
             segment=self.segment, ticks=ticks,
         )
         desk.recorder.trial(record)
+        answer = self.stimuli.finished(ev, desk.time_s(ev.end_ns))
+        if answer is not None:  # in the trial's transaction; the listeners see it on the record
+            desk.recorder.call(lambda db: insert_answer(db.conn, answer))
+            correct = answer.values.get("correct", math.nan)
+            record = dataclasses.replace(record, answer=answer.answer,
+                                         answer_correct=correct == 1.0 if math.isfinite(correct) else None)
         desk.mark(ev.end_ns, ev.outcome.value, ev.reason, spec)
         self.finished.append(record)
         st = desk.state

@@ -71,6 +71,8 @@ def participant_rows(conn: sqlite3.Connection, code: str) -> ParticipantRows | N
         "notes": ("SELECT * FROM notes WHERE session_id = ? ORDER BY rowid", has_table(conn, "notes")),
         "questionnaire_answers": ("SELECT * FROM questionnaire_answers WHERE session_id = ? ORDER BY rowid",
                                   has_table(conn, "questionnaire_answers")),
+        "trial_answers": ("SELECT * FROM trial_answers WHERE session_id = ? ORDER BY trial_index",
+                          has_table(conn, "trial_answers")),
         "recordings": ("SELECT * FROM recordings WHERE session_id = ? ORDER BY segment", has_table(conn, "recordings")),
         "session_blocks": (f"SELECT {blocks_cols} FROM session_blocks WHERE session_id = ? ORDER BY segment, block",
                            has_table(conn, "session_blocks")),

@@ -196,7 +196,7 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
                     if has_table(c, table):
                         c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
             erase_lsl_rows(c, sid)  # the external streams recorded with it, and its runs' clock links
-            for table in ("notes", "questionnaire_answers"):  # (a file made before them has none)
+            for table in ("notes", "questionnaire_answers", "trial_answers"):  # (a file made before them has none)
                 if has_table(c, table):
                     c.execute(f"DELETE FROM {table} WHERE session_id = ?", (sid,))
             c.execute("DELETE FROM trials WHERE session_id = ?", (sid,))

@@ -257,8 +257,12 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     _check_together(f, task, timing, training, tuple(modes), targets=tuple(labels),
                     forces=tuple(t.force_n for t in targets))
     covariates = covariates_from_tables(f, top.get("covariates"))
+    own_count = task.trials_per_cell(per_cell)  # a task whose block has its own count (discrimination's task.trials)
+    if own_count != per_cell and "trials_per_cell" in design:
+        raise f.fail("design.trials_per_cell", per_cell, f"leave it out: the {task.title} task's trials per target "
+                     f"are its own ({own_count})")
     return ProtocolConfig(
-        name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=per_cell,
+        name=name, targets=tuple(targets), modes=tuple(modes), trials_per_cell=own_count,
         ordering=ordering, abort_policy=policy, trial=timing, training=training, version=1, task_arm=task_arm,
         task=task, covariates=covariates,
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),

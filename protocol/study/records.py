@@ -153,6 +153,9 @@ class TrialRecord:
         How the loop ran over its records.
     segment, first_tick, last_tick
         Where its records are in the session's recording (None: in ``samples``, or none).
+    answer, answer_correct
+        A task that asks (force discrimination): the participant's answer and whether it was right, for the live
+        views (stored in ``trial_answers``, not in the row: :mod:`protocol.storage.trial_answers`).
     """
 
     session_id: int
@@ -173,6 +176,8 @@ class TrialRecord:
     segment: int | None = None
     first_tick: int | None = None
     last_tick: int | None = None
+    answer: str | None = None
+    answer_correct: bool | None = None
 
     def __post_init__(self) -> None:
         # the enums are the record's vocabulary: a stray string (or a typo) fails here, not in the database

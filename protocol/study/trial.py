@@ -9,6 +9,7 @@ Phases (bluesky-style explicit table)::
 
     IDLE ──start──► CUED ──first sample marked with the trial──► ACTIVE
     ACTIVE ──hold complete / 12 s / abort──► PAUSE ──2 s──► IDLE
+    ACTIVE ──rule complete, a task that asks an answer──► ANSWER ──answer / its window over / abort──► PAUSE
 
 The cue (the target word) is shown when the trial starts, and only then.  The
 trial's time origin is the first sample the loop marked with the trial's
@@ -18,6 +19,12 @@ same tick, so t = 0 is the first sample recorded under the trial's condition.
 What ends a trial early as a success is its task's rule (:meth:`protocol.tasks.base.Task.rule`, fed every sample);
 the finished trial is judged again by the task's offline form (:meth:`protocol.tasks.base.Task.judge`), which
 computes its metrics, and the two verdicts must agree.
+
+A task that asks the participant a question (:attr:`protocol.tasks.base.Task.answer_keys`: force discrimination's
+"which was stronger, 1 or 2?") is asked when its rule completes: the machine waits in ANSWER for
+:meth:`TrialMachine.answer` until the task's answer window closes (:meth:`protocol.tasks.base.Task.answer_by_s`);
+the trial's samples and metrics are those up to the question, its end the answer (or the window's end, with no
+answer).  A key outside the task's is refused in one line (``ValueError``).
 """
 
 from __future__ import annotations
@@ -34,7 +41,8 @@ from protocol.tasks.base import Task, TrialRule
 from protocol.tasks.force_regulation import ForceRegulation
 from protocol.tasks.window import TrialMetrics
 
-__all__ = ["TRANSITIONS", "PhaseChanged", "TrialFinished", "TrialMachine", "TrialMachineError", "TrialPhase"]
+__all__ = ["RUNNING", "TRANSITIONS", "PhaseChanged", "TrialFinished", "TrialMachine", "TrialMachineError",
+           "TrialPhase"]
 
 
 class TrialPhase(StrEnum):
@@ -44,18 +52,24 @@ class TrialPhase(StrEnum):
     CUED = "cued"
     ACTIVE = "active"
     PAUSE = "pause"
+    #: The trial's stimulus is over and its question asked: waiting for the participant's answer.
+    ANSWER = "answer"
 
 
 TRANSITIONS: Final[dict[TrialPhase, frozenset[TrialPhase]]] = {
     TrialPhase.IDLE: frozenset({TrialPhase.CUED}),
     TrialPhase.CUED: frozenset({TrialPhase.ACTIVE, TrialPhase.PAUSE}),
-    TrialPhase.ACTIVE: frozenset({TrialPhase.PAUSE}),
+    TrialPhase.ACTIVE: frozenset({TrialPhase.PAUSE, TrialPhase.ANSWER}),
+    TrialPhase.ANSWER: frozenset({TrialPhase.PAUSE}),
     TrialPhase.PAUSE: frozenset({TrialPhase.IDLE}),
 }
 
+#: The phases in which a trial runs (it may be aborted, its records are its own).
+RUNNING: Final[frozenset[TrialPhase]] = frozenset({TrialPhase.CUED, TrialPhase.ACTIVE, TrialPhase.ANSWER})
+
 #: Integer phase codes stamped into the loop's samples (the ``phase`` column).
 PHASE_CODES: Final[dict[TrialPhase, int]] = {
-    TrialPhase.IDLE: 0, TrialPhase.CUED: 1, TrialPhase.ACTIVE: 2, TrialPhase.PAUSE: 3,
+    TrialPhase.IDLE: 0, TrialPhase.CUED: 1, TrialPhase.ACTIVE: 2, TrialPhase.PAUSE: 3, TrialPhase.ANSWER: 4,
 }
 
 
@@ -83,6 +97,8 @@ class TrialFinished:
     end_ns: int
     metrics: TrialMetrics
     reason: str = ""
+    #: The participant's answer (a task that asks one; None: none asked, or none given within its window).
+    answer: str | None = None
 
 
 class TrialMachine:
@@ -111,6 +127,8 @@ class TrialMachine:
         self._f: list[float] = []
         self._cap_ns = int(round(timing.max_trial_s * 1e9))
         self._pause_ns = int(round(timing.pause_s * 1e9))
+        self._asks = bool(self.task.answer_keys)
+        self._answer_by_ns = int(round(self.task.answer_by_s(timing.max_trial_s) * 1e9))
 
     def _go(self, new: TrialPhase, t_ns: int) -> PhaseChanged:
         if new not in TRANSITIONS[self.phase]:
@@ -141,6 +159,11 @@ class TrialMachine:
         events: list[PhaseChanged | TrialFinished] = []
         for t_ns, force, mark in samples:
             phase = self.phase
+            if phase is TrialPhase.ANSWER:
+                if t_ns - self.cue_ns > self._answer_by_ns:  # type: ignore[operator]  # set from CUE on
+                    # no answer: the trial ends with none (stored so; its procedure skips it)
+                    events.extend(self._finish(Outcome.SUCCESS, self.cue_ns + self._answer_by_ns))  # type: ignore[operator]  # as above
+                continue
             if phase is TrialPhase.PAUSE:
                 if t_ns >= self.pause_until_ns:  # type: ignore[operator]  # set in PAUSE (no assert on the per-tick path)
                     events.append(self._go(TrialPhase.IDLE, t_ns))
@@ -164,20 +187,37 @@ class TrialMachine:
                 self._t.append(rel)
                 self._f.append(force)
                 if self._rule.feed(rel, force):  # type: ignore[union-attr]  # set from CUE on (no assert on the per-tick path)
+                    if self._asks:  # the question is asked: the trial ends with the answer
+                        events.append(self._go(TrialPhase.ANSWER, t_ns))
+                        continue
                     events.extend(self._finish(Outcome.SUCCESS, t_ns))
                 elif rel == self._cap_ns:
                     events.extend(self._finish(Outcome.TIMEOUT, t_ns))
         return events
 
+    def answer(self, t_ns: int, key: str) -> list[PhaseChanged | TrialFinished]:
+        """The participant's answer to the trial's question (ANSWER only): the trial ends at ``t_ns`` with it.
+
+        Raises ``ValueError`` (one line) for a key the task does not allow, :class:`TrialMachineError` when no
+        question is open.
+        """
+        if key not in self.task.answer_keys:
+            raise ValueError(f"answer = {key!r}: the {self.task.title} task's answers are "
+                             f"{', '.join(self.task.answer_keys) or 'none (it asks no question)'}")
+        if self.phase is not TrialPhase.ANSWER:
+            raise TrialMachineError(f"no question is open in phase {self.phase}")
+        return self._finish(Outcome.SUCCESS, t_ns, answer=key)
+
     def abort(self, t_ns: int, reason: str) -> list[PhaseChanged | TrialFinished]:
         """Abort the current trial (experimenter action); it is recorded as aborted."""
-        if self.phase not in (TrialPhase.CUED, TrialPhase.ACTIVE):
+        if self.phase not in RUNNING:
             raise TrialMachineError(f"no trial to abort in phase {self.phase}")
         if self.cue_ns is None:
             self.cue_ns = t_ns
         return self._finish(Outcome.ABORTED, t_ns, reason)
 
-    def _finish(self, outcome: Outcome, end_ns: int, reason: str = "") -> list[PhaseChanged | TrialFinished]:
+    def _finish(self, outcome: Outcome, end_ns: int, reason: str = "",
+                answer: str | None = None) -> list[PhaseChanged | TrialFinished]:
         spec = self.spec
         assert spec is not None and self.cue_ns is not None
         m = self.task.judge(self._t, self._f, spec, max_trial_s=self.timing.max_trial_s,
@@ -185,7 +225,7 @@ class TrialMachine:
         disagree = outcome is not Outcome.ABORTED and m.success != (outcome is Outcome.SUCCESS)
         if disagree:  # pragma: no cover - one definition
             raise TrialMachineError("the task's live rule disagrees with its offline judgement")
-        done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason)
+        done = TrialFinished(spec, outcome, self.cue_ns, end_ns, m, reason, answer)
         self.pause_until_ns = end_ns + self._pause_ns
         ev = self._go(TrialPhase.PAUSE, end_ns)
         return [done, ev]

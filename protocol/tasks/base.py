@@ -14,7 +14,11 @@ value and what is allowed); everything that runs, shows or analyses a trial asks
   report's figures -- and their words) and the cue event's text (:meth:`Task.cue_text`);
 * **what a simulated participant is told** at the cue (:meth:`Task.aim`, the pipeline's
   :class:`pipeline.core.aim.TrialAim`: what to aim at, when, and with which aid);
-* **its words in the report** (:meth:`Task.rule_words`, :meth:`Task.methods`).
+* **its words in the report** (:meth:`Task.rule_words`, :meth:`Task.methods`);
+* for a task that *presents* a force and *asks* about it (force discrimination): **the question's answers**
+  (:attr:`Task.answer_keys`, asked when the rule completes, until :meth:`Task.answer_by_s`) and **its procedure**
+  (:meth:`Task.stimulus_procedure`: each trial's :class:`Stimulus` -- the commanded force the loop renders and the
+  values that define it -- chosen from the answers so far, and each answer scored), rebuilt from the stored answers.
 
 A trial reaches the task as a :class:`TrialCondition`: its target (label and reference force, as the schedule and
 the ``trials`` table store them) and its haptic mode -- a schedule entry, a stored record, the engine's message and
@@ -33,13 +37,15 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.core.aim import TrialAim
+from pipeline.core.force_program import ForceProgram
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields
 from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics
 
-__all__ = ["BandEdges", "ConstantBand", "Parameter", "Task", "TaskTables", "Timing", "TrialCondition", "TrialRule",
-           "TrialScreen", "TrialTarget", "constant_band", "listed", "metrics_of"]
+__all__ = ["Answered", "BandEdges", "ConstantBand", "Parameter", "Procedure", "Stimulus", "Task", "TaskTables",
+           "Timing", "TrialCondition", "TrialRule", "TrialScreen", "TrialTarget", "constant_band", "listed",
+           "metrics_of"]
 
 
 class TrialCondition(Protocol):
@@ -124,6 +130,15 @@ class TrialScreen:
         What the participant screen says while it shows the band all trial, without the force (a target that
         moves, which the participant follows: ``Follow the target``); "" -- the participant screen shows the band
         only on the training gauge, with the force (the paper's).
+    show_band, ahead_s
+        Whether the participant screen shows the band (False: a task's display of the word only), and how far
+        ahead in trial time it draws the band's course above it (0: the band at present only), s.
+    spans
+        Words the participant screen shows over spans of trial time ``(t0_s, t1_s, word)``: force discrimination's
+        ``first`` and ``second`` while each force is presented.
+    question, answers
+        What the participant screen asks once the trial's question is open (:attr:`Task.answer_keys`), and each
+        answer's key with its words (``("1", "first")``): its buttons, and the keys that give them.
     """
 
     cue_word: str
@@ -131,6 +146,15 @@ class TrialScreen:
     band_label: str
     band_legend: str
     follow: str = ""
+    show_band: bool = True
+    ahead_s: float = 0.0
+    spans: tuple[tuple[float, float, str], ...] = ()
+    question: str = ""
+    answers: tuple[tuple[str, str], ...] = ()
+
+    def word_at(self, t_s: float) -> str:
+        """The word of the span holding trial time ``t_s`` ("" outside them)."""
+        return next((w for a, b, w in self.spans if a <= t_s < b), "")
 
     def band_over(self, t_s: npt.ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None:
         """The band's lower and upper edge at trial times ``t_s`` (s since the cue), N; None without a band."""
@@ -184,6 +208,42 @@ class Parameter:
     decimals: int
 
 
+@dataclass(frozen=True, slots=True)
+class Stimulus:
+    """What a trial presents beyond its target: the force the loop renders as commanded (from the cue on), and the
+    values that define it (stored with the trial's answer: force discrimination's ``delta_n``,
+    ``comparison_first``, ``reference_n``)."""
+
+    program: ForceProgram
+    values: Mapping[str, float]
+
+
+@dataclass(frozen=True, slots=True)
+class Answered:
+    """One trial of a block as its procedure sees it: its target, its stimulus's values and its answer's (scored:
+    ``correct``), and the answer (None: none given)."""
+
+    target_label: str
+    values: Mapping[str, float]
+    answer: str | None
+
+
+class Procedure(Protocol):
+    """A task's procedure over one block (a session): each trial's stimulus, each answer scored.  Its state is a
+    function of the block's :class:`Answered` history only (:meth:`Task.stimulus_procedure` rebuilds it from the stored
+    answers, so a resumed block continues where it stopped)."""
+
+    def next(self, trial: TrialCondition, index: int) -> Stimulus:
+        """The stimulus of the block's trial ``index`` (the schedule's trial index) at ``trial``'s target."""
+        ...
+
+    def answered(self, trial: TrialCondition, stimulus: Stimulus, answer: str | None,
+                 t_s: npt.NDArray[np.float64], rendered_n: npt.NDArray[np.float64]) -> dict[str, float]:
+        """One trial answered: its values to store (the stimulus's and the answer's: what was felt, whether it was
+        right), from the force rendered at trial times ``t_s``; the procedure takes it into its state."""
+        ...
+
+
 #: A task's parameters as the protocol file has them: its ``[task]`` table's fields (``kind`` aside) and the
 #: ``[trial]`` table's fields that are its own.
 TaskTables = tuple[dict[str, Any], dict[str, Any]]
@@ -204,6 +264,8 @@ class Task(ABC):
     trial_fields: ClassVar[frozenset[str]] = frozenset()
     #: Its parameters' columns as the codebook describes them (one per name of :meth:`parameters`).
     described: ClassVar[tuple[Parameter, ...]] = ()
+    #: The answers a trial's question allows (the participant screen's keys); () -- it asks none.
+    answer_keys: ClassVar[tuple[str, ...]] = ()
 
     # -- its parameters ------------------------------------------------------------------------------------------
     @classmethod
@@ -246,6 +308,27 @@ class Task(ABC):
         ``window`` is the error window (``"cue"`` or ``"first_contact"``, :mod:`protocol.tasks.window`); the
         verdict must be the streaming rule's on the same samples.
         """
+
+    def trials_per_cell(self, designed: int) -> int:
+        """The trials of each target × mode cell: the design's (``design.trials_per_cell``), unless the task's block
+        has its own count (force discrimination: ``task.trials`` per reference)."""
+        return designed
+
+    # -- what it presents and asks -------------------------------------------------------------------------------
+    def answer_by_s(self, max_trial_s: float) -> float:
+        """When a trial's answer window closes, s since the cue (a task that asks: its own; default the cap)."""
+        return max_trial_s
+
+    def stimulus_procedure(self, seed: int, block: int, history: Sequence[Answered]) -> Procedure | None:
+        """Its procedure for one block (the study's ``seed``, the block's number: its session), its state rebuilt
+        from the block's answers so far; None -- the task presents no stimulus (the loop renders the sensor's
+        force, Algorithm 1)."""
+        return None
+
+    def felt(self, t_s: npt.NDArray[np.float64], rendered_n: npt.NDArray[np.float64]) -> tuple[float, ...]:
+        """What a trial presented, as a participant felt it: from the force rendered at trial times ``t_s`` (force
+        discrimination: the mean over each interval's plateau); () -- it presents nothing."""
+        return ()
 
     # -- what it shows and tells ---------------------------------------------------------------------------------
     @abstractmethod

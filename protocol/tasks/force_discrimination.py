@@ -18,7 +18,12 @@ training can reach (docs/discrimination.md).  Definitions:
   a Weibull psychometric function's threshold, slope and lapse, updated after each answer, and the next Δ the one of
   least expected posterior entropy; its state is a function of the block's (Δ, answer) history only, so a resumed
   block rebuilds it from the stored trials;
-* **the block ends** after ``trials`` trials per reference (references interleaved trial by trial).
+* **the block ends** after ``trials`` trials per reference (the schedule's cells: references shuffled by the seed);
+* **in a study** (``haptic-study run``, the GUI) the block is a session: at each cue its procedure (the seam's
+  :meth:`~protocol.tasks.base.Task.stimulus_procedure`, rebuilt from the session's stored answers) gives the
+  trial's :class:`~protocol.tasks.base.Stimulus` -- the two-interval command as a
+  :class:`pipeline.core.force_program.ForceProgram` the loop renders through its safety stage -- and after the answer
+  (key ``1`` or ``2``) scores it from the force the loop rendered over each plateau.
 
 Validated when the file is read (one line naming the field, the value and what is allowed): the largest comparison
 within the device's range (``safety.f_max_n``), ramps the safety stage's slew limit can render as shaped, a lead-in
@@ -36,13 +41,25 @@ import numpy as np
 import numpy.typing as npt
 
 from pipeline.core.aim import TrialAim
+from pipeline.core.force_program import ForceProgram
 from pipeline.force.scaling import scale_magnitude
 from pipeline.settings.tomlfields import Fields
-from protocol.tasks.base import Parameter, Task, TaskTables, Timing, TrialCondition, TrialScreen, listed
+from protocol.tasks.base import (
+    Answered,
+    Parameter,
+    Stimulus,
+    Task,
+    TaskTables,
+    Timing,
+    TrialCondition,
+    TrialScreen,
+    listed,
+)
 from protocol.tasks.force_tracking import ProfileEnd
 from protocol.tasks.window import TrialMetrics, capped, judged
 
-__all__ = ["PROCEDURES", "ForceDiscrimination", "NextDelta", "comparison_first", "interval_means"]
+__all__ = ["PROCEDURES", "DiscriminationProcedure", "ForceDiscrimination", "NextDelta", "comparison_first",
+           "interval_means"]
 
 #: How the next Δ is chosen: QUEST+ (the only one; a staircase would be a second entry).
 PROCEDURES = ("questplus",)
@@ -123,6 +140,7 @@ class ForceDiscrimination(Task):
     procedure: str = "questplus"
 
     kind: ClassVar[str] = "force_discrimination"
+    answer_keys: ClassVar[tuple[str, ...]] = ("1", "2")
     title: ClassVar[str] = "force discrimination"
     #: No metric of a trial's force window: a trial's result is its answer (its Δ and whether it was right), fitted
     #: per participant and reference (:mod:`analysis.stats.psychometric`).
@@ -190,6 +208,29 @@ class ForceDiscrimination(Task):
                 raise f.fail(fld, cap, f"must be at least the discrimination trial's {need:g} s (task.lead_in_s + "
                              "2 × (2 × task.ramp_s + task.stimulus_s) + task.gap_s + task.response_s)")
 
+    def trials_per_cell(self, designed: int) -> int:
+        """A reference's trials are ``trials`` (the only mode is ON: a cell is a reference)."""
+        return self.trials
+
+    def answer_by_s(self, max_trial_s: float) -> float:
+        """The answer window closes ``response_s`` after the question (within the cap: checked)."""
+        return min(self.trial_s(), max_trial_s)
+
+    def stimulus_procedure(self, seed: int, block: int, history: Sequence[Answered]) -> DiscriminationProcedure:
+        """QUEST+ per reference, its posterior rebuilt from the block's answers so far."""
+        return DiscriminationProcedure(self, seed, block, history)
+
+    def felt(self, t_s: npt.NDArray[np.float64], rendered_n: npt.NDArray[np.float64]) -> tuple[float, ...]:
+        """The mean force rendered over each interval's plateau, N."""
+        return interval_means(t_s, rendered_n, self.plateaus())
+
+    def program(self, first_n: float, second_n: float) -> ForceProgram:
+        """The two-interval command as knots (:meth:`stimulus_n`'s trapezoids, exactly: they are linear)."""
+        (a1, b1), (a2, b2) = self.plateaus()
+        r = self.ramp_s
+        return ForceProgram(((0.0, 0.0), (a1 - r, 0.0), (a1, first_n), (b1, first_n), (b1 + r, 0.0),
+                             (a2 - r, 0.0), (a2, second_n), (b2, second_n), (b2 + r, 0.0)))
+
     # -- the stimulus ------------------------------------------------------------------------------------------
     @staticmethod
     def reference_n(tip_force_n: float) -> float:
@@ -252,8 +293,12 @@ class ForceDiscrimination(Task):
 
     def screen(self, trial: TrialCondition) -> TrialScreen:
         ref = self.reference_n(trial.target_force_n)
-        return TrialScreen(cue_word="Which was stronger? 1 or 2", band=None, band_label=f"{trial.target_label}: "
-                           f"reference {ref:.3f} N at the hand", band_legend="")
+        (a1, b1), (a2, b2) = self.plateaus()
+        r = self.ramp_s
+        return TrialScreen(cue_word="Feel the two forces", band=None, band_label=f"{trial.target_label}: "
+                           f"reference {ref:.3f} N at the hand", band_legend="",
+                           spans=((a1 - r, b1 + r, "first"), (a2 - r, b2 + r, "second")),
+                           question="Which was stronger?", answers=(("1", "first"), ("2", "second")))
 
     def aim(self, trial: TrialCondition, aid: bool) -> TrialAim:
         """The stylus held still (the device moves the hand): a zero target; the answer is the observer's."""
@@ -274,3 +319,39 @@ class ForceDiscrimination(Task):
                 "(76 % correct without lapses) of a cumulative Gaussian with a lapse rate fitted by maximum "
                 "likelihood, its 95 % interval from the profile likelihood; the Weber fraction is JND / reference.")
 
+
+class DiscriminationProcedure:
+    """One block's QUEST+ per reference (by target label), each trial's order from the seed, each answer scored
+    from the rendered force (the seam's :class:`~protocol.tasks.base.Procedure`)."""
+
+    def __init__(self, task: ForceDiscrimination, seed: int, block: int, history: Sequence[Answered]) -> None:
+        self.task, self.seed, self.block = task, seed, block
+        self._quests: dict[str, NextDelta] = {}
+        for done in history:  # the posterior is a function of the (Δ, correct) history only
+            if done.answer is not None:
+                self._quest(done.target_label, float(done.values["reference_n"])).answered(
+                    float(done.values["delta_n"]), bool(done.values["correct"]))
+
+    def _quest(self, label: str, reference_n: float) -> NextDelta:
+        if label not in self._quests:
+            self._quests[label] = self.task.next_delta(reference_n)
+        return self._quests[label]
+
+    def next(self, trial: TrialCondition, index: int) -> Stimulus:
+        task = self.task
+        ref = task.reference_n(trial.target_force_n)
+        delta = self._quest(trial.target_label, ref).next_n()
+        first = comparison_first(self.seed, self.block, 0, index)
+        program = task.program(ref + delta if first else ref, ref if first else ref + delta)
+        return Stimulus(program, {"reference_n": ref, "delta_n": delta, "comparison_first": float(first)})
+
+    def answered(self, trial: TrialCondition, stimulus: Stimulus, answer: str | None,
+                 t_s: npt.NDArray[np.float64], rendered_n: npt.NDArray[np.float64]) -> dict[str, float]:
+        v = stimulus.values
+        felt_first, felt_second = self.task.felt(t_s, rendered_n)
+        out = {**v, "felt_first_n": felt_first, "felt_second_n": felt_second}
+        if answer is not None:
+            correct = (answer == "1") == bool(v["comparison_first"])
+            out["correct"] = float(correct)
+            self._quest(trial.target_label, float(v["reference_n"])).answered(float(v["delta_n"]), correct)
+        return out

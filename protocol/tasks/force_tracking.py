@@ -18,6 +18,9 @@ of the simulated hand's parameters).  Definitions:
   vanish where a ramp starts at 0 N);
 * **success** -- the trial reached the profile's end (a tracking trial always runs its profile; how well it
   tracked is its metrics): the rule completes at the first sample at or after ``lead_in_s + duration_s``;
+* **display** -- what the participant screen shows of the target: ``"present"`` (the band where the target is now,
+  moving; the default), ``"trace_ahead"`` (that, and the target's course over the next ``ahead_s`` seconds drawn
+  above it, as a road seen ahead) or ``"word"`` (the cue word only: the target is felt, not seen);
 * **metrics** -- tracking RMSE and Max AE against ``F*(t)`` over the error window, time in band, and over the
   moving part the lag (the cross-correlation's peak) and the gain (the regression slope):
   :mod:`protocol.metrics.definitions`.
@@ -44,7 +47,7 @@ from pipeline.settings.tomlfields import Fields
 from protocol.tasks.base import Parameter, Task, TaskTables, Timing, TrialCondition, TrialScreen, listed
 from protocol.tasks.window import TrialMetrics, capped, judged
 
-__all__ = ["MAX_FREQUENCY_HZ", "METRIC_NAMES", "PROFILES", "ForceTracking", "ProfileEnd"]
+__all__ = ["DISPLAYS", "MAX_FREQUENCY_HZ", "METRIC_NAMES", "PROFILES", "ForceTracking", "ProfileEnd"]
 
 #: The metrics the task produces (:mod:`protocol.metrics`): RMSE and Max AE against the moving target (its primary
 #: measures), time in band, lag and gain (secondary: each tested with its own p).  Not the success rate: a tracking
@@ -55,6 +58,8 @@ PROFILES = ("ramp", "sine", "steps")
 #: The fastest sine a hand can follow: voluntary force modulation fades above ~2 Hz (Neilson 1972; the tracking
 #: hand's 2.5 Hz bandwidth, :mod:`pipeline.sim.tracking_hand`).
 MAX_FREQUENCY_HZ = 2.0
+#: What the participant screen may show of the target (``[task] display``).
+DISPLAYS = ("present", "trace_ahead", "word")
 #: The shortest step: a reaction time plus a corrective movement (science.md §4.2: 0.5–1.0 s).
 MIN_STEP_S = 1.0
 #: The fields of a profile, which a ``[task.targets.LABEL]`` table may change for one target's trials.
@@ -97,11 +102,14 @@ class ForceTracking(Task):
     levels_n: tuple[float, ...] = (0.4, 1.0, 0.6, 1.2)
     #: A target's own profile fields, by target label (``[task.targets.LABEL]``; a field not named there: this one's).
     targets: tuple[tuple[str, tuple[tuple[str, Any], ...]], ...] = ()
+    #: What the participant screen shows of the target (:data:`DISPLAYS`), and how far ahead a trace reaches, s.
+    display: str = "present"
+    ahead_s: float = 2.0
 
     kind: ClassVar[str] = "force_tracking"
     title: ClassVar[str] = "force tracking"
     metric_names: ClassVar[tuple[str, ...]] = METRIC_NAMES
-    task_fields: ClassVar[frozenset[str]] = frozenset({*PROFILE_FIELDS, "targets"})
+    task_fields: ClassVar[frozenset[str]] = frozenset({*PROFILE_FIELDS, "targets", "display", "ahead_s"})
     described: ClassVar[tuple[Parameter, ...]] = (
         Parameter("profile", "the target's profile over the trial: ramp, sine or steps", "", "profile", 0),
         Parameter("duration_s", "how long the target moves (after the lead-in)", "s", "duration (s)", 3),
@@ -131,7 +139,13 @@ class ForceTracking(Task):
             variant = cls._profile(f, {**task, **table}, lambda k, t=table, w=where: f"{w}.{k}" if k in t else
                                    f"task.{k}")
             targets.append((str(label), tuple((k, getattr(variant, k)) for k in PROFILE_FIELDS if k in table)))
-        return dataclasses.replace(base, targets=tuple(targets))
+        display = f.choice("task.display", task.get("display", base.display), DISPLAYS)
+        ahead = f.number("task.ahead_s", task.get("ahead_s", base.ahead_s), lo=0.5, hi=10.0, lo_open=False,
+                         note="s (the trace ahead: a glance of 0.5-10 s of the target's course)")
+        if "ahead_s" in task and display != "trace_ahead":
+            raise f.fail("task.ahead_s", task["ahead_s"], f"is read only with task.display = 'trace_ahead' (it is "
+                         f"{display!r})")
+        return dataclasses.replace(base, targets=tuple(targets), display=display, ahead_s=ahead)
 
     @classmethod
     def _profile(cls, f: Fields, task: Mapping[str, Any], name: Any) -> ForceTracking:
@@ -162,13 +176,17 @@ class ForceTracking(Task):
                                "band_n": self.band_n, "from_n": self.from_n, "to_n": self.to_n,
                                "offset_n": self.offset_n, "amplitude_n": self.amplitude_n,
                                "frequency_hz": self.frequency_hz, "levels_n": list(self.levels_n)}
+        if self.display != "present":  # (only where the file sets it: an earlier protocol stores what it stored)
+            own["display"] = self.display
+            if self.display == "trace_ahead":
+                own["ahead_s"] = self.ahead_s
         if self.targets:  # (only where the file has them: a protocol of one profile stores what it always stored)
             own["targets"] = {label: {k: list(v) if isinstance(v, tuple) else v for k, v in fields}
                               for label, fields in self.targets}
         return own, {}
 
     def parameters(self) -> dict[str, Any]:
-        own = {k: v for k, v in self.tables()[0].items() if k != "targets"}
+        own = {k: v for k, v in self.tables()[0].items() if k not in ("targets", "display", "ahead_s")}
         profiles = "; ".join(f"{label}: {self.of_target(label).profile_words()}" for label, _ in self.targets)
         return {**own, "levels_n": "/".join(f"{v:g}" for v in self.levels_n), "profiles": profiles}  # table cells
 
@@ -278,7 +296,8 @@ class ForceTracking(Task):
             cue_word=trial.target_label, band=p.band_edges,
             band_label=f"{trial.target_label}: track {p.profile_words()} ± {p.band_n:g} N",
             band_legend=f"target ± {p.band_n:g} N ({p.profile})",
-            follow="Follow the target",
+            follow="Follow the target", show_band=self.display != "word",
+            ahead_s=self.ahead_s if self.display == "trace_ahead" else 0.0,
         )
 
     def band_edges(self, t_s: npt.NDArray[np.float64]) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:

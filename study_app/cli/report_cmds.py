@@ -115,6 +115,10 @@ def cmd_report(args: argparse.Namespace) -> int:
         check_databases(args.db)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
+    from analysis.report.discrimination import discrimination_study
+
+    if discrimination_study(args.db):
+        return _discrimination_report(args)
     from analysis.reading.metrics import MetricOptions
     from analysis.report.report import build_report
     from study_app.cli.progress import ProgressBar
@@ -161,6 +165,31 @@ def cmd_report(args: argparse.Namespace) -> int:
             print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
                   f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
     print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
+    return 0
+
+
+def _discrimination_report(args: argparse.Namespace) -> int:
+    """A force-discrimination study's report: its section's tables, codebook, figures and page, by the output
+    policy (:func:`analysis.report.discrimination.write_discrimination_report`)."""
+    from analysis.report.discrimination import study_blocks, write_discrimination_report
+    from foundation.outdir import REPORT_MARKER, write_output_folder
+    from protocol.tasks.force_discrimination import ForceDiscrimination
+
+    results = study_blocks(args.db)
+    if not results:
+        raise CliError(f"--db = {args.db[0]!r}: no answered discrimination trial to report")
+    methods = ForceDiscrimination.methods([ForceDiscrimination()], [])
+    try:
+        files = write_output_folder(args.out, lambda tmp: write_discrimination_report(results, tmp, methods),
+                                    command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+    except InputRefused as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    for r in results:
+        print(f"P{r.participant:02d}  " + "  ".join(
+            f"{label} JND {f.jnd_n * 1000:.1f} mN, W {f.weber:.3f} [{f.weber_lo:.3f}, {f.weber_hi:.3f}]"
+            for label, f in r.fits))
+    print(f"Report {args.out}/report.html: {len(results)} participants; files: "
+          + ", ".join(f for f in files if "/" not in f))
     return 0
 
 

@@ -171,7 +171,6 @@ def cmd_run(args: argparse.Namespace) -> int:
     try:
         if args.resume is None:
             protocol = load_protocol(args.protocol)
-            _refuse_a_block_without_sessions(protocol, args.protocol)
             _check_task_arm(protocol, args)
             protocol = _lsl_checked(protocol, args)
         elif args.lsl:
@@ -278,14 +277,6 @@ def _connect(address: str | None) -> Any:
         return connect(address)
     except InputRefused as exc:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
-
-
-def _refuse_a_block_without_sessions(protocol: ProtocolConfig, path: str | None) -> None:
-    """A force-discrimination protocol does not run into a study database yet (the session runner renders contact
-    forces, not commanded ones, and takes no answers): one line naming the command that runs it."""
-    if protocol.task.kind == "force_discrimination":
-        raise CliError(f"--protocol = {path!r}: task.kind = 'force_discrimination' does not run into a study "
-                       "database yet; run it with: haptic-study discrimination --protocol FILE --out DIR")
 
 
 def _lsl_checked(protocol: ProtocolConfig, args: argparse.Namespace) -> ProtocolConfig:

@@ -369,7 +369,7 @@ class StudyEngine:
             m.StartSession: s.start, m.ResumeSession: s.resume, m.InjectFault: s.inject_fault,
             m.ListSessions: s.list_sessions, m.ParticipantScreenState: s.participant_screen,
             m.Pause: s.control, m.Resume: s.control, m.AbortTrial: s.control, m.AbortSession: s.control,
-            m.Note: s.note, m.AnswerQuestionnaire: s.answer,
+            m.Note: s.note, m.AnswerQuestionnaire: s.answer, m.AnswerTrial: s.answer_trial,
             m.ResetFaults: self._reset_faults,
             m.OperatorStop: lambda cmd: self.loop.submit(LoopOperatorStop()),
             m.Calibrate: c.calibrate, m.RecordPose: c.record_pose, m.IdentifyPoses: c.identify,

@@ -291,6 +291,14 @@ class EngineSessions:
         checked_answers(asked.questionnaire, cmd.answers)  # a ValueError: one line naming the item
         runner.answer(cmd.questionnaire, cmd.block, dict(cmd.answers))
 
+    def answer_trial(self, cmd: m.AnswerTrial) -> None:
+        """The participant's answer to the running trial's question: a key the task does not allow is refused in
+        one line (``ValueError``); taken by the runner with the next block."""
+        runner = self.runner
+        if runner is None or runner.done or runner.session_id != cmd.session_id:
+            raise RuntimeError(f"answer {cmd.key!r}: session {cmd.session_id} is not running")
+        runner.answer_trial(cmd.key)
+
     def _require_screen(self, what: str) -> None:
         """No trial is cued to a participant screen that is closed: a start or resume is refused, saying why."""
         if self.screen_open is False:

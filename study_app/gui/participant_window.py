@@ -3,9 +3,9 @@ trials the protocol's questionnaires (:mod:`study_app.gui.questionnaire_view`)."
 
 from __future__ import annotations
 
-from PySide6.QtCore import QEvent, QRectF, Qt, QTimer, Signal
-from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QShortcut
-from PySide6.QtWidgets import QLabel, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
+from PySide6.QtCore import QEvent, QPointF, QRectF, Qt, QTimer, Signal
+from PySide6.QtGui import QColor, QFont, QFontMetricsF, QKeySequence, QPainter, QPen, QPolygonF, QShortcut
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSizePolicy, QStackedLayout, QVBoxLayout, QWidget
 
 from study_app.gui.placement import centre_on_a_screen
 from study_app.gui.questionnaire_view import QuestionnaireView
@@ -17,18 +17,24 @@ __all__ = ["ForceGauge", "ParticipantWindow"]
 
 class ForceGauge(QWidget):
     """A horizontal bar 0–3 N with the target band; the force only ever shown in training sessions (a moving
-    target's band alone in experiments)."""
+    target's band alone in experiments).  A trace ahead (force tracking's ``display = "trace_ahead"``) is drawn above
+    the bar: the band's course over the next seconds rising from the bar (now) to the top (the trace's end), as a
+    road seen ahead."""
 
     def __init__(self, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.setMinimumHeight(90)
         self.force_n: float | None = 0.0
         self.band: tuple[float, float] | None = None
+        self.trace: tuple[tuple[float, float, float], ...] = ()
+        self.ahead_s = 0.0
         self.max_n = 3.0
 
-    def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float) -> None:
-        """The force (None: not shown, the band alone), the band and the scale."""
-        self.force_n, self.band, self.max_n = force_n, band, max_n
+    def set_state(self, force_n: float | None, band: tuple[float, float] | None, max_n: float,
+                  trace: tuple[tuple[float, float, float], ...] = (), ahead_s: float = 0.0) -> None:
+        """The force (None: not shown, the band alone), the band, the scale and the trace ahead (() none) with
+        how far ahead it reaches, s."""
+        self.force_n, self.band, self.max_n, self.trace, self.ahead_s = force_n, band, max_n, trace, ahead_s
         self.update()
 
     def paintEvent(self, event) -> None:  # Qt's name
@@ -37,6 +43,10 @@ class ForceGauge(QWidget):
         w, h = self.width(), self.height()
         x0, x1, y0, bar_h = 40.0, w - 40.0, 20.0, h - 50.0
         scale = (x1 - x0) / self.max_n
+        if self.trace:  # the road ahead over the upper part, the bar (now) below it
+            bar_h = min(70.0, 0.3 * (h - 30.0))
+            y0 = h - 30.0 - bar_h
+            self._paint_trace(p, x0, x1, scale, 10.0, y0)
         p.fillRect(QRectF(x0, y0, x1 - x0, bar_h), QColor(45, 45, 52))
         if self.band is not None:
             lo, hi = self.band
@@ -55,10 +65,29 @@ class ForceGauge(QWidget):
         p.end()
 
 
+    def _paint_trace(self, p: QPainter, x0: float, x1: float, scale: float, top: float, bottom: float) -> None:
+        """The band's course ahead: its edges from ``bottom`` (now) up to ``top`` (the trace's end), filled."""
+        p.fillRect(QRectF(x0, top, x1 - x0, bottom - top), QColor(30, 30, 38))
+        left = [QPointF(x0 + lo * scale, bottom - a * (bottom - top)) for a, lo, _ in self.trace]
+        right = [QPointF(x0 + hi * scale, bottom - a * (bottom - top)) for a, _, hi in reversed(self.trace)]
+        p.setPen(QPen(QColor(60, 170, 90), 1.5))
+        p.setBrush(QColor(60, 170, 90, 110))
+        p.drawPolygon(QPolygonF(left + right))
+        p.setBrush(Qt.BrushStyle.NoBrush)
+        p.setPen(QPen(QColor(170, 170, 180), 1))  # the time axis of the trace: now at the bar, later above
+        p.setFont(QFont("Sans", 11))
+        p.drawText(QRectF(x0 + 6, top + 4, 200, 20), Qt.AlignmentFlag.AlignLeft, f"in {self.ahead_s:g} s")
+        p.drawText(QRectF(x0 + 6, bottom - 22, 200, 20), Qt.AlignmentFlag.AlignLeft, "now")
+
+
 #: The cue word's largest size, px (a full HD monitor); it shrinks with the window, never the other way round.
 HEADLINE_MAX_PX = 96
 #: Words the headline shows at most: the cue is sized so the longest of these fits (the targets' labels added).
 _HEADLINE_WORDS = ("Thank you", "GENTLE", "FIRM", "Rest")
+
+
+#: The keys that answer a trial's question, by the name the model takes (``Left``/``Right``: the first/second answer).
+_ANSWER_KEYS = {Qt.Key.Key_1: "1", Qt.Key.Key_2: "2", Qt.Key.Key_Left: "Left", Qt.Key.Key_Right: "Right"}
 
 
 class ParticipantWindow(QWidget):
@@ -92,8 +121,8 @@ class ParticipantWindow(QWidget):
         self.subline.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         self._words: tuple[str, ...] = _HEADLINE_WORDS
         self.headline_px = HEADLINE_MAX_PX
-        self._scale_text()
         self.gauge = ForceGauge()
+        self._scale_text()
         cue = self.cue_page = QWidget()
         lay = QVBoxLayout(cue)
         lay.addStretch(2)
@@ -101,7 +130,17 @@ class ParticipantWindow(QWidget):
         lay.addWidget(self.subline)
         lay.addStretch(1)
         lay.addWidget(self.gauge)
+        # a trial's question (force discrimination): a button per answer, and the keys that give them
+        self.answer_box = QWidget()
+        self.answer_row = QHBoxLayout(self.answer_box)
+        self.answer_row.setSpacing(48)  # two answers far enough apart not to be pressed one for the other
+        self.answer_row.addStretch(1)
+        self.answer_row.addStretch(1)  # the buttons go between the two: centred
+        self.answer_buttons: list[QPushButton] = []
+        self.answer_box.setVisible(False)
+        lay.addWidget(self.answer_box)
         lay.addStretch(1)
+
         # the cue (and rest) screen, or a questionnaire between two trials
         self.questions = QuestionnaireView(self.questionnaire)
         self.pages = QStackedLayout(self)
@@ -170,6 +209,11 @@ class ParticipantWindow(QWidget):
         self.headline.setStyleSheet(f"font-size: {px}px; font-weight: 700; letter-spacing: 6px;")
         sub = max(12, min(22, px // 4))
         self.subline.setStyleSheet(f"font-size: {sub}px; color: #b8b8c0;")
+        self._size_gauge()
+
+    def _size_gauge(self) -> None:
+        """A gauge with a trace ahead takes half the window's height (the road ahead readable); else its own."""
+        self.gauge.setMinimumHeight(max(260, self.height() // 2) if self.gauge.trace else 90)
 
     def resizeEvent(self, event) -> None:  # Qt's name
         super().resizeEvent(event)
@@ -178,6 +222,12 @@ class ParticipantWindow(QWidget):
     def toggle_fullscreen(self) -> None:
         """Full screen on the participant's monitor, or back."""
         self.showNormal() if self.isFullScreen() else self.showFullScreen()
+
+    def keyPressEvent(self, event) -> None:  # Qt's name
+        """An answer's key (1, 2) or ←/→ (the first, the second) answers the open question; any other key is Qt's."""
+        name = _ANSWER_KEYS.get(Qt.Key(event.key()))
+        if name is None or not self.model.answer(name):
+            super().keyPressEvent(event)
 
     def mouseDoubleClickEvent(self, event) -> None:  # Qt's name
         self.toggle_fullscreen()
@@ -202,4 +252,27 @@ class ParticipantWindow(QWidget):
         show = s.show_gauge and (force is not None or s.band_n is not None)
         self.gauge.setVisible(show)
         if show:
-            self.gauge.set_state(force, s.band_n, s.gauge_max_n)
+            had = bool(self.gauge.trace)
+            self.gauge.set_state(force, s.band_n, s.gauge_max_n, s.trace, s.ahead_s)
+            if had != bool(s.trace):
+                self._size_gauge()
+        self._show_answers(s.answers)
+
+    def _show_answers(self, answers: tuple[tuple[str, str], ...]) -> None:
+        """A button per answer of the open question (none: the row empty)."""
+        if [b.property("key") for b in self.answer_buttons] == [k for k, _ in answers]:
+            return
+        for b in self.answer_buttons:
+            self.answer_row.removeWidget(b)
+            b.deleteLater()
+        self.answer_buttons = []
+        self.answer_box.setVisible(bool(answers))
+        for i, (key, words) in enumerate(answers):
+            b = QPushButton(f"{words}  ({key})")
+            b.setProperty("key", key)
+            b.setMinimumSize(220, 72)
+            b.setStyleSheet("font-size: 26px; background-color: #2c2c36; border: 2px solid #8a8aa0; "
+                            "border-radius: 8px; padding: 8px 24px;")
+            b.clicked.connect(lambda _=False, k=key: self.model.answer(k))
+            self.answer_row.insertWidget(1 + i, b)
+            self.answer_buttons.append(b)

@@ -25,8 +25,6 @@ from study_app.models.session import TRIAL_COLUMNS, SessionModel, TrialTable
 
 __all__ = ["QtCueWait", "QtProgress", "QtSessionNotes", "QtTrialTable"]
 
-#: The trial table's column of the experimenter's notes.
-NOTE_COLUMN = TRIAL_COLUMNS.index("Note")
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
                     "aborted": QColor(235, 235, 235)}
 
@@ -38,22 +36,36 @@ class QtTrialTable(QTableWidget):
     def __init__(self, table: TrialTable, parent: QWidget | None = None) -> None:
         super().__init__(0, len(TRIAL_COLUMNS), parent)
         self.table = table
-        self.setHorizontalHeaderLabels(list(TRIAL_COLUMNS))
+        self._set_columns()
         self.verticalHeader().setVisible(False)
         self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.setTextElideMode(Qt.TextElideMode.ElideRight)
         header = self.horizontalHeader()
         header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
-        header.setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
-        header.setSectionResizeMode(NOTE_COLUMN, QHeaderView.ResizeMode.Stretch)
         self.follow = FollowNewest(self)
         table.row_added.connect(self._on_row_added)
         table.cleared.connect(self._on_cleared)
         table.note_added.connect(self._on_note_added)
 
+    @property
+    def note_column(self) -> int:
+        """The column of the experimenter's notes (the last: the columns are the session's task's)."""
+        return len(self.table.columns) - 1
+
+    def _set_columns(self) -> None:
+        """The session's task's columns (:func:`study_app.models.session.trial_columns`)."""
+        cols = self.table.columns
+        self.setColumnCount(len(cols))
+        self.setHorizontalHeaderLabels(list(cols))
+        header = self.horizontalHeader()
+        stretch, fit = QHeaderView.ResizeMode.Stretch, QHeaderView.ResizeMode.ResizeToContents
+        for j in range(len(cols)):  # the outcome and the notes take the room left
+            header.setSectionResizeMode(j, stretch if j in (3, len(cols) - 1) else fit)
+
     def _on_cleared(self) -> None:
         self.setRowCount(0)
+        self._set_columns()
         self.follow.following = True
 
     def _on_row_added(self, i: int) -> None:
@@ -64,7 +76,7 @@ class QtTrialTable(QTableWidget):
         for j, text in enumerate(self.table.cells(row, designed)):
             item = QTableWidgetItem(text)
             item.setToolTip(text)  # an abort's reason may be longer than its column
-            if j not in (3, NOTE_COLUMN):
+            if j not in (3, self.note_column):
                 item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
             if colour is not None:
                 item.setBackground(colour)
@@ -75,7 +87,7 @@ class QtTrialTable(QTableWidget):
         """A note on a trial that has its row: the row's Note shows it (a session's notes are above the table)."""
         if i is None or i >= self.rowCount():
             return
-        item = self.item(i, NOTE_COLUMN)
+        item = self.item(i, self.note_column)
         text = self.table.note_text(self.table.rows[i].trial_index)
         if item is not None:
             item.setText(text)

@@ -70,7 +70,7 @@ class Actions:
         if action == "resume":
             return s.state == "paused" or (s.running and s.paused_requested)
         if action == "abort_trial":
-            return s.running and s.phase in ("active", "cued")
+            return s.running and s.phase in ("active", "cued", "answer")
         if action in ("abort_session", "note"):
             return s.running
         raise ValueError(f"unknown action {action!r}")

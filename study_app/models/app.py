@@ -67,6 +67,7 @@ class AppModel:
         self.notices = Notices()
         self.commands = Commands(send or (lambda cmd: False), self.notices)
         self.questionnaire = QuestionnaireModel(send=lambda cmd: self.commands(cmd, clear=False))
+        self.participant.send = lambda cmd: self.commands(cmd, clear=False)  # a trial's answer (discrimination)
         # the engine, what may be done, and the controls
         self.engine = EngineModel(self.commands, self.session, self.setup, self.health, self.plots, self.notices)
         self.actions = Actions(self.session, self.setup, self.calibration, self.real_calibration, self.commissioning,
@@ -120,7 +121,7 @@ class AppModel:
         self.participant.update(t, float(last["force_n"]))
         self.rig.update(float(last["tip_z_m"]), float(last["true_fz"]))
         rows = self.plots.new_rows
-        in_trial = self.session.phase in ("active", "cued")
+        in_trial = self.session.phase in ("active", "cued", "answer")
         self.health.update_force(float(np.nanmax(rows["force_n"])) if len(rows) else 0.0, in_trial)
         self.health.add_rows(rows)
         return n

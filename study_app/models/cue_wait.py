@@ -59,7 +59,7 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
             return "", None
         return "engine", CueWait("error", "no trial runs until the study engine is restarted",
                                  action="restart_engine", help="Restart engine, then Resume selected.")
-    if not s.running or s.session is None or s.phase in ("active", "cued"):
+    if not s.running or s.session is None or s.phase in ("active", "cued", "answer"):
         return "", None
     h = health.loop
     waiting = h.waiting if h is not None and h.session_running else ""
@@ -106,7 +106,8 @@ def headline(session: SessionModel, wait: CueWait | None) -> str:
     :meth:`SessionModel.progress_text` (a pause, the experimenter's or the session's, has its own words there)."""
     if wait is not None and wait.reason.startswith(QUESTIONNAIRE_REASON):
         return f"Next trial waits: {wait.reason}"
-    if wait is None or wait.level != "error" or session.state == "paused" or session.phase in ("active", "cued"):
+    in_trial = session.phase in ("active", "cued", "answer")
+    if wait is None or wait.level != "error" or session.state == "paused" or in_trial:
         return session.progress_text()
     action = CUE_ACTIONS.get(wait.action, "")
     return f"Next trial waits: {wait.reason}" + (f" · {action}" if action else "")

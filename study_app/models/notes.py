@@ -17,7 +17,7 @@ def note_subjects(session: SessionModel, selected: int | None = None) -> tuple[l
     the running trial, else the trial ``selected`` in the table (its index), else the last that ended, else the
     session."""
     choices: list[tuple[str, int | None]] = [("the session", None)]
-    tr = session.trial if session.phase in ("active", "cued") else None
+    tr = session.trial if session.phase in ("active", "cued", "answer") else None
     if tr is not None:
         choices.append((f"trial {tr.trial_index + 1} (running: {tr.target_label}, haptics {tr.haptic_mode.upper()})",
                         tr.trial_index))

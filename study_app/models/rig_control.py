@@ -70,7 +70,8 @@ class RigControl:
         s = self.session
         if not s.running or s.session is None:
             return range(0)
-        begun = s.trial.position if s.phase in ("active", "cued") and s.trial is not None else s.completed + s.aborted
+        in_trial = s.phase in ("active", "cued", "answer") and s.trial is not None
+        begun = s.trial.position if in_trial and s.trial is not None else s.completed + s.aborted
         return range(begun + 1, s.session.trials_total + 1)
 
     def rehearsal_refusal(self, trial: int | None) -> str:

@@ -57,7 +57,7 @@ class ScreenGuard:
         self.open, self.detail = is_open, detail
         s = self.session
         if not is_open and s.running:
-            tr = s.trial if s.phase in ("active", "cued") else None
+            tr = s.trial if s.phase in ("active", "cued", "answer") else None
             cut = f": trial {tr.trial_index + 1} is stored as aborted and run again later" if tr is not None else ""
             self.closed_in_session = f"the participant screen was {detail or 'closed'}{cut}"
         self.commands(m.ParticipantScreenState(is_open, detail), clear=False)

@@ -10,17 +10,41 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from protocol.metrics import Metric, Role
 from protocol.study.design import HapticMode
 from protocol.study.records import Outcome, TrialRecord
+from protocol.tasks.base import Task
+from protocol.tasks.force_regulation import ForceRegulation
 from study_app.engine import messages as m
 from study_app.models import Emitter
 
 __all__ = ["TRIAL_COLUMNS", "SessionModel", "TrialCount", "TrialTable", "time_left_text"]
 
-#: Columns of the live trial table.
-TRIAL_COLUMNS = ("#", "Target", "Mode", "Outcome", "TCT (s)", "RMSE (N)", "Max AE (N)", "Note")
+def table_metrics(task: Task | None) -> tuple[Metric, ...]:
+    """The metrics the live trial table shows of a task's trials: its stored measures that the report tests
+    (primary and secondary; a yes/no outcome is the Outcome column), in the registry's order."""
+    return tuple(m for m in (task or ForceRegulation()).metrics
+                 if m.stored and not m.boolean and m.role is not Role.DESCRIPTIVE)
+
+
+def trial_columns(task: Task | None) -> tuple[str, ...]:
+    """The live trial table's columns for a session of ``task`` (None: the paper's): its measures, and the answer
+    of a task that asks one."""
+    asks = ("Answer",) if task is not None and task.answer_keys else ()
+    return ("#", "Target", "Mode", "Outcome", *(m.label for m in table_metrics(task)), *asks, "Note")
+
+
+#: Columns of the live trial table of the paper's task (another task's: :func:`trial_columns`).
+TRIAL_COLUMNS = trial_columns(None)
 #: How the table marks a note the experimenter marked a deviation from the protocol.
 DEVIATION_MARK = "⚑ "
+
+
+def _answer(row: TrialRecord) -> str:
+    """A trial's answer as the table shows it: ``2 ✓`` (right), ``1 ✗`` (wrong), ``–`` (none)."""
+    if row.answer is None:
+        return "–"
+    return row.answer + ("" if row.answer_correct is None else " ✓" if row.answer_correct else " ✗")
 
 
 def _num(v: Any, fmt: str = "{:.2f}") -> str:
@@ -89,6 +113,8 @@ class TrialTable:
 
     rows: list[TrialRecord] = field(default_factory=list)
     notes: dict[int | None, list[str]] = field(default_factory=dict)
+    #: The session's task (its measures are the columns; None: the paper's).
+    task: Task | None = None
     row_added: Emitter = field(default_factory=Emitter)
     cleared: Emitter = field(default_factory=Emitter)
     #: A note was added: the row index it shows in (None: a session note, or a trial with no row yet).
@@ -99,8 +125,14 @@ class TrialTable:
         self.rows.append(row)
         self.row_added.emit(len(self.rows) - 1)
 
-    def clear(self) -> None:
-        """Forget all rows and notes (a new session)."""
+    @property
+    def columns(self) -> tuple[str, ...]:
+        """The table's columns: its task's (:func:`trial_columns`)."""
+        return trial_columns(self.task)
+
+    def clear(self, task: Task | None = None) -> None:
+        """Forget all rows and notes (a new session, of ``task``: its columns)."""
+        self.task = task
         self.rows.clear()
         self.notes.clear()
         self.cleared.emit()
@@ -139,9 +171,8 @@ class TrialTable:
             f"{row.target_label} {row.target_force_n:g} N",
             "haptics ON" if row.haptic_mode is HapticMode.ON else "haptics OFF",
             outcome,
-            _num(row.metric("tct_s")),
-            _num(row.metric("rmse_n"), "{:.3f}"),
-            _num(row.metric("max_ae_n"), "{:.3f}"),
+            *(_num(row.metric(m.name), "{:.2f}" if m.unit == "s" else "{:.3f}") for m in table_metrics(self.task)),
+            *((_answer(row),) if self.task is not None and self.task.answer_keys else ()),
             self.note_text(row.trial_index),
         )
 
@@ -197,7 +228,7 @@ class SessionModel:
             self.designed = len(designed) if ev.schedule else ev.trials_total
             self.paused_requested = False
             self.pause_until_s = None
-            self.table.clear()
+            self.table.clear(ev.task)
             for index, text, deviation in ev.stored_notes:  # a resumed session: its notes, table and progress
                 self.table.add_note(index, text, deviation)
             for row in ev.stored_trials:
@@ -298,7 +329,7 @@ class SessionModel:
             return "Paused · Resume (Space) to continue"
         pending = " · pause requested: pausing after this trial" if self.paused_requested else ""
         tr = self.trial
-        if self.phase in ("active", "cued") and tr is not None:
+        if self.phase in ("active", "cued", "answer") and tr is not None:
             left = max(0.0, s.max_trial_s - (self.latest_t_s - tr.t_s))
             again = "" if tr.repeat_of is None else f" (re-run of trial {self.table.designed_of(tr.repeat_of) + 1})"
             # when it times out (its cap), not "s left": beside the session's estimate, two "left"s read as one
@@ -320,7 +351,7 @@ class SessionModel:
         s = self.session
         if s is None:
             return ""
-        tr = self.trial if self.phase in ("active", "cued") else None
+        tr = self.trial if self.phase in ("active", "cued", "answer") else None
         left = max(0, self.count.designed - self.count.done)
         head = f"Abort session {s.session_id} ({s.code}, {s.kind})?"
         if tr is not None:
@@ -363,7 +394,7 @@ class SessionModel:
         bound = not self._durations_s
         per = s.max_trial_s if bound else min(s.max_trial_s, sum(self._durations_s) / len(self._durations_s))
         total = remaining * per + max(0, remaining - 1) * s.pause_s  # no pause after the last trial
-        if self.phase in ("active", "cued") and self.trial is not None and remaining:
+        if self.phase in ("active", "cued", "answer") and self.trial is not None and remaining:
             total -= min(per, max(0.0, self.latest_t_s - self.trial.t_s))
         return max(0.0, total), bound
 

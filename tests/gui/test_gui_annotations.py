@@ -136,5 +136,5 @@ def test_covariates_questionnaires_a_note_and_an_aborts_reason_through_the_windo
                      (0, "instrument re-gripped; trial 1 repeated at the end", 1, 1)]
     assert reason == "aborted by the experimenter: participant let go of the instrument"
     assert status == "completed"
-    note = w.trial_table.item(0, 7).text()
+    note = w.trial_table.item(0, w.trial_table.note_column).text()  # (the last: the task's measures before it)
     assert note.startswith("reason for the abort: participant let go") and "⚑ instrument re-gripped" in note

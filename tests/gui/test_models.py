@@ -200,10 +200,12 @@ def test_an_ended_session_of_another_database_or_erased_is_no_longer_shown():
 def test_trial_table_cells():
     row = trial_record(trial_index=4, target_label="GENTLE", target_force_n=0.6, haptic_mode="off", outcome="success",
                        tct_s=3.456, rmse_n=0.12345, max_ae_n=0.5, abort_reason=None)
-    assert TrialTable().cells(row) == ("5", "GENTLE 0.6 N", "haptics OFF", "success", "3.46", "0.123", "0.500", "")
+    # the task's tested measures (the paper's: TCT, RMSE, Max AE and the error impulse, none stored here)
+    assert TrialTable().cells(row) == ("5", "GENTLE 0.6 N", "haptics OFF", "success", "3.46", "0.123", "0.500", "–",
+                                       "")
     row = dataclasses.replace(row, outcome="aborted", metrics={**row.metrics, "tct_s": None, "rmse_n": float("nan")},
                               abort_reason="operator")
-    assert TrialTable().cells(row)[3:] == ("aborted (operator)", "–", "–", "0.500", "")
+    assert TrialTable().cells(row)[3:] == ("aborted (operator)", "–", "–", "0.500", "–", "")
 
 
 def test_session_progress_follows_events_and_sample_time():

@@ -71,9 +71,10 @@ def test_seed_must_be_a_non_negative_integer() -> None:
 
 def test_bad_target_is_rejected() -> None:
     p = SimulatedParticipant(seed=0)
-    for bad in (0.0, -1.0):
-        with pytest.raises(ValueError, match="must be a finite force > 0"):
-            p.begin_trial(TrialAim.constant(bad, True), 0.0)
+    with pytest.raises(ValueError, match="must be a finite force > 0"):
+        p.begin_trial(TrialAim.constant(-1.0, True), 0.0)
+    p.begin_trial(TrialAim.constant(0.0, True), 0.0)  # a zero target: hold still (the device presents a force)
+    assert p._pending is not None and p._pending[0] == "end"
     for bad in (math.nan, math.inf):  # not even an aim
         with pytest.raises(ValueError, match="must be finite"):
             TrialAim.constant(bad, True)

@@ -105,8 +105,10 @@ def test_the_tick_builds_its_record_by_name() -> None:
     the framework's stages are unpacked into locals named by STEP_FIELDS: no value is placed by counting."""
     assigned = _tick_assignments()
     assert _names(assigned["rec"]) == RECORD_FIELDS
+    # (the step, or -- a commanded force, issue 43 -- the same stages with the command rendered)
     stages = next(ast.parse(k, mode="eval").body for k, v in assigned.items()
-                  if isinstance(v, ast.Call) and ast.unparse(v.func) == "fw.step")
+                  if isinstance(call := v.body if isinstance(v, ast.IfExp) else v, ast.Call)
+                  and ast.unparse(call.func) == "fw.step")
     assert _names(stages) == STEP_FIELDS
     computed = {n for k in assigned for n in (_names(ast.parse(k, mode="eval").body) or (k,))}
     params = {"now", "period_ns", "dt_s"}

@@ -26,6 +26,7 @@ MS = 1_000_000
 S = 1_000_000_000
 T0 = 7_777 * S + 123_456  # loop clock at the start of the test session (arbitrary, not aligned)
 IDLE, CUED, ACTIVE, PAUSE = TrialPhase.IDLE, TrialPhase.CUED, TrialPhase.ACTIVE, TrialPhase.PAUSE
+ANSWER = TrialPhase.ANSWER
 SPEC = TrialSpec(3, "GENTLE", 0.6, "on")
 PRE = 4  # samples the loop stamps before it applies the trial's mark
 
@@ -64,11 +65,12 @@ def test_transitions_table_matches_the_phases():
     assert {
         IDLE: frozenset({CUED}),
         CUED: frozenset({ACTIVE, PAUSE}),
-        ACTIVE: frozenset({PAUSE}),
+        ACTIVE: frozenset({PAUSE, ANSWER}),
+        ANSWER: frozenset({PAUSE}),  # a task that asks a question (force discrimination)
         PAUSE: frozenset({IDLE}),
     } == TRANSITIONS
-    assert {str(p) for p in TrialPhase} == {"idle", "cued", "active", "pause"}
-    assert PHASE_CODES == {IDLE: 0, CUED: 1, ACTIVE: 2, PAUSE: 3}
+    assert {str(p) for p in TrialPhase} == {"idle", "cued", "active", "pause", "answer"}
+    assert PHASE_CODES == {IDLE: 0, CUED: 1, ACTIVE: 2, PAUSE: 3, ANSWER: 4}
 
 
 def test_a_new_machine_is_idle():

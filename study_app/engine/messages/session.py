@@ -17,6 +17,7 @@ __all__ = [
     "AbortSession",
     "AbortTrial",
     "AnswerQuestionnaire",
+    "AnswerTrial",
     "ListSessions",
     "Note",
     "NoteStored",
@@ -130,6 +131,15 @@ class AnswerQuestionnaire:
     questionnaire: str
     block: str
     answers: dict[str, float | str]
+
+
+@dataclass(frozen=True, slots=True)
+class AnswerTrial:
+    """The participant's answer to the running trial's question (a task that asks: force discrimination's ``"1"``
+    or ``"2"``), from the participant screen's keys or buttons."""
+
+    session_id: int
+    key: str
 
 
 @dataclass(frozen=True, slots=True)
