@@ -39,6 +39,16 @@ def _small(tmp_path: Path, trials: int) -> Path:
     return p
 
 
+def _retimed(text: str, **seconds: str) -> str:
+    """A protocol file's text with the named fields (each on a line of its own: ``name = value``) given new values."""
+    lines = text.splitlines()
+    for name, value in seconds.items():
+        at = [i for i, line in enumerate(lines) if line.split("=")[0].strip() == name]
+        assert len(at) == 1, name
+        lines[at[0]] = f"{name} = {value}"
+    return "\n".join(lines) + "\n"
+
+
 def test_a_program_is_linear_between_knots_and_refused_when_malformed() -> None:
     prog = ForceProgram(((0.0, 0.0), (0.5, 0.0), (0.7, 0.3), (1.7, 0.3), (1.9, 0.0)))
     assert prog.force_n(0) == 0.0 and prog.force_n(600 * MS) == pytest.approx(0.15, abs=1e-12)  # half-way up
@@ -156,7 +166,12 @@ def test_a_simulated_study_through_run_recovers_the_weber_fractions(tmp_path: Pa
     ``run``; each one's true Weber fraction (its observer's, drawn from its seed) within its fitted 95 % interval
     in at least 9 of 10 at each reference."""
     db, out = tmp_path / "d.db", tmp_path / "rep"
-    assert main(["run", "--protocol", str(EXAMPLE), "--participants", "10", "--seed", "0", "--db", str(db)]) == 0
+    # the example's block with shorter plateaus, gap and pauses: each trial 3.2 s of the virtual clock instead of
+    # 6.2 s (the suite's time), the task, the observer and the fit as they are
+    fast = tmp_path / "fast.toml"
+    fast.write_text(_retimed(EXAMPLE.read_text(encoding="utf-8"), stimulus_s="0.4", gap_s="0.4", pause_s="0.3",
+                             cue_s="0.3"), encoding="utf-8")
+    assert main(["run", "--protocol", str(fast), "--participants", "10", "--seed", "0", "--db", str(db)]) == 0
     assert main(["report", "--db", str(db), "--out", str(out)]) == 0
     fits = pd.read_csv(out / "discrimination_fits.csv")
     true = {p: SimulatedParticipant(seed=participant_seeds(0, p)[1]).observer.weber for p in range(1, 11)}
