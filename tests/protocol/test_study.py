@@ -262,16 +262,20 @@ def test_sigkill_of_a_parallel_study_leaves_no_orphan_and_resumes(tmp_path: Path
     while _processes_mentioning(str(db)) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert _processes_mentioning(str(db)) == []
-    sessions = rows(db, "SELECT session_id, status FROM sessions WHERE kind = 'experiment' ORDER BY session_id")
-    assert len(sessions) == 2 and all(s[1] == "running" for s in sessions)
-    for sid, _ in sessions:
+    sessions = rows(db, "SELECT p.code, s.session_id, s.status FROM sessions s JOIN participants p "
+                        "USING (participant_id) WHERE s.kind = 'experiment' ORDER BY s.session_id")
+    status = {code: st for code, _, st in sessions}
+    # P02's was cut by the kill; P01's ran beside it and may have ended first (the two workers start and run at the
+    # speed the machine gives each: CI on a clean clone once saw P01 done before P02's kill)
+    assert len(sessions) == 2 and status["P02"] == "running" and status["P01"] in ("running", "completed"), status
+    for _, sid, _ in sessions:
         for idx, n in rows(db, "SELECT trial_index, n_samples FROM trials WHERE session_id = ?", sid):
             assert len(trial_samples(db, sid * 1_000_000 + idx)) == n
-    for code in ("P01", "P02"):
+    for code in (c for c, st in status.items() if st == "running"):
         r = _run_cli(["run", "--db", str(db), "--resume", code])
         assert r.returncode == 0, r.stderr
     assert rows(db, "SELECT status FROM sessions ORDER BY session_id") == [("completed",), ("completed",)]
-    for sid, _ in sessions:
+    for _, sid, _ in sessions:
         done = rows(db, "SELECT target_label, haptic_mode FROM trials WHERE session_id = ? "
                         "AND outcome != 'aborted'", sid)
         assert len(done) == 4 and len(set(done)) == 4  # every cell once: nothing skipped or duplicated
