@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
+from cli_subprocess import tiny_protocol
 
 from analysis.planning.sweep import CACHE_FILE
 from pipeline.force.pipeline_settings import paper_settings
@@ -29,26 +30,14 @@ distributed = pytest.importorskip("distributed")
 
 T = TypeVar("T")
 
-SHORT = """name = "short"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 2
-[trial]
-max_trial_s = 2.0
-pause_s = 0.05
-[training]
-enabled = false
-"""
 
 
 @pytest.fixture(scope="module")
 def short_protocol():
     import tomllib
 
-    return protocol_from_dict(tomllib.loads(SHORT), "short.toml")
+    # one target, both modes, 2 trials per cell, no training: a participant takes a fraction of a second
+    return protocol_from_dict(tomllib.loads(tiny_protocol("short", 2.0, pause_s=0.05)), "short.toml")
 
 
 @pytest.fixture(scope="module")

@@ -49,7 +49,8 @@ from analysis.report.annotations_report import (
 )
 from analysis.report.groups_report import group_analysis, group_tables, groups_html
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
-from analysis.report.report_html import page, plural, power_html
+from analysis.report.power_section import power_html
+from analysis.report.report_html import page, plural
 from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
 from analysis.report.study_record import (
     aborted_reruns,

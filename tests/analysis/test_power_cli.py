@@ -323,7 +323,7 @@ def test_report_power_table_leaves_out_empty_columns(monkeypatch):
     from analysis.planning.power import estimate_power
     from analysis.planning.power_outputs import ReportPower
     from analysis.planning.power_plan import plan_table
-    from analysis.report.report_html import power_html as _power_html
+    from analysis.report.power_section import power_html as _power_html
 
     trials = pd.DataFrame([dict(participant_code=f"P{p}", target_label="GENTLE", target_force_n=0.6, haptic_mode=m,
                                 success=True, tct_s=3.0 + p + (m == "on"), rmse_n=1.0 + p * (m == "on"),
