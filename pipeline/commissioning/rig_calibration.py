@@ -46,6 +46,7 @@ __all__ = [
     "RigCalibrationFile",
     "ToolCalibration",
     "now_iso",
+    "write_text_atomically",
 ]
 
 CALIBRATION_FORMAT = "haptic-study calibration"
@@ -231,22 +232,28 @@ class RigCalibrationFile:
     def save(self) -> None:
         """Write the file atomically (a crash leaves the old or the new file, never half of one)."""
         p = Path(self.path)
-        text = json.dumps(self.to_dict(), indent=2) + "\n"
         try:
-            p.parent.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(prefix=p.name + ".", suffix=".tmp", dir=p.parent)
-            try:
-                with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                    fh.write(text)
-                    fh.flush()
-                    os.fsync(fh.fileno())
-                os.replace(tmp, p)
-            except BaseException:
-                try:
-                    os.unlink(tmp)
-                except OSError:
-                    pass
-                raise
+            write_text_atomically(p, json.dumps(self.to_dict(), indent=2) + "\n")
         except OSError as exc:
             raise CalibrationFileError(f"calibration file {p}: cannot be written ({exc})") from None
         self.legacy_payload = None
+
+
+def write_text_atomically(path: Path, text: str) -> None:
+    """Write ``path`` whole or not at all (a crash leaves the old file or the new one, never half of one), through
+    a temporary file of a fresh name beside it -- it can overwrite no file it did not make, and removes only its own
+    on failure.  OSError as the system gives it."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise

@@ -11,12 +11,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 from pipeline.commissioning.qualification import read_record, record_path
+from pipeline.commissioning.rig_calibration import write_text_atomically
 from study_app.cli.argtypes import add_command, arm_name
 from study_app.cli.error import CliError
 from study_app.guide_paths import hardware_template
@@ -76,13 +76,10 @@ def qualify(hardware: str, arm: str | None, checks: tuple[str, ...]) -> tuple[di
 
 
 def _write_atomically(path: Path, text: str) -> None:
-    """Write ``path`` whole or not at all (a crash leaves the old record or the new one)."""
-    tmp = path.with_name(path.name + ".tmp")
+    """Write ``path`` whole or not at all, as the calibration file beside it is written."""
     try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
+        write_text_atomically(path, text)
     except OSError as exc:
-        tmp.unlink(missing_ok=True)
         raise CliError(f"{path}: the qualification record cannot be written ({exc.strerror or exc})",
                        status=1) from None
 
