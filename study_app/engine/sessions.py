@@ -52,7 +52,7 @@ from study_app.engine import messages as m
 from study_app.engine import session_list
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
-from study_app.engine.session_config import config_record, real_config_record
+from study_app.engine.session_config import config_record, real_config_record, with_profile
 from study_app.engine.setup import StylusControl
 
 __all__ = ["EngineSessions", "list_resumable"]
@@ -106,11 +106,16 @@ class EngineSessions:
             return
         db = self._open_db(cmd.db_path)
         try:
+            record = self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1])
+            if self.engine.eng.simulated:  # the simulated participant's profile, from its group (stored or given)
+                from protocol.storage.annotations import covariates_by_code
+
+                known = {**covariates_by_code(db.conn).get(cmd.code, {}), **cmd.covariates}
+                record = with_profile(record, protocol.groups, known)
             opened = open_new_session(
                 db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
                 rig=self.engine.config.rig,
-                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui",
-                        **self.commissioning.provenance()},
+                config={**record, "app": "gui", **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
                 training_override=cmd.training_override, covariates=cmd.covariates,
