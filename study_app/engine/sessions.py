@@ -296,6 +296,18 @@ class EngineSessions:
         checked_answers(asked.questionnaire, cmd.answers)  # a ValueError: one line naming the item
         runner.answer(cmd.questionnaire, cmd.block, dict(cmd.answers))
 
+    def skip_questionnaire(self, cmd: m.SkipQuestionnaire) -> None:
+        """The experimenter skips the questionnaire waiting for the participant: stored by the runner with the next
+        block, as skipped (a deviation, with the reason)."""
+        runner = self.runner
+        if runner is None or runner.done or runner.session_id != cmd.session_id:
+            raise RuntimeError(f"skip {cmd.questionnaire}: session {cmd.session_id} is not running")
+        asked = runner.questions.asked
+        if asked is None or asked.key != (cmd.questionnaire, cmd.block):
+            raise RuntimeError(f"skip {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one waiting "
+                               "for answers")
+        runner.skip_questionnaire(cmd.questionnaire, cmd.block, cmd.reason)
+
     def answer_trial(self, cmd: m.AnswerTrial) -> None:
         """The participant's answer to the running trial's question: a key the task does not allow is refused in
         one line (``ValueError``); taken by the runner with the next block."""
@@ -412,11 +424,13 @@ class EngineSessions:
                     spec.target_force_n, spec.haptic_mode, spec.repeat_of,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
-        elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",)):
+        elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",),
+                                                  ("questionnaire_skipped",)):
             prompt = ev[1]
             self.engine.publish(m.QuestionnaireShown(runner.session_id, prompt.questionnaire, prompt.block)
                                 if ev[0] == "questionnaire" else
-                                m.QuestionnaireAnswered(runner.session_id, *prompt.key))
+                                m.QuestionnaireAnswered(runner.session_id, prompt.key[0], prompt.key[1],
+                                                        skipped=ev[0] == "questionnaire_skipped"))
         elif isinstance(ev, TrialRecord):
             cause = ev.abort_cause
             if cause in (AbortCause.GAP, AbortCause.FEEDBACK):  # not a watchdog fault, so the loop said nothing

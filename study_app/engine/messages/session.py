@@ -31,6 +31,7 @@ __all__ = [
     "SessionEnded",
     "SessionStarted",
     "SessionsListed",
+    "SkipQuestionnaire",
     "StartChecking",
     "StartSession",
     "TrialEnded",
@@ -131,6 +132,17 @@ class AnswerQuestionnaire:
     questionnaire: str
     block: str
     answers: dict[str, float | str]
+
+
+@dataclass(frozen=True, slots=True)
+class SkipQuestionnaire:
+    """The experimenter skips the questionnaire waiting for the participant: stored as skipped, a deviation from the
+    protocol with ``reason`` (the report lists it), and the next trial no longer waits."""
+
+    session_id: int
+    questionnaire: str
+    block: str
+    reason: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -267,11 +279,13 @@ class QuestionnaireShown:
 
 @dataclass(frozen=True, slots=True)
 class QuestionnaireAnswered:
-    """A questionnaire's answers were stored (the participant's, or the simulated participant's)."""
+    """A questionnaire's answers were stored (the participant's, or the simulated participant's), or it was skipped
+    by the experimenter (``skipped``: stored so, not answered)."""
 
     session_id: int
     questionnaire: str
     block: str
+    skipped: bool = False
 
 
 @dataclass(frozen=True, slots=True)
