@@ -229,7 +229,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
            "(that participant's pair is left out of the TCT test and counted)"
            if options.tct_policy == "successful" else
            f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
-    design = report_design.training_methods(study) + report_design.sites_methods(study)
+    design = (report_design.training_methods(study) + report_design.feedback_methods(study)
+              + report_design.sites_methods(study))
     return (
         _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "

@@ -48,6 +48,7 @@ from pipeline.runtime.loop_messages import Command, LoopEvent, StartRecording
 from protocol.lsl.streams import SessionStreams
 from protocol.runner.deliveries import Deliveries
 from protocol.runner.fault_wait import FaultWait
+from protocol.runner.feedback_wait import FeedbackWait
 from protocol.runner.questionnaire_wait import QuestionnaireWait
 from protocol.runner.requests import Request, Requests
 from protocol.runner.session_desk import SessionDesk, SessionPlan, SessionState, trial_words
@@ -106,6 +107,7 @@ class SessionRunner:
         self.machine: TrialMachine = self.trials.machine
         self.faults = FaultWait(self.desk, plan.protocol.trial.pause_s, auto_reset_faults, plan.arms, self.task_arm)
         self.questions = QuestionnaireWait(self.desk, plan)
+        self.feedback = FeedbackWait(self.desk, plan)
         self.requests = Requests()
         self._initial_pause_ns = int(round(plan.initial_pause_s * 1e9))
         self._ready_ns: int | None = None  # no cue before this loop time
@@ -325,6 +327,8 @@ class SessionRunner:
         if self._ready_ns is not None and t_ns < self._ready_ns:
             state.waiting = "pause"
             return
+        if self.feedback.holds(t_ns, self.trials.position, self.trials.schedule, self.finished):
+            return  # (the wait's words are the score card's)
         if self.questions.holds(t_ns, self.trials.position, self.trials.schedule):
             return  # (the wait's words are the questionnaire's)
         state.waiting = ""

@@ -424,6 +424,8 @@ class EngineSessions:
                     spec.target_force_n, spec.haptic_mode, spec.repeat_of,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
+        elif isinstance(ev, tuple) and ev[:1] == ("score_card",):
+            self.engine.publish(m.ScoreCardShown(runner.session_id, ev[1].block, ev[1].lines()))
         elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",),
                                                   ("questionnaire_skipped",)):
             prompt = ev[1]

@@ -28,6 +28,7 @@ __all__ = [
     "QuestionnaireShown",
     "Resume",
     "ResumeSession",
+    "ScoreCardShown",
     "SessionEnded",
     "SessionStarted",
     "SessionsListed",
@@ -266,6 +267,16 @@ class NoteStored:
     text: str
     trial_index: int | None
     deviation: bool
+
+
+@dataclass(frozen=True, slots=True)
+class ScoreCardShown:
+    """Feedback to the trainee (the protocol's ``[feedback]``): a block ended, its score card is on the participant
+    screen until the next cue (``lines``: a measure each, against the participant's earlier sessions)."""
+
+    session_id: int
+    block: str
+    lines: tuple[str, ...]
 
 
 @dataclass(frozen=True, slots=True)
