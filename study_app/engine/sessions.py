@@ -45,7 +45,7 @@ from protocol.runner.study_rules import (
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
 from protocol.storage.annotations import notes
 from protocol.study.config import ProtocolConfig, load_protocol
-from protocol.study.questionnaires import checked_answers
+from protocol.study.questionnaires import Prompt, checked_answers
 from protocol.study.records import AbortCause, TrialRecord
 from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
@@ -286,27 +286,27 @@ class EngineSessions:
     def answer(self, cmd: m.AnswerQuestionnaire) -> None:
         """The participant's answers to the questionnaire on their screen: checked here (a refusal names the item),
         stored by the runner with the next block."""
-        runner = self.runner
-        if runner is None or runner.done or runner.session_id != cmd.session_id:
-            raise RuntimeError(f"answers to {cmd.questionnaire}: session {cmd.session_id} is not running")
-        asked = runner.questions.asked
-        if asked is None or asked.key != (cmd.questionnaire, cmd.block):
-            raise RuntimeError(f"answers to {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one "
-                               "waiting for answers")
+        runner, asked = self._waiting(cmd, "answers to")
         checked_answers(asked.questionnaire, cmd.answers)  # a ValueError: one line naming the item
         runner.answer(cmd.questionnaire, cmd.block, dict(cmd.answers))
 
     def skip_questionnaire(self, cmd: m.SkipQuestionnaire) -> None:
         """The experimenter skips the questionnaire waiting for the participant: stored by the runner with the next
         block, as skipped (a deviation, with the reason)."""
+        runner, _ = self._waiting(cmd, "skip")
+        runner.skip_questionnaire(cmd.questionnaire, cmd.block, cmd.reason)
+
+    def _waiting(self, cmd: m.AnswerQuestionnaire | m.SkipQuestionnaire, what: str) -> tuple[SessionRunner, Prompt]:
+        """The running session and the questionnaire ``cmd`` names, the one waiting for answers (else a refusal in
+        one line: ``what`` begins it)."""
         runner = self.runner
         if runner is None or runner.done or runner.session_id != cmd.session_id:
-            raise RuntimeError(f"skip {cmd.questionnaire}: session {cmd.session_id} is not running")
+            raise RuntimeError(f"{what} {cmd.questionnaire}: session {cmd.session_id} is not running")
         asked = runner.questions.asked
         if asked is None or asked.key != (cmd.questionnaire, cmd.block):
-            raise RuntimeError(f"skip {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one waiting "
-                               "for answers")
-        runner.skip_questionnaire(cmd.questionnaire, cmd.block, cmd.reason)
+            raise RuntimeError(f"{what} {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one "
+                               "waiting for answers")
+        return runner, asked
 
     def answer_trial(self, cmd: m.AnswerTrial) -> None:
         """The participant's answer to the running trial's question: a key the task does not allow is refused in

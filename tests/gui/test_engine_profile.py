@@ -6,12 +6,10 @@ from __future__ import annotations
 import json
 import sqlite3
 
-import pytest
-
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
-from study_app.engine.setup import HostConfig
 from tests.gui.conftest import SHORT_PROTOCOL
+from tests.gui.test_engine_host import engine  # noqa: F401  (the fixture: a simulated engine, virtual clock)
 
 GROUPS = SHORT_PROTOCOL + """
 [[covariates]]
@@ -27,17 +25,6 @@ experienced = ["surgeon"]
 """
 
 
-@pytest.fixture
-def engine():
-    events: list[object] = []
-    e = StudyEngine(HostConfig(clock="virtual", speed=0), events.append, shared_ring=False)
-    e.start()
-    yield e, events
-    if not e.closed:
-        e.close("test over")
-    e.release_ring()
-
-
 def _stop(e: StudyEngine) -> None:
     e.handle(m.AbortSession("test: the record is what is looked at"))
     for _ in range(5_000):
@@ -47,7 +34,7 @@ def _stop(e: StudyEngine) -> None:
     raise AssertionError("the session did not stop")
 
 
-def test_a_gui_session_records_its_simulated_participants_profile(engine, tmp_path) -> None:
+def test_a_gui_session_records_its_simulated_participants_profile(engine, tmp_path) -> None:  # noqa: F811
     e, events = engine
     protocol = tmp_path / "groups.toml"
     protocol.write_text(GROUPS, encoding="utf-8")
