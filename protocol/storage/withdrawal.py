@@ -178,9 +178,9 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
                                     f"{chunks} WHERE session_id = ? GROUP BY {'arm, ' if arm else ''}segment, block)",
                                     (sid,)).fetchone()
                 blocks, records = blocks + int(b), records + int(r)
-    streams, chunks = _lsl_counts(conn, [sid for sid, _, _ in sessions])
+    lsl_streams, lsl_chunks = _lsl_counts(conn, [sid for sid, _, _ in sessions])
     return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples),
-                     streams, chunks)
+                     lsl_streams, lsl_chunks)
 
 
 def _lsl_counts(conn: sqlite3.Connection, session_ids: list[int]) -> tuple[int, int]:
