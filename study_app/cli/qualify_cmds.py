@@ -18,14 +18,12 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pipeline.commissioning.qualification import read_record, record_path
+from pipeline.commissioning.qualification import CHECKS, read_record, record_path
 from pipeline.commissioning.rig_calibration import write_text_atomically
 from study_app.cli.argtypes import add_command, arm_name
 from study_app.cli.error import CliError
 from study_app.guide_paths import hardware_template
 
-#: The checks by name, in the order they run.
-CHECKS = ("process-death", "thermal-budget", "latency", "loop-under-load")
 #: The checks that run the loop on the rig (one engine run serves both: :mod:`study_app.cli.qualify_engine`).
 ENGINE_CHECKS = ("latency", "loop-under-load")
 #: How long the loop-under-load check measures by default, s (the bench's quiet-machine figure is 30 s; a minute
