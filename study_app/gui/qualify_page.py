@@ -158,7 +158,16 @@ def _qcolor(hex_colour: str) -> Any:
 def attach_qualify(win: Any, hardware: str | None) -> QualifyPage:
     """Give the window's calibration wizard its Qualify tab, wired to the window's engine and arm picker."""
     model = QualifyModel(hardware)
-    page = QualifyPage(model, win.bridge.release, win.model.engine.restart,
+
+    def release() -> None:  # nothing of the stopped engine is read (its ring goes with it); no Start meanwhile
+        mdl = win.model
+        mdl.plots.detach()
+        mdl.session.reset("qualifying the rig: the study engine is stopped until haptic-study qualify ends …")
+        mdl.health.engine_restarted()  # its faults (a latched stall) are the stopped engine's, not news
+        win.bridge.release()
+        mdl.engine.changed.emit()
+
+    page = QualifyPage(model, release, win.model.engine.restart,
                        lambda: win.model.commissioning.arm, win.model.actions.calibration_refusal)
     win.calibration_wizard.steps.addTab(page, "4 · Qualify")
     win.model.actions.changed.connect(page.refresh)

@@ -21,6 +21,8 @@ __all__ = ["QualifyModel"]
 #: The loop check's default length in the window, s (the command's default).
 DEFAULT_SECONDS = 60.0
 _PREFIX = "qualify: "
+#: What a check's own progress line says of it (``qualify: CHECK: …``); any other line is what it is doing.
+_STATES = ("running", "PASS", "FAIL", "NOT CHECKED")
 
 
 class QualifyModel:
@@ -51,6 +53,8 @@ class QualifyModel:
         self.record_path = ""
         self.error = ""
         self.lines: list[str] = []
+        #: What the running check is doing, in the command's words ("" when it did not say).
+        self.detail = ""
 
     def refusal(self, calibration_refusal: str) -> str:
         """Why a qualification may not start now ("" when it may); ``calibration_refusal``: the window's reason
@@ -73,7 +77,7 @@ class QualifyModel:
         """A run starts on ``arm`` ("" on a rig of one arm) with the loop measured for ``seconds``."""
         self.arm, self.seconds = arm, float(seconds)
         self.state, self.current, self.results, self.record = "running", "", {}, None
-        self.record_path = self.error = ""
+        self.record_path = self.error = self.detail = ""
         self.lines = []
         self.changed.emit()
 
@@ -85,10 +89,13 @@ class QualifyModel:
         self.lines.append(text)
         if text.startswith(_PREFIX):
             name, _, what = text[len(_PREFIX):].partition(": ")
-            if name in CHECKS:
+            if name in CHECKS and what in _STATES:
                 self.current = name if what == "running" else ""
+                self.detail = ""
                 if what != "running":
                     self.results[name] = {"verdict": what}
+            else:  # what the running check is doing ("the loop runs on the rig: …")
+                self.detail = text[len(_PREFIX):]
         self.changed.emit()
 
     def finish(self, exit_code: int, stdout: str) -> None:
@@ -144,6 +151,7 @@ class QualifyModel:
         """One line: where the run is, or its verdict and where the record is."""
         if self.state == "running":
             where = f"running {self.current}" if self.current else "starting"
+            where += f" ({self.detail})" if self.detail else ""
             return (f"Qualifying{' ' + self.arm if self.arm else ''}: {where} ({self.done_checks} of {len(CHECKS)} "
                     "checks done); the study engine is stopped until it ends")
         if self.state == "failed":

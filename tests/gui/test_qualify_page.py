@@ -59,6 +59,8 @@ def test_the_model_reads_the_progress_and_a_refusal() -> None:
     assert model.command()[-4:] == ["--seconds", "5", "--arm", "left"]
     model.progress("qualify: process-death: running")
     assert model.rows()[0][1] == "running…" and model.rows()[1][1] == "waiting"
+    model.progress("qualify: latency: timing the F/T sensor's answers")  # what it does, not a verdict
+    assert model.done_checks == 0 and "timing the F/T sensor's answers" in model.summary()
     model.progress("qualify: process-death: PASS")
     assert model.done_checks == 1 and model.rows()[0][1] == "PASS"
     model.progress("/lab/hardware.toml has no such arm; its arms: right")
