@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import sys
 import time
 from typing import Any
 
@@ -172,8 +171,6 @@ class _Markers:
             conn.close()
         errors = sorted(abs(t - ((stored[key] - started) + t0_ns * 1e-9 + link)) for marker, t in self.got
                         if (key := (marker["event"], marker.get("trial"))) in stored)
-        if os.environ.get("BENCH_LSL_DEBUG"):
-            print([(mk["event"], mk.get("trial")) for mk, _ in self.got], errors, file=sys.stderr)
         return {"received": len(self.got), "matched": len(errors), "stored": len(stored), "error": self.error,
                 "max_error_us": max(errors) * 1e6 if errors else float("nan"),
                 "median_error_us": errors[len(errors) // 2] * 1e6 if errors else float("nan")}
