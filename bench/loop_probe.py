@@ -59,10 +59,7 @@ def measure(seconds: float, protocol: str | None, db: str, ready_file: str, lsl:
         trials: list[dict[str, Any]] = []
         lost = 0
         started = time.monotonic()
-        if protocol:
-            client.send(m.StartSession(db, "B01", "experiment", protocol, 1, 1))
-            if markers is not None:
-                markers.start()
+        _start_session(client, protocol, db, markers)
         ended = False
         last = first
         pauses, was_paused, resets, was_latched = 0, False, 0, False
@@ -153,27 +150,29 @@ class _Markers:
         """How many markers were received and matched, and the largest |marker − stored event| on LSL's clock."""
         import sqlite3
 
+        from protocol.storage.lsl_streams import stored_marker_times
+
         self.thread.join(30.0)
         conn = sqlite3.connect(db)
         try:
-            started, t0_ns = conn.execute("SELECT started_at_s, t0_ns FROM recordings WHERE session_id = 1 "
-                                          "ORDER BY segment").fetchone()
-            link = conn.execute("SELECT records_to_lsl_s FROM lsl_runs WHERE session_id = 1 ORDER BY segment"
-                                ).fetchone()[0]
-            stored: dict[tuple[str, int | None], float] = {("session_start", None): 0.0}
-            for kind, t_s, detail in conn.execute("SELECT kind, t_s, detail FROM events WHERE kind IN "
-                                                  "('cue', 'session_end', 'session_interrupted')"):
-                trial = int(detail.split("index ")[1].split(")")[0]) + 1 if kind == "cue" else None
-                stored[(kind, trial)] = float(t_s)
-            for index, outcome, end_s in conn.execute("SELECT trial_index, outcome, ended_at_s FROM trials"):
-                stored[({"aborted": "abort"}.get(outcome, outcome), int(index) + 1)] = float(end_s)
+            stored = stored_marker_times(conn, 1)
         finally:
             conn.close()
-        errors = sorted(abs(t - ((stored[key] - started) + t0_ns * 1e-9 + link)) for marker, t in self.got
+        errors = sorted(abs(t - stored[key]) for marker, t in self.got
                         if (key := (marker["event"], marker.get("trial"))) in stored)
         return {"received": len(self.got), "matched": len(errors), "stored": len(stored), "error": self.error,
                 "max_error_us": max(errors) * 1e6 if errors else float("nan"),
                 "median_error_us": errors[len(errors) // 2] * 1e6 if errors else float("nan")}
+
+
+def _start_session(client: Any, protocol: str | None, db: str, markers: _Markers | None) -> None:
+    """Start the measured session (with ``protocol``) and the inlet that records its markers (with LSL)."""
+    from study_app.engine import messages as m
+
+    if protocol:
+        client.send(m.StartSession(db, "B01", "experiment", protocol, 1, 1))
+    if markers is not None:  # (only with a session)
+        markers.start()
 
 
 def _figures(p_us: Any, lost: int, duration: float, first: Any, last: Any, trials: list[dict[str, Any]],

@@ -20,7 +20,6 @@ machine is as the lab uses it (qualify adds no load of its own).
 from __future__ import annotations
 
 import math
-import os
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -91,9 +90,12 @@ def run_engine(hardware: str, seconds: float, say: Callable[[str], None]) -> Eng
         last = _health_after(client, 0.6, last)  # the newest breakdown: the live stages of the run's last 2 s
     finally:
         client.shutdown()
+    from foundation.platform_support.machine import load_average
+
+    load = load_average()
     return EngineRun(np.concatenate(periods) if periods else np.zeros(0, dtype=np.int64), duration,
                      int(last.missed_slots - first.missed_slots), lost, faults, last.latency, last.scheduling,
-                     os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan)
+                     load[0] if load is not None else math.nan)
 
 
 def _health_after(client: Any, wait_s: float, newest: Any = None) -> Any:
