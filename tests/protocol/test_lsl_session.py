@@ -228,3 +228,19 @@ def test_a_withdrawal_leaves_nothing_of_the_streams(lsl_session, tmp_path, capsy
     conn.close()
     assert record is not None and (record.removed_lsl_streams, record.removed_lsl_chunks) == (streams, chunks)
     assert f"emg-{lsl_session['tag']}".encode() not in Path(copy).read_bytes()
+
+
+def test_the_storage_floor_puts_the_stored_events_on_the_lsl_clock_as_the_markers_are(lsl_session):
+    from protocol.storage.lsl_streams import stored_marker_times
+
+    conn = sqlite3.connect(lsl_session["db"])
+    stored = stored_marker_times(conn, 1)
+    lsl_of = _on_lsl_clock(conn)
+    cue_s = conn.execute("SELECT MIN(t_s) FROM events WHERE kind = 'cue'").fetchone()[0]
+    conn.close()
+    assert stored[("session_start", None)] == pytest.approx(lsl_of(0.0), abs=1e-9)  # float rounding of s
+    assert stored[("cue", 1)] == pytest.approx(lsl_of(cue_s), abs=1e-9)
+    got = {(m["event"], m.get("trial")): ts + lsl_session["correction"]
+           for m, ts in zip(lsl_session["markers"], lsl_session["marker_ts"], strict=True)}
+    assert max(abs(got[k] - t) for k, t in stored.items() if k in got) < BOUND_S  # what bench lsl reports
+    assert stored_marker_times(sqlite3.connect(":memory:"), 1) == {}  # a file without LSL
