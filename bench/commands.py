@@ -35,7 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "haptic-study bench pipeline --loop-seconds 15\nhaptic-study bench report --db study.db")
     bsub = b.add_subparsers(dest="bench", metavar="BENCH")
     bsub.required = True
-    for add in (_add_pipeline, _add_loop, _add_study, _add_report, _add_power, _add_stats, _add_gui):
+    for add in (_add_pipeline, _add_loop, _add_lsl, _add_study, _add_report, _add_power, _add_stats, _add_gui):
         add(bsub)
 
 
@@ -137,6 +137,31 @@ def _cmd_loop(args: argparse.Namespace) -> int:
     result = run_loop_bench(seconds=seconds, load=load, session=not args.no_session, reference_tree=tree,
                             rounds=args.rounds, study_db=args.study_db, progress=lambda line: _say(f"{line} ..."))
     print(json.dumps(result) if args.json else format_loop_bench(result))
+    return 0
+
+
+def _add_lsl(bsub: argparse._SubParsersAction) -> None:
+    bl = add_command(bsub, "lsl", "a real-clock 20-trial session with the Lab Streaming Layer off and on, alternating "
+                     "in the same run: loop p99, gap aborts and the markers' alignment", "haptic-study bench lsl "
+                     "--rounds 2")
+    bl.add_argument("--rounds", type=whole_number("--rounds", 1, 20), default=1,
+                    help="rounds of LSL off and on (alternating which goes first; default 1)")
+    bl.add_argument("--seconds", type=positive_seconds("--seconds", 3600.0), default=900.0,
+                    help="each session's cap (default 900)")
+    bl.add_argument("--json", action="store_true", help="print one JSON object")
+    bl.set_defaults(handler=_cmd_lsl)
+
+
+def _cmd_lsl(args: argparse.Namespace) -> int:
+    from bench.lsl_bench import format_lsl_bench, run_lsl_bench
+    from protocol.lsl.bus import LslUnavailable, pylsl
+
+    try:
+        pylsl()  # without pylsl: its one line saying how to install it, before any work
+    except LslUnavailable as exc:
+        raise CliError(str(exc)) from None
+    result = run_lsl_bench(args.rounds, args.seconds, progress=lambda line: _say(f"{line} ..."))
+    print(json.dumps(result) if args.json else format_lsl_bench(result))
     return 0
 
 

@@ -32,7 +32,7 @@ from bench.source_trees import check_tree, source_env
 from foundation.platform_support.threads import usable_cpu_count, usable_cpus
 from pipeline.core.clock import LOOP_CPU_ENV
 
-__all__ = ["PROTOCOL", "format_loop_bench", "run_loop_bench"]
+__all__ = ["PROTOCOL", "format_loop_bench", "probe", "run_loop_bench"]
 
 _PROBE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "loop_probe.py")
 #: The paper's protocol (protocol/study/default.toml) with the training not required: an experiment session at once.
@@ -62,12 +62,13 @@ TARGETS = {"abs_dev_p99_us": 100.0, "missed_fraction": 1e-4, "gap_aborts": 0}
 _LOAD_SETTLE_S = 10.0
 
 
-def _probe(tree: str | None, seconds: float, protocol: str | None, work: str, plot: bool,
-           tag: str) -> dict[str, Any]:
-    """One measurement in a fresh process of our tree (``tree`` None) or of ``tree``; the GUI load plots its ring."""
+def probe(tree: str | None, seconds: float, protocol: str | None, work: str, plot: bool,
+          tag: str, lsl: bool = False) -> dict[str, Any]:
+    """One measurement in a fresh process of our tree (``tree`` None) or of ``tree``; the GUI load plots its ring;
+    ``lsl``: the engine publishes on the Lab Streaming Layer and the session's markers are recorded and aligned."""
     ready = os.path.join(work, f"{tag}.ready")
     args = [sys.executable, _PROBE, "--seconds", repr(seconds), "--db", os.path.join(work, f"{tag}.db"),
-            "--ready-file", ready]
+            "--ready-file", ready, *(["--lsl"] if lsl else [])]
     if protocol is not None:
         args += ["--protocol", protocol]
     gui = Load(LoadSpec(0, False, plot), None, work)
@@ -136,7 +137,7 @@ def run_loop_bench(*, seconds: float, load: LoadSpec, session: bool, reference_t
                 for side, tree in sides:
                     what = "a 20-trial session" if session else f"{seconds:g} s of the loop"
                     say(f"round {k + 1} of {rounds}: {side} ({what})")
-                    runs[side].append(_probe(tree, seconds, protocol, work, load.gui, f"{side}{k}"))
+                    runs[side].append(probe(tree, seconds, protocol, work, load.gui, f"{side}{k}"))
         finally:
             background.stop()
         steal = steal_percent(cpu0, cpu_times())

@@ -26,15 +26,18 @@ def _abort_cause(record: Any) -> str:
     return "" if cause is None else str(getattr(cause, "value", cause))
 
 
-def measure(seconds: float, protocol: str | None, db: str, ready_file: str) -> dict[str, Any]:
-    """Run the engine, read its loop's periods and its session's trials; the figures as plain data."""
+def measure(seconds: float, protocol: str | None, db: str, ready_file: str, lsl: bool = False) -> dict[str, Any]:
+    """Run the engine, read its loop's periods and its session's trials; the figures as plain data.  With ``lsl``
+    the engine publishes on the Lab Streaming Layer (``gui --lsl``) and a pylsl inlet records the session's markers,
+    which are then held against the stored events (:class:`_Markers`)."""
     import numpy as np
 
     from study_app.engine import messages as m
     from study_app.engine.client import EngineClient
     from study_app.engine.setup import HostConfig
 
-    client = EngineClient(HostConfig(clock="real", health_period_s=0.5))
+    client = EngineClient(HostConfig(clock="real", health_period_s=0.5, lsl=lsl))
+    markers = _Markers(protocol) if lsl and protocol else None
     try:
         client.wait_ready(180.0)
         ring = client.ring
@@ -56,8 +59,7 @@ def measure(seconds: float, protocol: str | None, db: str, ready_file: str) -> d
         trials: list[dict[str, Any]] = []
         lost = 0
         started = time.monotonic()
-        if protocol:
-            client.send(m.StartSession(db, "B01", "experiment", protocol, 1, 1))
+        _start_session(client, protocol, db, markers)
         ended = False
         last = first
         pauses, was_paused, resets, was_latched = 0, False, 0, False
@@ -100,7 +102,77 @@ def measure(seconds: float, protocol: str | None, db: str, ready_file: str) -> d
     out["loop_stalled"] = stalls
     if out["session"] is not None:
         out["session"].update(self_pauses=pauses, fault_resets=resets)
+    if markers is not None:
+        out["markers"] = markers.aligned(db)
     return out
+
+
+class _Markers:
+    """A pylsl inlet on the session's marker outlet (found by its source id: this study's session 1 of ``B01``,
+    so no other program's streams of the same name), pulled on a thread until the outlet closes; then each marker
+    received is held against the stored event it stands for, put on LSL's clock through the run's stored link
+    (tests/protocol/test_lsl_session.py's comparison)."""
+
+    def __init__(self, protocol: str) -> None:
+        import threading
+        import tomllib
+
+        with open(protocol, "rb") as fh:
+            name = tomllib.load(fh)["name"]
+        self.source_id = f"haptic-study/{name} (seed 1)/B01/session-1/markers"
+        self.got: list[tuple[dict[str, Any], float]] = []
+        self.correction = float("nan")
+        self.error = ""
+        self.thread = threading.Thread(target=self._run, daemon=True)
+
+    def start(self) -> None:
+        self.thread.start()
+
+    def _run(self) -> None:
+        from protocol.lsl.bus import pylsl as lsl_library
+
+        pylsl = lsl_library()  # (quiet: liblsl's INFO lines off, as the product has it)
+        found = pylsl.resolve_byprop("source_id", self.source_id, 1, 30.0)
+        if not found:
+            self.error = "the marker outlet was not found within 30 s"
+            return
+        inlet = pylsl.StreamInlet(found[0], max_buflen=360, recover=False)
+        inlet.open_stream(timeout=30.0)
+        self.correction = inlet.time_correction(timeout=30.0)
+        while True:
+            try:
+                chunk, stamps = inlet.pull_chunk(timeout=0.2)
+            except pylsl.util.LostError:  # the outlet closed at the session's end
+                return
+            self.got += [(json.loads(c[0]), float(t) + self.correction) for c, t in zip(chunk, stamps, strict=True)]
+
+    def aligned(self, db: str) -> dict[str, Any]:
+        """How many markers were received and matched, and the largest |marker − stored event| on LSL's clock."""
+        import sqlite3
+
+        from protocol.storage.lsl_streams import stored_marker_times
+
+        self.thread.join(30.0)
+        conn = sqlite3.connect(db)
+        try:
+            stored = stored_marker_times(conn, 1)
+        finally:
+            conn.close()
+        errors = sorted(abs(t - stored[key]) for marker, t in self.got
+                        if (key := (marker["event"], marker.get("trial"))) in stored)
+        return {"received": len(self.got), "matched": len(errors), "stored": len(stored), "error": self.error,
+                "max_error_us": max(errors) * 1e6 if errors else float("nan"),
+                "median_error_us": errors[len(errors) // 2] * 1e6 if errors else float("nan")}
+
+
+def _start_session(client: Any, protocol: str | None, db: str, markers: _Markers | None) -> None:
+    """Start the measured session (with ``protocol``) and the inlet that records its markers (with LSL)."""
+    from study_app.engine import messages as m
+
+    if protocol:
+        client.send(m.StartSession(db, "B01", "experiment", protocol, 1, 1))
+    if markers is not None:  # (only with a session)
+        markers.start()
 
 
 def _figures(p_us: Any, lost: int, duration: float, first: Any, last: Any, trials: list[dict[str, Any]],
@@ -141,13 +213,14 @@ def main() -> None:
     ap.add_argument("--protocol", default=None)
     ap.add_argument("--db", required=True)
     ap.add_argument("--ready-file", required=True)
+    ap.add_argument("--lsl", action="store_true")
     args = ap.parse_args()
     from foundation.platform_support.processes import die_with
 
     die_with(os.getppid())  # a bench that is killed leaves no measurement behind (its engine follows it)
     if args.protocol and os.path.exists(args.db):
         raise SystemExit(f"--db {args.db}: exists (a fresh database per measurement)")
-    print(json.dumps(measure(args.seconds, args.protocol, args.db, args.ready_file)))
+    print(json.dumps(measure(args.seconds, args.protocol, args.db, args.ready_file, args.lsl)))
 
 
 if __name__ == "__main__":

@@ -231,8 +231,11 @@ CREATE TABLE IF NOT EXISTS withdrawals (
     removed_blocks   INTEGER NOT NULL,          -- recorded blocks, and the 1 kHz records they held
     removed_records  INTEGER NOT NULL,
     removed_samples  INTEGER NOT NULL,          -- samples rows (what versions 1 and 2 recorded)
-    rewritten        INTEGER                    -- 1 once the file's rewrite finished, 0 until then (withdraw again
+    rewritten        INTEGER,                   -- 1 once the file's rewrite finished, 0 until then (withdraw again
                                                 -- finishes it; check says so); NULL: recorded before this column
+    removed_lsl_streams INTEGER,                -- external LSL streams recorded with their sessions (lsl_streams
+    removed_lsl_chunks  INTEGER                 -- rows) and their samples' chunks (lsl_chunks rows); NULL: recorded
+                                                -- before these columns
 );
 
 -- Version 4, added later (issue 44; a writer adds these tables to a file made before them).

@@ -82,7 +82,7 @@ def test_bench_is_registered_by_entry_point_not_imported() -> None:
     assert eps.get("bench") == "bench.commands:register"  # pip install -e . (scripts/setup.sh) wrote it
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     bench = next(a for a in sub.choices["bench"]._actions if isinstance(a, argparse._SubParsersAction))
-    assert list(bench.choices) == ["pipeline", "loop", "study", "report", "power", "stats", "gui"]
+    assert list(bench.choices) == ["pipeline", "loop", "lsl", "study", "report", "power", "stats", "gui"]
 
 
 def _entry_points_of(monkeypatch: pytest.MonkeyPatch, *values: str) -> None:

@@ -173,8 +173,10 @@ def test_the_record_keeps_only_the_code_time_reason_and_counts(withdrawn) -> Non
     finally:
         c.close()
     assert cols == ["code", "withdrawn_at", "reason", "removed_sessions", "removed_trials", "removed_events",
-                    "removed_blocks", "removed_records", "removed_samples", "rewritten"]
+                    "removed_blocks", "removed_records", "removed_samples", "rewritten",
+                    "removed_lsl_streams", "removed_lsl_chunks"]
     assert (w.code, w.reason, w.rewritten) == (GONE, "withdrew consent by e-mail", 1)  # the rewrite finished
+    assert (w.removed_lsl_streams, w.removed_lsl_chunks) == (0, 0) and "LSL" not in w.counts()  # a study without LSL
     assert (w.removed_sessions, w.removed_trials, w.removed_events, w.removed_blocks, w.removed_records) == (
         len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records) and fp.trials == 4 and fp.records > 1000
     out = withdrawn["out"]

@@ -12,7 +12,10 @@ import json
 from pathlib import Path
 from typing import Any
 
-__all__ = ["read_record", "record_path"]
+__all__ = ["CHECKS", "read_record", "record_path"]
+
+#: The checks of ``haptic-study qualify`` by name, in the order they run (docs/qualify.md).
+CHECKS = ("process-death", "thermal-budget", "latency", "loop-under-load")
 
 #: The calibration file's name when the hardware file names none (pipeline.settings.hardware's default).
 _DEFAULT_CALIBRATION = "calibration.json"

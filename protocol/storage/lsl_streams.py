@@ -32,7 +32,7 @@ from protocol.storage.common import has_table
 from protocol.study.labels import plural
 
 __all__ = ["ALIGNED_COLUMNS", "LSL_TABLES", "LslChunk", "LslStream", "aligned_samples", "audit_lsl",
-           "ensure_lsl_tables", "erase_lsl_rows", "insert_chunk", "insert_run", "insert_stream"]
+           "ensure_lsl_tables", "erase_lsl_rows", "insert_chunk", "insert_run", "insert_stream", "stored_marker_times"]
 
 #: The tables, children first (the order a withdrawal deletes in).
 LSL_TABLES = ("lsl_chunks", "lsl_streams", "lsl_runs")
@@ -170,6 +170,30 @@ def aligned_samples(conn: sqlite3.Connection, session_id: int) -> Iterator[tuple
             ours = float(t[i]) + float(tc)  # the sample's time on our LSL clock
             session_s = None if start is None or link is None else start[0] + (ours - link) - start[1] * 1e-9
             yield (session_id, int(seg), name, float(t[i]), float(tc), session_s, json.dumps(values[i]))
+
+
+def stored_marker_times(conn: sqlite3.Connection, session_id: int) -> dict[tuple[str, int | None], float]:
+    """Where each stored event a marker stands for lies on our LSL clock, s, by (marker event, trial numbered from
+    1): the session's start, every cue, every trial's end (its outcome; ``abort`` for an aborted one), the session's
+    end or interruption -- through the first run's clock link (``lsl_runs``); empty for a session without one.  What
+    a marker inlet received is held against these (``haptic-study bench lsl``)."""
+    if not has_table(conn, "lsl_runs"):
+        return {}
+    run = conn.execute("SELECT r.started_at_s, r.t0_ns, l.records_to_lsl_s FROM recordings r JOIN lsl_runs l ON "
+                       "l.session_id = r.session_id AND l.segment = r.segment WHERE r.session_id = ? "
+                       "ORDER BY r.segment", (session_id,)).fetchone()
+    if run is None:
+        return {}
+    started, t0_ns, link = float(run[0]), int(run[1]), float(run[2])
+    stored: dict[tuple[str, int | None], float] = {("session_start", None): 0.0}
+    for kind, t_s, detail in conn.execute("SELECT kind, t_s, detail FROM events WHERE session_id = ? AND kind IN "
+                                          "('cue', 'session_end', 'session_interrupted')", (session_id,)):
+        trial = int(str(detail).split("index ")[1].split(")")[0]) + 1 if kind == "cue" else None
+        stored[(str(kind), trial)] = float(t_s)
+    for index, outcome, end_s in conn.execute("SELECT trial_index, outcome, ended_at_s FROM trials WHERE "
+                                              "session_id = ?", (session_id,)):
+        stored[({"aborted": "abort"}.get(str(outcome), str(outcome)), int(index) + 1)] = float(end_s)
+    return {key: (t_s - started) + t0_ns * 1e-9 + link for key, t_s in stored.items()}
 
 
 def erase_lsl_rows(conn: sqlite3.Connection, session_id: int) -> None:

@@ -147,8 +147,10 @@ def add_metric_columns(conn: sqlite3.Connection, names: Iterable[str]) -> list[s
 
 #: Columns added to version 4 after files of version 4 existed, NULL in the rows stored before (table, column):
 #: a run's count of its blocks (``n_blocks``: not NULL, its blocks' checksums bind their place; NULL, a run recorded
-#: before, whose checksums cover their bytes alone), and whether a withdrawal's rewrite of the file finished.
-_LATER_COLUMNS = (("recordings", "n_blocks"), ("arm_recordings", "n_blocks"), ("withdrawals", "rewritten"))
+#: before, whose checksums cover their bytes alone), whether a withdrawal's rewrite of the file finished, and the LSL
+#: rows a withdrawal removed (issue 46: NULL in a record made before them).
+_LATER_COLUMNS = (("recordings", "n_blocks"), ("arm_recordings", "n_blocks"), ("withdrawals", "rewritten"),
+                  ("withdrawals", "removed_lsl_streams"), ("withdrawals", "removed_lsl_chunks"))
 
 
 def add_later_columns(conn: sqlite3.Connection) -> list[str]:

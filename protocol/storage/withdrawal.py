@@ -31,8 +31,8 @@ from protocol.storage.lsl_streams import erase_lsl_rows
 from protocol.study.labels import plural
 from protocol.study.records import trial_id_of
 
-__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "mark_rewritten", "nobody_reading",
-           "rewrite_file", "rewrite_pending", "withdrawal_of", "withdrawals"]
+__all__ = ["Footprint", "Withdrawal", "erase_participant", "footprint", "lsl_words", "mark_rewritten",
+           "nobody_reading", "rewrite_file", "rewrite_pending", "withdrawal_of", "withdrawals"]
 
 
 class StudyDatabase(Protocol):
@@ -62,6 +62,10 @@ class Footprint:
     blocks: int
     records: int
     samples: int
+    #: The external LSL streams recorded with their sessions (``lsl_streams`` rows) and their samples' chunks
+    #: (``lsl_chunks`` rows): what the LSL recorder kept of other instruments while they took part
+    lsl_streams: int = 0
+    lsl_chunks: int = 0
 
     def describe(self) -> str:
         """One sentence naming what is stored (what a withdrawal will remove)."""
@@ -71,7 +75,16 @@ class Footprint:
                     f"({self.records:,} records at 1 kHz)")
         older = f", {plural(self.samples, 'samples row')} (an older version's)" if self.samples else ""
         return (f"participant {self.code}: {plural(len(self.sessions), 'session')}{': ' + kinds if kinds else ''}; "
-                f"{plural(self.trials, 'trial')}, {plural(self.events, 'event')}, {recorded}{older}")
+                f"{plural(self.trials, 'trial')}, {plural(self.events, 'event')}, {recorded}{older}"
+                f"{lsl_words(self.lsl_streams, self.lsl_chunks)}")
+
+
+def lsl_words(streams: int | None, chunks: int | None) -> str:
+    """The LSL rows of a footprint or a withdrawal, in words (nothing when there are none, or none were counted)."""
+    if not streams and not chunks:
+        return ""
+    return (f", {plural(streams or 0, 'external LSL stream')} ({plural(chunks or 0, 'chunk')} of their samples: "
+            f"lsl_streams, lsl_chunks)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,13 +103,18 @@ class Withdrawal:
     #: 1 once the file's rewrite after the removal finished; 0 until then (a reader held it up, or the command was
     #: stopped between the removal and the rewrite); None in a record made before this mark
     rewritten: int | None = None
+    #: The ``lsl_streams`` and ``lsl_chunks`` rows removed (external streams recorded with their sessions); None in
+    #: a record made before these columns
+    removed_lsl_streams: int | None = None
+    removed_lsl_chunks: int | None = None
 
     def counts(self) -> str:
         """What was removed, in words."""
         return (f"{plural(self.removed_sessions, 'session')}, {plural(self.removed_trials, 'trial')}, "
                 f"{plural(self.removed_events, 'event')}, {plural(self.removed_blocks, 'recorded block')} "
                 f"({self.removed_records:,} records)"
-                + (f", {plural(self.removed_samples, 'samples row')}" if self.removed_samples else ""))
+                + (f", {plural(self.removed_samples, 'samples row')}" if self.removed_samples else "")
+                + lsl_words(self.removed_lsl_streams, self.removed_lsl_chunks))
 
 
 _COLUMNS = ", ".join(f.name for f in fields(Withdrawal))
@@ -160,7 +178,21 @@ def footprint(conn: sqlite3.Connection, code: str) -> Footprint | None:
                                     f"{chunks} WHERE session_id = ? GROUP BY {'arm, ' if arm else ''}segment, block)",
                                     (sid,)).fetchone()
                 blocks, records = blocks + int(b), records + int(r)
-    return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples))
+    lsl_streams, lsl_chunks = _lsl_counts(conn, [sid for sid, _, _ in sessions])
+    return Footprint(code, pid, sessions, int(trials), int(events), int(segments), blocks, records, int(samples),
+                     lsl_streams, lsl_chunks)
+
+
+def _lsl_counts(conn: sqlite3.Connection, session_ids: list[int]) -> tuple[int, int]:
+    """The ``lsl_streams`` and ``lsl_chunks`` rows of these sessions (0 in a file no LSL session wrote to)."""
+    counts = []
+    for table in ("lsl_streams", "lsl_chunks"):
+        n = 0
+        if has_table(conn, table):
+            for sid in session_ids:
+                n += int(conn.execute(f"SELECT COUNT(*) FROM {table} WHERE session_id = ?", (sid,)).fetchone()[0])
+        counts.append(n)
+    return counts[0], counts[1]
 
 
 def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
@@ -207,7 +239,8 @@ def erase_participant(db: StudyDatabase, code: str, reason: str) -> Withdrawal:
             c.execute("DELETE FROM covariates WHERE participant_id = ?", (fp.participant_id,))
         c.execute("DELETE FROM participants WHERE participant_id = ?", (fp.participant_id,))
         record = Withdrawal(code, now_iso(), reason, len(fp.sessions), fp.trials, fp.events, fp.blocks, fp.records,
-                            fp.samples, rewritten=0)
+                            fp.samples, rewritten=0, removed_lsl_streams=fp.lsl_streams,
+                            removed_lsl_chunks=fp.lsl_chunks)
         c.execute(f"INSERT INTO withdrawals ({_COLUMNS}) VALUES ({', '.join('?' * len(fields(Withdrawal)))})",
                   astuple(record))
         _scrub_free_pages(c)

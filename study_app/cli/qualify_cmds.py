@@ -1,6 +1,7 @@
 """``haptic-study qualify``: qualify one arm of the real rig, and keep the record beside its calibration file.
 
-The checks are :mod:`study_app.cli.qualify_checks`'s (docs/qualify.md: what each does, its bound and its source).
+The checks are :mod:`study_app.cli.qualify_checks`'s and :mod:`study_app.cli.qualify_engine`'s (docs/qualify.md:
+what each does, its bound and its source).  Progress goes to stderr, one ``qualify: …`` line at a time.
 The record (:mod:`pipeline.commissioning.qualification`: ``calibration.json`` → ``calibration.qualification.json``)
 is JSON: the software version, the date, the hardware file and arm, and each check's measured value, bound and
 verdict.
@@ -11,22 +12,25 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import sys
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from pipeline.commissioning.qualification import read_record, record_path
+from pipeline.commissioning.qualification import CHECKS, read_record, record_path
 from pipeline.commissioning.rig_calibration import write_text_atomically
 from study_app.cli.argtypes import add_command, arm_name
 from study_app.cli.error import CliError
 from study_app.guide_paths import hardware_template
 
-#: The checks by name, in the order they run.
-CHECKS = ("process-death", "thermal-budget", "latency")
-
-#: Why the latency is not a check of this command (yet): said in its record, never passed.
-_LATENCY_WHY = ("not measured by qualify in this version: a real-rig session measures and stores it when it "
-                "starts, and the report's methods give it")
+#: The checks that run the loop on the rig (one engine run serves both: :mod:`study_app.cli.qualify_engine`).
+ENGINE_CHECKS = ("latency", "loop-under-load")
+#: How long the loop-under-load check measures by default, s (the bench's quiet-machine figure is 30 s; a minute
+#: catches the few-a-minute stalls a machine may have).
+DEFAULT_SECONDS = 60.0
+#: The most ``--seconds`` allows, s.
+MAX_SECONDS = 3600.0
 
 
 def parse_checks(text: str) -> tuple[str, ...]:
@@ -38,13 +42,31 @@ def parse_checks(text: str) -> tuple[str, ...]:
     return tuple(c for c in CHECKS if c in names)
 
 
-def qualify(hardware: str, arm: str | None, checks: tuple[str, ...]) -> tuple[dict[str, Any], Path]:
+def parse_seconds(text: str) -> float:
+    """``--seconds``: how long the loop is measured; :class:`CliError` outside 1 s … :data:`MAX_SECONDS`."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 1.0 <= value <= MAX_SECONDS:  # (NaN fails too)
+        raise CliError(f"--seconds = {text!r}: must be a number of seconds from 1 to {MAX_SECONDS:g}")
+    return value
+
+
+def _say(line: str) -> None:
+    """Progress, on stderr (the record is stdout's; the GUI shows these lines as they come)."""
+    print(f"qualify: {line}", file=sys.stderr, flush=True)
+
+
+def qualify(hardware: str, arm: str | None, checks: tuple[str, ...],
+            seconds: float = DEFAULT_SECONDS) -> tuple[dict[str, Any], Path]:
     """Run ``checks`` on the arm of ``hardware`` (``arm``: its name, None for a one-arm rig); the record and where it
     was written.  :class:`CliError` on a bad hardware file or arm, before any device is touched."""
     from foundation.version import software_version
     from pipeline.settings.hardware import HardwareError, load_hardware
     from study_app.cli.calibrate_cmds import chosen_arm
-    from study_app.cli.qualify_checks import CheckResult, not_checked, process_death, thermal_budget
+    from study_app.cli.qualify_checks import CheckResult, process_death, thermal_budget
+    from study_app.cli.qualify_engine import engine_checks
 
     try:
         hw = load_hardware(hardware)
@@ -53,13 +75,19 @@ def qualify(hardware: str, arm: str | None, checks: tuple[str, ...]) -> tuple[di
     one = chosen_arm(tuple(a.name for a in hw.arms), arm, hardware)
     settings = next(a for a in hw.arms if a.name == one)
     results: list[CheckResult] = []
+    engine: dict[str, CheckResult] = {}
     for name in checks:
+        _say(f"{name}: running")
         if name == "process-death":
             results.append(process_death(hardware, settings))
         elif name == "thermal-budget":
             results.append(thermal_budget(settings))
         else:
-            results.append(not_checked(name, _LATENCY_WHY))
+            if not engine:
+                engine = engine_checks(hardware, settings, tuple(c for c in checks if c in ENGINE_CHECKS), seconds,
+                                       _say)
+            results.append(engine[name])
+        _say(f"{name}: {results[-1].verdict}")
     verdicts = {r.verdict for r in results}
     record = {
         "software_version": software_version(),
@@ -113,14 +141,18 @@ def describe_record(calibration_file: str | None) -> str | None:
 
 def add_qualify_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``qualify``."""
-    q = add_command(sub, "qualify", "qualify one arm's real haptic device (process death, thermal budget) and keep "
-                    "the record beside its calibration file", "haptic-study qualify --hardware hardware.toml")
+    q = add_command(sub, "qualify", "qualify one arm of the real rig (process death, thermal budget, end-to-end "
+                    "latency, the loop under the lab's load) and keep the record beside its calibration file",
+                    "haptic-study qualify --hardware hardware.toml")
     q.add_argument("--hardware", default="hardware.toml", metavar="FILE",
                    help=f"hardware file (default ./hardware.toml; see {hardware_template()})")
     q.add_argument("--arm", type=arm_name("--arm"), default=None, metavar="NAME",
                    help="a rig of several arms: the arm to qualify")
     q.add_argument("--checks", default=",".join(CHECKS), metavar="NAMES",
                    help=f"comma-separated checks to run (default all: {', '.join(CHECKS)})")
+    q.add_argument("--seconds", default=repr(DEFAULT_SECONDS), metavar="S",
+                   help=f"how long loop-under-load measures the loop (default {DEFAULT_SECONDS:g} s; 1 to "
+                        f"{MAX_SECONDS:g}): run it while the machine is as the lab uses it")
     q.add_argument("--json", action="store_true", help="print the record as JSON")
     q.set_defaults(handler=cmd_qualify)
 
@@ -129,6 +161,7 @@ def cmd_qualify(args: argparse.Namespace) -> int:
     """Run ``haptic-study qualify``: 0 when no check failed (a check not done is shown, never passed), 1 when one
     failed."""
     checks = parse_checks(args.checks)
-    record, path = qualify(args.hardware, args.arm, checks)
+    seconds = parse_seconds(args.seconds)
+    record, path = qualify(args.hardware, args.arm, checks, seconds)
     print(json.dumps(record) if args.json else format_record(record) + f"\nrecord: {path}")
     return 1 if record["verdict"] == "FAIL" else 0

@@ -67,6 +67,13 @@ class QtEngineBridge(QObject):
         self._thread = threading.Thread(target=run, name="engine-monitor", daemon=True)
         self._thread.start()
 
+    def release(self, timeout_s: float = 15.0) -> None:
+        """Stop the engine and let its devices go (``haptic-study qualify`` opens them itself); nothing of it reaches
+        the window any more, and :meth:`restart` starts a new one."""
+        self.generation += 1
+        thread, self._thread = self._thread, None
+        _stop(self.client, thread, timeout_s)
+
     def _run(self, gen: int, client: EngineClient) -> None:
         try:
             client.start()

@@ -33,6 +33,7 @@ from study_app.gui.health_panel import QtHealthPanel
 from study_app.gui.jaw_box import QtJawBox
 from study_app.gui.menus import WindowMenus, remember_recent
 from study_app.gui.participant_window import ParticipantWindow
+from study_app.gui.qualify_page import attach_qualify
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.session_actions import SessionActions
 from study_app.gui.session_views import QtCueWait, QtProgress, QtSessionNotes, QtTrialTable
@@ -198,6 +199,8 @@ class ExperimenterWindow(QMainWindow):
             on_frames=steps.check_frames, on_arm=steps.select_arm,
         )
         self.calibration_wizard.hidden.connect(lambda: self.model.notices.clear(CALIBRATION_COMMANDS))
+        self.qualify_page = attach_qualify(self, self.bridge.client.config.hardware_path if
+                                           self.bridge.client.config.rig == "real" else None)
         # no trial is cued to a participant screen nobody sees: the engine hears each change, a start opens it
         self.participant_window.seen_changed.connect(self.model.screen.shown)
         self.model.screen.opener = self.open_participant_screen

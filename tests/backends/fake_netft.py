@@ -8,10 +8,14 @@ ways to produce data:
   datagrams a test wants (drop, reorder, duplicate, corrupt, stall, status);
 * free-running: ``rate_hz > 0`` streams records from a thread after START,
   with optional ``drop_every`` / ``duplicate_every`` / ``reorder_every``.
+
+A START with a sample count above 0 is answered with that many records and no stream, as the box does; with
+``delay_s`` every datagram leaves that long after it was made (a slow network: ``qualify``'s latency check).
 """
 
 from __future__ import annotations
 
+import queue
 import socket
 import struct
 import threading
@@ -79,8 +83,13 @@ class FakeNetFT:
         reorder_every: int = 0,
         status: int = 0,
         host: str = "127.0.0.1",
+        delay_s: float = 0.0,
     ) -> None:
         self.host = host
+        #: Every datagram leaves this long after it was made (a slow network or box: the misbehaving sensor of
+        #: ``qualify``'s latency check).
+        self.delay_s = delay_s
+        self._delayed: queue.Queue[tuple[float, bytes, tuple[str, int]]] = queue.Queue()
         self.counts = counts
         self.status = status
         self.initial_records = initial_records
@@ -135,6 +144,8 @@ class FakeNetFT:
             self.http_port = s.getsockname()[1]
             s.close()
         self._threads = [threading.Thread(target=self._serve_udp, daemon=True)]
+        if delay_s > 0:
+            self._threads.append(threading.Thread(target=self._send_delayed, daemon=True))
         if rate_hz > 0:
             self._threads.append(threading.Thread(target=self._stream, daemon=True))
         for t in self._threads:
@@ -201,13 +212,36 @@ class FakeNetFT:
                 self.bad_requests += 1
                 continue
             self.requests.append((header, cmd, count))
-            if cmd in (2, 3):
+            if cmd in (2, 3) and count > 0:  # so many records, then nothing (the box's single-sample request)
+                for _ in range(count):
+                    self._sendto(self.record(), addr)
+            elif cmd in (2, 3):
                 self.client = addr
                 self.streaming.set()
                 for _ in range(self.initial_records):
-                    self.udp.sendto(self.record(), addr)
+                    self._sendto(self.record(), addr)
             elif cmd == 0:
                 self.streaming.clear()
+
+    def _sendto(self, datagram: bytes, addr: tuple[str, int]) -> None:
+        if self.delay_s > 0:
+            self._delayed.put((time.perf_counter() + self.delay_s, datagram, addr))
+        else:
+            self.udp.sendto(datagram, addr)
+
+    def _send_delayed(self) -> None:
+        while not self._stop.is_set():
+            try:
+                due, datagram, addr = self._delayed.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            wait = due - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            try:
+                self.udp.sendto(datagram, addr)
+            except OSError:
+                pass
 
     def _stream(self) -> None:
         period = 1.0 / self.rate_hz
@@ -225,12 +259,12 @@ class FakeNetFT:
                 elif self.reorder_every and n % self.reorder_every == 0:
                     held = rec  # sent after the next one
                 else:
-                    self.udp.sendto(rec, self.client)
+                    self._sendto(rec, self.client)
                     if held is not None:
-                        self.udp.sendto(held, self.client)
+                        self._sendto(held, self.client)
                         held = None
                     if self.duplicate_every and n % self.duplicate_every == 0:
-                        self.udp.sendto(rec, self.client)
+                        self._sendto(rec, self.client)
             except OSError:
                 pass
             next_t += period

@@ -102,7 +102,10 @@ def test_a_device_that_cannot_be_opened_is_not_checked_never_passed(tmp_path: Pa
         (["--hardware", "/nonexistent/hw.toml"], "/nonexistent/hw.toml: no such hardware file"),
         (["--arm", "left"], "hardware.toml has no such arm; its arms: right"),
         (["--checks", "process-death,warp"], "--checks = 'process-death,warp': must name one or more of "
-                                             "process-death, thermal-budget, latency"),
+                                             "process-death, thermal-budget, latency, "
+                                             "loop-under-load"),
+        (["--seconds", "0.5"], "--seconds = '0.5': must be a number of seconds from 1 to 3600"),
+        (["--seconds", "nan"], "--seconds = 'nan': must be a number of seconds from 1 to 3600"),
     ],
 )
 def test_bad_input_is_one_line_exit_2_and_nothing_written(tmp_path: Path, hardware: Path, args: list[str],

@@ -28,6 +28,7 @@ import pytest
 
 import protocol.runner.session_lsl as session_lsl
 from analysis.export.participant_export import export_codebook, participant_export
+from protocol.storage.withdrawal import footprint, withdrawal_of
 from protocol.study.config import protocol_from_dict
 from study_app.cli.main import main
 from study_app.headless import SessionInterrupted, run_study
@@ -205,14 +206,41 @@ def test_check_counts_the_streams_and_finds_a_chunk_that_lost_samples(lsl_sessio
     assert "LSL stream 0, chunk 0" in capsys.readouterr().out
 
 
-def test_a_withdrawal_leaves_nothing_of_the_streams(lsl_session, tmp_path):
+def test_a_withdrawal_leaves_nothing_of_the_streams(lsl_session, tmp_path, capsys):
     copy = tmp_path / "copy.db"
     src = sqlite3.connect(lsl_session["db"])
     src.backup(sqlite3.connect(copy))
     src.close()
+    conn = sqlite3.connect(copy)
+    streams, chunks = (conn.execute(f"SELECT COUNT(*) FROM {t}").fetchone()[0] for t in ("lsl_streams", "lsl_chunks"))
+    fp = footprint(conn, "P01")
+    conn.close()
+    assert streams == 1 and chunks >= 1
+    # the confirmation names them (what withdraw prints before it asks for the code)
+    assert (fp.lsl_streams, fp.lsl_chunks) == (streams, chunks)
+    assert f"1 external LSL stream ({chunks} chunk" in fp.describe() and "lsl_streams, lsl_chunks" in fp.describe()
     assert main(["withdraw", "--db", str(copy), "--participant", "P01", "--reason", "test", "--yes", "P01"]) == 0
+    assert f"1 external LSL stream ({chunks} chunk" in capsys.readouterr().out  # "Withdrew P01 …: removed …"
     conn = sqlite3.connect(copy)
     for table in ("lsl_runs", "lsl_streams", "lsl_chunks"):
         assert conn.execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0] == 0, table
+    record = withdrawal_of(conn, "P01")
     conn.close()
+    assert record is not None and (record.removed_lsl_streams, record.removed_lsl_chunks) == (streams, chunks)
     assert f"emg-{lsl_session['tag']}".encode() not in Path(copy).read_bytes()
+
+
+def test_the_storage_floor_puts_the_stored_events_on_the_lsl_clock_as_the_markers_are(lsl_session):
+    from protocol.storage.lsl_streams import stored_marker_times
+
+    conn = sqlite3.connect(lsl_session["db"])
+    stored = stored_marker_times(conn, 1)
+    lsl_of = _on_lsl_clock(conn)
+    cue_s = conn.execute("SELECT MIN(t_s) FROM events WHERE kind = 'cue'").fetchone()[0]
+    conn.close()
+    assert stored[("session_start", None)] == pytest.approx(lsl_of(0.0), abs=1e-9)  # float rounding of s
+    assert stored[("cue", 1)] == pytest.approx(lsl_of(cue_s), abs=1e-9)
+    got = {(m["event"], m.get("trial")): ts + lsl_session["correction"]
+           for m, ts in zip(lsl_session["markers"], lsl_session["marker_ts"], strict=True)}
+    assert max(abs(got[k] - t) for k, t in stored.items() if k in got) < BOUND_S  # what bench lsl reports
+    assert stored_marker_times(sqlite3.connect(":memory:"), 1) == {}  # a file without LSL
