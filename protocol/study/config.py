@@ -20,6 +20,7 @@ from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
+from protocol.study.feedback import FeedbackConfig, feedback_from_table
 from protocol.study.groups import GroupDesign, groups_from_table
 from protocol.study.lsl_settings import LslSettings, lsl_from_table
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
@@ -121,6 +122,8 @@ class ProtocolConfig:
     #: What the session publishes and records on the Lab Streaming Layer (:mod:`protocol.study.lsl_settings`; the
     #: file's ``[lsl]``): nothing by default.
     lsl: LslSettings = field(default_factory=LslSettings)
+    #: Feedback to the trainee (:mod:`protocol.study.feedback`; the file's ``[feedback]``): none by default.
+    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
 
     @property
     def trials_per_participant(self) -> int:
@@ -185,6 +188,7 @@ class ProtocolConfig:
             **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
             **({"groups": self.groups.to_dict()} if self.groups is not None else {}),
             **({"lsl": lsl} if (lsl := self.lsl.to_dict()) is not None else {}),
+            **({"feedback": fb} if (fb := self.feedback.to_dict()) is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -207,7 +211,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires", "groups", "lsl"})
+                          "questionnaires", "groups", "lsl", "feedback"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -268,6 +272,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
         groups=groups_from_table(f, top.get("groups"), covariates),
         lsl=lsl_from_table(f, top),
+        feedback=feedback_from_table(f, top, ordering),
     )
 
 

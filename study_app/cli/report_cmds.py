@@ -4,12 +4,16 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from foundation.errors import InputRefused
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
 from protocol.study.labels import plural
 from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
+
+if TYPE_CHECKING:
+    from analysis.report.report import ReportSummary
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
@@ -115,10 +119,6 @@ def cmd_report(args: argparse.Namespace) -> int:
         check_databases(args.db)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
-    from analysis.report.discrimination import discrimination_study
-
-    if discrimination_study(args.db):
-        return _discrimination_report(args)
     from analysis.reading.metrics import MetricOptions
     from analysis.report.report import build_report
     from study_app.cli.progress import ProgressBar
@@ -143,6 +143,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     ex = summary.excluded
+    for line in summary.lines:  # the tasks' sections' own (a discrimination study's fits)
+        print(line)
     for line in summary.damage:  # as every reader of the recording names it; the report lists the trials
         print(f"haptic-study: recording damaged: {line}: the trials it touches are left out of the analysis "
               f"(listed in {summary.out_dir / 'report.html'} under Trials that did not count)", file=sys.stderr)
@@ -153,6 +155,14 @@ def cmd_report(args: argparse.Namespace) -> int:
           f"{damaged})")
     for line in summary.conditions:  # as the page opens with them
         print(f"haptic-study: warning: {line}", file=sys.stderr)
+    if not summary.stats.empty:
+        _print_tests(summary, args)
+    print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
+    return 0
+
+
+def _print_tests(summary: ReportSummary, args: argparse.Namespace) -> None:
+    """The tests ON vs OFF as stats.csv has them, with why a test's n is below the participants."""
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
     print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted; "
           f"error window: {args.error_window}, TCT: {args.tct}, zero differences: {args.zero_method}):")
@@ -164,33 +174,6 @@ def cmd_report(args: argparse.Namespace) -> int:
         if note or int(r.n) != summary.n_participants:
             print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
                   f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
-    print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
-    return 0
-
-
-def _discrimination_report(args: argparse.Namespace) -> int:
-    """A force-discrimination study's report: its section's tables, codebook, figures and page, by the output
-    policy (:func:`analysis.report.discrimination.write_discrimination_report`)."""
-    from analysis.report.discrimination import study_blocks, write_discrimination_report
-    from foundation.outdir import REPORT_MARKER, write_output_folder
-    from protocol.tasks.force_discrimination import ForceDiscrimination
-
-    results = study_blocks(args.db)
-    if not results:
-        raise CliError(f"--db = {args.db[0]!r}: no answered discrimination trial to report")
-    methods = ForceDiscrimination.methods([ForceDiscrimination()], [])
-    try:
-        files = write_output_folder(args.out, lambda tmp: write_discrimination_report(results, tmp, methods),
-                                    command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
-    except InputRefused as exc:
-        raise CliError(str(exc), getattr(exc, "status", 2)) from None
-    for r in results:
-        print(f"P{r.participant:02d}  " + "  ".join(
-            f"{label} JND {f.jnd_n * 1000:.1f} mN, W {f.weber:.3f} [{f.weber_lo:.3f}, {f.weber_hi:.3f}]"
-            for label, f in r.fits))
-    print(f"Report {args.out}/report.html: {len(results)} participants; files: "
-          + ", ".join(f for f in files if "/" not in f))
-    return 0
 
 
 def _trial_numbers(numbers: list[int]) -> str:
