@@ -37,3 +37,31 @@ def test_a_study_run_as_run_runs_it_is_read_as_the_report_reads_it(tmp_path) -> 
         assert set(s[key]) == {"off", "on", "change", "p", "n_pairs", "g"}
     assert 0.0 < s["rmse_n"]["off"] < 5.0 and s["rmse_n"]["n_pairs"] == 4
     assert "Bergholz" in format_effect_sizes([s]) and "RMSE" in format_effect_sizes([s])
+
+
+def test_the_schedule_path_meets_the_participants_run_meets(tmp_path) -> None:
+    """Participant j of the schedule path's study k is participant j of `run --seed k` (issue 48: the two paths
+    drew different people and disagreed by a third in Max AE off haptics), the training block before changing
+    nothing of the experiment: the same trials in the same order, and the same forces."""
+    import dataclasses
+    import sqlite3
+
+    from protocol.study.config import default_protocol
+    from study_app.headless import run_study
+    from study_app.headless.sim_trials import run_participant
+
+    protocol = dataclasses.replace(default_protocol(), trials_per_cell=1)  # 4 trials, the training block kept
+    db = tmp_path / "run.db"
+    run_study(str(db), participants=2, seed=11, protocol=protocol, jobs=1)
+    with sqlite3.connect(db) as conn:
+        stored = conn.execute(
+            "SELECT t.trial_index, t.target_label, t.haptic_mode, t.max_ae_n FROM trials t JOIN sessions s "
+            "USING (session_id) JOIN participants p USING (participant_id) WHERE s.kind = 'experiment' "
+            "AND p.code = 'P02' ORDER BY t.trial_index").fetchall()
+    rows = run_participant(11, 2, protocol)
+    assert [(r.index, r.target, r.mode) for r in rows] == [s[:3] for s in stored]
+    # The two runners start a trial on ticks up to one 20-tick read apart (the schedule path marks a trial at its
+    # block's end), so a trial's largest error can differ by what the force changes in 20 ms: ≤ 0.05 N here; a
+    # different participant differs by ~1 N.
+    for r, s in zip(rows, stored, strict=True):
+        assert float(r.values["max_ae_n"]) == pytest.approx(s[3], abs=0.05)

@@ -108,14 +108,15 @@ def test_a_second_run_computes_nothing_and_a_cut_line_is_run_again(tmp_path: Pat
 
 
 def test_the_cache_key_names_what_decides_the_rows() -> None:
-    base = cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION, "p")
-    assert base == cell_key(dict(reversed(list(paper_settings().items()))), 0, 10, 0, MODEL_VERSION, "p")
-    for other in (cell_key({**paper_settings(), "f_scale_n": 3.0}, 0, 10, 0, MODEL_VERSION, "p"),
-                  cell_key(paper_settings(), 1, 10, 0, MODEL_VERSION, "p"),
-                  cell_key(paper_settings(), 0, 9, 0, MODEL_VERSION, "p"),
-                  cell_key(paper_settings(), 0, 10, 1, MODEL_VERSION, "p"),
-                  cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION + "x", "p"),
-                  cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION, "q")):
+    base = cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION, "p", "run")
+    assert base == cell_key(dict(reversed(list(paper_settings().items()))), 0, 10, 0, MODEL_VERSION, "p", "run")
+    for other in (cell_key({**paper_settings(), "f_scale_n": 3.0}, 0, 10, 0, MODEL_VERSION, "p", "run"),
+                  cell_key(paper_settings(), 1, 10, 0, MODEL_VERSION, "p", "run"),
+                  cell_key(paper_settings(), 0, 9, 0, MODEL_VERSION, "p", "run"),
+                  cell_key(paper_settings(), 0, 10, 1, MODEL_VERSION, "p", "run"),
+                  cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION + "x", "p", "run"),
+                  cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION, "q", "run"),
+                  cell_key(paper_settings(), 0, 10, 0, MODEL_VERSION, "p", "bench-v2")):
         assert other != base
 
 

@@ -80,13 +80,14 @@ def protocol_digest(protocol_json: str) -> str:
 
 
 def cell_key(settings: Mapping[str, float], study: int, participants: int, seed: int, model_version: str,
-             protocol: str) -> str:
+             protocol: str, seed_rule: str) -> str:
     """What decides a cell's rows, as one canonical string: every pipeline setting (all of them, so a grid that
     does not sweep a setting shares cells with one that sweeps it through the same value), the study number, the
-    participants, the seed, the participant model's version and the protocol's digest."""
+    participants, the seed, the participant model's version, the protocol's digest and the rule that draws the
+    participants from the study number (a cell of another rule met other people)."""
     return json.dumps({"settings": {k: float(v) for k, v in sorted(settings.items())}, "study": study,
                        "participants": participants, "seed": seed, "model_version": model_version,
-                       "protocol": protocol}, sort_keys=True)
+                       "protocol": protocol, "seed_rule": seed_rule}, sort_keys=True)
 
 
 def read_cache(path: str | os.PathLike[str], metrics: Sequence[Metric]) -> dict[str, list[TrialRow]]:

@@ -11,7 +11,11 @@ wall clock per participant.
 
 Seeds depend on the study number and the participant number only
 (:func:`participant_seeds`), never on the pipeline's settings: the same
-participants meet every setting of a sweep, so the comparison is paired.
+participants meet every setting of a sweep, so the comparison is paired.  They are ``haptic-study run``'s
+(:func:`protocol.runner.session_setup.participant_seeds`, the study number as the study seed): participant j of
+study k here is participant j of ``run --seed k``, the same person on the same rig through the same schedule (issue
+48: the calibration's two paths met different participants and so disagreed; checked trial by trial in
+tests/test_sweep.py).
 """
 
 from __future__ import annotations
@@ -25,13 +29,17 @@ from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION
+from protocol.runner.session_setup import participant_seeds as run_seeds
 from protocol.study.config import ProtocolConfig, default_protocol
 from protocol.study.design import build_schedule
 from protocol.study.trial import PhaseChanged, TrialFinished, TrialMachine, TrialPhase
 from study_app.headless.fanout import run_tasks
 
-__all__ = ["MODEL_FIT", "MODEL_VERSION", "participant_seeds", "run_participant", "run_study"]
+__all__ = ["MODEL_FIT", "MODEL_VERSION", "SEED_RULE", "participant_seeds", "run_participant", "run_study"]
 
+#: How :func:`participant_seeds` draws the participants (part of a sweep cell's key: the rule before issue 48
+#: met other people for the same study number).
+SEED_RULE = "run"
 #: Ticks per step of the loop between reads of the ring.
 _BLOCK_TICKS = 20
 #: The ring's phase marks (as the session runner writes them).
@@ -40,8 +48,10 @@ _PHASE_PAUSE = 3
 
 
 def participant_seeds(study: int, participant: int) -> tuple[int, int, int]:
-    """(rig seed, participant seed, schedule seed) of participant ``participant`` (1-based) of ``study``."""
-    return 10_000 * study + participant, 1_000_003 * (study + 1) + 7919 * participant, study
+    """(rig seed, participant seed, schedule seed) of participant ``participant`` (1-based) of ``study``: those of
+    ``haptic-study run --seed study``'s participant of that number (its experiment session's rig)."""
+    rig_seed, p_seed = run_seeds(study, participant)
+    return rig_seed, p_seed, study
 
 
 def run_participant(study: int, participant: int, protocol: ProtocolConfig | None = None,

@@ -23,7 +23,7 @@ from analysis.planning.sweep import SweepCell, append_cell, cell_key, protocol_d
 from pipeline.force.pipeline_settings import framework_with
 from protocol.study.config import ProtocolConfig, default_protocol
 from study_app.headless.fanout import run_tasks
-from study_app.headless.sim_trials import MODEL_VERSION, run_participant
+from study_app.headless.sim_trials import MODEL_VERSION, SEED_RULE, run_participant
 
 __all__ = ["SweepProgress", "run_sweep", "study_number"]
 
@@ -89,7 +89,7 @@ def run_sweep(
     """
     proto = protocol or default_protocol()
     digest = protocol_digest(proto.to_json())
-    keys = [(dict(s), k, cell_key(s, k, participants, seed, MODEL_VERSION, digest))
+    keys = [(dict(s), k, cell_key(s, k, participants, seed, MODEL_VERSION, digest, SEED_RULE))
             for s in grid for k in range(studies)]
     have = read_cache(cache, sim_metrics(proto.task))
     todo = [i for i, (_, _, key) in enumerate(keys) if key not in have]
