@@ -210,7 +210,8 @@ def simulated_source(out: str, req: Any, bars: _Bars, protocol: Any = None, clie
                          "call with the same --pool and --seed reuses it"}
     print(f"power: {said[pool_db.status]}", file=sys.stderr)
     first = f"the first {pool_size} of " if pool_db.status == "reused-larger" else ""
-    source = f"a simulated pool of {pool_size} participants (study seed {seed}, {first}{path.name})"
+    source = (f"a simulated pool of {pool_size} participants of participant model v{MODEL_VERSION} (study seed "
+              f"{seed}, {first}{path.name})")
     return [str(path)], pool_db.participants, source
 
 

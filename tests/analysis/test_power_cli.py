@@ -17,6 +17,7 @@ from analysis.planning.power import POWER_CSV_COLUMNS
 from protocol.metrics import tested as which_tested  # (not `tested`: pytest would collect it)
 from protocol.tasks.force_regulation import ForceRegulation
 from study_app.cli.main import main
+from study_app.headless.sim_trials import MODEL_VERSION
 
 PAPER = ForceRegulation().metrics  # the paper's study's metrics (its task's)
 
@@ -227,7 +228,8 @@ def test_simulated_pool_is_simulated_once_then_reused(tmp_path, capsys, monkeypa
     pool = out / "pool-4-seed7.db"
     assert pool.is_file()
     assert f"simulated pool written to {pool}" in stderr and "simulating pool" in stderr  # the progress bar
-    assert "Source: a simulated pool of 4 participants (study seed 7, pool-4-seed7.db); 4 participants" in stdout
+    assert (f"Source: a simulated pool of 4 participants of participant model v{MODEL_VERSION} (study seed 7, "
+            "pool-4-seed7.db); 4 participants") in stdout
     first = pd.read_csv(out / "power.csv")
 
     def sessions() -> list[tuple]:
