@@ -145,11 +145,14 @@ class ProtocolConfig:
             return ()
         by_name = {p.part.name: p for p in self.parts if p.part is not None}
         order, row = order_of(tuple(by_name), self.counterbalance, seed, number)
+        training = {n for n, p in by_name.items() if p.part is not None and p.part.session == "training"}
         out = []
         for position, name in enumerate(order, start=1):
             part = by_name[name]
             assert part.part is not None
-            out.append(replace(part, part=replace(part.part, position=position, order=order, row=row)))
+            trained_by = tuple(n for n in order[:position - 1] if n in training)
+            out.append(replace(part, part=replace(part.part, position=position, order=order, row=row,
+                                                  trained_by=trained_by)))
         return tuple(out)
 
     def part_of(self, name: str, number: int, seed: int) -> ProtocolConfig:

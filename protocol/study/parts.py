@@ -86,6 +86,9 @@ class PartPlace:
         The participant's whole order of parts, by name.
     row
         The counterbalancing row the order is (0-based; 0 without counterbalancing).
+    trained_by
+        The training parts the participant does before this one (an experiment part whose protocol requires
+        training needs them completed: :mod:`protocol.runner.study_rules`).
     """
 
     name: str
@@ -93,11 +96,12 @@ class PartPlace:
     position: int = 0
     order: tuple[str, ...] = ()
     row: int = 0
+    trained_by: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """The ``part`` table as stored with a session's protocol."""
         return {"name": self.name, "session": self.session, "position": self.position, "order": list(self.order),
-                "row": self.row}
+                "row": self.row, "trained_by": list(self.trained_by)}
 
     def before(self) -> tuple[str, ...]:
         """The parts the participant does before this one."""
@@ -244,11 +248,14 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
     """A stored session's ``part`` table (None when it has none: a single-task study's session)."""
     if "part" not in top:
         return None
-    t = f.table("part", top["part"], {"name", "session", "position", "order", "row"})
+    t = f.table("part", top["part"], {"name", "session", "position", "order", "row", "trained_by"})
     name = f.string("part.name", t.get("name"), pattern=_NAME, what=_NAME_WHAT)
-    order = t.get("order", [])
-    if not isinstance(order, list) or any(not isinstance(n, str) for n in order):
-        raise f.fail("part.order", order, "must be a list of part names")
+    names = {}
+    for key in ("order", "trained_by"):
+        names[key] = t.get(key, [])
+        if not isinstance(names[key], list) or any(not isinstance(n, str) for n in names[key]):
+            raise f.fail(f"part.{key}", names[key], "must be a list of part names")
     return PartPlace(name=name, session=f.choice("part.session", t.get("session"), PART_KINDS),
                      position=f.integer("part.position", t.get("position", 0), lo=0, hi=MAX_PARTS),
-                     order=tuple(order), row=f.integer("part.row", t.get("row", 0), lo=0, hi=2 * MAX_PARTS))
+                     order=tuple(names["order"]), row=f.integer("part.row", t.get("row", 0), lo=0, hi=2 * MAX_PARTS),
+                     trained_by=tuple(names["trained_by"]))
