@@ -40,9 +40,9 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         ``session_id, code, participant_number, kind, status, rig, seed, started_at, ended_at, end_reason,
         trials_planned, trials_done, trials_aborted, successes``, ``first_trial``, ``last_trial``: the
         stored trials' numbers, from 1 (None when none is stored), and ``writer``: the live process running
-        a session right now ("" when none: a ``running`` session without one was interrupted), and
-        ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the paper's), and
-        ``part``: the study part it is ("" in a study of one task; :mod:`protocol.study.parts`).
+        a session right now ("" when none: a ``running`` session without one was interrupted),
+        ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the
+        paper's), and ``part``: the study part it is ("" in a study of one task; :mod:`protocol.study.parts`).
 
     ``check``: run the integrity check first (the command line does; the GUI's engine, listing between
     sessions, checks when it opens the database to write).
