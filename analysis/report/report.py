@@ -182,9 +182,11 @@ class _Within:
 
 def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
              confidence: float, progress: Progress | None, workers: int | None,
-             include_incomplete: bool = False, sites: Sequence[str] | None = None) -> _Analysis:
-    """Read the study, recompute every trial, aggregate per participant and test ON vs OFF (overall, per target)."""
-    study = load_study(databases, include_incomplete=include_incomplete, sites=sites)
+             include_incomplete: bool = False, sites: Sequence[str] | None = None,
+             part: str | None = None) -> _Analysis:
+    """Read the study (``part``: that part's sessions only), recompute every trial, aggregate per participant and
+    test ON vs OFF (overall, per target)."""
+    study = load_study(databases, include_incomplete=include_incomplete, sites=sites, part=part)
     table = compute_trials(study, options, progress=progress, workers=workers)
     trials = table.trials
     overall = per_participant(trials, options)
@@ -402,6 +404,7 @@ def build_report(
     power: bool = False,
     include_incomplete: bool = False,
     sites: Sequence[str] | None = None,
+    part: str | None = None,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -432,6 +435,8 @@ def build_report(
     sites
         One site per database (``report --site``): codes re-coded ``SITE:CODE``, a site term in the models, the
         tests within each site and each site's seed and protocol in the methods (:func:`load_study`).
+    part
+        One part of a study of several (:mod:`analysis.report.plan_report`): its sessions only, one task's report.
 
     Returns
     -------
@@ -443,7 +448,7 @@ def build_report(
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete, sites)
+    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete, sites, part)
     results: dict[str, pd.DataFrame] = {}
     fill = functools.partial(_write, a=a, databases=databases, options=options, zero_method=zero_method,
                              confidence=confidence, power=power, workers=workers, results=results)
@@ -451,3 +456,18 @@ def build_report(
     n_samples = int(a.study.included["n_samples"].fillna(0).sum())
     return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,
                          a.study.damage, tuple(condition_warnings(a.study)))
+
+
+def fill_report(folder: Path, databases: Sequence[str | os.PathLike[str]], *, part: str,
+                options: MetricOptions = MetricOptions(), zero_method: str = "wilcox", confidence: float = 0.95,
+                workers: int | None = None, include_incomplete: bool = False) -> ReportSummary:
+    """One part's report of a study of several parts (:mod:`analysis.report.plan_report`), written into ``folder``
+    (inside the caller's output folder, whose policy writes it): the part's sessions only, as :func:`build_report`
+    analyses a study."""
+    a = _analyse(databases, options, zero_method, confidence, None, workers, include_incomplete, None, part)
+    results: dict[str, pd.DataFrame] = {}
+    _write(folder, a=a, databases=databases, options=options, zero_method=zero_method, confidence=confidence,
+           power=False, workers=workers, results=results)
+    n_samples = int(a.study.included["n_samples"].fillna(0).sum())
+    return ReportSummary(folder, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"],
+                         [], a.study.damage, tuple(condition_warnings(a.study)))

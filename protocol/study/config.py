@@ -152,7 +152,7 @@ class ProtocolConfig:
             assert part.part is not None
             trained_by = tuple(n for n in order[:position - 1] if n in training)
             out.append(replace(part, part=replace(part.part, position=position, order=order, row=row,
-                                                  trained_by=trained_by)))
+                                                  trained_by=trained_by, balance=self.counterbalance)))
         return tuple(out)
 
     def part_of(self, name: str, number: int, seed: int) -> ProtocolConfig:

@@ -89,6 +89,9 @@ class PartPlace:
     trained_by
         The training parts the participant does before this one (an experiment part whose protocol requires
         training needs them completed: :mod:`protocol.runner.study_rules`).
+    balance
+        The study's ``[counterbalance]`` the order was dealt by (None: the file's order), so a session's record
+        says how its place was chosen (the report's methods).
     """
 
     name: str
@@ -97,11 +100,13 @@ class PartPlace:
     order: tuple[str, ...] = ()
     row: int = 0
     trained_by: tuple[str, ...] = ()
+    balance: Counterbalance | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``part`` table as stored with a session's protocol."""
         return {"name": self.name, "session": self.session, "position": self.position, "order": list(self.order),
-                "row": self.row, "trained_by": list(self.trained_by)}
+                "row": self.row, "trained_by": list(self.trained_by),
+                **({"counterbalance": self.balance.to_dict()} if self.balance is not None else {})}
 
     def before(self) -> tuple[str, ...]:
         """The parts the participant does before this one."""
@@ -248,7 +253,7 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
     """A stored session's ``part`` table (None when it has none: a single-task study's session)."""
     if "part" not in top:
         return None
-    t = f.table("part", top["part"], {"name", "session", "position", "order", "row", "trained_by"})
+    t = f.table("part", top["part"], {"name", "session", "position", "order", "row", "trained_by", "counterbalance"})
     name = f.string("part.name", t.get("name"), pattern=_NAME, what=_NAME_WHAT)
     names = {}
     for key in ("order", "trained_by"):
@@ -258,4 +263,5 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
     return PartPlace(name=name, session=f.choice("part.session", t.get("session"), PART_KINDS),
                      position=f.integer("part.position", t.get("position", 0), lo=0, hi=MAX_PARTS),
                      order=tuple(names["order"]), row=f.integer("part.row", t.get("row", 0), lo=0, hi=2 * MAX_PARTS),
-                     trained_by=tuple(names["trained_by"]))
+                     trained_by=tuple(names["trained_by"]),
+                     balance=counterbalance_from_table(f, t, names["order"]) if "counterbalance" in t else None)

@@ -4,12 +4,18 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
 
 from foundation.errors import InputRefused
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
 from protocol.study.labels import plural
 from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
+
+if TYPE_CHECKING:
+    from analysis.report.plan_report import PlanEntry
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
@@ -116,7 +122,11 @@ def cmd_report(args: argparse.Namespace) -> int:
     except InputRefused as exc:
         raise CliError(str(exc)) from None
     from analysis.report.discrimination import discrimination_study
+    from analysis.report.plan_report import study_plan
 
+    plan = study_plan(args.db)
+    if plan:  # a study of several parts: each experiment part's report, and the plan's page
+        return _plan_report(args, plan)
     if discrimination_study(args.db):
         return _discrimination_report(args)
     from analysis.reading.metrics import MetricOptions
@@ -165,6 +175,44 @@ def cmd_report(args: argparse.Namespace) -> int:
             print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
                   f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
     print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
+    return 0
+
+
+def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
+    """A study of several parts: each experiment part's report in ``OUT/PART/`` and the plan's page, by the output
+    policy (:mod:`analysis.report.plan_report`)."""
+    from analysis.reading.metrics import MetricOptions
+    from analysis.report.discrimination import study_blocks, write_discrimination_report
+    from analysis.report.plan_report import write_plan_report
+    from analysis.report.report import fill_report
+    from foundation.outdir import REPORT_MARKER, write_output_folder
+    from protocol.tasks.force_discrimination import ForceDiscrimination
+
+    if args.power or args.site:
+        raise CliError("--power and --site are for a study of one task; this study has parts: report it without "
+                       "them (each part's report is its own folder)")
+
+    def fill_part(folder: Path, name: str, kind: str) -> list[str]:
+        if kind == ForceDiscrimination.kind:  # a task without trial metrics: its fit per participant
+            results = study_blocks(args.db)
+            write_discrimination_report(results, folder, ForceDiscrimination.methods([ForceDiscrimination()], []))
+            return [f"{len(results)} participants' psychometric fits"]
+        s = fill_report(folder, args.db, part=name, options=MetricOptions(args.error_window, args.tct),
+                        zero_method=args.zero_method, confidence=args.confidence,
+                        include_incomplete=args.include_incomplete)
+        return [f"{plural(s.n_participants, 'participant')}, {plural(s.n_trials, 'trial')}"]
+
+    lines: list[str] = []
+    try:
+        files = write_output_folder(args.out, lambda tmp: lines.extend(write_plan_report(tmp, args.db, plan,
+                                                                                         fill_part)),
+                                    command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+    except InputRefused as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    for line in lines:
+        print(line)
+    print(f"Report {args.out}/report.html (the plan) with a report per part: "
+          + ", ".join(f for f in files if f.endswith("report.html")))
     return 0
 
 
