@@ -107,7 +107,8 @@ def plan_methods(plan: Sequence[PlanEntry]) -> str:
     names = list(first.order) or [first.name]
     kinds = {e.place.name: (e.place.session, e.task) for e in plan}
     parts = "; ".join(f"{n} ({kinds[n][0]}, {kinds[n][1].replace('_', ' ')})" for n in names if n in kinds)
-    return (f"Each participant ran {len(names)} parts, each stored and run as a session of its own: {parts}. "
+    return (f"Each participant ran {len(names)} parts, each stored and run as a session of its own: {parts} (in "
+            f"the order of {plan[0].code}). "
             + _method_words(first.balance, names)
             + " Each experiment part is analysed on its own, one value per participant per condition of its task; "
               "no measure is pooled across parts.")
