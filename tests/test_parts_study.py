@@ -14,6 +14,7 @@ import shutil
 import sqlite3
 from pathlib import Path
 
+import pandas as pd
 import pytest
 
 from protocol.runner.session_setup import open_new_session, participant_code
@@ -161,3 +162,33 @@ def test_withdrawal_of_a_multi_part_participant_removes_every_row(study, tmp_pat
     finally:
         c.close()
     assert _main("check", "--db", str(copy))[0] == 0
+
+
+def test_the_report_of_a_study_of_parts_is_a_report_per_part(study, tmp_path) -> None:
+    out = tmp_path / "report"
+    code, printed, err = _main("report", "--db", str(study["db"]), "--out", str(out))
+    assert code == 0, err
+    for name in ("regulation", "tracking", "firm"):  # each experiment part from its own sessions only
+        trials = pd.read_csv(out / name / "trials.csv")
+        assert sorted(trials["participant_code"].unique()) == ["P01", "P02", "P03"]
+        part_sessions = {sid for sid, _, kind, _, pj in _sessions(study["db"])
+                         if json.loads(pj)["part"]["name"] == name}
+        assert set(trials["session_id"]) <= part_sessions
+        assert (out / name / "report.html").is_file()
+    assert not (out / "practice").exists()  # a training part is not analysed
+    firm = pd.read_csv(out / "firm" / "trials.csv")
+    assert set(firm["target_label"]) == {"FIRM"}  # one task's targets, nothing pooled
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "balanced Latin square (Williams 1949)" in page and "6 rows" in page
+    assert "practice kept its place" in page
+    parts = pd.read_csv(out / "parts.csv")
+    assert len(parts) == 12 and set(parts["part"]) == {"practice", "regulation", "tracking", "firm"}
+    assert "regulation: 3 participants" in printed
+
+
+@pytest.mark.parametrize("argv", [("sweep", "--set", "filter_window=1,10", "--protocol"),
+                                  ("power", "--groups", "--simulated", "--protocol")])
+def test_commands_of_one_task_refuse_a_study_of_parts(study, tmp_path, argv) -> None:
+    code, _, err = _main(*argv, str(study["folder"] / "plan.toml"), "--out", str(tmp_path / "o"))
+    assert code == 2 and "a study of several parts (practice, regulation, tracking, firm)" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
