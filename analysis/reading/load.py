@@ -351,7 +351,22 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     events = pd.concat(all_events, ignore_index=True)
     runs = pd.concat(all_runs, ignore_index=True)
     sessions["n_runs"] = _run_counts(sessions, events, runs)
-    trials = pd.concat(all_trials, ignore_index=True)
+    trials = _analysed_trials(pd.concat(all_trials, ignore_index=True), sessions, params, tasks)
+    names = ", ".join(str(p) for p in paths)
+    if not experiment.any():
+        raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
+    if (trials["excluded"] == "").sum() == 0:
+        if (trials["excluded"] == "incomplete session").any():
+            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
+                                "by default; --include-incomplete analyses their finished trials")
+        raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
+    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
+                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
+
+
+def _analysed_trials(trials: pd.DataFrame, sessions: pd.DataFrame, params: list[str],
+                     tasks: dict[tuple[str, int], Task]) -> pd.DataFrame:
+    """The trials with their session's columns and why each is left out of the analysis ("" when it is not)."""
     meta = sessions[["database", "site", "session_id", "participant_code", "participant_number", "kind", "status",
                      *params, "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
@@ -373,16 +388,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
              *RECORD_COLUMNS,
              *params, "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]
-    names = ", ".join(str(p) for p in paths)
-    if not experiment.any():
-        raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
-    if (trials["excluded"] == "").sum() == 0:
-        if (trials["excluded"] == "incomplete session").any():
-            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
-                                "by default; --include-incomplete analyses their finished trials")
-        raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
-    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
+    return trials
 
 
 def _run_counts(sessions: pd.DataFrame, events: pd.DataFrame, runs: pd.DataFrame) -> pd.Series:

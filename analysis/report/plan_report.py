@@ -20,9 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from pipeline.settings.tomlfields import Fields
 from protocol.storage import StudyReader
-from protocol.study.parts import Counterbalance, PartPlace, place_from_table
+from protocol.study.parts import Counterbalance, PartPlace, stored_place
 from protocol.tasks.registry import stored_task
 
 __all__ = ["PlanEntry", "plan_methods", "study_plan", "write_plan_report"]
@@ -63,7 +62,7 @@ def study_plan(databases: Sequence[str | os.PathLike[str]]) -> list[PlanEntry]:
         with StudyReader(str(db), check=False) as reader:
             for info in reader.sessions():
                 stored = json.loads(info.protocol_json)
-                place = place_from_table(Fields(f"{db}: session {info.session_id}", ValueError), stored)
+                place = stored_place(stored, f"{db}: session {info.session_id}")
                 if place is None:
                     continue
                 task = stored_task(stored, f"{db}: session {info.session_id}").kind

@@ -52,7 +52,7 @@ from pipeline.settings.tomlfields import Fields
 from protocol.tasks.registry import DEFAULT_KIND, task_class
 
 __all__ = ["COUNTERBALANCE_METHODS", "PART_KINDS", "Counterbalance", "PartPlace", "PartTables", "balanced_rows",
-           "counterbalance_from_table", "order_of", "part_tables", "place_from_table"]
+           "counterbalance_from_table", "order_of", "part_tables", "place_from_table", "stored_place"]
 
 #: The session kinds a part is run as.
 PART_KINDS = ("training", "experiment")
@@ -247,6 +247,12 @@ def counterbalance_from_table(f: Fields, top: Mapping[str, Any], names: Sequence
         raise f.fail("counterbalance.parts", group, "each part at most once")
     method = f.choice("counterbalance.method", t.get("method", "latin_square"), COUNTERBALANCE_METHODS)
     return Counterbalance(tuple(group), method)
+
+
+def stored_place(protocol: Mapping[str, Any], source: str) -> PartPlace | None:
+    """A stored session's place in its participant's plan (its protocol's ``part`` table, parsed JSON), for a
+    reader of the record; None for a single-task study's session; a value it cannot read: one ``ValueError`` line."""
+    return place_from_table(Fields(source, ValueError), protocol)
 
 
 def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
