@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from protocol.storage import StudyReader
+from protocol.storage import EmptyDatabase, StudyReader
 from protocol.study.parts import Counterbalance, PartPlace, stored_place
 from protocol.tasks.registry import stored_task
 
@@ -59,7 +59,11 @@ def study_plan(databases: Sequence[str | os.PathLike[str]]) -> list[PlanEntry]:
     """Every session of a part in the databases, by participant number and place ([] for a study of one task)."""
     out: list[PlanEntry] = []
     for db in databases:
-        with StudyReader(str(db), check=False) as reader:
+        try:
+            reader = StudyReader(str(db), check=False)
+        except EmptyDatabase:  # no session: no plan (a command that needs one says so where it reads it)
+            continue
+        with reader:
             for info in reader.sessions():
                 stored = json.loads(info.protocol_json)
                 place = stored_place(stored, f"{db}: session {info.session_id}")
