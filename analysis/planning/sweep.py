@@ -230,10 +230,15 @@ def summary_lines(summary: pd.DataFrame, swept: Sequence[str]) -> list[str]:
     return lines
 
 
+def _front_words(front: Any) -> str:
+    """sweep_front.png in words (:class:`analysis.planning.sweep_figures.Front`; None: the task has no front)."""
+    return "no front: the protocol's task has none of the sweep's fronts" if front is None else front.words()
+
+
 def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swept: Sequence[str],
                 paper: Mapping[str, float], model_version: str, model_fit: str, header: Sequence[str]) -> list[str]:
     """Write sweep.csv, sweep_summary.csv, sweep.png, sweep_front.png and sweep.md into ``folder``; their names."""
-    from analysis.planning.sweep_figures import front_figure, metrics_figure
+    from analysis.planning.sweep_figures import front_figure, front_of, metrics_figure
     from analysis.plots.figures import save_one
 
     # the measures by the names of the report's CSVs and codebook (success_rate, rmse_N), not the runner's keys
@@ -251,7 +256,7 @@ def write_sweep(folder: Path, *, tidy: pd.DataFrame, summary: pd.DataFrame, swep
           "the cap, the report's default). Change: ON/OFF − 1.  The paper's setting is marked (paper).",
           *(["", FILTER_NOTE] if "filter_window" in swept else []), "", *summary_lines(summary, swept), "",
           "Files: sweep.csv (per study), sweep_summary.csv (this table), sweep.png (the measures against the "
-          "setting), sweep_front.png (the speed–accuracy front: rise time against RMSE after reach, haptics ON, each "
-          "setting's success rate beside it), cells.jsonl (the cache of finished cells).", ""]
+          f"setting), sweep_front.png ({_front_words(front_of(summary))}), cells.jsonl (the cache of finished "
+          "cells).", ""]
     (folder / "sweep.md").write_text("\n".join(md), encoding="utf-8")
     return ["sweep.csv", "sweep_summary.csv", "sweep.png", "sweep_front.png", "sweep.md"]

@@ -4,9 +4,11 @@
   phases, ...) against the first swept setting, haptics OFF and ON, each point the mean over studies with its 95 %
   t-interval (none over one study, and the title says so), TCT over successful trials with the successes it rests
   on, the paper's value of the setting marked; a second swept setting is a line per value (its own line style);
-* :func:`front_figure` -- the speed–accuracy front in the report's reading: rise time against RMSE after reach with
-  haptics ON (parts of the trial apart: docs/science.md §6.1), one point per setting (both intervals drawn), each
-  labelled with its success rate, the paper's setting starred.
+* :func:`front_figure` -- the front of the protocol's task's own measures (:data:`FRONTS`, the first whose two
+  measures the sweep has): for force regulation the speed–accuracy front in the report's reading, rise time against
+  RMSE after reach (parts of the trial apart: docs/science.md §6.1), each point labelled with its success rate; for
+  force tracking the lag against the tracking RMSE, each labelled with its gain -- with haptics ON, one point per
+  setting (both intervals drawn), the paper's setting starred.
 
 Both carry the sweep's caveat (a model's prediction) along the bottom.
 """
@@ -16,6 +18,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import matplotlib
@@ -26,15 +29,51 @@ from matplotlib.figure import Figure
 from analysis.planning.setting_labels import setting_formats
 from analysis.planning.sim_study import SIMULATED, measure_labels
 from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, add_note, margins, note_lines, styled
-from protocol.metrics import METRICS, TRADE_PHASES
+from protocol.metrics import METRICS, TRADE_PHASES, get
 
-__all__ = ["front_figure", "metrics_figure"]
+__all__ = ["FRONTS", "Front", "front_figure", "front_of", "metrics_figure"]
 
 #: A panel per measure of the sweep (the simulated trials' metrics, :data:`analysis.planning.sweep.METRICS`: those
 #: of them the summary has), two to a row.
 _PANELS = tuple(measure_labels(SIMULATED).items())
 #: The yes/no outcome (the front's success rate) and which panels are means over successful trials only.
 _VERDICT = next(m.name for m in METRICS if m.boolean)
+
+
+@dataclass(frozen=True, slots=True)
+class Front:
+    """A trade the sweep draws: ``y`` against ``x`` (registry names; lower left is better), each point labelled with
+    its ``badge`` measure."""
+
+    y: str
+    x: str
+    badge: str
+    #: The figure's title, before "across SETTING".
+    title: str
+    #: How the badge reads beside a value (``success 93%``).
+    badge_format: Callable[[float], str]
+
+    def words(self) -> str:
+        """The front in words (sweep.md's list of files)."""
+        name = self.title[:1].lower() + self.title[1:]
+        return (f"the {name}: {get(self.y).short} against {get(self.x).short}, haptics ON, each setting's "
+                f"{get(self.badge).short} beside it")
+
+
+#: The fronts a sweep may draw, the first whose two measures its summary has: force regulation's speed–accuracy
+#: trade in the report's reading (:data:`protocol.metrics.TRADE_PHASES`), and a moving target's lag against its
+#: tracking error (a setting that smooths the force more costs lag before it costs error).
+FRONTS: tuple[Front, ...] = (
+    Front(TRADE_PHASES[0].name, TRADE_PHASES[1].name, _VERDICT, "Speed–accuracy front",
+          lambda v: f"success {v:.0%}"),
+    Front("lag_s", "rmse_n", "gain", "Lag–error front", lambda v: f"gain {v:.2f}"),
+)
+
+
+def front_of(summary: pd.DataFrame) -> Front | None:
+    """The front of the sweep's measures (None: its task has none of :data:`FRONTS`)."""
+    have = set(summary["metric"]) if len(summary) else set()
+    return next((f for f in FRONTS if {f.y, f.x} <= have), None)
 _SUCCESS_ONLY = {m.name: m.success_only for m in METRICS}
 _MODE_NAMES = {"off": "haptics OFF", "on": "haptics ON"}
 _DASHES = ("-", "--", ":", "-.")
@@ -118,17 +157,20 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
 
 @styled
 def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figure:
-    """Rise time against RMSE after reach with haptics ON, one labelled point per setting (module docstring)."""
-    speed, accuracy = TRADE_PHASES
-    verdict = _VERDICT
+    """The front of the sweep's measures with haptics ON (:func:`front_of`), one labelled point per setting (module
+    docstring); a task without one: the axes empty, titled so."""
+    front = front_of(summary) or FRONTS[0]
+    speed, accuracy = get(front.y), get(front.x)
     lines = note_lines(note, PAGE_IN * 0.62)
     fig = Figure(figsize=(PAGE_IN * 0.62, 3.6 + 0.11 * lines))
     margins(fig, 0.6, 0.2, 0.5 + 0.11 * lines, 0.3)
     ax = fig.add_subplot()
     y_rows = summary[summary["metric"] == speed.name].reset_index(drop=True)
     x_rows = summary[summary["metric"] == accuracy.name].reset_index(drop=True)
-    ok = summary[summary["metric"] == verdict].reset_index(drop=True)
-    if y_rows.empty or x_rows.empty or ok.empty:  # a protocol whose task lacks the trade's phases: no front to draw
+    ok = summary[summary["metric"] == front.badge].reset_index(drop=True)
+    if ok.empty:  # no badge measure: the points unlabelled
+        ok = y_rows.assign(on=math.nan)
+    if y_rows.empty or x_rows.empty:  # a protocol whose task has no front: none to draw
         y_rows, x_rows, ok = y_rows.iloc[:0], x_rows.iloc[:0], ok.iloc[:0]
     pts: list[tuple[float, float]] = []
     one = len(swept) == 1  # the axis title names the setting: a point is labelled with its value alone
@@ -141,7 +183,7 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
         xerr = [[_half(r, "low")], [_half(r, "high")]]
         yerr = [[_half(t, "low")], [_half(t, "high")]]
         star = bool(t["paper"])
-        success = f", success {float(s['on']):.0%}" if math.isfinite(float(s["on"])) else ""
+        success = f", {front.badge_format(float(s['on']))}" if math.isfinite(float(s["on"])) else ""
         text = (fmts[swept[0]](t[swept[0]]) if one else _label(t, swept, fmts)) + (" (paper)" if star else "") + success
         ax.errorbar([x], [y], xerr=xerr, yerr=yerr, color=colours[i], marker="*" if star else "o",
                     markersize=9 if star else 5, capsize=2, linewidth=0.8, label=text)
@@ -153,8 +195,8 @@ def front_figure(summary: pd.DataFrame, swept: Sequence[str], note: str) -> Figu
     ax.set_ylabel(f"{speed.label}, haptics ON")
     ax.spines["top"].set_visible(False)
     ax.spines["right"].set_visible(False)
-    ax.set_title(("Speed–accuracy front across " + (swept[0] if one else "settings")) + " (lower left is better)")
-    ax.legend(title=(swept[0] if one else "setting") + ": ON success rate", frameon=False, fontsize=6.5,
+    ax.set_title(f"{front.title} across " + (swept[0] if one else "settings") + " (lower left is better)")
+    ax.legend(title=(swept[0] if one else "setting") + f": ON {get(front.badge).short}", frameon=False, fontsize=6.5,
               title_fontsize=7, loc="best")
     add_note(fig, note)
     return fig

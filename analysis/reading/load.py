@@ -30,6 +30,7 @@ from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.storage.damage import recording_damage
 from protocol.storage.database import part_of_protocol
+from protocol.study.feedback import FEEDBACK_EVENT
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import Task, metrics_of
 from protocol.tasks.registry import stored_task
@@ -41,7 +42,7 @@ RECORD_COLUMNS = ("segment", "first_tick", "last_tick")
 #: without a calibration step on record), which code ran each resumed part of a session ("software") and each resume
 #: of an interrupted session ("resume": which trial the interruption cut).
 DEVIATION_EVENTS = DEVIATION_KINDS  # their one definition: protocol.runner.study_rules
-LISTED_EVENTS = (*DEVIATION_EVENTS, "software", "resume")
+LISTED_EVENTS = (*DEVIATION_EVENTS, "software", "resume", FEEDBACK_EVENT)
 
 __all__ = [
     "DEVIATION_EVENTS",

@@ -37,6 +37,7 @@ import pandas as pd
 
 from analysis.plots import figures, model_figures
 from analysis.reading.annotations import read_annotations
+from analysis.reading.errors import AnalysisError
 from analysis.reading.load import Progress, StudyData, load_study
 from analysis.reading.metrics import MetricOptions, TrialTable, compute_trials
 from analysis.report import report_tables
@@ -51,7 +52,6 @@ from analysis.report.groups_report import group_analysis, group_tables, groups_h
 from analysis.report.measures import figure_groups, secondary_note, windowed_words
 from analysis.report.power_section import power_html
 from analysis.report.report_html import page, plural
-from analysis.report.report_tracking import speed_figure, tracking_html, tracking_tables
 from analysis.report.study_record import (
     aborted_reruns,
     condition_warnings,
@@ -61,6 +61,7 @@ from analysis.report.study_record import (
     provenance,
     resumed_sessions,
 )
+from analysis.report.task_sections import SectionInput, SectionOutput, section_for, sections_page, study_parts
 from analysis.report.withdrawals import study_withdrawals, withdrawals_html
 from analysis.stats.aggregate import PRIMARY_METRICS, TESTED_METRICS, mode_tests, per_participant, unbalanced_cells
 from analysis.stats.learning import first_modes, learning_curve, learning_models, order_check
@@ -68,7 +69,6 @@ from analysis.stats.models import MIN_PARTICIPANTS, ModelFit
 from analysis.stats.sensitivity import max_ae_from_approach, sensitivity
 from analysis.stats.sites import site_differences, site_tests, sites_in
 from analysis.stats.survival import CoxFit, cox_model, kaplan_meier, time_to_event_summary
-from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
 from analysis.stats.trade import (
     DEFAULT_READING,
     participant_slopes,
@@ -106,6 +106,8 @@ class ReportSummary:
     damage: tuple[str, ...] = ()
     #: Conditions the analysed sessions did not share (:func:`analysis.report.study_record.condition_warnings`).
     conditions: tuple[str, ...] = ()
+    #: What the tasks' sections say for the command line (:attr:`analysis.report.task_sections.SectionOutput.lines`).
+    lines: tuple[str, ...] = ()
 
 
 def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
@@ -148,8 +150,6 @@ class _Analysis:
     n_participants: int
     within: _Within
     confidence: float = 0.95
-    #: A moving target's trade of tracking error against its speed (None: the study's target does not move).
-    speed: TargetSpeedTrade | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -180,13 +180,22 @@ class _Within:
     site_diff: pd.DataFrame
 
 
-def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions, zero_method: str,
-             confidence: float, progress: Progress | None, workers: int | None,
-             include_incomplete: bool = False, sites: Sequence[str] | None = None,
-             part: str | None = None) -> _Analysis:
-    """Read the study (``part``: that part's sessions only), recompute every trial, aggregate per participant and
-    test ON vs OFF (overall, per target)."""
-    study = load_study(databases, include_incomplete=include_incomplete, sites=sites, part=part)
+def _excluded(study: StudyData) -> dict[str, int]:
+    """What the analysis leaves out, counted: sessions and trials, by why."""
+    all_t = study.trials
+    return {
+        "training_sessions": int((study.sessions["kind"] != "experiment").sum()),
+        "training_trials": int((all_t["excluded"] == "training session").sum()),
+        "incomplete_sessions": int(((study.sessions["kind"] == "experiment") & ~study.sessions["analysed"]).sum()),
+        "incomplete_trials": int(((all_t["excluded"] == "incomplete session") & (all_t["outcome"] != "aborted")).sum()),
+        "aborted_trials": int((all_t["excluded"] == "aborted trial").sum()),
+        "damaged_trials": int((all_t["excluded"] == "recording damaged").sum()),
+    }
+
+
+def _analyse(study: StudyData, options: MetricOptions, zero_method: str, confidence: float,
+             progress: Progress | None, workers: int | None) -> _Analysis:
+    """Recompute every trial of the study, aggregate per participant and test ON vs OFF (overall, per target)."""
     table = compute_trials(study, options, progress=progress, workers=workers)
     trials = table.trials
     overall = per_participant(trials, options)
@@ -201,23 +210,12 @@ def _analyse(databases: Sequence[str | os.PathLike[str]], options: MetricOptions
         frame.insert(0, "target_label", label)
         per_target.append(frame)
         target_results[label] = res
-    all_t = study.trials
-    excluded = {
-        "training_sessions": int((study.sessions["kind"] != "experiment").sum()),
-        "training_trials": int((all_t["excluded"] == "training session").sum()),
-        "incomplete_sessions": int(((study.sessions["kind"] == "experiment") & ~study.sessions["analysed"]).sum()),
-        "incomplete_trials": int(((all_t["excluded"] == "incomplete session") & (all_t["outcome"] != "aborted")).sum()),
-        "aborted_trials": int((all_t["excluded"] == "aborted trial").sum()),
-        "damaged_trials": int((all_t["excluded"] == "recording damaged").sum()),
-    }
     exp = study.sessions[study.sessions["kind"] == "experiment"]
     within = _within(study, table, overall, target_order, options, zero_method, confidence)
-    speed = target_speed_trade(trials.assign(max_trial_s=study.included["max_trial_s"].to_numpy(dtype=float)),
-                               study.task_of, zero_method=zero_method, confidence=confidence)
     return _Analysis(study, table, trials, overall, by_target, results, stats, target_order, target_results,
-                     pd.concat(per_target, ignore_index=True), excluded,
+                     pd.concat(per_target, ignore_index=True), _excluded(study),
                      int((exp["status"] != "completed").sum()), int(trials["participant_code"].nunique()), within,
-                     confidence, speed)
+                     confidence)
 
 
 def _within(study: StudyData, table: TrialTable, overall: pd.DataFrame, target_order: list[str],
@@ -351,7 +349,7 @@ def _draw(a: _Analysis, options: MetricOptions, marks_overall: dict[str, str], m
 
 def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str]], options: MetricOptions,
            zero_method: str, confidence: float, power: bool, workers: int | None,
-           results: dict[str, pd.DataFrame]) -> None:
+           results: dict[str, pd.DataFrame], outputs: list[SectionOutput]) -> None:
     """The report's files, written into the folder ``tmp`` (the output policy's temporary folder): the figures, the
     CSVs with their codebook (and ``power.csv``) and report.html; the CSVs' tables as written into ``results``."""
     marks_overall, marks = _all_marks(a)
@@ -374,21 +372,59 @@ def _write(tmp: Path, *, a: _Analysis, databases: Sequence[str | os.PathLike[str
         from analysis.planning.power_outputs import report_section
 
         section += power_html(report_section(a.trials, options, zero_method, tmp), a.study.metrics)
-    if a.speed is not None:  # a moving target: the trade of its error against its speed
-        tables.update(tracking_tables(a.speed))
-        shown.update(tracking_tables(a.speed, rounded=False))
-    moving = tracking_html(a.speed, shown["stats.csv"], a.study.metrics,
-                           speed_figure(a.speed, tmp / "figures") if a.speed is not None else None)
-    report_tables.write_tables(tmp, tables, written_too=[p.name for p in tmp.glob("*.csv")],
+    written_too = [p.name for p in tmp.glob("*.csv")]  # (power.csv; a section's own CSVs have their own codebook)
+    capped = a.trials.assign(max_trial_s=a.study.included["max_trial_s"].to_numpy(dtype=float))
+    parts = _sections(a.study, tmp, zero_method, confidence, trials=capped, stats=shown["stats.csv"])
+    for part in parts:
+        tables.update(part.tables)
+    report_tables.write_tables(tmp, tables, written_too=written_too,
                                metrics=a.study.metrics, described=covariate_codebook(ann.declared))
     html = page(
         study=a.study, table=a.table, options=options, zero_method=zero_method, confidence=confidence,
         excluded=a.excluded, n_participants=a.n_participants, n_incomplete=a.n_incomplete, tables=shown,
         marks_overall=marks_overall, pngs=pngs, examples=examples, power_html=section, within=within,
-        target_order=a.target_order, tracking_html=moving,
+        target_order=a.target_order, sections_html="\n".join(p.html() for p in parts if p.body),
     )
     (tmp / "report.html").write_text(html, encoding="utf-8")
     results.update(tables)
+    outputs.extend(parts)
+
+
+def _sections(study: StudyData, folder: Path, zero_method: str, confidence: float, *,
+              trials: pd.DataFrame | None = None, stats: pd.DataFrame | None = None) -> list[SectionOutput]:
+    """Each task's section (:mod:`analysis.report.task_sections`), from its own sessions, in the order the tasks first
+    appear; ``trials`` (with ``max_trial_s``) and ``stats`` are the core's, where the study has trial metrics."""
+    out = []
+    for kind, sessions in study_parts(study):
+        section = section_for(kind)
+        if section is None:
+            continue
+        keys = set(zip(sessions["database"], sessions["session_id"], strict=True))
+        mine = (pd.DataFrame() if trials is None else
+                trials[[k in keys for k in zip(trials["database"], trials["session_id"], strict=True)]])
+        given = SectionInput(study, kind, sessions, mine, pd.DataFrame() if stats is None else stats, zero_method,
+                             confidence)
+        out.append(section.build(given, folder))
+    return out
+
+
+def _lines(outputs: Sequence[SectionOutput]) -> tuple[str, ...]:
+    """What the sections say for the command line, in order."""
+    return tuple(line for o in outputs for line in o.lines)
+
+
+def _write_sections(tmp: Path, *, study: StudyData, zero_method: str, confidence: float,
+                    outputs: list[SectionOutput]) -> None:
+    """The report of a study whose tasks have no trial metric: its tasks' sections, each with its files, and a page
+    of them (:func:`analysis.report.task_sections.sections_page`)."""
+    (tmp / "figures").mkdir()
+    parts = _sections(study, tmp, zero_method, confidence)
+    if not any(p.body for p in parts):
+        kinds = ", ".join(kind for kind, _ in study_parts(study))
+        raise AnalysisError(f"{', '.join(study.databases)}: the study's tasks ({kinds}) have no trial metric and "
+                            "no report section: nothing to report")
+    (tmp / "report.html").write_text(sections_page(parts), encoding="utf-8")
+    outputs.extend(parts)
 
 
 def build_report(
@@ -448,26 +484,40 @@ def build_report(
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    a = _analyse(databases, options, zero_method, confidence, progress, workers, include_incomplete, sites, part)
+    study = load_study(databases, include_incomplete=include_incomplete, sites=sites, part=part)
+    outputs: list[SectionOutput] = []
+    n_samples = int(study.included["n_samples"].fillna(0).sum())
+    if not study.metrics:  # (force discrimination's: a fit per participant, no metric per trial) its sections alone
+        fill = functools.partial(_write_sections, study=study, zero_method=zero_method, confidence=confidence,
+                                 outputs=outputs)
+        files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
+        return ReportSummary(out, int(study.included["participant_code"].nunique()), len(study.included), n_samples,
+                             _excluded(study), pd.DataFrame(), files, study.damage, (), _lines(outputs))
+    a = _analyse(study, options, zero_method, confidence, progress, workers)
     results: dict[str, pd.DataFrame] = {}
     fill = functools.partial(_write, a=a, databases=databases, options=options, zero_method=zero_method,
-                             confidence=confidence, power=power, workers=workers, results=results)
+                             confidence=confidence, power=power, workers=workers, results=results, outputs=outputs)
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    n_samples = int(a.study.included["n_samples"].fillna(0).sum())
     return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,
-                         a.study.damage, tuple(condition_warnings(a.study)))
+                         a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs))
 
 
 def fill_report(folder: Path, databases: Sequence[str | os.PathLike[str]], *, part: str,
                 options: MetricOptions = MetricOptions(), zero_method: str = "wilcox", confidence: float = 0.95,
                 workers: int | None = None, include_incomplete: bool = False) -> ReportSummary:
     """One part's report of a study of several parts (:mod:`analysis.report.plan_report`), written into ``folder``
-    (inside the caller's output folder, whose policy writes it): the part's sessions only, as :func:`build_report`
-    analyses a study."""
-    a = _analyse(databases, options, zero_method, confidence, None, workers, include_incomplete, None, part)
+    (inside the caller's output folder, whose policy writes it): the part's sessions only, its task's core and
+    section as :func:`build_report` makes them for a study (a task without trial metrics: its section alone)."""
+    study = load_study(databases, include_incomplete=include_incomplete, part=part)
+    outputs: list[SectionOutput] = []
+    n_samples = int(study.included["n_samples"].fillna(0).sum())
+    if not study.metrics:
+        _write_sections(folder, study=study, zero_method=zero_method, confidence=confidence, outputs=outputs)
+        return ReportSummary(folder, int(study.included["participant_code"].nunique()), len(study.included),
+                             n_samples, _excluded(study), pd.DataFrame(), [], study.damage, (), _lines(outputs))
+    a = _analyse(study, options, zero_method, confidence, None, workers)
     results: dict[str, pd.DataFrame] = {}
     _write(folder, a=a, databases=databases, options=options, zero_method=zero_method, confidence=confidence,
-           power=False, workers=workers, results=results)
-    n_samples = int(a.study.included["n_samples"].fillna(0).sum())
-    return ReportSummary(folder, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"],
-                         [], a.study.damage, tuple(condition_warnings(a.study)))
+           power=False, workers=workers, results=results, outputs=outputs)
+    return ReportSummary(folder, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], [],
+                         a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs))

@@ -22,6 +22,7 @@ import pandas as pd
 
 from analysis.reading.load import StudyData
 from analysis.report.html_parts import fmt, fmt_p, html_table, plural
+from protocol.study.feedback import FEEDBACK_EVENT
 
 __all__ = ["sites_html", "sites_methods", "training_methods"]
 
@@ -32,6 +33,24 @@ _PAPER = ("The paper says only: \u201cPrior to the experiment, users received tr
 def _one(values: Any, unit: str = "") -> str:
     vals = sorted({float(v) for v in values if pd.notna(v)})
     return " / ".join(f"{v:g}{unit}" for v in vals) if vals else "not stored"
+
+
+def feedback_methods(study: StudyData) -> str:
+    """The methods' sentence on feedback to the trainee ("" when no score card was shown): an intervention."""
+    ev = study.events
+    cards = ev[ev["kind"] == FEEDBACK_EVENT] if not ev.empty else ev
+    if cards.empty:
+        return ""
+    kinds = study.sessions.set_index(["database", "session_id"])["kind"]
+    sessions = cards[["database", "session_id"]].drop_duplicates()
+    where = sorted({str(kinds.get((db, sid), "")) for db, sid in zip(sessions["database"], sessions["session_id"],
+                                                                      strict=True)} - {""})
+    return (f"<p><b>Feedback to the trainee.</b> An intervention the protocol allowed (its <code>[feedback]</code>): "
+            "after each block of one haptic mode the participant screen showed a score card -- the block's primary "
+            "measures against the participant's own earlier sessions with the same mode, and whether each was "
+            f"better -- before the next cue. {plural(len(cards), 'card')} {'was' if len(cards) == 1 else 'were'} "
+            f"shown in {plural(len(sessions), 'session')} ({' and '.join(where)}; events of kind feedback, each "
+            "with its card). Measures taken after a card are taken with that feedback.</p>")
 
 
 def training_methods(study: StudyData) -> str:

@@ -229,7 +229,8 @@ def _methods(study: StudyData, table: TrialTable, options: MetricOptions, zero_m
            "(that participant's pair is left out of the TCT test and counted)"
            if options.tct_policy == "successful" else
            f"averaged over all trials, a failed trial counting as the trial cap ({one(cap, ' s')})")
-    design = report_design.training_methods(study) + report_design.sites_methods(study)
+    design = (report_design.training_methods(study) + report_design.feedback_methods(study)
+              + report_design.sites_methods(study))
     return (
         _data_methods(study, table, excluded, n_participants, within) + design
         + f"<p><b>Trial metrics.</b> Targets: {html.escape(target_txt)}. The task force is the magnitude of the "
@@ -451,7 +452,7 @@ _SECONDARY_OWN = " (a secondary measure is tested on its own: see its note)"
 def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_method: str, confidence: float,
          excluded: dict[str, int], n_participants: int, n_incomplete: int, tables: dict[str, pd.DataFrame],
          marks_overall: dict[str, str], pngs: dict[str, bytes], examples: list[tuple[str, bytes]],
-         power_html: str = "", within: Any = None, target_order: Sequence[str] = (), tracking_html: str = "") -> str:
+         power_html: str = "", within: Any = None, target_order: Sequence[str] = (), sections_html: str = "") -> str:
     """report.html: self-contained (figures embedded), readable on screen and on paper.
 
     Parameters
@@ -464,8 +465,8 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
         :func:`analysis.report.report_tables.export_tables`' result: the page shows the CSVs' rows.
     marks_overall, pngs, examples, power_html
         Significance marks, the figures (PNG bytes), the example trials' figures and the power section.
-    tracking_html
-        The section on a moving target (:mod:`analysis.report.report_tracking`; "" when the target holds).
+    sections_html
+        The study's tasks' own sections (:mod:`analysis.report.task_sections`; "" when its tasks have none).
     within, target_order
         The within-participant analyses (``analysis.report.report._Within``) and the targets in order.
 
@@ -502,7 +503,7 @@ Medians are across participants; the HL shift is the Hodges–Lehmann estimate o
 across participants.</p></figure>
 {_html_table(per, "participants.csv", per_cols, caption=f"Per participant and mode; {windowed_words(metrics)} {win}")}
 {report_sections.trade_html(within, tables, options, pngs["speed_accuracy"], confidence) if timed else ""}
-{tracking_html}
+{sections_html}
 <h2>Force through the pipeline</h2>
 <p class="caption">Top: the task force the trial was judged on, the force rendered on the haptic device, the target
 band and the error window; bottom, on an axis of its own: the raw sensor force, the tool's weight included.</p>

@@ -16,7 +16,14 @@ from collections.abc import Mapping, Sequence
 from protocol.runner.session_desk import SessionDesk, SessionPlan
 from protocol.storage.annotations import insert_answers
 from protocol.study.design import TrialSpec
-from protocol.study.questionnaires import SESSION, Prompt, checked_answers, due
+from protocol.study.questionnaires import (
+    QUESTIONNAIRE_SKIPPED_EVENT,
+    SESSION,
+    Prompt,
+    checked_answers,
+    due,
+    skip_detail,
+)
 from protocol.study.sim_answers import simulated_answers
 
 __all__ = ["QuestionnaireWait", "prompt_words"]
@@ -84,6 +91,20 @@ class QuestionnaireWait:
         self._store(t_ns, asked, checked, "the participant")
         self.asked = None
         self.desk.state.waiting = ""
+        return ""
+
+    def skip(self, t_ns: int, name: str, block: str, reason: str) -> str:
+        """The experimenter skips the questionnaire waiting for the participant (in the caller's transaction): stored
+        as skipped, a deviation (:data:`protocol.study.questionnaires.QUESTIONNAIRE_SKIPPED_EVENT`), and the next
+        cue no longer waits; "" when skipped, else why not (it was not the one waiting)."""
+        asked = self.asked
+        if asked is None or asked.key != (name, block):
+            return f"skip of {name} ({block}) ignored: that questionnaire is not the one waiting for answers"
+        self.desk.event(t_ns, QUESTIONNAIRE_SKIPPED_EVENT, skip_detail(name, block, prompt_words(asked), reason))
+        self.answered.add(asked.key)
+        self.asked = None
+        self.desk.state.waiting = ""
+        self.desk.emit(("questionnaire_skipped", asked))
         return ""
 
     def _store(self, t_ns: int, prompt: Prompt, answers: Mapping[str, float | str], who: str) -> None:

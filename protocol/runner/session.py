@@ -48,6 +48,7 @@ from pipeline.runtime.loop_messages import Command, LoopEvent, StartRecording
 from protocol.lsl.streams import SessionStreams
 from protocol.runner.deliveries import Deliveries
 from protocol.runner.fault_wait import FaultWait
+from protocol.runner.feedback_wait import FeedbackWait
 from protocol.runner.questionnaire_wait import QuestionnaireWait
 from protocol.runner.requests import Request, Requests
 from protocol.runner.session_desk import SessionDesk, SessionPlan, SessionState, trial_words
@@ -106,6 +107,7 @@ class SessionRunner:
         self.machine: TrialMachine = self.trials.machine
         self.faults = FaultWait(self.desk, plan.protocol.trial.pause_s, auto_reset_faults, plan.arms, self.task_arm)
         self.questions = QuestionnaireWait(self.desk, plan)
+        self.feedback = FeedbackWait(self.desk, plan)
         self.requests = Requests()
         self._initial_pause_ns = int(round(plan.initial_pause_s * 1e9))
         self._ready_ns: int | None = None  # no cue before this loop time
@@ -218,6 +220,11 @@ class SessionRunner:
         """The participant's answers to the questionnaire shown (:mod:`protocol.runner.questionnaire_wait`)."""
         self.requests.put(Request("answer", questionnaire, block, answers=tuple(answers.items())))
 
+    def skip_questionnaire(self, questionnaire: str, block: str, reason: str = "") -> None:
+        """The experimenter skips the questionnaire waiting for the participant: stored as skipped (a deviation, with
+        ``reason``) at the next block, and the next cue no longer waits (:mod:`protocol.runner.questionnaire_wait`)."""
+        self.requests.put(Request("skip_questionnaire", questionnaire, block, answers=(("reason", reason),)))
+
     def answer_trial(self, key: str) -> None:
         """The participant's answer to the running trial's question (a task that asks one: force discrimination's
         ``"1"``/``"2"``), taken at the next block; ``ValueError`` (one line) for a key the task does not allow."""
@@ -320,6 +327,8 @@ class SessionRunner:
         if self._ready_ns is not None and t_ns < self._ready_ns:
             state.waiting = "pause"
             return
+        if self.feedback.holds(t_ns, self.trials.position, self.trials.schedule, self.finished):
+            return  # (the wait's words are the score card's)
         if self.questions.holds(t_ns, self.trials.position, self.trials.schedule):
             return  # (the wait's words are the questionnaire's)
         state.waiting = ""
@@ -348,7 +357,7 @@ class SessionRunner:
         requests = self.requests.take()
         with self.recorder.atomic():
             for r in requests:
-                if r.kind in ("note", "answer"):
+                if r.kind in ("note", "answer", "skip_questionnaire"):
                     self._annotate(t_ns, r)
                     continue
                 if r.kind == "trial_answer":
@@ -371,12 +380,15 @@ class SessionRunner:
 
 
     def _annotate(self, t_ns: int, r: Request) -> None:
-        """A note stored, or a questionnaire's answers (the next cue after the protocol's pause)."""
+        """A note stored, or a questionnaire's answers or skip (the next cue after the protocol's pause)."""
         if r.kind == "note":
             note = Note(self.session_id, self.desk.time_s(t_ns), r.trial_index, r.detail, r.deviation, "")
             self.recorder.call(lambda db: insert_note(db.conn, note))
             return
-        why = self.questions.answer(t_ns, r.detail, r.cause, dict(r.answers))
+        if r.kind == "skip_questionnaire":
+            why = self.questions.skip(t_ns, r.detail, r.cause, str(dict(r.answers).get("reason", "")))
+        else:
+            why = self.questions.answer(t_ns, r.detail, r.cause, dict(r.answers))
         if why:
             self.desk.event(t_ns, "questionnaire", why)
             return

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Command, Mark, SetHaptics, StopRecording
 from protocol.storage import Recorder
@@ -81,6 +82,12 @@ class SessionPlan:
     answers_seed: int | None = None
     #: The session's answered trials so far (a task that asks: its procedure is rebuilt from them on resume).
     trial_answers: tuple[Answered, ...] = ()
+    #: A score card after each block (the protocol's ``[feedback]`` allows it in this session's kind).
+    score_cards: bool = False
+    #: The participant's earlier trials a card compares with: (session id, haptic mode, metrics, outcome) each.
+    earlier: tuple[tuple[int, str, dict[str, Any], str], ...] = ()
+    #: The blocks (haptic modes) the session has shown its card for (a resume shows none twice).
+    cards_shown: tuple[str, ...] = ()
 
 
 @dataclass

@@ -36,6 +36,7 @@ from pipeline.core.aim import TrialParticipant
 from pipeline.runtime.loop_messages import Command
 from pipeline.runtime.loop_view import LoopView
 from protocol.metrics import stored
+from protocol.runner.feedback_wait import cards_shown, earlier_trials
 from protocol.runner.session import SessionRunner, first_unfinished
 from protocol.runner.session_desk import SessionPlan, trial_words
 from protocol.runner.study_rules import DEVIATION_EVENT, FAULT_REHEARSAL_EVENT, check_new_session, stored_sessions
@@ -157,6 +158,10 @@ class OpenedSession:
     answered: tuple[tuple[str, str], ...] = ()
     #: The trials answered so far (a task that asks: its procedure continues from them).
     trial_answers: tuple[Answered, ...] = ()
+    #: The participant's earlier trials a score card compares with, and the blocks shown a card
+    #: (:mod:`protocol.runner.feedback_wait`; read only where the protocol allows feedback).
+    earlier: tuple[tuple[int, str, dict[str, Any], str], ...] = ()
+    cards_shown: tuple[str, ...] = ()
 
     @property
     def participant_seed(self) -> int:
@@ -172,6 +177,8 @@ class OpenedSession:
             initial_pause_s=self.initial_pause_s, segment=self.segment, seed=self.seed,
             live_force_aid=self.live_force_aid, arms=arms, answered=self.answered,
             answers_seed=self.participant_seed if simulated_answers else None, trial_answers=self.trial_answers,
+            score_cards=self.protocol.feedback.in_session(self.kind), earlier=self.earlier,
+            cards_shown=self.cards_shown,
         )
 
 
@@ -249,6 +256,7 @@ def open_new_session(
         session_id=session_id, code=code, kind=kind, seed=seed, participant_number=number, protocol=run_protocol,
         schedule=schedule, start_position=0, clock_offset_s=0.0, initial_pause_s=0.0,
         live_force_aid=kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner, resumed=False,
+        earlier=earlier_trials(db, code, session_id) if run_protocol.feedback.in_session(kind) else (),
     )
 
 
@@ -324,6 +332,8 @@ def open_resumed_session(
         live_force_aid=info.kind == "training" and protocol.training.live_force_aid, lease_owner=lease_owner,
         resumed=True, notes=notes, segment=segment, answered=tuple(answered_blocks(db.conn, session_id)),
         trial_answers=stored_answers(db, session_id),
+        earlier=earlier_trials(db, info.code, session_id) if protocol.feedback.in_session(info.kind) else (),
+        cards_shown=cards_shown(db, session_id),
     )
 
 

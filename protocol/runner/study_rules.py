@@ -32,9 +32,11 @@ from pipeline.force.framework import FrameworkConfig
 from pipeline.force.pipeline_settings import describe, non_default_settings, settings_of, stored_settings
 from protocol.storage import SessionInfo, StorageError, StudyDatabase, StudyReader
 from protocol.study.config import ProtocolConfig
+from protocol.study.questionnaires import QUESTIONNAIRE_SKIPPED_EVENT
 
 __all__ = [
-    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "FAULT_REHEARSAL_EVENT", "TRAINING_SKIPPED",
+    "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "FAULT_REHEARSAL_EVENT",
+    "QUESTIONNAIRE_SKIPPED_EVENT", "TRAINING_SKIPPED",
     "StoredSession",
     "StudyRuleError", "check_arms", "check_new_session", "check_settings", "next_kind", "next_part", "part_states",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
@@ -49,7 +51,7 @@ CALIBRATION_OVERRIDE_EVENT = "calibration_override"
 #: device failure.
 FAULT_REHEARSAL_EVENT = "fault_rehearsal"
 #: Every ``events.kind`` that records a deviation from the designed study (the report lists them all).
-DEVIATION_KINDS = (DEVIATION_EVENT, CALIBRATION_OVERRIDE_EVENT, FAULT_REHEARSAL_EVENT)
+DEVIATION_KINDS = (DEVIATION_EVENT, CALIBRATION_OVERRIDE_EVENT, FAULT_REHEARSAL_EVENT, QUESTIONNAIRE_SKIPPED_EVENT)
 #: How the detail of the deviation "experiment without a completed training session" begins.
 TRAINING_SKIPPED = "training skipped"
 

@@ -20,10 +20,11 @@ from dataclasses import dataclass
 
 from protocol.storage.common import StorageError, has_table, now_iso
 from protocol.study.covariates import Covariate, CovariateValue
+from protocol.study.questionnaires import QUESTIONNAIRE_SKIPPED_EVENT, skipped_key
 
 __all__ = [
-    "Answer", "Note", "answered_blocks", "answers", "covariate_rows", "covariates_by_code", "insert_answers",
-    "insert_covariates", "insert_note", "notes",
+    "Answer", "Note", "answered_blocks", "answers", "covariate_rows", "covariates_by_code", "event_details",
+    "insert_answers", "insert_covariates", "insert_note", "notes",
 ]
 
 
@@ -141,9 +142,19 @@ def answers(conn: sqlite3.Connection, session_ids: Sequence[int] | None = None) 
             if wanted is None or s in wanted]
 
 
+def event_details(conn: sqlite3.Connection, session_id: int, kind: str) -> list[str]:
+    """The details of a session's events of ``kind``, in the order stored."""
+    return [str(d or "") for (d,) in conn.execute(
+        "SELECT detail FROM events WHERE session_id = ? AND kind = ? ORDER BY rowid", (session_id, kind))]
+
+
 def answered_blocks(conn: sqlite3.Connection, session_id: int) -> list[tuple[str, str]]:
-    """The (questionnaire, block) a session has answers of (a resume asks no questionnaire twice)."""
+    """The (questionnaire, block) a session has answers of, or skipped by the experimenter (a resume asks no
+    questionnaire twice)."""
+    skipped = [k for d in event_details(conn, session_id, QUESTIONNAIRE_SKIPPED_EVENT)
+               if (k := skipped_key(d)) is not None]
     if not has_table(conn, "questionnaire_answers"):
-        return []
+        return skipped
     return [(str(q), str(b)) for q, b in conn.execute(
-        "SELECT DISTINCT questionnaire, block FROM questionnaire_answers WHERE session_id = ?", (session_id,))]
+        "SELECT DISTINCT questionnaire, block FROM questionnaire_answers WHERE session_id = ?", (session_id,))
+            ] + skipped

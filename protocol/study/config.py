@@ -20,6 +20,7 @@ from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.force.safety import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
+from protocol.study.feedback import FeedbackConfig, feedback_from_table
 from protocol.study.groups import GroupDesign, groups_from_table
 from protocol.study.lsl_settings import LslSettings, lsl_from_table
 from protocol.study.parts import (
@@ -129,6 +130,8 @@ class ProtocolConfig:
     #: What the session publishes and records on the Lab Streaming Layer (:mod:`protocol.study.lsl_settings`; the
     #: file's ``[lsl]``): nothing by default.
     lsl: LslSettings = field(default_factory=LslSettings)
+    #: Feedback to the trainee (:mod:`protocol.study.feedback`; the file's ``[feedback]``): none by default.
+    feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
     #: The study's task blocks (:mod:`protocol.study.parts`; the file's ``[[parts]]``), each a protocol of its own
     #: with its :attr:`part` set, in the file's order: () for a study of one task (a training then an experiment
     #: session of :attr:`task`).
@@ -236,6 +239,7 @@ class ProtocolConfig:
             **({"parts": [_part_dict(p) for p in self.parts]} if self.parts else {}),
             **({"counterbalance": self.counterbalance.to_dict()} if self.counterbalance is not None else {}),
             **({"part": self.part.to_dict()} if self.part is not None else {}),
+            **({"feedback": fb} if (fb := self.feedback.to_dict()) is not None else {}),
         }
 
     def to_json(self) -> str:
@@ -267,7 +271,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires", "groups", "lsl", "parts", "counterbalance", "part"})
+                          "questionnaires", "groups", "lsl", "feedback", "parts", "counterbalance", "part"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -329,6 +333,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         groups=groups_from_table(f, top.get("groups"), covariates),
         lsl=lsl_from_table(f, top),
         **_plan(f, top),
+        feedback=feedback_from_table(f, top, ordering),
     )
 
 

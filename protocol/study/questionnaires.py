@@ -37,11 +37,15 @@ from pipeline.settings.tomlfields import Fields, show
 from protocol.study import tlx
 
 __all__ = [
-    "QUESTIONNAIRE_KINDS", "Item", "LikertScale", "Prompt", "Questionnaire", "checked_answers", "due",
-    "questionnaires_from_tables",
+    "QUESTIONNAIRE_KINDS", "QUESTIONNAIRE_SKIPPED_EVENT", "Item", "LikertScale", "Prompt", "Questionnaire",
+    "checked_answers", "due", "questionnaires_from_tables", "skip_detail", "skipped_key",
 ]
 
 QUESTIONNAIRE_KINDS = ("nasa_tlx", "likert")
+#: The ``events.kind`` of a questionnaire the experimenter skipped while it waited for the participant: not
+#: answered, stored so (a resume does not ask it again) and listed with the deviations from the protocol; its detail
+#: begins ``NAME/BLOCK:`` (:func:`skip_detail`).
+QUESTIONNAIRE_SKIPPED_EVENT = "questionnaire_skipped"
 AFTER = ("block", "session")
 #: A questionnaire's ``block`` when it follows the session rather than a block of one mode.
 SESSION = "session"
@@ -243,3 +247,17 @@ def _number(v: Any) -> float | None:
     if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
         return None
     return float(v)
+
+
+def skip_detail(name: str, block: str, words: str, reason: str) -> str:
+    """The detail of a :data:`QUESTIONNAIRE_SKIPPED_EVENT`: ``NAME/BLOCK:`` (read back by :func:`skipped_key`), then
+    the prompt's words and the experimenter's reason."""
+    why = reason.strip() or "no reason given"
+    return f"{name}/{block}: {words} skipped by the experimenter, not answered (reason: {why})"
+
+
+def skipped_key(detail: str) -> tuple[str, str] | None:
+    """The (questionnaire, block) a :data:`QUESTIONNAIRE_SKIPPED_EVENT`'s detail names (None: not one of its)."""
+    head = detail.split(":", 1)[0]
+    name, sep, block = head.partition("/")
+    return (name, block) if sep and _NAME.match(name) and block else None

@@ -55,7 +55,7 @@ def cmd_discrimination(args: argparse.Namespace) -> int:
     except (InputRefused, ValueError) as exc:
         raise CliError(str(exc)) from None
 
-    from analysis.report.discrimination import BlockResult, write_discrimination
+    from analysis.report.section_discrimination import BlockResult, write_discrimination
     from study_app.headless.discrimination_run import run_participants
 
     results = [BlockResult(r.observer.participant, [dataclasses.asdict(t) for t in r.trials], r.fits, r.observer.weber,

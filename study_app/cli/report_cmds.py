@@ -16,6 +16,7 @@ from study_app.cli.error import CliError
 
 if TYPE_CHECKING:
     from analysis.report.plan_report import PlanEntry
+    from analysis.report.report import ReportSummary
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
 
@@ -121,14 +122,11 @@ def cmd_report(args: argparse.Namespace) -> int:
         check_databases(args.db)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
-    from analysis.report.discrimination import discrimination_study
     from analysis.report.plan_report import study_plan
 
     plan = study_plan(args.db)
     if plan:  # a study of several parts: each experiment part's report, and the plan's page
         return _plan_report(args, plan)
-    if discrimination_study(args.db):
-        return _discrimination_report(args)
     from analysis.reading.metrics import MetricOptions
     from analysis.report.report import build_report
     from study_app.cli.progress import ProgressBar
@@ -153,6 +151,8 @@ def cmd_report(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     ex = summary.excluded
+    for line in summary.lines:  # the tasks' sections' own (a discrimination study's fits)
+        print(line)
     for line in summary.damage:  # as every reader of the recording names it; the report lists the trials
         print(f"haptic-study: recording damaged: {line}: the trials it touches are left out of the analysis "
               f"(listed in {summary.out_dir / 'report.html'} under Trials that did not count)", file=sys.stderr)
@@ -163,6 +163,14 @@ def cmd_report(args: argparse.Namespace) -> int:
           f"{damaged})")
     for line in summary.conditions:  # as the page opens with them
         print(f"haptic-study: warning: {line}", file=sys.stderr)
+    if not summary.stats.empty:
+        _print_tests(summary, args)
+    print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
+    return 0
+
+
+def _print_tests(summary: ReportSummary, args: argparse.Namespace) -> None:
+    """The tests ON vs OFF as stats.csv has them, with why a test's n is below the participants."""
     cols = ["metric", "n", "median_off", "median_on", "p_value", "p_holm", "method"]
     print("Paired Wilcoxon tests, haptics ON vs OFF (medians across participants; p_holm: Holm-adjusted; "
           f"error window: {args.error_window}, TCT: {args.tct}, zero differences: {args.zero_method}):")
@@ -174,33 +182,27 @@ def cmd_report(args: argparse.Namespace) -> int:
         if note or int(r.n) != summary.n_participants:
             print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
                   f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
-    print(f"Tables and figures in {summary.out_dir}/: " + ", ".join(f for f in summary.files if "/" not in f))
-    return 0
 
 
 def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
     """A study of several parts: each experiment part's report in ``OUT/PART/`` and the plan's page, by the output
     policy (:mod:`analysis.report.plan_report`)."""
     from analysis.reading.metrics import MetricOptions
-    from analysis.report.discrimination import study_blocks, write_discrimination_report
     from analysis.report.plan_report import write_plan_report
     from analysis.report.report import fill_report
     from foundation.outdir import REPORT_MARKER, write_output_folder
-    from protocol.tasks.force_discrimination import ForceDiscrimination
 
     if args.power or args.site:
         raise CliError("--power and --site are for a study of one task; this study has parts: report it without "
                        "them (each part's report is its own folder)")
 
     def fill_part(folder: Path, name: str, kind: str) -> list[str]:
-        if kind == ForceDiscrimination.kind:  # a task without trial metrics: its fit per participant
-            results = study_blocks(args.db)
-            write_discrimination_report(results, folder, ForceDiscrimination.methods([ForceDiscrimination()], []))
-            return [f"{len(results)} participants' psychometric fits"]
+        # the part's sessions only: its task's core and section (analysis/report/section_KIND.py), one task
         s = fill_report(folder, args.db, part=name, options=MetricOptions(args.error_window, args.tct),
                         zero_method=args.zero_method, confidence=args.confidence,
                         include_incomplete=args.include_incomplete)
-        return [f"{plural(s.n_participants, 'participant')}, {plural(s.n_trials, 'trial')}"]
+        return [f"{kind.replace('_', ' ')}: {plural(s.n_participants, 'participant')}, "
+                f"{plural(s.n_trials, 'trial')}", *s.lines]
 
     lines: list[str] = []
     try:
@@ -213,31 +215,6 @@ def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
         print(line)
     print(f"Report {args.out}/report.html (the plan) with a report per part: "
           + ", ".join(f for f in files if f.endswith("report.html")))
-    return 0
-
-
-def _discrimination_report(args: argparse.Namespace) -> int:
-    """A force-discrimination study's report: its section's tables, codebook, figures and page, by the output
-    policy (:func:`analysis.report.discrimination.write_discrimination_report`)."""
-    from analysis.report.discrimination import study_blocks, write_discrimination_report
-    from foundation.outdir import REPORT_MARKER, write_output_folder
-    from protocol.tasks.force_discrimination import ForceDiscrimination
-
-    results = study_blocks(args.db)
-    if not results:
-        raise CliError(f"--db = {args.db[0]!r}: no answered discrimination trial to report")
-    methods = ForceDiscrimination.methods([ForceDiscrimination()], [])
-    try:
-        files = write_output_folder(args.out, lambda tmp: write_discrimination_report(results, tmp, methods),
-                                    command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
-    except InputRefused as exc:
-        raise CliError(str(exc), getattr(exc, "status", 2)) from None
-    for r in results:
-        print(f"P{r.participant:02d}  " + "  ".join(
-            f"{label} JND {f.jnd_n * 1000:.1f} mN, W {f.weber:.3f} [{f.weber_lo:.3f}, {f.weber_hi:.3f}]"
-            for label, f in r.fits))
-    print(f"Report {args.out}/report.html: {len(results)} participants; files: "
-          + ", ".join(f for f in files if "/" not in f))
     return 0
 
 

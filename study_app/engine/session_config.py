@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 from pipeline.assembly.engine_view import EngineView
 from pipeline.commissioning.qualification import read_record
 from pipeline.force.pipeline_settings import non_default_settings, settings_of
 from pipeline.settings.hardware import HardwareConfig
+from protocol.study.groups import GroupDesign, simulated_profile
 
-__all__ = ["config_record", "qualification_record", "real_config_record"]
+__all__ = ["config_record", "qualification_record", "real_config_record", "with_profile"]
 
 
 def config_record(eng: EngineView, clock: str, rig_seed: int, participant_seed: int) -> dict[str, Any]:
@@ -36,6 +38,16 @@ def config_record(eng: EngineView, clock: str, rig_seed: int, participant_seed: 
         "pipeline_settings": non_default_settings(settings_of(fw)),
         "watchdog": _plain(dataclasses.asdict(eng.loop.watchdog)),
     }
+
+
+def with_profile(config: dict[str, Any], groups: GroupDesign | None, covariates: Mapping[str, object]
+                 ) -> dict[str, Any]:
+    """A simulated-rig session's config record naming the simulated participant's profile where it is not the
+    calibrated one (``participant_profile``; :mod:`pipeline.sim.experience`), from the participant's covariates
+    (its group, ``[groups]``): the record of a study without groups is as before.  The headless runner's and the
+    GUI's sessions both record it so."""
+    profile = simulated_profile(groups, covariates)
+    return config if profile == "novice" else {**config, "participant_profile": profile}
 
 
 def real_config_record(hw: HardwareConfig, hardware_text: str, eng: EngineView) -> dict[str, Any]:

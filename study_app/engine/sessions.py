@@ -45,14 +45,14 @@ from protocol.runner.study_rules import (
 from protocol.storage import Recorder, StorageError, StudyDatabase, StudyReader, validate_code
 from protocol.storage.annotations import notes
 from protocol.study.config import ProtocolConfig, load_protocol
-from protocol.study.questionnaires import checked_answers
+from protocol.study.questionnaires import Prompt, checked_answers
 from protocol.study.records import AbortCause, TrialRecord
 from protocol.study.trial import PhaseChanged, TrialPhase
 from study_app.engine import messages as m
 from study_app.engine import session_list
 from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
-from study_app.engine.session_config import config_record, real_config_record
+from study_app.engine.session_config import config_record, real_config_record, with_profile
 from study_app.engine.setup import StylusControl
 
 __all__ = ["EngineSessions", "list_resumable"]
@@ -106,11 +106,16 @@ class EngineSessions:
             return
         db = self._open_db(cmd.db_path)
         try:
+            record = self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1])
+            if self.engine.eng.simulated:  # the simulated participant's profile, from its group (stored or given)
+                from protocol.storage.annotations import covariates_by_code
+
+                known = {**covariates_by_code(db.conn).get(cmd.code, {}), **cmd.covariates}
+                record = with_profile(record, protocol.groups, known)
             opened = open_new_session(
                 db, code=cmd.code, number=cmd.participant_number, kind=cmd.kind, protocol=protocol, seed=cmd.seed,
                 rig=self.engine.config.rig,
-                config={**self._config_record(participant_seeds(cmd.seed, cmd.participant_number)[1]), "app": "gui",
-                        **self.commissioning.provenance()},
+                config={**record, "app": "gui", **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
                 training_override=cmd.training_override, covariates=cmd.covariates,
@@ -281,15 +286,27 @@ class EngineSessions:
     def answer(self, cmd: m.AnswerQuestionnaire) -> None:
         """The participant's answers to the questionnaire on their screen: checked here (a refusal names the item),
         stored by the runner with the next block."""
-        runner = self.runner
-        if runner is None or runner.done or runner.session_id != cmd.session_id:
-            raise RuntimeError(f"answers to {cmd.questionnaire}: session {cmd.session_id} is not running")
-        asked = runner.questions.asked
-        if asked is None or asked.key != (cmd.questionnaire, cmd.block):
-            raise RuntimeError(f"answers to {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one "
-                               "waiting for answers")
+        runner, asked = self._waiting(cmd, "answers to")
         checked_answers(asked.questionnaire, cmd.answers)  # a ValueError: one line naming the item
         runner.answer(cmd.questionnaire, cmd.block, dict(cmd.answers))
+
+    def skip_questionnaire(self, cmd: m.SkipQuestionnaire) -> None:
+        """The experimenter skips the questionnaire waiting for the participant: stored by the runner with the next
+        block, as skipped (a deviation, with the reason)."""
+        runner, _ = self._waiting(cmd, "skip")
+        runner.skip_questionnaire(cmd.questionnaire, cmd.block, cmd.reason)
+
+    def _waiting(self, cmd: m.AnswerQuestionnaire | m.SkipQuestionnaire, what: str) -> tuple[SessionRunner, Prompt]:
+        """The running session and the questionnaire ``cmd`` names, the one waiting for answers (else a refusal in
+        one line: ``what`` begins it)."""
+        runner = self.runner
+        if runner is None or runner.done or runner.session_id != cmd.session_id:
+            raise RuntimeError(f"{what} {cmd.questionnaire}: session {cmd.session_id} is not running")
+        asked = runner.questions.asked
+        if asked is None or asked.key != (cmd.questionnaire, cmd.block):
+            raise RuntimeError(f"{what} {cmd.questionnaire} ({cmd.block}): that questionnaire is not the one "
+                               "waiting for answers")
+        return runner, asked
 
     def answer_trial(self, cmd: m.AnswerTrial) -> None:
         """The participant's answer to the running trial's question: a key the task does not allow is refused in
@@ -407,11 +424,15 @@ class EngineSessions:
                     spec.target_force_n, spec.haptic_mode, spec.repeat_of,
                 ))
             self.engine.publish(m.PhaseEntered(t_s, ev.trial_index, str(ev.new)))
-        elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",)):
+        elif isinstance(ev, tuple) and ev[:1] == ("score_card",):
+            self.engine.publish(m.ScoreCardShown(runner.session_id, ev[1].block, ev[1].lines()))
+        elif isinstance(ev, tuple) and ev[:1] in (("questionnaire",), ("questionnaire_answered",),
+                                                  ("questionnaire_skipped",)):
             prompt = ev[1]
             self.engine.publish(m.QuestionnaireShown(runner.session_id, prompt.questionnaire, prompt.block)
                                 if ev[0] == "questionnaire" else
-                                m.QuestionnaireAnswered(runner.session_id, *prompt.key))
+                                m.QuestionnaireAnswered(runner.session_id, prompt.key[0], prompt.key[1],
+                                                        skipped=ev[0] == "questionnaire_skipped"))
         elif isinstance(ev, TrialRecord):
             cause = ev.abort_cause
             if cause in (AbortCause.GAP, AbortCause.FEEDBACK):  # not a watchdog fault, so the loop said nothing

@@ -28,6 +28,11 @@ class ControlBox(QGroupBox):
         self.abort_trial_button = QPushButton("Abort trial  [Esc]")
         self.abort_session_button = QPushButton("Abort session")
         self.note_button = QPushButton("Note…  [Ctrl+N]")
+        # a questionnaire waits for the participant: the experimenter may skip it (stored as skipped, a deviation)
+        self.skip_questionnaire_button = QPushButton("Skip questionnaire…")
+        self.skip_questionnaire_button.setToolTip("The participant does not answer it: stored as skipped, a "
+                                                  "deviation from the protocol the study report lists")
+        self.skip_questionnaire_button.hide()
         self.note_button.setToolTip("A note on the session or one of its trials, stored on the session clock (mark "
                                     "it a deviation and the study report lists it)")
         self.calibrate_button = QPushButton("Calibration…")
@@ -51,6 +56,7 @@ class ControlBox(QGroupBox):
         ab.addWidget(self.abort_session_button)
         grid.addLayout(ab)
         grid.addWidget(self.note_button)
+        grid.addWidget(self.skip_questionnaire_button)
         grid.addWidget(self.calibrate_button)
         # real rig: start although the calibration chain is incomplete -- only with a reason, which is stored
         self.override_button = QPushButton("Start without calibration…")

@@ -140,7 +140,7 @@ class ExperimenterWindow(QMainWindow):
             c.override_button
         self.pause_button, self.resume_button = c.pause_button, c.resume_button
         self.abort_trial_button, self.abort_session_button = c.abort_trial_button, c.abort_session_button
-        self.note_button = c.note_button
+        self.note_button, self.skip_questionnaire_button = c.note_button, c.skip_questionnaire_button
         self.calibrate_button, self.participant_button, self.rig_button = c.calibrate_button, c.participant_button, \
             c.rig_button
         self.engine_row, self.engine_label, self.restart_button = c.engine_row, c.engine_label, c.restart_button
@@ -217,6 +217,8 @@ class ExperimenterWindow(QMainWindow):
         self.abort_trial_button.clicked.connect(act.abort_trial)
         self.abort_session_button.clicked.connect(act.abort_session)
         self.note_button.clicked.connect(self.note)
+        self.skip_questionnaire_button.clicked.connect(act.skip_questionnaire)
+        self.model.questionnaire.changed.connect(self._on_questionnaire_changed)
         self.calibrate_button.clicked.connect(lambda: self.open_window(self.calibration_wizard))
         self.participant_button.clicked.connect(lambda: self.open_window(self.participant_window))
         self.rig_button.clicked.connect(lambda: self.open_window(self.rig_window))
@@ -366,6 +368,11 @@ class ExperimenterWindow(QMainWindow):
         self.override_button.setVisible(bool(missing))
         self.override_button.setEnabled(bool(missing) and can("start"))
         self.override_button.setToolTip(missing)
+
+    def _on_questionnaire_changed(self) -> None:
+        """Skip questionnaire…: shown while one waits for the participant's answers (not once they are sent)."""
+        q = self.model.questionnaire
+        self.skip_questionnaire_button.setVisible(q.active and not q.sent)
 
     def _on_engine_changed(self) -> None:
         trouble, detail = self.model.engine.notice()

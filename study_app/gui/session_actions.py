@@ -183,6 +183,29 @@ class SessionActions:
         dlg.finished.connect(lambda _r: setattr(self, "note_dialog", None))
         dlg.open()
 
+    def skip_questionnaire(self) -> None:
+        """Skip the questionnaire waiting for the participant, after confirmation with an optional reason: stored as
+        skipped, a deviation (moot once it is answered or the session ends)."""
+        q = self.model.questionnaire
+        if q.questionnaire is None or q.sent:
+            return
+        name, block = q.questionnaire.name, q.block
+        after = "the session" if block == "session" else f"the haptics {block.upper()} block"
+
+        def skip() -> None:
+            asked = self.questions.get("skip_questionnaire")
+            why = asked.reason if asked is not None and self.confirm is None else self.scripted_reason
+            q.skip(why)
+
+        self.ask("skip_questionnaire", "Skip questionnaire",
+                 f"Skip the questionnaire \"{name}\" after {after}? The participant does not answer it; it is stored "
+                 "as skipped, a deviation from the protocol the study report lists, and the next trial no longer "
+                 "waits for it.", skip,
+                 moot_when=lambda ev: (isinstance(ev, m.QuestionnaireAnswered) and (ev.questionnaire, ev.block)
+                                       == (name, block)) or isinstance(ev, (m.SessionEnded, m.EngineStopped)),
+                 moot_text=f"The questionnaire \"{name}\" was answered before you answered: nothing was skipped.",
+                 reason="Reason (optional, stored with the deviation), then Yes")
+
     def abort_session(self) -> None:
         """Abort the session after confirmation (that session only)."""
         s = self.model.session.session

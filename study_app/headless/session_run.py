@@ -45,7 +45,7 @@ from protocol.storage import StudyDatabase, new_owner_token
 from protocol.storage.annotations import covariates_by_code
 from protocol.study.config import ProtocolConfig
 from protocol.study.groups import simulated_covariates, simulated_profile
-from study_app.engine.session_config import config_record
+from study_app.engine.session_config import config_record, with_profile
 from study_app.headless.plan import Step
 
 __all__ = [
@@ -218,7 +218,7 @@ def run_session(
                  **(covariates or {})}
         opened = open_new_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
-            config=_with_profile(config_record(eng, clock, rig_seed, p_seed), protocol, given),
+            config=with_profile(config_record(eng, clock, rig_seed, p_seed), protocol.groups, given),
             calibration=eng.calibration.to_dict(), lease_owner=lease_owner, study_owner=study_owner,
             covariates=given,
         )
@@ -258,13 +258,6 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
-
-
-def _with_profile(config: dict[str, Any], protocol: ProtocolConfig, given: Mapping[str, object]) -> dict[str, Any]:
-    """The session's config record, naming the simulated participant's profile where it is not the calibrated one
-    (``participant_profile``; :mod:`pipeline.sim.experience`): the record of a study without groups is as before."""
-    profile = simulated_profile(protocol.groups, given)
-    return config if profile == "novice" else {**config, "participant_profile": profile}
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:

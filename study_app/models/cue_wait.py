@@ -78,7 +78,8 @@ def cue_wait_now(session: SessionModel, health: HealthModel, engine_trouble: str
         return "questionnaire", CueWait(
             "info", f"{QUESTIONNAIRE_REASON}{waiting.removeprefix(QUESTIONNAIRE_WAIT)} on their screen",
             help="The next trial comes the protocol's pause after the participant sends the answers (Submit on "
-                 "their screen); the answers are stored with the session.")
+                 "their screen); the answers are stored with the session. Skip questionnaire… skips it (stored as "
+                 "skipped, a deviation).")
     if waiting.startswith("fault latched") and "LOOP_STALLED" in waiting:
         return "fault", CueWait(
             "error", waiting.replace(": reset to continue", ""), action="reset_faults",

@@ -81,6 +81,8 @@ class ParticipantScreenModel:
     send: Callable[[object], object] | None = None
     session_id: int | None = None
     answered: str | None = None
+    #: The score card shown after a block (feedback the protocol allows), until the next trial.
+    card: m.ScoreCardShown | None = None
 
     @property
     def gauge_allowed(self) -> bool:
@@ -91,9 +93,11 @@ class ParticipantScreenModel:
         """Update from an engine event."""
         if isinstance(ev, m.SessionStarted):
             self.kind, self.live_aid, self.cue_s, self.session_id = ev.kind, ev.live_force_aid, ev.cue_s, ev.session_id
-            self.task, self.trial, self.phase, self.ended = ev.task, None, "idle", False
+            self.task, self.trial, self.phase, self.ended, self.card = ev.task, None, "idle", False, None
         elif isinstance(ev, m.TrialStarted):
-            self.trial, self.phase, self.answered = ev, "active", None
+            self.trial, self.phase, self.answered, self.card = ev, "active", None, None
+        elif isinstance(ev, m.ScoreCardShown):
+            self.card = ev
         elif isinstance(ev, m.PhaseEntered):
             self.phase = ev.phase
         elif isinstance(ev, m.SessionEnded):
@@ -133,6 +137,9 @@ class ParticipantScreenModel:
         if self.ended:
             return ParticipantScreen("Thank you", "The session is complete.", False, None, None)
         tr = self.trial
+        if self.card is not None and self.phase not in ("active", "cued", "answer"):  # feedback after a block
+            return ParticipantScreen(f"Your haptics {self.card.block.upper()} block", "\n".join(self.card.lines),
+                                     False, None, None)
         if self.phase == "pause":
             return ParticipantScreen("Rest", "Let go of the tissue. The next trial starts soon.", False, None, None)
         if tr is None or self.task is None or self.phase not in ("active", "cued", "answer"):

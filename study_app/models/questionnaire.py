@@ -159,6 +159,14 @@ class QuestionnaireModel:
             self.page -= 1
             self.changed.emit()
 
+    def skip(self, reason: str = "") -> bool:
+        """The experimenter skips the questionnaire on the participant screen (stored as skipped, a deviation, with
+        ``reason``); False when nothing was sent (none is waiting, or its answers are on their way)."""
+        q = self.questionnaire
+        if q is None or self.sent or self.send is None:
+            return False
+        return self.send(m.SkipQuestionnaire(self.session_id, q.name, self.block, reason.strip()))
+
     def submit(self) -> bool:
         """Send the answers (the last page only); False when they were not sent."""
         q = self.questionnaire

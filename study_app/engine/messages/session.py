@@ -28,9 +28,11 @@ __all__ = [
     "QuestionnaireShown",
     "Resume",
     "ResumeSession",
+    "ScoreCardShown",
     "SessionEnded",
     "SessionStarted",
     "SessionsListed",
+    "SkipQuestionnaire",
     "StartChecking",
     "StartSession",
     "TrialEnded",
@@ -134,6 +136,17 @@ class AnswerQuestionnaire:
     questionnaire: str
     block: str
     answers: dict[str, float | str]
+
+
+@dataclass(frozen=True, slots=True)
+class SkipQuestionnaire:
+    """The experimenter skips the questionnaire waiting for the participant: stored as skipped, a deviation from the
+    protocol with ``reason`` (the report lists it), and the next trial no longer waits."""
+
+    session_id: int
+    questionnaire: str
+    block: str
+    reason: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -260,6 +273,16 @@ class NoteStored:
 
 
 @dataclass(frozen=True, slots=True)
+class ScoreCardShown:
+    """Feedback to the trainee (the protocol's ``[feedback]``): a block ended, its score card is on the participant
+    screen until the next cue (``lines``: a measure each, against the participant's earlier sessions)."""
+
+    session_id: int
+    block: str
+    lines: tuple[str, ...]
+
+
+@dataclass(frozen=True, slots=True)
 class QuestionnaireShown:
     """A questionnaire is due: the participant screen shows it, and the next cue waits for its answers."""
 
@@ -270,11 +293,13 @@ class QuestionnaireShown:
 
 @dataclass(frozen=True, slots=True)
 class QuestionnaireAnswered:
-    """A questionnaire's answers were stored (the participant's, or the simulated participant's)."""
+    """A questionnaire's answers were stored (the participant's, or the simulated participant's), or it was skipped
+    by the experimenter (``skipped``: stored so, not answered)."""
 
     session_id: int
     questionnaire: str
     block: str
+    skipped: bool = False
 
 
 @dataclass(frozen=True, slots=True)

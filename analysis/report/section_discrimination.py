@@ -1,5 +1,5 @@
-"""A force-discrimination block's outputs: the trials and the fits as tidy CSVs, their codebook, and one
-psychometric-curve figure per participant (issue 43).
+"""Force discrimination's section of the report: the trials and the fits as tidy CSVs, their codebook, and one
+psychometric-curve figure per participant (issue 43); the section of its kind (:mod:`analysis.report.task_sections`).
 
 One row of ``discrimination_fits.csv`` per participant per reference (no pooling of trials across participants:
 each JND is one participant's, from its own trials, :mod:`analysis.stats.psychometric`).  A simulated block adds each
@@ -9,7 +9,7 @@ participant's true Weber fraction and lapse rate, and whether the fitted interva
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -19,13 +19,14 @@ import pandas as pd
 from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
+from analysis.reading.errors import AnalysisError
+from analysis.report.task_sections import SectionInput, SectionOutput
 from analysis.stats.psychometric import PsychometricFit
 
 if TYPE_CHECKING:
     from protocol.storage.trial_answers import TrialAnswer
 
-__all__ = ["CODEBOOK", "BlockResult", "discrimination_study", "study_blocks", "write_discrimination",
-           "write_discrimination_report"]
+__all__ = ["CODEBOOK", "SECTION", "BlockResult", "discrimination_body", "study_blocks", "write_discrimination"]
 
 #: Every column of the two tables: (file, column, unit, meaning).
 CODEBOOK: tuple[tuple[str, str, str, str], ...] = (
@@ -97,7 +98,7 @@ def write_discrimination(results: Sequence[BlockResult], folder: Path) -> list[s
     pd.DataFrame([e for e in CODEBOOK if (e[0], e[1]) in present], columns=["file", "column", "unit", "meaning"]
                  ).to_csv(folder / "discrimination_codebook.csv", index=False)
     files = ["discrimination_trials.csv", "discrimination_fits.csv", "discrimination_codebook.csv"]
-    (folder / "figures").mkdir()
+    (folder / "figures").mkdir(exist_ok=True)
     for r in results:
         name = f"figures/psychometric_P{r.participant:02d}.png"
         psychometric_figure(r).savefig(folder / name, format="png", dpi=_DPI)
@@ -141,25 +142,10 @@ def psychometric_figure(r: BlockResult) -> Figure:
     return fig
 
 
-def discrimination_study(databases: Sequence[str]) -> bool:
-    """Whether the study's experiment sessions are of a task that asks (force discrimination): its report is the
-    discrimination section (:func:`write_discrimination_report`)."""
-    from protocol.storage.schema import connect_readonly
-    from protocol.storage.trial_answers import asks_questions
-
-    for db in databases:
-        conn = connect_readonly(db)
-        try:
-            if not asks_questions(conn, "force_discrimination"):
-                return False
-        finally:
-            conn.close()
-    return True
-
-
-def study_blocks(databases: Sequence[str]) -> list[BlockResult]:
+def study_blocks(databases: Sequence[str], sessions: Collection[tuple[str, int]] | None = None) -> list[BlockResult]:
     """Each participant's answered experiment trials read from the study databases (``trial_answers`` beside
-    ``trials``: aborted trials and trials without an answer left out) and fitted per reference."""
+    ``trials``: aborted trials and trials without an answer left out) and fitted per reference; only the
+    ``sessions`` given as (database, session id), when given."""
     from analysis.stats.psychometric import fit_psychometric
     from protocol.storage.schema import connect_readonly
     from protocol.storage.trial_answers import answered_sessions
@@ -168,10 +154,12 @@ def study_blocks(databases: Sequence[str]) -> list[BlockResult]:
     for db in databases:
         conn = connect_readonly(db)
         try:
-            sessions = answered_sessions(conn)
+            answered = answered_sessions(conn)
         finally:
             conn.close()
-        for session in sessions:
+        for session in answered:
+            if sessions is not None and (str(db), session.session_id) not in sessions:
+                continue
             rows = [_answer_row(session.participant_number, label, a) for label, a in session.answers
                     if a.answer is not None]
             refs = dict.fromkeys((str(r["target_label"]), float(r["reference_n"])) for r in rows)
@@ -193,13 +181,10 @@ def _answer_row(participant: int, label: str, a: TrialAnswer) -> dict[str, Any]:
             "correct": int(v["correct"])}
 
 
-def write_discrimination_report(results: Sequence[BlockResult], folder: Path, methods: str) -> list[str]:
-    """The study's discrimination report into ``folder``: the tables, codebook and figures
-    (:func:`write_discrimination`) and ``report.html``, a row per participant and reference (JND and Weber
-    fraction with their 95 % intervals) and each participant's psychometric figure."""
+def discrimination_body(results: Sequence[BlockResult], files: Sequence[str], methods: str) -> str:
+    """The section's HTML below its heading: the methods, a row per participant and reference (JND and Weber
+    fraction with their 95 % intervals) and each participant's psychometric figure (``files``: the figures')."""
     import html
-
-    files = write_discrimination(results, folder)
 
     def cell(v: float, fmt: str) -> str:
         return format(v, fmt) if math.isfinite(v) else "open"
@@ -212,14 +197,39 @@ def write_discrimination_report(results: Sequence[BlockResult], folder: Path, me
         for r in results for label, f in r.fits)
     figures = "".join(f'<figure><img src="{n}" alt="psychometric curves, {n[-7:-4]}"></figure>'
                       for n in files if n.startswith("figures/"))
-    page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>Force discrimination</title></head><body>"
-            f"<h1>Force discrimination</h1><p>{html.escape(methods)}</p>"
+    return (f"<p>{html.escape(methods)}</p>"
             "<p>One row per participant and reference, from that participant's answered trials only (no pooling "
             "across participants); trials without an answer and aborted trials are left out.</p>"
             "<table border='1' cellspacing='0' cellpadding='3'><tr><th>participant</th><th>reference</th>"
             "<th>reference (N)</th><th>trials</th><th>JND (mN) [95 %]</th><th>Weber fraction [95 %]</th>"
-            f"<th>lapse</th></tr>{rows}</table><h2>Psychometric curves</h2>{figures}"
-            "<p>Files: discrimination_trials.csv, discrimination_fits.csv, discrimination_codebook.csv.</p>"
-            "</body></html>")
-    (folder / "report.html").write_text(page, encoding="utf-8")
-    return [*files, "report.html"]
+            f"<th>lapse</th></tr>{rows}</table><h3>Psychometric curves</h3>{figures}"
+            "<p>Files: discrimination_trials.csv, discrimination_fits.csv, discrimination_codebook.csv.</p>")
+
+
+def _line(r: BlockResult) -> str:
+    """What the ``report`` command prints of one participant."""
+    return f"P{r.participant:02d}  " + "  ".join(
+        f"{label} JND {f.jnd_n * 1000:.1f} mN, W {f.weber:.3f} [{f.weber_lo:.3f}, {f.weber_hi:.3f}]"
+        for label, f in r.fits)
+
+
+@dataclass(frozen=True, slots=True)
+class _Discrimination:
+    """The section (:class:`analysis.report.task_sections.TaskSection`) of force discrimination."""
+
+    kinds: tuple[str, ...] = ("force_discrimination",)
+
+    def build(self, given: SectionInput, folder: Path) -> SectionOutput:
+        """Each participant's fits from its sessions' answered trials: the tables, codebook, figures and HTML."""
+        results = study_blocks(given.study.databases, given.keys)
+        if not results:
+            raise AnalysisError(f"{', '.join(given.study.databases)}: no answered discrimination trial to report")
+        tasks = given.tasks
+        methods = type(tasks[0]).methods(tasks, sorted(set(given.sessions["max_trial_s"])))
+        files = write_discrimination(results, folder)
+        return SectionOutput("Force discrimination", discrimination_body(results, files, methods),
+                             files=tuple(files), lines=tuple(_line(r) for r in results))
+
+
+#: The section of force discrimination's kind.
+SECTION = _Discrimination()

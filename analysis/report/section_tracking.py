@@ -1,6 +1,7 @@
-"""The report's section on a moving target (force tracking): how the force follows it, and error against speed.
+"""Force tracking's section of the report: how the force follows a moving target, and error against speed.
 
-Shown when the study's target moves.  It gathers what a tracking study asks beyond the error measures:
+The section of the tracking task's kind (:mod:`analysis.report.task_sections`), shown when its target moves.  It gathers
+what a tracking study asks beyond the error measures:
 
 * the measures of how the force follows the target (the study's metrics drawn in the ``tracking`` figure: lag and
   gain), each one value per participant per mode (the mean of their trials), tested ON vs OFF with its own p
@@ -15,6 +16,7 @@ from __future__ import annotations
 
 import html
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +27,14 @@ from analysis.plots.figures import MODE_COLORS, MODE_MARKERS, PAGE_IN, margins, 
 from analysis.reading import codebook
 from analysis.report.html_parts import fmt, fmt_p, img, plural
 from analysis.report.measures import listed
-from analysis.stats.target_speed import TargetSpeedTrade
+from analysis.report.task_sections import SectionInput, SectionOutput
+from analysis.stats.target_speed import TargetSpeedTrade, target_speed_trade
 from protocol.metrics import Metric, family_word, primary
 
-__all__ = ["FILES", "follow_measures", "speed_figure", "tracking_html", "tracking_tables"]
+__all__ = ["FILES", "SECTION", "TITLE", "follow_measures", "speed_figure", "tracking_body", "tracking_tables"]
+
+#: The section's heading.
+TITLE = "Tracking a moving target"
 
 #: The section's CSV files.
 FILES = ("target_speed.csv", "target_speed_slopes.csv", "target_speed_test.csv")
@@ -98,14 +104,15 @@ def _test_row(trade: TargetSpeedTrade) -> str:
             + (f" ({html.escape(r.note)})" if r.note else "") + ".")
 
 
-def tracking_html(trade: TargetSpeedTrade | None, stats: pd.DataFrame, metrics: Sequence[Metric],
+def tracking_body(trade: TargetSpeedTrade | None, stats: pd.DataFrame, metrics: Sequence[Metric],
                   png: bytes | None) -> str:
-    """The section ("" when the study's target does not move: no trade and no measure of following)."""
+    """The section below its heading ("" when the study's target does not move: no trade and no measure of
+    following)."""
     follow = _follow_rows(stats, metrics)
     if trade is None and not follow:
         return ""
     family = listed([m.short for m in primary(metrics)]) if primary(metrics) else "none"
-    out = ["<h2>Tracking a moving target</h2>"]
+    out = []
     if follow:
         names = listed([m.short for m in follow_measures(metrics)])
         out.append(
@@ -135,3 +142,23 @@ def tracking_html(trade: TargetSpeedTrade | None, stats: pd.DataFrame, metrics: 
                '<p class="caption">Thin lines: each participant; thick: the mean across participants.</p>'
                if png else ""))
     return "\n".join(out)
+
+
+@dataclass(frozen=True, slots=True)
+class _Tracking:
+    """The section (:class:`analysis.report.task_sections.TaskSection`) of force tracking."""
+
+    kinds: tuple[str, ...] = ("force_tracking",)
+
+    def build(self, given: SectionInput, folder: Path) -> SectionOutput:
+        """The trade of the sessions' error against their targets' speed (none: the target holds, or fewer than two
+        speeds) and the measures of following from the core's tests."""
+        trade = (target_speed_trade(given.trials, given.study.task_of, zero_method=given.zero_method,
+                                    confidence=given.confidence) if len(given.trials) else None)
+        png = speed_figure(trade, folder / "figures") if trade is not None else None
+        body = tracking_body(trade, given.stats, given.study.metrics, png) if len(given.stats) else ""
+        return SectionOutput(TITLE, body, tracking_tables(trade) if trade is not None else {})
+
+
+#: The section of force tracking's kind.
+SECTION = _Tracking()
