@@ -18,6 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from tests.parts_plan import PLAN
+
 #: What a --seconds option allows (one tick at least: issue 42)
 SIM_SECONDS = "must be a number from 0.001 to 86400 (one tick of the 1 kHz loop at least)"
 BENCH_SECONDS = "must be a number from 0.001 to 3600 (one tick of the 1 kHz loop at least)"
@@ -222,6 +224,18 @@ CASES: list[Case] = [
          ("run", "--db", "{d}/new.db", "--protocol", "{d}/p\n.toml"),
          "p\\n.toml: no such protocol file"),
     Case("protocol: a folder", RUN_NEW, "p.toml: cannot read the protocol file", {"p.toml": folder}),
+    # a study of several parts (docs/study-design.md): each refusal names the part; nothing stored
+    Case("parts: an unknown task kind in a part", RUN_NEW,
+         "p.toml, part 'tracking' (parts[3]): task.kind = 'juggling': allowed values",
+         {"p.toml": _variant(PLAN, 'kind = "force_tracking"', 'kind = "juggling"')}),
+    Case("parts: a part without trials", RUN_NEW, "p.toml, part 'firm' (parts[4]): targets = []: must be a list",
+         {"p.toml": _variant(PLAN, '[[parts.targets]]\nlabel = "FIRM"\nforce_n = 1.2\n', "targets = []\n")}),
+    Case("parts: a counterbalance group naming an unknown part", RUN_NEW,
+         "p.toml: counterbalance.parts = ['regulation', 'tracking', 'soft']: names no part 'soft'",
+         {"p.toml": _variant(PLAN, '"firm"]', '"soft"]')}),
+    Case("parts: a training part without training", RUN_NEW,
+         "p.toml, part 'practice' (parts[1]): session = 'training': the part's training.enabled is false",
+         {"p.toml": _variant(PLAN, 'session = "training"', 'session = "training"\n[parts.training]\nenabled = false')}),
     # -- hardware files -----------------------------------------------------------------------------------------
     Case("hardware: version = true", CHECK, "hw.toml: version = true: this software reads hardware file version 1",
          {"hw.toml": hardware("version = 1", "version = true")}),

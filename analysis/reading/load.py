@@ -29,6 +29,7 @@ from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.storage.damage import recording_damage
+from protocol.storage.database import part_of_protocol
 from protocol.study.feedback import FEEDBACK_EVENT
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import Task, metrics_of
@@ -223,12 +224,15 @@ def _schedule_fields(schedule_json: object) -> dict[str, object]:
         return {"n_designed": np.nan, "first_mode": ""}
 
 
-def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str], pd.DataFrame,
-                                  dict[tuple[str, int], Task]]:
+def _read_one(path: str, part: str | None = None) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list[str],
+                                                          pd.DataFrame, dict[tuple[str, int], Task]]:
     db = _open(path)
     try:
         # schema version 4 records which code ran a session; earlier files do not (NULL)
         sessions = _query(db, db.session_table)
+        if part is not None:  # one part of a study of several (protocol.study.parts): its sessions only
+            sessions = sessions[[part_of_protocol(pj) == part for pj in sessions["protocol_json"]]]
+            sessions = sessions.reset_index(drop=True)
         read = [_protocol_fields(pj, f"{path}: session {sid}")
                 for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
         # the stored metrics of this file's tasks; schema version 2 records why a trial was aborted and how the
@@ -242,7 +246,12 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
     finally:
         db.close()
     if sessions.empty:
-        raise AnalysisError(f"{path}: empty study database (no sessions)")
+        raise AnalysisError(f"{path}: empty study database (no sessions)" if part is None else
+                            f"{path}: no session of the part {part!r}")
+    if part is not None:
+        own = set(sessions["session_id"].astype(int))
+        trials, events, runs = (frame[frame["session_id"].astype(int).isin(own)].reset_index(drop=True)
+                                for frame in (trials, events, runs))
     proto = pd.DataFrame([fields for fields, _ in read], index=sessions.index)
     tasks = {(path, int(sid)): task for sid, (_, task) in zip(sessions["session_id"], read, strict=True)}
     watchdog = pd.DataFrame([config_fields(cj) for cj in sessions["config_json"]], index=sessions.index)
@@ -257,7 +266,7 @@ def _read_one(path: str) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, list
 
 
 def _read_all(
-    paths: Sequence[str | os.PathLike[str]],
+    paths: Sequence[str | os.PathLike[str]], part: str | None = None,
 ) -> tuple[list[pd.DataFrame], list[pd.DataFrame], list[pd.DataFrame], list[str], list[pd.DataFrame],
            dict[tuple[str, int], Task]]:
     """Each database's sessions, trials and events (and the damage found, its recorded runs and each session's
@@ -269,7 +278,7 @@ def _read_all(
     damage: list[str] = []
     tasks: dict[tuple[str, int], Task] = {}
     for path in check_databases(paths, open_each=False):  # (each is opened, checked, just below)
-        s, t, e, d, r, k = _read_one(path)
+        s, t, e, d, r, k = _read_one(path, part)
         tasks.update(k)
         all_sessions.append(s)
         all_trials.append(t)
@@ -294,7 +303,7 @@ def _recode_sites(all_sessions: list[pd.DataFrame], sites: Sequence[str] | None)
 
 
 def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: bool = False,
-               sites: Sequence[str] | None = None) -> StudyData:
+               sites: Sequence[str] | None = None, part: str | None = None) -> StudyData:
     """Read and merge study databases.
 
     Parameters
@@ -309,6 +318,9 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         One site per database (``report --db A.db --site A --db B.db --site B``): each database's participant codes
         are re-coded ``SITE:CODE`` as they are read (so two sites' ``P01`` are two participants) and every session
         and trial carries its ``site``.  None: no sites (``site`` empty).
+    part
+        In a study of several parts (:mod:`protocol.study.parts`): read that part's sessions only (its task's
+        report, :mod:`analysis.report.plan_report`); None: every session.
 
     Returns
     -------
@@ -322,7 +334,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         merge refuses to guess whether they are one person), or a study with
         no experiment trial to analyse.
     """
-    all_sessions, all_trials, all_events, damage, all_runs, tasks = _read_all(paths)
+    all_sessions, all_trials, all_events, damage, all_runs, tasks = _read_all(paths, part)
     named = _recode_sites(all_sessions, sites)
     # each task's parameters are columns of the sessions and trials tables (the paper's: tolerance_fraction, hold_s)
     params = list(dict.fromkeys(name for task in tasks.values() for name in task.parameters()))
@@ -340,7 +352,22 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
     events = pd.concat(all_events, ignore_index=True)
     runs = pd.concat(all_runs, ignore_index=True)
     sessions["n_runs"] = _run_counts(sessions, events, runs)
-    trials = pd.concat(all_trials, ignore_index=True)
+    trials = _analysed_trials(pd.concat(all_trials, ignore_index=True), sessions, params, tasks)
+    names = ", ".join(str(p) for p in paths)
+    if not experiment.any():
+        raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
+    if (trials["excluded"] == "").sum() == 0:
+        if (trials["excluded"] == "incomplete session").any():
+            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
+                                "by default; --include-incomplete analyses their finished trials")
+        raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
+    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
+                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
+
+
+def _analysed_trials(trials: pd.DataFrame, sessions: pd.DataFrame, params: list[str],
+                     tasks: dict[tuple[str, int], Task]) -> pd.DataFrame:
+    """The trials with their session's columns and why each is left out of the analysis ("" when it is not)."""
     meta = sessions[["database", "site", "session_id", "participant_code", "participant_number", "kind", "status",
                      *params, "max_trial_s", "analysed"]].rename(
         columns={"kind": "session_kind", "status": "session_status"}
@@ -362,16 +389,7 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
              *RECORD_COLUMNS,
              *params, "max_trial_s", "repeat_of", "excluded", "damage"]
     trials = trials[order]
-    names = ", ".join(str(p) for p in paths)
-    if not experiment.any():
-        raise AnalysisError(f"{names}: only training sessions; there is no experiment session to analyse")
-    if (trials["excluded"] == "").sum() == 0:
-        if (trials["excluded"] == "incomplete session").any():
-            raise AnalysisError(f"{names}: no experiment session completed, and incomplete sessions are left out "
-                                "by default; --include-incomplete analyses their finished trials")
-        raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
-    return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
+    return trials
 
 
 def _run_counts(sessions: pd.DataFrame, events: pd.DataFrame, runs: pd.DataFrame) -> pd.Series:

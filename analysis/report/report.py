@@ -440,6 +440,7 @@ def build_report(
     power: bool = False,
     include_incomplete: bool = False,
     sites: Sequence[str] | None = None,
+    part: str | None = None,
 ) -> ReportSummary:
     """Analyse one study (one or more databases) and write its report.
 
@@ -470,6 +471,8 @@ def build_report(
     sites
         One site per database (``report --site``): codes re-coded ``SITE:CODE``, a site term in the models, the
         tests within each site and each site's seed and protocol in the methods (:func:`load_study`).
+    part
+        One part of a study of several (:mod:`analysis.report.plan_report`): its sessions only, one task's report.
 
     Returns
     -------
@@ -481,7 +484,7 @@ def build_report(
         Unreadable input, nothing to analyse, or an existing output folder without ``force``.
     """
     out = check_output_folder(out_dir, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
-    study = load_study(databases, include_incomplete=include_incomplete, sites=sites)
+    study = load_study(databases, include_incomplete=include_incomplete, sites=sites, part=part)
     outputs: list[SectionOutput] = []
     n_samples = int(study.included["n_samples"].fillna(0).sum())
     if not study.metrics:  # (force discrimination's: a fit per participant, no metric per trial) its sections alone
@@ -496,4 +499,25 @@ def build_report(
                              confidence=confidence, power=power, workers=workers, results=results, outputs=outputs)
     files = write_output_folder(out, fill, command="report", marker=REPORT_MARKER, inputs=databases, force=force)
     return ReportSummary(out, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], files,
+                         a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs))
+
+
+def fill_report(folder: Path, databases: Sequence[str | os.PathLike[str]], *, part: str,
+                options: MetricOptions = MetricOptions(), zero_method: str = "wilcox", confidence: float = 0.95,
+                workers: int | None = None, include_incomplete: bool = False) -> ReportSummary:
+    """One part's report of a study of several parts (:mod:`analysis.report.plan_report`), written into ``folder``
+    (inside the caller's output folder, whose policy writes it): the part's sessions only, its task's core and
+    section as :func:`build_report` makes them for a study (a task without trial metrics: its section alone)."""
+    study = load_study(databases, include_incomplete=include_incomplete, part=part)
+    outputs: list[SectionOutput] = []
+    n_samples = int(study.included["n_samples"].fillna(0).sum())
+    if not study.metrics:
+        _write_sections(folder, study=study, zero_method=zero_method, confidence=confidence, outputs=outputs)
+        return ReportSummary(folder, int(study.included["participant_code"].nunique()), len(study.included),
+                             n_samples, _excluded(study), pd.DataFrame(), [], study.damage, (), _lines(outputs))
+    a = _analyse(study, options, zero_method, confidence, None, workers)
+    results: dict[str, pd.DataFrame] = {}
+    _write(folder, a=a, databases=databases, options=options, zero_method=zero_method, confidence=confidence,
+           power=False, workers=workers, results=results, outputs=outputs)
+    return ReportSummary(folder, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], [],
                          a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs))

@@ -14,9 +14,11 @@ reproducible.  A different seed is refused with one line naming the stored one.
 
 **Training before the experiment.**  When the protocol says so (``[training] required``, which applies
 while ``[training] enabled``), an experiment session needs a *completed* training session of the same
-participant.  An experimenter may start one anyway only with a typed reason (:func:`check_new_session`'s
-``training_override``); the reason is stored as a :data:`DEVIATION_EVENT` event of that session, whose
-detail begins with :data:`TRAINING_SKIPPED`, so the report can list it among the study's deviations.
+participant.  In a study of several parts (:mod:`protocol.study.parts`) an experiment part needs the training parts
+before it in the participant's order completed (none before it: nothing to require).  An experimenter may start
+one anyway only with a typed reason (:func:`check_new_session`'s ``training_override``); the reason is stored as
+a :data:`DEVIATION_EVENT` event of that session, whose detail begins with :data:`TRAINING_SKIPPED`, so the report
+can list it among the study's deviations.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ __all__ = [
     "CALIBRATION_OVERRIDE_EVENT", "DEVIATION_EVENT", "DEVIATION_KINDS", "FAULT_REHEARSAL_EVENT",
     "QUESTIONNAIRE_SKIPPED_EVENT", "TRAINING_SKIPPED",
     "StoredSession",
-    "StudyRuleError", "check_arms", "check_new_session", "check_settings", "next_kind",
+    "StudyRuleError", "check_arms", "check_new_session", "check_settings", "next_kind", "next_part", "part_states",
     "requires_training", "seed_refusal", "stored_sessions", "study_seed", "training_refusal", "training_state",
 ]
 
@@ -67,16 +69,20 @@ class StoredSession:
     kind: str
     status: str
     seed: int
+    #: The study part it is ("" in a study of one task: :attr:`protocol.storage.SessionInfo.part`).
+    part: str = ""
 
     @classmethod
     def of(cls, d: dict[str, Any]) -> StoredSession:
-        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows)."""
-        return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]))
+        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows; ``part``
+        optional)."""
+        return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]),
+                   str(d.get("part", "")))
 
 
 def stored_sessions(db: StudyDatabase) -> list[StoredSession]:
     """Every session of the database, oldest first."""
-    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed))
+    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed), s.part)
             for s in StudyReader.over(db).sessions()]
 
 
@@ -96,14 +102,17 @@ def seed_refusal(sessions: Iterable[StoredSession], seed: int) -> str:
 
 
 def requires_training(protocol: ProtocolConfig) -> bool:
-    """Whether the protocol requires a completed training session before an experiment session."""
-    return protocol.training.enabled and protocol.training.required
+    """Whether the protocol requires a completed training session before an experiment session (a part of a study:
+    only when training parts come before it in the participant's order)."""
+    needs = protocol.training.enabled and protocol.training.required
+    return needs and (protocol.part is None or bool(protocol.part.trained_by))
 
 
-def training_state(sessions: Iterable[StoredSession], code: str) -> tuple[str, StoredSession | None]:
-    """A participant's training: ``completed``, ``interrupted`` (resumable), ``ended`` (ended early) or ``none``,
-    with the session that says so."""
-    mine = [s for s in sessions if s.code == code and s.kind == "training"]
+def training_state(sessions: Iterable[StoredSession], code: str,
+                   part: str | None = None) -> tuple[str, StoredSession | None]:
+    """A participant's training (of the study part ``part``, when given): ``completed``, ``interrupted``
+    (resumable), ``ended`` (ended early) or ``none``, with the session that says so."""
+    mine = [s for s in sessions if s.code == code and s.kind == "training" and (part is None or s.part == part)]
     for state, match in (("completed", "completed"), ("interrupted", "running")):
         found = [s for s in mine if s.status == match]
         if found:
@@ -112,18 +121,29 @@ def training_state(sessions: Iterable[StoredSession], code: str) -> tuple[str, S
 
 
 def training_refusal(sessions: Sequence[StoredSession], code: str, protocol: ProtocolConfig) -> str:
-    """Why an experiment session of ``code`` may not start for want of training ("" when it may)."""
+    """Why an experiment session of ``code`` may not start for want of training ("" when it may); a part of a
+    study: each training part before it in the participant's order (:attr:`PartPlace.trained_by`)."""
     if not requires_training(protocol):
         return ""
-    state, s = training_state(sessions, code)
+    for part in protocol.part.trained_by if protocol.part is not None else (None,):
+        why = _training_missing(sessions, code, part)
+        if why:
+            return why
+    return ""
+
+
+def _training_missing(sessions: Sequence[StoredSession], code: str, part: str | None) -> str:
+    """Why ``code``'s training (of ``part``) is not there to start an experiment on ("" when it is completed)."""
+    state, s = training_state(sessions, code, part)
     if state == "completed":
         return ""
     rule = "the protocol requires a completed one before the experiment (training.required)"
+    what = "training" if part is None else f"training part {part!r}"
     if state == "interrupted" and s is not None:
-        return f"{code}'s training (session {s.session_id}) was interrupted; {rule}: resume it first"
+        return f"{code}'s {what} (session {s.session_id}) was interrupted; {rule}: resume it first"
     if state == "ended" and s is not None:
-        return f"{code}'s training (session {s.session_id}) ended {s.status}, not completed; {rule}"
-    return f"{code} has no training session; {rule}"
+        return f"{code}'s {what} (session {s.session_id}) ended {s.status}, not completed; {rule}"
+    return f"{code} has no {what} session; {rule}"
 
 
 def next_kind(sessions: Sequence[StoredSession], code: str, protocol: ProtocolConfig) -> str:
@@ -134,6 +154,31 @@ def next_kind(sessions: Sequence[StoredSession], code: str, protocol: ProtocolCo
     state, _ = training_state(sessions, code)
     began = any(s.code == code and s.kind == "experiment" for s in sessions)
     return "training" if state == "interrupted" or (state == "none" and not began) else "experiment"
+
+
+def part_states(sessions: Sequence[StoredSession], code: str,
+                parts: Sequence[ProtocolConfig]) -> list[tuple[ProtocolConfig, str, StoredSession | None]]:
+    """Where a participant is in their plan (``parts``: :meth:`ProtocolConfig.plan_for`, in their order): each part
+    with its state -- ``completed``, ``interrupted`` (resumable), ``ended`` (ended early: not run again) or ``to do``
+    -- and its session (the newest of that part)."""
+    out: list[tuple[ProtocolConfig, str, StoredSession | None]] = []
+    for p in parts:
+        assert p.part is not None
+        mine = [s for s in sessions if s.code == code and s.part == p.part.name and s.kind == p.part.session]
+        s = mine[-1] if mine else None
+        state = "to do" if s is None else {"completed": "completed", "running": "interrupted"}.get(s.status, "ended")
+        out.append((p, state, s))
+    return out
+
+
+def next_part(sessions: Sequence[StoredSession], code: str,
+              parts: Sequence[ProtocolConfig]) -> tuple[ProtocolConfig, StoredSession | None] | None:
+    """The part a participant does next (the first in their order not completed or ended), with its interrupted
+    session to resume (None: a new session); None when the whole plan is done."""
+    for p, state, s in part_states(sessions, code, parts):
+        if state in ("interrupted", "to do"):
+            return p, s
+    return None
 
 
 def check_new_session(

@@ -69,6 +69,21 @@ class SessionInfo:
                  or [a["name"] for a in config.get("hardware", {}).get("arms", [])])
         return tuple(names) if names else (SINGLE_ARM_NAME,)
 
+    @property
+    def part(self) -> str:
+        """The study part (task block) the session is (:mod:`protocol.study.parts`), "" for a single-task study's."""
+        return part_of_protocol(self.protocol_json)
+
+
+def part_of_protocol(protocol_json: str) -> str:
+    """The part name a stored protocol names (its ``part`` table, :mod:`protocol.study.parts`); "" when none."""
+    try:
+        part = json.loads(protocol_json).get("part")
+    except (TypeError, ValueError, AttributeError):
+        return ""
+    name = part.get("name") if isinstance(part, dict) else None
+    return name if isinstance(name, str) else ""
+
 
 class StudyDatabase(SchemaFile, LeaseHolder):
     """The single writer of a study database.
@@ -236,7 +251,7 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             If another live process runs the whole study (a headless ``run``).
         """
         with self.transaction():
-            self._refuse_new_session(code, kind)
+            self._refuse_new_session(code, kind, part_of_protocol(protocol_json))
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
             extra_events = rules(self) if rules is not None else ()
@@ -264,16 +279,17 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 self.insert_event(session_id, 0.0, event_kind, detail)
         return session_id
 
-    def _refuse_new_session(self, code: str, kind: str) -> None:
+    def _refuse_new_session(self, code: str, kind: str, part: str = "") -> None:
         """Refuse (one :class:`StorageError` line) a new session of ``kind`` for ``code``: a code that reads as
-        another's, a participant who withdrew, or one who has a session of this kind (running, interrupted or ended)."""
+        another's, a participant who withdrew, or one who has a session of this kind (running, interrupted or ended)
+        -- of this ``part`` of a study of several (:attr:`SessionInfo.part`: one session per part)."""
         stored_clash(self.conn, validate_code(code), str(self.path))  # p01 beside P01 is refused, named
         gone = withdrawal_of(self.conn, code)
         if gone is not None:
             raise StorageError(f"participant {code} withdrew from the study in {self.path} "
                                f"({gone.withdrawn_at[:16].replace('T', ' ')} UTC) and their data were erased; "
                                "a withdrawn code is not used again (give a new participant code)")
-        existing = self.sessions_of(code, kind)
+        existing = [s for s in self.sessions_of(code, kind) if s.part == part]
         if existing:
             s = existing[-1]
             writer = self.sessions_being_written().get(s.session_id) if s.status == "running" else None
@@ -286,7 +302,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 hint = "use a new participant code"
             raise StorageError(
                 f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
-                f"(session {s.session_id}, status {s.status}) in {self.path}; {hint}"
+                f"{f'of part {part!r} ' if part else ''}(session {s.session_id}, status {s.status}) in {self.path}; "
+                f"{hint}"
             )
 
     def update_schedule(self, session_id: int, schedule_json: str) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -23,6 +23,14 @@ from protocol.study.covariates import Covariate, covariates_from_tables
 from protocol.study.feedback import FeedbackConfig, feedback_from_table
 from protocol.study.groups import GroupDesign, groups_from_table
 from protocol.study.lsl_settings import LslSettings, lsl_from_table
+from protocol.study.parts import (
+    Counterbalance,
+    PartPlace,
+    counterbalance_from_table,
+    order_of,
+    part_tables,
+    place_from_table,
+)
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
@@ -124,6 +132,43 @@ class ProtocolConfig:
     lsl: LslSettings = field(default_factory=LslSettings)
     #: Feedback to the trainee (:mod:`protocol.study.feedback`; the file's ``[feedback]``): none by default.
     feedback: FeedbackConfig = field(default_factory=FeedbackConfig)
+    #: The study's task blocks (:mod:`protocol.study.parts`; the file's ``[[parts]]``), each a protocol of its own
+    #: with its :attr:`part` set, in the file's order: () for a study of one task (a training then an experiment
+    #: session of :attr:`task`).
+    parts: tuple[ProtocolConfig, ...] = ()
+    #: Which parts' order varies across participants, and how (the file's ``[counterbalance]``).
+    counterbalance: Counterbalance | None = None
+    #: Which part of a study this protocol is (a part's protocol, as a session of it stores it); None otherwise.
+    part: PartPlace | None = None
+
+    def plan_for(self, number: int, seed: int) -> tuple[ProtocolConfig, ...]:
+        """Participant ``number``'s parts in their order (:func:`protocol.study.parts.order_of`), each with its
+        place set; () for a study of one task."""
+        if not self.parts:
+            return ()
+        by_name = {p.part.name: p for p in self.parts if p.part is not None}
+        order, row = order_of(tuple(by_name), self.counterbalance, seed, number)
+        training = {n for n, p in by_name.items() if p.part is not None and p.part.session == "training"}
+        out = []
+        for position, name in enumerate(order, start=1):
+            part = by_name[name]
+            assert part.part is not None
+            trained_by = tuple(n for n in order[:position - 1] if n in training)
+            out.append(replace(part, part=replace(part.part, position=position, order=order, row=row,
+                                                  trained_by=trained_by, balance=self.counterbalance)))
+        return tuple(out)
+
+    def part_of(self, name: str, number: int, seed: int) -> ProtocolConfig:
+        """Participant ``number``'s part ``name`` (:meth:`plan_for`; :class:`KeyError` naming the parts)."""
+        for p in self.plan_for(number, seed):
+            if p.part is not None and p.part.name == name:
+                return p
+        raise KeyError(f"no part {name!r}: the parts are {', '.join(self.part_names)}")
+
+    @property
+    def part_names(self) -> tuple[str, ...]:
+        """The parts' names in the file's order (() for a study of one task)."""
+        return tuple(p.part.name for p in self.parts if p.part is not None)
 
     @property
     def trials_per_participant(self) -> int:
@@ -164,6 +209,9 @@ class ProtocolConfig:
         checks the file had with the paper's ramps, :func:`_check_together`)."""
         _check_together(Fields(source, ProtocolError), self.task, self.trial, self.training, self.modes, safety,
                         tuple(t.label for t in self.targets), tuple(t.force_n for t in self.targets))
+        for part in self.parts:
+            assert part.part is not None
+            part.check_ramps(safety, f"{source}, part {part.part.name!r}")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data in the file's structure (stored with each session; ``design.task_arm`` only when set and
@@ -188,12 +236,24 @@ class ProtocolConfig:
             **({"questionnaires": [q.to_dict() for q in self.questionnaires]} if self.questionnaires else {}),
             **({"groups": self.groups.to_dict()} if self.groups is not None else {}),
             **({"lsl": lsl} if (lsl := self.lsl.to_dict()) is not None else {}),
+            **({"parts": [_part_dict(p) for p in self.parts]} if self.parts else {}),
+            **({"counterbalance": self.counterbalance.to_dict()} if self.counterbalance is not None else {}),
+            **({"part": self.part.to_dict()} if self.part is not None else {}),
             **({"feedback": fb} if (fb := self.feedback.to_dict()) is not None else {}),
         }
 
     def to_json(self) -> str:
         """Canonical JSON of :meth:`to_dict`."""
         return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def _part_dict(part: ProtocolConfig) -> dict[str, Any]:
+    """A part as the file's ``[[parts]]`` table writes it: its name and kind and all its own tables (its task named
+    even when it is the paper's, so the study's ``[task]`` is not inherited on reading it back)."""
+    assert part.part is not None
+    d = part.to_dict()
+    return {"name": part.part.name, "session": part.part.session, "task": d.get("task", {"kind": part.task.kind}),
+            **{k: d[k] for k in ("targets", "design", "trial", "training")}}
 
 
 def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
@@ -211,7 +271,7 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires", "groups", "lsl", "feedback"})
+                          "questionnaires", "groups", "lsl", "feedback", "parts", "counterbalance", "part"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -272,8 +332,23 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
         questionnaires=questionnaires_from_tables(f, top.get("questionnaires"), ordering),
         groups=groups_from_table(f, top.get("groups"), covariates),
         lsl=lsl_from_table(f, top),
+        **_plan(f, top),
         feedback=feedback_from_table(f, top, ordering),
     )
+
+
+def _plan(f: Fields, top: dict[str, Any]) -> dict[str, Any]:
+    """The file's task blocks (``[[parts]]``, each validated as a protocol of its own), ``[counterbalance]`` and a
+    stored session's ``part`` (:mod:`protocol.study.parts`): the :class:`ProtocolConfig` fields they set."""
+    parts = []
+    for t in part_tables(f, top):
+        p = protocol_from_dict(t.tables, t.source)
+        if t.session == "training" and not p.training.enabled:
+            raise ProtocolError(f"{t.source}: session = 'training': the part's training.enabled is false, so it has "
+                                "no trials (set [parts.training] enabled = true, or make it an experiment part)")
+        parts.append(replace(p, part=PartPlace(t.name, t.session)))
+    balance = counterbalance_from_table(f, top, [p.part.name for p in parts if p.part is not None])
+    return {"parts": tuple(parts), "counterbalance": balance, "part": place_from_table(f, top)}
 
 
 def _training_required(f: Fields, trn: dict[str, Any]) -> bool:
@@ -320,8 +395,14 @@ def load_protocol(path: str | Path | None = None) -> ProtocolConfig:
     else:
         source = str(Path(path))
         data = read_toml(Path(path), ProtocolError, "protocol file")
+        if "part" in data:  # the software's record of which part a stored session is: not a file's to say
+            raise Fields(source, ProtocolError).fail("part", data["part"], "is stored with each session of a "
+                                                     "[[parts]] study, not written in a protocol file")
     protocol = protocol_from_dict(data, source)
     _check_cue(Fields(source, ProtocolError), protocol.trial)
+    for part in protocol.parts:
+        assert part.part is not None
+        _check_cue(Fields(f"{source}, part {part.part.name!r}", ProtocolError), part.trial)
     return protocol
 
 

@@ -15,7 +15,7 @@ import sys
 
 from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, whole_number
-from study_app.cli.error import CliError
+from study_app.cli.error import CliError, one_task
 
 __all__ = ["DISCRIMINATION_MARKER", "add_discrimination_parser", "cmd_discrimination"]
 
@@ -47,6 +47,7 @@ def cmd_discrimination(args: argparse.Namespace) -> int:
     folder = dict(command="discrimination", marker=DISCRIMINATION_MARKER, inputs=[], force=args.force)
     try:
         protocol = load_protocol(args.protocol)
+        one_task(protocol, args.protocol, "discrimination")
         if not isinstance(protocol.task, ForceDiscrimination):
             raise CliError(f"--protocol = {args.protocol!r}: its task.kind is {protocol.task.kind!r}; discrimination "
                            "needs 'force_discrimination'")

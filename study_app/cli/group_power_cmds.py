@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from study_app.cli.error import CliError
+from study_app.cli.error import CliError, one_task
 
 __all__ = ["GROUP_POWER_FILES", "check_group_request", "default_two_group_protocol", "run_group_power"]
 
@@ -41,6 +41,7 @@ def check_group_request(args: argparse.Namespace) -> Any:
         protocol = load_protocol(args.protocol)
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
+    one_task(protocol, args.protocol, "power")
     if protocol.groups is None:
         raise CliError(f"--protocol = {args.protocol!r}: declares no [groups]; a two-group plan needs the covariate "
                        "that divides the participants (docs/groups.md)")

@@ -255,6 +255,12 @@ def cmd_power(args: argparse.Namespace) -> int:
             check_databases(args.db)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
+    if args.db:
+        from analysis.report.plan_report import study_plan
+
+        if study_plan(args.db):
+            raise CliError(f"--db = {args.db[0]!r}: a study of several parts; power plans one task from a pilot of "
+                           "that task (a study of one task's database)")
 
     from analysis.planning.paired_pool import load_pool
     from analysis.planning.power import estimate_power, is_family_row

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from foundation.errors import InputRefused
@@ -13,6 +15,7 @@ from study_app.cli.argtypes import add_command, arm_name, whole_number
 from study_app.cli.error import CliError
 
 if TYPE_CHECKING:
+    from analysis.report.plan_report import PlanEntry
     from analysis.report.report import ReportSummary
 
 __all__ = ["add_analysis_options", "add_report_parsers", "cmd_plot_trial", "cmd_report"]
@@ -119,6 +122,11 @@ def cmd_report(args: argparse.Namespace) -> int:
         check_databases(args.db)
     except InputRefused as exc:
         raise CliError(str(exc)) from None
+    from analysis.report.plan_report import study_plan
+
+    plan = study_plan(args.db)
+    if plan:  # a study of several parts: each experiment part's report, and the plan's page
+        return _plan_report(args, plan)
     from analysis.reading.metrics import MetricOptions
     from analysis.report.report import build_report
     from study_app.cli.progress import ProgressBar
@@ -174,6 +182,40 @@ def _print_tests(summary: ReportSummary, args: argparse.Namespace) -> None:
         if note or int(r.n) != summary.n_participants:
             print(f"  {r.metric}: {plural(int(r.n_pairs), 'complete pair')} of {summary.n_participants} "
                   f"participants, {plural(int(r.n_zero), 'zero difference')}{note}")
+
+
+def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
+    """A study of several parts: each experiment part's report in ``OUT/PART/`` and the plan's page, by the output
+    policy (:mod:`analysis.report.plan_report`)."""
+    from analysis.reading.metrics import MetricOptions
+    from analysis.report.plan_report import write_plan_report
+    from analysis.report.report import fill_report
+    from foundation.outdir import REPORT_MARKER, write_output_folder
+
+    if args.power or args.site:
+        raise CliError("--power and --site are for a study of one task; this study has parts: report it without "
+                       "them (each part's report is its own folder)")
+
+    def fill_part(folder: Path, name: str, kind: str) -> list[str]:
+        # the part's sessions only: its task's core and section (analysis/report/section_KIND.py), one task
+        s = fill_report(folder, args.db, part=name, options=MetricOptions(args.error_window, args.tct),
+                        zero_method=args.zero_method, confidence=args.confidence,
+                        include_incomplete=args.include_incomplete)
+        return [f"{kind.replace('_', ' ')}: {plural(s.n_participants, 'participant')}, "
+                f"{plural(s.n_trials, 'trial')}", *s.lines]
+
+    lines: list[str] = []
+    try:
+        files = write_output_folder(args.out, lambda tmp: lines.extend(write_plan_report(tmp, args.db, plan,
+                                                                                         fill_part)),
+                                    command="report", marker=REPORT_MARKER, inputs=args.db, force=args.force)
+    except InputRefused as exc:
+        raise CliError(str(exc), getattr(exc, "status", 2)) from None
+    for line in lines:
+        print(line)
+    print(f"Report {args.out}/report.html (the plan) with a report per part: "
+          + ", ".join(f for f in files if f.endswith("report.html")))
+    return 0
 
 
 def _trial_numbers(numbers: list[int]) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 from collections import Counter
+from typing import Any
 
 import pandas as pd
 
@@ -72,6 +73,41 @@ def _settings_line(config_jsons: list[str]) -> str:
         "" if found <= {"the paper's"} else " (the paper's for the others)")
 
 
+def _mode_table(exp: list[tuple[str, TrialRecord]], sessions: list[Any], codes: list[str]) -> list[str]:
+    """The rows of the per-mode table over the trials ``exp`` of ``sessions`` (whose tasks give the metrics)."""
+    lines: list[str] = []
+    tasks = [stored_task(json.loads(info.protocol_json), f"session {info.session_id}") for info in sessions]
+    metrics = metrics_of(tasks)
+    papers = all(t.kind == DEFAULT_KIND for t in tasks)  # the paper's numbers compare with the paper's task only
+    frame = _trials_frame(exp, metrics) if exp else None
+    # TCT as this summary labels it, over successful trials (the report's default counts a failure at the cap)
+    successful = MetricOptions(tct_policy="successful")
+    overall = None if frame is None else per_participant(frame, successful)
+    for m in tested(metrics):  # the rows: the study's metrics the report tests, in order
+        off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
+        finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
+        change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
+        quoted = PAPER.get(m.name, "") if papers else ""  # a metric or task the paper did not report: no comparison
+        paper = quoted if isinstance(quoted, str) else f"{quoted[0]:g} → {quoted[1]:g}"
+        name = m.summary_label
+        change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
+        lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
+    # TCT's mean is over fewer people where some never succeeded (a study of a task with a TCT)
+    if overall is not None and not overall.empty and "tct_s" in overall.columns:
+        tct = by_mode(overall, "tct_s")
+        n_off, n_on = (int(tct[mode].notna().sum()) if mode in tct else 0 for mode in ("off", "on"))
+        if min(n_off, n_on) < len(codes):
+            lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
+                         "with no success in a mode has no TCT there)")
+    targets = None if frame is None else per_participant(frame, successful, by_target=True)
+    rates = overall is not None and "success_rate" in overall.columns  # (a task with a success rule)
+    for label in sorted({t.target_label for _, t in exp}) if rates else ():
+        part = None if targets is None else targets[targets["target_label"] == label]
+        off, on = _across(part, "success_rate", "off"), _across(part, "success_rate", "on")
+        lines.append(f"  {'success, ' + label:<30}{_cell(off):>16}{_cell(on):>16}")
+    return lines
+
+
 def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) -> str:
     """Per-mode mean ± SD across participants, each participant's trials averaged first (as ``report`` does)."""
     with StudyReader(db_path, check=False) as reader:  # the run just wrote it
@@ -101,35 +137,17 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
-    tasks = [stored_task(json.loads(info.protocol_json), f"session {info.session_id}") for info in sessions.values()]
-    metrics = metrics_of(tasks)
-    papers = all(t.kind == DEFAULT_KIND for t in tasks)  # the paper's numbers compare with the paper's task only
-    frame = _trials_frame(exp, metrics) if exp else None
-    # TCT as this summary labels it, over successful trials (the report's default counts a failure at the cap)
-    successful = MetricOptions(tct_policy="successful")
-    overall = None if frame is None else per_participant(frame, successful)
-    for m in tested(metrics):  # the rows: the study's metrics the report tests, in order
-        off, on = _across(overall, m.participant, "off"), _across(overall, m.participant, "on")
-        finite = bool(off[0]) and math.isfinite(off[0]) and math.isfinite(on[0])
-        change = (on[0] - off[0]) / off[0] * 100 if finite else math.nan
-        quoted = PAPER.get(m.name, "") if papers else ""  # a metric or task the paper did not report: no comparison
-        paper = quoted if isinstance(quoted, str) else f"{quoted[0]:g} → {quoted[1]:g}"
-        name = m.summary_label
-        change_txt = f"{change:>8.0f}%" if math.isfinite(change) else f"{'–':>9}"  # no change from nothing
-        lines.append(f"  {name:<30}{_cell(off):>16}{_cell(on):>16}{change_txt}   {paper}")
-    # TCT's mean is over fewer people where some never succeeded (a study of a task with a TCT)
-    if overall is not None and not overall.empty and "tct_s" in overall.columns:
-        tct = by_mode(overall, "tct_s")
-        n_off, n_on = (int(tct[mode].notna().sum()) if mode in tct else 0 for mode in ("off", "on"))
-        if min(n_off, n_on) < len(codes):
-            lines.append(f"  (TCT: over {n_off} (OFF) / {n_on} (ON) of {plural(len(codes), 'participant')}: one "
-                         "with no success in a mode has no TCT there)")
-    targets = None if frame is None else per_participant(frame, successful, by_target=True)
-    rates = overall is not None and "success_rate" in overall.columns  # (a task with a success rule)
-    for label in sorted({t.target_label for _, t in exp}) if rates else ():
-        part = None if targets is None else targets[targets["target_label"] == label]
-        off, on = _across(part, "success_rate", "off"), _across(part, "success_rate", "on")
-        lines.append(f"  {'success, ' + label:<30}{_cell(off):>16}{_cell(on):>16}")
+    parts = sorted({(info.part, info.session_id) for info in sessions.values() if info.part}, key=lambda p: p[1])
+    if not parts:  # a study of one task: one table
+        lines.extend(_mode_table(exp, list(sessions.values()), codes))
+    for name in dict.fromkeys(p for p, _ in parts):  # a study of several parts: a table per experiment part
+        of_part = [info for info in sessions.values() if info.part == name]
+        if all(info.kind != "experiment" for info in of_part):
+            continue
+        ids = {info.session_id for info in of_part}
+        lines.append(f"  part {name!r}:")
+        table = _mode_table([(c, t) for c, t in exp if t.session_id in ids], of_part, codes)
+        lines.extend(table or ["  (no measure compared between the modes: haptic-study report gives its results)"])
     lines.append("")
     where = "recordings, session_blocks" if recorded else "samples"
     if other_arms:  # a rig of several arms: the others' records beside the task arm's

@@ -17,7 +17,7 @@ from typing import Any
 
 from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, setting_list, whole_number
-from study_app.cli.error import CliError
+from study_app.cli.error import CliError, one_task
 
 __all__ = ["MAX_SETTINGS", "add_sweep_parser", "cmd_sweep", "grid_of"]
 
@@ -102,6 +102,7 @@ def cmd_sweep(args: argparse.Namespace) -> int:
 
     try:
         protocol = load_protocol(args.protocol)
+        one_task(protocol, args.protocol, "sweep")
         for setting in grid:  # every setting's ramps fit the protocol's trials and pauses (else: one line)
             protocol.check_ramps(framework_with(setting).safety,
                                  f"protocol with --set {describe(non_default_settings(setting))}")

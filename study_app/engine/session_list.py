@@ -40,8 +40,9 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         ``session_id, code, participant_number, kind, status, rig, seed, started_at, ended_at, end_reason,
         trials_planned, trials_done, trials_aborted, successes``, ``first_trial``, ``last_trial``: the
         stored trials' numbers, from 1 (None when none is stored), and ``writer``: the live process running
-        a session right now ("" when none: a ``running`` session without one was interrupted), and
-        ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the paper's).
+        a session right now ("" when none: a ``running`` session without one was interrupted),
+        ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the
+        paper's), and ``part``: the study part it is ("" in a study of one task; :mod:`protocol.study.parts`).
 
     ``check``: run the integrity check first (the command line does; the GUI's engine, listing between
     sessions, checks when it opens the database to write).
@@ -57,7 +58,9 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
     try:
         reader = StudyReader.over(db)
         rows = reader.session_overview()
-        pipeline = {int(s.session_id): _pipeline_settings(s.config_json) for s in reader.sessions()}
+        infos = reader.sessions()
+        pipeline = {int(s.session_id): _pipeline_settings(s.config_json) for s in infos}
+        parts = {int(s.session_id): s.part for s in infos}
         writers = db.sessions_being_written()
     finally:
         db.close()
@@ -77,6 +80,7 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "last_trial": None if last is None else int(last) + 1,
             "writer": writers.get(int(sid), "") if status == "running" else "",
             "pipeline": pipeline.get(int(sid), {}),
+            "part": parts.get(int(sid), ""),
         })
     return out
 
@@ -117,17 +121,20 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     """A table of the sessions for the terminal, with how to plot one of their trials."""
     if not sessions:
         return f"{db_path}: no sessions yet"
-    head = ("session", "participant", "number", "kind", "status", "rig", "trials", "aborted", "started (UTC)")
+    parts = any(s.get("part") for s in sessions)  # a study of several parts: which part each session is
+    head = ("session", "participant", "number", "kind", *(("part",) if parts else ()), "status", "rig", "trials",
+            "aborted", "started (UTC)")
     rows = [head]
     for s in sessions:
         rows.append((
             str(s["session_id"]), s["code"], str(s["participant_number"]), s["kind"],
-            _status(s), s["rig"],
+            *((str(s.get("part", "")),) if parts else ()), _status(s), s["rig"],
             f"{s['trials_done']}/{s['trials_planned']}", str(s["trials_aborted"]),
             str(s["started_at"])[:16].replace("T", " "),
         ))
     widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
-    lines = ["  ".join(c.ljust(w) if i in (1, 3, 4, 5) else c.rjust(w)
+    left = (1, 3, 4, 5, 6) if parts else (1, 3, 4, 5)
+    lines = ["  ".join(c.ljust(w) if i in left else c.rjust(w)
                        for i, (c, w) in enumerate(zip(r, widths, strict=True)))
              for r in rows]
     n_participants = len({s["code"] for s in sessions})

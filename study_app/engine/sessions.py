@@ -97,7 +97,7 @@ class EngineSessions:
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
                              "number ≥ 1")
-        protocol = load_protocol(cmd.protocol_path or None)
+        protocol = part_to_run(cmd, load_protocol(cmd.protocol_path or None))
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
         _check_rules_first(cmd, protocol, self.engine.eng.framework.config, self._arms())
@@ -473,6 +473,23 @@ def _store_kill(runner: SessionRunner, what: str, t_ns: int) -> None:
     runner.recorder.flush()
 
 
+def part_to_run(cmd: m.StartSession, protocol: ProtocolConfig) -> ProtocolConfig:
+    """The protocol a new session runs: in a study of several parts, the part ``cmd.part`` in the participant's
+    order (of the kind ``cmd.kind``); refused in one line otherwise."""
+    if not protocol.parts:
+        if cmd.part:
+            raise ValueError(f"part = {cmd.part!r}: the protocol has no parts (a study of one task)")
+        return protocol
+    try:
+        part = protocol.part_of(cmd.part, cmd.participant_number, cmd.seed)
+    except KeyError as exc:
+        raise ValueError(f"part = {cmd.part!r}: {exc.args[0]}") from None
+    assert part.part is not None
+    if part.part.session != cmd.kind:
+        raise ValueError(f"part = {cmd.part!r} is a {part.part.session} part, not {cmd.kind}")
+    return part
+
+
 def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig,
                        arms: tuple[str, ...]) -> None:
     """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
@@ -486,7 +503,7 @@ def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework:
         sessions = StudyReader.over(db).sessions()
         check_settings(sessions, cmd.db_path, framework)
         check_arms(sessions, cmd.db_path, arms)
-        if not db.sessions_of(cmd.code, cmd.kind):
+        if not [s for s in db.sessions_of(cmd.code, cmd.kind) if s.part == cmd.part]:
             check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
                               training_override=cmd.training_override)
     finally:
@@ -517,6 +534,7 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
                 "trials_done": len(outcomes) - aborted, "trials_aborted": aborted, "trials_total": len(schedule),
                 "reruns_run": sum(r["repeat_of"] is not None for r in rows),
                 "arms": list(info.arms) if info is not None else [],  # the task arm first: resumed on these only
+                "part": s.part,  # a study of several parts: which part it is
             })
         return out
     finally:

@@ -66,6 +66,10 @@ class QtSetupPanel(QGroupBox):
         self.kind = QComboBox()
         self.kind.addItems(list(KINDS))
         self.kind.setCurrentText(v.kind)
+        self.part = QComboBox()  # a study of several parts: which part (its kind follows)
+        self.plan = QLabel()  # the participant's plan: each part in their order, done or not, the next marked
+        self.plan.setWordWrap(True)
+        self.plan.setTextFormat(Qt.TextFormat.PlainText)
         self.protocol = QLineEdit(v.protocol_path)
         self.protocol.setPlaceholderText("default: the paper's protocol")
         self.protocol_browse = QPushButton("…")
@@ -90,6 +94,8 @@ class QtSetupPanel(QGroupBox):
         form.addRow("Participant", self.code)
         form.addRow("Number", self.number)
         form.addRow("Kind", self.kind)
+        form.addRow("Part", self.part)
+        self._form = form
         form.addRow("Protocol", _row(self.protocol, self.protocol_browse))
         form.addRow("Seed", self.seed)
         self.resumable = QListWidget()
@@ -103,6 +109,7 @@ class QtSetupPanel(QGroupBox):
         self.resume_button = QPushButton("Resume selected")
         lay = QVBoxLayout(self)
         lay.addLayout(form)
+        lay.addWidget(self.plan)
         lay.addWidget(self.covariate_fields)
         lay.addWidget(self.errors)
         lay.addWidget(self.warnings)
@@ -128,6 +135,9 @@ class QtSetupPanel(QGroupBox):
                 signal.connect(lambda *_a, n=name, b=spin: self._check_entry(n, b))
         # the experimenter's choice only (textActivated): the form's own proposal of the next step is set from the model
         self.kind.textActivated.connect(lambda k: setup.update(kind=k))
+        self.part.textActivated.connect(lambda p: setup.update(part=p))
+        self.part.setToolTip("The part of the study to run: the form proposes the participant's next part in their "
+                             "(counterbalanced) order until you choose; its kind follows the part")
         self.kind.setToolTip("Training (practice with the live force gauge) or the experiment. The form proposes "
                              "the participant's next step — training, then the experiment — until you choose")
         # checked as typed (a refusal of the path before stays on screen no longer than that path), and when left
@@ -160,6 +170,7 @@ class QtSetupPanel(QGroupBox):
                 widget.setText(text)
         if self.kind.currentText() != v.kind:
             self.kind.setCurrentText(v.kind)
+        self._show_plan()
         if self.seed.value() != v.seed:
             self.seed.setValue(v.seed)
         if self.number.value() != v.participant_number:
@@ -171,6 +182,21 @@ class QtSetupPanel(QGroupBox):
         for label in (self.errors, self.warnings, self.hint):
             label.setVisible(bool(label.text()))
         self._show_seed()
+
+    def _show_plan(self) -> None:
+        """A study of several parts: the Part field (the kind follows it) and the participant's plan."""
+        protocol = self.setup.protocol
+        names = list(protocol.part_names) if protocol is not None else []
+        if [self.part.itemText(i) for i in range(self.part.count())] != names:
+            self.part.clear()
+            self.part.addItems(names)
+        if self.part.currentText() != self.setup.values.part:
+            self.part.setCurrentText(self.setup.values.part)
+        self._form.setRowVisible(self.part, bool(names))
+        self.kind.setEnabled(not names)
+        rows = self.setup.plan()
+        self.plan.setText("\n".join(["Plan (this participant's order):"] + [r.text() for r in rows]) if rows else "")
+        self.plan.setVisible(bool(rows))
 
     def _show_seed(self) -> None:
         """The study's seed: read-only once the database has a session, with a tooltip saying why."""

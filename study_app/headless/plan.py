@@ -34,6 +34,7 @@ from protocol.storage.reader import StudyReader
 from protocol.storage.withdrawal import withdrawals
 from protocol.study.config import ProtocolConfig, protocol_from_dict
 from protocol.study.design import schedule_from_json
+from study_app.headless.plan_parts import part_steps, parts_left
 
 __all__ = [
     "Step", "all_steps", "check_fault_plans", "check_settings", "interrupted_session_of", "open_notes", "peek",
@@ -53,7 +54,8 @@ def remaining_trials(db: StudyDatabase, info: SessionInfo) -> int:
 
 
 
-#: One step of a participant's part of a study: ("new", kind) or ("resume", session id).
+#: One step of a participant's part of a study: ("new", kind) or ("resume", session id); in a study of several
+#: parts, ("part", name) (:mod:`study_app.headless.plan_parts`).
 Step = tuple[str, Any]
 
 
@@ -84,11 +86,18 @@ def _plan_continue(
                     f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
                     f"--seed {info.seed}, not {seed}; nothing was changed (give the seed the study was started with)"
                 )
-            if info.kind in wanted and _same_protocol(info.protocol_json) != wanted[info.kind]:
+            if info.kind in wanted and not protocol.parts and _same_protocol(info.protocol_json) != wanted[info.kind]:
                 raise StorageError(
                     f"cannot continue: {code}'s {info.kind} session {info.session_id} in {db_path} was run with "
                     f"another protocol; nothing was changed (give the --protocol the study was started with)"
                 )
+        if protocol.parts:  # a study of several parts: one session each, in the participant's order
+            part_steps_left, left, kept_here = parts_left(db, db_path, protocol, n, seed, stored, remaining_trials)
+            kept.extend(kept_here)
+            trials += left
+            if part_steps_left:
+                plan[n] = part_steps_left
+            continue
         steps: list[Step] = []
         for kind in kinds:
             of_kind = [s for s in stored if s.kind == kind]
@@ -197,6 +206,9 @@ def plan_study(
                     )
             _check_seed(db, db_path, seed)
             _check_rig(db, db_path, framework, arms)
+        if protocol.parts:
+            per_part = {n: part_steps(protocol, n, seed) for n in range(1, participants + 1)}
+            return {n: steps for n, (steps, _) in per_part.items()}, sum(t for _, t in per_part.values()), []
         plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)
         return plan, per * participants, []
@@ -243,6 +255,9 @@ def check_fault_plans(faults: Sequence[FaultPlan], protocol: ProtocolConfig, cod
     ValueError
         One line naming the plan and what is allowed.
     """
+    if faults and protocol.parts:
+        raise ValueError(f"--inject-fault = {faults[0]}: faults are rehearsed in a study of one task; this protocol "
+                         f"has parts ({', '.join(protocol.part_names)}): rehearse on a protocol of one of them")
     for f in faults:
         if f.code not in codes:
             shown = ", ".join(codes[:3]) + (f", … {codes[-1]}" if len(codes) > 3 else "")

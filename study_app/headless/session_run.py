@@ -97,11 +97,21 @@ class StudyProgress:
 
 def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     """Upper bound of simulated time (every trial to its cap, plus pauses) for the progress bar."""
+    if protocol.parts:  # each part as a study of its own kind (its training part: the training alone)
+        return sum(_part_time_s(p) for p in protocol.parts) * participants
     tr = protocol.trial
     per = protocol.trials_per_participant * (tr.max_trial_s + tr.pause_s)
     if protocol.training.enabled:
         per += len(training_schedule(protocol)) * (protocol.training.seconds_per_target_per_mode + tr.pause_s)
     return per * participants
+
+
+def _part_time_s(part: ProtocolConfig) -> float:
+    """Upper bound of one part's simulated time (:func:`planned_study_time_s`)."""
+    tr = part.trial
+    if part.part is not None and part.part.session == "training":
+        return len(training_schedule(part)) * (part.training.seconds_per_target_per_mode + tr.pause_s)
+    return part.trials_per_participant * (tr.max_trial_s + tr.pause_s)
 
 
 def _engine(rig_seed: int, clock: str, arms: tuple[str, ...], framework: FrameworkConfig) -> Engine:
@@ -314,11 +324,17 @@ def run_steps(
     faults: Sequence[FaultPlan] = (), short_transactions: bool = False, sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
     framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
 ) -> None:
-    """Run one participant's steps in order: new sessions from the protocol, resumes from what is stored."""
+    """Run one participant's steps in order: new sessions from the protocol (a part's: its protocol in the
+    participant's order), resumes from what is stored."""
     code = participant_code(number)
     for what, arg in steps:
-        run_session(db, code=code, number=number, kind=arg if what == "new" else None, protocol=protocol,
-                     study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
-                     short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
-                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
-                     framework=framework, covariates=covariates)
+        kind, run_protocol = (arg if what == "new" else None), protocol
+        if what == "part":  # a study of several parts: this participant's part, its place in their order
+            run_protocol = protocol.part_of(arg, number, seed)
+            assert run_protocol.part is not None
+            kind = run_protocol.part.session
+        run_session(db, code=code, number=number, kind=kind, protocol=run_protocol,
+                    study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
+                    short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
+                    lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
+                    framework=framework, covariates=covariates)

@@ -41,6 +41,7 @@ from study_app.engine import messages as m
 from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.covariate_form import CovariateForm
+from study_app.models.plan import PlanRow, next_part_name, plan_rows, plan_words
 from study_app.models.session import TrialCount
 
 __all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable", "with_db_suffix"]
@@ -85,6 +86,8 @@ class SessionSetup:
     kind: str = "experiment"
     protocol_path: str = ""  # empty: the paper's protocol
     seed: int = 0
+    #: The part to start in a study of several parts (:mod:`protocol.study.parts`); "" in a study of one task.
+    part: str = ""
 
 
 @dataclass
@@ -135,9 +138,11 @@ class SetupModel:
             kwargs["db_path"] = with_db_suffix(str(kwargs["db_path"]))
         if "participant_number" in kwargs:
             self.number_suggested = False
-        if "kind" in kwargs:
+        if "kind" in kwargs or "part" in kwargs:
             self.kind_suggested = False
         self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]  # kwargs are checked field names
+        if "part" in kwargs:
+            self._kind_of_part()
         self._suggest_number()
         self._suggest_kind()
         self.validate()
@@ -158,9 +163,33 @@ class SetupModel:
         protocol = self._load_protocol() if self.kind_suggested else None
         if protocol is None:
             return
+        if protocol.parts or self.values.part:  # a study of several parts: the participant's next part
+            v = self.values
+            name = next_part_name(protocol, self._stored(), v.code, v.participant_number, v.seed)
+            self.values = replace(v, part=name or (v.part if v.part in protocol.part_names else ""))
+            self._kind_of_part()
+            return
         kind = next_kind(self._stored(), self.values.code, protocol)
         if kind != self.values.kind:
             self.values = replace(self.values, kind=kind)
+
+    def _kind_of_part(self) -> None:
+        """A part's session is of the part's kind (a training part: a training session)."""
+        part = self.part_protocol()
+        if part is not None and part.part is not None and part.part.session != self.values.kind:
+            self.values = replace(self.values, kind=part.part.session)
+
+    def part_protocol(self) -> ProtocolConfig | None:
+        """The protocol of the form's part for this participant (its place in their order); None without one."""
+        v, protocol = self.values, self.protocol
+        if protocol is None or v.part not in protocol.part_names:
+            return None
+        return protocol.part_of(v.part, max(v.participant_number, 1), max(v.seed, 0))
+
+    def plan(self) -> list[PlanRow]:
+        """The participant's plan in a study of several parts, each part's state (:mod:`study_app.models.plan`)."""
+        v = self.values
+        return plan_rows(self.protocol, self._stored(), v.code, v.participant_number, v.seed)
 
     def _stored(self) -> list[StoredSession]:
         return [StoredSession.of(s) for s in self.known]
@@ -205,6 +234,7 @@ class SetupModel:
                 errors["code"] = str(exc)
         if v.kind not in KINDS:
             errors["kind"] = f"session kind = {v.kind!r}: allowed values are training, experiment"
+        self._check_part(errors)
         if v.protocol_path.strip():
             try:
                 load_protocol(v.protocol_path)
@@ -227,6 +257,15 @@ class SetupModel:
         self.errors, self.warnings = errors, warnings
         self.changed.emit()
         return errors
+
+    def _check_part(self, errors: dict[str, str]) -> None:
+        """A study of several parts starts one of its parts (of the part's kind); a study of one task, none."""
+        names = self.protocol.part_names if self.protocol is not None else ()
+        part = self.values.part
+        if names and part not in names:
+            errors["part"] = f"part = {part!r}: this protocol's parts are {', '.join(names)}: choose one"
+        elif part and not names and self.protocol is not None:
+            errors["part"] = f"part = {part!r}: this protocol has no parts (a study of one task)"
 
     def _ask_covariates(self, errors: dict[str, str]) -> None:
         """The protocol's covariates: asked of a participant not registered yet (their answers checked), shown for
@@ -262,7 +301,7 @@ class SetupModel:
                               "and their data were erased; a withdrawn code is not used again: enter a new code")
             return
         same = [s for s in self.known if s["code"] == v.code and s["kind"] == v.kind
-                and s["session_id"] != self.running_session]
+                and s.get("part", "") == v.part and s["session_id"] != self.running_session]
         if same:
             s = same[-1]
             if s["status"] == "running" and s.get("writer"):
@@ -277,7 +316,7 @@ class SetupModel:
                 errors["code"] = (f"{v.code} already has {article(str(s['status']))} {s['status']} {v.kind} session "
                                   f"(session {s['session_id']}); the database keeps one per participant: {way}")
         elif v.kind == "experiment" and self.protocol is not None and self.running_session is None:
-            why = training_refusal(self._stored(), v.code, self.protocol)
+            why = training_refusal(self._stored(), v.code, self.part_protocol() or self.protocol)
             if why:
                 ended = training_state(self._stored(), v.code)[0] == "ended"
                 errors["training"] = f"{why}. {TRAINING_ENDED_HINT if ended else TRAINING_OVERRIDE_HINT}."
@@ -318,6 +357,8 @@ class SetupModel:
     def next_step(self) -> str:
         """What the participant does next, in words ("" without a code or a protocol)."""
         v, p = self.values, self.protocol
+        if p is not None and p.parts:
+            return plan_words(self.plan(), v.code)
         if not v.code or p is None or not p.training.enabled:
             return ""
         proposed = next_kind(self._stored(), v.code, p)
@@ -336,7 +377,7 @@ class SetupModel:
         v = self.values
         return m.StartSession(os.path.abspath(v.db_path), v.code, v.kind, v.protocol_path.strip() or None, v.seed,
                               v.participant_number, training_override=training_override.strip(),
-                              covariates=self.covariates.values())
+                              covariates=self.covariates.values(), part=v.part)
 
     def set_resumable(self, sessions: list[dict[str, object]]) -> None:
         """Interrupted sessions listed by the engine."""
@@ -377,8 +418,10 @@ class SetupModel:
         if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):
             self.known.append({"session_id": session_id, "code": code, "participant_number": participant_number,
                                "kind": kind, "status": "running", "seed": seed, "trials_planned": 0,
-                               "trials_done": 0, "trials_aborted": 0})
-        self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number)
+                               "trials_done": 0, "trials_aborted": 0, "part": self.values.part})
+        listed = next((s for s in self.known if s["session_id"] == session_id), None)
+        part = str(listed.get("part", "")) if listed is not None else self.values.part  # a resumed part: its own
+        self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number, part=part)
         self.number_suggested = False
         self.validate()
 
@@ -397,7 +440,12 @@ class SetupModel:
     def next_participant(self, ended_kind: str) -> None:
         """After training the same participant does the experiment; after an experiment, the next participant
         (empty code, the next free number suggested)."""
-        if ended_kind == "training":
+        v = self.values
+        coming = next_part_name(self.protocol, self._stored(), v.code, v.participant_number, v.seed)
+        if coming:  # a study of several parts: the same participant's next part
+            self.kind_suggested = True
+            self._suggest_kind()
+        elif ended_kind == "training" and not v.part:
             self.values = replace(self.values, kind="experiment")
         else:
             self.values = replace(self.values, code="")
@@ -410,5 +458,6 @@ class SetupModel:
 
     def describe_resumable(self, s: dict[str, object]) -> str:
         """One line for the resume list, its progress counted as the running session's is."""
-        return (f"session {s['session_id']}: {s['code']} {s['kind']}, {self.count_of(s).text()}, started "
+        part = f" (part {s['part']})" if s.get("part") else ""
+        return (f"session {s['session_id']}: {s['code']} {s['kind']}{part}, {self.count_of(s).text()}, started "
                 f"{str(s['started_at'])[:16].replace('T', ' ')}")

@@ -160,8 +160,8 @@ BAD_FIELDS = [
      "design.trials_per_cell = true: must be a whole number from 1 to 100"),
     ("unknown top-level key", 'name = "Shaker & Erden force regulation"',
      'name = "Shaker & Erden force regulation"\ncolour = "red"',
-     "colour = 'red': unknown field; allowed: covariates, design, feedback, groups, lsl, name, questionnaires, "
-     "targets, task, training, trial, version"),
+     "colour = 'red': unknown field; allowed: counterbalance, covariates, design, feedback, groups, lsl, name, part, "
+     "parts, questionnaires, targets, task, training, trial, version"),
     ("typo inside [trial]", "hold_s = 1.0 ", "hold_sec = 1.0 ",
      "trial.hold_sec = 1.0: unknown field; allowed: cue_s, hold_s, max_trial_s, pause_s, tolerance_fraction"),
     ("typo inside [design]", "trials_per_cell = 5 ", "trials_per_cel = 5 ",

@@ -64,6 +64,9 @@ class StartSession:
     #: Who the participant is, by covariate name (the protocol's ``[[covariates]]``; text as the form has it):
     #: stored with a participant this session registers (:mod:`protocol.study.covariates`).
     covariates: dict[str, str] = field(default_factory=dict)
+    #: The part of a study of several parts to start (:mod:`protocol.study.parts`): its protocol in the
+    #: participant's order is the session's, its kind ``kind``; "" in a study of one task.
+    part: str = ""
 
 
 @dataclass(frozen=True, slots=True)
