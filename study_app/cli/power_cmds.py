@@ -50,8 +50,9 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
     p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="with --simulated (also --groups): run the pool's participants on a Dask cluster (`dask scheduler` prints its "
-                        "address; default: the HAPTIC_STUDY_SCHEDULER environment variable, else this machine)")
+                   help="with --simulated (also --groups): run the pool's participants on a Dask cluster (`dask "
+                        "scheduler` prints its address; default: the HAPTIC_STUDY_SCHEDULER environment variable, else "
+                        "this machine)")
     p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool); it must "
