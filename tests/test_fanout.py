@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
-from cli_subprocess import tiny_protocol
+from cli_subprocess import TWO_GROUPS, tiny_protocol
 
 from analysis.planning.sweep import CACHE_FILE
 from pipeline.force.pipeline_settings import paper_settings
@@ -203,24 +203,11 @@ def test_power_runs_on_a_cluster_only_what_it_simulates(tmp_path: Path, capsys) 
                                "study is read here)"]
 
 
-_GROUPS = """
-[[covariates]]
-name = "group"
-kind = "category"
-levels = ["novice", "surgeon"]
-required = true
-[groups]
-by = "group"
-simulated = ["novice", "surgeon"]
-experienced = ["surgeon"]
-"""
-
-
 def test_a_two_group_power_on_a_cluster_is_the_local_one(tmp_path: Path, cluster, capsys) -> None:
     """Issue 44: `power --groups --simulated --scheduler`: the two-group pool's participants (novices and experienced
     surgeons, placed in turn) run on the cluster; the pool, its groups and the planned power equal the local run's."""
     proto = tmp_path / "groups.toml"
-    proto.write_text(tiny_protocol("two groups", 2.0, pause_s=0.05) + _GROUPS, encoding="utf-8")
+    proto.write_text(tiny_protocol("two groups", 2.0, pause_s=0.05) + TWO_GROUPS, encoding="utf-8")
     common = ["power", "--groups", "--simulated", "--protocol", str(proto), "--pool", "6", "--seed", "3",
               "--n", "3,4", "--resamples", "40"]
     assert main([*common, "--out", str(tmp_path / "here")]) == 0
