@@ -1,5 +1,5 @@
 """The ``haptic-study`` command run as a user runs it (a subprocess of the installed script), and the tiny protocol
-the end-to-end tests of resume, damage and rehearsal share."""
+the end-to-end tests of resume, damage and rehearsal share (and its two groups)."""
 
 from __future__ import annotations
 
@@ -34,4 +34,20 @@ hold_s = {hold_s}
 pause_s = {pause_s}
 [training]
 enabled = false
+"""
+
+
+#: A protocol's two groups (a protocol's text + this): novices and surgeons placed in turn, the surgeons simulated
+#: with the experienced profile (docs/groups.md).
+TWO_GROUPS = """
+[[covariates]]
+name = "group"
+kind = "category"
+levels = ["novice", "surgeon"]
+required = true
+
+[groups]
+by = "group"
+simulated = ["novice", "surgeon"]
+experienced = ["surgeon"]
 """

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import pytest
-from cli_subprocess import tiny_protocol
+from cli_subprocess import TWO_GROUPS, tiny_protocol
 
 from analysis.planning.sweep import CACHE_FILE
 from pipeline.force.pipeline_settings import paper_settings
@@ -201,3 +201,24 @@ def test_power_runs_on_a_cluster_only_what_it_simulates(tmp_path: Path, capsys) 
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and err == ["haptic-study: error: --scheduler = tcp://127.0.0.1:9: only with --simulated (a pilot "
                                "study is read here)"]
+
+
+def test_a_two_group_power_on_a_cluster_is_the_local_one(tmp_path: Path, cluster, capsys) -> None:
+    """Issue 44: `power --groups --simulated --scheduler`: the two-group pool's participants (novices and experienced
+    surgeons, placed in turn) run on the cluster; the pool, its groups and the planned power equal the local run's."""
+    proto = tmp_path / "groups.toml"
+    proto.write_text(tiny_protocol("two groups", 2.0, pause_s=0.05) + TWO_GROUPS, encoding="utf-8")
+    common = ["power", "--groups", "--simulated", "--protocol", str(proto), "--pool", "6", "--seed", "3",
+              "--n", "3,4", "--resamples", "40"]
+    assert main([*common, "--out", str(tmp_path / "here")]) == 0
+    here = capsys.readouterr().out
+    assert main([*common, "--scheduler", cluster.scheduler_address, "--out", str(tmp_path / "there")]) == 0
+    there, err = capsys.readouterr()
+    assert "merged" in err  # the progress bar's label: each participant came back from the cluster
+    assert "surgeon against novice (group)" in here
+    assert (tmp_path / "here" / "group_power.csv").read_bytes() == (tmp_path / "there" / "group_power.csv").read_bytes()
+    assert (tmp_path / "here" / "group_power.txt").read_text() == (tmp_path / "there" / "group_power.txt").read_text()
+    [pool_here] = (tmp_path / "here").glob("pool-*.db")
+    [pool_there] = (tmp_path / "there").glob("pool-*.db")
+    assert _same_study().compare(str(pool_here), str(pool_there))  # the covariates table included
+    assert there.splitlines()[-1] == f"Written in {tmp_path / 'there'}/: group_power.csv, group_power.txt"

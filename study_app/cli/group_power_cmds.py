@@ -70,9 +70,9 @@ def _say_the_size(n_values: tuple[int, ...], resamples: int) -> None:
 
 
 def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: dict[str, Any], bars: Any,
-                    simulated_source: Callable[..., tuple[list[str], Any, str]]) -> int:
-    """Build the pool (simulate it by ``simulated_source``, ``power``'s own, or read the pilot), estimate the power
-    and write the files."""
+                    simulated_source: Callable[..., tuple[list[str], Any, str]], client: Any = None) -> int:
+    """Build the pool (simulate it by ``simulated_source``, ``power``'s own -- its participants on ``client``'s Dask
+    cluster when one is given -- or read the pilot), estimate the power and write the files."""
     from analysis.planning.group_power import estimate_group_power, group_pool, group_power_text
     from analysis.reading.annotations import read_annotations
     from analysis.reading.load import load_study
@@ -83,7 +83,7 @@ def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: d
     databases, participants, source = list(args.db or []), None, None
     if args.simulated:
         databases, participants, source = simulated_source(args.out, req, bars,
-                                                           protocol or default_two_group_protocol())
+                                                           protocol or default_two_group_protocol(), client=client)
     study = load_study(databases)
     if participants is not None:
         keep = set(participants)

@@ -50,8 +50,9 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--resamples", default="2000", help="resampled studies per n (default 2000)")
     p.add_argument("--alpha", default="0.05", help="significance level, p < alpha (default 0.05)")
     p.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
-                   help="with --simulated: run the pool's participants on a Dask cluster (`dask scheduler` prints its "
-                        "address; default: the HAPTIC_STUDY_SCHEDULER environment variable, else this machine)")
+                   help="with --simulated (also --groups): run the pool's participants on a Dask cluster (`dask "
+                        "scheduler` prints its address; default: the HAPTIC_STUDY_SCHEDULER environment variable, else "
+                        "this machine)")
     p.add_argument("--seed", default="0", help="seed of the resampling and of the simulated pool (default 0)")
     p.add_argument("--out", default=None, metavar="DIR",
                    help="output folder: power.csv, power.txt, power.png/.pdf/.svg (and the simulated pool); it must "
@@ -231,14 +232,21 @@ def _say_the_size(req: _PowerRequest) -> None:
           "nothing written", file=sys.stderr)
 
 
+def _client(req: _PowerRequest, args: argparse.Namespace) -> Any:
+    """The Dask client the simulated pool's participants run on (``--scheduler``), or None: reached, its workers
+    running this software, before the pool is made (a refusal is :class:`foundation.errors.InputRefused`)."""
+    if req.scheduler is None or not args.simulated:
+        return None
+    from study_app.headless.fanout import connect
+
+    return connect(req.scheduler)
+
+
 def cmd_power(args: argparse.Namespace) -> int:
     """Run ``haptic-study power``; errors raise :class:`study_app.cli.error.CliError`."""
     req = _request(args)
     if args.protocol is not None and not args.groups:
         raise CliError(f"--protocol = {args.protocol!r}: only with --groups --simulated")
-    if args.groups and args.scheduler is not None:
-        raise CliError(f"--scheduler = {args.scheduler}: not with --groups yet (its two-group pool is simulated on "
-                       "this machine)")
     from study_app.cli.group_power_cmds import check_group_request, run_group_power
 
     protocol = check_group_request(args) if args.groups else None
@@ -273,17 +281,17 @@ def cmd_power(args: argparse.Namespace) -> int:
     client = None
     if args.groups:
         try:
-            return run_group_power(args, req, protocol, folder, bars, simulated_source)
+            client = _client(req, args)
+            return run_group_power(args, req, protocol, folder, bars, simulated_source, client=client)
         except InputRefused as exc:
             raise CliError(str(exc), getattr(exc, "status", 2)) from None
         finally:
             bars.close()
+            if client is not None:
+                client.close()
     _say_the_size(req)
     try:
-        if req.scheduler is not None and args.simulated:
-            from study_app.headless.fanout import connect
-
-            client = connect(req.scheduler)  # reached, its workers running this software, before the pool is made
+        client = _client(req, args)
         participants = None
         source = None
         databases = list(args.db or [])

@@ -8,6 +8,7 @@ from collections.abc import Callable
 
 from PySide6.QtWidgets import QComboBox, QFormLayout, QGroupBox, QLabel, QLineEdit, QVBoxLayout, QWidget
 
+from protocol.study.covariates import Covariate
 from study_app.models.covariate_form import CovariateForm
 
 __all__ = ["QtCovariateFields"]
@@ -72,9 +73,19 @@ class QtCovariateFields(QGroupBox):
                 line.textChanged.connect(lambda t, n=c.name: self._answer(n, t))
                 self.fields[c.name] = line
             self.fields[c.name].setToolTip(c.described())
-            self.layout_.addRow(c.question + (" *" if c.required else ""), self.fields[c.name])
+            self.layout_.addRow(_label(c), self.fields[c.name])
         self.note.setText("Nothing identifying: no names or dates of birth. * required by the protocol.")
 
     def _answer(self, name: str, text: str) -> None:
         self.form.set_text(name, text)
         self.on_answer()
+
+
+def _label(c: Covariate) -> str:
+    """A field's question, with a number's unit and range: they stay in view once a value is typed (the field's
+    placeholder goes), so *12* reads as years, not hours, and *75* is seen to be out of range before the error."""
+    mark = " *" if c.required else ""
+    if c.kind == "category":
+        return c.question + mark
+    lo, hi = (f"{int(c.lo)}", f"{int(c.hi)}") if c.kind == "integer" else (f"{c.lo:g}", f"{c.hi:g}")
+    return f"{c.question} ({lo}–{hi}{' ' + c.unit if c.unit else ''}){mark}"

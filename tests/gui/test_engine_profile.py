@@ -8,21 +8,11 @@ import sqlite3
 
 from study_app.engine import messages as m
 from study_app.engine.host import StudyEngine
+from tests.cli_subprocess import TWO_GROUPS
 from tests.gui.conftest import SHORT_PROTOCOL
 from tests.gui.test_engine_host import engine  # noqa: F401  (the fixture: a simulated engine, virtual clock)
 
-GROUPS = SHORT_PROTOCOL + """
-[[covariates]]
-name = "group"
-kind = "category"
-levels = ["novice", "surgeon"]
-required = true
-
-[groups]
-by = "group"
-simulated = ["novice", "surgeon"]
-experienced = ["surgeon"]
-"""
+GROUPS = SHORT_PROTOCOL + TWO_GROUPS
 
 
 def _stop(e: StudyEngine) -> None:

@@ -75,6 +75,8 @@ def test_covariates_questionnaires_a_note_and_an_aborts_reason_through_the_windo
     fields = panel.covariate_fields
     assert fields.isVisibleTo(panel) and set(fields.fields) == {"group", "years_experience"}
     assert not w.start_button.isEnabled()
+    # a number's unit and range stay in view in its question once a value is typed (the placeholder goes)
+    assert fields.layout_.labelForField(fields.fields["years_experience"]).text() == "Years experience (0–50 years)"
     assert "covariate group = (none): required by the protocol; must be one of novice, resident, surgeon" in \
         panel.errors.text()
     fields.fields["group"].setCurrentIndex(3)  # surgeon
