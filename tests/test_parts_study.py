@@ -174,7 +174,8 @@ def test_the_report_of_a_study_of_parts_is_a_report_per_part(study, tmp_path) ->
         part_sessions = {sid for sid, _, kind, _, pj in _sessions(study["db"])
                          if json.loads(pj)["part"]["name"] == name}
         assert set(trials["session_id"]) <= part_sessions
-        assert (out / name / "report.html").is_file()
+        part_page = (out / name / "report.html").read_text(encoding="utf-8")
+        assert f"Part <b>{name}</b>" in part_page and 'href="../report.html"' in part_page  # it says whose it is
     assert not (out / "practice").exists()  # a training part is not analysed
     firm = pd.read_csv(out / "firm" / "trials.csv")
     assert set(firm["target_label"]) == {"FIRM"}  # one task's targets, nothing pooled
