@@ -36,7 +36,7 @@ from study_app.gui.participant_window import ParticipantWindow
 from study_app.gui.qualify_page import attach_qualify
 from study_app.gui.rig_view import RigWindow
 from study_app.gui.session_actions import SessionActions
-from study_app.gui.session_views import QtCueWait, QtProgress, QtSessionNotes, QtTrialTable
+from study_app.gui.session_views import QtCueWait, QtProgress, QtSessionNotes, QtTrialTable, TrialsTab
 from study_app.gui.setup_panel import SPACE_IN_A_FIELD, QtSetupPanel
 from study_app.gui.timers import tracked_timer
 from study_app.gui.widgets import ElidedLabel
@@ -155,17 +155,10 @@ class ExperimenterWindow(QMainWindow):
         self.trial_table = QtTrialTable(self.model.session.table)
         self.session_notes = QtSessionNotes(self.model.session.table)
         self.cue_wait = QtCueWait(self.model.cue)
-        self.trials_tab = QWidget()
         self.trials_count = ElidedLabel()  # the session's count, as the progress line above reads it
         self.trials_count.setContentsMargins(6, 2, 6, 0)
         self.trials_count.hide()
-        tt = QVBoxLayout(self.trials_tab)
-        tt.setContentsMargins(0, 0, 0, 0)
-        tt.setSpacing(2)
-        tt.addWidget(self.trials_count)
-        tt.addWidget(self.cue_wait)
-        tt.addWidget(self.session_notes)
-        tt.addWidget(self.trial_table, 1)
+        self.trials_tab = TrialsTab(self.trials_count, self.cue_wait, self.session_notes, self.trial_table)
         self.health_panel = QtHealthPanel(self.model.health)
         self.tabs = QTabWidget()
         self.tabs.addTab(self.trials_tab, "Trials")

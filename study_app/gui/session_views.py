@@ -119,6 +119,8 @@ class QtCueWait(QWidget):
     def __init__(self, model: CueWaitModel, parent: QWidget | None = None) -> None:
         super().__init__(parent)
         self.model, self._actions = model, CUE_ACTIONS
+        #: The explanation folded into the headline's tooltip (:meth:`fold`): the tab is too short for it and rows.
+        self.folded = False
         self.label = QLabel()
         self.label.setWordWrap(True)
         self.help = QLabel()
@@ -152,7 +154,8 @@ class QtCueWait(QWidget):
         self.label.setStyleSheet(f"color: {fg}; font-weight: 600;")
         self.help.setStyleSheet(f"color: {fg};")
         self.help.setText(w.help)
-        self.help.setVisible(bool(w.help))
+        self.help.setVisible(bool(w.help) and not self.folded)
+        self.label.setToolTip(w.help if self.folded else "")
         self.button.setText(self._actions.get(w.action, ""))
         self.button.setVisible(bool(w.action))
         self._fit()
@@ -160,6 +163,18 @@ class QtCueWait(QWidget):
     def resizeEvent(self, event) -> None:  # Qt's name
         super().resizeEvent(event)
         self._fit()
+
+    def fold(self, folded: bool) -> None:
+        """Show the explanation under the headline, or keep it in the headline's tooltip (the headline, the seconds
+        left and the button stay)."""
+        if folded != self.folded:
+            self.folded = folded
+            self._on_changed()
+
+    def unfolded_height(self) -> int:
+        """The banner's height with its explanation shown, at its width."""
+        extra = 0 if not self.folded or not self.help.text() else self.help.heightForWidth(max(1, self.label.width()))
+        return self.sizeHint().height() + extra
 
     def _fit(self) -> None:
         """Each wrapped line as tall as its text at its width: a nested layout sized a long reason for a wider
@@ -221,3 +236,37 @@ class QtProgress(QWidget):
         if text != self.warning.text():
             self.warning.setText(text)
             self.warning.setVisible(bool(text))
+
+
+class TrialsTab(QWidget):
+    """The Trials tab: the session's count, why the next cue waits, the session's notes and the trial table.
+
+    Seen at 1366×768 with the participant screen beside the window: the waiting banner's explanation (three lines)
+    left the table one row, the trial just aborted half under it.  When the tab cannot hold the banner whole and
+    the table's header and three rows, the banner folds its explanation into its headline's tooltip."""
+
+    #: Rows of the table kept in view before the banner's explanation is.
+    ROWS_KEPT = 3
+
+    def __init__(self, count: QWidget, cue_wait: QtCueWait, notes: QWidget, table: QtTrialTable) -> None:
+        super().__init__()
+        self.count, self.cue_wait, self.notes, self.table = count, cue_wait, notes, table
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(0, 0, 0, 0)
+        lay.setSpacing(2)
+        for w in (count, cue_wait, notes):
+            lay.addWidget(w)
+        lay.addWidget(table, 1)
+        cue_wait.model.changed.connect(self._fold)
+
+    def resizeEvent(self, event) -> None:  # Qt's name
+        super().resizeEvent(event)
+        self._fold()
+
+    def _fold(self) -> None:
+        table = self.table
+        row_px = table.verticalHeader().defaultSectionSize()
+        rows = table.horizontalHeader().sizeHint().height() + self.ROWS_KEPT * row_px
+        above = sum(w.sizeHint().height() + 2 for w in (self.count, self.notes) if w.isVisibleTo(self))
+        room = self.height() - above - rows - 2 * table.frameWidth()
+        self.cue_wait.fold(self.cue_wait.isVisibleTo(self) and self.cue_wait.unfolded_height() > room)

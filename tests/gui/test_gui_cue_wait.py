@@ -8,6 +8,7 @@ from __future__ import annotations
 import pytest
 from conftest import SHORT_PROTOCOL, open_ready_window
 from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QApplication
 
 TIMEOUT_MS = 30_000
 # four trials, a 3 s pause between them (0.75 s of real time): long enough to be seen
@@ -47,6 +48,19 @@ def test_the_trials_tab_says_why_the_next_cue_waits_and_ends_the_wait(qtbot, win
     assert w.progress.label.full_text().endswith(" · Reset faults")
     assert banner.button.text() == "Reset faults" and banner.button.isVisible()
     assert "fault log under Devices & health" in banner.help.text()
+    # a short Trials tab keeps the table's rows before the explanation, which folds into the headline's tooltip
+    # (seen at 1366×768 beside the participant screen: one row left under the banner); a tall one shows it whole
+    right = w.tabs.parentWidget()
+    w.resize(990, 728)
+    right.setSizes([5000, 0])
+    QApplication.processEvents()
+    assert banner.folded and banner.help.isHidden() and "fault log" in banner.label.toolTip()
+    w.resize(990, 1060)  # (a 1920×1080 screen's window)
+    right.setSizes([0, 5000])
+    QApplication.processEvents()
+    assert not banner.folded and banner.help.isVisible() and banner.label.toolTip() == ""
+    table = w.trial_table
+    assert table.viewport().height() >= 3 * table.verticalHeader().defaultSectionSize()
     qtbot.waitUntil(lambda: "waiting" in banner.label.text(), timeout=TIMEOUT_MS)  # and for how long
     done = w.model.session.completed + w.model.session.aborted
     qtbot.mouseClick(banner.button, Qt.MouseButton.LeftButton)
