@@ -115,6 +115,9 @@ class StudyData:
         site was named.  A named site's participant codes are re-coded ``SITE:CODE`` in every table.
     tasks
         Each session's task (:mod:`protocol.tasks`), by database and session id (:meth:`task_of`).
+    part
+        The part of a study of several parts whose sessions these are (:mod:`protocol.study.parts`; the report says
+        so on its page); None: the study's every session.
     metrics
         The study's metrics: those its sessions' tasks produce (:func:`protocol.tasks.base.metrics_of`), which every
         table, test, file and figure of the analysis lists.
@@ -129,6 +132,7 @@ class StudyData:
     runs: pd.DataFrame = field(default_factory=pd.DataFrame)
     sites: tuple[str, ...] = ()
     tasks: Mapping[tuple[str, int], Task] = field(default_factory=dict)
+    part: str | None = None
 
     @property
     def metrics(self) -> tuple[Metric, ...]:
@@ -362,7 +366,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
                                 "by default; --include-incomplete analyses their finished trials")
         raise AnalysisError(f"{names}: the experiment sessions have no finished trial to analyse")
     return StudyData(trials=trials, sessions=sessions, databases=tuple(str(p) for p in paths), damage=tuple(damage),
-                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks)
+                     events=events, include_incomplete=include_incomplete, runs=runs, sites=named, tasks=tasks,
+                     part=part)
 
 
 def _analysed_trials(trials: pd.DataFrame, sessions: pd.DataFrame, params: list[str],

@@ -11,7 +11,7 @@ import base64
 import html
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -20,7 +20,10 @@ from analysis.reading import codebook
 from analysis.reading.codebook import p_text
 from protocol.study.labels import plural
 
-__all__ = ["fmt", "fmt_p", "fmt_w", "html_table", "img", "p_text", "plural", "th"]
+if TYPE_CHECKING:
+    from analysis.reading.load import StudyData
+
+__all__ = ["fmt", "fmt_p", "fmt_w", "html_table", "img", "p_text", "part_banner", "part_title", "plural", "th"]
 
 #: The resolution the figures are saved at (:func:`analysis.plots.figures.save`).
 _DPI = 300
@@ -85,3 +88,22 @@ def img(png: bytes, alt: str) -> str:
     size = f' style="width:{width:.2f}in"' if width > 0 else ""
     return (f'<img alt="{html.escape(alt)}"{size} '
             f'src="data:image/png;base64,{base64.b64encode(png).decode("ascii")}">')
+
+
+def part_banner(study: StudyData) -> str:
+    """Above a part's report (a study of several parts, :mod:`analysis.report.plan_report`): which part, of what
+    task, and the way back to the plan's page -- read alone (printed, sent on), a part's report looked like a whole
+    study's.  "" for a study's report."""
+    part = study.part
+    if part is None:
+        return ""
+    kind = next(iter(study.tasks.values())).kind if study.tasks else ""  # a part is one task
+    return (f'<p style="border-bottom:1px solid #999;padding-bottom:4px">Part <b>{html.escape(part)}</b> '
+            f"({html.escape(kind.replace('_', ' '))}) of a study of several parts: this part's sessions only. "
+            '<a href="../report.html">The plan and the other parts</a></p>')
+
+
+def part_title(part: str | None, title: str) -> str:
+    """A page's title, led by its part's name in a part's report."""
+    return html.escape(title if part is None else f"{part} — {title}")
+

@@ -172,25 +172,7 @@ def write_plan_report(folder: Path, databases: Sequence[str | os.PathLike[str]],
         sub = folder / name
         sub.mkdir()
         lines.extend(f"{name}: {line}" for line in fill_part(sub, name, kind))
-        _name_the_part(sub / "report.html", name, kind, study_name)
     parts_frame(plan).to_csv(folder / "parts.csv", index=False)
     (folder / "report.html").write_text(_page(plan, parts, study_name), encoding="utf-8")
     return lines
 
-
-def _name_the_part(page: Path, name: str, kind: str, study_name: str) -> None:
-    """A part's page says, above everything, which part of which study it reports and links back to the plan's
-    page: read alone (printed, sent on), a part's report looks like a whole study's."""
-    if not page.is_file():
-        return
-    text = page.read_text(encoding="utf-8")
-    banner = (f'<p style="border-bottom:1px solid #999;padding-bottom:4px">Part <b>{html.escape(name)}</b> '
-              f"({html.escape(kind.replace('_', ' '))}) of the study {html.escape(study_name)}: this part's sessions "
-              'only. <a href="../report.html">The plan and the other parts</a></p>')
-    body = text.find("<body>")
-    if body < 0:
-        return
-    cut = body + len("<body>")
-    text = text[:cut] + banner + text[cut:]
-    text = text.replace("<title>", f"<title>{html.escape(name)} — ", 1)
-    page.write_text(text, encoding="utf-8")

@@ -423,7 +423,7 @@ def _write_sections(tmp: Path, *, study: StudyData, zero_method: str, confidence
         kinds = ", ".join(kind for kind, _ in study_parts(study))
         raise AnalysisError(f"{', '.join(study.databases)}: the study's tasks ({kinds}) have no trial metric and "
                             "no report section: nothing to report")
-    (tmp / "report.html").write_text(sections_page(parts), encoding="utf-8")
+    (tmp / "report.html").write_text(sections_page(parts, study), encoding="utf-8")
     outputs.extend(parts)
 
 

@@ -21,7 +21,7 @@ from analysis.reading.load import StudyData
 from analysis.reading.metrics import MetricOptions, TrialTable
 from analysis.report import report_design, report_sections, report_tct
 from analysis.report.html_parts import fmt as _fmt
-from analysis.report.html_parts import fmt_p, fmt_w, plural
+from analysis.report.html_parts import fmt_p, fmt_w, part_banner, part_title, plural
 from analysis.report.html_parts import html_table as _html_table
 from analysis.report.html_parts import img as _img
 from analysis.report.html_parts import th as _th
@@ -481,9 +481,10 @@ def page(*, study: StudyData, table: TrialTable, options: MetricOptions, zero_me
     timed = any(m.success_only for m in metrics)  # a task with a completion time: its TCT sections and the trade
     per_cols = ["participant_code", "participant_number", "haptic_mode",
                 *(c for c in codebook.WIDE_MEASURES if c in per.columns)]  # the study's measures
+    title = part_title(study.part, "haptic-study report")
     return f"""<!DOCTYPE html>
-<html lang="en"><head><meta charset="utf-8"><title>haptic-study report</title><style>{_CSS}</style></head><body>
-{_head_html(study, table, options, n_participants, tables, within)}
+<html lang="en"><head><meta charset="utf-8"><title>{title}</title><style>{_CSS}</style></head><body>
+{part_banner(study)}{_head_html(study, table, options, n_participants, tables, within)}
 {_headline(per, stats, marks_overall, metrics)}
 <h2>Haptics ON vs OFF</h2>
 <p>Paired Wilcoxon signed-rank tests across participants (differences ON − OFF); p (Holm) is adjusted across the

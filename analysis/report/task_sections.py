@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Protocol
 
 import pandas as pd
 
+from analysis.report.html_parts import part_banner, part_title
+
 if TYPE_CHECKING:
     from analysis.reading.load import StudyData
     from protocol.tasks.base import Task
@@ -173,13 +175,15 @@ def study_parts(study: StudyData) -> list[tuple[str, pd.DataFrame]]:
     return [(kind, sessions[[k == kind for k in kinds]]) for kind in dict.fromkeys(kinds)]
 
 
-def sections_page(outputs: Sequence[SectionOutput]) -> str:
-    """report.html of a study without trial metrics: its sections (one: its title is the page's)."""
+def sections_page(outputs: Sequence[SectionOutput], study: StudyData | None = None) -> str:
+    """report.html of a study without trial metrics: its sections (one: its title is the page's), under its part's
+    banner in a part's report (``study``'s part; None: no part)."""
     shown = [o for o in outputs if o.body]
+    head, part = (part_banner(study), study.part) if study is not None else ("", None)
     if len(shown) == 1:
-        title = html.escape(shown[0].title)
-        return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title></head><body>"
+        title = part_title(part, shown[0].title)
+        return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{title}</title></head><body>{head}"
                 f"{shown[0].html(1)}</body></html>")
     parts = "".join(o.html(2) for o in shown)
-    return ("<!DOCTYPE html><html><head><meta charset='utf-8'><title>haptic-study report</title></head><body>"
-            f"<h1>Haptic feedback study: report</h1>{parts}</body></html>")
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{part_title(part, 'haptic-study report')}"
+            f"</title></head><body>{head}<h1>Haptic feedback study: report</h1>{parts}</body></html>")
