@@ -99,7 +99,32 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--lsl", action="store_true",
                    help="publish every session's force streams and trial markers on the Lab Streaming Layer (as the "
                         "protocol's [lsl] outlets = true; needs --clock real and pylsl: docs/lsl.md)")
+    r.add_argument("--visit", default=None, metavar="NAME",
+                   help="in a protocol with [[visits]]: run only this visit of each participant's schedule, "
+                        "continuing the study in --db (a lab's participants come back one visit at a time); "
+                        "default: every visit left, each on its planned day (docs/study-design.md)")
+    r.add_argument("--day", type=whole_number("--day", 0, 1100), default=None, metavar="N",
+                   help="with --visit: the study day the visit is held on (days after the participant's first "
+                        "visit; default: today's, from the first visit's date)")
+    r.add_argument("--deviation", default="", metavar="REASON",
+                   help="with --visit: run a visit out of order or outside its window anyway, for this reason "
+                        "(stored as a deviation of the visit, listed in the report)")
     r.set_defaults(handler=cmd_run)
+
+
+def _visit_request(args: argparse.Namespace) -> Any:
+    """``--visit``/``--day``/``--deviation`` as the headless run's request (None: the whole schedule)."""
+    from study_app.headless.plan_visits import VisitRequest
+
+    if args.visit is None:
+        for given, name in ((args.day is not None, "--day"), (bool(args.deviation), "--deviation")):
+            if given:
+                raise CliError(f"{name} is given without --visit: it applies to one visit run at a time")
+        return None
+    if args.resume is not None or args.continue_study:
+        raise CliError(f"--visit {args.visit} with {'--resume' if args.resume else '--continue'}: --visit runs "
+                       "(and continues) that visit alone; give one of them")
+    return VisitRequest(args.visit, args.day, args.deviation)
 
 
 def _covariate(text: str) -> tuple[str, str]:
@@ -163,6 +188,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from study_app.headless.fanout import ClusterError
 
     _check_resume_options(args)
+    visit = _visit_request(args)
     framework = framework_of(args.settings)
     address = _scheduler_of(args)
     _refuse_a_full_disk(args.db)
@@ -196,6 +222,7 @@ def cmd_run(args: argparse.Namespace) -> int:
                 args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
                 on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
                 sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client,
+                visit=visit,
             )
         wall = _time.perf_counter() - t0
         if bar is not None:
