@@ -93,6 +93,13 @@ def part_of_protocol(protocol_json: str, what: str = "part") -> str:
     return name if isinstance(name, str) else ""
 
 
+def part_key(protocol_json: str) -> str:
+    """The stored session's part as its report names it: ``VISIT-PART`` in a study with a schedule of visits (a part
+    recurs across visits), else the part's name ("" for a single-task study's session)."""
+    part, visit = part_of_protocol(protocol_json), part_of_protocol(protocol_json, "visit")
+    return f"{visit}-{part}" if visit else part
+
+
 class StudyDatabase(SchemaFile, LeaseHolder):
     """The single writer of a study database.
 

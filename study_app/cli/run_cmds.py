@@ -124,6 +124,9 @@ def _visit_request(args: argparse.Namespace) -> Any:
     if args.resume is not None or args.continue_study:
         raise CliError(f"--visit {args.visit} with {'--resume' if args.resume else '--continue'}: --visit runs "
                        "(and continues) that visit alone; give one of them")
+    if args.inject_fault or args.scheduler:
+        raise CliError(f"--visit {args.visit} with {'--inject-fault' if args.inject_fault else '--scheduler'}: "
+                       "that is for a whole study's run; run the visit without it")
     return VisitRequest(args.visit, args.day, args.deviation)
 
 
@@ -184,7 +187,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from protocol.storage import StorageError
     from protocol.study.config import ProtocolError, load_protocol
     from study_app.cli.progress import ProgressBar
-    from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
+    from study_app.headless import SessionInterrupted, StudyWorkerError
     from study_app.headless.fanout import ClusterError
 
     _check_resume_options(args)
@@ -214,16 +217,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         client = _connect(address)
         t0 = _time.perf_counter()
-        if args.resume is not None:
-            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
-                                      faults=args.inject_fault, framework=framework)
-        else:
-            progress = run_study(
-                args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
-                on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
-                sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client,
-                visit=visit,
-            )
+        progress = _run(args, protocol if args.resume is None else None, framework, show, client, visit)
         wall = _time.perf_counter() - t0
         if bar is not None:
             bar.close()
@@ -260,6 +254,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
+
+
+def _run(args: argparse.Namespace, protocol: Any, framework: Any, show: Any, client: Any, visit: Any) -> Any:
+    """The run ``cmd_run`` asked for: a resume, one visit of a schedule, or a study (new or continued)."""
+    from study_app.headless import resume_session, run_study
+    from study_app.headless.study import run_visit
+
+    if args.resume is not None:
+        return resume_session(args.db, args.resume, clock=args.clock, on_progress=show, faults=args.inject_fault,
+                              framework=framework)
+    if visit is not None:
+        return run_visit(args.db, visit, participants=args.participants, seed=args.seed, protocol=protocol,
+                         clock=args.clock, on_progress=show, jobs=args.jobs, sim_arms=args.sim_arms,
+                         framework=framework, covariates=dict(args.covariates))
+    return run_study(args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
+                     on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
+                     sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client)
 
 
 def _check_resume_options(args: argparse.Namespace) -> None:

@@ -22,6 +22,7 @@ from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
 from pipeline.sim.faults import latch_delay_s
+from pipeline.sim.learning import Practice
 from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
@@ -235,7 +236,8 @@ def run_session(
     # the participant's group, as stored, decides the simulated profile (:mod:`protocol.study.groups`)
     stored = covariates_by_code(db.conn).get(opened.code, {})
     participant = SimulatedParticipant(seed=opened.participant_seed,
-                                       profile=simulated_profile(opened.protocol.groups, stored))
+                                       profile=simulated_profile(opened.protocol.groups, stored),
+                                       practice=practice_of(opened.protocol))
     eng.rig.set_driver(participant)
     progress.sessions.append(opened.session_id)
     progress.kind = opened.kind
@@ -261,6 +263,14 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
+
+
+def practice_of(protocol: ProtocolConfig) -> Practice | None:
+    """Where in a schedule of visits a session is, for the simulated participant's learning
+    (:mod:`pipeline.sim.learning`): its stored visit's number and planned days since the previous visit (so a
+    resumed session meets the same participant); None in a study without visits."""
+    visit = protocol.part.visit if protocol.part is not None else None
+    return None if visit is None else Practice(visit.number, visit.gap_days)
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:

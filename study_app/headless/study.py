@@ -51,7 +51,7 @@ from study_app.headless.plan_visits import VisitRequest, check_visit_request
 from study_app.headless.pool import default_jobs, run_parallel
 from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps, sim_arms_of
 
-__all__ = ["resume_session", "run_study"]
+__all__ = ["resume_session", "run_study", "run_visit"]
 
 
 def run_study(
@@ -59,7 +59,6 @@ def run_study(
     on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None, continue_study: bool = False,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
     framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None, client: Any = None,
-    visit: VisitRequest | None = None,
 ) -> StudyProgress:
     """Run a complete simulated study into the database at ``db_path``.
 
@@ -103,10 +102,6 @@ def run_study(
     client
         A ``distributed.Client``: the participants run on its Dask cluster (the virtual clock, no faults; ``jobs``
         unused), each merged here as it comes back (:mod:`study_app.headless.cluster_study`).
-    visit
-        In a study with ``[[visits]]``: run only this visit (``run --visit``), continuing the study in the database;
-        a visit out of order or outside its window needs the request's deviation reason
-        (:mod:`study_app.headless.plan_visits`).  None: every visit left, each on its planned day.
 
     Returns
     -------
@@ -130,6 +125,35 @@ def run_study(
         A fault did not clear (one participant at a time; in parallel it is a
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
+    return _run_study(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                      on_progress=on_progress, jobs=jobs, continue_study=continue_study, faults=faults,
+                      sim_arms=sim_arms, framework=framework, covariates=covariates, client=client)
+
+
+def run_visit(
+    db_path: str, visit: VisitRequest, *, participants: int, seed: int, protocol: ProtocolConfig,
+    clock: str = "virtual", on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None,
+    sim_arms: Sequence[str] = (SINGLE_ARM_NAME,), framework: FrameworkConfig | None = None,
+    covariates: Mapping[str, str] | None = None,
+) -> StudyProgress:
+    """Run one visit of a schedule (``run --visit``, :mod:`study_app.headless.plan_visits`) for participants 1 …
+    ``participants``, continuing the study in ``db_path`` (created for the first visit): what is left of that visit
+    (interrupted sessions resumed, the rest run), held on ``visit.day`` (None: today's study day).  A visit out of
+    order or outside its window is refused (:class:`protocol.runner.study_rules.StudyRuleError`, nothing written)
+    unless ``visit.deviation`` gives the reason, stored as a deviation.  The other arguments are
+    :func:`run_study`'s."""
+    return _run_study(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                      on_progress=on_progress, jobs=jobs, continue_study=False, faults=(), sim_arms=sim_arms,
+                      framework=framework, covariates=covariates, client=None, visit=visit)
+
+
+def _run_study(
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int | None, continue_study: bool,
+    faults: Sequence[FaultPlan], sim_arms: Sequence[str], framework: FrameworkConfig | None,
+    covariates: Mapping[str, str] | None, client: Any, visit: VisitRequest | None = None,
+) -> StudyProgress:
+    """:func:`run_study` or :func:`run_visit`: refusals first, then the run under the study's lease."""
     given = {name: str(v) for name, v in (covariates or {}).items()}
     n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol, given, (client, clock))
     check_visit_request(protocol, visit)
