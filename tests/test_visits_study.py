@@ -47,11 +47,6 @@ day = 0
 parts = ["practice", "test"]
 role = "baseline"
 [[visits]]
-name = "t1"
-day = 1
-parts = ["test"]
-role = "training"
-[[visits]]
 name = "post"
 day = 2
 parts = ["test"]
@@ -98,14 +93,14 @@ def study(tmp_path_factory) -> dict:
 
 
 def test_the_whole_schedule_runs_each_visit_on_its_day(study) -> None:
-    want = [("baseline", "practice"), ("baseline", "test"), ("t1", "test"), ("post", "test"), ("keep", "test")]
+    want = [("baseline", "practice"), ("baseline", "test"), ("post", "test"), ("keep", "test")]
     assert _visits(study["db"]) == [(c, v, p) for c in ("P01", "P02") for v, p in want]
     assert {s for (s,) in _rows(study["db"], "SELECT status FROM sessions")} == {"completed"}
     held = _rows(study["db"], "SELECT detail FROM events WHERE kind = 'visit' ORDER BY session_id")
-    assert len(held) == 10 and held[4][0].startswith("keep (visit 4): held on study day 9, planned day 9 ± 1")
+    assert len(held) == 8 and held[3][0].startswith("keep (visit 3): held on study day 9, planned day 9 ± 1")
     # the simulated participant of a later visit has learned; the first visit's is the calibrated one
     plan = study["protocol"].plan_for(1, 4)
-    assert practice_of(plan[1]).learned() == 0.0 < practice_of(plan[3]).learned()  # type: ignore[union-attr]
+    assert practice_of(plan[1]).learned() == 0.0 < practice_of(plan[2]).learned()  # type: ignore[union-attr]
 
 
 def test_check_passes_and_continue_has_nothing_left(study) -> None:
@@ -123,29 +118,29 @@ def test_one_visit_at_a_time_refuses_a_visit_out_of_order_or_window(tmp_path, st
     assert _main(*args, "--visit", "baseline")[0] == 0
     assert [v for _, v, _ in _visits(db)] == ["baseline", "baseline"]
     before = hashlib.sha256(db.read_bytes()).hexdigest()
-    code, _, err = _main(*args, "--visit", "post", "--day", "2")
-    assert code == 2 and "visit 'post' is out of order: the earlier visit 't1' is not done" in err
-    code, _, err = _main(*args, "--visit", "t1", "--day", "3")
-    assert code == 2 and "outside its window: held on study day 3, planned for day 1 ± 0" in err
+    code, _, err = _main(*args, "--visit", "keep", "--day", "9")
+    assert code == 2 and "visit 'keep' is out of order: the earlier visit 'post' is not done" in err
+    code, _, err = _main(*args, "--visit", "post", "--day", "5")
+    assert code == 2 and "outside its window: held on study day 5, planned for day 2 ± 0" in err
     assert "--deviation" in err and len(err.strip().splitlines()) == 1
     assert hashlib.sha256(db.read_bytes()).hexdigest() == before  # refused: nothing stored, not even opened to write
-    assert _main(*args, "--visit", "t1", "--day", "3", "--deviation", "the participant was ill")[0] == 0
+    assert _main(*args, "--visit", "post", "--day", "5", "--deviation", "the participant was ill")[0] == 0
     dev = _rows(db, "SELECT detail FROM events WHERE kind = 'deviation'")
-    assert dev == [("visit 't1' is outside its window: held on study day 3, planned for day 1 ± 0: the participant "
+    assert dev == [("visit 'post' is outside its window: held on study day 5, planned for day 2 ± 0: the participant "
                     "was ill",)]
     assert _rows(db, "SELECT detail FROM events WHERE kind = 'visit' ORDER BY rowid DESC LIMIT 1")[0][0] \
-        .startswith("t1 (visit 2): held on study day 3, planned day 1 ± 0 (run --visit)")
+        .startswith("post (visit 2): held on study day 5, planned day 2 ± 0 (run --visit)")
     code, _, err = _main(*args, "--continue")  # the rest of the schedule, each visit left on its planned day
     assert code == 0, err
-    assert [v for _, v, _ in _visits(db)] == ["baseline", "baseline", "t1", "post", "keep"]
+    assert [v for _, v, _ in _visits(db)] == ["baseline", "baseline", "post", "keep"]
 
 
 def test_bad_visit_requests_are_refused_in_one_line(tmp_path, study) -> None:
     args = ("run", "--protocol", str(study["folder"] / "p.toml"), "--participants", "1", "--db",
             str(tmp_path / "x.db"))
-    for extra, said in ((("--visit", "later"), "--visit = 'later': no such visit; the visits are baseline, t1"),
+    for extra, said in ((("--visit", "later"), "--visit = 'later': no such visit; the visits are baseline, post"),
                         (("--day", "3"), "--day is given without --visit"),
-                        (("--visit", "t1", "--continue"), "--visit t1 with --continue")):
+                        (("--visit", "post", "--continue"), "--visit post with --continue")):
         code, _, err = _main(*args, *extra)
         assert code == 2 and said in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.db").exists()
@@ -156,10 +151,10 @@ def test_the_report_has_learning_curves_and_retention(study) -> None:
     code, printed, err = _main("report", "--db", str(study["db"]), "--out", str(out))
     assert code == 0, err
     assert "learning.html" in printed
-    for name in ("baseline-test", "t1-test", "post-test", "keep-test"):
+    for name in ("baseline-test", "post-test", "keep-test"):
         assert (out / name / "report.html").is_file()  # a report per visit and part: one session per participant
     learning = pd.read_csv(out / "learning.csv")
-    assert len(learning) == 2 * 4 * 2 and list(learning["day"].unique()) == [0, 1, 2, 9]
+    assert len(learning) == 2 * 3 * 2 and list(learning["day"].unique()) == [0, 2, 9]
     # each value is that visit's own report's (its participants.csv, rounded there to 4 decimals)
     part = pd.read_csv(out / "post-test" / "participants.csv")
     mine = learning[learning["visit"] == "post"].sort_values(["participant_code", "haptic_mode"])

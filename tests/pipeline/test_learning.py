@@ -9,13 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.sim.experience import experienced
-from pipeline.sim.learning import (
-    BOTH_MODES_GAIN,
-    FORGETTING_EXPONENT,
-    PRACTICE_EXPONENT,
-    Practice,
-    practised,
-)
+from pipeline.sim.learning import BOTH_MODES_GAIN, FORGETTING_EXPONENT, PRACTICE_EXPONENT, Practice, practised
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import ParticipantParams
 
