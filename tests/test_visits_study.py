@@ -15,10 +15,15 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
+from analysis.reading.load import load_study
+from analysis.report.study_record import deviations
+from protocol.runner.session_setup import open_new_session
+from protocol.storage import StorageError, StudyDatabase, new_owner_token, session_scope
 from protocol.study.config import load_protocol
 from study_app.cli.main import main
 from study_app.headless import run_study
-from study_app.headless.session_run import practice_of
+from study_app.headless.plan_visits import visit_step
+from study_app.headless.session_run import StudyProgress, practice_of, run_steps
 
 pytestmark = pytest.mark.xdist_group("visits_study")  # one worker builds the study once
 
@@ -133,6 +138,34 @@ def test_one_visit_at_a_time_refuses_a_visit_out_of_order_or_window(tmp_path, st
     code, _, err = _main(*args, "--continue")  # the rest of the schedule, each visit left on its planned day
     assert code == 0, err
     assert [v for _, v, _ in _visits(db)] == ["baseline", "baseline", "post", "keep"]
+    listed = deviations(load_study([db], part="post-test"))  # the report's deviations list it
+    assert listed["detail"].tolist() == [dev[0][0]] and listed["participant_code"].tolist() == ["P01"]
+
+
+def test_an_interrupted_visit_is_resumed_where_it_stopped(tmp_path, study) -> None:
+    """P01 did the baseline and was interrupted in the post-test: --visit post resumes that session (not a new
+    one); a second session of the same visit and part is refused naming both."""
+    protocol = study["protocol"]
+    db_path = tmp_path / "mid.db"
+    plan = protocol.plan_for(1, 4)
+    db = StudyDatabase(str(db_path))
+    try:
+        run_steps(db, 1, [("visit", visit_step(p, None, 0)) for p in plan[:2]], protocol=protocol, seed=4,
+                  clock="virtual", progress=StudyProgress(), on_progress=None, study_owner=new_owner_token())
+        owner = new_owner_token()  # the post-test stored, then its process gone before its first trial
+        opened = open_new_session(db, code="P01", number=1, kind="experiment", protocol=plan[2], seed=4, rig="sim",
+                                  config={}, calibration=None, lease_owner=owner)
+        db.release_lease(session_scope(opened.session_id), owner)
+        with pytest.raises(StorageError, match="already has an experiment session of part 'test' in visit 'post'"):
+            open_new_session(db, code="P01", number=1, kind="experiment", protocol=plan[2], seed=4, rig="sim",
+                             config={}, calibration=None, lease_owner=new_owner_token())
+    finally:
+        db.close()
+    code, _, err = _main("run", "--protocol", str(study["folder"] / "p.toml"), "--participants", "1", "--seed", "4",
+                         "--db", str(db_path), "--visit", "post", "--day", "2", "--jobs", "1")
+    assert code == 0, err
+    rows = _rows(db_path, "SELECT session_id, status FROM sessions ORDER BY session_id")
+    assert rows[-1] == (opened.session_id, "completed") and len(rows) == 3  # resumed, not stored again
 
 
 def test_bad_visit_requests_are_refused_in_one_line(tmp_path, study) -> None:
