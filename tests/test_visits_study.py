@@ -24,27 +24,11 @@ from study_app.cli.main import main
 from study_app.headless import run_study
 from study_app.headless.plan_visits import visit_step
 from study_app.headless.session_run import StudyProgress, practice_of, run_steps
+from tests.parts_plan import STUDY
 
 pytestmark = pytest.mark.xdist_group("visits_study")  # one worker builds the study once
 
-TINY = """name = "tiny schedule"
-[[targets]]
-label = "GENTLE"
-force_n = 0.6
-[design]
-modes = ["on", "off"]
-trials_per_cell = 1
-[trial]
-max_trial_s = 2.0
-hold_s = 0.3
-pause_s = 0.3
-[training]
-enabled = true
-seconds_per_target_per_mode = 1.0
-[[parts]]
-name = "practice"
-session = "training"
-[[parts]]
+TINY = STUDY.replace("tiny plan", "tiny schedule") + """[[parts]]
 name = "test"
 [[visits]]
 name = "baseline"
