@@ -192,4 +192,37 @@ def test_the_report_of_a_study_of_parts_is_a_report_per_part(study, tmp_path) ->
 def test_commands_of_one_task_refuse_a_study_of_parts(study, tmp_path, argv) -> None:
     code, _, err = _main(*argv, str(study["folder"] / "plan.toml"), "--out", str(tmp_path / "o"))
     assert code == 2 and "a study of several parts (practice, regulation, tracking, firm)" in err
+    assert "choose its part with --part NAME" in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "o").exists()
+
+
+def test_power_plans_one_part_of_a_pilot(study, tmp_path) -> None:
+    """``power --db`` on a pilot of parts: refused without --part (naming them), for a training part and a name it
+    does not hold; with --part, the pool is that part's sessions and its task's measures only."""
+    from analysis.planning.paired_pool import load_pool
+
+    db = str(study["db"])
+    firm, tracking = load_pool([db], part="firm"), load_pool([db], part="tracking")
+    assert firm.scopes == ("overall", "FIRM") and "success_rate" in firm.metrics and "lag_s" not in firm.metrics
+    assert tracking.scopes == ("overall", "GENTLE") and "lag_s" in tracking.metrics
+    assert "success_rate" not in tracking.metrics and "(its part 'tracking')" in tracking.source
+    assert firm.participants == tracking.participants == ("P01", "P02", "P03")
+    for extra, said in [((), "a study of several parts (practice, "),  # in P01's order
+                        (("--part", "practice"), "a training part"),
+                        (("--part", "nope"), "holds no session of it; its parts are")]:
+        code, _, err = _main("power", "--db", db, "--out", str(tmp_path / "o"), *extra)
+        assert code == 2 and said in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+    code, _, err = _main("power", "--db", db, "--out", str(tmp_path / "o"), "--part", "regulation")
+    assert code == 2 and "has 3 participants with both haptic modes" in err  # the part's pool was read
+
+
+def test_sweep_runs_one_part_of_a_protocol(study, tmp_path) -> None:
+    plan = str(study["folder"] / "plan.toml")
+    code, out, err = _main("sweep", "--protocol", plan, "--part", "tracking", "--set", "filter_window=10",
+                           "--participants", "1", "--studies", "1", "--out", str(tmp_path / "s"))
+    assert code == 0, err
+    assert "protocol 'tiny plan (part tracking)'" in out
+    assert set(pd.read_csv(tmp_path / "s" / "sweep.csv")["metric"]) == {"rmse_N", "max_ae_N", "lag_s", "gain"}
+    code, _, err = _main("sweep", "--part", "tracking", "--set", "filter_window=10", "--out", str(tmp_path / "d"))
+    assert code == 2 and "the default protocol (the paper's study) is a study of one task" in err

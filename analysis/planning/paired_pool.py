@@ -100,6 +100,7 @@ def load_pool(
     progress: Progress | None = None,
     workers: int | None = None,
     participants: Sequence[str] | None = None,
+    part: str | None = None,
 ) -> PairedPool:
     """Read study databases (read-only), recompute every trial as the report does, and build the pool.
 
@@ -115,8 +116,10 @@ def load_pool(
         As in :func:`analysis.reading.metrics.compute_trials`.
     participants
         Only these participant codes (the first N of a larger simulated pool); default: all.
+    part
+        In a study of several parts: that part's sessions only (its task's measures); default: a study of one task.
     """
-    study = load_study(databases)
+    study = load_study(databases, part=part)
     if participants is not None:
         import dataclasses
 
@@ -126,4 +129,6 @@ def load_pool(
     trials = compute_trials(study, options, progress=progress, workers=workers).trials
     if source is None:
         source = "the pilot study " + ", ".join(os.path.basename(str(d)) for d in databases)
+        if part is not None:
+            source += f" (its part {part!r})"
     return pool_from_trials(trials, options, source=source)

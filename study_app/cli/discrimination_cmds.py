@@ -15,7 +15,8 @@ import sys
 
 from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, whole_number
-from study_app.cli.error import CliError, one_task
+from study_app.cli.error import CliError
+from study_app.cli.part_choice import PART_HELP, one_part
 
 __all__ = ["DISCRIMINATION_MARKER", "add_discrimination_parser", "cmd_discrimination"]
 
@@ -30,6 +31,7 @@ def add_discrimination_parser(sub: argparse._SubParsersAction) -> None:
                     "--seed 0 --out disc")
     d.add_argument("--protocol", required=True, metavar="FILE", help="a protocol file whose [task] kind is "
                    "force_discrimination (docs/examples/discrimination.toml)")
+    d.add_argument("--part", default=None, metavar="NAME", help=PART_HELP)
     d.add_argument("--participants", type=whole_number("--participants", 1, 999), default=10,
                    help="number of simulated participants (default 10)")
     d.add_argument("--seed", type=SEED, default=0, help="study seed: orders, observers and answers (default 0)")
@@ -46,10 +48,10 @@ def cmd_discrimination(args: argparse.Namespace) -> int:
 
     folder = dict(command="discrimination", marker=DISCRIMINATION_MARKER, inputs=[], force=args.force)
     try:
-        protocol = load_protocol(args.protocol)
-        one_task(protocol, args.protocol, "discrimination")
+        protocol = one_part(load_protocol(args.protocol), args.protocol, args.part, "discrimination")
         if not isinstance(protocol.task, ForceDiscrimination):
-            raise CliError(f"--protocol = {args.protocol!r}: its task.kind is {protocol.task.kind!r}; discrimination "
+            which = f"--part = {args.part!r}" if args.part else f"--protocol = {args.protocol!r}"
+            raise CliError(f"{which}: its task.kind is {protocol.task.kind!r}; discrimination "
                            "needs 'force_discrimination'")
         check_output_folder(args.out, **folder)  # before any work
     except (InputRefused, ValueError) as exc:

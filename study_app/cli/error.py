@@ -7,7 +7,7 @@ time without importing the module that imports them (no circle).
 
 from __future__ import annotations
 
-__all__ = ["CliError", "one_task"]
+__all__ = ["CliError"]
 
 
 class CliError(Exception):
@@ -26,11 +26,3 @@ class CliError(Exception):
         super().__init__(message)
         self.status = status
 
-
-def one_task(protocol: object, path: object, command: str) -> None:
-    """Refuse (one :class:`CliError` line) a protocol of several parts (:mod:`protocol.study.parts`) where
-    ``command`` works on one task: it names the parts and what to give instead."""
-    names = getattr(protocol, "part_names", ())
-    if names:
-        raise CliError(f"--protocol = {path!r}: a study of several parts ({', '.join(names)}); {command} works on one "
-                       "task: give it one part's protocol (a file of that part's tables without [[parts]])")

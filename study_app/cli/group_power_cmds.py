@@ -16,7 +16,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from study_app.cli.error import CliError, one_task
+from study_app.cli.error import CliError
+from study_app.cli.part_choice import one_part
 
 __all__ = ["GROUP_POWER_FILES", "check_group_request", "default_two_group_protocol", "run_group_power"]
 
@@ -41,7 +42,7 @@ def check_group_request(args: argparse.Namespace) -> Any:
         protocol = load_protocol(args.protocol)
     except ProtocolError as exc:
         raise CliError(str(exc)) from None
-    one_task(protocol, args.protocol, "power")
+    protocol = one_part(protocol, args.protocol, args.part, "power")
     if protocol.groups is None:
         raise CliError(f"--protocol = {args.protocol!r}: declares no [groups]; a two-group plan needs the covariate "
                        "that divides the participants (docs/groups.md)")
@@ -84,7 +85,7 @@ def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: d
     if args.simulated:
         databases, participants, source = simulated_source(args.out, req, bars,
                                                            protocol or default_two_group_protocol(), client=client)
-    study = load_study(databases)
+    study = load_study(databases, part=args.part if args.db else None)
     if participants is not None:
         keep = set(participants)
         study = dataclasses.replace(study, trials=study.trials[study.trials["participant_code"].isin(keep)],
@@ -93,7 +94,8 @@ def run_group_power(args: argparse.Namespace, req: Any, protocol: Any, folder: d
     bars.close()
     ann = read_annotations(databases)
     pool = group_pool(trials, ann.covariates, ann.groups, options,
-                      source=source or "the pilot study " + ", ".join(str(d) for d in databases))
+                      source=source or "the pilot study " + ", ".join(str(d) for d in databases)
+                      + (f" (its part {args.part!r})" if args.part else ""))
     _say_the_size(req.n_values, req.resamples)
     t0 = time.perf_counter()
     big = 2 * req.resamples * sum(req.n_values) >= _BAR_DRAWS

@@ -14,6 +14,7 @@ from typing import Any
 
 from foundation.errors import InputRefused
 from study_app.cli.error import CliError
+from study_app.cli.part_choice import PART_HELP, pilot_part
 
 __all__ = ["add_power_parser", "cmd_power", "whole_option"]
 
@@ -69,6 +70,7 @@ def add_power_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--protocol", default=None, metavar="FILE",
                    help="with --groups --simulated: the protocol to simulate (it must declare [groups]; default: the "
                         "paper's with a group covariate of novices and surgeons, half and half)")
+    p.add_argument("--part", default=None, metavar="NAME", help=PART_HELP)
     add_analysis_options(p)
     p.set_defaults(handler=cmd_power)
 
@@ -247,6 +249,9 @@ def cmd_power(args: argparse.Namespace) -> int:
     req = _request(args)
     if args.protocol is not None and not args.groups:
         raise CliError(f"--protocol = {args.protocol!r}: only with --groups --simulated")
+    if args.part is not None and args.simulated and args.protocol is None:
+        raise CliError(f"--part = {args.part!r}: the simulated pool is the paper's study of one task; --part chooses "
+                       "a part of a pilot (--db) or of --protocol FILE (with --groups --simulated)")
     from study_app.cli.group_power_cmds import check_group_request, run_group_power
 
     protocol = check_group_request(args) if args.groups else None
@@ -264,11 +269,7 @@ def cmd_power(args: argparse.Namespace) -> int:
     except InputRefused as exc:
         raise CliError(str(exc)) from None
     if args.db:
-        from analysis.report.plan_report import study_plan
-
-        if study_plan(args.db):
-            raise CliError(f"--db = {args.db[0]!r}: a study of several parts; power plans one task from a pilot of "
-                           "that task (a study of one task's database)")
+        pilot_part(args.db, args.part, "power")
 
     from analysis.planning.paired_pool import load_pool
     from analysis.planning.power import estimate_power, is_family_row
@@ -297,7 +298,8 @@ def cmd_power(args: argparse.Namespace) -> int:
         databases = list(args.db or [])
         if args.simulated:
             databases, participants, source = simulated_source(args.out, req, bars, client=client)
-        pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants)
+        pool = load_pool(databases, options, source=source, progress=bars.reading, participants=participants,
+                         part=args.part if args.db else None)
         bars.close()
         t0 = time.perf_counter()
         result = estimate_power(pool, req.n_values, resamples=req.resamples, alpha=req.alpha, seed=req.seed,

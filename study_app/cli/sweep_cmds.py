@@ -17,7 +17,8 @@ from typing import Any
 
 from foundation.errors import InputRefused
 from study_app.cli.argtypes import SEED, add_command, setting_list, whole_number
-from study_app.cli.error import CliError, one_task
+from study_app.cli.error import CliError
+from study_app.cli.part_choice import PART_HELP, compared_measures, one_part
 
 __all__ = ["MAX_SETTINGS", "add_sweep_parser", "cmd_sweep", "grid_of"]
 
@@ -49,6 +50,7 @@ def add_sweep_parser(sub: argparse._SubParsersAction) -> None:
                         "command completes an interrupted sweep and a cell already run is not run again")
     s.add_argument("--protocol", default=None, metavar="FILE",
                    help="protocol file (default: the paper's study); its experiment schedule is run")
+    s.add_argument("--part", default=None, metavar="NAME", help=PART_HELP)
     s.add_argument("--jobs", type=whole_number("--jobs", 1, 1024, " (omit it to use the usable cores)"), default=None,
                    help="participants run at once, each in its own process (default: the usable cores)")
     s.add_argument("--scheduler", default=None, metavar="tcp://HOST:PORT",
@@ -101,8 +103,9 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     from protocol.study.config import ProtocolError, load_protocol
 
     try:
-        protocol = load_protocol(args.protocol)
-        one_task(protocol, args.protocol, "sweep")
+        protocol = one_part(load_protocol(args.protocol), args.protocol, args.part, "sweep")
+        compared_measures(protocol.task, f"--part = {args.part!r}" if args.part else f"--protocol = {args.protocol!r}",
+                          "sweep")
         for setting in grid:  # every setting's ramps fit the protocol's trials and pauses (else: one line)
             protocol.check_ramps(framework_with(setting).safety,
                                  f"protocol with --set {describe(non_default_settings(setting))}")

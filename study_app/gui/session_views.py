@@ -18,6 +18,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from protocol.study.records import Outcome
 from study_app.gui.widgets import LEVEL_COLOURS, ElidedLabel, FollowNewest
 from study_app.models.cue_wait import CUE_ACTIONS, CueWaitModel, headline
 from study_app.models.health import HealthModel
@@ -27,6 +28,8 @@ __all__ = ["QtCueWait", "QtProgress", "QtSessionNotes", "QtTrialTable"]
 
 _OUTCOME_COLOURS = {"success": QColor(215, 245, 215), "timeout": QColor(250, 235, 205),
                     "aborted": QColor(235, 235, 235)}
+#: What the Outcome column must show whole: its header and each outcome.
+_OUTCOME_WORDS = ("Outcome", *(str(o) for o in Outcome))
 
 
 class QtTrialTable(QTableWidget):
@@ -41,8 +44,7 @@ class QtTrialTable(QTableWidget):
         self.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
         self.setSelectionBehavior(QAbstractItemView.SelectionBehavior.SelectRows)
         self.setTextElideMode(Qt.TextElideMode.ElideRight)
-        header = self.horizontalHeader()
-        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        self.setWordWrap(False)  # one line per trial: more rows in view; a long cell is elided, its tooltip whole
         self.follow = FollowNewest(self)
         table.row_added.connect(self._on_row_added)
         table.cleared.connect(self._on_cleared)
@@ -59,9 +61,16 @@ class QtTrialTable(QTableWidget):
         self.setColumnCount(len(cols))
         self.setHorizontalHeaderLabels(list(cols))
         header = self.horizontalHeader()
-        stretch, fit = QHeaderView.ResizeMode.Stretch, QHeaderView.ResizeMode.ResizeToContents
-        for j in range(len(cols)):  # the outcome and the notes take the room left
-            header.setSectionResizeMode(j, stretch if j in (3, len(cols) - 1) else fit)
+        header.setSectionResizeMode(QHeaderView.ResizeMode.ResizeToContents)
+        # The outcome is as wide as its header and its longest word, not its text (an abort's reason is elided; its
+        # tooltip has it), and the notes at least 16 letters wide, taking the room left: stretched, both were
+        # squeezed below their headers ("utcom") in a narrow window; now the table scrolls sideways instead.
+        em = header.fontMetrics().horizontalAdvance("M")
+        for j, width in ((3, max(header.fontMetrics().horizontalAdvance(w) for w in _OUTCOME_WORDS) + 3 * em),
+                         (len(cols) - 1, 16 * em)):
+            header.setSectionResizeMode(j, QHeaderView.ResizeMode.Interactive)
+            header.resizeSection(j, width)
+        header.setStretchLastSection(True)
 
     def _on_cleared(self) -> None:
         self.setRowCount(0)

@@ -1,7 +1,7 @@
 """Force discrimination through the product's normal path (issue 43): the loop renders a commanded force through
 its safety stage and replay reproduces it, the trial machine takes an answer (a key outside the task's refused in
 one line), each trial's Δ is chosen from the stored answers (a resumed block continues its procedure), ``run`` then
-``report`` give each participant's JND and Weber fraction, and a simulated 10-participant study through ``run``
+``report`` give each participant's JND and Weber fraction, and a simulated 6-participant study through ``run``
 recovers the true Weber fractions."""
 
 from __future__ import annotations
@@ -162,23 +162,27 @@ def test_a_bad_reference_is_refused_in_one_line_before_any_work(tmp_path: Path, 
 
 @pytest.mark.slow
 def test_a_simulated_study_through_run_recovers_the_weber_fractions(tmp_path: Path, capsys) -> None:
-    """The test that can fail, on the product's path: 10 simulated participants, 60 trials per reference, through
+    """The test that can fail, on the product's path: 6 simulated participants, 60 trials per reference, through
     ``run``; each one's true Weber fraction (its observer's, drawn from its seed) within its fitted 95 % interval
-    in at least 9 of 10 at each reference."""
+    in at least 5 of 6 at each reference (with intervals that cover, P(≥ 5 of 6) ≈ 0.97; with a fit whose
+    intervals cover 60 %, 0.23).  The issue's 10-participant study (≥ 9 of 10) is the discrimination command's test
+    (tests/protocol/test_force_discrimination.py, with the checks that the intervals are not merely wide) and the
+    closing notes' run; 6 here, not 10: the suite's time (this was its slowest test)."""
     db, out = tmp_path / "d.db", tmp_path / "rep"
-    # the example's block with shorter plateaus, gap and pauses: each trial 3.2 s of the virtual clock instead of
-    # 6.2 s (the suite's time), the task, the observer and the fit as they are
+    # the example's block with shorter plateaus, ramps, lead-in, gap and pauses: each trial about 2.9 s of the
+    # virtual clock instead of 6.2 s, the task, the observer and the fit as they are (the ramp still longer than the
+    # largest force over the slew limit, 0.76 / 50 = 0.015 s; the lead-in the safety stage's ramp-in, 0.5 s)
     fast = tmp_path / "fast.toml"
     fast.write_text(_retimed(EXAMPLE.read_text(encoding="utf-8"), stimulus_s="0.4", gap_s="0.4", pause_s="0.3",
-                             cue_s="0.3"), encoding="utf-8")
-    assert main(["run", "--protocol", str(fast), "--participants", "10", "--seed", "0", "--db", str(db)]) == 0
+                             cue_s="0.3", ramp_s="0.1", lead_in_s="0.5"), encoding="utf-8")
+    assert main(["run", "--protocol", str(fast), "--participants", "6", "--seed", "0", "--db", str(db)]) == 0
     assert main(["report", "--db", str(db), "--out", str(out)]) == 0
     fits = pd.read_csv(out / "discrimination_fits.csv")
-    true = {p: SimulatedParticipant(seed=participant_seeds(0, p)[1]).observer.weber for p in range(1, 11)}
+    true = {p: SimulatedParticipant(seed=participant_seeds(0, p)[1]).observer.weber for p in range(1, 7)}
     for label in ("GENTLE", "FIRM"):
         mine = fits[fits["target_label"] == label]
         inside = sum(lo <= true[p] <= hi for p, lo, hi in zip(mine["participant"], mine["weber_lo"], mine["weber_hi"],
                                                                 strict=True))
-        assert inside >= 9, (label, inside)
+        assert len(mine) == 6 and inside >= 5, (label, inside)
     with sqlite3.connect(db) as conn:
         assert conn.execute("SELECT count(*) FROM trial_answers WHERE answer IS NULL").fetchone()[0] == 0
