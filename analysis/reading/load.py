@@ -29,7 +29,7 @@ from protocol.runner.study_rules import DEVIATION_KINDS
 from protocol.storage import HEALTH_COLUMNS, Rows, StorageError, StudyReader
 from protocol.storage import connect_readonly as _connect_readonly
 from protocol.storage.damage import recording_damage
-from protocol.storage.database import part_of_protocol
+from protocol.storage.database import part_key
 from protocol.study.feedback import FEEDBACK_EVENT
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import Task, metrics_of
@@ -235,7 +235,7 @@ def _read_one(path: str, part: str | None = None) -> tuple[pd.DataFrame, pd.Data
         # schema version 4 records which code ran a session; earlier files do not (NULL)
         sessions = _query(db, db.session_table)
         if part is not None:  # one part of a study of several (protocol.study.parts): its sessions only
-            sessions = sessions[[part_of_protocol(pj) == part for pj in sessions["protocol_json"]]]
+            sessions = sessions[[part_key(pj) == part for pj in sessions["protocol_json"]]]
             sessions = sessions.reset_index(drop=True)
         read = [_protocol_fields(pj, f"{path}: session {sid}")
                 for sid, pj in zip(sessions["session_id"], sessions["protocol_json"], strict=True)]
@@ -324,7 +324,8 @@ def load_study(paths: Sequence[str | os.PathLike[str]], *, include_incomplete: b
         and trial carries its ``site``.  None: no sites (``site`` empty).
     part
         In a study of several parts (:mod:`protocol.study.parts`): read that part's sessions only (its task's
-        report, :mod:`analysis.report.plan_report`); None: every session.
+        report, :mod:`analysis.report.plan_report`; ``VISIT-PART`` in a study with visits,
+        :func:`protocol.storage.database.part_key`); None: every session.
 
     Returns
     -------

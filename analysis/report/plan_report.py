@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from analysis.report.learning_report import VisitPart, write_learning
 from protocol.storage import EmptyDatabase, StudyReader
 from protocol.study.parts import Counterbalance, PartPlace, stored_place
 from protocol.tasks.registry import stored_task
@@ -39,6 +40,13 @@ PARTS_COLUMNS = {
     "session_id": "the part's session in its database",
     "status": "the session's status (completed, aborted: ended early, running: interrupted)",
     "database": "the study database the session is in",
+}
+#: parts.csv's further columns in a study with a schedule of visits (:mod:`protocol.study.visits`).
+VISIT_COLUMNS = {
+    "visit": "the visit of the schedule the session belongs to (position and order are within the visit)",
+    "visit_number": "the visit's place in the schedule (1 = first)",
+    "visit_day": "the visit's planned day (days after the participant's first visit)",
+    "visit_role": "what the visit is for in the analysis: baseline, training, post, retention (empty: none)",
 }
 
 
@@ -72,15 +80,23 @@ def study_plan(databases: Sequence[str | os.PathLike[str]]) -> list[PlanEntry]:
                 task = stored_task(stored, f"{db}: session {info.session_id}").kind
                 out.append(PlanEntry(str(db), info.code, info.participant_number, place, task, info.session_id,
                                      info.status))
-    return sorted(out, key=lambda e: (e.database, e.number, e.place.position, e.session_id))
+    return sorted(out, key=lambda e: (e.database, e.number, e.place.visit.number if e.place.visit else 0,
+                                      e.place.position, e.session_id))
+
+
+def entry_key(e: PlanEntry) -> str:
+    """The report's name of an entry's part: ``VISIT-PART`` in a study with visits
+    (:func:`protocol.storage.database.part_key`), else the part's name."""
+    return f"{e.place.visit.name}-{e.place.name}" if e.place.visit is not None else e.place.name
 
 
 def _experiment_parts(plan: Sequence[PlanEntry]) -> list[tuple[str, str]]:
-    """The experiment parts (name, task kind) in the order of the first participant's plan that has each."""
+    """The experiment parts (name, task kind) in the order of the first participant's plan that has each (with
+    visits: each visit's part, ``VISIT-PART``)."""
     seen: dict[str, str] = {}
     for e in plan:
         if e.place.session == "experiment":
-            seen.setdefault(e.place.name, e.task)
+            seen.setdefault(entry_key(e), e.task)
     return list(seen.items())
 
 
@@ -128,15 +144,21 @@ def _orders_table(plan: Sequence[PlanEntry]) -> str:
 
 def parts_frame(plan: Sequence[PlanEntry]) -> pd.DataFrame:
     """``parts.csv``: a row per participant and part."""
+    visits = any(e.place.visit is not None for e in plan)
+    columns = list(PARTS_COLUMNS) + (list(VISIT_COLUMNS) if visits else [])
     return pd.DataFrame([{
         "participant_code": e.code, "participant_number": e.number, "part": e.place.name,
         "position": e.place.position, "session_kind": e.place.session, "task": e.task,
         "counterbalancing_row": e.place.row, "order": " > ".join(e.place.order), "session_id": e.session_id,
         "status": e.status, "database": e.database,
-    } for e in plan], columns=list(PARTS_COLUMNS))
+        **({"visit": e.place.visit.name, "visit_number": e.place.visit.number, "visit_day": e.place.visit.day,
+            "visit_role": e.place.visit.role} if e.place.visit is not None else {}),
+    } for e in plan], columns=columns)
 
 
-def _page(plan: Sequence[PlanEntry], parts: Sequence[tuple[str, str]], study_name: str) -> str:
+def _page(plan: Sequence[PlanEntry], parts: Sequence[tuple[str, str]], study_name: str, learning: bool = False) -> str:
+    visits = ('<h2>Learning over the visits</h2><p><a href="learning.html">Learning curves, the mixed model of session '
+              "number, gain and retention</a></p>" if learning else "")
     links = "".join(f'<li><a href="{html.escape(name)}/report.html">{html.escape(name)}</a> '
                     f"({html.escape(kind.replace('_', ' '))})</li>" for name, kind in parts)
     codebook = "".join(f"<tr><td>{c}</td><td>{html.escape(w)}</td></tr>" for c, w in PARTS_COLUMNS.items())
@@ -150,6 +172,7 @@ def _page(plan: Sequence[PlanEntry], parts: Sequence[tuple[str, str]], study_nam
 <p>{html.escape(plan_methods(plan))}</p>
 <p>{n} participants; the orders as run:</p>
 {_orders_table(plan)}
+{visits}
 <h2>Each part's report</h2>
 <ul>{links}</ul>
 <h2>parts.csv</h2>
@@ -160,19 +183,26 @@ def _page(plan: Sequence[PlanEntry], parts: Sequence[tuple[str, str]], study_nam
 
 
 def write_plan_report(folder: Path, databases: Sequence[str | os.PathLike[str]], plan: Sequence[PlanEntry],
-                      fill_part: Callable[[Path, str, str], list[str]]) -> list[str]:
+                      fill_part: Callable[[Path, str, str], tuple[list[str], pd.DataFrame | None]]) -> list[str]:
     """The plan's page and ``parts.csv`` into ``folder``, and each experiment part's report into ``folder/PART``
-    by ``fill_part(subfolder, part, task kind)``; the lines to print."""
+    by ``fill_part(subfolder, part, task kind)`` (its lines, and its per-participant table); in a study with visits
+    each visit's part is ``VISIT-PART``, and the learning page follows (:mod:`analysis.report.learning_report`);
+    the lines to print."""
     lines: list[str] = []
     parts = _experiment_parts(plan)
     with StudyReader(str(databases[0]), check=False) as reader:
         first = reader.sessions()[0]
     study_name = str(json.loads(first.protocol_json).get("name", "study"))
+    overall: dict[str, pd.DataFrame | None] = {}
     for name, kind in parts:
         sub = folder / name
         sub.mkdir()
-        lines.extend(f"{name}: {line}" for line in fill_part(sub, name, kind))
+        said, overall[name] = fill_part(sub, name, kind)
+        lines.extend(f"{name}: {line}" for line in said)
     parts_frame(plan).to_csv(folder / "parts.csv", index=False)
-    (folder / "report.html").write_text(_page(plan, parts, study_name), encoding="utf-8")
+    visits = [VisitPart(e.place.visit, entry_key(e), e.place.session, e.task) for e in plan]
+    learning = write_learning(folder, visits, overall) if any(v.visit is not None for v in visits) else []
+    lines.extend(learning)
+    (folder / "report.html").write_text(_page(plan, parts, study_name, bool(learning)), encoding="utf-8")
     return lines
 

@@ -108,6 +108,9 @@ class ReportSummary:
     conditions: tuple[str, ...] = ()
     #: What the tasks' sections say for the command line (:attr:`analysis.report.task_sections.SectionOutput.lines`).
     lines: tuple[str, ...] = ()
+    #: Each participant's value per haptic mode (participants.csv's table; None for a task without trial metrics):
+    #: a study with visits draws its learning curves from each visit's (:mod:`analysis.report.learning_report`).
+    overall: pd.DataFrame | None = None
 
 
 def _example_trials(trials: pd.DataFrame) -> list[pd.Series]:
@@ -520,4 +523,4 @@ def fill_report(folder: Path, databases: Sequence[str | os.PathLike[str]], *, pa
     _write(folder, a=a, databases=databases, options=options, zero_method=zero_method, confidence=confidence,
            power=False, workers=workers, results=results, outputs=outputs)
     return ReportSummary(folder, a.n_participants, len(a.trials), n_samples, a.excluded, results["stats.csv"], [],
-                         a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs))
+                         a.study.damage, tuple(condition_warnings(a.study)), _lines(outputs), a.overall)

@@ -93,6 +93,7 @@ from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
+from pipeline.sim.learning import Practice, practised
 from pipeline.sim.participant_params import ParticipantParams
 from pipeline.sim.tissue import TissueParams
 from pipeline.sim.tracking_hand import TrackingHand
@@ -147,6 +148,9 @@ class SimulatedParticipant:
     profile
         ``novice`` (the calibrated participant) or ``experienced`` (the same draws, its OFF handicaps reduced as
         :mod:`pipeline.sim.experience` documents).
+    practice
+        Where in a schedule of visits the session is (:mod:`pipeline.sim.learning`): from the second visit on, the
+        participant has learned by the documented rule; None (or the first visit): the calibrated participant.
     """
 
     def __init__(
@@ -160,6 +164,7 @@ class SimulatedParticipant:
         f_max_n: float = 3.0,
         f_scale_n: float = 7.0,
         profile: str = "novice",
+        practice: Practice | None = None,
     ) -> None:
         if not (math.isfinite(motion_scale) and motion_scale > 0):
             raise ValueError(f"motion_scale = {motion_scale!r}: must be a finite number > 0")
@@ -167,8 +172,10 @@ class SimulatedParticipant:
             raise ValueError(f"seed = {seed!r}: must be a whole number ≥ 0")
         self.seed = int(seed)
         self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(0,)))
-        self.params = with_profile(params if params is not None else ParticipantParams.draw(self._rng), profile)
+        self.params = practised(with_profile(params if params is not None else ParticipantParams.draw(self._rng),
+                                             profile), practice)
         self.profile = profile
+        self._stream = practice.stream() if practice is not None else ()  # a later visit's trials: its own noise
         self._n_trials = 0
         self._n_practice = 0
         tp = tissue or TissueParams()
@@ -403,7 +410,7 @@ class SimulatedParticipant:
         else:
             self._n_trials += 1
             key = (1, self._n_trials)
-        rng = self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
+        rng = self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key + self._stream))
         self._z = []
         self._zi = 0
         self._cue_t = t
@@ -442,7 +449,7 @@ class SimulatedParticipant:
         else:
             self._n_trials += 1
             key = (1, self._n_trials)
-        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key))
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key + self._stream))
         self._cue_t, self._haptic, self._gauge = t, aim.haptic_on, aim.gauge
         self._stage, self._next = _CONTROL, math.inf
         self._tracking = TrackingHand(aim, self.params, rng, t, self._plan_value(t), stiffness=self._k,

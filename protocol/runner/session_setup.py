@@ -25,7 +25,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -186,6 +186,7 @@ def open_new_session(
     db: StudyDatabase, *, code: str, number: int, kind: str, protocol: ProtocolConfig, seed: int, rig: str,
     config: dict[str, Any], calibration: dict[str, Any] | None, lease_owner: str, study_owner: str | None = None,
     note: str = "", training_override: str = "", covariates: Mapping[str, Any] | None = None,
+    events: Sequence[tuple[str, str]] = (),
 ) -> OpenedSession:
     """Store a new session (whole schedule, provenance) and take its lease, before its first trial.
 
@@ -213,6 +214,9 @@ def open_new_session(
     covariates
         Who the participant is (by name; text or typed), as the protocol's ``[[covariates]]`` declare: checked
         before anything is stored, and stored with a participant this session registers.
+    events
+        Events ``(kind, detail)`` stored with the session at session time 0, in the transaction that stores it (a
+        visit's day, a visit's deviation: :mod:`study_app.headless.plan_visits`).
 
     Raises
     ------
@@ -238,7 +242,7 @@ def open_new_session(
         # what it read cannot change before the session is stored
         deviation = check_new_session(stored_sessions(locked), code=code, kind=kind, seed=seed, protocol=protocol,
                                       training_override=training_override)
-        return [(DEVIATION_EVENT, deviation)] if deviation else []
+        return [*([(DEVIATION_EVENT, deviation)] if deviation else []), *events]
 
     described = checked_values(protocol.covariates, covariates or {})  # before anything is stored
     code_ran = software_provenance()  # which code runs the session: version, commit, uncommitted changes

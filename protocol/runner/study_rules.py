@@ -71,18 +71,20 @@ class StoredSession:
     seed: int
     #: The study part it is ("" in a study of one task: :attr:`protocol.storage.SessionInfo.part`).
     part: str = ""
+    #: The visit of a schedule it belongs to ("" in a study without visits: :attr:`protocol.storage.SessionInfo.visit`).
+    visit: str = ""
 
     @classmethod
     def of(cls, d: dict[str, Any]) -> StoredSession:
-        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows; ``part``
-        optional)."""
+        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows; ``part`` and
+        ``visit`` optional)."""
         return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]),
-                   str(d.get("part", "")))
+                   str(d.get("part", "")), str(d.get("visit", "")))
 
 
 def stored_sessions(db: StudyDatabase) -> list[StoredSession]:
     """Every session of the database, oldest first."""
-    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed), s.part)
+    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed), s.part, s.visit)
             for s in StudyReader.over(db).sessions()]
 
 
@@ -160,11 +162,13 @@ def part_states(sessions: Sequence[StoredSession], code: str,
                 parts: Sequence[ProtocolConfig]) -> list[tuple[ProtocolConfig, str, StoredSession | None]]:
     """Where a participant is in their plan (``parts``: :meth:`ProtocolConfig.plan_for`, in their order): each part
     with its state -- ``completed``, ``interrupted`` (resumable), ``ended`` (ended early: not run again) or ``to do``
-    -- and its session (the newest of that part)."""
+    -- and its session (the newest of that part, in its visit where the study has visits)."""
     out: list[tuple[ProtocolConfig, str, StoredSession | None]] = []
     for p in parts:
         assert p.part is not None
-        mine = [s for s in sessions if s.code == code and s.part == p.part.name and s.kind == p.part.session]
+        visit = p.part.visit.name if p.part.visit is not None else ""
+        mine = [s for s in sessions if s.code == code and s.part == p.part.name and s.kind == p.part.session
+                and s.visit == visit]
         s = mine[-1] if mine else None
         state = "to do" if s is None else {"completed": "completed", "running": "interrupted"}.get(s.status, "ended")
         out.append((p, state, s))

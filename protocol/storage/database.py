@@ -74,15 +74,30 @@ class SessionInfo:
         """The study part (task block) the session is (:mod:`protocol.study.parts`), "" for a single-task study's."""
         return part_of_protocol(self.protocol_json)
 
+    @property
+    def visit(self) -> str:
+        """The visit of a schedule the session belongs to (:mod:`protocol.study.visits`), "" in a study without."""
+        return part_of_protocol(self.protocol_json, "visit")
 
-def part_of_protocol(protocol_json: str) -> str:
-    """The part name a stored protocol names (its ``part`` table, :mod:`protocol.study.parts`); "" when none."""
+
+def part_of_protocol(protocol_json: str, what: str = "part") -> str:
+    """The part name a stored protocol names (its ``part`` table, :mod:`protocol.study.parts`); "" when none.
+    ``what = "visit"``: the name of the visit it stores beside the part (``part.visit``)."""
     try:
         part = json.loads(protocol_json).get("part")
     except (TypeError, ValueError, AttributeError):
         return ""
+    if what == "visit":
+        part = part.get("visit") if isinstance(part, dict) else None
     name = part.get("name") if isinstance(part, dict) else None
     return name if isinstance(name, str) else ""
+
+
+def part_key(protocol_json: str) -> str:
+    """The stored session's part as its report names it: ``VISIT-PART`` in a study with a schedule of visits (a part
+    recurs across visits), else the part's name ("" for a single-task study's session)."""
+    part, visit = part_of_protocol(protocol_json), part_of_protocol(protocol_json, "visit")
+    return f"{visit}-{part}" if visit else part
 
 
 class StudyDatabase(SchemaFile, LeaseHolder):
@@ -251,7 +266,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
             If another live process runs the whole study (a headless ``run``).
         """
         with self.transaction():
-            self._refuse_new_session(code, kind, part_of_protocol(protocol_json))
+            self._refuse_new_session(code, kind, part_of_protocol(protocol_json),
+                                     part_of_protocol(protocol_json, "visit"))
             if lease_owner is not None:
                 self._refuse_if_study_held(study_owner or lease_owner)
             extra_events = rules(self) if rules is not None else ()
@@ -279,17 +295,18 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 self.insert_event(session_id, 0.0, event_kind, detail)
         return session_id
 
-    def _refuse_new_session(self, code: str, kind: str, part: str = "") -> None:
+    def _refuse_new_session(self, code: str, kind: str, part: str = "", visit: str = "") -> None:
         """Refuse (one :class:`StorageError` line) a new session of ``kind`` for ``code``: a code that reads as
         another's, a participant who withdrew, or one who has a session of this kind (running, interrupted or ended)
-        -- of this ``part`` of a study of several (:attr:`SessionInfo.part`: one session per part)."""
+        -- of this ``part`` of a study of several (:attr:`SessionInfo.part`: one session per part), in this
+        ``visit`` of a schedule (:attr:`SessionInfo.visit`: one session per visit and part)."""
         stored_clash(self.conn, validate_code(code), str(self.path))  # p01 beside P01 is refused, named
         gone = withdrawal_of(self.conn, code)
         if gone is not None:
             raise StorageError(f"participant {code} withdrew from the study in {self.path} "
                                f"({gone.withdrawn_at[:16].replace('T', ' ')} UTC) and their data were erased; "
                                "a withdrawn code is not used again (give a new participant code)")
-        existing = [s for s in self.sessions_of(code, kind) if s.part == part]
+        existing = [s for s in self.sessions_of(code, kind) if s.part == part and s.visit == visit]
         if existing:
             s = existing[-1]
             writer = self.sessions_being_written().get(s.session_id) if s.status == "running" else None
@@ -302,7 +319,8 @@ class StudyDatabase(SchemaFile, LeaseHolder):
                 hint = "use a new participant code"
             raise StorageError(
                 f"participant {code} already has a{'n' if kind == 'experiment' else ''} {kind} session "
-                f"{f'of part {part!r} ' if part else ''}(session {s.session_id}, status {s.status}) in {self.path}; "
+                f"{f'of part {part!r} ' if part else ''}"
+                f"{f'in visit {visit!r} ' if visit else ''}(session {s.session_id}, status {s.status}) in {self.path}; "
                 f"{hint}"
             )
 

@@ -32,6 +32,7 @@ from protocol.study.parts import (
     place_from_table,
 )
 from protocol.study.questionnaires import Questionnaire, questionnaires_from_tables
+from protocol.study.visits import Visit, VisitPlace, visits_from_tables
 from protocol.tasks.base import Task, Timing
 from protocol.tasks.force_regulation import ForceRegulation
 from protocol.tasks.registry import named, task_tables
@@ -140,30 +141,43 @@ class ProtocolConfig:
     counterbalance: Counterbalance | None = None
     #: Which part of a study this protocol is (a part's protocol, as a session of it stores it); None otherwise.
     part: PartPlace | None = None
+    #: The schedule of visits above the parts (:mod:`protocol.study.visits`; the file's ``[[visits]]``): () for a
+    #: study done in one visit.
+    visits: tuple[Visit, ...] = ()
 
     def plan_for(self, number: int, seed: int) -> tuple[ProtocolConfig, ...]:
         """Participant ``number``'s parts in their order (:func:`protocol.study.parts.order_of`), each with its
-        place set; () for a study of one task."""
+        place set; () for a study of one task.  With ``[[visits]]``: every visit's parts, visit after visit, each
+        with its visit and its place in the visit's order (counterbalanced within the visit)."""
         if not self.parts:
             return ()
         by_name = {p.part.name: p for p in self.parts if p.part is not None}
-        order, row = order_of(tuple(by_name), self.counterbalance, seed, number)
-        training = {n for n, p in by_name.items() if p.part is not None and p.part.session == "training"}
-        out = []
-        for position, name in enumerate(order, start=1):
-            part = by_name[name]
-            assert part.part is not None
-            trained_by = tuple(n for n in order[:position - 1] if n in training)
-            out.append(replace(part, part=replace(part.part, position=position, order=order, row=row,
-                                                  trained_by=trained_by, balance=self.counterbalance)))
+        if not self.visits:
+            return _placed(self, tuple(by_name), by_name, number, seed, None, ())
+        out: list[ProtocolConfig] = []
+        for i, v in enumerate(self.visits, start=1):
+            trained = tuple(dict.fromkeys(p.part.name for p in out if p.part is not None
+                                          and p.part.session == "training"))
+            out.extend(_placed(self, v.parts, by_name, number, seed,
+                               VisitPlace(v.name, i, v.day, v.window_days, v.role,
+                                          v.day - self.visits[i - 2].day if i > 1 else 0), trained))
         return tuple(out)
 
-    def part_of(self, name: str, number: int, seed: int) -> ProtocolConfig:
-        """Participant ``number``'s part ``name`` (:meth:`plan_for`; :class:`KeyError` naming the parts)."""
+    def part_of(self, name: str, number: int, seed: int, visit: str = "") -> ProtocolConfig:
+        """Participant ``number``'s part ``name`` (of the visit ``visit`` in a study of visits: :meth:`plan_for`;
+        :class:`KeyError` naming the parts, or the visits)."""
+        if self.visits and visit not in self.visit_names:
+            raise KeyError(f"no visit {visit!r}: the visits are {', '.join(self.visit_names)}")
         for p in self.plan_for(number, seed):
-            if p.part is not None and p.part.name == name:
+            if p.part is not None and p.part.name == name and (p.part.visit is None or p.part.visit.name == visit):
                 return p
-        raise KeyError(f"no part {name!r}: the parts are {', '.join(self.part_names)}")
+        where = f" in visit {visit!r}" if visit else ""
+        raise KeyError(f"no part {name!r}{where}: the parts are {', '.join(self.part_names)}")
+
+    @property
+    def visit_names(self) -> tuple[str, ...]:
+        """The visits' names in the schedule's order (() for a study without ``[[visits]]``)."""
+        return tuple(v.name for v in self.visits)
 
     @property
     def part_names(self) -> tuple[str, ...]:
@@ -238,6 +252,7 @@ class ProtocolConfig:
             **({"lsl": lsl} if (lsl := self.lsl.to_dict()) is not None else {}),
             **({"parts": [_part_dict(p) for p in self.parts]} if self.parts else {}),
             **({"counterbalance": self.counterbalance.to_dict()} if self.counterbalance is not None else {}),
+            **({"visits": [v.to_dict() for v in self.visits]} if self.visits else {}),
             **({"part": self.part.to_dict()} if self.part is not None else {}),
             **({"feedback": fb} if (fb := self.feedback.to_dict()) is not None else {}),
         }
@@ -245,6 +260,28 @@ class ProtocolConfig:
     def to_json(self) -> str:
         """Canonical JSON of :meth:`to_dict`."""
         return json.dumps(self.to_dict(), sort_keys=True)
+
+
+def _placed(study: ProtocolConfig, names: tuple[str, ...], by_name: dict[str, ProtocolConfig], number: int,
+            seed: int, visit: VisitPlace | None, trained: tuple[str, ...]) -> tuple[ProtocolConfig, ...]:
+    """The parts ``names`` (file order) in participant ``number``'s order, each with its place (in ``visit``), and
+    the training parts before it (``trained``: those done in earlier visits)."""
+    balance = study.counterbalance
+    if visit is not None and balance is not None:  # the visit's counterbalanced parts in the row's order among them
+        full, row = order_of(balance.parts, balance, seed, number)
+        mine = iter(n for n in full if n in names)
+        order = tuple(next(mine) if n in balance.parts else n for n in names)
+    else:
+        order, row = order_of(names, balance, seed, number)
+    training = {n for n, p in by_name.items() if p.part is not None and p.part.session == "training"}
+    out = []
+    for position, name in enumerate(order, start=1):
+        part = by_name[name]
+        assert part.part is not None
+        trained_by = tuple(dict.fromkeys(trained + tuple(n for n in order[:position - 1] if n in training)))
+        out.append(replace(part, part=replace(part.part, position=position, order=order, row=row,
+                                              trained_by=trained_by, balance=study.counterbalance, visit=visit)))
+    return tuple(out)
 
 
 def _part_dict(part: ProtocolConfig) -> dict[str, Any]:
@@ -271,7 +308,8 @@ def protocol_from_dict(d: Any, source: str = "protocol") -> ProtocolConfig:
     """
     f = Fields(source, ProtocolError)
     top = f.table("", d, {"name", "version", "targets", "design", "trial", "training", "task", "covariates",
-                          "questionnaires", "groups", "lsl", "feedback", "parts", "counterbalance", "part"})
+                          "questionnaires", "groups", "lsl", "feedback", "parts", "counterbalance", "part",
+                          "visits"})
     name = f.string("name", top.get("name", "unnamed protocol"))
     f.version(top, "protocol")
 
@@ -348,7 +386,8 @@ def _plan(f: Fields, top: dict[str, Any]) -> dict[str, Any]:
                                 "no trials (set [parts.training] enabled = true, or make it an experiment part)")
         parts.append(replace(p, part=PartPlace(t.name, t.session)))
     balance = counterbalance_from_table(f, top, [p.part.name for p in parts if p.part is not None])
-    return {"parts": tuple(parts), "counterbalance": balance, "part": place_from_table(f, top)}
+    visits = visits_from_tables(f, top.get("visits"), {p.part.name: p.part.session for p in parts if p.part})
+    return {"parts": tuple(parts), "counterbalance": balance, "part": place_from_table(f, top), "visits": visits}
 
 
 def _training_required(f: Fields, trn: dict[str, Any]) -> bool:

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.settings.tomlfields import Fields
+from protocol.study.visits import VisitPlace, visit_place_from_table
 from protocol.tasks.registry import DEFAULT_KIND, task_class
 
 __all__ = ["COUNTERBALANCE_METHODS", "PART_KINDS", "Counterbalance", "PartPlace", "PartTables", "balanced_rows",
@@ -61,7 +62,7 @@ COUNTERBALANCE_METHODS = ("latin_square", "rotation")
 #: A part's own tables (the rest of the study's file is every part's).
 _PART_KEYS = frozenset({"name", "session", "task", "targets", "design", "trial", "training"})
 #: The study-level tables a part's protocol does not take from the file's top level.
-_PLAN_KEYS = frozenset({"parts", "counterbalance", "part"})
+_PLAN_KEYS = frozenset({"parts", "counterbalance", "part", "visits"})
 _NAME = re.compile(r"^[a-z][a-z0-9_]{0,23}\Z")
 _NAME_WHAT = "a lower-case word of 1–24 letters/digits/_ beginning with a letter (e.g. tracking)"
 #: At most this many parts in a study (a participant's day, not an open list).
@@ -92,6 +93,9 @@ class PartPlace:
     balance
         The study's ``[counterbalance]`` the order was dealt by (None: the file's order), so a session's record
         says how its place was chosen (the report's methods).
+    visit
+        The visit of the schedule this session of the part belongs to (:mod:`protocol.study.visits`; None in a
+        study without ``[[visits]]``); ``position`` and ``order`` are then the part's within that visit.
     """
 
     name: str
@@ -101,12 +105,14 @@ class PartPlace:
     row: int = 0
     trained_by: tuple[str, ...] = ()
     balance: Counterbalance | None = None
+    visit: VisitPlace | None = None
 
     def to_dict(self) -> dict[str, Any]:
         """The ``part`` table as stored with a session's protocol."""
         return {"name": self.name, "session": self.session, "position": self.position, "order": list(self.order),
                 "row": self.row, "trained_by": list(self.trained_by),
-                **({"counterbalance": self.balance.to_dict()} if self.balance is not None else {})}
+                **({"counterbalance": self.balance.to_dict()} if self.balance is not None else {}),
+                **({"visit": self.visit.to_dict()} if self.visit is not None else {})}
 
     def before(self) -> tuple[str, ...]:
         """The parts the participant does before this one."""
@@ -259,7 +265,8 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
     """A stored session's ``part`` table (None when it has none: a single-task study's session)."""
     if "part" not in top:
         return None
-    t = f.table("part", top["part"], {"name", "session", "position", "order", "row", "trained_by", "counterbalance"})
+    t = f.table("part", top["part"], {"name", "session", "position", "order", "row", "trained_by", "counterbalance",
+                                      "visit"})
     name = f.string("part.name", t.get("name"), pattern=_NAME, what=_NAME_WHAT)
     names = {}
     for key in ("order", "trained_by"):
@@ -270,4 +277,13 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
                      position=f.integer("part.position", t.get("position", 0), lo=0, hi=MAX_PARTS),
                      order=tuple(names["order"]), row=f.integer("part.row", t.get("row", 0), lo=0, hi=2 * MAX_PARTS),
                      trained_by=tuple(names["trained_by"]),
-                     balance=counterbalance_from_table(f, t, names["order"]) if "counterbalance" in t else None)
+                     balance=counterbalance_from_table(f, t, _balanced_names(t, names["order"]))
+                     if "counterbalance" in t else None,
+                     visit=visit_place_from_table(f, t["visit"]) if "visit" in t else None)
+
+
+def _balanced_names(t: Mapping[str, Any], order: list[str]) -> list[str]:
+    """The parts a stored ``part.counterbalance`` may name: the participant's order, and in a visit (which holds
+    some of the study's parts, :mod:`protocol.study.visits`) the group's own parts too."""
+    group = t["counterbalance"].get("parts", []) if "visit" in t and isinstance(t["counterbalance"], dict) else []
+    return [*order, *(n for n in group if isinstance(n, str) and n not in order)]

@@ -6,7 +6,7 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 from foundation.errors import InputRefused
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
@@ -196,13 +196,13 @@ def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
         raise CliError("--power and --site are for a study of one task; this study has parts: report it without "
                        "them (each part's report is its own folder)")
 
-    def fill_part(folder: Path, name: str, kind: str) -> list[str]:
+    def fill_part(folder: Path, name: str, kind: str) -> tuple[list[str], Any]:
         # the part's sessions only: its task's core and section (analysis/report/section_KIND.py), one task
         s = fill_report(folder, args.db, part=name, options=MetricOptions(args.error_window, args.tct),
                         zero_method=args.zero_method, confidence=args.confidence,
                         include_incomplete=args.include_incomplete)
         return [f"{kind.replace('_', ' ')}: {plural(s.n_participants, 'participant')}, "
-                f"{plural(s.n_trials, 'trial')}", *s.lines]
+                f"{plural(s.n_trials, 'trial')}", *s.lines], s.overall
 
     lines: list[str] = []
     try:
@@ -213,6 +213,8 @@ def _plan_report(args: argparse.Namespace, plan: Sequence[PlanEntry]) -> int:
         raise CliError(str(exc), getattr(exc, "status", 2)) from None
     for line in lines:
         print(line)
+    if "learning.html" in files:
+        print(f"Learning over visits: {args.out}/learning.html (learning.csv, retention.csv, learning_curve.png)")
     print(f"Report {args.out}/report.html (the plan) with a report per part: "
           + ", ".join(f for f in files if f.endswith("report.html")))
     return 0

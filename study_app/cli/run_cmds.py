@@ -99,7 +99,35 @@ def add_run_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--lsl", action="store_true",
                    help="publish every session's force streams and trial markers on the Lab Streaming Layer (as the "
                         "protocol's [lsl] outlets = true; needs --clock real and pylsl: docs/lsl.md)")
+    r.add_argument("--visit", default=None, metavar="NAME",
+                   help="in a protocol with [[visits]]: run only this visit of each participant's schedule, "
+                        "continuing the study in --db (a lab's participants come back one visit at a time); "
+                        "default: every visit left, each on its planned day (docs/study-design.md)")
+    r.add_argument("--day", type=whole_number("--day", 0, 1100), default=None, metavar="N",
+                   help="with --visit: the study day the visit is held on (days after the participant's first "
+                        "visit; default: today's, from the first visit's date)")
+    r.add_argument("--deviation", default="", metavar="REASON",
+                   help="with --visit: run a visit out of order or outside its window anyway, for this reason "
+                        "(stored as a deviation of the visit, listed in the report)")
     r.set_defaults(handler=cmd_run)
+
+
+def _visit_request(args: argparse.Namespace) -> Any:
+    """``--visit``/``--day``/``--deviation`` as the headless run's request (None: the whole schedule)."""
+    from study_app.headless.plan_visits import VisitRequest
+
+    if args.visit is None:
+        for given, name in ((args.day is not None, "--day"), (bool(args.deviation), "--deviation")):
+            if given:
+                raise CliError(f"{name} is given without --visit: it applies to one visit run at a time")
+        return None
+    if args.resume is not None or args.continue_study:
+        raise CliError(f"--visit {args.visit} with {'--resume' if args.resume else '--continue'}: --visit runs "
+                       "(and continues) that visit alone; give one of them")
+    if args.inject_fault or args.scheduler:
+        raise CliError(f"--visit {args.visit} with {'--inject-fault' if args.inject_fault else '--scheduler'}: "
+                       "that is for a whole study's run; run the visit without it")
+    return VisitRequest(args.visit, args.day, args.deviation)
 
 
 def _covariate(text: str) -> tuple[str, str]:
@@ -159,10 +187,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     from protocol.storage import StorageError
     from protocol.study.config import ProtocolError, load_protocol
     from study_app.cli.progress import ProgressBar
-    from study_app.headless import SessionInterrupted, StudyWorkerError, resume_session, run_study
+    from study_app.headless import SessionInterrupted, StudyWorkerError
     from study_app.headless.fanout import ClusterError
 
     _check_resume_options(args)
+    visit = _visit_request(args)
     framework = framework_of(args.settings)
     address = _scheduler_of(args)
     _refuse_a_full_disk(args.db)
@@ -188,15 +217,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
         client = _connect(address)
         t0 = _time.perf_counter()
-        if args.resume is not None:
-            progress = resume_session(args.db, args.resume, clock=args.clock, on_progress=show,
-                                      faults=args.inject_fault, framework=framework)
-        else:
-            progress = run_study(
-                args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
-                on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
-                sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client,
-            )
+        progress = _run(args, protocol if args.resume is None else None, framework, show, client, visit)
         wall = _time.perf_counter() - t0
         if bar is not None:
             bar.close()
@@ -233,6 +254,23 @@ def cmd_run(args: argparse.Namespace) -> int:
     for line in progress.rehearsals:
         print(f"Fault rehearsal {line}")
     return 0
+
+
+def _run(args: argparse.Namespace, protocol: Any, framework: Any, show: Any, client: Any, visit: Any) -> Any:
+    """The run ``cmd_run`` asked for: a resume, one visit of a schedule, or a study (new or continued)."""
+    from study_app.headless import resume_session, run_study
+    from study_app.headless.study import run_visit
+
+    if args.resume is not None:
+        return resume_session(args.db, args.resume, clock=args.clock, on_progress=show, faults=args.inject_fault,
+                              framework=framework)
+    if visit is not None:
+        return run_visit(args.db, visit, participants=args.participants, seed=args.seed, protocol=protocol,
+                         clock=args.clock, on_progress=show, jobs=args.jobs, sim_arms=args.sim_arms,
+                         framework=framework, covariates=dict(args.covariates))
+    return run_study(args.db, participants=args.participants, seed=args.seed, protocol=protocol, clock=args.clock,
+                     on_progress=show, jobs=args.jobs, continue_study=args.continue_study, faults=args.inject_fault,
+                     sim_arms=args.sim_arms, framework=framework, covariates=dict(args.covariates), client=client)
 
 
 def _check_resume_options(args: argparse.Namespace) -> None:

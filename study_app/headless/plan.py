@@ -35,6 +35,7 @@ from protocol.storage.withdrawal import withdrawals
 from protocol.study.config import ProtocolConfig, protocol_from_dict
 from protocol.study.design import schedule_from_json
 from study_app.headless.plan_parts import part_steps, parts_left
+from study_app.headless.plan_visits import VisitRequest
 
 __all__ = [
     "Step", "all_steps", "check_fault_plans", "check_settings", "interrupted_session_of", "open_notes", "peek",
@@ -61,6 +62,7 @@ Step = tuple[str, Any]
 
 def _plan_continue(
     db: StudyDatabase, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
+    visit: VisitRequest | None = None,
 ) -> tuple[dict[int, list[Step]], int, list[int]]:
     """What is left of a study: steps per participant, trials they run, and the finished sessions kept.
 
@@ -92,7 +94,8 @@ def _plan_continue(
                     f"another protocol; nothing was changed (give the --protocol the study was started with)"
                 )
         if protocol.parts:  # a study of several parts: one session each, in the participant's order
-            part_steps_left, left, kept_here = parts_left(db, db_path, protocol, n, seed, stored, remaining_trials)
+            part_steps_left, left, kept_here = parts_left(db, db_path, protocol, n, seed, stored, remaining_trials,
+                                                          visit)
             kept.extend(kept_here)
             trials += left
             if part_steps_left:
@@ -178,14 +181,21 @@ def peek(db_path: str) -> StudyDatabase | None:
 def plan_study(
     db: StudyDatabase | None, db_path: str, participants: int, seed: int, protocol: ProtocolConfig,
     continue_study: bool, framework: FrameworkConfig | None = None, arms: Sequence[str] = (SINGLE_ARM_NAME,),
+    visit: VisitRequest | None = None,
 ) -> tuple[dict[int, list[Step]], int, list[int]]:
     """What a ``run`` will do: steps per participant, trials, finished sessions kept; refusals as :class:`StorageError`.
 
     ``db`` None: a new database.  A read-only ``db`` is closed afterwards.  ``framework`` (default: the paper's)
     must be the pipeline configuration every stored session of the study ran with (:func:`check_settings`), and
-    ``arms`` (the task arm first) the rig's arms they ran on (:func:`check_arms`).
+    ``arms`` (the task arm first) the rig's arms they ran on (:func:`check_arms`).  ``visit`` (``run --visit``):
+    only that visit of a schedule, continuing the study in ``db`` (:mod:`study_app.headless.plan_visits`).
     """
     try:
+        if visit is not None and db is not None:
+            planned = _plan_continue(db, db_path, participants, seed, protocol, visit)
+            _check_seed(db, db_path, seed)
+            _check_rig(db, db_path, framework, arms)
+            return planned
         if continue_study:
             if db is None and not os.path.exists(db_path):
                 raise StorageError(f"cannot continue a study: no study in {db_path}")
@@ -207,7 +217,7 @@ def plan_study(
             _check_seed(db, db_path, seed)
             _check_rig(db, db_path, framework, arms)
         if protocol.parts:
-            per_part = {n: part_steps(protocol, n, seed) for n in range(1, participants + 1)}
+            per_part = {n: part_steps(protocol, n, seed, visit) for n in range(1, participants + 1)}
             return {n: steps for n, (steps, _) in per_part.items()}, sum(t for _, t in per_part.values()), []
         plan = {n: all_steps(protocol) for n in range(1, participants + 1)}
         per = protocol.trials_per_participant + (len(training_schedule(protocol)) if protocol.training.enabled else 0)

@@ -22,6 +22,7 @@ from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.devices.rig import SINGLE_ARM_NAME
 from pipeline.force.framework import FrameworkConfig
 from pipeline.sim.faults import latch_delay_s
+from pipeline.sim.learning import Practice
 from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.rehearsal import FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
@@ -97,8 +98,9 @@ class StudyProgress:
 
 def planned_study_time_s(protocol: ProtocolConfig, participants: int) -> float:
     """Upper bound of simulated time (every trial to its cap, plus pauses) for the progress bar."""
-    if protocol.parts:  # each part as a study of its own kind (its training part: the training alone)
-        return sum(_part_time_s(p) for p in protocol.parts) * participants
+    if protocol.parts:  # each part as a study of its own kind (its training part: the training alone), per visit
+        parts = protocol.plan_for(1, 0) if protocol.visits else protocol.parts
+        return sum(_part_time_s(p) for p in parts) * participants
     tr = protocol.trial
     per = protocol.trials_per_participant * (tr.max_trial_s + tr.pause_s)
     if protocol.training.enabled:
@@ -197,6 +199,7 @@ def run_session(
     short_transactions: bool = False, resume_id: int | None = None, lease_owner: str, study_owner: str | None = None,
     faults: Sequence[FaultPlan] = (), sim_arms: Sequence[str] = (SINGLE_ARM_NAME,),
     framework: FrameworkConfig | None = None, covariates: Mapping[str, str] | None = None,
+    events: Sequence[tuple[str, str]] = (),
 ) -> int:
     """Run one session to its end on a fresh simulated rig with ``sim_arms``: a new one of ``kind``, or the
     interrupted ``resume_id`` (on the arms it ran on).
@@ -205,7 +208,8 @@ def run_session(
     The simulated participant is described by the protocol's covariates as its rule draws them
     (:func:`protocol.study.groups.simulated_covariates`: a grouping covariate placed in turn), ``covariates`` (text
     by name) given instead where named; its group (``[groups]``) decides its profile (:mod:`pipeline.sim.experience`),
-    and answers the questionnaires by its rule (:mod:`protocol.study.sim_answers`).
+    and answers the questionnaires by its rule (:mod:`protocol.study.sim_answers`).  ``events`` are stored with a
+    new session (a visit's day and deviation, :mod:`study_app.headless.plan_visits`).
     """
     fw = framework or FrameworkConfig()
     rig_seed, p_seed = participant_seeds(study_seed, number)
@@ -220,7 +224,7 @@ def run_session(
             db, code=code, number=number, kind=kind, protocol=protocol, seed=study_seed, rig="sim",
             config=with_profile(config_record(eng, clock, rig_seed, p_seed), protocol.groups, given),
             calibration=eng.calibration.to_dict(), lease_owner=lease_owner, study_owner=study_owner,
-            covariates=given,
+            covariates=given, events=events,
         )
     else:
         info = next(s for s in db.sessions_of(code) if s.session_id == resume_id)
@@ -232,7 +236,8 @@ def run_session(
     # the participant's group, as stored, decides the simulated profile (:mod:`protocol.study.groups`)
     stored = covariates_by_code(db.conn).get(opened.code, {})
     participant = SimulatedParticipant(seed=opened.participant_seed,
-                                       profile=simulated_profile(opened.protocol.groups, stored))
+                                       profile=simulated_profile(opened.protocol.groups, stored),
+                                       practice=practice_of(opened.protocol))
     eng.rig.set_driver(participant)
     progress.sessions.append(opened.session_id)
     progress.kind = opened.kind
@@ -258,6 +263,14 @@ def run_session(
     if runner.stop_reason:
         raise SessionInterrupted(f"{opened.code}'s {opened.kind} session {opened.session_id}: {runner.stop_reason}")
     return opened.session_id
+
+
+def practice_of(protocol: ProtocolConfig) -> Practice | None:
+    """Where in a schedule of visits a session is, for the simulated participant's learning
+    (:mod:`pipeline.sim.learning`): its stored visit's number and planned days since the previous visit (so a
+    resumed session meets the same participant); None in a study without visits."""
+    visit = protocol.part.visit if protocol.part is not None else None
+    return None if visit is None else Practice(visit.number, visit.gap_days)
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:
@@ -329,12 +342,17 @@ def run_steps(
     code = participant_code(number)
     for what, arg in steps:
         kind, run_protocol = (arg if what == "new" else None), protocol
+        events: tuple[tuple[str, str], ...] = ()
         if what == "part":  # a study of several parts: this participant's part, its place in their order
             run_protocol = protocol.part_of(arg, number, seed)
+            assert run_protocol.part is not None
+            kind = run_protocol.part.session
+        elif what == "visit":  # a part in a visit of a schedule (plan_visits.VisitStep), with its visit's events
+            run_protocol, events = protocol.part_of(arg.part, number, seed, arg.visit), arg.events
             assert run_protocol.part is not None
             kind = run_protocol.part.session
         run_session(db, code=code, number=number, kind=kind, protocol=run_protocol,
                     study_seed=seed, clock=clock, progress=progress, on_progress=on_progress,
                     short_transactions=short_transactions, resume_id=arg if what == "resume" else None,
                     lease_owner=new_owner_token(), study_owner=study_owner, faults=faults, sim_arms=sim_arms,
-                    framework=framework, covariates=covariates)
+                    framework=framework, covariates=covariates, events=events)

@@ -47,10 +47,11 @@ from study_app.headless.plan import (
     plan_study,
     remaining_trials,
 )
+from study_app.headless.plan_visits import VisitRequest, check_visit_request
 from study_app.headless.pool import default_jobs, run_parallel
 from study_app.headless.session_run import StudyProgress, planned_study_time_s, run_session, run_steps, sim_arms_of
 
-__all__ = ["resume_session", "run_study"]
+__all__ = ["resume_session", "run_study", "run_visit"]
 
 
 def run_study(
@@ -124,26 +125,56 @@ def run_study(
         A fault did not clear (one participant at a time; in parallel it is a
         :class:`StudyWorkerError`); ``continue_study`` completes the study.
     """
+    return _run_study(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                      on_progress=on_progress, jobs=jobs, continue_study=continue_study, faults=faults,
+                      sim_arms=sim_arms, framework=framework, covariates=covariates, client=client)
+
+
+def run_visit(
+    db_path: str, visit: VisitRequest, *, participants: int, seed: int, protocol: ProtocolConfig,
+    clock: str = "virtual", on_progress: Callable[[StudyProgress], None] | None = None, jobs: int | None = None,
+    sim_arms: Sequence[str] = (SINGLE_ARM_NAME,), framework: FrameworkConfig | None = None,
+    covariates: Mapping[str, str] | None = None,
+) -> StudyProgress:
+    """Run one visit of a schedule (``run --visit``, :mod:`study_app.headless.plan_visits`) for participants 1 …
+    ``participants``, continuing the study in ``db_path`` (created for the first visit): what is left of that visit
+    (interrupted sessions resumed, the rest run), held on ``visit.day`` (None: today's study day).  A visit out of
+    order or outside its window is refused (:class:`protocol.runner.study_rules.StudyRuleError`, nothing written)
+    unless ``visit.deviation`` gives the reason, stored as a deviation.  The other arguments are
+    :func:`run_study`'s."""
+    return _run_study(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
+                      on_progress=on_progress, jobs=jobs, continue_study=False, faults=(), sim_arms=sim_arms,
+                      framework=framework, covariates=covariates, client=None, visit=visit)
+
+
+def _run_study(
+    db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
+    on_progress: Callable[[StudyProgress], None] | None, jobs: int | None, continue_study: bool,
+    faults: Sequence[FaultPlan], sim_arms: Sequence[str], framework: FrameworkConfig | None,
+    covariates: Mapping[str, str] | None, client: Any, visit: VisitRequest | None = None,
+) -> StudyProgress:
+    """:func:`run_study` or :func:`run_visit`: refusals first, then the run under the study's lease."""
     given = {name: str(v) for name, v in (covariates or {}).items()}
     n_jobs = _checked_request(db_path, participants, jobs, continue_study, faults, protocol, given, (client, clock))
+    check_visit_request(protocol, visit)
     fw, arms, first_plan, first_kept = _first_look(db_path, participants, seed, protocol, continue_study, framework,
-                                                   sim_arms)
-    if continue_study and not first_plan:  # nothing left to run: nothing to write either
+                                                   sim_arms, visit)
+    if (continue_study or visit is not None) and not first_plan:  # nothing left to run: nothing to write either
         return StudyProgress(participants_total=participants, sessions=list(first_kept))
     return _run_under_lease(db_path, participants=participants, seed=seed, protocol=protocol, clock=clock,
                             on_progress=on_progress, jobs=n_jobs, continue_study=continue_study, faults=faults,
-                            sim_arms=arms, framework=fw, covariates=given, client=client)
+                            sim_arms=arms, framework=fw, covariates=given, client=client, visit=visit)
 
 
 def _first_look(db_path: str, participants: int, seed: int, protocol: ProtocolConfig, continue_study: bool,
-                framework: FrameworkConfig | None, sim_arms: Sequence[str],
+                framework: FrameworkConfig | None, sim_arms: Sequence[str], visit: VisitRequest | None = None,
                 ) -> tuple[FrameworkConfig, tuple[str, ...], dict[int, list[Step]], list[int]]:
     """Every refusal decided on a read-only look first (a refused command leaves the file byte-identical): the
     pipeline, the arms, and the plan with the sessions kept from before."""
     protocol.check_ramps((fw := framework or FrameworkConfig()).safety, "protocol with the pipeline's settings")
     arms = sim_arms_of(protocol, sim_arms)  # a bad task arm: refused before anything is stored
     first_plan, _, first_kept = plan_study(peek(db_path), db_path, participants, seed, protocol, continue_study, fw,
-                                           arms)
+                                           arms, visit)
     return fw, arms, first_plan, first_kept
 
 
@@ -176,6 +207,7 @@ def _run_under_lease(
     db_path: str, *, participants: int, seed: int, protocol: ProtocolConfig, clock: str,
     on_progress: Callable[[StudyProgress], None] | None, jobs: int, continue_study: bool, faults: Sequence[FaultPlan],
     sim_arms: tuple[str, ...], framework: FrameworkConfig, covariates: dict[str, str], client: Any = None,
+    visit: VisitRequest | None = None,
 ) -> StudyProgress:
     """:func:`run_study` once nothing refused it: take the study lease, plan again under it, run, give it back."""
     owner = new_owner_token()
@@ -189,7 +221,7 @@ def _run_under_lease(
         progress.notes.extend(open_notes(db, taken))
         # again under the lease: what another process did in between counts
         plan, progress.study_trials_total, kept = plan_study(db, db_path, participants, seed, protocol, continue_study,
-                                                             framework, sim_arms)
+                                                             framework, sim_arms, visit)
         progress.sessions.extend(kept)
         jobs_used = min(jobs, len(plan))
         if client is not None:

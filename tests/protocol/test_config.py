@@ -161,7 +161,7 @@ BAD_FIELDS = [
     ("unknown top-level key", 'name = "Shaker & Erden force regulation"',
      'name = "Shaker & Erden force regulation"\ncolour = "red"',
      "colour = 'red': unknown field; allowed: counterbalance, covariates, design, feedback, groups, lsl, name, part, "
-     "parts, questionnaires, targets, task, training, trial, version"),
+     "parts, questionnaires, targets, task, training, trial, version, visits"),
     ("typo inside [trial]", "hold_s = 1.0 ", "hold_sec = 1.0 ",
      "trial.hold_sec = 1.0: unknown field; allowed: cue_s, hold_s, max_trial_s, pause_s, tolerance_fraction"),
     ("typo inside [design]", "trials_per_cell = 5 ", "trials_per_cel = 5 ",
