@@ -42,7 +42,8 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         stored trials' numbers, from 1 (None when none is stored), and ``writer``: the live process running
         a session right now ("" when none: a ``running`` session without one was interrupted),
         ``pipeline``: the pipeline settings it ran with that are not the paper's (``run --set``; {} for the
-        paper's), and ``part``: the study part it is ("" in a study of one task; :mod:`protocol.study.parts`).
+        paper's), ``part``: the study part it is ("" in a study of one task; :mod:`protocol.study.parts`), and
+        ``visit``: the visit of a schedule it belongs to ("" without ``[[visits]]``; :mod:`protocol.study.visits`).
 
     ``check``: run the integrity check first (the command line does; the GUI's engine, listing between
     sessions, checks when it opens the database to write).
@@ -61,6 +62,7 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
         infos = reader.sessions()
         pipeline = {int(s.session_id): _pipeline_settings(s.config_json) for s in infos}
         parts = {int(s.session_id): s.part for s in infos}
+        visits = {int(s.session_id): s.visit for s in infos}
         writers = db.sessions_being_written()
     finally:
         db.close()
@@ -81,6 +83,7 @@ def list_sessions(db_path: str | os.PathLike[str], *, check: bool = True) -> lis
             "writer": writers.get(int(sid), "") if status == "running" else "",
             "pipeline": pipeline.get(int(sid), {}),
             "part": parts.get(int(sid), ""),
+            "visit": visits.get(int(sid), ""),
         })
     return out
 
