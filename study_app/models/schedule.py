@@ -38,7 +38,7 @@ __all__ = ["ScheduleForm", "VisitRow", "visit_events"]
 #: How a visit's state reads in the schedule view.
 STATE_WORDS = {"done": "done", "due": "due today", "overdue": "overdue", "not yet": "not yet"}
 #: How a part's state reads in it.
-_PART_WORDS = {"completed": "done", "interrupted": "interrupted: resume it", "ended": "ended early", "to do": "to do"}
+_PART_WORDS = {"completed": "done", "interrupted": "interrupted (resume it)", "ended": "ended early", "to do": "to do"}
 #: What ``run --visit`` writes in a visit event's last words; a session started from the window says so instead.
 _RUN_HOW, _GUI_HOW = "(run --visit)", "(started in the GUI)"
 
@@ -51,22 +51,37 @@ class VisitRow:
     visit: VisitState
     proposed: str = ""
 
-    def text(self) -> str:
-        """The row in words: ``▶ 2. post — day 7 ± 1, 2026-12-05 to 2026-12-07: due today — test: to do``."""
+    def text(self, today: _dt.date | None = None) -> str:
+        """The row in words, short enough for the form's column: ``▶ 2. post, day 7 ± 1 (4–6 Dec): due today — test
+        to do`` (a date in another year than ``today``'s -- default: today -- with its year)."""
         v = self.visit
         mark = "▶" if self.proposed else ("✓" if v.state == "done" else "•")
         window = f" ± {v.window_days}" if v.window_days else ""
-        parts = ", ".join(f"{p}: {_PART_WORDS[s]}" for p, s in v.parts)
-        return f"{mark} {v.number}. {v.name} — day {v.day}{window}{_dates(v)}: {STATE_WORDS[v.state]} — {parts}"
+        parts = ", ".join(f"{p} {_PART_WORDS[s]}" for p, s in v.parts)
+        dates = _dates(v, today or _dt.date.today())
+        return f"{mark} {v.number}. {v.name}, day {v.day}{window}{dates}: {STATE_WORDS[v.state]} — {parts}"
 
 
-def _dates(v: VisitState) -> str:
-    """The visit's date, or its window's first and last dates ("" before the participant's first visit)."""
-    if v.earliest is None or v.latest is None:
+_MONTHS = ("Jan", "Feb", "Mar", "Apr", "May", "Jun", "Jul", "Aug", "Sep", "Oct", "Nov", "Dec")
+
+
+def _date(d: _dt.date, today: _dt.date, month: bool = True) -> str:
+    """``6 Dec`` (``6`` without the ``month``), ``6 Dec 2027`` in another year than ``today``'s."""
+    if not month:
+        return f"{d.day}"
+    return f"{d.day} {_MONTHS[d.month - 1]}" + (f" {d.year}" if d.year != today.year else "")
+
+
+def _dates(v: VisitState, today: _dt.date) -> str:
+    """The visit's date, or its window's first and last (`` (4–6 Dec)``); "" before the participant's first visit
+    (the dates count from it)."""
+    lo, hi = v.earliest, v.latest
+    if lo is None or hi is None:
         return ""
-    if v.earliest == v.latest:
-        return f", {v.earliest.isoformat()}"
-    return f", {v.earliest.isoformat()} to {v.latest.isoformat()}"
+    if lo == hi:
+        return f" ({_date(lo, today)})"
+    same = (lo.year, lo.month) == (hi.year, hi.month)
+    return f" ({_date(lo, today, month=not same)}–{_date(hi, today)})"
 
 
 def _infos(known: Sequence[dict[str, Any]]) -> list[SessionInfo]:
@@ -158,8 +173,8 @@ class ScheduleForm:
         sched = self.schedule
         if sched is None:
             return ""
-        first = (f"first visit {sched.first.isoformat()}, today study day {self.day}" if sched.first is not None
-                 else "no visit yet: the first is due today")
+        first = ("no visit yet: the first is due today" if sched.first is None else
+                 f"first visit {_date(sched.first, _dt.date.today())}, today study day {self.day}")
         done = sum(v.state == "done" for v in sched.visits)
         coming = self.next
         tail = ("the schedule is done" if coming is None else

@@ -47,8 +47,8 @@ def test_an_overdue_visit_of_a_returning_participant(qtbot, tmp_path, monkeypatc
     assert (setup.values.visit, setup.values.part) == ("post", "test")
     assert panel.visit.isVisible() and panel.visit.currentText() == "post" and panel.part.currentText() == "test"
     lines = panel.plan.text().splitlines()
-    assert lines[1].startswith("✓ 1. baseline — day 0") and lines[1].endswith("done — practice: done, test: done")
-    assert lines[2].startswith("▶ 2. post — day 7 ± 1") and "overdue — test: to do" in lines[2]
+    assert lines[1].startswith("✓ 1. baseline, day 0 (") and lines[1].endswith("): done — practice done, test done")
+    assert lines[2].startswith("▶ 2. post, day 7 ± 1 (") and lines[2].endswith("): overdue — test to do")
     assert "not yet" in lines[3] and "today study day 12" in panel.hint.text()
     assert panel.off_schedule.isVisible() and "outside its window: held on study day 12" in panel.off_schedule.text()
     # Start asks for the reason; No starts nothing
