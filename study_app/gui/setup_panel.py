@@ -3,6 +3,8 @@ seed, and what the protocol asks about a new participant) and the interrupted se
 
 from __future__ import annotations
 
+import html
+
 from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox,
@@ -25,6 +27,10 @@ from study_app.gui.widgets import LEVEL_COLOURS
 from study_app.models.setup import KINDS, SetupModel, breakable
 
 __all__ = ["SPACE_IN_A_FIELD", "SPACE_WHILE_TYPING", "QtSetupPanel"]
+
+#: How a visit of the schedule is shown by its state: what needs the experimenter today stands out.
+_STATE_STYLES = {"overdue": f"color: {LEVEL_COLOURS['error'][0]}; font-weight: bold", "due": "font-weight: bold",
+                 "done": "color: #555555", "not yet": ""}
 
 #: The line a Space typed into a setup field shows instead of starting (or becoming part of the code).
 SPACE_WHILE_TYPING = "A code or number has no spaces: press Enter to start (Space starts once you leave the field)."
@@ -70,7 +76,7 @@ class QtSetupPanel(QGroupBox):
         self.part = QComboBox()  # a study of several parts: which part (its kind follows)
         self.plan = QLabel()  # the participant's plan: each part in their order, done or not, the next marked
         self.plan.setWordWrap(True)
-        self.plan.setTextFormat(Qt.TextFormat.PlainText)
+        self.plan.setTextFormat(Qt.TextFormat.RichText)  # a schedule's visit coloured by its state
         self.protocol = QLineEdit(v.protocol_path)
         self.protocol.setPlaceholderText("default: the paper's protocol")
         self.protocol_browse = QPushButton("…")
@@ -208,12 +214,12 @@ class QtSetupPanel(QGroupBox):
         self._form.setRowVisible(self.part, bool(names))
         self.kind.setEnabled(not names)
         if visits:
-            rows = sched.rows()
-            lines = ["Schedule (each visit: its day, dates, state, parts):", *(r.text() for r in rows)] if rows else []
+            head = "Schedule (each visit: its day, dates, state, parts):"
+            lines = [f'<span style="{_STATE_STYLES[r.visit.state]}">{_html(r.text())}</span>' for r in sched.rows()]
         else:
-            lines = ["Plan (this participant's order):", *(r.text() for r in self.setup.plan())]
-        self.plan.setText("\n".join(lines) if len(lines) > 1 else "")
-        self.plan.setVisible(len(lines) > 1)
+            head, lines = "Plan (this participant's order):", [_html(r.text()) for r in self.setup.plan()]
+        self.plan.setText("<br>".join([head, *lines]) if lines else "")
+        self.plan.setVisible(bool(lines))
 
     def _show_seed(self) -> None:
         """The study's seed: read-only once the database has a session, with a tooltip saying why."""
@@ -272,6 +278,10 @@ class QtSetupPanel(QGroupBox):
         """The session id selected in the resume list."""
         item = self.resumable.currentItem()
         return None if item is None else int(item.data(Qt.ItemDataRole.UserRole))
+
+
+def _html(text: str) -> str:
+    return html.escape(text, quote=False)
 
 
 def _choices(box: QComboBox, items: list[str], current: str) -> None:

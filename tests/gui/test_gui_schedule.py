@@ -5,6 +5,7 @@ of that visit."""
 
 from __future__ import annotations
 
+import re
 import sqlite3
 
 from conftest import open_ready_window
@@ -35,6 +36,11 @@ def _events(db, session_id: int) -> list[tuple[str, str]]:
         c.close()
 
 
+def _lines(shown: str) -> list[str]:
+    """The schedule's lines as the label shows them (each visit coloured by its state)."""
+    return [re.sub("<[^>]+>", "", line) for line in shown.split("<br>")]
+
+
 def test_an_overdue_visit_of_a_returning_participant(qtbot, tmp_path, monkeypatch) -> None:
     proto = tmp_path / "visits.toml"
     proto.write_text(VISITS, encoding="utf-8")
@@ -46,10 +52,11 @@ def test_an_overdue_visit_of_a_returning_participant(qtbot, tmp_path, monkeypatc
     qtbot.keyClicks(panel.code, "P01")
     assert (setup.values.visit, setup.values.part) == ("post", "test")
     assert panel.visit.isVisible() and panel.visit.currentText() == "post" and panel.part.currentText() == "test"
-    lines = panel.plan.text().splitlines()
+    lines = _lines(panel.plan.text())
     assert lines[1].startswith("✓ 1. baseline, day 0 (") and lines[1].endswith("): done — practice done, test done")
     assert lines[2].startswith("▶ 2. post, day 7 ± 1 (") and lines[2].endswith("): overdue — test to do")
     assert "not yet" in lines[3] and "today study day 12" in panel.hint.text()
+    assert "font-weight: bold\">▶ 2. post" in panel.plan.text()  # the overdue visit stands out
     assert panel.off_schedule.isVisible() and "outside its window: held on study day 12" in panel.off_schedule.text()
     # Start asks for the reason; No starts nothing
     qtbot.mouseClick(w.start_button, Qt.MouseButton.LeftButton)
@@ -73,5 +80,5 @@ def test_an_overdue_visit_of_a_returning_participant(qtbot, tmp_path, monkeypatc
     # the visit done, the participant comes back for the retention test: the next participant's turn now
     qtbot.waitUntil(lambda: setup.values.code == "" and len(setup.known) == 3, timeout=TIMEOUT_MS)
     qtbot.keyClicks(panel.code, "P01")
-    assert panel.plan.text().splitlines()[2].startswith("✓ 2. post")
+    assert _lines(panel.plan.text())[2].startswith("✓ 2. post")
     assert (setup.values.visit, setup.schedule.rows()[2].visit.state) == ("retention", "not yet")
