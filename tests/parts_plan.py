@@ -1,8 +1,8 @@
 """The small plan of several parts the tests of ``[[parts]]`` share (tests/protocol/test_parts.py,
 tests/test_parts_study.py)."""
 
-#: A small plan: practice, then three test parts counterbalanced (the tests of the headless run use it too).
-PLAN = """name = "tiny plan"
+#: The plan's study tables and its practice part (tests/test_visits_study.py builds a schedule on them).
+STUDY = """name = "tiny plan"
 [[targets]]
 label = "GENTLE"
 force_n = 0.6
@@ -19,7 +19,9 @@ seconds_per_target_per_mode = 1.0
 [[parts]]
 name = "practice"
 session = "training"
-[[parts]]
+"""
+#: A small plan: practice, then three test parts counterbalanced (the tests of the headless run use it too).
+PLAN = STUDY + """[[parts]]
 name = "regulation"
 [[parts]]
 name = "tracking"

@@ -107,7 +107,8 @@ def learning_page(table: pd.DataFrame, metrics: Sequence[str], models: pd.DataFr
 <p>{n} participants. The task followed over the visits: {html.escape(task.replace('_', ' '))} (the experiment part the
 baseline, post and retention visits share). Each value is a participant's mean over the visit's analysed trials in
 one haptic mode, as that visit's own report computes it (its participants.csv): one value per participant per visit
-per mode (learning.csv).</p>
+per mode (learning.csv). TCT is as the report's <code>--tct</code> makes it (by default a failed trial counts at
+the trial's cap, the paper's figure).</p>
 <h2>Learning curves</h2>
 <img src="learning_curve.png" alt="learning curves" style="max-width:100%">
 <p>Thin lines: each participant; thick: the mean per mode with its 95 % t interval (participants as the unit).

@@ -303,6 +303,8 @@ the same seed (the same constants), and its trials draw from their own random st
 ``(2, k)``), so nothing learned in the training block carries over.  That is a choice: the paper gives its
 training no duration or content, and its experiment levels -- what these constants are fitted to -- are the
 levels of participants who had trained; a learning rule here would be a parameter the paper cannot identify.
+Across the visits of a schedule (days apart) the participant does learn, from the second visit on only, by the rule
+:mod:`pipeline.sim.learning` documents (a power law of practice and of forgetting; docs/science.md §4.4).
 During training the participant reads the live force gauge (log noise 0.03) and aims at the shown band.
 
 Wall time: one 10-participant study takes ≈ 19 s with ``--jobs 2`` on the

@@ -266,7 +266,13 @@ def _placed(study: ProtocolConfig, names: tuple[str, ...], by_name: dict[str, Pr
             seed: int, visit: VisitPlace | None, trained: tuple[str, ...]) -> tuple[ProtocolConfig, ...]:
     """The parts ``names`` (file order) in participant ``number``'s order, each with its place (in ``visit``), and
     the training parts before it (``trained``: those done in earlier visits)."""
-    order, row = order_of(names, study.counterbalance, seed, number)
+    balance = study.counterbalance
+    if visit is not None and balance is not None:  # the visit's counterbalanced parts in the row's order among them
+        full, row = order_of(balance.parts, balance, seed, number)
+        mine = iter(n for n in full if n in names)
+        order = tuple(next(mine) if n in balance.parts else n for n in names)
+    else:
+        order, row = order_of(names, balance, seed, number)
     training = {n for n, p in by_name.items() if p.part is not None and p.part.session == "training"}
     out = []
     for position, name in enumerate(order, start=1):

@@ -277,5 +277,13 @@ def place_from_table(f: Fields, top: Mapping[str, Any]) -> PartPlace | None:
                      position=f.integer("part.position", t.get("position", 0), lo=0, hi=MAX_PARTS),
                      order=tuple(names["order"]), row=f.integer("part.row", t.get("row", 0), lo=0, hi=2 * MAX_PARTS),
                      trained_by=tuple(names["trained_by"]),
-                     balance=counterbalance_from_table(f, t, names["order"]) if "counterbalance" in t else None,
+                     balance=counterbalance_from_table(f, t, _balanced_names(t, names["order"]))
+                     if "counterbalance" in t else None,
                      visit=visit_place_from_table(f, t["visit"]) if "visit" in t else None)
+
+
+def _balanced_names(t: Mapping[str, Any], order: list[str]) -> list[str]:
+    """The parts a stored ``part.counterbalance`` may name: the participant's order, and in a visit (which holds
+    some of the study's parts, :mod:`protocol.study.visits`) the group's own parts too."""
+    group = t["counterbalance"].get("parts", []) if "visit" in t and isinstance(t["counterbalance"], dict) else []
+    return [*order, *(n for n in group if isinstance(n, str) and n not in order)]

@@ -19,6 +19,7 @@ from analysis.stats.aggregate import by_mode, mean_sd, per_participant
 from pipeline.force.pipeline_settings import describe, non_default_settings, stored_settings
 from protocol.metrics import Metric, tested
 from protocol.storage import StudyReader
+from protocol.storage.database import part_key
 from protocol.study.labels import plural
 from protocol.study.records import Outcome, TrialRecord
 from protocol.tasks.base import metrics_of
@@ -137,11 +138,12 @@ def format_study_summary(db_path: str, session_ids: list[int], wall_s: float) ->
         "mean ± SD across participants (each participant's trials averaged first; the report's headline figures)",
         f"{'':<32}{'haptics OFF':>16}{'haptics ON':>16}{'change':>9}   paper OFF → ON (means)",
     ]
-    parts = sorted({(info.part, info.session_id) for info in sessions.values() if info.part}, key=lambda p: p[1])
+    parts = sorted({(part_key(info.protocol_json), info.session_id) for info in sessions.values() if info.part},
+                   key=lambda p: p[1])
     if not parts:  # a study of one task: one table
         lines.extend(_mode_table(exp, list(sessions.values()), codes))
-    for name in dict.fromkeys(p for p, _ in parts):  # a study of several parts: a table per experiment part
-        of_part = [info for info in sessions.values() if info.part == name]
+    for name in dict.fromkeys(p for p, _ in parts):  # several parts: a table per experiment part (VISIT-PART)
+        of_part = [info for info in sessions.values() if part_key(info.protocol_json) == name]
         if all(info.kind != "experiment" for info in of_part):
             continue
         ids = {info.session_id for info in of_part}

@@ -109,6 +109,12 @@ def _pipeline_settings(config_json: str | None) -> dict[str, float]:
     return non_default_settings(stored_settings(record))
 
 
+def _part(s: dict[str, Any]) -> str:
+    """A session's part as the listing shows it: ``VISIT/PART`` in a study with visits."""
+    part, visit = str(s.get("part", "")), str(s.get("visit", ""))
+    return f"{visit}/{part}" if visit else part
+
+
 def next_participant_number(sessions: list[dict[str, Any]]) -> int:
     """One more than the largest participant number in use (1 for an empty database)."""
     return max((int(s["participant_number"]) for s in sessions), default=0) + 1
@@ -131,7 +137,7 @@ def format_sessions(db_path: str, sessions: list[dict[str, Any]]) -> str:
     for s in sessions:
         rows.append((
             str(s["session_id"]), s["code"], str(s["participant_number"]), s["kind"],
-            *((str(s.get("part", "")),) if parts else ()), _status(s), s["rig"],
+            *((_part(s),) if parts else ()), _status(s), s["rig"],
             f"{s['trials_done']}/{s['trials_planned']}", str(s["trials_aborted"]),
             str(s["started_at"])[:16].replace("T", " "),
         ))
