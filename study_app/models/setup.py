@@ -462,10 +462,10 @@ class SetupModel:
                                "trials_done": 0, "trials_aborted": 0, "part": self.values.part,
                                "visit": self.values.visit})
         listed = next((s for s in self.known if s["session_id"] == session_id), None)
-        v = self.values  # a resumed part: its own part and visit
-        part, visit = (str(listed.get("part", "")), str(listed.get("visit", ""))) if listed is not None else (v.part,
-                                                                                                               v.visit)
-        self.values = replace(v, code=code, kind=kind, participant_number=participant_number, part=part, visit=visit)
+        v = self.values
+        if listed is not None:  # a resumed part: its own part (and visit)
+            v = replace(v, part=str(listed.get("part", "")), visit=str(listed.get("visit", "")))
+        self.values = replace(v, code=code, kind=kind, participant_number=participant_number)
         self.number_suggested = False
         self.validate()
 
