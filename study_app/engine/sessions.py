@@ -54,6 +54,7 @@ from study_app.engine.commissioning import REST_MAX_FORCE_N, Commissioning
 from study_app.engine.core import EngineCore
 from study_app.engine.session_config import config_record, real_config_record, with_profile
 from study_app.engine.setup import StylusControl
+from study_app.engine.visit_start import check_visit_start
 
 __all__ = ["EngineSessions", "list_resumable"]
 
@@ -97,10 +98,11 @@ class EngineSessions:
         if cmd.seed < 0 or cmd.participant_number < 1:
             raise ValueError(f"seed = {cmd.seed}, participant number = {cmd.participant_number}: need seed ≥ 0 and "
                              "number ≥ 1")
-        protocol = part_to_run(cmd, load_protocol(cmd.protocol_path or None))
+        study = load_protocol(cmd.protocol_path or None)
+        protocol = part_to_run(cmd, study)
         protocol.check_ramps(self.engine.eng.framework.config.safety, "protocol with the pipeline's settings")
         self._check_task_arm(protocol)
-        _check_rules_first(cmd, protocol, self.engine.eng.framework.config, self._arms())
+        _check_rules_first(cmd, protocol, self.engine.eng.framework.config, self._arms(), study)
         protocol, infos = self._lsl_of(protocol)
         if self.commissioning.gate.check(cmd):
             return
@@ -118,7 +120,7 @@ class EngineSessions:
                 config={**record, "app": "gui", **self.commissioning.provenance()},
                 calibration=self.engine.calibration.to_dict(), lease_owner=self.engine.lease_owner,
                 note=f"{cmd.kind} session for {cmd.code}, seed {cmd.seed} (GUI)",
-                training_override=cmd.training_override, covariates=cmd.covariates,
+                training_override=cmd.training_override, covariates=cmd.covariates, events=cmd.events,
             )
         except BaseException:
             db.close()
@@ -196,13 +198,19 @@ class EngineSessions:
 
     def _run(self, db: StudyDatabase, opened: OpenedSession, lsl_infos: list[Any] | None = None) -> None:
         if self.engine.eng.simulated:
+            from pipeline.sim.learning import Practice
             from pipeline.sim.participant import SimulatedParticipant  # the simulated rig only
             from protocol.storage.annotations import covariates_by_code
             from protocol.study.groups import simulated_profile
 
             # the participant's stored group decides the simulated profile, as in the headless runner
             profile = simulated_profile(opened.protocol.groups, covariates_by_code(db.conn).get(opened.code, {}))
-            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed, profile=profile))
+            # in a schedule of visits it learns from visit to visit, as run's does (its stored visit: a resumed
+            # session meets the same participant)
+            visit = opened.protocol.part.visit if opened.protocol.part is not None else None
+            practice = None if visit is None else Practice(visit.number, visit.gap_days)
+            self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed, profile=profile,
+                                                            practice=practice))
             sim_rig = self.engine.eng.rig
             participant: StylusControl | None = self.engine.driver
 
@@ -480,8 +488,8 @@ def part_to_run(cmd: m.StartSession, protocol: ProtocolConfig) -> ProtocolConfig
         if cmd.part:
             raise ValueError(f"part = {cmd.part!r}: the protocol has no parts (a study of one task)")
         return protocol
-    try:
-        part = protocol.part_of(cmd.part, cmd.participant_number, cmd.seed)
+    try:  # in a schedule of visits, the part of the visit ``cmd.visit``
+        part = protocol.part_of(cmd.part, cmd.participant_number, cmd.seed, cmd.visit)
     except KeyError as exc:
         raise ValueError(f"part = {cmd.part!r}: {exc.args[0]}") from None
     assert part.part is not None
@@ -491,21 +499,24 @@ def part_to_run(cmd: m.StartSession, protocol: ProtocolConfig) -> ProtocolConfig
 
 
 def _check_rules_first(cmd: m.StartSession, protocol: ProtocolConfig, framework: FrameworkConfig,
-                       arms: tuple[str, ...]) -> None:
+                       arms: tuple[str, ...], study: ProtocolConfig) -> None:
     """The study's rules on a read-only look, before the real rig's 2 s rest check (they are applied again,
     where the session is stored, by :func:`protocol.runner.session_setup.open_new_session`), one pipeline per study
     (``gui --set``: the settings every stored session ran with) and one rig per study (``arms``, the task arm
-    first: the arms every stored session ran on, as ``run`` requires)."""
+    first: the arms every stored session ran on, as ``run`` requires) and, in a schedule of visits, the visit's rule
+    (:func:`study_app.engine.visit_start.check_visit_start`; ``study``: the whole protocol)."""
     if not cmd.db_path or not os.path.isfile(cmd.db_path) or os.path.getsize(cmd.db_path) == 0:
+        check_visit_start(cmd, study, [], [])
         return
     db = StudyDatabase(cmd.db_path, readonly=True)
     try:
         sessions = StudyReader.over(db).sessions()
         check_settings(sessions, cmd.db_path, framework)
         check_arms(sessions, cmd.db_path, arms)
-        if not [s for s in db.sessions_of(cmd.code, cmd.kind) if s.part == cmd.part]:
+        if not [s for s in db.sessions_of(cmd.code, cmd.kind) if s.part == cmd.part and s.visit == cmd.visit]:
             check_new_session(stored_sessions(db), code=cmd.code, kind=cmd.kind, seed=cmd.seed, protocol=protocol,
                               training_override=cmd.training_override)
+        check_visit_start(cmd, study, stored_sessions(db), sessions)
     finally:
         db.close()
 
@@ -535,6 +546,7 @@ def list_resumable(db_path: str) -> list[dict[str, Any]]:
                 "reruns_run": sum(r["repeat_of"] is not None for r in rows),
                 "arms": list(info.arms) if info is not None else [],  # the task arm first: resumed on these only
                 "part": s.part,  # a study of several parts: which part it is
+                "visit": s.visit,  # a schedule of visits: which visit it belongs to
             })
         return out
     finally:

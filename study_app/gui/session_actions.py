@@ -107,8 +107,32 @@ class SessionActions:
             self._start()
 
     def _start(self) -> None:
-        if self.model.control.start():
+        if self.model.setup.schedule.refusal and self.model.actions.can("start"):
+            self.start_off_schedule()
+        elif self.model.control.start():
             self.save_settings()
+
+    def start_off_schedule(self) -> None:
+        """A visit out of order or outside its window (the form's schedule says which rule): asked with a field for
+        the experimenter's reason, stored as a ``deviation`` with the session as ``run --visit`` stores it."""
+        setup = self.model.setup
+        v = setup.values
+
+        def start() -> None:
+            asked = self.questions.get("visit_deviation")
+            why = asked.reason if asked is not None and self.confirm is None else self.scripted_reason
+            if not why.strip():
+                self.model.notices.notify("info", "Nothing was started: a visit out of its schedule needs a reason.",
+                                          "StartSession")
+            elif self.model.control.start(visit_reason=why):
+                self.save_settings()
+
+        self.ask("visit_deviation", "Visit out of schedule",
+                 f"Start {v.code}'s {v.part} in visit {v.visit} anyway?\n\nThe schedule refuses it: "
+                 f"{setup.schedule.refusal}.\n\nThe session is stored with this deviation from the protocol and "
+                 "your reason; the study report lists it.", start,
+                 moot_when=lambda ev: isinstance(ev, (m.SessionStarted, m.EngineStopped)),
+                 reason="Reason (required, stored as a deviation), then Yes")
 
     def start_with_override(self) -> None:
         """Real rig, calibration incomplete: ask for a reason, then start anyway (the reason is stored)."""

@@ -3,6 +3,8 @@ seed, and what the protocol asks about a new participant) and the interrupted se
 
 from __future__ import annotations
 
+import html
+
 from PySide6.QtCore import QEvent, Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox,
@@ -25,6 +27,10 @@ from study_app.gui.widgets import LEVEL_COLOURS
 from study_app.models.setup import KINDS, SetupModel, breakable
 
 __all__ = ["SPACE_IN_A_FIELD", "SPACE_WHILE_TYPING", "QtSetupPanel"]
+
+#: How a visit of the schedule is shown by its state: what needs the experimenter today stands out.
+_STATE_STYLES = {"overdue": f"color: {LEVEL_COLOURS['error'][0]}; font-weight: bold", "due": "font-weight: bold",
+                 "done": "color: #555555", "not yet": ""}
 
 #: The line a Space typed into a setup field shows instead of starting (or becoming part of the code).
 SPACE_WHILE_TYPING = "A code or number has no spaces: press Enter to start (Space starts once you leave the field)."
@@ -66,10 +72,11 @@ class QtSetupPanel(QGroupBox):
         self.kind = QComboBox()
         self.kind.addItems(list(KINDS))
         self.kind.setCurrentText(v.kind)
+        self.visit = QComboBox()  # a schedule of visits: which visit (its parts in the Part field)
         self.part = QComboBox()  # a study of several parts: which part (its kind follows)
         self.plan = QLabel()  # the participant's plan: each part in their order, done or not, the next marked
         self.plan.setWordWrap(True)
-        self.plan.setTextFormat(Qt.TextFormat.PlainText)
+        self.plan.setTextFormat(Qt.TextFormat.RichText)  # a schedule's visit coloured by its state
         self.protocol = QLineEdit(v.protocol_path)
         self.protocol.setPlaceholderText("default: the paper's protocol")
         self.protocol_browse = QPushButton("…")
@@ -80,6 +87,9 @@ class QtSetupPanel(QGroupBox):
         self.errors = QLabel()
         self.errors.setWordWrap(True)
         self.errors.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]};")
+        self.off_schedule = QLabel()  # why the form's visit starts only with a reason (out of order, out of window)
+        self.off_schedule.setWordWrap(True)
+        self.off_schedule.setStyleSheet(f"color: {LEVEL_COLOURS['error'][0]};")
         self.warnings = QLabel()
         self.warnings.setWordWrap(True)
         self.warnings.setStyleSheet(f"color: {LEVEL_COLOURS['warning'][0]};")
@@ -94,6 +104,7 @@ class QtSetupPanel(QGroupBox):
         form.addRow("Participant", self.code)
         form.addRow("Number", self.number)
         form.addRow("Kind", self.kind)
+        form.addRow("Visit", self.visit)
         form.addRow("Part", self.part)
         self._form = form
         form.addRow("Protocol", _row(self.protocol, self.protocol_browse))
@@ -110,6 +121,7 @@ class QtSetupPanel(QGroupBox):
         lay = QVBoxLayout(self)
         lay.addLayout(form)
         lay.addWidget(self.plan)
+        lay.addWidget(self.off_schedule)
         lay.addWidget(self.covariate_fields)
         lay.addWidget(self.errors)
         lay.addWidget(self.warnings)
@@ -136,6 +148,10 @@ class QtSetupPanel(QGroupBox):
         # the experimenter's choice only (textActivated): the form's own proposal of the next step is set from the model
         self.kind.textActivated.connect(lambda k: setup.update(kind=k))
         self.part.textActivated.connect(lambda p: setup.update(part=p))
+        self.visit.textActivated.connect(lambda name: setup.update(visit=name))
+        self.visit.setToolTip("The visit of the participant's schedule: the form proposes their next visit and part "
+                              "until you choose; a visit out of order or outside its window starts only with your "
+                              "reason (stored as a deviation)")
         self.part.setToolTip("The part of the study to run: the form proposes the participant's next part in their "
                              "(counterbalanced) order until you choose; its kind follows the part")
         self.kind.setToolTip("Training (practice with the live force gauge) or the experiment. The form proposes "
@@ -179,24 +195,31 @@ class QtSetupPanel(QGroupBox):
         self.warnings.setText(breakable("\n".join(self.setup.warnings.values())))
         idle = self.setup.running_session is None
         self.hint.setText(self.setup.hint or ("" if self.setup.errors or not idle else self.setup.next_step()))
-        for label in (self.errors, self.warnings, self.hint):
+        why = self.setup.schedule.refusal
+        self.off_schedule.setText(breakable(f"Out of schedule: {why}. Start asks for your reason (stored as a "
+                                            "deviation)." if why else ""))
+        for label in (self.errors, self.off_schedule, self.warnings, self.hint):
             label.setVisible(bool(label.text()))
         self._show_seed()
 
     def _show_plan(self) -> None:
-        """A study of several parts: the Part field (the kind follows it) and the participant's plan."""
-        protocol = self.setup.protocol
+        """A study of several parts: the Part field (the kind follows it) and the participant's plan; with a schedule
+        of visits, the Visit field (the Part field lists its parts) and the participant's schedule."""
+        protocol, v, sched = self.setup.protocol, self.setup.values, self.setup.schedule
+        visits = list(protocol.visit_names) if protocol is not None else []
         names = list(protocol.part_names) if protocol is not None else []
-        if [self.part.itemText(i) for i in range(self.part.count())] != names:
-            self.part.clear()
-            self.part.addItems(names)
-        if self.part.currentText() != self.setup.values.part:
-            self.part.setCurrentText(self.setup.values.part)
+        _choices(self.visit, visits, v.visit)
+        _choices(self.part, list(sched.parts_of.get(v.visit, ())) if visits else names, v.part)
+        self._form.setRowVisible(self.visit, bool(visits))
         self._form.setRowVisible(self.part, bool(names))
         self.kind.setEnabled(not names)
-        rows = self.setup.plan()
-        self.plan.setText("\n".join(["Plan (this participant's order):"] + [r.text() for r in rows]) if rows else "")
-        self.plan.setVisible(bool(rows))
+        if visits:
+            head = "Schedule (each visit: its day, dates, state, parts):"
+            lines = [f'<span style="{_STATE_STYLES[r.visit.state]}">{_html(r.text())}</span>' for r in sched.rows()]
+        else:
+            head, lines = "Plan (this participant's order):", [_html(r.text()) for r in self.setup.plan()]
+        self.plan.setText("<br>".join([head, *lines]) if lines else "")
+        self.plan.setVisible(bool(lines))
 
     def _show_seed(self) -> None:
         """The study's seed: read-only once the database has a session, with a tooltip saying why."""
@@ -255,6 +278,19 @@ class QtSetupPanel(QGroupBox):
         """The session id selected in the resume list."""
         item = self.resumable.currentItem()
         return None if item is None else int(item.data(Qt.ItemDataRole.UserRole))
+
+
+def _html(text: str) -> str:
+    return html.escape(text, quote=False)
+
+
+def _choices(box: QComboBox, items: list[str], current: str) -> None:
+    """A combo box's items (replaced only when they change) and its current one."""
+    if [box.itemText(i) for i in range(box.count())] != items:
+        box.clear()
+        box.addItems(items)
+    if box.currentText() != current:
+        box.setCurrentText(current)
 
 
 def _row(*widgets: QWidget) -> QWidget:

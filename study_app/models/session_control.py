@@ -89,15 +89,22 @@ class SessionControl:
             if self.setup.values.db_path:
                 self.list_sessions()
 
-    def start(self, override_reason: str = "", training_override: str = "") -> bool:
+    def start(self, override_reason: str = "", training_override: str = "", visit_reason: str = "") -> bool:
         """Start the session described by the setup form (False if the form is invalid or nothing may start).
 
         ``override_reason``: start on the real rig although the calibration chain is not complete (stored).
         ``training_override``: start an experiment without the completed training the protocol requires; the
         engine stores the reason as a ``deviation`` event (:mod:`protocol.runner.study_rules`).
+        ``visit_reason``: start a visit's part out of order or outside its window (the form's schedule says why it
+        needs one), stored as a ``deviation`` event as ``run --visit --deviation`` stores it.
         """
         can = self.actions.can
-        for given in (training_override, override_reason):
+        refusal = self.setup.schedule.refusal
+        if refusal and not visit_reason.strip() and can("start"):
+            self.notices.notify("error", f"Nothing was started: {refusal}; start it with your reason (stored as a "
+                                "deviation).", "StartSession")
+            return False
+        for given in (training_override, override_reason, visit_reason if refusal else ""):
             why = reason_refusal(given) if given.strip() else ""
             if why:
                 self.notices.notify("error", f"Nothing was started: {why}.", "StartSession")
@@ -111,7 +118,7 @@ class SessionControl:
             return False
         if not self.screen.ready("Start", "StartSession"):  # no cue to a screen nobody sees
             return False
-        cmd = self.setup.start_command(training_override if skip_training else "")
+        cmd = self.setup.start_command(training_override if skip_training else "", visit_reason if refusal else "")
         if override_reason.strip():
             cmd = dataclasses.replace(cmd, override_reason=override_reason.strip())
         self._training_override = cmd.training_override

@@ -42,6 +42,7 @@ from study_app.engine.session_list import next_participant_number
 from study_app.models import Emitter
 from study_app.models.covariate_form import CovariateForm
 from study_app.models.plan import PlanRow, next_part_name, plan_rows, plan_words
+from study_app.models.schedule import ScheduleForm, visit_events
 from study_app.models.session import TrialCount
 
 __all__ = ["KINDS", "TRAINING_OVERRIDE_HINT", "SessionSetup", "SetupModel", "article", "breakable", "with_db_suffix"]
@@ -88,6 +89,8 @@ class SessionSetup:
     seed: int = 0
     #: The part to start in a study of several parts (:mod:`protocol.study.parts`); "" in a study of one task.
     part: str = ""
+    #: The visit whose part starts, in a study with a schedule of visits (:mod:`protocol.study.visits`); "" without.
+    visit: str = ""
 
 
 @dataclass
@@ -127,6 +130,9 @@ class SetupModel:
     #: stored covariates by code (as the engine listed them).
     covariates: CovariateForm = field(default_factory=CovariateForm)
     registered: dict[str, dict[str, Any]] = field(default_factory=dict)
+    #: The participant's schedule of visits (:mod:`study_app.models.schedule`), and why the form's visit needs the
+    #: experimenter's reason (out of order, outside its window).
+    schedule: ScheduleForm = field(default_factory=ScheduleForm)
     changed: Emitter = field(default_factory=Emitter)
     resumable_changed: Emitter = field(default_factory=Emitter)
 
@@ -138,10 +144,13 @@ class SetupModel:
             kwargs["db_path"] = with_db_suffix(str(kwargs["db_path"]))
         if "participant_number" in kwargs:
             self.number_suggested = False
-        if "kind" in kwargs or "part" in kwargs:
+        if "kind" in kwargs or "part" in kwargs or "visit" in kwargs:
             self.kind_suggested = False
         self.values = replace(self.values, **kwargs)  # type: ignore[arg-type]  # kwargs are checked field names
-        if "part" in kwargs:
+        if "visit" in kwargs and "part" not in kwargs:  # a visit chosen: its first part not done yet
+            self._refresh_schedule()
+            self.values = replace(self.values, part=self.schedule.first_left(self.values.visit))
+        if "part" in kwargs or "visit" in kwargs:
             self._kind_of_part()
         self._suggest_number()
         self._suggest_kind()
@@ -162,6 +171,16 @@ class SetupModel:
     def _suggest_kind(self) -> None:
         protocol = self._load_protocol() if self.kind_suggested else None
         if protocol is None:
+            return
+        if protocol.visits:  # a schedule of visits: the participant's next (visit, part)
+            self._refresh_schedule()
+            v = self.values
+            visit, part = self.schedule.next or (v.visit, v.part)
+            if visit not in protocol.visit_names:  # no participant yet: the schedule's first visit
+                visit = protocol.visit_names[0]
+                part = self.schedule.first_left(visit)
+            self.values = replace(v, visit=visit, part=part)
+            self._kind_of_part()
             return
         if protocol.parts or self.values.part:  # a study of several parts: the participant's next part
             v = self.values
@@ -184,12 +203,19 @@ class SetupModel:
         v, protocol = self.values, self.protocol
         if protocol is None or v.part not in protocol.part_names:
             return None
-        return protocol.part_of(v.part, max(v.participant_number, 1), max(v.seed, 0))
+        try:  # in a schedule of visits: the part of the form's visit (None while the visit does not hold it)
+            return protocol.part_of(v.part, max(v.participant_number, 1), max(v.seed, 0), v.visit)
+        except KeyError:
+            return None
 
     def plan(self) -> list[PlanRow]:
         """The participant's plan in a study of several parts, each part's state (:mod:`study_app.models.plan`)."""
         v = self.values
         return plan_rows(self.protocol, self._stored(), v.code, v.participant_number, v.seed)
+
+    def _refresh_schedule(self) -> None:
+        v = self.values
+        self.schedule.update(self._load_protocol(), self.known, v.code, v.participant_number, v.seed, v.visit)
 
     def _stored(self) -> list[StoredSession]:
         return [StoredSession.of(s) for s in self.known]
@@ -234,6 +260,7 @@ class SetupModel:
                 errors["code"] = str(exc)
         if v.kind not in KINDS:
             errors["kind"] = f"session kind = {v.kind!r}: allowed values are training, experiment"
+        self._refresh_schedule()
         self._check_part(errors)
         if v.protocol_path.strip():
             try:
@@ -262,7 +289,14 @@ class SetupModel:
         """A study of several parts starts one of its parts (of the part's kind); a study of one task, none."""
         names = self.protocol.part_names if self.protocol is not None else ()
         part = self.values.part
-        if names and part not in names:
+        visits = self.protocol.visit_names if self.protocol is not None else ()
+        if visits and self.values.visit not in visits:
+            errors["visit"] = (f"visit = {self.values.visit!r}: this protocol's visits are {', '.join(visits)}: "
+                               "choose one")
+        elif visits and names and part not in self.schedule.parts_of.get(self.values.visit, names):
+            errors["part"] = (f"part = {part!r}: visit {self.values.visit!r} holds the parts "
+                              f"{', '.join(self.schedule.parts_of[self.values.visit])}: choose one")
+        elif names and part not in names:
             errors["part"] = f"part = {part!r}: this protocol's parts are {', '.join(names)}: choose one"
         elif part and not names and self.protocol is not None:
             errors["part"] = f"part = {part!r}: this protocol has no parts (a study of one task)"
@@ -300,8 +334,8 @@ class SetupModel:
             errors["code"] = (f"{v.code} withdrew from the study ({gone['withdrawn_at'][:16].replace('T', ' ')} UTC) "
                               "and their data were erased; a withdrawn code is not used again: enter a new code")
             return
-        same = [s for s in self.known if s["code"] == v.code and s["kind"] == v.kind
-                and s.get("part", "") == v.part and s["session_id"] != self.running_session]
+        same = [s for s in self.known if s["code"] == v.code and s["kind"] == v.kind and s.get("part", "") == v.part
+                and s.get("visit", "") == v.visit and s["session_id"] != self.running_session]
         if same:
             s = same[-1]
             if s["status"] == "running" and s.get("writer"):
@@ -357,6 +391,8 @@ class SetupModel:
     def next_step(self) -> str:
         """What the participant does next, in words ("" without a code or a protocol)."""
         v, p = self.values, self.protocol
+        if p is not None and p.visits:
+            return self.schedule.words()
         if p is not None and p.parts:
             return plan_words(self.plan(), v.code)
         if not v.code or p is None or not p.training.enabled:
@@ -367,17 +403,22 @@ class SetupModel:
             return f"Next for {v.code}: training ({rule}), then the experiment."
         return f"Next for {v.code}: the experiment."
 
-    def start_command(self, training_override: str = "") -> m.StartSession:
-        """The command that starts this session (validate first); ``training_override`` passes a missing training."""
+    def start_command(self, training_override: str = "", visit_reason: str = "") -> m.StartSession:
+        """The command that starts this session (validate first); ``training_override`` passes a missing training,
+        ``visit_reason`` a visit out of order or outside its window (:attr:`schedule`'s refusal; stored as a
+        deviation, as ``run --visit --deviation`` stores it)."""
         errors = dict(self.validate())
         if training_override.strip() and self.training_missing:
             errors.pop("training")
         if errors or not self.values.code:
             raise ValueError("; ".join(errors.values()) or self.hint)
         v = self.values
+        events = () if not v.visit or self.protocol is None else visit_events(
+            self.protocol, self.known, v.code, v.participant_number, v.seed, v.visit, v.part, visit_reason.strip(),
+            os.path.abspath(v.db_path))
         return m.StartSession(os.path.abspath(v.db_path), v.code, v.kind, v.protocol_path.strip() or None, v.seed,
                               v.participant_number, training_override=training_override.strip(),
-                              covariates=self.covariates.values(), part=v.part)
+                              covariates=self.covariates.values(), part=v.part, visit=v.visit, events=events)
 
     def set_resumable(self, sessions: list[dict[str, object]]) -> None:
         """Interrupted sessions listed by the engine."""
@@ -418,10 +459,13 @@ class SetupModel:
         if session_id is not None and seed is not None and all(s["session_id"] != session_id for s in self.known):
             self.known.append({"session_id": session_id, "code": code, "participant_number": participant_number,
                                "kind": kind, "status": "running", "seed": seed, "trials_planned": 0,
-                               "trials_done": 0, "trials_aborted": 0, "part": self.values.part})
+                               "trials_done": 0, "trials_aborted": 0, "part": self.values.part,
+                               "visit": self.values.visit})
         listed = next((s for s in self.known if s["session_id"] == session_id), None)
-        part = str(listed.get("part", "")) if listed is not None else self.values.part  # a resumed part: its own
-        self.values = replace(self.values, code=code, kind=kind, participant_number=participant_number, part=part)
+        v = self.values
+        if listed is not None:  # a resumed part: its own part (and visit)
+            v = replace(v, part=str(listed.get("part", "")), visit=str(listed.get("visit", "")))
+        self.values = replace(v, code=code, kind=kind, participant_number=participant_number)
         self.number_suggested = False
         self.validate()
 
@@ -442,6 +486,9 @@ class SetupModel:
         (empty code, the next free number suggested)."""
         v = self.values
         coming = next_part_name(self.protocol, self._stored(), v.code, v.participant_number, v.seed)
+        self._refresh_schedule()
+        if coming and self.schedule.next is not None and self.schedule.next[0] != v.visit:
+            coming = ""  # the visit is done: the participant comes back for the next one, another comes now
         if coming:  # a study of several parts: the same participant's next part
             self.kind_suggested = True
             self._suggest_kind()
@@ -459,5 +506,7 @@ class SetupModel:
     def describe_resumable(self, s: dict[str, object]) -> str:
         """One line for the resume list, its progress counted as the running session's is."""
         part = f" (part {s['part']})" if s.get("part") else ""
+        if s.get("visit"):
+            part = f" (visit {s['visit']}, part {s['part']})"
         return (f"session {s['session_id']}: {s['code']} {s['kind']}{part}, {self.count_of(s).text()}, started "
                 f"{str(s['started_at'])[:16].replace('T', ' ')}")

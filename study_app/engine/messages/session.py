@@ -67,6 +67,13 @@ class StartSession:
     #: The part of a study of several parts to start (:mod:`protocol.study.parts`): its protocol in the
     #: participant's order is the session's, its kind ``kind``; "" in a study of one task.
     part: str = ""
+    #: The visit of a schedule (:mod:`protocol.study.visits`) whose part ``part`` starts; "" without ``[[visits]]``.
+    visit: str = ""
+    #: Events ``(kind, detail)`` stored with a visit's new session at session time 0, as ``run --visit`` stores them
+    #: (:mod:`study_app.models.schedule`): the study day it is held on, and the deviation with the experimenter's
+    #: reason when it is out of order or outside its window.  The engine refuses a visit the schedule's rule
+    #: refuses (:func:`protocol.runner.visit_schedule.visit_refusal`) without that deviation.
+    events: tuple[tuple[str, str], ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
