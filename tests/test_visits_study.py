@@ -183,3 +183,17 @@ def test_the_report_has_learning_curves_and_retention(study) -> None:
     assert "MixedLM" in page or "not fitted: 2 participants" in page
     assert (out / "learning_curve.png").stat().st_size > 10_000
     assert 'href="learning.html"' in (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_power_names_a_visits_part_as_the_report_does(study, tmp_path) -> None:
+    """A pilot with visits: a part recurs across visits, so power takes VISIT-PART (the report's name); the bare
+    part name is refused naming the keys, and the chosen key's sessions are the ones read."""
+    from analysis.planning.paired_pool import load_pool
+
+    db = str(study["db"])
+    code, _, err = _main("power", "--db", db, "--out", str(tmp_path / "o"), "--part", "test")
+    assert code == 2 and "holds no session of it; its parts are baseline-practice, baseline-test, post-test" in err
+    pool = load_pool([db], part="post-test")
+    assert pool.participants == ("P01", "P02") and "(its part 'post-test')" in pool.source
+    code, _, err = _main("power", "--db", db, "--out", str(tmp_path / "o"), "--part", "post-test")
+    assert code == 2 and "has 2 participants with both haptic modes" in err and not (tmp_path / "o").exists()

@@ -2,8 +2,9 @@
 
 ``power``, ``sweep`` and ``discrimination`` plan or measure *one* task: in a study of several parts the user names
 the part with ``--part NAME`` (its task, targets, design, trial and training as the part's protocol gives them, the
-study's covariates and groups); without ``--part`` such a study is refused, naming its parts.  A training part is
-free practice, analysed by nothing, and so is refused too.  Every refusal is one :class:`CliError` line, before any
+study's covariates and groups; in a pilot with a schedule of visits, ``VISIT-PART`` as its report names it: a part
+recurs across visits); without ``--part`` such a study is refused, naming its parts.  A training part is free
+practice, analysed by nothing, and so is refused too.  Every refusal is one :class:`CliError` line, before any
 work.
 """
 
@@ -20,7 +21,7 @@ __all__ = ["PART_HELP", "compared_measures", "one_part", "pilot_part"]
 
 #: The ``--part`` option's help (one wording for every command that has it).
 PART_HELP = ("in a protocol or pilot of several parts ([[parts]]): the part whose task this command works on (an "
-             "experiment part, by its name in the file)")
+             "experiment part, by its name in the file; of a pilot with [[visits]], VISIT-PART as its report names it)")
 
 
 def one_part(protocol: Any, path: object, part: str | None, command: str) -> Any:
@@ -47,11 +48,11 @@ def one_part(protocol: Any, path: object, part: str | None, command: str) -> Any
 def pilot_part(databases: Sequence[str | os.PathLike[str]], part: str | None, command: str) -> None:
     """Refuse (one line) a pilot of several parts without ``--part``, a part it does not hold, a training part, or
     ``--part`` with a pilot of one task.  Reads the databases' stored protocols only."""
-    from analysis.report.plan_report import study_plan
+    from analysis.report.plan_report import entry_key, study_plan
 
     plan = study_plan(databases)
     where = ", ".join(str(d) for d in databases)
-    sessions = {e.place.name: e.place.session for e in plan}
+    sessions = {entry_key(e): e.place.session for e in plan}  # VISIT-PART in a study with visits, as the report
     names = list(sessions)
     if part is None:
         if plan:
@@ -66,7 +67,7 @@ def pilot_part(databases: Sequence[str | os.PathLike[str]], part: str | None, co
     _experiment(part, sessions[part], [n for n, s in sessions.items() if s == "experiment"], command)
     from protocol.tasks.registry import task_class
 
-    compared_measures(task_class(next(e.task for e in plan if e.place.name == part)), f"--part = {part!r}", command)
+    compared_measures(task_class(next(e.task for e in plan if entry_key(e) == part)), f"--part = {part!r}", command)
 
 
 def compared_measures(task: Any, which: str, command: str) -> None:
