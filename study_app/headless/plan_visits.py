@@ -59,11 +59,13 @@ def check_visit_request(protocol: ProtocolConfig, request: VisitRequest | None) 
         raise ValueError(f"--day = {request.day}: must be a study day ≥ 0 (days after the participant's first visit)")
 
 
-def visit_step(part: ProtocolConfig, request: VisitRequest | None, day: int, deviation: str = "") -> VisitStep:
-    """The step of a new session of ``part`` (a part of a visit) held on study ``day``."""
+def visit_step(part: ProtocolConfig, request: VisitRequest | None, day: int, deviation: str = "",
+               how: str = "") -> VisitStep:
+    """The step of a new session of ``part`` (a part of a visit) held on study ``day``; ``how`` it was started, in
+    the visit event's last words (default: ``run --visit`` for a request, else the simulated schedule)."""
     assert part.part is not None and part.part.visit is not None
     v: VisitPlace = part.part.visit
-    how = "run --visit" if request is not None else "the simulated participant keeps the schedule"
+    how = how or ("run --visit" if request is not None else "the simulated participant keeps the schedule")
     held = (f"{v.name} (visit {v.number}): held on study day {day}, planned day {v.day} ± {v.window_days} "
             f"({how})")
     events = ((VISIT_EVENT, held),) + (((DEVIATION_EVENT, deviation),) if deviation else ())

@@ -21,7 +21,6 @@ from typing import Any
 
 from protocol.runner.study_rules import StoredSession
 from protocol.runner.visit_schedule import (
-    VISIT_EVENT,
     Schedule,
     VisitState,
     first_visit_date,
@@ -39,8 +38,6 @@ __all__ = ["ScheduleForm", "VisitRow", "visit_events"]
 STATE_WORDS = {"done": "done", "due": "due today", "overdue": "overdue", "not yet": "not yet"}
 #: How a part's state reads in it.
 _PART_WORDS = {"completed": "done", "interrupted": "interrupted (resume it)", "ended": "ended early", "to do": "to do"}
-#: What ``run --visit`` writes in a visit event's last words; a session started from the window says so instead.
-_RUN_HOW, _GUI_HOW = "(run --visit)", "(started in the GUI)"
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,10 +103,7 @@ def visit_events(protocol: ProtocolConfig, known: Sequence[dict[str, Any]], code
     rules = [StoredSession.of(s) for s in known]
     day = request_day(request, run_part, infos, code, _dt.date.today())
     deviation = visit_deviation(protocol, number, seed, rules, code, infos, request, day, db_path)
-    step = visit_step(run_part, request, day, deviation)
-    # visit_step names how the visit was started by run's words only: the record says the window started it
-    return tuple((kind, detail.replace(_RUN_HOW, _GUI_HOW) if kind == VISIT_EVENT else detail)
-                 for kind, detail in step.events)
+    return visit_step(run_part, request, day, deviation, how="started in the GUI").events
 
 
 @dataclass
