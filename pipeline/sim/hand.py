@@ -67,9 +67,21 @@ class CompliantArm:
 
     def step(self, y_c: float, felt_force_n: float, dt_s: float) -> float:
         """Advance by ``dt_s`` toward ``y_c`` under the felt force; return the new position."""
-        p = self.params
+        if dt_s / 0.001 <= 1.0:
+            # one sub-step (every tick of a 1 kHz loop): substeps(..., 1) without its count, range and attribute
+            # stores (0.16 against 0.35 µs a tick measured); the same arithmetic in its order
+            p = self.params
+            v = self.v_m_s + (p.stiffness_n_per_m * (y_c - self.y_m) - p.damping_ns_per_m * self.v_m_s
+                              + felt_force_n) / p.mass_kg * dt_s
+            self.v_m_s = v
+            y = self.y_m = self.y_m + v * dt_s
+            return y
         # integrate in sub-steps of ≤ 1 ms so a long tick stays stable
-        n = max(1, int(math.ceil(dt_s / 0.001)))
+        return self.substeps(y_c, felt_force_n, dt_s, max(1, int(math.ceil(dt_s / 0.001))))
+
+    def substeps(self, y_c: float, felt_force_n: float, dt_s: float, n: int) -> float:
+        """Advance by ``dt_s`` in ``n`` equal semi-implicit Euler steps; return the new position."""
+        p = self.params
         h = dt_s / n
         for _ in range(n):
             a = (p.stiffness_n_per_m * (y_c - self.y_m) - p.damping_ns_per_m * self.v_m_s + felt_force_n) / p.mass_kg

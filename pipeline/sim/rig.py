@@ -41,6 +41,7 @@ __all__ = ["SimRig", "SimRigConfig"]
 
 #: A long tick (a stalled loop) is simulated as at most this much time.
 _MAX_DT_S = 0.01
+_new_tuple = tuple.__new__
 
 
 @dataclass(frozen=True, slots=True)
@@ -204,10 +205,12 @@ class SimRig:
         robot = self.robot
         tip_z = robot.position_m[2]
         depth = cfg.surface_z_m - tip_z
-        obs = HandObservation(self.sim_time_s, self.arm.y_m, felt, depth if depth > 0 else 0.0,
-                              -depth if depth < 0 else 0.0)
+        arm = self.arm
+        # (tuple.__new__: the named tuple without its __new__'s Python frame, ~0.14 µs a tick)
+        obs = _new_tuple(HandObservation, (self.sim_time_s, arm.y_m, felt, depth if depth > 0 else 0.0,
+                                           -depth if depth < 0 else 0.0))
         self.last_observation = obs
-        y = self.arm.step(self.driver.equilibrium_y(obs), felt, dt)
+        y = arm.step(self.driver.equilibrium_y(obs), felt, dt)
         # a displacement along the hand's axis, device frame (off-axis components exactly zero)
         touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
         if self.teleop is None:

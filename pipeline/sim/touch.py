@@ -28,6 +28,8 @@ __all__ = [
     "SimTouch",
 ]
 
+_new_tuple = tuple.__new__
+
 
 class SimTouch:
     """A ``HapticDevice`` whose stylus position is set by whoever holds it (the rig's hand model).
@@ -92,7 +94,9 @@ class SimTouch:
     def read_state(self) -> HapticState:
         """Stylus position (m, device frame), buttons, error code, the derated force limit and the heat fraction."""
         heat = self.output.heat
-        return HapticState(self._t_ns, self.stylus_m, self.buttons, self.error_code, heat.limit_n, heat.fraction)
+        # (tuple.__new__: the named tuple without its __new__'s Python frame, ~0.14 µs a tick)
+        return _new_tuple(HapticState, (self._t_ns, self.stylus_m, self.buttons, self.error_code, heat.limit_n,
+                                        heat.fraction))
 
     def close(self) -> None:
         """Zero the output."""

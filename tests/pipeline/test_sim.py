@@ -14,6 +14,7 @@ from pipeline.core.clock import VirtualClock
 from pipeline.devices.touch_output import HD_WARM_MOTORS, HapticLimits
 from pipeline.force.frames import IDENTITY, mat_mul, transpose
 from pipeline.sim.calibration import auto_calibrate
+from pipeline.sim.hand import CompliantArm
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
 from pipeline.sim.sensor import GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
@@ -251,3 +252,18 @@ def test_haptics_off_renders_nothing_and_presses_deeper() -> None:
     assert np.all(off["render_fx"] == 0) and np.all(off["render_fy"] == 0) and np.all(off["render_fz"] == 0)
     # Wagner–Howe: without the push-back the same hand motion indents further
     assert np.abs(off["true_fz"]).max() > np.abs(on["true_fz"]).max()
+
+
+def test_arm_one_substep_shortcut_is_the_integrator_bit_for_bit() -> None:
+    # step() writes the 1 kHz case out (issue 47: a cheaper tick); it must stay the general integrator's arithmetic
+    # in its order -- a stored study's bytes depend on it -- so the two are compared exactly, not within a tolerance
+    rng = np.random.default_rng(47)
+    fast, ref = CompliantArm(), CompliantArm()
+    for dt in [0.001, 0.0009999999999999998, 0.0005, 0.0, *rng.uniform(0.0, 0.001, 300)]:
+        y_c, felt = float(rng.uniform(-0.03, 0.005)), float(rng.uniform(-1.0, 3.0))
+        assert fast.step(y_c, felt, float(dt)) == ref.substeps(y_c, felt, float(dt), 1)
+        assert (fast.y_m, fast.v_m_s) == (ref.y_m, ref.v_m_s)
+    # a long tick (a stalled loop) still takes sub-steps of at most 1 ms
+    fast.step(0.0, 0.0, 0.0025)
+    ref.substeps(0.0, 0.0, 0.0025, 3)
+    assert (fast.y_m, fast.v_m_s) == (ref.y_m, ref.v_m_s)
