@@ -46,6 +46,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from pipeline.sim.experience import EXPERIENCED_RATIO, experienced
 from pipeline.sim.participant_params import ParticipantParams
@@ -69,6 +70,12 @@ class Practice:
 
     visit: int
     gap_days: int = 0
+
+    @classmethod
+    def at(cls, visit: Any) -> Practice | None:
+        """The practice of a session held in ``visit`` (a stored visit's place, with its ``number`` and
+        ``gap_days``); None for a session outside a schedule of visits."""
+        return None if visit is None else cls(visit.number, visit.gap_days)
 
     def __post_init__(self) -> None:
         if isinstance(self.visit, bool) or not isinstance(self.visit, int) or self.visit < 1:

@@ -73,18 +73,21 @@ class StoredSession:
     part: str = ""
     #: The visit of a schedule it belongs to ("" in a study without visits: :attr:`protocol.storage.SessionInfo.visit`).
     visit: str = ""
+    #: When it started (ISO 8601, UTC; "" where not known): a schedule's days count from the first one.
+    started_at: str = ""
 
     @classmethod
     def of(cls, d: dict[str, Any]) -> StoredSession:
-        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows; ``part`` and
-        ``visit`` optional)."""
+        """From a dict with these keys (:func:`study_app.engine.session_list.list_sessions`' rows; ``part``,
+        ``visit`` and ``started_at`` optional)."""
         return cls(int(d["session_id"]), str(d["code"]), str(d["kind"]), str(d["status"]), int(d["seed"]),
-                   str(d.get("part", "")), str(d.get("visit", "")))
+                   str(d.get("part", "")), str(d.get("visit", "")), str(d.get("started_at") or ""))
 
 
 def stored_sessions(db: StudyDatabase) -> list[StoredSession]:
     """Every session of the database, oldest first."""
-    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed), s.part, s.visit)
+    return [StoredSession(int(s.session_id), str(s.code), str(s.kind), str(s.status), int(s.seed), s.part, s.visit,
+                          str(s.started_at))
             for s in StudyReader.over(db).sessions()]
 
 

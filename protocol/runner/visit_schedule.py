@@ -69,9 +69,9 @@ class Schedule:
         raise KeyError(f"no visit {name!r}: the visits are {', '.join(v.name for v in self.visits)}")
 
 
-def first_visit_date(sessions: Sequence[SessionInfo], code: str) -> _dt.date | None:
+def first_visit_date(sessions: Sequence[SessionInfo | StoredSession], code: str) -> _dt.date | None:
     """The local date of ``code``'s first stored session (None when they have none)."""
-    starts = [s.started_at for s in sessions if s.code == code]
+    starts = [s.started_at for s in sessions if s.code == code and s.started_at]
     if not starts:
         return None
     return _dt.datetime.fromisoformat(min(starts)).astimezone().date()

@@ -180,6 +180,11 @@ class ProtocolConfig:
         return tuple(v.name for v in self.visits)
 
     @property
+    def visit(self) -> VisitPlace | None:
+        """The visit of a schedule this part's session belongs to (a part's protocol in a study with visits)."""
+        return self.part.visit if self.part is not None else None
+
+    @property
     def part_names(self) -> tuple[str, ...]:
         """The parts' names in the file's order (() for a study of one task)."""
         return tuple(p.part.name for p in self.parts if p.part is not None)

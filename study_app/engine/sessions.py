@@ -207,10 +207,8 @@ class EngineSessions:
             profile = simulated_profile(opened.protocol.groups, covariates_by_code(db.conn).get(opened.code, {}))
             # in a schedule of visits it learns from visit to visit, as run's does (its stored visit: a resumed
             # session meets the same participant)
-            visit = opened.protocol.part.visit if opened.protocol.part is not None else None
-            practice = None if visit is None else Practice(visit.number, visit.gap_days)
             self.engine.driver.install(SimulatedParticipant(seed=opened.participant_seed, profile=profile,
-                                                            practice=practice))
+                                                            practice=Practice.at(opened.protocol.visit)))
             sim_rig = self.engine.eng.rig
             participant: StylusControl | None = self.engine.driver
 

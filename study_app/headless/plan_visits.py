@@ -17,6 +17,7 @@ visit's first new session, and the report lists it among the deviations.
 from __future__ import annotations
 
 import datetime as _dt
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from protocol.runner.study_rules import DEVIATION_EVENT, StoredSession, StudyRuleError
@@ -72,8 +73,8 @@ def visit_step(part: ProtocolConfig, request: VisitRequest | None, day: int, dev
     return VisitStep(v.name, part.part.name, events)
 
 
-def request_day(request: VisitRequest | None, part: ProtocolConfig, stored: list[SessionInfo], code: str,
-                today: _dt.date) -> int:
+def request_day(request: VisitRequest | None, part: ProtocolConfig, stored: Sequence[SessionInfo | StoredSession],
+                code: str, today: _dt.date) -> int:
     """The study day a new session of ``part`` is held on: the planned day in a whole-schedule run, else
     ``--day`` or today's study day."""
     assert part.part is not None and part.part.visit is not None
@@ -85,7 +86,8 @@ def request_day(request: VisitRequest | None, part: ProtocolConfig, stored: list
 
 
 def visit_deviation(protocol: ProtocolConfig, number: int, seed: int, rules: list[StoredSession], code: str,
-                    stored: list[SessionInfo], request: VisitRequest, day: int, db_path: str) -> str:
+                    stored: Sequence[SessionInfo | StoredSession], request: VisitRequest, day: int,
+                    db_path: str) -> str:
     """The deviation detail to store with the requested visit's first new session ("" when none is needed); a
     :class:`StudyRuleError` line (nothing written) when one is needed and no reason was given."""
     sched = visit_schedule(protocol, number, seed, rules, code, first_visit_date(stored, code), _dt.date.today())

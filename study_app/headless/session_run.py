@@ -269,8 +269,7 @@ def practice_of(protocol: ProtocolConfig) -> Practice | None:
     """Where in a schedule of visits a session is, for the simulated participant's learning
     (:mod:`pipeline.sim.learning`): its stored visit's number and planned days since the previous visit (so a
     resumed session meets the same participant); None in a study without visits."""
-    visit = protocol.part.visit if protocol.part is not None else None
-    return None if visit is None else Practice(visit.number, visit.gap_days)
+    return Practice.at(protocol.visit)
 
 
 def _commit_deadline(eng: Engine, clock: str, faults: Sequence[FaultPlan], opened: OpenedSession) -> dict[str, Any]:

@@ -28,7 +28,6 @@ from protocol.runner.visit_schedule import (
     visit_refusal,
     visit_schedule,
 )
-from protocol.storage import SessionInfo
 from protocol.study.config import ProtocolConfig
 from study_app.headless.plan_visits import VisitRequest, request_day, visit_deviation, visit_step
 
@@ -81,16 +80,6 @@ def _dates(v: VisitState, today: _dt.date) -> str:
     return f" ({_date(lo, today, month=not same)}–{_date(hi, today)})"
 
 
-def _infos(known: Sequence[dict[str, Any]]) -> list[SessionInfo]:
-    """The listed sessions (:func:`study_app.engine.session_list.list_sessions`' rows) as the schedule's functions
-    read them: :func:`~protocol.runner.visit_schedule.first_visit_date` reads a session's code and ``started_at``
-    only, which the listing has (a session just started, not listed yet, started now)."""
-    now = _dt.datetime.now(_dt.UTC).isoformat(timespec="milliseconds")
-    return [SessionInfo(int(s["session_id"]), 0, str(s["code"]), str(s["kind"]), int(s["seed"]),
-                        int(s["participant_number"]), "{}", "[]", str(s["status"]), str(s.get("started_at") or now),
-                        None, "{}") for s in known]
-
-
 def visit_events(protocol: ProtocolConfig, known: Sequence[dict[str, Any]], code: str, number: int, seed: int,
                  visit: str, part: str, reason: str, db_path: str) -> tuple[tuple[str, str], ...]:
     """The events a new session of ``part`` in ``visit`` stores at session time 0, built as ``run --visit`` builds
@@ -99,10 +88,9 @@ def visit_events(protocol: ProtocolConfig, known: Sequence[dict[str, Any]], code
     :class:`protocol.runner.study_rules.StudyRuleError` (one line) when the rule refuses it and ``reason`` is empty."""
     run_part = protocol.part_of(part, number, seed, visit)
     request = VisitRequest(visit, None, reason)
-    infos = _infos(known)
     rules = [StoredSession.of(s) for s in known]
-    day = request_day(request, run_part, infos, code, _dt.date.today())
-    deviation = visit_deviation(protocol, number, seed, rules, code, infos, request, day, db_path)
+    day = request_day(request, run_part, rules, code, _dt.date.today())
+    deviation = visit_deviation(protocol, number, seed, rules, code, rules, request, day, db_path)
     return visit_step(run_part, request, day, deviation, how="started in the GUI").events
 
 
@@ -132,7 +120,7 @@ class ScheduleForm:
         if not code:
             return
         today = _dt.date.today()
-        first = first_visit_date(_infos(known), code)
+        first = first_visit_date([StoredSession.of(s) for s in known], code)
         self.schedule = visit_schedule(protocol, max(number, 1), max(seed, 0), [StoredSession.of(s) for s in known],
                                        code, first, today)
         self.day = held_day(first, today)
