@@ -222,7 +222,7 @@ class SimulatedParticipant:
         self._khat = self._k
         self._haptic = False
         self._gauge = False
-        self._surface_err = 0.0
+        self._surface_z = 0.0  # the trial's standard-normal draw of its surface-depth error (±3)
         self._approach_s = 0.7
         self._period = 0.5
         self._interval = 0.3
@@ -428,7 +428,7 @@ class SimulatedParticipant:
         self._khat = self._k * p.stiffness_belief_median * math.exp(p.stiffness_belief_sigma * zk)
         zs = self._randn()
         zs = -3.0 if zs < -3.0 else (3.0 if zs > 3.0 else zs)
-        self._surface_err = p.surface_sigma_m * zs
+        self._surface_z = zs
         rt = p.reaction_center_s + float(rng.uniform(-0.1, 0.1))
         feel = haptic or gauge  # the force is felt or shown: no slower, visual-only checking
         approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
@@ -502,8 +502,12 @@ class SimulatedParticipant:
             gap = 0.015 if gap != gap else (0.0 if gap < 0.0 else 0.1)
         if not (0.0 <= ind <= 0.05):
             ind = 0.0 if (ind != ind or ind < 0.0) else 0.05
+        # where the approach ends, off the surface: the depth judged on the image (σ_vis) and the move's own endpoint
+        # scatter, which grows with its mean speed (Schmidt et al. 1979): a faster approach ends farther off
+        speed_m_s = (gap + self._delta_star) / self._approach_s
+        err = self._surface_z * math.hypot(p.surface_sigma_m, p.endpoint_sd_s * speed_m_s)
         # believed surface position in stylus coordinates (e > 0: believed deeper than it is)
-        surface = y_st - (gap + self._surface_err) / s + ind / s
+        surface = y_st - (gap + err) / s + ind / s
         y1 = surface - self._delta_star / s
         if self._haptic and not self._gauge:
             y1 -= p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k

@@ -325,7 +325,7 @@ __all__ = ["MODEL_FIT", "MODEL_VERSION", "PARAM_RANGES", "ParticipantParams"]
 
 #: The participant model's version: changes whenever a parameter, range or behaviour changes what a simulated
 #: study gives (a sweep's or a simulated study's results name it, so a prediction can be traced to its model).
-MODEL_VERSION = "2"
+MODEL_VERSION = "3"
 #: What the fitted parameters were fitted to (one line; the calibration table is in this module's docstring).
 MODEL_FIT = ("stiffness-belief spread, surface-depth error, push-back expectation and the OFF slow-downs fitted on "
              "seeds 100-102 to the paper's OFF and ON levels of success, RMSE, Max AE and to TCT; on the participants "
@@ -333,7 +333,7 @@ MODEL_FIT = ("stiffness-belief spread, surface-depth error, push-back expectatio
 
 
 #: Spread (log σ) of a participant's bias of the remembered target without and with feedback.
-BIAS_SIGMA_OFF = 0.15
+BIAS_SIGMA_OFF = 0.10
 BIAS_SIGMA_ON = 0.05
 
 
@@ -376,7 +376,8 @@ class ParticipantParams:
     sigma_gauge: float = 0.03  # per-look log noise of reading a live force gauge (training)
     sigma_mem_off: float = 0.10  # per-trial memory noise of the target, OFF
     sigma_mem_on: float = 0.13  # per-trial memory noise of the target, ON
-    surface_sigma_m: float = 0.0043  # per-trial error of the believed surface depth
+    surface_sigma_m: float = 0.0025  # per-trial error of the surface depth judged on the image (σ_vis)
+    endpoint_sd_s: float = 0.36  # the approach's endpoint SD per unit of its mean speed (m per m/s; Schmidt et al.)
     off_interval_factor: float = 4.0  # visual checking is slower than feeling
     off_approach_factor: float = 1.75  # without feeling contact, the approach to the surface is slower
     motor_noise_rel: float = 0.15  # signal-dependent log noise of a submovement amplitude
