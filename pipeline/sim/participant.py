@@ -25,13 +25,15 @@ driven by delayed, biased, noisy force percepts):
     ``w_h = σ_v,tot²/(σ_v,tot² + σ_h,tot²)``, ``σ_v,tot² = σ_v² + σ_k²``, ``σ_h,tot² = σ_h² + 0.13²``;
   - contact is noticed visually at ``δ > 1 mm`` or haptically at ``F̂_h > 0.05 N``.
 
-* **Internal target** ``F* = F_target·b·e^{N(0,σ_mem)}``: OFF ``b ~ LogN(1, 0.15)``,
+* **Internal target** ``F* = F_target·b·e^{N(0,σ_mem)}``: OFF ``b ~ LogN(1, 0.10)``,
   ``σ_mem = 0.10``; ON ``b ~ LogN(1, 0.05)``, ``σ_mem = 0.13``.
 
 * **Control.** After a reaction time, one feed-forward minimum-jerk approach
   (:func:`pipeline.sim.hand.min_jerk`), 1.1–1.7 s long (× 1.75 with feedback OFF: contact
-  cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
-  σ 4.3 mm) plus the believed target indentation
+  cannot be felt), to the believed surface (the visible gap plus a per-trial error
+  ``z·√(σ_vis² + (b·v)²)``: the depth judged on the image, σ_vis 2.5 mm, and the move's
+  endpoint scatter, b 0.36 s times its mean speed v -- a faster approach ends farther
+  off, Schmidt et al. 1979) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
   fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
   decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
