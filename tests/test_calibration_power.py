@@ -97,6 +97,7 @@ def test_the_verdict_judges_every_target_and_both_readings_of_tct() -> None:
         in verdict
     assert "improved in the mean: yes (-38 %)" in verdict
     for label in ("RMSE (N)", "TCT (s), successes", "TCT (s), fail=12 s"):
-        assert f"{label:22s} significant in 5/5 studies (need 4): yes" in verdict
+        assert f"{label:22s} significant in 5/5 studies (p < 0.05; a count, not a target)" in verdict
     without = [summarise_study([r for r in _rows(1, 10, False, seed=k)]) for k in range(5)]
-    assert f"{'TCT (s), successes':22s} significant in 0/5 studies (need 4): NO" in format_verdict(without)
+    assert (f"{'TCT (s), successes':22s} significant in 0/5 studies (p < 0.05; a count, not a target)"
+            in format_verdict(without))
