@@ -34,11 +34,11 @@ Nothing else changes: the delays, the submovements, the motor noise, the haptic 
 calibrated participant's (no source gives a surgeon's submovement noise in this task, and a change acting on both
 modes alike would move the levels, not the benefit of feedback).  The approach's endpoint scatter follows its
 speed (participant model v3): the experienced participant's faster approach without feedback ends farther off
-the surface than the inexperienced one's -- the speed–accuracy trade, not a handicap mapped.  The mapping is linear in each handicap, an
-assumption: a standardized effect need not scale so; it was chosen before any simulated two-group study was run
-and is not fitted to one (docs/groups.md gives what a simulated study then showed).  The draws are the calibrated
-participant's (the same seed gives the same person, only more practised), so a paired comparison of the profiles
-is possible.
+the surface than the inexperienced one's -- the speed–accuracy trade, not a handicap mapped.
+The mapping is linear in each handicap, an assumption: a standardized effect need not scale so; it was chosen
+before any simulated two-group study was run and is not fitted to one (docs/groups.md gives what a simulated study
+then showed).  The draws are the calibrated participant's (the same seed gives the same person, only more
+practised), so a paired comparison of the profiles is possible.
 """
 
 from __future__ import annotations
