@@ -268,14 +268,25 @@ class RingBuffer:
         return max(0, count - self.capacity + 1)
 
     def _copy(self, start: int, stop: int) -> npt.NDArray[np.void]:
+        """Records ``start`` to ``stop`` (write counts) copied out of the slots, oldest first.
+
+        Copied as bytes and read as the record type: NumPy copies a structured array field by field (16.7 µs for
+        the 50 records of a session runner's block, against 0.84 µs as bytes; timeit, this VM), the same bytes.
+        """
         n = stop - start  # ≤ capacity by construction
         if n <= 0:
             return np.empty(0, dtype=self.dtype)
         cap = self.capacity
+        rb = self._row_bytes
+        buf = self._buf
         i = start % cap
+        first = _HEADER + i * rb
         if i + n <= cap:
-            return self._rows[i : i + n].copy()
-        return np.concatenate((self._rows[i:], self._rows[: n - (cap - i)]))
+            raw = bytearray(buf[first : first + n * rb])
+        else:  # the range wraps: the slots to the end, then from the first
+            raw = bytearray(buf[first : self._end_off])
+            raw += buf[_HEADER : _HEADER + (n - (cap - i)) * rb]
+        return np.frombuffer(raw, dtype=self.dtype)
 
     def column(self, rows: npt.NDArray[np.void], name: str) -> npt.NDArray[np.float64]:
         """One field of copied rows as a float array."""
