@@ -33,6 +33,7 @@ breaks the 1 kHz loop (science.md §7).
 from __future__ import annotations
 
 import struct
+import sys
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING
 
@@ -115,11 +116,22 @@ class RingBuffer:
         self.fields: tuple[str, ...] = tuple(names)
         self.capacity: int = int(capacity)
         self._row_bytes = 8 * n_fields
-        # one struct call packs a record: an int64 field takes an int (a float there raises, never truncates)
-        self._pack_row = struct.Struct("<" + "".join(_CODES[t][1] for _, _, t in fields)).pack_into
+        # one struct call packs a record: an int64 field takes an int (a float there raises, never truncates).
+        # On a little-endian machine in its native order ("@"): the same bytes as "<" here (8-byte fields, no
+        # padding: checked), through struct's native packers, and into a new bytes object copied into the slot --
+        # 0.31 µs a 50-field record against 0.59 µs for "<" with pack_into (timeit, this VM)
+        codes = "".join(_CODES[t][1] for _, _, t in fields)
+        row = struct.Struct(("@" if sys.byteorder == "little" else "<") + codes)
+        if row.size != 8 * n_fields:  # pragma: no cover - every platform the product runs on packs q and d in 8 bytes
+            row = struct.Struct("<" + codes)
+        self._pack_row = row.pack
         # the write counter as one aligned int64 word (offset 24): stored and loaded whole, never torn
         self._count_cell = np.ndarray((1,), dtype=np.int64, buffer=buf, offset=24)
         self._count = int(self._count_cell[0])
+        # the next slot's byte offset, advanced by one row per write and wrapped at the end: no modulo and
+        # product per record (measured with the loop's whole tick, see write)
+        self._slot_off = _HEADER + (self._count % self.capacity) * self._row_bytes
+        self._end_off = _HEADER + self.capacity * self._row_bytes
         self.dtype = np.dtype([(n, _CODES[t][0]) for n, _, t in fields])
         self._rows = np.ndarray((self.capacity,), dtype=self.dtype, buffer=buf, offset=_HEADER)
 
@@ -200,9 +212,11 @@ class RingBuffer:
     # -- writer ---------------------------------------------------------------------------------
     def write(self, values: Sequence[float]) -> None:
         """Append one record (exactly ``len(fields)`` numbers, an int for an ``int64`` field). Never blocks."""
-        c = self._count
-        self._pack_row(self._buf, _HEADER + (c % self.capacity) * self._row_bytes, *values)
-        c += 1
+        off = self._slot_off
+        end = off + self._row_bytes
+        self._buf[off:end] = self._pack_row(*values)
+        self._slot_off = end if end < self._end_off else _HEADER
+        c = self._count + 1
         self._count = c
         # publish after the row is complete
         self._count_cell[0] = c
@@ -254,14 +268,25 @@ class RingBuffer:
         return max(0, count - self.capacity + 1)
 
     def _copy(self, start: int, stop: int) -> npt.NDArray[np.void]:
+        """Records ``start`` to ``stop`` (write counts) copied out of the slots, oldest first.
+
+        Copied as bytes and read as the record type: NumPy copies a structured array field by field (16.7 µs for
+        the 50 records of a session runner's block, against 0.84 µs as bytes; timeit, this VM), the same bytes.
+        """
         n = stop - start  # ≤ capacity by construction
         if n <= 0:
             return np.empty(0, dtype=self.dtype)
         cap = self.capacity
+        rb = self._row_bytes
+        buf = self._buf
         i = start % cap
+        first = _HEADER + i * rb
         if i + n <= cap:
-            return self._rows[i : i + n].copy()
-        return np.concatenate((self._rows[i:], self._rows[: n - (cap - i)]))
+            raw = bytearray(buf[first : first + n * rb])
+        else:  # the range wraps: the slots to the end, then from the first
+            raw = bytearray(buf[first : self._end_off])
+            raw += buf[_HEADER : _HEADER + (n - (cap - i)) * rb]
+        return np.frombuffer(raw, dtype=self.dtype)
 
     def column(self, rows: npt.NDArray[np.void], name: str) -> npt.NDArray[np.float64]:
         """One field of copied rows as a float array."""

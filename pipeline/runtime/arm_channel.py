@@ -126,29 +126,28 @@ class ArmChannel:
 
         # -- watchdog --
         cond = 0
-        _, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz = w[:7]
-        sensor_age_ns = now - w.t_ns
+        # the sample unpacked whole, once (pipeline.devices.interfaces.WrenchSample): no w[:7] tuple, no lookups by name
+        w_t_ns, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, w_status, _, _ = w
+        sensor_age_ns = now - w_t_ns
         if sensor_age_ns > self._sensor_age_ns:
             cond |= Fault.SENSOR_STALE
-        if w.status:
+        if w_status:
             cond |= Fault.SENSOR_STATUS
         if (raw_fx - raw_fx) + (raw_fy - raw_fy) + (raw_fz - raw_fz) + (raw_tx - raw_tx) + (raw_ty - raw_ty) + (
                 raw_tz - raw_tz) != 0.0:
             cond |= Fault.NON_FINITE
         else:
-            s = self._sat
-            if (abs(raw_fx) > s[0] or abs(raw_fy) > s[1] or abs(raw_fz) > s[2]
-                    or abs(raw_tx) > s[3] or abs(raw_ty) > s[4] or abs(raw_tz) > s[5]):
+            s0, s1, s2, s3, s4, s5 = self._sat  # |v| > s as -s <= v <= s failing (v finite here): no abs() calls
+            if not (-s0 <= raw_fx <= s0 and -s1 <= raw_fy <= s1 and -s2 <= raw_fz <= s2
+                    and -s3 <= raw_tx <= s3 and -s4 <= raw_ty <= s4 and -s5 <= raw_tz <= s5):
                 cond |= Fault.SENSOR_SATURATION
         pose_age_ns = now - pose.t_ns
         if pose_age_ns > self._pose_age_ns:
             cond |= Fault.POSE_STALE
         if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
             cond |= self._take_pose(pose)
-        if hs.error_code:
-            cond |= Fault.HAPTIC_DEVICE
-        if hs.force_limit_n != self._device_limit_n:  # the device derates (rare; a compare per tick otherwise)
-            self._device_limit(now, hs)
+        if hs.error_code or hs.force_limit_n != self._device_limit_n:  # (rare: two compares a tick otherwise)
+            cond |= self._device_changed(now, hs)
         faults = self.faults  # latched
         if cond != self.active_faults or cond & ~faults:  # (fault-free steady state: both false)
             faults = self._conditions_changed(cond, now, w, pose, hs, sensor_age_ns, pose_age_ns)
@@ -167,7 +166,7 @@ class ArmChannel:
         self.haptic.command_force(render_fx, render_fy, render_fz, now)
         derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
         # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
-        latency_ns = loop.clock.now_ns() - w.t_ns
+        latency_ns = loop.clock.now_ns() - w_t_ns
         true_fx, true_fy, true_fz = self._truth() or _NAN3
         tip_x_m, tip_y_m, tip_z_m = pose.position_m
         stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
@@ -233,6 +232,13 @@ class ArmChannel:
                 self.emit(now - loop.t0_ns, "fault_cleared",
                           f"{Fault(gone).describe()}: the condition is gone (latched until a reset)")
         return latched
+
+    def _device_changed(self, now: int, hs: HapticState) -> int:
+        """The haptic device reports an error or a new force limit: take the limit (derating); ``Fault.HAPTIC_DEVICE``
+        while it reports an error, else 0."""
+        if hs.force_limit_n != self._device_limit_n:
+            self._device_limit(now, hs)
+        return Fault.HAPTIC_DEVICE if hs.error_code else 0
 
     def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
         """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets

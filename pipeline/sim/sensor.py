@@ -22,6 +22,8 @@ from pipeline.force.frames import Mat3, Vec3, cross, mat_vec
 
 __all__ = ["GAMMA_RANGE", "SATURATION_STATUS", "SensorParams", "SimForceSensor"]
 
+#: 1.5·2⁵²: added to and taken from a double under 2⁵¹ in magnitude, rounds it to an integer, halves to even.
+_ROUND = 6755399441055744.0
 #: SI-130-10 full scale: Fx, Fy ±130 N; Fz ±400 N; Tx, Ty, Tz ±10 N·m.
 GAMMA_RANGE: tuple[float, float, float, float, float, float] = (130.0, 130.0, 400.0, 10.0, 10.0, 10.0)
 #: Status word the simulated box reports while a gauge is saturated (non-zero = serious).
@@ -89,6 +91,10 @@ class SimForceSensor:
 
     def __init__(self, params: SensorParams | None = None, seed: int = 0) -> None:
         self.params = params or SensorParams()
+        r, cpf, cpt = self.params.range_n, self.params.counts_per_force, self.params.counts_per_torque
+        if not (max(r[:3]) * cpf < 2.0**51 and max(r[3:]) * cpt < 2.0**51):  # (sample's rounding holds below it)
+            raise ValueError(f"counts_per_force = {cpf!r}, counts_per_torque = {cpt!r} with range_n = {r!r}: a "
+                             "full-scale reading must be under 2**51 counts")
         self._rng = np.random.default_rng(seed)
         self._noise: list[list[float]] = []
         self._ni = self._BLOCK
@@ -194,15 +200,18 @@ class SimForceSensor:
             status |= SATURATION_STATUS
             v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip((v0, v1, v2, v3, v4, v5), r, strict=True))
         cpf, cpt = p.counts_per_force, p.counts_per_torque
-        # integer counts on the wire
-        v0 = round(v0 * cpf) / cpf
+        # integer counts on the wire: x + 1.5·2⁵² − 1.5·2⁵² is round(x) (halves to even, as round does) for
+        # |x| < 2⁵¹, which the clamp to the range above and the counts' check in __init__ guarantee; an int's
+        # quotient and an integral float's are the same double.  0.04 against 0.08 µs a value (timeit), six a tick
+        v0 = (v0 * cpf + _ROUND - _ROUND) / cpf
         if self.inject_nan:
             v0 = math.nan
         self._rdt += 1
         self._ft += 1
         self._latest = _new_tuple(WrenchSample, (
-            t_ns, v0, round(v1 * cpf) / cpf, round(v2 * cpf) / cpf,
-            round(v3 * cpt) / cpt, round(v4 * cpt) / cpt, round(v5 * cpt) / cpt, status, self._rdt, self._ft,
+            t_ns, v0, (v1 * cpf + _ROUND - _ROUND) / cpf, (v2 * cpf + _ROUND - _ROUND) / cpf,
+            (v3 * cpt + _ROUND - _ROUND) / cpt, (v4 * cpt + _ROUND - _ROUND) / cpt, (v5 * cpt + _ROUND - _ROUND) / cpt,
+            status, self._rdt, self._ft,
         ))
 
     def read_wrench(self) -> WrenchSample:

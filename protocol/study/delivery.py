@@ -171,8 +171,13 @@ class TrialWindow:
         mask = (rows["trial_index"] == trial_index) & (t_ns >= cue_ns)
         if ended is not None:
             mask &= t_ns <= ended.end_ns
-        if mask.any():
-            self.note(rows[mask])
+        idx = np.flatnonzero(mask)
+        if len(idx) == 0:
+            return
+        first, last = int(idx[0]), int(idx[-1])
+        # the trial's records are one run of the block (marked, in time order): a slice, not a boolean index --
+        # NumPy copies a structured array's masked rows field by field (~12 µs a 50-record block against ~1 µs)
+        self.note(rows[first : last + 1] if last - first + 1 == len(idx) else rows[mask])
 
     def take(self) -> tuple[tuple[int, int] | None, LoopHealth]:
         """The finished trial's record ticks and loop health; the window is empty again."""

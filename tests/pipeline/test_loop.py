@@ -94,6 +94,20 @@ def test_loop_stats_quantiles_on_a_constructed_sequence():
     }
 
 
+def test_loop_stats_counts_the_nominal_period_as_any_other():
+    """add only counts a period equal to the nominal one; every figure is what the histogram path gives."""
+    slow = LoopStats(3_000_000)  # a nominal period over 2 ms: its ticks count there too
+    for p in (3_000_000, 3_000_000, 3_000_400, 3_000_000):
+        slow.add(p)
+    assert (slow.count, slow.max_ns, slow.over_2ms) == (4, 3_000_400, 4)
+    assert slow.summary()["period_p50_us"] == 3000.0 and slow.summary()["abs_dev_p99_us"] == 0.0
+    only = LoopStats(PERIOD_NS)
+    only.add(PERIOD_NS)
+    assert (only.count, only.max_ns, only.over_2ms) == (1, PERIOD_NS, 0)
+    only.reset()
+    assert (only.count, only.max_ns, only.summary()["ticks"]) == (0, 0, 0.0)
+
+
 def test_loop_stats_edges():
     s = LoopStats(PERIOD_NS)
     summary = s.summary()

@@ -17,7 +17,7 @@ from pipeline.sim.calibration import auto_calibrate
 from pipeline.sim.hand import CompliantArm
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.robot import TOOL_DOWN, SimRobot
-from pipeline.sim.sensor import GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
+from pipeline.sim.sensor import _ROUND, GAMMA_RANGE, SATURATION_STATUS, SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
 from pipeline.sim.touch import SimTouch
 
@@ -267,3 +267,15 @@ def test_arm_one_substep_shortcut_is_the_integrator_bit_for_bit() -> None:
     fast.step(0.0, 0.0, 0.0025)
     ref.substeps(0.0, 0.0, 0.0025, 3)
     assert (fast.y_m, fast.v_m_s) == (ref.y_m, ref.v_m_s)
+
+
+def test_the_sensors_counts_round_as_round_does() -> None:
+    """The sample's quantisation (x + 1.5·2⁵² − 1.5·2⁵²) is round(x) -- halves to even, signs, zero -- below 2⁵¹ counts,
+    and a sensor whose full scale could reach 2⁵¹ counts is refused."""
+    rng = np.random.default_rng(4)
+    values = [*rng.uniform(-4e8, 4e8, 20_000), *(k + 0.5 for k in range(-50, 50)), -0.5, -0.0, 0.49999999999999994,
+              2.0**51 - 1.5, -(2.0**51) + 0.5, 130.0 * 1e6 + 0.5]
+    assert all(x + _ROUND - _ROUND == round(x) for x in values)
+    assert all(math.copysign(1.0, (x + _ROUND - _ROUND) / 1e6) == math.copysign(1.0, round(x) / 1e6) for x in values)
+    with pytest.raises(ValueError, match="counts_per_force"):
+        SimForceSensor(SensorParams(counts_per_force=1e14))
