@@ -26,19 +26,17 @@ stiffness belief σ_k         0.40               the participant's felt-force   
                                                 √(σ_h² + 0.13²) ≈ 0.18
 OFF decision-interval ×      4.0                1                              1 + 3ρ ≈ 1.46
 OFF approach ×               1.75               1                              1 + 0.75ρ ≈ 1.11
-bias of the remembered       LogN(1, 0.10)      LogN(1, 0.05)                  LogN(1, 0.05 + 0.05ρ):
+bias of the remembered       LogN(1, 0.15)      LogN(1, 0.05)                  LogN(1, 0.05 + 0.10ρ):
 target OFF                                                                     the same draw, rescaled
 ===========================  =================  =============================  ==========================
 
 Nothing else changes: the delays, the submovements, the motor noise, the haptic percept and everything ON are the
 calibrated participant's (no source gives a surgeon's submovement noise in this task, and a change acting on both
-modes alike would move the levels, not the benefit of feedback).  The approach's endpoint scatter follows its
-speed (participant model v3): the experienced participant's faster approach without feedback ends farther off
-the surface than the inexperienced one's -- the speed–accuracy trade, not a handicap mapped.
-The mapping is linear in each handicap, an assumption: a standardized effect need not scale so; it was chosen
-before any simulated two-group study was run and is not fitted to one (docs/groups.md gives what a simulated study
-then showed).  The draws are the calibrated participant's (the same seed gives the same person, only more
-practised), so a paired comparison of the profiles is possible.
+modes alike would move the levels, not the benefit of feedback).  The mapping is linear in each handicap, an
+assumption: a standardized effect need not scale so; it was chosen before any simulated two-group study was run
+and is not fitted to one (docs/groups.md gives what a simulated study then showed).  The draws are the calibrated
+participant's (the same seed gives the same person, only more practised), so a paired comparison of the profiles
+is possible.
 """
 
 from __future__ import annotations

@@ -25,15 +25,14 @@ driven by delayed, biased, noisy force percepts):
     ``w_h = σ_v,tot²/(σ_v,tot² + σ_h,tot²)``, ``σ_v,tot² = σ_v² + σ_k²``, ``σ_h,tot² = σ_h² + 0.13²``;
   - contact is noticed visually at ``δ > 1 mm`` or haptically at ``F̂_h > 0.05 N``.
 
-* **Internal target** ``F* = F_target·b·e^{N(0,σ_mem)}``: OFF ``b ~ LogN(1, 0.10)``,
+* **Internal target** ``F* = F_target·b·e^{N(0,σ_mem)}``: OFF ``b ~ LogN(1, 0.15)``,
   ``σ_mem = 0.10``; ON ``b ~ LogN(1, 0.05)``, ``σ_mem = 0.13``.
 
 * **Control.** After a reaction time, one feed-forward minimum-jerk approach
   (:func:`pipeline.sim.hand.min_jerk`), 1.1–1.7 s long (× 1.75 with feedback OFF: contact
-  cannot be felt), to the believed surface (the visible gap plus a per-trial error
-  ``z·√(σ_vis² + (b·v)²)``: the depth judged on the image, σ_vis 2.5 mm, and the move's
-  endpoint scatter, b 0.36 s times its mean speed v -- a faster approach ends farther
-  off, Schmidt et al. 1979) plus the believed target indentation
+  cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
+  ``z·√(σ² + (b·v)²)``, σ 4.3 mm; b, the endpoint scatter per unit of the approach's mean speed v
+  (Schmidt et al. 1979), is 0 in model v2: docs/participant-calibration.md) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
   fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
   decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
@@ -504,8 +503,9 @@ class SimulatedParticipant:
             gap = 0.015 if gap != gap else (0.0 if gap < 0.0 else 0.1)
         if not (0.0 <= ind <= 0.05):
             ind = 0.0 if (ind != ind or ind < 0.0) else 0.05
-        # where the approach ends, off the surface: the depth judged on the image (σ_vis) and the move's own endpoint
-        # scatter, which grows with its mean speed (Schmidt et al. 1979): a faster approach ends farther off
+        # where the approach ends, off the surface: the depth judged on the image and the move's own endpoint scatter,
+        # which grows with its mean speed (Schmidt et al. 1979; its coefficient is 0 in model v2: with it, a faster
+        # approach ends farther off -- the v3 candidate of docs/participant-calibration.md)
         speed_m_s = (gap + self._delta_star) / self._approach_s
         err = self._surface_z * math.hypot(p.surface_sigma_m, p.endpoint_sd_s * speed_m_s)
         # believed surface position in stylus coordinates (e > 0: believed deeper than it is)

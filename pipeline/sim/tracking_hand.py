@@ -93,8 +93,6 @@ class TrackingHand:
         self._arm_k, self._fmax, self._fscale = arm_k, f_max_n, f_scale_n
         z = float(np.clip(rng.standard_normal(), -3.0, 3.0))
         self._khat = stiffness * p.stiffness_belief_median * math.exp(p.stiffness_belief_sigma * z)
-        # the depth judged on the image only: the hand has no planned approach whose speed would add the regulation
-        # model's endpoint scatter (it closes on the surface through its low-pass)
         self._surface_err = p.surface_sigma_m * float(np.clip(rng.standard_normal(), -3.0, 3.0))
         self._start = t0_s + p.reaction_center_s + float(rng.uniform(-0.1, 0.1))
         self._tau_v = p.tau_visual_s + p.camera_latency_s

@@ -154,7 +154,9 @@ def _approach_end_error_m(params: ParticipantParams) -> tuple[float, SimulatedPa
 def test_a_faster_approach_ends_farther_off_the_surface() -> None:
     # impulse variability (Schmidt et al. 1979): the endpoint scatter grows with the move's mean speed; the same
     # person and the same draw, only the approach's duration differs
-    base = ParticipantParams.draw(np.random.default_rng(3))
+    # the candidate's constants (docs/participant-calibration.md; model v2 has the coefficient at 0)
+    base = dataclasses.replace(ParticipantParams.draw(np.random.default_rng(3)), surface_sigma_m=0.0025,
+                               endpoint_sd_s=0.36)
     err_fast, fast = _approach_end_error_m(dataclasses.replace(base, approach_center_s=1.2))
     err_slow, slow = _approach_end_error_m(dataclasses.replace(base, approach_center_s=2.4))
     assert fast._surface_z == slow._surface_z != 0.0
@@ -166,7 +168,7 @@ def test_a_faster_approach_ends_farther_off_the_surface() -> None:
 
     # rel 1e-9: two plans' ends subtracted (values ~2e-2 m, differences ~5e-3 m) lose a few ulps, nothing more
     assert err_fast / err_slow == pytest.approx(sd(fast) / sd(slow), rel=1e-9)
-    # without the speed term the error is the image's depth error alone, whatever the speed (model v2's rule)
+    # without the speed term the error is the image's depth error alone, whatever the speed (model v2)
     err_v2, p = _approach_end_error_m(dataclasses.replace(base, approach_center_s=1.2, endpoint_sd_s=0.0))
     assert err_v2 == pytest.approx(p._surface_z * base.surface_sigma_m, rel=1e-9)
 
