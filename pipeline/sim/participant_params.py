@@ -302,7 +302,7 @@ A candidate for version 3 (issue 48, docs/participant-calibration.md): the appro
 speed (``endpoint_sd_s``, impulse variability, Schmidt et al. 1979), so the faster ON approach ends farther off.
 Fitted on seeds 1000–1004 and validated on ten studies run as ``run`` runs them (seeds 3000–3009), it puts every
 OFF and ON level within ±25 % of the paper's -- but its ON excursions are ON's peaks too: Max AE's benefit falls to
-−19 … −24 % (power 0.27 at n = 10 on seeds 300–329, v2 0.91), ON trials reach 9–10 N (a 15 mm over-travel at +3σ),
+−19 … −24 % (power 0.27 at n = 10 on seeds 300–329, v2 0.91), ON trials reach 8.6–9.8 N (a 15 mm over-travel at +3σ),
 and the README's seed-0 study shows Max AE *higher* with feedback (2.00 → 2.20 N) and no TCT benefit.  Not
 adopted: ``endpoint_sd_s`` is 0 here, where the code gives model v2's bytes exactly.
 
