@@ -31,8 +31,7 @@ driven by delayed, biased, noisy force percepts):
 * **Control.** After a reaction time, one feed-forward minimum-jerk approach
   (:func:`pipeline.sim.hand.min_jerk`), 1.1–1.7 s long (× 1.75 with feedback OFF: contact
   cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
-  ``z·√(σ² + (b·v)²)``, σ 4.3 mm; b, the endpoint scatter per unit of the approach's mean speed v
-  (Schmidt et al. 1979), is 0 in model v2: docs/participant-calibration.md) plus the believed target indentation
+  σ 4.3 mm) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
   fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
   decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
@@ -223,7 +222,7 @@ class SimulatedParticipant:
         self._khat = self._k
         self._haptic = False
         self._gauge = False
-        self._surface_z = 0.0  # the trial's standard-normal draw of its surface-depth error (±3)
+        self._surface_err = 0.0
         self._approach_s = 0.7
         self._period = 0.5
         self._interval = 0.3
@@ -429,7 +428,7 @@ class SimulatedParticipant:
         self._khat = self._k * p.stiffness_belief_median * math.exp(p.stiffness_belief_sigma * zk)
         zs = self._randn()
         zs = -3.0 if zs < -3.0 else (3.0 if zs > 3.0 else zs)
-        self._surface_z = zs
+        self._surface_err = p.surface_sigma_m * zs
         rt = p.reaction_center_s + float(rng.uniform(-0.1, 0.1))
         feel = haptic or gauge  # the force is felt or shown: no slower, visual-only checking
         approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
@@ -503,13 +502,8 @@ class SimulatedParticipant:
             gap = 0.015 if gap != gap else (0.0 if gap < 0.0 else 0.1)
         if not (0.0 <= ind <= 0.05):
             ind = 0.0 if (ind != ind or ind < 0.0) else 0.05
-        # where the approach ends, off the surface: the depth judged on the image and the move's own endpoint scatter,
-        # which grows with its mean speed (Schmidt et al. 1979; its coefficient is 0 in model v2: with it, a faster
-        # approach ends farther off -- the v3 candidate of docs/participant-calibration.md)
-        speed_m_s = (gap + self._delta_star) / self._approach_s
-        err = self._surface_z * math.hypot(p.surface_sigma_m, p.endpoint_sd_s * speed_m_s)
         # believed surface position in stylus coordinates (e > 0: believed deeper than it is)
-        surface = y_st - (gap + err) / s + ind / s
+        surface = y_st - (gap + self._surface_err) / s + ind / s
         y1 = surface - self._delta_star / s
         if self._haptic and not self._gauge:
             y1 -= p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k

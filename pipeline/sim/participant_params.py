@@ -299,12 +299,12 @@ needs a mechanism that keeps ON errors longer (the paper's RMSE / Max AE is 0.59
 OFF's peaks, and a run of its own; until then the model stays version 2.
 
 A candidate for version 3 (issue 48, docs/participant-calibration.md): the approach's end scatters with its mean
-speed (``endpoint_sd_s``, impulse variability, Schmidt et al. 1979), so the faster ON approach ends farther off.
+speed (impulse variability, Schmidt et al. 1979), so the faster ON approach ends farther off.
 Fitted on seeds 1000–1004 and validated on ten studies run as ``run`` runs them (seeds 3000–3009), it puts every
 OFF and ON level within ±25 % of the paper's -- but its ON excursions are ON's peaks too: Max AE's benefit falls to
 −19 … −24 % (power 0.27 at n = 10 on seeds 300–329, v2 0.91), ON trials reach 8.6–9.8 N (a 15 mm over-travel at +3σ),
 and the README's seed-0 study shows Max AE *higher* with feedback (2.00 → 2.20 N) and no TCT benefit.  Not
-adopted: ``endpoint_sd_s`` is 0 here, where the code gives model v2's bytes exactly.
+adopted, and not in this model's code (a parameter no study uses would be a model of nothing).
 
 **Training** does nothing to the simulated participant's experiment: each session meets a fresh participant of
 the same seed (the same constants), and its trials draw from their own random streams (practice trials from
@@ -385,9 +385,6 @@ class ParticipantParams:
     sigma_mem_off: float = 0.10  # per-trial memory noise of the target, OFF
     sigma_mem_on: float = 0.13  # per-trial memory noise of the target, ON
     surface_sigma_m: float = 0.0043  # per-trial error of the believed surface depth
-    # the approach's endpoint SD per unit of its mean speed (m per m/s; Schmidt et al. 1979): 0 in model v2 (a
-    # candidate for v3 with 0.36 was validated and not adopted: docs/participant-calibration.md)
-    endpoint_sd_s: float = 0.0
     off_interval_factor: float = 4.0  # visual checking is slower than feeling
     off_approach_factor: float = 1.75  # without feeling contact, the approach to the surface is slower
     motor_noise_rel: float = 0.15  # signal-dependent log noise of a submovement amplitude

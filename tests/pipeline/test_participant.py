@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 
@@ -136,41 +135,6 @@ def test_without_feedback_the_approach_and_the_checks_are_slower() -> None:
     assert off.params.off_approach_factor > 1.0 and off.params.off_interval_factor > 1.0
     assert off._approach_s == pytest.approx(on._approach_s * off.params.off_approach_factor, rel=1e-12)
     assert off._interval == pytest.approx(on._interval * off.params.off_interval_factor, rel=1e-12)
-
-
-def _approach_end_error_m(params: ParticipantParams) -> tuple[float, SimulatedParticipant]:
-    """How far (m, + deeper) participant 9's first approach (haptics ON, FIRM) ends from where the same person
-    with no depth error would end it, read from the planned end of the move once the approach has started."""
-    ends = []
-    for q in (params, dataclasses.replace(params, surface_sigma_m=0.0, endpoint_sd_s=0.0)):
-        p = SimulatedParticipant(seed=9, params=q)
-        p.begin_trial(TrialAim.constant(1.2, True), 0.0)
-        for i in range(1500):  # the reaction time is at most 1.0 s: the approach has started by 1.5 s
-            p.equilibrium_y(HandObservation(i * 1e-3, 0.0, 0.0, 0.0, GAP_M))
-        ends.append(p)
-    return ends[1]._p_y1 - ends[0]._p_y1, ends[0]
-
-
-def test_a_faster_approach_ends_farther_off_the_surface() -> None:
-    # impulse variability (Schmidt et al. 1979): the endpoint scatter grows with the move's mean speed; the same
-    # person and the same draw, only the approach's duration differs
-    # the candidate's constants (docs/participant-calibration.md; model v2 has the coefficient at 0)
-    base = dataclasses.replace(ParticipantParams.draw(np.random.default_rng(3)), surface_sigma_m=0.0025,
-                               endpoint_sd_s=0.36)
-    err_fast, fast = _approach_end_error_m(dataclasses.replace(base, approach_center_s=1.2))
-    err_slow, slow = _approach_end_error_m(dataclasses.replace(base, approach_center_s=2.4))
-    assert fast._surface_z == slow._surface_z != 0.0
-    assert abs(err_fast) > abs(err_slow) > 0.0 and (err_fast > 0) == (err_slow > 0)
-
-    def sd(p: SimulatedParticipant) -> float:
-        v_m_s = (GAP_M + p._delta_star) / p._approach_s
-        return math.hypot(base.surface_sigma_m, base.endpoint_sd_s * v_m_s)
-
-    # rel 1e-9: two plans' ends subtracted (values ~2e-2 m, differences ~5e-3 m) lose a few ulps, nothing more
-    assert err_fast / err_slow == pytest.approx(sd(fast) / sd(slow), rel=1e-9)
-    # without the speed term the error is the image's depth error alone, whatever the speed (model v2)
-    err_v2, p = _approach_end_error_m(dataclasses.replace(base, approach_center_s=1.2, endpoint_sd_s=0.0))
-    assert err_v2 == pytest.approx(p._surface_z * base.surface_sigma_m, rel=1e-9)
 
 
 # -- retraction and safety --------------------------------------------------------------------

@@ -275,6 +275,8 @@ def test_the_sensors_counts_round_as_round_does() -> None:
     rng = np.random.default_rng(4)
     values = [*rng.uniform(-4e8, 4e8, 20_000), *(k + 0.5 for k in range(-50, 50)), -0.5, -0.0, 0.49999999999999994,
               2.0**51 - 1.5, -(2.0**51) + 0.5, 130.0 * 1e6 + 0.5]
+    # exact, not approximate: the claim is bit-identity with round() (the stored counts), and two IEEE-754 double
+    # additions are correctly rounded on every CPU -- no BLAS kernel or fused operation is involved
     assert all(x + _ROUND - _ROUND == round(x) for x in values)
     assert all(math.copysign(1.0, (x + _ROUND - _ROUND) / 1e6) == math.copysign(1.0, round(x) / 1e6) for x in values)
     with pytest.raises(ValueError, match="counts_per_force"):
