@@ -33,7 +33,10 @@ driven by delayed, biased, noisy force percepts):
   cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
   σ 4.3 mm) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
-  fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
+  fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Without
+  feedback the approach is watched on the image (every 20 ms, delayed ``τ_v +
+  camera``) and stopped where it is once the seen force ``k̂·δⁿ`` passes twice
+  ``F*`` (:mod:`pipeline.sim.approach`, model version 3).  Then a
   decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
   ``|F* − F̂| < 5 % F*``; if no contact is noticed, step down by the search
   step; otherwise a submovement of duration ``D`` by
@@ -90,6 +93,7 @@ import numpy as np
 
 from pipeline.core.aim import TrialAim, TrialQuestion
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim.approach import approach_end_y, seen_over_aim
 from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
@@ -227,6 +231,8 @@ class SimulatedParticipant:
         self._period = 0.5
         self._interval = 0.3
         self._delta_star = 0.0
+        self._approach_end = 0.0
+        self._watched = False
         self.decisions = 0  # decisions taken since construction (for tests and logs)
         self.submovements = 0
 
@@ -377,6 +383,7 @@ class SimulatedParticipant:
         self._d_t0 += dt
         self._d_t1 += dt
         self._next += dt
+        self._approach_end += dt
         self._cue_t += dt
         ht = self._ht
         for k in range(_HIST):
@@ -434,6 +441,7 @@ class SimulatedParticipant:
         approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
         self._approach_s = approach_s * (1.0 if feel else p.off_approach_factor)
         self._interval = p.interval_s * (1.0 if feel else p.off_interval_factor)
+        self._watched = not feel
         self._period = p.submove_s + self._interval
         self._delta_star = (self._target / self._khat) ** self._inv_n
         # hold where we are until the reaction time has passed
@@ -487,6 +495,8 @@ class SimulatedParticipant:
     def _event(self, t: float) -> None:
         if self._stage == _WAIT:
             self._start_approach(t)
+        elif self._stage == _APPROACH and t < self._approach_end:
+            self._watch(t)
         else:
             self._decide(t)
 
@@ -494,24 +504,31 @@ class SimulatedParticipant:
         """One feed-forward minimum-jerk move to the believed surface + believed indentation."""
         p = self.params
         j = self._lookup(t - p.tau_visual_s - p.camera_latency_s)
-        y_st, gap, ind = self._hy[j], self._hg[j], self._hd[j]
-        s = self._s
+        y_st = self._hy[j]
         if not (-0.1 <= y_st <= 0.1):  # also NaN: trust the own command instead
             y_st = self._plan_value(t)
-        if not (0.0 <= gap <= 0.1):
-            gap = 0.015 if gap != gap else (0.0 if gap < 0.0 else 0.1)
-        if not (0.0 <= ind <= 0.05):
-            ind = 0.0 if (ind != ind or ind < 0.0) else 0.05
-        # believed surface position in stylus coordinates (e > 0: believed deeper than it is)
-        surface = y_st - (gap + self._surface_err) / s + ind / s
-        y1 = surface - self._delta_star / s
+        pushback = 0.0
         if self._haptic and not self._gauge:
-            y1 -= p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k
-        self._plan(t, self._approach_s, y1)
+            pushback = p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k
+        self._plan(t, self._approach_s, approach_end_y(y_st, self._hg[j], self._hd[j], self._surface_err,
+                                                       self._delta_star, self._s, pushback))
         self._drift_on = True
         self._d_t0, self._d_t1, self._d0, self._d1 = t, t + _DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
         self._stage = _APPROACH
-        self._next = t + self._approach_s + self._interval
+        self._approach_end = self._next = t + self._approach_s + self._interval
+        if self._watched:  # feedback OFF: the approach is watched on the image (pipeline.sim.approach)
+            self._next = min(t + p.approach_look_s, self._approach_end)
+
+    def _watch(self, t: float) -> None:
+        """A look at the image during a watched approach: stop it if the seen force is well past the aim."""
+        p = self.params
+        self._next = min(t + p.approach_look_s, self._approach_end)
+        d = self._hd[self._lookup(t - p.tau_visual_s - p.camera_latency_s)]
+        if seen_over_aim(d, self._khat, self._n, self._target, p.approach_stop_excess):
+            # a guarded move's stop: the equilibrium stays where it is now; the next look at the usual interval
+            self._plan(t, 1e-3, self._plan_value(t))
+            self._stage = _CONTROL
+            self._next = t + self._period
 
     def _decide(self, t: float) -> None:
         """One intermittent decision: perceive (delayed, noisy), then hold or start a submovement."""
