@@ -14,8 +14,8 @@ slower (v2's fitted factor 1.75: contact can only be seen) because it is guided 
 corrected online from vision with a delay of a visual reaction (Elliott, Helsen & Chua 2001, *Psychol. Bull.*
 127:342-357; Saunders & Knill 2003, *Exp. Brain Res.* 152:341-352), and a move that meets something sooner than
 expected is stopped and re-planned (a guarded move).  Model v2 had none of it: an approach whose surface-depth error
-sat near +3σ drove the tool 10-13 mm into the tissue (OFF trials of 8-16 N at targets of 0.6 and 1.2 N, 10 % of
-them above 7.9 N), which made OFF's Max AE 40 % above the paper's on the participants ``run`` meets.  With feedback
+sat 2-3σ deep ended 9-13 mm past where it was meant to (10 % of OFF trials had a Max AE above 7.9 N at targets of
+0.6 and 1.2 N), which made OFF's Max AE 40 % above the paper's on the participants ``run`` meets.  With feedback
 the approach is not watched this way: it is fast and feed-forward, planned *through* the expected push-back (which
 physically limits how deep it goes, :mod:`pipeline.sim.hand`), and corrected by feel after it.
 """

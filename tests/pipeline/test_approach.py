@@ -58,17 +58,52 @@ def _with_excess(seed: int, excess: float) -> SimulatedParticipant:
 
 def test_a_watched_approach_that_overshoots_is_stopped_short_of_where_it_was_going() -> None:
     seed = _deep_surface_seed()
-    watched = _scripted_run(_with_excess(seed, 1.0), seconds=6.0, haptic=False)
-    unwatched = _scripted_run(_with_excess(seed, math.inf), seconds=6.0, haptic=False)
+    p_watched, p_unwatched = _with_excess(seed, 1.0), _with_excess(seed, math.inf)
+    watched = _scripted_run(p_watched, seconds=6.0, haptic=False)
+    unwatched = _scripted_run(p_unwatched, seconds=6.0, haptic=False)
     # the unwatched approach ends > 8.6 mm past the believed surface; the watched one is stopped before its end
     # (this seed: the deepest command -24.7 mm against -27.2 mm; deterministic, no BLAS, so a 2 mm margin is safe)
     assert min(watched) > min(unwatched) + 0.002
-    # until the stop the two are the same command, tick for tick (the watch draws no random number)
+    # the watch draws no random number: the two are the same command until the stop, which comes while the
+    # movement still runs, and then the equilibrium holds (only the slow postural drift moves it)
     first = next(i for i, (a, b) in enumerate(zip(watched, unwatched, strict=True)) if a != b)
-    assert first > 500
+    assert first * 1e-3 < p_unwatched._move_end_s
+    held = watched[first:first + 100]
+    assert max(held) - min(held) < 1e-4 < abs(unwatched[first + 100] - unwatched[first])
 
 
-def test_with_feedback_the_approach_is_not_watched() -> None:
+def test_with_feedback_or_a_live_gauge_the_approach_is_not_watched() -> None:
+    # a stop at the first sign of contact (excess 0) changes an OFF trial, and changes nothing with feedback
     seed = _deep_surface_seed()
-    assert _scripted_run(_with_excess(seed, 1.0), haptic=True) == _scripted_run(_with_excess(seed, math.inf),
+    assert _scripted_run(_with_excess(seed, 0.0), haptic=False) != _scripted_run(_with_excess(seed, math.inf),
+                                                                                  haptic=False)
+    assert _scripted_run(_with_excess(seed, 0.0), haptic=True) == _scripted_run(_with_excess(seed, math.inf),
                                                                                  haptic=True)
+    for aim, watched in ((TrialAim.constant(1.2, False), True), (TrialAim.constant(1.2, True), False),
+                         (TrialAim.constant(1.2, False, gauge=True, practice=True), False)):
+        p = SimulatedParticipant(seed=seed)
+        p.begin_trial(aim, 0.0)
+        p.equilibrium_y(HandObservation(0.0, 0.0, 0.0, 0.0, GAP_M))
+        assert p._watched is watched
+
+
+def test_a_jump_of_the_time_base_moves_the_approachs_times_with_it() -> None:
+    p = SimulatedParticipant(seed=1)
+    p.begin_trial(TrialAim.constant(0.6, False), 0.0)
+    for i in range(1200):  # past the reaction time: the approach has started
+        p.equilibrium_y(HandObservation(i * 1e-3, 0.0, 0.0, 0.0, GAP_M))
+    move_end_s, approach_end_s, next_s = p._move_end_s, p._approach_end_s, p._next
+    assert next_s < move_end_s < approach_end_s < math.inf  # watching the movement
+    jump_s = 101.2 - 1.199  # another time base, 100 s on from the last tick
+    p.equilibrium_y(HandObservation(101.2, 0.0, 0.0, 0.0, GAP_M))
+    assert p._move_end_s == pytest.approx(move_end_s + jump_s, abs=1e-9)  # abs: sums of s-sized floats
+    assert p._approach_end_s == pytest.approx(approach_end_s + jump_s, abs=1e-9)
+
+
+@pytest.mark.parametrize(("field", "bad"), [("approach_look_s", math.nan), ("approach_look_s", 0.0),
+                                            ("approach_look_s", math.inf), ("approach_stop_excess", -0.5),
+                                            ("approach_stop_excess", math.nan)])
+def test_the_watchs_constants_are_checked(field: str, bad: float) -> None:
+    drawn = SimulatedParticipant(seed=0).params
+    with pytest.raises(ValueError, match=field):
+        dataclasses.replace(drawn, **{field: bad})
