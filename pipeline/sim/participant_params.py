@@ -307,13 +307,13 @@ OFF and ON level within ±25 % of the paper's -- but its ON excursions are ON's 
 and the README's seed-0 study shows Max AE *higher* with feedback (2.00 → 2.20 N) and no TCT benefit.  Not
 adopted, and not in this model's code (a parameter no study uses would be a model of nothing).
 
-**Version 3** (issue 48, docs/participant-calibration.md has the fit and the runs): OFF's peaks were the tail of the
-feed-forward approach -- a surface believed 2–3 σ deeper ended it 9–13 mm past where it was meant to (10 % of OFF
-trials with a Max AE above 7.9 N) -- so the approach that cannot feel contact is watched on the image while it moves
-(:mod:`pipeline.sim.approach`) and stopped where it is when the seen force passes 1.5 × the aim; the first decision
-comes after the usual OFF pause.  With
-feedback nothing changed.  Validated once on ten studies run as ``run`` runs them (seeds 7000–7009, never used
-before; ``python -m bench.participant_calibration --path run --studies 10 --first-study 7000 --jobs 2``):
+**Version 3** (issue 48, docs/participant-calibration.md has the fit and the runs): OFF's peaks were the tail of
+the feed-forward approach -- aimed at a surface believed 2–3 σ deeper, it ended 9–13 mm past where it was meant to
+(10 % of OFF trials with a Max AE above 7.9 N) -- so the approach that cannot feel contact is watched on the image
+while it moves (:mod:`pipeline.sim.approach`) and stopped where it is when the seen force passes 1.5 × the aim; the
+first decision comes after the usual OFF pause.  With feedback nothing changed.  Validated once on ten studies run
+as ``run`` runs them (seeds 7000–7009, never used before;
+``python -m bench.participant_calibration --path run --studies 10 --first-study 7000 --jobs 2``):
 
 =====================  ========  ========  ==========  ======================================
 metric                 sim OFF   sim ON    change      against the paper's level
