@@ -37,7 +37,7 @@ import numpy as np
 
 from analysis.planning.sim_study import TrialRow, summarise_study
 from pipeline.sim.participant import SimulatedParticipant
-from pipeline.sim.participant_params import ParticipantParams
+from pipeline.sim.participant_params import MODEL_VERSION, ParticipantParams
 from study_app.headless.sim_trials import participant_seeds, run_participant, run_study
 
 __all__ = [
@@ -327,7 +327,7 @@ def main(argv: list[str] | None = None) -> int:
             print(format_table([s]))
             sys.stdout.flush()
     print(f"\n== mean ± SD [min–max] over {len(summaries)} studies, path {args.path} "
-          f"({time.perf_counter() - t_total:.0f} s wall, jobs={args.jobs}) ==")
+          f"({time.perf_counter() - t_total:.0f} s wall, jobs={args.jobs}), participant model v{MODEL_VERSION} ==")
     print(format_table(summaries))
     print()
     print(format_verdict(summaries))

@@ -37,6 +37,8 @@ assumption: a standardized effect need not scale so; it was chosen before any si
 and is not fitted to one (docs/groups.md gives what a simulated study then showed).  The draws are the calibrated
 participant's (the same seed gives the same person, only more practised), so a paired comparison of the profiles
 is possible.
+Model version 3's watch of the approach without feedback (:mod:`pipeline.sim.approach`) is not a handicap mapped
+here: an experienced participant's OFF approach is watched and stopped by the same rule.
 """
 
 from __future__ import annotations

@@ -33,7 +33,10 @@ driven by delayed, biased, noisy force percepts):
   cannot be felt), to the believed surface (the visible gap plus a per-trial depth error
   σ 4.3 mm) plus the believed target indentation
   ``(F*/k̂)^{1/n}``; with feedback ON the participant also pre-compensates a
-  fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Then a
+  fraction ``c_pb`` of the arm's expected push-back ``f_H(F*)/K_a``.  Without
+  feedback the approach is watched on the image (every 20 ms, delayed ``τ_v +
+  camera``) while it moves, and stopped where it is once the seen force ``k̂·δⁿ``
+  passes 1.5 ``F*`` (:mod:`pipeline.sim.approach`, model version 3).  Then a
   decision every ``D + T_int`` (``T_int × 4`` with feedback OFF): hold if
   ``|F* − F̂| < 5 % F*``; if no contact is noticed, step down by the search
   step; otherwise a submovement of duration ``D`` by
@@ -74,7 +77,8 @@ out-of-range observations are ignored or clipped (a NaN image is "no look", a
 NaN time "no time passes", a jump of the time base by > 0.5 s shifts every
 internal time), so ``equilibrium_y`` always returns a finite value and never
 jumps.  Cost: ≈ 0.3–0.9 µs per call (1–2.5 µs on a loaded 2-vCPU VM); decisions
-happen every 0.35–1.75 s, between them the current minimum-jerk value is returned.
+happen every 0.35–1.75 s (and an OFF approach's movement is looked at every 20 ms),
+between them the current minimum-jerk value is returned.
 
 The participant's constants, the population they are drawn from, the
 deviations from the model's sources and the calibration against the paper
@@ -90,6 +94,7 @@ import numpy as np
 
 from pipeline.core.aim import TrialAim, TrialQuestion
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim.approach import approach_end_y, seen_over_aim
 from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
@@ -227,6 +232,9 @@ class SimulatedParticipant:
         self._period = 0.5
         self._interval = 0.3
         self._delta_star = 0.0
+        self._move_end_s = 0.0  # when the approach's movement ends
+        self._approach_end_s = 0.0  # ... and its pause: the first decision
+        self._watched = False
         self.decisions = 0  # decisions taken since construction (for tests and logs)
         self.submovements = 0
 
@@ -377,6 +385,8 @@ class SimulatedParticipant:
         self._d_t0 += dt
         self._d_t1 += dt
         self._next += dt
+        self._move_end_s += dt
+        self._approach_end_s += dt
         self._cue_t += dt
         ht = self._ht
         for k in range(_HIST):
@@ -402,15 +412,7 @@ class SimulatedParticipant:
             return
         _, force, haptic, _t_s, gauge, practice = cmd
         p = self.params
-        # every trial has its own random stream (common random numbers: trial k's beliefs and
-        # noise do not depend on what happened in earlier trials)
-        if practice:
-            self._n_practice += 1
-            key: tuple[int, ...] = (2, self._n_practice)
-        else:
-            self._n_trials += 1
-            key = (1, self._n_trials)
-        rng = self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key + self._stream))
+        rng = self._rng = self._trial_stream(practice)
         self._z = []
         self._zi = 0
         self._cue_t = t
@@ -434,6 +436,7 @@ class SimulatedParticipant:
         approach_s = p.approach_center_s + float(rng.uniform(-0.1, 0.1))
         self._approach_s = approach_s * (1.0 if feel else p.off_approach_factor)
         self._interval = p.interval_s * (1.0 if feel else p.off_interval_factor)
+        self._watched = not feel
         self._period = p.submove_s + self._interval
         self._delta_star = (self._target / self._khat) ** self._inv_n
         # hold where we are until the reaction time has passed
@@ -443,18 +446,23 @@ class SimulatedParticipant:
 
     def _start_tracking(self, aim: TrialAim, t: float) -> None:
         """A tracking trial: its own random stream (the trial's, as a regulation trial's) and the tracking hand."""
-        if aim.practice:
-            self._n_practice += 1
-            key: tuple[int, ...] = (2, self._n_practice)
-        else:
-            self._n_trials += 1
-            key = (1, self._n_trials)
-        rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key + self._stream))
+        rng = self._trial_stream(aim.practice)
         self._cue_t, self._haptic, self._gauge = t, aim.haptic_on, aim.gauge
         self._stage, self._next = _CONTROL, math.inf
         self._tracking = TrackingHand(aim, self.params, rng, t, self._plan_value(t), stiffness=self._k,
                                       exponent=self._n, arm_k=self._arm_k, motion_scale=self._s,
                                       f_max_n=self._fmax, f_scale_n=self._fscale)
+
+    def _trial_stream(self, practice: bool) -> np.random.Generator:
+        """The next trial's own random stream (common random numbers: trial k's beliefs and noise do not depend on
+        what happened in earlier trials); practice trials count apart."""
+        if practice:
+            self._n_practice += 1
+            key: tuple[int, ...] = (2, self._n_practice)
+        else:
+            self._n_trials += 1
+            key = (1, self._n_trials)
+        return np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=key + self._stream))
 
     def _lookup(self, tq: float) -> int:
         """Index of the newest history sample at or before ``tq`` (not before the cue)."""
@@ -487,6 +495,8 @@ class SimulatedParticipant:
     def _event(self, t: float) -> None:
         if self._stage == _WAIT:
             self._start_approach(t)
+        elif self._stage == _APPROACH and t < self._approach_end_s:
+            self._watch(t)
         else:
             self._decide(t)
 
@@ -494,24 +504,38 @@ class SimulatedParticipant:
         """One feed-forward minimum-jerk move to the believed surface + believed indentation."""
         p = self.params
         j = self._lookup(t - p.tau_visual_s - p.camera_latency_s)
-        y_st, gap, ind = self._hy[j], self._hg[j], self._hd[j]
-        s = self._s
+        y_st = self._hy[j]
         if not (-0.1 <= y_st <= 0.1):  # also NaN: trust the own command instead
             y_st = self._plan_value(t)
-        if not (0.0 <= gap <= 0.1):
-            gap = 0.015 if gap != gap else (0.0 if gap < 0.0 else 0.1)
-        if not (0.0 <= ind <= 0.05):
-            ind = 0.0 if (ind != ind or ind < 0.0) else 0.05
-        # believed surface position in stylus coordinates (e > 0: believed deeper than it is)
-        surface = y_st - (gap + self._surface_err) / s + ind / s
-        y1 = surface - self._delta_star / s
+        pushback = 0.0
         if self._haptic and not self._gauge:
-            y1 -= p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k
-        self._plan(t, self._approach_s, y1)
+            pushback = p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k
+        self._plan(t, self._approach_s, approach_end_y(y_st, self._hg[j], self._hd[j], self._surface_err,
+                                                       self._delta_star, self._s, pushback))
         self._drift_on = True
         self._d_t0, self._d_t1, self._d0, self._d1 = t, t + _DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
         self._stage = _APPROACH
-        self._next = t + self._approach_s + self._interval
+        self._move_end_s = t + self._approach_s
+        self._approach_end_s = self._next = self._move_end_s + self._interval
+        if self._watched:  # feedback OFF: the approach is watched on the image (pipeline.sim.approach)
+            self._next_look(t)
+
+    def _next_look(self, t: float) -> None:
+        # looks while the movement runs; after it (nothing left to stop) the first decision after its pause
+        look = t + self.params.approach_look_s
+        self._next = look if look < self._move_end_s else self._approach_end_s
+
+    def _watch(self, t: float) -> None:
+        """A look at the image during a watched approach: stop it if the seen force is well past the aim."""
+        p = self.params
+        self._next_look(t)
+        d = self._hd[self._lookup(t - p.tau_visual_s - p.camera_latency_s)]
+        if seen_over_aim(d, self._khat, self._n, self._target, p.approach_stop_excess):
+            # a guarded move's stop: the equilibrium stays where it is now (a stop, not a submovement: no D) and
+            # the next decision comes after the usual pause, as after any movement
+            self._plan(t, 1e-3, self._plan_value(t))
+            self._stage = _CONTROL
+            self._next = t + self._interval
 
     def _decide(self, t: float) -> None:
         """One intermittent decision: perceive (delayed, noisy), then hold or start a submovement."""

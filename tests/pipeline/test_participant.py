@@ -242,7 +242,8 @@ def test_feedback_on_lowers_max_abs_error_on_the_same_seed() -> None:
     # surface-depth error and timing in both modes (per-trial random streams).  Robust: with
     # participant seed = rig seed, ON's mean Max AE was lower than OFF's for 19 of the seeds 0–19
     # and equal for seed 17 (no overshoot in either mode: Max AE = the pre-contact error F*); so with model
-    # version 2.  Seed 1: OFF 2.98 N vs ON 1.78 N (model version 1: 2.15 vs 1.42 N).
+    # version 2.  Seed 1: OFF 2.19 N vs ON 1.78 N with model version 3 (its watched OFF approach), 2.98 vs 1.78 N
+    # with version 2, 2.15 vs 1.42 N with version 1.
     targets = [0.6, 1.2, 0.6, 1.2, 0.6, 1.2]
     off = _rig_trials(seed=1, rig_seed=1, targets=targets, haptic=False, trial_s=5.0)
     on = _rig_trials(seed=1, rig_seed=1, targets=targets, haptic=True, trial_s=5.0)
