@@ -100,6 +100,7 @@ from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.learning import Practice, practised
 from pipeline.sim.participant_params import ParticipantParams
+from pipeline.sim.percepts import HISTORY_TICKS, inverse_scale, newest_at, weber_sigma
 from pipeline.sim.tissue import TissueParams
 from pipeline.sim.tracking_hand import TrackingHand
 
@@ -116,14 +117,9 @@ _CONTACT_HAPTIC_N = 0.05  # ... or felt at F > 0.05 N (haptic percept, tissue-fo
 _HOLD_FRACTION = 0.05  # no submovement when |F* − F̂| < 5 % F*
 _RETRACT_S = 0.4  # minimum-jerk retraction to the start pose after a trial
 _DRIFT_KNOT_S = 0.02  # postural drift: a random walk sampled every 20 ms, linearly interpolated
-_HIST = 1024  # observation history (ticks); must cover the longest percept delay
+_HIST = HISTORY_TICKS  # observation history (ticks); covers the longest percept delay
 _MASK = _HIST - 1
 _NOISE_BLOCK = 1024
-# haptic Weber fraction vs displayed force (science.md §4.1: 10–15 % at the GENTLE display of
-# 0.257 N, 8–12 % at FIRM's 0.509 N): σ_h·(0.257/f)^0.325, floored at 0.8 σ_h
-_DISPLAY_GENTLE_N = 0.257
-_WEBER_EXP = 0.325
-_WEBER_FLOOR = 0.8
 
 
 # stages of a trial
@@ -232,8 +228,6 @@ class SimulatedParticipant:
         self._period = 0.5
         self._interval = 0.3
         self._delta_star = 0.0
-        self._move_end_s = 0.0  # when the approach's movement ends
-        self._approach_end_s = 0.0  # ... and its pause: the first decision
         self._watched = False
         self.decisions = 0  # decisions taken since construction (for tests and logs)
         self.submovements = 0
@@ -385,8 +379,6 @@ class SimulatedParticipant:
         self._d_t0 += dt
         self._d_t1 += dt
         self._next += dt
-        self._move_end_s += dt
-        self._approach_end_s += dt
         self._cue_t += dt
         ht = self._ht
         for k in range(_HIST):
@@ -466,27 +458,7 @@ class SimulatedParticipant:
 
     def _lookup(self, tq: float) -> int:
         """Index of the newest history sample at or before ``tq`` (not before the cue)."""
-        if tq < self._cue_t:
-            tq = self._cue_t
-        ht = self._ht
-        j = self._hi
-        for _ in range(_HIST - 1):
-            if ht[j] <= tq:
-                return j
-            jn = (j - 1) & _MASK
-            if ht[jn] == -math.inf:
-                return j
-            j = jn
-        return j
-
-    def _inverse_scale(self, felt_n: float) -> float:
-        """Tissue force whose rendered magnitude is ``felt_n`` (inverse of :func:`scale_magnitude`)."""
-        x = felt_n / self._fmax
-        if x <= 0.0:
-            return 0.0
-        if x >= 0.999:
-            x = 0.999
-        return self._fscale * math.atanh(x)
+        return newest_at(self._ht, self._hi, tq, self._cue_t)
 
     def _depth_for(self, force_n: float) -> float:
         """Believed indentation (m) that produces ``force_n`` under the stiffness belief."""
@@ -495,7 +467,7 @@ class SimulatedParticipant:
     def _event(self, t: float) -> None:
         if self._stage == _WAIT:
             self._start_approach(t)
-        elif self._stage == _APPROACH and t < self._approach_end_s:
+        elif self._stage == _APPROACH and self._watched and t < self._p_end + self._interval:  # a look at it
             self._watch(t)
         else:
             self._decide(t)
@@ -515,15 +487,15 @@ class SimulatedParticipant:
         self._drift_on = True
         self._d_t0, self._d_t1, self._d0, self._d1 = t, t + _DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
         self._stage = _APPROACH
-        self._move_end_s = t + self._approach_s
-        self._approach_end_s = self._next = self._move_end_s + self._interval
+        self._next = self._p_end + self._interval  # the plan's end (t + the approach's duration), then the pause
         if self._watched:  # feedback OFF: the approach is watched on the image (pipeline.sim.approach)
             self._next_look(t)
 
     def _next_look(self, t: float) -> None:
-        # looks while the movement runs; after it (nothing left to stop) the first decision after its pause
+        # looks while the movement runs (the plan is the approach's until a stop); after it (nothing left to stop)
+        # the first decision after its pause
         look = t + self.params.approach_look_s
-        self._next = look if look < self._move_end_s else self._approach_end_s
+        self._next = look if look < self._p_end else self._p_end + self._interval
 
     def _watch(self, t: float) -> None:
         """A look at the image during a watched approach: stop it if the seen force is well past the aim."""
@@ -562,11 +534,8 @@ class SimulatedParticipant:
         if self._haptic:
             felt = self._hf[self._lookup(t - p.tau_haptic_s)]
             if -10.0 <= felt <= 10.0:  # also rejects NaN
-                # Weber fraction: σ_h at the GENTLE display level, falling to 0.8 σ_h at FIRM's
-                sh = p.sigma_haptic
-                if felt > _DISPLAY_GENTLE_N:
-                    sh *= max(_WEBER_FLOOR, (_DISPLAY_GENTLE_N / felt) ** _WEBER_EXP)
-                f_hap = self._inverse_scale(felt * math.exp(sh * self._randn()))
+                sh = weber_sigma(p.sigma_haptic, felt)  # σ_h at the GENTLE display, 0.8 σ_h at FIRM's
+                f_hap = inverse_scale(felt * math.exp(sh * self._randn()), self._fmax, self._fscale)
                 var_h = sh * sh + p.sigma_haptic_model * p.sigma_haptic_model
                 w_h = var_v / (var_v + var_h)
                 f_hat = w_h * f_hap + (1.0 - w_h) * f_vis

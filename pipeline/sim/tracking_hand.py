@@ -46,6 +46,7 @@ from pipeline.core.aim import TrialAim
 from pipeline.force.scaling import scale_magnitude
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant_params import ParticipantParams
+from pipeline.sim.percepts import HISTORY_TICKS, inverse_scale, newest_at
 
 __all__ = ["CONTROL_S", "CROSSOVER_PHASE_RAD", "HAND_BANDWIDTH_HZ", "REFLEX_GAIN", "REFLEX_S", "TrackingHand"]
 
@@ -63,7 +64,7 @@ REFLEX_S = 0.06
 #: near 33 rad/s, where the low-pass passes 0.43); on the simulated rig the pipeline's filter, the rendering and the
 #: arm add delay, and 1 oscillated: 0.4 is stable there (an assumption, chosen, not fitted to a result).
 REFLEX_GAIN = 0.4
-_HIST = 1024  # ticks of observation history (≥ the longest delay, 0.36 s, at 1 kHz)
+_HIST = HISTORY_TICKS  # ticks of observation history (≥ the longest delay, 0.36 s, at 1 kHz)
 _MASK = _HIST - 1
 
 
@@ -137,14 +138,7 @@ class TrackingHand:
 
     def _at(self, tq: float) -> int:
         """The newest history sample at or before ``tq`` (not before the cue)."""
-        tq = max(tq, self._t0)
-        j = self._hi
-        for _ in range(_HIST - 1):
-            jn = (j - 1) & _MASK
-            if self._ht[j] <= tq or self._ht[jn] == -math.inf:
-                return j
-            j = jn
-        return j
+        return newest_at(self._ht, self._hi, tq, self._t0)
 
     def _percept(self, t: float) -> float | None:
         """The force the participant perceives now (delayed, noisy), N; None: no usable look."""
@@ -156,8 +150,7 @@ class TrackingHand:
         if self._haptic:
             felt = self._hf[self._at(t - p.tau_haptic_s)]
             if -10.0 <= felt <= 10.0:
-                x = min(felt * math.exp(p.sigma_haptic * rng.standard_normal()) / self._fmax, 0.999)
-                f_hap = self._fscale * math.atanh(x) if x > 0.0 else 0.0
+                f_hap = inverse_scale(felt * math.exp(p.sigma_haptic * rng.standard_normal()), self._fmax, self._fscale)
                 f_hat = self._w_h * f_hap + (1.0 - self._w_h) * f_hat
         return f_hat
 
@@ -187,8 +180,7 @@ class TrackingHand:
         felt = self._hf[self._at(t - REFLEX_S)]
         if not -10.0 <= felt <= 10.0:
             return 0.0
-        x = min(felt / self._fmax, 0.999)
-        f_felt = self._fscale * math.atanh(x) if x > 0.0 else 0.0
+        f_felt = inverse_scale(felt, self._fmax, self._fscale)
         meant = self.aim.force_n(t - REFLEX_S - self._t0 - self._tau_v)
         return REFLEX_GAIN * (self._depth(f_felt) - self._depth(meant)) / self._s
 

@@ -51,6 +51,18 @@ def _deep_surface_seed() -> int:
     raise AssertionError("no seed in 0-399 with a surface-depth error above 2 sigma")  # pragma: no cover
 
 
+def _approach_move_end_s(seed: int) -> float:
+    """When the first trial's approach movement ends (the plan's end once the approach has started; the same for any
+    observations: the reaction time and the approach's duration are drawn, not sensed)."""
+    p = _with_excess(seed, math.inf)
+    p.begin_trial(TrialAim.constant(1.2, False), 0.0)
+    for i in range(2000):
+        p.equilibrium_y(HandObservation(i * 1e-3, 0.0, 0.0, 0.0, GAP_M))
+        if p._p_end > 0.5:  # before the approach the plan is a 1 ms hold
+            return p._p_end
+    raise AssertionError("no approach within 2 s")  # pragma: no cover
+
+
 def _with_excess(seed: int, excess: float) -> SimulatedParticipant:
     drawn = SimulatedParticipant(seed=seed).params
     return SimulatedParticipant(seed=seed, params=dataclasses.replace(drawn, approach_stop_excess=excess))
@@ -67,13 +79,15 @@ def test_a_watched_approach_that_overshoots_is_stopped_short_of_where_it_was_goi
     # the watch draws no random number: the two are the same command until the stop, which comes while the
     # movement still runs, and then the equilibrium holds (only the slow postural drift moves it)
     first = next(i for i, (a, b) in enumerate(zip(watched, unwatched, strict=True)) if a != b)
-    assert first * 1e-3 < p_unwatched._move_end_s
+    assert first * 1e-3 < _approach_move_end_s(seed)
     held = watched[first:first + 100]
     assert max(held) - min(held) < 1e-4 < abs(unwatched[first + 100] - unwatched[first])
 
 
 def test_with_feedback_or_a_live_gauge_the_approach_is_not_watched() -> None:
-    # a stop at the first sign of contact (excess 0) changes an OFF trial, and changes nothing with feedback
+    # a stop at the first sign of contact (excess 0) changes an OFF trial, and changes nothing with feedback.
+    # Compared exactly: the same pure-Python arithmetic run twice in one process (no BLAS, no threads) is the same
+    # bits; an unwatched trial must be the same trajectory, not a close one
     seed = _deep_surface_seed()
     assert _scripted_run(_with_excess(seed, 0.0), haptic=False) != _scripted_run(_with_excess(seed, math.inf),
                                                                                   haptic=False)
@@ -92,12 +106,13 @@ def test_a_jump_of_the_time_base_moves_the_approachs_times_with_it() -> None:
     p.begin_trial(TrialAim.constant(0.6, False), 0.0)
     for i in range(1200):  # past the reaction time: the approach has started
         p.equilibrium_y(HandObservation(i * 1e-3, 0.0, 0.0, 0.0, GAP_M))
-    move_end_s, approach_end_s, next_s = p._move_end_s, p._approach_end_s, p._next
-    assert next_s < move_end_s < approach_end_s < math.inf  # watching the movement
+    move_end_s, next_s = p._p_end, p._next
+    assert next_s < move_end_s < move_end_s + p._interval < math.inf  # watching the movement
     jump_s = 101.2 - 1.199  # another time base, 100 s on from the last tick
     p.equilibrium_y(HandObservation(101.2, 0.0, 0.0, 0.0, GAP_M))
-    assert p._move_end_s == pytest.approx(move_end_s + jump_s, abs=1e-9)  # abs: sums of s-sized floats
-    assert p._approach_end_s == pytest.approx(approach_end_s + jump_s, abs=1e-9)
+    # the movement's end (and with it the first decision's time) and the next look move with the time base
+    assert p._p_end == pytest.approx(move_end_s + jump_s, abs=1e-9)  # abs: sums of s-sized floats
+    assert p._next == pytest.approx(next_s + jump_s, abs=1e-9)
 
 
 @pytest.mark.parametrize(("field", "bad"), [("approach_look_s", math.nan), ("approach_look_s", 0.0),

@@ -15,6 +15,7 @@ from pipeline.runtime.loop_messages import Mark, SetHaptics
 from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant import SAFE_Y_RANGE_M, SimulatedParticipant
 from pipeline.sim.participant_params import PARAM_RANGES, ParticipantParams
+from pipeline.sim.percepts import inverse_scale
 from pipeline.sim.rig import SimRigConfig
 from protocol.tasks.force_regulation import trial_metrics
 
@@ -117,12 +118,12 @@ def test_parameters_are_drawn_within_the_documented_ranges() -> None:
 
 
 def test_haptic_percept_inverts_the_pipeline_scaling_law() -> None:
-    p = SimulatedParticipant(seed=0)
+    # the participant's law is the pipeline's (f_max 3 N, f_scale 7 N); rel 1e-9: atanh(tanh(x)) loses a few ulps
     for f in (0.01, 0.3, 0.6, 1.2, 2.5, 6.0):
-        assert p._inverse_scale(scale_magnitude(f, 3.0, 7.0)) == pytest.approx(f, rel=1e-9)
-    assert p._inverse_scale(0.0) == 0.0
-    assert p._inverse_scale(-0.2) == 0.0
-    assert math.isfinite(p._inverse_scale(5.0))  # beyond f_max: clipped, not a domain error
+        assert inverse_scale(scale_magnitude(f, 3.0, 7.0), 3.0, 7.0) == pytest.approx(f, rel=1e-9)
+    assert inverse_scale(0.0, 3.0, 7.0) == 0.0
+    assert inverse_scale(-0.2, 3.0, 7.0) == 0.0
+    assert math.isfinite(inverse_scale(5.0, 3.0, 7.0))  # beyond f_max: clipped, not a domain error
 
 
 def test_without_feedback_the_approach_and_the_checks_are_slower() -> None:
