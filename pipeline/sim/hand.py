@@ -19,6 +19,10 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple, Protocol
 
+import numpy as np
+
+from pipeline.core.compiled import KernelState, State, kernel
+
 __all__ = ["ArmParams", "CompliantArm", "HandObservation", "HoldStill", "ScriptedPresses", "StylusDriver", "min_jerk"]
 
 
@@ -55,39 +59,73 @@ class ArmParams:
     mass_kg: float = 0.25
 
 
-class CompliantArm:
-    """Integrates the arm along y with semi-implicit Euler (stable at 1 kHz: ω ≈ 45 rad/s)."""
+# The arm's state, a float64 array (its kernels' layout): position and velocity along y, then its impedance.
+_Y, _V, _K, _B, _M = 0, 1, 2, 3, 4
+STATE_SIZE = 5
 
-    __slots__ = ("params", "v_m_s", "y_m")
+
+@kernel
+def step_kernel(st: State, y_c: float, felt_force_n: float, dt_s: float) -> float:
+    """Advance by ``dt_s`` toward ``y_c`` under the felt force; return the new position (:class:`CompliantArm`)."""
+    if dt_s / 0.001 <= 1.0:
+        # one sub-step (every tick of a 1 kHz loop): substeps_kernel(..., 1) without its loop, the same arithmetic
+        v = st[_V] + (st[_K] * (y_c - st[_Y]) - st[_B] * st[_V] + felt_force_n) / st[_M] * dt_s
+        st[_V] = v
+        y: float = st[_Y] + v * dt_s
+        st[_Y] = y
+        return y
+    # integrate in sub-steps of ≤ 1 ms so a long tick stays stable
+    return substeps_kernel(st, y_c, felt_force_n, dt_s, max(1, int(math.ceil(dt_s / 0.001))))
+
+
+@kernel
+def substeps_kernel(st: State, y_c: float, felt_force_n: float, dt_s: float, n: int) -> float:
+    """Advance by ``dt_s`` in ``n`` equal semi-implicit Euler steps; return the new position."""
+    h = dt_s / n
+    for _ in range(n):
+        a = (st[_K] * (y_c - st[_Y]) - st[_B] * st[_V] + felt_force_n) / st[_M]
+        st[_V] += a * h
+        st[_Y] += st[_V] * h
+    y: float = st[_Y]
+    return y
+
+
+class CompliantArm(KernelState):
+    """Integrates the arm along y with semi-implicit Euler (stable at 1 kHz: ω ≈ 45 rad/s): :func:`step_kernel`,
+    compiled, over the state array :attr:`state` (which the rig's compiled step works on too)."""
+
+    __slots__ = ("_params",)
 
     def __init__(self, params: ArmParams | None = None) -> None:
-        self.params = params or ArmParams()
-        self.y_m = 0.0
-        self.v_m_s = 0.0
+        self._params = p = params or ArmParams()
+        #: The state the kernels work on (the rig may move it into
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
+        self.state = np.array([0.0, 0.0, p.stiffness_n_per_m, p.damping_ns_per_m, p.mass_kg])
+
+    @property
+    def params(self) -> ArmParams:
+        """The arm's impedance (read-only: it is in :attr:`state`)."""
+        return self._params
+
+    @property
+    def y_m(self) -> float:
+        """Position along y, m."""
+        return float(self.state[_Y])
+
+    @property
+    def v_m_s(self) -> float:
+        """Velocity along y, m/s."""
+        return float(self.state[_V])
 
     def step(self, y_c: float, felt_force_n: float, dt_s: float) -> float:
         """Advance by ``dt_s`` toward ``y_c`` under the felt force; return the new position."""
-        if dt_s / 0.001 <= 1.0:
-            # one sub-step (every tick of a 1 kHz loop): substeps(..., 1) without its count, range and attribute
-            # stores (0.16 against 0.35 µs a tick measured); the same arithmetic in its order
-            p = self.params
-            v = self.v_m_s + (p.stiffness_n_per_m * (y_c - self.y_m) - p.damping_ns_per_m * self.v_m_s
-                              + felt_force_n) / p.mass_kg * dt_s
-            self.v_m_s = v
-            y = self.y_m = self.y_m + v * dt_s
-            return y
-        # integrate in sub-steps of ≤ 1 ms so a long tick stays stable
-        return self.substeps(y_c, felt_force_n, dt_s, max(1, int(math.ceil(dt_s / 0.001))))
+        if dt_s != dt_s or dt_s == math.inf:  # (how many sub-steps: as many as ceil() of it, which has none)
+            raise ValueError(f"dt_s = {dt_s!r}: must be a finite number of seconds")
+        return step_kernel(self.state, float(y_c), float(felt_force_n), float(dt_s))
 
     def substeps(self, y_c: float, felt_force_n: float, dt_s: float, n: int) -> float:
         """Advance by ``dt_s`` in ``n`` equal semi-implicit Euler steps; return the new position."""
-        p = self.params
-        h = dt_s / n
-        for _ in range(n):
-            a = (p.stiffness_n_per_m * (y_c - self.y_m) - p.damping_ns_per_m * self.v_m_s + felt_force_n) / p.mass_kg
-            self.v_m_s += a * h
-            self.y_m += self.v_m_s * h
-        return self.y_m
+        return substeps_kernel(self.state, float(y_c), float(felt_force_n), float(dt_s), int(n))
 
 
 def min_jerk(t: float, t0: float, duration: float, y0: float, y1: float) -> float:

@@ -25,10 +25,15 @@ from typing import Any
 
 import numpy as np
 
+from pipeline.core.compiled import State, fingerprint, kernel
 from pipeline.devices.registry import DEFAULT_HAPTIC_MODEL, DEFAULT_ROBOT_MODEL, haptic_model, robot_model
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HapticLimits
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
+from pipeline.sim import hand as sim_hand
+from pipeline.sim import robot as sim_robot
+from pipeline.sim import sensor as sim_sensor
+from pipeline.sim import tissue as sim_tissue
 from pipeline.sim.faults import DEFAULT_DURATION_S, FaultInjector, SimFault
 from pipeline.sim.hand import ArmParams, CompliantArm, HandObservation, HoldStill, StylusDriver
 from pipeline.sim.jaw import SimJaw
@@ -42,6 +47,61 @@ __all__ = ["SimRig", "SimRigConfig"]
 #: A long tick (a stalled loop) is simulated as at most this much time.
 _MAX_DT_S = 0.01
 _new_tuple = tuple.__new__
+
+# The rig's state, one float64 array (:func:`step_kernel`'s layout): the tool's home (base frame), the haptic device's
+# frame in the base frame (row-major), the hand's axis in the device's frame, the motion scale, the surface's height,
+# a push on the tip (base frame); then the arm's, the robot's, the tissue's and the sensor's states, each the slice
+# its model works on (``adopt_state``).
+_HOME, _ROT, _AXIS, _SCALE, _SURFACE, _PUSH = 0, 3, 12, 15, 16, 17
+_ARM = 20
+_ROBOT = _ARM + sim_hand.STATE_SIZE
+_TISSUE = _ROBOT + sim_robot.STATE_SIZE
+_SENSOR = _TISSUE + sim_tissue.STATE_SIZE
+_STATE_SIZE = _SENSOR + sim_sensor.STATE_SIZE
+
+
+def _compile_step(callees: int) -> Callable[..., tuple[float, float, bool, int, float, float, float, float, float,
+                                                        float]]:
+    """:func:`step_kernel` closed over ``callees``, the :func:`pipeline.core.compiled.fingerprint` of the models it
+    calls: numba keys its cache on the kernel's own file and closure, so a change in a model recompiles it."""
+
+    @kernel
+    def step_kernel(st: State, noise: State, ni: int, y_c: float, felt: float, dt_s: float, robot_ns: int,
+                    sensor_ns: int) -> tuple[float, float, bool, int, float, float, float, float, float, float]:
+        """The tick after the hand's decision, when nothing on the Python side is due (:meth:`SimRig.advance`): the
+        arm toward ``y_c`` under the felt force, the robot's target from the stylus, the robot (at ``robot_ns``), the
+        tissue, the sensor (at ``sensor_ns``) -- each model's own kernel on its slice of ``st``, in
+        :meth:`SimRig._advance_by_models`' order.
+
+        Returns the stylus position along the hand's axis (m), the contact force (N), whether the robot's controller
+        cycled, what the sensor did (:func:`pipeline.sim.sensor.sample_kernel`) and its record's six values.
+        """
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        y = sim_hand.step_kernel(st[_ARM:_ROBOT], y_c, felt, dt_s)
+        ym = y * st[_SCALE]
+        ax, ay, az = st[_AXIS], st[_AXIS + 1], st[_AXIS + 2]
+        hx = ax * ym if ax != 0.0 else 0.0  # (off-axis components exactly zero)
+        hy = ay * ym if ay != 0.0 else 0.0
+        hz = az * ym if az != 0.0 else 0.0
+        r = _ROT
+        rob = st[_ROBOT:_TISSUE]
+        sim_robot.command_kernel(rob, st[_HOME] + (st[r] * hx + st[r + 1] * hy + st[r + 2] * hz),
+                                 st[_HOME + 1] + (st[r + 3] * hx + st[r + 4] * hy + st[r + 5] * hz),
+                                 st[_HOME + 2] + (st[r + 6] * hx + st[r + 7] * hy + st[r + 8] * hz))
+        cycled = sim_robot.advance_kernel(rob, robot_ns, dt_s)
+        depth = st[_SURFACE] - rob[2]
+        tis = st[_TISSUE:_SENSOR]
+        f = sim_tissue.step_kernel(tis, depth, dt_s) if dt_s > 0 else tis[2]
+        what = sim_sensor.sample_kernel(st[_SENSOR:_STATE_SIZE], noise, ni, sensor_ns, st[_PUSH], st[_PUSH + 1],
+                                        f + st[_PUSH + 2], dt_s)
+        o = _SENSOR + sim_sensor.OUT
+        return y, f, cycled, what, st[o], st[o + 1], st[o + 2], st[o + 3], st[o + 4], st[o + 5]
+
+    return step_kernel
+
+
+#: The rig's tick after the hand's decision in one compiled call (:func:`_compile_step`).
+step_kernel = _compile_step(fingerprint(sim_hand, sim_robot, sim_tissue, sim_sensor))
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,8 +220,17 @@ class SimRig:
             err = mat_mul(err, axis_angle((0.0, 0.0, 1.0), cfg.sensor_z_mount_deg * np.pi / 180.0))
         #: The true sensor mounting (nominal × error) the physics uses.
         self.true_rot_tip_sensor: Mat3 = mat_mul(cfg.rot_tip_sensor, err)
-        #: A force someone applies to the tip by hand, base frame, N (the frame and sign check's pushes).
-        self.push_base_n: Vec3 = (0.0, 0.0, 0.0)
+        #: The rig's state (:func:`step_kernel`'s layout); the arm, the robot, the tissue and the sensor keep theirs
+        #: in its slices from here on.
+        self.state = st = np.zeros(_STATE_SIZE)
+        st[_HOME:_HOME + 3], st[_ROT:_ROT + 9] = cfg.tip_home_m, self._rot_base_haptic
+        st[_AXIS:_AXIS + 3] = self.hand_axis
+        st[_SCALE], st[_SURFACE] = cfg.motion_scale, cfg.surface_z_m
+        self.arm.adopt_state(st[_ARM:_ROBOT])
+        self.robot.adopt_state(st[_ROBOT:_TISSUE])
+        self.tissue.adopt_state(st[_TISSUE:_SENSOR])
+        self.sensor.adopt_state(st[_SENSOR:_STATE_SIZE])
+        self._push_base_n: Vec3 = (0.0, 0.0, 0.0)
         self._orient: Mat3 | None = None
         self._rot_sensor_base: Mat3 = IDENTITY
         self._last_ns: int | None = None
@@ -178,10 +247,51 @@ class SimRig:
         #: Called with (now_ns, the stylus buttons) every step:
         #: :meth:`pipeline.devices.jaw_control.JawController.buttons`.
         self.on_buttons: Callable[[int, int], None] | None = None
+        #: Whether a tick with nothing due on the Python side runs as one compiled call (:func:`step_kernel`); False
+        #: runs every tick model by model, the path the one call is tested against (the same bits either way).
+        self.one_call = True
+        #: Ticks that ran as one compiled call (diagnostics).
+        self.one_call_ticks = 0
+        self.warm_up()
+
+    @property
+    def push_base_n(self) -> Vec3:
+        """A force someone applies to the tip by hand, base frame, N (the frame and sign check's pushes)."""
+        return self._push_base_n
+
+    @push_base_n.setter
+    def push_base_n(self, value: Vec3) -> None:
+        self._push_base_n = value
+        self.state[_PUSH:_PUSH + 3] = value
+
+    def warm_up(self) -> None:
+        """Compile the models' kernels (or load them from numba's cache) now, on scratch copies of their states, so
+        that no tick of a running loop waits for it."""
+        st, noise = self.state.copy(), np.zeros_like(self.sensor.noise)
+        step_kernel(st, noise, 0, 0.0, 0.0, 0.001, 1, 1)
+        # and each on its own, as the models' methods call them (a tick with Python's turns in it)
+        sim_hand.step_kernel(st[_ARM:_ROBOT], 0.0, 0.0, 0.001)
+        sim_robot.command_kernel(st[_ROBOT:_TISSUE], 0.0, 0.0, 0.0)
+        sim_robot.advance_kernel(st[_ROBOT:_TISSUE], 2, 0.001)
+        sim_tissue.step_kernel(st[_TISSUE:_SENSOR], 0.0, 0.001)
+        sim_sensor.sample_kernel(st[_SENSOR:_STATE_SIZE], noise, 0, 2, 0.0, 0.0, 0.0, 0.001)
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """A copy (``copy.deepcopy``, pickle) shares its state array with its own models, as the original does."""
+        self.__dict__.update(state)
+        st = self.state
+        self.arm.state, self.robot.state = st[_ARM:_ROBOT], st[_ROBOT:_TISSUE]
+        self.tissue.state, self.sensor.state = st[_TISSUE:_SENSOR], st[_SENSOR:_STATE_SIZE]
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
-        """Step the physics to ``now_ns``: Touch output, hand, robot, tissue, then the sensor."""
+        """Step the physics to ``now_ns``: Touch output, hand, robot, tissue, then the sensor.
+
+        The hand's decision and the Touch's output are Python's; the rest is :func:`step_kernel` (one compiled call)
+        unless something on the Python side is due in it this tick -- an attached teleoperation driver, a
+        re-orientation or a servo stop at the robot's next cycle -- when :meth:`_advance_by_models` runs it model by
+        model with the same kernels in the same order (and always with :attr:`one_call` False).
+        """
         last = self._last_ns
         dt = 0.0 if last is None else (now_ns - last) * 1e-9
         if dt < 0.0:
@@ -203,16 +313,45 @@ class SimRig:
                 else applied[0] * ax + applied[1] * ay + applied[2] * az)
 
         robot = self.robot
-        tip_z = robot.position_m[2]
-        depth = cfg.surface_z_m - tip_z
-        arm = self.arm
+        st = self.state
+        depth = cfg.surface_z_m - st.item(_ROBOT + 2)  # (the tool's z: item() gives a Python float)
         # (tuple.__new__: the named tuple without its __new__'s Python frame, ~0.14 µs a tick)
-        obs = _new_tuple(HandObservation, (self.sim_time_s, arm.y_m, felt, depth if depth > 0 else 0.0,
+        obs = _new_tuple(HandObservation, (self.sim_time_s, st.item(_ARM), felt, depth if depth > 0 else 0.0,
                                            -depth if depth < 0 else 0.0))
         self.last_observation = obs
-        y = arm.step(self.driver.equilibrium_y(obs), felt, dt)
+        # (float(): a kernel is compiled for its arguments' types; a driver's int or a command's would compile another)
+        y_c, felt = float(self.driver.equilibrium_y(obs)), float(felt)
+        if self.teleop is not None or not robot.moves_smoothly or not self.one_call:
+            self._advance_by_models(now_ns, dt, y_c, felt)
+        else:
+            sensor = self.sensor
+            ni = sensor.next_noise_row()
+            if robot.orientation is not self._orient:  # (no cycle re-orients the robot this tick: moves_smoothly)
+                self._reorient()
+            y, f, cycled, what, v0, v1, v2, v3, v4, v5 = step_kernel(
+                st, sensor.noise, ni, y_c, felt, dt, robot.since_first_ns(now_ns), sensor.since_first_ns(now_ns))
+            # a displacement along the hand's axis, device frame (off-axis components exactly zero)
+            touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+            if cycled:
+                robot.cycled(now_ns)
+            px, py, pz = self._push_base_n
+            self._truth = (px, py, f + pz)
+            sensor.took(what, now_ns, v0, v1, v2, v3, v4, v5)
+            self.one_call_ticks += 1
+        hook = self.on_buttons
+        if hook is not None:  # (it reads the buttons only, which no model of the tick changes: its turn is last)
+            hook(now_ns, touch.buttons)
+
+    def _advance_by_models(self, now_ns: int, dt: float, y_c: float, felt: float) -> None:
+        """:meth:`advance` after the hand's decision, model by model (the teleoperation driver, the robot's
+        re-orientation or servo stop have their turns in it)."""
+        cfg = self.config
+        touch = self.haptic
+        ax, ay, az = self.hand_axis
+        y = self.arm.step(y_c, felt, dt)
         # a displacement along the hand's axis, device frame (off-axis components exactly zero)
         touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+        robot = self.robot
         if self.teleop is None:
             ym = y * cfg.motion_scale
             d = mat_vec(self._rot_base_haptic, (ax * ym if ax else 0.0, ay * ym if ay else 0.0, az * ym if az else 0.0))
@@ -222,18 +361,20 @@ class SimRig:
             # the app owns the robot: targets come from the teleoperation controller through servo_tcp
             self.teleop.update(now_ns)
         robot.advance(now_ns, dt)
-        hook = self.on_buttons
-        if hook is not None:
-            hook(now_ns, touch.buttons)
-
-        depth = cfg.surface_z_m - robot.position_m[2]
+        depth = cfg.surface_z_m - self.state.item(_ROBOT + 2)
         f = self.tissue.step(depth, dt) if dt > 0 else self.tissue.force_n
-        px, py, pz = self.push_base_n
+        px, py, pz = self._push_base_n
         self._truth = (px, py, f + pz)
         if robot.orientation is not self._orient:
-            self._orient = robot.orientation
-            self._rot_sensor_base = transpose(mat_mul(robot.orientation, self.true_rot_tip_sensor))
+            self._reorient()
         self.sensor.sample(now_ns, self._rot_sensor_base, self._truth, dt)
+
+    def _reorient(self) -> None:
+        """The robot's orientation changed: the sensor's true orientation in the base frame, told to the sensor."""
+        orient = self.robot.orientation
+        self._orient = orient
+        self._rot_sensor_base = transpose(mat_mul(orient, self.true_rot_tip_sensor))
+        self.sensor.set_rotation(self._rot_sensor_base)
 
     def true_contact_force(self) -> Vec3:
         """Contact force on the tool tip in the base frame, N (ground truth)."""
@@ -280,5 +421,5 @@ class SimRig:
     @property
     def indentation_m(self) -> float:
         """Current true tissue indentation, m."""
-        d = self.config.surface_z_m - self.robot.position_m[2]
+        d = self.config.surface_z_m - self.state.item(_ROBOT + 2)
         return d if d > 0 else 0.0

@@ -17,6 +17,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from pipeline.core.compiled import KernelState, State, kernel
 from pipeline.devices.interfaces import WrenchSample
 from pipeline.force.frames import Mat3, Vec3, cross, mat_vec
 
@@ -75,46 +76,152 @@ class SensorParams:
     packet_loss: float = 0.0
 
 
-class SimForceSensor:
+# The sensor's state, a float64 array (its kernel's layout): the random walk, the payload's weight in S at the current
+# orientation, that orientation (row-major), the constants, the first sample's time (ns since the first sample: 0;
+# NaN before it), the fault switches and the newest record's six values.
+_RW, _GRAV, _ROT, _BIAS0, _DRIFT, _RANGE, _LEVER = 0, 6, 12, 21, 27, 33, 39
+_CPF, _CPT, _TAU, _RW_SCALE, _LOSS, _T0, _STALLED, _NAN = 42, 43, 44, 45, 46, 47, 48, 49
+_OUT = 50
+STATE_SIZE = 56
+#: Where the newest record's six values are in the state.
+OUT = _OUT
+#: What :func:`sample_kernel` did: no record (a stalled box), a lost packet, a record, a saturated record.
+STALLED, LOST, RECORD, SATURATED = 0, 1, 2, 3
+
+
+@kernel
+def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: float, c2: float,
+                  dt_s: float) -> int:
+    """This tick's record at ``t_ns`` (ns since the first sample: :meth:`SimForceSensor.since_first_ns`) from the
+    contact force ``(c0, c1, c2)`` (base frame, N) and noise row ``ni``, into ``st``.
+
+    The orientation and the weight in ``st`` are the current ones (:meth:`SimForceSensor.set_rotation`).  Returns
+    :data:`STALLED`, :data:`LOST`, :data:`RECORD` or :data:`SATURATED`; the record's six values are ``st[_OUT:]``.
+    """
+    if st[_T0] != st[_T0]:  # (NaN: the first sample)
+        st[_T0] = t_ns
+    scale = st[_RW_SCALE]
+    if dt_s > 0.0 and scale > 0.0:
+        s = scale * math.sqrt(dt_s)
+        s_t = 0.01 * s
+        st[0] = st[0] + s * noise[ni, 6]
+        st[1] = st[1] + s * noise[ni, 7]
+        st[2] = st[2] + s * noise[ni, 8]
+        st[3] = st[3] + s_t * noise[ni, 9]
+        st[4] = st[4] + s_t * noise[ni, 10]
+        st[5] = st[5] + s_t * noise[ni, 11]
+    if st[_STALLED] != 0.0:
+        return STALLED
+    if noise[ni, 12] < st[_LOSS]:
+        return LOST  # the box sampled and sent it; the network ate it
+    r = _ROT
+    f0 = st[r] * c0 + st[r + 1] * c1 + st[r + 2] * c2
+    f1 = st[r + 3] * c0 + st[r + 4] * c1 + st[r + 5] * c2
+    f2 = st[r + 6] * c0 + st[r + 7] * c1 + st[r + 8] * c2
+    lx, ly, lz = st[_LEVER], st[_LEVER + 1], st[_LEVER + 2]
+    w = 1.0 - math.exp((st[_T0] - t_ns) * 1e-9 / st[_TAU])
+    b, d = _BIAS0, _DRIFT
+    v0 = st[_GRAV] + f0 + (st[b] + st[d] * w + st[0]) + noise[ni, 0]
+    v1 = st[_GRAV + 1] + f1 + (st[b + 1] + st[d + 1] * w + st[1]) + noise[ni, 1]
+    v2 = st[_GRAV + 2] + f2 + (st[b + 2] + st[d + 2] * w + st[2]) + noise[ni, 2]
+    v3 = st[_GRAV + 3] + (ly * f2 - lz * f1) + (st[b + 3] + st[d + 3] * w + st[3]) + noise[ni, 3]
+    v4 = st[_GRAV + 4] + (lz * f0 - lx * f2) + (st[b + 4] + st[d + 4] * w + st[4]) + noise[ni, 4]
+    v5 = st[_GRAV + 5] + (lx * f1 - ly * f0) + (st[b + 5] + st[d + 5] * w + st[5]) + noise[ni, 5]
+    out = RECORD
+    st[_OUT] = v0
+    st[_OUT + 1] = v1
+    st[_OUT + 2] = v2
+    st[_OUT + 3] = v3
+    st[_OUT + 4] = v4
+    st[_OUT + 5] = v5
+    for i in range(6):
+        v, ri = st[_OUT + i], st[_RANGE + i]
+        if not (-ri <= v <= ri):
+            # saturated gauges read full scale and the box flags it (max(-ri, min(ri, v)) as Python's min and max
+            # pick: a NaN reads +ri)
+            out = SATURATED
+            m = v if v < ri else ri
+            st[_OUT + i] = m if m > -ri else -ri
+    # integer counts on the wire: x + 1.5·2⁵² − 1.5·2⁵² is round(x) (halves to even) for |x| < 2⁵¹, which the clamp
+    # to the range above and the counts' check in __init__ guarantee; an integral double's quotient is the count's
+    for i in range(6):
+        per = st[_CPF] if i < 3 else st[_CPT]
+        st[_OUT + i] = (st[_OUT + i] * per + _ROUND - _ROUND) / per
+    if st[_NAN] != 0.0:
+        st[_OUT] = math.nan
+    return out
+
+
+class SimForceSensor(KernelState):
     """A ``ForceSensor`` whose readings come from the simulated world.
 
     The rig calls :meth:`sample` once per tick with the true sensor
     orientation and the contact force; the loop reads the newest record with
     :meth:`read_wrench`.  ``stalled``, ``status_override`` and
     ``inject_nan`` are fault-injection switches for watchdog tests.
+
+    The arithmetic of a sample is :func:`sample_kernel`'s, compiled, over the state array :attr:`state` (the rig's
+    compiled step runs the same kernel on the same array).
     """
 
     #: Noise rows drawn per NumPy call.  The stream is the same for any block
-    #: size (consecutive draws of one generator); 64 rows cost ~35 µs at once,
-    #: where 1024 cost ~0.6 ms in one tick of a real-time run, the same per tick.
+    #: size (consecutive draws of one generator); 64 rows cost ~11 µs at once
+    #: (the draws; the rows stay an array the kernel reads), a short pause in one
+    #: tick of a real-time run, and a larger block costs the same per row.
     _BLOCK = 64
 
     def __init__(self, params: SensorParams | None = None, seed: int = 0) -> None:
-        self.params = params or SensorParams()
-        r, cpf, cpt = self.params.range_n, self.params.counts_per_force, self.params.counts_per_torque
+        self._params = params or SensorParams()
+        r, cpf, cpt = self._params.range_n, self._params.counts_per_force, self._params.counts_per_torque
         if not (max(r[:3]) * cpf < 2.0**51 and max(r[3:]) * cpt < 2.0**51):  # (sample's rounding holds below it)
             raise ValueError(f"counts_per_force = {cpf!r}, counts_per_torque = {cpt!r} with range_n = {r!r}: a "
                              "full-scale reading must be under 2**51 counts")
         self._rng = np.random.default_rng(seed)
-        self._noise: list[list[float]] = []
-        self._ni = self._BLOCK
-        p = self.params
+        #: The clock reading of the first sample: the state counts time from it (None before it).
+        self.origin_ns: int | None = None
+        p = self._params
         self._sig = np.array([*p.noise_force_n, *p.noise_torque_nm, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0])
-        self._rw: tuple[float, float, float, float, float, float] = (0.0,) * 6
+        #: The current block of noise rows (6 white-noise channels, 6 random-walk steps, 1 packet-loss draw).
+        self.noise = np.zeros((self._BLOCK, 13))
+        self._ni = self._BLOCK
         self._rdt = 0
         self._ft = 0
-        self._t0_ns: int | None = None
         self._latest = WrenchSample(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)
-        self.stalled = False
         self.status_override = 0
-        self.inject_nan = False
         self.lost_packets = 0
-        self._loss_threshold = _normal_quantile(self.params.packet_loss)
         self._bias0 = (*p.bias_force_n, *p.bias_torque_nm)
         self._drift = (*p.drift_force_n, *(0.01 * d for d in p.drift_force_n))
-        self._rw_scale = p.random_walk_n_per_sqrt_s
+        #: The state :func:`sample_kernel` works on (the rig may move it into
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
+        self.state = st = np.zeros(STATE_SIZE)
+        st[_BIAS0:_BIAS0 + 6], st[_DRIFT:_DRIFT + 6], st[_RANGE:_RANGE + 6] = self._bias0, self._drift, p.range_n
+        st[_LEVER:_LEVER + 3] = p.tip_in_sensor_m
+        st[_CPF], st[_CPT], st[_TAU], st[_RW_SCALE] = cpf, cpt, p.drift_tau_s, p.random_walk_n_per_sqrt_s
+        st[_LOSS], st[_T0] = _normal_quantile(p.packet_loss), math.nan
         self._grav_rot: Mat3 | None = None
-        self._grav: tuple[float, ...] = (0.0,) * 6
+
+    @property
+    def params(self) -> SensorParams:
+        """The sensor's physical truth (read-only: it is in :attr:`state`)."""
+        return self._params
+
+    @property
+    def stalled(self) -> bool:
+        """Fault switch: the box stops sending (the random walk goes on)."""
+        return bool(self.state[_STALLED])
+
+    @stalled.setter
+    def stalled(self, on: bool) -> None:
+        self.state[_STALLED] = 1.0 if on else 0.0
+
+    @property
+    def inject_nan(self) -> bool:
+        """Fault switch: Fx reads NaN."""
+        return bool(self.state[_NAN])
+
+    @inject_nan.setter
+    def inject_nan(self, on: bool) -> None:
+        self.state[_NAN] = 1.0 if on else 0.0
 
     @property
     def range_n(self) -> tuple[float, float, float, float, float, float]:
@@ -126,9 +233,15 @@ class SimForceSensor:
         """Counts per N and per N·m: every reading is an integer count divided by these, as on the wire."""
         return (self.params.counts_per_force, self.params.counts_per_torque)
 
-    def _refill_noise(self) -> None:
-        """The next :attr:`_BLOCK` rows of noise (6 white-noise channels, 6 random-walk steps, 1 packet-loss draw)."""
-        self._noise = (self._rng.standard_normal((self._BLOCK, 13)) * self._sig).tolist()
+    def next_noise_row(self) -> int:
+        """The row of :attr:`noise` this tick's sample takes (a new block of :attr:`_BLOCK` rows drawn when one is
+        used up)."""
+        ni = self._ni
+        if ni >= self._BLOCK:
+            np.multiply(self._rng.standard_normal((self._BLOCK, 13)), self._sig, out=self.noise)
+            ni = 0
+        self._ni = ni + 1
+        return ni
 
     def bias_at(self, t_s: float) -> tuple[float, ...]:
         """Deterministic part of the bias at ``t_s`` (without the random walk), N and N·m.
@@ -142,77 +255,49 @@ class SimForceSensor:
     def current_bias(self, t_s: float) -> tuple[float, ...]:
         """Full bias at ``t_s`` including the random walk so far (ground truth for tests)."""
         b = self.bias_at(t_s)
-        return tuple(b[i] + self._rw[i] for i in range(6))
+        rw = self.state[_RW:_RW + 6].tolist()
+        return tuple(b[i] + rw[i] for i in range(6))
+
+    def set_rotation(self, rot_sensor_base: Mat3) -> None:
+        """The sensor's orientation in the base frame changed: the rotation and the payload's weight in S."""
+        if rot_sensor_base is self._grav_rot:
+            return
+        # the payload's weight only changes with the orientation
+        g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * self.params.mass_kg))
+        st = self.state
+        st[_GRAV:_GRAV + 6] = (*g_s, *cross(self.params.com_m, g_s))
+        st[_ROT:_ROT + 9] = rot_sensor_base
+        self._grav_rot = rot_sensor_base
+
+    def since_first_ns(self, t_ns: int) -> int:
+        """``t_ns`` as the state counts it: ns since the first sample (the first call's reading)."""
+        if self.origin_ns is None:
+            self.origin_ns = t_ns
+        return t_ns - self.origin_ns
 
     def sample(self, t_ns: int, rot_sensor_base: Mat3, contact_force_base: Vec3, dt_s: float) -> None:
-        """Produce this tick's record from the true orientation and contact force.
+        """Produce this tick's record from the true orientation and contact force (:func:`sample_kernel`)."""
+        ni = self.next_noise_row()
+        self.set_rotation(rot_sensor_base)
+        c0, c1, c2 = contact_force_base
+        t_ns = int(t_ns)
+        what = sample_kernel(self.state, self.noise, ni, self.since_first_ns(t_ns), float(c0), float(c1), float(c2),
+                             float(dt_s))
+        self.took(what, t_ns, *self.state[_OUT:_OUT + 6].tolist())
 
-        Every tick of every simulated study: the noise row, the random walk, the bias and the orientation are
-        unpacked into locals and the record built with ``tuple.__new__`` (one subscript, attribute or call each
-        instead of a dozen; 2.17 against 2.70 µs a sample measured, the same arithmetic in the same order).
-        """
-        if self._t0_ns is None:
-            self._t0_ns = t_ns
-        p = self.params
-        ni = self._ni
-        if ni >= self._BLOCK:
-            self._refill_noise()
-            ni = 0
-        n0, n1, n2, n3, n4, n5, n6, n7, n8, n9, n10, n11, n12 = self._noise[ni]
-        self._ni = ni + 1
-        if dt_s > 0.0 and self._rw_scale > 0.0:
-            s = self._rw_scale * math.sqrt(dt_s)
-            st = 0.01 * s
-            w0, w1, w2, w3, w4, w5 = self._rw
-            self._rw = (w0 + s * n6, w1 + s * n7, w2 + s * n8, w3 + st * n9, w4 + st * n10, w5 + st * n11)
-        if self.stalled:
+    def took(self, what: int, t_ns: int, v0: float, v1: float, v2: float, v3: float, v4: float, v5: float) -> None:
+        """Count and publish what :func:`sample_kernel` did at ``t_ns`` (the record's values ``v0`` ... ``v5``)."""
+        if what == STALLED:
             return
-        if n12 < self._loss_threshold:
-            self.lost_packets += 1
-            self._rdt += 1  # the box sampled and sent it; the network ate it
-            self._ft += 1
-            return
-        if rot_sensor_base is not self._grav_rot:
-            # the payload's weight only changes with the orientation
-            g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * p.mass_kg))
-            self._grav = (*g_s, *cross(p.com_m, g_s))
-            self._grav_rot = rot_sensor_base
-        g0, g1, g2, g3, g4, g5 = self._grav
-        f0, f1, f2 = mat_vec(rot_sensor_base, contact_force_base)
-        lx, ly, lz = p.tip_in_sensor_m
-        w = 1.0 - math.exp((self._t0_ns - t_ns) * 1e-9 / p.drift_tau_s)
-        b0, b1, b2, b3, b4, b5 = self._bias0
-        d0, d1, d2, d3, d4, d5 = self._drift
-        w0, w1, w2, w3, w4, w5 = self._rw
-        v0 = g0 + f0 + (b0 + d0 * w + w0) + n0
-        v1 = g1 + f1 + (b1 + d1 * w + w1) + n1
-        v2 = g2 + f2 + (b2 + d2 * w + w2) + n2
-        v3 = g3 + (ly * f2 - lz * f1) + (b3 + d3 * w + w3) + n3
-        v4 = g4 + (lz * f0 - lx * f2) + (b4 + d4 * w + w4) + n4
-        v5 = g5 + (lx * f1 - ly * f0) + (b5 + d5 * w + w5) + n5
-        status = self.status_override
-        r0, r1, r2, r3, r4, r5 = r = p.range_n
-        if not (
-            -r0 <= v0 <= r0 and -r1 <= v1 <= r1 and -r2 <= v2 <= r2
-            and -r3 <= v3 <= r3 and -r4 <= v4 <= r4 and -r5 <= v5 <= r5
-        ):
-            # saturated gauges read full scale and the box flags it
-            status |= SATURATION_STATUS
-            v0, v1, v2, v3, v4, v5 = (max(-ri, min(ri, vi)) for vi, ri in zip((v0, v1, v2, v3, v4, v5), r, strict=True))
-        cpf, cpt = p.counts_per_force, p.counts_per_torque
-        # integer counts on the wire: x + 1.5·2⁵² − 1.5·2⁵² is round(x) (halves to even, as round does) for
-        # |x| < 2⁵¹, which the clamp to the range above and the counts' check in __init__ guarantee; an int's
-        # quotient and an integral float's are the same double.  0.04 against 0.08 µs a value (timeit), six a tick
-        v0 = (v0 * cpf + _ROUND - _ROUND) / cpf
-        if self.inject_nan:
-            v0 = math.nan
         self._rdt += 1
         self._ft += 1
-        self._latest = _new_tuple(WrenchSample, (
-            t_ns, v0, (v1 * cpf + _ROUND - _ROUND) / cpf, (v2 * cpf + _ROUND - _ROUND) / cpf,
-            (v3 * cpt + _ROUND - _ROUND) / cpt, (v4 * cpt + _ROUND - _ROUND) / cpt, (v5 * cpt + _ROUND - _ROUND) / cpt,
-            status, self._rdt, self._ft,
-        ))
+        if what == LOST:
+            self.lost_packets += 1
+            return
+        status = self.status_override
+        if what == SATURATED:
+            status |= SATURATION_STATUS
+        self._latest = _new_tuple(WrenchSample, (t_ns, v0, v1, v2, v3, v4, v5, status, self._rdt, self._ft))
 
     def read_wrench(self) -> WrenchSample:
         """Newest record (never blocks)."""

@@ -15,6 +15,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
+from pipeline.core.compiled import KernelState, State, kernel
+
 __all__ = ["HuntCrossleyTissue", "TissueParams"]
 
 
@@ -63,35 +67,57 @@ class TissueParams:
         return self.stiffness_n_per_m_pow * depth_m**self.exponent if depth_m > 0 else 0.0
 
 
-class HuntCrossleyTissue:
-    """Stateful tissue: call :meth:`step` with the tip penetration each tick."""
+# The tissue's state, a float64 array (its kernel's layout): the last penetration, the Maxwell branch's force, the
+# contact force of the last step, and the parameters.
+_PREV, _MAXWELL, _FORCE, _K, _N, _DAMPING, _RELAX_K, _RELAX_TAU = 0, 1, 2, 3, 4, 5, 6, 7
+STATE_SIZE = 8
 
-    __slots__ = ("_maxwell_n", "_prev_depth", "force_n", "params")
+
+@kernel
+def step_kernel(st: State, depth_m: float, dt_s: float) -> float:
+    """Advance by ``dt_s`` with penetration ``depth_m`` (≤ 0: no contact); return the force, N."""
+    rate = (depth_m - st[_PREV]) / dt_s if dt_s > 0 else 0.0
+    st[_PREV] = depth_m
+    if depth_m <= 0.0:
+        st[_MAXWELL] = 0.0
+        st[_FORCE] = 0.0
+        return 0.0
+    elastic = st[_K] * depth_m ** st[_N]
+    f = elastic * (1.0 + st[_DAMPING] * rate)
+    if st[_RELAX_K] > 0.0 and dt_s > 0:
+        # exact update of Ḟ_M = k_M δ̇ − F_M/τ_M over one step at constant δ̇
+        decay = math.exp(-dt_s / st[_RELAX_TAU])
+        fm = st[_MAXWELL] * decay + st[_RELAX_K] * rate * st[_RELAX_TAU] * (1.0 - decay)
+        st[_MAXWELL] = fm
+        f += fm
+    f = f if f > 0.0 else 0.0
+    st[_FORCE] = f
+    return f
+
+
+class HuntCrossleyTissue(KernelState):
+    """Stateful tissue: call :meth:`step` with the tip penetration each tick (:func:`step_kernel`, compiled, over the
+    state array :attr:`state`, which the rig's compiled step works on too)."""
+
+    __slots__ = ("_params",)
 
     def __init__(self, params: TissueParams | None = None) -> None:
-        self.params = params or TissueParams()
-        self._prev_depth = 0.0
-        self._maxwell_n = 0.0
-        #: The contact force of the last step, N (≥ 0).
-        self.force_n = 0.0
+        self._params = p = params or TissueParams()
+        #: The state :func:`step_kernel` works on (the rig may move it into
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
+        self.state = np.array([0.0, 0.0, 0.0, p.stiffness_n_per_m_pow, p.exponent, p.damping_s_per_m,
+                               p.relax_stiffness_n_per_m, p.relax_time_s])
+
+    @property
+    def params(self) -> TissueParams:
+        """The tissue's parameters (read-only: they are in :attr:`state`)."""
+        return self._params
+
+    @property
+    def force_n(self) -> float:
+        """The contact force of the last step, N (≥ 0)."""
+        return float(self.state[_FORCE])
 
     def step(self, depth_m: float, dt_s: float) -> float:
         """Advance by ``dt_s`` with penetration ``depth_m`` (≤ 0: no contact); return the force, N."""
-        p = self.params
-        rate = (depth_m - self._prev_depth) / dt_s if dt_s > 0 else 0.0
-        self._prev_depth = depth_m
-        if depth_m <= 0.0:
-            self._maxwell_n = 0.0
-            self.force_n = 0.0
-            return 0.0
-        elastic = p.stiffness_n_per_m_pow * depth_m**p.exponent
-        f = elastic * (1.0 + p.damping_s_per_m * rate)
-        if p.relax_stiffness_n_per_m > 0.0 and dt_s > 0:
-            # exact update of Ḟ_M = k_M δ̇ − F_M/τ_M over one step at constant δ̇
-            decay = math.exp(-dt_s / p.relax_time_s)
-            fm = self._maxwell_n * decay + p.relax_stiffness_n_per_m * rate * p.relax_time_s * (1.0 - decay)
-            self._maxwell_n = fm
-            f += fm
-        f = f if f > 0.0 else 0.0
-        self.force_n = f
-        return f
+        return step_kernel(self.state, float(depth_m), float(dt_s))
