@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.planning.sweep_figures import FRONTS, front_figure, front_of
+from analysis.planning.sweep_figures import FRONTS, front_figure, front_of, metrics_figure
 from protocol.metrics import METRICS
 from study_app.cli.main import main
 
@@ -74,3 +74,21 @@ def test_the_paper_s_task_keeps_its_speed_accuracy_front() -> None:
                                                                     "rmse_n")]
     assert front_of(pd.DataFrame(rows)) is FRONTS[0]
     assert front_of(pd.DataFrame([{"metric": "rmse_n", "on": 0.5}])) is None
+
+
+def test_the_success_counts_stand_apart_from_each_other() -> None:
+    """Each TCT-over-successes point's count (n=) sits on the side away from the other mode's point at the same
+    setting -- the higher one's above, the lower one's below, a tie ON above -- so close points' labels do not
+    overlap (they did at filter_window 1 of the README's sweep: OFF's below its point, ON's above its own)."""
+    tct = next(m.name for m in METRICS if m.success_only)
+    rows = [(1, 8.27, 7.97), (10, 6.70, 8.35), (50, 7.0, 7.0)]  # OFF above, OFF below, a tie
+    summary = pd.DataFrame([{"filter_window": w, "metric": tct, "n_studies": 3, "n_trials_off": 13,
+                             "n_trials_on": 17, "off": off, "off_ci_low": off - 0.5, "off_ci_high": off + 0.5,
+                             "on": on, "on_ci_low": on - 0.5, "on_ci_high": on + 0.5} for w, off, on in rows])
+    fig = metrics_figure(summary, ["filter_window"], {"filter_window": 10.0}, "a note")
+    ax = fig.axes[0]
+    near = [w for w, _, _ in rows]  # (the modes' points are drawn a little apart on a log axis)
+    up = {(min(near, key=lambda w: abs(w - t.xy[0])), t.get_text()): t.xyann[1] > 0
+          for t in ax.texts if t.get_text().startswith("n=")}
+    assert up == {(1, "n=13"): True, (1, "n=17"): False, (10, "n=13"): False, (10, "n=17"): True,
+                  (50, "n=13"): False, (50, "n=17"): True}

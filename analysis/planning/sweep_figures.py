@@ -122,9 +122,14 @@ def metrics_figure(summary: pd.DataFrame, swept: Sequence[str], paper: Mapping[s
                 _errorbar(ax, x, sel, mode, color=MODE_COLORS[mode], marker=MODE_MARKERS[mode],
                           linestyle=_DASHES[g_i % len(_DASHES)], label=_MODE_NAMES[mode] + tag)
                 if _SUCCESS_ONLY.get(metric) and f"n_trials_{mode}" in sel:  # what a mean of successes rests on
-                    for xi, yi, n in zip(x, sel[mode], sel[f"n_trials_{mode}"], strict=True):
-                        if math.isfinite(float(yi)):
-                            ax.annotate(f"n={int(n)}", (xi, float(yi)), xytext=(3, 3 if mode == "on" else -8),
+                    other = sel["on" if mode == "off" else "off"]
+                    for xi, yi, yo, n in zip(x, sel[mode], other, sel[f"n_trials_{mode}"], strict=True):
+                        y, y_other = float(yi), float(yo)
+                        if math.isfinite(y):
+                            # the count on the side away from the other mode's point at this setting (the two
+                            # points are often close: labels on facing sides overlapped); a tie: ON above
+                            up = y > y_other if y != y_other and math.isfinite(y_other) else mode == "on"
+                            ax.annotate(f"n={int(n)}", (xi, y), xytext=(3, 3 if up else -8),
                                         textcoords="offset points", fontsize=5.5, color=MODE_COLORS[mode])
         if _log_x(xs):
             ax.set_xscale("log")
