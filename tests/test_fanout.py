@@ -125,10 +125,28 @@ def test_a_scheduler_nobody_answers_at_is_refused_before_the_folder_is_made(tmp_
     assert not out.exists()
 
 
+def _rig_kernels_cached_where(dask_worker) -> tuple[str, list[str]]:
+    """On a worker: build a simulated rig; where numba caches, and the cache files there."""
+    import numba
+
+    from pipeline.sim.rig import SimRig
+
+    SimRig()
+    folder = numba.config.CACHE_DIR
+    return dask_worker.local_directory, sorted(p.name for p in Path(folder).rglob("*.nbi"))
+
+
 def test_the_workers_run_this_software(cluster) -> None:
+    """And, connected, each worker caches the simulated rig's compiled code in its own scratch folder."""
     client = fanout.connect(cluster.scheduler_address)
     try:
         assert set(client.run(fanout.software_identity).values()) == {fanout.software_identity()}
+        where = client.run(fanout.kernels_in_scratch)
+        seen = client.run(_rig_kernels_cached_where)
+        assert len(seen) == 2
+        for worker, (local, files) in seen.items():
+            assert where[worker] == os.path.join(local, "haptic-study-kernels")
+            assert any(f.startswith("rig.") for f in files) and any(f.startswith("sensor.") for f in files), files
     finally:
         client.close()
 

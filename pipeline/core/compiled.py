@@ -20,10 +20,12 @@ below hold for every compiled function:
 * **Integer times stay exact.** A float64 holds integers exactly below 2⁵³ (104 days in nanoseconds): the models
   keep times in their states relative to their first tick (a monotonic clock's nanoseconds since boot may pass
   2⁵³).
-* **Compiled once a machine.** The machine code is cached beside the source (``__pycache__``; numba's own per-user
-  cache where that folder is read-only) and loaded in milliseconds by the next process; a user who can write to
-  neither (an unprivileged account without a home) gets it compiled in each process, a few seconds.  A rig compiles
-  (or loads) its kernels when it is built (:meth:`pipeline.sim.rig.SimRig.warm_up`), never in its first tick.
+* **Compiled once a machine.** Once :func:`cache_kernels` has run (a simulated rig's construction runs it), the
+  machine code is cached beside the source (``__pycache__``; numba's own per-user cache where that folder is
+  read-only; a Dask worker's own scratch folder on a cluster) and loaded in milliseconds by the next process; a user
+  who can write to neither (an unprivileged account without a home) gets it compiled in each process, a few
+  seconds.  A rig compiles (or loads) its kernels when it is built (:meth:`pipeline.sim.rig.SimRig.warm_up`), never
+  in its first tick.
   numba keys its cache on the kernel's own file and closure only, not on kernels it calls in other modules nor on
   the options below: a kernel that calls other modules' kernels closes over their :func:`fingerprint`
   (``pipeline/sim/rig.py``), and a change of the options must come with the caches deleted
@@ -42,21 +44,43 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["KernelState", "State", "fingerprint", "kernel"]
+__all__ = ["KernelState", "State", "cache_kernels", "fingerprint", "kernel"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 #: A kernel's state: a float64 array (integers kept in it are below 2⁵³, so exact).
 State = npt.NDArray[np.float64]
 
 
+#: Every kernel's dispatcher, and those whose machine code is kept on disk (:func:`cache_kernels`).
+_KERNELS: list[Any] = []
+_CACHED: set[int] = set()
+
+
 def kernel(fn: F) -> F:
-    """Compile ``fn`` (lazily, at its first call, from the on-disk cache when there is one); typed as ``fn``."""
-    try:
-        return cast(F, numba.njit(cache=True, fastmath=False, error_model="python")(fn))
-    except RuntimeError:
-        # no folder to cache in (the source read-only to this user, and no home for numba's own): compiled in each
-        # process instead, a few seconds at the first rig's construction
-        return cast(F, numba.njit(cache=False, fastmath=False, error_model="python")(fn))
+    """Compile ``fn`` (lazily, at its first call; from the on-disk cache once :func:`cache_kernels` has run); typed
+    as ``fn``."""
+    dispatcher = numba.njit(cache=False, fastmath=False, error_model="python")(fn)
+    _KERNELS.append(dispatcher)
+    return cast(F, dispatcher)
+
+
+def cache_kernels(folder: str | None = None) -> None:
+    """Keep every kernel's machine code on disk from now on: beside its source (numba's own per-user cache where that
+    is read-only), or in ``folder`` (a Dask worker's own scratch folder: nothing is written in its installation).
+
+    The place is chosen once a kernel a process, at its first call here (a kernel defined later is taken at the
+    next call); where there is none (the source read-only to this user, and no home for numba's own), the kernel is
+    compiled in each process instead, a few seconds at the first rig's construction.
+    """
+    if folder is not None:
+        numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # numba makes its settings at run time
+    for dispatcher in _KERNELS:
+        if id(dispatcher) not in _CACHED:
+            _CACHED.add(id(dispatcher))
+            try:
+                dispatcher.enable_caching()
+            except RuntimeError:
+                pass  # no folder to cache in (numba: "no locator available"): compiled in memory
 
 
 def fingerprint(*modules: ModuleType) -> int:

@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.core.compiled import State, fingerprint, kernel
+from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.devices.registry import DEFAULT_HAPTIC_MODEL, DEFAULT_ROBOT_MODEL, haptic_model, robot_model
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HapticLimits
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
@@ -267,6 +267,7 @@ class SimRig:
     def warm_up(self) -> None:
         """Compile the models' kernels (or load them from numba's cache) now, on scratch copies of their states, so
         that no tick of a running loop waits for it."""
+        cache_kernels()
         st, noise = self.state.copy(), np.zeros_like(self.sensor.noise)
         step_kernel(st, noise, 0, 0.0, 0.0, 0.001, 1, 1)
         # and each on its own, as the models' methods call them (a tick with Python's turns in it)

@@ -119,7 +119,18 @@ def connect(address: str, option: str = "--scheduler") -> Any:
         raise InputRefused(f"{option}: worker {w} runs haptic-study {version} (participant model {model}), this "
                            f"machine {mine[0]} ({mine[1]}); every worker must run the same software, or the "
                            "results would depend on where a participant ran")
+    client.run(kernels_in_scratch)
     return client
+
+
+def kernels_in_scratch(dask_worker: Any) -> str:
+    """On a worker (``client.run``): the simulated rig's compiled code cached in the worker's own folder, not in its
+    installation; returns the folder."""
+    from pipeline.core.compiled import cache_kernels
+
+    folder = os.path.join(dask_worker.local_directory, "haptic-study-kernels")
+    cache_kernels(folder)
+    return folder
 
 
 def run_tasks(fn: Callable[[T], R], tasks: Sequence[T], on_result: Callable[[R], None], *, jobs: int = 1,
