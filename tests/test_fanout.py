@@ -137,10 +137,19 @@ def _rig_kernels_cached_where(dask_worker) -> tuple[str, list[str]]:
 
 
 def test_the_workers_run_this_software(cluster) -> None:
-    """And, connected, each worker caches the simulated rig's compiled code in its own scratch folder."""
     client = fanout.connect(cluster.scheduler_address)
     try:
         assert set(client.run(fanout.software_identity).values()) == {fanout.software_identity()}
+    finally:
+        client.close()
+
+
+def test_the_workers_cache_the_compiled_rig_in_their_own_folders(cluster) -> None:
+    """Once tasks have run on them (after a worker killed mid-run, in this module), each worker caches the simulated
+    rig's compiled code in its own scratch folder, not in the installation."""
+    client = fanout.connect(cluster.scheduler_address)
+    try:
+        fanout.run_tasks(abs, [-1, -2], lambda _: None, client=client)
         where = client.run(fanout.kernels_in_scratch)
         seen = client.run(_rig_kernels_cached_where)
         assert len(seen) == 2

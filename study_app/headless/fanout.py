@@ -119,18 +119,31 @@ def connect(address: str, option: str = "--scheduler") -> Any:
         raise InputRefused(f"{option}: worker {w} runs haptic-study {version} (participant model {model}), this "
                            f"machine {mine[0]} ({mine[1]}); every worker must run the same software, or the "
                            "results would depend on where a participant ran")
-    client.run(kernels_in_scratch)
     return client
 
 
 def kernels_in_scratch(dask_worker: Any) -> str:
-    """On a worker (``client.run``): the simulated rig's compiled code cached in the worker's own folder, not in its
-    installation; returns the folder."""
+    """On a worker: the simulated rig's compiled code cached in the worker's own folder, not in its installation;
+    returns the folder."""
     from pipeline.core.compiled import cache_kernels
 
     folder = os.path.join(dask_worker.local_directory, "haptic-study-kernels")
     cache_kernels(folder)
     return folder
+
+
+def _kernels_in_scratch_plugin() -> Any:
+    """A Dask worker plugin running :func:`kernels_in_scratch` on each worker as it starts (Dask imported only here:
+    it is an optional extra)."""
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class KernelsInScratch(WorkerPlugin):
+        name = "haptic-study-kernels-in-scratch"
+
+        def setup(self, worker: Any) -> None:
+            kernels_in_scratch(worker)
+
+    return KernelsInScratch()
 
 
 def run_tasks(fn: Callable[[T], R], tasks: Sequence[T], on_result: Callable[[R], None], *, jobs: int = 1,
@@ -160,6 +173,9 @@ def _run_dask(fn: Callable[[T], R], tasks: Sequence[T], on_result: Callable[[R],
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
+    # the rig's compiled code cached in each worker's own folder: on every worker, and on any that joins later (one
+    # restarted after a crash), before its first task -- whoever made the client
+    client.register_plugin(_kernels_in_scratch_plugin())
     run = uuid4().hex[:12]
     # keys of our own: pure=True would hash each task's arguments (a protocol object per task) for nothing
     futures = client.map(fn, tasks, key=[f"{name}-{run}-{i}" for i in range(len(tasks))], pure=False)
