@@ -145,8 +145,8 @@ def test_the_workers_run_this_software(cluster) -> None:
 
 
 def test_the_workers_cache_the_compiled_rig_in_their_own_folders(cluster) -> None:
-    """Once tasks have run on them (after a worker killed mid-run, in this module), each worker caches the simulated
-    rig's compiled code in its own scratch folder, not in the installation."""
+    """Once tasks have run on them (after a worker killed mid-run, in this module), the workers cache the simulated
+    rig's compiled code in Dask's scratch folder, not in the installation."""
     client = fanout.connect(cluster.scheduler_address)
     try:
         fanout.run_tasks(abs, [-1, -2], lambda _: None, client=client)
@@ -154,7 +154,7 @@ def test_the_workers_cache_the_compiled_rig_in_their_own_folders(cluster) -> Non
         seen = client.run(_rig_kernels_cached_where)
         assert len(seen) == 2
         for worker, (local, files) in seen.items():
-            assert where[worker] == os.path.join(local, "haptic-study-kernels")
+            assert where[worker] == os.path.join(os.path.dirname(os.path.abspath(local)), "haptic-study-kernels")
             assert any(f.startswith("rig.") for f in files) and any(f.startswith("sensor.") for f in files), files
     finally:
         client.close()

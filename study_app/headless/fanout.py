@@ -123,11 +123,12 @@ def connect(address: str, option: str = "--scheduler") -> Any:
 
 
 def kernels_in_scratch(dask_worker: Any) -> str:
-    """On a worker: the simulated rig's compiled code cached in the worker's own folder, not in its installation;
+    """On a worker: the simulated rig's compiled code cached in Dask's scratch folder, not in the installation --
+    beside the workers' own folders, so the workers of a machine (and one restarted after a crash) compile it once;
     returns the folder."""
     from pipeline.core.compiled import cache_kernels
 
-    folder = os.path.join(dask_worker.local_directory, "haptic-study-kernels")
+    folder = os.path.join(os.path.dirname(os.path.abspath(dask_worker.local_directory)), "haptic-study-kernels")
     cache_kernels(folder)
     return folder
 
