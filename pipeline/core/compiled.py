@@ -51,16 +51,15 @@ F = TypeVar("F", bound=Callable[..., Any])
 State = npt.NDArray[np.float64]
 
 
-#: Every kernel's dispatcher, and those whose machine code is kept on disk (:func:`cache_kernels`).
-_KERNELS: list[Any] = []
-_CACHED: set[int] = set()
+#: The kernels' dispatchers whose machine code :func:`cache_kernels` has not yet placed on disk.
+_UNCACHED: list[Any] = []
 
 
 def kernel(fn: F) -> F:
     """Compile ``fn`` (lazily, at its first call; from the on-disk cache once :func:`cache_kernels` has run); typed
     as ``fn``."""
     dispatcher = numba.njit(cache=False, fastmath=False, error_model="python")(fn)
-    _KERNELS.append(dispatcher)
+    _UNCACHED.append(dispatcher)
     return cast(F, dispatcher)
 
 
@@ -74,13 +73,11 @@ def cache_kernels(folder: str | None = None) -> None:
     """
     if folder is not None:
         numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # numba makes its settings at run time
-    for dispatcher in _KERNELS:
-        if id(dispatcher) not in _CACHED:
-            _CACHED.add(id(dispatcher))
-            try:
-                dispatcher.enable_caching()
-            except RuntimeError:
-                pass  # no folder to cache in (numba: "no locator available"): compiled in memory
+    while _UNCACHED:
+        try:
+            _UNCACHED.pop().enable_caching()
+        except RuntimeError:
+            pass  # no folder to cache in (numba: "no locator available"): compiled in memory
 
 
 def fingerprint(*modules: ModuleType) -> int:

@@ -28,7 +28,7 @@ import numpy as np
 from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.devices.registry import DEFAULT_HAPTIC_MODEL, DEFAULT_ROBOT_MODEL, haptic_model, robot_model
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HapticLimits
-from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, mat_vec, transpose
+from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, transpose
 from pipeline.force.framework import DEFAULT_ROT_HAPTIC_BASE, DEFAULT_ROT_TIP_SENSOR
 from pipeline.sim import hand as sim_hand
 from pipeline.sim import robot as sim_robot
@@ -60,6 +60,21 @@ _SENSOR = _TISSUE + sim_tissue.STATE_SIZE
 _STATE_SIZE = _SENSOR + sim_sensor.STATE_SIZE
 
 
+@kernel
+def target_kernel(st: State, y: float) -> tuple[float, float, float]:
+    """The robot's target (base frame, m) for the stylus at ``y`` along the hand's axis (m): home plus the motion
+    scale times the displacement, turned from the haptic device's frame into the base frame."""
+    ym = y * st[_SCALE]
+    ax, ay, az = st[_AXIS], st[_AXIS + 1], st[_AXIS + 2]
+    hx = ax * ym if ax != 0.0 else 0.0  # (off-axis components exactly zero)
+    hy = ay * ym if ay != 0.0 else 0.0
+    hz = az * ym if az != 0.0 else 0.0
+    r = _ROT
+    return (st[_HOME] + (st[r] * hx + st[r + 1] * hy + st[r + 2] * hz),
+            st[_HOME + 1] + (st[r + 3] * hx + st[r + 4] * hy + st[r + 5] * hz),
+            st[_HOME + 2] + (st[r + 6] * hx + st[r + 7] * hy + st[r + 8] * hz))
+
+
 def _compile_step(callees: int) -> Callable[..., tuple[float, float, bool, int, float, float, float, float, float,
                                                         float]]:
     """:func:`step_kernel` closed over ``callees``, the :func:`pipeline.core.compiled.fingerprint` of the models it
@@ -78,16 +93,9 @@ def _compile_step(callees: int) -> Callable[..., tuple[float, float, bool, int, 
         """
         _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         y = sim_hand.step_kernel(st[_ARM:_ROBOT], y_c, felt, dt_s)
-        ym = y * st[_SCALE]
-        ax, ay, az = st[_AXIS], st[_AXIS + 1], st[_AXIS + 2]
-        hx = ax * ym if ax != 0.0 else 0.0  # (off-axis components exactly zero)
-        hy = ay * ym if ay != 0.0 else 0.0
-        hz = az * ym if az != 0.0 else 0.0
-        r = _ROT
         rob = st[_ROBOT:_TISSUE]
-        sim_robot.command_kernel(rob, st[_HOME] + (st[r] * hx + st[r + 1] * hy + st[r + 2] * hz),
-                                 st[_HOME + 1] + (st[r + 3] * hx + st[r + 4] * hy + st[r + 5] * hz),
-                                 st[_HOME + 2] + (st[r + 6] * hx + st[r + 7] * hy + st[r + 8] * hz))
+        tx, ty, tz = target_kernel(st, y)
+        sim_robot.command_kernel(rob, tx, ty, tz)
         cycled = sim_robot.advance_kernel(rob, robot_ns, dt_s)
         depth = st[_SURFACE] - rob[2]
         tis = st[_TISSUE:_SENSOR]
@@ -208,7 +216,7 @@ class SimRig:
         self.tissue = HuntCrossleyTissue(cfg.tissue)
         self.arm = CompliantArm(cfg.arm)
         self.driver: StylusDriver = driver or HoldStill()
-        self._rot_base_haptic = transpose(cfg.rot_haptic_base)
+        rot_base_haptic = transpose(cfg.rot_haptic_base)
         r = cfg.rot_haptic_base
         #: The tissue normal (base +z) in the haptic device's frame: the axis the hand moves the stylus along.
         self.hand_axis: Vec3 = (r[2], r[5], r[8])
@@ -223,7 +231,7 @@ class SimRig:
         #: The rig's state (:func:`step_kernel`'s layout); the arm, the robot, the tissue and the sensor keep theirs
         #: in its slices from here on.
         self.state = st = np.zeros(_STATE_SIZE)
-        st[_HOME:_HOME + 3], st[_ROT:_ROT + 9] = cfg.tip_home_m, self._rot_base_haptic
+        st[_HOME:_HOME + 3], st[_ROT:_ROT + 9] = cfg.tip_home_m, rot_base_haptic
         st[_AXIS:_AXIS + 3] = self.hand_axis
         st[_SCALE], st[_SURFACE] = cfg.motion_scale, cfg.surface_z_m
         self.arm.adopt_state(st[_ARM:_ROBOT])
@@ -273,6 +281,7 @@ class SimRig:
         # and each on its own, as the models' methods call them (a tick with Python's turns in it)
         sim_hand.step_kernel(st[_ARM:_ROBOT], 0.0, 0.0, 0.001)
         sim_robot.command_kernel(st[_ROBOT:_TISSUE], 0.0, 0.0, 0.0)
+        target_kernel(st, 0.0)
         sim_robot.advance_kernel(st[_ROBOT:_TISSUE], 2, 0.001)
         sim_tissue.step_kernel(st[_TISSUE:_SENSOR], 0.0, 0.001)
         sim_sensor.sample_kernel(st[_SENSOR:_STATE_SIZE], noise, 0, 2, 0.0, 0.0, 0.0, 0.001)
@@ -354,10 +363,7 @@ class SimRig:
         touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
         robot = self.robot
         if self.teleop is None:
-            ym = y * cfg.motion_scale
-            d = mat_vec(self._rot_base_haptic, (ax * ym if ax else 0.0, ay * ym if ay else 0.0, az * ym if az else 0.0))
-            home = cfg.tip_home_m
-            robot.command((home[0] + d[0], home[1] + d[1], home[2] + d[2]))
+            robot.command(target_kernel(self.state, y))
         else:
             # the app owns the robot: targets come from the teleoperation controller through servo_tcp
             self.teleop.update(now_ns)

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from pipeline.sim import hand, robot, sensor, tissue
 from pipeline.sim.hand import CompliantArm, ScriptedPresses
-from pipeline.sim.rig import SimRig, SimRigConfig, step_kernel
+from pipeline.sim.rig import SimRig, SimRigConfig, step_kernel, target_kernel
 from pipeline.sim.robot import SimRobot
 from pipeline.sim.sensor import SensorParams, SimForceSensor
 from pipeline.sim.tissue import HuntCrossleyTissue, TissueParams
@@ -119,6 +119,7 @@ def test_rig_step(y_c: float, felt: float, dt: float, seed: int, push: tuple[flo
     rig.push_base_n = push
     rig.advance(0)  # the sensor's orientation and first record
     same(step_kernel, rig.state, rig.sensor.noise, rig.sensor.next_noise_row(), y_c, felt, dt, 10**6, 10**6)
+    same(target_kernel, rig.state, y_c)
 
 
 class _Presses(ScriptedPresses):
@@ -195,9 +196,9 @@ def test_kernels_are_compiled_when_a_rig_is_built() -> None:
     """A rig is built with its kernels compiled or loaded: its loop's first tick waits for no compiler (in a fresh
     process: this one's may have compiled them already)."""
     code = ("from pipeline.sim import hand, robot, sensor, tissue\n"
-            "from pipeline.sim.rig import SimRig, step_kernel\n"
-            "ks = (step_kernel, hand.step_kernel, robot.advance_kernel, robot.command_kernel, tissue.step_kernel,"
-            " sensor.sample_kernel)\n"
+            "from pipeline.sim.rig import SimRig, step_kernel, target_kernel\n"
+            "ks = (step_kernel, target_kernel, hand.step_kernel, robot.advance_kernel, robot.command_kernel,"
+            " tissue.step_kernel, sensor.sample_kernel)\n"
             "assert not any(k.signatures for k in ks)\n"
             "SimRig()\n"
             "print(all(k.signatures for k in ks))\n")
