@@ -9,7 +9,7 @@ import pytest
 
 from bench.pipeline_bench import format_pipeline_bench, run_pipeline_bench
 from bench.pipeline_cost import measure_pipeline_cost, record_samples
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,8 @@
-"""Sizes (house style): no file over 600 lines, no function over 80 lines -- outside ``HapticFramework.step``.
+"""Sizes (house style): no file over 600 lines, no function over 80 lines.
 
-The one exception is the fused 1 kHz step of the force path (``pipeline/force/framework.py``), kept in one piece
-because each call it would make costs the loop per tick (it is measured in ``haptic-study bench``).  Pure AST, no
-imports of the code it reads: a fraction of a second.
+There is no exception any more: the 1 kHz step of the force path, once fused by hand into one long Python function
+because each call it made cost the loop per tick, is a compiled kernel that calls its stages' kernels (a call between
+kernels costs nothing once compiled).  Pure AST, no imports of the code it reads: a fraction of a second.
 """
 
 from __future__ import annotations
@@ -15,8 +15,6 @@ ROOT = Path(__file__).resolve().parent.parent
 SCANNED = ("foundation", "pipeline", "protocol", "analysis", "study_app", "bench", "scripts")
 MAX_FILE_LINES = 600
 MAX_FUNCTION_LINES = 80
-#: Functions allowed over the limit: (file relative to the root, qualified name).
-EXCEPTIONS = {("pipeline/force/framework.py", "HapticFramework.step")}
 
 
 def oversized(relpath: str, text: str) -> list[str]:
@@ -32,7 +30,7 @@ def oversized(relpath: str, text: str) -> list[str]:
                 name = f"{prefix}{child.name}"
                 if not isinstance(child, ast.ClassDef):
                     length = (child.end_lineno or child.lineno) - child.lineno + 1
-                    if length > MAX_FUNCTION_LINES and (relpath, name) not in EXCEPTIONS:
+                    if length > MAX_FUNCTION_LINES:
                         found.append(f"{relpath}:{child.lineno}: {name} is {length} lines (at most "
                                      f"{MAX_FUNCTION_LINES})")
                 visit(child, f"{name}.")
@@ -50,16 +48,6 @@ def test_no_file_or_function_over_the_limits() -> None:
     assert not found, "split by job:\n" + "\n".join(found)
 
 
-def test_the_exception_is_there_and_still_needed() -> None:
-    """The named exception exists (a rename would silently drop it) and is over the limit (else it goes)."""
-    ((relpath, name),) = EXCEPTIONS
-    tree = ast.parse((ROOT / relpath).read_text("utf-8"))
-    cls_name, fn_name = name.split(".")
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == cls_name)
-    fn = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == fn_name)
-    assert (fn.end_lineno or fn.lineno) - fn.lineno + 1 > MAX_FUNCTION_LINES
-
-
 def _function(name: str, lines: int, indent: str = "") -> str:
     body = "".join(f"{indent}    x = {i}\n" for i in range(lines - 1))
     return f"{indent}def {name}():\n{body}"
@@ -72,10 +60,8 @@ def test_the_check_reports_what_breaks_the_limits() -> None:
     assert oversized("a.py", method) == ["a.py:2: C.g is 81 lines (at most 80)"]
     nested = _function("outer", 3) + "    " + _function("inner", 81, "    ").lstrip()
     assert any("outer.inner is 81 lines" in line for line in oversized("a.py", nested))
-    # the exception is one function of one file: a `step` elsewhere, or of another class, is not excused
+    # the old exception is gone: the framework's step is held to the limit as any function
     step = "class HapticFramework:\n" + _function("step", 81, "    ")
-    assert oversized("pipeline/force/framework.py", step) == []
-    assert oversized("pipeline/force/other.py", step) != []
-    assert oversized("pipeline/force/framework.py", step.replace("HapticFramework", "Other")) != []
+    assert oversized("pipeline/force/framework.py", step) != []
     assert oversized("a.py", "x = 1\n" * 601) == ["a.py: 601 lines (at most 600)"]
     assert oversized("a.py", "x = 1\n" * 600) == []

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 
 __all__ = ["STEP_N", "Latency", "Stage", "live_stages", "robot_stage", "simulated_stages"]
 

@@ -14,15 +14,25 @@ spike is flushed within ``2·window`` samples of its arrival.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
+from pipeline.core import exact
+from pipeline.core.compiled import State, fingerprint, kernel
 from pipeline.force.frames import Vec3
 
-__all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s"]
+__all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s", "ma3_mean", "ma3_update", "state_size"]
 
-_FSUM = math.fsum
+# The state of a 3-vector moving average (:class:`MovingAverage3`), one float64 array: the running sums, the ring
+# index, the count, the samples rejected, the window, then the three rings (x, y, z) of ``window`` samples each.
+_SX, _SY, _SZ, _I, _N, _REJECTED, _W, _BUF = range(8)
+
+
+def state_size(window: int) -> int:
+    """The length of the state array of a ``window``-sample :class:`MovingAverage3`."""
+    return _BUF + 3 * window
 
 
 def exact_sum(values: list[float]) -> float:
@@ -32,12 +42,9 @@ def exact_sum(values: list[float]) -> float:
     DBL_MAX may legitimately sum beyond it, and the filter must not raise at
     1 kHz.  The plain sum then gives the overflowed ±inf (or NaN for mixed
     signs); the next re-sum repairs the running sum once the window is finite
-    again.
+    again.  (:func:`pipeline.core.exact.fsum`, which the filter's kernel calls.)
     """
-    try:
-        return _FSUM(values)
-    except OverflowError:
-        return sum(values)
+    return float(exact.fsum(np.asarray(values, dtype=np.float64)))
 
 
 def _check_window(window: object) -> int:
@@ -49,6 +56,66 @@ def _check_window(window: object) -> int:
 def group_delay_s(window: int, rate_hz: float = 1000.0) -> float:
     """Group delay of a ``window``-sample moving average, ``(N - 1) / 2`` samples, in s."""
     return (_check_window(window) - 1) / 2.0 / rate_hz
+
+
+def _compile(callees: int) -> tuple[Any, Any]:
+    """:func:`ma3_update` and :func:`ma3_mean`, closed over the :func:`pipeline.core.compiled.fingerprint` of
+    :mod:`pipeline.core.exact` (numba keys its cache on a kernel's own file and closure)."""
+
+    @kernel
+    def ma3_mean(st: State) -> tuple[float, float, float]:
+        """The current output (zeros before the first accepted sample)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        n = st[_N]
+        if n == 0.0:
+            return (0.0, 0.0, 0.0)
+        sx, sy, sz = st[_SX], st[_SY], st[_SZ]
+        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
+            # a window of finite samples whose sum exceeds DBL_MAX: sum the samples divided by n
+            w = int(st[_W])
+            b = st[_BUF:]
+            return (exact.fsum(b[:w] / n), exact.fsum(b[w:2 * w] / n), exact.fsum(b[2 * w:3 * w] / n))
+        return (sx / n, sy / n, sz / n)
+
+    @kernel
+    def ma3_update(st: State, x: float, y: float, z: float) -> tuple[float, float, float]:
+        """Add one sample; the mean of the last ``window`` accepted samples (:meth:`MovingAverage3.update`)."""
+        if (x - x) + (y - y) + (z - z) != 0.0:  # NaN or ±inf in any component
+            st[_REJECTED] += 1.0
+            return ma3_mean(st)
+        w = int(st[_W])
+        i = int(st[_I])
+        n = st[_N]
+        b = st[_BUF:]
+        sx = st[_SX] + (x - b[i])
+        sy = st[_SY] + (y - b[w + i])
+        sz = st[_SZ] + (z - b[2 * w + i])
+        b[i] = x
+        b[w + i] = y
+        b[2 * w + i] = z
+        i += 1
+        if n < w:
+            n += 1.0
+        if i == w:
+            i = 0
+            # Re-sum exactly once per window: bounds rounding drift and flushes
+            # the residue a huge spike leaves behind when it is evicted.
+            sx = exact.fsum(b[:w])
+            sy = exact.fsum(b[w:2 * w])
+            sz = exact.fsum(b[2 * w:3 * w])
+        st[_SX] = sx
+        st[_SY] = sy
+        st[_SZ] = sz
+        st[_I] = i
+        st[_N] = n
+        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
+            return ma3_mean(st)
+        return (sx / n, sy / n, sz / n)
+
+    return ma3_update, ma3_mean
+
+
+ma3_update, ma3_mean = _compile(fingerprint(exact))
 
 
 class MovingAverage3:
@@ -64,96 +131,70 @@ class MovingAverage3:
     -----
     Until ``window`` samples have arrived the output is the mean of those seen.
     A sample with any non-finite component is rejected (counted in
-    :attr:`rejected`) and the previous mean is returned unchanged.
+    :attr:`rejected`) and the previous mean is returned unchanged.  The arithmetic is :func:`ma3_update`'s, compiled,
+    over the array :attr:`array` (Algorithm 1's compiled tick runs the same kernel on the framework's slice of it).
     """
 
-    # State: the three sample rings in ``_buf`` and the running sums, the
-    # ring index and the sample count in one tuple ``_st`` -- one attribute
-    # read and one write per sample, which is what makes it cheap at 1 kHz.
-    # The rings are cleared in place and never replaced: HapticFramework's
-    # fused per-tick path holds them instead of loading them every tick.
-    __slots__ = ("_buf", "_st", "rejected", "window")
+    __slots__ = ("array", "window")
 
     def __init__(self, window: int) -> None:
         self.window = _check_window(window)
-        self.rejected = 0
-        self._buf = ([0.0] * window, [0.0] * window, [0.0] * window)
+        #: The state (running sums, index, count, rejected, window, rings) as :func:`ma3_update` reads it.
+        self.array: State = np.zeros(state_size(window))
         self.reset()
 
     def reset(self) -> None:
-        """Empty the window (the next output is the next sample)."""
-        for b in self._buf:  # in place: see the note on the state above
-            b[:] = (0.0,) * self.window
-        self._st = (0.0, 0.0, 0.0, 0, 0)
+        """Empty the window (the next output is the next sample); the count of rejected samples stays."""
+        st = self.array
+        rejected = st[_REJECTED]
+        st[:] = 0.0
+        st[_REJECTED], st[_W] = rejected, float(self.window)
+
+    @property
+    def rejected(self) -> int:
+        """Non-finite samples refused so far."""
+        return int(self.array[_REJECTED])
 
     @property
     def count(self) -> int:
         """Samples currently in the window (≤ ``window``)."""
-        return self._st[4]
+        return int(self.array[_N])
+
+    def _rings(self) -> tuple[State, State, State]:
+        b, w = self.array[_BUF:], self.window
+        return b[:w], b[w:2 * w], b[2 * w:]
+
+    def adopt(self, view: State) -> None:
+        """Keep the state in ``view`` (a slice of the framework's array) from now on, as it is now."""
+        view[:] = self.array
+        self.array = view
 
     def state(self) -> dict[str, Any]:
         """The window's contents and running sums, JSON-safe and exact (see :meth:`load_state`)."""
-        return {"window": self.window, "buf": [list(b) for b in self._buf], "st": list(self._st),
+        st = self.array
+        return {"window": self.window, "buf": [r.tolist() for r in self._rings()],
+                "st": [float(st[_SX]), float(st[_SY]), float(st[_SZ]), int(st[_I]), int(st[_N])],
                 "rejected": self.rejected}
 
     def load_state(self, d: Mapping[str, Any]) -> None:
         """Continue exactly from a :meth:`state` of a filter of the same window (rings refilled in place)."""
         if int(d["window"]) != self.window:
             raise ValueError(f"filter state of window {d['window']!r}: this filter's window is {self.window}")
-        for ring, values in zip(self._buf, d["buf"], strict=True):
+        for ring, values in zip(self._rings(), d["buf"], strict=True):
             ring[:] = [float(v) for v in values]
         sx, sy, sz, i, n = d["st"]
-        self._st = (float(sx), float(sy), float(sz), int(i), int(n))
-        self.rejected = int(d["rejected"])
+        st = self.array
+        st[_SX], st[_SY], st[_SZ], st[_I], st[_N] = float(sx), float(sy), float(sz), int(i), int(n)
+        st[_REJECTED] = int(d["rejected"])
 
     def update(self, x: float, y: float, z: float) -> Vec3:
         """Add one sample and return the mean of the last ``window`` accepted samples."""
-        if (x - x) + (y - y) + (z - z) != 0.0:  # NaN or ±inf in any component
-            self.rejected += 1
-            return self.mean
-        sx, sy, sz, i, n = self._st
-        bx, by, bz = self._buf
-        sx += x - bx[i]
-        sy += y - by[i]
-        sz += z - bz[i]
-        bx[i] = x
-        by[i] = y
-        bz[i] = z
-        i += 1
-        w = self.window
-        if n < w:
-            n += 1
-        if i == w:
-            i = 0
-            # Re-sum exactly once per window: bounds rounding drift and flushes
-            # the residue a huge spike leaves behind when it is evicted.
-            sx = exact_sum(bx)
-            sy = exact_sum(by)
-            sz = exact_sum(bz)
-        self._st = (sx, sy, sz, i, n)
-        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
-            return self._mean_without_overflow()
-        return (sx / n, sy / n, sz / n)
+        return ma3_update(self.array, float(x), float(y), float(z))  # type: ignore[no-any-return]  # a kernel
 
     @property
     def mean(self) -> Vec3:
         """Current output (zeros before the first accepted sample)."""
-        sx, sy, sz, _, n = self._st
-        if n == 0:
-            return (0.0, 0.0, 0.0)
-        if (sx - sx) + (sy - sy) + (sz - sz) != 0.0:
-            return self._mean_without_overflow()
-        return (sx / n, sy / n, sz / n)
-
-    def _mean_without_overflow(self) -> Vec3:
-        """Mean of a window of finite samples whose sum exceeds DBL_MAX: sum the samples divided by n."""
-        n = self._st[4]
-        bx, by, bz = self._buf
-        return (
-            _FSUM([v / n for v in bx]),
-            _FSUM([v / n for v in by]),
-            _FSUM([v / n for v in bz]),
-        )
+        return ma3_mean(self.array)  # type: ignore[no-any-return]  # a kernel
 
 
 class MovingAverage:

@@ -242,13 +242,3 @@ def wrench_transform(
 def sensor_to_haptic_chain(rot_tip_sensor: Mat3, rot_base_tip: Mat3, rot_haptic_base: Mat3) -> Mat3:
     """Composite rotation ``rot_haptic_sensor = rot_haptic_base · rot_base_tip · rot_tip_sensor`` (eqs. 2–4)."""
     return mat_mul(rot_haptic_base, mat_mul(rot_base_tip, rot_tip_sensor))
-
-
-def clamp_norm(v: Vec3, limit: float) -> Vec3:
-    """Return ``v`` shrunk (by as few ulps as needed) so that ``hypot(*v) ≤ limit``."""
-    m = math.hypot(*v)
-    while m > limit:
-        k = (limit / m) * (1.0 - 2.0**-52)
-        v = (v[0] * k, v[1] * k, v[2] * k)
-        m = math.hypot(*v)
-    return v

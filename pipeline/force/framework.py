@@ -12,32 +12,36 @@ Per F/T sample (1 kHz)::
 
 The gravity term depends on the robot pose, which changes at 125 Hz (CB3), so
 it is recomputed in :meth:`HapticFramework.set_pose`, not per sample.  The
-per-sample path is pure float arithmetic with every stage's state held
-locally: it is the hot loop of the product (≤ 2 µs per tick, see
-``haptic-study bench pipeline``).  The stage modules own the equations;
-this class only sequences them, except the three rotations, which are
-``frames.mat_vec`` written out in place because a call per rotation would be
-a third of the budget.
+per-sample path is :func:`step_kernel`, compiled (:mod:`pipeline.core.compiled`): the stages' own kernels
+(:func:`pipeline.force.filters.ma3_update`, :func:`pipeline.force.scaling.scale_kernel`,
+:func:`pipeline.force.safety.safety_step`) and the three rotations, over one float64 array that holds the whole
+state (the framework's :attr:`HapticFramework.array`, of which the filter and the safety stage keep slices).  It is
+the hot loop of the product (``haptic-study bench pipeline``), the same code on hardware, in replay and in a
+simulated study.  The stage modules own the equations; this one only sequences them.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.core import tick_record
-from pipeline.force.bias_refinement import RlsBias
-from pipeline.force.filters import MovingAverage3, exact_sum
-from pipeline.force.frames import IDENTITY, Mat3, Vec3, check_rotation
-from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
-from pipeline.force.safety import SafetyConfig, SafetyGovernor
-from pipeline.force.scaling import _SATURATED_T, _SERIES_T, scale_components
+import numpy as np
 
-_HYPOT = math.hypot
-_TANH = math.tanh
-_FSUM = math.fsum
-_INF = math.inf
+from pipeline.core import exact, tick_record
+from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.force import filters, frames, safety, scaling
+from pipeline.force.bias_refinement import RlsBias
+from pipeline.force.config import (
+    DEFAULT_ROT_HAPTIC_BASE,
+    DEFAULT_ROT_TIP_SENSOR,
+    FrameworkConfig,
+    framework_config_from_dict,
+    framework_config_to_dict,
+)
+from pipeline.force.filters import MovingAverage3
+from pipeline.force.frames import IDENTITY, Mat3, Vec3
+from pipeline.force.payload_compensator import NO_PAYLOAD, PayloadCalibration
+from pipeline.force.safety import SafetyGovernor
 
 __all__ = [
     "DEFAULT_ROT_HAPTIC_BASE",
@@ -48,63 +52,56 @@ __all__ = [
     "HapticFramework",
     "framework_config_from_dict",
     "framework_config_to_dict",
+    "step_kernel",
 ]
-
-#: Touch frame (+x right, +y up, +z toward the user) for an experimenter facing
-#: the robot along base +y: base x → haptic x, base z (up) → haptic y (up),
-#: base −y → haptic z.  Rows are the haptic axes expressed in the base frame.
-DEFAULT_ROT_HAPTIC_BASE: Mat3 = (1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -1.0, 0.0)
-#: Sensor mounted coaxially with the instrument: its axes coincide with the tip's.
-DEFAULT_ROT_TIP_SENSOR: Mat3 = IDENTITY
-
-
-@dataclass(frozen=True, slots=True)
-class FrameworkConfig:
-    """Parameters of Algorithm 1, validated at construction.
-
-    Attributes
-    ----------
-    f_max_n, f_scale_n
-        Scaling law parameters, N (paper: 3 and 7).
-    filter_window
-        Moving-average length in samples (group delay (N−1)/2 ms at 1 kHz).
-    rot_tip_sensor, rot_haptic_base
-        The fixed rotations ᵀ_S R and ᴴ_B R (row-major 9-tuples or 3x3 nested
-        sequences); checked for orthonormality.
-    safety
-        Clamp/slew/ramp limits; its ``f_max_n`` is forced equal to ``f_max_n``.
-    """
-
-    f_max_n: float = 3.0
-    f_scale_n: float = 7.0
-    filter_window: int = 10
-    rot_tip_sensor: Mat3 = DEFAULT_ROT_TIP_SENSOR
-    rot_haptic_base: Mat3 = DEFAULT_ROT_HAPTIC_BASE
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
-
-    def __post_init__(self) -> None:
-        for name in ("f_max_n", "f_scale_n"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and v > 0):
-                raise ValueError(f"{name} = {v!r}: must be a finite number of newtons > 0")
-        w = self.filter_window
-        if isinstance(w, bool) or not isinstance(w, int) or not 1 <= w <= 1000:
-            raise ValueError(f"filter_window = {w!r}: must be a whole number of samples from 1 to 1000")
-        object.__setattr__(self, "rot_tip_sensor", check_rotation(self.rot_tip_sensor, "rot_tip_sensor"))
-        object.__setattr__(self, "rot_haptic_base", check_rotation(self.rot_haptic_base, "rot_haptic_base"))
-        if self.safety.f_max_n != self.f_max_n:
-            s = self.safety
-            object.__setattr__(
-                self,
-                "safety",
-                SafetyConfig(self.f_max_n, s.slew_n_per_s, s.ramp_in_s, s.fault_ramp_s, s.max_dt_s),
-            )
-
 
 #: Names of the values :meth:`HapticFramework.step` returns, in order (defined with the tick's record,
 #: :data:`pipeline.core.tick_record.STEP_FIELDS`; indices: comp 0–2, filt 3–5, tip 6–8, base 9–11, haptic 12–14,
 #: scaled 15–17, render 18–20).
 STEP_FIELDS = tick_record.STEP_FIELDS
+
+
+# The framework's state, one float64 array: the force offsets (payload weight plus bias in the current pose), the
+# three rotations ᵀ_S R, ᴮ_T R, ᴴ_B R (row-major), f_scale and f_max, the safety stage's state, the filter's state.
+_OFF, _RTS, _RBT, _RHB, _FSCALE, _FMAX = 0, 3, 12, 21, 30, 31
+_SAFE = 32
+_FILT = _SAFE + safety.STATE_SIZE
+
+
+def _compile(callees: int) -> Any:
+    """:func:`step_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the stages it calls (numba
+    keys its cache on a kernel's own file and closure)."""
+
+    @kernel
+    def step_kernel(st: State, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:
+        """Algorithm 1 on one raw force sample: :meth:`HapticFramework.step` over the framework's array ``st``."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        cx = fx - st[_OFF]
+        cy = fy - st[_OFF + 1]
+        cz = fz - st[_OFF + 2]
+        mx, my, mz = filters.ma3_update(st[_FILT:], cx, cy, cz)
+        # eqs. (TCP), (Base), (Haptic): frames.mat_vec three times
+        a = _RTS
+        ax = st[a] * mx + st[a + 1] * my + st[a + 2] * mz
+        ay = st[a + 3] * mx + st[a + 4] * my + st[a + 5] * mz
+        az = st[a + 6] * mx + st[a + 7] * my + st[a + 8] * mz
+        b = _RBT
+        bx = st[b] * ax + st[b + 1] * ay + st[b + 2] * az
+        by = st[b + 3] * ax + st[b + 4] * ay + st[b + 5] * az
+        bz = st[b + 6] * ax + st[b + 7] * ay + st[b + 8] * az
+        c = _RHB
+        hx = st[c] * bx + st[c + 1] * by + st[c + 2] * bz
+        hy = st[c + 3] * bx + st[c + 4] * by + st[c + 5] * bz
+        hz = st[c + 6] * bx + st[c + 7] * by + st[c + 8] * bz
+        qx, qy, qz = scaling.scale_kernel(hx, hy, hz, st[_FMAX], st[_FSCALE])  # eq. (H_scaled)
+        ox, oy, oz = safety.safety_step(st[_SAFE:_FILT], qx, qy, qz, enabled, dt_s)
+        return (cx, cy, cz, mx, my, mz, ax, ay, az, bx, by, bz, hx, hy, hz, qx, qy, qz, ox, oy, oz)
+
+    return step_kernel
+
+
+#: Algorithm 1's tick, compiled (:meth:`HapticFramework.step`).
+step_kernel = _compile(fingerprint(exact, frames, filters, safety, scaling))
 
 
 class HapticFramework:
@@ -127,18 +124,12 @@ class HapticFramework:
     __slots__ = (
         "_bias",
         "_cal",
-        "_fmax",
-        "_fscale",
-        "_ft_safe",
-        "_hot",
-        "_hot_head",
-        "_hot_tail",
         "_mounted",
         "_off",
         "_payload",
         "_rbt",
-        "_rhb",
         "_rts",
+        "array",
         "config",
         "device_peak_n",
         "filter",
@@ -166,24 +157,20 @@ class HapticFramework:
         self.rls = rls
         if rls is not None:
             rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
-        self._fmax = float(config.f_max_n)
-        self._fscale = float(config.f_scale_n)
-        self._ft_safe = _clamp_free_bound(self.safety)
         self._rts = config.rot_tip_sensor
-        self._rhb = config.rot_haptic_base
         self._rbt: Mat3 = IDENTITY
         self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6
-        # the parts of the per-tick tuple that no pose or bias change touches
-        # (the filter rings are cleared in place by MovingAverage3.reset, so
-        # holding them is safe)
-        f = self.filter
-        self._hot_head: tuple[Any, ...] = (f, f.window, float(f.window), *f._buf, *self._rts)
-        self._hot_tail: tuple[Any, ...] = self._tail()
+        #: The whole state of the per-tick path, as :func:`step_kernel` reads it; the filter and the safety stage keep
+        #: their states in slices of it.
+        self.array: State = np.zeros(_FILT + filters.state_size(config.filter_window))
+        st = self.array
+        st[_RTS:_RTS + 9] = config.rot_tip_sensor
+        st[_RHB:_RHB + 9] = config.rot_haptic_base
+        st[_FSCALE], st[_FMAX] = float(config.f_scale_n), float(config.f_max_n)
+        self.safety.adopt(st[_SAFE:_FILT])
+        self.filter.adopt(st[_FILT:])
         self.set_pose(IDENTITY)
-
-    def _tail(self) -> tuple[Any, ...]:
-        g = self.safety
-        return (*self._rhb, self._fscale, self._fmax, g, g._max_dt, g._slew, self._ft_safe)
+        warm_kernels(st)
 
     def set_pose(self, rot_base_tip: Mat3) -> None:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
@@ -198,11 +185,11 @@ class HapticFramework:
     def _update_offsets(self) -> None:
         p, b = self._payload, self._bias
         self._off = off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
-        # Everything the per-tick path reads and never writes, in one tuple
-        # (one attribute load and one unpack per tick instead of ~20 loads).
-        # Rebuilt whenever one of its parts changes: here, which set_pose and
-        # every bias change go through.
-        self._hot = (off[0], off[1], off[2], *self._hot_head, *self._rbt, *self._hot_tail)
+        # what the per-tick path reads of them: the force offsets and the pose (set_pose and every bias change
+        # come here)
+        st = self.array
+        st[_OFF:_OFF + 3] = off[:3]
+        st[_RBT:_RBT + 9] = self._rbt
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -234,9 +221,6 @@ class HapticFramework:
         """
         g = self.safety
         g.set_device_limit(device_limit_n)
-        self._ft_safe = _clamp_free_bound(g)
-        self._hot_tail = self._tail()
-        self._update_offsets()
         return g
 
     def refine_bias(self, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
@@ -339,101 +323,8 @@ class HapticFramework:
             filtered force, tip, base and haptic frame force, scaled and
             rendered force (3 each).
         """
-        # One function on purpose, though over 80 lines: this is the per-tick hot path.  The same
-        # arithmetic as four stage helpers (moving average, the three rotations, scaling, safety)
-        # measured 1.89–2.01 µs per tick against 1.57–1.71 µs fused (medians of 21 runs over 20 000
-        # recorded ticks, thread CPU time, bench.pipeline_bench's harness, four repetitions): about
-        # +0.3 µs, a fifth more per tick.  Only the once-per-window re-sum, which is not per tick, is
-        # out of line (_resum_window).
-        (
-            o0, o1, o2, f, w, wf, bx, by, bz,
-            a0, a1, a2, a3, a4, a5, a6, a7, a8,
-            b0, b1, b2, b3, b4, b5, b6, b7, b8,
-            c0, c1, c2, c3, c4, c5, c6, c7, c8,
-            fscale, fmax, g, max_dt, slew, ft_safe,
-        ) = self._hot
-        cx = fx - o0
-        cy = fy - o1
-        cz = fz - o2
-        # -- moving average: the steady-state path of MovingAverage3.update,
-        # written out (same arithmetic, same state).  The running sums are
-        # formed first and one finiteness test of their total stands for both
-        # of update's tests: a finite total means a finite sample and no
-        # overflow.  A non-finite total (a rejected sample, an overflowing
-        # window, or merely a total beyond DBL_MAX) leaves the state untouched
-        # and takes the method, which redoes this tick exactly; so do the
-        # first W samples.
-        sx, sy, sz, i, n = f._st
-        if n == w:
-            sx += cx - bx[i]
-            sy += cy - by[i]
-            sz += cz - bz[i]
-            m = sx + sy + sz
-            if m - m == 0.0:
-                bx[i] = cx
-                by[i] = cy
-                bz[i] = cz
-                i += 1
-                if i < w:
-                    f._st = (sx, sy, sz, i, n)
-                    mx = sx / wf  # n == w: a float divisor gives the same quotient, faster
-                    my = sy / wf
-                    mz = sz / wf
-                else:  # once per window
-                    mx, my, mz = _resum_window(f, wf)
-            else:
-                mx, my, mz = f.update(cx, cy, cz)
-        else:
-            mx, my, mz = f.update(cx, cy, cz)
-        # -- eqs. (TCP), (Base), (Haptic): frames.mat_vec three times, in place
-        ax = a0 * mx + a1 * my + a2 * mz
-        ay = a3 * mx + a4 * my + a5 * mz
-        az = a6 * mx + a7 * my + a8 * mz
-        bx_ = b0 * ax + b1 * ay + b2 * az
-        by_ = b3 * ax + b4 * ay + b5 * az
-        bz_ = b6 * ax + b7 * ay + b8 * az
-        hx = c0 * bx_ + c1 * by_ + c2 * bz_
-        hy = c3 * bx_ + c4 * by_ + c5 * bz_
-        hz = c6 * bx_ + c7 * by_ + c8 * bz_
-        # -- eq. (H_scaled): scaling.scale_components' general branch in place;
-        # zero, tiny, huge, saturated and non-finite inputs take the function.
-        fmag = _HYPOT(hx, hy, hz)
-        t = fmag / fscale
-        if t >= _SERIES_T and t <= _SATURATED_T:
-            ft = fmax * _TANH(t)
-            k = ft / fmag
-            qx = hx * k
-            qy = hy * k
-            qz = hz * k
-        else:
-            qx, qy, qz = scale_components(hx, hy, hz, fmax, fscale)
-            # SafetyGovernor.step's clamp test, done here (q is finite)
-            ft = 0.0 if qx * qx + qy * qy + qz * qz <= g._lim2 else _INF
-        # -- safety: SafetyGovernor.step's steady state (enabled, fully ramped
-        # in, in range, clamp and slew not limiting) in place; everything else
-        # the method.  ft ≤ ft_safe proves the clamp inactive (see
-        # _clamp_free_bound), so the fused path need not form |q|².
-        if enabled and ft <= ft_safe and g.gain == 1.0 and dt_s > 0.0 and dt_s <= max_dt:
-            px = g._sx
-            py = g._sy
-            pz = g._sz
-            dx = qx - px
-            dy = qy - py
-            dz = qz - pz
-            step = slew * dt_s
-            if dx * dx + dy * dy + dz * dz <= step * step:
-                g._sx = ox = px + dx
-                g._sy = oy = py + dy
-                g._sz = oz = pz + dz
-            else:
-                ox, oy, oz = g.step(qx, qy, qz, enabled, dt_s)
-        else:
-            ox, oy, oz = g.step(qx, qy, qz, enabled, dt_s)
-        return (
-            cx, cy, cz,
-            mx, my, mz, ax, ay, az, bx_, by_, bz_, hx, hy, hz,
-            qx, qy, qz, ox, oy, oz,
-        )
+        return step_kernel(self.array, float(fx), float(fy), float(fz),  # type: ignore[no-any-return]  # a kernel
+                           bool(enabled), float(dt_s))
 
     def step_commanded(self, fx: float, fy: float, fz: float, command_n: float, enabled: bool,
                        dt_s: float) -> tuple[float, ...]:
@@ -457,57 +348,25 @@ class HapticFramework:
 SNAPSHOT_VERSION = 1
 
 
-def framework_config_to_dict(config: FrameworkConfig) -> dict[str, Any]:
-    """A configuration as plain JSON data (inverse of :func:`framework_config_from_dict`)."""
-    return {
-        "f_max_n": config.f_max_n, "f_scale_n": config.f_scale_n, "filter_window": config.filter_window,
-        "rot_tip_sensor": list(config.rot_tip_sensor), "rot_haptic_base": list(config.rot_haptic_base),
-        "safety": {f: getattr(config.safety, f) for f in config.safety.__dataclass_fields__},
-    }
+def warm_kernels(array: State) -> None:
+    """Compile Algorithm 1's kernels (or load them from numba's cache), once a process, on a copy of a framework's
+    ``array``: a framework's construction calls it, so that no tick of a running loop waits for a compiler (cold,
+    ~2 s once an installation)."""
+    global _WARM
+    if _WARM:
+        return
+    cache_kernels()
+    st = array.copy()
+    step_kernel(st, 0.0, 0.0, 0.0, True, 0.001)
+    # and each stage as its Python side calls it (a commanded force's tick, a replay, the figures)
+    filters.ma3_update(st[_FILT:], 0.0, 0.0, 0.0)
+    filters.ma3_mean(st[_FILT:])
+    safety.safety_step(st[_SAFE:_FILT], 0.0, 0.0, 0.0, True, 0.001)
+    scaling.scale_kernel(1.0, 0.0, 0.0, 3.0, 7.0)
+    scaling.clamp3(1.0, 0.0, 0.0, 3.0)
+    exact.hypot3(1.0, 0.0, 0.0)
+    exact.fsum(st[:3])
+    _WARM = True
 
 
-def framework_config_from_dict(d: dict[str, Any]) -> FrameworkConfig:
-    """The configuration :func:`framework_config_to_dict` wrote (validated like any other)."""
-    return FrameworkConfig(
-        f_max_n=d["f_max_n"], f_scale_n=d["f_scale_n"], filter_window=d["filter_window"],
-        rot_tip_sensor=tuple(d["rot_tip_sensor"]), rot_haptic_base=tuple(d["rot_haptic_base"]),
-        safety=SafetyConfig(**d["safety"]),
-    )
-
-
-def _resum_window(f: MovingAverage3, wf: float) -> Vec3:
-    """The fused step's once-per-window exact re-sum of a full window: :meth:`MovingAverage3.update`'s.
-
-    Called with the window's last sample stored; sets the state as ``update``
-    would (running sums re-summed exactly, index back to 0) and returns the
-    mean.  Out of :meth:`HapticFramework.step` because it runs once per
-    window, not per tick.
-    """
-    bx, by, bz = f._buf
-    n = f._st[4]
-    try:
-        sx = _FSUM(bx)
-        sy = _FSUM(by)
-        sz = _FSUM(bz)
-    except OverflowError:  # filters.exact_sum's fallback, for sums beyond DBL_MAX
-        sx, sy, sz = exact_sum(bx), exact_sum(by), exact_sum(bz)
-    f._st = (sx, sy, sz, 0, n)
-    m = sx + sy + sz
-    if m - m == 0.0:
-        return (sx / wf, sy / wf, sz / wf)
-    return f.mean  # the exact re-sum overflowed
-
-
-def _clamp_free_bound(g: SafetyGovernor) -> float:
-    """Largest ``f_max·tanh(t)`` for which SafetyGovernor.step surely does not clamp.
-
-    The fused scaling forms ``k = ft/|h|`` and ``q = h·k`` with
-    ``ft = f_max·tanh(|h|/f_scale)``; each of the roundings in ``hypot``,
-    ``k``, ``q_i``, the squares and their sum is below 2⁻⁵² relatively, so the
-    computed ``|q|²`` is below ``ft²·(1 + 12·2⁻⁵²)`` (plus subnormal residues far
-    below any limit).  With ``ft`` a relative 1e-9 under the clamp radius that
-    is below ``_lim2`` whatever the roundings, so the clamp test ``|q|² > _lim2``
-    is certainly false and need not be evaluated.  Forces within 1e-9 of the
-    radius (|h| ≳ 10·f_scale at the paper's limits) take the full method.
-    """
-    return g._lim_inner * (1.0 - 1e-9)
+_WARM = False  # warm_kernels has run in this process (a forked child inherits it with the machine code)

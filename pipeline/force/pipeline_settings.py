@@ -13,7 +13,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 
 __all__ = [
     "ALIASES", "SETTING_NAMES", "canonical_name", "describe", "framework_with", "non_default_settings",

@@ -16,12 +16,16 @@ import math
 from collections.abc import Sequence
 from fractions import Fraction
 from numbers import Real
+from typing import Any
 
-from pipeline.force.frames import Vec3, clamp_norm
+from pipeline.core import exact
+from pipeline.core.compiled import fingerprint, kernel
+from pipeline.force.config import LIMIT_RANGE_N
+from pipeline.force.frames import Vec3
 
-__all__ = ["scale_components", "scale_force", "scale_magnitude", "small_signal_gain"]
+__all__ = ["LIMIT_RANGE_N", "clamp3", "clamp_norm", "scale_components", "scale_force", "scale_kernel",
+           "scale_magnitude", "small_signal_gain"]
 
-_ZERO: Vec3 = (0.0, 0.0, 0.0)
 # Below t = |f|/f_scale = 1e-4 the series tanh(t)/t = 1 - t²/3 + 2t⁴/15 is exact
 # to rounding (the next term, 17t⁶/315, is < 1e-25); above it math.tanh is.
 _SERIES_T = 1e-4
@@ -29,7 +33,7 @@ _SERIES_T = 1e-4
 _SATURATED_T = 17.0
 _INF = math.inf
 _HYPOT = math.hypot
-_TANH = math.tanh
+_TINY = 2.0**-600  # an exact power of two that brings an overflowing norm's components back in range
 
 
 def small_signal_gain(f_max_n: float = 3.0, f_scale_n: float = 7.0) -> float:
@@ -88,10 +92,6 @@ def scale_force(f: Sequence[float], f_max_n: float = 3.0, f_scale_n: float = 7.0
     return scale_components(fx, fy, fz, f_max_n, f_scale_n)
 
 
-#: Accepted range of f_max and f_scale, N.  Beyond it the law is meaningless for
-#: a haptic device and the bounds on rounding no longer hold (e.g. f_max below
-#: the smallest normal double).
-LIMIT_RANGE_N = (1e-6, 1e6)
 
 
 def check_limits(f_max_n: float, f_scale_n: float) -> None:
@@ -102,35 +102,70 @@ def check_limits(f_max_n: float, f_scale_n: float) -> None:
             raise ValueError(f"{name} = {v!r}: must be a number of newtons from {lo:g} to {hi:g}")
 
 
+def _compile(callees: int) -> tuple[Any, Any]:
+    """:func:`scale_kernel` and :func:`clamp3` closed over the :func:`pipeline.core.compiled.fingerprint` of
+    :mod:`pipeline.core.exact` (numba keys its cache on a kernel's own file and closure)."""
+
+    @kernel
+    def clamp3(x: float, y: float, z: float, limit: float) -> tuple[float, float, float]:
+        """``(x, y, z)`` shrunk (by as few ulps as needed) so that ``hypot(x, y, z) ≤ limit`` (:func:`clamp_norm`)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        m = exact.hypot3(x, y, z)
+        while m > limit:
+            k = (limit / m) * (1.0 - 2.0**-52)
+            x, y, z = x * k, y * k, z * k
+            m = exact.hypot3(x, y, z)
+        return (x, y, z)
+
+    @kernel
+    def scale_kernel(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n: float) -> tuple[float, float,
+                                                                                                  float]:
+        """:func:`scale_components`, compiled."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        # x - x is 0.0 for finite x and NaN for ±inf/NaN: one cheap test for all three.
+        if (fx - fx) + (fy - fy) + (fz - fz) != 0.0:
+            return (0.0, 0.0, 0.0)
+        n = exact.hypot3(fx, fy, fz)
+        if n == 0.0:
+            return (0.0, 0.0, 0.0)
+        if n == _INF:
+            # finite components whose norm overflows: an exact power-of-two rescale
+            s = _TINY
+            fx, fy, fz = fx * s, fy * s, fz * s
+            n = exact.hypot3(fx, fy, fz)
+            return clamp3(fx / n * f_max_n, fy / n * f_max_n, fz / n * f_max_n, f_max_n)
+        t = n / f_scale_n
+        if t < _SERIES_T:
+            t2 = t * t
+            k = (f_max_n / f_scale_n) * (1.0 - t2 / 3.0 + 2.0 * t2 * t2 / 15.0)
+            return (fx * k, fy * k, fz * k)
+        k = f_max_n * math.tanh(t) / n
+        if t > _SATURATED_T:
+            # tanh(t) is within 15 ulps of 1: the few roundings in k·f_i could
+            # leave |out| an ulp above f_max, so clamp explicitly.
+            return clamp3(fx * k, fy * k, fz * k, f_max_n)
+        return (fx * k, fy * k, fz * k)
+
+    return scale_kernel, clamp3
+
+
+#: :func:`scale_components`, compiled (Algorithm 1's compiled tick calls it), and :func:`clamp_norm`, compiled.
+scale_kernel, clamp3 = _compile(fingerprint(exact))
+
+
 def scale_components(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n: float) -> Vec3:
     """Kernel of :func:`scale_force` for float components and pre-validated limits.
 
     The 1 kHz loop validates ``f_max_n``/``f_scale_n`` once at configuration and
-    calls this directly; everything else should call :func:`scale_force`.
+    calls this directly; everything else should call :func:`scale_force`.  The arithmetic is :func:`scale_kernel`'s.
     """
-    # x - x is 0.0 for finite x and NaN for ±inf/NaN: one cheap test for all three.
-    if (fx - fx) + (fy - fy) + (fz - fz) != 0.0:
-        return _ZERO
-    n = _HYPOT(fx, fy, fz)
-    if n == 0.0:
-        return _ZERO
-    if n == _INF:
-        # finite components whose norm overflows: an exact power-of-two rescale
-        s = 2.0**-600
-        fx, fy, fz = fx * s, fy * s, fz * s
-        n = _HYPOT(fx, fy, fz)
-        return clamp_norm((fx / n * f_max_n, fy / n * f_max_n, fz / n * f_max_n), f_max_n)
-    t = n / f_scale_n
-    if t < _SERIES_T:
-        t2 = t * t
-        k = (f_max_n / f_scale_n) * (1.0 - t2 / 3.0 + 2.0 * t2 * t2 / 15.0)
-        return (fx * k, fy * k, fz * k)
-    k = f_max_n * _TANH(t) / n
-    if t > _SATURATED_T:
-        # tanh(t) is within 15 ulps of 1: the few roundings in k·f_i could
-        # leave |out| an ulp above f_max, so clamp explicitly.
-        return clamp_norm((fx * k, fy * k, fz * k), f_max_n)
-    return (fx * k, fy * k, fz * k)
+    return scale_kernel(float(fx), float(fy), float(fz), float(f_max_n),  # type: ignore[no-any-return]  # a kernel
+                        float(f_scale_n))
+
+
+def clamp_norm(v: Vec3, limit: float) -> Vec3:
+    """Return ``v`` shrunk (by as few ulps as needed) so that ``hypot(*v) ≤ limit`` (:func:`clamp3`)."""
+    return clamp3(float(v[0]), float(v[1]), float(v[2]), float(limit))  # type: ignore[no-any-return]  # a kernel
 
 
 def _to_floats(fx: object, fy: object, fz: object) -> tuple[float, float, float] | None:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 from pipeline.core.clock import Clock
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.runtime.loop_messages import Command, LoopEvent
 from pipeline.runtime.watchdog import WatchdogConfig
 

@@ -34,8 +34,8 @@ from pipeline.devices.registry import (
 # SINGLE_ARM_NAME: the one arm of a file without [[arm]] tables
 from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
+from pipeline.force.config import FrameworkConfig
 from pipeline.force.frames import Vec3
-from pipeline.force.framework import FrameworkConfig
 from pipeline.runtime.watchdog import WatchdogConfig
 from pipeline.settings.tomlfields import Fields, read_toml
 

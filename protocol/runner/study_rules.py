@@ -28,7 +28,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.force.pipeline_settings import describe, non_default_settings, settings_of, stored_settings
 from protocol.storage import SessionInfo, StorageError, StudyDatabase, StudyReader
 from protocol.study.config import ProtocolConfig

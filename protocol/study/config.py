@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from pipeline.devices.rig import ARM_NAME, ARM_NAME_WHAT, SINGLE_ARM_NAME
-from pipeline.force.safety import SafetyConfig
+from pipeline.force.config import SafetyConfig
 from pipeline.settings.tomlfields import Fields, parse_toml, read_toml
 from protocol.study.covariates import Covariate, covariates_from_tables
 from protocol.study.feedback import FeedbackConfig, feedback_from_table

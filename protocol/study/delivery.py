@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.devices.interfaces import Fault
-from pipeline.force.safety import SafetyConfig
+from pipeline.force.config import SafetyConfig
 from pipeline.runtime.watchdog import WatchdogConfig, ms_beyond
 from protocol.study.design import HapticMode, TrialSpec
 from protocol.study.records import AbortCause, LoopHealth, trial_health

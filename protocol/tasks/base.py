@@ -38,7 +38,7 @@ import numpy.typing as npt
 
 from pipeline.core.aim import TrialAim
 from pipeline.core.force_program import ForceProgram
-from pipeline.force.safety import SafetyConfig
+from pipeline.force.config import SafetyConfig
 from pipeline.settings.tomlfields import Fields
 from protocol.metrics import Metric, select
 from protocol.tasks.window import TrialMetrics

@@ -42,7 +42,6 @@ import numpy.typing as npt
 
 from pipeline.core.aim import TrialAim
 from pipeline.core.force_program import ForceProgram
-from pipeline.force.scaling import scale_magnitude
 from pipeline.settings.tomlfields import Fields
 from protocol.tasks.base import (
     Answered,
@@ -235,6 +234,9 @@ class ForceDiscrimination(Task):
     @staticmethod
     def reference_n(tip_force_n: float) -> float:
         """A reference at the hand: a target's tip force as the paper's tanh law renders it (3 N · tanh(F/7 N))."""
+        # (deferred: the law is compiled code, and reading a protocol file needs no compiler)
+        from pipeline.force.scaling import scale_magnitude
+
         return scale_magnitude(tip_force_n)
 
     def interval_s(self) -> float:

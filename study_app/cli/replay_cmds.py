@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from foundation.errors import InputRefused
-from pipeline.force.scaling import LIMIT_RANGE_N
+from pipeline.force.config import LIMIT_RANGE_N
 from pipeline.settings.tomlfields import SQLITE_INTEGER_MAX
 from study_app.cli.argtypes import add_command, arm_name, real_number, whole_number
 from study_app.cli.error import CliError

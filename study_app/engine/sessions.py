@@ -19,7 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from foundation.platform_support.processes import kill_hard
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from protocol.runner.rehearsal import FAULT_KINDS, FaultPlan, RehearsalTrigger
 from protocol.runner.session import SessionRunner
 from protocol.runner.session_lsl import attach_lsl, detach_lsl, lsl_streams_of

@@ -26,7 +26,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StudyDatabase, new_owner_token
 from protocol.storage.merge import database_bytes, merge_database_bytes

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session import first_unfinished
 from protocol.runner.session_setup import (

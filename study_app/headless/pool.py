@@ -15,7 +15,8 @@ from typing import Any
 
 from foundation.platform_support.processes import die_with, worker_context
 from foundation.platform_support.threads import usable_cpu_count
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
+from pipeline.sim.rig import warm_kernels
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase
@@ -108,6 +109,8 @@ def run_parallel(
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
     ctx = worker_context()
+    if ctx.get_start_method() == "fork":
+        warm_kernels()  # once here, not once a participant: the children inherit the compiled rig
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

@@ -20,7 +20,7 @@ from typing import Any
 from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.sim.faults import latch_delay_s
 from pipeline.sim.learning import Practice
 from pipeline.sim.participant import SimulatedParticipant

@@ -25,7 +25,7 @@ from typing import Any
 from analysis.planning.sim_study import TrialRow, sim_metrics
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
 from pipeline.assembly.sim_config import sim_rig_config
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, SetHaptics
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.participant_params import MODEL_FIT, MODEL_VERSION

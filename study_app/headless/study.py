@@ -30,7 +30,7 @@ from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from pipeline.devices.rig import SINGLE_ARM_NAME
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase, new_owner_token, validate_code

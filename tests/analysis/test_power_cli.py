@@ -364,7 +364,7 @@ def test_parser_default_n_is_the_analysis_default_and_needs_no_analysis_import()
     assert ",".join(str(n) for n in DEFAULT_N_VALUES) == DEFAULT_N_TEXT
     proc = subprocess.run([sys.executable, "-c", "import sys; from study_app.cli.main import build_parser; "
                           "build_parser(); "
-                           "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib') if m in sys.modules))"],
+                           "print(sorted(m for m in ('pandas', 'scipy', 'matplotlib', 'numba') if m in sys.modules))"],
                           capture_output=True, text=True, timeout=60)
     assert proc.stdout.strip() == "[]"
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
+from kernel_checks import bits, same
 
 from pipeline.sim import hand, robot, sensor, tissue
 from pipeline.sim.hand import CompliantArm, ScriptedPresses
@@ -31,45 +32,6 @@ ANY = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
 FINITE = st.floats(allow_nan=False, allow_infinity=False, allow_subnormal=True)
 DT = st.one_of(st.just(0.001), st.floats(0.0, 0.02), st.floats(-1.0, 0.0))  # a tick, a stall, a clock step back
 POSITIVE = st.floats(1e-6, 1e6)  # a model's parameters: what their dataclasses accept
-
-
-_NAN_BITS = np.float64(math.nan).view(np.uint64).item()
-
-
-def bits(x: Any) -> Any:
-    """A value or array as its bits (0.0 differs from -0.0), every NaN as one: IEEE 754 leaves to the machine which
-    operand's NaN an operation of two NaNs passes on, and LLVM may swap the operands of ``+`` and ``*`` (the sign and
-    payload of a NaN from NaN inputs are no result of ours to keep)."""
-    if isinstance(x, np.ndarray):
-        a = x.astype(np.float64)
-        return np.where(np.isnan(a), _NAN_BITS, a.view(np.uint64)).tolist()
-    if isinstance(x, tuple):
-        return tuple(bits(v) for v in x)
-    if x is None or isinstance(x, (bool, np.bool_)):
-        return x if x is None else bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    return _NAN_BITS if math.isnan(x) else np.float64(x).view(np.uint64).item()
-
-
-def same(kernel: Any, state: np.ndarray, *args: Any) -> None:
-    """``kernel`` compiled and interpreted from the same state and arguments: the same result and state, bit for
-    bit; a Python exception raised by both alike."""
-    a, b = state.copy(), state.copy()
-    try:
-        got_c = kernel(a, *args)
-    except ZeroDivisionError:
-        got_c = ZeroDivisionError
-    with np.errstate(all="ignore"):
-        try:
-            got_i = kernel.py_func(b, *args)
-        except ZeroDivisionError:
-            got_i = ZeroDivisionError
-    if got_c is ZeroDivisionError or got_i is ZeroDivisionError:
-        assert got_c is got_i
-        return
-    assert bits(got_c) == bits(got_i)
-    assert bits(a) == bits(b)
 
 
 @given(y=FINITE, v=FINITE, k=POSITIVE, b=st.floats(0.0, 1e3), m=POSITIVE, y_c=ANY, felt=ANY, dt=DT)

@@ -34,8 +34,8 @@ from pipeline.devices.registry import (
     unregister_haptic,
 )
 from pipeline.devices.touch_output import HapticLimits
+from pipeline.force.config import FrameworkConfig
 from pipeline.force.frames import IDENTITY
-from pipeline.force.framework import FrameworkConfig
 from pipeline.settings.hardware import HardwareError, hardware_from_dict
 from pipeline.sim.rig import SimRig, SimRigConfig
 from pipeline.sim.touch import SimTouch

@@ -278,7 +278,8 @@ def test_ten_hour_run_stays_exact():
     ys = [-50.0 - ((k * 104729) % 997) * 1.3e-3 for k in range(period)]
     zs = [(50.0 if k % 2 else -50.0) + ((k * 31) % 101) * 1e-2 - 0.37 for k in range(period)]
     tables = (xs, ys, zs)
-    assert set(MovingAverage3.__slots__) == {"window", "rejected", "_buf", "_st"}  # all of it is in state()
+    # all of it (sums, index, count, rejected, rings) is in state()
+    assert set(MovingAverage3.__slots__) == {"window", "array"}
 
     def exact(done: int) -> list[float]:
         """The exact mean of the window ending with sample ``done`` (1-based count of samples fed)."""

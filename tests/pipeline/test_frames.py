@@ -19,7 +19,6 @@ from pipeline.force.frames import (
     as_mat3,
     axis_angle,
     check_rotation,
-    clamp_norm,
     cross,
     det3,
     mat_mul,
@@ -32,6 +31,7 @@ from pipeline.force.frames import (
     transpose,
     wrench_transform,
 )
+from pipeline.force.scaling import clamp_norm
 
 PI = math.pi
 

@@ -9,7 +9,7 @@ import pytest
 
 from pipeline.assembly.latency import STEP_N, Latency, Stage, live_stages, robot_stage, simulated_stages
 from pipeline.core.tick_record import TICK_DTYPE
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.force.pipeline_settings import framework_with
 
 

@@ -14,8 +14,7 @@ from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.core.clock import VirtualClock
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.registry import haptic_model
-from pipeline.force.framework import FrameworkConfig
-from pipeline.force.safety import SafetyConfig
+from pipeline.force.config import FrameworkConfig, SafetyConfig
 from pipeline.runtime.loop_messages import RECORD_FIELDS, ControllerDetached, Mark, OperatorStop, SetHaptics
 from pipeline.runtime.loop_stats import LoopStats
 from pipeline.sim.hand import ScriptedPresses

@@ -23,8 +23,8 @@ from pipeline.assembly.engine import Engine, EngineConfig, build_sim_engine
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.registry import haptic_model
 from pipeline.devices.touch_output import HD_WARM_MOTORS
+from pipeline.force.config import SafetyConfig
 from pipeline.force.framework import STEP_FIELDS
-from pipeline.force.safety import SafetyConfig
 from pipeline.runtime.loop_messages import OperatorStop, ResetFaults
 from pipeline.sim.rig import SimRigConfig
 

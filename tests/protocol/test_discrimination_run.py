@@ -15,8 +15,8 @@ import pandas as pd
 import pytest
 
 from pipeline.core.force_program import ForceProgram
+from pipeline.force.config import SafetyConfig
 from pipeline.force.framework import FrameworkConfig, HapticFramework
-from pipeline.force.safety import SafetyConfig
 from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.session_setup import participant_seeds
 from protocol.storage.schema import connect_readonly

@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 
 from analysis.stats.psychometric import LAPSE_MAX, fit_psychometric, p_correct
-from pipeline.force.safety import SafetyConfig
+from pipeline.force.config import SafetyConfig
 from pipeline.sim.discrimination_observer import LAPSE_RANGE, WEBER_RANGE, DiscriminationObserver
 from protocol.study.config import ProtocolError, protocol_from_dict
 from protocol.tasks.force_discrimination import ForceDiscrimination, comparison_first, interval_means

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.force.framework import FrameworkConfig
+from pipeline.force.config import FrameworkConfig
 from pipeline.sim.participant import SimulatedParticipant
 from protocol.runner.session_driver import SessionDriver
 from protocol.runner.session_setup import delivery_limits, finish_session, open_new_session, start_runner

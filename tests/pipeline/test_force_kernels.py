@@ -1,0 +1,90 @@
+"""Algorithm 1's compiled kernels give the bits of the Python they are compiled from, and are compiled before a loop
+ticks.
+
+Each stage's kernel (the moving average, the scaling law, the safety stage, the norm clamp) and the whole tick
+(:func:`pipeline.force.framework.step_kernel`) run compiled and as their ``py_func`` from the same state and inputs,
+at the extremes (zero of either sign, subnormals, huge values, infinities, NaN): the same outputs and the same state,
+bit for bit.  With ``tests/pipeline/test_exact.py`` (the norm and the exact sum are CPython's) and
+``tests/pipeline/test_framework.py`` (the tick is the stages composed) this holds the compiled tick to the
+interpreted product's arithmetic; ``scripts/same_study.py`` showed a seeded study's tables identical across the
+change.
+"""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from kernel_checks import bits, same
+
+from pipeline.force import filters, frames, safety, scaling
+from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel
+from pipeline.force.safety import SafetyConfig, SafetyGovernor
+
+ANY = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+FORCE = st.one_of(st.floats(-50.0, 50.0), ANY)  # mostly forces, the extremes among them
+DT = st.one_of(st.just(0.001), st.floats(0.0, 0.2), st.floats(-1.0, 0.0), st.just(math.nan))
+
+
+@settings(max_examples=300)
+@given(window=st.integers(1, 6), fill=st.lists(st.tuples(FORCE, FORCE, FORCE), max_size=14), x=FORCE, y=FORCE,
+       z=FORCE)
+def test_moving_average(window: int, fill: list[tuple[float, float, float]], x: float, y: float, z: float) -> None:
+    ma = filters.MovingAverage3(window)
+    for s in fill:  # any state a run can reach: rejected samples, partial and full windows, overflowed sums
+        ma.update(*s)
+    same(filters.ma3_update, ma.array, x, y, z)
+    same(filters.ma3_mean, ma.array)
+
+
+@settings(max_examples=300)
+@given(gain=st.sampled_from([0.0, 0.3, 1.0]), s=st.tuples(*[st.floats(-2.0, 2.0)] * 3), f=st.tuples(ANY, ANY, ANY),
+       enabled=st.booleans(), dt=DT, peak=st.sampled_from([3.3, 2.0, 0.5]))
+def test_safety_step(gain: float, s: tuple[float, float, float], f: tuple[float, float, float], enabled: bool,
+                     dt: float, peak: float) -> None:
+    g = SafetyGovernor(SafetyConfig(), peak)
+    g.load_state({"gain": gain, "sx": s[0], "sy": s[1], "sz": s[2]})  # (a command the last tick left)
+    same(safety.safety_step, g.array, *f, enabled, dt)
+
+
+@settings(max_examples=500)
+@given(f=st.tuples(ANY, ANY, ANY), f_max=st.sampled_from([3.0, 1e-6, 1e6]), f_scale=st.sampled_from([7.0, 1e-6, 1e6]))
+def test_scaling_and_clamp(f: tuple[float, float, float], f_max: float, f_scale: float) -> None:
+    with np.errstate(all="ignore"):
+        assert bits(scaling.scale_kernel(*f, f_max, f_scale)) == bits(scaling.scale_kernel.py_func(*f, f_max, f_scale))
+        if all(v - v == 0.0 for v in f):  # (the clamp is asked of finite vectors only)
+            assert bits(scaling.clamp3(*f, f_max)) == bits(scaling.clamp3.py_func(*f, f_max))
+
+
+@settings(max_examples=200, deadline=None)
+@given(window=st.integers(1, 12), fill=st.lists(st.tuples(FORCE, FORCE, FORCE, st.booleans(), DT), max_size=30),
+       f=st.tuples(FORCE, FORCE, FORCE), enabled=st.booleans(), dt=DT,
+       rv=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_the_tick(window: int, fill: list[tuple[float, float, float, bool, float]], f: tuple[float, float, float],
+                  enabled: bool, dt: float, rv: tuple[float, float, float]) -> None:
+    fw = HapticFramework(FrameworkConfig(filter_window=window), device_peak_n=3.3)
+    fw.set_pose(frames.rotvec_to_matrix(*rv))
+    for fx, fy, fz, on, d in fill:
+        fw.step(fx, fy, fz, on, d)
+    same(step_kernel, fw.array, *f, enabled, dt)
+
+
+def test_the_kernels_are_compiled_when_a_framework_is_built() -> None:
+    """A framework is built with Algorithm 1's kernels compiled or loaded: the loop's first tick waits for no compiler
+    (in a fresh process: this one's may have compiled them already)."""
+    code = ("from pipeline.core import exact\n"
+            "from pipeline.force import filters, frames, safety, scaling\n"
+            "from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel\n"
+            "ks = (step_kernel, filters.ma3_update, filters.ma3_mean, safety.safety_step, scaling.scale_kernel,"
+            " scaling.clamp3, exact.hypot3, exact.fsum)\n"
+            "assert not any(k.signatures for k in ks)\n"
+            "HapticFramework(FrameworkConfig(), device_peak_n=3.3)\n"
+            "print(all(k.signatures for k in ks))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).parents[2])
+    assert out.stdout.strip() == "True", out.stderr
