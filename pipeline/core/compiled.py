@@ -28,7 +28,9 @@ below hold for every compiled function:
   in its first tick.
   numba keys its cache on the kernel's own file and closure only, not on kernels it calls in other modules nor on
   the options below: a kernel that calls other modules' kernels closes over their :func:`fingerprint`
-  (``pipeline/sim/rig.py``), and a change of the options must come with the caches deleted
+  (``pipeline/sim/rig.py``) and reaches those kernels as globals, never through its closure (a kernel pickles
+  differently in every process: a closure holding one would miss the cache every time), and a change of the options
+  must come with the caches deleted
   (``find . -name '*.nb[ci]' -delete``; an installed version's files are new, and so are its caches).
 """
 
@@ -44,7 +46,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["KernelState", "State", "cache_kernels", "fingerprint", "kernel"]
+__all__ = ["KernelState", "State", "cache_kernels", "fingerprint", "kernel", "kernels"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 #: A kernel's state: a float64 array (integers kept in it are below 2⁵³, so exact).
@@ -53,6 +55,8 @@ State = npt.NDArray[np.float64]
 
 #: The kernels' dispatchers whose machine code :func:`cache_kernels` has not yet placed on disk.
 _UNCACHED: list[Any] = []
+#: Every kernel's dispatcher, in the order defined.
+_ALL: list[Any] = []
 
 
 def kernel(fn: F) -> F:
@@ -60,7 +64,13 @@ def kernel(fn: F) -> F:
     as ``fn``."""
     dispatcher = numba.njit(cache=False, fastmath=False, error_model="python")(fn)
     _UNCACHED.append(dispatcher)
+    _ALL.append(dispatcher)
     return cast(F, dispatcher)
+
+
+def kernels() -> tuple[Any, ...]:
+    """Every kernel defined so far in this process (its modules imported), as numba's dispatchers."""
+    return tuple(_ALL)
 
 
 def cache_kernels(folder: str | None = None) -> None:

@@ -14,13 +14,13 @@ spike is flushed within ``2·window`` samples of its arrival.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, fingerprint, kernel
+from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.force.frames import Vec3
 
 __all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s", "ma3_mean", "ma3_update", "state_size"]
@@ -58,9 +58,10 @@ def group_delay_s(window: int, rate_hz: float = 1000.0) -> float:
     return (_check_window(window) - 1) / 2.0 / rate_hz
 
 
-def _compile(callees: int) -> tuple[Any, Any]:
-    """:func:`ma3_update` and :func:`ma3_mean`, closed over the :func:`pipeline.core.compiled.fingerprint` of
-    :mod:`pipeline.core.exact` (numba keys its cache on a kernel's own file and closure)."""
+def _compile_mean(callees: int) -> Callable[..., tuple[float, float, float]]:
+    """:func:`ma3_mean` closed over the :func:`pipeline.core.compiled.fingerprint` of :mod:`pipeline.core.exact`
+    (numba keys its cache on a kernel's own file and closure: a closure must hold plain values only, never another
+    kernel, whose pickled form differs from process to process)."""
 
     @kernel
     def ma3_mean(st: State) -> tuple[float, float, float]:
@@ -77,9 +78,16 @@ def _compile(callees: int) -> tuple[Any, Any]:
             return (exact.fsum(b[:w] / n), exact.fsum(b[w:2 * w] / n), exact.fsum(b[2 * w:3 * w] / n))
         return (sx / n, sy / n, sz / n)
 
+    return ma3_mean
+
+
+def _compile_update(callees: int) -> Callable[..., tuple[float, float, float]]:
+    """:func:`ma3_update` closed over the same fingerprint (it calls :func:`ma3_mean`, a global of this module)."""
+
     @kernel
     def ma3_update(st: State, x: float, y: float, z: float) -> tuple[float, float, float]:
         """Add one sample; the mean of the last ``window`` accepted samples (:meth:`MovingAverage3.update`)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         if (x - x) + (y - y) + (z - z) != 0.0:  # NaN or ±inf in any component
             st[_REJECTED] += 1.0
             return ma3_mean(st)
@@ -112,10 +120,11 @@ def _compile(callees: int) -> tuple[Any, Any]:
             return ma3_mean(st)
         return (sx / n, sy / n, sz / n)
 
-    return ma3_update, ma3_mean
+    return ma3_update
 
 
-ma3_update, ma3_mean = _compile(fingerprint(exact))
+ma3_mean = _compile_mean(fingerprint(exact))
+ma3_update = _compile_update(fingerprint(exact))
 
 
 class MovingAverage3:
@@ -142,6 +151,7 @@ class MovingAverage3:
         #: The state (running sums, index, count, rejected, window, rings) as :func:`ma3_update` reads it.
         self.array: State = np.zeros(state_size(window))
         self.reset()
+        _warm(self.array)
 
     def reset(self) -> None:
         """Empty the window (the next output is the next sample); the count of rejected samples stays."""
@@ -189,12 +199,27 @@ class MovingAverage3:
 
     def update(self, x: float, y: float, z: float) -> Vec3:
         """Add one sample and return the mean of the last ``window`` accepted samples."""
-        return ma3_update(self.array, float(x), float(y), float(z))  # type: ignore[no-any-return]  # a kernel
+        return ma3_update(self.array, float(x), float(y), float(z))
 
     @property
     def mean(self) -> Vec3:
         """Current output (zeros before the first accepted sample)."""
-        return ma3_mean(self.array)  # type: ignore[no-any-return]  # a kernel
+        return ma3_mean(self.array)
+
+
+def _warm(array: State) -> None:
+    """Compile the filter's kernels (or load them from numba's cache) once a process, on a copy of a filter's state:
+    a filter's first sample waits for no compiler."""
+    global _WARM
+    if not _WARM:
+        cache_kernels()
+        st = array.copy()
+        ma3_update(st, 0.0, 0.0, 0.0)
+        ma3_mean(st)
+        _WARM = True
+
+
+_WARM = False
 
 
 class MovingAverage:

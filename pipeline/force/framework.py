@@ -172,6 +172,14 @@ class HapticFramework:
         self.set_pose(IDENTITY)
         warm_kernels(st)
 
+    def __setstate__(self, state: tuple[None, dict[str, Any]]) -> None:
+        """A copy (``copy.deepcopy``, pickle) keeps its filter's and safety stage's states in its own array, as the
+        original does (else a reset or a derated clamp would reach a copy of the state the tick never reads)."""
+        for name, value in state[1].items():
+            object.__setattr__(self, name, value)
+        st = self.array
+        self.safety.array, self.filter.array = st[_SAFE:_FILT], st[_FILT:]
+
     def set_pose(self, rot_base_tip: Mat3) -> None:
         """Take a new robot orientation ᴮ_T R (at each robot update, 125 Hz on a CB3).
 

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, fingerprint, kernel
+from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.force.config import SafetyConfig
 from pipeline.force.frames import Vec3
 
@@ -133,6 +133,7 @@ class SafetyGovernor:
         st[_DOWN] = 1.0 / config.fault_ramp_s
         st[_SLEW] = config.slew_n_per_s
         st[_MAX_DT] = config.max_dt_s
+        _warm(st)
 
     def adopt(self, view: State) -> None:
         """Keep the state in ``view`` (a slice of the framework's array) from now on, as it is now."""
@@ -198,3 +199,16 @@ class SafetyGovernor:
         st = self.array
         st[_GAIN] = float(d["gain"])
         st[_SX], st[_SY], st[_SZ] = float(d["sx"]), float(d["sy"]), float(d["sz"])
+
+
+def _warm(array: State) -> None:
+    """Compile :func:`safety_step` (or load it from numba's cache) once a process, on a copy of a governor's state: a
+    governor's first step waits for no compiler."""
+    global _WARM
+    if not _WARM:
+        cache_kernels()
+        safety_step(array.copy(), 0.0, 0.0, 0.0, True, 0.001)
+        _WARM = True
+
+
+_WARM = False

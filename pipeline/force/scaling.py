@@ -13,10 +13,9 @@ a non-finite value or a magnitude above ``f_max_n``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from fractions import Fraction
 from numbers import Real
-from typing import Any
 
 from pipeline.core import exact
 from pipeline.core.compiled import fingerprint, kernel
@@ -102,9 +101,10 @@ def check_limits(f_max_n: float, f_scale_n: float) -> None:
             raise ValueError(f"{name} = {v!r}: must be a number of newtons from {lo:g} to {hi:g}")
 
 
-def _compile(callees: int) -> tuple[Any, Any]:
-    """:func:`scale_kernel` and :func:`clamp3` closed over the :func:`pipeline.core.compiled.fingerprint` of
-    :mod:`pipeline.core.exact` (numba keys its cache on a kernel's own file and closure)."""
+def _compile_clamp(callees: int) -> Callable[..., tuple[float, float, float]]:
+    """:func:`clamp3` closed over the :func:`pipeline.core.compiled.fingerprint` of :mod:`pipeline.core.exact` (numba
+    keys its cache on a kernel's own file and closure: a closure must hold plain values only, never another kernel,
+    whose pickled form differs from process to process)."""
 
     @kernel
     def clamp3(x: float, y: float, z: float, limit: float) -> tuple[float, float, float]:
@@ -116,6 +116,12 @@ def _compile(callees: int) -> tuple[Any, Any]:
             x, y, z = x * k, y * k, z * k
             m = exact.hypot3(x, y, z)
         return (x, y, z)
+
+    return clamp3
+
+
+def _compile_scale(callees: int) -> Callable[..., tuple[float, float, float]]:
+    """:func:`scale_kernel` closed over the same fingerprint (it calls :func:`clamp3`, a global of this module)."""
 
     @kernel
     def scale_kernel(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n: float) -> tuple[float, float,
@@ -146,11 +152,12 @@ def _compile(callees: int) -> tuple[Any, Any]:
             return clamp3(fx * k, fy * k, fz * k, f_max_n)
         return (fx * k, fy * k, fz * k)
 
-    return scale_kernel, clamp3
+    return scale_kernel
 
 
 #: :func:`scale_components`, compiled (Algorithm 1's compiled tick calls it), and :func:`clamp_norm`, compiled.
-scale_kernel, clamp3 = _compile(fingerprint(exact))
+clamp3 = _compile_clamp(fingerprint(exact))
+scale_kernel = _compile_scale(fingerprint(exact))
 
 
 def scale_components(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n: float) -> Vec3:
@@ -159,13 +166,13 @@ def scale_components(fx: float, fy: float, fz: float, f_max_n: float, f_scale_n:
     The 1 kHz loop validates ``f_max_n``/``f_scale_n`` once at configuration and
     calls this directly; everything else should call :func:`scale_force`.  The arithmetic is :func:`scale_kernel`'s.
     """
-    return scale_kernel(float(fx), float(fy), float(fz), float(f_max_n),  # type: ignore[no-any-return]  # a kernel
+    return scale_kernel(float(fx), float(fy), float(fz), float(f_max_n),
                         float(f_scale_n))
 
 
 def clamp_norm(v: Vec3, limit: float) -> Vec3:
     """Return ``v`` shrunk (by as few ulps as needed) so that ``hypot(*v) ≤ limit`` (:func:`clamp3`)."""
-    return clamp3(float(v[0]), float(v[1]), float(v[2]), float(limit))  # type: ignore[no-any-return]  # a kernel
+    return clamp3(float(v[0]), float(v[1]), float(v[2]), float(limit))
 
 
 def _to_floats(fx: object, fy: object, fz: object) -> tuple[float, float, float] | None:

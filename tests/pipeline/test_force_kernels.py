@@ -12,7 +12,9 @@ change.
 
 from __future__ import annotations
 
+import copy
 import math
+import pickle
 import subprocess
 import sys
 from pathlib import Path
@@ -88,3 +90,33 @@ def test_the_kernels_are_compiled_when_a_framework_is_built() -> None:
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          cwd=Path(__file__).parents[2])
     assert out.stdout.strip() == "True", out.stderr
+
+
+def test_a_copy_of_a_framework_shares_its_own_state() -> None:
+    """A framework's copy (deepcopy, pickle) keeps its filter's and safety stage's states in its own array: its reset
+    and its derated clamp reach the state its tick reads."""
+    fw = HapticFramework(FrameworkConfig(), device_peak_n=3.3)
+    fw.step(5.0, 0.0, 0.0, True, 0.001)
+    for c in (copy.deepcopy(fw), pickle.loads(pickle.dumps(fw))):
+        assert np.shares_memory(c.array, c.safety.array) and np.shares_memory(c.array, c.filter.array)
+        assert not np.shares_memory(c.array, fw.array)
+        for _ in range(600):  # fully ramped in
+            c.step(5.0, 0.0, 0.0, True, 0.001)
+        c.set_device_limit(1.0)
+        assert abs(c.step(5.0, 0.0, 0.0, True, 0.001)[-3]) <= 1.0  # the derated clamp reaches the tick
+        c.reset()
+        assert c.step(5.0, 0.0, 0.0, False, 0.001)[-3:] == (0.0, 0.0, 0.0)
+
+
+def test_no_kernel_closes_over_another() -> None:
+    """numba keys its on-disk cache on a kernel's closure pickled, and a kernel pickles differently in every process:
+    a kernel that held another in its closure would be compiled anew by every process (found in review: two kernels
+    were, each run adding a cache file).  Each closes over plain values only (its callees' fingerprint)."""
+    import pipeline.sim.rig  # noqa: F401  (its kernels too)
+    from pipeline.core.compiled import kernels
+
+    ks = kernels()
+    assert len(ks) >= 15
+    for k in ks:
+        cells = [c.cell_contents for c in (k.py_func.__closure__ or ())]
+        assert all(isinstance(v, (int, float, str)) for v in cells), (k.py_func.__qualname__, cells)
