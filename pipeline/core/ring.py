@@ -221,6 +221,18 @@ class RingBuffer:
         # publish after the row is complete
         self._count_cell[0] = c
 
+    def write_row(self, row: memoryview) -> None:
+        """Append one record given as its bytes (a record of this ring's fields, packed as they lie: the loop's row
+        that :func:`pipeline.runtime.arm_channel.record_kernel` writes). Never blocks."""
+        off = self._slot_off
+        end = off + self._row_bytes
+        self._buf[off:end] = row
+        self._slot_off = end if end < self._end_off else _HEADER
+        c = self._count + 1
+        self._count = c
+        # publish after the row is complete
+        self._count_cell[0] = c
+
     # -- readers --------------------------------------------------------------------------------
     @property
     def write_count(self) -> int:

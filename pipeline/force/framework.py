@@ -66,6 +66,8 @@ STEP_FIELDS = tick_record.STEP_FIELDS
 _OFF, _RTS, _RBT, _RHB, _FSCALE, _FMAX = 0, 3, 12, 21, 30, 31
 _SAFE = 32
 _FILT = _SAFE + safety.STATE_SIZE
+#: Where the framework's array keeps the safety stage's ramp gain (the tick's record reads it there).
+GAIN_AT = _SAFE + safety.GAIN
 
 
 def _compile(callees: int) -> Any:
@@ -73,8 +75,10 @@ def _compile(callees: int) -> Any:
     keys its cache on a kernel's own file and closure)."""
 
     @kernel
-    def step_kernel(st: State, fx: float, fy: float, fz: float, enabled: bool, dt_s: float) -> tuple[float, ...]:
-        """Algorithm 1 on one raw force sample: :meth:`HapticFramework.step` over the framework's array ``st``."""
+    def step_kernel(st: State, fx: float, fy: float, fz: float, command_n: float, commanded: bool, enabled: bool,
+                    dt_s: float) -> tuple[float, ...]:
+        """Algorithm 1 on one raw force sample over the framework's array ``st``: :meth:`HapticFramework.step`, or with
+        ``commanded`` :meth:`HapticFramework.step_commanded` (``command_n`` rendered instead of the scaled force)."""
         _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         cx = fx - st[_OFF]
         cy = fy - st[_OFF + 1]
@@ -94,7 +98,12 @@ def _compile(callees: int) -> Any:
         hy = st[c + 3] * bx + st[c + 4] * by + st[c + 5] * bz
         hz = st[c + 6] * bx + st[c + 7] * by + st[c + 8] * bz
         qx, qy, qz = scaling.scale_kernel(hx, hy, hz, st[_FMAX], st[_FSCALE])  # eq. (H_scaled)
-        ox, oy, oz = safety.safety_step(st[_SAFE:_FILT], qx, qy, qz, enabled, dt_s)
+        g = st[_SAFE:_FILT]
+        if commanded:
+            # the command along the haptic frame's z in the scaled force's place: the safety stage advances once
+            ox, oy, oz = safety.safety_step(g, 0.0, 0.0, command_n, enabled, dt_s)
+        else:
+            ox, oy, oz = safety.safety_step(g, qx, qy, qz, enabled, dt_s)
         return (cx, cy, cz, mx, my, mz, ax, ay, az, bx, by, bz, hx, hy, hz, qx, qy, qz, ox, oy, oz)
 
     return step_kernel
@@ -187,17 +196,19 @@ class HapticFramework:
         (:meth:`pipeline.force.payload_compensator.MountedPayload.payload_wrench`).
         """
         self._rbt = rot_base_tip
+        self.array[_RBT:_RBT + 9] = rot_base_tip
         self._payload = self._mounted.payload_wrench(rot_base_tip)
         self._update_offsets()
 
     def _update_offsets(self) -> None:
         p, b = self._payload, self._bias
         self._off = off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
-        # what the per-tick path reads of them: the force offsets and the pose (set_pose and every bias change
-        # come here)
+        # what the per-tick path reads of them: the force offsets (item by item: a slice assignment from a tuple
+        # costs a microsecond, and a bias refinement comes here every tick it updates)
         st = self.array
-        st[_OFF:_OFF + 3] = off[:3]
-        st[_RBT:_RBT + 9] = self._rbt
+        st[_OFF] = off[0]
+        st[_OFF + 1] = off[1]
+        st[_OFF + 2] = off[2]
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -331,8 +342,8 @@ class HapticFramework:
             filtered force, tip, base and haptic frame force, scaled and
             rendered force (3 each).
         """
-        return step_kernel(self.array, float(fx), float(fy), float(fz),  # type: ignore[no-any-return]  # a kernel
-                           bool(enabled), float(dt_s))
+        return step_kernel(self.array, float(fx), float(fy), float(fz), 0.0,  # type: ignore[no-any-return]  # a kernel
+                           False, bool(enabled), float(dt_s))
 
     def step_commanded(self, fx: float, fy: float, fz: float, command_n: float, enabled: bool,
                        dt_s: float) -> tuple[float, ...]:
@@ -341,31 +352,31 @@ class HapticFramework:
         the sensor measured), the rendered force the safety stage's output for ``command_n`` along the haptic
         frame's ``z`` -- clamped, slew-limited, faded in and out, ramped to zero by a fault, as any force.
 
-        :meth:`step` runs as ever and its safety stage's state is put back before the command takes its place, so
-        the stage advances once per tick (the fused step's state is the governor's own: :meth:`SafetyGovernor.state`).
+        The stages run as in :meth:`step`, and the safety stage advances once per tick, on the command
+        (:func:`step_kernel` with ``commanded``).
         """
-        g = self.safety
-        before = g.state()
-        stages = self.step(fx, fy, fz, enabled, dt_s)
-        g.load_state(before)
-        ox, oy, oz = g.step(0.0, 0.0, command_n, enabled, dt_s)
-        return (*stages[:-3], ox, oy, oz)
+        return step_kernel(self.array, float(fx), float(fy), float(fz),  # type: ignore[no-any-return]  # a kernel
+                           float(command_n), True, bool(enabled), float(dt_s))
 
 
 #: Version of :meth:`HapticFramework.snapshot`'s layout.
 SNAPSHOT_VERSION = 1
 
 
-def warm_kernels(array: State) -> None:
+def warm_kernels(array: State | None = None) -> None:
     """Compile Algorithm 1's kernels (or load them from numba's cache), once a process, on a copy of a framework's
-    ``array``: a framework's construction calls it, so that no tick of a running loop waits for a compiler (cold,
-    ~2 s once an installation)."""
+    ``array`` (None: a default framework's, built for it): a framework's construction calls it, so that no tick of a
+    running loop waits for a compiler (cold, ~2 s once an installation); so does a parent that forks a process per
+    participant, before forking (its children inherit the machine code)."""
     global _WARM
     if _WARM:
         return
+    if array is None:
+        HapticFramework(FrameworkConfig(), device_peak_n=3.3)  # (its construction comes back here with its array)
+        return
     cache_kernels()
     st = array.copy()
-    step_kernel(st, 0.0, 0.0, 0.0, True, 0.001)
+    step_kernel(st, 0.0, 0.0, 0.0, 0.0, False, True, 0.001)
     # and each stage as its Python side calls it (a commanded force's tick, a replay, the figures)
     filters.ma3_update(st[_FILT:], 0.0, 0.0, 0.0)
     filters.ma3_mean(st[_FILT:])

@@ -19,7 +19,6 @@ participant would have felt.  It is the live code path, not a model of it.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -27,13 +26,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from pipeline.core import exact
 from pipeline.core.force_program import ForceProgram
 from pipeline.force.framework import STEP_FIELDS, FrameworkConfig, HapticFramework
 from pipeline.force.payload_compensator import PayloadCalibration
 
 __all__ = ["REPLAY_LOG_KINDS", "ReplayInputs", "ReplayOutputs", "replay"]
 
-_HYPOT = math.hypot
+_HYPOT = exact.hypot3  # the loop's |filtered| (pipeline.runtime.arm_channel.record_kernel)
 
 
 @dataclass(frozen=True)
@@ -172,6 +172,6 @@ def replay(inputs: ReplayInputs, config: FrameworkConfig | None = None) -> Repla
             keep(fw.step_commanded(fx, fy, fz, program.force_n(elapsed_ns), enabled[k], dts[k]))
         keep_gain(safety.gain)
     stages = np.array(outs, dtype=np.float64).reshape(n, len(STEP_FIELDS))
-    # |filtered|, as the loop forms it: math.hypot per record (numpy's hypot may round differently)
+    # |filtered|, as the loop forms it: CPython's norm per record (numpy's hypot may round differently)
     force = np.fromiter((_HYPOT(o[3], o[4], o[5]) for o in outs), dtype=np.float64, count=n)
     return ReplayOutputs(stages, force, np.array(gains, dtype=np.float64))

@@ -26,13 +26,13 @@ from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.force.config import SafetyConfig
 from pipeline.force.frames import Vec3
 
-__all__ = ["STATE_SIZE", "SafetyConfig", "SafetyGovernor", "safety_step"]
+__all__ = ["GAIN", "STATE_SIZE", "SafetyConfig", "SafetyGovernor", "safety_step"]
 
 # The governor's state, one float64 array: the ramp gain, the slew-limited command, the ramp and slew rates, the
 # longest tick the rates count, the clamp radius a hair under the limit and its square.
 _GAIN, _SX, _SY, _SZ, _UP, _DOWN, _SLEW, _MAX_DT, _LIM_INNER, _LIM2 = range(10)
-#: The length of a governor's state array.
-STATE_SIZE = 10
+#: The length of a governor's state array, and where in it the ramp gain is.
+STATE_SIZE, GAIN = 10, _GAIN
 
 
 def _compile(callees: int) -> Any:

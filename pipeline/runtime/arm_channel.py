@@ -18,13 +18,22 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from typing import TYPE_CHECKING, Protocol
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
+import numpy as np
+
+from pipeline.core import exact, record_writer
 from pipeline.core.clock import Clock
+from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
 from pipeline.core.force_program import ForceProgram
+from pipeline.core.record_writer import IntRow, write_record
+from pipeline.core.tick_record import RECORD_FIELDS, TICK_DTYPE
 from pipeline.devices.interfaces import Fault, HapticState, PoseSample, WrenchSample
 from pipeline.devices.rig import RigArm
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S
+from pipeline.force import filters, frames, safety, scaling
+from pipeline.force import framework as algorithm_1
 from pipeline.force.framework import HapticFramework
 from pipeline.runtime.loop_messages import LoopEvent
 from pipeline.runtime.watchdog import WatchdogConfig, derating_detail, derating_ended_detail, fault_detail
@@ -57,7 +66,58 @@ class LoopSide(Protocol):
         ...
 
 _NAN3 = (math.nan, math.nan, math.nan)
-_HYPOT = math.hypot
+
+
+_LATENCY = RECORD_FIELDS.index("latency_ns")  # written after the command is handed over (see ArmChannel.tick)
+_INTEGER = tuple(TICK_DTYPE[n] == np.int64 for n in RECORD_FIELDS)
+
+
+def _compile(callees: int) -> Callable[..., tuple[float, float, float]]:
+    """:func:`record_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls (numba
+    keys its cache on a kernel's own file and closure)."""
+
+    @kernel
+    def record_kernel(fw: State, rf: State, ri: IntRow, raw_fx: float, raw_fy: float, raw_fz: float, raw_tx: float,
+                      raw_ty: float, raw_tz: float, command_n: float, commanded: bool, enabled: bool, dt_s: float,
+                      derate_check: bool, limit_n: float, static_limit_n: float, tick: int, t_ns: int,
+                      period_ns: int, sensor_age_ns: int, pose_age_ns: int, faults: int, haptic_on: int,
+                      trial_index: int, phase: int, stylus_x_m: float, stylus_y_m: float, stylus_z_m: float,
+                      tip_x_m: float, tip_y_m: float, tip_z_m: float, true_fx: float, true_fy: float,
+                      true_fz: float) -> tuple[float, float, float]:
+        """An arm's tick after its watchdog: Algorithm 1 (:func:`pipeline.force.framework.step_kernel`), the derating
+        measure, and the record written into the row ``rf``/``ri`` by name (its latency is the caller's, once the
+        command is handed over).  Returns the force to command."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        # the stages by their names in pipeline.core.tick_record.STEP_FIELDS (the step's one definition of its output)
+        (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
+         haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
+         ) = algorithm_1.step_kernel(fw, raw_fx, raw_fy, raw_fz, command_n, commanded, enabled, dt_s)
+        derate = 1.0
+        if derate_check and enabled:
+            # the fraction of the designed force (scaled, within the safety stage's own limit) the derated limit
+            # lets through (asked only while the thermal limit is below the safety stage's own)
+            want = exact.hypot3(scaled_fx, scaled_fy, scaled_fz)
+            if want > limit_n:
+                derate = limit_n / (want if want < static_limit_n else static_limit_n)
+        latency_ns = 0
+        gain = fw[algorithm_1.GAIN_AT]
+        force_n = exact.hypot3(filt_fx, filt_fy, filt_fz)
+        t_s = t_ns * 1e-9
+        # the record: every field by its name, in pipeline.core.tick_record.RECORD_FIELDS' order
+        write_record(
+            rf, ri, tick, t_ns, period_ns, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, sensor_age_ns,
+            pose_age_ns, latency_ns, faults, haptic_on, trial_index, phase, gain, render_fx, render_fy, render_fz,
+            force_n, stylus_x_m, stylus_y_m, stylus_z_m, derate, t_s, comp_fx, comp_fy, comp_fz, filt_fx, filt_fy,
+            filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx, haptic_fy, haptic_fz, scaled_fx,
+            scaled_fy, scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
+        )
+        return render_fx, render_fy, render_fz
+
+    return record_kernel
+
+
+#: An arm's tick after its watchdog, compiled (:meth:`ArmChannel.tick`).
+record_kernel = _compile(fingerprint(exact, frames, filters, safety, scaling, algorithm_1, record_writer))
 
 
 class ArmChannel:
@@ -92,7 +152,11 @@ class ArmChannel:
         self._sensor_age_ns = int(wd.sensor_max_age_s * 1e9)
         self._pose_age_ns = int(wd.pose_max_age_s * 1e9)
         self._sat = tuple(wd.saturation_fraction * r for r in arm.sensor.range_n)
-        self._last_record: tuple[float | int, ...] | None = None
+        # this arm's record of the tick, written by record_kernel (a float64 row and its int64 view: one memory)
+        self._row_f: State = np.zeros(len(RECORD_FIELDS))
+        self._row_i: IntRow = self._row_f.view(np.int64)
+        self._row_bytes = self._row_f.view(np.uint8).data
+        self._recorded = False
         #: What replay of this arm needs beyond its records, while recording (see ``StartRecording``).
         self.replay_log: deque[tuple[int, str, object]] = deque()
         self._truth = arm.true_contact_force
@@ -108,15 +172,17 @@ class ArmChannel:
         #: tick that applied it (:class:`pipeline.runtime.loop_messages.CommandForce`).
         self.program: ForceProgram | None = None
         self.program_t0_ns = 0
+        _warm(self)
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self, now: int, period_ns: int, dt_s: float) -> None:
         """Run this arm's part of the tick at ``now``: read, watchdog, Algorithm 1, command, record.
 
-        The record is built by name: each of its values is the local variable named as its field
-        (:data:`pipeline.core.tick_record.RECORD_FIELDS`), and the record is those names in the fields' order
-        (``tests/pipeline/test_tick_record.py`` reads this method and holds it to that), so a field is added by
-        computing a local of its name; no value is placed by counting.
+        After the watchdog the tick is one compiled call, :func:`record_kernel`, which builds the record by name: each
+        of its values is the kernel's local variable (or parameter) named as its field, passed to
+        :func:`pipeline.core.record_writer.write_record` in :data:`pipeline.core.tick_record.RECORD_FIELDS`' order
+        (``tests/pipeline/test_tick_record.py`` reads both and holds them to that), so a field is added by computing
+        a local of its name; no value is placed by counting.
         """
         loop = self.loop
         w = self.sensor.read_wrench()
@@ -157,38 +223,25 @@ class ArmChannel:
 
         on = loop.haptic_on
         enabled = on and not faults
-        # the stages by their names in pipeline.core.tick_record.STEP_FIELDS (the step's one definition of its output)
-        (comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz, tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz,
-         haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy, scaled_fz, render_fx, render_fy, render_fz,
-         ) = (fw.step(raw_fx, raw_fy, raw_fz, enabled, dt_s) if self.program is None
-              else self._commanded(raw_fx, raw_fy, raw_fz, enabled, dt_s, now))
-        # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
-        self.haptic.command_force(render_fx, render_fy, render_fz, now)
-        derate = self._derate(scaled_fx, scaled_fy, scaled_fz) if self._derate_check and enabled else 1.0
-        # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
-        latency_ns = loop.clock.now_ns() - w_t_ns
+        program = self.program
+        g = fw.safety
         true_fx, true_fy, true_fz = self._truth() or _NAN3
         tip_x_m, tip_y_m, tip_z_m = pose.position_m
         stylus_x_m, stylus_y_m, stylus_z_m = hs.position_m
-        tick = loop.tick_count
-        t_ns = now - loop.t0_ns
-        t_s = t_ns * 1e-9
-        haptic_on = 1 if on else 0  # an int64 field (the ring refuses a float or a bool for one)
-        trial_index = loop.trial_index
-        phase = loop.phase
-        gain = fw.safety.gain
-        force_n = _HYPOT(filt_fx, filt_fy, filt_fz)
-        # the record: every field by its name, in pipeline.core.tick_record.RECORD_FIELDS' order
-        rec = (
-            tick, t_ns, period_ns, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, sensor_age_ns, pose_age_ns,
-            latency_ns, faults, haptic_on, trial_index, phase, gain, render_fx, render_fy, render_fz, force_n,
-            stylus_x_m, stylus_y_m, stylus_z_m, derate, t_s, comp_fx, comp_fy, comp_fz, filt_fx, filt_fy, filt_fz,
-            tip_fx, tip_fy, tip_fz, base_fx, base_fy, base_fz, haptic_fx, haptic_fy, haptic_fz, scaled_fx, scaled_fy,
-            scaled_fz, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz,
-        )
-        self._last_record = rec
+        # the stages, the derating measure and the record (every field by its name: record_kernel), compiled
+        render_fx, render_fy, render_fz = record_kernel(
+            fw.array, self._row_f, self._row_i, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz,
+            0.0 if program is None else program.force_n(now - self.program_t0_ns), program is not None, enabled,
+            dt_s, self._derate_check, g.limit_n, g.static_limit_n, loop.tick_count, now - loop.t0_ns, period_ns,
+            sensor_age_ns, pose_age_ns, faults, 1 if on else 0, loop.trial_index, loop.phase, stylus_x_m,
+            stylus_y_m, stylus_z_m, tip_x_m, tip_y_m, tip_z_m, true_fx, true_fy, true_fz)
+        # stamped with this tick's time: should the tick have frozen half-way, the device drops the old force
+        self.haptic.command_force(render_fx, render_fy, render_fz, now)
+        # sample arrival to command hand-over on the loop's clock (on a virtual clock: the sample's age)
+        self._row_i[_LATENCY] = loop.clock.now_ns() - w_t_ns
+        self._recorded = True
         if self.ring is not None:
-            self.ring.write(rec)
+            self.ring.write_row(self._row_bytes)
 
     def _take_pose(self, pose: PoseSample) -> int:
         """Hand a new robot pose to the framework; a non-finite one is refused: ``Fault.NON_FINITE``, else 0."""
@@ -239,20 +292,6 @@ class ArmChannel:
         if hs.force_limit_n != self._device_limit_n:
             self._device_limit(now, hs)
         return Fault.HAPTIC_DEVICE if hs.error_code else 0
-
-    def _derate(self, scaled_fx: float, scaled_fy: float, scaled_fz: float) -> float:
-        """The fraction of the designed force (scaled, within the safety stage's own limit) the derated limit lets
-        through.
-
-        Only asked while the thermal limit is below the safety stage's own (and feedback is enabled).
-        """
-        want = _HYPOT(scaled_fx, scaled_fy, scaled_fz)
-        safety = self.framework.safety
-        lim = safety.limit_n
-        if want > lim:
-            designed = want if want < safety.static_limit_n else safety.static_limit_n
-            return lim / designed
-        return 1.0
 
     def _device_limit(self, now: int, hs: HapticState) -> None:
         """The device changed the force it may render (thermal derating): clamp to it; report derating."""
@@ -324,12 +363,6 @@ class ArmChannel:
         self.loop.emit(ev)
         return ev
 
-    def _commanded(self, fx: float, fy: float, fz: float, enabled: bool, dt_s: float, now: int) -> tuple[float, ...]:
-        """The tick's stages with the program's force at ``now`` rendered (:meth:`HapticFramework.step_commanded`)."""
-        program = self.program
-        assert program is not None  # (asked only while one runs)
-        return self.framework.step_commanded(fx, fy, fz, program.force_n(now - self.program_t0_ns), enabled, dt_s)
-
     def command(self, program: ForceProgram | None, now: int) -> None:
         """Render ``program`` from this tick on (None: the sensor's force again); logged for replay."""
         self.program, self.program_t0_ns = program, now
@@ -355,8 +388,12 @@ class ArmChannel:
 
     @property
     def last_record(self) -> tuple[float | int, ...] | None:
-        """The arm's newest record (a tuple in the record's field order)."""
-        return self._last_record
+        """The arm's newest record (a tuple in the record's field order, its integers as ints)."""
+        if not self._recorded:
+            return None
+        f, i = self._row_f.tolist(), self._row_i.tolist()
+        return tuple(i[k] if integer else f[k] for k, integer in enumerate(_INTEGER))
+
 
 
 def own_faults(faults: int) -> int:
@@ -366,3 +403,22 @@ def own_faults(faults: int) -> int:
 
 #: Faults every arm latches by itself (the loop's or the experimenter's): they do not propagate between arms.
 RIG_WIDE_FAULTS = int(Fault.OPERATOR_STOP | Fault.ENGINE_DETACHED | Fault.LOOP_STALLED)
+
+
+def _warm(ch: ArmChannel) -> None:
+    """Compile :func:`record_kernel` (or load it from numba's cache) once a process, on scratch copies of a channel's
+    framework and row, then forbid it any other compilation: a value of another type from a device (an int where a
+    float is read) is converted to the compiled types, never compiled for in a tick of the running loop."""
+    global _WARM
+    if _WARM:
+        return
+    cache_kernels()
+    row = ch._row_f.copy()
+    record_kernel(ch.framework.array.copy(), row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True,
+                  0.001, False, 3.0, 3.0, 0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                  0.0)
+    cast(Any, record_kernel).disable_compile()  # (a numba dispatcher's)
+    _WARM = True
+
+
+_WARM = False

@@ -15,8 +15,9 @@ from typing import Any
 
 from foundation.platform_support.processes import die_with, worker_context
 from foundation.platform_support.threads import usable_cpu_count
+from pipeline.force import framework as algorithm_1
 from pipeline.force.config import FrameworkConfig
-from pipeline.sim.rig import warm_kernels
+from pipeline.sim import rig as sim_rig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase
@@ -109,8 +110,9 @@ def run_parallel(
     """:func:`run_study` over ``jobs`` worker processes, one participant per process."""
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
     ctx = worker_context()
-    if ctx.get_start_method() == "fork":
-        warm_kernels()  # once here, not once a participant: the children inherit the compiled rig
+    if ctx.get_start_method() == "fork":  # once here, not once a participant: the children inherit the machine code
+        sim_rig.warm_kernels()
+        algorithm_1.warm_kernels()
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

@@ -66,14 +66,14 @@ def test_scaling_and_clamp(f: tuple[float, float, float], f_max: float, f_scale:
 @settings(max_examples=200, deadline=None)
 @given(window=st.integers(1, 12), fill=st.lists(st.tuples(FORCE, FORCE, FORCE, st.booleans(), DT), max_size=30),
        f=st.tuples(FORCE, FORCE, FORCE), enabled=st.booleans(), dt=DT,
-       rv=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+       rv=st.tuples(*[st.floats(-3.0, 3.0)] * 3), command=st.one_of(st.none(), FORCE))
 def test_the_tick(window: int, fill: list[tuple[float, float, float, bool, float]], f: tuple[float, float, float],
-                  enabled: bool, dt: float, rv: tuple[float, float, float]) -> None:
+                  enabled: bool, dt: float, rv: tuple[float, float, float], command: float | None) -> None:
     fw = HapticFramework(FrameworkConfig(filter_window=window), device_peak_n=3.3)
     fw.set_pose(frames.rotvec_to_matrix(*rv))
     for fx, fy, fz, on, d in fill:
         fw.step(fx, fy, fz, on, d)
-    same(step_kernel, fw.array, *f, enabled, dt)
+    same(step_kernel, fw.array, *f, 0.0 if command is None else command, command is not None, enabled, dt)
 
 
 def test_the_kernels_are_compiled_when_a_framework_is_built() -> None:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline.assembly.engine import EngineConfig, build_sim_engine
+from pipeline.core import record_writer
 from pipeline.core.tick_record import KEPT_DTYPE, KEPT_FIELDS, TICK_DTYPE, TICK_FIELDS
 from pipeline.force.framework import STEP_FIELDS
 from pipeline.runtime import arm_channel
@@ -79,18 +80,10 @@ def test_the_loop_writes_its_integers_as_ints() -> None:
     assert np.array([tuple(last[n] for n in RECORD_FIELDS)], TICK_DTYPE).tobytes() == rows[-1:].tobytes()
 
 
-def _tick_assignments() -> dict[str, ast.AST]:
-    """``ArmChannel.tick``'s assignments by target: a name, or the tuple of names a step's stages unpack into."""
-    tree = ast.parse(Path(arm_channel.__file__).read_text(encoding="utf-8"))
-    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == "ArmChannel")
-    tick = next(n for n in cls.body if isinstance(n, ast.FunctionDef) and n.name == "tick")
-    out: dict[str, ast.AST] = {}
-    for node in ast.walk(tick):
-        if isinstance(node, ast.Assign) and len(node.targets) == 1:
-            target = node.targets[0]
-            key = target.id if isinstance(target, ast.Name) else ast.unparse(target)
-            out[key] = node.value
-    return out
+def _function(module: object, name: str) -> ast.FunctionDef:
+    """The function ``name`` of a module's source, at any depth (a kernel is defined inside its compiling factory)."""
+    tree = ast.parse(Path(module.__file__).read_text(encoding="utf-8"))  # type: ignore[attr-defined]
+    return next(n for n in ast.walk(tree) if isinstance(n, ast.FunctionDef) and n.name == name)
 
 
 def _names(node: ast.AST) -> tuple[str, ...] | None:
@@ -100,19 +93,40 @@ def _names(node: ast.AST) -> tuple[str, ...] | None:
     return None
 
 
+def test_the_writer_stores_each_field_at_its_place_with_its_type() -> None:
+    """write_record's parameters are the record's fields in order, each stored at its index through the view of its
+    type (int64 or float64): the one definition, read from the code."""
+    fn = _function(record_writer, "write_record")
+    params = [a.arg for a in fn.args.args]
+    assert params[:2] == ["rf", "ri"] and tuple(params[2:]) == RECORD_FIELDS
+    stores = [n for n in fn.body if isinstance(n, ast.Assign)]
+    assert len(stores) == len(RECORD_FIELDS)
+    for i, (node, field) in enumerate(zip(stores, TICK_FIELDS, strict=True)):
+        target = node.targets[0]
+        assert isinstance(target, ast.Subscript) and isinstance(node.value, ast.Name)
+        assert (ast.unparse(target.value), ast.unparse(target.slice), node.value.id) == (
+            "ri" if field.integer else "rf", str(i), field.name)
+
+
 def test_the_tick_builds_its_record_by_name() -> None:
-    """Each value of a record is the tick's local variable named as its field, in the one definition's order, and
-    the framework's stages are unpacked into locals named by STEP_FIELDS: no value is placed by counting."""
-    assigned = _tick_assignments()
-    assert _names(assigned["rec"]) == RECORD_FIELDS
-    # (the step, or -- a commanded force, issue 43 -- the same stages with the command rendered)
-    stages = next(ast.parse(k, mode="eval").body for k, v in assigned.items()
-                  if isinstance(call := v.body if isinstance(v, ast.IfExp) else v, ast.Call)
-                  and ast.unparse(call.func) == "fw.step")
-    assert _names(stages) == STEP_FIELDS
-    computed = {n for k in assigned for n in (_names(ast.parse(k, mode="eval").body) or (k,))}
-    params = {"now", "period_ns", "dt_s"}
-    assert set(RECORD_FIELDS) <= computed | params  # every field is a value the tick computed under its name
+    """Each value of a record is the tick's kernel's local variable (or parameter) named as its field, passed to the
+    writer in the one definition's order, and the framework's stages are unpacked into locals named by STEP_FIELDS:
+    no value is placed by counting."""
+    fn = _function(arm_channel, "record_kernel")
+    call = next(n for n in ast.walk(fn) if isinstance(n, ast.Call) and ast.unparse(n.func) == "write_record")
+    assert [ast.unparse(a) for a in call.args[:2]] == ["rf", "ri"]
+    assert tuple(ast.unparse(a) for a in call.args[2:]) == RECORD_FIELDS
+    assigned: set[str] = {a.arg for a in fn.args.args}
+    stages = None
+    for node in ast.walk(fn):
+        if isinstance(node, ast.Assign) and len(node.targets) == 1:
+            target = node.targets[0]
+            names = _names(target) or ((target.id,) if isinstance(target, ast.Name) else ())
+            assigned |= set(names)
+            if isinstance(node.value, ast.Call) and ast.unparse(node.value.func) == "algorithm_1.step_kernel":
+                stages = names
+    assert stages == STEP_FIELDS
+    assert set(RECORD_FIELDS) <= assigned  # every field is a value the tick computed under its name
 
 
 def test_a_record_written_by_the_tick_reads_back_by_name() -> None:
