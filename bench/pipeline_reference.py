@@ -4,7 +4,7 @@ Each round runs ``bench pipeline --json`` of our tree and of the reference tree 
 version: :mod:`bench.source_trees`), each in a fresh process, in turn -- ours, theirs, ours, theirs, … -- so a busy
 spell of a shared machine falls on both alike.  A figure is the median of its rounds, and the ratio ours /
 reference is of those medians; the best (least disturbed) round of each and every round's figures are kept.  The
-figures compared are the per-tick costs: the fused Algorithm 1 step (``ours_us_per_tick``) and the loop's whole
+figures compared are the per-tick costs: Algorithm 1's step (``ours_us_per_tick``) and the loop's whole
 tick with one and two arms (devices read, watchdog, Algorithm 1, command, record), and, with ``--loop-seconds``,
 the 1 kHz loop's p99 |period - 1 ms|.
 """
@@ -25,7 +25,7 @@ __all__ = ["COMPARED", "format_reference", "run_reference"]
 
 #: The figures compared, with what they are.
 COMPARED: dict[str, str] = {
-    "ours_us_per_tick": "Algorithm 1, one fused step (µs)",
+    "ours_us_per_tick": "Algorithm 1, one step (µs)",
     "arms_tick_one_us": "the loop's whole tick, one arm (µs)",
     "arms_tick_two_us": "the loop's whole tick, two arms (µs)",
     "loop_abs_dev_p99_us": "1 kHz loop, p99 |period - 1 ms| (µs)",
