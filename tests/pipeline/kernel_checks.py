@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -44,3 +47,14 @@ def same(kernel: Any, state: np.ndarray, *args: Any) -> None:
         return
     assert bits(got_c) == bits(got_i)
     assert bits(a) == bits(b)
+
+
+def compiled_on_construction(imports: str, kernels: str, build: str) -> None:
+    """In a fresh process (this one's may have compiled them already): none of ``kernels`` (an expression, after
+    ``imports``) is compiled before ``build`` runs, and every one is after it -- so the first tick of a loop that
+    ``build`` makes waits for no compiler."""
+    code = (f"{imports}\nks = {kernels}\nassert not any(k.signatures for k in ks)\n{build}\n"
+            "print(all(k.signatures for k in ks))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=Path(__file__).parents[2])
+    assert out.stdout.strip() == "True", out.stderr

@@ -10,15 +10,12 @@ from __future__ import annotations
 
 import copy
 import math
-import subprocess
-import sys
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from kernel_checks import bits, same
+from kernel_checks import bits, compiled_on_construction, same
 
 from pipeline.sim import hand, robot, sensor, tissue
 from pipeline.sim.hand import CompliantArm, ScriptedPresses
@@ -157,16 +154,12 @@ def test_teleoperation_takes_the_models_path() -> None:
 def test_kernels_are_compiled_when_a_rig_is_built() -> None:
     """A rig is built with its kernels compiled or loaded: its loop's first tick waits for no compiler (in a fresh
     process: this one's may have compiled them already)."""
-    code = ("from pipeline.sim import hand, robot, sensor, tissue\n"
-            "from pipeline.sim.rig import SimRig, step_kernel, target_kernel\n"
-            "ks = (step_kernel, target_kernel, hand.step_kernel, robot.advance_kernel, robot.command_kernel,"
-            " tissue.step_kernel, sensor.sample_kernel)\n"
-            "assert not any(k.signatures for k in ks)\n"
-            "SimRig()\n"
-            "print(all(k.signatures for k in ks))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         cwd=Path(__file__).parents[2])
-    assert out.stdout.strip() == "True", out.stderr
+    compiled_on_construction(
+        "from pipeline.sim import hand, robot, sensor, tissue\n"
+        "from pipeline.sim.rig import SimRig, step_kernel, target_kernel",
+        "(step_kernel, target_kernel, hand.step_kernel, robot.advance_kernel, robot.command_kernel, tissue.step_kernel,"
+        " sensor.sample_kernel)",
+        "SimRig()")
 
 
 def test_a_copy_shares_its_own_state() -> None:

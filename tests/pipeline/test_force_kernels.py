@@ -15,14 +15,11 @@ from __future__ import annotations
 import copy
 import math
 import pickle
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from kernel_checks import bits, same
+from kernel_checks import bits, compiled_on_construction, same
 
 from pipeline.force import filters, frames, safety, scaling
 from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel
@@ -79,17 +76,12 @@ def test_the_tick(window: int, fill: list[tuple[float, float, float, bool, float
 def test_the_kernels_are_compiled_when_a_framework_is_built() -> None:
     """A framework is built with Algorithm 1's kernels compiled or loaded: the loop's first tick waits for no compiler
     (in a fresh process: this one's may have compiled them already)."""
-    code = ("from pipeline.core import exact\n"
-            "from pipeline.force import filters, frames, safety, scaling\n"
-            "from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel\n"
-            "ks = (step_kernel, filters.ma3_update, filters.ma3_mean, safety.safety_step, scaling.scale_kernel,"
-            " scaling.clamp3, exact.hypot3, exact.fsum)\n"
-            "assert not any(k.signatures for k in ks)\n"
-            "HapticFramework(FrameworkConfig(), device_peak_n=3.3)\n"
-            "print(all(k.signatures for k in ks))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         cwd=Path(__file__).parents[2])
-    assert out.stdout.strip() == "True", out.stderr
+    compiled_on_construction(
+        "from pipeline.core import exact\nfrom pipeline.force import filters, frames, safety, scaling\n"
+        "from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel",
+        "(step_kernel, filters.ma3_update, filters.ma3_mean, safety.safety_step, scaling.scale_kernel, scaling.clamp3,"
+        " exact.hypot3, exact.fsum)",
+        "HapticFramework(FrameworkConfig(), device_peak_n=3.3)")
 
 
 def test_a_copy_of_a_framework_shares_its_own_state() -> None:
