@@ -41,7 +41,8 @@ from pipeline.runtime.watchdog import WatchdogConfig, derating_detail, derating_
 if TYPE_CHECKING:
     from pipeline.runtime.ring import RingBuffer
 
-__all__ = ["RIG_WIDE_FAULTS", "ArmChannel", "LoopSide", "own_faults"]
+__all__ = ["RECORD_KERNEL_TYPES", "RIG_WIDE_FAULTS", "ArmChannel", "LoopSide", "own_faults", "record_kernel",
+           "warm_kernels"]
 
 
 class LoopSide(Protocol):
@@ -172,7 +173,7 @@ class ArmChannel:
         #: tick that applied it (:class:`pipeline.runtime.loop_messages.CommandForce`).
         self.program: ForceProgram | None = None
         self.program_t0_ns = 0
-        _warm(self)
+        warm_kernels(self.framework.array)
 
     # -- one tick -----------------------------------------------------------------------------
     def tick(self, now: int, period_ns: int, dt_s: float) -> None:
@@ -391,7 +392,10 @@ class ArmChannel:
         """The arm's newest record (a tuple in the record's field order, its integers as ints)."""
         if not self._recorded:
             return None
-        f, i = self._row_f.tolist(), self._row_i.tolist()
+        # one copy (a C call: a tick cannot run half-way through it), both views of the same tick's row; read during a
+        # tick, the tick's own latency_ns is 0 (it is written once the command is handed over)
+        row = self._row_f.copy()
+        f, i = row.tolist(), row.view(np.int64).tolist()
         return tuple(i[k] if integer else f[k] for k, integer in enumerate(_INTEGER))
 
 
@@ -405,18 +409,26 @@ def own_faults(faults: int) -> int:
 RIG_WIDE_FAULTS = int(Fault.OPERATOR_STOP | Fault.ENGINE_DETACHED | Fault.LOOP_STALLED)
 
 
-def _warm(ch: ArmChannel) -> None:
-    """Compile :func:`record_kernel` (or load it from numba's cache) once a process, on scratch copies of a channel's
-    framework and row, then forbid it any other compilation: a value of another type from a device (an int where a
-    float is read) is converted to the compiled types, never compiled for in a tick of the running loop."""
+#: record_kernel's argument types, as warm_kernels compiles it (by position: numba reads values, not annotations):
+#: the forces, positions and times in seconds float64, the switches bool, the counts and nanoseconds int64.
+RECORD_KERNEL_TYPES = ("float64",) * 6 + ("float64", "bool", "bool", "float64", "bool", "float64", "float64") + (
+    "int64",) * 9 + ("float64",) * 9
+
+
+def warm_kernels(framework_array: State | None = None) -> None:
+    """Compile :func:`record_kernel` (or load it from numba's cache) once a process, on a scratch copy of a framework's
+    array (None: a default framework's), then forbid it any other compilation: a value of another type from a device
+    (an int where a float is read) is converted to the compiled types, never compiled for in a tick of the running
+    loop.  A channel's construction calls it; so does a parent that forks a process per participant."""
     global _WARM
     if _WARM:
         return
     cache_kernels()
-    row = ch._row_f.copy()
-    record_kernel(ch.framework.array.copy(), row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True,
-                  0.001, False, 3.0, 3.0, 0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-                  0.0)
+    fw = (framework_array if framework_array is not None
+          else HapticFramework(algorithm_1.FrameworkConfig(), device_peak_n=3.3).array).copy()
+    row = np.zeros(len(RECORD_FIELDS))
+    record_kernel(fw, row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True, 0.001, False, 3.0, 3.0,
+                  0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     cast(Any, record_kernel).disable_compile()  # (a numba dispatcher's)
     _WARM = True
 

@@ -17,6 +17,7 @@ from foundation.platform_support.processes import die_with, worker_context
 from foundation.platform_support.threads import usable_cpu_count
 from pipeline.force import framework as algorithm_1
 from pipeline.force.config import FrameworkConfig
+from pipeline.runtime import arm_channel
 from pipeline.sim import rig as sim_rig
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
@@ -113,6 +114,7 @@ def run_parallel(
     if ctx.get_start_method() == "fork":  # once here, not once a participant: the children inherit the machine code
         sim_rig.warm_kernels()
         algorithm_1.warm_kernels()
+        arm_channel.warm_kernels()
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

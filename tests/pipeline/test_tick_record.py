@@ -129,6 +129,36 @@ def test_the_tick_builds_its_record_by_name() -> None:
     assert set(RECORD_FIELDS) <= assigned  # every field is a value the tick computed under its name
 
 
+def test_the_tick_passes_each_value_to_the_kernel_under_its_name() -> None:
+    """ArmChannel.tick hands record_kernel its values by position: each one that is a plain name is the parameter's
+    own name (stylus and tip, or the two ages, cannot change places unseen), and every field the kernel takes as a
+    parameter is one of them."""
+    params = [a.arg for a in _function(arm_channel, "record_kernel").args.args]
+    tick = _function(arm_channel, "tick")
+    call = next(n for n in ast.walk(tick) if isinstance(n, ast.Call) and ast.unparse(n.func) == "record_kernel")
+    assert len(call.args) == len(params)
+    named = {p for p, a in zip(params, call.args, strict=True) if isinstance(a, ast.Name)}
+    assert all(a.id == p for p, a in zip(params, call.args, strict=True) if isinstance(a, ast.Name))
+    computed = {"fw", "rf", "ri", "command_n", "commanded", "derate_check", "limit_n", "static_limit_n", "tick",
+                "t_ns", "haptic_on", "trial_index", "phase"}  # (expressions of the loop's or the channel's state)
+    assert set(params) - named == computed
+
+
+def test_the_kernel_is_compiled_for_the_types_its_fields_have() -> None:
+    """numba types a kernel by the values of its first call, not by annotations: the warmed record_kernel takes
+    floats for every force, position and time in seconds, bools for the switches and int64 for the counts and
+    nanoseconds -- so a converted value is never a force truncated to an integer."""
+    build_sim_engine(EngineConfig(clock="virtual"))  # (its channel warms the kernel)
+    params = [a.arg for a in _function(arm_channel, "record_kernel").args.args][3:]
+    (sig,) = arm_channel.record_kernel.signatures  # type: ignore[attr-defined]  # a numba dispatcher's
+    got = [str(t) for t in sig[3:]]
+    assert got == list(arm_channel.RECORD_KERNEL_TYPES)
+    ints = {p for p, t in zip(params, got, strict=True) if t == "int64"}
+    assert ints == {p for p in params if p.endswith("_ns") or p in ("tick", "faults", "haptic_on", "trial_index",
+                                                                      "phase")}
+    assert {p for p, t in zip(params, got, strict=True) if t == "bool"} == {"commanded", "enabled", "derate_check"}
+
+
 def test_a_record_written_by_the_tick_reads_back_by_name() -> None:
     """The loop's record, read from the ring by field name, holds what the tick computed under that name."""
     eng = build_sim_engine(EngineConfig(clock="virtual", driver="hold", ring_seconds=1.0))
