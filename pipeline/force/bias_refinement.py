@@ -3,7 +3,8 @@
 The offline calibration (:mod:`pipeline.commissioning.payload_identification`) fixes mass,
 centre of mass and mount; only the bias drifts (with temperature, §1.5), and
 :class:`RlsBias` follows it from samples the loop knows to be contact-free.
-Plain float arithmetic: it runs in the 1 kHz loop.
+Its update is a compiled kernel over the estimator's float64 array (:func:`rls_update`), which Algorithm 1's
+compiled refinement step calls too (:func:`pipeline.force.framework.refine_kernel`): it runs in the 1 kHz loop.
 """
 
 from __future__ import annotations
@@ -12,10 +13,42 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
+from pipeline.core.compiled import State, cache_kernels, kernel
 from pipeline.force.frames import Vec3
 from pipeline.force.payload_compensator import finite_tuple
 
-__all__ = ["RlsBias"]
+__all__ = ["STATE_SIZE", "THETA", "RlsBias", "rls_update"]
+
+# The estimator's state, one float64 array: the six offsets (force N, torque N·m), P, the forgetting factor, P's
+# start and bound, the squared contact gate, and the counts of updates and refused samples (exact below 2**53).
+_TH, _P, _LAM, _P0, _PMAX, _GATE2, _UPDATES, _REJECTED = 0, 6, 7, 8, 9, 10, 11, 12
+#: The length of the estimator's array, and where its six offsets start.
+STATE_SIZE, THETA = 13, _TH
+
+
+@kernel
+def rls_update(r: State, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
+    """:meth:`RlsBias.update` of an allowed sample (the wrench minus the payload's weight) over the array ``r``."""
+    ex, ey, ez = fx - r[0], fy - r[1], fz - r[2]
+    etx, ety, etz = tx - r[3], ty - r[4], tz - r[5]
+    # NaN fails both comparisons, so a corrupt sample is refused too
+    if not (ex * ex + ey * ey + ez * ez < r[_GATE2] and abs(etx) + abs(ety) + abs(etz) < math.inf):
+        r[_REJECTED] += 1.0
+        return False
+    p = r[_P]
+    k = p / (r[_LAM] + p)
+    r[0] += k * ex
+    r[1] += k * ey
+    r[2] += k * ez
+    r[3] += k * etx
+    r[4] += k * ety
+    r[5] += k * etz
+    p = (p - k * p) / r[_LAM]
+    r[_P] = p if p < r[_PMAX] else r[_PMAX]
+    r[_UPDATES] += 1.0
+    return True
 
 
 class RlsBias:
@@ -64,7 +97,7 @@ class RlsBias:
     samples, and a growing count at rest means: re-bias offline.
     """
 
-    __slots__ = ("_gate2", "_lam", "_p", "_p0", "_p_max", "_theta", "rejected", "updates")
+    __slots__ = ("array",)
 
     def __init__(
         self,
@@ -85,24 +118,32 @@ class RlsBias:
             raise ValueError(f"p0 = {p0!r}: must be > 0 and ≤ p_max = {p_max!r}")
         if not (isinstance(gate_force_n, (int, float)) and gate_force_n > 0.0):
             raise ValueError(f"gate_force_n = {gate_force_n!r}: must be > 0 N (inf disables the gate)")
-        self._lam = float(forgetting)
-        self._p0 = float(p0)
-        self._p_max = float(p_max)
-        self._gate2 = float(gate_force_n) ** 2
-        self._theta = [*fb, *tb]
-        self._p = self._p0
-        #: Number of samples that updated the estimate.
-        self.updates = 0
-        #: Number of allowed samples refused by the contact gate (or non-finite).
-        self.rejected = 0
+        #: The state as :func:`rls_update` reads it.
+        self.array: State = np.zeros(STATE_SIZE)
+        r = self.array
+        r[_LAM], r[_P0], r[_PMAX], r[_GATE2] = float(forgetting), float(p0), float(p_max), float(gate_force_n) ** 2
+        r[_TH:_TH + 6] = (*fb, *tb)
+        r[_P] = r[_P0]
+        _warm(r)
+
+    @property
+    def updates(self) -> int:
+        """Number of samples that updated the estimate."""
+        return int(self.array[_UPDATES])
+
+    @property
+    def rejected(self) -> int:
+        """Number of allowed samples refused by the contact gate (or non-finite)."""
+        return int(self.array[_REJECTED])
 
     def reset(self, force_bias_n: Sequence[float], torque_bias_nm: Sequence[float]) -> None:
         """Restart from new offsets (e.g. after a re-bias at rest) with ``P = p0``."""
         fb = finite_tuple(force_bias_n, 3, "force_bias_n")
-        self._theta = [*fb, *finite_tuple(torque_bias_nm, 3, "torque_bias_nm")]
-        self._p = self._p0
-        self.updates = 0
-        self.rejected = 0
+        tb = finite_tuple(torque_bias_nm, 3, "torque_bias_nm")
+        r = self.array
+        r[_TH:_TH + 6] = (*fb, *tb)
+        r[_P] = r[_P0]
+        r[_UPDATES] = r[_REJECTED] = 0.0
 
     def update(self, wrench_minus_gravity: Sequence[float], allowed: bool) -> bool:
         """Feed one sample; return whether it updated the estimate.
@@ -125,55 +166,51 @@ class RlsBias:
         """
         if not allowed:
             return False
-        th = self._theta
-        fx, fy, fz, tx, ty, tz = wrench_minus_gravity
-        ex, ey, ez = fx - th[0], fy - th[1], fz - th[2]
-        etx, ety, etz = tx - th[3], ty - th[4], tz - th[5]
-        # NaN fails both comparisons, so a corrupt sample is refused too
-        if not (ex * ex + ey * ey + ez * ez < self._gate2 and abs(etx) + abs(ety) + abs(etz) < math.inf):
-            self.rejected += 1
-            return False
-        p = self._p
-        k = p / (self._lam + p)
-        th[0] += k * ex
-        th[1] += k * ey
-        th[2] += k * ez
-        th[3] += k * etx
-        th[4] += k * ety
-        th[5] += k * etz
-        p = (p - k * p) / self._lam
-        self._p = p if p < self._p_max else self._p_max
-        self.updates += 1
-        return True
+        fx, fy, fz, tx, ty, tz = (float(v) for v in wrench_minus_gravity)
+        return bool(rls_update(self.array, fx, fy, fz, tx, ty, tz))
 
     @property
     def force_bias_n(self) -> Vec3:
         """Current force offset estimate, N."""
-        th = self._theta
-        return (th[0], th[1], th[2])
+        r = self.array
+        return (float(r[0]), float(r[1]), float(r[2]))
 
     @property
     def torque_bias_nm(self) -> Vec3:
         """Current torque offset estimate, N·m."""
-        th = self._theta
-        return (th[3], th[4], th[5])
+        r = self.array
+        return (float(r[3]), float(r[4]), float(r[5]))
 
     @property
     def covariance(self) -> float:
         """Current ``P`` (the same for all six channels)."""
-        return self._p
+        return float(self.array[_P])
 
     def state(self) -> dict[str, Any]:
         """Everything that determines the next update, JSON-safe and exact (see :meth:`from_state`)."""
-        return {"forgetting": self._lam, "p0": self._p0, "p_max": self._p_max, "gate2": self._gate2,
-                "theta": list(self._theta), "p": self._p, "updates": self.updates, "rejected": self.rejected}
+        r = self.array
+        return {"forgetting": float(r[_LAM]), "p0": float(r[_P0]), "p_max": float(r[_PMAX]),
+                "gate2": float(r[_GATE2]), "theta": [float(v) for v in r[_TH:_TH + 6]], "p": float(r[_P]),
+                "updates": self.updates, "rejected": self.rejected}
 
     @classmethod
     def from_state(cls, d: Mapping[str, Any]) -> RlsBias:
         """The estimator exactly as :meth:`state` saw it."""
         th = [float(v) for v in d["theta"]]
         rls = cls(th[:3], th[3:], forgetting=float(d["forgetting"]), p0=float(d["p0"]), p_max=float(d["p_max"]))
-        rls._gate2 = float(d["gate2"])
-        rls._p = float(d["p"])
-        rls.updates, rls.rejected = int(d["updates"]), int(d["rejected"])
+        r = rls.array
+        r[_GATE2], r[_P] = float(d["gate2"]), float(d["p"])
+        r[_UPDATES], r[_REJECTED] = int(d["updates"]), int(d["rejected"])
         return rls
+
+
+def _warm(array: State) -> None:
+    """Compile :func:`rls_update` (or load it from numba's cache) once a process, on a copy of an estimator's state."""
+    global _WARM
+    if not _WARM:
+        cache_kernels()
+        rls_update(array.copy(), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        _WARM = True
+
+
+_WARM = False

@@ -23,13 +23,14 @@ simulated study.  The stage modules own the equations; this one only sequences t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from pipeline.core import exact, tick_record
 from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
-from pipeline.force import filters, frames, safety, scaling
+from pipeline.force import bias_refinement, filters, frames, safety, scaling
 from pipeline.force.bias_refinement import RlsBias
 from pipeline.force.config import (
     DEFAULT_ROT_HAPTIC_BASE,
@@ -62,9 +63,11 @@ STEP_FIELDS = tick_record.STEP_FIELDS
 
 
 # The framework's state, one float64 array: the force offsets (payload weight plus bias in the current pose), the
-# three rotations ᵀ_S R, ᴮ_T R, ᴴ_B R (row-major), f_scale and f_max, the safety stage's state, the filter's state.
-_OFF, _RTS, _RBT, _RHB, _FSCALE, _FMAX = 0, 3, 12, 21, 30, 31
-_SAFE = 32
+# three rotations ᵀ_S R, ᴮ_T R, ᴴ_B R (row-major), f_scale and f_max,
+# the payload's weight in the current pose and the bias (6 each: force N, torque N·m), the safety stage's state, the
+# filter's state.
+_OFF, _RTS, _RBT, _RHB, _FSCALE, _FMAX, _PAY, _BIAS = 0, 3, 12, 21, 30, 31, 32, 38
+_SAFE = 44
 _FILT = _SAFE + safety.STATE_SIZE
 #: Where the framework's array keeps the safety stage's ramp gain (the tick's record reads it there).
 GAIN_AT = _SAFE + safety.GAIN
@@ -109,8 +112,32 @@ def _compile(callees: int) -> Any:
     return step_kernel
 
 
+def _compile_refine(callees: int) -> Callable[..., bool]:
+    """:func:`refine_kernel` closed over the fingerprint of :mod:`pipeline.force.bias_refinement`."""
+
+    @kernel
+    def refine_kernel(st: State, r: State, fx: float, fy: float, fz: float, tx: float, ty: float, tz: float) -> bool:
+        """:meth:`HapticFramework.refine_bias` over the framework's array ``st`` and the estimator's ``r``: the
+        sample minus the payload's weight to :func:`pipeline.force.bias_refinement.rls_update`, and on an update
+        the new bias and force offsets."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        p = _PAY
+        if not bias_refinement.rls_update(r, fx - st[p], fy - st[p + 1], fz - st[p + 2], tx - st[p + 3],
+                                          ty - st[p + 4], tz - st[p + 5]):
+            return False
+        for k in range(6):
+            st[_BIAS + k] = r[bias_refinement.THETA + k]
+        for k in range(3):  # (HapticFramework._update_offsets' arithmetic)
+            st[_OFF + k] = st[p + k] + st[_BIAS + k]
+        return True
+
+    return refine_kernel
+
+
 #: Algorithm 1's tick, compiled (:meth:`HapticFramework.step`).
 step_kernel = _compile(fingerprint(exact, frames, filters, safety, scaling))
+#: The online bias refinement's step, compiled (:meth:`HapticFramework.refine_bias`).
+refine_kernel = _compile_refine(fingerprint(bias_refinement))
 
 
 class HapticFramework:
@@ -131,10 +158,8 @@ class HapticFramework:
     """
 
     __slots__ = (
-        "_bias",
         "_cal",
         "_mounted",
-        "_off",
         "_payload",
         "_rbt",
         "_rts",
@@ -159,7 +184,6 @@ class HapticFramework:
         self.device_peak_n = float(device_peak_n)
         self._cal = calibration
         self._mounted = calibration.for_mount(config.rot_tip_sensor)
-        self._bias: tuple[float, ...] = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         self._payload: tuple[float, ...] = (0.0,) * 6
         self.filter = MovingAverage3(config.filter_window)
         self.safety = SafetyGovernor(config.safety, device_peak_n)
@@ -168,7 +192,6 @@ class HapticFramework:
             rls.reset(calibration.force_bias_n, calibration.torque_bias_nm)
         self._rts = config.rot_tip_sensor
         self._rbt: Mat3 = IDENTITY
-        self._off: tuple[float, float, float, float, float, float] = (0.0,) * 6
         #: The whole state of the per-tick path, as :func:`step_kernel` reads it; the filter and the safety stage keep
         #: their states in slices of it.
         self.array: State = np.zeros(_FILT + filters.state_size(config.filter_window))
@@ -176,6 +199,7 @@ class HapticFramework:
         st[_RTS:_RTS + 9] = config.rot_tip_sensor
         st[_RHB:_RHB + 9] = config.rot_haptic_base
         st[_FSCALE], st[_FMAX] = float(config.f_scale_n), float(config.f_max_n)
+        self._bias = (*calibration.force_bias_n, *calibration.torque_bias_nm)
         self.safety.adopt(st[_SAFE:_FILT])
         self.filter.adopt(st[_FILT:])
         self.set_pose(IDENTITY)
@@ -197,18 +221,33 @@ class HapticFramework:
         """
         self._rbt = rot_base_tip
         self.array[_RBT:_RBT + 9] = rot_base_tip
-        self._payload = self._mounted.payload_wrench(rot_base_tip)
+        self._payload = pay = self._mounted.payload_wrench(rot_base_tip)
+        self.array[_PAY:_PAY + 6] = pay
         self._update_offsets()
 
-    def _update_offsets(self) -> None:
+    @property
+    def _bias(self) -> tuple[float, ...]:
+        """The sensor's bias now (force N, torque N·m): the calibration's, refined online."""
+        return tuple(self.array[_BIAS:_BIAS + 6].tolist())
+
+    @_bias.setter
+    def _bias(self, bias: tuple[float, ...]) -> None:
+        self.array[_BIAS:_BIAS + 6] = bias
+
+    @property
+    def _off(self) -> tuple[float, float, float, float, float, float]:
+        """The offsets the raw wrench is compensated by: the payload's weight in this pose plus the bias."""
         p, b = self._payload, self._bias
-        self._off = off = (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
-        # what the per-tick path reads of them: the force offsets (item by item: a slice assignment from a tuple
-        # costs a microsecond, and a bias refinement comes here every tick it updates)
+        return (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
+
+    def _update_offsets(self) -> None:
+        # what the per-tick path reads: the force offsets (item by item: a slice assignment from a tuple costs a
+        # microsecond); set_pose and every bias change come here
+        p, b = self._payload, self._bias
         st = self.array
-        st[_OFF] = off[0]
-        st[_OFF + 1] = off[1]
-        st[_OFF + 2] = off[2]
+        st[_OFF] = p[0] + b[0]
+        st[_OFF + 1] = p[1] + b[1]
+        st[_OFF + 2] = p[2] + b[2]
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -252,12 +291,8 @@ class HapticFramework:
         rls = self.rls
         if rls is None:
             return False
-        p = self._payload
-        if not rls.update((fx - p[0], fy - p[1], fz - p[2], tx - p[3], ty - p[4], tz - p[5]), True):
-            return False
-        self._bias = (*rls.force_bias_n, *rls.torque_bias_nm)
-        self._update_offsets()
-        return True
+        return refine_kernel(self.array, rls.array, float(fx), float(fy), float(fz), float(tx),
+                             float(ty), float(tz))
 
     def reset(self) -> None:
         """Empty the filter and drop the output to zero (after a fault reset or re-calibration)."""
@@ -385,6 +420,7 @@ def warm_kernels(array: State | None = None) -> None:
     scaling.clamp3(1.0, 0.0, 0.0, 3.0)
     exact.hypot3(1.0, 0.0, 0.0)
     exact.fsum(st[:3])
+    refine_kernel(st, RlsBias((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).array, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     _WARM = True
 
 

@@ -21,8 +21,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from kernel_checks import bits, compiled_on_construction, same
 
-from pipeline.force import filters, frames, safety, scaling
-from pipeline.force.framework import FrameworkConfig, HapticFramework, step_kernel
+from pipeline.force import bias_refinement, filters, frames, safety, scaling
+from pipeline.force.bias_refinement import RlsBias
+from pipeline.force.framework import FrameworkConfig, HapticFramework, refine_kernel, step_kernel
 from pipeline.force.safety import SafetyConfig, SafetyGovernor
 
 ANY = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
@@ -112,3 +113,22 @@ def test_no_kernel_closes_over_another() -> None:
     for k in ks:
         cells = [c.cell_contents for c in (k.py_func.__closure__ or ())]
         assert all(isinstance(v, (int, float, str)) for v in cells), (k.py_func.__qualname__, cells)
+
+
+@settings(max_examples=300)
+@given(theta=st.tuples(*[st.floats(-2.0, 2.0)] * 6), p=st.floats(1e-6, 1.0), w=st.tuples(*[ANY] * 6),
+       pose=st.tuples(*[st.floats(-3.0, 3.0)] * 3))
+def test_the_bias_refinement(theta: tuple[float, ...], p: float, w: tuple[float, ...],
+                             pose: tuple[float, float, float]) -> None:
+    """The online bias estimator's update and the framework's refinement step around it, compiled and interpreted."""
+    rls = RlsBias(theta[:3], theta[3:])
+    rls.array[6] = p  # (P)
+    same(bias_refinement.rls_update, rls.array, *w)
+    fw = HapticFramework(FrameworkConfig(), device_peak_n=3.3, rls=rls)
+    fw.set_pose(frames.rotvec_to_matrix(*pose))
+    a, b = fw.array.copy(), fw.array.copy()
+    ra, rb = rls.array.copy(), rls.array.copy()
+    with np.errstate(all="ignore"):
+        got_c = refine_kernel(a, ra, *w)
+        got_i = refine_kernel.py_func(b, rb, *w)
+    assert got_c == got_i and bits(a) == bits(b) and bits(ra) == bits(rb)
