@@ -8,7 +8,8 @@ of the sum of squares round differently in the last bit):
 
 * :func:`hypot3` is ``vector_norm`` of CPython 3.11's ``Modules/mathmodule.c`` for three coordinates: lossless
   scaling by a power of two, Veltkamp--Dekker splitting of each square, a compensated (Neumaier) sum with ``1.0``
-  as its guard, and one differential correction of the square root.  Faithfully rounded, almost always correctly
+  as its guard, and one differential correction of the square root; all-subnormal inputs divided by the largest
+  instead, with a plain compensated sum.  Faithfully rounded, almost always correctly
   rounded.  CPython 3.12 rewrote the same steps with two accumulators, which can differ in the last bit on rare
   inputs: the product's records are this kernel's on any interpreter (the replay forms them with it too), and the
   test that holds it to ``math.hypot`` bit for bit runs on 3.11 (``tests/pipeline/test_exact.py``).
@@ -28,7 +29,6 @@ from pipeline.core.compiled import State, kernel
 __all__ = ["fsum", "hypot3"]
 
 _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's constant for splitting a double into two 26-bit halves
-_DBL_MIN = 2.2250738585072014e-308  # the smallest normal double
 
 
 @kernel
@@ -94,9 +94,20 @@ def hypot3(x: float, y: float, z: float) -> float:
     if mx == 0.0:
         return mx
     _, max_e = math.frexp(mx)
-    if max_e < -1023:  # all subnormal: ldexp(1, -max_e) would overflow; bring them up to normals first
-        return _DBL_MIN * _norm_scaled(x / _DBL_MIN, y / _DBL_MIN, z / _DBL_MIN, mx / _DBL_MIN)
-    return _norm_scaled(x, y, z, mx)
+    if max_e >= -1023:
+        return _norm_scaled(x, y, z, mx)
+    # all subnormal: ldexp(1, -max_e) would overflow, so 3.11 divides by the largest instead of scaling, with a
+    # plain compensated sum (3.12 rescales by DBL_MIN and recurses: another last bit on some such inputs)
+    csum = 1.0
+    frac = 0.0
+    for i in range(3):
+        v = x if i == 0 else (y if i == 1 else z)
+        v /= mx
+        v = v * v
+        oldcsum = csum
+        csum += v
+        frac += (oldcsum - csum) + v
+    return mx * math.sqrt(csum - 1.0 + frac)
 
 
 @kernel

@@ -36,7 +36,8 @@ def _bits(x: float) -> int:
 @ON_311
 @settings(max_examples=1500)
 @given(x=ANY, y=ANY, z=ANY)
-@example(5e-324, 5e-324, 5e-324)  # all subnormal: the rescaled branch
+@example(5e-324, 5e-324, 5e-324)  # all subnormal: divided by the largest, not scaled
+@example(1.53783614892744e-309, 1.53783614892744e-309, 1.53783614892744e-309)  # 3.12's rescaling would round up
 @example(1.7976931348623157e308, 1.7976931348623157e308, 1.0)  # the sum of squares overflows, the norm too
 @example(3.0, 4.0, 12.0)  # exact: 13
 @example(-0.0, 0.0, -0.0)
