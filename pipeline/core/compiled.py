@@ -46,7 +46,7 @@ import numba
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["KernelState", "State", "cache_kernels", "fingerprint", "kernel", "kernels"]
+__all__ = ["KernelState", "State", "cache_kernels", "fingerprint", "is_warm", "kernel", "kernels", "warm_once"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 #: A kernel's state: a float64 array (integers kept in it are below 2⁵³, so exact).
@@ -88,6 +88,26 @@ def cache_kernels(folder: str | None = None) -> None:
             _UNCACHED.pop().enable_caching()
         except RuntimeError:
             pass  # no folder to cache in (numba: "no locator available"): compiled in memory
+
+
+def warm_once(owner: str, compile_them: Callable[[], object]) -> None:
+    """Compile ``owner``'s kernels (or load them from the cache) once a process: ``compile_them`` calls each on scratch
+    copies of a state, as its owner's methods will.  An owner's construction calls it, so that no tick waits for a
+    compiler; a process forked after it inherits the machine code and this record of it."""
+    if owner in _WARMED:
+        return
+    cache_kernels()
+    compile_them()
+    _WARMED.add(owner)
+
+
+def is_warm(owner: str) -> bool:
+    """Whether :func:`warm_once` has run for ``owner`` in this process."""
+    return owner in _WARMED
+
+
+#: The owners (module names) whose kernels :func:`warm_once` has compiled or loaded in this process.
+_WARMED: set[str] = set()
 
 
 def fingerprint(*modules: ModuleType) -> int:

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.core.compiled import State, cache_kernels, kernel
+from pipeline.core.compiled import State, kernel, warm_once
 from pipeline.force.frames import Vec3
 from pipeline.force.payload_compensator import finite_tuple
 
@@ -206,11 +206,4 @@ class RlsBias:
 
 def _warm(array: State) -> None:
     """Compile :func:`rls_update` (or load it from numba's cache) once a process, on a copy of an estimator's state."""
-    global _WARM
-    if not _WARM:
-        cache_kernels()
-        rls_update(array.copy(), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        _WARM = True
-
-
-_WARM = False
+    warm_once(__name__, lambda: rls_update(array.copy(), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0))

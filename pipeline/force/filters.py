@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, kernel, warm_once
 from pipeline.force.frames import Vec3
 
 __all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s", "ma3_mean", "ma3_update", "state_size"]
@@ -210,16 +210,8 @@ class MovingAverage3:
 def _warm(array: State) -> None:
     """Compile the filter's kernels (or load them from numba's cache) once a process, on a copy of a filter's state:
     a filter's first sample waits for no compiler."""
-    global _WARM
-    if not _WARM:
-        cache_kernels()
-        st = array.copy()
-        ma3_update(st, 0.0, 0.0, 0.0)
-        ma3_mean(st)
-        _WARM = True
-
-
-_WARM = False
+    st = array.copy()
+    warm_once(__name__, lambda: (ma3_update(st, 0.0, 0.0, 0.0), ma3_mean(st)))
 
 
 class MovingAverage:

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact, tick_record
-from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, is_warm, kernel, warm_once
 from pipeline.force import bias_refinement, filters, frames, safety, scaling
 from pipeline.force.bias_refinement import RlsBias
 from pipeline.force.config import (
@@ -403,25 +403,22 @@ def warm_kernels(array: State | None = None) -> None:
     ``array`` (None: a default framework's, built for it): a framework's construction calls it, so that no tick of a
     running loop waits for a compiler (cold, ~2 s once an installation); so does a parent that forks a process per
     participant, before forking (its children inherit the machine code)."""
-    global _WARM
-    if _WARM:
-        return
     if array is None:
-        HapticFramework(FrameworkConfig(), device_peak_n=3.3)  # (its construction comes back here with its array)
+        if not is_warm(__name__):
+            HapticFramework(FrameworkConfig(), device_peak_n=3.3)  # (its construction comes back here with its array)
         return
-    cache_kernels()
     st = array.copy()
-    step_kernel(st, 0.0, 0.0, 0.0, 0.0, False, True, 0.001)
-    # and each stage as its Python side calls it (a commanded force's tick, a replay, the figures)
-    filters.ma3_update(st[_FILT:], 0.0, 0.0, 0.0)
-    filters.ma3_mean(st[_FILT:])
-    safety.safety_step(st[_SAFE:_FILT], 0.0, 0.0, 0.0, True, 0.001)
-    scaling.scale_kernel(1.0, 0.0, 0.0, 3.0, 7.0)
-    scaling.clamp3(1.0, 0.0, 0.0, 3.0)
-    exact.hypot3(1.0, 0.0, 0.0)
-    exact.fsum(st[:3])
-    refine_kernel(st, RlsBias((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).array, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    _WARM = True
 
+    def compile_them() -> None:
+        step_kernel(st, 0.0, 0.0, 0.0, 0.0, False, True, 0.001)
+        # and each stage as its Python side calls it (a commanded force's tick, a replay, the figures)
+        filters.ma3_update(st[_FILT:], 0.0, 0.0, 0.0)
+        filters.ma3_mean(st[_FILT:])
+        safety.safety_step(st[_SAFE:_FILT], 0.0, 0.0, 0.0, True, 0.001)
+        scaling.scale_kernel(1.0, 0.0, 0.0, 3.0, 7.0)
+        scaling.clamp3(1.0, 0.0, 0.0, 3.0)
+        exact.hypot3(1.0, 0.0, 0.0)
+        exact.fsum(st[:3])
+        refine_kernel(st, RlsBias((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).array, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
-_WARM = False  # warm_kernels has run in this process (a forked child inherits it with the machine code)
+    warm_once(__name__, compile_them)

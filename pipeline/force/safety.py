@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, kernel, warm_once
 from pipeline.force.config import SafetyConfig
 from pipeline.force.frames import Vec3
 
@@ -204,11 +204,4 @@ class SafetyGovernor:
 def _warm(array: State) -> None:
     """Compile :func:`safety_step` (or load it from numba's cache) once a process, on a copy of a governor's state: a
     governor's first step waits for no compiler."""
-    global _WARM
-    if not _WARM:
-        cache_kernels()
-        safety_step(array.copy(), 0.0, 0.0, 0.0, True, 0.001)
-        _WARM = True
-
-
-_WARM = False
+    warm_once(__name__, lambda: safety_step(array.copy(), 0.0, 0.0, 0.0, True, 0.001))

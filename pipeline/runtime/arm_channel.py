@@ -25,7 +25,7 @@ import numpy as np
 
 from pipeline.core import exact, record_writer
 from pipeline.core.clock import Clock
-from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, is_warm, kernel, warm_once
 from pipeline.core.force_program import ForceProgram
 from pipeline.core.record_writer import IntRow, write_record
 from pipeline.core.tick_record import RECORD_FIELDS, TICK_DTYPE
@@ -420,17 +420,15 @@ def warm_kernels(framework_array: State | None = None) -> None:
     array (None: a default framework's), then forbid it any other compilation: a value of another type from a device
     (an int where a float is read) is converted to the compiled types, never compiled for in a tick of the running
     loop.  A channel's construction calls it; so does a parent that forks a process per participant."""
-    global _WARM
-    if _WARM:
+    if is_warm(__name__):
         return
-    cache_kernels()
     fw = (framework_array if framework_array is not None
           else HapticFramework(algorithm_1.FrameworkConfig(), device_peak_n=3.3).array).copy()
     row = np.zeros(len(RECORD_FIELDS))
-    record_kernel(fw, row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True, 0.001, False, 3.0, 3.0,
-                  0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    cast(Any, record_kernel).disable_compile()  # (a numba dispatcher's)
-    _WARM = True
 
+    def compile_them() -> None:
+        record_kernel(fw, row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True, 0.001, False, 3.0,
+                      3.0, 0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        cast(Any, record_kernel).disable_compile()  # (a numba dispatcher's)
 
-_WARM = False
+    warm_once(__name__, compile_them)

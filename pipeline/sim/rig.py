@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.core.compiled import State, cache_kernels, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, is_warm, kernel, warm_once
 from pipeline.devices.registry import DEFAULT_HAPTIC_MODEL, DEFAULT_ROBOT_MODEL, haptic_model, robot_model
 from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HapticLimits
 from pipeline.force.frames import IDENTITY, Mat3, Vec3, axis_angle, mat_mul, transpose
@@ -431,23 +431,20 @@ def warm_kernels(state: State | None = None, noise: State | None = None) -> None
     (:func:`study_app.headless.pool.run_parallel`): its children then inherit the machine code instead of each
     loading it from the cache (~0.2 s of a core a participant).
     """
-    global _WARM
-    if _WARM:
-        return
     if state is None or noise is None:
-        SimRig()  # (its construction comes back here with its own state: a zero state would divide by zero)
+        if not is_warm(__name__):
+            SimRig()  # (its construction comes back here with its own state: a zero state would divide by zero)
         return
-    cache_kernels()
-    st, noise = state.copy(), np.zeros_like(noise)
-    step_kernel(st, noise, 0, 0.0, 0.0, 0.001, 1, 1)
-    # and each on its own, as the models' methods call them (a tick with Python's turns in it)
-    sim_hand.step_kernel(st[_ARM:_ROBOT], 0.0, 0.0, 0.001)
-    sim_robot.command_kernel(st[_ROBOT:_TISSUE], 0.0, 0.0, 0.0)
-    target_kernel(st, 0.0)
-    sim_robot.advance_kernel(st[_ROBOT:_TISSUE], 2, 0.001)
-    sim_tissue.step_kernel(st[_TISSUE:_SENSOR], 0.0, 0.001)
-    sim_sensor.sample_kernel(st[_SENSOR:_STATE_SIZE], noise, 0, 2, 0.0, 0.0, 0.0, 0.001)
-    _WARM = True
+    st, scratch = state.copy(), np.zeros_like(noise)
 
+    def compile_them() -> None:
+        step_kernel(st, scratch, 0, 0.0, 0.0, 0.001, 1, 1)
+        # and each on its own, as the models' methods call them (a tick with Python's turns in it)
+        sim_hand.step_kernel(st[_ARM:_ROBOT], 0.0, 0.0, 0.001)
+        sim_robot.command_kernel(st[_ROBOT:_TISSUE], 0.0, 0.0, 0.0)
+        target_kernel(st, 0.0)
+        sim_robot.advance_kernel(st[_ROBOT:_TISSUE], 2, 0.001)
+        sim_tissue.step_kernel(st[_TISSUE:_SENSOR], 0.0, 0.001)
+        sim_sensor.sample_kernel(st[_SENSOR:_STATE_SIZE], scratch, 0, 2, 0.0, 0.0, 0.0, 0.001)
 
-_WARM = False  # warm_kernels has run in this process (a forked child inherits it with the machine code)
+    warm_once(__name__, compile_them)
