@@ -8,9 +8,9 @@ of the sum of squares round differently in the last bit):
 
 * :func:`hypot3` is ``vector_norm`` of CPython 3.11's ``Modules/mathmodule.c`` for three coordinates: lossless
   scaling by a power of two, Veltkamp--Dekker splitting of each square, a compensated (Neumaier) sum with ``1.0``
-  as its guard, and one differential correction of the square root; all-subnormal inputs divided by the largest
-  instead, with a plain compensated sum.  Faithfully rounded, almost always correctly
-  rounded.  CPython 3.12 rewrote the same steps with two accumulators, which can differ in the last bit on rare
+  as its guard, and one differential correction of the square root; a vector whose largest component is below
+  2⁻¹⁰²⁴ (``frexp``'s exponent below −1023, where the scale would overflow) is divided by the largest instead,
+  with a plain compensated sum.  Faithfully rounded, almost always correctly rounded.  CPython 3.12 rewrote the same steps with two accumulators, which can differ in the last bit on rare
   inputs: the product's records are this kernel's on any interpreter (the replay forms them with it too), and the
   test that holds it to ``math.hypot`` bit for bit runs on 3.11 (``tests/pipeline/test_exact.py``).
 * :func:`fsum` is ``math_fsum``'s Shewchuk partials with its half-even fix-up across partials, the same on every
@@ -33,7 +33,7 @@ _SPLIT = 134217729.0  # 2**27 + 1: Veltkamp's constant for splitting a double in
 
 @kernel
 def _norm_scaled(x: float, y: float, z: float, mx: float) -> float:
-    """``vector_norm`` of finite non-negative ``x, y, z`` with ``mx`` their largest, a normal double > 0."""
+    """``vector_norm`` of finite non-negative ``x, y, z`` with ``mx`` their largest, at least 2⁻¹⁰²⁴."""
     _, max_e = math.frexp(mx)
     scale = math.ldexp(1.0, -max_e)
     csum = 1.0
@@ -96,7 +96,7 @@ def hypot3(x: float, y: float, z: float) -> float:
     _, max_e = math.frexp(mx)
     if max_e >= -1023:
         return _norm_scaled(x, y, z, mx)
-    # all subnormal: ldexp(1, -max_e) would overflow, so 3.11 divides by the largest instead of scaling, with a
+    # the largest below 2**-1024: ldexp(1, -max_e) would overflow, so 3.11 divides by it instead of scaling, with a
     # plain compensated sum (3.12 rescales by DBL_MIN and recurses: another last bit on some such inputs)
     csum = 1.0
     frac = 0.0

@@ -19,13 +19,13 @@ from pipeline.core.compiled import State, kernel, warm_once
 from pipeline.force.frames import Vec3
 from pipeline.force.payload_compensator import finite_tuple
 
-__all__ = ["STATE_SIZE", "THETA", "RlsBias", "rls_update"]
+__all__ = ["COVARIANCE", "STATE_SIZE", "THETA", "RlsBias", "rls_update"]
 
 # The estimator's state, one float64 array: the six offsets (force N, torque N·m), P, the forgetting factor, P's
 # start and bound, the squared contact gate, and the counts of updates and refused samples (exact below 2**53).
 _TH, _P, _LAM, _P0, _PMAX, _GATE2, _UPDATES, _REJECTED = 0, 6, 7, 8, 9, 10, 11, 12
-#: The length of the estimator's array, and where its six offsets start.
-STATE_SIZE, THETA = 13, _TH
+#: The length of the estimator's array, where its six offsets start, and where its P is.
+STATE_SIZE, THETA, COVARIANCE = 13, _TH, _P
 
 
 @kernel

@@ -241,8 +241,8 @@ class HapticFramework:
         return (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
 
     def _update_offsets(self) -> None:
-        # what the per-tick path reads: the force offsets (item by item: a slice assignment from a tuple costs a
-        # microsecond); set_pose and every bias change come here
+        # what the per-tick path reads: the force offsets, after a new pose or a new calibration (the online
+        # refinement's updates set them in refine_kernel, with the same sums)
         p, b = self._payload, self._bias
         st = self.array
         st[_OFF] = p[0] + b[0]

@@ -122,7 +122,7 @@ def test_the_bias_refinement(theta: tuple[float, ...], p: float, w: tuple[float,
                              pose: tuple[float, float, float]) -> None:
     """The online bias estimator's update and the framework's refinement step around it, compiled and interpreted."""
     rls = RlsBias(theta[:3], theta[3:])
-    rls.array[6] = p  # (P)
+    rls.array[bias_refinement.COVARIANCE] = p
     same(bias_refinement.rls_update, rls.array, *w)
     fw = HapticFramework(FrameworkConfig(), device_peak_n=3.3, rls=rls)
     fw.set_pose(frames.rotvec_to_matrix(*pose))
