@@ -10,9 +10,10 @@ of the sum of squares round differently in the last bit):
   scaling by a power of two, Veltkamp--Dekker splitting of each square, a compensated (Neumaier) sum with ``1.0``
   as its guard, and one differential correction of the square root; a vector whose largest component is below
   2⁻¹⁰²⁴ (``frexp``'s exponent below −1023, where the scale would overflow) is divided by the largest instead,
-  with a plain compensated sum.  Faithfully rounded, almost always correctly rounded.  CPython 3.12 rewrote the same steps with two accumulators, which can differ in the last bit on rare
-  inputs: the product's records are this kernel's on any interpreter (the replay forms them with it too), and the
-  test that holds it to ``math.hypot`` bit for bit runs on 3.11 (``tests/pipeline/test_exact.py``).
+  with a plain compensated sum.  Faithfully rounded, almost always correctly rounded.  CPython 3.12 rewrote the
+  same steps with two accumulators, which can differ in the last bit on rare inputs: the product's records are
+  this kernel's on any interpreter (the replay forms them with it too), and the test that holds it to
+  ``math.hypot`` bit for bit runs on 3.11 (``tests/pipeline/test_exact.py``).
 * :func:`fsum` is ``math_fsum``'s Shewchuk partials with its half-even fix-up across partials, the same on every
   CPython since 2.6; where ``fsum`` raises on intermediate overflow it gives the plain left-to-right sum (±inf), as
   :func:`pipeline.force.filters.exact_sum` does.
