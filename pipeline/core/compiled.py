@@ -121,13 +121,14 @@ def fingerprint(*modules: ModuleType) -> int:
 
 
 class KernelState:
-    """A model whose per-tick arithmetic is a kernel over its :attr:`state` array, which a composite (the simulated
-    rig) may move into a slice of its own array so that one compiled call steps them all."""
+    """An object whose per-tick arithmetic is a kernel over its :attr:`array` (a float64 state), which a composite (the
+    simulated rig, Algorithm 1's framework) may move into a slice of its own array so that one compiled call steps
+    them all."""
 
-    __slots__ = ("state",)
-    state: State
+    __slots__ = ("array",)
+    array: State
 
-    def adopt_state(self, view: State) -> None:
+    def adopt(self, view: State) -> None:
         """Keep the state in ``view`` (a slice of the composite's array) from now on, as it is now."""
-        view[:] = self.state
-        self.state = view
+        view[:] = self.array
+        self.array = view

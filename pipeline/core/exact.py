@@ -15,8 +15,9 @@ of the sum of squares round differently in the last bit):
   this kernel's on any interpreter (the replay forms them with it too), and the test that holds it to
   ``math.hypot`` bit for bit runs on 3.11 (``tests/pipeline/test_exact.py``).
 * :func:`fsum` is ``math_fsum``'s Shewchuk partials with its half-even fix-up across partials, the same on every
-  CPython since 2.6; where ``fsum`` raises on intermediate overflow it gives the plain left-to-right sum (±inf), as
-  :func:`pipeline.force.filters.exact_sum` does.
+  CPython since 2.6; where ``fsum`` raises on intermediate overflow it gives the plain left-to-right sum (±inf or
+  NaN: a filter's window of finite samples near DBL_MAX may sum beyond it, and the filter must not raise at 1 kHz;
+  its next re-sum repairs the running sum).
 """
 
 from __future__ import annotations
@@ -139,7 +140,7 @@ def fsum(values: State) -> float:
         if x != 0.0:
             if x - x != 0.0:  # non-finite: an overflow of finite values, or an inf or a NaN among them
                 if xsave - xsave == 0.0:
-                    total = 0.0  # fsum raises "intermediate overflow"; exact_sum sums plainly instead
+                    total = 0.0  # fsum raises "intermediate overflow": the plain sum instead
                     for v in values:
                         total += v
                     return total

@@ -212,18 +212,11 @@ class RingBuffer:
     # -- writer ---------------------------------------------------------------------------------
     def write(self, values: Sequence[float]) -> None:
         """Append one record (exactly ``len(fields)`` numbers, an int for an ``int64`` field). Never blocks."""
-        off = self._slot_off
-        end = off + self._row_bytes
-        self._buf[off:end] = self._pack_row(*values)
-        self._slot_off = end if end < self._end_off else _HEADER
-        c = self._count + 1
-        self._count = c
-        # publish after the row is complete
-        self._count_cell[0] = c
+        self.write_row(self._pack_row(*values))
 
-    def write_row(self, row: memoryview) -> None:
-        """Append one record given as its bytes (a record of this ring's fields, packed as they lie: the loop's row
-        that :func:`pipeline.runtime.arm_channel.record_kernel` writes). Never blocks."""
+    def write_row(self, row: bytes | memoryview) -> None:
+        """Append one record given as its bytes (a record of this ring's fields, packed as they lie: :meth:`write`'s,
+        or the row the loop's :func:`pipeline.runtime.arm_channel.record_kernel` writes). Never blocks."""
         off = self._slot_off
         end = off + self._row_bytes
         self._buf[off:end] = row

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from pipeline.core.compiled import State, kernel, warm_once
+from pipeline.core.compiled import KernelState, State, kernel, warm_once
 from pipeline.force.frames import Vec3
 from pipeline.force.payload_compensator import finite_tuple
 
@@ -51,7 +51,7 @@ def rls_update(r: State, fx: float, fy: float, fz: float, tx: float, ty: float, 
     return True
 
 
-class RlsBias:
+class RlsBias(KernelState):
     """Recursive least-squares refinement of the 6 sensor offsets (science.md §1.4).
 
     Mass and centre of mass stay at their offline values; only the bias, the
@@ -97,7 +97,7 @@ class RlsBias:
     samples, and a growing count at rest means: re-bias offline.
     """
 
-    __slots__ = ("array",)
+    __slots__ = ()
 
     def __init__(
         self,

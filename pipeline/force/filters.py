@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, fingerprint, kernel, warm_once
+from pipeline.core.compiled import KernelState, State, fingerprint, kernel, warm_once
 from pipeline.force.frames import Vec3
 
-__all__ = ["MovingAverage", "MovingAverage3", "exact_sum", "group_delay_s", "ma3_mean", "ma3_update", "state_size"]
+__all__ = ["MovingAverage", "MovingAverage3", "group_delay_s", "ma3_mean", "ma3_update", "state_size"]
 
 # The state of a 3-vector moving average (:class:`MovingAverage3`), one float64 array: the running sums, the ring
 # index, the count, the samples rejected, the window, then the three rings (x, y, z) of ``window`` samples each.
@@ -33,18 +33,6 @@ _SX, _SY, _SZ, _I, _N, _REJECTED, _W, _BUF = range(8)
 def state_size(window: int) -> int:
     """The length of the state array of a ``window``-sample :class:`MovingAverage3`."""
     return _BUF + 3 * window
-
-
-def exact_sum(values: list[float]) -> float:
-    """Correctly rounded sum (``math.fsum``); ±inf when the true sum overflows.
-
-    ``fsum`` raises on intermediate overflow; a window of finite samples near
-    DBL_MAX may legitimately sum beyond it, and the filter must not raise at
-    1 kHz.  The plain sum then gives the overflowed ±inf (or NaN for mixed
-    signs); the next re-sum repairs the running sum once the window is finite
-    again.  (:func:`pipeline.core.exact.fsum`, which the filter's kernel calls.)
-    """
-    return float(exact.fsum(np.asarray(values, dtype=np.float64)))
 
 
 def _check_window(window: object) -> int:
@@ -127,7 +115,7 @@ ma3_mean = _compile_mean(fingerprint(exact))
 ma3_update = _compile_update(fingerprint(exact))
 
 
-class MovingAverage3:
+class MovingAverage3(KernelState):
     """Moving average of 3-vectors (a force), exact over arbitrarily long runs.
 
     Parameters
@@ -144,7 +132,7 @@ class MovingAverage3:
     over the array :attr:`array` (Algorithm 1's compiled tick runs the same kernel on the framework's slice of it).
     """
 
-    __slots__ = ("array", "window")
+    __slots__ = ("window",)
 
     def __init__(self, window: int) -> None:
         self.window = _check_window(window)
@@ -173,11 +161,6 @@ class MovingAverage3:
     def _rings(self) -> tuple[State, State, State]:
         b, w = self.array[_BUF:], self.window
         return b[:w], b[w:2 * w], b[2 * w:]
-
-    def adopt(self, view: State) -> None:
-        """Keep the state in ``view`` (a slice of the framework's array) from now on, as it is now."""
-        view[:] = self.array
-        self.array = view
 
     def state(self) -> dict[str, Any]:
         """The window's contents and running sums, JSON-safe and exact (see :meth:`load_state`)."""
@@ -210,8 +193,12 @@ class MovingAverage3:
 def _warm(array: State) -> None:
     """Compile the filter's kernels (or load them from numba's cache) once a process, on a copy of a filter's state:
     a filter's first sample waits for no compiler."""
-    st = array.copy()
-    warm_once(__name__, lambda: (ma3_update(st, 0.0, 0.0, 0.0), ma3_mean(st)))
+    def compile_them() -> None:
+        st = array.copy()
+        ma3_update(st, 0.0, 0.0, 0.0)
+        ma3_mean(st)
+
+    warm_once(__name__, compile_them)
 
 
 class MovingAverage:

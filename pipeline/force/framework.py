@@ -63,9 +63,8 @@ STEP_FIELDS = tick_record.STEP_FIELDS
 
 
 # The framework's state, one float64 array: the force offsets (payload weight plus bias in the current pose), the
-# three rotations ᵀ_S R, ᴮ_T R, ᴴ_B R (row-major), f_scale and f_max,
-# the payload's weight in the current pose and the bias (6 each: force N, torque N·m), the safety stage's state, the
-# filter's state.
+# three rotations ᵀ_S R, ᴮ_T R, ᴴ_B R (row-major), f_scale and f_max, the payload's weight in the current pose and
+# the bias (6 each: force N, torque N·m), the safety stage's state, the filter's state.
 _OFF, _RTS, _RBT, _RHB, _FSCALE, _FMAX, _PAY, _BIAS = 0, 3, 12, 21, 30, 31, 32, 38
 _SAFE = 44
 _FILT = _SAFE + safety.STATE_SIZE
@@ -73,7 +72,7 @@ _FILT = _SAFE + safety.STATE_SIZE
 GAIN_AT = _SAFE + safety.GAIN
 
 
-def _compile(callees: int) -> Any:
+def _compile(callees: int) -> Callable[..., tuple[float, ...]]:
     """:func:`step_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the stages it calls (numba
     keys its cache on a kernel's own file and closure)."""
 
@@ -112,6 +111,14 @@ def _compile(callees: int) -> Any:
     return step_kernel
 
 
+@kernel
+def offsets_kernel(st: State) -> None:
+    """The force offsets the per-tick path subtracts: the payload's weight in this pose plus the bias, from the
+    framework's array (after a new pose, a new calibration, a refined bias)."""
+    for k in range(3):
+        st[_OFF + k] = st[_PAY + k] + st[_BIAS + k]
+
+
 def _compile_refine(callees: int) -> Callable[..., bool]:
     """:func:`refine_kernel` closed over the fingerprint of :mod:`pipeline.force.bias_refinement`."""
 
@@ -127,8 +134,7 @@ def _compile_refine(callees: int) -> Callable[..., bool]:
             return False
         for k in range(6):
             st[_BIAS + k] = r[bias_refinement.THETA + k]
-        for k in range(3):  # (HapticFramework._update_offsets' arithmetic)
-            st[_OFF + k] = st[p + k] + st[_BIAS + k]
+        offsets_kernel(st)
         return True
 
     return refine_kernel
@@ -160,7 +166,6 @@ class HapticFramework:
     __slots__ = (
         "_cal",
         "_mounted",
-        "_payload",
         "_rbt",
         "_rts",
         "array",
@@ -184,7 +189,6 @@ class HapticFramework:
         self.device_peak_n = float(device_peak_n)
         self._cal = calibration
         self._mounted = calibration.for_mount(config.rot_tip_sensor)
-        self._payload: tuple[float, ...] = (0.0,) * 6
         self.filter = MovingAverage3(config.filter_window)
         self.safety = SafetyGovernor(config.safety, device_peak_n)
         self.rls = rls
@@ -220,10 +224,15 @@ class HapticFramework:
         (:meth:`pipeline.force.payload_compensator.MountedPayload.payload_wrench`).
         """
         self._rbt = rot_base_tip
-        self.array[_RBT:_RBT + 9] = rot_base_tip
-        self._payload = pay = self._mounted.payload_wrench(rot_base_tip)
-        self.array[_PAY:_PAY + 6] = pay
-        self._update_offsets()
+        st = self.array
+        st[_RBT:_RBT + 9] = rot_base_tip
+        st[_PAY:_PAY + 6] = self._mounted.payload_wrench(rot_base_tip)
+        offsets_kernel(st)
+
+    @property
+    def _payload(self) -> tuple[float, ...]:
+        """The payload's weight the sensor reads in the current pose (force N, torque N·m)."""
+        return tuple(self.array[_PAY:_PAY + 6].tolist())
 
     @property
     def _bias(self) -> tuple[float, ...]:
@@ -239,15 +248,6 @@ class HapticFramework:
         """The offsets the raw wrench is compensated by: the payload's weight in this pose plus the bias."""
         p, b = self._payload, self._bias
         return (p[0] + b[0], p[1] + b[1], p[2] + b[2], p[3] + b[3], p[4] + b[4], p[5] + b[5])
-
-    def _update_offsets(self) -> None:
-        # what the per-tick path reads: the force offsets, after a new pose or a new calibration (the online
-        # refinement's updates set them in refine_kernel, with the same sums)
-        p, b = self._payload, self._bias
-        st = self.array
-        st[_OFF] = p[0] + b[0]
-        st[_OFF + 1] = p[1] + b[1]
-        st[_OFF + 2] = p[2] + b[2]
 
     def compensated_torque(self, tx: float, ty: float, tz: float) -> Vec3:
         """Raw torque minus the payload moment and torque bias in the current pose, N·m."""
@@ -273,10 +273,8 @@ class HapticFramework:
         self.set_pose(self._rbt)
 
     def set_device_limit(self, device_limit_n: float) -> SafetyGovernor:
-        """Clamp to the haptic device's current (derated) force limit as well (:meth:`SafetyGovernor.set_device_limit`).
-
-        Rebuilds the per-tick tuple (its clamp-free bound depends on the limit); returns the safety stage.
-        """
+        """Clamp to the haptic device's current (derated) force limit as well (:meth:`SafetyGovernor.set_device_limit`);
+        returns the safety stage."""
         g = self.safety
         g.set_device_limit(device_limit_n)
         return g
@@ -377,7 +375,7 @@ class HapticFramework:
             filtered force, tip, base and haptic frame force, scaled and
             rendered force (3 each).
         """
-        return step_kernel(self.array, float(fx), float(fy), float(fz), 0.0,  # type: ignore[no-any-return]  # a kernel
+        return step_kernel(self.array, float(fx), float(fy), float(fz), 0.0,
                            False, bool(enabled), float(dt_s))
 
     def step_commanded(self, fx: float, fy: float, fz: float, command_n: float, enabled: bool,
@@ -390,7 +388,7 @@ class HapticFramework:
         The stages run as in :meth:`step`, and the safety stage advances once per tick, on the command
         (:func:`step_kernel` with ``commanded``).
         """
-        return step_kernel(self.array, float(fx), float(fy), float(fz),  # type: ignore[no-any-return]  # a kernel
+        return step_kernel(self.array, float(fx), float(fy), float(fz),
                            float(command_n), True, bool(enabled), float(dt_s))
 
 
@@ -407,9 +405,9 @@ def warm_kernels(array: State | None = None) -> None:
         if not is_warm(__name__):
             HapticFramework(FrameworkConfig(), device_peak_n=3.3)  # (its construction comes back here with its array)
         return
-    st = array.copy()
 
     def compile_them() -> None:
+        st = array.copy()
         step_kernel(st, 0.0, 0.0, 0.0, 0.0, False, True, 0.001)
         # and each stage as its Python side calls it (a commanded force's tick, a replay, the figures)
         filters.ma3_update(st[_FILT:], 0.0, 0.0, 0.0)
@@ -420,5 +418,6 @@ def warm_kernels(array: State | None = None) -> None:
         exact.hypot3(1.0, 0.0, 0.0)
         exact.fsum(st[:3])
         refine_kernel(st, RlsBias((0.0, 0.0, 0.0), (0.0, 0.0, 0.0)).array, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        offsets_kernel(st)
 
     warm_once(__name__, compile_them)

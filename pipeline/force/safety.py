@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pipeline.core import exact
-from pipeline.core.compiled import State, fingerprint, kernel, warm_once
+from pipeline.core.compiled import KernelState, State, fingerprint, kernel, warm_once
 from pipeline.force.config import SafetyConfig
 from pipeline.force.frames import Vec3
 
@@ -98,7 +98,7 @@ def _compile(callees: int) -> Any:
 safety_step = _compile(fingerprint(exact))
 
 
-class SafetyGovernor:
+class SafetyGovernor(KernelState):
     """Stateful safety stage; call :meth:`step` once per tick.
 
     Parameters
@@ -113,7 +113,7 @@ class SafetyGovernor:
     tick runs the same kernel on the framework's slice of it).
     """
 
-    __slots__ = ("array", "config", "device_limit_n", "limit_n", "static_limit_n")
+    __slots__ = ("config", "device_limit_n", "limit_n", "static_limit_n")
 
     def __init__(self, config: SafetyConfig, device_peak_n: float) -> None:
         if not (isinstance(device_peak_n, (int, float)) and 1e-6 <= device_peak_n <= 1e3):
@@ -134,11 +134,6 @@ class SafetyGovernor:
         st[_SLEW] = config.slew_n_per_s
         st[_MAX_DT] = config.max_dt_s
         _warm(st)
-
-    def adopt(self, view: State) -> None:
-        """Keep the state in ``view`` (a slice of the framework's array) from now on, as it is now."""
-        view[:] = self.array
-        self.array = view
 
     @property
     def gain(self) -> float:

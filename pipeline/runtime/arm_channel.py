@@ -399,7 +399,6 @@ class ArmChannel:
         return tuple(i[k] if integer else f[k] for k, integer in enumerate(_INTEGER))
 
 
-
 def own_faults(faults: int) -> int:
     """The faults that are this arm's own, not the policy's copy of another arm's."""
     return faults & ~Fault.OTHER_ARM

@@ -92,40 +92,40 @@ def substeps_kernel(st: State, y_c: float, felt_force_n: float, dt_s: float, n: 
 
 class CompliantArm(KernelState):
     """Integrates the arm along y with semi-implicit Euler (stable at 1 kHz: ω ≈ 45 rad/s): :func:`step_kernel`,
-    compiled, over the state array :attr:`state` (which the rig's compiled step works on too)."""
+    compiled, over the state array :attr:`array` (which the rig's compiled step works on too)."""
 
     __slots__ = ("_params",)
 
     def __init__(self, params: ArmParams | None = None) -> None:
         self._params = p = params or ArmParams()
         #: The state the kernels work on (the rig may move it into
-        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
-        self.state = np.array([0.0, 0.0, p.stiffness_n_per_m, p.damping_ns_per_m, p.mass_kg])
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt`).
+        self.array = np.array([0.0, 0.0, p.stiffness_n_per_m, p.damping_ns_per_m, p.mass_kg])
 
     @property
     def params(self) -> ArmParams:
-        """The arm's impedance (read-only: it is in :attr:`state`)."""
+        """The arm's impedance (read-only: it is in :attr:`array`)."""
         return self._params
 
     @property
     def y_m(self) -> float:
         """Position along y, m."""
-        return float(self.state[_Y])
+        return float(self.array[_Y])
 
     @property
     def v_m_s(self) -> float:
         """Velocity along y, m/s."""
-        return float(self.state[_V])
+        return float(self.array[_V])
 
     def step(self, y_c: float, felt_force_n: float, dt_s: float) -> float:
         """Advance by ``dt_s`` toward ``y_c`` under the felt force; return the new position."""
         if dt_s != dt_s or dt_s == math.inf:  # (how many sub-steps: as many as ceil() of it, which has none)
             raise ValueError(f"dt_s = {dt_s!r}: must be a finite number of seconds")
-        return step_kernel(self.state, float(y_c), float(felt_force_n), float(dt_s))
+        return step_kernel(self.array, float(y_c), float(felt_force_n), float(dt_s))
 
     def substeps(self, y_c: float, felt_force_n: float, dt_s: float, n: int) -> float:
         """Advance by ``dt_s`` in ``n`` equal semi-implicit Euler steps; return the new position."""
-        return substeps_kernel(self.state, float(y_c), float(felt_force_n), float(dt_s), int(n))
+        return substeps_kernel(self.array, float(y_c), float(felt_force_n), float(dt_s), int(n))
 
 
 def min_jerk(t: float, t0: float, duration: float, y0: float, y1: float) -> float:

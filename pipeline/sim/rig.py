@@ -51,7 +51,7 @@ _new_tuple = tuple.__new__
 # The rig's state, one float64 array (:func:`step_kernel`'s layout): the tool's home (base frame), the haptic device's
 # frame in the base frame (row-major), the hand's axis in the device's frame, the motion scale, the surface's height,
 # a push on the tip (base frame); then the arm's, the robot's, the tissue's and the sensor's states, each the slice
-# its model works on (``adopt_state``).
+# its model works on (``adopt``).
 _HOME, _ROT, _AXIS, _SCALE, _SURFACE, _PUSH = 0, 3, 12, 15, 16, 17
 _ARM = 20
 _ROBOT = _ARM + sim_hand.STATE_SIZE
@@ -234,10 +234,10 @@ class SimRig:
         st[_HOME:_HOME + 3], st[_ROT:_ROT + 9] = cfg.tip_home_m, rot_base_haptic
         st[_AXIS:_AXIS + 3] = self.hand_axis
         st[_SCALE], st[_SURFACE] = cfg.motion_scale, cfg.surface_z_m
-        self.arm.adopt_state(st[_ARM:_ROBOT])
-        self.robot.adopt_state(st[_ROBOT:_TISSUE])
-        self.tissue.adopt_state(st[_TISSUE:_SENSOR])
-        self.sensor.adopt_state(st[_SENSOR:_STATE_SIZE])
+        self.arm.adopt(st[_ARM:_ROBOT])
+        self.robot.adopt(st[_ROBOT:_TISSUE])
+        self.tissue.adopt(st[_TISSUE:_SENSOR])
+        self.sensor.adopt(st[_SENSOR:_STATE_SIZE])
         self._push_base_n: Vec3 = (0.0, 0.0, 0.0)
         self._orient: Mat3 | None = None
         self._rot_sensor_base: Mat3 = IDENTITY
@@ -281,8 +281,8 @@ class SimRig:
         """A copy (``copy.deepcopy``, pickle) shares its state array with its own models, as the original does."""
         self.__dict__.update(state)
         st = self.state
-        self.arm.state, self.robot.state = st[_ARM:_ROBOT], st[_ROBOT:_TISSUE]
-        self.tissue.state, self.sensor.state = st[_TISSUE:_SENSOR], st[_SENSOR:_STATE_SIZE]
+        self.arm.array, self.robot.array = st[_ARM:_ROBOT], st[_ROBOT:_TISSUE]
+        self.tissue.array, self.sensor.array = st[_TISSUE:_SENSOR], st[_SENSOR:_STATE_SIZE]
 
     # -- Rig interface ------------------------------------------------------------------------
     def advance(self, now_ns: int) -> None:
@@ -435,9 +435,9 @@ def warm_kernels(state: State | None = None, noise: State | None = None) -> None
         if not is_warm(__name__):
             SimRig()  # (its construction comes back here with its own state: a zero state would divide by zero)
         return
-    st, scratch = state.copy(), np.zeros_like(noise)
 
     def compile_them() -> None:
+        st, scratch = state.copy(), np.zeros_like(noise)
         step_kernel(st, scratch, 0, 0.0, 0.0, 0.001, 1, 1)
         # and each on its own, as the models' methods call them (a tick with Python's turns in it)
         sim_hand.step_kernel(st[_ARM:_ROBOT], 0.0, 0.0, 0.001)

@@ -94,7 +94,7 @@ class SimRobot(KernelState):
     """A ``Robot`` with a settable target; the rig advances it each tick.
 
     ``frozen = True`` stops pose publication (a dead RTDE link) for watchdog tests.  The motion is
-    :func:`advance_kernel`'s, compiled, over the state array :attr:`state` (the rig's compiled step runs the same
+    :func:`advance_kernel`'s, compiled, over the state array :attr:`array` (the rig's compiled step runs the same
     kernel on the same array); the controller's cycle in Python (:meth:`cycled`) only re-orients and publishes.
     """
 
@@ -103,8 +103,8 @@ class SimRobot(KernelState):
         #: The clock reading of the first step: the state counts time from it (None before it).
         self.origin_ns: int | None = None
         #: The state :func:`advance_kernel` works on (the rig may move it into
-        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
-        self.state = st = np.zeros(STATE_SIZE)
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt`).
+        self.array = st = np.zeros(STATE_SIZE)
         st[_POS:_POS + 3] = st[_TARGET:_TARGET + 3] = st[_HELD:_HELD + 3] = home_m
         st[_NEXT], st[_CYCLE] = math.nan, int(round(1e9 / self._params.controller_rate_hz))
         st[_LAG_DT], st[_TAU] = -1.0, self._params.tracking_lag_s  # (the dt the lag factor is for: none yet)
@@ -122,13 +122,13 @@ class SimRobot(KernelState):
 
     @property
     def params(self) -> RobotParams:
-        """The arm's timing (read-only: it is in :attr:`state`)."""
+        """The arm's timing (read-only: it is in :attr:`array`)."""
         return self._params
 
     @property
     def position_m(self) -> list[float]:
         """The tool's position now (base frame, m; a copy)."""
-        return self.state[_POS:_POS + 3].tolist()  # type: ignore[no-any-return]  # a float64 array's list: floats
+        return self.array[_POS:_POS + 3].tolist()  # type: ignore[no-any-return]  # a float64 array's list: floats
 
     @property
     def moves_smoothly(self) -> bool:
@@ -138,7 +138,7 @@ class SimRobot(KernelState):
 
     def command(self, target_m: Vec3) -> None:
         """Set the TCP position the teleoperation program asks for (base frame, m)."""
-        self.state[_TARGET:_TARGET + 3] = target_m
+        self.array[_TARGET:_TARGET + 3] = target_m
 
     # -- TcpServo -----------------------------------------------------------------------------
     def servo_tcp(self, position_m: Vec3, rot_base_tip: Mat3) -> None:
@@ -146,7 +146,7 @@ class SimRobot(KernelState):
         self._stop_requested = False
         self.servoing = True
         self.servo_commands += 1
-        self.state[_TARGET:_TARGET + 3] = position_m
+        self.array[_TARGET:_TARGET + 3] = position_m
         if rot_base_tip != self._pending_orientation:
             self._pending_orientation = rot_base_tip
 
@@ -173,7 +173,7 @@ class SimRobot(KernelState):
 
     def advance(self, now_ns: int, dt_s: float) -> None:
         """Run the controller cycle if due and integrate the tracking lag over ``dt_s``."""
-        st = self.state
+        st = self.array
         t_ns = self.since_first_ns(int(now_ns))
         if self._stop_requested:
             nxt = st[_NEXT]
@@ -189,12 +189,12 @@ class SimRobot(KernelState):
         """A controller cycle ran at ``now_ns``: take the pending orientation, publish the pose (unless frozen)."""
         self.orientation = self._pending_orientation
         if not self.frozen:
-            x, y, z = self.state[_POSE:_POSE + 3].tolist()
+            x, y, z = self.array[_POSE:_POSE + 3].tolist()
             self._pose = PoseSample(now_ns, (x, y, z), self.orientation, now_ns * 1e-9)
 
     def teleport(self, position_m: Vec3) -> None:
         """Place the tool at ``position_m`` at rest (set-up and calibration, not teleoperation)."""
-        st = self.state
+        st = self.array
         st[_POS:_POS + 3] = st[_TARGET:_TARGET + 3] = st[_HELD:_HELD + 3] = position_m
 
     def read_pose(self) -> PoseSample:

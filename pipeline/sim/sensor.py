@@ -160,7 +160,7 @@ class SimForceSensor(KernelState):
     :meth:`read_wrench`.  ``stalled``, ``status_override`` and
     ``inject_nan`` are fault-injection switches for watchdog tests.
 
-    The arithmetic of a sample is :func:`sample_kernel`'s, compiled, over the state array :attr:`state` (the rig's
+    The arithmetic of a sample is :func:`sample_kernel`'s, compiled, over the state array :attr:`array` (the rig's
     compiled step runs the same kernel on the same array).
     """
 
@@ -192,8 +192,8 @@ class SimForceSensor(KernelState):
         self._bias0 = (*p.bias_force_n, *p.bias_torque_nm)
         self._drift = (*p.drift_force_n, *(0.01 * d for d in p.drift_force_n))
         #: The state :func:`sample_kernel` works on (the rig may move it into
-        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
-        self.state = st = np.zeros(STATE_SIZE)
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt`).
+        self.array = st = np.zeros(STATE_SIZE)
         st[_BIAS0:_BIAS0 + 6], st[_DRIFT:_DRIFT + 6], st[_RANGE:_RANGE + 6] = self._bias0, self._drift, p.range_n
         st[_LEVER:_LEVER + 3] = p.tip_in_sensor_m
         st[_CPF], st[_CPT], st[_TAU], st[_RW_SCALE] = cpf, cpt, p.drift_tau_s, p.random_walk_n_per_sqrt_s
@@ -202,26 +202,26 @@ class SimForceSensor(KernelState):
 
     @property
     def params(self) -> SensorParams:
-        """The sensor's physical truth (read-only: it is in :attr:`state`)."""
+        """The sensor's physical truth (read-only: it is in :attr:`array`)."""
         return self._params
 
     @property
     def stalled(self) -> bool:
         """Fault switch: the box stops sending (the random walk goes on)."""
-        return bool(self.state[_STALLED])
+        return bool(self.array[_STALLED])
 
     @stalled.setter
     def stalled(self, on: bool) -> None:
-        self.state[_STALLED] = 1.0 if on else 0.0
+        self.array[_STALLED] = 1.0 if on else 0.0
 
     @property
     def inject_nan(self) -> bool:
         """Fault switch: Fx reads NaN."""
-        return bool(self.state[_NAN])
+        return bool(self.array[_NAN])
 
     @inject_nan.setter
     def inject_nan(self, on: bool) -> None:
-        self.state[_NAN] = 1.0 if on else 0.0
+        self.array[_NAN] = 1.0 if on else 0.0
 
     @property
     def range_n(self) -> tuple[float, float, float, float, float, float]:
@@ -255,7 +255,7 @@ class SimForceSensor(KernelState):
     def current_bias(self, t_s: float) -> tuple[float, ...]:
         """Full bias at ``t_s`` including the random walk so far (ground truth for tests)."""
         b = self.bias_at(t_s)
-        rw = self.state[_RW:_RW + 6].tolist()
+        rw = self.array[_RW:_RW + 6].tolist()
         return tuple(b[i] + rw[i] for i in range(6))
 
     def set_rotation(self, rot_sensor_base: Mat3) -> None:
@@ -264,7 +264,7 @@ class SimForceSensor(KernelState):
             return
         # the payload's weight only changes with the orientation
         g_s = mat_vec(rot_sensor_base, (0.0, 0.0, -_G * self.params.mass_kg))
-        st = self.state
+        st = self.array
         st[_GRAV:_GRAV + 6] = (*g_s, *cross(self.params.com_m, g_s))
         st[_ROT:_ROT + 9] = rot_sensor_base
         self._grav_rot = rot_sensor_base
@@ -281,9 +281,9 @@ class SimForceSensor(KernelState):
         self.set_rotation(rot_sensor_base)
         c0, c1, c2 = contact_force_base
         t_ns = int(t_ns)
-        what = sample_kernel(self.state, self.noise, ni, self.since_first_ns(t_ns), float(c0), float(c1), float(c2),
+        what = sample_kernel(self.array, self.noise, ni, self.since_first_ns(t_ns), float(c0), float(c1), float(c2),
                              float(dt_s))
-        self.took(what, t_ns, *self.state[_OUT:_OUT + 6].tolist())
+        self.took(what, t_ns, *self.array[_OUT:_OUT + 6].tolist())
 
     def took(self, what: int, t_ns: int, v0: float, v1: float, v2: float, v3: float, v4: float, v5: float) -> None:
         """Count and publish what :func:`sample_kernel` did at ``t_ns`` (the record's values ``v0`` ... ``v5``)."""

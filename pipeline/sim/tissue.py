@@ -97,27 +97,27 @@ def step_kernel(st: State, depth_m: float, dt_s: float) -> float:
 
 class HuntCrossleyTissue(KernelState):
     """Stateful tissue: call :meth:`step` with the tip penetration each tick (:func:`step_kernel`, compiled, over the
-    state array :attr:`state`, which the rig's compiled step works on too)."""
+    state array :attr:`array`, which the rig's compiled step works on too)."""
 
     __slots__ = ("_params",)
 
     def __init__(self, params: TissueParams | None = None) -> None:
         self._params = p = params or TissueParams()
         #: The state :func:`step_kernel` works on (the rig may move it into
-        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt_state`).
-        self.state = np.array([0.0, 0.0, 0.0, p.stiffness_n_per_m_pow, p.exponent, p.damping_s_per_m,
+        #: its own array: :meth:`~pipeline.core.compiled.KernelState.adopt`).
+        self.array = np.array([0.0, 0.0, 0.0, p.stiffness_n_per_m_pow, p.exponent, p.damping_s_per_m,
                                p.relax_stiffness_n_per_m, p.relax_time_s])
 
     @property
     def params(self) -> TissueParams:
-        """The tissue's parameters (read-only: they are in :attr:`state`)."""
+        """The tissue's parameters (read-only: they are in :attr:`array`)."""
         return self._params
 
     @property
     def force_n(self) -> float:
         """The contact force of the last step, N (≥ 0)."""
-        return float(self.state[_FORCE])
+        return float(self.array[_FORCE])
 
     def step(self, depth_m: float, dt_s: float) -> float:
         """Advance by ``dt_s`` with penetration ``depth_m`` (≤ 0: no contact); return the force, N."""
-        return step_kernel(self.state, float(depth_m), float(dt_s))
+        return step_kernel(self.array, float(depth_m), float(dt_s))

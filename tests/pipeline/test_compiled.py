@@ -41,7 +41,7 @@ def test_arm_step(y: float, v: float, k: float, b: float, m: float, y_c: float, 
 @given(depth=ANY, prev=FINITE, maxwell=FINITE, dt=DT, relax=st.sampled_from([0.0, 40.0]), n=st.floats(1.0, 2.5))
 def test_tissue_step(depth: float, prev: float, maxwell: float, dt: float, relax: float, n: float) -> None:
     t = HuntCrossleyTissue(TissueParams(exponent=n, relax_stiffness_n_per_m=relax))
-    s = t.state.copy()
+    s = t.array.copy()
     s[0], s[1] = prev, maxwell
     same(tissue.step_kernel, s, depth, dt)
 
@@ -54,9 +54,9 @@ def test_robot(pos: tuple[float, float, float], target: tuple[float, float, floa
     r = SimRobot(pos)
     if not first:
         r.advance(now // 2, 0.001)  # a controller cycle already ran: the next one is due later
-    same(robot.command_kernel, r.state, *target)
+    same(robot.command_kernel, r.array, *target)
     r.command(target)
-    same(robot.advance_kernel, r.state, now, dt)
+    same(robot.advance_kernel, r.array, now, dt)
 
 
 @given(contact=st.tuples(ANY, ANY, ANY), t_ns=st.integers(0, 2**53 - 10**7), dt=DT, loss=st.sampled_from([0.0, 0.3]),
@@ -67,9 +67,9 @@ def test_sensor_sample(contact: tuple[float, float, float], t_ns: int, dt: float
     s.stalled, s.inject_nan = stalled, nan
     ni = s.next_noise_row()
     s.set_rotation((0.0, 1.0, 0.0, -1.0, 0.0, 0.0, 0.0, 0.0, -1.0))
-    same(sensor.sample_kernel, s.state, s.noise, ni, t_ns, *contact, dt)
+    same(sensor.sample_kernel, s.array, s.noise, ni, t_ns, *contact, dt)
     s.sample(t_ns, (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 5.0), 0.001)  # a first sample set t0
-    same(sensor.sample_kernel, s.state, s.noise, s.next_noise_row(), t_ns + 10**6, *contact, dt)
+    same(sensor.sample_kernel, s.array, s.noise, s.next_noise_row(), t_ns + 10**6, *contact, dt)
 
 
 @given(y_c=ANY, felt=ANY, dt=DT, seed=st.integers(0, 1000), push=st.tuples(FINITE, FINITE, FINITE))

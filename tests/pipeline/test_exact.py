@@ -52,7 +52,7 @@ def test_hypot3_compiled_is_its_python(x: float, y: float, z: float) -> None:
 
 
 def _python_fsum(values: list[float]) -> float | str:
-    """``math.fsum``, with :func:`pipeline.force.filters.exact_sum`'s fallback to the plain sum on an intermediate
+    """``math.fsum``, with :func:`pipeline.core.exact.fsum`'s fallback to the plain sum on an intermediate
     overflow ("VE" for its ValueError)."""
     try:
         return math.fsum(values)
