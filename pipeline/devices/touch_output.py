@@ -44,7 +44,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, cast
 
+import numpy as np
+
+from pipeline.core import exact
+from pipeline.core.compiled import State, fingerprint, kernel, warm_once
+from pipeline.core.record_writer import IntRow
 from pipeline.force.frames import Vec3
 
 __all__ = [
@@ -52,10 +58,14 @@ __all__ = [
     "HD_ERRORS",
     "HD_EXCEEDED_MAX_FORCE",
     "HD_WARM_MOTORS",
+    "STATE_SIZE",
+    "WARM",
     "HapticLimits",
     "MotorHeat",
     "TouchOutput",
+    "command_kernel",
     "hd_error_text",
+    "render_kernel",
 ]
 
 #: OpenHaptics ``HD_WARM_MOTORS`` (hdDefines.h).
@@ -138,88 +148,166 @@ class HapticLimits:
             raise ValueError(f"haptic.derate_from_fraction = {f!r}: must be a number from 0 to below 1")
 
 
+
+# The output's state, one float64 array (its kernels' layout; the times are int64 in the same memory, the array's int64
+# view): the command (N, device frame), its time on the device's clock and whether there is one, what the last render
+# put out, whether it found the command stale, how many did, whether the budget was passed (HD_WARM_MOTORS); the
+# heat (MotorHeat): the heat, the derated limit, the fraction of the budget, over the budget; then the constants.
+_CMD, _CMD_T, _HAS_CMD, _RENDERED, _STALE, _STALE_TICKS, _WARM = 0, 3, 4, 5, 8, 9, 10
+_HEAT, _LIMIT, _FRACTION, _OVER = 11, 12, 13, 14
+_TIMEOUT_NS, _CONT2, _BUDGET, _FROM, _SPAN, _PEAK, _DROP, _CONT = 15, 16, 17, 18, 19, 20, 21, 22
+STATE_SIZE = 23
+#: Where the state says the budget was passed (HD_WARM_MOTORS): the simulated Touch raises its error from it.
+WARM = _WARM
+
+
+@kernel
+def set_heat_kernel(st: State, h: float) -> None:
+    """The heat is ``h`` (N²·s): the derated limit, the fraction of the budget and whether it is passed with it."""
+    st[_HEAT] = h
+    if h <= st[_FROM]:
+        st[_LIMIT] = st[_PEAK]
+    elif h >= st[_BUDGET]:
+        st[_LIMIT] = st[_CONT]
+    else:
+        st[_LIMIT] = st[_PEAK] - st[_DROP] * (h - st[_FROM]) / st[_SPAN]
+    st[_FRACTION] = h / st[_BUDGET]
+    st[_OVER] = 1.0 if h > st[_BUDGET] else 0.0
+
+
+@kernel
+def add_heat_kernel(st: State, force_n: float, dt_s: float) -> None:
+    """Account ``dt_s`` of rendering ``force_n`` (a magnitude, N): :meth:`MotorHeat.add`."""
+    if dt_s > _MAX_HEAT_DT_S:
+        dt_s = _MAX_HEAT_DT_S
+    h = st[_HEAT] + (force_n * force_n - st[_CONT2]) * dt_s
+    if h > 0.0:
+        set_heat_kernel(st, h)
+    elif st[_HEAT] != 0.0:  # cold, and it stays so: nothing to update (the common case at rest)
+        set_heat_kernel(st, 0.0)
+
+
+@kernel
+def command_kernel(st: State, sti: IntRow, fx: float, fy: float, fz: float, t_ns: int) -> None:
+    """The force to render from now on (N, device frame), commanded at ``t_ns``: :meth:`TouchOutput.command`.
+
+    One compiled call: a servo thread (the real Touch's) never renders half of a command (a compiled call holds the
+    interpreter's lock throughout)."""
+    st[_CMD] = fx
+    st[_CMD + 1] = fy
+    st[_CMD + 2] = fz
+    sti[_CMD_T] = t_ns
+    st[_HAS_CMD] = 1.0
+
+
+def _compile_render(callees: int) -> Any:
+    """:func:`render_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
+
+    @kernel
+    def render_kernel(st: State, sti: IntRow, now_ns: int, dt_s: float, enabled: bool) -> tuple[float, float, float]:
+        """The force to put out this servo tick, its heat accounted over ``dt_s``: :meth:`TouchOutput.render`."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        fx, fy, fz = st[_CMD], st[_CMD + 1], st[_CMD + 2]
+        stale = st[_HAS_CMD] == 0.0 or now_ns - sti[_CMD_T] >= sti[_TIMEOUT_NS]
+        st[_STALE] = 1.0 if stale else 0.0
+        if stale or not enabled or st[_WARM] != 0.0:
+            if stale:
+                st[_STALE_TICKS] += 1.0
+            fx = fy = fz = m = 0.0
+        else:
+            m = exact.hypot3(fx, fy, fz)  # (math.hypot's bits: pipeline.core.exact)
+            if m - m != 0.0:  # (not finite: inf - inf and NaN - NaN are NaN)
+                fx = fy = fz = m = 0.0
+            else:
+                lim = st[_LIMIT]
+                if m > lim:
+                    k = lim / m
+                    fx, fy, fz, m = fx * k, fy * k, fz * k, lim
+        if dt_s > 0.0:
+            add_heat_kernel(st, m, dt_s)
+        if st[_OVER] != 0.0 and st[_WARM] == 0.0:
+            st[_WARM] = 1.0
+            fx = fy = fz = 0.0
+        st[_RENDERED] = fx
+        st[_RENDERED + 1] = fy
+        st[_RENDERED + 2] = fz
+        return fx, fy, fz
+
+    return render_kernel
+
+
+#: What the device renders this servo tick (:meth:`TouchOutput.render`), compiled.
+render_kernel = _compile_render(fingerprint(exact))
+
+
 class MotorHeat:
     """The Touch's thermal budget: heat, the derated force limit, and whether the budget was passed.
 
     :attr:`limit_n`, :attr:`fraction` and :attr:`over_budget` are kept up to date whenever the heat changes
-    (they are read every servo and loop tick; the heat changes once per servo tick).
+    (:func:`set_heat_kernel`; they are read every servo and loop tick, the heat changes once per servo tick).  The
+    state is its :class:`TouchOutput`'s array (or its own).
 
     Parameters
     ----------
     spec
         Peak, continuous rating, budget and where derating starts.
+    array
+        The state to keep it in (a :class:`TouchOutput`'s); None: its own.
     """
 
-    __slots__ = (
-        "_budget",
-        "_cont2",
-        "_drop",
-        "_from",
-        "_h",
-        "_peak",
-        "_span",
-        "fraction",
-        "limit_n",
-        "over_budget",
-        "spec",
-    )
+    __slots__ = ("array", "spec")
 
-    def __init__(self, spec: HapticLimits) -> None:
+    def __init__(self, spec: HapticLimits, array: State | None = None) -> None:
         self.spec = spec
-        self._cont2 = spec.continuous_force_n ** 2
-        self._budget = spec.thermal_budget_n2s
-        self._from = spec.derate_from_fraction * spec.thermal_budget_n2s
-        self._span = spec.thermal_budget_n2s - self._from
-        self._peak = spec.peak_force_n
-        self._drop = spec.peak_force_n - spec.continuous_force_n
-        #: The force the device may render now, N: its peak, falling to the continuous rating as it warms.
-        self.limit_n = self._peak
-        #: Heat as a fraction of the budget (0 cold, 1 at the budget).
-        self.fraction = 0.0
-        #: The heat passed the budget (the device must stop: ``HD_WARM_MOTORS``).
-        self.over_budget = False
-        self._h = 0.0
-        self.heat_n2s = 0.0
+        self.array = st = array if array is not None else np.zeros(STATE_SIZE)
+        st[_CONT2] = spec.continuous_force_n ** 2
+        st[_BUDGET] = spec.thermal_budget_n2s
+        st[_FROM] = spec.derate_from_fraction * spec.thermal_budget_n2s
+        st[_SPAN] = spec.thermal_budget_n2s - st[_FROM]
+        st[_PEAK], st[_CONT] = spec.peak_force_n, spec.continuous_force_n
+        st[_DROP] = spec.peak_force_n - spec.continuous_force_n
+        set_heat_kernel(st, 0.0)
+
+    @property
+    def limit_n(self) -> float:
+        """The force the device may render now, N: its peak, falling to the continuous rating as it warms."""
+        return float(self.array[_LIMIT])
+
+    @property
+    def fraction(self) -> float:
+        """Heat as a fraction of the budget (0 cold, 1 at the budget)."""
+        return float(self.array[_FRACTION])
+
+    @property
+    def over_budget(self) -> bool:
+        """The heat passed the budget (the device must stop: ``HD_WARM_MOTORS``)."""
+        return bool(self.array[_OVER])
 
     @property
     def heat_n2s(self) -> float:
         """Motor heat above the continuous rating's steady state, N²·s (0 cold)."""
-        return self._h
+        return float(self.array[_HEAT])
 
     @heat_n2s.setter
     def heat_n2s(self, h: float) -> None:
-        self._h = h
-        if h <= self._from:
-            self.limit_n = self._peak
-        elif h >= self._budget:
-            self.limit_n = self.spec.continuous_force_n
-        else:
-            self.limit_n = self._peak - self._drop * (h - self._from) / self._span
-        self.fraction = h / self._budget
-        self.over_budget = h > self._budget
+        set_heat_kernel(self.array, float(h))
 
     def add(self, force_n: float, dt_s: float) -> None:
         """Account ``dt_s`` of rendering ``force_n`` (a magnitude, N)."""
-        if dt_s > _MAX_HEAT_DT_S:
-            dt_s = _MAX_HEAT_DT_S
-        h = self._h + (force_n * force_n - self._cont2) * dt_s
-        if h > 0.0:
-            self.heat_n2s = h
-        elif self._h != 0.0:  # cold, and it stays so: nothing to update (the common case at rest)
-            self.heat_n2s = 0.0
+        add_heat_kernel(self.array, float(force_n), float(dt_s))
 
     def cooled(self) -> bool:
         """Cool enough to re-arm after ``HD_WARM_MOTORS`` (half the budget)."""
-        return self._h <= 0.5 * self._budget
+        return self.heat_n2s <= 0.5 * self.spec.thermal_budget_n2s
 
 
 class TouchOutput:
     """The latest command, with its time, and what the device renders from it (see the module docstring).
 
-    :meth:`command` is called by whoever commands the device (the haptic loop's
-    thread); :meth:`render` only in the device's own servo tick.  The command
-    is one tuple replaced in a single assignment, so the servo thread never
-    reads half of one.
+    :meth:`command` is called by whoever commands the device (the haptic loop's thread); :meth:`render` only in the
+    device's own servo tick.  Each is one compiled call over the output's state (:attr:`array`:
+    :func:`command_kernel`, :func:`render_kernel`), which holds the interpreter's lock throughout, so the servo thread
+    never reads half of a command.
 
     Parameters
     ----------
@@ -230,17 +318,7 @@ class TouchOutput:
         this long after the last command, so at most this long after the loop stopped.
     """
 
-    __slots__ = (
-        "_cmd",
-        "_timeout_ns",
-        "command_timeout_s",
-        "heat",
-        "rendered_n",
-        "spec",
-        "stale",
-        "stale_ticks",
-        "warm",
-    )
+    __slots__ = ("array", "command_timeout_s", "heat", "ints", "spec")
 
     def __init__(self, spec: HapticLimits, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
         if isinstance(command_timeout_s, bool) or not (isinstance(command_timeout_s, (int, float))
@@ -248,32 +326,49 @@ class TouchOutput:
             raise ValueError(f"command_timeout_s = {command_timeout_s!r}: must be a number of seconds above 0, "
                              "at most 1")
         self.spec = spec
-        self.heat = MotorHeat(spec)
+        #: The state (the module's layout) and its int64 view (the times).
+        self.array: State = np.zeros(STATE_SIZE)
+        self.ints: IntRow = self.array.view(np.int64)
+        self.heat = MotorHeat(spec, self.array)
         self.command_timeout_s = float(command_timeout_s)
-        self._timeout_ns = int(round(command_timeout_s * 1e9))
-        self._cmd: tuple[float, float, float, int | None] = (0.0, 0.0, 0.0, None)
-        #: What the last :meth:`render` put out, N (device frame).
-        self.rendered_n: Vec3 = (0.0, 0.0, 0.0)
-        #: The last render found the command stale (as old as the timeout) and put out zero.
-        self.stale = False
-        #: Renders that found the command stale (diagnostics).
-        self.stale_ticks = 0
-        #: The heat passed the budget: nothing is rendered until :meth:`rearm` succeeds.
-        self.warm = False
+        self.ints[_TIMEOUT_NS] = int(round(command_timeout_s * 1e9))
+        warm_once(__name__, lambda: _compile_them(self.array.copy()))
 
     def command(self, fx: float, fy: float, fz: float, t_ns: int) -> None:
         """The force to render from now on (N, device frame), commanded at ``t_ns`` on the device's clock."""
-        self._cmd = (fx, fy, fz, t_ns)
+        command_kernel(self.array, self.ints, float(fx), float(fy), float(fz), int(t_ns))
 
     @property
     def commanded(self) -> Vec3:
         """The latest command, N (whatever its age)."""
-        c = self._cmd
+        c = self.array[_CMD:_CMD + 3].tolist()
         return (c[0], c[1], c[2])
+
+    @property
+    def rendered_n(self) -> Vec3:
+        """What the last :meth:`render` put out, N (device frame)."""
+        r = self.array[_RENDERED:_RENDERED + 3].tolist()
+        return (r[0], r[1], r[2])
+
+    @property
+    def stale(self) -> bool:
+        """The last render found the command stale (as old as the timeout) and put out zero."""
+        return bool(self.array[_STALE])
+
+    @property
+    def stale_ticks(self) -> int:
+        """Renders that found the command stale (diagnostics)."""
+        return int(self.array[_STALE_TICKS])
+
+    @property
+    def warm(self) -> bool:
+        """The heat passed the budget: nothing is rendered until :meth:`rearm` succeeds."""
+        return bool(self.array[_WARM])
 
     def clear(self) -> None:
         """Forget the command (a re-arm starts from zero, not from a stale command)."""
-        self._cmd = (0.0, 0.0, 0.0, None)
+        command_kernel(self.array, self.ints, 0.0, 0.0, 0.0, 0)
+        self.array[_HAS_CMD] = 0.0
 
     @property
     def limit_n(self) -> float:
@@ -281,7 +376,7 @@ class TouchOutput:
         return self.heat.limit_n
 
     def render(self, now_ns: int, dt_s: float, enabled: bool = True) -> Vec3:
-        """The force to put out this servo tick, and account its heat over ``dt_s``.
+        """The force to put out this servo tick, and account its heat over ``dt_s`` (:func:`render_kernel`).
 
         Parameters
         ----------
@@ -292,36 +387,21 @@ class TouchOutput:
         enabled
             False while the device is in an error state: output zero.
         """
-        fx, fy, fz, t_cmd = self._cmd
-        stale = t_cmd is None or now_ns - t_cmd >= self._timeout_ns
-        self.stale = stale
-        if stale or not enabled or self.warm:
-            if stale:
-                self.stale_ticks += 1
-            fx = fy = fz = m = 0.0
-        else:
-            m = math.hypot(fx, fy, fz)
-            if not math.isfinite(m):
-                fx = fy = fz = m = 0.0
-            else:
-                lim = self.heat.limit_n
-                if m > lim:
-                    k = lim / m
-                    fx, fy, fz, m = fx * k, fy * k, fz * k, lim
-        heat = self.heat
-        if dt_s > 0.0:
-            heat.add(m, dt_s)
-        if heat.over_budget and not self.warm:
-            self.warm = True
-            fx = fy = fz = 0.0
-        out = (fx, fy, fz)
-        self.rendered_n = out
-        return out
+        return cast(Vec3, render_kernel(self.array, self.ints, int(now_ns), float(dt_s), bool(enabled)))
 
     def rearm(self) -> bool:
         """Clear :attr:`warm` if the motors have cooled to half the budget; True if no longer warm."""
         if self.warm and not self.heat.cooled():
             return False
-        self.warm = False
+        self.array[_WARM] = 0.0
         self.clear()
         return True
+
+
+def _compile_them(st: State) -> None:
+    """Compile the output's kernels (or load them from numba's cache) on a scratch state, as its methods call them:
+    once a process, at the first output's construction, so that no servo or loop tick waits for a compiler."""
+    si = st.view(np.int64)
+    command_kernel(st, si, 0.0, 0.0, 0.0, 0)
+    render_kernel(st, si, 1, 0.001, True)
+    add_heat_kernel(st, 0.0, 0.001)

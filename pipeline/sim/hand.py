@@ -128,14 +128,16 @@ class CompliantArm(KernelState):
         return substeps_kernel(self.array, float(y_c), float(felt_force_n), float(dt_s), int(n))
 
 
+@kernel
 def min_jerk(t: float, t0: float, duration: float, y0: float, y1: float) -> float:
-    """Minimum-jerk interpolation from ``y0`` at ``t0`` to ``y1`` at ``t0 + duration``."""
+    """Minimum-jerk interpolation from ``y0`` at ``t0`` to ``y1`` at ``t0 + duration`` (floats only: compiled)."""
     if t <= t0:
         return y0
     if t >= t0 + duration:
         return y1
     s = (t - t0) / duration
-    return y0 + (y1 - y0) * (10 * s**3 - 15 * s**4 + 6 * s**5)
+    # float exponents: the C library's pow, as Python's ** calls it (numba would multiply out an int exponent)
+    return float(y0 + (y1 - y0) * (10.0 * s**3.0 - 15.0 * s**4.0 + 6.0 * s**5.0))
 
 
 class HoldStill:
@@ -184,6 +186,7 @@ class ScriptedPresses:
         bottom = -(self.start_gap_m + self.depths_m[i]) - obs.felt_force_n / self.k
         t_down = self.rest_s
         t_up = self.rest_s + 0.6 + self.hold_s
+        # (float(): the kernel is compiled for floats; an int period or rest would compile another version)
         if tc < t_up:
-            return min_jerk(tc, t_down, 0.6, 0.0, bottom)
-        return min_jerk(tc, t_up, 0.4, bottom, 0.0)
+            return min_jerk(float(tc), float(t_down), 0.6, 0.0, float(bottom))
+        return min_jerk(float(tc), float(t_up), 0.4, float(bottom), 0.0)

@@ -88,12 +88,14 @@ are in :mod:`pipeline.sim.participant_params`.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
 from pipeline.core.aim import TrialAim, TrialQuestion
+from pipeline.core.compiled import State, fingerprint, kernel, warm_once
 from pipeline.force.scaling import scale_magnitude
+from pipeline.sim import hand
 from pipeline.sim.approach import approach_end_y, seen_over_aim
 from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
@@ -104,7 +106,7 @@ from pipeline.sim.percepts import HISTORY_TICKS, inverse_scale, newest_at, weber
 from pipeline.sim.tissue import TissueParams
 from pipeline.sim.tracking_hand import TrackingHand
 
-__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant"]
+__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant", "plan_kernel", "remember_kernel"]
 
 #: The participant never commands an equilibrium outside this range (m along the Touch's +y, from
 #: the start pose): 30 mm down is 15 mm into the tissue (≈ 20 N, far beyond any task force) and
@@ -125,9 +127,115 @@ _NOISE_BLOCK = 1024
 # stages of a trial
 _IDLE, _WAIT, _APPROACH, _CONTROL = 0, 1, 2, 3
 
+# The participant's per-tick state, a float64 array (its kernels' layout): the newest observation's time (NaN before
+# the first) and its place in the history, the commanded minimum-jerk segment (y0 → y1 over [t0, t0 + dur], its end),
+# the postural drift (on, its knots' times and values, its step), the last output, the next event's time, the normals
+# drawn (the next one's index, how many), the cue's time.
+_T, _HI, _P_T0, _P_DUR, _P_Y0, _P_Y1, _P_END, _DRIFT_ON, _D_T0, _D_T1, _D0, _D1, _D_STEP, _OUT, _NEXT = range(15)
+_ZI, _NZ, _CUE_T = 15, 16, 17
+STATE_SIZE = 18
+#: Where the state holds the next event's time, the newest observation's time, whether the drift is on, the next
+#: drift knot's time, and the normals drawn and used (what a caller running ticks in a block checks before each).
+NEXT_AT, T_AT, DRIFT_ON_AT, D_T1_AT, ZI_AT, NZ_AT = _NEXT, _T, _DRIFT_ON, _D_T1, _ZI, _NZ
+#: The history's rows: times, stylus positions, felt forces, indentations, gaps.
+_HT, _HY, _HF, _HD, _HG = range(5)
+
+
+@kernel
+def remember_kernel(ps: State, hist: State, t: float, y_st: float, felt: float, ind: float, gap: float) -> None:
+    """Keep this tick's observation (at the participant's time ``t``) in the history's next slot."""
+    i = (int(ps[_HI]) + 1) & _MASK
+    ps[_HI] = i
+    hist[_HT, i] = t
+    hist[_HY, i] = y_st
+    hist[_HF, i] = felt
+    hist[_HD, i] = ind
+    hist[_HG, i] = gap
+
+
+def _compile_plan(callees: int) -> Any:
+    """:func:`plan_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
+
+    @kernel
+    def plan_kernel(ps: State, z: State, t: float) -> float:
+        """The equilibrium at ``t``: the current plan plus the postural drift (its knots drawn from ``z`` as due),
+        clamped to :data:`SAFE_Y_RANGE_M`; NaN, and nothing changed, when the knots due need more normals than
+        ``z`` has left (the caller draws more and asks again)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        y = ps[_P_Y1] if t >= ps[_P_END] else hand.min_jerk(t, ps[_P_T0], ps[_P_DUR], ps[_P_Y0], ps[_P_Y1])
+        if ps[_DRIFT_ON] != 0.0:
+            if t >= ps[_D_T1]:
+                d_t1 = ps[_D_T1]
+                if t - d_t1 > 1.0:  # cannot happen at 1 kHz; re-anchor instead of looping
+                    d_t1 = t
+                knots, tk = 0, d_t1
+                while t >= tk:
+                    knots += 1
+                    tk = tk + _DRIFT_KNOT_S
+                zi = int(ps[_ZI])
+                if zi + knots > ps[_NZ]:
+                    return math.nan
+                ps[_D_T1] = d_t1
+                while t >= ps[_D_T1]:
+                    ps[_D_T0] = ps[_D_T1]
+                    ps[_D0] = ps[_D1]
+                    ps[_D1] = ps[_D0] + ps[_D_STEP] * z[zi]
+                    zi += 1
+                    ps[_D_T1] = ps[_D_T0] + _DRIFT_KNOT_S
+                ps[_ZI] = zi
+            y += ps[_D0] + (ps[_D1] - ps[_D0]) * (t - ps[_D_T0]) * (1.0 / _DRIFT_KNOT_S)
+        if y < -0.030:
+            y = -0.030
+        elif y > 0.005:
+            y = 0.005
+        elif y != y:  # pragma: no cover - the plan is built from finite values only
+            y = ps[_OUT]
+        ps[_OUT] = y
+        return y
+
+    return plan_kernel
+
+
+#: The participant's equilibrium between its events (:meth:`SimulatedParticipant.equilibrium_y`), compiled.
+plan_kernel = _compile_plan(fingerprint(hand))
+
+
+class _Slot:
+    """An attribute of the participant kept in its state array (:data:`STATE_SIZE`'s layout), a float."""
+
+    __slots__ = ("index",)
+
+    def __init__(self, index: int) -> None:
+        self.index = index
+
+    def __get__(self, obj: Any, owner: Any = None) -> float:
+        return obj.array.item(self.index)  # type: ignore[no-any-return]  # (a float64 array's item: a float)
+
+    def __set__(self, obj: Any, value: float) -> None:
+        obj.array[self.index] = value
+
+
+class _IntSlot(_Slot):
+    """An attribute kept in the state array, an int."""
+
+    def __get__(self, obj: Any, owner: Any = None) -> int:
+        return int(obj.array.item(self.index))
+
+
+class _BoolSlot(_Slot):
+    """An attribute kept in the state array, a bool."""
+
+    def __get__(self, obj: Any, owner: Any = None) -> bool:
+        return obj.array.item(self.index) != 0.0  # type: ignore[no-any-return]  # (a float's comparison)
+
 
 class SimulatedParticipant:
     """A seeded simulated participant: implements the rig's ``StylusDriver``.
+
+    Its per-tick state is a float64 array (:attr:`array`; the attributes below backed by it), its observation history
+    another (:attr:`history`, one row per quantity) and its drawn normals a third, so that the tick between its events
+    is two compiled calls (:func:`remember_kernel`, :func:`plan_kernel`), which a caller running ticks in a block
+    calls too.
 
     Parameters
     ----------
@@ -154,6 +262,25 @@ class SimulatedParticipant:
         participant has learned by the documented rule; None (or the first visit): the calibrated participant.
     """
 
+    _t = _Slot(_T)
+    _hi = _IntSlot(_HI)
+    _p_t0 = _Slot(_P_T0)
+    _p_dur = _Slot(_P_DUR)
+    _p_y0 = _Slot(_P_Y0)
+    _p_y1 = _Slot(_P_Y1)
+    _p_end = _Slot(_P_END)
+    _drift_on = _BoolSlot(_DRIFT_ON)
+    _d_t0 = _Slot(_D_T0)
+    _d_t1 = _Slot(_D_T1)
+    _d0 = _Slot(_D0)
+    _d1 = _Slot(_D1)
+    _d_step = _Slot(_D_STEP)
+    _out = _Slot(_OUT)
+    _next = _Slot(_NEXT)
+    _zi = _IntSlot(_ZI)
+    _nz = _IntSlot(_NZ)
+    _cue_t = _Slot(_CUE_T)
+
     def __init__(
         self,
         seed: int = 0,
@@ -171,6 +298,8 @@ class SimulatedParticipant:
             raise ValueError(f"motion_scale = {motion_scale!r}: must be a finite number > 0")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed = {seed!r}: must be a whole number ≥ 0")
+        #: The per-tick state (the module's layout).
+        self.array: State = np.zeros(STATE_SIZE)
         self.seed = int(seed)
         self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(0,)))
         self.params = practised(with_profile(params if params is not None else ParticipantParams.draw(self._rng),
@@ -188,14 +317,14 @@ class SimulatedParticipant:
         self._fmax = float(f_max_n)
         self._fscale = float(f_scale_n)
         scale_magnitude(1.0, self._fmax, self._fscale)  # validates the law's parameters
-        self._z: list[float] = []
+        #: The normals drawn for the current trial's stream, the next one at :attr:`_zi` (of :attr:`_nz`).
+        self._z: State = np.zeros(0)
         self._zi = 0
-        # observation history (ring of the last _HIST ticks)
-        self._ht = [-math.inf] * _HIST
-        self._hy = [0.0] * _HIST
-        self._hf = [0.0] * _HIST
-        self._hd = [0.0] * _HIST
-        self._hg = [0.0] * _HIST
+        self._nz = 0
+        #: The observation history, a ring of the last _HIST ticks: times, stylus positions, felt forces,
+        #: indentations, gaps (unfilled times -inf).
+        self.history: State = np.zeros((5, _HIST))
+        self.history[_HT] = -math.inf
         self._hi = 0
         self._t = math.nan  # time of the newest observation (NaN before the first)
         # commanded trajectory: a minimum-jerk segment (y0 → y1 over [t0, t0 + dur])
@@ -231,15 +360,45 @@ class SimulatedParticipant:
         self._watched = False
         self.decisions = 0  # decisions taken since construction (for tests and logs)
         self.submovements = 0
+        warm_once(__name__, lambda: _compile_them(self))
+
+    # -- the history's rows (what a decision looks back at) ------------------------------------
+    @property
+    def _ht(self) -> State:
+        return cast(State, self.history[_HT])
+
+    @property
+    def _hy(self) -> State:
+        return cast(State, self.history[_HY])
+
+    @property
+    def _hf(self) -> State:
+        return cast(State, self.history[_HF])
+
+    @property
+    def _hd(self) -> State:
+        return cast(State, self.history[_HD])
+
+    @property
+    def _hg(self) -> State:
+        return cast(State, self.history[_HG])
 
     # -- random numbers -------------------------------------------------------------------------
     def _randn(self) -> float:
         i = self._zi
-        if i >= len(self._z):
-            self._z = self._rng.standard_normal(_NOISE_BLOCK).tolist()
+        if i >= self._nz:
+            self._z = self._rng.standard_normal(_NOISE_BLOCK)
+            self._nz = _NOISE_BLOCK
             i = 0
         self._zi = i + 1
-        return self._z[i]
+        return float(self._z[i])
+
+    def more_normals(self) -> None:
+        """Draw the next block of normals behind those left (the same stream, in the same order, as one at a time:
+        consecutive draws of one generator): :func:`plan_kernel` asked for more than are left."""
+        self._z = np.concatenate((self._z[self._zi:self._nz], self._rng.standard_normal(_NOISE_BLOCK)))
+        self._zi = 0
+        self._nz = len(self._z)
 
     # -- the session runner's interface (pipeline.core.aim.TrialParticipant) --------------------
     def begin_trial(self, aim: TrialAim, t_s: float) -> None:
@@ -293,39 +452,27 @@ class SimulatedParticipant:
     def equilibrium_y(self, obs: HandObservation) -> float:
         """Equilibrium point of the arm, m along the Touch's +y from the start pose."""
         t, y_st, felt, ind, gap = obs
-        dt = t - self._t
+        ps = self.array
+        dt = t - ps.item(_T)
         if -0.5 <= dt <= 0.5:  # False for NaN: the rig never steps more than 10 ms
-            self._t = t
+            ps[_T] = t
         else:
             t = self._time_jump(t, dt)
-        i = (self._hi + 1) & _MASK
-        self._hi = i
-        self._ht[i] = t
-        self._hy[i] = y_st
-        self._hf[i] = felt
-        self._hd[i] = ind
-        self._hg[i] = gap
+        t = float(t)  # (the kernels are compiled for floats)
+        remember_kernel(ps, self.history, t, float(y_st), float(felt), float(ind), float(gap))
         if self._pending is not None:
             self._apply_pending(t)
         if self._tracking is not None:
             y = self._out = min(max(self._tracking.equilibrium_y(obs._replace(t_s=t)), -0.030), 0.005)
             return y
-        if t >= self._next:
+        if t >= ps.item(_NEXT):
             self._event(t)
-        # the current plan
-        y = self._p_y1 if t >= self._p_end else min_jerk(t, self._p_t0, self._p_dur, self._p_y0, self._p_y1)
-        if self._drift_on:
-            if t >= self._d_t1:
-                self._drift_advance(t)
-            y += self._d0 + (self._d1 - self._d0) * (t - self._d_t0) * (1.0 / _DRIFT_KNOT_S)
-        if y < -0.030:
-            y = -0.030
-        elif y > 0.005:
-            y = 0.005
-        elif y != y:  # pragma: no cover - the plan is built from finite values only
-            y = self._out
-        self._out = y
-        return y
+        # the current plan, its drift and its clamp
+        y = plan_kernel(ps, self._z, t)
+        if y != y:  # the drift's knots due need more normals than are drawn
+            self.more_normals()
+            y = plan_kernel(ps, self._z, t)
+        return y  # type: ignore[no-any-return]  # (a kernel's float)
 
     # -- internals ------------------------------------------------------------------------------
     def _plan(self, t0: float, dur: float, y1: float) -> None:
@@ -341,7 +488,7 @@ class SimulatedParticipant:
     def _plan_value(self, t: float) -> float:
         if t >= self._p_end:
             return self._p_y1
-        return min_jerk(t, self._p_t0, self._p_dur, self._p_y0, self._p_y1)
+        return min_jerk(float(t), self._p_t0, self._p_dur, self._p_y0, self._p_y1)
 
     def _fold_drift(self, t: float) -> None:
         """Absorb the drift into the plan (so the output stays continuous) and stop it."""
@@ -351,15 +498,6 @@ class SimulatedParticipant:
             self._p_y1 += d
         self._drift_on = False
         self._d0 = self._d1 = 0.0
-
-    def _drift_advance(self, t: float) -> None:
-        if t - self._d_t1 > 1.0:  # cannot happen at 1 kHz; re-anchor instead of looping
-            self._d_t1 = t
-        while t >= self._d_t1:
-            self._d_t0 = self._d_t1
-            self._d0 = self._d1
-            self._d1 = self._d0 + self._d_step * self._randn()
-            self._d_t1 = self._d_t0 + _DRIFT_KNOT_S
 
     def _time_jump(self, t: float, dt: float) -> float:
         """A non-finite time, or a jump of more than 0.5 s (another time base): stay continuous.
@@ -380,9 +518,7 @@ class SimulatedParticipant:
         self._d_t1 += dt
         self._next += dt
         self._cue_t += dt
-        ht = self._ht
-        for k in range(_HIST):
-            ht[k] += dt
+        self.history[_HT] += dt  # (each time plus dt, as one at a time)
         self._t = t
         return t
 
@@ -405,8 +541,8 @@ class SimulatedParticipant:
         _, force, haptic, _t_s, gauge, practice = cmd
         p = self.params
         rng = self._rng = self._trial_stream(practice)
-        self._z = []
-        self._zi = 0
+        self._z = np.zeros(0)
+        self._zi = self._nz = 0
         self._cue_t = t
         self._haptic = haptic
         self._gauge = gauge
@@ -458,7 +594,7 @@ class SimulatedParticipant:
 
     def _lookup(self, tq: float) -> int:
         """Index of the newest history sample at or before ``tq`` (not before the cue)."""
-        return newest_at(self._ht, self._hi, tq, self._cue_t)
+        return newest_at(self.history[_HT], self._hi, float(tq), self._cue_t)
 
     def _depth_for(self, force_n: float) -> float:
         """Believed indentation (m) that produces ``force_n`` under the stiffness belief."""
@@ -476,13 +612,13 @@ class SimulatedParticipant:
         """One feed-forward minimum-jerk move to the believed surface + believed indentation."""
         p = self.params
         j = self._lookup(t - p.tau_visual_s - p.camera_latency_s)
-        y_st = self._hy[j]
+        y_st = float(self._hy[j])
         if not (-0.1 <= y_st <= 0.1):  # also NaN: trust the own command instead
             y_st = self._plan_value(t)
         pushback = 0.0
         if self._haptic and not self._gauge:
             pushback = p.pushback_comp * scale_magnitude(self._target, self._fmax, self._fscale) / self._arm_k
-        self._plan(t, self._approach_s, approach_end_y(y_st, self._hg[j], self._hd[j], self._surface_err,
+        self._plan(t, self._approach_s, approach_end_y(y_st, float(self._hg[j]), float(self._hd[j]), self._surface_err,
                                                        self._delta_star, self._s, pushback))
         self._drift_on = True
         self._d_t0, self._d_t1, self._d0, self._d1 = t, t + _DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
@@ -501,7 +637,7 @@ class SimulatedParticipant:
         """A look at the image during a watched approach: stop it if the seen force is well past the aim."""
         p = self.params
         self._next_look(t)
-        d = self._hd[self._lookup(t - p.tau_visual_s - p.camera_latency_s)]
+        d = float(self._hd[self._lookup(t - p.tau_visual_s - p.camera_latency_s)])
         if seen_over_aim(d, self._khat, self._n, self._target, p.approach_stop_excess):
             # a guarded move's stop: the equilibrium stays where it is now (a stop, not a submovement: no D) and
             # the next decision comes after the usual pause, as after any movement
@@ -517,7 +653,7 @@ class SimulatedParticipant:
         self._next = t + self._period
         # visual percept
         j = self._lookup(t - p.tau_visual_s - p.camera_latency_s)
-        d = self._hd[j]
+        d = float(self._hd[j])
         if not (0.0 <= d <= 0.05):
             if d != d:
                 return  # no usable image: wait for the next look
@@ -532,7 +668,7 @@ class SimulatedParticipant:
         contact = d > _CONTACT_VISUAL_M or (self._gauge and f_vis > _CONTACT_HAPTIC_N)
         f_hat = f_vis
         if self._haptic:
-            felt = self._hf[self._lookup(t - p.tau_haptic_s)]
+            felt = float(self._hf[self._lookup(t - p.tau_haptic_s)])
             if -10.0 <= felt <= 10.0:  # also rejects NaN
                 sh = weber_sigma(p.sigma_haptic, felt)  # σ_h at the GENTLE display, 0.8 σ_h at FIRM's
                 f_hap = inverse_scale(felt * math.exp(sh * self._randn()), self._fmax, self._fscale)
@@ -561,3 +697,13 @@ class SimulatedParticipant:
         dy = p.gain * dy * math.exp(p.motor_noise_rel * z_rel) + p.motor_noise_abs_m * z_abs
         self._plan(t, p.submove_s, self._p_y1 - dy / s)
         self.submovements += 1
+
+
+def _compile_them(p: SimulatedParticipant) -> None:
+    """Compile the participant's kernels (or load them from numba's cache) on scratch copies of ``p``'s state, as its
+    methods call them: once a process, when the first participant is built, so that no tick waits for a compiler."""
+    ps, hist = p.array.copy(), p.history.copy()
+    remember_kernel(ps, hist, 0.0, 0.0, 0.0, 0.0, 0.0)
+    plan_kernel(ps, np.zeros(1), 0.0)
+    newest_at(hist[_HT], 0, 0.0, 0.0)
+    min_jerk(0.5, 0.0, 1.0, 0.0, 1.0)

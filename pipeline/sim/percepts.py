@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 
+from pipeline.core.compiled import State, kernel
+
 __all__ = ["HISTORY_TICKS", "inverse_scale", "newest_at", "weber_sigma"]
 
 #: Ticks of observation history a simulated person keeps: ≥ the longest percept delay (0.36 s) at 1 kHz, a power of
@@ -28,10 +30,11 @@ _WEBER_FLOOR = 0.8
 _X_MAX = 0.999
 
 
-def newest_at(times_s: list[float], newest: int, t_s: float, not_before_s: float) -> int:
+@kernel
+def newest_at(times_s: State, newest: int, t_s: float, not_before_s: float) -> int:
     """Index, in a ring of :data:`HISTORY_TICKS` observation times whose newest is at ``newest`` (unfilled slots -inf),
     of the newest observation at or before ``t_s`` -- or before ``not_before_s`` if ``t_s`` is earlier; the oldest
-    kept if none is that old."""
+    kept if none is that old (compiled: a look back of 0.36 s is 360 steps)."""
     if t_s < not_before_s:
         t_s = not_before_s
     j = newest

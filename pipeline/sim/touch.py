@@ -19,16 +19,44 @@ the loop stops commanding, the output is zero 10 ms later.
 
 from __future__ import annotations
 
+from typing import Any
+
+from pipeline.core import exact
+from pipeline.core.compiled import State, fingerprint, kernel
+from pipeline.core.record_writer import IntRow
+from pipeline.devices import touch_output
 from pipeline.devices.interfaces import HapticState
 from pipeline.devices.registry import haptic_model
-from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, HapticLimits, TouchOutput
+from pipeline.devices.touch_output import DEFAULT_COMMAND_TIMEOUT_S, HD_WARM_MOTORS, WARM, HapticLimits, TouchOutput
 from pipeline.force.frames import Vec3
 
 __all__ = [
     "SimTouch",
+    "advance_kernel",
 ]
 
 _new_tuple = tuple.__new__
+
+
+def _compile_advance(callees: int) -> Any:
+    """:func:`advance_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
+
+    @kernel
+    def advance_kernel(st: State, sti: IntRow, now_ns: int, dt_s: float,
+                       error_code: int) -> tuple[float, float, float, int]:
+        """:meth:`SimTouch.advance` over its output's state: the force rendered for ``dt_s`` (while no error is
+        raised) and the error code after it (``HD_WARM_MOTORS`` once the heat passed the budget)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        fx, fy, fz = touch_output.render_kernel(st, sti, now_ns, dt_s, error_code == 0)
+        if st[WARM] != 0.0 and error_code == 0:
+            error_code = HD_WARM_MOTORS
+        return fx, fy, fz, error_code
+
+    return advance_kernel
+
+
+#: The simulated Touch's step (:meth:`SimTouch.advance`), compiled.
+advance_kernel = _compile_advance(fingerprint(exact, touch_output))
 
 
 class SimTouch:
@@ -80,9 +108,9 @@ class SimTouch:
         """Render the current command for ``dt_s``: watchdog, clamp, derate, heat, and fault when too warm."""
         self._t_ns = now_ns
         out = self.output
-        self.applied_force_n = out.render(now_ns, dt_s, enabled=not self.error_code)
-        if out.warm and not self.error_code:
-            self.error_code = HD_WARM_MOTORS
+        fx, fy, fz, self.error_code = advance_kernel(out.array, out.ints, int(now_ns), float(dt_s),
+                                                     int(self.error_code))
+        self.applied_force_n = (fx, fy, fz)
 
     def rearm(self) -> bool:
         """Clear a device error if the motors have cooled to half the budget."""

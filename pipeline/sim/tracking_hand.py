@@ -109,9 +109,9 @@ class TrackingHand:
         self._u = 0.0  # the integrator's depth correction, m
         self._cmd = self._y = self._y0 = y0_m
         self._next = self._start
-        self._ht = [-math.inf] * _HIST
-        self._hf = [0.0] * _HIST
-        self._hd = [0.0] * _HIST
+        self._ht = np.full(_HIST, -math.inf)
+        self._hf = np.zeros(_HIST)
+        self._hd = np.zeros(_HIST)
         self._hi = 0
 
     def equilibrium_y(self, obs: HandObservation) -> float:
@@ -138,17 +138,17 @@ class TrackingHand:
 
     def _at(self, tq: float) -> int:
         """The newest history sample at or before ``tq`` (not before the cue)."""
-        return newest_at(self._ht, self._hi, tq, self._t0)
+        return newest_at(self._ht, self._hi, float(tq), float(self._t0))
 
     def _percept(self, t: float) -> float | None:
         """The force the participant perceives now (delayed, noisy), N; None: no usable look."""
         p, rng = self.params, self._rng
-        d = self._hd[self._at(t - self._tau_v)]
+        d = float(self._hd[self._at(t - self._tau_v)])
         if not (0.0 <= d <= 0.05):
             return None
         f_hat: float = self._khat * d ** self._n * math.exp(p.sigma_visual * rng.standard_normal())
         if self._haptic:
-            felt = self._hf[self._at(t - p.tau_haptic_s)]
+            felt = float(self._hf[self._at(t - p.tau_haptic_s)])
             if -10.0 <= felt <= 10.0:
                 f_hap = inverse_scale(felt * math.exp(p.sigma_haptic * rng.standard_normal()), self._fmax, self._fscale)
                 f_hat = self._w_h * f_hap + (1.0 - self._w_h) * f_hat
@@ -177,7 +177,7 @@ class TrackingHand:
     def _reflex_m(self, t: float) -> float:
         """The long-latency reflex's correction, m of believed depth: the force felt ``REFLEX_S`` ago against the
         force meant then (the target seen then), in proportion (:data:`REFLEX_GAIN`)."""
-        felt = self._hf[self._at(t - REFLEX_S)]
+        felt = float(self._hf[self._at(t - REFLEX_S)])
         if not -10.0 <= felt <= 10.0:
             return 0.0
         f_felt = inverse_scale(felt, self._fmax, self._fscale)
