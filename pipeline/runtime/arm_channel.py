@@ -41,8 +41,8 @@ from pipeline.runtime.watchdog import WatchdogConfig, derating_detail, derating_
 if TYPE_CHECKING:
     from pipeline.runtime.ring import RingBuffer
 
-__all__ = ["RECORD_KERNEL_TYPES", "RIG_WIDE_FAULTS", "ArmChannel", "LoopSide", "own_faults", "record_kernel",
-           "warm_kernels"]
+__all__ = ["LATENCY_AT", "RECORD_KERNEL_TYPES", "RIG_WIDE_FAULTS", "ArmChannel", "LoopSide", "conditions_kernel",
+           "own_faults", "record_kernel", "warm_kernels"]
 
 
 class LoopSide(Protocol):
@@ -70,7 +70,36 @@ _NAN3 = (math.nan, math.nan, math.nan)
 
 
 _LATENCY = RECORD_FIELDS.index("latency_ns")  # written after the command is handed over (see ArmChannel.tick)
+#: Where the record's latency is (written once the command is handed over).
+LATENCY_AT = _LATENCY
 _INTEGER = tuple(TICK_DTYPE[n] == np.int64 for n in RECORD_FIELDS)
+# the watchdog's conditions as plain ints (an IntFlag's | runs in Python; a kernel takes ints)
+_SENSOR_STALE, _SENSOR_STATUS, _NON_FINITE = int(Fault.SENSOR_STALE), int(Fault.SENSOR_STATUS), int(Fault.NON_FINITE)
+_SENSOR_SATURATION, _POSE_STALE = int(Fault.SENSOR_SATURATION), int(Fault.POSE_STALE)
+
+
+@kernel
+def conditions_kernel(sat: State, sensor_max_age_ns: int, pose_max_age_ns: int, now: int, w_t_ns: int, fx: float,
+                      fy: float, fz: float, tx: float, ty: float, tz: float, status: int,
+                      pose_t_ns: int) -> tuple[int, int, int]:
+    """The watchdog's conditions this tick from the sample and the pose's time: a stale sample or pose, a bad status
+    word, a non-finite or saturated value (``sat``: the six saturation limits); returns them (``Fault`` bits) with
+    the sample's and the pose's ages (ns)."""
+    cond = 0
+    sensor_age_ns = now - w_t_ns
+    if sensor_age_ns > sensor_max_age_ns:
+        cond |= _SENSOR_STALE
+    if status != 0:
+        cond |= _SENSOR_STATUS
+    if (fx - fx) + (fy - fy) + (fz - fz) + (tx - tx) + (ty - ty) + (tz - tz) != 0.0:
+        cond |= _NON_FINITE
+    elif not (-sat[0] <= fx <= sat[0] and -sat[1] <= fy <= sat[1] and -sat[2] <= fz <= sat[2]
+              and -sat[3] <= tx <= sat[3] and -sat[4] <= ty <= sat[4] and -sat[5] <= tz <= sat[5]):
+        cond |= _SENSOR_SATURATION  # (|v| > s as -s <= v <= s failing: v is finite here)
+    pose_age_ns = now - pose_t_ns
+    if pose_age_ns > pose_max_age_ns:
+        cond |= _POSE_STALE
+    return cond, sensor_age_ns, pose_age_ns
 
 
 def _compile(callees: int) -> Callable[..., tuple[float, float, float]]:
@@ -153,6 +182,8 @@ class ArmChannel:
         self._sensor_age_ns = int(wd.sensor_max_age_s * 1e9)
         self._pose_age_ns = int(wd.pose_max_age_s * 1e9)
         self._sat = tuple(wd.saturation_fraction * r for r in arm.sensor.range_n)
+        #: The saturation limits as the watchdog's kernel reads them.
+        self.saturation_n = np.array(self._sat, dtype=np.float64)
         # this arm's record of the tick, written by record_kernel (a float64 row and its int64 view: one memory)
         self._row_f: State = np.zeros(len(RECORD_FIELDS))
         self._row_i: IntRow = self._row_f.view(np.int64)
@@ -192,25 +223,11 @@ class ArmChannel:
         fw = self.framework
 
         # -- watchdog --
-        cond = 0
         # the sample unpacked whole, once (pipeline.devices.interfaces.WrenchSample): no w[:7] tuple, no lookups by name
         w_t_ns, raw_fx, raw_fy, raw_fz, raw_tx, raw_ty, raw_tz, w_status, _, _ = w
-        sensor_age_ns = now - w_t_ns
-        if sensor_age_ns > self._sensor_age_ns:
-            cond |= Fault.SENSOR_STALE
-        if w_status:
-            cond |= Fault.SENSOR_STATUS
-        if (raw_fx - raw_fx) + (raw_fy - raw_fy) + (raw_fz - raw_fz) + (raw_tx - raw_tx) + (raw_ty - raw_ty) + (
-                raw_tz - raw_tz) != 0.0:
-            cond |= Fault.NON_FINITE
-        else:
-            s0, s1, s2, s3, s4, s5 = self._sat  # |v| > s as -s <= v <= s failing (v finite here): no abs() calls
-            if not (-s0 <= raw_fx <= s0 and -s1 <= raw_fy <= s1 and -s2 <= raw_fz <= s2
-                    and -s3 <= raw_tx <= s3 and -s4 <= raw_ty <= s4 and -s5 <= raw_tz <= s5):
-                cond |= Fault.SENSOR_SATURATION
-        pose_age_ns = now - pose.t_ns
-        if pose_age_ns > self._pose_age_ns:
-            cond |= Fault.POSE_STALE
+        cond, sensor_age_ns, pose_age_ns = conditions_kernel(
+            self.saturation_n, self._sensor_age_ns, self._pose_age_ns, now, w_t_ns, raw_fx, raw_fy, raw_fz, raw_tx,
+            raw_ty, raw_tz, w_status, pose.t_ns)
         if pose.t_ns != self._pose_t_ns:  # a new robot pose (125 Hz)
             cond |= self._take_pose(pose)
         if hs.error_code or hs.force_limit_n != self._device_limit_n:  # (rare: two compares a tick otherwise)
@@ -428,6 +445,8 @@ def warm_kernels(framework_array: State | None = None) -> None:
     def compile_them() -> None:
         record_kernel(fw, row, row.view(np.int64), 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False, True, 0.001, False, 3.0,
                       3.0, 0, 0, 1_000_000, 0, 0, 0, 0, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        conditions_kernel(np.ones(6), 5_000_000, 50_000_000, 0, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0)
         cast(Any, record_kernel).disable_compile()  # (a numba dispatcher's)
+        cast(Any, conditions_kernel).disable_compile()
 
     warm_once(__name__, compile_them)

@@ -78,11 +78,13 @@ class SensorParams:
 
 # The sensor's state, a float64 array (its kernel's layout): the random walk, the payload's weight in S at the current
 # orientation, that orientation (row-major), the constants, the first sample's time (ns since the first sample: 0;
-# NaN before it), the fault switches and the newest record's six values.
+# NaN before it), the fault switches, the newest record's six values, the box's RDT and F/T sequence counters, the
+# packets lost, the status word a fault rehearsal sets and the newest record's status word.
 _RW, _GRAV, _ROT, _BIAS0, _DRIFT, _RANGE, _LEVER = 0, 6, 12, 21, 27, 33, 39
 _CPF, _CPT, _TAU, _RW_SCALE, _LOSS, _T0, _STALLED, _NAN = 42, 43, 44, 45, 46, 47, 48, 49
 _OUT = 50
-STATE_SIZE = 56
+_RDT, _FT, _LOST, _OVERRIDE, _STATUS = 56, 57, 58, 59, 60
+STATE_SIZE = 61
 #: Where the newest record's six values are in the state.
 OUT = _OUT
 #: What :func:`sample_kernel` did: no record (a stalled box), a lost packet, a record, a saturated record.
@@ -96,7 +98,8 @@ def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: fl
     contact force ``(c0, c1, c2)`` (base frame, N) and noise row ``ni``, into ``st``.
 
     The orientation and the weight in ``st`` are the current ones (:meth:`SimForceSensor.set_rotation`).  Returns
-    :data:`STALLED`, :data:`LOST`, :data:`RECORD` or :data:`SATURATED`; the record's six values are ``st[_OUT:]``.
+    :data:`STALLED`, :data:`LOST`, :data:`RECORD` or :data:`SATURATED`; the record's six values are ``st[_OUT:]``,
+    its status word ``st[_STATUS]``, the box's counters (what :meth:`SimForceSensor.took` publishes) counted.
     """
     if st[_T0] != st[_T0]:  # (NaN: the first sample)
         st[_T0] = t_ns
@@ -112,7 +115,10 @@ def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: fl
         st[5] = st[5] + s_t * noise[ni, 11]
     if st[_STALLED] != 0.0:
         return STALLED
+    st[_RDT] += 1.0
+    st[_FT] += 1.0
     if noise[ni, 12] < st[_LOSS]:
+        st[_LOST] += 1.0
         return LOST  # the box sampled and sent it; the network ate it
     r = _ROT
     f0 = st[r] * c0 + st[r + 1] * c1 + st[r + 2] * c2
@@ -149,6 +155,7 @@ def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: fl
         st[_OUT + i] = (st[_OUT + i] * per + _ROUND - _ROUND) / per
     if st[_NAN] != 0.0:
         st[_OUT] = math.nan
+    st[_STATUS] = int(st[_OVERRIDE]) | (SATURATION_STATUS if out == SATURATED else 0)
     return out
 
 
@@ -184,11 +191,7 @@ class SimForceSensor(KernelState):
         #: The current block of noise rows (6 white-noise channels, 6 random-walk steps, 1 packet-loss draw).
         self.noise = np.zeros((self._BLOCK, 13))
         self._ni = self._BLOCK
-        self._rdt = 0
-        self._ft = 0
         self._latest = WrenchSample(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)
-        self.status_override = 0
-        self.lost_packets = 0
         self._bias0 = (*p.bias_force_n, *p.bias_torque_nm)
         self._drift = (*p.drift_force_n, *(0.01 * d for d in p.drift_force_n))
         #: The state :func:`sample_kernel` works on (the rig may move it into
@@ -204,6 +207,20 @@ class SimForceSensor(KernelState):
     def params(self) -> SensorParams:
         """The sensor's physical truth (read-only: it is in :attr:`array`)."""
         return self._params
+
+    @property
+    def lost_packets(self) -> int:
+        """Samples the network lost (the previous one stayed newest)."""
+        return int(self.array[_LOST])
+
+    @property
+    def status_override(self) -> int:
+        """Fault switch: the status word the box reports (0: none; non-zero is serious)."""
+        return int(self.array[_OVERRIDE])
+
+    @status_override.setter
+    def status_override(self, word: int) -> None:
+        self.array[_OVERRIDE] = int(word)
 
     @property
     def stalled(self) -> bool:
@@ -286,18 +303,13 @@ class SimForceSensor(KernelState):
         self.took(what, t_ns, *self.array[_OUT:_OUT + 6].tolist())
 
     def took(self, what: int, t_ns: int, v0: float, v1: float, v2: float, v3: float, v4: float, v5: float) -> None:
-        """Count and publish what :func:`sample_kernel` did at ``t_ns`` (the record's values ``v0`` ... ``v5``)."""
-        if what == STALLED:
+        """Publish what :func:`sample_kernel` did at ``t_ns`` (the record's values ``v0`` ... ``v5``; its status and
+        the box's counters are in the state): a record is the newest sample from now on."""
+        if what < RECORD:  # (STALLED, LOST: nothing new to read)
             return
-        self._rdt += 1
-        self._ft += 1
-        if what == LOST:
-            self.lost_packets += 1
-            return
-        status = self.status_override
-        if what == SATURATED:
-            status |= SATURATION_STATUS
-        self._latest = _new_tuple(WrenchSample, (t_ns, v0, v1, v2, v3, v4, v5, status, self._rdt, self._ft))
+        st = self.array
+        self._latest = _new_tuple(WrenchSample, (t_ns, v0, v1, v2, v3, v4, v5, int(st.item(_STATUS)),
+                                                 int(st.item(_RDT)), int(st.item(_FT))))
 
     def read_wrench(self) -> WrenchSample:
         """Newest record (never blocks)."""
