@@ -161,10 +161,13 @@ def build_sim_engine(
         Optional ``progress(done, total)`` for the calibration.
     """
     from pipeline.commissioning.payload_identification import recommended_pose_set
+    from pipeline.sim import participant
     from pipeline.sim.arms import SimArms
     from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
     from pipeline.sim.hand import ScriptedPresses
     from pipeline.sim.rig import SimRig, SimRigConfig
+
+    participant.warm_kernels()  # a simulated participant may be handed the stylus while the loop runs
 
     clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
     base = config.sim if config.sim is not None else SimRigConfig()
@@ -192,6 +195,11 @@ def build_sim_engine(
     (framework, ring), others = pipelines[0], pipelines[1:]
     loop = HapticLoop(rig, framework, clk, ring, watchdog=config.watchdog, arm_pipelines=others,
                       fault_policy=config.fault_policy)
+    if arms is None and isinstance(clk, VirtualClock) and not shared_ring:
+        # on a virtual clock a one-arm loop's ticks run in compiled blocks (pipeline.sim.block: the same ticks)
+        from pipeline.sim.block import SimBlocks
+
+        loop.block_runner = SimBlocks(loop, sims[0]).run_ticks
     loop.submit(SetHaptics(config.haptics_on))
     loop.submit(AllowBiasRefinement(config.refine_bias))
     names = config.arms

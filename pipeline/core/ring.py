@@ -226,6 +226,32 @@ class RingBuffer:
         # publish after the row is complete
         self._count_cell[0] = c
 
+    def write_rows(self, rows: npt.NDArray[np.float64]) -> None:
+        """Append records given as the rows of a C-contiguous 2-D float64 array in this ring's layout (an int64
+        field's bits in its float64 place: one row as :meth:`write_row` takes it), all published at once.
+
+        For a private ring only (no reader in another process or thread): a reader copying the oldest records while
+        they are overwritten could not tell, as it can for one record at a time.
+        """
+        if self._shm is not None:
+            raise ValueError("write_rows: the ring is shared; write one record at a time (write_row)")
+        data = memoryview(rows.data).cast("B")
+        rb = self._row_bytes
+        if len(data) % rb:
+            raise ValueError(f"write_rows: rows of {rows.shape[-1] * 8} bytes; this ring's are {rb}")
+        off, start = self._slot_off, 0
+        while start < len(data):
+            m = min(len(data) - start, self._end_off - off)
+            self._buf[off:off + m] = data[start:start + m]
+            start += m
+            off += m
+            if off >= self._end_off:
+                off = _HEADER
+        self._slot_off = off
+        c = self._count + len(data) // rb
+        self._count = c
+        self._count_cell[0] = c  # publish after the rows are complete
+
     # -- readers --------------------------------------------------------------------------------
     @property
     def write_count(self) -> int:

@@ -159,6 +159,8 @@ _TIMEOUT_NS, _CONT2, _BUDGET, _FROM, _SPAN, _PEAK, _DROP, _CONT = 15, 16, 17, 18
 STATE_SIZE = 23
 #: Where the state says the budget was passed (HD_WARM_MOTORS): the simulated Touch raises its error from it.
 WARM = _WARM
+#: Where the state holds the derated force limit (N) and what the last render put out.
+LIMIT_AT, RENDERED_AT = _LIMIT, _RENDERED
 
 
 @kernel
@@ -258,6 +260,7 @@ class MotorHeat:
     __slots__ = ("array", "spec")
 
     def __init__(self, spec: HapticLimits, array: State | None = None) -> None:
+        warm_once(__name__, _compile_them)
         self.spec = spec
         self.array = st = array if array is not None else np.zeros(STATE_SIZE)
         st[_CONT2] = spec.continuous_force_n ** 2
@@ -332,7 +335,6 @@ class TouchOutput:
         self.heat = MotorHeat(spec, self.array)
         self.command_timeout_s = float(command_timeout_s)
         self.ints[_TIMEOUT_NS] = int(round(command_timeout_s * 1e9))
-        warm_once(__name__, lambda: _compile_them(self.array.copy()))
 
     def command(self, fx: float, fy: float, fz: float, t_ns: int) -> None:
         """The force to render from now on (N, device frame), commanded at ``t_ns`` on the device's clock."""
@@ -398,10 +400,14 @@ class TouchOutput:
         return True
 
 
-def _compile_them(st: State) -> None:
+def _compile_them() -> None:
     """Compile the output's kernels (or load them from numba's cache) on a scratch state, as its methods call them:
-    once a process, at the first output's construction, so that no servo or loop tick waits for a compiler."""
+    once a process, at the first output's or heat model's construction, so that no servo or loop tick waits for a
+    compiler."""
+    st = np.zeros(STATE_SIZE)
+    st[_BUDGET] = st[_SPAN] = st[_PEAK] = st[_CONT] = 1.0
     si = st.view(np.int64)
+    set_heat_kernel(st, 0.0)
     command_kernel(st, si, 0.0, 0.0, 0.0, 0)
     render_kernel(st, si, 1, 0.001, True)
     add_heat_kernel(st, 0.0, 0.001)

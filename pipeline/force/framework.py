@@ -230,6 +230,11 @@ class HapticFramework:
         offsets_kernel(st)
 
     @property
+    def rot_base_tip(self) -> Mat3:
+        """The robot's orientation the framework holds (:meth:`set_pose`)."""
+        return self._rbt
+
+    @property
     def _payload(self) -> tuple[float, ...]:
         """The payload's weight the sensor reads in the current pose (force N, torque N·m)."""
         return tuple(self.array[_PAY:_PAY + 6].tolist())

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any, Protocol, cast
 
 import numpy as np
@@ -328,6 +328,41 @@ class ArmChannel:
         elif self._derating and lim >= self._peak_n:
             self._derating = False
             self.emit(t, "derating_ended", derating_ended_detail(frac, lim))
+
+    # -- a simulated rig's compiled block of ticks (pipeline.sim.block) -------------------------------
+    @property
+    def pose_time_ns(self) -> int | None:
+        """The time of the robot pose last taken (None before the first)."""
+        return self._pose_t_ns
+
+    @property
+    def max_ages_ns(self) -> tuple[int, int]:
+        """The watchdog's largest sample and pose ages, ns."""
+        return self._sensor_age_ns, self._pose_age_ns
+
+    @property
+    def device_limit_n(self) -> float:
+        """The device's derated force limit as last seen, N."""
+        return self._device_limit_n
+
+    @property
+    def derate_check(self) -> bool:
+        """Whether the thermal limit is below the safety stage's own (the derating measure is taken)."""
+        return self._derate_check
+
+    def ran_block(self, rows: State, ticks: int, pose_time_ns: int, poses: State, n_poses: int,
+                  rot: Sequence[float]) -> None:
+        """``ticks`` of this arm's ticks ran in a compiled block (:mod:`pipeline.sim.block`): their records
+        (``rows``, in the ring's layout) into the ring, the last as the newest; the pose taken last; the poses
+        taken (``poses``: tick, x, y, z, t_ns), at orientation ``rot``, into the replay log."""
+        if ticks:
+            if self.ring is not None:
+                self.ring.write_rows(rows[:ticks])
+            self._row_f[:] = rows[ticks - 1]
+            self._recorded = True
+        self._pose_t_ns = pose_time_ns
+        for tick, x, y, z, t_ns in poses[:n_poses].tolist():
+            self.replay_log.append((int(tick), "pose", (rot, (x, y, z), int(t_ns))))
 
     # -- faults, resets and the record (rare paths) ----------------------------------------------
     def latch(self, fault: int, now: int) -> bool:

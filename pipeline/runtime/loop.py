@@ -248,12 +248,39 @@ class HapticLoop(PacedTicks):
         self._last_ns = now
         dt_s = period * 1e-9
         self.rig.advance(now)
+        self.arms_tick(now, period, dt_s)
+
+    def arms_tick(self, now: int, period: int, dt_s: float) -> None:
+        """The tick after the rig's step: the queued commands (and what else is due at its start), then every arm's
+        part (:meth:`tick`'s; a simulated rig's compiled block, :mod:`pipeline.sim.block`, calls it for a tick whose
+        arm's part needs Python)."""
         if self._inbox or period > self.command_timeout_ns or self._snapshot_due is not None:
             self._start_of_tick(now, period)
         self._resync = False
         for ch in self.arms:
             ch.tick(now, period, dt_s)
         self.tick_count += 1
+
+    @property
+    def tick_due_work(self) -> bool:
+        """Whether the next tick has work of its start to do in Python (queued commands, a replay snapshot), or is
+        the first: what a compiled block of ticks (:mod:`pipeline.sim.block`) leaves to :meth:`tick`."""
+        return bool(self._inbox) or self._snapshot_due is not None or self._last_ns is None
+
+    @property
+    def last_tick_ns(self) -> int | None:
+        """The clock reading of the last tick (None before the first)."""
+        return self._last_ns
+
+    def ticked_elsewhere(self, started: int, completed: int, last_ns: int) -> None:
+        """``started`` ticks at the nominal period ran outside :meth:`tick` (a simulated rig's compiled block), the
+        last at ``last_ns``, ``completed`` of them whole (the rest's arms' part is :meth:`arms_tick`'s): count
+        them as :meth:`tick` does."""
+        if started:
+            self.stats.add_nominal(started)
+            self._last_ns = last_ns
+            self._resync = False
+        self.tick_count += completed
 
     def _start_of_tick(self, now: int, period: int) -> None:
         """Apply the queued commands, restart the output after a late tick, take a due replay snapshot.

@@ -41,6 +41,10 @@ class LoopStats:
         if period_ns > 2_000_000:
             self._over_2ms += 1
 
+    def add_nominal(self, n: int) -> None:
+        """Record ``n`` tick periods of exactly the nominal length (ticks run in a block on a virtual clock)."""
+        self._nominal += n
+
     @property
     def count(self) -> int:
         """Periods recorded."""

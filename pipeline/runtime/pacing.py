@@ -35,8 +35,15 @@ class PacedTicks:
         """Bring the rendered force to zero (the loop's)."""
         raise NotImplementedError
 
+    #: Runs ``n`` ticks in place of :meth:`run_ticks` when set: a simulated rig's compiled blocks on a virtual clock
+    #: (:class:`pipeline.sim.block.SimBlocks`, the same ticks bit for bit).
+    block_runner: Callable[[int], None] | None = None
+
     def run_ticks(self, n: int) -> None:
         """Run ``n`` ticks paced on the clock (instant on a virtual clock)."""
+        if self.block_runner is not None:
+            self.block_runner(n)
+            return
         clock = self.clock
         deadline = clock.now_ns()
         period = self.period_ns

@@ -106,7 +106,8 @@ from pipeline.sim.percepts import HISTORY_TICKS, inverse_scale, newest_at, weber
 from pipeline.sim.tissue import TissueParams
 from pipeline.sim.tracking_hand import TrackingHand
 
-__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant", "plan_kernel", "remember_kernel"]
+__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant", "normals_short", "plan_kernel", "remember_kernel",
+           "warm_kernels"]
 
 #: The participant never commands an equilibrium outside this range (m along the Touch's +y, from
 #: the start pose): 30 mm down is 15 mm into the tissue (≈ 20 N, far beyond any task force) and
@@ -153,6 +154,22 @@ def remember_kernel(ps: State, hist: State, t: float, y_st: float, felt: float, 
     hist[_HG, i] = gap
 
 
+@kernel
+def normals_short(ps: State, t: float) -> bool:
+    """Whether the drift's knots due at ``t`` need more normals than are drawn (:func:`plan_kernel` would ask for
+    more): a caller running ticks in a block checks it before a tick."""
+    if ps[_DRIFT_ON] == 0.0 or t < ps[_D_T1]:
+        return False
+    tk = ps[_D_T1]
+    if t - tk > 1.0:  # (plan_kernel's re-anchoring)
+        tk = t
+    knots = 0
+    while t >= tk:
+        knots += 1
+        tk = tk + _DRIFT_KNOT_S
+    return bool(ps[_ZI] + knots > ps[_NZ])
+
+
 def _compile_plan(callees: int) -> Any:
     """:func:`plan_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
 
@@ -165,16 +182,12 @@ def _compile_plan(callees: int) -> Any:
         y = ps[_P_Y1] if t >= ps[_P_END] else hand.min_jerk(t, ps[_P_T0], ps[_P_DUR], ps[_P_Y0], ps[_P_Y1])
         if ps[_DRIFT_ON] != 0.0:
             if t >= ps[_D_T1]:
+                if normals_short(ps, t):
+                    return math.nan
                 d_t1 = ps[_D_T1]
                 if t - d_t1 > 1.0:  # cannot happen at 1 kHz; re-anchor instead of looping
                     d_t1 = t
-                knots, tk = 0, d_t1
-                while t >= tk:
-                    knots += 1
-                    tk = tk + _DRIFT_KNOT_S
                 zi = int(ps[_ZI])
-                if zi + knots > ps[_NZ]:
-                    return math.nan
                 ps[_D_T1] = d_t1
                 while t >= ps[_D_T1]:
                     ps[_D_T0] = ps[_D_T1]
@@ -360,7 +373,24 @@ class SimulatedParticipant:
         self._watched = False
         self.decisions = 0  # decisions taken since construction (for tests and logs)
         self.submovements = 0
-        warm_once(__name__, lambda: _compile_them(self))
+        warm_kernels()
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """An unpickled participant (sent to the loop's own process) has its kernels compiled, or loaded from numba's
+        cache, before its first tick, as a built one has."""
+        self.__dict__.update(state)
+        warm_kernels()
+
+    @property
+    def between_events(self) -> bool:
+        """Whether its next ticks are its compiled tick until :data:`NEXT_AT` (no trial being staged, no tracking
+        trial's hand): what a caller running ticks in a block checks before one."""
+        return self._pending is None and self._tracking is None
+
+    @property
+    def normals(self) -> State:
+        """The normals drawn for the current trial's stream (:func:`plan_kernel` reads them)."""
+        return self._z
 
     # -- the history's rows (what a decision looks back at) ------------------------------------
     @property
@@ -699,11 +729,18 @@ class SimulatedParticipant:
         self.submovements += 1
 
 
-def _compile_them(p: SimulatedParticipant) -> None:
-    """Compile the participant's kernels (or load them from numba's cache) on scratch copies of ``p``'s state, as its
-    methods call them: once a process, when the first participant is built, so that no tick waits for a compiler."""
-    ps, hist = p.array.copy(), p.history.copy()
+def warm_kernels() -> None:
+    """Compile the participant's kernels (or load them from numba's cache) on a scratch state, as its methods call
+    them, once a process: when the first participant is built or unpickled, or a simulated engine is built (the
+    loop's own process, where a participant arrives by pickle while the loop runs), so that no tick waits for a
+    compiler."""
+    warm_once(__name__, _compile_them)
+
+
+def _compile_them() -> None:
+    ps, hist = np.zeros(STATE_SIZE), np.zeros((5, _HIST))
     remember_kernel(ps, hist, 0.0, 0.0, 0.0, 0.0, 0.0)
     plan_kernel(ps, np.zeros(1), 0.0)
+    normals_short(ps, 0.0)
     newest_at(hist[_HT], 0, 0.0, 0.0)
     min_jerk(0.5, 0.0, 1.0, 0.0, 1.0)

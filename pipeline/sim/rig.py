@@ -58,6 +58,10 @@ _ROBOT = _ARM + sim_hand.STATE_SIZE
 _TISSUE = _ROBOT + sim_robot.STATE_SIZE
 _SENSOR = _TISSUE + sim_tissue.STATE_SIZE
 _STATE_SIZE = _SENSOR + sim_sensor.STATE_SIZE
+#: Where the rig's state holds the arm's, the robot's and the sensor's slices (a block of ticks reads them).
+ARM_AT, ROBOT_AT, SENSOR_AT = _ARM, _ROBOT, _SENSOR
+#: A long tick (a stalled loop) is simulated as at most this much time, s.
+MAX_DT_S = _MAX_DT_S
 
 
 @kernel
@@ -263,6 +267,45 @@ class SimRig:
         self.warm_up()
 
     @property
+    def hand_one_axis(self) -> tuple[int, float] | None:
+        """The one device axis the hand moves along and its component (the paper's frames: +y), or None."""
+        return self._hand_one_axis
+
+    @property
+    def last_ns(self) -> int | None:
+        """The clock reading of the last step (None before the first)."""
+        return self._last_ns
+
+    @property
+    def steps_elsewhere(self) -> bool:
+        """Whether the next step may run in a compiled block of ticks (:mod:`pipeline.sim.block`): it has stepped
+        once, and nothing on the Python side is due in its step -- a teleoperation driver, a buttons hook, a fault
+        being rehearsed, a re-orientation or a servo stop, a frozen robot, a device error."""
+        robot = self.robot
+        return (self._last_ns is not None and self.one_call and self.teleop is None and self.on_buttons is None
+                and not self.faults.busy and robot.moves_smoothly and not robot.frozen
+                and robot.orientation is self._orient and robot.origin_ns is not None
+                and self.sensor.origin_ns is not None and self.haptic.error_code == 0)
+
+    def ran_block(self, ticks: int, last_ns: int, sim_time_s: float, force_n: float, obs: HandObservation,
+                  y_m: float, error_code: int) -> None:
+        """``ticks`` steps ran in a compiled block of ticks (:mod:`pipeline.sim.block`), the last at ``last_ns``:
+        take what the last left -- the time, the contact force (N), the hand's observation, the stylus along the
+        hand's axis (m), the Touch's error code (the models' states are in :attr:`state` already)."""
+        self._last_ns = last_ns
+        self.sim_time_s = sim_time_s
+        px, py, pz = self._push_base_n
+        self._truth = (px, py, force_n + pz)
+        self.last_observation = obs
+        self.haptic.ran_block(last_ns, self._stylus(y_m), error_code)
+        self.one_call_ticks += ticks
+
+    def _stylus(self, y: float) -> Vec3:
+        """The stylus at ``y`` along the hand's axis, device frame (off-axis components exactly zero)."""
+        ax, ay, az = self.hand_axis
+        return (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+
+    @property
     def push_base_n(self) -> Vec3:
         """A force someone applies to the tip by hand, base frame, N (the frame and sign check's pushes)."""
         return self._push_base_n
@@ -331,8 +374,7 @@ class SimRig:
                 self._reorient()
             y, f, cycled, what, v0, v1, v2, v3, v4, v5 = step_kernel(
                 st, sensor.noise, ni, y_c, felt, dt, robot.since_first_ns(now_ns), sensor.since_first_ns(now_ns))
-            # a displacement along the hand's axis, device frame (off-axis components exactly zero)
-            touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+            touch.stylus_m = self._stylus(y)
             if cycled:
                 robot.cycled(now_ns)
             px, py, pz = self._push_base_n
@@ -348,10 +390,8 @@ class SimRig:
         re-orientation or servo stop have their turns in it)."""
         cfg = self.config
         touch = self.haptic
-        ax, ay, az = self.hand_axis
         y = self.arm.step(y_c, felt, dt)
-        # a displacement along the hand's axis, device frame (off-axis components exactly zero)
-        touch.stylus_m = (ax * y if ax else 0.0, ay * y if ay else 0.0, az * y if az else 0.0)
+        touch.stylus_m = self._stylus(y)
         robot = self.robot
         if self.teleop is None:
             robot.command(target_kernel(self.state, y))

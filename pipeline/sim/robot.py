@@ -56,6 +56,8 @@ class RobotParams:
 # factor was computed for and that factor, the lag's time constant, and the position published at the last cycle.
 _POS, _TARGET, _HELD, _NEXT, _CYCLE, _LAG_DT, _LAG_A, _TAU, _POSE = 0, 3, 6, 9, 10, 11, 12, 13, 14
 STATE_SIZE = 17
+#: Where the state holds the position published at the last cycle.
+POSE_AT = _POSE
 
 
 @kernel

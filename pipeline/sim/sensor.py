@@ -85,6 +85,8 @@ _CPF, _CPT, _TAU, _RW_SCALE, _LOSS, _T0, _STALLED, _NAN = 42, 43, 44, 45, 46, 47
 _OUT = 50
 _RDT, _FT, _LOST, _OVERRIDE, _STATUS = 56, 57, 58, 59, 60
 STATE_SIZE = 61
+#: Where the state holds the newest record's status word.
+STATUS_AT = _STATUS
 #: Where the newest record's six values are in the state.
 OUT = _OUT
 #: What :func:`sample_kernel` did: no record (a stalled box), a lost packet, a record, a saturated record.
@@ -255,10 +257,28 @@ class SimForceSensor(KernelState):
         used up)."""
         ni = self._ni
         if ni >= self._BLOCK:
-            np.multiply(self._rng.standard_normal((self._BLOCK, 13)), self._sig, out=self.noise)
+            self.refill_noise()
             ni = 0
         self._ni = ni + 1
         return ni
+
+    def refill_noise(self) -> None:
+        """Draw the next block of :attr:`noise` rows (the next sample takes its first)."""
+        np.multiply(self._rng.standard_normal((self._BLOCK, 13)), self._sig, out=self.noise)
+        self._ni = 0
+
+    @property
+    def noise_row(self) -> int:
+        """The row of :attr:`noise` the next sample takes (its length: a new block is due)."""
+        return self._ni
+
+    def ran_block(self, noise_row: int, published_ns: int | None) -> None:
+        """Samples were taken in a compiled block of ticks (:mod:`pipeline.sim.block`) over its state: the next noise
+        row, and the newest record published at ``published_ns`` (None: none in the block)."""
+        self._ni = noise_row
+        if published_ns is not None:
+            v = self.array[_OUT:_OUT + 6].tolist()
+            self.took(RECORD, published_ns, v[0], v[1], v[2], v[3], v[4], v[5])
 
     def bias_at(self, t_s: float) -> tuple[float, ...]:
         """Deterministic part of the bias at ``t_s`` (without the random walk), N and N·m.

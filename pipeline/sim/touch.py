@@ -112,6 +112,14 @@ class SimTouch:
                                                      int(self.error_code))
         self.applied_force_n = (fx, fy, fz)
 
+    def ran_block(self, now_ns: int, stylus_m: Vec3, error_code: int) -> None:
+        """Its steps ran in a compiled block of ticks (:mod:`pipeline.sim.block`) over its output's state, the last at
+        ``now_ns``: take the stylus and the error code they left, and what the last rendered."""
+        self._t_ns = now_ns
+        self.stylus_m = stylus_m
+        self.error_code = error_code
+        self.applied_force_n = self.output.rendered_n
+
     def rearm(self) -> bool:
         """Clear a device error if the motors have cooled to half the budget."""
         if not self.output.rearm():

@@ -15,10 +15,8 @@ from typing import Any
 
 from foundation.platform_support.processes import die_with, worker_context
 from foundation.platform_support.threads import usable_cpu_count
-from pipeline.force import framework as algorithm_1
 from pipeline.force.config import FrameworkConfig
-from pipeline.runtime import arm_channel
-from pipeline.sim import rig as sim_rig
+from pipeline.sim import block as sim_block
 from protocol.runner.rehearsal import FaultPlan
 from protocol.runner.session_setup import participant_code
 from protocol.storage import StorageError, StudyDatabase
@@ -112,9 +110,7 @@ def run_parallel(
     # fork is cheap (the workers inherit the imported modules) but unsafe once other threads exist
     ctx = worker_context()
     if ctx.get_start_method() == "fork":  # once here, not once a participant: the children inherit the machine code
-        sim_rig.warm_kernels()
-        algorithm_1.warm_kernels()
-        arm_channel.warm_kernels()
+        sim_block.warm_kernels()
     messages = ctx.Queue()
     waiting = list(plan)
     running: dict[int, Any] = {}

@@ -1,0 +1,362 @@
+"""A simulated rig's loop ticks in compiled blocks: the same ticks, bit for bit, at a fraction of the interpreter's
+cost.
+
+A simulated study is a million ticks a participant; as Python, each tick is a hundred-odd lines spread over the rig,
+the Touch, the participant, the sensor, the robot, the loop and the arm's channel, at ~50 ns a line.  On a virtual
+clock nothing waits between ticks, so :class:`SimBlocks` runs them as one compiled call (:func:`block_kernel`) until
+something only Python does is due, and hands that tick to the loop's own Python:
+
+* **before a tick** (nothing of it done yet): the participant's next event (a decision, a look, the start of the
+  approach) or a time jump, the drift's next knot when its normals are used up, the sensor's next block of noise;
+  and at a block's start, whatever the loop, the rig or the participant holds in Python only -- a queued command or
+  a replay snapshot, a commanded force program, a fault being rehearsed, a teleoperation driver, a re-orientation, a
+  frozen robot, a device error, a tracking trial or a trial being staged, a driver that is not the simulated
+  participant (:meth:`SimBlocks.ready`): the tick is :meth:`pipeline.runtime.loop.HapticLoop.tick`;
+* **after the rig's step** (the arm's part not begun): a watchdog condition that changes, a robot pose that is new
+  in orientation or not finite, the device's error or derated limit changing: the arm's part is
+  :meth:`pipeline.runtime.loop.HapticLoop.arms_tick`.
+
+Every step of a tick in the block is the kernel its Python calls (one implementation): the Touch's step
+(:func:`pipeline.sim.touch.advance_kernel`), the participant's tick (:func:`pipeline.sim.participant.remember_kernel`,
+:func:`~pipeline.sim.participant.plan_kernel`), the rig's physics (:func:`pipeline.sim.rig.step_kernel`), the
+watchdog's conditions (:func:`pipeline.runtime.arm_channel.conditions_kernel`), the bias refinement
+(:func:`pipeline.force.framework.refine_kernel`), Algorithm 1 and the record
+(:func:`pipeline.runtime.arm_channel.record_kernel`) and the command
+(:func:`pipeline.devices.touch_output.command_kernel`); what the block adds is the sequencing (the order of
+:meth:`pipeline.sim.rig.SimRig.advance` and :meth:`pipeline.runtime.arm_channel.ArmChannel.tick`), the few lines of
+the rig's glue (the felt force along the hand's axis, the observation, the stylus, the truth), and the bookkeeping
+the Python objects are given back when a block ends (their newest sample, pose, observation, counters; the records
+into the ring, the poses into the replay log).  ``tests/pipeline/test_sim_block.py`` holds a study's ticks run in
+blocks to the same ticks run one by one, every record, state and event, bit for bit.
+
+One arm, a virtual clock, a private ring (no reader in another process or thread: the block writes its records
+into the ring when it ends): what a simulated study's engine is (:func:`pipeline.assembly.engine.build_sim_engine`
+installs it there); any other loop runs tick by tick.
+"""
+
+from __future__ import annotations
+
+from typing import Any, cast
+
+import numpy as np
+
+from pipeline.core import exact, record_writer
+from pipeline.core.clock import VirtualClock
+from pipeline.core.compiled import State, fingerprint, is_warm, kernel, warm_once
+from pipeline.core.record_writer import IntRow
+from pipeline.core.tick_record import RECORD_FIELDS
+from pipeline.devices import touch_output
+from pipeline.force import bias_refinement, filters, frames, safety, scaling
+from pipeline.force import framework as algorithm_1
+from pipeline.runtime import arm_channel
+from pipeline.runtime.loop import HapticLoop
+from pipeline.sim import hand, participant, sensor, tissue
+from pipeline.sim import rig as sim_rig
+from pipeline.sim import robot as sim_robot
+from pipeline.sim import touch as sim_touch
+from pipeline.sim.hand import HandObservation
+from pipeline.sim.participant import SimulatedParticipant
+from pipeline.sim.rig import SimRig
+
+__all__ = ["SimBlocks", "block_kernel", "warm_kernels"]
+
+# The block's state, one float64 array and its int64 view (the layout below): what the Python objects hold that a
+# tick reads or changes, gathered when a block starts and given back when it ends.
+# -- integers (the int64 view): times in ns, counters, codes
+_NOW0, _PERIOD, _RIG_LAST, _ROBOT_ORIGIN, _SENSOR_ORIGIN, _TICK, _T0, _W_T, _W_STATUS, _POSE_T = range(10)
+_CH_POSE_T, _FAULTS, _ACTIVE, _TRIAL, _PHASE, _ERR, _NI, _NOISE_ROWS, _SENSOR_MAX_AGE, _POSE_MAX_AGE = range(10, 20)
+_ONE_AXIS, _N_POSES, _DONE, _STOP, _STARTED, _PUBLISHED, _CYCLED = range(20, 27)
+# -- floats
+_SIM_TIME, _AXIS, _ONE_SIGN, _SURFACE, _PUSH, _DEV_LIMIT, _LIMIT_N, _STATIC_LIMIT = 27, 28, 31, 32, 33, 36, 37, 38
+_ON, _REFINE, _RECORDING, _DERATE_CHECK, _ROT_SAME, _ROT_SUM = 39, 40, 41, 42, 43, 44
+_TIP, _Y, _F, _OBS = 45, 48, 49, 50
+_SIZE = _OBS + 5
+# how a block ended: every tick asked run; a tick's Python is due before it; the arm's part of a tick is Python's; the
+# sensor's noise or the participant's normals are used up (drawn in Python, and the block goes on)
+_RAN_ALL, _BEFORE, _MID, _NOISE, _NORMALS = 0, 1, 2, 3, 4
+
+_R, _S = sim_rig.ROBOT_AT, sim_rig.SENSOR_AT
+
+
+def _compile_block(callees: int) -> Any:
+    """:func:`block_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def block_kernel(n: int, b: State, bi: IntRow, st: State, noise: State, tst: State, tint: IntRow, ps: State,
+                     hist: State, z: State, fw: State, rls: State, sat: State, rows: State, rows_i: Any,
+                     poses: State) -> None:
+        """Up to ``n`` ticks of a one-arm simulated loop from the block's state ``b``/``bi`` (the module's layout),
+        the rig's state ``st`` and its sensor's ``noise``, the Touch output's ``tst``/``tint``, the participant's
+        ``ps``, ``hist`` and ``z``, the framework's ``fw`` and its bias estimator's ``rls``, the watchdog's
+        saturation limits ``sat``; each tick's record into ``rows``/``rows_i``, each pose logged for replay into
+        ``poses`` (tick, x, y, z, t_ns).  How many ran and why it stopped are ``bi[_DONE]``, ``bi[_STOP]``."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        period = bi[_PERIOD]
+        dt_loop = period * 1e-9  # (the loop's dt_s at the nominal period)
+        now = bi[_NOW0]
+        o = _S + sensor.OUT
+        k = 0
+        stop = _RAN_ALL
+        started = 0
+        while k < n:
+            # -- Python's before the tick? (SimRig.advance's dt and the participant's time; nothing changed yet) --
+            dt = (now - bi[_RIG_LAST]) * 1e-9
+            if dt < 0.0:
+                dt = 0.0
+            elif dt > sim_rig.MAX_DT_S:
+                dt = sim_rig.MAX_DT_S
+            t = b[_SIM_TIME] + dt
+            pdt = t - ps[participant.T_AT]
+            if not (-0.5 <= pdt <= 0.5) or t >= ps[participant.NEXT_AT]:
+                stop = _BEFORE
+                break
+            if bi[_NI] >= bi[_NOISE_ROWS]:
+                stop = _NOISE
+                break
+            if participant.normals_short(ps, t):
+                stop = _NORMALS
+                break
+            started += 1
+            # -- the rig's step (SimRig.advance): the Touch, the hand's decision, the physics --
+            bi[_RIG_LAST] = now
+            b[_SIM_TIME] = t
+            ax, ay, az, err = sim_touch.advance_kernel(tst, tint, now, dt, bi[_ERR])
+            bi[_ERR] = err
+            one = bi[_ONE_AXIS]
+            if one >= 0:  # one device axis: that component, exactly
+                felt = (ax if one == 0 else (ay if one == 1 else az)) * b[_ONE_SIGN]
+            else:
+                felt = ax * b[_AXIS] + ay * b[_AXIS + 1] + az * b[_AXIS + 2]
+            depth = b[_SURFACE] - st[_R + 2]
+            y_arm = st[sim_rig.ARM_AT]
+            ind = depth if depth > 0 else 0.0
+            gap = -depth if depth < 0 else 0.0
+            b[_OBS], b[_OBS + 1], b[_OBS + 2], b[_OBS + 3], b[_OBS + 4] = t, y_arm, felt, ind, gap
+            ps[participant.T_AT] = t
+            participant.remember_kernel(ps, hist, t, y_arm, felt, ind, gap)
+            y_c = participant.plan_kernel(ps, z, t)
+            ni = bi[_NI]
+            bi[_NI] = ni + 1
+            # (the record's six values are in the sensor's state, read below as the newest sample's)
+            y, f, cycled, what, _r0, _r1, _r2, _r3, _r4, _r5 = sim_rig.step_kernel(
+                st, noise, ni, y_c, felt, dt, now - bi[_ROBOT_ORIGIN], now - bi[_SENSOR_ORIGIN])
+            b[_Y], b[_F] = y, f
+            if cycled:  # the robot's controller published its pose (SimRobot.cycled)
+                bi[_POSE_T] = now
+                bi[_CYCLED] = 1
+                b[_TIP], b[_TIP + 1], b[_TIP + 2] = st[_R + sim_robot.POSE_AT], st[_R + sim_robot.POSE_AT + 1], st[
+                    _R + sim_robot.POSE_AT + 2]
+            if what >= sensor.RECORD:  # a new newest sample (SimForceSensor.took)
+                bi[_W_T] = now
+                bi[_W_STATUS] = int(st[_S + sensor.STATUS_AT])
+                bi[_PUBLISHED] += 1
+            # -- the arm's part (ArmChannel.tick): Python's if a condition, a pose or the device changed --
+            w_t = bi[_W_T]
+            r0, r1, r2, r3, r4, r5 = st[o], st[o + 1], st[o + 2], st[o + 3], st[o + 4], st[o + 5]
+            cond, sensor_age_ns, pose_age_ns = arm_channel.conditions_kernel(
+                sat, bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE], now, w_t, r0, r1, r2, r3, r4, r5, bi[_W_STATUS],
+                bi[_POSE_T])
+            new_pose = bi[_POSE_T] != bi[_CH_POSE_T]
+            if new_pose:
+                total = b[_ROT_SUM] + (b[_TIP] + b[_TIP + 1] + b[_TIP + 2])
+                if b[_ROT_SAME] == 0.0 or total - total != 0.0:
+                    stop = _MID
+                    break
+            if bi[_ERR] != 0 or tst[touch_output.LIMIT_AT] != b[_DEV_LIMIT]:
+                stop = _MID
+                break
+            faults = bi[_FAULTS]
+            if cond != bi[_ACTIVE] or cond & ~faults:
+                stop = _MID
+                break
+            if new_pose:  # the framework's pose is this orientation already (_ROT_SAME): only its time is new
+                bi[_CH_POSE_T] = bi[_POSE_T]
+                if b[_RECORDING] != 0.0:
+                    j = bi[_N_POSES]
+                    poses[j, 0], poses[j, 1], poses[j, 2] = bi[_TICK], b[_TIP], b[_TIP + 1]
+                    poses[j, 3], poses[j, 4] = b[_TIP + 2], bi[_POSE_T]
+                    bi[_N_POSES] = j + 1
+            if b[_REFINE] != 0.0 and faults == 0:
+                algorithm_1.refine_kernel(fw, rls, r0, r1, r2, r3, r4, r5)
+            on = b[_ON] != 0.0
+            enabled = on and faults == 0
+            haptic_on = 1 if on else 0
+            derate_check = b[_DERATE_CHECK] != 0.0
+            true_fz = f + b[_PUSH + 2]
+            ax_y, ay_y, az_y = b[_AXIS] * y, b[_AXIS + 1] * y, b[_AXIS + 2] * y  # the stylus (SimRig.advance)
+            sx = ax_y if b[_AXIS] != 0.0 else 0.0
+            sy = ay_y if b[_AXIS + 1] != 0.0 else 0.0
+            sz = az_y if b[_AXIS + 2] != 0.0 else 0.0
+            rfx, rfy, rfz = arm_channel.record_kernel(
+                fw, rows[k], rows_i[k], r0, r1, r2, r3, r4, r5, 0.0, False, enabled, dt_loop, derate_check,
+                b[_LIMIT_N], b[_STATIC_LIMIT], bi[_TICK], now - bi[_T0], period, sensor_age_ns, pose_age_ns, faults,
+                haptic_on, bi[_TRIAL], bi[_PHASE], sx, sy, sz, b[_TIP], b[_TIP + 1], b[_TIP + 2], b[_PUSH],
+                b[_PUSH + 1], true_fz)
+            touch_output.command_kernel(tst, tint, rfx, rfy, rfz, now)
+            rows_i[k, arm_channel.LATENCY_AT] = now - w_t  # (on a virtual clock: the sample's age)
+            bi[_TICK] += 1
+            k += 1
+            now += period
+        bi[_DONE] = k
+        bi[_STOP] = stop
+        bi[_STARTED] = started
+
+    return block_kernel
+
+
+#: Ticks of a one-arm simulated loop in one compiled call (:class:`SimBlocks`).
+block_kernel = _compile_block(fingerprint(exact, frames, filters, safety, scaling, algorithm_1, bias_refinement,
+                                          record_writer, arm_channel, touch_output, sim_touch, hand, participant,
+                                          sim_robot, tissue, sensor, sim_rig))
+
+_new_tuple = tuple.__new__
+
+
+class SimBlocks:
+    """Runs a one-arm simulated loop's ticks in compiled blocks (see the module's docstring): the loop's
+    :attr:`~pipeline.runtime.pacing.PacedTicks.block_runner`.
+
+    Parameters
+    ----------
+    loop
+        The loop (one arm, a virtual clock, a private ring or none).
+    rig
+        Its simulated rig.
+    """
+
+    #: Most ticks in one compiled call (the records it holds until it ends).
+    ROWS = 256
+
+    def __init__(self, loop: HapticLoop, rig: SimRig) -> None:
+        if len(loop.arms) != 1 or loop.rig is not rig:
+            raise ValueError("SimBlocks runs a one-arm loop of this simulated rig")
+        ring = loop.ring
+        if ring is not None and ring.segment:
+            raise ValueError("SimBlocks writes a block's records when it ends: its loop's ring must be private")
+        self.loop, self.rig, self.ch = loop, rig, loop.arms[0]
+        self.rows: State = np.zeros((self.ROWS, len(RECORD_FIELDS)))
+        self.rows_i: Any = self.rows.view(np.int64)
+        self.poses: State = np.zeros((self.ROWS, 5))
+        self.b: State = np.zeros(_SIZE)
+        self.bi: IntRow = self.b.view(np.int64)
+        self._no_rls: State = np.zeros(1)
+        #: Ticks run in compiled blocks, and one by one in Python (diagnostics).
+        self.block_ticks = 0
+        self.python_ticks = 0
+        warm_once(__name__, self._compile)
+
+    def run_ticks(self, n: int) -> None:
+        """Run ``n`` ticks paced on the (virtual) clock, as :meth:`pipeline.runtime.pacing.PacedTicks.run_ticks`
+        does, in compiled blocks where nothing on the Python side is due."""
+        loop = self.loop
+        clock = loop.clock
+        period = loop.period_ns
+        deadline = clock.now_ns()
+        done = 0
+        while done < n:
+            stop = _BEFORE
+            if self.ready(deadline):
+                k, stop = self._block(min(n - done, self.ROWS), deadline)
+                done += k
+                deadline += k * period
+                clock.sleep_until(deadline)
+                if stop == _NOISE:  # (drawn where the tick would draw them: the rig's random streams are its own)
+                    self.rig.sensor.refill_noise()
+                elif stop == _NORMALS:
+                    cast(SimulatedParticipant, self.rig.driver).more_normals()
+                if stop in (_RAN_ALL, _NOISE, _NORMALS):
+                    continue
+            if stop == _MID:  # the rig's step of this tick ran in the block; the arm's part is Python's
+                loop.arms_tick(deadline, period, period * 1e-9)
+            else:
+                loop.tick()
+            self.python_ticks += 1
+            done += 1
+            deadline += period
+            clock.sleep_until(deadline)
+
+    def ready(self, now: int) -> bool:
+        """Whether a block may start with the tick at ``now``: nothing the loop, the rig or the participant holds in
+        Python only is due in it (see the module's docstring)."""
+        loop, rig, ch = self.loop, self.rig, self.ch
+        driver = rig.driver
+        return (not loop.tick_due_work and now - cast(int, loop.last_tick_ns) == loop.period_ns
+                and ch.program is None and ch.pose_time_ns is not None and rig.steps_elsewhere
+                and isinstance(driver, SimulatedParticipant) and driver.between_events and now < 2**53)
+
+    def _block(self, n: int, now: int) -> tuple[int, int]:
+        """One compiled call of up to ``n`` ticks from ``now``; the Python objects given back their state.  Returns
+        the ticks run whole and how it stopped."""
+        loop, rig, ch = self.loop, self.rig, self.ch
+        b, bi = self.b, self.bi
+        touch, sens, robot = rig.haptic, rig.sensor, rig.robot
+        p = cast(SimulatedParticipant, rig.driver)
+        fw = ch.framework
+        w = sens.read_wrench()
+        pose = robot.read_pose()
+        rls = fw.rls
+        # -- gather --
+        # (the times ready() found set: cast)
+        bi[_NOW0], bi[_PERIOD], bi[_TICK], bi[_T0] = now, loop.period_ns, loop.tick_count, loop.t0_ns
+        bi[_RIG_LAST], bi[_ROBOT_ORIGIN], bi[_SENSOR_ORIGIN] = cast(int, rig.last_ns), cast(int, robot.origin_ns), \
+            cast(int, sens.origin_ns)
+        bi[_W_T], bi[_W_STATUS], bi[_POSE_T], bi[_CH_POSE_T] = w.t_ns, w.status, pose.t_ns, cast(int, ch.pose_time_ns)
+        bi[_FAULTS], bi[_ACTIVE], bi[_TRIAL], bi[_PHASE] = ch.faults, ch.active_faults, loop.trial_index, loop.phase
+        bi[_ERR], bi[_NI], bi[_NOISE_ROWS] = touch.error_code, sens.noise_row, len(sens.noise)
+        bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE] = ch.max_ages_ns
+        one = rig.hand_one_axis
+        bi[_ONE_AXIS] = -1 if one is None else one[0]
+        b[_ONE_SIGN] = 0.0 if one is None else one[1]
+        bi[_N_POSES] = bi[_PUBLISHED] = bi[_CYCLED] = 0
+        b[_SIM_TIME], b[_SURFACE] = rig.sim_time_s, rig.config.surface_z_m
+        b[_AXIS:_AXIS + 3], b[_PUSH:_PUSH + 3] = rig.hand_axis, rig.push_base_n
+        g = fw.safety
+        b[_DEV_LIMIT], b[_LIMIT_N], b[_STATIC_LIMIT] = ch.device_limit_n, g.limit_n, g.static_limit_n
+        b[_ON], b[_REFINE] = loop.haptic_on, loop.refine_bias and rls is not None
+        b[_RECORDING], b[_DERATE_CHECK] = loop.recording, ch.derate_check
+        rot = pose.rot_base_tip
+        b[_ROT_SAME], b[_ROT_SUM] = fw.rot_base_tip == rot, sum(rot)  # (the sum: only whether it is finite)
+        b[_TIP:_TIP + 3] = pose.position_m
+        out = touch.output
+        block_kernel(n, b, bi, rig.state, sens.noise, out.array, out.ints, p.array, p.history, p.normals, fw.array,
+                     self._no_rls if rls is None else rls.array, ch.saturation_n, self.rows, self.rows_i, self.poses)
+        # -- give back --
+        k, stop, started = int(bi[_DONE]), int(bi[_STOP]), int(bi[_STARTED])
+        if not started:
+            return 0, stop
+        last = now + (started - 1) * loop.period_ns
+        loop.ticked_elsewhere(started, k, last)
+        y, f = b.item(_Y), b.item(_F)
+        rig.ran_block(started, last, b.item(_SIM_TIME), f,
+                      _new_tuple(HandObservation, (b.item(_OBS), b.item(_OBS + 1), b.item(_OBS + 2),
+                                                   b.item(_OBS + 3), b.item(_OBS + 4))), y, int(bi[_ERR]))
+        sens.ran_block(int(bi[_NI]), int(bi[_W_T]) if bi[_PUBLISHED] else None)
+        if bi[_CYCLED]:
+            robot.cycled(int(bi[_POSE_T]))
+        ch.ran_block(self.rows, k, int(bi[_CH_POSE_T]), self.poses, int(bi[_N_POSES]), rot)
+        self.block_ticks += k
+        return k, stop
+
+    def _compile(self) -> None:
+        """Compile :func:`block_kernel` (or load it from numba's cache) once a process, on scratch copies of this
+        loop's states, for none of its ticks (a block of zero ticks)."""
+        rig, ch = self.rig, self.ch
+        out, p, fw = rig.haptic.output, rig.driver, ch.framework
+        hist = p.history.copy() if isinstance(p, SimulatedParticipant) else np.zeros((5, 1024))
+        ps = p.array.copy() if isinstance(p, SimulatedParticipant) else np.zeros(participant.STATE_SIZE)
+        block_kernel(0, self.b.copy(), self.bi.copy(), rig.state.copy(), rig.sensor.noise.copy(), out.array.copy(),
+                     out.ints.copy(), ps, hist, np.zeros(1), fw.array.copy(), np.zeros(1), ch.saturation_n.copy(),
+                     self.rows.copy(), self.rows_i.copy(), self.poses.copy())
+
+
+def warm_kernels() -> None:
+    """Compile a simulated study's kernels (or load them from numba's cache), once a process: the rig's, the
+    participant's, Algorithm 1's, the arm's and the block's, on scratch objects.  What a parent that forks a process
+    per participant calls before forking (:func:`study_app.headless.pool.run_parallel`): its children inherit the
+    machine code instead of each loading it (~0.2 s of a core a participant)."""
+    if is_warm(__name__):
+        return
+    rig = SimRig()
+    rig.set_driver(SimulatedParticipant())
+    framework = algorithm_1.HapticFramework(algorithm_1.FrameworkConfig(), device_peak_n=rig.haptic.peak_force_n)
+    SimBlocks(HapticLoop(rig, framework, VirtualClock()), rig)
