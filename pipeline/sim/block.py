@@ -240,9 +240,10 @@ class SimBlocks:
         self.b: State = np.zeros(_SIZE)
         self.bi: IntRow = self.b.view(np.int64)
         self._no_rls: State = np.zeros(1)
-        #: Ticks run in compiled blocks, and one by one in Python (diagnostics).
+        #: Ticks run in compiled blocks, one by one in Python, and in a block up to their arm's part (diagnostics).
         self.block_ticks = 0
         self.python_ticks = 0
+        self.half_ticks = 0
         warm_once(__name__, self._compile)
 
     def run_ticks(self, n: int) -> None:
@@ -268,6 +269,7 @@ class SimBlocks:
                     continue
             if stop == _MID:  # the rig's step of this tick ran in the block; the arm's part is Python's
                 loop.arms_tick(deadline, period, period * 1e-9)
+                self.half_ticks += 1
             else:
                 loop.tick()
             self.python_ticks += 1

@@ -79,12 +79,12 @@ class SensorParams:
 # The sensor's state, a float64 array (its kernel's layout): the random walk, the payload's weight in S at the current
 # orientation, that orientation (row-major), the constants, the first sample's time (ns since the first sample: 0;
 # NaN before it), the fault switches, the newest record's six values, the box's RDT and F/T sequence counters, the
-# packets lost, the status word a fault rehearsal sets and the newest record's status word.
+# packets lost, the status word a fault rehearsal sets, and the newest record's status word and counters.
 _RW, _GRAV, _ROT, _BIAS0, _DRIFT, _RANGE, _LEVER = 0, 6, 12, 21, 27, 33, 39
 _CPF, _CPT, _TAU, _RW_SCALE, _LOSS, _T0, _STALLED, _NAN = 42, 43, 44, 45, 46, 47, 48, 49
 _OUT = 50
-_RDT, _FT, _LOST, _OVERRIDE, _STATUS = 56, 57, 58, 59, 60
-STATE_SIZE = 61
+_RDT, _FT, _LOST, _OVERRIDE, _STATUS, _PUB_RDT, _PUB_FT = 56, 57, 58, 59, 60, 61, 62
+STATE_SIZE = 63
 #: Where the state holds the newest record's status word.
 STATUS_AT = _STATUS
 #: Where the newest record's six values are in the state.
@@ -101,7 +101,7 @@ def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: fl
 
     The orientation and the weight in ``st`` are the current ones (:meth:`SimForceSensor.set_rotation`).  Returns
     :data:`STALLED`, :data:`LOST`, :data:`RECORD` or :data:`SATURATED`; the record's six values are ``st[_OUT:]``,
-    its status word ``st[_STATUS]``, the box's counters (what :meth:`SimForceSensor.took` publishes) counted.
+    its status word and the box's counters then ``st[_STATUS:]`` (what :meth:`SimForceSensor.took` publishes).
     """
     if st[_T0] != st[_T0]:  # (NaN: the first sample)
         st[_T0] = t_ns
@@ -158,6 +158,8 @@ def sample_kernel(st: State, noise: State, ni: int, t_ns: int, c0: float, c1: fl
     if st[_NAN] != 0.0:
         st[_OUT] = math.nan
     st[_STATUS] = int(st[_OVERRIDE]) | (SATURATION_STATUS if out == SATURATED else 0)
+    st[_PUB_RDT] = st[_RDT]
+    st[_PUB_FT] = st[_FT]
     return out
 
 
@@ -329,7 +331,7 @@ class SimForceSensor(KernelState):
             return
         st = self.array
         self._latest = _new_tuple(WrenchSample, (t_ns, v0, v1, v2, v3, v4, v5, int(st.item(_STATUS)),
-                                                 int(st.item(_RDT)), int(st.item(_FT))))
+                                                 int(st.item(_PUB_RDT)), int(st.item(_PUB_FT))))
 
     def read_wrench(self) -> WrenchSample:
         """Newest record (never blocks)."""
