@@ -240,6 +240,9 @@ class SimBlocks:
         self.b: State = np.zeros(_SIZE)
         self.bi: IntRow = self.b.view(np.int64)
         self._no_rls: State = np.zeros(1)
+        # the sensor's noise drawn 4096 rows at once from its next draw on (the same stream as 64 at a time: one
+        # generator's consecutive draws), so that a refill, a block's pause, comes every 4 s of ticks, not 64 ms
+        rig.sensor.rows_per_draw = 4096
         #: Ticks run in compiled blocks, one by one in Python, and in a block up to their arm's part (diagnostics).
         self.block_ticks = 0
         self.python_ticks = 0

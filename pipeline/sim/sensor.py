@@ -195,6 +195,9 @@ class SimForceSensor(KernelState):
         #: The current block of noise rows (6 white-noise channels, 6 random-walk steps, 1 packet-loss draw).
         self.noise = np.zeros((self._BLOCK, 13))
         self._ni = self._BLOCK
+        #: Rows drawn at the next refill (:attr:`_BLOCK`; a simulated study's compiled blocks of ticks draw more at
+        #: once, :mod:`pipeline.sim.block`: the same stream).
+        self.rows_per_draw = self._BLOCK
         self._latest = WrenchSample(0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)
         self._bias0 = (*p.bias_force_n, *p.bias_torque_nm)
         self._drift = (*p.drift_force_n, *(0.01 * d for d in p.drift_force_n))
@@ -255,10 +258,10 @@ class SimForceSensor(KernelState):
         return (self.params.counts_per_force, self.params.counts_per_torque)
 
     def next_noise_row(self) -> int:
-        """The row of :attr:`noise` this tick's sample takes (a new block of :attr:`_BLOCK` rows drawn when one is
-        used up)."""
+        """The row of :attr:`noise` this tick's sample takes (a new block of :attr:`rows_per_draw` rows drawn when one
+        is used up)."""
         ni = self._ni
-        if ni >= self._BLOCK:
+        if ni >= len(self.noise):
             self.refill_noise()
             ni = 0
         self._ni = ni + 1
@@ -266,7 +269,10 @@ class SimForceSensor(KernelState):
 
     def refill_noise(self) -> None:
         """Draw the next block of :attr:`noise` rows (the next sample takes its first)."""
-        np.multiply(self._rng.standard_normal((self._BLOCK, 13)), self._sig, out=self.noise)
+        n = self.rows_per_draw
+        if len(self.noise) != n:
+            self.noise = np.zeros((n, 13))
+        np.multiply(self._rng.standard_normal((n, 13)), self._sig, out=self.noise)
         self._ni = 0
 
     @property

@@ -152,6 +152,7 @@ def _engine(blocks: bool) -> tuple[Any, SimulatedParticipant]:
     assert (eng.loop.block_runner is not None) == True  # noqa: E712  (the simulated engine installs it)
     if not blocks:
         eng.loop.block_runner = None
+        eng.rig.sensor.rows_per_draw = 64  # the sensor's noise drawn as a rig on its own draws it: the same stream
     p = SimulatedParticipant(seed=12)
     eng.rig.set_driver(p)
     return eng, p
