@@ -161,13 +161,13 @@ def build_sim_engine(
         Optional ``progress(done, total)`` for the calibration.
     """
     from pipeline.commissioning.payload_identification import recommended_pose_set
-    from pipeline.sim import participant
+    from pipeline.sim import participant_tick
     from pipeline.sim.arms import SimArms
     from pipeline.sim.calibration import auto_calibrate, calibration_duration_ns
     from pipeline.sim.hand import ScriptedPresses
     from pipeline.sim.rig import SimRig, SimRigConfig
 
-    participant.warm_kernels()  # a simulated participant may be handed the stylus while the loop runs
+    participant_tick.warm_kernels()  # a simulated participant may be handed the stylus while the loop runs
 
     clk: Clock = clock or (VirtualClock() if config.clock == "virtual" else MonotonicClock())
     base = config.sim if config.sim is not None else SimRigConfig()

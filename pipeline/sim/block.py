@@ -17,8 +17,9 @@ something only Python does is due, and hands that tick to the loop's own Python:
   :meth:`pipeline.runtime.loop.HapticLoop.arms_tick`.
 
 Every step of a tick in the block is the kernel its Python calls (one implementation): the Touch's step
-(:func:`pipeline.sim.touch.advance_kernel`), the participant's tick (:func:`pipeline.sim.participant.remember_kernel`,
-:func:`~pipeline.sim.participant.plan_kernel`), the rig's physics (:func:`pipeline.sim.rig.step_kernel`), the
+(:func:`pipeline.sim.touch.advance_kernel`), the participant's tick
+(:func:`pipeline.sim.participant_tick.remember_kernel`, :func:`~pipeline.sim.participant_tick.plan_kernel`), the
+rig's physics (:func:`pipeline.sim.rig.step_kernel`), the
 watchdog's conditions (:func:`pipeline.runtime.arm_channel.conditions_kernel`), the bias refinement
 (:func:`pipeline.force.framework.refine_kernel`), Algorithm 1 and the record
 (:func:`pipeline.runtime.arm_channel.record_kernel`) and the command
@@ -50,7 +51,7 @@ from pipeline.force import bias_refinement, filters, frames, safety, scaling
 from pipeline.force import framework as algorithm_1
 from pipeline.runtime import arm_channel
 from pipeline.runtime.loop import HapticLoop
-from pipeline.sim import hand, participant, sensor, tissue
+from pipeline.sim import hand, participant_tick, sensor, tissue
 from pipeline.sim import rig as sim_rig
 from pipeline.sim import robot as sim_robot
 from pipeline.sim import touch as sim_touch
@@ -58,7 +59,7 @@ from pipeline.sim.hand import HandObservation
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRig
 
-__all__ = ["SimBlocks", "block_kernel", "warm_kernels"]
+__all__ = ["SimBlocks", "arm_kernel", "block_kernel", "due_kernel", "rig_kernel", "warm_kernels"]
 
 # The block's state, one float64 array and its int64 view (the layout below): what the Python objects hold that a
 # tick reads or changes, gathered when a block starts and given back when it ends.
@@ -78,6 +79,142 @@ _RAN_ALL, _BEFORE, _MID, _NOISE, _NORMALS = 0, 1, 2, 3, 4
 _R, _S = sim_rig.ROBOT_AT, sim_rig.SENSOR_AT
 
 
+def _compile_due(callees: int) -> Any:
+    """:func:`due_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def due_kernel(b: State, bi: IntRow, ps: State, now: int) -> tuple[int, float, float]:
+        """Whether Python is due before the tick at ``now`` (nothing of it done yet): its stop, or :data:`_RAN_ALL`
+        for none, with the rig's step (s) and the participant's time then (:meth:`pipeline.sim.rig.SimRig.advance`'s
+        and :meth:`pipeline.sim.participant.SimulatedParticipant.equilibrium_y`'s)."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        dt = (now - bi[_RIG_LAST]) * 1e-9
+        if dt < 0.0:
+            dt = 0.0
+        elif dt > sim_rig.MAX_DT_S:
+            dt = sim_rig.MAX_DT_S
+        t = b[_SIM_TIME] + dt
+        pdt = t - ps[participant_tick.T_AT]
+        if not (-0.5 <= pdt <= 0.5) or t >= ps[participant_tick.NEXT_AT]:
+            return _BEFORE, dt, t
+        if bi[_NI] >= bi[_NOISE_ROWS]:
+            return _NOISE, dt, t
+        if participant_tick.normals_short(ps, t):
+            return _NORMALS, dt, t
+        return _RAN_ALL, dt, t
+
+    return due_kernel
+
+
+def _compile_rig(callees: int) -> Any:
+    """:func:`rig_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def rig_kernel(b: State, bi: IntRow, st: State, noise: State, tst: State, tint: IntRow, ps: State, hist: State,
+                   z: State, now: int, dt: float, t: float) -> None:
+        """The rig's step of the tick at ``now`` (:meth:`pipeline.sim.rig.SimRig.advance`): the Touch, the hand's
+        observation and decision, the physics; the newest sample and pose into the block's state."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        bi[_RIG_LAST] = now
+        b[_SIM_TIME] = t
+        ax, ay, az, err = sim_touch.advance_kernel(tst, tint, now, dt, bi[_ERR])
+        bi[_ERR] = err
+        one = bi[_ONE_AXIS]
+        if one >= 0:  # one device axis: that component, exactly
+            felt = (ax if one == 0 else (ay if one == 1 else az)) * b[_ONE_SIGN]
+        else:
+            felt = ax * b[_AXIS] + ay * b[_AXIS + 1] + az * b[_AXIS + 2]
+        depth = b[_SURFACE] - st[_R + 2]
+        y_arm = st[sim_rig.ARM_AT]
+        ind = depth if depth > 0 else 0.0
+        gap = -depth if depth < 0 else 0.0
+        b[_OBS], b[_OBS + 1], b[_OBS + 2], b[_OBS + 3], b[_OBS + 4] = t, y_arm, felt, ind, gap
+        ps[participant_tick.T_AT] = t
+        participant_tick.remember_kernel(ps, hist, t, y_arm, felt, ind, gap)
+        y_c = participant_tick.plan_kernel(ps, z, t)
+        ni = bi[_NI]
+        bi[_NI] = ni + 1
+        # (the record's six values are in the sensor's state, read as the newest sample's)
+        y, f, cycled, what, _r0, _r1, _r2, _r3, _r4, _r5 = sim_rig.step_kernel(
+            st, noise, ni, y_c, felt, dt, now - bi[_ROBOT_ORIGIN], now - bi[_SENSOR_ORIGIN])
+        b[_Y], b[_F] = y, f
+        if cycled:  # the robot's controller published its pose (SimRobot.cycled)
+            bi[_POSE_T] = now
+            bi[_CYCLED] = 1
+            p = _R + sim_robot.POSE_AT
+            b[_TIP], b[_TIP + 1], b[_TIP + 2] = st[p], st[p + 1], st[p + 2]
+        if what >= sensor.RECORD:  # a new newest sample (SimForceSensor.took)
+            bi[_W_T] = now
+            bi[_W_STATUS] = int(st[_S + sensor.STATUS_AT])
+            bi[_PUBLISHED] += 1
+
+    return rig_kernel
+
+
+def _compile_arm(callees: int) -> Any:
+    """:func:`arm_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def arm_kernel(b: State, bi: IntRow, st: State, tst: State, tint: IntRow, fw: State, rls: State, sat: State,
+                   row_f: State, row_i: IntRow, poses: State, now: int, period: int) -> bool:
+        """The arm's part of the tick at ``now`` (:meth:`pipeline.runtime.arm_channel.ArmChannel.tick`), its record
+        into ``row_f``/``row_i``; False, and nothing done, when it is Python's: a watchdog condition changes, the
+        pose is new in orientation or not finite, the device's error or derated limit changed."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        w_t = bi[_W_T]
+        o = _S + sensor.OUT
+        r0, r1, r2, r3, r4, r5 = st[o], st[o + 1], st[o + 2], st[o + 3], st[o + 4], st[o + 5]
+        cond, sensor_age_ns, pose_age_ns = arm_channel.conditions_kernel(
+            sat, bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE], now, w_t, r0, r1, r2, r3, r4, r5, bi[_W_STATUS], bi[_POSE_T])
+        new_pose = bi[_POSE_T] != bi[_CH_POSE_T]
+        if new_pose:
+            total = b[_ROT_SUM] + (b[_TIP] + b[_TIP + 1] + b[_TIP + 2])
+            if b[_ROT_SAME] == 0.0 or total - total != 0.0:
+                return False
+        faults = bi[_FAULTS]
+        if (bi[_ERR] != 0 or tst[touch_output.LIMIT_AT] != b[_DEV_LIMIT] or cond != bi[_ACTIVE]
+                or cond & ~faults):
+            return False
+        if new_pose:  # the framework's pose is this orientation already (_ROT_SAME): only its time is new
+            bi[_CH_POSE_T] = bi[_POSE_T]
+            if b[_RECORDING] != 0.0:
+                j = bi[_N_POSES]
+                poses[j, 0], poses[j, 1], poses[j, 2] = bi[_TICK], b[_TIP], b[_TIP + 1]
+                poses[j, 3], poses[j, 4] = b[_TIP + 2], bi[_POSE_T]
+                bi[_N_POSES] = j + 1
+        if b[_REFINE] != 0.0 and faults == 0:
+            algorithm_1.refine_kernel(fw, rls, r0, r1, r2, r3, r4, r5)
+        on = b[_ON] != 0.0
+        enabled = on and faults == 0
+        haptic_on = 1 if on else 0
+        derate_check = b[_DERATE_CHECK] != 0.0
+        true_fz = b[_F] + b[_PUSH + 2]
+        y = b[_Y]
+        ax_y, ay_y, az_y = b[_AXIS] * y, b[_AXIS + 1] * y, b[_AXIS + 2] * y  # the stylus (SimRig.advance)
+        sx = ax_y if b[_AXIS] != 0.0 else 0.0
+        sy = ay_y if b[_AXIS + 1] != 0.0 else 0.0
+        sz = az_y if b[_AXIS + 2] != 0.0 else 0.0
+        rfx, rfy, rfz = arm_channel.record_kernel(
+            fw, row_f, row_i, r0, r1, r2, r3, r4, r5, 0.0, False, enabled, period * 1e-9, derate_check,
+            b[_LIMIT_N], b[_STATIC_LIMIT], bi[_TICK], now - bi[_T0], period, sensor_age_ns, pose_age_ns, faults,
+            haptic_on, bi[_TRIAL], bi[_PHASE], sx, sy, sz, b[_TIP], b[_TIP + 1], b[_TIP + 2], b[_PUSH],
+            b[_PUSH + 1], true_fz)
+        touch_output.command_kernel(tst, tint, rfx, rfy, rfz, now)
+        row_i[arm_channel.LATENCY_AT] = now - w_t  # (on a virtual clock: the sample's age)
+        bi[_TICK] += 1
+        return True
+
+    return arm_kernel
+
+
+_TICK_MODULES = (exact, frames, filters, safety, scaling, algorithm_1, bias_refinement, record_writer, arm_channel,
+                 touch_output, sim_touch, hand, participant_tick, sim_robot, tissue, sensor, sim_rig)
+#: Whether Python is due before a tick; the rig's step; the arm's part (block_kernel's steps, compiled).
+due_kernel = _compile_due(fingerprint(*_TICK_MODULES))
+rig_kernel = _compile_rig(fingerprint(*_TICK_MODULES))
+arm_kernel = _compile_arm(fingerprint(*_TICK_MODULES))
+
+
 def _compile_block(callees: int) -> Any:
     """:func:`block_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
 
@@ -89,112 +226,22 @@ def _compile_block(callees: int) -> Any:
         the rig's state ``st`` and its sensor's ``noise``, the Touch output's ``tst``/``tint``, the participant's
         ``ps``, ``hist`` and ``z``, the framework's ``fw`` and its bias estimator's ``rls``, the watchdog's
         saturation limits ``sat``; each tick's record into ``rows``/``rows_i``, each pose logged for replay into
-        ``poses`` (tick, x, y, z, t_ns).  How many ran and why it stopped are ``bi[_DONE]``, ``bi[_STOP]``."""
+        ``poses`` (tick, x, y, z, t_ns).  How many ran whole, how many began and why it stopped are ``bi[_DONE]``,
+        ``bi[_STARTED]``, ``bi[_STOP]``."""
         _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         period = bi[_PERIOD]
-        dt_loop = period * 1e-9  # (the loop's dt_s at the nominal period)
         now = bi[_NOW0]
-        o = _S + sensor.OUT
-        k = 0
+        k = started = 0
         stop = _RAN_ALL
-        started = 0
         while k < n:
-            # -- Python's before the tick? (SimRig.advance's dt and the participant's time; nothing changed yet) --
-            dt = (now - bi[_RIG_LAST]) * 1e-9
-            if dt < 0.0:
-                dt = 0.0
-            elif dt > sim_rig.MAX_DT_S:
-                dt = sim_rig.MAX_DT_S
-            t = b[_SIM_TIME] + dt
-            pdt = t - ps[participant.T_AT]
-            if not (-0.5 <= pdt <= 0.5) or t >= ps[participant.NEXT_AT]:
-                stop = _BEFORE
-                break
-            if bi[_NI] >= bi[_NOISE_ROWS]:
-                stop = _NOISE
-                break
-            if participant.normals_short(ps, t):
-                stop = _NORMALS
+            stop, dt, t = due_kernel(b, bi, ps, now)
+            if stop != _RAN_ALL:
                 break
             started += 1
-            # -- the rig's step (SimRig.advance): the Touch, the hand's decision, the physics --
-            bi[_RIG_LAST] = now
-            b[_SIM_TIME] = t
-            ax, ay, az, err = sim_touch.advance_kernel(tst, tint, now, dt, bi[_ERR])
-            bi[_ERR] = err
-            one = bi[_ONE_AXIS]
-            if one >= 0:  # one device axis: that component, exactly
-                felt = (ax if one == 0 else (ay if one == 1 else az)) * b[_ONE_SIGN]
-            else:
-                felt = ax * b[_AXIS] + ay * b[_AXIS + 1] + az * b[_AXIS + 2]
-            depth = b[_SURFACE] - st[_R + 2]
-            y_arm = st[sim_rig.ARM_AT]
-            ind = depth if depth > 0 else 0.0
-            gap = -depth if depth < 0 else 0.0
-            b[_OBS], b[_OBS + 1], b[_OBS + 2], b[_OBS + 3], b[_OBS + 4] = t, y_arm, felt, ind, gap
-            ps[participant.T_AT] = t
-            participant.remember_kernel(ps, hist, t, y_arm, felt, ind, gap)
-            y_c = participant.plan_kernel(ps, z, t)
-            ni = bi[_NI]
-            bi[_NI] = ni + 1
-            # (the record's six values are in the sensor's state, read below as the newest sample's)
-            y, f, cycled, what, _r0, _r1, _r2, _r3, _r4, _r5 = sim_rig.step_kernel(
-                st, noise, ni, y_c, felt, dt, now - bi[_ROBOT_ORIGIN], now - bi[_SENSOR_ORIGIN])
-            b[_Y], b[_F] = y, f
-            if cycled:  # the robot's controller published its pose (SimRobot.cycled)
-                bi[_POSE_T] = now
-                bi[_CYCLED] = 1
-                b[_TIP], b[_TIP + 1], b[_TIP + 2] = st[_R + sim_robot.POSE_AT], st[_R + sim_robot.POSE_AT + 1], st[
-                    _R + sim_robot.POSE_AT + 2]
-            if what >= sensor.RECORD:  # a new newest sample (SimForceSensor.took)
-                bi[_W_T] = now
-                bi[_W_STATUS] = int(st[_S + sensor.STATUS_AT])
-                bi[_PUBLISHED] += 1
-            # -- the arm's part (ArmChannel.tick): Python's if a condition, a pose or the device changed --
-            w_t = bi[_W_T]
-            r0, r1, r2, r3, r4, r5 = st[o], st[o + 1], st[o + 2], st[o + 3], st[o + 4], st[o + 5]
-            cond, sensor_age_ns, pose_age_ns = arm_channel.conditions_kernel(
-                sat, bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE], now, w_t, r0, r1, r2, r3, r4, r5, bi[_W_STATUS],
-                bi[_POSE_T])
-            new_pose = bi[_POSE_T] != bi[_CH_POSE_T]
-            if new_pose:
-                total = b[_ROT_SUM] + (b[_TIP] + b[_TIP + 1] + b[_TIP + 2])
-                if b[_ROT_SAME] == 0.0 or total - total != 0.0:
-                    stop = _MID
-                    break
-            if bi[_ERR] != 0 or tst[touch_output.LIMIT_AT] != b[_DEV_LIMIT]:
+            rig_kernel(b, bi, st, noise, tst, tint, ps, hist, z, now, dt, t)
+            if not arm_kernel(b, bi, st, tst, tint, fw, rls, sat, rows[k], rows_i[k], poses, now, period):
                 stop = _MID
                 break
-            faults = bi[_FAULTS]
-            if cond != bi[_ACTIVE] or cond & ~faults:
-                stop = _MID
-                break
-            if new_pose:  # the framework's pose is this orientation already (_ROT_SAME): only its time is new
-                bi[_CH_POSE_T] = bi[_POSE_T]
-                if b[_RECORDING] != 0.0:
-                    j = bi[_N_POSES]
-                    poses[j, 0], poses[j, 1], poses[j, 2] = bi[_TICK], b[_TIP], b[_TIP + 1]
-                    poses[j, 3], poses[j, 4] = b[_TIP + 2], bi[_POSE_T]
-                    bi[_N_POSES] = j + 1
-            if b[_REFINE] != 0.0 and faults == 0:
-                algorithm_1.refine_kernel(fw, rls, r0, r1, r2, r3, r4, r5)
-            on = b[_ON] != 0.0
-            enabled = on and faults == 0
-            haptic_on = 1 if on else 0
-            derate_check = b[_DERATE_CHECK] != 0.0
-            true_fz = f + b[_PUSH + 2]
-            ax_y, ay_y, az_y = b[_AXIS] * y, b[_AXIS + 1] * y, b[_AXIS + 2] * y  # the stylus (SimRig.advance)
-            sx = ax_y if b[_AXIS] != 0.0 else 0.0
-            sy = ay_y if b[_AXIS + 1] != 0.0 else 0.0
-            sz = az_y if b[_AXIS + 2] != 0.0 else 0.0
-            rfx, rfy, rfz = arm_channel.record_kernel(
-                fw, rows[k], rows_i[k], r0, r1, r2, r3, r4, r5, 0.0, False, enabled, dt_loop, derate_check,
-                b[_LIMIT_N], b[_STATIC_LIMIT], bi[_TICK], now - bi[_T0], period, sensor_age_ns, pose_age_ns, faults,
-                haptic_on, bi[_TRIAL], bi[_PHASE], sx, sy, sz, b[_TIP], b[_TIP + 1], b[_TIP + 2], b[_PUSH],
-                b[_PUSH + 1], true_fz)
-            touch_output.command_kernel(tst, tint, rfx, rfy, rfz, now)
-            rows_i[k, arm_channel.LATENCY_AT] = now - w_t  # (on a virtual clock: the sample's age)
-            bi[_TICK] += 1
             k += 1
             now += period
         bi[_DONE] = k
@@ -205,9 +252,7 @@ def _compile_block(callees: int) -> Any:
 
 
 #: Ticks of a one-arm simulated loop in one compiled call (:class:`SimBlocks`).
-block_kernel = _compile_block(fingerprint(exact, frames, filters, safety, scaling, algorithm_1, bias_refinement,
-                                          record_writer, arm_channel, touch_output, sim_touch, hand, participant,
-                                          sim_robot, tissue, sensor, sim_rig))
+block_kernel = _compile_block(fingerprint(*_TICK_MODULES))
 
 _new_tuple = tuple.__new__
 
@@ -348,7 +393,7 @@ class SimBlocks:
         rig, ch = self.rig, self.ch
         out, p, fw = rig.haptic.output, rig.driver, ch.framework
         hist = p.history.copy() if isinstance(p, SimulatedParticipant) else np.zeros((5, 1024))
-        ps = p.array.copy() if isinstance(p, SimulatedParticipant) else np.zeros(participant.STATE_SIZE)
+        ps = p.array.copy() if isinstance(p, SimulatedParticipant) else np.zeros(participant_tick.STATE_SIZE)
         block_kernel(0, self.b.copy(), self.bi.copy(), rig.state.copy(), rig.sensor.noise.copy(), out.array.copy(),
                      out.ints.copy(), ps, hist, np.zeros(1), fw.array.copy(), np.zeros(1), ch.saturation_n.copy(),
                      self.rows.copy(), self.rows_i.copy(), self.poses.copy())

@@ -88,26 +88,32 @@ are in :mod:`pipeline.sim.participant_params`.
 from __future__ import annotations
 
 import math
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
 from pipeline.core.aim import TrialAim, TrialQuestion
-from pipeline.core.compiled import State, fingerprint, kernel, warm_once
 from pipeline.force.scaling import scale_magnitude
-from pipeline.sim import hand
 from pipeline.sim.approach import approach_end_y, seen_over_aim
 from pipeline.sim.discrimination_observer import DiscriminationObserver
 from pipeline.sim.experience import with_profile
 from pipeline.sim.hand import ArmParams, HandObservation, min_jerk
 from pipeline.sim.learning import Practice, practised
 from pipeline.sim.participant_params import ParticipantParams
-from pipeline.sim.percepts import HISTORY_TICKS, inverse_scale, newest_at, weber_sigma
+from pipeline.sim.participant_tick import (
+    DRIFT_KNOT_S,
+    NEXT_AT,
+    T_AT,
+    TickState,
+    plan_kernel,
+    remember_kernel,
+    warm_kernels,
+)
+from pipeline.sim.percepts import inverse_scale, newest_at, weber_sigma
 from pipeline.sim.tissue import TissueParams
 from pipeline.sim.tracking_hand import TrackingHand
 
-__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant", "normals_short", "plan_kernel", "remember_kernel",
-           "warm_kernels"]
+__all__ = ["SAFE_Y_RANGE_M", "SimulatedParticipant"]
 
 #: The participant never commands an equilibrium outside this range (m along the Touch's +y, from
 #: the start pose): 30 mm down is 15 mm into the tissue (≈ 20 N, far beyond any task force) and
@@ -119,130 +125,13 @@ _CONTACT_VISUAL_M = 0.001  # contact noticed on the camera image at δ > 1 mm
 _CONTACT_HAPTIC_N = 0.05  # ... or felt at F > 0.05 N (haptic percept, tissue-force units)
 _HOLD_FRACTION = 0.05  # no submovement when |F* − F̂| < 5 % F*
 _RETRACT_S = 0.4  # minimum-jerk retraction to the start pose after a trial
-_DRIFT_KNOT_S = 0.02  # postural drift: a random walk sampled every 20 ms, linearly interpolated
-_HIST = HISTORY_TICKS  # observation history (ticks); covers the longest percept delay
-_MASK = _HIST - 1
 _NOISE_BLOCK = 1024
 
 
 # stages of a trial
 _IDLE, _WAIT, _APPROACH, _CONTROL = 0, 1, 2, 3
 
-# The participant's per-tick state, a float64 array (its kernels' layout): the newest observation's time (NaN before
-# the first) and its place in the history, the commanded minimum-jerk segment (y0 → y1 over [t0, t0 + dur], its end),
-# the postural drift (on, its knots' times and values, its step), the last output, the next event's time, the normals
-# drawn (the next one's index, how many), the cue's time.
-_T, _HI, _P_T0, _P_DUR, _P_Y0, _P_Y1, _P_END, _DRIFT_ON, _D_T0, _D_T1, _D0, _D1, _D_STEP, _OUT, _NEXT = range(15)
-_ZI, _NZ, _CUE_T = 15, 16, 17
-STATE_SIZE = 18
-#: Where the state holds the next event's time, the newest observation's time, whether the drift is on, the next
-#: drift knot's time, and the normals drawn and used (what a caller running ticks in a block checks before each).
-NEXT_AT, T_AT, DRIFT_ON_AT, D_T1_AT, ZI_AT, NZ_AT = _NEXT, _T, _DRIFT_ON, _D_T1, _ZI, _NZ
-#: The history's rows: times, stylus positions, felt forces, indentations, gaps.
-_HT, _HY, _HF, _HD, _HG = range(5)
-
-
-@kernel
-def remember_kernel(ps: State, hist: State, t: float, y_st: float, felt: float, ind: float, gap: float) -> None:
-    """Keep this tick's observation (at the participant's time ``t``) in the history's next slot."""
-    i = (int(ps[_HI]) + 1) & _MASK
-    ps[_HI] = i
-    hist[_HT, i] = t
-    hist[_HY, i] = y_st
-    hist[_HF, i] = felt
-    hist[_HD, i] = ind
-    hist[_HG, i] = gap
-
-
-@kernel
-def normals_short(ps: State, t: float) -> bool:
-    """Whether the drift's knots due at ``t`` need more normals than are drawn (:func:`plan_kernel` would ask for
-    more): a caller running ticks in a block checks it before a tick."""
-    if ps[_DRIFT_ON] == 0.0 or t < ps[_D_T1]:
-        return False
-    tk = ps[_D_T1]
-    if t - tk > 1.0:  # (plan_kernel's re-anchoring)
-        tk = t
-    knots = 0
-    while t >= tk:
-        knots += 1
-        tk = tk + _DRIFT_KNOT_S
-    return bool(ps[_ZI] + knots > ps[_NZ])
-
-
-def _compile_plan(callees: int) -> Any:
-    """:func:`plan_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
-
-    @kernel
-    def plan_kernel(ps: State, z: State, t: float) -> float:
-        """The equilibrium at ``t``: the current plan plus the postural drift (its knots drawn from ``z`` as due),
-        clamped to :data:`SAFE_Y_RANGE_M`; NaN, and nothing changed, when the knots due need more normals than
-        ``z`` has left (the caller draws more and asks again)."""
-        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
-        y = ps[_P_Y1] if t >= ps[_P_END] else hand.min_jerk(t, ps[_P_T0], ps[_P_DUR], ps[_P_Y0], ps[_P_Y1])
-        if ps[_DRIFT_ON] != 0.0:
-            if t >= ps[_D_T1]:
-                if normals_short(ps, t):
-                    return math.nan
-                d_t1 = ps[_D_T1]
-                if t - d_t1 > 1.0:  # cannot happen at 1 kHz; re-anchor instead of looping
-                    d_t1 = t
-                zi = int(ps[_ZI])
-                ps[_D_T1] = d_t1
-                while t >= ps[_D_T1]:
-                    ps[_D_T0] = ps[_D_T1]
-                    ps[_D0] = ps[_D1]
-                    ps[_D1] = ps[_D0] + ps[_D_STEP] * z[zi]
-                    zi += 1
-                    ps[_D_T1] = ps[_D_T0] + _DRIFT_KNOT_S
-                ps[_ZI] = zi
-            y += ps[_D0] + (ps[_D1] - ps[_D0]) * (t - ps[_D_T0]) * (1.0 / _DRIFT_KNOT_S)
-        if y < -0.030:
-            y = -0.030
-        elif y > 0.005:
-            y = 0.005
-        elif y != y:  # pragma: no cover - the plan is built from finite values only
-            y = ps[_OUT]
-        ps[_OUT] = y
-        return y
-
-    return plan_kernel
-
-
-#: The participant's equilibrium between its events (:meth:`SimulatedParticipant.equilibrium_y`), compiled.
-plan_kernel = _compile_plan(fingerprint(hand))
-
-
-class _Slot:
-    """An attribute of the participant kept in its state array (:data:`STATE_SIZE`'s layout), a float."""
-
-    __slots__ = ("index",)
-
-    def __init__(self, index: int) -> None:
-        self.index = index
-
-    def __get__(self, obj: Any, owner: Any = None) -> float:
-        return obj.array.item(self.index)  # type: ignore[no-any-return]  # (a float64 array's item: a float)
-
-    def __set__(self, obj: Any, value: float) -> None:
-        obj.array[self.index] = value
-
-
-class _IntSlot(_Slot):
-    """An attribute kept in the state array, an int."""
-
-    def __get__(self, obj: Any, owner: Any = None) -> int:
-        return int(obj.array.item(self.index))
-
-
-class _BoolSlot(_Slot):
-    """An attribute kept in the state array, a bool."""
-
-    def __get__(self, obj: Any, owner: Any = None) -> bool:
-        return obj.array.item(self.index) != 0.0  # type: ignore[no-any-return]  # (a float's comparison)
-
-
-class SimulatedParticipant:
+class SimulatedParticipant(TickState):
     """A seeded simulated participant: implements the rig's ``StylusDriver``.
 
     Its per-tick state is a float64 array (:attr:`array`; the attributes below backed by it), its observation history
@@ -275,25 +164,6 @@ class SimulatedParticipant:
         participant has learned by the documented rule; None (or the first visit): the calibrated participant.
     """
 
-    _t = _Slot(_T)
-    _hi = _IntSlot(_HI)
-    _p_t0 = _Slot(_P_T0)
-    _p_dur = _Slot(_P_DUR)
-    _p_y0 = _Slot(_P_Y0)
-    _p_y1 = _Slot(_P_Y1)
-    _p_end = _Slot(_P_END)
-    _drift_on = _BoolSlot(_DRIFT_ON)
-    _d_t0 = _Slot(_D_T0)
-    _d_t1 = _Slot(_D_T1)
-    _d0 = _Slot(_D0)
-    _d1 = _Slot(_D1)
-    _d_step = _Slot(_D_STEP)
-    _out = _Slot(_OUT)
-    _next = _Slot(_NEXT)
-    _zi = _IntSlot(_ZI)
-    _nz = _IntSlot(_NZ)
-    _cue_t = _Slot(_CUE_T)
-
     def __init__(
         self,
         seed: int = 0,
@@ -311,8 +181,7 @@ class SimulatedParticipant:
             raise ValueError(f"motion_scale = {motion_scale!r}: must be a finite number > 0")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed = {seed!r}: must be a whole number ≥ 0")
-        #: The per-tick state (the module's layout).
-        self.array: State = np.zeros(STATE_SIZE)
+        self.init_tick_state()
         self.seed = int(seed)
         self._rng = np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=(0,)))
         self.params = practised(with_profile(params if params is not None else ParticipantParams.draw(self._rng),
@@ -330,14 +199,8 @@ class SimulatedParticipant:
         self._fmax = float(f_max_n)
         self._fscale = float(f_scale_n)
         scale_magnitude(1.0, self._fmax, self._fscale)  # validates the law's parameters
-        #: The normals drawn for the current trial's stream, the next one at :attr:`_zi` (of :attr:`_nz`).
-        self._z: State = np.zeros(0)
         self._zi = 0
         self._nz = 0
-        #: The observation history, a ring of the last _HIST ticks: times, stylus positions, felt forces,
-        #: indentations, gaps (unfilled times -inf).
-        self.history: State = np.zeros((5, _HIST))
-        self.history[_HT] = -math.inf
         self._hi = 0
         self._t = math.nan  # time of the newest observation (NaN before the first)
         # commanded trajectory: a minimum-jerk segment (y0 → y1 over [t0, t0 + dur])
@@ -352,7 +215,7 @@ class SimulatedParticipant:
         self._d_t1 = math.inf
         self._d0 = 0.0
         self._d1 = 0.0
-        self._d_step = self.params.drift_m_per_sqrt_s * math.sqrt(_DRIFT_KNOT_S)
+        self._d_step = self.params.drift_m_per_sqrt_s * math.sqrt(DRIFT_KNOT_S)
         self._out = 0.0
         # trial state
         self._pending: tuple[Any, ...] | None = None
@@ -386,32 +249,6 @@ class SimulatedParticipant:
         """Whether its next ticks are its compiled tick until :data:`NEXT_AT` (no trial being staged, no tracking
         trial's hand): what a caller running ticks in a block checks before one."""
         return self._pending is None and self._tracking is None
-
-    @property
-    def normals(self) -> State:
-        """The normals drawn for the current trial's stream (:func:`plan_kernel` reads them)."""
-        return self._z
-
-    # -- the history's rows (what a decision looks back at) ------------------------------------
-    @property
-    def _ht(self) -> State:
-        return cast(State, self.history[_HT])
-
-    @property
-    def _hy(self) -> State:
-        return cast(State, self.history[_HY])
-
-    @property
-    def _hf(self) -> State:
-        return cast(State, self.history[_HF])
-
-    @property
-    def _hd(self) -> State:
-        return cast(State, self.history[_HD])
-
-    @property
-    def _hg(self) -> State:
-        return cast(State, self.history[_HG])
 
     # -- random numbers -------------------------------------------------------------------------
     def _randn(self) -> float:
@@ -483,9 +320,9 @@ class SimulatedParticipant:
         """Equilibrium point of the arm, m along the Touch's +y from the start pose."""
         t, y_st, felt, ind, gap = obs
         ps = self.array
-        dt = t - ps.item(_T)
+        dt = t - ps.item(T_AT)
         if -0.5 <= dt <= 0.5:  # False for NaN: the rig never steps more than 10 ms
-            ps[_T] = t
+            ps[T_AT] = t
         else:
             t = self._time_jump(t, dt)
         t = float(t)  # (the kernels are compiled for floats)
@@ -495,7 +332,7 @@ class SimulatedParticipant:
         if self._tracking is not None:
             y = self._out = min(max(self._tracking.equilibrium_y(obs._replace(t_s=t)), -0.030), 0.005)
             return y
-        if t >= ps.item(_NEXT):
+        if t >= ps.item(NEXT_AT):
             self._event(t)
         # the current plan, its drift and its clamp
         y = plan_kernel(ps, self._z, t)
@@ -523,7 +360,7 @@ class SimulatedParticipant:
     def _fold_drift(self, t: float) -> None:
         """Absorb the drift into the plan (so the output stays continuous) and stop it."""
         if self._drift_on:
-            d = self._d0 + (self._d1 - self._d0) * min(1.0, (t - self._d_t0) / _DRIFT_KNOT_S)
+            d = self._d0 + (self._d1 - self._d0) * min(1.0, (t - self._d_t0) / DRIFT_KNOT_S)
             self._p_y0 += d
             self._p_y1 += d
         self._drift_on = False
@@ -548,7 +385,8 @@ class SimulatedParticipant:
         self._d_t1 += dt
         self._next += dt
         self._cue_t += dt
-        self.history[_HT] += dt  # (each time plus dt, as one at a time)
+        ht = self._ht
+        ht += dt  # (each time plus dt, as one at a time)
         self._t = t
         return t
 
@@ -624,7 +462,7 @@ class SimulatedParticipant:
 
     def _lookup(self, tq: float) -> int:
         """Index of the newest history sample at or before ``tq`` (not before the cue)."""
-        return newest_at(self.history[_HT], self._hi, float(tq), self._cue_t)
+        return newest_at(self._ht, self._hi, float(tq), self._cue_t)
 
     def _depth_for(self, force_n: float) -> float:
         """Believed indentation (m) that produces ``force_n`` under the stiffness belief."""
@@ -651,7 +489,7 @@ class SimulatedParticipant:
         self._plan(t, self._approach_s, approach_end_y(y_st, float(self._hg[j]), float(self._hd[j]), self._surface_err,
                                                        self._delta_star, self._s, pushback))
         self._drift_on = True
-        self._d_t0, self._d_t1, self._d0, self._d1 = t, t + _DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
+        self._d_t0, self._d_t1, self._d0, self._d1 = t, t + DRIFT_KNOT_S, 0.0, self._d_step * self._randn()
         self._stage = _APPROACH
         self._next = self._p_end + self._interval  # the plan's end (t + the approach's duration), then the pause
         if self._watched:  # feedback OFF: the approach is watched on the image (pipeline.sim.approach)
@@ -727,20 +565,3 @@ class SimulatedParticipant:
         dy = p.gain * dy * math.exp(p.motor_noise_rel * z_rel) + p.motor_noise_abs_m * z_abs
         self._plan(t, p.submove_s, self._p_y1 - dy / s)
         self.submovements += 1
-
-
-def warm_kernels() -> None:
-    """Compile the participant's kernels (or load them from numba's cache) on a scratch state, as its methods call
-    them, once a process: when the first participant is built or unpickled, or a simulated engine is built (the
-    loop's own process, where a participant arrives by pickle while the loop runs), so that no tick waits for a
-    compiler."""
-    warm_once(__name__, _compile_them)
-
-
-def _compile_them() -> None:
-    ps, hist = np.zeros(STATE_SIZE), np.zeros((5, _HIST))
-    remember_kernel(ps, hist, 0.0, 0.0, 0.0, 0.0, 0.0)
-    plan_kernel(ps, np.zeros(1), 0.0)
-    normals_short(ps, 0.0)
-    newest_at(hist[_HT], 0, 0.0, 0.0)
-    min_jerk(0.5, 0.0, 1.0, 0.0, 1.0)

@@ -32,7 +32,7 @@ from pipeline.devices.interfaces import Fault
 from pipeline.devices.touch_output import HapticLimits, TouchOutput
 from pipeline.runtime import arm_channel
 from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, ResetFaults, SetHaptics
-from pipeline.sim import hand, participant, percepts
+from pipeline.sim import hand, participant_tick, percepts
 from pipeline.sim import touch as sim_touch
 from pipeline.sim.block import SimBlocks
 from pipeline.sim.participant import SimulatedParticipant
@@ -112,16 +112,16 @@ def _participant(seed: int, t: float, drift: bool, zi: int, nz: int) -> Simulate
 def test_participant_kernels(seed: int, t: float, dt: float, drift: bool, zi: int,
                              obs: tuple[float, float, float, float]) -> None:
     p = _participant(seed, t, drift, zi, 8)
-    same(participant.plan_kernel, p.array, p.normals, t + dt)
-    same(participant.normals_short, p.array, t + dt)
+    same(participant_tick.plan_kernel, p.array, p.normals, t + dt)
+    same(participant_tick.normals_short, p.array, t + dt)
     hist = p.history.copy()
     a, b = p.array.copy(), p.array.copy()
-    participant.remember_kernel(a, hist, t, *obs)
+    participant_tick.remember_kernel(a, hist, t, *obs)
     h2 = p.history.copy()
-    participant.remember_kernel.py_func(b, h2, t, *obs)
+    participant_tick.remember_kernel.py_func(b, h2, t, *obs)
     assert bits(a) == bits(b) and bits(hist) == bits(h2)
     j = int(a[1])
-    assert participant.newest_at(hist[0], j, t + dt, t - 1.0) == percepts.newest_at.py_func(hist[0], j, t + dt,
+    assert participant_tick.newest_at(hist[0], j, t + dt, t - 1.0) == percepts.newest_at.py_func(hist[0], j, t + dt,
                                                                                               t - 1.0)
 
 
@@ -130,10 +130,11 @@ def test_the_drift_asks_for_normals_it_has_not() -> None:
     p = _participant(3, 5.0, True, 8, 8)
     p._d_t1 = 4.99
     before = p.array.copy()
-    assert participant.normals_short(p.array, 5.0) and math.isnan(participant.plan_kernel(p.array, p.normals, 5.0))
+    assert participant_tick.normals_short(p.array, 5.0)
+    assert math.isnan(participant_tick.plan_kernel(p.array, p.normals, 5.0))
     assert bits(p.array) == bits(before)
     p.more_normals()
-    assert p._nz == 1024 and not math.isnan(participant.plan_kernel(p.array, p.normals, 5.0))
+    assert p._nz == 1024 and not math.isnan(participant_tick.plan_kernel(p.array, p.normals, 5.0))
 
 
 @settings(max_examples=300)
@@ -272,17 +273,17 @@ def test_the_kernels_are_compiled_when_a_simulated_engine_is_built() -> None:
     compiled or loaded when it is built (in a fresh process: this one's may have compiled them already) -- the loop's
     own process too, where a participant arrives by pickle while the loop runs."""
     compiled_on_construction(
-        "from pipeline.sim import block, participant, percepts, hand, touch\n"
+        "from pipeline.sim import block, participant_tick, percepts, hand, touch\n"
         "from pipeline.devices import touch_output\n"
         "from pipeline.assembly.engine import EngineConfig, build_sim_engine",
-        "(block.block_kernel, participant.plan_kernel, participant.remember_kernel, participant.normals_short, "
-        "percepts.newest_at, hand.min_jerk, touch.advance_kernel, touch_output.render_kernel, "
-        "touch_output.command_kernel)",
+        "(block.block_kernel, block.due_kernel, block.rig_kernel, block.arm_kernel, participant_tick.plan_kernel, "
+        "participant_tick.remember_kernel, participant_tick.normals_short, percepts.newest_at, hand.min_jerk, "
+        "touch.advance_kernel, touch_output.render_kernel, touch_output.command_kernel)",
         "build_sim_engine(EngineConfig(clock='virtual'))")
 
 
 def test_an_unpickled_participant_is_ready() -> None:
     p = pickle.loads(pickle.dumps(SimulatedParticipant(seed=2)))
-    assert participant.plan_kernel.signatures and p.array.shape == (participant.STATE_SIZE,)
+    assert participant_tick.plan_kernel.signatures and p.array.shape == (participant_tick.STATE_SIZE,)
     assert int(Fault.SENSOR_STALE) & arm_channel.conditions_kernel.py_func(
         np.ones(6), 5, 5, 100, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 100)[0]
