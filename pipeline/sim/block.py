@@ -42,7 +42,7 @@ from typing import Any, cast
 import numpy as np
 
 from pipeline.core import exact, record_writer
-from pipeline.core.clock import VirtualClock
+from pipeline.core.clock import Clock, VirtualClock
 from pipeline.core.compiled import State, fingerprint, is_warm, kernel, warm_once
 from pipeline.core.record_writer import IntRow
 from pipeline.core.tick_record import RECORD_FIELDS
@@ -55,11 +55,12 @@ from pipeline.sim import hand, participant_tick, sensor, tissue
 from pipeline.sim import rig as sim_rig
 from pipeline.sim import robot as sim_robot
 from pipeline.sim import touch as sim_touch
-from pipeline.sim.hand import HandObservation
+from pipeline.sim.hand import HandObservation, HoldStill
 from pipeline.sim.participant import SimulatedParticipant
 from pipeline.sim.rig import SimRig
 
-__all__ = ["SimBlocks", "arm_kernel", "block_kernel", "due_kernel", "rig_kernel", "warm_kernels"]
+__all__ = ["SimBlocks", "arm_kernel", "block_kernel", "due_kernel", "hold_kernel", "hold_still", "observe_kernel",
+           "physics_kernel", "rig_kernel", "step_s", "warm_kernels"]
 
 # The block's state, one float64 array and its int64 view (the layout below): what the Python objects hold that a
 # tick reads or changes, gathered when a block starts and given back when it ends.
@@ -79,6 +80,15 @@ _RAN_ALL, _BEFORE, _MID, _NOISE, _NORMALS = 0, 1, 2, 3, 4
 _R, _S = sim_rig.ROBOT_AT, sim_rig.SENSOR_AT
 
 
+@kernel
+def step_s(bi: IntRow, now: int) -> float:
+    """The rig's step to the tick at ``now``, s (:meth:`pipeline.sim.rig.SimRig.advance`'s: at most ``MAX_DT_S``)."""
+    dt = (now - bi[_RIG_LAST]) * 1e-9
+    if dt < 0.0:
+        return 0.0
+    return sim_rig.MAX_DT_S if dt > sim_rig.MAX_DT_S else dt
+
+
 def _compile_due(callees: int) -> Any:
     """:func:`due_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
 
@@ -88,11 +98,7 @@ def _compile_due(callees: int) -> Any:
         for none, with the rig's step (s) and the participant's time then (:meth:`pipeline.sim.rig.SimRig.advance`'s
         and :meth:`pipeline.sim.participant.SimulatedParticipant.equilibrium_y`'s)."""
         _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
-        dt = (now - bi[_RIG_LAST]) * 1e-9
-        if dt < 0.0:
-            dt = 0.0
-        elif dt > sim_rig.MAX_DT_S:
-            dt = sim_rig.MAX_DT_S
+        dt = step_s(bi, now)
         t = b[_SIM_TIME] + dt
         pdt = t - ps[participant_tick.T_AT]
         if not (-0.5 <= pdt <= 0.5) or t >= ps[participant_tick.NEXT_AT]:
@@ -106,14 +112,14 @@ def _compile_due(callees: int) -> Any:
     return due_kernel
 
 
-def _compile_rig(callees: int) -> Any:
-    """:func:`rig_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+def _compile_observe(callees: int) -> Any:
+    """:func:`observe_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
 
     @kernel
-    def rig_kernel(b: State, bi: IntRow, st: State, noise: State, tst: State, tint: IntRow, ps: State, hist: State,
-                   z: State, now: int, dt: float, t: float) -> None:
-        """The rig's step of the tick at ``now`` (:meth:`pipeline.sim.rig.SimRig.advance`): the Touch, the hand's
-        observation and decision, the physics; the newest sample and pose into the block's state."""
+    def observe_kernel(b: State, bi: IntRow, st: State, tst: State, tint: IntRow, now: int, dt: float,
+                       t: float) -> float:
+        """The rig's step of the tick at ``now`` up to the hand's decision (:meth:`pipeline.sim.rig.SimRig.advance`):
+        the Touch renders, the hand's observation into the block's state; returns the felt force (N)."""
         _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         bi[_RIG_LAST] = now
         b[_SIM_TIME] = t
@@ -125,13 +131,22 @@ def _compile_rig(callees: int) -> Any:
         else:
             felt = ax * b[_AXIS] + ay * b[_AXIS + 1] + az * b[_AXIS + 2]
         depth = b[_SURFACE] - st[_R + 2]
-        y_arm = st[sim_rig.ARM_AT]
-        ind = depth if depth > 0 else 0.0
-        gap = -depth if depth < 0 else 0.0
-        b[_OBS], b[_OBS + 1], b[_OBS + 2], b[_OBS + 3], b[_OBS + 4] = t, y_arm, felt, ind, gap
-        ps[participant_tick.T_AT] = t
-        participant_tick.remember_kernel(ps, hist, t, y_arm, felt, ind, gap)
-        y_c = participant_tick.plan_kernel(ps, z, t)
+        b[_OBS], b[_OBS + 1], b[_OBS + 2] = t, st[sim_rig.ARM_AT], felt
+        b[_OBS + 3], b[_OBS + 4] = depth if depth > 0 else 0.0, -depth if depth < 0 else 0.0
+        return float(felt)
+
+    return observe_kernel
+
+
+def _compile_physics(callees: int) -> Any:
+    """:func:`physics_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def physics_kernel(b: State, bi: IntRow, st: State, noise: State, y_c: float, felt: float, now: int,
+                       dt: float) -> None:
+        """The rig's step of the tick at ``now`` after the hand's decision ``y_c`` (the rig's ``step_kernel``); the
+        newest sample and pose into the block's state."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
         ni = bi[_NI]
         bi[_NI] = ni + 1
         # (the record's six values are in the sensor's state, read as the newest sample's)
@@ -147,6 +162,23 @@ def _compile_rig(callees: int) -> Any:
             bi[_W_T] = now
             bi[_W_STATUS] = int(st[_S + sensor.STATUS_AT])
             bi[_PUBLISHED] += 1
+
+    return physics_kernel
+
+
+def _compile_rig(callees: int) -> Any:
+    """:func:`rig_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def rig_kernel(b: State, bi: IntRow, st: State, noise: State, tst: State, tint: IntRow, ps: State, hist: State,
+                   z: State, now: int, dt: float, t: float) -> None:
+        """The rig's step of the tick at ``now`` (:meth:`pipeline.sim.rig.SimRig.advance`) with the simulated
+        participant's decision."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        felt = observe_kernel(b, bi, st, tst, tint, now, dt, t)
+        ps[participant_tick.T_AT] = t
+        participant_tick.remember_kernel(ps, hist, t, b[_OBS + 1], felt, b[_OBS + 3], b[_OBS + 4])
+        physics_kernel(b, bi, st, noise, participant_tick.plan_kernel(ps, z, t), felt, now, dt)
 
     return rig_kernel
 
@@ -209,8 +241,11 @@ def _compile_arm(callees: int) -> Any:
 
 _TICK_MODULES = (exact, frames, filters, safety, scaling, algorithm_1, bias_refinement, record_writer, arm_channel,
                  touch_output, sim_touch, hand, participant_tick, sim_robot, tissue, sensor, sim_rig)
-#: Whether Python is due before a tick; the rig's step; the arm's part (block_kernel's steps, compiled).
+#: Whether Python is due before a tick; the rig's step to the hand's decision, after it, and with the simulated
+#: participant's; the arm's part (block_kernel's steps, compiled).
 due_kernel = _compile_due(fingerprint(*_TICK_MODULES))
+observe_kernel = _compile_observe(fingerprint(*_TICK_MODULES))
+physics_kernel = _compile_physics(fingerprint(*_TICK_MODULES))
 rig_kernel = _compile_rig(fingerprint(*_TICK_MODULES))
 arm_kernel = _compile_arm(fingerprint(*_TICK_MODULES))
 
@@ -253,6 +288,43 @@ def _compile_block(callees: int) -> Any:
 
 #: Ticks of a one-arm simulated loop in one compiled call (:class:`SimBlocks`).
 block_kernel = _compile_block(fingerprint(*_TICK_MODULES))
+
+
+def _compile_hold(callees: int) -> Any:
+    """:func:`hold_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the modules it calls."""
+
+    @kernel
+    def hold_kernel(n: int, b: State, bi: IntRow, st: State, noise: State, tst: State, tint: IntRow, y_c: float,
+                    sums: State) -> None:
+        """Up to ``n`` ticks of the rig alone, the hand holding ``y_c`` (:func:`hold_still`), from the block's state
+        ``b``/``bi``; each tick's newest wrench added into ``sums`` (if it has six entries).  How many ran and why it
+        stopped are ``bi[_DONE]``, ``bi[_STOP]``."""
+        _ = callees  # (read, so that it is in the closure numba's cache is keyed on)
+        period = bi[_PERIOD]
+        now = bi[_NOW0]
+        o = _S + sensor.OUT
+        k = 0
+        stop = _RAN_ALL
+        while k < n:
+            if bi[_NI] >= bi[_NOISE_ROWS]:
+                stop = _NOISE
+                break
+            dt = step_s(bi, now)
+            felt = observe_kernel(b, bi, st, tst, tint, now, dt, b[_SIM_TIME] + dt)
+            physics_kernel(b, bi, st, noise, y_c, felt, now, dt)
+            if len(sums) == 6:
+                for i in range(6):
+                    sums[i] += st[o + i]
+            k += 1
+            now += period
+        bi[_DONE] = bi[_STARTED] = k
+        bi[_STOP] = stop
+
+    return hold_kernel
+
+
+#: Ticks of the rig alone, the hand held still, in one compiled call (:func:`hold_still`).
+hold_kernel = _compile_hold(fingerprint(*_TICK_MODULES))
 
 _new_tuple = tuple.__new__
 
@@ -339,27 +411,16 @@ class SimBlocks:
         the ticks run whole and how it stopped."""
         loop, rig, ch = self.loop, self.rig, self.ch
         b, bi = self.b, self.bi
-        touch, sens, robot = rig.haptic, rig.sensor, rig.robot
         p = cast(SimulatedParticipant, rig.driver)
         fw = ch.framework
-        w = sens.read_wrench()
-        pose = robot.read_pose()
+        pose = rig.robot.read_pose()
         rls = fw.rls
-        # -- gather --
-        # (the times ready() found set: cast)
-        bi[_NOW0], bi[_PERIOD], bi[_TICK], bi[_T0] = now, loop.period_ns, loop.tick_count, loop.t0_ns
-        bi[_RIG_LAST], bi[_ROBOT_ORIGIN], bi[_SENSOR_ORIGIN] = cast(int, rig.last_ns), cast(int, robot.origin_ns), \
-            cast(int, sens.origin_ns)
-        bi[_W_T], bi[_W_STATUS], bi[_POSE_T], bi[_CH_POSE_T] = w.t_ns, w.status, pose.t_ns, cast(int, ch.pose_time_ns)
+        _gather_rig(b, bi, rig, now, loop.period_ns)
+        bi[_TICK], bi[_T0] = loop.tick_count, loop.t0_ns
+        bi[_POSE_T], bi[_CH_POSE_T] = pose.t_ns, cast(int, ch.pose_time_ns)
         bi[_FAULTS], bi[_ACTIVE], bi[_TRIAL], bi[_PHASE] = ch.faults, ch.active_faults, loop.trial_index, loop.phase
-        bi[_ERR], bi[_NI], bi[_NOISE_ROWS] = touch.error_code, sens.noise_row, len(sens.noise)
         bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE] = ch.max_ages_ns
-        one = rig.hand_one_axis
-        bi[_ONE_AXIS] = -1 if one is None else one[0]
-        b[_ONE_SIGN] = 0.0 if one is None else one[1]
-        bi[_N_POSES] = bi[_PUBLISHED] = bi[_CYCLED] = 0
-        b[_SIM_TIME], b[_SURFACE] = rig.sim_time_s, rig.config.surface_z_m
-        b[_AXIS:_AXIS + 3], b[_PUSH:_PUSH + 3] = rig.hand_axis, rig.push_base_n
+        bi[_N_POSES] = 0
         g = fw.safety
         b[_DEV_LIMIT], b[_LIMIT_N], b[_STATIC_LIMIT] = ch.device_limit_n, g.limit_n, g.static_limit_n
         b[_ON], b[_REFINE] = loop.haptic_on, loop.refine_bias and rls is not None
@@ -367,22 +428,15 @@ class SimBlocks:
         rot = pose.rot_base_tip
         b[_ROT_SAME], b[_ROT_SUM] = fw.rot_base_tip == rot, sum(rot)  # (the sum: only whether it is finite)
         b[_TIP:_TIP + 3] = pose.position_m
-        out = touch.output
-        block_kernel(n, b, bi, rig.state, sens.noise, out.array, out.ints, p.array, p.history, p.normals, fw.array,
-                     self._no_rls if rls is None else rls.array, ch.saturation_n, self.rows, self.rows_i, self.poses)
+        out, rls_array = rig.haptic.output, self._no_rls if rls is None else rls.array
+        block_kernel(n, b, bi, rig.state, rig.sensor.noise, out.array, out.ints, p.array, p.history, p.normals,
+                     fw.array, rls_array, ch.saturation_n, self.rows, self.rows_i, self.poses)
         # -- give back --
         k, stop, started = int(bi[_DONE]), int(bi[_STOP]), int(bi[_STARTED])
         if not started:
             return 0, stop
-        last = now + (started - 1) * loop.period_ns
+        last = _give_back_rig(b, bi, rig, now, loop.period_ns)
         loop.ticked_elsewhere(started, k, last)
-        y, f = b.item(_Y), b.item(_F)
-        rig.ran_block(started, last, b.item(_SIM_TIME), f,
-                      _new_tuple(HandObservation, (b.item(_OBS), b.item(_OBS + 1), b.item(_OBS + 2),
-                                                   b.item(_OBS + 3), b.item(_OBS + 4))), y, int(bi[_ERR]))
-        sens.ran_block(int(bi[_NI]), int(bi[_W_T]) if bi[_PUBLISHED] else None)
-        if bi[_CYCLED]:
-            robot.cycled(int(bi[_POSE_T]))
         ch.ran_block(self.rows, k, int(bi[_CH_POSE_T]), self.poses, int(bi[_N_POSES]), rot)
         self.block_ticks += k
         return k, stop
@@ -397,6 +451,103 @@ class SimBlocks:
         block_kernel(0, self.b.copy(), self.bi.copy(), rig.state.copy(), rig.sensor.noise.copy(), out.array.copy(),
                      out.ints.copy(), ps, hist, np.zeros(1), fw.array.copy(), np.zeros(1), ch.saturation_n.copy(),
                      self.rows.copy(), self.rows_i.copy(), self.poses.copy())
+
+
+def _gather_rig(b: State, bi: IntRow, rig: SimRig, now: int, period_ns: int) -> None:
+    """What a block's rig step reads of the Python objects (:func:`observe_kernel`, :func:`physics_kernel`), into its
+    state, for a block from the tick at ``now`` (the times :meth:`pipeline.sim.rig.SimRig.steps_elsewhere` found set:
+    cast)."""
+    sens, robot = rig.sensor, rig.robot
+    w = sens.read_wrench()
+    bi[_NOW0], bi[_PERIOD], bi[_RIG_LAST] = now, period_ns, cast(int, rig.last_ns)
+    bi[_ROBOT_ORIGIN], bi[_SENSOR_ORIGIN] = cast(int, robot.origin_ns), cast(int, sens.origin_ns)
+    bi[_W_T], bi[_W_STATUS], bi[_POSE_T] = w.t_ns, w.status, robot.read_pose().t_ns
+    bi[_ERR], bi[_NI], bi[_NOISE_ROWS] = rig.haptic.error_code, sens.noise_row, len(sens.noise)
+    one = rig.hand_one_axis
+    bi[_ONE_AXIS] = -1 if one is None else one[0]
+    b[_ONE_SIGN] = 0.0 if one is None else one[1]
+    bi[_PUBLISHED] = bi[_CYCLED] = 0
+    b[_SIM_TIME], b[_SURFACE] = rig.sim_time_s, rig.config.surface_z_m
+    b[_AXIS:_AXIS + 3], b[_PUSH:_PUSH + 3] = rig.hand_axis, rig.push_base_n
+
+
+def _give_back_rig(b: State, bi: IntRow, rig: SimRig, now: int, period_ns: int) -> int:
+    """The rig, its sensor and its robot take what the block's rig steps, from the tick at ``now``, left; returns the
+    clock reading of the last."""
+    started = int(bi[_STARTED])
+    last = now + (started - 1) * period_ns
+    rig.ran_block(started, last, b.item(_SIM_TIME), b.item(_F),
+                  _new_tuple(HandObservation, (b.item(_OBS), b.item(_OBS + 1), b.item(_OBS + 2), b.item(_OBS + 3),
+                                               b.item(_OBS + 4))), b.item(_Y), int(bi[_ERR]))
+    rig.sensor.ran_block(int(bi[_NI]), int(bi[_W_T]) if bi[_PUBLISHED] else None)
+    if bi[_CYCLED]:
+        rig.robot.cycled(int(bi[_POSE_T]))
+    return last
+
+
+def hold_still(rig: SimRig, clock: Clock, ticks: int, sums: list[float] | None = None,
+               period_ns: int = 1_000_000) -> None:
+    """Step the rig alone ``ticks`` times, ``period_ns`` apart on ``clock``, the hand holding the stylus where its
+    :class:`pipeline.sim.hand.HoldStill` holds it, each tick's newest wrench added into ``sums`` (six, N and N·m):
+    the simulated calibration's settling and averaging at each pose (:mod:`pipeline.sim.calibration`), as
+    :meth:`pipeline.sim.rig.SimRig.advance` a tick at a time would, in compiled blocks on a virtual clock
+    (:func:`hold_kernel`; tick by tick while the robot turns to the pose, or on another clock)."""
+    warm_once(__name__ + ".hold", _compile_hold_once)
+    b, bi = _HOLD.b, _HOLD.bi
+    acc = np.array(sums if sums is not None else (), dtype=np.float64)
+    t = clock.now_ns()
+    done = 0
+    while done < ticks:
+        if _hold_ready(rig, clock, t + period_ns):
+            _gather_rig(b, bi, rig, t + period_ns, period_ns)
+            out = rig.haptic.output
+            hold_kernel(ticks - done, b, bi, rig.state, rig.sensor.noise, out.array, out.ints,
+                        float(cast(HoldStill, rig.driver).y_m), acc)
+            k, stop = int(bi[_DONE]), int(bi[_STOP])
+            if k:
+                _give_back_rig(b, bi, rig, t + period_ns, period_ns)
+                done += k
+                t += k * period_ns
+                clock.sleep_until(t)
+            if stop == _NOISE:  # (drawn where the tick would draw it)
+                rig.sensor.refill_noise()
+                continue
+            if stop == _RAN_ALL:
+                continue
+        t += period_ns
+        clock.sleep_until(t)
+        rig.advance(clock.now_ns())
+        if len(acc):
+            w = rig.sensor.read_wrench()
+            for i in range(6):
+                acc[i] += w[1 + i]
+        done += 1
+    if sums is not None:
+        sums[:] = acc.tolist()
+
+
+def _hold_ready(rig: SimRig, clock: Clock, now: int) -> bool:
+    """Whether the rig's tick at ``now`` may run in a block held still (a virtual clock, nothing due in Python)."""
+    return (isinstance(clock, VirtualClock) and isinstance(rig.driver, HoldStill) and rig.steps_elsewhere
+            and now < 2**53)
+
+
+class _HoldState:
+    """The block state :func:`hold_still` gathers into (one a process: it runs in one thread at a time)."""
+
+    def __init__(self) -> None:
+        self.b: State = np.zeros(_SIZE)
+        self.bi: IntRow = self.b.view(np.int64)
+
+
+_HOLD = _HoldState()
+
+
+def _compile_hold_once() -> None:
+    """Compile :func:`hold_kernel` (or load it from numba's cache) once a process, for no tick, on scratch states."""
+    b = np.zeros(_SIZE)
+    out = np.zeros(touch_output.STATE_SIZE)
+    hold_kernel(0, b, b.view(np.int64), np.zeros(1), np.zeros((1, 13)), out, out.view(np.int64), 0.0, np.zeros(6))
 
 
 def warm_kernels() -> None:

@@ -14,6 +14,7 @@ from pipeline.commissioning.payload_identification import CalibrationPose, ident
 from pipeline.core.clock import Clock
 from pipeline.force.frames import Mat3, mat_mul, transpose
 from pipeline.force.payload_compensator import PayloadCalibration
+from pipeline.sim.block import hold_still
 from pipeline.sim.hand import HoldStill
 from pipeline.sim.rig import SimRig
 from pipeline.sim.robot import TOOL_DOWN
@@ -38,14 +39,7 @@ def collect_pose(rig: SimRig, clock: Clock, samples: int, label: str = "",
     nominal sensor mounting -- exactly what the application knows on hardware.
     """
     acc = [0.0] * 6
-    t = clock.now_ns()
-    for _ in range(samples):
-        t += period_ns
-        clock.sleep_until(t)
-        rig.advance(clock.now_ns())
-        w = rig.sensor.read_wrench()
-        for i in range(6):
-            acc[i] += w[1 + i]
+    hold_still(rig, clock, samples, acc, period_ns)  # each tick's newest wrench added in, tick by tick
     pose = rig.robot.read_pose()
     rot_base_sensor = mat_mul(pose.rot_base_tip, rig.config.rot_tip_sensor)
     return CalibrationPose(rot_base_sensor, tuple(a / samples for a in acc), label)  # type: ignore[arg-type]  # six items: mypy cannot count a generator
@@ -76,11 +70,7 @@ def measure_poses(
     try:
         for k, rot_base_sensor in enumerate(rots):
             rig.robot.set_orientation(mat_mul(rot_base_sensor, rts_t))
-            t = clock.now_ns()
-            for _ in range(settle_ticks):
-                t += 1_000_000
-                clock.sleep_until(t)
-                rig.advance(clock.now_ns())
+            hold_still(rig, clock, settle_ticks)
             poses.append(collect_pose(rig, clock, samples_per_pose, label=f"P{k + 1:02d}"))
             if progress is not None:
                 progress(k + 1, len(rots))

@@ -276,7 +276,8 @@ def test_the_kernels_are_compiled_when_a_simulated_engine_is_built() -> None:
         "from pipeline.sim import block, participant_tick, percepts, hand, touch\n"
         "from pipeline.devices import touch_output\n"
         "from pipeline.assembly.engine import EngineConfig, build_sim_engine",
-        "(block.block_kernel, block.due_kernel, block.rig_kernel, block.arm_kernel, participant_tick.plan_kernel, "
+        # (the kernels Python calls: the block's steps are compiled into it, or loaded with it from numba's cache)
+        "(block.block_kernel, block.hold_kernel, participant_tick.plan_kernel, "
         "participant_tick.remember_kernel, participant_tick.normals_short, percepts.newest_at, hand.min_jerk, "
         "touch.advance_kernel, touch_output.render_kernel, touch_output.command_kernel)",
         "build_sim_engine(EngineConfig(clock='virtual'))")
@@ -287,3 +288,31 @@ def test_an_unpickled_participant_is_ready() -> None:
     assert participant_tick.plan_kernel.signatures and p.array.shape == (participant_tick.STATE_SIZE,)
     assert int(Fault.SENSOR_STALE) & arm_channel.conditions_kernel.py_func(
         np.ones(6), 5, 5, 100, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0, 100)[0]
+
+
+def test_the_calibration_held_still_in_blocks_is_the_calibration_tick_by_tick(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The simulated calibration's settling and averaging (:func:`pipeline.sim.block.hold_still`) in blocks and tick by
+    tick: the same poses, calibration and rig, bit for bit (the robot turning to each pose runs tick by tick)."""
+    from pipeline.core.clock import VirtualClock
+    from pipeline.sim import block
+    from pipeline.sim.calibration import auto_calibrate
+    from pipeline.sim.rig import SimRig
+
+    def calibrate() -> tuple[Any, ...]:
+        rig, clock = SimRig(SimRigConfig(seed=8, sensor=SensorParams(packet_loss=0.05))), VirtualClock()
+        cal, poses = auto_calibrate(rig, clock)
+        return (cal, [(p.rot_base_sensor, bits(p.wrench)) for p in poses], bits(rig.state), rig.sim_time_s,
+                rig.sensor.read_wrench(), rig.robot.read_pose(), clock.now_ns(), rig.one_call_ticks)
+
+    python_ticks = []
+    advance = SimRig.advance
+
+    def counted(rig: SimRig, now_ns: int) -> None:
+        python_ticks.append(now_ns)
+        advance(rig, now_ns)
+
+    monkeypatch.setattr(SimRig, "advance", counted)
+    fast = calibrate()
+    assert 0 < len(python_ticks) < 0.05 * 24 * 500  # most of the 24 poses' settling and averaging ran in blocks
+    monkeypatch.setattr(block, "_hold_ready", lambda rig, clock, now: False)
+    assert calibrate() == fast
