@@ -493,7 +493,8 @@ def hold_still(rig: SimRig, clock: Clock, ticks: int, sums: list[float] | None =
     :meth:`pipeline.sim.rig.SimRig.advance` a tick at a time would, in compiled blocks on a virtual clock
     (:func:`hold_kernel`; tick by tick while the robot turns to the pose, or on another clock)."""
     warm_once(__name__ + ".hold", _compile_hold_once)
-    b, bi = _HOLD.b, _HOLD.bi
+    b = np.zeros(_SIZE)  # (its own: rigs of studies run in threads of one process, a Dask worker's, each have one)
+    bi = b.view(np.int64)
     acc = np.array(sums if sums is not None else (), dtype=np.float64)
     t = clock.now_ns()
     done = 0
@@ -530,17 +531,6 @@ def _hold_ready(rig: SimRig, clock: Clock, now: int) -> bool:
     """Whether the rig's tick at ``now`` may run in a block held still (a virtual clock, nothing due in Python)."""
     return (isinstance(clock, VirtualClock) and isinstance(rig.driver, HoldStill) and rig.steps_elsewhere
             and now < 2**53)
-
-
-class _HoldState:
-    """The block state :func:`hold_still` gathers into (one a process: it runs in one thread at a time)."""
-
-    def __init__(self) -> None:
-        self.b: State = np.zeros(_SIZE)
-        self.bi: IntRow = self.b.view(np.int64)
-
-
-_HOLD = _HoldState()
 
 
 def _compile_hold_once() -> None:
