@@ -37,6 +37,7 @@ below hold for every compiled function:
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Callable
 from pathlib import Path
 from types import ModuleType
@@ -81,13 +82,14 @@ def cache_kernels(folder: str | None = None) -> None:
     next call); where there is none (the source read-only to this user, and no home for numba's own), the kernel is
     compiled in each process instead, a few seconds at the first rig's construction.
     """
-    if folder is not None:
-        numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # numba makes its settings at run time
-    while _UNCACHED:
-        try:
-            _UNCACHED.pop().enable_caching()
-        except RuntimeError:
-            pass  # no folder to cache in (numba: "no locator available"): compiled in memory
+    with _LOCK:  # (studies may run in threads of one process, a Dask worker's: one list, popped by one at a time)
+        if folder is not None:
+            numba.config.CACHE_DIR = folder  # type: ignore[attr-defined]  # numba makes its settings at run time
+        while _UNCACHED:
+            try:
+                _UNCACHED.pop().enable_caching()
+            except RuntimeError:
+                pass  # no folder to cache in (numba: "no locator available"): compiled in memory
 
 
 def warm_once(owner: str, compile_them: Callable[[], object]) -> None:
@@ -96,9 +98,12 @@ def warm_once(owner: str, compile_them: Callable[[], object]) -> None:
     compiler; a process forked after it inherits the machine code and this record of it."""
     if owner in _WARMED:
         return
-    cache_kernels()
-    compile_them()
-    _WARMED.add(owner)
+    with _LOCK:  # (an owner's warm-up may warm others: re-entrant)
+        if owner in _WARMED:
+            return
+        cache_kernels()
+        compile_them()
+        _WARMED.add(owner)
 
 
 def is_warm(owner: str) -> bool:
@@ -106,6 +111,8 @@ def is_warm(owner: str) -> bool:
     return owner in _WARMED
 
 
+#: One warm-up, and one switch of kernels to the cache, at a time in a process.
+_LOCK = threading.RLock()
 #: The owners (module names) whose kernels :func:`warm_once` has compiled or loaded in this process.
 _WARMED: set[str] = set()
 

@@ -235,10 +235,11 @@ class RingBuffer:
         """
         if self._shm is not None:
             raise ValueError("write_rows: the ring is shared; write one record at a time (write_row)")
-        data = memoryview(rows.data).cast("B")
         rb = self._row_bytes
-        if len(data) % rb:
-            raise ValueError(f"write_rows: rows of {rows.shape[-1] * 8} bytes; this ring's are {rb}")
+        if rows.ndim != 2 or rows.shape[1] * rows.itemsize != rb or not rows.flags.c_contiguous:
+            raise ValueError(f"write_rows: a C-contiguous 2-D array of rows of {rb} bytes; given {rows.shape} "
+                             f"of {rows.itemsize}-byte values")
+        data = memoryview(rows.data).cast("B")
         off, start = self._slot_off, 0
         while start < len(data):
             m = min(len(data) - start, self._end_off - off)

@@ -202,6 +202,19 @@ def command_kernel(st: State, sti: IntRow, fx: float, fy: float, fz: float, t_ns
     st[_HAS_CMD] = 1.0
 
 
+@kernel
+def clear_kernel(st: State, sti: IntRow, rearm: bool) -> None:
+    """Forget the command (and with ``rearm`` the passed budget's stop) in one call: :meth:`TouchOutput.clear`,
+    :meth:`TouchOutput.rearm`."""
+    st[_CMD] = 0.0
+    st[_CMD + 1] = 0.0
+    st[_CMD + 2] = 0.0
+    sti[_CMD_T] = 0
+    st[_HAS_CMD] = 0.0
+    if rearm:
+        st[_WARM] = 0.0
+
+
 def _compile_render(callees: int) -> Any:
     """:func:`render_kernel` closed over the :func:`pipeline.core.compiled.fingerprint` of the module it calls."""
 
@@ -369,8 +382,7 @@ class TouchOutput:
 
     def clear(self) -> None:
         """Forget the command (a re-arm starts from zero, not from a stale command)."""
-        command_kernel(self.array, self.ints, 0.0, 0.0, 0.0, 0)
-        self.array[_HAS_CMD] = 0.0
+        clear_kernel(self.array, self.ints, False)
 
     @property
     def limit_n(self) -> float:
@@ -395,9 +407,19 @@ class TouchOutput:
         """Clear :attr:`warm` if the motors have cooled to half the budget; True if no longer warm."""
         if self.warm and not self.heat.cooled():
             return False
-        self.array[_WARM] = 0.0
-        self.clear()
+        clear_kernel(self.array, self.ints, True)  # (one call: no servo tick renders the old command in between)
         return True
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"spec": self.spec, "array": self.array, "command_timeout_s": self.command_timeout_s}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """A copy (``copy.deepcopy``, pickle) keeps its times in an int64 view of its own state, and its heat model
+        that state, as the original does."""
+        self.spec, self.array, self.command_timeout_s = state["spec"], state["array"], state["command_timeout_s"]
+        self.ints = self.array.view(np.int64)
+        self.heat = MotorHeat.__new__(MotorHeat)
+        self.heat.spec, self.heat.array = self.spec, self.array
 
 
 def _compile_them() -> None:
@@ -409,5 +431,6 @@ def _compile_them() -> None:
     si = st.view(np.int64)
     set_heat_kernel(st, 0.0)
     command_kernel(st, si, 0.0, 0.0, 0.0, 0)
+    clear_kernel(st, si, False)
     render_kernel(st, si, 1, 0.001, True)
     add_heat_kernel(st, 0.0, 0.001)

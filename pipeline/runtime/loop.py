@@ -263,9 +263,11 @@ class HapticLoop(PacedTicks):
 
     @property
     def tick_due_work(self) -> bool:
-        """Whether the next tick has work of its start to do in Python (queued commands, a replay snapshot), or is
-        the first: what a compiled block of ticks (:mod:`pipeline.sim.block`) leaves to :meth:`tick`."""
-        return bool(self._inbox) or self._snapshot_due is not None or self._last_ns is None
+        """Whether the next tick has work of its start to do in Python (queued commands, a replay snapshot, a period
+        longer than the devices' command timeout), or is the first: what a compiled block of ticks
+        (:mod:`pipeline.sim.block`) leaves to :meth:`tick`."""
+        return (bool(self._inbox) or self._snapshot_due is not None or self._last_ns is None
+                or self.period_ns > self.command_timeout_ns)
 
     @property
     def last_tick_ns(self) -> int | None:

@@ -16,19 +16,23 @@ something only Python does is due, and hands that tick to the loop's own Python:
   in orientation or not finite, the device's error or derated limit changing: the arm's part is
   :meth:`pipeline.runtime.loop.HapticLoop.arms_tick`.
 
-Every step of a tick in the block is the kernel its Python calls (one implementation): the Touch's step
-(:func:`pipeline.sim.touch.advance_kernel`), the participant's tick
+The arithmetic of every step of a tick in the block is the kernel its Python calls (one implementation): the
+Touch's step (:func:`pipeline.sim.touch.advance_kernel`), the participant's tick
 (:func:`pipeline.sim.participant_tick.remember_kernel`, :func:`~pipeline.sim.participant_tick.plan_kernel`), the
-rig's physics (:func:`pipeline.sim.rig.step_kernel`), the
-watchdog's conditions (:func:`pipeline.runtime.arm_channel.conditions_kernel`), the bias refinement
+rig's physics (:func:`pipeline.sim.rig.step_kernel`), the watchdog's conditions
+(:func:`pipeline.runtime.arm_channel.conditions_kernel`), the bias refinement
 (:func:`pipeline.force.framework.refine_kernel`), Algorithm 1 and the record
 (:func:`pipeline.runtime.arm_channel.record_kernel`) and the command
-(:func:`pipeline.devices.touch_output.command_kernel`); what the block adds is the sequencing (the order of
-:meth:`pipeline.sim.rig.SimRig.advance` and :meth:`pipeline.runtime.arm_channel.ArmChannel.tick`), the few lines of
-the rig's glue (the felt force along the hand's axis, the observation, the stylus, the truth), and the bookkeeping
-the Python objects are given back when a block ends (their newest sample, pose, observation, counters; the records
-into the ring, the poses into the replay log).  ``tests/pipeline/test_sim_block.py`` holds a study's ticks run in
-blocks to the same ticks run one by one, every record, state and event, bit for bit.
+(:func:`pipeline.devices.touch_output.command_kernel`).  What the block writes again, as the lines it mirrors: the
+sequencing (the order of :meth:`pipeline.sim.rig.SimRig.advance` and
+:meth:`pipeline.runtime.arm_channel.ArmChannel.tick`), the rig's glue (the step's clamp, the felt force along the
+hand's axis, the observation, the stylus, the truth), the tests that hand a tick to Python (the participant's time
+window and next event; the arm's conditions changing, a pose's finiteness, the device's error or limit) and the
+arm's switches (feedback enabled without a fault, the refinement without one); and the bookkeeping the Python
+objects are given back when a block ends (their newest sample, pose, observation, counters; the records into the
+ring, the poses into the replay log).  A change to those lines of the Python must be made here too:
+``tests/pipeline/test_sim_block.py`` holds a loop's and a study's ticks run in blocks to the same ticks run one by
+one, every record, replay-log entry, state and event, bit for bit.
 
 One arm, a virtual clock, a private ring (no reader in another process or thread: the block writes its records
 into the ring when it ends): what a simulated study's engine is (:func:`pipeline.assembly.engine.build_sim_engine`
@@ -402,9 +406,10 @@ class SimBlocks:
         Python only is due in it (see the module's docstring)."""
         loop, rig, ch = self.loop, self.rig, self.ch
         driver = rig.driver
+        # (the exact class: a subclass may decide otherwise than the compiled tick)
         return (not loop.tick_due_work and now - cast(int, loop.last_tick_ns) == loop.period_ns
                 and ch.program is None and ch.pose_time_ns is not None and rig.steps_elsewhere
-                and isinstance(driver, SimulatedParticipant) and driver.between_events and now < 2**53)
+                and type(driver) is SimulatedParticipant and driver.between_events and now < 2**53)
 
     def _block(self, n: int, now: int) -> tuple[int, int]:
         """One compiled call of up to ``n`` ticks from ``now``; the Python objects given back their state.  Returns
@@ -425,7 +430,9 @@ class SimBlocks:
         b[_DEV_LIMIT], b[_LIMIT_N], b[_STATIC_LIMIT] = ch.device_limit_n, g.limit_n, g.static_limit_n
         b[_ON], b[_REFINE] = loop.haptic_on, loop.refine_bias and rls is not None
         b[_RECORDING], b[_DERATE_CHECK] = loop.recording, ch.derate_check
-        rot = pose.rot_base_tip
+        # every pose a new one in the block: the last published (rig.steps_elsewhere: at the robot's orientation) or
+        # one its cycles publish, at that orientation
+        rot = rig.robot.orientation
         b[_ROT_SAME], b[_ROT_SUM] = fw.rot_base_tip == rot, sum(rot)  # (the sum: only whether it is finite)
         b[_TIP:_TIP + 3] = pose.position_m
         out, rls_array = rig.haptic.output, self._no_rls if rls is None else rls.array
@@ -529,8 +536,7 @@ def hold_still(rig: SimRig, clock: Clock, ticks: int, sums: list[float] | None =
 
 def _hold_ready(rig: SimRig, clock: Clock, now: int) -> bool:
     """Whether the rig's tick at ``now`` may run in a block held still (a virtual clock, nothing due in Python)."""
-    return (isinstance(clock, VirtualClock) and isinstance(rig.driver, HoldStill) and rig.steps_elsewhere
-            and now < 2**53)
+    return (type(clock) is VirtualClock and type(rig.driver) is HoldStill and rig.steps_elsewhere and now < 2**53)
 
 
 def _compile_hold_once() -> None:
@@ -551,3 +557,4 @@ def warm_kernels() -> None:
     rig.set_driver(SimulatedParticipant())
     framework = algorithm_1.HapticFramework(algorithm_1.FrameworkConfig(), device_peak_n=rig.haptic.peak_force_n)
     SimBlocks(HapticLoop(rig, framework, VirtualClock()), rig)
+    warm_once(__name__ + ".hold", _compile_hold_once)

@@ -280,12 +280,13 @@ class SimRig:
     def steps_elsewhere(self) -> bool:
         """Whether the next step may run in a compiled block of ticks (:mod:`pipeline.sim.block`): it has stepped
         once, and nothing on the Python side is due in its step -- a teleoperation driver, a buttons hook, a fault
-        being rehearsed, a re-orientation or a servo stop, a frozen robot, a device error."""
+        being rehearsed, a re-orientation or a servo stop, a frozen robot or a published pose at another orientation
+        than the robot's (one published before it turned while frozen), a device error."""
         robot = self.robot
         return (self._last_ns is not None and self.one_call and self.teleop is None and self.on_buttons is None
                 and not self.faults.busy and robot.moves_smoothly and not robot.frozen
-                and robot.orientation is self._orient and robot.origin_ns is not None
-                and self.sensor.origin_ns is not None and self.haptic.error_code == 0)
+                and robot.orientation is self._orient and robot.read_pose().rot_base_tip == robot.orientation
+                and robot.origin_ns is not None and self.sensor.origin_ns is not None and self.haptic.error_code == 0)
 
     def ran_block(self, ticks: int, last_ns: int, sim_time_s: float, force_n: float, obs: HandObservation,
                   y_m: float, error_code: int) -> None:

@@ -21,8 +21,10 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from pipeline.core import exact
-from pipeline.core.compiled import State, fingerprint, kernel
+from pipeline.core.compiled import State, fingerprint, kernel, warm_once
 from pipeline.core.record_writer import IntRow
 from pipeline.devices import touch_output
 from pipeline.devices.interfaces import HapticState
@@ -73,6 +75,7 @@ class SimTouch:
     def __init__(self, spec: HapticLimits | None = None, command_timeout_s: float = DEFAULT_COMMAND_TIMEOUT_S) -> None:
         self.spec = spec or haptic_model("touch").limits
         self.output = TouchOutput(self.spec, command_timeout_s)
+        warm_once(__name__, lambda: _compile_them(self.output))
         self.applied_force_n: Vec3 = (0.0, 0.0, 0.0)
         #: An HD error code (0 = none): ``HD_WARM_MOTORS`` from the heat model, or one a fault rehearsal sets.
         self.error_code = 0
@@ -138,3 +141,10 @@ class SimTouch:
         """Zero the output."""
         self.output.clear()
         self.applied_force_n = (0.0, 0.0, 0.0)
+
+
+def _compile_them(output: TouchOutput) -> None:
+    """Compile :func:`advance_kernel` (or load it from numba's cache) on a copy of ``output``'s state: once a process,
+    when the first simulated Touch is built, so that no tick waits for a compiler."""
+    st = output.array.copy()
+    advance_kernel(st, st.view(np.int64), 1, 0.001, 0)

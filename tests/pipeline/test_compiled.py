@@ -155,10 +155,11 @@ def test_kernels_are_compiled_when_a_rig_is_built() -> None:
     """A rig is built with its kernels compiled or loaded: its loop's first tick waits for no compiler (in a fresh
     process: this one's may have compiled them already)."""
     compiled_on_construction(
-        "from pipeline.sim import hand, robot, sensor, tissue\n"
+        "from pipeline.sim import hand, robot, sensor, tissue, touch\n"
+        "from pipeline.devices import touch_output\n"
         "from pipeline.sim.rig import SimRig, step_kernel, target_kernel",
         "(step_kernel, target_kernel, hand.step_kernel, robot.advance_kernel, robot.command_kernel, tissue.step_kernel,"
-        " sensor.sample_kernel)",
+        " sensor.sample_kernel, touch.advance_kernel, touch_output.render_kernel, touch_output.command_kernel)",
         "SimRig()")
 
 

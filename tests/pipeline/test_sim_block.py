@@ -31,7 +31,7 @@ from pipeline.devices import touch_output
 from pipeline.devices.interfaces import Fault
 from pipeline.devices.touch_output import HapticLimits, TouchOutput
 from pipeline.runtime import arm_channel
-from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, ResetFaults, SetHaptics
+from pipeline.runtime.loop_messages import AllowBiasRefinement, Mark, ResetFaults, SetHaptics, StartRecording
 from pipeline.sim import hand, participant_tick, percepts
 from pipeline.sim import touch as sim_touch
 from pipeline.sim.block import SimBlocks
@@ -172,6 +172,7 @@ def _script(eng: Any, p: SimulatedParticipant) -> list[Any]:
                      rig.robot.read_pose(), rig.haptic.read_state(), loop.last_record, loop.faults,
                      loop.active_faults))
 
+    loop.submit(StartRecording(1))  # (the replay log: the poses the framework takes, logged from here on)
     run(300)
     for k, (force, on) in enumerate(((1.2, True), (0.6, False), (1.2, False))):
         loop.submit(AllowBiasRefinement(False))
@@ -207,6 +208,7 @@ def test_a_loop_in_blocks_is_the_loop_tick_by_tick() -> None:
     assert ra.rows.tobytes() == rb.rows.tobytes() and len(ra.rows) > 10_000
     assert list(fast.loop.events) == list(slow.loop.events)
     assert list(fast.loop.replay_log) == list(slow.loop.replay_log)
+    assert sum(1 for e in fast.loop.replay_log if e[1] == "pose") > 1000  # a pose every 8 ms, logged
     kinds = [ev.kind for ev in fast.loop.events]
     assert "fault" in kinds and "fault_cleared" in kinds and "faults_reset" in kinds and "derating" in kinds
     assert fast.rig.sensor.lost_packets > 0 and pf.decisions > 3  # lost packets, and the participant decided
@@ -316,3 +318,39 @@ def test_the_calibration_held_still_in_blocks_is_the_calibration_tick_by_tick(mo
     assert 0 < len(python_ticks) < 0.05 * 24 * 500  # most of the 24 poses' settling and averaging ran in blocks
     monkeypatch.setattr(block, "_hold_ready", lambda rig, clock, now: False)
     assert calibrate() == fast
+
+
+def test_a_pose_turned_while_the_robot_was_frozen_is_taken_as_tick_by_tick() -> None:
+    """The robot turns while it publishes nothing (frozen), then publishes again: the framework takes the turned pose
+    (its payload compensation and the replay log with it) in blocks as tick by tick."""
+    from pipeline.force.frames import axis_angle, mat_mul
+    from pipeline.sim.robot import TOOL_DOWN
+
+    def go(blocks: bool) -> tuple[Any, ...]:
+        eng, _ = _engine(blocks)
+        loop, rig = eng.loop, eng.rig
+        loop.submit(StartRecording(1))
+        loop.run_ticks(100)
+        rig.robot.frozen = True
+        rig.robot.set_orientation(mat_mul(TOOL_DOWN, axis_angle((1.0, 0.0, 0.0), 0.2)))
+        loop.run_ticks(20)
+        rig.robot.frozen = False
+        loop.run_ticks(60)
+        return (loop.framework.rot_base_tip, bits(loop.framework.array), list(loop.replay_log), loop.last_record,
+                list(loop.events), eng.ring.read_since(0).rows.tobytes())
+
+    fast = go(True)
+    assert fast == go(False)
+    assert fast[0] != TOOL_DOWN  # the turned pose was taken
+
+
+def test_a_copied_touch_output_keeps_its_times_in_its_own_state() -> None:
+    import copy
+
+    out = TouchOutput(HapticLimits(3.3, 0.88, 10.0))
+    out.command(0.5, 0.0, 0.0, 1_000_000)
+    twin = copy.deepcopy(out)
+    assert np.shares_memory(twin.ints, twin.array) and twin.heat.array is twin.array
+    twin.command(1.0, 0.0, 0.0, 5_000_000)
+    assert out.render(2_000_000, 0.001) == (0.5, 0.0, 0.0) and twin.render(6_000_000, 0.001) == (1.0, 0.0, 0.0)
+    assert pickle.loads(pickle.dumps(twin)).render(6_000_000, 0.001) == (1.0, 0.0, 0.0)
