@@ -181,9 +181,8 @@ class ArmChannel:
         self._pose_t_ns: int | None = None
         self._sensor_age_ns = int(wd.sensor_max_age_s * 1e9)
         self._pose_age_ns = int(wd.pose_max_age_s * 1e9)
-        self._sat = tuple(wd.saturation_fraction * r for r in arm.sensor.range_n)
-        #: The saturation limits as the watchdog's kernel reads them.
-        self.saturation_n = np.array(self._sat, dtype=np.float64)
+        #: The saturation limits (N, N·m), as the watchdog's kernel reads them.
+        self.saturation_n = np.array([wd.saturation_fraction * r for r in arm.sensor.range_n], dtype=np.float64)
         # this arm's record of the tick, written by record_kernel (a float64 row and its int64 view: one memory)
         self._row_f: State = np.zeros(len(RECORD_FIELDS))
         self._row_i: IntRow = self._row_f.view(np.int64)
@@ -294,7 +293,7 @@ class ArmChannel:
             self._gone_reported &= ~new
             self.faults_changed(now)
             self.emit(now - loop.t0_ns, "fault", fault_detail(new, w, pose, hs, sensor_age, pose_age, loop.watchdog,
-                                                              self._sat))
+                                                              tuple(self.saturation_n.tolist())))
             loop.arm_faulted(self, new, now)
         if cond != prev:
             gone = latched & prev & ~cond & ~self._gone_reported

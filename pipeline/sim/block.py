@@ -418,11 +418,9 @@ class SimBlocks:
         b, bi = self.b, self.bi
         p = cast(SimulatedParticipant, rig.driver)
         fw = ch.framework
-        pose = rig.robot.read_pose()
         rls = fw.rls
         _gather_rig(b, bi, rig, now, loop.period_ns)
-        bi[_TICK], bi[_T0] = loop.tick_count, loop.t0_ns
-        bi[_POSE_T], bi[_CH_POSE_T] = pose.t_ns, cast(int, ch.pose_time_ns)
+        bi[_TICK], bi[_T0], bi[_CH_POSE_T] = loop.tick_count, loop.t0_ns, cast(int, ch.pose_time_ns)
         bi[_FAULTS], bi[_ACTIVE], bi[_TRIAL], bi[_PHASE] = ch.faults, ch.active_faults, loop.trial_index, loop.phase
         bi[_SENSOR_MAX_AGE], bi[_POSE_MAX_AGE] = ch.max_ages_ns
         bi[_N_POSES] = 0
@@ -434,7 +432,6 @@ class SimBlocks:
         # one its cycles publish, at that orientation
         rot = rig.robot.orientation
         b[_ROT_SAME], b[_ROT_SUM] = fw.rot_base_tip == rot, sum(rot)  # (the sum: only whether it is finite)
-        b[_TIP:_TIP + 3] = pose.position_m
         out, rls_array = rig.haptic.output, self._no_rls if rls is None else rls.array
         block_kernel(n, b, bi, rig.state, rig.sensor.noise, out.array, out.ints, p.array, p.history, p.normals,
                      fw.array, rls_array, ch.saturation_n, self.rows, self.rows_i, self.poses)
@@ -452,12 +449,11 @@ class SimBlocks:
         """Compile :func:`block_kernel` (or load it from numba's cache) once a process, on scratch copies of this
         loop's states, for none of its ticks (a block of zero ticks)."""
         rig, ch = self.rig, self.ch
-        out, p, fw = rig.haptic.output, rig.driver, ch.framework
-        hist = p.history.copy() if isinstance(p, SimulatedParticipant) else np.zeros((5, 1024))
-        ps = p.array.copy() if isinstance(p, SimulatedParticipant) else np.zeros(participant_tick.STATE_SIZE)
-        block_kernel(0, self.b.copy(), self.bi.copy(), rig.state.copy(), rig.sensor.noise.copy(), out.array.copy(),
-                     out.ints.copy(), ps, hist, np.zeros(1), fw.array.copy(), np.zeros(1), ch.saturation_n.copy(),
-                     self.rows.copy(), self.rows_i.copy(), self.poses.copy())
+        out = rig.haptic.output.array.copy()
+        block_kernel(0, self.b.copy(), self.bi.copy(), rig.state.copy(), rig.sensor.noise.copy(), out,
+                     out.view(np.int64), np.zeros(participant_tick.STATE_SIZE), np.zeros((5, 1)), np.zeros(1),
+                     ch.framework.array.copy(), np.zeros(1), ch.saturation_n.copy(), self.rows.copy(),
+                     self.rows_i.copy(), self.poses.copy())
 
 
 def _gather_rig(b: State, bi: IntRow, rig: SimRig, now: int, period_ns: int) -> None:
@@ -465,10 +461,11 @@ def _gather_rig(b: State, bi: IntRow, rig: SimRig, now: int, period_ns: int) -> 
     state, for a block from the tick at ``now`` (the times :meth:`pipeline.sim.rig.SimRig.steps_elsewhere` found set:
     cast)."""
     sens, robot = rig.sensor, rig.robot
-    w = sens.read_wrench()
+    w, pose = sens.read_wrench(), robot.read_pose()
     bi[_NOW0], bi[_PERIOD], bi[_RIG_LAST] = now, period_ns, cast(int, rig.last_ns)
     bi[_ROBOT_ORIGIN], bi[_SENSOR_ORIGIN] = cast(int, robot.origin_ns), cast(int, sens.origin_ns)
-    bi[_W_T], bi[_W_STATUS], bi[_POSE_T] = w.t_ns, w.status, robot.read_pose().t_ns
+    bi[_W_T], bi[_W_STATUS], bi[_POSE_T] = w.t_ns, w.status, pose.t_ns
+    b[_TIP:_TIP + 3] = pose.position_m
     bi[_ERR], bi[_NI], bi[_NOISE_ROWS] = rig.haptic.error_code, sens.noise_row, len(sens.noise)
     one = rig.hand_one_axis
     bi[_ONE_AXIS] = -1 if one is None else one[0]
